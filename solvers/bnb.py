@@ -1,0 +1,226 @@
+"""One branch-and-bound engine for every problem kind (thesis 4.3, Algorithms 1 and 2).
+
+A problem supplies a root box, an incumbent, a bound on a box (a convex relaxation), the true
+objective at a candidate, and how to split a box. The engine owns the queue, pruning, stopping
+rules and the anytime result. Progress goes to a callback after every node; the callback may
+stop the search by returning True or raising StopIteration (scipy.optimize's pattern).
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Protocol
+
+import numpy as np
+
+
+class BoxStatus:
+    BOUNDED = "bounded"  # a trustworthy lower bound
+    EMPTY = "empty"  # no point of the box can beat the incumbent (or no point at all)
+    UNRESOLVED = "unresolved"  # the convex solve was not clean: keep the parent's bound
+
+
+@dataclass
+class Box:
+    lo: np.ndarray
+    hi: np.ndarray
+
+    @property
+    def width(self) -> np.ndarray:
+        return self.hi - self.lo
+
+
+@dataclass
+class BoxBound:
+    status: str
+    lower_bound: float = -math.inf
+    candidate: Any = None  # a point of the domain to try as incumbent (problem-specific)
+    split_hint: Any = None  # e.g. the relaxation's point, for the split rule
+
+
+class BranchProblem(Protocol):
+    def root_box(self) -> Box: ...
+
+    def bound(self, box: Box, upper_bound: float) -> BoxBound: ...
+
+    def objective(self, candidate: Any) -> float: ...
+
+    def improve(self, candidate: Any) -> tuple[Any, float]: ...
+
+    def split(self, box: Box, bound: BoxBound) -> list[Box]: ...
+
+
+@dataclass
+class BnbOptions:
+    rel_gap: float = 1e-3
+    abs_gap: float = 1e-9
+    max_nodes: int = 10_000
+    time_limit_s: float = 60.0
+    min_box_width: float = 1e-12  # an unresolved box smaller than this is left as an open leaf
+
+
+@dataclass
+class Progress:
+    nodes: int
+    open_boxes: int
+    lower_bound: float
+    upper_bound: float
+    gap_abs: float
+    gap_rel: float
+    elapsed_s: float
+
+
+@dataclass
+class BnbResult:
+    status: str  # optimal, node_limit, time_limit, cancelled, not_certified
+    candidate: Any
+    upper_bound: float
+    lower_bound: float
+    nodes: int
+    leaves: int  # boxes closed by their bound (pruned or empty) plus open ones at the stop
+    unresolved: int
+    elapsed_s: float
+    tolerance: float
+    leaf_boxes: list[tuple[Box, float]] = field(default_factory=list)
+
+    @property
+    def gap(self) -> float:
+        return self.upper_bound - self.lower_bound
+
+
+def tolerance(upper_bound: float, options: BnbOptions) -> float:
+    if not math.isfinite(upper_bound):
+        return options.abs_gap
+    return max(options.abs_gap, options.rel_gap * abs(upper_bound))
+
+
+def relative_gap(upper_bound: float, lower_bound: float) -> float:
+    if not math.isfinite(upper_bound) or not math.isfinite(lower_bound):
+        return math.inf
+    if upper_bound == 0:
+        return 0.0 if lower_bound >= 0 else math.inf
+    return max(0.0, (upper_bound - lower_bound) / abs(upper_bound))
+
+
+def branch_and_bound(
+    problem: BranchProblem,
+    incumbent: Any,
+    upper_bound: float,
+    options: BnbOptions,
+    callback: Callable[[Progress], bool | None] | None = None,
+    trivial_lower_bound: float = 0.0,
+    keep_leaves: bool = False,
+) -> BnbResult:
+    """Minimise the problem's objective over its root box, returning an anytime certified result.
+
+    ``trivial_lower_bound`` is a bound valid everywhere (0 for sums of residual norms); an
+    unresolved box that cannot be split further falls back to it, never to a guess.
+    """
+    start = time.perf_counter()
+    counter = itertools.count()
+    heap: list[tuple[float, int, Box, BoxBound]] = []
+    closed_min = math.inf  # smallest bound among boxes closed by pruning
+    closed_count = 0
+    unresolved = 0
+    nodes = 0
+    leaf_boxes: list[tuple[Box, float]] = []
+    stuck: list[tuple[Box, float]] = []
+
+    def close(box: Box, bound: float) -> None:
+        nonlocal closed_min, closed_count
+        closed_min = min(closed_min, bound)
+        closed_count += 1
+        if keep_leaves:
+            leaf_boxes.append((box, bound))
+
+    def consider(box: Box, parent_bound: float) -> None:
+        nonlocal nodes, incumbent, upper_bound, unresolved
+        nodes += 1
+        result = problem.bound(box, upper_bound)
+        if result.candidate is not None:
+            value = problem.objective(result.candidate)
+            if value < upper_bound - tolerance(upper_bound, options):
+                result.candidate, value = problem.improve(result.candidate)
+            if value < upper_bound:
+                incumbent, upper_bound = result.candidate, value
+        if result.status == BoxStatus.EMPTY:
+            # Nothing in this box beats the incumbent of the moment: that value bounds it.
+            close(box, max(parent_bound, upper_bound))
+            return
+        if result.status == BoxStatus.UNRESOLVED:
+            unresolved += 1
+            if float(np.max(box.width)) <= options.min_box_width:
+                # Cannot be bounded and too small to split: it keeps only the trivial bound.
+                stuck.append((box, trivial_lower_bound))
+                return
+            bound = parent_bound
+        else:
+            bound = max(parent_bound, result.lower_bound)
+        if bound >= upper_bound - tolerance(upper_bound, options):
+            close(box, bound)
+        else:
+            heapq.heappush(heap, (bound, next(counter), box, result))
+
+    def global_lower_bound() -> float:
+        open_min = heap[0][0] if heap else math.inf
+        stuck_min = trivial_lower_bound if stuck else math.inf
+        value = min(open_min, closed_min, stuck_min)
+        return value if math.isfinite(value) else upper_bound
+
+    status = "optimal"
+    consider(problem.root_box(), trivial_lower_bound)
+    while True:
+        lower = global_lower_bound()
+        if upper_bound - lower <= tolerance(upper_bound, options):
+            status = "optimal"
+            break
+        if not heap:
+            status = "not_certified"
+            break
+        elapsed = time.perf_counter() - start
+        if callback is not None:
+            progress = Progress(
+                nodes, len(heap), lower, upper_bound, upper_bound - lower,
+                relative_gap(upper_bound, lower), elapsed,
+            )
+            try:
+                if callback(progress):
+                    status = "cancelled"
+                    break
+            except StopIteration:
+                status = "cancelled"
+                break
+        if nodes >= options.max_nodes:
+            status = "node_limit"
+            break
+        if elapsed >= options.time_limit_s:
+            status = "time_limit"
+            break
+        bound, _, box, box_bound = heapq.heappop(heap)
+        if bound >= upper_bound - tolerance(upper_bound, options):
+            close(box, bound)
+            continue
+        for child in problem.split(box, box_bound):
+            consider(child, bound)
+
+    lower = global_lower_bound()
+    lower = max(lower, trivial_lower_bound)
+    if keep_leaves:
+        leaf_boxes.extend((box, b) for b, _, box, _ in heap)
+        leaf_boxes.extend(stuck)
+    return BnbResult(
+        status=status,
+        candidate=incumbent,
+        upper_bound=upper_bound,
+        lower_bound=min(lower, upper_bound),
+        nodes=nodes,
+        leaves=closed_count + len(heap) + len(stuck),
+        unresolved=unresolved,
+        elapsed_s=time.perf_counter() - start,
+        tolerance=tolerance(upper_bound, options),
+        leaf_boxes=leaf_boxes,
+    )

@@ -1,0 +1,162 @@
+"""The one place that talks to the conic solver (Clarabel), and the map from its statuses to ours.
+
+Inner-loop relaxations assemble sparse data themselves and call :func:`solve_conic`; cvxpy is
+kept out of the hot path (it costs milliseconds of compilation per problem).
+
+Conic form (Clarabel's): minimise ``q'x`` subject to ``A x + s = b``, ``s`` in the product cone.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import clarabel
+import numpy as np
+import scipy.sparse as sp
+
+
+class ConicStatus(enum.Enum):
+    OPTIMAL = "optimal"  # a clean optimum: its bound may be trusted
+    INFEASIBLE = "infeasible"  # a Farkas certificate of primal infeasibility
+    UNBOUNDED = "unbounded"  # a certificate of dual infeasibility
+    INACCURATE = "inaccurate"  # "almost" answers: never used to prune or certify
+    FAILED = "failed"  # iteration/time limits, numerical failure
+
+
+# Explicit and exhaustive: a status Clarabel adds later falls to FAILED, never to OPTIMAL.
+_CLARABEL_STATUS = {
+    "Solved": ConicStatus.OPTIMAL,
+    "PrimalInfeasible": ConicStatus.INFEASIBLE,
+    "DualInfeasible": ConicStatus.UNBOUNDED,
+    "AlmostSolved": ConicStatus.INACCURATE,
+    "AlmostPrimalInfeasible": ConicStatus.INACCURATE,
+    "AlmostDualInfeasible": ConicStatus.INACCURATE,
+    "MaxIterations": ConicStatus.FAILED,
+    "MaxTime": ConicStatus.FAILED,
+    "NumericalError": ConicStatus.FAILED,
+    "InsufficientProgress": ConicStatus.FAILED,
+    "CallbackTerminated": ConicStatus.FAILED,
+    "Unsolved": ConicStatus.FAILED,
+}
+
+
+def map_clarabel_status(status) -> ConicStatus:
+    return _CLARABEL_STATUS.get(str(status), ConicStatus.FAILED)
+
+
+@dataclass
+class ConeSpec:
+    """Cone layout of the rows of ``A``: ``zero`` equalities, ``nonneg`` inequalities, then SOCs."""
+
+    zero: int = 0
+    nonneg: int = 0
+    soc: tuple[int, ...] = ()
+
+    def clarabel_cones(self) -> list:
+        cones = []
+        if self.zero:
+            cones.append(clarabel.ZeroConeT(self.zero))
+        if self.nonneg:
+            cones.append(clarabel.NonnegativeConeT(self.nonneg))
+        cones.extend(clarabel.SecondOrderConeT(d) for d in self.soc)
+        return cones
+
+    @property
+    def rows(self) -> int:
+        return self.zero + self.nonneg + sum(self.soc)
+
+
+@dataclass
+class ConicResult:
+    status: ConicStatus
+    x: np.ndarray | None
+    z: np.ndarray | None  # dual vector, for certificates
+    primal_objective: float
+    dual_objective: float
+    raw_status: str
+
+    @property
+    def lower_bound(self) -> float:
+        # Both objectives bound the optimum within the solver's tolerance; the smaller is the safer.
+        return min(self.primal_objective, self.dual_objective)
+
+
+def _settings() -> clarabel.DefaultSettings:
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.max_iter = 100
+    settings.tol_gap_abs = 1e-9
+    settings.tol_gap_rel = 1e-9
+    settings.tol_feas = 1e-9
+    return settings
+
+
+_SETTINGS = _settings()
+
+
+def solve_conic(q: np.ndarray, A: sp.csc_matrix, b: np.ndarray, cones: ConeSpec) -> ConicResult:
+    """Solve a linear-objective conic program; never raises on solver trouble, reports it instead."""
+    n = q.shape[0]
+    P = sp.csc_matrix((n, n))
+    try:
+        solver = clarabel.DefaultSolver(P, q, A, b, cones.clarabel_cones(), _SETTINGS)
+        solution = solver.solve()
+    except BaseException as exc:  # Clarabel raises on malformed data (panic) as a Python exception
+        if isinstance(exc, (KeyboardInterrupt, SystemExit)):
+            raise
+        return ConicResult(ConicStatus.FAILED, None, None, np.nan, np.nan, f"exception: {exc}")
+    return _result(solution)
+
+
+def _result(solution) -> ConicResult:
+    status = map_clarabel_status(solution.status)
+    x = np.asarray(solution.x, dtype=float)
+    z = np.asarray(solution.z, dtype=float)
+    if status is ConicStatus.OPTIMAL and not (np.all(np.isfinite(x)) and np.isfinite(solution.obj_val)):
+        status = ConicStatus.FAILED
+    return ConicResult(
+        status=status,
+        x=x,
+        z=z,
+        primal_objective=float(solution.obj_val),
+        dual_objective=float(solution.obj_val_dual),
+        raw_status=str(solution.status),
+    )
+
+
+class ReusableConicProgram:
+    """A conic program re-solved with new numbers but the same shape, as in branch and bound.
+
+    Keeps the CSC structure and the Clarabel solver (its symbolic factorisation) while the
+    sparsity pattern and cones stay the same, and updates the data in place; any change of
+    pattern rebuilds both, so reuse can never alter the problem solved.
+    """
+
+    def __init__(self) -> None:
+        self._key = None
+        self._mask: np.ndarray | None = None
+        self._csc: sp.csc_matrix | None = None
+        self._solver = None
+
+    def solve(self, q: np.ndarray, A_dense: np.ndarray, b: np.ndarray, cones: ConeSpec) -> ConicResult:
+        key = (A_dense.shape, cones.zero, cones.nonneg, cones.soc)
+        mask = A_dense != 0
+        try:
+            if key == self._key and np.array_equal(mask, self._mask):
+                self._csc.data[:] = A_dense.T[mask.T]
+                self._solver.update(q=q, b=b, A=self._csc)
+            else:
+                self._key, self._mask = key, mask
+                self._csc = sp.csc_matrix(A_dense)
+                n = q.shape[0]
+                self._solver = clarabel.DefaultSolver(
+                    sp.csc_matrix((n, n)), q, self._csc, b, cones.clarabel_cones(), _SETTINGS
+                )
+            solution = self._solver.solve()
+        except BaseException as exc:
+            if isinstance(exc, (KeyboardInterrupt, SystemExit)):
+                raise
+            self._key = None
+            return ConicResult(ConicStatus.FAILED, None, None, np.nan, np.nan, f"exception: {exc}")
+        return _result(solution)
