@@ -86,6 +86,9 @@ class _Chart:
 
     def __init__(self, cameras: np.ndarray, points: np.ndarray, reference: int):
         self.reference = reference
+        frame = _camera_frame(cameras)
+        cameras = cameras @ frame
+        cameras = cameras / np.linalg.norm(cameras[:, 2, :3], axis=1)[:, None, None]
         depth_row = cameras[reference, 2]
         _, _, vt = np.linalg.svd(depth_row[None, :])
         self.T = np.column_stack([vt[1], vt[2], vt[3], depth_row / (depth_row @ depth_row)])
@@ -93,6 +96,7 @@ class _Chart:
         shifted[:, 0] -= points[:, 0:1] * cameras[:, 2]
         shifted[:, 1] -= points[:, 1:2] * cameras[:, 2]
         M = shifted @ self.T  # (k, 3, 4)
+        self.T = frame @ self.T  # from chart coordinates to the caller's frame
         grad = np.linalg.norm(M[:, 2, :3], axis=1)
         self.exact = grad <= 1e-9 * np.linalg.norm(M[:, 2], axis=1)
         self.exact[reference] = True
@@ -133,6 +137,37 @@ class _Chart:
         Y = np.append(y, 1.0)
         return ((self.num @ Y) / (self.den @ Y)[:, None]).ravel()
 
+    def residual_jacobian(self, y: np.ndarray) -> np.ndarray:
+        Y = np.append(y, 1.0)
+        n, g = self.num @ Y, self.den @ Y  # (k, 2), (k,)
+        jac = self.num[:, :, :3] / g[:, None, None] - n[:, :, None] * self.den[:, None, :3] / (g**2)[:, None, None]
+        return jac.reshape(-1, 3)
+
+
+def camera_centres(cameras: np.ndarray) -> np.ndarray:
+    """Null vectors of the (k, 3, 4) cameras, signed so that the last coordinate is not negative."""
+    centres = np.linalg.svd(cameras)[2][:, -1, :]
+    return centres * np.where(centres[:, 3:4] < 0, -1.0, 1.0)
+
+
+def _camera_frame(cameras: np.ndarray) -> np.ndarray:
+    """A 4x4 similarity H (X = H X') centring the camera centres with unit mean distance.
+
+    Only conditioning: the problem is the same in any frame, and H keeps the last coordinate.
+    """
+    centres = camera_centres(cameras)
+    finite = np.abs(centres[:, 3]) > 1e-9 * np.linalg.norm(centres, axis=1)
+    H = np.eye(4)
+    if np.any(finite):
+        euclid = centres[finite, :3] / centres[finite, 3:4]
+        middle = euclid.mean(axis=0)
+        spread = float(np.mean(np.linalg.norm(euclid - middle, axis=1)))
+        if not spread > 0:
+            spread = 1.0
+        H[:3, :3] *= spread
+        H[:3, 3] = middle
+    return H
+
 
 def gamma_for(upper_bound: float, norm: str) -> float:
     """Largest single residual (2-norm) a point costing less than ``upper_bound`` can have."""
@@ -144,22 +179,15 @@ def _choose_reference(cameras: np.ndarray, points: np.ndarray) -> int:
 
     A centre inside another view's residual cone makes the chart's region unbounded.
     """
-    best, best_score = 0, -math.inf
-    for r in range(len(cameras)):
-        centre = np.linalg.svd(cameras[r])[2][-1]
-        if abs(centre[3]) > 1e-12 * np.linalg.norm(centre):
-            centre = centre * np.sign(centre[3])
-        score = math.inf
-        for j in range(len(cameras)):
-            if j == r:
-                continue
-            p = cameras[j] @ centre
-            if p[2] <= 1e-12 * np.linalg.norm(p):
-                continue  # behind camera j, or at infinity: outside its cone
-            score = min(score, float(np.linalg.norm(p[:2] / p[2] - points[j])))
-        if score > best_score:
-            best, best_score = r, score
-    return best
+    centres = camera_centres(cameras)
+    proj = np.einsum("jab,rb->rja", cameras, centres)  # centre r seen by camera j
+    depth = proj[:, :, 2]
+    safe = np.where(depth > 1e-12 * np.linalg.norm(proj, axis=2), depth, np.nan)
+    distance = np.linalg.norm(proj[:, :, :2] / safe[:, :, None] - points[None], axis=2)
+    # Behind camera j (or at infinity) is outside its cone: as good as infinitely far.
+    distance = np.where(np.isnan(distance), np.inf, distance)
+    np.fill_diagonal(distance, np.inf)
+    return int(np.argmax(distance.min(axis=1)))
 
 
 def _branch_directions(chart: _Chart) -> np.ndarray:
@@ -357,14 +385,18 @@ def local_refine(chart: _Chart, y: np.ndarray, norm: str) -> tuple[np.ndarray, f
     best_y, best_cost = y, start_cost
     try:
         if norm == "L2L2":
-            fit = scipy.optimize.least_squares(chart.residual_vector, y, method="lm", max_nfev=60)
+            fit = scipy.optimize.least_squares(
+                chart.residual_vector, y, jac=chart.residual_jacobian, method="lm", max_nfev=30)
             trial = fit.x
         else:
-            fit = scipy.optimize.minimize(
-                lambda v: chart.cost(v, norm), y, method="Nelder-Mead",
-                options={"maxfev": 300, "xatol": 1e-10, "fatol": 1e-12 * max(start_cost, 1e-300)},
-            )
-            trial = fit.x
+            # sum_i sqrt(term_i)^2 is the cost; the square roots make it a least-squares problem.
+            def roots(v: np.ndarray) -> np.ndarray:
+                r = chart.residual_vector(v).reshape(-1, 2)
+                terms = np.linalg.norm(r, axis=1) if norm == "L2L1" else np.abs(r).ravel()
+                # zero padding: MINPACK's LM needs at least as many residuals as unknowns
+                return np.concatenate([np.sqrt(terms + 1e-30), np.zeros(max(0, 3 - terms.size))])
+
+            trial = scipy.optimize.least_squares(roots, y, method="lm", max_nfev=100).x
         trial_cost = chart.cost(trial, norm)
         if trial_cost < best_cost:
             best_y, best_cost = trial, trial_cost
@@ -381,22 +413,26 @@ def _dlt_in_chart(chart: _Chart) -> np.ndarray | None:
     return Y[:3] / Y[3]
 
 
+def _residual_region(chart: _Chart, gamma: float) -> tuple[sp.csc_matrix, np.ndarray, ConeSpec]:
+    """Conic data of {y : ||residual_i(y)|| <= gamma for every view, last coordinate >= 0}.
+
+    ``||n_i|| <= gamma * g_i`` also puts the point in front of every camera (g_i >= 0).
+    """
+    rows = [np.append(chart.x4[:3], chart.x4[3])]
+    for view in range(len(chart.num)):
+        rows += [gamma * chart.den[view], chart.num[view, 0], chart.num[view, 1]]
+    E = np.array(rows)  # each row: coefficients of y, then the constant
+    cones = ConeSpec(nonneg=1, soc=(3,) * len(chart.num))
+    return sp.csc_matrix(-E[:, :3]), E[:, 3].copy(), cones
+
+
 def _front_point(chart: _Chart) -> np.ndarray | None:
     """A point in front of every camera with small max residual (bisection on the L-infinity cost).
 
     Used only when the DLT point is behind a camera; None when no point is in front of all.
     """
     def feasible(gamma: float) -> np.ndarray | None:
-        n, rows, socs = 3, [], []
-        lin = [(-chart.x4[:3], chart.x4[3])]
-        for view in range(len(chart.num)):
-            socs.append([(-gamma * chart.den[view, :3], gamma * chart.den[view, 3]),
-                         (-chart.num[view, 0, :3], chart.num[view, 0, 3]),
-                         (-chart.num[view, 1, :3], chart.num[view, 1, 3])])
-        rows = lin + [r for cone in socs for r in cone]
-        A = sp.csc_matrix(np.array([a for a, _ in rows]).reshape(-1, n))
-        b = np.array([c for _, c in rows])
-        res = solve_conic(np.zeros(n), A, b, ConeSpec(nonneg=1, soc=tuple(3 for _ in socs)))
+        res = solve_conic(np.zeros(3), *_residual_region(chart, gamma))
         if res.status is ConicStatus.OPTIMAL and math.isfinite(chart.cost(res.x, "L2L2")):
             return res.x
         return None
@@ -420,28 +456,20 @@ def _front_point(chart: _Chart) -> np.ndarray | None:
 
 def _root_region(chart: _Chart, B: np.ndarray, gamma: float) -> tuple[str, Box | None]:
     """Bound B y over {every residual <= gamma, in front of every camera}: six small SOCPs."""
-    n = 3
-    rows = [(-chart.x4[:3], chart.x4[3])]
-    socs = []
-    for view in range(len(chart.num)):
-        socs.append([(-gamma * chart.den[view, :3], gamma * chart.den[view, 3]),
-                     (-chart.num[view, 0, :3], chart.num[view, 0, 3]),
-                     (-chart.num[view, 1, :3], chart.num[view, 1, 3])])
-    rows += [r for cone in socs for r in cone]
-    A = sp.csc_matrix(np.array([a for a, _ in rows]).reshape(-1, n))
-    b = np.array([c for _, c in rows])
-    cones = ConeSpec(nonneg=1, soc=tuple(3 for _ in socs))
+    A, b, cones = _residual_region(chart, gamma)
+    A = A.toarray()
+    program = ReusableConicProgram()  # six objectives over one feasible set
     lo, hi = np.zeros(3), np.zeros(3)
     for k in range(3):
         for sign, out in ((1.0, lo), (-1.0, hi)):
-            res = solve_conic(sign * B[k], A, b, cones)
+            res = program.solve(sign * B[k], A, b, cones)
             if res.status is ConicStatus.UNBOUNDED:
                 return "degenerate", None
             if res.status is ConicStatus.INFEASIBLE:
                 return "infeasible", None
             if res.status is not ConicStatus.OPTIMAL:
                 return "not_certified", None
-            out[k] = sign * res.lower_bound if sign > 0 else -res.lower_bound
+            out[k] = sign * res.lower_bound  # min(primal, dual): the outer side for both ends
     pad = 1e-7 * (1 + np.abs(lo) + np.abs(hi))
     return "ok", Box(lo - pad, hi + pad)
 
