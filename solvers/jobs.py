@@ -1,0 +1,270 @@
+"""Problem kinds and the job model shared by the CLI, the workers and the API.
+
+A job is ``{"kind", "data", "options"}``. Each kind parses its data (raising InputError that names
+the field), says how many independent items it holds (tracks, maps, ...), solves one item, and
+assembles the result document. Items are solved on their own, so a batch can be split into
+chunks that run anywhere and are put back together in input order.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from .bnb import Progress
+from .geometry import InputError, check_cameras
+from .triangulation import NORMS, TrackResult, TriangulationOptions, triangulate
+
+ProgressSink = Callable[[dict], None]
+StopCheck = Callable[[], bool]
+
+
+def finite_or_none(value: float | None) -> float | None:
+    return value if value is not None and math.isfinite(value) else None
+
+
+def options_from(options_type: type, given: dict | None, field: str = "options"):
+    """Build an options dataclass from a dict, naming any unknown or ill-typed option."""
+    given = dict(given or {})
+    names = {f.name for f in dataclasses.fields(options_type)}
+    for key in given:
+        if key not in names:
+            raise InputError(f"{field}/{key}", f"unknown option (known: {', '.join(sorted(names))})")
+    defaults = options_type()
+    for key, value in given.items():
+        default = getattr(defaults, key)
+        if isinstance(default, str) and not isinstance(value, str):
+            raise InputError(f"{field}/{key}", "must be a string")
+        numeric = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if (isinstance(default, (int, float)) or (default is None and value is not None)) and not numeric:
+            raise InputError(f"{field}/{key}", "must be a number")
+        if isinstance(default, int) and not isinstance(default, bool) and not isinstance(value, int):
+            raise InputError(f"{field}/{key}", "must be an integer")
+    options = options_type(**given)
+    options.check()
+    return options
+
+
+@dataclass
+class TriangulationData:
+    cameras: np.ndarray  # (N, 3, 4)
+    tracks: list[tuple[list[int], np.ndarray]]
+
+
+class TriangulationKind:
+    name = "triangulation"
+    options_type = TriangulationOptions
+    item_name = "tracks"
+    description = "N-view triangulation: the 3D point minimising reprojection error, certified globally optimal."
+
+    def parse(self, data: Any) -> TriangulationData:
+        if not isinstance(data, dict):
+            raise InputError("data", "must be an object with 'cameras' and 'tracks'")
+        for key in ("cameras", "tracks"):
+            if key not in data:
+                raise InputError(f"data/{key}", "is required")
+        try:
+            cameras = np.asarray(data["cameras"], dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise InputError("data/cameras", "must be a list of 3x4 numeric matrices") from exc
+        cameras = check_cameras(cameras, "data/cameras")
+        if not isinstance(data["tracks"], list) or not data["tracks"]:
+            raise InputError("data/tracks", "must be a non-empty list")
+        tracks = []
+        for i, track in enumerate(data["tracks"]):
+            where = f"data/tracks/{i}"
+            if not isinstance(track, dict) or "views" not in track or "points" not in track:
+                raise InputError(where, "must be an object with 'views' and 'points'")
+            views, points = track["views"], track["points"]
+            if not isinstance(views, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in views):
+                raise InputError(f"{where}/views", "must be a list of camera indices")
+            try:
+                pts = np.asarray(points, dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise InputError(f"{where}/points", "must be a list of [u, v] pairs") from exc
+            if pts.ndim != 2 or pts.shape[1] != 2:
+                raise InputError(f"{where}/points", "must be a list of [u, v] pairs")
+            if len(views) != len(pts):
+                raise InputError(where, f"has {len(views)} views but {len(pts)} points")
+            if len(views) < 2:
+                raise InputError(f"{where}/views", "a track needs at least 2 views")
+            for j, v in enumerate(views):
+                if not 0 <= v < len(cameras):
+                    raise InputError(f"{where}/views/{j}", f"camera index {v} out of range 0..{len(cameras) - 1}")
+            if len(set(views)) != len(views):
+                raise InputError(f"{where}/views", "a camera appears twice in the track")
+            bad = np.argwhere(~np.isfinite(pts))
+            if len(bad):
+                raise InputError(f"{where}/points/{bad[0][0]}", "contains a non-finite number")
+            tracks.append((list(views), pts))
+        return TriangulationData(cameras, tracks)
+
+    def count(self, parsed: TriangulationData) -> int:
+        return len(parsed.tracks)
+
+    def solve_item(self, parsed: TriangulationData, index: int, options: TriangulationOptions,
+                   callback: Callable[[Progress], bool | None] | None) -> dict:
+        views, points = parsed.tracks[index]
+        return track_document(triangulate(parsed.cameras[views], points, options, callback))
+
+    def cancelled_item(self) -> dict:
+        return track_document(TrackResult("cancelled", False, reason="the job was cancelled before this track started"))
+
+    def assemble(self, options: TriangulationOptions, items: list[dict], stats: dict) -> dict:
+        return {"kind": self.name, "norm": options.norm, "tracks": items, "stats": stats}
+
+
+def track_document(result: TrackResult) -> dict:
+    certificate = None
+    if result.certificate is not None:
+        c = result.certificate
+        certificate = {
+            "scope": c.scope,
+            "root_region": {
+                "reference_view": c.reference_view,
+                "functionals": c.functionals,
+                "lower": c.lower,
+                "upper": c.upper,
+                "meaning": "lower <= (F X) / (P_ref[2] . X) <= upper for every point of the scope, "
+                           "F = functionals, P_ref the reference view's camera",
+            },
+            "tolerance": finite_or_none(c.tolerance),
+            "tolerance_met": c.tolerance_met,
+            "leaves": c.leaves,
+        }
+    elif result.certified:
+        certificate = {"scope": "every point in front of every camera", "root_region": None,
+                       "tolerance": 0.0, "tolerance_met": True, "leaves": 0,
+                       "note": "the incumbent's cost is within abs_gap of the trivial bound 0"}
+    return {
+        "point": result.point,
+        "at_infinity": result.at_infinity,
+        "cost": finite_or_none(result.cost),
+        "lower_bound": finite_or_none(result.lower_bound),
+        "gap": finite_or_none(result.gap),
+        "status": result.status,
+        "certified": result.certified,
+        "nodes": result.nodes,
+        "elapsed_s": result.elapsed_s,
+        "reason": result.reason,
+        "certificate": certificate,
+    }
+
+
+KINDS = {kind.name: kind for kind in (TriangulationKind(),)}
+
+
+def get_kind(name: Any):
+    if name not in KINDS:
+        raise InputError("kind", f"unknown problem kind {name!r} (served: {', '.join(KINDS)})")
+    return KINDS[name]
+
+
+def default_options(kind) -> dict:
+    return dataclasses.asdict(kind.options_type())
+
+
+class ItemProgress:
+    """Aggregates progress over the items of a chunk: finished items plus the one running."""
+
+    def __init__(self, total: int, sink: ProgressSink | None, should_stop: StopCheck | None):
+        self.total = total
+        self.sink = sink
+        self.should_stop = should_stop
+        self.done = 0
+        self.nodes_done = 0
+        self.lower_done = 0.0
+        self.upper_done = 0.0
+        self.worst_gap_rel = 0.0
+        self.start = time.perf_counter()
+        self.stopped = False
+
+    def finished(self, item: dict) -> None:
+        self.done += 1
+        self.nodes_done += item["nodes"]
+        if item["cost"] is not None and item["lower_bound"] is not None:
+            self.lower_done += item["lower_bound"]
+            self.upper_done += item["cost"]
+            if item["cost"] > 0:
+                self.worst_gap_rel = max(self.worst_gap_rel, (item["cost"] - item["lower_bound"]) / item["cost"])
+        self.emit(None)
+
+    def emit(self, running: Progress | None) -> None:
+        if self.sink is None:
+            return
+        lower, upper, nodes, gap_rel, open_boxes = self.lower_done, self.upper_done, self.nodes_done, self.worst_gap_rel, 0
+        if running is not None:
+            nodes += running.nodes
+            open_boxes = running.open_boxes
+            if math.isfinite(running.lower_bound) and math.isfinite(running.upper_bound):
+                lower += running.lower_bound
+                upper += running.upper_bound
+                gap_rel = max(gap_rel, running.gap_rel)
+        self.sink({
+            "nodes": nodes, "open_boxes": open_boxes,
+            "lower_bound": lower, "upper_bound": upper, "gap_abs": max(0.0, upper - lower),
+            "gap_rel": finite_or_none(gap_rel), "tracks_done": self.done, "tracks_total": self.total,
+            "elapsed_s": time.perf_counter() - self.start,
+        })
+
+    def engine_callback(self, progress: Progress) -> bool:
+        if self.should_stop is not None and self.should_stop():
+            self.stopped = True
+            return True
+        self.emit(progress)
+        return False
+
+
+def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None = None,
+                should_stop: StopCheck | None = None, total: int | None = None) -> list[dict]:
+    """Solve the given items in order; once stopped, the rest are marked cancelled unsolved."""
+    tracker = ItemProgress(total if total is not None else len(indices), sink, should_stop)
+    items = []
+    for index in indices:
+        if tracker.stopped or (should_stop is not None and should_stop()):
+            tracker.stopped = True
+            items.append(kind.cancelled_item())
+            continue
+        item = kind.solve_item(parsed, index, options, tracker.engine_callback)
+        items.append(item)
+        tracker.finished(item)
+    return items
+
+
+def job_stats(items: list[dict], elapsed_s: float) -> dict:
+    statuses: dict[str, int] = {}
+    for item in items:
+        statuses[item["status"]] = statuses.get(item["status"], 0) + 1
+    return {
+        "items": len(items),
+        "certified": sum(1 for item in items if item["certified"]),
+        "nodes": sum(item["nodes"] for item in items),
+        "solve_s": sum(item["elapsed_s"] for item in items),
+        "elapsed_s": elapsed_s,
+        "statuses": statuses,
+    }
+
+
+def solve_job(job: dict, sink: ProgressSink | None = None, should_stop: StopCheck | None = None) -> dict:
+    """Run a whole job in this process (the CLI's path): parse, solve every item, assemble."""
+    kind, parsed, options = parse_job(job)
+    start = time.perf_counter()
+    items = solve_items(kind, parsed, options, range(kind.count(parsed)), sink, should_stop)
+    return kind.assemble(options, items, job_stats(items, time.perf_counter() - start))
+
+
+def parse_job(job: Any):
+    if not isinstance(job, dict):
+        raise InputError("", "a job must be an object with 'kind', 'data' and optional 'options'")
+    kind = get_kind(job.get("kind"))
+    options = options_from(kind.options_type, job.get("options"))
+    parsed = kind.parse(job.get("data"))
+    return kind, parsed, options
+
+
+__all__ = ["KINDS", "NORMS", "get_kind", "parse_job", "solve_job", "solve_items", "job_stats", "default_options"]
