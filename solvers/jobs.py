@@ -89,10 +89,10 @@ class TriangulationKind:
                 raise InputError(f"{where}/points", "must be a list of [u, v] pairs") from exc
             if pts.ndim != 2 or pts.shape[1] != 2:
                 raise InputError(f"{where}/points", "must be a list of [u, v] pairs")
-            if len(views) != len(pts):
-                raise InputError(where, f"has {len(views)} views but {len(pts)} points")
             if len(views) < 2:
                 raise InputError(f"{where}/views", "a track needs at least 2 views")
+            if len(views) != len(pts):
+                raise InputError(where, f"has {len(views)} views but {len(pts)} points")
             for j, v in enumerate(views):
                 if not 0 <= v < len(cameras):
                     raise InputError(f"{where}/views/{j}", f"camera index {v} out of range 0..{len(cameras) - 1}")
@@ -128,10 +128,11 @@ def track_document(result: TrackResult) -> dict:
             "root_region": {
                 "reference_view": c.reference_view,
                 "functionals": c.functionals,
+                "denominator": c.denominator,
                 "lower": c.lower,
                 "upper": c.upper,
-                "meaning": "lower <= (F X) / (P_ref[2] . X) <= upper for every point of the scope, "
-                           "F = functionals, P_ref the reference view's camera",
+                "meaning": "lower <= (F X) / (d . X) <= upper for every point X of the scope, "
+                           "F = functionals, d = denominator (positive in front of the reference view)",
             },
             "tolerance": finite_or_none(c.tolerance),
             "tolerance_met": c.tolerance_met,

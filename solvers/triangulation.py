@@ -52,8 +52,10 @@ class TriangulationOptions:
 class Certificate:
     scope: str
     reference_view: int  # index into the track's views
-    # Root region: lower <= (F X) / (pi_ref . X) <= upper, F's rows in the original 3D frame.
+    # Root region: lower <= (F X) / (d . X) <= upper for X in the caller's 3D frame, with
+    # d . X > 0 exactly when X is in front of the reference view.
     functionals: list[list[float]]
+    denominator: list[float]
     lower: list[float]
     upper: list[float]
     tolerance: float
@@ -474,45 +476,34 @@ def _root_region(chart: _Chart, B: np.ndarray, gamma: float) -> tuple[str, Box |
     return "ok", Box(lo - pad, hi + pad)
 
 
-def triangulate(
-    cameras: np.ndarray,
-    points: np.ndarray,
-    options: TriangulationOptions | None = None,
-    callback: Callable[[Progress], bool | None] | None = None,
-) -> TrackResult:
-    """Certified global optimum of one track: ``cameras`` (k, 3, 4) of its views, ``points`` (k, 2)."""
-    options = options or TriangulationOptions()
-    start = time.perf_counter()
+def prepare_track(cameras: np.ndarray, points: np.ndarray, options: TriangulationOptions) -> "TrackProblem | TrackResult":
+    """Chart, incumbent and root region of one track; a TrackResult when it ends before any search.
+
+    The returned problem carries ``incumbent``, ``upper`` (its scaled cost) and ``unit``
+    (scaled cost = unit * cost in pixels) for :func:`triangulate`, and for the property tests.
+    """
     cameras = np.asarray(cameras, dtype=float)
     points = np.asarray(points, dtype=float)
     norm = options.norm
-
-    def finish(result: TrackResult) -> TrackResult:
-        result.elapsed_s = time.perf_counter() - start
-        return result
-
-    reference = _choose_reference(cameras, points)
-    chart = _Chart(cameras, points, reference)
+    chart = _Chart(cameras, points, _choose_reference(cameras, points))
     if chart.constant_depth_behind:
-        return finish(TrackResult("infeasible", False, reason="no point is in front of every camera"))
+        return TrackResult("infeasible", False, reason="no point is in front of every camera")
 
     y0 = _dlt_in_chart(chart)
     if y0 is None or not math.isfinite(chart.cost(y0, norm)):
         y0 = _front_point(chart)
         if y0 is None:
-            return finish(TrackResult("infeasible", False, reason="no point is in front of every camera"))
-    y0, cost0 = local_refine(chart, y0, "L2L2")
+            return TrackResult("infeasible", False, reason="no point is in front of every camera")
+    y0, _ = local_refine(chart, y0, "L2L2")
     if norm != "L2L2":
-        y0, cost0 = local_refine(chart, y0, norm)
+        y0, _ = local_refine(chart, y0, norm)
     cost0 = chart.cost(y0, norm)
-
     if cost0 <= options.abs_gap:  # the incumbent is within tolerance of the trivial bound 0
-        return finish(_track_result(chart, cameras, points, y0, norm, "optimal", cost0, 0.0, 0,
-                                    certificate=None, options=options))
+        return _track_result(chart, cameras, points, y0, norm, "optimal", cost0, 0.0, 0, None)
 
     factor = 1.0 / math.sqrt(cost0) if norm == "L2L2" else 1.0 / cost0
     chart.rescale(factor)
-    unit = factor**2 if norm == "L2L2" else factor  # scaled cost = unit * cost in pixels
+    unit = factor**2 if norm == "L2L2" else factor
     upper = chart.cost(y0, norm)
     user_gamma = options.max_residual * factor if options.max_residual is not None else None
     gamma = gamma_for(upper, norm)
@@ -526,34 +517,59 @@ def triangulate(
     if root is None:
         reasons = {
             "degenerate": "the rays are (nearly) parallel: the points within the residual bound form an unbounded set",
-            "infeasible": "no point is in front of every camera with every residual within the bound",
+            "infeasible": "no point is in front of every camera with every residual within max_residual",
             "not_certified": "the root region's bounds could not be computed accurately",
         }
         if state == "infeasible" and math.isfinite(upper):
-            state = "not_certified"
-        result = _track_result(chart, cameras, points, y0, norm, state, upper / unit if math.isfinite(upper) else None,
-                               None, 0, None, options)
+            state = "not_certified"  # the incumbent is inside: the solve, not the data, failed
+        if not math.isfinite(upper):
+            return TrackResult(state, False, reason=reasons[state])
+        result = _track_result(chart, cameras, points, y0, norm, state, upper / unit, None, 0, None)
         result.reason = reasons[state]
-        return finish(result)
+        return result
 
     problem = TrackProblem(chart, norm, user_gamma, B, root)
+    problem.incumbent, problem.upper, problem.unit = y0, upper, unit
+    return problem
+
+
+def triangulate(
+    cameras: np.ndarray,
+    points: np.ndarray,
+    options: TriangulationOptions | None = None,
+    callback: Callable[[Progress], bool | None] | None = None,
+) -> TrackResult:
+    """Certified global optimum of one track: ``cameras`` (k, 3, 4) of its views, ``points`` (k, 2)."""
+    options = options or TriangulationOptions()
+    start = time.perf_counter()
+    cameras = np.asarray(cameras, dtype=float)
+    points = np.asarray(points, dtype=float)
+    prepared = prepare_track(cameras, points, options)
+    if isinstance(prepared, TrackResult):
+        prepared.elapsed_s = time.perf_counter() - start
+        return prepared
+    problem, unit, chart = prepared, prepared.unit, prepared.chart
     bnb = branch_and_bound(
-        problem, y0, upper,
+        problem, problem.incumbent, problem.upper,
         BnbOptions(rel_gap=options.rel_gap, abs_gap=options.abs_gap * unit,
                    max_nodes=options.max_nodes, time_limit_s=options.time_limit_s),
         callback=_unscaled(callback, unit) if callback else None,
     )
     if not math.isfinite(bnb.upper_bound):
-        return finish(TrackResult("infeasible", False, nodes=bnb.nodes,
-                                  reason="no point has every residual within max_residual"))
-    tol_met = bnb.upper_bound - bnb.lower_bound <= bnb.tolerance
-    functionals = (np.hstack([B, np.zeros((3, 1))]) @ np.linalg.inv(chart.T)).tolist()
-    scope = ("every point in front of every camera" if user_gamma is None else
+        return TrackResult("infeasible", False, nodes=bnb.nodes, elapsed_s=time.perf_counter() - start,
+                           reason="no point has every residual within max_residual")
+    # Root region in the caller's frame: lower <= (F X) / (d . X) <= upper.
+    to_chart = np.linalg.inv(chart.T)
+    scope = ("every point in front of every camera" if options.max_residual is None else
              f"every point in front of every camera with every residual <= {options.max_residual} px")
-    certificate = Certificate(scope, reference, functionals, root.lo.tolist(), root.hi.tolist(),
-                              bnb.tolerance / unit, tol_met, bnb.leaves)
-    return finish(_track_result(chart, cameras, points, bnb.candidate, norm, bnb.status, bnb.upper_bound / unit,
-                                bnb.lower_bound / unit, bnb.nodes, certificate, options))
+    certificate = Certificate(
+        scope, chart.reference, (problem.B @ to_chart[:3]).tolist(), to_chart[3].tolist(),
+        problem.root.lo.tolist(), problem.root.hi.tolist(), bnb.tolerance / unit,
+        bnb.upper_bound - bnb.lower_bound <= bnb.tolerance, bnb.leaves)
+    result = _track_result(chart, cameras, points, bnb.candidate, options.norm, bnb.status,
+                           bnb.upper_bound / unit, bnb.lower_bound / unit, bnb.nodes, certificate)
+    result.elapsed_s = time.perf_counter() - start
+    return result
 
 
 def _unscaled(callback, unit: float):
@@ -563,7 +579,7 @@ def _unscaled(callback, unit: float):
     return report
 
 
-def _track_result(chart, cameras, points, y, norm, status, cost, lower, nodes, certificate, options) -> TrackResult:
+def _track_result(chart, cameras, points, y, norm, status, cost, lower, nodes, certificate) -> TrackResult:
     X = chart.homogeneous(y)
     X = X / np.linalg.norm(X)
     at_infinity = abs(X[3]) <= 1e-12

@@ -1,0 +1,79 @@
+"""Bad input names the field and the reason; the solve reports what only it can discover."""
+
+import numpy as np
+import pytest
+
+from solvers.geometry import InputError
+from solvers.jobs import parse_job, solve_job
+
+from .scenes import random_cameras
+
+
+def job(**changes):
+    rng = np.random.default_rng(0)
+    cameras = random_cameras(rng, 3).tolist()
+    body = {"kind": "triangulation",
+            "data": {"cameras": cameras, "tracks": [{"views": [0, 1], "points": [[300.0, 200.0], [310.0, 205.0]]}]},
+            "options": {"norm": "L2L2"}}
+    for path, value in changes.items():
+        target = body
+        keys = path.split("__")
+        for key in keys[:-1]:
+            target = target[int(key)] if key.isdigit() else target[key]
+        last = keys[-1]
+        target[int(last) if last.isdigit() else last] = value
+    return body
+
+
+class TestParse:
+    @pytest.mark.parametrize("changes, field", [
+        ({"kind": "nope"}, "kind"),
+        ({"data__tracks__0__views": [0]}, "data/tracks/0/views"),
+        ({"data__tracks__0__points": [[1.0, 2.0]]}, "data/tracks/0"),
+        ({"data__tracks__0__views": [0, 7]}, "data/tracks/0/views/1"),
+        ({"data__tracks__0__views": [1, 1]}, "data/tracks/0/views"),
+        ({"data__tracks__0__points": [[float("nan"), 1.0], [1.0, 2.0]]}, "data/tracks/0/points/0"),
+        ({"data__cameras__1": [[1, 0, 0, 0], [2, 0, 0, 0], [0, 0, 1, 0]]}, "data/cameras/1"),
+        ({"data__cameras__2": [[1, 0, 0, 0], [0, 1, 0, 0]]}, "data/cameras"),
+        ({"data__tracks": []}, "data/tracks"),
+        ({"options": {"norm": "L3"}}, "options/norm"),
+        ({"options": {"rel_gap": -1}}, "options/rel_gap"),
+        ({"options": {"rel_gap": "small"}}, "options/rel_gap"),
+        ({"options": {"max_nodes": 1.5}}, "options/max_nodes"),
+        ({"options": {"colour": "red"}}, "options/colour"),
+        ({"options": {"max_residual": 0}}, "options/max_residual"),
+    ])
+    def test_error_names_the_field(self, changes, field):
+        with pytest.raises(InputError) as error:
+            parse_job(job(**changes))
+        assert error.value.field == field
+        assert error.value.reason
+
+
+class TestSolveTimeStatuses:
+    def test_no_point_in_front_of_both_cameras(self):
+        # Two cameras facing each other along z, observations that only a point behind one fits.
+        P1 = np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]])
+        P2 = np.array([[-1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 10]])  # at z = 10 looking back
+        body = {"kind": "triangulation", "data": {"cameras": [P1.tolist(), P2.tolist()], "tracks": [
+            {"views": [0, 1], "points": [[0.1, 0.0], [0.1, 0.0]]}]}}
+        track = solve_job(body)["tracks"][0]
+        # Every point in front of both projects inside the cameras' common field; the answer is
+        # either a certified point in front of both, or a status that says why not. Never a point behind.
+        if track["certified"]:
+            X = np.array(track["point"] + [1.0])
+            assert X[2] > 0 and X[2] < 10
+        else:
+            assert track["reason"]
+
+    def test_parallel_rays_are_degenerate_not_wrong(self):
+        # Two views from the same centre: every depth along the ray fits equally well.
+        P = np.array([[800.0, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]])
+        body = {"kind": "triangulation", "data": {"cameras": [P.tolist(), P.tolist()], "tracks": [
+            {"views": [0, 1], "points": [[330.0, 250.0], [330.0, 250.0]]}]}}
+        track = solve_job(body)["tracks"][0]
+        assert track["status"] in ("degenerate", "optimal")
+        if track["status"] == "degenerate":
+            assert "parallel" in track["reason"]
+        else:  # cost 0 is optimal whatever the depth: certified with lower bound 0
+            assert track["cost"] == pytest.approx(0.0, abs=1e-9)

@@ -1,0 +1,69 @@
+"""Every relaxation under-estimates: at random points of random boxes, bound <= true cost."""
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from solvers.bnb import Box, BoxStatus
+from solvers.triangulation import NORMS, TriangulationOptions, TrackProblem, gamma_for, prepare_track
+
+from .scenes import noisy_track, random_cameras
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    views=st.integers(2, 6),
+    norm=st.sampled_from(NORMS),
+    shrink=st.floats(0.01, 1.0),
+    slack=st.floats(1.0, 4.0),
+)
+def test_box_bound_never_exceeds_cost_inside_the_box(seed, views, norm, shrink, slack):
+    rng = np.random.default_rng(seed)
+    cameras = random_cameras(rng, views)
+    _, points = noisy_track(rng, cameras, noise_px=3.0)
+    prepared = prepare_track(cameras, points, TriangulationOptions(norm=norm))
+    if not isinstance(prepared, TrackProblem):
+        return  # closed before any box exists (noiseless or degenerate): nothing to bound
+    problem, root = prepared, prepared.root
+    # A random sub-box of the root region, and random points inside it.
+    centre = root.lo + rng.uniform(size=3) * root.width
+    half = 0.5 * shrink * root.width * rng.uniform(0.05, 1.0, size=3)
+    box = Box(np.maximum(root.lo, centre - half), np.minimum(root.hi, centre + half))
+    samples = box.lo + rng.uniform(size=(200, 3)) * box.width
+    ys = samples @ np.linalg.inv(problem.B).T  # z = B y  ->  y = B^-1 z
+    costs = np.array([problem.objective(y) for y in ys])
+    finite = costs[np.isfinite(costs)]
+    if finite.size == 0:
+        return
+    # The bound is only claimed for points costing at most the upper bound it is given.
+    upper = float(np.min(finite)) * slack
+    bound = problem.bound(box, upper)
+    cheapest = float(np.min(finite))
+    if bound.status == BoxStatus.BOUNDED:
+        assert bound.lower_bound <= cheapest * (1 + 1e-6) + 1e-9
+    else:
+        # "empty" means no point of the box costs at most the upper bound: a sample contradicts it.
+        assert bound.status != BoxStatus.EMPTY or cheapest > upper * (1 - 1e-9)
+    assert math.isfinite(gamma_for(upper, norm))
+
+
+class TestEnvelope:
+    def test_envelope_of_ratio_is_below_ratio(self):
+        """The t/s envelope's defining inequalities hold at every (t, s) of a random box."""
+        rng = np.random.default_rng(5)
+        for _ in range(200):
+            u = rng.uniform(0.1, 10)
+            L = rng.uniform(0.01, 5)
+            U = L + rng.uniform(0.01, 5)
+            t = rng.uniform(0, u)
+            s = rng.uniform(L, U)
+            # The relaxation's feasible (t, s, w, r) with the smallest r: r = t^2 / (u w), w chosen
+            # freely in its interval; the envelope value must stay at or below t / s.
+            lam = t / u
+            w_lo, w_hi = max(lam * L, s - (1 - lam) * U), min(lam * U, s - (1 - lam) * L)
+            assert w_lo <= w_hi + 1e-12
+            r_min = t * t / (u * w_hi) if w_hi > 0 else 0.0
+            assert r_min <= t / s + 1e-12
