@@ -1,0 +1,47 @@
+"""Problem kinds served, liveness and readiness."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Depends
+from fastapi.responses import JSONResponse
+
+from app.api.deps import get_store
+from app.schemas import REQUEST_MODELS, ProblemKindInfo
+from solvers.jobs import KINDS, default_options
+from workers.store import JobStore
+
+router = APIRouter()
+
+
+@router.get("/v1/problems", response_model=list[ProblemKindInfo], tags=["problems"])
+def list_problems():
+    """The problem kinds served, with the JSON schema of a job and the default options."""
+    return [
+        ProblemKindInfo(kind=name, description=kind.description, item_name=kind.item_name,
+                        request_schema=REQUEST_MODELS[name][0].model_json_schema(),
+                        default_options=default_options(kind))
+        for name, kind in KINDS.items()
+    ]
+
+
+@router.get("/healthz", tags=["service"])
+def healthz():
+    """The API process is alive."""
+    return {"status": "ok"}
+
+
+@router.get("/readyz", tags=["service"], responses={503: {"description": "Redis or the workers do not answer"}})
+def readyz(store: Annotated[JobStore, Depends(get_store)]):
+    """Ready when Redis answers and at least one worker answers a ping."""
+    checks = {"redis": False, "workers": 0}
+    try:
+        checks["redis"] = bool(store.r.ping())
+        from workers.celery_app import celery_app
+
+        checks["workers"] = len(celery_app.control.ping(timeout=1.0) or [])
+    except Exception as exc:  # not ready is an answer, not an error
+        checks["error"] = type(exc).__name__
+    ready = checks["redis"] and checks["workers"] > 0
+    return JSONResponse({"status": "ready" if ready else "not ready", **checks}, status_code=200 if ready else 503)

@@ -1,0 +1,148 @@
+"""The ``geocert`` command: solve in-process, serve the API, run a worker, export the OpenAPI spec."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+from pydantic import ValidationError
+
+
+def _problem_from_validation(exc: ValidationError) -> dict:
+    errors = [{"field": "/".join(str(p) for p in e["loc"]) or "body", "reason": e["msg"]} for e in exc.errors()]
+    return {"type": "about:blank", "title": "Invalid request", "status": 422,
+            "detail": f"{errors[0]['field']}: {errors[0]['reason']}", "errors": errors}
+
+
+def _progress_bar(progress: dict) -> None:
+    done, total = progress["tracks_done"], progress["tracks_total"]
+    width = 30
+    filled = int(width * done / total) if total else width
+    gap = progress.get("gap_rel")
+    gap_text = f"{gap:.2e}" if gap is not None else "-"
+    sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} items, "
+                     f"{progress['nodes']} nodes, worst gap {gap_text}, {progress['elapsed_s']:.1f} s")
+    sys.stderr.flush()
+
+
+def cmd_solve(args: argparse.Namespace) -> int:
+    from app.schemas import JobRequest
+    from solvers.geometry import InputError
+    from solvers.jobs import solve_job
+
+    try:
+        text = sys.stdin.read() if args.job == "-" else Path(args.job).read_text()
+        body = json.loads(text)
+    except (OSError, json.JSONDecodeError) as exc:
+        print(json.dumps({"type": "about:blank", "title": "Unreadable job", "status": 400, "detail": str(exc)}),
+              file=sys.stderr)
+        return 2
+    try:
+        request = JobRequest.model_validate(body).model_dump(mode="json")
+        sink = _progress_bar if sys.stderr.isatty() else None
+        result = solve_job(request, sink=sink)
+    except ValidationError as exc:
+        print(json.dumps(_problem_from_validation(exc)), file=sys.stderr)
+        return 2
+    except InputError as exc:
+        print(json.dumps({"type": "about:blank", "title": "Invalid request", "status": 422, "detail": str(exc),
+                          "errors": [{"field": exc.field, "reason": exc.reason}]}), file=sys.stderr)
+        return 2
+    if sys.stderr.isatty():
+        sys.stderr.write("\n")
+    json.dump(result, sys.stdout, indent=None if args.compact else 2)
+    sys.stdout.write("\n")
+    return 0
+
+
+def _worker_command(concurrency: int, name: str) -> list[str]:
+    return [sys.executable, "-m", "celery", "-A", "workers.celery_app", "worker", "--loglevel", "WARNING",
+            "--concurrency", str(concurrency), "--pool", "prefork", "-n", f"{name}@%h", "--without-gossip",
+            "--without-mingle"]
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from app.core.config import get_settings
+
+    redis_process = None
+    if not os.environ.get("GEOCERT_REDIS_URL"):
+        from workers.redis_server import start_embedded_redis
+
+        redis_process, url = start_embedded_redis(get_settings().data_dir)
+        os.environ["GEOCERT_REDIS_URL"] = url
+        print(f"geocert: embedded Redis at {url}", file=sys.stderr)
+    get_settings.cache_clear()
+    workers = [subprocess.Popen(_worker_command(args.concurrency, f"geocert-{i}"), env=os.environ.copy())
+               for i in range(args.workers)]
+    print(f"geocert: {args.workers} worker process(es), concurrency {args.concurrency} each", file=sys.stderr)
+    try:
+        uvicorn.run("app.main:app", host=args.host, port=args.port, log_level="warning")
+    finally:
+        for process in workers:
+            process.send_signal(signal.SIGTERM)
+        for process in workers:
+            try:
+                process.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                process.kill()
+        if redis_process is not None:
+            redis_process.terminate()
+            redis_process.wait(timeout=10)
+    return 0
+
+
+def cmd_worker(args: argparse.Namespace) -> int:
+    if not os.environ.get("GEOCERT_REDIS_URL"):
+        print("geocert worker: set GEOCERT_REDIS_URL to the Redis the API uses", file=sys.stderr)
+        return 2
+    os.execv(sys.executable, _worker_command(args.concurrency, "geocert"))
+    return 0  # not reached
+
+
+def openapi_document() -> dict:
+    from app.main import create_app
+
+    return create_app().openapi()
+
+
+def cmd_openapi(args: argparse.Namespace) -> int:
+    text = json.dumps(openapi_document(), indent=2, sort_keys=True) + "\n"
+    if args.output:
+        Path(args.output).write_text(text)
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="geocert", description="Certified globally optimal geometry solves.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    solve = sub.add_parser("solve", help="solve a job file in this process and print the result JSON")
+    solve.add_argument("job", help="path to a job JSON file, or - for standard input")
+    solve.add_argument("--compact", action="store_true", help="print the result on one line")
+    solve.set_defaults(func=cmd_solve)
+    serve = sub.add_parser("serve", help="run the API with embedded workers (and Redis unless GEOCERT_REDIS_URL)")
+    serve.add_argument("--host", default="127.0.0.1")
+    serve.add_argument("--port", type=int, default=8000)
+    serve.add_argument("--workers", type=int, default=1, help="worker processes to start (0 allowed)")
+    serve.add_argument("--concurrency", type=int, default=1, help="solver processes per worker")
+    serve.set_defaults(func=cmd_serve)
+    worker = sub.add_parser("worker", help="run one Celery worker against GEOCERT_REDIS_URL")
+    worker.add_argument("--concurrency", type=int, default=os.cpu_count() or 1)
+    worker.set_defaults(func=cmd_worker)
+    spec = sub.add_parser("openapi", help="print (or write) the OpenAPI document")
+    spec.add_argument("--output", help="file to write instead of standard output")
+    spec.set_defaults(func=cmd_openapi)
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,151 @@
+"""Request and response models of the HTTP API (version 1). Option defaults come from the
+solvers' own option dataclasses, so the API, the CLI and the solvers cannot disagree."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from solvers.triangulation import TriangulationOptions
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+CameraRow = Annotated[list[Finite], Field(min_length=4, max_length=4)]
+Camera = Annotated[list[CameraRow], Field(min_length=3, max_length=3, description="3x4 projective camera")]
+Pixel = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[u, v] in pixels")]
+
+_TRI = TriangulationOptions()
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class TrackIn(Strict):
+    views: list[Annotated[int, Field(ge=0)]] = Field(min_length=2, description="camera indices")
+    points: list[Pixel] = Field(min_length=2, description="one observation per view, in the same order")
+
+
+class TriangulationData(Strict):
+    cameras: list[Camera] = Field(min_length=1)
+    tracks: list[TrackIn] = Field(min_length=1)
+
+
+class TriangulationOptionsIn(Strict):
+    norm: Literal["L2L2", "L2L1", "L1L1"] = _TRI.norm
+    rel_gap: Finite = Field(_TRI.rel_gap, ge=0, le=1, description="stop when gap <= rel_gap * cost ...")
+    abs_gap: Finite = Field(_TRI.abs_gap, ge=0, description="... or gap <= abs_gap (cost units)")
+    max_nodes: int = Field(_TRI.max_nodes, ge=1, le=1_000_000, description="per track")
+    time_limit_s: Finite = Field(_TRI.time_limit_s, gt=0, le=3600, description="per track")
+    max_residual: Finite | None = Field(_TRI.max_residual, gt=0, description="pixels; narrows the certificate's scope")
+
+
+class TriangulationJob(Strict):
+    kind: Literal["triangulation"]
+    data: TriangulationData
+    options: TriangulationOptionsIn = Field(default_factory=TriangulationOptionsIn)
+
+
+JobRequest = TriangulationJob  # a discriminated union on "kind" as more kinds arrive
+
+JOB_STATUSES = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+
+
+class FieldError(BaseModel):
+    field: str
+    reason: str
+
+
+class ProblemDetails(BaseModel):
+    """RFC 9457 problem details."""
+
+    type: str = "about:blank"
+    title: str
+    status: int
+    detail: str | None = None
+    instance: str | None = None
+    errors: list[FieldError] | None = None
+
+
+class JobProgress(BaseModel):
+    nodes: int = 0
+    open_boxes: int = 0
+    lower_bound: float | None = None
+    upper_bound: float | None = None
+    gap_abs: float | None = None
+    gap_rel: float | None = Field(None, description="worst relative gap over the tracks finished or running")
+    tracks_done: int = 0
+    tracks_total: int = 0
+    elapsed_s: float = 0.0
+
+
+class RootRegion(BaseModel):
+    reference_view: int
+    functionals: list[list[float]]
+    denominator: list[float]
+    lower: list[float]
+    upper: list[float]
+    meaning: str
+
+
+class TrackCertificate(BaseModel):
+    scope: str
+    root_region: RootRegion | None
+    tolerance: float | None
+    tolerance_met: bool
+    leaves: int
+    note: str | None = None
+
+
+class TrackOut(BaseModel):
+    point: list[float] | None = Field(description="[x, y, z], or a homogeneous 4-vector when at_infinity")
+    at_infinity: bool
+    cost: float | None = Field(description="the upper bound: squared pixels (L2L2) or pixels")
+    lower_bound: float | None
+    gap: float | None
+    status: Literal["optimal", "node_limit", "time_limit", "cancelled", "not_certified", "infeasible", "degenerate"]
+    certified: bool
+    nodes: int
+    elapsed_s: float
+    reason: str | None
+    certificate: TrackCertificate | None
+
+
+class JobStats(BaseModel):
+    items: int
+    certified: int
+    nodes: int
+    solve_s: float
+    elapsed_s: float
+    statuses: dict[str, int]
+
+
+class TriangulationResult(BaseModel):
+    kind: Literal["triangulation"]
+    norm: str
+    tracks: list[TrackOut]
+    stats: JobStats
+
+
+class Job(BaseModel):
+    id: str
+    kind: str
+    status: JOB_STATUSES
+    created_at: float
+    started_at: float | None
+    finished_at: float | None
+    progress: JobProgress
+    result: TriangulationResult | None = None
+    error: ProblemDetails | None = None
+    links: dict[str, str]
+
+
+class ProblemKindInfo(BaseModel):
+    kind: str
+    description: str
+    item_name: str
+    request_schema: dict[str, Any]
+    default_options: dict[str, Any]
+
+
+REQUEST_MODELS = {"triangulation": (TriangulationJob, TriangulationOptionsIn)}

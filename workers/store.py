@@ -1,0 +1,193 @@
+"""Jobs in Redis: their state, request, chunk results, progress and event stream.
+
+Shared by the API (reads, cancels, streams) and the workers (progress, results). Every key of
+a job starts with ``geocert:job:{id}`` and expires ``result_ttl_s`` after the job ends.
+
+Events form a Redis stream per job; a stream entry's id is the SSE event id, so a client that
+reconnects with ``Last-Event-ID`` resumes exactly where it stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import uuid
+from typing import Any, Iterator
+
+import redis
+
+TERMINAL = ("succeeded", "failed", "cancelled")
+_STREAM_MAXLEN = 2000
+
+
+def now() -> float:
+    return time.time()
+
+
+class JobStore:
+    def __init__(self, client: redis.Redis, result_ttl_s: int = 7 * 24 * 3600):
+        self.r = client
+        self.ttl = result_ttl_s
+
+    @classmethod
+    def from_url(cls, url: str, result_ttl_s: int = 7 * 24 * 3600) -> "JobStore":
+        return cls(redis.Redis.from_url(url, decode_responses=True), result_ttl_s)
+
+    @staticmethod
+    def key(job_id: str, part: str = "") -> str:
+        return f"geocert:job:{job_id}" + (f":{part}" if part else "")
+
+    # --- creation and reads ------------------------------------------------------------------
+    def create(self, kind: str, request: dict, items_total: int, chunk_size: int) -> dict:
+        job_id = uuid.uuid4().hex
+        chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
+        meta = {
+            "id": job_id, "kind": kind, "status": "queued", "created_at": now(), "started_at": None,
+            "finished_at": None, "items_total": items_total, "chunks": chunks, "task_ids": [],
+            "progress": {"nodes": 0, "open_boxes": 0, "lower_bound": None, "upper_bound": None, "gap_abs": None,
+                         "gap_rel": None, "tracks_done": 0, "tracks_total": items_total, "elapsed_s": 0.0},
+            "error": None,
+        }
+        pipe = self.r.pipeline()
+        pipe.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in meta.items()})
+        pipe.set(self.key(job_id, "request"), json.dumps(request))
+        pipe.execute()
+        self.publish(job_id, "status", {"status": "queued"})
+        return meta
+
+    def get(self, job_id: str) -> dict | None:
+        raw = self.r.hgetall(self.key(job_id))
+        if not raw:
+            return None
+        return {k: json.loads(v) for k, v in raw.items()}
+
+    def field(self, job_id: str, name: str) -> Any:
+        raw = self.r.hget(self.key(job_id), name)
+        return None if raw is None else json.loads(raw)
+
+    def set_fields(self, job_id: str, **fields: Any) -> None:
+        self.r.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in fields.items()})
+
+    def request(self, job_id: str) -> dict:
+        return json.loads(self.r.get(self.key(job_id, "request")))
+
+    def result(self, job_id: str) -> dict | None:
+        raw = self.r.get(self.key(job_id, "result"))
+        return None if raw is None else json.loads(raw)
+
+    # --- events ------------------------------------------------------------------------------
+    def publish(self, job_id: str, event: str, data: dict) -> str:
+        return self.r.xadd(self.key(job_id, "events"), {"event": event, "data": json.dumps(data)},
+                           maxlen=_STREAM_MAXLEN, approximate=True)
+
+    def events(self, job_id: str, after: str = "0-0", block_ms: int = 1000) -> Iterator[tuple[str, str, dict]]:
+        """Yield (id, event, data) after ``after``, blocking for new ones, until the end event."""
+        stream = self.key(job_id, "events")
+        last = after
+        while True:
+            answer = self.r.xread({stream: last}, count=100, block=block_ms)
+            if not answer:
+                status = self.field(job_id, "status")
+                if status is None:
+                    return  # the job expired or was removed
+                yield "", "keepalive", {}
+                continue
+            for entry_id, fields in answer[0][1]:
+                last = entry_id
+                yield entry_id, fields["event"], json.loads(fields["data"])
+                if fields["event"] == "end":
+                    return
+
+    # --- cancellation ------------------------------------------------------------------------
+    def request_cancel(self, job_id: str) -> None:
+        self.r.set(self.key(job_id, "cancel"), "1", ex=self.ttl)
+
+    def cancel_if_queued(self, job_id: str) -> bool:
+        """Queued -> cancelled atomically (so a worker cannot start it meanwhile); True if done."""
+        script = """
+        if redis.call('HGET', KEYS[1], 'status') == '"queued"' then
+            redis.call('HSET', KEYS[1], 'status', '"cancelled"', 'finished_at', ARGV[1])
+            return 1
+        end
+        return 0
+        """
+        if self.r.eval(script, 1, self.key(job_id), json.dumps(now())) != 1:
+            return False
+        self.publish(job_id, "end", {"status": "cancelled", "error": None})
+        self.expire(job_id)
+        return True
+
+    def cancel_requested(self, job_id: str) -> bool:
+        return bool(self.r.exists(self.key(job_id, "cancel")))
+
+    # --- worker side -------------------------------------------------------------------------
+    def mark_running(self, job_id: str) -> bool:
+        """Queued -> running, once; False when the job already ended (e.g. cancelled while queued)."""
+        script = """
+        local s = redis.call('HGET', KEYS[1], 'status')
+        if s == '"queued"' then
+            redis.call('HSET', KEYS[1], 'status', '"running"', 'started_at', ARGV[1])
+            return 1
+        elseif s == '"running"' then return 2 end
+        return 0
+        """
+        answer = self.r.eval(script, 1, self.key(job_id), json.dumps(now()))
+        if answer == 1:
+            self.publish(job_id, "status", {"status": "running"})
+        return answer != 0
+
+    def save_chunk_progress(self, job_id: str, chunk: int, progress: dict) -> dict:
+        """Record one chunk's progress and return (and publish) the job's aggregate."""
+        self.r.hset(self.key(job_id, "chunkprogress"), str(chunk), json.dumps(progress))
+        parts = [json.loads(v) for v in self.r.hvals(self.key(job_id, "chunkprogress"))]
+        total = self.field(job_id, "items_total")
+        started = self.field(job_id, "started_at") or now()
+        gaps = [p["gap_rel"] for p in parts if p.get("gap_rel") is not None]
+        aggregate = {
+            "nodes": sum(p["nodes"] for p in parts),
+            "open_boxes": sum(p["open_boxes"] for p in parts),
+            "lower_bound": sum(p["lower_bound"] for p in parts),
+            "upper_bound": sum(p["upper_bound"] for p in parts),
+            "gap_abs": sum(p["gap_abs"] for p in parts),
+            "gap_rel": max(gaps) if gaps else None,
+            "tracks_done": sum(p["tracks_done"] for p in parts),
+            "tracks_total": total,
+            "elapsed_s": now() - started,
+        }
+        self.set_fields(job_id, progress=aggregate)
+        self.publish(job_id, "progress", aggregate)
+        return aggregate
+
+    def save_chunk_items(self, job_id: str, chunk: int, items: list[dict]) -> int:
+        """Store a chunk's items (idempotent: a redelivered chunk overwrites itself); returns chunks done."""
+        pipe = self.r.pipeline()
+        pipe.hset(self.key(job_id, "chunks"), str(chunk), json.dumps(items))
+        pipe.hlen(self.key(job_id, "chunks"))
+        return pipe.execute()[1]
+
+    def claim_finalisation(self, job_id: str) -> bool:
+        return bool(self.r.set(self.key(job_id, "final"), "1", nx=True, ex=self.ttl))
+
+    def chunk_items(self, job_id: str, chunks: int) -> list[dict]:
+        raw = self.r.hgetall(self.key(job_id, "chunks"))
+        items: list[dict] = []
+        for index in range(chunks):
+            items.extend(json.loads(raw[str(index)]))
+        return items
+
+    def finish(self, job_id: str, status: str, result: dict | None = None, error: dict | None = None) -> None:
+        pipe = self.r.pipeline()
+        if result is not None:
+            pipe.set(self.key(job_id, "result"), json.dumps(result))
+        pipe.hset(self.key(job_id), mapping={"status": json.dumps(status), "finished_at": json.dumps(now()),
+                                              "error": json.dumps(error)})
+        pipe.delete(self.key(job_id, "chunks"), self.key(job_id, "chunkprogress"))
+        pipe.execute()
+        self.publish(job_id, "end", {"status": status, "error": error})
+        self.expire(job_id)
+
+    def expire(self, job_id: str) -> None:
+        pipe = self.r.pipeline()
+        for part in ("", "request", "result", "events", "cancel", "final"):
+            pipe.expire(self.key(job_id, part), self.ttl)
+        pipe.execute()
