@@ -66,6 +66,16 @@ def _worker_command(concurrency: int, name: str) -> list[str]:
             "--without-mingle"]
 
 
+def _die_with_parent() -> None:
+    """In a child: ask Linux to send SIGTERM when the parent dies, even by SIGKILL."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
 def cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
@@ -75,12 +85,16 @@ def cmd_serve(args: argparse.Namespace) -> int:
     if not os.environ.get("GEOCERT_REDIS_URL"):
         from workers.redis_server import start_embedded_redis
 
-        redis_process, url = start_embedded_redis(get_settings().data_dir)
+        redis_process, url = start_embedded_redis(get_settings().data_dir, preexec_fn=_die_with_parent)
         os.environ["GEOCERT_REDIS_URL"] = url
         print(f"geocert: embedded Redis at {url}", file=sys.stderr)
     get_settings.cache_clear()
-    workers = [subprocess.Popen(_worker_command(args.concurrency, f"geocert-{i}"), env=os.environ.copy())
+    workers = [subprocess.Popen(_worker_command(args.concurrency, f"geocert-{i}"), env=os.environ.copy(),
+                                preexec_fn=_die_with_parent)
                for i in range(args.workers)]
+    # uvicorn re-raises SIGTERM after its own shutdown; make that an ordinary exit so that the
+    # workers and the embedded Redis below are stopped too.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     print(f"geocert: {args.workers} worker process(es), concurrency {args.concurrency} each", file=sys.stderr)
     try:
         uvicorn.run("app.main:app", host=args.host, port=args.port, log_level="warning")

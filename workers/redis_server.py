@@ -21,7 +21,7 @@ def redis_server_binary() -> str:
     return path
 
 
-def start_embedded_redis(directory: Path) -> tuple[subprocess.Popen, str]:
+def start_embedded_redis(directory: Path, preexec_fn=None) -> tuple[subprocess.Popen, str]:
     """Start redis-server on a unix socket in ``directory``; returns the process and its URL."""
     directory = Path(directory).resolve()
     directory.mkdir(parents=True, exist_ok=True)
@@ -35,6 +35,7 @@ def start_embedded_redis(directory: Path) -> tuple[subprocess.Popen, str]:
          "--dir", str(directory), "--appendonly", "yes", "--save", "", "--daemonize", "no",
          "--loglevel", "warning"],
         stdout=subprocess.DEVNULL,
+        preexec_fn=preexec_fn,
     )
     url = f"unix://{socket_path}"
     deadline = time.monotonic() + 20

@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# Creates .venv beside the checkout and installs geocert into it (with test extras when asked).
+# Idempotent: re-installs only when pyproject.toml changed since the last install.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+extras="${1:-}"
+python="${PYTHON:-python3}"
+venv="$root/.venv"
+stamp="$venv/.installed${extras:+-$extras}"
+if [ ! -x "$venv/bin/python" ]; then
+  "$python" -m venv "$venv"
+  "$venv/bin/python" -m pip install --quiet --upgrade pip
+fi
+if [ ! -f "$stamp" ] || [ "$root/pyproject.toml" -nt "$stamp" ]; then
+  target="$root"
+  [ -n "$extras" ] && target="$root[$extras]"
+  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -e "$target"
+  touch "$stamp"
+fi

@@ -1,0 +1,208 @@
+"""End to end through HTTP: a real `geocert serve` (embedded Redis, a real Celery worker)."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+
+import httpx
+import numpy as np
+import pytest
+
+from solvers.jobs import solve_job
+
+from .scenes import noisy_track, random_cameras
+
+BODY_LIMIT = 2_000_000
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory):
+    port = free_port()
+    env = os.environ.copy()
+    env.pop("GEOCERT_REDIS_URL", None)
+    env.update(GEOCERT_DATA_DIR=str(tmp_path_factory.mktemp("geocert")), GEOCERT_MAX_BODY_BYTES=str(BODY_LIMIT),
+               GEOCERT_CHUNK_SIZE="40", GEOCERT_PROGRESS_INTERVAL_S="0.05")
+    process = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--workers", "1",
+                                "--concurrency", "1"], env=env)
+    base = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 90
+    with httpx.Client(base_url=base, timeout=10) as client:
+        while True:
+            try:
+                if client.get("/readyz").status_code == 200:
+                    break
+            except httpx.TransportError:
+                pass
+            assert process.poll() is None, "geocert serve exited"
+            assert time.monotonic() < deadline, "service not ready within 90 s"
+            time.sleep(0.3)
+        yield client
+    process.terminate()
+    process.wait(timeout=30)
+
+
+def sse_events(client: httpx.Client, job_id: str, last_event_id: str | None = None, limit_s: float = 60):
+    """Yield (id, event, data) from the job's event stream until it closes."""
+    headers = {"Last-Event-ID": last_event_id} if last_event_id else {}
+    with client.stream("GET", f"/v1/jobs/{job_id}/events", headers=headers, timeout=limit_s) as response:
+        assert response.status_code == 200
+        assert response.headers["content-type"].startswith("text/event-stream")
+        event: dict = {}
+        for line in response.iter_lines():
+            if line == "":
+                if "event" in event:
+                    yield event.get("id"), event["event"], json.loads(event["data"])
+                event = {}
+            elif not line.startswith(":"):
+                key, _, value = line.partition(": ")
+                event[key] = value
+
+
+def triangulation_job(rng, tracks: int, views: int = 4, **options) -> dict:
+    cameras = random_cameras(rng, views)
+    body_tracks = []
+    for _ in range(tracks):
+        chosen = sorted(rng.choice(views, size=int(rng.integers(2, views + 1)), replace=False).tolist())
+        _, points = noisy_track(rng, cameras[chosen])
+        body_tracks.append({"views": chosen, "points": points.tolist()})
+    return {"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": body_tracks},
+            "options": options}
+
+
+def wait_for(client: httpx.Client, job_id: str, statuses=("succeeded", "failed", "cancelled"), limit_s=120) -> dict:
+    deadline = time.monotonic() + limit_s
+    while True:
+        job = client.get(f"/v1/jobs/{job_id}").json()
+        if job["status"] in statuses:
+            return job
+        assert time.monotonic() < deadline, f"job still {job['status']}"
+        time.sleep(0.1)
+
+
+class TestSubmitStreamResult:
+    def test_batch_result_in_track_order_with_progress_events(self, service):
+        rng = np.random.default_rng(21)
+        body = triangulation_job(rng, tracks=100, norm="L2L2")  # 3 chunks of 40, 40, 20
+        response = service.post("/v1/jobs", json=body)
+        assert response.status_code == 202
+        job_id = response.json()["id"]
+        assert response.headers["location"] == f"/v1/jobs/{job_id}"
+        events = list(sse_events(service, job_id))
+        kinds = [event for _, event, _ in events]
+        assert kinds[0] == "status" and kinds[-1] == "end"
+        progress = [data for _, event, data in events if event == "progress"]
+        assert progress, "no progress event"
+        assert all(p["lower_bound"] <= p["upper_bound"] + 1e-9 for p in progress)
+        assert progress[-1]["tracks_done"] == 100 and progress[-1]["tracks_total"] == 100
+        job = service.get(f"/v1/jobs/{job_id}").json()
+        assert job["status"] == "succeeded"
+        tracks = job["result"]["tracks"]
+        assert len(tracks) == 100 and all(t["certified"] for t in tracks)
+        # The same job solved in this process gives the same answers, in the same order.
+        local = solve_job(body)["tracks"]
+        for remote, mine in zip(tracks, local):
+            assert remote["cost"] == pytest.approx(mine["cost"], rel=1e-9, abs=1e-12)
+            assert np.allclose(remote["point"], mine["point"], rtol=1e-6, atol=1e-9)
+
+    def test_last_event_id_resumes_after_that_event(self, service):
+        body = triangulation_job(np.random.default_rng(22), tracks=3)
+        job_id = service.post("/v1/jobs", json=body).json()["id"]
+        events = list(sse_events(service, job_id))
+        assert len(events) >= 3
+        resumed = list(sse_events(service, job_id, last_event_id=events[1][0]))
+        assert resumed == events[2:]
+
+    def test_problems_lists_triangulation_with_schema_and_defaults(self, service):
+        kinds = {k["kind"]: k for k in service.get("/v1/problems").json()}
+        assert kinds["triangulation"]["default_options"]["norm"] == "L2L2"
+        assert "data" in kinds["triangulation"]["request_schema"]["properties"]
+
+
+class TestCancel:
+    def test_running_job_stops_and_keeps_its_best_result(self, service):
+        # An unreachable gap keeps the search running until it is told to stop.
+        body = triangulation_job(np.random.default_rng(23), tracks=3, views=6, norm="L1L1", rel_gap=0.0,
+                                 abs_gap=0.0, max_nodes=1_000_000, time_limit_s=600)
+        job_id = service.post("/v1/jobs", json=body).json()["id"]
+        for _, event, data in sse_events(service, job_id):
+            if event == "progress" and data["nodes"] > 20:
+                break
+        assert service.post(f"/v1/jobs/{job_id}/cancel").status_code == 202
+        job = wait_for(service, job_id, limit_s=30)
+        assert job["status"] == "cancelled"
+        first = job["result"]["tracks"][0]
+        assert first["status"] == "cancelled" and first["point"] is not None
+        assert first["lower_bound"] <= first["cost"]  # an anytime answer with its gap
+        assert all(t["status"] == "cancelled" for t in job["result"]["tracks"])
+
+    def test_queued_job_never_starts(self, service):
+        blocker = triangulation_job(np.random.default_rng(24), tracks=1, views=6, norm="L1L1", rel_gap=0.0,
+                                    abs_gap=0.0, max_nodes=1_000_000, time_limit_s=600)
+        blocker_id = service.post("/v1/jobs", json=blocker).json()["id"]
+        wait_for(service, blocker_id, statuses=("running",))
+        queued_id = service.post("/v1/jobs", json=triangulation_job(np.random.default_rng(25), tracks=2)).json()["id"]
+        assert service.get(f"/v1/jobs/{queued_id}").json()["status"] == "queued"
+        cancelled = service.post(f"/v1/jobs/{queued_id}/cancel").json()
+        assert cancelled["status"] == "cancelled"
+        service.post(f"/v1/jobs/{blocker_id}/cancel")
+        wait_for(service, blocker_id)
+        time.sleep(1.0)  # time for the worker to have picked the queued job up, were it to
+        job = service.get(f"/v1/jobs/{queued_id}").json()
+        assert job["status"] == "cancelled" and job["started_at"] is None and job["result"] is None
+        assert [e for _, e, _ in sse_events(service, queued_id)] == ["status", "end"]
+
+
+class TestBadInput:
+    def assert_problem(self, response, status: int, field: str | None = None):
+        assert response.status_code == status
+        assert response.headers["content-type"].startswith("application/problem+json")
+        problem = response.json()
+        assert problem["status"] == status and problem["title"]
+        if field is not None:
+            assert any(e["field"] == field for e in problem["errors"]), problem
+        return problem
+
+    def test_malformed_payloads_get_422_naming_the_field(self, service):
+        good = triangulation_job(np.random.default_rng(26), tracks=1)
+        bad_index = json.loads(json.dumps(good))
+        bad_index["data"]["tracks"][0]["views"][-1] = 99
+        self.assert_problem(service.post("/v1/jobs", json=bad_index), 422, "data/tracks/0/views/1")
+        nan = json.dumps(good).replace(str(good["data"]["tracks"][0]["points"][0][0]), "NaN", 1)
+        self.assert_problem(service.post("/v1/jobs", content=nan, headers={"content-type": "application/json"}),
+                            422, "data/tracks/0/points/0/0")
+        short = json.loads(json.dumps(good))
+        short["data"]["tracks"][0] = {"views": [0], "points": [[1.0, 2.0]]}
+        self.assert_problem(service.post("/v1/jobs", json=short), 422, "data/tracks/0/views")
+        flat = json.loads(json.dumps(good))
+        flat["data"]["cameras"][0] = [[0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 1, 0]]
+        self.assert_problem(service.post("/v1/jobs", json=flat), 422, "data/cameras/0")
+        self.assert_problem(service.post("/v1/jobs", content=b"{not json", headers={"content-type": "application/json"}), 422)
+        self.assert_problem(service.post("/v1/jobs", json={**good, "options": {"norm": "L9"}}), 422, "options/norm")
+
+    def test_body_over_the_limit_gets_413(self, service):
+        response = service.post("/v1/jobs", content=b" " * (BODY_LIMIT + 1), headers={"content-type": "application/json"})
+        problem = self.assert_problem(response, 413)
+        assert str(BODY_LIMIT) in problem["detail"]
+
+    def test_unknown_job_is_404(self, service):
+        self.assert_problem(service.get("/v1/jobs/0123"), 404)
+        self.assert_problem(service.get("/v1/jobs/0123/events"), 404)
+
+
+class TestOpenAPI:
+    def test_checked_in_spec_is_current(self):
+        from app.cli import openapi_document
+
+        path = __import__("pathlib").Path(__file__).resolve().parents[1] / "openapi" / "openapi.json"
+        assert json.loads(path.read_text()) == openapi_document(), "run: geocert openapi --output openapi/openapi.json"
