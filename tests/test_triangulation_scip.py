@@ -7,64 +7,11 @@ import pytest
 
 pyscipopt = pytest.importorskip("pyscipopt")
 
+from bench.baselines import scip_triangulate
 from solvers.geometry import norm_cost
 from solvers.triangulation import NORMS, TriangulationOptions, triangulate
 
 from .scenes import noisy_track, random_cameras
-
-
-def scip_triangulate(cameras: np.ndarray, points: np.ndarray, norm: str, centre: np.ndarray, radius: float,
-                     quiet: bool = True, time_limit: float = 15) -> tuple[np.ndarray | None, bool, float]:
-    """SCIP's spatial branch and bound: (its best point, whether it reached its gap, its dual bound).
-
-    Residuals (in units of 100 px) are variables tied to X by bilinear equalities
-    ``d * depth = (row - u * depth_row) . X``; X is searched in the box ``centre +- radius``.
-    """
-    scale = 100.0
-    model = pyscipopt.Model()
-    model.hideOutput(quiet)
-    model.setParam("numerics/feastol", 1e-9)
-    model.setParam("limits/gap", 1e-5)
-    model.setParam("limits/time", time_limit)
-    X = [model.addVar(lb=centre[k] - radius, ub=centre[k] + radius, name=f"x{k}") for k in range(3)]
-
-    def linear(row):
-        return row[0] * X[0] + row[1] * X[1] + row[2] * X[2] + row[3]
-
-    terms = []
-    for i, P in enumerate(cameras):
-        P = P / np.linalg.norm(P[2, :3])
-        depth = linear(P[2])
-        model.addCons(depth >= 1e-3)
-        residuals = []
-        for row in range(2):
-            d = model.addVar(lb=-20, ub=20, name=f"d{i}{row}")
-            model.addCons(d * depth * scale == linear(P[row] - points[i, row] * P[2]))
-            residuals.append(d)
-        if norm == "L2L2":
-            terms.append(residuals[0] * residuals[0] + residuals[1] * residuals[1])
-        elif norm == "L2L1":
-            e = model.addVar(lb=0, ub=30, name=f"e{i}")
-            # sqrt, not e*e >= ...: the squared form hides a 1e-3 px residual inside the tolerance
-            model.addCons(e >= pyscipopt.sqrt(residuals[0] * residuals[0] + residuals[1] * residuals[1]))
-            terms.append(e)
-        else:
-            for row in range(2):
-                a = model.addVar(lb=0, ub=20, name=f"a{i}{row}")
-                model.addCons(a >= residuals[row])
-                model.addCons(a >= -residuals[row])
-                terms.append(a)
-    objective = model.addVar(lb=0, ub=1e4, name="objective")
-    model.addCons(objective >= pyscipopt.quicksum(terms))
-    model.setObjective(objective, "minimize")
-    try:
-        model.optimize()
-    except Exception:  # SCIP's own LP trouble ("unresolved numerical troubles"): no answer from it
-        return None, False, -math.inf
-    status = model.getStatus()
-    assert status in ("optimal", "gaplimit", "timelimit"), status
-    dual_bound = model.getDualbound() * scale**2 if norm == "L2L2" else model.getDualbound() * scale
-    return np.array([model.getVal(x) for x in X] + [1.0]), status != "timelimit", dual_bound
 
 
 class TestAgainstSCIP:

@@ -1,0 +1,188 @@
+"""Triangulation benchmark on the Oxford Dinosaur (4983 tracks, 36 cameras; Oxford VGG data).
+
+Prints, in one run and side by side:
+  1. per norm, every track at rel_gap 1e-3 in this process: median / p95 / p99 time and nodes,
+     the certified fraction;
+  2. on a 200-track sample, SCIP at the same tolerance (per-track wall time, model building
+     included), and OpenCV DLT followed by Levenberg-Marquardt (how often its point is behind a
+     camera, or costs more than the certified optimum);
+  3. the whole L2L2 batch through a running service (`geocert serve`, 2 workers), submit to result.
+
+    .venv/bin/python -m bench.triangulation [--norms L2L2,L2L1,L1L1] [--sample 200] [--no-scip] [--no-service]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from solvers.datasets import load_dinosaur
+from solvers.geometry import norm_cost
+from solvers.triangulation import NORMS, TriangulationOptions, triangulate
+
+DINOSAUR = Path(__file__).resolve().parents[2] / "shared" / "data" / "oxford_dinosaur"
+
+
+def percentiles(values) -> tuple[float, float, float]:
+    values = np.asarray(values, dtype=float)
+    return tuple(float(np.percentile(values, q)) for q in (50, 95, 99))
+
+
+def solve_all(cameras, tracks, norm: str, indices) -> dict:
+    options = TriangulationOptions(norm=norm, rel_gap=1e-3)
+    times, nodes, certified, results = [], [], 0, {}
+    for i in indices:
+        track = tracks[i]
+        start = time.perf_counter()
+        result = triangulate(cameras[track.views], track.points, options)
+        times.append(time.perf_counter() - start)
+        nodes.append(result.nodes)
+        certified += result.certified
+        results[i] = result
+    return {"times": times, "nodes": nodes, "certified": certified, "results": results}
+
+
+def scip_sample(cameras, tracks, norm: str, sample, ours: dict) -> dict:
+    from bench.baselines import dlt_lm, scip_triangulate
+
+    times, agree, reached, box_held = [], 0, 0, 0
+    for i in sample:
+        track = tracks[i]
+        cams = cameras[track.views]
+        centre = dlt_lm(cams, track.points)[:3]  # an independent centre for SCIP's box
+        mine = ours["results"][i]
+        box_held += bool(np.max(np.abs(np.array(mine.point[:3]) - centre)) < 0.05)
+        start = time.perf_counter()
+        X, ok, _ = scip_triangulate(cams, track.points, norm, centre, radius=0.05, time_limit=60, gap=1e-3)
+        times.append(time.perf_counter() - start)
+        if X is None:
+            continue
+        reached += ok
+        proj = cams @ X
+        cost = norm_cost(proj[:, :2] / proj[:, 2:3] - track.points, norm)
+        agree += abs(cost - mine.cost) <= 1e-3 * mine.cost + 1e-9
+    return {"times": times, "agree": agree, "reached": reached, "box_held": box_held}
+
+
+def dlt_lm_sample(cameras, tracks, sample, ours: dict) -> dict:
+    from bench.baselines import dlt_lm
+
+    behind, worse, below, times = 0, 0, 0, []
+    for i in sample:
+        track = tracks[i]
+        cams = cameras[track.views]
+        start = time.perf_counter()
+        X = dlt_lm(cams, track.points)
+        times.append(time.perf_counter() - start)
+        depth = cams[:, 2] @ X
+        proj = cams @ X
+        cost = norm_cost(proj[:, :2] / proj[:, 2:3] - track.points, "L2L2")
+        optimum = ours["results"][i].cost
+        if np.any(depth <= 0):
+            behind += 1
+            below += cost < optimum * (1 - 1e-6)
+        elif cost > optimum * (1 + 1e-6) + 1e-9:
+            worse += 1
+    return {"behind": behind, "worse": worse, "below_optimum_behind": below, "times": times}
+
+
+def service_batch(cameras, tracks, workers: int) -> dict:
+    import httpx
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = os.environ.copy()
+    env.pop("GEOCERT_REDIS_URL", None)
+    env["GEOCERT_DATA_DIR"] = tempfile.mkdtemp(prefix="geocert-bench-")
+    server = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--workers",
+                               str(workers), "--concurrency", "1"], env=env)
+    try:
+        with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=60) as client:
+            deadline = time.monotonic() + 90
+            while True:
+                try:
+                    ready = client.get("/readyz").json()
+                    if ready.get("workers", 0) >= workers:
+                        break
+                except httpx.TransportError:
+                    pass
+                if time.monotonic() > deadline:
+                    raise RuntimeError("service not ready")
+                time.sleep(0.3)
+            body = {"kind": "triangulation", "options": {"norm": "L2L2", "rel_gap": 1e-3},
+                    "data": {"cameras": cameras.tolist(),
+                             "tracks": [{"views": t.views, "points": t.points.tolist()} for t in tracks]}}
+            payload = json.dumps(body)
+            start = time.perf_counter()
+            job = client.post("/v1/jobs", content=payload, headers={"content-type": "application/json"}).json()
+            with client.stream("GET", f"/v1/jobs/{job['id']}/events", timeout=600) as stream:
+                for line in stream.iter_lines():
+                    if line == "event: end":
+                        break
+            final = client.get(f"/v1/jobs/{job['id']}").json()
+            wall = time.perf_counter() - start
+        return {"wall": wall, "status": final["status"], "certified": final["result"]["stats"]["certified"],
+                "tracks": len(final["result"]["tracks"]), "body_mb": len(payload) / 1e6}
+    finally:
+        server.terminate()
+        server.wait(timeout=60)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--norms", default=",".join(NORMS))
+    parser.add_argument("--sample", type=int, default=200)
+    parser.add_argument("--no-scip", action="store_true")
+    parser.add_argument("--no-service", action="store_true")
+    parser.add_argument("--workers", type=int, default=2)
+    args = parser.parse_args()
+
+    cameras, tracks = load_dinosaur(DINOSAUR)
+    everything = range(len(tracks))
+    sample = np.random.default_rng(0).choice(len(tracks), size=args.sample, replace=False).tolist()
+    print(f"Dinosaur: {len(tracks)} tracks, {len(cameras)} cameras, rel_gap 1e-3, one process")
+    print(f"{'norm':6} {'solver':8} {'tracks':>6} {'median ms':>10} {'p95 ms':>8} {'p99 ms':>8} "
+          f"{'nodes med/p95/p99':>18} {'certified':>10}")
+    solved = {}
+    for norm in args.norms.split(","):
+        ours = solve_all(cameras, tracks, norm, everything)
+        solved[norm] = ours
+        t = [1e3 * v for v in percentiles(ours["times"])]
+        n = percentiles(ours["nodes"])
+        print(f"{norm:6} {'geocert':8} {len(tracks):6d} {t[0]:10.2f} {t[1]:8.2f} {t[2]:8.2f} "
+              f"{n[0]:6.0f}/{n[1]:.0f}/{n[2]:.0f}".ljust(75) + f"{ours['certified'] / len(tracks):10.2%}")
+        if not args.no_scip:
+            scip = scip_sample(cameras, tracks, norm, sample, ours)
+            s = [1e3 * v for v in percentiles(scip["times"])]
+            mine = [1e3 * ours["times"][i] for i in sample]
+            print(f"{norm:6} {'SCIP':8} {len(sample):6d} {s[0]:10.2f} {s[1]:8.2f} {s[2]:8.2f} "
+                  f"  reached gap {scip['reached']}/{len(sample)}, agrees {scip['agree']}/{len(sample)}, "
+                  f"our optimum in its box {scip['box_held']}/{len(sample)}")
+            print(f"{'':6} {'ratio':8} {'':6} {s[0] / np.median(mine):9.1f}x  (SCIP median / geocert median "
+                  f"on the same {len(sample)} tracks: {np.median(mine):.2f} ms)")
+    if "L2L2" in solved:
+        base = dlt_lm_sample(cameras, tracks, sample, solved["L2L2"])
+        print(f"\nOpenCV DLT + LM on the same {len(sample)} tracks (L2L2): median "
+              f"{1e3 * np.median(base['times']):.2f} ms; point behind a camera {base['behind']}, of which "
+              f"{base['below_optimum_behind']} cost less than the certified optimum in front; costs more than "
+              f"the certified optimum {base['worse']}")
+        if not args.no_service:
+            total = sum(solved["L2L2"]["times"])
+            batch = service_batch(cameras, tracks, args.workers)
+            print(f"\nService, {args.workers} workers: {batch['tracks']} tracks ({batch['body_mb']:.1f} MB) submit to "
+                  f"result {batch['wall']:.2f} s, status {batch['status']}, certified {batch['certified']}; "
+                  f"in-process single-core solve time {total:.2f} s")
+
+
+if __name__ == "__main__":
+    main()
