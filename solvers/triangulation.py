@@ -24,13 +24,16 @@ from .geometry import InputError, norm_cost
 
 NORMS = ("L2L2", "L2L1", "L1L1")
 _EPS_DEPTH = 1e-12
+_MAX_SCALE = 1e3
 
 
 @dataclass
 class TriangulationOptions:
     norm: str = "L2L2"
     rel_gap: float = 1e-3
-    abs_gap: float = 1e-9  # in the cost's units: squared pixels (L2L2) or pixels
+    # In the cost's units: squared pixels (L2L2) or pixels. Below about 1e-7 the conic solves
+    # cannot resolve the bound (measured on a Dinosaur track whose optimum is 1e-6 px).
+    abs_gap: float = 1e-7
     max_nodes: int = 2000
     time_limit_s: float = 30.0
     max_residual: float | None = None  # pixels; narrows the certificate's scope when given
@@ -501,7 +504,10 @@ def prepare_track(cameras: np.ndarray, points: np.ndarray, options: Triangulatio
     if cost0 <= options.abs_gap:  # the incumbent is within tolerance of the trivial bound 0
         return _track_result(chart, cameras, points, y0, norm, "optimal", cost0, 0.0, 0, None)
 
-    factor = 1.0 / math.sqrt(cost0) if norm == "L2L2" else 1.0 / cost0
+    # Scale residuals so the incumbent costs 1 (measured: raw costs near 1e-5 cost accuracy), but
+    # never by more than _MAX_SCALE: nearly exact data would otherwise make the residual rows of
+    # the cones 1e6 times the depth rows, and every conic solve inaccurate.
+    factor = min(_MAX_SCALE, 1.0 / math.sqrt(cost0) if norm == "L2L2" else 1.0 / cost0)
     chart.rescale(factor)
     unit = factor**2 if norm == "L2L2" else factor
     upper = chart.cost(y0, norm)

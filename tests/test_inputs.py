@@ -51,20 +51,19 @@ class TestParse:
 
 
 class TestSolveTimeStatuses:
-    def test_no_point_in_front_of_both_cameras(self):
-        # Two cameras facing each other along z, observations that only a point behind one fits.
-        P1 = np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]])
-        P2 = np.array([[-1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 10]])  # at z = 10 looking back
-        body = {"kind": "triangulation", "data": {"cameras": [P1.tolist(), P2.tolist()], "tracks": [
-            {"views": [0, 1], "points": [[0.1, 0.0], [0.1, 0.0]]}]}}
+    def test_no_point_in_front_of_every_camera_is_infeasible(self):
+        # In front of these three means z > 0, x > 0 and x + z < 0 at once: no such point.
+        cameras = [
+            [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]],
+            [[0, 0, 1, 0], [0, 1, 0, 0], [1, 0, 0, 0]],
+            [[0, 1, 0, 0], [1, 0, 0, 1], [-1, 0, -1, 0]],
+        ]
+        body = {"kind": "triangulation", "data": {"cameras": cameras, "tracks": [
+            {"views": [0, 1, 2], "points": [[0.1, 0.2], [0.3, 0.1], [0.2, -0.4]]}]}}
         track = solve_job(body)["tracks"][0]
-        # Every point in front of both projects inside the cameras' common field; the answer is
-        # either a certified point in front of both, or a status that says why not. Never a point behind.
-        if track["certified"]:
-            X = np.array(track["point"] + [1.0])
-            assert X[2] > 0 and X[2] < 10
-        else:
-            assert track["reason"]
+        assert track["status"] == "infeasible" and not track["certified"]
+        assert "in front of every camera" in track["reason"]
+        assert track["point"] is None
 
     def test_parallel_rays_are_degenerate_not_wrong(self):
         # Two views from the same centre: every depth along the ray fits equally well.
