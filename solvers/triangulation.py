@@ -16,7 +16,6 @@ from typing import Callable
 
 import numpy as np
 import scipy.optimize
-import scipy.sparse as sp
 
 from .bnb import BnbOptions, Box, BoxBound, BoxStatus, Progress, branch_and_bound
 from .conic import ConeSpec, ConicStatus, ReusableConicProgram, solve_conic
@@ -395,13 +394,27 @@ def local_refine(chart: _Chart, y: np.ndarray, norm: str) -> tuple[np.ndarray, f
             trial = fit.x
         else:
             # sum_i sqrt(term_i)^2 is the cost; the square roots make it a least-squares problem.
-            def roots(v: np.ndarray) -> np.ndarray:
+            # Zero padding: MINPACK's LM needs at least as many residuals as unknowns.
+            def terms_and_jacobian(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                 r = chart.residual_vector(v).reshape(-1, 2)
-                terms = np.linalg.norm(r, axis=1) if norm == "L2L1" else np.abs(r).ravel()
-                # zero padding: MINPACK's LM needs at least as many residuals as unknowns
-                return np.concatenate([np.sqrt(terms + 1e-30), np.zeros(max(0, 3 - terms.size))])
+                J = chart.residual_jacobian(v).reshape(-1, 2, 3)
+                if norm == "L2L1":
+                    terms = np.linalg.norm(r, axis=1)
+                    dterms = np.einsum("ka,kab->kb", r, J) / np.maximum(terms, 1e-300)[:, None]
+                else:
+                    terms, dterms = np.abs(r).ravel(), (np.sign(r)[:, :, None] * J).reshape(-1, 3)
+                return terms, dterms
 
-            trial = scipy.optimize.least_squares(roots, y, method="lm", max_nfev=100).x
+            pad = max(0, 3 - (len(chart.num) if norm == "L2L1" else 2 * len(chart.num)))
+
+            def roots(v: np.ndarray) -> np.ndarray:
+                return np.concatenate([np.sqrt(terms_and_jacobian(v)[0] + 1e-30), np.zeros(pad)])
+
+            def roots_jacobian(v: np.ndarray) -> np.ndarray:
+                terms, dterms = terms_and_jacobian(v)
+                return np.vstack([dterms / (2 * np.sqrt(terms + 1e-30))[:, None], np.zeros((pad, 3))])
+
+            trial = scipy.optimize.least_squares(roots, y, jac=roots_jacobian, method="lm", max_nfev=50).x
         trial_cost = chart.cost(trial, norm)
         if trial_cost < best_cost:
             best_y, best_cost = trial, trial_cost
@@ -418,7 +431,7 @@ def _dlt_in_chart(chart: _Chart) -> np.ndarray | None:
     return Y[:3] / Y[3]
 
 
-def _residual_region(chart: _Chart, gamma: float) -> tuple[sp.csc_matrix, np.ndarray, ConeSpec]:
+def _residual_region(chart: _Chart, gamma: float) -> tuple[np.ndarray, np.ndarray, ConeSpec]:
     """Conic data of {y : ||residual_i(y)|| <= gamma for every view, last coordinate >= 0}.
 
     ``||n_i|| <= gamma * g_i`` also puts the point in front of every camera (g_i >= 0).
@@ -428,7 +441,7 @@ def _residual_region(chart: _Chart, gamma: float) -> tuple[sp.csc_matrix, np.nda
         rows += [gamma * chart.den[view], chart.num[view, 0], chart.num[view, 1]]
     E = np.array(rows)  # each row: coefficients of y, then the constant
     cones = ConeSpec(nonneg=1, soc=(3,) * len(chart.num))
-    return sp.csc_matrix(-E[:, :3]), E[:, 3].copy(), cones
+    return -E[:, :3], E[:, 3].copy(), cones
 
 
 def _front_point(chart: _Chart) -> np.ndarray | None:
@@ -460,9 +473,20 @@ def _front_point(chart: _Chart) -> np.ndarray | None:
 
 
 def _root_region(chart: _Chart, B: np.ndarray, gamma: float) -> tuple[str, Box | None]:
-    """Bound B y over {every residual <= gamma, in front of every camera}: six small SOCPs."""
+    """Bound B y over {every residual <= gamma, in front of every camera}: six small SOCPs.
+
+    An inaccurate solve is retried with gamma inflated slightly: a larger residual bound still
+    gives a region holding every better point, and a different problem often solves cleanly.
+    """
+    for inflation in (1.0, 1.001, 1.01):
+        state, box = _root_region_once(chart, B, gamma * inflation)
+        if state != "not_certified":
+            return state, box
+    return state, box
+
+
+def _root_region_once(chart: _Chart, B: np.ndarray, gamma: float) -> tuple[str, Box | None]:
     A, b, cones = _residual_region(chart, gamma)
-    A = A.toarray()
     program = ReusableConicProgram()  # six objectives over one feasible set
     lo, hi = np.zeros(3), np.zeros(3)
     for k in range(3):
