@@ -104,8 +104,9 @@ def service_batch(cameras, tracks, workers: int) -> dict:
     env = os.environ.copy()
     env.pop("GEOCERT_REDIS_URL", None)
     env["GEOCERT_DATA_DIR"] = tempfile.mkdtemp(prefix="geocert-bench-")
+    log = open(Path(env["GEOCERT_DATA_DIR"]) / "serve.log", "w")
     server = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--workers",
-                               str(workers), "--concurrency", "1"], env=env)
+                               str(workers), "--concurrency", "1"], env=env, stdout=log, stderr=log)
     try:
         with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=60) as client:
             deadline = time.monotonic() + 90

@@ -62,7 +62,9 @@ class TriangulationKind:
     item_name = "tracks"
     description = "N-view triangulation: the 3D point minimising reprojection error, certified globally optimal."
 
-    def parse(self, data: Any) -> TriangulationData:
+    def parse(self, data: Any, items: range | None = None) -> TriangulationData:
+        """Checked problem data; with ``items``, only those tracks are read (the rest stay None),
+        which is how a worker takes its chunk of a large batch."""
         if not isinstance(data, dict):
             raise InputError("data", "must be an object with 'cameras' and 'tracks'")
         for key in ("cameras", "tracks"):
@@ -75,8 +77,9 @@ class TriangulationKind:
         cameras = check_cameras(cameras, "data/cameras")
         if not isinstance(data["tracks"], list) or not data["tracks"]:
             raise InputError("data/tracks", "must be a non-empty list")
-        tracks = []
-        for i, track in enumerate(data["tracks"]):
+        tracks: list = [None] * len(data["tracks"])
+        for i in items if items is not None else range(len(data["tracks"])):
+            track = data["tracks"][i]
             where = f"data/tracks/{i}"
             if not isinstance(track, dict) or "views" not in track or "points" not in track:
                 raise InputError(where, "must be an object with 'views' and 'points'")
@@ -101,7 +104,7 @@ class TriangulationKind:
             bad = np.argwhere(~np.isfinite(pts))
             if len(bad):
                 raise InputError(f"{where}/points/{bad[0][0]}", "contains a non-finite number")
-            tracks.append((list(views), pts))
+            tracks[i] = (list(views), pts)
         return TriangulationData(cameras, tracks)
 
     def count(self, parsed: TriangulationData) -> int:

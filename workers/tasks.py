@@ -55,7 +55,7 @@ def solve_chunk(job_id: str, chunk: int) -> None:
         request = jobs.request(job_id)
         kind = get_kind(request["kind"])
         options = options_from(kind.options_type, request.get("options"))
-        parsed = kind.parse(request["data"])
+        parsed = kind.parse(request["data"], items=range(start, stop))
         throttle = _Throttle(jobs, job_id, chunk, get_settings().progress_interval_s)
         items = solve_items(kind, parsed, options, range(start, stop), throttle, throttle.should_stop)
         done = jobs.save_chunk_items(job_id, chunk, items)
