@@ -7,7 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from solvers.bnb import Box, BoxStatus
-from solvers.triangulation import NORMS, TriangulationOptions, TrackProblem, gamma_for, prepare_track
+from solvers.fractional import Prepared, gamma_for
+from solvers.triangulation import NORMS, TriangulationOptions, prepare_track
 
 from .scenes import noisy_track, random_cameras
 
@@ -24,10 +25,11 @@ def test_box_bound_never_exceeds_cost_inside_the_box(seed, views, norm, shrink, 
     rng = np.random.default_rng(seed)
     cameras = random_cameras(rng, views)
     _, points = noisy_track(rng, cameras, noise_px=3.0)
-    prepared = prepare_track(cameras, points, TriangulationOptions(norm=norm))
-    if not isinstance(prepared, TrackProblem):
+    _, prepared = prepare_track(cameras, points, TriangulationOptions(norm=norm))
+    if not isinstance(prepared, Prepared):
         return  # closed before any box exists (noiseless or degenerate): nothing to bound
-    problem, root = prepared, prepared.root
+    problem = prepared.problem
+    root = problem.root
     # A random sub-box of the root region, and random points inside it.
     centre = root.lo + rng.uniform(size=3) * root.width
     half = 0.5 * shrink * root.width * rng.uniform(0.05, 1.0, size=3)
