@@ -13,12 +13,6 @@ from pathlib import Path
 from pydantic import ValidationError
 
 
-def _problem_from_validation(exc: ValidationError) -> dict:
-    errors = [{"field": "/".join(str(p) for p in e["loc"]) or "body", "reason": e["msg"]} for e in exc.errors()]
-    return {"type": "about:blank", "title": "Invalid request", "status": 422,
-            "detail": f"{errors[0]['field']}: {errors[0]['reason']}", "errors": errors}
-
-
 def _progress_bar(progress: dict) -> None:
     done, total = progress["tracks_done"], progress["tracks_total"]
     width = 30
@@ -31,7 +25,7 @@ def _progress_bar(progress: dict) -> None:
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
-    from app.schemas import JobRequest
+    from app.schemas import JOB_REQUEST
     from solvers.geometry import InputError
     from solvers.jobs import solve_job
 
@@ -43,11 +37,13 @@ def cmd_solve(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     try:
-        request = JobRequest.model_validate(body).model_dump(mode="json")
+        request = JOB_REQUEST.dump_python(JOB_REQUEST.validate_python(body), mode="json")
         sink = _progress_bar if sys.stderr.isatty() else None
         result = solve_job(request, sink=sink)
     except ValidationError as exc:
-        print(json.dumps(_problem_from_validation(exc)), file=sys.stderr)
+        from app.problems import validation_problem
+
+        print(json.dumps(validation_problem(exc.errors())), file=sys.stderr)
         return 2
     except InputError as exc:
         print(json.dumps({"type": "about:blank", "title": "Invalid request", "status": 422, "detail": str(exc),

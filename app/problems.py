@@ -8,6 +8,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from solvers.geometry import InputError
+from solvers.jobs import KINDS
 
 PROBLEM_JSON = "application/problem+json"
 
@@ -24,20 +25,33 @@ def problem(status: int, title: str, detail: str | None = None, errors: list[dic
     return JSONResponse(body, status_code=status, media_type=PROBLEM_JSON, headers=headers)
 
 
-def _field(loc: tuple) -> str:
+def field_path(loc: tuple) -> str:
+    """A pydantic error location as the field path we name in problems (``data/tracks/0/views``):
+    without the request part and without the tag of the job's kind (the union's branch)."""
     parts = [str(p) for p in loc]
     if parts and parts[0] in ("body", "query", "path", "header"):
         parts = parts[1:]
+    if parts and parts[0] in KINDS:
+        parts = parts[1:]
     return "/".join(parts) or "body"
+
+
+def validation_problem(errors: list[dict], instance: str | None = None) -> dict:
+    """422 problem details from pydantic errors."""
+    fields = [{"field": field_path(e.get("loc", ())), "reason": e.get("msg", "invalid")} for e in errors]
+    first = fields[0] if fields else {"field": "body", "reason": "invalid"}
+    body = {"type": "about:blank", "title": "Invalid request", "status": 422,
+            "detail": f"{first['field']}: {first['reason']}", "errors": fields}
+    if instance:
+        body["instance"] = instance
+    return body
 
 
 def install(app: FastAPI) -> None:
     @app.exception_handler(RequestValidationError)
     async def validation(request: Request, exc: RequestValidationError):
-        errors = [{"field": _field(e.get("loc", ())), "reason": e.get("msg", "invalid")} for e in exc.errors()]
-        first = errors[0] if errors else {"field": "body", "reason": "invalid"}
-        return problem(422, "Invalid request", f"{first['field']}: {first['reason']}", errors,
-                       instance=str(request.url.path))
+        body = validation_problem(list(exc.errors()), instance=str(request.url.path))
+        return JSONResponse(body, status_code=422, media_type=PROBLEM_JSON)
 
     @app.exception_handler(InputError)
     async def input_error(request: Request, exc: InputError):

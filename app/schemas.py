@@ -3,10 +3,11 @@ solvers' own option dataclasses, so the API, the CLI and the solvers cannot disa
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, create_model
 
+from solvers.maps import MapOptions
 from solvers.triangulation import TriangulationOptions
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
@@ -14,7 +15,6 @@ CameraRow = Annotated[list[Finite], Field(min_length=4, max_length=4)]
 Camera = Annotated[list[CameraRow], Field(min_length=3, max_length=3, description="3x4 projective camera")]
 Pixel = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[u, v] in pixels")]
 
-_TRI = TriangulationOptions()
 
 
 class Strict(BaseModel):
@@ -31,13 +31,23 @@ class TriangulationData(Strict):
     tracks: list[TrackIn] = Field(min_length=1)
 
 
-class TriangulationOptionsIn(Strict):
-    norm: Literal["L2L2", "L2L1", "L1L1"] = _TRI.norm
-    rel_gap: Finite = Field(_TRI.rel_gap, ge=0, le=1, description="stop when gap <= rel_gap * cost ...")
-    abs_gap: Finite = Field(_TRI.abs_gap, ge=0, description="... or gap <= abs_gap (cost units)")
-    max_nodes: int = Field(_TRI.max_nodes, ge=1, le=1_000_000, description="per track")
-    time_limit_s: Finite = Field(_TRI.time_limit_s, gt=0, le=3600, description="per track")
-    max_residual: Finite | None = Field(_TRI.max_residual, gt=0, description="pixels; narrows the certificate's scope")
+def options_model(name: str, defaults, residual_units: str) -> type[BaseModel]:
+    """The options of a kind, defaults taken from its solver's options dataclass."""
+    return create_model(
+        name,
+        __base__=Strict,
+        norm=(Literal["L2L2", "L2L1", "L1L1"], defaults.norm),
+        rel_gap=(Finite, Field(defaults.rel_gap, ge=0, le=1, description="stop when gap <= rel_gap * cost ...")),
+        abs_gap=(Finite, Field(defaults.abs_gap, ge=0, description="... or gap <= abs_gap (cost units)")),
+        max_nodes=(int, Field(defaults.max_nodes, ge=1, le=1_000_000, description="per item")),
+        time_limit_s=(Finite, Field(defaults.time_limit_s, gt=0, le=3600, description="per item")),
+        max_residual=(Finite | None, Field(defaults.max_residual, gt=0,
+                                           description=f"{residual_units}; narrows the certificate's scope")),
+    )
+
+
+TriangulationOptionsIn = options_model("TriangulationOptionsIn", TriangulationOptions(), "pixels")
+MapOptionsIn = options_model("MapOptionsIn", MapOptions(), "target units")
 
 
 class TriangulationJob(Strict):
@@ -46,7 +56,32 @@ class TriangulationJob(Strict):
     options: TriangulationOptionsIn = Field(default_factory=TriangulationOptionsIn)
 
 
-JobRequest = TriangulationJob  # a discriminated union on "kind" as more kinds arrive
+Coordinates = Annotated[list[Finite], Field(min_length=2, max_length=3)]
+
+
+class MapIn(Strict):
+    source: list[Coordinates] = Field(min_length=1, description="source points (3D for resection)")
+    target: list[Coordinates] = Field(min_length=1, description="target points, same order (pixels for resection)")
+
+
+class MapsData(Strict):
+    maps: list[MapIn] = Field(min_length=1, description="independent maps, solved in parallel")
+
+
+class ResectionJob(Strict):
+    kind: Literal["resection"]
+    data: MapsData
+    options: MapOptionsIn = Field(default_factory=MapOptionsIn)
+
+
+class HomographyJob(Strict):
+    kind: Literal["homography"]
+    data: MapsData
+    options: MapOptionsIn = Field(default_factory=MapOptionsIn)
+
+
+JobRequest = Annotated[Union[TriangulationJob, ResectionJob, HomographyJob], Field(discriminator="kind")]
+JOB_REQUEST = TypeAdapter(JobRequest)
 
 JOB_STATUSES = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 
@@ -74,8 +109,8 @@ class JobProgress(BaseModel):
     upper_bound: float | None = None
     gap_abs: float | None = None
     gap_rel: float | None = Field(None, description="worst relative gap over the tracks finished or running")
-    tracks_done: int = 0
-    tracks_total: int = 0
+    tracks_done: int = Field(0, description="items (tracks, maps) finished")
+    tracks_total: int = Field(0, description="items (tracks, maps) in the job")
     elapsed_s: float = 0.0
 
 
@@ -127,6 +162,36 @@ class TriangulationResult(BaseModel):
     stats: JobStats
 
 
+class MapCertificate(BaseModel):
+    scope: str
+    root_region: dict[str, Any] | None
+    tolerance: float | None
+    tolerance_met: bool
+    leaves: int
+    note: str | None = None
+
+
+class MapOut(BaseModel):
+    matrix: list[list[float]] | None = Field(description="Frobenius norm 1, reference depth positive")
+    residuals: list[list[float]] = Field(description="target minus the map's image, per point")
+    cost: float | None
+    lower_bound: float | None
+    gap: float | None
+    status: Literal["optimal", "node_limit", "time_limit", "cancelled", "not_certified", "infeasible", "degenerate"]
+    certified: bool
+    nodes: int
+    elapsed_s: float
+    reason: str | None
+    certificate: MapCertificate | None
+
+
+class MapsResult(BaseModel):
+    kind: Literal["resection", "homography"]
+    norm: str
+    maps: list[MapOut]
+    stats: JobStats
+
+
 class Job(BaseModel):
     id: str
     kind: str
@@ -135,7 +200,7 @@ class Job(BaseModel):
     started_at: float | None
     finished_at: float | None
     progress: JobProgress
-    result: TriangulationResult | None = None
+    result: TriangulationResult | MapsResult | None = None
     error: ProblemDetails | None = None
     links: dict[str, str]
 
@@ -148,4 +213,4 @@ class ProblemKindInfo(BaseModel):
     default_options: dict[str, Any]
 
 
-REQUEST_MODELS = {"triangulation": (TriangulationJob, TriangulationOptionsIn)}
+REQUEST_MODELS = {"triangulation": TriangulationJob, "resection": ResectionJob, "homography": HomographyJob}

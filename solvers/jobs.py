@@ -18,6 +18,7 @@ import numpy as np
 
 from .bnb import Progress
 from .geometry import InputError, check_cameras
+from .maps import MapOptions, MapResult, check_correspondences, fit_map
 from .triangulation import NORMS, TrackResult, TriangulationOptions, triangulate
 
 ProgressSink = Callable[[dict], None]
@@ -160,7 +161,107 @@ def track_document(result: TrackResult) -> dict:
     }
 
 
-KINDS = {kind.name: kind for kind in (TriangulationKind(),)}
+@dataclass
+class MapsData:
+    maps: list[tuple[np.ndarray, np.ndarray] | None]
+
+
+class MapKind:
+    """Resection (3D -> 2D) and homographies (2D -> 2D, 3D -> 3D): independent maps, one item each."""
+
+    options_type = MapOptions
+    item_name = "maps"
+
+    def __init__(self, name: str, dimensions: set[tuple[int, int]], description: str):
+        self.name, self.dimensions, self.description = name, dimensions, description
+
+    def parse(self, data: Any, items: range | None = None) -> MapsData:
+        if not isinstance(data, dict) or "maps" not in data:
+            raise InputError("data/maps", "is required: a list of {source, target} correspondences")
+        if not isinstance(data["maps"], list) or not data["maps"]:
+            raise InputError("data/maps", "must be a non-empty list")
+        maps: list = [None] * len(data["maps"])
+        for i in items if items is not None else range(len(data["maps"])):
+            where = f"data/maps/{i}"
+            entry = data["maps"][i]
+            if not isinstance(entry, dict) or "source" not in entry or "target" not in entry:
+                raise InputError(where, "must be an object with 'source' and 'target'")
+            arrays = []
+            for key in ("source", "target"):
+                try:
+                    array = np.asarray(entry[key], dtype=float)
+                except (TypeError, ValueError) as exc:
+                    raise InputError(f"{where}/{key}", "must be a list of points (lists of numbers)") from exc
+                if array.ndim != 2 or array.shape[0] == 0:
+                    raise InputError(f"{where}/{key}", "must be a non-empty list of points of one dimension")
+                arrays.append(array)
+            source, target = arrays
+            if (source.shape[1], target.shape[1]) not in self.dimensions:
+                allowed = " or ".join(f"{n}D -> {m}D" for n, m in sorted(self.dimensions))
+                raise InputError(where, f"{source.shape[1]}D -> {target.shape[1]}D points; {self.name} takes {allowed}")
+            check_correspondences(source, target, where)
+            maps[i] = (source, target)
+        return MapsData(maps)
+
+    def count(self, parsed: MapsData) -> int:
+        return len(parsed.maps)
+
+    def solve_item(self, parsed: MapsData, index: int, options: MapOptions, callback) -> dict:
+        source, target = parsed.maps[index]
+        return map_document(fit_map(source, target, options, callback))
+
+    def cancelled_item(self) -> dict:
+        return map_document(MapResult("cancelled", False, reason="the job was cancelled before this map started"))
+
+    def assemble(self, options: MapOptions, items: list[dict], stats: dict) -> dict:
+        return {"kind": self.name, "norm": options.norm, "maps": items, "stats": stats}
+
+
+def map_document(result: MapResult) -> dict:
+    certificate = None
+    if result.certificate is not None:
+        c = result.certificate
+        certificate = {
+            "scope": c.scope,
+            "root_region": {
+                "reference_point": c.reference_point,
+                "functionals": c.functionals,
+                "denominator": c.denominator,
+                "lower": c.lower,
+                "upper": c.upper,
+                "meaning": "lower <= (F l) / (d . l) <= upper for the last row l of every map in the scope, "
+                           "F = functionals, d = denominator (the reference point, homogeneous)",
+            },
+            "tolerance": finite_or_none(c.tolerance),
+            "tolerance_met": c.tolerance_met,
+            "leaves": c.leaves,
+        }
+    elif result.certified:
+        certificate = {"scope": "every map that puts every point at positive depth", "root_region": None,
+                       "tolerance": 0.0, "tolerance_met": True, "leaves": 0,
+                       "note": "the incumbent's cost is within abs_gap of the trivial bound 0"}
+    return {
+        "matrix": result.matrix,
+        "residuals": result.residuals,
+        "cost": finite_or_none(result.cost),
+        "lower_bound": finite_or_none(result.lower_bound),
+        "gap": finite_or_none(result.gap),
+        "status": result.status,
+        "certified": result.certified,
+        "nodes": result.nodes,
+        "elapsed_s": result.elapsed_s,
+        "reason": result.reason,
+        "certificate": certificate,
+    }
+
+
+KINDS = {kind.name: kind for kind in (
+    TriangulationKind(),
+    MapKind("resection", {(3, 2)}, "Camera resectioning: the projective camera (3x4) from 3D-2D matches, "
+                                   "certified globally optimal."),
+    MapKind("homography", {(2, 2), (3, 3)}, "Homographies of P^2 (from 2D-2D matches) or P^3 (from 3D-3D "
+                                            "matches), certified globally optimal."),
+)}
 
 
 def get_kind(name: Any):
@@ -191,7 +292,7 @@ class ItemProgress:
     def finished(self, item: dict) -> None:
         self.done += 1
         self.nodes_done += item["nodes"]
-        if item["cost"] is not None and item["lower_bound"] is not None:
+        if item.get("cost") is not None and item.get("lower_bound") is not None:
             self.lower_done += item["lower_bound"]
             self.upper_done += item["cost"]
             if item["cost"] > 0:

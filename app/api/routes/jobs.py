@@ -39,7 +39,7 @@ def job_document(store: JobStore, meta: dict) -> dict:
 @router.post("", status_code=202, response_model=Job, responses={k: _ERRORS[k] for k in (413, 422)})
 def submit_job(body: JobRequest, response: Response, store: Annotated[JobStore, Depends(get_store)]):
     """Queue a job; answers 202 with its id and a Location to poll."""
-    request = body.model_dump(mode="json")
+    request = body.model_dump(mode="json")  # validated by its kind's model (discriminated on "kind")
     kind, parsed, _ = parse_job(request)  # the solvers' own checks: rank, indices, duplicates
     items = kind.count(parsed)
     settings = get_settings()

@@ -20,7 +20,7 @@ def list_problems():
     """The problem kinds served, with the JSON schema of a job and the default options."""
     return [
         ProblemKindInfo(kind=name, description=kind.description, item_name=kind.item_name,
-                        request_schema=REQUEST_MODELS[name][0].model_json_schema(),
+                        request_schema=REQUEST_MODELS[name].model_json_schema(),
                         default_options=default_options(kind))
         for name, kind in KINDS.items()
     ]

@@ -1,0 +1,257 @@
+"""Certified P^n -> P^m maps (thesis 5.5.2-5.5.3): camera resectioning (n=3, m=2), 2D
+homographies (n=m=2) and 3D homographies (n=m=3), under the three norms.
+
+The unknown is the (m+1)x(n+1) matrix M. Residual j is ``x_j - (M_k . X_j / M_last . X_j)_k``:
+numerators ``x_jk (M_last . X_j) - M_k . X_j`` are linear in M, depths ``M_last . X_j`` linear
+in its last row. The scale is fixed by the reference point's depth being 1, so the last row
+has n free parameters w; they are the only directions ever branched. Variables:
+``v = (w, the other m rows of M)``; the last row is ``l0 + N w`` with N spanning the
+complement of the reference point.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .bnb import Progress
+from .fractional import REASONS, Early, FractionalProgram, prepare, search
+from .geometry import InputError, norm_cost
+from .triangulation import NORMS
+
+
+@dataclass
+class MapOptions:
+    norm: str = "L2L2"
+    rel_gap: float = 1e-3
+    abs_gap: float = 1e-7  # in the cost's units (squared target units for L2L2)
+    max_nodes: int = 5000
+    time_limit_s: float = 60.0
+    max_residual: float | None = None  # target units; narrows the certificate's scope
+
+    def check(self) -> None:
+        if self.norm not in NORMS:
+            raise InputError("options/norm", f"must be one of {', '.join(NORMS)}")
+        for name in ("rel_gap", "abs_gap", "time_limit_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise InputError(f"options/{name}", "must be a finite number >= 0")
+        if self.max_nodes < 1:
+            raise InputError("options/max_nodes", "must be at least 1")
+        if self.max_residual is not None and not (math.isfinite(self.max_residual) and self.max_residual > 0):
+            raise InputError("options/max_residual", "must be a finite number > 0")
+
+
+@dataclass
+class MapCertificate:
+    scope: str
+    reference_point: int
+    # Root region: lower <= (F l) / (X_ref . l) <= upper for the last row l of every map in scope.
+    functionals: list[list[float]]
+    denominator: list[float]
+    lower: list[float]
+    upper: list[float]
+    tolerance: float
+    tolerance_met: bool
+    leaves: int
+
+
+@dataclass
+class MapResult:
+    status: str
+    certified: bool
+    matrix: list[list[float]] | None = None  # Frobenius norm 1, reference depth positive
+    residuals: list[list[float]] = field(default_factory=list)
+    cost: float | None = None
+    lower_bound: float | None = None
+    gap: float | None = None
+    nodes: int = 0
+    elapsed_s: float = 0.0
+    reason: str | None = None
+    certificate: MapCertificate | None = None
+
+
+def minimum_points(n: int, m: int) -> int:
+    """Fewest correspondences that determine the (m+1)(n+1) - 1 degrees of freedom."""
+    return math.ceil(((m + 1) * (n + 1) - 1) / m)
+
+
+def check_correspondences(source: np.ndarray, target: np.ndarray, field_name: str) -> None:
+    """Raise InputError for data that cannot determine a general map (and say why)."""
+    n, m = source.shape[1], target.shape[1]
+    if len(source) != len(target):
+        raise InputError(field_name, f"has {len(source)} source points but {len(target)} target points")
+    needed = minimum_points(n, m)
+    if len(source) < needed:
+        raise InputError(f"{field_name}/source", f"a P^{n} -> P^{m} map needs at least {needed} points, got {len(source)}")
+    for name, array in (("source", source), ("target", target)):
+        bad = np.argwhere(~np.isfinite(array))
+        if len(bad):
+            raise InputError(f"{field_name}/{name}/{bad[0][0]}", "contains a non-finite number")
+    _, first = np.unique(source, axis=0, return_index=True)
+    if len(first) < len(source):
+        duplicate = sorted(set(range(len(source))) - set(first.tolist()))[0]
+        raise InputError(f"{field_name}/source/{duplicate}", "duplicates an earlier source point")
+    centred = source - source.mean(axis=0)
+    singular = np.linalg.svd(centred, compute_uv=False)
+    if singular[-1] <= 1e-9 * max(singular[0], 1e-300):
+        shape = {2: "on one line", 3: "on one plane"}.get(n, "in one hyperplane")
+        what = "a general projective camera" if (n, m) == (3, 2) else f"a general P^{n} -> P^{m} map"
+        raise InputError(f"{field_name}/source", f"all source points lie {shape}: a degenerate configuration for {what}")
+
+
+def _normaliser(points: np.ndarray) -> np.ndarray:
+    """Similarity (homogeneous) taking the points' centroid to 0 and mean distance to sqrt(dim)."""
+    dim = points.shape[1]
+    centre = points.mean(axis=0)
+    spread = float(np.mean(np.linalg.norm(points - centre, axis=1))) or 1.0
+    S = np.eye(dim + 1)
+    S[:dim, :dim] *= math.sqrt(dim) / spread
+    S[:dim, dim] = -centre * math.sqrt(dim) / spread
+    return S
+
+
+@dataclass
+class MapChart:
+    program: FractionalProgram
+    source_norm: np.ndarray  # S: normalised source = S [X; 1]
+    target_shift: np.ndarray  # target translated by this (residuals unchanged)
+    reference: int
+    last_row_origin: np.ndarray  # l0
+    last_row_basis: np.ndarray  # N, (n+1) x n
+
+    @classmethod
+    def build(cls, source: np.ndarray, target: np.ndarray, norm: str) -> "MapChart":
+        count, n = source.shape
+        m = target.shape[1]
+        S = _normaliser(source)
+        X = (S @ np.hstack([source, np.ones((count, 1))]).T).T  # (count, n+1)
+        shift = target.mean(axis=0)
+        x = target - shift
+        # Reference: the point nearest the centroid, whose depth is 1 by the choice of scale.
+        reference = int(np.argmin(np.linalg.norm(X[:, :n], axis=1)))
+        l0 = X[reference] / (X[reference] @ X[reference])
+        N = np.linalg.svd(X[reference][None, :])[2][1:].T  # (n+1, n), orthonormal, N' X_ref = 0
+        d = n + m * (n + 1)
+        num = np.zeros((count, m, d + 1))
+        den = np.zeros((count, d + 1))
+        for j in range(count):
+            # depth_j = (l0 + N w) . X_j
+            den[j, :n] = N.T @ X[j]
+            den[j, d] = l0 @ X[j]
+            for k in range(m):
+                # x_jk * depth_j - M_k . X_j; row k of M sits at v[n + k(n+1) : n + (k+1)(n+1)]
+                num[j, k] = x[j, k] * den[j]
+                num[j, k, n + k * (n + 1): n + (k + 1) * (n + 1)] -= X[j]
+        exact = np.zeros(count, dtype=bool)
+        exact[reference] = True
+        den[reference] = 0.0
+        den[reference, d] = 1.0
+        program = FractionalProgram(num, den, exact, np.zeros((0, d + 1)), norm)
+        return cls(program, S, shift, reference, l0, N)
+
+    def matrix(self, v: np.ndarray) -> np.ndarray:
+        """M in the caller's coordinates (before normalising its scale)."""
+        n = self.last_row_basis.shape[1]
+        m = (len(v) - n) // (n + 1)
+        rows = v[n:].reshape(m, n + 1)
+        last = self.last_row_origin + self.last_row_basis @ v[:n]
+        M = np.vstack([rows, last])
+        T = np.eye(m + 1)
+        T[:m, m] = self.target_shift  # undo the target translation
+        return T @ M @ self.source_norm
+
+    def from_matrix(self, M: np.ndarray) -> np.ndarray | None:
+        """v for a map given in the caller's coordinates (None when the reference depth <= 0)."""
+        m = M.shape[0] - 1
+        T_inv = np.eye(m + 1)
+        T_inv[:m, m] = -self.target_shift
+        Mn = T_inv @ M @ np.linalg.inv(self.source_norm)
+        X_ref = self.last_row_origin / (self.last_row_origin @ self.last_row_origin)
+        depth = Mn[m] @ X_ref
+        if not depth > 0:
+            return None
+        Mn = Mn / depth
+        w = self.last_row_basis.T @ Mn[m]
+        return np.concatenate([w, Mn[:m].ravel()])
+
+
+def dlt(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The linear estimate of M (normalised DLT); sign chosen so most depths are positive."""
+    S, T = _normaliser(source), _normaliser(target)
+    X = (S @ np.hstack([source, np.ones((len(source), 1))]).T).T
+    x = (T @ np.hstack([target, np.ones((len(target), 1))]).T).T
+    n1, m = X.shape[1], target.shape[1]
+    rows = []
+    for j in range(len(X)):
+        for k in range(m):
+            row = np.zeros((m + 1, n1))
+            row[k] = -X[j]
+            row[m] = x[j, k] * X[j]
+            rows.append(row.ravel())
+    Mn = np.linalg.svd(np.array(rows))[2][-1].reshape(m + 1, n1)
+    M = np.linalg.inv(T) @ Mn @ S
+    depths = M[m] @ np.hstack([source, np.ones((len(source), 1))]).T
+    return M if np.sum(depths > 0) >= np.sum(depths < 0) else -M
+
+
+def fit_map(
+    source: np.ndarray,
+    target: np.ndarray,
+    options: MapOptions | None = None,
+    callback: Callable[[Progress], bool | None] | None = None,
+) -> MapResult:
+    """Certified global optimum of one map from correspondences ``source`` (k, n) -> ``target`` (k, m)."""
+    options = options or MapOptions()
+    start = time.perf_counter()
+    source = np.asarray(source, dtype=float)
+    target = np.asarray(target, dtype=float)
+    chart = MapChart.build(source, target, options.norm)
+    n = source.shape[1]
+    prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n],
+                       options.abs_gap, options.max_residual)
+    if isinstance(prepared, Early):
+        if prepared.incumbent is None:
+            reason = prepared.reason if prepared.reason == REASONS["infeasible"] else (
+                "no map puts every point at positive depth")
+            return MapResult(prepared.status, False, reason=reason, elapsed_s=time.perf_counter() - start)
+        result = _map_result(chart, source, target, prepared.incumbent, options.norm, prepared.status,
+                             0.0 if prepared.status == "optimal" else None, 0, None)
+        result.reason = prepared.reason
+        result.elapsed_s = time.perf_counter() - start
+        return result
+    bnb = search(prepared, options.rel_gap, options.abs_gap, options.max_nodes, options.time_limit_s, callback)
+    if not math.isfinite(bnb.upper_bound):
+        return MapResult("infeasible", False, nodes=bnb.nodes, reason=REASONS["infeasible"],
+                         elapsed_s=time.perf_counter() - start)
+    unit, problem = prepared.unit, prepared.problem
+    # Root region on the caller's last row l: z = B w with w = N' S^-T l / (l . X_ref).
+    functionals = problem.B[:, :n] @ chart.last_row_basis.T @ np.linalg.inv(chart.source_norm).T
+    reference_point = np.append(source[chart.reference], 1.0)
+    scope = ("every map that puts every point at positive depth" if options.max_residual is None else
+             f"every map that puts every point at positive depth with every residual <= {options.max_residual}")
+    certificate = MapCertificate(scope, chart.reference, functionals.tolist(), reference_point.tolist(),
+                                 problem.root.lo.tolist(), problem.root.hi.tolist(), bnb.tolerance / unit,
+                                 bnb.upper_bound - bnb.lower_bound <= bnb.tolerance, bnb.leaves)
+    result = _map_result(chart, source, target, bnb.candidate, options.norm, bnb.status,
+                         bnb.lower_bound / unit, bnb.nodes, certificate)
+    result.elapsed_s = time.perf_counter() - start
+    return result
+
+
+def _map_result(chart: MapChart, source, target, v, norm, status, lower, nodes, certificate) -> MapResult:
+    M = chart.matrix(v)
+    M = M / np.linalg.norm(M)  # positive scale: the reference depth stays positive
+    homogeneous = np.hstack([source, np.ones((len(source), 1))])
+    proj = homogeneous @ M.T
+    residuals = target - proj[:, :-1] / proj[:, -1:]
+    cost = norm_cost(residuals, norm)  # recomputed from the caller's data
+    if lower is not None:
+        lower = min(lower, cost)
+    return MapResult(status=status, certified=status == "optimal" and lower is not None, matrix=M.tolist(),
+                     residuals=residuals.tolist(), cost=cost, lower_bound=lower,
+                     gap=cost - lower if lower is not None else None, nodes=nodes, certificate=certificate)
