@@ -83,3 +83,20 @@ def dlt_lm(cameras: np.ndarray, points: np.ndarray) -> np.ndarray:
 
     fit = scipy.optimize.least_squares(residuals, start, method="lm" if residuals(start).size >= 3 else "trf")
     return np.append(fit.x, 1.0)
+
+
+def map_dlt_lm(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The usual pipeline for a projective map: normalised DLT, then LM on the reprojection
+    error (OpenCV's findHomography does the same for 2D homographies)."""
+    from solvers.maps import dlt
+
+    M0 = dlt(source, target)
+    homogeneous = np.hstack([source, np.ones((len(source), 1))])
+
+    def residuals(flat):
+        proj = homogeneous @ flat.reshape(M0.shape).T
+        return (proj[:, :-1] / proj[:, -1:] - target).ravel()
+
+    start = (M0 / np.linalg.norm(M0)).ravel()
+    fit = scipy.optimize.least_squares(residuals, start, method="lm" if residuals(start).size >= start.size else "trf")
+    return fit.x.reshape(M0.shape)

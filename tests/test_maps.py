@@ -1,0 +1,137 @@
+"""Certified P^n -> P^m maps: resection, 2D and 3D homographies (thesis 5.5.2-5.5.3)."""
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from bench.baselines import map_dlt_lm
+from solvers.bnb import Box, BoxStatus
+from solvers.fractional import Prepared, prepare
+from solvers.geometry import InputError, norm_cost
+from solvers.maps import MapChart, MapOptions, check_correspondences, dlt, fit_map
+from solvers.triangulation import NORMS
+
+from .scenes import look_at
+
+
+def apply(M: np.ndarray, points: np.ndarray) -> np.ndarray:
+    proj = np.hstack([points, np.ones((len(points), 1))]) @ M.T
+    return proj[:, :-1] / proj[:, -1:]
+
+
+def scene(rng, kind: str, count: int):
+    """A map with every point at positive depth, its source points, and their exact images."""
+    if kind == "resection":
+        M = look_at(rng.normal(size=3) * 2 + np.array([0, 0, -8.0]), rng.normal(size=3) * 0.3)
+        source = rng.normal(size=(count, 3))
+    elif kind == "homography2":  # a plane z = 0 seen by a camera: H = K [r1 r2 t]
+        P = look_at(rng.normal(size=3) * 2 + np.array([0, 0, -8.0]), rng.normal(size=3) * 0.3)
+        M = P[:, [0, 1, 3]]
+        source = rng.uniform(-2, 2, size=(count, 2))
+    else:  # a 3D projective map close to a similarity, depths positive on the cloud
+        M = np.eye(4) + rng.normal(size=(4, 4)) * 0.05
+        M[3] = [0.02, -0.01, 0.03, 1.0]
+        source = rng.normal(size=(count, 3))
+    return M, source, apply(M, source)
+
+
+def same_map(A, B) -> float:
+    A, B = np.asarray(A) / np.linalg.norm(A), np.asarray(B) / np.linalg.norm(B)
+    return min(np.abs(A - B).max(), np.abs(A + B).max())
+
+
+class TestExactRecovery:
+    @pytest.mark.parametrize("norm", NORMS)
+    @pytest.mark.parametrize("kind, count", [("resection", 10), ("homography2", 6), ("homography3", 8)])
+    def test_noiseless_data_give_the_map(self, kind, count, norm):
+        rng = np.random.default_rng(hash((kind, norm)) % 2**32)
+        M, source, target = scene(rng, kind, count)
+        result = fit_map(source, target, MapOptions(norm=norm))
+        assert result.certified, result.reason
+        assert result.cost <= 1e-7
+        assert same_map(result.matrix, M) < 1e-6
+
+
+class TestBaselinesNeverBeatTheCertificate:
+    @pytest.mark.parametrize("norm", NORMS)
+    def test_homography_against_find_homography(self, norm):
+        rng = np.random.default_rng(41)
+        for _ in range(8):
+            count = int(rng.integers(4, 9))
+            _, source, target = scene(rng, "homography2", count)
+            target = target + rng.normal(size=target.shape) * 2.0
+            ours = fit_map(source, target, MapOptions(norm=norm))
+            assert ours.certified, ours.reason
+            H, _ = cv2.findHomography(source, target, 0)
+            if H is None or np.any(np.hstack([source, np.ones((count, 1))]) @ H[2] * np.sign(H[2, 2]) <= 0):
+                continue  # outside the certificate's scope (a point at negative depth)
+            theirs = norm_cost(apply(H, source) - target, norm)
+            assert theirs >= ours.lower_bound * (1 - 1e-9) - 1e-9
+
+    @pytest.mark.parametrize("norm", NORMS)
+    def test_resection_against_dlt_and_levenberg_marquardt(self, norm):
+        rng = np.random.default_rng(42)
+        for _ in range(6):
+            count = int(rng.integers(6, 11))
+            _, source, target = scene(rng, "resection", count)
+            target = target + rng.normal(size=target.shape) * 2.0
+            ours = fit_map(source, target, MapOptions(norm=norm))
+            assert ours.certified, ours.reason
+            M = map_dlt_lm(source, target)
+            depths = np.hstack([source, np.ones((count, 1))]) @ M[2]
+            if not (np.all(depths > 0) or np.all(depths < 0)):
+                continue
+            theirs = norm_cost(apply(M, source) - target, norm)
+            assert theirs >= ours.lower_bound * (1 - 1e-9) - 1e-9
+            if norm == "L2L2":  # LM minimises this very cost: it should find the optimum here
+                assert theirs == pytest.approx(ours.cost, rel=1e-3)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), norm=st.sampled_from(NORMS), kind=st.sampled_from(["resection", "homography2"]),
+       shrink=st.floats(0.02, 1.0))
+def test_map_relaxation_never_exceeds_the_cost_in_its_box(seed, norm, kind, shrink):
+    rng = np.random.default_rng(seed)
+    _, source, target = scene(rng, kind, 8)
+    target = target + rng.normal(size=target.shape) * 2.0
+    chart = MapChart.build(source, target, norm)
+    n = source.shape[1]
+    prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n], 1e-7, None)
+    if not isinstance(prepared, Prepared):
+        return
+    problem = prepared.problem
+    # Random maps near the incumbent, and a random box (inside the root) around one of them.
+    samples = prepared.incumbent + rng.normal(size=(100, chart.program.dim)) * 0.02 * shrink
+    costs = np.array([problem.objective(v) for v in samples])
+    keep = np.isfinite(costs)
+    if not keep.any():
+        return
+    samples, costs = samples[keep], costs[keep]
+    z = samples @ problem.B.T
+    lo = np.maximum(problem.root.lo, z.min(axis=0) - shrink * problem.root.width * rng.uniform(size=n))
+    hi = np.minimum(problem.root.hi, z.max(axis=0) + shrink * problem.root.width * rng.uniform(size=n))
+    inside = np.all((z >= lo) & (z <= hi), axis=1)
+    if not inside.any():
+        return
+    cheapest = float(costs[inside].min())
+    bound = problem.bound(Box(lo, hi), cheapest * 2.0)
+    if bound.status == BoxStatus.BOUNDED:
+        assert bound.lower_bound <= cheapest * (1 + 1e-6) + 1e-9
+    else:
+        assert bound.status != BoxStatus.EMPTY
+
+
+class TestCorrespondenceChecks:
+    @pytest.mark.parametrize("source, target, field, words", [
+        (np.zeros((3, 2)) + np.arange(3)[:, None] * [1, 2], np.zeros((3, 2)), "m/source", "at least 4"),
+        (np.c_[np.random.default_rng(0).normal(size=(8, 2)), np.zeros(8)], np.zeros((8, 2)), "m/source", "one plane"),
+        (np.array([[0, 0], [1, 0], [0, 1], [1, 1], [1, 1]], float), np.zeros((5, 2)), "m/source/4", "duplicates"),
+        (np.array([[0, 0], [1, 0], [0, 1], [1, 1]], float), np.zeros((5, 2)), "m", "5 target"),
+        (np.array([[0, 0], [1, 0], [0, 1], [np.nan, 1]]), np.zeros((4, 2)), "m/source/3", "non-finite"),
+    ])
+    def test_bad_correspondences_are_named(self, source, target, field, words):
+        with pytest.raises(InputError) as error:
+            check_correspondences(source, target, "m")
+        assert error.value.field == field and words in error.value.reason
