@@ -129,6 +129,35 @@ class TestSubmitStreamResult:
         assert "data" in kinds["triangulation"]["request_schema"]["properties"]
 
 
+class TestMapsThroughTheService:
+    def test_resection_job_returns_certified_maps_in_order(self, service):
+        rng = np.random.default_rng(27)
+        cameras = random_cameras(rng, 3)
+        maps = []
+        for camera in cameras:
+            source = rng.normal(size=(8, 3))
+            proj = np.hstack([source, np.ones((8, 1))]) @ camera.T
+            target = proj[:, :2] / proj[:, 2:3] + rng.normal(size=(8, 2)) * 0.5
+            maps.append({"source": source.tolist(), "target": target.tolist()})
+        body = {"kind": "resection", "data": {"maps": maps}, "options": {"norm": "L2L2"}}
+        job_id = service.post("/v1/jobs", json=body).json()["id"]
+        job = wait_for(service, job_id)
+        assert job["status"] == "succeeded"
+        result = job["result"]
+        assert result["kind"] == "resection" and len(result["maps"]) == 3
+        for camera, fitted in zip(cameras, result["maps"]):
+            assert fitted["certified"]
+            M, P = np.array(fitted["matrix"]), camera / np.linalg.norm(camera)
+            assert min(np.abs(M - P).max(), np.abs(M + P).max()) < 0.05  # 0.5 px noise: close to the truth
+
+    def test_coplanar_resection_is_a_422_that_says_why(self, service):
+        source = [[x, y, 0.0] for x in range(3) for y in range(3)]
+        body = {"kind": "resection", "data": {"maps": [{"source": source, "target": [[1.0, 2.0]] * 9}]}}
+        response = service.post("/v1/jobs", json=body)
+        assert response.status_code == 422
+        assert "one plane" in response.json()["errors"][0]["reason"]
+
+
 class TestCancel:
     def test_running_job_stops_and_keeps_its_best_result(self, service):
         # An unreachable gap keeps the search running until it is told to stop.
