@@ -100,3 +100,66 @@ def map_dlt_lm(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     start = (M0 / np.linalg.norm(M0)).ravel()
     fit = scipy.optimize.least_squares(residuals, start, method="lm" if residuals(start).size >= start.size else "trf")
     return fit.x.reshape(M0.shape)
+
+
+def scip_map(source: np.ndarray, target: np.ndarray, norm: str, box: float = 10.0, time_limit: float = 30,
+             gap: float = 1e-5) -> tuple[np.ndarray | None, bool, float, float]:
+    """SCIP on a P^n -> P^m map: (its map in the caller's coordinates, whether it reached its
+    gap, its dual bound in the caller's units, the largest |entry| of our normalisation of
+    its map — to check the box held).
+
+    Coordinates are normalised (source and target similarities, which leave the norms unchanged
+    up to the target's scale); the scale is fixed by the first point's depth being 1 and every
+    entry of the normalised map lies in [-box, box]. Residuals d are variables tied to the map by
+    ``d * depth = M_k . X - x_k * depth``.
+    """
+    from solvers.maps import _normaliser
+
+    n, m = source.shape[1], target.shape[1]
+    S, T = _normaliser(source), _normaliser(target)
+    X = (S @ np.hstack([source, np.ones((len(source), 1))]).T).T
+    x = (T @ np.hstack([target, np.ones((len(target), 1))]).T).T[:, :m]
+    model = pyscipopt.Model()
+    model.hideOutput()
+    model.setParam("numerics/feastol", 1e-9)
+    model.setParam("limits/gap", gap)
+    model.setParam("limits/time", time_limit)
+    M = [[model.addVar(lb=-box, ub=box, name=f"M{r}{c}") for c in range(n + 1)] for r in range(m + 1)]
+
+    def row_dot(r, point):
+        return pyscipopt.quicksum(float(point[c]) * M[r][c] for c in range(n + 1))
+
+    model.addCons(row_dot(m, X[0]) == 1)
+    terms = []
+    for j in range(len(X)):
+        depth = model.addVar(lb=1e-4, ub=1e4, name=f"g{j}")
+        model.addCons(depth == row_dot(m, X[j]))
+        d = [model.addVar(lb=-100, ub=100, name=f"d{j}{k}") for k in range(m)]
+        for k in range(m):
+            model.addCons(d[k] * depth == row_dot(k, X[j]) - float(x[j, k]) * depth)
+        if norm == "L2L2":
+            terms.append(pyscipopt.quicksum(dk * dk for dk in d))
+        elif norm == "L2L1":
+            e = model.addVar(lb=0, ub=200, name=f"e{j}")
+            model.addCons(e >= pyscipopt.sqrt(pyscipopt.quicksum(dk * dk for dk in d)))
+            terms.append(e)
+        else:
+            for k in range(m):
+                a = model.addVar(lb=0, ub=100, name=f"a{j}{k}")
+                model.addCons(a >= d[k])
+                model.addCons(a >= -d[k])
+                terms.append(a)
+    objective = model.addVar(lb=0, ub=1e6, name="objective")
+    model.addCons(objective >= pyscipopt.quicksum(terms))
+    model.setObjective(objective, "minimize")
+    try:
+        model.optimize()
+    except Exception:  # SCIP's own LP trouble: no answer from it
+        return None, False, -math.inf, math.nan
+    status = model.getStatus()
+    if model.getNSols() == 0:
+        return None, False, -math.inf, math.nan
+    Mn = np.array([[model.getVal(v) for v in row] for row in M])
+    scale = T[0, 0]  # target units -> normalised units
+    dual = model.getDualbound() / (scale**2 if norm == "L2L2" else scale)
+    return np.linalg.inv(T) @ Mn @ S, status in ("optimal", "gaplimit"), dual, float(np.abs(Mn).max())
