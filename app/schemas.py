@@ -114,36 +114,36 @@ class JobProgress(BaseModel):
     elapsed_s: float = 0.0
 
 
-class RootRegion(BaseModel):
-    reference_view: int
-    functionals: list[list[float]]
-    denominator: list[float]
-    lower: list[float]
-    upper: list[float]
-    meaning: str
+ItemStatus = Literal["optimal", "node_limit", "time_limit", "cancelled", "not_certified", "infeasible", "degenerate"]
 
 
-class TrackCertificate(BaseModel):
+class ItemCertificate(BaseModel):
     scope: str
-    root_region: RootRegion | None
+    root_region: dict[str, Any] | None = Field(
+        description="the region searched and shown to hold the optimum; 'meaning' says how to read it")
     tolerance: float | None
     tolerance_met: bool
     leaves: int
     note: str | None = None
 
 
-class TrackOut(BaseModel):
-    point: list[float] | None = Field(description="[x, y, z], or a homogeneous 4-vector when at_infinity")
-    at_infinity: bool
-    cost: float | None = Field(description="the upper bound: squared pixels (L2L2) or pixels")
+class ItemOutcome(BaseModel):
+    """What every item (track, map) reports about its solve."""
+
+    cost: float | None = Field(description="the upper bound, recomputed from the input: squared units (L2L2) or units")
     lower_bound: float | None
     gap: float | None
-    status: Literal["optimal", "node_limit", "time_limit", "cancelled", "not_certified", "infeasible", "degenerate"]
+    status: ItemStatus
     certified: bool
     nodes: int
     elapsed_s: float
-    reason: str | None
-    certificate: TrackCertificate | None
+    reason: str | None = Field(description="why the item is not certified, when it is not")
+    certificate: ItemCertificate | None
+
+
+class TrackOut(ItemOutcome):
+    point: list[float] | None = Field(description="[x, y, z], or a homogeneous 4-vector when at_infinity")
+    at_infinity: bool
 
 
 class JobStats(BaseModel):
@@ -162,27 +162,9 @@ class TriangulationResult(BaseModel):
     stats: JobStats
 
 
-class MapCertificate(BaseModel):
-    scope: str
-    root_region: dict[str, Any] | None
-    tolerance: float | None
-    tolerance_met: bool
-    leaves: int
-    note: str | None = None
-
-
-class MapOut(BaseModel):
+class MapOut(ItemOutcome):
     matrix: list[list[float]] | None = Field(description="Frobenius norm 1, reference depth positive")
     residuals: list[list[float]] = Field(description="target minus the map's image, per point")
-    cost: float | None
-    lower_bound: float | None
-    gap: float | None
-    status: Literal["optimal", "node_limit", "time_limit", "cancelled", "not_certified", "infeasible", "degenerate"]
-    certified: bool
-    nodes: int
-    elapsed_s: float
-    reason: str | None
-    certificate: MapCertificate | None
 
 
 class MapsResult(BaseModel):

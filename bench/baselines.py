@@ -11,6 +11,24 @@ import pyscipopt
 import scipy.optimize
 
 
+def norm_terms(model, residuals: list, norm: str, tag: str, bound: float) -> list:
+    """SCIP objective terms of one observation's residual variables under the norm."""
+    if norm == "L2L2":
+        return [pyscipopt.quicksum(r * r for r in residuals)]
+    if norm == "L2L1":
+        e = model.addVar(lb=0, ub=bound, name=f"e{tag}")
+        # sqrt, not e*e >= ...: the squared form hides a 1e-3 px residual inside the tolerance
+        model.addCons(e >= pyscipopt.sqrt(pyscipopt.quicksum(r * r for r in residuals)))
+        return [e]
+    terms = []
+    for k, r in enumerate(residuals):
+        a = model.addVar(lb=0, ub=bound, name=f"a{tag}_{k}")
+        model.addCons(a >= r)
+        model.addCons(a >= -r)
+        terms.append(a)
+    return terms
+
+
 def scip_triangulate(cameras: np.ndarray, points: np.ndarray, norm: str, centre: np.ndarray, radius: float,
                      quiet: bool = True, time_limit: float = 15, gap: float = 1e-5,
                      ) -> tuple[np.ndarray | None, bool, float]:
@@ -40,19 +58,7 @@ def scip_triangulate(cameras: np.ndarray, points: np.ndarray, norm: str, centre:
             d = model.addVar(lb=-20, ub=20, name=f"d{i}{row}")
             model.addCons(d * depth * scale == linear(P[row] - points[i, row] * P[2]))
             residuals.append(d)
-        if norm == "L2L2":
-            terms.append(residuals[0] * residuals[0] + residuals[1] * residuals[1])
-        elif norm == "L2L1":
-            e = model.addVar(lb=0, ub=30, name=f"e{i}")
-            # sqrt, not e*e >= ...: the squared form hides a 1e-3 px residual inside the tolerance
-            model.addCons(e >= pyscipopt.sqrt(residuals[0] * residuals[0] + residuals[1] * residuals[1]))
-            terms.append(e)
-        else:
-            for row in range(2):
-                a = model.addVar(lb=0, ub=20, name=f"a{i}{row}")
-                model.addCons(a >= residuals[row])
-                model.addCons(a >= -residuals[row])
-                terms.append(a)
+        terms += norm_terms(model, residuals, norm, f"{i}", bound=30)
     objective = model.addVar(lb=0, ub=1e4, name="objective")
     model.addCons(objective >= pyscipopt.quicksum(terms))
     model.setObjective(objective, "minimize")
@@ -137,18 +143,7 @@ def scip_map(source: np.ndarray, target: np.ndarray, norm: str, box: float = 10.
         d = [model.addVar(lb=-100, ub=100, name=f"d{j}{k}") for k in range(m)]
         for k in range(m):
             model.addCons(d[k] * depth == row_dot(k, X[j]) - float(x[j, k]) * depth)
-        if norm == "L2L2":
-            terms.append(pyscipopt.quicksum(dk * dk for dk in d))
-        elif norm == "L2L1":
-            e = model.addVar(lb=0, ub=200, name=f"e{j}")
-            model.addCons(e >= pyscipopt.sqrt(pyscipopt.quicksum(dk * dk for dk in d)))
-            terms.append(e)
-        else:
-            for k in range(m):
-                a = model.addVar(lb=0, ub=100, name=f"a{j}{k}")
-                model.addCons(a >= d[k])
-                model.addCons(a >= -d[k])
-                terms.append(a)
+        terms += norm_terms(model, d, norm, f"{j}", bound=200)
     objective = model.addVar(lb=0, ub=1e6, name="objective")
     model.addCons(objective >= pyscipopt.quicksum(terms))
     model.setObjective(objective, "minimize")

@@ -123,32 +123,28 @@ class TriangulationKind:
         return {"kind": self.name, "norm": options.norm, "tracks": items, "stats": stats}
 
 
-def track_document(result: TrackResult) -> dict:
-    certificate = None
-    if result.certificate is not None:
-        c = result.certificate
-        certificate = {
+def certificate_document(result, region: dict, meaning: str, scope: str) -> dict | None:
+    """The certificate part of an item: the search's (when there was one), or the note that the
+    incumbent met the trivial bound 0."""
+    c = result.certificate
+    if c is not None:
+        return {
             "scope": c.scope,
-            "root_region": {
-                "reference_view": c.reference_view,
-                "functionals": c.functionals,
-                "denominator": c.denominator,
-                "lower": c.lower,
-                "upper": c.upper,
-                "meaning": "lower <= (F X) / (d . X) <= upper for every point X of the scope, "
-                           "F = functionals, d = denominator (positive in front of the reference view)",
-            },
+            "root_region": {**region, "functionals": c.functionals, "denominator": c.denominator,
+                            "lower": c.lower, "upper": c.upper, "meaning": meaning},
             "tolerance": finite_or_none(c.tolerance),
             "tolerance_met": c.tolerance_met,
             "leaves": c.leaves,
         }
-    elif result.certified:
-        certificate = {"scope": "every point in front of every camera", "root_region": None,
-                       "tolerance": 0.0, "tolerance_met": True, "leaves": 0,
-                       "note": "the incumbent's cost is within abs_gap of the trivial bound 0"}
+    if result.certified:
+        return {"scope": scope, "root_region": None, "tolerance": 0.0, "tolerance_met": True, "leaves": 0,
+                "note": "the incumbent's cost is within abs_gap of the trivial bound 0"}
+    return None
+
+
+def outcome_document(result) -> dict:
+    """The fields every item (track, map) reports about its solve."""
     return {
-        "point": result.point,
-        "at_infinity": result.at_infinity,
         "cost": finite_or_none(result.cost),
         "lower_bound": finite_or_none(result.lower_bound),
         "gap": finite_or_none(result.gap),
@@ -157,8 +153,18 @@ def track_document(result: TrackResult) -> dict:
         "nodes": result.nodes,
         "elapsed_s": result.elapsed_s,
         "reason": result.reason,
-        "certificate": certificate,
     }
+
+
+def track_document(result: TrackResult) -> dict:
+    region = {"reference_view": result.certificate.reference_view} if result.certificate else {}
+    certificate = certificate_document(
+        result, region,
+        "lower <= (F X) / (d . X) <= upper for every point X of the scope, "
+        "F = functionals, d = denominator (positive in front of the reference view)",
+        "every point in front of every camera")
+    return {"point": result.point, "at_infinity": result.at_infinity, **outcome_document(result),
+            "certificate": certificate}
 
 
 @dataclass
@@ -218,41 +224,14 @@ class MapKind:
 
 
 def map_document(result: MapResult) -> dict:
-    certificate = None
-    if result.certificate is not None:
-        c = result.certificate
-        certificate = {
-            "scope": c.scope,
-            "root_region": {
-                "reference_point": c.reference_point,
-                "functionals": c.functionals,
-                "denominator": c.denominator,
-                "lower": c.lower,
-                "upper": c.upper,
-                "meaning": "lower <= (F l) / (d . l) <= upper for the last row l of every map in the scope, "
-                           "F = functionals, d = denominator (the reference point, homogeneous)",
-            },
-            "tolerance": finite_or_none(c.tolerance),
-            "tolerance_met": c.tolerance_met,
-            "leaves": c.leaves,
-        }
-    elif result.certified:
-        certificate = {"scope": "every map that puts every point at positive depth", "root_region": None,
-                       "tolerance": 0.0, "tolerance_met": True, "leaves": 0,
-                       "note": "the incumbent's cost is within abs_gap of the trivial bound 0"}
-    return {
-        "matrix": result.matrix,
-        "residuals": result.residuals,
-        "cost": finite_or_none(result.cost),
-        "lower_bound": finite_or_none(result.lower_bound),
-        "gap": finite_or_none(result.gap),
-        "status": result.status,
-        "certified": result.certified,
-        "nodes": result.nodes,
-        "elapsed_s": result.elapsed_s,
-        "reason": result.reason,
-        "certificate": certificate,
-    }
+    region = {"reference_point": result.certificate.reference_point} if result.certificate else {}
+    certificate = certificate_document(
+        result, region,
+        "lower <= (F l) / (d . l) <= upper for the last row l of every map in the scope, "
+        "F = functionals, d = denominator (the reference point, homogeneous)",
+        "every map that puts every point at positive depth")
+    return {"matrix": result.matrix, "residuals": result.residuals, **outcome_document(result),
+            "certificate": certificate}
 
 
 KINDS = {kind.name: kind for kind in (

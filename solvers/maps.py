@@ -19,31 +19,16 @@ from typing import Callable
 import numpy as np
 
 from .bnb import Progress
-from .fractional import REASONS, Early, FractionalProgram, prepare, search
+from .fractional import REASONS, Early, FractionalOptions, FractionalProgram, prepare, search
 from .geometry import InputError, norm_cost
-from .triangulation import NORMS
 
 
 @dataclass
-class MapOptions:
-    norm: str = "L2L2"
-    rel_gap: float = 1e-3
-    abs_gap: float = 1e-7  # in the cost's units (squared target units for L2L2)
+class MapOptions(FractionalOptions):
+    """Residuals in target units; limits per map (larger than a track's: more unknowns)."""
+
     max_nodes: int = 5000
     time_limit_s: float = 60.0
-    max_residual: float | None = None  # target units; narrows the certificate's scope
-
-    def check(self) -> None:
-        if self.norm not in NORMS:
-            raise InputError("options/norm", f"must be one of {', '.join(NORMS)}")
-        for name in ("rel_gap", "abs_gap", "time_limit_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise InputError(f"options/{name}", "must be a finite number >= 0")
-        if self.max_nodes < 1:
-            raise InputError("options/max_nodes", "must be at least 1")
-        if self.max_residual is not None and not (math.isfinite(self.max_residual) and self.max_residual > 0):
-            raise InputError("options/max_residual", "must be a finite number > 0")
 
 
 @dataclass

@@ -17,34 +17,14 @@ from typing import Callable
 import numpy as np
 
 from .bnb import Progress
-from .fractional import REASONS, Early, FractionalProgram, gamma_for, prepare, search
-from .geometry import InputError, norm_cost
+from .fractional import NORMS, REASONS, Early, FractionalOptions, FractionalProgram, gamma_for, prepare, search
+from .geometry import norm_cost
 
-NORMS = ("L2L2", "L2L1", "L1L1")
 
 
 @dataclass
-class TriangulationOptions:
-    norm: str = "L2L2"
-    rel_gap: float = 1e-3
-    # In the cost's units: squared pixels (L2L2) or pixels. Below about 1e-7 the conic solves
-    # cannot resolve the bound (measured on a Dinosaur track whose optimum is 1e-6 px).
-    abs_gap: float = 1e-7
-    max_nodes: int = 2000
-    time_limit_s: float = 30.0
-    max_residual: float | None = None  # pixels; narrows the certificate's scope when given
-
-    def check(self) -> None:
-        if self.norm not in NORMS:
-            raise InputError("options/norm", f"must be one of {', '.join(NORMS)}")
-        for name in ("rel_gap", "abs_gap", "time_limit_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise InputError(f"options/{name}", "must be a finite number >= 0")
-        if self.max_nodes < 1:
-            raise InputError("options/max_nodes", "must be at least 1")
-        if self.max_residual is not None and not (math.isfinite(self.max_residual) and self.max_residual > 0):
-            raise InputError("options/max_residual", "must be a finite number > 0")
+class TriangulationOptions(FractionalOptions):
+    """Residuals in pixels; limits per track."""
 
 
 @dataclass
