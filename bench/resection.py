@@ -8,6 +8,7 @@ for six points, so only --scip-cameras of each dataset); and the DLT + LM baseli
 (how often it is worse than the certified optimum, or puts a point at negative depth).
 
     .venv/bin/python -m bench.resection [--norms L2L2,L2L1,L1L1] [--gaps 1e-2,1e-3] [--scip-cameras 3]
+                                        [--cameras N] [--time-limit S]
 """
 
 from __future__ import annotations
@@ -54,8 +55,12 @@ def main() -> None:
     parser.add_argument("--gaps", default="1e-2,1e-3")
     parser.add_argument("--scip-cameras", type=int, default=3)
     parser.add_argument("--time-limit", type=float, default=60.0, help="per camera, seconds")
+    parser.add_argument("--cameras", type=int, default=0, help="evenly spaced cameras per dataset (0: all)")
     args = parser.parse_args()
     datasets = {"Dinosaur": dinosaur_problems(), "House": house_problems()}
+    if args.cameras:
+        datasets = {name: [problems[i] for i in np.linspace(0, len(problems) - 1, args.cameras).astype(int)]
+                    for name, problems in datasets.items()}
     print(f"{'data':9} {'norm':5} {'gap':>6} {'cams':>4} {'points med':>10} {'median s':>9} {'p95 s':>7} "
           f"{'nodes med/p95':>14} {'certified':>9}")
     for name, problems in datasets.items():
