@@ -65,28 +65,32 @@ def main() -> None:
           f"{'nodes med/p95':>14} {'certified':>9}")
     for name, problems in datasets.items():
         sizes = [len(s) for s, _ in problems]
+        best_l2 = [np.inf] * len(problems)  # the best certified L2L2 cost seen per camera
         for norm in args.norms.split(","):
             for gap in (float(g) for g in args.gaps.split(",")):
                 times, nodes, certified = [], [], 0
-                for source, target in problems:
+                for index, (source, target) in enumerate(problems):
                     start = time.perf_counter()
                     result = fit_map(source, target, MapOptions(norm=norm, rel_gap=gap, time_limit_s=args.time_limit))
                     times.append(time.perf_counter() - start)
                     nodes.append(result.nodes)
                     certified += result.certified
+                    if norm == "L2L2" and result.certified:
+                        best_l2[index] = min(best_l2[index], result.cost)
                 print(f"{name:9} {norm:5} {gap:6.0e} {len(problems):4d} {int(np.median(sizes)):10d} "
                       f"{np.median(times):9.2f} {np.percentile(times, 95):7.2f} "
                       f"{np.median(nodes):6.0f}/{np.percentile(nodes, 95):<7.0f} {certified:5d}/{len(problems)}")
-        baseline(name, problems)
+        if "L2L2" in args.norms.split(","):
+            baseline(name, problems, best_l2)
         if args.scip_cameras:
             scip_subsets(name, problems, args.scip_cameras)
 
 
-def baseline(name: str, problems) -> None:
+def baseline(name: str, problems, certified_costs: list[float]) -> None:
     from bench.baselines import map_dlt_lm
 
     worse, negative, times = 0, 0, []
-    for source, target in problems:
+    for (source, target), optimum in zip(problems, certified_costs):
         start = time.perf_counter()
         M = map_dlt_lm(source, target)
         times.append(time.perf_counter() - start)
@@ -94,10 +98,10 @@ def baseline(name: str, problems) -> None:
         if not (np.all(depths > 0) or np.all(depths < 0)):
             negative += 1
             continue
-        optimum = fit_map(source, target, MapOptions(rel_gap=1e-3)).cost
         worse += norm_cost(apply(M, source) - target, "L2L2") > optimum * (1 + 1e-6)
-    print(f"{name}: DLT + LM (L2L2) median {1e3 * np.median(times):.1f} ms per camera; worse than the certified "
-          f"optimum on {worse} of {len(problems)} cameras; a point at negative depth on {negative}")
+    print(f"{name}: DLT + LM (L2L2) median {1e3 * np.median(times):.1f} ms per camera; costlier than our certified "
+          f"map on {worse} of {len(problems)} cameras (uncertified cameras count as not); a point at negative "
+          f"depth on {negative}")
 
 
 def scip_subsets(name: str, problems, count: int) -> None:
