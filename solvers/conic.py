@@ -153,16 +153,25 @@ class ReusableConicProgram:
         self._csc: sp.csc_matrix | None = None
         self._solver = None
 
-    def solve(self, q: np.ndarray, A_dense: np.ndarray, b: np.ndarray, cones: ConeSpec) -> ConicResult:
-        key = (A_dense.shape, cones.zero, cones.nonneg, cones.soc)
-        mask = A_dense != 0
+    def solve(self, q: np.ndarray, A: np.ndarray | sp.csc_matrix, b: np.ndarray, cones: ConeSpec) -> ConicResult:
+        """``A`` dense (small problems: its nonzero pattern is compared) or CSC (large ones: its
+        index arrays are compared); either way the solver is only updated when they match."""
+        key = (A.shape, cones.zero, cones.nonneg, cones.soc)
         try:
-            if key == self._key and np.array_equal(mask, self._mask):
-                self._csc.data[:] = A_dense.T[mask.T]
+            if sp.issparse(A):
+                same = (key == self._key and self._mask is None and np.array_equal(A.indptr, self._csc.indptr)
+                        and np.array_equal(A.indices, self._csc.indices))
+                data, mask, fresh = A.data, None, A
+            else:
+                mask = A != 0
+                same = key == self._key and self._mask is not None and np.array_equal(mask, self._mask)
+                data, fresh = (A.T[mask.T] if same else None), None
+            if same:
+                self._csc.data[:] = data
                 self._solver.update(q=q, b=b, A=self._csc)
             else:
                 self._key, self._mask = key, mask
-                self._csc = dense_to_csc(A_dense)
+                self._csc = fresh.copy() if fresh is not None else dense_to_csc(A)
                 self._solver = clarabel.DefaultSolver(
                     _zero_quadratic(q.shape[0]), q, self._csc, b, cones.clarabel_cones(), _SETTINGS
                 )

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.optimize
+import scipy.sparse as sp
 
 from .bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound
 from .conic import ConeSpec, ConicStatus, ReusableConicProgram, solve_conic
@@ -247,6 +248,45 @@ def _cost_in(program: FractionalProgram, v: np.ndarray, norm: str) -> float:
     return value if not math.isfinite(value) else norm_cost(program.residuals(v), norm)
 
 
+_DENSE_LIMIT = 200_000  # relaxations with fewer matrix entries are assembled dense
+
+
+class _Rows:
+    """A block of rows ``c + E x``: E as a dense part over the d unknowns plus (row, column,
+    value) triplets for the per-observation columns, so that assembly stays linear in size."""
+
+    def __init__(self, rows: int, d: int):
+        self.v = np.zeros((rows, d))
+        self.c = np.zeros(rows)
+        self.triplets: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def set(self, rows: np.ndarray, cols: np.ndarray, values) -> None:
+        """Entries (rows[i], cols[i]) = values[i] (or the one value given); rows, cols alike."""
+        if np.isscalar(values):
+            values = np.full(len(rows), float(values))
+        self.triplets.append((rows, cols, values))
+
+
+def _assemble(blocks: list[_Rows], n: int):
+    """A = -E for Clarabel (dense when small, CSC otherwise) and the constants b = c."""
+    offsets = np.cumsum([0] + [len(b.c) for b in blocks])
+    V = np.vstack([b.v for b in blocks])
+    rows = np.concatenate([r + offsets[i] for i, b in enumerate(blocks) for r, _, _ in b.triplets])
+    cols = np.concatenate([k for b in blocks for _, k, _ in b.triplets])
+    vals = np.concatenate([x for b in blocks for _, _, x in b.triplets])
+    c = np.concatenate([b.c for b in blocks])
+    d = V.shape[1]
+    if V.shape[0] * n <= _DENSE_LIMIT:
+        E = np.zeros((V.shape[0], n))
+        E[:, :d] = V
+        E[rows, cols] = vals
+        return -E, c
+    vr, vc = np.nonzero(V)
+    E = sp.coo_matrix((np.concatenate([V[vr, vc], vals]), (np.concatenate([vr, rows]), np.concatenate([vc, cols]))),
+                      shape=(V.shape[0], n))
+    return (-E).tocsc(), c
+
+
 class BoxProblem:
     """The branch-and-bound problem of a fractional program over boxes of ``z = B v``."""
 
@@ -318,7 +358,8 @@ class BoxProblem:
 
         Rows are expressions ``c + E x`` that must lie in the cone (Clarabel wants ``b - A x``,
         so ``A = -E``). Variables: v (d), then t, w, r per envelope observation, then one
-        epigraph variable per exact observation. Blocks are filled for all observations at once.
+        epigraph variable per exact observation. Blocks are filled for all observations at once,
+        and assembled dense for small problems, sparse for large ones.
         """
         program, norm = self.program, self.norm
         d, m = program.dim, program.num.shape[1]
@@ -335,80 +376,82 @@ class BoxProblem:
         depth = program.den[obs]
         num = program.num[obs]  # (V, m, d + 1)
         V = len(obs)
-        blocks_E, blocks_c = [], []
+        blocks: list[_Rows] = []
 
-        def block(rows: int) -> tuple[np.ndarray, np.ndarray]:
-            E, c = np.zeros((rows, n)), np.zeros(rows)
-            blocks_E.append(E)
-            blocks_c.append(c)
-            return E, c
+        def block(rows: int) -> _Rows:
+            blocks.append(_Rows(rows, d))
+            return blocks[-1]
 
         k = len(self.B)
         L = len(program.linear)
-        E, c = block(2 * k + L)  # the box on z = B v, and the domain's linear constraints
-        E[:k, :d], c[:k] = self.B, -box.lo
-        E[k:2 * k, :d], c[k:2 * k] = -self.B, box.hi
-        E[2 * k:, :d], c[2 * k:] = program.linear[:, :-1], program.linear[:, -1]
+        B = block(2 * k + L)  # the box on z = B v, and the domain's linear constraints
+        B.v[:k], B.c[:k] = self.B, -box.lo
+        B.v[k:2 * k], B.c[k:2 * k] = -self.B, box.hi
+        B.v[2 * k:], B.c[2 * k:] = program.linear[:, :-1], program.linear[:, -1]
         # Envelope of t/s on [0, u] x [L, U], first cone vacuous since l = 0 (5 rows each).
-        E, c = block(5 * nE)
+        B = block(5 * nE)
         rows = 5 * np.arange(nE)
         g = program.den[env]
-        E[rows, w_idx], E[rows, t_idx] = 1.0, -low / u
-        E[rows + 1, t_idx], E[rows + 1, w_idx] = high / u, -1.0
-        E[rows + 2, :d], E[rows + 2, w_idx], E[rows + 2, t_idx] = g[:, :-1], -1.0, low / u
-        c[rows + 2] = g[:, -1] - low
-        E[rows + 3, :d], E[rows + 3, w_idx], E[rows + 3, t_idx] = -g[:, :-1], 1.0, -high / u
-        c[rows + 3] = high - g[:, -1]
-        E[rows + 4, t_idx], c[rows + 4] = -1.0, u
+        B.set(rows, w_idx, 1.0), B.set(rows, t_idx, -low / u)
+        B.set(rows + 1, t_idx, high / u), B.set(rows + 1, w_idx, -1.0)
+        B.v[rows + 2], B.c[rows + 2] = g[:, :-1], g[:, -1] - low
+        B.set(rows + 2, w_idx, -1.0), B.set(rows + 2, t_idx, low / u)
+        B.v[rows + 3], B.c[rows + 3] = -g[:, :-1], high - g[:, -1]
+        B.set(rows + 3, w_idx, 1.0), B.set(rows + 3, t_idx, -high / u)
+        B.set(rows + 4, t_idx, -1.0)
+        B.c[rows + 4] = u
         socs: list[int] = []
         if norm == "L1L1":  # top >= sum |n_a|, and sum |n_a| <= gamma * depth
             signs = np.array(list(itertools.product((1.0, -1.0), repeat=m)))
             for with_gamma in ([False, True] if finite_gamma else [False]):
-                E, c = block(len(signs) * V)
-                for s, sign in enumerate(signs):
-                    rows = len(signs) * np.arange(V) + s
+                B = block(len(signs) * V)
+                for s_index, sign in enumerate(signs):
+                    rows = len(signs) * np.arange(V) + s_index
                     combined = -np.einsum("a,vab->vb", sign, num)
-                    E[rows, :d], c[rows] = combined[:, :-1], combined[:, -1]
+                    B.v[rows], B.c[rows] = combined[:, :-1], combined[:, -1]
                     if with_gamma:
-                        E[rows, :d] += gamma * depth[:, :-1]
-                        c[rows] += gamma * depth[:, -1]
+                        B.v[rows] += gamma * depth[:, :-1]
+                        B.c[rows] += gamma * depth[:, -1]
                     else:
-                        E[rows, top_idx] = 1.0
-        n_lin = sum(len(cb) for cb in blocks_c)
+                        B.set(rows, top_idx, 1.0)
+        n_lin = sum(len(b.c) for b in blocks)
         if norm == "L2L2":  # top * depth >= |n|^2: (top + depth, 2 n, top - depth) in the SOC
-            E, c = block((m + 2) * V)
+            B = block((m + 2) * V)
             rows = (m + 2) * np.arange(V)
-            E[rows, top_idx], E[rows, :d], c[rows] = 1.0, depth[:, :-1], depth[:, -1]
+            B.set(rows, top_idx, 1.0)
+            B.v[rows], B.c[rows] = depth[:, :-1], depth[:, -1]
             for a in range(m):
-                E[rows + 1 + a, :d], c[rows + 1 + a] = 2 * num[:, a, :-1], 2 * num[:, a, -1]
-            E[rows + m + 1, top_idx], E[rows + m + 1, :d], c[rows + m + 1] = 1.0, -depth[:, :-1], -depth[:, -1]
+                B.v[rows + 1 + a], B.c[rows + 1 + a] = 2 * num[:, a, :-1], 2 * num[:, a, -1]
+            B.set(rows + m + 1, top_idx, 1.0)
+            B.v[rows + m + 1], B.c[rows + m + 1] = -depth[:, :-1], -depth[:, -1]
             socs += [m + 2] * V
         elif norm == "L2L1":  # top >= |n|
-            E, c = block((m + 1) * V)
+            B = block((m + 1) * V)
             rows = (m + 1) * np.arange(V)
-            E[rows, top_idx] = 1.0
+            B.set(rows, top_idx, 1.0)
             for a in range(m):
-                E[rows + 1 + a, :d], c[rows + 1 + a] = num[:, a, :-1], num[:, a, -1]
+                B.v[rows + 1 + a], B.c[rows + 1 + a] = num[:, a, :-1], num[:, a, -1]
             socs += [m + 1] * V
         if finite_gamma and norm != "L1L1":  # every residual of a better point is below gamma
-            E, c = block((m + 1) * V)
+            B = block((m + 1) * V)
             rows = (m + 1) * np.arange(V)
-            E[rows, :d], c[rows] = gamma * depth[:, :-1], gamma * depth[:, -1]
+            B.v[rows], B.c[rows] = gamma * depth[:, :-1], gamma * depth[:, -1]
             for a in range(m):
-                E[rows + 1 + a, :d], c[rows + 1 + a] = num[:, a, :-1], num[:, a, -1]
+                B.v[rows + 1 + a], B.c[rows + 1 + a] = num[:, a, :-1], num[:, a, -1]
             socs += [m + 1] * V
         # r * (u w) >= t^2 (the envelope's second cone), everything divided by u.
-        E, c = block(3 * nE)
+        B = block(3 * nE)
         rows = 3 * np.arange(nE)
-        E[rows, r_idx], E[rows, w_idx] = 1.0, 1.0 / u
-        E[rows + 1, t_idx] = 2.0 / u
-        E[rows + 2, r_idx], E[rows + 2, w_idx] = 1.0, -1.0 / u
+        B.set(rows, r_idx, 1.0), B.set(rows, w_idx, 1.0 / u)
+        B.set(rows + 1, t_idx, 2.0 / u)
+        B.set(rows + 2, r_idx, 1.0), B.set(rows + 2, w_idx, -1.0 / u)
         socs += [3] * nE
 
         q = np.zeros(n)
         q[r_idx] = 1.0
         q[q_idx] = 1.0
-        return q, -np.vstack(blocks_E), np.concatenate(blocks_c), ConeSpec(nonneg=n_lin, soc=tuple(socs))
+        A, c = _assemble(blocks, n)
+        return q, A, c, ConeSpec(nonneg=n_lin, soc=tuple(socs))
 
 
 @dataclass
