@@ -12,7 +12,7 @@ import heapq
 import itertools
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Protocol
 
 import numpy as np
@@ -85,11 +85,6 @@ class BnbResult:
     unresolved: int
     elapsed_s: float
     tolerance: float
-    leaf_boxes: list[tuple[Box, float]] = field(default_factory=list)
-
-    @property
-    def gap(self) -> float:
-        return self.upper_bound - self.lower_bound
 
 
 def tolerance(upper_bound: float, options: BnbOptions) -> float:
@@ -113,7 +108,6 @@ def branch_and_bound(
     options: BnbOptions,
     callback: Callable[[Progress], bool | None] | None = None,
     trivial_lower_bound: float = 0.0,
-    keep_leaves: bool = False,
 ) -> BnbResult:
     """Minimise the problem's objective over its root box, returning an anytime certified result.
 
@@ -127,15 +121,12 @@ def branch_and_bound(
     closed_count = 0
     unresolved = 0
     nodes = 0
-    leaf_boxes: list[tuple[Box, float]] = []
-    stuck: list[tuple[Box, float]] = []
+    stuck: list[Box] = []  # unresolved and too small to split: only the trivial bound holds
 
     def close(box: Box, bound: float) -> None:
         nonlocal closed_min, closed_count
         closed_min = min(closed_min, bound)
         closed_count += 1
-        if keep_leaves:
-            leaf_boxes.append((box, bound))
 
     def consider(box: Box, parent_bound: float) -> None:
         nonlocal nodes, incumbent, upper_bound, unresolved
@@ -155,7 +146,7 @@ def branch_and_bound(
             unresolved += 1
             if float(np.max(box.width)) <= options.min_box_width:
                 # Cannot be bounded and too small to split: it keeps only the trivial bound.
-                stuck.append((box, trivial_lower_bound))
+                stuck.append(box)
                 return
             bound = parent_bound
         else:
@@ -209,9 +200,6 @@ def branch_and_bound(
 
     lower = global_lower_bound()
     lower = max(lower, trivial_lower_bound)
-    if keep_leaves:
-        leaf_boxes.extend((box, b) for b, _, box, _ in heap)
-        leaf_boxes.extend(stuck)
     return BnbResult(
         status=status,
         candidate=incumbent,
@@ -222,5 +210,4 @@ def branch_and_bound(
         unresolved=unresolved,
         elapsed_s=time.perf_counter() - start,
         tolerance=tolerance(upper_bound, options),
-        leaf_boxes=leaf_boxes,
     )

@@ -18,7 +18,7 @@ import numpy as np
 import scipy.optimize
 import scipy.sparse as sp
 
-from .bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound
+from .bnb import BnbOptions, Box, BoxBound, BoxStatus, Progress, branch_and_bound
 from .conic import ConeSpec, ConicStatus, ReusableConicProgram, solve_conic
 from .geometry import InputError, norm_cost
 
@@ -474,22 +474,25 @@ class Early:
     reason: str | None
 
 
-REASONS = {
-    "degenerate": "the data do not determine the solution: the set of solutions within the residual bound is unbounded",
-    "infeasible": "no point has every residual within max_residual",
-    "not_certified": "the root region's bounds could not be computed accurately",
-}
+@dataclass
+class Reasons:
+    """Why a solve ended before any search, in the words of the problem kind."""
+
+    no_domain: str  # nothing satisfies the domain (every depth positive)
+    degenerate: str  # the data do not bound the solutions within the residual bound
+    over_max_residual: str = "no solution has every residual within max_residual"
+    not_certified: str = "the root region's bounds could not be computed accurately"
 
 
 def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.ndarray,
-            abs_gap: float, max_residual: float | None) -> Prepared | Early:
+            abs_gap: float, max_residual: float | None, reasons: Reasons) -> Prepared | Early:
     """Incumbent, scaling and root region. ``start``: an initial point (None or infeasible: one
     is searched for); ``subspace``: rows spanning the directions the depths depend on."""
     norm = program.norm
     if start is None or not math.isfinite(program.cost(start)):
         start = feasible_point(program)
         if start is None:
-            return Early("infeasible", None, None, "no solution puts every point at positive depth")
+            return Early("infeasible", None, None, reasons.no_domain)
     v0, _ = local_refine(program, start, "L2L2")
     if norm != "L2L2":
         v0, _ = local_refine(program, v0)
@@ -513,24 +516,62 @@ def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.n
     if root is None:
         if state == "infeasible" and math.isfinite(upper):
             state = "not_certified"  # the incumbent is inside: the solve, not the data, failed
+        reason = {"degenerate": reasons.degenerate, "infeasible": reasons.over_max_residual,
+                  "not_certified": reasons.not_certified}[state]
         if not math.isfinite(upper):
-            return Early(state, None, None, REASONS[state])
-        return Early(state, v0, upper / unit, REASONS[state])
+            return Early(state, None, None, reason)
+        return Early(state, v0, upper / unit, reason)
     return Prepared(BoxProblem(program, user_gamma, B, root), v0, upper, unit)
 
 
-def search(prepared: Prepared, rel_gap: float, abs_gap: float, max_nodes: int, time_limit_s: float, callback=None):
-    """Branch and bound from a prepared program; progress is reported in the caller's units."""
+@dataclass
+class Certificate:
+    """What a finished search proves: the scope, the root region the search covered (in the
+    caller's coordinates: ``lower <= (F u) / (d . u) <= upper`` for the kind's unknown u), the
+    tolerance and whether it was met, and the number of leaves."""
+
+    scope: str
+    reference: int  # the observation whose depth is fixed to 1
+    functionals: list[list[float]]
+    denominator: list[float]
+    lower: list[float]
+    upper: list[float]
+    tolerance: float
+    tolerance_met: bool
+    leaves: int
+
+
+@dataclass
+class Searched:
+    status: str
+    solution: np.ndarray | None  # None: nothing within max_residual
+    lower_bound: float | None  # in the caller's units
+    nodes: int
+    certificate: Certificate | None
+
+
+def search(prepared: Prepared, options: FractionalOptions, scope: str, reference: int,
+           functionals: np.ndarray, denominator: np.ndarray, callback=None) -> Searched:
+    """Branch and bound from a prepared program; progress and bounds in the caller's units.
+    ``functionals`` maps the caller's unknown to ``B v`` up to the ``denominator``'s scale."""
     unit = prepared.unit
 
-    def unscaled(p):
-        from .bnb import Progress
-
+    def unscaled(p: Progress):
         return callback(Progress(p.nodes, p.open_boxes, p.lower_bound / unit, p.upper_bound / unit,
                                  p.gap_abs / unit, p.gap_rel, p.elapsed_s))
 
-    return branch_and_bound(
+    bnb = branch_and_bound(
         prepared.problem, prepared.incumbent, prepared.upper,
-        BnbOptions(rel_gap=rel_gap, abs_gap=abs_gap * unit, max_nodes=max_nodes, time_limit_s=time_limit_s),
+        BnbOptions(rel_gap=options.rel_gap, abs_gap=options.abs_gap * unit, max_nodes=options.max_nodes,
+                   time_limit_s=options.time_limit_s),
         callback=unscaled if callback else None,
     )
+    if not math.isfinite(bnb.upper_bound):
+        return Searched("infeasible", None, None, bnb.nodes, None)
+    if options.max_residual is not None:
+        scope = f"{scope} with every residual <= {options.max_residual}"
+    root = prepared.problem.root
+    certificate = Certificate(scope, reference, np.asarray(functionals).tolist(), np.asarray(denominator).tolist(),
+                              root.lo.tolist(), root.hi.tolist(), bnb.tolerance / unit,
+                              bnb.upper_bound - bnb.lower_bound <= bnb.tolerance, bnb.leaves)
+    return Searched(bnb.status, bnb.candidate, bnb.lower_bound / unit, bnb.nodes, certificate)

@@ -157,7 +157,7 @@ def outcome_document(result) -> dict:
 
 
 def track_document(result: TrackResult) -> dict:
-    region = {"reference_view": result.certificate.reference_view} if result.certificate else {}
+    region = {"reference_view": result.certificate.reference} if result.certificate else {}
     certificate = certificate_document(
         result, region,
         "lower <= (F X) / (d . X) <= upper for every point X of the scope, "
@@ -224,7 +224,7 @@ class MapKind:
 
 
 def map_document(result: MapResult) -> dict:
-    region = {"reference_point": result.certificate.reference_point} if result.certificate else {}
+    region = {"reference_point": result.certificate.reference} if result.certificate else {}
     certificate = certificate_document(
         result, region,
         "lower <= (F l) / (d . l) <= upper for the last row l of every map in the scope, "

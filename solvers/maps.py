@@ -19,7 +19,7 @@ from typing import Callable
 import numpy as np
 
 from .bnb import Progress
-from .fractional import REASONS, Early, FractionalOptions, FractionalProgram, prepare, search
+from .fractional import Certificate, Early, FractionalOptions, FractionalProgram, Reasons, prepare, search
 from .geometry import InputError, norm_cost
 
 
@@ -29,20 +29,6 @@ class MapOptions(FractionalOptions):
 
     max_nodes: int = 5000
     time_limit_s: float = 60.0
-
-
-@dataclass
-class MapCertificate:
-    scope: str
-    reference_point: int
-    # Root region: lower <= (F l) / (X_ref . l) <= upper for the last row l of every map in scope.
-    functionals: list[list[float]]
-    denominator: list[float]
-    lower: list[float]
-    upper: list[float]
-    tolerance: float
-    tolerance_met: bool
-    leaves: int
 
 
 @dataclass
@@ -57,7 +43,7 @@ class MapResult:
     nodes: int = 0
     elapsed_s: float = 0.0
     reason: str | None = None
-    certificate: MapCertificate | None = None
+    certificate: Certificate | None = None
 
 
 def minimum_points(n: int, m: int) -> int:
@@ -184,6 +170,12 @@ def dlt(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     return M if np.sum(depths > 0) >= np.sum(depths < 0) else -M
 
 
+_REASONS = Reasons(
+    no_domain="no map puts every point at positive depth",
+    degenerate="the correspondences do not determine the map: the maps within the residual bound form an unbounded set",
+)
+
+
 def fit_map(
     source: np.ndarray,
     target: np.ndarray,
@@ -198,32 +190,24 @@ def fit_map(
     chart = MapChart.build(source, target, options.norm)
     n = source.shape[1]
     prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n],
-                       options.abs_gap, options.max_residual)
+                       options.abs_gap, options.max_residual, _REASONS)
     if isinstance(prepared, Early):
         if prepared.incumbent is None:
-            reason = prepared.reason if prepared.reason == REASONS["infeasible"] else (
-                "no map puts every point at positive depth")
-            return MapResult(prepared.status, False, reason=reason, elapsed_s=time.perf_counter() - start)
-        result = _map_result(chart, source, target, prepared.incumbent, options.norm, prepared.status,
-                             0.0 if prepared.status == "optimal" else None, 0, None)
-        result.reason = prepared.reason
-        result.elapsed_s = time.perf_counter() - start
-        return result
-    bnb = search(prepared, options.rel_gap, options.abs_gap, options.max_nodes, options.time_limit_s, callback)
-    if not math.isfinite(bnb.upper_bound):
-        return MapResult("infeasible", False, nodes=bnb.nodes, reason=REASONS["infeasible"],
-                         elapsed_s=time.perf_counter() - start)
-    unit, problem = prepared.unit, prepared.problem
-    # Root region on the caller's last row l: z = B w with w = N' S^-T l / (l . X_ref).
-    functionals = problem.B[:, :n] @ chart.last_row_basis.T @ np.linalg.inv(chart.source_norm).T
-    reference_point = np.append(source[chart.reference], 1.0)
-    scope = ("every map that puts every point at positive depth" if options.max_residual is None else
-             f"every map that puts every point at positive depth with every residual <= {options.max_residual}")
-    certificate = MapCertificate(scope, chart.reference, functionals.tolist(), reference_point.tolist(),
-                                 problem.root.lo.tolist(), problem.root.hi.tolist(), bnb.tolerance / unit,
-                                 bnb.upper_bound - bnb.lower_bound <= bnb.tolerance, bnb.leaves)
-    result = _map_result(chart, source, target, bnb.candidate, options.norm, bnb.status,
-                         bnb.lower_bound / unit, bnb.nodes, certificate)
+            result = MapResult(prepared.status, False, reason=prepared.reason)
+        else:
+            result = _map_result(chart, source, target, prepared.incumbent, options.norm, prepared.status,
+                                 0.0 if prepared.status == "optimal" else None, 0, None)
+            result.reason = prepared.reason
+    else:
+        # Root region on the caller's last row l: z = B w with w = N' S^-T l / (l . X_ref).
+        functionals = prepared.problem.B[:, :n] @ chart.last_row_basis.T @ np.linalg.inv(chart.source_norm).T
+        searched = search(prepared, options, "every map that puts every point at positive depth", chart.reference,
+                          functionals, np.append(source[chart.reference], 1.0), callback)
+        if searched.solution is None:
+            result = MapResult("infeasible", False, nodes=searched.nodes, reason=_REASONS.over_max_residual)
+        else:
+            result = _map_result(chart, source, target, searched.solution, options.norm, searched.status,
+                                 searched.lower_bound, searched.nodes, searched.certificate)
     result.elapsed_s = time.perf_counter() - start
     return result
 

@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from .bnb import Progress
-from .fractional import NORMS, REASONS, Early, FractionalOptions, FractionalProgram, gamma_for, prepare, search
+from .fractional import NORMS, Certificate, Early, FractionalOptions, FractionalProgram, Reasons, prepare, search
 from .geometry import norm_cost
 
 
@@ -25,21 +25,6 @@ from .geometry import norm_cost
 @dataclass
 class TriangulationOptions(FractionalOptions):
     """Residuals in pixels; limits per track."""
-
-
-@dataclass
-class Certificate:
-    scope: str
-    reference_view: int  # index into the track's views
-    # Root region: lower <= (F X) / (d . X) <= upper for X in the caller's 3D frame, with
-    # d . X > 0 exactly when X is in front of the reference view.
-    functionals: list[list[float]]
-    denominator: list[float]
-    lower: list[float]
-    upper: list[float]
-    tolerance: float
-    tolerance_met: bool
-    leaves: int
 
 
 @dataclass
@@ -148,10 +133,10 @@ class Chart:
         return Y[:3] / Y[3]
 
 
-_REASONS = {  # the general reasons (fractional.REASONS) in this problem's words
-    "infeasible": "no point is in front of every camera",
-    "degenerate": "the rays are (nearly) parallel: the points within the residual bound form an unbounded set",
-}
+_REASONS = Reasons(
+    no_domain="no point is in front of every camera",
+    degenerate="the rays are (nearly) parallel: the points within the residual bound form an unbounded set",
+)
 
 
 def prepare_track(cameras: np.ndarray, points: np.ndarray, options: TriangulationOptions):
@@ -161,20 +146,14 @@ def prepare_track(cameras: np.ndarray, points: np.ndarray, options: Triangulatio
     points = np.asarray(points, dtype=float)
     chart = Chart.build(cameras, points, options.norm)
     if chart.constant_depth_behind:
-        return chart, TrackResult("infeasible", False, reason=_REASONS["infeasible"])
-    prepared = prepare(chart.program, chart.dlt(), np.eye(3), options.abs_gap, options.max_residual)
+        return chart, TrackResult("infeasible", False, reason=_REASONS.no_domain)
+    prepared = prepare(chart.program, chart.dlt(), np.eye(3), options.abs_gap, options.max_residual, _REASONS)
     if isinstance(prepared, Early):
-        reason = prepared.reason
-        if prepared.status == "degenerate":
-            reason = _REASONS["degenerate"]
-        elif prepared.status == "infeasible" and prepared.reason != REASONS["infeasible"]:
-            reason = _REASONS["infeasible"]  # no point in front (not: none within max_residual)
         if prepared.incumbent is None:
-            return chart, TrackResult(prepared.status, False, reason=reason)
-        lower = 0.0 if prepared.status == "optimal" else None
+            return chart, TrackResult(prepared.status, False, reason=prepared.reason)
         result = _track_result(chart, cameras, points, prepared.incumbent, options.norm, prepared.status,
-                               lower, 0, None)
-        result.reason = reason
+                               0.0 if prepared.status == "optimal" else None, 0, None)
+        result.reason = prepared.reason
         return chart, result
     return chart, prepared
 
@@ -194,21 +173,16 @@ def triangulate(
     if isinstance(prepared, TrackResult):
         prepared.elapsed_s = time.perf_counter() - start
         return prepared
-    bnb = search(prepared, options.rel_gap, options.abs_gap, options.max_nodes, options.time_limit_s, callback)
-    if not math.isfinite(bnb.upper_bound):
-        return TrackResult("infeasible", False, nodes=bnb.nodes, elapsed_s=time.perf_counter() - start,
-                           reason="no point has every residual within max_residual")
-    unit, problem = prepared.unit, prepared.problem
-    # Root region in the caller's frame: lower <= (F X) / (d . X) <= upper.
+    # Root region in the caller's frame: lower <= (F X) / (d . X) <= upper, d . X > 0 exactly
+    # in front of the reference view.
     to_chart = np.linalg.inv(chart.T)
-    scope = ("every point in front of every camera" if options.max_residual is None else
-             f"every point in front of every camera with every residual <= {options.max_residual} px")
-    certificate = Certificate(
-        scope, chart.reference, (problem.B @ to_chart[:3]).tolist(), to_chart[3].tolist(),
-        problem.root.lo.tolist(), problem.root.hi.tolist(), bnb.tolerance / unit,
-        bnb.upper_bound - bnb.lower_bound <= bnb.tolerance, bnb.leaves)
-    result = _track_result(chart, cameras, points, bnb.candidate, options.norm, bnb.status,
-                           bnb.lower_bound / unit, bnb.nodes, certificate)
+    searched = search(prepared, options, "every point in front of every camera", chart.reference,
+                      prepared.problem.B @ to_chart[:3], to_chart[3], callback)
+    if searched.solution is None:
+        result = TrackResult("infeasible", False, nodes=searched.nodes, reason=_REASONS.over_max_residual)
+    else:
+        result = _track_result(chart, cameras, points, searched.solution, options.norm, searched.status,
+                               searched.lower_bound, searched.nodes, searched.certificate)
     result.elapsed_s = time.perf_counter() - start
     return result
 
@@ -230,4 +204,4 @@ def _track_result(chart: Chart, cameras, points, y, norm, status, lower, nodes, 
 
 
 __all__ = ["NORMS", "TriangulationOptions", "TrackResult", "Certificate", "triangulate", "prepare_track",
-           "camera_centres", "gamma_for"]
+           "camera_centres"]

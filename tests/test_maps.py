@@ -10,7 +10,7 @@ from bench.baselines import map_dlt_lm
 from solvers.bnb import Box, BoxStatus
 from solvers.fractional import Prepared, prepare
 from solvers.geometry import InputError, norm_cost
-from solvers.maps import MapChart, MapOptions, _normaliser, check_correspondences, dlt, fit_map
+from solvers.maps import _REASONS, MapChart, MapOptions, _normaliser, check_correspondences, dlt, fit_map
 from solvers.triangulation import NORMS
 
 from .scenes import look_at
@@ -58,6 +58,7 @@ class TestBaselinesNeverBeatTheCertificate:
     @pytest.mark.parametrize("norm", NORMS)
     def test_homography_against_find_homography(self, norm):
         rng = np.random.default_rng(41)
+        compared = 0
         for _ in range(8):
             count = int(rng.integers(4, 9))
             _, source, target = scene(rng, "homography2", count)
@@ -69,10 +70,13 @@ class TestBaselinesNeverBeatTheCertificate:
                 continue  # outside the certificate's scope (a point at negative depth)
             theirs = norm_cost(apply(H, source) - target, norm)
             assert theirs >= ours.lower_bound * (1 - 1e-9) - 1e-9
+            compared += 1
+        assert compared >= 4, f"OpenCV's map was in scope on only {compared} of 8"
 
     @pytest.mark.parametrize("norm", NORMS)
     def test_resection_against_dlt_and_levenberg_marquardt(self, norm):
         rng = np.random.default_rng(42)
+        compared = 0
         for _ in range(6):
             count = int(rng.integers(6, 11))
             _, source, target = scene(rng, "resection", count)
@@ -87,6 +91,8 @@ class TestBaselinesNeverBeatTheCertificate:
             assert theirs >= ours.lower_bound * (1 - 1e-9) - 1e-9
             if norm == "L2L2":  # LM minimises this very cost: it should find the optimum here
                 assert theirs == pytest.approx(ours.cost, rel=1e-3)
+            compared += 1
+        assert compared >= 3, f"the baseline's map was in scope on only {compared} of 6"
 
 
 @settings(max_examples=40, deadline=None)
@@ -98,7 +104,8 @@ def test_map_relaxation_never_exceeds_the_cost_in_its_box(seed, norm, kind, shri
     target = target + rng.normal(size=target.shape) * 2.0
     chart = MapChart.build(source, target, norm)
     n = source.shape[1]
-    prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n], 1e-7, None)
+    prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n], 1e-7, None,
+                       _REASONS)
     if not isinstance(prepared, Prepared):
         return
     problem = prepared.problem
@@ -138,18 +145,21 @@ class TestCorrespondenceChecks:
 
 
 class TestAgainstSCIP:
-    """SCIP is slow on these bilinear programs (measured: 1.5-5 s a small homography, about 30 s a
-    six-point resection at a 1e-3 gap, against 20-70 ms for ours), so the instances are few."""
+    """SCIP is slow on these bilinear programs (measured: 1.5-5 s a small homography, 30 s to over
+    60 s a six-point resection at a 1e-3 gap, against 20-70 ms for ours), so the instances are
+    few. SCIP's map and its bound are checked against our certificate on every instance; that
+    SCIP also reaches its own gap is required only where it reliably does within its time limit
+    (homographies): for resections it depends on the machine's speed."""
 
     @pytest.mark.parametrize("norm", NORMS)
-    @pytest.mark.parametrize("kind, sizes, instances, time_limit", [
-        ("homography2", (4, 9), 4, 30), ("resection", (6, 7), 2, 60)])
-    def test_small_instances(self, kind, sizes, instances, time_limit, norm):
+    @pytest.mark.parametrize("kind, sizes, instances, time_limit, must_close", [
+        ("homography2", (4, 9), 4, 30, 2), ("resection", (6, 7), 2, 60, 0)])
+    def test_small_instances(self, kind, sizes, instances, time_limit, must_close, norm):
         pytest.importorskip("pyscipopt")
         from bench.baselines import scip_map
 
         rng = np.random.default_rng(hash((kind, norm, "scip")) % 2**32)
-        closed = 0
+        closed = checked = 0
         for _ in range(instances):
             count = int(rng.integers(*sizes))
             _, source, target = scene(rng, kind, count)
@@ -163,7 +173,8 @@ class TestAgainstSCIP:
             assert np.abs(mine).max() < 5.0
             M, reached, scip_lower, _ = scip_map(source, target, norm, box=10.0, time_limit=time_limit, gap=1e-3)
             if M is None:
-                continue
+                continue  # SCIP's own LP failure: it gives no answer to compare
+            checked += 1
             depths = np.hstack([source, np.ones((count, 1))]) @ M[-1]
             assert np.all(depths * np.sign(depths[0]) > 0)  # SCIP's map is in our scope
             scip_cost = norm_cost(apply(M, source) - target, norm)  # recomputed at SCIP's map
@@ -173,4 +184,5 @@ class TestAgainstSCIP:
             if reached:  # both at their gaps (SCIP 1e-3, ours 1e-4): the values agree within them
                 closed += 1
                 assert scip_cost == pytest.approx(ours.cost, rel=1.1e-3, abs=1e-7)
-        assert closed >= instances // 2, f"SCIP reached its gap on only {closed} of {instances}"
+        assert checked >= instances - 1, f"SCIP answered on only {checked} of {instances}"
+        assert closed >= must_close, f"SCIP reached its gap on only {closed} of {instances}"

@@ -1,13 +1,11 @@
 """Every relaxation under-estimates: at random points of random boxes, bound <= true cost."""
 
-import math
-
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from solvers.bnb import Box, BoxStatus
-from solvers.fractional import Prepared, gamma_for
+from solvers.fractional import Prepared
 from solvers.triangulation import NORMS, TriangulationOptions, prepare_track
 
 from .scenes import noisy_track, random_cameras
@@ -49,23 +47,3 @@ def test_box_bound_never_exceeds_cost_inside_the_box(seed, views, norm, shrink, 
     else:
         # "empty" means no point of the box costs at most the upper bound: a sample contradicts it.
         assert bound.status != BoxStatus.EMPTY or cheapest > upper * (1 - 1e-9)
-    assert math.isfinite(gamma_for(upper, norm))
-
-
-class TestEnvelope:
-    def test_envelope_of_ratio_is_below_ratio(self):
-        """The t/s envelope's defining inequalities hold at every (t, s) of a random box."""
-        rng = np.random.default_rng(5)
-        for _ in range(200):
-            u = rng.uniform(0.1, 10)
-            L = rng.uniform(0.01, 5)
-            U = L + rng.uniform(0.01, 5)
-            t = rng.uniform(0, u)
-            s = rng.uniform(L, U)
-            # The relaxation's feasible (t, s, w, r) with the smallest r: r = t^2 / (u w), w chosen
-            # freely in its interval; the envelope value must stay at or below t / s.
-            lam = t / u
-            w_lo, w_hi = max(lam * L, s - (1 - lam) * U), min(lam * U, s - (1 - lam) * L)
-            assert w_lo <= w_hi + 1e-12
-            r_min = t * t / (u * w_hi) if w_hi > 0 else 0.0
-            assert r_min <= t / s + 1e-12

@@ -37,7 +37,7 @@ class TestMaxResidual:
         bounded = triangulate(cameras, points, TriangulationOptions(max_residual=50.0))
         assert bounded.certified
         assert bounded.cost == pytest.approx(plain.cost, rel=1e-3)
-        assert "residual <= 50.0 px" in bounded.certificate.scope
+        assert "every residual <= 50.0" in bounded.certificate.scope
 
     def test_bound_below_every_solution_is_infeasible(self):
         cameras, points = instance(33)
