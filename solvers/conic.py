@@ -83,17 +83,22 @@ class ConicResult:
         return min(self.primal_objective, self.dual_objective)
 
 
-def _settings() -> clarabel.DefaultSettings:
+def _settings(tolerance: float) -> clarabel.DefaultSettings:
     settings = clarabel.DefaultSettings()
     settings.verbose = False
     settings.max_iter = 100
-    settings.tol_gap_abs = 1e-9
-    settings.tol_gap_rel = 1e-9
-    settings.tol_feas = 1e-9
+    settings.tol_gap_abs = tolerance
+    settings.tol_gap_rel = tolerance
+    settings.tol_feas = tolerance
     return settings
 
 
-_SETTINGS = _settings()
+# Solves aim at 1e-9. On nearly exact relaxations (tiny boxes) Clarabel can stall with a
+# duality gap near 3e-8 and answer AlmostSolved; such a solve is repeated once at 1e-7, and only
+# a clean "Solved" there is trusted. Both are far below the gaps searches stop at (1e-4 and up
+# on costs scaled to about 1), and the lower bound taken is the smaller objective anyway.
+_SETTINGS = _settings(1e-9)
+_RETRY_SETTINGS = _settings(1e-7)
 
 
 @functools.lru_cache(maxsize=64)
@@ -115,12 +120,20 @@ def solve_conic(q: np.ndarray, A: np.ndarray | sp.csc_matrix, b: np.ndarray, con
         A = dense_to_csc(A)
     try:
         solver = clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, A, b, cones.clarabel_cones(), _SETTINGS)
-        solution = solver.solve()
+        result = _result(solver.solve())
+        return _retried(result, q, A, b, cones)
     except BaseException as exc:  # Clarabel raises on malformed data (panic) as a Python exception
         if isinstance(exc, (KeyboardInterrupt, SystemExit)):
             raise
         return ConicResult(ConicStatus.FAILED, None, None, np.nan, np.nan, f"exception: {exc}")
-    return _result(solution)
+
+
+def _retried(result: ConicResult, q, A: sp.csc_matrix, b, cones: ConeSpec) -> ConicResult:
+    """An inaccurate answer solved again at the retry tolerance (see _RETRY_SETTINGS)."""
+    if result.status is not ConicStatus.INACCURATE:
+        return result
+    solver = clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, A, b, cones.clarabel_cones(), _RETRY_SETTINGS)
+    return _result(solver.solve())
 
 
 def _result(solution) -> ConicResult:
@@ -175,10 +188,9 @@ class ReusableConicProgram:
                 self._solver = clarabel.DefaultSolver(
                     _zero_quadratic(q.shape[0]), q, self._csc, b, cones.clarabel_cones(), _SETTINGS
                 )
-            solution = self._solver.solve()
+            return _retried(_result(self._solver.solve()), q, self._csc, b, cones)
         except BaseException as exc:
             if isinstance(exc, (KeyboardInterrupt, SystemExit)):
                 raise
             self._key = None
             return ConicResult(ConicStatus.FAILED, None, None, np.nan, np.nan, f"exception: {exc}")
-        return _result(solution)

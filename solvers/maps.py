@@ -190,7 +190,7 @@ def fit_map(
     chart = MapChart.build(source, target, options.norm)
     n = source.shape[1]
     prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n],
-                       options.abs_gap, options.max_residual, _REASONS)
+                       options.abs_gap, options.max_residual, _REASONS, tighten_rounds=4)
     if isinstance(prepared, Early):
         if prepared.incumbent is None:
             result = MapResult(prepared.status, False, reason=prepared.reason)

@@ -1,5 +1,7 @@
 """Certified P^n -> P^m maps: resection, 2D and 3D homographies (thesis 5.5.2-5.5.3)."""
 
+import zlib
+
 import cv2
 import numpy as np
 import pytest
@@ -37,6 +39,11 @@ def scene(rng, kind: str, count: int):
     return M, source, apply(M, source)
 
 
+def seed(*words: str) -> int:
+    """A seed that is the same in every process (``hash`` of a str is not)."""
+    return zlib.crc32(" ".join(words).encode())
+
+
 def same_map(A, B) -> float:
     A, B = np.asarray(A) / np.linalg.norm(A), np.asarray(B) / np.linalg.norm(B)
     return min(np.abs(A - B).max(), np.abs(A + B).max())
@@ -46,7 +53,7 @@ class TestExactRecovery:
     @pytest.mark.parametrize("norm", NORMS)
     @pytest.mark.parametrize("kind, count", [("resection", 10), ("homography2", 6), ("homography3", 8)])
     def test_noiseless_data_give_the_map(self, kind, count, norm):
-        rng = np.random.default_rng(hash((kind, norm)) % 2**32)
+        rng = np.random.default_rng(seed(kind, norm))
         M, source, target = scene(rng, kind, count)
         result = fit_map(source, target, MapOptions(norm=norm))
         assert result.certified, result.reason
@@ -153,25 +160,26 @@ class TestAgainstSCIP:
 
     @pytest.mark.parametrize("norm", NORMS)
     @pytest.mark.parametrize("kind, sizes, instances, time_limit, must_close", [
-        ("homography2", (4, 9), 4, 30, 2), ("resection", (6, 7), 2, 60, 0)])
+        ("homography2", (4, 9), 4, 30, 2), ("resection", (6, 11), 2, 30, 0)])
     def test_small_instances(self, kind, sizes, instances, time_limit, must_close, norm):
         pytest.importorskip("pyscipopt")
         from bench.baselines import scip_map
 
-        rng = np.random.default_rng(hash((kind, norm, "scip")) % 2**32)
+        rng = np.random.default_rng(seed(kind, norm, "scip"))
         closed = checked = 0
         for _ in range(instances):
             count = int(rng.integers(*sizes))
             _, source, target = scene(rng, kind, count)
             target = target + rng.normal(size=target.shape) * 2.0
-            ours = fit_map(source, target, MapOptions(norm=norm, rel_gap=1e-4))
+            ours = fit_map(source, target, MapOptions(norm=norm, rel_gap=1e-3))
             assert ours.certified, ours.reason
-            # SCIP searches normalised maps with entries in [-10, 10]: ours must lie well inside.
+            # SCIP searches normalised maps in a box: one at least twice as wide as our optimum (a
+            # few-point homography can be nearly singular and have large entries).
             S, T = _normaliser(source), _normaliser(target)
             mine = T @ np.array(ours.matrix) @ np.linalg.inv(S)
             mine = mine / (mine[-1] @ (S @ np.append(source[0], 1.0)))
-            assert np.abs(mine).max() < 5.0
-            M, reached, scip_lower, _ = scip_map(source, target, norm, box=10.0, time_limit=time_limit, gap=1e-3)
+            box = max(10.0, 2.0 * np.abs(mine).max())
+            M, reached, scip_lower, _ = scip_map(source, target, norm, box=box, time_limit=time_limit, gap=1e-3)
             if M is None:
                 continue  # SCIP's own LP failure: it gives no answer to compare
             checked += 1
@@ -181,8 +189,8 @@ class TestAgainstSCIP:
             # SCIP's map never beats our certified bound; SCIP's bound never exceeds our cost.
             assert ours.lower_bound <= scip_cost * (1 + 1e-7) + 1e-9
             assert scip_lower <= ours.cost * (1 + 1e-6) + 1e-9
-            if reached:  # both at their gaps (SCIP 1e-3, ours 1e-4): the values agree within them
+            if reached:  # both within 1e-3 of their optima: the values agree within 2e-3
                 closed += 1
-                assert scip_cost == pytest.approx(ours.cost, rel=1.1e-3, abs=1e-7)
+                assert scip_cost == pytest.approx(ours.cost, rel=2.1e-3, abs=1e-7)
         assert checked >= instances - 1, f"SCIP answered on only {checked} of {instances}"
         assert closed >= must_close, f"SCIP reached its gap on only {closed} of {instances}"
