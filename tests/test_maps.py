@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 from bench.baselines import map_dlt_lm
 from solvers.bnb import Box, BoxStatus
+from solvers.conic import ConicStatus, solve_conic
 from solvers.fractional import Prepared, prepare
 from solvers.geometry import InputError, norm_cost
 from solvers.maps import _REASONS, MapChart, MapOptions, _normaliser, check_correspondences, dlt, fit_map
@@ -135,6 +136,38 @@ def test_map_relaxation_never_exceeds_the_cost_in_its_box(seed, norm, kind, shri
         assert bound.lower_bound <= cheapest * (1 + 1e-6) + 1e-9
     else:
         assert bound.status != BoxStatus.EMPTY
+    # The cheaper relaxation that bound tightening uses (t / U for each ratio) under-estimates too.
+    cheap = solve_conic(*problem.conic_data(Box(lo, hi), cheapest * 2.0, envelope=False))
+    if cheap.status is ConicStatus.OPTIMAL:
+        assert cheap.lower_bound <= cheapest * (1 + 1e-6) + 1e-9
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), norm=st.sampled_from(NORMS), kind=st.sampled_from(["resection", "homography2"]),
+       margin=st.floats(1.05, 3.0))
+def test_tightening_keeps_every_map_within_the_bound(seed, norm, kind, margin):
+    rng = np.random.default_rng(seed)
+    _, source, target = scene(rng, kind, 8)
+    target = target + rng.normal(size=target.shape) * 2.0
+    n = source.shape[1]
+    chart = MapChart.build(source, target, norm)
+    prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n], 1e-7, None,
+                       _REASONS)
+    if not isinstance(prepared, Prepared):
+        return
+    problem = prepared.problem
+    bound = margin * prepared.upper
+    tight = problem.tighten(problem.root, bound, rounds=4)
+    assert np.prod(tight.width / problem.root.width) < 0.5  # it does tighten
+    # Maps around the incumbent on every scale: those costing at most the bound lie in the box.
+    scales = 10.0 ** rng.uniform(-6, -1, size=(2000, 1))
+    samples = prepared.incumbent + rng.normal(size=(2000, chart.program.dim)) * scales
+    costs = np.array([problem.objective(v) for v in samples])
+    within = samples[costs <= bound]
+    assert len(within) >= 20
+    z = within @ problem.B.T
+    slack = 1e-9 * (1 + np.abs(z))
+    assert np.all(z >= tight.lo - slack) and np.all(z <= tight.hi + slack)
 
 
 class TestCorrespondenceChecks:
