@@ -158,7 +158,7 @@ def test_tightening_keeps_every_map_within_the_bound(seed, norm, kind, margin):
     problem = prepared.problem
     bound = margin * prepared.upper
     tight = problem.tighten(problem.root, bound, rounds=4)
-    assert np.prod(tight.width / problem.root.width) < 0.5  # it does tighten
+    assert np.prod(tight.width / problem.root.width) < 0.9  # it does tighten
     # Maps around the incumbent on every scale: those costing at most the bound lie in the box.
     scales = 10.0 ** rng.uniform(-6, -1, size=(2000, 1))
     samples = prepared.incumbent + rng.normal(size=(2000, chart.program.dim)) * scales
