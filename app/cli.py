@@ -74,9 +74,23 @@ def _die_with_parent() -> None:
 
 def cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
+    from pydantic import ValidationError as SettingsError
 
     from app.core.config import get_settings
+    from app.core.security import is_loopback, parse_keys
 
+    try:
+        keys = parse_keys(get_settings().api_keys)
+    except (ValueError, SettingsError) as exc:
+        print(f"geocert serve: {exc}", file=sys.stderr)
+        return 2
+    if not keys and not is_loopback(args.host):
+        print(f"geocert serve: refusing to listen on {args.host} without API keys: set GEOCERT_API_KEYS, "
+              "or listen on loopback (127.0.0.1)", file=sys.stderr)
+        return 2
+    print("geocert: API keys required on /v1" if keys else
+          "geocert: no API keys configured (GEOCERT_API_KEYS): serving loopback only, without authentication",
+          file=sys.stderr)
     redis_process = None
     if not os.environ.get("GEOCERT_REDIS_URL"):
         from workers.redis_server import start_embedded_redis
@@ -116,6 +130,17 @@ def cmd_worker(args: argparse.Namespace) -> int:
     return 0  # not reached
 
 
+def cmd_webhook_secret(args: argparse.Namespace) -> int:
+    """Print the key webhook signatures use (GEOCERT_WEBHOOK_SECRET, or the one kept in Redis)."""
+    import redis
+
+    from workers.celery_app import redis_url
+    from workers.webhooks import webhook_secret
+
+    print(webhook_secret(redis.Redis.from_url(redis_url(), decode_responses=True)))
+    return 0
+
+
 def openapi_document() -> dict:
     from app.main import create_app
 
@@ -147,6 +172,8 @@ def main(argv: list[str] | None = None) -> int:
     worker = sub.add_parser("worker", help="run one Celery worker against GEOCERT_REDIS_URL")
     worker.add_argument("--concurrency", type=int, default=os.cpu_count() or 1)
     worker.set_defaults(func=cmd_worker)
+    secret = sub.add_parser("webhook-secret", help="print the key that signs webhook deliveries")
+    secret.set_defaults(func=cmd_webhook_secret)
     spec = sub.add_parser("openapi", help="print (or write) the OpenAPI document")
     spec.add_argument("--output", help="file to write instead of standard output")
     spec.set_defaults(func=cmd_openapi)

@@ -5,9 +5,10 @@ from __future__ import annotations
 from fastapi import FastAPI
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from app import problems
+from app import observability, problems
 from app.api.routes import jobs, service
 from app.core.config import get_settings
+from workers import logs
 
 
 class BodySizeLimit:
@@ -60,10 +61,13 @@ def create_app() -> FastAPI:
             "after M. Chandraker, *From Pictures to 3D: Global Optimization for Scene Reconstruction* (2009)."
         ),
     )
+    logs.configure()
     problems.install(app)
     app.include_router(jobs.router)
     app.include_router(service.router)
+    app.include_router(observability.router)
     app.add_middleware(BodySizeLimit, limit=get_settings().max_body_bytes)
+    app.add_middleware(observability.RequestContext)  # outermost: sees every answer, 413s included
     return app
 
 

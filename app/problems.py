@@ -13,6 +13,14 @@ from solvers.jobs import KINDS
 PROBLEM_JSON = "application/problem+json"
 
 
+class ApiProblem(Exception):
+    """An error answer with a field named (when one is to blame) and optional headers."""
+
+    def __init__(self, status: int, detail: str, field: str | None = None, headers: dict | None = None):
+        super().__init__(detail)
+        self.status, self.detail, self.field, self.headers = status, detail, field, headers
+
+
 def problem(status: int, title: str, detail: str | None = None, errors: list[dict] | None = None,
             instance: str | None = None, headers: dict | None = None) -> JSONResponse:
     body = {"type": "about:blank", "title": title, "status": status}
@@ -58,6 +66,12 @@ def install(app: FastAPI) -> None:
         return problem(422, "Invalid request", str(exc), [{"field": exc.field, "reason": exc.reason}],
                        instance=str(request.url.path))
 
+    @app.exception_handler(ApiProblem)
+    async def api_problem(request: Request, exc: ApiProblem):
+        errors = [{"field": exc.field, "reason": exc.detail}] if exc.field else None
+        return problem(exc.status, _TITLES.get(exc.status, "Error"), exc.detail, errors,
+                       instance=str(request.url.path), headers=exc.headers)
+
     @app.exception_handler(StarletteHTTPException)
     async def http_error(request: Request, exc: StarletteHTTPException):
         return problem(exc.status_code, _TITLES.get(exc.status_code, "Error"), str(exc.detail),
@@ -68,5 +82,6 @@ def install(app: FastAPI) -> None:
         return problem(500, "Internal error", f"{type(exc).__name__}", instance=str(request.url.path))
 
 
-_TITLES = {400: "Bad request", 404: "Not found", 405: "Method not allowed", 409: "Conflict",
-           413: "Payload too large", 415: "Unsupported media type", 503: "Service unavailable"}
+_TITLES = {400: "Bad request", 401: "Unauthorized", 403: "Forbidden", 404: "Not found", 405: "Method not allowed",
+           409: "Conflict", 413: "Payload too large", 415: "Unsupported media type", 422: "Invalid request",
+           429: "Too many requests", 503: "Service unavailable"}

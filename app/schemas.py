@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, create_model
+from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, TypeAdapter, create_model
 
 from solvers.maps import MapOptions
 from solvers.triangulation import TriangulationOptions
@@ -50,7 +50,12 @@ TriangulationOptionsIn = options_model("TriangulationOptionsIn", TriangulationOp
 MapOptionsIn = options_model("MapOptionsIn", MapOptions(), "target units")
 
 
-class TriangulationJob(Strict):
+class JobBase(Strict):
+    callback_url: AnyHttpUrl | None = Field(
+        None, description="receives the job document once it ends (POST, signed: X-Geocert-Signature)")
+
+
+class TriangulationJob(JobBase):
     kind: Literal["triangulation"]
     data: TriangulationData
     options: TriangulationOptionsIn = Field(default_factory=TriangulationOptionsIn)
@@ -68,13 +73,13 @@ class MapsData(Strict):
     maps: list[MapIn] = Field(min_length=1, description="independent maps, solved in parallel")
 
 
-class ResectionJob(Strict):
+class ResectionJob(JobBase):
     kind: Literal["resection"]
     data: MapsData
     options: MapOptionsIn = Field(default_factory=MapOptionsIn)
 
 
-class HomographyJob(Strict):
+class HomographyJob(JobBase):
     kind: Literal["homography"]
     data: MapsData
     options: MapOptionsIn = Field(default_factory=MapOptionsIn)
@@ -174,6 +179,14 @@ class MapsResult(BaseModel):
     stats: JobStats
 
 
+class WebhookState(BaseModel):
+    url: str
+    state: Literal["waiting", "retrying", "delivered", "failed"]
+    attempts: int
+    last_error: str | None = None
+    delivered_at: float | None = None
+
+
 class Job(BaseModel):
     id: str
     kind: str
@@ -184,6 +197,7 @@ class Job(BaseModel):
     progress: JobProgress
     result: TriangulationResult | MapsResult | None = None
     error: ProblemDetails | None = None
+    webhook: WebhookState | None = None
     links: dict[str, str]
 
 

@@ -305,11 +305,16 @@ class ItemProgress:
 
 
 def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None = None,
-                should_stop: StopCheck | None = None, total: int | None = None) -> list[dict]:
-    """Solve the given items in order; once stopped, the rest are marked cancelled unsolved."""
+                should_stop: StopCheck | None = None, total: int | None = None,
+                stop_at: float | None = None) -> list[dict]:
+    """Solve the given items in order; once stopped, the rest are marked cancelled unsolved.
+    After the ``time.monotonic()`` value ``stop_at`` no new item is started (at least one is
+    always solved): the list returned is then shorter, and the caller solves the rest later."""
     tracker = ItemProgress(total if total is not None else len(indices), sink, should_stop)
     items = []
     for index in indices:
+        if stop_at is not None and items and not tracker.stopped and time.monotonic() > stop_at:
+            break
         if tracker.stopped or (should_stop is not None and should_stop()):
             tracker.stopped = True
             items.append(kind.cancelled_item())

@@ -162,7 +162,7 @@ class TestCancel:
     def test_running_job_stops_and_keeps_its_best_result(self, service):
         # An unreachable gap keeps the search running until it is told to stop.
         body = triangulation_job(np.random.default_rng(23), tracks=3, views=6, norm="L1L1", rel_gap=0.0,
-                                 abs_gap=0.0, max_nodes=1_000_000, time_limit_s=600)
+                                 abs_gap=0.0, max_nodes=100_000, time_limit_s=60)
         job_id = service.post("/v1/jobs", json=body).json()["id"]
         for _, event, data in sse_events(service, job_id):
             if event == "progress" and data["nodes"] > 20:
@@ -177,7 +177,7 @@ class TestCancel:
 
     def test_queued_job_never_starts(self, service):
         blocker = triangulation_job(np.random.default_rng(24), tracks=1, views=6, norm="L1L1", rel_gap=0.0,
-                                    abs_gap=0.0, max_nodes=1_000_000, time_limit_s=600)
+                                    abs_gap=0.0, max_nodes=100_000, time_limit_s=60)
         blocker_id = service.post("/v1/jobs", json=blocker).json()["id"]
         wait_for(service, blocker_id, statuses=("running",))
         queued_id = service.post("/v1/jobs", json=triangulation_job(np.random.default_rng(25), tracks=2)).json()["id"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 
 from celery import Celery
+from celery.signals import worker_process_init
 
 from app.core.config import get_settings
 from workers.redis_server import broker_url
@@ -18,19 +19,35 @@ def redis_url() -> str:
 
 
 def make_celery() -> Celery:
-    app = Celery("geocert", broker=broker_url(redis_url()), include=["workers.tasks"])
+    settings = get_settings()
+    app = Celery("geocert", broker=broker_url(redis_url()), include=["workers.tasks", "workers.webhooks"])
     app.conf.update(
         task_serializer="json",
         accept_content=["json"],
         task_ignore_result=True,  # results live in the job store, not in a Celery backend
         task_acks_late=True,  # a task lost with its worker is delivered again
         task_reject_on_worker_lost=True,
-        worker_prefetch_multiplier=1,  # long tasks: never hoard work another worker could do
+        worker_prefetch_multiplier=1,  # never hoard work another worker could do
         broker_connection_retry_on_startup=True,
         worker_hijack_root_logger=False,
-        broker_transport_options={"visibility_timeout": 3600},
+        worker_redirect_stdouts=False,  # our JSON lines go straight to standard error
+        # Tasks end well inside the visibility timeout (see Settings), so a task is delivered
+        # again only when its worker is gone; the restore sweep runs every 5 s so that happens
+        # within about visibility_timeout_s + 5 s of the loss.
+        broker_transport_options={"visibility_timeout": settings.visibility_timeout_s,
+                                  "unacked_restore_interval": 5, "unacked_restore_throttle": 1},
+        # A runaway task fails (and its job keeps the error) before it could be delivered twice.
+        task_soft_time_limit=settings.visibility_timeout_s - 10,
+        task_time_limit=settings.visibility_timeout_s - 2,
     )
     return app
 
 
 celery_app = make_celery()
+
+
+@worker_process_init.connect
+def _json_logs(**_) -> None:
+    from workers import logs
+
+    logs.configure()

@@ -9,6 +9,7 @@ reconnects with ``Last-Event-ID`` resumes exactly where it stopped.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 import uuid
@@ -38,15 +39,18 @@ class JobStore:
         return f"geocert:job:{job_id}" + (f":{part}" if part else "")
 
     # --- creation and reads ------------------------------------------------------------------
-    def create(self, kind: str, request: dict, items_total: int, chunk_size: int) -> dict:
+    def create(self, kind: str, request: dict, items_total: int, chunk_size: int, owner: str,
+               callback_url: str | None = None) -> dict:
         job_id = uuid.uuid4().hex
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
-            "id": job_id, "kind": kind, "status": "queued", "created_at": now(), "started_at": None,
-            "finished_at": None, "items_total": items_total, "chunks": chunks, "task_ids": [],
+            "id": job_id, "kind": kind, "owner": owner, "status": "queued", "created_at": now(), "started_at": None,
+            "finished_at": None, "items_total": items_total, "chunks": chunks,
             "progress": {"nodes": 0, "open_boxes": 0, "lower_bound": None, "upper_bound": None, "gap_abs": None,
                          "gap_rel": None, "tracks_done": 0, "tracks_total": items_total, "elapsed_s": 0.0},
             "error": None,
+            "webhook": {"url": callback_url, "state": "waiting", "attempts": 0, "last_error": None,
+                        "delivered_at": None} if callback_url else None,
         }
         pipe = self.r.pipeline()
         pipe.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in meta.items()})
@@ -67,6 +71,22 @@ class JobStore:
 
     def set_fields(self, job_id: str, **fields: Any) -> None:
         self.r.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in fields.items()})
+
+    def document(self, meta: dict) -> dict:
+        """The job as the API shows it (and as webhooks deliver it)."""
+        document = {key: meta.get(key) for key in ("id", "kind", "status", "created_at", "started_at", "finished_at",
+                                                   "progress", "error", "webhook")}
+        document["result"] = self.result(meta["id"]) if meta["status"] in TERMINAL else None
+        base = f"/v1/jobs/{meta['id']}"
+        document["links"] = {"self": base, "events": f"{base}/events", "cancel": f"{base}/cancel"}
+        return document
+
+    def add_task_ids(self, job_id: str, *task_ids: str) -> None:
+        if task_ids:
+            self.r.rpush(self.key(job_id, "tasks"), *task_ids)
+
+    def task_ids(self, job_id: str) -> list[str]:
+        return self.r.lrange(self.key(job_id, "tasks"), 0, -1)
 
     def request(self, job_id: str) -> dict:
         return json.loads(self.r.get(self.key(job_id, "request")))
@@ -113,6 +133,7 @@ class JobStore:
         """
         if self.r.eval(script, 1, self.key(job_id), json.dumps(now())) != 1:
             return False
+        self.release(self.field(job_id, "owner") or "", job_id)
         self.publish(job_id, "end", {"status": "cancelled", "error": None})
         self.expire(job_id)
         return True
@@ -136,9 +157,10 @@ class JobStore:
             self.publish(job_id, "status", {"status": "running"})
         return answer != 0
 
-    def save_chunk_progress(self, job_id: str, chunk: int, progress: dict) -> dict:
-        """Record one chunk's progress and return (and publish) the job's aggregate."""
-        self.r.hset(self.key(job_id, "chunkprogress"), str(chunk), json.dumps(progress))
+    def save_progress(self, job_id: str, segment: int, progress: dict) -> dict:
+        """Record the progress of the task that started at item ``segment`` and return (and
+        publish) the job's aggregate over all its tasks."""
+        self.r.hset(self.key(job_id, "chunkprogress"), str(segment), json.dumps(progress))
         parts = [json.loads(v) for v in self.r.hvals(self.key(job_id, "chunkprogress"))]
         total = self.field(job_id, "items_total")
         started = self.field(job_id, "started_at") or now()
@@ -158,22 +180,22 @@ class JobStore:
         self.publish(job_id, "progress", aggregate)
         return aggregate
 
-    def save_chunk_items(self, job_id: str, chunk: int, items: list[dict]) -> int:
-        """Store a chunk's items (idempotent: a redelivered chunk overwrites itself); returns chunks done."""
+    def save_items(self, job_id: str, start: int, items: list[dict]) -> int:
+        """Store items start, start+1, ... (idempotent: a redelivered task overwrites the same
+        fields, so nothing is counted twice); returns how many items of the job are stored."""
+        if not items:
+            return int(self.r.hlen(self.key(job_id, "items")))
         pipe = self.r.pipeline()
-        pipe.hset(self.key(job_id, "chunks"), str(chunk), json.dumps(items))
-        pipe.hlen(self.key(job_id, "chunks"))
+        pipe.hset(self.key(job_id, "items"), mapping={str(start + i): json.dumps(item) for i, item in enumerate(items)})
+        pipe.hlen(self.key(job_id, "items"))
         return pipe.execute()[1]
 
     def claim_finalisation(self, job_id: str) -> bool:
         return bool(self.r.set(self.key(job_id, "final"), "1", nx=True, ex=self.ttl))
 
-    def chunk_items(self, job_id: str, chunks: int) -> list[dict]:
-        raw = self.r.hgetall(self.key(job_id, "chunks"))
-        items: list[dict] = []
-        for index in range(chunks):
-            items.extend(json.loads(raw[str(index)]))
-        return items
+    def all_items(self, job_id: str, total: int) -> list[dict]:
+        raw = self.r.hgetall(self.key(job_id, "items"))
+        return [json.loads(raw[str(index)]) for index in range(total)]
 
     def finish(self, job_id: str, status: str, result: dict | None = None, error: dict | None = None) -> None:
         pipe = self.r.pipeline()
@@ -181,13 +203,64 @@ class JobStore:
             pipe.set(self.key(job_id, "result"), json.dumps(result))
         pipe.hset(self.key(job_id), mapping={"status": json.dumps(status), "finished_at": json.dumps(now()),
                                               "error": json.dumps(error)})
-        pipe.delete(self.key(job_id, "chunks"), self.key(job_id, "chunkprogress"))
+        pipe.delete(self.key(job_id, "items"), self.key(job_id, "chunkprogress"))
+        pipe.srem(self.owner_key(self.field(job_id, "owner") or "", "active"), job_id)
         pipe.execute()
         self.publish(job_id, "end", {"status": status, "error": error})
         self.expire(job_id)
 
+    _PARTS = ("", "request", "result", "events", "cancel", "final", "items", "chunkprogress", "tasks")
+
     def expire(self, job_id: str) -> None:
         pipe = self.r.pipeline()
-        for part in ("", "request", "result", "events", "cancel", "final"):
+        for part in self._PARTS:
             pipe.expire(self.key(job_id, part), self.ttl)
         pipe.execute()
+
+    def delete(self, job_id: str) -> None:
+        self.r.delete(*(self.key(job_id, part) for part in self._PARTS))
+
+    # --- per-key accounting ------------------------------------------------------------------
+    @staticmethod
+    def owner_key(owner: str, part: str) -> str:
+        return f"geocert:owner:{owner}:{part}"
+
+    def admit(self, owner: str, job_id: str, limit: int) -> bool:
+        """Count ``job_id`` among the owner's active jobs unless it already has ``limit`` (0: no limit)."""
+        script = """
+        if tonumber(ARGV[2]) > 0 and redis.call('SCARD', KEYS[1]) >= tonumber(ARGV[2]) then return 0 end
+        redis.call('SADD', KEYS[1], ARGV[1])
+        return 1
+        """
+        return self.r.eval(script, 1, self.owner_key(owner, "active"), job_id, limit) == 1
+
+    def release(self, owner: str, job_id: str) -> None:
+        self.r.srem(self.owner_key(owner, "active"), job_id)
+
+    def count_request(self, owner: str, window_s: int = 60) -> tuple[int, int]:
+        """Requests by ``owner`` in the current fixed window, and the seconds until it ends."""
+        window = int(now() // window_s)
+        key = self.owner_key(owner, f"rate:{window}")
+        pipe = self.r.pipeline()
+        pipe.incr(key)
+        pipe.expire(key, 2 * window_s)
+        count = pipe.execute()[0]
+        return count, int((window + 1) * window_s - now()) + 1
+
+    def remember_idempotent(self, owner: str, idempotency_key: str, body_digest: str) -> dict | None:
+        """Reserve ``idempotency_key`` for a body; returns None when newly reserved, else what
+        was stored before: ``{"body": digest, "job": id or None while being created}``."""
+        key = self.owner_key(owner, f"idempotency:{hashlib.sha256(idempotency_key.encode()).hexdigest()}")
+        entry = json.dumps({"body": body_digest, "job": None})
+        if self.r.set(key, entry, nx=True, ex=self.ttl):
+            return None
+        raw = self.r.get(key)
+        return json.loads(raw) if raw else None
+
+    def settle_idempotent(self, owner: str, idempotency_key: str, body_digest: str, job_id: str | None) -> None:
+        """Record the job made for a reserved key (or, with None, free the key: creation failed)."""
+        key = self.owner_key(owner, f"idempotency:{hashlib.sha256(idempotency_key.encode()).hexdigest()}")
+        if job_id is None:
+            self.r.delete(key)
+        else:
+            self.r.set(key, json.dumps({"body": body_digest, "job": job_id}), ex=self.ttl)

@@ -1,4 +1,11 @@
-"""Thin tasks: load a chunk of a job, solve it with ``solvers``, publish progress, store results."""
+"""Thin tasks: solve a segment of a job with ``solvers``, publish progress, store results.
+
+A job's items are split into chunks, one task each, run in parallel across workers. A task
+starts no new item after GEOCERT_CHUNK_TIME_BUDGET_S and queues the rest of its chunk as a new
+task, so every task stays well inside the broker's visibility timeout: a task lost with its
+worker is delivered again soon, and no running task is ever delivered twice. Results are stored
+per item, so a repeated task overwrites what it wrote before and nothing is counted twice.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +16,7 @@ import traceback
 from app.core.config import get_settings
 from solvers.geometry import InputError
 from solvers.jobs import get_kind, job_stats, options_from, solve_items
+from workers import logs, metrics
 from workers.celery_app import celery_app, redis_url
 from workers.store import JobStore
 
@@ -24,10 +32,10 @@ def store() -> JobStore:
 
 
 class _Throttle:
-    """Publishes a chunk's progress at most every ``interval`` seconds (always the last one)."""
+    """Publishes a task's progress at most every ``interval`` seconds (always the last one)."""
 
-    def __init__(self, jobs: JobStore, job_id: str, chunk: int, interval: float):
-        self.jobs, self.job_id, self.chunk, self.interval = jobs, job_id, chunk, interval
+    def __init__(self, jobs: JobStore, job_id: str, segment: int, interval: float):
+        self.jobs, self.job_id, self.segment, self.interval = jobs, job_id, segment, interval
         self.last = 0.0
         self.cancel_checked = 0.0
         self.cancelled = False
@@ -35,7 +43,7 @@ class _Throttle:
     def __call__(self, progress: dict) -> None:
         if time.monotonic() - self.last >= self.interval or progress["tracks_done"] == progress["tracks_total"]:
             self.last = time.monotonic()
-            self.jobs.save_chunk_progress(self.job_id, self.chunk, progress)
+            self.jobs.save_progress(self.job_id, self.segment, progress)
 
     def should_stop(self) -> bool:
         if not self.cancelled and time.monotonic() - self.cancel_checked >= 0.05:
@@ -44,37 +52,47 @@ class _Throttle:
         return self.cancelled
 
 
-@celery_app.task(name="geocert.solve_chunk")
-def solve_chunk(job_id: str, chunk: int) -> None:
-    jobs = store()
-    meta = jobs.get(job_id)
-    if meta is None or not jobs.mark_running(job_id):
-        return  # expired, or ended (cancelled) before it started: nothing to do
-    start, stop = meta["chunks"][chunk]
-    try:
-        request = jobs.request(job_id)
-        kind = get_kind(request["kind"])
-        options = options_from(kind.options_type, request.get("options"))
-        parsed = kind.parse(request["data"], items=range(start, stop))
-        throttle = _Throttle(jobs, job_id, chunk, get_settings().progress_interval_s)
-        items = solve_items(kind, parsed, options, range(start, stop), throttle, throttle.should_stop)
-        done = jobs.save_chunk_items(job_id, chunk, items)
-        if done == len(meta["chunks"]) and jobs.claim_finalisation(job_id):
-            finalise(jobs, job_id, meta, kind, options)
-    except InputError as exc:  # the API validates first, so this is a stored job gone bad
-        fail(jobs, job_id, 422, "Invalid job data", str(exc), exc.field)
-    except Exception as exc:  # never lose the reason: the job keeps its error
-        log.exception("chunk %s of job %s failed", chunk, job_id)
-        fail(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
-             traceback.format_exc(limit=5))
+@celery_app.task(name="geocert.solve_segment")
+def solve_segment(job_id: str, start: int, stop: int, request_id: str | None = None) -> None:
+    """Solve items ``start`` to ``stop - 1`` of a job (or the first of them, within the budget)."""
+    with logs.context(job_id=job_id, request_id=request_id, items=f"{start}-{stop}"):
+        jobs = store()
+        meta = jobs.get(job_id)
+        if meta is None or not jobs.mark_running(job_id):
+            return  # expired, deleted, or ended (cancelled) before it started: nothing to do
+        settings = get_settings()
+        try:
+            request = jobs.request(job_id)
+            kind = get_kind(request["kind"])
+            options = options_from(kind.options_type, request.get("options"))
+            parsed = kind.parse(request["data"], items=range(start, stop))
+            throttle = _Throttle(jobs, job_id, start, settings.progress_interval_s)
+            began = time.monotonic()
+            items = solve_items(kind, parsed, options, range(start, stop), throttle, throttle.should_stop,
+                                stop_at=began + settings.chunk_time_budget_s)
+            metrics.record_items(kind.name, items)
+            done = jobs.save_items(job_id, start, items)
+            cut = start + len(items)
+            if cut < stop:  # over the budget: the rest of the chunk becomes a task of its own
+                log.info("continuing items %d-%d in a new task", cut, stop)
+                jobs.add_task_ids(job_id, solve_segment.delay(job_id, cut, stop, request_id).id)
+            elif done == meta["items_total"] and jobs.claim_finalisation(job_id):
+                finalise(jobs, job_id, meta, kind, options)
+        except InputError as exc:  # the API validates first, so this is a stored job gone bad
+            fail(jobs, job_id, 422, "Invalid job data", str(exc), exc.field)
+        except Exception as exc:  # never lose the reason: the job keeps its error
+            log.exception("items %d-%d of job %s failed", start, stop, job_id)
+            fail(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
+                 traceback.format_exc(limit=5))
 
 
 def finalise(jobs: JobStore, job_id: str, meta: dict, kind, options) -> None:
-    items = jobs.chunk_items(job_id, len(meta["chunks"]))
+    items = jobs.all_items(job_id, meta["items_total"])
     elapsed = time.time() - (meta["started_at"] or meta["created_at"])
     result = kind.assemble(options, items, job_stats(items, elapsed))
     status = "cancelled" if any(item["status"] == "cancelled" for item in items) else "succeeded"
     jobs.finish(job_id, status, result=result)
+    ended(jobs, job_id)
 
 
 def fail(jobs: JobStore, job_id: str, status: int, title: str, detail: str, field: str | None,
@@ -86,3 +104,17 @@ def fail(jobs: JobStore, job_id: str, status: int, title: str, detail: str, fiel
         error["trace"] = trace
     if jobs.claim_finalisation(job_id):
         jobs.finish(job_id, "failed", error=error)
+        ended(jobs, job_id)
+
+
+def ended(jobs: JobStore, job_id: str) -> None:
+    """After a job reaches a terminal state: count it, and queue its webhook if it has one."""
+    meta = jobs.get(job_id)
+    if meta is None:
+        return
+    metrics.record_job_end(meta)
+    log.info("job ended %s", meta["status"])
+    if meta.get("webhook"):
+        from workers.webhooks import deliver_webhook
+
+        deliver_webhook.delay(job_id)

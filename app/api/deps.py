@@ -1,10 +1,16 @@
-"""Shared dependencies: the job store and the queue."""
+"""Shared dependencies: the job store, the caller, the rate limit, and the queue."""
 
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Annotated
+
+from fastapi import Depends
 
 from app.core.config import get_settings
+from app.core.security import caller
+from app.problems import PROBLEM_JSON, ApiProblem
+from app.schemas import ProblemDetails
 from workers.store import JobStore
 
 
@@ -15,12 +21,44 @@ def get_store() -> JobStore:
     return JobStore.from_url(redis_url(), get_settings().result_ttl_s)
 
 
-def submit_chunks(store: JobStore, meta: dict) -> None:
+JobStoreDep = Annotated[JobStore, Depends(get_store)]
+Caller = Annotated[str, Depends(caller)]
+
+
+def rate_limited(owner: Caller, store: JobStoreDep) -> None:
+    """At most GEOCERT_RATE_LIMIT_PER_MINUTE requests per key per minute (a fixed window in Redis,
+    shared by every API process)."""
+    limit = get_settings().rate_limit_per_minute
+    if limit <= 0:
+        return
+    count, retry_after = store.count_request(owner)
+    if count > limit:
+        raise ApiProblem(429, f"more than {limit} requests this minute (GEOCERT_RATE_LIMIT_PER_MINUTE)",
+                         headers={"Retry-After": str(retry_after)})
+
+
+def _problem(description: str) -> dict:
+    return {"model": ProblemDetails, "content": {PROBLEM_JSON: {}}, "description": description}
+
+
+ERRORS = {
+    400: _problem("the body is not parseable JSON"),
+    401: _problem("no X-API-Key header (keys are configured)"),
+    403: _problem("the X-API-Key is not one of the configured keys"),
+    404: _problem("no such job (for this key)"),
+    409: _problem("the job is not in a state that allows this, or an idempotent request is in progress"),
+    413: _problem("body, items or observations over a limit (named in the detail)"),
+    422: _problem("invalid request: names the field"),
+    429: _problem("rate or active-job limit reached (named in the detail); see Retry-After"),
+}
+
+
+def submit_chunks(store: JobStore, meta: dict, request_id: str | None) -> None:
     """One task per chunk, so a batch runs in parallel across every worker (a Celery group)."""
     from celery import group
 
-    from workers.tasks import solve_chunk
+    from workers.tasks import solve_segment
 
-    signatures = [solve_chunk.s(meta["id"], index) for index in range(len(meta["chunks"]))]
+    signatures = [solve_segment.s(meta["id"], start, stop, request_id) for start, stop in meta["chunks"]]
     result = group(signatures).apply_async()
-    store.set_fields(meta["id"], task_ids=[r.id for r in result.results])
+    store.add_task_ids(meta["id"], *(task.id for task in result.results))

@@ -1,10 +1,14 @@
-"""Settings, from GEOCERT_* environment variables (pydantic-settings)."""
+"""Settings, from GEOCERT_* environment variables (pydantic-settings).
+
+Every setting is listed with its variable and default in the README's configuration table.
+"""
 
 from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
 
+from pydantic import model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
@@ -15,16 +19,50 @@ class Settings(BaseSettings):
     redis_url: str | None = None
     # Where the embedded Redis keeps its socket and append-only file.
     data_dir: Path = Path("var")
+    # API keys, comma-separated: the keys themselves or "sha256:<hex digest>". Empty: no
+    # authentication, and the service listens on loopback only.
+    api_keys: str = ""
     # Largest request body accepted, in bytes (413 beyond it).
     max_body_bytes: int = 32 * 1024 * 1024
-    # Most items (tracks) in one job (422 beyond it).
+    # Most items (tracks or maps) in one job (413 beyond it).
     max_items_per_job: int = 200_000
-    # Items per queued task: batches are split into chunks that run in parallel across workers.
+    # Most observations or correspondences, summed over a job's items (413 beyond it).
+    max_points_per_job: int = 2_000_000
+    # Requests per minute one key may make to /v1 (429 beyond it; 0: unlimited).
+    rate_limit_per_minute: int = 600
+    # Jobs one key may have queued or running at once (429 beyond it; 0: unlimited).
+    max_active_jobs_per_key: int = 100
+    # Server-side maxima of the per-item options time_limit_s and max_nodes (422 beyond them).
+    max_item_time_limit_s: float = 60.0
+    max_item_nodes: int = 100_000
+    # Items per queued task, by kind: batches are split into chunks that run in parallel.
     chunk_size: int = 100
+    map_chunk_size: int = 1
+    # A task starts no new item after this many seconds; the rest of its chunk is queued as a
+    # new task. With max_item_time_limit_s it bounds a task's length below the visibility timeout.
+    chunk_time_budget_s: float = 20.0
+    # Seconds before Redis hands an unacknowledged task (its worker died) to another worker.
+    visibility_timeout_s: int = 90
     # Seconds between progress events of one chunk.
     progress_interval_s: float = 0.25
     # Seconds a finished job (and its events) is kept.
     result_ttl_s: int = 7 * 24 * 3600
+    # Key for the HMAC-SHA256 signature of webhook deliveries (X-Geocert-Signature). Empty: a
+    # random one is made once and kept in Redis for every process (`geocert webhook-secret`).
+    webhook_secret: str = ""
+    # Webhook delivery attempts and the first retry delay (doubling each time).
+    webhook_attempts: int = 6
+    webhook_backoff_s: float = 2.0
+    webhook_timeout_s: float = 10.0
+
+    @model_validator(mode="after")
+    def _tasks_end_before_redelivery(self) -> "Settings":
+        longest_task = self.chunk_time_budget_s + self.max_item_time_limit_s + 5
+        if longest_task >= self.visibility_timeout_s:
+            raise ValueError(
+                f"GEOCERT_VISIBILITY_TIMEOUT_S ({self.visibility_timeout_s}) must exceed GEOCERT_CHUNK_TIME_BUDGET_S + "
+                f"GEOCERT_MAX_ITEM_TIME_LIMIT_S + 5 ({longest_task:g}): a task still running would be delivered twice")
+        return self
 
 
 @lru_cache

@@ -1,86 +1,159 @@
-"""Jobs: submit, read, stream, cancel."""
+"""Jobs: submit, read, stream, cancel, delete. Every route needs the caller's key (when keys are
+configured) and shows a job only to the key that created it."""
 
 from __future__ import annotations
 
+import hashlib
+import json
 import re
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Header, HTTPException, Response
+from fastapi import APIRouter, Depends, Header, Response
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
-from app.api.deps import get_store, submit_chunks
+from app.api.deps import ERRORS, Caller, JobStoreDep, rate_limited, submit_chunks
 from app.core.config import get_settings
-from app.problems import PROBLEM_JSON
-from app.schemas import Job, JobRequest, ProblemDetails
+from app.problems import ApiProblem
+from app.schemas import Job, JobRequest
 from solvers.geometry import InputError
 from solvers.jobs import parse_job
+from workers import logs
 from workers.store import TERMINAL, JobStore
 
-router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
-
-_ERRORS = {
-    404: {"model": ProblemDetails, "content": {PROBLEM_JSON: {}}, "description": "no such job"},
-    413: {"model": ProblemDetails, "content": {PROBLEM_JSON: {}}, "description": "body over the size limit"},
-    422: {"model": ProblemDetails, "content": {PROBLEM_JSON: {}}, "description": "invalid job: names the field"},
-}
+router = APIRouter(prefix="/v1/jobs", tags=["jobs"], dependencies=[Depends(rate_limited)])
 
 
-def job_document(store: JobStore, meta: dict) -> dict:
-    document = {
-        key: meta.get(key) for key in ("id", "kind", "status", "created_at", "started_at", "finished_at",
-                                       "progress", "error")
-    }
-    document["result"] = store.result(meta["id"]) if meta["status"] in TERMINAL else None
-    document["links"] = {"self": f"/v1/jobs/{meta['id']}", "events": f"/v1/jobs/{meta['id']}/events",
-                         "cancel": f"/v1/jobs/{meta['id']}/cancel"}
-    return document
+def _errors(*codes: int) -> dict:
+    return {code: ERRORS[code] for code in (401, 403, 429) + codes}
 
 
-@router.post("", status_code=202, response_model=Job, responses={k: _ERRORS[k] for k in (413, 422)})
-def submit_job(body: JobRequest, response: Response, store: Annotated[JobStore, Depends(get_store)]):
+def _check_limits(kind, parsed, body, request: dict) -> None:
+    settings = get_settings()
+    items = kind.count(parsed)
+    if items > settings.max_items_per_job:
+        raise ApiProblem(413, f"{items} {kind.item_name} exceed the limit of {settings.max_items_per_job} per job "
+                              "(GEOCERT_MAX_ITEMS_PER_JOB)", f"data/{kind.item_name}")
+    data = request["data"]
+    points = (sum(len(t["points"]) for t in data["tracks"]) if "tracks" in data
+              else sum(len(m["source"]) for m in data["maps"]))
+    if points > settings.max_points_per_job:
+        raise ApiProblem(413, f"{points} observations exceed the limit of {settings.max_points_per_job} per job "
+                              "(GEOCERT_MAX_POINTS_PER_JOB)", f"data/{kind.item_name}")
+    options, given = request["options"], body.options.model_fields_set
+    for name, maximum, unit, variable in (("time_limit_s", settings.max_item_time_limit_s, " s", "MAX_ITEM_TIME_LIMIT_S"),
+                                          ("max_nodes", settings.max_item_nodes, " nodes", "MAX_ITEM_NODES")):
+        if options[name] <= maximum:
+            continue
+        if name in given:
+            raise ApiProblem(422, f"exceeds this server's maximum of {maximum:g}{unit} per item (GEOCERT_{variable})",
+                             f"options/{name}")
+        options[name] = maximum  # a default above the server's maximum is lowered to it
+
+
+@router.post("", status_code=202, response_model=Job, responses={
+    200: {"model": Job, "description": "a replay: the job made earlier for this Idempotency-Key and body"},
+    **_errors(400, 409, 413, 422)})
+def submit_job(
+    body: JobRequest,
+    response: Response,
+    store: JobStoreDep,
+    owner: Caller,
+    idempotency_key: Annotated[str | None, Header(max_length=255, description=(
+        "repeat a submission safely: the same key and body give the same job; "
+        "another body with the same key is a 422"))] = None,
+):
     """Queue a job; answers 202 with its id and a Location to poll."""
     request = body.model_dump(mode="json")  # validated by its kind's model (discriminated on "kind")
     kind, parsed, _ = parse_job(request)  # the solvers' own checks: rank, indices, duplicates
-    items = kind.count(parsed)
-    settings = get_settings()
-    if items > settings.max_items_per_job:
-        raise InputError(f"data/{kind.item_name}",
-                         f"{items} items exceed the limit of {settings.max_items_per_job} per job")
-    meta = store.create(kind.name, request, items, settings.chunk_size)
-    submit_chunks(store, meta)
+    _check_limits(kind, parsed, body, request)
+    digest = hashlib.sha256(json.dumps(request, sort_keys=True).encode()).hexdigest()
+    if idempotency_key is not None:
+        earlier = store.remember_idempotent(owner, idempotency_key, digest)
+        if earlier is not None:
+            return _replay(store, earlier, digest, response)
+    try:
+        meta = _create(store, owner, kind, request, kind.count(parsed))
+    except BaseException:
+        if idempotency_key is not None:
+            store.settle_idempotent(owner, idempotency_key, digest, None)  # free the key for a retry
+        raise
+    if idempotency_key is not None:
+        store.settle_idempotent(owner, idempotency_key, digest, meta["id"])
     response.headers["Location"] = f"/v1/jobs/{meta['id']}"
-    return job_document(store, meta)
+    return store.document(meta)
 
 
-def _load(store: JobStore, job_id: str) -> dict:
-    meta = store.get(job_id)
-    if meta is None:
-        raise HTTPException(404, f"no job {job_id}")
+def _create(store: JobStore, owner: str, kind, request: dict, items: int) -> dict:
+    settings = get_settings()
+    chunk = settings.map_chunk_size if kind.item_name == "maps" else settings.chunk_size
+    meta = store.create(kind.name, request, items, chunk, owner, request.get("callback_url"))
+    if not store.admit(owner, meta["id"], settings.max_active_jobs_per_key):
+        store.delete(meta["id"])
+        raise ApiProblem(429, f"this key already has {settings.max_active_jobs_per_key} jobs queued or running "
+                              "(GEOCERT_MAX_ACTIVE_JOBS_PER_KEY); wait for one to end", headers={"Retry-After": "5"})
+    with logs.context(job_id=meta["id"]):
+        submit_chunks(store, meta, logs.current("request_id"))
     return meta
 
 
-def _existing(job_id: str, store: Annotated[JobStore, Depends(get_store)]) -> dict:
-    return _load(store, job_id)
+def _replay(store: JobStore, earlier: dict, digest: str, response: Response) -> dict:
+    if earlier["body"] != digest:
+        raise ApiProblem(422, "this Idempotency-Key was used with a different body", "Idempotency-Key")
+    if earlier["job"] is None:
+        raise ApiProblem(409, "a request with this Idempotency-Key is still being processed; retry shortly",
+                         "Idempotency-Key", headers={"Retry-After": "1"})
+    meta = store.get(earlier["job"])
+    if meta is None:
+        raise ApiProblem(404, f"the job made for this Idempotency-Key ({earlier['job']}) no longer exists")
+    response.status_code = 200
+    response.headers["Location"] = f"/v1/jobs/{meta['id']}"
+    response.headers["Idempotent-Replayed"] = "true"
+    return store.document(meta)
 
 
-@router.get("/{job_id}", response_model=Job, responses={404: _ERRORS[404]})
-def get_job(job_id: str, store: Annotated[JobStore, Depends(get_store)]):
+def _load(store: JobStore, job_id: str, owner: str) -> dict:
+    meta = store.get(job_id)
+    if meta is None or meta.get("owner") != owner:  # another key's job does not exist for this one
+        raise ApiProblem(404, f"no job {job_id}")
+    return meta
+
+
+def _owned(job_id: str, store: JobStoreDep, owner: Caller) -> dict:
+    return _load(store, job_id, owner)
+
+
+OwnedJob = Annotated[dict, Depends(_owned)]
+
+
+@router.get("/{job_id}", response_model=Job, responses=_errors(404))
+def get_job(job: OwnedJob, store: JobStoreDep):
     """Status, progress, and once finished the result (or the error as problem details)."""
-    return job_document(store, _load(store, job_id))
+    return store.document(job)
 
 
-@router.post("/{job_id}/cancel", response_model=Job, status_code=202, responses={404: _ERRORS[404]})
-def cancel_job(job_id: str, store: Annotated[JobStore, Depends(get_store)]):
+@router.post("/{job_id}/cancel", response_model=Job, status_code=202, responses=_errors(404))
+def cancel_job(job: OwnedJob, store: JobStoreDep):
     """A queued job never starts; a running one stops at its next node and keeps its best result."""
-    meta = _load(store, job_id)
-    if meta["status"] not in TERMINAL:
+    job_id = job["id"]
+    if job["status"] not in TERMINAL:
         store.request_cancel(job_id)
         if store.cancel_if_queued(job_id):
             from workers.celery_app import celery_app
+            from workers.tasks import ended
 
-            for task_id in meta.get("task_ids") or []:
+            for task_id in store.task_ids(job_id):
                 celery_app.control.revoke(task_id)
-    return job_document(store, _load(store, job_id))
+            ended(store, job_id)
+    return store.document(store.get(job_id))
+
+
+@router.delete("/{job_id}", status_code=204, responses=_errors(404, 409))
+def delete_job(job: OwnedJob, store: JobStoreDep):
+    """Remove a finished job and everything kept for it (409 while it is queued or running)."""
+    if job["status"] not in TERMINAL:
+        raise ApiProblem(409, f"job {job['id']} is {job['status']}: cancel it first, then delete it")
+    store.delete(job["id"])
+    return Response(status_code=204)
 
 
 def _resume_point(last_event_id: Annotated[str | None, Header()] = None) -> str:
@@ -91,16 +164,11 @@ def _resume_point(last_event_id: Annotated[str | None, Header()] = None) -> str:
     return last_event_id
 
 
-@router.get("/{job_id}/events", response_class=EventSourceResponse, responses={k: _ERRORS[k] for k in (404, 422)})
-def job_events(
-    job_id: str,
-    store: Annotated[JobStore, Depends(get_store)],
-    after: Annotated[str, Depends(_resume_point)],
-    _job: Annotated[dict, Depends(_existing)],
-):
+@router.get("/{job_id}/events", response_class=EventSourceResponse, responses=_errors(404, 422))
+def job_events(job: OwnedJob, store: JobStoreDep, after: Annotated[str, Depends(_resume_point)]):
     """Server-Sent Events: `status` and `progress` events, then one `end` event after which the
     stream closes; resumes after `Last-Event-ID`. Event data is JSON."""
-    for event_id, event, data in store.events(job_id, after):
+    for event_id, event, data in store.events(job["id"], after):
         if event == "keepalive":
             yield ServerSentEvent(comment="keepalive")
             continue

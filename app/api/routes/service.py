@@ -7,7 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends
 from fastapi.responses import JSONResponse
 
-from app.api.deps import get_store
+from app.api.deps import ERRORS, get_store, rate_limited
 from app.schemas import REQUEST_MODELS, ProblemKindInfo
 from solvers.jobs import KINDS, default_options
 from workers.store import JobStore
@@ -15,7 +15,8 @@ from workers.store import JobStore
 router = APIRouter()
 
 
-@router.get("/v1/problems", response_model=list[ProblemKindInfo], tags=["problems"])
+@router.get("/v1/problems", response_model=list[ProblemKindInfo], tags=["problems"],
+            dependencies=[Depends(rate_limited)], responses={code: ERRORS[code] for code in (401, 403, 429)})
 def list_problems():
     """The problem kinds served, with the JSON schema of a job and the default options."""
     return [

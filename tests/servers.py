@@ -1,0 +1,90 @@
+"""Real processes for end-to-end tests: an embedded Redis, the API (`geocert serve`) and Celery
+workers (`geocert worker`), each a process of its own on loopback, so a test can kill one."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import httpx
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_ready(client: httpx.Client, process: subprocess.Popen, limit_s: float = 90, workers: bool = True) -> None:
+    deadline = time.monotonic() + limit_s
+    while True:
+        try:
+            if client.get("/readyz" if workers else "/healthz").status_code == 200:
+                return
+        except httpx.TransportError:
+            pass
+        assert process.poll() is None, "geocert serve exited"
+        assert time.monotonic() < deadline, f"service not ready within {limit_s} s"
+        time.sleep(0.3)
+
+
+class Cluster:
+    """Redis + API (no embedded workers) + separately started workers."""
+
+    def __init__(self, data_dir: Path, env: dict[str, str]):
+        from workers.redis_server import start_embedded_redis
+
+        self.redis, self.redis_url = start_embedded_redis(data_dir)
+        self.env = {**os.environ, **env, "GEOCERT_REDIS_URL": self.redis_url, "GEOCERT_DATA_DIR": str(data_dir)}
+        self.port = free_port()
+        self.api = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", str(self.port),
+                                     "--workers", "0"], env=self.env)
+        self.base = f"http://127.0.0.1:{self.port}"
+        self.workers: list[subprocess.Popen] = []
+
+    def start_worker(self) -> subprocess.Popen:
+        # A session of its own, so that a kill takes the worker's pool processes too (as when a
+        # machine or container dies).
+        worker = subprocess.Popen([sys.executable, "-m", "app.cli", "worker", "--concurrency", "1"], env=self.env,
+                                  start_new_session=True)
+        self.workers.append(worker)
+        return worker
+
+    @staticmethod
+    def kill(worker: subprocess.Popen) -> None:
+        os.killpg(worker.pid, signal.SIGKILL)
+        worker.wait(timeout=10)
+
+    def stop(self) -> None:
+        for process in [self.api, *self.workers]:
+            if process.poll() is None:
+                try:
+                    os.killpg(process.pid, signal.SIGTERM) if process in self.workers else process.terminate()
+                except ProcessLookupError:
+                    pass
+        for process in [self.api, *self.workers]:
+            try:
+                process.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                process.kill()
+        self.redis.terminate()
+        self.redis.wait(timeout=10)
+
+
+@contextmanager
+def cluster(data_dir: Path, workers: int = 1, **env: str):
+    running = Cluster(data_dir, {key.upper(): str(value) for key, value in env.items()})
+    try:
+        for _ in range(workers):
+            running.start_worker()
+        with httpx.Client(base_url=running.base, timeout=30) as client:
+            wait_ready(client, running.api, workers=workers > 0)
+            yield running, client
+    finally:
+        running.stop()

@@ -1,0 +1,67 @@
+"""Faults and load through real processes: a worker killed mid-job, and 500 concurrent jobs."""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import httpx
+import numpy as np
+
+from .servers import cluster
+from .test_service import triangulation_job
+
+
+def test_a_worker_killed_mid_job_leaves_its_work_to_another(tmp_path):
+    # Short task budgets so the visibility timeout can be short (it must exceed budget + item
+    # limit + 5 s); the defaults (20 s, 60 s, 90 s) give redelivery within about 95 s.
+    body = triangulation_job(np.random.default_rng(77), tracks=1200, views=5)
+    with cluster(tmp_path, workers=2, geocert_chunk_size="60", geocert_chunk_time_budget_s="2",
+                 geocert_max_item_time_limit_s="10", geocert_visibility_timeout_s="20") as (running, client):
+        job_id = client.post("/v1/jobs", json=body).json()["id"]
+        deadline = time.monotonic() + 120
+        while client.get(f"/v1/jobs/{job_id}").json()["progress"]["tracks_done"] < 200:
+            assert time.monotonic() < deadline, "the job did not get going"
+            time.sleep(0.05)
+        running.kill(running.workers[0])  # SIGKILL to its whole process group, mid-chunk
+        killed_at = time.monotonic()
+        while (job := client.get(f"/v1/jobs/{job_id}").json())["status"] not in ("succeeded", "failed", "cancelled"):
+            assert time.monotonic() - killed_at < 120, f"job still {job['status']} two minutes after the kill"
+            time.sleep(0.2)
+        recovery = time.monotonic() - killed_at
+    assert job["status"] == "succeeded", job["error"]
+    tracks = job["result"]["tracks"]
+    assert len(tracks) == 1200 and job["result"]["stats"]["items"] == 1200  # none lost, none twice
+    assert all(track["certified"] for track in tracks)
+    print(f"\nkilled a worker after 200 of 1200 tracks; the job ended certified {recovery:.1f} s after the kill")
+
+
+def test_five_hundred_concurrent_jobs_all_succeed_once(tmp_path):
+    rng = np.random.default_rng(500)
+    bodies = [triangulation_job(rng, tracks=2, views=3) for _ in range(500)]
+    keys = [f"client-key-{i:02d}" for i in range(10)]
+    with cluster(tmp_path, workers=2, geocert_api_keys=",".join(keys), geocert_rate_limit_per_minute="100000",
+                 geocert_progress_interval_s="1.0") as (running, _):
+
+        def submit_and_wait(index: int) -> tuple[str, str, float, int]:
+            headers = {"X-API-Key": keys[index % len(keys)]}
+            with httpx.Client(base_url=running.base, timeout=60, headers=headers) as client:
+                start = time.monotonic()
+                created = client.post("/v1/jobs", json=bodies[index])
+                assert created.status_code == 202, created.text
+                job_id = created.json()["id"]
+                while (job := client.get(f"/v1/jobs/{job_id}").json())["status"] in ("queued", "running"):
+                    time.sleep(0.05)
+                return job_id, job["status"], time.monotonic() - start, len(job["result"]["tracks"])
+
+        began = time.monotonic()
+        with ThreadPoolExecutor(max_workers=40) as pool:  # 40 clients in flight at once, 10 keys
+            outcomes = list(pool.map(submit_and_wait, range(500)))
+        wall = time.monotonic() - began
+    ids = [o[0] for o in outcomes]
+    assert len(set(ids)) == 500  # none duplicated
+    assert [o[1] for o in outcomes] == ["succeeded"] * 500  # none lost or failed
+    assert all(o[3] == 2 for o in outcomes)
+    latency = np.array([o[2] for o in outcomes])
+    print(f"\n500 jobs, 40 concurrent clients, 2 workers: {500 / wall:.1f} jobs/s; submit-to-result "
+          f"p50 {1e3 * np.percentile(latency, 50):.0f} ms, p99 {1e3 * np.percentile(latency, 99):.0f} ms")

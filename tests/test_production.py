@@ -1,0 +1,225 @@
+"""A service other services can depend on: keys, limits, idempotency, deletion, webhooks and
+metrics, through real processes on loopback."""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import http.server
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from .servers import cluster
+from .test_service import triangulation_job
+
+KEY_A, KEY_B = "key-alpha-0123456789", "key-beta-9876543210"
+SECRET = "webhook-test-secret"
+A, B = {"X-API-Key": KEY_A}, {"X-API-Key": KEY_B}
+
+
+def wait_for_end(client, job_id: str, headers: dict, limit_s: float = 60) -> dict:
+    deadline = time.monotonic() + limit_s
+    while True:
+        job = client.get(f"/v1/jobs/{job_id}", headers=headers).json()
+        if job["status"] in ("succeeded", "failed", "cancelled"):
+            return job
+        assert time.monotonic() < deadline, f"job {job_id} still {job['status']} after {limit_s} s"
+        time.sleep(0.1)
+
+
+def small_job(seed: int = 0, tracks: int = 3, **options) -> dict:
+    return triangulation_job(np.random.default_rng(seed), tracks, **options)
+
+
+@pytest.fixture(scope="module")
+def keyed(tmp_path_factory):
+    digest_b = hashlib.sha256(KEY_B.encode()).hexdigest()
+    with cluster(tmp_path_factory.mktemp("keyed"), workers=1, geocert_api_keys=f"{KEY_A}, sha256:{digest_b}",
+                 geocert_webhook_secret=SECRET, geocert_webhook_backoff_s="0.2", geocert_webhook_attempts="3",
+                 geocert_progress_interval_s="0.05") as (_, client):
+        yield client
+
+
+class TestAuthentication:
+    def test_no_key_is_401_and_a_wrong_key_403(self, keyed):
+        for method, path in (("POST", "/v1/jobs"), ("GET", "/v1/jobs/abc"), ("GET", "/v1/problems")):
+            missing = keyed.request(method, path, json=small_job())
+            assert missing.status_code == 401
+            assert missing.headers["content-type"] == "application/problem+json"
+            assert "X-API-Key" in missing.json()["detail"]
+            wrong = keyed.request(method, path, json=small_job(), headers={"X-API-Key": "not-a-key"})
+            assert wrong.status_code == 403 and wrong.json()["status"] == 403
+
+    def test_a_job_is_visible_only_to_its_key(self, keyed):
+        created = keyed.post("/v1/jobs", json=small_job(), headers=A)
+        assert created.status_code == 202
+        job_id = created.json()["id"]
+        assert keyed.get(f"/v1/jobs/{job_id}", headers=A).status_code == 200
+        for method, path in (("GET", f"/v1/jobs/{job_id}"), ("POST", f"/v1/jobs/{job_id}/cancel"),
+                             ("GET", f"/v1/jobs/{job_id}/events"), ("DELETE", f"/v1/jobs/{job_id}")):
+            other = keyed.request(method, path, headers=B)  # B is configured as a sha256: digest
+            assert other.status_code == 404, (method, path)
+        assert wait_for_end(keyed, job_id, A)["status"] == "succeeded"
+
+    def test_health_and_metrics_need_no_key(self, keyed):
+        assert keyed.get("/healthz").status_code == 200
+        assert keyed.get("/metrics").status_code == 200
+
+
+class TestIdempotency:
+    def test_same_key_and_body_give_the_same_job(self, keyed):
+        body = small_job(seed=5)
+        first = keyed.post("/v1/jobs", json=body, headers={**A, "Idempotency-Key": "order-17"})
+        again = keyed.post("/v1/jobs", json=body, headers={**A, "Idempotency-Key": "order-17"})
+        assert first.status_code == 202 and again.status_code == 200
+        assert again.json()["id"] == first.json()["id"] and again.headers["Idempotent-Replayed"] == "true"
+        other_body = small_job(seed=6)
+        conflict = keyed.post("/v1/jobs", json=other_body, headers={**A, "Idempotency-Key": "order-17"})
+        assert conflict.status_code == 422
+        assert conflict.json()["errors"][0]["field"] == "Idempotency-Key"
+        # Keys belong to their caller: B's "order-17" is a job of its own.
+        theirs = keyed.post("/v1/jobs", json=body, headers={**B, "Idempotency-Key": "order-17"})
+        assert theirs.status_code == 202 and theirs.json()["id"] != first.json()["id"]
+
+    def test_an_invalid_body_does_not_take_the_key(self, keyed):
+        bad = small_job()
+        bad["data"]["tracks"][0]["views"] = [0, 99]
+        assert keyed.post("/v1/jobs", json=bad, headers={**A, "Idempotency-Key": "k2"}).status_code == 422
+        assert keyed.post("/v1/jobs", json=small_job(), headers={**A, "Idempotency-Key": "k2"}).status_code == 202
+
+
+class TestDeletion:
+    def test_only_finished_jobs_are_deleted(self, keyed):
+        slow = keyed.post("/v1/jobs", json=small_job(seed=9, tracks=400), headers=A).json()
+        refused = keyed.delete(f"/v1/jobs/{slow['id']}", headers=A)
+        assert refused.status_code == 409 and "cancel it first" in refused.json()["detail"]
+        keyed.post(f"/v1/jobs/{slow['id']}/cancel", headers=A)
+        assert wait_for_end(keyed, slow["id"], A)["status"] in ("cancelled", "succeeded")
+        assert keyed.delete(f"/v1/jobs/{slow['id']}", headers=A).status_code == 204
+        assert keyed.get(f"/v1/jobs/{slow['id']}", headers=A).status_code == 404
+
+
+class Receiver:
+    """A webhook receiver on loopback that fails its first ``failures`` deliveries with 500."""
+
+    def __init__(self, failures: int):
+        self.failures, self.received = failures, []
+        outer = self
+
+        class Handler(http.server.BaseHTTPRequestHandler):
+            def do_POST(self):
+                body = self.rfile.read(int(self.headers["Content-Length"]))
+                outer.received.append((dict(self.headers), body))
+                self.send_response(500 if len(outer.received) <= outer.failures else 200)
+                self.end_headers()
+
+            def log_message(self, *args):
+                pass
+
+        self.server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+        self.url = f"http://127.0.0.1:{self.server.server_address[1]}/hook"
+
+    def close(self):
+        self.server.shutdown()
+
+
+class TestWebhooks:
+    def test_a_receiver_that_fails_twice_gets_the_signed_document_on_the_third_try(self, keyed):
+        receiver = Receiver(failures=2)
+        try:
+            job = keyed.post("/v1/jobs", json={**small_job(), "callback_url": receiver.url}, headers=A).json()
+            deadline = time.monotonic() + 60
+            while (keyed.get(f"/v1/jobs/{job['id']}", headers=A).json()["webhook"]["state"] != "delivered"):
+                assert time.monotonic() < deadline, "webhook not delivered within 60 s"
+                time.sleep(0.1)
+        finally:
+            receiver.close()
+        final = keyed.get(f"/v1/jobs/{job['id']}", headers=A).json()
+        assert final["webhook"]["attempts"] == 3 and final["webhook"]["last_error"] is None
+        assert len(receiver.received) == 3
+        headers, body = receiver.received[-1]
+        stamp, _, signature = headers["X-Geocert-Signature"].partition(",v1=")
+        timestamp = stamp.removeprefix("t=")
+        expected = hmac.new(SECRET.encode(), timestamp.encode() + b"." + body, hashlib.sha256).hexdigest()
+        assert hmac.compare_digest(signature, expected)
+        document = json.loads(body)
+        assert document["id"] == job["id"] and document["status"] == "succeeded"
+        assert document["result"]["stats"]["certified"] == 3
+
+    def test_a_receiver_that_never_accepts_is_recorded_as_failed(self, keyed):
+        receiver = Receiver(failures=100)
+        try:
+            job = keyed.post("/v1/jobs", json={**small_job(), "callback_url": receiver.url}, headers=A).json()
+            deadline = time.monotonic() + 60
+            while (hook := keyed.get(f"/v1/jobs/{job['id']}", headers=A).json()["webhook"])["state"] != "failed":
+                assert time.monotonic() < deadline, f"webhook still {hook['state']} after 60 s"
+                time.sleep(0.1)
+        finally:
+            receiver.close()
+        assert hook["attempts"] == 3 and "HTTP 500" in hook["last_error"]
+        assert len(receiver.received) == 3
+        assert keyed.get(f"/v1/jobs/{job['id']}", headers=A).json()["status"] == "succeeded"  # the job is intact
+
+    def test_metrics_count_jobs_and_deliveries(self, keyed):
+        text = keyed.get("/metrics").text
+        assert 'geocert_jobs_total{kind="triangulation",status="succeeded"}' in text
+        assert 'geocert_webhook_deliveries_total{state="delivered"}' in text
+        assert "geocert_item_solve_seconds_bucket" in text and "geocert_queue_depth" in text
+
+
+@pytest.fixture(scope="module")
+def limited(tmp_path_factory):
+    """No workers: jobs stay queued, so the active-job limit is reached deterministically."""
+    with cluster(tmp_path_factory.mktemp("limited"), workers=0, geocert_max_items_per_job="5",
+                 geocert_max_points_per_job="12", geocert_max_active_jobs_per_key="2",
+                 geocert_rate_limit_per_minute="25", geocert_max_item_time_limit_s="10",
+                 geocert_max_item_nodes="1000") as (_, client):
+        yield client
+
+
+class TestLimits:
+    def test_each_limit_is_named_with_its_value(self, limited):
+        too_many = limited.post("/v1/jobs", json=small_job(tracks=6))
+        assert too_many.status_code == 413
+        assert too_many.json()["errors"][0]["field"] == "data/tracks" and "limit of 5" in too_many.json()["detail"]
+        assert "GEOCERT_MAX_ITEMS_PER_JOB" in too_many.json()["detail"]
+        points = small_job(tracks=5)
+        for track in points["data"]["tracks"]:  # 4 views each: 20 observations
+            track["views"], track["points"] = [0, 1, 2, 3], [[100.0, 100.0], [110, 100], [120, 100], [130, 100]]
+        over = limited.post("/v1/jobs", json=points)
+        assert over.status_code == 413 and "limit of 12" in over.json()["detail"]
+        slow = limited.post("/v1/jobs", json=small_job(time_limit_s=11))
+        assert slow.status_code == 422 and slow.json()["errors"][0]["field"] == "options/time_limit_s"
+        assert "maximum of 10" in slow.json()["detail"]
+        deep = limited.post("/v1/jobs", json=small_job(max_nodes=1001))
+        assert deep.status_code == 422 and deep.json()["errors"][0]["field"] == "options/max_nodes"
+
+    def test_active_jobs_per_key(self, limited):
+        assert limited.post("/v1/jobs", json=small_job(1)).status_code == 202
+        assert limited.post("/v1/jobs", json=small_job(2)).status_code == 202
+        third = limited.post("/v1/jobs", json=small_job(3))
+        assert third.status_code == 429 and "GEOCERT_MAX_ACTIVE_JOBS_PER_KEY" in third.json()["detail"]
+        assert "Retry-After" in third.headers
+
+    def test_rate_per_key(self, limited):
+        answers = [limited.get("/v1/problems").status_code for _ in range(60)]  # 2 windows: one sees > 25
+        assert answers.count(429) >= 1
+        last = limited.get("/v1/problems")
+        assert last.status_code == 429 and int(last.headers["Retry-After"]) <= 61
+        assert "GEOCERT_RATE_LIMIT_PER_MINUTE" in last.json()["detail"] and "25" in last.json()["detail"]
+
+
+def test_serve_refuses_other_addresses_without_keys(tmp_path):
+    env = {k: v for k, v in os.environ.items() if not k.startswith("GEOCERT_")}
+    env["GEOCERT_DATA_DIR"] = str(tmp_path)
+    done = subprocess.run([sys.executable, "-m", "app.cli", "serve", "--host", "0.0.0.0", "--workers", "0"],
+                          env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "GEOCERT_API_KEYS" in done.stderr
