@@ -29,7 +29,7 @@ class Settings(BaseSettings):
     # Most observations or correspondences, summed over a job's items (413 beyond it).
     max_points_per_job: int = 2_000_000
     # Requests per minute one key may make to /v1 (429 beyond it; 0: unlimited).
-    rate_limit_per_minute: int = 600
+    rate_limit_per_minute: int = 1200
     # Jobs one key may have queued or running at once (429 beyond it; 0: unlimited).
     max_active_jobs_per_key: int = 100
     # Server-side maxima of the per-item options time_limit_s and max_nodes (422 beyond them).
