@@ -9,7 +9,6 @@ of ``t/s`` per view (see ALGORITHMS.md section 2). Costs are scaled so the incum
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable
