@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from solvers.geometry import norm_cost
-from solvers.maps import MapOptions, fit_map
+from bench.mapfits import apply, fit_all
 from solvers.triangulation import NORMS
 
 
@@ -33,11 +33,6 @@ def plane_homography(rng: np.random.Generator) -> np.ndarray:
     K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
     P = K @ np.hstack([R, -R @ centre[:, None]])
     return P[:, [0, 1, 3]]
-
-
-def apply(H: np.ndarray, points: np.ndarray) -> np.ndarray:
-    proj = np.hstack([points, np.ones((len(points), 1))]) @ H.T
-    return proj[:, :2] / proj[:, 2:]
 
 
 def instances(size: int, count: int, noise: float, seed: int = 0):
@@ -63,15 +58,7 @@ def main() -> None:
         best_l2 = [np.inf] * len(problems)
         for norm in args.norms.split(","):
             for gap in (float(g) for g in args.gaps.split(",")):
-                times, nodes, certified = [], [], 0
-                for index, (source, target) in enumerate(problems):
-                    start = time.perf_counter()
-                    result = fit_map(source, target, MapOptions(norm=norm, rel_gap=gap))
-                    times.append(time.perf_counter() - start)
-                    nodes.append(result.nodes)
-                    certified += result.certified
-                    if norm == "L2L2" and result.certified:
-                        best_l2[index] = min(best_l2[index], result.cost)
+                times, nodes, certified = fit_all(problems, norm, gap, best_l2)
                 print(f"{size:6d} {norm:5} {gap:6.0e} {1e3 * np.median(times):10.1f} {1e3 * np.percentile(times, 95):8.1f} "
                       f"{np.median(nodes):6.0f}/{np.percentile(nodes, 95):<7.0f} {certified:5d}/{len(problems)}")
         if "L2L2" in args.norms.split(","):

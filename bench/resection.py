@@ -21,6 +21,7 @@ import numpy as np
 
 from solvers.datasets import load_dinosaur, load_house
 from solvers.geometry import norm_cost
+from bench.mapfits import apply, fit_all
 from solvers.maps import MapOptions, fit_map
 from solvers.triangulation import NORMS, triangulate
 
@@ -44,11 +45,6 @@ def house_problems() -> list[tuple[np.ndarray, np.ndarray]]:
     return [(points[v.point_indices], v.pixels) for v in views]
 
 
-def apply(M: np.ndarray, points: np.ndarray) -> np.ndarray:
-    proj = np.hstack([points, np.ones((len(points), 1))]) @ M.T
-    return proj[:, :-1] / proj[:, -1:]
-
-
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--norms", default=",".join(NORMS))
@@ -68,15 +64,7 @@ def main() -> None:
         best_l2 = [np.inf] * len(problems)  # the best certified L2L2 cost seen per camera
         for norm in args.norms.split(","):
             for gap in (float(g) for g in args.gaps.split(",")):
-                times, nodes, certified = [], [], 0
-                for index, (source, target) in enumerate(problems):
-                    start = time.perf_counter()
-                    result = fit_map(source, target, MapOptions(norm=norm, rel_gap=gap, time_limit_s=args.time_limit))
-                    times.append(time.perf_counter() - start)
-                    nodes.append(result.nodes)
-                    certified += result.certified
-                    if norm == "L2L2" and result.certified:
-                        best_l2[index] = min(best_l2[index], result.cost)
+                times, nodes, certified = fit_all(problems, norm, gap, best_l2, time_limit_s=args.time_limit)
                 print(f"{name:9} {norm:5} {gap:6.0e} {len(problems):4d} {int(np.median(sizes)):10d} "
                       f"{np.median(times):9.2f} {np.percentile(times, 95):7.2f} "
                       f"{np.median(nodes):6.0f}/{np.percentile(nodes, 95):<7.0f} {certified:5d}/{len(problems)}")

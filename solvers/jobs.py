@@ -111,6 +111,9 @@ class TriangulationKind:
     def count(self, parsed: TriangulationData) -> int:
         return len(parsed.tracks)
 
+    def observations(self, parsed: TriangulationData) -> int:
+        return sum(len(track[1]) for track in parsed.tracks if track is not None)  # parsed items only
+
     def solve_item(self, parsed: TriangulationData, index: int, options: TriangulationOptions,
                    callback: Callable[[Progress], bool | None] | None) -> dict:
         views, points = parsed.tracks[index]
@@ -211,6 +214,9 @@ class MapKind:
 
     def count(self, parsed: MapsData) -> int:
         return len(parsed.maps)
+
+    def observations(self, parsed: MapsData) -> int:
+        return sum(len(pair[0]) for pair in parsed.maps if pair is not None)  # parsed items only
 
     def solve_item(self, parsed: MapsData, index: int, options: MapOptions, callback) -> dict:
         source, target = parsed.maps[index]

@@ -12,20 +12,6 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Histo
 METRICS_KEY = "geocert:metrics"
 SOLVE_BUCKETS = (0.001, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 60.0)
 JOB_BUCKETS = (0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
-_REDIS = None
-
-
-def _client():
-    global _REDIS
-    if _REDIS is None:
-        import redis
-
-        from workers.celery_app import redis_url
-
-        _REDIS = redis.Redis.from_url(redis_url(), decode_responses=True)
-    return _REDIS
-
-
 def _field(name: str, **labels) -> str:
     return json.dumps([name, labels], sort_keys=True)
 
@@ -38,8 +24,8 @@ def _observe(pipe, name: str, buckets, value: float, **labels) -> None:
     pipe.hincrbyfloat(METRICS_KEY, _field(name + "_sum", **labels), value)
 
 
-def record_items(kind: str, items: list[dict]) -> None:
-    pipe = _client().pipeline()
+def record_items(client, kind: str, items: list[dict]) -> None:
+    pipe = client.pipeline()
     for item in items:
         pipe.hincrby(METRICS_KEY, _field("items", kind=kind, status=item["status"]), 1)
         if item["status"] != "cancelled":
@@ -47,16 +33,16 @@ def record_items(kind: str, items: list[dict]) -> None:
     pipe.execute()
 
 
-def record_job_end(meta: dict) -> None:
-    pipe = _client().pipeline()
+def record_job_end(client, meta: dict) -> None:
+    pipe = client.pipeline()
     pipe.hincrby(METRICS_KEY, _field("jobs", kind=meta["kind"], status=meta["status"]), 1)
     if meta.get("finished_at") and meta.get("created_at"):
         _observe(pipe, "job_seconds", JOB_BUCKETS, meta["finished_at"] - meta["created_at"], kind=meta["kind"])
     pipe.execute()
 
 
-def record_webhook(state: str) -> None:
-    _client().hincrby(METRICS_KEY, _field("webhooks", state=state), 1)
+def record_webhook(client, state: str) -> None:
+    client.hincrby(METRICS_KEY, _field("webhooks", state=state), 1)
 
 
 class RedisCollector:

@@ -70,7 +70,7 @@ def solve_segment(job_id: str, start: int, stop: int, request_id: str | None = N
             began = time.monotonic()
             items = solve_items(kind, parsed, options, range(start, stop), throttle, throttle.should_stop,
                                 stop_at=began + settings.chunk_time_budget_s)
-            metrics.record_items(kind.name, items)
+            metrics.record_items(jobs.r, kind.name, items)
             done = jobs.save_items(job_id, start, items)
             cut = start + len(items)
             if cut < stop:  # over the budget: the rest of the chunk becomes a task of its own
@@ -112,7 +112,7 @@ def ended(jobs: JobStore, job_id: str) -> None:
     meta = jobs.get(job_id)
     if meta is None:
         return
-    metrics.record_job_end(meta)
+    metrics.record_job_end(jobs.r, meta)
     log.info("job ended %s", meta["status"])
     if meta.get("webhook"):
         from workers.webhooks import deliver_webhook

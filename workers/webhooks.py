@@ -67,7 +67,7 @@ def deliver_webhook(self, job_id: str) -> None:
         else:
             hook["state"] = "retrying"
         jobs.set_fields(job_id, webhook=hook)
-        metrics.record_webhook(hook["state"])
+        metrics.record_webhook(jobs.r, hook["state"])
         log.info("webhook attempt %d: %s", attempt, error or "delivered")
         if hook["state"] == "retrying":
             raise self.retry(countdown=settings.webhook_backoff_s * 2 ** (attempt - 1))

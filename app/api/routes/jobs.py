@@ -33,9 +33,7 @@ def _check_limits(kind, parsed, body, request: dict) -> None:
     if items > settings.max_items_per_job:
         raise ApiProblem(413, f"{items} {kind.item_name} exceed the limit of {settings.max_items_per_job} per job "
                               "(GEOCERT_MAX_ITEMS_PER_JOB)", f"data/{kind.item_name}")
-    data = request["data"]
-    points = (sum(len(t["points"]) for t in data["tracks"]) if "tracks" in data
-              else sum(len(m["source"]) for m in data["maps"]))
+    points = kind.observations(parsed)
     if points > settings.max_points_per_job:
         raise ApiProblem(413, f"{points} observations exceed the limit of {settings.max_points_per_job} per job "
                               "(GEOCERT_MAX_POINTS_PER_JOB)", f"data/{kind.item_name}")
