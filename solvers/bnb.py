@@ -40,6 +40,7 @@ class BoxBound:
     lower_bound: float = -math.inf
     candidate: Any = None  # a point of the domain to try as incumbent (problem-specific)
     split_hint: Any = None  # e.g. the relaxation's point, for the split rule
+    proof: Any = None  # what proves lower_bound (or emptiness) to a third party, when asked for
 
 
 class BranchProblem(Protocol):
@@ -108,27 +109,34 @@ def branch_and_bound(
     options: BnbOptions,
     callback: Callable[[Progress], bool | None] | None = None,
     trivial_lower_bound: float = 0.0,
+    leaves: list | None = None,
 ) -> BnbResult:
     """Minimise the problem's objective over its root box, returning an anytime certified result.
 
     ``trivial_lower_bound`` is a bound valid everywhere (0 for sums of residual norms); an
     unresolved box that cannot be split further falls back to it, never to a guess.
+    ``leaves``, when given, receives ``(box, proof)`` for every leaf of the tree: together the
+    boxes cover the root, and each proof is the one behind the bound the box was closed with
+    (its own relaxation's, or an ancestor's when that was higher or its own solve failed; None
+    for the trivial bound).
     """
     start = time.perf_counter()
     counter = itertools.count()
-    heap: list[tuple[float, int, Box, BoxBound]] = []
+    heap: list[tuple[float, int, Box, BoxBound, Any]] = []
     closed_min = math.inf  # smallest bound among boxes closed by pruning
     closed_count = 0
     unresolved = 0
     nodes = 0
     stuck: list[Box] = []  # unresolved and too small to split: only the trivial bound holds
 
-    def close(box: Box, bound: float) -> None:
+    def close(box: Box, bound: float, proof: Any) -> None:
         nonlocal closed_min, closed_count
         closed_min = min(closed_min, bound)
         closed_count += 1
+        if leaves is not None:
+            leaves.append((box, proof))
 
-    def consider(box: Box, parent_bound: float) -> None:
+    def consider(box: Box, parent_bound: float, parent_proof: Any) -> None:
         nonlocal nodes, incumbent, upper_bound, unresolved
         nodes += 1
         result = problem.bound(box, upper_bound)
@@ -140,7 +148,7 @@ def branch_and_bound(
                 incumbent, upper_bound = result.candidate, value
         if result.status == BoxStatus.EMPTY:
             # Nothing in this box beats the incumbent of the moment: that value bounds it.
-            close(box, max(parent_bound, upper_bound))
+            close(box, max(parent_bound, upper_bound), result.proof)
             return
         if result.status == BoxStatus.UNRESOLVED:
             unresolved += 1
@@ -148,13 +156,15 @@ def branch_and_bound(
                 # Cannot be bounded and too small to split: it keeps only the trivial bound.
                 stuck.append(box)
                 return
-            bound = parent_bound
+            bound, proof = parent_bound, parent_proof
+        elif result.lower_bound >= parent_bound:
+            bound, proof = result.lower_bound, result.proof
         else:
-            bound = max(parent_bound, result.lower_bound)
+            bound, proof = parent_bound, parent_proof
         if bound >= upper_bound - tolerance(upper_bound, options):
-            close(box, bound)
+            close(box, bound, proof)
         else:
-            heapq.heappush(heap, (bound, next(counter), box, result))
+            heapq.heappush(heap, (bound, next(counter), box, result, proof))
 
     def global_lower_bound() -> float:
         open_min = heap[0][0] if heap else math.inf
@@ -163,7 +173,7 @@ def branch_and_bound(
         return value if math.isfinite(value) else upper_bound
 
     status = "optimal"
-    consider(problem.root_box(), trivial_lower_bound)
+    consider(problem.root_box(), trivial_lower_bound, None)
     while True:
         lower = global_lower_bound()
         if upper_bound - lower <= tolerance(upper_bound, options):
@@ -191,13 +201,16 @@ def branch_and_bound(
         if elapsed >= options.time_limit_s:
             status = "time_limit"
             break
-        bound, _, box, box_bound = heapq.heappop(heap)
+        bound, _, box, box_bound, proof = heapq.heappop(heap)
         if bound >= upper_bound - tolerance(upper_bound, options):
-            close(box, bound)
+            close(box, bound, proof)
             continue
         for child in problem.split(box, box_bound):
-            consider(child, bound)
+            consider(child, bound, proof)
 
+    if leaves is not None:
+        leaves.extend((entry[2], entry[4]) for entry in heap)
+        leaves.extend((box, None) for box in stuck)
     lower = global_lower_bound()
     lower = max(lower, trivial_lower_bound)
     return BnbResult(

@@ -16,6 +16,8 @@ import clarabel
 import numpy as np
 import scipy.sparse as sp
 
+from .cones import ConeSpec
+
 
 class ConicStatus(enum.Enum):
     OPTIMAL = "optimal"  # a clean optimum: its bound may be trusted
@@ -46,26 +48,14 @@ def map_clarabel_status(status) -> ConicStatus:
     return _CLARABEL_STATUS.get(str(status), ConicStatus.FAILED)
 
 
-@dataclass
-class ConeSpec:
-    """Cone layout of the rows of ``A``: ``zero`` equalities, ``nonneg`` inequalities, then SOCs."""
-
-    zero: int = 0
-    nonneg: int = 0
-    soc: tuple[int, ...] = ()
-
-    def clarabel_cones(self) -> list:
-        cones = []
-        if self.zero:
-            cones.append(clarabel.ZeroConeT(self.zero))
-        if self.nonneg:
-            cones.append(clarabel.NonnegativeConeT(self.nonneg))
-        cones.extend(clarabel.SecondOrderConeT(d) for d in self.soc)
-        return cones
-
-    @property
-    def rows(self) -> int:
-        return self.zero + self.nonneg + sum(self.soc)
+def clarabel_cones(spec: ConeSpec) -> list:
+    cones = []
+    if spec.zero:
+        cones.append(clarabel.ZeroConeT(spec.zero))
+    if spec.nonneg:
+        cones.append(clarabel.NonnegativeConeT(spec.nonneg))
+    cones.extend(clarabel.SecondOrderConeT(d) for d in spec.soc)
+    return cones
 
 
 @dataclass
@@ -119,7 +109,7 @@ def solve_conic(q: np.ndarray, A: np.ndarray | sp.csc_matrix, b: np.ndarray, con
     if isinstance(A, np.ndarray):
         A = dense_to_csc(A)
     try:
-        solver = clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, A, b, cones.clarabel_cones(), _SETTINGS)
+        solver = clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, A, b, clarabel_cones(cones), _SETTINGS)
         result = _result(solver.solve())
         return _retried(result, q, A, b, cones)
     except BaseException as exc:  # Clarabel raises on malformed data (panic) as a Python exception
@@ -132,7 +122,7 @@ def _retried(result: ConicResult, q, A: sp.csc_matrix, b, cones: ConeSpec) -> Co
     """An inaccurate answer solved again at the retry tolerance (see _RETRY_SETTINGS)."""
     if result.status is not ConicStatus.INACCURATE:
         return result
-    solver = clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, A, b, cones.clarabel_cones(), _RETRY_SETTINGS)
+    solver = clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, A, b, clarabel_cones(cones), _RETRY_SETTINGS)
     return _result(solver.solve())
 
 
@@ -186,7 +176,7 @@ class ReusableConicProgram:
                 self._key, self._mask = key, mask
                 self._csc = fresh.copy() if fresh is not None else dense_to_csc(A)
                 self._solver = clarabel.DefaultSolver(
-                    _zero_quadratic(q.shape[0]), q, self._csc, b, cones.clarabel_cones(), _SETTINGS
+                    _zero_quadratic(q.shape[0]), q, self._csc, b, clarabel_cones(cones), _SETTINGS
                 )
             return _retried(_result(self._solver.solve()), q, self._csc, b, cones)
         except BaseException as exc:

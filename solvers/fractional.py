@@ -10,21 +10,22 @@ ratio above the convex envelope of ``t / s`` (ALGORITHMS.md section 2).
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.optimize
-import scipy.sparse as sp
 
 from .bnb import BnbOptions, Box, BoxBound, BoxStatus, Progress, branch_and_bound
-from .conic import ConeSpec, ConicStatus, ReusableConicProgram, solve_conic
+from .certificates import LeafProof, RootProof, SearchProof, TighteningProof, encode
+from .conic import ConicStatus, ReusableConicProgram, solve_conic
+from .cones import proves_infeasible, safe_lower_bound
 from .geometry import InputError, norm_cost
+from .relaxation import (EPS_DEPTH, NORMS, ConicData, FractionalProgram, Relaxation, complete_functionals,
+                         gamma_for, residual_region, tightening_objective, with_cost_cap)
 
-EPS_DEPTH = 1e-12
 MAX_SCALE = 1e3
-NORMS = ("L2L2", "L2L1", "L1L1")
+CERTIFICATES = ("summary", "full")
 
 
 @dataclass
@@ -39,6 +40,7 @@ class FractionalOptions:
     max_nodes: int = 2000
     time_limit_s: float = 30.0
     max_residual: float | None = None  # the kind's residual units; narrows the certificate's scope
+    certificate: str = "summary"  # "full": every bound's proof, checkable by solvers.verify
 
     def check(self) -> None:
         if self.norm not in NORMS:
@@ -49,50 +51,10 @@ class FractionalOptions:
                 raise InputError(f"options/{name}", "must be a finite number >= 0")
         if self.max_nodes < 1:
             raise InputError("options/max_nodes", "must be at least 1")
+        if self.certificate not in CERTIFICATES:
+            raise InputError("options/certificate", f"must be one of {', '.join(CERTIFICATES)}")
         if self.max_residual is not None and not (math.isfinite(self.max_residual) and self.max_residual > 0):
             raise InputError("options/max_residual", "must be a finite number > 0")
-
-
-def gamma_for(upper_bound: float, norm: str) -> float:
-    """Largest single residual (2-norm) of any point costing at most ``upper_bound``."""
-    return math.sqrt(upper_bound) if norm == "L2L2" else upper_bound
-
-
-@dataclass
-class FractionalProgram:
-    num: np.ndarray  # (N, m, d + 1): numerator rows, last column constant
-    den: np.ndarray  # (N, d + 1): depths; exact observations hold e_{d+1}
-    exact: np.ndarray  # (N,) bool
-    linear: np.ndarray  # (L, d + 1): linear(v) >= 0 on the domain
-    norm: str
-
-    @property
-    def dim(self) -> int:
-        return self.num.shape[2] - 1
-
-    def rescale(self, factor: float) -> None:
-        self.num = self.num * factor
-
-    def __post_init__(self) -> None:
-        self._linear_slack = 1e-12 * np.linalg.norm(self.linear, axis=1)  # round-off allowed
-
-    def cost(self, v: np.ndarray) -> float:
-        V = np.append(v, 1.0)
-        g = self.den @ V
-        if np.any(g <= 0) or np.any(self.linear @ V < -self._linear_slack * np.linalg.norm(V)):
-            return math.inf
-        return norm_cost((self.num @ V) / g[:, None], self.norm)
-
-    def residuals(self, v: np.ndarray) -> np.ndarray:
-        V = np.append(v, 1.0)
-        return (self.num @ V) / (self.den @ V)[:, None]
-
-    def residual_jacobian(self, v: np.ndarray) -> np.ndarray:
-        """(N, m, d): derivative of each residual coordinate."""
-        V = np.append(v, 1.0)
-        n, g = self.num @ V, self.den @ V
-        d = self.dim
-        return self.num[:, :, :d] / g[:, None, None] - n[:, :, None] * self.den[:, None, :d] / (g**2)[:, None, None]
 
 
 def branch_directions(program: FractionalProgram, subspace: np.ndarray) -> np.ndarray:
@@ -121,50 +83,65 @@ def branch_directions(program: FractionalProgram, subspace: np.ndarray) -> np.nd
     return np.array(chosen)
 
 
-def residual_region(program: FractionalProgram, gamma: float) -> tuple[np.ndarray, np.ndarray, ConeSpec]:
-    """Conic data (A, b, cones) of {v : ||residual_i(v)|| <= gamma for all i, linear(v) >= 0}.
-
-    ``||n_i|| <= gamma * g_i`` also gives positive depths.
-    """
-    m = program.num.shape[1]
-    rows = list(program.linear)
-    for i in range(len(program.num)):
-        rows.append(gamma * program.den[i])
-        rows.extend(program.num[i])
-    E = np.array(rows)  # each row: coefficients of v, then the constant
-    cones = ConeSpec(nonneg=len(program.linear), soc=(m + 1,) * len(program.num))
-    return -E[:, :-1], E[:, -1].copy(), cones
-
-
-def root_region(program: FractionalProgram, B: np.ndarray, gamma: float) -> tuple[str, Box | None]:
-    """Bound B v over the residual region: 2k small SOCPs.
+def root_region(program: FractionalProgram, B: np.ndarray, gamma: float,
+                certify: bool = False) -> tuple[str, Box | None, RootProof | None]:
+    """Bound B v over the residual region: 2k small SOCPs (2d with ``certify``, which bounds the
+    complement of B's rows too and proves every bound; see RootProof).
 
     An inaccurate solve is retried with gamma inflated slightly: a larger residual bound still
     gives a region holding every better point, and a different problem often solves cleanly.
     """
+    rows = complete_functionals(B) if certify else B
     for inflation in (1.0, 1.001, 1.01):
-        state, box = _root_region_once(program, B, gamma * inflation)
+        state, lo, hi, duals = _root_region_once(program, rows, gamma * inflation)
         if state != "not_certified":
-            return state, box
-    return state, box
+            break
+    if state != "ok":
+        return state, None, None
+    k = len(B)
+    if not certify:
+        pad = 1e-7 * (1 + np.abs(lo) + np.abs(hi))
+        return "ok", Box(lo - pad, hi + pad), None
+    proof = prove_root(program, rows, gamma * inflation, lo, hi, duals)
+    if proof is None:
+        return "not_certified", None, None
+    return "ok", Box(proof.lower[:k].copy(), proof.upper[:k].copy()), proof
 
 
-def _root_region_once(program: FractionalProgram, B: np.ndarray, gamma: float) -> tuple[str, Box | None]:
+def _root_region_once(program: FractionalProgram, rows: np.ndarray, gamma: float):
     A, b, cones = residual_region(program, gamma)
-    solver = ReusableConicProgram()  # 2k objectives over one feasible set
-    lo, hi = np.zeros(len(B)), np.zeros(len(B))
-    for k in range(len(B)):
+    solver = ReusableConicProgram()  # 2 objectives per row over one feasible set
+    lo, hi = np.zeros(len(rows)), np.zeros(len(rows))
+    duals = []
+    for k in range(len(rows)):
         for sign, out in ((1.0, lo), (-1.0, hi)):
-            res = solver.solve(sign * B[k], A, b, cones)
+            res = solver.solve(sign * rows[k], A, b, cones)
             if res.status is ConicStatus.UNBOUNDED:
-                return "degenerate", None
+                return "degenerate", None, None, None
             if res.status is ConicStatus.INFEASIBLE:
-                return "infeasible", None
+                return "infeasible", None, None, None
             if res.status is not ConicStatus.OPTIMAL:
-                return "not_certified", None
+                return "not_certified", None, None, None
             out[k] = sign * res.lower_bound  # min(primal, dual): the outer side for both ends
-    pad = 1e-7 * (1 + np.abs(lo) + np.abs(hi))
-    return "ok", Box(lo - pad, hi + pad)
+            duals.append(res.z)
+    return "ok", lo, hi, duals
+
+
+def prove_root(program: FractionalProgram, F: np.ndarray, gamma: float, lo: np.ndarray, hi: np.ndarray,
+               duals: list[np.ndarray]) -> RootProof | None:
+    """Safe bounds on ``F v`` over the residual region, proven over a claimed box half as wide
+    again on each side; None when a safe bound does not fall strictly inside the claim."""
+    A, b, cones = residual_region(program, gamma)
+    transform = np.linalg.inv(F)
+    pad = 0.5 * (hi - lo) + 1e-6 * (1 + np.abs(lo) + np.abs(hi))
+    claim_lo, claim_hi = lo - pad, hi + pad
+    lower, upper = np.zeros(len(F)), np.zeros(len(F))
+    for k in range(len(F)):
+        lower[k] = safe_lower_bound(F[k], A, b, cones, duals[2 * k], claim_lo, claim_hi, transform)
+        upper[k] = -safe_lower_bound(-F[k], A, b, cones, duals[2 * k + 1], claim_lo, claim_hi, transform)
+    if not (np.all(claim_lo < lower) and np.all(upper < claim_hi) and np.all(lower <= upper)):
+        return None
+    return RootProof(gamma, F, claim_lo, claim_hi, lower, upper, duals)
 
 
 def feasible_point(program: FractionalProgram) -> np.ndarray | None:
@@ -248,60 +225,27 @@ def _cost_in(program: FractionalProgram, v: np.ndarray, norm: str) -> float:
     return value if not math.isfinite(value) else norm_cost(program.residuals(v), norm)
 
 
-_DENSE_LIMIT = 200_000  # relaxations with fewer matrix entries are assembled dense
-
-
-class _Rows:
-    """A block of rows ``c + E x``: E as a dense part over the d unknowns plus (row, column,
-    value) triplets for the per-observation columns, so that assembly stays linear in size."""
-
-    def __init__(self, rows: int, d: int):
-        self.v = np.zeros((rows, d))
-        self.c = np.zeros(rows)
-        self.triplets: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-
-    def set(self, rows: np.ndarray, cols: np.ndarray, values) -> None:
-        """Entries (rows[i], cols[i]) = values[i] (or the one value given); rows, cols alike."""
-        if np.isscalar(values):
-            values = np.full(len(rows), float(values))
-        self.triplets.append((rows, cols, values))
-
-
-def _assemble(blocks: list[_Rows], n: int):
-    """A = -E for Clarabel (dense when small, CSC otherwise) and the constants b = c."""
-    offsets = np.cumsum([0] + [len(b.c) for b in blocks])
-    V = np.vstack([b.v for b in blocks])
-    rows = np.concatenate([r + offsets[i] for i, b in enumerate(blocks) for r, _, _ in b.triplets])
-    cols = np.concatenate([k for b in blocks for _, k, _ in b.triplets])
-    vals = np.concatenate([x for b in blocks for _, _, x in b.triplets])
-    c = np.concatenate([b.c for b in blocks])
-    d = V.shape[1]
-    if V.shape[0] * n <= _DENSE_LIMIT:
-        E = np.zeros((V.shape[0], n))
-        E[:, :d] = V
-        E[rows, cols] = vals
-        return -E, c
-    vr, vc = np.nonzero(V)
-    E = sp.coo_matrix((np.concatenate([V[vr, vc], vals]), (np.concatenate([vr, rows]), np.concatenate([vc, cols]))),
-                      shape=(V.shape[0], n))
-    return (-E).tocsc(), c
-
-
 class BoxProblem:
-    """The branch-and-bound problem of a fractional program over boxes of ``z = B v``."""
+    """The branch-and-bound problem of a fractional program over boxes of ``z = B v``.
 
-    def __init__(self, program: FractionalProgram, user_gamma: float | None, B: np.ndarray, root: Box):
+    Given the root region's proof, every bound is the safe bound of its dual vector
+    (cones.safe_lower_bound) and carries a LeafProof: the leaves make a certificate.
+    """
+
+    def __init__(self, program: FractionalProgram, user_gamma: float | None, B: np.ndarray, root: Box,
+                 root_proof: RootProof | None = None):
         self.program = program
         self.norm = program.norm
-        self.user_gamma = user_gamma
         self.B = B
         self.root = root
-        self.env = np.flatnonzero(~program.exact)  # observations bounded by the envelope
-        self.exact = np.flatnonzero(program.exact)
-        # Depth of envelope observation j in terms of z: coef[j] @ z + offset[j]. Exact because
-        # every depth gradient lies in the row space of B (B spans the depths' subspace).
-        self.coef = program.den[self.env, :-1] @ B.T @ np.linalg.inv(B @ B.T)  # B's pseudo-inverse
-        self.offset = program.den[self.env, -1]
+        self.certify = root_proof is not None
+        if root_proof is None:
+            self.relaxation = Relaxation(program, B, user_gamma)
+        else:
+            k = len(B)
+            complement = (root_proof.lower[k:], root_proof.upper[k:])
+            self.relaxation = Relaxation(program, B, user_gamma, complement, root_proof.functionals)
+        self.tightening: list[TighteningProof] = []
         self._solver = ReusableConicProgram()
 
     # --- BranchProblem interface -------------------------------------------------------------
@@ -314,67 +258,71 @@ class BoxProblem:
     def improve(self, v: np.ndarray) -> tuple[np.ndarray, float]:
         return local_refine(self.program, v)
 
-    def depth_range(self, box: Box) -> tuple[np.ndarray, np.ndarray]:
-        pos, neg = np.clip(self.coef, 0, None), np.clip(self.coef, None, 0)
-        return self.offset + pos @ box.lo + neg @ box.hi, self.offset + pos @ box.hi + neg @ box.lo
-
-    def conic_data(self, box: Box, upper_bound: float, envelope: bool = True):
-        """The relaxation on ``box`` as (q, A, b, cones), or None when some depth is negative on
-        the whole box."""
-        low, high = self.depth_range(box)
-        if np.any(high <= EPS_DEPTH):
-            return None
-        low = np.maximum(low, EPS_DEPTH)
-        high = np.maximum(high, low * (1 + 1e-9) + 1e-15)
-        gamma = gamma_for(upper_bound, self.norm) if math.isfinite(upper_bound) else math.inf
-        if self.user_gamma is not None:
-            gamma = min(gamma, self.user_gamma)
-        return self.relaxation(box, low, high, gamma, envelope)
+    def conic_data(self, box: Box, upper_bound: float, envelope: bool = True) -> ConicData | None:
+        return self.relaxation.conic_data(box, upper_bound, envelope)
 
     def bound(self, box: Box, upper_bound: float) -> BoxBound:
         data = self.conic_data(box, upper_bound)
-        if data is None:
-            return BoxBound(BoxStatus.EMPTY)  # some depth is negative on the whole box
-        result = self._solver.solve(*data)
+        if data is None:  # some depth is negative on the whole box
+            return BoxBound(BoxStatus.EMPTY, proof=self._proof(box, upper_bound, "depth", None, math.inf))
+        result = self._solver.solve(data.q, data.A, data.b, data.cones)
         if result.status is ConicStatus.INFEASIBLE:
-            return BoxBound(BoxStatus.EMPTY)
+            if not self.certify:
+                return BoxBound(BoxStatus.EMPTY)
+            if proves_infeasible(data.A, data.b, data.cones, result.z, data.lower, data.upper, data.transform):
+                return BoxBound(BoxStatus.EMPTY, proof=self._proof(box, upper_bound, "farkas", result.z, math.inf))
+            return BoxBound(BoxStatus.UNRESOLVED)
         if result.status is not ConicStatus.OPTIMAL:
             return BoxBound(BoxStatus.UNRESOLVED)
         v = result.x[: self.program.dim]
         candidate = v if math.isfinite(self.program.cost(v)) else None
-        return BoxBound(BoxStatus.BOUNDED, result.lower_bound, candidate, self.B @ v)
+        if not self.certify:
+            return BoxBound(BoxStatus.BOUNDED, result.lower_bound, candidate, self.B @ v)
+        safe = safe_lower_bound(data.q, data.A, data.b, data.cones, result.z, data.lower, data.upper, data.transform)
+        if not math.isfinite(safe):
+            return BoxBound(BoxStatus.UNRESOLVED, candidate=candidate, split_hint=self.B @ v)
+        return BoxBound(BoxStatus.BOUNDED, safe, candidate, self.B @ v,
+                        self._proof(box, upper_bound, "dual", result.z, safe))
+
+    def _proof(self, box: Box, upper_bound: float, kind: str, z, bound: float) -> LeafProof | None:
+        return LeafProof(box, upper_bound, kind, z, bound) if self.certify else None
 
     def tighten(self, box: Box, upper_bound: float, rounds: int) -> Box:
         """Shrink ``box`` to the range of ``z = B v`` over the relaxation's points costing at most
         ``upper_bound`` (optimality-based bound tightening), repeated while it shrinks the volume
         by half. Valid: every point costing at most ``upper_bound`` is such a point, because the
         relaxation under-estimates the cost. The tighter box makes the envelopes tighter, so a
-        round can shrink it again. A solve that is not accurate leaves its side as it was."""
+        round can shrink it again. A solve that is not accurate leaves its side as it was. With
+        ``certify``, each side is the safe bound of its dual, recorded in ``self.tightening``."""
         solver = ReusableConicProgram()  # 2k objectives over one feasible set per round
-        d, k = self.program.dim, len(self.B)
         for _ in range(rounds):
             data = self.conic_data(box, upper_bound, envelope=False)
             if data is None:
                 return box
-            q, A, b, cones = data
-            # sum r <= upper_bound: one more nonnegative row, ahead of the others
-            A = sp.vstack([sp.csr_matrix(q[None, :]), A]).tocsc() if sp.issparse(A) else np.vstack([q[None, :], A])
-            b = np.concatenate([[upper_bound], b])
-            cones = ConeSpec(nonneg=cones.nonneg + 1, soc=cones.soc)
+            data = with_cost_cap(data, upper_bound)
             lo, hi = box.lo.copy(), box.hi.copy()
-            for i in range(k):
+            duals: list[np.ndarray | None] = []
+            for i in range(len(self.B)):
                 for sign, side in ((1.0, lo), (-1.0, hi)):
-                    objective = np.zeros(len(q))
-                    objective[:d] = sign * self.B[i]
-                    result = solver.solve(objective, A, b, cones)
+                    objective = tightening_objective(data, self.B[i], sign)
+                    result = solver.solve(objective, data.A, data.b, data.cones)
                     if result.status is ConicStatus.INFEASIBLE:
                         return box  # cannot happen with the incumbent inside; keep what is proven
-                    if result.status is ConicStatus.OPTIMAL:
+                    duals.append(result.z if result.status is ConicStatus.OPTIMAL else None)
+                    if result.status is not ConicStatus.OPTIMAL:
+                        continue
+                    if self.certify:
+                        value = sign * safe_lower_bound(objective, data.A, data.b, data.cones, result.z,
+                                                        data.lower, data.upper, data.transform)
+                    else:
                         value = sign * result.lower_bound  # min(primal, dual): the outer side
                         value -= sign * 1e-7 * (1 + abs(value))
+                    if math.isfinite(value):
                         side[i] = max(side[i], value) if sign > 0 else min(side[i], value)
             hi = np.maximum(hi, lo)
             ratio = float(np.prod((hi - lo) / np.maximum(box.width, 1e-300)))
+            if self.certify:
+                self.tightening.append(TighteningProof(upper_bound, box, Box(lo, hi), duals))
             box = Box(lo, hi)
             if ratio > 0.5:
                 break
@@ -383,9 +331,9 @@ class BoxProblem:
     def split(self, box: Box, bound: BoxBound) -> list[Box]:
         """Split where the depths vary most relative to their size, at the relaxation's point."""
         width = box.width
-        if len(self.env):
-            low = np.maximum(self.depth_range(box)[0], EPS_DEPTH)
-            score = width * np.max(np.abs(self.coef) / low[:, None], axis=0)
+        if len(self.relaxation.env):
+            low = np.maximum(self.relaxation.depth_range(box)[0], EPS_DEPTH)
+            score = width * np.max(np.abs(self.relaxation.coef) / low[:, None], axis=0)
         else:
             score = width.copy()
         k = int(np.argmax(score))
@@ -396,112 +344,6 @@ class BoxProblem:
         left_hi[k], right_lo[k] = cut, cut
         return [Box(box.lo.copy(), left_hi), Box(right_lo, box.hi.copy())]
 
-    def relaxation(self, box: Box, low: np.ndarray, high: np.ndarray, gamma: float, envelope: bool = True):
-        """``min sum r`` over the box in Clarabel's form (ALGORITHMS.md section 2).
-
-        Rows are expressions ``c + E x`` that must lie in the cone (Clarabel wants ``b - A x``,
-        so ``A = -E``). Variables: v (d), then t, w, r per envelope observation, then one
-        epigraph variable per exact observation. Blocks are filled for all observations at once,
-        and assembled dense for small problems, sparse for large ones.
-
-        Without ``envelope``, each ratio ``t / s`` is bounded below by ``t / U`` instead: weaker
-        on wide depth intervals, nearly as tight on narrow ones, and a third of the size (no w,
-        r and their six rows), which is what bound tightening wants.
-        """
-        program, norm = self.program, self.norm
-        d, m = program.dim, program.num.shape[1]
-        env, exact = self.env, self.exact
-        nE, nX = len(env), len(exact)
-        per_env = 3 if envelope else 1
-        n = d + per_env * nE + nX
-        t_idx = d + np.arange(nE)
-        w_idx, r_idx = t_idx + nE, t_idx + 2 * nE
-        q_idx = d + per_env * nE + np.arange(nX)
-        finite_gamma = math.isfinite(gamma)
-        u = (gamma**2 if norm == "L2L2" else gamma) * high if finite_gamma else 1e12 * high
-        obs = np.concatenate([env, exact])
-        top_idx = np.concatenate([t_idx, q_idx])  # the variable above each observation's numerator
-        depth = program.den[obs]
-        num = program.num[obs]  # (V, m, d + 1)
-        V = len(obs)
-        blocks: list[_Rows] = []
-
-        def block(rows: int) -> _Rows:
-            blocks.append(_Rows(rows, d))
-            return blocks[-1]
-
-        k = len(self.B)
-        L = len(program.linear)
-        B = block(2 * k + L)  # the box on z = B v, and the domain's linear constraints
-        B.v[:k], B.c[:k] = self.B, -box.lo
-        B.v[k:2 * k], B.c[k:2 * k] = -self.B, box.hi
-        B.v[2 * k:], B.c[2 * k:] = program.linear[:, :-1], program.linear[:, -1]
-        if envelope:  # envelope of t/s on [0, u] x [L, U], first cone vacuous since l = 0 (5 rows each)
-            B = block(5 * nE)
-            rows = 5 * np.arange(nE)
-            g = program.den[env]
-            B.set(rows, w_idx, 1.0), B.set(rows, t_idx, -low / u)
-            B.set(rows + 1, t_idx, high / u), B.set(rows + 1, w_idx, -1.0)
-            B.v[rows + 2], B.c[rows + 2] = g[:, :-1], g[:, -1] - low
-            B.set(rows + 2, w_idx, -1.0), B.set(rows + 2, t_idx, low / u)
-            B.v[rows + 3], B.c[rows + 3] = -g[:, :-1], high - g[:, -1]
-            B.set(rows + 3, w_idx, 1.0), B.set(rows + 3, t_idx, -high / u)
-            B.set(rows + 4, t_idx, -1.0)
-            B.c[rows + 4] = u
-        socs: list[int] = []
-        if norm == "L1L1":  # top >= sum |n_a|, and sum |n_a| <= gamma * depth
-            signs = np.array(list(itertools.product((1.0, -1.0), repeat=m)))
-            for with_gamma in ([False, True] if finite_gamma else [False]):
-                B = block(len(signs) * V)
-                for s_index, sign in enumerate(signs):
-                    rows = len(signs) * np.arange(V) + s_index
-                    combined = -np.einsum("a,vab->vb", sign, num)
-                    B.v[rows], B.c[rows] = combined[:, :-1], combined[:, -1]
-                    if with_gamma:
-                        B.v[rows] += gamma * depth[:, :-1]
-                        B.c[rows] += gamma * depth[:, -1]
-                    else:
-                        B.set(rows, top_idx, 1.0)
-        n_lin = sum(len(b.c) for b in blocks)
-        if norm == "L2L2":  # top * depth >= |n|^2: (top + depth, 2 n, top - depth) in the SOC
-            B = block((m + 2) * V)
-            rows = (m + 2) * np.arange(V)
-            B.set(rows, top_idx, 1.0)
-            B.v[rows], B.c[rows] = depth[:, :-1], depth[:, -1]
-            for a in range(m):
-                B.v[rows + 1 + a], B.c[rows + 1 + a] = 2 * num[:, a, :-1], 2 * num[:, a, -1]
-            B.set(rows + m + 1, top_idx, 1.0)
-            B.v[rows + m + 1], B.c[rows + m + 1] = -depth[:, :-1], -depth[:, -1]
-            socs += [m + 2] * V
-        elif norm == "L2L1":  # top >= |n|
-            B = block((m + 1) * V)
-            rows = (m + 1) * np.arange(V)
-            B.set(rows, top_idx, 1.0)
-            for a in range(m):
-                B.v[rows + 1 + a], B.c[rows + 1 + a] = num[:, a, :-1], num[:, a, -1]
-            socs += [m + 1] * V
-        if finite_gamma and norm != "L1L1":  # every residual of a better point is below gamma
-            B = block((m + 1) * V)
-            rows = (m + 1) * np.arange(V)
-            B.v[rows], B.c[rows] = gamma * depth[:, :-1], gamma * depth[:, -1]
-            for a in range(m):
-                B.v[rows + 1 + a], B.c[rows + 1 + a] = num[:, a, :-1], num[:, a, -1]
-            socs += [m + 1] * V
-        q = np.zeros(n)
-        q[q_idx] = 1.0
-        if envelope:  # r * (u w) >= t^2 (the envelope's second cone), everything divided by u
-            B = block(3 * nE)
-            rows = 3 * np.arange(nE)
-            B.set(rows, r_idx, 1.0), B.set(rows, w_idx, 1.0 / u)
-            B.set(rows + 1, t_idx, 2.0 / u)
-            B.set(rows + 2, r_idx, 1.0), B.set(rows + 2, w_idx, -1.0 / u)
-            socs += [3] * nE
-            q[r_idx] = 1.0
-        else:
-            q[t_idx] = 1.0 / high
-        A, c = _assemble(blocks, n)
-        return q, A, c, ConeSpec(nonneg=n_lin, soc=tuple(socs))
-
 
 @dataclass
 class Prepared:
@@ -511,6 +353,8 @@ class Prepared:
     incumbent: np.ndarray
     upper: float  # the incumbent's scaled cost (inf when outside the user's bound)
     unit: float  # scaled cost = unit * cost in the caller's units
+    scale: float = 1.0  # the residuals' factor (unit is its square for L2L2)
+    root_proof: RootProof | None = None  # with certify
 
 
 @dataclass
@@ -534,11 +378,13 @@ class Reasons:
 
 
 def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.ndarray,
-            abs_gap: float, max_residual: float | None, reasons: Reasons, tighten_rounds: int = 0) -> Prepared | Early:
+            abs_gap: float, max_residual: float | None, reasons: Reasons, tighten_rounds: int = 0,
+            certify: bool = False) -> Prepared | Early:
     """Incumbent, scaling and root region. ``start``: an initial point (None or infeasible: one
     is searched for); ``subspace``: rows spanning the directions the depths depend on;
     ``tighten_rounds``: rounds of bound tightening on the root region (worth it when nodes are
-    many and costly, as for maps; not for triangulation, whose searches take a few nodes)."""
+    many and costly, as for maps; not for triangulation, whose searches take a few nodes);
+    ``certify``: prove every bound for a full certificate (Prepared.root_proof, leaves' proofs)."""
     norm = program.norm
     if start is None or not math.isfinite(program.cost(start)):
         start = feasible_point(program)
@@ -563,7 +409,7 @@ def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.n
             upper = math.inf  # the incumbent lies outside the user's domain
         gamma = min(gamma, user_gamma)
     B = branch_directions(program, subspace)
-    state, root = root_region(program, B, gamma)
+    state, root, root_proof = root_region(program, B, gamma, certify)
     if root is None:
         if state == "infeasible" and math.isfinite(upper):
             state = "not_certified"  # the incumbent is inside: the solve, not the data, failed
@@ -572,10 +418,10 @@ def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.n
         if not math.isfinite(upper):
             return Early(state, None, None, reason)
         return Early(state, v0, upper / unit, reason)
-    problem = BoxProblem(program, user_gamma, B, root)
+    problem = BoxProblem(program, user_gamma, B, root, root_proof)
     if tighten_rounds and math.isfinite(upper):
         problem.root = problem.tighten(root, upper, tighten_rounds)
-    return Prepared(problem, v0, upper, unit)
+    return Prepared(problem, v0, upper, unit, factor, root_proof)
 
 
 @dataclass
@@ -593,6 +439,7 @@ class Certificate:
     tolerance: float
     tolerance_met: bool
     leaves: int
+    proof: dict | None = None  # with options.certificate == "full": certificates.encode's form
 
 
 @dataclass
@@ -614,11 +461,13 @@ def search(prepared: Prepared, options: FractionalOptions, scope: str, reference
         return callback(Progress(p.nodes, p.open_boxes, p.lower_bound / unit, p.upper_bound / unit,
                                  p.gap_abs / unit, p.gap_rel, p.elapsed_s))
 
+    leaves: list | None = [] if prepared.problem.certify else None
     bnb = branch_and_bound(
         prepared.problem, prepared.incumbent, prepared.upper,
         BnbOptions(rel_gap=options.rel_gap, abs_gap=options.abs_gap * unit, max_nodes=options.max_nodes,
                    time_limit_s=options.time_limit_s),
         callback=unscaled if callback else None,
+        leaves=leaves,
     )
     if not math.isfinite(bnb.upper_bound):
         return Searched("infeasible", None, None, bnb.nodes, None)
@@ -628,4 +477,7 @@ def search(prepared: Prepared, options: FractionalOptions, scope: str, reference
     certificate = Certificate(scope, reference, np.asarray(functionals).tolist(), np.asarray(denominator).tolist(),
                               root.lo.tolist(), root.hi.tolist(), bnb.tolerance / unit,
                               bnb.upper_bound - bnb.lower_bound <= bnb.tolerance, bnb.leaves)
+    if leaves is not None and prepared.root_proof is not None:
+        certificate.proof = encode(SearchProof(prepared.scale, prepared.root_proof, prepared.problem.tightening,
+                                               root, leaves))
     return Searched(bnb.status, bnb.candidate, bnb.lower_bound / unit, bnb.nodes, certificate)

@@ -11,6 +11,7 @@ complement of the reference point.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -19,8 +20,10 @@ from typing import Callable
 import numpy as np
 
 from .bnb import Progress
-from .fractional import Certificate, Early, FractionalOptions, FractionalProgram, Reasons, prepare, search
+from .charts import MapChart, _normaliser
+from .fractional import Certificate, Early, FractionalOptions, Reasons, prepare, search
 from .geometry import InputError, norm_cost
+from .verify import claim_of, self_check, self_check_enabled
 
 
 @dataclass
@@ -75,82 +78,6 @@ def check_correspondences(source: np.ndarray, target: np.ndarray, field_name: st
         raise InputError(f"{field_name}/source", f"all source points lie {shape}: a degenerate configuration for {what}")
 
 
-def _normaliser(points: np.ndarray) -> np.ndarray:
-    """Similarity (homogeneous) taking the points' centroid to 0 and mean distance to sqrt(dim)."""
-    dim = points.shape[1]
-    centre = points.mean(axis=0)
-    spread = float(np.mean(np.linalg.norm(points - centre, axis=1))) or 1.0
-    S = np.eye(dim + 1)
-    S[:dim, :dim] *= math.sqrt(dim) / spread
-    S[:dim, dim] = -centre * math.sqrt(dim) / spread
-    return S
-
-
-@dataclass
-class MapChart:
-    program: FractionalProgram
-    source_norm: np.ndarray  # S: normalised source = S [X; 1]
-    target_shift: np.ndarray  # target translated by this (residuals unchanged)
-    reference: int
-    last_row_origin: np.ndarray  # l0
-    last_row_basis: np.ndarray  # N, (n+1) x n
-
-    @classmethod
-    def build(cls, source: np.ndarray, target: np.ndarray, norm: str) -> "MapChart":
-        count, n = source.shape
-        m = target.shape[1]
-        S = _normaliser(source)
-        X = (S @ np.hstack([source, np.ones((count, 1))]).T).T  # (count, n+1)
-        shift = target.mean(axis=0)
-        x = target - shift
-        # Reference: the point nearest the centroid, whose depth is 1 by the choice of scale.
-        reference = int(np.argmin(np.linalg.norm(X[:, :n], axis=1)))
-        l0 = X[reference] / (X[reference] @ X[reference])
-        N = np.linalg.svd(X[reference][None, :])[2][1:].T  # (n+1, n), orthonormal, N' X_ref = 0
-        d = n + m * (n + 1)
-        num = np.zeros((count, m, d + 1))
-        den = np.zeros((count, d + 1))
-        for j in range(count):
-            # depth_j = (l0 + N w) . X_j
-            den[j, :n] = N.T @ X[j]
-            den[j, d] = l0 @ X[j]
-            for k in range(m):
-                # x_jk * depth_j - M_k . X_j; row k of M sits at v[n + k(n+1) : n + (k+1)(n+1)]
-                num[j, k] = x[j, k] * den[j]
-                num[j, k, n + k * (n + 1): n + (k + 1) * (n + 1)] -= X[j]
-        exact = np.zeros(count, dtype=bool)
-        exact[reference] = True
-        den[reference] = 0.0
-        den[reference, d] = 1.0
-        program = FractionalProgram(num, den, exact, np.zeros((0, d + 1)), norm)
-        return cls(program, S, shift, reference, l0, N)
-
-    def matrix(self, v: np.ndarray) -> np.ndarray:
-        """M in the caller's coordinates (before normalising its scale)."""
-        n = self.last_row_basis.shape[1]
-        m = (len(v) - n) // (n + 1)
-        rows = v[n:].reshape(m, n + 1)
-        last = self.last_row_origin + self.last_row_basis @ v[:n]
-        M = np.vstack([rows, last])
-        T = np.eye(m + 1)
-        T[:m, m] = self.target_shift  # undo the target translation
-        return T @ M @ self.source_norm
-
-    def from_matrix(self, M: np.ndarray) -> np.ndarray | None:
-        """v for a map given in the caller's coordinates (None when the reference depth <= 0)."""
-        m = M.shape[0] - 1
-        T_inv = np.eye(m + 1)
-        T_inv[:m, m] = -self.target_shift
-        Mn = T_inv @ M @ np.linalg.inv(self.source_norm)
-        X_ref = self.last_row_origin / (self.last_row_origin @ self.last_row_origin)
-        depth = Mn[m] @ X_ref
-        if not depth > 0:
-            return None
-        Mn = Mn / depth
-        w = self.last_row_basis.T @ Mn[m]
-        return np.concatenate([w, Mn[:m].ravel()])
-
-
 def dlt(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     """The linear estimate of M (normalised DLT); sign chosen so most depths are positive."""
     S, T = _normaliser(source), _normaliser(target)
@@ -184,13 +111,26 @@ def fit_map(
 ) -> MapResult:
     """Certified global optimum of one map from correspondences ``source`` (k, n) -> ``target`` (k, m)."""
     options = options or MapOptions()
+    checking = self_check_enabled()
+    run = dataclasses.replace(options, certificate="full") if checking else options
     start = time.perf_counter()
     source = np.asarray(source, dtype=float)
     target = np.asarray(target, dtype=float)
+    result = _fit_map(source, target, run, callback, start)
+    if checking and result.certified:
+        kind = "resection" if source.shape[1] == 3 and target.shape[1] == 2 else "homography"
+        self_check(kind, (source, target), dataclasses.asdict(run), claim_of(result, matrix=result.matrix))
+    if options.certificate != "full" and result.certificate is not None:
+        result.certificate.proof = None
+    return result
+
+
+def _fit_map(source, target, options: MapOptions, callback, start: float) -> MapResult:
     chart = MapChart.build(source, target, options.norm)
     n = source.shape[1]
     prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n],
-                       options.abs_gap, options.max_residual, _REASONS, tighten_rounds=4)
+                       options.abs_gap, options.max_residual, _REASONS, tighten_rounds=4,
+                       certify=options.certificate == "full")
     if isinstance(prepared, Early):
         if prepared.incumbent is None:
             result = MapResult(prepared.status, False, reason=prepared.reason)

@@ -9,6 +9,7 @@ of ``t/s`` per view (see ALGORITHMS.md section 2). Costs are scaled so the incum
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -16,8 +17,10 @@ from typing import Callable
 import numpy as np
 
 from .bnb import Progress
-from .fractional import NORMS, Certificate, Early, FractionalOptions, FractionalProgram, Reasons, prepare, search
+from .charts import Chart, camera_centres
+from .fractional import NORMS, Certificate, Early, FractionalOptions, Reasons, prepare, search
 from .geometry import norm_cost
+from .verify import claim_of, self_check, self_check_enabled
 
 
 
@@ -42,96 +45,6 @@ class TrackResult:
     residuals: list[list[float]] = field(default_factory=list)
 
 
-def camera_centres(cameras: np.ndarray) -> np.ndarray:
-    """Null vectors of the (k, 3, 4) cameras, signed so that the last coordinate is not negative."""
-    centres = np.linalg.svd(cameras)[2][:, -1, :]
-    return centres * np.where(centres[:, 3:4] < 0, -1.0, 1.0)
-
-
-def _camera_frame(cameras: np.ndarray) -> np.ndarray:
-    """A 4x4 similarity H (X = H X') centring the camera centres with unit mean distance.
-
-    Only conditioning: the problem is the same in any frame, and H keeps the last coordinate.
-    """
-    centres = camera_centres(cameras)
-    finite = np.abs(centres[:, 3]) > 1e-9 * np.linalg.norm(centres, axis=1)
-    H = np.eye(4)
-    if np.any(finite):
-        euclid = centres[finite, :3] / centres[finite, 3:4]
-        middle = euclid.mean(axis=0)
-        spread = float(np.mean(np.linalg.norm(euclid - middle, axis=1)))
-        if not spread > 0:
-            spread = 1.0
-        H[:3, :3] *= spread
-        H[:3, 3] = middle
-    return H
-
-
-def _choose_reference(cameras: np.ndarray, points: np.ndarray) -> int:
-    """The camera whose centre projects farthest from the other views' observations.
-
-    A centre inside another view's residual cone makes the chart's region unbounded.
-    """
-    centres = camera_centres(cameras)
-    proj = np.einsum("jab,rb->rja", cameras, centres)  # centre r seen by camera j
-    depth = proj[:, :, 2]
-    safe = np.where(depth > 1e-12 * np.linalg.norm(proj, axis=2), depth, np.nan)
-    distance = np.linalg.norm(proj[:, :, :2] / safe[:, :, None] - points[None], axis=2)
-    # Behind camera j (or at infinity) is outside its cone: as good as infinitely far.
-    distance = np.where(np.isnan(distance), np.inf, distance)
-    np.fill_diagonal(distance, np.inf)
-    return int(np.argmax(distance.min(axis=1)))
-
-
-@dataclass
-class Chart:
-    """A track as a fractional program in chart coordinates y, with X = T [y; 1].
-
-    The reference camera's depth is 1 on the chart, so points at infinity are ordinary points and
-    "in front of the reference camera" holds by construction; views whose depth is constant on the
-    chart are exact. ``constant_depth_behind``: some view's depth is a non-positive constant.
-    """
-
-    program: FractionalProgram
-    T: np.ndarray
-    reference: int
-    constant_depth_behind: bool
-
-    @classmethod
-    def build(cls, cameras: np.ndarray, points: np.ndarray, norm: str) -> "Chart":
-        reference = _choose_reference(cameras, points)
-        frame = _camera_frame(cameras)
-        cams = cameras @ frame
-        cams = cams / np.linalg.norm(cams[:, 2, :3], axis=1)[:, None, None]
-        depth_row = cams[reference, 2]
-        _, _, vt = np.linalg.svd(depth_row[None, :])
-        T = np.column_stack([vt[1], vt[2], vt[3], depth_row / (depth_row @ depth_row)])
-        shifted = cams.copy()  # image coordinates translated to the observation
-        shifted[:, 0] -= points[:, 0:1] * cams[:, 2]
-        shifted[:, 1] -= points[:, 1:2] * cams[:, 2]
-        M = shifted @ T  # (k, 3, 4)
-        grad = np.linalg.norm(M[:, 2, :3], axis=1)
-        exact = grad <= 1e-9 * np.linalg.norm(M[:, 2], axis=1)
-        exact[reference] = True
-        scale = np.where(exact, M[:, 2, 3], grad)
-        behind = bool(np.any(exact & (scale <= 0)))
-        scale = np.where(scale == 0, 1.0, np.abs(scale))
-        M = M / scale[:, None, None]
-        den = M[:, 2, :].copy()
-        den[exact] = np.array([0.0, 0.0, 0.0, 1.0])
-        T = frame @ T  # from chart coordinates to the caller's frame
-        # The domain also asks for a non-negative last homogeneous coordinate.
-        program = FractionalProgram(M[:, :2, :].copy(), den, exact, T[3][None, :].copy(), norm)
-        return cls(program, T, reference, behind)
-
-    def dlt(self) -> np.ndarray | None:
-        rows = self.program.num.reshape(-1, 4)
-        Y = np.linalg.svd(rows / np.linalg.norm(rows, axis=1, keepdims=True))[2][-1]
-        if abs(Y[3]) < 1e-14 * np.linalg.norm(Y):
-            return None
-        return Y[:3] / Y[3]
-
-
 _REASONS = Reasons(
     no_domain="no point is in front of every camera",
     degenerate="the rays are (nearly) parallel: the points within the residual bound form an unbounded set",
@@ -146,7 +59,8 @@ def prepare_track(cameras: np.ndarray, points: np.ndarray, options: Triangulatio
     chart = Chart.build(cameras, points, options.norm)
     if chart.constant_depth_behind:
         return chart, TrackResult("infeasible", False, reason=_REASONS.no_domain)
-    prepared = prepare(chart.program, chart.dlt(), np.eye(3), options.abs_gap, options.max_residual, _REASONS)
+    prepared = prepare(chart.program, chart.dlt(), np.eye(3), options.abs_gap, options.max_residual, _REASONS,
+                       certify=options.certificate == "full")
     if isinstance(prepared, Early):
         if prepared.incumbent is None:
             return chart, TrackResult(prepared.status, False, reason=prepared.reason)
@@ -165,9 +79,21 @@ def triangulate(
 ) -> TrackResult:
     """Certified global optimum of one track: ``cameras`` (k, 3, 4) of its views, ``points`` (k, 2)."""
     options = options or TriangulationOptions()
+    checking = self_check_enabled()
+    run = dataclasses.replace(options, certificate="full") if checking else options
     start = time.perf_counter()
     cameras = np.asarray(cameras, dtype=float)
     points = np.asarray(points, dtype=float)
+    result = _triangulate(cameras, points, run, callback, start)
+    if checking and result.certified:
+        self_check("triangulation", (cameras, points), dataclasses.asdict(run),
+                   claim_of(result, point=result.point))
+    if options.certificate != "full" and result.certificate is not None:
+        result.certificate.proof = None
+    return result
+
+
+def _triangulate(cameras, points, options: TriangulationOptions, callback, start: float) -> TrackResult:
     chart, prepared = prepare_track(cameras, points, options)
     if isinstance(prepared, TrackResult):
         prepared.elapsed_s = time.perf_counter() - start

@@ -1,0 +1,127 @@
+"""Full certificates: what a search records so that anyone can check its bound (docs/certificate.md).
+
+The records are plain data (numpy only): the solver fills them, :mod:`solvers.verify` reads them
+back from JSON. Arrays of dual values are stored as base64 of little-endian float64 (exact and
+half the size of decimal text); boxes and scalars are JSON numbers (Python writes floats so that
+they read back bit for bit).
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .bnb import Box
+
+FORMAT = "geocert-certificate"
+VERSION = 1
+
+
+@dataclass
+class RootProof:
+    """Bounds on ``y = F v`` over the residual region {every residual <= gamma, domain rows}.
+
+    Each bound is proven over ``claim`` (a box on y); as the region is convex and meets
+    ``claim`` only strictly inside it, the region lies inside ``claim``, so the bounds hold on
+    the whole region. ``duals[2 j]`` proves ``lower[j]``, ``duals[2 j + 1]`` proves ``upper[j]``.
+    """
+
+    gamma: float
+    functionals: np.ndarray  # F (d x d): B's k rows, then the complement's
+    claim_lower: np.ndarray
+    claim_upper: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    duals: list[np.ndarray]
+
+
+@dataclass
+class TighteningProof:
+    """One round of bound tightening: over ``box_in``, every point costing at most
+    ``upper_bound`` has ``B v`` within ``box_out``; a side without a dual was left as it was."""
+
+    upper_bound: float
+    box_in: Box
+    box_out: Box
+    duals: list[np.ndarray | None]  # 2 per functional: lower side, upper side
+
+
+@dataclass
+class LeafProof:
+    """Why no point of ``box`` costing at most ``upper_bound`` costs less than ``bound``:
+    ``dual`` (a dual vector of the box's relaxation), ``farkas`` (the relaxation is infeasible:
+    bound is infinite) or ``depth`` (some depth is below EPS_DEPTH on the whole box)."""
+
+    box: Box
+    upper_bound: float
+    kind: str
+    z: np.ndarray | None
+    bound: float
+
+
+@dataclass
+class SearchProof:
+    """Everything a search proves, in the program's scaled units (cost times ``unit``)."""
+
+    scale: float  # the residuals' factor (unit = scale^2 for L2L2, scale otherwise)
+    root: RootProof
+    tightening: list[TighteningProof] = field(default_factory=list)
+    search_box: Box | None = None
+    leaves: list[tuple[Box, LeafProof | None]] = field(default_factory=list)
+
+
+def pack(array: np.ndarray | None) -> str | None:
+    if array is None:
+        return None
+    return base64.b64encode(np.asarray(array, dtype="<f8").tobytes()).decode("ascii")
+
+
+def unpack(text: str | None) -> np.ndarray | None:
+    if text is None:
+        return None
+    return np.frombuffer(base64.b64decode(text, validate=True), dtype="<f8").astype(float)
+
+
+def _box(box: Box) -> list[list[float]]:
+    return [box.lo.tolist(), box.hi.tolist()]
+
+
+def encode(proof: SearchProof) -> dict:
+    """The JSON form of a search's proof (the ``proof`` member of an item's certificate)."""
+    proofs: list[dict] = []
+    index: dict[int, int] = {}
+    leaves = []
+    for box, leaf in proof.leaves:
+        if leaf is not None and id(leaf) not in index:
+            index[id(leaf)] = len(proofs)
+            proofs.append({"box": _box(leaf.box), "upper_bound": leaf.upper_bound, "kind": leaf.kind,
+                           "z": pack(leaf.z), "bound": leaf.bound})
+        leaves.append(_box(box) + [index[id(leaf)] if leaf is not None else None])
+    root = proof.root
+    return {
+        "type": "branch_and_bound",
+        "scale": proof.scale,
+        "root": {"gamma": root.gamma, "functionals": root.functionals.tolist(),
+                 "claim": [root.claim_lower.tolist(), root.claim_upper.tolist()],
+                 "bounds": [root.lower.tolist(), root.upper.tolist()],
+                 "duals": [pack(z) for z in root.duals]},
+        "tightening": [{"upper_bound": t.upper_bound, "box_in": _box(t.box_in), "box_out": _box(t.box_out),
+                        "duals": [pack(z) for z in t.duals]} for t in proof.tightening],
+        "search_box": _box(proof.search_box),
+        "proofs": proofs,
+        "leaves": leaves,  # [lower corner, upper corner, index into proofs or null (trivial bound 0)]
+    }
+
+
+def canonical_json(value: Any) -> bytes:
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False).encode()
+
+
+def data_hash(kind: str, data: Any) -> str:
+    """SHA-256 of the problem, as canonical JSON of {"kind", "data"} (sorted keys, no spaces)."""
+    return hashlib.sha256(canonical_json({"kind": kind, "data": data})).hexdigest()

@@ -1,0 +1,181 @@
+"""Problem data as fractional programs: the charts of triangulation and of P^n -> P^m maps.
+
+Plain numpy, shared by the solvers and the certificate verifier (which rebuilds a program from
+the problem data exactly as the solver built it). Choices made here (frames, reference
+observations) are conditioning only: the program's cost is the caller's cost in any of them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .relaxation import FractionalProgram
+
+
+def camera_centres(cameras: np.ndarray) -> np.ndarray:
+    """Null vectors of the (k, 3, 4) cameras, signed so that the last coordinate is not negative."""
+    centres = np.linalg.svd(cameras)[2][:, -1, :]
+    return centres * np.where(centres[:, 3:4] < 0, -1.0, 1.0)
+
+
+def _camera_frame(cameras: np.ndarray) -> np.ndarray:
+    """A 4x4 similarity H (X = H X') centring the camera centres with unit mean distance.
+
+    Only conditioning: the problem is the same in any frame, and H keeps the last coordinate.
+    """
+    centres = camera_centres(cameras)
+    finite = np.abs(centres[:, 3]) > 1e-9 * np.linalg.norm(centres, axis=1)
+    H = np.eye(4)
+    if np.any(finite):
+        euclid = centres[finite, :3] / centres[finite, 3:4]
+        middle = euclid.mean(axis=0)
+        spread = float(np.mean(np.linalg.norm(euclid - middle, axis=1)))
+        if not spread > 0:
+            spread = 1.0
+        H[:3, :3] *= spread
+        H[:3, 3] = middle
+    return H
+
+
+def _choose_reference(cameras: np.ndarray, points: np.ndarray) -> int:
+    """The camera whose centre projects farthest from the other views' observations.
+
+    A centre inside another view's residual cone makes the chart's region unbounded.
+    """
+    centres = camera_centres(cameras)
+    proj = np.einsum("jab,rb->rja", cameras, centres)  # centre r seen by camera j
+    depth = proj[:, :, 2]
+    safe = np.where(depth > 1e-12 * np.linalg.norm(proj, axis=2), depth, np.nan)
+    distance = np.linalg.norm(proj[:, :, :2] / safe[:, :, None] - points[None], axis=2)
+    # Behind camera j (or at infinity) is outside its cone: as good as infinitely far.
+    distance = np.where(np.isnan(distance), np.inf, distance)
+    np.fill_diagonal(distance, np.inf)
+    return int(np.argmax(distance.min(axis=1)))
+
+
+@dataclass
+class Chart:
+    """A track as a fractional program in chart coordinates y, with X = T [y; 1].
+
+    The reference camera's depth is 1 on the chart, so points at infinity are ordinary points and
+    "in front of the reference camera" holds by construction; views whose depth is constant on the
+    chart are exact. ``constant_depth_behind``: some view's depth is a non-positive constant.
+    """
+
+    program: FractionalProgram
+    T: np.ndarray
+    reference: int
+    constant_depth_behind: bool
+
+    @classmethod
+    def build(cls, cameras: np.ndarray, points: np.ndarray, norm: str) -> "Chart":
+        reference = _choose_reference(cameras, points)
+        frame = _camera_frame(cameras)
+        cams = cameras @ frame
+        cams = cams / np.linalg.norm(cams[:, 2, :3], axis=1)[:, None, None]
+        depth_row = cams[reference, 2]
+        _, _, vt = np.linalg.svd(depth_row[None, :])
+        T = np.column_stack([vt[1], vt[2], vt[3], depth_row / (depth_row @ depth_row)])
+        shifted = cams.copy()  # image coordinates translated to the observation
+        shifted[:, 0] -= points[:, 0:1] * cams[:, 2]
+        shifted[:, 1] -= points[:, 1:2] * cams[:, 2]
+        M = shifted @ T  # (k, 3, 4)
+        grad = np.linalg.norm(M[:, 2, :3], axis=1)
+        exact = grad <= 1e-9 * np.linalg.norm(M[:, 2], axis=1)
+        exact[reference] = True
+        scale = np.where(exact, M[:, 2, 3], grad)
+        behind = bool(np.any(exact & (scale <= 0)))
+        scale = np.where(scale == 0, 1.0, np.abs(scale))
+        M = M / scale[:, None, None]
+        den = M[:, 2, :].copy()
+        den[exact] = np.array([0.0, 0.0, 0.0, 1.0])
+        T = frame @ T  # from chart coordinates to the caller's frame
+        # The domain also asks for a non-negative last homogeneous coordinate.
+        program = FractionalProgram(M[:, :2, :].copy(), den, exact, T[3][None, :].copy(), norm)
+        return cls(program, T, reference, behind)
+
+    def dlt(self) -> np.ndarray | None:
+        rows = self.program.num.reshape(-1, 4)
+        Y = np.linalg.svd(rows / np.linalg.norm(rows, axis=1, keepdims=True))[2][-1]
+        if abs(Y[3]) < 1e-14 * np.linalg.norm(Y):
+            return None
+        return Y[:3] / Y[3]
+
+
+def _normaliser(points: np.ndarray) -> np.ndarray:
+    """Similarity (homogeneous) taking the points' centroid to 0 and mean distance to sqrt(dim)."""
+    dim = points.shape[1]
+    centre = points.mean(axis=0)
+    spread = float(np.mean(np.linalg.norm(points - centre, axis=1))) or 1.0
+    S = np.eye(dim + 1)
+    S[:dim, :dim] *= math.sqrt(dim) / spread
+    S[:dim, dim] = -centre * math.sqrt(dim) / spread
+    return S
+
+
+@dataclass
+class MapChart:
+    program: FractionalProgram
+    source_norm: np.ndarray  # S: normalised source = S [X; 1]
+    target_shift: np.ndarray  # target translated by this (residuals unchanged)
+    reference: int
+    last_row_origin: np.ndarray  # l0
+    last_row_basis: np.ndarray  # N, (n+1) x n
+
+    @classmethod
+    def build(cls, source: np.ndarray, target: np.ndarray, norm: str) -> "MapChart":
+        count, n = source.shape
+        m = target.shape[1]
+        S = _normaliser(source)
+        X = (S @ np.hstack([source, np.ones((count, 1))]).T).T  # (count, n+1)
+        shift = target.mean(axis=0)
+        x = target - shift
+        # Reference: the point nearest the centroid, whose depth is 1 by the choice of scale.
+        reference = int(np.argmin(np.linalg.norm(X[:, :n], axis=1)))
+        l0 = X[reference] / (X[reference] @ X[reference])
+        N = np.linalg.svd(X[reference][None, :])[2][1:].T  # (n+1, n), orthonormal, N' X_ref = 0
+        d = n + m * (n + 1)
+        num = np.zeros((count, m, d + 1))
+        den = np.zeros((count, d + 1))
+        for j in range(count):
+            # depth_j = (l0 + N w) . X_j
+            den[j, :n] = N.T @ X[j]
+            den[j, d] = l0 @ X[j]
+            for k in range(m):
+                # x_jk * depth_j - M_k . X_j; row k of M sits at v[n + k(n+1) : n + (k+1)(n+1)]
+                num[j, k] = x[j, k] * den[j]
+                num[j, k, n + k * (n + 1): n + (k + 1) * (n + 1)] -= X[j]
+        exact = np.zeros(count, dtype=bool)
+        exact[reference] = True
+        den[reference] = 0.0
+        den[reference, d] = 1.0
+        program = FractionalProgram(num, den, exact, np.zeros((0, d + 1)), norm)
+        return cls(program, S, shift, reference, l0, N)
+
+    def matrix(self, v: np.ndarray) -> np.ndarray:
+        """M in the caller's coordinates (before normalising its scale)."""
+        n = self.last_row_basis.shape[1]
+        m = (len(v) - n) // (n + 1)
+        rows = v[n:].reshape(m, n + 1)
+        last = self.last_row_origin + self.last_row_basis @ v[:n]
+        M = np.vstack([rows, last])
+        T = np.eye(m + 1)
+        T[:m, m] = self.target_shift  # undo the target translation
+        return T @ M @ self.source_norm
+
+    def from_matrix(self, M: np.ndarray) -> np.ndarray | None:
+        """v for a map given in the caller's coordinates (None when the reference depth <= 0)."""
+        m = M.shape[0] - 1
+        T_inv = np.eye(m + 1)
+        T_inv[:m, m] = -self.target_shift
+        Mn = T_inv @ M @ np.linalg.inv(self.source_norm)
+        X_ref = self.last_row_origin / (self.last_row_origin @ self.last_row_origin)
+        depth = Mn[m] @ X_ref
+        if not depth > 0:
+            return None
+        Mn = Mn / depth
+        w = self.last_row_basis.T @ Mn[m]
+        return np.concatenate([w, Mn[:m].ravel()])

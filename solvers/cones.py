@@ -1,0 +1,104 @@
+"""Cone layouts and safe bounds from dual vectors: plain numpy, no conic solver.
+
+A conic program here is ``min q'x`` subject to ``A x + s = b``, ``s`` in a product of a zero
+cone, a nonnegative orthant and second-order cones (Clarabel's form). Its dual asks for ``z`` in
+the dual cone with ``A'z + q = 0``. A solver's ``z`` satisfies that only approximately, so
+bounds are taken the safe way (ALGORITHMS.md section 0; Neumaier & Shcherbina 2004): project
+``z`` into the dual cone, then for every feasible ``x`` with ``lower <= x <= upper``
+
+    q'x = (q + A'z)'x + z's - b'z >= -b'z + sum_j min(r_j lower_j, r_j upper_j),  r = q + A'z,
+
+because ``z's >= 0``. The solver and the certificate verifier both call these functions, so the
+bound a certificate claims is exactly the one a verifier recomputes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+
+@dataclass
+class ConeSpec:
+    """Cone layout of the rows of ``A``: ``zero`` equalities, ``nonneg`` inequalities, then SOCs."""
+
+    zero: int = 0
+    nonneg: int = 0
+    soc: tuple[int, ...] = ()
+
+    @property
+    def rows(self) -> int:
+        return self.zero + self.nonneg + sum(self.soc)
+
+
+def project_dual(z: np.ndarray, cones: ConeSpec) -> np.ndarray:
+    """The nearest point of the dual cone (free on the zero cone; the orthant and second-order
+    cones are self-dual)."""
+    z = np.array(z, dtype=float)
+    start = cones.zero
+    z[start:start + cones.nonneg] = np.maximum(z[start:start + cones.nonneg], 0.0)
+    start += cones.nonneg
+    if not cones.soc:
+        return z
+    sizes = np.asarray(cones.soc)
+    for size in np.unique(sizes):  # all cones of one size at once
+        offsets = start + np.concatenate([[0], np.cumsum(sizes)[:-1]])[sizes == size]
+        block = z[offsets[:, None] + np.arange(size)]
+        z[offsets[:, None] + np.arange(size)] = _project_soc(block)
+    return z
+
+
+def _project_soc(block: np.ndarray) -> np.ndarray:
+    """Rows (t, x) projected onto {t >= |x|}."""
+    t, x = block[:, 0], block[:, 1:]
+    norm = np.linalg.norm(x, axis=1)
+    out = block.copy()
+    below = norm <= -t  # in the polar cone: projects to 0
+    out[below] = 0.0
+    middle = (norm > np.abs(t)) & ~below
+    alpha = 0.5 * (t[middle] + norm[middle])
+    out[middle, 0] = alpha
+    out[middle, 1:] = x[middle] * (alpha / norm[middle])[:, None]
+    return out
+
+
+def _transposed_product(A, z: np.ndarray) -> np.ndarray:
+    return np.asarray(A.T @ z).ravel() if sp.issparse(A) else A.T @ z
+
+
+def _box_minimum(c: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> float:
+    """min of c'x over lower <= x <= upper (zero coefficients cost nothing, even on infinite sides)."""
+    with np.errstate(invalid="ignore"):
+        terms = np.minimum(c * lower, c * upper)
+    terms[c == 0] = 0.0
+    return float(np.sum(terms))
+
+
+def safe_lower_bound(q: np.ndarray, A, b: np.ndarray, cones: ConeSpec, z: np.ndarray,
+                     lower: np.ndarray, upper: np.ndarray, transform: np.ndarray | None = None) -> float:
+    """A lower bound on ``q'x`` over the feasible points with ``lower <= x <= upper``.
+
+    ``transform`` (d x d), when given, says the first d variables are ``x[:d] = transform @ y``
+    and that ``lower[:d], upper[:d]`` bound ``y`` instead: the residual of those variables is
+    charged through it (boxes of branching functionals are boxes in y, not in x).
+    """
+    z = project_dual(z, cones)
+    residual = q + _transposed_product(A, z)
+    if transform is not None:
+        d = transform.shape[0]
+        residual = np.concatenate([transform.T @ residual[:d], residual[d:]])
+    return float(-b @ z) + _box_minimum(residual, lower, upper)
+
+
+def proves_infeasible(A, b: np.ndarray, cones: ConeSpec, z: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                      transform: np.ndarray | None = None) -> bool:
+    """Whether ``z`` (a Farkas vector) proves that no ``x`` within the bounds is feasible:
+    ``z's >= 0`` gives ``b'z >= (A'z)'x >= min over the bounds``, impossible when ``b'z`` is smaller."""
+    z = project_dual(z, cones)
+    a = _transposed_product(A, z)
+    if transform is not None:
+        d = transform.shape[0]
+        a = np.concatenate([transform.T @ a[:d], a[d:]])
+    return float(b @ z) < _box_minimum(a, lower, upper)
