@@ -1,4 +1,5 @@
-"""The ``geocert`` command: solve in-process, serve the API, run a worker, export the OpenAPI spec."""
+"""The ``geocert`` command: solve in-process, verify a certificate, serve the API, run a worker, export
+the OpenAPI spec."""
 
 from __future__ import annotations
 
@@ -54,6 +55,30 @@ def cmd_solve(args: argparse.Namespace) -> int:
     json.dump(result, sys.stdout, indent=None if args.compact else 2)
     sys.stdout.write("\n")
     return 0
+
+
+def cmd_verify(args: argparse.Namespace) -> int:
+    """Exit 0 when the certificate is valid, 1 when it is not, 2 when the input cannot be read."""
+    from solvers.verify import verify_document
+
+    try:
+        text = sys.stdin.read() if args.file == "-" else Path(args.file).read_text()
+        document = json.loads(text)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        print(f"geocert verify: cannot read {args.file}: {exc}", file=sys.stderr)
+        return 2
+    # A result (geocert solve's output) or a job document carry the certificate inside.
+    for key in ("result", "certificate"):
+        if isinstance(document, dict) and key in document and document.get("format") is None:
+            document = document[key]
+    if not isinstance(document, dict) or document.get("format") != "geocert-certificate":
+        print(f"geocert verify: {args.file} holds no certificate (solve with options.certificate = \"full\")",
+              file=sys.stderr)
+        return 2
+    report = verify_document(document).as_dict()
+    json.dump(report, sys.stdout, indent=None if args.compact else 2)
+    sys.stdout.write("\n")
+    return 0 if report["valid"] else 1
 
 
 def _worker_command(concurrency: int, name: str) -> list[str]:
@@ -163,6 +188,10 @@ def main(argv: list[str] | None = None) -> int:
     solve.add_argument("job", help="path to a job JSON file, or - for standard input")
     solve.add_argument("--compact", action="store_true", help="print the result on one line")
     solve.set_defaults(func=cmd_solve)
+    verify = sub.add_parser("verify", help="check a full certificate (a result, job or certificate JSON file)")
+    verify.add_argument("file", help="path to the JSON file, or - for standard input")
+    verify.add_argument("--compact", action="store_true", help="print the report on one line")
+    verify.set_defaults(func=cmd_verify)
     serve = sub.add_parser("serve", help="run the API with embedded workers (and Redis unless GEOCERT_REDIS_URL)")
     serve.add_argument("--host", default="127.0.0.1")
     serve.add_argument("--port", type=int, default=8000)

@@ -6,7 +6,7 @@ from fastapi import FastAPI
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from app import observability, problems
-from app.api.routes import jobs, service
+from app.api.routes import certificates, jobs, service
 from app.core.config import get_settings
 from workers import logs
 
@@ -64,6 +64,7 @@ def create_app() -> FastAPI:
     logs.configure()
     problems.install(app)
     app.include_router(jobs.router)
+    app.include_router(certificates.router)
     app.include_router(service.router)
     app.include_router(observability.router)
     app.add_middleware(BodySizeLimit, limit=get_settings().max_body_bytes)

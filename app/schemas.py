@@ -43,6 +43,9 @@ def options_model(name: str, defaults, residual_units: str) -> type[BaseModel]:
         time_limit_s=(Finite, Field(defaults.time_limit_s, gt=0, le=3600, description="per item")),
         max_residual=(Finite | None, Field(defaults.max_residual, gt=0,
                                            description=f"{residual_units}; narrows the certificate's scope")),
+        certificate=(Literal["summary", "full"], Field(
+            defaults.certificate, description="full: every bound's proof (dual vectors), checkable without "
+                                              "a conic solver; see GET /v1/jobs/{id}/certificate")),
     )
 
 
@@ -122,6 +125,39 @@ class JobProgress(BaseModel):
 ItemStatus = Literal["optimal", "node_limit", "time_limit", "cancelled", "not_certified", "infeasible", "degenerate"]
 
 
+class CertificateDocument(BaseModel):
+    """A full certificate (docs/certificate.md): anyone can check it with linear algebra alone."""
+
+    format: Literal["geocert-certificate"]
+    version: int = Field(description="1")
+    kind: str
+    options: dict[str, Any] = Field(description="the options solved with, defaults filled in")
+    data: dict[str, Any] = Field(description="the problem data as solved")
+    data_sha256: str = Field(description='SHA-256 of canonical JSON {"kind", "data"} (sorted keys, no spaces)')
+    items: list[dict[str, Any]] = Field(description="per item: index, status, certified, cost, lower_bound, gap, "
+                                                    "the solution, and the proof (root region, tightening, leaves)")
+
+
+class VerifyCheck(BaseModel):
+    name: str
+    passed: int = Field(description="items that passed this check (documents, for format and data_hash)")
+    failed: int
+
+
+class VerifyFailure(BaseModel):
+    check: str
+    item: int | None
+    detail: str
+
+
+class VerifyReport(BaseModel):
+    valid: bool
+    checks: list[VerifyCheck] = Field(description="the checks in the order they run")
+    first_failure: VerifyFailure | None = Field(description="the first check that failed, and on which item")
+    items_checked: int
+    items_skipped: int = Field(description="items not claimed certified: nothing to check")
+
+
 class ItemCertificate(BaseModel):
     scope: str
     root_region: dict[str, Any] | None = Field(
@@ -165,6 +201,7 @@ class TriangulationResult(BaseModel):
     norm: str
     tracks: list[TrackOut]
     stats: JobStats
+    certificate: CertificateDocument | None = Field(None, description='with options.certificate = "full"')
 
 
 class MapOut(ItemOutcome):
@@ -177,6 +214,7 @@ class MapsResult(BaseModel):
     norm: str
     maps: list[MapOut]
     stats: JobStats
+    certificate: CertificateDocument | None = Field(None, description='with options.certificate = "full"')
 
 
 class WebhookState(BaseModel):

@@ -17,9 +17,11 @@ from typing import Any, Callable
 import numpy as np
 
 from .bnb import Progress
+from .certificates import FORMAT, VERSION, data_hash
 from .geometry import InputError, check_cameras
 from .maps import MapOptions, MapResult, check_correspondences, fit_map
 from .triangulation import NORMS, TrackResult, TriangulationOptions, triangulate
+from .verify import proof_of
 
 ProgressSink = Callable[[dict], None]
 StopCheck = Callable[[], bool]
@@ -128,10 +130,13 @@ class TriangulationKind:
 
 def certificate_document(result, region: dict, meaning: str, scope: str) -> dict | None:
     """The certificate part of an item: the search's (when there was one), or the note that the
-    incumbent met the trivial bound 0."""
+    incumbent met the trivial bound 0. With a full certificate, ``proof`` too (moved into the
+    job's certificate document when the result is assembled)."""
     c = result.certificate
+    proof = proof_of(result)
+    extra = {"proof": proof} if proof is not None and (c is None or c.proof is not None) else {}
     if c is not None:
-        return {
+        return {**extra,
             "scope": c.scope,
             "root_region": {**region, "functionals": c.functionals, "denominator": c.denominator,
                             "lower": c.lower, "upper": c.upper, "meaning": meaning},
@@ -141,7 +146,7 @@ def certificate_document(result, region: dict, meaning: str, scope: str) -> dict
         }
     if result.certified:
         return {"scope": scope, "root_region": None, "tolerance": 0.0, "tolerance_met": True, "leaves": 0,
-                "note": "the incumbent's cost is within abs_gap of the trivial bound 0"}
+                "note": "the incumbent's cost is within abs_gap of the trivial bound 0", **extra}
     return None
 
 
@@ -350,7 +355,36 @@ def solve_job(job: dict, sink: ProgressSink | None = None, should_stop: StopChec
     kind, parsed, options = parse_job(job)
     start = time.perf_counter()
     items = solve_items(kind, parsed, options, range(kind.count(parsed)), sink, should_stop)
-    return kind.assemble(options, items, job_stats(items, time.perf_counter() - start))
+    return assemble(kind, job, options, items, job_stats(items, time.perf_counter() - start))
+
+
+def assemble(kind, job: dict, options, items: list[dict], stats: dict) -> dict:
+    """The result document; with ``options.certificate == "full"`` it carries the certificate
+    document too (the items' proofs move there)."""
+    if options.certificate == "full":
+        certificate = full_certificate(kind.name, job["data"], options, items)
+    else:
+        certificate = None
+        for item in items:
+            (item.get("certificate") or {}).pop("proof", None)
+    result = kind.assemble(options, items, stats)
+    if certificate is not None:
+        result["certificate"] = certificate
+    return result
+
+
+def full_certificate(kind_name: str, data: Any, options, items: list[dict]) -> dict:
+    """The certificate document (docs/certificate.md): the problem data and its hash, the options,
+    and each item's claim (solution, cost, gap) with its proof."""
+    claims = []
+    for index, item in enumerate(items):
+        proof = (item.get("certificate") or {}).pop("proof", None)
+        solution = {key: item[key] for key in ("point", "at_infinity", "matrix") if key in item}
+        claims.append({"index": index, "status": item["status"], "certified": item["certified"] and proof is not None,
+                       "cost": item["cost"], "lower_bound": item["lower_bound"], "gap": item["gap"],
+                       **solution, "proof": proof})
+    return {"format": FORMAT, "version": VERSION, "kind": kind_name, "options": dataclasses.asdict(options),
+            "data": data, "data_sha256": data_hash(kind_name, data), "items": claims}
 
 
 def parse_job(job: Any):

@@ -194,12 +194,13 @@ def verify_item(kind: str, data: dict, options: dict, claim: dict) -> list[str]:
     """Every check of one certified item, in order; raises Invalid at the first failure and
     returns the names of the checks passed."""
     arrays = _item_data(kind, data, claim["index"])
-    return ["data"] + verify_arrays(kind, arrays, options, claim)
+    return ["data"] + verify_arrays(kind, arrays, options, claim)[0]
 
 
-def verify_arrays(kind: str, arrays: tuple, options: dict, claim: dict) -> list[str]:
+def verify_arrays(kind: str, arrays: tuple, options: dict, claim: dict) -> tuple[list[str], float]:
     """verify_item on one item's raw arrays: (cameras of the views, points) for triangulation,
-    (source, target) for maps."""
+    (source, target) for maps. Also returns the lower bound the proof establishes (caller's
+    units)."""
     norm = options.get("norm")
     if norm not in NORMS:
         raise Invalid("format", f"options.norm {norm!r} is not one of {NORMS}")
@@ -232,7 +233,7 @@ def verify_arrays(kind: str, arrays: tuple, options: dict, claim: dict) -> list[
     if not (0 <= float(claim["gap"]) <= tolerance * (1 + 1e-12) + 1e-300):
         raise Invalid("gap", f"gap {claim['gap']!r} exceeds the tolerance {tolerance!r} (abs_gap, rel_gap)")
     passed.append("gap")
-    return passed
+    return passed, bound
 
 
 def _verify_search(item: _Item, options: dict, proof: dict, cost: float, lower_claimed: float, solution,

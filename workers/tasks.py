@@ -15,7 +15,7 @@ import traceback
 
 from app.core.config import get_settings
 from solvers.geometry import InputError
-from solvers.jobs import get_kind, job_stats, options_from, solve_items
+from solvers.jobs import assemble, get_kind, job_stats, options_from, solve_items
 from workers import logs, metrics
 from workers.celery_app import celery_app, redis_url
 from workers.store import JobStore
@@ -89,7 +89,7 @@ def solve_segment(job_id: str, start: int, stop: int, request_id: str | None = N
 def finalise(jobs: JobStore, job_id: str, meta: dict, kind, options) -> None:
     items = jobs.all_items(job_id, meta["items_total"])
     elapsed = time.time() - (meta["started_at"] or meta["created_at"])
-    result = kind.assemble(options, items, job_stats(items, elapsed))
+    result = assemble(kind, jobs.request(job_id), options, items, job_stats(items, elapsed))
     status = "cancelled" if any(item["status"] == "cancelled" for item in items) else "succeeded"
     jobs.finish(job_id, status, result=result)
     ended(jobs, job_id)
