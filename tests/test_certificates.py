@@ -1,0 +1,238 @@
+"""Full certificates: every kind and norm verifies, tampering is caught, and the verifier's bound
+agrees with the solver's within the documented tolerance."""
+
+from __future__ import annotations
+
+import copy
+import json
+import subprocess
+import sys
+import zlib
+
+import numpy as np
+import pytest
+
+from solvers.certificates import data_hash, pack, unpack
+from solvers.jobs import solve_job
+from solvers.relaxation import NORMS
+from solvers.verify import BOUND_TOLERANCE, uncovered_part, verify_arrays, verify_document
+from solvers.bnb import Box
+
+from .scenes import noisy_track, random_cameras
+from .test_maps import scene
+
+
+def seed(*words: str) -> int:
+    return zlib.crc32(" ".join(words).encode())
+
+
+def triangulation_job(rng, tracks: int, views: int, norm: str, noise: float = 3.0) -> dict:
+    cameras = random_cameras(rng, 8)
+    entries = []
+    for _ in range(tracks):
+        chosen = sorted(rng.choice(8, size=views, replace=False).tolist())
+        _, points = noisy_track(rng, cameras[chosen], noise_px=noise)
+        entries.append({"views": chosen, "points": points.tolist()})
+    return {"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": entries},
+            "options": {"norm": norm, "certificate": "full"}}
+
+
+def map_job(rng, kind: str, count: int, norm: str, maps: int = 2, noise: float = 1.0) -> dict:
+    entries = []
+    for _ in range(maps):
+        _, source, target = scene(rng, kind, count)
+        entries.append({"source": source.tolist(), "target": (target + rng.normal(size=target.shape) * noise).tolist()})
+    name = "resection" if kind == "resection" else "homography"
+    return {"kind": name, "data": {"maps": entries}, "options": {"norm": norm, "certificate": "full"}}
+
+
+def certified(result: dict) -> list[dict]:
+    return [item for item in result["certificate"]["items"] if item["certified"]]
+
+
+class TestEveryKindVerifies:
+    @pytest.mark.parametrize("norm", NORMS)
+    def test_triangulation(self, norm):
+        result = solve_job(triangulation_job(np.random.default_rng(seed("tri", norm)), 6, 4, norm))
+        report = verify_document(result["certificate"])
+        assert report.valid, report.first_failure
+        assert report.items_checked == result["stats"]["certified"] == 6
+
+    @pytest.mark.parametrize("norm", NORMS)
+    @pytest.mark.parametrize("kind, count, noise", [("resection", 8, 1.0), ("homography2", 6, 1.0),
+                                                    ("homography3", 8, 0.005)])  # 3D targets are unit-sized
+    def test_maps(self, kind, count, noise, norm):
+        result = solve_job(map_job(np.random.default_rng(seed(kind, norm)), kind, count, norm, noise=noise))
+        report = verify_document(result["certificate"])
+        assert report.valid, report.first_failure
+        assert report.items_checked == result["stats"]["certified"] == 2
+
+    def test_exact_data_verify_by_the_trivial_bound(self):
+        rng = np.random.default_rng(seed("exact"))
+        job = triangulation_job(rng, 2, 3, "L2L2", noise=0.0)
+        result = solve_job(job)
+        assert all(item["proof"]["type"] == "trivial" for item in certified(result))
+        assert verify_document(result["certificate"]).valid
+
+    def test_summary_results_carry_no_proof(self):
+        job = triangulation_job(np.random.default_rng(seed("summary")), 2, 3, "L2L2")
+        job["options"]["certificate"] = "summary"
+        result = solve_job(job)
+        assert "certificate" not in result
+        assert all("proof" not in track["certificate"] for track in result["tracks"])
+
+
+class TestVerifierBoundMatchesSolver:
+    """The verifier recomputes each leaf's bound from its dual vector: it proves what the solver
+    claimed, within BOUND_TOLERANCE (scaled units), and never more than that above it."""
+
+    @pytest.mark.parametrize("norm", NORMS)
+    def test_bounds_agree(self, norm):
+        rng = np.random.default_rng(seed("agree", norm))
+        jobs = [triangulation_job(rng, 4, 5, norm), map_job(rng, "resection", 8, norm), map_job(rng, "homography2", 6, norm)]
+        compared = 0
+        for job in jobs:
+            document = solve_job(job)["certificate"]
+            for claim in [c for c in document["items"] if c["certified"]]:
+                if claim["proof"]["type"] != "branch_and_bound":
+                    continue
+                arrays = _arrays(document, claim["index"])
+                _, proven = verify_arrays(document["kind"], arrays, document["options"], claim)
+                scale = claim["proof"]["scale"]
+                unit = scale**2 if norm == "L2L2" else scale
+                solver = claim["lower_bound"]
+                slack = BOUND_TOLERANCE * max(1.0, abs(solver) * unit) / unit
+                assert proven >= solver - slack
+                assert proven <= solver + slack or claim["cost"] <= proven  # lower_bound is min(bound, cost)
+                compared += 1
+        assert compared >= 6
+
+
+def _arrays(document: dict, index: int) -> tuple:
+    data = document["data"]
+    if document["kind"] == "triangulation":
+        track = data["tracks"][index]
+        return np.asarray(data["cameras"])[track["views"]], np.asarray(track["points"])
+    entry = data["maps"][index]
+    return np.asarray(entry["source"]), np.asarray(entry["target"])
+
+
+@pytest.fixture(scope="module")
+def branched() -> dict:
+    """A certificate whose first item needed several leaves and a tightening round (a map)."""
+    rng = np.random.default_rng(seed("tamper"))
+    for _ in range(20):
+        document = solve_job(map_job(rng, "resection", 7, "L2L2", maps=1, noise=3.0))["certificate"]
+        item = document["items"][0]
+        proof = item["proof"]
+        if item["certified"] and proof["type"] == "branch_and_bound" and len(proof["leaves"]) >= 3 and proof["tightening"]:
+            assert verify_document(document).valid
+            return document
+    pytest.fail("no instance with several leaves")
+
+
+def failed_check(document: dict) -> str | None:
+    report = verify_document(document)
+    return None if report.valid else report.first_failure["check"]
+
+
+class TestTamperingIsCaught:
+    def test_raised_leaf_bound(self, branched):
+        doc = copy.deepcopy(branched)
+        proofs = doc["items"][0]["proof"]["proofs"]
+        target = max((p for p in proofs if p["kind"] == "dual"), key=lambda p: p["bound"])
+        target["bound"] = target["bound"] * 1.01 + 1e-3
+        assert failed_check(doc) == "leaf_bounds"
+
+    def test_dropped_leaf(self, branched):
+        doc = copy.deepcopy(branched)
+        doc["items"][0]["proof"]["leaves"].pop(1)
+        assert failed_check(doc) == "coverage"
+
+    def test_shrunken_root_region(self, branched):
+        doc = copy.deepcopy(branched)
+        lower, upper = doc["items"][0]["proof"]["root"]["bounds"]
+        lower[0] += 0.25 * (upper[0] - lower[0])
+        assert failed_check(doc) == "root_region"
+
+    def test_shrunken_search_box(self, branched):
+        doc = copy.deepcopy(branched)
+        proof = doc["items"][0]["proof"]
+        lo, hi = proof["search_box"]
+        lo[0] += 0.25 * (hi[0] - lo[0])
+        for leaf in proof["leaves"]:  # leaves clipped to match: coverage holds, the proof chain does not
+            leaf[0][0] = max(leaf[0][0], lo[0])
+            leaf[1][0] = max(leaf[1][0], lo[0])
+        assert failed_check(doc) == "tightening"
+
+    def test_perturbed_solution(self, branched):
+        doc = copy.deepcopy(branched)
+        matrix = np.asarray(doc["items"][0]["matrix"])
+        doc["items"][0]["matrix"] = (matrix + 1e-4 * np.abs(matrix).max()).tolist()
+        assert failed_check(doc) == "objective"
+
+    def test_perturbed_dual_vector(self, branched):
+        doc = copy.deepcopy(branched)
+        proofs = doc["items"][0]["proof"]["proofs"]
+        target = max((p for p in proofs if p["kind"] == "dual"), key=lambda p: p["bound"])
+        z = unpack(target["z"])
+        z = z * (1 + 0.05 * np.random.default_rng(0).standard_normal(z.shape))
+        target["z"] = pack(z)
+        assert failed_check(doc) == "leaf_bounds"
+
+    def test_edited_problem_data(self, branched):
+        doc = copy.deepcopy(branched)
+        doc["data"]["maps"][0]["target"][0][0] += 0.5
+        assert failed_check(doc) == "data_hash"
+
+    def test_edited_problem_data_with_its_hash_recomputed(self, branched):
+        doc = copy.deepcopy(branched)
+        doc["data"]["maps"][0]["target"][0][0] += 0.5
+        doc["data_sha256"] = data_hash(doc["kind"], doc["data"])
+        assert failed_check(doc) in ("objective", "leaf_bounds", "lower_bound")
+
+    def test_understated_gap(self, branched):
+        doc = copy.deepcopy(branched)
+        item = doc["items"][0]
+        item["gap"] = item["gap"] * 0.01 - 1e-3 * item["cost"]
+        assert failed_check(doc) in ("lower_bound", "gap")
+
+
+class TestCoverage:
+    def test_partition_covers_and_a_missing_sliver_is_found(self):
+        root = Box(np.zeros(2), np.ones(2))
+        lo = np.array([[0, 0], [0.5, 0], [0.5, 0.25]])
+        hi = np.array([[0.5, 1], [1, 0.25], [1, 1]])
+        assert uncovered_part(root, lo, hi) is None
+        hi_short = hi.copy()
+        hi_short[2, 1] = 1 - 1e-12
+        gap = uncovered_part(root, lo, hi_short)
+        assert gap is not None and gap[0][1] == 1 - 1e-12
+
+
+class TestVerifierStandsAlone:
+    def test_imports_no_conic_solver(self):
+        code = ("import sys, solvers.verify; bad = [m for m in sys.modules if m.split('.')[0] in "
+                "('clarabel', 'cvxpy', 'pyscipopt', 'scs', 'ecos', 'osqp')]; print(json.dumps(bad))")
+        out = subprocess.run([sys.executable, "-c", "import json; " + code], capture_output=True, text=True, check=True)
+        assert json.loads(out.stdout) == []
+
+
+class TestCommandLine:
+    def run(self, *args, stdin: str | None = None):
+        return subprocess.run([sys.executable, "-m", "app.cli", *args], input=stdin, capture_output=True, text=True)
+
+    def test_exit_status_valid_invalid_unreadable(self, tmp_path, branched):
+        good = tmp_path / "result.json"
+        good.write_text(json.dumps({"kind": "resection", "certificate": branched}))
+        assert self.run("verify", str(good)).returncode == 0
+        bad_doc = copy.deepcopy(branched)
+        bad_doc["items"][0]["proof"]["leaves"].pop(0)
+        bad = tmp_path / "bad.json"
+        bad.write_text(json.dumps(bad_doc))
+        out = self.run("verify", str(bad))
+        assert out.returncode == 1
+        assert json.loads(out.stdout)["first_failure"]["check"] == "coverage"
+        assert self.run("verify", str(tmp_path / "missing.json")).returncode == 2
+        assert self.run("verify", "-", stdin="{not json").returncode == 2
+        assert self.run("verify", "-", stdin='{"kind": "triangulation"}').returncode == 2
