@@ -105,15 +105,17 @@ class TestBaselinesNeverBeatTheCertificate:
 
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), norm=st.sampled_from(NORMS), kind=st.sampled_from(["resection", "homography2"]),
-       shrink=st.floats(0.02, 1.0))
-def test_map_relaxation_never_exceeds_the_cost_in_its_box(seed, norm, kind, shrink):
+       shrink=st.floats(0.02, 1.0), full=st.booleans())
+def test_map_relaxation_never_exceeds_the_cost_in_its_box(seed, norm, kind, shrink, full):
+    """Also with full certificates (the safe bound of the dual vector, valid for maps inside
+    the root region's proven bounds)."""
     rng = np.random.default_rng(seed)
     _, source, target = scene(rng, kind, 8)
     target = target + rng.normal(size=target.shape) * 2.0
     chart = MapChart.build(source, target, norm)
     n = source.shape[1]
     prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n], 1e-7, None,
-                       _REASONS)
+                       _REASONS, certify=full)
     if not isinstance(prepared, Prepared):
         return
     problem = prepared.problem
@@ -124,6 +126,13 @@ def test_map_relaxation_never_exceeds_the_cost_in_its_box(seed, norm, kind, shri
     if not keep.any():
         return
     samples, costs = samples[keep], costs[keep]
+    if full:  # the variable bounds hold inside the root region's proven bounds
+        low, high = problem.relaxation.complement
+        y = samples @ problem.relaxation.F[n:].T
+        keep = np.all((y >= low) & (y <= high), axis=1)
+        samples, costs = samples[keep], costs[keep]
+        if not keep.any():
+            return
     z = samples @ problem.B.T
     lo = np.maximum(problem.root.lo, z.min(axis=0) - shrink * problem.root.width * rng.uniform(size=n))
     hi = np.minimum(problem.root.hi, z.max(axis=0) + shrink * problem.root.width * rng.uniform(size=n))
@@ -137,7 +146,8 @@ def test_map_relaxation_never_exceeds_the_cost_in_its_box(seed, norm, kind, shri
     else:
         assert bound.status != BoxStatus.EMPTY
     # The cheaper relaxation that bound tightening uses (t / U for each ratio) under-estimates too.
-    cheap = solve_conic(*problem.conic_data(Box(lo, hi), cheapest * 2.0, envelope=False))
+    data = problem.conic_data(Box(lo, hi), cheapest * 2.0, envelope=False)
+    cheap = solve_conic(data.q, data.A, data.b, data.cones)
     if cheap.status is ConicStatus.OPTIMAL:
         assert cheap.lower_bound <= cheapest * (1 + 1e-6) + 1e-9
 

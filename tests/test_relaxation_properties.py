@@ -18,12 +18,14 @@ from .scenes import noisy_track, random_cameras
     norm=st.sampled_from(NORMS),
     shrink=st.floats(0.01, 1.0),
     slack=st.floats(1.0, 4.0),
+    full=st.booleans(),
 )
-def test_box_bound_never_exceeds_cost_inside_the_box(seed, views, norm, shrink, slack):
+def test_box_bound_never_exceeds_cost_inside_the_box(seed, views, norm, shrink, slack, full):
+    """Also with full certificates, where the bound is the safe bound of the dual vector."""
     rng = np.random.default_rng(seed)
     cameras = random_cameras(rng, views)
     _, points = noisy_track(rng, cameras, noise_px=3.0)
-    _, prepared = prepare_track(cameras, points, TriangulationOptions(norm=norm))
+    _, prepared = prepare_track(cameras, points, TriangulationOptions(norm=norm, certificate="full" if full else "summary"))
     if not isinstance(prepared, Prepared):
         return  # closed before any box exists (noiseless or degenerate): nothing to bound
     problem = prepared.problem

@@ -192,6 +192,39 @@ class TestCancel:
         assert [e for _, e, _ in sse_events(service, queued_id)] == ["status", "end"]
 
 
+class TestCertificates:
+    def test_full_certificate_is_served_and_verified(self, service):
+        body = triangulation_job(np.random.default_rng(27), tracks=3, views=5, norm="L1L1", certificate="full")
+        job_id = service.post("/v1/jobs", json=body).json()["id"]
+        job = wait_for(service, job_id)
+        assert job["status"] == "succeeded" and job["result"]["stats"]["certified"] == 3
+        response = service.get(f"/v1/jobs/{job_id}/certificate")
+        assert response.status_code == 200
+        document = response.json()
+        assert document["format"] == "geocert-certificate" and document["version"] == 1
+        assert document == job["result"]["certificate"]
+        report = service.post("/v1/certificates/verify", json=document).json()
+        assert report["valid"] is True and report["items_checked"] == 3 and report["first_failure"] is None
+        tampered = json.loads(json.dumps(document))
+        tampered["items"][1]["point"][0] += 1e-3
+        report = service.post("/v1/certificates/verify", json=tampered).json()
+        assert report["valid"] is False
+        assert report["first_failure"] == {**report["first_failure"], "check": "objective", "item": 1}
+
+    def test_summary_job_has_no_certificate_document(self, service):
+        job_id = service.post("/v1/jobs", json=triangulation_job(np.random.default_rng(28), tracks=1)).json()["id"]
+        assert wait_for(service, job_id)["status"] == "succeeded"
+        response = service.get(f"/v1/jobs/{job_id}/certificate")
+        assert response.status_code == 409
+        assert response.headers["content-type"].startswith("application/problem+json")
+        assert 'options.certificate = "full"' in response.json()["detail"]
+
+    def test_malformed_certificate_is_422(self, service):
+        response = service.post("/v1/certificates/verify", json={"format": "something else"})
+        assert response.status_code == 422
+        assert response.headers["content-type"].startswith("application/problem+json")
+
+
 class TestBadInput:
     def assert_problem(self, response, status: int, field: str | None = None):
         assert response.status_code == status
