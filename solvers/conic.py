@@ -178,7 +178,22 @@ class ReusableConicProgram:
                 self._solver = clarabel.DefaultSolver(
                     _zero_quadratic(q.shape[0]), q, self._csc, b, clarabel_cones(cones), _SETTINGS
                 )
+            self._b, self._cones = b, cones
             return _retried(_result(self._solver.solve()), q, self._csc, b, cones)
+        except BaseException as exc:
+            if isinstance(exc, (KeyboardInterrupt, SystemExit)):
+                raise
+            self._key = None
+            return ConicResult(ConicStatus.FAILED, None, None, np.nan, np.nan, f"exception: {exc}")
+
+    def solve_objective(self, q: np.ndarray) -> ConicResult:
+        """The last program solved again with objective ``q`` (a feasible set optimised in many
+        directions, as for root regions and bound tightening): no data compared or copied."""
+        if self._key is None:
+            return ConicResult(ConicStatus.FAILED, None, None, np.nan, np.nan, "no program to re-solve")
+        try:
+            self._solver.update(q=q)
+            return _retried(_result(self._solver.solve()), q, self._csc, self._b, self._cones)
         except BaseException as exc:
             if isinstance(exc, (KeyboardInterrupt, SystemExit)):
                 raise

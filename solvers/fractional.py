@@ -115,7 +115,7 @@ def _root_region_once(program: FractionalProgram, rows: np.ndarray, gamma: float
     duals = []
     for k in range(len(rows)):
         for sign, out in ((1.0, lo), (-1.0, hi)):
-            res = solver.solve(sign * rows[k], A, b, cones)
+            res = solver.solve(sign * rows[k], A, b, cones) if not duals else solver.solve_objective(sign * rows[k])
             if res.status is ConicStatus.UNBOUNDED:
                 return "degenerate", None, None, None
             if res.status is ConicStatus.INFEASIBLE:
@@ -141,7 +141,10 @@ def prove_root(program: FractionalProgram, F: np.ndarray, gamma: float, lo: np.n
         upper[k] = -safe_lower_bound(-F[k], A, b, cones, duals[2 * k + 1], claim_lo, claim_hi, transform)
     if not (np.all(claim_lo < lower) and np.all(upper < claim_hi) and np.all(lower <= upper)):
         return None
-    return RootProof(gamma, F, claim_lo, claim_hi, lower, upper, duals)
+    # Padded like the uncertified region (looser than proven, so still proven): both searches
+    # then start from the same box.
+    pad = 1e-7 * (1 + np.abs(lower) + np.abs(upper))
+    return RootProof(gamma, F, claim_lo, claim_hi, lower - pad, upper + pad, duals)
 
 
 def feasible_point(program: FractionalProgram) -> np.ndarray | None:
@@ -246,6 +249,7 @@ class BoxProblem:
             complement = (root_proof.lower[k:], root_proof.upper[k:])
             self.relaxation = Relaxation(program, B, user_gamma, complement, root_proof.functionals)
         self.tightening: list[TighteningProof] = []
+        self.interior: np.ndarray | None = None  # a point of the domain (the first incumbent)
         self._solver = ReusableConicProgram()
 
     # --- BranchProblem interface -------------------------------------------------------------
@@ -275,7 +279,7 @@ class BoxProblem:
         if result.status is not ConicStatus.OPTIMAL:
             return BoxBound(BoxStatus.UNRESOLVED)
         v = result.x[: self.program.dim]
-        candidate = v if math.isfinite(self.program.cost(v)) else None
+        candidate = self._candidate(v)
         if not self.certify:
             return BoxBound(BoxStatus.BOUNDED, result.lower_bound, candidate, self.B @ v)
         safe = safe_lower_bound(data.q, data.A, data.b, data.cones, result.z, data.lower, data.upper, data.transform)
@@ -283,6 +287,19 @@ class BoxProblem:
             return BoxBound(BoxStatus.UNRESOLVED, candidate=candidate, split_hint=self.B @ v)
         return BoxBound(BoxStatus.BOUNDED, safe, candidate, self.B @ v,
                         self._proof(box, upper_bound, "dual", result.z, safe))
+
+    def _candidate(self, v: np.ndarray) -> np.ndarray | None:
+        """The relaxation's point as a candidate incumbent. It often lies on the domain's boundary
+        (a depth or the chart's last coordinate at 0), where round-off can put it just outside:
+        then a point slightly towards a known interior point (the domain is convex) is tried."""
+        if math.isfinite(self.program.cost(v)):
+            return v
+        if self.interior is not None:
+            for step in (1e-9, 1e-6, 1e-3):
+                w = v + step * (self.interior - v)
+                if math.isfinite(self.program.cost(w)):
+                    return w
+        return None
 
     def _proof(self, box: Box, upper_bound: float, kind: str, z, bound: float) -> LeafProof | None:
         return LeafProof(box, upper_bound, kind, z, bound) if self.certify else None
@@ -305,7 +322,8 @@ class BoxProblem:
             for i in range(len(self.B)):
                 for sign, side in ((1.0, lo), (-1.0, hi)):
                     objective = tightening_objective(data, self.B[i], sign)
-                    result = solver.solve(objective, data.A, data.b, data.cones)
+                    result = (solver.solve(objective, data.A, data.b, data.cones) if not duals
+                              else solver.solve_objective(objective))
                     if result.status is ConicStatus.INFEASIBLE:
                         return box  # cannot happen with the incumbent inside; keep what is proven
                     duals.append(result.z if result.status is ConicStatus.OPTIMAL else None)
@@ -419,6 +437,7 @@ def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.n
             return Early(state, None, None, reason)
         return Early(state, v0, upper / unit, reason)
     problem = BoxProblem(program, user_gamma, B, root, root_proof)
+    problem.interior = v0
     if tighten_rounds and math.isfinite(upper):
         problem.root = problem.tighten(root, upper, tighten_rounds)
     return Prepared(problem, v0, upper, unit, factor, root_proof)
