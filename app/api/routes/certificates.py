@@ -30,7 +30,7 @@ def job_certificate(job: OwnedJob, store: JobStoreDep):
     return result["certificate"]
 
 
-@router.post("/v1/certificates/verify", response_model=VerifyReport, responses=_errors(413, 422))
+@router.post("/v1/certificates/verify", response_model=VerifyReport, responses=_errors(400, 413, 422))
 def verify_certificate(document: CertificateDocument):
     """Check a certificate document with the verifier (linear algebra only, no conic solver).
     ``valid`` is false, with ``first_failure`` naming the check, when any check fails."""
