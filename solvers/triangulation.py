@@ -117,7 +117,8 @@ def _track_result(chart: Chart, cameras, points, y, norm, status, lower, nodes, 
     X = X / np.linalg.norm(X)
     at_infinity = abs(X[3]) <= 1e-12
     point = X.tolist() if at_infinity else (X[:3] / X[3]).tolist()
-    proj = cameras @ X
+    # The cost of the point as returned (what anyone recomputing it gets, to the last bit).
+    proj = cameras @ (X if at_infinity else np.append(point, 1.0))
     residuals = proj[:, :2] / proj[:, 2:3] - points
     cost = norm_cost(residuals, norm)  # recomputed in pixels from the original data
     if lower is not None:

@@ -100,12 +100,17 @@ class _Item:
 
     def raw_residuals(self, solution) -> tuple[np.ndarray, np.ndarray]:
         """Residuals and depths of the caller's solution, from the raw data only."""
+        numerators, depths = self.raw_parts(solution)
+        return numerators / depths[:, None], depths
+
+    def raw_parts(self, solution) -> tuple[np.ndarray, np.ndarray]:
+        """Each residual as numerator / depth, from the raw data only."""
         if self.kind == "triangulation":
             proj = self.cameras @ solution
-            return proj[:, :2] / proj[:, 2:3] - self.points, proj[:, 2]
+            return proj[:, :2] - self.points * proj[:, 2:3], proj[:, 2]
         homogeneous = np.hstack([self.source, np.ones((len(self.source), 1))])
         proj = homogeneous @ solution.T
-        return self.target - proj[:, :-1] / proj[:, -1:], proj[:, -1]
+        return self.target * proj[:, -1:] - proj[:, :-1], proj[:, -1]
 
     def solution(self, claim: dict):
         """The caller's solution from the claim (homogeneous point, or matrix), sign-normalised."""
@@ -296,8 +301,10 @@ def _verify_search(item: _Item, options: dict, proof: dict, cost: float, lower_c
 
 def _check_program(item: _Item, solution, scale: float, proof: dict) -> None:
     """The program rebuilt from the data is the data's problem: at the solution and at points
-    around it, its residuals and depth signs are the raw data's (a program is a ratio of affine
-    maps, so agreement at generic points means agreement everywhere)."""
+    around it, each residual's numerator and depth are proportional to the raw data's, with a
+    positive factor (compared cross-multiplied, so that points near a depth of 0 compare as
+    well as any). A program is a ratio of affine maps, so agreement at generic points means
+    agreement everywhere."""
     v0 = item.to_program(solution)
     if v0 is None:
         raise Invalid("program", "the solution lies outside the program's chart")
@@ -305,12 +312,16 @@ def _check_program(item: _Item, solution, scale: float, proof: dict) -> None:
     samples = [v0] + [v0 + rng.normal(size=v0.shape) * 10.0 ** rng.uniform(-4, 0) * (1 + np.abs(v0))
                       for _ in range(8)]
     for v in samples:
-        residuals, depths = item.raw_residuals(item.from_program(v))
-        ours = item.program.residuals(v) / scale
-        ours_depth = item.program.den @ np.append(v, 1.0)
-        if not np.allclose(np.abs(ours), np.abs(residuals), rtol=1e-6, atol=1e-9 * (1 + np.max(np.abs(residuals)))):
+        numerators, depths = item.raw_parts(item.from_program(v))
+        V = np.append(v, 1.0)
+        ours, ours_depth = (item.program.num @ V) / scale, item.program.den @ V
+        left, right = ours * depths[:, None], numerators * ours_depth[:, None]
+        # Where a point is (nearly) on a camera's centre, numerator and depth are both round-off:
+        # such observations are compared at the other points.
+        clear = np.abs(depths) > 1e-6 * np.max(np.abs(depths))
+        if not np.all((np.abs(left - right) <= 1e-8 * (np.abs(left) + np.abs(right)) + 1e-300)[clear]):
             raise Invalid("program", "the program's residuals differ from the data's")
-        varying = ~item.program.exact & (np.abs(depths) > 1e-9 * np.max(np.abs(depths)))
+        varying = ~item.program.exact & clear
         relative = np.sign(ours_depth[varying]) * np.sign(depths[varying])
         if relative.size and not (np.all(relative > 0) or (item.kind != "triangulation" and np.all(relative < 0))):
             raise Invalid("program", "the program's depth signs differ from the data's")
