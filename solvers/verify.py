@@ -301,10 +301,8 @@ def _verify_search(item: _Item, options: dict, proof: dict, cost: float, lower_c
 
 def _check_program(item: _Item, solution, scale: float, proof: dict) -> None:
     """The program rebuilt from the data is the data's problem: at the solution and at points
-    around it, each residual's numerator and depth are proportional to the raw data's, with a
-    positive factor (compared cross-multiplied, so that points near a depth of 0 compare as
-    well as any). A program is a ratio of affine maps, so agreement at generic points means
-    agreement everywhere."""
+    around it, its residuals and depth signs are the raw data's. A program is a ratio of affine
+    maps, so agreement at generic points means agreement everywhere."""
     v0 = item.to_program(solution)
     if v0 is None:
         raise Invalid("program", "the solution lies outside the program's chart")
@@ -315,11 +313,11 @@ def _check_program(item: _Item, solution, scale: float, proof: dict) -> None:
         numerators, depths = item.raw_parts(item.from_program(v))
         V = np.append(v, 1.0)
         ours, ours_depth = (item.program.num @ V) / scale, item.program.den @ V
-        left, right = ours * depths[:, None], numerators * ours_depth[:, None]
         # Where a point is (nearly) on a camera's centre, numerator and depth are both round-off:
         # such observations are compared at the other points.
         clear = np.abs(depths) > 1e-6 * np.max(np.abs(depths))
-        if not np.all((np.abs(left - right) <= 1e-8 * (np.abs(left) + np.abs(right)) + 1e-300)[clear]):
+        theirs, ours = numerators[clear] / depths[clear, None], ours[clear] / ours_depth[clear, None]
+        if not np.allclose(ours, theirs, rtol=1e-6, atol=1e-9 * (1 + np.max(np.abs(theirs), initial=0))):
             raise Invalid("program", "the program's residuals differ from the data's")
         varying = ~item.program.exact & clear
         relative = np.sign(ours_depth[varying]) * np.sign(depths[varying])
