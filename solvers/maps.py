@@ -11,7 +11,6 @@ complement of the reference point.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -23,7 +22,7 @@ from .bnb import Progress
 from .charts import MapChart, _normaliser
 from .fractional import Certificate, Early, FractionalOptions, Reasons, prepare, search
 from .geometry import InputError, norm_cost
-from .verify import claim_of, self_check, self_check_enabled
+from .verify import checked_solve
 
 
 @dataclass
@@ -111,18 +110,12 @@ def fit_map(
 ) -> MapResult:
     """Certified global optimum of one map from correspondences ``source`` (k, n) -> ``target`` (k, m)."""
     options = options or MapOptions()
-    checking = self_check_enabled()
-    run = dataclasses.replace(options, certificate="full") if checking else options
     start = time.perf_counter()
     source = np.asarray(source, dtype=float)
     target = np.asarray(target, dtype=float)
-    result = _fit_map(source, target, run, callback, start)
-    if checking and result.certified:
-        kind = "resection" if source.shape[1] == 3 and target.shape[1] == 2 else "homography"
-        self_check(kind, (source, target), dataclasses.asdict(run), claim_of(result, matrix=result.matrix))
-    if options.certificate != "full" and result.certificate is not None:
-        result.certificate.proof = None
-    return result
+    kind = "resection" if (source.shape[1], target.shape[1]) == (3, 2) else "homography"
+    return checked_solve(kind, (source, target), options, lambda run: _fit_map(source, target, run, callback, start),
+                         lambda result: {"matrix": result.matrix})
 
 
 def _fit_map(source, target, options: MapOptions, callback, start: float) -> MapResult:

@@ -9,7 +9,6 @@ of ``t/s`` per view (see ALGORITHMS.md section 2). Costs are scaled so the incum
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -20,7 +19,7 @@ from .bnb import Progress
 from .charts import Chart, camera_centres
 from .fractional import NORMS, Certificate, Early, FractionalOptions, Reasons, prepare, search
 from .geometry import norm_cost
-from .verify import claim_of, self_check, self_check_enabled
+from .verify import checked_solve
 
 
 
@@ -79,18 +78,12 @@ def triangulate(
 ) -> TrackResult:
     """Certified global optimum of one track: ``cameras`` (k, 3, 4) of its views, ``points`` (k, 2)."""
     options = options or TriangulationOptions()
-    checking = self_check_enabled()
-    run = dataclasses.replace(options, certificate="full") if checking else options
     start = time.perf_counter()
     cameras = np.asarray(cameras, dtype=float)
     points = np.asarray(points, dtype=float)
-    result = _triangulate(cameras, points, run, callback, start)
-    if checking and result.certified:
-        self_check("triangulation", (cameras, points), dataclasses.asdict(run),
-                   claim_of(result, point=result.point))
-    if options.certificate != "full" and result.certificate is not None:
-        result.certificate.proof = None
-    return result
+    return checked_solve("triangulation", (cameras, points), options,
+                         lambda run: _triangulate(cameras, points, run, callback, start),
+                         lambda result: {"point": result.point})
 
 
 def _triangulate(cameras, points, options: TriangulationOptions, callback, start: float) -> TrackResult:

@@ -9,10 +9,11 @@ the smallest leaf bound reaches ``upper_bound - gap``. docs/certificate.md expla
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -486,3 +487,17 @@ def claim_of(result, **solution) -> dict:
     """What a certificate document says of one item (index 0), from a solver's result."""
     return {"index": 0, "status": result.status, "certified": result.certified, "cost": result.cost,
             "lower_bound": result.lower_bound, "gap": result.gap, **solution, "proof": proof_of(result)}
+
+
+def checked_solve(kind: str, arrays: tuple, options, solve: Callable, solution: Callable) -> Any:
+    """``solve(options)``, self-checked when GEOCERT_SELF_VERIFY=1: then it runs with a full
+    certificate and the verifier checks a certified result (``solution(result)`` gives the
+    claim's solution fields); the proof is kept only when the caller asked for it."""
+    checking = self_check_enabled()
+    run = dataclasses.replace(options, certificate="full") if checking else options
+    result = solve(run)
+    if checking and result.certified:
+        self_check(kind, arrays, dataclasses.asdict(run), claim_of(result, **solution(result)))
+    if options.certificate != "full" and result.certificate is not None:
+        result.certificate.proof = None
+    return result
