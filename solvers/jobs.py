@@ -134,7 +134,7 @@ def certificate_document(result, region: dict, meaning: str, scope: str) -> dict
     job's certificate document when the result is assembled)."""
     c = result.certificate
     proof = proof_of(result)
-    extra = {"proof": proof} if proof is not None and (c is None or c.proof is not None) else {}
+    extra = {"proof": proof} if proof is not None else {}
     if c is not None:
         return {**extra,
             "scope": c.scope,

@@ -137,6 +137,8 @@ def complete_functionals(B: np.ndarray) -> np.ndarray:
     """B's rows followed by an orthonormal basis of the complement of their span: a square,
     invertible F, so that a box on ``F v`` bounds every variable."""
     d = B.shape[1]
+    if len(B) == d:
+        return B
     _, _, vt = np.linalg.svd(B)
     return np.vstack([B, vt[len(B):d]])
 

@@ -262,7 +262,7 @@ def _verify_search(item: _Item, options: dict, proof: dict, cost: float, lower_c
     # hold for them, so its cost cap may be anything not below that bound (less the tolerance).
     claimed = lower_claimed * unit
     cap = max(0.0, claimed - BOUND_TOLERANCE * max(1.0, abs(claimed)))
-    _check_program(item, solution, scale, proof)
+    _check_program(item, solution, scale)
     passed.append("program")
 
     max_residual = options.get("max_residual")
@@ -300,7 +300,7 @@ def _verify_search(item: _Item, options: dict, proof: dict, cost: float, lower_c
     return min(bounds) / unit if bounds else math.inf
 
 
-def _check_program(item: _Item, solution, scale: float, proof: dict) -> None:
+def _check_program(item: _Item, solution, scale: float) -> None:
     """The program rebuilt from the data is the data's problem: at the solution and at points
     around it, its residuals and depth signs are the raw data's. A program is a ratio of affine
     maps, so agreement at generic points means agreement everywhere."""

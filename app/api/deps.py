@@ -62,3 +62,8 @@ def submit_chunks(store: JobStore, meta: dict, request_id: str | None) -> None:
     signatures = [solve_segment.s(meta["id"], start, stop, request_id) for start, stop in meta["chunks"]]
     result = group(signatures).apply_async()
     store.add_task_ids(meta["id"], *(task.id for task in result.results))
+
+
+def error_responses(*codes: int) -> dict:
+    """OpenAPI responses of a keyed, rate-limited route: 401, 403, 429 and ``codes``."""
+    return {code: ERRORS[code] for code in (401, 403, 429) + codes}

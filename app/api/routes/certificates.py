@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from fastapi import APIRouter, Depends
 
-from app.api.deps import ERRORS, JobStoreDep, rate_limited
+from app.api.deps import JobStoreDep, error_responses, rate_limited
 from app.api.routes.jobs import OwnedJob
 from app.problems import ApiProblem
 from app.schemas import CertificateDocument, VerifyReport
@@ -14,11 +14,7 @@ from workers.store import TERMINAL
 router = APIRouter(tags=["certificates"], dependencies=[Depends(rate_limited)])
 
 
-def _errors(*codes: int) -> dict:
-    return {code: ERRORS[code] for code in (401, 403, 429) + codes}
-
-
-@router.get("/v1/jobs/{job_id}/certificate", response_model=CertificateDocument, responses=_errors(404, 409))
+@router.get("/v1/jobs/{job_id}/certificate", response_model=CertificateDocument, responses=error_responses(404, 409))
 def job_certificate(job: OwnedJob, store: JobStoreDep):
     """The certificate document of a finished job submitted with ``options.certificate = "full"``."""
     if job["status"] not in TERMINAL:
@@ -30,7 +26,7 @@ def job_certificate(job: OwnedJob, store: JobStoreDep):
     return result["certificate"]
 
 
-@router.post("/v1/certificates/verify", response_model=VerifyReport, responses=_errors(400, 413, 422))
+@router.post("/v1/certificates/verify", response_model=VerifyReport, responses=error_responses(400, 413, 422))
 def verify_certificate(document: CertificateDocument):
     """Check a certificate document with the verifier (linear algebra only, no conic solver).
     ``valid`` is false, with ``first_failure`` naming the check, when any check fails."""

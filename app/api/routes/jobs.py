@@ -11,7 +11,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Header, Response
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
-from app.api.deps import ERRORS, Caller, JobStoreDep, rate_limited, submit_chunks
+from app.api.deps import Caller, JobStoreDep, error_responses, rate_limited, submit_chunks
 from app.core.config import get_settings
 from app.problems import ApiProblem
 from app.schemas import Job, JobRequest
@@ -21,10 +21,6 @@ from workers import logs
 from workers.store import TERMINAL, JobStore
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"], dependencies=[Depends(rate_limited)])
-
-
-def _errors(*codes: int) -> dict:
-    return {code: ERRORS[code] for code in (401, 403, 429) + codes}
 
 
 def _check_limits(kind, parsed, body, request: dict) -> None:
@@ -50,7 +46,7 @@ def _check_limits(kind, parsed, body, request: dict) -> None:
 
 @router.post("", status_code=202, response_model=Job, responses={
     200: {"model": Job, "description": "a replay: the job made earlier for this Idempotency-Key and body"},
-    **_errors(400, 409, 413, 422)})
+    **error_responses(400, 409, 413, 422)})
 def submit_job(
     body: JobRequest,
     response: Response,
@@ -123,13 +119,13 @@ def _owned(job_id: str, store: JobStoreDep, owner: Caller) -> dict:
 OwnedJob = Annotated[dict, Depends(_owned)]
 
 
-@router.get("/{job_id}", response_model=Job, responses=_errors(404))
+@router.get("/{job_id}", response_model=Job, responses=error_responses(404))
 def get_job(job: OwnedJob, store: JobStoreDep):
     """Status, progress, and once finished the result (or the error as problem details)."""
     return store.document(job)
 
 
-@router.post("/{job_id}/cancel", response_model=Job, status_code=202, responses=_errors(404))
+@router.post("/{job_id}/cancel", response_model=Job, status_code=202, responses=error_responses(404))
 def cancel_job(job: OwnedJob, store: JobStoreDep):
     """A queued job never starts; a running one stops at its next node and keeps its best result."""
     job_id = job["id"]
@@ -145,7 +141,7 @@ def cancel_job(job: OwnedJob, store: JobStoreDep):
     return store.document(store.get(job_id))
 
 
-@router.delete("/{job_id}", status_code=204, responses=_errors(404, 409))
+@router.delete("/{job_id}", status_code=204, responses=error_responses(404, 409))
 def delete_job(job: OwnedJob, store: JobStoreDep):
     """Remove a finished job and everything kept for it (409 while it is queued or running)."""
     if job["status"] not in TERMINAL:
@@ -162,7 +158,7 @@ def _resume_point(last_event_id: Annotated[str | None, Header()] = None) -> str:
     return last_event_id
 
 
-@router.get("/{job_id}/events", response_class=EventSourceResponse, responses=_errors(404, 422))
+@router.get("/{job_id}/events", response_class=EventSourceResponse, responses=error_responses(404, 422))
 def job_events(job: OwnedJob, store: JobStoreDep, after: Annotated[str, Depends(_resume_point)]):
     """Server-Sent Events: `status` and `progress` events, then one `end` event after which the
     stream closes; resumes after `Last-Event-ID`. Event data is JSON."""

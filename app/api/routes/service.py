@@ -7,7 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends
 from fastapi.responses import JSONResponse
 
-from app.api.deps import ERRORS, get_store, rate_limited
+from app.api.deps import error_responses, get_store, rate_limited
 from app.schemas import REQUEST_MODELS, ProblemKindInfo
 from solvers.jobs import KINDS, default_options
 from workers.store import JobStore
@@ -16,7 +16,7 @@ router = APIRouter()
 
 
 @router.get("/v1/problems", response_model=list[ProblemKindInfo], tags=["problems"],
-            dependencies=[Depends(rate_limited)], responses={code: ERRORS[code] for code in (401, 403, 429)})
+            dependencies=[Depends(rate_limited)], responses=error_responses())
 def list_problems():
     """The problem kinds served, with the JSON schema of a job and the default options."""
     return [
