@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import enum
 import functools
+import math
 from dataclasses import dataclass
 
 import clarabel
@@ -127,19 +128,17 @@ def _retried(result: ConicResult, q, A: sp.csc_matrix, b, cones: ConeSpec) -> Co
 
 
 def _result(solution) -> ConicResult:
-    status = map_clarabel_status(solution.status)
-    x = np.asarray(solution.x, dtype=float)
-    z = np.asarray(solution.z, dtype=float)
-    if status is ConicStatus.OPTIMAL and not (np.all(np.isfinite(x)) and np.isfinite(solution.obj_val)):
+    raw_status = str(solution.status)
+    status = _CLARABEL_STATUS.get(raw_status, ConicStatus.FAILED)
+    x = np.array(solution.x, dtype=float)
+    z = np.array(solution.z, dtype=float)
+    primal, dual = float(solution.obj_val), float(solution.obj_val_dual)
+    # A sum is finite only if every term is (an overflowing sum of finite terms is refused too,
+    # which is as it should be); cheaper than np.isfinite on the small vectors of the hot path.
+    if status is ConicStatus.OPTIMAL and not math.isfinite(float(x.sum()) + primal):
         status = ConicStatus.FAILED
-    return ConicResult(
-        status=status,
-        x=x,
-        z=z,
-        primal_objective=float(solution.obj_val),
-        dual_objective=float(solution.obj_val_dual),
-        raw_status=str(solution.status),
-    )
+    return ConicResult(status=status, x=x, z=z, primal_objective=primal, dual_objective=dual,
+                       raw_status=raw_status)
 
 
 class ReusableConicProgram:

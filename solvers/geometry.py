@@ -54,10 +54,12 @@ def depths(cameras: np.ndarray, X: np.ndarray) -> np.ndarray:
 
 
 def norm_cost(residuals: np.ndarray, norm: str) -> float:
+    # Method calls rather than np.sum and np.linalg.norm: the same sums, a few microseconds less
+    # on the small arrays of a triangulation's inner loop.
     if norm == "L2L2":
-        return float(np.sum(residuals**2))
+        return float((residuals * residuals).sum())
     if norm == "L2L1":
-        return float(np.sum(np.linalg.norm(residuals, axis=1)))
+        return float(np.sqrt((residuals * residuals).sum(axis=1)).sum())
     if norm == "L1L1":
-        return float(np.sum(np.abs(residuals)))
+        return float(np.abs(residuals).sum())
     raise ValueError(f"unknown norm {norm!r}")

@@ -46,19 +46,23 @@ class FractionalProgram:
         self._linear_slack = 1e-12 * np.linalg.norm(self.linear, axis=1)  # round-off allowed
 
     def cost(self, v: np.ndarray) -> float:
-        V = np.append(v, 1.0)
+        V = np.concatenate((v, (1.0,)))
         g = self.den @ V
-        if np.any(g <= 0) or np.any(self.linear @ V < -self._linear_slack * np.linalg.norm(V)):
+        if (g <= 0).any():
             return math.inf
+        if len(self.linear):
+            linear = self.linear @ V
+            if (linear < 0).any() and (linear < -self._linear_slack * np.linalg.norm(V)).any():
+                return math.inf
         return norm_cost((self.num @ V) / g[:, None], self.norm)
 
     def residuals(self, v: np.ndarray) -> np.ndarray:
-        V = np.append(v, 1.0)
+        V = np.concatenate((v, (1.0,)))
         return (self.num @ V) / (self.den @ V)[:, None]
 
     def residual_jacobian(self, v: np.ndarray) -> np.ndarray:
         """(N, m, d): derivative of each residual coordinate."""
-        V = np.append(v, 1.0)
+        V = np.concatenate((v, (1.0,)))
         n, g = self.num @ V, self.den @ V
         d = self.dim
         return self.num[:, :, :d] / g[:, None, None] - n[:, :, None] * self.den[:, None, :d] / (g**2)[:, None, None]
