@@ -21,12 +21,11 @@ def camera_centres(cameras: np.ndarray) -> np.ndarray:
     return centres * np.where(centres[:, 3:4] < 0, -1.0, 1.0)
 
 
-def _camera_frame(cameras: np.ndarray) -> np.ndarray:
+def _camera_frame(centres: np.ndarray) -> np.ndarray:
     """A 4x4 similarity H (X = H X') centring the camera centres with unit mean distance.
 
     Only conditioning: the problem is the same in any frame, and H keeps the last coordinate.
     """
-    centres = camera_centres(cameras)
     finite = np.abs(centres[:, 3]) > 1e-9 * np.linalg.norm(centres, axis=1)
     H = np.eye(4)
     if np.any(finite):
@@ -40,12 +39,11 @@ def _camera_frame(cameras: np.ndarray) -> np.ndarray:
     return H
 
 
-def _choose_reference(cameras: np.ndarray, points: np.ndarray) -> int:
+def _choose_reference(cameras: np.ndarray, points: np.ndarray, centres: np.ndarray) -> int:
     """The camera whose centre projects farthest from the other views' observations.
 
     A centre inside another view's residual cone makes the chart's region unbounded.
     """
-    centres = camera_centres(cameras)
     proj = np.einsum("jab,rb->rja", cameras, centres)  # centre r seen by camera j
     depth = proj[:, :, 2]
     safe = np.where(depth > 1e-12 * np.linalg.norm(proj, axis=2), depth, np.nan)
@@ -72,8 +70,9 @@ class Chart:
 
     @classmethod
     def build(cls, cameras: np.ndarray, points: np.ndarray, norm: str) -> "Chart":
-        reference = _choose_reference(cameras, points)
-        frame = _camera_frame(cameras)
+        centres = camera_centres(cameras)
+        reference = _choose_reference(cameras, points, centres)
+        frame = _camera_frame(centres)
         cams = cameras @ frame
         cams = cams / np.linalg.norm(cams[:, 2, :3], axis=1)[:, None, None]
         depth_row = cams[reference, 2]

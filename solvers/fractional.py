@@ -60,20 +60,24 @@ class FractionalOptions:
 
 def branch_directions(program: FractionalProgram, subspace: np.ndarray) -> np.ndarray:
     """Rows spanning ``subspace`` (k orthonormal rows): the best-conditioned depth gradients
-    first (greedy), completed with orthogonal directions of the subspace."""
-    candidates = [program.den[i, :-1] for i in np.flatnonzero(~program.exact)]
-    candidates = [c / np.linalg.norm(c) for c in candidates if np.linalg.norm(c) > 0]
+    first (greedy Gram-Schmidt), completed with orthogonal directions of the subspace."""
+    gradients = program.den[~program.exact, :-1]
+    sizes = np.sqrt((gradients * gradients).sum(axis=1))
+    candidates = gradients[sizes > 0] / sizes[sizes > 0, None]
+    residuals = candidates.copy()  # each candidate's part orthogonal to the basis so far
     k = subspace.shape[0]
     chosen: list[np.ndarray] = []
     basis: list[np.ndarray] = []
-    while len(chosen) < k and candidates:
-        residuals = [c - sum((c @ b) * b for b in basis) for c in candidates]
-        norms = [np.linalg.norm(r) for r in residuals]
+    while len(chosen) < k and len(candidates):
+        norms = np.sqrt((residuals * residuals).sum(axis=1))
         best = int(np.argmax(norms))
         if norms[best] < 0.25:
             break
-        chosen.append(candidates.pop(best))
+        chosen.append(candidates[best])
         basis.append(residuals[best] / norms[best])
+        keep = np.arange(len(candidates)) != best
+        candidates, residuals = candidates[keep], residuals[keep]
+        residuals = residuals - np.outer(residuals @ basis[-1], basis[-1])
     for e in subspace:
         if len(basis) == k:
             break

@@ -74,11 +74,9 @@ def residual_region(program: FractionalProgram, gamma: float) -> tuple[np.ndarra
     ``||n_i|| <= gamma * g_i`` also gives positive depths.
     """
     m = program.num.shape[1]
-    rows = list(program.linear)
-    for i in range(len(program.num)):
-        rows.append(gamma * program.den[i])
-        rows.extend(program.num[i])
-    E = np.array(rows)  # each row: coefficients of v, then the constant
+    # Each row: coefficients of v, then the constant. Per observation: gamma * depth, numerator.
+    per_observation = np.concatenate((gamma * program.den[:, None, :], program.num), axis=1)
+    E = np.concatenate((program.linear, per_observation.reshape(-1, program.num.shape[2])))
     cones = ConeSpec(nonneg=len(program.linear), soc=(m + 1,) * len(program.num))
     return -E[:, :-1], E[:, -1].copy(), cones
 
@@ -87,38 +85,50 @@ _DENSE_LIMIT = 200_000  # relaxations with fewer matrix entries are assembled de
 
 
 class _Rows:
-    """A block of rows ``c + E x``: E as a dense part over the d unknowns plus (row, column,
-    value) triplets for the per-observation columns, so that assembly stays linear in size."""
+    """``count`` groups of ``per`` rows ``c + E x``, one group per observation (or a single group
+    of rows that belong to none). E's columns over the d unknowns are held dense, (count, per, d);
+    its per-observation columns as entries ``(slot, columns, values)``: row ``slot`` of group i
+    has ``values[i]`` in column ``columns[i]``. Assembly stays linear in size and, for small
+    problems, a handful of array operations."""
 
-    def __init__(self, rows: int, d: int):
-        self.v = np.zeros((rows, d))
-        self.c = np.zeros(rows)
-        self.triplets: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    def __init__(self, count: int, per: int, d: int):
+        self.v = np.zeros((count, per, d))
+        self.c = np.zeros((count, per))
+        self.entries: list[tuple[int, np.ndarray, np.ndarray | float]] = []
 
-    def set(self, rows: np.ndarray, cols: np.ndarray, values) -> None:
-        """Entries (rows[i], cols[i]) = values[i] (or the one value given); rows, cols alike."""
-        if np.isscalar(values):
-            values = np.full(len(rows), float(values))
-        self.triplets.append((rows, cols, values))
+    def set(self, slot: int, columns: np.ndarray, values) -> None:
+        self.entries.append((slot, columns, values))
 
 
 def _assemble(blocks: list[_Rows], n: int):
     """A = -E for Clarabel (dense when small, CSC otherwise) and the constants b = c."""
-    offsets = np.cumsum([0] + [len(b.c) for b in blocks])
-    V = np.vstack([b.v for b in blocks])
-    rows = np.concatenate([r + offsets[i] for i, b in enumerate(blocks) for r, _, _ in b.triplets])
-    cols = np.concatenate([k for b in blocks for _, k, _ in b.triplets])
-    vals = np.concatenate([x for b in blocks for _, _, x in b.triplets])
-    c = np.concatenate([b.c for b in blocks])
-    d = V.shape[1]
-    if V.shape[0] * n <= _DENSE_LIMIT:
-        E = np.zeros((V.shape[0], n))
-        E[:, :d] = V
-        E[rows, cols] = vals
+    d = blocks[0].v.shape[2]
+    total = sum(b.c.size for b in blocks)
+    c = np.concatenate([b.c.ravel() for b in blocks])
+    if total * n <= _DENSE_LIMIT:
+        E = np.zeros((total, n))
+        start = 0
+        for b in blocks:
+            count, per = b.c.shape
+            group = E[start:start + count * per].reshape(count, per, n)  # a view of E's rows
+            group[:, :, :d] = b.v
+            every = np.arange(count)
+            for slot, columns, values in b.entries:
+                group[every, slot, columns] = values
+            start += count * per
         return -E, c
-    vr, vc = np.nonzero(V)
-    E = sp.coo_matrix((np.concatenate([V[vr, vc], vals]), (np.concatenate([vr, rows]), np.concatenate([vc, cols]))),
-                      shape=(V.shape[0], n))
+    rows, cols, vals = [], [], []
+    start = 0
+    for b in blocks:
+        count, per = b.c.shape
+        dense = b.v.reshape(count * per, d)
+        vr, vc = np.nonzero(dense)
+        rows.append(start + vr), cols.append(vc), vals.append(dense[vr, vc])
+        first = start + per * np.arange(count)
+        for slot, columns, values in b.entries:
+            rows.append(first + slot), cols.append(columns), vals.append(np.broadcast_to(values, (count,)))
+        start += count * per
+    E = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(total, n))
     return (-E).tocsc(), c
 
 
@@ -234,75 +244,65 @@ class Relaxation:
         V = len(obs)
         blocks: list[_Rows] = []
 
-        def block(rows: int) -> _Rows:
-            blocks.append(_Rows(rows, d))
+        def block(count: int, per: int) -> _Rows:
+            blocks.append(_Rows(count, per, d))
             return blocks[-1]
 
         k = len(self.B)
         L = len(program.linear)
-        B = block(2 * k + L)  # the box on z = B v, and the domain's linear constraints
-        B.v[:k], B.c[:k] = self.B, -box.lo
-        B.v[k:2 * k], B.c[k:2 * k] = -self.B, box.hi
-        B.v[2 * k:], B.c[2 * k:] = program.linear[:, :-1], program.linear[:, -1]
+        B = block(1, 2 * k + L)  # the box on z = B v, and the domain's linear constraints
+        B.v[0, :k], B.c[0, :k] = self.B, -box.lo
+        B.v[0, k:2 * k], B.c[0, k:2 * k] = -self.B, box.hi
+        B.v[0, 2 * k:], B.c[0, 2 * k:] = program.linear[:, :-1], program.linear[:, -1]
         if envelope:  # envelope of t/s on [0, u] x [L, U], first cone vacuous since l = 0 (5 rows each)
-            B = block(5 * nE)
-            rows = 5 * np.arange(nE)
+            B = block(nE, 5)
             g = program.den[env]
-            B.set(rows, w_idx, 1.0), B.set(rows, t_idx, -low / u)
-            B.set(rows + 1, t_idx, high / u), B.set(rows + 1, w_idx, -1.0)
-            B.v[rows + 2], B.c[rows + 2] = g[:, :-1], g[:, -1] - low
-            B.set(rows + 2, w_idx, -1.0), B.set(rows + 2, t_idx, low / u)
-            B.v[rows + 3], B.c[rows + 3] = -g[:, :-1], high - g[:, -1]
-            B.set(rows + 3, w_idx, 1.0), B.set(rows + 3, t_idx, -high / u)
-            B.set(rows + 4, t_idx, -1.0)
-            B.c[rows + 4] = u
+            B.set(0, w_idx, 1.0), B.set(0, t_idx, -low / u)
+            B.set(1, t_idx, high / u), B.set(1, w_idx, -1.0)
+            B.v[:, 2], B.c[:, 2] = g[:, :-1], g[:, -1] - low
+            B.set(2, w_idx, -1.0), B.set(2, t_idx, low / u)
+            B.v[:, 3], B.c[:, 3] = -g[:, :-1], high - g[:, -1]
+            B.set(3, w_idx, 1.0), B.set(3, t_idx, -high / u)
+            B.set(4, t_idx, -1.0)
+            B.c[:, 4] = u
         socs: list[int] = []
         if norm == "L1L1":  # top >= sum |n_a|, and sum |n_a| <= gamma * depth
             signs = np.array(list(itertools.product((1.0, -1.0), repeat=m)))
-            for with_gamma in ([False, True] if finite_gamma else [False]):
-                B = block(len(signs) * V)
-                for s_index, sign in enumerate(signs):
-                    rows = len(signs) * np.arange(V) + s_index
-                    combined = -np.einsum("a,vab->vb", sign, num)
-                    B.v[rows], B.c[rows] = combined[:, :-1], combined[:, -1]
-                    if with_gamma:
-                        B.v[rows] += gamma * depth[:, :-1]
-                        B.c[rows] += gamma * depth[:, -1]
-                    else:
-                        B.set(rows, top_idx, 1.0)
-        n_lin = sum(len(b.c) for b in blocks)
+            combined = -np.einsum("sa,vab->vsb", signs, num)  # (V, signs, d + 1)
+            B = block(V, len(signs))
+            B.v[:], B.c[:] = combined[:, :, :-1], combined[:, :, -1]
+            for s_index in range(len(signs)):
+                B.set(s_index, top_idx, 1.0)
+            if finite_gamma:
+                B = block(V, len(signs))
+                B.v[:] = combined[:, :, :-1] + gamma * depth[:, None, :-1]
+                B.c[:] = combined[:, :, -1] + gamma * depth[:, None, -1]
+        n_lin = sum(b.c.size for b in blocks)
         if norm == "L2L2":  # top * depth >= |n|^2: (top + depth, 2 n, top - depth) in the SOC
-            B = block((m + 2) * V)
-            rows = (m + 2) * np.arange(V)
-            B.set(rows, top_idx, 1.0)
-            B.v[rows], B.c[rows] = depth[:, :-1], depth[:, -1]
-            for a in range(m):
-                B.v[rows + 1 + a], B.c[rows + 1 + a] = 2 * num[:, a, :-1], 2 * num[:, a, -1]
-            B.set(rows + m + 1, top_idx, 1.0)
-            B.v[rows + m + 1], B.c[rows + m + 1] = -depth[:, :-1], -depth[:, -1]
+            B = block(V, m + 2)
+            B.set(0, top_idx, 1.0)
+            B.v[:, 0], B.c[:, 0] = depth[:, :-1], depth[:, -1]
+            B.v[:, 1:m + 1], B.c[:, 1:m + 1] = 2 * num[:, :, :-1], 2 * num[:, :, -1]
+            B.set(m + 1, top_idx, 1.0)
+            B.v[:, m + 1], B.c[:, m + 1] = -depth[:, :-1], -depth[:, -1]
             socs += [m + 2] * V
         elif norm == "L2L1":  # top >= |n|
-            B = block((m + 1) * V)
-            rows = (m + 1) * np.arange(V)
-            B.set(rows, top_idx, 1.0)
-            for a in range(m):
-                B.v[rows + 1 + a], B.c[rows + 1 + a] = num[:, a, :-1], num[:, a, -1]
+            B = block(V, m + 1)
+            B.set(0, top_idx, 1.0)
+            B.v[:, 1:], B.c[:, 1:] = num[:, :, :-1], num[:, :, -1]
             socs += [m + 1] * V
         if finite_gamma and norm != "L1L1":  # every residual of a better point is below gamma
-            B = block((m + 1) * V)
-            rows = (m + 1) * np.arange(V)
-            B.v[rows], B.c[rows] = gamma * depth[:, :-1], gamma * depth[:, -1]
-            for a in range(m):
-                B.v[rows + 1 + a], B.c[rows + 1 + a] = num[:, a, :-1], num[:, a, -1]
+            B = block(V, m + 1)
+            B.v[:, 0], B.c[:, 0] = gamma * depth[:, :-1], gamma * depth[:, -1]
+            B.v[:, 1:], B.c[:, 1:] = num[:, :, :-1], num[:, :, -1]
             socs += [m + 1] * V
         q = np.zeros(n)
         q[q_idx] = 1.0
         if envelope:  # r * (u w) >= t^2 (the envelope's second cone), everything divided by u
-            B = block(3 * nE)
-            rows = 3 * np.arange(nE)
-            B.set(rows, r_idx, 1.0), B.set(rows, w_idx, 1.0 / u)
-            B.set(rows + 1, t_idx, 2.0 / u)
-            B.set(rows + 2, r_idx, 1.0), B.set(rows + 2, w_idx, -1.0 / u)
+            B = block(nE, 3)
+            B.set(0, r_idx, 1.0), B.set(0, w_idx, 1.0 / u)
+            B.set(1, t_idx, 2.0 / u)
+            B.set(2, r_idx, 1.0), B.set(2, w_idx, -1.0 / u)
             socs += [3] * nE
             q[r_idx] = 1.0
         else:

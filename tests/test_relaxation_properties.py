@@ -1,9 +1,13 @@
 """Every relaxation under-estimates: at random points of random boxes, bound <= true cost."""
 
+import contextlib
+
 import numpy as np
+import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from solvers import relaxation
 from solvers.bnb import Box, BoxStatus
 from solvers.fractional import Prepared
 from solvers.triangulation import NORMS, TriangulationOptions, prepare_track
@@ -49,3 +53,32 @@ def test_box_bound_never_exceeds_cost_inside_the_box(seed, views, norm, shrink, 
     else:
         # "empty" means no point of the box costs at most the upper bound: a sample contradicts it.
         assert bound.status != BoxStatus.EMPTY or cheapest > upper * (1 - 1e-9)
+
+
+@contextlib.contextmanager
+def dense_limit(value: int):
+    """The size below which relaxations are assembled dense, set for the block's duration."""
+    saved, relaxation._DENSE_LIMIT = relaxation._DENSE_LIMIT, value
+    try:
+        yield
+    finally:
+        relaxation._DENSE_LIMIT = saved
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), views=st.integers(2, 6), norm=st.sampled_from(NORMS), envelope=st.booleans())
+def test_dense_and_sparse_assembly_build_the_same_matrix(seed, views, norm, envelope):
+    """Small relaxations are assembled dense, large ones sparse: both paths give the same A."""
+    rng = np.random.default_rng(seed)
+    cameras = random_cameras(rng, views)
+    _, points = noisy_track(rng, cameras, noise_px=3.0)
+    _, prepared = prepare_track(cameras, points, TriangulationOptions(norm=norm))
+    if not isinstance(prepared, Prepared):
+        return
+    problem = prepared.problem
+    dense = problem.conic_data(problem.root, prepared.upper, envelope)
+    with dense_limit(0):
+        sparse = problem.conic_data(problem.root, prepared.upper, envelope)
+    assert isinstance(dense.A, np.ndarray) and sp.issparse(sparse.A)
+    assert np.array_equal(sparse.A.toarray(), dense.A)
+    assert np.array_equal(sparse.b, dense.b) and sparse.cones == dense.cones
