@@ -15,6 +15,11 @@ import numpy as np
 from .relaxation import FractionalProgram
 
 
+def _lengths(x: np.ndarray, axis: int) -> np.ndarray:
+    """np.linalg.norm(x, axis=axis) for real x, without its argument handling (the hot path)."""
+    return np.sqrt((x * x).sum(axis=axis))
+
+
 def camera_centres(cameras: np.ndarray) -> np.ndarray:
     """Null vectors of the (k, 3, 4) cameras, signed so that the last coordinate is not negative."""
     centres = np.linalg.svd(cameras)[2][:, -1, :]
@@ -26,12 +31,12 @@ def _camera_frame(centres: np.ndarray) -> np.ndarray:
 
     Only conditioning: the problem is the same in any frame, and H keeps the last coordinate.
     """
-    finite = np.abs(centres[:, 3]) > 1e-9 * np.linalg.norm(centres, axis=1)
+    finite = np.abs(centres[:, 3]) > 1e-9 * _lengths(centres, 1)
     H = np.eye(4)
-    if np.any(finite):
+    if finite.any():
         euclid = centres[finite, :3] / centres[finite, 3:4]
         middle = euclid.mean(axis=0)
-        spread = float(np.mean(np.linalg.norm(euclid - middle, axis=1)))
+        spread = float(_lengths(euclid - middle, 1).mean())
         if not spread > 0:
             spread = 1.0
         H[:3, :3] *= spread
@@ -46,8 +51,8 @@ def _choose_reference(cameras: np.ndarray, points: np.ndarray, centres: np.ndarr
     """
     proj = np.einsum("jab,rb->rja", cameras, centres)  # centre r seen by camera j
     depth = proj[:, :, 2]
-    safe = np.where(depth > 1e-12 * np.linalg.norm(proj, axis=2), depth, np.nan)
-    distance = np.linalg.norm(proj[:, :, :2] / safe[:, :, None] - points[None], axis=2)
+    safe = np.where(depth > 1e-12 * _lengths(proj, 2), depth, np.nan)
+    distance = _lengths(proj[:, :, :2] / safe[:, :, None] - points[None], 2)
     # Behind camera j (or at infinity) is outside its cone: as good as infinitely far.
     distance = np.where(np.isnan(distance), np.inf, distance)
     np.fill_diagonal(distance, np.inf)
@@ -74,19 +79,21 @@ class Chart:
         reference = _choose_reference(cameras, points, centres)
         frame = _camera_frame(centres)
         cams = cameras @ frame
-        cams = cams / np.linalg.norm(cams[:, 2, :3], axis=1)[:, None, None]
+        cams = cams / _lengths(cams[:, 2, :3], 1)[:, None, None]
         depth_row = cams[reference, 2]
         _, _, vt = np.linalg.svd(depth_row[None, :])
-        T = np.column_stack([vt[1], vt[2], vt[3], depth_row / (depth_row @ depth_row)])
+        T = np.empty((4, 4))
+        T[:, :3] = vt[1:].T
+        T[:, 3] = depth_row / (depth_row @ depth_row)
         shifted = cams.copy()  # image coordinates translated to the observation
         shifted[:, 0] -= points[:, 0:1] * cams[:, 2]
         shifted[:, 1] -= points[:, 1:2] * cams[:, 2]
         M = shifted @ T  # (k, 3, 4)
-        grad = np.linalg.norm(M[:, 2, :3], axis=1)
-        exact = grad <= 1e-9 * np.linalg.norm(M[:, 2], axis=1)
+        grad = _lengths(M[:, 2, :3], 1)
+        exact = grad <= 1e-9 * _lengths(M[:, 2], 1)
         exact[reference] = True
         scale = np.where(exact, M[:, 2, 3], grad)
-        behind = bool(np.any(exact & (scale <= 0)))
+        behind = bool((exact & (scale <= 0)).any())
         scale = np.where(scale == 0, 1.0, np.abs(scale))
         M = M / scale[:, None, None]
         den = M[:, 2, :].copy()

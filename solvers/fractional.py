@@ -88,6 +88,21 @@ def branch_directions(program: FractionalProgram, subspace: np.ndarray) -> np.nd
     return np.array(chosen)
 
 
+def depth_subspace(program: FractionalProgram) -> np.ndarray:
+    """Orthonormal rows spanning the gradients of the depths that vary (the whole space when
+    none does). Only along these do the envelopes need bounds: a search branches on them alone,
+    and the directions it leaves out are bounded by the residual cones (and, with a full
+    certificate, by proven root bounds). Directions below round-off (1e-12 of the largest
+    singular value; the chart already treats a depth varying by 1e-9 as constant) are left out."""
+    gradients = program.den[~program.exact, :-1]
+    if len(gradients):
+        _, singular, vt = np.linalg.svd(gradients)
+        rank = int((singular > 1e-12 * singular[0]).sum()) if singular[0] > 0 else 0
+        if rank:
+            return vt[:rank]
+    return np.eye(program.dim)
+
+
 def root_region(program: FractionalProgram, B: np.ndarray, gamma: float,
                 certify: bool = False) -> tuple[str, Box | None, RootProof | None]:
     """Bound B v over the residual region: 2k small SOCPs (2d with ``certify``, which bounds the

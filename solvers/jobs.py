@@ -169,7 +169,8 @@ def track_document(result: TrackResult) -> dict:
     certificate = certificate_document(
         result, region,
         "lower <= (F X) / (d . X) <= upper for every point X of the scope, "
-        "F = functionals, d = denominator (positive in front of the reference view)",
+        "F = functionals (one per direction the other views' depths vary along), "
+        "d = denominator (positive in front of the reference view)",
         "every point in front of every camera")
     return {"point": result.point, "at_infinity": result.at_infinity, **outcome_document(result),
             "certificate": certificate}

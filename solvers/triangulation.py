@@ -2,9 +2,10 @@
 
 Each track is a fractional program ``sum_i f_i(X) / g_i(X)`` (numerator convex, depth affine).
 The search space is a projective chart where a reference camera's depth is 1, so that camera's
-term is convex and points at infinity are ordinary points (inverse depth 0). Boxes live on three
-well-conditioned depth functionals; the lower bound on a box is one SOCP with the convex envelope
-of ``t/s`` per view (see ALGORITHMS.md section 2). Costs are scaled so the incumbent costs 1.
+term is convex and points at infinity are ordinary points (inverse depth 0). Boxes live on
+well-conditioned depth functionals, as many as the other views' depths vary along (one for two
+views, up to three); the lower bound on a box is one SOCP with the convex envelope of ``t/s`` per
+view (see ALGORITHMS.md section 2). Costs are scaled so the incumbent costs 1.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 
 from .bnb import Progress
 from .charts import Chart, camera_centres
-from .fractional import NORMS, Certificate, Early, FractionalOptions, Reasons, prepare, search
+from .fractional import NORMS, Certificate, Early, FractionalOptions, Reasons, depth_subspace, prepare, search
 from .geometry import norm_cost
 from .verify import checked_solve
 
@@ -58,8 +59,10 @@ def prepare_track(cameras: np.ndarray, points: np.ndarray, options: Triangulatio
     chart = Chart.build(cameras, points, options.norm)
     if chart.constant_depth_behind:
         return chart, TrackResult("infeasible", False, reason=_REASONS.no_domain)
-    prepared = prepare(chart.program, chart.dlt(), np.eye(3), options.abs_gap, options.max_residual, _REASONS,
-                       certify=options.certificate == "full")
+    # Branch only where the depths vary: one direction for two views, two for three (most of a
+    # turntable's tracks), three from four views on.
+    prepared = prepare(chart.program, chart.dlt(), depth_subspace(chart.program), options.abs_gap,
+                       options.max_residual, _REASONS, certify=options.certificate == "full")
     if isinstance(prepared, Early):
         if prepared.incumbent is None:
             return chart, TrackResult(prepared.status, False, reason=prepared.reason)

@@ -34,12 +34,18 @@ def test_box_bound_never_exceeds_cost_inside_the_box(seed, views, norm, shrink, 
         return  # closed before any box exists (noiseless or degenerate): nothing to bound
     problem = prepared.problem
     root = problem.root
-    # A random sub-box of the root region, and random points inside it.
-    centre = root.lo + rng.uniform(size=3) * root.width
-    half = 0.5 * shrink * root.width * rng.uniform(0.05, 1.0, size=3)
+    k = len(problem.B)  # branched directions: as many as the depths vary along (1 to 3)
+    # A random sub-box of the root region, and random points inside it: z = B y in the box, and
+    # along the directions not branched (where the residual cones bound the region) around the
+    # incumbent, within their proven bounds when there are some.
+    centre = root.lo + rng.uniform(size=k) * root.width
+    half = 0.5 * shrink * root.width * rng.uniform(0.05, 1.0, size=k)
     box = Box(np.maximum(root.lo, centre - half), np.minimum(root.hi, centre + half))
-    samples = box.lo + rng.uniform(size=(200, 3)) * box.width
-    ys = samples @ np.linalg.inv(problem.B).T  # z = B y  ->  y = B^-1 z
+    z = box.lo + rng.uniform(size=(200, k)) * box.width
+    F, transform = problem.relaxation.F, problem.relaxation.transform
+    w = F[k:] @ prepared.incumbent + rng.uniform(-1, 1, size=(200, 3 - k)) * shrink * np.max(root.width)
+    w = np.clip(w, *problem.relaxation.complement)
+    ys = np.hstack([z, w]) @ transform.T  # y = F^-1 [z; w]
     costs = np.array([problem.objective(y) for y in ys])
     finite = costs[np.isfinite(costs)]
     if finite.size == 0:
