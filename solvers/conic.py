@@ -74,13 +74,16 @@ class ConicResult:
         return min(self.primal_objective, self.dual_objective)
 
 
-def _settings(tolerance: float) -> clarabel.DefaultSettings:
+def _settings(tolerance: float, lean: bool = False) -> clarabel.DefaultSettings:
     settings = clarabel.DefaultSettings()
     settings.verbose = False
     settings.max_iter = 100
     settings.tol_gap_abs = tolerance
     settings.tol_gap_rel = tolerance
     settings.tol_feas = tolerance
+    if lean:
+        settings.equilibrate_enable = False
+        settings.iterative_refinement_enable = False
     return settings
 
 
@@ -90,6 +93,20 @@ def _settings(tolerance: float) -> clarabel.DefaultSettings:
 # on costs scaled to about 1), and the lower bound taken is the smaller objective anyway.
 _SETTINGS = _settings(1e-9)
 _RETRY_SETTINGS = _settings(1e-7)
+
+# Small programs (a track's relaxations and root region, a small map's) are built well scaled:
+# charts normalise the frame and costs are scaled so that the incumbent costs 1. For them
+# Clarabel's equilibration and iterative refinement cost a third of the solve time and change
+# nothing measurable: on 586 Dinosaur relaxations and root-region programs, the same statuses
+# (all Solved), 2 fewer iterations, and objectives within 8e-10 of the full settings'. The
+# termination test (and so the meaning of "Solved") is the same. A lean solve that does not end
+# cleanly is repeated with the full settings before anything else is concluded.
+_LEAN_SETTINGS = _settings(1e-9, lean=True)
+_LEAN_ROWS = 400
+
+
+def _first_settings(A) -> clarabel.DefaultSettings:
+    return _LEAN_SETTINGS if A.shape[0] <= _LEAN_ROWS else _SETTINGS
 
 
 @functools.lru_cache(maxsize=64)
@@ -110,17 +127,22 @@ def solve_conic(q: np.ndarray, A: np.ndarray | sp.csc_matrix, b: np.ndarray, con
     if isinstance(A, np.ndarray):
         A = dense_to_csc(A)
     try:
-        solver = clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, A, b, clarabel_cones(cones), _SETTINGS)
+        settings = _first_settings(A)
+        solver = clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, A, b, clarabel_cones(cones), settings)
         result = _result(solver.solve())
-        return _retried(result, q, A, b, cones)
+        return _retried(result, q, A, b, cones, settings is _LEAN_SETTINGS)
     except BaseException as exc:  # Clarabel raises on malformed data (panic) as a Python exception
         if isinstance(exc, (KeyboardInterrupt, SystemExit)):
             raise
         return ConicResult(ConicStatus.FAILED, None, None, np.nan, np.nan, f"exception: {exc}")
 
 
-def _retried(result: ConicResult, q, A: sp.csc_matrix, b, cones: ConeSpec) -> ConicResult:
-    """An inaccurate answer solved again at the retry tolerance (see _RETRY_SETTINGS)."""
+def _retried(result: ConicResult, q, A: sp.csc_matrix, b, cones: ConeSpec, lean: bool) -> ConicResult:
+    """A lean solve that did not end cleanly solved again with the full settings; an inaccurate
+    answer solved again at the retry tolerance (see _RETRY_SETTINGS)."""
+    if lean and result.status in (ConicStatus.INACCURATE, ConicStatus.FAILED):
+        result = _result(clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, A, b, clarabel_cones(cones),
+                                                _SETTINGS).solve())
     if result.status is not ConicStatus.INACCURATE:
         return result
     solver = clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, A, b, clarabel_cones(cones), _RETRY_SETTINGS)
@@ -154,6 +176,7 @@ class ReusableConicProgram:
         self._mask: np.ndarray | None = None
         self._csc: sp.csc_matrix | None = None
         self._solver = None
+        self._lean = False
 
     def solve(self, q: np.ndarray, A: np.ndarray | sp.csc_matrix, b: np.ndarray, cones: ConeSpec) -> ConicResult:
         """``A`` dense (small problems: its nonzero pattern is compared) or CSC (large ones: its
@@ -174,11 +197,13 @@ class ReusableConicProgram:
             else:
                 self._key, self._mask = key, mask
                 self._csc = fresh.copy() if fresh is not None else dense_to_csc(A)
+                self._lean = _first_settings(A) is _LEAN_SETTINGS
                 self._solver = clarabel.DefaultSolver(
-                    _zero_quadratic(q.shape[0]), q, self._csc, b, clarabel_cones(cones), _SETTINGS
+                    _zero_quadratic(q.shape[0]), q, self._csc, b, clarabel_cones(cones),
+                    _LEAN_SETTINGS if self._lean else _SETTINGS,
                 )
             self._b, self._cones = b, cones
-            return _retried(_result(self._solver.solve()), q, self._csc, b, cones)
+            return _retried(_result(self._solver.solve()), q, self._csc, b, cones, self._lean)
         except BaseException as exc:
             if isinstance(exc, (KeyboardInterrupt, SystemExit)):
                 raise
@@ -192,7 +217,7 @@ class ReusableConicProgram:
             return ConicResult(ConicStatus.FAILED, None, None, np.nan, np.nan, "no program to re-solve")
         try:
             self._solver.update(q=q)
-            return _retried(_result(self._solver.solve()), q, self._csc, self._b, self._cones)
+            return _retried(_result(self._solver.solve()), q, self._csc, self._b, self._cones, self._lean)
         except BaseException as exc:
             if isinstance(exc, (KeyboardInterrupt, SystemExit)):
                 raise
