@@ -10,8 +10,12 @@ from __future__ import annotations
 
 import enum
 import functools
+import itertools
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
+from typing import Any
 
 import clarabel
 import numpy as np
@@ -163,61 +167,131 @@ def _result(solution) -> ConicResult:
                        raw_status=raw_status)
 
 
+def _updated(entry: "_Loaded", q: np.ndarray, data: np.ndarray, b: np.ndarray) -> "_Loaded | None":
+    """The entry loaded with new data, or None when Clarabel refuses the update (then a new
+    solver is built: a refused update must not fail the solve)."""
+    try:
+        entry.csc.data[:] = data
+        entry.solver.update(q=q, b=b, A=entry.csc)
+        return entry
+    except Exception:
+        return None
+
+
+@dataclass
+class _Loaded:
+    """A Clarabel solver, the CSC matrix it was built on (its data updated in place), and a
+    token of the program whose data it holds."""
+
+    csc: sp.csc_matrix
+    solver: Any
+    lean: bool
+    holder: int = 0
+
+
+class _Pool(threading.local):
+    """Per thread, the solvers of small dense programs by (shape, cones, nonzero pattern), kept
+    from one program to the next: a track's root region and first relaxation have the patterns
+    of the previous track with as many views, and a built solver skips Clarabel's setup (a third
+    of a small solve). Only lean solvers are kept: with no equilibration, a solver loaded with
+    new data solves exactly the problem a new one would."""
+
+    size = 64
+
+    def __init__(self) -> None:
+        self.entries: OrderedDict = OrderedDict()
+
+    def get(self, key) -> _Loaded | None:
+        entry = self.entries.get(key)
+        if entry is not None:
+            self.entries.move_to_end(key)
+        return entry
+
+    def put(self, key, entry: _Loaded) -> None:
+        self.entries[key] = entry
+        if len(self.entries) > self.size:
+            self.entries.popitem(last=False)
+
+    def drop(self, key) -> None:
+        self.entries.pop(key, None)
+
+
+_POOL = _Pool()
+_TOKENS = itertools.count(1)
+
+
 class ReusableConicProgram:
     """A conic program re-solved with new numbers but the same shape, as in branch and bound.
 
     Keeps the CSC structure and the Clarabel solver (its symbolic factorisation) while the
     sparsity pattern and cones stay the same, and updates the data in place; any change of
-    pattern rebuilds both, so reuse can never alter the problem solved.
+    pattern rebuilds both (or takes a pooled solver of that exact pattern, see _Pool), so reuse
+    can never alter the problem solved.
     """
 
     def __init__(self) -> None:
+        self._token = next(_TOKENS)
         self._key = None
         self._mask: np.ndarray | None = None
-        self._csc: sp.csc_matrix | None = None
-        self._solver = None
-        self._lean = False
+        self._entry: _Loaded | None = None
+        self._data = self._b = self._cones = None
 
     def solve(self, q: np.ndarray, A: np.ndarray | sp.csc_matrix, b: np.ndarray, cones: ConeSpec) -> ConicResult:
         """``A`` dense (small problems: its nonzero pattern is compared) or CSC (large ones: its
         index arrays are compared); either way the solver is only updated when they match."""
         key = (A.shape, cones.zero, cones.nonneg, cones.soc)
+        pool_key = None
         try:
             if sp.issparse(A):
-                same = (key == self._key and self._mask is None and np.array_equal(A.indptr, self._csc.indptr)
-                        and np.array_equal(A.indices, self._csc.indices))
-                data, mask, fresh = A.data, None, A
+                mask, data = None, A.data
+                same = (key == self._key and self._mask is None and np.array_equal(A.indptr, self._entry.csc.indptr)
+                        and np.array_equal(A.indices, self._entry.csc.indices))
+                entry = self._entry if same else None
             else:
                 mask = A != 0
+                data = A.T[mask.T]
                 same = key == self._key and self._mask is not None and np.array_equal(mask, self._mask)
-                data, fresh = (A.T[mask.T] if same else None), None
-            if same:
-                self._csc.data[:] = data
-                self._solver.update(q=q, b=b, A=self._csc)
-            else:
-                self._key, self._mask = key, mask
-                self._csc = fresh.copy() if fresh is not None else dense_to_csc(A)
-                self._lean = _first_settings(A) is _LEAN_SETTINGS
-                self._solver = clarabel.DefaultSolver(
-                    _zero_quadratic(q.shape[0]), q, self._csc, b, clarabel_cones(cones),
-                    _LEAN_SETTINGS if self._lean else _SETTINGS,
-                )
-            self._b, self._cones = b, cones
-            return _retried(_result(self._solver.solve()), q, self._csc, b, cones, self._lean)
+                entry = self._entry if same else None
+                if entry is None and _first_settings(A) is _LEAN_SETTINGS:
+                    pool_key = (key, mask.tobytes())
+                    entry = _POOL.get(pool_key)
+            if entry is not None:
+                entry = _updated(entry, q, data, b)
+            if entry is None:
+                csc = A.copy() if mask is None else dense_to_csc(A)
+                lean = _first_settings(A) is _LEAN_SETTINGS
+                solver = clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, csc, b, clarabel_cones(cones),
+                                                _LEAN_SETTINGS if lean else _SETTINGS)
+                entry = _Loaded(csc, solver, lean)
+                if pool_key is not None:
+                    _POOL.put(pool_key, entry)
+            entry.holder = self._token
+            self._key, self._mask, self._entry = key, mask, entry
+            self._data, self._b, self._cones = data, b, cones
+            return _retried(_result(entry.solver.solve()), q, entry.csc, b, cones, entry.lean)
         except BaseException as exc:
             if isinstance(exc, (KeyboardInterrupt, SystemExit)):
                 raise
             self._key = None
+            if pool_key is not None:
+                _POOL.drop(pool_key)  # never hand a solver in an unknown state to another program
             return ConicResult(ConicStatus.FAILED, None, None, np.nan, np.nan, f"exception: {exc}")
 
     def solve_objective(self, q: np.ndarray) -> ConicResult:
         """The last program solved again with objective ``q`` (a feasible set optimised in many
-        directions, as for root regions and bound tightening): no data compared or copied."""
+        directions, as for root regions and bound tightening): no data compared, and none copied
+        unless another program has used the pooled solver since."""
         if self._key is None:
             return ConicResult(ConicStatus.FAILED, None, None, np.nan, np.nan, "no program to re-solve")
+        entry = self._entry
         try:
-            self._solver.update(q=q)
-            return _retried(_result(self._solver.solve()), q, self._csc, self._b, self._cones, self._lean)
+            if entry.holder != self._token:
+                entry.csc.data[:] = self._data
+                entry.solver.update(q=q, b=self._b, A=entry.csc)
+                entry.holder = self._token
+            else:
+                entry.solver.update(q=q)
+            return _retried(_result(entry.solver.solve()), q, entry.csc, self._b, self._cones, entry.lean)
         except BaseException as exc:
             if isinstance(exc, (KeyboardInterrupt, SystemExit)):
                 raise

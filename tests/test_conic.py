@@ -1,0 +1,91 @@
+"""The conic-solver boundary: status map, and solvers reused across programs (solvers.conic)."""
+
+import numpy as np
+import pytest
+
+from solvers import conic
+from solvers.cones import ConeSpec
+from solvers.conic import ConicStatus, ReusableConicProgram, map_clarabel_status, solve_conic
+
+BALL = ConeSpec(nonneg=1, soc=(4,))
+
+
+def ball(centre, radius: float, cap: float = 100.0):
+    """{x : ||x - centre|| <= radius, sum(x) <= cap} as (A, b): one nonnegative row, one SOC."""
+    A = np.vstack([np.ones((1, 3)), np.zeros((1, 3)), -np.eye(3)])
+    b = np.concatenate([[cap, radius], -np.asarray(centre, dtype=float)])
+    return A, b
+
+
+def minimum(q, centre, radius):
+    """min q.x over the ball (the cap inactive): q.centre - radius |q|."""
+    return float(q @ centre - radius * np.linalg.norm(q))
+
+
+class TestStatusMap:
+    def test_only_solved_is_optimal(self):
+        assert map_clarabel_status("Solved") is ConicStatus.OPTIMAL
+        for almost in ("AlmostSolved", "AlmostPrimalInfeasible", "AlmostDualInfeasible"):
+            assert map_clarabel_status(almost) is ConicStatus.INACCURATE
+
+    def test_an_unknown_status_is_a_failure(self):
+        assert map_clarabel_status("SomethingNew") is ConicStatus.FAILED
+
+
+class TestReusableConicProgram:
+    def setup_method(self):
+        conic._POOL.entries.clear()
+
+    def test_solves_agree_with_closed_form(self):
+        rng = np.random.default_rng(7)
+        program = ReusableConicProgram()
+        for _ in range(5):
+            q, centre, radius = rng.normal(size=3), rng.normal(size=3), rng.uniform(0.5, 2)
+            result = program.solve(q, *ball(centre, radius), BALL)
+            assert result.status is ConicStatus.OPTIMAL
+            assert result.primal_objective == pytest.approx(minimum(q, centre, radius), abs=1e-7)
+
+    def test_a_pooled_solver_gives_what_a_new_one_gives(self):
+        rng = np.random.default_rng(8)
+        first, second = ReusableConicProgram(), ReusableConicProgram()
+        q1, q2 = rng.normal(size=3), rng.normal(size=3)
+        first.solve(q1, *ball([1.0, 2.0, 3.0], 1.0), BALL)
+        assert len(conic._POOL.entries) == 1
+        pooled = second.solve(q2, *ball([-1.0, 0.5, 2.0], 0.7), BALL)  # same pattern: the pooled solver
+        assert len(conic._POOL.entries) == 1
+        fresh = solve_conic(q2, *ball([-1.0, 0.5, 2.0], 0.7), BALL)
+        assert pooled.primal_objective == fresh.primal_objective
+        assert np.array_equal(pooled.x, fresh.x) and np.array_equal(pooled.z, fresh.z)
+
+    def test_re_solving_reloads_data_another_program_replaced(self):
+        """A root region re-solves its feasible set in many directions; if another program used
+        the pooled solver in between, its own data must come back first."""
+        rng = np.random.default_rng(9)
+        mine, other = ReusableConicProgram(), ReusableConicProgram()
+        centre, radius = np.array([1.0, 2.0, 3.0]), 1.0
+        mine.solve(rng.normal(size=3), *ball(centre, radius), BALL)
+        other.solve(rng.normal(size=3), *ball([10.0, -4.0, 0.0], 3.0), BALL)  # same solver, other data
+        q = rng.normal(size=3)
+        again = mine.solve_objective(q)
+        assert again.status is ConicStatus.OPTIMAL
+        assert again.primal_objective == pytest.approx(minimum(q, centre, radius), abs=1e-7)
+
+    def test_a_different_pattern_gets_its_own_solver(self):
+        program = ReusableConicProgram()
+        A, b = ball([0.0, 0.0, 0.0], 1.0)
+        program.solve(np.ones(3), A, b, BALL)
+        A_sparser = A.copy()
+        A_sparser[0, 2] = 0.0  # the cap on x0 + x1 only: another nonzero pattern
+        result = program.solve(np.array([0.0, 0.0, 1.0]), A_sparser, b, BALL)
+        assert result.primal_objective == pytest.approx(-1.0, abs=1e-7)
+        assert len(conic._POOL.entries) == 2
+
+    def test_pool_stays_bounded(self):
+        for n in range(conic._POOL.size + 10):
+            cap = np.zeros((n + 1, 3))  # programs of different shapes
+            cap[:, 0] = 1.0
+            A, b = ball([0.0, 0.0, 0.0], 1.0)
+            A = np.vstack([cap, A[1:]])
+            b = np.concatenate([np.full(len(cap), 100.0 + n), b[1:]])
+            ReusableConicProgram().solve(np.ones(3), A, b, ConeSpec(nonneg=len(cap), soc=(4,)))
+        assert len(conic._POOL.entries) == conic._POOL.size
