@@ -434,10 +434,9 @@ def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.n
         start = feasible_point(program)
         if start is None:
             return Early("infeasible", None, None, reasons.no_domain)
-    v0, _ = local_refine(program, start, "L2L2")
+    v0, cost0 = local_refine(program, start, "L2L2")  # program.cost(v0) when the norm is L2L2
     if norm != "L2L2":
-        v0, _ = local_refine(program, v0)
-    cost0 = program.cost(v0)
+        v0, cost0 = local_refine(program, v0)
     if cost0 <= abs_gap:  # within tolerance of the trivial bound 0
         return Early("optimal", v0, cost0, None)
     # Scale residuals so the incumbent costs 1 (raw costs near 1e-5 lose accuracy), but by no more
