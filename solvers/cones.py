@@ -14,13 +14,14 @@ bound a certificate claims is exactly the one a verifier recomputes.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
 
-@dataclass
+@dataclass(frozen=True)
 class ConeSpec:
     """Cone layout of the rows of ``A``: ``zero`` equalities, ``nonneg`` inequalities, then SOCs."""
 
@@ -42,12 +43,17 @@ def project_dual(z: np.ndarray, cones: ConeSpec) -> np.ndarray:
     start += cones.nonneg
     if not cones.soc:
         return z
-    sizes = np.asarray(cones.soc)
-    for size in np.unique(sizes):  # all cones of one size at once
-        offsets = start + np.concatenate([[0], np.cumsum(sizes)[:-1]])[sizes == size]
-        block = z[offsets[:, None] + np.arange(size)]
-        z[offsets[:, None] + np.arange(size)] = _project_soc(block)
+    for rows in _soc_rows(start, cones.soc):  # all cones of one size at once
+        z[rows] = _project_soc(z[rows])
     return z
+
+
+@functools.lru_cache(maxsize=256)
+def _soc_rows(start: int, soc: tuple[int, ...]) -> tuple[np.ndarray, ...]:
+    """Per cone size, the (cones, size) matrix of the rows those cones occupy."""
+    sizes = np.asarray(soc)
+    offsets = start + np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    return tuple(offsets[sizes == size][:, None] + np.arange(size) for size in np.unique(sizes))
 
 
 def _project_soc(block: np.ndarray) -> np.ndarray:
