@@ -167,17 +167,6 @@ def _result(solution) -> ConicResult:
                        raw_status=raw_status)
 
 
-def _updated(entry: "_Loaded", q: np.ndarray, data: np.ndarray, b: np.ndarray) -> "_Loaded | None":
-    """The entry loaded with new data, or None when Clarabel refuses the update (then a new
-    solver is built: a refused update must not fail the solve)."""
-    try:
-        entry.csc.data[:] = data
-        entry.solver.update(q=q, b=b, A=entry.csc)
-        return entry
-    except Exception:
-        return None
-
-
 @dataclass
 class _Loaded:
     """A Clarabel solver, the CSC matrix it was built on (its data updated in place), and a
@@ -187,6 +176,18 @@ class _Loaded:
     solver: Any
     lean: bool
     holder: int = 0
+
+
+def _updated(entry: _Loaded, q: np.ndarray, data: np.ndarray, b: np.ndarray) -> _Loaded | None:
+    """The entry loaded with new data, or None when Clarabel refuses the update (then a new
+    solver is built: a refused update must not fail the solve)."""
+    try:
+        entry.csc.data[:] = data
+        entry.solver.update(q=q, b=b, A=entry.csc)
+        return entry
+    except Exception:
+        entry.holder = 0  # its data are now nobody's: whoever uses it next must load all of theirs
+        return None
 
 
 class _Pool(threading.local):

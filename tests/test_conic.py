@@ -89,3 +89,33 @@ class TestReusableConicProgram:
             b = np.concatenate([np.full(len(cap), 100.0 + n), b[1:]])
             ReusableConicProgram().solve(np.ones(3), A, b, ConeSpec(nonneg=len(cap), soc=(4,)))
         assert len(conic._POOL.entries) == conic._POOL.size
+
+    def test_a_refused_update_never_gives_a_wrong_answer(self):
+        """Clarabel may refuse to load new data into a built solver: the program that wanted it
+        gets a new solver, and a program whose data the refused solver held does not trust it."""
+
+        class Refusing:  # takes new objectives, and new data only halfway (b, not A)
+            def __init__(self, solver):
+                self.solver = solver
+
+            def update(self, q=None, b=None, A=None):
+                self.solver.update(q=q) if b is None else self.solver.update(q=q, b=b)
+                if A is not None:
+                    raise RuntimeError("update refused")
+
+            def solve(self):
+                return self.solver.solve()
+
+        rng = np.random.default_rng(10)
+        mine, other = ReusableConicProgram(), ReusableConicProgram()
+        centre, radius = np.array([1.0, 2.0, 3.0]), 1.0
+        mine.solve(rng.normal(size=3), *ball(centre, radius), BALL)
+        (entry,) = conic._POOL.entries.values()
+        entry.solver = Refusing(entry.solver)
+        q_other = rng.normal(size=3)
+        theirs = other.solve(q_other, *ball([10.0, -4.0, 0.0], 3.0), BALL)
+        assert theirs.primal_objective == pytest.approx(minimum(q_other, np.array([10.0, -4.0, 0.0]), 3.0), abs=1e-7)
+        q = rng.normal(size=3)
+        again = mine.solve_objective(q)
+        assert again.status is ConicStatus.FAILED or again.primal_objective == pytest.approx(
+            minimum(q, centre, radius), abs=1e-7)
