@@ -12,12 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .geometry import lengths
 from .relaxation import FractionalProgram
-
-
-def _lengths(x: np.ndarray, axis: int) -> np.ndarray:
-    """np.linalg.norm(x, axis=axis) for real x, without its argument handling (the hot path)."""
-    return np.sqrt((x * x).sum(axis=axis))
 
 
 def camera_centres(cameras: np.ndarray) -> np.ndarray:
@@ -31,12 +27,12 @@ def _camera_frame(centres: np.ndarray) -> np.ndarray:
 
     Only conditioning: the problem is the same in any frame, and H keeps the last coordinate.
     """
-    finite = np.abs(centres[:, 3]) > 1e-9 * _lengths(centres, 1)
+    finite = np.abs(centres[:, 3]) > 1e-9 * lengths(centres, 1)
     H = np.eye(4)
     if finite.any():
         euclid = centres[finite, :3] / centres[finite, 3:4]
         middle = euclid.sum(axis=0) / len(euclid)  # the mean, without np.mean's overhead
-        spread = float(_lengths(euclid - middle, 1).sum() / len(euclid))
+        spread = float(lengths(euclid - middle, 1).sum() / len(euclid))
         if not spread > 0:
             spread = 1.0
         H[:3, :3] *= spread
@@ -51,8 +47,8 @@ def _choose_reference(cameras: np.ndarray, points: np.ndarray, centres: np.ndarr
     """
     proj = np.einsum("jab,rb->rja", cameras, centres)  # centre r seen by camera j
     depth = proj[:, :, 2]
-    safe = np.where(depth > 1e-12 * _lengths(proj, 2), depth, np.nan)
-    distance = _lengths(proj[:, :, :2] / safe[:, :, None] - points[None], 2)
+    safe = np.where(depth > 1e-12 * lengths(proj, 2), depth, np.nan)
+    distance = lengths(proj[:, :, :2] / safe[:, :, None] - points[None], 2)
     # Behind camera j (or at infinity) is outside its cone: as good as infinitely far.
     distance = np.where(np.isnan(distance), np.inf, distance)
     np.fill_diagonal(distance, np.inf)
@@ -79,7 +75,7 @@ class Chart:
         reference = _choose_reference(cameras, points, centres)
         frame = _camera_frame(centres)
         cams = cameras @ frame
-        cams = cams / _lengths(cams[:, 2, :3], 1)[:, None, None]
+        cams = cams / lengths(cams[:, 2, :3], 1)[:, None, None]
         depth_row = cams[reference, 2]
         _, _, vt = np.linalg.svd(depth_row[None, :])
         T = np.empty((4, 4))
@@ -89,8 +85,8 @@ class Chart:
         shifted[:, 0] -= points[:, 0:1] * cams[:, 2]
         shifted[:, 1] -= points[:, 1:2] * cams[:, 2]
         M = shifted @ T  # (k, 3, 4)
-        grad = _lengths(M[:, 2, :3], 1)
-        exact = grad <= 1e-9 * _lengths(M[:, 2], 1)
+        grad = lengths(M[:, 2, :3], 1)
+        exact = grad <= 1e-9 * lengths(M[:, 2], 1)
         exact[reference] = True
         scale = np.where(exact, M[:, 2, 3], grad)
         behind = bool((exact & (scale <= 0)).any())

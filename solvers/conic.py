@@ -109,10 +109,6 @@ _LEAN_SETTINGS = _settings(1e-9, lean=True)
 _LEAN_ROWS = 400
 
 
-def _first_settings(A) -> clarabel.DefaultSettings:
-    return _LEAN_SETTINGS if A.shape[0] <= _LEAN_ROWS else _SETTINGS
-
-
 @functools.lru_cache(maxsize=64)
 def _zero_quadratic(n: int) -> sp.csc_matrix:
     return sp.csc_matrix((n, n))
@@ -131,10 +127,10 @@ def solve_conic(q: np.ndarray, A: np.ndarray | sp.csc_matrix, b: np.ndarray, con
     if isinstance(A, np.ndarray):
         A = dense_to_csc(A)
     try:
-        settings = _first_settings(A)
-        solver = clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, A, b, clarabel_cones(cones), settings)
-        result = _result(solver.solve())
-        return _retried(result, q, A, b, cones, settings is _LEAN_SETTINGS)
+        lean = A.shape[0] <= _LEAN_ROWS
+        solver = clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, A, b, clarabel_cones(cones),
+                                        _LEAN_SETTINGS if lean else _SETTINGS)
+        return _retried(_result(solver.solve()), q, A, b, cones, lean)
     except BaseException as exc:  # Clarabel raises on malformed data (panic) as a Python exception
         if isinstance(exc, (KeyboardInterrupt, SystemExit)):
             raise
@@ -241,6 +237,7 @@ class ReusableConicProgram:
         """``A`` dense (small problems: its nonzero pattern is compared) or CSC (large ones: its
         index arrays are compared); either way the solver is only updated when they match."""
         key = (A.shape, cones.zero, cones.nonneg, cones.soc)
+        lean = A.shape[0] <= _LEAN_ROWS
         pool_key = None
         try:
             if sp.issparse(A):
@@ -253,14 +250,13 @@ class ReusableConicProgram:
                 data = A.T[mask.T]
                 same = key == self._key and self._mask is not None and np.array_equal(mask, self._mask)
                 entry = self._entry if same else None
-                if entry is None and _first_settings(A) is _LEAN_SETTINGS:
+                if entry is None and lean:
                     pool_key = (key, mask.tobytes())
                     entry = _POOL.get(pool_key)
             if entry is not None:
                 entry = _updated(entry, q, data, b)
             if entry is None:
                 csc = A.copy() if mask is None else dense_to_csc(A)
-                lean = _first_settings(A) is _LEAN_SETTINGS
                 solver = clarabel.DefaultSolver(_zero_quadratic(q.shape[0]), q, csc, b, clarabel_cones(cones),
                                                 _LEAN_SETTINGS if lean else _SETTINGS)
                 entry = _Loaded(csc, solver, lean)

@@ -21,7 +21,7 @@ from .bnb import BnbOptions, Box, BoxBound, BoxStatus, Progress, branch_and_boun
 from .certificates import LeafProof, RootProof, SearchProof, TighteningProof, encode
 from .conic import ConicStatus, ReusableConicProgram, solve_conic
 from .cones import proves_infeasible, safe_lower_bound
-from .geometry import InputError, norm_cost
+from .geometry import InputError, lengths, norm_cost
 from .relaxation import (EPS_DEPTH, NORMS, ConicData, FractionalProgram, Relaxation, complete_functionals,
                          gamma_for, residual_region, tightening_objective, with_cost_cap)
 
@@ -62,14 +62,14 @@ def branch_directions(program: FractionalProgram, subspace: np.ndarray) -> np.nd
     """Rows spanning ``subspace`` (k orthonormal rows): the best-conditioned depth gradients
     first (greedy Gram-Schmidt), completed with orthogonal directions of the subspace."""
     gradients = program.den[~program.exact, :-1]
-    sizes = np.sqrt((gradients * gradients).sum(axis=1))
+    sizes = lengths(gradients, 1)
     candidates = gradients[sizes > 0] / sizes[sizes > 0, None]
     residuals = candidates.copy()  # each candidate's part orthogonal to the basis so far
     k = subspace.shape[0]
     chosen: list[np.ndarray] = []
     basis: list[np.ndarray] = []
     while len(chosen) < k and len(candidates):
-        norms = np.sqrt((residuals * residuals).sum(axis=1))
+        norms = lengths(residuals, 1)
         best = int(np.argmax(norms))
         if norms[best] < 0.25:
             break
