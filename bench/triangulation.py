@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench import machine_speed_ms
 from solvers.datasets import load_dinosaur
 from solvers.geometry import norm_cost
 from solvers.triangulation import NORMS, TriangulationOptions, triangulate
@@ -151,7 +152,8 @@ def main() -> None:
     cameras, tracks = load_dinosaur(DINOSAUR)
     everything = range(len(tracks))
     sample = np.random.default_rng(0).choice(len(tracks), size=args.sample, replace=False).tolist()
-    print(f"Dinosaur: {len(tracks)} tracks, {len(cameras)} cameras, rel_gap 1e-3, one process")
+    print(f"Dinosaur: {len(tracks)} tracks, {len(cameras)} cameras, rel_gap 1e-3, one process; "
+          f"machine speed (a fixed Python loop) {machine_speed_ms():.0f} ms")
     print(f"{'norm':6} {'solver':8} {'tracks':>6} {'median ms':>10} {'p95 ms':>8} {'p99 ms':>8} "
           f"{'nodes med/p95/p99':>18} {'certified':>10}")
     solved = {}
@@ -183,6 +185,7 @@ def main() -> None:
             print(f"\nService, {args.workers} workers: {batch['tracks']} tracks ({batch['body_mb']:.1f} MB) submit to "
                   f"result {batch['wall']:.2f} s, status {batch['status']}, certified {batch['certified']}; "
                   f"in-process single-core solve time {total:.2f} s")
+    print(f"\nMachine speed at the end (the same loop): {machine_speed_ms():.0f} ms")
 
 
 if __name__ == "__main__":
