@@ -5,7 +5,7 @@ import time
 
 def machine_speed_ms() -> float:
     """How long a fixed pure-Python loop (3 million additions) takes, in ms. The development
-    machine's speed drifts by up to half between runs; printed beside a run's figures, this says
+    machine's speed drifts by up to 70% between runs; printed beside a run's figures, this says
     how fast the machine was while they were measured."""
     start = time.perf_counter()
     total = 0

@@ -119,10 +119,10 @@ def scip_map(source: np.ndarray, target: np.ndarray, norm: str, box: float = 10.
     entry of the normalised map lies in [-box, box]. Residuals d are variables tied to the map by
     ``d * depth = M_k . X - x_k * depth``.
     """
-    from solvers.maps import _normaliser
+    from solvers.charts import normaliser
 
     n, m = source.shape[1], target.shape[1]
-    S, T = _normaliser(source), _normaliser(target)
+    S, T = normaliser(source), normaliser(target)
     X = (S @ np.hstack([source, np.ones((len(source), 1))]).T).T
     x = (T @ np.hstack([target, np.ones((len(target), 1))]).T).T[:, :m]
     model = pyscipopt.Model()

@@ -107,7 +107,7 @@ class Chart:
         return Y[:3] / Y[3]
 
 
-def _normaliser(points: np.ndarray) -> np.ndarray:
+def normaliser(points: np.ndarray) -> np.ndarray:
     """Similarity (homogeneous) taking the points' centroid to 0 and mean distance to sqrt(dim)."""
     dim = points.shape[1]
     centre = points.mean(axis=0)
@@ -131,7 +131,7 @@ class MapChart:
     def build(cls, source: np.ndarray, target: np.ndarray, norm: str) -> "MapChart":
         count, n = source.shape
         m = target.shape[1]
-        S = _normaliser(source)
+        S = normaliser(source)
         X = (S @ np.hstack([source, np.ones((count, 1))]).T).T  # (count, n+1)
         shift = target.mean(axis=0)
         x = target - shift

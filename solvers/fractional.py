@@ -20,10 +20,10 @@ import scipy.optimize
 from .bnb import BnbOptions, Box, BoxBound, BoxStatus, Progress, branch_and_bound
 from .certificates import LeafProof, RootProof, SearchProof, TighteningProof, encode
 from .conic import ConicStatus, ReusableConicProgram, solve_conic
-from .cones import proves_infeasible, safe_lower_bound
+from .cones import ConeSpec, proves_infeasible, safe_lower_bound
 from .geometry import InputError, lengths, norm_cost
 from .relaxation import (EPS_DEPTH, NORMS, ConicData, FractionalProgram, Relaxation, complete_functionals,
-                         gamma_for, residual_region, tightening_objective, with_cost_cap)
+                         cost_unit, gamma_for, residual_region, root_bounds, tightening_objective, with_cost_cap)
 
 MAX_SCALE = 1e3
 CERTIFICATES = ("summary", "full")
@@ -113,7 +113,8 @@ def root_region(program: FractionalProgram, B: np.ndarray, gamma: float,
     """
     rows = complete_functionals(B) if certify else B
     for inflation in (1.0, 1.001, 1.01):
-        state, lo, hi, duals = _root_region_once(program, rows, gamma * inflation)
+        region = residual_region(program, gamma * inflation)
+        state, lo, hi, duals = _root_region_once(region, rows)
         if state != "not_certified":
             break
     if state != "ok":
@@ -122,14 +123,14 @@ def root_region(program: FractionalProgram, B: np.ndarray, gamma: float,
     if not certify:
         pad = 1e-7 * (1 + np.abs(lo) + np.abs(hi))
         return "ok", Box(lo - pad, hi + pad), None
-    proof = prove_root(program, rows, gamma * inflation, lo, hi, duals)
+    proof = prove_root(region, gamma * inflation, rows, lo, hi, duals)
     if proof is None:
         return "not_certified", None, None
     return "ok", Box(proof.lower[:k].copy(), proof.upper[:k].copy()), proof
 
 
-def _root_region_once(program: FractionalProgram, rows: np.ndarray, gamma: float):
-    A, b, cones = residual_region(program, gamma)
+def _root_region_once(region: tuple[np.ndarray, np.ndarray, ConeSpec], rows: np.ndarray):
+    A, b, cones = region
     solver = ReusableConicProgram()  # 2 objectives per row over one feasible set
     lo, hi = np.zeros(len(rows)), np.zeros(len(rows))
     duals = []
@@ -147,18 +148,13 @@ def _root_region_once(program: FractionalProgram, rows: np.ndarray, gamma: float
     return "ok", lo, hi, duals
 
 
-def prove_root(program: FractionalProgram, F: np.ndarray, gamma: float, lo: np.ndarray, hi: np.ndarray,
-               duals: list[np.ndarray]) -> RootProof | None:
-    """Safe bounds on ``F v`` over the residual region, proven over a claimed box half as wide
-    again on each side; None when a safe bound does not fall strictly inside the claim."""
-    A, b, cones = residual_region(program, gamma)
-    transform = np.linalg.inv(F)
+def prove_root(region: tuple[np.ndarray, np.ndarray, ConeSpec], gamma: float, F: np.ndarray, lo: np.ndarray,
+               hi: np.ndarray, duals: list[np.ndarray]) -> RootProof | None:
+    """Safe bounds on ``F v`` over the residual region of ``gamma``, proven over a claimed box
+    half as wide again on each side; None when a safe bound does not fall strictly inside it."""
     pad = 0.5 * (hi - lo) + 1e-6 * (1 + np.abs(lo) + np.abs(hi))
     claim_lo, claim_hi = lo - pad, hi + pad
-    lower, upper = np.zeros(len(F)), np.zeros(len(F))
-    for k in range(len(F)):
-        lower[k] = safe_lower_bound(F[k], A, b, cones, duals[2 * k], claim_lo, claim_hi, transform)
-        upper[k] = -safe_lower_bound(-F[k], A, b, cones, duals[2 * k + 1], claim_lo, claim_hi, transform)
+    lower, upper = root_bounds(region, F, duals, claim_lo, claim_hi)
     if not (np.all(claim_lo < lower) and np.all(upper < claim_hi) and np.all(lower <= upper)):
         return None
     # Padded like the uncertified region (looser than proven, so still proven): both searches
@@ -396,9 +392,13 @@ class Prepared:
     problem: BoxProblem
     incumbent: np.ndarray
     upper: float  # the incumbent's scaled cost (inf when outside the user's bound)
-    unit: float  # scaled cost = unit * cost in the caller's units
-    scale: float = 1.0  # the residuals' factor (unit is its square for L2L2)
+    scale: float = 1.0  # the residuals' factor
     root_proof: RootProof | None = None  # with certify
+
+    @property
+    def unit(self) -> float:
+        """Scaled cost = unit * cost in the caller's units."""
+        return cost_unit(self.scale, self.problem.norm)
 
 
 @dataclass
@@ -443,7 +443,7 @@ def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.n
     # than MAX_SCALE: nearly exact data would make residual rows 1e6 times the depth rows.
     factor = min(MAX_SCALE, 1.0 / math.sqrt(cost0) if norm == "L2L2" else 1.0 / cost0)
     program.rescale(factor)
-    unit = factor**2 if norm == "L2L2" else factor
+    unit = cost_unit(factor, norm)
     upper = program.cost(v0)
     user_gamma = max_residual * factor if max_residual is not None else None
     gamma = gamma_for(upper, norm)
@@ -465,7 +465,7 @@ def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.n
     problem.interior = v0
     if tighten_rounds and math.isfinite(upper):
         problem.root = problem.tighten(root, upper, tighten_rounds)
-    return Prepared(problem, v0, upper, unit, factor, root_proof)
+    return Prepared(problem, v0, upper, factor, root_proof)
 
 
 @dataclass
@@ -505,7 +505,7 @@ def search(prepared: Prepared, options: FractionalOptions, scope: str, reference
         return callback(Progress(p.nodes, p.open_boxes, p.lower_bound / unit, p.upper_bound / unit,
                                  p.gap_abs / unit, p.gap_rel, p.elapsed_s))
 
-    leaves: list | None = [] if prepared.problem.certify else None
+    leaves: list | None = [] if prepared.root_proof is not None else None
     bnb = branch_and_bound(
         prepared.problem, prepared.incumbent, prepared.upper,
         BnbOptions(rel_gap=options.rel_gap, abs_gap=options.abs_gap * unit, max_nodes=options.max_nodes,
@@ -521,7 +521,7 @@ def search(prepared: Prepared, options: FractionalOptions, scope: str, reference
     certificate = Certificate(scope, reference, np.asarray(functionals).tolist(), np.asarray(denominator).tolist(),
                               root.lo.tolist(), root.hi.tolist(), bnb.tolerance / unit,
                               bnb.upper_bound - bnb.lower_bound <= bnb.tolerance, bnb.leaves)
-    if leaves is not None and prepared.root_proof is not None:
+    if leaves is not None:
         certificate.proof = encode(SearchProof(prepared.scale, prepared.root_proof, prepared.problem.tightening,
                                                root, leaves))
     return Searched(bnb.status, bnb.candidate, bnb.lower_bound / unit, bnb.nodes, certificate)

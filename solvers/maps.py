@@ -19,7 +19,7 @@ from typing import Callable
 import numpy as np
 
 from .bnb import Progress
-from .charts import MapChart, _normaliser
+from .charts import MapChart, normaliser
 from .fractional import Certificate, Early, FractionalOptions, Reasons, prepare, search
 from .geometry import InputError, norm_cost
 from .verify import checked_solve
@@ -79,7 +79,7 @@ def check_correspondences(source: np.ndarray, target: np.ndarray, field_name: st
 
 def dlt(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     """The linear estimate of M (normalised DLT); sign chosen so most depths are positive."""
-    S, T = _normaliser(source), _normaliser(target)
+    S, T = normaliser(source), normaliser(target)
     X = (S @ np.hstack([source, np.ones((len(source), 1))]).T).T
     x = (T @ np.hstack([target, np.ones((len(target), 1))]).T).T
     n1, m = X.shape[1], target.shape[1]

@@ -15,11 +15,16 @@ import numpy as np
 import scipy.sparse as sp
 
 from .bnb import Box
-from .cones import ConeSpec
+from .cones import ConeSpec, safe_lower_bound
 from .geometry import norm_cost
 
 EPS_DEPTH = 1e-12  # depths below this (in the program's units) are outside the domain
 NORMS = ("L2L2", "L2L1", "L1L1")
+
+
+def cost_unit(scale: float, norm: str) -> float:
+    """What a program's cost is multiplied by when its residuals are multiplied by ``scale``."""
+    return scale**2 if norm == "L2L2" else scale
 
 
 def gamma_for(upper_bound: float, norm: str) -> float:
@@ -79,6 +84,20 @@ def residual_region(program: FractionalProgram, gamma: float) -> tuple[np.ndarra
     E = np.concatenate((program.linear, per_observation.reshape(-1, program.num.shape[2])))
     cones = ConeSpec(nonneg=len(program.linear), soc=(m + 1,) * len(program.num))
     return -E[:, :-1], E[:, -1].copy(), cones
+
+
+def root_bounds(region: tuple[np.ndarray, np.ndarray, ConeSpec], F: np.ndarray, duals: list[np.ndarray],
+                claim_lo: np.ndarray, claim_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Safe lower and upper bounds on ``F v`` over a residual region (A, b, cones), from dual
+    vectors (index 2j for ``min F_j v``, 2j + 1 for ``max F_j v``) with their residuals charged to
+    the claimed box on ``y = F v``: what a root proof claims and what its verifier recomputes."""
+    A, b, cones = region
+    transform = np.linalg.inv(F)
+    lower = np.array([safe_lower_bound(F[j], A, b, cones, duals[2 * j], claim_lo, claim_hi, transform)
+                      for j in range(len(F))])
+    upper = np.array([-safe_lower_bound(-F[j], A, b, cones, duals[2 * j + 1], claim_lo, claim_hi, transform)
+                      for j in range(len(F))])
+    return lower, upper
 
 
 _DENSE_LIMIT = 200_000  # relaxations with fewer matrix entries are assembled dense

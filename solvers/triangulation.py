@@ -19,7 +19,7 @@ import numpy as np
 from .bnb import Progress
 from .charts import Chart, camera_centres
 from .fractional import NORMS, Certificate, Early, FractionalOptions, Reasons, depth_subspace, prepare, search
-from .geometry import norm_cost
+from .geometry import norm_cost, reprojection_residuals
 from .verify import checked_solve
 
 
@@ -114,8 +114,7 @@ def _track_result(chart: Chart, cameras, points, y, norm, status, lower, nodes, 
     at_infinity = abs(X[3]) <= 1e-12
     point = X.tolist() if at_infinity else (X[:3] / X[3]).tolist()
     # The cost of the point as returned (what anyone recomputing it gets, to the last bit).
-    proj = cameras @ (X if at_infinity else np.append(point, 1.0))
-    residuals = proj[:, :2] / proj[:, 2:3] - points
+    residuals = reprojection_residuals(cameras, X if at_infinity else np.append(point, 1.0), points)
     cost = norm_cost(residuals, norm)  # recomputed in pixels from the original data
     if lower is not None:
         lower = min(lower, cost)

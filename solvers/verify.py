@@ -23,7 +23,8 @@ from .certificates import FORMAT, VERSION, data_hash, unpack
 from .charts import Chart, MapChart
 from .cones import proves_infeasible, safe_lower_bound
 from .geometry import norm_cost
-from .relaxation import NORMS, Relaxation, gamma_for, residual_region, tightening_objective, with_cost_cap
+from .relaxation import (NORMS, Relaxation, cost_unit, gamma_for, residual_region, root_bounds, tightening_objective,
+                         with_cost_cap)
 
 # A bound the verifier recomputes may fall below the one the solver claimed by this much, times
 # max(1, |claimed|), in the program's scaled units (where the incumbent costs about 1): what
@@ -258,7 +259,7 @@ def _verify_search(item: _Item, options: dict, proof: dict, cost: float, lower_c
     if not (math.isfinite(scale) and scale > 0):
         raise Invalid("program", "scale must be positive")
     program.rescale(scale)
-    unit = scale**2 if norm == "L2L2" else scale
+    unit = cost_unit(scale, norm)
     # Only points costing less than the claimed lower bound need excluding: every proof must
     # hold for them, so its cost cap may be anything not below that bound (less the tolerance).
     claimed = lower_claimed * unit
@@ -338,15 +339,13 @@ def _check_program(item: _Item, solution, scale: float) -> None:
 def _check_root(program, F: np.ndarray, gamma: float, needed: float, root: dict, lower, upper) -> None:
     if not gamma >= needed:
         raise Invalid("root_region", f"gamma {gamma!r} is below the residual bound {needed!r} of the claimed lower bound")
-    A, b, cones = residual_region(program, gamma)
+    region = residual_region(program, gamma)
     claim_lo, claim_hi = (np.asarray(side, dtype=float) for side in root["claim"])
-    transform = np.linalg.inv(F)
-    duals = root["duals"]
-    if len(duals) != 2 * len(F):
-        raise Invalid("root_region", f"{len(duals)} dual vectors for {len(F)} functionals")
-    for j in range(len(F)):
-        low = safe_lower_bound(F[j], A, b, cones, _dual(duals[2 * j], len(b)), claim_lo, claim_hi, transform)
-        high = -safe_lower_bound(-F[j], A, b, cones, _dual(duals[2 * j + 1], len(b)), claim_lo, claim_hi, transform)
+    if len(root["duals"]) != 2 * len(F):
+        raise Invalid("root_region", f"{len(root['duals'])} dual vectors for {len(F)} functionals")
+    duals = [_dual(text, len(region[1])) for text in root["duals"]]
+    proven_lower, proven_upper = root_bounds(region, F, duals, claim_lo, claim_hi)
+    for j, (low, high) in enumerate(zip(proven_lower, proven_upper)):
         if not (claim_lo[j] < low and high < claim_hi[j]):
             raise Invalid("root_region", f"functional {j}: proven range [{low}, {high}] not inside the claimed box")
         if not (lower[j] <= low and upper[j] >= high):

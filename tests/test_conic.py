@@ -119,3 +119,18 @@ class TestReusableConicProgram:
         again = mine.solve_objective(q)
         assert again.status is ConicStatus.FAILED or again.primal_objective == pytest.approx(
             minimum(q, centre, radius), abs=1e-7)
+
+
+class TestLeanSettings:
+    def test_a_lean_solve_that_fails_is_solved_again_with_the_full_settings(self, monkeypatch):
+        """Small programs are first solved without equilibration and iterative refinement; one
+        that does not end cleanly must not be reported as a failure (or trusted) as it stands."""
+        conic._POOL.entries.clear()  # no solver built with the usual lean settings to reuse
+        starved = conic._settings(1e-9, lean=True)
+        starved.max_iter = 1  # the lean attempt cannot finish
+        monkeypatch.setattr(conic, "_LEAN_SETTINGS", starved)
+        q, centre, radius = np.array([1.0, -2.0, 0.5]), np.array([1.0, 2.0, 3.0]), 1.5
+        for result in (solve_conic(q, *ball(centre, radius), BALL),
+                       ReusableConicProgram().solve(q, *ball(centre, radius), BALL)):
+            assert result.status is ConicStatus.OPTIMAL
+            assert result.primal_objective == pytest.approx(minimum(q, centre, radius), abs=1e-7)

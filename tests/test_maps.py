@@ -10,10 +10,11 @@ from hypothesis import strategies as st
 
 from bench.baselines import map_dlt_lm
 from solvers.bnb import Box, BoxStatus
+from solvers.charts import MapChart, normaliser
 from solvers.conic import ConicStatus, solve_conic
 from solvers.fractional import Prepared, prepare
 from solvers.geometry import InputError, norm_cost
-from solvers.maps import _REASONS, MapChart, MapOptions, _normaliser, check_correspondences, dlt, fit_map
+from solvers.maps import _REASONS, MapOptions, check_correspondences, dlt, fit_map
 from solvers.triangulation import NORMS
 
 from .scenes import look_at
@@ -218,7 +219,7 @@ class TestAgainstSCIP:
             assert ours.certified, ours.reason
             # SCIP searches normalised maps in a box: one at least twice as wide as our optimum (a
             # few-point homography can be nearly singular and have large entries).
-            S, T = _normaliser(source), _normaliser(target)
+            S, T = normaliser(source), normaliser(target)
             mine = T @ np.array(ours.matrix) @ np.linalg.inv(S)
             mine = mine / (mine[-1] @ (S @ np.append(source[0], 1.0)))
             box = max(10.0, 2.0 * np.abs(mine).max())
