@@ -9,6 +9,8 @@ import os
 import signal
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 from pydantic import ValidationError
@@ -58,24 +60,24 @@ def cmd_solve(args: argparse.Namespace) -> int:
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
-    """Exit 0 when the certificate is valid, 1 when it is not, 2 when the input cannot be read."""
-    from solvers.verify import verify_document
+    """Exit 0 when the certificate is valid, 1 when it is not, 2 when the input cannot be read
+    (unreadable, not JSON, nested too deeply, or carrying no certificate)."""
+    from solvers.verify import find_certificate, verify_any
 
     try:
         text = sys.stdin.read() if args.file == "-" else Path(args.file).read_text()
         document = json.loads(text)
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        print(f"geocert verify: cannot read {args.file}: {exc}", file=sys.stderr)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        reason = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
+        print(f"geocert verify: cannot read {args.file}: {reason}", file=sys.stderr)
         return 2
-    # A result (geocert solve's output) or a job document carry the certificate inside.
-    for key in ("result", "certificate"):
-        if isinstance(document, dict) and key in document and document.get("format") is None:
-            document = document[key]
-    if not isinstance(document, dict) or document.get("format") != "geocert-certificate":
+    # A result (geocert solve's output) or a job document carry the certificate inside; then the
+    # items they return are checked against it too.
+    if find_certificate(document) is None:
         print(f"geocert verify: {args.file} holds no certificate (solve with options.certificate = \"full\")",
               file=sys.stderr)
         return 2
-    report = verify_document(document).as_dict()
+    report = verify_any(document).as_dict()
     json.dump(report, sys.stdout, indent=None if args.compact else 2)
     sys.stdout.write("\n")
     return 0 if report["valid"] else 1
@@ -145,6 +147,23 @@ def cmd_serve(args: argparse.Namespace) -> int:
             redis_process.terminate()
             redis_process.wait(timeout=10)
     return 0
+
+
+def _watch_workers(workers: list[subprocess.Popen], stopping: threading.Event) -> None:
+    """Say on standard error when an embedded worker exits on its own (a worker that dies at import,
+    say, would otherwise leave only /readyz answering "not ready")."""
+
+    def watch() -> None:
+        reported: set[int] = set()
+        while len(reported) < len(workers) and not stopping.is_set():
+            for index, process in enumerate(workers):
+                if index not in reported and process.poll() is not None and not stopping.is_set():
+                    reported.add(index)
+                    print(f"geocert: worker process geocert-{index} exited with status {process.returncode}; "
+                          "/readyz answers not ready while no worker runs", file=sys.stderr)
+            time.sleep(1.0)
+
+    threading.Thread(target=watch, name="geocert-worker-watch", daemon=True).start()
 
 
 def cmd_worker(args: argparse.Namespace) -> int:
