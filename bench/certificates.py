@@ -79,7 +79,7 @@ def main() -> None:
         tracks = [tracks[i] for i in np.linspace(0, len(tracks) - 1, args.tracks).astype(int)]
     items = [(cameras[t.views], t.points) for t in tracks]
     report(f"Dinosaur tracks {args.norm}", measure("triangulation", items, triangulate, TriangulationOptions(norm=args.norm),
-                                                   lambda r: {"point": r.point}))
+                                                   lambda r: {"point": r.point, "at_infinity": r.at_infinity}))
     problems = dinosaur_problems()
     if args.cameras:
         problems = [problems[i] for i in np.linspace(0, len(problems) - 1, args.cameras).astype(int)]

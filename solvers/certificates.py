@@ -19,7 +19,9 @@ import numpy as np
 from .bnb import Box
 
 FORMAT = "geocert-certificate"
-VERSION = 1
+VERSION = 2  # 2: problem_sha256 covers the options a claim depends on; strict numbers throughout
+# The options a claim depends on: the cost (norm), the scope (max_residual) and the tolerance.
+CLAIM_OPTIONS = ("norm", "max_residual", "rel_gap", "abs_gap")
 
 
 @dataclass
@@ -123,5 +125,15 @@ def canonical_json(value: Any) -> bytes:
 
 
 def data_hash(kind: str, data: Any) -> str:
-    """SHA-256 of the problem, as canonical JSON of {"kind", "data"} (sorted keys, no spaces)."""
+    """SHA-256 of the problem data, as canonical JSON of {"kind", "data"} (sorted keys, no spaces)."""
     return hashlib.sha256(canonical_json({"kind": kind, "data": data})).hexdigest()
+
+
+def problem_hash(kind: str, data: Any, options: dict) -> str:
+    """SHA-256 of everything a claim depends on: canonical JSON of {"kind", "data", "options"}
+    with the options CLAIM_OPTIONS only, numbers as floats (max_residual null when unset)."""
+    claimed = {name: options.get(name) for name in CLAIM_OPTIONS}
+    for name in ("rel_gap", "abs_gap", "max_residual"):
+        if claimed[name] is not None:
+            claimed[name] = float(claimed[name])
+    return hashlib.sha256(canonical_json({"kind": kind, "data": data, "options": claimed})).hexdigest()

@@ -103,15 +103,15 @@ def depth_subspace(program: FractionalProgram) -> np.ndarray:
     return np.eye(program.dim)
 
 
-def root_region(program: FractionalProgram, B: np.ndarray, gamma: float,
-                certify: bool = False) -> tuple[str, Box | None, RootProof | None]:
-    """Bound B v over the residual region: 2k small SOCPs (2d with ``certify``, which bounds the
-    complement of B's rows too and proves every bound; see RootProof).
+def root_region(program: FractionalProgram, B: np.ndarray, gamma: float) -> tuple[str, Box | None, RootProof | None]:
+    """Bound B v over the residual region, and the complement of B's rows too: 2d small SOCPs,
+    every bound proven (RootProof). Every mode proves its bounds: a summary certificate differs
+    from a full one only in what is returned, never in what the search relies on.
 
     An inaccurate solve is retried with gamma inflated slightly: a larger residual bound still
     gives a region holding every better point, and a different problem often solves cleanly.
     """
-    rows = complete_functionals(B) if certify else B
+    rows = complete_functionals(B)
     for inflation in (1.0, 1.001, 1.01):
         region = residual_region(program, gamma * inflation)
         state, lo, hi, duals = _root_region_once(region, rows)
@@ -120,9 +120,6 @@ def root_region(program: FractionalProgram, B: np.ndarray, gamma: float,
     if state != "ok":
         return state, None, None
     k = len(B)
-    if not certify:
-        pad = 1e-7 * (1 + np.abs(lo) + np.abs(hi))
-        return "ok", Box(lo - pad, hi + pad), None
     proof = prove_root(region, gamma * inflation, rows, lo, hi, duals)
     if proof is None:
         return "not_certified", None, None
@@ -254,22 +251,18 @@ class BoxProblem:
     """The branch-and-bound problem of a fractional program over boxes of ``z = B v``.
 
     Given the root region's proof, every bound is the safe bound of its dual vector
-    (cones.safe_lower_bound) and carries a LeafProof: the leaves make a certificate.
+    (cones.safe_lower_bound) and carries a LeafProof: the leaves make a certificate, in every
+    mode (a summary certificate just does not return them).
     """
 
-    def __init__(self, program: FractionalProgram, user_gamma: float | None, B: np.ndarray, root: Box,
-                 root_proof: RootProof | None = None):
+    def __init__(self, program: FractionalProgram, B: np.ndarray, root: Box, root_proof: RootProof):
         self.program = program
         self.norm = program.norm
         self.B = B
         self.root = root
-        self.certify = root_proof is not None
-        if root_proof is None:
-            self.relaxation = Relaxation(program, B, user_gamma)
-        else:
-            k = len(B)
-            complement = (root_proof.lower[k:], root_proof.upper[k:])
-            self.relaxation = Relaxation(program, B, user_gamma, complement, root_proof.functionals)
+        k = len(B)
+        complement = (root_proof.lower[k:], root_proof.upper[k:])
+        self.relaxation = Relaxation(program, B, complement, root_proof.functionals)
         self.tightening: list[TighteningProof] = []
         self.interior: np.ndarray | None = None  # a point of the domain (the first incumbent)
         self._solver = ReusableConicProgram()
@@ -293,8 +286,6 @@ class BoxProblem:
             return BoxBound(BoxStatus.EMPTY, proof=self._proof(box, upper_bound, "depth", None, math.inf))
         result = self._solver.solve(data.q, data.A, data.b, data.cones)
         if result.status is ConicStatus.INFEASIBLE:
-            if not self.certify:
-                return BoxBound(BoxStatus.EMPTY)
             if proves_infeasible(data.A, data.b, data.cones, result.z, data.lower, data.upper, data.transform):
                 return BoxBound(BoxStatus.EMPTY, proof=self._proof(box, upper_bound, "farkas", result.z, math.inf))
             return BoxBound(BoxStatus.UNRESOLVED)
@@ -302,8 +293,6 @@ class BoxProblem:
             return BoxBound(BoxStatus.UNRESOLVED)
         v = result.x[: self.program.dim]
         candidate = self._candidate(v)
-        if not self.certify:
-            return BoxBound(BoxStatus.BOUNDED, result.lower_bound, candidate, self.B @ v)
         safe = safe_lower_bound(data.q, data.A, data.b, data.cones, result.z, data.lower, data.upper, data.transform)
         if not math.isfinite(safe):
             return BoxBound(BoxStatus.UNRESOLVED, candidate=candidate, split_hint=self.B @ v)
@@ -323,16 +312,16 @@ class BoxProblem:
                     return w
         return None
 
-    def _proof(self, box: Box, upper_bound: float, kind: str, z, bound: float) -> LeafProof | None:
-        return LeafProof(box, upper_bound, kind, z, bound) if self.certify else None
+    def _proof(self, box: Box, upper_bound: float, kind: str, z, bound: float) -> LeafProof:
+        return LeafProof(box, upper_bound, kind, z, bound)
 
     def tighten(self, box: Box, upper_bound: float, rounds: int) -> Box:
         """Shrink ``box`` to the range of ``z = B v`` over the relaxation's points costing at most
         ``upper_bound`` (optimality-based bound tightening), repeated while it shrinks the volume
         by half. Valid: every point costing at most ``upper_bound`` is such a point, because the
         relaxation under-estimates the cost. The tighter box makes the envelopes tighter, so a
-        round can shrink it again. A solve that is not accurate leaves its side as it was. With
-        ``certify``, each side is the safe bound of its dual, recorded in ``self.tightening``."""
+        round can shrink it again. A solve that is not accurate leaves its side as it was. Each
+        side is the safe bound of its dual, recorded in ``self.tightening``."""
         solver = ReusableConicProgram()  # 2k objectives over one feasible set per round
         for _ in range(rounds):
             data = self.conic_data(box, upper_bound, envelope=False)
@@ -351,18 +340,13 @@ class BoxProblem:
                     duals.append(result.z if result.status is ConicStatus.OPTIMAL else None)
                     if result.status is not ConicStatus.OPTIMAL:
                         continue
-                    if self.certify:
-                        value = sign * safe_lower_bound(objective, data.A, data.b, data.cones, result.z,
-                                                        data.lower, data.upper, data.transform)
-                    else:
-                        value = sign * result.lower_bound  # min(primal, dual): the outer side
-                        value -= sign * 1e-7 * (1 + abs(value))
+                    value = sign * safe_lower_bound(objective, data.A, data.b, data.cones, result.z,
+                                                    data.lower, data.upper, data.transform)
                     if math.isfinite(value):
                         side[i] = max(side[i], value) if sign > 0 else min(side[i], value)
             hi = np.maximum(hi, lo)
             ratio = float(np.prod((hi - lo) / np.maximum(box.width, 1e-300)))
-            if self.certify:
-                self.tightening.append(TighteningProof(upper_bound, box, Box(lo, hi), duals))
+            self.tightening.append(TighteningProof(upper_bound, box, Box(lo, hi), duals))
             box = Box(lo, hi)
             if ratio > 0.5:
                 break
@@ -393,7 +377,8 @@ class Prepared:
     incumbent: np.ndarray
     upper: float  # the incumbent's scaled cost (inf when outside the user's bound)
     scale: float = 1.0  # the residuals' factor
-    root_proof: RootProof | None = None  # with certify
+    root_proof: RootProof | None = None
+    reasons: Reasons | None = None
 
     @property
     def unit(self) -> float:
@@ -415,57 +400,77 @@ class Early:
 class Reasons:
     """Why a solve ended before any search, in the words of the problem kind."""
 
-    no_domain: str  # nothing satisfies the domain (every depth positive)
+    no_domain_found: str  # no point of the domain (every depth positive) was found
     degenerate: str  # the data do not bound the solutions within the residual bound
-    over_max_residual: str = "no solution has every residual within max_residual"
+    over_max_residual: str = "no solution with every residual within max_residual was found"
+    proven_over_max_residual: str = "no solution has every residual within max_residual (proven by the search)"
     not_certified: str = "the root region's bounds could not be computed accurately"
 
 
+def _in_scope_start(program: FractionalProgram, v: np.ndarray) -> np.ndarray | None:
+    """A point of the scope (every residual within max_residual) near ``v``: ``v`` itself when
+    it is in scope, else a point of the residual region of max_residual (one SOCP)."""
+    if math.isfinite(program.cost(v)):
+        return v
+    res = solve_conic(np.zeros(program.dim), *residual_region(program, program.max_residual * (1 - 1e-6)))
+    if res.status is ConicStatus.OPTIMAL and math.isfinite(program.cost(res.x)):
+        return res.x
+    return None
+
+
 def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.ndarray,
-            abs_gap: float, max_residual: float | None, reasons: Reasons, tighten_rounds: int = 0,
-            certify: bool = False) -> Prepared | Early:
+            abs_gap: float, max_residual: float | None, reasons: Reasons,
+            tighten_rounds: int = 0) -> Prepared | Early:
     """Incumbent, scaling and root region. ``start``: an initial point (None or infeasible: one
     is searched for); ``subspace``: rows spanning the directions the depths depend on;
-    ``tighten_rounds``: rounds of bound tightening on the root region (worth it when nodes are
-    many and costly, as for maps; not for triangulation, whose searches take a few nodes);
-    ``certify``: prove every bound for a full certificate (Prepared.root_proof, leaves' proofs)."""
+    ``max_residual``: the scope (every residual's 2-norm within it; None: no limit); incumbents
+    are always in it. ``tighten_rounds``: rounds of bound tightening on the root region (worth
+    it when nodes are many and costly, as for maps; not for triangulation, whose searches take a
+    few nodes). Every bound is proven (Prepared.root_proof, leaves' proofs), in every mode."""
     norm = program.norm
     if start is None or not math.isfinite(program.cost(start)):
         start = feasible_point(program)
-        if start is None:
-            return Early("infeasible", None, None, reasons.no_domain)
+        if start is None:  # no proof that the domain is empty: only that none was found
+            return Early("not_certified", None, None, reasons.no_domain_found)
     v0, cost0 = local_refine(program, start, "L2L2")  # program.cost(v0) when the norm is L2L2
     if norm != "L2L2":
         v0, cost0 = local_refine(program, v0)
-    if cost0 <= abs_gap:  # within tolerance of the trivial bound 0
+    program.max_residual = max_residual
+    in_scope = _in_scope_start(program, v0) if max_residual is not None else v0
+    if in_scope is not None and in_scope is not v0:
+        v0, cost0 = local_refine(program, in_scope)
+    if in_scope is not None and cost0 <= abs_gap:  # within tolerance of the trivial bound 0
         return Early("optimal", v0, cost0, None)
     # Scale residuals so the incumbent costs 1 (raw costs near 1e-5 lose accuracy), but by no more
     # than MAX_SCALE: nearly exact data would make residual rows 1e6 times the depth rows.
     factor = min(MAX_SCALE, 1.0 / math.sqrt(cost0) if norm == "L2L2" else 1.0 / cost0)
     program.rescale(factor)
     unit = cost_unit(factor, norm)
-    upper = program.cost(v0)
-    user_gamma = max_residual * factor if max_residual is not None else None
+    upper = program.cost(v0)  # inf when no point of the scope was found
     gamma = gamma_for(upper, norm)
-    if user_gamma is not None:
-        if np.max(np.linalg.norm(program.residuals(v0), axis=1)) > user_gamma:
-            upper = math.inf  # the incumbent lies outside the user's domain
-        gamma = min(gamma, user_gamma)
+    if program.max_residual is not None:
+        gamma = min(gamma, program.max_residual)
+    if not math.isfinite(upper):
+        # No incumbent: the root region must hold the whole scope. That of the out-of-scope
+        # point's residual bound does (it is larger than max_residual), and it is not empty, so
+        # its bounds can be proven; the search then proves each box empty of in-scope points
+        # (or finds one).
+        gamma = max(program.max_residual, gamma_for(cost0 * unit, norm))
     B = branch_directions(program, subspace)
-    state, root, root_proof = root_region(program, B, gamma, certify)
+    state, root, root_proof = root_region(program, B, gamma)
     if root is None:
-        if state == "infeasible" and math.isfinite(upper):
-            state = "not_certified"  # the incumbent is inside: the solve, not the data, failed
-        reason = {"degenerate": reasons.degenerate, "infeasible": reasons.over_max_residual,
-                  "not_certified": reasons.not_certified}[state]
+        if state == "infeasible":  # a solver's word, not a proof
+            state = "not_certified"
+        reason = {"degenerate": reasons.degenerate, "not_certified":
+                  reasons.not_certified if math.isfinite(upper) else reasons.over_max_residual}[state]
         if not math.isfinite(upper):
             return Early(state, None, None, reason)
         return Early(state, v0, upper / unit, reason)
-    problem = BoxProblem(program, user_gamma, B, root, root_proof)
+    problem = BoxProblem(program, B, root, root_proof)
     problem.interior = v0
     if tighten_rounds and math.isfinite(upper):
         problem.root = problem.tighten(root, upper, tighten_rounds)
-    return Prepared(problem, v0, upper, factor, root_proof)
+    return Prepared(problem, v0, upper, factor, root_proof, reasons)
 
 
 @dataclass
@@ -489,10 +494,11 @@ class Certificate:
 @dataclass
 class Searched:
     status: str
-    solution: np.ndarray | None  # None: nothing within max_residual
+    solution: np.ndarray | None  # None: nothing within max_residual was found
     lower_bound: float | None  # in the caller's units
     nodes: int
     certificate: Certificate | None
+    reason: str | None = None
 
 
 def search(prepared: Prepared, options: FractionalOptions, scope: str, reference: int,
@@ -505,7 +511,7 @@ def search(prepared: Prepared, options: FractionalOptions, scope: str, reference
         return callback(Progress(p.nodes, p.open_boxes, p.lower_bound / unit, p.upper_bound / unit,
                                  p.gap_abs / unit, p.gap_rel, p.elapsed_s))
 
-    leaves: list | None = [] if prepared.root_proof is not None else None
+    leaves: list = []
     bnb = branch_and_bound(
         prepared.problem, prepared.incumbent, prepared.upper,
         BnbOptions(rel_gap=options.rel_gap, abs_gap=options.abs_gap * unit, max_nodes=options.max_nodes,
@@ -513,15 +519,19 @@ def search(prepared: Prepared, options: FractionalOptions, scope: str, reference
         callback=unscaled if callback else None,
         leaves=leaves,
     )
-    if not math.isfinite(bnb.upper_bound):
-        return Searched("infeasible", None, None, bnb.nodes, None)
+    if not math.isfinite(bnb.upper_bound):  # no point of the scope was found
+        if all(proof is not None and math.isinf(proof.bound) for _, proof in leaves):
+            # Every box of the root region (which holds the whole scope) proven to hold none.
+            return Searched("infeasible", None, None, bnb.nodes, None, prepared.reasons.proven_over_max_residual)
+        status = bnb.status if bnb.status != "optimal" else "not_certified"
+        return Searched(status, None, None, bnb.nodes, None, prepared.reasons.over_max_residual)
     if options.max_residual is not None:
         scope = f"{scope} with every residual <= {options.max_residual}"
     root = prepared.problem.root
     certificate = Certificate(scope, reference, np.asarray(functionals).tolist(), np.asarray(denominator).tolist(),
                               root.lo.tolist(), root.hi.tolist(), bnb.tolerance / unit,
                               bnb.upper_bound - bnb.lower_bound <= bnb.tolerance, bnb.leaves)
-    if leaves is not None:
+    if options.certificate == "full":
         certificate.proof = encode(SearchProof(prepared.scale, prepared.root_proof, prepared.problem.tightening,
                                                root, leaves))
     return Searched(bnb.status, bnb.candidate, bnb.lower_bound / unit, bnb.nodes, certificate)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -14,8 +16,71 @@ class InputError(ValueError):
         self.reason = reason
 
 
+# Largest magnitude of an observed coordinate (pixels, or the units of a map's points). Beyond it
+# the products the relaxations are built from lose the digits a certificate needs; a job with
+# such a coordinate is refused with the field and this limit named, rather than answered badly.
+COORDINATE_LIMIT = 1e9
+
+
+def _is_number(x) -> bool:
+    if type(x) is float:  # not bool, not str
+        return math.isfinite(x)
+    return type(x) is int and abs(x) < 2**1023
+
+
+def number_array(value, field: str, what: str, ndim: int, limit: float | None = None) -> np.ndarray:
+    """A JSON value of nested lists of numbers, taken strictly: no strings, no booleans, no
+    non-finite values, exactly ``ndim`` levels, rows of one length; with ``limit``, every entry
+    within +-limit. Raises InputError naming the first offending entry."""
+    if ndim == 1:
+        rows = [value]
+    else:
+        if not isinstance(value, list):
+            raise InputError(field, f"must be {what}")
+        rows = value
+    for i, row in enumerate(rows):
+        where = field if ndim == 1 else f"{field}/{i}"
+        if ndim == 3:
+            number_array(row, where, what, 2, limit)
+            continue
+        if not isinstance(row, list):
+            raise InputError(where, f"must be {what}")
+        for j, x in enumerate(row):
+            if not _is_number(x):
+                kind = "a string" if isinstance(x, str) else "a boolean" if isinstance(x, bool) else \
+                    "not finite" if isinstance(x, float) else f"a {type(x).__name__}"
+                raise InputError(f"{where}/{j}", f"must be a finite number, got {kind}")
+            if limit is not None and abs(x) > limit:
+                raise InputError(f"{where}/{j}", f"magnitude {abs(x):g} exceeds the limit {limit:g} "
+                                                 "(rescale the coordinates, e.g. to pixels or metres)")
+    try:
+        array = np.array(value, dtype=float)
+    except ValueError as exc:  # ragged
+        raise InputError(field, f"must be {what} (rows of one length)") from exc
+    if array.ndim != ndim:
+        raise InputError(field, f"must be {what}")
+    return array
+
+
+def normalised_cameras(cameras: np.ndarray) -> np.ndarray:
+    """Cameras (k, 3, 4) each divided by a power of two near its largest entry, when that entry
+    is far from 1 (beyond 2^+-64). A camera is defined up to a positive scale, and a power of two
+    scales every product exactly, so residuals and depths keep their values to the last bit;
+    only entries near the limits of floating point (1e300, 1e-300), whose squares overflow or
+    vanish, are changed. Solvers and verifier read cameras through this."""
+    cams = np.array(cameras, dtype=float)
+    for cam in cams:
+        largest = float(np.max(np.abs(cam)))
+        if largest > 0 and np.isfinite(largest):
+            exponent = math.frexp(largest)[1]
+            if abs(exponent) > 64:
+                cam *= math.ldexp(1.0, -exponent)
+    return cams
+
+
 def check_cameras(cameras: np.ndarray, field: str = "cameras") -> np.ndarray:
-    """Return cameras as an (N, 3, 4) float array, or raise InputError naming the bad camera."""
+    """Return cameras as an (N, 3, 4) float array (normalised_cameras), or raise InputError
+    naming the bad camera and the reason."""
     cams = np.asarray(cameras, dtype=float)
     if cams.ndim != 3 or cams.shape[1:] != (3, 4):
         raise InputError(field, f"expected a list of 3x4 matrices, got shape {list(cams.shape)}")
@@ -24,9 +89,14 @@ def check_cameras(cameras: np.ndarray, field: str = "cameras") -> np.ndarray:
     for i, cam in enumerate(cams):
         if not np.all(np.isfinite(cam)):
             raise InputError(f"{field}/{i}", "contains a non-finite number")
+    cams = normalised_cameras(cams)
+    for i, cam in enumerate(cams):
+        if not np.any(cam):
+            raise InputError(f"{field}/{i}", "camera matrix is zero")
         singular = np.linalg.svd(cam, compute_uv=False)
-        if singular[0] == 0 or singular[2] <= 1e-12 * singular[0]:
-            raise InputError(f"{field}/{i}", "camera matrix is rank-deficient (rank < 3)")
+        if singular[2] <= 1e-12 * singular[0]:
+            raise InputError(f"{field}/{i}", f"camera matrix is rank-deficient: its singular values "
+                                             f"{singular.tolist()} have a ratio below 1e-12 (rank < 3)")
         if np.linalg.norm(cam[2, :3]) == 0 and cam[2, 3] == 0:
             raise InputError(f"{field}/{i}", "camera has a zero depth row")
     return cams

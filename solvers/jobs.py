@@ -17,8 +17,8 @@ from typing import Any, Callable
 import numpy as np
 
 from .bnb import Progress
-from .certificates import FORMAT, VERSION, data_hash
-from .geometry import InputError, check_cameras
+from .certificates import FORMAT, VERSION, data_hash, problem_hash
+from .geometry import COORDINATE_LIMIT, InputError, check_cameras, number_array
 from .maps import MapOptions, MapResult, check_correspondences, fit_map
 from .triangulation import NORMS, TrackResult, TriangulationOptions, triangulate
 from .verify import proof_of
@@ -73,11 +73,8 @@ class TriangulationKind:
         for key in ("cameras", "tracks"):
             if key not in data:
                 raise InputError(f"data/{key}", "is required")
-        try:
-            cameras = np.asarray(data["cameras"], dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise InputError("data/cameras", "must be a list of 3x4 numeric matrices") from exc
-        cameras = check_cameras(cameras, "data/cameras")
+        cameras = check_cameras(number_array(data["cameras"], "data/cameras", "a list of 3x4 numeric matrices", 3),
+                                "data/cameras")
         if not isinstance(data["tracks"], list) or not data["tracks"]:
             raise InputError("data/tracks", "must be a non-empty list")
         tracks: list = [None] * len(data["tracks"])
@@ -89,11 +86,8 @@ class TriangulationKind:
             views, points = track["views"], track["points"]
             if not isinstance(views, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in views):
                 raise InputError(f"{where}/views", "must be a list of camera indices")
-            try:
-                pts = np.asarray(points, dtype=float)
-            except (TypeError, ValueError) as exc:
-                raise InputError(f"{where}/points", "must be a list of [u, v] pairs") from exc
-            if pts.ndim != 2 or pts.shape[1] != 2:
+            pts = number_array(points, f"{where}/points", "a list of [u, v] pairs", 2, COORDINATE_LIMIT)
+            if pts.shape[1] != 2:
                 raise InputError(f"{where}/points", "must be a list of [u, v] pairs")
             if len(views) < 2:
                 raise InputError(f"{where}/views", "a track needs at least 2 views")
@@ -203,11 +197,9 @@ class MapKind:
                 raise InputError(where, "must be an object with 'source' and 'target'")
             arrays = []
             for key in ("source", "target"):
-                try:
-                    array = np.asarray(entry[key], dtype=float)
-                except (TypeError, ValueError) as exc:
-                    raise InputError(f"{where}/{key}", "must be a list of points (lists of numbers)") from exc
-                if array.ndim != 2 or array.shape[0] == 0:
+                array = number_array(entry[key], f"{where}/{key}", "a list of points (lists of numbers)", 2,
+                                     COORDINATE_LIMIT)
+                if array.shape[0] == 0:
                     raise InputError(f"{where}/{key}", "must be a non-empty list of points of one dimension")
                 arrays.append(array)
             source, target = arrays
@@ -384,8 +376,10 @@ def full_certificate(kind_name: str, data: Any, options, items: list[dict]) -> d
         claims.append({"index": index, "status": item["status"], "certified": item["certified"] and proof is not None,
                        "cost": item["cost"], "lower_bound": item["lower_bound"], "gap": item["gap"],
                        **solution, "proof": proof})
-    return {"format": FORMAT, "version": VERSION, "kind": kind_name, "options": dataclasses.asdict(options),
-            "data": data, "data_sha256": data_hash(kind_name, data), "items": claims}
+    options = dataclasses.asdict(options)
+    return {"format": FORMAT, "version": VERSION, "kind": kind_name, "options": options,
+            "data": data, "data_sha256": data_hash(kind_name, data),
+            "problem_sha256": problem_hash(kind_name, data, options), "items": claims}
 
 
 def parse_job(job: Any):

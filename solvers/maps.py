@@ -97,7 +97,7 @@ def dlt(source: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 
 _REASONS = Reasons(
-    no_domain="no map puts every point at positive depth",
+    no_domain_found="no map putting every point at positive depth was found",
     degenerate="the correspondences do not determine the map: the maps within the residual bound form an unbounded set",
 )
 
@@ -122,8 +122,7 @@ def _fit_map(source, target, options: MapOptions, callback, start: float) -> Map
     chart = MapChart.build(source, target, options.norm)
     n = source.shape[1]
     prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n],
-                       options.abs_gap, options.max_residual, _REASONS, tighten_rounds=4,
-                       certify=options.certificate == "full")
+                       options.abs_gap, options.max_residual, _REASONS, tighten_rounds=4)
     if isinstance(prepared, Early):
         if prepared.incumbent is None:
             result = MapResult(prepared.status, False, reason=prepared.reason)
@@ -137,7 +136,7 @@ def _fit_map(source, target, options: MapOptions, callback, start: float) -> Map
         searched = search(prepared, options, "every map that puts every point at positive depth", chart.reference,
                           functionals, np.append(source[chart.reference], 1.0), callback)
         if searched.solution is None:
-            result = MapResult("infeasible", False, nodes=searched.nodes, reason=_REASONS.over_max_residual)
+            result = MapResult(searched.status, False, nodes=searched.nodes, reason=searched.reason)
         else:
             result = _map_result(chart, source, target, searched.solution, options.norm, searched.status,
                                  searched.lower_bound, searched.nodes, searched.certificate)

@@ -7,7 +7,6 @@ paths or importing any conic solver. ALGORITHMS.md section 2 states the relaxati
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 
@@ -28,8 +27,15 @@ def cost_unit(scale: float, norm: str) -> float:
 
 
 def gamma_for(upper_bound: float, norm: str) -> float:
-    """Largest single residual (2-norm) of any point costing at most ``upper_bound``."""
+    """Largest single residual of any point costing at most ``upper_bound``: its 2-norm, and
+    for L1L1 its 1-norm too (which bounds the 2-norm)."""
     return math.sqrt(upper_bound) if norm == "L2L2" else upper_bound
+
+
+# A point is in a program's scope when every residual's 2-norm is at most max_residual. The
+# solver's incumbents must satisfy it with this much to spare, so that the same point, its
+# residuals recomputed from the raw data by anyone, is in scope too.
+SCOPE_MARGIN = 1e-9
 
 
 @dataclass
@@ -39,6 +45,9 @@ class FractionalProgram:
     exact: np.ndarray  # (N,) bool
     linear: np.ndarray  # (L, d + 1): linear(v) >= 0 on the domain
     norm: str
+    # The scope: every residual's 2-norm (pixel distance, whatever the norm) at most this, in
+    # the program's units; None for no limit. Scaled with the residuals.
+    max_residual: float | None = None
 
     @property
     def dim(self) -> int:
@@ -46,6 +55,8 @@ class FractionalProgram:
 
     def rescale(self, factor: float) -> None:
         self.num = self.num * factor
+        if self.max_residual is not None:
+            self.max_residual = self.max_residual * factor
 
     def __post_init__(self) -> None:
         self._linear_slack = 1e-12 * np.linalg.norm(self.linear, axis=1)  # round-off allowed
@@ -59,7 +70,15 @@ class FractionalProgram:
             linear = self.linear @ V
             if (linear < 0).any() and (linear < -self._linear_slack * np.linalg.norm(V)).any():
                 return math.inf
-        return norm_cost((self.num @ V) / g[:, None], self.norm)
+        residuals = (self.num @ V) / g[:, None]
+        if self.max_residual is not None and not self.in_scope(residuals):
+            return math.inf
+        return norm_cost(residuals, self.norm)
+
+    def in_scope(self, residuals: np.ndarray) -> bool:
+        """Every residual within max_residual, with SCOPE_MARGIN to spare (see there)."""
+        return self.max_residual is None or bool(
+            np.all(np.sqrt((residuals * residuals).sum(axis=1)) <= self.max_residual * (1 - SCOPE_MARGIN)))
 
     def residuals(self, v: np.ndarray) -> np.ndarray:
         V = np.concatenate((v, (1.0,)))
@@ -184,12 +203,11 @@ class Relaxation:
     of v are infinite.
     """
 
-    def __init__(self, program: FractionalProgram, B: np.ndarray, user_gamma: float | None = None,
+    def __init__(self, program: FractionalProgram, B: np.ndarray,
                  complement: tuple[np.ndarray, np.ndarray] | None = None, F: np.ndarray | None = None):
         self.program = program
         self.norm = program.norm
         self.B = B
-        self.user_gamma = user_gamma
         self.F = complete_functionals(B) if F is None else F  # F's first rows are B's
         self.transform = np.linalg.inv(self.F)
         extra = len(self.F) - len(B)
@@ -202,9 +220,13 @@ class Relaxation:
         self.coef_complement = depth_y[:, len(B):]
         self.offset = program.den[self.env, -1]
 
-    def gamma(self, upper_bound: float) -> float:
-        gamma = gamma_for(upper_bound, self.norm) if math.isfinite(upper_bound) else math.inf
-        return min(gamma, self.user_gamma) if self.user_gamma is not None else gamma
+    def gammas(self, upper_bound: float) -> tuple[float, float]:
+        """(cost_gamma, scope_gamma): every residual of a point of the scope costing at most
+        ``upper_bound`` has norm at most cost_gamma (the 1-norm for L1L1, the 2-norm otherwise)
+        and 2-norm at most scope_gamma (max_residual; inf without one)."""
+        cost_gamma = gamma_for(upper_bound, self.norm) if math.isfinite(upper_bound) else math.inf
+        scope = self.program.max_residual
+        return cost_gamma, (scope if scope is not None else math.inf)
 
     def y_bounds(self, box: Box) -> tuple[np.ndarray, np.ndarray]:
         return np.concatenate([box.lo, self.complement[0]]), np.concatenate([box.hi, self.complement[1]])
@@ -230,15 +252,16 @@ class Relaxation:
             return None
         low = np.maximum(low, EPS_DEPTH)
         high = np.maximum(high, low * (1 + 1e-9) + 1e-15)
-        return self.relaxation(box, low, high, self.gamma(upper_bound), upper_bound, envelope)
+        return self.relaxation(box, low, high, *self.gammas(upper_bound), upper_bound, envelope)
 
-    def relaxation(self, box: Box, low: np.ndarray, high: np.ndarray, gamma: float, upper_bound: float,
-                   envelope: bool = True) -> ConicData:
+    def relaxation(self, box: Box, low: np.ndarray, high: np.ndarray, cost_gamma: float, scope_gamma: float,
+                   upper_bound: float, envelope: bool = True) -> ConicData:
         """``min sum r`` over the box in Clarabel's form (ALGORITHMS.md section 2).
 
         Rows are expressions ``c + E x`` that must lie in the cone (Clarabel wants ``b - A x``,
         so ``A = -E``). Variables: v (d), then t, w, r per envelope observation, then one
-        epigraph variable per exact observation. Blocks are filled for all observations at once,
+        epigraph variable per exact observation, then (L1L1) one ``a >= |n_a|`` per residual
+        coordinate of every observation (linear in the dimension, no sign enumeration). Blocks are filled for all observations at once,
         and assembled dense for small problems, sparse for large ones.
 
         Without ``envelope``, each ratio ``t / s`` is bounded below by ``t / U`` instead: weaker
@@ -250,17 +273,27 @@ class Relaxation:
         env, exact = self.env, self.exact
         nE, nX = len(env), len(exact)
         per_env = 3 if envelope else 1
-        n = d + per_env * nE + nX
+        V = nE + nX
+        n_abs = m * V if norm == "L1L1" else 0
+        n = d + per_env * nE + nX + n_abs
         t_idx = d + np.arange(nE)
         w_idx, r_idx = t_idx + nE, t_idx + 2 * nE
         q_idx = d + per_env * nE + np.arange(nX)
-        finite_gamma = math.isfinite(gamma)
-        u = (gamma**2 if norm == "L2L2" else gamma) * high if finite_gamma else 1e12 * high
+        a_idx = (d + per_env * nE + nX + np.arange(n_abs)).reshape(V, m if n_abs else 0)
+        # The largest cost term of one observation (its t / s) and the 2-norm bound on its residual.
+        if norm == "L2L2":
+            gamma = min(cost_gamma, scope_gamma)
+            term = gamma**2
+        elif norm == "L2L1":
+            gamma = term = min(cost_gamma, scope_gamma)
+        else:  # the term is the 1-norm: at most cost_gamma, and sqrt(m) times the 2-norm
+            gamma = scope_gamma
+            term = min(cost_gamma, math.sqrt(m) * scope_gamma)
+        u = term * high if math.isfinite(term) else 1e12 * high
         obs = np.concatenate([env, exact])
         top_idx = np.concatenate([t_idx, q_idx])  # the variable above each observation's numerator
         depth = program.den[obs]
         num = program.num[obs]  # (V, m, d + 1)
-        V = len(obs)
         blocks: list[_Rows] = []
 
         def block(count: int, per: int) -> _Rows:
@@ -285,17 +318,20 @@ class Relaxation:
             B.set(4, t_idx, -1.0)
             B.c[:, 4] = u
         socs: list[int] = []
-        if norm == "L1L1":  # top >= sum |n_a|, and sum |n_a| <= gamma * depth
-            signs = np.array(list(itertools.product((1.0, -1.0), repeat=m)))
-            combined = -np.einsum("sa,vab->vsb", signs, num)  # (V, signs, d + 1)
-            B = block(V, len(signs))
-            B.v[:], B.c[:] = combined[:, :, :-1], combined[:, :, -1]
-            for s_index in range(len(signs)):
-                B.set(s_index, top_idx, 1.0)
-            if finite_gamma:
-                B = block(V, len(signs))
-                B.v[:] = combined[:, :, :-1] + gamma * depth[:, None, :-1]
-                B.c[:] = combined[:, :, -1] + gamma * depth[:, None, -1]
+        if norm == "L1L1":  # a_a >= |n_a|, top >= sum a_a, and sum a_a <= cost_gamma * depth
+            finite_cost = math.isfinite(cost_gamma)
+            B = block(V, 2 * m + 1 + finite_cost)
+            for a in range(m):
+                B.v[:, 2 * a], B.c[:, 2 * a] = -num[:, a, :-1], -num[:, a, -1]
+                B.set(2 * a, a_idx[:, a], 1.0)
+                B.v[:, 2 * a + 1], B.c[:, 2 * a + 1] = num[:, a, :-1], num[:, a, -1]
+                B.set(2 * a + 1, a_idx[:, a], 1.0)
+                B.set(2 * m, a_idx[:, a], -1.0)
+                if finite_cost:
+                    B.set(2 * m + 1, a_idx[:, a], -1.0)
+            B.set(2 * m, top_idx, 1.0)
+            if finite_cost:
+                B.v[:, 2 * m + 1], B.c[:, 2 * m + 1] = cost_gamma * depth[:, :-1], cost_gamma * depth[:, -1]
         n_lin = sum(b.c.size for b in blocks)
         if norm == "L2L2":  # top * depth >= |n|^2: (top + depth, 2 n, top - depth) in the SOC
             B = block(V, m + 2)
@@ -310,7 +346,7 @@ class Relaxation:
             B.set(0, top_idx, 1.0)
             B.v[:, 1:], B.c[:, 1:] = num[:, :, :-1], num[:, :, -1]
             socs += [m + 1] * V
-        if finite_gamma and norm != "L1L1":  # every residual of a better point is below gamma
+        if math.isfinite(gamma):  # every residual's 2-norm (of a better point, or in scope) within gamma
             B = block(V, m + 1)
             B.v[:, 0], B.c[:, 0] = gamma * depth[:, :-1], gamma * depth[:, -1]
             B.v[:, 1:], B.c[:, 1:] = num[:, :, :-1], num[:, :, -1]
@@ -329,11 +365,15 @@ class Relaxation:
         A, c = _assemble(blocks, n)
         # Where the lift of a point costing at most upper_bound lies: t = s * term <= min(u, high * ub)
         # (its smallest feasible value), w = s t / u in [0, high], r = term <= ub, epigraphs <= ub.
-        lower, upper = np.zeros(n), np.full(n, upper_bound)
+        # r and the epigraphs are one observation's term: at most the upper bound and ``term``
+        # (finite whenever either is, so that every variable is bounded in a safe bound).
+        lower, upper = np.zeros(n), np.full(n, min(upper_bound, term))
         lower[:d], upper[:d] = self.y_bounds(box)
         upper[t_idx] = np.minimum(u, high * upper_bound)
         if envelope:
             upper[w_idx] = high
+        if n_abs:  # a_a <= sum a = the observation's top variable, at the smallest lift
+            upper[a_idx] = upper[top_idx][:, None]
         return ConicData(q, A, c, ConeSpec(nonneg=n_lin, soc=tuple(socs)), lower, upper, self.transform)
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from .bnb import Progress
 from .charts import Chart, camera_centres
 from .fractional import NORMS, Certificate, Early, FractionalOptions, Reasons, depth_subspace, prepare, search
-from .geometry import norm_cost, reprojection_residuals
+from .geometry import norm_cost, normalised_cameras, reprojection_residuals
 from .verify import checked_solve
 
 
@@ -45,8 +45,10 @@ class TrackResult:
     residuals: list[list[float]] = field(default_factory=list)
 
 
+AT_INFINITY = 1e-12  # |X[3]| of a unit-norm X below which the point is returned at infinity
+
 _REASONS = Reasons(
-    no_domain="no point is in front of every camera",
+    no_domain_found="no point in front of every camera was found (the cameras' signs may need orienting)",
     degenerate="the rays are (nearly) parallel: the points within the residual bound form an unbounded set",
 )
 
@@ -57,12 +59,12 @@ def prepare_track(cameras: np.ndarray, points: np.ndarray, options: Triangulatio
     cameras = np.asarray(cameras, dtype=float)
     points = np.asarray(points, dtype=float)
     chart = Chart.build(cameras, points, options.norm)
-    if chart.constant_depth_behind:
-        return chart, TrackResult("infeasible", False, reason=_REASONS.no_domain)
+    if chart.constant_depth_behind:  # exact: a depth that is a non-positive constant
+        return chart, TrackResult("infeasible", False, reason="no point is in front of every camera")
     # Branch only where the depths vary: one direction for two views, two for three (most of a
     # turntable's tracks), three from four views on.
     prepared = prepare(chart.program, chart.dlt(), depth_subspace(chart.program), options.abs_gap,
-                       options.max_residual, _REASONS, certify=options.certificate == "full")
+                       options.max_residual, _REASONS)
     if isinstance(prepared, Early):
         if prepared.incumbent is None:
             return chart, TrackResult(prepared.status, False, reason=prepared.reason)
@@ -82,11 +84,11 @@ def triangulate(
     """Certified global optimum of one track: ``cameras`` (k, 3, 4) of its views, ``points`` (k, 2)."""
     options = options or TriangulationOptions()
     start = time.perf_counter()
-    cameras = np.asarray(cameras, dtype=float)
+    cameras = normalised_cameras(cameras)
     points = np.asarray(points, dtype=float)
     return checked_solve("triangulation", (cameras, points), options,
                          lambda run: _triangulate(cameras, points, run, callback, start),
-                         lambda result: {"point": result.point})
+                         lambda result: {"point": result.point, "at_infinity": result.at_infinity})
 
 
 def _triangulate(cameras, points, options: TriangulationOptions, callback, start: float) -> TrackResult:
@@ -100,7 +102,7 @@ def _triangulate(cameras, points, options: TriangulationOptions, callback, start
     searched = search(prepared, options, "every point in front of every camera", chart.reference,
                       prepared.problem.B @ to_chart[:3], to_chart[3], callback)
     if searched.solution is None:
-        result = TrackResult("infeasible", False, nodes=searched.nodes, reason=_REASONS.over_max_residual)
+        result = TrackResult(searched.status, False, nodes=searched.nodes, reason=searched.reason)
     else:
         result = _track_result(chart, cameras, points, searched.solution, options.norm, searched.status,
                                searched.lower_bound, searched.nodes, searched.certificate)
@@ -111,7 +113,12 @@ def _triangulate(cameras, points, options: TriangulationOptions, callback, start
 def _track_result(chart: Chart, cameras, points, y, norm, status, lower, nodes, certificate) -> TrackResult:
     X = chart.T @ np.append(y, 1.0)
     X = X / np.linalg.norm(X)
-    at_infinity = abs(X[3]) <= 1e-12
+    # The chart keeps X[3] >= 0 up to round-off; a point this close to the plane at infinity is
+    # returned on it, with X[3] exactly 0, so that solver and verifier read one point, signed so
+    # that its depths are positive (X and -X differ there).
+    at_infinity = abs(X[3]) <= AT_INFINITY
+    if at_infinity:
+        X[3] = 0.0
     point = X.tolist() if at_infinity else (X[:3] / X[3]).tolist()
     # The cost of the point as returned (what anyone recomputing it gets, to the last bit).
     residuals = reprojection_residuals(cameras, X if at_infinity else np.append(point, 1.0), points)

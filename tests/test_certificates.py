@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from solvers.certificates import data_hash, pack, unpack
+from solvers.certificates import data_hash, pack, problem_hash, unpack
 from solvers.jobs import solve_job
 from solvers.relaxation import NORMS
 from solvers.verify import BOUND_TOLERANCE, uncovered_part, verify_arrays, verify_document
@@ -184,12 +184,14 @@ class TestTamperingIsCaught:
         doc = copy.deepcopy(branched)
         doc["data"]["maps"][0]["target"][0][0] += 0.5
         doc["data_sha256"] = data_hash(doc["kind"], doc["data"])
+        doc["problem_sha256"] = problem_hash(doc["kind"], doc["data"], doc["options"])
         assert failed_check(doc) in ("objective", "leaf_bounds", "lower_bound")
 
     def test_understated_gap(self, branched):
         doc = copy.deepcopy(branched)
         item = doc["items"][0]
         item["gap"] = item["gap"] * 0.01  # claims a lower bound the leaves do not reach
+        item["lower_bound"] = item["cost"] - item["gap"]
         assert failed_check(doc) == "lower_bound"
 
 
@@ -218,8 +220,8 @@ class TestCommandLine:
         return subprocess.run([sys.executable, "-m", "app.cli", *args], input=stdin, capture_output=True, text=True)
 
     def test_exit_status_valid_invalid_unreadable(self, tmp_path, branched):
-        good = tmp_path / "result.json"
-        good.write_text(json.dumps({"kind": "resection", "certificate": branched}))
+        good = tmp_path / "certificate.json"
+        good.write_text(json.dumps(branched))
         assert self.run("verify", str(good)).returncode == 0
         bad_doc = copy.deepcopy(branched)
         bad_doc["items"][0]["proof"]["leaves"].pop(0)

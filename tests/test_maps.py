@@ -116,7 +116,7 @@ def test_map_relaxation_never_exceeds_the_cost_in_its_box(seed, norm, kind, shri
     chart = MapChart.build(source, target, norm)
     n = source.shape[1]
     prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n], 1e-7, None,
-                       _REASONS, certify=full)
+                       _REASONS)
     if not isinstance(prepared, Prepared):
         return
     problem = prepared.problem
