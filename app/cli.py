@@ -133,9 +133,12 @@ def cmd_serve(args: argparse.Namespace) -> int:
     # workers and the embedded Redis below are stopped too.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     print(f"geocert: {args.workers} worker process(es), concurrency {args.concurrency} each", file=sys.stderr)
+    stopping = threading.Event()
+    _watch_workers(workers, stopping)
     try:
         uvicorn.run("app.main:app", host=args.host, port=args.port, log_level="warning")
     finally:
+        stopping.set()
         for process in workers:
             process.send_signal(signal.SIGTERM)
         for process in workers:
