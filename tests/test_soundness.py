@@ -1,0 +1,383 @@
+"""Certified must mean certified: one class per way a claim could be false or a forged certificate
+accepted (issue 11). Each test fails on the code before the soundness work; each says why."""
+
+from __future__ import annotations
+
+import base64
+import copy
+import json
+import math
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import scipy.optimize
+
+from solvers.certificates import data_hash, pack, problem_hash, unpack
+from solvers.conic import ConicStatus, solve_conic
+from solvers.geometry import InputError
+from solvers.fractional import root_region
+from solvers.jobs import parse_job, solve_job
+from solvers.relaxation import Relaxation
+from solvers.charts import Chart
+from solvers.verify import verify_any, verify_document
+from solvers.bnb import Box
+from solvers.cones import proves_infeasible
+
+from .scenes import project, random_cameras
+
+CAMERAS = [[[800, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]],
+           [[800, 0, 320, -800], [0, 800, 240, 0], [0, 0, 1, 0]]]
+
+
+def readme_job(u: float = 330.0, mode: str = "summary", norm: str = "L2L2", **options) -> dict:
+    """The README's two-view job; its optimum costs 0.5 (L2L2) whatever u, in front of both."""
+    return {"kind": "triangulation",
+            "data": {"cameras": copy.deepcopy(CAMERAS), "tracks": [{"views": [0, 1], "points": [[u, 250], [250, 251]]}]},
+            "options": {"norm": norm, "certificate": mode, **options}}
+
+
+def failed_check(document) -> str | None:
+    report = verify_any(document)
+    return None if report.valid else report.first_failure["check"]
+
+
+def rehash(doc: dict) -> dict:
+    """What a forger can always do: make the hashes match whatever the document now says."""
+    doc["data_sha256"] = data_hash(doc["kind"], doc["data"])
+    doc["problem_sha256"] = problem_hash(doc["kind"], doc["data"], doc["options"])
+    return doc
+
+
+def six_view_job(norm: str, max_residual: float | None, mode: str = "full") -> dict:
+    """Six views of one point, exact but for one view off by (3, 3) px."""
+    rng = np.random.default_rng(11)
+    cameras = random_cameras(rng, 6)
+    points = project(cameras, np.array([0.2, -0.1, 0.3, 1.0]))
+    points[2] += 3.0
+    return {"kind": "triangulation",
+            "data": {"cameras": cameras.tolist(), "tracks": [{"views": list(range(6)), "points": points.tolist()}]},
+            "options": {"norm": norm, "certificate": mode, "max_residual": max_residual}}
+
+
+class TestEveryModeIsSafe:
+    """Class 1: the summary mode used the solver's own objective where full mode used the safe
+    bound; the modes now search alike and differ only in what they return."""
+
+    @pytest.mark.parametrize("norm", ["L2L2", "L2L1", "L1L1"])
+    @pytest.mark.parametrize("u", [330.0, 1e6, -1e9, 1e9])
+    def test_summary_and_full_prove_the_same_bound(self, u, norm):
+        summary = solve_job(readme_job(u, "summary", norm))["tracks"][0]
+        full = solve_job(readme_job(u, "full", norm))["tracks"][0]
+        assert (summary["status"], summary["lower_bound"], summary["cost"]) == \
+            (full["status"], full["lower_bound"], full["cost"])
+
+    @pytest.mark.parametrize("u", [1e6, 1e9, -1e9])
+    def test_extreme_coordinates_within_the_limit_never_overstate(self, u):
+        track = solve_job(readme_job(u))["tracks"][0]
+        # 0.5 is attainable in front of both cameras: no true lower bound exceeds it.
+        assert track["lower_bound"] is None or track["lower_bound"] <= 0.5 * (1 + 1e-9)
+        assert track["status"] in ("optimal", "not_certified", "node_limit")
+
+    @pytest.mark.parametrize("u", [1.0000001e9, 1e15, 1e16, -1e300])
+    def test_coordinates_beyond_the_limit_are_refused_with_the_limit(self, u):
+        with pytest.raises(InputError) as error:
+            parse_job(readme_job(u))
+        assert error.value.field == "data/tracks/0/points/0/0"
+        assert "1e+09" in error.value.reason
+
+
+class TestNoFalseInfeasible:
+    """Class 2: 'infeasible' was reported when a solver merely failed, and a camera of large
+    scale was called rank-deficient."""
+
+    def test_a_camera_of_extreme_scale_is_the_same_camera(self):
+        scaled = readme_job()
+        scaled["data"]["cameras"][0] = (np.array(CAMERAS[0], float) * 1e300).tolist()
+        tiny = readme_job()
+        tiny["data"]["cameras"][1] = (np.array(CAMERAS[1], float) * 1e-300).tolist()
+        plain = solve_job(readme_job())["tracks"][0]
+        for job in (scaled, tiny):
+            track = solve_job(job)["tracks"][0]
+            assert track["certified"] and track["cost"] == pytest.approx(plain["cost"], rel=1e-12)
+            assert np.allclose(track["point"], plain["point"], rtol=1e-9)
+
+    def test_a_rank_deficient_camera_is_named_with_its_singular_values(self):
+        job = readme_job()
+        job["data"]["cameras"][0] = [[1e300, 0, 0, 0], [2e300, 0, 0, 0], [0, 0, 1e300, 0]]
+        with pytest.raises(InputError) as error:
+            parse_job(job)
+        assert error.value.field == "data/cameras/0" and "singular values" in error.value.reason
+
+    def test_infeasible_only_when_proven(self):
+        # Points beyond the coordinate limit never reach the solver; a track whose every box is
+        # proven empty of in-scope points is infeasible (max_residual far below any fit).
+        job = six_view_job("L2L2", 1e-3, mode="summary")
+        track = solve_job(job)["tracks"][0]
+        assert track["status"] == "infeasible" and "proven" in track["reason"]
+
+
+class TestMaxResidualScope:
+    """Class 3: incumbents were adopted outside max_residual; under L1L1 the leaves bounded the
+    1-norm where the scope is the pixel distance."""
+
+    @pytest.mark.parametrize("norm", ["L2L2", "L2L1", "L1L1"])
+    def test_the_solution_is_in_scope_and_its_bound_true(self, norm):
+        job = six_view_job(norm, 3.5)
+        result = solve_job(job)
+        track = result["tracks"][0]
+        assert track["status"] == "optimal" and track["certified"]
+        cameras = np.array(job["data"]["cameras"])
+        points = np.array(job["data"]["tracks"][0]["points"])
+        residuals = project(cameras, np.append(track["point"], 1.0)) - points
+        assert np.max(np.linalg.norm(residuals, axis=1)) <= 3.5
+        assert verify_document(result["certificate"]).valid
+        # An independent local optimum of the same problem within the scope is never below the bound.
+        cost = {"L2L2": lambda r: float((r**2).sum()), "L2L1": lambda r: float(np.linalg.norm(r, axis=1).sum()),
+                "L1L1": lambda r: float(np.abs(r).sum())}[norm]
+
+        def residual_of(x):
+            return project(cameras, np.append(x, 1.0)) - points
+
+        best = scipy.optimize.minimize(
+            lambda x: cost(residual_of(x)), np.array(track["point"]) + 0.01, method="SLSQP",
+            constraints=[{"type": "ineq", "fun": lambda x: 3.5**2 - (residual_of(x) ** 2).sum(axis=1)}])
+        if np.max(np.linalg.norm(residual_of(best.x), axis=1)) <= 3.5:
+            assert track["lower_bound"] <= cost(residual_of(best.x)) * (1 + 1e-9)
+
+    def test_the_verifier_refuses_a_solution_outside_the_scope(self):
+        result = solve_job(six_view_job("L2L2", None))
+        doc = rehash(copy.deepcopy(result["certificate"]))
+        doc["options"]["max_residual"] = 3.5  # the unbounded optimum has a residual beyond it
+        assert failed_check(rehash(doc)) in ("scope", "root_region", "leaf_bounds", "lower_bound")
+
+
+class TestPointsAtInfinity:
+    """Class 4: a point at infinity came back with X[3] = -2.7e-17, which the verifier flipped."""
+
+    def test_zero_disparity_is_at_infinity_and_verifies(self):
+        job = readme_job(mode="full")
+        job["data"]["tracks"][0]["points"] = [[330, 250], [330, 250]]
+        result = solve_job(job)
+        track = result["tracks"][0]
+        assert track["at_infinity"] and track["point"][3] == 0.0
+        depths = np.array(CAMERAS, float)[:, 2] @ np.array(track["point"])
+        assert np.all(depths > 0)
+        assert verify_document(result["certificate"]).valid
+
+
+@pytest.fixture(scope="module")
+def genuine() -> dict:
+    """A full certificate of a track that needed a search (README cameras, 3 px of disparity noise)."""
+    job = readme_job(mode="full")
+    job["data"]["tracks"][0]["points"] = [[330, 250], [251.5, 253]]
+    result = solve_job(job)
+    assert result["certificate"]["items"][0]["proof"]["type"] == "branch_and_bound"
+    assert verify_document(result["certificate"]).valid
+    return result
+
+
+class TestScaleIsNoLoophole:
+    """Class 5: a tiny proof.scale made the absolute slack on cost caps swallow the claim."""
+
+    def test_a_cap_below_the_claim_is_refused_at_any_scale(self, genuine):
+        doc = copy.deepcopy(genuine["certificate"])
+        item = doc["items"][0]
+        proof = item["proof"]
+        # Forge: a worse point claimed optimal, with a proof whose leaf is the relaxation at cost
+        # cap 0 (infeasible: no point fits exactly), at a scale where the old absolute slack
+        # (1e-9, scaled units) exceeded the whole claim.
+        bad = [0.5, 0.7, 5.0]
+        cams = np.array(CAMERAS, float)
+        pts = np.array(doc["data"]["tracks"][0]["points"], float)
+        cost = float(((project(cams, np.append(bad, 1.0)) - pts) ** 2).sum())
+        scale = 1e-7
+        item.update(point=bad, cost=cost, gap=cost * 1e-4, lower_bound=cost - cost * 1e-4)
+        chart = Chart.build(cams, pts, "L2L2")
+        chart.program.rescale(scale)
+        k = len(proof["search_box"][0])
+        B = np.array(proof["root"]["functionals"])[:k]
+        # The root region proven at the forger's scale, holding the bad point.
+        _, _, root = root_region(chart.program, B, math.sqrt(cost) * scale)
+        assert root is not None
+        proof["root"] = {"gamma": root.gamma, "functionals": root.functionals.tolist(),
+                         "claim": [root.claim_lower.tolist(), root.claim_upper.tolist()],
+                         "bounds": [root.lower.tolist(), root.upper.tolist()], "duals": [pack(z) for z in root.duals]}
+        lower, upper, F = root.lower, root.upper, root.functionals
+        relaxation = Relaxation(chart.program, F[:k], (lower[k:], upper[k:]), F)
+        box = Box(lower[:k], upper[:k])
+        claimed = item["lower_bound"] * scale**2
+        for cap in (1e-4 * claimed, 1e-6 * claimed, 1e-8 * claimed):  # all below the old slack of 1e-9
+            data = relaxation.conic_data(box, cap)
+            res = solve_conic(data.q, data.A, data.b, data.cones)
+            if res.status is ConicStatus.INFEASIBLE and proves_infeasible(
+                    data.A, data.b, data.cones, res.z, data.lower, data.upper, data.transform):
+                break
+        else:
+            pytest.fail("no cap gave a checkable Farkas vector")
+        proof.update(scale=scale, tightening=[], search_box=[box.lo.tolist(), box.hi.tolist()],
+                     proofs=[{"box": [box.lo.tolist(), box.hi.tolist()], "upper_bound": cap, "kind": "farkas",
+                              "z": pack(res.z), "bound": 1e300}],
+                     leaves=[[box.lo.tolist(), box.hi.tolist(), 0]])
+        assert failed_check(doc) == "leaf_bounds"
+
+    @pytest.mark.parametrize("scale", [1e-300, 0.0, -1.0, 1e10])
+    def test_a_scale_outside_the_solver_range_is_refused(self, genuine, scale):
+        doc = copy.deepcopy(genuine["certificate"])
+        doc["items"][0]["proof"]["scale"] = scale
+        assert failed_check(doc) == "program"
+
+
+class TestNumbersOnly:
+    """Class 6: strings such as "inf" were parsed as numbers, and terms over infinite bounds
+    dropped."""
+
+    @pytest.mark.parametrize("value", ["inf", "-inf", "1.5", None, True])
+    def test_root_bounds_must_be_finite_json_numbers(self, genuine, value):
+        doc = copy.deepcopy(genuine["certificate"])
+        doc["items"][0]["proof"]["root"]["bounds"][1][0] = value
+        assert failed_check(doc) == "format"
+
+    def test_a_leaf_box_must_be_numbers(self, genuine):
+        doc = copy.deepcopy(genuine["certificate"])
+        doc["items"][0]["proof"]["leaves"][0][1][0] = "Infinity"
+        assert failed_check(doc) == "format"
+
+
+class TestRelativeTolerances:
+    """Class 7: absolute 1e-9 slacks let a trivial proof claim cost 1e-9 where the true cost is
+    far smaller."""
+
+    def test_an_exact_track_cannot_claim_a_larger_cost(self):
+        cams = np.array(CAMERAS, float) / 800.0  # normalised cameras: residuals of order 1e-12
+        X = np.array([0.1, 0.2, 4.0, 1.0])
+        points = project(cams, X)
+        job = {"kind": "triangulation", "data": {"cameras": cams.tolist(),
+               "tracks": [{"views": [0, 1], "points": points.tolist()}]}, "options": {"certificate": "full"}}
+        result = solve_job(job)
+        item = result["certificate"]["items"][0]
+        assert item["proof"]["type"] == "trivial" and item["cost"] < 1e-12
+        forged = copy.deepcopy(result["certificate"])
+        forged["items"][0].update(cost=1e-9, gap=0.0, lower_bound=1e-9)
+        assert failed_check(forged) in ("objective", "lower_bound")
+
+
+class TestClaimFieldsChecked:
+    """Class 8: lower_bound, status, certified and gap were never compared with the proof."""
+
+    @pytest.mark.parametrize("change", [{"lower_bound": 1e6}, {"status": "node_limit"}, {"gap": -1.0},
+                                        {"certified": "yes"}, {"lower_bound": "0.1"}])
+    def test_a_claim_the_proof_does_not_support_is_refused(self, genuine, change):
+        doc = copy.deepcopy(genuine["certificate"])
+        doc["items"][0].update(change)
+        report = verify_document(doc)
+        assert not report.valid
+
+
+class TestOptionsHashedAndChecked:
+    """Class 9: options were neither checked nor hashed: an empty scope made "optimal" vacuous."""
+
+    @pytest.mark.parametrize("max_residual", [-1.0, 0.0, "1"])
+    def test_invalid_options_are_an_invalid_certificate(self, genuine, max_residual):
+        doc = copy.deepcopy(genuine["certificate"])
+        doc["options"]["max_residual"] = max_residual
+        assert failed_check(doc) == "options"
+
+    def test_a_narrower_scope_changes_the_hash_and_must_hold_the_solution(self, genuine):
+        doc = copy.deepcopy(genuine["certificate"])
+        doc["options"]["max_residual"] = 0.001
+        assert failed_check(doc) == "data_hash"
+        assert failed_check(rehash(doc)) == "scope"
+
+    def test_the_report_states_the_scope(self, genuine):
+        report = verify_document(genuine["certificate"]).as_dict()
+        assert report["scope"]["norm"] == "L2L2" and report["scope"]["max_residual"] is None
+        assert "in front of every camera" in report["scope"]["statement"]
+
+
+class TestReturnedItemsMatch:
+    """Class 10: a result whose numbers differed from its certificate verified."""
+
+    @pytest.mark.parametrize("field, value", [("point", [0.0, 0.0, 5.0]), ("cost", 0.1), ("certified", False)])
+    def test_a_result_must_return_what_its_certificate_proves(self, genuine, field, value):
+        result = copy.deepcopy(genuine)
+        assert verify_any(result).valid and verify_any({"id": "j", "result": result}).valid
+        result["tracks"][0][field] = value
+        assert failed_check(result) == "returned"
+        assert failed_check({"id": "j", "result": result}) == "returned"
+
+    def test_the_command_line_checks_the_result_too(self, genuine, tmp_path):
+        result = copy.deepcopy(genuine)
+        result["tracks"][0]["point"] = [0.0, 0.0, 5.0]
+        path = tmp_path / "result.json"
+        path.write_text(json.dumps(result))
+        out = subprocess.run([sys.executable, "-m", "app.cli", "verify", str(path)], capture_output=True, text=True)
+        assert out.returncode == 1 and json.loads(out.stdout)["first_failure"]["check"] == "returned"
+
+
+class TestNoCrashNoExhaustion:
+    """Class 11: deep nesting crashed the CLI, and an unserved dimension made the verifier build
+    2^18 rows."""
+
+    def test_deep_nesting_is_refused_fast(self, genuine, tmp_path):
+        path = tmp_path / "deep.json"
+        path.write_text("[" * 100_000 + "]" * 100_000)
+        out = subprocess.run([sys.executable, "-m", "app.cli", "verify", str(path)], capture_output=True, text=True)
+        assert out.returncode == 2 and "Traceback" not in out.stderr
+        doc = copy.deepcopy(genuine["certificate"])
+        nested: list = []
+        for _ in range(200):
+            nested = [nested]
+        doc["data"]["extra"] = nested
+        assert failed_check(doc) == "format"
+
+    def test_unserved_dimensions_are_refused_fast(self):
+        rng = np.random.default_rng(3)
+        source = rng.normal(size=(40, 2)).tolist()
+        target = rng.normal(size=(40, 18)).tolist()
+        doc = {"format": "geocert-certificate", "version": 2, "kind": "homography",
+               "options": {"norm": "L1L1", "rel_gap": 1e-3, "abs_gap": 1e-7, "max_residual": None},
+               "data": {"maps": [{"source": source, "target": target}]},
+               "items": [{"index": 0, "status": "optimal", "certified": True, "cost": 1.0, "gap": 0.0,
+                          "lower_bound": 1.0, "matrix": np.eye(19, 3).tolist(), "proof": {"type": "trivial"}}]}
+        rehash(doc)
+        start = time.perf_counter()
+        assert failed_check(doc) == "data"
+        assert time.perf_counter() - start < 1.0
+
+    def test_l1_relaxations_grow_linearly_with_the_dimension(self):
+        from solvers.charts import MapChart
+        rows = {}
+        for n in (2, 3):
+            rng = np.random.default_rng(n)
+            chart = MapChart.build(rng.normal(size=(12, n)), rng.normal(size=(12, n)), "L1L1")
+            data = Relaxation(chart.program, np.eye(chart.program.dim)[:n]).conic_data(
+                Box(-np.ones(n), np.ones(n)), 10.0)
+            rows[n] = data.cones.nonneg
+        # Per observation: 2 rows per coordinate, one for the sum, one for the cost cap (and the
+        # envelope's five), plus 2 box rows per branched functional: linear in the dimension,
+        # where sign enumeration doubled (2 x 4 rows per observation in 2D, 2 x 8 in 3D).
+        assert rows[3] - rows[2] == 2 * 12 + 2
+
+
+class TestStrictTypes:
+    """Class 12 (solver side, the CLI's path): strings and booleans are not numbers."""
+
+    @pytest.mark.parametrize("path, value, field", [
+        (("data", "tracks", 0, "points", 0, 0), "330", "data/tracks/0/points/0/0"),
+        (("data", "tracks", 0, "points", 0, 1), True, "data/tracks/0/points/0/1"),
+        (("data", "tracks", 0, "views", 1), 1.0, "data/tracks/0/views"),
+        (("data", "cameras", 0, 0, 0), "800", "data/cameras/0/0/0"),
+        (("options", "rel_gap"), "1e-3", "options/rel_gap"),
+    ])
+    def test_loose_types_are_refused(self, path, value, field):
+        job = readme_job()
+        target = job
+        for key in path[:-1]:
+            target = target[key]
+        target[path[-1]] = value
+        with pytest.raises(InputError) as error:
+            parse_job(job)
+        assert error.value.field == field
