@@ -13,6 +13,8 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import scipy.optimize
 
 from solvers.certificates import data_hash, pack, problem_hash, unpack
@@ -381,3 +383,74 @@ class TestStrictTypes:
         with pytest.raises(InputError) as error:
             parse_job(job)
         assert error.value.field == field
+
+
+# --- property: any perturbation of a genuine certificate is refused, or leaves a true claim ------
+
+def _numbers_in(value, path=()):
+    """Paths of every number (and of every dual vector's entries) in a proof or claim."""
+    if isinstance(value, dict):
+        for key, v in value.items():
+            yield from _numbers_in(v, path + (key,))
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            yield from _numbers_in(v, path + (i,))
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        yield path
+    elif isinstance(value, str) and path and path[-1] not in ("kind", "type", "status") and len(value) > 8:
+        yield path + ("dual",)
+
+
+@pytest.fixture(scope="module")
+def genuine_documents(genuine) -> list[dict]:
+    """A branched track, and a resection with tightening rounds and several leaves."""
+    from .test_certificates import map_job
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        document = solve_job(map_job(rng, "resection", 7, "L2L2", maps=1, noise=3.0))["certificate"]
+        proof = document["items"][0]["proof"]
+        if document["items"][0]["certified"] and proof.get("tightening") and len(proof["leaves"]) >= 3:
+            return [genuine["certificate"], document]
+    pytest.fail("no branched resection")
+
+
+@settings(max_examples=150, deadline=None)
+@given(which=st.integers(0, 1), pick=st.integers(0, 10**6), how=st.integers(0, 4),
+       amount=st.floats(1e-12, 0.5), section=st.sampled_from(["proof", "claim", "options"]))
+def test_a_perturbed_certificate_is_refused_or_still_true(genuine_documents, which, pick, how, amount, section):
+    original = genuine_documents[which]
+    doc = copy.deepcopy(original)
+    item = doc["items"][0]
+    if section == "proof":
+        paths = [("items", 0, "proof") + p for p in _numbers_in(item["proof"])]
+    elif section == "claim":
+        paths = [("items", 0, key) for key in ("cost", "lower_bound", "gap")] + \
+            [("items", 0) + p for p in _numbers_in({k: item[k] for k in ("point", "matrix") if k in item})]
+    else:
+        paths = [("options", key) for key in ("rel_gap", "abs_gap")]
+    path = paths[pick % len(paths)]
+    if path[-1] == "dual":
+        *where, _ = path
+        target = doc
+        for key in where[:-1]:
+            target = target[key]
+        z = unpack(target[where[-1]]).copy()
+        z[pick % len(z)] = z[pick % len(z)] * (1 + amount) if how else -z[pick % len(z)] - amount
+        target[where[-1]] = pack(z)
+    else:
+        target = doc
+        for key in path[:-1]:
+            target = target[key]
+        old = target[path[-1]]
+        target[path[-1]] = [old * (1 + amount), old + amount, -old, old * 1e6 + 1, 0.0][how]
+    if section == "options":
+        rehash(doc)  # a forger recomputes the hashes; the third party compares the scope stated
+    report = verify_document(doc)
+    if not report.valid:
+        return
+    # Still valid: the claim must still be true. The optimum lies in [original bound, original
+    # cost]; a valid claim's lower bound may not exceed the cost of the original (attainable)
+    # solution, and its cost is recomputed from its solution, which must be in scope.
+    claim = doc["items"][0]
+    assert claim["lower_bound"] <= original["items"][0]["cost"] * (1 + 1e-9)
+    assert report.scope["max_residual"] == original["options"].get("max_residual")
