@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+from typing import Any
+
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
@@ -44,9 +47,24 @@ def field_path(loc: tuple) -> str:
     return "/".join(parts) or "body"
 
 
+_JSON_TYPES = {str: "a string", bool: "a boolean", float: "a decimal number", type(None): "null",
+               list: "an array", dict: "an object"}
+
+
+def _reason(error: dict) -> str:
+    """pydantic's message, and for a strict type error what the JSON held instead."""
+    reason = error.get("msg", "invalid")
+    if error.get("type") in ("float_type", "int_type", "int_from_float", "bool_type", "string_type"):
+        given = error.get("input")
+        if type(given) in _JSON_TYPES:
+            shown = json.dumps(given) if isinstance(given, (str, bool, float)) else ""
+            reason += f" (got {_JSON_TYPES[type(given)]}{' ' + shown if shown else ''})"
+    return reason
+
+
 def validation_problem(errors: list[dict], instance: str | None = None) -> dict:
     """422 problem details from pydantic errors."""
-    fields = [{"field": field_path(e.get("loc", ())), "reason": e.get("msg", "invalid")} for e in errors]
+    fields = [{"field": field_path(e.get("loc", ())), "reason": _reason(e)} for e in errors]
     first = fields[0] if fields else {"field": "body", "reason": "invalid"}
     body = {"type": "about:blank", "title": "Invalid request", "status": 422,
             "detail": f"{first['field']}: {first['reason']}", "errors": fields}
@@ -55,10 +73,47 @@ def validation_problem(errors: list[dict], instance: str | None = None) -> dict:
     return body
 
 
+def is_json_media_type(value: str | None) -> bool:
+    """``application/json`` or ``application/<anything>+json``, parameters allowed."""
+    if not value:
+        return False
+    media = value.split(";", 1)[0].strip().lower()
+    return media == "application/json" or (media.startswith("application/") and media.endswith("+json"))
+
+
+def json_syntax_problem(error: dict, document: Any, instance: str | None = None) -> dict:
+    """400 problem details for a body the JSON parser refused: its message, line and column."""
+    position = error.get("loc", ("body", 0))[-1]
+    position = position if isinstance(position, int) else 0
+    text = document.decode("utf-8", "replace") if isinstance(document, (bytes, bytearray)) else str(document or "")
+    line = text.count("\n", 0, position) + 1
+    column = position - (text.rfind("\n", 0, position) + 1) + 1
+    message = (error.get("ctx") or {}).get("error") or "invalid JSON"
+    reason = f"not valid JSON: {message} at line {line}, column {column}"
+    body = {"type": "about:blank", "title": "Bad request", "status": 400, "detail": f"the request body is {reason}",
+            "errors": [{"field": "body", "reason": reason}], "line": line, "column": column}
+    if instance:
+        body["instance"] = instance
+    return body
+
+
 def install(app: FastAPI) -> None:
     @app.exception_handler(RequestValidationError)
     async def validation(request: Request, exc: RequestValidationError):
-        body = validation_problem(list(exc.errors()), instance=str(request.url.path))
+        errors = list(exc.errors())
+        instance = str(request.url.path)
+        syntax = next((e for e in errors if e.get("type") == "json_invalid"), None)
+        if syntax is not None:
+            return JSONResponse(json_syntax_problem(syntax, exc.body, instance), status_code=400,
+                                media_type=PROBLEM_JSON)
+        content_type = request.headers.get("content-type")
+        if request.method in ("POST", "PUT", "PATCH") and not is_json_media_type(content_type) and any(
+                tuple(e.get("loc", ()))[:1] == ("body",) for e in errors):
+            given = f"it was {content_type!r}" if content_type else "it was missing"
+            return problem(415, "Unsupported media type",
+                           f"the body must be JSON sent with the header content-type: application/json ({given})",
+                           [{"field": "content-type", "reason": "must be application/json"}], instance=instance)
+        body = validation_problem(errors, instance=instance)
         return JSONResponse(body, status_code=422, media_type=PROBLEM_JSON)
 
     @app.exception_handler(InputError)

@@ -10,7 +10,9 @@ from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, TypeAdapter, crea
 from solvers.maps import MapOptions
 from solvers.triangulation import TriangulationOptions
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
+# Strict types (the Strict models below): a JSON string ("330") or a boolean is never a number, and
+# a float (1.0) is never an integer; a JSON integer is still a number wherever a float is asked for.
+Finite = Annotated[float, Field(allow_inf_nan=False, strict=True)]
 CameraRow = Annotated[list[Finite], Field(min_length=4, max_length=4)]
 Camera = Annotated[list[CameraRow], Field(min_length=3, max_length=3, description="3x4 projective camera")]
 Pixel = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[u, v] in pixels")]
@@ -18,7 +20,9 @@ Pixel = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[
 
 
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    """Unknown fields are refused, and values are taken only as their JSON type (strict mode)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
 
 
 class TrackIn(Strict):
@@ -108,9 +112,15 @@ class ProblemDetails(BaseModel):
     detail: str | None = None
     instance: str | None = None
     errors: list[FieldError] | None = None
+    line: int | None = Field(None, description="for a body that is not JSON: where the parser stopped (from 1)")
+    column: int | None = Field(None, description="for a body that is not JSON: where the parser stopped (from 1)")
 
 
 class JobProgress(BaseModel):
+    """While a job runs: finished items plus the ones running. Once it ends: recomputed from its
+    result, so the two agree (``tracks_done`` counts the items whose status is not ``cancelled``,
+    ``nodes`` equals ``stats.nodes``, the bounds sum the items' lower bounds and costs)."""
+
     nodes: int = 0
     open_boxes: int = 0
     lower_bound: float | None = None

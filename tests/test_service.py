@@ -249,8 +249,44 @@ class TestBadInput:
         flat = json.loads(json.dumps(good))
         flat["data"]["cameras"][0] = [[0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 1, 0]]
         self.assert_problem(service.post("/v1/jobs", json=flat), 422, "data/cameras/0")
-        self.assert_problem(service.post("/v1/jobs", content=b"{not json", headers={"content-type": "application/json"}), 422)
         self.assert_problem(service.post("/v1/jobs", json={**good, "options": {"norm": "L9"}}), 422, "options/norm")
+
+    def test_unparseable_json_is_a_400_with_line_column_and_the_parsers_message(self, service):
+        body = b'{"kind": "triangulation",\n "data": {"cameras": [1, 2,]}}'
+        problem = self.assert_problem(
+            service.post("/v1/jobs", content=body, headers={"content-type": "application/json"}), 400, "body")
+        assert (problem["line"], problem["column"]) == (2, 28)
+        assert "line 2, column 28" in problem["detail"] and "Expecting value" in problem["detail"]
+        problem = self.assert_problem(
+            service.post("/v1/certificates/verify", content=b"{not json", headers={"content-type": "application/json"}),
+            400, "body")
+        assert (problem["line"], problem["column"]) == (1, 2) and "double quotes" in problem["detail"]
+
+    @pytest.mark.parametrize("headers", [{}, {"content-type": "text/plain"}, {"content-type": "application/x-www-form-urlencoded"}])
+    def test_a_body_not_sent_as_json_gets_a_415_naming_the_header(self, service, headers):
+        body = json.dumps(triangulation_job(np.random.default_rng(26), tracks=1)).encode()
+        response = service.post("/v1/jobs", content=body, headers=headers)
+        problem = self.assert_problem(response, 415, "content-type")
+        assert "content-type: application/json" in problem["detail"]
+
+    @pytest.mark.parametrize("place, value, field", [
+        (("data", "tracks", 0, "points", 0, 0), "330", "data/tracks/0/points/0/0"),
+        (("data", "tracks", 0, "points", 0, 1), True, "data/tracks/0/points/0/1"),
+        (("data", "cameras", 0, 0, 0), "800", "data/cameras/0/0/0"),
+        (("data", "tracks", 0, "views", 1), 1.0, "data/tracks/0/views/1"),
+        (("options", "rel_gap"), "1e-3", "options/rel_gap"),
+        (("options", "max_nodes"), 100.0, "options/max_nodes"),
+        (("options", "time_limit_s"), False, "options/time_limit_s"),
+    ])
+    def test_values_are_taken_only_as_their_json_type(self, service, place, value, field):
+        body = triangulation_job(np.random.default_rng(26), tracks=1, rel_gap=1e-3)
+        target = body
+        for key in place[:-1]:
+            target = target[key]
+        target[place[-1]] = value
+        problem = self.assert_problem(service.post("/v1/jobs", json=body), 422, field)
+        reason = next(e["reason"] for e in problem["errors"] if e["field"] == field)
+        assert json.dumps(value) in reason  # says what it got: "330" is a string, 1.0 a decimal number
 
     def test_body_over_the_limit_gets_413(self, service):
         response = service.post("/v1/jobs", content=b" " * (BODY_LIMIT + 1), headers={"content-type": "application/json"})

@@ -42,12 +42,13 @@ def _problem(description: str) -> dict:
 
 
 ERRORS = {
-    400: _problem("the body is not parseable JSON"),
+    400: _problem("the body is not parseable JSON (the parser's message, line and column)"),
     401: _problem("no X-API-Key header (keys are configured)"),
     403: _problem("the X-API-Key is not one of the configured keys"),
     404: _problem("no such job (for this key)"),
     409: _problem("the job is not in a state that allows this, or an idempotent request is in progress"),
     413: _problem("body, items or observations over a limit (named in the detail)"),
+    415: _problem("the body was not sent as content-type: application/json"),
     422: _problem("invalid request: names the field"),
     429: _problem("rate or active-job limit reached (named in the detail); see Retry-After"),
 }

@@ -46,7 +46,7 @@ def _check_limits(kind, parsed, body, request: dict) -> None:
 
 @router.post("", status_code=202, response_model=Job, responses={
     200: {"model": Job, "description": "a replay: the job made earlier for this Idempotency-Key and body"},
-    **error_responses(400, 409, 413, 422)})
+    **error_responses(400, 409, 413, 415, 422)})
 def submit_job(
     body: JobRequest,
     response: Response,
