@@ -209,6 +209,12 @@ class TestLimits:
         assert third.status_code == 429 and "GEOCERT_MAX_ACTIVE_JOBS_PER_KEY" in third.json()["detail"]
         assert "Retry-After" in third.headers
 
+    def test_not_ready_without_workers_and_answered_at_once(self, limited):
+        start = time.perf_counter()
+        response = limited.get("/readyz")
+        assert time.perf_counter() - start < 0.25
+        assert response.status_code == 503 and response.json() == {"status": "not ready", "redis": True, "workers": 0}
+
     def test_rate_per_key(self, limited):
         answers = [limited.get("/v1/problems").status_code for _ in range(60)]  # 2 windows: one sees > 25
         assert answers.count(429) >= 1

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 
 from celery import Celery
-from celery.signals import worker_process_init
+from celery.signals import worker_process_init, worker_ready, worker_shutdown
 
 from app.core.config import get_settings
 from workers.redis_server import broker_url
@@ -51,3 +51,22 @@ def _json_logs(**_) -> None:
     from workers import logs
 
     logs.configure()
+
+
+_HEARTBEAT = None
+
+
+@worker_ready.connect
+def _start_heartbeat(sender=None, **_) -> None:
+    """From the moment the worker takes tasks, it beats (``workers.heartbeat``; read by /readyz)."""
+    global _HEARTBEAT
+    from workers.heartbeat import Heartbeat
+
+    name = getattr(sender, "hostname", None) or "geocert@unknown"
+    _HEARTBEAT = Heartbeat(redis_url(), name).start()
+
+
+@worker_shutdown.connect
+def _stop_heartbeat(**_) -> None:
+    if _HEARTBEAT is not None:
+        _HEARTBEAT.stop()
