@@ -249,6 +249,25 @@ class Job(BaseModel):
     links: dict[str, str]
 
 
+class JobSummary(BaseModel):
+    """A job in a listing: its state and progress, without the result (GET its ``self`` link)."""
+
+    id: str
+    kind: str
+    status: JOB_STATUSES
+    created_at: float
+    started_at: float | None
+    finished_at: float | None
+    progress: JobProgress
+    links: dict[str, str]
+
+
+class JobList(BaseModel):
+    jobs: list[JobSummary] = Field(description="newest first")
+    next_cursor: str | None = Field(description="pass as ?cursor= for the next page; null on the last page")
+    links: dict[str, str | None] = Field(description="next: the next page's URL (null on the last page)")
+
+
 class ProblemKindInfo(BaseModel):
     kind: str
     description: str

@@ -19,9 +19,9 @@ import pytest
 from .servers import cluster
 from .test_service import triangulation_job
 
-KEY_A, KEY_B = "key-alpha-0123456789", "key-beta-9876543210"
+KEY_A, KEY_B, KEY_C = "key-alpha-0123456789", "key-beta-9876543210", "key-gamma-listing-only"
 SECRET = "webhook-test-secret"
-A, B = {"X-API-Key": KEY_A}, {"X-API-Key": KEY_B}
+A, B, C = {"X-API-Key": KEY_A}, {"X-API-Key": KEY_B}, {"X-API-Key": KEY_C}
 
 
 def wait_for_end(client, job_id: str, headers: dict, limit_s: float = 60) -> dict:
@@ -41,7 +41,7 @@ def small_job(seed: int = 0, tracks: int = 3, **options) -> dict:
 @pytest.fixture(scope="module")
 def keyed(tmp_path_factory):
     digest_b = hashlib.sha256(KEY_B.encode()).hexdigest()
-    with cluster(tmp_path_factory.mktemp("keyed"), workers=1, geocert_api_keys=f"{KEY_A}, sha256:{digest_b}",
+    with cluster(tmp_path_factory.mktemp("keyed"), workers=1, geocert_api_keys=f"{KEY_A}, sha256:{digest_b}, {KEY_C}",
                  geocert_webhook_secret=SECRET, geocert_webhook_backoff_s="0.2", geocert_webhook_attempts="3",
                  geocert_progress_interval_s="0.05") as (_, client):
         yield client
@@ -104,6 +104,90 @@ class TestDeletion:
         assert wait_for_end(keyed, slow["id"], A)["status"] in ("cancelled", "succeeded")
         assert keyed.delete(f"/v1/jobs/{slow['id']}", headers=A).status_code == 204
         assert keyed.get(f"/v1/jobs/{slow['id']}", headers=A).status_code == 404
+
+
+class TestListing:
+    """GET /v1/jobs: the caller's jobs (KEY_C makes jobs only here), newest first, by pages."""
+
+    @staticmethod
+    def pages(client, query: str, headers: dict) -> list[dict]:
+        listed, url, links = [], f"/v1/jobs?{query}", []
+        while url:
+            response = client.get(url, headers=headers)
+            assert response.status_code == 200, response.text
+            page = response.json()
+            listed.append(page)
+            url = page["links"]["next"]
+            assert (page["next_cursor"] is None) == (url is None)
+            if url:
+                assert response.headers["Link"] == f'<{url}>; rel="next"'
+                links.append(url)
+        return listed
+
+    def test_newest_first_in_pages_with_a_status_filter_and_only_the_callers(self, keyed):
+        made = []
+        for seed in range(5):
+            made.append(keyed.post("/v1/jobs", json=small_job(seed=40 + seed, tracks=1), headers=C).json()["id"])
+        for job_id in made:
+            assert wait_for_end(keyed, job_id, C)["status"] == "succeeded"
+        long = keyed.post("/v1/jobs", json=small_job(seed=46, tracks=1, views=6, norm="L1L1", rel_gap=0.0,
+                                                     abs_gap=0.0, max_nodes=100_000, time_limit_s=30), headers=C)
+        long_id = long.json()["id"]
+        keyed.post(f"/v1/jobs/{long_id}/cancel", headers=C)
+        assert wait_for_end(keyed, long_id, C)["status"] == "cancelled"
+        newest_first = [long_id, *reversed(made)]
+
+        pages = self.pages(keyed, "limit=2", C)
+        assert [len(page["jobs"]) for page in pages] == [2, 2, 2]
+        listed = [job for page in pages for job in page["jobs"]]
+        assert [job["id"] for job in listed] == newest_first
+        assert [job["created_at"] for job in listed] == sorted((job["created_at"] for job in listed), reverse=True)
+        assert listed[0]["status"] == "cancelled" and "result" not in listed[0]
+        assert listed[1]["links"]["self"] == f"/v1/jobs/{listed[1]['id']}"
+
+        succeeded = [job["id"] for page in self.pages(keyed, "status=succeeded&limit=3", C) for job in page["jobs"]]
+        assert succeeded == list(reversed(made))
+        either = keyed.get("/v1/jobs?status=cancelled&status=failed", headers=C).json()
+        assert [job["id"] for job in either["jobs"]] == [long_id] and either["next_cursor"] is None
+
+        others = [job["id"] for page in self.pages(keyed, "limit=100", A) for job in page["jobs"]]
+        assert not set(others) & set(newest_first)  # another key's jobs are not listed
+
+        assert keyed.delete(f"/v1/jobs/{made[2]}", headers=C).status_code == 204
+        remaining = [job["id"] for page in self.pages(keyed, "limit=4", C) for job in page["jobs"]]
+        assert remaining == [job_id for job_id in newest_first if job_id != made[2]]
+
+    def test_bad_parameters_are_422_naming_them(self, keyed):
+        for query, field in (("cursor=not-a-cursor", "cursor"), ("limit=0", "limit"), ("limit=101", "limit"),
+                             ("status=done", "status/0")):
+            response = keyed.get(f"/v1/jobs?{query}", headers=C)
+            assert response.status_code == 422, query
+            assert response.headers["content-type"] == "application/problem+json"
+            assert response.json()["errors"][0]["field"] == field, response.json()
+        assert keyed.get("/v1/jobs").status_code == 401
+
+
+def test_the_job_index_forgets_expired_jobs(tmp_path):
+    """Jobs expire GEOCERT_RESULT_TTL_S after they end; the listing drops them from its index."""
+    from workers.redis_server import start_embedded_redis
+    from workers.store import JobStore
+
+    process, url = start_embedded_redis(tmp_path)
+    try:
+        store = JobStore.from_url(url, result_ttl_s=1)
+        kept = store.create("triangulation", {}, 1, 1, "someone")
+        gone = store.create("triangulation", {}, 1, 1, "someone")
+        store.finish(gone["id"], "succeeded", result={})
+        assert [meta["id"] for meta in store.list_jobs("someone", 10)[0]] == [gone["id"], kept["id"]]
+        time.sleep(1.5)
+        jobs, following = store.list_jobs("someone", 10)
+        assert [meta["id"] for meta in jobs] == [kept["id"]] and following is None
+        assert store.r.zrange(JobStore.owner_key("someone", "jobs"), 0, -1) == [kept["id"]]
+        store.delete(kept["id"])
+        assert store.r.zcard(JobStore.owner_key("someone", "jobs")) == 0
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
 
 
 class Receiver:

@@ -90,6 +90,22 @@ def wait_for(client: httpx.Client, job_id: str, statuses=("succeeded", "failed",
         time.sleep(0.1)
 
 
+def assert_progress_agrees(client: httpx.Client, job: dict) -> None:
+    """A finished job's progress is its result's: items done, nodes, bounds; and the last
+    progress event of its stream says the same."""
+    result, progress = job["result"], job["progress"]
+    items = result.get("tracks", result.get("maps"))
+    assert progress["tracks_total"] == len(items)
+    assert progress["tracks_done"] == sum(1 for item in items if item["status"] != "cancelled")
+    assert progress["nodes"] == result["stats"]["nodes"] == sum(item["nodes"] for item in items)
+    bounded = [item for item in items if item["cost"] is not None and item["lower_bound"] is not None]
+    if bounded:
+        assert progress["upper_bound"] == pytest.approx(sum(item["cost"] for item in bounded), rel=1e-12)
+        assert progress["lower_bound"] == pytest.approx(sum(item["lower_bound"] for item in bounded), rel=1e-12)
+    last = [data for _, event, data in sse_events(client, job["id"]) if event == "progress"][-1]
+    assert last == progress
+
+
 class TestSubmitStreamResult:
     def test_batch_result_in_track_order_with_progress_events(self, service):
         rng = np.random.default_rng(21)
@@ -174,6 +190,30 @@ class TestCancel:
         assert first["status"] == "cancelled" and first["point"] is not None
         assert first["lower_bound"] <= first["cost"]  # an anytime answer with its gap
         assert all(t["status"] == "cancelled" for t in job["result"]["tracks"])
+        assert_progress_agrees(service, job)
+
+    def test_after_a_cancel_the_final_progress_agrees_with_the_result(self, service):
+        # Chunks of 40: some finish, one is stopped mid-track, the queued ones never solve.
+        body = triangulation_job(np.random.default_rng(31), tracks=200, views=5, norm="L1L1", rel_gap=1e-6)
+        job_id = service.post("/v1/jobs", json=body).json()["id"]
+        for _, event, data in sse_events(service, job_id):
+            if event == "progress" and data["tracks_done"] >= 15:
+                break
+        assert service.post(f"/v1/jobs/{job_id}/cancel").status_code == 202
+        job = wait_for(service, job_id, limit_s=60)
+        assert job["status"] in ("cancelled", "succeeded")
+        statuses = job["result"]["stats"]["statuses"]
+        assert job["progress"]["tracks_done"] == sum(n for status, n in statuses.items() if status != "cancelled")
+        assert_progress_agrees(service, job)
+
+    def test_cancelling_a_finished_job_is_a_409_naming_its_status(self, service):
+        job_id = service.post("/v1/jobs", json=triangulation_job(np.random.default_rng(32), tracks=1)).json()["id"]
+        assert wait_for(service, job_id)["status"] == "succeeded"
+        response = service.post(f"/v1/jobs/{job_id}/cancel")
+        assert response.status_code == 409
+        assert response.headers["content-type"] == "application/problem+json"
+        assert "succeeded" in response.json()["detail"] and "nothing to cancel" in response.json()["detail"]
+        assert service.get(f"/v1/jobs/{job_id}").json()["status"] == "succeeded"  # untouched
 
     def test_queued_job_never_starts(self, service):
         blocker = triangulation_job(np.random.default_rng(24), tracks=1, views=6, norm="L1L1", rel_gap=0.0,

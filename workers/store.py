@@ -55,6 +55,7 @@ class JobStore:
         pipe = self.r.pipeline()
         pipe.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in meta.items()})
         pipe.set(self.key(job_id, "request"), json.dumps(request))
+        pipe.zadd(self.owner_key(owner, "jobs"), {job_id: meta["created_at"]})
         pipe.execute()
         self.publish(job_id, "status", {"status": "queued"})
         return meta
@@ -77,9 +78,13 @@ class JobStore:
         document = {key: meta.get(key) for key in ("id", "kind", "status", "created_at", "started_at", "finished_at",
                                                    "progress", "error", "webhook")}
         document["result"] = self.result(meta["id"]) if meta["status"] in TERMINAL else None
-        base = f"/v1/jobs/{meta['id']}"
-        document["links"] = {"self": base, "events": f"{base}/events", "cancel": f"{base}/cancel"}
+        document["links"] = self.links(meta["id"])
         return document
+
+    @staticmethod
+    def links(job_id: str) -> dict:
+        base = f"/v1/jobs/{job_id}"
+        return {"self": base, "events": f"{base}/events", "cancel": f"{base}/cancel"}
 
     def add_task_ids(self, job_id: str, *task_ids: str) -> None:
         if task_ids:
@@ -218,7 +223,51 @@ class JobStore:
         pipe.execute()
 
     def delete(self, job_id: str) -> None:
-        self.r.delete(*(self.key(job_id, part) for part in self._PARTS))
+        owner = self.field(job_id, "owner")
+        pipe = self.r.pipeline()
+        pipe.delete(*(self.key(job_id, part) for part in self._PARTS))
+        if owner is not None:
+            pipe.zrem(self.owner_key(owner, "jobs"), job_id)
+        pipe.execute()
+
+    # --- listing -----------------------------------------------------------------------------
+    def list_jobs(self, owner: str, limit: int, after: tuple[float, str] | None = None,
+                  statuses: tuple[str, ...] | None = None) -> tuple[list[dict], tuple[float, str] | None]:
+        """The owner's jobs, newest first: up to ``limit`` after the position ``after`` (the
+        created time and id of the last job of the previous page), only those whose status is in
+        ``statuses`` when given. Returns the jobs and the position to continue after (None when
+        no job follows). The index is a sorted set per owner (created time -> id), written on
+        create and delete; ids whose job expired are dropped from it here, when met."""
+        index = self.owner_key(owner, "jobs")
+        top = "+inf" if after is None else repr(after[0])
+        found: list[tuple[float, str, dict]] = []
+        gone: list[str] = []
+        offset, batch = 0, max(2 * limit + 2, 50)
+        while len(found) <= limit:
+            entries = self.r.zrevrangebyscore(index, top, "-inf", start=offset, num=batch, withscores=True)
+            if not entries:
+                break
+            offset += len(entries)
+            pipe = self.r.pipeline()
+            for job_id, _ in entries:
+                pipe.hgetall(self.key(job_id))
+            for (job_id, score), raw in zip(entries, pipe.execute()):
+                # Equal times are ordered by id, descending: skip up to and including ``after``.
+                if after is not None and score == after[0] and job_id >= after[1]:
+                    continue
+                if not raw:
+                    gone.append(job_id)
+                    continue
+                meta = {k: json.loads(v) for k, v in raw.items()}
+                if statuses and meta["status"] not in statuses:
+                    continue
+                found.append((score, job_id, meta))
+                if len(found) > limit:
+                    break
+        if gone:
+            self.r.zrem(index, *gone)
+        following = (found[limit - 1][0], found[limit - 1][1]) if len(found) > limit else None
+        return [meta for _, _, meta in found[:limit]], following
 
     # --- per-key accounting ------------------------------------------------------------------
     @staticmethod

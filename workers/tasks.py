@@ -89,10 +89,32 @@ def solve_segment(job_id: str, start: int, stop: int, request_id: str | None = N
 def finalise(jobs: JobStore, job_id: str, meta: dict, kind, options) -> None:
     items = jobs.all_items(job_id, meta["items_total"])
     elapsed = time.time() - (meta["started_at"] or meta["created_at"])
-    result = assemble(kind, jobs.request(job_id), options, items, job_stats(items, elapsed))
+    stats = job_stats(items, elapsed)
+    # The last progress of each task may be throttled away or, after a cancel, stop short of
+    # its items: the job's final progress is computed from the very items of the result.
+    progress = final_progress(items, stats)
+    result = assemble(kind, jobs.request(job_id), options, items, stats)
     status = "cancelled" if any(item["status"] == "cancelled" for item in items) else "succeeded"
+    jobs.set_fields(job_id, progress=progress)
+    jobs.publish(job_id, "progress", progress)
     jobs.finish(job_id, status, result=result)
     ended(jobs, job_id)
+
+
+def final_progress(items: list[dict], stats: dict) -> dict:
+    """A finished job's progress, from its items: ``tracks_done`` counts the items that ran to an
+    end of their own (every status but ``cancelled``), ``nodes`` is ``stats.nodes``, the bounds
+    sum the lower bounds and costs of the items that have both."""
+    bounded = [item for item in items if item.get("cost") is not None and item.get("lower_bound") is not None]
+    lower = sum(item["lower_bound"] for item in bounded)
+    upper = sum(item["cost"] for item in bounded)
+    gaps = [(item["cost"] - item["lower_bound"]) / item["cost"] for item in bounded if item["cost"] > 0]
+    return {"nodes": stats["nodes"], "open_boxes": 0,
+            "lower_bound": lower if bounded else None, "upper_bound": upper if bounded else None,
+            "gap_abs": max(0.0, upper - lower) if bounded else None,
+            "gap_rel": max(gaps, default=0.0) if bounded else None,
+            "tracks_done": sum(1 for item in items if item["status"] != "cancelled"),
+            "tracks_total": len(items), "elapsed_s": stats["elapsed_s"]}
 
 
 def fail(jobs: JobStore, job_id: str, status: int, title: str, detail: str, field: str | None,

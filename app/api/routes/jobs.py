@@ -3,18 +3,21 @@ configured) and shows a job only to the key that created it."""
 
 from __future__ import annotations
 
+import base64
 import hashlib
 import json
+import math
 import re
-from typing import Annotated
+from typing import Annotated, Literal
+from urllib.parse import urlencode
 
-from fastapi import APIRouter, Depends, Header, Response
+from fastapi import APIRouter, Depends, Header, Query, Response
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
 from app.api.deps import Caller, JobStoreDep, error_responses, rate_limited, submit_chunks
 from app.core.config import get_settings
 from app.problems import ApiProblem
-from app.schemas import Job, JobRequest
+from app.schemas import Job, JobList, JobRequest
 from solvers.geometry import InputError
 from solvers.jobs import parse_job
 from workers import logs
@@ -119,25 +122,69 @@ def _owned(job_id: str, store: JobStoreDep, owner: Caller) -> dict:
 OwnedJob = Annotated[dict, Depends(_owned)]
 
 
+def _encode_cursor(position: tuple[float, str]) -> str:
+    return base64.urlsafe_b64encode(f"{position[0]!r}/{position[1]}".encode()).decode().rstrip("=")
+
+
+def _decode_cursor(cursor: str) -> tuple[float, str]:
+    try:
+        text = base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4)).decode()
+        created, job_id = text.split("/", 1)
+        position = float(created), job_id
+    except ValueError:
+        position = None
+    if position is None or not math.isfinite(position[0]) or not re.fullmatch(r"[0-9a-f]{32}", position[1]):
+        raise ApiProblem(422, "not a cursor this listing gave (use next_cursor as it came)", "cursor")
+    return position
+
+
+@router.get("", response_model=JobList, responses=error_responses(422))
+def list_jobs(
+    response: Response,
+    store: JobStoreDep,
+    owner: Caller,
+    limit: Annotated[int, Query(ge=1, le=100, description="jobs per page")] = 20,
+    cursor: Annotated[str | None, Query(max_length=200, description="next_cursor of the previous page")] = None,
+    status: Annotated[list[Literal["queued", "running", "succeeded", "failed", "cancelled"]] | None, Query(
+        description="only jobs in this status (repeat for several)")] = None,
+):
+    """The caller's jobs, newest first, a page at a time: follow ``next_cursor`` (or the ``next``
+    link, also sent as a ``Link: <...>; rel="next"`` header) until it is null. Jobs are listed
+    until they are deleted or expire (GEOCERT_RESULT_TTL_S after they end)."""
+    after = _decode_cursor(cursor) if cursor is not None else None
+    metas, following = store.list_jobs(owner, limit, after, tuple(status) if status else None)
+    next_cursor = _encode_cursor(following) if following else None
+    next_link = None
+    if next_cursor:
+        query = [("limit", str(limit)), ("cursor", next_cursor)] + [("status", s) for s in status or ()]
+        next_link = "/v1/jobs?" + urlencode(query)
+        response.headers["Link"] = f'<{next_link}>; rel="next"'
+    jobs = [{key: meta.get(key) for key in ("id", "kind", "status", "created_at", "started_at", "finished_at",
+                                              "progress")} | {"links": store.links(meta["id"])} for meta in metas]
+    return {"jobs": jobs, "next_cursor": next_cursor, "links": {"next": next_link}}
+
+
 @router.get("/{job_id}", response_model=Job, responses=error_responses(404))
 def get_job(job: OwnedJob, store: JobStoreDep):
     """Status, progress, and once finished the result (or the error as problem details)."""
     return store.document(job)
 
 
-@router.post("/{job_id}/cancel", response_model=Job, status_code=202, responses=error_responses(404))
+@router.post("/{job_id}/cancel", response_model=Job, status_code=202, responses=error_responses(404, 409))
 def cancel_job(job: OwnedJob, store: JobStoreDep):
-    """A queued job never starts; a running one stops at its next node and keeps its best result."""
+    """A queued job never starts; a running one stops at its next node and keeps its best result.
+    A job that has already ended is a 409 naming its status (nothing to cancel)."""
     job_id = job["id"]
-    if job["status"] not in TERMINAL:
-        store.request_cancel(job_id)
-        if store.cancel_if_queued(job_id):
-            from workers.celery_app import celery_app
-            from workers.tasks import ended
+    if job["status"] in TERMINAL:
+        raise ApiProblem(409, f"job {job_id} has already ended ({job['status']}): there is nothing to cancel")
+    store.request_cancel(job_id)
+    if store.cancel_if_queued(job_id):
+        from workers.celery_app import celery_app
+        from workers.tasks import ended
 
-            for task_id in store.task_ids(job_id):
-                celery_app.control.revoke(task_id)
-            ended(store, job_id)
+        for task_id in store.task_ids(job_id):
+            celery_app.control.revoke(task_id)
+        ended(store, job_id)
     return store.document(store.get(job_id))
 
 
