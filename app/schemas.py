@@ -136,14 +136,19 @@ ItemStatus = Literal["optimal", "node_limit", "time_limit", "cancelled", "not_ce
 
 
 class CertificateDocument(BaseModel):
-    """A full certificate (docs/certificate.md): anyone can check it with linear algebra alone."""
+    """A full certificate (docs/certificate.md): anyone can check it with linear algebra alone.
+    Members beyond those listed are kept as they are (the verifier decides what they mean)."""
+
+    model_config = ConfigDict(extra="allow")
 
     format: Literal["geocert-certificate"]
-    version: int = Field(description="1")
+    version: int = Field(description="the format's version (docs/certificate.md)")
     kind: str
     options: dict[str, Any] = Field(description="the options solved with, defaults filled in")
     data: dict[str, Any] = Field(description="the problem data as solved")
     data_sha256: str = Field(description='SHA-256 of canonical JSON {"kind", "data"} (sorted keys, no spaces)')
+    problem_sha256: str | None = Field(None, description="SHA-256 of the kind, the data and the options a claim "
+                                                         "depends on (docs/certificate.md)")
     items: list[dict[str, Any]] = Field(description="per item: index, status, certified, cost, lower_bound, gap, "
                                                     "the solution, and the proof (root region, tightening, leaves)")
 
@@ -166,6 +171,8 @@ class VerifyReport(BaseModel):
     first_failure: VerifyFailure | None = Field(description="the first check that failed, and on which item")
     items_checked: int
     items_skipped: int = Field(description="items not claimed certified: nothing to check")
+    scope: dict[str, Any] | None = Field(None, description="what a valid document proves, and for which problem "
+                                                           "(kind, norm, max_residual, gaps, statement)")
 
 
 class ItemCertificate(BaseModel):

@@ -13,6 +13,7 @@ import httpx
 import numpy as np
 import pytest
 
+from solvers.certificates import VERSION
 from solvers.jobs import solve_job
 
 from .scenes import noisy_track, random_cameras
@@ -241,7 +242,7 @@ class TestCertificates:
         response = service.get(f"/v1/jobs/{job_id}/certificate")
         assert response.status_code == 200
         document = response.json()
-        assert document["format"] == "geocert-certificate" and document["version"] == 1
+        assert document["format"] == "geocert-certificate" and document["version"] == VERSION
         assert document == job["result"]["certificate"]
         report = service.post("/v1/certificates/verify", json=document).json()
         assert report["valid"] is True and report["items_checked"] == 3 and report["first_failure"] is None
@@ -259,8 +260,27 @@ class TestCertificates:
         assert response.headers["content-type"].startswith("application/problem+json")
         assert 'options.certificate = "full"' in response.json()["detail"]
 
-    def test_malformed_certificate_is_422(self, service):
-        response = service.post("/v1/certificates/verify", json={"format": "something else"})
+    def test_verify_takes_what_geocert_verify_takes(self, service):
+        # A certificate, a result carrying one, or a job document carrying such a result; for the
+        # last two every item returned must equal the item its certificate proves.
+        body = triangulation_job(np.random.default_rng(29), tracks=2, views=3, certificate="full")
+        job = wait_for(service, service.post("/v1/jobs", json=body).json()["id"])
+        assert job["status"] == "succeeded"
+        for document in (job, job["result"], job["result"]["certificate"]):
+            report = service.post("/v1/certificates/verify", json=document).json()
+            assert report["valid"] is True and report["items_checked"] == 2, report
+        moved = json.loads(json.dumps(job))
+        moved["result"]["tracks"][0]["point"][0] += 1.0  # the certificate itself is untouched
+        report = service.post("/v1/certificates/verify", json=moved).json()
+        assert report["valid"] is False and report["first_failure"]["check"] == "returned"
+
+    def test_a_document_without_a_certificate_is_answered_invalid(self, service):
+        for document in ({"format": "something else"}, {"kind": "triangulation", "tracks": []}):
+            response = service.post("/v1/certificates/verify", json=document)
+            assert response.status_code == 200
+            report = response.json()
+            assert report["valid"] is False and report["first_failure"]["check"] == "format"
+        response = service.post("/v1/certificates/verify", json=[1, 2, 3])  # not even an object
         assert response.status_code == 422
         assert response.headers["content-type"].startswith("application/problem+json")
 

@@ -1,14 +1,17 @@
-"""Full certificates: fetch a job's, and check any with the independent verifier."""
+"""Full certificates: fetch a job's, and check any (or a result or job carrying one) with the
+independent verifier."""
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Depends
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, Depends
 
 from app.api.deps import JobStoreDep, error_responses, rate_limited
 from app.api.routes.jobs import OwnedJob
 from app.problems import ApiProblem
 from app.schemas import CertificateDocument, VerifyReport
-from solvers.verify import verify_document
+from solvers import verify
 from workers.store import TERMINAL
 
 router = APIRouter(tags=["certificates"], dependencies=[Depends(rate_limited)])
@@ -26,8 +29,23 @@ def job_certificate(job: OwnedJob, store: JobStoreDep):
     return result["certificate"]
 
 
-@router.post("/v1/certificates/verify", response_model=VerifyReport, responses=error_responses(400, 413, 422))
-def verify_certificate(document: CertificateDocument):
-    """Check a certificate document with the verifier (linear algebra only, no conic solver).
-    ``valid`` is false, with ``first_failure`` naming the check, when any check fails."""
-    return verify_document(document.model_dump(mode="json")).as_dict()
+_VERIFIABLE = {
+    "anyOf": [{"$ref": "#/components/schemas/CertificateDocument"},
+              {"$ref": "#/components/schemas/TriangulationResult"},
+              {"$ref": "#/components/schemas/MapsResult"},
+              {"$ref": "#/components/schemas/Job"},
+              {"type": "object", "description": "any other object: answered with valid = false and the reason"}],
+    "description": "a certificate document, a result carrying one (geocert solve's output, or a job's result) "
+                   "or a job document (GET /v1/jobs/{id}) whose result carries one",
+}
+
+
+@router.post("/v1/certificates/verify", response_model=VerifyReport, responses=error_responses(400, 413, 415, 422),
+             openapi_extra={"requestBody": {"content": {"application/json": {"schema": _VERIFIABLE}}}})
+def verify_certificate(document: Annotated[dict[str, Any], Body()]):
+    """Check a certificate with the verifier (linear algebra only, no conic solver); takes what
+    ``geocert verify`` takes: a certificate document, a result or a job document. For a result or
+    a job, every item returned must also equal the item its certificate proves. ``valid`` is false,
+    with ``first_failure`` naming the check, when any check fails (or the document carries no
+    certificate); ``scope`` says what a valid document proves."""
+    return verify.verify_any(document).as_dict()
