@@ -5,8 +5,8 @@ from __future__ import annotations
 from fastapi import FastAPI
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from app import observability, problems
-from app.api.routes import certificates, jobs, service
+from app import docs, observability, problems
+from app.api.routes import certificates, jobs, orient, service
 from app.core.config import get_settings
 from workers import logs
 
@@ -51,6 +51,8 @@ class _TooLarge(Exception):
 
 def create_app() -> FastAPI:
     app = FastAPI(
+        docs_url=None,  # served by app.docs, with local assets
+        redoc_url=None,
         title="geocert",
         version="1.0.0",
         summary="Certified globally optimal multiview-geometry solves.",
@@ -63,8 +65,10 @@ def create_app() -> FastAPI:
     )
     logs.configure()
     problems.install(app)
+    docs.install(app)
     app.include_router(jobs.router)
     app.include_router(certificates.router)
+    app.include_router(orient.router)
     app.include_router(service.router)
     app.include_router(observability.router)
     app.add_middleware(BodySizeLimit, limit=get_settings().max_body_bytes)

@@ -275,6 +275,37 @@ class JobList(BaseModel):
     links: dict[str, str | None] = Field(description="next: the next page's URL (null on the last page)")
 
 
+PointIn = Annotated[list[Finite], Field(min_length=3, max_length=4, description="[x, y, z] or homogeneous [x, y, z, w]")]
+
+
+class OrientRequest(Strict):
+    """A projective reconstruction: cameras, points, and which cameras see which point."""
+
+    cameras: list[Camera] = Field(min_length=1)
+    points: list[PointIn] = Field(min_length=1)
+    views: list[list[Annotated[int, Field(ge=0)]]] | None = Field(
+        None, description="views[j]: the cameras that see point j (default: every camera sees every point)")
+
+
+class OrientResult(BaseModel):
+    cameras: list[list[list[float]]] = Field(description="the cameras with their signs fixed (and in the new frame "
+                                                         "when frame_changed), each of Frobenius norm 1")
+    points: list[list[float]] = Field(description="homogeneous [x, y, z, w]: w = 1 for every point when quasi_affine")
+    camera_signs: list[int] = Field(description="+1 or -1 applied to each input camera")
+    point_signs: list[int] = Field(description="+1 or -1 applied to each input point")
+    transform: list[list[float]] = Field(description="H (4x4): points = H (signed points), cameras = (signed cameras) "
+                                                     "H^-1; the identity unless frame_changed")
+    frame_changed: bool = Field(description="the plane at infinity was moved off the scene (a projective change "
+                                            "of frame; pixels are unchanged)")
+    quasi_affine: bool = Field(description="every point has a positive last coordinate")
+    centres_one_side: bool = Field(description="every camera centre is on one side of the plane at infinity too")
+    oriented: bool = Field(description="every observed point is in front of (at positive depth in) every camera "
+                                       "that sees it, with quasi_affine: the scope certificates speak of")
+    negative_depths: list[list[int]] = Field(description="[camera, point] pairs still at negative depth: no choice "
+                                                         "of signs puts them in front (noise or outliers)")
+    undetermined: list[list[int]] = Field(description="[camera, point] pairs at depth 0 (on the principal plane)")
+
+
 class ProblemKindInfo(BaseModel):
     kind: str
     description: str

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -356,6 +357,61 @@ class TestBadInput:
     def test_unknown_job_is_404(self, service):
         self.assert_problem(service.get("/v1/jobs/0123"), 404)
         self.assert_problem(service.get("/v1/jobs/0123/events"), 404)
+
+
+class TestReadiness:
+    def test_readyz_answers_from_heartbeats_well_under_a_second(self, service):
+        for _ in range(5):
+            start = time.perf_counter()
+            response = service.get("/readyz")
+            took = time.perf_counter() - start
+            assert response.status_code == 200 and response.json()["workers"] == 1
+            assert took < 0.25, f"/readyz took {took:.3f} s"
+
+
+class TestDocs:
+    def test_docs_and_redoc_load_every_asset_from_the_service_itself(self, service):
+        for page in ("/docs", "/redoc"):
+            response = service.get(page)
+            assert response.status_code == 200 and response.headers["content-type"].startswith("text/html")
+            assert not re.search(r"(?i)(https?:)?//[a-z0-9.-]+\.[a-z]{2,}", response.text), "an external host"
+            assets = re.findall(r'(?:src|href)="([^"]+)"', response.text)
+            assert any(a.endswith(".js") for a in assets)
+            for asset in assets:
+                assert asset.startswith("/"), asset
+                loaded = service.get(asset)
+                assert loaded.status_code == 200 and len(loaded.content) > 1000, asset
+        spec = re.search(r"url: '([^']+)'", service.get("/docs").text).group(1)
+        assert service.get(spec).json()["info"]["title"] == "geocert"
+
+
+README_CAMERAS = [[[800, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]], [[800, 0, 320, -800], [0, 800, 240, 0], [0, 0, 1, 0]]]
+README_TRACK = {"views": [0, 1], "points": [[330, 250], [250, 251]]}
+
+
+class TestOrient:
+    def test_a_negated_camera_is_oriented_and_its_track_then_certified(self, service):
+        flipped = [README_CAMERAS[0], (-np.array(README_CAMERAS[1])).tolist()]
+        before = wait_for(service, service.post("/v1/jobs", json={
+            "kind": "triangulation", "data": {"cameras": flipped, "tracks": [README_TRACK]}}).json()["id"])
+        assert before["result"]["tracks"][0]["status"] == "infeasible"
+        points = [[0.125, 0.125, 10.0], [0.0, 0.0, 8.0], [1.0, -1.0, 12.0, 1.0]]
+        response = service.post("/v1/orient", json={"cameras": flipped, "points": points})
+        assert response.status_code == 200
+        oriented = response.json()
+        assert oriented["camera_signs"] == [1, -1] and oriented["oriented"] and not oriented["frame_changed"]
+        assert np.allclose(np.array(oriented["points"])[:, :3], [point[:3] for point in points])
+        after = wait_for(service, service.post("/v1/jobs", json={
+            "kind": "triangulation", "data": {"cameras": oriented["cameras"], "tracks": [README_TRACK]}}).json()["id"])
+        track = after["result"]["tracks"][0]
+        assert track["certified"] and track["cost"] == pytest.approx(0.5, rel=1e-6)
+
+    def test_bad_input_names_the_field(self, service):
+        problem = service.post("/v1/orient", json={"cameras": README_CAMERAS, "points": [[1, 2, 3]],
+                                                   "views": [[0, 2]]}).json()
+        assert problem["status"] == 422 and problem["errors"][0]["field"] == "views/0/1"
+        problem = service.post("/v1/orient", json={"cameras": README_CAMERAS, "points": [[0, 0, 0, 0]]}).json()
+        assert problem["status"] == 422 and problem["errors"][0]["field"] == "points/0"
 
 
 class TestOpenAPI:
