@@ -57,7 +57,7 @@ class TighteningProof:
 class LeafProof:
     """Why no point of ``box`` costing at most ``upper_bound`` costs less than ``bound``:
     ``dual`` (a dual vector of the box's relaxation), ``farkas`` (the relaxation is infeasible:
-    bound is infinite) or ``depth`` (some depth is below EPS_DEPTH on the whole box)."""
+    bound is infinite) or ``depth`` (some depth is at most 0 on the whole box)."""
 
     box: Box
     upper_bound: float

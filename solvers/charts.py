@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 
@@ -45,14 +46,39 @@ def _choose_reference(cameras: np.ndarray, points: np.ndarray, centres: np.ndarr
 
     A centre inside another view's residual cone makes the chart's region unbounded.
     """
-    proj = np.einsum("jab,rb->rja", cameras, centres)  # centre r seen by camera j
-    depth = proj[:, :, 2]
-    safe = np.where(depth > 1e-12 * lengths(proj, 2), depth, np.nan)
-    distance = lengths(proj[:, :, :2] / safe[:, :, None] - points[None], 2)
-    # Behind camera j (or at infinity) is outside its cone: as good as infinitely far.
-    distance = np.where(np.isnan(distance), np.inf, distance)
-    np.fill_diagonal(distance, np.inf)
-    return int(np.argmax(distance.min(axis=1)))
+    nearest = np.empty(len(cameras))
+    block = max(1, 4096 // len(cameras))  # k^2 work in blocks of rows: memory stays linear in k
+    for start in range(0, len(cameras), block):
+        rows = slice(start, start + block)
+        proj = np.einsum("jab,rb->rja", cameras, centres[rows])  # centre r seen by camera j
+        depth = proj[:, :, 2]
+        safe = np.where(depth > 1e-12 * lengths(proj, 2), depth, np.nan)
+        distance = lengths(proj[:, :, :2] / safe[:, :, None] - points[None], 2)
+        # Behind camera j (or at infinity) is outside its cone: as good as infinitely far.
+        distance = np.where(np.isnan(distance), np.inf, distance)
+        own = np.arange(start, min(start + block, len(cameras)))
+        distance[own - start, own] = np.inf
+        nearest[rows] = distance.min(axis=1)
+    return int(np.argmax(nearest))
+
+
+def _parallel_rows(rows: np.ndarray, reference: int) -> np.ndarray:
+    """Which rows are exactly parallel to row ``reference`` (every 2x2 minor zero in exact
+    rational arithmetic; a quick float test first rules out the rest)."""
+    d = rows[reference]
+    minors = rows[:, :, None] * d[None, None, :] - rows[:, None, :] * d[None, :, None]
+    size = lengths(rows, 1) * float(np.sqrt(d @ d))
+    maybe = np.all(np.abs(minors) <= 1e-12 * size[:, None, None], axis=(1, 2))
+    maybe[reference] = True
+    exact = np.zeros(len(rows), dtype=bool)
+    exact[reference] = True
+    d_exact = [Fraction(x) for x in d.tolist()]
+    for i in np.flatnonzero(maybe):
+        if i == reference:
+            continue
+        p = [Fraction(x) for x in rows[i].tolist()]
+        exact[i] = all(p[a] * d_exact[b] == p[b] * d_exact[a] for a in range(4) for b in range(a + 1, 4))
+    return exact
 
 
 @dataclass
@@ -86,9 +112,14 @@ class Chart:
         shifted[:, 1] -= points[:, 1:2] * cams[:, 2]
         M = shifted @ T  # (k, 3, 4)
         grad = lengths(M[:, 2, :3], 1)
-        exact = grad <= 1e-9 * lengths(M[:, 2], 1)
-        exact[reference] = True
-        scale = np.where(exact, M[:, 2, 3], grad)
+        row = lengths(M[:, 2], 1)
+        # Exact (constant depth) only when it is constant: when the view's depth row is exactly
+        # parallel to the reference's in the caller's data (the chart's round-off is then
+        # discarded). A depth varying ever so slowly still varies, and far out on the chart it
+        # would differ from any constant. Rows are scaled to a unit depth gradient, or, when the
+        # depth barely varies, to a unit depth row.
+        exact = _parallel_rows(cameras[:, 2], reference)
+        scale = np.where(exact, M[:, 2, 3], np.where(grad > 1e-9 * row, grad, row))
         behind = bool((exact & (scale <= 0)).any())
         scale = np.where(scale == 0, 1.0, np.abs(scale))
         M = M / scale[:, None, None]

@@ -3,7 +3,7 @@
 A conic program here is ``min q'x`` subject to ``A x + s = b``, ``s`` in a product of a zero
 cone, a nonnegative orthant and second-order cones (Clarabel's form). Its dual asks for ``z`` in
 the dual cone with ``A'z + q = 0``. A solver's ``z`` satisfies that only approximately, so
-bounds are taken the safe way (ALGORITHMS.md section 0; Neumaier & Shcherbina 2004): project
+bounds are taken the safe way (docs/algorithms.md section 6; Neumaier & Shcherbina 2004): project
 ``z`` into the dual cone, then for every feasible ``x`` with ``lower <= x <= upper``
 
     q'x = (q + A'z)'x + z's - b'z >= -b'z + sum_j min(r_j lower_j, r_j upper_j),  r = q + A'z,

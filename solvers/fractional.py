@@ -5,7 +5,7 @@ resectioning and P^n -> P^m maps have in common.
 residual times its depth) and an affine depth ``g_i(v) > 0``. Observations whose depth is
 constant are "exact": stored with depth identically 1, their terms are convex and need no
 envelope. The lower bound on a box of branching functionals ``z = B v`` is one SOCP holding each
-ratio above the convex envelope of ``t / s`` (ALGORITHMS.md section 2).
+ratio above the convex envelope of ``t / s`` (docs/algorithms.md, section 4).
 """
 
 from __future__ import annotations
@@ -92,12 +92,14 @@ def depth_subspace(program: FractionalProgram) -> np.ndarray:
     """Orthonormal rows spanning the gradients of the depths that vary (the whole space when
     none does). Only along these do the envelopes need bounds: a search branches on them alone,
     and the directions it leaves out are bounded by the residual cones (and, with a full
-    certificate, by proven root bounds). Directions below round-off (1e-12 of the largest
-    singular value; the chart already treats a depth varying by 1e-9 as constant) are left out."""
+    certificate, by proven root bounds). Directions below round-off are left out."""
     gradients = program.den[~program.exact, :-1]
     if len(gradients):
         _, singular, vt = np.linalg.svd(gradients)
-        rank = int((singular > 1e-12 * singular[0]).sum()) if singular[0] > 0 else 0
+        # Depth rows are scaled to a unit gradient or (barely varying) a unit row: directions
+        # below 1e-12 vary by round-off only, and their variation is still counted in every
+        # depth range once the root region bounds them.
+        rank = int((singular > 1e-12 * max(1.0, singular[0])).sum())
         if rank:
             return vt[:rank]
     return np.eye(program.dim)
@@ -489,6 +491,17 @@ class Certificate:
     tolerance_met: bool
     leaves: int
     proof: dict | None = None  # with options.certificate == "full": certificates.encode's form
+
+
+def recomputed_status(status: str, cost: float, lower: float | None, rel_gap: float,
+                      abs_gap: float) -> tuple[str, str | None]:
+    """The status of a solution whose cost was recomputed from the raw data at the point as
+    returned (rounded from the search's variables): "optimal" stays only when that cost is
+    still within the tolerance of the proven bound."""
+    if status != "optimal" or lower is None or cost - lower <= max(abs_gap, rel_gap * cost):
+        return status, None
+    return "not_certified", (f"the solution's cost recomputed from the data, {cost!r}, is not within the "
+                             f"tolerance of the proven bound {lower!r}")
 
 
 @dataclass

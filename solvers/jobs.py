@@ -24,6 +24,7 @@ from .triangulation import NORMS, TrackResult, TriangulationOptions, triangulate
 from .verify import proof_of
 
 ProgressSink = Callable[[dict], None]
+MAX_VIEWS = 1000  # views in one track: a chart's choice of reference takes views^2 work
 StopCheck = Callable[[], bool]
 
 
@@ -91,6 +92,8 @@ class TriangulationKind:
                 raise InputError(f"{where}/points", "must be a list of [u, v] pairs")
             if len(views) < 2:
                 raise InputError(f"{where}/views", "a track needs at least 2 views")
+            if len(views) > MAX_VIEWS:
+                raise InputError(f"{where}/views", f"{len(views)} views exceed the limit of {MAX_VIEWS} per track")
             if len(views) != len(pts):
                 raise InputError(where, f"has {len(views)} views but {len(pts)} points")
             for j, v in enumerate(views):

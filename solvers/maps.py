@@ -20,7 +20,7 @@ import numpy as np
 
 from .bnb import Progress
 from .charts import MapChart, normaliser
-from .fractional import Certificate, Early, FractionalOptions, Reasons, prepare, search
+from .fractional import Certificate, Early, FractionalOptions, Reasons, prepare, recomputed_status, search
 from .geometry import InputError, norm_cost
 from .verify import checked_solve
 
@@ -127,9 +127,9 @@ def _fit_map(source, target, options: MapOptions, callback, start: float) -> Map
         if prepared.incumbent is None:
             result = MapResult(prepared.status, False, reason=prepared.reason)
         else:
-            result = _map_result(chart, source, target, prepared.incumbent, options.norm, prepared.status,
+            result = _map_result(chart, source, target, prepared.incumbent, options, prepared.status,
                                  0.0 if prepared.status == "optimal" else None, 0, None)
-            result.reason = prepared.reason
+            result.reason = result.reason or prepared.reason
     else:
         # Root region on the caller's last row l: z = B w with w = N' S^-T l / (l . X_ref).
         functionals = prepared.problem.B[:, :n] @ chart.last_row_basis.T @ np.linalg.inv(chart.source_norm).T
@@ -138,21 +138,22 @@ def _fit_map(source, target, options: MapOptions, callback, start: float) -> Map
         if searched.solution is None:
             result = MapResult(searched.status, False, nodes=searched.nodes, reason=searched.reason)
         else:
-            result = _map_result(chart, source, target, searched.solution, options.norm, searched.status,
+            result = _map_result(chart, source, target, searched.solution, options, searched.status,
                                  searched.lower_bound, searched.nodes, searched.certificate)
     result.elapsed_s = time.perf_counter() - start
     return result
 
 
-def _map_result(chart: MapChart, source, target, v, norm, status, lower, nodes, certificate) -> MapResult:
+def _map_result(chart: MapChart, source, target, v, options, status, lower, nodes, certificate) -> MapResult:
     M = chart.matrix(v)
     M = M / np.linalg.norm(M)  # positive scale: the reference depth stays positive
     homogeneous = np.hstack([source, np.ones((len(source), 1))])
     proj = homogeneous @ M.T
     residuals = target - proj[:, :-1] / proj[:, -1:]
-    cost = norm_cost(residuals, norm)  # recomputed from the caller's data
+    cost = norm_cost(residuals, options.norm)  # recomputed from the caller's data
     if lower is not None:
         lower = min(lower, cost)
-    return MapResult(status=status, certified=status == "optimal" and lower is not None, matrix=M.tolist(),
+    status, reason = recomputed_status(status, cost, lower, options.rel_gap, options.abs_gap)
+    return MapResult(status=status, certified=status == "optimal" and lower is not None, matrix=M.tolist(), reason=reason,
                      residuals=residuals.tolist(), cost=cost, lower_bound=lower,
                      gap=cost - lower if lower is not None else None, nodes=nodes, certificate=certificate)

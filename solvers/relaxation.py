@@ -2,7 +2,7 @@
 
 What the branch-and-bound search solves and what a certificate verifier rebuilds are the same
 arrays, built here, so a verifier can check a solver's dual vectors without trusting its code
-paths or importing any conic solver. ALGORITHMS.md section 2 states the relaxation.
+paths or importing any conic solver. docs/algorithms.md (section 4) states the relaxation.
 """
 
 from __future__ import annotations
@@ -17,7 +17,9 @@ from .bnb import Box
 from .cones import ConeSpec, safe_lower_bound
 from .geometry import norm_cost
 
-EPS_DEPTH = 1e-12  # depths below this (in the program's units) are outside the domain
+# Only for the split heuristic (a relative variation): the domain is every positive depth, cut
+# nowhere short of 0, so that no point of the scope is left out of a bound.
+EPS_DEPTH = 1e-12
 NORMS = ("L2L2", "L2L1", "L1L1")
 
 
@@ -238,25 +240,30 @@ class Relaxation:
         if self.coef_complement.size and np.all(np.isfinite(self.complement)):
             ranges.append((self.coef_complement, *self.complement))
         low, high = self.offset.copy(), self.offset.copy()
+        size = np.abs(self.offset)
         for coef, lo, hi in ranges:
             pos, neg = np.clip(coef, 0, None), np.clip(coef, None, 0)
             low += pos @ lo + neg @ hi
             high += pos @ hi + neg @ lo
-        return low, high
+            size = size + np.abs(coef) @ np.maximum(np.abs(lo), np.abs(hi))
+        # Rounded outwards: the sums above round, and a range must hold every true depth.
+        return low - 1e-12 * size, high + 1e-12 * size
 
     def conic_data(self, box: Box, upper_bound: float, envelope: bool = True) -> ConicData | None:
         """The relaxation on ``box`` for points costing at most ``upper_bound``, or None when
-        some depth is below EPS_DEPTH on the whole box (no point of the domain is in it)."""
+        some depth is at most 0 on the whole box (no point of the domain is in it). A depth
+        range reaching down to 0 keeps 0 as its lower end: the envelope of t/s stays valid there
+        (w = s t / u and r = t / s lift every point with s > 0)."""
         low, high = self.depth_range(box)
-        if np.any(high <= EPS_DEPTH):
+        if np.any(high <= 0):
             return None
-        low = np.maximum(low, EPS_DEPTH)
+        low = np.maximum(low, 0.0)
         high = np.maximum(high, low * (1 + 1e-9) + 1e-15)
         return self.relaxation(box, low, high, *self.gammas(upper_bound), upper_bound, envelope)
 
     def relaxation(self, box: Box, low: np.ndarray, high: np.ndarray, cost_gamma: float, scope_gamma: float,
                    upper_bound: float, envelope: bool = True) -> ConicData:
-        """``min sum r`` over the box in Clarabel's form (ALGORITHMS.md section 2).
+        """``min sum r`` over the box in Clarabel's form (docs/algorithms.md, section 4).
 
         Rows are expressions ``c + E x`` that must lie in the cone (Clarabel wants ``b - A x``,
         so ``A = -E``). Variables: v (d), then t, w, r per envelope observation, then one

@@ -5,7 +5,7 @@ The search space is a projective chart where a reference camera's depth is 1, so
 term is convex and points at infinity are ordinary points (inverse depth 0). Boxes live on
 well-conditioned depth functionals, as many as the other views' depths vary along (one for two
 views, up to three); the lower bound on a box is one SOCP with the convex envelope of ``t/s`` per
-view (see ALGORITHMS.md section 2). Costs are scaled so the incumbent costs 1.
+view (see docs/algorithms.md, section 4). Costs are scaled so the incumbent costs 1.
 """
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ import numpy as np
 
 from .bnb import Progress
 from .charts import Chart, camera_centres
-from .fractional import NORMS, Certificate, Early, FractionalOptions, Reasons, depth_subspace, prepare, search
+from .fractional import (NORMS, Certificate, Early, FractionalOptions, Reasons, depth_subspace, prepare,
+                         recomputed_status, search)
 from .geometry import norm_cost, normalised_cameras, reprojection_residuals
 from .verify import checked_solve
 
@@ -68,9 +69,9 @@ def prepare_track(cameras: np.ndarray, points: np.ndarray, options: Triangulatio
     if isinstance(prepared, Early):
         if prepared.incumbent is None:
             return chart, TrackResult(prepared.status, False, reason=prepared.reason)
-        result = _track_result(chart, cameras, points, prepared.incumbent, options.norm, prepared.status,
+        result = _track_result(chart, cameras, points, prepared.incumbent, options, prepared.status,
                                0.0 if prepared.status == "optimal" else None, 0, None)
-        result.reason = prepared.reason
+        result.reason = result.reason or prepared.reason
         return chart, result
     return chart, prepared
 
@@ -104,13 +105,13 @@ def _triangulate(cameras, points, options: TriangulationOptions, callback, start
     if searched.solution is None:
         result = TrackResult(searched.status, False, nodes=searched.nodes, reason=searched.reason)
     else:
-        result = _track_result(chart, cameras, points, searched.solution, options.norm, searched.status,
+        result = _track_result(chart, cameras, points, searched.solution, options, searched.status,
                                searched.lower_bound, searched.nodes, searched.certificate)
     result.elapsed_s = time.perf_counter() - start
     return result
 
 
-def _track_result(chart: Chart, cameras, points, y, norm, status, lower, nodes, certificate) -> TrackResult:
+def _track_result(chart: Chart, cameras, points, y, options, status, lower, nodes, certificate) -> TrackResult:
     X = chart.T @ np.append(y, 1.0)
     X = X / np.linalg.norm(X)
     # The chart keeps X[3] >= 0 up to round-off; a point this close to the plane at infinity is
@@ -122,10 +123,11 @@ def _track_result(chart: Chart, cameras, points, y, norm, status, lower, nodes, 
     point = X.tolist() if at_infinity else (X[:3] / X[3]).tolist()
     # The cost of the point as returned (what anyone recomputing it gets, to the last bit).
     residuals = reprojection_residuals(cameras, X if at_infinity else np.append(point, 1.0), points)
-    cost = norm_cost(residuals, norm)  # recomputed in pixels from the original data
+    cost = norm_cost(residuals, options.norm)  # recomputed in pixels from the original data
     if lower is not None:
         lower = min(lower, cost)
-    return TrackResult(status=status, certified=status == "optimal" and lower is not None, point=point,
+    status, reason = recomputed_status(status, cost, lower, options.rel_gap, options.abs_gap)
+    return TrackResult(status=status, certified=status == "optimal" and lower is not None, point=point, reason=reason,
                        at_infinity=bool(at_infinity), cost=cost, lower_bound=lower,
                        gap=cost - lower if lower is not None else None, nodes=nodes,
                        certificate=certificate, residuals=residuals.tolist())

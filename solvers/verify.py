@@ -35,10 +35,10 @@ OBJECTIVE_TOLERANCE = 1e-9
 # What the service serves, and nothing else: (source, target) dimensions per map kind, the most
 # views in a track, points in a map, leaves in a search and the nesting of a document.
 MAP_DIMENSIONS = {"resection": {(3, 2)}, "homography": {(2, 2), (3, 3)}}
-MAX_VIEWS = 100_000
+MAX_VIEWS = 1000  # views in a track (the parser's limit too)
 MAX_POINTS = 1_000_000
 MAX_DEPTH = 64
-MAX_PIECES = 200_000
+MAX_PIECES = 20_000
 SCALE_RANGE = (1e-15, 1e3)  # the solver's residual factor lies in it (fractional.MAX_SCALE above)
 CHECKS = ("format", "data_hash", "options", "data", "claim", "objective", "scope", "program", "root_region",
           "tightening", "coverage", "leaf_bounds", "lower_bound", "gap", "returned")
@@ -685,10 +685,63 @@ def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_
 def uncovered_part(root: Box, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """A part of ``root`` that no box (lo[i], hi[i]) covers, or None when they cover it all.
 
-    Exact (no tolerance): subtract each closed box from the closed pieces still uncovered; what
-    a subtraction leaves are slabs reaching strictly beyond the box, so nothing is lost.
+    Exact (no tolerance). A branch-and-bound tree's leaves are a guillotine partition: some
+    axis-aligned plane crosses no leaf. So the boxes are split along every such plane of one
+    axis at once, and each slab is checked the same way: n log n per level, whatever the
+    leaves. A slab with no leaf, or a gap between the leaves along an axis, is uncovered. Where
+    no plane separates the leaves (not a tree's partition), the slab's leaves are subtracted one
+    by one, within a budget. Boxes are closed; leaves of zero volume cover nothing a positive
+    volume does not (the union of closed boxes covering a box's interior covers the box).
     """
-    pieces = [(root.lo.copy(), root.hi.copy())]
+    if not np.all(root.hi > root.lo):
+        return _subtracted(root.lo, root.hi, lo, hi)
+    stack = [(root.lo, root.hi, np.arange(len(lo)))]
+    while stack:
+        box_lo, box_hi, index = stack.pop()
+        L = np.maximum(lo[index], box_lo)
+        H = np.minimum(hi[index], box_hi)
+        inside = np.all(L < H, axis=1)
+        index, L, H = index[inside], L[inside], H[inside]
+        if not len(index):
+            return box_lo, box_hi
+        if np.any(np.all(L == box_lo, axis=1) & np.all(H == box_hi, axis=1)):
+            continue
+        for axis in range(len(box_lo)):
+            order = np.argsort(L[:, axis], kind="stable")
+            starts, ends = L[order, axis], np.maximum.accumulate(H[order, axis])
+            if starts[0] > box_lo[axis]:
+                return _slab(box_lo, box_hi, axis, box_lo[axis], starts[0])
+            if ends[-1] < box_hi[axis]:
+                return _slab(box_lo, box_hi, axis, ends[-1], box_hi[axis])
+            gaps = np.flatnonzero(ends[:-1] < starts[1:])
+            if len(gaps):
+                return _slab(box_lo, box_hi, axis, ends[gaps[0]], starts[gaps[0] + 1])
+            cuts = np.flatnonzero(ends[:-1] <= starts[1:]) + 1  # planes that cross no leaf
+            if len(cuts):
+                bounds = np.concatenate([[box_lo[axis]], starts[cuts], [box_hi[axis]]])
+                for group, (a, b) in zip(np.split(order, cuts), zip(bounds[:-1], bounds[1:])):
+                    slab_lo, slab_hi = box_lo.copy(), box_hi.copy()
+                    slab_lo[axis], slab_hi[axis] = a, b
+                    stack.append((slab_lo, slab_hi, index[group]))
+                break
+        else:  # no separating plane: not a tree's partition
+            gap = _subtracted(box_lo, box_hi, L, H)
+            if gap is not None:
+                return gap
+    return None
+
+
+def _slab(box_lo, box_hi, axis: int, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
+    slab_lo, slab_hi = box_lo.copy(), box_hi.copy()
+    slab_lo[axis], slab_hi[axis] = a, b
+    return slab_lo, slab_hi
+
+
+def _subtracted(root_lo: np.ndarray, root_hi: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """uncovered_part by subtracting each closed box from the closed pieces still uncovered
+    (what a subtraction leaves are slabs reaching strictly beyond the box, so nothing is lost);
+    past MAX_PIECES pieces the box is reported as not shown covered."""
+    pieces = [(root_lo.copy(), root_hi.copy())]
     order = np.lexsort(lo.T[::-1])  # a sweep: neighbours follow each other
     for i in order:
         remaining = []
@@ -711,8 +764,8 @@ def uncovered_part(root: Box, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarra
         pieces = remaining
         if not pieces:
             return None
-        if len(pieces) > MAX_PIECES:  # leaves that fragment the box this much cover nothing sensibly
-            return pieces[0]
+        if len(pieces) > MAX_PIECES:
+            return root_lo, root_hi
     return pieces[0] if pieces else None
 
 

@@ -24,7 +24,7 @@ from solvers.fractional import root_region
 from solvers.jobs import parse_job, solve_job
 from solvers.relaxation import Relaxation
 from solvers.charts import Chart
-from solvers.verify import verify_any, verify_document
+from solvers.verify import uncovered_part, verify_any, verify_document
 from solvers.bnb import Box
 from solvers.cones import proves_infeasible
 
@@ -454,3 +454,85 @@ def test_a_perturbed_certificate_is_refused_or_still_true(genuine_documents, whi
     claim = doc["items"][0]
     assert claim["lower_bound"] <= original["items"][0]["cost"] * (1 + 1e-9)
     assert report.scope["max_residual"] == original["options"].get("max_residual")
+
+
+class TestHostileReview:
+    """What an independent attack on the solver and the verifier found (each reproduced here)."""
+
+    def test_a_barely_varying_depth_is_not_taken_for_a_constant(self):
+        # View 1's depth varies by 5e-10 of its row: once taken as constant, far points (x ~ 2e9)
+        # were priced wrongly and a bound of 1.25 was certified where 0.8 is attainable.
+        eps, f = 5e-10, 1e-3
+        cameras = np.array([[[f, 0, 0, 0], [0, f, 0, 0], [0, 0, 1.0, 0]],
+                            [[f, 0, 0, -f], [0, f, 0, 0], [eps, 0, 1.0, 0]]])
+        points = project(cameras, np.array([1 / eps, 0.0, 1.0, 1.0]))
+        points[1, 1] += 1.0
+        job = {"kind": "triangulation", "data": {"cameras": cameras.tolist(),
+               "tracks": [{"views": [0, 1], "points": points.tolist()}]}}
+        track = solve_job(job)["tracks"][0]
+        witness = np.array([2000395674.223707, 400.0791355985553, 1.000197837111884, 1.0])
+        assert np.all(cameras[:, 2] @ witness > 0)
+        witness_cost = float(((project(cameras, witness) - points) ** 2).sum())  # 0.8
+        assert track["lower_bound"] <= witness_cost * (1 + 1e-9)
+
+    @pytest.mark.parametrize("f0, z0, norm", [(100.0, 0.1, "L1L1"), (1e3, 1e-2, "L2L2"), (1e5, 1e-4, "L2L2")])
+    def test_an_observed_epipole_is_never_certified_above_the_infimum(self, f0, z0, norm):
+        # View 0 observes the image of camera 1's centre: points ever closer to that centre, in
+        # front of both cameras, cost ever less (infimum 0, not attained). The domain is cut
+        # nowhere short of depth 0, so no positive bound can be certified.
+        cameras = [[[f0, 0, 0, f0], [0, f0, 0, 0], [0, 0, 1.0, z0]],
+                   [[800.0, 0, 320, 0], [0, 800.0, 240, 0], [0, 0, 1.0, 0]]]
+        job = {"kind": "triangulation", "data": {"cameras": cameras, "tracks": [
+            {"views": [0, 1], "points": [[f0 / z0, 0.0], [330.0, 250.0]]}]}, "options": {"norm": norm}}
+        for mode in ("summary", "full"):
+            job["options"]["certificate"] = mode
+            track = solve_job(job)["tracks"][0]
+            assert not track["certified"] or track["lower_bound"] <= 1e-9
+
+    def test_a_solution_whose_recomputed_cost_misses_the_tolerance_is_not_certified(self):
+        cameras = [[[800.0, 0, 0, 0], [0, 800.0, 0, 0], [0, 0, 1.0, 0]],
+                   [[800.0, 0, 320, -1120], [0, 800.0, 240, -240], [0, 0, 1.0, -1]]]
+        job = {"kind": "triangulation", "data": {"cameras": cameras, "tracks": [
+            {"views": [0, 1], "points": [[800.0, 0.0], [330.0, 250.0]]}]}, "options": {"certificate": "full"}}
+        result = solve_job(job)
+        track = result["tracks"][0]
+        if track["certified"]:
+            assert track["gap"] <= max(1e-7, 1e-3 * track["cost"])
+            assert verify_any(result).valid
+        else:
+            assert track["status"] == "not_certified" and track["reason"]
+
+    def test_many_views_cost_linear_memory(self):
+        import resource
+        rng = np.random.default_rng(2)
+        cameras = random_cameras(rng, 1000, spread=20.0)
+        points = project(cameras, np.array([0.1, 0.0, 0.2, 1.0]))
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        Chart.build(cameras, points, "L2L2")
+        assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 200_000  # kB
+        job = readme_job()
+        job["data"]["cameras"] = [CAMERAS[0]] * 1001
+        job["data"]["tracks"][0] = {"views": list(range(1001)), "points": [[1.0, 1.0]] * 1001}
+        with pytest.raises(InputError) as error:
+            parse_job(job)
+        assert "limit of 1000" in error.value.reason
+
+    def test_coverage_takes_n_log_n_time(self, genuine):
+        doc = copy.deepcopy(genuine["certificate"])
+        proof = doc["items"][0]["proof"]
+        lo, hi = np.array(proof["search_box"][0]), np.array(proof["search_box"][1])
+        starts = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.01, 0.99, 8000)[None, :]
+        proof["leaves"] = [[starts[:, i].tolist(), (starts[:, i] + 1e-9 * (hi - lo)).tolist(), None]
+                           for i in range(8000)]
+        start = time.perf_counter()
+        assert failed_check(doc) == "coverage"
+        assert time.perf_counter() - start < 5.0
+        # A genuine partition into many slabs is still recognised as covering.
+        cuts = np.linspace(lo[0], hi[0], 5001)
+        cuts[-1] = hi[0]
+        leaves_lo = np.tile(lo, (5000, 1))
+        leaves_hi = np.tile(hi, (5000, 1))
+        leaves_lo[:, 0], leaves_hi[:, 0] = cuts[:-1], cuts[1:]
+        assert uncovered_part(Box(lo, hi), leaves_lo, leaves_hi) is None
+        leaves_hi[2500, 0] = leaves_lo[2500, 0] + 0.5 * (leaves_hi[2500, 0] - leaves_lo[2500, 0])
+        assert uncovered_part(Box(lo, hi), leaves_lo, leaves_hi) is not None
