@@ -114,7 +114,10 @@ def root_region(program: FractionalProgram, B: np.ndarray, gamma: float) -> tupl
     gives a region holding every better point, and a different problem often solves cleanly.
     """
     rows = complete_functionals(B)
-    for inflation in (1.0, 1.001, 1.01):
+    # Inflated a little from the start: every point whose residuals are within gamma (the
+    # incumbent, and so the solution returned) is then strictly inside the region, which is the
+    # witness a verifier asks for (verify._check_root).
+    for inflation in (1 + 1e-6, 1.001, 1.01):
         region = residual_region(program, gamma * inflation)
         state, lo, hi, duals = _root_region_once(region, rows)
         if state != "not_certified":

@@ -536,3 +536,83 @@ class TestHostileReview:
         assert uncovered_part(Box(lo, hi), leaves_lo, leaves_hi) is None
         leaves_hi[2500, 0] = leaves_lo[2500, 0] + 0.5 * (leaves_hi[2500, 0] - leaves_lo[2500, 0])
         assert uncovered_part(Box(lo, hi), leaves_lo, leaves_hi) is not None
+
+
+class TestHostileReviewRoundTwo:
+    """A second attack, on forged proofs and verifier work."""
+
+    def test_a_root_claim_box_that_misses_the_region_is_refused(self):
+        # Dual bounds hold on R ∩ claim. A claim box that R does not meet (one depth -1 there)
+        # gets "proven" ranges from a Farkas ray; a depth leaf then "proves" any bound. The
+        # solution must be a point of R inside the claim box.
+        from solvers.relaxation import residual_region, root_bounds, gamma_for
+        from solvers.verify import _Item
+        from solvers.geometry import norm_cost, normalised_cameras
+        cameras = copy.deepcopy(CAMERAS) + [[[800, 0, 320, 0], [0, 800, 240, -800], [0.3, 0, 1, 0]]]
+        data = {"cameras": cameras, "tracks": [{"views": [0, 1, 2], "points": [[330, 250], [250, 251], [320, 200]]}]}
+        options = {"norm": "L2L2", "rel_gap": 0.001, "abs_gap": 1e-07, "max_residual": None}
+        cams, pts = np.array(cameras, float), np.array(data["tracks"][0]["points"], float)
+        bad = np.array([0.0, 0.0, 100.0, 1.0])  # in front of every camera, a poor fit
+        cost = norm_cost(project(cams, bad) - pts, "L2L2")
+        program = _Item("triangulation", (normalised_cameras(cams), pts), "L2L2").program
+        gamma = 2 * gamma_for(cost, "L2L2")
+        region = residual_region(program, gamma)
+        varying = next(j for j in range(len(program.den)) if not program.exact[j])
+        a, c = program.den[varying, :3], program.den[varying, 3]
+        y0 = -(c + 1.0) * a / (a @ a)
+        lo, hi, F = y0 - 1e-3, y0 + 1e-3, np.eye(3)
+        ray = np.zeros(len(region[1]))
+        ray[len(program.linear) + varying * 3] = 1.0
+        for lam in np.logspace(-8, 3, 200):
+            duals = [lam * ray] * 6
+            low, high = root_bounds(region, F, duals, lo, hi)
+            if np.all(lo < low) and np.all(high < hi):
+                break
+        box = [lo.tolist(), hi.tolist()]
+        proof = {"type": "branch_and_bound", "scale": 1.0,
+                 "root": {"gamma": gamma, "functionals": F.tolist(), "claim": box, "bounds": box,
+                          "duals": [pack(z) for z in duals]},
+                 "tightening": [], "search_box": box,
+                 "proofs": [{"box": box, "upper_bound": cost, "kind": "depth", "z": None, "bound": 0.0}],
+                 "leaves": [box + [0]]}
+        doc = rehash({"format": "geocert-certificate", "version": 2, "kind": "triangulation", "options": options,
+                      "data": data, "items": [{"index": 0, "status": "optimal", "certified": True, "cost": cost,
+                                               "lower_bound": cost, "gap": 0.0, "point": bad[:3].tolist(),
+                                               "at_infinity": False, "proof": proof}]})
+        assert failed_check(doc) == "root_region"
+
+    def test_rounds_without_duals_cost_nothing_and_are_capped(self, genuine_documents):
+        doc = copy.deepcopy(genuine_documents[1])
+        proof = doc["items"][0]["proof"]
+        last = proof["tightening"][-1]["box_out"]
+        empty = {"upper_bound": proof["tightening"][-1]["upper_bound"], "box_in": last, "box_out": last,
+                 "duals": [None] * (2 * len(last[0]))}
+        proof["tightening"] += [copy.deepcopy(empty) for _ in range(3)]
+        assert verify_document(doc).valid
+        proof["tightening"] += [copy.deepcopy(empty) for _ in range(20)]
+        assert failed_check(doc) == "tightening"
+        moved = copy.deepcopy(genuine_documents[1])
+        widened = copy.deepcopy(empty)
+        widened["box_out"] = [[x - 1 for x in last[0]], [x + 1 for x in last[1]]]
+        moved["items"][0]["proof"]["tightening"].append(widened)
+        assert failed_check(moved) == "tightening"
+
+    def test_leaves_no_plane_separates_are_bounded_work(self):
+        # A pinwheel (no separating plane) with many small leaves in its hole, then fillers.
+        lo, hi = np.zeros(2), np.ones(2)
+        pinwheel = [([0, 0], [0.6, 0.4]), ([0.6, 0], [1, 0.6]), ([0.4, 0.6], [1, 1]), ([0, 0.4], [0.4, 1])]
+        boxes = [(np.array(a, float), np.array(b, float)) for a, b in pinwheel]
+        for i in range(200):
+            x = 0.401 + 0.198 * (i % 20) / 20
+            y = 0.401 + 0.198 * (i // 20) / 10
+            boxes.append((np.array([x, y]), np.array([x + 0.001, y + 0.001])))
+        boxes += [(np.array([0.01, 0.01]), np.array([0.02, 0.02]))] * 5000
+        leaves_lo = np.array([b[0] for b in boxes])
+        leaves_hi = np.array([b[1] for b in boxes])
+        start = time.perf_counter()
+        assert uncovered_part(Box(lo, hi), leaves_lo, leaves_hi) is not None
+        assert time.perf_counter() - start < 5.0
+        # The pinwheel with its hole filled covers, and is recognised.
+        full = np.array([[0, 0], [0.6, 0], [0.4, 0.6], [0, 0.4], [0.4, 0.4]], float)
+        full_hi = np.array([[0.6, 0.4], [1, 0.6], [1, 1], [0.4, 1], [0.6, 0.6]], float)
+        assert uncovered_part(Box(lo, hi), full, full_hi) is None
