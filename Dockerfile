@@ -1,9 +1,7 @@
 FROM python:3.11-slim
 WORKDIR /srv/geocert
 COPY pyproject.toml README.md ./
-COPY app ./app
-COPY workers ./workers
-COPY solvers ./solvers
+COPY geocert ./geocert
 RUN pip install --no-cache-dir . && useradd --create-home geocert
 USER geocert
 EXPOSE 8000

@@ -20,10 +20,10 @@ import time
 import numpy as np
 
 from bench.resection import DATA, dinosaur_problems
-from solvers.datasets import load_dinosaur
-from solvers.maps import MapOptions, fit_map
-from solvers.triangulation import TriangulationOptions, triangulate
-from solvers.verify import claim_of, verify_arrays
+from geocert.solvers.datasets import load_dinosaur
+from geocert.solvers.maps import MapOptions, fit_map
+from geocert.solvers.triangulation import TriangulationOptions, triangulate
+from geocert.solvers.verify import claim_of, verify_arrays
 
 
 def measure(kind: str, items, solve, options, solution) -> dict:

@@ -17,9 +17,9 @@ import time
 import cv2
 import numpy as np
 
-from solvers.geometry import norm_cost
+from geocert.solvers.geometry import norm_cost
 from bench.mapfits import apply, fit_all
-from solvers.triangulation import NORMS
+from geocert.solvers.triangulation import NORMS
 
 
 def plane_homography(rng: np.random.Generator) -> np.ndarray:

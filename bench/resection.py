@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from solvers.datasets import load_dinosaur, load_house
-from solvers.geometry import norm_cost
+from geocert.solvers.datasets import load_dinosaur, load_house
+from geocert.solvers.geometry import norm_cost
 from bench.mapfits import apply, fit_all
-from solvers.maps import MapOptions, fit_map
-from solvers.triangulation import NORMS, triangulate
+from geocert.solvers.maps import MapOptions, fit_map
+from geocert.solvers.triangulation import NORMS, triangulate
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 

@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from bench import machine_speed_ms
-from solvers.datasets import load_dinosaur
-from solvers.geometry import norm_cost
-from solvers.triangulation import NORMS, TriangulationOptions, triangulate
+from geocert.solvers.datasets import load_dinosaur
+from geocert.solvers.geometry import norm_cost
+from geocert.solvers.triangulation import NORMS, TriangulationOptions, triangulate
 
 DINOSAUR = Path(__file__).resolve().parents[2] / "shared" / "data" / "oxford_dinosaur"
 
@@ -106,7 +106,7 @@ def service_batch(cameras, tracks, workers: int) -> dict:
     env.pop("GEOCERT_REDIS_URL", None)
     env["GEOCERT_DATA_DIR"] = tempfile.mkdtemp(prefix="geocert-bench-")
     log = open(Path(env["GEOCERT_DATA_DIR"]) / "serve.log", "w")
-    server = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--workers",
+    server = subprocess.Popen([sys.executable, "-m", "geocert.app.cli", "serve", "--port", str(port), "--workers",
                                str(workers), "--concurrency", "1"], env=env, stdout=log, stderr=log)
     try:
         with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=60) as client:

@@ -38,12 +38,12 @@ class Cluster:
     """Redis + API (no embedded workers) + separately started workers."""
 
     def __init__(self, data_dir: Path, env: dict[str, str]):
-        from workers.redis_server import start_embedded_redis
+        from geocert.workers.redis_server import start_embedded_redis
 
         self.redis, self.redis_url = start_embedded_redis(data_dir)
         self.env = {**os.environ, **env, "GEOCERT_REDIS_URL": self.redis_url, "GEOCERT_DATA_DIR": str(data_dir)}
         self.port = free_port()
-        self.api = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", str(self.port),
+        self.api = subprocess.Popen([sys.executable, "-m", "geocert.app.cli", "serve", "--port", str(self.port),
                                      "--workers", "0"], env=self.env)
         self.base = f"http://127.0.0.1:{self.port}"
         self.workers: list[subprocess.Popen] = []
@@ -51,7 +51,7 @@ class Cluster:
     def start_worker(self) -> subprocess.Popen:
         # A session of its own, so that a kill takes the worker's pool processes too (as when a
         # machine or container dies).
-        worker = subprocess.Popen([sys.executable, "-m", "app.cli", "worker", "--concurrency", "1"], env=self.env,
+        worker = subprocess.Popen([sys.executable, "-m", "geocert.app.cli", "worker", "--concurrency", "1"], env=self.env,
                                   start_new_session=True)
         self.workers.append(worker)
         return worker

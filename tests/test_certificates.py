@@ -11,11 +11,11 @@ import sys
 import numpy as np
 import pytest
 
-from solvers.certificates import data_hash, pack, problem_hash, unpack
-from solvers.jobs import solve_job
-from solvers.relaxation import NORMS
-from solvers.verify import BOUND_TOLERANCE, uncovered_part, verify_arrays, verify_document
-from solvers.bnb import Box
+from geocert.solvers.certificates import data_hash, pack, problem_hash, unpack
+from geocert.solvers.jobs import solve_job
+from geocert.solvers.relaxation import NORMS
+from geocert.solvers.verify import BOUND_TOLERANCE, uncovered_part, verify_arrays, verify_document
+from geocert.solvers.bnb import Box
 
 from .scenes import noisy_track, random_cameras
 from .test_maps import scene, seed
@@ -209,7 +209,7 @@ class TestCoverage:
 
 class TestVerifierStandsAlone:
     def test_imports_no_conic_solver(self):
-        code = ("import sys, solvers.verify; bad = [m for m in sys.modules if m.split('.')[0] in "
+        code = ("import sys, geocert.solvers.verify; bad = [m for m in sys.modules if m.split('.')[0] in "
                 "('clarabel', 'cvxpy', 'pyscipopt', 'scs', 'ecos', 'osqp')]; print(json.dumps(bad))")
         out = subprocess.run([sys.executable, "-c", "import json; " + code], capture_output=True, text=True, check=True)
         assert json.loads(out.stdout) == []
@@ -217,7 +217,7 @@ class TestVerifierStandsAlone:
 
 class TestCommandLine:
     def run(self, *args, stdin: str | None = None):
-        return subprocess.run([sys.executable, "-m", "app.cli", *args], input=stdin, capture_output=True, text=True)
+        return subprocess.run([sys.executable, "-m", "geocert.app.cli", *args], input=stdin, capture_output=True, text=True)
 
     def test_exit_status_valid_invalid_unreadable(self, tmp_path, branched):
         good = tmp_path / "certificate.json"

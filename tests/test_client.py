@@ -7,7 +7,7 @@ import httpx
 import numpy as np
 import pytest
 
-from app.client import (
+from geocert.app.client import (
     BadRequest,
     Client,
     Conflict,

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from solvers import conic
-from solvers.cones import ConeSpec
-from solvers.conic import ConicStatus, ReusableConicProgram, map_clarabel_status, solve_conic
+from geocert.solvers import conic
+from geocert.solvers.cones import ConeSpec
+from geocert.solvers.conic import ConicStatus, ReusableConicProgram, map_clarabel_status, solve_conic
 
 BALL = ConeSpec(nonneg=1, soc=(4,))
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from solvers.datasets import load_dinosaur
-from solvers.triangulation import TriangulationOptions, triangulate
+from geocert.solvers.datasets import load_dinosaur
+from geocert.solvers.triangulation import TriangulationOptions, triangulate
 
 from .scenes import SHARED
 

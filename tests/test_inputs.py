@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from solvers.geometry import InputError
-from solvers.jobs import parse_job, solve_job
+from geocert.solvers.geometry import InputError
+from geocert.solvers.jobs import parse_job, solve_job
 
 from .scenes import random_cameras
 

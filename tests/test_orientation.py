@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from solvers.jobs import solve_job
-from solvers.orientation import camera_centre, orient
+from geocert.solvers.jobs import solve_job
+from geocert.solvers.orientation import camera_centre, orient
 
 from .scenes import noisy_track, project, random_cameras
 

@@ -169,8 +169,8 @@ class TestListing:
 
 def test_the_job_index_forgets_expired_jobs(tmp_path):
     """Jobs expire GEOCERT_RESULT_TTL_S after they end; the listing drops them from its index."""
-    from workers.redis_server import start_embedded_redis
-    from workers.store import JobStore
+    from geocert.workers.redis_server import start_embedded_redis
+    from geocert.workers.store import JobStore
 
     process, url = start_embedded_redis(tmp_path)
     try:
@@ -310,6 +310,6 @@ class TestLimits:
 def test_serve_refuses_other_addresses_without_keys(tmp_path):
     env = {k: v for k, v in os.environ.items() if not k.startswith("GEOCERT_")}
     env["GEOCERT_DATA_DIR"] = str(tmp_path)
-    done = subprocess.run([sys.executable, "-m", "app.cli", "serve", "--host", "0.0.0.0", "--workers", "0"],
+    done = subprocess.run([sys.executable, "-m", "geocert.app.cli", "serve", "--host", "0.0.0.0", "--workers", "0"],
                           env=env, capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and "GEOCERT_API_KEYS" in done.stderr

@@ -14,8 +14,8 @@ import httpx
 import numpy as np
 import pytest
 
-from solvers.certificates import VERSION
-from solvers.jobs import solve_job
+from geocert.solvers.certificates import VERSION
+from geocert.solvers.jobs import solve_job
 
 from .scenes import noisy_track, random_cameras
 
@@ -35,7 +35,7 @@ def service(tmp_path_factory):
     env.pop("GEOCERT_REDIS_URL", None)
     env.update(GEOCERT_DATA_DIR=str(tmp_path_factory.mktemp("geocert")), GEOCERT_MAX_BODY_BYTES=str(BODY_LIMIT),
                GEOCERT_CHUNK_SIZE="40", GEOCERT_PROGRESS_INTERVAL_S="0.05")
-    process = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--workers", "1",
+    process = subprocess.Popen([sys.executable, "-m", "geocert.app.cli", "serve", "--port", str(port), "--workers", "1",
                                 "--concurrency", "1"], env=env)
     base = f"http://127.0.0.1:{port}"
     deadline = time.monotonic() + 90
@@ -416,7 +416,7 @@ class TestOrient:
 
 class TestOpenAPI:
     def test_checked_in_spec_is_current(self):
-        from app.cli import openapi_document
+        from geocert.app.cli import openapi_document
 
         path = __import__("pathlib").Path(__file__).resolve().parents[1] / "openapi" / "openapi.json"
         assert json.loads(path.read_text()) == openapi_document(), "run: geocert openapi --output openapi/openapi.json"

@@ -10,8 +10,8 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from solvers.geometry import InputError
-from solvers.jobs import KINDS
+from geocert.solvers.geometry import InputError
+from geocert.solvers.jobs import KINDS
 
 PROBLEM_JSON = "application/problem+json"
 

@@ -7,16 +7,16 @@ from typing import Annotated
 
 from fastapi import Depends
 
-from app.core.config import get_settings
-from app.core.security import caller
-from app.problems import PROBLEM_JSON, ApiProblem
-from app.schemas import ProblemDetails
-from workers.store import JobStore
+from geocert.app.core.config import get_settings
+from geocert.app.core.security import caller
+from geocert.app.problems import PROBLEM_JSON, ApiProblem
+from geocert.app.schemas import ProblemDetails
+from geocert.workers.store import JobStore
 
 
 @lru_cache
 def get_store() -> JobStore:
-    from workers.celery_app import redis_url
+    from geocert.workers.celery_app import redis_url
 
     return JobStore.from_url(redis_url(), get_settings().result_ttl_s)
 
@@ -58,7 +58,7 @@ def submit_chunks(store: JobStore, meta: dict, request_id: str | None) -> None:
     """One task per chunk, so a batch runs in parallel across every worker (a Celery group)."""
     from celery import group
 
-    from workers.tasks import solve_segment
+    from geocert.workers.tasks import solve_segment
 
     signatures = [solve_segment.s(meta["id"], start, stop, request_id) for start, stop in meta["chunks"]]
     result = group(signatures).apply_async()

@@ -17,8 +17,8 @@ from fastapi import APIRouter, Response
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, Counter, Histogram, generate_latest
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from workers import logs
-from workers.metrics import RedisCollector
+from geocert.workers import logs
+from geocert.workers.metrics import RedisCollector
 
 log = logging.getLogger("geocert.api")
 REGISTRY = CollectorRegistry()
@@ -73,7 +73,7 @@ def metrics():
     deliveries and queue depth over the whole service."""
     global _collector_registered
     if not _collector_registered:
-        from app.api.deps import get_store
+        from geocert.app.api.deps import get_store
 
         REGISTRY.register(RedisCollector(get_store().r))
         _collector_registered = True

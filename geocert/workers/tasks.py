@@ -13,12 +13,12 @@ import logging
 import time
 import traceback
 
-from app.core.config import get_settings
-from solvers.geometry import InputError
-from solvers.jobs import assemble, get_kind, job_stats, options_from, solve_items
-from workers import logs, metrics
-from workers.celery_app import celery_app, redis_url
-from workers.store import JobStore
+from geocert.app.core.config import get_settings
+from geocert.solvers.geometry import InputError
+from geocert.solvers.jobs import assemble, get_kind, job_stats, options_from, solve_items
+from geocert.workers import logs, metrics
+from geocert.workers.celery_app import celery_app, redis_url
+from geocert.workers.store import JobStore
 
 log = logging.getLogger("geocert.worker")
 _STORE: JobStore | None = None
@@ -137,6 +137,6 @@ def ended(jobs: JobStore, job_id: str) -> None:
     metrics.record_job_end(jobs.r, meta)
     log.info("job ended %s", meta["status"])
     if meta.get("webhook"):
-        from workers.webhooks import deliver_webhook
+        from geocert.workers.webhooks import deliver_webhook
 
         deliver_webhook.delay(job_id)

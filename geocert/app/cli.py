@@ -28,9 +28,9 @@ def _progress_bar(progress: dict) -> None:
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
-    from app.schemas import JOB_REQUEST
-    from solvers.geometry import InputError
-    from solvers.jobs import solve_job
+    from geocert.app.schemas import JOB_REQUEST
+    from geocert.solvers.geometry import InputError
+    from geocert.solvers.jobs import solve_job
 
     try:
         text = sys.stdin.read() if args.job == "-" else Path(args.job).read_text()
@@ -44,7 +44,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
         sink = _progress_bar if sys.stderr.isatty() else None
         result = solve_job(request, sink=sink)
     except ValidationError as exc:
-        from app.problems import validation_problem
+        from geocert.app.problems import validation_problem
 
         print(json.dumps(validation_problem(exc.errors())), file=sys.stderr)
         return 2
@@ -62,7 +62,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
 def cmd_verify(args: argparse.Namespace) -> int:
     """Exit 0 when the certificate is valid, 1 when it is not, 2 when the input cannot be read
     (unreadable, not JSON, nested too deeply, or carrying no certificate)."""
-    from solvers.verify import find_certificate, verify_any
+    from geocert.solvers.verify import find_certificate, verify_any
 
     try:
         text = sys.stdin.read() if args.file == "-" else Path(args.file).read_text()
@@ -84,7 +84,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
 
 
 def _worker_command(concurrency: int, name: str) -> list[str]:
-    return [sys.executable, "-m", "celery", "-A", "workers.celery_app", "worker", "--loglevel", "WARNING",
+    return [sys.executable, "-m", "celery", "-A", "geocert.workers.celery_app", "worker", "--loglevel", "WARNING",
             "--concurrency", str(concurrency), "--pool", "prefork", "-n", f"{name}@%h", "--without-gossip",
             "--without-mingle"]
 
@@ -103,8 +103,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
     from pydantic import ValidationError as SettingsError
 
-    from app.core.config import get_settings
-    from app.core.security import is_loopback, parse_keys
+    from geocert.app.core.config import get_settings
+    from geocert.app.core.security import is_loopback, parse_keys
 
     try:
         keys = parse_keys(get_settings().api_keys)
@@ -120,7 +120,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
           file=sys.stderr)
     redis_process = None
     if not os.environ.get("GEOCERT_REDIS_URL"):
-        from workers.redis_server import start_embedded_redis
+        from geocert.workers.redis_server import start_embedded_redis
 
         redis_process, url = start_embedded_redis(get_settings().data_dir, preexec_fn=_die_with_parent)
         os.environ["GEOCERT_REDIS_URL"] = url
@@ -136,7 +136,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     stopping = threading.Event()
     _watch_workers(workers, stopping)
     try:
-        uvicorn.run("app.main:app", host=args.host, port=args.port, log_level="warning")
+        uvicorn.run("geocert.app.main:app", host=args.host, port=args.port, log_level="warning")
     finally:
         stopping.set()
         for process in workers:
@@ -181,15 +181,15 @@ def cmd_webhook_secret(args: argparse.Namespace) -> int:
     """Print the key webhook signatures use (GEOCERT_WEBHOOK_SECRET, or the one kept in Redis)."""
     import redis
 
-    from workers.celery_app import redis_url
-    from workers.webhooks import webhook_secret
+    from geocert.workers.celery_app import redis_url
+    from geocert.workers.webhooks import webhook_secret
 
     print(webhook_secret(redis.Redis.from_url(redis_url(), decode_responses=True)))
     return 0
 
 
 def openapi_document() -> dict:
-    from app.main import create_app
+    from geocert.app.main import create_app
 
     return create_app().openapi()
 

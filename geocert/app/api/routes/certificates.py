@@ -7,12 +7,12 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Depends
 
-from app.api.deps import JobStoreDep, error_responses, rate_limited
-from app.api.routes.jobs import OwnedJob
-from app.problems import ApiProblem
-from app.schemas import CertificateDocument, VerifyReport
-from solvers import verify
-from workers.store import TERMINAL
+from geocert.app.api.deps import JobStoreDep, error_responses, rate_limited
+from geocert.app.api.routes.jobs import OwnedJob
+from geocert.app.problems import ApiProblem
+from geocert.app.schemas import CertificateDocument, VerifyReport
+from geocert.solvers import verify
+from geocert.workers.store import TERMINAL
 
 router = APIRouter(tags=["certificates"], dependencies=[Depends(rate_limited)])
 

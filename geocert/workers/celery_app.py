@@ -7,8 +7,8 @@ import os
 from celery import Celery
 from celery.signals import worker_process_init, worker_ready, worker_shutdown
 
-from app.core.config import get_settings
-from workers.redis_server import broker_url
+from geocert.app.core.config import get_settings
+from geocert.workers.redis_server import broker_url
 
 
 def redis_url() -> str:
@@ -20,7 +20,7 @@ def redis_url() -> str:
 
 def make_celery() -> Celery:
     settings = get_settings()
-    app = Celery("geocert", broker=broker_url(redis_url()), include=["workers.tasks", "workers.webhooks"])
+    app = Celery("geocert", broker=broker_url(redis_url()), include=["geocert.workers.tasks", "geocert.workers.webhooks"])
     app.conf.update(
         task_serializer="json",
         accept_content=["json"],
@@ -48,7 +48,7 @@ celery_app = make_celery()
 
 @worker_process_init.connect
 def _json_logs(**_) -> None:
-    from workers import logs
+    from geocert.workers import logs
 
     logs.configure()
 
@@ -60,7 +60,7 @@ _HEARTBEAT = None
 def _start_heartbeat(sender=None, **_) -> None:
     """From the moment the worker takes tasks, it beats (``workers.heartbeat``; read by /readyz)."""
     global _HEARTBEAT
-    from workers.heartbeat import Heartbeat
+    from geocert.workers.heartbeat import Heartbeat
 
     name = getattr(sender, "hostname", None) or "geocert@unknown"
     _HEARTBEAT = Heartbeat(redis_url(), name).start()

@@ -14,14 +14,14 @@ from urllib.parse import urlencode
 from fastapi import APIRouter, Depends, Header, Query, Response
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
-from app.api.deps import Caller, JobStoreDep, error_responses, rate_limited, submit_chunks
-from app.core.config import get_settings
-from app.problems import ApiProblem
-from app.schemas import Job, JobList, JobRequest
-from solvers.geometry import InputError
-from solvers.jobs import parse_job
-from workers import logs
-from workers.store import TERMINAL, JobStore
+from geocert.app.api.deps import Caller, JobStoreDep, error_responses, rate_limited, submit_chunks
+from geocert.app.core.config import get_settings
+from geocert.app.problems import ApiProblem
+from geocert.app.schemas import Job, JobList, JobRequest
+from geocert.solvers.geometry import InputError
+from geocert.solvers.jobs import parse_job
+from geocert.workers import logs
+from geocert.workers.store import TERMINAL, JobStore
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"], dependencies=[Depends(rate_limited)])
 
@@ -179,8 +179,8 @@ def cancel_job(job: OwnedJob, store: JobStoreDep):
         raise ApiProblem(409, f"job {job_id} has already ended ({job['status']}): there is nothing to cancel")
     store.request_cancel(job_id)
     if store.cancel_if_queued(job_id):
-        from workers.celery_app import celery_app
-        from workers.tasks import ended
+        from geocert.workers.celery_app import celery_app
+        from geocert.workers.tasks import ended
 
         for task_id in store.task_ids(job_id):
             celery_app.control.revoke(task_id)

@@ -5,10 +5,10 @@ from __future__ import annotations
 from fastapi import FastAPI
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from app import docs, observability, problems
-from app.api.routes import certificates, jobs, orient, service
-from app.core.config import get_settings
-from workers import logs
+from geocert.app import docs, observability, problems
+from geocert.app.api.routes import certificates, jobs, orient, service
+from geocert.app.core.config import get_settings
+from geocert.workers import logs
 
 
 class BodySizeLimit:

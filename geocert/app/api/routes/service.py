@@ -7,10 +7,10 @@ from typing import Annotated
 from fastapi import APIRouter, Depends
 from fastapi.responses import JSONResponse
 
-from app.api.deps import error_responses, get_store, rate_limited
-from app.schemas import REQUEST_MODELS, ProblemKindInfo
-from solvers.jobs import KINDS, default_options
-from workers.store import JobStore
+from geocert.app.api.deps import error_responses, get_store, rate_limited
+from geocert.app.schemas import REQUEST_MODELS, ProblemKindInfo
+from geocert.solvers.jobs import KINDS, default_options
+from geocert.workers.store import JobStore
 
 router = APIRouter()
 
@@ -37,7 +37,7 @@ def healthz():
 def readyz(store: Annotated[JobStore, Depends(get_store)]):
     """Ready when Redis answers and at least one worker beat within the last 10 s (each worker
     writes a heartbeat into Redis every 2 s): two Redis commands, no waiting on workers."""
-    from workers.heartbeat import live_workers
+    from geocert.workers.heartbeat import live_workers
 
     checks = {"redis": False, "workers": 0}
     try:

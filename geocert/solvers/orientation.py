@@ -68,7 +68,11 @@ def _homogeneous(points: np.ndarray) -> np.ndarray:
         raise ValueError("points must be an (n, 3) or (n, 4) array")
     if points.shape[1] == 3:
         points = np.hstack([points, np.ones((len(points), 1))])
-    return points
+    # Each point divided by a power of two near its largest entry: the same projective point,
+    # and no square of an entry near 1e308 overflows below.
+    largest = np.max(np.abs(points), axis=1)
+    exponents = np.frexp(np.where(largest > 0, largest, 1.0))[1]
+    return np.ldexp(points, -exponents[:, None])
 
 
 def _signs(W: np.ndarray, seen: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -158,6 +162,8 @@ def orient(cameras, points, views: list[list[int]] | None = None) -> Orientation
     P = np.asarray(cameras, dtype=float)
     if P.ndim != 3 or P.shape[1:] != (3, 4) or len(P) == 0:
         raise ValueError("cameras must be an (m, 3, 4) array with m >= 1")
+    largest = np.max(np.abs(P), axis=(1, 2))
+    P = np.ldexp(P, -np.frexp(np.where(largest > 0, largest, 1.0))[1][:, None, None])  # exact rescaling
     X = _homogeneous(points)
     m, n = len(P), len(X)
     if n == 0:
@@ -192,7 +198,12 @@ def orient(cameras, points, views: list[list[int]] | None = None) -> Orientation
     Xo = Xs @ H.T
     Po = Ps @ np.linalg.inv(H)
     Po /= np.linalg.norm(Po, axis=(1, 2), keepdims=True)
-    Xo /= np.where(Xo[:, 3:] > 0, Xo[:, 3:], np.linalg.norm(Xo, axis=1, keepdims=True))
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        affine = Xo / np.where(Xo[:, 3:] > 0, Xo[:, 3:], 1.0)
+    # w = 1 where that is representable; a point too near the plane at infinity for it keeps
+    # unit norm (still w > 0).
+    finite = (Xo[:, 3] > 0) & np.all(np.isfinite(affine), axis=1)
+    Xo = np.where(finite[:, None], affine, Xo / np.linalg.norm(Xo, axis=1, keepdims=True))
     depths = np.einsum("ik,jk->ij", Po[:, 2, :], Xo)
     negative = [(int(i), int(j)) for i, j in zip(*np.nonzero(seen & ~zero & (depths <= 0)))]
     undetermined = [(int(i), int(j)) for i, j in zip(*np.nonzero(zero))]

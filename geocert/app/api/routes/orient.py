@@ -7,12 +7,12 @@ from __future__ import annotations
 import numpy as np
 from fastapi import APIRouter, Depends
 
-from app.api.deps import error_responses, rate_limited
-from app.core.config import get_settings
-from app.problems import ApiProblem
-from app.schemas import OrientRequest, OrientResult
-from solvers.geometry import InputError, check_cameras
-from solvers.orientation import orient
+from geocert.app.api.deps import error_responses, rate_limited
+from geocert.app.core.config import get_settings
+from geocert.app.problems import ApiProblem
+from geocert.app.schemas import OrientRequest, OrientResult
+from geocert.solvers.geometry import InputError, check_cameras
+from geocert.solvers.orientation import orient
 
 router = APIRouter(tags=["orientation"], dependencies=[Depends(rate_limited)])
 

@@ -1,6 +1,6 @@
 """A Python client for the geocert HTTP API (on httpx).
 
-    from app.client import Client
+    from geocert.app.client import Client
 
     with Client("http://127.0.0.1:8000") as geocert:        # API key: argument or GEOCERT_API_KEY
         job = geocert.submit("triangulation", {"cameras": [...], "tracks": [...]}, {"norm": "L2L2"})

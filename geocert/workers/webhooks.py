@@ -18,10 +18,10 @@ import time
 
 import httpx
 
-from app.core.config import get_settings
-from workers import logs, metrics
-from workers.celery_app import celery_app
-from workers.tasks import store
+from geocert.app.core.config import get_settings
+from geocert.workers import logs, metrics
+from geocert.workers.celery_app import celery_app
+from geocert.workers.tasks import store
 
 log = logging.getLogger("geocert.webhooks")
 _SECRET_KEY = "geocert:webhook_secret"
