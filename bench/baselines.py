@@ -94,7 +94,7 @@ def dlt_lm(cameras: np.ndarray, points: np.ndarray) -> np.ndarray:
 def map_dlt_lm(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     """The usual pipeline for a projective map: normalised DLT, then LM on the reprojection
     error (OpenCV's findHomography does the same for 2D homographies)."""
-    from geocert.solvers.maps import dlt
+    from geocert.solvers.fractional.maps import dlt
 
     M0 = dlt(source, target)
     homogeneous = np.hstack([source, np.ones((len(source), 1))])
@@ -119,7 +119,7 @@ def scip_map(source: np.ndarray, target: np.ndarray, norm: str, box: float = 10.
     entry of the normalised map lies in [-box, box]. Residuals d are variables tied to the map by
     ``d * depth = M_k . X - x_k * depth``.
     """
-    from geocert.solvers.charts import normaliser
+    from geocert.solvers.fractional.charts import normaliser
 
     n, m = source.shape[1], target.shape[1]
     S, T = normaliser(source), normaliser(target)

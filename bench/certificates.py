@@ -21,8 +21,8 @@ import numpy as np
 
 from bench.resection import DATA, dinosaur_problems
 from geocert.solvers.datasets import load_dinosaur
-from geocert.solvers.maps import MapOptions, fit_map
-from geocert.solvers.triangulation import TriangulationOptions, triangulate
+from geocert.solvers.fractional.maps import MapOptions, fit_map
+from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 from geocert.solvers.verify import claim_of, verify_arrays
 
 

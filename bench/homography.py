@@ -17,9 +17,9 @@ import time
 import cv2
 import numpy as np
 
-from geocert.solvers.geometry import norm_cost
+from geocert.solvers.core.geometry import norm_cost
 from bench.mapfits import apply, fit_all
-from geocert.solvers.triangulation import NORMS
+from geocert.solvers.fractional.triangulation import NORMS
 
 
 def plane_homography(rng: np.random.Generator) -> np.ndarray:

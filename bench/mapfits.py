@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from geocert.solvers.maps import MapOptions, fit_map
+from geocert.solvers.fractional.maps import MapOptions, fit_map
 
 
 def apply(M: np.ndarray, points: np.ndarray) -> np.ndarray:

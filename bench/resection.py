@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from geocert.solvers.datasets import load_dinosaur, load_house
-from geocert.solvers.geometry import norm_cost
+from geocert.solvers.core.geometry import norm_cost
 from bench.mapfits import apply, fit_all
-from geocert.solvers.maps import MapOptions, fit_map
-from geocert.solvers.triangulation import NORMS, triangulate
+from geocert.solvers.fractional.maps import MapOptions, fit_map
+from geocert.solvers.fractional.triangulation import NORMS, triangulate
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 

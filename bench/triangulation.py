@@ -27,8 +27,8 @@ import numpy as np
 
 from bench import machine_speed_ms
 from geocert.solvers.datasets import load_dinosaur
-from geocert.solvers.geometry import norm_cost
-from geocert.solvers.triangulation import NORMS, TriangulationOptions, triangulate
+from geocert.solvers.core.geometry import norm_cost
+from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, triangulate
 
 DINOSAUR = Path(__file__).resolve().parents[2] / "shared" / "data" / "oxford_dinosaur"
 

@@ -11,11 +11,11 @@ import sys
 import numpy as np
 import pytest
 
-from geocert.solvers.certificates import data_hash, pack, problem_hash, unpack
+from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unpack
 from geocert.solvers.jobs import solve_job
-from geocert.solvers.relaxation import NORMS
+from geocert.solvers.fractional.relaxation import NORMS
 from geocert.solvers.verify import BOUND_TOLERANCE, uncovered_part, verify_arrays, verify_document
-from geocert.solvers.bnb import Box
+from geocert.solvers.core.bnb import Box
 
 from .scenes import noisy_track, random_cameras
 from .test_maps import scene, seed

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from geocert.solvers import conic
-from geocert.solvers.cones import ConeSpec
-from geocert.solvers.conic import ConicStatus, ReusableConicProgram, map_clarabel_status, solve_conic
+from geocert.solvers.core import conic
+from geocert.solvers.core.cones import ConeSpec
+from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram, map_clarabel_status, solve_conic
 
 BALL = ConeSpec(nonneg=1, soc=(4,))
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from geocert.solvers.datasets import load_dinosaur
-from geocert.solvers.triangulation import TriangulationOptions, triangulate
+from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 
 from .scenes import SHARED
 

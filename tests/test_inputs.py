@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from geocert.solvers.geometry import InputError
+from geocert.solvers.core.geometry import InputError
 from geocert.solvers.jobs import parse_job, solve_job
 
 from .scenes import random_cameras

@@ -9,13 +9,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bench.baselines import map_dlt_lm
-from geocert.solvers.bnb import Box, BoxStatus
-from geocert.solvers.charts import MapChart, normaliser
-from geocert.solvers.conic import ConicStatus, solve_conic
-from geocert.solvers.fractional import Prepared, prepare
-from geocert.solvers.geometry import InputError, norm_cost
-from geocert.solvers.maps import _REASONS, MapOptions, check_correspondences, dlt, fit_map
-from geocert.solvers.triangulation import NORMS
+from geocert.solvers.core.bnb import Box, BoxStatus
+from geocert.solvers.fractional.charts import MapChart, normaliser
+from geocert.solvers.core.conic import ConicStatus, solve_conic
+from geocert.solvers.fractional.search import Prepared, prepare
+from geocert.solvers.core.geometry import InputError, norm_cost
+from geocert.solvers.fractional.maps import _REASONS, MapOptions, check_correspondences, dlt, fit_map
+from geocert.solvers.fractional.triangulation import NORMS
 
 from .scenes import look_at
 

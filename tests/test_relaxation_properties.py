@@ -7,10 +7,10 @@ import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from geocert.solvers import relaxation
-from geocert.solvers.bnb import Box, BoxStatus
-from geocert.solvers.fractional import Prepared
-from geocert.solvers.triangulation import NORMS, TriangulationOptions, prepare_track
+from geocert.solvers.fractional import relaxation
+from geocert.solvers.core.bnb import Box, BoxStatus
+from geocert.solvers.fractional.search import Prepared
+from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, prepare_track
 
 from .scenes import noisy_track, random_cameras
 

@@ -14,7 +14,7 @@ import httpx
 import numpy as np
 import pytest
 
-from geocert.solvers.certificates import VERSION
+from geocert.solvers.core.certificates import VERSION
 from geocert.solvers.jobs import solve_job
 
 from .scenes import noisy_track, random_cameras

@@ -17,16 +17,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 import scipy.optimize
 
-from geocert.solvers.certificates import data_hash, pack, problem_hash, unpack
-from geocert.solvers.conic import ConicStatus, solve_conic
-from geocert.solvers.geometry import InputError
-from geocert.solvers.fractional import root_region
+from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unpack
+from geocert.solvers.core.conic import ConicStatus, solve_conic
+from geocert.solvers.core.geometry import InputError
+from geocert.solvers.fractional.search import root_region
 from geocert.solvers.jobs import parse_job, solve_job
-from geocert.solvers.relaxation import Relaxation
-from geocert.solvers.charts import Chart
+from geocert.solvers.fractional.relaxation import Relaxation
+from geocert.solvers.fractional.charts import Chart
 from geocert.solvers.verify import uncovered_part, verify_any, verify_document
-from geocert.solvers.bnb import Box
-from geocert.solvers.cones import proves_infeasible
+from geocert.solvers.core.bnb import Box
+from geocert.solvers.core.cones import proves_infeasible
 
 from .scenes import project, random_cameras
 
@@ -350,7 +350,7 @@ class TestNoCrashNoExhaustion:
         assert time.perf_counter() - start < 1.0
 
     def test_l1_relaxations_grow_linearly_with_the_dimension(self):
-        from geocert.solvers.charts import MapChart
+        from geocert.solvers.fractional.charts import MapChart
         rows = {}
         for n in (2, 3):
             rng = np.random.default_rng(n)
@@ -545,9 +545,9 @@ class TestHostileReviewRoundTwo:
         # Dual bounds hold on R ∩ claim. A claim box that R does not meet (one depth -1 there)
         # gets "proven" ranges from a Farkas ray; a depth leaf then "proves" any bound. The
         # solution must be a point of R inside the claim box.
-        from geocert.solvers.relaxation import residual_region, root_bounds, gamma_for
+        from geocert.solvers.fractional.relaxation import residual_region, root_bounds, gamma_for
         from geocert.solvers.verify import _Item
-        from geocert.solvers.geometry import norm_cost, normalised_cameras
+        from geocert.solvers.core.geometry import norm_cost, normalised_cameras
         cameras = copy.deepcopy(CAMERAS) + [[[800, 0, 320, 0], [0, 800, 240, -800], [0.3, 0, 1, 0]]]
         data = {"cameras": cameras, "tracks": [{"views": [0, 1, 2], "points": [[330, 250], [250, 251], [320, 200]]}]}
         options = {"norm": "L2L2", "rel_gap": 0.001, "abs_gap": 1e-07, "max_residual": None}

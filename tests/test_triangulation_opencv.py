@@ -4,8 +4,8 @@ import cv2
 import numpy as np
 import pytest
 
-from geocert.solvers.geometry import fundamental_from_cameras
-from geocert.solvers.triangulation import TriangulationOptions, triangulate
+from geocert.solvers.core.geometry import fundamental_from_cameras
+from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 
 from .scenes import random_cameras
 

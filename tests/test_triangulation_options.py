@@ -4,7 +4,7 @@ narrows the certificate's scope."""
 import numpy as np
 import pytest
 
-from geocert.solvers.triangulation import TriangulationOptions, triangulate
+from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 
 from .scenes import noisy_track, random_cameras
 

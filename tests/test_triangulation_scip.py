@@ -8,8 +8,8 @@ import pytest
 pyscipopt = pytest.importorskip("pyscipopt")
 
 from bench.baselines import scip_triangulate
-from geocert.solvers.geometry import norm_cost
-from geocert.solvers.triangulation import NORMS, TriangulationOptions, triangulate
+from geocert.solvers.core.geometry import norm_cost
+from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, triangulate
 
 from .scenes import noisy_track, random_cameras
 

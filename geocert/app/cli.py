@@ -29,7 +29,7 @@ def _progress_bar(progress: dict) -> None:
 
 def cmd_solve(args: argparse.Namespace) -> int:
     from geocert.app.schemas import JOB_REQUEST
-    from geocert.solvers.geometry import InputError
+    from geocert.solvers.core.geometry import InputError
     from geocert.solvers.jobs import solve_job
 
     try:

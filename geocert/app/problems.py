@@ -10,7 +10,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from geocert.solvers.geometry import InputError
+from geocert.solvers.core.geometry import InputError
 from geocert.solvers.jobs import KINDS
 
 PROBLEM_JSON = "application/problem+json"

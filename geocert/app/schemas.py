@@ -7,8 +7,8 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, TypeAdapter, create_model
 
-from geocert.solvers.maps import MapOptions
-from geocert.solvers.triangulation import TriangulationOptions
+from geocert.solvers.fractional.maps import MapOptions
+from geocert.solvers.fractional.triangulation import TriangulationOptions
 
 # Strict types (the Strict models below): a JSON string ("330") or a boolean is never a number, and
 # a float (1.0) is never an integer; a JSON integer is still a number wherever a float is asked for.

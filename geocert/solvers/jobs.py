@@ -16,12 +16,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .bnb import Progress
-from .certificates import FORMAT, VERSION, data_hash, problem_hash
-from .geometry import COORDINATE_LIMIT, InputError, check_cameras, number_array
-from .maps import MapOptions, MapResult, check_correspondences, fit_map
-from .triangulation import NORMS, TrackResult, TriangulationOptions, triangulate
-from .verify import proof_of
+from geocert.solvers.core.bnb import Progress
+from geocert.solvers.core.certificates import FORMAT, VERSION, data_hash, problem_hash
+from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, check_cameras, number_array
+from geocert.solvers.fractional.maps import MapOptions, MapResult, check_correspondences, fit_map
+from geocert.solvers.fractional.triangulation import NORMS, TrackResult, TriangulationOptions, triangulate
+from geocert.solvers.verify import proof_of
 
 ProgressSink = Callable[[dict], None]
 MAX_VIEWS = 1000  # views in one track: a chart's choice of reference takes views^2 work

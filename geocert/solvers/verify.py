@@ -18,12 +18,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .bnb import Box
-from .certificates import FORMAT, VERSION, data_hash, problem_hash, unpack
-from .charts import Chart, MapChart
-from .cones import proves_infeasible, safe_lower_bound
-from .geometry import norm_cost, normalised_cameras
-from .relaxation import (NORMS, Relaxation, cost_unit, gamma_for, residual_region, root_bounds, tightening_objective,
+from geocert.solvers.core.bnb import Box
+from geocert.solvers.core.certificates import FORMAT, VERSION, data_hash, problem_hash, unpack
+from geocert.solvers.fractional.charts import Chart, MapChart
+from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
+from geocert.solvers.core.geometry import norm_cost, normalised_cameras
+from geocert.solvers.fractional.relaxation import (NORMS, Relaxation, cost_unit, gamma_for, residual_region, root_bounds, tightening_objective,
                          with_cost_cap)
 
 # Every tolerance is relative, with no absolute floor a document could exploit (docs/certificate.md,

@@ -14,7 +14,7 @@ import time
 import traceback
 
 from geocert.app.core.config import get_settings
-from geocert.solvers.geometry import InputError
+from geocert.solvers.core.geometry import InputError
 from geocert.solvers.jobs import assemble, get_kind, job_stats, options_from, solve_items
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app, redis_url

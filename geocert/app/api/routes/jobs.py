@@ -18,7 +18,7 @@ from geocert.app.api.deps import Caller, JobStoreDep, error_responses, rate_limi
 from geocert.app.core.config import get_settings
 from geocert.app.problems import ApiProblem
 from geocert.app.schemas import Job, JobList, JobRequest
-from geocert.solvers.geometry import InputError
+from geocert.solvers.core.geometry import InputError
 from geocert.solvers.jobs import parse_job
 from geocert.workers import logs
 from geocert.workers.store import TERMINAL, JobStore

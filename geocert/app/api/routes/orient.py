@@ -11,7 +11,7 @@ from geocert.app.api.deps import error_responses, rate_limited
 from geocert.app.core.config import get_settings
 from geocert.app.problems import ApiProblem
 from geocert.app.schemas import OrientRequest, OrientResult
-from geocert.solvers.geometry import InputError, check_cameras
+from geocert.solvers.core.geometry import InputError, check_cameras
 from geocert.solvers.orientation import orient
 
 router = APIRouter(tags=["orientation"], dependencies=[Depends(rate_limited)])

@@ -17,12 +17,12 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.optimize
 
-from .bnb import BnbOptions, Box, BoxBound, BoxStatus, Progress, branch_and_bound
-from .certificates import LeafProof, RootProof, SearchProof, TighteningProof, encode
-from .conic import ConicStatus, ReusableConicProgram, solve_conic
-from .cones import ConeSpec, proves_infeasible, safe_lower_bound
-from .geometry import InputError, lengths, norm_cost
-from .relaxation import (EPS_DEPTH, NORMS, ConicData, FractionalProgram, Relaxation, complete_functionals,
+from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, Progress, branch_and_bound
+from geocert.solvers.core.certificates import LeafProof, RootProof, SearchProof, TighteningProof, encode
+from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram, solve_conic
+from geocert.solvers.core.cones import ConeSpec, proves_infeasible, safe_lower_bound
+from geocert.solvers.core.geometry import InputError, lengths, norm_cost
+from geocert.solvers.fractional.relaxation import (EPS_DEPTH, NORMS, ConicData, FractionalProgram, Relaxation, complete_functionals,
                          cost_unit, gamma_for, residual_region, root_bounds, tightening_objective, with_cost_cap)
 
 MAX_SCALE = 1e3

@@ -13,8 +13,8 @@ from fractions import Fraction
 
 import numpy as np
 
-from .geometry import lengths
-from .relaxation import FractionalProgram
+from geocert.solvers.core.geometry import lengths
+from geocert.solvers.fractional.relaxation import FractionalProgram
 
 
 def camera_centres(cameras: np.ndarray) -> np.ndarray:

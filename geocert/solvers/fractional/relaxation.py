@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .bnb import Box
-from .cones import ConeSpec, safe_lower_bound
-from .geometry import norm_cost
+from geocert.solvers.core.bnb import Box
+from geocert.solvers.core.cones import ConeSpec, safe_lower_bound
+from geocert.solvers.core.geometry import norm_cost
 
 # Only for the split heuristic (a relative variation): the domain is every positive depth, cut
 # nowhere short of 0, so that no point of the scope is left out of a bound.

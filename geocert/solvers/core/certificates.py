@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .bnb import Box
+from geocert.solvers.core.bnb import Box
 
 FORMAT = "geocert-certificate"
 VERSION = 2  # 2: problem_sha256 covers the options a claim depends on; strict numbers throughout

@@ -16,12 +16,12 @@ from typing import Callable
 
 import numpy as np
 
-from .bnb import Progress
-from .charts import Chart, camera_centres
-from .fractional import (NORMS, Certificate, Early, FractionalOptions, Reasons, depth_subspace, prepare,
+from geocert.solvers.core.bnb import Progress
+from geocert.solvers.fractional.charts import Chart, camera_centres
+from geocert.solvers.fractional.search import (NORMS, Certificate, Early, FractionalOptions, Reasons, depth_subspace, prepare,
                          recomputed_status, search)
-from .geometry import norm_cost, normalised_cameras, reprojection_residuals
-from .verify import checked_solve
+from geocert.solvers.core.geometry import norm_cost, normalised_cameras, reprojection_residuals
+from geocert.solvers.verify import checked_solve
 
 
 

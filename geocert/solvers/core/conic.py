@@ -21,7 +21,7 @@ import clarabel
 import numpy as np
 import scipy.sparse as sp
 
-from .cones import ConeSpec
+from geocert.solvers.core.cones import ConeSpec
 
 
 class ConicStatus(enum.Enum):

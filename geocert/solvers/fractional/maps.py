@@ -18,11 +18,11 @@ from typing import Callable
 
 import numpy as np
 
-from .bnb import Progress
-from .charts import MapChart, normaliser
-from .fractional import Certificate, Early, FractionalOptions, Reasons, prepare, recomputed_status, search
-from .geometry import InputError, norm_cost
-from .verify import checked_solve
+from geocert.solvers.core.bnb import Progress
+from geocert.solvers.fractional.charts import MapChart, normaliser
+from geocert.solvers.fractional.search import Certificate, Early, FractionalOptions, Reasons, prepare, recomputed_status, search
+from geocert.solvers.core.geometry import InputError, norm_cost
+from geocert.solvers.verify import checked_solve
 
 
 @dataclass
