@@ -23,7 +23,8 @@ from bench.resection import DATA, dinosaur_problems
 from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.fractional.maps import MapOptions, fit_map
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
-from geocert.solvers.verify import claim_of, verify_arrays
+from geocert.solvers.fractional.results import claim_of
+from geocert.solvers.verify import verify_arrays
 
 
 def measure(kind: str, items, solve, options, solution) -> dict:

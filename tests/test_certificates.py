@@ -12,33 +12,14 @@ import numpy as np
 import pytest
 
 from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unpack
-from geocert.solvers.jobs import solve_job
+from geocert.batch import solve_job
 from geocert.solvers.fractional.relaxation import NORMS
-from geocert.solvers.verify import BOUND_TOLERANCE, uncovered_part, verify_arrays, verify_document
+from geocert.solvers.core.certificates import BOUND_TOLERANCE
+from geocert.solvers.fractional.proof import uncovered_part
+from geocert.solvers.verify import verify_arrays, verify_document
 from geocert.solvers.core.bnb import Box
 
-from .scenes import noisy_track, random_cameras
-from .test_maps import scene, seed
-
-
-def triangulation_job(rng, tracks: int, views: int, norm: str, noise: float = 3.0) -> dict:
-    cameras = random_cameras(rng, 8)
-    entries = []
-    for _ in range(tracks):
-        chosen = sorted(rng.choice(8, size=views, replace=False).tolist())
-        _, points = noisy_track(rng, cameras[chosen], noise_px=noise)
-        entries.append({"views": chosen, "points": points.tolist()})
-    return {"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": entries},
-            "options": {"norm": norm, "certificate": "full"}}
-
-
-def map_job(rng, kind: str, count: int, norm: str, maps: int = 2, noise: float = 1.0) -> dict:
-    entries = []
-    for _ in range(maps):
-        _, source, target = scene(rng, kind, count)
-        entries.append({"source": source.tolist(), "target": (target + rng.normal(size=target.shape) * noise).tolist()})
-    name = "resection" if kind == "resection" else "homography"
-    return {"kind": name, "data": {"maps": entries}, "options": {"norm": norm, "certificate": "full"}}
+from .support import map_job, seed, triangulation_job
 
 
 def certified(document: dict) -> list[dict]:
@@ -208,11 +189,16 @@ class TestCoverage:
 
 
 class TestVerifierStandsAlone:
-    def test_imports_no_conic_solver(self):
-        code = ("import sys, geocert.solvers.verify; bad = [m for m in sys.modules if m.split('.')[0] in "
-                "('clarabel', 'cvxpy', 'pyscipopt', 'scs', 'ecos', 'osqp')]; print(json.dumps(bad))")
-        out = subprocess.run([sys.executable, "-c", "import json; " + code], capture_output=True, text=True, check=True)
-        assert json.loads(out.stdout) == []
+    def test_imports_no_conic_solver(self, branched, tmp_path):
+        # Reading the registry and checking a whole document, not only importing the module.
+        path = tmp_path / "certificate.json"
+        path.write_text(json.dumps(branched))
+        code = ("import json, sys; from geocert.solvers.verify import verify_document; "
+                f"valid = verify_document(json.load(open({str(path)!r}))).valid; "
+                "bad = [m for m in sys.modules if m.split('.')[0] in "
+                "('clarabel', 'cvxpy', 'pyscipopt', 'scs', 'ecos', 'osqp')]; print(json.dumps([valid, bad]))")
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+        assert json.loads(out.stdout) == [True, []]
 
 
 class TestCommandLine:

@@ -20,15 +20,18 @@ from geocert.app.client import (
 )
 
 from .servers import cluster
-from .test_service import triangulation_job
+from .support import service_job as triangulation_job
 
 KEY = "client-test-key-0123456789"
+
+
+pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run only
 
 
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
     with cluster(tmp_path_factory.mktemp("client"), workers=1, geocert_api_keys=KEY,
-                 geocert_progress_interval_s="0.05", geocert_chunk_size="5") as (running, _):
+                 geocert_progress_interval_s="0.05", geocert_chunk_sizes='{"triangulation": 5}') as (running, _):
         yield running.base
 
 

@@ -6,9 +6,12 @@ import pytest
 from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 
-from .scenes import SHARED
+from .support import SHARED
 
 DINOSAUR = SHARED / "data" / "oxford_dinosaur"
+
+
+pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run only
 
 
 @pytest.fixture(scope="module")

@@ -6,17 +6,21 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 import httpx
+import pytest
 import numpy as np
 
 from .servers import cluster
-from .test_service import triangulation_job
+from .support import service_job as triangulation_job
+
+
+pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run only
 
 
 def test_a_worker_killed_mid_job_leaves_its_work_to_another(tmp_path):
     # Short task budgets so the visibility timeout can be short (it must exceed budget + item
     # limit + 5 s); the defaults (20 s, 60 s, 90 s) give redelivery within about 95 s.
     body = triangulation_job(np.random.default_rng(77), tracks=1200, views=5)
-    with cluster(tmp_path, workers=2, geocert_chunk_size="60", geocert_chunk_time_budget_s="2",
+    with cluster(tmp_path, workers=2, geocert_chunk_sizes='{"triangulation": 60}', geocert_chunk_time_budget_s="2",
                  geocert_max_item_time_limit_s="10", geocert_visibility_timeout_s="20") as (running, client):
         job_id = client.post("/v1/jobs", json=body).json()["id"]
         deadline = time.monotonic() + 120

@@ -27,6 +27,9 @@ CHECKS = [not_a_server_error, status_code_conformance, content_type_conformance,
           response_headers_conformance]
 
 
+pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run only
+
+
 @pytest.fixture(scope="module")
 def hostile(tmp_path_factory):
     """One worker (so /readyz is ready), and no rate or active-job limits to trip over."""

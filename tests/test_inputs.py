@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.jobs import parse_job, solve_job
+from geocert.batch import parse_job, solve_job
 
-from .scenes import random_cameras
+from .support import random_cameras
 
 
 def job(**changes):

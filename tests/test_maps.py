@@ -1,6 +1,5 @@
 """Certified P^n -> P^m maps: resection, 2D and 3D homographies (thesis 5.5.2-5.5.3)."""
 
-import zlib
 
 import cv2
 import numpy as np
@@ -14,36 +13,12 @@ from geocert.solvers.fractional.charts import MapChart, normaliser
 from geocert.solvers.core.conic import ConicStatus, solve_conic
 from geocert.solvers.fractional.search import Prepared, prepare
 from geocert.solvers.core.geometry import InputError, norm_cost
-from geocert.solvers.fractional.maps import _REASONS, MapOptions, check_correspondences, dlt, fit_map
+from geocert.solvers.fractional.inputs import check_correspondences
+from geocert.solvers.fractional.maps import _REASONS, dlt, fit_map
+from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.fractional.triangulation import NORMS
 
-from .scenes import look_at
-
-
-def apply(M: np.ndarray, points: np.ndarray) -> np.ndarray:
-    proj = np.hstack([points, np.ones((len(points), 1))]) @ M.T
-    return proj[:, :-1] / proj[:, -1:]
-
-
-def scene(rng, kind: str, count: int):
-    """A map with every point at positive depth, its source points, and their exact images."""
-    if kind == "resection":
-        M = look_at(rng.normal(size=3) * 2 + np.array([0, 0, -8.0]), rng.normal(size=3) * 0.3)
-        source = rng.normal(size=(count, 3))
-    elif kind == "homography2":  # a plane z = 0 seen by a camera: H = K [r1 r2 t]
-        P = look_at(rng.normal(size=3) * 2 + np.array([0, 0, -8.0]), rng.normal(size=3) * 0.3)
-        M = P[:, [0, 1, 3]]
-        source = rng.uniform(-2, 2, size=(count, 2))
-    else:  # a 3D projective map close to a similarity, depths positive on the cloud
-        M = np.eye(4) + rng.normal(size=(4, 4)) * 0.05
-        M[3] = [0.02, -0.01, 0.03, 1.0]
-        source = rng.normal(size=(count, 3))
-    return M, source, apply(M, source)
-
-
-def seed(*words: str) -> int:
-    """A seed that is the same in every process (``hash`` of a str is not)."""
-    return zlib.crc32(" ".join(words).encode())
+from .support import apply, scene, seed
 
 
 def same_map(A, B) -> float:
@@ -195,6 +170,7 @@ class TestCorrespondenceChecks:
         assert error.value.field == field and words in error.value.reason
 
 
+@pytest.mark.slow
 class TestAgainstSCIP:
     """SCIP is slow on these bilinear programs (measured: 1.5-5 s a small homography, 30 s to over
     60 s a six-point resection at a 1e-3 gap, against 20-70 ms for ours), so the instances are

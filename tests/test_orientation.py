@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geocert.solvers.jobs import solve_job
+from geocert.batch import solve_job
 from geocert.solvers.orientation import camera_centre, orient
 
-from .scenes import noisy_track, project, random_cameras
+from .support import noisy_track, project, random_cameras
 
 
 def scene(seed: int, cameras: int = 5, points: int = 40):

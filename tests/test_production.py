@@ -17,11 +17,14 @@ import numpy as np
 import pytest
 
 from .servers import cluster
-from .test_service import triangulation_job
+from .support import service_job as triangulation_job
 
 KEY_A, KEY_B, KEY_C = "key-alpha-0123456789", "key-beta-9876543210", "key-gamma-listing-only"
 SECRET = "webhook-test-secret"
 A, B, C = {"X-API-Key": KEY_A}, {"X-API-Key": KEY_B}, {"X-API-Key": KEY_C}
+
+
+pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run only
 
 
 def wait_for_end(client, job_id: str, headers: dict, limit_s: float = 60) -> dict:

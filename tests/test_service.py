@@ -15,11 +15,14 @@ import numpy as np
 import pytest
 
 from geocert.solvers.core.certificates import VERSION
-from geocert.solvers.jobs import solve_job
+from geocert.batch import solve_job
 
-from .scenes import noisy_track, random_cameras
+from .support import random_cameras, service_job as triangulation_job
 
 BODY_LIMIT = 2_000_000
+
+
+pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run only
 
 
 def free_port() -> int:
@@ -34,7 +37,7 @@ def service(tmp_path_factory):
     env = os.environ.copy()
     env.pop("GEOCERT_REDIS_URL", None)
     env.update(GEOCERT_DATA_DIR=str(tmp_path_factory.mktemp("geocert")), GEOCERT_MAX_BODY_BYTES=str(BODY_LIMIT),
-               GEOCERT_CHUNK_SIZE="40", GEOCERT_PROGRESS_INTERVAL_S="0.05")
+               GEOCERT_CHUNK_SIZES='{"triangulation": 40}', GEOCERT_PROGRESS_INTERVAL_S="0.05")
     process = subprocess.Popen([sys.executable, "-m", "geocert.app.cli", "serve", "--port", str(port), "--workers", "1",
                                 "--concurrency", "1"], env=env)
     base = f"http://127.0.0.1:{port}"
@@ -69,17 +72,6 @@ def sse_events(client: httpx.Client, job_id: str, last_event_id: str | None = No
             elif not line.startswith(":"):
                 key, _, value = line.partition(": ")
                 event[key] = value
-
-
-def triangulation_job(rng, tracks: int, views: int = 4, **options) -> dict:
-    cameras = random_cameras(rng, views)
-    body_tracks = []
-    for _ in range(tracks):
-        chosen = sorted(rng.choice(views, size=int(rng.integers(2, views + 1)), replace=False).tolist())
-        _, points = noisy_track(rng, cameras[chosen])
-        body_tracks.append({"views": chosen, "points": points.tolist()})
-    return {"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": body_tracks},
-            "options": options}
 
 
 def wait_for(client: httpx.Client, job_id: str, statuses=("succeeded", "failed", "cancelled"), limit_s=120) -> dict:

@@ -3,7 +3,6 @@ accepted (issue 11). Each test fails on the code before the soundness work; each
 
 from __future__ import annotations
 
-import base64
 import copy
 import json
 import math
@@ -21,14 +20,15 @@ from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unp
 from geocert.solvers.core.conic import ConicStatus, solve_conic
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.search import root_region
-from geocert.solvers.jobs import parse_job, solve_job
+from geocert.batch import parse_job, solve_job
 from geocert.solvers.fractional.relaxation import Relaxation
 from geocert.solvers.fractional.charts import Chart
-from geocert.solvers.verify import uncovered_part, verify_any, verify_document
+from geocert.solvers.fractional.proof import uncovered_part
+from geocert.solvers.verify import verify_any, verify_document
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import proves_infeasible
 
-from .scenes import project, random_cameras
+from .support import project, random_cameras
 
 CAMERAS = [[[800, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]],
            [[800, 0, 320, -800], [0, 800, 240, 0], [0, 0, 1, 0]]]
@@ -546,7 +546,7 @@ class TestHostileReviewRoundTwo:
         # gets "proven" ranges from a Farkas ray; a depth leaf then "proves" any bound. The
         # solution must be a point of R inside the claim box.
         from geocert.solvers.fractional.relaxation import residual_region, root_bounds, gamma_for
-        from geocert.solvers.verify import _Item
+        from geocert.solvers.fractional.items import TrackItem
         from geocert.solvers.core.geometry import norm_cost, normalised_cameras
         cameras = copy.deepcopy(CAMERAS) + [[[800, 0, 320, 0], [0, 800, 240, -800], [0.3, 0, 1, 0]]]
         data = {"cameras": cameras, "tracks": [{"views": [0, 1, 2], "points": [[330, 250], [250, 251], [320, 200]]}]}
@@ -554,7 +554,7 @@ class TestHostileReviewRoundTwo:
         cams, pts = np.array(cameras, float), np.array(data["tracks"][0]["points"], float)
         bad = np.array([0.0, 0.0, 100.0, 1.0])  # in front of every camera, a poor fit
         cost = norm_cost(project(cams, bad) - pts, "L2L2")
-        program = _Item("triangulation", (normalised_cameras(cams), pts), "L2L2").program
+        program = TrackItem((normalised_cameras(cams), pts), "L2L2").program
         gamma = 2 * gamma_for(cost, "L2L2")
         region = residual_region(program, gamma)
         varying = next(j for j in range(len(program.den)) if not program.exact[j])

@@ -6,7 +6,7 @@ import pytest
 
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 
-from .scenes import noisy_track, random_cameras
+from .support import noisy_track, random_cameras
 
 
 def instance(seed: int, views: int = 5):

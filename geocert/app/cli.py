@@ -30,7 +30,7 @@ def _progress_bar(progress: dict) -> None:
 def cmd_solve(args: argparse.Namespace) -> int:
     from geocert.app.schemas import JOB_REQUEST
     from geocert.solvers.core.geometry import InputError
-    from geocert.solvers.jobs import solve_job
+    from geocert.batch import solve_job
 
     try:
         text = sys.stdin.read() if args.job == "-" else Path(args.job).read_text()
@@ -103,7 +103,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
     from pydantic import ValidationError as SettingsError
 
-    from geocert.app.core.config import get_settings
+    from geocert.settings import get_settings
     from geocert.app.core.security import is_loopback, parse_keys
 
     try:

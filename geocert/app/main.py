@@ -7,7 +7,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from geocert.app import docs, observability, problems
 from geocert.app.api.routes import certificates, jobs, orient, service
-from geocert.app.core.config import get_settings
+from geocert.settings import get_settings
 from geocert.workers import logs
 
 

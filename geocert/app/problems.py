@@ -11,7 +11,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.jobs import KINDS
+from geocert.kinds import KINDS
 
 PROBLEM_JSON = "application/problem+json"
 

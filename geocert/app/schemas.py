@@ -5,95 +5,17 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, TypeAdapter, create_model
+from pydantic import BaseModel, Field, TypeAdapter
 
-from geocert.solvers.fractional.maps import MapOptions
-from geocert.solvers.fractional.triangulation import TriangulationOptions
+from geocert.kinds import KINDS
+from geocert.kinds.schema import Camera, Finite, Strict
 
-# Strict types (the Strict models below): a JSON string ("330") or a boolean is never a number, and
-# a float (1.0) is never an integer; a JSON integer is still a number wherever a float is asked for.
-Finite = Annotated[float, Field(allow_inf_nan=False, strict=True)]
-CameraRow = Annotated[list[Finite], Field(min_length=4, max_length=4)]
-Camera = Annotated[list[CameraRow], Field(min_length=3, max_length=3, description="3x4 projective camera")]
-Pixel = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[u, v] in pixels")]
-
-
-
-class Strict(BaseModel):
-    """Unknown fields are refused, and values are taken only as their JSON type (strict mode)."""
-
-    model_config = ConfigDict(extra="forbid", strict=True)
-
-
-class TrackIn(Strict):
-    views: list[Annotated[int, Field(ge=0)]] = Field(min_length=2, description="camera indices")
-    points: list[Pixel] = Field(min_length=2, description="one observation per view, in the same order")
-
-
-class TriangulationData(Strict):
-    cameras: list[Camera] = Field(min_length=1)
-    tracks: list[TrackIn] = Field(min_length=1)
-
-
-def options_model(name: str, defaults, residual_units: str) -> type[BaseModel]:
-    """The options of a kind, defaults taken from its solver's options dataclass."""
-    return create_model(
-        name,
-        __base__=Strict,
-        norm=(Literal["L2L2", "L2L1", "L1L1"], defaults.norm),
-        rel_gap=(Finite, Field(defaults.rel_gap, ge=0, le=1, description="stop when gap <= rel_gap * cost ...")),
-        abs_gap=(Finite, Field(defaults.abs_gap, ge=0, description="... or gap <= abs_gap (cost units)")),
-        max_nodes=(int, Field(defaults.max_nodes, ge=1, le=1_000_000, description="per item")),
-        time_limit_s=(Finite, Field(defaults.time_limit_s, gt=0, le=3600, description="per item")),
-        max_residual=(Finite | None, Field(defaults.max_residual, gt=0,
-                                           description=f"{residual_units}; narrows the certificate's scope")),
-        certificate=(Literal["summary", "full"], Field(
-            defaults.certificate, description="full: every bound's proof (dual vectors), checkable without "
-                                              "a conic solver; see GET /v1/jobs/{id}/certificate")),
-    )
-
-
-TriangulationOptionsIn = options_model("TriangulationOptionsIn", TriangulationOptions(), "pixels")
-MapOptionsIn = options_model("MapOptionsIn", MapOptions(), "target units")
-
-
-class JobBase(Strict):
-    callback_url: AnyHttpUrl | None = Field(
-        None, description="receives the job document once it ends (POST, signed: X-Geocert-Signature)")
-
-
-class TriangulationJob(JobBase):
-    kind: Literal["triangulation"]
-    data: TriangulationData
-    options: TriangulationOptionsIn = Field(default_factory=TriangulationOptionsIn)
-
-
-Coordinates = Annotated[list[Finite], Field(min_length=2, max_length=3)]
-
-
-class MapIn(Strict):
-    source: list[Coordinates] = Field(min_length=1, description="source points (3D for resection)")
-    target: list[Coordinates] = Field(min_length=1, description="target points, same order (pixels for resection)")
-
-
-class MapsData(Strict):
-    maps: list[MapIn] = Field(min_length=1, description="independent maps, solved in parallel")
-
-
-class ResectionJob(JobBase):
-    kind: Literal["resection"]
-    data: MapsData
-    options: MapOptionsIn = Field(default_factory=MapOptionsIn)
-
-
-class HomographyJob(JobBase):
-    kind: Literal["homography"]
-    data: MapsData
-    options: MapOptionsIn = Field(default_factory=MapOptionsIn)
-
-
-JobRequest = Annotated[Union[TriangulationJob, ResectionJob, HomographyJob], Field(discriminator="kind")]
+# One request model and one result model per kind, from the registry (geocert.kinds): the API's
+# unions, and so its OpenAPI schema, follow the kinds served.
+REQUEST_MODELS = {kind.name: kind.request_model for kind in KINDS}
+JobRequest = Annotated[Union[tuple(REQUEST_MODELS.values())], Field(discriminator="kind")]
 JOB_REQUEST = TypeAdapter(JobRequest)
+JobResult = Union[tuple(dict.fromkeys(kind.result_model for kind in KINDS))]
 
 JOB_STATUSES = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 
@@ -132,27 +54,6 @@ class JobProgress(BaseModel):
     elapsed_s: float = 0.0
 
 
-ItemStatus = Literal["optimal", "node_limit", "time_limit", "cancelled", "not_certified", "infeasible", "degenerate"]
-
-
-class CertificateDocument(BaseModel):
-    """A full certificate (docs/certificate.md): anyone can check it with linear algebra alone.
-    Members beyond those listed are kept as they are (the verifier decides what they mean)."""
-
-    model_config = ConfigDict(extra="allow")
-
-    format: Literal["geocert-certificate"]
-    version: int = Field(description="the format's version (docs/certificate.md)")
-    kind: str
-    options: dict[str, Any] = Field(description="the options solved with, defaults filled in")
-    data: dict[str, Any] = Field(description="the problem data as solved")
-    data_sha256: str = Field(description='SHA-256 of canonical JSON {"kind", "data"} (sorted keys, no spaces)')
-    problem_sha256: str | None = Field(None, description="SHA-256 of the kind, the data and the options a claim "
-                                                         "depends on (docs/certificate.md)")
-    items: list[dict[str, Any]] = Field(description="per item: index, status, certified, cost, lower_bound, gap, "
-                                                    "the solution, and the proof (root region, tightening, leaves)")
-
-
 class VerifyCheck(BaseModel):
     name: str
     passed: int = Field(description="items that passed this check (documents, for format and data_hash)")
@@ -175,65 +76,6 @@ class VerifyReport(BaseModel):
                                                            "(kind, norm, max_residual, gaps, statement)")
 
 
-class ItemCertificate(BaseModel):
-    scope: str
-    root_region: dict[str, Any] | None = Field(
-        description="the region searched and shown to hold the optimum; 'meaning' says how to read it")
-    tolerance: float | None
-    tolerance_met: bool
-    leaves: int
-    note: str | None = None
-
-
-class ItemOutcome(BaseModel):
-    """What every item (track, map) reports about its solve."""
-
-    cost: float | None = Field(description="the upper bound, recomputed from the input: squared units (L2L2) or units")
-    lower_bound: float | None
-    gap: float | None
-    status: ItemStatus
-    certified: bool
-    nodes: int
-    elapsed_s: float
-    reason: str | None = Field(description="why the item is not certified, when it is not")
-    certificate: ItemCertificate | None
-
-
-class TrackOut(ItemOutcome):
-    point: list[float] | None = Field(description="[x, y, z], or a homogeneous 4-vector when at_infinity")
-    at_infinity: bool
-
-
-class JobStats(BaseModel):
-    items: int
-    certified: int
-    nodes: int
-    solve_s: float
-    elapsed_s: float
-    statuses: dict[str, int]
-
-
-class TriangulationResult(BaseModel):
-    kind: Literal["triangulation"]
-    norm: str
-    tracks: list[TrackOut]
-    stats: JobStats
-    certificate: CertificateDocument | None = Field(None, description='with options.certificate = "full"')
-
-
-class MapOut(ItemOutcome):
-    matrix: list[list[float]] | None = Field(description="Frobenius norm 1, reference depth positive")
-    residuals: list[list[float]] = Field(description="target minus the map's image, per point")
-
-
-class MapsResult(BaseModel):
-    kind: Literal["resection", "homography"]
-    norm: str
-    maps: list[MapOut]
-    stats: JobStats
-    certificate: CertificateDocument | None = Field(None, description='with options.certificate = "full"')
-
-
 class WebhookState(BaseModel):
     url: str
     state: Literal["waiting", "retrying", "delivered", "failed"]
@@ -250,7 +92,7 @@ class Job(BaseModel):
     started_at: float | None
     finished_at: float | None
     progress: JobProgress
-    result: TriangulationResult | MapsResult | None = None
+    result: JobResult | None = None
     error: ProblemDetails | None = None
     webhook: WebhookState | None = None
     links: dict[str, str]
@@ -313,5 +155,3 @@ class ProblemKindInfo(BaseModel):
     request_schema: dict[str, Any]
     default_options: dict[str, Any]
 
-
-REQUEST_MODELS = {"triangulation": TriangulationJob, "resection": ResectionJob, "homography": HomographyJob}

@@ -7,7 +7,7 @@ import os
 from celery import Celery
 from celery.signals import worker_process_init, worker_ready, worker_shutdown
 
-from geocert.app.core.config import get_settings
+from geocert.settings import get_settings
 from geocert.workers.redis_server import broker_url
 
 

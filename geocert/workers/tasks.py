@@ -13,9 +13,10 @@ import logging
 import time
 import traceback
 
-from geocert.app.core.config import get_settings
+from geocert.settings import get_settings
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.jobs import assemble, get_kind, job_stats, options_from, solve_items
+from geocert.batch import assemble, job_stats, solve_items
+from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app, redis_url
 from geocert.workers.store import JobStore

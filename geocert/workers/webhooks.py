@@ -18,7 +18,7 @@ import time
 
 import httpx
 
-from geocert.app.core.config import get_settings
+from geocert.settings import get_settings
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
 from geocert.workers.tasks import store

@@ -7,7 +7,7 @@ from typing import Annotated
 
 from fastapi import Depends
 
-from geocert.app.core.config import get_settings
+from geocert.settings import get_settings
 from geocert.app.core.security import caller
 from geocert.app.problems import PROBLEM_JSON, ApiProblem
 from geocert.app.schemas import ProblemDetails

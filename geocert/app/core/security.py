@@ -16,7 +16,7 @@ from typing import Annotated
 from fastapi import HTTPException, Security
 from fastapi.security import APIKeyHeader
 
-from geocert.app.core.config import get_settings
+from geocert.settings import get_settings
 
 PUBLIC_OWNER = "public"  # every caller, when no keys are configured (loopback only)
 

@@ -19,6 +19,12 @@ import numpy as np
 from geocert.solvers.core.bnb import Box
 
 FORMAT = "geocert-certificate"
+# Every tolerance is relative, with no absolute floor a document could exploit (docs/certificate.md,
+# "Trust model"). A bound the verifier recomputes may fall below the one claimed by this fraction
+# of it: what rebuilding the data on another machine (other BLAS, other rounding) can change. The
+# same fraction applies to cost caps and to the claimed lower bound; the objective has its own.
+BOUND_TOLERANCE = 1e-9
+OBJECTIVE_TOLERANCE = 1e-9
 VERSION = 2  # 2: problem_sha256 covers the options a claim depends on; strict numbers throughout
 # The options a claim depends on: the cost (norm), the scope (max_residual) and the tolerance.
 CLAIM_OPTIONS = ("norm", "max_residual", "rel_gap", "abs_gap")

@@ -21,41 +21,13 @@ from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, Progr
 from geocert.solvers.core.certificates import LeafProof, RootProof, SearchProof, TighteningProof, encode
 from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram, solve_conic
 from geocert.solvers.core.cones import ConeSpec, proves_infeasible, safe_lower_bound
-from geocert.solvers.core.geometry import InputError, lengths, norm_cost
-from geocert.solvers.fractional.relaxation import (EPS_DEPTH, NORMS, ConicData, FractionalProgram, Relaxation, complete_functionals,
+from geocert.solvers.core.geometry import lengths, norm_cost
+from geocert.solvers.fractional.options import FractionalOptions
+from geocert.solvers.fractional.results import Certificate
+from geocert.solvers.fractional.relaxation import (EPS_DEPTH, ConicData, FractionalProgram, Relaxation, complete_functionals,
                          cost_unit, gamma_for, residual_region, root_bounds, tightening_objective, with_cost_cap)
 
 MAX_SCALE = 1e3
-CERTIFICATES = ("summary", "full")
-
-
-@dataclass
-class FractionalOptions:
-    """Options every fractional-program kind shares (each kind sets its own defaults)."""
-
-    norm: str = "L2L2"
-    rel_gap: float = 1e-3
-    # In the cost's units (squared for L2L2). Below about 1e-7 the conic solves cannot resolve
-    # the bound (measured on a Dinosaur track whose optimum is 1e-6 px).
-    abs_gap: float = 1e-7
-    max_nodes: int = 2000
-    time_limit_s: float = 30.0
-    max_residual: float | None = None  # the kind's residual units; narrows the certificate's scope
-    certificate: str = "summary"  # "full": every bound's proof, checkable by solvers.verify
-
-    def check(self) -> None:
-        if self.norm not in NORMS:
-            raise InputError("options/norm", f"must be one of {', '.join(NORMS)}")
-        for name in ("rel_gap", "abs_gap", "time_limit_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise InputError(f"options/{name}", "must be a finite number >= 0")
-        if self.max_nodes < 1:
-            raise InputError("options/max_nodes", "must be at least 1")
-        if self.certificate not in CERTIFICATES:
-            raise InputError("options/certificate", f"must be one of {', '.join(CERTIFICATES)}")
-        if self.max_residual is not None and not (math.isfinite(self.max_residual) and self.max_residual > 0):
-            raise InputError("options/max_residual", "must be a finite number > 0")
 
 
 def branch_directions(program: FractionalProgram, subspace: np.ndarray) -> np.ndarray:
@@ -476,24 +448,6 @@ def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.n
     if tighten_rounds and math.isfinite(upper):
         problem.root = problem.tighten(root, upper, tighten_rounds)
     return Prepared(problem, v0, upper, factor, root_proof, reasons)
-
-
-@dataclass
-class Certificate:
-    """What a finished search proves: the scope, the root region the search covered (in the
-    caller's coordinates: ``lower <= (F u) / (d . u) <= upper`` for the kind's unknown u), the
-    tolerance and whether it was met, and the number of leaves."""
-
-    scope: str
-    reference: int  # the observation whose depth is fixed to 1
-    functionals: list[list[float]]
-    denominator: list[float]
-    lower: list[float]
-    upper: list[float]
-    tolerance: float
-    tolerance_met: bool
-    leaves: int
-    proof: dict | None = None  # with options.certificate == "full": certificates.encode's form
 
 
 def recomputed_status(status: str, cost: float, lower: float | None, rel_gap: float,

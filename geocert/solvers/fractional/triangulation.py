@@ -11,39 +11,18 @@ view (see docs/algorithms.md, section 4). Costs are scaled so the incumbent cost
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
 from geocert.solvers.core.bnb import Progress
 from geocert.solvers.fractional.charts import Chart, camera_centres
-from geocert.solvers.fractional.search import (NORMS, Certificate, Early, FractionalOptions, Reasons, depth_subspace, prepare,
-                         recomputed_status, search)
+from geocert.solvers.fractional.options import NORMS, TriangulationOptions
+from geocert.solvers.fractional.results import Certificate, TrackResult
+from geocert.solvers.fractional.search import Early, Reasons, depth_subspace, prepare, recomputed_status, search
 from geocert.solvers.core.geometry import norm_cost, normalised_cameras, reprojection_residuals
 from geocert.solvers.verify import checked_solve
 
-
-
-@dataclass
-class TriangulationOptions(FractionalOptions):
-    """Residuals in pixels; limits per track."""
-
-
-@dataclass
-class TrackResult:
-    status: str  # optimal, node_limit, time_limit, cancelled, not_certified, infeasible, degenerate
-    certified: bool
-    point: list[float] | None = None  # [x, y, z], or a homogeneous 4-vector when at infinity
-    at_infinity: bool = False
-    cost: float | None = None
-    lower_bound: float | None = None
-    gap: float | None = None
-    nodes: int = 0
-    elapsed_s: float = 0.0
-    reason: str | None = None
-    certificate: Certificate | None = None
-    residuals: list[list[float]] = field(default_factory=list)
 
 
 AT_INFINITY = 1e-12  # |X[3]| of a unit-norm X below which the point is returned at infinity

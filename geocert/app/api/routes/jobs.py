@@ -15,11 +15,11 @@ from fastapi import APIRouter, Depends, Header, Query, Response
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
 from geocert.app.api.deps import Caller, JobStoreDep, error_responses, rate_limited, submit_chunks
-from geocert.app.core.config import get_settings
+from geocert.settings import chunk_size_for, get_settings
 from geocert.app.problems import ApiProblem
 from geocert.app.schemas import Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.jobs import parse_job
+from geocert.batch import parse_job
 from geocert.workers import logs
 from geocert.workers.store import TERMINAL, JobStore
 
@@ -30,12 +30,12 @@ def _check_limits(kind, parsed, body, request: dict) -> None:
     settings = get_settings()
     items = kind.count(parsed)
     if items > settings.max_items_per_job:
-        raise ApiProblem(413, f"{items} {kind.item_name} exceed the limit of {settings.max_items_per_job} per job "
-                              "(GEOCERT_MAX_ITEMS_PER_JOB)", f"data/{kind.item_name}")
+        raise ApiProblem(413, f"{items} {kind.item_key} exceed the limit of {settings.max_items_per_job} per job "
+                              "(GEOCERT_MAX_ITEMS_PER_JOB)", f"data/{kind.item_key}")
     points = kind.observations(parsed)
     if points > settings.max_points_per_job:
         raise ApiProblem(413, f"{points} observations exceed the limit of {settings.max_points_per_job} per job "
-                              "(GEOCERT_MAX_POINTS_PER_JOB)", f"data/{kind.item_name}")
+                              "(GEOCERT_MAX_POINTS_PER_JOB)", f"data/{kind.item_key}")
     options, given = request["options"], body.options.model_fields_set
     for name, maximum, unit, variable in (("time_limit_s", settings.max_item_time_limit_s, " s", "MAX_ITEM_TIME_LIMIT_S"),
                                           ("max_nodes", settings.max_item_nodes, " nodes", "MAX_ITEM_NODES")):
@@ -82,7 +82,7 @@ def submit_job(
 
 def _create(store: JobStore, owner: str, kind, request: dict, items: int) -> dict:
     settings = get_settings()
-    chunk = settings.map_chunk_size if kind.item_name == "maps" else settings.chunk_size
+    chunk = chunk_size_for(kind)
     meta = store.create(kind.name, request, items, chunk, owner, request.get("callback_url"))
     if not store.admit(owner, meta["id"], settings.max_active_jobs_per_key):
         store.delete(meta["id"])

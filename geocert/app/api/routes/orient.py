@@ -8,7 +8,7 @@ import numpy as np
 from fastapi import APIRouter, Depends
 
 from geocert.app.api.deps import error_responses, rate_limited
-from geocert.app.core.config import get_settings
+from geocert.settings import get_settings
 from geocert.app.problems import ApiProblem
 from geocert.app.schemas import OrientRequest, OrientResult
 from geocert.solvers.core.geometry import InputError, check_cameras

@@ -8,8 +8,8 @@ from fastapi import APIRouter, Depends
 from fastapi.responses import JSONResponse
 
 from geocert.app.api.deps import error_responses, get_store, rate_limited
-from geocert.app.schemas import REQUEST_MODELS, ProblemKindInfo
-from geocert.solvers.jobs import KINDS, default_options
+from geocert.app.schemas import ProblemKindInfo
+from geocert.kinds import KINDS, default_options
 from geocert.workers.store import JobStore
 
 router = APIRouter()
@@ -20,10 +20,10 @@ router = APIRouter()
 def list_problems():
     """The problem kinds served, with the JSON schema of a job and the default options."""
     return [
-        ProblemKindInfo(kind=name, description=kind.description, item_name=kind.item_name,
-                        request_schema=REQUEST_MODELS[name].model_json_schema(),
+        ProblemKindInfo(kind=kind.name, description=kind.description, item_name=kind.item_key,
+                        request_schema=kind.request_model.model_json_schema(),
                         default_options=default_options(kind))
-        for name, kind in KINDS.items()
+        for kind in KINDS
     ]
 
 

@@ -1,4 +1,5 @@
-"""Settings, from GEOCERT_* environment variables (pydantic-settings).
+"""Settings, from GEOCERT_* environment variables (pydantic-settings): one module that the API,
+the workers and the command line all read (the workers import nothing of the web layer).
 
 Every setting is listed with its variable and default in the README's configuration table.
 """
@@ -35,9 +36,9 @@ class Settings(BaseSettings):
     # Server-side maxima of the per-item options time_limit_s and max_nodes (422 beyond them).
     max_item_time_limit_s: float = 60.0
     max_item_nodes: int = 100_000
-    # Items per queued task, by kind: batches are split into chunks that run in parallel.
-    chunk_size: int = 100
-    map_chunk_size: int = 1
+    # Items per queued task: batches are split into chunks that run in parallel. Each kind has
+    # its own default (100 tracks, 1 map); GEOCERT_CHUNK_SIZES (JSON, by kind) overrides it.
+    chunk_sizes: dict[str, int] = {}
     # A task starts no new item after this many seconds; the rest of its chunk is queued as a
     # new task. With max_item_time_limit_s it bounds a task's length below the visibility timeout.
     chunk_time_budget_s: float = 20.0
@@ -63,6 +64,11 @@ class Settings(BaseSettings):
                 f"GEOCERT_VISIBILITY_TIMEOUT_S ({self.visibility_timeout_s}) must exceed GEOCERT_CHUNK_TIME_BUDGET_S + "
                 f"GEOCERT_MAX_ITEM_TIME_LIMIT_S + 5 ({longest_task:g}): a task still running would be delivered twice")
         return self
+
+
+def chunk_size_for(kind) -> int:
+    """Items per queued task for a kind: GEOCERT_CHUNK_SIZES's entry, else the kind's default."""
+    return max(1, int(get_settings().chunk_sizes.get(kind.name, kind.chunk_size)))
 
 
 @lru_cache

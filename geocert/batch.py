@@ -1,0 +1,157 @@
+"""A job's items, solved in order, and its result document: what the CLI runs in-process and a
+worker runs on its chunk. A job is ``{"kind", "data", "options"}``; its kind (geocert.kinds) parses
+the data, solves one item and assembles the result. Items are solved on their own, so a batch can
+be split into chunks that run anywhere and are put back together in input order."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from typing import Any, Callable
+
+from geocert.kinds import get_kind, options_from
+from geocert.kinds.documents import finite_or_none
+from geocert.solvers.core.bnb import Progress
+from geocert.solvers.core.certificates import FORMAT, VERSION, data_hash, problem_hash
+from geocert.solvers.core.geometry import InputError
+
+ProgressSink = Callable[[dict], None]
+StopCheck = Callable[[], bool]
+
+
+class ItemProgress:
+    """Aggregates progress over the items of a chunk: finished items plus the one running."""
+
+    def __init__(self, total: int, sink: ProgressSink | None, should_stop: StopCheck | None):
+        self.total = total
+        self.sink = sink
+        self.should_stop = should_stop
+        self.done = 0
+        self.nodes_done = 0
+        self.lower_done = 0.0
+        self.upper_done = 0.0
+        self.worst_gap_rel = 0.0
+        self.start = time.perf_counter()
+        self.stopped = False
+
+    def finished(self, item: dict) -> None:
+        self.done += 1
+        self.nodes_done += item["nodes"]
+        if item.get("cost") is not None and item.get("lower_bound") is not None:
+            self.lower_done += item["lower_bound"]
+            self.upper_done += item["cost"]
+            if item["cost"] > 0:
+                self.worst_gap_rel = max(self.worst_gap_rel, (item["cost"] - item["lower_bound"]) / item["cost"])
+        self.emit(None)
+
+    def emit(self, running: Progress | None) -> None:
+        if self.sink is None:
+            return
+        lower, upper, nodes, gap_rel, open_boxes = self.lower_done, self.upper_done, self.nodes_done, self.worst_gap_rel, 0
+        if running is not None:
+            nodes += running.nodes
+            open_boxes = running.open_boxes
+            if math.isfinite(running.lower_bound) and math.isfinite(running.upper_bound):
+                lower += running.lower_bound
+                upper += running.upper_bound
+                gap_rel = max(gap_rel, running.gap_rel)
+        self.sink({
+            "nodes": nodes, "open_boxes": open_boxes,
+            "lower_bound": lower, "upper_bound": upper, "gap_abs": max(0.0, upper - lower),
+            "gap_rel": finite_or_none(gap_rel), "tracks_done": self.done, "tracks_total": self.total,
+            "elapsed_s": time.perf_counter() - self.start,
+        })
+
+    def engine_callback(self, progress: Progress) -> bool:
+        if self.should_stop is not None and self.should_stop():
+            self.stopped = True
+            return True
+        self.emit(progress)
+        return False
+
+
+def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None = None,
+                should_stop: StopCheck | None = None, total: int | None = None,
+                stop_at: float | None = None) -> list[dict]:
+    """Solve the given items in order; once stopped, the rest are marked cancelled unsolved.
+    After the ``time.monotonic()`` value ``stop_at`` no new item is started (at least one is
+    always solved): the list returned is then shorter, and the caller solves the rest later."""
+    tracker = ItemProgress(total if total is not None else len(indices), sink, should_stop)
+    items = []
+    for index in indices:
+        if stop_at is not None and items and not tracker.stopped and time.monotonic() > stop_at:
+            break
+        if tracker.stopped or (should_stop is not None and should_stop()):
+            tracker.stopped = True
+            items.append(kind.cancelled_item())
+            continue
+        item = kind.solve_item(parsed, index, options, tracker.engine_callback)
+        items.append(item)
+        tracker.finished(item)
+    return items
+
+
+def job_stats(items: list[dict], elapsed_s: float) -> dict:
+    statuses: dict[str, int] = {}
+    for item in items:
+        statuses[item["status"]] = statuses.get(item["status"], 0) + 1
+    return {
+        "items": len(items),
+        "certified": sum(1 for item in items if item["certified"]),
+        "nodes": sum(item["nodes"] for item in items),
+        "solve_s": sum(item["elapsed_s"] for item in items),
+        "elapsed_s": elapsed_s,
+        "statuses": statuses,
+    }
+
+
+def solve_job(job: dict, sink: ProgressSink | None = None, should_stop: StopCheck | None = None) -> dict:
+    """Run a whole job in this process (the CLI's path): parse, solve every item, assemble."""
+    kind, parsed, options = parse_job(job)
+    start = time.perf_counter()
+    items = solve_items(kind, parsed, options, range(kind.count(parsed)), sink, should_stop)
+    return assemble(kind, job, options, items, job_stats(items, time.perf_counter() - start))
+
+
+def assemble(kind, job: dict, options, items: list[dict], stats: dict) -> dict:
+    """The result document; with ``options.certificate == "full"`` it carries the certificate
+    document too (the items' proofs move there)."""
+    if options.certificate == "full":
+        certificate = full_certificate(kind, job["data"], options, items)
+    else:
+        certificate = None
+        for item in items:
+            (item.get("certificate") or {}).pop("proof", None)
+    result = kind.assemble(options, items, stats)
+    if certificate is not None:
+        result["certificate"] = certificate
+    return result
+
+
+def full_certificate(kind, data: Any, options, items: list[dict]) -> dict:
+    """The certificate document (docs/certificate.md): the problem data and its hash, the options,
+    and each item's claim (solution, cost, gap) with its proof."""
+    claims = []
+    for index, item in enumerate(items):
+        proof = (item.get("certificate") or {}).pop("proof", None)
+        solution = {key: item[key] for key in kind.solution_fields}
+        claims.append({"index": index, "status": item["status"], "certified": item["certified"] and proof is not None,
+                       "cost": item["cost"], "lower_bound": item["lower_bound"], "gap": item["gap"],
+                       **solution, "proof": proof})
+    options = dataclasses.asdict(options)
+    return {"format": FORMAT, "version": VERSION, "kind": kind.name, "options": options,
+            "data": data, "data_sha256": data_hash(kind.name, data),
+            "problem_sha256": problem_hash(kind.name, data, options), "items": claims}
+
+
+def parse_job(job: Any):
+    if not isinstance(job, dict):
+        raise InputError("", "a job must be an object with 'kind', 'data' and optional 'options'")
+    kind = get_kind(job.get("kind"))
+    options = options_from(kind.options_type, job.get("options"))
+    parsed = kind.parse(job.get("data"))
+    return kind, parsed, options
+
+
+__all__ = ["parse_job", "solve_job", "solve_items", "job_stats", "assemble", "ItemProgress"]

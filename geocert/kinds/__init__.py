@@ -1,0 +1,14 @@
+"""The problem kinds served: one line each (see base.py for what a kind is)."""
+
+from geocert.kinds.base import ProblemKind, Registry, default_options, options_from
+from geocert.kinds.maps import HOMOGRAPHY, RESECTION
+from geocert.kinds.triangulation import KIND as TRIANGULATION
+
+KINDS = Registry(
+    TRIANGULATION,
+    RESECTION,
+    HOMOGRAPHY,
+)
+get_kind = KINDS.get
+
+__all__ = ["KINDS", "ProblemKind", "Registry", "default_options", "get_kind", "options_from"]

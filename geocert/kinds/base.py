@@ -1,0 +1,107 @@
+"""What a problem kind is, and the registry of the kinds served.
+
+A kind turns a job's ``data`` into independent items (tracks, maps, frames, ...), solves one
+item, and assembles the result. Everything that depends on the kind comes from its entry here:
+the API's request and result models (and so the OpenAPI schema), ``/v1/problems``, chunk sizes,
+the verifier's reading of its data, the benchmark runner and the contract tests. Adding a kind is
+one module (or package) defining a ProblemKind and one line in ``geocert/kinds/__init__.py``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable, Protocol, runtime_checkable
+
+from pydantic import BaseModel
+
+from geocert.solvers.core.geometry import InputError
+
+ProgressCallback = Callable[[Any], "bool | None"]
+
+
+@runtime_checkable
+class ProblemKind(Protocol):
+    """The protocol every kind meets (duck-typed; see kinds/triangulation.py for one)."""
+
+    name: str  # the job's "kind"
+    description: str
+    item_key: str  # where items sit in data and result ("tracks", "maps")
+    chunk_size: int  # items per queued task by default (GEOCERT_CHUNK_SIZES overrides)
+    options_type: type  # the solver's options dataclass (defaults, OPTION_RANGES, check())
+    request_model: type[BaseModel]  # the job request: kind literal, data, options
+    result_model: type[BaseModel]  # the result document
+    solution_fields: tuple[str, ...]  # what of an item its certificate claims as the solution
+    verification: Any  # numpy-only adapter the verifier reads items through (read, item, domain, proofs)
+    example: dict  # a small job ({"kind", "data", "options"}) that solves quickly: docs and contract tests
+
+    def parse(self, data: Any, items: range | None = None) -> Any: ...
+
+    def count(self, parsed: Any) -> int: ...
+
+    def observations(self, parsed: Any) -> int: ...
+
+    def solve_item(self, parsed: Any, index: int, options: Any, callback: ProgressCallback | None) -> dict: ...
+
+    def cancelled_item(self) -> dict: ...
+
+    def assemble(self, options: Any, items: list[dict], stats: dict) -> dict: ...
+
+
+class Registry:
+    """The kinds served, by name, in the order registered."""
+
+    def __init__(self, *kinds: ProblemKind):
+        self._kinds: dict[str, ProblemKind] = {}
+        for kind in kinds:
+            self.register(kind)
+
+    def register(self, kind: ProblemKind) -> ProblemKind:
+        missing = [name for name in ProblemKind.__annotations__ if not hasattr(kind, name)]
+        if missing or not isinstance(kind, ProblemKind):
+            raise TypeError(f"{kind!r} is not a ProblemKind (missing: {', '.join(missing) or 'methods'})")
+        self._kinds[kind.name] = kind
+        return kind
+
+    def unregister(self, name: str) -> None:
+        self._kinds.pop(name, None)
+
+    def get(self, name: Any) -> ProblemKind:
+        if not isinstance(name, str) or name not in self._kinds:
+            raise InputError("kind", f"unknown problem kind {name!r} (served: {', '.join(self._kinds)})")
+        return self._kinds[name]
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._kinds
+
+    def __iter__(self):
+        return iter(self._kinds.values())
+
+    def names(self) -> list[str]:
+        return list(self._kinds)
+
+
+def options_from(options_type: type, given: dict | None, field: str = "options"):
+    """Build an options dataclass from a dict, naming any unknown or ill-typed option; the
+    dataclass's own check() validates ranges (the same OPTION_RANGES the API's models use)."""
+    given = dict(given or {})
+    names = {f.name for f in dataclasses.fields(options_type)}
+    for key in given:
+        if key not in names:
+            raise InputError(f"{field}/{key}", f"unknown option (known: {', '.join(sorted(names))})")
+    defaults = options_type()
+    for key, value in given.items():
+        default = getattr(defaults, key)
+        if isinstance(default, str) and not isinstance(value, str):
+            raise InputError(f"{field}/{key}", "must be a string")
+        numeric = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if (isinstance(default, (int, float)) or (default is None and value is not None)) and not numeric:
+            raise InputError(f"{field}/{key}", "must be a number")
+        if isinstance(default, int) and not isinstance(default, bool) and not isinstance(value, int):
+            raise InputError(f"{field}/{key}", "must be an integer")
+    options = options_type(**given)
+    options.check()
+    return options
+
+
+def default_options(kind: ProblemKind) -> dict:
+    return dataclasses.asdict(kind.options_type())

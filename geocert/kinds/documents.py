@@ -1,0 +1,48 @@
+"""The parts of an item's result document that every fractional kind shares: its outcome (cost,
+bounds, status) and its certificate summary (with the proof, when a full certificate was asked
+for, until the job's certificate document takes it)."""
+
+from __future__ import annotations
+
+import math
+
+from geocert.solvers.fractional.results import ItemResult, proof_of
+
+
+def finite_or_none(value: float | None) -> float | None:
+    return value if value is not None and math.isfinite(value) else None
+
+
+def certificate_document(result: ItemResult, region: dict, meaning: str, scope: str) -> dict | None:
+    """The certificate part of an item: the search's (when there was one), or the note that the
+    incumbent met the trivial bound 0. With a full certificate, ``proof`` too (moved into the
+    job's certificate document when the result is assembled)."""
+    c = result.certificate
+    proof = proof_of(result)
+    extra = {"proof": proof} if proof is not None else {}
+    if c is not None:
+        return {**extra,
+                "scope": c.scope,
+                "root_region": {**region, "functionals": c.functionals, "denominator": c.denominator,
+                                "lower": c.lower, "upper": c.upper, "meaning": meaning},
+                "tolerance": finite_or_none(c.tolerance),
+                "tolerance_met": c.tolerance_met,
+                "leaves": c.leaves}
+    if result.certified:
+        return {"scope": scope, "root_region": None, "tolerance": 0.0, "tolerance_met": True, "leaves": 0,
+                "note": "the incumbent's cost is within abs_gap of the trivial bound 0", **extra}
+    return None
+
+
+def outcome_document(result: ItemResult) -> dict:
+    """The fields every item (track, map) reports about its solve."""
+    return {
+        "cost": finite_or_none(result.cost),
+        "lower_bound": finite_or_none(result.lower_bound),
+        "gap": finite_or_none(result.gap),
+        "status": result.status,
+        "certified": result.certified,
+        "nodes": result.nodes,
+        "elapsed_s": result.elapsed_s,
+        "reason": result.reason,
+    }

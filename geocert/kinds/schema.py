@@ -1,0 +1,100 @@
+"""Pydantic building blocks the kinds' request and result models are made of (strict JSON types,
+options from a solver's options dataclass, the outcome every item reports, the certificate)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, create_model
+
+# Strict types (the Strict models below): a JSON string ("330") or a boolean is never a number, and
+# a float (1.0) is never an integer; a JSON integer is still a number wherever a float is asked for.
+Finite = Annotated[float, Field(allow_inf_nan=False, strict=True)]
+CameraRow = Annotated[list[Finite], Field(min_length=4, max_length=4)]
+Camera = Annotated[list[CameraRow], Field(min_length=3, max_length=3, description="3x4 projective camera")]
+Pixel = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[u, v] in pixels")]
+
+
+class Strict(BaseModel):
+    """Unknown fields are refused, and values are taken only as their JSON type (strict mode)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+
+def options_model(name: str, defaults, residual_units: str) -> type[BaseModel]:
+    """The options of a kind, defaults and ranges taken from its solver's options dataclass
+    (``OPTION_RANGES`` there), so the API, the CLI and the solver cannot disagree."""
+    ranges = type(defaults).OPTION_RANGES
+    return create_model(
+        name,
+        __base__=Strict,
+        norm=(Literal["L2L2", "L2L1", "L1L1"], defaults.norm),
+        rel_gap=(Finite, Field(defaults.rel_gap, **ranges["rel_gap"], description="stop when gap <= rel_gap * cost ...")),
+        abs_gap=(Finite, Field(defaults.abs_gap, **ranges["abs_gap"], description="... or gap <= abs_gap (cost units)")),
+        max_nodes=(int, Field(defaults.max_nodes, **ranges["max_nodes"], description="per item")),
+        time_limit_s=(Finite, Field(defaults.time_limit_s, **ranges["time_limit_s"], description="per item")),
+        max_residual=(Finite | None, Field(defaults.max_residual, **ranges["max_residual"],
+                                           description=f"{residual_units}; narrows the certificate's scope")),
+        certificate=(Literal["summary", "full"], Field(
+            defaults.certificate, description="full: every bound's proof (dual vectors), checkable without "
+                                              "a conic solver; see GET /v1/jobs/{id}/certificate")),
+    )
+
+
+class JobBase(Strict):
+    callback_url: AnyHttpUrl | None = Field(
+        None, description="receives the job document once it ends (POST, signed: X-Geocert-Signature)")
+
+
+ItemStatus = Literal["optimal", "node_limit", "time_limit", "cancelled", "not_certified", "infeasible", "degenerate"]
+
+
+class CertificateDocument(BaseModel):
+    """A full certificate (docs/certificate.md): anyone can check it with linear algebra alone.
+    Members beyond those listed are kept as they are (the verifier decides what they mean)."""
+
+    model_config = ConfigDict(extra="allow")
+
+    format: Literal["geocert-certificate"]
+    version: int = Field(description="the format's version (docs/certificate.md)")
+    kind: str
+    options: dict[str, Any] = Field(description="the options solved with, defaults filled in")
+    data: dict[str, Any] = Field(description="the problem data as solved")
+    data_sha256: str = Field(description='SHA-256 of canonical JSON {"kind", "data"} (sorted keys, no spaces)')
+    problem_sha256: str | None = Field(None, description="SHA-256 of the kind, the data and the options a claim "
+                                                         "depends on (docs/certificate.md)")
+    items: list[dict[str, Any]] = Field(description="per item: index, status, certified, cost, lower_bound, gap, "
+                                                    "the solution, and the proof (root region, tightening, leaves)")
+
+
+class ItemCertificate(BaseModel):
+    scope: str
+    root_region: dict[str, Any] | None = Field(
+        description="the region searched and shown to hold the optimum; 'meaning' says how to read it")
+    tolerance: float | None
+    tolerance_met: bool
+    leaves: int
+    note: str | None = None
+
+
+class ItemOutcome(BaseModel):
+    """What every item (track, map) reports about its solve."""
+
+    cost: float | None = Field(description="the upper bound, recomputed from the input: squared units (L2L2) or units")
+    lower_bound: float | None
+    gap: float | None
+    status: ItemStatus
+    certified: bool
+    nodes: int
+    elapsed_s: float
+    reason: str | None = Field(description="why the item is not certified, when it is not")
+    certificate: ItemCertificate | None
+
+
+class JobStats(BaseModel):
+    items: int
+    certified: int
+    nodes: int
+    solve_s: float
+    elapsed_s: float
+    statuses: dict[str, int]

@@ -1,0 +1,145 @@
+"""The triangulation kind: tracks of pixel observations seen by known projective cameras."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, Field
+
+from geocert.kinds.documents import certificate_document, outcome_document
+from geocert.kinds.schema import Camera, CertificateDocument, ItemOutcome, JobBase, JobStats, Pixel, Strict, options_model
+from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, check_cameras, number_array
+from geocert.solvers.fractional.items import TRACKS
+from geocert.solvers.fractional.options import TriangulationOptions
+from geocert.solvers.fractional.results import TrackResult
+
+MAX_VIEWS = 1000  # views in one track: a chart's choice of reference takes views^2 work
+
+
+class TrackIn(Strict):
+    views: list[Annotated[int, Field(ge=0)]] = Field(min_length=2, description="camera indices")
+    points: list[Pixel] = Field(min_length=2, description="one observation per view, in the same order")
+
+
+class TriangulationData(Strict):
+    cameras: list[Camera] = Field(min_length=1)
+    tracks: list[TrackIn] = Field(min_length=1)
+
+
+TriangulationOptionsIn = options_model("TriangulationOptionsIn", TriangulationOptions(), "pixels")
+
+
+class TriangulationJob(JobBase):
+    kind: Literal["triangulation"]
+    data: TriangulationData
+    options: TriangulationOptionsIn = Field(default_factory=TriangulationOptionsIn)
+
+
+class TrackOut(ItemOutcome):
+    point: list[float] | None = Field(description="[x, y, z], or a homogeneous 4-vector when at_infinity")
+    at_infinity: bool
+
+
+class TriangulationResult(BaseModel):
+    kind: Literal["triangulation"]
+    norm: str
+    tracks: list[TrackOut]
+    stats: JobStats
+    certificate: CertificateDocument | None = Field(None, description='with options.certificate = "full"')
+
+
+@dataclass
+class ParsedTracks:
+    cameras: np.ndarray  # (N, 3, 4)
+    tracks: list[tuple[list[int], np.ndarray] | None]
+
+
+def track_document(result: TrackResult) -> dict:
+    region = {"reference_view": result.certificate.reference} if result.certificate else {}
+    certificate = certificate_document(
+        result, region,
+        "lower <= (F X) / (d . X) <= upper for every point X of the scope, "
+        "F = functionals (one per direction the other views' depths vary along), "
+        "d = denominator (positive in front of the reference view)",
+        "every point in front of every camera")
+    return {"point": result.point, "at_infinity": result.at_infinity, **outcome_document(result),
+            "certificate": certificate}
+
+
+class TriangulationKind:
+    name = "triangulation"
+    description = "N-view triangulation: the 3D point minimising reprojection error, certified globally optimal."
+    item_key = "tracks"
+    chunk_size = 100
+    options_type = TriangulationOptions
+    request_model = TriangulationJob
+    result_model = TriangulationResult
+    solution_fields = ("point", "at_infinity")
+    verification = TRACKS
+    example = {"kind": "triangulation", "options": {"norm": "L2L2"}, "data": {
+        "cameras": [[[800, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]],
+                    [[800, 0, 320, -800], [0, 800, 240, 0], [0, 0, 1, 0]],
+                    [[800, 0, 320, 0], [0, 800, 240, -800], [0.3, 0, 1, 0]]],
+        "tracks": [{"views": [0, 1], "points": [[330, 250], [251.5, 253]]},
+                   {"views": [0, 1, 2], "points": [[330, 250], [250, 251], [320, 200]]}]}}
+
+    def parse(self, data: Any, items: range | None = None) -> ParsedTracks:
+        """Checked problem data; with ``items``, only those tracks are read (the rest stay None),
+        which is how a worker takes its chunk of a large batch."""
+        if not isinstance(data, dict):
+            raise InputError("data", "must be an object with 'cameras' and 'tracks'")
+        for key in ("cameras", "tracks"):
+            if key not in data:
+                raise InputError(f"data/{key}", "is required")
+        cameras = check_cameras(number_array(data["cameras"], "data/cameras", "a list of 3x4 numeric matrices", 3),
+                                "data/cameras")
+        if not isinstance(data["tracks"], list) or not data["tracks"]:
+            raise InputError("data/tracks", "must be a non-empty list")
+        tracks: list = [None] * len(data["tracks"])
+        for i in items if items is not None else range(len(data["tracks"])):
+            track = data["tracks"][i]
+            where = f"data/tracks/{i}"
+            if not isinstance(track, dict) or "views" not in track or "points" not in track:
+                raise InputError(where, "must be an object with 'views' and 'points'")
+            views, points = track["views"], track["points"]
+            if not isinstance(views, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in views):
+                raise InputError(f"{where}/views", "must be a list of camera indices")
+            pts = number_array(points, f"{where}/points", "a list of [u, v] pairs", 2, COORDINATE_LIMIT)
+            if pts.shape[1] != 2:
+                raise InputError(f"{where}/points", "must be a list of [u, v] pairs")
+            if len(views) < 2:
+                raise InputError(f"{where}/views", "a track needs at least 2 views")
+            if len(views) > MAX_VIEWS:
+                raise InputError(f"{where}/views", f"{len(views)} views exceed the limit of {MAX_VIEWS} per track")
+            if len(views) != len(pts):
+                raise InputError(where, f"has {len(views)} views but {len(pts)} points")
+            for j, v in enumerate(views):
+                if not 0 <= v < len(cameras):
+                    raise InputError(f"{where}/views/{j}", f"camera index {v} out of range 0..{len(cameras) - 1}")
+            if len(set(views)) != len(views):
+                raise InputError(f"{where}/views", "a camera appears twice in the track")
+            tracks[i] = (list(views), pts)
+        return ParsedTracks(cameras, tracks)
+
+    def count(self, parsed: ParsedTracks) -> int:
+        return len(parsed.tracks)
+
+    def observations(self, parsed: ParsedTracks) -> int:
+        return sum(len(track[1]) for track in parsed.tracks if track is not None)  # parsed items only
+
+    def solve_item(self, parsed: ParsedTracks, index: int, options: TriangulationOptions, callback) -> dict:
+        from geocert.solvers.fractional.triangulation import triangulate  # the conic solver, only to solve
+
+        views, points = parsed.tracks[index]
+        return track_document(triangulate(parsed.cameras[views], points, options, callback))
+
+    def cancelled_item(self) -> dict:
+        return track_document(TrackResult("cancelled", False, reason="the job was cancelled before this track started"))
+
+    def assemble(self, options: TriangulationOptions, items: list[dict], stats: dict) -> dict:
+        return {"kind": self.name, "norm": options.norm, "tracks": items, "stats": stats}
+
+
+KIND = TriangulationKind()

@@ -1,0 +1,151 @@
+"""How the verifier reads the fractional kinds' items (numpy only): the raw arrays of one item
+from the problem data, refused unless the service serves them; the item's program (rebuilt with
+the solver's charts); its solution from a claim; residuals from the raw data; and the scope."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from geocert.solvers.core.geometry import normalised_cameras
+from geocert.solvers.core.strict import Invalid, numbers
+from geocert.solvers.fractional.charts import Chart, MapChart
+from geocert.solvers.fractional.proof import verify_search
+
+MAX_VIEWS = 1000  # views in a track (the parser's limit too)
+MAX_POINTS = 1_000_000
+
+
+class TrackItem:
+    """One track's program and the maps between its point and the program's variables."""
+
+    def __init__(self, arrays: tuple, norm: str):
+        self.norm = norm
+        self.cameras, self.points = arrays
+        self.chart = Chart.build(self.cameras, self.points, norm)
+        self.program = self.chart.program
+
+    def solution(self, claim: dict) -> np.ndarray:
+        """A finite point [x, y, z], or a point at infinity (a 4-vector with last coordinate
+        exactly 0, signed so that its depths are positive)."""
+        point = claim.get("point")
+        at_infinity = claim.get("at_infinity")
+        if at_infinity is True:
+            X = numbers(point, "point", (4,))
+            if X[3] != 0:
+                raise Invalid("claim", "a point at infinity must have last coordinate 0")
+            return X
+        if at_infinity is not False:
+            raise Invalid("claim", "at_infinity must be true or false")
+        return np.append(numbers(point, "point", (3,)), 1.0)
+
+    def raw_residuals(self, solution) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Residuals and depths of the solution from the raw data, computed as the solver
+        computes them (projection minus observation), and a bound on each residual coordinate's
+        rounding error (a few thousand units in the last place of the larger of the two)."""
+        proj = self.cameras @ solution
+        image = proj[:, :2] / proj[:, 2:3]
+        return image - self.points, proj[:, 2], 1e-12 * (np.abs(image) + np.abs(self.points))
+
+    def raw_parts(self, solution) -> tuple[np.ndarray, np.ndarray]:
+        """Each residual as numerator / depth, from the raw data only."""
+        proj = self.cameras @ solution
+        return proj[:, :2] - self.points * proj[:, 2:3], proj[:, 2]
+
+    def depths_agree(self, depths: np.ndarray) -> bool:
+        return bool(np.all(depths > 0))
+
+    def to_program(self, solution) -> np.ndarray | None:
+        w = np.linalg.solve(self.chart.T, solution)
+        return w[:3] / w[3] if w[3] > 0 else None
+
+    def from_program(self, v: np.ndarray):
+        return self.chart.T @ np.append(v, 1.0)
+
+
+class MapItem:
+    """One map's program and the maps between its matrix and the program's variables."""
+
+    def __init__(self, arrays: tuple, norm: str):
+        self.norm = norm
+        self.source, self.target = arrays
+        self.chart = MapChart.build(self.source, self.target, norm)
+        self.program = self.chart.program
+
+    def solution(self, claim: dict) -> np.ndarray:
+        return numbers(claim.get("matrix"), "matrix", (self.target.shape[1] + 1, self.source.shape[1] + 1))
+
+    def raw_residuals(self, solution) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        proj = np.hstack([self.source, np.ones((len(self.source), 1))]) @ solution.T
+        image = proj[:, :-1] / proj[:, -1:]
+        return self.target - image, proj[:, -1], 1e-12 * (np.abs(image) + np.abs(self.target))
+
+    def raw_parts(self, solution) -> tuple[np.ndarray, np.ndarray]:
+        homogeneous = np.hstack([self.source, np.ones((len(self.source), 1))])
+        proj = homogeneous @ solution.T
+        return self.target * proj[:, -1:] - proj[:, :-1], proj[:, -1]
+
+    def depths_agree(self, depths: np.ndarray) -> bool:
+        return bool(np.all(depths > 0) or np.all(depths < 0))  # a map is defined up to its sign
+
+    def to_program(self, solution) -> np.ndarray | None:
+        v = self.chart.from_matrix(solution)
+        return v if v is not None else self.chart.from_matrix(-solution)
+
+    def from_program(self, v: np.ndarray):
+        return self.chart.matrix(v)
+
+
+class TrackItems:
+    """The triangulation kind's verification adapter."""
+
+    proofs = {"branch_and_bound": verify_search}
+    domain = ("every point in front of every camera (positive depth in every view, last homogeneous "
+              "coordinate >= 0)")
+
+    def read(self, data: dict, index: int) -> tuple:
+        if not isinstance(data, dict):
+            raise Invalid("data", "data must be an object")
+        cameras = numbers(data.get("cameras"), "data/cameras", (None, 3, 4), "data")
+        tracks = data.get("tracks")
+        if not isinstance(tracks, list) or not 0 <= index < len(tracks) or not isinstance(tracks[index], dict):
+            raise Invalid("data", f"data/tracks/{index}: no such track")
+        track = tracks[index]
+        views = track.get("views")
+        if (not isinstance(views, list) or not 2 <= len(views) <= MAX_VIEWS
+                or not all(type(v) is int and 0 <= v < len(cameras) for v in views) or len(set(views)) != len(views)):
+            raise Invalid("data", f"data/tracks/{index}/views: 2 to {MAX_VIEWS} distinct camera indices")
+        points = numbers(track.get("points"), f"data/tracks/{index}/points", (len(views), 2), "data")
+        return normalised_cameras(cameras[views]), points
+
+    def item(self, arrays: tuple, norm: str) -> TrackItem:
+        return TrackItem(arrays, norm)
+
+
+class MapItems:
+    """A map kind's verification adapter (the (source, target) dimensions it serves)."""
+
+    proofs = {"branch_and_bound": verify_search}
+    domain = "every map that puts every point at positive depth"
+
+    def __init__(self, kind: str, dimensions: set[tuple[int, int]]):
+        self.kind, self.dimensions = kind, dimensions
+
+    def read(self, data: dict, index: int) -> tuple:
+        if not isinstance(data, dict):
+            raise Invalid("data", "data must be an object")
+        maps = data.get("maps")
+        if not isinstance(maps, list) or not 0 <= index < len(maps) or not isinstance(maps[index], dict):
+            raise Invalid("data", f"data/maps/{index}: no such map")
+        entry = maps[index]
+        source = numbers(entry.get("source"), f"data/maps/{index}/source", (None, None), "data")
+        target = numbers(entry.get("target"), f"data/maps/{index}/target", (len(source), None), "data")
+        dims = (source.shape[1], target.shape[1])
+        if dims not in self.dimensions or not 1 <= len(source) <= MAX_POINTS:
+            raise Invalid("data", f"data/maps/{index}: {dims[0]}D -> {dims[1]}D is not served for {self.kind}")
+        return source, target
+
+    def item(self, arrays: tuple, norm: str) -> MapItem:
+        return MapItem(arrays, norm)
+
+
+TRACKS = TrackItems()

@@ -1,0 +1,84 @@
+"""Options of the fractional kinds, as plain dataclasses composed of what any search takes
+(SearchOptions) and what fixes the cost and its scope (ResidualOptions). Ranges are stated once,
+in OPTION_RANGES: check() applies them, and the API's models are built from them."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from geocert.solvers.core.geometry import InputError
+from geocert.solvers.fractional.relaxation import NORMS
+
+CERTIFICATES = ("summary", "full")
+
+
+@dataclass
+class SearchOptions:
+    """How far a branch and bound goes, and what it returns (every kind's search)."""
+
+    rel_gap: float = 1e-3
+    # In the cost's units (squared for L2L2). Below about 1e-7 the conic solves cannot resolve
+    # the bound (measured on a Dinosaur track whose optimum is 1e-6 px).
+    abs_gap: float = 1e-7
+    max_nodes: int = 2000
+    time_limit_s: float = 30.0
+    certificate: str = "summary"  # "full": every bound's proof, checkable by geocert.solvers.verify
+
+    # pydantic Field keywords per option: the one statement of each range.
+    OPTION_RANGES = {"rel_gap": {"ge": 0, "le": 1}, "abs_gap": {"ge": 0}, "max_nodes": {"ge": 1, "le": 1_000_000},
+                     "time_limit_s": {"gt": 0, "le": 3600}, "max_residual": {"gt": 0}}
+
+    def check(self) -> None:
+        for name in ("rel_gap", "abs_gap", "time_limit_s", "max_nodes"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and _within(value, self.OPTION_RANGES[name])):
+                raise InputError(f"options/{name}", f"must be a finite number {_describe(self.OPTION_RANGES[name])}")
+        if self.certificate not in CERTIFICATES:
+            raise InputError("options/certificate", f"must be one of {', '.join(CERTIFICATES)}")
+
+
+@dataclass
+class ResidualOptions:
+    """The cost (norm of the reprojection residuals) and its scope (max_residual)."""
+
+    norm: str = "L2L2"
+    max_residual: float | None = None  # the kind's residual units; narrows the certificate's scope
+
+    def check(self) -> None:
+        if self.norm not in NORMS:
+            raise InputError("options/norm", f"must be one of {', '.join(NORMS)}")
+        if self.max_residual is not None and not (math.isfinite(self.max_residual) and self.max_residual > 0):
+            raise InputError("options/max_residual", "must be a finite number > 0")
+
+
+@dataclass
+class FractionalOptions(ResidualOptions, SearchOptions):
+    """Options every fractional-program kind shares (each kind sets its own defaults)."""
+
+    def check(self) -> None:
+        ResidualOptions.check(self)
+        SearchOptions.check(self)
+
+
+@dataclass
+class TriangulationOptions(FractionalOptions):
+    """Residuals in pixels; limits per track."""
+
+
+@dataclass
+class MapOptions(FractionalOptions):
+    """Residuals in target units; limits per map (larger than a track's: more unknowns)."""
+
+    max_nodes: int = 5000
+    time_limit_s: float = 60.0
+
+
+def _within(value: float, bounds: dict) -> bool:
+    return (value >= bounds.get("ge", -math.inf) and value > bounds.get("gt", -math.inf)
+            and value <= bounds.get("le", math.inf))
+
+
+def _describe(bounds: dict) -> str:
+    words = {"ge": ">=", "gt": ">", "le": "<="}
+    return " and ".join(f"{words[key]} {value:g}" for key, value in bounds.items())

@@ -1,0 +1,96 @@
+"""What the tests share: synthetic scenes (cameras looking at a cloud of points, noisy tracks,
+maps with their exact images), stable seeds, and jobs built from them."""
+
+from __future__ import annotations
+
+import zlib
+
+import numpy as np
+
+SHARED = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared"
+
+
+def look_at(centre: np.ndarray, target: np.ndarray, focal: float = 800.0) -> np.ndarray:
+    """A 3x4 camera K [R | -R c] at ``centre`` looking at ``target`` (640x480 image)."""
+    z = target - centre
+    z = z / np.linalg.norm(z)
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x = x / np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z])
+    K = np.array([[focal, 0, 320], [0, focal, 240], [0, 0, 1.0]])
+    return K @ np.hstack([R, -R @ centre[:, None]])
+
+
+def random_cameras(rng: np.random.Generator, count: int, spread: float = 2.0) -> np.ndarray:
+    return np.array([
+        look_at(rng.normal(size=3) * spread + np.array([0.0, 0.0, -8.0]), rng.normal(size=3) * 0.3)
+        for _ in range(count)
+    ])
+
+
+def project(cameras: np.ndarray, X: np.ndarray) -> np.ndarray:
+    proj = cameras @ X
+    return proj[:, :2] / proj[:, 2:3]
+
+
+def noisy_track(rng: np.random.Generator, cameras: np.ndarray, noise_px: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    X = np.append(rng.normal(size=3), 1.0)
+    return X, project(cameras, X) + rng.normal(size=(len(cameras), 2)) * noise_px
+
+
+def seed(*words: str) -> int:
+    """A seed that is the same in every process (``hash`` of a str is not)."""
+    return zlib.crc32(" ".join(words).encode())
+
+
+def apply(M: np.ndarray, points: np.ndarray) -> np.ndarray:
+    proj = np.hstack([points, np.ones((len(points), 1))]) @ M.T
+    return proj[:, :-1] / proj[:, -1:]
+
+
+def scene(rng, kind: str, count: int):
+    """A map with every point at positive depth, its source points, and their exact images."""
+    if kind == "resection":
+        M = look_at(rng.normal(size=3) * 2 + np.array([0, 0, -8.0]), rng.normal(size=3) * 0.3)
+        source = rng.normal(size=(count, 3))
+    elif kind == "homography2":  # a plane z = 0 seen by a camera: H = K [r1 r2 t]
+        P = look_at(rng.normal(size=3) * 2 + np.array([0, 0, -8.0]), rng.normal(size=3) * 0.3)
+        M = P[:, [0, 1, 3]]
+        source = rng.uniform(-2, 2, size=(count, 2))
+    else:  # a 3D projective map close to a similarity, depths positive on the cloud
+        M = np.eye(4) + rng.normal(size=(4, 4)) * 0.05
+        M[3] = [0.02, -0.01, 0.03, 1.0]
+        source = rng.normal(size=(count, 3))
+    return M, source, apply(M, source)
+
+
+def map_job(rng, kind: str, count: int, norm: str, maps: int = 2, noise: float = 1.0) -> dict:
+    entries = []
+    for _ in range(maps):
+        _, source, target = scene(rng, kind, count)
+        entries.append({"source": source.tolist(), "target": (target + rng.normal(size=target.shape) * noise).tolist()})
+    name = "resection" if kind == "resection" else "homography"
+    return {"kind": name, "data": {"maps": entries}, "options": {"norm": norm, "certificate": "full"}}
+
+
+def triangulation_job(rng, tracks: int, views: int, norm: str, noise: float = 3.0) -> dict:
+    cameras = random_cameras(rng, 8)
+    entries = []
+    for _ in range(tracks):
+        chosen = sorted(rng.choice(8, size=views, replace=False).tolist())
+        _, points = noisy_track(rng, cameras[chosen], noise_px=noise)
+        entries.append({"views": chosen, "points": points.tolist()})
+    return {"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": entries},
+            "options": {"norm": norm, "certificate": "full"}}
+
+
+def service_job(rng, tracks: int, views: int = 4, **options) -> dict:
+    cameras = random_cameras(rng, views)
+    body_tracks = []
+    for _ in range(tracks):
+        chosen = sorted(rng.choice(views, size=int(rng.integers(2, views + 1)), replace=False).tolist())
+        _, points = noisy_track(rng, cameras[chosen])
+        body_tracks.append({"views": chosen, "points": points.tolist()})
+    return {"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": body_tracks},
+            "options": options}
