@@ -134,3 +134,56 @@ class TestLeanSettings:
                        ReusableConicProgram().solve(q, *ball(centre, radius), BALL)):
             assert result.status is ConicStatus.OPTIMAL
             assert result.primal_objective == pytest.approx(minimum(q, centre, radius), abs=1e-7)
+
+
+class TestPSDCones:
+    """Positive semidefinite cones at the conic boundary, with safe bounds from their duals: what
+    the SDP relaxations of autocalibration will stand on."""
+
+    def smallest_eigenvalue_program(self, C: np.ndarray):
+        """min trace(C X) s.t. trace(X) = 1, X PSD: its value is C's smallest eigenvalue."""
+        from geocert.solvers.core.cones import ConeSpec, svec
+        n = len(C)
+        size = n * (n + 1) // 2
+        q = svec(C)
+        trace = svec(np.eye(n))
+        A = np.vstack([trace[None, :], -np.eye(size)])  # trace(X) = 1; svec(X) in the PSD cone
+        b = np.concatenate([[1.0], np.zeros(size)])
+        return q, A, b, ConeSpec(zero=1, psd=(n,))
+
+    def test_svec_is_an_isometry(self):
+        from geocert.solvers.core.cones import smat, svec
+        rng = np.random.default_rng(4)
+        for n in (1, 2, 4):
+            A, B = rng.normal(size=(2, n, n))
+            A, B = A + A.T, B + B.T
+            assert svec(A) @ svec(B) == pytest.approx(np.trace(A @ B))
+            assert np.allclose(smat(svec(A), n), A)
+
+    def test_the_solver_and_the_safe_bound_agree_with_the_eigenvalue(self):
+        from geocert.solvers.core.cones import safe_lower_bound
+        rng = np.random.default_rng(5)
+        for n in (2, 3, 5):
+            C = rng.normal(size=(n, n))
+            C = C + C.T
+            q, A, b, cones = self.smallest_eigenvalue_program(C)
+            result = conic.solve_conic(q, A, b, cones)
+            assert result.status is conic.ConicStatus.OPTIMAL
+            smallest = np.linalg.eigvalsh(C)[0]
+            assert result.primal_objective == pytest.approx(smallest, abs=1e-6)
+            # Every feasible X has |svec entries| <= 1 (trace 1, PSD): the box the residual is
+            # charged to. The safe bound is below the optimum, and close to it.
+            box = np.ones(len(q))
+            bound = safe_lower_bound(q, A, b, cones, result.z, -box, box)
+            assert bound <= smallest + 1e-12 and bound >= smallest - 1e-6
+            # Any dual vector gives a valid bound once projected, however wrong it is.
+            noisy = result.z + rng.normal(size=len(result.z)) * 0.1
+            assert safe_lower_bound(q, A, b, cones, noisy, -box, box) <= smallest + 1e-12
+
+    def test_the_projection_lands_in_the_cone(self):
+        from geocert.solvers.core.cones import ConeSpec, project_dual, smat
+        rng = np.random.default_rng(6)
+        z = rng.normal(size=1 + 2 + 3 + 6)
+        projected = project_dual(z, ConeSpec(nonneg=1, soc=(2,), psd=(2, 3)))[3:]
+        assert np.linalg.eigvalsh(smat(projected[:3], 2))[0] >= -1e-12
+        assert np.linalg.eigvalsh(smat(projected[3:], 3))[0] >= -1e-12

@@ -23,15 +23,17 @@ import scipy.sparse as sp
 
 @dataclass(frozen=True)
 class ConeSpec:
-    """Cone layout of the rows of ``A``: ``zero`` equalities, ``nonneg`` inequalities, then SOCs."""
+    """Cone layout of the rows of ``A``: ``zero`` equalities, ``nonneg`` inequalities, SOCs, then
+    positive semidefinite cones of n x n matrices, each as its svec (svec below: n(n+1)/2 rows)."""
 
     zero: int = 0
     nonneg: int = 0
     soc: tuple[int, ...] = ()
+    psd: tuple[int, ...] = ()
 
     @property
     def rows(self) -> int:
-        return self.zero + self.nonneg + sum(self.soc)
+        return self.zero + self.nonneg + sum(self.soc) + sum(n * (n + 1) // 2 for n in self.psd)
 
 
 def project_dual(z: np.ndarray, cones: ConeSpec) -> np.ndarray:
@@ -41,11 +43,42 @@ def project_dual(z: np.ndarray, cones: ConeSpec) -> np.ndarray:
     start = cones.zero
     z[start:start + cones.nonneg] = np.maximum(z[start:start + cones.nonneg], 0.0)
     start += cones.nonneg
-    if not cones.soc:
-        return z
-    for rows in _soc_rows(start, cones.soc):  # all cones of one size at once
-        z[rows] = _project_soc(z[rows])
+    if cones.soc:
+        for rows in _soc_rows(start, cones.soc):  # all cones of one size at once
+            z[rows] = _project_soc(z[rows])
+        start += sum(cones.soc)
+    for n in cones.psd:  # the PSD cone is self-dual under svec's inner product
+        size = n * (n + 1) // 2
+        z[start:start + size] = svec(_project_psd(smat(z[start:start + size], n)))
+        start += size
     return z
+
+
+def svec(S: np.ndarray) -> np.ndarray:
+    """A symmetric matrix as Clarabel's PSDTriangleConeT vector: the upper triangle column by
+    column, off-diagonal entries times sqrt(2), so that svec(A) . svec(B) = trace(A B)."""
+    rows, cols = np.triu_indices(S.shape[0])
+    order = np.lexsort((rows, cols))  # column-major: by column, then row
+    rows, cols = rows[order], cols[order]
+    return np.where(rows == cols, 1.0, np.sqrt(2.0)) * S[rows, cols]
+
+
+def smat(v: np.ndarray, n: int) -> np.ndarray:
+    """svec's inverse."""
+    rows, cols = np.triu_indices(n)
+    order = np.lexsort((rows, cols))
+    rows, cols = rows[order], cols[order]
+    values = v / np.where(rows == cols, 1.0, np.sqrt(2.0))
+    S = np.zeros((n, n))
+    S[rows, cols] = values
+    S[cols, rows] = values
+    return S
+
+
+def _project_psd(S: np.ndarray) -> np.ndarray:
+    """The nearest positive semidefinite matrix (Frobenius): negative eigenvalues clipped to 0."""
+    values, vectors = np.linalg.eigh(S)
+    return (vectors * np.maximum(values, 0.0)) @ vectors.T
 
 
 @functools.lru_cache(maxsize=256)

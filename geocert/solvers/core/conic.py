@@ -60,6 +60,7 @@ def clarabel_cones(spec: ConeSpec) -> list:
     if spec.nonneg:
         cones.append(clarabel.NonnegativeConeT(spec.nonneg))
     cones.extend(clarabel.SecondOrderConeT(d) for d in spec.soc)
+    cones.extend(clarabel.PSDTriangleConeT(n) for n in spec.psd)
     return cones
 
 
