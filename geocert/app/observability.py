@@ -67,7 +67,9 @@ router = APIRouter(tags=["service"])
 
 
 @router.get("/metrics", response_class=Response,
-            responses={200: {"content": {CONTENT_TYPE_LATEST: {}}, "description": "Prometheus text format"}})
+            responses={200: {"content": {CONTENT_TYPE_LATEST: {}}, "description": "Prometheus text format"},
+                       503: {"content": {"application/problem+json": {}},
+                             "description": "the job store (Redis) is not answering; see Retry-After"}})
 def metrics():
     """Prometheus metrics: requests of this API process, and jobs, items, solve times, webhook
     deliveries and queue depth over the whole service."""

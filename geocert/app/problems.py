@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
+import redis
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
@@ -14,6 +15,7 @@ from geocert.solvers.core.geometry import InputError
 from geocert.kinds import KINDS
 
 PROBLEM_JSON = "application/problem+json"
+REDIS_RETRY_AFTER_S = 5  # Retry-After of a 503 while Redis does not answer
 
 
 class ApiProblem(Exception):
@@ -131,6 +133,16 @@ def install(app: FastAPI) -> None:
     async def http_error(request: Request, exc: StarletteHTTPException):
         return problem(exc.status_code, _TITLES.get(exc.status_code, "Error"), str(exc.detail),
                        instance=str(request.url.path), headers=getattr(exc, "headers", None))
+
+    async def redis_unavailable(request: Request, exc: Exception):
+        # Redis restarting, loading its append-only file or unreachable: a passing state the
+        # client can retry, not a server fault.
+        return problem(503, "Service unavailable",
+                       f"the job store (Redis) is not answering ({type(exc).__name__}); retry shortly",
+                       instance=str(request.url.path), headers={"Retry-After": str(REDIS_RETRY_AFTER_S)})
+
+    for unavailable in (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError):  # BusyLoadingError too
+        app.add_exception_handler(unavailable, redis_unavailable)
 
     @app.exception_handler(Exception)
     async def unexpected(request: Request, exc: Exception):

@@ -31,8 +31,8 @@ class JobStore:
         self.ttl = result_ttl_s
 
     @classmethod
-    def from_url(cls, url: str, result_ttl_s: int = 7 * 24 * 3600) -> "JobStore":
-        return cls(redis.Redis.from_url(url, decode_responses=True), result_ttl_s)
+    def from_url(cls, url: str, result_ttl_s: int = 7 * 24 * 3600, **options: Any) -> "JobStore":
+        return cls(redis.Redis.from_url(url, decode_responses=True, **options), result_ttl_s)
 
     @staticmethod
     def key(job_id: str, part: str = "") -> str:

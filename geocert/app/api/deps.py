@@ -16,9 +16,15 @@ from geocert.workers.store import JobStore
 
 @lru_cache
 def get_store() -> JobStore:
+    from redis.backoff import ExponentialBackoff
+    from redis.retry import Retry
+
     from geocert.workers.celery_app import redis_url
 
-    return JobStore.from_url(redis_url(), get_settings().result_ttl_s)
+    # Bounded waits: a request during a Redis outage fails over to 503 within a few seconds
+    # instead of hanging (the socket timeout exceeds the SSE stream's 1 s blocking XREAD).
+    return JobStore.from_url(redis_url(), get_settings().result_ttl_s, socket_connect_timeout=2, socket_timeout=5,
+                             retry=Retry(ExponentialBackoff(cap=0.5, base=0.05), 2))
 
 
 JobStoreDep = Annotated[JobStore, Depends(get_store)]
@@ -51,6 +57,7 @@ ERRORS = {
     415: _problem("the body was not sent as content-type: application/json"),
     422: _problem("invalid request: names the field"),
     429: _problem("rate or active-job limit reached (named in the detail); see Retry-After"),
+    503: _problem("the job store (Redis) is not answering, e.g. while it restarts; see Retry-After"),
 }
 
 
@@ -66,5 +73,5 @@ def submit_chunks(store: JobStore, meta: dict, request_id: str | None) -> None:
 
 
 def error_responses(*codes: int) -> dict:
-    """OpenAPI responses of a keyed, rate-limited route: 401, 403, 429 and ``codes``."""
-    return {code: ERRORS[code] for code in (401, 403, 429) + codes}
+    """OpenAPI responses of a keyed, rate-limited route: 401, 403, 429, 503 and ``codes``."""
+    return {code: ERRORS[code] for code in (401, 403, 429, 503) + codes}
