@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from fastapi import FastAPI
-from starlette.types import ASGIApp, Receive, Scope, Send
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from geocert.app import docs, observability, problems
 from geocert.app.api.routes import certificates, jobs, orient, service
@@ -12,7 +12,11 @@ from geocert.workers import logs
 
 
 class BodySizeLimit:
-    """Rejects bodies over ``max_body_bytes`` with 413 problem+json, by header or while reading."""
+    """Rejects bodies over ``max_body_bytes`` with 413 problem+json: at once when content-length
+    says so, else (chunked bodies) while the bytes arrive. Nothing beyond the limit is read: on
+    overflow this middleware answers 413 itself and tells the app the client has gone (an
+    ``http.disconnect``), whose own answer to that is dropped. So a request never holds more than
+    the limit plus one chunk in memory."""
 
     def __init__(self, app: ASGIApp, limit: int):
         self.app, self.limit = app, limit
@@ -24,29 +28,36 @@ class BodySizeLimit:
         if declared is not None and declared.isdigit() and int(declared) > self.limit:
             return await self._reject(scope, receive, send)
         seen = 0
+        state = {"started": False, "rejected": False}
 
-        async def limited_receive():
+        async def limited_receive() -> Message:
             nonlocal seen
+            if state["rejected"]:
+                return {"type": "http.disconnect"}
             message = await receive()
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
                 if seen > self.limit:
-                    raise _TooLarge()
+                    state["rejected"] = True
+                    if not state["started"]:
+                        await self._reject(scope, receive, send)
+                    return {"type": "http.disconnect"}
             return message
 
-        try:
-            await self.app(scope, limited_receive, send)
-        except _TooLarge:
-            await self._reject(scope, receive, send)
+        async def guarded_send(message: Message) -> None:
+            if state["rejected"]:
+                return  # the 413 is the answer; the app's reply to the "disconnect" is dropped
+            if message["type"] == "http.response.start":
+                state["started"] = True
+            await send(message)
+
+        await self.app(scope, limited_receive, guarded_send)
 
     async def _reject(self, scope, receive, send):
         response = problems.problem(413, "Payload too large",
-                                    f"the request body exceeds the limit of {self.limit} bytes (GEOCERT_MAX_BODY_BYTES)")
+                                    f"the request body exceeds the limit of {self.limit} bytes (GEOCERT_MAX_BODY_BYTES)",
+                                    headers={"Connection": "close"})
         await response(scope, receive, send)
-
-
-class _TooLarge(Exception):
-    pass
 
 
 def create_app() -> FastAPI:
