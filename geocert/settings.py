@@ -55,6 +55,12 @@ class Settings(BaseSettings):
     webhook_attempts: int = 6
     webhook_backoff_s: float = 2.0
     webhook_timeout_s: float = 10.0
+    # A connection must complete a request's headers within this many seconds of opening (or of
+    # its previous response), else it is closed (slow-header clients).
+    header_timeout_s: float = 10.0
+    # On SIGTERM: event streams end at once (telling clients to reconnect); requests still running
+    # after this many seconds are cancelled and the API exits.
+    shutdown_timeout_s: float = 5.0
 
     @model_validator(mode="after")
     def _tasks_end_before_redelivery(self) -> "Settings":

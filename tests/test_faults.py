@@ -4,8 +4,12 @@ and one client flooding the others' budget."""
 
 from __future__ import annotations
 
+import signal
+import socket
+import threading
 import time
 
+import httpx
 import numpy as np
 import pytest
 
@@ -83,3 +87,69 @@ def test_a_chunked_body_over_the_limit_is_413_without_reading_it_all(limited):
     assert small.status_code == 400 and small.json()["errors"][0]["field"] == "body"
     print(f"\nchunked body over the limit: 413 after the client sent {sent['bytes'] / 1e6:.1f} MB of 64 MB offered; "
           f"API peak memory grew {grew_kib / 1024:.1f} MiB (limit {BODY_LIMIT / 2**20:.1f} MiB)")
+
+
+def test_slow_header_connections_are_closed(limited):
+    """Slowloris: headers a few bytes a second, on a fresh connection and on a kept-alive one after
+    a complete request; the server closes both within GEOCERT_HEADER_TIMEOUT_S (10 s) of their start."""
+    running, _ = limited
+    fresh = socket.create_connection(("127.0.0.1", running.port), timeout=30)
+    kept = socket.create_connection(("127.0.0.1", running.port), timeout=30)
+    kept.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+    assert kept.recv(65536).startswith(b"HTTP/1.1 200")
+    for sock in (fresh, kept):
+        sock.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n")
+        sock.setblocking(False)
+    start = time.monotonic()
+    closed_after: dict[int, float] = {}
+    while len(closed_after) < 2 and time.monotonic() - start < 30:
+        for index, sock in enumerate((fresh, kept)):
+            if index in closed_after:
+                continue
+            try:
+                sock.sendall(b"X-Slow: 1\r\n")
+                if sock.recv(65536) == b"":
+                    closed_after[index] = time.monotonic() - start
+            except BlockingIOError:
+                pass
+            except OSError:  # reset or broken pipe: closed
+                closed_after[index] = time.monotonic() - start
+        time.sleep(0.5)
+    for sock in (fresh, kept):
+        sock.close()
+    assert len(closed_after) == 2, f"a slow-header connection was still open after 30 s: {closed_after}"
+    assert max(closed_after.values()) < 12, closed_after
+    print(f"\nslow-header connections closed after {closed_after[0]:.1f} s (fresh) and {closed_after[1]:.1f} s "
+          "(kept alive)")
+
+
+def test_sigterm_with_streams_open_exits_within_ten_seconds(tmp_path):
+    with cluster(tmp_path, workers=0) as (running, client):
+        job_id = client.post("/v1/jobs", json=small_job()).json()["id"]  # no workers: queued for ever
+        lines: list[list[str]] = [[] for _ in range(5)]
+        opened = threading.Barrier(6)
+
+        def listen(index: int) -> None:
+            with httpx.Client(base_url=running.base, timeout=30) as own:
+                with own.stream("GET", f"/v1/jobs/{job_id}/events") as stream:
+                    opened.wait()
+                    for line in stream.iter_lines():
+                        lines[index].append(line)
+
+        threads = [threading.Thread(target=listen, args=(i,), daemon=True) for i in range(5)]
+        for thread in threads:
+            thread.start()
+        opened.wait(timeout=30)
+        time.sleep(1.5)  # the streams are idle (keepalives only)
+        running.api.send_signal(signal.SIGTERM)
+        start = time.monotonic()
+        running.api.wait(timeout=30)
+        exited = time.monotonic() - start
+        for thread in threads:
+            thread.join(timeout=10)
+        assert exited < 10, f"the API took {exited:.1f} s to exit with 5 streams open"
+        assert running.api.returncode == 0
+        for seen in lines:
+            assert any(line.startswith("retry:") for line in seen), seen  # told to reconnect
+            assert "event: end" not in seen  # the job did not end: the stream did
+        print(f"\nSIGTERM with 5 event streams open: the API exited in {exited:.1f} s")

@@ -100,7 +100,6 @@ def _die_with_parent() -> None:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    import uvicorn
     from pydantic import ValidationError as SettingsError
 
     from geocert.settings import get_settings
@@ -136,7 +135,9 @@ def cmd_serve(args: argparse.Namespace) -> int:
     stopping = threading.Event()
     _watch_workers(workers, stopping)
     try:
-        uvicorn.run("geocert.app.main:app", host=args.host, port=args.port, log_level="warning")
+        from geocert.app import lifecycle
+
+        lifecycle.run("geocert.app.main:app", host=args.host, port=args.port)
     finally:
         stopping.set()
         for process in workers:

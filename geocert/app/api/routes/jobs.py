@@ -16,6 +16,7 @@ from fastapi.sse import EventSourceResponse, ServerSentEvent
 
 from geocert.app.api.deps import Caller, JobStoreDep, error_responses, rate_limited, submit_chunks
 from geocert.settings import chunk_size_for, get_settings
+from geocert.app import lifecycle
 from geocert.app.problems import ApiProblem
 from geocert.app.schemas import Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
@@ -208,8 +209,12 @@ def _resume_point(last_event_id: Annotated[str | None, Header()] = None) -> str:
 @router.get("/{job_id}/events", response_class=EventSourceResponse, responses=error_responses(404, 422))
 def job_events(job: OwnedJob, store: JobStoreDep, after: Annotated[str, Depends(_resume_point)]):
     """Server-Sent Events: `status` and `progress` events, then one `end` event after which the
-    stream closes; resumes after `Last-Event-ID`. Event data is JSON."""
+    stream closes; resumes after `Last-Event-ID`. Event data is JSON. When the server is stopping
+    the stream ends early with a `retry` hint and no `end` event: reconnect with `Last-Event-ID`."""
     for event_id, event, data in store.events(job["id"], after):
+        if lifecycle.stopping.is_set():
+            yield ServerSentEvent(comment="server stopping: reconnect with Last-Event-ID", retry=1000)
+            return
         if event == "keepalive":
             yield ServerSentEvent(comment="keepalive")
             continue
