@@ -153,3 +153,22 @@ def test_sigterm_with_streams_open_exits_within_ten_seconds(tmp_path):
             assert any(line.startswith("retry:") for line in seen), seen  # told to reconnect
             assert "event: end" not in seen  # the job did not end: the stream did
         print(f"\nSIGTERM with 5 event streams open: the API exited in {exited:.1f} s")
+
+
+def test_without_keys_each_client_address_has_its_own_budget(limited):
+    """30 requests a minute in this cluster: a client on 127.0.0.3 spends its budget, and one on
+    127.0.0.4 (loopback too) still gets answers."""
+    running, _ = limited
+
+    def client_from(address: str) -> httpx.Client:
+        return httpx.Client(base_url=running.base, timeout=30, transport=httpx.HTTPTransport(local_address=address))
+
+    if time.time() % 60 > 55:  # the budget is a fixed window per minute: start well inside one
+        time.sleep(61 - time.time() % 60)
+    with client_from("127.0.0.3") as flooder, client_from("127.0.0.4") as other:
+        statuses = [flooder.get("/v1/problems").status_code for _ in range(31)]
+        assert statuses[:30] == [200] * 30 and statuses[30] == 429, statuses
+        refused = flooder.get("/v1/jobs")
+        assert refused.status_code == 429 and int(refused.headers["retry-after"]) > 0
+        assert other.get("/v1/problems").status_code == 200
+        assert other.get("/v1/jobs").status_code == 200

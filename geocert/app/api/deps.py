@@ -5,10 +5,10 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import Annotated
 
-from fastapi import Depends
+from fastapi import Depends, Request
 
 from geocert.settings import get_settings
-from geocert.app.core.security import caller
+from geocert.app.core.security import PUBLIC_OWNER, caller
 from geocert.app.problems import PROBLEM_JSON, ApiProblem
 from geocert.app.schemas import ProblemDetails
 from geocert.workers.store import JobStore
@@ -31,13 +31,17 @@ JobStoreDep = Annotated[JobStore, Depends(get_store)]
 Caller = Annotated[str, Depends(caller)]
 
 
-def rate_limited(owner: Caller, store: JobStoreDep) -> None:
+def rate_limited(request: Request, owner: Caller, store: JobStoreDep) -> None:
     """At most GEOCERT_RATE_LIMIT_PER_MINUTE requests per key per minute (a fixed window in Redis,
-    shared by every API process)."""
+    shared by every API process). Without keys every caller is the same owner, so the budget is
+    per client address instead: one flooding client does not spend the others'."""
     limit = get_settings().rate_limit_per_minute
     if limit <= 0:
         return
-    count, retry_after = store.count_request(owner)
+    bucket = owner
+    if owner == PUBLIC_OWNER:
+        bucket = f"{PUBLIC_OWNER}@{request.client.host if request.client else 'unknown'}"
+    count, retry_after = store.count_request(bucket)
     if count > limit:
         raise ApiProblem(429, f"more than {limit} requests this minute (GEOCERT_RATE_LIMIT_PER_MINUTE)",
                          headers={"Retry-After": str(retry_after)})
