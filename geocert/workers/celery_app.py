@@ -62,8 +62,15 @@ def _start_heartbeat(sender=None, **_) -> None:
     global _HEARTBEAT
     from geocert.workers.heartbeat import Heartbeat
 
+    from geocert.workers.reaper import reap
+    from geocert.workers.store import JobStore
+
     name = getattr(sender, "hostname", None) or "geocert@unknown"
-    _HEARTBEAT = Heartbeat(redis_url(), name).start()
+    settings = get_settings()
+    jobs = JobStore.from_url(redis_url(), settings.result_ttl_s, socket_timeout=10, socket_connect_timeout=5)
+    every_s = 5.0
+    _HEARTBEAT = Heartbeat(redis_url(), name, reaper=lambda: reap(jobs, settings.visibility_timeout_s, every_s),
+                           reap_every_s=every_s).start()
 
 
 @worker_shutdown.connect

@@ -39,9 +39,10 @@ def beat(client: redis.Redis, name: str) -> None:
 class Heartbeat:
     """A daemon thread beating for one worker until ``stop()``."""
 
-    def __init__(self, url: str, name: str, interval_s: float = INTERVAL_S):
+    def __init__(self, url: str, name: str, interval_s: float = INTERVAL_S, reaper=None, reap_every_s: float = 5.0):
         self.client = redis.Redis.from_url(url, socket_timeout=5, socket_connect_timeout=5)
         self.name, self.interval_s = name, interval_s
+        self.reaper, self.reap_every_s, self.reaped_at = reaper, reap_every_s, 0.0
         self.stopped = threading.Event()
         self.thread = threading.Thread(target=self._run, name="geocert-heartbeat", daemon=True)
 
@@ -55,6 +56,12 @@ class Heartbeat:
                 beat(self.client, self.name)
             except redis.RedisError as exc:  # Redis away for a moment: beat again next time
                 log.warning("heartbeat not written: %s", exc)
+            if self.reaper is not None and time.monotonic() - self.reaped_at >= self.reap_every_s:
+                self.reaped_at = time.monotonic()
+                try:
+                    self.reaper()
+                except Exception as exc:  # Redis away, say: look again next time
+                    log.warning("reaper round failed: %s", exc)
             self.stopped.wait(self.interval_s)
 
     def stop(self) -> None:

@@ -160,12 +160,32 @@ class JobStore:
         answer = self.r.eval(script, 1, self.key(job_id), json.dumps(now()))
         if answer == 1:
             self.publish(job_id, "status", {"status": "running"})
+        if answer != 0:
+            self.touch(job_id)
         return answer != 0
+
+    RUNNING = "geocert:running"  # running job id -> the last time a task of it showed life
+
+    def touch(self, job_id: str) -> None:
+        """A task of this job is alive (read by the reaper, ``workers.reaper``)."""
+        self.r.zadd(self.RUNNING, {job_id: now()})
+
+    def stale_running(self, older_than_s: float) -> list[str]:
+        return self.r.zrangebyscore(self.RUNNING, "-inf", now() - older_than_s)
+
+    def missing_items(self, job_id: str, total: int) -> list[int]:
+        stored = set(self.r.hkeys(self.key(job_id, "items")))
+        return [index for index in range(total) if str(index) not in stored]
+
+    def reopen_finalisation(self, job_id: str) -> None:
+        """Drop a finalisation claim whose holder is gone (the job is running but nobody moves)."""
+        self.r.delete(self.key(job_id, "final"))
 
     def save_progress(self, job_id: str, segment: int, progress: dict) -> dict:
         """Record the progress of the task that started at item ``segment`` and return (and
         publish) the job's aggregate over all its tasks."""
         self.r.hset(self.key(job_id, "chunkprogress"), str(segment), json.dumps(progress))
+        self.touch(job_id)
         parts = [json.loads(v) for v in self.r.hvals(self.key(job_id, "chunkprogress"))]
         total = self.field(job_id, "items_total")
         started = self.field(job_id, "started_at") or now()
@@ -193,6 +213,7 @@ class JobStore:
         pipe = self.r.pipeline()
         pipe.hset(self.key(job_id, "items"), mapping={str(start + i): json.dumps(item) for i, item in enumerate(items)})
         pipe.hlen(self.key(job_id, "items"))
+        pipe.zadd(self.RUNNING, {job_id: now()})
         return pipe.execute()[1]
 
     def claim_finalisation(self, job_id: str) -> bool:
@@ -210,6 +231,7 @@ class JobStore:
                                               "error": json.dumps(error)})
         pipe.delete(self.key(job_id, "items"), self.key(job_id, "chunkprogress"))
         pipe.srem(self.owner_key(self.field(job_id, "owner") or "", "active"), job_id)
+        pipe.zrem(self.RUNNING, job_id)
         pipe.execute()
         self.publish(job_id, "end", {"status": status, "error": error})
         self.expire(job_id)
@@ -226,6 +248,7 @@ class JobStore:
         owner = self.field(job_id, "owner")
         pipe = self.r.pipeline()
         pipe.delete(*(self.key(job_id, part) for part in self._PARTS))
+        pipe.zrem(self.RUNNING, job_id)
         if owner is not None:
             pipe.zrem(self.owner_key(owner, "jobs"), job_id)
         pipe.execute()

@@ -13,6 +13,8 @@ import logging
 import time
 import traceback
 
+import redis
+
 from geocert.settings import get_settings
 from geocert.solvers.core.geometry import InputError
 from geocert.batch import assemble, job_stats, solve_items
@@ -53,38 +55,68 @@ class _Throttle:
         return self.cancelled
 
 
-@celery_app.task(name="geocert.solve_segment")
-def solve_segment(job_id: str, start: int, stop: int, request_id: str | None = None) -> None:
-    """Solve items ``start`` to ``stop - 1`` of a job (or the first of them, within the budget)."""
+REDIS_GONE = (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError)
+
+
+@celery_app.task(name="geocert.solve_segment", bind=True, max_retries=5)
+def solve_segment(self, job_id: str, start: int, stop: int, request_id: str | None = None) -> None:
+    """Solve items ``start`` to ``stop - 1`` of a job (or the first of them, within the budget).
+
+    When Redis goes away under the task, the job is not failed (that needs Redis too): the task
+    waits for Redis to come back and is retried (its items are stored per item, so solving them
+    again counts nothing twice). Should even that fail, the reaper (``workers.reaper``) finds the
+    job without a live task and queues its missing chunks again."""
     with logs.context(job_id=job_id, request_id=request_id, items=f"{start}-{stop}"):
-        jobs = store()
-        meta = jobs.get(job_id)
-        if meta is None or not jobs.mark_running(job_id):
-            return  # expired, deleted, or ended (cancelled) before it started: nothing to do
-        settings = get_settings()
         try:
-            request = jobs.request(job_id)
-            kind = get_kind(request["kind"])
-            options = options_from(kind.options_type, request.get("options"))
-            parsed = kind.parse(request["data"], items=range(start, stop))
-            throttle = _Throttle(jobs, job_id, start, settings.progress_interval_s)
-            began = time.monotonic()
-            items = solve_items(kind, parsed, options, range(start, stop), throttle, throttle.should_stop,
-                                stop_at=began + settings.chunk_time_budget_s)
-            metrics.record_items(jobs.r, kind.name, items)
-            done = jobs.save_items(job_id, start, items)
-            cut = start + len(items)
-            if cut < stop:  # over the budget: the rest of the chunk becomes a task of its own
-                log.info("continuing items %d-%d in a new task", cut, stop)
-                jobs.add_task_ids(job_id, solve_segment.delay(job_id, cut, stop, request_id).id)
-            elif done == meta["items_total"] and jobs.claim_finalisation(job_id):
-                finalise(jobs, job_id, meta, kind, options)
-        except InputError as exc:  # the API validates first, so this is a stored job gone bad
-            fail(jobs, job_id, 422, "Invalid job data", str(exc), exc.field)
-        except Exception as exc:  # never lose the reason: the job keeps its error
-            log.exception("items %d-%d of job %s failed", start, stop, job_id)
-            fail(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
-                 traceback.format_exc(limit=5))
+            _solve_segment(job_id, start, stop, request_id)
+        except REDIS_GONE as exc:
+            log.warning("Redis went away under items %d-%d of job %s (%s): retrying", start, stop, job_id,
+                        type(exc).__name__)
+            _wait_for_redis(store(), limit_s=60)
+            raise self.retry(exc=exc, countdown=1)
+
+
+def _wait_for_redis(jobs: JobStore, limit_s: float) -> None:
+    deadline = time.monotonic() + limit_s
+    while time.monotonic() < deadline:
+        try:
+            if jobs.r.ping():
+                return
+        except REDIS_GONE:
+            time.sleep(0.5)
+
+
+def _solve_segment(job_id: str, start: int, stop: int, request_id: str | None) -> None:
+    jobs = store()
+    meta = jobs.get(job_id)
+    if meta is None or not jobs.mark_running(job_id):
+        return  # expired, deleted, or ended (cancelled) before it started: nothing to do
+    settings = get_settings()
+    try:
+        request = jobs.request(job_id)
+        kind = get_kind(request["kind"])
+        options = options_from(kind.options_type, request.get("options"))
+        parsed = kind.parse(request["data"], items=range(start, stop))
+        throttle = _Throttle(jobs, job_id, start, settings.progress_interval_s)
+        began = time.monotonic()
+        items = solve_items(kind, parsed, options, range(start, stop), throttle, throttle.should_stop,
+                            stop_at=began + settings.chunk_time_budget_s)
+        metrics.record_items(jobs.r, kind.name, items)
+        done = jobs.save_items(job_id, start, items)
+        cut = start + len(items)
+        if cut < stop:  # over the budget: the rest of the chunk becomes a task of its own
+            log.info("continuing items %d-%d in a new task", cut, stop)
+            jobs.add_task_ids(job_id, solve_segment.delay(job_id, cut, stop, request_id).id)
+        elif done == meta["items_total"] and jobs.claim_finalisation(job_id):
+            finalise(jobs, job_id, meta, kind, options)
+    except InputError as exc:  # the API validates first, so this is a stored job gone bad
+        fail(jobs, job_id, 422, "Invalid job data", str(exc), exc.field)
+    except REDIS_GONE:
+        raise  # not the job's fault: retried (solve_segment), never recorded as its failure
+    except Exception as exc:  # never lose the reason: the job keeps its error
+        log.exception("items %d-%d of job %s failed", start, stop, job_id)
+        fail(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
+             traceback.format_exc(limit=5))
 
 
 def finalise(jobs: JobStore, job_id: str, meta: dict, kind, options) -> None:

@@ -1,0 +1,61 @@
+"""The reaper: no job stays ``running`` without a live task.
+
+Every task of a running job records when it last showed life (``JobStore.touch``: on start,
+progress and stored items). A live task does so at least every item time limit, which the
+visibility timeout exceeds; so a running job silent for longer than the visibility timeout has no
+live task: its tasks were lost, e.g. with a Redis restart that dropped them from the queue. The
+reaper (run by every worker's heartbeat thread, one at a time through a lock in Redis) queues the
+chunks of such a job that still miss items again; results are stored per item, so solving a chunk
+again overwrites what was stored and counts nothing twice. After ``MAX_REAPS`` rounds without the
+job ending, it is failed with the reason.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from geocert.workers.store import JobStore
+
+log = logging.getLogger("geocert.worker")
+LOCK = "geocert:reaper"
+MAX_REAPS = 3
+
+
+def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str, str]]:
+    """One round: returns (job id, what was done) for each stranded job found."""
+    if not jobs.r.set(LOCK, "1", nx=True, ex=max(1, int(every_s))):
+        return []  # another worker reaps this round
+    from geocert.workers.tasks import fail, solve_segment
+
+    done = []
+    stale = jobs.stale_running(stale_after_s)
+    if stale:  # a job with a task still queued, or delivered and due back (kombu's unacked), waits
+        pending = "\n".join(jobs.r.lrange("celery", 0, -1) + jobs.r.hvals("unacked"))
+    for job_id in stale:
+        if job_id in pending:
+            jobs.touch(job_id)
+            continue
+        meta = jobs.get(job_id)
+        if meta is None or meta["status"] != "running":
+            jobs.r.zrem(jobs.RUNNING, job_id)
+            continue
+        reaps = int(jobs.r.hincrby(jobs.key(job_id), "reaps", 1))
+        if reaps > MAX_REAPS:
+            jobs.reopen_finalisation(job_id)
+            fail(jobs, job_id, 500, "Tasks lost",
+                 f"the job's tasks were lost {MAX_REAPS} times (workers or Redis gone) and re-queued each time "
+                 "without the job ending", None)
+            done.append((job_id, "failed"))
+            continue
+        missing = set(jobs.missing_items(job_id, meta["items_total"]))
+        chunks = [(start, stop) for start, stop in meta["chunks"] if missing.intersection(range(start, stop))]
+        if not chunks:  # every item stored, but the task that was to finalise it is gone
+            chunks = [tuple(meta["chunks"][-1])]
+        jobs.reopen_finalisation(job_id)
+        jobs.touch(job_id)  # give the re-queued tasks a full period before the next look
+        for start, stop in chunks:
+            jobs.add_task_ids(job_id, solve_segment.delay(job_id, start, stop).id)
+        log.warning("job %s had no live task for %.0f s: re-queued %d chunk(s), %d item(s) missing (round %d)",
+                    job_id, stale_after_s, len(chunks), len(missing), reaps)
+        done.append((job_id, f"requeued {len(chunks)}"))
+    return done
