@@ -336,3 +336,17 @@ class JobStore:
             self.r.delete(key)
         else:
             self.r.set(key, json.dumps({"body": body_digest, "job": job_id}), ex=self.ttl)
+
+
+_SHARED: JobStore | None = None
+
+
+def shared_store() -> JobStore:
+    """This worker process's job store (one connection pool for its tasks and webhooks)."""
+    global _SHARED
+    if _SHARED is None:
+        from geocert.settings import get_settings
+        from geocert.workers.celery_app import redis_url
+
+        _SHARED = JobStore.from_url(redis_url(), get_settings().result_ttl_s)
+    return _SHARED

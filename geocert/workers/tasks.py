@@ -20,21 +20,11 @@ from geocert.solvers.core.geometry import InputError
 from geocert.batch import assemble, job_stats, solve_items
 from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
-from geocert.workers.celery_app import celery_app, redis_url
-from geocert.workers.store import JobStore
+from geocert.workers.celery_app import celery_app
+from geocert.workers.store import JobStore, shared_store as store
 
 log = logging.getLogger("geocert.worker")
-_STORE: JobStore | None = None
-
-
-def store() -> JobStore:
-    global _STORE
-    if _STORE is None:
-        _STORE = JobStore.from_url(redis_url(), get_settings().result_ttl_s)
-    return _STORE
-
-
-class _Throttle:
+class ProgressPublisher:
     """Publishes a task's progress at most every ``interval`` seconds (always the last one)."""
 
     def __init__(self, jobs: JobStore, job_id: str, segment: int, interval: float):
@@ -58,8 +48,8 @@ class _Throttle:
 REDIS_GONE = (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError)
 
 
-@celery_app.task(name="geocert.solve_segment", bind=True, max_retries=5)
-def solve_segment(self, job_id: str, start: int, stop: int, request_id: str | None = None) -> None:
+@celery_app.task(name="geocert.solve_chunk", bind=True, max_retries=5)
+def solve_chunk(self, job_id: str, start: int, stop: int, request_id: str | None = None) -> None:
     """Solve items ``start`` to ``stop - 1`` of a job (or the first of them, within the budget).
 
     When Redis goes away under the task, the job is not failed (that needs Redis too): the task
@@ -68,7 +58,7 @@ def solve_segment(self, job_id: str, start: int, stop: int, request_id: str | No
     job without a live task and queues its missing chunks again."""
     with logs.context(job_id=job_id, request_id=request_id, items=f"{start}-{stop}"):
         try:
-            _solve_segment(job_id, start, stop, request_id)
+            _solve_chunk(job_id, start, stop, request_id)
         except REDIS_GONE as exc:
             log.warning("Redis went away under items %d-%d of job %s (%s): retrying", start, stop, job_id,
                         type(exc).__name__)
@@ -86,7 +76,7 @@ def _wait_for_redis(jobs: JobStore, limit_s: float) -> None:
             time.sleep(0.5)
 
 
-def _solve_segment(job_id: str, start: int, stop: int, request_id: str | None) -> None:
+def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> None:
     jobs = store()
     meta = jobs.get(job_id)
     if meta is None or not jobs.mark_running(job_id):
@@ -97,22 +87,22 @@ def _solve_segment(job_id: str, start: int, stop: int, request_id: str | None) -
         kind = get_kind(request["kind"])
         options = options_from(kind.options_type, request.get("options"))
         parsed = kind.parse(request["data"], items=range(start, stop))
-        throttle = _Throttle(jobs, job_id, start, settings.progress_interval_s)
+        publisher = ProgressPublisher(jobs, job_id, start, settings.progress_interval_s)
         began = time.monotonic()
-        items = solve_items(kind, parsed, options, range(start, stop), throttle, throttle.should_stop,
+        items = solve_items(kind, parsed, options, range(start, stop), publisher, publisher.should_stop,
                             stop_at=began + settings.chunk_time_budget_s)
         metrics.record_items(jobs.r, kind.name, items)
         done = jobs.save_items(job_id, start, items)
         cut = start + len(items)
         if cut < stop:  # over the budget: the rest of the chunk becomes a task of its own
             log.info("continuing items %d-%d in a new task", cut, stop)
-            jobs.add_task_ids(job_id, solve_segment.delay(job_id, cut, stop, request_id).id)
+            jobs.add_task_ids(job_id, solve_chunk.delay(job_id, cut, stop, request_id).id)
         elif done == meta["items_total"] and jobs.claim_finalisation(job_id):
             finalise(jobs, job_id, meta, kind, options)
     except InputError as exc:  # the API validates first, so this is a stored job gone bad
         fail(jobs, job_id, 422, "Invalid job data", str(exc), exc.field)
     except REDIS_GONE:
-        raise  # not the job's fault: retried (solve_segment), never recorded as its failure
+        raise  # not the job's fault: retried (solve_chunk), never recorded as its failure
     except Exception as exc:  # never lose the reason: the job keeps its error
         log.exception("items %d-%d of job %s failed", start, stop, job_id)
         fail(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,

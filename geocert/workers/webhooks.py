@@ -21,7 +21,7 @@ import httpx
 from geocert.settings import get_settings
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
-from geocert.workers.tasks import store
+from geocert.workers.store import shared_store as store
 
 log = logging.getLogger("geocert.webhooks")
 _SECRET_KEY = "geocert:webhook_secret"

@@ -65,17 +65,6 @@ ERRORS = {
 }
 
 
-def submit_chunks(store: JobStore, meta: dict, request_id: str | None) -> None:
-    """One task per chunk, so a batch runs in parallel across every worker (a Celery group)."""
-    from celery import group
-
-    from geocert.workers.tasks import solve_segment
-
-    signatures = [solve_segment.s(meta["id"], start, stop, request_id) for start, stop in meta["chunks"]]
-    result = group(signatures).apply_async()
-    store.add_task_ids(meta["id"], *(task.id for task in result.results))
-
-
 def error_responses(*codes: int) -> dict:
     """OpenAPI responses of a keyed, rate-limited route: 401, 403, 429, 503 and ``codes``."""
     return {code: ERRORS[code] for code in (401, 403, 429, 503) + codes}

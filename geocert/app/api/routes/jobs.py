@@ -14,7 +14,7 @@ from urllib.parse import urlencode
 from fastapi import APIRouter, Depends, Header, Query, Response
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
-from geocert.app.api.deps import Caller, JobStoreDep, error_responses, rate_limited, submit_chunks
+from geocert.app.api.deps import Caller, JobStoreDep, error_responses, rate_limited
 from geocert.settings import chunk_size_for, get_settings
 from geocert.app import lifecycle
 from geocert.app.problems import ApiProblem
@@ -22,6 +22,7 @@ from geocert.app.schemas import Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
 from geocert.batch import parse_job
 from geocert.workers import logs
+from geocert.workers.queue import submit_chunks, withdraw_queued
 from geocert.workers.store import TERMINAL, JobStore
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"], dependencies=[Depends(rate_limited)])
@@ -180,12 +181,7 @@ def cancel_job(job: OwnedJob, store: JobStoreDep):
         raise ApiProblem(409, f"job {job_id} has already ended ({job['status']}): there is nothing to cancel")
     store.request_cancel(job_id)
     if store.cancel_if_queued(job_id):
-        from geocert.workers.celery_app import celery_app
-        from geocert.workers.tasks import ended
-
-        for task_id in store.task_ids(job_id):
-            celery_app.control.revoke(task_id)
-        ended(store, job_id)
+        withdraw_queued(store, job_id)
     return store.document(store.get(job_id))
 
 
