@@ -3,15 +3,33 @@ importing the tasks' solver code at module level."""
 
 from __future__ import annotations
 
+import threading
+
 from geocert.workers.store import JobStore
+
+_LOCK = threading.Lock()
+_SOLVE_CHUNK = None
+
+
+def _solve_chunk_task():
+    """The solve task, resolved once under a lock: Celery's task objects are lazy proxies whose
+    first evaluation is not thread-safe, and the API submits from many threads at once (a burst
+    of first submissions answered 500 with AttributeError: 'PromiseProxy' ... '_Proxy__local')."""
+    global _SOLVE_CHUNK
+    with _LOCK:
+        if _SOLVE_CHUNK is None:
+            from geocert.workers.tasks import solve_chunk
+
+            solve_chunk.name  # noqa: B018 (evaluates the proxy here, under the lock)
+            _SOLVE_CHUNK = solve_chunk
+    return _SOLVE_CHUNK
 
 
 def submit_chunks(store: JobStore, meta: dict, request_id: str | None) -> None:
     """One task per chunk, so a batch runs in parallel across every worker (a Celery group)."""
     from celery import group
 
-    from geocert.workers.tasks import solve_chunk
-
+    solve_chunk = _solve_chunk_task()
     signatures = [solve_chunk.s(meta["id"], start, stop, request_id) for start, stop in meta["chunks"]]
     result = group(signatures).apply_async()
     store.add_task_ids(meta["id"], *(task.id for task in result.results))
