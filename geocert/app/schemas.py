@@ -15,7 +15,8 @@ from geocert.kinds.schema import Camera, Finite, Strict
 REQUEST_MODELS = {kind.name: kind.request_model for kind in KINDS}
 JobRequest = Annotated[Union[tuple(REQUEST_MODELS.values())], Field(discriminator="kind")]
 JOB_REQUEST = TypeAdapter(JobRequest)
-JobResult = Union[tuple(dict.fromkeys(kind.result_model for kind in KINDS))]
+RESULT_MODELS = tuple(dict.fromkeys(kind.result_model for kind in KINDS))  # kinds may share one
+JobResult = Union[RESULT_MODELS]
 
 JOB_STATUSES = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 

@@ -10,7 +10,7 @@ from fastapi import APIRouter, Body, Depends
 from geocert.app.api.deps import JobStoreDep, error_responses, rate_limited
 from geocert.app.api.routes.jobs import OwnedJob
 from geocert.app.problems import ApiProblem
-from geocert.app.schemas import VerifyReport
+from geocert.app.schemas import RESULT_MODELS, VerifyReport
 from geocert.kinds.schema import CertificateDocument
 from geocert.solvers import verify
 from geocert.workers.store import TERMINAL
@@ -32,8 +32,7 @@ def job_certificate(job: OwnedJob, store: JobStoreDep):
 
 _VERIFIABLE = {
     "anyOf": [{"$ref": "#/components/schemas/CertificateDocument"},
-              {"$ref": "#/components/schemas/TriangulationResult"},
-              {"$ref": "#/components/schemas/MapsResult"},
+              *({"$ref": f"#/components/schemas/{model.__name__}"} for model in RESULT_MODELS),  # from the registry
               {"$ref": "#/components/schemas/Job"},
               {"type": "object", "description": "any other object: answered with valid = false and the reason"}],
     "description": "a certificate document, a result carrying one (geocert solve's output, or a job's result) "
