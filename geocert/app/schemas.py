@@ -85,20 +85,6 @@ class WebhookState(BaseModel):
     delivered_at: float | None = None
 
 
-class Job(BaseModel):
-    id: str
-    kind: str
-    status: JOB_STATUSES
-    created_at: float
-    started_at: float | None
-    finished_at: float | None
-    progress: JobProgress
-    result: JobResult | None = None
-    error: ProblemDetails | None = None
-    webhook: WebhookState | None = None
-    links: dict[str, str]
-
-
 class JobSummary(BaseModel):
     """A job in a listing: its state and progress, without the result (GET its ``self`` link)."""
 
@@ -110,6 +96,12 @@ class JobSummary(BaseModel):
     finished_at: float | None
     progress: JobProgress
     links: dict[str, str]
+
+
+class Job(JobSummary):
+    result: JobResult | None = None
+    error: ProblemDetails | None = None
+    webhook: WebhookState | None = None
 
 
 class JobList(BaseModel):

@@ -73,10 +73,15 @@ class JobStore:
     def set_fields(self, job_id: str, **fields: Any) -> None:
         self.r.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in fields.items()})
 
+    _SUMMARY = ("id", "kind", "status", "created_at", "started_at", "finished_at", "progress")
+
+    def summary(self, meta: dict) -> dict:
+        """The job as a listing shows it: its state and progress, no result."""
+        return {key: meta.get(key) for key in self._SUMMARY} | {"links": self.links(meta["id"])}
+
     def document(self, meta: dict) -> dict:
         """The job as the API shows it (and as webhooks deliver it)."""
-        document = {key: meta.get(key) for key in ("id", "kind", "status", "created_at", "started_at", "finished_at",
-                                                   "progress", "error", "webhook")}
+        document = {key: meta.get(key) for key in self._SUMMARY + ("error", "webhook")}
         document["result"] = self.result(meta["id"]) if meta["status"] in TERMINAL else None
         document["links"] = self.links(meta["id"])
         return document

@@ -8,7 +8,7 @@ import hashlib
 import json
 import math
 import re
-from typing import Annotated, Literal
+from typing import Annotated
 from urllib.parse import urlencode
 
 from fastapi import APIRouter, Depends, Header, Query, Response
@@ -18,7 +18,7 @@ from geocert.app.api.deps import Caller, JobStoreDep, error_responses, rate_limi
 from geocert.settings import chunk_size_for, get_settings
 from geocert.app import lifecycle
 from geocert.app.problems import ApiProblem
-from geocert.app.schemas import Job, JobList, JobRequest
+from geocert.app.schemas import JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
 from geocert.batch import parse_job
 from geocert.workers import logs
@@ -147,7 +147,7 @@ def list_jobs(
     owner: Caller,
     limit: Annotated[int, Query(ge=1, le=100, description="jobs per page")] = 20,
     cursor: Annotated[str | None, Query(max_length=200, description="next_cursor of the previous page")] = None,
-    status: Annotated[list[Literal["queued", "running", "succeeded", "failed", "cancelled"]] | None, Query(
+    status: Annotated[list[JOB_STATUSES] | None, Query(
         description="only jobs in this status (repeat for several)")] = None,
 ):
     """The caller's jobs, newest first, a page at a time: follow ``next_cursor`` (or the ``next``
@@ -161,9 +161,7 @@ def list_jobs(
         query = [("limit", str(limit)), ("cursor", next_cursor)] + [("status", s) for s in status or ()]
         next_link = "/v1/jobs?" + urlencode(query)
         response.headers["Link"] = f'<{next_link}>; rel="next"'
-    jobs = [{key: meta.get(key) for key in ("id", "kind", "status", "created_at", "started_at", "finished_at",
-                                              "progress")} | {"links": store.links(meta["id"])} for meta in metas]
-    return {"jobs": jobs, "next_cursor": next_cursor, "links": {"next": next_link}}
+    return {"jobs": [store.summary(meta) for meta in metas], "next_cursor": next_cursor, "links": {"next": next_link}}
 
 
 @router.get("/{job_id}", response_model=Job, responses=error_responses(404))
