@@ -62,9 +62,6 @@ class Registry:
         self._kinds[kind.name] = kind
         return kind
 
-    def unregister(self, name: str) -> None:
-        self._kinds.pop(name, None)
-
     def get(self, name: Any) -> ProblemKind:
         if not isinstance(name, str) or name not in self._kinds:
             raise InputError("kind", f"unknown problem kind {name!r} (served: {', '.join(self._kinds)})")

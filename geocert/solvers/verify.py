@@ -20,9 +20,8 @@ import numpy as np
 
 from geocert.solvers.core.certificates import (BOUND_TOLERANCE, FORMAT, OBJECTIVE_TOLERANCE, VERSION, data_hash,
                                                problem_hash)
-from geocert.solvers.core.geometry import norm_cost
+from geocert.solvers.core.geometry import InputError, norm_cost
 from geocert.solvers.core.strict import Invalid, nesting_depth, number as _number
-from geocert.solvers.fractional.relaxation import NORMS
 from geocert.solvers.fractional.results import claim_of
 
 MAX_DEPTH = 64
@@ -49,36 +48,39 @@ class Report:
 
 # --- the problem: options, data, one item ---------------------------------------------------
 
-def checked_options(options: Any) -> dict:
-    """The options a claim depends on, validated as the solver validates them: the norm, the
-    scope (max_residual: every residual's pixel distance within it) and the gap tolerances."""
+def checked_options(kind: str, options: Any) -> dict:
+    """The options a claim depends on (the norm, the scope: max_residual, each residual's pixel
+    distance, and the gap tolerances), read strictly and validated by the kind's own options
+    class, exactly as the solver validates them."""
     if not isinstance(options, dict):
         raise Invalid("options", "options must be an object")
     norm = options.get("norm")
-    if norm not in NORMS:
-        raise Invalid("options", f"norm {norm!r} is not one of {NORMS}")
+    if not isinstance(norm, str):
+        raise Invalid("options", f"options/norm must be a string, got {norm!r:.40}")
     checked = {"norm": norm}
     for name in ("rel_gap", "abs_gap"):
-        value = _number(options.get(name), f"options/{name}", "options")
-        if value < 0:
-            raise Invalid("options", f"options/{name} must be >= 0")
-        checked[name] = value
+        checked[name] = _number(options.get(name), f"options/{name}", "options")
     max_residual = options.get("max_residual")
-    if max_residual is not None:
-        max_residual = _number(max_residual, "options/max_residual", "options")
-        if not max_residual > 0:
-            raise Invalid("options", "options/max_residual must be > 0")
-    checked["max_residual"] = max_residual
+    checked["max_residual"] = None if max_residual is None else _number(max_residual, "options/max_residual", "options")
+    try:
+        _kind(kind).options_type(**checked).check()
+    except InputError as exc:
+        raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
     return checked
 
 
-def _adapter(kind: Any):
-    """The kind's verification adapter, from the registry; a kind not served is invalid."""
+def _kind(kind: Any):
+    """The kind, from the registry; a kind not served is invalid."""
     from geocert.kinds import KINDS  # the registry imports no conic solver either
 
     if kind not in KINDS:
         raise Invalid("format", f"kind {kind!r} is not served (served: {', '.join(KINDS.names())})")
-    return KINDS.get(kind).verification
+    return KINDS.get(kind)
+
+
+def _adapter(kind: Any):
+    """The kind's verification adapter."""
+    return _kind(kind).verification
 
 
 def scope_statement(kind: str, options: dict) -> dict:
@@ -147,7 +149,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
             raise Invalid("format", f"the document nests deeper than {MAX_DEPTH} levels")
         items = _document_items(document)
         tallies["format"][0] += 1
-        options = checked_options(document["options"])
+        options = checked_options(document["kind"], document["options"])
         tallies["options"][0] += 1
         _check_hashes(document, options)
         tallies["data_hash"][0] += 1
@@ -221,9 +223,7 @@ RETURNED_FIELDS = ("status", "certified", "cost", "lower_bound", "gap")
 
 
 def _check_returned(result: dict, certificate: dict) -> None:
-    from geocert.kinds import KINDS
-
-    kind = KINDS.get(certificate["kind"])
+    kind = _kind(certificate["kind"])
     key = kind.item_key
     if result.get("kind") != certificate["kind"] or result.get("norm") != certificate["options"].get("norm"):
         raise Invalid("returned", "the result's kind or norm differs from its certificate's")
@@ -250,7 +250,7 @@ def verify_arrays(kind: str, arrays: tuple, options: dict, claim: dict) -> tuple
     """verify_item on one item's raw arrays: (cameras of the views, points) for triangulation,
     (source, target) for maps. Also returns the lower bound the proof establishes (caller's
     units)."""
-    options = checked_options(options)
+    options = checked_options(kind, options)
     norm = options["norm"]
     adapter = _adapter(kind)
     item = adapter.item(arrays, norm)

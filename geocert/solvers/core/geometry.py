@@ -22,7 +22,8 @@ class InputError(ValueError):
 COORDINATE_LIMIT = 1e9
 
 
-def _is_number(x) -> bool:
+def is_number(x) -> bool:
+    """A finite JSON number: a float or an int (never a bool or a string)."""
     if type(x) is float:  # not bool, not str
         return math.isfinite(x)
     return type(x) is int and abs(x) < 2**1023
@@ -46,7 +47,7 @@ def number_array(value, field: str, what: str, ndim: int, limit: float | None = 
         if not isinstance(row, list):
             raise InputError(where, f"must be {what}")
         for j, x in enumerate(row):
-            if not _is_number(x):
+            if not is_number(x):
                 kind = "a string" if isinstance(x, str) else "a boolean" if isinstance(x, bool) else \
                     "not finite" if isinstance(x, float) else f"a {type(x).__name__}"
                 raise InputError(f"{where}/{j}", f"must be a finite number, got {kind}")

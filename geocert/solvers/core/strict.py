@@ -4,12 +4,12 @@ naming the verifier's check and what was wrong."""
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
 from geocert.solvers.core.bnb import Box
+from geocert.solvers.core.geometry import InputError, is_number, number_array
 
 
 class Invalid(Exception):
@@ -21,30 +21,20 @@ class Invalid(Exception):
 
 
 def number(value: Any, name: str, check: str = "format") -> float:
-    if type(value) is float:
-        if math.isfinite(value):
-            return value
-    elif type(value) is int and abs(value) < 2**1023:
-        return float(value)
-    raise Invalid(check, f"{name} must be a finite JSON number, got {value!r:.40}")
+    if not is_number(value):
+        raise Invalid(check, f"{name} must be a finite JSON number, got {value!r:.40}")
+    return float(value)
 
 
 def numbers(value: Any, name: str, shape: tuple[int | None, ...], check: str = "format") -> np.ndarray:
-    """Nested lists of finite JSON numbers of the given shape (None: any length)."""
-    def walk(v, level: int, where: str):
-        if level == len(shape):
-            return number(v, where, check)
-        if not isinstance(v, list) or (shape[level] is not None and len(v) != shape[level]):
-            size = "a list" if shape[level] is None else f"a list of {shape[level]}"
-            raise Invalid(check, f"{where} must be {size}")
-        return [walk(x, level + 1, f"{where}/{i}") for i, x in enumerate(v)]
-    rows = walk(value, 0, name)
+    """Nested lists of finite JSON numbers of the given shape (None: any length): the parser's
+    strict reader (geometry.number_array), its refusal turned into the verifier's."""
     try:
-        array = np.array(rows, dtype=float)
-    except ValueError as exc:
-        raise Invalid(check, f"{name}: rows of different lengths") from exc
-    if array.ndim != len(shape):
-        raise Invalid(check, f"{name}: rows of different lengths")
+        array = number_array(value, name, f"nested lists of numbers of shape {shape}", len(shape))
+    except InputError as exc:
+        raise Invalid(check, f"{exc.field}: {exc.reason}") from exc
+    if any(expected is not None and size != expected for size, expected in zip(array.shape, shape)):
+        raise Invalid(check, f"{name} has shape {list(array.shape)}, not {list(shape)}")
     return array
 
 

@@ -101,7 +101,7 @@ def _map_result(chart: MapChart, source, target, v, options, status, lower, node
     cost = norm_cost(residuals, options.norm)  # recomputed from the caller's data
     if lower is not None:
         lower = min(lower, cost)
-    status, reason = recomputed_status(status, cost, lower, options.rel_gap, options.abs_gap)
+    status, reason = recomputed_status(status, residuals, cost, lower, options)
     return MapResult(status=status, certified=status == "optimal" and lower is not None, matrix=M.tolist(), reason=reason,
                      residuals=residuals.tolist(), cost=cost, lower_bound=lower,
                      gap=cost - lower if lower is not None else None, nodes=nodes, certificate=certificate)

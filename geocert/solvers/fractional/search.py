@@ -63,8 +63,8 @@ def branch_directions(program: FractionalProgram, subspace: np.ndarray) -> np.nd
 def depth_subspace(program: FractionalProgram) -> np.ndarray:
     """Orthonormal rows spanning the gradients of the depths that vary (the whole space when
     none does). Only along these do the envelopes need bounds: a search branches on them alone,
-    and the directions it leaves out are bounded by the residual cones (and, with a full
-    certificate, by proven root bounds). Directions below round-off are left out."""
+    and the directions it leaves out are bounded by the root region's proven bounds. Directions
+    below round-off are left out."""
     gradients = program.den[~program.exact, :-1]
     if len(gradients):
         _, singular, vt = np.linalg.svd(gradients)
@@ -131,8 +131,7 @@ def prove_root(region: tuple[np.ndarray, np.ndarray, ConeSpec], gamma: float, F:
     lower, upper = root_bounds(region, F, duals, claim_lo, claim_hi)
     if not (np.all(claim_lo < lower) and np.all(upper < claim_hi) and np.all(lower <= upper)):
         return None
-    # Padded like the uncertified region (looser than proven, so still proven): both searches
-    # then start from the same box.
+    # Padded a little (looser than proven, so still proven).
     pad = 1e-7 * (1 + np.abs(lower) + np.abs(upper))
     return RootProof(gamma, F, claim_lo, claim_hi, lower - pad, upper + pad, duals)
 
@@ -260,11 +259,11 @@ class BoxProblem:
     def bound(self, box: Box, upper_bound: float) -> BoxBound:
         data = self.conic_data(box, upper_bound)
         if data is None:  # some depth is negative on the whole box
-            return BoxBound(BoxStatus.EMPTY, proof=self._proof(box, upper_bound, "depth", None, math.inf))
+            return BoxBound(BoxStatus.EMPTY, proof=LeafProof(box, upper_bound, "depth", None, math.inf))
         result = self._solver.solve(data.q, data.A, data.b, data.cones)
         if result.status is ConicStatus.INFEASIBLE:
             if proves_infeasible(data.A, data.b, data.cones, result.z, data.lower, data.upper, data.transform):
-                return BoxBound(BoxStatus.EMPTY, proof=self._proof(box, upper_bound, "farkas", result.z, math.inf))
+                return BoxBound(BoxStatus.EMPTY, proof=LeafProof(box, upper_bound, "farkas", result.z, math.inf))
             return BoxBound(BoxStatus.UNRESOLVED)
         if result.status is not ConicStatus.OPTIMAL:
             return BoxBound(BoxStatus.UNRESOLVED)
@@ -274,7 +273,7 @@ class BoxProblem:
         if not math.isfinite(safe):
             return BoxBound(BoxStatus.UNRESOLVED, candidate=candidate, split_hint=self.B @ v)
         return BoxBound(BoxStatus.BOUNDED, safe, candidate, self.B @ v,
-                        self._proof(box, upper_bound, "dual", result.z, safe))
+                        LeafProof(box, upper_bound, "dual", result.z, safe))
 
     def _candidate(self, v: np.ndarray) -> np.ndarray | None:
         """The relaxation's point as a candidate incumbent. It often lies on the domain's boundary
@@ -288,9 +287,6 @@ class BoxProblem:
                 if math.isfinite(self.program.cost(w)):
                     return w
         return None
-
-    def _proof(self, box: Box, upper_bound: float, kind: str, z, bound: float) -> LeafProof:
-        return LeafProof(box, upper_bound, kind, z, bound)
 
     def tighten(self, box: Box, upper_bound: float, rounds: int) -> Box:
         """Shrink ``box`` to the range of ``z = B v`` over the relaxation's points costing at most
@@ -353,9 +349,9 @@ class Prepared:
     problem: BoxProblem
     incumbent: np.ndarray
     upper: float  # the incumbent's scaled cost (inf when outside the user's bound)
-    scale: float = 1.0  # the residuals' factor
-    root_proof: RootProof | None = None
-    reasons: Reasons | None = None
+    scale: float  # the residuals' factor
+    root_proof: RootProof
+    reasons: Reasons
 
     @property
     def unit(self) -> float:
@@ -450,15 +446,21 @@ def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.n
     return Prepared(problem, v0, upper, factor, root_proof, reasons)
 
 
-def recomputed_status(status: str, cost: float, lower: float | None, rel_gap: float,
-                      abs_gap: float) -> tuple[str, str | None]:
-    """The status of a solution whose cost was recomputed from the raw data at the point as
-    returned (rounded from the search's variables): "optimal" stays only when that cost is
-    still within the tolerance of the proven bound."""
-    if status != "optimal" or lower is None or cost - lower <= max(abs_gap, rel_gap * cost):
+def recomputed_status(status: str, residuals: np.ndarray, cost: float, lower: float | None,
+                      options: FractionalOptions) -> tuple[str, str | None]:
+    """The status of a solution whose residuals and cost were recomputed from the raw data at
+    the point as returned (rounded from the search's variables), as the verifier recomputes
+    them: "optimal" stays only when that cost is still within the tolerance of the proven bound
+    and every residual still within max_residual."""
+    if status != "optimal" or lower is None:
         return status, None
-    return "not_certified", (f"the solution's cost recomputed from the data, {cost!r}, is not within the "
-                             f"tolerance of the proven bound {lower!r}")
+    if cost - lower > max(options.abs_gap, options.rel_gap * cost):
+        return "not_certified", (f"the solution's cost recomputed from the data, {cost!r}, is not within the "
+                                 f"tolerance of the proven bound {lower!r}")
+    if options.max_residual is not None and not np.all(lengths(residuals, 1) <= options.max_residual):
+        return "not_certified", ("the solution as returned has a residual beyond max_residual "
+                                 f"{options.max_residual!r} once recomputed from the data")
+    return status, None
 
 
 @dataclass

@@ -105,7 +105,7 @@ def _track_result(chart: Chart, cameras, points, y, options, status, lower, node
     cost = norm_cost(residuals, options.norm)  # recomputed in pixels from the original data
     if lower is not None:
         lower = min(lower, cost)
-    status, reason = recomputed_status(status, cost, lower, options.rel_gap, options.abs_gap)
+    status, reason = recomputed_status(status, residuals, cost, lower, options)
     return TrackResult(status=status, certified=status == "optimal" and lower is not None, point=point, reason=reason,
                        at_infinity=bool(at_infinity), cost=cost, lower_bound=lower,
                        gap=cost - lower if lower is not None else None, nodes=nodes,
