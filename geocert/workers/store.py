@@ -189,11 +189,15 @@ class JobStore:
     def save_progress(self, job_id: str, segment: int, progress: dict) -> dict:
         """Record the progress of the task that started at item ``segment`` and return (and
         publish) the job's aggregate over all its tasks."""
-        self.r.hset(self.key(job_id, "chunkprogress"), str(segment), json.dumps(progress))
-        self.touch(job_id)
-        parts = [json.loads(v) for v in self.r.hvals(self.key(job_id, "chunkprogress"))]
-        total = self.field(job_id, "items_total")
-        started = self.field(job_id, "started_at") or now()
+        pipe = self.r.pipeline()  # one round trip: this runs on every progress event of every task
+        pipe.hset(self.key(job_id, "chunkprogress"), str(segment), json.dumps(progress))
+        pipe.zadd(self.RUNNING, {job_id: now()})  # touch()
+        pipe.hvals(self.key(job_id, "chunkprogress"))
+        pipe.hmget(self.key(job_id), "items_total", "started_at")
+        _, _, raw_parts, (raw_total, raw_started) = pipe.execute()
+        parts = [json.loads(v) for v in raw_parts]
+        total = None if raw_total is None else json.loads(raw_total)
+        started = (None if raw_started is None else json.loads(raw_started)) or now()
         gaps = [p["gap_rel"] for p in parts if p.get("gap_rel") is not None]
         aggregate = {
             "nodes": sum(p["nodes"] for p in parts),
@@ -218,7 +222,7 @@ class JobStore:
         pipe = self.r.pipeline()
         pipe.hset(self.key(job_id, "items"), mapping={str(start + i): json.dumps(item) for i, item in enumerate(items)})
         pipe.hlen(self.key(job_id, "items"))
-        pipe.zadd(self.RUNNING, {job_id: now()})
+        pipe.zadd(self.RUNNING, {job_id: now()})  # touch()
         return pipe.execute()[1]
 
     def claim_finalisation(self, job_id: str) -> bool:
