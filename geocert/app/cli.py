@@ -100,14 +100,12 @@ def _die_with_parent() -> None:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    from pydantic import ValidationError as SettingsError
-
     from geocert.settings import get_settings
     from geocert.app.core.security import is_loopback, parse_keys
 
     try:
         keys = parse_keys(get_settings().api_keys)
-    except (ValueError, SettingsError) as exc:
+    except (ValueError, ValidationError) as exc:  # a malformed key or setting
         print(f"geocert serve: {exc}", file=sys.stderr)
         return 2
     if not keys and not is_loopback(args.host):

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 from typing import Any
 
-import redis
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
@@ -13,6 +12,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from geocert.solvers.core.geometry import InputError
 from geocert.kinds import KINDS
+from geocert.workers.store import REDIS_GONE
 
 PROBLEM_JSON = "application/problem+json"
 REDIS_RETRY_AFTER_S = 5  # Retry-After of a 503 while Redis does not answer
@@ -141,7 +141,7 @@ def install(app: FastAPI) -> None:
                        f"the job store (Redis) is not answering ({type(exc).__name__}); retry shortly",
                        instance=str(request.url.path), headers={"Retry-After": str(REDIS_RETRY_AFTER_S)})
 
-    for unavailable in (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError):  # BusyLoadingError too
+    for unavailable in REDIS_GONE:
         app.add_exception_handler(unavailable, redis_unavailable)
 
     @app.exception_handler(Exception)

@@ -18,6 +18,8 @@ from typing import Any, Iterator
 import redis
 
 TERMINAL = ("succeeded", "failed", "cancelled")
+# Redis restarting, loading its append-only file or unreachable (BusyLoadingError is a ConnectionError).
+REDIS_GONE = (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError)
 _STREAM_MAXLEN = 2000
 
 

@@ -13,17 +13,17 @@ import logging
 import time
 import traceback
 
-import redis
-
 from geocert.settings import get_settings
 from geocert.solvers.core.geometry import InputError
 from geocert.batch import assemble, job_stats, solve_items
 from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
-from geocert.workers.store import JobStore, shared_store as store
+from geocert.workers.store import REDIS_GONE, JobStore, shared_store as store
 
 log = logging.getLogger("geocert.worker")
+
+
 class ProgressPublisher:
     """Publishes a task's progress at most every ``interval`` seconds (always the last one)."""
 
@@ -43,9 +43,6 @@ class ProgressPublisher:
             self.cancel_checked = time.monotonic()
             self.cancelled = self.jobs.cancel_requested(self.job_id)
         return self.cancelled
-
-
-REDIS_GONE = (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError)
 
 
 @celery_app.task(name="geocert.solve_chunk", bind=True, max_retries=5)
