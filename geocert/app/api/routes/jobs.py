@@ -28,7 +28,8 @@ from geocert.workers.store import TERMINAL, JobStore
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"], dependencies=[Depends(rate_limited)])
 
 
-def _check_limits(kind, parsed, body, request: dict) -> None:
+def _check_limits(kind, parsed, body, request: dict) -> int:
+    """Raises on a limit passed (lowering default options to the server's maxima); returns the item count."""
     settings = get_settings()
     items = kind.count(parsed)
     if items > settings.max_items_per_job:
@@ -47,6 +48,7 @@ def _check_limits(kind, parsed, body, request: dict) -> None:
             raise ApiProblem(422, f"exceeds this server's maximum of {maximum:g}{unit} per item (GEOCERT_{variable})",
                              f"options/{name}")
         options[name] = maximum  # a default above the server's maximum is lowered to it
+    return items
 
 
 @router.post("", status_code=202, response_model=Job, responses={
@@ -64,14 +66,14 @@ def submit_job(
     """Queue a job; answers 202 with its id and a Location to poll."""
     request = body.model_dump(mode="json")  # validated by its kind's model (discriminated on "kind")
     kind, parsed, _ = parse_job(request)  # the solvers' own checks: rank, indices, duplicates
-    _check_limits(kind, parsed, body, request)
+    items = _check_limits(kind, parsed, body, request)
     digest = hashlib.sha256(json.dumps(request, sort_keys=True).encode()).hexdigest()
     if idempotency_key is not None:
         earlier = store.remember_idempotent(owner, idempotency_key, digest)
         if earlier is not None:
             return _replay(store, earlier, digest, response)
     try:
-        meta = _create(store, owner, kind, request, kind.count(parsed))
+        meta = _create(store, owner, kind, request, items)
     except BaseException:
         if idempotency_key is not None:
             store.settle_idempotent(owner, idempotency_key, digest, None)  # free the key for a retry
