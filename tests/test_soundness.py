@@ -8,7 +8,6 @@ import json
 import math
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -335,7 +334,7 @@ class TestNoCrashNoExhaustion:
         doc["data"]["extra"] = nested
         assert failed_check(doc) == "format"
 
-    def test_unserved_dimensions_are_refused_fast(self):
+    def test_unserved_dimensions_are_refused_before_any_program_is_built(self, monkeypatch):
         rng = np.random.default_rng(3)
         source = rng.normal(size=(40, 2)).tolist()
         target = rng.normal(size=(40, 18)).tolist()
@@ -345,9 +344,14 @@ class TestNoCrashNoExhaustion:
                "items": [{"index": 0, "status": "optimal", "certified": True, "cost": 1.0, "gap": 0.0,
                           "lower_bound": 1.0, "matrix": np.eye(19, 3).tolist(), "proof": {"type": "trivial"}}]}
         rehash(doc)
-        start = time.perf_counter()
+        # The old verifier built this 18-dimensional program (2^18 rows, 18 s and 7 GB); now the
+        # data are refused as they are read, and no chart is ever built.
+        from geocert.solvers.fractional import items
+
+        def never(*args, **kwargs):
+            raise AssertionError("a program was built for a kind or dimension not served")
+        monkeypatch.setattr(items.MapChart, "build", never)
         assert failed_check(doc) == "data"
-        assert time.perf_counter() - start < 1.0
 
     def test_l1_relaxations_grow_linearly_with_the_dimension(self):
         from geocert.solvers.fractional.charts import MapChart
@@ -503,13 +507,17 @@ class TestHostileReview:
             assert track["status"] == "not_certified" and track["reason"]
 
     def test_many_views_cost_linear_memory(self):
-        import resource
+        import tracemalloc
         rng = np.random.default_rng(2)
         cameras = random_cameras(rng, 1000, spread=20.0)
         points = project(cameras, np.array([0.1, 0.0, 0.2, 1.0]))
-        before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        # numpy reports its buffers to tracemalloc. Views^2 arrays of 1000 views held at once
+        # (the old reference choice) peak at 72 MB (measured); in blocks, a few MB.
+        tracemalloc.start()
         Chart.build(cameras, points, "L2L2")
-        assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 200_000  # kB
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        assert peak < 20e6
         job = readme_job()
         job["data"]["cameras"] = [CAMERAS[0]] * 1001
         job["data"]["tracks"][0] = {"views": list(range(1001)), "points": [[1.0, 1.0]] * 1001}
@@ -517,16 +525,21 @@ class TestHostileReview:
             parse_job(job)
         assert "limit of 1000" in error.value.reason
 
-    def test_coverage_takes_n_log_n_time(self, genuine):
+    def test_coverage_needs_no_subtraction_for_a_tree_of_leaves(self, genuine, monkeypatch):
         doc = copy.deepcopy(genuine["certificate"])
         proof = doc["items"][0]["proof"]
         lo, hi = np.array(proof["search_box"][0]), np.array(proof["search_box"][1])
         starts = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.01, 0.99, 8000)[None, :]
         proof["leaves"] = [[starts[:, i].tolist(), (starts[:, i] + 1e-9 * (hi - lo)).tolist(), None]
                            for i in range(8000)]
-        start = time.perf_counter()
+        # Disjoint leaves are split apart by planes (n log n a level): the quadratic subtraction
+        # that took 13 minutes on 8000 leaves is never reached.
+        from geocert.solvers.fractional import proof as proof_module
+
+        def never(*args, **kwargs):
+            raise AssertionError("leaves separable by planes were subtracted one by one")
+        monkeypatch.setattr(proof_module, "_subtracted", never)
         assert failed_check(doc) == "coverage"
-        assert time.perf_counter() - start < 5.0
         # A genuine partition into many slabs is still recognised as covering.
         cuts = np.linspace(lo[0], hi[0], 5001)
         cuts[-1] = hi[0]
@@ -597,7 +610,7 @@ class TestHostileReviewRoundTwo:
         moved["items"][0]["proof"]["tightening"].append(widened)
         assert failed_check(moved) == "tightening"
 
-    def test_leaves_no_plane_separates_are_bounded_work(self):
+    def test_leaves_no_plane_separates_are_subtracted_within_a_budget(self, monkeypatch):
         # A pinwheel (no separating plane) with many small leaves in its hole, then fillers.
         lo, hi = np.zeros(2), np.ones(2)
         pinwheel = [([0, 0], [0.6, 0.4]), ([0.6, 0], [1, 0.6]), ([0.4, 0.6], [1, 1]), ([0, 0.4], [0.4, 1])]
@@ -609,10 +622,13 @@ class TestHostileReviewRoundTwo:
         boxes += [(np.array([0.01, 0.01]), np.array([0.02, 0.02]))] * 5000
         leaves_lo = np.array([b[0] for b in boxes])
         leaves_hi = np.array([b[1] for b in boxes])
-        start = time.perf_counter()
         assert uncovered_part(Box(lo, hi), leaves_lo, leaves_hi) is not None
-        assert time.perf_counter() - start < 5.0
-        # The pinwheel with its hole filled covers, and is recognised.
+        # The pinwheel with its hole filled covers, and is recognised; with a budget below the
+        # work it takes, the same cover is "not shown covered" (refused): the budget is enforced,
+        # so the hostile document above stops after MAX_WORK leaf-piece tests (83 s before it).
+        from geocert.solvers.fractional import proof as proof_module
         full = np.array([[0, 0], [0.6, 0], [0.4, 0.6], [0, 0.4], [0.4, 0.4]], float)
         full_hi = np.array([[0.6, 0.4], [1, 0.6], [1, 1], [0.4, 1], [0.6, 0.6]], float)
         assert uncovered_part(Box(lo, hi), full, full_hi) is None
+        monkeypatch.setattr(proof_module, "MAX_WORK", 3)
+        assert uncovered_part(Box(lo, hi), full, full_hi) is not None
