@@ -9,7 +9,7 @@ import httpx
 import pytest
 import numpy as np
 
-from .servers import cluster
+from .servers import SHORT_TASKS, cluster, wait_until_done
 from .support import service_job as triangulation_job
 
 
@@ -17,16 +17,10 @@ pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run o
 
 
 def test_a_worker_killed_mid_job_leaves_its_work_to_another(tmp_path):
-    # Short task budgets so the visibility timeout can be short (it must exceed budget + item
-    # limit + 5 s); the defaults (20 s, 60 s, 90 s) give redelivery within about 95 s.
     body = triangulation_job(np.random.default_rng(77), tracks=1200, views=5)
-    with cluster(tmp_path, workers=2, geocert_chunk_sizes='{"triangulation": 60}', geocert_chunk_time_budget_s="2",
-                 geocert_max_item_time_limit_s="10", geocert_visibility_timeout_s="20") as (running, client):
+    with cluster(tmp_path, workers=2, **SHORT_TASKS) as (running, client):
         job_id = client.post("/v1/jobs", json=body).json()["id"]
-        deadline = time.monotonic() + 120
-        while client.get(f"/v1/jobs/{job_id}").json()["progress"]["tracks_done"] < 200:
-            assert time.monotonic() < deadline, "the job did not get going"
-            time.sleep(0.05)
+        wait_until_done(client, job_id, 200)
         running.kill(running.workers[0])  # SIGKILL to its whole process group, mid-chunk
         killed_at = time.monotonic()
         while (job := client.get(f"/v1/jobs/{job_id}").json())["status"] not in ("succeeded", "failed", "cancelled"):

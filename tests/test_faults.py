@@ -13,7 +13,7 @@ import httpx
 import numpy as np
 import pytest
 
-from .servers import cluster
+from .servers import SHORT_TASKS, cluster, wait_until_done
 from .support import service_job as triangulation_job
 
 pytestmark = pytest.mark.slow  # real servers: the full run only
@@ -180,13 +180,9 @@ def test_a_redis_restart_under_a_running_job_strands_nothing(tmp_path):
     from geocert.workers.redis_server import start_embedded_redis
 
     body = triangulation_job(np.random.default_rng(21), tracks=600, views=5)
-    with cluster(tmp_path, workers=2, geocert_chunk_sizes='{"triangulation": 60}', geocert_chunk_time_budget_s="2",
-                 geocert_max_item_time_limit_s="10", geocert_visibility_timeout_s="20") as (running, client):
+    with cluster(tmp_path, workers=2, **SHORT_TASKS) as (running, client):
         job_id = client.post("/v1/jobs", json=body).json()["id"]
-        deadline = time.monotonic() + 120
-        while client.get(f"/v1/jobs/{job_id}").json()["progress"]["tracks_done"] < 120:
-            assert time.monotonic() < deadline, "the job did not get going"
-            time.sleep(0.05)
+        wait_until_done(client, job_id, 120)
         running.redis.send_signal(signal.SIGTERM)
         running.redis.wait(timeout=20)
         statuses = set()
