@@ -114,7 +114,7 @@ class TestListing:
 
     @staticmethod
     def pages(client, query: str, headers: dict) -> list[dict]:
-        listed, url, links = [], f"/v1/jobs?{query}", []
+        listed, url = [], f"/v1/jobs?{query}"
         while url:
             response = client.get(url, headers=headers)
             assert response.status_code == 200, response.text
@@ -124,7 +124,6 @@ class TestListing:
             assert (page["next_cursor"] is None) == (url is None)
             if url:
                 assert response.headers["Link"] == f'<{url}>; rel="next"'
-                links.append(url)
         return listed
 
     def test_newest_first_in_pages_with_a_status_filter_and_only_the_callers(self, keyed):
