@@ -202,10 +202,9 @@ def test_a_redis_restart_under_a_running_job_strands_nothing(tmp_path):
             time.sleep(0.2)
         recovery = time.monotonic() - back
     assert 500 not in statuses and statuses <= {200, 503}, statuses
-    assert job["status"] == "succeeded" or (job["status"] == "failed" and job["error"]["detail"]), job["error"]
-    if job["status"] == "succeeded":
-        tracks = job["result"]["tracks"]
-        assert len(tracks) == 600 and job["result"]["stats"]["items"] == 600  # none lost, none twice
-        assert job["progress"]["tracks_done"] == 600
+    assert job["status"] == "succeeded", job["error"]  # as the README says: nothing stranded, nothing failed
+    tracks = job["result"]["tracks"]
+    assert len(tracks) == 600 and job["result"]["stats"]["items"] == 600  # none lost, none twice
+    assert job["progress"]["tracks_done"] == 600
     print(f"\nRedis stopped after 120 of 600 tracks, back 3 s later: the job ended {job['status']} "
           f"{recovery:.1f} s after Redis's return")
