@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import socket
 import subprocess
 import sys
 import time
@@ -17,18 +16,13 @@ import pytest
 from geocert.solvers.core.certificates import VERSION
 from geocert.batch import solve_job
 
+from .servers import free_port
 from .support import random_cameras, service_job as triangulation_job
 
 BODY_LIMIT = 2_000_000
 
 
 pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run only
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")
