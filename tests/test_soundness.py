@@ -493,6 +493,22 @@ class TestHostileReview:
             track = solve_job(job)["tracks"][0]
             assert not track["certified"] or track["lower_bound"] <= 1e-9
 
+    def test_the_solution_as_returned_is_checked_again(self):
+        # The point or matrix returned is rounded from the search's variables: its cost and
+        # residuals are recomputed from the raw data, and "optimal" survives only when the gap
+        # and the scope still hold for them.
+        from geocert.solvers.fractional.options import TriangulationOptions
+        from geocert.solvers.fractional.search import recomputed_status
+        residuals = np.array([[3.0, 0.0], [0.0, 1.0]])
+        options = TriangulationOptions(rel_gap=1e-3, max_residual=3.0)
+        assert recomputed_status("optimal", residuals, 10.0, 9.995, options) == ("optimal", None)
+        status, reason = recomputed_status("optimal", residuals, 10.0, 9.9, options)
+        assert status == "not_certified" and "tolerance" in reason
+        outside = TriangulationOptions(rel_gap=1e-3, max_residual=3.0 * (1 - 1e-12))
+        status, reason = recomputed_status("optimal", residuals, 10.0, 9.995, outside)
+        assert status == "not_certified" and "max_residual" in reason
+        assert recomputed_status("node_limit", residuals, 10.0, 5.0, options) == ("node_limit", None)
+
     def test_a_solution_whose_recomputed_cost_misses_the_tolerance_is_not_certified(self):
         cameras = [[[800.0, 0, 0, 0], [0, 800.0, 0, 0], [0, 0, 1.0, 0]],
                    [[800.0, 0, 320, -1120], [0, 800.0, 240, -240], [0, 0, 1.0, -1]]]
