@@ -11,11 +11,10 @@ from pydantic import BaseModel, Field
 from geocert.kinds.documents import certificate_document, outcome_document
 from geocert.kinds.schema import Camera, CertificateDocument, ItemOutcome, JobBase, JobStats, Pixel, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, check_cameras, number_array
-from geocert.solvers.fractional.items import TRACKS
+from geocert.solvers.fractional.items import MAX_VIEWS, TRACKS
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.fractional.results import TrackResult
 
-MAX_VIEWS = 1000  # views in one track: a chart's choice of reference takes views^2 work
 
 
 class TrackIn(Strict):

@@ -11,7 +11,7 @@ from geocert.solvers.core.strict import Invalid, numbers
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.proof import verify_search
 
-MAX_VIEWS = 1000  # views in a track (the parser's limit too)
+MAX_VIEWS = 1000  # views in a track, for the parser too: a chart's choice of reference takes views^2 work
 MAX_POINTS = 1_000_000
 
 
