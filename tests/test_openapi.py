@@ -1,0 +1,13 @@
+"""The checked-in OpenAPI spec is the app's (quick tier: no server is started)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from geocert.app.cli import openapi_document
+
+
+def test_checked_in_spec_is_current():
+    path = Path(__file__).resolve().parents[1] / "openapi" / "openapi.json"
+    assert json.loads(path.read_text()) == openapi_document(), "run: geocert openapi --output openapi/openapi.json"
