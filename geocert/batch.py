@@ -20,6 +20,12 @@ ProgressSink = Callable[[dict], None]
 StopCheck = Callable[[], bool]
 
 
+def item_counts(done: int, total: int | None) -> dict:
+    """Progress's item counts: ``items_done`` and ``items_total``, and the same values under their
+    deprecated names ``tracks_done`` and ``tracks_total`` (which count maps too)."""
+    return {"items_done": done, "items_total": total, "tracks_done": done, "tracks_total": total}
+
+
 class ItemProgress:
     """Aggregates progress over the items of a chunk: finished items plus the one running."""
 
@@ -59,7 +65,7 @@ class ItemProgress:
         self.sink({
             "nodes": nodes, "open_boxes": open_boxes,
             "lower_bound": lower, "upper_bound": upper, "gap_abs": max(0.0, upper - lower),
-            "gap_rel": finite_or_none(gap_rel), "tracks_done": self.done, "tracks_total": self.total,
+            "gap_rel": finite_or_none(gap_rel), **item_counts(self.done, self.total),
             "elapsed_s": time.perf_counter() - self.start,
         })
 

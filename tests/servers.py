@@ -43,7 +43,7 @@ SHORT_TASKS = {"geocert_chunk_sizes": '{"triangulation": 60}', "geocert_chunk_ti
 def wait_until_done(client: httpx.Client, job_id: str, tracks: int, limit_s: float = 120) -> None:
     """Until at least ``tracks`` items of the job are done (its progress)."""
     deadline = time.monotonic() + limit_s
-    while client.get(f"/v1/jobs/{job_id}").json()["progress"]["tracks_done"] < tracks:
+    while client.get(f"/v1/jobs/{job_id}").json()["progress"]["items_done"] < tracks:
         assert time.monotonic() < deadline, "the job did not get going"
         time.sleep(0.05)
 

@@ -205,6 +205,6 @@ def test_a_redis_restart_under_a_running_job_strands_nothing(tmp_path):
     assert job["status"] == "succeeded", job["error"]  # as the README says: nothing stranded, nothing failed
     tracks = job["result"]["tracks"]
     assert len(tracks) == 600 and job["result"]["stats"]["items"] == 600  # none lost, none twice
-    assert job["progress"]["tracks_done"] == 600
+    assert job["progress"]["items_done"] == 600
     print(f"\nRedis stopped after 120 of 600 tracks, back 3 s later: the job ended {job['status']} "
           f"{recovery:.1f} s after Redis's return")

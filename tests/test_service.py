@@ -83,8 +83,9 @@ def assert_progress_agrees(client: httpx.Client, job: dict) -> None:
     progress event of its stream says the same."""
     result, progress = job["result"], job["progress"]
     items = result.get("tracks", result.get("maps"))
-    assert progress["tracks_total"] == len(items)
-    assert progress["tracks_done"] == sum(1 for item in items if item["status"] != "cancelled")
+    assert progress["items_total"] == len(items)
+    assert progress["items_done"] == sum(1 for item in items if item["status"] != "cancelled")
+    assert (progress["tracks_done"], progress["tracks_total"]) == (progress["items_done"], progress["items_total"])
     assert progress["nodes"] == result["stats"]["nodes"] == sum(item["nodes"] for item in items)
     bounded = [item for item in items if item["cost"] is not None and item["lower_bound"] is not None]
     if bounded:
@@ -108,7 +109,8 @@ class TestSubmitStreamResult:
         progress = [data for _, event, data in events if event == "progress"]
         assert progress, "no progress event"
         assert all(p["lower_bound"] <= p["upper_bound"] + 1e-9 for p in progress)
-        assert progress[-1]["tracks_done"] == 100 and progress[-1]["tracks_total"] == 100
+        assert progress[-1]["items_done"] == 100 and progress[-1]["items_total"] == 100
+        assert all((p["tracks_done"], p["tracks_total"]) == (p["items_done"], p["items_total"]) for p in progress)
         job = service.get(f"/v1/jobs/{job_id}").json()
         assert job["status"] == "succeeded"
         tracks = job["result"]["tracks"]
@@ -185,13 +187,13 @@ class TestCancel:
         body = triangulation_job(np.random.default_rng(31), tracks=200, views=5, norm="L1L1", rel_gap=1e-6)
         job_id = service.post("/v1/jobs", json=body).json()["id"]
         for _, event, data in sse_events(service, job_id):
-            if event == "progress" and data["tracks_done"] >= 15:
+            if event == "progress" and data["items_done"] >= 15:
                 break
         assert service.post(f"/v1/jobs/{job_id}/cancel").status_code == 202
         job = wait_for(service, job_id, limit_s=60)
         assert job["status"] in ("cancelled", "succeeded")
         statuses = job["result"]["stats"]["statuses"]
-        assert job["progress"]["tracks_done"] == sum(n for status, n in statuses.items() if status != "cancelled")
+        assert job["progress"]["items_done"] == sum(n for status, n in statuses.items() if status != "cancelled")
         assert_progress_agrees(service, job)
 
     def test_cancelling_a_finished_job_is_a_409_naming_its_status(self, service):

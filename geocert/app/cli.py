@@ -17,7 +17,7 @@ from pydantic import ValidationError
 
 
 def _progress_bar(progress: dict) -> None:
-    done, total = progress["tracks_done"], progress["tracks_total"]
+    done, total = progress["items_done"], progress["items_total"]
     width = 30
     filled = int(width * done / total) if total else width
     gap = progress.get("gap_rel")

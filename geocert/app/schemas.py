@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, Field, TypeAdapter
+from pydantic import BaseModel, Field, TypeAdapter, model_validator
 
 from geocert.kinds import KINDS
 from geocert.kinds.schema import Camera, Finite, Strict
@@ -41,18 +41,35 @@ class ProblemDetails(BaseModel):
 
 class JobProgress(BaseModel):
     """While a job runs: finished items plus the ones running. Once it ends: recomputed from its
-    result, so the two agree (``tracks_done`` counts the items whose status is not ``cancelled``,
-    ``nodes`` equals ``stats.nodes``, the bounds sum the items' lower bounds and costs)."""
+    result, so the two agree (``items_done`` counts the items whose status is not ``cancelled``,
+    ``nodes`` equals ``stats.nodes``, the bounds sum the items' lower bounds and costs).
+
+    ``tracks_done`` and ``tracks_total`` are the old names of ``items_done`` and ``items_total``
+    (they count maps too), kept with the same values for clients that read them."""
 
     nodes: int = 0
     open_boxes: int = 0
     lower_bound: float | None = None
     upper_bound: float | None = None
     gap_abs: float | None = None
-    gap_rel: float | None = Field(None, description="worst relative gap over the tracks finished or running")
-    tracks_done: int = Field(0, description="items (tracks, maps) finished")
-    tracks_total: int = Field(0, description="items (tracks, maps) in the job")
+    gap_rel: float | None = Field(None, description="worst relative gap over the items finished or running")
+    items_done: int = Field(0, description="items (tracks, maps) finished")
+    items_total: int = Field(0, description="items (tracks, maps) in the job")
+    tracks_done: int = Field(0, deprecated=True, description="the same as items_done (an old name: it counts maps too)")
+    tracks_total: int = Field(0, deprecated=True, description="the same as items_total (an old name: it counts maps too)")
     elapsed_s: float = 0.0
+
+    @model_validator(mode="before")
+    @classmethod
+    def _either_name(cls, data: Any) -> Any:
+        """Progress stored under one pair of names only (e.g. by an older release) shows both."""
+        if isinstance(data, dict):
+            for new, old in (("items_done", "tracks_done"), ("items_total", "tracks_total")):
+                if new in data and old not in data:
+                    data = data | {old: data[new]}
+                elif old in data and new not in data:
+                    data = data | {new: data[old]}
+        return data
 
 
 class VerifyCheck(BaseModel):

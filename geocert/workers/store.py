@@ -49,7 +49,8 @@ class JobStore:
             "id": job_id, "kind": kind, "owner": owner, "status": "queued", "created_at": now(), "started_at": None,
             "finished_at": None, "items_total": items_total, "chunks": chunks,
             "progress": {"nodes": 0, "open_boxes": 0, "lower_bound": None, "upper_bound": None, "gap_abs": None,
-                         "gap_rel": None, "tracks_done": 0, "tracks_total": items_total, "elapsed_s": 0.0},
+                         "gap_rel": None, "items_done": 0, "items_total": items_total,
+                         "tracks_done": 0, "tracks_total": items_total, "elapsed_s": 0.0},  # tracks_*: deprecated names
             "error": None,
             "webhook": {"url": callback_url, "state": "waiting", "attempts": 0, "last_error": None,
                         "delivered_at": None} if callback_url else None,
@@ -201,6 +202,7 @@ class JobStore:
         total = None if raw_total is None else json.loads(raw_total)
         started = (None if raw_started is None else json.loads(raw_started)) or now()
         gaps = [p["gap_rel"] for p in parts if p.get("gap_rel") is not None]
+        done = sum(p["items_done"] if "items_done" in p else p["tracks_done"] for p in parts)  # or an older task's
         aggregate = {
             "nodes": sum(p["nodes"] for p in parts),
             "open_boxes": sum(p["open_boxes"] for p in parts),
@@ -208,7 +210,9 @@ class JobStore:
             "upper_bound": sum(p["upper_bound"] for p in parts),
             "gap_abs": sum(p["gap_abs"] for p in parts),
             "gap_rel": max(gaps) if gaps else None,
-            "tracks_done": sum(p["tracks_done"] for p in parts),
+            "items_done": done,
+            "items_total": total,
+            "tracks_done": done,  # deprecated names of items_done and items_total
             "tracks_total": total,
             "elapsed_s": now() - started,
         }

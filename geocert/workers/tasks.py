@@ -15,7 +15,7 @@ import traceback
 
 from geocert.settings import get_settings
 from geocert.solvers.core.geometry import InputError
-from geocert.batch import assemble, job_stats, solve_items
+from geocert.batch import assemble, item_counts, job_stats, solve_items
 from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
@@ -34,7 +34,7 @@ class ProgressPublisher:
         self.cancelled = False
 
     def __call__(self, progress: dict) -> None:
-        if time.monotonic() - self.last >= self.interval or progress["tracks_done"] == progress["tracks_total"]:
+        if time.monotonic() - self.last >= self.interval or progress["items_done"] == progress["items_total"]:
             self.last = time.monotonic()
             self.jobs.save_progress(self.job_id, self.segment, progress)
 
@@ -122,7 +122,7 @@ def finalise(jobs: JobStore, job_id: str, meta: dict, kind, options) -> None:
 
 
 def final_progress(items: list[dict], stats: dict) -> dict:
-    """A finished job's progress, from its items: ``tracks_done`` counts the items that ran to an
+    """A finished job's progress, from its items: ``items_done`` counts the items that ran to an
     end of their own (every status but ``cancelled``), ``nodes`` is ``stats.nodes``, the bounds
     sum the lower bounds and costs of the items that have both."""
     bounded = [item for item in items if item.get("cost") is not None and item.get("lower_bound") is not None]
@@ -133,8 +133,8 @@ def final_progress(items: list[dict], stats: dict) -> dict:
             "lower_bound": lower if bounded else None, "upper_bound": upper if bounded else None,
             "gap_abs": max(0.0, upper - lower) if bounded else None,
             "gap_rel": max(gaps, default=0.0) if bounded else None,
-            "tracks_done": sum(1 for item in items if item["status"] != "cancelled"),
-            "tracks_total": len(items), "elapsed_s": stats["elapsed_s"]}
+            **item_counts(sum(1 for item in items if item["status"] != "cancelled"), len(items)),
+            "elapsed_s": stats["elapsed_s"]}
 
 
 def fail(jobs: JobStore, job_id: str, status: int, title: str, detail: str, field: str | None,
