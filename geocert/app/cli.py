@@ -44,7 +44,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
         sink = _progress_bar if sys.stderr.isatty() else None
         result = solve_job(request, sink=sink)
     except ValidationError as exc:
-        from geocert.app.problems import validation_problem
+        from geocert.app.errors import validation_problem
 
         print(json.dumps(validation_problem(exc.errors())), file=sys.stderr)
         return 2

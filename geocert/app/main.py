@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import FastAPI
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from geocert.app import docs, observability, problems
+from geocert.app import docs, errors, observability
 from geocert.app.api.routes import certificates, jobs, orient, service
 from geocert.settings import get_settings
 from geocert.workers import logs
@@ -54,7 +54,7 @@ class BodySizeLimit:
         await self.app(scope, limited_receive, guarded_send)
 
     async def _reject(self, scope, receive, send):
-        response = problems.problem(413, "Payload too large",
+        response = errors.problem(413, "Payload too large",
                                     f"the request body exceeds the limit of {self.limit} bytes (GEOCERT_MAX_BODY_BYTES)",
                                     headers={"Connection": "close"})
         await response(scope, receive, send)
@@ -75,7 +75,7 @@ def create_app() -> FastAPI:
         ),
     )
     logs.configure()
-    problems.install(app)
+    errors.install(app)
     docs.install(app)
     app.include_router(jobs.router)
     app.include_router(certificates.router)

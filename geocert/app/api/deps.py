@@ -9,7 +9,7 @@ from fastapi import Depends, Request
 
 from geocert.settings import get_settings
 from geocert.app.core.security import PUBLIC_OWNER, caller
-from geocert.app.problems import PROBLEM_JSON, ApiProblem
+from geocert.app.errors import PROBLEM_JSON, ApiProblem
 from geocert.app.schemas import ProblemDetails
 from geocert.workers.store import JobStore
 

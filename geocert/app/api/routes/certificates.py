@@ -9,7 +9,7 @@ from fastapi import APIRouter, Body, Depends
 
 from geocert.app.api.deps import JobStoreDep, error_responses, rate_limited
 from geocert.app.api.routes.jobs import OwnedJob
-from geocert.app.problems import ApiProblem
+from geocert.app.errors import ApiProblem
 from geocert.app.schemas import RESULT_MODELS, VerifyReport
 from geocert.kinds.schema import CertificateDocument
 from geocert.solvers import verify

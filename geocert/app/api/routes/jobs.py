@@ -17,7 +17,7 @@ from fastapi.sse import EventSourceResponse, ServerSentEvent
 from geocert.app.api.deps import Caller, JobStoreDep, error_responses, rate_limited
 from geocert.settings import chunk_size_for, get_settings
 from geocert.app import lifecycle
-from geocert.app.problems import ApiProblem
+from geocert.app.errors import ApiProblem
 from geocert.app.schemas import JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
 from geocert.batch import parse_job

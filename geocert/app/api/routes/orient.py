@@ -9,7 +9,7 @@ from fastapi import APIRouter, Depends
 
 from geocert.app.api.deps import error_responses, rate_limited
 from geocert.settings import get_settings
-from geocert.app.problems import ApiProblem
+from geocert.app.errors import ApiProblem
 from geocert.app.schemas import OrientRequest, OrientResult
 from geocert.solvers.core.geometry import InputError, check_cameras
 from geocert.solvers.orientation import orient
