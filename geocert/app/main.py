@@ -55,8 +55,8 @@ class BodySizeLimit:
 
     async def _reject(self, scope, receive, send):
         response = errors.problem(413, "Payload too large",
-                                    f"the request body exceeds the limit of {self.limit} bytes (GEOCERT_MAX_BODY_BYTES)",
-                                    headers={"Connection": "close"})
+                                  f"the request body exceeds the limit of {self.limit} bytes (GEOCERT_MAX_BODY_BYTES)",
+                                  headers={"Connection": "close"})
         await response(scope, receive, send)
 
 
