@@ -179,7 +179,7 @@ def test_the_job_index_forgets_expired_jobs(tmp_path):
         store = JobStore.from_url(url, result_ttl_s=1)
         kept = store.create("triangulation", {}, 1, 1, "someone")
         gone = store.create("triangulation", {}, 1, 1, "someone")
-        store.finish(gone["id"], "succeeded", result={})
+        store.end(gone["id"], "succeeded", result={})
         assert [meta["id"] for meta in store.list_jobs("someone", 10)[0]] == [gone["id"], kept["id"]]
         time.sleep(1.5)
         jobs, following = store.list_jobs("someone", 10)

@@ -36,11 +36,11 @@ def submit_chunks(store: JobStore, meta: dict, request_id: str | None) -> None:
 
 
 def withdraw_queued(store: JobStore, job_id: str) -> None:
-    """A job cancelled before it started: its tasks are revoked and its end recorded (metrics,
-    webhook)."""
+    """A job ended while queued (``JobStore.cancel_if_queued``): its tasks are revoked and its end
+    counted (metrics, webhook)."""
     from geocert.workers.celery_app import celery_app
-    from geocert.workers.tasks import ended
+    from geocert.workers.tasks import after_end
 
     for task_id in store.task_ids(job_id):
         celery_app.control.revoke(task_id)
-    ended(store, job_id)
+    after_end(store, job_id)

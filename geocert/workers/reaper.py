@@ -25,7 +25,7 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
     """One round: returns (job id, what was done) for each stranded job found."""
     if not jobs.r.set(LOCK, "1", nx=True, ex=max(1, int(every_s))):
         return []  # another worker reaps this round
-    from geocert.workers.tasks import fail, solve_chunk
+    from geocert.workers.tasks import end_with_error, solve_chunk
 
     done = []
     stale = jobs.stale_running(stale_after_s)
@@ -41,17 +41,17 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
             continue
         reaps = int(jobs.r.hincrby(jobs.key(job_id), "reaps", 1))
         if reaps > MAX_REAPS:
-            jobs.reopen_finalisation(job_id)
-            fail(jobs, job_id, 500, "Tasks lost",
+            jobs.reopen_end(job_id)
+            end_with_error(jobs, job_id, 500, "Tasks lost",
                  f"the job's tasks were lost {MAX_REAPS} times (workers or Redis gone) and re-queued each time "
                  "without the job ending", None)
             done.append((job_id, "failed"))
             continue
         missing = set(jobs.missing_items(job_id, meta["items_total"]))
         chunks = [(start, stop) for start, stop in meta["chunks"] if missing.intersection(range(start, stop))]
-        if not chunks:  # every item stored, but the task that was to finalise it is gone
+        if not chunks:  # every item stored, but the task that was to end it is gone
             chunks = [tuple(meta["chunks"][-1])]
-        jobs.reopen_finalisation(job_id)
+        jobs.reopen_end(job_id)
         jobs.touch(job_id)  # give the re-queued tasks a full period before the next look
         for start, stop in chunks:
             jobs.add_task_ids(job_id, solve_chunk.delay(job_id, start, stop).id)

@@ -136,7 +136,8 @@ class JobStore:
         self.r.set(self.key(job_id, "cancel"), "1", ex=self.ttl)
 
     def cancel_if_queued(self, job_id: str) -> bool:
-        """Queued -> cancelled atomically (so a worker cannot start it meanwhile); True if done."""
+        """Queued -> cancelled atomically (so a worker cannot start it meanwhile); True if done.
+        The one way a job ends other than ``end``: nothing of it ran, so there is nothing to store."""
         script = """
         if redis.call('HGET', KEYS[1], 'status') == '"queued"' then
             redis.call('HSET', KEYS[1], 'status', '"cancelled"', 'finished_at', ARGV[1])
@@ -147,8 +148,7 @@ class JobStore:
         if self.r.eval(script, 1, self.key(job_id), json.dumps(now())) != 1:
             return False
         self.release(self.field(job_id, "owner") or "", job_id)
-        self.publish(job_id, "end", {"status": "cancelled", "error": None})
-        self.expire(job_id)
+        self._announce_end(job_id, "cancelled", None)
         return True
 
     def cancel_requested(self, job_id: str) -> bool:
@@ -185,8 +185,8 @@ class JobStore:
         stored = set(self.r.hkeys(self.key(job_id, "items")))
         return [index for index in range(total) if str(index) not in stored]
 
-    def reopen_finalisation(self, job_id: str) -> None:
-        """Drop a finalisation claim whose holder is gone (the job is running but nobody moves)."""
+    def reopen_end(self, job_id: str) -> None:
+        """Drop a claim to end the job whose holder is gone (the job is running but nobody moves)."""
         self.r.delete(self.key(job_id, "final"))
 
     def save_progress(self, job_id: str, segment: int, progress: dict) -> dict:
@@ -231,14 +231,19 @@ class JobStore:
         pipe.zadd(self.RUNNING, {job_id: now()})  # touch()
         return pipe.execute()[1]
 
-    def claim_finalisation(self, job_id: str) -> bool:
+    def claim_end(self, job_id: str) -> bool:
+        """Become the one caller that ends this job (``end``): the task that stored its last items,
+        or one that failed; False when another already has the claim."""
         return bool(self.r.set(self.key(job_id, "final"), "1", nx=True, ex=self.ttl))
 
     def all_items(self, job_id: str, total: int) -> list[dict]:
         raw = self.r.hgetall(self.key(job_id, "items"))
         return [json.loads(raw[str(index)]) for index in range(total)]
 
-    def finish(self, job_id: str, status: str, result: dict | None = None, error: dict | None = None) -> None:
+    def end(self, job_id: str, status: str, result: dict | None = None, error: dict | None = None) -> None:
+        """The job ends (the caller holds ``claim_end``): its status becomes ``status`` (one of
+        TERMINAL) with its result or error, its working state is dropped, the end event is
+        published and every key of it expires ``result_ttl_s`` from now."""
         pipe = self.r.pipeline()
         if result is not None:
             pipe.set(self.key(job_id, "result"), json.dumps(result))
@@ -248,6 +253,9 @@ class JobStore:
         pipe.srem(self.owner_key(self.field(job_id, "owner") or "", "active"), job_id)
         pipe.zrem(self.RUNNING, job_id)
         pipe.execute()
+        self._announce_end(job_id, status, error)
+
+    def _announce_end(self, job_id: str, status: str, error: dict | None) -> None:
         self.publish(job_id, "end", {"status": status, "error": error})
         self.expire(job_id)
 

@@ -1,10 +1,15 @@
-"""Thin tasks: solve a segment of a job with ``solvers``, publish progress, store results.
+"""Thin tasks: solve a chunk of a job with ``solvers``, publish progress, store results.
 
 A job's items are split into chunks, one task each, run in parallel across workers. A task
 starts no new item after GEOCERT_CHUNK_TIME_BUDGET_S and queues the rest of its chunk as a new
 task, so every task stays well inside the broker's visibility timeout: a task lost with its
 worker is delivered again soon, and no running task is ever delivered twice. Results are stored
 per item, so a repeated task overwrites what it wrote before and nothing is counted twice.
+
+A job ends in one place, ``JobStore.end``, under the job's ``claim_end`` (one caller ends it):
+``end_with_result`` when the last items are stored, ``end_with_error`` when a task fails (or the
+reaper gives up). A queued job cancelled ends in ``JobStore.cancel_if_queued`` instead. Either
+way ``after_end`` then counts the job and queues its webhook.
 """
 
 from __future__ import annotations
@@ -94,19 +99,21 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
         if cut < stop:  # over the budget: the rest of the chunk becomes a task of its own
             log.info("continuing items %d-%d in a new task", cut, stop)
             jobs.add_task_ids(job_id, solve_chunk.delay(job_id, cut, stop, request_id).id)
-        elif done == meta["items_total"] and jobs.claim_finalisation(job_id):
-            finalise(jobs, job_id, meta, kind, options)
+        elif done == meta["items_total"] and jobs.claim_end(job_id):
+            end_with_result(jobs, job_id, meta, kind, options)
     except InputError as exc:  # the API validates first, so this is a stored job gone bad
-        fail(jobs, job_id, 422, "Invalid job data", str(exc), exc.field)
+        end_with_error(jobs, job_id, 422, "Invalid job data", str(exc), exc.field)
     except REDIS_GONE:
         raise  # not the job's fault: retried (solve_chunk), never recorded as its failure
     except Exception as exc:  # never lose the reason: the job keeps its error
         log.exception("items %d-%d of job %s failed", start, stop, job_id)
-        fail(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
+        end_with_error(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
              traceback.format_exc(limit=5))
 
 
-def finalise(jobs: JobStore, job_id: str, meta: dict, kind, options) -> None:
+def end_with_result(jobs: JobStore, job_id: str, meta: dict, kind, options) -> None:
+    """Every item is stored: the job ends ``succeeded`` (or ``cancelled`` when some item was
+    stopped) with its result document. The caller holds the job's ``claim_end``."""
     items = jobs.all_items(job_id, meta["items_total"])
     elapsed = time.time() - (meta["started_at"] or meta["created_at"])
     stats = job_stats(items, elapsed)
@@ -117,8 +124,8 @@ def finalise(jobs: JobStore, job_id: str, meta: dict, kind, options) -> None:
     status = "cancelled" if any(item["status"] == "cancelled" for item in items) else "succeeded"
     jobs.set_fields(job_id, progress=progress)
     jobs.publish(job_id, "progress", progress)
-    jobs.finish(job_id, status, result=result)
-    ended(jobs, job_id)
+    jobs.end(job_id, status, result=result)
+    after_end(jobs, job_id)
 
 
 def final_progress(items: list[dict], stats: dict) -> dict:
@@ -137,20 +144,23 @@ def final_progress(items: list[dict], stats: dict) -> dict:
             "elapsed_s": stats["elapsed_s"]}
 
 
-def fail(jobs: JobStore, job_id: str, status: int, title: str, detail: str, field: str | None,
-         trace: str | None = None) -> None:
-    error = {"type": "about:blank", "title": title, "status": status, "detail": detail}
+def end_with_error(jobs: JobStore, job_id: str, http_status: int, title: str, detail: str, field: str | None,
+                   trace: str | None = None) -> None:
+    """The job ends ``failed`` with this error (problem details), unless another caller already
+    holds its ``claim_end``."""
+    error = {"type": "about:blank", "title": title, "status": http_status, "detail": detail}
     if field is not None:
         error["errors"] = [{"field": field, "reason": detail}]
     if trace:
         error["trace"] = trace
-    if jobs.claim_finalisation(job_id):
-        jobs.finish(job_id, "failed", error=error)
-        ended(jobs, job_id)
+    if jobs.claim_end(job_id):
+        jobs.end(job_id, "failed", error=error)
+        after_end(jobs, job_id)
 
 
-def ended(jobs: JobStore, job_id: str) -> None:
-    """After a job reaches a terminal state: count it, and queue its webhook if it has one."""
+def after_end(jobs: JobStore, job_id: str) -> None:
+    """After a job has ended (``JobStore.end`` or ``cancel_if_queued``): count it, and queue its
+    webhook if it has one."""
     meta = jobs.get(job_id)
     if meta is None:
         return
