@@ -122,22 +122,23 @@ def solve_job(job: dict, sink: ProgressSink | None = None, should_stop: StopChec
 
 def assemble(kind, job: dict, options, items: list[dict], stats: dict) -> dict:
     """The result document; with ``options.certificate == "full"`` it carries the certificate
-    document too (the items' proofs move there)."""
+    document too (the proofs move there from the items' certificate summaries)."""
     if options.certificate == "full":
-        certificate = full_certificate(kind, job["data"], options, items)
+        document = certificate_document(kind, job["data"], options, items)
     else:
-        certificate = None
+        document = None
         for item in items:
             (item.get("certificate") or {}).pop("proof", None)
     result = kind.assemble(options, items, stats)
-    if certificate is not None:
-        result["certificate"] = certificate
+    if document is not None:
+        result["certificate"] = document
     return result
 
 
-def full_certificate(kind, data: Any, options, items: list[dict]) -> dict:
+def certificate_document(kind, data: Any, options, items: list[dict]) -> dict:
     """The certificate document (docs/certificate.md): the problem data and its hash, the options,
-    and each item's claim (solution, cost, gap) with its proof."""
+    and each item's claim (solution, cost, gap) with its proof, taken out of the item's
+    certificate summary."""
     claims = []
     for index, item in enumerate(items):
         proof = (item.get("certificate") or {}).pop("proof", None)

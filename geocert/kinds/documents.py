@@ -13,10 +13,11 @@ def finite_or_none(value: float | None) -> float | None:
     return value if value is not None and math.isfinite(value) else None
 
 
-def certificate_document(result: ItemResult, region: dict, meaning: str, scope: str) -> dict | None:
-    """The certificate part of an item: the search's (when there was one), or the note that the
-    incumbent met the trivial bound 0. With a full certificate, ``proof`` too (moved into the
-    job's certificate document when the result is assembled)."""
+def certificate_summary(result: ItemResult, region: dict, meaning: str, scope: str) -> dict | None:
+    """An item's certificate summary (its ``certificate`` member): the search's certificate (when
+    there was one), or the note that the incumbent met the trivial bound 0. With a full
+    certificate, ``proof`` too (moved into the job's certificate document when the result is
+    assembled). Glossary: docs/certificate.md."""
     c = result.certificate
     proof = proof_of(result)
     extra = {"proof": proof} if proof is not None else {}

@@ -9,7 +9,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
-from geocert.kinds.documents import certificate_document, outcome_document
+from geocert.kinds.documents import certificate_summary, outcome_document
 from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
 from geocert.solvers.fractional.inputs import check_correspondences
@@ -64,7 +64,7 @@ class ParsedMaps:
 
 def map_document(result: MapResult) -> dict:
     region = {"reference_point": result.certificate.reference} if result.certificate else {}
-    certificate = certificate_document(
+    certificate = certificate_summary(
         result, region,
         "lower <= (F l) / (d . l) <= upper for the last row l of every map in the scope, "
         "F = functionals, d = denominator (the reference point, homogeneous)",

@@ -8,7 +8,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
-from geocert.kinds.documents import certificate_document, outcome_document
+from geocert.kinds.documents import certificate_summary, outcome_document
 from geocert.kinds.schema import Camera, CertificateDocument, ItemOutcome, JobBase, JobStats, Pixel, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, check_cameras, number_array
 from geocert.solvers.fractional.items import MAX_VIEWS, TRACKS
@@ -57,7 +57,7 @@ class ParsedTracks:
 
 def track_document(result: TrackResult) -> dict:
     region = {"reference_view": result.certificate.reference} if result.certificate else {}
-    certificate = certificate_document(
+    certificate = certificate_summary(
         result, region,
         "lower <= (F X) / (d . X) <= upper for every point X of the scope, "
         "F = functionals (one per direction the other views' depths vary along), "

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.relaxation import NORMS
 
-CERTIFICATES = ("summary", "full")
+CERTIFICATE_MODES = ("summary", "full")  # the option certificate: the proof returned or not
 
 
 @dataclass
@@ -34,8 +34,8 @@ class SearchOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and _within(value, self.OPTION_RANGES[name])):
                 raise InputError(f"options/{name}", f"must be a finite number {_describe(self.OPTION_RANGES[name])}")
-        if self.certificate not in CERTIFICATES:
-            raise InputError("options/certificate", f"must be one of {', '.join(CERTIFICATES)}")
+        if self.certificate not in CERTIFICATE_MODES:
+            raise InputError("options/certificate", f"must be one of {', '.join(CERTIFICATE_MODES)}")
 
 
 @dataclass

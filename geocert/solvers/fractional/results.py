@@ -1,6 +1,6 @@
 """What a fractional solve returns: one result base for every item (scipy.optimize's pattern of
-one result type), the track's and the map's solution fields on top, and the search's certificate
-summary. Plain dataclasses, no solver imports."""
+one result type), the track's and the map's solution fields on top, and the search's certificate.
+Plain dataclasses, no solver imports."""
 
 from __future__ import annotations
 
@@ -8,8 +8,9 @@ from dataclasses import dataclass, field
 
 
 @dataclass
-class Certificate:
-    """What a finished search proves: the scope, the root region the search covered (in the
+class SearchCertificate:
+    """A search's certificate, what a finished search proves (shown as the item's certificate
+    summary, geocert.kinds.documents): the scope, the root region the search covered (in the
     caller's coordinates: ``lower <= (F u) / (d . u) <= upper`` for the kind's unknown u), the
     tolerance and whether it was met, and the number of leaves."""
 
@@ -39,7 +40,7 @@ class ItemResult:
     nodes: int = 0
     elapsed_s: float = 0.0
     reason: str | None = None
-    certificate: Certificate | None = None
+    certificate: SearchCertificate | None = None
 
 
 @dataclass

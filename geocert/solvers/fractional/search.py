@@ -23,7 +23,7 @@ from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram, solve_
 from geocert.solvers.core.cones import ConeSpec, proves_infeasible, safe_lower_bound
 from geocert.solvers.core.geometry import lengths, norm_cost
 from geocert.solvers.fractional.options import FractionalOptions
-from geocert.solvers.fractional.results import Certificate
+from geocert.solvers.fractional.results import SearchCertificate
 from geocert.solvers.fractional.relaxation import (EPS_DEPTH, ConicData, FractionalProgram, Relaxation, complete_functionals,
                          cost_unit, gamma_for, residual_region, root_bounds, tightening_objective, with_cost_cap)
 
@@ -469,7 +469,7 @@ class Searched:
     solution: np.ndarray | None  # None: nothing within max_residual was found
     lower_bound: float | None  # in the caller's units
     nodes: int
-    certificate: Certificate | None
+    certificate: SearchCertificate | None
     reason: str | None = None
 
 
@@ -500,9 +500,10 @@ def search(prepared: Prepared, options: FractionalOptions, scope: str, reference
     if options.max_residual is not None:
         scope = f"{scope} with every residual <= {options.max_residual}"
     root = prepared.problem.root
-    certificate = Certificate(scope, reference, np.asarray(functionals).tolist(), np.asarray(denominator).tolist(),
-                              root.lo.tolist(), root.hi.tolist(), bnb.tolerance / unit,
-                              bnb.upper_bound - bnb.lower_bound <= bnb.tolerance, bnb.leaves)
+    certificate = SearchCertificate(scope, reference, np.asarray(functionals).tolist(),
+                                    np.asarray(denominator).tolist(), root.lo.tolist(), root.hi.tolist(),
+                                    bnb.tolerance / unit, bnb.upper_bound - bnb.lower_bound <= bnb.tolerance,
+                                    bnb.leaves)
     if options.certificate == "full":
         certificate.proof = encode(SearchProof(prepared.scale, prepared.root_proof, prepared.problem.tightening,
                                                root, leaves))

@@ -18,7 +18,7 @@ import numpy as np
 from geocert.solvers.core.bnb import Progress
 from geocert.solvers.fractional.charts import Chart, camera_centres
 from geocert.solvers.fractional.options import NORMS, TriangulationOptions
-from geocert.solvers.fractional.results import Certificate, TrackResult
+from geocert.solvers.fractional.results import SearchCertificate, TrackResult
 from geocert.solvers.fractional.search import Early, Reasons, depth_subspace, prepare, recomputed_status, search
 from geocert.solvers.core.geometry import norm_cost, normalised_cameras, reprojection_residuals
 from geocert.solvers.verify import checked_solve
@@ -112,5 +112,5 @@ def _track_result(chart: Chart, cameras, points, y, options, status, lower, node
                        certificate=certificate, residuals=residuals.tolist())
 
 
-__all__ = ["NORMS", "TriangulationOptions", "TrackResult", "Certificate", "triangulate", "prepare_track",
+__all__ = ["NORMS", "TriangulationOptions", "TrackResult", "SearchCertificate", "triangulate", "prepare_track",
            "camera_centres"]
