@@ -189,11 +189,11 @@ class JobStore:
         """Drop a claim to end the job whose holder is gone (the job is running but nobody moves)."""
         self.r.delete(self.key(job_id, "final"))
 
-    def save_progress(self, job_id: str, segment: int, progress: dict) -> dict:
-        """Record the progress of the task that started at item ``segment`` and return (and
+    def save_progress(self, job_id: str, start: int, progress: dict) -> dict:
+        """Record the progress of the task that started at item ``start`` and return (and
         publish) the job's aggregate over all its tasks."""
         pipe = self.r.pipeline()  # one round trip: this runs on every progress event of every task
-        pipe.hset(self.key(job_id, "chunkprogress"), str(segment), json.dumps(progress))
+        pipe.hset(self.key(job_id, "chunkprogress"), str(start), json.dumps(progress))
         pipe.zadd(self.RUNNING, {job_id: now()})  # touch()
         pipe.hvals(self.key(job_id, "chunkprogress"))
         pipe.hmget(self.key(job_id), "items_total", "started_at")

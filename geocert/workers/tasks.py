@@ -32,8 +32,8 @@ log = logging.getLogger("geocert.worker")
 class ProgressPublisher:
     """Publishes a task's progress at most every ``interval`` seconds (always the last one)."""
 
-    def __init__(self, jobs: JobStore, job_id: str, segment: int, interval: float):
-        self.jobs, self.job_id, self.segment, self.interval = jobs, job_id, segment, interval
+    def __init__(self, jobs: JobStore, job_id: str, start: int, interval: float):
+        self.jobs, self.job_id, self.start, self.interval = jobs, job_id, start, interval
         self.last = 0.0
         self.cancel_checked = 0.0
         self.cancelled = False
@@ -41,7 +41,7 @@ class ProgressPublisher:
     def __call__(self, progress: dict) -> None:
         if time.monotonic() - self.last >= self.interval or progress["items_done"] == progress["items_total"]:
             self.last = time.monotonic()
-            self.jobs.save_progress(self.job_id, self.segment, progress)
+            self.jobs.save_progress(self.job_id, self.start, progress)
 
     def should_stop(self) -> bool:
         if not self.cancelled and time.monotonic() - self.cancel_checked >= 0.05:
