@@ -4,10 +4,12 @@ maps with their exact images), stable seeds, and jobs built from them."""
 from __future__ import annotations
 
 import zlib
+from pathlib import Path
 
 import numpy as np
 
-SHARED = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared"
+ROOT = Path(__file__).resolve().parents[1]  # the project's checkout
+SHARED = ROOT.parent / "shared"
 
 
 def look_at(centre: np.ndarray, target: np.ndarray, focal: float = 800.0) -> np.ndarray:

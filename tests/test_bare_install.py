@@ -18,9 +18,9 @@ from pathlib import Path
 import httpx
 import pytest
 
-from .servers import free_port
+from tests.servers import free_port
+from tests.support import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 README_JOB = {
     "kind": "triangulation",
     "data": {"cameras": [[[800, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]],

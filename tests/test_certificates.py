@@ -19,7 +19,7 @@ from geocert.solvers.fractional.proof import uncovered_part
 from geocert.solvers.verify import verify_arrays, verify_document
 from geocert.solvers.core.bnb import Box
 
-from .support import map_job, seed, triangulation_job
+from tests.support import map_job, seed, triangulation_job
 
 
 def certified(document: dict) -> list[dict]:

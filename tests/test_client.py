@@ -19,8 +19,8 @@ from geocert.app.client import (
     WaitTimeout,
 )
 
-from .servers import cluster
-from .support import service_job as triangulation_job
+from tests.servers import cluster
+from tests.support import service_job as triangulation_job
 
 KEY = "client-test-key-0123456789"
 

@@ -6,7 +6,7 @@ import pytest
 from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 
-from .support import SHARED
+from tests.support import SHARED
 
 DINOSAUR = SHARED / "data" / "oxford_dinosaur"
 

@@ -9,8 +9,8 @@ import httpx
 import pytest
 import numpy as np
 
-from .servers import SHORT_TASKS, cluster, wait_until_done
-from .support import service_job as triangulation_job
+from tests.servers import SHORT_TASKS, cluster, wait_until_done
+from tests.support import service_job as triangulation_job
 
 
 pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run only

@@ -13,8 +13,8 @@ import httpx
 import numpy as np
 import pytest
 
-from .servers import SHORT_TASKS, cluster, wait_until_done
-from .support import service_job as triangulation_job
+from tests.servers import SHORT_TASKS, cluster, wait_until_done
+from tests.support import service_job as triangulation_job
 
 pytestmark = pytest.mark.slow  # real servers: the full run only
 

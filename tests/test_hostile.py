@@ -5,7 +5,6 @@ answer 500 or outside the schema; every rejection is 4xx problem+json."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 import schemathesis
@@ -19,9 +18,10 @@ from schemathesis.checks import (
     status_code_conformance,
 )
 
-from .servers import cluster
+from tests.servers import cluster
+from tests.support import ROOT
 
-SPEC = Path(__file__).resolve().parents[1] / "openapi" / "openapi.json"
+SPEC = ROOT / "openapi" / "openapi.json"
 SCHEMA = schemathesis.openapi.from_path(SPEC).exclude(path="/v1/jobs/{job_id}/events")
 CHECKS = [not_a_server_error, status_code_conformance, content_type_conformance, response_schema_conformance,
           response_headers_conformance]

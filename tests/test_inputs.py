@@ -6,7 +6,7 @@ import pytest
 from geocert.solvers.core.geometry import InputError
 from geocert.batch import parse_job, solve_job
 
-from .support import random_cameras
+from tests.support import random_cameras
 
 
 def job(**changes):

@@ -18,7 +18,7 @@ from geocert.solvers.fractional.maps import _REASONS, dlt, fit_map
 from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.fractional.triangulation import NORMS
 
-from .support import apply, scene, seed
+from tests.support import apply, scene, seed
 
 
 def same_map(A, B) -> float:

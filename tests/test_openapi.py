@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
-
 from geocert.app.cli import openapi_document
+from tests.support import ROOT
 
 
 def test_checked_in_spec_is_current():
-    path = Path(__file__).resolve().parents[1] / "openapi" / "openapi.json"
+    path = ROOT / "openapi" / "openapi.json"
     assert json.loads(path.read_text()) == openapi_document(), "run: geocert openapi --output openapi/openapi.json"

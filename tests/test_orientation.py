@@ -9,7 +9,7 @@ import pytest
 from geocert.batch import solve_job
 from geocert.solvers.orientation import camera_centre, orient
 
-from .support import noisy_track, project, random_cameras
+from tests.support import noisy_track, project, random_cameras
 
 
 def scene(seed: int, cameras: int = 5, points: int = 40):

@@ -16,8 +16,8 @@ import time
 import numpy as np
 import pytest
 
-from .servers import cluster
-from .support import service_job as triangulation_job
+from tests.servers import cluster
+from tests.support import service_job as triangulation_job
 
 KEY_A, KEY_B, KEY_C = "key-alpha-0123456789", "key-beta-9876543210", "key-gamma-listing-only"
 SECRET = "webhook-test-secret"

@@ -12,7 +12,7 @@ from geocert.solvers.core.bnb import Box, BoxStatus
 from geocert.solvers.fractional.search import Prepared
 from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, prepare_track
 
-from .support import noisy_track, random_cameras
+from tests.support import noisy_track, random_cameras
 
 
 @settings(max_examples=60, deadline=None)

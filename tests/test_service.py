@@ -16,8 +16,8 @@ import pytest
 from geocert.solvers.core.certificates import VERSION
 from geocert.batch import solve_job
 
-from .servers import free_port
-from .support import random_cameras, service_job as triangulation_job
+from tests.servers import free_port
+from tests.support import random_cameras, service_job as triangulation_job
 
 BODY_LIMIT = 2_000_000
 

@@ -27,7 +27,7 @@ from geocert.solvers.verify import verify_any, verify_document
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import proves_infeasible
 
-from .support import project, random_cameras
+from tests.support import project, random_cameras
 
 CAMERAS = [[[800, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]],
            [[800, 0, 320, -800], [0, 800, 240, 0], [0, 0, 1, 0]]]

@@ -7,7 +7,7 @@ import pytest
 from geocert.solvers.core.geometry import fundamental_from_cameras
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 
-from .support import random_cameras
+from tests.support import random_cameras
 
 
 def correct_matches_cost(cameras: np.ndarray, points: np.ndarray) -> float:

@@ -6,7 +6,7 @@ import pytest
 
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 
-from .support import noisy_track, random_cameras
+from tests.support import noisy_track, random_cameras
 
 
 def instance(seed: int, views: int = 5):

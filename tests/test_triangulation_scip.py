@@ -11,7 +11,7 @@ from bench.baselines import scip_triangulate
 from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, triangulate
 
-from .support import noisy_track, random_cameras
+from tests.support import noisy_track, random_cameras
 
 
 pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run only
