@@ -70,7 +70,7 @@ class TestOneLineToAddAKind:
         code = """
 import json
 from geocert.kinds import KINDS
-from tests import toy_kind
+from tests.kinds import toy_kind
 KINDS.register(toy_kind.KIND)  # the one line
 from geocert.batch import solve_job
 from geocert.solvers.verify import verify_any
