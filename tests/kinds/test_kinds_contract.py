@@ -63,7 +63,7 @@ class TestEveryKind:
 
 
 class TestOneLineToAddAKind:
-    """A toy kind (tests/toy_kind.py) registered with one line: solved, verified, served in the
+    """A toy kind (tests/kinds/toy_kind.py) registered with one line: solved, verified, served in the
     API's schema and /v1/problems, and checked by the same contract."""
 
     def test_registered_kind_is_solved_verified_and_served(self):
