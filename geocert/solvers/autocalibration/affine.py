@@ -1,0 +1,259 @@
+"""The affine upgrade: the plane at infinity minimising the modulus constraints over every plane
+chirality allows, to certified global optimality (thesis 6.5; branch on v only, 3 dimensions)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from geocert.solvers.autocalibration import affine_relaxation as relax
+from geocert.solvers.autocalibration import frames
+from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound
+from geocert.solvers.core.certificates import LeafProof
+from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
+from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
+
+MAX_RELAXATION_ROWS = 64  # chirality rows beyond this: only the hull's (the others are redundant)
+
+
+@dataclass
+class Region:
+    """One orientation's polytope of planes, its frame and box, and the search over it."""
+
+    delta: float
+    G: np.ndarray
+    rows: list[int]  # chirality rows used in the relaxation
+    lo: np.ndarray
+    hi: np.ndarray
+    basis: list[list[int]]  # per side (v0 low, v0 high, v1 low, ...): three rows proving it
+    setup: relax.AffineSetup
+    leaves: list = field(default_factory=list)
+    status: str = "optimal"
+    nodes: int = 0
+
+
+@dataclass
+class AffineStage:
+    status: str  # optimal, node_limit, time_limit, cancelled, not_certified, failed
+    certified: bool
+    plane: np.ndarray | None  # reference-frame plane (p, 1)
+    cost: float
+    lower_bound: float
+    nodes: int
+    regions: list[Region]
+    excluded: list[dict]  # orientations with no quasi-affine plane, with their exact proof
+    reason: str | None = None
+
+
+def relaxation_rows(a: np.ndarray, b: np.ndarray, always: int) -> list[int]:
+    if len(a) <= MAX_RELAXATION_ROWS:
+        return list(range(len(a)))
+    from scipy.spatial import ConvexHull
+
+    try:
+        vertices = set(int(i) for i in ConvexHull(a / b[:, None]).vertices)
+    except Exception:
+        return list(range(len(a)))
+    vertices.add(always)
+    return sorted(vertices)
+
+
+def gordan_rows(rows: np.ndarray) -> list[int] | None:
+    """Rows (at most 5) with a nonnegative combination exactly 0: no plane is positive on all."""
+    from scipy.optimize import linprog
+
+    k = len(rows)
+    res = linprog(np.zeros(k), A_eq=np.vstack([rows.T, np.ones((1, k))]), b_eq=np.append(np.zeros(4), 1.0),
+                  bounds=[(0, None)] * k, method="highs")
+    if res.status != 0:
+        return None
+    chosen = [int(i) for i in np.argsort(-res.x)[:5] if res.x[i] > 0]
+    return chosen if exact_gordan(rows, chosen) else None
+
+
+def exact_gordan(rows: np.ndarray, chosen: list[int]) -> bool:
+    """Whether the chosen rows have, in exact arithmetic, a nonzero nonnegative combination
+    equal to 0 (then pi . w > 0 on all of them is impossible, by Gordan's alternative)."""
+    from fractions import Fraction
+
+    if not 1 <= len(chosen) <= 5 or len(set(chosen)) != len(chosen) or not all(0 <= i < len(rows) for i in chosen):
+        return False
+    W = [[Fraction(float(rows[i][c])) for i in chosen] for c in range(4)]  # 4 x k
+    null = _null_vector(W, len(chosen))
+    if null is None:
+        return False
+    if all(x <= 0 for x in null):
+        null = [-x for x in null]
+    return all(x >= 0 for x in null) and any(x > 0 for x in null)
+
+
+def _null_vector(W, k):
+    """A nonzero rational vector y with W y = 0, when the null space is one-dimensional."""
+    from fractions import Fraction
+
+    rows = [r[:] for r in W]
+    pivots = []
+    r = 0
+    for c in range(k):
+        p = next((i for i in range(r, len(rows)) if rows[i][c] != 0), None)
+        if p is None:
+            continue
+        rows[r], rows[p] = rows[p], rows[r]
+        for i in range(len(rows)):
+            if i != r and rows[i][c] != 0:
+                f = rows[i][c] / rows[r][c]
+                rows[i] = [x - f * y for x, y in zip(rows[i], rows[r])]
+        pivots.append(c)
+        r += 1
+    free = [c for c in range(k) if c not in pivots]
+    if len(free) != 1:
+        return None
+    y = [Fraction(0)] * k
+    y[free[0]] = Fraction(1)
+    for i, c in enumerate(pivots):
+        y[c] = -rows[i][free[0]] / rows[i][c]
+    return y
+
+
+class AffineProblem:
+    """The branch-and-bound problem of one region (geocert.solvers.core.bnb.BranchProblem)."""
+
+    def __init__(self, region: Region, all_a: np.ndarray, all_b: np.ndarray, record: bool):
+        self.region = region
+        self.all_a, self.all_b = all_a, all_b
+        self.record = record
+        self.program = ReusableConicProgram()
+
+    def root_box(self) -> Box:
+        return Box(self.region.lo.copy(), self.region.hi.copy())
+
+    def in_domain(self, v: np.ndarray) -> bool:
+        return bool(np.all(self.all_a @ v + self.all_b >= 0))
+
+    def objective(self, v: np.ndarray) -> float:
+        if not self.in_domain(v):
+            return math.inf
+        return relax.cost(self.region.setup, v)
+
+    def improve(self, v: np.ndarray) -> tuple[np.ndarray, float]:
+        setup = self.region.setup
+        start = self.objective(v)
+
+        def residuals(w):
+            h = setup.M @ np.append(w, 1.0)
+            if not h[3] > 0:
+                return np.full(len(setup.coef), 1e6)
+            return frames.modulus_residuals(setup.coef, h[:3] / h[3])
+
+        try:
+            fit = least_squares(residuals, v, bounds=(self.region.lo, self.region.hi), method="trf",
+                                x_scale="jac", max_nfev=50, xtol=1e-14, ftol=1e-14, gtol=1e-14)
+            value = self.objective(fit.x)
+            if value < start:
+                return fit.x, value
+        except ValueError:
+            pass
+        return v, start
+
+    def bound(self, box: Box, upper_bound: float) -> BoxBound:
+        cap = upper_bound if math.isfinite(upper_bound) else 1e300
+        program = relax.build(self.region.setup, box.lo, box.hi, cap)
+        if program is None:  # d <= 0 on the whole box: no plane of the domain here
+            proof = LeafProof(box, upper_bound, "no_domain", None, math.inf) if self.record else None
+            return BoxBound(BoxStatus.EMPTY, math.inf, proof=proof)
+        result = self.program.solve(program.q, program.A, program.b, program.cones)
+        if result.status is ConicStatus.OPTIMAL:
+            bound = safe_lower_bound(program.q, program.A, program.b, program.cones, result.z,
+                                     program.lower, program.upper)
+            if not math.isfinite(bound):
+                return BoxBound(BoxStatus.UNRESOLVED)
+            candidate = np.clip(result.x[:3], box.lo, box.hi)
+            proof = LeafProof(box, upper_bound, "dual", result.z.copy(), bound) if self.record else None
+            if bound >= upper_bound:
+                return BoxBound(BoxStatus.EMPTY, bound, candidate=candidate, proof=proof)
+            return BoxBound(BoxStatus.BOUNDED, bound, candidate=candidate, proof=proof)
+        if result.status is ConicStatus.INFEASIBLE and result.z is not None and proves_infeasible(
+                program.A, program.b, program.cones, result.z, program.lower, program.upper):
+            proof = LeafProof(box, upper_bound, "farkas", result.z.copy(), math.inf) if self.record else None
+            return BoxBound(BoxStatus.EMPTY, math.inf, proof=proof)
+        return BoxBound(BoxStatus.UNRESOLVED)
+
+    def split(self, box: Box, bound: BoxBound) -> list[Box]:
+        axis = int(np.argmax(box.width / np.maximum(self.region.hi - self.region.lo, 1e-300)))
+        middle = 0.5 * (box.lo[axis] + box.hi[axis])
+        left_hi, right_lo = box.hi.copy(), box.lo.copy()
+        left_hi[axis] = middle
+        right_lo[axis] = middle
+        return [Box(box.lo.copy(), left_hi), Box(right_lo, box.hi.copy())]
+
+
+def regions_of(norm: frames.Normalised, coef: np.ndarray) -> tuple[list[Region], list[dict], str | None]:
+    """Each orientation's region (frame, box proved side by side), or its exclusion proof."""
+    regions, excluded = [], []
+    for delta in (1.0, -1.0):
+        rows = frames.chirality_rows(norm, delta)
+        plane = frames.interior_plane(rows)
+        if plane is None:
+            chosen = gordan_rows(rows)
+            if chosen is None:
+                return [], [], (f"the orientation {delta:+g} has no strictly quasi-affine plane, but that could "
+                                "not be proved exactly (points on the boundary of chirality?)")
+            excluded.append({"delta": delta, "rows": chosen})
+            continue
+        G = frames.centred_frame(rows, plane)
+        a, b = frames.frame_rows(G, rows)
+        sides = [frames.box_side(a, b, k, upper) for k in range(3) for upper in (False, True)]
+        if any(side is None for side in sides):
+            return [], [], ("chirality does not bound the plane at infinity (give the reconstruction's points, "
+                            "or more cameras in general position)")
+        lo = np.array([sides[2 * k][0] for k in range(3)])
+        hi = np.array([sides[2 * k + 1][0] for k in range(3)])
+        reference_row = (0 if norm.points is None else len(norm.points)) + norm.reference
+        used = relaxation_rows(a, b, reference_row)
+        setup = relax.AffineSetup(coef, frames.plane_map(G, delta), a[used], b[used])
+        regions.append(Region(delta, G, used, lo, hi, [side[1] for side in sides], setup))
+    if not regions:
+        return [], excluded, "no plane at infinity is consistent with chirality (no quasi-affine frame)"
+    return regions, excluded, None
+
+
+def solve_affine(norm: frames.Normalised, bnb: BnbOptions, record: bool, callback=None) -> AffineStage:
+    coef, _ = frames.modulus_coefficients(norm.cameras, norm.reference)
+    regions, excluded, reason = regions_of(norm, coef)
+    if reason is not None:
+        return AffineStage("failed", False, None, math.inf, -math.inf, 0, [], excluded, reason)
+    best_v, best_region, upper = None, None, math.inf
+    problems = []
+    for region in regions:
+        rows = frames.chirality_rows(norm, region.delta)
+        all_a, all_b = frames.frame_rows(region.G, rows)
+        problem = AffineProblem(region, all_a, all_b, record)
+        problems.append(problem)
+        centre = np.zeros(3) if problem.in_domain(np.zeros(3)) else 0.5 * (region.lo + region.hi)
+        v, value = problem.improve(centre)
+        if value < upper:
+            best_v, best_region, upper = v, region, value
+    lower_bounds, nodes, statuses = [], 0, []
+    for problem in problems:
+        region = problem.region
+        start = best_v if best_region is region else np.zeros(3)
+        leaves: list | None = [] if record else None
+        result = branch_and_bound(problem, start, upper, bnb, callback,
+                                  trivial_lower_bound=0.0, leaves=leaves)
+        region.leaves = leaves or []
+        region.status, region.nodes = result.status, result.nodes
+        nodes += result.nodes
+        statuses.append(result.status)
+        lower_bounds.append(result.lower_bound)
+        if result.upper_bound < upper:
+            best_v, best_region, upper = result.candidate, region, result.upper_bound
+    lower = min(min(lower_bounds), upper)
+    tolerance = max(bnb.abs_gap, bnb.rel_gap * abs(upper))
+    certified = all(s == "optimal" for s in statuses) and upper - lower <= tolerance and math.isfinite(upper)
+    status = "optimal" if certified else next((s for s in statuses if s != "optimal"), "not_certified")
+    h = best_region.setup.M @ np.append(best_v, 1.0) if best_region is not None else None
+    plane = None if h is None else np.append(h[:3] / h[3], 1.0)
+    return AffineStage(status, certified, plane, upper, lower, nodes, regions, excluded)

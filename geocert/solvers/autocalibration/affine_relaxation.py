@@ -1,0 +1,171 @@
+"""The affine stage's convex relaxation on a box of v (thesis 6.5.4, (6.29)), numpy only: the
+solver and the verifier build it with this one function.
+
+In the centred quasi-affine frame the plane at infinity is (v, 1); ``M @ (v, 1) = (num, d)``
+gives the reference-frame plane ``(p, 1) = (num / d, 1)`` with d > 0 on the chirality polytope.
+For view j, alpha_j d = a_j(v), beta_j d = b_j(v), gamma_j d = c_j(v) are linear in v and
+
+    cost(v) = sum_j (cbrt(gamma_j) alpha_j - beta_j)^2 = sum_j (cbrt(c_j) a_j - cbrt(d) b_j)^2 / d^(8/3).
+
+Relaxation: minimise r subject to r e >= sum_j (f_j - g_j)^2 (a rotated cone),
+f_j within the envelopes of t_j a_j with t_j within those of cbrt(c_j) (B.12/B.13, then
+McCormick B.4: the two-step relaxation of x^(1/3) y, valid whatever the signs), g_j likewise
+with s = cbrt(d), e below the secant of d^(8/3) (B.1), v in the box and on the chirality rows.
+
+Variables: x = [v (3), r, e, s, t (m), f (m), g (m)].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from geocert.solvers.autocalibration import envelopes
+from geocert.solvers.core.cones import ConeSpec
+
+WIDEN = 1e-12  # relative outward rounding of every interval computed here
+
+
+@dataclass
+class AffineSetup:
+    coef: np.ndarray  # (m, 3, 4): alpha, beta, gamma of each view, affine in p
+    M: np.ndarray  # 4x4 plane map
+    rows_a: np.ndarray  # (k, 3) chirality rows used in the relaxation: a . v + b >= 0
+    rows_b: np.ndarray  # (k,)
+
+    def functionals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(D, A, B, C): d = D . (v, 1); a_j = A[j] . (v, 1); likewise b_j, c_j."""
+        num, D = self.M[:3], self.M[3]
+        forms = self.coef[:, :, :3] @ num + self.coef[:, :, 3:4] * D[None, None, :]  # (m, 3, 4)
+        return D, forms[:, 0], forms[:, 1], forms[:, 2]
+
+
+def interval(F: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Range of F . (v, 1) over the box (rows of F at once), widened outward."""
+    F = np.atleast_2d(F)
+    low = F[:, 3] + np.minimum(F[:, :3] * lo, F[:, :3] * hi).sum(axis=1)
+    high = F[:, 3] + np.maximum(F[:, :3] * lo, F[:, :3] * hi).sum(axis=1)
+    pad = WIDEN * (np.abs(F[:, 3]) + (np.abs(F[:, :3]) * np.maximum(np.abs(lo), np.abs(hi))).sum(axis=1))
+    return low - pad, high + pad
+
+
+def product_interval(al, au, bl, bu):
+    corners = np.stack([al * bl, al * bu, au * bl, au * bu])
+    low, high = corners.min(axis=0), corners.max(axis=0)
+    pad = WIDEN * np.abs(corners).max(axis=0)
+    return low - pad, high + pad
+
+
+def cbrt_interval(lo, hi):
+    low, high = np.cbrt(lo), np.cbrt(hi)
+    pad = WIDEN * np.maximum(np.abs(low), np.abs(high))
+    return low - pad, high + pad
+
+
+@dataclass
+class AffineProgram:
+    q: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    cones: ConeSpec
+    lower: np.ndarray  # bounds every point of the domain in the box (costing at most the cap) meets
+    upper: np.ndarray
+
+
+def d_range(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray) -> tuple[float, float]:
+    """d's range over the box, clipped at 0 (d > 0 on the domain)."""
+    D = setup.functionals()[0]
+    dl, du = interval(D, lo, hi)
+    return max(float(dl[0]), 0.0), float(du[0])
+
+
+def build(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray, cap: float) -> AffineProgram | None:
+    """The relaxation over the box; None when d <= 0 on the whole box (no domain point there)."""
+    D, Af, Bf, Cf = setup.functionals()
+    m = len(Af)
+    dl, du = d_range(setup, lo, hi)
+    if not du > 0:
+        return None
+    al, au = interval(Af, lo, hi)
+    bl, bu = interval(Bf, lo, hi)
+    cl, cu = interval(Cf, lo, hi)
+    sl, su = cbrt_interval(np.array([dl]), np.array([du]))
+    sl = np.maximum(sl, 0.0)
+    tl, tu = cbrt_interval(cl, cu)
+    fl, fu = product_interval(tl, tu, al, au)
+    gl, gu = product_interval(sl, su, bl, bu)
+    e_hi = du ** (8.0 / 3.0) * (1 + 1e-9)
+
+    n = 6 + 3 * m
+    V, R, E, S = slice(0, 3), 3, 4, 5
+    T, Fv, Gv = 6 + np.arange(m), 6 + m + np.arange(m), 6 + 2 * m + np.arange(m)
+    rows: list[np.ndarray] = []
+    rhs: list[float] = []
+
+    def le(coeffs: dict, v_coeffs: np.ndarray | None, bound: float) -> None:
+        """sum coeffs[i] x_i + v_coeffs . v <= bound."""
+        row = np.zeros(n)
+        for i, c in coeffs.items():
+            row[i] += c
+        if v_coeffs is not None:
+            row[V] += v_coeffs
+        rows.append(row)
+        rhs.append(bound)
+
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = 1.0
+        le({}, e, hi[k])
+        le({}, -e, -lo[k])
+    for a, b in zip(setup.rows_a, setup.rows_b):
+        le({}, -a, b)
+
+    def cube_root_rows(var: int, F: np.ndarray, xl: float, xu: float) -> None:
+        for slope, icpt in envelopes.cbrt_over(xl, xu):  # y <= slope x + icpt
+            le({var: 1.0}, -slope * F[:3], slope * F[3] + icpt)
+        for slope, icpt in envelopes.cbrt_under(xl, xu):  # y >= slope x + icpt
+            le({var: -1.0}, slope * F[:3], -slope * F[3] - icpt)
+
+    def product_rows(z: int, y: int, F: np.ndarray, yl, yu, xl, xu) -> None:
+        """z = y * x(v), x = F . (v, 1): McCormick with y in [yl, yu], x in [xl, xu]."""
+        under, over = envelopes.mccormick(yl, yu, xl, xu)
+        for cy, cx, c0 in under:  # z >= cy y + cx x + c0
+            le({z: -1.0, y: cy}, cx * F[:3], -c0 - cx * F[3])
+        for cy, cx, c0 in over:  # z <= cy y + cx x + c0
+            le({z: 1.0, y: -cy}, -cx * F[:3], c0 + cx * F[3])
+
+    cube_root_rows(S, D, dl, du)
+    for j in range(m):
+        cube_root_rows(T[j], Cf[j], cl[j], cu[j])
+        product_rows(Fv[j], T[j], Af[j], tl[j], tu[j], al[j], au[j])
+        product_rows(Gv[j], S, Bf[j], sl[0], su[0], bl[j], bu[j])
+    slope, icpt = envelopes.power_secant(dl, du, 8.0 / 3.0)  # e <= slope d + icpt
+    le({E: 1.0}, -slope * D[:3], slope * D[3] + icpt)
+
+    nonneg = len(rows)
+    # Rotated cone r e >= |w|^2, w = f - g: (r + e, r - e, 2 w) in the second-order cone; as
+    # s = b - A x, the rows of A are the negated expressions.
+    cone = np.zeros((m + 2, n))
+    cone[0, R], cone[0, E] = -1.0, -1.0
+    cone[1, R], cone[1, E] = -1.0, 1.0
+    cone[2 + np.arange(m), Fv] = -2.0
+    cone[2 + np.arange(m), Gv] = 2.0
+    A = np.vstack([np.array(rows), cone])
+    b = np.concatenate([np.array(rhs), np.zeros(m + 2)])
+    q = np.zeros(n)
+    q[R] = 1.0
+    lower = np.concatenate([lo, [0.0, 0.0], sl, tl, fl, gl])
+    upper = np.concatenate([hi, [cap, e_hi], su, tu, fu, gu])
+    return AffineProgram(q, A, b, ConeSpec(nonneg=nonneg, soc=(m + 2,)), lower, upper)
+
+
+def cost(setup: AffineSetup, v: np.ndarray) -> float:
+    """The modulus cost at v (inf where d <= 0: not a plane of the domain)."""
+    from geocert.solvers.autocalibration.frames import modulus_residuals
+
+    h = setup.M @ np.append(v, 1.0)
+    if not h[3] > 0:
+        return float("inf")
+    residuals = modulus_residuals(setup.coef, h[:3] / h[3])
+    return float(residuals @ residuals)

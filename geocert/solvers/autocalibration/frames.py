@@ -1,0 +1,252 @@
+"""The frames of stratified autocalibration, in numpy only (the verifier rebuilds them).
+
+* Image coordinates are preconditioned by ``N = K0^-1`` (K0: the middle of the intrinsics
+  ranges), so that the calibration sought is near the identity (thesis 6.7 works with K = I).
+* The reference camera (the best conditioned left 3x3 block) is moved to ``[I | 0]`` by ``T0``;
+  there the plane at infinity is ``(p, 1)`` (thesis 6.2) and view j's infinite homography is
+  ``H_j = A_j - a_j p^T``, whose characteristic polynomial has coefficients affine in p (3.5, 6.2.2).
+* Chirality (thesis 3.5, 6.2.3; Hartley 1998): with points and cameras sign-normalised so that
+  depths are positive, the plane at infinity has the same sign on every point and, up to one
+  unknown orientation ``delta``, on every signed camera centre. A quasi-affine frame ``G`` makes
+  those rows have positive last coordinates; centred and scaled there, the plane at infinity is
+  ``(v, 1)`` with ``v . x_k + 1 >= 0`` for every row: a polytope, boxed by six linear programs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from fractions import Fraction
+
+import numpy as np
+
+from geocert.solvers.core.geometry import InputError
+
+
+@dataclass
+class Normalised:
+    """The reconstruction in the reference frame: ``cameras[i] = s_i N P_i T0`` (unit scale,
+    the reference exactly [I | 0]), ``points[j] = T0^-1 X_j`` (unit norm), signs applied."""
+
+    cameras: np.ndarray  # (m, 3, 4)
+    points: np.ndarray | None  # (n, 4), sign-normalised
+    reference: int
+    T0: np.ndarray  # 4x4: input frame -> reference frame is X -> T0^-1 X; cameras P -> P T0
+    N: np.ndarray  # 3x3 image preconditioner
+    camera_signs: np.ndarray  # (m,)
+
+
+def signed_centre(P: np.ndarray) -> np.ndarray:
+    """The cofactor 4-vector c with P c = 0 and c[3] = det(P[:, :3]): for a real camera
+    M [I | -C], c = det(M) (C, 1), so its sign carries the camera's orientation."""
+    c = np.empty(4)
+    for k in range(4):
+        c[k] = (-1) ** (k + 1) * np.linalg.det(np.delete(P, k, axis=1))
+    return c
+
+
+def reference_camera(cameras: np.ndarray) -> int:
+    """The camera whose left 3x3 block is best conditioned (moved to [I | 0])."""
+    s = np.linalg.svd(cameras[:, :, :3], compute_uv=False)
+    return int(np.argmax(s[:, 2] / s[:, 0]))
+
+
+def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray) -> Normalised:
+    cams = np.einsum("ab,ibc->iac", N, cameras)
+    r = reference_camera(cams)
+    A, a = cams[r, :, :3], cams[r, :, 3]
+    Ainv = np.linalg.inv(A)
+    T0 = np.eye(4)
+    T0[:3, :3] = Ainv
+    T0[:3, 3] = -Ainv @ a
+    out = cams @ T0
+    out /= np.linalg.norm(out, axis=(1, 2))[:, None, None] / np.sqrt(3.0)
+    out[r] = np.hstack([np.eye(3), np.zeros((3, 1))])
+    pts = None
+    if points is not None:
+        inv = np.eye(4)
+        inv[:3, :3] = A
+        inv[:3, 3] = a
+        pts = points @ inv.T
+        pts /= np.linalg.norm(pts, axis=1)[:, None]
+    signs = np.ones(len(out))
+    if pts is not None:
+        depth_signs = np.sign(np.einsum("ik,jk->ij", out[:, 2, :], pts))
+        tau = np.where(depth_signs[r] >= 0, 1.0, -1.0)  # the reference's view of each point
+        for _ in range(4):  # majority vote, alternately cameras and points (deterministic)
+            signs = np.where((depth_signs * tau[None, :]).sum(axis=1) >= 0, 1.0, -1.0)
+            signs[r] = 1.0
+            tau = np.where((depth_signs * signs[:, None]).sum(axis=0) >= 0, 1.0, -1.0)
+        pts = pts * tau[:, None]
+        out = out * signs[:, None, None]
+    return Normalised(out, pts, r, T0, N, signs)
+
+
+def modulus_coefficients(cameras: np.ndarray, reference: int) -> tuple[np.ndarray, np.ndarray]:
+    """For every view but the reference: ``(coef, views)``, coef (m', 3, 4) such that
+    (alpha, beta, gamma) of ``H = A - a p^T`` equal ``coef[:, :, :3] @ p + coef[:, :, 3]``
+    (trace, sum of principal 2x2 minors, determinant: each affine in p, a rank-one update)."""
+    views = np.array([i for i in range(len(cameras)) if i != reference])
+
+    def char(H):  # (k, 3, 3) -> (k, 3): alpha, beta, gamma
+        tr = np.trace(H, axis1=1, axis2=2)
+        minors = (H[:, 0, 0] * H[:, 1, 1] - H[:, 0, 1] * H[:, 1, 0] + H[:, 0, 0] * H[:, 2, 2]
+                  - H[:, 0, 2] * H[:, 2, 0] + H[:, 1, 1] * H[:, 2, 2] - H[:, 1, 2] * H[:, 2, 1])
+        return np.stack([tr, minors, np.linalg.det(H)], axis=1)
+
+    A, a = cameras[views, :, :3], cameras[views, :, 3]
+    base = char(A)
+    coef = np.empty((len(views), 3, 4))
+    coef[:, :, 3] = base
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = 1.0
+        coef[:, :, k] = char(A - a[:, :, None] * e[None, None, :]) - base
+    return coef, views
+
+
+def modulus_residuals(coef: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """cbrt(gamma) alpha - beta per view (thesis 6.21)."""
+    abg = coef[:, :, :3] @ p + coef[:, :, 3]
+    return np.cbrt(abg[:, 2]) * abg[:, 0] - abg[:, 1]
+
+
+def chirality_rows(norm: Normalised, delta: float) -> np.ndarray:
+    """Rows w (4-vectors) with pi . w > 0 for the plane at infinity pi in the reference frame:
+    the signed points, then delta times the signed camera centres."""
+    centres = np.array([delta * signed_centre(P) for P in norm.cameras])
+    centres /= np.linalg.norm(centres, axis=1)[:, None]
+    return centres if norm.points is None else np.vstack([norm.points, centres])
+
+
+def interior_plane(rows: np.ndarray) -> np.ndarray | None:
+    """A plane pi with pi . w > 0 for every row, as deep inside as a linear program finds, or None."""
+    from scipy.optimize import linprog
+
+    k = len(rows)
+    # maximise t subject to rows @ pi >= t, -1 <= pi <= 1
+    c = np.zeros(5)
+    c[4] = -1.0
+    A_ub = np.hstack([-rows, np.ones((k, 1))])
+    res = linprog(c, A_ub=A_ub, b_ub=np.zeros(k), bounds=[(-1, 1)] * 4 + [(None, 1)], method="highs")
+    if res.status != 0 or -res.fun <= 1e-9:
+        return None
+    return res.x[:4]
+
+
+def quasi_affine_frame(rows: np.ndarray, plane: np.ndarray) -> np.ndarray:
+    """G (4x4) with last row ``plane`` (so every row's last coordinate is positive), then
+    centred on the rows' mean and scaled to unit RMS radius: rows in that frame are ``G @ w``."""
+    _, _, vt = np.linalg.svd(plane[None, :])
+    G = np.vstack([vt[1:], plane / np.linalg.norm(plane)])
+    y = rows @ G.T
+    x = y[:, :3] / y[:, 3:4]
+    mean = x.mean(axis=0)
+    # Whitened (not just scaled): a flat cloud of rows makes a long polytope of planes.
+    values, vectors = np.linalg.eigh(np.cov((x - mean).T) + 1e-300 * np.eye(3))
+    W = (vectors / np.sqrt(np.maximum(values, 1e-300 * values.max()))) @ vectors.T
+    Ha = np.eye(4)
+    Ha[:3, :3] = W
+    Ha[:3, 3] = -W @ mean
+    return Ha @ G
+
+
+def centred_frame(rows: np.ndarray, plane: np.ndarray, rounds: int = 4) -> np.ndarray:
+    """A quasi-affine frame whose plane at infinity sits at the Chebyshev centre of the polytope
+    of planes (recomputed a few times): an arbitrary interior plane can leave the polytope
+    hundreds of units long, and branch and bound pays for every unit."""
+    from scipy.optimize import linprog
+
+    G = quasi_affine_frame(rows, plane)
+    for _ in range(rounds):
+        a, b = frame_rows(G, rows)
+        norms = np.linalg.norm(a, axis=1)
+        # maximise r subject to a_k . v + b_k >= r |a_k|
+        res = linprog([0, 0, 0, -1], A_ub=np.hstack([-a, norms[:, None]]), b_ub=b,
+                      bounds=[(None, None)] * 3 + [(0, None)], method="highs")
+        if res.status != 0:
+            break
+        centre = G.T @ np.append(res.x[:3], 1.0)
+        G = quasi_affine_frame(rows, centre / np.linalg.norm(centre))
+    return G
+
+
+def frame_rows(G: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The polytope of v in the frame: ``a_k . v + b_k >= 0`` with (a_k, b_k) = G @ w_k."""
+    y = rows @ G.T
+    return y[:, :3], y[:, 3]
+
+
+def plane_map(G: np.ndarray, sign: float) -> np.ndarray:
+    """M (4x4) with (num_1, num_2, num_3, d) = M @ (v, 1) the reference-frame plane at infinity
+    G^T (v, 1), signed so that d > 0 on the chirality polytope; p = num / d."""
+    M = sign * G.T
+    return M / M[3, 3]  # d = 1 at the frame's centre (v = 0): the relaxation's numbers near 1
+
+
+# --- the root box, proved by exact arithmetic ------------------------------------------------
+
+def box_side(a: np.ndarray, b: np.ndarray, axis: int, upper: bool) -> tuple[float, list[int]] | None:
+    """A bound on v[axis] over {v : a v + b >= 0} and the three rows that prove it (or None)."""
+    from scipy.optimize import linprog
+
+    c = np.zeros(3)
+    c[axis] = -1.0 if upper else 1.0
+    res = linprog(c, A_ub=-a, b_ub=b, bounds=[(None, None)] * 3, method="highs")
+    if res.status != 0:
+        return None
+    y = -np.asarray(res.ineqlin.marginals)
+    basis = [int(i) for i in np.argsort(-y)[:3]]
+    bound = exact_side(a, b, axis, upper, basis)
+    return None if bound is None else (bound, basis)
+
+
+def exact_side(a: np.ndarray, b: np.ndarray, axis: int, upper: bool, basis: list[int]) -> float | None:
+    """The bound three rows prove, computed exactly (rationals from the floats) and rounded
+    outward: y >= 0 with sum_k y_k a_k = +-e_axis gives +-v[axis] = sum y_k a_k . v >= -sum y_k b_k.
+    None when the rows do not prove a bound (singular, or a negative multiplier)."""
+    if len(basis) != 3 or len(set(basis)) != 3 or not all(0 <= k < len(a) for k in basis):
+        return None
+    M = [[Fraction(float(a[k][i])) for k in basis] for i in range(3)]  # columns are the rows a_k
+    rhs = [Fraction(0)] * 3
+    rhs[axis] = Fraction(-1 if upper else 1)
+    y = _solve3(M, rhs)
+    if y is None or any(value < 0 for value in y):
+        return None
+    total = -sum(value * Fraction(float(b[k])) for value, k in zip(y, basis))
+    bound = -total if upper else total
+    result = float(bound)
+    # float() rounds to nearest: step outward so that the float still bounds the exact value.
+    if upper and Fraction(result) < bound:
+        result = float(np.nextafter(result, np.inf))
+    if not upper and Fraction(result) > bound:
+        result = float(np.nextafter(result, -np.inf))
+    return result
+
+
+def _solve3(M: list[list[Fraction]], rhs: list[Fraction]) -> list[Fraction] | None:
+    """Gaussian elimination in rationals (3x3)."""
+    rows = [M[i][:] + [rhs[i]] for i in range(3)]
+    for col in range(3):
+        pivot = next((r for r in range(col, 3) if rows[r][col] != 0), None)
+        if pivot is None:
+            return None
+        rows[col], rows[pivot] = rows[pivot], rows[col]
+        for r in range(3):
+            if r != col and rows[r][col] != 0:
+                factor = rows[r][col] / rows[col][col]
+                rows[r] = [x - factor * y for x, y in zip(rows[r], rows[col])]
+    return [rows[i][3] / rows[i][i] for i in range(3)]
+
+
+def check_reconstruction(cameras: np.ndarray, field: str = "data/cameras") -> None:
+    if cameras.ndim != 3 or cameras.shape[1:] != (3, 4):
+        raise InputError(field, "must be a list of 3x4 matrices")
+    if len(cameras) < 3:
+        raise InputError(field, f"autocalibration needs at least 3 cameras, got {len(cameras)}")
+    s = np.linalg.svd(cameras, compute_uv=False)
+    for i, values in enumerate(s):
+        if not values[2] > 1e-9 * values[0]:
+            raise InputError(f"{field}/{i}", "is rank-deficient (a camera has rank 3)")
+    left = np.linalg.svd(cameras[:, :, :3], compute_uv=False)
+    if not np.any(left[:, 2] > 1e-9 * left[:, 0]):
+        raise InputError(field, "no camera has an invertible left 3x3 block (every centre at infinity)")

@@ -1,0 +1,144 @@
+"""The metric upgrade: the DIAC minimising the infinite-homography relations over every omega
+the intrinsics ranges allow, positive semidefinite inside the relaxation, to certified global
+optimality (thesis 6.6; branch on omega's five free entries). Also the thesis's linear baseline."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from geocert.solvers.autocalibration import metric_relaxation as relax
+from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound
+from geocert.solvers.core.certificates import LeafProof
+from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
+from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
+
+
+@dataclass
+class MetricStage:
+    status: str
+    certified: bool
+    w: np.ndarray | None
+    cost: float
+    lower_bound: float
+    nodes: int
+    lo: np.ndarray
+    hi: np.ndarray
+    leaves: list = field(default_factory=list)
+    reason: str | None = None
+
+
+def homographies(cameras: np.ndarray, reference: int, p: np.ndarray) -> np.ndarray:
+    views = [i for i in range(len(cameras)) if i != reference]
+    return np.array([cameras[i, :, :3] - np.outer(cameras[i, :, 3], p) for i in views])
+
+
+def setup_for(cameras: np.ndarray, reference: int, p: np.ndarray, ranges: dict) -> relax.MetricSetup:
+    H = homographies(cameras, reference, p)
+    bounds = np.array([relax.q_range(h, ranges) for h in H])
+    return relax.MetricSetup(H, bounds[:, 0], bounds[:, 1])
+
+
+class MetricProblem:
+    def __init__(self, setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, record: bool):
+        self.setup, self.lo, self.hi, self.record = setup, lo, hi, record
+        self.program = ReusableConicProgram()
+
+    def root_box(self) -> Box:
+        return Box(self.lo.copy(), self.hi.copy())
+
+    def objective(self, w: np.ndarray) -> float:
+        if not relax.in_domain(self.setup, w, self.lo, self.hi):
+            return math.inf
+        return relax.cost(self.setup, w)
+
+    def improve(self, w: np.ndarray) -> tuple[np.ndarray, float]:
+        start = self.objective(w)
+        try:
+            fit = least_squares(lambda x: relax.residuals(self.setup, x), np.clip(w, self.lo, self.hi),
+                                bounds=(self.lo, self.hi), method="trf", max_nfev=50, xtol=1e-14, ftol=1e-14,
+                                gtol=1e-14)
+            value = self.objective(fit.x)
+            if value < start:
+                return fit.x, value
+        except ValueError:
+            pass
+        return w, start
+
+    def bound(self, box: Box, upper_bound: float) -> BoxBound:
+        cap = upper_bound if math.isfinite(upper_bound) else 1e300
+        try:
+            program = relax.build(self.setup, box.lo, box.hi, cap)
+        except ValueError:
+            return BoxBound(BoxStatus.UNRESOLVED)
+        if program is None:
+            proof = LeafProof(box, upper_bound, "no_domain", None, math.inf) if self.record else None
+            return BoxBound(BoxStatus.EMPTY, math.inf, proof=proof)
+        result = self.program.solve(program.q, program.A, program.b, program.cones)
+        if result.status is ConicStatus.OPTIMAL:
+            bound = safe_lower_bound(program.q, program.A, program.b, program.cones, result.z,
+                                     program.lower, program.upper)
+            if not math.isfinite(bound):
+                return BoxBound(BoxStatus.UNRESOLVED)
+            candidate = np.clip(result.x[:5], box.lo, box.hi)
+            proof = LeafProof(box, upper_bound, "dual", result.z.copy(), bound) if self.record else None
+            status = BoxStatus.EMPTY if bound >= upper_bound else BoxStatus.BOUNDED
+            return BoxBound(status, bound, candidate=candidate, proof=proof)
+        if result.status is ConicStatus.INFEASIBLE and proves_infeasible(
+                program.A, program.b, program.cones, result.z, program.lower, program.upper):
+            proof = LeafProof(box, upper_bound, "farkas", result.z.copy(), math.inf) if self.record else None
+            return BoxBound(BoxStatus.EMPTY, math.inf, proof=proof)
+        return BoxBound(BoxStatus.UNRESOLVED)
+
+    def split(self, box: Box, bound: BoxBound) -> list[Box]:
+        axis = int(np.argmax(box.width / np.maximum(self.hi - self.lo, 1e-300)))
+        middle = 0.5 * (box.lo[axis] + box.hi[axis])
+        left_hi, right_lo = box.hi.copy(), box.lo.copy()
+        left_hi[axis] = middle
+        right_lo[axis] = middle
+        return [Box(box.lo.copy(), left_hi), Box(right_lo, box.hi.copy())]
+
+
+def linear_baseline(setup: relax.MetricSetup) -> tuple[np.ndarray, bool]:
+    """The thesis's linear method (6.30, 6.31): each H normalised by det^(1/3), then
+    omega - H omega H^T = 0 in least squares with omega33 = 1; the PSD flag says whether the
+    answer is a DIAC at all (it is clipped to the nearest PSD matrix when not)."""
+    rows, rhs = [], []
+    basis = relax.sym_basis()
+    for H in setup.H:
+        Hn = H / np.cbrt(np.linalg.det(H))
+        images = np.einsum("ka,iab,lb->ikl", Hn, basis, Hn)
+        for e, (a, b) in enumerate(relax.ALL):
+            coeffs = basis[:, a, b] - images[:, a, b]
+            rows.append(relax.WEIGHTS[e] * coeffs[:5])
+            rhs.append(-relax.WEIGHTS[e] * coeffs[5])
+    w, *_ = np.linalg.lstsq(np.array(rows), np.array(rhs), rcond=None)
+    omega = relax.omega_of(w)
+    values, vectors = np.linalg.eigh(omega)
+    psd = bool(values[0] >= 0)
+    if not psd:
+        omega = (vectors * np.maximum(values, 1e-12)) @ vectors.T
+        omega = omega / omega[2, 2]
+        w = np.array([omega[a, b] for a, b in relax.ENTRIES])
+    return w, psd
+
+
+def solve_metric(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, bnb: BnbOptions, record: bool,
+                 callback=None) -> MetricStage:
+    problem = MetricProblem(setup, lo, hi, record)
+    best, upper = None, math.inf
+    baseline, _ = linear_baseline(setup)
+    for start in (np.clip(baseline, lo, hi), 0.5 * (lo + hi)):
+        w, value = problem.improve(start)
+        if value < upper:
+            best, upper = w, value
+    leaves: list | None = [] if record else None
+    result = branch_and_bound(problem, best, upper, bnb, callback, trivial_lower_bound=0.0, leaves=leaves)
+    certified = result.status == "optimal" and math.isfinite(result.upper_bound)
+    w = result.candidate if math.isfinite(result.upper_bound) else None
+    reason = None if w is not None else "no omega within the intrinsics ranges was found (widen the ranges?)"
+    return MetricStage(result.status if w is not None else "failed", certified, w, result.upper_bound,
+                       result.lower_bound, result.nodes, lo, hi, leaves or [], reason)

@@ -1,0 +1,231 @@
+"""The metric stage's relaxation on a box of omega (thesis 6.6, (6.36)), numpy only.
+
+omega (the DIAC in preconditioned coordinates) has free entries w = (w11, w12, w13, w22, w23)
+and w33 = 1. With the plane at infinity fixed, view j's infinite homography H_j, and
+q_j(omega) = h_j3' omega h_j3 (h_j3 the third row of H_j), the cost is
+
+    cost(omega) = sum_j || omega - H_j omega H_j^T / q_j(omega) ||_F^2.
+
+Relaxation: nu_j = lambda_j omega with lambda_j = 1 / q_j within bounds from q_j's range;
+nu_j's entries within McCormick envelopes (B.4) of lambda_j w_k; nu_j33 = lambda_j;
+h_j3' nu_j h_j3 = 1 (exact on the domain: a linear equation in the lifted variables);
+omega positive semidefinite (a 3x3 PSD cone); omega in the box; q_j(omega) within its bounds;
+r >= sum_j || omega - H_j nu_j H_j^T ||_F^2 (a rotated cone). Minimise r.
+
+Variables: x = [w (5), r, then per view: lambda_j, n_j (5)].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from geocert.solvers.autocalibration import envelopes
+from geocert.solvers.core.cones import ConeSpec
+
+WIDEN = 1e-12
+ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2))  # the free entries of omega, in w's order
+ALL = ENTRIES + ((2, 2),)
+WEIGHTS = np.array([1.0, np.sqrt(2), np.sqrt(2), 1.0, np.sqrt(2), 1.0])  # Frobenius over 6 entries
+
+
+def omega_of(w: np.ndarray) -> np.ndarray:
+    return np.array([[w[0], w[1], w[2]], [w[1], w[3], w[4]], [w[2], w[4], 1.0]])
+
+
+def sym_basis() -> np.ndarray:
+    """(6, 3, 3): the symmetric matrix of each of the six entries (w's five, then the 33)."""
+    basis = np.zeros((6, 3, 3))
+    for i, (a, b) in enumerate(ALL):
+        basis[i, a, b] = basis[i, b, a] = 1.0
+    return basis
+
+
+def congruence(H: np.ndarray) -> np.ndarray:
+    """(6, 6) C with entries(H S H^T) = C @ coords(S) for symmetric S (both in ALL's order)."""
+    basis = sym_basis()
+    images = np.einsum("ka,iab,lb->ikl", H, basis, H)  # (6 coords, 3, 3)
+    return np.array([[images[i, a, b] for i in range(6)] for a, b in ALL])
+
+
+def q_form(H: np.ndarray) -> np.ndarray:
+    """q(omega) = h3' omega h3 = Q[:5] . w + Q[5]."""
+    h = H[2]
+    return np.array([h[0] ** 2, 2 * h[0] * h[1], 2 * h[0] * h[2], h[1] ** 2, 2 * h[1] * h[2], h[2] ** 2])
+
+
+@dataclass
+class MetricSetup:
+    H: np.ndarray  # (m, 3, 3) infinite homographies of the views but the reference
+    q_lower: np.ndarray  # (m,) q_j's range on the domain (every K within the ranges)
+    q_upper: np.ndarray
+
+
+def cost(setup: MetricSetup, w: np.ndarray) -> float:
+    return float(residuals(setup, w) @ residuals(setup, w))
+
+
+def residuals(setup: MetricSetup, w: np.ndarray) -> np.ndarray:
+    omega = omega_of(w)
+    images = np.einsum("jka,ab,jlb->jkl", setup.H, omega, setup.H)
+    q = images[:, 2, 2]
+    diff = omega[None] - images / q[:, None, None]
+    return np.concatenate([WEIGHTS * np.array([d[a, b] for a, b in ALL]) for d in diff])
+
+
+def in_domain(setup: MetricSetup, w: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    if not (np.all(w >= lo) and np.all(w <= hi)):
+        return False
+    if np.linalg.eigvalsh(omega_of(w))[0] < 0:
+        return False
+    q = np.array([q_form(H)[:5] @ w + q_form(H)[5] for H in setup.H])
+    return bool(np.all(q >= setup.q_lower) and np.all(q <= setup.q_upper))
+
+
+def lambda_range(setup: MetricSetup, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    Q = np.array([q_form(H) for H in setup.H])
+    ql = Q[:, 5] + np.minimum(Q[:, :5] * lo, Q[:, :5] * hi).sum(axis=1)
+    qu = Q[:, 5] + np.maximum(Q[:, :5] * lo, Q[:, :5] * hi).sum(axis=1)
+    pad = WIDEN * (np.abs(Q[:, 5]) + (np.abs(Q[:, :5]) * np.maximum(np.abs(lo), np.abs(hi))).sum(axis=1))
+    ql, qu = np.maximum(ql - pad, setup.q_lower), np.minimum(qu + pad, setup.q_upper)
+    if np.any(ql > qu):
+        return None  # no omega of the box meets every view's q range
+    if not np.all(ql > 0):
+        raise ValueError("a view's scale q = h3' omega h3 is not bounded away from 0 on the domain")
+    low, high = 1.0 / qu, 1.0 / ql
+    return low * (1 - 4e-16) - 1e-300, high * (1 + 4e-16)
+
+
+@dataclass
+class MetricProgram:
+    q: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    cones: ConeSpec
+    lower: np.ndarray
+    upper: np.ndarray
+
+
+def build(setup: MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float) -> MetricProgram | None:
+    """The relaxation over the box; None when no omega of the box meets the q ranges."""
+    lam = lambda_range(setup, lo, hi)
+    if lam is None:
+        return None
+    Ll, Lu = lam
+    m = len(setup.H)
+    n = 6 + 6 * m
+    R = 5
+    zero_rows, zero_rhs, rows, rhs = [], [], [], []
+
+    def var(j: int, k: int) -> int:  # k = 0: lambda_j; k = 1..5: n_j's entries
+        return 6 + 6 * j + k
+
+    def le(coeffs: dict, bound: float, target=rows, target_rhs=rhs) -> None:
+        row = np.zeros(n)
+        for i, c in coeffs.items():
+            row[i] += c
+        target.append(row)
+        target_rhs.append(bound)
+
+    for j, H in enumerate(setup.H):
+        Q = q_form(H)  # h3' nu h3 = 1, nu = [n_j entries, lambda_j at 33]
+        le({**{var(j, 1 + k): Q[k] for k in range(5)}, var(j, 0): Q[5]}, 1.0, zero_rows, zero_rhs)
+    for k in range(5):
+        le({k: 1.0}, hi[k])
+        le({k: -1.0}, -lo[k])
+    lam_lo_w, lam_hi_w = np.zeros(5 * m), np.zeros(5 * m)
+    for j, H in enumerate(setup.H):
+        Q = q_form(H)
+        le({k: Q[k] for k in range(5)}, setup.q_upper[j] - Q[5])
+        le({k: -Q[k] for k in range(5)}, Q[5] - setup.q_lower[j])
+        le({var(j, 0): 1.0}, Lu[j])
+        le({var(j, 0): -1.0}, -Ll[j])
+        for k in range(5):
+            under, over = envelopes.mccormick(Ll[j], Lu[j], lo[k], hi[k])
+            for cx, cy, c0 in under:  # n >= cx lambda + cy w_k + c0
+                le({var(j, 1 + k): -1.0, var(j, 0): cx, k: cy}, -c0)
+            for cx, cy, c0 in over:
+                le({var(j, 1 + k): 1.0, var(j, 0): -cx, k: -cy}, c0)
+            corners = np.array([Ll[j] * lo[k], Ll[j] * hi[k], Lu[j] * lo[k], Lu[j] * hi[k]])
+            pad = WIDEN * np.abs(corners).max()
+            lam_lo_w[5 * j + k], lam_hi_w[5 * j + k] = corners.min() - pad, corners.max() + pad
+    # r >= |res|^2: (r + 1, r - 1, 2 res) in the second-order cone, res_j = W (omega - C_j nu_j).
+    cone_rows, cone_rhs = [np.zeros(n), np.zeros(n)], [1.0, -1.0]
+    cone_rows[0][R] = -1.0
+    cone_rows[1][R] = -1.0
+    for j, H in enumerate(setup.H):
+        C = congruence(H)
+        for e in range(6):
+            row = np.zeros(n)
+            constant = 0.0
+            if e < 5:
+                row[e] += 1.0  # omega's entry
+            else:
+                constant += 1.0  # omega33
+            row[var(j, 1):var(j, 1) + 5] -= C[e, :5]
+            row[var(j, 0)] -= C[e, 5]
+            cone_rows.append(-2 * WEIGHTS[e] * row)
+            cone_rhs.append(2 * WEIGHTS[e] * constant)
+    # omega PSD: svec order (0,0), (0,1), (1,1), (0,2), (1,2), (2,2), off-diagonals times sqrt 2.
+    psd_rows, psd_rhs = [], []
+    for (k, scale) in ((0, 1.0), (1, np.sqrt(2)), (3, 1.0), (2, np.sqrt(2)), (4, np.sqrt(2))):
+        row = np.zeros(n)
+        row[k] = -scale
+        psd_rows.append(row)
+        psd_rhs.append(0.0)
+    psd_rows.append(np.zeros(n))
+    psd_rhs.append(1.0)
+    A = np.vstack(zero_rows + rows + cone_rows + psd_rows)
+    b = np.array(zero_rhs + rhs + cone_rhs + psd_rhs)
+    q = np.zeros(n)
+    q[R] = 1.0
+    lower = np.concatenate([lo, [0.0], *[np.concatenate([[Ll[j]], lam_lo_w[5 * j:5 * j + 5]]) for j in range(m)]])
+    upper = np.concatenate([hi, [cap], *[np.concatenate([[Lu[j]], lam_hi_w[5 * j:5 * j + 5]]) for j in range(m)]])
+    cones = ConeSpec(zero=len(zero_rows), nonneg=len(rows), soc=(len(cone_rows),), psd=(3,))
+    return MetricProgram(q, A, b, cones, lower, upper)
+
+
+def omega_box(ranges: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The box of w from ranges of the (preconditioned) intrinsics by interval arithmetic:
+    omega = [[fx^2 + s^2 + u^2, s fy + u v, u], [., fy^2 + v^2, v], [., ., 1]], fy = aspect fx."""
+    f, aspect, s, u, v = (np.array(ranges[k], dtype=float) for k in ("focal", "aspect", "skew", "u", "v"))
+    fy = _mul(f, aspect)
+    w11 = _add(_add(_sq(f), _sq(s)), _sq(u))
+    w12 = _add(_mul(s, fy), _mul(u, v))
+    w22 = _add(_sq(fy), _sq(v))
+    lo = np.array([w11[0], w12[0], u[0], w22[0], v[0]])
+    hi = np.array([w11[1], w12[1], u[1], w22[1], v[1]])
+    pad = WIDEN * np.maximum(np.abs(lo), np.abs(hi)) + 1e-300
+    return lo - pad, hi + pad
+
+
+def q_range(H: np.ndarray, ranges: dict) -> tuple[float, float]:
+    """q = h3' K K^T h3 = |K^T h3|^2 over the ranges: K^T h = (fx h1, s h1 + fy h2, u h1 + v h2 + h3)."""
+    f, aspect, s, u, v = (np.array(ranges[k], dtype=float) for k in ("focal", "aspect", "skew", "u", "v"))
+    h = H[2]
+    fy = _mul(f, aspect)
+    c1 = _scale(f, h[0])
+    c2 = _add(_scale(s, h[0]), _scale(fy, h[1]))
+    c3 = _add(_add(_scale(u, h[0]), _scale(v, h[1])), np.array([h[2], h[2]]))
+    total = _add(_add(_sq(c1), _sq(c2)), _sq(c3))
+    return total[0] * (1 - 1e-12), total[1] * (1 + 1e-12)
+
+
+def _mul(a, b):
+    c = [a[0] * b[0], a[0] * b[1], a[1] * b[0], a[1] * b[1]]
+    return np.array([min(c), max(c)])
+
+
+def _add(a, b):
+    return np.array([a[0] + b[0], a[1] + b[1]])
+
+
+def _scale(a, x):
+    return np.array(sorted([a[0] * x, a[1] * x]))
+
+
+def _sq(a):
+    if a[0] <= 0 <= a[1]:
+        return np.array([0.0, max(a[0] ** 2, a[1] ** 2)])
+    return np.array(sorted([a[0] ** 2, a[1] ** 2]))

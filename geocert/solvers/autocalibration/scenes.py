@@ -1,0 +1,118 @@
+"""Synthetic projective reconstructions with known calibration (tests and benchmarks).
+
+The thesis's protocol (section 6.7): 100 points in a cube of side 20 centred at the origin,
+cameras at a distance of about 40 looking at it, noise added to the image coordinates, and the
+scene moved by a random projective transformation. Here each camera of the reconstruction is
+resected (DLT) from the noisy image points and the projective points, so the input carries the
+noise as a real projective reconstruction would.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class Scene:
+    cameras: np.ndarray  # (m, 3, 4) projective, the input
+    points: np.ndarray  # (n, 4) projective, the input frame
+    K: np.ndarray
+    rotations: np.ndarray  # (m, 3, 3) true
+    centres: np.ndarray  # (m, 3)
+    metric_points: np.ndarray  # (n, 3)
+    projective: np.ndarray  # Hp: input = metric moved by Hp (cameras P Hp, points Hp^-1 X)
+    image_size: tuple[int, int]
+
+    @property
+    def plane_at_infinity(self) -> np.ndarray:
+        """The true plane at infinity in the input frame, scaled to unit norm."""
+        plane = self.projective.T @ np.array([0.0, 0.0, 0.0, 1.0])
+        return plane / np.linalg.norm(plane)
+
+    def job_data(self, with_points: bool = True) -> dict:
+        data = {"cameras": self.cameras.tolist(), "image_size": list(self.image_size)}
+        if with_points:
+            data["points"] = self.points.tolist()
+        return data
+
+
+def look_at(centre: np.ndarray, target: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    z = target - centre
+    z /= np.linalg.norm(z)
+    up = rng.normal(size=3)
+    x = np.cross(up, z)
+    x /= np.linalg.norm(x)
+    return np.vstack([x, np.cross(z, x), z])
+
+
+def dlt_resection(points3: np.ndarray, image: np.ndarray) -> np.ndarray:
+    """The camera minimising the algebraic error of x ~ P X (homogeneous X, normalised data)."""
+    mu = image.mean(axis=0)
+    s = np.sqrt(2) / np.sqrt(((image - mu) ** 2).sum(axis=1).mean())
+    T = np.array([[s, 0, -s * mu[0]], [0, s, -s * mu[1]], [0, 0, 1]])
+    X = points3 / np.linalg.norm(points3, axis=1)[:, None]
+    x = image * s - s * mu
+    rows = []
+    for Xi, (u, v) in zip(X, x):
+        rows.append(np.concatenate([np.zeros(4), -Xi, v * Xi]))
+        rows.append(np.concatenate([Xi, np.zeros(4), -u * Xi]))
+    _, _, vt = np.linalg.svd(np.array(rows))
+    return np.linalg.inv(T) @ vt[-1].reshape(3, 4)
+
+
+def make_scene(views: int, noise_percent: float = 0.0, points: int = 100, seed: int = 0,
+               K: np.ndarray | None = None, image_size: tuple[int, int] = (1000, 1000),
+               grid_points: np.ndarray | None = None) -> Scene:
+    rng = np.random.default_rng(seed)
+    if K is None:
+        K = np.array([[1000.0, 0.0, 500.0], [0.0, 1000.0, 500.0], [0.0, 0.0, 1.0]])
+    X = grid_points if grid_points is not None else rng.uniform(-10, 10, size=(points, 3))
+    rotations, centres, cams = [], [], []
+    for _ in range(views):
+        direction = rng.normal(size=3)
+        centre = 40 * direction / np.linalg.norm(direction)
+        R = look_at(centre, rng.normal(scale=2.0, size=3), rng)
+        rotations.append(R)
+        centres.append(centre)
+        cams.append(K @ np.hstack([R, -(R @ centre)[:, None]]))
+    Hp = np.eye(4)
+    Hp[:3, :3] += 0.3 * rng.normal(size=(3, 3))
+    Hp[:3, 3] = rng.normal(size=3)
+    Hp[3, :3] = 0.03 * rng.normal(size=3)
+    Xh = np.hstack([X, np.ones((len(X), 1))])
+    Xin = Xh @ np.linalg.inv(Hp).T
+    sigma = noise_percent / 100.0 * max(image_size)
+    inputs = []
+    for P in cams:
+        x = Xh @ P.T
+        x = x[:, :2] / x[:, 2:3]
+        if sigma > 0:
+            x = x + rng.normal(scale=sigma, size=x.shape)
+            Pin = dlt_resection(Xin, x)
+        else:
+            Pin = P @ Hp
+        inputs.append(Pin / np.linalg.norm(Pin))
+    return Scene(np.array(inputs), Xin / np.linalg.norm(Xin, axis=1)[:, None], K, np.array(rotations),
+                 np.array(centres), X, Hp, image_size)
+
+
+def orthogonal_grids(size: int = 5, spacing: float = 4.0) -> tuple[np.ndarray, list[list[int]]]:
+    """Three mutually orthogonal size x size grids (thesis Table 6.2) and their lines (indices
+    of the points on each grid line)."""
+    ticks = (np.arange(size) - (size - 1) / 2) * spacing
+    points, lines = [], []
+    for plane in range(3):
+        start = len(points)
+        for i, a in enumerate(ticks):
+            for j, b in enumerate(ticks):
+                p = np.zeros(3)
+                axes = [k for k in range(3) if k != plane]
+                p[axes[0]], p[axes[1]] = a, b
+                p[plane] = -((size - 1) / 2) * spacing - spacing  # the grids sit on three faces
+                points.append(p)
+        for i in range(size):
+            lines.append([start + i * size + j for j in range(size)])
+            lines.append([start + j * size + i for j in range(size)])
+    return np.array(points), lines

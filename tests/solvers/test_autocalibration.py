@@ -1,0 +1,170 @@
+"""Stratified autocalibration's solver pieces (geocert.solvers.autocalibration): frames, the
+modulus constraints, the two relaxations' under-estimation, and exact recovery without noise."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from geocert.solvers.autocalibration import affine, affine_relaxation, frames, metric, metric_relaxation, scenes
+from geocert.solvers.core.bnb import BnbOptions, Box
+from geocert.solvers.core.conic import ConicStatus, solve_conic
+from geocert.solvers.core.cones import safe_lower_bound
+
+K0 = np.array([[1000.0, 0.0, 500.0], [0.0, 1000.0, 500.0], [0.0, 0.0, 1.0]])
+RANGES = {"focal": [0.3, 5.0], "aspect": [0.9, 1.1], "skew": [-0.01, 0.01], "u": [-0.25, 0.25], "v": [-0.25, 0.25]}
+
+
+def normalised_scene(views: int, noise: float, seed: int):
+    scene = scenes.make_scene(views, noise, seed=seed)
+    return scene, frames.normalise(scene.cameras, scene.points, np.linalg.inv(K0))
+
+
+def true_plane(scene, norm) -> np.ndarray:
+    plane = norm.T0.T @ scene.plane_at_infinity
+    return plane[:3] / plane[3]
+
+
+class TestSignedCentre:
+    def test_orientation_and_null_vector(self):
+        rng = np.random.default_rng(0)
+        for _ in range(20):
+            M, C = rng.normal(size=(3, 3)), rng.normal(size=3)
+            P = M @ np.hstack([np.eye(3), -C[:, None]])
+            c = frames.signed_centre(P)
+            assert np.allclose(P @ c, 0, atol=1e-12)
+            assert c[3] == pytest.approx(np.linalg.det(M))
+            assert np.allclose(c[:3] / c[3], C)
+
+
+class TestModulusConstraints:
+    @pytest.mark.parametrize("seed", [0, 1, 2])
+    def test_zero_at_the_true_plane_only(self, seed):
+        scene, norm = normalised_scene(6, 0.0, seed)
+        coef, views = frames.modulus_coefficients(norm.cameras, norm.reference)
+        p = true_plane(scene, norm)
+        assert len(views) == 5
+        assert np.abs(frames.modulus_residuals(coef, p)).max() < 1e-9
+        assert np.abs(frames.modulus_residuals(coef, p * 1.01)).max() > 1e-6
+
+
+class TestChiralityBox:
+    def test_the_true_plane_is_inside_the_proved_box(self):
+        scene, norm = normalised_scene(8, 0.0, 3)
+        coef, _ = frames.modulus_coefficients(norm.cameras, norm.reference)
+        regions, excluded, reason = affine.regions_of(norm, coef)
+        assert reason is None and len(regions) + len(excluded) == 2
+        plane = norm.T0.T @ scene.plane_at_infinity
+        inside = []
+        for region in regions:
+            v = np.linalg.solve(region.setup.M, plane)
+            v = v[:3] / v[3]
+            inside.append(bool(np.all(v >= region.lo) and np.all(v <= region.hi)))
+            for side, rows in enumerate(region.basis):  # each side re-proved exactly
+                rows_all = frames.chirality_rows(norm, region.delta)
+                a, b = frames.frame_rows(region.G, rows_all)
+                bound = frames.exact_side(a, b, side // 2, side % 2 == 1, rows)
+                assert bound is not None
+                assert (bound <= region.lo[side // 2]) if side % 2 == 0 else (bound >= region.hi[side // 2])
+        assert any(inside)
+        for item in excluded:
+            assert affine.exact_gordan(frames.chirality_rows(norm, item["delta"]), item["rows"])
+
+    def test_a_wrong_basis_proves_nothing(self):
+        a = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0], [-1.0, -1.0, -1.0]])
+        b = np.ones(4)
+        assert frames.exact_side(a, b, 0, False, [0, 1, 2]) == -1.0  # row 0: v0 + 1 >= 0
+        assert frames.exact_side(a, b, 0, True, [0, 1, 2]) is None  # these rows bound v0 from below only
+        assert frames.exact_side(a, b, 0, True, [1, 2, 3]) == 3.0  # rows 1-3: v0 <= 1 + 1 + 1
+
+    def test_gordan_refuses_a_feasible_set(self):
+        rows = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1.0], [1.0, 1.0, 1.0, 1.0]])
+        assert not affine.exact_gordan(rows, [0, 1, 2, 3, 4])
+        rows[4] = -rows[4]
+        assert affine.exact_gordan(rows, [0, 1, 2, 3, 4])
+
+
+def relaxation_bound(program) -> float:
+    result = solve_conic(program.q, program.A, program.b, program.cones)
+    assert result.status is ConicStatus.OPTIMAL, result.raw_status
+    return safe_lower_bound(program.q, program.A, program.b, program.cones, result.z, program.lower, program.upper)
+
+
+class TestAffineRelaxationUnderestimates:
+    @pytest.mark.parametrize("seed", [4, 5])
+    def test_every_domain_point_of_a_box_costs_at_least_its_bound(self, seed):
+        scene, norm = normalised_scene(6, 0.2, seed)
+        coef, _ = frames.modulus_coefficients(norm.cameras, norm.reference)
+        regions, _, _ = affine.regions_of(norm, coef)
+        region = regions[0]
+        rows = frames.chirality_rows(norm, region.delta)
+        a, b = frames.frame_rows(region.G, rows)
+        rng = np.random.default_rng(seed)
+        checked = 0
+        for _ in range(120):
+            centre = rng.uniform(region.lo, region.hi)
+            if not np.all(a @ centre + b >= 0):
+                continue
+            half = rng.uniform(0.001, 0.2) * (region.hi - region.lo)
+            lo, hi = np.maximum(centre - half, region.lo), np.minimum(centre + half, region.hi)
+            points = rng.uniform(lo, hi, size=(30, 3))
+            points = points[np.all(points @ a.T + b >= 0, axis=1)]
+            costs = [affine_relaxation.cost(region.setup, v) for v in points]
+            cap = max(costs) if costs else 1.0
+            program = affine_relaxation.build(region.setup, lo, hi, cap)
+            if program is None or not costs:
+                continue
+            assert relaxation_bound(program) <= min(costs) * (1 + 1e-7) + 1e-12
+            checked += 1
+            if checked == 12:
+                break
+        assert checked == 12
+
+
+class TestMetricRelaxationUnderestimates:
+    def test_every_domain_point_of_a_box_costs_at_least_its_bound(self):
+        scene, norm = normalised_scene(6, 0.2, 6)
+        p = true_plane(scene, norm)
+        setup = metric.setup_for(norm.cameras, norm.reference, p, RANGES)
+        root_lo, root_hi = metric_relaxation.omega_box(RANGES)
+        rng = np.random.default_rng(6)
+        checked = 0
+        for _ in range(200):
+            K = np.array([[rng.uniform(0.5, 2), rng.uniform(-0.01, 0.01), rng.uniform(-0.25, 0.25)],
+                          [0, 0, rng.uniform(-0.25, 0.25)], [0, 0, 1.0]])
+            K[1, 1] = K[0, 0] * rng.uniform(0.9, 1.1)
+            omega = K @ K.T
+            w = np.array([omega[a, b] for a, b in metric_relaxation.ENTRIES])
+            half = rng.uniform(0.001, 0.3) * (root_hi - root_lo)
+            lo, hi = np.maximum(w - rng.uniform(0, 1, 5) * half, root_lo), np.minimum(w + half, root_hi)
+            if not metric_relaxation.in_domain(setup, w, root_lo, root_hi):
+                continue
+            value = metric_relaxation.cost(setup, w)
+            program = metric_relaxation.build(setup, lo, hi, value * 2 + 1e-9)
+            assert program is not None
+            assert relaxation_bound(program) <= value * (1 + 1e-7) + 1e-12
+            checked += 1
+            if checked == 15:
+                break
+        assert checked == 15
+
+
+class TestNoiseFreeRecovery:
+    @pytest.mark.parametrize("views", [10, 20])
+    def test_exact_plane_and_calibration_certified(self, views):
+        scene, norm = normalised_scene(views, 0.0, 7)
+        options = BnbOptions(rel_gap=1e-5, abs_gap=1e-12, max_nodes=200, time_limit_s=30)
+        stage = affine.solve_affine(norm, options, record=False)
+        assert stage.certified and stage.status == "optimal"
+        p = true_plane(scene, norm)
+        assert np.linalg.norm(stage.plane[:3] - p) <= 1e-7 * np.linalg.norm(p)
+        setup = metric.setup_for(norm.cameras, norm.reference, stage.plane[:3], RANGES)
+        lo, hi = metric_relaxation.omega_box(RANGES)
+        result = metric.solve_metric(setup, lo, hi, BnbOptions(rel_gap=1e-4, abs_gap=1e-12, max_nodes=200), False)
+        assert result.certified
+        assert np.allclose(result.w, [1, 0, 0, 1, 0], atol=1e-7)  # K = K0 exactly: omega = I after preconditioning
+        assert np.linalg.eigvalsh(metric_relaxation.omega_of(result.w))[0] >= 0
+        baseline, psd = metric.linear_baseline(setup)
+        assert psd and np.allclose(baseline, [1, 0, 0, 1, 0], atol=1e-7)
