@@ -62,7 +62,9 @@ class ItemProgress:
                 lower += running.lower_bound
                 upper += running.upper_bound
                 gap_rel = max(gap_rel, running.gap_rel)
+        stage = {"stage": running.stage} if getattr(running, "stage", None) else {}
         self.sink({
+            **stage,
             "nodes": nodes, "open_boxes": open_boxes,
             "lower_bound": lower, "upper_bound": upper, "gap_abs": max(0.0, upper - lower),
             "gap_rel": finite_or_none(gap_rel), **item_counts(self.done, self.total),
@@ -140,16 +142,24 @@ def certificate_document(kind, data: Any, options, items: list[dict]) -> dict:
     and each item's claim (solution, cost, gap) with its proof, taken out of the item's
     certificate summary."""
     claims = []
-    for index, item in enumerate(items):
+    # A kind may prove several claims per item (autocalibration: one per stage).
+    claimed = kind.claimed_items(items) if hasattr(kind, "claimed_items") else items
+    for index, item in enumerate(claimed):
         proof = (item.get("certificate") or {}).pop("proof", None)
-        solution = {key: item[key] for key in kind.solution_fields}
+        solution = {key: item[key] for key in kind.solution_fields if key in item}
         claims.append({"index": index, "status": item["status"], "certified": item["certified"] and proof is not None,
                        "cost": item["cost"], "lower_bound": item["lower_bound"], "gap": item["gap"],
                        **solution, "proof": proof})
     options = dataclasses.asdict(options)
     return {"format": FORMAT, "version": VERSION, "kind": kind.name, "options": options,
             "data": data, "data_sha256": data_hash(kind.name, data),
-            "problem_sha256": problem_hash(kind.name, data, options), "items": claims}
+            "problem_sha256": problem_hash(kind.name, data, options, *claim_option_names(kind)), "items": claims}
+
+
+def claim_option_names(kind) -> tuple:
+    """The options a kind's claims depend on (hashed into problem_sha256), when not the default."""
+    names = getattr(kind.verification, "claim_options", None)
+    return () if names is None else (names,)
 
 
 def parse_job(job: Any):

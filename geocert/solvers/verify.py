@@ -54,6 +54,9 @@ def checked_options(kind: str, options: Any) -> dict:
     class, exactly as the solver validates them."""
     if not isinstance(options, dict):
         raise Invalid("options", "options must be an object")
+    own = getattr(_adapter(kind), "checked_options", None)
+    if own is not None:  # a kind whose cost is not a norm of residuals reads its own
+        return own(options)
     norm = options.get("norm")
     if not isinstance(norm, str):
         raise Invalid("options", f"options/norm must be a string, got {norm!r:.40}")
@@ -85,6 +88,9 @@ def _adapter(kind: Any):
 
 def scope_statement(kind: str, options: dict) -> dict:
     """What a valid certificate of this kind proves, in words and numbers."""
+    own = getattr(_adapter(kind), "scope_statement", None)
+    if own is not None:
+        return own(options)
     domain = _adapter(kind).domain
     if options["max_residual"] is not None:
         domain += f" with every residual's length (pixel distance) at most {options['max_residual']!r}"
@@ -211,7 +217,8 @@ def _check_hashes(document: dict, options: dict) -> None:
     expected = data_hash(document["kind"], document["data"])
     if expected != document["data_sha256"]:
         raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
-    expected = problem_hash(document["kind"], document["data"], options)
+    names = getattr(_adapter(document["kind"]), "claim_options", None)
+    expected = problem_hash(document["kind"], document["data"], options, *(() if names is None else (names,)))
     if expected != document["problem_sha256"]:
         raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and "
                                    f"options (norm, max_residual, rel_gap, abs_gap) hash to {expected!r}")
@@ -251,9 +258,7 @@ def verify_arrays(kind: str, arrays: tuple, options: dict, claim: dict) -> tuple
     (source, target) for maps. Also returns the lower bound the proof establishes (caller's
     units)."""
     options = checked_options(kind, options)
-    norm = options["norm"]
     adapter = _adapter(kind)
-    item = adapter.item(arrays, norm)
     passed: list[str] = []
     if claim.get("status") != "optimal" or claim.get("certified") is not True:
         raise Invalid("claim", "a certified item has status 'optimal' and certified true")
@@ -265,6 +270,28 @@ def verify_arrays(kind: str, arrays: tuple, options: dict, claim: dict) -> tuple
         raise Invalid("claim", f"lower_bound {lower_claimed!r}, cost {claimed!r} and gap {gap!r} disagree "
                                "(lower_bound = cost - gap, gap >= 0)")
     passed.append("claim")
+    own = getattr(adapter, "check_claim", None)
+    if own is not None:  # the kind checks its solution, scope and proof itself, and names its tolerance
+        bound, rel_gap = own(arrays, options, claim, claimed, lower_claimed, passed)
+    else:
+        bound = _check_residual_claim(kind, adapter, arrays, options, claim, claimed, lower_claimed, passed)
+        rel_gap = options["rel_gap"]
+    if not bound >= lower_claimed - BOUND_TOLERANCE * abs(lower_claimed):
+        raise Invalid("lower_bound", f"the proof establishes {bound!r}, less than lower_bound {lower_claimed!r}")
+    passed.append("lower_bound")
+    tolerance = max(options["abs_gap"], rel_gap * abs(claimed))
+    if not gap <= tolerance * (1 + 1e-12):
+        raise Invalid("gap", f"gap {gap!r} exceeds the tolerance {tolerance!r} (abs_gap, rel_gap)")
+    passed.append("gap")
+    return passed, bound
+
+
+def _check_residual_claim(kind: str, adapter, arrays: tuple, options: dict, claim: dict, claimed: float,
+                          lower_claimed: float, passed: list[str]) -> float:
+    """A fractional kind's claim: its solution's cost and scope from the raw residuals, and the
+    bound its proof establishes."""
+    norm = options["norm"]
+    item = adapter.item(arrays, norm)
     solution = item.solution(claim)
     residuals, depths, rounding = item.raw_residuals(solution)
     if not item.depths_agree(depths):
@@ -288,14 +315,7 @@ def verify_arrays(kind: str, arrays: tuple, options: dict, claim: dict) -> tuple
         bound = adapter.proofs[proof["type"]](item, options, proof, lower_claimed, solution, passed)
     else:
         raise Invalid("format", f"proof type {proof.get('type')!r} is not one {kind} takes")
-    if not bound >= lower_claimed - BOUND_TOLERANCE * abs(lower_claimed):
-        raise Invalid("lower_bound", f"the proof establishes {bound!r}, less than lower_bound {lower_claimed!r}")
-    passed.append("lower_bound")
-    tolerance = max(options["abs_gap"], options["rel_gap"] * abs(claimed))
-    if not gap <= tolerance * (1 + 1e-12):
-        raise Invalid("gap", f"gap {gap!r} exceeds the tolerance {tolerance!r} (abs_gap, rel_gap)")
-    passed.append("gap")
-    return passed, bound
+    return bound
 
 
 def _cost_rounding(residuals: np.ndarray, rounding: np.ndarray, norm: str) -> float:

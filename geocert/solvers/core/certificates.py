@@ -135,11 +135,12 @@ def data_hash(kind: str, data: Any) -> str:
     return hashlib.sha256(canonical_json({"kind": kind, "data": data})).hexdigest()
 
 
-def problem_hash(kind: str, data: Any, options: dict) -> str:
+def problem_hash(kind: str, data: Any, options: dict, names: tuple[str, ...] = CLAIM_OPTIONS) -> str:
     """SHA-256 of everything a claim depends on: canonical JSON of {"kind", "data", "options"}
-    with the options CLAIM_OPTIONS only, numbers as floats (max_residual null when unset)."""
-    claimed = {name: options.get(name) for name in CLAIM_OPTIONS}
-    for name in ("rel_gap", "abs_gap", "max_residual"):
-        if claimed[name] is not None:
-            claimed[name] = float(claimed[name])
+    with the options ``names`` only (the kind's: CLAIM_OPTIONS for the fractional kinds), numbers
+    as floats (max_residual null when unset)."""
+    claimed = {name: options.get(name) for name in names}
+    for name, value in claimed.items():
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            claimed[name] = float(value)
     return hashlib.sha256(canonical_json({"kind": kind, "data": data, "options": claimed})).hexdigest()
