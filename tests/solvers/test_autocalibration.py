@@ -70,7 +70,7 @@ class TestChiralityBox:
                 assert (bound <= region.lo[side // 2]) if side % 2 == 0 else (bound >= region.hi[side // 2])
         assert any(inside)
         for item in excluded:
-            assert affine.exact_gordan(frames.chirality_rows(norm, item["delta"]), item["rows"])
+            assert frames.exact_gordan(frames.chirality_rows(norm, item["delta"]), item["rows"])
 
     def test_a_wrong_basis_proves_nothing(self):
         a = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0], [-1.0, -1.0, -1.0]])
@@ -81,9 +81,9 @@ class TestChiralityBox:
 
     def test_gordan_refuses_a_feasible_set(self):
         rows = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1.0], [1.0, 1.0, 1.0, 1.0]])
-        assert not affine.exact_gordan(rows, [0, 1, 2, 3, 4])
+        assert not frames.exact_gordan(rows, [0, 1, 2, 3, 4])
         rows[4] = -rows[4]
-        assert affine.exact_gordan(rows, [0, 1, 2, 3, 4])
+        assert frames.exact_gordan(rows, [0, 1, 2, 3, 4])
 
 
 def relaxation_bound(program) -> float:

@@ -71,51 +71,7 @@ def gordan_rows(rows: np.ndarray) -> list[int] | None:
     if res.status != 0:
         return None
     chosen = [int(i) for i in np.argsort(-res.x)[:5] if res.x[i] > 0]
-    return chosen if exact_gordan(rows, chosen) else None
-
-
-def exact_gordan(rows: np.ndarray, chosen: list[int]) -> bool:
-    """Whether the chosen rows have, in exact arithmetic, a nonzero nonnegative combination
-    equal to 0 (then pi . w > 0 on all of them is impossible, by Gordan's alternative)."""
-    from fractions import Fraction
-
-    if not 1 <= len(chosen) <= 5 or len(set(chosen)) != len(chosen) or not all(0 <= i < len(rows) for i in chosen):
-        return False
-    W = [[Fraction(float(rows[i][c])) for i in chosen] for c in range(4)]  # 4 x k
-    null = _null_vector(W, len(chosen))
-    if null is None:
-        return False
-    if all(x <= 0 for x in null):
-        null = [-x for x in null]
-    return all(x >= 0 for x in null) and any(x > 0 for x in null)
-
-
-def _null_vector(W, k):
-    """A nonzero rational vector y with W y = 0, when the null space is one-dimensional."""
-    from fractions import Fraction
-
-    rows = [r[:] for r in W]
-    pivots = []
-    r = 0
-    for c in range(k):
-        p = next((i for i in range(r, len(rows)) if rows[i][c] != 0), None)
-        if p is None:
-            continue
-        rows[r], rows[p] = rows[p], rows[r]
-        for i in range(len(rows)):
-            if i != r and rows[i][c] != 0:
-                f = rows[i][c] / rows[r][c]
-                rows[i] = [x - f * y for x, y in zip(rows[i], rows[r])]
-        pivots.append(c)
-        r += 1
-    free = [c for c in range(k) if c not in pivots]
-    if len(free) != 1:
-        return None
-    y = [Fraction(0)] * k
-    y[free[0]] = Fraction(1)
-    for i, c in enumerate(pivots):
-        y[c] = -rows[i][free[0]] / rows[i][c]
-    return y
+    return chosen if frames.exact_gordan(rows, chosen) else None
 
 
 class AffineProblem:
@@ -167,7 +123,7 @@ class AffineProblem:
         result = self.program.solve(program.q, program.A, program.b, program.cones)
         if result.status is ConicStatus.OPTIMAL:
             bound = safe_lower_bound(program.q, program.A, program.b, program.cones, result.z,
-                                     program.lower, program.upper)
+                                     program.lower, program.upper) / self.region.setup.unit
             if not math.isfinite(bound):
                 return BoxBound(BoxStatus.UNRESOLVED)
             candidate = np.clip(result.x[:3], box.lo, box.hi)
@@ -236,6 +192,9 @@ def solve_affine(norm: frames.Normalised, bnb: BnbOptions, record: bool, callbac
         v, value = problem.improve(centre)
         if value < upper:
             best_v, best_region, upper = v, region, value
+    unit = 1.0 / upper if 0 < upper < math.inf else 1.0
+    for problem in problems:
+        problem.region.setup.unit = unit
     lower_bounds, nodes, statuses = [], 0, []
     for problem in problems:
         region = problem.region

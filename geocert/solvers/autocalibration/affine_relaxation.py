@@ -33,6 +33,7 @@ class AffineSetup:
     M: np.ndarray  # 4x4 plane map
     rows_a: np.ndarray  # (k, 3) chirality rows used in the relaxation: a . v + b >= 0
     rows_b: np.ndarray  # (k,)
+    unit: float = 1.0  # the program's objective is unit * cost (about 1 at the incumbent: solver accuracy)
 
     def functionals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(D, A, B, C): d = D . (v, 1); a_j = A[j] . (v, 1); likewise b_j, c_j."""
@@ -81,7 +82,9 @@ def d_range(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray) -> tuple[float, 
 
 
 def build(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray, cap: float) -> AffineProgram | None:
-    """The relaxation over the box; None when d <= 0 on the whole box (no domain point there)."""
+    """The relaxation over the box, its objective in units of ``1 / setup.unit`` of the cost;
+    ``cap`` bounds the cost of the points that matter. None when d <= 0 on the whole box (no
+    domain point there)."""
     D, Af, Bf, Cf = setup.functionals()
     m = len(Af)
     dl, du = d_range(setup, lo, hi)
@@ -149,14 +152,15 @@ def build(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray, cap: float) -> Aff
     cone = np.zeros((m + 2, n))
     cone[0, R], cone[0, E] = -1.0, -1.0
     cone[1, R], cone[1, E] = -1.0, 1.0
-    cone[2 + np.arange(m), Fv] = -2.0
-    cone[2 + np.arange(m), Gv] = 2.0
+    root_unit = np.sqrt(setup.unit)
+    cone[2 + np.arange(m), Fv] = -2.0 * root_unit
+    cone[2 + np.arange(m), Gv] = 2.0 * root_unit
     A = np.vstack([np.array(rows), cone])
     b = np.concatenate([np.array(rhs), np.zeros(m + 2)])
     q = np.zeros(n)
     q[R] = 1.0
     lower = np.concatenate([lo, [0.0, 0.0], sl, tl, fl, gl])
-    upper = np.concatenate([hi, [cap, e_hi], su, tu, fu, gu])
+    upper = np.concatenate([hi, [cap * setup.unit, e_hi], su, tu, fu, gu])
     return AffineProgram(q, A, b, ConeSpec(nonneg=nonneg, soc=(m + 2,)), lower, upper)
 
 

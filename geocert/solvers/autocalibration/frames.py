@@ -238,6 +238,50 @@ def _solve3(M: list[list[Fraction]], rhs: list[Fraction]) -> list[Fraction] | No
     return [rows[i][3] / rows[i][i] for i in range(3)]
 
 
+def exact_gordan(rows: np.ndarray, chosen: list[int]) -> bool:
+    """Whether the chosen rows have, in exact arithmetic, a nonzero nonnegative combination
+    equal to 0 (then pi . w > 0 on all of them is impossible, by Gordan's alternative)."""
+    from fractions import Fraction
+
+    if not 1 <= len(chosen) <= 5 or len(set(chosen)) != len(chosen) or not all(0 <= i < len(rows) for i in chosen):
+        return False
+    W = [[Fraction(float(rows[i][c])) for i in chosen] for c in range(4)]  # 4 x k
+    null = _null_vector(W, len(chosen))
+    if null is None:
+        return False
+    if all(x <= 0 for x in null):
+        null = [-x for x in null]
+    return all(x >= 0 for x in null) and any(x > 0 for x in null)
+
+
+def _null_vector(W, k):
+    """A nonzero rational vector y with W y = 0, when the null space is one-dimensional."""
+    from fractions import Fraction
+
+    rows = [r[:] for r in W]
+    pivots = []
+    r = 0
+    for c in range(k):
+        p = next((i for i in range(r, len(rows)) if rows[i][c] != 0), None)
+        if p is None:
+            continue
+        rows[r], rows[p] = rows[p], rows[r]
+        for i in range(len(rows)):
+            if i != r and rows[i][c] != 0:
+                f = rows[i][c] / rows[r][c]
+                rows[i] = [x - f * y for x, y in zip(rows[i], rows[r])]
+        pivots.append(c)
+        r += 1
+    free = [c for c in range(k) if c not in pivots]
+    if len(free) != 1:
+        return None
+    y = [Fraction(0)] * k
+    y[free[0]] = Fraction(1)
+    for i, c in enumerate(pivots):
+        y[c] = -rows[i][free[0]] / rows[i][c]
+    return y
+
+
 def check_reconstruction(cameras: np.ndarray, field: str = "data/cameras") -> None:
     if cameras.ndim != 3 or cameras.shape[1:] != (3, 4):
         raise InputError(field, "must be a list of 3x4 matrices")

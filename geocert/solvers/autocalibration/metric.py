@@ -29,17 +29,13 @@ class MetricStage:
     hi: np.ndarray
     leaves: list = field(default_factory=list)
     reason: str | None = None
+    rounds: list = field(default_factory=list)  # Tightening rounds, the first on lo..hi
+    search_lo: np.ndarray | None = None  # the box searched: the last round's
+    search_hi: np.ndarray | None = None
+    unit: float = 1.0
 
 
-def homographies(cameras: np.ndarray, reference: int, p: np.ndarray) -> np.ndarray:
-    views = [i for i in range(len(cameras)) if i != reference]
-    return np.array([cameras[i, :, :3] - np.outer(cameras[i, :, 3], p) for i in views])
-
-
-def setup_for(cameras: np.ndarray, reference: int, p: np.ndarray, ranges: dict) -> relax.MetricSetup:
-    H = homographies(cameras, reference, p)
-    bounds = np.array([relax.q_range(h, ranges) for h in H])
-    return relax.MetricSetup(H, bounds[:, 0], bounds[:, 1])
+homographies, setup_for = relax.homographies, relax.setup_for
 
 
 class MetricProblem:
@@ -47,8 +43,11 @@ class MetricProblem:
         self.setup, self.lo, self.hi, self.record = setup, lo, hi, record
         self.program = ReusableConicProgram()
 
+    search_box: Box | None = None  # the root box after tightening
+
     def root_box(self) -> Box:
-        return Box(self.lo.copy(), self.hi.copy())
+        box = self.search_box or Box(self.lo, self.hi)
+        return Box(box.lo.copy(), box.hi.copy())
 
     def objective(self, w: np.ndarray) -> float:
         if not relax.in_domain(self.setup, w, self.lo, self.hi):
@@ -80,7 +79,7 @@ class MetricProblem:
         result = self.program.solve(program.q, program.A, program.b, program.cones)
         if result.status is ConicStatus.OPTIMAL:
             bound = safe_lower_bound(program.q, program.A, program.b, program.cones, result.z,
-                                     program.lower, program.upper)
+                                     program.lower, program.upper) / self.setup.unit
             if not math.isfinite(bound):
                 return BoxBound(BoxStatus.UNRESOLVED)
             candidate = np.clip(result.x[:5], box.lo, box.hi)
@@ -100,6 +99,56 @@ class MetricProblem:
         left_hi[axis] = middle
         right_lo[axis] = middle
         return [Box(box.lo.copy(), left_hi), Box(right_lo, box.hi.copy())]
+
+
+@dataclass
+class Tightening:
+    """One round: over ``lo_in..hi_in``, every omega costing at most ``cap`` lies in
+    ``lo_out..hi_out``; duals[2k] proves lo_out[k], duals[2k + 1] hi_out[k] (None: unchanged)."""
+
+    cap: float
+    lo_in: np.ndarray
+    hi_in: np.ndarray
+    lo_out: np.ndarray
+    hi_out: np.ndarray
+    duals: list
+
+
+def tighten(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float, rounds: int = 12,
+            progress: float = 0.02) -> tuple[np.ndarray, np.ndarray, list[Tightening]]:
+    """Optimality-based bound tightening: each entry of omega minimised and maximised over the
+    relaxation with the cost capped at the incumbent's, repeated while the box shrinks by more
+    than ``progress`` of its volume a round. Every new side is a safe dual bound."""
+    record: list[Tightening] = []
+    for _ in range(rounds):
+        program = relax.build(setup, lo, hi, cap, cap_row=True)
+        if program is None:
+            break
+        solver = ReusableConicProgram()
+        new_lo, new_hi, duals = lo.copy(), hi.copy(), []
+        for k in range(5):
+            for sign in (1.0, -1.0):
+                q = np.zeros_like(program.q)
+                q[k] = sign
+                result = solver.solve(q, program.A, program.b, program.cones) if k == 0 and sign == 1.0 \
+                    else solver.solve_objective(q)
+                dual = None
+                if result.status is ConicStatus.OPTIMAL:
+                    value = safe_lower_bound(q, program.A, program.b, program.cones, result.z, program.lower,
+                                             program.upper)
+                    if sign > 0 and value > new_lo[k]:
+                        new_lo[k], dual = value, result.z.copy()
+                    if sign < 0 and -value < new_hi[k]:
+                        new_hi[k], dual = -value, result.z.copy()
+                duals.append(dual)
+        if np.any(new_lo > new_hi):
+            break  # nothing of the box costs at most cap: a search leaf will say so
+        shrink = np.prod((new_hi - new_lo) / np.maximum(hi - lo, 1e-300))
+        record.append(Tightening(cap, lo, hi, new_lo, new_hi, duals))
+        lo, hi = new_lo, new_hi
+        if shrink > 1 - progress:
+            break
+    return lo, hi, record
 
 
 def linear_baseline(setup: relax.MetricSetup) -> tuple[np.ndarray, bool]:
@@ -135,10 +184,16 @@ def solve_metric(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, bnb: 
         w, value = problem.improve(start)
         if value < upper:
             best, upper = w, value
+    setup.unit = 1.0 / upper if 0 < upper < math.inf else 1.0
+    search_lo, search_hi, rounds = lo, hi, []
+    if math.isfinite(upper):
+        search_lo, search_hi, rounds = tighten(setup, lo, hi, upper)
+        problem.search_box = Box(search_lo, search_hi)
     leaves: list | None = [] if record else None
     result = branch_and_bound(problem, best, upper, bnb, callback, trivial_lower_bound=0.0, leaves=leaves)
     certified = result.status == "optimal" and math.isfinite(result.upper_bound)
     w = result.candidate if math.isfinite(result.upper_bound) else None
     reason = None if w is not None else "no omega within the intrinsics ranges was found (widen the ranges?)"
     return MetricStage(result.status if w is not None else "failed", certified, w, result.upper_bound,
-                       result.lower_bound, result.nodes, lo, hi, leaves or [], reason)
+                       result.lower_bound, result.nodes, lo, hi, leaves or [], reason, rounds, search_lo, search_hi,
+                       setup.unit)

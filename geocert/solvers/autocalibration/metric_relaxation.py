@@ -60,6 +60,7 @@ class MetricSetup:
     H: np.ndarray  # (m, 3, 3) infinite homographies of the views but the reference
     q_lower: np.ndarray  # (m,) q_j's range on the domain (every K within the ranges)
     q_upper: np.ndarray
+    unit: float = 1.0  # the program's objective is unit * cost (about 1 at the incumbent: solver accuracy)
 
 
 def cost(setup: MetricSetup, w: np.ndarray) -> float:
@@ -107,8 +108,10 @@ class MetricProgram:
     upper: np.ndarray
 
 
-def build(setup: MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float) -> MetricProgram | None:
-    """The relaxation over the box; None when no omega of the box meets the q ranges."""
+def build(setup: MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float, cap_row: bool = False
+          ) -> MetricProgram | None:
+    """The relaxation over the box; None when no omega of the box meets the q ranges. With
+    ``cap_row``, also r <= cap (in the program's units): the set bound tightening optimises over."""
     lam = lambda_range(setup, lo, hi)
     if lam is None:
         return None
@@ -134,6 +137,8 @@ def build(setup: MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float) -> Met
     for k in range(5):
         le({k: 1.0}, hi[k])
         le({k: -1.0}, -lo[k])
+    if cap_row:
+        le({R: 1.0}, cap * setup.unit)
     lam_lo_w, lam_hi_w = np.zeros(5 * m), np.zeros(5 * m)
     for j, H in enumerate(setup.H):
         Q = q_form(H)
@@ -165,24 +170,41 @@ def build(setup: MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float) -> Met
                 constant += 1.0  # omega33
             row[var(j, 1):var(j, 1) + 5] -= C[e, :5]
             row[var(j, 0)] -= C[e, 5]
-            cone_rows.append(-2 * WEIGHTS[e] * row)
-            cone_rhs.append(2 * WEIGHTS[e] * constant)
-    # omega PSD: svec order (0,0), (0,1), (1,1), (0,2), (1,2), (2,2), off-diagonals times sqrt 2.
+            scale = 2 * WEIGHTS[e] * np.sqrt(setup.unit)
+            cone_rows.append(-scale * row)
+            cone_rhs.append(scale * constant)
+    # omega PSD, and (lambda_j - L_j) omega = nu_j - L_j omega PSD, (U_j - lambda_j) omega =
+    # U_j omega - nu_j PSD (lambda_j within [L_j, U_j], omega PSD: the matrix form of McCormick's
+    # envelopes, much tighter than the entrywise one). Each as svec, order (0,0), (0,1), (1,1),
+    # (0,2), (1,2), (2,2), off-diagonals times sqrt 2; s = b - A x.
     psd_rows, psd_rhs = [], []
-    for (k, scale) in ((0, 1.0), (1, np.sqrt(2)), (3, 1.0), (2, np.sqrt(2)), (4, np.sqrt(2))):
-        row = np.zeros(n)
-        row[k] = -scale
-        psd_rows.append(row)
-        psd_rhs.append(0.0)
-    psd_rows.append(np.zeros(n))
-    psd_rhs.append(1.0)
+    svec_order = ((0, 1.0), (1, np.sqrt(2)), (3, 1.0), (2, np.sqrt(2)), (4, np.sqrt(2)), (5, 1.0))
+
+    def psd_block(omega_scale: float, nu_scale: float, j: int | None) -> None:
+        """omega_scale * Omega + nu_scale * N_j in the PSD cone (Omega33 = 1, N_j33 = lambda_j)."""
+        for entry, scale in svec_order:
+            row = np.zeros(n)
+            constant = 0.0
+            if entry < 5:
+                row[entry] -= omega_scale * scale
+            else:
+                constant += omega_scale * scale
+            if j is not None:
+                row[var(j, 1 + entry) if entry < 5 else var(j, 0)] -= nu_scale * scale
+            psd_rows.append(row)
+            psd_rhs.append(constant)
+
+    psd_block(1.0, 0.0, None)
+    for j in range(m):
+        psd_block(-Ll[j], 1.0, j)
+        psd_block(Lu[j], -1.0, j)
     A = np.vstack(zero_rows + rows + cone_rows + psd_rows)
     b = np.array(zero_rhs + rhs + cone_rhs + psd_rhs)
     q = np.zeros(n)
     q[R] = 1.0
     lower = np.concatenate([lo, [0.0], *[np.concatenate([[Ll[j]], lam_lo_w[5 * j:5 * j + 5]]) for j in range(m)]])
-    upper = np.concatenate([hi, [cap], *[np.concatenate([[Lu[j]], lam_hi_w[5 * j:5 * j + 5]]) for j in range(m)]])
-    cones = ConeSpec(zero=len(zero_rows), nonneg=len(rows), soc=(len(cone_rows),), psd=(3,))
+    upper = np.concatenate([hi, [cap * setup.unit], *[np.concatenate([[Lu[j]], lam_hi_w[5 * j:5 * j + 5]]) for j in range(m)]])
+    cones = ConeSpec(zero=len(zero_rows), nonneg=len(rows), soc=(len(cone_rows),), psd=(3,) * (1 + 2 * m))
     return MetricProgram(q, A, b, cones, lower, upper)
 
 
@@ -229,3 +251,14 @@ def _sq(a):
     if a[0] <= 0 <= a[1]:
         return np.array([0.0, max(a[0] ** 2, a[1] ** 2)])
     return np.array(sorted([a[0] ** 2, a[1] ** 2]))
+
+
+def homographies(cameras: np.ndarray, reference: int, p: np.ndarray) -> np.ndarray:
+    views = [i for i in range(len(cameras)) if i != reference]
+    return np.array([cameras[i, :, :3] - np.outer(cameras[i, :, 3], p) for i in views])
+
+
+def setup_for(cameras: np.ndarray, reference: int, p: np.ndarray, ranges: dict) -> MetricSetup:
+    H = homographies(cameras, reference, p)
+    bounds = np.array([q_range(h, ranges) for h in H])
+    return MetricSetup(H, bounds[:, 0], bounds[:, 1])

@@ -1,0 +1,194 @@
+"""Stratified autocalibration's problem, numpy only (the verifier reads it too): options, the
+intrinsics ranges and preconditioning, the frames, and the metric reconstruction an answer gives."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from geocert.solvers.autocalibration import frames
+from geocert.solvers.autocalibration import metric_relaxation as mrelax
+from geocert.solvers.core.bnb import BnbOptions, Progress
+from geocert.solvers.core.geometry import InputError
+from geocert.solvers.fractional.options import SearchOptions
+
+METHODS = ("stratified",)
+RANGE_NAMES = ("focal", "aspect", "skew", "principal_point")
+
+
+@dataclass
+class AutocalibrationOptions(SearchOptions):
+    """``rel_gap`` is the affine stage's, ``metric_rel_gap`` the metric stage's (the thesis's
+    targets: 1e-5 and 1e-4); ``max_nodes`` and ``time_limit_s`` apply to each stage.
+    ``intrinsics``: ranges in pixels, {"focal": [lo, hi], "aspect": [lo, hi], "skew": [lo, hi],
+    "principal_point": [[u_lo, u_hi], [v_lo, v_hi]]}; a range not given follows from
+    data.image_size (see default_ranges)."""
+
+    method: str = "stratified"
+    intrinsics: dict = field(default_factory=dict)
+    rel_gap: float = 1e-5
+    metric_rel_gap: float = 1e-4
+    abs_gap: float = 1e-12
+    max_nodes: int = 20_000
+    time_limit_s: float = 60.0
+
+    OPTION_RANGES = {**SearchOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": 1}}
+
+    def check(self) -> None:
+        SearchOptions.check(self)
+        if self.method not in METHODS:
+            raise InputError("options/method", f"must be one of {', '.join(METHODS)} (direct autocalibration is "
+                                               "not served yet)")
+        if not (isinstance(self.metric_rel_gap, (int, float)) and 0 <= self.metric_rel_gap <= 1):
+            raise InputError("options/metric_rel_gap", "must be a finite number >= 0 and <= 1")
+        if not isinstance(self.intrinsics, dict):
+            raise InputError("options/intrinsics", "must be an object of ranges")
+        for name, value in self.intrinsics.items():
+            where = f"options/intrinsics/{name}"
+            if name not in RANGE_NAMES:
+                raise InputError(where, f"unknown range (known: {', '.join(RANGE_NAMES)})")
+            pairs = value if name == "principal_point" else [value]
+            if name == "principal_point" and (not isinstance(value, list) or len(value) != 2):
+                raise InputError(where, "must be [[u_lo, u_hi], [v_lo, v_hi]]")
+            for i, pair in enumerate(pairs):
+                at = where if name != "principal_point" else f"{where}/{i}"
+                if not (isinstance(pair, list) and len(pair) == 2 and all(_finite(x) for x in pair)):
+                    raise InputError(at, "must be [lo, hi] with finite numbers")
+                if not pair[0] <= pair[1]:
+                    raise InputError(at, f"is empty: lo {pair[0]!r} > hi {pair[1]!r}")
+            if name in ("focal", "aspect") and not value[0] > 0:
+                raise InputError(where, "must be positive")
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def default_ranges(image_size: tuple[float, float] | None) -> dict:
+    """Focal length 0.3 to 5 times the larger side, principal point in the middle half of the
+    image, aspect ratio 0.95 to 1.05, skew within 1% of the larger side (pixels)."""
+    if image_size is None:
+        return {}
+    width, height = image_size
+    side = max(width, height)
+    return {"focal": [0.3 * side, 5.0 * side], "aspect": [0.95, 1.05], "skew": [-0.01 * side, 0.01 * side],
+            "principal_point": [[width / 4, 3 * width / 4], [height / 4, 3 * height / 4]]}
+
+
+def resolve_ranges(intrinsics: dict, image_size) -> dict:
+    ranges = {**default_ranges(image_size), **intrinsics}
+    for name in RANGE_NAMES:
+        if name not in ranges:
+            raise InputError(f"options/intrinsics/{name}", "give this range, or data/image_size for its default")
+    return ranges
+
+
+def preconditioner(ranges: dict) -> np.ndarray:
+    """K0 (3x3): the geometric middle of the focal range, the middle of the principal point's."""
+    (fl, fu), ((ul, uu), (vl, vu)) = ranges["focal"], ranges["principal_point"]
+    f0 = math.sqrt(fl * fu)
+    return np.array([[f0, 0.0, (ul + uu) / 2], [0.0, f0, (vl + vu) / 2], [0.0, 0.0, 1.0]])
+
+
+def normalised_ranges(ranges: dict, K0: np.ndarray) -> dict:
+    """The ranges of K0^-1 K's entries: focal / f0, aspect, skew / f0, (u - u0) / f0, (v - v0) / f0."""
+    f0, u0, v0 = K0[0, 0], K0[0, 2], K0[1, 2]
+    (ul, uu), (vl, vu) = ranges["principal_point"]
+    return {"focal": [ranges["focal"][0] / f0, ranges["focal"][1] / f0], "aspect": list(ranges["aspect"]),
+            "skew": [ranges["skew"][0] / f0, ranges["skew"][1] / f0],
+            "u": [(ul - u0) / f0, (uu - u0) / f0], "v": [(vl - v0) / f0, (vu - v0) / f0]}
+
+
+@dataclass
+class Problem:
+    """Everything both stages and the verifier derive from the data and the options."""
+
+    norm: frames.Normalised
+    ranges: dict  # pixels, as solved (defaults filled in)
+    K0: np.ndarray
+    unit_ranges: dict  # preconditioned
+
+
+def prepare(cameras: np.ndarray, points: np.ndarray | None, image_size, intrinsics: dict) -> Problem:
+    ranges = resolve_ranges(intrinsics, image_size)
+    K0 = preconditioner(ranges)
+    norm = frames.normalise(cameras, points, np.linalg.inv(K0))
+    return Problem(norm, ranges, K0, normalised_ranges(ranges, K0))
+
+
+@dataclass
+class StageProgress(Progress):
+    stage: str = "affine"
+
+
+def stage_callback(callback, stage: str):
+    if callback is None:
+        return None
+
+    def report(progress: Progress):
+        return callback(StageProgress(**progress.__dict__, stage=stage))
+
+    return report
+
+
+def bnb_options(options: AutocalibrationOptions, rel_gap: float) -> BnbOptions:
+    return BnbOptions(rel_gap=rel_gap, abs_gap=options.abs_gap, max_nodes=options.max_nodes,
+                      time_limit_s=options.time_limit_s)
+
+
+def upper_triangular_root(omega: np.ndarray) -> np.ndarray:
+    """K upper triangular with K K^T = omega and K[2, 2] = 1 (omega positive definite)."""
+    J = np.eye(3)[::-1]
+    L = np.linalg.cholesky(J @ omega @ J)
+    K = J @ L @ J
+    K = K * np.sign(np.diag(K))[None, :]
+    return K / K[2, 2]
+
+
+def upgrade(problem: Problem, p: np.ndarray, K_unit: np.ndarray) -> np.ndarray:
+    """H (4x4) in the input frame: metric cameras P_i H, metric points H^-1 X (thesis 6.4)."""
+    H = np.zeros((4, 4))
+    H[:3, :3] = K_unit
+    H[3, :3] = -p @ K_unit
+    H[3, 3] = 1.0
+    return problem.norm.T0 @ H
+
+
+def metric_cameras(cameras: np.ndarray, H: np.ndarray) -> list[dict]:
+    """Each metric camera as K [R | t] (R a rotation, K with K[2, 2] = 1) and its centre."""
+    from scipy.linalg import rq
+
+    out = []
+    for P in cameras:
+        Q = P @ H
+        K, R = rq(Q[:, :3])
+        D = np.diag(np.sign(np.diag(K)))
+        K, R = K @ D, D @ R
+        scale = K[2, 2]
+        t = np.linalg.solve(K, Q[:, 3])
+        if np.linalg.det(R) < 0:
+            R, t = -R, -t
+        K = K / scale
+        t = t / scale if scale > 0 else t
+        out.append({"K": K.tolist(), "R": R.tolist(), "t": t.tolist(), "center": (-R.T @ t).tolist()})
+    return out
+
+
+def dual_absolute_quadric(H: np.ndarray) -> np.ndarray:
+    Q = H @ np.diag([1.0, 1.0, 1.0, 0.0]) @ H.T
+    return Q / np.linalg.norm(Q)
+
+
+def omega_in_pixels(K_pixels: np.ndarray) -> np.ndarray:
+    omega = K_pixels @ K_pixels.T
+    return omega / omega[2, 2]
+
+
+def w_of_K(problem: Problem, K_pixels: np.ndarray) -> np.ndarray:
+    """omega's five free entries (preconditioned) for a calibration in pixels."""
+    K_unit = np.linalg.solve(problem.K0, K_pixels)
+    omega = K_unit @ K_unit.T
+    omega = omega / omega[2, 2]
+    return np.array([omega[a, b] for a, b in mrelax.ENTRIES])

@@ -1,0 +1,245 @@
+"""Stratified autocalibration's proofs: their JSON form, and their check with numpy alone.
+
+Affine stage ("stratified_affine"): for each orientation of chirality, either an exact proof that
+no plane is positive on all its rows (Gordan, rational arithmetic), or a region: the frame G, the
+box on v with each side proved by three chirality rows in rational arithmetic (so the box holds
+every plane chirality allows), and the branch-and-bound leaves covering the box, each with a dual
+vector whose safe bound the verifier recomputes from the relaxation it rebuilds (affine_relaxation).
+
+Metric stage ("stratified_metric"), for the plane at infinity it states: the root box of omega
+from the intrinsics ranges (interval arithmetic, recomputed), rounds of bound tightening (each
+side a safe dual bound over the relaxation with the cost capped), and leaves covering the last
+round's box, each with its dual vector.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from geocert.solvers.autocalibration import affine_relaxation as arelax
+from geocert.solvers.autocalibration import frames
+from geocert.solvers.autocalibration import metric_relaxation as mrelax
+from geocert.solvers.core.bnb import Box
+from geocert.solvers.core.certificates import BOUND_TOLERANCE, pack, unpack
+from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
+from geocert.solvers.core.strict import Invalid, number as _number, numbers as _numbers
+from geocert.solvers.fractional.proof import uncovered_part
+
+MAX_LEAVES = 200_000
+
+
+def _box(lo: np.ndarray, hi: np.ndarray) -> list:
+    return [np.asarray(lo, float).tolist(), np.asarray(hi, float).tolist()]
+
+
+def encode_leaves(leaves: list) -> tuple[list, list]:
+    proofs, index, out = [], {}, []
+    for box, leaf in leaves:
+        if leaf is not None and id(leaf) not in index:
+            index[id(leaf)] = len(proofs)
+            proofs.append({"box": _box(leaf.box.lo, leaf.box.hi), "upper_bound": leaf.upper_bound, "kind": leaf.kind,
+                           "z": pack(leaf.z), "bound": leaf.bound if math.isfinite(leaf.bound) else None})
+        out.append(_box(box.lo, box.hi) + [index[id(leaf)] if leaf is not None else None])
+    return proofs, out
+
+
+def encode_affine(stage) -> dict:
+    regions = []
+    for region in stage.regions:
+        proofs, leaves = encode_leaves(region.leaves)
+        regions.append({"delta": region.delta, "frame": region.G.tolist(), "rows": region.rows,
+                        "box": _box(region.lo, region.hi), "basis": region.basis, "unit": region.setup.unit,
+                        "proofs": proofs, "leaves": leaves})
+    return {"type": "stratified_affine", "regions": regions,
+            "excluded": [{"delta": item["delta"], "rows": item["rows"]} for item in stage.excluded]}
+
+
+def encode_metric(stage) -> dict:
+    proofs, leaves = encode_leaves(stage.leaves)
+    return {"type": "stratified_metric", "unit": stage.unit,
+            "tightening": [{"cap": r.cap, "box_in": _box(r.lo_in, r.hi_in), "box_out": _box(r.lo_out, r.hi_out),
+                            "duals": [pack(z) for z in r.duals]} for r in stage.rounds],
+            "search_box": _box(stage.search_lo, stage.search_hi), "proofs": proofs, "leaves": leaves}
+
+
+# --- checks -----------------------------------------------------------------------------------
+
+def _int_list(value: Any, where: str, length: int | None = None) -> list[int]:
+    if not isinstance(value, list) or not all(isinstance(x, int) and not isinstance(x, bool) for x in value):
+        raise Invalid("format", f"{where} must be a list of integers")
+    if length is not None and len(value) != length:
+        raise Invalid("format", f"{where} must have {length} entries")
+    return value
+
+
+def _read_box(value: Any, where: str, d: int) -> tuple[np.ndarray, np.ndarray]:
+    if not isinstance(value, list) or len(value) != 2:
+        raise Invalid("format", f"{where} must be [lower corner, upper corner]")
+    lo, hi = _numbers(value[0], f"{where}/0", (d,)), _numbers(value[1], f"{where}/1", (d,))
+    if not np.all(lo <= hi):
+        raise Invalid("format", f"{where} is empty")
+    return lo, hi
+
+
+def _dual(text: Any, rows: int, where: str) -> np.ndarray:
+    try:
+        z = unpack(text)
+    except Exception as exc:
+        raise Invalid("leaf_bounds", f"{where}: not base64 float64: {exc}") from exc
+    if z is None or z.shape != (rows,) or not np.all(np.isfinite(z)):
+        raise Invalid("leaf_bounds", f"{where}: a dual vector of {rows} finite numbers is needed")
+    return z
+
+
+def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, unit: float, d: int) -> float:
+    """The smallest bound the leaves prove over the root box, in cost units: they must cover it,
+    and each leaf's proof is rebuilt and rechecked. ``build(lo, hi, cap)`` gives the leaf's
+    program (or None: no point of the domain in that box)."""
+    proofs, leaves = proof.get("proofs"), proof.get("leaves")
+    if not isinstance(proofs, list) or not isinstance(leaves, list) or not leaves or len(leaves) > MAX_LEAVES:
+        raise Invalid("format", f"proofs and leaves must be lists (1 to {MAX_LEAVES} leaves)")
+    proven = []
+    for i, item in enumerate(proofs):
+        if not isinstance(item, dict):
+            raise Invalid("format", f"proofs/{i} must be an object")
+        lo, hi = _read_box(item.get("box"), f"proofs/{i}/box", d)
+        cap = _number(item.get("upper_bound"), f"proofs/{i}/upper_bound", "format")
+        kind = item.get("kind")
+        if kind == "no_domain":
+            if build(lo, hi, cap) is not None:
+                raise Invalid("leaf_bounds", f"proofs/{i}: the box holds points of the domain")
+            proven.append(cap)  # no point at all: nothing below the cap either
+            continue
+        program = build(lo, hi, cap)
+        if program is None:
+            proven.append(cap)
+            continue
+        z = _dual(item.get("z"), len(program.b), f"proofs/{i}/z")
+        if kind == "dual":
+            bound = safe_lower_bound(program.q, program.A, program.b, program.cones, z, program.lower,
+                                     program.upper) / unit
+        elif kind == "farkas":
+            if not proves_infeasible(program.A, program.b, program.cones, z, program.lower, program.upper):
+                raise Invalid("leaf_bounds", f"proofs/{i}: the Farkas vector does not prove infeasibility")
+            bound = math.inf
+        else:
+            raise Invalid("format", f"proofs/{i}/kind must be dual, farkas or no_domain")
+        # No point of the box costing at most cap costs less than bound: so none costs less than
+        # min(bound, cap).
+        proven.append(min(bound, cap))
+    leaf_lo = np.empty((len(leaves), d))
+    leaf_hi = np.empty((len(leaves), d))
+    bounds = []
+    for i, leaf in enumerate(leaves):
+        if not isinstance(leaf, list) or len(leaf) != 3:
+            raise Invalid("format", f"leaves/{i} must be [lower corner, upper corner, proof index or null]")
+        leaf_lo[i], leaf_hi[i] = _read_box(leaf[:2], f"leaves/{i}", d)
+        index = leaf[2]
+        if index is None:
+            bounds.append(0.0)  # every cost is a sum of squares
+            continue
+        if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < len(proofs):
+            raise Invalid("format", f"leaves/{i}: no proof {index!r}")
+        plo, phi = _read_box(proofs[index]["box"], f"proofs/{index}/box", d)
+        if not (np.all(plo <= leaf_lo[i]) and np.all(phi >= leaf_hi[i])):
+            raise Invalid("leaf_bounds", f"leaves/{i} is not inside the box of its proof {index}")
+        bounds.append(proven[index])
+    if uncovered_part(Box(root_lo, root_hi), leaf_lo, leaf_hi) is not None:
+        raise Invalid("coverage", "the leaves do not cover the box searched")
+    return float(min(bounds))
+
+
+def check_affine(problem, proof: dict, lower_claimed: float, passed: list) -> float:
+    """The bound an affine proof establishes over every plane chirality allows."""
+    coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
+    regions, excluded = proof.get("regions"), proof.get("excluded")
+    if not isinstance(regions, list) or not isinstance(excluded, list):
+        raise Invalid("format", "an affine proof has regions and excluded")
+    deltas = sorted([r.get("delta") for r in regions if isinstance(r, dict)]
+                    + [e.get("delta") for e in excluded if isinstance(e, dict)])
+    if deltas != [-1.0, 1.0]:
+        raise Invalid("root_region", "each orientation (delta = +1 and -1) needs a region or an exclusion")
+    for item in excluded:
+        rows = frames.chirality_rows(problem.norm, float(item["delta"]))
+        if not frames.exact_gordan(rows, _int_list(item.get("rows"), "excluded/rows")):
+            raise Invalid("root_region", f"orientation {item['delta']:+g}: the rows do not exclude it")
+    bound = math.inf
+    for i, region in enumerate(regions):
+        delta = float(region["delta"])
+        G = _numbers(region.get("frame"), f"regions/{i}/frame", (4, 4))
+        if not np.linalg.cond(G) < 1e12:
+            raise Invalid("root_region", f"regions/{i}: the frame is not invertible")
+        rows = frames.chirality_rows(problem.norm, delta)
+        a, b = frames.frame_rows(G, rows)
+        lo, hi = _read_box(region.get("box"), f"regions/{i}/box", 3)
+        basis = region.get("basis")
+        if not isinstance(basis, list) or len(basis) != 6:
+            raise Invalid("format", f"regions/{i}/basis must give three rows for each of the six sides")
+        for side, chosen in enumerate(basis):
+            axis, upper = side // 2, side % 2 == 1
+            value = frames.exact_side(a, b, axis, upper, _int_list(chosen, f"regions/{i}/basis/{side}", 3))
+            if value is None or (value > hi[axis] if upper else value < lo[axis]):
+                raise Invalid("root_region", f"regions/{i}: side {side} of the box is not proved by its rows")
+        used = _int_list(region.get("rows"), f"regions/{i}/rows")
+        if not used or not all(0 <= k < len(a) for k in used):
+            raise Invalid("format", f"regions/{i}/rows: no such rows")
+        unit = _number(region.get("unit"), f"regions/{i}/unit", "format")
+        if not unit > 0:
+            raise Invalid("format", f"regions/{i}/unit must be positive")
+        setup = arelax.AffineSetup(coef, frames.plane_map(G, delta), a[used], b[used], unit)
+        bound = min(bound, check_leaves(region, lo, hi, lambda l, h, c: arelax.build(setup, l, h, c), unit, 3))
+    passed += ["root_region", "coverage", "leaf_bounds"]
+    return bound
+
+
+def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, passed: list) -> float:
+    """The bound a metric proof establishes over every omega of the domain, for the plane p."""
+    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+    unit = _number(proof.get("unit"), "unit", "format")
+    if not unit > 0:
+        raise Invalid("format", "unit must be positive")
+    setup.unit = unit
+    lo, hi = mrelax.omega_box(problem.unit_ranges)
+    rounds = proof.get("tightening")
+    if not isinstance(rounds, list):
+        raise Invalid("format", "tightening must be a list")
+    for n, round_ in enumerate(rounds):
+        if not isinstance(round_, dict):
+            raise Invalid("format", f"tightening/{n} must be an object")
+        lo_in, hi_in = _read_box(round_.get("box_in"), f"tightening/{n}/box_in", 5)
+        if not (np.array_equal(lo_in, lo) and np.array_equal(hi_in, hi)):
+            raise Invalid("tightening", f"tightening/{n} does not start from the box before it")
+        cap = _number(round_.get("cap"), f"tightening/{n}/cap", "tightening")
+        if not cap >= lower_claimed:
+            raise Invalid("tightening", f"tightening/{n}: its cap is below the lower bound claimed")
+        lo_out, hi_out = _read_box(round_.get("box_out"), f"tightening/{n}/box_out", 5)
+        program = mrelax.build(setup, lo_in, hi_in, cap, cap_row=True)
+        duals = round_.get("duals")
+        if program is None or not isinstance(duals, list) or len(duals) != 10:
+            raise Invalid("tightening", f"tightening/{n}: ten duals (or null) are needed over a box of the domain")
+        for side, text in enumerate(duals):
+            k, sign = side // 2, (1.0 if side % 2 == 0 else -1.0)
+            target = lo_out[k] if sign > 0 else -hi_out[k]
+            before = lo_in[k] if sign > 0 else -hi_in[k]
+            if text is None:
+                if target != before:
+                    raise Invalid("tightening", f"tightening/{n}: side {side} moved without a proof")
+                continue
+            q = np.zeros_like(program.q)
+            q[k] = sign
+            value = safe_lower_bound(q, program.A, program.b, program.cones,
+                                     _dual(text, len(program.b), f"tightening/{n}/duals/{side}"),
+                                     program.lower, program.upper)
+            if not value >= target:
+                raise Invalid("tightening", f"tightening/{n}: side {side} is proved only to {value!r}")
+        lo, hi = lo_out, hi_out
+    search_lo, search_hi = _read_box(proof.get("search_box"), "search_box", 5)
+    if not (np.array_equal(search_lo, lo) and np.array_equal(search_hi, hi)):
+        raise Invalid("root_region", "the box searched is not the last tightening's")
+    passed += ["root_region", "tightening"]
+    bound = check_leaves(proof, lo, hi, lambda l, h, c: mrelax.build(setup, l, h, c), unit, 5)
+    passed += ["coverage", "leaf_bounds"]
+    return bound
