@@ -1,5 +1,6 @@
 """The problem kinds served: one line each (see base.py for what a kind is)."""
 
+from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION
 from geocert.kinds.base import ProblemKind, Registry, default_options, options_from
 from geocert.kinds.maps import HOMOGRAPHY, RESECTION
 from geocert.kinds.triangulation import KIND as TRIANGULATION
@@ -8,6 +9,7 @@ KINDS = Registry(
     TRIANGULATION,
     RESECTION,
     HOMOGRAPHY,
+    AUTOCALIBRATION,
 )
 get_kind = KINDS.get
 

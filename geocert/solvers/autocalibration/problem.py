@@ -45,6 +45,7 @@ class AutocalibrationOptions(SearchOptions):
             raise InputError("options/metric_rel_gap", "must be a finite number >= 0 and <= 1")
         if not isinstance(self.intrinsics, dict):
             raise InputError("options/intrinsics", "must be an object of ranges")
+        self.intrinsics = {name: value for name, value in self.intrinsics.items() if value is not None}
         for name, value in self.intrinsics.items():
             where = f"options/intrinsics/{name}"
             if name not in RANGE_NAMES:
@@ -192,3 +193,34 @@ def w_of_K(problem: Problem, K_pixels: np.ndarray) -> np.ndarray:
     omega = K_unit @ K_unit.T
     omega = omega / omega[2, 2]
     return np.array([omega[a, b] for a, b in mrelax.ENTRIES])
+
+
+def plane_in_input(problem: Problem, p: np.ndarray) -> np.ndarray:
+    """The plane at infinity (p, 1) of the reference frame, in the input frame, unit norm."""
+    plane = np.linalg.solve(problem.norm.T0.T, np.append(p, 1.0))
+    return plane / np.linalg.norm(plane)
+
+
+def plane_from_input(problem: Problem, plane: np.ndarray) -> np.ndarray | None:
+    """p for a plane given in the input frame (None when it passes through the reference camera's
+    centre: not a plane at infinity of this reconstruction)."""
+    reference = problem.norm.T0.T @ plane
+    if not abs(reference[3]) > 1e-300 or not np.all(np.isfinite(reference[:3] / reference[3])):
+        return None
+    return reference[:3] / reference[3]
+
+
+def affine_cost(problem: Problem, p: np.ndarray) -> float:
+    coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
+    residuals = frames.modulus_residuals(coef, p)
+    return float(residuals @ residuals)
+
+
+def allowed_by_chirality(problem: Problem, p: np.ndarray) -> bool:
+    """Whether (p, 1) (either sign) is positive on every chirality row of some orientation."""
+    plane = np.append(p, 1.0)
+    for delta in (1.0, -1.0):
+        values = frames.chirality_rows(problem.norm, delta) @ plane
+        if np.all(values >= 0) or np.all(values <= 0):
+            return True
+    return False

@@ -12,8 +12,8 @@ import numpy as np
 
 from geocert.solvers.autocalibration import affine, metric
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
-from geocert.solvers.autocalibration.problem import (AutocalibrationOptions, Problem, bnb_options, stage_callback,
-                                                     upper_triangular_root)
+from geocert.solvers.autocalibration.problem import (AutocalibrationOptions, Problem, bnb_options, plane_from_input,
+                                                     plane_in_input, stage_callback, upper_triangular_root)
 
 
 @dataclass
@@ -25,6 +25,7 @@ class Stratified:
     metric_s: float
     baseline: dict | None
     K_unit: np.ndarray | None  # preconditioned calibration (K0^-1 K)
+    p: np.ndarray | None = None  # the plane the metric stage used (the affine answer as returned)
 
 
 def solve(problem: Problem, options: AutocalibrationOptions, callback=None) -> Stratified:
@@ -36,7 +37,9 @@ def solve(problem: Problem, options: AutocalibrationOptions, callback=None) -> S
     if stage.plane is None or (stage.status == "cancelled"):
         return Stratified(problem, stage, affine_s, None, 0.0, None, None)
     start = time.perf_counter()
-    p = stage.plane[:3]
+    # The metric stage starts from the plane as returned (in the input frame), so that what a
+    # verifier reads back is exactly what was solved.
+    p = plane_from_input(problem, plane_in_input(problem, stage.plane[:3]))
     try:
         setup = metric.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
         lo, hi = mrelax.omega_box(problem.unit_ranges)
@@ -56,4 +59,4 @@ def solve(problem: Problem, options: AutocalibrationOptions, callback=None) -> S
     if setup is not None:
         w, psd = metric.linear_baseline(setup)
         baseline = {"w": w, "psd": psd, "cost": mrelax.cost(setup, w)}
-    return Stratified(problem, stage, affine_s, result, metric_s, baseline, K_unit)
+    return Stratified(problem, stage, affine_s, result, metric_s, baseline, K_unit, p)

@@ -1,0 +1,258 @@
+"""The autocalibration kind: a projective reconstruction (cameras, optional points) upgraded to a
+metric one with constant intrinsics, each stage of the stratified method certified (thesis ch. 6).
+
+A job is one reconstruction, so one item; its result is the document itself, and its
+certificate's claims are the two stages (item 0 affine, item 1 metric)."""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, Field
+
+from geocert.kinds.documents import finite_or_none
+from geocert.kinds.schema import Camera, CertificateDocument, Finite, JobBase, JobStats, Strict
+from geocert.solvers.autocalibration import metric_relaxation as mrelax
+from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration.verification import STAGES, read_data
+
+Range = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[lo, hi]")]
+Point4 = Annotated[list[Finite], Field(min_length=4, max_length=4, description="[X, Y, Z, W]")]
+Matrix3 = list[list[float]]
+
+
+class AutocalibrationData(Strict):
+    cameras: list[Camera] = Field(min_length=3, description="3x4 projective cameras of one reconstruction")
+    points: list[Point4] | None = Field(None, description="homogeneous points of the same reconstruction "
+                                                          "(bound the plane at infinity by chirality)")
+    image_size: Range | None = Field(None, description="[width, height] in pixels: the intrinsics ranges' defaults")
+
+
+class IntrinsicsIn(Strict):
+    focal: Range | None = Field(None, description="pixels; default 0.3 to 5 times the larger image side")
+    aspect: Range | None = Field(None, description="fy / fx; default 0.95 to 1.05")
+    skew: Range | None = Field(None, description="pixels; default within 1% of the larger side")
+    principal_point: Annotated[list[Range], Field(min_length=2, max_length=2)] | None = Field(
+        None, description="[[u_lo, u_hi], [v_lo, v_hi]] pixels; default the middle half of the image")
+
+
+_DEFAULTS = pr.AutocalibrationOptions()
+_RANGES = pr.AutocalibrationOptions.OPTION_RANGES
+
+
+class AutocalibrationOptionsIn(Strict):
+    method: Literal["stratified"] = "stratified"
+    intrinsics: IntrinsicsIn = Field(default_factory=IntrinsicsIn)
+    rel_gap: Finite = Field(_DEFAULTS.rel_gap, **_RANGES["rel_gap"], description="the affine stage's")
+    metric_rel_gap: Finite = Field(_DEFAULTS.metric_rel_gap, **_RANGES["metric_rel_gap"],
+                                   description="the metric stage's")
+    abs_gap: Finite = Field(_DEFAULTS.abs_gap, **_RANGES["abs_gap"])
+    max_nodes: int = Field(_DEFAULTS.max_nodes, **_RANGES["max_nodes"], description="per stage")
+    time_limit_s: Finite = Field(_DEFAULTS.time_limit_s, **_RANGES["time_limit_s"], description="per stage")
+    certificate: Literal["summary", "full"] = "summary"
+
+
+class AutocalibrationJob(JobBase):
+    kind: Literal["autocalibration"]
+    data: AutocalibrationData
+    options: AutocalibrationOptionsIn = Field(default_factory=AutocalibrationOptionsIn)
+
+
+class StageOut(BaseModel):
+    name: Literal["affine", "metric"]
+    cost: float | None
+    lower_bound: float | None
+    gap: float | None
+    status: str
+    certified: bool
+    nodes: int
+    elapsed_s: float
+    reason: str | None = None
+    plane_at_infinity: list[float] | None = None
+    K: Matrix3 | None = None
+    certificate: dict[str, Any] | None = None
+
+
+class CameraOut(BaseModel):
+    K: Matrix3
+    R: Matrix3
+    t: list[float]
+    center: list[float]
+
+
+class Baseline(BaseModel):
+    method: Literal["linear"]
+    K: Matrix3 | None
+    psd: bool
+    cost: float | None
+
+
+class AutocalibrationResult(BaseModel):
+    kind: Literal["autocalibration"]
+    method: str
+    plane_at_infinity: list[float] | None = Field(description="in the input frame, unit norm")
+    K: Matrix3 | None
+    dual_absolute_quadric: list[list[float]] | None = Field(description="4x4, input frame, unit Frobenius norm")
+    upgrade: list[list[float]] | None = Field(description="H: metric cameras P_i H, metric points H^-1 X")
+    cameras: list[CameraOut] | None
+    points: list[list[float]] | None
+    intrinsics: dict[str, Any] = Field(description="the ranges solved with (pixels; defaults filled in)")
+    stages: list[StageOut]
+    baseline: Baseline | None
+    stats: JobStats
+    certificate: CertificateDocument | None = Field(None, description='with options.certificate = "full"')
+
+
+class Parsed:
+    def __init__(self, cameras, points, image_size):
+        self.cameras, self.points, self.image_size = cameras, points, image_size
+
+
+def _stage(name: str, status: str, certified: bool, cost: float, lower: float, nodes: int, elapsed: float,
+           reason: str | None, rel_gap: float, abs_gap: float, scope: str, proof: dict | None) -> dict:
+    cost_out, lower_out = finite_or_none(cost), finite_or_none(lower)
+    gap = None if cost_out is None or lower_out is None else max(0.0, cost_out - lower_out)
+    if certified and gap is not None and not gap <= max(abs_gap, rel_gap * abs(cost_out)) * (1 + 1e-12):
+        certified, status, reason = False, "not_certified", "the gap at the solution as returned exceeds the tolerance"
+    if certified and gap is not None:
+        lower_out = cost_out - gap
+    summary = {"scope": scope, "tolerance": max(abs_gap, rel_gap * abs(cost_out)) if cost_out is not None else None,
+               "tolerance_met": certified}
+    if proof is not None:
+        summary["proof"] = proof
+    return {"name": name, "cost": cost_out, "lower_bound": lower_out, "gap": gap, "status": status,
+            "certified": certified, "nodes": nodes, "elapsed_s": elapsed, "reason": reason, "certificate": summary}
+
+
+# A small reconstruction (6 views of 12 points, synthetic: geocert.solvers.autocalibration.scenes, seed 11)
+EXAMPLE_DATA = {
+    "cameras": [
+        [[-0.02816711, -0.009239009, -0.02841612, 0.6616719], [0.02921911, -0.05869841, -0.02266608, 0.7454456], [-2.161665e-05, -3.637794e-05, -3.507275e-06, 0.001366901]],
+        [[-0.01639864, 0.05228969, 0.03011414, 0.7416068], [0.05670724, -0.01258258, 0.01681269, 0.6651694], [5.169981e-05, 3.695175e-05, -9.116066e-06, 0.001542663]],
+        [[-0.000716687, 0.04823162, 0.0229049, 0.7190031], [0.04661264, 0.02747577, -0.02408013, 0.6904156], [-1.052211e-05, 4.326086e-05, -1.524159e-05, 0.001367951]],
+        [[0.05799904, -0.007353172, 0.01092701, 0.678145], [-0.01623979, 0.04343117, 0.0298118, 0.730439], [5.857866e-06, -2.115806e-05, 2.196089e-05, 0.001468231]],
+        [[-0.02372678, 0.01123949, -0.02693955, 0.7658457], [0.04526395, 0.01056192, -0.02989863, 0.6395385], [2.457204e-05, -3.316495e-05, -3.736134e-05, 0.001244715]],
+        [[-0.04200139, -0.008769303, -0.01904658, 0.6552572], [-0.04233386, 0.02963408, 0.02483423, 0.7517615], [-1.681433e-05, 4.054183e-05, -1.430714e-05, 0.001355983]],
+    ],
+    "points": [
+        [-0.9308024, 0.2377182, 0.1422046, 0.2384842], [-0.6067509, -0.3816615, 0.6891877, 0.1058683],
+        [-0.5487213, -0.4062356, 0.7233545, 0.1031301], [0.5494556, -0.6881953, 0.1129505, 0.460139],
+        [0.08864005, -0.2673143, -0.9516883, 0.1223742], [0.8806039, 0.4119633, 0.1359677, 0.1906193],
+        [0.4330033, -0.03800767, 0.8963123, 0.08768026], [-0.7644421, 0.4471554, -0.3906084, 0.2512079],
+        [-0.2213906, 0.3561306, -0.8969624, 0.1400561], [0.4759324, 0.5224634, -0.7017487, 0.08982815],
+        [-0.1883752, -0.1630011, -0.9631133, 0.1017757], [0.5379696, -0.06936636, -0.8317444, 0.1182295],
+    ],
+    "image_size": [1000, 1000],
+}
+
+
+class AutocalibrationKind:
+    name = "autocalibration"
+    description = ("Stratified autocalibration of a projective reconstruction (constant intrinsics): the plane at "
+                   "infinity, then the DIAC, each certified globally optimal.")
+    item_key = "stages"  # the certificate's claims; a job is one reconstruction
+    chunk_size = 1
+    options_type = pr.AutocalibrationOptions
+    request_model = AutocalibrationJob
+    result_model = AutocalibrationResult
+    solution_fields = ("plane_at_infinity", "K")
+    verification = STAGES
+    example = {"kind": "autocalibration", "options": {}, "data": EXAMPLE_DATA}
+
+    def parse(self, data: Any, items: range | None = None) -> Parsed:
+        return Parsed(*read_data(data))
+
+    def count(self, parsed: Parsed) -> int:
+        return 1
+
+    def observations(self, parsed: Parsed) -> int:
+        return len(parsed.cameras) * (1 + (0 if parsed.points is None else len(parsed.points)))
+
+    def solve_item(self, parsed: Parsed, index: int, options: pr.AutocalibrationOptions, callback) -> dict:
+        from geocert.solvers.autocalibration import proofs, stratified  # the conic solver, only to solve
+
+        problem = pr.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
+        result = stratified.solve(problem, options, callback)
+        full = options.certificate == "full"
+        a = result.affine
+        document: dict = {"method": options.method, "intrinsics": problem.ranges, "plane_at_infinity": None,
+                          "K": None, "dual_absolute_quadric": None, "upgrade": None, "cameras": None, "points": None,
+                          "baseline": None}
+        plane = None
+        affine_cost = math.inf
+        if a.plane is not None:
+            plane = pr.plane_in_input(problem, a.plane[:3])
+            affine_cost = pr.affine_cost(problem, result.p)  # at the plane as returned
+            document["plane_at_infinity"] = plane.tolist()
+        affine_stage = _stage("affine", a.status, a.certified and pr.allowed_by_chirality(problem, result.p)
+                              if result.p is not None else False, affine_cost, a.lower_bound, a.nodes, result.affine_s,
+                              a.reason, options.rel_gap, options.abs_gap,
+                              "every plane at infinity chirality allows",
+                              proofs.encode_affine(a) if full and a.certified else None)
+        affine_stage["plane_at_infinity"] = document["plane_at_infinity"]
+        m = result.metric
+        metric_stage = _stage("metric", "failed" if m is None else m.status, False, math.inf, -math.inf,
+                              0 if m is None else m.nodes, result.metric_s,
+                              "no plane at infinity" if m is None else m.reason, options.metric_rel_gap,
+                              options.abs_gap, "", None)
+        if m is not None and result.K_unit is not None:
+            K = problem.K0 @ result.K_unit
+            K = K / K[2, 2]
+            K[1, 0] = K[2, 0] = K[2, 1] = 0.0
+            K[2, 2] = 1.0
+            setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, result.p, problem.unit_ranges)
+            w = pr.w_of_K(problem, K)
+            lo, hi = mrelax.omega_box(problem.unit_ranges)
+            inside = mrelax.in_domain(setup, w, lo, hi)
+            metric_stage = _stage("metric", m.status if inside or not m.certified else "not_certified",
+                                  m.certified and inside, mrelax.cost(setup, w), m.lower_bound, m.nodes,
+                                  result.metric_s, m.reason if inside else "the DIAC returned left its domain by rounding",
+                                  options.metric_rel_gap, options.abs_gap,
+                                  "every DIAC within the intrinsics ranges, for the plane at infinity stated",
+                                  proofs.encode_metric(m) if full and m.certified else None)
+            metric_stage["K"] = K.tolist()
+            H = pr.upgrade(problem, result.p, np.linalg.solve(problem.K0, K))
+            document.update(K=K.tolist(), upgrade=H.tolist(), dual_absolute_quadric=pr.dual_absolute_quadric(H).tolist(),
+                            cameras=pr.metric_cameras(parsed.cameras, H))
+            if parsed.points is not None:
+                X = np.linalg.solve(H, parsed.points.T).T
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    xyz = X[:, :3] / X[:, 3:4]
+                document["points"] = [row.tolist() if np.all(np.isfinite(row)) else None for row in xyz]
+        metric_stage["plane_at_infinity"] = document["plane_at_infinity"]
+        if result.baseline is not None:
+            Kb = problem.K0 @ pr.upper_triangular_root(mrelax.omega_of(result.baseline["w"])) \
+                if np.linalg.eigvalsh(mrelax.omega_of(result.baseline["w"]))[0] > 0 else None
+            document["baseline"] = {"method": "linear", "K": None if Kb is None else (Kb / Kb[2, 2]).tolist(),
+                                    "psd": result.baseline["psd"], "cost": finite_or_none(result.baseline["cost"])}
+        stages = [affine_stage, metric_stage]
+        # What the job's statistics count: both stages (certified only when both are).
+        return {**document, "stages": stages, "status": metric_stage["status"] if affine_stage["certified"]
+                else affine_stage["status"], "certified": affine_stage["certified"] and metric_stage["certified"],
+                "nodes": affine_stage["nodes"] + metric_stage["nodes"],
+                "elapsed_s": result.affine_s + result.metric_s,
+                "cost": metric_stage["cost"], "lower_bound": metric_stage["lower_bound"]}
+
+    def cancelled_item(self) -> dict:
+        stage = {"cost": None, "lower_bound": None, "gap": None, "status": "cancelled", "certified": False,
+                 "nodes": 0, "elapsed_s": 0.0, "reason": "the job was cancelled before it started"}
+        return {"method": "stratified", "intrinsics": {}, "plane_at_infinity": None, "K": None,
+                "dual_absolute_quadric": None, "upgrade": None, "cameras": None, "points": None, "baseline": None,
+                "stages": [{"name": "affine", **stage}, {"name": "metric", **stage}], "status": "cancelled",
+                "certified": False, "nodes": 0, "elapsed_s": 0.0, "cost": None, "lower_bound": None}
+
+    def claimed_items(self, items: list[dict]) -> list[dict]:
+        return items[0]["stages"]
+
+    def assemble(self, options, items: list[dict], stats: dict) -> dict:
+        item = dict(items[0])
+        for key in ("status", "certified", "nodes", "elapsed_s", "cost", "lower_bound"):
+            item.pop(key, None)
+        for stage in item["stages"]:
+            (stage.get("certificate") or {}).pop("proof", None)
+        return {"kind": self.name, **item, "stats": stats}
+
+
+KIND = AutocalibrationKind()

@@ -1,0 +1,129 @@
+"""The verifier's adapter for autocalibration (geocert.solvers.verify reads claims through it):
+numpy only. The certificate's items are the stages: item 0 the affine stage's claim, item 1 the
+metric stage's (conditional on the plane at infinity it states)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from geocert.solvers.autocalibration import metric_relaxation as mrelax
+from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import proofs
+from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
+from geocert.solvers.core.geometry import InputError, number_array
+from geocert.solvers.core.strict import Invalid, number as _number, numbers as _numbers
+
+CLAIM_OPTIONS = ("method", "intrinsics", "rel_gap", "metric_rel_gap", "abs_gap")
+
+
+def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, float] | None]:
+    """cameras, points, image_size, read strictly (InputError names the field)."""
+    from geocert.solvers.autocalibration.frames import check_reconstruction
+
+    if not isinstance(data, dict):
+        raise InputError("data", "must be an object with 'cameras' (and optional 'points', 'image_size')")
+    for key in data:
+        if key not in ("cameras", "points", "image_size"):
+            raise InputError(f"data/{key}", "unknown field (known: cameras, points, image_size)")
+    if "cameras" not in data:
+        raise InputError("data/cameras", "is required")
+    cameras = number_array(data["cameras"], "data/cameras", "a list of 3x4 numeric matrices", 3)
+    check_reconstruction(cameras)
+    points = None
+    if data.get("points") is not None:
+        points = number_array(data["points"], "data/points", "a list of [X, Y, Z, W] points", 2)
+        if points.ndim != 2 or points.shape[1] != 4 or len(points) == 0:
+            raise InputError("data/points", "must be a non-empty list of homogeneous [X, Y, Z, W] points")
+        zero = np.flatnonzero(~np.any(points != 0, axis=1))
+        if len(zero):
+            raise InputError(f"data/points/{zero[0]}", "is the zero vector (not a point)")
+    image_size = None
+    if data.get("image_size") is not None:
+        size = number_array(data["image_size"], "data/image_size", "[width, height]", 1)
+        if size.shape != (2,) or not np.all(size > 0):
+            raise InputError("data/image_size", "must be [width, height], both positive")
+        image_size = (float(size[0]), float(size[1]))
+    return cameras, points, image_size
+
+
+class AutocalibrationVerification:
+    claim_options = CLAIM_OPTIONS
+    proofs: dict = {}
+    domain = "every plane at infinity chirality allows, then every DIAC the intrinsics ranges allow"
+
+    def checked_options(self, options: dict) -> dict:
+        checked = {name: options.get(name) for name in CLAIM_OPTIONS}
+        for name in ("rel_gap", "metric_rel_gap", "abs_gap"):
+            checked[name] = _number(checked[name], f"options/{name}", "options")
+        try:
+            pr.AutocalibrationOptions(**{**checked, "intrinsics": dict(checked["intrinsics"] or {})}).check()
+        except (InputError, TypeError) as exc:
+            raise Invalid("options", str(exc)) from exc
+        return checked
+
+    def scope_statement(self, options: dict) -> dict:
+        return {"kind": "autocalibration", "method": options["method"], "intrinsics": options["intrinsics"],
+                "rel_gap": options["rel_gap"], "metric_rel_gap": options["metric_rel_gap"],
+                "abs_gap": options["abs_gap"],
+                "statement": "stage 0 (affine): no plane at infinity chirality allows has a modulus cost below "
+                             "lower_bound; stage 1 (metric), for the plane at infinity it states: no DIAC "
+                             "(positive semidefinite, within the box the intrinsics ranges give, each view's "
+                             "scale within its range) costs less than lower_bound; each solution returned "
+                             "is in its scope and costs cost"}
+
+    def read(self, data: dict, index: int):
+        if index not in (0, 1):
+            raise Invalid("format", f"stage {index}: autocalibration has stages 0 (affine) and 1 (metric)")
+        try:
+            return read_data(data)
+        except InputError as exc:
+            raise Invalid("data", f"{exc.field}: {exc.reason}") from exc
+
+    def check_claim(self, arrays, options: dict, claim: dict, claimed: float, lower_claimed: float,
+                    passed: list) -> tuple[float, float]:
+        cameras, points, image_size = arrays
+        try:
+            problem = pr.prepare(cameras, points, image_size, dict(options["intrinsics"] or {}))
+        except InputError as exc:
+            raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
+        plane = _numbers(claim.get("plane_at_infinity"), "plane_at_infinity", (4,), "claim")
+        p = pr.plane_from_input(problem, plane)
+        if p is None:
+            raise Invalid("objective", "the plane at infinity passes through the reference camera's centre")
+        proof = claim.get("proof")
+        if not isinstance(proof, dict):
+            raise Invalid("format", "a certified stage needs a proof")
+        if claim["index"] == 0:
+            if proof.get("type") != "stratified_affine":
+                raise Invalid("format", "stage 0 takes a stratified_affine proof")
+            cost = pr.affine_cost(problem, p)
+            _check_cost(cost, claimed)
+            passed.append("objective")
+            if not pr.allowed_by_chirality(problem, p):
+                raise Invalid("scope", "the plane at infinity returned is not one chirality allows")
+            passed.append("scope")
+            return proofs.check_affine(problem, proof, lower_claimed, passed), options["rel_gap"]
+        if proof.get("type") != "stratified_metric":
+            raise Invalid("format", "stage 1 takes a stratified_metric proof")
+        K = _numbers(claim.get("K"), "K", (3, 3), "claim")
+        if not (K[1, 0] == 0 and K[2, 0] == 0 and K[2, 1] == 0 and K[2, 2] == 1):
+            raise Invalid("claim", "K must be upper triangular with K[2][2] = 1")
+        w = pr.w_of_K(problem, K)
+        setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+        lo, hi = mrelax.omega_box(problem.unit_ranges)
+        _check_cost(mrelax.cost(setup, w), claimed)
+        passed.append("objective")
+        if not mrelax.in_domain(setup, w, lo, hi):
+            raise Invalid("scope", "the DIAC returned is outside the domain (box, PSD, or a view's scale range)")
+        passed.append("scope")
+        return proofs.check_metric(problem, p, proof, lower_claimed, passed), options["metric_rel_gap"]
+
+
+def _check_cost(cost: float, claimed: float) -> None:
+    if not abs(cost - claimed) <= OBJECTIVE_TOLERANCE * abs(cost) + 1e-300:
+        raise Invalid("objective", f"the solution costs {cost!r}, the certificate claims {claimed!r}")
+
+
+STAGES = AutocalibrationVerification()
