@@ -97,7 +97,7 @@ class AutocalibrationResult(BaseModel):
     dual_absolute_quadric: list[list[float]] | None = Field(description="4x4, input frame, unit Frobenius norm")
     upgrade: list[list[float]] | None = Field(description="H: metric cameras P_i H, metric points H^-1 X")
     cameras: list[CameraOut] | None
-    points: list[list[float]] | None
+    points: list[list[float] | None] | None
     intrinsics: dict[str, Any] = Field(description="the ranges solved with (pixels; defaults filled in)")
     stages: list[StageOut]
     baseline: Baseline | None
@@ -216,11 +216,7 @@ class AutocalibrationKind:
             H = pr.upgrade(problem, result.p, np.linalg.solve(problem.K0, K))
             document.update(K=K.tolist(), upgrade=H.tolist(), dual_absolute_quadric=pr.dual_absolute_quadric(H).tolist(),
                             cameras=pr.metric_cameras(parsed.cameras, H))
-            if parsed.points is not None:
-                X = np.linalg.solve(H, parsed.points.T).T
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    xyz = X[:, :3] / X[:, 3:4]
-                document["points"] = [row.tolist() if np.all(np.isfinite(row)) else None for row in xyz]
+            document["points"] = pr.metric_points(H, parsed.points)
         metric_stage["plane_at_infinity"] = document["plane_at_infinity"]
         if result.baseline is not None:
             Kb = problem.K0 @ pr.upper_triangular_root(mrelax.omega_of(result.baseline["w"])) \

@@ -184,6 +184,13 @@ def _verify(document: Any, returned: dict | None) -> Report:
             fail(exc.check, position, exc.detail)
         except Exception as exc:  # a malformed document is invalid, never a crash
             fail("format", position, f"{type(exc).__name__}: {exc}")
+    together = getattr(_adapter(document["kind"]), "check_claims", None) if first is None and items else None
+    if together is not None:  # what ties a kind's claims to each other (e.g. the stages of one solve)
+        try:
+            together(items)
+            tallies["claim"][0] += 1
+        except Invalid as exc:
+            fail(exc.check, None, exc.detail)
     if returned is not None and first is None:
         try:
             _check_returned(returned, document)
@@ -244,6 +251,9 @@ def _check_returned(result: dict, certificate: dict) -> None:
             if (name in item or name in claim) and item.get(name) != claim.get(name):
                 raise Invalid("returned", f"{key}/{index}/{name} is {item.get(name)!r}, its certificate proves "
                                           f"{claim.get(name)!r}")
+    own = getattr(kind.verification, "check_returned", None)
+    if own is not None:  # what else the result returns, derived from the claims
+        own(result, certificate)
 
 
 def verify_item(kind: str, data: dict, options: dict, claim: dict) -> list[str]:

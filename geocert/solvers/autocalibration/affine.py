@@ -3,7 +3,9 @@ chirality allows, to certified global optimality (thesis 6.5; branch on v only, 
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -196,11 +198,15 @@ def solve_affine(norm: frames.Normalised, bnb: BnbOptions, record: bool, callbac
     for problem in problems:
         problem.region.setup.unit = unit
     lower_bounds, nodes, statuses = [], 0, []
+    began = time.perf_counter()
     for problem in problems:
         region = problem.region
         start = best_v if best_region is region else np.zeros(3)
         leaves: list | None = [] if record else None
-        result = branch_and_bound(problem, start, upper, bnb, callback,
+        # One budget for the stage: each region gets what the ones before it left.
+        budget = dataclasses.replace(bnb, max_nodes=max(1, bnb.max_nodes - nodes),
+                                     time_limit_s=max(1e-3, bnb.time_limit_s - (time.perf_counter() - began)))
+        result = branch_and_bound(problem, start, upper, budget, callback,
                                   trivial_lower_bound=0.0, leaves=leaves)
         region.leaves = leaves or []
         region.status, region.nodes = result.status, result.nodes

@@ -4,7 +4,9 @@ optimality (thesis 6.6; branch on omega's five free entries). Also the thesis's 
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -151,28 +153,7 @@ def tighten(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float
     return lo, hi, record
 
 
-def linear_baseline(setup: relax.MetricSetup) -> tuple[np.ndarray, bool]:
-    """The thesis's linear method (6.30, 6.31): each H normalised by det^(1/3), then
-    omega - H omega H^T = 0 in least squares with omega33 = 1; the PSD flag says whether the
-    answer is a DIAC at all (it is clipped to the nearest PSD matrix when not)."""
-    rows, rhs = [], []
-    basis = relax.sym_basis()
-    for H in setup.H:
-        Hn = H / np.cbrt(np.linalg.det(H))
-        images = np.einsum("ka,iab,lb->ikl", Hn, basis, Hn)
-        for e, (a, b) in enumerate(relax.ALL):
-            coeffs = basis[:, a, b] - images[:, a, b]
-            rows.append(relax.WEIGHTS[e] * coeffs[:5])
-            rhs.append(-relax.WEIGHTS[e] * coeffs[5])
-    w, *_ = np.linalg.lstsq(np.array(rows), np.array(rhs), rcond=None)
-    omega = relax.omega_of(w)
-    values, vectors = np.linalg.eigh(omega)
-    psd = bool(values[0] >= 0)
-    if not psd:
-        omega = (vectors * np.maximum(values, 1e-12)) @ vectors.T
-        omega = omega / omega[2, 2]
-        w = np.array([omega[a, b] for a, b in relax.ENTRIES])
-    return w, psd
+linear_baseline = relax.linear_baseline
 
 
 def solve_metric(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, bnb: BnbOptions, record: bool,
@@ -186,9 +167,11 @@ def solve_metric(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, bnb: 
             best, upper = w, value
     setup.unit = 1.0 / upper if 0 < upper < math.inf else 1.0
     search_lo, search_hi, rounds = lo, hi, []
+    began = time.perf_counter()
     if math.isfinite(upper):
         search_lo, search_hi, rounds = tighten(setup, lo, hi, upper)
         problem.search_box = Box(search_lo, search_hi)
+    bnb = dataclasses.replace(bnb, time_limit_s=max(1e-3, bnb.time_limit_s - (time.perf_counter() - began)))
     leaves: list | None = [] if record else None
     result = branch_and_bound(problem, best, upper, bnb, callback, trivial_lower_bound=0.0, leaves=leaves)
     certified = result.status == "optimal" and math.isfinite(result.upper_bound)

@@ -177,6 +177,16 @@ def metric_cameras(cameras: np.ndarray, H: np.ndarray) -> list[dict]:
     return out
 
 
+def metric_points(H: np.ndarray, points: np.ndarray | None) -> list | None:
+    """H^-1 X dehomogenised (None for a point the upgrade sends to infinity)."""
+    if points is None:
+        return None
+    X = np.linalg.solve(H, points.T).T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xyz = X[:, :3] / X[:, 3:4]
+    return [row.tolist() if np.all(np.isfinite(row)) else None for row in xyz]
+
+
 def dual_absolute_quadric(H: np.ndarray) -> np.ndarray:
     Q = H @ np.diag([1.0, 1.0, 1.0, 0.0]) @ H.T
     return Q / np.linalg.norm(Q)
@@ -217,10 +227,11 @@ def affine_cost(problem: Problem, p: np.ndarray) -> float:
 
 
 def allowed_by_chirality(problem: Problem, p: np.ndarray) -> bool:
-    """Whether (p, 1) (either sign) is positive on every chirality row of some orientation."""
+    """Whether (p, 1) (either sign) is strictly positive on every chirality row of some
+    orientation (strictly: the orientations a proof excludes are excluded strictly)."""
     plane = np.append(p, 1.0)
     for delta in (1.0, -1.0):
         values = frames.chirality_rows(problem.norm, delta) @ plane
-        if np.all(values >= 0) or np.all(values <= 0):
+        if np.all(values > 0) or np.all(values < 0):
             return True
     return False

@@ -149,6 +149,8 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
         bounds.append(proven[index])
     if uncovered_part(Box(root_lo, root_hi), leaf_lo, leaf_hi) is not None:
         raise Invalid("coverage", "the leaves do not cover the box searched")
+    if not all(value == value for value in bounds):
+        raise Invalid("leaf_bounds", "a leaf's bound is not a number")
     return float(min(bounds))
 
 
@@ -178,11 +180,19 @@ def check_affine(problem, proof: dict, lower_claimed: float, passed: list) -> fl
         basis = region.get("basis")
         if not isinstance(basis, list) or len(basis) != 6:
             raise Invalid("format", f"regions/{i}/basis must give three rows for each of the six sides")
+        proven = []
         for side, chosen in enumerate(basis):
             axis, upper = side // 2, side % 2 == 1
             value = frames.exact_side(a, b, axis, upper, _int_list(chosen, f"regions/{i}/basis/{side}", 3))
             if value is None or (value > hi[axis] if upper else value < lo[axis]):
                 raise Invalid("root_region", f"regions/{i}: side {side} of the box is not proved by its rows")
+            proven.append(value)
+        # Every plane positive on the rows is G^T (v, 1) times a positive number for some v of
+        # the polytope only if the polytope is bounded (the sides above) and not "inside out":
+        # a plane with a negative last coordinate in this frame would need the proved lower
+        # bounds above the upper ones on every axis (e.g. a frame with its last row negated).
+        if not all(proven[2 * k] < proven[2 * k + 1] for k in range(3)):
+            raise Invalid("root_region", f"regions/{i}: the proved sides leave no plane in the frame's polytope")
         used = _int_list(region.get("rows"), f"regions/{i}/rows")
         if not used or not all(0 <= k < len(a) for k in used):
             raise Invalid("format", f"regions/{i}/rows: no such rows")

@@ -73,6 +73,46 @@ class AutocalibrationVerification:
                              "scale within its range) costs less than lower_bound; each solution returned "
                              "is in its scope and costs cost"}
 
+    def check_claims(self, items: list) -> None:
+        """The metric stage's claim is about the plane the affine stage returns."""
+        if len(items) != 2:
+            raise Invalid("format", "autocalibration certifies two stages: affine, then metric")
+        planes = [item.get("plane_at_infinity") for item in items]
+        if planes[1] != planes[0]:
+            raise Invalid("claim", "the metric stage states another plane at infinity than the affine stage")
+        if items[0].get("K") is not None:
+            raise Invalid("claim", "the affine stage states no calibration")
+
+    def check_returned(self, result: dict, certificate: dict) -> None:
+        """The result's headline fields are the claims' (plane, K), and what follows from them
+        (upgrade, quadric, cameras, points, ranges, baseline) recomputed from the data."""
+        claims = certificate["items"]
+        if result.get("plane_at_infinity") != claims[0].get("plane_at_infinity"):
+            raise Invalid("returned", "plane_at_infinity differs from the affine stage's claim")
+        if result.get("K") != claims[1].get("K"):
+            raise Invalid("returned", "K differs from the metric stage's claim")
+        try:
+            cameras, points, image_size = read_data(certificate["data"])
+            options = certificate["options"]
+            problem = pr.prepare(cameras, points, image_size, dict(options.get("intrinsics") or {}))
+        except (InputError, TypeError, ValueError) as exc:
+            raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
+        if result.get("method") != options.get("method") or result.get("intrinsics") != problem.ranges:
+            raise Invalid("returned", "method or intrinsics differ from what the options give")
+        derived = {"upgrade": None, "dual_absolute_quadric": None, "cameras": None, "points": None}
+        p = None
+        if result.get("plane_at_infinity") is not None:
+            p = pr.plane_from_input(problem, _numbers(result["plane_at_infinity"], "plane_at_infinity", (4,),
+                                                      "returned"))
+        if p is not None and result.get("K") is not None:
+            K = _numbers(result["K"], "K", (3, 3), "returned")
+            H = pr.upgrade(problem, p, np.linalg.solve(problem.K0, K))
+            derived = {"upgrade": H.tolist(), "dual_absolute_quadric": pr.dual_absolute_quadric(H).tolist(),
+                       "cameras": pr.metric_cameras(cameras, H), "points": pr.metric_points(H, points)}
+        for name, expected in derived.items():
+            if not _close(result.get(name), expected):
+                raise Invalid("returned", f"{name} is not what the plane at infinity and K give")
+
     def read(self, data: dict, index: int):
         if index not in (0, 1):
             raise Invalid("format", f"stage {index}: autocalibration has stages 0 (affine) and 1 (metric)")
@@ -119,6 +159,22 @@ class AutocalibrationVerification:
             raise Invalid("scope", "the DIAC returned is outside the domain (box, PSD, or a view's scale range)")
         passed.append("scope")
         return proofs.check_metric(problem, p, proof, lower_claimed, passed), options["metric_rel_gap"]
+
+
+def _close(value: Any, expected: Any) -> bool:
+    """Equal structure, numbers within 1e-9 of their scale (recomputed on another machine)."""
+    if expected is None or value is None:
+        return value is None and expected is None
+    if isinstance(expected, dict):
+        return isinstance(value, dict) and value.keys() == expected.keys() and all(
+            _close(value[key], expected[key]) for key in expected)
+    if isinstance(expected, list):
+        return isinstance(value, list) and len(value) == len(expected) and all(
+            _close(v, e) for v, e in zip(value, expected))
+    if isinstance(expected, float) or isinstance(expected, int):
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value - expected) <= (
+            1e-9 * max(abs(expected), 1.0))
+    return value == expected
 
 
 def _check_cost(cost: float, claimed: float) -> None:

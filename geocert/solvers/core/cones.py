@@ -128,7 +128,10 @@ def safe_lower_bound(q: np.ndarray, A, b: np.ndarray, cones: ConeSpec, z: np.nda
     if transform is not None:
         d = transform.shape[0]
         residual = np.concatenate([transform.T @ residual[:d], residual[d:]])
-    return float(-b @ z) + _box_minimum(residual, lower, upper)
+    bound = float(-b @ z) + _box_minimum(residual, lower, upper)
+    # A dual vector of huge entries can make the sum inf - inf: no bound at all, never NaN
+    # (a NaN compares false with everything, and min() keeps or drops it by position).
+    return bound if bound == bound else -np.inf
 
 
 def proves_infeasible(A, b: np.ndarray, cones: ConeSpec, z: np.ndarray, lower: np.ndarray, upper: np.ndarray,
