@@ -58,6 +58,11 @@ class Settings(BaseSettings):
     # A connection must complete a request's headers within this many seconds of opening (or of
     # its previous response), else it is closed (slow-header clients).
     header_timeout_s: float = 10.0
+    # Event streams (SSE) one key may hold open at once in one API process, or one client address
+    # when no keys are configured (429 beyond it; 0: unlimited).
+    max_streams_per_key: int = 100
+    # Seconds between heartbeat comments on an idle event stream (under any proxy's read timeout).
+    stream_heartbeat_s: float = 10.0
     # On SIGTERM: event streams end at once (telling clients to reconnect); requests still running
     # after this many seconds are cancelled and the API exits.
     shutdown_timeout_s: float = 5.0

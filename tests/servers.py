@@ -102,3 +102,58 @@ def cluster(data_dir: Path, workers: int = 1, **env: str):
             yield running, client
     finally:
         running.stop()
+
+
+class Streams:
+    """``count`` event streams of ``path`` held open by one asyncio thread (no thread each), opened
+    one after another: the status each was answered with, and the lines each received until the
+    server ended it."""
+
+    def __init__(self, base: str, path: str, count: int):
+        import asyncio
+        import threading
+
+        self.statuses: list[int] = []
+        self.lines: list[list[str]] = [[] for _ in range(count)]
+        self._answered = threading.Semaphore(0)
+        self._count = count
+
+        async def hold() -> None:
+            limits = httpx.Limits(max_connections=count + 5, max_keepalive_connections=0)
+            async with httpx.AsyncClient(base_url=base, timeout=httpx.Timeout(30, read=None), limits=limits) as client:
+                async def one(index: int, answered: asyncio.Event) -> None:
+                    try:
+                        async with client.stream("GET", path) as response:
+                            self.statuses.append(response.status_code)
+                            answered.set()
+                            async for line in response.aiter_lines():
+                                self.lines[index].append(line)
+                    except httpx.TransportError as exc:
+                        self.lines[index].append(f"transport error: {exc!r}")
+                    finally:
+                        answered.set()
+
+                running = []
+                for index in range(count):  # one after another: a stream opens once the last is answered
+                    answered = asyncio.Event()
+                    running.append(asyncio.create_task(one(index, answered)))
+                    await answered.wait()
+                    self._answered.release()
+                await asyncio.gather(*running)
+
+        self.thread = threading.Thread(target=lambda: asyncio.run(hold()), daemon=True)
+        self.thread.start()
+
+    def wait_answered(self, limit_s: float = 60) -> None:
+        deadline = time.monotonic() + limit_s
+        for _ in range(self._count):
+            assert self._answered.acquire(timeout=max(0.0, deadline - time.monotonic())), \
+                f"only {len(self.statuses)} of {self._count} streams answered within {limit_s} s"
+
+    def join(self, limit_s: float = 30) -> None:
+        self.thread.join(timeout=limit_s)
+
+
+def thread_count(pid: int) -> int:
+    with open(f"/proc/{pid}/status") as status:
+        return next(int(line.split()[1]) for line in status if line.startswith("Threads:"))

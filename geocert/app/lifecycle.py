@@ -1,9 +1,10 @@
 """The API process's way out and its guard against slow clients.
 
-``stopping`` is set the moment the server is told to stop (SIGTERM or SIGINT): open event streams
-see it within a second, tell their clients to reconnect (``retry``), and end, so the server exits
-in about a second instead of waiting on every stream; ``GEOCERT_SHUTDOWN_TIMEOUT_S`` cancels
-whatever is still running after that.
+``stopping`` is set the moment the server is told to stop (SIGTERM or SIGINT), and every event
+loop's ``stop_event()`` with it: open event streams, which wait on it beside their blocking read,
+tell their clients to reconnect (``retry``) and end at once, so the server exits in about a second
+instead of waiting on every stream; ``GEOCERT_SHUTDOWN_TIMEOUT_S`` cancels whatever is still
+running after that.
 
 ``HeaderTimeoutH11`` is uvicorn's h11 protocol with one addition: a connection must complete a
 request's headers within ``GEOCERT_HEADER_TIMEOUT_S`` of opening, or of its previous response, or
@@ -15,16 +16,36 @@ from __future__ import annotations
 
 import asyncio
 import threading
+import weakref
 
 import uvicorn
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
 stopping = threading.Event()
+_STOP_EVENTS: "weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, asyncio.Event]" = weakref.WeakKeyDictionary()
+
+
+def stop_event() -> asyncio.Event:
+    """This event loop's view of ``stopping``: set (thread-safely) when the server is told to stop."""
+    loop = asyncio.get_running_loop()
+    event = _STOP_EVENTS.get(loop)
+    if event is None:
+        event = _STOP_EVENTS[loop] = asyncio.Event()
+        if stopping.is_set():
+            event.set()
+    return event
+
+
+def stop() -> None:
+    stopping.set()
+    for loop, event in list(_STOP_EVENTS.items()):
+        if not loop.is_closed():
+            loop.call_soon_threadsafe(event.set)  # from a signal handler, never event.set() directly
 
 
 class Server(uvicorn.Server):
     def handle_exit(self, sig, frame) -> None:
-        stopping.set()
+        stop()
         super().handle_exit(sig, frame)
 
 

@@ -9,13 +9,15 @@ reconnects with ``Last-Event-ID`` resumes exactly where it stopped.
 
 from __future__ import annotations
 
+import asyncio
 import hashlib
 import json
 import time
 import uuid
-from typing import Any, Iterator
+from typing import Any, AsyncIterator
 
 import redis
+import redis.asyncio
 
 TERMINAL = ("succeeded", "failed", "cancelled")
 # Redis restarting, loading its append-only file or unreachable (BusyLoadingError is a ConnectionError).
@@ -112,24 +114,6 @@ class JobStore:
     def publish(self, job_id: str, event: str, data: dict) -> str:
         return self.r.xadd(self.key(job_id, "events"), {"event": event, "data": json.dumps(data)},
                            maxlen=_STREAM_MAXLEN, approximate=True)
-
-    def events(self, job_id: str, after: str = "0-0", block_ms: int = 1000) -> Iterator[tuple[str, str, dict]]:
-        """Yield (id, event, data) after ``after``, blocking for new ones, until the end event."""
-        stream = self.key(job_id, "events")
-        last = after
-        while True:
-            answer = self.r.xread({stream: last}, count=100, block=block_ms)
-            if not answer:
-                status = self.field(job_id, "status")
-                if status is None:
-                    return  # the job expired or was removed
-                yield "", "keepalive", {}
-                continue
-            for entry_id, fields in answer[0][1]:
-                last = entry_id
-                yield entry_id, fields["event"], json.loads(fields["data"])
-                if fields["event"] == "end":
-                    return
 
     # --- cancellation ------------------------------------------------------------------------
     def request_cancel(self, job_id: str) -> None:
@@ -359,6 +343,42 @@ class JobStore:
             self.r.delete(key)
         else:
             self.r.set(key, json.dumps({"body": body_digest, "job": job_id}), ex=self.ttl)
+
+
+async def events(client: redis.asyncio.Redis, job_id: str, after: str, block_ms: int,
+                 stop: asyncio.Event) -> AsyncIterator[tuple[str, str, dict]]:
+    """Yield a job's events (id, event, data) after ``after`` until its end event, from an asyncio
+    Redis client (``decode_responses``), without holding a thread: each read blocks up to
+    ``block_ms`` on the Redis side while the event loop serves other requests. After a read that
+    found nothing, ("", "keepalive", {}) is yielded (the caller's heartbeat), or nothing more when
+    the job has expired or been removed. When ``stop`` is set, ("", "stopping", {}) is yielded at
+    once and the iteration ends (the blocking read is abandoned)."""
+    stream = JobStore.key(job_id, "events")
+    last = after
+    halt = asyncio.ensure_future(stop.wait())
+    read: asyncio.Future | None = None
+    try:
+        while True:
+            read = asyncio.ensure_future(client.xread({stream: last}, count=100, block=block_ms))
+            await asyncio.wait({read, halt}, return_when=asyncio.FIRST_COMPLETED)
+            if not read.done():
+                yield "", "stopping", {}
+                return
+            answer = read.result()
+            if not answer:
+                if await client.hget(JobStore.key(job_id), "status") is None:
+                    return  # the job expired or was removed
+                yield "", "keepalive", {}
+                continue
+            for entry_id, fields in answer[0][1]:
+                last = entry_id
+                yield entry_id, fields["event"], json.loads(fields["data"])
+                if fields["event"] == "end":
+                    return
+    finally:
+        halt.cancel()
+        if read is not None and not read.done():
+            read.cancel()  # redis-py drops that connection rather than reuse it mid-reply
 
 
 _SHARED: JobStore | None = None

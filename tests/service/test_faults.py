@@ -13,7 +13,7 @@ import httpx
 import numpy as np
 import pytest
 
-from tests.servers import SHORT_TASKS, cluster, wait_until_done
+from tests.servers import SHORT_TASKS, Streams, cluster, thread_count, wait_until_done
 from tests.support import service_job as triangulation_job
 
 pytestmark = pytest.mark.slow  # real servers: the full run only
@@ -123,36 +123,66 @@ def test_slow_header_connections_are_closed(limited):
           "(kept alive)")
 
 
-def test_sigterm_with_streams_open_exits_within_ten_seconds(tmp_path):
-    with cluster(tmp_path, workers=0) as (running, client):
+def test_idle_streams_hold_no_thread_and_sigterm_ends_them(tmp_path):
+    """200 idle event streams (a 1 s heartbeat): the API holds no thread for them (the old sync
+    stream held one each, up to the thread pool's 40, which starved every other route), each
+    carries heartbeat comments, a normal GET is answered, and SIGTERM ends every stream with a
+    reconnect hint (not cut off by the shutdown timeout) before the API exits."""
+    streams = 200
+    with cluster(tmp_path, workers=0, geocert_stream_heartbeat_s="1", geocert_max_streams_per_key=str(streams),
+                 geocert_rate_limit_per_minute="0") as (running, client):
         job_id = client.post("/v1/jobs", json=small_job()).json()["id"]  # no workers: queued for ever
-        lines: list[list[str]] = [[] for _ in range(5)]
-        opened = threading.Barrier(6)
-
-        def listen(index: int) -> None:
-            with httpx.Client(base_url=running.base, timeout=30) as own:
-                with own.stream("GET", f"/v1/jobs/{job_id}/events") as stream:
-                    opened.wait()
-                    for line in stream.iter_lines():
-                        lines[index].append(line)
-
-        threads = [threading.Thread(target=listen, args=(i,), daemon=True) for i in range(5)]
-        for thread in threads:
-            thread.start()
-        opened.wait(timeout=30)
-        time.sleep(1.5)  # the streams are idle (keepalives only)
+        threads_before = thread_count(running.api.pid)
+        held = Streams(running.base, f"/v1/jobs/{job_id}/events", streams)
+        held.wait_answered()
+        assert held.statuses == [200] * streams
+        time.sleep(2.5)  # idle: heartbeats only
+        threads_open = thread_count(running.api.pid)
+        assert threads_open < threads_before + 10, (threads_before, threads_open)
+        assert client.get(f"/v1/jobs/{job_id}").status_code == 200
         running.api.send_signal(signal.SIGTERM)
         start = time.monotonic()
-        running.api.wait(timeout=30)
+        running.api.wait(timeout=60)
         exited = time.monotonic() - start
-        for thread in threads:
-            thread.join(timeout=10)
-        assert exited < 10, f"the API took {exited:.1f} s to exit with 5 streams open"
+        held.join()
         assert running.api.returncode == 0
-        for seen in lines:
-            assert any(line.startswith("retry:") for line in seen), seen  # told to reconnect
+        for seen in held.lines:
+            assert ": keepalive" in seen, seen[:8]  # the heartbeat
+            assert any(line.startswith("retry:") for line in seen), seen[-4:]  # told to reconnect
             assert "event: end" not in seen  # the job did not end: the stream did
-        print(f"\nSIGTERM with 5 event streams open: the API exited in {exited:.1f} s")
+        print(f"\n{streams} idle event streams: API threads {threads_before} before, {threads_open} with them open; "
+              f"SIGTERM: the API exited in {exited:.1f} s")
+
+
+def test_open_streams_are_capped_per_key(tmp_path):
+    """GEOCERT_MAX_STREAMS_PER_KEY = 2: a key's third stream is a 429 problem+json while two are
+    open; once one has closed, a new one is served. Another key has its own slots."""
+    keys = "key-one,key-two"
+    with cluster(tmp_path, workers=0, geocert_max_streams_per_key="2", geocert_api_keys=keys) as (running, client):
+        one, two = ({"X-API-Key": key} for key in keys.split(","))
+        job_one = client.post("/v1/jobs", json=small_job(), headers=one).json()["id"]
+        job_two = client.post("/v1/jobs", json=small_job(), headers=two).json()["id"]
+        with httpx.Client(base_url=running.base, timeout=30, headers=one) as a, \
+                httpx.Client(base_url=running.base, timeout=30, headers=one) as b:
+            with a.stream("GET", f"/v1/jobs/{job_one}/events") as first, \
+                    b.stream("GET", f"/v1/jobs/{job_one}/events") as second:
+                assert (first.status_code, second.status_code) == (200, 200)
+                with client.stream("GET", f"/v1/jobs/{job_one}/events", headers=one) as refused:
+                    assert refused.status_code == 429  # (a stream served here would never end)
+                    refused.read()
+                assert refused.headers["content-type"] == "application/problem+json"
+                assert "GEOCERT_MAX_STREAMS_PER_KEY" in refused.json()["detail"]
+                assert int(refused.headers["retry-after"]) > 0
+                with client.stream("GET", f"/v1/jobs/{job_two}/events", headers=two) as other:
+                    assert other.status_code == 200
+            deadline = time.monotonic() + 10  # the closed streams' slots are freed as the server sees them go
+            while True:
+                with client.stream("GET", f"/v1/jobs/{job_one}/events", headers=one) as again:
+                    if again.status_code == 200:
+                        break
+                    assert again.status_code == 429
+                assert time.monotonic() < deadline, "a closed stream's slot was never freed"
+                time.sleep(0.2)
 
 
 def test_without_keys_each_client_address_has_its_own_budget(limited):

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import asyncio
+import weakref
 from functools import lru_cache
-from typing import Annotated
+from typing import Annotated, AsyncIterator
 
+import redis.asyncio
 from fastapi import Depends, Request
 
 from geocert.settings import get_settings
@@ -30,21 +33,66 @@ def get_store() -> JobStore:
 JobStoreDep = Annotated[JobStore, Depends(get_store)]
 Caller = Annotated[str, Depends(caller)]
 
+_ASYNC_CLIENTS: "weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, redis.asyncio.Redis]" = weakref.WeakKeyDictionary()
+
+
+def get_async_redis() -> redis.asyncio.Redis:
+    """This event loop's asyncio Redis client, for event streams: each open stream holds one of its
+    connections in a blocking XREAD (hence the large pool), none of the API's threads."""
+    loop = asyncio.get_running_loop()
+    client = _ASYNC_CLIENTS.get(loop)
+    if client is None:
+        from redis.asyncio.retry import Retry
+        from redis.backoff import ExponentialBackoff
+
+        from geocert.workers.celery_app import redis_url
+
+        settings = get_settings()
+        client = _ASYNC_CLIENTS[loop] = redis.asyncio.Redis.from_url(
+            redis_url(), decode_responses=True, max_connections=100_000, socket_connect_timeout=2,
+            socket_timeout=settings.stream_heartbeat_s + 5, retry=Retry(ExponentialBackoff(cap=0.5, base=0.05), 2))
+    return client
+
+
+def client_bucket(request: Request, owner: str) -> str:
+    """Whom a limit counts: the key's owner, or without keys (every caller the same owner) the
+    client's address, so that one flooding client does not spend the others' budget."""
+    if owner == PUBLIC_OWNER:
+        return f"{PUBLIC_OWNER}@{request.client.host if request.client else 'unknown'}"
+    return owner
+
 
 def rate_limited(request: Request, owner: Caller, store: JobStoreDep) -> None:
     """At most GEOCERT_RATE_LIMIT_PER_MINUTE requests per key per minute (a fixed window in Redis,
-    shared by every API process). Without keys every caller is the same owner, so the budget is
-    per client address instead: one flooding client does not spend the others'."""
+    shared by every API process), per client address without keys (``client_bucket``)."""
     limit = get_settings().rate_limit_per_minute
     if limit <= 0:
         return
-    bucket = owner
-    if owner == PUBLIC_OWNER:
-        bucket = f"{PUBLIC_OWNER}@{request.client.host if request.client else 'unknown'}"
-    count, retry_after = store.count_request(bucket)
+    count, retry_after = store.count_request(client_bucket(request, owner))
     if count > limit:
         raise ApiProblem(429, f"more than {limit} requests this minute (GEOCERT_RATE_LIMIT_PER_MINUTE)",
                          headers={"Retry-After": str(retry_after)})
+
+
+_OPEN_STREAMS: dict[str, int] = {}  # client_bucket -> event streams open in this process
+
+
+async def stream_slot(request: Request, owner: Caller) -> AsyncIterator[None]:
+    """Holds one of the caller's GEOCERT_MAX_STREAMS_PER_KEY event-stream slots in this API
+    process from the request until its stream has ended (429 when none is free). Runs on the event
+    loop, so the count needs no lock; a request-scoped dependency, released after the response."""
+    limit = get_settings().max_streams_per_key
+    bucket = client_bucket(request, owner)
+    if limit > 0 and _OPEN_STREAMS.get(bucket, 0) >= limit:
+        raise ApiProblem(429, f"this key already has {limit} event streams open (GEOCERT_MAX_STREAMS_PER_KEY); "
+                              "close one first", headers={"Retry-After": "5"})
+    _OPEN_STREAMS[bucket] = _OPEN_STREAMS.get(bucket, 0) + 1
+    try:
+        yield
+    finally:
+        _OPEN_STREAMS[bucket] -= 1
+        if not _OPEN_STREAMS[bucket]:
+            del _OPEN_STREAMS[bucket]
 
 
 def _problem(description: str) -> dict:
@@ -60,7 +108,7 @@ ERRORS = {
     413: _problem("body, items or observations over a limit (named in the detail)"),
     415: _problem("the body was not sent as content-type: application/json"),
     422: _problem("invalid request: names the field"),
-    429: _problem("rate or active-job limit reached (named in the detail); see Retry-After"),
+    429: _problem("rate, active-job or open-stream limit reached (named in the detail); see Retry-After"),
     503: _problem("the job store (Redis) is not answering, e.g. while it restarts; see Retry-After"),
 }
 

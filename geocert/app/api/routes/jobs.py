@@ -14,7 +14,7 @@ from urllib.parse import urlencode
 from fastapi import APIRouter, Depends, Header, Query, Response
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
-from geocert.app.api.deps import Caller, JobStoreDep, error_responses, rate_limited
+from geocert.app.api.deps import Caller, JobStoreDep, error_responses, get_async_redis, rate_limited, stream_slot
 from geocert.settings import chunk_size_for, get_settings
 from geocert.app import lifecycle
 from geocert.app.errors import ApiProblem
@@ -23,7 +23,7 @@ from geocert.solvers.core.geometry import InputError
 from geocert.batch import parse_job
 from geocert.workers import logs
 from geocert.workers.queue import submit_chunks, withdraw_queued
-from geocert.workers.store import TERMINAL, JobStore
+from geocert.workers.store import REDIS_GONE, TERMINAL, JobStore, events
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"], dependencies=[Depends(rate_limited)])
 
@@ -202,16 +202,25 @@ def _resume_point(last_event_id: Annotated[str | None, Header()] = None) -> str:
     return last_event_id
 
 
-@router.get("/{job_id}/events", response_class=EventSourceResponse, responses=error_responses(404, 422))
-def job_events(job: OwnedJob, store: JobStoreDep, after: Annotated[str, Depends(_resume_point)]):
+@router.get("/{job_id}/events", response_class=EventSourceResponse, responses=error_responses(404, 422),
+            dependencies=[Depends(stream_slot)])
+async def job_events(job: OwnedJob, after: Annotated[str, Depends(_resume_point)]):
     """Server-Sent Events: `status` and `progress` events, then one `end` event after which the
-    stream closes; resumes after `Last-Event-ID`. Event data is JSON. When the server is stopping
-    the stream ends early with a `retry` hint and no `end` event: reconnect with `Last-Event-ID`."""
-    for event_id, event, data in store.events(job["id"], after):
-        if lifecycle.stopping.is_set():
-            yield ServerSentEvent(comment="server stopping: reconnect with Last-Event-ID", retry=1000)
-            return
-        if event == "keepalive":
-            yield ServerSentEvent(comment="keepalive")
-            continue
-        yield ServerSentEvent(id=event_id, event=event, data=data)
+    stream closes; resumes after `Last-Event-ID`. Event data is JSON. An idle stream carries a
+    `: keepalive` comment every GEOCERT_STREAM_HEARTBEAT_S (10 s). A key may hold
+    GEOCERT_MAX_STREAMS_PER_KEY streams open at once (429 beyond). When the server is stopping, or
+    its job store stops answering, the stream ends early with a `retry` hint and no `end` event:
+    reconnect with `Last-Event-ID`."""
+    settings = get_settings()
+    try:
+        async for event_id, event, data in events(get_async_redis(), job["id"], after,
+                                                  int(1000 * settings.stream_heartbeat_s), lifecycle.stop_event()):
+            if event == "stopping":
+                yield ServerSentEvent(comment="server stopping: reconnect with Last-Event-ID", retry=1000)
+                return
+            if event == "keepalive":
+                yield ServerSentEvent(comment="keepalive")
+                continue
+            yield ServerSentEvent(id=event_id, event=event, data=data)
+    except REDIS_GONE:
+        yield ServerSentEvent(comment="the job store is not answering: reconnect with Last-Event-ID", retry=5000)
