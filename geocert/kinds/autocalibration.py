@@ -193,10 +193,11 @@ class AutocalibrationKind:
                               proofs.encode_affine(a) if full and a.certified else None)
         affine_stage["plane_at_infinity"] = document["plane_at_infinity"]
         m = result.metric
-        metric_stage = _stage("metric", "failed" if m is None else m.status, False, math.inf, -math.inf,
+        not_run = "cancelled" if a.status == "cancelled" else "failed"
+        metric_stage = _stage("metric", not_run if m is None else m.status, False, math.inf, -math.inf,
                               0 if m is None else m.nodes, result.metric_s,
-                              "no plane at infinity" if m is None else m.reason, options.metric_rel_gap,
-                              options.abs_gap, "", None)
+                              ("the job was cancelled" if not_run == "cancelled" else "no plane at infinity")
+                              if m is None else m.reason, options.metric_rel_gap, options.abs_gap, "", None)
         if m is not None and result.K_unit is not None:
             K = problem.K0 @ result.K_unit
             K = K / K[2, 2]
@@ -210,7 +211,7 @@ class AutocalibrationKind:
                                   m.certified and inside, mrelax.cost(setup, w), m.lower_bound, m.nodes,
                                   result.metric_s, m.reason if inside else "the DIAC returned left its domain by rounding",
                                   options.metric_rel_gap, options.abs_gap,
-                                  "every DIAC within the intrinsics ranges, for the plane at infinity stated",
+                                  "every K within the intrinsics ranges, for the plane at infinity stated",
                                   proofs.encode_metric(m) if full and m.certified else None)
             metric_stage["K"] = K.tolist()
             H = pr.upgrade(problem, result.p, np.linalg.solve(problem.K0, K))

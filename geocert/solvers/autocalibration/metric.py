@@ -57,14 +57,36 @@ class MetricProblem:
         return relax.cost(self.setup, w)
 
     def improve(self, w: np.ndarray) -> tuple[np.ndarray, float]:
+        """A local minimum from w, searched over the intrinsics themselves (fx, aspect, skew, u, v
+        within their ranges), so that every point tried is a calibration of the domain."""
         start = self.objective(w)
+        ranges = self.setup.ranges
+        k = relax.intrinsics_of(w)
+        if ranges is None or k is None:
+            return w, start
+        names = ("focal", "aspect", "skew", "u", "v")
+        lower = np.array([ranges[n][0] for n in names])
+        upper = np.array([ranges[n][1] for n in names])
+        x0 = np.clip([k["fx"], k["fy"] / k["fx"], k["skew"], k["u"], k["v"]], lower, upper)
+        flat = upper <= lower  # a fixed intrinsic (a range of one value) is not a variable
+        free = ~flat
+
+        def w_of(x_free):
+            x = x0.copy()
+            x[free] = x_free
+            f, aspect, skew, u, v = x
+            K = np.array([[f, skew, u], [0.0, f * aspect, v], [0.0, 0.0, 1.0]])
+            omega = K @ K.T
+            return np.array([omega[a, b] for a, b in relax.ENTRIES])
+
         try:
-            fit = least_squares(lambda x: relax.residuals(self.setup, x), np.clip(w, self.lo, self.hi),
-                                bounds=(self.lo, self.hi), method="trf", max_nfev=50, xtol=1e-14, ftol=1e-14,
-                                gtol=1e-14)
-            value = self.objective(fit.x)
+            fit = least_squares(lambda x: relax.residuals(self.setup, w_of(x)), x0[free],
+                                bounds=(lower[free], upper[free]), method="trf", max_nfev=60, xtol=1e-14,
+                                ftol=1e-14, gtol=1e-14)
+            candidate = w_of(fit.x)
+            value = self.objective(candidate)
             if value < start:
-                return fit.x, value
+                return candidate, value
         except ValueError:
             pass
         return w, start
@@ -161,7 +183,9 @@ def solve_metric(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, bnb: 
     problem = MetricProblem(setup, lo, hi, record)
     best, upper = None, math.inf
     baseline, _ = linear_baseline(setup)
-    for start in (np.clip(baseline, lo, hi), 0.5 * (lo + hi)):
+    centre = relax.w_of_intrinsics({name: 0.5 * (a + b) for name, (a, b) in setup.ranges.items()}) \
+        if setup.ranges is not None else 0.5 * (lo + hi)
+    for start in (np.clip(baseline, lo, hi), centre):
         w, value = problem.improve(start)
         if value < upper:
             best, upper = w, value

@@ -65,6 +65,7 @@ class MetricSetup:
     H: np.ndarray  # (m, 3, 3) infinite homographies of the views but the reference
     q_lower: np.ndarray  # (m,) q_j's range on the domain (every K within the ranges)
     q_upper: np.ndarray
+    ranges: dict | None = None  # the intrinsics' (preconditioned): the domain is every K within them
     unit: float = 1.0  # the program's objective is unit * cost (about 1 at the incumbent: solver accuracy)
 
 
@@ -80,13 +81,81 @@ def residuals(setup: MetricSetup, w: np.ndarray) -> np.ndarray:
     return np.concatenate([WEIGHTS * np.array([d[a, b] for a, b in ALL]) for d in diff])
 
 
+def intrinsics_of(w: np.ndarray) -> dict | None:
+    """fx, fy, skew, u, v of the K with K K^T = omega (None unless omega is positive definite)."""
+    omega = omega_of(w)
+    J = np.eye(3)[::-1]
+    try:
+        L = np.linalg.cholesky(J @ omega @ J)
+    except np.linalg.LinAlgError:
+        return None
+    K = J @ L @ J
+    K = K * np.sign(np.diag(K))[None, :]
+    K = K / K[2, 2]
+    return {"fx": K[0, 0], "fy": K[1, 1], "skew": K[0, 1], "u": K[0, 2], "v": K[1, 2]}
+
+
+def w_of_intrinsics(ranges_point: dict) -> np.ndarray:
+    """omega's free entries for K from {focal, aspect, skew, u, v}."""
+    f, aspect = ranges_point["focal"], ranges_point["aspect"]
+    K = np.array([[f, ranges_point["skew"], ranges_point["u"]], [0.0, f * aspect, ranges_point["v"]], [0.0, 0.0, 1.0]])
+    omega = K @ K.T
+    return np.array([omega[a, b] for a, b in ENTRIES])
+
+
+def in_ranges(ranges: dict, k: dict) -> bool:
+    def within(x, pair):
+        return pair[0] <= x <= pair[1]
+
+    return (within(k["fx"], ranges["focal"]) and within(k["fy"] / k["fx"], ranges["aspect"])
+            and within(k["skew"], ranges["skew"]) and within(k["u"], ranges["u"]) and within(k["v"], ranges["v"]))
+
+
 def in_domain(setup: MetricSetup, w: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """omega in the box, positive definite, its K within the ranges, each view's scale in range."""
     if not (np.all(w >= lo) and np.all(w <= hi)):
         return False
-    if np.linalg.eigvalsh(omega_of(w))[0] < 0:
+    k = intrinsics_of(w)
+    if k is None or (setup.ranges is not None and not in_ranges(setup.ranges, k)):
         return False
     q = np.array([q_form(H)[:5] @ w + q_form(H)[5] for H in setup.H])
     return bool(np.all(q >= setup.q_lower) and np.all(q <= setup.q_upper))
+
+
+def may_meet_ranges(ranges: dict, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """False only when no omega of the box has its K within the ranges (interval arithmetic on
+    v = w23, u = w13, fy^2 = w22 - v^2, skew = (w12 - u v) / fy, fx^2 = w11 - skew^2 - u^2,
+    aspect = fy / fx; every interval widened outward, so rounding never empties one wrongly)."""
+    def meet(a, b):
+        low, high = max(a[0], b[0]), min(a[1], b[1])
+        return None if low > high else np.array([low, high])
+
+    def widen(a):
+        pad = WIDEN * max(abs(a[0]), abs(a[1]), 1e-300)
+        return np.array([a[0] - pad, a[1] + pad])
+
+    fy_range = _mul(np.array(ranges["focal"], float), np.array(ranges["aspect"], float))
+    u = meet(widen(np.array([lo[2], hi[2]])), ranges["u"])
+    v = meet(widen(np.array([lo[4], hi[4]])), ranges["v"])
+    if u is None or v is None:
+        return False
+    v2 = _sq(v)
+    fy2 = meet(widen(np.array([lo[3] - v2[1], hi[3] - v2[0]])), fy_range ** 2)
+    if fy2 is None:
+        return False
+    fy = widen(np.sqrt(fy2))
+    numerator = widen(_add(np.array([lo[1], hi[1]]), -_mul(u, v)[::-1]))
+    quotients = [numerator[0] / fy[0], numerator[0] / fy[1], numerator[1] / fy[0], numerator[1] / fy[1]]
+    skew = meet(widen(np.array([min(quotients), max(quotients)])), ranges["skew"])
+    if skew is None:
+        return False
+    s2, u2 = _sq(skew), _sq(u)
+    fx2 = meet(widen(np.array([lo[0] - s2[1] - u2[1], hi[0] - s2[0] - u2[0]])), np.array(ranges["focal"], float) ** 2)
+    if fx2 is None:
+        return False
+    fx = widen(np.sqrt(fx2))
+    aspect = widen(np.array([fy[0] / fx[1], fy[1] / fx[0]]))
+    return meet(aspect, ranges["aspect"]) is not None
 
 
 def lambda_range(setup: MetricSetup, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -117,6 +186,8 @@ def build(setup: MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float, cap_ro
           ) -> MetricProgram | None:
     """The relaxation over the box; None when no omega of the box meets the q ranges. With
     ``cap_row``, also r <= cap (in the program's units): the set bound tightening optimises over."""
+    if setup.ranges is not None and not may_meet_ranges(setup.ranges, lo, hi):
+        return None  # no K of the box within the ranges
     lam = lambda_range(setup, lo, hi)
     if lam is None:
         return None
@@ -266,7 +337,7 @@ def homographies(cameras: np.ndarray, reference: int, p: np.ndarray) -> np.ndarr
 def setup_for(cameras: np.ndarray, reference: int, p: np.ndarray, ranges: dict) -> MetricSetup:
     H = homographies(cameras, reference, p)
     bounds = np.array([q_range(h, ranges) for h in H])
-    return MetricSetup(H, bounds[:, 0], bounds[:, 1])
+    return MetricSetup(H, bounds[:, 0], bounds[:, 1], ranges)
 
 
 def linear_baseline(setup: MetricSetup) -> tuple[np.ndarray, bool]:

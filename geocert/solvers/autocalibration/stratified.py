@@ -12,8 +12,9 @@ import numpy as np
 
 from geocert.solvers.autocalibration import affine, metric
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
-from geocert.solvers.autocalibration.problem import (AutocalibrationOptions, Problem, bnb_options, plane_from_input,
-                                                     plane_in_input, stage_callback, upper_triangular_root)
+from geocert.solvers.autocalibration.problem import (AutocalibrationOptions, Problem, StageProgress, bnb_options,
+                                                     plane_from_input, plane_in_input, stage_callback,
+                                                     upper_triangular_root)
 
 
 @dataclass
@@ -28,14 +29,31 @@ class Stratified:
     p: np.ndarray | None = None  # the plane the metric stage used (the affine answer as returned)
 
 
+def announce(callback, stage: str, upper: float = math.inf) -> bool:
+    """Progress at a stage's start (a search that certifies at its root reports nothing else)."""
+    if callback is None:
+        return False
+    try:
+        return bool(callback(StageProgress(0, 0, -math.inf, upper, math.inf, math.inf, 0.0, stage=stage)))
+    except StopIteration:
+        return True
+
+
 def solve(problem: Problem, options: AutocalibrationOptions, callback=None) -> Stratified:
     record = options.certificate == "full"
+    if announce(callback, "affine"):
+        stage = affine.AffineStage("cancelled", False, None, math.inf, -math.inf, 0, [], [], "cancelled")
+        return Stratified(problem, stage, 0.0, None, 0.0, None, None)
     start = time.perf_counter()
     stage = affine.solve_affine(problem.norm, bnb_options(options, options.rel_gap), record,
                                 stage_callback(callback, "affine"))
     affine_s = time.perf_counter() - start
     if stage.plane is None or (stage.status == "cancelled"):
         return Stratified(problem, stage, affine_s, None, 0.0, None, None)
+    if announce(callback, "metric"):
+        cancelled = metric.MetricStage("cancelled", False, None, math.inf, -math.inf, 0, np.zeros(5), np.zeros(5),
+                                       reason="the job was cancelled")
+        return Stratified(problem, stage, affine_s, cancelled, 0.0, None, None)
     start = time.perf_counter()
     # The metric stage starts from the plane as returned (in the input frame), so that what a
     # verifier reads back is exactly what was solved.

@@ -51,7 +51,7 @@ def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, fl
 class AutocalibrationVerification:
     claim_options = CLAIM_OPTIONS
     proofs: dict = {}
-    domain = "every plane at infinity chirality allows, then every DIAC the intrinsics ranges allow"
+    domain = "every plane at infinity chirality allows, then every K within the intrinsics ranges"
 
     def checked_options(self, options: dict) -> dict:
         checked = {name: options.get(name) for name in CLAIM_OPTIONS}
@@ -68,10 +68,9 @@ class AutocalibrationVerification:
                 "rel_gap": options["rel_gap"], "metric_rel_gap": options["metric_rel_gap"],
                 "abs_gap": options["abs_gap"],
                 "statement": "stage 0 (affine): no plane at infinity chirality allows has a modulus cost below "
-                             "lower_bound; stage 1 (metric), for the plane at infinity it states: no DIAC "
-                             "(positive semidefinite, within the box the intrinsics ranges give, each view's "
-                             "scale within its range) costs less than lower_bound; each solution returned "
-                             "is in its scope and costs cost"}
+                             "lower_bound; stage 1 (metric), for the plane at infinity it states: no "
+                             "calibration K within the intrinsics ranges gives a DIAC K K^T costing less than "
+                             "lower_bound; each solution returned is in its scope and costs cost"}
 
     def check_claims(self, items: list) -> None:
         """The metric stage's claim is about the plane the affine stage returns."""

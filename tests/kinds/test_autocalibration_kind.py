@@ -1,0 +1,182 @@
+"""The autocalibration kind end to end in-process: bad input named, progress by stage,
+cancellation, certified synthetic scenes that verify, the command line (geocert solve / verify),
+and the Oxford Dinosaur's turntable (credit: Oxford VGG, A. Fitzgibbon and A. Zisserman)."""
+
+from __future__ import annotations
+
+import copy
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from geocert.batch import parse_job, solve_job
+from geocert.kinds import get_kind
+from geocert.solvers.autocalibration import scenes
+from geocert.solvers.core.geometry import InputError
+from geocert.solvers.verify import verify_any
+from tests.support import ROOT
+
+KIND = get_kind("autocalibration")
+SHARED = ROOT.parent / "shared" / "data"
+
+
+def job(data=None, **options) -> dict:
+    return {"kind": "autocalibration", "data": copy.deepcopy(data or KIND.example["data"]), "options": options}
+
+
+def refused(job_document: dict) -> InputError:
+    with pytest.raises(InputError) as error:
+        kind, parsed, options = parse_job(job_document)
+        from geocert.solvers.autocalibration.problem import prepare
+        prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
+    return error.value
+
+
+class TestBadInput:
+    def test_fewer_than_three_cameras(self):
+        document = job()
+        document["data"]["cameras"] = document["data"]["cameras"][:2]
+        assert refused(document).field == "data/cameras"
+
+    def test_a_rank_deficient_camera(self):
+        document = job()
+        document["data"]["cameras"][1][2] = list(document["data"]["cameras"][1][1])
+        assert refused(document).field == "data/cameras/1"
+
+    def test_points_of_the_wrong_shape(self):
+        document = job()
+        document["data"]["points"] = [[1.0, 2.0, 3.0]]
+        assert refused(document).field == "data/points"
+
+    def test_not_a_number(self):
+        document = job()
+        document["data"]["cameras"][0][0][0] = float("nan")
+        assert refused(document).field == "data/cameras/0/0/0"
+
+    def test_an_empty_range(self):
+        assert refused(job(intrinsics={"focal": [900, 800]})).field == "options/intrinsics/focal"
+
+    def test_ranges_without_image_size(self):
+        document = job()
+        del document["data"]["image_size"]
+        error = refused(document)
+        assert error.field.startswith("options/intrinsics/") and "image_size" in error.reason
+
+    def test_a_method_not_served(self):
+        assert refused(job(method="direct")).field == "options/method"
+
+    def test_the_api_model_refuses_the_same(self):
+        from pydantic import ValidationError
+
+        document = job()
+        document["data"]["cameras"] = document["data"]["cameras"][:2]
+        with pytest.raises(ValidationError):
+            KIND.request_model.model_validate(document)
+
+
+class TestProgressAndCancel:
+    def test_progress_names_each_stage(self):
+        events = []
+        solve_job(job(), sink=events.append)
+        stages = [event.get("stage") for event in events]
+        assert "affine" in stages and "metric" in stages
+        assert stages.index("affine") < stages.index("metric")
+
+    def test_a_cancelled_job_says_so_for_both_stages(self):
+        result = solve_job(job(), should_stop=lambda: True)
+        assert [stage["status"] for stage in result["stages"]] == ["cancelled", "cancelled"]
+        assert not any(stage["certified"] for stage in result["stages"])
+
+
+@pytest.fixture(scope="module")
+def noisy():
+    scene = scenes.make_scene(10, 0.1, seed=21)
+    return scene, solve_job(job(scene.job_data(), certificate="full"))
+
+
+class TestSyntheticScene:
+    def test_both_stages_certified_and_verified(self, noisy):
+        scene, result = noisy
+        KIND.result_model.model_validate(result)
+        assert [stage["certified"] for stage in result["stages"]] == [True, True]
+        report = verify_any(result)
+        assert report.valid, report.first_failure
+
+    def test_calibration_and_plane_near_the_truth(self, noisy):
+        scene, result = noisy
+        K = np.array(result["K"])
+        assert abs(K[0, 0] / scene.K[0, 0] - 1) < 0.02 and abs(K[1, 1] / scene.K[1, 1] - 1) < 0.02
+        assert np.abs(K[:2, 2] - scene.K[:2, 2]).max() < 20
+        plane = np.array(result["plane_at_infinity"])
+        assert min(np.linalg.norm(plane - scene.plane_at_infinity), np.linalg.norm(plane + scene.plane_at_infinity)) < 0.05
+
+    def test_the_dual_image_of_the_absolute_conic_is_psd_and_the_baseline_says_whether_it_is(self, noisy):
+        scene, result = noisy
+        K = np.array(result["K"])
+        assert np.linalg.eigvalsh(K @ K.T)[0] > 0
+        Q = np.array(result["dual_absolute_quadric"])
+        values = np.linalg.eigvalsh(Q * np.sign(np.trace(Q)))
+        assert values[0] > -1e-9 * values[-1]  # positive semidefinite, rank 3
+        assert isinstance(result["baseline"]["psd"], bool)
+
+    def test_metric_cameras_are_rotations_with_the_returned_calibration(self, noisy):
+        scene, result = noisy
+        for camera in result["cameras"]:
+            R = np.array(camera["R"])
+            assert np.allclose(R @ R.T, np.eye(3), atol=1e-9) and np.linalg.det(R) > 0
+            assert np.allclose(np.array(camera["K"]) / camera["K"][0][0], np.array(result["K"]) / result["K"][0][0],
+                               atol=0.05)
+
+
+class TestCommandLine:
+    def test_solve_then_verify(self, tmp_path):
+        path = tmp_path / "job.json"
+        path.write_text(json.dumps(job(certificate="full")))
+        solved = subprocess.run([sys.executable, "-m", "geocert.app.cli", "solve", str(path)], capture_output=True,
+                                text=True, timeout=300)
+        assert solved.returncode == 0, solved.stderr
+        result_path = tmp_path / "result.json"
+        result_path.write_text(solved.stdout)
+        assert json.loads(solved.stdout)["kind"] == "autocalibration"
+        checked = subprocess.run([sys.executable, "-m", "geocert.app.cli", "verify", str(result_path)],
+                                 capture_output=True, text=True, timeout=300)
+        assert checked.returncode == 0, checked.stdout + checked.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (SHARED / "oxford_dinosaur").exists(), reason="needs ../shared/data")
+class TestOxfordDinosaur:
+    """The turntable is a critical motion for constant intrinsics (ALGORITHMS.md section 3): the
+    modulus constraints vanish on a family of planes, and K is not determined. What a metric
+    upgrade must still show: the 36 rotations share one axis and step by equal angles."""
+
+    def test_rotations_share_one_axis_and_step_equally(self):
+        from geocert.solvers.datasets import load_dinosaur
+
+        cameras, tracks = load_dinosaur(SHARED / "oxford_dinosaur")
+        points = []
+        for track in tracks:
+            if len(track.views) >= 6:
+                rows = [x * cameras[v][2] - cameras[v][0] for v, (x, y) in zip(track.views, track.points)]
+                rows += [y * cameras[v][2] - cameras[v][1] for v, (x, y) in zip(track.views, track.points)]
+                points.append(np.linalg.svd(np.array(rows))[2][-1])
+        wide = {"focal": [100, 5000], "aspect": [0.2, 5], "skew": [-200, 200], "principal_point": [[0, 720], [0, 576]]}
+        result = solve_job(job({"cameras": cameras.tolist(), "points": np.array(points).tolist(),
+                                "image_size": [720, 576]}, intrinsics=wide))
+        assert [stage["certified"] for stage in result["stages"]] == [True, True]
+        rotations = [np.array(camera["R"]) for camera in result["cameras"]]
+        steps = [b @ a.T for a, b in zip(rotations, rotations[1:])]
+        angles = np.degrees([np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)) for R in steps])
+        axes = []
+        for R in steps:
+            values, vectors = np.linalg.eig(R)
+            axis = np.real(vectors[:, np.argmin(np.abs(values - 1))])
+            axes.append(axis * np.sign(axis[np.argmax(np.abs(axis))]))
+        axes = np.array(axes)
+        mean = axes.mean(axis=0) / np.linalg.norm(axes.mean(axis=0))
+        spread = np.degrees(np.arccos(np.clip(np.abs(axes @ mean), -1, 1)))
+        assert abs(angles.mean() - 10.0) < 0.1 and angles.std() < 0.2  # 36 views, 360 degrees
+        assert spread.max() < 0.1
