@@ -168,3 +168,31 @@ class TestNoiseFreeRecovery:
         assert np.linalg.eigvalsh(metric_relaxation.omega_of(result.w))[0] >= 0
         baseline, psd = metric.linear_baseline(setup)
         assert psd and np.allclose(baseline, [1, 0, 0, 1, 0], atol=1e-7)
+
+
+class TestRangePruning:
+    """metric_relaxation.may_meet_ranges prunes boxes of omega with no K in the ranges: it must
+    never prune a box holding an in-range K (property), and it must prune most boxes far from one."""
+
+    def test_never_prunes_a_box_around_an_in_range_calibration(self):
+        rng = np.random.default_rng(8)
+        root_lo, root_hi = metric_relaxation.omega_box(RANGES)
+        for _ in range(3000):
+            point = {name: rng.uniform(*RANGES[name]) for name in ("focal", "aspect", "skew", "u", "v")}
+            w = metric_relaxation.w_of_intrinsics(point)
+            k = metric_relaxation.intrinsics_of(w)
+            assert metric_relaxation.in_ranges(RANGES, k)
+            half = rng.uniform(0, 0.1) * (root_hi - root_lo)
+            lo, hi = w - rng.uniform(0, 1, 5) * half, w + rng.uniform(0, 1, 5) * half
+            assert metric_relaxation.may_meet_ranges(RANGES, lo, hi)
+            assert metric_relaxation.may_meet_ranges(RANGES, w, w)  # a box of one point
+
+    def test_prunes_boxes_far_from_every_calibration(self):
+        rng = np.random.default_rng(9)
+        root_lo, root_hi = metric_relaxation.omega_box(RANGES)
+        pruned = 0
+        for _ in range(500):
+            centre = rng.uniform(root_lo, root_hi)
+            half = 0.01 * (root_hi - root_lo)
+            pruned += not metric_relaxation.may_meet_ranges(RANGES, centre - half, centre + half)
+        assert pruned > 300
