@@ -83,7 +83,7 @@ class AffineProblem:
         self.region = region
         self.all_a, self.all_b = all_a, all_b
         self.record = record
-        self.program = ReusableConicProgram()
+        self.program = ReusableConicProgram(lean=False)
 
     def root_box(self) -> Box:
         return Box(self.region.lo.copy(), self.region.hi.copy())

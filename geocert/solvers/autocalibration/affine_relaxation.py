@@ -103,18 +103,24 @@ def build(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray, cap: float) -> Aff
     n = 6 + 3 * m
     V, R, E, S = slice(0, 3), 3, 4, 5
     T, Fv, Gv = 6 + np.arange(m), 6 + m + np.arange(m), 6 + 2 * m + np.arange(m)
-    rows: list[np.ndarray] = []
-    rhs: list[float] = []
+    capacity = 6 + len(setup.rows_a) + 12 + m * 40  # enough: at most ~14 envelope rows a view
+    A_rows = np.zeros((capacity, n))
+    rhs = np.zeros(capacity)
+    count = 0
 
     def le(coeffs: dict, v_coeffs: np.ndarray | None, bound: float) -> None:
         """sum coeffs[i] x_i + v_coeffs . v <= bound."""
-        row = np.zeros(n)
+        nonlocal A_rows, rhs, count
+        if count == len(rhs):
+            A_rows = np.vstack([A_rows, np.zeros_like(A_rows)])
+            rhs = np.concatenate([rhs, np.zeros_like(rhs)])
+        row = A_rows[count]
         for i, c in coeffs.items():
             row[i] += c
         if v_coeffs is not None:
             row[V] += v_coeffs
-        rows.append(row)
-        rhs.append(bound)
+        rhs[count] = bound
+        count += 1
 
     for k in range(3):
         e = np.zeros(3)
@@ -146,7 +152,7 @@ def build(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray, cap: float) -> Aff
     slope, icpt = envelopes.power_secant(dl, du, 8.0 / 3.0)  # e <= slope d + icpt
     le({E: 1.0}, -slope * D[:3], slope * D[3] + icpt)
 
-    nonneg = len(rows)
+    nonneg = count
     # Rotated cone r e >= |w|^2, w = f - g: (r + e, r - e, 2 w) in the second-order cone; as
     # s = b - A x, the rows of A are the negated expressions.
     cone = np.zeros((m + 2, n))
@@ -155,8 +161,8 @@ def build(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray, cap: float) -> Aff
     root_unit = np.sqrt(setup.unit)
     cone[2 + np.arange(m), Fv] = -2.0 * root_unit
     cone[2 + np.arange(m), Gv] = 2.0 * root_unit
-    A = np.vstack([np.array(rows), cone])
-    b = np.concatenate([np.array(rhs), np.zeros(m + 2)])
+    A = np.vstack([A_rows[:count], cone])
+    b = np.concatenate([rhs[:count], np.zeros(m + 2)])
     q = np.zeros(n)
     q[R] = 1.0
     lower = np.concatenate([lo, [0.0, 0.0], sl, tl, fl, gl])

@@ -13,7 +13,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from geocert.solvers.autocalibration import metric_relaxation as relax
-from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound
+from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound, tolerance
 from geocert.solvers.core.certificates import LeafProof
 from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
 from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
@@ -43,7 +43,7 @@ homographies, setup_for = relax.homographies, relax.setup_for
 class MetricProblem:
     def __init__(self, setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, record: bool):
         self.setup, self.lo, self.hi, self.record = setup, lo, hi, record
-        self.program = ReusableConicProgram()
+        self.program = ReusableConicProgram(lean=False)
 
     search_box: Box | None = None  # the root box after tightening
 
@@ -138,24 +138,32 @@ class Tightening:
     duals: list
 
 
-def tighten(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float, rounds: int = 12,
-            progress: float = 0.02) -> tuple[np.ndarray, np.ndarray, list[Tightening]]:
+def tighten(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float, tolerance: float = 0.0,
+            rounds: int = 12, progress: float = 0.02) -> tuple[np.ndarray, np.ndarray, list[Tightening]]:
     """Optimality-based bound tightening: each entry of omega minimised and maximised over the
     relaxation with the cost capped at the incumbent's, repeated while the box shrinks by more
-    than ``progress`` of its volume a round. Every new side is a safe dual bound."""
+    than ``progress`` of its volume a round, and until the relaxation's own bound on the box is
+    within ``tolerance`` of the cap (the search then certifies at its root). Every new side is
+    a safe dual bound."""
     record: list[Tightening] = []
     for _ in range(rounds):
         program = relax.build(setup, lo, hi, cap, cap_row=True)
         if program is None:
             break
         solver = ReusableConicProgram()
+        if record:  # is the box tight enough already?
+            result = solver.solve(program.q, program.A, program.b, program.cones)
+            if result.status is ConicStatus.OPTIMAL and cap - safe_lower_bound(
+                    program.q, program.A, program.b, program.cones, result.z, program.lower,
+                    program.upper) / setup.unit <= tolerance:
+                break
         new_lo, new_hi, duals = lo.copy(), hi.copy(), []
         for k in range(5):
             for sign in (1.0, -1.0):
                 q = np.zeros_like(program.q)
                 q[k] = sign
                 result = solver.solve(q, program.A, program.b, program.cones) if k == 0 and sign == 1.0 \
-                    else solver.solve_objective(q)
+                    and not record else solver.solve_objective(q)
                 dual = None
                 if result.status is ConicStatus.OPTIMAL:
                     value = safe_lower_bound(q, program.A, program.b, program.cones, result.z, program.lower,
@@ -193,7 +201,7 @@ def solve_metric(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, bnb: 
     search_lo, search_hi, rounds = lo, hi, []
     began = time.perf_counter()
     if math.isfinite(upper):
-        search_lo, search_hi, rounds = tighten(setup, lo, hi, upper)
+        search_lo, search_hi, rounds = tighten(setup, lo, hi, upper, tolerance(upper, bnb))
         problem.search_box = Box(search_lo, search_hi)
     bnb = dataclasses.replace(bnb, time_limit_s=max(1e-3, bnb.time_limit_s - (time.perf_counter() - began)))
     leaves: list | None = [] if record else None

@@ -230,7 +230,10 @@ class ReusableConicProgram:
     can never alter the problem solved.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, lean: bool | None = None) -> None:
+        """``lean``: the lean settings (no equilibration) for small programs (None: by size);
+        False for programs not built well scaled, where a lean solve fails and is repeated."""
+        self._lean = lean
         self._token = next(_TOKENS)
         self._key = None
         self._mask: np.ndarray | None = None
@@ -240,8 +243,8 @@ class ReusableConicProgram:
     def solve(self, q: np.ndarray, A: np.ndarray | sp.csc_matrix, b: np.ndarray, cones: ConeSpec) -> ConicResult:
         """``A`` dense (small problems: its nonzero pattern is compared) or CSC (large ones: its
         index arrays are compared); either way the solver is only updated when they match."""
-        key = (A.shape, cones.zero, cones.nonneg, cones.soc)
-        lean = A.shape[0] <= _LEAN_ROWS
+        key = (A.shape, cones.zero, cones.nonneg, cones.soc, cones.psd)
+        lean = A.shape[0] <= _LEAN_ROWS if self._lean is None else self._lean
         pool_key = None
         try:
             if sp.issparse(A):
