@@ -81,10 +81,11 @@ class ItemProgress:
 
 def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None = None,
                 should_stop: StopCheck | None = None, total: int | None = None,
-                stop_at: float | None = None) -> list[dict]:
+                stop_at: float | None = None, on_item: Callable[[int, dict], None] | None = None) -> list[dict]:
     """Solve the given items in order; once stopped, the rest are marked cancelled unsolved.
     After the ``time.monotonic()`` value ``stop_at`` no new item is started (at least one is
-    always solved): the list returned is then shorter, and the caller solves the rest later."""
+    always solved): the list returned is then shorter, and the caller solves the rest later.
+    ``on_item(index, item)`` sees each item as it ends, before the progress that counts it."""
     tracker = ItemProgress(total if total is not None else len(indices), sink, should_stop)
     items = []
     for index in indices:
@@ -93,9 +94,13 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
         if tracker.stopped or (should_stop is not None and should_stop()):
             tracker.stopped = True
             items.append(kind.cancelled_item())
+            if on_item is not None:
+                on_item(index, items[-1])
             continue
         item = kind.solve_item(parsed, index, options, tracker.engine_callback)
         items.append(item)
+        if on_item is not None:
+            on_item(index, item)
         tracker.finished(item)
     return items
 

@@ -42,8 +42,9 @@ class Settings(BaseSettings):
     # A task starts no new item after this many seconds; the rest of its chunk is queued as a
     # new task. With max_item_time_limit_s it bounds a task's length below the visibility timeout.
     chunk_time_budget_s: float = 20.0
-    # Seconds before Redis hands an unacknowledged task (its worker died) to another worker.
-    visibility_timeout_s: int = 90
+    # Seconds after its worker's last heartbeat (every 2 s) before Redis hands a task the worker
+    # held to another worker (the worker died). A live worker's tasks are never handed on.
+    visibility_timeout_s: int = 10
     # Seconds between progress events of one chunk.
     progress_interval_s: float = 0.25
     # Seconds a finished job (and its events) is kept.
@@ -68,13 +69,17 @@ class Settings(BaseSettings):
     shutdown_timeout_s: float = 5.0
 
     @model_validator(mode="after")
-    def _tasks_end_before_redelivery(self) -> "Settings":
-        longest_task = self.chunk_time_budget_s + self.max_item_time_limit_s + 5
-        if longest_task >= self.visibility_timeout_s:
-            raise ValueError(
-                f"GEOCERT_VISIBILITY_TIMEOUT_S ({self.visibility_timeout_s}) must exceed GEOCERT_CHUNK_TIME_BUDGET_S + "
-                f"GEOCERT_MAX_ITEM_TIME_LIMIT_S + 5 ({longest_task:g}): a task still running would be delivered twice")
+    def _leases_outlive_heartbeats(self) -> "Settings":
+        if self.visibility_timeout_s < 6:
+            raise ValueError(f"GEOCERT_VISIBILITY_TIMEOUT_S ({self.visibility_timeout_s}) must be at least 6: three "
+                             "of the workers' 2 s heartbeats, which renew their tasks' leases")
         return self
+
+    @property
+    def longest_task_s(self) -> float:
+        """The longest a task runs: it starts no item after the chunk budget, and an item stops at
+        its time limit (then Celery's soft and hard time limits, a little later, stop a runaway)."""
+        return self.chunk_time_budget_s + self.max_item_time_limit_s + 5
 
 
 def chunk_size_for(kind) -> int:

@@ -34,10 +34,10 @@ def wait_ready(client: httpx.Client, process: subprocess.Popen, limit_s: float =
         time.sleep(0.3)
 
 
-# Short tasks, so that a lost one comes back soon: the visibility timeout (20 s) must exceed the
-# task budget + item limit + 5 s; the defaults (20 s, 60 s, 90 s) give redelivery within about 95 s.
+# Many short tasks, so that a job has several in flight when a fault strikes and a worker freed
+# takes up a redelivered one soon.
 SHORT_TASKS = {"geocert_chunk_sizes": '{"triangulation": 60}', "geocert_chunk_time_budget_s": "2",
-               "geocert_max_item_time_limit_s": "10", "geocert_visibility_timeout_s": "20"}
+               "geocert_max_item_time_limit_s": "10"}
 
 
 def wait_until_done(client: httpx.Client, job_id: str, tracks: int, limit_s: float = 120) -> None:

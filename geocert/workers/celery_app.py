@@ -31,14 +31,15 @@ def make_celery() -> Celery:
         broker_connection_retry_on_startup=True,
         worker_hijack_root_logger=False,
         worker_redirect_stdouts=False,  # our JSON lines go straight to standard error
-        # Tasks end well inside the visibility timeout (see Settings), so a task is delivered
-        # again only when its worker is gone; the restore sweep runs every 5 s so that happens
-        # within about visibility_timeout_s + 5 s of the loss.
+        # Each live worker renews the delivery time of every task it holds with its heartbeat
+        # (workers.heartbeat), so a task is delivered again only when its worker is gone; the
+        # restore sweep runs every 5 s, so that happens within visibility_timeout_s + 5 s of the
+        # worker's last beat.
         broker_transport_options={"visibility_timeout": settings.visibility_timeout_s,
                                   "unacked_restore_interval": 5, "unacked_restore_throttle": 1},
-        # A runaway task fails (and its job keeps the error) before it could be delivered twice.
-        task_soft_time_limit=settings.visibility_timeout_s - 10,
-        task_time_limit=settings.visibility_timeout_s - 2,
+        # A runaway task fails (and its job keeps the error).
+        task_soft_time_limit=settings.longest_task_s + 5,
+        task_time_limit=settings.longest_task_s + 15,
     )
     return app
 

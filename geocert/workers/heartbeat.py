@@ -1,9 +1,18 @@
-"""Worker heartbeats in Redis, so that ``/readyz`` answers at once instead of pinging workers.
+"""Worker heartbeats in Redis: ``/readyz`` answers from them at once, and they are the leases on
+the tasks a worker holds.
 
 Each worker's main process writes its name and the time into one sorted set every
 ``INTERVAL_S`` seconds from the moment it is ready to take tasks, and removes itself when it shuts
 down. A worker counts as alive while its last beat is at most ``FRESH_S`` old; one killed outright
 stops beating and drops out of the count within ``FRESH_S``.
+
+With each beat the worker also renews its leases (``renew_leases``): every task it holds
+(running, reserved, or waiting for its countdown) gets the time of the beat as its delivery time
+in the broker's index of unacknowledged messages (Kombu's ``unacked_index``), and every job those
+tasks belong to is marked alive for the reaper. Kombu's own restore sweep (every 5 s) hands a
+message back to the queue once its delivery time is older than the visibility timeout: so a task
+whose worker died runs again within GEOCERT_VISIBILITY_TIMEOUT_S + 5 s of the worker's last beat,
+while one held by a live worker is never delivered twice however long it runs.
 """
 
 from __future__ import annotations
@@ -13,6 +22,8 @@ import threading
 import time
 
 import redis
+
+from geocert.workers.store import JobStore
 
 KEY = "geocert:workers"
 INTERVAL_S = 2.0
@@ -28,21 +39,50 @@ def live_workers(client: redis.Redis, now: float | None = None) -> int:
     return int(client.zcount(KEY, now - FRESH_S, "+inf"))
 
 
-def beat(client: redis.Redis, name: str) -> None:
+UNACKED_INDEX = "unacked_index"  # Kombu's Redis transport: delivery tag -> when it was delivered
+SOLVE_TASK = "geocert.solve_chunk"
+
+
+def held_tasks() -> list[tuple[str, str | None]]:
+    """(delivery tag, job id of a solve task or None) of every task this worker process holds:
+    running, reserved, or waiting for its countdown (Celery's worker state, main process)."""
+    from celery.worker import state
+
+    held = []
+    for request in list(state.requests.values()):  # copied at once: the consumer thread adds and removes
+        tag = getattr(getattr(request, "message", None), "delivery_tag", None)
+        if tag is None:
+            continue
+        args = request.args or ()
+        held.append((tag, args[0] if request.name == SOLVE_TASK and args else None))
+    return held
+
+
+def beat(client: redis.Redis, name: str, held: list[tuple[str, str | None]] = ()) -> None:
+    """Beat, and renew the leases of the tasks held (only entries that exist are updated: XX)."""
     now = time.time()
     pipe = client.pipeline()
     pipe.zadd(KEY, {name: now})
     pipe.zremrangebyscore(KEY, "-inf", now - FORGET_S)
+    tags = {tag: now for tag, _ in held}
+    jobs = {job: now for _, job in held if job}
+    if tags:
+        pipe.zadd(UNACKED_INDEX, tags, xx=True)
+    if jobs:
+        pipe.zadd(JobStore.RUNNING, jobs, xx=True)
     pipe.execute()
 
 
 class Heartbeat:
-    """A daemon thread beating for one worker until ``stop()``."""
+    """A daemon thread beating for one worker (and renewing the leases of what ``held()`` lists)
+    until ``stop()``."""
 
-    def __init__(self, url: str, name: str, interval_s: float = INTERVAL_S, reaper=None, reap_every_s: float = 5.0):
+    def __init__(self, url: str, name: str, interval_s: float = INTERVAL_S, reaper=None, reap_every_s: float = 5.0,
+                 held=held_tasks):
         self.client = redis.Redis.from_url(url, socket_timeout=5, socket_connect_timeout=5)
         self.name, self.interval_s = name, interval_s
         self.reaper, self.reap_every_s, self.reaped_at = reaper, reap_every_s, 0.0
+        self.held = held
         self.stopped = threading.Event()
         self.thread = threading.Thread(target=self._run, name="geocert-heartbeat", daemon=True)
 
@@ -53,7 +93,7 @@ class Heartbeat:
     def _run(self) -> None:
         while not self.stopped.is_set():
             try:
-                beat(self.client, self.name)
+                beat(self.client, self.name, self.held())
             except redis.RedisError as exc:  # Redis away for a moment: beat again next time
                 log.warning("heartbeat not written: %s", exc)
             if self.reaper is not None and time.monotonic() - self.reaped_at >= self.reap_every_s:

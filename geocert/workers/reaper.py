@@ -1,9 +1,10 @@
 """The reaper: no job stays ``running`` without a live task.
 
-Every task of a running job records when it last showed life (``JobStore.touch``: on start,
-progress and stored items). A live task does so at least every item time limit, which the
-visibility timeout exceeds; so a running job silent for longer than the visibility timeout has no
-live task: its tasks were lost, e.g. with a Redis restart that dropped them from the queue. The
+A running job is marked alive (``JobStore.touch``) when a task of it starts, stores items or
+publishes progress, and with every heartbeat of a worker holding a task of it
+(``workers.heartbeat``, every 2 s). So a running job unmarked for longer than the visibility
+timeout, with no task queued or delivered and due back, has no live task: its tasks were lost,
+e.g. with a Redis restart that dropped them from the queue. The
 reaper (run by every worker's heartbeat thread, one at a time through a lock in Redis) queues the
 chunks of such a job that still miss items again; results are stored per item, so solving a chunk
 again overwrites what was stored and counts nothing twice. After ``MAX_REAPS`` rounds without the

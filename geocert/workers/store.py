@@ -111,9 +111,10 @@ class JobStore:
         return None if raw is None else json.loads(raw)
 
     # --- events ------------------------------------------------------------------------------
-    def publish(self, job_id: str, event: str, data: dict) -> str:
-        return self.r.xadd(self.key(job_id, "events"), {"event": event, "data": json.dumps(data)},
-                           maxlen=_STREAM_MAXLEN, approximate=True)
+    def publish(self, job_id: str, event: str, data: dict, pipe=None) -> str | None:
+        """Append an event to the job's stream; returns its id (None when added to ``pipe``)."""
+        return (pipe or self.r).xadd(self.key(job_id, "events"), {"event": event, "data": json.dumps(data)},
+                                     maxlen=_STREAM_MAXLEN, approximate=True)
 
     # --- cancellation ------------------------------------------------------------------------
     def request_cancel(self, job_id: str) -> None:
@@ -173,20 +174,25 @@ class JobStore:
         """Drop a claim to end the job whose holder is gone (the job is running but nobody moves)."""
         self.r.delete(self.key(job_id, "final"))
 
-    def save_progress(self, job_id: str, start: int, progress: dict) -> dict:
-        """Record the progress of the task that started at item ``start`` and return (and
-        publish) the job's aggregate over all its tasks."""
-        pipe = self.r.pipeline()  # one round trip: this runs on every progress event of every task
+    def save_progress(self, job_id: str, start: int, progress: dict, items: dict[int, dict] | None = None) -> dict:
+        """Store the items given (index -> item) and the progress of the task that started at item
+        ``start``, and return (and publish) the job's aggregate over all its tasks. Its
+        ``items_done`` is the number of items stored, read after this call's items are written:
+        progress never counts an item whose result is not stored (a task that dies loses only
+        items it had not counted)."""
+        pipe = self.r.pipeline()  # one round trip for the writes and reads, one for the aggregate
+        if items:
+            pipe.hset(self.key(job_id, "items"), mapping={str(i): json.dumps(item) for i, item in items.items()})
         pipe.hset(self.key(job_id, "chunkprogress"), str(start), json.dumps(progress))
         pipe.zadd(self.RUNNING, {job_id: now()})  # touch()
         pipe.hvals(self.key(job_id, "chunkprogress"))
+        pipe.hlen(self.key(job_id, "items"))
         pipe.hmget(self.key(job_id), "items_total", "started_at")
-        _, _, raw_parts, (raw_total, raw_started) = pipe.execute()
+        raw_parts, done, (raw_total, raw_started) = pipe.execute()[-3:]
         parts = [json.loads(v) for v in raw_parts]
         total = None if raw_total is None else json.loads(raw_total)
         started = (None if raw_started is None else json.loads(raw_started)) or now()
         gaps = [p["gap_rel"] for p in parts if p.get("gap_rel") is not None]
-        done = sum(p["items_done"] if "items_done" in p else p["tracks_done"] for p in parts)  # or an older task's
         aggregate = {
             "nodes": sum(p["nodes"] for p in parts),
             "open_boxes": sum(p["open_boxes"] for p in parts),
@@ -200,20 +206,21 @@ class JobStore:
             "tracks_total": total,
             "elapsed_s": now() - started,
         }
-        self.set_fields(job_id, progress=aggregate)
-        self.publish(job_id, "progress", aggregate)
+        pipe = self.r.pipeline()
+        pipe.hset(self.key(job_id), "progress", json.dumps(aggregate))
+        self.publish(job_id, "progress", aggregate, pipe)
+        pipe.execute()
         return aggregate
 
-    def save_items(self, job_id: str, start: int, items: list[dict]) -> int:
-        """Store items start, start+1, ... (idempotent: a redelivered task overwrites the same
-        fields, so nothing is counted twice); returns how many items of the job are stored."""
-        if not items:
-            return int(self.r.hlen(self.key(job_id, "items")))
+    def save_items(self, job_id: str, items: dict[int, dict]) -> int:
+        """Store items (index -> item; idempotent: a redelivered task overwrites the same fields,
+        so nothing is counted twice); returns how many items of the job are stored."""
         pipe = self.r.pipeline()
-        pipe.hset(self.key(job_id, "items"), mapping={str(start + i): json.dumps(item) for i, item in enumerate(items)})
+        if items:
+            pipe.hset(self.key(job_id, "items"), mapping={str(i): json.dumps(item) for i, item in items.items()})
         pipe.hlen(self.key(job_id, "items"))
         pipe.zadd(self.RUNNING, {job_id: now()})  # touch()
-        return pipe.execute()[1]
+        return pipe.execute()[-2]
 
     def claim_end(self, job_id: str) -> bool:
         """Become the one caller that ends this job (``end``): the task that stored its last items,

@@ -2,9 +2,10 @@
 
 A job's items are split into chunks, one task each, run in parallel across workers. A task
 starts no new item after GEOCERT_CHUNK_TIME_BUDGET_S and queues the rest of its chunk as a new
-task, so every task stays well inside the broker's visibility timeout: a task lost with its
-worker is delivered again soon, and no running task is ever delivered twice. Results are stored
-per item, so a repeated task overwrites what it wrote before and nothing is counted twice.
+task. A live worker renews the broker's lease on every task it holds (``workers.heartbeat``), so a
+task is delivered again only when its worker is gone: within GEOCERT_VISIBILITY_TIMEOUT_S + 5 s
+of its last beat. Results are stored per item as they end, with the progress that counts them,
+so a repeated task overwrites what it wrote before and nothing is counted twice.
 
 A job ends in one place, ``JobStore.end``, under the job's ``claim_end`` (one caller ends it):
 ``end_with_result`` when the last items are stored, ``end_with_error`` when a task fails (or the
@@ -30,18 +31,32 @@ log = logging.getLogger("geocert.worker")
 
 
 class ProgressPublisher:
-    """Publishes a task's progress at most every ``interval`` seconds (always the last one)."""
+    """Stores a task's items as they end and publishes its progress, both at most every
+    ``interval`` seconds (and always at the last item), in the same round trip: the job's
+    progress counts stored items only, so a task that dies never leaves progress counting items
+    that are not stored (they would be solved again, and progress would fall back)."""
 
     def __init__(self, jobs: JobStore, job_id: str, start: int, interval: float):
         self.jobs, self.job_id, self.start, self.interval = jobs, job_id, start, interval
         self.last = 0.0
         self.cancel_checked = 0.0
         self.cancelled = False
+        self.unsaved: dict[int, dict] = {}
+
+    def item_ended(self, index: int, item: dict) -> None:
+        self.unsaved[index] = item
 
     def __call__(self, progress: dict) -> None:
         if time.monotonic() - self.last >= self.interval or progress["items_done"] == progress["items_total"]:
             self.last = time.monotonic()
-            self.jobs.save_progress(self.job_id, self.start, progress)
+            self.jobs.save_progress(self.job_id, self.start, progress, self.unsaved)
+            self.unsaved = {}
+
+    def flush(self) -> int:
+        """Store the items not stored yet; returns how many items of the job are stored."""
+        done = self.jobs.save_items(self.job_id, self.unsaved)
+        self.unsaved = {}
+        return done
 
     def should_stop(self) -> bool:
         if not self.cancelled and time.monotonic() - self.cancel_checked >= 0.05:
@@ -92,9 +107,9 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
         publisher = ProgressPublisher(jobs, job_id, start, settings.progress_interval_s)
         began = time.monotonic()
         items = solve_items(kind, parsed, options, range(start, stop), publisher, publisher.should_stop,
-                            stop_at=began + settings.chunk_time_budget_s)
+                            stop_at=began + settings.chunk_time_budget_s, on_item=publisher.item_ended)
+        done = publisher.flush()
         metrics.record_items(jobs.r, kind.name, items)
-        done = jobs.save_items(job_id, start, items)
         cut = start + len(items)
         if cut < stop:  # over the budget: the rest of the chunk becomes a task of its own
             log.info("continuing items %d-%d in a new task", cut, stop)

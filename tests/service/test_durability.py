@@ -17,20 +17,35 @@ pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run o
 
 
 def test_a_worker_killed_mid_job_leaves_its_work_to_another(tmp_path):
+    """A worker SIGKILLed mid-chunk: its task is delivered again by the broker (its lease, renewed
+    by the dead worker's heartbeat, runs out), not re-queued by the reaper, and the job ends
+    certified with every item once. Throughout, progress never counts more items than are stored
+    (read after it): the killed task's solved but unstored items were never counted."""
+    import redis
+
     body = triangulation_job(np.random.default_rng(77), tracks=1200, views=5)
     with cluster(tmp_path, workers=2, **SHORT_TASKS) as (running, client):
+        store = redis.Redis.from_url(running.redis_url, decode_responses=True)
         job_id = client.post("/v1/jobs", json=body).json()["id"]
         wait_until_done(client, job_id, 200)
         running.kill(running.workers[0])  # SIGKILL to its whole process group, mid-chunk
         killed_at = time.monotonic()
+        overcounts = []
         while (job := client.get(f"/v1/jobs/{job_id}").json())["status"] not in ("succeeded", "failed", "cancelled"):
+            stored = store.hlen(f"geocert:job:{job_id}:items")
+            if job["progress"]["items_done"] > stored:
+                overcounts.append((job["progress"]["items_done"], stored))
             assert time.monotonic() - killed_at < 120, f"job still {job['status']} two minutes after the kill"
-            time.sleep(0.2)
+            time.sleep(0.1)
         recovery = time.monotonic() - killed_at
+        reaps = store.hget(f"geocert:job:{job_id}", "reaps")
     assert job["status"] == "succeeded", job["error"]
+    assert not overcounts, f"progress counted items not stored (counted, stored): {overcounts[:5]}"
+    assert reaps is None, "the reaper re-queued the job: the broker did not deliver the lost task again"
     tracks = job["result"]["tracks"]
     assert len(tracks) == 1200 and job["result"]["stats"]["items"] == 1200  # none lost, none twice
     assert all(track["certified"] for track in tracks)
+    assert job["progress"]["items_done"] == 1200
     print(f"\nkilled a worker after 200 of 1200 tracks; the job ended certified {recovery:.1f} s after the kill")
 
 
