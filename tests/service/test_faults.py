@@ -238,3 +238,42 @@ def test_a_redis_restart_under_a_running_job_strands_nothing(tmp_path):
     assert job["progress"]["items_done"] == 600
     print(f"\nRedis stopped after 120 of 600 tracks, back 3 s later: the job ended {job['status']} "
           f"{recovery:.1f} s after Redis's return")
+
+
+def test_the_reaper_requeues_a_stranded_job_and_fails_one_stranded_too_often(tmp_path):
+    """Two jobs stranded on purpose, as a lost task leaves them: marked running, with no task
+    queued, delivered or alive (their queued messages deleted, their last sign of life long ago).
+    A worker then starts; its reaper re-queues the first job's chunks (the job succeeds, every item
+    once, after one reaper round) and fails the second, already re-queued MAX_REAPS times, with
+    the reason. Neither Celery nor the broker could have recovered them: nothing of them is left
+    in the queue."""
+    import json
+
+    import redis
+
+    from geocert.workers.reaper import MAX_REAPS
+
+    with cluster(tmp_path, workers=0, **SHORT_TASKS) as (running, client):
+        store = redis.Redis.from_url(running.redis_url, decode_responses=True)
+        rescued = client.post("/v1/jobs", json=triangulation_job(np.random.default_rng(31), 150)).json()["id"]
+        doomed = client.post("/v1/jobs", json=small_job(32)).json()["id"]
+        assert store.llen("celery") > 0
+        store.delete("celery")  # the tasks are lost
+        for job_id in (rescued, doomed):
+            store.hset(f"geocert:job:{job_id}", mapping={"status": json.dumps("running"),
+                                                         "started_at": json.dumps(time.time() - 100)})
+            store.zadd("geocert:running", {job_id: time.time() - 100})
+        store.hset(f"geocert:job:{doomed}", "reaps", MAX_REAPS)
+        running.start_worker()
+        deadline = time.monotonic() + 120
+        while any(client.get(f"/v1/jobs/{job_id}").json()["status"] == "running" for job_id in (rescued, doomed)):
+            assert time.monotonic() < deadline, "a stranded job was still running two minutes after a worker started"
+            time.sleep(0.3)
+        saved, failed = (client.get(f"/v1/jobs/{job_id}").json() for job_id in (rescued, doomed))
+        assert saved["status"] == "succeeded", saved["error"]
+        assert store.hget(f"geocert:job:{rescued}", "reaps") == "1"  # the reaper, once
+        assert saved["result"]["stats"]["items"] == 150 and len(saved["result"]["tracks"]) == 150
+        assert saved["progress"]["items_done"] == 150
+        assert failed["status"] == "failed"
+        assert failed["error"]["title"] == "Tasks lost" and str(MAX_REAPS) in failed["error"]["detail"]
+        assert client.get("/v1/jobs", params={"status": "running"}).json()["jobs"] == []
