@@ -58,6 +58,7 @@ class JobProgress(BaseModel):
     tracks_done: int = Field(0, deprecated=True, description="the same as items_done (an old name: it counts maps too)")
     tracks_total: int = Field(0, deprecated=True, description="the same as items_total (an old name: it counts maps too)")
     elapsed_s: float = 0.0
+    stage: str | None = Field(None, description="a staged solve's running stage (autocalibration: affine, metric)")
 
     @model_validator(mode="before")
     @classmethod

@@ -205,6 +205,8 @@ class JobStore:
             "tracks_done": done,  # deprecated names of items_done and items_total
             "tracks_total": total,
             "elapsed_s": now() - started,
+            # A staged solve (autocalibration) says which stage runs: the latest task's.
+            **({"stage": stages[-1]} if (stages := [p["stage"] for p in parts if p.get("stage")]) else {}),
         }
         pipe = self.r.pipeline()
         pipe.hset(self.key(job_id), "progress", json.dumps(aggregate))
