@@ -25,14 +25,15 @@ def _solve_chunk_task():
     return _SOLVE_CHUNK
 
 
-def submit_chunks(store: JobStore, meta: dict, request_id: str | None) -> None:
-    """One task per chunk, so a batch runs in parallel across every worker (a Celery group)."""
+def submit_chunks(meta: dict, request_id: str | None) -> None:
+    """One task per chunk, so a batch runs in parallel across every worker (a Celery group), each
+    under the id ``JobStore.create`` recorded for it (``meta["task_ids"]``)."""
     from celery import group
 
     solve_chunk = _solve_chunk_task()
-    signatures = [solve_chunk.s(meta["id"], start, stop, request_id) for start, stop in meta["chunks"]]
-    result = group(signatures).apply_async()
-    store.add_task_ids(meta["id"], *(task.id for task in result.results))
+    signatures = [solve_chunk.s(meta["id"], start, stop, request_id).set(task_id=task_id)
+                  for (start, stop), task_id in zip(meta["chunks"], meta["task_ids"])]
+    group(signatures).apply_async()
 
 
 def withdraw_queued(store: JobStore, job_id: str) -> None:

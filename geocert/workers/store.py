@@ -44,7 +44,11 @@ class JobStore:
 
     # --- creation and reads ------------------------------------------------------------------
     def create(self, kind: str, request: dict, items_total: int, chunk_size: int, owner: str,
-               callback_url: str | None = None) -> dict:
+               callback_url: str | None = None, active_limit: int = 0, task_ids=None) -> dict | None:
+        """Record a new queued job, counted among the owner's active jobs, with its ``status``
+        event and the ids its tasks will have (one per chunk; made here unless given), in one
+        round trip. None when the owner already has ``active_limit`` jobs queued or running (0:
+        no limit): nothing of the job is kept then."""
         job_id = uuid.uuid4().hex
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
@@ -57,12 +61,18 @@ class JobStore:
             "webhook": {"url": callback_url, "state": "waiting", "attempts": 0, "last_error": None,
                         "delivered_at": None} if callback_url else None,
         }
+        meta["task_ids"] = list(task_ids) if task_ids is not None else [uuid.uuid4().hex for _ in chunks]
         pipe = self.r.pipeline()
-        pipe.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in meta.items()})
+        pipe.eval(self._ADMIT, 1, self.owner_key(owner, "active"), job_id, active_limit)
+        pipe.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in meta.items() if k != "task_ids"})
         pipe.set(self.key(job_id, "request"), json.dumps(request))
         pipe.zadd(self.owner_key(owner, "jobs"), {job_id: meta["created_at"]})
-        pipe.execute()
-        self.publish(job_id, "status", {"status": "queued"})
+        self.publish(job_id, "status", {"status": "queued"}, pipe)
+        if meta["task_ids"]:
+            pipe.rpush(self.key(job_id, "tasks"), *meta["task_ids"])
+        if pipe.execute()[0] != 1:
+            self.delete(job_id)
+            return None
         return meta
 
     def get(self, job_id: str) -> dict | None:
@@ -313,27 +323,15 @@ class JobStore:
     def owner_key(owner: str, part: str) -> str:
         return f"geocert:owner:{owner}:{part}"
 
-    def admit(self, owner: str, job_id: str, limit: int) -> bool:
-        """Count ``job_id`` among the owner's active jobs unless it already has ``limit`` (0: no limit)."""
-        script = """
-        if tonumber(ARGV[2]) > 0 and redis.call('SCARD', KEYS[1]) >= tonumber(ARGV[2]) then return 0 end
-        redis.call('SADD', KEYS[1], ARGV[1])
-        return 1
-        """
-        return self.r.eval(script, 1, self.owner_key(owner, "active"), job_id, limit) == 1
+    # Count a job among the owner's active jobs unless it already has the limit (0: no limit).
+    _ADMIT = """
+    if tonumber(ARGV[2]) > 0 and redis.call('SCARD', KEYS[1]) >= tonumber(ARGV[2]) then return 0 end
+    redis.call('SADD', KEYS[1], ARGV[1])
+    return 1
+    """
 
     def release(self, owner: str, job_id: str) -> None:
         self.r.srem(self.owner_key(owner, "active"), job_id)
-
-    def count_request(self, owner: str, window_s: int = 60) -> tuple[int, int]:
-        """Requests by ``owner`` in the current fixed window, and the seconds until it ends."""
-        window = int(now() // window_s)
-        key = self.owner_key(owner, f"rate:{window}")
-        pipe = self.r.pipeline()
-        pipe.incr(key)
-        pipe.expire(key, 2 * window_s)
-        count = pipe.execute()[0]
-        return count, int((window + 1) * window_s - now()) + 1
 
     def remember_idempotent(self, owner: str, idempotency_key: str, body_digest: str) -> dict | None:
         """Reserve ``idempotency_key`` for a body; returns None when newly reserved, else what
@@ -352,6 +350,23 @@ class JobStore:
             self.r.delete(key)
         else:
             self.r.set(key, json.dumps({"body": body_digest, "job": job_id}), ex=self.ttl)
+
+
+async def read_job(client: redis.asyncio.Redis, job_id: str) -> dict | None:
+    """``JobStore.get`` from an asyncio client (``decode_responses``): the API's reads on the loop."""
+    raw = await client.hgetall(JobStore.key(job_id))
+    return {k: json.loads(v) for k, v in raw.items()} if raw else None
+
+
+async def count_request(client: redis.asyncio.Redis, owner: str, window_s: int = 60) -> tuple[int, int]:
+    """Requests by ``owner`` in the current fixed window, and the seconds until it ends."""
+    window = int(now() // window_s)
+    key = JobStore.owner_key(owner, f"rate:{window}")
+    async with client.pipeline(transaction=False) as pipe:
+        pipe.incr(key)
+        pipe.expire(key, 2 * window_s)
+        count = (await pipe.execute())[0]
+    return count, int((window + 1) * window_s - now()) + 1
 
 
 async def events(client: redis.asyncio.Redis, job_id: str, after: str, block_ms: int,

@@ -14,7 +14,7 @@ from geocert.settings import get_settings
 from geocert.app.core.security import PUBLIC_OWNER, caller
 from geocert.app.errors import PROBLEM_JSON, ApiProblem
 from geocert.app.schemas import ProblemDetails
-from geocert.workers.store import JobStore
+from geocert.workers.store import JobStore, count_request
 
 
 @lru_cache
@@ -30,28 +30,36 @@ def get_store() -> JobStore:
                              retry=Retry(ExponentialBackoff(cap=0.5, base=0.05), 2))
 
 
-JobStoreDep = Annotated[JobStore, Depends(get_store)]
+async def _store() -> JobStore:
+    return get_store()  # as a coroutine, FastAPI resolves it on the loop instead of in a thread
+
+
+JobStoreDep = Annotated[JobStore, Depends(_store)]
 Caller = Annotated[str, Depends(caller)]
 
-_ASYNC_CLIENTS: "weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, redis.asyncio.Redis]" = weakref.WeakKeyDictionary()
+_ASYNC_CLIENTS: "weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, dict]" = weakref.WeakKeyDictionary()
 
 
-def get_async_redis() -> redis.asyncio.Redis:
-    """This event loop's asyncio Redis client, for event streams: each open stream holds one of its
-    connections in a blocking XREAD (hence the large pool), none of the API's threads."""
+def get_async_redis(streams: bool = False) -> redis.asyncio.Redis:
+    """This event loop's asyncio Redis clients. The plain one serves the reads every request makes
+    (rate limit, the job) on the loop, with the sync store's bounded waits (a request during an
+    outage fails over to 503 within a few seconds). The ``streams`` one serves event streams: each
+    open stream holds one of its connections in a blocking XREAD (hence the large pool, and a read
+    timeout longer than the heartbeat) and none of the API's threads."""
     loop = asyncio.get_running_loop()
-    client = _ASYNC_CLIENTS.get(loop)
-    if client is None:
+    clients = _ASYNC_CLIENTS.setdefault(loop, {})
+    if streams not in clients:
         from redis.asyncio.retry import Retry
         from redis.backoff import ExponentialBackoff
 
         from geocert.workers.celery_app import redis_url
 
         settings = get_settings()
-        client = _ASYNC_CLIENTS[loop] = redis.asyncio.Redis.from_url(
-            redis_url(), decode_responses=True, max_connections=100_000, socket_connect_timeout=2,
-            socket_timeout=settings.stream_heartbeat_s + 5, retry=Retry(ExponentialBackoff(cap=0.5, base=0.05), 2))
-    return client
+        clients[streams] = redis.asyncio.Redis.from_url(
+            redis_url(), decode_responses=True, socket_connect_timeout=2,
+            socket_timeout=settings.stream_heartbeat_s + 5 if streams else 5,
+            max_connections=100_000 if streams else 1000, retry=Retry(ExponentialBackoff(cap=0.5, base=0.05), 2))
+    return clients[streams]
 
 
 def client_bucket(request: Request, owner: str) -> str:
@@ -62,13 +70,14 @@ def client_bucket(request: Request, owner: str) -> str:
     return owner
 
 
-def rate_limited(request: Request, owner: Caller, store: JobStoreDep) -> None:
+async def rate_limited(request: Request, owner: Caller) -> None:
     """At most GEOCERT_RATE_LIMIT_PER_MINUTE requests per key per minute (a fixed window in Redis,
-    shared by every API process), per client address without keys (``client_bucket``)."""
+    shared by every API process), per client address without keys (``client_bucket``). On the
+    event loop, with the asyncio client: every /v1 request passes here."""
     limit = get_settings().rate_limit_per_minute
     if limit <= 0:
         return
-    count, retry_after = store.count_request(client_bucket(request, owner))
+    count, retry_after = await count_request(get_async_redis(), client_bucket(request, owner))
     if count > limit:
         raise ApiProblem(429, f"more than {limit} requests this minute (GEOCERT_RATE_LIMIT_PER_MINUTE)",
                          headers={"Retry-After": str(retry_after)})

@@ -23,7 +23,7 @@ from geocert.solvers.core.geometry import InputError
 from geocert.batch import parse_job
 from geocert.workers import logs
 from geocert.workers.queue import submit_chunks, withdraw_queued
-from geocert.workers.store import REDIS_GONE, TERMINAL, JobStore, events
+from geocert.workers.store import REDIS_GONE, TERMINAL, JobStore, events, read_job
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"], dependencies=[Depends(rate_limited)])
 
@@ -87,13 +87,13 @@ def submit_job(
 def _create(store: JobStore, owner: str, kind, request: dict, items: int) -> dict:
     settings = get_settings()
     chunk = chunk_size_for(kind)
-    meta = store.create(kind.name, request, items, chunk, owner, request.get("callback_url"))
-    if not store.admit(owner, meta["id"], settings.max_active_jobs_per_key):
-        store.delete(meta["id"])
+    meta = store.create(kind.name, request, items, chunk, owner, request.get("callback_url"),
+                        settings.max_active_jobs_per_key)
+    if meta is None:
         raise ApiProblem(429, f"this key already has {settings.max_active_jobs_per_key} jobs queued or running "
                               "(GEOCERT_MAX_ACTIVE_JOBS_PER_KEY); wait for one to end", headers={"Retry-After": "5"})
     with logs.context(job_id=meta["id"]):
-        submit_chunks(store, meta, logs.current("request_id"))
+        submit_chunks(meta, logs.current("request_id"))
     return meta
 
 
@@ -112,15 +112,11 @@ def _replay(store: JobStore, earlier: dict, digest: str, response: Response) -> 
     return store.document(meta)
 
 
-def _load(store: JobStore, job_id: str, owner: str) -> dict:
-    meta = store.get(job_id)
+async def _owned(job_id: str, owner: Caller) -> dict:
+    meta = await read_job(get_async_redis(), job_id)  # on the loop: every job route reads the job first
     if meta is None or meta.get("owner") != owner:  # another key's job does not exist for this one
         raise ApiProblem(404, f"no job {job_id}")
     return meta
-
-
-def _owned(job_id: str, store: JobStoreDep, owner: Caller) -> dict:
-    return _load(store, job_id, owner)
 
 
 OwnedJob = Annotated[dict, Depends(_owned)]
@@ -213,7 +209,7 @@ async def job_events(job: OwnedJob, after: Annotated[str, Depends(_resume_point)
     reconnect with `Last-Event-ID`."""
     settings = get_settings()
     try:
-        async for event_id, event, data in events(get_async_redis(), job["id"], after,
+        async for event_id, event, data in events(get_async_redis(streams=True), job["id"], after,
                                                   int(1000 * settings.stream_heartbeat_s), lifecycle.stop_event()):
             if event == "stopping":
                 yield ServerSentEvent(comment="server stopping: reconnect with Last-Event-ID", retry=1000)
