@@ -196,3 +196,67 @@ class TestRangePruning:
             half = 0.01 * (root_hi - root_lo)
             pruned += not metric_relaxation.may_meet_ranges(RANGES, centre - half, centre + half)
         assert pruned > 300
+
+
+@pytest.fixture(scope="module")
+def node_tightened():
+    scene, norm = normalised_scene(10, 0.5, 1)
+    ranges = {"focal": [0.3, 5.0], "aspect": [0.95, 1.05], "skew": [-0.01, 0.01], "u": [-0.25, 0.25],
+              "v": [-0.25, 0.25]}
+    stage = affine.solve_affine(norm, BnbOptions(rel_gap=1e-5, abs_gap=1e-12), record=False)
+    setup = metric.setup_for(norm.cameras, norm.reference, stage.plane[:3], ranges)
+    lo, hi = metric_relaxation.omega_box(ranges)
+    result = metric.solve_metric(setup, lo, hi, BnbOptions(rel_gap=1e-4, abs_gap=1e-12, max_nodes=3000), True)
+    return setup, result
+
+
+class TestNodeTightening:
+    """Before a box is split it is tightened; the slabs cut off are leaves closed by their cut.
+    No point of a slab (off its inner face) may cost at most the cut's cap, and the verifier must
+    refuse a leaf moved past its cut."""
+
+    def test_cut_slabs_hold_no_point_costing_at_most_their_cap(self, node_tightened):
+        setup, result = node_tightened
+        assert result.certified
+        cuts = [(box, proof) for box, proof in result.leaves if isinstance(proof, metric.CutProof)]
+        assert len(cuts) > 10
+        rng = np.random.default_rng(3)
+        checked = 0
+        for box, proof in cuts[:40]:
+            for w in rng.uniform(box.lo, box.hi, size=(20, 5)):
+                if metric_relaxation.in_domain(setup, w, result.lo, result.hi):
+                    assert metric_relaxation.cost(setup, w) > proof.upper_bound
+                    checked += 1
+        assert checked > 0
+
+    def test_the_lower_bound_is_below_every_sampled_cost(self, node_tightened):
+        setup, result = node_tightened
+        rng = np.random.default_rng(4)
+        for box, _ in result.leaves[:200]:
+            for w in rng.uniform(box.lo, box.hi, size=(5, 5)):
+                if metric_relaxation.in_domain(setup, w, result.lo, result.hi):
+                    assert metric_relaxation.cost(setup, w) >= result.lower_bound * (1 - 1e-9)
+
+    def test_a_certificate_with_cuts_verifies_and_a_leaf_past_its_cut_is_refused(self):
+        import copy
+
+        from geocert.batch import solve_job
+        from geocert.solvers.verify import verify_any
+
+        scene = scenes.make_scene(10, 0.5, seed=1)
+        result = solve_job({"kind": "autocalibration", "data": scene.job_data(), "options": {"certificate": "full"}})
+        proof = result["certificate"]["items"][1]["proof"]
+        cut_leaves = [leaf for leaf in proof["leaves"] if leaf[2] is not None and proof["proofs"][leaf[2]]["kind"] == "cut"]
+        assert result["stages"][1]["certified"] and cut_leaves
+        report = verify_any(result)
+        assert report.valid, report.first_failure
+        forged = copy.deepcopy(result)
+        proof = forged["certificate"]["items"][1]["proof"]
+        leaf = next(leaf for leaf in proof["leaves"] if leaf[2] is not None and proof["proofs"][leaf[2]]["kind"] == "cut")
+        cut = proof["proofs"][leaf[2]]
+        if cut["sign"] > 0:
+            leaf[1][cut["axis"]] += 1e-3
+        else:
+            leaf[0][cut["axis"]] -= 1e-3
+        assert verify_any(forged).first_failure["check"] == "leaf_bounds"
+

@@ -41,7 +41,8 @@ def encode_leaves(leaves: list) -> tuple[list, list]:
         if leaf is not None and id(leaf) not in index:
             index[id(leaf)] = len(proofs)
             proofs.append({"box": _box(leaf.box.lo, leaf.box.hi), "upper_bound": leaf.upper_bound, "kind": leaf.kind,
-                           "z": pack(leaf.z), "bound": leaf.bound if math.isfinite(leaf.bound) else None})
+                           "z": pack(leaf.z), "bound": leaf.bound if math.isfinite(leaf.bound) else None,
+                           **({"axis": leaf.axis, "sign": leaf.sign} if leaf.kind == "cut" else {})})
         out.append(_box(box.lo, box.hi) + [index[id(leaf)] if leaf is not None else None])
     return proofs, out
 
@@ -94,20 +95,43 @@ def _dual(text: Any, rows: int, where: str) -> np.ndarray:
     return z
 
 
-def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, unit: float, d: int) -> float:
+def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, unit: float, d: int,
+                 build_capped=None) -> float:
     """The smallest bound the leaves prove over the root box, in cost units: they must cover it,
     and each leaf's proof is rebuilt and rechecked. ``build(lo, hi, cap)`` gives the leaf's
-    program (or None: no point of the domain in that box)."""
+    program (or None: no point of the domain in that box); ``build_capped`` the same with the
+    cost capped, for "cut" proofs (a box's tightening: no point of it costing at most the cap
+    lies beyond ``value`` along ``axis``, so the leaves beyond it are closed at the cap)."""
     proofs, leaves = proof.get("proofs"), proof.get("leaves")
     if not isinstance(proofs, list) or not isinstance(leaves, list) or not leaves or len(leaves) > MAX_LEAVES:
         raise Invalid("format", f"proofs and leaves must be lists (1 to {MAX_LEAVES} leaves)")
     proven = []
+    cuts: dict[int, tuple[int, float, float]] = {}
     for i, item in enumerate(proofs):
         if not isinstance(item, dict):
             raise Invalid("format", f"proofs/{i} must be an object")
         lo, hi = _read_box(item.get("box"), f"proofs/{i}/box", d)
         cap = _number(item.get("upper_bound"), f"proofs/{i}/upper_bound", "format")
         kind = item.get("kind")
+        if kind == "cut":
+            if build_capped is None:
+                raise Invalid("format", f"proofs/{i}: this stage takes no cut")
+            axis, sign = item.get("axis"), item.get("sign")
+            if not (isinstance(axis, int) and not isinstance(axis, bool) and 0 <= axis < d and sign in (1.0, -1.0)):
+                raise Invalid("format", f"proofs/{i}: a cut needs an axis (0-{d - 1}) and a sign (1.0 or -1.0)")
+            program = build_capped(lo, hi, cap)
+            if program is None:
+                proven.append(cap)
+                cuts[i] = (axis, sign, math.inf)  # no point of the domain there at all
+                continue
+            q = np.zeros_like(program.q)
+            q[axis] = sign
+            value = safe_lower_bound(q, program.A, program.b, program.cones,
+                                     _dual(item.get("z"), len(program.b), f"proofs/{i}/z"), program.lower,
+                                     program.upper)
+            cuts[i] = (axis, sign, value)
+            proven.append(cap)
+            continue
         if kind == "no_domain":
             if build(lo, hi, cap) is not None:
                 raise Invalid("leaf_bounds", f"proofs/{i}: the box holds points of the domain")
@@ -146,6 +170,11 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
         plo, phi = _read_box(proofs[index]["box"], f"proofs/{index}/box", d)
         if not (np.all(plo <= leaf_lo[i]) and np.all(phi >= leaf_hi[i])):
             raise Invalid("leaf_bounds", f"leaves/{i} is not inside the box of its proof {index}")
+        if index in cuts:  # the leaf must lie beyond its cut (its face on it: covered by others too)
+            axis, sign, value = cuts[index]
+            beyond = leaf_hi[i][axis] <= value if sign > 0 else leaf_lo[i][axis] >= -value
+            if not (value == value and beyond):
+                raise Invalid("leaf_bounds", f"leaves/{i} is not beyond the cut of its proof {index}")
         bounds.append(proven[index])
     if uncovered_part(Box(root_lo, root_hi), leaf_lo, leaf_hi) is not None:
         raise Invalid("coverage", "the leaves do not cover the box searched")
@@ -250,6 +279,7 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, pass
     if not (np.array_equal(search_lo, lo) and np.array_equal(search_hi, hi)):
         raise Invalid("root_region", "the box searched is not the last tightening's")
     passed += ["root_region", "tightening"]
-    bound = check_leaves(proof, lo, hi, lambda l, h, c: mrelax.build(setup, l, h, c), unit, 5)
+    bound = check_leaves(proof, lo, hi, lambda l, h, c: mrelax.build(setup, l, h, c), unit, 5,
+                         lambda l, h, c: mrelax.build(setup, l, h, c, cap_row=True))
     passed += ["coverage", "leaf_bounds"]
     return bound
