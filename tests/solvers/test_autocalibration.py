@@ -260,3 +260,23 @@ class TestNodeTightening:
             leaf[0][cut["axis"]] -= 1e-3
         assert verify_any(forged).first_failure["check"] == "leaf_bounds"
 
+
+    def test_the_affine_stage_cuts_too_and_its_cuts_are_checked(self):
+        import copy
+
+        from geocert.batch import solve_job
+        from geocert.solvers.verify import verify_any
+
+        scene = scenes.make_scene(20, 0.1, seed=20000)
+        result = solve_job({"kind": "autocalibration", "data": scene.job_data(), "options": {"certificate": "full"}})
+        assert verify_any(result).valid
+        forged = copy.deepcopy(result)
+        region = forged["certificate"]["items"][0]["proof"]["regions"][0]
+        leaf = next(leaf for leaf in region["leaves"]
+                    if leaf[2] is not None and region["proofs"][leaf[2]]["kind"] == "cut")
+        cut = region["proofs"][leaf[2]]
+        if cut["sign"] > 0:
+            leaf[1][cut["axis"]] += 1e-3
+        else:
+            leaf[0][cut["axis"]] -= 1e-3
+        assert verify_any(forged).first_failure["check"] == "leaf_bounds"

@@ -12,6 +12,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from geocert.solvers.autocalibration import affine_relaxation as relax
+from geocert.solvers.autocalibration import cuts
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound
 from geocert.solvers.core.certificates import LeafProof
@@ -84,6 +85,8 @@ class AffineProblem:
         self.all_a, self.all_b = all_a, all_b
         self.record = record
         self.program = ReusableConicProgram(lean=False)
+        self.upper = math.inf  # the incumbent's cost at the last bound
+        self.cuts: dict[int, cuts.CutProof] = {}  # slabs cut off, by id, until the engine closes them
 
     def root_box(self) -> Box:
         return Box(self.region.lo.copy(), self.region.hi.copy())
@@ -117,6 +120,10 @@ class AffineProblem:
         return v, start
 
     def bound(self, box: Box, upper_bound: float) -> BoxBound:
+        cut = self.cuts.pop(id(box), None)
+        if cut is not None:  # a slab its parent's tightening showed holds no point costing <= its cap
+            return BoxBound(BoxStatus.EMPTY, cut.upper_bound, proof=cut if self.record else None)
+        self.upper = min(self.upper, upper_bound)
         cap = upper_bound if math.isfinite(upper_bound) else 1e300
         program = relax.build(self.region.setup, box.lo, box.hi, cap)
         if program is None:  # d <= 0 on the whole box: no plane of the domain here
@@ -140,12 +147,27 @@ class AffineProblem:
         return BoxBound(BoxStatus.UNRESOLVED)
 
     def split(self, box: Box, bound: BoxBound) -> list[Box]:
+        """Tighten the box (geocert.solvers.autocalibration.cuts), then halve what remains along
+        its widest side relative to the root's."""
+        slabs: list = []
+        if NODE_TIGHTENING and math.isfinite(self.upper):
+            cut_off, box = cuts.tighten_box(
+                lambda lo, hi, cap: relax.build(self.region.setup, lo, hi, cap, cap_row=True), box, self.upper,
+                self.record)
+            for slab, proof in cut_off:
+                self.cuts[id(slab)] = proof
+            slabs = [slab for slab, _ in cut_off]
+            if box is None:
+                return slabs
         axis = int(np.argmax(box.width / np.maximum(self.region.hi - self.region.lo, 1e-300)))
         middle = 0.5 * (box.lo[axis] + box.hi[axis])
         left_hi, right_lo = box.hi.copy(), box.lo.copy()
         left_hi[axis] = middle
         right_lo[axis] = middle
-        return [Box(box.lo.copy(), left_hi), Box(right_lo, box.hi.copy())]
+        return slabs + [Box(box.lo.copy(), left_hi), Box(right_lo, box.hi.copy())]
+
+
+NODE_TIGHTENING = True
 
 
 def regions_of(norm: frames.Normalised, coef: np.ndarray) -> tuple[list[Region], list[dict], str | None]:

@@ -81,10 +81,12 @@ def d_range(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray) -> tuple[float, 
     return max(float(dl[0]), 0.0), float(du[0])
 
 
-def build(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray, cap: float) -> AffineProgram | None:
+def build(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray, cap: float, cap_row: bool = False
+          ) -> AffineProgram | None:
     """The relaxation over the box, its objective in units of ``1 / setup.unit`` of the cost;
-    ``cap`` bounds the cost of the points that matter. None when d <= 0 on the whole box (no
-    domain point there)."""
+    ``cap`` bounds the cost of the points that matter (with ``cap_row``, also as a constraint:
+    the set a box's tightening optimises over). None when d <= 0 on the whole box (no domain
+    point there)."""
     D, Af, Bf, Cf = setup.functionals()
     m = len(Af)
     dl, du = d_range(setup, lo, hi)
@@ -151,6 +153,8 @@ def build(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray, cap: float) -> Aff
         product_rows(Gv[j], S, Bf[j], sl[0], su[0], bl[j], bu[j])
     slope, icpt = envelopes.power_secant(dl, du, 8.0 / 3.0)  # e <= slope d + icpt
     le({E: 1.0}, -slope * D[:3], slope * D[3] + icpt)
+    if cap_row:
+        le({R: 1.0}, None, cap * setup.unit)
 
     nonneg = count
     # Rotated cone r e >= |w|^2, w = f - g: (r + e, r - e, 2 w) in the second-order cone; as

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
+from geocert.solvers.autocalibration import cuts
 from geocert.solvers.autocalibration import metric_relaxation as relax
 from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound, tolerance
 from geocert.solvers.core.certificates import LeafProof
@@ -40,15 +41,7 @@ class MetricStage:
 homographies, setup_for = relax.homographies, relax.setup_for
 
 
-@dataclass
-class CutProof(LeafProof):
-    """Every point of ``box`` costing at most ``upper_bound`` has sign * w[axis] >= value (a
-    safe dual bound over the relaxation with the cost capped): the slab of the box beyond that
-    value holds no such point."""
-
-    axis: int = 0
-    sign: float = 1.0
-    value: float = 0.0
+CutProof = cuts.CutProof
 
 
 class MetricProblem:
@@ -151,51 +144,11 @@ class MetricProblem:
         return slabs + [Box(box.lo.copy(), left_hi), Box(right_lo, box.hi.copy())]
 
     def tighten_box(self, box: Box) -> tuple[list[Box], Box | None]:
-        """The slabs of the box that its tightening cuts off (each registered with its cut, in
-        a guillotine order so that they and what remains partition the box), and what remains
-        (None when nothing does)."""
-        cap = self.upper
-        try:
-            program = relax.build(self.setup, box.lo, box.hi, cap, cap_row=True)
-        except ValueError:
-            return [], box
-        if program is None:
-            return [], box
-        solver = ReusableConicProgram(lean=False)
-        current_lo, current_hi = box.lo.copy(), box.hi.copy()
-        slabs: list[Box] = []
-        first = True
-        for k in range(5):
-            for sign in (1.0, -1.0):
-                q = np.zeros_like(program.q)
-                q[k] = sign
-                result = solver.solve(q, program.A, program.b, program.cones) if first else solver.solve_objective(q)
-                first = False
-                if result.status is not ConicStatus.OPTIMAL:
-                    continue
-                value = safe_lower_bound(q, program.A, program.b, program.cones, result.z, program.lower,
-                                         program.upper)
-                if not math.isfinite(value):
-                    continue
-                side = value if sign > 0 else -value  # points costing <= cap: w_k >= side (or <=)
-                if sign > 0 and side > current_lo[k]:
-                    slab_hi = current_hi.copy()
-                    slab_hi[k] = min(side, current_hi[k])
-                    slab = Box(current_lo.copy(), slab_hi)
-                    current_lo[k] = side
-                elif sign < 0 and side < current_hi[k]:
-                    slab_lo = current_lo.copy()
-                    slab_lo[k] = max(side, current_lo[k])
-                    slab = Box(slab_lo, current_hi.copy())
-                    current_hi[k] = side
-                else:
-                    continue
-                self.cuts[id(slab)] = CutProof(box, cap, "cut", result.z.copy() if self.record else None, cap,
-                                               axis=k, sign=sign, value=value)
-                slabs.append(slab)
-                if current_lo[k] >= current_hi[k]:
-                    return slabs, None  # nothing of the box costs at most cap
-        return slabs, Box(current_lo, current_hi)
+        slabs, remaining = cuts.tighten_box(
+            lambda lo, hi, cap: relax.build(self.setup, lo, hi, cap, cap_row=True), box, self.upper, self.record)
+        for slab, proof in slabs:
+            self.cuts[id(slab)] = proof
+        return [slab for slab, _ in slabs], remaining
 
 
 NODE_TIGHTENING = True

@@ -229,7 +229,8 @@ def check_affine(problem, proof: dict, lower_claimed: float, passed: list) -> fl
         if not unit > 0:
             raise Invalid("format", f"regions/{i}/unit must be positive")
         setup = arelax.AffineSetup(coef, frames.plane_map(G, delta), a[used], b[used], unit)
-        bound = min(bound, check_leaves(region, lo, hi, lambda l, h, c: arelax.build(setup, l, h, c), unit, 3))
+        bound = min(bound, check_leaves(region, lo, hi, lambda l, h, c: arelax.build(setup, l, h, c), unit, 3,
+                                        lambda l, h, c: arelax.build(setup, l, h, c, cap_row=True)))
     passed += ["root_region", "coverage", "leaf_bounds"]
     return bound
 
