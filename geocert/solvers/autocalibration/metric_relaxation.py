@@ -104,8 +104,12 @@ def w_of_intrinsics(ranges_point: dict) -> np.ndarray:
 
 
 def in_ranges(ranges: dict, k: dict) -> bool:
+    """Whether the intrinsics lie in the ranges, up to 1e-13 of a range's scale: a calibration on
+    a range's edge must survive the round trip to pixels and back (the boxes and the pruning are
+    widened by WIDEN = 1e-12, so the bounds still cover such points)."""
     def within(x, pair):
-        return pair[0] <= x <= pair[1]
+        slack = 1e-13 * max(abs(pair[0]), abs(pair[1]), 1.0)
+        return pair[0] - slack <= x <= pair[1] + slack
 
     return (within(k["fx"], ranges["focal"]) and within(k["fy"] / k["fx"], ranges["aspect"])
             and within(k["skew"], ranges["skew"]) and within(k["u"], ranges["u"]) and within(k["v"], ranges["v"]))
