@@ -67,8 +67,9 @@ def submit_job(
     request = body.model_dump(mode="json")  # validated by its kind's model (discriminated on "kind")
     kind, parsed, _ = parse_job(request)  # the solvers' own checks: rank, indices, duplicates
     items = _check_limits(kind, parsed, body, request)
-    digest = hashlib.sha256(json.dumps(request, sort_keys=True).encode()).hexdigest()
-    if idempotency_key is not None:
+    digest = None
+    if idempotency_key is not None:  # the body's digest only for a key (a whole body hashed: not on every submit)
+        digest = hashlib.sha256(json.dumps(request, sort_keys=True).encode()).hexdigest()
         earlier = store.remember_idempotent(owner, idempotency_key, digest)
         if earlier is not None:
             return _replay(store, earlier, digest, response)
