@@ -115,7 +115,7 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
             log.info("continuing items %d-%d in a new task", cut, stop)
             jobs.add_task_ids(job_id, solve_chunk.delay(job_id, cut, stop, request_id).id)
         elif done == meta["items_total"] and jobs.claim_end(job_id):
-            end_with_result(jobs, job_id, meta, kind, options)
+            end_with_result(jobs, job_id, meta, kind, request, options)
     except InputError as exc:  # the API validates first, so this is a stored job gone bad
         end_with_error(jobs, job_id, 422, "Invalid job data", str(exc), exc.field)
     except REDIS_GONE:
@@ -126,7 +126,7 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
              traceback.format_exc(limit=5))
 
 
-def end_with_result(jobs: JobStore, job_id: str, meta: dict, kind, options) -> None:
+def end_with_result(jobs: JobStore, job_id: str, meta: dict, kind, request: dict, options) -> None:
     """Every item is stored: the job ends ``succeeded`` (or ``cancelled`` when some item was
     stopped) with its result document. The caller holds the job's ``claim_end``."""
     items = jobs.all_items(job_id, meta["items_total"])
@@ -135,7 +135,7 @@ def end_with_result(jobs: JobStore, job_id: str, meta: dict, kind, options) -> N
     # The last progress of each task may be throttled away or, after a cancel, stop short of
     # its items: the job's final progress is computed from the very items of the result.
     progress = final_progress(items, stats)
-    result = assemble(kind, jobs.request(job_id), options, items, stats)
+    result = assemble(kind, request, options, items, stats)
     status = "cancelled" if any(item["status"] == "cancelled" for item in items) else "succeeded"
     jobs.set_fields(job_id, progress=progress)
     jobs.publish(job_id, "progress", progress)
