@@ -333,10 +333,13 @@ class JobStore:
     def release(self, owner: str, job_id: str) -> None:
         self.r.srem(self.owner_key(owner, "active"), job_id)
 
+    def _idempotency_key(self, owner: str, idempotency_key: str) -> str:
+        return self.owner_key(owner, f"idempotency:{hashlib.sha256(idempotency_key.encode()).hexdigest()}")
+
     def remember_idempotent(self, owner: str, idempotency_key: str, body_digest: str) -> dict | None:
         """Reserve ``idempotency_key`` for a body; returns None when newly reserved, else what
         was stored before: ``{"body": digest, "job": id or None while being created}``."""
-        key = self.owner_key(owner, f"idempotency:{hashlib.sha256(idempotency_key.encode()).hexdigest()}")
+        key = self._idempotency_key(owner, idempotency_key)
         entry = json.dumps({"body": body_digest, "job": None})
         if self.r.set(key, entry, nx=True, ex=self.ttl):
             return None
@@ -345,7 +348,7 @@ class JobStore:
 
     def settle_idempotent(self, owner: str, idempotency_key: str, body_digest: str, job_id: str | None) -> None:
         """Record the job made for a reserved key (or, with None, free the key: creation failed)."""
-        key = self.owner_key(owner, f"idempotency:{hashlib.sha256(idempotency_key.encode()).hexdigest()}")
+        key = self._idempotency_key(owner, idempotency_key)
         if job_id is None:
             self.r.delete(key)
         else:
