@@ -14,10 +14,7 @@ from scipy.optimize import least_squares
 from geocert.solvers.autocalibration import affine_relaxation as relax
 from geocert.solvers.autocalibration import cuts
 from geocert.solvers.autocalibration import frames
-from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound
-from geocert.solvers.core.certificates import LeafProof
-from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
-from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
+from geocert.solvers.core.bnb import BnbOptions, Box, branch_and_bound
 
 MAX_RELAXATION_ROWS = 64  # chirality rows beyond this: only the hull's (the others are redundant)
 
@@ -77,16 +74,13 @@ def gordan_rows(rows: np.ndarray) -> list[int] | None:
     return chosen if frames.exact_gordan(rows, chosen) else None
 
 
-class AffineProblem:
+class AffineProblem(cuts.BoxSearch):
     """The branch-and-bound problem of one region (geocert.solvers.core.bnb.BranchProblem)."""
 
     def __init__(self, region: Region, all_a: np.ndarray, all_b: np.ndarray, record: bool):
+        super().__init__(region.lo, region.hi, record)
         self.region = region
         self.all_a, self.all_b = all_a, all_b
-        self.record = record
-        self.program = ReusableConicProgram(lean=False)
-        self.upper = math.inf  # the incumbent's cost at the last bound
-        self.cuts: dict[int, cuts.CutProof] = {}  # slabs cut off, by id, until the engine closes them
 
     def root_box(self) -> Box:
         return Box(self.region.lo.copy(), self.region.hi.copy())
@@ -119,55 +113,12 @@ class AffineProblem:
             pass
         return v, start
 
-    def bound(self, box: Box, upper_bound: float) -> BoxBound:
-        cut = self.cuts.pop(id(box), None)
-        if cut is not None:  # a slab its parent's tightening showed holds no point costing <= its cap
-            return BoxBound(BoxStatus.EMPTY, cut.upper_bound, proof=cut if self.record else None)
-        self.upper = min(self.upper, upper_bound)
-        cap = upper_bound if math.isfinite(upper_bound) else 1e300
-        program = relax.build(self.region.setup, box.lo, box.hi, cap)
-        if program is None:  # d <= 0 on the whole box: no plane of the domain here
-            proof = LeafProof(box, upper_bound, "no_domain", None, math.inf) if self.record else None
-            return BoxBound(BoxStatus.EMPTY, math.inf, proof=proof)
-        result = self.program.solve(program.q, program.A, program.b, program.cones)
-        if result.status is ConicStatus.OPTIMAL:
-            bound = safe_lower_bound(program.q, program.A, program.b, program.cones, result.z,
-                                     program.lower, program.upper) / self.region.setup.unit
-            if not math.isfinite(bound):
-                return BoxBound(BoxStatus.UNRESOLVED)
-            candidate = np.clip(result.x[:3], box.lo, box.hi)
-            proof = LeafProof(box, upper_bound, "dual", result.z.copy(), bound) if self.record else None
-            if bound >= upper_bound:
-                return BoxBound(BoxStatus.EMPTY, bound, candidate=candidate, proof=proof)
-            return BoxBound(BoxStatus.BOUNDED, bound, candidate=candidate, proof=proof)
-        if result.status is ConicStatus.INFEASIBLE and result.z is not None and proves_infeasible(
-                program.A, program.b, program.cones, result.z, program.lower, program.upper):
-            proof = LeafProof(box, upper_bound, "farkas", result.z.copy(), math.inf) if self.record else None
-            return BoxBound(BoxStatus.EMPTY, math.inf, proof=proof)
-        return BoxBound(BoxStatus.UNRESOLVED)
+    def build(self, lo: np.ndarray, hi: np.ndarray, cap: float, cap_row: bool = False):
+        return relax.build(self.region.setup, lo, hi, cap, cap_row)
 
-    def split(self, box: Box, bound: BoxBound) -> list[Box]:
-        """Tighten the box (geocert.solvers.autocalibration.cuts), then halve what remains along
-        its widest side relative to the root's."""
-        slabs: list = []
-        if NODE_TIGHTENING and math.isfinite(self.upper):
-            cut_off, box = cuts.tighten_box(
-                lambda lo, hi, cap: relax.build(self.region.setup, lo, hi, cap, cap_row=True), box, self.upper,
-                self.record)
-            for slab, proof in cut_off:
-                self.cuts[id(slab)] = proof
-            slabs = [slab for slab, _ in cut_off]
-            if box is None:
-                return slabs
-        axis = int(np.argmax(box.width / np.maximum(self.region.hi - self.region.lo, 1e-300)))
-        middle = 0.5 * (box.lo[axis] + box.hi[axis])
-        left_hi, right_lo = box.hi.copy(), box.lo.copy()
-        left_hi[axis] = middle
-        right_lo[axis] = middle
-        return slabs + [Box(box.lo.copy(), left_hi), Box(right_lo, box.hi.copy())]
-
-
-NODE_TIGHTENING = True
+    @property
+    def unit(self) -> float:
+        return self.region.setup.unit
 
 
 def regions_of(norm: frames.Normalised, coef: np.ndarray) -> tuple[list[Region], list[dict], str | None]:

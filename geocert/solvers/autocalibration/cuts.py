@@ -1,6 +1,7 @@
-"""Tightening a box before it is split, for any stage whose relaxation can cap the cost: each
+"""What both stages' searches share: a box's bound from its relaxation (a safe dual bound, a
+Farkas vector, or no domain point at all), and tightening a box before it is split (each
 coordinate minimised and maximised over the box's relaxation with the cost capped at the
-incumbent's. What remains is split; the slabs cut off are leaves closed by a cut proof (a safe
+incumbent's). What remains is halved; the slabs cut off are leaves closed by a cut proof (a safe
 dual bound), which the verifier rebuilds (proofs.check_leaves)."""
 
 from __future__ import annotations
@@ -11,10 +12,10 @@ from typing import Callable
 
 import numpy as np
 
-from geocert.solvers.core.bnb import Box
+from geocert.solvers.core.bnb import Box, BoxBound, BoxStatus
 from geocert.solvers.core.certificates import LeafProof
 from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
-from geocert.solvers.core.cones import safe_lower_bound
+from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
 
 
 @dataclass
@@ -26,6 +27,25 @@ class CutProof(LeafProof):
     axis: int = 0
     sign: float = 1.0
     value: float = 0.0
+
+
+def side_bounds(program, dims: int) -> list[tuple[int, float, float, np.ndarray]]:
+    """(k, sign, value, z) for each of the first ``dims`` variables and each sign whose solve
+    ended clean: sign * x_k >= value over the program's feasible set, a safe dual bound by z."""
+    solver = ReusableConicProgram(lean=False)
+    out = []
+    for k in range(dims):
+        for sign in (1.0, -1.0):
+            q = np.zeros_like(program.q)
+            q[k] = sign
+            result = solver.solve(q, program.A, program.b, program.cones) if not (k or sign < 0) \
+                else solver.solve_objective(q)
+            if result.status is not ConicStatus.OPTIMAL:
+                continue
+            value = safe_lower_bound(q, program.A, program.b, program.cones, result.z, program.lower, program.upper)
+            if math.isfinite(value):
+                out.append((k, sign, value, result.z))
+    return out
 
 
 def tighten_box(build_capped: Callable, box: Box, cap: float, record: bool
@@ -40,36 +60,85 @@ def tighten_box(build_capped: Callable, box: Box, cap: float, record: bool
         return [], box
     if program is None:
         return [], box
-    solver = ReusableConicProgram(lean=False)
     current_lo, current_hi = box.lo.copy(), box.hi.copy()
     slabs: list[tuple[Box, CutProof]] = []
-    first = True
-    for k in range(len(box.lo)):
-        for sign in (1.0, -1.0):
-            q = np.zeros_like(program.q)
-            q[k] = sign
-            result = solver.solve(q, program.A, program.b, program.cones) if first else solver.solve_objective(q)
-            first = False
-            if result.status is not ConicStatus.OPTIMAL:
-                continue
-            value = safe_lower_bound(q, program.A, program.b, program.cones, result.z, program.lower, program.upper)
-            if not math.isfinite(value):
-                continue
-            side = value if sign > 0 else -value  # points costing <= cap: x_k >= side (or <= side)
-            if sign > 0 and side > current_lo[k]:
-                slab_hi = current_hi.copy()
-                slab_hi[k] = min(side, current_hi[k])
-                slab = Box(current_lo.copy(), slab_hi)
-                current_lo[k] = side
-            elif sign < 0 and side < current_hi[k]:
-                slab_lo = current_lo.copy()
-                slab_lo[k] = max(side, current_lo[k])
-                slab = Box(slab_lo, current_hi.copy())
-                current_hi[k] = side
-            else:
-                continue
-            slabs.append((slab, CutProof(box, cap, "cut", result.z.copy() if record else None, cap,
-                                         axis=k, sign=sign, value=value)))
-            if current_lo[k] >= current_hi[k]:
-                return slabs, None  # nothing of the box costs at most cap
+    for k, sign, value, z in side_bounds(program, len(box.lo)):
+        side = value if sign > 0 else -value  # points costing <= cap: x_k >= side (or <= side)
+        if sign > 0 and side > current_lo[k]:
+            slab_hi = current_hi.copy()
+            slab_hi[k] = min(side, current_hi[k])
+            slab = Box(current_lo.copy(), slab_hi)
+            current_lo[k] = side
+        elif sign < 0 and side < current_hi[k]:
+            slab_lo = current_lo.copy()
+            slab_lo[k] = max(side, current_lo[k])
+            slab = Box(slab_lo, current_hi.copy())
+            current_hi[k] = side
+        else:
+            continue
+        slabs.append((slab, CutProof(box, cap, "cut", z.copy() if record else None, cap,
+                                     axis=k, sign=sign, value=value)))
+        if current_lo[k] >= current_hi[k]:
+            return slabs, None  # nothing of the box costs at most cap
     return slabs, Box(current_lo, current_hi)
+
+
+class BoxSearch:
+    """The bound and split of a stage's branch-and-bound problem (core.bnb.BranchProblem); a
+    stage supplies ``build(lo, hi, cap, cap_row=False)`` (its relaxation, or None where the box
+    holds no point of the domain), ``unit`` (the programs' cost scale), ``root_lo``/``root_hi``
+    (the widths splits are relative to), ``record`` and ``objective``/``improve``."""
+
+    tightening = True  # tighten a box before splitting it
+
+    def __init__(self, root_lo: np.ndarray, root_hi: np.ndarray, record: bool):
+        self.root_lo, self.root_hi, self.record = root_lo, root_hi, record
+        self.program = ReusableConicProgram(lean=False)
+        self.upper = math.inf  # the incumbent's cost at the last bound
+        self.cuts: dict[int, CutProof] = {}  # slabs cut off, by id, until the engine closes them
+
+    def bound(self, box: Box, upper_bound: float) -> BoxBound:
+        cut = self.cuts.pop(id(box), None)
+        if cut is not None:  # a slab its parent's tightening showed holds no point costing <= its cap
+            return BoxBound(BoxStatus.EMPTY, cut.upper_bound, proof=cut if self.record else None)
+        self.upper = min(self.upper, upper_bound)
+        try:
+            program = self.build(box.lo, box.hi, upper_bound if math.isfinite(upper_bound) else 1e300)
+        except ValueError:
+            return BoxBound(BoxStatus.UNRESOLVED)
+        if program is None:  # no point of the domain in the box
+            proof = LeafProof(box, upper_bound, "no_domain", None, math.inf) if self.record else None
+            return BoxBound(BoxStatus.EMPTY, math.inf, proof=proof)
+        result = self.program.solve(program.q, program.A, program.b, program.cones)
+        if result.status is ConicStatus.OPTIMAL:
+            bound = safe_lower_bound(program.q, program.A, program.b, program.cones, result.z,
+                                     program.lower, program.upper) / self.unit
+            if not math.isfinite(bound):
+                return BoxBound(BoxStatus.UNRESOLVED)
+            candidate = np.clip(result.x[:len(box.lo)], box.lo, box.hi)
+            proof = LeafProof(box, upper_bound, "dual", result.z.copy(), bound) if self.record else None
+            status = BoxStatus.EMPTY if bound >= upper_bound else BoxStatus.BOUNDED
+            return BoxBound(status, bound, candidate=candidate, proof=proof)
+        if result.status is ConicStatus.INFEASIBLE and result.z is not None and proves_infeasible(
+                program.A, program.b, program.cones, result.z, program.lower, program.upper):
+            proof = LeafProof(box, upper_bound, "farkas", result.z.copy(), math.inf) if self.record else None
+            return BoxBound(BoxStatus.EMPTY, math.inf, proof=proof)
+        return BoxBound(BoxStatus.UNRESOLVED)
+
+    def split(self, box: Box, bound: BoxBound) -> list[Box]:
+        """Tighten the box, then halve what remains along its widest side relative to the root's."""
+        slabs: list[Box] = []
+        if self.tightening and math.isfinite(self.upper):
+            cut_off, box = tighten_box(lambda lo, hi, cap: self.build(lo, hi, cap, cap_row=True), box, self.upper,
+                                       self.record)
+            for slab, proof in cut_off:
+                self.cuts[id(slab)] = proof
+            slabs = [slab for slab, _ in cut_off]
+            if box is None:
+                return slabs
+        axis = int(np.argmax(box.width / np.maximum(self.root_hi - self.root_lo, 1e-300)))
+        middle = 0.5 * (box.lo[axis] + box.hi[axis])
+        left_hi, right_lo = box.hi.copy(), box.lo.copy()
+        left_hi[axis] = middle
+        right_lo[axis] = middle
+        return slabs + [Box(box.lo.copy(), left_hi), Box(right_lo, box.hi.copy())]

@@ -14,10 +14,9 @@ from scipy.optimize import least_squares
 
 from geocert.solvers.autocalibration import cuts
 from geocert.solvers.autocalibration import metric_relaxation as relax
-from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound, tolerance
-from geocert.solvers.core.certificates import LeafProof
+from geocert.solvers.core.bnb import BnbOptions, Box, branch_and_bound, tolerance
 from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
-from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
+from geocert.solvers.core.cones import safe_lower_bound
 
 
 @dataclass
@@ -44,7 +43,7 @@ homographies, setup_for = relax.homographies, relax.setup_for
 CutProof = cuts.CutProof
 
 
-class MetricProblem:
+class MetricProblem(cuts.BoxSearch):
     """The metric stage's branch-and-bound problem. Before a box is split it is tightened the way
     the root is (each entry of omega minimised and maximised with the cost capped at the
     incumbent's): the children are the halves of what remains, and the slabs cut off are leaves
@@ -52,10 +51,15 @@ class MetricProblem:
     uncertified without)."""
 
     def __init__(self, setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, record: bool):
-        self.setup, self.lo, self.hi, self.record = setup, lo, hi, record
-        self.program = ReusableConicProgram(lean=False)
-        self.upper = math.inf  # the incumbent's cost at the last bound
-        self.cuts: dict[int, CutProof] = {}  # slabs cut off, by id, until the engine closes them
+        super().__init__(lo, hi, record)
+        self.setup, self.lo, self.hi = setup, lo, hi
+
+    def build(self, lo: np.ndarray, hi: np.ndarray, cap: float, cap_row: bool = False):
+        return relax.build(self.setup, lo, hi, cap, cap_row)
+
+    @property
+    def unit(self) -> float:
+        return self.setup.unit
 
     search_box: Box | None = None  # the root box after tightening
 
@@ -103,57 +107,6 @@ class MetricProblem:
             pass
         return w, start
 
-    def bound(self, box: Box, upper_bound: float) -> BoxBound:
-        cut = self.cuts.pop(id(box), None)
-        if cut is not None:  # a slab its parent's tightening showed holds no point costing <= its cap
-            return BoxBound(BoxStatus.EMPTY, cut.upper_bound, proof=cut if self.record else None)
-        self.upper = min(self.upper, upper_bound)
-        cap = upper_bound if math.isfinite(upper_bound) else 1e300
-        try:
-            program = relax.build(self.setup, box.lo, box.hi, cap)
-        except ValueError:
-            return BoxBound(BoxStatus.UNRESOLVED)
-        if program is None:
-            proof = LeafProof(box, upper_bound, "no_domain", None, math.inf) if self.record else None
-            return BoxBound(BoxStatus.EMPTY, math.inf, proof=proof)
-        result = self.program.solve(program.q, program.A, program.b, program.cones)
-        if result.status is ConicStatus.OPTIMAL:
-            bound = safe_lower_bound(program.q, program.A, program.b, program.cones, result.z,
-                                     program.lower, program.upper) / self.setup.unit
-            if not math.isfinite(bound):
-                return BoxBound(BoxStatus.UNRESOLVED)
-            candidate = np.clip(result.x[:5], box.lo, box.hi)
-            proof = LeafProof(box, upper_bound, "dual", result.z.copy(), bound) if self.record else None
-            status = BoxStatus.EMPTY if bound >= upper_bound else BoxStatus.BOUNDED
-            return BoxBound(status, bound, candidate=candidate, proof=proof)
-        if result.status is ConicStatus.INFEASIBLE and proves_infeasible(
-                program.A, program.b, program.cones, result.z, program.lower, program.upper):
-            proof = LeafProof(box, upper_bound, "farkas", result.z.copy(), math.inf) if self.record else None
-            return BoxBound(BoxStatus.EMPTY, math.inf, proof=proof)
-        return BoxBound(BoxStatus.UNRESOLVED)
-
-    def split(self, box: Box, bound: BoxBound) -> list[Box]:
-        slabs, box = self.tighten_box(box) if NODE_TIGHTENING and math.isfinite(self.upper) else ([], box)
-        if box is None:
-            return slabs
-        axis = int(np.argmax(box.width / np.maximum(self.hi - self.lo, 1e-300)))
-        middle = 0.5 * (box.lo[axis] + box.hi[axis])
-        left_hi, right_lo = box.hi.copy(), box.lo.copy()
-        left_hi[axis] = middle
-        right_lo[axis] = middle
-        return slabs + [Box(box.lo.copy(), left_hi), Box(right_lo, box.hi.copy())]
-
-    def tighten_box(self, box: Box) -> tuple[list[Box], Box | None]:
-        slabs, remaining = cuts.tighten_box(
-            lambda lo, hi, cap: relax.build(self.setup, lo, hi, cap, cap_row=True), box, self.upper, self.record)
-        for slab, proof in slabs:
-            self.cuts[id(slab)] = proof
-        return [slab for slab, _ in slabs], remaining
-
-
-NODE_TIGHTENING = True
-
-
 @dataclass
 class Tightening:
     """One round: over ``lo_in..hi_in``, every omega costing at most ``cap`` lies in
@@ -179,29 +132,19 @@ def tighten(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float
         program = relax.build(setup, lo, hi, cap, cap_row=True)
         if program is None:
             break
-        solver = ReusableConicProgram()
+        solver = ReusableConicProgram(lean=False)
         if record:  # is the box tight enough already?
             result = solver.solve(program.q, program.A, program.b, program.cones)
             if result.status is ConicStatus.OPTIMAL and cap - safe_lower_bound(
                     program.q, program.A, program.b, program.cones, result.z, program.lower,
                     program.upper) / setup.unit <= tolerance:
                 break
-        new_lo, new_hi, duals = lo.copy(), hi.copy(), []
-        for k in range(5):
-            for sign in (1.0, -1.0):
-                q = np.zeros_like(program.q)
-                q[k] = sign
-                result = solver.solve(q, program.A, program.b, program.cones) if k == 0 and sign == 1.0 \
-                    and not record else solver.solve_objective(q)
-                dual = None
-                if result.status is ConicStatus.OPTIMAL:
-                    value = safe_lower_bound(q, program.A, program.b, program.cones, result.z, program.lower,
-                                             program.upper)
-                    if sign > 0 and value > new_lo[k]:
-                        new_lo[k], dual = value, result.z.copy()
-                    if sign < 0 and -value < new_hi[k]:
-                        new_hi[k], dual = -value, result.z.copy()
-                duals.append(dual)
+        new_lo, new_hi, duals = lo.copy(), hi.copy(), [None] * 10
+        for k, sign, value, z in cuts.side_bounds(program, 5):
+            if sign > 0 and value > new_lo[k]:
+                new_lo[k], duals[2 * k] = value, z.copy()
+            if sign < 0 and -value < new_hi[k]:
+                new_hi[k], duals[2 * k + 1] = -value, z.copy()
         if np.any(new_lo > new_hi):
             break  # nothing of the box costs at most cap: a search leaf will say so
         shrink = np.prod((new_hi - new_lo) / np.maximum(hi - lo, 1e-300))
