@@ -23,9 +23,9 @@ from geocert.solvers.autocalibration import affine_relaxation as arelax
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.certificates import BOUND_TOLERANCE, pack, unpack
+from geocert.solvers.core.certificates import pack
 from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
-from geocert.solvers.core.strict import Invalid, number as _number, numbers as _numbers
+from geocert.solvers.core.strict import Invalid, dual_vector, number as _number, numbers as _numbers
 from geocert.solvers.fractional.proof import uncovered_part
 
 MAX_LEAVES = 200_000
@@ -85,16 +85,6 @@ def _read_box(value: Any, where: str, d: int) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def _dual(text: Any, rows: int, where: str) -> np.ndarray:
-    try:
-        z = unpack(text)
-    except Exception as exc:
-        raise Invalid("leaf_bounds", f"{where}: not base64 float64: {exc}") from exc
-    if z is None or z.shape != (rows,) or not np.all(np.isfinite(z)):
-        raise Invalid("leaf_bounds", f"{where}: a dual vector of {rows} finite numbers is needed")
-    return z
-
-
 def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, unit: float, d: int,
                  build_capped=None) -> float:
     """The smallest bound the leaves prove over the root box, in cost units: they must cover it,
@@ -127,7 +117,7 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
             q = np.zeros_like(program.q)
             q[axis] = sign
             value = safe_lower_bound(q, program.A, program.b, program.cones,
-                                     _dual(item.get("z"), len(program.b), f"proofs/{i}/z"), program.lower,
+                                     dual_vector(item.get("z"), len(program.b), f"proofs/{i}/z", "leaf_bounds"), program.lower,
                                      program.upper)
             cuts[i] = (axis, sign, value)
             proven.append(cap)
@@ -141,7 +131,7 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
         if program is None:
             proven.append(cap)
             continue
-        z = _dual(item.get("z"), len(program.b), f"proofs/{i}/z")
+        z = dual_vector(item.get("z"), len(program.b), f"proofs/{i}/z", "leaf_bounds")
         if kind == "dual":
             bound = safe_lower_bound(program.q, program.A, program.b, program.cones, z, program.lower,
                                      program.upper) / unit
@@ -271,7 +261,7 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, pass
             q = np.zeros_like(program.q)
             q[k] = sign
             value = safe_lower_bound(q, program.A, program.b, program.cones,
-                                     _dual(text, len(program.b), f"tightening/{n}/duals/{side}"),
+                                     dual_vector(text, len(program.b), f"tightening/{n}/duals/{side}", "leaf_bounds"),
                                      program.lower, program.upper)
             if not value >= target:
                 raise Invalid("tightening", f"tightening/{n}: side {side} is proved only to {value!r}")

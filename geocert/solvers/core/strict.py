@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from geocert.solvers.core.bnb import Box
+from geocert.solvers.core.certificates import unpack
 from geocert.solvers.core.geometry import InputError, is_number, number_array
 
 
@@ -55,3 +56,17 @@ def nesting_depth(value: Any, limit: int) -> int:
                 return depth
             stack.extend((x, depth + 1) for x in (v.values() if isinstance(v, dict) else v))
     return deepest
+
+
+def dual_vector(text: Any, rows: int, where: str = "a dual vector", check: str = "format") -> np.ndarray:
+    """A dual vector stored as base64 of little-endian float64: exactly ``rows`` finite entries."""
+    if not isinstance(text, str):
+        raise Invalid(check, f"{where} must be a base64 string")
+    try:
+        z = unpack(text)
+    except ValueError as exc:
+        raise Invalid(check, f"{where} is not base64 of float64: {exc}") from exc
+    if z is None or z.shape != (rows,) or not np.all(np.isfinite(z)):
+        raise Invalid(check, f"{where} must have {rows} finite entries")
+    return z
+

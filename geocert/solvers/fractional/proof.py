@@ -12,9 +12,9 @@ from typing import Any
 import numpy as np
 
 from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.certificates import BOUND_TOLERANCE, unpack
+from geocert.solvers.core.certificates import BOUND_TOLERANCE
 from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
-from geocert.solvers.core.strict import Invalid, box as _box, number as _number, numbers as _numbers
+from geocert.solvers.core.strict import Invalid, box as _box, dual_vector, number as _number, numbers as _numbers
 from geocert.solvers.fractional.relaxation import (Relaxation, cost_unit, gamma_for, residual_region, root_bounds,
                                                    tightening_objective, with_cost_cap)
 
@@ -148,7 +148,7 @@ def _check_root(program, F: np.ndarray, gamma: float, needed: float, root: dict,
     texts = root.get("duals")
     if not isinstance(texts, list) or len(texts) != 2 * len(F):
         raise Invalid("root_region", f"{len(F)} functionals need {2 * len(F)} dual vectors")
-    duals = [_dual(text, len(region[1])) for text in texts]
+    duals = [dual_vector(text, len(region[1])) for text in texts]
     proven_lower, proven_upper = root_bounds(region, F, duals, claim_lo, claim_hi)
     for j, (low, high) in enumerate(zip(proven_lower, proven_upper)):
         if not (claim_lo[j] < low <= high < claim_hi[j]):
@@ -156,18 +156,6 @@ def _check_root(program, F: np.ndarray, gamma: float, needed: float, root: dict,
         if not (lower[j] <= low and upper[j] >= high):
             raise Invalid("root_region", f"functional {j}: bounds [{lower[j]}, {upper[j]}] are tighter than "
                                          f"the proven [{low}, {high}]")
-
-
-def _dual(text: Any, rows: int) -> np.ndarray:
-    if not isinstance(text, str):
-        raise Invalid("format", "a dual vector must be a base64 string")
-    try:
-        z = unpack(text)
-    except ValueError as exc:
-        raise Invalid("format", f"a dual vector is not base64 of float64: {exc}") from exc
-    if z is None or z.shape != (rows,) or not np.all(np.isfinite(z)):
-        raise Invalid("format", f"a dual vector must have {rows} finite entries")
-    return z
 
 
 def _finite_bounds(data, where: str) -> None:
@@ -205,7 +193,7 @@ def _check_round(relaxation: Relaxation, round_: Any, box: Box, cap: float, numb
             proven = box_in.lo[i] if sign > 0 else box_in.hi[i]
             if z is not None:
                 objective = tightening_objective(data, relaxation.B[i], sign)
-                value = sign * safe_lower_bound(objective, data.A, data.b, data.cones, _dual(z, len(data.b)),
+                value = sign * safe_lower_bound(objective, data.A, data.b, data.cones, dual_vector(z, len(data.b)),
                                                 data.lower, data.upper, data.transform)
                 proven = max(proven, value) if sign > 0 else min(proven, value)
             claimed = box_out.lo[i] if sign > 0 else box_out.hi[i]
@@ -238,7 +226,7 @@ def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_
         if data is None:
             raise Invalid("leaf_bounds", f"proof {number}: no relaxation on a box without positive depths")
         _finite_bounds(data, f"proof {number}")
-        z = _dual(proof.get("z"), len(data.b))
+        z = dual_vector(proof.get("z"), len(data.b))
         if kind == "farkas":
             if not proves_infeasible(data.A, data.b, data.cones, z, data.lower, data.upper, data.transform):
                 raise Invalid("leaf_bounds", f"proof {number}: its Farkas vector does not prove infeasibility")
