@@ -15,7 +15,7 @@ from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unp
 from geocert.batch import solve_job
 from geocert.solvers.fractional.relaxation import NORMS
 from geocert.solvers.core.certificates import BOUND_TOLERANCE
-from geocert.solvers.fractional.proof import uncovered_part
+from geocert.solvers.core.coverage import uncovered_part
 from geocert.solvers.verify import verify_arrays, verify_document
 from geocert.solvers.core.bnb import Box
 

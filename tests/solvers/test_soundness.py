@@ -22,7 +22,7 @@ from geocert.solvers.fractional.search import root_region
 from geocert.batch import parse_job, solve_job
 from geocert.solvers.fractional.relaxation import Relaxation
 from geocert.solvers.fractional.charts import Chart
-from geocert.solvers.fractional.proof import uncovered_part
+from geocert.solvers.core.coverage import uncovered_part
 from geocert.solvers.verify import verify_any, verify_document
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import proves_infeasible
@@ -550,7 +550,7 @@ class TestHostileReview:
                            for i in range(8000)]
         # Disjoint leaves are split apart by planes (n log n a level): the quadratic subtraction
         # that took 13 minutes on 8000 leaves is never reached.
-        from geocert.solvers.fractional import proof as proof_module
+        from geocert.solvers.core import coverage as proof_module
 
         def never(*args, **kwargs):
             raise AssertionError("leaves separable by planes were subtracted one by one")
@@ -642,7 +642,7 @@ class TestHostileReviewRoundTwo:
         # The pinwheel with its hole filled covers, and is recognised; with a budget below the
         # work it takes, the same cover is "not shown covered" (refused): the budget is enforced,
         # so the hostile document above stops after MAX_WORK leaf-piece tests (83 s before it).
-        from geocert.solvers.fractional import proof as proof_module
+        from geocert.solvers.core import coverage as proof_module
         full = np.array([[0, 0], [0.6, 0], [0.4, 0.6], [0, 0.4], [0.4, 0.4]], float)
         full_hi = np.array([[0.6, 0.4], [1, 0.6], [1, 1], [0.4, 1], [0.6, 0.6]], float)
         assert uncovered_part(Box(lo, hi), full, full_hi) is None

@@ -26,7 +26,7 @@ from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import pack
 from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
 from geocert.solvers.core.strict import Invalid, dual_vector, number as _number, numbers as _numbers
-from geocert.solvers.fractional.proof import uncovered_part
+from geocert.solvers.core.coverage import uncovered_part
 
 MAX_LEAVES = 200_000
 

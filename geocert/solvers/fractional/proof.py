@@ -14,13 +14,12 @@ import numpy as np
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import BOUND_TOLERANCE
 from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
+from geocert.solvers.core.coverage import uncovered_part
 from geocert.solvers.core.strict import Invalid, box as _box, dual_vector, number as _number, numbers as _numbers
 from geocert.solvers.fractional.relaxation import (Relaxation, cost_unit, gamma_for, residual_region, root_bounds,
                                                    tightening_objective, with_cost_cap)
 
-MAX_PIECES = 5_000
 MAX_ROUNDS = 16  # bound-tightening rounds (the solver makes at most 4)
-MAX_WORK = 200_000  # leaf-piece tests when leaves are subtracted one by one
 SCALE_RANGE = (1e-15, 1e3)  # the solver's residual factor lies in it (search.MAX_SCALE above)
 
 
@@ -250,94 +249,3 @@ def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_
             raise Invalid("leaf_bounds", f"leaf {number} is not inside the box of its proof {index}")
         bounds.append(proven[index])
     return bounds
-
-
-def uncovered_part(root: Box, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """A part of ``root`` that no box (lo[i], hi[i]) covers, or None when they cover it all.
-
-    Exact (no tolerance). A branch-and-bound tree's leaves are a guillotine partition: some
-    axis-aligned plane crosses no leaf. So the boxes are split along every such plane of one
-    axis at once, and each slab is checked the same way: n log n per level, whatever the
-    leaves. A slab with no leaf, or a gap between the leaves along an axis, is uncovered. Where
-    no plane separates the leaves (not a tree's partition), the slab's leaves are subtracted one
-    by one, within a budget. Boxes are closed; leaves of zero volume cover nothing a positive
-    volume does not (the union of closed boxes covering a box's interior covers the box).
-    """
-    if not np.all(root.hi > root.lo):
-        return _subtracted(root.lo, root.hi, lo, hi)
-    stack = [(root.lo, root.hi, np.arange(len(lo)))]
-    while stack:
-        box_lo, box_hi, index = stack.pop()
-        L = np.maximum(lo[index], box_lo)
-        H = np.minimum(hi[index], box_hi)
-        inside = np.all(L < H, axis=1)
-        index, L, H = index[inside], L[inside], H[inside]
-        if not len(index):
-            return box_lo, box_hi
-        if np.any(np.all(L == box_lo, axis=1) & np.all(H == box_hi, axis=1)):
-            continue
-        for axis in range(len(box_lo)):
-            order = np.argsort(L[:, axis], kind="stable")
-            starts, ends = L[order, axis], np.maximum.accumulate(H[order, axis])
-            if starts[0] > box_lo[axis]:
-                return _slab(box_lo, box_hi, axis, box_lo[axis], starts[0])
-            if ends[-1] < box_hi[axis]:
-                return _slab(box_lo, box_hi, axis, ends[-1], box_hi[axis])
-            gaps = np.flatnonzero(ends[:-1] < starts[1:])
-            if len(gaps):
-                return _slab(box_lo, box_hi, axis, ends[gaps[0]], starts[gaps[0] + 1])
-            cuts = np.flatnonzero(ends[:-1] <= starts[1:]) + 1  # planes that cross no leaf
-            if len(cuts):
-                bounds = np.concatenate([[box_lo[axis]], starts[cuts], [box_hi[axis]]])
-                for group, (a, b) in zip(np.split(order, cuts), zip(bounds[:-1], bounds[1:])):
-                    slab_lo, slab_hi = box_lo.copy(), box_hi.copy()
-                    slab_lo[axis], slab_hi[axis] = a, b
-                    stack.append((slab_lo, slab_hi, index[group]))
-                break
-        else:  # no separating plane: not a tree's partition
-            gap = _subtracted(box_lo, box_hi, L, H)
-            if gap is not None:
-                return gap
-    return None
-
-
-def _slab(box_lo, box_hi, axis: int, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
-    slab_lo, slab_hi = box_lo.copy(), box_hi.copy()
-    slab_lo[axis], slab_hi[axis] = a, b
-    return slab_lo, slab_hi
-
-
-def _subtracted(root_lo: np.ndarray, root_hi: np.ndarray, lo: np.ndarray, hi: np.ndarray):
-    """uncovered_part by subtracting each closed box from the closed pieces still uncovered
-    (what a subtraction leaves are slabs reaching strictly beyond the box, so nothing is lost);
-    past MAX_PIECES pieces or MAX_WORK leaf-piece tests the box is reported as not shown covered."""
-    pieces = [(root_lo.copy(), root_hi.copy())]
-    order = np.lexsort(lo.T[::-1])  # a sweep: neighbours follow each other
-    work = 0
-    for i in order:
-        work += len(pieces)
-        if work > MAX_WORK:
-            return root_lo, root_hi
-        remaining = []
-        for p_lo, p_hi in pieces:
-            if np.any(lo[i] > p_hi) or np.any(hi[i] < p_lo):
-                remaining.append((p_lo, p_hi))
-                continue
-            p_lo, p_hi = p_lo.copy(), p_hi.copy()
-            for axis in range(len(p_lo)):
-                if p_lo[axis] < lo[i][axis]:
-                    slab_hi = p_hi.copy()
-                    slab_hi[axis] = lo[i][axis]
-                    remaining.append((p_lo.copy(), slab_hi))
-                    p_lo[axis] = lo[i][axis]
-                if p_hi[axis] > hi[i][axis]:
-                    slab_lo = p_lo.copy()
-                    slab_lo[axis] = hi[i][axis]
-                    remaining.append((slab_lo, p_hi.copy()))
-                    p_hi[axis] = hi[i][axis]
-        pieces = remaining
-        if not pieces:
-            return None
-        if len(pieces) > MAX_PIECES:
-            return root_lo, root_hi
-    return pieces[0] if pieces else None
