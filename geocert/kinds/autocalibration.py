@@ -6,6 +6,7 @@ certificate's claims are the two stages (item 0 affine, item 1 metric)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Annotated, Any, Literal
 
@@ -17,6 +18,8 @@ from geocert.kinds.schema import Camera, CertificateDocument, Finite, JobBase, J
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.autocalibration.verification import STAGES, read_data
+from geocert.solvers.core.strict import Invalid
+from geocert.solvers.verify import SelfCheckFailed, self_check_enabled, verify_arrays
 
 Range = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[lo, hi]")]
 Point4 = Annotated[list[Finite], Field(min_length=4, max_length=4, description="[X, Y, Z, W]")]
@@ -148,6 +151,23 @@ EXAMPLE_DATA = {
 }
 
 
+def self_check_stages(parsed: Parsed, options: pr.AutocalibrationOptions, stages: list[dict]) -> None:
+    """Every certified stage checked by the verifier before it is returned (GEOCERT_SELF_VERIFY=1),
+    as the other kinds' items are; the proofs are dropped afterwards unless asked for."""
+    arrays = (parsed.cameras, parsed.points, parsed.image_size)
+    for index, stage in enumerate(stages):
+        proof = (stage.get("certificate") or {}).get("proof")
+        if stage["certified"]:
+            claim = {"index": index, **{key: stage.get(key) for key in (
+                "status", "certified", "cost", "lower_bound", "gap", "plane_at_infinity", "K")}, "proof": proof}
+            try:
+                verify_arrays("autocalibration", arrays, dataclasses.asdict(options), claim)
+            except Invalid as exc:
+                raise SelfCheckFailed(f"autocalibration stage {index}: check {exc.check} failed: {exc.detail}") from exc
+        if options.certificate != "full" and proof is not None:
+            del stage["certificate"]["proof"]
+
+
 class AutocalibrationKind:
     name = "autocalibration"
     description = ("Stratified autocalibration of a projective reconstruction (constant intrinsics): the plane at "
@@ -174,8 +194,10 @@ class AutocalibrationKind:
         from geocert.solvers.autocalibration import proofs, stratified  # the conic solver, only to solve
 
         problem = pr.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
-        result = stratified.solve(problem, options, callback)
-        full = options.certificate == "full"
+        checking = self_check_enabled()  # GEOCERT_SELF_VERIFY=1: proofs made, and checked below
+        result = stratified.solve(problem, dataclasses.replace(options, certificate="full") if checking else options,
+                                  callback)
+        full = options.certificate == "full" or checking
         a = result.affine
         document: dict = {"method": options.method, "intrinsics": problem.ranges, "plane_at_infinity": None,
                           "K": None, "dual_absolute_quadric": None, "upgrade": None, "cameras": None, "points": None,
@@ -225,6 +247,8 @@ class AutocalibrationKind:
             document["baseline"] = {"method": "linear", "K": None if Kb is None else (Kb / Kb[2, 2]).tolist(),
                                     "psd": result.baseline["psd"], "cost": finite_or_none(result.baseline["cost"])}
         stages = [affine_stage, metric_stage]
+        if checking:
+            self_check_stages(parsed, options, stages)
         # What the job's statistics count: both stages (certified only when both are).
         return {**document, "stages": stages, "status": metric_stage["status"] if affine_stage["certified"]
                 else affine_stage["status"], "certified": affine_stage["certified"] and metric_stage["certified"],

@@ -180,3 +180,27 @@ class TestOxfordDinosaur:
         spread = np.degrees(np.arccos(np.clip(np.abs(axes @ mean), -1, 1)))
         assert abs(angles.mean() - 10.0) < 0.1 and angles.std() < 0.2  # 36 views, 360 degrees
         assert spread.max() < 0.1
+
+
+class TestSelfCheck:
+    """With GEOCERT_SELF_VERIFY=1 (the test suites' setting) every certified stage is checked by
+    the verifier before it is returned, and a stage it refuses fails the job."""
+
+    def test_a_refused_stage_fails_the_solve(self, monkeypatch):
+        from geocert.solvers.autocalibration import proofs
+        from geocert.solvers.core.strict import Invalid
+        from geocert.solvers.verify import SelfCheckFailed
+
+        def refuse(*args, **kwargs):
+            raise Invalid("leaf_bounds", "refused on purpose")
+
+        monkeypatch.setenv("GEOCERT_SELF_VERIFY", "1")
+        monkeypatch.setattr(proofs, "check_metric", refuse)
+        with pytest.raises(SelfCheckFailed, match="stage 1"):
+            solve_job(job())
+
+    def test_a_summary_result_carries_no_proof(self, monkeypatch):
+        monkeypatch.setenv("GEOCERT_SELF_VERIFY", "1")
+        result = solve_job(job())
+        assert "certificate" not in result
+        assert all("proof" not in stage["certificate"] for stage in result["stages"])
