@@ -25,11 +25,11 @@ from geocert.solvers.autocalibration import envelopes
 from geocert.solvers.core.cones import ConeSpec
 
 WIDEN = 1e-12
-# The matrix form of McCormick's envelopes ((lambda - L) omega and (U - lambda) omega PSD) is valid
-# and tighter, but two more 3x3 cones per view cost more than they save: side by side on a 20-view
-# scene (0.1% noise) 5.4 s with them against 1.7 s without (both certified in 1 node after
-# tightening), and on 10 views at 1% noise 1443 against 3329 nodes in the same 40 s, gaps alike.
-MATRIX_MCCORMICK = False
+# Not used, measured: the matrix form of McCormick's envelopes ((lambda - L) omega and
+# (U - lambda) omega PSD) is valid and tighter, but its two 3x3 cones per view cost more than they
+# save: side by side on a 20-view scene (0.1% noise) 5.4 s with them against 1.7 s without (both
+# certified in 1 node after tightening), and on 10 views at 1% noise 1443 against 3329 nodes in
+# the same 40 s, gaps alike.
 ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2))  # the free entries of omega, in w's order
 ALL = ENTRIES + ((2, 2),)
 WEIGHTS = np.array([1.0, np.sqrt(2), np.sqrt(2), 1.0, np.sqrt(2), 1.0])  # Frobenius over 6 entries
@@ -253,38 +253,22 @@ def build(setup: MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float, cap_ro
             scale = 2 * WEIGHTS[e] * np.sqrt(setup.unit)
             cone_rows.append(-scale * row)
             cone_rhs.append(scale * constant)
-    # omega PSD, and (lambda_j - L_j) omega = nu_j - L_j omega PSD, (U_j - lambda_j) omega =
-    # U_j omega - nu_j PSD (lambda_j within [L_j, U_j], omega PSD: the matrix form of McCormick's
-    # envelopes, much tighter than the entrywise one). Each as svec, order (0,0), (0,1), (1,1),
-    # (0,2), (1,2), (2,2), off-diagonals times sqrt 2; s = b - A x.
+    # omega PSD: its svec, order (0,0), (0,1), (1,1), (0,2), (1,2), (2,2), off-diagonals times
+    # sqrt 2 (s = b - A x; omega33 = 1 is a constant).
     psd_rows, psd_rhs = [], []
-    svec_order = ((0, 1.0), (1, np.sqrt(2)), (3, 1.0), (2, np.sqrt(2)), (4, np.sqrt(2)), (5, 1.0))
-
-    def psd_block(omega_scale: float, nu_scale: float, j: int | None) -> None:
-        """omega_scale * Omega + nu_scale * N_j in the PSD cone (Omega33 = 1, N_j33 = lambda_j)."""
-        for entry, scale in svec_order:
-            row = np.zeros(n)
-            constant = 0.0
-            if entry < 5:
-                row[entry] -= omega_scale * scale
-            else:
-                constant += omega_scale * scale
-            if j is not None:
-                row[var(j, 1 + entry) if entry < 5 else var(j, 0)] -= nu_scale * scale
-            psd_rows.append(row)
-            psd_rhs.append(constant)
-
-    psd_block(1.0, 0.0, None)
-    for j in range(m if MATRIX_MCCORMICK else 0):
-        psd_block(-Ll[j], 1.0, j)
-        psd_block(Lu[j], -1.0, j)
+    for entry, scale in ((0, 1.0), (1, np.sqrt(2)), (3, 1.0), (2, np.sqrt(2)), (4, np.sqrt(2)), (5, 1.0)):
+        row = np.zeros(n)
+        if entry < 5:
+            row[entry] = -scale
+        psd_rows.append(row)
+        psd_rhs.append(0.0 if entry < 5 else scale)
     A = np.vstack(zero_rows + rows + cone_rows + psd_rows)
     b = np.array(zero_rhs + rhs + cone_rhs + psd_rhs)
     q = np.zeros(n)
     q[R] = 1.0
     lower = np.concatenate([lo, [0.0], *[np.concatenate([[Ll[j]], lam_lo_w[5 * j:5 * j + 5]]) for j in range(m)]])
     upper = np.concatenate([hi, [cap * setup.unit], *[np.concatenate([[Lu[j]], lam_hi_w[5 * j:5 * j + 5]]) for j in range(m)]])
-    cones = ConeSpec(zero=len(zero_rows), nonneg=len(rows), soc=(len(cone_rows),), psd=(3,) * (len(psd_rows) // 6))
+    cones = ConeSpec(zero=len(zero_rows), nonneg=len(rows), soc=(len(cone_rows),), psd=(3,))
     return MetricProgram(q, A, b, cones, lower, upper)
 
 

@@ -192,11 +192,6 @@ def dual_absolute_quadric(H: np.ndarray) -> np.ndarray:
     return Q / np.linalg.norm(Q)
 
 
-def omega_in_pixels(K_pixels: np.ndarray) -> np.ndarray:
-    omega = K_pixels @ K_pixels.T
-    return omega / omega[2, 2]
-
-
 def w_of_K(problem: Problem, K_pixels: np.ndarray) -> np.ndarray:
     """omega's five free entries (preconditioned) for a calibration in pixels."""
     K_unit = np.linalg.solve(problem.K0, K_pixels)
