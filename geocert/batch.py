@@ -158,13 +158,8 @@ def certificate_document(kind, data: Any, options, items: list[dict]) -> dict:
     options = dataclasses.asdict(options)
     return {"format": FORMAT, "version": VERSION, "kind": kind.name, "options": options,
             "data": data, "data_sha256": data_hash(kind.name, data),
-            "problem_sha256": problem_hash(kind.name, data, options, *claim_option_names(kind)), "items": claims}
-
-
-def claim_option_names(kind) -> tuple:
-    """The options a kind's claims depend on (hashed into problem_sha256), when not the default."""
-    names = getattr(kind.verification, "claim_options", None)
-    return () if names is None else (names,)
+            "problem_sha256": problem_hash(kind.name, data, options, getattr(kind.verification, "claim_options", None)),
+            "items": claims}
 
 
 def parse_job(job: Any):

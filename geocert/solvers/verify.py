@@ -224,8 +224,8 @@ def _check_hashes(document: dict, options: dict) -> None:
     expected = data_hash(document["kind"], document["data"])
     if expected != document["data_sha256"]:
         raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
-    names = getattr(_adapter(document["kind"]), "claim_options", None)
-    expected = problem_hash(document["kind"], document["data"], options, *(() if names is None else (names,)))
+    expected = problem_hash(document["kind"], document["data"], options,
+                            getattr(_adapter(document["kind"]), "claim_options", None))
     if expected != document["problem_sha256"]:
         raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and "
                                    f"options (norm, max_residual, rel_gap, abs_gap) hash to {expected!r}")

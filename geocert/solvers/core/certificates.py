@@ -135,11 +135,11 @@ def data_hash(kind: str, data: Any) -> str:
     return hashlib.sha256(canonical_json({"kind": kind, "data": data})).hexdigest()
 
 
-def problem_hash(kind: str, data: Any, options: dict, names: tuple[str, ...] = CLAIM_OPTIONS) -> str:
+def problem_hash(kind: str, data: Any, options: dict, names: tuple[str, ...] | None = None) -> str:
     """SHA-256 of everything a claim depends on: canonical JSON of {"kind", "data", "options"}
-    with the options ``names`` only (the kind's: CLAIM_OPTIONS for the fractional kinds), numbers
-    as floats (max_residual null when unset)."""
-    claimed = {name: options.get(name) for name in names}
+    with the options ``names`` only (a kind's own, or CLAIM_OPTIONS: the fractional kinds'),
+    numbers as floats (max_residual null when unset)."""
+    claimed = {name: options.get(name) for name in (names or CLAIM_OPTIONS)}
     for name, value in claimed.items():
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             claimed[name] = float(value)
