@@ -180,6 +180,9 @@ class TestOxfordDinosaur:
         spread = np.degrees(np.arccos(np.clip(np.abs(axes @ mean), -1, 1)))
         assert abs(angles.mean() - 10.0) < 0.1 and angles.std() < 0.2  # 36 views, 360 degrees
         assert spread.max() < 0.1
+        for stage in result["stages"]:  # and the result says K is not fixed by such a motion
+            codes = [warning["code"] for warning in stage["determinacy"]["warnings"]]
+            assert "orbital_motion" in codes and not stage["determinacy"]["determined"]
 
 
 class TestSelfCheck:
