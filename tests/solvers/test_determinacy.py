@@ -169,6 +169,23 @@ class TestAutocalibration:
         assert "orbital_motion" in codes(ring) and not ring["determined"]
         assert width(ring, "focal_x") > 20 * width(sphere, "focal_x")
 
+    @pytest.mark.parametrize("noise", [0.1, 1.0])
+    def test_the_motion_is_read_off_the_infinite_homographies(self, noise):
+        from geocert.solvers.autocalibration import determinacy, problem
+        from geocert.solvers.autocalibration import metric_relaxation as mrelax
+
+        found = {}
+        for motion in ("ring", "sphere", "translation"):
+            for seed in range(4):
+                scene = scenes.make_scene((10, 20)[seed % 2], noise, seed=900 + seed, motion=motion)
+                prepared = problem.prepare(scene.cameras, scene.points, (1000, 1000), {})
+                p = problem.plane_from_input(prepared, scene.plane_at_infinity)
+                H = mrelax.homographies(prepared.norm.cameras, prepared.norm.reference, p)
+                found.setdefault(motion, []).append([w["code"] for w in determinacy.motion_warnings(H, scene.centres)])
+        assert found["ring"] == [["orbital_motion"]] * 4
+        assert found["sphere"] == [[]] * 4
+        assert found["translation"] == [["pure_translation"]] * 4
+
     def test_a_translating_camera_is_flagged(self):
         for stage in self.stages("translation"):
             assert "pure_translation" in codes(stage["determinacy"])
