@@ -160,6 +160,8 @@ class Moments:
         self.sorted_keys = keys[self.sorter]
 
     def index(self, exps: np.ndarray) -> np.ndarray:
+        if exps.size and (exps.min() < 0 or exps.sum(axis=-1).max() > 2 * self.order):
+            raise ValueError("a monomial beyond the relaxation's degree")
         keys = exps @ self.powers
         pos = np.searchsorted(self.sorted_keys, keys)
         if np.any(pos >= len(self.sorted_keys)) or np.any(self.sorted_keys[np.minimum(pos, len(self.sorted_keys) - 1)] != keys):
@@ -345,7 +347,7 @@ def safe_bound(program: Program, z: np.ndarray) -> tuple[float, float]:
     feasible Q, q'y = -b'z + r'y + sum_cones <z, s> >= -b'z + r'y + min(0, lambda_min(Z)) tr M_d(y),
     with tr M_d(y) = sum over the basis of x^(2 alpha) <= order + 1 (|x|^2 <= ||Q||_F^2 <= trace(Q)^2
     = 1 for Q PSD, so each degree's sum is at most 1), and r'y charged to the box (rounding only)."""
-    from geocert.solvers.core.cones import ConeSpec as Spec, project_dual, smat, svec
+    from geocert.solvers.core.cones import ConeSpec as Spec, project_dual, smat
 
     cones = program.cones
     m_size = cones.psd[-1]
@@ -366,7 +368,6 @@ def safe_bound(program: Program, z: np.ndarray) -> tuple[float, float]:
     with np.errstate(invalid="ignore"):
         charge = float(np.sum(np.minimum(r * program.lower, r * program.upper)))
     bound = program.constant - float(program.b @ z) + charge + min(0.0, lam) * (program.moments.order + 1)
-    del svec
     return (bound if bound == bound else -np.inf), lam
 
 

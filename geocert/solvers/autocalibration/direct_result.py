@@ -49,7 +49,7 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
         except (np.linalg.LinAlgError, ValueError) as exc:
             result.certified, result.status, result.reason = False, "not_certified", f"no metric upgrade: {exc}"
     stage = _stage("direct", result.status, result.certified, cost, result.lower_bound, 0, result.elapsed_s,
-                   result.reason, options.rel_gap, options.abs_gap, SCOPE,
+                   result.reason, options.metric_rel_gap, options.abs_gap, SCOPE,
                    result.proof if full and result.certified else None)
     stage["certificate"].update({"order": result.order, "moment_rank": result.rank,
                                  "eigenvalue_ratio": result.eigenvalue_ratio, "conic_status": result.conic_status})

@@ -44,7 +44,7 @@ class DirectStage:
     elapsed_s: float = 0.0
 
 
-TOL = 1e-9
+TOLERANCES = (1e-9, 1e-8)
 
 
 def _settings(tolerance: float) -> clarabel.DefaultSettings:
@@ -62,11 +62,22 @@ def _settings(tolerance: float) -> clarabel.DefaultSettings:
 
 
 def solve_program(program: dr.Program) -> tuple[ConicStatus, np.ndarray | None, np.ndarray | None, str]:
-    """(status, y, z, raw status); never raises on solver trouble."""
+    """(status, y, z, raw status) of the first clean solve at TOLERANCES (an "AlmostSolved" solve
+    is repeated at the next, looser tolerance: the safe bound does not rest on the solver's
+    accuracy, only the status gate does); never raises on solver trouble."""
+    answer = (ConicStatus.FAILED, None, None, "not solved")
+    for tolerance in TOLERANCES:
+        answer = _solve_once(program, tolerance)
+        if answer[0] is ConicStatus.OPTIMAL:
+            break
+    return answer
+
+
+def _solve_once(program: dr.Program, tolerance: float):
     try:
         P = sp.csc_matrix((len(program.q), len(program.q)))
         solution = clarabel.DefaultSolver(P, program.q, program.A, program.b, clarabel_cones(program.cones),
-                                          _settings(TOL)).solve()
+                                          _settings(tolerance)).solve()
         raw = str(solution.status)
         status = map_clarabel_status(raw)
         y, z = np.array(solution.x, dtype=float), np.array(solution.z, dtype=float)
@@ -159,7 +170,7 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -
     if best is None:
         return DirectStage("not_certified", False, None, math.inf, bound, order, rank, ratio, statuses, None,
                            "no feasible quadric rounded from the relaxation satisfies chirality")
-    tolerance = max(options.abs_gap, options.rel_gap * abs(best_cost))
+    tolerance = max(options.abs_gap, options.metric_rel_gap * abs(best_cost))
     certified = clean and best_cost - bound <= tolerance
     reason = None
     if not clean:

@@ -27,8 +27,10 @@ class AutocalibrationOptions(SearchOptions):
     data.image_size (see default_ranges).
     The direct method (thesis ch. 7, geocert.solvers.autocalibration.direct) reads ``chirality``
     ("points", "centers" or "none"), ``varying_focal`` (one K, or one per view) and
-    ``relaxation_order``; its stage is certified with ``rel_gap`` and ``abs_gap``; the
-    intrinsics ranges only precondition it."""
+    ``relaxation_order``; its one stage returns the metric upgrade and is certified with
+    ``metric_rel_gap`` and ``abs_gap`` (its conic solves reach about 1e-5 relative: measured, the
+    safe bound 1.3e-5 below the polished optimum on a 0.2% noise scene); the intrinsics ranges only
+    precondition it."""
 
     method: str = "stratified"
     intrinsics: dict = field(default_factory=dict)

@@ -72,7 +72,7 @@ class AutocalibrationVerification:
         if options["method"] == "direct":
             return {"kind": "autocalibration", "method": "direct", "intrinsics": options["intrinsics"],
                     "chirality": options["chirality"], "relaxation_order": options["relaxation_order"],
-                    "rel_gap": options["rel_gap"], "abs_gap": options["abs_gap"],
+                    "metric_rel_gap": options["metric_rel_gap"], "abs_gap": options["abs_gap"],
                     "statement": "stage 0 (direct): no absolute dual quadric Q positive semidefinite of rank 3 allowed "
                                  "by the chirality option (in the program's frame, trace 1) costs less than "
                                  "lower_bound in (7.12); the quadric returned is one of them and costs cost"}
@@ -145,7 +145,7 @@ class AutocalibrationVerification:
         except InputError as exc:
             raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
         if options["method"] == "direct":
-            return _check_direct(problem, arrays, options, claim, claimed, passed), options["rel_gap"]
+            return _check_direct(problem, arrays, options, claim, claimed, passed), options["metric_rel_gap"]
         plane = _numbers(claim.get("plane_at_infinity"), "plane_at_infinity", (4,), "claim")
         p = pr.plane_from_input(problem, plane)
         if p is None:
