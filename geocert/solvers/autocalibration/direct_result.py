@@ -44,6 +44,10 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
     cost = math.inf
     if result.Q is not None:
         Q_in, cost = returned_quadric(setup, result.Q)
+        excluded = tuple(item["delta"] for item in setup.excluded)
+        if result.certified and not direct.in_domain(setup, setup.from_input(np.array(Q_in)), excluded):
+            result.certified, result.status = False, "not_certified"
+            result.reason = "the quadric as returned (input frame, rounded) left the domain (rank 3, PSD, chirality)"
         try:
             document.update(direct.derived(parsed.cameras, parsed.points, np.array(Q_in), options.varying_focal))
         except (np.linalg.LinAlgError, ValueError) as exc:
