@@ -30,9 +30,10 @@ from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.strict import Invalid, dual_vector
 
 CHIRALITY = ("points", "centers", "none")
-# Relaxation orders served. Order 3 was measured not to fit: in 9 variables its moment matrix is
-# 220 x 220 (24310 svec rows, a dense block of the KKT system: 4.7 GB, about 1e13 flops a
-# factorisation) over 5004 moments; order 2 is 55 x 55 over 714.
+# Relaxation orders served. Order 3 was measured not to fit: in 9 variables it has 5004 moments and
+# 57865 constraint rows (built in 0.07 s), with two 220 x 220 PSD cones (the moment matrix and Q's
+# localizing matrix), each a dense 24310-row block of Clarabel's KKT system (about 2.4 GB each as
+# a triangle, some 5e12 flops a factorisation); order 2 has 714 moments and a 55 x 55 moment matrix.
 ORDERS = (2,)
 RANK_TOLERANCE = 1e-4  # numerical rank: eigenvalues of the moment matrix above this times the largest
 PSD_TOLERANCE = 1e-9  # a returned Q (rounded to JSON) counts as PSD of rank 3 within this of its norm
