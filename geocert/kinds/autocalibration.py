@@ -14,7 +14,7 @@ import numpy as np
 from pydantic import BaseModel, Field
 
 from geocert.kinds.documents import finite_or_none
-from geocert.kinds.schema import Camera, CertificateDocument, Finite, JobBase, JobStats, Strict
+from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finite, JobBase, JobStats, Strict
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.autocalibration.verification import STAGES, read_data
@@ -82,6 +82,8 @@ class StageOut(BaseModel):
     K: Matrix3 | None = None
     dual_absolute_quadric: list[list[float]] | None = None
     certificate: dict[str, Any] | None = None
+    determinacy: Determinacy | None = Field(None, description="how well the data fix the stage's answer "
+                                                              "(estimated), and critical motions recognised")
 
 
 class CameraOut(BaseModel):
@@ -200,7 +202,7 @@ class AutocalibrationKind:
         return len(parsed.cameras) * (1 + (0 if parsed.points is None else len(parsed.points)))
 
     def solve_item(self, parsed: Parsed, index: int, options: pr.AutocalibrationOptions, callback) -> dict:
-        from geocert.solvers.autocalibration import proofs, stratified  # the conic solver, only to solve
+        from geocert.solvers.autocalibration import determinacy, proofs, stratified  # the conic solver, only to solve
 
         if options.method == "direct":  # thesis ch. 7: one stage
             from geocert.solvers.autocalibration.direct_result import solve_document
@@ -254,6 +256,14 @@ class AutocalibrationKind:
                             cameras=pr.metric_cameras(parsed.cameras, H))
             document["points"] = pr.metric_points(H, parsed.points)
         metric_stage["plane_at_infinity"] = document["plane_at_infinity"]
+        centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
+        if result.p is not None and math.isfinite(affine_cost):
+            affine_stage["determinacy"] = determinacy.affine_stage(problem, result.p, affine_stage["cost"],
+                                                                   affine_stage["lower_bound"], centres)
+        if document["K"] is not None:
+            metric_stage["determinacy"] = determinacy.metric_stage(problem, result.p, np.array(document["K"]),
+                                                                   metric_stage["cost"], metric_stage["lower_bound"],
+                                                                   centres)
         if result.baseline is not None:
             Kb = problem.K0 @ pr.upper_triangular_root(mrelax.omega_of(result.baseline["w"])) \
                 if np.linalg.eigvalsh(mrelax.omega_of(result.baseline["w"]))[0] > 0 else None

@@ -123,8 +123,12 @@ class MapKind:
     def solve_item(self, parsed: ParsedMaps, index: int, options: MapOptions, callback) -> dict:
         from geocert.solvers.fractional.maps import fit_map  # the conic solver, only to solve
 
+        from geocert.solvers.fractional import determinacy
+
         source, target = parsed.maps[index]
-        return map_document(fit_map(source, target, options, callback))
+        result = fit_map(source, target, options, callback)
+        return {**map_document(result),
+                "determinacy": determinacy.map_(source, target, result.matrix, result.cost, result.lower_bound)}
 
     def cancelled_item(self) -> dict:
         return map_document(MapResult("cancelled", False, reason="the job was cancelled before this map started"))

@@ -77,6 +77,35 @@ class ItemCertificate(BaseModel):
     note: str | None = None
 
 
+class DeterminacyInterval(BaseModel):
+    name: str
+    value: float | None
+    lower: float | None = Field(description="null: not fixed by the data (unbounded)")
+    upper: float | None
+
+
+class DeterminacyWarning(BaseModel):
+    code: str = Field(description="near_zero_parallax, at_infinity, near_coplanar_points, "
+                                  "near_critical_configuration, near_collinear_points, pure_translation, "
+                                  "rotation_about_one_axis, orbital_motion, ...")
+    detail: str
+
+
+class Determinacy(BaseModel):
+    """How well the data fix the answer (a certificate proves the optimum, not that it is unique):
+    intervals of what a user reads off it over the answers costing at most cost_increase more,
+    and the degeneracies recognised (README, "Determinacy")."""
+
+    method: Literal["curvature"]
+    proven: bool = Field(description="false: estimated from the local curvature, not proved")
+    determined: bool = Field(description="every interval bounded and no warning")
+    level: str
+    cost_increase: float | None
+    redundancy: int = Field(description="residuals beyond the parameters (0: no noise estimate)")
+    intervals: list[DeterminacyInterval]
+    warnings: list[DeterminacyWarning]
+
+
 class ItemOutcome(BaseModel):
     """What every item (track, map) reports about its solve."""
 
@@ -89,6 +118,7 @@ class ItemOutcome(BaseModel):
     elapsed_s: float
     reason: str | None = Field(description="why the item is not certified, when it is not")
     certificate: ItemCertificate | None
+    determinacy: Determinacy | None = Field(None, description="how well the data fix the answer (estimated)")
 
 
 class JobStats(BaseModel):

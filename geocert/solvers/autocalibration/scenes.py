@@ -38,10 +38,11 @@ class Scene:
         return data
 
 
-def look_at(centre: np.ndarray, target: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def look_at(centre: np.ndarray, target: np.ndarray, rng: np.random.Generator, up: np.ndarray | None = None
+            ) -> np.ndarray:
     z = target - centre
     z /= np.linalg.norm(z)
-    up = rng.normal(size=3)
+    up = rng.normal(size=3) if up is None else up
     x = np.cross(up, z)
     x /= np.linalg.norm(x)
     return np.vstack([x, np.cross(z, x), z])
@@ -64,16 +65,26 @@ def dlt_resection(points3: np.ndarray, image: np.ndarray) -> np.ndarray:
 
 def make_scene(views: int, noise_percent: float = 0.0, points: int = 100, seed: int = 0,
                K: np.ndarray | None = None, image_size: tuple[int, int] = (1000, 1000),
-               grid_points: np.ndarray | None = None) -> Scene:
+               grid_points: np.ndarray | None = None, motion: str = "sphere") -> Scene:
+    """``motion``: "sphere" (cameras all round, the thesis's), "ring" (a turntable) or
+    "translation" (one orientation): the last two are critical motions for constant intrinsics."""
     rng = np.random.default_rng(seed)
     if K is None:
         K = np.array([[1000.0, 0.0, 500.0], [0.0, 1000.0, 500.0], [0.0, 0.0, 1.0]])
     X = grid_points if grid_points is not None else rng.uniform(-10, 10, size=(points, 3))
     rotations, centres, cams = [], [], []
-    for _ in range(views):
-        direction = rng.normal(size=3)
-        centre = 40 * direction / np.linalg.norm(direction)
-        R = look_at(centre, rng.normal(scale=2.0, size=3), rng)
+    for index in range(views):
+        if motion == "ring":  # a turntable: centres on a circle, every rotation about the y axis
+            angle = 2 * np.pi * index / views
+            centre = 40 * np.array([np.sin(angle), 0.0, np.cos(angle)])
+            R = look_at(centre, np.zeros(3), rng, up=np.array([0.0, 1.0, 0.0]))
+        elif motion == "translation":  # one orientation, centres spread over a plane facing the cube
+            centre = np.array([*rng.uniform(-15, 15, size=2), -40.0])
+            R = np.eye(3)
+        else:
+            direction = rng.normal(size=3)
+            centre = 40 * direction / np.linalg.norm(direction)
+            R = look_at(centre, rng.normal(scale=2.0, size=3), rng)
         rotations.append(R)
         centres.append(centre)
         cams.append(K @ np.hstack([R, -(R @ centre)[:, None]]))

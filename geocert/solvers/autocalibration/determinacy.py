@@ -1,0 +1,144 @@
+"""How well a projective reconstruction fixes its metric upgrade (core/determinacy.py).
+
+Critical motions (Sturm 1997; Kahl, Triggs and Astrom 2000) leave constant intrinsics
+undetermined whatever the solver does. They are read off the infinite homographies of the plane
+found, H_j ~ K R_j K^-1 (the reference view to view j): the angle of R_j is that of H_j's complex
+eigenvalues (K cancels), and R_j's axis is K^-1 times H_j's real eigenvector, so views rotating
+about one axis share that eigenvector. Warnings: ``pure_translation`` (every angle below
+0.5 degree), ``rotation_about_one_axis`` (every real eigenvector within 2 degrees of one line) and
+``orbital_motion`` (one axis, and the camera centres nearly coplanar: a turntable or a ring).
+
+Intervals: the affine stage's plane at infinity (input frame, unit norm) over the planes whose
+modulus residuals cost at most ``cost_increase`` more; the metric stage's focal lengths, skew and
+principal point (pixels) over the omega doing so for the metric cost."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from geocert.solvers.autocalibration import frames
+from geocert.solvers.autocalibration import metric_relaxation as mrelax
+from geocert.solvers.core.determinacy import Determinacy, curvature_intervals, numeric_jacobian, spread
+
+STILL_DEGREES = 0.5
+AXIS_DEGREES = 2.0
+FLAT = 1e-2
+
+
+def _gap(cost: float | None, lower: float | None) -> float | None:
+    if cost is None or lower is None or not (math.isfinite(cost) and math.isfinite(lower)):
+        return None
+    return max(cost - lower, 0.0)
+
+
+def rotation_angles_and_axes(H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(angles in degrees, unit real eigenvectors) of each H_j (m, 3, 3)."""
+    angles, axes = [], []
+    for Hj in H:
+        det = np.linalg.det(Hj)
+        Hn = Hj / np.cbrt(det) if det != 0 else Hj
+        values, vectors = np.linalg.eig(Hn)
+        angles.append(float(np.degrees(np.abs(np.angle(values)).max())))
+        real = int(np.argmin(np.abs(values - 1.0)))
+        axis = np.real(vectors[:, real])
+        axes.append(axis / max(float(np.linalg.norm(axis)), 1e-300))
+    return np.array(angles), np.array(axes)
+
+
+def motion_warnings(H: np.ndarray, centres: np.ndarray | None) -> list[dict]:
+    angles, axes = rotation_angles_and_axes(H)
+    if np.all(angles < STILL_DEGREES):
+        return [{"code": "pure_translation",
+                 "detail": f"no view rotates by more than {angles.max():.2g} degrees from the reference: the "
+                           "intrinsics are not fixed by a translating camera"}]
+    moving = axes[angles >= STILL_DEGREES]
+    # the line closest to every axis: the leading right singular vector (signs do not matter)
+    line = np.linalg.svd(moving)[2][0]
+    off = np.degrees(np.arccos(np.clip(np.abs(moving @ line), -1.0, 1.0)))
+    if len(moving) < 2 or off.max() >= AXIS_DEGREES:
+        return []
+    if centres is not None and len(centres) >= 4 and np.all(np.isfinite(centres)) and spread(centres)[-1] < FLAT:
+        return [{"code": "orbital_motion",
+                 "detail": f"every rotation shares one axis (within {off.max():.2g} degrees) and the centres are "
+                           "nearly coplanar (a turntable or a ring): a critical motion for constant intrinsics"}]
+    return [{"code": "rotation_about_one_axis",
+             "detail": f"every rotation shares one axis (within {off.max():.2g} degrees): a critical motion for "
+                       "constant intrinsics"}]
+
+
+def affine_stage(problem, p: np.ndarray, cost: float | None, lower: float | None, centres: np.ndarray | None) -> dict:
+    from geocert.solvers.autocalibration.problem import plane_in_input
+
+    coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
+    plane = plane_in_input(problem, p)
+    sign = 1.0 if plane[np.argmax(np.abs(plane))] >= 0 else -1.0
+
+    def plane_of(q):
+        out = plane_in_input(problem, q)
+        return out * sign * np.sign(out @ plane * sign) if out @ plane != 0 else out
+
+    J = numeric_jacobian(lambda q: frames.modulus_residuals(coef, q), p)
+    gradient = numeric_jacobian(plane_of, p)
+    value = plane_of(p)
+    quantities = {f"plane_at_infinity[{k}]": (float(value[k]), gradient[k]) for k in range(4)}
+    out = curvature_intervals(J, frames.modulus_residuals(coef, p), quantities, _gap(cost, lower))
+    H = mrelax.homographies(problem.norm.cameras, problem.norm.reference, p)
+    out.warnings += motion_warnings(H, centres)
+    return out.document()
+
+
+def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | None, lower: float | None,
+                 centres: np.ndarray | None) -> dict:
+    from geocert.solvers.autocalibration.problem import upper_triangular_root, w_of_K
+
+    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+    w = w_of_K(problem, K_pixels)
+
+    def intrinsics(x):
+        omega = mrelax.omega_of(x)
+        if np.linalg.eigvalsh(omega)[0] <= 0:
+            return np.full(5, np.nan)
+        K = problem.K0 @ upper_triangular_root(omega)
+        K = K / K[2, 2]
+        return np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]])
+
+    informative = np.concatenate([np.arange(5) + 6 * j for j in range(len(setup.H))])  # the 33 entry is 0
+
+    def residuals(x, q=p):
+        here = setup if q is p else mrelax.setup_for(problem.norm.cameras, problem.norm.reference, q,
+                                                     problem.unit_ranges)
+        return mrelax.residuals(here, x)[informative]
+
+    J = numeric_jacobian(residuals, w)
+    value = intrinsics(w)
+    gradient = numeric_jacobian(intrinsics, w)
+    names = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")
+    quantities = {name: (float(value[k]), gradient[k]) for k, name in enumerate(names)}
+    out = curvature_intervals(J, residuals(w), quantities, _gap(cost, lower))
+    # The plane is an estimate too: its uncertainty moves the optimum, w*(p) ~ w - (J'J)^-1 J' J_p dp
+    # (Gauss-Newton), with dp over the affine stage's own ellipsoid; the two added in quadrature.
+    coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
+    Ja = numeric_jacobian(lambda q: frames.modulus_residuals(coef, q), p)
+    ra = frames.modulus_residuals(coef, p)
+    plane_part = curvature_intervals(Ja, ra, {}, None)
+    Jp = numeric_jacobian(lambda q: residuals(w, q), p)
+    try:
+        D = -np.linalg.lstsq(J, Jp, rcond=None)[0]  # dw*/dp, 5 x 3
+        Sa = np.linalg.pinv(Ja.T @ Ja)
+        singular_plane = np.linalg.matrix_rank(Ja.T @ Ja, tol=1e-10 * np.abs(Ja.T @ Ja).max()) < 3
+    except np.linalg.LinAlgError:
+        D, Sa, singular_plane = None, None, True
+    for interval, (name, (val, g)) in zip(out.intervals, quantities.items()):
+        if interval["lower"] is None or D is None:
+            continue
+        moved = D.T @ g
+        if singular_plane and np.abs(moved).max() > 0:
+            interval["lower"] = interval["upper"] = None
+            continue
+        extra = float(plane_part.cost_increase or 0.0) * float(moved @ Sa @ moved)
+        half = math.hypot(interval["upper"] - val, math.sqrt(max(extra, 0.0)))
+        interval["lower"], interval["upper"] = val - half, val + half
+    out.warnings += motion_warnings(setup.H, centres)
+    return out.document()

@@ -1,0 +1,174 @@
+"""Determinacy (issue 19): intervals from the local curvature and the degeneracies recognised.
+Scenes built to be degenerate are flagged and get wide intervals; well-posed ones are not flagged,
+their intervals hold the truth and shrink with more data."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+
+from geocert.batch import solve_job
+from geocert.solvers.autocalibration import scenes
+from geocert.solvers.core.determinacy import curvature_intervals
+from geocert.solvers.fractional import determinacy as fractional
+
+
+def codes(document: dict) -> list[str]:
+    return [w["code"] for w in document["warnings"]]
+
+
+def interval(document: dict, name: str) -> dict:
+    return next(i for i in document["intervals"] if i["name"] == name)
+
+
+def width(document: dict, name: str) -> float:
+    found = interval(document, name)
+    return np.inf if found["lower"] is None else found["upper"] - found["lower"]
+
+
+class TestCurvatureIntervals:
+    def test_a_linear_fit_gets_its_standard_errors(self):
+        rng = np.random.default_rng(0)
+        A = rng.normal(size=(40, 3))
+        x = np.linalg.lstsq(A, A @ [1.0, 2.0, 3.0] + rng.normal(scale=0.1, size=40), rcond=None)[0]
+        r = A @ x - (A @ [1.0, 2.0, 3.0] + rng.normal(scale=0.1, size=40))
+        out = curvature_intervals(A, r, {"x0": (x[0], np.array([1.0, 0, 0]))}, sigmas=1.0)
+        expected = np.sqrt((r @ r) / 37 * np.linalg.inv(A.T @ A)[0, 0])
+        found = out.intervals[0]
+        assert found["upper"] - x[0] == pytest.approx(expected, rel=1e-9)
+
+    def test_a_direction_the_data_do_not_fix_is_unbounded(self):
+        A = np.array([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0]])  # only x0 + x1 is seen
+        out = curvature_intervals(A, np.array([0.1, -0.1, 0.05]), {
+            "x0": (0.0, np.array([1.0, 0.0])), "sum": (0.0, np.array([1.0, 1.0]))})
+        assert interval(out.document(), "x0")["lower"] is None
+        assert interval(out.document(), "sum")["lower"] is not None
+
+    def test_never_narrower_than_the_certified_gap_allows(self):
+        A = np.eye(2)
+        out = curvature_intervals(A, np.zeros(2), {"x0": (0.0, np.array([1.0, 0.0]))}, gap=0.25)
+        assert interval(out.document(), "x0")["upper"] == pytest.approx(0.5)
+
+
+def cameras_looking_at_origin(centres: np.ndarray) -> np.ndarray:
+    K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
+    out = []
+    for c in centres:
+        R = scenes.look_at(c, np.zeros(3), np.random.default_rng(0), up=np.array([0.0, 1.0, 0.0]))
+        out.append(K @ np.hstack([R, -(R @ c)[:, None]]))
+    return np.array(out)
+
+
+def project(cameras, X):
+    x = cameras @ np.append(X, 1.0)
+    return x[:, :2] / x[:, 2:3]
+
+
+class TestTriangulation:
+    def track(self, centres, noise, seed):
+        cameras = cameras_looking_at_origin(centres)
+        X = np.array([0.3, -0.2, 0.1])
+        points = project(cameras, X) + np.random.default_rng(seed).normal(scale=noise, size=(len(centres), 2))
+        result = solve_job({"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": [
+            {"views": list(range(len(centres))), "points": points.tolist()}]}, "options": {}})
+        return X, result["tracks"][0]["determinacy"]
+
+    def test_wide_baseline_intervals_hold_the_truth_and_shrink_with_views(self):
+        inside, widths = 0, {}
+        for views in (3, 12):
+            angles = np.linspace(0, np.pi / 2, views)
+            centres = 10 * np.c_[np.sin(angles), np.zeros(views), np.cos(angles)]
+            for seed in range(10):
+                X, document = self.track(centres, 1.0, seed)
+                assert codes(document) == [] and document["determined"]
+                inside += all(interval(document, k)["lower"] <= X[i] <= interval(document, k)["upper"]
+                              for i, k in enumerate("xyz"))
+                widths.setdefault(views, []).append(width(document, "depth_view0"))
+        assert inside >= 17  # of 20: 3 standard errors each
+        assert np.median(widths[12]) < 0.7 * np.median(widths[3])
+
+    def test_near_zero_parallax_is_flagged_and_wide(self):
+        narrow = np.array([[0.0, 0, 10], [0.05, 0, 10], [0.1, 0, 10]])
+        wide = np.array([[0.0, 0, 10], [7.0, 0, 7], [10.0, 0, 0]])
+        _, flat = self.track(narrow, 1.0, 0)
+        _, good = self.track(wide, 1.0, 0)
+        assert "near_zero_parallax" in codes(flat) and not flat["determined"]
+        assert width(flat, "depth_view0") > 50 * width(good, "depth_view0")
+
+
+class TestMaps:
+    def resection(self, points3, noise=0.5, seed=0):
+        centre = np.array([0.0, 0.0, -10.0])
+        camera = cameras_looking_at_origin(centre[None, :])
+        image = np.array([project(camera, X)[0] for X in points3])
+        image += np.random.default_rng(seed).normal(scale=noise, size=image.shape)
+        result = solve_job({"kind": "resection", "data": {"maps": [
+            {"source": points3.tolist(), "target": image.tolist()}]}, "options": {}})
+        return centre, result["maps"][0]["determinacy"]
+
+    def test_a_well_posed_resection_holds_its_centre(self):
+        points3 = np.random.default_rng(1).uniform(-2, 2, size=(20, 3))
+        centre, document = self.resection(points3)
+        assert codes(document) == []
+        for k, name in enumerate(("centre_x", "centre_y", "centre_z")):
+            assert interval(document, name)["lower"] <= centre[k] <= interval(document, name)["upper"]
+
+    def test_coplanar_points_are_flagged(self):
+        points3 = np.random.default_rng(1).uniform(-2, 2, size=(20, 3))
+        points3[:, 2] = 0.3 * points3[:, 0] + np.random.default_rng(2).normal(scale=0.005, size=20)  # nearly a plane
+        _, document = self.resection(points3)
+        assert "near_coplanar_points" in codes(document) and not document["determined"]
+
+    def test_collinear_points_are_flagged_for_a_homography(self):
+        rng = np.random.default_rng(2)
+        t = rng.uniform(0, 100, size=10)
+        source = np.c_[t, 2 * t + rng.normal(scale=0.01, size=10)]
+        H = np.array([[1.1, 0.1, 5], [0.05, 0.9, -3], [1e-4, 2e-4, 1]])
+        image = np.c_[source, np.ones(10)] @ H.T
+        target = image[:, :2] / image[:, 2:]
+        result = solve_job({"kind": "homography", "data": {"maps": [
+            {"source": source.tolist(), "target": target.tolist()}]}, "options": {}})
+        assert "near_collinear_points" in codes(result["maps"][0]["determinacy"])
+
+    def test_a_spread_homography_is_not_flagged(self):
+        rng = np.random.default_rng(3)
+        source = rng.uniform(0, 100, size=(12, 2))
+        image = np.c_[source, np.ones(12)] @ np.array([[1.1, 0.1, 5], [0.05, 0.9, -3], [1e-4, 2e-4, 1]]).T
+        target = image[:, :2] / image[:, 2:] + rng.normal(scale=0.5, size=(12, 2))
+        document = fractional.map_(source, target, None, None, None)
+        assert document is None  # no map, nothing to say
+        result = solve_job({"kind": "homography", "data": {"maps": [
+            {"source": source.tolist(), "target": target.tolist()}]}, "options": {}})
+        assert result["maps"][0]["determinacy"]["determined"]
+
+
+class TestAutocalibration:
+    TRUTH = {"focal_x": 1000.0, "focal_y": 1000.0, "skew": 0.0, "principal_u": 500.0, "principal_v": 500.0}
+
+    @staticmethod
+    @functools.lru_cache(maxsize=None)
+    def _solved(motion):
+        scene = scenes.make_scene(12, 0.1, seed=1, motion=motion)
+        return solve_job({"kind": "autocalibration", "data": scene.job_data(), "options": {"time_limit_s": 5}})
+
+    def stages(self, motion):
+        return self._solved(motion)["stages"]
+
+    def test_cameras_all_round_are_not_flagged_and_hold_the_truth(self):
+        for stage in self.stages("sphere"):
+            assert stage["determinacy"]["determined"], stage["determinacy"]
+        metric = self.stages("sphere")[1]["determinacy"]
+        for name, value in self.TRUTH.items():
+            assert interval(metric, name)["lower"] <= value <= interval(metric, name)["upper"]
+
+    def test_a_turntable_is_flagged_and_its_focal_length_is_wide(self):
+        ring = self.stages("ring")[1]["determinacy"]
+        sphere = self.stages("sphere")[1]["determinacy"]
+        assert "orbital_motion" in codes(ring) and not ring["determined"]
+        assert width(ring, "focal_x") > 20 * width(sphere, "focal_x")
+
+    def test_a_translating_camera_is_flagged(self):
+        for stage in self.stages("translation"):
+            assert "pure_translation" in codes(stage["determinacy"])
