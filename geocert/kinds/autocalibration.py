@@ -46,7 +46,7 @@ _RANGES = pr.AutocalibrationOptions.OPTION_RANGES
 
 
 class AutocalibrationOptionsIn(Strict):
-    method: Literal["stratified"] = "stratified"
+    method: Literal["stratified", "direct"] = "stratified"
     intrinsics: IntrinsicsIn = Field(default_factory=IntrinsicsIn)
     rel_gap: Finite = Field(_DEFAULTS.rel_gap, **_RANGES["rel_gap"], description="the affine stage's")
     metric_rel_gap: Finite = Field(_DEFAULTS.metric_rel_gap, **_RANGES["metric_rel_gap"],
@@ -55,6 +55,11 @@ class AutocalibrationOptionsIn(Strict):
     max_nodes: int = Field(_DEFAULTS.max_nodes, **_RANGES["max_nodes"], description="per stage")
     time_limit_s: Finite = Field(_DEFAULTS.time_limit_s, **_RANGES["time_limit_s"], description="per stage")
     certificate: Literal["summary", "full"] = "summary"
+    chirality: Literal["points", "centers", "none"] = Field(
+        _DEFAULTS.chirality, description="direct method: which rows must lie on one side of the plane at infinity")
+    varying_focal: bool = Field(_DEFAULTS.varying_focal, description="direct method: one focal length per view")
+    relaxation_order: int = Field(_DEFAULTS.relaxation_order, ge=2, le=2,
+                                  description="direct method: the moment relaxation's order (order 3 does not fit)")
 
 
 class AutocalibrationJob(JobBase):
@@ -64,7 +69,7 @@ class AutocalibrationJob(JobBase):
 
 
 class StageOut(BaseModel):
-    name: Literal["affine", "metric"]
+    name: Literal["affine", "metric", "direct"]
     cost: float | None
     lower_bound: float | None
     gap: float | None
@@ -75,6 +80,7 @@ class StageOut(BaseModel):
     reason: str | None = None
     plane_at_infinity: list[float] | None = None
     K: Matrix3 | None = None
+    dual_absolute_quadric: list[list[float]] | None = None
     certificate: dict[str, Any] | None = None
     determinacy: Determinacy | None = Field(None, description="how well the data fix the stage's answer "
                                                               "(estimated), and critical motions recognised")
@@ -99,6 +105,7 @@ class AutocalibrationResult(BaseModel):
     method: str
     plane_at_infinity: list[float] | None = Field(description="in the input frame, unit norm")
     K: Matrix3 | None
+    Ks: list[Matrix3 | None] | None = Field(None, description="direct method with varying_focal: one K per view")
     dual_absolute_quadric: list[list[float]] | None = Field(description="4x4, input frame, unit Frobenius norm")
     upgrade: list[list[float]] | None = Field(description="H: metric cameras P_i H, metric points H^-1 X")
     cameras: list[CameraOut] | None
@@ -161,7 +168,8 @@ def self_check_stages(parsed: Parsed, options: pr.AutocalibrationOptions, stages
         proof = (stage.get("certificate") or {}).get("proof")
         if stage["certified"]:
             claim = {"index": index, **{key: stage.get(key) for key in (
-                "status", "certified", "cost", "lower_bound", "gap", "plane_at_infinity", "K")}, "proof": proof}
+                "status", "certified", "cost", "lower_bound", "gap", "plane_at_infinity", "K", "dual_absolute_quadric")},
+                "proof": proof}
             try:
                 verify_arrays("autocalibration", arrays, dataclasses.asdict(options), claim)
             except Invalid as exc:
@@ -172,14 +180,15 @@ def self_check_stages(parsed: Parsed, options: pr.AutocalibrationOptions, stages
 
 class AutocalibrationKind:
     name = "autocalibration"
-    description = ("Stratified autocalibration of a projective reconstruction (constant intrinsics): the plane at "
-                   "infinity, then the DIAC, each certified globally optimal.")
+    description = ("Autocalibration of a projective reconstruction: stratified (constant intrinsics; the plane at "
+                   "infinity, then the DIAC, each certified globally optimal) or direct (the absolute dual quadric "
+                   "by a moment relaxation, certified when the relaxation is tight).")
     item_key = "stages"  # the certificate's claims; a job is one reconstruction
     chunk_size = 1
     options_type = pr.AutocalibrationOptions
     request_model = AutocalibrationJob
     result_model = AutocalibrationResult
-    solution_fields = ("plane_at_infinity", "K")
+    solution_fields = ("plane_at_infinity", "K", "dual_absolute_quadric")  # the last: the direct stage's
     verification = STAGES
     example = {"kind": "autocalibration", "options": {}, "data": EXAMPLE_DATA}
 
@@ -195,6 +204,10 @@ class AutocalibrationKind:
     def solve_item(self, parsed: Parsed, index: int, options: pr.AutocalibrationOptions, callback) -> dict:
         from geocert.solvers.autocalibration import determinacy, proofs, stratified  # the conic solver, only to solve
 
+        if options.method == "direct":  # thesis ch. 7: one stage
+            from geocert.solvers.autocalibration.direct_result import solve_document
+
+            return solve_document(parsed, options, callback)
         problem = pr.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
         checking = self_check_enabled()  # GEOCERT_SELF_VERIFY=1: proofs made, and checked below
         result = stratified.solve(problem, dataclasses.replace(options, certificate="full") if checking else options,

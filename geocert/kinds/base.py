@@ -88,6 +88,10 @@ def options_from(options_type: type, given: dict | None, field: str = "options")
     defaults = options_type()
     for key, value in given.items():
         default = getattr(defaults, key)
+        if isinstance(default, bool):  # before the numbers: a bool is an int to Python
+            if not isinstance(value, bool):
+                raise InputError(f"{field}/{key}", "must be true or false")
+            continue
         if isinstance(default, str) and not isinstance(value, str):
             raise InputError(f"{field}/{key}", "must be a string")
         numeric = isinstance(value, (int, float)) and not isinstance(value, bool)

@@ -66,7 +66,7 @@ class TestBadInput:
         assert error.field.startswith("options/intrinsics/") and "image_size" in error.reason
 
     def test_a_method_not_served(self):
-        assert refused(job(method="direct")).field == "options/method"
+        assert refused(job(method="bundle")).field == "options/method"
 
     def test_the_api_model_refuses_the_same(self):
         from pydantic import ValidationError

@@ -127,3 +127,43 @@ def orthogonal_grids(size: int = 5, spacing: float = 4.0) -> tuple[np.ndarray, l
             lines.append([start + i * size + j for j in range(size)])
             lines.append([start + j * size + i for j in range(size)])
     return np.array(points), lines
+
+
+def table71_scene(seed: int, noise_percent: float = 0.2, varying_focal: bool = False, views: int = 12,
+                  points: int = 15) -> tuple[Scene, list[np.ndarray]]:
+    """Thesis Table 7.1's protocol: 15 points in [-1, 1]^3, 12 cameras at distance 2 looking at
+    the origin, K = I (or diag(f, f, 1) with f in [0.05, 1] per view), noise of noise_percent of
+    the image size (2 units: the image of K = I spans about [-1, 1]) before the reconstruction
+    (each camera resected from the noisy image points), a random projective frame. Returns the
+    scene (scene.K the first view's) and every view's K."""
+    rng = np.random.default_rng(seed)
+    X = rng.uniform(-1, 1, size=(points, 3))
+    Xh = np.hstack([X, np.ones((points, 1))])
+    Hp = np.eye(4)
+    Hp[:3, :3] += 0.3 * rng.normal(size=(3, 3))
+    Hp[:3, 3] = rng.normal(size=3)
+    Hp[3, :3] = 0.1 * rng.normal(size=3)
+    Xin = Xh @ np.linalg.inv(Hp).T
+    rotations, centres, inputs, Ks = [], [], [], []
+    sigma = noise_percent / 100.0 * 2.0
+    for _ in range(views):
+        direction = rng.normal(size=3)
+        centre = 2.0 * direction / np.linalg.norm(direction)
+        R = look_at(centre, rng.normal(scale=0.1, size=3), rng)
+        f = rng.uniform(0.05, 1.0) if varying_focal else 1.0
+        K = np.diag([f, f, 1.0])
+        P = K @ np.hstack([R, -(R @ centre)[:, None]])
+        x = Xh @ P.T
+        x = x[:, :2] / x[:, 2:3]
+        if sigma > 0:
+            x = x + rng.normal(scale=sigma * (f if varying_focal else 1.0), size=x.shape)
+            Pin = dlt_resection(Xin, x)
+        else:
+            Pin = P @ Hp
+        rotations.append(R)
+        centres.append(centre)
+        inputs.append(Pin / np.linalg.norm(Pin))
+        Ks.append(K)
+    scene = Scene(np.array(inputs), Xin / np.linalg.norm(Xin, axis=1)[:, None], Ks[0], np.array(rotations),
+                  np.array(centres), X, Hp, (2, 2))
+    return scene, Ks

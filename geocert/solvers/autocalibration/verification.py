@@ -15,7 +15,8 @@ from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, number as _number, numbers as _numbers
 
-CLAIM_OPTIONS = ("method", "intrinsics", "rel_gap", "metric_rel_gap", "abs_gap")
+CLAIM_OPTIONS = ("method", "intrinsics", "rel_gap", "metric_rel_gap", "abs_gap", "chirality", "varying_focal",
+                 "relaxation_order")
 
 
 def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, float] | None]:
@@ -57,6 +58,10 @@ class AutocalibrationVerification:
         checked = {name: options.get(name) for name in CLAIM_OPTIONS}
         for name in ("rel_gap", "metric_rel_gap", "abs_gap"):
             checked[name] = _number(checked[name], f"options/{name}", "options")
+        defaults = pr.AutocalibrationOptions()
+        for name in ("chirality", "varying_focal", "relaxation_order"):  # documents made before the direct method
+            if checked[name] is None and checked["method"] == "stratified":
+                checked[name] = getattr(defaults, name)
         try:
             pr.AutocalibrationOptions(**{**checked, "intrinsics": dict(checked["intrinsics"] or {})}).check()
         except (InputError, TypeError) as exc:
@@ -64,6 +69,13 @@ class AutocalibrationVerification:
         return checked
 
     def scope_statement(self, options: dict) -> dict:
+        if options["method"] == "direct":
+            return {"kind": "autocalibration", "method": "direct", "intrinsics": options["intrinsics"],
+                    "chirality": options["chirality"], "relaxation_order": options["relaxation_order"],
+                    "metric_rel_gap": options["metric_rel_gap"], "abs_gap": options["abs_gap"],
+                    "statement": "stage 0 (direct): no absolute dual quadric Q positive semidefinite of rank 3 allowed "
+                                 "by the chirality option (in the program's frame, trace 1) costs less than "
+                                 "lower_bound in (7.12); the quadric returned is one of them and costs cost"}
         return {"kind": "autocalibration", "method": options["method"], "intrinsics": options["intrinsics"],
                 "rel_gap": options["rel_gap"], "metric_rel_gap": options["metric_rel_gap"],
                 "abs_gap": options["abs_gap"],
@@ -73,7 +85,10 @@ class AutocalibrationVerification:
                              "lower_bound; each solution returned is in its scope and costs cost"}
 
     def check_claims(self, items: list) -> None:
-        """The metric stage's claim is about the plane the affine stage returns."""
+        """The metric stage's claim is about the plane the affine stage returns (the direct method
+        has one stage)."""
+        if len(items) == 1 and (items[0].get("proof") or {}).get("type") == "direct_moment":
+            return
         if len(items) != 2:
             raise Invalid("format", "autocalibration certifies two stages: affine, then metric")
         planes = [item.get("plane_at_infinity") for item in items]
@@ -86,6 +101,8 @@ class AutocalibrationVerification:
         """The result's headline fields are the claims' (plane, K), and what follows from them
         (upgrade, quadric, cameras, points, ranges, baseline) recomputed from the data."""
         claims = certificate["items"]
+        if certificate["options"].get("method") == "direct":
+            return _check_returned_direct(result, certificate)
         if result.get("plane_at_infinity") != claims[0].get("plane_at_infinity"):
             raise Invalid("returned", "plane_at_infinity differs from the affine stage's claim")
         if result.get("K") != claims[1].get("K"):
@@ -127,6 +144,8 @@ class AutocalibrationVerification:
             problem = pr.prepare(cameras, points, image_size, dict(options["intrinsics"] or {}))
         except InputError as exc:
             raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
+        if options["method"] == "direct":
+            return _check_direct(problem, arrays, options, claim, claimed, passed), options["metric_rel_gap"]
         plane = _numbers(claim.get("plane_at_infinity"), "plane_at_infinity", (4,), "claim")
         p = pr.plane_from_input(problem, plane)
         if p is None:
@@ -158,6 +177,68 @@ class AutocalibrationVerification:
             raise Invalid("scope", "the DIAC returned is outside the domain (box, PSD, or a view's scale range)")
         passed.append("scope")
         return proofs.check_metric(problem, p, proof, lower_claimed, passed), options["metric_rel_gap"]
+
+
+def _direct_setup(problem, options: dict):
+    from geocert.solvers.autocalibration import direct
+
+    try:
+        return direct.setup_for(problem, options["chirality"], exclude=False)
+    except InputError as exc:
+        raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
+
+
+def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, passed: list) -> float:
+    """The direct stage: the quadric's cost and scope, what it gives, and the moment proof."""
+    from geocert.solvers.autocalibration import direct
+    from geocert.solvers.autocalibration import direct_relaxation as dr
+
+    if claim["index"] != 0:
+        raise Invalid("format", "the direct method has one stage (0)")
+    proof = claim.get("proof")
+    if not isinstance(proof, dict) or proof.get("type") != "direct_moment":
+        raise Invalid("format", "the direct stage takes a direct_moment proof")
+    Q_in = _numbers(claim.get("dual_absolute_quadric"), "dual_absolute_quadric", (4, 4), "claim")
+    if not np.array_equal(Q_in, Q_in.T) or not abs(np.trace(Q_in)) > 0:
+        raise Invalid("claim", "dual_absolute_quadric must be symmetric with a nonzero trace")
+    setup = _direct_setup(problem, options)
+    Q = setup.from_input(Q_in)
+    _check_cost(dr.cost(setup.cameras, Q), claimed)
+    passed.append("objective")
+    bound, excluded = direct.check_proof(setup, proof, options["relaxation_order"])
+    if not direct.in_domain(setup, Q, excluded):
+        raise Invalid("scope", "the quadric returned is not PSD of rank 3 or not allowed by chirality")
+    cameras, points, _ = arrays
+    try:
+        given = direct.derived(cameras, points, Q_in, bool(options["varying_focal"]))
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise Invalid("scope", f"the quadric gives no metric upgrade: {exc}") from exc
+    for name in ("plane_at_infinity", "K"):
+        if not _close(claim.get(name), given[name]):
+            raise Invalid("claim", f"{name} is not what the quadric gives")
+    passed += ["scope", "program", "root_region", "leaf_bounds"]
+    return bound
+
+
+def _check_returned_direct(result: dict, certificate: dict) -> None:
+    from geocert.solvers.autocalibration import direct
+
+    claim = certificate["items"][0]
+    options = certificate["options"]
+    try:
+        cameras, points, image_size = read_data(certificate["data"])
+        problem = pr.prepare(cameras, points, image_size, dict(options.get("intrinsics") or {}))
+    except (InputError, TypeError, ValueError) as exc:
+        raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
+    if result.get("method") != "direct" or result.get("intrinsics") != problem.ranges:
+        raise Invalid("returned", "method or intrinsics differ from what the options give")
+    if result.get("dual_absolute_quadric") != claim.get("dual_absolute_quadric"):
+        raise Invalid("returned", "dual_absolute_quadric differs from the direct stage's claim")
+    Q_in = _numbers(claim.get("dual_absolute_quadric"), "dual_absolute_quadric", (4, 4), "returned")
+    expected = direct.derived(cameras, points, Q_in, bool(options.get("varying_focal")))
+    for name, value in expected.items():
+        if not _close(result.get(name), value):
+            raise Invalid("returned", f"{name} is not what the quadric gives")
 
 
 def _close(value: Any, expected: Any) -> bool:

@@ -1,0 +1,279 @@
+"""Direct autocalibration (thesis chapter 7), the part both the solver and the verifier read
+(numpy only): the program's frame and data, the chirality pairs of each orientation, what a
+dual absolute quadric gives (plane at infinity, calibrations, upgrade), and the proof's check.
+
+The program, for the reconstruction of ``problem.norm`` (image coordinates preconditioned by
+K0^-1, so that K is near the identity; cameras in the reference frame, signs normalised):
+cameras moved to the conditioning frame T (direct_relaxation.conditioning_frame: the linear
+estimate of Q becomes diag(1, 1, 1, 0)) and scaled to Frobenius norm sqrt(3); Q in that frame has
+trace 1; the objective is (7.12). Q in the input frame is T0 T Q T' T0', scaled to unit Frobenius
+norm in the result.
+
+Chirality (options.chirality): "none"; "centers": every pair of signed camera centres on one side
+of the plane at infinity; "points": also every point on the side of the centres (times an
+orientation delta = +1 or -1 of the reconstruction, unknown: each orientation is either excluded
+by an exact Gordan proof, as in the stratified method, or gets its own program; the bound is the
+smaller of the programs').
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from geocert.solvers.autocalibration import direct_relaxation as dr
+from geocert.solvers.autocalibration import frames
+from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.core.geometry import InputError
+from geocert.solvers.core.strict import Invalid, dual_vector
+
+CHIRALITY = ("points", "centers", "none")
+# Relaxation orders served. Order 3 was measured not to fit: in 9 variables it has 5004 moments and
+# 57865 constraint rows (built in 0.07 s), with two 220 x 220 PSD cones (the moment matrix and Q's
+# localizing matrix), each a dense 24310-row block of Clarabel's KKT system (about 2.4 GB each as
+# a triangle, some 5e12 flops a factorisation); order 2 has 714 moments and a 55 x 55 moment matrix.
+ORDERS = (2,)
+RANK_TOLERANCE = 1e-4  # numerical rank: eigenvalues of the moment matrix above this times the largest
+PSD_TOLERANCE = 1e-9  # a returned Q (rounded to JSON) counts as PSD of rank 3 within this of its norm
+
+
+@dataclass
+class Orientation:
+    delta: float | None  # None: no chirality or centres only (no orientation to choose)
+    pairs: np.ndarray | None  # (k, 4, 4) chirality pairs in the program's frame
+    rows: np.ndarray | None  # the chirality rows (program frame), to check a solution
+    centres: int = 0
+
+
+@dataclass
+class DirectSetup:
+    problem: pr.Problem
+    T: np.ndarray  # reference frame -> program frame (cameras P T)
+    cameras: np.ndarray  # the program's data
+    orientations: list[Orientation]
+    excluded: list[dict]  # {"delta", "rows"}: orientations with no quasi-affine plane (Gordan)
+
+    def to_input(self, Q: np.ndarray) -> np.ndarray:
+        """Q of the program's frame in the input frame, unit Frobenius norm."""
+        M = self.problem.norm.T0 @ self.T
+        Q_in = M @ Q @ M.T
+        Q_in = (Q_in + Q_in.T) / 2
+        return Q_in / np.linalg.norm(Q_in)
+
+    def from_input(self, Q_in: np.ndarray) -> np.ndarray:
+        """Q of the input frame in the program's frame, trace 1."""
+        M = np.linalg.inv(self.problem.norm.T0 @ self.T)
+        Q = M @ Q_in @ M.T
+        Q = (Q + Q.T) / 2
+        return Q / np.trace(Q)
+
+
+def _centres(cameras: np.ndarray) -> np.ndarray:
+    c = np.array([frames.signed_centre(P) for P in cameras])
+    return c / np.linalg.norm(c, axis=1)[:, None]
+
+
+def setup_for(problem: pr.Problem, chirality: str, exclude: bool = True) -> DirectSetup:
+    """``exclude``: look for Gordan proofs excluding an orientation (the solver; the verifier
+    keeps both orientations and reads the exclusions from the proof)."""
+    norm = problem.norm
+    T = dr.conditioning_frame(norm.cameras)
+    cameras = dr.framed_cameras(norm.cameras, T)
+    to_frame = np.linalg.inv(T).T  # rows (points, centres) of the reference frame -> program frame
+
+    def framed(rows):
+        rows = rows @ to_frame
+        return rows / np.linalg.norm(rows, axis=1)[:, None]
+
+    centres = _centres(norm.cameras)
+    excluded: list[dict] = []
+    if chirality == "none":
+        orientations = [Orientation(None, None, None)]
+    elif chirality == "centers":
+        rows = framed(centres)
+        orientations = [Orientation(None, dr.chirality_pairs(rows, len(rows)), rows, len(rows))]
+    else:
+        if norm.points is None:
+            raise InputError("options/chirality", '"points" needs data/points (or choose "centers" or "none")')
+        orientations = []
+        for delta in (1.0, -1.0):
+            ref_rows = frames.chirality_rows(norm, delta)
+            chosen = _gordan_rows(ref_rows) if exclude else None
+            if chosen is not None:
+                excluded.append({"delta": delta, "rows": chosen})
+                continue
+            rows = framed(ref_rows)
+            orientations.append(Orientation(delta, dr.chirality_pairs(rows, len(centres)), rows, len(centres)))
+    return DirectSetup(problem, T, cameras, orientations, excluded)
+
+
+def _gordan_rows(rows: np.ndarray) -> list[int] | None:
+    from geocert.solvers.autocalibration.affine import gordan_rows
+
+    return gordan_rows(rows)
+
+
+def chirality_holds(orientation: Orientation, Q: np.ndarray, tolerance: float = 0.0) -> bool:
+    """Whether Q (program frame) satisfies the orientation's pairs: R_k' adj(Q) R_l >= 0."""
+    if orientation.pairs is None:
+        return True
+    adj = adjugate(Q)
+    values = np.einsum("kab,ab->k", orientation.pairs, adj)
+    return bool(np.all(values >= -tolerance * np.abs(adj).max()))
+
+
+def adjugate(Q: np.ndarray) -> np.ndarray:
+    out = np.empty((4, 4))
+    for a in range(4):
+        for b in range(4):
+            minor = np.delete(np.delete(Q, b, axis=0), a, axis=1)
+            out[a, b] = (-1) ** (a + b) * np.linalg.det(minor)
+    return out
+
+
+def in_domain(setup: DirectSetup, Q: np.ndarray, excluded: tuple = ()) -> bool:
+    """Q (program frame, trace 1) PSD of rank 3 within PSD_TOLERANCE, and allowed by chirality
+    in some orientation not excluded."""
+    values = np.linalg.eigvalsh(Q)
+    scale = np.abs(values).max()
+    if not (values[0] >= -PSD_TOLERANCE * scale and abs(values[0]) <= PSD_TOLERANCE * scale and values[1] > 0):
+        return False
+    return any(chirality_holds(o, Q, 1e-9) for o in setup.orientations if o.delta not in excluded)
+
+
+def rank_one_projection(Q: np.ndarray) -> np.ndarray:
+    """The nearest PSD matrix of rank 3 with trace 1 (eigenvalues clipped, the smallest zeroed)."""
+    values, V = np.linalg.eigh((Q + Q.T) / 2)
+    values = np.maximum(values, 0.0)
+    values[0] = 0.0
+    if values.sum() <= 0:
+        values[1:] = 1.0
+    out = (V * values) @ V.T
+    return out / np.trace(out)
+
+
+# --- what a dual absolute quadric gives ---------------------------------------------------------
+
+def calibrations(cameras: np.ndarray, Q_in: np.ndarray) -> list[np.ndarray | None]:
+    """K_i (pixels, K[2, 2] = 1) with K_i K_i' proportional to P_i Q P_i' (None if not definite)."""
+    out = []
+    for P in cameras:
+        omega = P @ Q_in @ P.T
+        omega = (omega + omega.T) / 2
+        if not omega[2, 2] != 0:
+            out.append(None)
+            continue
+        omega = omega / omega[2, 2]
+        try:
+            K = pr.upper_triangular_root(omega)
+        except np.linalg.LinAlgError:
+            K = None
+        out.append(K)
+    return out
+
+
+def mean_calibration(cameras: np.ndarray, Q_in: np.ndarray) -> np.ndarray | None:
+    """One K for constant intrinsics: the root of the mean of the views' normalised P_i Q P_i'."""
+    omegas = [P @ Q_in @ P.T for P in cameras]
+    omega = np.mean([(w + w.T) / 2 / w[2, 2] for w in omegas], axis=0)
+    try:
+        return pr.upper_triangular_root(omega)
+    except np.linalg.LinAlgError:
+        return None
+
+
+def upgrade(cameras: np.ndarray, points: np.ndarray | None, Q_in: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(H, plane at infinity) with Q_in = H diag(1, 1, 1, 0) H' up to scale (thesis 7.2): H's
+    first columns the eigenvectors of Q_in times the roots of their eigenvalues, its last the
+    null vector, signed so that most points (without points: most cameras' viewing directions
+    towards the centres' centroid) are in front of the metric cameras."""
+    values, V = np.linalg.eigh(Q_in)
+    order = np.argsort(-values)
+    values, V = values[order], V[:, order]
+    H = np.empty((4, 4))
+    H[:, :3] = V[:, :3] * np.sqrt(np.maximum(values[:3], 0.0))
+    H[:, 3] = V[:, 3]
+    best, best_score = None, -math.inf
+    for sign in (1.0, -1.0):
+        Hs = H.copy()
+        Hs[:, 3] *= sign
+        try:
+            cams = pr.metric_cameras(cameras, Hs)
+        except (np.linalg.LinAlgError, ValueError):
+            continue
+        R = np.array([c["R"] for c in cams])
+        C = np.array([c["center"] for c in cams])
+        if points is not None:
+            X = pr.metric_points(Hs, points)
+            X = np.array([x for x in X if x is not None]).reshape(-1, 3)
+            score = float(np.sum(np.einsum("ik,ijk->ij", R[:, 2], X[None, :, :] - C[:, None, :]) > 0))
+        else:
+            score = float(np.sum(np.einsum("ik,ik->i", R[:, 2], C.mean(axis=0) - C) > 0))
+        if score > best_score:
+            best, best_score = Hs, score
+    if best is None:
+        raise np.linalg.LinAlgError("no metric cameras from this quadric")
+    plane = np.linalg.inv(best).T @ np.array([0.0, 0.0, 0.0, 1.0])
+    return best, plane / np.linalg.norm(plane)
+
+
+def derived(cameras: np.ndarray, points: np.ndarray | None, Q_in: np.ndarray, varying_focal: bool) -> dict:
+    """The result's fields that follow from the returned quadric (the verifier recomputes them)."""
+    H, plane = upgrade(cameras, points, Q_in)
+    Ks = calibrations(cameras, Q_in)
+    K = None if varying_focal else mean_calibration(cameras, Q_in)
+    return {"plane_at_infinity": plane.tolist(), "K": None if K is None else K.tolist(),
+            "Ks": [None if k is None else k.tolist() for k in Ks] if varying_focal else None,
+            "upgrade": H.tolist(), "dual_absolute_quadric": Q_in.tolist(),
+            "cameras": pr.metric_cameras(cameras, H), "points": pr.metric_points(H, points)}
+
+
+# --- the proof --------------------------------------------------------------------------------
+
+def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tuple]:
+    """The bound a "direct_moment" proof establishes over the program's feasible set, and the
+    orientations it excludes: each orientation of the setup (built with exclude=False) is either
+    excluded exactly (Gordan, rational arithmetic) or bounded by the safe bound of its dual."""
+    if proof.get("order") != order:
+        raise Invalid("program", f"the proof is for relaxation order {proof.get('order')!r}, not {order}")
+    excluded, programs = proof.get("excluded"), proof.get("programs")
+    if not isinstance(excluded, list) or not isinstance(programs, list):
+        raise Invalid("format", "a direct proof has excluded and programs lists")
+    gone = []
+    for item in excluded:
+        if not isinstance(item, dict) or item.get("delta") not in (1.0, -1.0) or setup.orientations[0].delta is None:
+            raise Invalid("format", "excluded items are {delta: 1.0 or -1.0, rows} (chirality points only)")
+        rows = frames.chirality_rows(setup.problem.norm, float(item["delta"]))
+        chosen = item.get("rows")
+        if not (isinstance(chosen, list) and all(isinstance(k, int) and not isinstance(k, bool) for k in chosen)
+                and frames.exact_gordan(rows, chosen)):
+            raise Invalid("root_region", f"orientation {item['delta']:+g}: the rows do not exclude it")
+        gone.append(float(item["delta"]))
+    bound = math.inf
+    for o in setup.orientations:
+        if o.delta in gone:
+            continue
+        match = [p for p in programs if isinstance(p, dict) and p.get("delta") == o.delta]
+        if len(match) != 1:
+            raise Invalid("root_region", f"orientation {o.delta!r} needs exactly one program or an exclusion")
+        program = dr.build(setup.cameras, o.pairs, order)
+        z = dual_vector(match[0].get("z"), len(program.b), f"programs/{o.delta}/z", "leaf_bounds")
+        value, _ = dr.safe_bound(program, z)
+        bound = min(bound, value)
+    if bound == math.inf:
+        raise Invalid("root_region", "every orientation is excluded: nothing to bound")
+    return bound, tuple(gone)
+
+
+def check_options(chirality, varying_focal, order) -> None:
+    if chirality not in CHIRALITY:
+        raise InputError("options/chirality", f"must be one of {', '.join(CHIRALITY)}")
+    if not isinstance(varying_focal, bool):
+        raise InputError("options/varying_focal", "must be true or false")
+    if not (isinstance(order, int) and not isinstance(order, bool) and order in ORDERS):
+        raise InputError("options/relaxation_order", f"must be one of {', '.join(map(str, ORDERS))} (order 3's "
+                                                     "moment matrix is 220 x 220: too large to solve here)")
+
+

@@ -1,0 +1,66 @@
+"""The direct method's result document (the autocalibration kind dispatches here for
+options.method = "direct"): one stage, "direct", and the fields the stratified method returns."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from geocert.solvers.autocalibration import direct
+from geocert.solvers.autocalibration import direct_relaxation as dr
+from geocert.solvers.autocalibration import problem as pr
+
+SCOPE = ("every absolute dual quadric Q (trace 1 in the program's frame) positive semidefinite of rank 3 "
+         "that the chirality option allows (pairs of rows on one side of its null plane)")
+
+
+def returned_quadric(setup: direct.DirectSetup, Q: np.ndarray) -> tuple[list, float]:
+    """Q in the input frame as the result states it (JSON floats), and its cost recomputed from
+    that, as the verifier does."""
+    Q_in = setup.to_input(Q).tolist()
+    return Q_in, dr.cost(setup.cameras, setup.from_input(np.array(Q_in)))
+
+
+def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict:
+    from geocert.kinds.autocalibration import _stage, self_check_stages
+    from geocert.solvers.autocalibration import direct_solve
+    from geocert.solvers.autocalibration.stratified import announce
+    from geocert.solvers.verify import self_check_enabled
+
+    problem = pr.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
+    setup = direct.setup_for(problem, options.chirality)
+    checking = self_check_enabled()
+    full = options.certificate == "full" or checking
+    document: dict = {"method": "direct", "intrinsics": problem.ranges, "plane_at_infinity": None, "K": None,
+                      "Ks": None, "dual_absolute_quadric": None, "upgrade": None, "cameras": None, "points": None,
+                      "baseline": None}
+    if announce(callback, "direct"):
+        result = direct_solve.DirectStage("cancelled", False, None, math.inf, -math.inf, options.relaxation_order,
+                                          reason="the job was cancelled")
+    else:
+        result = direct_solve.solve_direct(setup, options, full)
+    cost = math.inf
+    if result.Q is not None:
+        Q_in, cost = returned_quadric(setup, result.Q)
+        excluded = tuple(item["delta"] for item in setup.excluded)
+        if result.certified and not direct.in_domain(setup, setup.from_input(np.array(Q_in)), excluded):
+            result.certified, result.status = False, "not_certified"
+            result.reason = "the quadric as returned (input frame, rounded) left the domain (rank 3, PSD, chirality)"
+        try:
+            document.update(direct.derived(parsed.cameras, parsed.points, np.array(Q_in), options.varying_focal))
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            result.certified, result.status, result.reason = False, "not_certified", f"no metric upgrade: {exc}"
+    stage = _stage("direct", result.status, result.certified, cost, result.lower_bound, 0, result.elapsed_s,
+                   result.reason, options.metric_rel_gap, options.abs_gap, SCOPE,
+                   result.proof if full and result.certified else None)
+    stage["certificate"].update({"order": result.order, "moment_rank": result.rank,
+                                 "eigenvalue_ratio": result.eigenvalue_ratio, "conic_status": result.conic_status})
+    for key in ("plane_at_infinity", "K", "dual_absolute_quadric"):
+        stage[key] = document[key]
+    stages = [stage]
+    if checking:
+        self_check_stages(parsed, dataclasses.replace(options), stages)
+    return {**document, "stages": stages, "status": stage["status"], "certified": stage["certified"], "nodes": 0,
+            "elapsed_s": result.elapsed_s, "cost": stage["cost"], "lower_bound": stage["lower_bound"]}

@@ -1,0 +1,182 @@
+"""Direct autocalibration solved (thesis chapter 7): the moment relaxation of each orientation as
+one SDP for Clarabel (assembled directly, sparse: no cvxpy, whose compilation of a 714-variable
+program with a 55 x 55 PSD block would only add to the solve), its safe bound, the quadric from
+the first-order moments, rounded to the feasible set and polished locally, and the rank test.
+
+Clarabel's KKT system carries the moment matrix's cone as a dense block (1540 svec rows at order
+2), so one solve takes seconds, not milliseconds; the supernodal "faer" factorisation is used
+(about half the time of the default's, measured), at tolerance 1e-9 with more static
+regularisation (1e-6): measured on four 12-view scenes (0.2% noise with each chirality option,
+and one without noise), the default 1e-8 ends "AlmostSolved" (stalled at iteration 11), 1e-7 on
+three of the four, 1e-6 "Solved" on all four in 14 to 19 iterations with bounds within 1e-9 of
+the optimum. Only "Solved" certifies (conic.py's status map); the bound is safe either way.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import clarabel
+import numpy as np
+import scipy.sparse as sp
+
+from geocert.solvers.autocalibration import direct
+from geocert.solvers.autocalibration import direct_relaxation as dr
+from geocert.solvers.core.certificates import pack
+from geocert.solvers.core.conic import ConicStatus, clarabel_cones, map_clarabel_status
+
+
+@dataclass
+class DirectStage:
+    status: str
+    certified: bool
+    Q: np.ndarray | None  # program frame, trace 1
+    cost: float
+    lower_bound: float
+    order: int
+    rank: int | None = None
+    eigenvalue_ratio: float | None = None
+    conic_status: list = field(default_factory=list)
+    proof: dict | None = None
+    reason: str | None = None
+    elapsed_s: float = 0.0
+
+
+TOLERANCES = (1e-9, 1e-8)
+
+
+def _settings(tolerance: float) -> clarabel.DefaultSettings:
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.max_iter = 60
+    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = tolerance
+    settings.static_regularization_constant = 1e-6
+    settings.max_threads = 1
+    try:
+        settings.direct_solve_method = "faer"
+    except Exception:  # a build without it: the default factorisation
+        pass
+    return settings
+
+
+def solve_program(program: dr.Program) -> tuple[ConicStatus, np.ndarray | None, np.ndarray | None, str]:
+    """(status, y, z, raw status) of the first clean solve at TOLERANCES (an "AlmostSolved" solve
+    is repeated at the next, looser tolerance: the safe bound does not rest on the solver's
+    accuracy, only the status gate does); never raises on solver trouble."""
+    answer = (ConicStatus.FAILED, None, None, "not solved")
+    for tolerance in TOLERANCES:
+        answer = _solve_once(program, tolerance)
+        if answer[0] is ConicStatus.OPTIMAL:
+            break
+    return answer
+
+
+def _solve_once(program: dr.Program, tolerance: float):
+    try:
+        P = sp.csc_matrix((len(program.q), len(program.q)))
+        solution = clarabel.DefaultSolver(P, program.q, program.A, program.b, clarabel_cones(program.cones),
+                                          _settings(tolerance)).solve()
+        raw = str(solution.status)
+        status = map_clarabel_status(raw)
+        y, z = np.array(solution.x, dtype=float), np.array(solution.z, dtype=float)
+        if not (np.all(np.isfinite(y)) and np.all(np.isfinite(z))):
+            return ConicStatus.FAILED, None, None, raw
+        return status, y, z, raw
+    except BaseException as exc:
+        if isinstance(exc, (KeyboardInterrupt, SystemExit)):
+            raise
+        return ConicStatus.FAILED, None, None, f"exception: {exc}"
+
+
+def rank_test(program: dr.Program, y: np.ndarray) -> tuple[int, float, np.ndarray]:
+    """(numerical rank, second / first eigenvalue, eigenvalues) of the moment matrix."""
+    values = np.linalg.eigvalsh(dr.moment_matrix(program, y))[::-1]
+    rank = int(np.sum(values > direct.RANK_TOLERANCE * values[0]))
+    return rank, float(values[1] / values[0]), values
+
+
+def polish(cameras: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """Local minimisation of f over Q = B B' / trace (B 4x3) from a rank-3 PSD start."""
+    from scipy.optimize import least_squares
+
+    values, V = np.linalg.eigh(Q)
+    B0 = V[:, 1:] * np.sqrt(np.maximum(values[1:], 1e-12))
+
+    def residuals(b):
+        B = b.reshape(4, 3)
+        S = B @ B.T
+        S = S / np.trace(S)
+        w = np.einsum("iab,bc,idc->iad", cameras, S, cameras)
+        return np.concatenate([w[:, 0, 0] - w[:, 1, 1], w[:, 0, 1], w[:, 0, 2], w[:, 1, 2]])
+
+    result = least_squares(residuals, B0.ravel(), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=2000)
+    B = result.x.reshape(4, 3)
+    S = B @ B.T
+    return direct.rank_one_projection(S)
+
+
+def candidates(setup: direct.DirectSetup, y: np.ndarray, orientation: direct.Orientation) -> list[np.ndarray]:
+    """Feasible quadrics from a relaxation's first moments: rounded, and rounded then polished
+    (the polish kept only when chirality still holds)."""
+    rounded = direct.rank_one_projection(dr.q_of(y[:dr.N]))
+    out = [rounded] if direct.chirality_holds(orientation, rounded) else []
+    polished = polish(setup.cameras, rounded)
+    if direct.chirality_holds(orientation, polished):
+        out.append(polished)
+    return out
+
+
+def solve_direct(setup: direct.DirectSetup, options, record: bool) -> DirectStage:
+    start = time.perf_counter()
+    if not setup.orientations:
+        return DirectStage("failed", False, None, math.inf, -math.inf, options.relaxation_order,
+                           reason="no plane at infinity is consistent with chirality (both orientations excluded)",
+                           elapsed_s=time.perf_counter() - start)
+    stage = None
+    for order in range(2, options.relaxation_order + 1):
+        stage = _solve_order(setup, options, order, record)
+        if stage.certified:
+            break
+    stage.elapsed_s = time.perf_counter() - start
+    return stage
+
+
+def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -> DirectStage:
+    bound, best, best_cost = math.inf, None, math.inf
+    statuses, programs, ranks = [], [], []
+    clean = True
+    for orientation in setup.orientations:
+        program = dr.build(setup.cameras, orientation.pairs, order)
+        status, y, z, raw = solve_program(program)
+        statuses.append(raw)
+        if z is None:
+            return DirectStage("failed", False, None, math.inf, -math.inf, order, conic_status=statuses,
+                               reason=f"the conic solver failed ({raw})")
+        clean = clean and status is ConicStatus.OPTIMAL
+        value, _ = dr.safe_bound(program, z)
+        bound = min(bound, value)
+        programs.append({"delta": orientation.delta, "z": pack(z), "bound": value})
+        ranks.append(rank_test(program, y))
+        for Q in candidates(setup, y, orientation):
+            c = dr.cost(setup.cameras, Q)
+            if c < best_cost:
+                best, best_cost = Q, c
+    rank = max(r[0] for r in ranks)
+    ratio = max(r[1] for r in ranks)
+    proof = {"type": "direct_moment", "order": order, "programs": programs, "excluded": setup.excluded,
+             "moment_rank": rank, "eigenvalue_ratio": ratio} if record else None
+    if best is None:
+        return DirectStage("not_certified", False, None, math.inf, bound, order, rank, ratio, statuses, None,
+                           "no feasible quadric rounded from the relaxation satisfies chirality")
+    tolerance = max(options.abs_gap, options.metric_rel_gap * abs(best_cost))
+    certified = clean and best_cost - bound <= tolerance
+    reason = None
+    if not clean:
+        reason = f"the conic solve was not clean ({', '.join(statuses)}): its bound is reported, not certified"
+    elif not certified:
+        reason = (f"the relaxation is not tight at order {order} (gap {best_cost - bound:.3g}, moment matrix rank "
+                  f"{rank}); the bound and the rounded solution are returned")
+    return DirectStage("optimal" if certified else "not_certified", certified, best, best_cost, bound, order, rank,
+                       ratio, statuses, proof, reason)
