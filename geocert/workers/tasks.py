@@ -156,6 +156,7 @@ def final_progress(items: list[dict], stats: dict) -> dict:
             "gap_abs": max(0.0, upper - lower) if bounded else None,
             "gap_rel": max(gaps, default=0.0) if bounded else None,
             **item_counts(sum(1 for item in items if item["status"] != "cancelled"), len(items)),
+            "items_certified": stats["certified"],
             "elapsed_s": stats["elapsed_s"]}
 
 

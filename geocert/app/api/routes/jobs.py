@@ -169,6 +169,18 @@ def get_job(job: OwnedJob, store: JobStoreDep):
     return store.document(job)
 
 
+@router.get("/{job_id}/request", response_class=Response, responses={
+    200: {"content": {"application/json": {"schema": {"type": "object", "description": "a job request (POST /v1/jobs)"}}},
+          "description": "the job as submitted"}, **error_responses(404)})
+def get_job_request(job: OwnedJob, store: JobStoreDep):
+    """The job as submitted (``kind``, ``data``, ``options`` with the defaults filled in): what a
+    result's items refer to (e.g. the cameras and observations a triangulation's residuals come from)."""
+    raw = store.r.get(store.key(job["id"], "request"))
+    if raw is None:
+        raise ApiProblem(404, f"no request kept for job {job['id']}")
+    return Response(raw, media_type="application/json")  # stored as JSON: sent as it is
+
+
 @router.post("/{job_id}/cancel", response_model=Job, status_code=202, responses=error_responses(404, 409))
 def cancel_job(job: OwnedJob, store: JobStoreDep):
     """A queued job never starts; a running one stops at its next node and keeps its best result.
