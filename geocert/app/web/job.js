@@ -35,8 +35,14 @@
   }
 
   async function refresh() {
-    const job = await GC.json(`/v1/jobs/${encodeURIComponent(jobId)}`);
+    const response = await GC.api(`/v1/jobs/${encodeURIComponent(jobId)}`);
+    const text = await response.text();
+    if (!response.ok) throw new GC.ApiError(response.status, JSON.parse(text || "null"));
+    const job = JSON.parse(text);
     state.job = job;
+    // Verification posts the document as the server sent it: JavaScript would write 1.0 back as 1,
+    // and a certificate's data hash is over the exact JSON numbers (canonical_json).
+    state.jobText = text;
     $("s-kind").textContent = job.kind;
     showStatus(job.status);
     if (GC.TERMINAL.has(job.status)) {
@@ -108,7 +114,7 @@
     button.disabled = true;
     $("verify-note").textContent = "Verifying…";
     try {
-      const report = await GC.json("/v1/certificates/verify", {method: "POST", body: JSON.stringify(state.job),
+      const report = await GC.json("/v1/certificates/verify", {method: "POST", body: state.jobText,
                                                                 headers: {"Content-Type": "application/json"}});
       window.GC_STATE.verify = report;
       const rows = report.checks.map((c) => el("tr", {"data-check": c.name},
