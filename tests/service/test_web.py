@@ -282,3 +282,22 @@ class TestApiKeys:
             page.execute_script("sessionStorage.clear();")
         finally:
             stop(process)
+
+
+class TestRoutesThePageUses:
+    def test_a_finished_job_is_sent_as_the_job_model_writes_it_and_its_request_is_kept(self, service):
+        from geocert.app.schemas import Job
+
+        body = service_job(np.random.default_rng(11), tracks=3, views=3, certificate="full")
+        job_id = service.post("/v1/jobs", json=body).json()["id"]
+        wait_job(service, job_id)
+        response = service.get(f"/v1/jobs/{job_id}")  # the stored result, sent as stored
+        document = response.json()
+        assert response.headers["content-type"] == "application/json"
+        assert document == json.loads(Job.model_validate(document).model_dump_json(by_alias=True))
+        assert document["progress"]["items_certified"] == document["result"]["stats"]["certified"] == 3
+        assert service.get(f"/v1/jobs/{job_id}/certificate").json() == document["result"]["certificate"]
+        request = service.get(f"/v1/jobs/{job_id}/request").json()
+        assert request["data"] == body["data"] and request["options"]["certificate"] == "full"
+        assert request["options"]["rel_gap"] == 1e-3  # defaults filled in
+        assert service.get("/v1/jobs/0123456789abcdef0123456789abcdef/request").status_code == 404
