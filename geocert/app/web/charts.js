@@ -114,11 +114,11 @@ const Charts = (() => {
     ctx.fillText(String(max), 4, top + 10);
     ctx.fillText("0", 4, top + h);
     for (let i = 0; i <= 4; i++) ctx.fillText(GC.num(lo + (hi - lo) * i / 4, 2), left + w * i / 4 - (i === 4 ? 30 : 0), top + h + 16);
-    ctx.fillText(`${unit}${over ? ` (${over} above ${GC.num(hi, 2)} not shown)` : ""}`, left, height - 4);
+    ctx.fillText(unit, left, height - 4);
     const median = finite[Math.floor(finite.length / 2)];
     canvas.setAttribute("aria-label", `Histogram of ${finite.length} values (${unit}); median ${GC.num(median)}, ` +
                                       `largest ${GC.num(finite[finite.length - 1])}`);
-    return {count: finite.length, median, max: finite[finite.length - 1]};
+    return {count: finite.length, median, max: finite[finite.length - 1], over, cut: hi};
   }
 
   // points: [[x, y, z]]; cameras: [{center: [x, y, z], axes: [right, down, forward] or null}]
@@ -128,11 +128,14 @@ const Charts = (() => {
       this.points = points;
       this.cameras = cameras;
       this.yaw = 0.6; this.pitch = -0.35; this.zoom = 1;
-      const all = points.concat(cameras.map((c) => c.center));
-      const median = (k) => { const v = all.map((p) => p[k]).sort((a, b) => a - b); return v[Math.floor(v.length / 2)] || 0; };
+      // centred on the points' median; scaled so that 95% of the points and every camera fit
+      const middle = points.length ? points : cameras.map((c) => c.center);
+      const median = (k) => { const v = middle.map((p) => p[k]).sort((a, b) => a - b); return v[Math.floor(v.length / 2)] || 0; };
       this.centre = [median(0), median(1), median(2)];
-      const dist = all.map((p) => Math.hypot(p[0] - this.centre[0], p[1] - this.centre[1], p[2] - this.centre[2])).sort((a, b) => a - b);
-      this.scale = dist.length ? (dist[Math.floor(0.95 * (dist.length - 1))] || 1) : 1;
+      const away = (p) => Math.hypot(p[0] - this.centre[0], p[1] - this.centre[1], p[2] - this.centre[2]);
+      const dist = points.map(away).sort((a, b) => a - b);
+      const p95 = dist.length ? dist[Math.floor(0.95 * (dist.length - 1))] : 0;
+      this.scale = Math.max(p95, ...cameras.map((c) => away(c.center))) || 1;
       this.bind();
       this.draw();
     }
@@ -210,7 +213,7 @@ const Charts = (() => {
       }
       ctx.fillStyle = css("--muted");
       ctx.font = "12px system-ui, sans-serif";
-      ctx.fillText(`${this.points.length} points, ${this.cameras.length} cameras — drag or arrow keys to rotate, wheel or +/− to zoom`, 8, height - 8);
+      ctx.fillText(`${this.points.length} points, ${this.cameras.length} cameras`, 8, height - 8);
     }
   }
 

@@ -8,7 +8,8 @@
   const jobId = decodeURIComponent(location.pathname.split("/").filter(Boolean).pop() || "");
   const state = {job: null, kinds: null, chart: null, stream: null, table: null, view: null, request: undefined,
                  finishedShown: false};
-  window.GC_STATE = {jobId, rendered: null, chart: null, view: null, verify: null};
+  window.GC_STATE = {jobId, rendered: null, chart: null, view: null, verify: null, timings: {}};
+  const mark = (name) => { if (!(name in window.GC_STATE.timings)) window.GC_STATE.timings[name] = Math.round(performance.now()); };
 
   const $ = (id) => document.getElementById(id);
 
@@ -36,9 +37,12 @@
 
   async function refresh() {
     const response = await GC.api(`/v1/jobs/${encodeURIComponent(jobId)}`);
+    mark("answered");
     const text = await response.text();
+    mark("received");
     if (!response.ok) throw new GC.ApiError(response.status, JSON.parse(text || "null"));
     const job = JSON.parse(text);
+    mark("job");
     state.job = job;
     // Verification posts the document as the server sent it: JavaScript would write 1.0 back as 1,
     // and a certificate's data hash is over the exact JSON numbers (canonical_json).
@@ -57,7 +61,7 @@
     else if (name === "status") showStatus(data.status);
     else if (name === "end") {
       showStatus(data.status);
-      refresh().catch(GC.showError);
+      if (!state.finishedShown) refresh().catch(GC.showError);  // (a finished job's replayed stream: shown already)
     } else if (name === "error") GC.showError(data.message);
   }
 
@@ -73,18 +77,25 @@
     }
   }
 
+  // Asked for at once, beside the job itself: a finished job's page needs both.
+  let kindsPromise = null;
+  function kinds() {
+    if (!kindsPromise) kindsPromise = GC.json("/v1/problems").catch(() => []);
+    return kindsPromise;
+  }
+
   async function itemKey(kind, result) {
-    if (!state.kinds) state.kinds = await GC.json("/v1/problems").catch(() => []);
+    if (!state.kinds) state.kinds = await kinds();
     const info = state.kinds.find((k) => k.kind === kind);
     if (info && Array.isArray(result[info.item_name])) return info.item_name;
     for (const key of ["tracks", "maps", "stages", "items"]) if (Array.isArray(result[key])) return key;
     return null;
   }
 
-  async function request() {
-    if (state.request === undefined)
-      state.request = await GC.json(`/v1/jobs/${encodeURIComponent(jobId)}/request`).catch(() => null);
-    return state.request;
+  let requestPromise = null;
+  function request() {
+    if (!requestPromise) requestPromise = GC.json(`/v1/jobs/${encodeURIComponent(jobId)}/request`).catch(() => null);
+    return requestPromise;
   }
 
   // --- links -----------------------------------------------------------------------------------
@@ -338,34 +349,48 @@
     $("summary").textContent = `${stats.items ?? items.length} ${key || "items"}, ${stats.certified ?? "—"} certified, ` +
       `${num(stats.nodes)} nodes, ${duration(stats.elapsed_s)}.`;
     state.table = new ItemTable(items);
+    mark("table");
     const needsRequest = items.some((it) => it && Array.isArray(it.point)) &&
                          !items.some((it) => it && Array.isArray(it.residuals));
     const req = needsRequest ? await request() : null;
-    const res = residuals(items, req, key);
+    mark("request");
+    const res = residuals(items, req, key);  // {values, unit} or null
     if (res && res.values.length) {
       const h = Charts.histogram($("histogram"), res.values, res.unit);
-      $("hist-note").textContent = `${h.count} residuals; median ${num(h.median)}, largest ${num(h.max)}.`;
+      $("hist-note").textContent = `${h.count} residuals (${res.unit}); median ${num(h.median)}, largest ${num(h.max)}` +
+        (h.over ? `; ${h.over} above ${num(h.cut)} (the 99th percentile) not drawn.` : ".");
     } else {
       const costs = items.map((it) => it && it.cost).filter(Number.isFinite);
-      Charts.histogram($("histogram"), costs, "item cost");
-      $("hist-note").textContent = "This result carries no per-observation residuals: the items' costs are shown.";
+      if (costs.length >= 3) {
+        Charts.histogram($("histogram"), costs, "item cost");
+        $("hist-note").textContent = "This result carries no per-observation residuals: the items' costs are shown.";
+      } else {
+        $("histogram").hidden = true;
+        $("hist-note").textContent = "This result carries no per-observation residuals (its items' costs are in the table).";
+      }
     }
+    mark("histogram");
     const {points, cameras} = scene(result, items, req);
     if (points.length || cameras.length) {
       $("view-section").hidden = false;
       state.view = new Charts.View3D($("view3d"), points, cameras);
       $("view-reset").addEventListener("click", () => state.view.reset());
       window.GC_STATE.view = {points: points.length, cameras: cameras.length};
+      $("view-note").textContent = "Drag, or focus the view and use the arrow keys, to rotate; the wheel or + and − zoom.";
     }
     window.GC_STATE.rendered = performance.now();
   }
 
   document.addEventListener("DOMContentLoaded", () => {
+    mark("ready");
     $("job-id").textContent = jobId;
     state.chart = new Charts.BoundChart($("chart"));
     window.GC_STATE.chart = state.chart.points;
     $("cancel").addEventListener("click", cancel);
     $("verify").addEventListener("click", verify);
+    // Beside the job itself: a finished job's page needs the kinds (the name of its items) and, to
+    // reproject tracks, the request; fetched at once, they cost no time after the job arrives.
+    GC.api("/web/config.json").then(() => { kinds(); request(); }).catch(() => null);
     refresh().then((job) => {
       state.stream = GC.stream(`/v1/jobs/${encodeURIComponent(jobId)}/events`, onEvent);
       state.chart.draw();
