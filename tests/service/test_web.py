@@ -88,9 +88,9 @@ def browser(request):
     SCREENSHOTS.mkdir(exist_ok=True)
     yield driver
     driver.quit()
-    reporter = request.config.pluginmanager.get_plugin("terminalreporter")
-    if reporter is not None:
-        reporter.write_line(f"web page screenshots: {SCREENSHOTS}")
+    capture = request.config.pluginmanager.get_plugin("capturemanager")
+    with capture.global_and_fixture_disabled():  # printed whatever -s says: a person looks at them
+        print(f"\nweb page screenshots: {SCREENSHOTS}", flush=True)
 
 
 @pytest.fixture
