@@ -279,6 +279,13 @@ class TestApiKeys:
             wait(page, lambda d: state(d)["status"] == "queued", 20)
             assert not page.find_element(By.ID, "key-dialog").is_displayed()
             assert page.find_element(By.ID, "cancel").is_enabled()
+            page.execute_script("sessionStorage.clear();")  # a new tab's state: the job's page asks, once
+            page.get(f"{base}/jobs/{job_id}")
+            dialog = wait(page, lambda d: d.find_element(By.ID, "key-dialog").is_displayed()
+                          and d.find_element(By.ID, "key-dialog"), 20, "the job's page did not ask for a key")
+            dialog.find_element(By.ID, "key-input").send_keys(KEY + Keys.ENTER)
+            wait(page, lambda d: state(d)["status"] == "queued", 20)
+            assert not page.find_element(By.ID, "key-dialog").is_displayed()
             page.execute_script("sessionStorage.clear();")
         finally:
             stop(process)

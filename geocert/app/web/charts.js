@@ -177,7 +177,7 @@ const Charts = (() => {
       ctx.clearRect(0, 0, width, height);
       const cy = Math.cos(this.yaw), sy = Math.sin(this.yaw), cp = Math.cos(this.pitch), sp = Math.sin(this.pitch);
       const [ox, oy, oz] = this.centre, s = 1 / this.scale;
-      const f = 0.9 * Math.min(width, height) * this.zoom, dist = 3.2;
+      const f = 2.6 * Math.min(width, height) * this.zoom, dist = 3.2;  // radius 1 fills about 0.8 of the view
       // world -> view: centre, scale, yaw about y, pitch about x; the eye at z = -dist looking along +z
       const project = (p) => {
         const x = (p[0] - ox) * s, y = (p[1] - oy) * s, z = (p[2] - oz) * s;

@@ -15,12 +15,20 @@ const GC = (() => {
   }
 
   // Ask for the API key in the page's dialog; resolves once one is given (kept for the tab only).
+  // Calls made while the dialog is open wait for the same answer: the page asks once.
+  let asking = null;
   function askKey(message) {
+    if (!asking) asking = showKeyDialog(message).finally(() => { asking = null; });
+    return asking;
+  }
+
+  function showKeyDialog(message) {
     const dialog = document.getElementById("key-dialog");
     const form = dialog.querySelector("form");
     const input = dialog.querySelector("input");
     dialog.querySelector(".key-message").textContent = message || "This service needs an API key.";
     input.value = "";
+    dialog.oncancel = (event) => event.preventDefault();  // Escape: every call needs the key, so the question stays
     return new Promise((resolve) => {
       form.onsubmit = (event) => {
         event.preventDefault();

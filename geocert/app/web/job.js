@@ -312,7 +312,7 @@
     const values = [];
     if (items.some((it) => it && Array.isArray(it.residuals))) {
       for (const it of items) for (const r of (it && it.residuals) || []) values.push(Array.isArray(r) ? Math.hypot(...r) : Math.abs(r));
-      return {values, unit: "residual length (target units)"};
+      return {values, unit: "residual length, target units"};
     }
     const cams = req && req.data && req.data.cameras, inputs = req && req.data && req.data[itemKeyName];
     if (Array.isArray(cams) && Array.isArray(inputs) && items.some((it) => it && Array.isArray(it.point))) {
@@ -327,7 +327,7 @@
           if (x[2]) values.push(Math.hypot(x[0] / x[2] - obs[0], x[1] / x[2] - obs[1]));
         });
       });
-      return {values, unit: "reprojection error (pixels)"};
+      return {values, unit: "reprojection error, pixels"};
     }
     return null;
   }
@@ -390,7 +390,8 @@
     $("verify").addEventListener("click", verify);
     // Beside the job itself: a finished job's page needs the kinds (the name of its items) and, to
     // reproject tracks, the request; fetched at once, they cost no time after the job arrives.
-    GC.api("/web/config.json").then(() => { kinds(); request(); }).catch(() => null);
+    kinds();
+    request();
     refresh().then((job) => {
       state.stream = GC.stream(`/v1/jobs/${encodeURIComponent(jobId)}/events`, onEvent);
       state.chart.draw();
