@@ -43,9 +43,12 @@ const Charts = (() => {
         ctx.fillText("Waiting for progress…", left, top + 20);
         return;
       }
-      let lo = niceExp(Math.min(...values)), hi = niceExp(Math.max(...values)) + 1;
+      // (loops, not Math.min(...values): a long job's thousands of points would overflow the call's arguments)
+      let least = Infinity, most = -Infinity;
+      for (const v of values) { if (v < least) least = v; if (v > most) most = v; }
+      let lo = niceExp(least), hi = niceExp(most) + 1;
       if (hi - lo < 1) hi = lo + 1;
-      const t0 = 0, t1 = Math.max(1e-3, ...this.points.map((p) => p.t));
+      const t0 = 0, t1 = Math.max(1e-3, this.points[this.points.length - 1].t);  // points are kept in time order
       const x = (t) => left + w * (t - t0) / (t1 - t0);
       const y = (v) => top + h * (1 - (Math.log10(v) - lo) / (hi - lo));
       // grid and axes
@@ -92,7 +95,7 @@ const Charts = (() => {
     ctx.clearRect(0, 0, width, height);
     ctx.font = "12px system-ui, sans-serif";
     ctx.fillStyle = css("--muted");
-    const finite = values.filter(Number.isFinite).sort((a, b) => a - b);
+    const finite = Float64Array.from(values.filter(Number.isFinite)).sort();  // a typed array sorts numerically, fast
     if (!finite.length) { ctx.fillText("No values.", 10, 20); return null; }
     const lo = Math.min(0, finite[0]);
     let hi = finite[Math.min(finite.length - 1, Math.floor(0.99 * (finite.length - 1)))];

@@ -320,12 +320,16 @@
         const input = inputs[i];
         if (!it || !Array.isArray(it.point) || !input || !Array.isArray(input.views)) return;
         const X = it.point.length === 4 ? it.point : [...it.point, 1];
-        input.views.forEach((v, j) => {
-          const P = cams[v], obs = input.points[j];
-          if (!P || !obs) return;
-          const x = P.map((row) => row[0] * X[0] + row[1] * X[1] + row[2] * X[2] + row[3] * X[3]);
-          if (x[2]) values.push(Math.hypot(x[0] / x[2] - obs[0], x[1] / x[2] - obs[1]));
-        });
+        for (let j = 0; j < input.views.length; j++) {
+          const P = cams[input.views[j]], obs = input.points[j];
+          if (!P || !obs) continue;
+          const [a, b, c] = P;
+          const w = c[0] * X[0] + c[1] * X[1] + c[2] * X[2] + c[3] * X[3];
+          if (!w) continue;
+          const u = (a[0] * X[0] + a[1] * X[1] + a[2] * X[2] + a[3] * X[3]) / w - obs[0];
+          const v = (b[0] * X[0] + b[1] * X[1] + b[2] * X[2] + b[3] * X[3]) / w - obs[1];
+          values.push(Math.sqrt(u * u + v * v));
+        }
       });
       return {values, unit: "reprojection error, pixels"};
     }
