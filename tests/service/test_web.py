@@ -189,6 +189,28 @@ class TestWebPages:
         row = wait(page, lambda d: d.find_elements(By.CSS_SELECTOR, f"tr[data-job='{job_id}']"), 20)[0]
         assert "succeeded" in row.text and "60 / 60" in row.text and "100 %" in row.text
 
+    def test_the_form_says_what_is_not_json_and_takes_an_uploaded_file(self, page, service, tmp_path):
+        base = str(service.base_url).rstrip("/")
+        page.get(base + "/")
+        wait(page, lambda d: len(Select(d.find_element(By.ID, "template-kind")).options) > 1, 20)
+        assert not page.find_element(By.ID, "source-images").is_enabled()  # no reconstruction kind served yet
+        assert "reconstruction" in page.find_element(By.ID, "images-note").text
+        Select(page.find_element(By.ID, "template-kind")).select_by_value("triangulation")
+        template = json.loads(page.find_element(By.ID, "job-json").get_attribute("value"))
+        assert template["kind"] == "triangulation" and template["options"]["norm"] == "L2L2"
+        page.execute_script("document.getElementById('job-json').value = '{\"kind\": ';")
+        page.find_element(By.ID, "submit-button").click()  # refused before any request: nothing in the console
+        error = wait(page, lambda d: d.find_element(By.ID, "error").is_displayed() and d.find_element(By.ID, "error"), 10)
+        assert error.text.startswith("Not JSON")
+        job_file = tmp_path / "job.json"
+        job_file.write_text(json.dumps(service_job(np.random.default_rng(5), tracks=2, views=3)))
+        page.find_element(By.CSS_SELECTOR, "input[name=source][value=upload]").click()
+        page.find_element(By.ID, "job-file").send_keys(str(job_file))
+        page.find_element(By.ID, "submit-button").click()
+        wait(page, lambda d: "/jobs/" in d.current_url, 20, "the uploaded job was not submitted")
+        wait(page, lambda d: state(d)["status"] == "succeeded" and state(d)["rendered"], 60)
+        assert page.find_element(By.ID, "s-items").text == "2 / 2"
+
     def test_a_running_job_is_cancelled_from_its_page(self, page, service):
         base = str(service.base_url).rstrip("/")
         body = service_job(np.random.default_rng(24), tracks=1, views=6, norm="L1L1", rel_gap=0.0, abs_gap=0.0,
