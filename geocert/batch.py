@@ -6,6 +6,7 @@ be split into chunks that run anywhere and are put back together in input order.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from typing import Any, Callable
@@ -140,6 +141,25 @@ def assemble(kind, job: dict, options, items: list[dict], stats: dict) -> dict:
     if document is not None:
         result["certificate"] = document
     return result
+
+
+@functools.cache
+def _result_adapter(model: type):
+    from pydantic import TypeAdapter
+
+    return TypeAdapter(model)
+
+
+def result_json(kind, result: dict) -> str | None:
+    """The result document as JSON written by its kind's result model: byte for byte what the API
+    would send for it (a worker stores this, so serving a large result copies it instead of
+    parsing, validating and writing it again). None if the model does not take it (then the
+    API's own serializer decides)."""
+    adapter = _result_adapter(kind.result_model)
+    try:
+        return adapter.dump_json(adapter.validate_python(result), by_alias=True).decode()
+    except ValueError:
+        return None
 
 
 def certificate_document(kind, data: Any, options, items: list[dict]) -> dict:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import FastAPI
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from geocert.app import docs, errors, observability
+from geocert.app import docs, errors, observability, webui
 from geocert.app.api.routes import certificates, jobs, orient, service
 from geocert.settings import get_settings
 from geocert.workers import logs
@@ -82,6 +82,7 @@ def create_app() -> FastAPI:
     app.include_router(orient.router)
     app.include_router(service.router)
     app.include_router(observability.router)
+    webui.install(app)  # after the API's routes: /web is a mount
     app.add_middleware(BodySizeLimit, limit=get_settings().max_body_bytes)
     app.add_middleware(observability.RequestContext)  # outermost: sees every answer, 413s included
     return app

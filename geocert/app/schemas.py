@@ -55,6 +55,7 @@ class JobProgress(BaseModel):
     gap_rel: float | None = Field(None, description="worst relative gap over the items finished or running")
     items_done: int = Field(0, description="items (tracks, maps) finished")
     items_total: int = Field(0, description="items (tracks, maps) in the job")
+    items_certified: int | None = Field(None, description="items certified: set once the job has ended (with a result)")
     tracks_done: int = Field(0, deprecated=True, description="the same as items_done (an old name: it counts maps too)")
     tracks_total: int = Field(0, deprecated=True, description="the same as items_total (an old name: it counts maps too)")
     elapsed_s: float = 0.0

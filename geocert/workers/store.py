@@ -243,12 +243,18 @@ class JobStore:
         raw = self.r.hgetall(self.key(job_id, "items"))
         return [json.loads(raw[str(index)]) for index in range(total)]
 
-    def end(self, job_id: str, status: str, result: dict | None = None, error: dict | None = None) -> None:
+    def end(self, job_id: str, status: str, result: dict | None = None, error: dict | None = None,
+            result_text: str | None = None) -> None:
         """The job ends (the caller holds ``claim_end``): its status becomes ``status`` (one of
         TERMINAL) with its result or error, its working state is dropped, the end event is
-        published and every key of it expires ``result_ttl_s`` from now."""
+        published and every key of it expires ``result_ttl_s`` from now. ``result_text``: the
+        result as its kind's model writes it (``batch.result_json``), stored in place of our own
+        JSON of ``result`` and marked so (``result_form``) for the API to send as it is."""
         pipe = self.r.pipeline()
-        if result is not None:
+        if result is not None and result_text is not None:
+            pipe.set(self.key(job_id, "result"), result_text)
+            pipe.hset(self.key(job_id), "result_form", json.dumps("model"))
+        elif result is not None:
             pipe.set(self.key(job_id, "result"), json.dumps(result))
         pipe.hset(self.key(job_id), mapping={"status": json.dumps(status), "finished_at": json.dumps(now()),
                                               "error": json.dumps(error)})

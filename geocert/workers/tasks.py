@@ -21,7 +21,7 @@ import traceback
 
 from geocert.settings import get_settings
 from geocert.solvers.core.geometry import InputError
-from geocert.batch import assemble, item_counts, job_stats, solve_items
+from geocert.batch import assemble, item_counts, job_stats, result_json, solve_items
 from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
@@ -139,7 +139,7 @@ def end_with_result(jobs: JobStore, job_id: str, meta: dict, kind, request: dict
     status = "cancelled" if any(item["status"] == "cancelled" for item in items) else "succeeded"
     jobs.set_fields(job_id, progress=progress)
     jobs.publish(job_id, "progress", progress)
-    jobs.end(job_id, status, result=result)
+    jobs.end(job_id, status, result=result, result_text=result_json(kind, result))
     after_end(jobs, job_id)
 
 
@@ -156,6 +156,7 @@ def final_progress(items: list[dict], stats: dict) -> dict:
             "gap_abs": max(0.0, upper - lower) if bounded else None,
             "gap_rel": max(gaps, default=0.0) if bounded else None,
             **item_counts(sum(1 for item in items if item["status"] != "cancelled"), len(items)),
+            "items_certified": stats["certified"],
             "elapsed_s": stats["elapsed_s"]}
 
 

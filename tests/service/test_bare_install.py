@@ -94,6 +94,9 @@ def serve_and_solve(venv: Path, work: Path, ready_within_s: float = 120) -> dict
                     f"not ready within {ready_within_s} s ({ready.text if ready is not None else 'no answer'}):\n"
                     f"{log_tail()}")
                 time.sleep(0.5)
+            for page, text in (("/", "index.js"), ("/web/job.js", "GC_STATE")):  # the web page's files: package data
+                answer = client.get(page)
+                assert answer.status_code == 200 and text in answer.text, f"{page}: {answer.status_code}"
             created = client.post("/v1/jobs", json=README_JOB)
             assert created.status_code == 202, created.text
             location = created.headers["location"]

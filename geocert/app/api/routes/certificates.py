@@ -24,7 +24,7 @@ def job_certificate(job: OwnedJob, store: JobStoreDep):
     if job["status"] not in TERMINAL:
         raise ApiProblem(409, f"job {job['id']} is {job['status']}: its certificate comes with its result")
     result = store.result(job["id"]) or {}
-    if "certificate" not in result:
+    if result.get("certificate") is None:  # absent, or null as the result model writes it
         raise ApiProblem(409, f"job {job['id']} has no full certificate: submit with options.certificate = \"full\"",
                          "options/certificate")
     return result["certificate"]

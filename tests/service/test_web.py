@@ -1,0 +1,332 @@
+"""The web pages in a real browser: headless Chromium (Debian's `chromium`, driven through
+`chromedriver` by selenium) against a real `geocert serve` (embedded Redis, a real Celery worker).
+
+Submit a job from the form and watch its bound chart move while it runs, cancel one, open a
+finished triangulation's and an autocalibration's 3D view, page, filter and sort the items, verify
+a certificate, use the pages at a phone's width and from the keyboard, and give an API key once.
+Every test ends by reading the browser's console log: any error there fails it. Screenshots go to
+tests/service/screenshots/ (printed at the end of the run) for a person to look at.
+
+`scripts/test` installs chromium and chromium-driver when missing (scripts/bootstrap.sh), so these
+tests run wherever the suite runs; they are not skipped for want of a browser."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+from selenium import webdriver
+from selenium.webdriver.chrome.service import Service
+from selenium.webdriver.common.action_chains import ActionChains
+from selenium.webdriver.common.by import By
+from selenium.webdriver.common.keys import Keys
+from selenium.webdriver.support.ui import Select, WebDriverWait
+
+from geocert.solvers.autocalibration import scenes
+from tests.servers import free_port, wait_ready
+from tests.support import service_job
+
+pytestmark = pytest.mark.slow  # real servers and a browser: the full run only
+
+SCREENSHOTS = Path(__file__).resolve().parent / "screenshots"
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
+KEY = "web-test-key"
+
+
+def start_service(tmp: Path, **env: str) -> tuple[subprocess.Popen, str]:
+    port = free_port()
+    environment = {key: value for key, value in os.environ.items() if key != "GEOCERT_REDIS_URL"}
+    environment.update(GEOCERT_DATA_DIR=str(tmp), GEOCERT_PROGRESS_INTERVAL_S="0.1",
+                       GEOCERT_CHUNK_SIZES='{"triangulation": 20}', **env)
+    workers = "0" if env.get("NO_WORKERS") else "1"
+    process = subprocess.Popen([sys.executable, "-m", "geocert.app.cli", "serve", "--port", str(port),
+                                "--workers", workers, "--concurrency", "2"], env=environment)
+    base = f"http://127.0.0.1:{port}"
+    with httpx.Client(base_url=base, timeout=10) as client:
+        wait_ready(client, process, workers=workers != "0")
+    return process, base
+
+
+def stop(process: subprocess.Popen) -> None:
+    process.terminate()
+    try:
+        process.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory):
+    process, base = start_service(tmp_path_factory.mktemp("web"))
+    with httpx.Client(base_url=base, timeout=30) as client:
+        yield client
+    stop(process)
+
+
+@pytest.fixture(scope="module")
+def browser(request):
+    assert Path(CHROMIUM).exists() and Path(CHROMEDRIVER).exists(), (
+        "chromium and chromedriver are needed: scripts/test installs them (apt-get install chromium chromium-driver)")
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for argument in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--window-size=1280,1000",
+                     "--disable-gpu", "--no-first-run"):
+        options.add_argument(argument)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    driver = webdriver.Chrome(options=options, service=Service(CHROMEDRIVER))
+    driver.set_script_timeout(30)
+    SCREENSHOTS.mkdir(exist_ok=True)
+    yield driver
+    driver.quit()
+    capture = request.config.pluginmanager.get_plugin("capturemanager")
+    with capture.global_and_fixture_disabled():  # printed whatever -s says: a person looks at them
+        print(f"\nweb page screenshots: {SCREENSHOTS}", flush=True)
+
+
+@pytest.fixture
+def page(browser):
+    """The browser, with its console checked after the test: an error there fails the test."""
+    browser.set_window_size(1280, 1000)
+    browser.get_log("browser")  # drop what an earlier test left
+    yield browser
+    errors = [entry for entry in browser.get_log("browser") if entry["level"] == "SEVERE"]
+    assert not errors, f"console errors: {errors}"
+
+
+def shot(driver, name: str) -> None:
+    driver.save_screenshot(str(SCREENSHOTS / f"{name}.png"))
+
+
+def state(driver) -> dict:
+    return driver.execute_script(
+        "const s = window.GC_STATE || {}; return {rendered: s.rendered, view: s.view, verify: s.verify, "
+        "chart: (s.chart || []).map(p => [p.t, p.upper, p.lower, p.gap]), "
+        "status: (document.getElementById('status') || {}).textContent};")
+
+
+def wait(driver, condition, limit_s: float = 60, message: str = ""):
+    return WebDriverWait(driver, limit_s, poll_frequency=0.05).until(lambda d: condition(d), message)
+
+
+def wait_job(client: httpx.Client, job_id: str, limit_s: float = 120) -> dict:
+    deadline = time.monotonic() + limit_s
+    while (job := client.get(f"/v1/jobs/{job_id}").json())["status"] not in ("succeeded", "failed", "cancelled"):
+        assert time.monotonic() < deadline, f"job still {job['status']}"
+        time.sleep(0.1)
+    return job
+
+
+def finished_page(driver, base: str, job_id: str) -> dict:
+    driver.get(f"{base}/jobs/{job_id}")
+    wait(driver, lambda d: state(d)["rendered"], 30, "the finished job's page did not render")
+    return state(driver)
+
+
+class TestWebPages:
+    def test_a_job_submitted_from_the_form_streams_its_bounds_then_shows_its_items(self, page, service):
+        base = str(service.base_url).rstrip("/")
+        body = service_job(np.random.default_rng(7), tracks=60, views=5, norm="L1L1", rel_gap=1e-5,
+                           certificate="full")
+        page.get(base + "/")
+        wait(page, lambda d: len(Select(d.find_element(By.ID, "template-kind")).options) > 1, 20)
+        page.execute_script("document.getElementById('job-json').value = arguments[0];", json.dumps(body))
+        page.find_element(By.ID, "submit-button").click()
+        wait(page, lambda d: "/jobs/" in d.current_url, 20, "the form did not lead to the job's page")
+        job_id = page.current_url.rstrip("/").rsplit("/", 1)[1]
+
+        seen_running: list = []  # distinct chart points seen while the page said the job was running
+        while True:
+            now = state(page)
+            if now["status"] in ("succeeded", "failed", "cancelled"):
+                break
+            if now["status"] == "running":
+                seen_running = max(seen_running, now["chart"], key=len)
+                if len({tuple(p) for p in seen_running}) == 3:
+                    shot(page, "job-running")
+            time.sleep(0.05)
+        distinct = {tuple(p) for p in seen_running}
+        assert len(distinct) >= 2, f"the chart had {len(distinct)} distinct points while the job ran"
+        assert len({p[0] for p in distinct}) >= 2 and len({p[2] for p in distinct}) >= 2  # time and lower bound moved
+        assert now["status"] == "succeeded"
+
+        done = wait(page, lambda d: state(d)["rendered"] and state(d), 30, "the result did not render")
+        job = service.get(f"/v1/jobs/{job_id}").json()
+        assert done["view"] == {"points": 60, "cameras": 5}  # a triangulation's points, its cameras from the request
+        assert int(page.find_element(By.ID, "chart").get_attribute("data-points")) >= 2
+        assert page.find_element(By.ID, "s-items").text == "60 / 60"
+        note = page.find_element(By.ID, "page-note").text
+        assert note == "60 of 60 items; page 1 of 2", note
+        assert "residuals" in page.find_element(By.ID, "hist-note").text
+        shot(page, "job-finished")
+
+        # sort by cost, highest first: the table's first row is the costliest item
+        page.find_element(By.CSS_SELECTOR, "#items thead button[data-sort='cost']").click()
+        page.find_element(By.CSS_SELECTOR, "#items thead button[data-sort='cost']").click()
+        costs = [track["cost"] for track in job["result"]["tracks"]]
+        first = int(page.find_element(By.CSS_SELECTOR, "#items tbody tr").get_attribute("data-item"))
+        assert first == int(np.argmax(costs))
+        # pages of 25: three, the last with 10 rows
+        Select(page.find_element(By.ID, "f-size")).select_by_visible_text("25")
+        page.find_element(By.ID, "last").click()
+        assert len(page.find_elements(By.CSS_SELECTOR, "#items tbody tr")) == 10
+        assert page.find_element(By.ID, "page-note").text == "60 of 60 items; page 3 of 3"
+        # a filter nothing meets
+        Select(page.find_element(By.ID, "f-certified")).select_by_visible_text("no")
+        assert page.find_element(By.ID, "page-note").text.startswith("0 of 60 items")
+
+        # the job is listed on / with its certified fraction
+        page.get(base + "/")
+        row = wait(page, lambda d: d.find_elements(By.CSS_SELECTOR, f"tr[data-job='{job_id}']"), 20)[0]
+        assert "succeeded" in row.text and "60 / 60" in row.text and "100 %" in row.text
+
+    def test_the_form_says_what_is_not_json_and_takes_an_uploaded_file(self, page, service, tmp_path):
+        base = str(service.base_url).rstrip("/")
+        page.get(base + "/")
+        wait(page, lambda d: len(Select(d.find_element(By.ID, "template-kind")).options) > 1, 20)
+        assert not page.find_element(By.ID, "source-images").is_enabled()  # no reconstruction kind served yet
+        assert "reconstruction" in page.find_element(By.ID, "images-note").text
+        Select(page.find_element(By.ID, "template-kind")).select_by_value("triangulation")
+        template = json.loads(page.find_element(By.ID, "job-json").get_attribute("value"))
+        assert template["kind"] == "triangulation" and template["options"]["norm"] == "L2L2"
+        page.execute_script("document.getElementById('job-json').value = '{\"kind\": ';")
+        page.find_element(By.ID, "submit-button").click()  # refused before any request: nothing in the console
+        error = wait(page, lambda d: d.find_element(By.ID, "error").is_displayed() and d.find_element(By.ID, "error"), 10)
+        assert error.text.startswith("Not JSON")
+        job_file = tmp_path / "job.json"
+        job_file.write_text(json.dumps(service_job(np.random.default_rng(5), tracks=2, views=3)))
+        page.find_element(By.CSS_SELECTOR, "input[name=source][value=upload]").click()
+        page.find_element(By.ID, "job-file").send_keys(str(job_file))
+        page.find_element(By.ID, "submit-button").click()
+        wait(page, lambda d: "/jobs/" in d.current_url, 20, "the uploaded job was not submitted")
+        wait(page, lambda d: state(d)["status"] == "succeeded" and state(d)["rendered"], 60)
+        assert page.find_element(By.ID, "s-items").text == "2 / 2"
+
+    def test_a_running_job_is_cancelled_from_its_page(self, page, service):
+        base = str(service.base_url).rstrip("/")
+        body = service_job(np.random.default_rng(24), tracks=1, views=6, norm="L1L1", rel_gap=0.0, abs_gap=0.0,
+                           max_nodes=100_000, time_limit_s=60)
+        job_id = service.post("/v1/jobs", json=body).json()["id"]
+        page.get(f"{base}/jobs/{job_id}")
+        wait(page, lambda d: state(d)["status"] == "running" and len(state(d)["chart"]) >= 1, 30,
+             "the job did not start")
+        button = page.find_element(By.ID, "cancel")
+        assert button.is_enabled()
+        button.click()
+        wait(page, lambda d: state(d)["status"] == "cancelled", 30, "the page never said cancelled")
+        wait(page, lambda d: state(d)["rendered"], 20)
+        assert not page.find_element(By.ID, "cancel").is_enabled()
+        assert service.get(f"/v1/jobs/{job_id}").json()["status"] == "cancelled"
+        shot(page, "job-cancelled")
+
+    def test_an_autocalibration_in_3d_and_its_certificate_verified(self, page, service):
+        base = str(service.base_url).rstrip("/")
+        scene = scenes.make_scene(8, 0.1, seed=5)
+        body = {"kind": "autocalibration", "data": scene.job_data(), "options": {"certificate": "full"}}
+        job_id = service.post("/v1/jobs", json=body).json()["id"]
+        assert wait_job(service, job_id)["status"] == "succeeded"
+        now = finished_page(page, base, job_id)
+        assert now["view"] == {"points": 100, "cameras": 8}
+
+        canvas = page.find_element(By.ID, "view3d")
+        image = lambda: page.execute_script("return arguments[0].toDataURL();", canvas)  # noqa: E731
+        before = image()
+        ActionChains(page).move_to_element(canvas).click_and_hold().move_by_offset(80, 30).release().perform()
+        dragged = image()
+        assert dragged != before, "dragging did not rotate the view"
+        canvas.send_keys("+++")  # zoom from the keyboard
+        assert image() != dragged
+        shot(page, "autocalibration-3d")
+
+        page.find_element(By.ID, "verify").click()
+        wait(page, lambda d: state(d)["verify"], 60, "no verification report")
+        verdict = page.find_element(By.ID, "verify-verdict").text
+        report = state(page)["verify"]
+        assert verdict == "valid" and report["valid"] is True, report["first_failure"]
+        rows = page.find_elements(By.CSS_SELECTOR, "#verify-report tr[data-check]")
+        assert [row.get_attribute("data-check") for row in rows] == [check["name"] for check in report["checks"]]
+        assert all("passed" in row.text for row in rows)
+        page.execute_script("document.getElementById('verify-report').scrollIntoView();")
+        shot(page, "autocalibration-verified")
+
+    def test_phone_width_and_keyboard(self, page, service):
+        base = str(service.base_url).rstrip("/")
+        job_id = service.post("/v1/jobs", json=service_job(np.random.default_rng(3), tracks=120, views=4)).json()["id"]
+        wait_job(service, job_id)
+        page.set_window_size(390, 844)
+        page.get(base + "/")
+        wait(page, lambda d: d.find_elements(By.CSS_SELECTOR, f"tr[data-job='{job_id}']"), 20)
+        overflow = "return document.documentElement.scrollWidth - window.innerWidth;"
+        assert page.execute_script(overflow) <= 1, "the jobs page is wider than a phone"
+        shot(page, "phone-jobs")
+
+        # the keyboard reaches the form's submit button, and the job's link, by Tab alone
+        page.find_element(By.TAG_NAME, "body").click()
+        reached = set()
+        for _ in range(40):
+            ActionChains(page).send_keys(Keys.TAB).perform()
+            active = page.switch_to.active_element
+            reached.add(active.get_attribute("id") or active.get_attribute("href") or active.tag_name)
+        assert "submit-button" in reached and f"{base}/jobs/{job_id}" in reached, reached
+
+        now = finished_page(page, base, job_id)
+        assert now["view"]["points"] == 120
+        assert page.execute_script(overflow) <= 1, "the job's page is wider than a phone"
+        page.find_element(By.ID, "view3d").send_keys(Keys.ARROW_LEFT)  # focusable: rotates from the keyboard
+        shot(page, "phone-job")
+
+
+class TestApiKeys:
+    def test_the_page_asks_for_the_key_once_and_keeps_it_for_the_tab(self, page, tmp_path):
+        process, base = start_service(tmp_path, GEOCERT_API_KEYS=KEY, NO_WORKERS="1")
+        try:
+            with httpx.Client(base_url=base, timeout=10, headers={"X-API-Key": KEY}) as client:
+                job_id = client.post("/v1/jobs", json=service_job(np.random.default_rng(1), tracks=1)).json()["id"]
+            page.get(base + "/")
+            dialog = wait(page, lambda d: d.find_element(By.ID, "key-dialog").is_displayed()
+                          and d.find_element(By.ID, "key-dialog"), 20, "the page did not ask for a key")
+            dialog.find_element(By.ID, "key-input").send_keys(KEY + Keys.ENTER)
+            wait(page, lambda d: d.find_elements(By.CSS_SELECTOR, f"tr[data-job='{job_id}']"), 20)
+            assert page.execute_script("return sessionStorage.getItem('geocert.apiKey');") == KEY
+            page.get(f"{base}/jobs/{job_id}")  # the same tab: no second question
+            wait(page, lambda d: state(d)["status"] == "queued", 20)
+            assert not page.find_element(By.ID, "key-dialog").is_displayed()
+            assert page.find_element(By.ID, "cancel").is_enabled()
+            page.execute_script("sessionStorage.clear();")  # a new tab's state: the job's page asks, once
+            page.get(f"{base}/jobs/{job_id}")
+            dialog = wait(page, lambda d: d.find_element(By.ID, "key-dialog").is_displayed()
+                          and d.find_element(By.ID, "key-dialog"), 20, "the job's page did not ask for a key")
+            dialog.find_element(By.ID, "key-input").send_keys(KEY + Keys.ENTER)
+            wait(page, lambda d: state(d)["status"] == "queued", 20)
+            assert not page.find_element(By.ID, "key-dialog").is_displayed()
+            page.execute_script("sessionStorage.clear();")
+        finally:
+            stop(process)
+
+
+class TestRoutesThePageUses:
+    def test_a_finished_job_is_sent_as_the_job_model_writes_it_and_its_request_is_kept(self, service):
+        from geocert.app.schemas import Job
+
+        body = service_job(np.random.default_rng(11), tracks=3, views=3, certificate="full")
+        job_id = service.post("/v1/jobs", json=body).json()["id"]
+        wait_job(service, job_id)
+        response = service.get(f"/v1/jobs/{job_id}")  # the stored result, sent as stored
+        document = response.json()
+        assert response.headers["content-type"] == "application/json"
+        assert document == json.loads(Job.model_validate(document).model_dump_json(by_alias=True))
+        assert document["progress"]["items_certified"] == document["result"]["stats"]["certified"] == 3
+        assert service.get(f"/v1/jobs/{job_id}/certificate").json() == document["result"]["certificate"]
+        request = service.get(f"/v1/jobs/{job_id}/request").json()
+        assert request["data"] == body["data"] and request["options"]["certificate"] == "full"
+        assert request["options"]["rel_gap"] == 1e-3  # defaults filled in
+        assert service.get("/v1/jobs/0123456789abcdef0123456789abcdef/request").status_code == 404
