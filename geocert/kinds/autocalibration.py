@@ -18,6 +18,7 @@ from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finit
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.autocalibration.verification import STAGES, read_data
+from geocert.solvers.core.determinacy import safely
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.verify import SelfCheckFailed, self_check_enabled, verify_arrays
 
@@ -258,12 +259,11 @@ class AutocalibrationKind:
         metric_stage["plane_at_infinity"] = document["plane_at_infinity"]
         centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
         if result.p is not None and math.isfinite(affine_cost):
-            affine_stage["determinacy"] = determinacy.affine_stage(problem, result.p, affine_stage["cost"],
-                                                                   affine_stage["lower_bound"], centres)
+            affine_stage["determinacy"] = safely(determinacy.affine_stage, problem, result.p, affine_stage["cost"],
+                                                 affine_stage["lower_bound"], centres)
         if document["K"] is not None:
-            metric_stage["determinacy"] = determinacy.metric_stage(problem, result.p, np.array(document["K"]),
-                                                                   metric_stage["cost"], metric_stage["lower_bound"],
-                                                                   centres)
+            metric_stage["determinacy"] = safely(determinacy.metric_stage, problem, result.p, np.array(document["K"]),
+                                                 metric_stage["cost"], metric_stage["lower_bound"], centres)
         if result.baseline is not None:
             Kb = problem.K0 @ pr.upper_triangular_root(mrelax.omega_of(result.baseline["w"])) \
                 if np.linalg.eigvalsh(mrelax.omega_of(result.baseline["w"]))[0] > 0 else None

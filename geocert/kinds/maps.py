@@ -123,12 +123,14 @@ class MapKind:
     def solve_item(self, parsed: ParsedMaps, index: int, options: MapOptions, callback) -> dict:
         from geocert.solvers.fractional.maps import fit_map  # the conic solver, only to solve
 
+        from geocert.solvers.core.determinacy import safely
         from geocert.solvers.fractional import determinacy
 
         source, target = parsed.maps[index]
         result = fit_map(source, target, options, callback)
         return {**map_document(result),
-                "determinacy": determinacy.map_(source, target, result.matrix, result.cost, result.lower_bound)}
+                "determinacy": safely(determinacy.map_, source, target, result.matrix, result.cost,
+                                      result.lower_bound)}
 
     def cancelled_item(self) -> dict:
         return map_document(MapResult("cancelled", False, reason="the job was cancelled before this map started"))

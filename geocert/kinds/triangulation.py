@@ -131,13 +131,14 @@ class TriangulationKind:
     def solve_item(self, parsed: ParsedTracks, index: int, options: TriangulationOptions, callback) -> dict:
         from geocert.solvers.fractional.triangulation import triangulate  # the conic solver, only to solve
 
+        from geocert.solvers.core.determinacy import safely
         from geocert.solvers.fractional import determinacy
 
         views, points = parsed.tracks[index]
         result = triangulate(parsed.cameras[views], points, options, callback)
         return {**track_document(result),
-                "determinacy": determinacy.track(parsed.cameras[views], points, result.point, result.at_infinity,
-                                                 result.cost, result.lower_bound)}
+                "determinacy": safely(determinacy.track, parsed.cameras[views], points, result.point,
+                                      result.at_infinity, result.cost, result.lower_bound)}
 
     def cancelled_item(self) -> dict:
         return track_document(TrackResult("cancelled", False, reason="the job was cancelled before this track started"))

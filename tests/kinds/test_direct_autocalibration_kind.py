@@ -89,5 +89,9 @@ def test_stratified_and_direct_agree_on_a_scene():
     for method in ("stratified", "direct"):
         result = solve_job({"kind": "autocalibration", "data": scene.job_data(), "options": {"method": method}})
         K[method] = np.array(result["K"])
+        determinacy = result["stages"][-1]["determinacy"]  # issue 19: well posed, the truth inside
+        assert determinacy["determined"], determinacy
+        focal = next(i for i in determinacy["intervals"] if i["name"] == "focal_x")
+        assert focal["lower"] <= scene.K[0, 0] <= focal["upper"]
     assert abs(K["direct"][0, 0] / K["stratified"][0, 0] - 1) < 0.03
     assert np.abs(K["direct"][:2, 2] - K["stratified"][:2, 2]).max() < 30

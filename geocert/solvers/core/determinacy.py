@@ -43,6 +43,16 @@ class Determinacy:
                 "intervals": self.intervals, "warnings": self.warnings}
 
 
+def safely(function, *args, **kwargs) -> dict | None:
+    """A determinacy document, or None when the data defeat the estimate's own linear algebra (it
+    is an estimate beside the answer: it never fails a solve)."""
+    try:
+        with np.errstate(all="ignore"):
+            return function(*args, **kwargs)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return None
+
+
 def _finite(value: float | None) -> float | None:
     return float(value) if value is not None and math.isfinite(value) else None
 
