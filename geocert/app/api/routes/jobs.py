@@ -42,7 +42,7 @@ def _check_limits(kind, parsed, body, request: dict) -> int:
     options, given = request["options"], body.options.model_fields_set
     for name, maximum, unit, variable in (("time_limit_s", settings.max_item_time_limit_s, " s", "MAX_ITEM_TIME_LIMIT_S"),
                                           ("max_nodes", settings.max_item_nodes, " nodes", "MAX_ITEM_NODES")):
-        if options[name] <= maximum:
+        if name not in options or options[name] <= maximum:  # a kind without the option (stereo_lines)
             continue
         if name in given:
             raise ApiProblem(422, f"exceeds this server's maximum of {maximum:g}{unit} per item (GEOCERT_{variable})",
