@@ -218,9 +218,10 @@ class StereoLinesKind:
         if "rig" not in data:
             raise InputError("data/rig", "is required")
         rig = read_rig(data["rig"])
-        if ("frames" in data) == ("matches" in data):
+        has_frames, has_matches = data.get("frames") is not None, data.get("matches") is not None  # null: absent
+        if has_frames == has_matches:
             raise InputError("data/frames", "give either frames (segments per frame) or matches (per frame pair)")
-        if "frames" in data:
+        if has_frames:
             frames = data["frames"]
             if not isinstance(frames, list) or len(frames) < 2:
                 raise InputError("data/frames", "must be a list of at least 2 frames")
