@@ -63,12 +63,14 @@ class StereoLinesOptions:
     """The stereo_lines kind's options. Defaults: the incremental solver (frame-rate motion is
     small; the thesis's Figure 9.5 finds it the most accurate there) on samples of 3 lines (the
     thesis's real-data setting, 9.3.6: 2-line samples are minimal but far more noise-sensitive
-    with a narrow baseline), no refinement (it costs more than the rest of a frame pair)."""
+    with a narrow baseline), and the refinement (a two-frame bundle adjustment of the inliers:
+    about 0.8 degrees of rotation error at 0.5 px noise without it, about 0.15 with it; it costs
+    about as much as the rest of the frame pair)."""
 
     solver: str = "incremental"
     sample_size: int | None = 3  # None: the solver's minimum (2; 3 for linear)
     ransac: RansacOptions = field(default_factory=RansacOptions)
-    refine: bool = False
+    refine: bool = True
     incremental_iterations: int = 3
     matching: MatchingOptions = field(default_factory=MatchingOptions)
 
