@@ -20,9 +20,9 @@ from geocert.solvers.lines.results import Motion
 
 @dataclass
 class RefineOptions:
-    max_iterations: int = 20
+    max_iterations: int = 12
     loss_scale_px: float = 2.0  # Huber: residuals beyond this are down-weighted
-    tolerance: float = 1e-8  # relative decrease of the cost below which the iteration stops
+    tolerance: float = 1e-7  # relative decrease of the cost below which the iteration stops
 
 
 def _points_on_lines(lines: LineSet, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -69,7 +69,8 @@ class _Problem:
 
     def __init__(self, lines: LineSet):
         cameras = np.stack(lines.rig.cameras())  # (2, 3, 4): left, right
-        self.M, self.m = cameras[:, :, :3], cameras[:, :, 3]
+        self.Mt = cameras[:, None, :, :3].transpose(0, 1, 3, 2)  # (2 cameras, 1, 3, 3): x = X M^T + m
+        self.m = cameras[:, None, None, :, 3]  # (2 cameras, 1, 1, 3)
         n = len(lines)
         # views in the order left a, right a, left b, right b -> (frame, camera, N, ...)
         self.segments = lines.segments.transpose(1, 0, 2).reshape(2, 2, n, 4)
@@ -82,7 +83,7 @@ class _Problem:
         points = np.stack([P, Q], axis=1)  # (B, 2 points, N, 3)
         moved = points @ R[:, None].transpose(0, 1, 3, 2) + t[:, None, None, :]
         X = np.stack([points, moved], axis=1)  # (B, 2 frames, 2 points, N, 3)
-        x = np.einsum("bfpnj,cij->bfcpni", X, self.M) + self.m[None, None, :, None, None, :]
+        x = X[:, :, None] @ self.Mt + self.m  # (B, 2 frames, 2 cameras, 2 points, N, 3)
         line = cross(x[:, :, :, 0], x[:, :, :, 1])  # (B, 2, 2, N, 3)
         norm = np.hypot(line[..., 0], line[..., 1])
         norm[norm == 0] = 1e-300
@@ -107,7 +108,9 @@ def refine(lines: LineSet, motion: Motion, options: RefineOptions | None = None)
 
     def states(dm: np.ndarray, dl: np.ndarray):
         """Motions and lines after steps dm (B, 6: rotation vector, t) and dl (B, N, 4)."""
-        R1 = np.stack([rodrigues(w) for w in dm[:, :3]]) @ R
+        R1 = np.repeat(R[None], len(dm), axis=0)
+        for k in np.flatnonzero(np.any(dm[:, :3] != 0, axis=1)):  # the Jacobian's line rows keep R
+            R1[k] = rodrigues(dm[k, :3]) @ R
         P1 = P + dl[..., 0, None] * basis[:, 0] + dl[..., 1, None] * basis[:, 1]
         Q1 = Q + dl[..., 2, None] * basis[:, 0] + dl[..., 3, None] * basis[:, 1]
         return R1, t + dm[:, 3:], P1, Q1
@@ -138,19 +141,19 @@ def refine(lines: LineSet, motion: Motion, options: RefineOptions | None = None)
         Jm = J[:6].transpose(1, 2, 0) / h_m  # (N, 8, 6)
         Jl = J[6:].transpose(1, 2, 0) / h_l  # (N, 8, 4)
         rw = r * sw
-        U = np.einsum("nri,nrj->nij", Jl, Jl)  # (N, 4, 4)
-        W = np.einsum("nri,nrj->nij", Jm, Jl)  # (N, 6, 4)
-        V = np.einsum("nri,nrj->ij", Jm, Jm)  # (6, 6)
-        gm = np.einsum("nri,nr->i", Jm, rw)
-        gl = np.einsum("nri,nr->ni", Jl, rw)
+        U = Jl.transpose(0, 2, 1) @ Jl  # (N, 4, 4)
+        W = Jm.transpose(0, 2, 1) @ Jl  # (N, 6, 4)
+        V = Jm.reshape(-1, 6).T @ Jm.reshape(-1, 6)  # (6, 6)
+        gm = Jm.reshape(-1, 6).T @ rw.reshape(-1)
+        gl = (Jl.transpose(0, 2, 1) @ rw[:, :, None])[:, :, 0]
         diagonal = np.einsum("nii->ni", U)[:, :, None] * eye4 + 1e-12 * eye4
         improved = converged = False
         for _ in range(8):
             Ui = np.linalg.inv(U + damping * diagonal)
-            WUi = W @ Ui
-            S = V + damping * np.diag(np.diag(V)) - np.einsum("nij,nkj->ik", WUi, W)
-            dm = -np.linalg.solve(S, gm - np.einsum("nij,nj->i", WUi, gl))
-            dl = -np.einsum("nij,nj->ni", Ui, gl + np.einsum("nji,j->ni", W, dm))
+            WUi = W @ Ui  # (N, 6, 4)
+            S = V + damping * np.diag(np.diag(V)) - np.tensordot(WUi, W, axes=([0, 2], [0, 2]))  # Schur
+            dm = -np.linalg.solve(S, gm - np.tensordot(WUi, gl, axes=([0, 2], [0, 1])))
+            dl = -(Ui @ (gl + (dm @ W))[:, :, None])[:, :, 0]
             R1, t1, P1, Q1 = states(dm[None], dl[None])
             r1 = problem.residuals(R1, t1, P1, Q1)[0]
             sw1, cost1 = weighted(r1)

@@ -99,3 +99,106 @@ def sequence(rng, frames: int, count: int, noise_px: float = 0.0, degrees: float
             right = right + rng.normal(scale=noise_px, size=right.shape)
         out.append({"left": left, "right": right})
     return rig, poses, out
+
+
+def room_of_boxes(rng, boxes: int = 12, size=(8.0, 2.6, 8.0)) -> np.ndarray:
+    """(N, 2, 3) the edges of an indoor scene (world coordinates, y down as in the cameras): the
+    room's 12 edges, a door frame and a window on the walls, and ``boxes`` boxes on the floor
+    (12 edges each) kept away from the room's centre, where the rig moves."""
+    w, h, d = size
+    edges = []
+
+    def box(lo, hi):
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        for i in range(8):
+            for j in range(i + 1, 8):
+                if np.sum(corners[i] != corners[j]) == 1:
+                    edges.append((corners[i], corners[j]))
+
+    box(np.array([-w / 2, -h / 2, -d / 2]), np.array([w / 2, h / 2, d / 2]))  # the room (floor at y = h/2)
+    for x0 in (-1.2, 0.4):  # a door frame and a window on the far wall, shelves on the side walls
+        edges += [(np.array([x0, h / 2, d / 2]), np.array([x0, -0.6, d / 2])),
+                  (np.array([x0 + 0.9, h / 2, d / 2]), np.array([x0 + 0.9, -0.6, d / 2])),
+                  (np.array([x0, -0.6, d / 2]), np.array([x0 + 0.9, -0.6, d / 2]))]
+    for z0 in (-2.0, 0.5, 2.5):
+        for side in (-1, 1):
+            edges.append((np.array([side * w / 2, z0 / 4, z0 - 1.0]), np.array([side * w / 2, z0 / 4, z0 + 0.8])))
+    placed = 0
+    while placed < boxes:
+        centre = rng.uniform([-w / 2 + 0.6, -d / 2 + 0.6], [w / 2 - 0.6, d / 2 - 0.6])
+        if np.hypot(*centre) < 2.6:
+            continue
+        half = rng.uniform(0.2, 0.5, size=3)
+        top = h / 2 - 2 * half[1]
+        box(np.array([centre[0] - half[0], top, centre[1] - half[2]]),
+            np.array([centre[0] + half[0], h / 2, centre[1] + half[2]]))
+        placed += 1
+    return np.array(edges, dtype=float)
+
+
+def visible_segments(rig: Rig, X: np.ndarray, R: np.ndarray, t: np.ndarray, near: float = 0.2,
+                     min_length_px: float = 15.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The parts of the 3D segments X (N, 2, 3; world) in front of both cameras of the rig at pose
+    (R, t) (X_cam = R X + t) and inside both images: (left, right, index) with index the 3D segment
+    each image segment comes from (the same for left and right: a segment is kept when visible in
+    both, clipped in 3D to the part both cameras see)."""
+    P_left, P_right = rig.cameras()
+    cam = X @ R.T + t  # (N, 2, 3) left camera frame
+    keep_left, keep_right, index = [], [], []
+    for i, (a, b) in enumerate(cam):
+        lo, hi = 0.0, 1.0
+        for P in (P_left, P_right):  # clip the parameter range to each camera's near plane and image
+            pa, pb = P[:, :3] @ a + P[:, 3], P[:, :3] @ b + P[:, 3]
+            # constraints linear in s after multiplying by depth: depth(s) > near, 0 < u < W, 0 < v < H
+            for ca, cb in ((pa[2] - near, pb[2] - near), (pa[0], pb[0]), (WIDTH * pa[2] - pa[0], WIDTH * pb[2] - pb[0]),
+                           (pa[1], pb[1]), (HEIGHT * pa[2] - pa[1], HEIGHT * pb[2] - pb[1])):
+                if ca < 0 and cb < 0:
+                    lo, hi = 1.0, 0.0
+                elif ca < 0:
+                    lo = max(lo, ca / (ca - cb))
+                elif cb < 0:
+                    hi = min(hi, ca / (ca - cb))
+        if hi - lo < 1e-6:
+            continue
+        p, q = a + lo * (b - a), a + hi * (b - a)
+        segments = []
+        for P in (P_left, P_right):
+            x = np.array([P[:, :3] @ p + P[:, 3], P[:, :3] @ q + P[:, 3]])
+            segments.append((x[:, :2] / x[:, 2:]).ravel())
+        if min(np.hypot(s[2] - s[0], s[3] - s[1]) for s in segments) < min_length_px:
+            continue
+        keep_left.append(segments[0])
+        keep_right.append(segments[1])
+        index.append(i)
+    return np.array(keep_left).reshape(-1, 4), np.array(keep_right).reshape(-1, 4), np.array(index, dtype=int)
+
+
+def room_loop(rng, frames: int = 120, radius: float = 1.2, noise_px: float = 0.0, rig: Rig | None = None,
+              boxes: int = 12) -> tuple[Rig, list[tuple[np.ndarray, np.ndarray]], list[dict], float]:
+    """A rig walking once round a circle in a room of boxes, looking along its path (slightly
+    outwards), back to where it started: poses X_k = R_k X_0 + t_k (frame 0's left camera as the
+    origin), segments per frame (left, right; visible parts only, with noise on the endpoints),
+    and the loop's length."""
+    rig = rig or thesis_rig()
+    world = room_of_boxes(rng, boxes)
+    world_poses = []
+    for k in range(frames + 1):  # the last frame is the first pose again
+        angle = 2 * np.pi * k / frames
+        centre = np.array([radius * np.cos(angle), 0.1 * np.sin(2 * angle), radius * np.sin(angle)])
+        heading = angle + np.pi / 2 - 0.3  # tangent, turned slightly outwards
+        forward = np.array([np.cos(heading), 0.0, np.sin(heading)])
+        down = np.array([0.0, 1.0, 0.0])
+        right = np.cross(down, forward)
+        R = np.stack([right, down, forward])  # rows: camera axes in the world
+        world_poses.append((R, -R @ centre))
+    R0, t0 = world_poses[0]
+    poses, out = [], []
+    for R, t in world_poses:
+        poses.append((R @ R0.T, t - R @ R0.T @ t0))  # relative to frame 0
+        left, right, _ = visible_segments(rig, world, R, t)
+        if noise_px:
+            left = left + rng.normal(scale=noise_px, size=left.shape)
+            right = right + rng.normal(scale=noise_px, size=right.shape)
+        order = rng.permutation(len(left))  # detections come in no particular order
+        out.append({"left": left[order], "right": right[order]})
+    return rig, poses, out, 2 * np.pi * radius
