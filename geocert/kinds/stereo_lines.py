@@ -65,7 +65,10 @@ class RansacIn(Strict):
                                      description="lines whose stereo planes meet at a smaller sine are not sampled")
     min_sample_angle_deg: Finite = Field(RansacOptions.min_sample_angle_deg, ge=0, le=90)
     seed: int | None = Field(RansacOptions.seed, description="sampling seed (null: fresh randomness)")
-    local_optimisation: int = Field(RansacOptions.local_optimisation, ge=0, le=20)
+    min_inliers: int = Field(RansacOptions.min_inliers, ge=2, le=10_000,
+                             description="a pair with fewer inliers fails (its motion is not trusted)")
+    local_optimisation: int = Field(RansacOptions.local_optimisation, ge=0, le=20,
+                                    description="rounds of refitting each new best sample on its inliers")
 
 
 class MatchingIn(Strict):
@@ -74,6 +77,8 @@ class MatchingIn(Strict):
     min_epipolar_angle_deg: Finite = Field(MatchingOptions.min_epipolar_angle_deg, ge=0, lt=90)
     max_track_px: Finite = Field(MatchingOptions.max_track_px, gt=0, le=10_000)
     max_track_angle_deg: Finite = Field(MatchingOptions.max_track_angle_deg, gt=0, le=90)
+    ambiguity_margin: Finite = Field(MatchingOptions.ambiguity_margin, ge=0, le=10,
+                                     description="drop a stereo match whose rival costs within this of it (0: off)")
 
 
 _DEFAULTS = StereoLinesOptions()

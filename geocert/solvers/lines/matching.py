@@ -7,14 +7,16 @@ image; a right segment matches when the stretch of it between those epipolar lin
 is in front of both cameras. Segments nearly along the epipolar lines (within
 ``min_epipolar_angle_deg``) are not matched: the stereo pair cannot place them. The cost
 (1 - overlap + angle / max angle) is minimised over one-to-one assignments (Hungarian method,
-scipy's linear_sum_assignment).
+scipy's linear_sum_assignment), and a match is dropped when another candidate of either segment
+costs within ``ambiguity_margin`` of it (nearby parallel segments at other depths, which geometry
+alone cannot tell apart).
 
 Frame to frame (left images): a nearest-neighbour tracker on the segments' geometry: a segment of
 frame b is a candidate for one of frame a when their orientations differ by at most
 ``max_track_angle_deg`` and its midpoint lies within ``max_track_px`` of frame a's segment's line
 and of its midpoint (``2 max_track_px``); the cost (normalised distance and angle) is minimised
 over one-to-one assignments. A line seen in the four views is a left-a segment tracked to a left-b
-segment, both with a stereo match.
+segment, both with a stereo match, whose right segments are tracked to each other too.
 """
 
 from __future__ import annotations
@@ -34,12 +36,14 @@ class MatchingOptions:
     min_overlap: float = 0.5
     max_stereo_angle_deg: float = 20.0
     min_epipolar_angle_deg: float = 5.0
-    max_track_px: float = 40.0
+    max_track_px: float = 60.0
     max_track_angle_deg: float = 10.0
+    ambiguity_margin: float = 0.0  # > 0: a stereo match is dropped when a rival's cost is within this of its own
 
     OPTION_RANGES = {"min_overlap": {"ge": 0, "le": 1}, "max_stereo_angle_deg": {"gt": 0, "le": 90},
                      "min_epipolar_angle_deg": {"ge": 0, "lt": 90}, "max_track_px": {"gt": 0, "le": 10_000},
-                     "max_track_angle_deg": {"gt": 0, "le": 90}}
+                     "max_track_angle_deg": {"gt": 0, "le": 90},
+                     "ambiguity_margin": {"ge": 0, "le": 10}}
 
 
 def fundamental(rig: Rig) -> np.ndarray:
@@ -98,7 +102,17 @@ def stereo_matches(rig: Rig, left: np.ndarray, right: np.ndarray, options: Match
     cost = 1.0 - overlap + angle / options.max_stereo_angle_deg
     allowed = (np.nan_to_num(overlap, nan=-1.0) >= options.min_overlap) & (angle <= options.max_stereo_angle_deg) \
         & (epipolar_angle >= options.min_epipolar_angle_deg) & depth_ok
-    return _assign(np.where(allowed, cost, _BIG))
+    cost = np.where(allowed, cost, _BIG)
+    pairs = _assign(cost)
+    if options.ambiguity_margin > 0 and len(pairs):
+        # Ambiguous: another candidate nearly as good for either segment (nearby parallel segments
+        # at other depths): a wrong match there is a wrong 3D line that small motions cannot expose.
+        chosen = cost[pairs[:, 0], pairs[:, 1]]
+        rival = cost.copy()
+        rival[pairs[:, 0], pairs[:, 1]] = _BIG
+        second = np.minimum(rival[pairs[:, 0]].min(axis=1), rival[:, pairs[:, 1]].min(axis=0))
+        pairs = pairs[second > chosen + options.ambiguity_margin]
+    return pairs
 
 
 def _positive_depths(rig: Rig, x_left: np.ndarray, x_right: np.ndarray) -> np.ndarray:
@@ -151,6 +165,10 @@ def four_view_matches(rig: Rig, frame_a: dict, frame_b: dict, options: MatchingO
     """(K, 4) indices [left a, right a, left b, right b] of the lines seen in the four views."""
     stereo_a = dict(map(tuple, stereo_matches(rig, frame_a["left"], frame_a["right"], options)))
     stereo_b = dict(map(tuple, stereo_matches(rig, frame_b["left"], frame_b["right"], options)))
+    right_track = dict(map(tuple, track(frame_a["right"], frame_b["right"], options)))
+    # A line is kept when the right images' tracker agrees with the left's (the loop left a ->
+    # left b -> right b closes through right a): one check that removes most of the
+    # appearance-free matcher's confusions between nearby parallel segments.
     quads = [(i, stereo_a[i], j, stereo_b[j]) for i, j in track(frame_a["left"], frame_b["left"], options)
-             if i in stereo_a and j in stereo_b]
+             if i in stereo_a and j in stereo_b and right_track.get(stereo_a[i]) == stereo_b[j]]
     return np.array(quads, dtype=int).reshape(-1, 4)

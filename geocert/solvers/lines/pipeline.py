@@ -13,7 +13,7 @@ import numpy as np
 
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.lines import align, incremental, linear, polynomial
-from geocert.solvers.lines.geometry import LineSet, Rig, line_set, reprojection_residuals
+from geocert.solvers.lines.geometry import LineSet, Rig, directions_and_points, line_set, reprojection_residuals
 from geocert.solvers.lines.matching import MatchingOptions, four_view_matches
 from geocert.solvers.lines.ransac import RansacOptions, ransac
 from geocert.solvers.lines.refine import RefineOptions, refine
@@ -108,6 +108,20 @@ class StereoLinesOptions:
         return SOLVERS[self.solver][0]
 
 
+def weak_support(lines: LineSet, inliers: np.ndarray, options: StereoLinesOptions) -> str | None:
+    """Why the inliers do not fix the motion, or None: too few of them (``ransac.min_inliers``),
+    or all nearly parallel (their directions within ``ransac.min_sample_angle_deg`` of one line:
+    the translation along them, and with it much of the motion, is then unobserved)."""
+    if len(inliers) < max(options.ransac.min_inliers, options.samples):
+        return (f"degenerate: {len(inliers)} inlier lines of {len(lines)}; at least {options.ransac.min_inliers} are "
+                "needed to trust the motion (ransac.min_inliers)")
+    directions = directions_and_points(lines.planes_a[inliers])[0]
+    spread = np.linalg.svd(directions, compute_uv=False)
+    if spread[1] < math.tan(math.radians(options.ransac.min_sample_angle_deg)) * spread[0]:
+        return f"degenerate: the {len(inliers)} inlier lines are nearly parallel (the motion along them is not fixed)"
+    return None
+
+
 def estimate_motion(lines: LineSet, options: StereoLinesOptions,
                     should_stop: Callable[[], bool] | None = None) -> PairEstimate:
     """The motion of a frame pair from lines matched across its four views."""
@@ -129,6 +143,10 @@ def estimate_motion(lines: LineSet, options: StereoLinesOptions,
     errors[found.degenerate] = np.inf
     inliers = np.flatnonzero(errors <= options.ransac.threshold_px)
     rms = float(np.sqrt(np.mean(errors[inliers] ** 2))) if len(inliers) else None
+    weak = weak_support(lines, inliers, options)
+    if weak is not None:
+        return PairEstimate("failed", lines=n, iterations=found.iterations, solver=options.solver, reason=weak,
+                            inliers=inliers.tolist(), degenerate=found.degenerate.tolist(), rms_px=rms, refined=refined)
     return PairEstimate("estimate", motion.R, motion.t, inliers.tolist(), n, found.iterations, options.solver,
                         degenerate=found.degenerate.tolist(), rms_px=rms, refined=refined)
 

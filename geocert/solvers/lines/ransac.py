@@ -28,10 +28,12 @@ class RansacOptions:
     min_conditioning: float = 0.002  # sin of the angle between a line's two stereo planes, below: not sampled
     min_sample_angle_deg: float = 5.0  # samples whose lines are all within this of one direction are skipped
     seed: int | None = 0  # reproducible sampling (None: fresh randomness)
+    min_inliers: int = 6  # fewer inliers than this: the pair fails (its motion is not trusted)
     local_optimisation: int = 3  # rounds of refitting a new best hypothesis on its inliers (0: none)
 
     OPTION_RANGES = {"threshold_px": {"gt": 0, "le": 1000}, "confidence": {"gt": 0, "lt": 1},
-                     "max_iterations": {"ge": 1, "le": 100_000}}
+                     "max_iterations": {"ge": 1, "le": 100_000},
+                     "min_inliers": {"ge": 2, "le": 10_000}}
 
 
 @dataclass

@@ -174,15 +174,15 @@ def visible_segments(rig: Rig, X: np.ndarray, R: np.ndarray, t: np.ndarray, near
 
 
 def room_loop(rng, frames: int = 120, radius: float = 1.2, noise_px: float = 0.0, rig: Rig | None = None,
-              boxes: int = 12) -> tuple[Rig, list[tuple[np.ndarray, np.ndarray]], list[dict], float]:
+              boxes: int = 12, take: int | None = None) -> tuple[Rig, list[tuple[np.ndarray, np.ndarray]], list[dict], float]:
     """A rig walking once round a circle in a room of boxes, looking along its path (slightly
     outwards), back to where it started: poses X_k = R_k X_0 + t_k (frame 0's left camera as the
     origin), segments per frame (left, right; visible parts only, with noise on the endpoints),
-    and the loop's length."""
+    and the loop's length. ``take``: only the first so many frames (the tests' short walk)."""
     rig = rig or thesis_rig()
     world = room_of_boxes(rng, boxes)
     world_poses = []
-    for k in range(frames + 1):  # the last frame is the first pose again
+    for k in range(frames + 1 if take is None else min(take, frames + 1)):  # the last frame is the first again
         angle = 2 * np.pi * k / frames
         centre = np.array([radius * np.cos(angle), 0.1 * np.sin(2 * angle), radius * np.sin(angle)])
         heading = angle + np.pi / 2 - 0.3  # tangent, turned slightly outwards
