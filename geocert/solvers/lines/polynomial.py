@@ -74,10 +74,11 @@ def quadratics(lines: LineSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     # t eliminated: the equations [A_R, -b] [r; 1] = 0 projected off t's columns (rank <= 4N - 3),
     # then their 5 strongest combinations (all of them for 2 lines).
     H = np.concatenate([A[:, :9], -b[:, None]], axis=1)
-    At = A[:, 9:]
-    H = H - At @ np.linalg.lstsq(At, H, rcond=None)[0]
-    _, s, Vt = np.linalg.svd(H, full_matrices=False)
-    H = s[:5, None] * Vt[:5]
+    basis = np.linalg.qr(A[:, 9:], mode="complete")[0]
+    H = basis[:, 3:].T @ H  # the 4N - 3 equations on R alone
+    if len(H) > 5:
+        _, s, Vt = np.linalg.svd(H, full_matrices=False)
+        H = s[:5, None] * Vt[:5]
     Q = H[:, :9] @ _T + np.outer(H[:, 9], _DENOMINATOR)
     return Q, A, b
 
@@ -131,11 +132,11 @@ def real_roots(p: np.ndarray, tolerance: float) -> np.ndarray:
     return roots[np.abs(roots.imag) <= tolerance * (1 + np.abs(roots.real))].real
 
 
-def _horner(coefficients: np.ndarray, x: float) -> float:
-    value = 0.0
-    for c in coefficients:
-        value = value * x + c
-    return value
+def cayley_many(c: np.ndarray) -> np.ndarray:
+    """(K, 3, 3) rotations of the Cayley vectors c (K, 3)."""
+    c1, c2, c3 = c[:, 0], c[:, 1], c[:, 2]
+    monomials = np.stack([c1 * c1, c2 * c2, c1 * c2, c1, c2, c1 * c3, c2 * c3, c3 * c3, c3, np.ones_like(c1)], axis=1)
+    return (monomials @ _T.T).reshape(-1, 3, 3) / (monomials @ _DENOMINATOR)[:, None, None]
 
 
 def solve(lines: LineSet, options: PolynomialOptions | None = None) -> list[Motion]:
@@ -146,22 +147,22 @@ def solve(lines: LineSet, options: PolynomialOptions | None = None) -> list[Moti
     scale = np.abs(Q).max()
     if not scale > 0:
         raise Degenerate("the lines give no equation on the rotation")
-    Q = Q / scale
-    p, u = degree_11(Q)
+    p, u = degree_11(Q / scale)
     roots = real_roots(p, options.imaginary_tolerance)
-    candidates = []
-    At = A[:, 9:]
-    pinv_t = np.linalg.pinv(At)
-    for x3 in roots:
-        values = np.array([_horner(ui, x3) for ui in u])
-        if abs(values[5]) < 1e-14 * np.abs(values).max():
-            continue
-        c = np.array([values[3] / values[5], values[4] / values[5], x3])
-        R = cayley(c)
-        rhs = b - A[:, :9] @ R.reshape(9)
-        t = pinv_t @ rhs
-        candidates.append(Motion(R, t, float(np.linalg.norm(At @ t - rhs))))
-    if not candidates:
+    if len(roots) == 0:
+        raise Degenerate("the degree-11 polynomial has no real root")
+    powers = roots[:, None] ** np.arange(4, -1, -1.0)  # (K, 5): x^4 .. 1
+    values = np.stack([powers[:, 5 - len(ui):] @ ui for ui in u], axis=1)  # (K, 6): u_i(x3)
+    usable = np.abs(values[:, 5]) > 1e-14 * np.abs(values).max(axis=1)
+    if not usable.any():
         raise Degenerate("the degree-11 polynomial has no usable real root")
-    candidates.sort(key=lambda m: m.residual)
-    return candidates[:options.max_candidates]
+    values, roots = values[usable], roots[usable]
+    c = np.stack([values[:, 3] / values[:, 5], values[:, 4] / values[:, 5], roots], axis=1)
+    rotations = cayley_many(c)
+    At = A[:, 9:]
+    rhs = b[:, None] - A[:, :9] @ rotations.reshape(-1, 9).T  # (4N, K)
+    t, *_ = np.linalg.lstsq(At, rhs, rcond=None)
+    residuals = np.linalg.norm(At @ t - rhs, axis=0)
+    order = np.argsort(residuals)[:options.max_candidates]
+    candidates = [Motion(rotations[k], t[:, k], float(residuals[k])) for k in order]
+    return candidates
