@@ -21,6 +21,7 @@ per second end to end with 100 lines; rotation error at most 0.1 degrees per fra
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
@@ -185,6 +186,16 @@ def room(frames: int) -> None:
               f"{(len(sequence) - 1) / seconds:.1f} |")
 
 
+def machine() -> str:
+    """The load and a fixed workload's time: this 2-core machine is shared, and every time above
+    scales with what else runs (the figures of one run are comparable with each other only)."""
+    start = time.perf_counter()
+    a = np.random.default_rng(0).normal(size=(4, 4))
+    for _ in range(20_000):
+        np.linalg.svd(a)
+    return f"load average {os.getloadavg()[0]:.1f}, 20k 4x4 SVDs {1000 * (time.perf_counter() - start):.0f} ms"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--instances", type=int, default=20)
@@ -192,12 +203,13 @@ def main() -> None:
     args = parser.parse_args()
     instances = 5 if args.quick else args.instances
     began = time.time()
+    print(f"machine at the start: {machine()}")
     minimal_times(60 if args.quick else 300)
     ransac_table(instances)
     noise_table(instances)
     end_to_end(10 if args.quick else 40)
     room(180)  # 2 degrees and 4 cm a frame: a slower walk is not faster to bench
-    print(f"\n(ran in {time.time() - began:.0f} s)")
+    print(f"\nmachine at the end: {machine()} (ran in {time.time() - began:.0f} s)")
 
 
 if __name__ == "__main__":

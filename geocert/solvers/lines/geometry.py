@@ -29,10 +29,13 @@ class Rig:
     R: np.ndarray
     t: np.ndarray
 
+    def __post_init__(self):
+        self._cameras = (self.K_left @ np.hstack([np.eye(3), np.zeros((3, 1))]),
+                         self.K_right @ np.hstack([self.R, np.asarray(self.t, dtype=float).reshape(3, 1)]))
+
     def cameras(self) -> tuple[np.ndarray, np.ndarray]:
-        left = self.K_left @ np.hstack([np.eye(3), np.zeros((3, 1))])
-        right = self.K_right @ np.hstack([self.R, self.t.reshape(3, 1)])
-        return left, right
+        """(left, right) 3x4 cameras (computed once: the hot loops ask often)."""
+        return self._cameras
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
