@@ -77,6 +77,8 @@ class MatchingIn(Strict):
     min_epipolar_angle_deg: Finite = Field(MatchingOptions.min_epipolar_angle_deg, ge=0, lt=90)
     max_track_px: Finite = Field(MatchingOptions.max_track_px, gt=0, le=10_000)
     max_track_angle_deg: Finite = Field(MatchingOptions.max_track_angle_deg, gt=0, le=90)
+    guided: bool = Field(MatchingOptions.guided, description="track again with the first estimate's rotation "
+                                                             "and estimate again (segments only)")
     ambiguity_margin: Finite = Field(MatchingOptions.ambiguity_margin, ge=0, le=10,
                                      description="drop a stereo match whose rival costs within this of it (0: off)")
 

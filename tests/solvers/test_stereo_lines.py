@@ -181,6 +181,8 @@ class TestBadInput:
         (lambda j: j["options"].__setitem__("ransac", {"threshold": 1}), "options/ransac/threshold"),
         (lambda j: j["options"].__setitem__("ransac", {"confidence": 1.5}), "options/ransac/confidence"),
         (lambda j: j["options"].__setitem__("refine", 1), "options/refine"),
+        (lambda j: j["options"].__setitem__("matching", {"guided": "yes"}), "options/matching/guided"),
+        (lambda j: j["options"].__setitem__("ransac", {"max_iterations": 2.5}), "options/ransac/max_iterations"),
         (lambda j: j["options"].__setitem__("solver", "magic"), "options/solver"),
         (lambda j: j["data"].__setitem__("frames", [{"left": [], "right": []}] * 2), "data/frames"),
     ])
@@ -205,11 +207,32 @@ class TestBadInput:
             parse_job(job)
         assert error.value.field == "data/frames/1/left"
 
+    def test_a_null_seed_is_fresh_randomness(self):
+        job = example()
+        job["options"]["ransac"] = {"seed": None}
+        assert parse_job(job)[2].ransac.seed is None
+
     def test_a_null_sample_size_is_the_solvers_minimum(self):
         job = example()
         job["options"] = {"solver": "linear", "sample_size": None}
         _, _, options = parse_job(job)
         assert options.samples == 3
+
+
+class TestGuidedMatching:
+    def test_tracking_with_the_rotation_corrects_mistracked_parallel_edges(self):
+        rig, poses, frames, _ = scenes.room_loop(np.random.default_rng(6), frames=180, noise_px=0.5, boxes=30,
+                                                 take=30)
+        wrong = {False: [], True: []}
+        for k in range(len(frames) - 1):
+            a, b = frames[k], frames[k + 1]
+            for guided in (False, True):
+                rotation = poses[k + 1][0] @ poses[k][0].T if guided else None
+                quads = four_view_matches(rig, a, b, MatchingOptions(), rotation)
+                ids = np.stack([a["ids"][quads[:, 0]], a["ids"][quads[:, 1]], b["ids"][quads[:, 2]],
+                                b["ids"][quads[:, 3]]], axis=1)
+                wrong[guided].append(1 - np.all(ids == ids[:, :1], axis=1).mean())
+        assert np.mean(wrong[True]) < 0.03 < np.mean(wrong[False])
 
 
 class TestIndoorSequence:

@@ -38,6 +38,7 @@ class MatchingOptions:
     min_epipolar_angle_deg: float = 5.0
     max_track_px: float = 60.0
     max_track_angle_deg: float = 10.0
+    guided: bool = True  # track again with the first estimate's rotation, and estimate again
     ambiguity_margin: float = 0.0  # > 0: a stereo match is dropped when a rival's cost is within this of its own
 
     OPTION_RANGES = {"min_overlap": {"ge": 0, "le": 1}, "max_stereo_angle_deg": {"gt": 0, "le": 90},
@@ -161,14 +162,30 @@ def _assign(cost: np.ndarray) -> np.ndarray:
     return np.column_stack([rows[keep], cols[keep]]).astype(int)
 
 
-def four_view_matches(rig: Rig, frame_a: dict, frame_b: dict, options: MatchingOptions) -> np.ndarray:
-    """(K, 4) indices [left a, right a, left b, right b] of the lines seen in the four views."""
+def rotated(segments: np.ndarray, H: np.ndarray) -> np.ndarray:
+    """Segments (N, 4) moved by the homography H (3x3)."""
+    ends = _homogeneous(segments.reshape(-1, 2)) @ H.T
+    return (ends[:, :2] / ends[:, 2:]).reshape(-1, 4)
+
+
+def four_view_matches(rig: Rig, frame_a: dict, frame_b: dict, options: MatchingOptions,
+                      rotation: np.ndarray | None = None) -> np.ndarray:
+    """(K, 4) indices [left a, right a, left b, right b] of the lines seen in the four views.
+
+    With ``rotation`` (the frame pair's R, e.g. a first estimate's), frame a's segments are first
+    moved by the rotation's homographies (K R K^-1 in the left image, K_r R0 R R0^T K_r^-1 in the
+    right): the tracker then only bridges the translation's parallax, and its preference for
+    small image motion no longer pulls the matches, and the motion, towards a smaller rotation."""
+    left_a, right_a = frame_a["left"], frame_a["right"]
+    if rotation is not None:
+        left_a = rotated(left_a, rig.K_left @ rotation @ np.linalg.inv(rig.K_left))
+        right_a = rotated(right_a, rig.K_right @ rig.R @ rotation @ rig.R.T @ np.linalg.inv(rig.K_right))
     stereo_a = dict(map(tuple, stereo_matches(rig, frame_a["left"], frame_a["right"], options)))
     stereo_b = dict(map(tuple, stereo_matches(rig, frame_b["left"], frame_b["right"], options)))
-    right_track = dict(map(tuple, track(frame_a["right"], frame_b["right"], options)))
+    right_track = dict(map(tuple, track(right_a, frame_b["right"], options)))
     # A line is kept when the right images' tracker agrees with the left's (the loop left a ->
     # left b -> right b closes through right a): one check that removes most of the
     # appearance-free matcher's confusions between nearby parallel segments.
-    quads = [(i, stereo_a[i], j, stereo_b[j]) for i, j in track(frame_a["left"], frame_b["left"], options)
+    quads = [(i, stereo_a[i], j, stereo_b[j]) for i, j in track(left_a, frame_b["left"], options)
              if i in stereo_a and j in stereo_b and right_track.get(stereo_a[i]) == stereo_b[j]]
     return np.array(quads, dtype=int).reshape(-1, 4)

@@ -195,10 +195,10 @@ def room_loop(rng, frames: int = 120, radius: float = 1.2, noise_px: float = 0.0
     poses, out = [], []
     for R, t in world_poses:
         poses.append((R @ R0.T, t - R @ R0.T @ t0))  # relative to frame 0
-        left, right, _ = visible_segments(rig, world, R, t)
+        left, right, ids = visible_segments(rig, world, R, t)
         if noise_px:
             left = left + rng.normal(scale=noise_px, size=left.shape)
             right = right + rng.normal(scale=noise_px, size=right.shape)
         order = rng.permutation(len(left))  # detections come in no particular order
-        out.append({"left": left[order], "right": right[order]})
+        out.append({"left": left[order], "right": right[order], "ids": ids[order]})  # ids: the room's edge seen
     return rig, poses, out, 2 * np.pi * radius
