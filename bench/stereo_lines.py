@@ -30,6 +30,7 @@ import numpy as np
 
 from geocert.solvers.lines import align, incremental, linear, polynomial, scenes
 from geocert.solvers.lines.geometry import line_set, rotation_error_deg
+from geocert.solvers.lines.matching import MatchingOptions
 from geocert.solvers.lines.pipeline import StereoLinesOptions, estimate_motion, estimate_pair
 from geocert.solvers.lines.results import Degenerate
 
@@ -175,14 +176,16 @@ def thesis_setting(instances: int, noises=(0.0, 0.25, 0.5, 1.0, 2.0)) -> None:
 def end_to_end(frames: int) -> None:
     print(f"\n4. End to end from segments (matching, RANSAC, refinement), 100 lines per frame, 0.5 px noise, "
           f"{frames} frames, one core")
-    print("| solver | sample | refine | frame pairs/s | median ms | p99 ms | lines matched (median) | "
+    print("| solver | sample | refine | guided | frame pairs/s | median ms | p99 ms | lines matched (median) | "
           "rotation deg (median) |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     rig, poses, sequence = scenes.sequence(np.random.default_rng(5), frames, 100, noise_px=0.5, degrees=1.0,
                                            metres=0.03)
-    for name, sample, refine in (("incremental", 3, True), ("incremental", 3, False), ("polynomial", 2, True),
-                                 ("polynomial", 3, False)):
-        options = StereoLinesOptions(solver=name, sample_size=sample, refine=refine)
+    for name, sample, refine, guided in (("incremental", 3, True, True), ("incremental", 3, False, True),
+                                         ("incremental", 3, False, False), ("polynomial", 2, True, True),
+                                         ("polynomial", 3, False, True)):
+        options = StereoLinesOptions(solver=name, sample_size=sample, refine=refine,
+                                     matching=MatchingOptions(guided=guided))
         times, matched, rotation = [], [], []
         for k in range(frames - 1):
             estimate, quads, seconds = estimate_pair(rig, sequence[k], sequence[k + 1], None, options)
@@ -191,7 +194,8 @@ def end_to_end(frames: int) -> None:
             if estimate.status == "estimate":
                 truth = poses[k + 1][0] @ poses[k][0].T
                 rotation.append(rotation_error_deg(estimate.R, truth))
-        print(f"| {name} | {sample} | {'yes' if refine else 'no'} | {1000 * len(times) / sum(times):.1f} | "
+        print(f"| {name} | {sample} | {'yes' if refine else 'no'} | {'yes' if guided else 'no'} | "
+              f"{1000 * len(times) / sum(times):.1f} | "
               f"{np.median(times):.1f} | {percentile(times, 99):.1f} | {np.median(matched):.0f} | "
               f"{np.median(rotation):.3f} |")
 
@@ -199,12 +203,14 @@ def end_to_end(frames: int) -> None:
 def room(frames: int) -> None:
     print(f"\n5. A room of 30 boxes walked round once ({frames} frames, 0.5 px noise, segments only): drift "
           "(a failed pair counts as no motion)")
-    print("| solver | refine | pairs failed | lines matched (median) | rotation drift deg | position drift cm | "
-          "% of the loop | frame pairs/s |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| solver | refine | guided | pairs failed | lines matched (median) | rotation drift deg | "
+          "position drift cm | % of the loop | frame pairs/s |")
+    print("|---|---|---|---|---|---|---|---|---|")
     rig, poses, sequence, length = scenes.room_loop(np.random.default_rng(6), frames=frames, noise_px=0.5, boxes=30)
-    for name, refine in (("incremental", True), ("incremental", False), ("polynomial", True)):
-        options = StereoLinesOptions(solver=name, sample_size=3, refine=refine)
+    for name, refine, guided in (("incremental", True, True), ("incremental", False, True),
+                                 ("incremental", True, False), ("polynomial", True, True)):
+        options = StereoLinesOptions(solver=name, sample_size=3, refine=refine,
+                                     matching=MatchingOptions(guided=guided))
         R, t = np.eye(3), np.zeros(3)
         failed, matched, seconds = 0, [], 0.0
         for k in range(len(sequence) - 1):
@@ -217,7 +223,8 @@ def room(frames: int) -> None:
             R, t = estimate.R @ R, estimate.R @ t + estimate.t
         R_true, t_true = poses[-1]
         drift = np.linalg.norm(-R.T @ t - (-R_true.T @ t_true))
-        print(f"| {name} | {'yes' if refine else 'no'} | {failed} | {np.median(matched):.0f} | "
+        print(f"| {name} | {'yes' if refine else 'no'} | {'yes' if guided else 'no'} | {failed} | "
+              f"{np.median(matched):.0f} | "
               f"{rotation_error_deg(R, R_true):.2f} | {100 * drift:.1f} | {100 * drift / length:.2f}% | "
               f"{(len(sequence) - 1) / seconds:.1f} |")
 

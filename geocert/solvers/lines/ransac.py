@@ -81,6 +81,21 @@ def ransac(lines: LineSet, solver: Callable[[LineSet], list[Motion]], sample_siz
 
     needed = float(options.max_iterations)
     iterations = skipped = 0
+
+    def local_optimisation() -> None:
+        nonlocal best_cost, best_motion, best_inliers
+        for _ in range(options.local_optimisation):
+            if len(best_inliers) < 3:
+                break
+            try:
+                motion = incremental.solve(lines.subset(best_inliers), start=best_motion.R)[0]
+            except (Degenerate, np.linalg.LinAlgError):
+                break
+            cost, inliers = score(motion)
+            if not cost < best_cost:
+                break
+            best_cost, best_motion, best_inliers = cost, motion, inliers
+
     while iterations < min(needed, options.max_iterations):
         if should_stop is not None and should_stop():
             break
@@ -99,18 +114,8 @@ def ransac(lines: LineSet, solver: Callable[[LineSet], list[Motion]], sample_siz
             cost, inliers = score(motion)
             if cost < best_cost:
                 best_cost, best_motion, best_inliers, improved = cost, motion, inliers, True
-        for _ in range(options.local_optimisation if improved else 0):
-            if len(best_inliers) < 3:
-                break
-            try:
-                motion = incremental.solve(lines.subset(best_inliers), start=best_motion.R)[0]
-            except (Degenerate, np.linalg.LinAlgError):
-                break
-            cost, inliers = score(motion)
-            if not cost < best_cost:
-                break
-            best_cost, best_motion, best_inliers = cost, motion, inliers
         if improved:
+            local_optimisation()
             needed = required_iterations(len(best_inliers) / len(usable), sample_size, options.confidence)
     if best_motion is None:
         return RansacResult(None, np.zeros(0, int), iterations, degenerate,
