@@ -13,7 +13,7 @@ from geocert.batch import parse_job, solve_job
 from geocert.kinds.stereo_lines import KIND
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.lines import align, incremental, linear, polynomial, scenes
-from geocert.solvers.lines.geometry import line_errors, line_set, log_rotation, rotation_error_deg
+from geocert.solvers.lines.geometry import line_set, log_rotation, rotation_error_deg
 from geocert.solvers.lines.matching import MatchingOptions, four_view_matches
 from geocert.solvers.lines.pipeline import StereoLinesOptions, estimate_motion
 from geocert.solvers.lines.results import Degenerate
