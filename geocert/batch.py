@@ -131,7 +131,7 @@ def solve_job(job: dict, sink: ProgressSink | None = None, should_stop: StopChec
 def assemble(kind, job: dict, options, items: list[dict], stats: dict) -> dict:
     """The result document; with ``options.certificate == "full"`` it carries the certificate
     document too (the proofs move there from the items' certificate summaries)."""
-    if options.certificate == "full":
+    if getattr(options, "certificate", None) == "full":  # a kind that issues estimates has no such option
         document = certificate_document(kind, job["data"], options, items)
     else:
         document = None
@@ -188,6 +188,9 @@ def parse_job(job: Any):
     kind = get_kind(job.get("kind"))
     options = options_from(kind.options_type, job.get("options"))
     parsed = kind.parse(job.get("data"))
+    check = getattr(kind, "check_options", None)  # what the data must give the options (e.g. enough lines)
+    if check is not None:
+        check(parsed, options)
     return kind, parsed, options
 
 

@@ -3,6 +3,7 @@
 from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION
 from geocert.kinds.base import ProblemKind, Registry, default_options, options_from
 from geocert.kinds.maps import HOMOGRAPHY, RESECTION
+from geocert.kinds.stereo_lines import KIND as STEREO_LINES
 from geocert.kinds.triangulation import KIND as TRIANGULATION
 
 KINDS = Registry(
@@ -10,6 +11,7 @@ KINDS = Registry(
     RESECTION,
     HOMOGRAPHY,
     AUTOCALIBRATION,
+    STEREO_LINES,
 )
 get_kind = KINDS.get
 

@@ -86,11 +86,14 @@ def options_from(options_type: type, given: dict | None, field: str = "options")
         if key not in names:
             raise InputError(f"{field}/{key}", f"unknown option (known: {', '.join(sorted(names))})")
     defaults = options_type()
+    types = {f.name: str(f.type) for f in dataclasses.fields(options_type)}
     for key, value in given.items():
         default = getattr(defaults, key)
         if isinstance(default, bool):  # before the numbers: a bool is an int to Python
             if not isinstance(value, bool):
                 raise InputError(f"{field}/{key}", "must be true or false")
+            continue
+        if value is None and "None" in types[key]:  # an optional option set to null
             continue
         if isinstance(default, str) and not isinstance(value, str):
             raise InputError(f"{field}/{key}", "must be a string")

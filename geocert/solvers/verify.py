@@ -121,16 +121,32 @@ def find_certificate(document: Any) -> tuple[dict, dict | None] | None:
     return None
 
 
+def estimates_kind(document: Any) -> str | None:
+    """The kind of a result or job document when that kind issues estimates, never certificates
+    (its ``certifies`` is False, e.g. stereo_lines); None otherwise."""
+    if not isinstance(document, dict):
+        return None
+    inner = document["result"] if isinstance(document.get("result"), dict) else document
+    name = inner.get("kind", document.get("kind"))
+    from geocert.kinds import KINDS
+
+    if isinstance(name, str) and name in KINDS and not getattr(KINDS.get(name), "certifies", True):
+        return name
+    return None
+
+
 def verify_any(document: Any) -> Report:
     """Check what ``geocert verify`` and ``POST /v1/certificates/verify`` take: a certificate
     document, a result document carrying one, or a job document carrying such a result. For a
     result or job, every item it returns must also equal the item its certificate proves."""
     found = find_certificate(document)
     if found is None:
-        report = Report(valid=False, first_failure={
-            "check": "format", "item": None,
-            "detail": "no certificate in this document (a job or result solved with options.certificate = \"full\" "
-                      "carries one)"})
+        uncertified = estimates_kind(document)
+        detail = (f"{uncertified} results are estimates, never certified: there is no certificate, so nothing to "
+                  "verify" if uncertified is not None else
+                  "no certificate in this document (a job or result solved with options.certificate = \"full\" "
+                  "carries one)")
+        report = Report(valid=False, first_failure={"check": "format", "item": None, "detail": detail})
         report.checks = [{"name": "format", "passed": 0, "failed": 1}]
         return report
     return _verify(*found)

@@ -1,6 +1,8 @@
 """Every kind in the registry meets the same contract (in-process: no Redis, no worker): bad
 input is refused naming the field, the result fits the kind's result model, a full certificate
-verifies and a tampered one is refused. And a new kind plugs in with one registry line."""
+verifies and a tampered one is refused (a kind that issues estimates only, ``certifies = False``:
+no certificate is issued or accepted, and the verifier says so). And a new kind plugs in with one
+registry line."""
 
 from __future__ import annotations
 
@@ -15,7 +17,8 @@ from pydantic import ValidationError
 from geocert.batch import parse_job, solve_job
 from geocert.kinds import KINDS
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.verify import verify_any
+from geocert.solvers.core.certificates import FORMAT, VERSION
+from geocert.solvers.verify import verify_any, verify_document
 
 KIND_NAMES = KINDS.names()
 
@@ -45,6 +48,8 @@ class TestEveryKind:
 
     def test_result_fits_the_model_and_its_certificate_verifies(self, name):
         kind = KINDS.get(name)
+        if not certifies(kind):
+            return self.check_estimates_kind(kind)
         result = solve_job(full(kind.example))
         kind.result_model.model_validate(result)
         assert all(item["certified"] for item in result[kind.item_key])
@@ -53,6 +58,12 @@ class TestEveryKind:
 
     def test_tampering_is_refused(self, name):
         kind = KINDS.get(name)
+        if not certifies(kind):  # a certificate claimed for a kind that issues none is refused, saying why
+            forged = {"format": FORMAT, "version": VERSION, "kind": name, "options": {}, "data": kind.example["data"],
+                      "data_sha256": "", "problem_sha256": "", "items": [{"index": 0, "certified": True}]}
+            report = verify_document(forged)
+            assert not report.valid and "estimates" in report.first_failure["detail"]
+            return
         result = solve_job(full(kind.example))
         forged = copy.deepcopy(result)
         forged["certificate"]["items"][0]["cost"] *= 0.5
@@ -60,6 +71,26 @@ class TestEveryKind:
         moved = copy.deepcopy(result)
         moved[kind.item_key][0]["cost"] = 0.0
         assert verify_any(moved).first_failure["check"] == "returned"
+
+
+    @staticmethod
+    def check_estimates_kind(kind):
+        """A kind that issues estimates, never certificates (``certifies = False``): its result fits
+        its model, every item says it is not certified, asking for a certificate is refused naming
+        the option, and the verifier answers that there is nothing to verify."""
+        result = solve_job(kind.example)
+        kind.result_model.model_validate(result)
+        assert result[kind.item_key] and not any(item["certified"] for item in result[kind.item_key])
+        with pytest.raises(InputError) as error:
+            parse_job(full(kind.example))
+        assert error.value.field == "options/certificate"
+        report = verify_any(result)
+        assert not report.valid and "nothing to verify" in report.first_failure["detail"]
+
+
+def certifies(kind) -> bool:
+    """Whether a kind issues certificates (the default) or estimates only (``certifies = False``)."""
+    return getattr(kind, "certifies", True)
 
 
 class TestOneLineToAddAKind:
@@ -73,7 +104,8 @@ from geocert.kinds import KINDS
 from tests.kinds import toy_kind
 KINDS.register(toy_kind.KIND)  # the one line
 from geocert.batch import solve_job
-from geocert.solvers.verify import verify_any
+from geocert.solvers.core.certificates import FORMAT, VERSION
+from geocert.solvers.verify import verify_any, verify_document
 from geocert.app.cli import openapi_document
 from geocert.app.api.routes.service import list_problems
 result = solve_job({**toy_kind.KIND.example, "options": {"certificate": "full"}})

@@ -400,3 +400,51 @@ class TestOrient:
         assert problem["status"] == 422 and problem["errors"][0]["field"] == "views/0/1"
         problem = service.post("/v1/orient", json={"cameras": README_CAMERAS, "points": [[0, 0, 0, 0]]}).json()
         assert problem["status"] == 422 and problem["errors"][0]["field"] == "points/0"
+
+
+class TestPreferWait:
+    """Prefer: wait=N (RFC 7240) on POST /v1/jobs, for every kind: the finished job when it ends
+    within N seconds, else the usual 202."""
+
+    def test_a_job_that_ends_within_the_wait_comes_back_whole(self, service):
+        body = triangulation_job(np.random.default_rng(41), tracks=2)
+        response = service.post("/v1/jobs", json=body, headers={"Prefer": "wait=60"}, timeout=90)
+        assert response.status_code == 200
+        assert response.headers["Preference-Applied"] == "wait=60"
+        job = response.json()
+        assert job["status"] == "succeeded" and len(job["result"]["tracks"]) == 2
+        assert response.headers["Location"] == f"/v1/jobs/{job['id']}"
+
+    def test_a_job_longer_than_the_wait_is_the_usual_202(self, service):
+        blocker = triangulation_job(np.random.default_rng(42), tracks=1, views=6, norm="L1L1", rel_gap=0.0,
+                                    abs_gap=0.0, max_nodes=100_000, time_limit_s=60)
+        response = service.post("/v1/jobs", json=blocker, headers={"Prefer": "respond-async, wait=1"})
+        assert response.status_code == 202
+        job = response.json()
+        assert job["status"] in ("queued", "running") and job["result"] is None
+        service.post(f"/v1/jobs/{job['id']}/cancel")
+        assert wait_for(service, job["id"])["status"] == "cancelled"
+
+    def test_without_the_preference_nothing_waits(self, service):
+        response = service.post("/v1/jobs", json=triangulation_job(np.random.default_rng(43), tracks=1))
+        assert response.status_code == 202 and "Preference-Applied" not in response.headers
+        wait_for(service, response.json()["id"])
+
+
+class TestStereoLines:
+    def test_the_example_is_solved_through_the_api_as_an_estimate(self, service):
+        from geocert.kinds.stereo_lines import KIND
+
+        response = service.post("/v1/jobs", json=KIND.example, headers={"Prefer": "wait=60"}, timeout=90)
+        assert response.status_code == 200
+        result = response.json()["result"]
+        assert result["status"] == "estimate" and result["pairs"][0]["status"] == "estimate"
+        assert result["pairs"][0]["certified"] is False and len(result["trajectory"]) == 2
+
+    def test_a_rig_whose_R_is_not_a_rotation_is_a_422_naming_it(self, service):
+        from geocert.kinds.stereo_lines import KIND
+
+        body = json.loads(json.dumps(KIND.example))
+        body["data"]["rig"]["R"] = [[1, 0, 0], [0, 2, 0], [0, 0, 1]]
+        problem = service.post("/v1/jobs", json=body).json()
+        assert problem["status"] == 422 and problem["errors"][0]["field"] == "data/rig/R"

@@ -3,7 +3,9 @@ configured) and shows a job only to the key that created it."""
 
 from __future__ import annotations
 
+import asyncio
 import base64
+import contextlib
 import hashlib
 import json
 import math
@@ -12,6 +14,7 @@ from typing import Annotated
 from urllib.parse import urlencode
 
 from fastapi import APIRouter, Depends, Header, Query, Response
+from fastapi.concurrency import run_in_threadpool
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
 from geocert.app.api.deps import Caller, JobStoreDep, error_responses, get_async_redis, rate_limited, stream_slot
@@ -42,7 +45,7 @@ def _check_limits(kind, parsed, body, request: dict) -> int:
     options, given = request["options"], body.options.model_fields_set
     for name, maximum, unit, variable in (("time_limit_s", settings.max_item_time_limit_s, " s", "MAX_ITEM_TIME_LIMIT_S"),
                                           ("max_nodes", settings.max_item_nodes, " nodes", "MAX_ITEM_NODES")):
-        if options[name] <= maximum:
+        if name not in options or options[name] <= maximum:  # a kind without the option (stereo_lines)
             continue
         if name in given:
             raise ApiProblem(422, f"exceeds this server's maximum of {maximum:g}{unit} per item (GEOCERT_{variable})",
@@ -51,10 +54,48 @@ def _check_limits(kind, parsed, body, request: dict) -> int:
     return items
 
 
+MAX_WAIT_S = 60  # the longest Prefer: wait honoured (a larger N waits this long)
+
+
+def preferred_wait(prefer: str | None) -> int | None:
+    """The seconds of a ``wait=N`` preference (RFC 7240) in Prefer headers, capped at MAX_WAIT_S;
+    None without one. Preferences are comma-separated ``token[=value][; params]``; one not
+    understood (or a wait that is not a non-negative integer) is ignored, as the RFC asks."""
+    if not prefer:
+        return None
+    for preference in prefer.split(","):
+        name, _, value = preference.split(";", 1)[0].strip().partition("=")
+        value = value.strip().strip('"')
+        if name.strip().lower() == "wait" and value.isdigit():
+            return min(int(value), MAX_WAIT_S)
+    return None
+
+
+async def wait_for_end(job_id: str, seconds: float) -> bool:
+    """Whether the job ends within ``seconds``: waits on its event stream's end event (a blocking
+    XREAD on the loop, from the stream's start, so an end already announced counts), holding no
+    thread. False at the deadline, when the server stops, or when the job is gone."""
+    settings = get_settings()
+    try:
+        async with asyncio.timeout(seconds):
+            stream = events(get_async_redis(streams=True), job_id, "0-0",
+                            int(1000 * min(settings.stream_heartbeat_s, max(seconds, 0.001))), lifecycle.stop_event())
+            async with contextlib.aclosing(stream):
+                async for _, event, _ in stream:
+                    if event == "end":
+                        return True
+                    if event == "stopping":
+                        return False
+    except TimeoutError:
+        return False
+    return False
+
+
 @router.post("", status_code=202, response_model=Job, responses={
-    200: {"model": Job, "description": "a replay: the job made earlier for this Idempotency-Key and body"},
+    200: {"model": Job, "description": "a replay: the job made earlier for this Idempotency-Key and body; or, "
+                                       "with Prefer: wait=N, the job, finished within N seconds"},
     **error_responses(400, 409, 413, 415, 422)})
-def submit_job(
+async def submit_job(
     body: JobRequest,
     response: Response,
     store: JobStoreDep,
@@ -62,8 +103,29 @@ def submit_job(
     idempotency_key: Annotated[str | None, Header(max_length=255, description=(
         "repeat a submission safely: the same key and body give the same job; "
         "another body with the same key is a 422"))] = None,
+    prefer: Annotated[str | None, Header(max_length=1000, description=(
+        f"wait=N (RFC 7240): answer with the finished job (200) if it ends within N seconds (at most "
+        f"{MAX_WAIT_S}), else the usual 202; Preference-Applied says the wait was honoured"))] = None,
 ):
-    """Queue a job; answers 202 with its id and a Location to poll."""
+    """Queue a job; answers 202 with its id and a Location to poll. With ``Prefer: wait=N`` the
+    answer waits up to N seconds (at most 60) for the job to end: a job that ends in time comes
+    back whole (200, its result or error), one that does not as the usual 202."""
+    document = await run_in_threadpool(_submit, body, response, store, owner, idempotency_key)
+    wait = preferred_wait(prefer)
+    if wait is None:
+        return document
+    response.headers["Preference-Applied"] = f"wait={wait}"
+    if document["status"] not in TERMINAL and not await wait_for_end(document["id"], wait):
+        return document
+    meta = await read_job(get_async_redis(), document["id"])
+    if meta is None or meta["status"] not in TERMINAL:
+        return document
+    response.status_code = 200
+    return await run_in_threadpool(store.document, meta)
+
+
+def _submit(body, response: Response, store: JobStore, owner: str, idempotency_key: str | None) -> dict:
+    """The submission itself (synchronous Redis calls: run in FastAPI's thread pool)."""
     request = body.model_dump(mode="json")  # validated by its kind's model (discriminated on "kind")
     kind, parsed, _ = parse_job(request)  # the solvers' own checks: rank, indices, duplicates
     items = _check_limits(kind, parsed, body, request)

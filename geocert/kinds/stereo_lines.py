@@ -1,0 +1,360 @@
+"""The stereo_lines kind: the motion of a calibrated stereo rig from lines (thesis chapter 9).
+
+Items are frame pairs (frames k and k + 1): each is solved on its own (matching included), so a
+long sequence is split across workers like any batch, and a robot's one-pair job is one item; the
+trajectory is composed from the pairs when the result is assembled. Results are estimates
+(RANSAC around an algebraic solver): every item says ``"status": "estimate"`` (or ``"failed"``
+with the reason) and ``certified: false``; this kind issues no certificate, and the verifier says
+so rather than checking anything.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, Field
+
+from geocert.kinds.schema import Finite, JobBase, JobStats, Strict
+from geocert.solvers.core.bnb import Progress
+from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
+from geocert.solvers.core.strict import Invalid
+from geocert.solvers.lines.geometry import Rig
+from geocert.solvers.lines.matching import MatchingOptions
+from geocert.solvers.lines.pipeline import SOLVERS, StereoLinesOptions, compose, estimate_pair
+from geocert.solvers.lines.ransac import RansacOptions
+
+Segment = Annotated[list[Finite], Field(min_length=4, max_length=4, description="[x0, y0, x1, y1] pixels")]
+Row3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+Matrix3 = Annotated[list[Row3], Field(min_length=3, max_length=3)]
+Quad = Annotated[list[Segment], Field(min_length=4, max_length=4,
+                                      description="one line's segments: left k, right k, left k+1, right k+1")]
+
+NOT_CERTIFIED = ("stereo_lines results are estimates (RANSAC around algebraic solvers), never certified: there is "
+                 "no certificate to verify")
+
+
+class RigIn(Strict):
+    K_left: Matrix3 = Field(description="left intrinsics (pixels)")
+    K_right: Matrix3 = Field(description="right intrinsics (pixels)")
+    R: Matrix3 = Field(description="rotation of the right camera: right = K_right [R | t] in the left frame")
+    t: Row3 = Field(description="translation of the right camera (the baseline's units: the motion's)")
+
+
+class FrameIn(Strict):
+    left: list[Segment] = Field(description="segments detected in the left image")
+    right: list[Segment] = Field(description="segments detected in the right image")
+
+
+class StereoLinesData(Strict):
+    rig: RigIn
+    frames: list[FrameIn] | None = Field(None, min_length=2, description="segments per frame: matched here "
+                                                                          "(left-right, then frame to frame)")
+    matches: list[Annotated[list[Quad], Field(min_length=1)]] | None = Field(
+        None, min_length=1, description="or, per consecutive frame pair, the lines matched across its four views")
+
+
+class RansacIn(Strict):
+    threshold_px: Finite = Field(RansacOptions.threshold_px, gt=0, le=1000,
+                                 description="inlier: RMS of a line's 8 endpoint transfer distances (pixels)")
+    confidence: Finite = Field(RansacOptions.confidence, gt=0, lt=1)
+    max_iterations: int = Field(RansacOptions.max_iterations, ge=1, le=100_000)
+    min_conditioning: Finite = Field(RansacOptions.min_conditioning, ge=0, le=1,
+                                     description="lines whose stereo planes meet at a smaller sine are not sampled")
+    min_sample_angle_deg: Finite = Field(RansacOptions.min_sample_angle_deg, ge=0, le=90)
+    seed: int | None = Field(RansacOptions.seed, description="sampling seed (null: fresh randomness)")
+    min_inliers: int = Field(RansacOptions.min_inliers, ge=2, le=10_000,
+                             description="a pair with fewer inliers fails (its motion is not trusted)")
+    local_optimisation: int = Field(RansacOptions.local_optimisation, ge=0, le=20,
+                                    description="rounds of refitting each new best sample on its inliers")
+
+
+class MatchingIn(Strict):
+    min_overlap: Finite = Field(MatchingOptions.min_overlap, ge=0, le=1)
+    max_stereo_angle_deg: Finite = Field(MatchingOptions.max_stereo_angle_deg, gt=0, le=90)
+    min_epipolar_angle_deg: Finite = Field(MatchingOptions.min_epipolar_angle_deg, ge=0, lt=90)
+    max_track_px: Finite = Field(MatchingOptions.max_track_px, gt=0, le=10_000)
+    max_track_angle_deg: Finite = Field(MatchingOptions.max_track_angle_deg, gt=0, le=90)
+    guided: bool = Field(MatchingOptions.guided, description="track again with the first estimate's rotation "
+                                                             "and estimate again (segments only)")
+    ambiguity_margin: Finite = Field(MatchingOptions.ambiguity_margin, ge=0, le=10,
+                                     description="drop a stereo match whose rival costs within this of it (0: off)")
+
+
+_DEFAULTS = StereoLinesOptions()
+
+
+class StereoLinesOptionsIn(Strict):
+    solver: Literal["polynomial", "linear", "incremental", "align"] = _DEFAULTS.solver
+    sample_size: Annotated[int, Field(ge=2, le=10)] | None = Field(
+        _DEFAULTS.sample_size, description="lines per RANSAC sample (null: the solver's minimum, 2; linear 3)")
+    ransac: RansacIn = Field(default_factory=RansacIn)
+    refine: bool = Field(_DEFAULTS.refine, description="refine each motion on its inliers (least squares)")
+    incremental_iterations: int = Field(_DEFAULTS.incremental_iterations, ge=1, le=20,
+                                        description="the incremental solver's relinearisations (1: the thesis's)")
+    matching: MatchingIn = Field(default_factory=MatchingIn)
+
+
+class StereoLinesJob(JobBase):
+    kind: Literal["stereo_lines"]
+    data: StereoLinesData
+    options: StereoLinesOptionsIn = Field(default_factory=StereoLinesOptionsIn)
+
+
+class PairOut(BaseModel):
+    frames: list[int] = Field(description="[k, k + 1]")
+    status: Literal["estimate", "failed", "cancelled"]
+    certified: Literal[False] = Field(description="always false: an estimate, not a certified optimum")
+    R: list[list[float]] | None = Field(description="X_{k+1} = R X_k + t (left camera coordinates)")
+    t: list[float] | None
+    inliers: list[int] = Field(description="indices into this pair's lines (matches, or the given matches)")
+    inlier_ratio: float
+    lines: int = Field(description="lines seen in the four views")
+    matches: list[list[int]] | None = Field(description="from segments: per line [left k, right k, left k+1, "
+                                                        "right k+1] segment indices")
+    degenerate: list[int] = Field(description="lines the stereo pair does not fix (in or near an epipolar plane)")
+    solver: str
+    iterations: int = Field(description="RANSAC samples drawn")
+    time_ms: float = Field(description="matching, RANSAC and refinement of this pair")
+    rms_px: float | None = Field(description="RMS reprojection distance of the inliers' endpoints (pixels)")
+    refined: bool
+    reason: str | None
+    nodes: int = 0
+    elapsed_s: float
+    cost: None = None
+    lower_bound: None = None
+
+
+class PoseOut(BaseModel):
+    R: list[list[float]]
+    t: list[float] = Field(description="X_k = R X_0 + t")
+    center: list[float] = Field(description="the left camera's centre in frame 0's coordinates")
+
+
+class StereoLinesResult(BaseModel):
+    kind: Literal["stereo_lines"]
+    status: Literal["estimate"] = Field(description="estimates, never certified")
+    solver: str
+    pairs: list[PairOut]
+    trajectory: list[PoseOut | None] = Field(description="one pose per frame (frame 0: the identity); null after "
+                                                         "a pair without a motion")
+    stats: JobStats
+
+
+@dataclass
+class ParsedLines:
+    rig: Rig
+    frames: list[dict] | None
+    matches: list[np.ndarray] | None
+
+    @property
+    def pairs(self) -> int:
+        return len(self.frames) - 1 if self.frames is not None else len(self.matches)
+
+
+def _matrix(value: Any, field: str) -> np.ndarray:
+    array = number_array(value, field, "a 3x3 matrix (3 rows of 3 numbers)", 2, COORDINATE_LIMIT)
+    if array.shape != (3, 3):
+        raise InputError(field, "must be a 3x3 matrix (3 rows of 3 numbers)")
+    return array
+
+
+def read_rig(value: Any) -> Rig:
+    if not isinstance(value, dict):
+        raise InputError("data/rig", "must be an object with K_left, K_right, R and t")
+    for key in ("K_left", "K_right", "R", "t"):
+        if key not in value:
+            raise InputError(f"data/rig/{key}", "is required")
+    for key in value:
+        if key not in ("K_left", "K_right", "R", "t"):
+            raise InputError(f"data/rig/{key}", "unknown member (known: K_left, K_right, R, t)")
+    Ks = []
+    for key in ("K_left", "K_right"):
+        K = _matrix(value[key], f"data/rig/{key}")
+        if abs(np.linalg.det(K)) < 1e-12 * max(1.0, np.abs(K).max()) ** 3:
+            raise InputError(f"data/rig/{key}", "is singular: not an intrinsics matrix")
+        Ks.append(K)
+    R = _matrix(value["R"], "data/rig/R")
+    if np.abs(R.T @ R - np.eye(3)).max() > 1e-6 or np.linalg.det(R) < 0:
+        raise InputError("data/rig/R", "is not a rotation (R^T R = I within 1e-6 and det R = +1)")
+    t = number_array(value["t"], "data/rig/t", "a list of 3 numbers", 1, COORDINATE_LIMIT)
+    if t.shape != (3,):
+        raise InputError("data/rig/t", "must be a list of 3 numbers")
+    if not np.linalg.norm(t) > 0:
+        raise InputError("data/rig/t", "is zero: a stereo rig needs a baseline")
+    return Rig(Ks[0], Ks[1], R, t)
+
+
+def _segments(value: Any, field: str, allow_empty: bool = True) -> np.ndarray:
+    array = number_array(value, field, "a list of segments [x0, y0, x1, y1]", 2, COORDINATE_LIMIT)
+    if array.size == 0:
+        if not allow_empty:
+            raise InputError(field, "must not be empty")
+        return np.zeros((0, 4))
+    if array.ndim != 2 or array.shape[1] != 4:
+        raise InputError(field, "must be a list of segments [x0, y0, x1, y1]")
+    length = np.hypot(array[:, 2] - array[:, 0], array[:, 3] - array[:, 1])
+    short = np.flatnonzero(~(length > 1e-9 * (1 + np.abs(array).max(axis=1))))
+    if len(short):
+        raise InputError(f"{field}/{int(short[0])}", "is a segment of zero length (its endpoints coincide)")
+    return array
+
+
+class StereoLinesKind:
+    name = "stereo_lines"
+    description = ("Stereo line structure and motion (thesis ch. 9): the motion of a calibrated stereo rig between "
+                   "frames from lines; estimates (RANSAC), never certified.")
+    item_key = "pairs"  # frame pairs: frames k, k + 1 (data: frames, or matches per pair)
+    chunk_size = 20
+    options_type = StereoLinesOptions
+    request_model = StereoLinesJob
+    result_model = StereoLinesResult
+    solution_fields = ("R", "t")
+    certifies = False  # estimates only: no certificate, nothing for the verifier to check
+    verification = None  # set below
+    example: dict = {}  # set below (a synthetic scene)
+
+    def parse(self, data: Any, items: range | None = None) -> ParsedLines:
+        if not isinstance(data, dict):
+            raise InputError("data", "must be an object with 'rig' and 'frames' (or 'matches')")
+        for key in data:
+            if key not in ("rig", "frames", "matches"):
+                raise InputError(f"data/{key}", "unknown member (known: rig, frames, matches)")
+        if "rig" not in data:
+            raise InputError("data/rig", "is required")
+        rig = read_rig(data["rig"])
+        has_frames, has_matches = data.get("frames") is not None, data.get("matches") is not None  # null: absent
+        if has_frames == has_matches:
+            raise InputError("data/frames", "give either frames (segments per frame) or matches (per frame pair)")
+        if has_frames:
+            frames = data["frames"]
+            if not isinstance(frames, list) or len(frames) < 2:
+                raise InputError("data/frames", "must be a list of at least 2 frames")
+            parsed = []
+            for k, frame in enumerate(frames):
+                where = f"data/frames/{k}"
+                if not isinstance(frame, dict) or set(frame) != {"left", "right"}:
+                    raise InputError(where, "must be an object with 'left' and 'right' segment lists")
+                parsed.append({side: _segments(frame[side], f"{where}/{side}") for side in ("left", "right")})
+            return ParsedLines(rig, parsed, None)
+        matches = data["matches"]
+        if not isinstance(matches, list) or not matches:
+            raise InputError("data/matches", "must be a non-empty list (one entry per frame pair)")
+        parsed_matches = []
+        for k, pair in enumerate(matches):
+            where = f"data/matches/{k}"
+            if not isinstance(pair, list) or not pair:
+                raise InputError(where, "must be a non-empty list of lines, each 4 segments (left k, right k, "
+                                        "left k+1, right k+1)")
+            quads = []
+            for i, quad in enumerate(pair):
+                if not isinstance(quad, list) or len(quad) != 4:
+                    raise InputError(f"{where}/{i}", "must be 4 segments: left k, right k, left k+1, right k+1")
+                quads.append(_segments(quad, f"{where}/{i}", allow_empty=False))
+            parsed_matches.append(np.stack(quads))
+        return ParsedLines(rig, None, parsed_matches)
+
+    def check_options(self, parsed: ParsedLines, options: StereoLinesOptions) -> None:
+        """What the data must give the solver chosen: enough lines per frame pair (a 422 naming
+        the field, rather than a pair that cannot but fail)."""
+        need = options.samples
+        if parsed.matches is not None:
+            for k, quads in enumerate(parsed.matches):
+                if len(quads) < need:
+                    raise InputError(f"data/matches/{k}", f"{len(quads)} lines; the {options.solver} solver with "
+                                                          f"samples of {need} needs at least {need}")
+            return
+        for k, frame in enumerate(parsed.frames):
+            for side in ("left", "right"):
+                if len(frame[side]) < need:
+                    raise InputError(f"data/frames/{k}/{side}", f"{len(frame[side])} segments; the {options.solver} "
+                                                                f"solver with samples of {need} needs at least {need}")
+
+    def count(self, parsed: ParsedLines) -> int:
+        return parsed.pairs
+
+    def observations(self, parsed: ParsedLines) -> int:
+        if parsed.matches is not None:
+            return sum(4 * len(quads) for quads in parsed.matches)
+        return sum(len(frame["left"]) + len(frame["right"]) for frame in parsed.frames)
+
+    def solve_item(self, parsed: ParsedLines, index: int, options: StereoLinesOptions, callback) -> dict:
+        start = time.perf_counter()
+        stopped = []
+
+        def should_stop() -> bool:
+            if callback is not None and not stopped and callback(Progress(0, 0, 0.0, 0.0, 0.0, 0.0,
+                                                                          time.perf_counter() - start)):
+                stopped.append(True)
+            return bool(stopped)
+
+        if parsed.matches is not None:
+            estimate, quads, seconds = estimate_pair(parsed.rig, None, None, parsed.matches[index], options,
+                                                     should_stop)
+        else:
+            estimate, quads, seconds = estimate_pair(parsed.rig, parsed.frames[index], parsed.frames[index + 1],
+                                                     None, options, should_stop)
+        status, reason = estimate.status, estimate.reason
+        if stopped:
+            status, reason = "cancelled", "the job was cancelled while this pair was solved"
+        return {
+            "frames": [index, index + 1], "status": status, "certified": False,
+            "R": None if estimate.R is None or status == "cancelled" else estimate.R.tolist(),
+            "t": None if estimate.t is None or status == "cancelled" else estimate.t.tolist(),
+            "inliers": estimate.inliers, "inlier_ratio": estimate.inlier_ratio, "lines": estimate.lines,
+            "matches": None if quads is None else quads.tolist(), "degenerate": estimate.degenerate,
+            "solver": options.solver, "iterations": estimate.iterations, "time_ms": 1000 * seconds,
+            "rms_px": estimate.rms_px, "refined": estimate.refined, "reason": reason,
+            "nodes": 0, "elapsed_s": seconds, "cost": None, "lower_bound": None,
+        }
+
+    def cancelled_item(self) -> dict:
+        return {"frames": [-1, -1], "status": "cancelled", "certified": False, "R": None, "t": None, "inliers": [],
+                "inlier_ratio": 0.0, "lines": 0, "matches": None, "degenerate": [], "solver": "", "iterations": 0,
+                "time_ms": 0.0, "rms_px": None, "refined": False,
+                "reason": "the job was cancelled before this pair started", "nodes": 0, "elapsed_s": 0.0,
+                "cost": None, "lower_bound": None}
+
+    def assemble(self, options: StereoLinesOptions, items: list[dict], stats: dict) -> dict:
+        for index, item in enumerate(items):
+            item["frames"] = [index, index + 1]
+        motions = [(np.array(item["R"]), np.array(item["t"])) if item["status"] == "estimate" else None
+                   for item in items]
+        return {"kind": self.name, "status": "estimate", "solver": options.solver, "pairs": items,
+                "trajectory": compose(motions), "stats": stats}
+
+
+class NoCertificates:
+    """The verifier's adapter for a kind that issues no certificate: any document claiming one
+    for this kind is refused, saying why."""
+
+    domain = "none: stereo_lines issues estimates, not certificates"
+
+    def checked_options(self, options: Any) -> dict:
+        raise Invalid("format", NOT_CERTIFIED)
+
+    def read(self, data: Any, index: int):
+        raise Invalid("format", NOT_CERTIFIED)
+
+    def item(self, arrays, norm):  # pragma: no cover - read refuses first
+        raise Invalid("format", NOT_CERTIFIED)
+
+
+def example_job() -> dict:
+    """A small job: one frame pair of 12 lines, matched, seen by the thesis's rig (synthetic)."""
+    from geocert.solvers.lines.scenes import pair_scene
+
+    scene = pair_scene(np.random.default_rng(7), 12, noise_px=0.0, degrees=2.0, metres=0.05)
+    rig = scene.rig
+    return {"kind": "stereo_lines", "options": {"solver": "polynomial", "sample_size": 2},
+            "data": {"rig": {"K_left": rig.K_left.tolist(), "K_right": rig.K_right.tolist(), "R": rig.R.tolist(),
+                             "t": rig.t.tolist()},
+                     "matches": [np.round(scene.segments, 4).tolist()]}}
+
+
+KIND = StereoLinesKind()
+KIND.verification = NoCertificates()
+KIND.example = example_job()
+__all__ = ["KIND", "NOT_CERTIFIED", "SOLVERS"]
