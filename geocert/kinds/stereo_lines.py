@@ -17,8 +17,9 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
-from geocert.kinds.schema import Finite, JobBase, JobStats, Strict
+from geocert.kinds.schema import Determinacy, Finite, JobBase, JobStats, Strict
 from geocert.solvers.core.bnb import Progress
+from geocert.solvers.core.determinacy import safely
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.lines.geometry import Rig
@@ -125,6 +126,8 @@ class PairOut(BaseModel):
     elapsed_s: float
     cost: None = None
     lower_bound: None = None
+    determinacy: Determinacy | None = Field(None, description="how well the inlier lines fix the motion "
+                                                              "(estimated from the refinement's curvature)")
 
 
 class PoseOut(BaseModel):
@@ -299,6 +302,9 @@ class StereoLinesKind:
         status, reason = estimate.status, estimate.reason
         if stopped:
             status, reason = "cancelled", "the job was cancelled while this pair was solved"
+        determinacy = None
+        if status == "estimate" and estimate.R is not None and estimate.inliers:
+            determinacy = safely(_motion_determinacy, parsed, index, quads, estimate)
         return {
             "frames": [index, index + 1], "status": status, "certified": False,
             "R": None if estimate.R is None or status == "cancelled" else estimate.R.tolist(),
@@ -307,7 +313,7 @@ class StereoLinesKind:
             "matches": None if quads is None else quads.tolist(), "degenerate": estimate.degenerate,
             "solver": options.solver, "iterations": estimate.iterations, "time_ms": 1000 * seconds,
             "rms_px": estimate.rms_px, "refined": estimate.refined, "reason": reason,
-            "nodes": 0, "elapsed_s": seconds, "cost": None, "lower_bound": None,
+            "nodes": 0, "elapsed_s": seconds, "cost": None, "lower_bound": None, "determinacy": determinacy,
         }
 
     def cancelled_item(self) -> dict:
@@ -340,6 +346,21 @@ class NoCertificates:
 
     def item(self, arrays, norm):  # pragma: no cover - read refuses first
         raise Invalid("format", NOT_CERTIFIED)
+
+
+def _motion_determinacy(parsed: ParsedLines, index: int, quads, estimate) -> dict | None:
+    """How well the pair's inlier lines fix its motion (solvers/lines/determinacy.py)."""
+    from geocert.solvers.lines import determinacy
+    from geocert.solvers.lines.geometry import line_set
+
+    if parsed.matches is not None:
+        segments = np.asarray(parsed.matches[index], dtype=float)
+    else:
+        a, b = parsed.frames[index], parsed.frames[index + 1]
+        q = np.asarray(quads, dtype=int)
+        segments = np.stack([a["left"][q[:, 0]], a["right"][q[:, 1]], b["left"][q[:, 2]], b["right"][q[:, 3]]], axis=1)
+    inliers = np.asarray(estimate.inliers, dtype=int)
+    return determinacy.motion(line_set(parsed.rig, segments[inliers]), np.asarray(estimate.R), np.asarray(estimate.t))
 
 
 def example_job() -> dict:

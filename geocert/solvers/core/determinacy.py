@@ -76,17 +76,24 @@ def curvature_intervals(J: np.ndarray, residuals: np.ndarray, quantities: dict[s
     J = np.asarray(J, dtype=float)
     r = np.asarray(residuals, dtype=float)
     n, p = J.shape
-    cost = float(r @ r)
-    redundancy = n - p
+    information = J.T @ J if np.all(np.isfinite(J)) else np.full((p, p), np.nan)
+    return information_intervals(information, float(r @ r), n - p, quantities, gap, sigmas)
+
+
+def information_intervals(information: np.ndarray, cost: float, redundancy: int,
+                          quantities: dict[str, tuple[float, np.ndarray]], gap: float | None = None,
+                          sigmas: float = SIGMAS) -> Determinacy:
+    """The same from J'J itself (or a Schur complement of it, for parameters of interest with the
+    others eliminated), the squared residuals' sum and n - p."""
     delta = sigmas ** 2 * cost / redundancy if redundancy > 0 else 0.0
     if gap is not None and math.isfinite(gap):
         delta = max(delta, gap)
     out = Determinacy(cost_increase=delta, redundancy=redundancy)
-    if not (np.all(np.isfinite(J)) and math.isfinite(delta)):
+    if not (np.all(np.isfinite(information)) and math.isfinite(delta)):
         for name, (value, _) in quantities.items():
             out.intervals.append({"name": name, "value": _finite(value), "lower": None, "upper": None})
         return out
-    values, vectors = np.linalg.eigh(J.T @ J)
+    values, vectors = np.linalg.eigh(0.5 * (information + information.T))
     largest = max(float(values[-1]), 1e-300)
     fixed = values > SINGULAR * largest
     for name, (value, gradient) in quantities.items():
