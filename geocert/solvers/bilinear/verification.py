@@ -146,7 +146,6 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
         raise Invalid("format", f"proof/tightening must be a list of at most {MAX_ROUNDS} rounds")
     for number, round_ in enumerate(rounds):
         box_lo, box_hi = _check_round(relaxation, round_, box_lo, box_hi, cap, number)
-    passed.append("tightening")
     search, alpha_lo, alpha_hi = Box(box_lo[:6], box_hi[:6]), box_lo[6:], box_hi[6:]
 
     leaves, proofs = proof.get("leaves"), proof.get("proofs")
@@ -163,6 +162,9 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
         raise Invalid("coverage", f"no leaf covers the box {gap[0].tolist()} .. {gap[1].tolist()}")
     passed.append("coverage")
 
+    nodes = _check_node_tightening(relaxation, proof.get("node_tightening"), search, alpha_lo, alpha_hi, cap)
+    passed.append("tightening")
+
     proven, boxes = [], []
     for number, record in enumerate(proofs):
         if not isinstance(record, dict):
@@ -172,8 +174,25 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
         ub = _number(record.get("upper_bound"), f"proofs/{number}/upper_bound")
         if not ub >= cap:
             raise Invalid("leaf_bounds", f"proof {number} assumed a cost cap below the claimed lower bound")
-        data = relaxation.conic_data(lo, hi, ub, alpha_lo, alpha_hi)
+        source = record.get("alpha_from")
+        if source is None:
+            within, a_lo, a_hi = (search.lo, search.hi), alpha_lo, alpha_hi
+        elif type(source) is int and 0 <= source < len(nodes):
+            within, a_lo, a_hi = nodes[source]
+        else:
+            raise Invalid("format", f"proof {number}: alpha_from must be null or a node tightening record's index")
+        if not (np.all(within[0] <= lo) and np.all(hi <= within[1])):
+            raise Invalid("leaf_bounds", f"proof {number}: its box is not inside the box its coefficients' range "
+                                         "was proven for")
         kind = record.get("kind")
+        if kind == "alpha_empty":  # the tightening proved that no coefficient vector fits within the cap
+            if np.all(a_lo <= a_hi):
+                raise Invalid("leaf_bounds", f"proof {number}: its coefficients' range is not empty")
+            proven.append(ub)
+            continue
+        if not np.all(a_lo <= a_hi):
+            raise Invalid("leaf_bounds", f"proof {number}: an empty coefficients' range needs kind alpha_empty")
+        data = relaxation.conic_data(lo, hi, ub, a_lo, a_hi)
         if kind == "empty":  # no translation fits every observation within the cap
             if data is not None:
                 raise Invalid("leaf_bounds", f"proof {number}: its box is not empty of points costing at most its cap")
@@ -205,6 +224,66 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
         bounds.append(proven[leaf[2]])
     passed.append("leaf_bounds")
     return min(bounds) * unit
+
+
+def _check_node_tightening(relaxation: Relaxation, records: Any, search: Box, alpha_lo: np.ndarray,
+                           alpha_hi: np.ndarray, cap: float) -> list:
+    """The node tightening records, in order: each over a camera box inside its parent's (the
+    root's searched box for parent null), starting from the coefficients' box its parent proved,
+    and proving its own coefficients' box (2K dual vectors, the camera box unchanged). Returns per
+    record (camera box, coefficients' lower, upper) as proven."""
+    if records is None:
+        records = []
+    if not isinstance(records, list):
+        raise Invalid("format", "proof/node_tightening must be a list")
+    K = relaxation.K
+    out: list = []
+    for number, record in enumerate(records):
+        if not isinstance(record, dict):
+            raise Invalid("format", f"node tightening {number} must be an object")
+        parent = record.get("parent")
+        if parent is None:
+            within, a_lo, a_hi = (search.lo, search.hi), alpha_lo, alpha_hi
+        elif type(parent) is int and 0 <= parent < number:
+            within, a_lo, a_hi = out[parent]
+        else:
+            raise Invalid("format", f"node tightening {number}: parent must be null or an earlier record")
+        d = 6 + K
+        lo_in, hi_in = _numbers(record.get("box_in"), f"node_tightening/{number}/box_in", (2, d))
+        lo_out, hi_out = _numbers(record.get("box_out"), f"node_tightening/{number}/box_out", (2, d))
+        if not (np.all(within[0] <= lo_in[:6]) and np.all(hi_in[:6] <= within[1])):
+            raise Invalid("tightening", f"node tightening {number}: its camera box is not inside its parent's")
+        if not (np.array_equal(lo_in[6:], a_lo) and np.array_equal(hi_in[6:], a_hi)):
+            raise Invalid("tightening", f"node tightening {number} does not start from its parent's coefficients' box")
+        if not (np.array_equal(lo_out[:6], lo_in[:6]) and np.array_equal(hi_out[:6], hi_in[:6])):
+            raise Invalid("tightening", f"node tightening {number} moves the camera box")
+        if not np.all(a_lo <= a_hi):
+            raise Invalid("tightening", f"node tightening {number}: its parent left no coefficient")
+        ub = _number(record.get("upper_bound"), f"node_tightening/{number}/upper_bound")
+        if not ub >= cap:
+            raise Invalid("tightening", f"node tightening {number} assumed a cost cap below the claimed lower bound")
+        duals = record.get("duals")
+        if not isinstance(duals, list) or len(duals) != 2 * K:
+            raise Invalid("tightening", f"node tightening {number}: {K} coefficients need {2 * K} dual vectors")
+        data = relaxation.conic_data(lo_in[:6], hi_in[:6], ub, a_lo, a_hi)
+        if data is None:
+            raise Invalid("tightening", f"node tightening {number}: its box holds no point within its cap")
+        data = with_cost_cap(relaxation, data, ub)
+        for i in range(K):
+            for side, sign in ((0, 1.0), (1, -1.0)):
+                z = duals[2 * i + side]
+                proven = lo_in[6 + i] if sign > 0 else hi_in[6 + i]
+                if z is not None:
+                    q = tightening_objective(relaxation, 6 + i, sign)
+                    value = sign * safe_lower_bound(q, data.A, data.b, data.cones, dual_vector(z, len(data.b)),
+                                                    data.lower, data.upper)
+                    proven = max(proven, value) if sign > 0 else min(proven, value)
+                claimed = lo_out[6 + i] if sign > 0 else hi_out[6 + i]
+                if (sign > 0 and claimed > proven) or (sign < 0 and claimed < proven):
+                    raise Invalid("tightening", f"node tightening {number}, coefficient {i}: side {claimed!r} is "
+                                                f"beyond the proven {proven!r}")
+        out.append(((lo_in[:6], hi_in[:6]), lo_out[6:], hi_out[6:]))
+    return out
 
 
 def _check_round(relaxation: Relaxation, round_: Any, box_lo: np.ndarray, box_hi: np.ndarray, cap: float,
