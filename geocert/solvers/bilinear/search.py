@@ -103,7 +103,7 @@ class Model:
             except (ValueError, np.linalg.LinAlgError):
                 break
             value = self.cost(M, alpha, t)
-            if value < best[3] * (1 - 1e-9):
+            if value < best[3] * (1 - 1e-7):
                 best = (M, alpha, t, value)
             else:
                 if value < best[3]:
@@ -290,13 +290,16 @@ class BoxProblem:
 TIGHTENING_ROUNDS = 6
 
 
-def tighten(relaxation: Relaxation, lo: np.ndarray, hi: np.ndarray, cap: float, rounds: int = TIGHTENING_ROUNDS):
+def tighten(relaxation: Relaxation, lo: np.ndarray, hi: np.ndarray, cap: float, rounds: int = TIGHTENING_ROUNDS,
+            deadline: float = math.inf):
     """Bound tightening at the root: each entry of M and each coefficient minimised and maximised
     over the relaxation with "cost at most cap"; every side moved is the safe bound of a dual
     vector (points of the box outside the new one cost more than cap). The coefficients' ranges
     shrinking is what makes McCormick's envelopes tight as the camera boxes shrink (their error
     is the product of both widths). Rounds repeat while a side moves by more than a tenth of its
-    width. Returns the camera box, the coefficients' box and the rounds' records (proof)."""
+    width, and no new round starts after ``deadline`` (time.perf_counter()); a round stopped by it
+    leaves its remaining sides as they were. Returns the camera box, the coefficients' box and the
+    rounds' records (proof)."""
     records = []
     solver = ReusableConicProgram(lean=False)
     K = relaxation.K
@@ -311,6 +314,9 @@ def tighten(relaxation: Relaxation, lo: np.ndarray, hi: np.ndarray, cap: float, 
         duals: list = []
         for entry in range(6 + K):
             for sign in (1.0, -1.0):
+                if time.perf_counter() > deadline and duals:
+                    duals.append(None)
+                    continue
                 q = tightening_objective(relaxation, entry, sign)
                 res = solver.solve(q, data.A, data.b, data.cones) if entry == 0 and sign > 0 else \
                     solver.solve_objective(q)
@@ -329,27 +335,33 @@ def tighten(relaxation: Relaxation, lo: np.ndarray, hi: np.ndarray, cap: float, 
         records.append({"upper_bound": cap, "box_in": [box_lo.tolist(), box_hi.tolist()],
                         "box_out": [new_lo.tolist(), new_hi.tolist()], "duals": [pack(z) for z in duals]})
         box_lo, box_hi = new_lo, new_hi
-        if moved < 0.1:
+        if moved < 0.1 or time.perf_counter() > deadline:
             break
     return box_lo[:6], box_hi[:6], box_lo[6:], box_hi[6:], records
 
 
 def root_incumbent(model: Model, seed: int = 0):
     """The best of alternating least squares from the baseline, the mean shape and a few random
-    coefficient vectors (unconstrained camera)."""
+    coefficient vectors (unconstrained camera). For L1L1 the starts run least squares first (fast)
+    and only the two best are polished with L1 steps (each an LP)."""
     starts = [linear_baseline(model)[1], np.full(model.K, 1.0 / model.K)]
     rng = np.random.default_rng(seed)
     for _ in range(ALS_STARTS if model.K > 1 else 0):
         starts.append(pb.project_coefficients(rng.dirichlet(np.ones(model.K)), model.coefficients, model.bound))
-    best = None
+    squares = model if model.norm == "L2L2" else Model.__new__(Model)
+    if squares is not model:
+        squares.__dict__.update(model.__dict__)
+        squares.norm = "L2L2"
+    found = []
     for alpha in starts:
-        step = model.camera_step(alpha, None, None)
+        step = squares.camera_step(alpha, None, None)
         if step is None:
             continue
-        M, alpha2, t, value = model.als(step[0], alpha, step[1], iterations=50)
-        if best is None or value < best[3]:
-            best = (M, alpha2, t, value)
-    return best
+        found.append(squares.als(step[0], alpha, step[1], iterations=50))
+    if squares is not model:
+        found.sort(key=lambda point: model.cost(*point[:3]))
+        found = [model.als(M, alpha, model.best_t(M, alpha), iterations=10) for M, alpha, _, _ in found[:2]]
+    return min(found, key=lambda point: point[3]) if found else None
 
 
 def root_half_width(M: np.ndarray, camera_bound: float | None, frame: pb.Frame) -> float:
@@ -388,7 +400,10 @@ def fit_frame(basis: np.ndarray, points: np.ndarray, options: BilinearOptions, c
     abs_gap = options.abs_gap / unit
     relaxation = Relaxation(frame.X, frame.u, norm, options.coefficients, options.coefficient_bound)
     if value > abs_gap:
-        tight_lo, tight_hi, alpha_lo, alpha_hi, rounds = tighten(relaxation, lo, hi, value * (1 + 1e-9))
+        # at most half the time limit at the root: the search has the rest
+        deadline = start + 0.5 * options.time_limit_s
+        tight_lo, tight_hi, alpha_lo, alpha_hi, rounds = tighten(relaxation, lo, hi, value * (1 + 1e-9),
+                                                                 deadline=deadline)
     else:
         tight_lo, tight_hi, alpha_lo, alpha_hi, rounds = lo, hi, None, None, []
     if alpha_lo is None:
