@@ -284,3 +284,28 @@ def test_a_dual_vector_changed_is_refused(certified_result):
                 record["z"] = pack(z * 0.5)
     report = verify_any(forged(certified_result, change))
     assert not report.valid and report.first_failure["check"] in ("leaf_bounds", "lower_bound")
+
+
+def test_geocert_verify_checks_it_without_a_conic_solver(certified_result, tmp_path):
+    """`geocert verify` accepts the result (exit 0) and refuses a forged one (exit 1); the check
+    imports no conic solver."""
+    import json
+    import subprocess
+    import sys
+
+    good = tmp_path / "result.json"
+    good.write_text(json.dumps(certified_result))
+    run = subprocess.run([sys.executable, "-m", "geocert.app.cli", "verify", str(good)], capture_output=True, text=True)
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    bad = copy.deepcopy(certified_result["certificate"])
+    bad["items"][1]["proof"]["leaves"].pop(0)
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(bad))
+    assert subprocess.run([sys.executable, "-m", "geocert.app.cli", "verify", str(path)],
+                          capture_output=True, text=True).returncode == 1
+    code = ("import json, sys; from geocert.solvers.verify import verify_any; "
+            f"valid = verify_any(json.load(open({str(good)!r}))).valid; "
+            "bad = [m for m in sys.modules if m.split('.')[0] in ('clarabel', 'cvxpy', 'pyscipopt')]; "
+            "print(json.dumps([valid, bad]))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == [True, []]

@@ -291,7 +291,7 @@ TIGHTENING_ROUNDS = 6
 
 
 def tighten(relaxation: Relaxation, lo: np.ndarray, hi: np.ndarray, cap: float, rounds: int = TIGHTENING_ROUNDS,
-            deadline: float = math.inf):
+            deadline: float = math.inf, enough: float = -math.inf):
     """Bound tightening at the root: each entry of M and each coefficient minimised and maximised
     over the relaxation with "cost at most cap"; every side moved is the safe bound of a dual
     vector (points of the box outside the new one cost more than cap). The coefficients' ranges
@@ -299,7 +299,8 @@ def tighten(relaxation: Relaxation, lo: np.ndarray, hi: np.ndarray, cap: float, 
     is the product of both widths). Rounds repeat while a side moves by more than a tenth of its
     width, and no new round starts after ``deadline`` (time.perf_counter()); a round stopped by it
     leaves its remaining sides as they were. Returns the camera box, the coefficients' box and the
-    rounds' records (proof)."""
+    rounds' records (proof). Rounds stop too once the relaxation's own bound on the box reaches
+    ``enough`` (the search's root node then closes at once)."""
     records = []
     solver = ReusableConicProgram(lean=False)
     K = relaxation.K
@@ -336,6 +337,9 @@ def tighten(relaxation: Relaxation, lo: np.ndarray, hi: np.ndarray, cap: float, 
                         "box_out": [new_lo.tolist(), new_hi.tolist()], "duals": [pack(z) for z in duals]})
         box_lo, box_hi = new_lo, new_hi
         if moved < 0.1 or time.perf_counter() > deadline:
+            break
+        res = solver.solve_objective(data.q)  # the cost over this round's (looser) box: a cheap look
+        if res.status is ConicStatus.OPTIMAL and relaxation.bound(data, res.z) >= enough:
             break
     return box_lo[:6], box_hi[:6], box_lo[6:], box_hi[6:], records
 
@@ -402,8 +406,9 @@ def fit_frame(basis: np.ndarray, points: np.ndarray, options: BilinearOptions, c
     if value > abs_gap:
         # at most half the time limit at the root: the search has the rest
         deadline = start + 0.5 * options.time_limit_s
+        enough = value - max(abs_gap, options.rel_gap * value)
         tight_lo, tight_hi, alpha_lo, alpha_hi, rounds = tighten(relaxation, lo, hi, value * (1 + 1e-9),
-                                                                 deadline=deadline)
+                                                                 deadline=deadline, enough=enough)
     else:
         tight_lo, tight_hi, alpha_lo, alpha_hi, rounds = lo, hi, None, None, []
     if alpha_lo is None:
