@@ -287,23 +287,25 @@ class BoxProblem:
                 CameraBox(right_lo, box.hi.copy(), alpha_lo, alpha_hi, source, box.depth + 1)]
 
 
-TIGHTENING_ROUNDS = 6
+TIGHTENING_ROUNDS = 30
+MIN_MOVE = 0.02
 
 
-def tighten(relaxation: Relaxation, lo: np.ndarray, hi: np.ndarray, cap: float, rounds: int = TIGHTENING_ROUNDS,
+def tighten(relaxation: Relaxation, lo: np.ndarray, hi: np.ndarray, cap: float, rounds: int | None = None,
             deadline: float = math.inf, enough: float = -math.inf):
     """Bound tightening at the root: each entry of M and each coefficient minimised and maximised
     over the relaxation with "cost at most cap"; every side moved is the safe bound of a dual
     vector (points of the box outside the new one cost more than cap). The coefficients' ranges
     shrinking is what makes McCormick's envelopes tight as the camera boxes shrink (their error
-    is the product of both widths). Rounds repeat while a side moves by more than a tenth of its
-    width, and no new round starts after ``deadline`` (time.perf_counter()); a round stopped by it
+    is the product of both widths). Rounds repeat while a side moves by more than 2% of its
+    width (MIN_MOVE), and no new round starts after ``deadline`` (time.perf_counter()); a round stopped by it
     leaves its remaining sides as they were. Returns the camera box, the coefficients' box and the
     rounds' records (proof). Rounds stop too once the relaxation's own bound on the box reaches
     ``enough`` (the search's root node then closes at once)."""
     records = []
     solver = ReusableConicProgram(lean=False)
     K = relaxation.K
+    rounds = TIGHTENING_ROUNDS if rounds is None else rounds
     box_lo = np.concatenate([lo, np.full(K, relaxation.alpha_range[0])])
     box_hi = np.concatenate([hi, np.full(K, relaxation.alpha_range[1])])
     for _ in range(rounds):
@@ -336,7 +338,7 @@ def tighten(relaxation: Relaxation, lo: np.ndarray, hi: np.ndarray, cap: float, 
         records.append({"upper_bound": cap, "box_in": [box_lo.tolist(), box_hi.tolist()],
                         "box_out": [new_lo.tolist(), new_hi.tolist()], "duals": [pack(z) for z in duals]})
         box_lo, box_hi = new_lo, new_hi
-        if moved < 0.1 or time.perf_counter() > deadline:
+        if moved < MIN_MOVE or time.perf_counter() > deadline:
             break
         res = solver.solve_objective(data.q)  # the cost over this round's (looser) box: a cheap look
         if res.status is ConicStatus.OPTIMAL and relaxation.bound(data, res.z) >= enough:
