@@ -309,3 +309,20 @@ def test_geocert_verify_checks_it_without_a_conic_solver(certified_result, tmp_p
             "print(json.dumps([valid, bad]))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert json.loads(out.stdout.strip().splitlines()[-1]) == [True, []]
+
+
+def test_affine_coefficients_and_a_given_camera_box_verify():
+    """Affine coefficients (sum 1, |alpha_i| <= coefficient_bound) and a scope box given by
+    camera_bound: certified, the box as asked, verified; a claim that the box was smaller than
+    camera_bound's is refused."""
+    basis, points, *_ = scene(3, 12, 0.01, 6)
+    result = solve_job(job(basis.tolist(), [{"points": points.tolist()}], coefficients="affine",
+                           coefficient_bound=5.0, camera_bound=400.0, certificate="full"))
+    frame = result["frames"][0]
+    assert frame["certified"] and sum(frame["coefficients"]) == pytest.approx(1.0, abs=1e-12)
+    assert frame["certificate"]["root_region"]["camera_upper"] == [[400.0] * 3] * 2
+    assert verify_any(result).valid
+    document = copy.deepcopy(result["certificate"])
+    document["items"][0]["proof"]["camera_box"][1][0] = 200.0
+    report = verify_any(document)
+    assert not report.valid and report.first_failure["check"] == "scope"

@@ -394,6 +394,8 @@ def fit_frame(basis: np.ndarray, points: np.ndarray, options: BilinearOptions, c
     baseline = {"method": "linear", "camera": baseline_camera.tolist(), "coefficients": ab.tolist(),
                 "cost": pb.cost(pb.residuals(basis, points, baseline_camera, ab), norm)}
     incumbent = root_incumbent(model)
+    if incumbent is None:  # every start's first step failed (an LP solver refusing): the baseline
+        incumbent = (Mb, ab, tb, model.cost(Mb, ab, tb))
     half = root_half_width(incumbent[0], options.camera_bound, frame)
     lo, hi = np.full(6, -half), np.full(6, half)
     M, alpha, t, value = incumbent
