@@ -1,6 +1,7 @@
 """The problem kinds served: one line each (see base.py for what a kind is)."""
 
 from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION
+from geocert.kinds.bilinear import KIND as BILINEAR
 from geocert.kinds.base import ProblemKind, Registry, default_options, options_from
 from geocert.kinds.maps import HOMOGRAPHY, RESECTION
 from geocert.kinds.stereo_lines import KIND as STEREO_LINES
@@ -11,6 +12,7 @@ KINDS = Registry(
     RESECTION,
     HOMOGRAPHY,
     AUTOCALIBRATION,
+    BILINEAR,
     STEREO_LINES,
 )
 get_kind = KINDS.get

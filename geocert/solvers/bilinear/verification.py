@@ -1,0 +1,328 @@
+"""The verifier's adapter for bilinear fitting (geocert.solvers.verify reads claims through it):
+numpy and scipy.sparse only, no conic solver. An item is a frame; its claim is the camera and
+coefficients, their cost recomputed from the raw data, and a proof: ``trivial`` (cost within
+abs_gap of 0) or ``bilinear_bnb`` (the camera box of the scope, the root's bound-tightening
+rounds, the leaves covering the searched box and each leaf's safe bound), docs/certificate.md."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from geocert.solvers.bilinear import problem as pb
+from geocert.solvers.bilinear.options import BilinearOptions
+from geocert.solvers.bilinear.relaxation import Relaxation, tightening_objective, with_cost_cap
+from geocert.solvers.core.bnb import Box
+from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
+from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
+from geocert.solvers.core.coverage import uncovered_part
+from geocert.solvers.core.geometry import InputError
+from geocert.solvers.core.strict import Invalid, dual_vector, number as _number, numbers as _numbers
+
+CLAIM_OPTIONS = ("norm", "coefficients", "camera", "coefficient_bound", "camera_bound", "rel_gap", "abs_gap")
+MAX_ROUNDS = 32
+
+
+class BilinearVerification:
+    claim_options = CLAIM_OPTIONS
+    proofs: dict = {}
+    domain = ("every affine camera [M | t] whose 2x3 part M lies in the item's camera box (any translation t), "
+              "with every coefficient vector of the coefficient set")
+
+    def checked_options(self, options: dict) -> dict:
+        checked = {name: options.get(name) for name in CLAIM_OPTIONS}
+        for name in ("rel_gap", "abs_gap", "coefficient_bound"):
+            checked[name] = _number(checked[name], f"options/{name}", "options")
+        if checked["camera_bound"] is not None:
+            checked["camera_bound"] = _number(checked["camera_bound"], "options/camera_bound", "options")
+        for name in ("norm", "coefficients", "camera"):
+            if not isinstance(checked[name], str):
+                raise Invalid("options", f"options/{name} must be a string")
+        try:
+            BilinearOptions(**checked).check()
+        except (InputError, TypeError) as exc:
+            raise Invalid("options", str(exc)) from exc
+        return checked
+
+    def scope_statement(self, options: dict) -> dict:
+        coefficients = ("alpha >= 0, sum alpha = 1" if options["coefficients"] == "convex" else
+                        f"sum alpha = 1, |alpha_i| <= {options['coefficient_bound']!r}")
+        box = ("|M_rk| <= " + repr(options["camera_bound"]) if options["camera_bound"] is not None
+               else "the camera box stated in the item's proof (camera_box)")
+        return {"kind": "bilinear", "norm": options["norm"], "coefficients": options["coefficients"],
+                "coefficient_bound": options["coefficient_bound"], "camera_bound": options["camera_bound"],
+                "rel_gap": options["rel_gap"], "abs_gap": options["abs_gap"],
+                "statement": f"for each certified frame: no affine camera [M | t] with M within {box} (any "
+                             f"translation t) and coefficients alpha with {coefficients} images the basis's "
+                             f"combination at a cost below lower_bound * (1 - {BOUND_TOLERANCE:g}); the camera "
+                             f"and coefficients returned are in that scope and cost cost (within a relative "
+                             f"{OBJECTIVE_TOLERANCE:g})"}
+
+    def read(self, data: Any, index: int):
+        try:
+            basis, frames = pb.read_data(data, range(index, index + 1) if isinstance(index, int) else None)
+        except InputError as exc:
+            raise Invalid("data", f"{exc.field}: {exc.reason}") from exc
+        except IndexError:
+            raise Invalid("format", f"item {index} is not a frame of the data") from None
+        return basis, frames[index]
+
+    def check_claim(self, arrays, options: dict, claim: dict, claimed: float, lower_claimed: float,
+                    passed: list) -> tuple[float, float]:
+        basis, points = arrays
+        K = basis.shape[0]
+        camera = _numbers(claim.get("camera"), "camera", (2, 4), "claim")
+        alpha = _numbers(claim.get("coefficients"), "coefficients", (K,), "claim")
+        cost = pb.cost(pb.residuals(basis, points, camera, alpha), options["norm"])
+        if not abs(cost - claimed) <= OBJECTIVE_TOLERANCE * abs(cost) + 1e-300:
+            raise Invalid("objective", f"the solution costs {cost!r}, the certificate claims {claimed!r}")
+        passed.append("objective")
+        if not pb.feasible_coefficients(alpha, options["coefficients"], options["coefficient_bound"]):
+            raise Invalid("scope", "the coefficients are not in the coefficient set (sum 1 within 1e-12 per "
+                                   "coefficient; convex: non-negative; affine: within coefficient_bound)")
+        proof = claim.get("proof")
+        if not isinstance(proof, dict):
+            raise Invalid("format", "a certified item needs a proof")
+        if proof.get("type") == "trivial":  # every cost is a sum of non-negative terms
+            passed.append("scope")
+            return 0.0, options["rel_gap"]
+        if proof.get("type") != "bilinear_bnb":
+            raise Invalid("format", f"proof type {proof.get('type')!r} is not one bilinear takes")
+        return check_search(basis, points, camera, options, proof, lower_claimed, passed), options["rel_gap"]
+
+    def check_returned(self, result: dict, certificate: dict) -> None:
+        """Each frame's shape and residuals are what its camera and coefficients give."""
+        try:
+            basis, frames = pb.read_data(certificate["data"])
+        except InputError as exc:
+            raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
+        if result.get("coefficients") != certificate["options"].get("coefficients"):
+            raise Invalid("returned", "the result's coefficient set differs from its certificate's")
+        for index, (item, points) in enumerate(zip(result["frames"], frames)):
+            if item.get("camera") is None or item.get("coefficients") is None:
+                continue
+            camera = _numbers(item["camera"], f"frames/{index}/camera", (2, 4), "returned")
+            alpha = _numbers(item["coefficients"], f"frames/{index}/coefficients", (basis.shape[0],), "returned")
+            shape = _numbers(item.get("shape"), f"frames/{index}/shape", (basis.shape[1], 3), "returned")
+            if not np.allclose(shape, pb.shape_of(basis, alpha), rtol=1e-9, atol=1e-12):
+                raise Invalid("returned", f"frames/{index}/shape is not the coefficients' combination of the basis")
+            r = pb.residuals(basis, points, camera, alpha)
+            given = item.get("residuals")
+            if not isinstance(given, list) or len(given) != len(r) or any(
+                    (g is None) != bool(np.isnan(row[0])) or (g is not None and not (
+                        isinstance(g, list) and len(g) == 2 and np.allclose(g, row, rtol=1e-9, atol=1e-9)))
+                    for g, row in zip(given, r)):
+                raise Invalid("returned", f"frames/{index}/residuals are not the camera's")
+
+
+def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, options: dict, proof: dict,
+                 lower_claimed: float, passed: list) -> float:
+    """The lower bound (caller's units) a bilinear_bnb proof establishes."""
+    norm, K = options["norm"], basis.shape[0]
+    frame = pb.normalise(basis, points)
+    unit = pb.cost_unit(frame, norm)
+    # Only points costing less than the claimed lower bound need excluding (as for the other kinds).
+    cap = max(0.0, lower_claimed / unit * (1 - BOUND_TOLERANCE))
+    scale = frame.camera_scale
+    scope_lo, scope_hi = _numbers(proof.get("camera_box"), "proof/camera_box", (2, 6), "scope")
+    scope_lo, scope_hi = scope_lo / scale, scope_hi / scale  # powers of two: exact
+    if options["camera_bound"] is not None:
+        bound = options["camera_bound"] / scale
+        if not (np.all(scope_lo <= -bound) and np.all(scope_hi >= bound)):
+            raise Invalid("scope", "the camera box does not contain the box camera_bound states")
+    M = camera[:, :3].ravel() / scale
+    if not (np.all(scope_lo <= M) and np.all(M <= scope_hi)):
+        raise Invalid("scope", "the camera returned is outside the camera box of the scope")
+    passed.append("scope")
+    relaxation = Relaxation(frame.X, frame.u, norm, options["coefficients"], options["coefficient_bound"])
+    passed.append("program")
+
+    box_lo = np.concatenate([scope_lo, np.full(K, relaxation.alpha_range[0])])
+    box_hi = np.concatenate([scope_hi, np.full(K, relaxation.alpha_range[1])])
+    rounds = proof.get("tightening")
+    if not isinstance(rounds, list) or len(rounds) > MAX_ROUNDS:
+        raise Invalid("format", f"proof/tightening must be a list of at most {MAX_ROUNDS} rounds")
+    for number, round_ in enumerate(rounds):
+        box_lo, box_hi = _check_round(relaxation, round_, box_lo, box_hi, cap, number)
+    search, alpha_lo, alpha_hi = Box(box_lo[:6], box_hi[:6]), box_lo[6:], box_hi[6:]
+
+    leaves, proofs = proof.get("leaves"), proof.get("proofs")
+    if not isinstance(leaves, list) or not leaves or not isinstance(proofs, list):
+        raise Invalid("format", "proof/leaves and proof/proofs must be lists, leaves not empty")
+    for number, leaf in enumerate(leaves):
+        if not (isinstance(leaf, list) and len(leaf) == 3 and (leaf[2] is None or (
+                type(leaf[2]) is int and 0 <= leaf[2] < len(proofs)))):
+            raise Invalid("format", f"leaf {number} must be [lower corner, upper corner, proof index or null]")
+    leaf_lo = _numbers([leaf[0] for leaf in leaves], "proof/leaves (lower corners)", (len(leaves), 6))
+    leaf_hi = _numbers([leaf[1] for leaf in leaves], "proof/leaves (upper corners)", (len(leaves), 6))
+    gap = uncovered_part(search, leaf_lo, leaf_hi)
+    if gap is not None:
+        raise Invalid("coverage", f"no leaf covers the box {gap[0].tolist()} .. {gap[1].tolist()}")
+    passed.append("coverage")
+
+    nodes = _check_node_tightening(relaxation, proof.get("node_tightening"), search, alpha_lo, alpha_hi, cap)
+    passed.append("tightening")
+
+    proven, boxes = [], []
+    for number, record in enumerate(proofs):
+        if not isinstance(record, dict):
+            raise Invalid("format", f"proof {number} must be an object")
+        lo, hi = _numbers(record.get("box"), f"proofs/{number}/box", (2, 6))
+        boxes.append((lo, hi))
+        ub = _number(record.get("upper_bound"), f"proofs/{number}/upper_bound")
+        if not ub >= cap:
+            raise Invalid("leaf_bounds", f"proof {number} assumed a cost cap below the claimed lower bound")
+        source = record.get("alpha_from")
+        if source is None:
+            within, a_lo, a_hi = (search.lo, search.hi), alpha_lo, alpha_hi
+        elif type(source) is int and 0 <= source < len(nodes):
+            within, a_lo, a_hi = nodes[source]
+        else:
+            raise Invalid("format", f"proof {number}: alpha_from must be null or a node tightening record's index")
+        if not (np.all(within[0] <= lo) and np.all(hi <= within[1])):
+            raise Invalid("leaf_bounds", f"proof {number}: its box is not inside the box its coefficients' range "
+                                         "was proven for")
+        kind = record.get("kind")
+        if kind == "alpha_empty":  # the tightening proved that no coefficient vector fits within the cap
+            if np.all(a_lo <= a_hi):
+                raise Invalid("leaf_bounds", f"proof {number}: its coefficients' range is not empty")
+            proven.append(ub)
+            continue
+        if not np.all(a_lo <= a_hi):
+            raise Invalid("leaf_bounds", f"proof {number}: an empty coefficients' range needs kind alpha_empty")
+        data = relaxation.conic_data(lo, hi, ub, a_lo, a_hi)
+        if kind == "empty":  # no translation fits every observation within the cap
+            if data is not None:
+                raise Invalid("leaf_bounds", f"proof {number}: its box is not empty of points costing at most its cap")
+            proven.append(ub)
+            continue
+        if data is None:
+            raise Invalid("leaf_bounds", f"proof {number}: no relaxation on a box empty of points within its cap")
+        z = dual_vector(record.get("z"), len(data.b))
+        if kind == "farkas":
+            if not proves_infeasible(data.A, data.b, data.cones, z, data.lower, data.upper):
+                raise Invalid("leaf_bounds", f"proof {number}: its Farkas vector does not prove infeasibility")
+            proven.append(ub)
+            continue
+        if kind != "dual":
+            raise Invalid("format", f"proof {number}: unknown kind {kind!r}")
+        bound = relaxation.bound(data, z)
+        claimed = _number(record.get("bound"), f"proofs/{number}/bound")
+        if not bound >= claimed - BOUND_TOLERANCE * abs(claimed):
+            raise Invalid("leaf_bounds", f"proof {number}: its dual proves {bound!r}, it claims {claimed!r}")
+        proven.append(min(bound, ub))  # points costing more than the cap are bounded by it
+    bounds = []
+    for number, leaf in enumerate(leaves):
+        if leaf[2] is None:
+            bounds.append(0.0)
+            continue
+        lo, hi = boxes[leaf[2]]
+        if not (np.all(lo <= leaf_lo[number]) and np.all(hi >= leaf_hi[number])):
+            raise Invalid("leaf_bounds", f"leaf {number} is not inside the box of its proof {leaf[2]}")
+        bounds.append(proven[leaf[2]])
+    passed.append("leaf_bounds")
+    return min(bounds) * unit
+
+
+def _check_node_tightening(relaxation: Relaxation, records: Any, search: Box, alpha_lo: np.ndarray,
+                           alpha_hi: np.ndarray, cap: float) -> list:
+    """The node tightening records, in order: each over a camera box inside its parent's (the
+    root's searched box for parent null), starting from the coefficients' box its parent proved,
+    and proving its own coefficients' box (2K dual vectors, the camera box unchanged). Returns per
+    record (camera box, coefficients' lower, upper) as proven."""
+    if records is None:
+        records = []
+    if not isinstance(records, list):
+        raise Invalid("format", "proof/node_tightening must be a list")
+    K = relaxation.K
+    out: list = []
+    for number, record in enumerate(records):
+        if not isinstance(record, dict):
+            raise Invalid("format", f"node tightening {number} must be an object")
+        parent = record.get("parent")
+        if parent is None:
+            within, a_lo, a_hi = (search.lo, search.hi), alpha_lo, alpha_hi
+        elif type(parent) is int and 0 <= parent < number:
+            within, a_lo, a_hi = out[parent]
+        else:
+            raise Invalid("format", f"node tightening {number}: parent must be null or an earlier record")
+        d = 6 + K
+        lo_in, hi_in = _numbers(record.get("box_in"), f"node_tightening/{number}/box_in", (2, d))
+        lo_out, hi_out = _numbers(record.get("box_out"), f"node_tightening/{number}/box_out", (2, d))
+        if not (np.all(within[0] <= lo_in[:6]) and np.all(hi_in[:6] <= within[1])):
+            raise Invalid("tightening", f"node tightening {number}: its camera box is not inside its parent's")
+        if not (np.array_equal(lo_in[6:], a_lo) and np.array_equal(hi_in[6:], a_hi)):
+            raise Invalid("tightening", f"node tightening {number} does not start from its parent's coefficients' box")
+        if not (np.array_equal(lo_out[:6], lo_in[:6]) and np.array_equal(hi_out[:6], hi_in[:6])):
+            raise Invalid("tightening", f"node tightening {number} moves the camera box")
+        if not np.all(a_lo <= a_hi):
+            raise Invalid("tightening", f"node tightening {number}: its parent left no coefficient")
+        ub = _number(record.get("upper_bound"), f"node_tightening/{number}/upper_bound")
+        if not ub >= cap:
+            raise Invalid("tightening", f"node tightening {number} assumed a cost cap below the claimed lower bound")
+        duals = record.get("duals")
+        if not isinstance(duals, list) or len(duals) != 2 * K:
+            raise Invalid("tightening", f"node tightening {number}: {K} coefficients need {2 * K} dual vectors")
+        data = relaxation.conic_data(lo_in[:6], hi_in[:6], ub, a_lo, a_hi)
+        if data is None:
+            raise Invalid("tightening", f"node tightening {number}: its box holds no point within its cap")
+        data = with_cost_cap(relaxation, data, ub)
+        for i in range(K):
+            for side, sign in ((0, 1.0), (1, -1.0)):
+                z = duals[2 * i + side]
+                proven = lo_in[6 + i] if sign > 0 else hi_in[6 + i]
+                if z is not None:
+                    q = tightening_objective(relaxation, 6 + i, sign)
+                    value = sign * safe_lower_bound(q, data.A, data.b, data.cones, dual_vector(z, len(data.b)),
+                                                    data.lower, data.upper)
+                    proven = max(proven, value) if sign > 0 else min(proven, value)
+                claimed = lo_out[6 + i] if sign > 0 else hi_out[6 + i]
+                if (sign > 0 and claimed > proven) or (sign < 0 and claimed < proven):
+                    raise Invalid("tightening", f"node tightening {number}, coefficient {i}: side {claimed!r} is "
+                                                f"beyond the proven {proven!r}")
+        out.append(((lo_in[:6], hi_in[:6]), lo_out[6:], hi_out[6:]))
+    return out
+
+
+def _check_round(relaxation: Relaxation, round_: Any, box_lo: np.ndarray, box_hi: np.ndarray, cap: float,
+                 number: int) -> tuple[np.ndarray, np.ndarray]:
+    """One round of bound tightening: over box_in, every point costing at most upper_bound has
+    (M, alpha) within box_out; each side moved is the safe bound of its dual vector."""
+    if not isinstance(round_, dict):
+        raise Invalid("format", f"tightening round {number} must be an object")
+    d = len(box_lo)
+    ub = _number(round_.get("upper_bound"), f"tightening/{number}/upper_bound")
+    lo_in, hi_in = _numbers(round_.get("box_in"), f"tightening/{number}/box_in", (2, d))
+    lo_out, hi_out = _numbers(round_.get("box_out"), f"tightening/{number}/box_out", (2, d))
+    if not (np.array_equal(lo_in, box_lo) and np.array_equal(hi_in, box_hi)):
+        raise Invalid("tightening", f"round {number} starts from a box that is not the previous one")
+    if not ub >= cap:
+        raise Invalid("tightening", f"round {number} assumed a cost cap below the claimed lower bound")
+    duals = round_.get("duals")
+    if not isinstance(duals, list) or len(duals) != 2 * d:
+        raise Invalid("tightening", f"round {number}: {d} variables need {2 * d} dual vectors (or null)")
+    data = relaxation.conic_data(lo_in[:6], hi_in[:6], ub, lo_in[6:], hi_in[6:])
+    if data is None:
+        raise Invalid("tightening", f"round {number}: its box holds no point within its cap")
+    data = with_cost_cap(relaxation, data, ub)
+    for entry in range(d):
+        for side, sign in ((0, 1.0), (1, -1.0)):
+            z = duals[2 * entry + side]
+            proven = lo_in[entry] if sign > 0 else hi_in[entry]
+            if z is not None:
+                q = tightening_objective(relaxation, entry, sign)
+                value = sign * safe_lower_bound(q, data.A, data.b, data.cones, dual_vector(z, len(data.b)),
+                                                data.lower, data.upper)
+                proven = max(proven, value) if sign > 0 else min(proven, value)
+            claimed = lo_out[entry] if sign > 0 else hi_out[entry]
+            if (sign > 0 and claimed > proven) or (sign < 0 and claimed < proven) or math.isnan(claimed):
+                raise Invalid("tightening", f"round {number}, variable {entry}: side {claimed!r} is beyond the "
+                                            f"proven {proven!r}")
+    if not np.all(lo_out <= hi_out):
+        raise Invalid("tightening", f"round {number} leaves an empty box (the solver never does: its incumbent is in it)")
+    return lo_out, hi_out
+
+
+FRAMES = BilinearVerification()
