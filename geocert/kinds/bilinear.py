@@ -11,9 +11,11 @@ from pydantic import BaseModel, Field
 
 from geocert.kinds.documents import finite_or_none
 from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Pixel, Strict
+from geocert.solvers.bilinear import determinacy
 from geocert.solvers.bilinear import problem as pb
 from geocert.solvers.bilinear.options import BilinearOptions
 from geocert.solvers.bilinear.verification import FRAMES
+from geocert.solvers.core.determinacy import safely
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.verify import SelfCheckFailed, self_check_enabled, verify_arrays
 
@@ -163,6 +165,8 @@ class BilinearKind:
                 raise SelfCheckFailed(f"bilinear frame {index}: check {exc.check} failed: {exc.detail}") from exc
         if options.certificate != "full" and document["certificate"] is not None:
             document["certificate"].pop("proof", None)
+        document["determinacy"] = safely(determinacy.frame, parsed.basis, points, document["camera"],
+                                         document["coefficients"], document["cost"], document["lower_bound"])
         return document
 
     def cancelled_item(self) -> dict:

@@ -235,3 +235,37 @@ class TestStereoLines:
             assert "near_parallel_lines" in codes(pair["determinacy"])
         else:
             assert pair["determinacy"] is None and pair["reason"]
+
+
+class TestBilinear:
+    """A frame's coefficients: intervals hold the truth on well-posed frames; a nearly dependent
+    basis is flagged and its coefficients left unbounded or wide."""
+
+    @staticmethod
+    def solve(basis, points):
+        job = {"kind": "bilinear", "data": {"basis": basis.tolist(), "frames": [{"points": points.tolist()}]},
+               "options": {"norm": "L2L2"}}
+        return solve_job(job)["frames"][0]
+
+    def test_intervals_hold_the_true_coefficients(self):
+        from bench.bilinear import scene
+
+        inside = total = 0
+        for seed in range(6):
+            basis, points, _, alpha, _ = scene(3, 20, 0.005, 40 + seed)
+            document = self.solve(basis, points)["determinacy"]
+            assert document["determined"], document
+            for k, value in enumerate(alpha):
+                found = interval(document, f"coefficient[{k}]")
+                inside += found["lower"] <= value <= found["upper"]
+                total += 1
+        assert inside >= 0.9 * total
+
+    def test_a_nearly_dependent_basis_is_flagged(self):
+        from bench.bilinear import scene
+
+        basis, points, *_ = scene(3, 20, 0.005, 50)
+        basis[2] = basis[0] + 1e-4 * np.random.default_rng(1).normal(size=basis[0].shape)
+        item = self.solve(basis, points)
+        document = item["determinacy"]
+        assert "near_dependent_basis" in codes(document) and not document["determined"]
