@@ -62,6 +62,14 @@ class TestVaryingFocal:
         for K, truth in zip(result["Ks"], Ks):
             assert abs(K[0][0] / truth[0, 0] - 1) < 0.1 and abs(K[1][1] / truth[1, 1] - 1) < 0.1
 
+    def test_each_focal_length_gets_an_interval_holding_the_truth(self, varying):
+        _, Ks, result, _ = varying
+        determinacy = result["stages"][0]["determinacy"]
+        assert determinacy["determined"], determinacy
+        inside = sum(interval["lower"] <= truth[0, 0] <= interval["upper"]
+                     for interval, truth in zip(determinacy["intervals"], Ks))
+        assert inside >= 0.8 * len(Ks), determinacy["intervals"]
+
     def test_progress_names_the_stage(self, varying):
         _, _, _, events = varying
         assert "direct" in [event.get("stage") for event in events]

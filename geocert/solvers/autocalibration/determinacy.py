@@ -138,3 +138,34 @@ def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | Non
         interval["lower"], interval["upper"] = val - half, val + half
     out.warnings += motion_warnings(setup.H, centres)
     return out.document()
+
+
+def varying_focal_stage(problem, p: np.ndarray, Ks: list, centres: np.ndarray | None) -> dict | None:
+    """One focal length per view (zero skew, unit aspect, the principal point at the
+    preconditioner's): each view's DIAC diag(a_i^2, a_i^2, 1) (preconditioned, a_i = f_i / f0)
+    against the reference view's carried by H_i, with the plane p free too."""
+    reference = problem.norm.reference
+    if any(K is None for K in Ks):
+        return None
+    f0 = float(problem.K0[0, 0])
+    a = np.array([float(np.asarray(K)[0, 0]) / f0 for K in Ks])
+    others = [i for i in range(len(Ks)) if i != reference]
+    m = len(Ks)
+
+    def residuals(theta):
+        focal, q = theta[:m], theta[m:]
+        H = mrelax.homographies(problem.norm.cameras, reference, q)
+        omega_ref = np.diag([focal[reference] ** 2, focal[reference] ** 2, 1.0])
+        out = []
+        for j, i in enumerate(others):
+            image = H[j] @ omega_ref @ H[j].T
+            diff = np.diag([focal[i] ** 2, focal[i] ** 2, 1.0]) - image / image[2, 2]
+            out.append(mrelax.WEIGHTS[:5] * np.array([diff[x, y] for x, y in mrelax.ENTRIES]))
+        return np.concatenate(out)
+
+    theta = np.concatenate([a, p])
+    J = numeric_jacobian(residuals, theta)
+    quantities = {f"focal[{i}]": (f0 * a[i], f0 * np.eye(len(theta))[i]) for i in range(m)}
+    out = curvature_intervals(J, residuals(theta), quantities)
+    out.warnings += motion_warnings(mrelax.homographies(problem.norm.cameras, reference, p), centres)
+    return out.document()

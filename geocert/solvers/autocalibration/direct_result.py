@@ -59,7 +59,15 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
                                  "eigenvalue_ratio": result.eigenvalue_ratio, "conic_status": result.conic_status})
     for key in ("plane_at_infinity", "K", "dual_absolute_quadric"):
         stage[key] = document[key]
-    if document["K"] is not None and document["plane_at_infinity"] is not None:
+    if document["Ks"] is not None and document["plane_at_infinity"] is not None:  # one focal length a view
+        from geocert.solvers.autocalibration import determinacy
+        from geocert.solvers.core.determinacy import safely
+
+        p = pr.plane_from_input(problem, np.array(document["plane_at_infinity"]))
+        centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
+        if p is not None:
+            stage["determinacy"] = safely(determinacy.varying_focal_stage, problem, p, document["Ks"], centres)
+    elif document["K"] is not None and document["plane_at_infinity"] is not None:
         # How well the data fix this plane and K, read with the stratified costs' curvature (the
         # moment relaxation has no local parametrisation of its own); critical motions likewise.
         from geocert.solvers.autocalibration import determinacy
