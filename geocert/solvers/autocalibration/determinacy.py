@@ -22,17 +22,11 @@ import numpy as np
 
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
-from geocert.solvers.core.determinacy import Determinacy, curvature_intervals, numeric_jacobian, spread
+from geocert.solvers.core.determinacy import certified_gap, curvature_intervals, numeric_jacobian, spread
 
 STILL_DEGREES = 3.0
 AXIS_RATIO = 0.15
 FLAT = 1e-2
-
-
-def _gap(cost: float | None, lower: float | None) -> float | None:
-    if cost is None or lower is None or not (math.isfinite(cost) and math.isfinite(lower)):
-        return None
-    return max(cost - lower, 0.0)
 
 
 def rotation_angles(H: np.ndarray) -> np.ndarray:
@@ -79,7 +73,7 @@ def affine_stage(problem, p: np.ndarray, cost: float | None, lower: float | None
     gradient = numeric_jacobian(plane_of, p)
     value = plane_of(p)
     quantities = {f"plane_at_infinity[{k}]": (float(value[k]), gradient[k]) for k in range(4)}
-    out = curvature_intervals(J, frames.modulus_residuals(coef, p), quantities, _gap(cost, lower))
+    out = curvature_intervals(J, frames.modulus_residuals(coef, p), quantities, certified_gap(cost, lower))
     H = mrelax.homographies(problem.norm.cameras, problem.norm.reference, p)
     out.warnings += motion_warnings(H, centres)
     return out.document()
@@ -112,7 +106,7 @@ def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | Non
     gradient = numeric_jacobian(intrinsics, w)
     names = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")
     quantities = {name: (float(value[k]), gradient[k]) for k, name in enumerate(names)}
-    out = curvature_intervals(J, residuals(w), quantities, _gap(cost, lower))
+    out = curvature_intervals(J, residuals(w), quantities, certified_gap(cost, lower))
     # The plane is an estimate too: its uncertainty moves the optimum, w*(p) ~ w - (J'J)^-1 J' J_p dp
     # (Gauss-Newton), with dp over the affine stage's own ellipsoid; the two added in quadrature.
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)

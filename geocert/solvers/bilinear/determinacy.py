@@ -8,11 +8,9 @@ the curvature is that of the squared image residuals whatever the norm solved fo
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from geocert.solvers.core.determinacy import curvature_intervals, numeric_jacobian
+from geocert.solvers.core.determinacy import certified_gap, curvature_intervals, numeric_jacobian
 
 DEPENDENT = 1e-3  # basis shapes whose differences' smallest singular value is below this fraction: nearly dependent
 
@@ -48,9 +46,7 @@ def frame(basis: np.ndarray, points: np.ndarray, camera, coefficients, cost: flo
         else:
             g[8:] = -1.0
         quantities[f"coefficient[{i}]"] = (float(alpha[i]), g)
-    gap = None if cost is None or lower is None or not (math.isfinite(cost) and math.isfinite(lower)) \
-        else max(cost - lower, 0.0)
-    out = curvature_intervals(J, residuals(theta), quantities, gap)
+    out = curvature_intervals(J, residuals(theta), quantities, certified_gap(cost, lower))
     if k > 1:
         differences = (X[1:] - X[0]).reshape(k - 1, -1)
         s = np.linalg.svd(differences, compute_uv=False)

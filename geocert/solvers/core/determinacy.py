@@ -53,6 +53,13 @@ def safely(function, *args, **kwargs) -> dict | None:
         return None
 
 
+def certified_gap(cost: float | None, lower: float | None) -> float | None:
+    """cost - lower_bound when both are finite numbers (None otherwise)."""
+    if cost is None or lower is None or not (math.isfinite(cost) and math.isfinite(lower)):
+        return None
+    return max(cost - lower, 0.0)
+
+
 def _finite(value: float | None) -> float | None:
     return float(value) if value is not None and math.isfinite(value) else None
 

@@ -16,20 +16,13 @@ Maps are fixed up to scale: their parameters are the directions orthogonal to th
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from geocert.solvers.core.determinacy import Determinacy, curvature_intervals, numeric_jacobian, spread
+from geocert.solvers.core.determinacy import (Determinacy, certified_gap, curvature_intervals, numeric_jacobian,
+                                               spread)
 
 PARALLAX_DEGREES = 1.0  # rays meeting at less than this: near-zero parallax
 FLAT = 1e-2  # points whose centred spread along a direction is below this fraction: (nearly) flat
-
-
-def _gap(cost: float | None, lower: float | None) -> float | None:
-    if cost is None or lower is None or not (math.isfinite(cost) and math.isfinite(lower)):
-        return None
-    return max(cost - lower, 0.0)
 
 
 def _centres(cameras: np.ndarray) -> np.ndarray:
@@ -67,7 +60,7 @@ def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at
         length = float(np.linalg.norm(ray))
         if length > 0:
             quantities["depth_view0"] = (length, ray / length)
-    out = curvature_intervals(J, residuals(X), quantities, _gap(cost, lower))
+    out = curvature_intervals(J, residuals(X), quantities, certified_gap(cost, lower))
     rays = X[None, :] - centres
     rays = rays[np.all(np.isfinite(rays), axis=1)]
     if len(rays) >= 2:
@@ -145,7 +138,7 @@ def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | Non
         names = ("centroid_image_x", "centroid_image_y", "centroid_image_z")
         for k in range(len(value)):
             quantities[names[k]] = (float(value[k]), gradient[k])
-    out = curvature_intervals(J, residuals(zero), quantities, _gap(cost, lower))
+    out = curvature_intervals(J, residuals(zero), quantities, certified_gap(cost, lower))
     values = np.linalg.eigvalsh(J.T @ J)
     if m == 3 and n1 == 4:
         flat = spread(source)
