@@ -5,7 +5,7 @@ The unknown is the absolute dual quadric Q (symmetric 4x4) as x = its 10 upper-t
 (ENTRIES' order). The polynomial program (thesis 7.11 with the objective 7.12):
 
     min  f(x) = sum_i (w_i11 - w_i22)^2 + w_i12^2 + w_i13^2 + w_i23^2,   w_i = P_i Q P_i^T
-    s.t. ||Q||_F^2 = 1,  det Q = 0,  Q positive semidefinite,
+    s.t. trace Q = 1 (Q_33 = 1 - Q_00 - Q_11 - Q_22, so x has 9 entries),  det Q = 0,  Q PSD,
          chirality (optional): R_k' adj(Q) R_l >= 0 for the chosen pairs of rows (k, l).
 
 For Q positive semidefinite of rank 3, adj(Q) = c u u' with c >= 0 and u the plane at infinity (Q's
@@ -19,13 +19,14 @@ Order-d relaxation, variables y_a (the moments of degree 1..2d; y_0 = 1):
   (Q >= 0 times a square);
 - each 2x2 principal minor's localizing matrix (degree <= d - 1) positive semidefinite, each 3x3
   principal minor's moment >= 0 and each chirality pair's moment >= 0;
-- ||Q||_F^2 - 1 times every monomial of degree <= 2d - 2 and det Q: equalities.
+- det Q's moment: an equality (trace Q = 1 is substituted, no rows).
 Conic form (Clarabel's, geocert.solvers.core.cones): minimise q'y s.t. A y + s = b, s in the cones.
 
-Safe bound: every entry of a Q with ||Q||_F = 1 lies in [-1, 1], so every moment y_a of a feasible
-Q lies in [-1, 1], and in [0, 1] when every exponent is even; cones.safe_lower_bound charges the
-dual residual to that box after projecting the dual into the cones (negative eigenvalues of the
-PSD blocks clipped): a bound on f over the polynomial program's feasible set, whatever the solver.
+Safe bound (safe_bound): every entry of a PSD Q with trace 1 lies in [-1, 1] (|Q_ab| <=
+sqrt(Q_aa Q_bb) <= 1), so every moment y_a of a feasible Q lies in [-1, 1], and in [0, 1] when every
+exponent is even; the dual is projected into the cones but the moment matrix's block, which is
+corrected to zero the residual and whose negative eigenvalue is charged against tr M_d(y): a bound
+on f over the polynomial program's feasible set, whatever the solver.
 """
 
 from __future__ import annotations
@@ -347,12 +348,12 @@ def safe_bound(program: Program, z: np.ndarray) -> tuple[float, float]:
     feasible Q, q'y = -b'z + r'y + sum_cones <z, s> >= -b'z + r'y + min(0, lambda_min(Z)) tr M_d(y),
     with tr M_d(y) = sum over the basis of x^(2 alpha) <= order + 1 (|x|^2 <= ||Q||_F^2 <= trace(Q)^2
     = 1 for Q PSD, so each degree's sum is at most 1), and r'y charged to the box (rounding only)."""
-    from geocert.solvers.core.cones import ConeSpec as Spec, project_dual, smat
+    from geocert.solvers.core.cones import project_dual, smat
 
     cones = program.cones
     m_size = cones.psd[-1]
     m_rows = m_size * (m_size + 1) // 2
-    head = Spec(cones.zero, cones.nonneg, cones.soc, cones.psd[:-1])
+    head = ConeSpec(cones.zero, cones.nonneg, cones.soc, cones.psd[:-1])
     z = np.array(z, dtype=float)
     z[:head.rows] = project_dual(z[:head.rows], head)
     A = program.A
