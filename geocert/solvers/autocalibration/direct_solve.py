@@ -67,7 +67,9 @@ def solve_program(program: dr.Program) -> tuple[ConicStatus, np.ndarray | None, 
     accuracy, only the status gate does); never raises on solver trouble."""
     answer = (ConicStatus.FAILED, None, None, "not solved")
     for tolerance in TOLERANCES:
-        answer = _solve_once(program, tolerance)
+        retry = _solve_once(program, tolerance)
+        if retry[2] is not None or answer[2] is None:  # a failed retry keeps the earlier dual (still a safe bound)
+            answer = retry
         if answer[0] is ConicStatus.OPTIMAL:
             break
     return answer
