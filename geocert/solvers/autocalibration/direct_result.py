@@ -59,23 +59,17 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
                                  "eigenvalue_ratio": result.eigenvalue_ratio, "conic_status": result.conic_status})
     for key in ("plane_at_infinity", "K", "dual_absolute_quadric"):
         stage[key] = document[key]
-    if document["Ks"] is not None and document["plane_at_infinity"] is not None:  # one focal length a view
+    if document["plane_at_infinity"] is not None and (document["Ks"] is not None or document["K"] is not None):
+        # How well the data fix the plane and K (one focal length a view: each view's), read with the
+        # stratified costs' curvature (the moment relaxation has no local parametrisation of its own).
         from geocert.solvers.autocalibration import determinacy
         from geocert.solvers.core.determinacy import safely
 
         p = pr.plane_from_input(problem, np.array(document["plane_at_infinity"]))
         centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
-        if p is not None:
+        if p is not None and document["Ks"] is not None:
             stage["determinacy"] = safely(determinacy.varying_focal_stage, problem, p, document["Ks"], centres)
-    elif document["K"] is not None and document["plane_at_infinity"] is not None:
-        # How well the data fix this plane and K, read with the stratified costs' curvature (the
-        # moment relaxation has no local parametrisation of its own); critical motions likewise.
-        from geocert.solvers.autocalibration import determinacy
-        from geocert.solvers.core.determinacy import safely
-
-        p = pr.plane_from_input(problem, np.array(document["plane_at_infinity"]))
-        centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
-        if p is not None:
+        elif p is not None:
             stage["determinacy"] = safely(determinacy.metric_stage, problem, p, np.array(document["K"]), None, None,
                                           centres)
     stages = [stage]
