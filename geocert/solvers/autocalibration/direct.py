@@ -143,7 +143,7 @@ def in_domain(setup: DirectSetup, Q: np.ndarray, excluded: tuple = ()) -> bool:
     return any(chirality_holds(o, Q, 1e-9) for o in setup.orientations if o.delta not in excluded)
 
 
-def rank_one_projection(Q: np.ndarray) -> np.ndarray:
+def rank_three_projection(Q: np.ndarray) -> np.ndarray:
     """The nearest PSD matrix of rank 3 with trace 1 (eigenvalues clipped, the smallest zeroed)."""
     values, V = np.linalg.eigh((Q + Q.T) / 2)
     values = np.maximum(values, 0.0)

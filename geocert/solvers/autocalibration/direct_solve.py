@@ -116,13 +116,13 @@ def polish(cameras: np.ndarray, Q: np.ndarray) -> np.ndarray:
     result = least_squares(residuals, B0.ravel(), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=2000)
     B = result.x.reshape(4, 3)
     S = B @ B.T
-    return direct.rank_one_projection(S)
+    return direct.rank_three_projection(S)
 
 
 def candidates(setup: direct.DirectSetup, y: np.ndarray, orientation: direct.Orientation) -> list[np.ndarray]:
     """Feasible quadrics from a relaxation's first moments: rounded, and rounded then polished
     (the polish kept only when chirality still holds)."""
-    rounded = direct.rank_one_projection(dr.q_of(y[:dr.N]))
+    rounded = direct.rank_three_projection(dr.q_of(y[:dr.N]))
     out = [rounded] if direct.chirality_holds(orientation, rounded) else []
     polished = polish(setup.cameras, rounded)
     if direct.chirality_holds(orientation, polished):
