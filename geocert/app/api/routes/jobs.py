@@ -121,7 +121,11 @@ async def submit_job(
     if meta is None or meta["status"] not in TERMINAL:
         return document
     response.status_code = 200
-    return await run_in_threadpool(store.document, meta)
+    finished = await run_in_threadpool(job_document, store, meta)
+    if isinstance(finished, Response):  # sent as it is: the headers set above go with it
+        finished.status_code = 200
+        finished.headers.update({k: v for k, v in response.headers.items() if k != "content-length"})
+    return finished
 
 
 def _submit(body, response: Response, store: JobStore, owner: str, idempotency_key: str | None) -> dict:
@@ -228,11 +232,17 @@ def list_jobs(
 @router.get("/{job_id}", response_model=Job, responses=error_responses(404))
 def get_job(job: OwnedJob, store: JobStoreDep):
     """Status, progress, and once finished the result (or the error as problem details)."""
+    return job_document(store, job)
+
+
+def job_document(store: JobStore, job: dict) -> dict | Response:
+    """The job document to answer with (GET, and a POST that waited for the end): a finished
+    job whose worker stored the result as the result model writes it (batch.result_json) goes out
+    as stored, in a Response; any other as the store's document, for the route's model to write.
+    Parsing, validating (through the union of every kind's results) and writing a stored result
+    again took most of a large job's GET: over 1 s for 5,000 tracks on this machine under load."""
     if job["status"] not in TERMINAL or job.get("result_form") != "model":
         return store.document(job)
-    # The worker stored the result as the result model writes it (batch.result_json): it goes out
-    # as stored. Parsing, validating (through the union of every kind's results) and writing it
-    # again took most of a large job's GET: over 1 s for 5,000 tracks on this machine under load.
     raw = store.r.get(store.key(job["id"], "result"))
     shell = {key: job.get(key) for key in store._SUMMARY + ("error", "webhook")}
     text = Job.model_validate(shell | {"result": None, "links": store.links(job["id"])}).model_dump_json(by_alias=True)
