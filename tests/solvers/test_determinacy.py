@@ -9,6 +9,7 @@ import functools
 import numpy as np
 import pytest
 
+from bench.determinacy import cameras_looking_at_origin, project
 from geocert.batch import solve_job
 from geocert.solvers.autocalibration import scenes
 from geocert.solvers.core.determinacy import curvature_intervals
@@ -50,20 +51,6 @@ class TestCurvatureIntervals:
         A = np.eye(2)
         out = curvature_intervals(A, np.zeros(2), {"x0": (0.0, np.array([1.0, 0.0]))}, gap=0.25)
         assert interval(out.document(), "x0")["upper"] == pytest.approx(0.5)
-
-
-def cameras_looking_at_origin(centres: np.ndarray) -> np.ndarray:
-    K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
-    out = []
-    for c in centres:
-        R = scenes.look_at(c, np.zeros(3), np.random.default_rng(0), up=np.array([0.0, 1.0, 0.0]))
-        out.append(K @ np.hstack([R, -(R @ c)[:, None]]))
-    return np.array(out)
-
-
-def project(cameras, X):
-    x = cameras @ np.append(X, 1.0)
-    return x[:, :2] / x[:, 2:3]
 
 
 class TestTriangulation:

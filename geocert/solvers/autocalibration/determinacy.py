@@ -62,12 +62,11 @@ def affine_stage(problem, p: np.ndarray, cost: float | None, lower: float | None
     from geocert.solvers.autocalibration.problem import plane_in_input
 
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
-    plane = plane_in_input(problem, p)
-    sign = 1.0 if plane[np.argmax(np.abs(plane))] >= 0 else -1.0
+    plane = plane_in_input(problem, p)  # as the result states it
 
-    def plane_of(q):
+    def plane_of(q):  # nearby planes with the returned plane's sign
         out = plane_in_input(problem, q)
-        return out * sign * np.sign(out @ plane * sign) if out @ plane != 0 else out
+        return out if out @ plane >= 0 else -out
 
     J = numeric_jacobian(lambda q: frames.modulus_residuals(coef, q), p)
     gradient = numeric_jacobian(plane_of, p)

@@ -20,17 +20,18 @@ import numpy as np
 
 from geocert.solvers.core.determinacy import (Determinacy, certified_gap, curvature_intervals, numeric_jacobian,
                                                spread)
+from geocert.solvers.fractional.charts import camera_centres
 
 PARALLAX_DEGREES = 1.0  # rays meeting at less than this: near-zero parallax
 FLAT = 1e-2  # points whose centred spread along a direction is below this fraction: (nearly) flat
 
 
 def _centres(cameras: np.ndarray) -> np.ndarray:
-    out = []
-    for P in cameras:
-        C = np.linalg.svd(P)[2][-1]
-        out.append(C[:3] / C[3] if abs(C[3]) > 1e-12 * np.abs(C).max() else np.full(3, np.nan))
-    return np.array(out)
+    """Euclidean centres (NaN for a camera whose centre is at infinity)."""
+    C = camera_centres(cameras)
+    finite = np.abs(C[:, 3:4]) > 1e-12 * np.abs(C).max(axis=1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(finite, C[:, :3] / C[:, 3:4], np.nan)
 
 
 def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at_infinity: bool,
@@ -139,14 +140,13 @@ def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | Non
         for k in range(len(value)):
             quantities[names[k]] = (float(value[k]), gradient[k])
     out = curvature_intervals(J, residuals(zero), quantities, certified_gap(cost, lower))
-    values = np.linalg.eigvalsh(J.T @ J)
     if m == 3 and n1 == 4:
         flat = spread(source)
         if flat[-1] < FLAT:
             out.warnings.append({"code": "near_coplanar_points",
                                  "detail": f"the 3D points are nearly coplanar (spread {flat[-1]:.2g} of their extent): "
                                            "the camera is poorly fixed off their plane"})
-        if values[0] <= 1e-10 * values[-1]:
+        if any(interval["lower"] is None for interval in out.intervals):  # a direction the data do not fix
             out.warnings.append({"code": "near_critical_configuration",
                                  "detail": "the points and the camera centre are near a configuration that does not fix "
                                            "the camera (coplanar points, or a twisted cubic through the centre)"})
