@@ -38,6 +38,14 @@ SOLVERS = {"polynomial": (polynomial.solve, 2), "linear": (linear.solve, 3), "in
            "align": (align.solve, 2)}
 
 
+def motion_errors(motion, R, t) -> tuple[float, float]:
+    """A motion's rotation error (degrees) and translation error (cm); a failed solve (None) counts
+    as 180 degrees and 1 m."""
+    if motion is None:
+        return 180.0, 100.0
+    return rotation_error_deg(motion.R, R), 100 * float(np.linalg.norm(motion.t - t))
+
+
 def percentile(values, q) -> float:
     return float(np.percentile(values, q)) if len(values) else float("nan")
 
@@ -80,12 +88,11 @@ def ransac_table(instances: int) -> None:
             estimate = estimate_motion(line_set(scene.rig, scene.segments), options)
             times.append(1000 * (time.perf_counter() - start))
             samples.append(estimate.iterations)
-            if estimate.status != "estimate":
-                rotation.append(180.0)
-                translation.append(100.0)
+            ok = estimate.status == "estimate"
+            for errors, error in zip((rotation, translation), motion_errors(estimate if ok else None, scene.R, scene.t)):
+                errors.append(error)
+            if not ok:
                 continue
-            rotation.append(rotation_error_deg(estimate.R, scene.R))
-            translation.append(100 * np.linalg.norm(estimate.t - scene.t))
             inliers, truth = set(estimate.inliers), set(np.flatnonzero(~scene.outliers))
             found.append(len(inliers & truth) / len(truth))
             kept.append(len(inliers - truth))
@@ -110,11 +117,9 @@ def noise_table(instances: int, noises=(0.0, 0.25, 0.5, 1.0, 2.0)) -> None:
                 try:
                     motion = solve(line_set(scene.rig, scene.segments))[0]
                 except Degenerate:
-                    rotation.append(180.0)
-                    translation.append(100.0)
-                    continue
-                rotation.append(rotation_error_deg(motion.R, scene.R))
-                translation.append(100 * np.linalg.norm(motion.t - scene.t))
+                    motion = None
+                for errors, error in zip((rotation, translation), motion_errors(motion, scene.R, scene.t)):
+                    errors.append(error)
             cells.append(f"{np.median(rotation):.3f} / {np.median(translation):.2f}")
         print(f"| {noise} | " + " | ".join(cells) + " |")
     print("RANSAC (samples of 3) and refinement on 100 lines, 30% outliers:")
@@ -129,12 +134,9 @@ def noise_table(instances: int, noises=(0.0, 0.25, 0.5, 1.0, 2.0)) -> None:
                 scene = scenes.pair_scene(rng, 100, noise_px=noise, outlier_fraction=0.3)
                 estimate = estimate_motion(line_set(scene.rig, scene.segments),
                                            StereoLinesOptions(solver=name, sample_size=3))
-                if estimate.status != "estimate":
-                    rotation.append(180.0)
-                    translation.append(100.0)
-                    continue
-                rotation.append(rotation_error_deg(estimate.R, scene.R))
-                translation.append(100 * np.linalg.norm(estimate.t - scene.t))
+                motion = estimate if estimate.status == "estimate" else None
+                for errors, error in zip((rotation, translation), motion_errors(motion, scene.R, scene.t)):
+                    errors.append(error)
             cells.append(f"{np.median(rotation):.3f} / {np.median(translation):.2f}")
         print(f"| {noise} | " + " | ".join(cells) + " |")
 
@@ -164,11 +166,9 @@ def thesis_setting(instances: int, noises=(0.0, 0.25, 0.5, 1.0, 2.0)) -> None:
                     found = solve(line_set(rig, segments))
                     motion = min(found, key=lambda m: rotation_error_deg(m.R, R))
                 except (Degenerate, np.linalg.LinAlgError):
-                    rotation.append(180.0)
-                    translation.append(100.0)
-                    continue
-                rotation.append(rotation_error_deg(motion.R, R))
-                translation.append(100 * np.linalg.norm(motion.t - t))
+                    motion = None
+                for errors, error in zip((rotation, translation), motion_errors(motion, R, t)):
+                    errors.append(error)
             cells.append(f"{percentile(rotation, 25):.3f} / {percentile(translation, 25):.2f}")
         print(f"| {noise} | " + " | ".join(cells) + " |")
 
