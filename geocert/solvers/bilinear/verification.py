@@ -6,7 +6,6 @@ rounds, the leaves covering the searched box and each leaf's safe bound), docs/c
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -268,20 +267,8 @@ def _check_node_tightening(relaxation: Relaxation, records: Any, search: Box, al
         data = relaxation.conic_data(lo_in[:6], hi_in[:6], ub, a_lo, a_hi)
         if data is None:
             raise Invalid("tightening", f"node tightening {number}: its box holds no point within its cap")
-        data = with_cost_cap(relaxation, data, ub)
-        for i in range(K):
-            for side, sign in ((0, 1.0), (1, -1.0)):
-                z = duals[2 * i + side]
-                proven = lo_in[6 + i] if sign > 0 else hi_in[6 + i]
-                if z is not None:
-                    q = tightening_objective(relaxation, 6 + i, sign)
-                    value = sign * safe_lower_bound(q, data.A, data.b, data.cones, dual_vector(z, len(data.b)),
-                                                    data.lower, data.upper)
-                    proven = max(proven, value) if sign > 0 else min(proven, value)
-                claimed = lo_out[6 + i] if sign > 0 else hi_out[6 + i]
-                if (sign > 0 and claimed > proven) or (sign < 0 and claimed < proven):
-                    raise Invalid("tightening", f"node tightening {number}, coefficient {i}: side {claimed!r} is "
-                                                f"beyond the proven {proven!r}")
+        _check_sides(relaxation, with_cost_cap(relaxation, data, ub), range(6, d), lo_in, hi_in, lo_out, hi_out,
+                     duals, f"node tightening {number}")
         out.append(((lo_in[:6], hi_in[:6]), lo_out[6:], hi_out[6:]))
     return out
 
@@ -306,10 +293,21 @@ def _check_round(relaxation: Relaxation, round_: Any, box_lo: np.ndarray, box_hi
     data = relaxation.conic_data(lo_in[:6], hi_in[:6], ub, lo_in[6:], hi_in[6:])
     if data is None:
         raise Invalid("tightening", f"round {number}: its box holds no point within its cap")
-    data = with_cost_cap(relaxation, data, ub)
-    for entry in range(d):
+    _check_sides(relaxation, with_cost_cap(relaxation, data, ub), range(d), lo_in, hi_in, lo_out, hi_out, duals,
+                 f"round {number}")
+    if not np.all(lo_out <= hi_out):
+        raise Invalid("tightening", f"round {number} leaves an empty box (the solver never does: its incumbent is in it)")
+    return lo_out, hi_out
+
+
+def _check_sides(relaxation: Relaxation, data, entries: range, lo_in: np.ndarray, hi_in: np.ndarray,
+                 lo_out: np.ndarray, hi_out: np.ndarray, duals: list, where: str) -> None:
+    """Each side of box_out over ``entries`` (index into the (M, alpha) box; duals 2 per entry,
+    counted from the first) is no tighter than max(side in, safe bound of its dual): ``data`` is
+    the relaxation with its cost cap (the tightening's feasible set)."""
+    for n, entry in enumerate(entries):
         for side, sign in ((0, 1.0), (1, -1.0)):
-            z = duals[2 * entry + side]
+            z = duals[2 * n + side]
             proven = lo_in[entry] if sign > 0 else hi_in[entry]
             if z is not None:
                 q = tightening_objective(relaxation, entry, sign)
@@ -317,12 +315,9 @@ def _check_round(relaxation: Relaxation, round_: Any, box_lo: np.ndarray, box_hi
                                                 data.lower, data.upper)
                 proven = max(proven, value) if sign > 0 else min(proven, value)
             claimed = lo_out[entry] if sign > 0 else hi_out[entry]
-            if (sign > 0 and claimed > proven) or (sign < 0 and claimed < proven) or math.isnan(claimed):
-                raise Invalid("tightening", f"round {number}, variable {entry}: side {claimed!r} is beyond the "
+            if (sign > 0 and claimed > proven) or (sign < 0 and claimed < proven):
+                raise Invalid("tightening", f"{where}, variable {entry}: side {claimed!r} is beyond the "
                                             f"proven {proven!r}")
-    if not np.all(lo_out <= hi_out):
-        raise Invalid("tightening", f"round {number} leaves an empty box (the solver never does: its incumbent is in it)")
-    return lo_out, hi_out
 
 
 FRAMES = BilinearVerification()
