@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.optimize
@@ -217,24 +217,7 @@ class BoxProblem:
             return None
         data = with_cost_cap(rel, data, cap)
         lo, hi = box.alpha_lo.copy(), box.alpha_hi.copy()
-        duals: list = []
-        for i in range(rel.K):
-            for sign in (1.0, -1.0):
-                if duals and time.perf_counter() > self.deadline:
-                    duals.append(None)
-                    continue
-                q = tightening_objective(rel, 6 + i, sign)
-                res = self._tightener.solve(q, data.A, data.b, data.cones) if not duals else \
-                    self._tightener.solve_objective(q)
-                if res.status is not ConicStatus.OPTIMAL:
-                    duals.append(None)
-                    continue
-                value = sign * safe_lower_bound(q, data.A, data.b, data.cones, res.z, data.lower, data.upper)
-                if sign > 0 and value > lo[i]:
-                    lo[i] = value
-                elif sign < 0 and value < hi[i]:
-                    hi[i] = value
-                duals.append(res.z)
+        duals = _tighten_sides(self._tightener, rel, data, range(6, 6 + rel.K), lo, hi, -6, self.deadline)
         if all(z is None for z in duals):
             return None
         self.tightenings.append({"parent": box.source, "upper_bound": cap,
@@ -292,6 +275,31 @@ class BoxProblem:
                 CameraBox(right_lo, box.hi.copy(), alpha_lo, alpha_hi, source, box.depth + 1)]
 
 
+def _tighten_sides(solver: ReusableConicProgram, relaxation: Relaxation, data, entries: range, lo: np.ndarray,
+                   hi: np.ndarray, offset: int, deadline: float) -> list:
+    """Minimise and maximise each (M, alpha) entry over ``data`` (the relaxation with its cost cap),
+    moving lo[entry + offset] / hi[entry + offset] in place to the safe bound of each dual; returns
+    the duals (None where unsolved, or past ``deadline`` after the first solve)."""
+    duals: list = []
+    for entry in entries:
+        for sign in (1.0, -1.0):
+            if duals and time.perf_counter() > deadline:
+                duals.append(None)
+                continue
+            q = tightening_objective(relaxation, entry, sign)
+            res = solver.solve_objective(q) if duals else solver.solve(q, data.A, data.b, data.cones)
+            if res.status is not ConicStatus.OPTIMAL:
+                duals.append(None)
+                continue
+            value = sign * safe_lower_bound(q, data.A, data.b, data.cones, res.z, data.lower, data.upper)
+            if sign > 0 and value > lo[entry + offset]:
+                lo[entry + offset] = value
+            elif sign < 0 and value < hi[entry + offset]:
+                hi[entry + offset] = value
+            duals.append(res.z)
+    return duals
+
+
 TIGHTENING_ROUNDS = 30
 MIN_MOVE = 0.02
 
@@ -319,24 +327,7 @@ def tighten(relaxation: Relaxation, lo: np.ndarray, hi: np.ndarray, cap: float, 
             break
         data = with_cost_cap(relaxation, data, cap)
         new_lo, new_hi = box_lo.copy(), box_hi.copy()
-        duals: list = []
-        for entry in range(6 + K):
-            for sign in (1.0, -1.0):
-                if time.perf_counter() > deadline and duals:
-                    duals.append(None)
-                    continue
-                q = tightening_objective(relaxation, entry, sign)
-                res = solver.solve(q, data.A, data.b, data.cones) if entry == 0 and sign > 0 else \
-                    solver.solve_objective(q)
-                if res.status is not ConicStatus.OPTIMAL:
-                    duals.append(None)
-                    continue
-                value = sign * safe_lower_bound(q, data.A, data.b, data.cones, res.z, data.lower, data.upper)
-                if sign > 0 and value > new_lo[entry]:
-                    new_lo[entry] = value
-                elif sign < 0 and value < new_hi[entry]:
-                    new_hi[entry] = value
-                duals.append(res.z)
+        duals = _tighten_sides(solver, relaxation, data, range(6 + K), new_lo, new_hi, 0, deadline)
         if not np.all(new_lo <= new_hi):
             break  # nothing costs at most cap: keep the last box (the incumbent is in it)
         moved = float(np.max(((new_lo - box_lo) + (box_hi - new_hi)) / np.maximum(box_hi - box_lo, 1e-300)))
@@ -429,13 +420,12 @@ def fit_frame(basis: np.ndarray, points: np.ndarray, options: BilinearOptions, c
                              time_limit_s=max(1e-3, options.time_limit_s - (time.perf_counter() - start)))
     trivial = value <= abs_gap
     if trivial:
-        status, lower, nodes, candidate, tol = "optimal", 0.0, 0, (M, alpha, t), abs_gap
+        status, lower, nodes, candidate = "optimal", 0.0, 0, (M, alpha, t)
     else:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             result = branch_and_bound(problem, (M, alpha, t), value, bnb_options, callback, 0.0, leaves)
-        status, lower, nodes, candidate, tol = (result.status, result.lower_bound, result.nodes, result.candidate,
-                                                result.tolerance)
+        status, lower, nodes, candidate = result.status, result.lower_bound, result.nodes, result.candidate
     M, alpha, t = candidate
     camera = pb.to_raw(frame, M, t)
     r = pb.residuals(basis, points, camera, alpha)
