@@ -35,6 +35,29 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def chrome():
+    """Headless Debian chromium through its chromedriver (as the browser tests drive it)."""
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = "/usr/bin/chromium"
+    for argument in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--window-size=1280,1000"):
+        options.add_argument(argument)
+    return webdriver.Chrome(options=options, service=Service("/usr/bin/chromedriver"))
+
+
+def open_rendered(driver, url: str, timeout: float, poll: float) -> float:
+    """Opens ``url`` afresh and waits for the page's finished render; its ms after navigation start."""
+    driver.get("about:blank")
+    driver.get(url)
+    deadline = time.monotonic() + timeout
+    while (rendered := driver.execute_script("return window.GC_STATE && window.GC_STATE.rendered")) is None:
+        assert time.monotonic() < deadline, "the page did not render"
+        time.sleep(poll)
+    return rendered
+
+
 def scene_job(tracks: int, seed: int = 0) -> dict:
     rng = np.random.default_rng(seed)
     K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
@@ -107,29 +130,16 @@ def main() -> None:
 
 
 def load_pages(base: str, job_id: str, loads: int, tracks: int) -> None:
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
     with httpx.Client(base_url=base, timeout=60) as client:
         start = time.perf_counter()
         client.get(f"/v1/jobs/{job_id}").raise_for_status()
         print(f"GET /v1/jobs/{{id}} alone: {1000 * (time.perf_counter() - start):.0f} ms")
     driver = None
     try:
-
-        options = webdriver.ChromeOptions()
-        options.binary_location = "/usr/bin/chromium"
-        for argument in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--window-size=1280,1000"):
-            options.add_argument(argument)
-        driver = webdriver.Chrome(options=options, service=Service("/usr/bin/chromedriver"))
+        driver = chrome()
         times = []
         for load in range(loads):
-            driver.get("about:blank")
-            driver.get(f"{base}/jobs/{job_id}")
-            deadline = time.monotonic() + 60
-            while (rendered := driver.execute_script("return window.GC_STATE && window.GC_STATE.rendered")) is None:
-                assert time.monotonic() < deadline, "the page did not render"
-                time.sleep(0.02)
+            rendered = open_rendered(driver, f"{base}/jobs/{job_id}", 60, 0.02)
             view = driver.execute_script("return window.GC_STATE.view")
             marks = driver.execute_script("return window.GC_STATE.timings")
             times.append(rendered)
@@ -149,9 +159,6 @@ def synthetic(tracks: int, loads: int) -> None:
     import threading
     from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
     from pathlib import Path
-
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
 
     web = Path(__file__).resolve().parents[1] / "geocert" / "app" / "web"
     job = scene_job(tracks)
@@ -216,19 +223,10 @@ def synthetic(tracks: int, loads: int) -> None:
     base = f"http://127.0.0.1:{server.server_address[1]}"
     print(f"a made-up finished job of {tracks} tracks: job document {len(document) / 1e6:.1f} MB, "
           f"request {len(request) / 1e6:.1f} MB")
-    options = webdriver.ChromeOptions()
-    options.binary_location = "/usr/bin/chromium"
-    for argument in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--window-size=1280,1000"):
-        options.add_argument(argument)
-    driver = webdriver.Chrome(options=options, service=Service("/usr/bin/chromedriver"))
+    driver = chrome()
     try:
         for load in range(loads):
-            driver.get("about:blank")
-            driver.get(f"{base}/jobs/{'0' * 32}")
-            deadline = time.monotonic() + 120
-            while (rendered := driver.execute_script("return window.GC_STATE && window.GC_STATE.rendered")) is None:
-                assert time.monotonic() < deadline, "the page did not render"
-                time.sleep(0.05)
+            rendered = open_rendered(driver, f"{base}/jobs/{'0' * 32}", 120, 0.05)
             timed = driver.execute_script("""
                 const t = (f) => { const s = performance.now(); f(); return Math.round(performance.now() - s); };
                 const sort = document.querySelector("#items thead button[data-sort='cost']");
