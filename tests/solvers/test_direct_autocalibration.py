@@ -83,6 +83,22 @@ class TestMoments:
         with pytest.raises(ValueError):
             moments.index(np.array([[5] + [0] * (dr.N - 1)]))
 
+    def test_the_frame_does_not_depend_on_lapacks_eigenvector_signs(self, monkeypatch):
+        """A recorded dual vector is for one program: a verifier whose eigh signs its eigenvectors
+        otherwise must rebuild the same frame, hence the same program."""
+        scene, _, _, intrinsics = table71(4, 0.2)
+        cameras = pr.prepare(scene.cameras, scene.points, None, intrinsics).norm.cameras
+        T = dr.conditioning_frame(cameras)
+        rng, eigh = np.random.default_rng(6), np.linalg.eigh
+
+        def flipped(M):
+            values, V = eigh(M)
+            return values, V * rng.choice([-1.0, 1.0], size=V.shape[1])
+
+        monkeypatch.setattr(dr.np.linalg, "eigh", flipped)
+        for _ in range(10):
+            assert np.array_equal(dr.conditioning_frame(cameras), T)
+
 
 # --- the safe bound -----------------------------------------------------------------------------
 

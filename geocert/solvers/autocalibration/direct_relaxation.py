@@ -375,10 +375,12 @@ def safe_bound(program: Program, z: np.ndarray) -> tuple[float, float]:
 def conditioning_frame(cameras: np.ndarray) -> np.ndarray:
     """T (4x4) in which the linear estimate of Q (the unit vector of Q's entries minimising f, the
     classic linear method) becomes diag(1, 1, 1, 0): cameras P T, Q_in = T Q T'. Orthogonal freedom
-    (eigenvector signs, repeated eigenvalues) changes neither the program nor its optimum."""
+    changes not the optimum but the program, and with it what a recorded dual vector means:
+    eigenvector signs are fixed (largest entry positive), so that a verifier whose LAPACK picks
+    other signs rebuilds the program the proof's z was solved for."""
     forms = forms10(cameras)
     _, vectors = np.linalg.eigh(forms.T @ forms)
-    v = vectors[:, 0]
+    v = _signed(vectors[:, :1])[:, 0]
     Q = np.empty((4, 4))
     for k, (a, b) in enumerate(ALL):
         Q[a, b] = Q[b, a] = v[k]
@@ -386,7 +388,7 @@ def conditioning_frame(cameras: np.ndarray) -> np.ndarray:
     if np.sum(values > 0) < np.sum(values < 0):  # the sign that makes it nearer PSD
         values, V = -values[::-1], V[:, ::-1]
     order = np.argsort(-values)
-    values, V = values[order], V[:, order]
+    values, V = values[order], _signed(V[:, order])
     top = np.maximum(np.abs(values[:3]), 1e-9 * np.abs(values[0]))
     T = np.empty((4, 4))
     T[:, :3] = V[:, :3] * np.sqrt(top)
@@ -394,6 +396,12 @@ def conditioning_frame(cameras: np.ndarray) -> np.ndarray:
     right = np.linalg.norm(cameras @ V[:, 3])
     T[:, 3] = V[:, 3] * (left / np.sqrt(3.0) / right if right > 0 else 1.0)
     return T
+
+
+def _signed(V: np.ndarray) -> np.ndarray:
+    """The columns of V, each signed so that its entry largest in magnitude is positive."""
+    top = V[np.argmax(np.abs(V), axis=0), np.arange(V.shape[1])]
+    return V * np.where(top < 0, -1.0, 1.0)
 
 
 def framed_cameras(cameras: np.ndarray, T: np.ndarray) -> np.ndarray:
