@@ -136,11 +136,7 @@ def solve_direct(setup: direct.DirectSetup, options, record: bool) -> DirectStag
         return DirectStage("failed", False, None, math.inf, -math.inf, options.relaxation_order,
                            reason="no plane at infinity is consistent with chirality (both orientations excluded)",
                            elapsed_s=time.perf_counter() - start)
-    stage = None
-    for order in range(2, options.relaxation_order + 1):
-        stage = _solve_order(setup, options, order, record)
-        if stage.certified:
-            break
+    stage = _solve_order(setup, options, options.relaxation_order, record)
     stage.elapsed_s = time.perf_counter() - start
     return stage
 
