@@ -127,6 +127,12 @@ def in_domain(setup: MetricSetup, w: np.ndarray, lo: np.ndarray, hi: np.ndarray)
     return bool(np.all(q >= setup.q_lower) and np.all(q <= setup.q_upper))
 
 
+def _widen(a) -> np.ndarray:
+    """An interval widened outward by WIDEN of its size (rounding never narrows one wrongly)."""
+    pad = WIDEN * max(abs(a[0]), abs(a[1]), 1e-300)
+    return np.array([a[0] - pad, a[1] + pad])
+
+
 def may_meet_ranges(ranges: dict, lo: np.ndarray, hi: np.ndarray) -> bool:
     """False only when no omega of the box has its K within the ranges (interval arithmetic on
     v = w23, u = w13, fy^2 = w22 - v^2, skew = (w12 - u v) / fy, fx^2 = w11 - skew^2 - u^2,
@@ -135,31 +141,27 @@ def may_meet_ranges(ranges: dict, lo: np.ndarray, hi: np.ndarray) -> bool:
         low, high = max(a[0], b[0]), min(a[1], b[1])
         return None if low > high else np.array([low, high])
 
-    def widen(a):
-        pad = WIDEN * max(abs(a[0]), abs(a[1]), 1e-300)
-        return np.array([a[0] - pad, a[1] + pad])
-
     fy_range = _mul(np.array(ranges["focal"], float), np.array(ranges["aspect"], float))
-    u = meet(widen(np.array([lo[2], hi[2]])), ranges["u"])
-    v = meet(widen(np.array([lo[4], hi[4]])), ranges["v"])
+    u = meet(_widen(np.array([lo[2], hi[2]])), ranges["u"])
+    v = meet(_widen(np.array([lo[4], hi[4]])), ranges["v"])
     if u is None or v is None:
         return False
     v2 = _sq(v)
-    fy2 = meet(widen(np.array([lo[3] - v2[1], hi[3] - v2[0]])), fy_range ** 2)
+    fy2 = meet(_widen(np.array([lo[3] - v2[1], hi[3] - v2[0]])), fy_range ** 2)
     if fy2 is None:
         return False
-    fy = widen(np.sqrt(fy2))
-    numerator = widen(_add(np.array([lo[1], hi[1]]), -_mul(u, v)[::-1]))
+    fy = _widen(np.sqrt(fy2))
+    numerator = _widen(_add(np.array([lo[1], hi[1]]), -_mul(u, v)[::-1]))
     quotients = [numerator[0] / fy[0], numerator[0] / fy[1], numerator[1] / fy[0], numerator[1] / fy[1]]
-    skew = meet(widen(np.array([min(quotients), max(quotients)])), ranges["skew"])
+    skew = meet(_widen(np.array([min(quotients), max(quotients)])), ranges["skew"])
     if skew is None:
         return False
     s2, u2 = _sq(skew), _sq(u)
-    fx2 = meet(widen(np.array([lo[0] - s2[1] - u2[1], hi[0] - s2[0] - u2[0]])), np.array(ranges["focal"], float) ** 2)
+    fx2 = meet(_widen(np.array([lo[0] - s2[1] - u2[1], hi[0] - s2[0] - u2[0]])), np.array(ranges["focal"], float) ** 2)
     if fx2 is None:
         return False
-    fx = widen(np.sqrt(fx2))
-    aspect = widen(np.array([fy[0] / fx[1], fy[1] / fx[0]]))
+    fx = _widen(np.sqrt(fx2))
+    aspect = _widen(np.array([fy[0] / fx[1], fy[1] / fx[0]]))
     return meet(aspect, ranges["aspect"]) is not None
 
 
@@ -307,11 +309,9 @@ def domain_rows(ranges: dict, lo: np.ndarray, hi: np.ndarray, first: int, le) ->
     U, V, W11, W12, W22 = 2, 4, 0, 1, 3
     f, aspect, skew = (np.array(ranges[k], dtype=float) for k in ("focal", "aspect", "skew"))
     u, v = np.array([lo[U], hi[U]]), np.array([lo[V], hi[V]])
-    pad = lambda a: np.array([a[0] - WIDEN * max(abs(a[0]), abs(a[1]), 1e-300),  # noqa: E731
-                              a[1] + WIDEN * max(abs(a[0]), abs(a[1]), 1e-300)])
-    su, sv, puv, ss = pad(_sq(u)), pad(_sq(v)), pad(_mul(u, v)), pad(_sq(skew))
-    fx2, fy2 = pad(_sq(f)), pad(_sq(_mul(f, aspect)))
-    a2 = pad(_sq(aspect))
+    su, sv, puv, ss = _widen(_sq(u)), _widen(_sq(v)), _widen(_mul(u, v)), _widen(_sq(skew))
+    fx2, fy2 = _widen(_sq(f)), _widen(_sq(_mul(f, aspect)))
+    a2 = _widen(_sq(aspect))
     for var, x, xr in ((SU, U, u), (SV, V, v)):  # secant: x^2 <= (l + h) x - l h on [l, h]
         slope, icpt = xr[0] + xr[1], -xr[0] * xr[1]
         le({var: 1.0, x: -slope}, icpt + WIDEN * (1.0 + abs(icpt) + abs(slope) * np.abs(xr).max()))
