@@ -9,16 +9,12 @@ import httpx
 import pytest
 import numpy as np
 
+from geocert.workers.store import JobStore
 from tests.servers import SHORT_TASKS, cluster, wait_until_done
 from tests.support import service_job as triangulation_job
 
 
 pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run only
-
-
-def json_status(store, job_id: str) -> str | None:
-    raw = store.hget(f"geocert:job:{job_id}", "status")
-    return None if raw is None else raw.strip('"')
 
 
 def test_a_worker_killed_mid_job_leaves_its_work_to_another(tmp_path):
@@ -31,6 +27,7 @@ def test_a_worker_killed_mid_job_leaves_its_work_to_another(tmp_path):
     body = triangulation_job(np.random.default_rng(77), tracks=1200, views=5)
     with cluster(tmp_path, workers=2, **SHORT_TASKS) as (running, client):
         store = redis.Redis.from_url(running.redis_url, decode_responses=True)
+        jobs = JobStore(store)
         job_id = client.post("/v1/jobs", json=body).json()["id"]
         wait_until_done(client, job_id, 200)
         running.kill(running.workers[0])  # SIGKILL to its whole process group, mid-chunk
@@ -38,7 +35,7 @@ def test_a_worker_killed_mid_job_leaves_its_work_to_another(tmp_path):
         overcounts = []
         while (job := client.get(f"/v1/jobs/{job_id}").json())["status"] not in ("succeeded", "failed", "cancelled"):
             stored = store.hlen(f"geocert:job:{job_id}:items")
-            ended = json_status(store, job_id) in ("succeeded", "failed", "cancelled")
+            ended = jobs.field(job_id, "status") in ("succeeded", "failed", "cancelled")
             # (the end drops the stored items with the status change, atomically: a sample the end
             # fell inside proves nothing, and is skipped)
             if job["progress"]["items_done"] > stored and not ended:
