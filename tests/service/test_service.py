@@ -414,6 +414,7 @@ class TestPreferWait:
         job = response.json()
         assert job["status"] == "succeeded" and len(job["result"]["tracks"]) == 2
         assert response.headers["Location"] == f"/v1/jobs/{job['id']}"
+        assert response.content == service.get(f"/v1/jobs/{job['id']}").content  # the GET's document, as stored
 
     def test_a_job_longer_than_the_wait_is_the_usual_202(self, service):
         blocker = triangulation_job(np.random.default_rng(42), tracks=1, views=6, norm="L1L1", rel_gap=0.0,
