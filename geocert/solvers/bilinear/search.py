@@ -64,7 +64,8 @@ class Model:
                 x = _l1_fit(design, self.u[:, r], list(zip(np.broadcast_to(blo, 4), np.broadcast_to(bhi, 4))), None)
                 if x is None:
                     return None
-            M[r], t[r] = x[:3], x[3]
+            # the LP solver may overshoot a bound by its tolerance: the camera must stay in the box
+            M[r], t[r] = (x[:3] if lo is None else np.clip(x[:3], lo[3 * r:3 * r + 3], hi[3 * r:3 * r + 3])), x[3]
         return M, t
 
     def alpha_step(self, M: np.ndarray, t: np.ndarray) -> np.ndarray | None:
