@@ -9,7 +9,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, Field
 
-from geocert.kinds.documents import finite_or_none
+from geocert.kinds.documents import finite_or_none, outcome_document
 from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Pixel, Strict
 from geocert.solvers.bilinear import determinacy
 from geocert.solvers.bilinear import problem as pb
@@ -111,10 +111,7 @@ def frame_document(result, options: BilinearOptions) -> dict:
         if result.proof is not None:
             certificate["proof"] = result.proof
     return {"camera": result.camera, "coefficients": result.coefficients, "shape": result.shape,
-            "residuals": result.residuals, "baseline": result.baseline,
-            "cost": finite_or_none(result.cost), "lower_bound": finite_or_none(result.lower_bound),
-            "gap": finite_or_none(result.gap), "status": result.status, "certified": result.certified,
-            "nodes": result.nodes, "elapsed_s": result.elapsed_s, "reason": result.reason,
+            "residuals": result.residuals, "baseline": result.baseline, **outcome_document(result),
             "certificate": certificate}
 
 

@@ -23,6 +23,7 @@ from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branc
 from geocert.solvers.core.certificates import pack
 from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
 from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
+from geocert.solvers.fractional.results import ItemResult
 
 ROOT_FACTOR = 4.0  # the default camera box: |M'_rk| <= 4 max |M'_incumbent| (rounded up to a power of two)
 ALS_STARTS = 4  # random starts at the root, beside the baseline's and the mean shape's
@@ -147,15 +148,10 @@ def linear_baseline(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 @dataclass
-class FrameResult:
-    status: str
-    certified: bool
-    cost: float | None = None
-    lower_bound: float | None = None
-    gap: float | None = None
-    nodes: int = 0
-    elapsed_s: float = 0.0
-    reason: str | None = None
+class FrameResult(ItemResult):
+    """One frame's outcome (ItemResult's fields; its ``certificate`` stays None: the frame's
+    summary is built by the kind from camera_box, tolerance and leaves, the proof is ``proof``)."""
+
     camera: list | None = None
     coefficients: list | None = None
     shape: list | None = None
