@@ -259,11 +259,13 @@ def forged(result, change) -> dict:
 
 
 @pytest.mark.parametrize("change, check", [
-    (lambda item: item.__setitem__("lower_bound", item["lower_bound"] * 1.01) or
-     item.__setitem__("gap", item["cost"] - item["lower_bound"]), "lower_bound"),
+    # the lower bound raised to the cost (gap 0), above what the proof's leaves prove
+    (lambda item: item.__setitem__("lower_bound", item["cost"]) or item.__setitem__("gap", 0.0), "lower_bound"),
     (lambda item: item["coefficients"].__setitem__(0, item["coefficients"][0] + 1e-3), "objective"),
     (lambda item: item["proof"]["leaves"].pop(), "coverage"),
-    (lambda item: item["proof"]["camera_box"][0].__setitem__(0, item["proof"]["camera_box"][0][0] / 2), "scope"),
+    # a smaller camera box stated (the camera still in it): the root's rounds no longer start from it
+    (lambda item: item["proof"]["camera_box"][0].__setitem__(0, item["proof"]["camera_box"][0][0] / 2),
+     "tightening"),
     (lambda item: item["proof"]["tightening"][0]["box_out"][0].__setitem__(
         0, item["proof"]["tightening"][0]["box_out"][0][0] + 1e-3), "tightening"),
 ])
@@ -271,7 +273,24 @@ def test_tampered_certificate_is_refused(certified_result, change, check):
     document = forged(certified_result, change)
     report = verify_any(document)
     assert not report.valid
-    assert report.first_failure["check"] in (check, "claim", "leaf_bounds", "scope", "tightening"), report.first_failure
+    assert report.first_failure["check"] == check, report.first_failure
+
+
+def test_a_node_tightening_side_moved_is_refused(certified_result):
+    """A coefficient's side moved beyond what its dual vector proves, in a node tightening record."""
+    records = [item["proof"]["node_tightening"] for item in certified_result["certificate"]["items"]]
+    assert any(records), "the fixture's search tightened no node: nothing to tamper with"
+
+    def change(item):
+        record = item["proof"]["node_tightening"][0]
+        lo_out, hi_out = record["box_out"]
+        lo_out[6] = min(hi_out[6], lo_out[6] + 0.5 * (hi_out[6] - lo_out[6]) + 1e-6)
+    index = next(i for i, r in enumerate(records) if r)
+    document = copy.deepcopy(certified_result["certificate"])
+    change(document["items"][index])
+    report = verify_any(document)
+    assert not report.valid and report.first_failure["check"] == "tightening", report.first_failure
+    assert "beyond the proven" in report.first_failure["detail"], report.first_failure
 
 
 def test_a_dual_vector_changed_is_refused(certified_result):
