@@ -74,7 +74,8 @@ class AutocalibrationVerification:
                     "chirality": options["chirality"], "relaxation_order": options["relaxation_order"],
                     "metric_rel_gap": options["metric_rel_gap"], "abs_gap": options["abs_gap"],
                     "statement": "stage 0 (direct): no absolute dual quadric Q positive semidefinite of rank 3 allowed "
-                                 "by the chirality option (in the program's frame, trace 1) costs less than "
+                                 "by the chirality option (its chosen rows strictly on one side of Q's null plane, "
+                                 "none on it; in the program's frame, trace 1) costs less than "
                                  "lower_bound in (7.12); the quadric returned is one of them and costs cost"}
         return {"kind": "autocalibration", "method": options["method"], "intrinsics": options["intrinsics"],
                 "rel_gap": options["rel_gap"], "metric_rel_gap": options["metric_rel_gap"],
