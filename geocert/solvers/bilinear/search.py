@@ -8,6 +8,7 @@ back exactly (powers of two) and its cost recomputed from the raw data.
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 import warnings
@@ -347,10 +348,8 @@ def root_incumbent(model: Model, seed: int = 0):
     rng = np.random.default_rng(seed)
     for _ in range(ALS_STARTS if model.K > 1 else 0):
         starts.append(pb.project_coefficients(rng.dirichlet(np.ones(model.K)), model.coefficients, model.bound))
-    squares = model if model.norm == "L2L2" else Model.__new__(Model)
-    if squares is not model:
-        squares.__dict__.update(model.__dict__)
-        squares.norm = "L2L2"
+    squares = model if model.norm == "L2L2" else copy.copy(model)
+    squares.norm = "L2L2"
     found = []
     for alpha in starts:
         step = squares.camera_step(alpha, None, None)
