@@ -131,7 +131,7 @@ def solve_job(job: dict, sink: ProgressSink | None = None, should_stop: StopChec
 def assemble(kind, job: dict, options, items: list[dict], stats: dict) -> dict:
     """The result document; with ``options.certificate == "full"`` it carries the certificate
     document too (the proofs move there from the items' certificate summaries)."""
-    if getattr(options, "certificate", None) == "full":  # a kind that issues estimates has no such option
+    if kind.certifies and options.certificate == "full":  # a kind of estimates has no such option
         document = certificate_document(kind, job["data"], options, items)
     else:
         document = None
@@ -168,7 +168,7 @@ def certificate_document(kind, data: Any, options, items: list[dict]) -> dict:
     certificate summary."""
     claims = []
     # A kind may prove several claims per item (autocalibration: one per stage).
-    claimed = kind.claimed_items(items) if hasattr(kind, "claimed_items") else items
+    claimed = kind.claimed_items(items)
     for index, item in enumerate(claimed):
         proof = (item.get("certificate") or {}).pop("proof", None)
         solution = {key: item[key] for key in kind.solution_fields if key in item}
@@ -188,9 +188,7 @@ def parse_job(job: Any):
     kind = get_kind(job.get("kind"))
     options = options_from(kind.options_type, job.get("options"))
     parsed = kind.parse(job.get("data"))
-    check = getattr(kind, "check_options", None)  # what the data must give the options (e.g. enough lines)
-    if check is not None:
-        check(parsed, options)
+    kind.check_options(parsed, options)  # what the data must give the options (e.g. enough lines)
     return kind, parsed, options
 
 

@@ -47,6 +47,20 @@ class ProblemKind(Protocol):
     def assemble(self, options: Any, items: list[dict], stats: dict) -> dict: ...
 
 
+def _no_check(parsed: Any, options: Any) -> None:
+    return None
+
+
+def _every_item(items: list[dict]) -> list[dict]:
+    return items
+
+
+# Members a kind may leave out, with what they mean then: it issues certificates (a kind of
+# estimates sets certifies = False: no certificate option, nothing for the verifier); nothing to
+# check between its data and options beyond each alone; every item is a claim of its certificate.
+OPTIONAL_MEMBERS: dict[str, Any] = {"certifies": True, "check_options": _no_check, "claimed_items": _every_item}
+
+
 class Registry:
     """The kinds served, by name, in the order registered."""
 
@@ -59,6 +73,9 @@ class Registry:
         missing = [name for name in ProblemKind.__annotations__ if not hasattr(kind, name)]
         if missing or not isinstance(kind, ProblemKind):
             raise TypeError(f"{kind!r} is not a ProblemKind (missing: {', '.join(missing) or 'methods'})")
+        for name, default in OPTIONAL_MEMBERS.items():  # what a kind may leave out, filled in once here
+            if not hasattr(kind, name):
+                setattr(kind, name, default)
         self._kinds[kind.name] = kind
         return kind
 

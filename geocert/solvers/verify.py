@@ -130,7 +130,7 @@ def estimates_kind(document: Any) -> str | None:
     name = inner.get("kind", document.get("kind"))
     from geocert.kinds import KINDS
 
-    if isinstance(name, str) and name in KINDS and not getattr(KINDS.get(name), "certifies", True):
+    if isinstance(name, str) and name in KINDS and not KINDS.get(name).certifies:
         return name
     return None
 

@@ -90,7 +90,7 @@ class TestEveryKind:
 
 def certifies(kind) -> bool:
     """Whether a kind issues certificates (the default) or estimates only (``certifies = False``)."""
-    return getattr(kind, "certifies", True)
+    return kind.certifies
 
 
 class TestOneLineToAddAKind:
