@@ -108,8 +108,9 @@ def _transposed_product(A, z: np.ndarray) -> np.ndarray:
 
 
 def _box_minimum(c: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> float:
-    """min of c'x over lower <= x <= upper (zero coefficients cost nothing, even on infinite sides)."""
-    with np.errstate(invalid="ignore"):
+    """min of c'x over lower <= x <= upper (zero coefficients cost nothing, even on infinite sides;
+    a product past the float range is -inf or inf, as it should be: no bound, or none lost)."""
+    with np.errstate(invalid="ignore", over="ignore"):
         terms = np.minimum(c * lower, c * upper)
     terms[c == 0] = 0.0
     return float(np.sum(terms))
