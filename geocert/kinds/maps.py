@@ -77,6 +77,7 @@ class MapKind:
     """Independent maps P^n -> P^m of the given (n, m) dimensions, one item each."""
 
     item_key = "maps"
+    chunk_key = "maps"  # data["maps"][i] is item i: a task reads only its chunk's
     chunk_size = 1
     options_type = MapOptions
     result_model = MapsResult

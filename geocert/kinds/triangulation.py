@@ -71,6 +71,7 @@ class TriangulationKind:
     name = "triangulation"
     description = "N-view triangulation: the 3D point minimising reprojection error, certified globally optimal."
     item_key = "tracks"
+    chunk_key = "tracks"  # data["tracks"][i] is item i: a task reads only its chunk's
     chunk_size = 100
     options_type = TriangulationOptions
     request_model = TriangulationJob

@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import hashlib
 import json
+import math
 import time
 import uuid
 from typing import Any, AsyncIterator
@@ -44,11 +45,17 @@ class JobStore:
 
     # --- creation and reads ------------------------------------------------------------------
     def create(self, kind: str, request: dict, items_total: int, chunk_size: int, owner: str,
-               callback_url: str | None = None, active_limit: int = 0, task_ids=None) -> dict | None:
+               callback_url: str | None = None, active_limit: int = 0, task_ids=None,
+               chunk_key: str | None = None) -> dict | None:
         """Record a new queued job, counted among the owner's active jobs, with its ``status``
         event and the ids its tasks will have (one per chunk; made here unless given), in one
         round trip. None when the owner already has ``active_limit`` jobs queued or running (0:
-        no limit): nothing of the job is kept then."""
+        no limit): nothing of the job is kept then.
+
+        ``chunk_key``: the data list whose entries are the job's items one to one (a kind's
+        ``chunk_key``). Those entries are kept one per element of a Redis list beside the rest of
+        the request, so that a task reads its own items (``chunk_request``), not the whole request:
+        read traffic stays about the request's size whatever the number of chunks."""
         job_id = uuid.uuid4().hex
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
@@ -65,7 +72,7 @@ class JobStore:
         pipe = self.r.pipeline()
         pipe.eval(self._ADMIT, 1, self.owner_key(owner, "active"), job_id, active_limit)
         pipe.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in meta.items() if k != "task_ids"})
-        pipe.set(self.key(job_id, "request"), json.dumps(request))
+        self._put_request(pipe, job_id, request, chunk_key)
         pipe.zadd(self.owner_key(owner, "jobs"), {job_id: meta["created_at"]})
         self.publish(job_id, "status", {"status": "queued"}, pipe)
         if meta["task_ids"]:
@@ -113,8 +120,68 @@ class JobStore:
     def task_ids(self, job_id: str) -> list[str]:
         return self.r.lrange(self.key(job_id, "tasks"), 0, -1)
 
+    # --- the request, whole or by chunk ------------------------------------------------------
+    # A request whose items sit in ``data[chunk_key]`` is kept as its head (that list replaced by
+    # a placeholder naming the job) and its items, one JSON text per element of a list; written
+    # with json.dumps's separators, so the whole request's text is rebuilt byte for byte.
+
+    @staticmethod
+    def _placeholder(job_id: str) -> str:
+        return json.dumps(f"geocert-items-{job_id}")
+
+    _ITEMS_PER_PUSH = 10_000
+
+    def _put_request(self, pipe, job_id: str, request: dict, chunk_key: str | None) -> None:
+        data = request.get("data")
+        items = data.get(chunk_key) if chunk_key and isinstance(data, dict) else None
+        if not isinstance(items, list) or not items:
+            pipe.set(self.key(job_id, "request"), json.dumps(request))
+            return
+        head = {**request, "data": {**data, chunk_key: f"geocert-items-{job_id}"}}
+        pipe.set(self.key(job_id, "request"), json.dumps(head))
+        pipe.hset(self.key(job_id), "request_items", json.dumps(chunk_key))
+        for begin in range(0, len(items), self._ITEMS_PER_PUSH):
+            pipe.rpush(self.key(job_id, "request:items"),
+                       *(json.dumps(item) for item in items[begin:begin + self._ITEMS_PER_PUSH]))
+
+    def request_text(self, job_id: str) -> str | None:
+        """The job as submitted, as JSON text (None when no request is kept)."""
+        pipe = self.r.pipeline()
+        pipe.get(self.key(job_id, "request"))
+        pipe.hget(self.key(job_id), "request_items")
+        head, chunk_key = pipe.execute()
+        if head is None or chunk_key is None:
+            return head
+        items = self.r.lrange(self.key(job_id, "request:items"), 0, -1)
+        return head.replace(self._placeholder(job_id), "[" + ", ".join(items) + "]", 1)
+
     def request(self, job_id: str) -> dict:
-        return json.loads(self.r.get(self.key(job_id, "request")))
+        return json.loads(self.request_text(job_id))
+
+    def chunk_request(self, job_id: str, start: int, stop: int) -> dict:
+        """The request with only items ``start`` to ``stop - 1`` of its item list read (the
+        others None, indices unchanged): what a task solving that chunk needs. The whole request
+        when its items are not kept apart."""
+        pipe = self.r.pipeline()
+        pipe.get(self.key(job_id, "request"))
+        pipe.hget(self.key(job_id), "request_items")
+        pipe.llen(self.key(job_id, "request:items"))
+        pipe.lrange(self.key(job_id, "request:items"), start, stop - 1)
+        head, chunk_key, total, items = pipe.execute()
+        request = json.loads(head)
+        if chunk_key is not None:
+            chunk_key = json.loads(chunk_key)
+            request["data"][chunk_key] = ([None] * start + [json.loads(item) for item in items]
+                                          + [None] * max(0, total - start - len(items)))
+        return request
+
+    def fields(self, job_id: str, *names: str) -> dict | None:
+        """Some fields of the job (None when there is no such job): a task reads these, not the
+        whole record (whose chunk list grows with the job)."""
+        raw = self.r.hmget(self.key(job_id), "status", *names)
+        if raw[0] is None:
+            return None
+        return {name: None if value is None else json.loads(value) for name, value in zip(("status",) + names, raw)}
 
     def result(self, job_id: str) -> dict | None:
         raw = self.r.get(self.key(job_id, "result"))
@@ -184,40 +251,66 @@ class JobStore:
         """Drop a claim to end the job whose holder is gone (the job is running but nobody moves)."""
         self.r.delete(self.key(job_id, "final"))
 
+    # The job's progress sums its tasks' progress (and takes the worst gap): each task's last
+    # figures are kept, and the sums moved by the change, in Redis, so that storing a task's
+    # progress costs the same however many chunks the job has (reading every task's progress at
+    # every save made a large job's traffic grow with the square of its chunks).
+    _SUMS = ("nodes", "open_boxes", "lower_bound", "upper_bound", "gap_abs")
+    _ADD_PROGRESS = """
+    local old = redis.call('HGET', KEYS[1], ARGV[1])
+    redis.call('HSET', KEYS[1], ARGV[1], ARGV[2])
+    local before = {}
+    if old then for v in string.gmatch(old, '[^,]+') do table.insert(before, tonumber(v)) end end
+    local i = 0
+    for v in string.gmatch(ARGV[2], '[^,]+') do
+        i = i + 1
+        local change = tonumber(v) - (before[i] or 0)
+        if change ~= 0 then redis.call('HINCRBYFLOAT', KEYS[2], ARGV[2 + i], change) end
+    end
+    if ARGV[8] == '' then redis.call('ZREM', KEYS[3], ARGV[1]) else redis.call('ZADD', KEYS[3], ARGV[8], ARGV[1]) end
+    local sums = redis.call('HMGET', KEYS[2], ARGV[3], ARGV[4], ARGV[5], ARGV[6], ARGV[7])
+    local worst = redis.call('ZREVRANGE', KEYS[3], 0, 0, 'WITHSCORES')
+    return {sums, worst}
+    """
+
     def save_progress(self, job_id: str, start: int, progress: dict, items: dict[int, dict] | None = None) -> dict:
         """Store the items given (index -> item) and the progress of the task that started at item
         ``start``, and return (and publish) the job's aggregate over all its tasks. Its
         ``items_done`` is the number of items stored, read after this call's items are written:
         progress never counts an item whose result is not stored (a task that dies loses only
         items it had not counted)."""
+        figures = ",".join(repr(float(v)) if math.isfinite(v := float(progress.get(name) or 0.0)) else "0.0"
+                           for name in self._SUMS)
+        gap = progress.get("gap_rel")
         pipe = self.r.pipeline()  # one round trip for the writes and reads, one for the aggregate
         if items:
             pipe.hset(self.key(job_id, "items"), mapping={str(i): json.dumps(item) for i, item in items.items()})
-        pipe.hset(self.key(job_id, "chunkprogress"), str(start), json.dumps(progress))
+        pipe.eval(self._ADD_PROGRESS, 3, self.key(job_id, "chunkprogress"), self.key(job_id, "progressparts"),
+                  self.key(job_id, "gaps"), str(start), figures, *self._SUMS,
+                  repr(float(gap)) if gap is not None and math.isfinite(gap) else "")
         pipe.zadd(self.RUNNING, {job_id: now()})  # touch()
-        pipe.hvals(self.key(job_id, "chunkprogress"))
         pipe.hlen(self.key(job_id, "items"))
         pipe.hmget(self.key(job_id), "items_total", "started_at")
-        raw_parts, done, (raw_total, raw_started) = pipe.execute()[-3:]
-        parts = [json.loads(v) for v in raw_parts]
+        (sums, worst), _, done, (raw_total, raw_started) = pipe.execute()[-4:]
         total = None if raw_total is None else json.loads(raw_total)
         started = (None if raw_started is None else json.loads(raw_started)) or now()
-        gaps = [p["gap_rel"] for p in parts if p.get("gap_rel") is not None]
+        sums = [float(v) if v is not None else 0.0 for v in sums]
         aggregate = {
-            "nodes": sum(p["nodes"] for p in parts),
-            "open_boxes": sum(p["open_boxes"] for p in parts),
-            "lower_bound": sum(p["lower_bound"] for p in parts),
-            "upper_bound": sum(p["upper_bound"] for p in parts),
-            "gap_abs": sum(p["gap_abs"] for p in parts),
-            "gap_rel": max(gaps) if gaps else None,
+            "nodes": int(round(sums[0])),
+            "open_boxes": int(round(sums[1])),
+            "lower_bound": sums[2],
+            "upper_bound": sums[3],
+            "gap_abs": sums[4],
+            "gap_rel": float(worst[1]) if worst else None,
             "items_done": done,
             "items_total": total,
             "tracks_done": done,  # deprecated names of items_done and items_total
             "tracks_total": total,
             "elapsed_s": now() - started,
-            # A staged solve (autocalibration) says which stage runs: the latest task's.
-            **({"stage": stages[-1]} if (stages := [p["stage"] for p in parts if p.get("stage")]) else {}),
         }
+        # A staged solve (autocalibration) says which stage runs: the latest task's.
+        if progress.get("stage"):
+            aggregate["stage"] = progress["stage"]
         pipe = self.r.pipeline()
         pipe.hset(self.key(job_id), "progress", json.dumps(aggregate))
         self.publish(job_id, "progress", aggregate, pipe)
@@ -258,7 +351,8 @@ class JobStore:
             pipe.set(self.key(job_id, "result"), json.dumps(result))
         pipe.hset(self.key(job_id), mapping={"status": json.dumps(status), "finished_at": json.dumps(now()),
                                               "error": json.dumps(error)})
-        pipe.delete(self.key(job_id, "items"), self.key(job_id, "chunkprogress"))
+        pipe.delete(self.key(job_id, "items"), self.key(job_id, "chunkprogress"), self.key(job_id, "progressparts"),
+                    self.key(job_id, "gaps"))
         pipe.srem(self.owner_key(self.field(job_id, "owner") or "", "active"), job_id)
         pipe.zrem(self.RUNNING, job_id)
         pipe.execute()
@@ -268,7 +362,8 @@ class JobStore:
         self.publish(job_id, "end", {"status": status, "error": error})
         self.expire(job_id)
 
-    _PARTS = ("", "request", "result", "events", "cancel", "final", "items", "chunkprogress", "tasks")
+    _PARTS = ("", "request", "request:items", "result", "events", "cancel", "final", "items", "chunkprogress",
+              "progressparts", "gaps", "tasks")
 
     def expire(self, job_id: str) -> None:
         pipe = self.r.pipeline()

@@ -95,12 +95,12 @@ def _wait_for_redis(jobs: JobStore, limit_s: float) -> None:
 
 def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> None:
     jobs = store()
-    meta = jobs.get(job_id)
+    meta = jobs.fields(job_id, "items_total")
     if meta is None or not jobs.mark_running(job_id):
         return  # expired, deleted, or ended (cancelled) before it started: nothing to do
     settings = get_settings()
     try:
-        request = jobs.request(job_id)
+        request = jobs.chunk_request(job_id, start, stop)  # its own items only (see JobStore.create)
         kind = get_kind(request["kind"])
         options = options_from(kind.options_type, request.get("options"))
         parsed = kind.parse(request["data"], items=range(start, stop))
@@ -115,7 +115,7 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
             log.info("continuing items %d-%d in a new task", cut, stop)
             jobs.add_task_ids(job_id, solve_chunk.delay(job_id, cut, stop, request_id).id)
         elif done == meta["items_total"] and jobs.claim_end(job_id):
-            end_with_result(jobs, job_id, meta, kind, request, options)
+            end_with_result(jobs, job_id, kind, options)
     except InputError as exc:  # the API validates first, so this is a stored job gone bad
         end_with_error(jobs, job_id, 422, "Invalid job data", str(exc), exc.field)
     except REDIS_GONE:
@@ -126,9 +126,12 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
              traceback.format_exc(limit=5))
 
 
-def end_with_result(jobs: JobStore, job_id: str, meta: dict, kind, request: dict, options) -> None:
+def end_with_result(jobs: JobStore, job_id: str, kind, options) -> None:
     """Every item is stored: the job ends ``succeeded`` (or ``cancelled`` when some item was
-    stopped) with its result document. The caller holds the job's ``claim_end``."""
+    stopped) with its result document. The caller holds the job's ``claim_end``. The whole
+    request is read only when the result carries it (a full certificate holds the data)."""
+    meta = jobs.fields(job_id, "items_total", "started_at", "created_at")
+    request = jobs.request(job_id) if kind.certifies and options.certificate == "full" else None
     items = jobs.all_items(job_id, meta["items_total"])
     elapsed = time.time() - (meta["started_at"] or meta["created_at"])
     stats = job_stats(items, elapsed)

@@ -155,7 +155,7 @@ def _create(store: JobStore, owner: str, kind, request: dict, items: int) -> dic
     settings = get_settings()
     chunk = chunk_size_for(kind)
     meta = store.create(kind.name, request, items, chunk, owner, request.get("callback_url"),
-                        settings.max_active_jobs_per_key)
+                        settings.max_active_jobs_per_key, chunk_key=kind.chunk_key)
     if meta is None:
         raise ApiProblem(429, f"this key already has {settings.max_active_jobs_per_key} jobs queued or running "
                               "(GEOCERT_MAX_ACTIVE_JOBS_PER_KEY); wait for one to end", headers={"Retry-After": "5"})
@@ -257,7 +257,7 @@ def job_document(store: JobStore, job: dict) -> dict | Response:
 def get_job_request(job: OwnedJob, store: JobStoreDep):
     """The job as submitted (``kind``, ``data``, ``options`` with the defaults filled in): what a
     result's items refer to (e.g. the cameras and observations a triangulation's residuals come from)."""
-    raw = store.r.get(store.key(job["id"], "request"))
+    raw = store.request_text(job["id"])
     if raw is None:
         raise ApiProblem(404, f"no request kept for job {job['id']}")
     return Response(raw, media_type="application/json")  # stored as JSON: sent as it is

@@ -1,0 +1,96 @@
+"""The job store's request and progress, in a real Redis: a task reads its own chunk's items only,
+the whole request comes back byte for byte, and the job's progress is the sum of its tasks' last
+figures however they arrive."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import redis
+
+from geocert.workers.store import JobStore
+
+
+@pytest.fixture(scope="module")
+def jobs(tmp_path_factory):
+    from geocert.workers.redis_server import start_embedded_redis
+
+    process, url = start_embedded_redis(tmp_path_factory.mktemp("redis"))
+    try:
+        yield JobStore(redis.Redis.from_url(url, decode_responses=True))
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
+
+
+def request_of(tracks: int, seed: int = 0) -> dict:
+    rng = np.random.default_rng(seed)
+    return {"kind": "triangulation",
+            "data": {"cameras": rng.normal(size=(5, 3, 4)).tolist(),
+                     "tracks": [{"views": [0, 1, 2], "points": rng.normal(size=(3, 2)).tolist()} for _ in range(tracks)],
+                     "note": "geocert-items-"},  # a string like the placeholder's stays as it is
+            "options": {"norm": "L2L2"}}
+
+
+def output_bytes(jobs: JobStore) -> int:
+    return int(jobs.r.info("stats")["total_net_output_bytes"])
+
+
+class TestRequestByChunk:
+    def test_the_whole_request_comes_back_byte_for_byte(self, jobs):
+        request = request_of(250)
+        meta = jobs.create("triangulation", request, 250, 100, "someone", chunk_key="tracks")
+        assert jobs.request_text(meta["id"]) == json.dumps(request)
+        assert jobs.request(meta["id"]) == request
+
+    def test_a_chunk_holds_its_items_at_their_indices_and_none_elsewhere(self, jobs):
+        request = request_of(250)
+        meta = jobs.create("triangulation", request, 250, 100, "someone", chunk_key="tracks")
+        chunk = jobs.chunk_request(meta["id"], 100, 200)
+        tracks = chunk["data"]["tracks"]
+        assert len(tracks) == 250
+        assert tracks[100:200] == request["data"]["tracks"][100:200]
+        assert all(track is None for track in tracks[:100] + tracks[200:])
+        assert chunk["data"]["cameras"] == request["data"]["cameras"] and chunk["options"] == request["options"]
+        last = jobs.chunk_request(meta["id"], 200, 250)["data"]["tracks"]
+        assert len(last) == 250 and last[249] == request["data"]["tracks"][249]
+
+    def test_a_chunk_reads_about_its_share_of_the_request(self, jobs):
+        request = request_of(4000)
+        size = len(json.dumps(request))
+        meta = jobs.create("triangulation", request, 4000, 100, "someone", chunk_key="tracks")
+        before = output_bytes(jobs)
+        jobs.chunk_request(meta["id"], 0, 100)
+        read = output_bytes(jobs) - before
+        # 1/40 of the tracks, plus the cameras and what INFO itself writes: far below the whole.
+        assert read < 0.1 * size
+
+    def test_without_a_chunk_key_the_request_is_kept_whole(self, jobs):
+        request = request_of(10)
+        meta = jobs.create("triangulation", request, 10, 100, "someone")
+        assert jobs.chunk_request(meta["id"], 0, 5) == request
+        assert jobs.request_text(meta["id"]) == json.dumps(request)
+
+
+class TestProgressSums:
+    def test_the_aggregate_is_the_sum_of_each_tasks_last_figures(self, jobs):
+        meta = jobs.create("triangulation", request_of(30), 30, 10, "someone", chunk_key="tracks")
+        rng = np.random.default_rng(1)
+        last: dict[int, dict] = {}
+        for _ in range(40):
+            start = int(rng.choice([0, 10, 20]))
+            lower = float(rng.uniform(0, 100))
+            gap_rel = None if rng.uniform() < 0.2 else float(rng.uniform(0, 0.5))
+            progress = {"nodes": int(rng.integers(0, 500)), "open_boxes": int(rng.integers(0, 9)),
+                        "lower_bound": lower, "upper_bound": lower + float(rng.uniform(0, 5)),
+                        "gap_abs": float(rng.uniform(0, 5)), "gap_rel": gap_rel}
+            last[start] = progress
+            aggregate = jobs.save_progress(meta["id"], start, progress)
+            for name in ("nodes", "open_boxes", "lower_bound", "upper_bound", "gap_abs"):
+                assert math.isclose(aggregate[name], sum(p[name] for p in last.values()), rel_tol=1e-12, abs_tol=1e-9)
+            gaps = [p["gap_rel"] for p in last.values() if p["gap_rel"] is not None]
+            assert aggregate["gap_rel"] == (max(gaps) if gaps else None)
+        assert json.loads(jobs.r.hget(jobs.key(meta["id"]), "progress")) == aggregate
