@@ -418,3 +418,37 @@ def test_a_frame_past_its_time_limit_stops_every_step():
     lo, hi, _, _, rounds = search.tighten(relaxation, np.full(6, -8.0), np.full(6, 8.0), 1.0, deadline=-math.inf)
     assert len(rounds) == 1 and all(z is None for z in rounds[0]["duals"])
     assert np.array_equal(lo, np.full(6, -8.0)) and np.array_equal(hi, np.full(6, 8.0))
+
+
+def test_the_cost_cap_row_is_inserted_where_stacking_puts_it():
+    """relaxation.insert_row (the cost cap's row, built without vstack) gives exactly the matrix
+    of stacking the rows above, the new row and the rows below, on random sparse matrices and on
+    both norms' relaxations (the verifier rebuilds the same program through it)."""
+    import scipy.sparse as sp
+
+    from geocert.solvers.bilinear.relaxation import insert_row, with_cost_cap
+
+    def stacked(A, at, columns):
+        row = np.zeros(A.shape[1])
+        row[columns] = 1.0
+        return sp.vstack([A[:at], sp.csr_matrix(row), A[at:]]).tocsc()
+    rng = np.random.default_rng(0)
+    for trial in range(200):
+        n, m = rng.integers(1, 12, 2)
+        A = sp.random(n, m, density=rng.uniform(0, 1), random_state=trial, format="csc")
+        at = int(rng.integers(0, n + 1))
+        columns = np.flatnonzero(rng.uniform(size=m) < 0.5)
+        got = insert_row(A, at, columns)
+        got.check_format()
+        for c in range(m):  # rows sorted within each column, as a solver reading raw CSC expects
+            assert np.all(np.diff(got.indices[got.indptr[c]:got.indptr[c + 1]]) > 0), trial
+        assert np.array_equal(got.toarray(), stacked(A, at, columns).toarray()), trial
+    basis, points, *_ = scene(4, 15, 0.01, 1)
+    frame = pb.normalise(basis, points)
+    for norm in ("L1L1", "L2L2"):
+        relaxation = Relaxation(frame.X, frame.u, norm, "convex", 10.0)
+        data = relaxation.conic_data(np.full(6, -4.0), np.full(6, 4.0), 10.0)
+        capped = with_cost_cap(relaxation, data, 10.0)
+        at = data.cones.zero + data.cones.nonneg
+        expected = stacked(data.A, at, np.arange(relaxation.ie, relaxation.nvar))
+        assert np.array_equal(capped.A.toarray(), expected.toarray())
