@@ -345,3 +345,110 @@ def test_affine_coefficients_and_a_given_camera_box_verify():
     document["items"][0]["proof"]["camera_box"][1][0] = 200.0
     report = verify_any(document)
     assert not report.valid and report.first_failure["check"] == "scope"
+
+
+def test_root_rounds_alternate_camera_and_coefficients(certified_result):
+    """The root's tightening rounds are half rounds: the camera's entries, then the coefficients',
+    alternately, each record with null duals for the half it leaves alone (and that half's sides
+    unmoved)."""
+    K = 3
+    for item in certified_result["certificate"]["items"]:
+        rounds = item["proof"]["tightening"]
+        assert len(rounds) >= 2
+        for number, record in enumerate(rounds):
+            duals = record["duals"]
+            camera, coefficients = duals[:12], duals[12:]
+            idle = coefficients if number % 2 == 0 else camera
+            assert all(z is None for z in idle), f"round {number} solved for both halves"
+            assert any(z is not None for z in (camera if number % 2 == 0 else coefficients))
+            (lo_in, hi_in), (lo_out, hi_out) = record["box_in"], record["box_out"]
+            half = slice(6, 6 + K) if number % 2 == 0 else slice(0, 6)
+            assert lo_out[half] == lo_in[half] and hi_out[half] == hi_in[half]
+
+
+def test_a_side_moved_without_its_dual_is_refused(certified_result):
+    """A half round's record leaves the other half's duals null: a side of that half moved anyway
+    (with nothing proving it) is refused."""
+    document = copy.deepcopy(certified_result["certificate"])
+    record = document["items"][0]["proof"]["tightening"][0]  # the camera's half: coefficients' duals null
+    lo_out, hi_out = record["box_out"]
+    lo_out[6] = 0.5 * (lo_out[6] + hi_out[6])
+    report = verify_any(document)
+    assert not report.valid and report.first_failure["check"] == "tightening", report.first_failure
+    assert "beyond the proven" in report.first_failure["detail"], report.first_failure
+
+
+def test_root_incumbent_past_its_deadline_takes_one_step(monkeypatch):
+    """Past its deadline the incumbent's search makes the one camera step an incumbent needs and
+    nothing more (no further start, no alternating step, no L1 polish); before it, many."""
+    from geocert.solvers.bilinear import search
+
+    basis, points, *_ = scene(10, 30, 0.005, 0)
+    frame = pb.normalise(basis, points)
+    for norm in ("L2L2", "L1L1"):
+        model = Model(frame, norm, "convex", 10.0)
+        calls = {"camera": 0, "alpha": 0}
+        camera_step, alpha_step = Model.camera_step, Model.alpha_step
+
+        def counted_camera(self, *args):
+            calls["camera"] += 1
+            return camera_step(self, *args)
+
+        def counted_alpha(self, *args):
+            calls["alpha"] += 1
+            return alpha_step(self, *args)
+        monkeypatch.setattr(Model, "camera_step", counted_camera)
+        monkeypatch.setattr(Model, "alpha_step", counted_alpha)
+        M, alpha, t, value = search.root_incumbent(model, deadline=-math.inf)
+        assert calls == {"camera": 1, "alpha": 0}
+        assert value == pytest.approx(model.cost(M, alpha, t), rel=1e-12)  # the cost in the model's own norm
+        search.root_incumbent(model)
+        assert calls["camera"] > 6 and calls["alpha"] > 6
+        monkeypatch.undo()
+
+
+def test_a_frame_past_its_time_limit_stops_every_step():
+    """With a time limit already spent, no tightening solve starts (the root's first half round
+    records null duals only) and the search stops at its root: time_limit, not certified."""
+    basis, points, *_ = scene(20, 50, 0.005, 0)
+    fit = fit_frame(basis, points, BilinearOptions(norm="L2L2", time_limit_s=1e-6, certificate="full"))
+    assert fit.status == "time_limit" and not fit.certified and fit.nodes <= 1
+    import geocert.solvers.bilinear.search as search
+    relaxation = Relaxation(*(lambda f: (f.X, f.u))(pb.normalise(basis, points)), "L2L2", "convex", 10.0)
+    lo, hi, _, _, rounds = search.tighten(relaxation, np.full(6, -8.0), np.full(6, 8.0), 1.0, deadline=-math.inf)
+    assert len(rounds) == 1 and all(z is None for z in rounds[0]["duals"])
+    assert np.array_equal(lo, np.full(6, -8.0)) and np.array_equal(hi, np.full(6, 8.0))
+
+
+def test_the_cost_cap_row_is_inserted_where_stacking_puts_it():
+    """relaxation.insert_row (the cost cap's row, built without vstack) gives exactly the matrix
+    of stacking the rows above, the new row and the rows below, on random sparse matrices and on
+    both norms' relaxations (the verifier rebuilds the same program through it)."""
+    import scipy.sparse as sp
+
+    from geocert.solvers.bilinear.relaxation import insert_row, with_cost_cap
+
+    def stacked(A, at, columns):
+        row = np.zeros(A.shape[1])
+        row[columns] = 1.0
+        return sp.vstack([A[:at], sp.csr_matrix(row), A[at:]]).tocsc()
+    rng = np.random.default_rng(0)
+    for trial in range(200):
+        n, m = rng.integers(1, 12, 2)
+        A = sp.random(n, m, density=rng.uniform(0, 1), random_state=trial, format="csc")
+        at = int(rng.integers(0, n + 1))
+        columns = np.flatnonzero(rng.uniform(size=m) < 0.5)
+        got = insert_row(A, at, columns)
+        got.check_format()
+        for c in range(m):  # rows sorted within each column, as a solver reading raw CSC expects
+            assert np.all(np.diff(got.indices[got.indptr[c]:got.indptr[c + 1]]) > 0), trial
+        assert np.array_equal(got.toarray(), stacked(A, at, columns).toarray()), trial
+    basis, points, *_ = scene(4, 15, 0.01, 1)
+    frame = pb.normalise(basis, points)
+    for norm in ("L1L1", "L2L2"):
+        relaxation = Relaxation(frame.X, frame.u, norm, "convex", 10.0)
+        data = relaxation.conic_data(np.full(6, -4.0), np.full(6, 4.0), 10.0)
+        capped = with_cost_cap(relaxation, data, 10.0)
+        at = data.cones.zero + data.cones.nonneg
+        expected = stacked(data.A, at, np.arange(relaxation.ie, relaxation.nvar))
+        assert np.array_equal(capped.A.toarray(), expected.toarray())

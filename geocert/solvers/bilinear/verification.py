@@ -21,7 +21,7 @@ from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.strict import Invalid, dual_vector, number as _number, numbers as _numbers
 
 CLAIM_OPTIONS = ("norm", "coefficients", "camera", "coefficient_bound", "camera_bound", "rel_gap", "abs_gap")
-MAX_ROUNDS = 32
+MAX_ROUNDS = 64  # the solver's half rounds (search.TIGHTENING_ROUNDS) with room
 
 
 class BilinearVerification:
