@@ -120,6 +120,7 @@ class BilinearKind:
     description = ("Bilinear fitting (shape from exemplars, non-rigid structure from motion): per frame the affine "
                    "camera and the basis coefficients, certified globally optimal.")
     item_key = "frames"
+    chunk_key = "frames"  # data["frames"][i] is item i: a task reads only its chunk's
     chunk_size = 1
     options_type = BilinearOptions
     request_model = BilinearJob
