@@ -49,6 +49,8 @@ class CalibratedOptions:
     pnp_threshold_px: float = 4.0
     pnp_min_inliers: int = 15
     pnp_iterations: int = 2000
+    essential_min_tracks: int = 15  # fallback registration: tracks linking the view to a registered one
+    essential_min_points: int = 3  # and triangulated points it sees (to fix the translation's length)
     ba_loss: str = "soft_l1"  # least_squares' robust loss
     ba_f_scale_px: float = 1.0  # residual (pixels) where the robust loss starts to flatten
     ba_max_nfev: int = 30  # per bundle adjustment after a view is added
@@ -213,72 +215,103 @@ def _remove_outliers(state: _State, options: CalibratedOptions) -> int:
     return len(bad)
 
 
-def _bundle_adjust(state: _State, fixed: int, max_nfev: int, options: CalibratedOptions) -> int:
+def _skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrices of rows of v (n, 3) -> (n, 3, 3)."""
+    S = np.zeros((len(v), 3, 3))
+    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return S
+
+
+def _left_jacobian(w: np.ndarray) -> np.ndarray:
+    """SO(3)'s left Jacobian J(w) (n, 3, 3): exp(w + e) = exp(J(w) e) exp(w) to first order."""
+    theta = np.linalg.norm(w, axis=1)
+    W = _skew(w)
+    small = theta < 1e-8
+    th = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5, (1 - np.cos(th)) / th ** 2)
+    b = np.where(small, 1.0 / 6.0, (th - np.sin(th)) / th ** 3)
+    return np.eye(3)[None] + a[:, None, None] * W + b[:, None, None] * (W @ W)
+
+
+def _bundle_adjust(state: _State, fixed: int, max_nfev: int, options: CalibratedOptions, ftol: float = 1e-8) -> int:
     """Metric bundle adjustment of registered cameras (all but ``fixed``) and valid points over the
-    inlier observations; returns the function evaluations used."""
+    inlier observations; returns the function evaluations used.
+
+    Each free camera's rotation is exp(w) R0 with R0 its rotation at the start and w a rotation
+    vector (starting at 0); the Jacobian is analytic (pixels against w, t and the point)."""
     registered = state.registered
     valid = np.isfinite(state.points[:, 0])
     obs = np.flatnonzero(state.inlier & registered[state.obs_view] & valid[state.obs_track])
     if len(obs) == 0:
         return 0
-    free_views = [v for v in np.flatnonzero(registered) if v != fixed]
-    cam_index = np.full(state.n_views, -1)
-    cam_index[free_views] = np.arange(len(free_views))
+    free_views = [int(v) for v in np.flatnonzero(registered) if v != fixed]
+    cam_of_view = np.full(state.n_views, -1)
+    cam_of_view[free_views] = np.arange(len(free_views))
     tracks = np.flatnonzero(valid)
-    pt_index = np.full(len(state.points), -1)
-    pt_index[tracks] = np.arange(len(tracks))
-    o_view, o_cam, o_pt = state.obs_view[obs], cam_index[state.obs_view[obs]], pt_index[state.obs_track[obs]]
+    pt_of_track = np.full(len(state.points), -1)
+    pt_of_track[tracks] = np.arange(len(tracks))
+    o_view, o_cam, o_pt = state.obs_view[obs], cam_of_view[state.obs_view[obs]], pt_of_track[state.obs_track[obs]]
     o_px = state.obs_px[obs]
     Ks = np.array(state.Ks)[o_view]
-    n_cam = 6 * len(free_views)
-    fixed_rot = Rotation.from_matrix(state.R[fixed])
-    fixed_t = state.t[fixed]
-    fixed_mask = o_cam < 0
+    n_free, n_cam = len(free_views), 6 * len(free_views)
+    R0 = np.array([state.R[v] for v in free_views]).reshape(-1, 3, 3)
+    moving = o_cam >= 0
+    m_idx = np.flatnonzero(moving)
 
-    def unpack(x):
-        cams = x[:n_cam].reshape(-1, 6)
-        return cams, x[n_cam:].reshape(-1, 3)
+    def cameras(x):
+        """Per observation: rotation, translation (the fixed camera's where o_cam < 0), and w."""
+        c = x[:n_cam].reshape(-1, 6)
+        Rf = Rotation.from_rotvec(c[:, :3]).as_matrix().reshape(-1, 3, 3) @ R0 if n_free else R0
+        R_obs = np.repeat(state.R[fixed][None], len(obs), axis=0)
+        t_obs = np.repeat(state.t[fixed][None], len(obs), axis=0)
+        R_obs[moving] = Rf[o_cam[moving]]
+        t_obs[moving] = c[o_cam[moving], 3:]
+        return R_obs, t_obs, c
+
+    def project(x):
+        R_obs, t_obs, c = cameras(x)
+        X = x[n_cam:].reshape(-1, 3)[o_pt]
+        xc = np.einsum("nij,nj->ni", R_obs, X) + t_obs
+        h = np.einsum("nij,nj->ni", Ks, xc)
+        z = np.where(np.abs(h[:, 2]) < 1e-12, 1e-12, h[:, 2])
+        return R_obs, t_obs, c, X, xc, h, z
 
     def residuals(x):
-        cams, pts = unpack(x)
-        X = pts[o_pt]
-        xc = np.empty_like(X)
-        moving = ~fixed_mask
-        if moving.any():
-            c = cams[o_cam[moving]]
-            xc[moving] = Rotation.from_rotvec(c[:, :3]).apply(X[moving]) + c[:, 3:]
-        if fixed_mask.any():
-            xc[fixed_mask] = fixed_rot.apply(X[fixed_mask]) + fixed_t
-        h = np.einsum("nij,nj->ni", Ks, xc)
-        z = h[:, 2:3]
-        z = np.where(np.abs(z) < 1e-12, 1e-12, z)
-        return (h[:, :2] / z - o_px).ravel()
+        *_, h, z = project(x)
+        return (h[:, :2] / z[:, None] - o_px).ravel()
 
-    x0 = np.concatenate([np.concatenate([np.r_[Rotation.from_matrix(state.R[v]).as_rotvec(), state.t[v]]
-                                         for v in free_views]) if free_views else np.zeros(0),
-                         state.points[tracks].ravel()])
-    rows = np.repeat(np.arange(2 * len(obs)), 0)  # placeholder for clarity below
     r = np.arange(len(obs))
-    rows, cols = [], []
-    moving = np.flatnonzero(o_cam >= 0)
-    for k in range(6):
-        for d in range(2):
-            rows.append(2 * r[moving] + d)
-            cols.append(6 * o_cam[moving] + k)
-    for k in range(3):
-        for d in range(2):
-            rows.append(2 * r + d)
-            cols.append(n_cam + 3 * o_pt + k)
-    rows, cols = np.concatenate(rows), np.concatenate(cols)
-    sparsity = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(2 * len(obs), len(x0))).tocsr()
-    result = least_squares(residuals, x0, jac_sparsity=sparsity, loss=options.ba_loss,
-                           f_scale=options.ba_f_scale_px, x_scale="jac", method="trf",
-                           max_nfev=max_nfev, xtol=1e-10, ftol=1e-10)
-    cams, pts = unpack(result.x)
-    for v, c in zip(free_views, cams):
-        state.R[v] = Rotation.from_rotvec(c[:3]).as_matrix()
-        state.t[v] = c[3:].copy()
-    state.points[tracks] = pts
+    rows = np.concatenate([np.repeat(2 * m_idx[:, None] + np.arange(2)[None, :], 6, axis=1).ravel(),
+                           np.repeat(2 * r[:, None] + np.arange(2)[None, :], 3, axis=1).ravel()])
+    cam_cols = (6 * o_cam[m_idx])[:, None] + np.arange(6)[None, :]
+    pt_cols = (n_cam + 3 * o_pt)[:, None] + np.arange(3)[None, :]
+    cols = np.concatenate([np.tile(cam_cols, (1, 2)).reshape(-1, 2, 6).ravel(),
+                           np.tile(pt_cols, (1, 2)).reshape(-1, 2, 3).ravel()])
+
+    def jacobian(x):
+        R_obs, t_obs, c, X, xc, h, z = project(x)
+        dh = np.zeros((len(obs), 2, 3))  # d pixel / d h
+        dh[:, 0, 0] = dh[:, 1, 1] = 1.0 / z
+        dh[:, :, 2] = -h[:, :2] / (z ** 2)[:, None]
+        du_dxc = dh @ Ks  # (n, 2, 3)
+        d_pt = du_dxc @ R_obs
+        m = m_idx
+        d_w = -du_dxc[m] @ _skew(xc[m] - t_obs[m]) @ _left_jacobian(c[o_cam[m], :3])
+        d_cam = np.concatenate([d_w, du_dxc[m]], axis=2)  # (k, 2, 6)
+        vals = np.concatenate([d_cam.ravel(), d_pt.ravel()])
+        return coo_matrix((vals, (rows, cols)), shape=(2 * len(obs), len(x))).tocsr()
+
+    x0 = np.concatenate([np.concatenate([np.r_[np.zeros(3), state.t[v]] for v in free_views])
+                         if free_views else np.zeros(0), state.points[tracks].ravel()])
+    result = least_squares(residuals, x0, jac=jacobian, loss=options.ba_loss, f_scale=options.ba_f_scale_px,
+                           x_scale="jac", method="trf", tr_solver="lsmr", max_nfev=max_nfev,
+                           ftol=ftol, xtol=1e-10, gtol=1e-10)
+    R_obs, t_obs, c = cameras(result.x)
+    for k, v in enumerate(free_views):
+        state.R[v] = Rotation.from_rotvec(c[k, :3]).as_matrix() @ R0[k]
+        state.t[v] = c[k, 3:].copy()
+    state.points[tracks] = result.x[n_cam:].reshape(-1, 3)
     return int(result.nfev)
 
 
@@ -362,6 +395,61 @@ def _register_next(state: _State, options: CalibratedOptions, last_tried: dict) 
     return None, reasons
 
 
+def _register_by_essential(state: _State, options: CalibratedOptions) -> int | None:
+    """Fallback when no view can be resected: a view linked to a registered view a by enough tracks
+    takes the pair's relative pose (essential matrix, RANSAC, as for the initial pair) composed with
+    a's pose; the translation's length comes from the triangulated points the view sees (the median
+    of each point's scale, at least ``essential_min_points`` points reprojecting within
+    ``pnp_threshold_px``). The bundle adjustment that follows refines it with the other views."""
+    registered = state.registered
+    valid = np.isfinite(state.points[:, 0])
+    links = {}
+    for track in range(len(state.points)):
+        obs = np.arange(state.start[track], state.start[track + 1])
+        obs = obs[state.inlier[obs]]
+        views = state.obs_view[obs]
+        for o_new, v in zip(obs, views):
+            if registered[v]:
+                continue
+            for o_old, a in zip(obs, views):
+                if registered[a]:
+                    links.setdefault((int(v), int(a)), []).append((o_old, o_new))
+    for (v, a), pairs in sorted(links.items(), key=lambda kv: -len(kv[1])):
+        if len(pairs) < options.essential_min_tracks:
+            break
+        pairs = np.array(pairs)
+        ra, rb = state.obs_ray[pairs[:, 0]], state.obs_ray[pairs[:, 1]]
+        focal = 0.25 * (state.Ks[a][0, 0] + state.Ks[a][1, 1] + state.Ks[v][0, 0] + state.Ks[v][1, 1])
+        E, mask = cv2.findEssentialMat(ra, rb, np.eye(3), method=cv2.RANSAC, prob=0.9999,
+                                       threshold=options.essential_threshold_px / focal)
+        if E is None or mask is None:
+            continue
+        n_in, R_rel, u, mask = cv2.recoverPose(E[:3], ra, rb, np.eye(3), mask=mask.copy())
+        if n_in < options.essential_min_tracks:
+            continue
+        u = u.ravel() / np.linalg.norm(u)
+        obs = np.flatnonzero(state.inlier & (state.obs_view == v) & valid[state.obs_track])
+        if len(obs) < options.essential_min_points:
+            continue
+        Y = state.points[state.obs_track[obs]] @ (R_rel @ state.R[a]).T + R_rel @ state.t[a]
+        x = np.c_[state.obs_ray[obs], np.ones(len(obs))]
+        xu, xY = np.cross(x, u), np.cross(x, Y)
+        scales = -np.einsum("ni,ni->n", xu, xY) / np.maximum(np.einsum("ni,ni->n", xu, xu), 1e-300)
+        scale = float(np.median(scales))
+        if not scale > 0:
+            continue
+        state.R[v], state.t[v] = R_rel @ state.R[a], R_rel @ state.t[a] + scale * u
+        err, depth = state.reprojection(obs)
+        good = (err <= options.pnp_threshold_px) & (depth > 0)
+        if good.sum() < options.essential_min_points:
+            state.R[v] = state.t[v] = None
+            continue
+        state.inlier[obs[~good]] = False
+        state.outliers_removed += int((~good).sum())
+        return v
+    return None
+
+
 def _stop(callback, progress: dict) -> bool:
     if callback is None:
         return False
@@ -381,7 +469,8 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
     cv2.setRNGSeed(options.seed)
     state = _State(tracks, Ks)
     timing = {"initial_pair": 0.0, "registration": 0.0, "triangulation": 0.0, "bundle_adjustment": 0.0}
-    stats: dict = {"views": state.n_views, "tracks": len(tracks), "time_s": timing, "ba_nfev": []}
+    stats: dict = {"views": state.n_views, "tracks": len(tracks), "time_s": timing, "ba_nfev": [],
+                   "registered_by": {}}
     status = "ok"
 
     def result() -> CalibratedReconstruction:
@@ -411,6 +500,7 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
         return result()
     i, j, R, t = pair
     stats["initial_pair"] = [i, j]
+    stats["registered_by"].update({i: "initial pair", j: "initial pair"})
     state.R[i], state.t[i] = np.eye(3), np.zeros(3)
     state.R[j], state.t[j] = R, t
     start = time.perf_counter()
@@ -429,6 +519,11 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
         start = time.perf_counter()
         v, failed = _register_next(state, options, last_tried)
         reasons_by_view.update(failed)
+        method = "pnp"
+        if v is None:
+            v, method = _register_by_essential(state, options), "essential"
+        if v is not None:
+            stats["registered_by"][v] = method
         timing["registration"] += time.perf_counter() - start
         if v is None:
             break

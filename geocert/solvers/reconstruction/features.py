@@ -53,7 +53,7 @@ class FeatureOptions:
     mutual: bool = True  # keep a match only when the two features are each other's nearest
     ransac_threshold_px: float = 1.0  # epipolar distance (pixels) of a fundamental-matrix inlier
     ransac_confidence: float = 0.999
-    ransac_max_iters: int = 10_000
+    ransac_max_iters: int = 5_000
     min_inliers: int = 15  # a verified pair has at least this many inliers
     min_track_length: int = 2  # views per kept track
     exhaustive_limit: int = 30  # match all pairs for at most this many images
@@ -227,18 +227,26 @@ def _stop(callback, progress: dict) -> bool:
         return True
 
 
-def _match(desc_a: np.ndarray, desc_b: np.ndarray, matcher, options: FeatureOptions) -> np.ndarray:
-    """Ratio-test (and mutual) matches as (m, 2) keypoint indices."""
+def _match(desc_a: np.ndarray, desc_b: np.ndarray, options: FeatureOptions) -> np.ndarray:
+    """Ratio-test (and mutual) matches as (m, 2) keypoint indices.
+
+    Squared descriptor distances come from one matrix product (|a|^2 + |b|^2 - 2 a.b), which gives
+    both directions' nearest neighbours at once (brute force, exact as cv2.BFMatcher with NORM_L2)."""
     if len(desc_a) < 2 or len(desc_b) < 2:
         return np.zeros((0, 2), dtype=np.int64)
-    forward = matcher.knnMatch(desc_a, desc_b, k=2)
-    rows = [(m[0].queryIdx, m[0].trainIdx) for m in forward
-            if len(m) == 2 and m[0].distance < options.ratio * m[1].distance]
-    if options.mutual and rows:
-        backward = matcher.match(desc_b, desc_a)
-        nearest_in_a = {m.queryIdx: m.trainIdx for m in backward}
-        rows = [(a, b) for a, b in rows if nearest_in_a.get(b) == a]
-    return np.array(rows, dtype=np.int64).reshape(-1, 2)
+    a, b = desc_a.astype(np.float32), desc_b.astype(np.float32)
+    d2 = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T)
+    np.maximum(d2, 0.0, out=d2)
+    two = np.argpartition(d2, 1, axis=1)[:, :2]
+    rows = np.arange(len(a))
+    first, second = d2[rows, two[:, 0]], d2[rows, two[:, 1]]
+    swap = second < first
+    nearest = np.where(swap, two[:, 1], two[:, 0])
+    d_first, d_second = np.minimum(first, second), np.maximum(first, second)
+    keep = d_first < (options.ratio ** 2) * d_second
+    if options.mutual:
+        keep &= np.argmin(d2, axis=0)[nearest] == rows
+    return np.c_[rows[keep], nearest[keep]].astype(np.int64)
 
 
 def verify_pair(points_a: np.ndarray, points_b: np.ndarray, options: FeatureOptions) -> np.ndarray:
@@ -278,13 +286,12 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
     start = time.perf_counter()
     pairs = candidate_pairs(len(images), options)
     stats["candidate_pairs"] = len(pairs)
-    matcher = cv2.BFMatcher(cv2.NORM_L2)
     pair_matches: dict[tuple[int, int], np.ndarray] = {}
     verified: list[dict] = []
     for k, (i, j) in enumerate(pairs):
         if _stop(callback, {"stage": "matches", "done": k, "total": len(pairs)}):
             return ImageTracks([], sizes, stats, "cancelled")
-        rows = _match(descriptors[i], descriptors[j], matcher, options)
+        rows = _match(descriptors[i], descriptors[j], options)
         inliers = verify_pair(keypoints[i][rows[:, 0]], keypoints[j][rows[:, 1]], options)
         if inliers.sum() >= options.min_inliers:
             pair_matches[(i, j)] = rows[inliers]
