@@ -43,18 +43,20 @@ class CalibratedOptions:
     min_pair_tracks: int = 30  # tracks two views must share to be tried as the initial pair
     init_candidates: int = 12  # initial pairs tried (those sharing the most tracks)
     essential_threshold_px: float = 1.0  # RANSAC threshold of the essential matrix (pixels)
-    init_min_angle_deg: float = 2.0  # an initial-pair inlier counts when its rays meet at least this wide
+    init_min_angle_deg: float = 16.0  # an initial-pair inlier counts when its rays meet at least this wide
     min_triangulation_angle_deg: float = 1.0
     max_reprojection_px: float = 4.0  # an observation farther than this from its point's image is an outlier
     pnp_threshold_px: float = 4.0
     pnp_min_inliers: int = 15
     pnp_iterations: int = 2000
+    essential_fallback: bool = False  # register views PnP cannot by essential matrices (see below)
     essential_min_tracks: int = 15  # fallback registration: tracks linking the view to a registered one
     essential_min_points: int = 3  # and triangulated points it sees (to fix the translation's length)
     ba_loss: str = "soft_l1"  # least_squares' robust loss
     ba_f_scale_px: float = 1.0  # residual (pixels) where the robust loss starts to flatten
-    ba_max_nfev: int = 30  # per bundle adjustment after a view is added
-    final_ba_max_nfev: int = 200
+    ba_ftol: float = 1e-8  # least_squares' relative cost-decrease tolerance
+    ba_max_nfev: int = 50  # evaluations per bundle adjustment after a view is added
+    final_ba_max_nfev: int = 300
     final_rounds: int = 3  # final bundle adjustment / outlier removal rounds
     seed: int = 0  # OpenCV's RANSAC generator
 
@@ -234,7 +236,7 @@ def _left_jacobian(w: np.ndarray) -> np.ndarray:
     return np.eye(3)[None] + a[:, None, None] * W + b[:, None, None] * (W @ W)
 
 
-def _bundle_adjust(state: _State, fixed: int, max_nfev: int, options: CalibratedOptions, ftol: float = 1e-8) -> int:
+def _bundle_adjust(state: _State, fixed: int, max_nfev: int, options: CalibratedOptions) -> int:
     """Metric bundle adjustment of registered cameras (all but ``fixed``) and valid points over the
     inlier observations; returns the function evaluations used.
 
@@ -306,7 +308,7 @@ def _bundle_adjust(state: _State, fixed: int, max_nfev: int, options: Calibrated
                          if free_views else np.zeros(0), state.points[tracks].ravel()])
     result = least_squares(residuals, x0, jac=jacobian, loss=options.ba_loss, f_scale=options.ba_f_scale_px,
                            x_scale="jac", method="trf", tr_solver="lsmr", max_nfev=max_nfev,
-                           ftol=ftol, xtol=1e-10, gtol=1e-10)
+                           ftol=options.ba_ftol, xtol=1e-10, gtol=1e-10)
     R_obs, t_obs, c = cameras(result.x)
     for k, v in enumerate(free_views):
         state.R[v] = Rotation.from_rotvec(c[k, :3]).as_matrix() @ R0[k]
@@ -395,56 +397,117 @@ def _register_next(state: _State, options: CalibratedOptions, last_tried: dict) 
     return None, reasons
 
 
-def _register_by_essential(state: _State, options: CalibratedOptions) -> int | None:
-    """Fallback when no view can be resected: a view linked to a registered view a by enough tracks
-    takes the pair's relative pose (essential matrix, RANSAC, as for the initial pair) composed with
-    a's pose; the translation's length comes from the triangulated points the view sees (the median
-    of each point's scale, at least ``essential_min_points`` points reprojecting within
-    ``pnp_threshold_px``). The bundle adjustment that follows refines it with the other views."""
+def _epipolar_links(state: _State) -> dict[int, list[tuple[int, int]]]:
+    """Per unregistered view, its inlier observations paired with inlier observations of registered
+    views in the same track: (registered observation, this view's observation)."""
     registered = state.registered
-    valid = np.isfinite(state.points[:, 0])
-    links = {}
+    links: dict[int, list[tuple[int, int]]] = {}
     for track in range(len(state.points)):
         obs = np.arange(state.start[track], state.start[track + 1])
         obs = obs[state.inlier[obs]]
-        views = state.obs_view[obs]
-        for o_new, v in zip(obs, views):
-            if registered[v]:
-                continue
-            for o_old, a in zip(obs, views):
-                if registered[a]:
-                    links.setdefault((int(v), int(a)), []).append((o_old, o_new))
-    for (v, a), pairs in sorted(links.items(), key=lambda kv: -len(kv[1])):
+        done = registered[state.obs_view[obs]]
+        if done.all() or not done.any():
+            continue
+        for o_new in obs[~done]:
+            links.setdefault(int(state.obs_view[o_new]), []).extend((int(o), int(o_new)) for o in obs[done])
+    return links
+
+
+def _pose_residuals(state: _State, v: int, pairs: np.ndarray, known: np.ndarray, focal: float):
+    """Residuals (pixels) of a pose (w, t) of view v, R = exp(w) R0: the Sampson distances of the
+    pairs to the epipolar geometry with their registered views, and the reprojection errors of the
+    triangulated points v sees (``known``, its observations); the latter fix the translation's length."""
+    old = state.obs_view[pairs[:, 0]]
+    Ra = np.array([state.R[a] for a in old])
+    ta = np.array([state.t[a] for a in old])
+    xa = np.c_[state.obs_ray[pairs[:, 0]], np.ones(len(pairs))]
+    xv = np.c_[state.obs_ray[pairs[:, 1]], np.ones(len(pairs))]
+    X = state.points[state.obs_track[known]]
+    px = state.obs_px[known]
+    K = state.Ks[v]
+
+    def residuals(params, R0):
+        R = Rotation.from_rotvec(params[:3]).as_matrix() @ R0
+        t = params[3:]
+        R_rel = R @ np.transpose(Ra, (0, 2, 1))  # a's camera frame -> v's
+        t_rel = t - np.einsum("nij,nj->ni", R_rel, ta)
+        Ex = np.cross(t_rel, np.einsum("nij,nj->ni", R_rel, xa))  # E xa with E = [t_rel]x R_rel
+        Etx = np.einsum("nij,nj->ni", np.transpose(R_rel, (0, 2, 1)), np.cross(xv, t_rel))  # E^T xv
+        num = np.einsum("ni,ni->n", xv, Ex)
+        den = np.sqrt(Ex[:, 0] ** 2 + Ex[:, 1] ** 2 + Etx[:, 0] ** 2 + Etx[:, 1] ** 2) + 1e-300
+        h = (X @ R.T + t) @ K.T
+        z = np.where(np.abs(h[:, 2]) < 1e-12, 1e-12, h[:, 2])
+        return np.concatenate([focal * num / den, (h[:, :2] / z[:, None] - px).ravel()])
+    return residuals
+
+
+def _register_by_essential(state: _State, options: CalibratedOptions) -> int | None:
+    """Fallback when no view can be resected. The unregistered view with the most tracks shared with
+    registered views gets candidate poses from essential matrices with its best-linked registered
+    view (RANSAC and MAGSAC++, thresholds 1x and 2x ``essential_threshold_px``; the translation's
+    length from the triangulated points it sees), each refined over the pose's 6 parameters on
+    the Sampson distances to every registered view it shares tracks with and the reprojection of
+    those points (robust loss); the candidate of least cost is kept when at least
+    ``essential_min_tracks`` pairs and ``essential_min_points`` points fit within
+    ``pnp_threshold_px``. The bundle adjustment that follows refines it with the other views.
+
+    Narrow fields of view make two-view relative rotations poorly determined (a rotation about an
+    axis across the view trades against the translation), hence several candidates and the
+    refinement on all linked views rather than one essential matrix. Off by default: on the
+    Middlebury ring (focal 3310 px, 640 px wide) it registered a view 20 degrees off, which the
+    bundle adjustment then spread to its neighbours; a view left unregistered with its reason is
+    the honest answer there."""
+    valid = np.isfinite(state.points[:, 0])
+    links = _epipolar_links(state)
+    for v, pairs in sorted(links.items(), key=lambda kv: -len(kv[1])):
         if len(pairs) < options.essential_min_tracks:
             break
         pairs = np.array(pairs)
-        ra, rb = state.obs_ray[pairs[:, 0]], state.obs_ray[pairs[:, 1]]
+        known = np.flatnonzero(state.inlier & (state.obs_view == v) & valid[state.obs_track])
+        if len(known) < options.essential_min_points:
+            continue
+        old = state.obs_view[pairs[:, 0]]
+        a = int(np.bincount(old).argmax())
+        sel = old == a
+        ra, rb = state.obs_ray[pairs[sel, 0]], state.obs_ray[pairs[sel, 1]]
         focal = 0.25 * (state.Ks[a][0, 0] + state.Ks[a][1, 1] + state.Ks[v][0, 0] + state.Ks[v][1, 1])
-        E, mask = cv2.findEssentialMat(ra, rb, np.eye(3), method=cv2.RANSAC, prob=0.9999,
-                                       threshold=options.essential_threshold_px / focal)
-        if E is None or mask is None:
+        residuals = _pose_residuals(state, v, pairs, known, focal)
+        x = np.c_[state.obs_ray[known], np.ones(len(known))]
+        best = None
+        for method in (cv2.RANSAC, cv2.USAC_MAGSAC):
+            for factor in (1.0, 2.0):
+                if len(ra) < 5:
+                    continue
+                E, mask = cv2.findEssentialMat(ra, rb, np.eye(3), method=method, prob=0.9999,
+                                               threshold=factor * options.essential_threshold_px / focal)
+                if E is None or mask is None:
+                    continue
+                for k in range(0, len(E) - 2, 3):
+                    _, R_rel, u, _ = cv2.recoverPose(E[k:k + 3], ra, rb, np.eye(3), mask=mask.copy())
+                    u = u.ravel() / np.linalg.norm(u)
+                    R0 = R_rel @ state.R[a]
+                    Y = state.points[state.obs_track[known]] @ R0.T + R_rel @ state.t[a]
+                    xu, xY = np.cross(x, u), np.cross(x, Y)
+                    scale = float(np.median(-np.einsum("ni,ni->n", xu, xY)
+                                            / np.maximum(np.einsum("ni,ni->n", xu, xu), 1e-300)))
+                    t0 = R_rel @ state.t[a] + scale * u
+                    fit = least_squares(residuals, np.r_[np.zeros(3), t0], args=(R0,), loss="soft_l1",
+                                        f_scale=options.ba_f_scale_px, x_scale="jac", max_nfev=200)
+                    if best is None or fit.cost < best[0]:
+                        best = (fit.cost, fit.x, R0)
+        if best is None:
             continue
-        n_in, R_rel, u, mask = cv2.recoverPose(E[:3], ra, rb, np.eye(3), mask=mask.copy())
-        if n_in < options.essential_min_tracks:
+        _, params, R0 = best
+        r = np.abs(residuals(params, R0))
+        epipolar_ok = int((r[:len(pairs)] <= options.pnp_threshold_px).sum())
+        point_err = np.hypot(r[len(pairs)::2], r[len(pairs) + 1::2])
+        R = Rotation.from_rotvec(params[:3]).as_matrix() @ R0
+        depth = state.points[state.obs_track[known]] @ R[2] + params[5]
+        good = (point_err <= options.pnp_threshold_px) & (depth > 0)
+        if epipolar_ok < options.essential_min_tracks or good.sum() < options.essential_min_points:
             continue
-        u = u.ravel() / np.linalg.norm(u)
-        obs = np.flatnonzero(state.inlier & (state.obs_view == v) & valid[state.obs_track])
-        if len(obs) < options.essential_min_points:
-            continue
-        Y = state.points[state.obs_track[obs]] @ (R_rel @ state.R[a]).T + R_rel @ state.t[a]
-        x = np.c_[state.obs_ray[obs], np.ones(len(obs))]
-        xu, xY = np.cross(x, u), np.cross(x, Y)
-        scales = -np.einsum("ni,ni->n", xu, xY) / np.maximum(np.einsum("ni,ni->n", xu, xu), 1e-300)
-        scale = float(np.median(scales))
-        if not scale > 0:
-            continue
-        state.R[v], state.t[v] = R_rel @ state.R[a], R_rel @ state.t[a] + scale * u
-        err, depth = state.reprojection(obs)
-        good = (err <= options.pnp_threshold_px) & (depth > 0)
-        if good.sum() < options.essential_min_points:
-            state.R[v] = state.t[v] = None
-            continue
-        state.inlier[obs[~good]] = False
+        state.R[v], state.t[v] = R, params[3:].copy()
+        state.inlier[known[~good]] = False
         state.outliers_removed += int((~good).sum())
         return v
     return None
@@ -520,7 +583,7 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
         v, failed = _register_next(state, options, last_tried)
         reasons_by_view.update(failed)
         method = "pnp"
-        if v is None:
+        if v is None and options.essential_fallback:
             v, method = _register_by_essential(state, options), "essential"
         if v is not None:
             stats["registered_by"][v] = method
