@@ -195,6 +195,16 @@ class TestCalibrated:
         assert len(result.inliers) == len(box_tracks.tracks)
         dropped = np.isnan(result.points[:, 0])
         assert all(not inl.any() for inl, d in zip(result.inliers, dropped) if d)
+        # every observation kept as an inlier reprojects within the outlier threshold, in front
+        limit = CalibratedOptions().max_reprojection_px
+        worst = 0.0
+        for (views, points), X, inl in zip(box_tracks.tracks, result.points, result.inliers):
+            for v, p in zip(views[inl], points[inl]):
+                xc = result.rotations[v] @ X + result.translations[v]
+                assert xc[2] > 0
+                h = scene.cameras[v].K @ xc
+                worst = max(worst, float(np.linalg.norm(h[:2] / h[2] - p)))
+        assert worst <= limit
 
     def test_unlinked_view_has_a_reason(self, box):
         scene, _ = box
