@@ -213,8 +213,20 @@ class TestCalibrated:
         tracks = [(np.array([0, 1, 2]), np.array([scene.cameras[v].project(x)[0] for v in (0, 1, 2)])) for x in X]
         result = calibrated_reconstruction(tracks, [c.K for c in scene.cameras[:4]])
         assert result.stats["registered"] == 3
-        assert result.rotations[3] is None and "3 triangulated points" not in result.reasons[3]
-        assert result.reasons[3] is not None
+        assert result.rotations[3] is None and result.translations[3] is None
+        assert result.reasons[3] == "sees 0 triangulated points; PnP needs 15"
+        assert result.reasons[:3] == [None, None, None]
+
+    def test_callback_stops(self, box):
+        scene, _ = box
+        rng = np.random.default_rng(3)
+        X = rng.uniform([-0.5, -0.4, 0.0], [0.5, 0.4, 0.6], size=(60, 3))
+        tracks = [(np.arange(4), np.array([scene.cameras[v].project(x)[0] for v in range(4)])) for x in X]
+        seen = []
+        result = calibrated_reconstruction(tracks, [c.K for c in scene.cameras[:4]],
+                                           callback=lambda p: seen.append(p) or p["done"] >= 3)
+        assert result.status == "cancelled" and result.stats["registered"] == 3
+        assert seen[-1] == {"stage": "registration", "done": 3, "total": 4}
 
     def test_no_initial_pair(self):
         K = np.diag([500.0, 500.0, 1.0])

@@ -150,8 +150,6 @@ def decode_image(content_b64: str, field: str) -> np.ndarray:
     if image.shape != (h, w):
         raise InputError(field, f"the decoded image is {image.shape[1]}x{image.shape[0]}, "
                                 f"its header says {w}x{h}")
-    if image.dtype != np.uint8:  # 16-bit PNG
-        image = cv2.convertScaleAbs(image, alpha=255.0 / 65535.0)
     return np.ascontiguousarray(image)
 
 
