@@ -228,6 +228,18 @@ class TestCalibrated:
         assert result.status == "cancelled" and result.stats["registered"] == 3
         assert seen[-1] == {"stage": "registration", "done": 3, "total": 4}
 
+    @pytest.mark.parametrize("tracks, Ks, field", [
+        ([(np.array([0, 2]), np.zeros((2, 2)))], [np.eye(3)] * 2, "tracks/0/views"),
+        ([(np.array([0, 0]), np.zeros((2, 2)))], [np.eye(3)] * 2, "tracks/0/views"),
+        ([(np.array([0, 1]), np.zeros((3, 2)))], [np.eye(3)] * 2, "tracks/0"),
+        ([(np.array([0, 1]), np.zeros((2, 2)))], [np.eye(3), -np.eye(3)], "Ks/1"),
+        ([(np.array([0, 1]), np.zeros((2, 2)))], [np.eye(3), np.ones((3, 3))], "Ks/1"),
+    ])
+    def test_bad_input_names_the_item(self, tracks, Ks, field):
+        with pytest.raises(InputError) as caught:
+            calibrated_reconstruction(tracks, Ks)
+        assert caught.value.field == field
+
     def test_no_initial_pair(self):
         K = np.diag([500.0, 500.0, 1.0])
         tracks = [(np.array([0, 1]), np.array([[1.0, 2.0], [3.0, 4.0]]))]

@@ -37,6 +37,8 @@ from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 from scipy.spatial.transform import Rotation
 
+from geocert.solvers.core.geometry import InputError
+
 
 @dataclass
 class CalibratedOptions:
@@ -522,6 +524,25 @@ def _stop(callback, progress: dict) -> bool:
         return True
 
 
+def _check_inputs(tracks, Ks) -> None:
+    """InputError naming the item for a K that is not an invertible upper-triangular 3x3 with
+    positive focal lengths, or a track whose views or points do not fit."""
+    for v, K in enumerate(Ks):
+        K = np.asarray(K, dtype=np.float64)
+        if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+            raise InputError(f"Ks/{v}", "K must be a finite 3x3 matrix")
+        if K[0, 0] <= 0 or K[1, 1] <= 0 or abs(K[2, 2] - 1.0) > 1e-9 or np.any(K[[1, 2, 2], [0, 0, 1]] != 0):
+            raise InputError(f"Ks/{v}", "K must be upper triangular with positive focal lengths and K[2][2] = 1")
+    for k, (views, points) in enumerate(tracks):
+        views, points = np.asarray(views), np.asarray(points, dtype=np.float64)
+        if views.ndim != 1 or points.shape != (len(views), 2) or not np.all(np.isfinite(points)):
+            raise InputError(f"tracks/{k}", "a track needs one finite (u, v) point per view")
+        if len(views) and (views.min() < 0 or views.max() >= len(Ks)):
+            raise InputError(f"tracks/{k}/views", f"view indices must lie in 0..{len(Ks) - 1}")
+        if len(np.unique(views)) != len(views):
+            raise InputError(f"tracks/{k}/views", "a view appears twice in one track")
+
+
 def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: list[np.ndarray],
                               options: CalibratedOptions | None = None, callback=None) -> CalibratedReconstruction:
     """Cameras and points from tracks (views, pixels) and each view's K (see the module docstring).
@@ -529,6 +550,7 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
     ``callback(progress)`` gets {"stage": "registration", "done": k, "total": n} (and
     "bundle_adjustment") and may return True to stop (status "cancelled", the views so far kept)."""
     options = options or CalibratedOptions()
+    _check_inputs(tracks, Ks)
     cv2.setRNGSeed(options.seed)
     state = _State(tracks, Ks)
     timing = {"initial_pair": 0.0, "registration": 0.0, "triangulation": 0.0, "bundle_adjustment": 0.0}

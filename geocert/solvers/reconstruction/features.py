@@ -265,7 +265,7 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
     ``callback(progress)`` gets {"stage": "features" | "matches", "done": k, "total": n} and may
     return True to stop (the result then has status "cancelled" and no tracks)."""
     options = options or FeatureOptions()
-    sizes = [(int(im.shape[1]), int(im.shape[0])) for im in images]
+    sizes = [(int(im.shape[1]), int(im.shape[0])) for im in images]  # grayscale or BGR uint8
     timing: dict[str, float] = {}
     stats: dict = {"images": len(images), "time_s": timing}
     start = time.perf_counter()
@@ -275,7 +275,9 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
     for k, image in enumerate(images):
         if _stop(callback, {"stage": "features", "done": k, "total": len(images)}):
             return ImageTracks([], sizes, stats, "cancelled")
-        kps, desc = sift.detectAndCompute(image, None)
+        if image.ndim == 3:
+            image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+        kps, desc = sift.detectAndCompute(np.ascontiguousarray(image, dtype=np.uint8), None)
         keypoints.append(np.array([kp.pt for kp in kps], dtype=np.float64).reshape(-1, 2))
         descriptors.append(desc if desc is not None else np.zeros((0, 128), np.float32))
     stats["features_per_image"] = [len(k) for k in keypoints]
