@@ -15,10 +15,14 @@ essential matrix fixes the pair's geometry up to scale). The steps, incremental 
    every camera that sees it (chirality).
 3. Views added one at a time, the one seeing the most triangulated points first, by PnP RANSAC
    (``cv2.solvePnPRansac``) on those points, then the tracks they complete triangulated.
-4. Metric bundle adjustment (``scipy.optimize.least_squares``, rotations as rotation vectors,
-   sparse Jacobian, robust loss) after each view and at the end; observations that reproject
-   farther than ``max_reprojection_px`` or lie behind their camera are then marked outliers and
-   counted, and a point left with fewer than two inlier observations is dropped.
+4. Metric bundle adjustment (``scipy.optimize.least_squares``, each rotation as a rotation
+   vector w in exp(w) R0, an analytic sparse Jacobian, soft-L1 loss) after each view and at the
+   end; observations that reproject farther than ``max_reprojection_px`` or lie behind their
+   camera are then marked outliers and counted, and a point left with fewer than two inlier
+   observations is dropped.
+
+A view PnP cannot place stays unregistered with the reason (an essential-matrix fallback exists,
+off by default: see ``_register_by_essential``).
 
 The gauge: the first camera of the initial pair stays at R = I, t = 0 and the pair's baseline has
 length 1 (the bundle adjustment keeps the first camera fixed; the scale is free). Cameras are
