@@ -217,6 +217,25 @@ class TestCalibrated:
         assert result.reasons[3] == "sees 0 triangulated points; PnP needs 15"
         assert result.reasons[:3] == [None, None, None]
 
+    def test_components_merged(self, box):
+        # Views 0-3 and 4-7 share only 6 tracks (seen by 2, 3, 4, 5): too few for PnP (15), so one
+        # reconstruction stops at a half; merging a second one started in the other half, by the
+        # similarity of the 6 points both triangulate, registers all 8 exactly.
+        scene, _ = box
+        rng = np.random.default_rng(4)
+        X = rng.uniform([-0.5, -0.4, 0.0], [0.5, 0.4, 0.6], size=(206, 3))
+        groups = [(0, 1, 2, 3)] * 100 + [(4, 5, 6, 7)] * 100 + [(2, 3, 4, 5)] * 6
+        tracks = [(np.array(g), np.array([scene.cameras[v].project(x)[0] for v in g])) for g, x in zip(groups, X)]
+        Ks = [c.K for c in scene.cameras]
+        alone = calibrated_reconstruction(tracks, Ks)
+        assert alone.stats["registered"] == 4 and alone.stats["merged"] == []
+        joined = calibrated_reconstruction(tracks, Ks, CalibratedOptions(merge_components=True))
+        assert joined.stats["registered"] == 8
+        assert joined.stats["merged"][0]["common_points"] == 6
+        _, errors = align_rotations(joined.rotations, [c.R for c in scene.cameras])
+        assert errors.max() < 1e-6
+        assert _centres_error(joined, scene.cameras) < 1e-8
+
     def test_callback_stops(self, box):
         scene, _ = box
         rng = np.random.default_rng(3)
