@@ -7,7 +7,7 @@ geocert.solvers.reconstruction.render). Prints per dataset: features per image, 
 tracks, views registered, rotation error after aligning to the truth (median / max degrees),
 RMS reprojection error and time per step.
 
-    .venv/bin/python -m bench.reconstruction_images [--no-ring] [--no-render]
+    .venv/bin/python -m bench.reconstruction_images [--no-ring] [--no-render] [--merge]
 """
 
 from __future__ import annotations
@@ -73,12 +73,16 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--no-ring", action="store_true")
     parser.add_argument("--no-render", action="store_true")
+    parser.add_argument("--merge", action="store_true", help="the ring again with merge_components=True")
     args = parser.parse_args()
     print(f"machine speed: {machine_speed_ms():.0f} ms for the reference loop (shared machine: timings inflated)")
     if not args.no_ring:
         if RING.exists():
             _, images, Ks, Rs = load_ring()
             run("Middlebury dinoSparseRing (K given)", images, Ks, Rs, RING_FEATURES, RING_CALIBRATED)
+            if args.merge:
+                run("Middlebury dinoSparseRing (K given, merge_components=True)", images, Ks, Rs, RING_FEATURES,
+                    CalibratedOptions(pnp_min_inliers=10, merge_components=True))
         else:
             print(f"{RING} not found: ring skipped")
     if not args.no_render:
