@@ -41,6 +41,8 @@ def decompose(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     K, R = K @ D, D @ R
     scale = K[2, 2]
     t = np.linalg.solve(K, Q[:, 3])
+    if np.linalg.det(R) < 0:  # -K [R | t] is the same camera
+        R, t = -R, -t
     return K / scale, R, t
 
 
