@@ -142,12 +142,12 @@ class Parsed:
 
 
 def _example_data() -> dict:
-    """A small scene (6 views, 24 points, f = 800 px, pixels rounded to 1e-3: synthetic.scene seed 3)."""
+    """A small scene (6 views, 24 points, f = 800 px, pixels rounded to 1e-6: synthetic.scene seed 3)."""
     from geocert.solvers.reconstruction import synthetic
 
     scene = synthetic.scene(views=6, points=24, seed=3)
     return {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
-            "tracks": [{"views": [int(v) for v in views], "points": [[round(float(u), 3), round(float(w), 3)]
+            "tracks": [{"views": [int(v) for v in views], "points": [[round(float(u), 6), round(float(w), 6)]
                                                                      for u, w in pixels]}
                        for views, pixels in scene.tracks]}
 

@@ -183,10 +183,10 @@ def _triangulate_new(P, X, registered, obs, xn, scales, inlier, options) -> None
 
 
 def _adjust_if_grown(P, X, registered, obs, xn, scales, inlier, options, last: int, stats) -> int:
-    """Bundle adjust when the registered views have grown by a quarter (and at 3 views) since the
+    """Bundle adjust when the registered views have grown by a half (and at 3 views) since the
     last adjustment: a few adjustments in all, each over everything."""
     n = int(registered.sum())
-    if n >= max(3, math.ceil(1.25 * last)) or (n == 2 and last == 2 and stats["bundle_adjustments"] == 0):
+    if n >= max(3, math.ceil(1.5 * last)) or (n == 2 and last == 2 and stats["bundle_adjustments"] == 0):
         _adjust(P, X, registered, obs, xn, scales, inlier, options, stats, final=False)
         return n
     return last
@@ -214,7 +214,7 @@ def _adjust(P, X, registered, obs, xn, scales, inlier, options, stats, final: bo
         cams, pts, _ = bundle.projective(P[views], X[points], view_index[obs.view[use]], point_index[obs.track[use]],
                                          xn[use], scales[views],
                                          f_scale=options.threshold_px / 2 if round_ == 0 else None,
-                                         max_iterations=50 if final else 15)
+                                         max_iterations=50 if final else 10)
         P[views], X[points] = cams, pts
         stats["bundle_adjustments"] += 1
         # Every observation of a registered view and a triangulated point is judged again at the
