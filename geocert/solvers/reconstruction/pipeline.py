@@ -187,7 +187,7 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
         else:
             name, metric = starts[0]
             stage.update(status="skipped", reason="options.bundle_adjustment is false", started_from=name)
-        out.metric = metric
+        out.metric = metric = _normalise_frame(metric)
     P = {}
     for v in range(n_views):
         cam = out.cameras[v]
@@ -230,6 +230,23 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
         for v, bound in bounds.items():
             out.cameras[v].bound = bound
         stage.update(cameras=len(bounds), certified=sum(1 for b in bounds.values() if b.certified))
+
+
+def _normalise_frame(metric: upgrade.Metric) -> upgrade.Metric:
+    """The similarity that puts the points' centroid at the origin and their RMS distance from it
+    at 1 (a metric reconstruction's frame and scale are arbitrary; these keep the numbers near 1)."""
+    finite = np.isfinite(metric.points[:, 0])
+    if finite.sum() < 2:
+        return metric
+    c = metric.points[finite].mean(axis=0)
+    spread = np.sqrt(np.mean(np.sum((metric.points[finite] - c) ** 2, axis=1)))
+    if not spread > 0:
+        return metric
+    s = 1.0 / spread
+    metric.points = s * (metric.points - c)
+    metric.translations = [None if t is None else s * (R @ c + t) for R, t in zip(metric.rotations,
+                                                                                  metric.translations)]
+    return metric
 
 
 def _rms(metric: upgrade.Metric, obs: Observations, keep: np.ndarray) -> float | None:
