@@ -1,1 +1,1 @@
-"""From correspondences (or photos) to a certified metric reconstruction (issue 14)."""
+"""From correspondences or photos to a certified metric reconstruction (issue 14)."""

@@ -1,0 +1,312 @@
+"""Tracks from photos: the image stage of the reconstruction pipeline (issue 14, stage 1).
+
+Per image: SIFT keypoints and descriptors (OpenCV's ``cv2.SIFT_create``, Lowe 2004). Per pair of
+images: each descriptor's two nearest neighbours in the other image; a match is kept when the
+nearest is clearly nearer than the second (Lowe's ratio test) and, with ``mutual``, when the two
+features are each other's nearest neighbour. The kept matches are verified geometrically: a
+fundamental matrix is fitted by RANSAC (OpenCV's USAC MAGSAC++), and a pair whose inliers number
+fewer than ``min_inliers`` contributes nothing (two views of a scene share a fundamental matrix;
+chance matches do not).
+
+Which pairs are matched: every pair when there are at most ``exhaustive_limit`` images (matching
+is cheap next to what follows for sets of that size); beyond that, each image with its
+``neighbour_window`` successors in the order given (photos of a sequence or a ring), the last
+wrapping round to the first when ``ring`` is set.
+
+Tracks: the verified inlier matches link features (view, keypoint) into groups, found by
+union-find. A group holding two different features of one view is inconsistent (one scene point
+cannot appear twice in an image: some match in it is wrong, and which one is unknown), so it is
+dropped whole, and counted. Kept tracks have at least ``min_track_length`` views.
+
+Coordinates are pixels as OpenCV reports keypoints: origin top-left, x to the right, y down, the
+top-left pixel's centre at (0, 0).
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import struct
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from geocert.solvers.core.geometry import InputError
+
+# Limits on one image. The encoded size bounds the work of decoding and the memory a request can
+# claim; the side and pixel limits are read from the file's header before decoding (so an image
+# that claims to be huge is refused without being decompressed).
+MAX_ENCODED_BYTES = 20_000_000
+MAX_IMAGE_SIDE = 8192
+MAX_IMAGE_PIXELS = 25_000_000
+MIN_IMAGE_SIDE = 16
+
+
+@dataclass
+class FeatureOptions:
+    max_features: int = 4000  # keypoints kept per image (the strongest); 0 keeps all
+    contrast_threshold: float = 0.04  # SIFT's DoG contrast threshold (OpenCV's default); lower finds more
+    edge_threshold: float = 10.0  # SIFT's edge-response threshold (OpenCV's default)
+    ratio: float = 0.8  # Lowe's ratio test: nearest / second nearest descriptor distance below this
+    mutual: bool = True  # keep a match only when the two features are each other's nearest
+    ransac_threshold_px: float = 1.0  # epipolar distance (pixels) of a fundamental-matrix inlier
+    ransac_confidence: float = 0.999
+    ransac_max_iters: int = 5_000
+    min_inliers: int = 15  # a verified pair has at least this many inliers
+    min_track_length: int = 2  # views per kept track
+    exhaustive_limit: int = 30  # match all pairs for at most this many images
+    neighbour_window: int = 5  # otherwise each image with this many successors
+    ring: bool = False  # the successors wrap round (a turntable or a closed loop)
+
+
+@dataclass
+class ImageTracks:
+    tracks: list[tuple[np.ndarray, np.ndarray]]  # (views int array, points (n, 2) float64 pixels)
+    image_sizes: list[tuple[int, int]]  # (width, height) per image
+    stats: dict = field(default_factory=dict)
+    status: str = "ok"  # "ok" or "cancelled" (the callback asked to stop; tracks then empty)
+
+
+# ---------------------------------------------------------------------------------------------
+# Decoding
+
+
+def _png_size(data: bytes) -> tuple[int, int] | None:
+    if data[:8] != b"\x89PNG\r\n\x1a\n" or len(data) < 24 or data[12:16] != b"IHDR":
+        return None
+    w, h = struct.unpack(">II", data[16:24])
+    return int(w), int(h)
+
+
+_SOF_MARKERS = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
+
+
+def _jpeg_size(data: bytes) -> tuple[int, int] | None:
+    """The frame size from a JPEG's start-of-frame segment (walking the segments from the top)."""
+    if data[:2] != b"\xff\xd8":
+        return None
+    i = 2
+    while i + 4 <= len(data):
+        if data[i] != 0xFF:
+            return None
+        marker = data[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:  # segments without a length
+            i += 2
+            continue
+        (length,) = struct.unpack(">H", data[i + 2:i + 4])
+        if marker in _SOF_MARKERS:
+            if i + 9 > len(data):
+                return None
+            h, w = struct.unpack(">HH", data[i + 5:i + 9])
+            return int(w), int(h)
+        if marker == 0xDA:  # start of scan before any frame header
+            return None
+        i += 2 + length
+    return None
+
+
+def decode_image(content_b64: str, field: str) -> np.ndarray:
+    """A base64 PNG or JPEG (optionally a ``data:image/...;base64,`` URL) as a grayscale uint8 array.
+
+    Refused with ``InputError(field, reason)``: content that is not a string, not base64, empty,
+    not a PNG or JPEG, larger than the limits above (encoded bytes, sides, pixels), smaller than
+    ``MIN_IMAGE_SIDE`` on a side, or that OpenCV cannot decode.
+    """
+    if not isinstance(content_b64, str):
+        raise InputError(field, "an image's content must be a base64 string (PNG or JPEG)")
+    text = content_b64.strip()
+    if text.startswith("data:"):
+        head, sep, text = text.partition(",")
+        if not sep or ";base64" not in head:
+            raise InputError(field, "a data URL must be base64 encoded (data:image/png;base64,...)")
+    text = "".join(text.split())  # line breaks are common in base64 text
+    if not text:
+        raise InputError(field, "the image is empty")
+    if len(text) > (MAX_ENCODED_BYTES * 4) // 3 + 4:
+        raise InputError(field, f"the image is larger than {MAX_ENCODED_BYTES} bytes")
+    try:
+        data = base64.b64decode(text, validate=True)
+    except (binascii.Error, ValueError):
+        raise InputError(field, "the content is not valid base64") from None
+    if not data:
+        raise InputError(field, "the image is empty")
+    size = _png_size(data) or _jpeg_size(data)
+    if size is None:
+        raise InputError(field, "the content is not a PNG or JPEG image (or its header is damaged)")
+    w, h = size
+    if w > MAX_IMAGE_SIDE or h > MAX_IMAGE_SIDE or w * h > MAX_IMAGE_PIXELS:
+        raise InputError(field, f"the image is {w}x{h}; the limits are {MAX_IMAGE_SIDE} pixels a side "
+                                f"and {MAX_IMAGE_PIXELS} pixels in all")
+    if w < MIN_IMAGE_SIDE or h < MIN_IMAGE_SIDE:
+        raise InputError(field, f"the image is {w}x{h}; at least {MIN_IMAGE_SIDE} pixels a side are needed")
+    image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
+    if image is None or image.size == 0:
+        raise InputError(field, "the image could not be decoded (truncated or corrupt)")
+    if image.shape != (h, w):
+        raise InputError(field, f"the decoded image is {image.shape[1]}x{image.shape[0]}, "
+                                f"its header says {w}x{h}")
+    if image.dtype != np.uint8:  # 16-bit PNG
+        image = cv2.convertScaleAbs(image, alpha=255.0 / 65535.0)
+    return np.ascontiguousarray(image)
+
+
+# ---------------------------------------------------------------------------------------------
+# Tracks
+
+
+def candidate_pairs(n: int, options: FeatureOptions) -> list[tuple[int, int]]:
+    """The image pairs to match (the rule in the module docstring)."""
+    if n <= options.exhaustive_limit:
+        return [(i, j) for i in range(n) for j in range(i + 1, n)]
+    pairs = set()
+    for i in range(n):
+        for step in range(1, options.neighbour_window + 1):
+            j = i + step
+            if j >= n:
+                if not options.ring:
+                    break
+                j -= n
+            if j != i:
+                pairs.add((min(i, j), max(i, j)))
+    return sorted(pairs)
+
+
+def build_tracks(pair_matches: dict[tuple[int, int], np.ndarray], features_per_view: list[int],
+                 min_track_length: int = 2) -> tuple[list[list[tuple[int, int]]], dict]:
+    """Union-find over features (view, keypoint) linked by ``pair_matches[(i, j)]`` ((m, 2) rows of
+    keypoint indices in view i and view j). Returns the kept tracks (each a list of (view, keypoint)
+    sorted by view) and counts: groups built, dropped as inconsistent, dropped as short, kept."""
+    offsets = np.concatenate([[0], np.cumsum(features_per_view)]).astype(np.int64)
+    parent = np.arange(int(offsets[-1]), dtype=np.int64)
+
+    def find(a: int) -> int:
+        root = a
+        while parent[root] != root:
+            root = parent[root]
+        while parent[a] != root:  # path compression
+            parent[a], a = root, parent[a]
+        return int(root)
+
+    linked = set()
+    for (i, j), matches in pair_matches.items():
+        for a, b in np.asarray(matches, dtype=np.int64).reshape(-1, 2):
+            u, v = int(offsets[i] + a), int(offsets[j] + b)
+            linked.update((u, v))
+            ru, rv = find(u), find(v)
+            if ru != rv:
+                parent[max(ru, rv)] = min(ru, rv)
+    view_of = np.searchsorted(offsets, np.arange(offsets[-1]), side="right") - 1
+    groups: dict[int, list[tuple[int, int]]] = {}
+    for node in sorted(linked):
+        groups.setdefault(find(node), []).append((int(view_of[node]), int(node - offsets[view_of[node]])))
+    kept, inconsistent, short = [], 0, 0
+    for members in groups.values():
+        views = [v for v, _ in members]
+        if len(set(views)) != len(views):
+            inconsistent += 1
+        elif len(views) < min_track_length:
+            short += 1
+        else:
+            kept.append(sorted(members))
+    kept.sort(key=lambda t: (t[0][0], t[0][1]))
+    return kept, {"tracks_built": len(groups), "dropped_inconsistent": inconsistent,
+                  "dropped_short": short, "tracks_kept": len(kept)}
+
+
+def _stop(callback, progress: dict) -> bool:
+    if callback is None:
+        return False
+    try:
+        return bool(callback(progress))
+    except StopIteration:
+        return True
+
+
+def _match(desc_a: np.ndarray, desc_b: np.ndarray, options: FeatureOptions) -> np.ndarray:
+    """Ratio-test (and mutual) matches as (m, 2) keypoint indices.
+
+    Squared descriptor distances come from one matrix product (|a|^2 + |b|^2 - 2 a.b), which gives
+    both directions' nearest neighbours at once (brute force, exact as cv2.BFMatcher with NORM_L2)."""
+    if len(desc_a) < 2 or len(desc_b) < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    a, b = desc_a.astype(np.float32), desc_b.astype(np.float32)
+    d2 = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T)
+    np.maximum(d2, 0.0, out=d2)
+    two = np.argpartition(d2, 1, axis=1)[:, :2]
+    rows = np.arange(len(a))
+    first, second = d2[rows, two[:, 0]], d2[rows, two[:, 1]]
+    swap = second < first
+    nearest = np.where(swap, two[:, 1], two[:, 0])
+    d_first, d_second = np.minimum(first, second), np.maximum(first, second)
+    keep = d_first < (options.ratio ** 2) * d_second
+    if options.mutual:
+        keep &= np.argmin(d2, axis=0)[nearest] == rows
+    return np.c_[rows[keep], nearest[keep]].astype(np.int64)
+
+
+def verify_pair(points_a: np.ndarray, points_b: np.ndarray, options: FeatureOptions) -> np.ndarray:
+    """Inlier mask of a RANSAC fundamental matrix (all False when none is found)."""
+    if len(points_a) < max(8, options.min_inliers):
+        return np.zeros(len(points_a), dtype=bool)
+    F, mask = cv2.findFundamentalMat(points_a, points_b, cv2.USAC_MAGSAC, options.ransac_threshold_px,
+                                     options.ransac_confidence, options.ransac_max_iters)
+    if F is None or mask is None or F.shape != (3, 3):
+        return np.zeros(len(points_a), dtype=bool)
+    return mask.ravel().astype(bool)
+
+
+def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None = None,
+                       callback=None) -> ImageTracks:
+    """Features, verified matches and tracks for grayscale uint8 images (see the module docstring).
+
+    ``callback(progress)`` gets {"stage": "features" | "matches", "done": k, "total": n} and may
+    return True to stop (the result then has status "cancelled" and no tracks)."""
+    options = options or FeatureOptions()
+    sizes = [(int(im.shape[1]), int(im.shape[0])) for im in images]
+    timing: dict[str, float] = {}
+    stats: dict = {"images": len(images), "time_s": timing}
+    start = time.perf_counter()
+    sift = cv2.SIFT_create(nfeatures=options.max_features, contrastThreshold=options.contrast_threshold,
+                           edgeThreshold=options.edge_threshold)
+    keypoints, descriptors = [], []
+    for k, image in enumerate(images):
+        if _stop(callback, {"stage": "features", "done": k, "total": len(images)}):
+            return ImageTracks([], sizes, stats, "cancelled")
+        kps, desc = sift.detectAndCompute(image, None)
+        keypoints.append(np.array([kp.pt for kp in kps], dtype=np.float64).reshape(-1, 2))
+        descriptors.append(desc if desc is not None else np.zeros((0, 128), np.float32))
+    stats["features_per_image"] = [len(k) for k in keypoints]
+    timing["features"] = time.perf_counter() - start
+
+    start = time.perf_counter()
+    pairs = candidate_pairs(len(images), options)
+    stats["candidate_pairs"] = len(pairs)
+    pair_matches: dict[tuple[int, int], np.ndarray] = {}
+    verified: list[dict] = []
+    for k, (i, j) in enumerate(pairs):
+        if _stop(callback, {"stage": "matches", "done": k, "total": len(pairs)}):
+            return ImageTracks([], sizes, stats, "cancelled")
+        rows = _match(descriptors[i], descriptors[j], options)
+        inliers = verify_pair(keypoints[i][rows[:, 0]], keypoints[j][rows[:, 1]], options)
+        if inliers.sum() >= options.min_inliers:
+            pair_matches[(i, j)] = rows[inliers]
+            verified.append({"views": [i, j], "matches": len(rows), "inliers": int(inliers.sum())})
+    stats["verified_pairs"] = verified
+    _stop(callback, {"stage": "matches", "done": len(pairs), "total": len(pairs)})
+    timing["matches"] = time.perf_counter() - start
+
+    start = time.perf_counter()
+    groups, counts = build_tracks(pair_matches, stats["features_per_image"], options.min_track_length)
+    stats.update(counts)
+    tracks = []
+    for members in groups:
+        views = np.array([v for v, _ in members], dtype=np.int64)
+        points = np.array([keypoints[v][f] for v, f in members], dtype=np.float64).reshape(-1, 2)
+        tracks.append((views, points))
+    timing["tracks"] = time.perf_counter() - start
+    return ImageTracks(tracks, sizes, stats)
