@@ -280,14 +280,6 @@ class ReconstructionKind:
         from geocert.solvers.reconstruction import pipeline
 
         start = time.perf_counter()
-        images_document = None
-        tracks = parsed.tracks
-        if tracks is None:  # photos: stage 1
-            from geocert.solvers.reconstruction import features
-
-            found = features.tracks_from_images(parsed.images_stats["images"], options)
-            tracks = [(np.asarray(v, dtype=int), np.asarray(p, dtype=float)) for v, p in found.tracks]
-            images_document = dict(found.stats)
 
         def report(stage: str, done: int, total: int, progress=None) -> bool:
             if callback is None:
@@ -297,6 +289,25 @@ class ReconstructionKind:
                 return bool(callback(StageProgress(**{**progress.__dict__, "stage": label})))
             return bool(callback(StageProgress(0, 0, -math.inf, math.inf, math.inf, math.inf,
                                                time.perf_counter() - start, stage=label)))
+
+        images_document = None
+        tracks = parsed.tracks
+        if tracks is None:  # photos: stage 1
+            from geocert.solvers.reconstruction import features
+
+            def matching(progress: dict) -> bool:
+                return report("matches", progress.get("done", 0), progress.get("total", 1))
+
+            found = features.tracks_from_images(parsed.images_stats["images"], None, matching)
+            tracks = [(np.asarray(v, dtype=int), np.asarray(p, dtype=float)) for v, p in found.tracks]
+            images_document = _jsonable(dict(found.stats))
+            if found.status == "cancelled" or len({int(v) for views, _ in tracks for v in views}) < 2:
+                reason = ("the job was cancelled" if found.status == "cancelled"
+                          else "fewer than 2 images have verified matches")
+                return {**self.cancelled_item(), "images": images_document,
+                        "stages": [{"name": "matches", "status": "cancelled" if found.status == "cancelled"
+                                    else "failed", "reason": reason, **images_document}],
+                        "status": "cancelled" if found.status == "cancelled" else "not_certified"}
 
         out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
         cameras = [self._camera(camera, parsed) for camera in out.cameras]

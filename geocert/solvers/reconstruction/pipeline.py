@@ -116,9 +116,65 @@ def _skip(stages: dict, after: str, reason: str) -> None:
         later = later or name == after
 
 
+def _calibrated(tracks, n_views: int, K: np.ndarray, options: ReconstructionOptions, stages, out: Reconstruction,
+                tell, obs: Observations):
+    """K known: the calibrated path (calibrated.py: essential matrices, PnP, a metric bundle
+    adjustment with K fixed) replaces the projective reconstruction and its upgrade. Returns the
+    metric reconstruction and the observations kept, or None when it failed."""
+    from geocert.solvers.reconstruction.calibrated import CalibratedOptions, calibrated_reconstruction
+
+    stages["autocalibration"].update(status="skipped", reason="K is known: no metric upgrade is needed")
+    with _timed(stages, "projective") as stage:
+        stage["method"] = "calibrated (K known: essential matrices, PnP, metric bundle adjustment)"
+        tell("projective", 0, n_views)
+        found = calibrated_reconstruction(
+            tracks, [K] * n_views, CalibratedOptions(max_reprojection_px=2 * options.threshold_px,
+                                                      pnp_min_inliers=options.min_inliers, seed=options.seed),
+            lambda progress: tell("projective", progress.get("done", 0), progress.get("total", 1)))
+        stage.update(_plain(found.stats))
+        for v in range(n_views):
+            out.cameras[v].registered = found.rotations[v] is not None
+            out.cameras[v].reason = found.reasons[v]
+        if found.status == "cancelled":
+            raise Cancelled("projective")
+        if sum(R is not None for R in found.rotations) < 2:
+            stage.update(status="failed", reason=found.stats.get("reason") or "fewer than 2 views registered")
+            _skip(stages, "projective", "the calibrated reconstruction failed")
+            return None
+    keep = np.concatenate(found.inliers) if found.inliers else np.zeros(0, dtype=bool)
+    metric = upgrade.Metric(K, list(found.rotations), [None if t is None else np.asarray(t, dtype=float)
+                                                       for t in found.translations],
+                            np.asarray(found.points, dtype=float), [], False)
+    return metric, keep
+
+
+def _plain(stats: dict) -> dict:
+    return {key: value for key, value in stats.items() if key not in ("ba_nfev",)}
+
+
 def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Reconstruction, tell) -> None:
     n_views = len(image_sizes)
     obs = Observations.from_tracks(tracks, n_views)
+    known = options.known_K()
+    if known is not None:
+        found = _calibrated(tracks, n_views, known, options, stages, out, tell, obs)
+        if found is None:
+            return
+        metric, keep = found
+        with _timed(stages, "bundle_adjustment") as stage:
+            if options.bundle_adjustment:
+                tell("bundle_adjustment", 0, 1)
+                before = _rms(metric, obs, keep)
+                metric, keep, figures = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, options.threshold_px,
+                                                       model="fixed")
+                stage.update(started_from="calibrated", model="fixed", rms_px_before=before,
+                             rms_px_after=_rms(metric, obs, keep), K=metric.K.tolist(),
+                             observations_kept=figures["observations_kept"])
+            else:
+                stage.update(status="skipped", reason="options.bundle_adjustment is false")
+        out.metric = metric = _normalise_frame(metric)
+        _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
+        return
     with _timed(stages, "projective") as stage:
         tell("projective", 0, n_views)
         proj = projective.reconstruct(tracks, n_views, projective.ProjectiveOptions(
@@ -135,7 +191,6 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             return
     sizes = {tuple(image_sizes[v]) for v, P in enumerate(proj.cameras) if P is not None}
     image_size = next(iter(sizes)) if len(sizes) == 1 else None
-    known = options.known_K()
     with _timed(stages, "autocalibration") as stage:
         tell("autocalibration", 0, 1)
         method = options.autocalibration
@@ -188,6 +243,10 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             name, metric = starts[0]
             stage.update(status="skipped", reason="options.bundle_adjustment is false", started_from=name)
         out.metric = metric = _normalise_frame(metric)
+    _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
+
+
+def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs, metric, keep) -> None:
     P = {}
     for v in range(n_views):
         cam = out.cameras[v]
