@@ -34,28 +34,28 @@ Matrix3 = list[list[float]]
 Size = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[width, height] in pixels")]
 
 
-class TrackIn(Strict):
+class ReconstructionTrack(Strict):
     views: list[Annotated[int, Field(ge=0)]] = Field(min_length=2, description="view indices (into data.views)")
     points: list[Pixel] = Field(min_length=2, description="one observation per view, in the same order")
 
 
-class ViewIn(Strict):
+class ReconstructionView(Strict):
     name: str | None = Field(None, max_length=200)
     image_size: Size
 
 
-class ImageIn(Strict):
+class ReconstructionImage(Strict):
     name: str | None = Field(None, max_length=200)
     content: str = Field(description="base64 PNG or JPEG")
 
 
 class ReconstructionData(Strict):
-    tracks: list[TrackIn] | None = Field(None, description="matches across views (no cameras)")
-    views: list[ViewIn] | None = Field(None, description="the views the tracks index, with their image sizes")
-    images: list[ImageIn] | None = Field(None, description="instead of tracks and views: the photos")
+    tracks: list[ReconstructionTrack] | None = Field(None, description="matches across views (no cameras)")
+    views: list[ReconstructionView] | None = Field(None, description="the views the tracks index, with their image sizes")
+    images: list[ReconstructionImage] | None = Field(None, description="instead of tracks and views: the photos")
 
 
-class KnownK(Strict):
+class KnownCalibration(Strict):
     K: Annotated[list[Annotated[list[Finite], Field(min_length=3, max_length=3)]], Field(min_length=3, max_length=3)]
 
 
@@ -64,7 +64,7 @@ _R = ReconstructionOptions.OPTION_RANGES
 
 
 class ReconstructionOptionsIn(Strict):
-    intrinsics: Literal["unknown"] | KnownK | IntrinsicsIn = Field(
+    intrinsics: Literal["unknown"] | KnownCalibration | IntrinsicsIn = Field(
         default_factory=IntrinsicsIn, description='"unknown" (ranges from the image size), {"K": 3x3}, or ranges')
     autocalibration: Literal["stratified", "direct", "auto"] = "stratified"
     camera_model: Literal["simple", "varying", "full"] = Field(
@@ -96,7 +96,7 @@ class ReconstructionJob(JobBase):
     options: ReconstructionOptionsIn = Field(default_factory=ReconstructionOptionsIn)
 
 
-class CameraOut(BaseModel):
+class ReconstructionCamera(BaseModel):
     view: int
     name: str | None
     registered: bool
@@ -117,7 +117,7 @@ class CameraOut(BaseModel):
     points: int = Field(description="points the resection used")
 
 
-class PointOut(TrackOut):
+class ReconstructionPoint(TrackOut):
     track: int = Field(description="index into data.tracks")
     observations: list[list[float]] = Field(description="[[view, u, v], ...] the observations the point was solved from")
 
@@ -125,8 +125,8 @@ class PointOut(TrackOut):
 class ReconstructionResult(BaseModel):
     kind: Literal["reconstruction"]
     norm: str
-    cameras: list[CameraOut]
-    points: list[PointOut]
+    cameras: list[ReconstructionCamera]
+    points: list[ReconstructionPoint]
     stages: list[dict[str, Any]]
     summary: dict[str, Any]
     images: dict[str, Any] | None = Field(None, description="stage 1's figures when photos were given")

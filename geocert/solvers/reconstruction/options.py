@@ -85,16 +85,12 @@ class ReconstructionOptions(FractionalOptions):
             raise InputError("options/intrinsics/K", "must be upper triangular with a positive diagonal and K[2][2] = 1")
         return K
 
-    def ranges(self, image_size) -> dict:
-        """The intrinsics ranges the metric upgrade searches: the ranges given, or (for a known K)
-        a narrow box around it."""
-        K = self.known_K()
-        if K is None:
-            return {} if self.intrinsics == "unknown" else dict(self.intrinsics)
-        f = K[0, 0]
-        return {"focal": [0.98 * f, 1.02 * f], "aspect": [0.99 * K[1, 1] / f, 1.01 * K[1, 1] / f],
-                "skew": [K[0, 1] - 0.01 * f, K[0, 1] + 0.01 * f],
-                "principal_point": [[K[0, 2] - 0.02 * f, K[0, 2] + 0.02 * f], [K[1, 2] - 0.02 * f, K[1, 2] + 0.02 * f]]}
+    def ranges(self, image_size=None) -> dict:
+        """The intrinsics ranges the metric upgrade searches (none with a known K: the calibrated
+        path needs no upgrade)."""
+        if self.known_K() is not None or self.intrinsics == "unknown":
+            return {}
+        return dict(self.intrinsics)
 
     def autocalibration_options(self, image_size=None) -> AutocalibrationOptions:
         return AutocalibrationOptions(

@@ -199,12 +199,11 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
                                        method, lambda p: tell(f"autocalibration {getattr(p, 'stage', '')}".strip(),
                                                               0, 1, p))
         stage.update(method=method, stages=metric.stages, certified=metric.certified, intrinsics=metric.ranges,
-                     points_used=metric.autocalibration_points, K=None if metric.K is None else metric.K.tolist(),
-                     known_K=known is not None)
+                     points_used=metric.autocalibration_points, K=None if metric.K is None else metric.K.tolist())
         starts = []
         if metric.K is not None:
             starts.append(("autocalibration", metric))
-        if metric.alternative is not None and known is None:
+        if metric.alternative is not None:
             alternative = upgrade.metric_from(proj.cameras, proj.points, *metric.alternative)
             starts.append(("linear", alternative))
             stage["linear_K"] = alternative.K.tolist()
@@ -217,11 +216,7 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
     keep = proj.inlier.copy()
     with _timed(stages, "bundle_adjustment") as stage:
         model = options.camera_model
-        if known is not None:  # the upgrade's K was searched near the given one; the given one is kept
-            for _, start in starts:
-                start.K = known
-            model = "fixed"
-        elif model in ("simple", "varying") and image_size is not None:  # the principal point at the image centre
+        if model in ("simple", "varying") and image_size is not None:  # the principal point at the image centre
             for _, start in starts:
                 f = float(np.sqrt(abs(start.K[0, 0] * start.K[1, 1])))
                 start.K = np.array([[f, 0.0, image_size[0] / 2], [0.0, f, image_size[1] / 2], [0.0, 0.0, 1.0]])
