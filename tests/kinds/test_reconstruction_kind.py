@@ -167,3 +167,37 @@ class TestExports:
         result["cameras"][0]["K"][0][1] = 3.0
         text = export.colmap_files(result)["cameras.txt"]
         assert "skew 3 px dropped" in text and text.splitlines()[4].split()[1] == "PINHOLE"
+
+
+@pytest.mark.slow
+class TestPhotos:
+    def test_rendered_photos_with_their_K_and_without(self):
+        """Stage 1 from photos (a rendered textured box, 8 views over 120 degrees): with K given the
+        calibrated path registers every view; without, the upgrade and the "simple" adjustment
+        recover f = 700 px."""
+        import base64
+
+        import cv2
+
+        from geocert.solvers.reconstruction import render
+        from tests.solvers.test_reconstruction import aligned_rotation_errors
+
+        scene = render.box_scene(n_views=8, arc_deg=120, seed=1)
+        images = [{"name": f"v{k}", "content": base64.b64encode(cv2.imencode(".png", scene.render(c))[1]).decode()}
+                  for k, c in enumerate(scene.cameras)]
+        K = scene.cameras[0].K
+        for options in ({"intrinsics": {"K": K.tolist()}}, {"autocalibration_time_limit_s": 5}):
+            result = solve_job({"kind": "reconstruction", "data": {"images": images},
+                                "options": {**options, "resect_cameras": False}})
+            KIND.result_model.model_validate(result)
+            assert result["stages"][0]["name"] == "matches" and result["images"]["images"] == 8
+            assert result["summary"]["views_registered"] == 8 and result["summary"]["points"] > 500
+            assert result["summary"]["points_certified_fraction"] == 1.0
+            assert abs(result["cameras"][0]["K"][0][0] / 700 - 1) < 0.01
+            errors = aligned_rotation_errors([np.array(c["R"]) for c in result["cameras"]], [c.R for c in scene.cameras])
+            assert errors.max() < 0.5
+
+    def test_an_undecodable_image_names_the_item(self):
+        with pytest.raises(InputError) as error:
+            parse_job({"kind": "reconstruction", "data": {"images": [{"content": "aGVsbG8="}] * 2}})
+        assert error.value.field == "data/images/0/content"
