@@ -115,17 +115,14 @@ class TestDinosaur:
         assert proj.stats["views_registered"] == 36 and proj.stats["points"] > 4900
         metric = upgrade.autocalibrate(proj.cameras, proj.points, (720, 576), {}, options.autocalibration_options(),
                                        300)
-        starts = ([metric] if metric.K is not None else []) + [upgrade.metric_from(proj.cameras, proj.points,
-                                                                                     *metric.alternative)]
-        obs = Observations.from_tracks(tracks, 36)
-        tried = []
-        for start in starts:  # as the pipeline does: each upgrade adjusted, the smaller RMS kept
+        starts = ([("autocalibration", metric)] if metric.K is not None else []) + [
+            ("linear", upgrade.metric_from(proj.cameras, proj.points, *metric.alternative))]
+        for _, start in starts:  # the "simple" model: one focal length, the principal point at the centre
             f = np.sqrt(abs(start.K[0, 0] * start.K[1, 1]))
             start.K = np.array([[f, 0, 360.0], [0, f, 288.0], [0, 0, 1]])
-            adjusted, kept, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, 2.0)
-            tried.append((pipeline._rms(adjusted, obs, kept), adjusted))
-        rms, adjusted = min(tried, key=lambda item: item[0])
-        assert rms < 0.5
+        obs = Observations.from_tracks(tracks, 36)
+        _, adjusted, kept, _, _ = pipeline.adjust_best(starts, obs, proj.inlier.copy(), 2.0, "simple")
+        assert pipeline._rms(adjusted, obs, kept) < 0.5
         R = adjusted.rotations
         steps = Rotation.from_matrix(np.array([R[i + 1] @ R[i].T for i in range(35)])).as_rotvec()
         angles = np.degrees(np.linalg.norm(steps, axis=1))

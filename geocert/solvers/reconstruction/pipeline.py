@@ -222,18 +222,10 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
                 start.K = np.array([[f, 0.0, image_size[0] / 2], [0.0, f, image_size[1] / 2], [0.0, 0.0, 1.0]])
         if options.bundle_adjustment:
             tell("bundle_adjustment", 0, 1)
-            tried = []
-            for name, start in starts:  # a short adjustment from each start; the better one goes on
-                adjusted, kept, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, options.threshold_px,
-                                                   max_iterations=8, model=model)
-                tried.append((_rms(adjusted, obs, kept), name, adjusted, kept, _rms(start, obs, keep)))
-                stage.setdefault("starts", []).append({"from": name, "rms_px_before": tried[-1][4],
-                                                       "rms_px_after_8_iterations": tried[-1][0]})
-            rms, name, metric, keep, before = min(tried, key=lambda item: (item[0] is None, item[0] or 0.0))
-            metric, keep, figures = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, options.threshold_px,
-                                                   model=model)
+            name, metric, keep, before, trials = adjust_best(starts, obs, keep, options.threshold_px, model)
+            stage["starts"] = trials
             stage.update(started_from=name, model=model, rms_px_before=before, rms_px_after=_rms(metric, obs, keep),
-                         K=metric.K.tolist(), observations_kept=figures["observations_kept"])
+                         K=metric.K.tolist(), observations_kept=int(keep.sum()))
         else:
             name, metric = starts[0]
             stage.update(status="skipped", reason="options.bundle_adjustment is false", started_from=name)
@@ -284,6 +276,22 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
         for v, bound in bounds.items():
             out.cameras[v].bound = bound
         stage.update(cameras=len(bounds), certified=sum(1 for b in bounds.values() if b.certified))
+
+
+def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px: float, model: str):
+    """A short adjustment (8 iterations) from each upgrade (name, Metric); the one with the
+    smaller RMS goes on to a full adjustment. Returns its name, the adjusted reconstruction, the
+    observations kept, the RMS before, and each start's figures."""
+    tried, trials = [], []
+    for name, start in starts:
+        adjusted, kept, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, threshold_px, max_iterations=8,
+                                           model=model)
+        before = _rms(start, obs, keep)
+        tried.append((_rms(adjusted, obs, kept), name, adjusted, before))
+        trials.append({"from": name, "rms_px_before": before, "rms_px_after_8_iterations": tried[-1][0]})
+    rms, name, metric, before = min(tried, key=lambda item: (item[0] is None, item[0] or 0.0))
+    metric, keep, _ = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, threshold_px, model=model)
+    return name, metric, keep, before, trials
 
 
 def _normalise_frame(metric: upgrade.Metric) -> upgrade.Metric:
