@@ -71,7 +71,7 @@ class ReconstructionOptionsIn(Strict):
         _D.camera_model, description="the metric adjustment's calibration: one focal length (principal point at the "
                                      "image centre, square pixels), one per view, or one K with five free entries")
     norm: Literal["L2L2", "L2L1", "L1L1"] = _D.norm
-    rel_gap: Finite = Field(_D.rel_gap, **_R["rel_gap"], description="each point's and camera's certified solve")
+    rel_gap: Finite = Field(_D.rel_gap, **_R["rel_gap"], description="each point's certified solve")
     abs_gap: Finite = Field(_D.abs_gap, **_R["abs_gap"])
     max_nodes: int = Field(_D.max_nodes, **_R["max_nodes"], description="per point and per camera")
     time_limit_s: Finite = Field(_D.time_limit_s, **_R["time_limit_s"], description="per point and per camera")
@@ -87,6 +87,8 @@ class ReconstructionOptionsIn(Strict):
     min_inliers: int = Field(_D.min_inliers, **_R["min_inliers"])
     bundle_adjustment: bool = _D.bundle_adjustment
     resect_cameras: bool = _D.resect_cameras
+    camera_rel_gap: Finite = Field(_D.camera_rel_gap, **_R["camera_rel_gap"],
+                                   description="each camera's resection, and the returned camera's tolerance")
     seed: int = Field(_D.seed, **_R["seed"])
 
 
@@ -392,7 +394,7 @@ class ReconstructionKind:
             maps = [entry.pop("map") for entry in camera_results]
             for entry in camera_results:
                 entry.pop("view", None)
-            map_options = MapOptions(norm=options.norm, rel_gap=options.rel_gap, abs_gap=options.abs_gap,
+            map_options = MapOptions(norm=options.norm, rel_gap=options.camera_rel_gap, abs_gap=options.abs_gap,
                                      max_nodes=options.max_nodes, time_limit_s=options.time_limit_s,
                                      max_residual=options.max_residual, certificate="full")
             result["camera_certificate"] = certificate_document(resection, {"maps": maps}, map_options, camera_results)

@@ -42,10 +42,12 @@ class ReconstructionOptions(FractionalOptions):
     # one K with all five entries free.
     camera_model: str = "simple"
     resect_cameras: bool = True  # the certified resection of every camera
+    camera_rel_gap: float = 1e-2  # the resections' (and the returned camera's tolerance against their bound)
     time_limit_s: float = 10.0
     seed: int = 0
 
     OPTION_RANGES = {**FractionalOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": 1},
+                     "camera_rel_gap": {"ge": 0, "le": 1},
                      "autocalibration_rel_gap": {"ge": 0, "le": 1},
                      "autocalibration_max_nodes": {"ge": 1, "le": 1_000_000},
                      "autocalibration_time_limit_s": {"gt": 0, "le": 3600},
@@ -59,7 +61,7 @@ class ReconstructionOptions(FractionalOptions):
             raise InputError("options/camera_model", f"must be one of {', '.join(CAMERA_MODELS)}")
         if self.autocalibration not in AUTOCALIBRATION_METHODS:
             raise InputError("options/autocalibration", f"must be one of {', '.join(AUTOCALIBRATION_METHODS)}")
-        for name in ("metric_rel_gap", "autocalibration_rel_gap", "autocalibration_max_nodes",
+        for name in ("metric_rel_gap", "camera_rel_gap", "autocalibration_rel_gap", "autocalibration_max_nodes",
                      "autocalibration_time_limit_s", "autocalibration_points", "threshold_px", "min_inliers", "seed"):
             value, bounds = getattr(self, name), self.OPTION_RANGES[name]
             if not (math.isfinite(value) and value >= bounds.get("ge", -math.inf) and value > bounds.get("gt", -math.inf)

@@ -269,7 +269,7 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
                 sources[int(v)][0].append(point.result.point)
                 sources[int(v)][1].append([u, w])
         arrays = {v: (np.array(X, dtype=float), np.array(x, dtype=float)) for v, (X, x) in sources.items()}
-        map_options = MapOptions(norm=options.norm, rel_gap=options.rel_gap, abs_gap=options.abs_gap,
+        map_options = MapOptions(norm=options.norm, rel_gap=options.camera_rel_gap, abs_gap=options.abs_gap,
                                  max_nodes=options.max_nodes, time_limit_s=options.time_limit_s,
                                  max_residual=options.max_residual, certificate=options.certificate)
         bounds = structure.resect_cameras(P, arrays, map_options, lambda d, total: tell("cameras", d, total))
