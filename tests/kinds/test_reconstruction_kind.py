@@ -49,6 +49,15 @@ class TestBadInput:
             parse_job(job(data=data))
         assert error.value.field == field, error.value
 
+    def test_the_api_models_options_are_taken(self):
+        """The API validates a job with its model and passes model_dump's options on: ranges not
+        given are null there (a regression: they reached the upgrade as None)."""
+        from geocert.batch import solve_job
+
+        body = KIND.request_model.model_validate(job(resect_cameras=False)).model_dump(mode="json")
+        assert body["options"]["intrinsics"]["focal"] is None
+        assert solve_job(body)["summary"]["views_registered"] == 6
+
     def test_fewer_than_two_views_with_matches(self):
         tracks = [{"views": [0, 0 + 1], "points": [[1.0, 2.0], [3.0, 4.0]]}]
         parse_job(job(data={"tracks": tracks}))  # two views: accepted

@@ -57,6 +57,8 @@ class ReconstructionOptions(FractionalOptions):
 
     def check(self) -> None:
         FractionalOptions.check(self)
+        if isinstance(self.intrinsics, dict):  # ranges not given (null, as the API's model writes them) are absent
+            self.intrinsics = {name: value for name, value in self.intrinsics.items() if value is not None}
         if self.camera_model not in CAMERA_MODELS:
             raise InputError("options/camera_model", f"must be one of {', '.join(CAMERA_MODELS)}")
         if self.autocalibration not in AUTOCALIBRATION_METHODS:
