@@ -167,6 +167,7 @@ def certificate_document(kind, data: Any, options, items: list[dict]) -> dict:
     and each item's claim (solution, cost, gap) with its proof, taken out of the item's
     certificate summary."""
     claims = []
+    data = kind.certificate_data(data, items)  # the data the claims are about (the job's, for most kinds)
     # A kind may prove several claims per item (autocalibration: one per stage).
     claimed = kind.claimed_items(items)
     for index, item in enumerate(claimed):

@@ -55,13 +55,19 @@ def _every_item(items: list[dict]) -> list[dict]:
     return items
 
 
+def _data_as_given(data: Any, items: list[dict]) -> Any:
+    return data
+
+
 # Members a kind may leave out, with what they mean then: it issues certificates (a kind of
 # estimates sets certifies = False: no certificate option, nothing for the verifier); nothing to
 # check between its data and options beyond each alone; every item is a claim of its certificate;
 # no list of its data holds its items one to one (chunk_key: the list that does, e.g. "tracks",
-# which the job store keeps item by item so that a task reads only its chunk's).
+# which the job store keeps item by item so that a task reads only its chunk's); its certificate's
+# data are the job's (a kind whose claims are about what an earlier stage found, e.g.
+# reconstruction's points in the cameras it returns, states those instead).
 OPTIONAL_MEMBERS: dict[str, Any] = {"certifies": True, "check_options": _no_check, "claimed_items": _every_item,
-                                    "chunk_key": None}
+                                    "chunk_key": None, "certificate_data": _data_as_given}
 
 
 class Registry:

@@ -263,6 +263,31 @@ def get_job_request(job: OwnedJob, store: JobStoreDep):
     return Response(raw, media_type="application/json")  # stored as JSON: sent as it is
 
 
+@router.get("/{job_id}/export", response_class=Response, responses={
+    200: {"content": {"application/zip": {}, "application/octet-stream": {}, "text/plain": {}},
+          "description": "format=colmap: a zip of COLMAP's text model (cameras.txt, images.txt, points3D.txt); "
+                         "format=ply: the points as PLY (ascii, or binary with binary=true)"},
+    **error_responses(404, 409, 422)})
+def export_job(job: OwnedJob, store: JobStoreDep, format: Annotated[str, Query(description="colmap or ply")],
+               binary: Annotated[bool, Query(description="ply: binary little-endian")] = False):
+    """A finished reconstruction job's result in a format other tools open."""
+    from geocert.solvers.reconstruction import export
+
+    if format not in export.FORMATS:
+        raise ApiProblem(422, f"unknown format {format!r} (served: {', '.join(export.FORMATS)})", "format")
+    if job["status"] != "succeeded":
+        raise ApiProblem(409, f"job {job['id']} is {job['status']}: only a succeeded job's result is exported")
+    result = store.result(job["id"]) or {}
+    if result.get("kind") != "reconstruction":
+        raise ApiProblem(422, f"job {job['id']} is a {result.get('kind')} job: only reconstruction results are "
+                              "exported", "format")
+    if format == "colmap":
+        return Response(export.colmap_zip(result), media_type="application/zip",
+                        headers={"content-disposition": f'attachment; filename="{job["id"]}-colmap.zip"'})
+    return Response(export.ply(result, binary), media_type="application/octet-stream" if binary else "text/plain",
+                    headers={"content-disposition": f'attachment; filename="{job["id"]}.ply"'})
+
+
 @router.post("/{job_id}/cancel", response_model=Job, status_code=202, responses=error_responses(404, 409))
 def cancel_job(job: OwnedJob, store: JobStoreDep):
     """A queued job never starts; a running one stops at its next node and keeps its best result.

@@ -1,0 +1,420 @@
+"""The reconstruction kind (issue 14): from tracks (matches, no cameras) or photos to a metric
+reconstruction, stage by stage (geocert.solvers.reconstruction.pipeline), with the certified
+solvers where the thesis gives them: the metric upgrade (autocalibration, ch. 6-7), every
+point (triangulation, ch. 5) and a bound for every camera (resection, ch. 5).
+
+A job is one reconstruction, so one item. A full certificate's claims are the points: each a
+triangulation in the metric cameras the result returns (the certificate's data are those
+cameras and the observations each point kept), checked by ``geocert verify`` like any
+triangulation; the cameras' bounds come with their own resection certificate
+(``camera_certificate``), a document of the resection kind."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, Field
+
+from geocert.kinds.autocalibration import IntrinsicsIn
+from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict
+from geocert.kinds.triangulation import TrackOut, track_document
+from geocert.solvers.autocalibration.problem import StageProgress
+from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
+from geocert.solvers.fractional.items import TRACKS
+from geocert.solvers.reconstruction.options import ReconstructionOptions
+
+MAX_VIEWS = 1000
+MAX_TRACKS = 200_000
+MAX_OBSERVATIONS = 2_000_000
+Matrix3 = list[list[float]]
+Size = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[width, height] in pixels")]
+
+
+class ReconstructionTrack(Strict):
+    views: list[Annotated[int, Field(ge=0)]] = Field(min_length=2, description="view indices (into data.views)")
+    points: list[Pixel] = Field(min_length=2, description="one observation per view, in the same order")
+
+
+class ReconstructionView(Strict):
+    name: str | None = Field(None, max_length=200)
+    image_size: Size
+
+
+class ReconstructionImage(Strict):
+    name: str | None = Field(None, max_length=200)
+    content: str = Field(description="base64 PNG or JPEG")
+
+
+class ReconstructionData(Strict):
+    tracks: list[ReconstructionTrack] | None = Field(None, description="matches across views (no cameras)")
+    views: list[ReconstructionView] | None = Field(None, description="the views the tracks index, with their image sizes")
+    images: list[ReconstructionImage] | None = Field(None, description="instead of tracks and views: the photos")
+
+
+class KnownCalibration(Strict):
+    K: Annotated[list[Annotated[list[Finite], Field(min_length=3, max_length=3)]], Field(min_length=3, max_length=3)]
+
+
+_D = ReconstructionOptions()
+_R = ReconstructionOptions.OPTION_RANGES
+
+
+class ReconstructionOptionsIn(Strict):
+    intrinsics: Literal["unknown"] | KnownCalibration | IntrinsicsIn = Field(
+        default_factory=IntrinsicsIn, description='"unknown" (ranges from the image size), {"K": 3x3}, or ranges')
+    autocalibration: Literal["stratified", "direct", "auto"] = "stratified"
+    camera_model: Literal["simple", "varying", "full"] = Field(
+        _D.camera_model, description="the metric adjustment's calibration: one focal length (principal point at the "
+                                     "image centre, square pixels), one per view, or one K with five free entries")
+    norm: Literal["L2L2", "L2L1", "L1L1"] = _D.norm
+    rel_gap: Finite = Field(_D.rel_gap, **_R["rel_gap"], description="each point's certified solve")
+    abs_gap: Finite = Field(_D.abs_gap, **_R["abs_gap"])
+    max_nodes: int = Field(_D.max_nodes, **_R["max_nodes"], description="per point and per camera")
+    time_limit_s: Finite = Field(_D.time_limit_s, **_R["time_limit_s"], description="per point and per camera")
+    max_residual: Finite | None = Field(None, **_R["max_residual"], description="pixels; narrows the scope")
+    certificate: Literal["summary", "full"] = "summary"
+    metric_rel_gap: Finite = Field(_D.metric_rel_gap, **_R["metric_rel_gap"])
+    autocalibration_rel_gap: Finite = Field(_D.autocalibration_rel_gap, **_R["autocalibration_rel_gap"])
+    autocalibration_max_nodes: int = Field(_D.autocalibration_max_nodes, **_R["autocalibration_max_nodes"])
+    autocalibration_time_limit_s: Finite = Field(_D.autocalibration_time_limit_s, **_R["autocalibration_time_limit_s"])
+    autocalibration_points: int = Field(_D.autocalibration_points, **_R["autocalibration_points"])
+    chirality: Literal["points", "centers", "none"] = _D.chirality
+    threshold_px: Finite = Field(_D.threshold_px, **_R["threshold_px"], description="outlier threshold, pixels")
+    min_inliers: int = Field(_D.min_inliers, **_R["min_inliers"])
+    bundle_adjustment: bool = _D.bundle_adjustment
+    resect_cameras: bool = _D.resect_cameras
+    camera_rel_gap: Finite = Field(_D.camera_rel_gap, **_R["camera_rel_gap"],
+                                   description="each camera's resection, and the returned camera's tolerance")
+    seed: int = Field(_D.seed, **_R["seed"])
+
+
+class ReconstructionJob(JobBase):
+    kind: Literal["reconstruction"]
+    data: ReconstructionData
+    options: ReconstructionOptionsIn = Field(default_factory=ReconstructionOptionsIn)
+
+
+class ReconstructionCamera(BaseModel):
+    view: int
+    name: str | None
+    registered: bool
+    reason: str | None
+    image_size: list[float] | None
+    K: Matrix3 | None
+    R: Matrix3 | None
+    t: list[float] | None
+    center: list[float] | None
+    P: list[list[float]] | None = Field(description="3x4 pixels: K [R | t] (the projective camera when no metric "
+                                                    "upgrade was found)")
+    cost: float | None = Field(description="the camera's reprojection cost on the returned points (the norm's)")
+    lower_bound: float | None = Field(description="certified: no 3x4 camera putting those points in front costs less")
+    gap: float | None
+    optimal_cost: float | None = Field(description="the certified resection's own optimum")
+    certified: bool
+    status: str
+    points: int = Field(description="points the resection used")
+
+
+class ReconstructionPoint(TrackOut):
+    track: int = Field(description="index into data.tracks")
+    observations: list[list[float]] = Field(description="[[view, u, v], ...] the observations the point was solved from")
+
+
+class ReconstructionResult(BaseModel):
+    kind: Literal["reconstruction"]
+    norm: str
+    cameras: list[ReconstructionCamera]
+    points: list[ReconstructionPoint]
+    stages: list[dict[str, Any]]
+    summary: dict[str, Any]
+    images: dict[str, Any] | None = Field(None, description="stage 1's figures when photos were given")
+    stats: JobStats
+    certificate: CertificateDocument | None = Field(None, description='with options.certificate = "full": the points')
+    camera_certificate: CertificateDocument | None = Field(
+        None, description='with options.certificate = "full": the cameras\' bounds, a resection certificate')
+
+
+class Parsed:
+    def __init__(self, tracks, image_sizes, names, images_stats=None):
+        self.tracks, self.image_sizes, self.names, self.images_stats = tracks, image_sizes, names, images_stats
+
+
+def _example_data() -> dict:
+    """A small scene (6 views, 24 points, f = 800 px, pixels rounded to 1e-6: synthetic.scene seed 3)."""
+    from geocert.solvers.reconstruction import synthetic
+
+    scene = synthetic.scene(views=6, points=24, seed=3)
+    return {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
+            "tracks": [{"views": [int(v) for v in views], "points": [[round(float(u), 6), round(float(w), 6)]
+                                                                     for u, w in pixels]}
+                       for views, pixels in scene.tracks]}
+
+
+def _read_views(data: dict) -> tuple[list, list]:
+    views = data.get("views")
+    if not isinstance(views, list) or not views:
+        raise InputError("data/views", "must be a non-empty list of {name, image_size}")
+    if len(views) > MAX_VIEWS:
+        raise InputError("data/views", f"{len(views)} views exceed the limit of {MAX_VIEWS}")
+    sizes, names = [], []
+    for i, view in enumerate(views):
+        if not isinstance(view, dict) or "image_size" not in view:
+            raise InputError(f"data/views/{i}", "must be an object with image_size [width, height]")
+        size = number_array(view["image_size"], f"data/views/{i}/image_size", "[width, height]", 1, COORDINATE_LIMIT)
+        if size.shape != (2,) or not np.all(size > 0):
+            raise InputError(f"data/views/{i}/image_size", "must be [width, height], both positive")
+        name = view.get("name")
+        if name is not None and not isinstance(name, str):
+            raise InputError(f"data/views/{i}/name", "must be a string")
+        sizes.append((float(size[0]), float(size[1])))
+        names.append(name)
+    return sizes, names
+
+
+def _read_tracks(data: dict, n_views: int) -> list:
+    tracks = data.get("tracks")
+    if not isinstance(tracks, list) or not tracks:
+        raise InputError("data/tracks", "must be a non-empty list of {views, points}")
+    if len(tracks) > MAX_TRACKS:
+        raise InputError("data/tracks", f"{len(tracks)} tracks exceed the limit of {MAX_TRACKS}")
+    out, total = [], 0
+    for i, track in enumerate(tracks):
+        where = f"data/tracks/{i}"
+        if not isinstance(track, dict) or "views" not in track or "points" not in track:
+            raise InputError(where, "must be an object with 'views' and 'points'")
+        views = track["views"]
+        if not isinstance(views, list) or not all(type(v) is int for v in views):
+            raise InputError(f"{where}/views", "must be a list of view indices")
+        for j, v in enumerate(views):
+            if not 0 <= v < n_views:
+                raise InputError(f"{where}/views/{j}", f"view {v} is not one of data/views (0..{n_views - 1})")
+        if len(views) < 2:
+            raise InputError(f"{where}/views", "a track needs at least 2 views")
+        if len(set(views)) != len(views):
+            raise InputError(f"{where}/views", "a view appears twice in the track")
+        points = number_array(track["points"], f"{where}/points", "a list of [u, v] pairs", 2, COORDINATE_LIMIT)
+        if points.shape != (len(views), 2):
+            raise InputError(where, f"has {len(views)} views but points of shape {list(points.shape)} "
+                                    "(one [u, v] per view)")
+        total += len(views)
+        if total > MAX_OBSERVATIONS:
+            raise InputError("data/tracks", f"more than {MAX_OBSERVATIONS} observations")
+        out.append((np.array(views, dtype=int), points))
+    seen = {int(v) for views, _ in out for v in views}
+    if len(seen) < 2:
+        raise InputError("data/tracks", f"fewer than 2 views have matches ({len(seen)})")
+    return out
+
+
+def _read_images(data: dict):
+    try:  # stage 1 (features.py): matches from photos
+        from geocert.solvers.reconstruction import features
+    except ImportError as exc:  # pragma: no cover - until the features module is merged
+        raise InputError("data/images", "photos are not read by this build: give tracks and views") from exc
+    images = data["images"]
+    if not isinstance(images, list) or len(images) < 2:
+        raise InputError("data/images", "must be a list of at least 2 {name, content} objects")
+    if len(images) > MAX_VIEWS:
+        raise InputError("data/images", f"{len(images)} images exceed the limit of {MAX_VIEWS}")
+    arrays, names = [], []
+    for i, image in enumerate(images):
+        if not isinstance(image, dict) or not isinstance(image.get("content"), str):
+            raise InputError(f"data/images/{i}", "must be an object with content (base64 PNG or JPEG)")
+        arrays.append(features.decode_image(image["content"], f"data/images/{i}/content"))
+        names.append(image.get("name"))
+    return arrays, names
+
+
+class ReconstructionKind:
+    name = "reconstruction"
+    description = ("From matches (tracks across views, no cameras) or photos to a metric reconstruction: a "
+                   "projective reconstruction, the certified metric upgrade (autocalibration), a metric bundle "
+                   "adjustment, then every point triangulated and every camera bounded by the certified solvers.")
+    item_key = "points"  # the certificate's claims; a job is one reconstruction
+    chunk_size = 1
+    options_type = ReconstructionOptions
+    request_model = ReconstructionJob
+    result_model = ReconstructionResult
+    solution_fields = ("point", "at_infinity")
+    verification = TRACKS  # the claims are triangulations in the cameras the certificate's data states
+    example = {"kind": "reconstruction", "options": {}, "data": _example_data()}
+
+    def parse(self, data: Any, items: range | None = None) -> Parsed:
+        if not isinstance(data, dict):
+            raise InputError("data", "must be an object with 'tracks' and 'views', or 'images'")
+        for key in data:
+            if key not in ("tracks", "views", "images"):
+                raise InputError(f"data/{key}", "unknown field (known: tracks, views, images)")
+        if data.get("images") is not None:
+            if data.get("tracks") is not None:
+                raise InputError("data/images", "give images, or tracks and views, not both")
+            arrays, names = _read_images(data)
+            return Parsed(None, [(float(a.shape[1]), float(a.shape[0])) for a in arrays], names, {"images": arrays})
+        if "tracks" not in data:
+            raise InputError("data/tracks", "is required (or data/images)")
+        sizes, names = _read_views(data) if "views" in data else (None, None)
+        if sizes is None:
+            raise InputError("data/views", "is required with tracks: [{name, image_size}, ...] per view")
+        return Parsed(_read_tracks(data, len(sizes)), sizes, names)
+
+    def check_options(self, parsed: Parsed, options: ReconstructionOptions) -> None:
+        ranges = options.intrinsics if isinstance(options.intrinsics, dict) else {}
+        complete = "K" in ranges or all(name in ranges for name in ("focal", "aspect", "skew", "principal_point"))
+        if not complete and options.camera_model != "varying":
+            first = parsed.image_sizes[0]
+            for i, size in enumerate(parsed.image_sizes):
+                if size != first:
+                    raise InputError(f"data/views/{i}/image_size", f"{list(size)} differs from view 0's {list(first)}: "
+                                     "images of different sizes claimed as one camera (give options.intrinsics "
+                                     "ranges, or camera_model \"varying\")")
+
+    def count(self, parsed: Parsed) -> int:
+        return 1
+
+    def observations(self, parsed: Parsed) -> int:
+        return sum(len(v) for v, _ in parsed.tracks) if parsed.tracks is not None else len(parsed.image_sizes)
+
+    def solve_item(self, parsed: Parsed, index: int, options: ReconstructionOptions, callback) -> dict:
+        from geocert.solvers.reconstruction import pipeline
+
+        start = time.perf_counter()
+
+        def report(stage: str, done: int, total: int, progress=None) -> bool:
+            if callback is None:
+                return False
+            label = f"{stage} {done}/{total}" if total > 1 else stage
+            if progress is not None:
+                return bool(callback(StageProgress(**{**progress.__dict__, "stage": label})))
+            return bool(callback(StageProgress(0, 0, -math.inf, math.inf, math.inf, math.inf,
+                                               time.perf_counter() - start, stage=label)))
+
+        images_document = None
+        tracks = parsed.tracks
+        if tracks is None:  # photos: stage 1
+            from geocert.solvers.reconstruction import features
+
+            def matching(progress: dict) -> bool:
+                return report("matches", progress.get("done", 0), progress.get("total", 1))
+
+            found = features.tracks_from_images(parsed.images_stats["images"], None, matching)
+            tracks = [(np.asarray(v, dtype=int), np.asarray(p, dtype=float)) for v, p in found.tracks]
+            images_document = _jsonable(dict(found.stats))
+            if found.status == "cancelled" or len({int(v) for views, _ in tracks for v in views}) < 2:
+                reason = ("the job was cancelled" if found.status == "cancelled"
+                          else "fewer than 2 images have verified matches")
+                return {**self.cancelled_item(), "images": images_document,
+                        "stages": [{"name": "matches", "status": "cancelled" if found.status == "cancelled"
+                                    else "failed", "reason": reason, **images_document}],
+                        "status": "cancelled" if found.status == "cancelled" else "not_certified"}
+
+        out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
+        cameras = [self._camera(camera, parsed) for camera in out.cameras]
+        points = [{"track": p.track, **track_document(p.result), "observations": p.observations} for p in out.points]
+        for point in points:
+            point["determinacy"] = None
+        stages = [_jsonable(stage) for stage in out.stages]
+        if images_document is not None:
+            stages.insert(0, {"name": "matches", "status": "done", **_jsonable(images_document)})
+        camera_maps = {c.view: c.bound for c in out.cameras if c.bound is not None and c.bound.result is not None}
+        return {"cameras": cameras, "points": points, "stages": stages, "summary": _jsonable(out.summary),
+                "images": images_document, "camera_results": self._camera_items(out, options, camera_maps),
+                "status": "optimal" if all(p["certified"] for p in points) and points else "not_certified",
+                "certified": bool(points) and all(p["certified"] for p in points),
+                "nodes": sum(p["nodes"] for p in points), "elapsed_s": time.perf_counter() - start,
+                "cost": None, "lower_bound": None}
+
+    @staticmethod
+    def _camera(camera, parsed: Parsed) -> dict:
+        b = camera.bound
+        lst = (lambda a: None if a is None else np.asarray(a, dtype=float).tolist())
+        return {"view": camera.view, "name": parsed.names[camera.view] if parsed.names else None,
+                "registered": camera.registered, "reason": camera.reason,
+                "image_size": list(parsed.image_sizes[camera.view]), "K": lst(camera.K), "R": lst(camera.R),
+                "t": lst(camera.t), "center": lst(camera.center), "P": lst(camera.P),
+                "cost": None if b is None else b.cost, "lower_bound": None if b is None else b.lower_bound,
+                "gap": None if b is None else b.gap, "optimal_cost": None if b is None else b.optimal_cost,
+                "certified": bool(b is not None and b.certified), "status": "not_run" if b is None else b.status,
+                "points": 0 if b is None else b.points}
+
+    @staticmethod
+    def _camera_items(out, options, bounds: dict) -> list[dict]:
+        """Each camera's resection as a resection item (with its data), for the camera certificate."""
+        from geocert.kinds.maps import map_document
+
+        items = []
+        for view, bound in sorted(bounds.items()):
+            source, target = [], []
+            for point in out.points:
+                if point.result.point is None or point.result.at_infinity:
+                    continue
+                for v, u, w in point.observations:
+                    if int(v) == view:
+                        source.append(list(point.result.point))
+                        target.append([u, w])
+            items.append({"view": view, "map": {"source": source, "target": target}, **map_document(bound.result)})
+        return items
+
+    def cancelled_item(self) -> dict:
+        return {"cameras": [], "points": [], "summary": {}, "images": None, "camera_results": [],
+                "stages": [{"name": "projective", "status": "cancelled", "reason": "the job was cancelled"}],
+                "status": "cancelled", "certified": False, "nodes": 0, "elapsed_s": 0.0, "cost": None,
+                "lower_bound": None}
+
+    def claimed_items(self, items: list[dict]) -> list[dict]:
+        return items[0]["points"]
+
+    def certificate_data(self, data: Any, items: list[dict]) -> dict:
+        """The data the points' claims are about: the metric cameras returned (registered views,
+        in view order) and each point's kept observations as a triangulation track."""
+        item = items[0]
+        views = [c["view"] for c in item["cameras"] if c["P"] is not None and c["K"] is not None]
+        index = {v: k for k, v in enumerate(views)}
+        cameras = [item["cameras"][v]["P"] for v in views]
+        tracks = [{"views": [index[int(o[0])] for o in p["observations"]], "points": [[o[1], o[2]]
+                                                                                     for o in p["observations"]]}
+                  for p in item["points"]]
+        return {"cameras": cameras, "views": views, "tracks": tracks}
+
+    def assemble(self, options: ReconstructionOptions, items: list[dict], stats: dict) -> dict:
+        item = dict(items[0])
+        camera_results = item.pop("camera_results", [])
+        for key in ("status", "certified", "nodes", "elapsed_s", "cost", "lower_bound"):
+            item.pop(key, None)
+        result = {"kind": self.name, "norm": options.norm, **item, "stats": stats}
+        if options.certificate == "full" and camera_results:
+            from geocert.batch import certificate_document
+            from geocert.kinds import get_kind
+            from geocert.solvers.fractional.options import MapOptions
+
+            resection = get_kind("resection")
+            maps = [entry.pop("map") for entry in camera_results]
+            for entry in camera_results:
+                entry.pop("view", None)
+            map_options = MapOptions(norm=options.norm, rel_gap=options.camera_rel_gap, abs_gap=options.abs_gap,
+                                     max_nodes=options.max_nodes, time_limit_s=options.time_limit_s,
+                                     max_residual=options.max_residual, certificate="full")
+            result["camera_certificate"] = certificate_document(resection, {"maps": maps}, map_options, camera_results)
+        return result
+
+
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, (np.bool_,)):
+        return bool(value)
+    return value
+
+
+KIND = ReconstructionKind()

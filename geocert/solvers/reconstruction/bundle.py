@@ -1,0 +1,81 @@
+"""Bundle adjustments, both by Levenberg-Marquardt with the points eliminated (schur.py).
+
+Projective: each camera's 12 entries and each point's 4 homogeneous coordinates are free (the
+gauge, a 4x4 projective change of frame and each row's scale, is left to the damping).
+Metric: one K shared by every view (fx, fy, skew, cx, cy), a rotation vector and a translation
+per view, each point's 3 coordinates. Residuals are in pixels either way; ``f_scale`` (pixels)
+makes the loss Huber's, None plain least squares."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from geocert.solvers.reconstruction import schur
+
+
+def projective(cameras: np.ndarray, points: np.ndarray, view: np.ndarray, track: np.ndarray, pixels: np.ndarray,
+               scales: np.ndarray, f_scale: float | None = None, max_iterations: int = 30):
+    """Refine cameras (n, 3, 4) and homogeneous points (p, 4) over observations (view, track,
+    pixel): pixels are normalised image coordinates and ``scales`` each view's normalisation
+    scale, so residual / scale is in pixels. Returns cameras, points, pixel residuals (M, 2)."""
+    n = len(cameras)
+    A = (cameras / np.linalg.norm(cameras.reshape(n, -1), axis=1)[:, None, None]).reshape(n, 12)
+    B = points / np.linalg.norm(points, axis=1)[:, None]
+    inv_scale = (1.0 / scales[view])[:, None]
+
+    def residual(Am, S, Bm):
+        proj = (Am.reshape(-1, 3, 4) @ Bm[:, :, None])[:, :, 0]
+        return (proj[:, :2] / proj[:, 2:3] - pixels) * inv_scale
+
+    A, _, B, r, _ = schur.solve(residual, A, np.zeros(0), B, view, track, f_scale, max_iterations)
+    P = A.reshape(n, 3, 4)
+    P = P / np.linalg.norm(A, axis=1)[:, None, None]
+    X = B / np.linalg.norm(B, axis=1)[:, None]
+    return P, X, r
+
+
+# The shared K's free entries: "simple" the focal length (square pixels, no skew, the principal
+# point held where K has it: the image centre, as COLMAP's default of not refining it), "full" all
+# five, "fixed" none, "varying" one focal length per view (principal point held, square pixels).
+MODELS = ("simple", "full", "fixed", "varying")
+
+
+def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, points: np.ndarray, view: np.ndarray,
+           track: np.ndarray, pixels: np.ndarray, f_scale: float | None = None, max_iterations: int = 30,
+           model: str = "simple", focals: np.ndarray | None = None):
+    """Refine one shared K (``model``: "simple" f with square pixels, no skew and cx, cy fixed; "full"
+    fx, fy, skew, cx, cy; "fixed" K as given), rotations (n, 3, 3), translations (n, 3) and
+    points (p, 3) against pixel observations. Returns K, rotations, translations, points,
+    residuals (M, 2)."""
+    A = np.hstack([Rotation.from_matrix(rotations).as_rotvec(), translations])
+    given = np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]])
+    if model == "varying":
+        A = np.hstack([A, (np.full(len(A), K[0, 0]) if focals is None else focals)[:, None]])
+
+    def entries(S):
+        if model == "fixed":
+            return given
+        if model == "simple":
+            return np.array([S[0], S[0], 0.0, given[3], given[4]])
+        if model == "varying":
+            return given
+        return S
+
+    def residual(Am, S, Bm):
+        k = entries(S)
+        cam = Rotation.from_rotvec(Am[:, :3]).apply(Bm) + Am[:, 3:6]
+        u = cam[:, 0] / cam[:, 2]
+        v = cam[:, 1] / cam[:, 2]
+        if model == "varying":
+            return np.stack([Am[:, 6] * u + k[3] - pixels[:, 0], Am[:, 6] * v + k[4] - pixels[:, 1]], axis=1)
+        return np.stack([k[0] * u + k[2] * v + k[3] - pixels[:, 0], k[1] * v + k[4] - pixels[:, 1]], axis=1)
+
+    start = {"fixed": np.zeros(0), "varying": np.zeros(0), "simple": np.array([np.sqrt(abs(given[0] * given[1]))]),
+             "full": given.copy()}[model]
+    A, S, B, r, _ = schur.solve(residual, A, start, points.copy(), view, track, f_scale, max_iterations)
+    k = entries(S)
+    K = np.array([[k[0], k[2], k[3]], [0.0, k[1], k[4]], [0.0, 0.0, 1.0]])
+    if model == "varying":  # one K per view
+        K = np.array([[[f, 0.0, k[3]], [0.0, f, k[4]], [0.0, 0.0, 1.0]] for f in A[:, 6]])
+    return K, Rotation.from_rotvec(A[:, :3]).as_matrix(), A[:, 3:6], B, r

@@ -1,0 +1,104 @@
+"""The reconstruction's options: the structure stage's search options (FractionalOptions: the
+norm, gaps and limits of each certified triangulation and resection), the metric upgrade's, and
+the projective stage's thresholds. Ranges are stated once, in OPTION_RANGES."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from geocert.solvers.autocalibration.problem import AutocalibrationOptions
+from geocert.solvers.core.geometry import InputError
+from geocert.solvers.fractional.options import FractionalOptions
+
+AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")
+CAMERA_MODELS = ("simple", "varying", "full")
+
+
+@dataclass
+class ReconstructionOptions(FractionalOptions):
+    """``intrinsics``: "unknown" (ranges from the image size, as autocalibration's defaults), the
+    ranges themselves ({"focal", "aspect", "skew", "principal_point"}, pixels), or {"K": 3x3}
+    (known calibration). ``rel_gap``, ``abs_gap``, ``max_nodes`` and ``time_limit_s`` apply to
+    each track's and each camera's certified solve; the ``autocalibration_*`` options to each
+    stage of the metric upgrade (its rel_gap the affine stage's, ``metric_rel_gap`` the metric
+    stage's)."""
+
+    intrinsics: dict = field(default_factory=dict)
+    autocalibration: str = "stratified"
+    metric_rel_gap: float = 1e-4
+    autocalibration_rel_gap: float = 1e-5
+    autocalibration_max_nodes: int = 20_000
+    autocalibration_time_limit_s: float = 60.0
+    autocalibration_points: int = 300  # points whose chirality bounds the plane at infinity
+    chirality: str = "centers"  # the direct method's
+    threshold_px: float = 2.0  # an observation farther than this from its reprojection is an outlier
+    min_inliers: int = 12  # 3D-2D inliers a view needs to register
+    bundle_adjustment: bool = True  # a metric bundle adjustment before the certified structure
+    # The adjustment's calibration: "simple" one focal length (square pixels, no skew, the principal
+    # point at the image centre), "varying" one focal length per view (the same otherwise), "full"
+    # one K with all five entries free.
+    camera_model: str = "simple"
+    resect_cameras: bool = True  # the certified resection of every camera
+    camera_rel_gap: float = 1e-2  # the resections' (and the returned camera's tolerance against their bound)
+    time_limit_s: float = 10.0
+    seed: int = 0
+
+    OPTION_RANGES = {**FractionalOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": 1},
+                     "camera_rel_gap": {"ge": 0, "le": 1},
+                     "autocalibration_rel_gap": {"ge": 0, "le": 1},
+                     "autocalibration_max_nodes": {"ge": 1, "le": 1_000_000},
+                     "autocalibration_time_limit_s": {"gt": 0, "le": 3600},
+                     "autocalibration_points": {"ge": 10, "le": 100_000},
+                     "threshold_px": {"gt": 0, "le": 1000}, "min_inliers": {"ge": 6, "le": 100_000},
+                     "seed": {"ge": 0, "le": 2**31 - 1}}
+
+    def check(self) -> None:
+        FractionalOptions.check(self)
+        if isinstance(self.intrinsics, dict):  # ranges not given (null, as the API's model writes them) are absent
+            self.intrinsics = {name: value for name, value in self.intrinsics.items() if value is not None}
+        if self.camera_model not in CAMERA_MODELS:
+            raise InputError("options/camera_model", f"must be one of {', '.join(CAMERA_MODELS)}")
+        if self.autocalibration not in AUTOCALIBRATION_METHODS:
+            raise InputError("options/autocalibration", f"must be one of {', '.join(AUTOCALIBRATION_METHODS)}")
+        for name in ("metric_rel_gap", "camera_rel_gap", "autocalibration_rel_gap", "autocalibration_max_nodes",
+                     "autocalibration_time_limit_s", "autocalibration_points", "threshold_px", "min_inliers", "seed"):
+            value, bounds = getattr(self, name), self.OPTION_RANGES[name]
+            if not (math.isfinite(value) and value >= bounds.get("ge", -math.inf) and value > bounds.get("gt", -math.inf)
+                    and value <= bounds.get("le", math.inf)):
+                raise InputError(f"options/{name}", f"must be a finite number within {bounds}")
+        self.known_K()  # validates {"K": ...}
+        self.autocalibration_options().check()  # validates the ranges and the direct method's options
+
+    def known_K(self) -> np.ndarray | None:
+        if self.intrinsics == "unknown" or not isinstance(self.intrinsics, dict) or "K" not in self.intrinsics:
+            if not (self.intrinsics == "unknown" or isinstance(self.intrinsics, dict)):
+                raise InputError("options/intrinsics", 'must be "unknown", {"K": 3x3} or the ranges of autocalibration')
+            return None
+        if set(self.intrinsics) != {"K"}:
+            raise InputError("options/intrinsics", 'give either {"K": 3x3} or ranges, not both')
+        K = self.intrinsics["K"]
+        ok = (isinstance(K, list) and len(K) == 3 and all(isinstance(r, list) and len(r) == 3 for r in K)
+              and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for r in K for x in r))
+        if not ok:
+            raise InputError("options/intrinsics/K", "must be a 3x3 matrix of finite numbers")
+        K = np.array(K, dtype=float)
+        if not (K[0, 0] > 0 and K[1, 1] > 0 and K[1, 0] == 0 and K[2, 0] == 0 and K[2, 1] == 0 and K[2, 2] == 1):
+            raise InputError("options/intrinsics/K", "must be upper triangular with a positive diagonal and K[2][2] = 1")
+        return K
+
+    def ranges(self, image_size=None) -> dict:
+        """The intrinsics ranges the metric upgrade searches (none with a known K: the calibrated
+        path needs no upgrade)."""
+        if self.known_K() is not None or self.intrinsics == "unknown":
+            return {}
+        return dict(self.intrinsics)
+
+    def autocalibration_options(self, image_size=None) -> AutocalibrationOptions:
+        return AutocalibrationOptions(
+            method="direct" if self.autocalibration == "direct" else "stratified",
+            intrinsics=self.ranges(image_size), chirality=self.chirality, rel_gap=self.autocalibration_rel_gap,
+            metric_rel_gap=self.metric_rel_gap, abs_gap=1e-12, max_nodes=self.autocalibration_max_nodes,
+            time_limit_s=self.autocalibration_time_limit_s)

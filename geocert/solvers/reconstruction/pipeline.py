@@ -1,0 +1,349 @@
+"""From tracks to a certified metric reconstruction (issue 14), stage by stage:
+
+1. projective: a projective reconstruction from the tracks alone (projective.py);
+2. autocalibration: the metric upgrade by the certified autocalibration solver (upgrade.py);
+3. bundle_adjustment: optionally, a metric bundle adjustment with one shared K (upgrade.py);
+4. structure: every kept track triangulated, and cameras: every camera resected, by the
+   certified solvers in the metric frame (structure.py).
+
+A stage that fails keeps what the earlier stages found and says why. ``report(stage, done,
+total, progress=None)`` sees each stage's progress; when it returns True the run stops (the
+stage running and those after it are marked cancelled)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
+from geocert.solvers.reconstruction import projective, structure, upgrade
+from geocert.solvers.reconstruction.options import ReconstructionOptions
+from geocert.solvers.reconstruction.tracks import Observations
+
+STAGES = ("projective", "autocalibration", "bundle_adjustment", "structure", "cameras")
+
+
+class Cancelled(Exception):
+    pass
+
+
+@dataclass
+class Camera:
+    view: int
+    registered: bool
+    reason: str | None = None
+    K: np.ndarray | None = None
+    R: np.ndarray | None = None
+    t: np.ndarray | None = None
+    P: np.ndarray | None = None  # 3x4 pixels: K [R | t], or the projective camera when no upgrade was found
+    bound: structure.CameraBound | None = None
+
+    @property
+    def center(self) -> np.ndarray | None:
+        return None if self.R is None else -self.R.T @ self.t
+
+
+@dataclass
+class Point:
+    track: int
+    result: object  # fractional.results.TrackResult
+    observations: list[list[float]]  # [[view, u, v], ...] the triangulation used
+
+
+@dataclass
+class Reconstruction:
+    cameras: list[Camera]
+    points: list[Point]
+    stages: list[dict]
+    summary: dict = field(default_factory=dict)
+    metric: upgrade.Metric | None = None
+
+
+def _stage(name: str) -> dict:
+    return {"name": name, "status": "not_run", "elapsed_s": 0.0, "reason": None}
+
+
+def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], image_sizes: list, options: ReconstructionOptions,
+                report=None) -> Reconstruction:
+    n_views = len(image_sizes)
+    stages = {name: _stage(name) for name in STAGES}
+    cameras = [Camera(v, False, "not registered") for v in range(n_views)]
+    out = Reconstruction(cameras, [], list(stages.values()))
+
+    def tell(stage: str, done: int, total: int, progress=None) -> None:
+        if report is not None and report(stage, done, total, progress):
+            raise Cancelled(stage.split()[0])
+
+    try:
+        _run(tracks, image_sizes, options, stages, out, tell)
+    except Cancelled as stop:
+        _cancel(stages, str(stop))
+    _summarise(out, tracks, n_views)
+    return out
+
+
+def _cancel(stages: dict, at: str) -> None:
+    hit = False
+    for name in STAGES:
+        hit = hit or name == at
+        if hit and stages[name]["status"] in ("not_run", "running"):
+            stages[name].update(status="cancelled", reason="the job was cancelled")
+
+
+def _timed(stages: dict, name: str):
+    class Timer:
+        def __enter__(self):
+            stages[name]["status"] = "running"
+            self.start = time.perf_counter()
+            return stages[name]
+
+        def __exit__(self, *exc):
+            stages[name]["elapsed_s"] = time.perf_counter() - self.start
+            if stages[name]["status"] == "running" and exc[0] is None:
+                stages[name]["status"] = "done"
+            return False
+
+    return Timer()
+
+
+def _skip(stages: dict, after: str, reason: str) -> None:
+    later = False
+    for name in STAGES:
+        if later and stages[name]["status"] == "not_run":
+            stages[name].update(status="skipped", reason=reason)
+        later = later or name == after
+
+
+def _calibrated(tracks, n_views: int, K: np.ndarray, options: ReconstructionOptions, stages, out: Reconstruction,
+                tell, obs: Observations):
+    """K known: the calibrated path (calibrated.py: essential matrices, PnP, a metric bundle
+    adjustment with K fixed) replaces the projective reconstruction and its upgrade. Returns the
+    metric reconstruction and the observations kept, or None when it failed."""
+    from geocert.solvers.reconstruction.calibrated import CalibratedOptions, calibrated_reconstruction
+
+    stages["autocalibration"].update(status="skipped", reason="K is known: no metric upgrade is needed")
+    with _timed(stages, "projective") as stage:
+        stage["method"] = "calibrated (K known: essential matrices, PnP, metric bundle adjustment)"
+        tell("projective", 0, n_views)
+        found = calibrated_reconstruction(
+            tracks, [K] * n_views, CalibratedOptions(max_reprojection_px=2 * options.threshold_px,
+                                                      pnp_min_inliers=options.min_inliers, seed=options.seed),
+            lambda progress: tell("projective", progress.get("done", 0), progress.get("total", 1)))
+        stage.update(_plain(found.stats))
+        for v in range(n_views):
+            out.cameras[v].registered = found.rotations[v] is not None
+            out.cameras[v].reason = found.reasons[v]
+        if found.status == "cancelled":
+            raise Cancelled("projective")
+        if sum(R is not None for R in found.rotations) < 2:
+            stage.update(status="failed", reason=found.stats.get("reason") or "fewer than 2 views registered")
+            _skip(stages, "projective", "the calibrated reconstruction failed")
+            return None
+    keep = np.concatenate(found.inliers) if found.inliers else np.zeros(0, dtype=bool)
+    metric = upgrade.Metric(K, list(found.rotations), [None if t is None else np.asarray(t, dtype=float)
+                                                       for t in found.translations],
+                            np.asarray(found.points, dtype=float), [], False)
+    return metric, keep
+
+
+def _plain(stats: dict) -> dict:
+    return {key: value for key, value in stats.items() if key not in ("ba_nfev",)}
+
+
+def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Reconstruction, tell) -> None:
+    n_views = len(image_sizes)
+    obs = Observations.from_tracks(tracks, n_views)
+    known = options.known_K()
+    if known is not None:
+        found = _calibrated(tracks, n_views, known, options, stages, out, tell, obs)
+        if found is None:
+            return
+        metric, keep = found
+        with _timed(stages, "bundle_adjustment") as stage:
+            if options.bundle_adjustment:
+                tell("bundle_adjustment", 0, 1)
+                before = _rms(metric, obs, keep)
+                metric, keep, figures = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, options.threshold_px,
+                                                       model="fixed")
+                stage.update(started_from="calibrated", model="fixed", rms_px_before=before,
+                             rms_px_after=_rms(metric, obs, keep), K=metric.K.tolist(),
+                             observations_kept=figures["observations_kept"])
+            else:
+                stage.update(status="skipped", reason="options.bundle_adjustment is false")
+        out.metric = metric = _normalise_frame(metric)
+        _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
+        return
+    with _timed(stages, "projective") as stage:
+        tell("projective", 0, n_views)
+        proj = projective.reconstruct(tracks, n_views, projective.ProjectiveOptions(
+            options.threshold_px, options.min_inliers, seed=options.seed), lambda s, d, t: tell("projective", d, t))
+        stage.update({key: value for key, value in proj.stats.items() if key != "reason"})
+        for v, P in enumerate(proj.cameras):
+            out.cameras[v].registered = P is not None
+            out.cameras[v].reason = proj.reasons[v]
+            out.cameras[v].P = P
+        registered = sum(P is not None for P in proj.cameras)
+        if registered < 2:
+            stage.update(status="failed", reason=proj.stats.get("reason") or "fewer than 2 views registered")
+            _skip(stages, "projective", "the projective reconstruction failed")
+            return
+    sizes = {tuple(image_sizes[v]) for v, P in enumerate(proj.cameras) if P is not None}
+    image_size = next(iter(sizes)) if len(sizes) == 1 else None
+    with _timed(stages, "autocalibration") as stage:
+        tell("autocalibration", 0, 1)
+        method = options.autocalibration
+        metric = upgrade.autocalibrate(proj.cameras, proj.points, image_size, options.ranges(image_size),
+                                       options.autocalibration_options(image_size), options.autocalibration_points,
+                                       method, lambda p: tell(f"autocalibration {getattr(p, 'stage', '')}".strip(),
+                                                              0, 1, p))
+        stage.update(method=method, stages=metric.stages, certified=metric.certified, intrinsics=metric.ranges,
+                     points_used=metric.autocalibration_points, K=None if metric.K is None else metric.K.tolist())
+        starts = []
+        if metric.K is not None:
+            starts.append(("autocalibration", metric))
+        if metric.alternative is not None:
+            alternative = upgrade.metric_from(proj.cameras, proj.points, *metric.alternative)
+            starts.append(("linear", alternative))
+            stage["linear_K"] = alternative.K.tolist()
+        if metric.K is None:
+            stage.update(status="failed", reason=metric.reason + (
+                "; the adjustment starts from the linear estimate" if starts else ""))
+        if not starts:
+            _skip(stages, "autocalibration", "no metric upgrade was found")
+            return
+    keep = proj.inlier.copy()
+    with _timed(stages, "bundle_adjustment") as stage:
+        model = options.camera_model
+        if model in ("simple", "varying") and image_size is not None:  # the principal point at the image centre
+            for _, start in starts:
+                f = float(np.sqrt(abs(start.K[0, 0] * start.K[1, 1])))
+                start.K = np.array([[f, 0.0, image_size[0] / 2], [0.0, f, image_size[1] / 2], [0.0, 0.0, 1.0]])
+        if options.bundle_adjustment:
+            tell("bundle_adjustment", 0, 1)
+            name, metric, keep, before, trials = adjust_best(starts, obs, keep, options.threshold_px, model)
+            stage["starts"] = trials
+            stage.update(started_from=name, model=model, rms_px_before=before, rms_px_after=_rms(metric, obs, keep),
+                         K=metric.K.tolist(), observations_kept=int(keep.sum()))
+        else:
+            name, metric = starts[0]
+            stage.update(status="skipped", reason="options.bundle_adjustment is false", started_from=name)
+        out.metric = metric = _normalise_frame(metric)
+    _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
+
+
+def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs, metric, keep) -> None:
+    P = {}
+    for v in range(n_views):
+        cam = out.cameras[v]
+        if metric.rotations[v] is not None:
+            cam.K, cam.R, cam.t = upgrade.K_of(metric, v), metric.rotations[v], metric.translations[v]
+            cam.P = structure.camera_matrix(cam.K, cam.R, cam.t)
+            P[v] = cam.P
+    with _timed(stages, "structure") as stage:
+        kept_tracks = []
+        for t in range(len(tracks)):
+            m = np.flatnonzero((obs.track == t) & keep & np.isin(obs.view, list(P)))
+            if len(m) >= 2 and np.isfinite(metric.points[t, 0]):
+                kept_tracks.append((t, obs.view[m], obs.pixel[m]))
+        tri_options = TriangulationOptions(norm=options.norm, rel_gap=options.rel_gap, abs_gap=options.abs_gap,
+                                           max_nodes=options.max_nodes, time_limit_s=options.time_limit_s,
+                                           max_residual=options.max_residual, certificate=options.certificate)
+        results = structure.triangulate_tracks(P, [(v, x) for _, v, x in kept_tracks], tri_options,
+                                               lambda d, total: tell("structure", d, total))
+        for (t, views, pixels), result in zip(kept_tracks, results):
+            out.points.append(Point(t, result, [[int(v), float(x[0]), float(x[1])] for v, x in zip(views, pixels)]))
+        stage.update(tracks=len(tracks), points=len(out.points),
+                     certified=sum(1 for p in out.points if p.result.certified))
+    with _timed(stages, "cameras") as stage:
+        if not options.resect_cameras:
+            stage.update(status="skipped", reason="options.resect_cameras is false")
+            return
+        sources: dict[int, tuple[list, list]] = {}
+        for point in out.points:
+            if point.result.point is None or point.result.at_infinity:
+                continue
+            for v, u, w in point.observations:
+                sources.setdefault(int(v), ([], []))
+                sources[int(v)][0].append(point.result.point)
+                sources[int(v)][1].append([u, w])
+        arrays = {v: (np.array(X, dtype=float), np.array(x, dtype=float)) for v, (X, x) in sources.items()}
+        map_options = MapOptions(norm=options.norm, rel_gap=options.camera_rel_gap, abs_gap=options.abs_gap,
+                                 max_nodes=options.max_nodes, time_limit_s=options.time_limit_s,
+                                 max_residual=options.max_residual, certificate=options.certificate)
+        bounds = structure.resect_cameras(P, arrays, map_options, lambda d, total: tell("cameras", d, total))
+        for v, bound in bounds.items():
+            out.cameras[v].bound = bound
+        stage.update(cameras=len(bounds), certified=sum(1 for b in bounds.values() if b.certified))
+
+
+def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px: float, model: str):
+    """A short adjustment (8 iterations) from each upgrade (name, Metric); the one with the
+    smaller RMS goes on to a full adjustment. Returns its name, the adjusted reconstruction, the
+    observations kept, the RMS before, and each start's figures."""
+    tried, trials = [], []
+    for name, start in starts:
+        adjusted, kept, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, threshold_px, max_iterations=8,
+                                           model=model)
+        before = _rms(start, obs, keep)
+        tried.append((_rms(adjusted, obs, kept), name, adjusted, before))
+        trials.append({"from": name, "rms_px_before": before, "rms_px_after_8_iterations": tried[-1][0]})
+    rms, name, metric, before = min(tried, key=lambda item: (item[0] is None, item[0] or 0.0))
+    metric, keep, _ = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, threshold_px, model=model)
+    return name, metric, keep, before, trials
+
+
+def _normalise_frame(metric: upgrade.Metric) -> upgrade.Metric:
+    """The similarity that puts the points' centroid at the origin and their RMS distance from it
+    at 1 (a metric reconstruction's frame and scale are arbitrary; these keep the numbers near 1)."""
+    finite = np.isfinite(metric.points[:, 0])
+    if finite.sum() < 2:
+        return metric
+    c = metric.points[finite].mean(axis=0)
+    spread = np.sqrt(np.mean(np.sum((metric.points[finite] - c) ** 2, axis=1)))
+    if not spread > 0:
+        return metric
+    s = 1.0 / spread
+    metric.points = s * (metric.points - c)
+    metric.translations = [None if t is None else s * (R @ c + t) for R, t in zip(metric.rotations,
+                                                                                  metric.translations)]
+    return metric
+
+
+def _rms(metric: upgrade.Metric, obs: Observations, keep: np.ndarray) -> float | None:
+    errors = []
+    for m in np.flatnonzero(keep):
+        v, t = obs.view[m], obs.track[m]
+        if metric.rotations[v] is None or not np.isfinite(metric.points[t, 0]):
+            continue
+        cam = metric.rotations[v] @ metric.points[t] + metric.translations[v]
+        image = upgrade.K_of(metric, v) @ cam
+        errors.append(np.sum((image[:2] / image[2] - obs.pixel[m]) ** 2))
+    return float(np.sqrt(np.mean(errors))) if errors else None
+
+
+def _summarise(out: Reconstruction, tracks, n_views: int) -> None:
+    squared, count = 0.0, 0
+    for point in out.points:
+        r = point.result
+        if r.point is None:
+            continue
+        X = np.array(r.point if r.at_infinity else [*r.point, 1.0])
+        for v, u, w in point.observations:
+            proj = out.cameras[int(v)].P @ X
+            squared += (proj[0] / proj[2] - u) ** 2 + (proj[1] / proj[2] - w) ** 2
+            count += 1
+    registered = [c for c in out.cameras if c.registered]
+    bounded = [c for c in out.cameras if c.bound is not None]
+    out.summary = {
+        "views": n_views, "views_registered": len(registered), "tracks": len(tracks), "points": len(out.points),
+        "observations": count, "rms_reprojection_px": float(np.sqrt(squared / count)) if count else None,
+        "points_certified": sum(1 for p in out.points if p.result.certified),
+        "points_certified_fraction": (sum(1 for p in out.points if p.result.certified) / len(out.points)
+                                      if out.points else None),
+        "cameras_certified": sum(1 for c in bounded if c.bound.certified),
+        "cameras_certified_fraction": (sum(1 for c in bounded if c.bound.certified) / len(bounded) if bounded else None),
+        "autocalibration_certified": bool(out.stages[1].get("certified")),
+        "time_s": {stage["name"]: stage["elapsed_s"] for stage in out.stages},
+    }

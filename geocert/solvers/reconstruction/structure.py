@@ -1,0 +1,103 @@
+"""Stage 4: certified structure in the metric frame. Every kept track is triangulated by the
+certified triangulation solver (thesis chapter 5) in the cameras returned, so its point is the
+certified optimum itself; every registered camera is resected by the certified resection solver
+from the points returned, and the bound that search proves (no 3x4 camera putting those points
+in front fits them better) is stated for the camera returned: its own cost, the gap to that
+bound, and certified when the gap is within the tolerance. The certificates are for the
+numbers returned."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from geocert.solvers.core.geometry import norm_cost
+from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
+from geocert.solvers.fractional.results import MapResult, TrackResult
+
+
+@dataclass
+class CameraBound:
+    view: int
+    cost: float | None  # the returned camera's, on the returned points
+    optimal_cost: float | None  # the certified resection's optimum
+    lower_bound: float | None
+    gap: float | None
+    certified: bool
+    status: str
+    points: int
+    elapsed_s: float
+    reason: str | None
+    result: MapResult | None = None
+
+
+def camera_matrix(K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return K @ np.hstack([R, t[:, None]])
+
+
+def triangulate_tracks(cameras: dict[int, np.ndarray], tracks: list[tuple[np.ndarray, np.ndarray]],
+                       options: TriangulationOptions, progress=None, should_stop=None) -> list[TrackResult | None]:
+    """One certified triangulation per track (views, pixels) over the given cameras; None for a
+    track with fewer than two views."""
+    from geocert.solvers.fractional.triangulation import triangulate
+
+    out: list[TrackResult | None] = []
+    for index, (views, pixels) in enumerate(tracks):
+        if should_stop is not None and should_stop():
+            out.append(TrackResult("cancelled", False, reason="the job was cancelled"))
+            continue
+        if len(views) < 2:
+            out.append(None)
+            continue
+        out.append(triangulate(np.array([cameras[v] for v in views]), pixels, options))
+        if progress is not None and (index % 50 == 0 or index == len(tracks) - 1):
+            progress(index + 1, len(tracks))
+    return out
+
+
+def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.ndarray, np.ndarray]],
+                   options: MapOptions, progress=None, should_stop=None) -> dict[int, CameraBound]:
+    """For each view: its points (3D) and pixels; the certified resection's bound, stated for
+    the camera returned."""
+    from geocert.solvers.fractional.maps import fit_map
+
+    out = {}
+    for done, (view, P) in enumerate(sorted(cameras.items())):
+        X, x = sources.get(view, (np.zeros((0, 3)), np.zeros((0, 2))))
+        start = time.perf_counter()
+        if should_stop is not None and should_stop():
+            out[view] = CameraBound(view, None, None, None, None, False, "cancelled", len(X), 0.0, "the job was cancelled")
+            continue
+        if len(X) < 6:
+            out[view] = CameraBound(view, None, None, None, None, False, "degenerate", len(X), 0.0,
+                                    f"{len(X)} points: a camera needs at least 6")
+            continue
+        result = fit_map(X, x, options)
+        proj = np.hstack([X, np.ones((len(X), 1))]) @ P.T
+        depths_positive = bool(np.all(proj[:, 2] > 0))
+        residuals = x - proj[:, :2] / proj[:, 2:3]
+        cost = norm_cost(residuals, options.norm)
+        lower = result.lower_bound if result.certified else None
+        gap = None if lower is None else max(0.0, cost - lower)
+        tolerance = max(options.abs_gap, options.rel_gap * cost)
+        certified = bool(result.certified and depths_positive and gap is not None and gap <= tolerance)
+        if certified:
+            status, reason = "optimal", None
+        elif not result.certified:
+            status, reason = result.status, f"the resection was not certified: {result.reason}"
+        elif not depths_positive:
+            status, reason = "not_certified", "a point is behind the camera returned: outside the bound's scope"
+        else:
+            status, reason = "not_certified", (f"the camera returned costs {cost:.4g}, {gap / max(cost, 1e-300):.2%} "
+                                               "above the certified bound (a shared K is a constraint the "
+                                               "unconstrained resection does not have)")
+        if certified:
+            lower = cost - gap
+        out[view] = CameraBound(view, cost if math.isfinite(cost) else None, result.cost, lower, gap, certified, status,
+                                len(X), time.perf_counter() - start, reason, result)
+        if progress is not None:
+            progress(done + 1, len(cameras))
+    return out

@@ -1,0 +1,231 @@
+"""Stage 3: the metric upgrade of the projective reconstruction by the stratified
+autocalibration solver (thesis chapter 6; geocert.solvers.autocalibration), then, optionally,
+a metric bundle adjustment with one K shared by every view.
+
+The autocalibration stage solves for the plane at infinity and the DIAC over every plane
+chirality allows and every K within the intrinsics ranges; its certificate is for the upgrade
+it returns (H), before any adjustment moves the cameras."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.linalg import rq
+
+from geocert.solvers.autocalibration import problem as pr
+
+
+@dataclass
+class Metric:
+    K: np.ndarray | None  # shared calibration (pixels, K[2, 2] = 1)
+    rotations: list[np.ndarray | None]
+    translations: list[np.ndarray | None]
+    points: np.ndarray  # (T, 3), NaN where not reconstructed
+    stages: list[dict]  # the autocalibration stages' figures (affine, metric)
+    certified: bool  # both autocalibration stages certified
+    reason: str | None = None
+    ranges: dict = field(default_factory=dict)
+    autocalibration_points: int = 0
+    Ks: list | None = None  # one K per view (the "varying" adjustment), else K for every view
+    alternative: tuple | None = None  # (H, K) of the linear estimate: a second start for the adjustment
+
+
+def decompose(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """K (K[2, 2] = 1, positive diagonal), R (a rotation) and t of a camera Q ~ K [R | t] whose
+    depths keep Q's sign (t is then negated with R when det R < 0: the mirrored solution)."""
+    K, R = rq(Q[:, :3])
+    D = np.diag(np.sign(np.diag(K)))
+    K, R = K @ D, D @ R
+    scale = K[2, 2]
+    t = np.linalg.solve(K, Q[:, 3])
+    if np.linalg.det(R) < 0:  # -K [R | t] is the same camera
+        R, t = -R, -t
+    return K / scale, R, t
+
+
+def choose_points(points: np.ndarray, limit: int) -> np.ndarray:
+    """Indices of at most ``limit`` reconstructed points spread over the track list (the
+    autocalibration's chirality rows; every point is not needed to bound the plane)."""
+    finite = np.flatnonzero(np.isfinite(points[:, 0]))
+    if len(finite) <= limit:
+        return finite
+    return finite[np.linspace(0, len(finite) - 1, limit).round().astype(int)]
+
+
+def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_size, intrinsics: dict,
+                  options: pr.AutocalibrationOptions, max_points: int, method: str = "stratified",
+                  callback=None) -> Metric:
+    """The metric upgrade by the stratified method (thesis ch. 6), the direct one (ch. 7), or
+    "auto": stratified, and the direct method when the stratified one finds no upgrade."""
+    views = [v for v, P in enumerate(cameras) if P is not None]
+    n_tracks = len(points)
+    empty = Metric(None, [None] * len(cameras), [None] * len(cameras), np.full((n_tracks, 3), np.nan), [], False)
+    if len(views) < 3:
+        empty.reason = f"autocalibration needs at least 3 registered views ({len(views)} registered)"
+        return empty
+    chosen = choose_points(points, max_points)
+    P = np.array([cameras[v] for v in views])
+    X = points[chosen]
+    problem = pr.prepare(P, X, image_size, intrinsics)
+    empty.ranges, empty.autocalibration_points = problem.ranges, len(chosen)
+    stages: list[dict] = []
+    H = K = None
+    if method in ("stratified", "auto"):
+        H, K, found = _stratified(problem, options, intrinsics, callback)
+        stages += found
+    if H is None and method in ("direct", "auto"):
+        H, K, found = _direct(problem, P, X, options)
+        stages += found
+    empty.stages = stages
+    linear = _linear(P, X, image_size)
+    empty.alternative = linear
+    if H is None:
+        reasons = "; ".join(f"{stage['name']}: {stage['reason']}" for stage in stages if stage.get("reason"))
+        empty.reason = f"autocalibration found no metric upgrade ({reasons or 'no answer'})"
+        return empty
+    certified = bool(stages) and all(stage["certified"] for stage in stages if stage["status"] != "skipped")
+    out = metric_from(cameras, points, H, K)
+    out.stages, out.certified, out.ranges, out.autocalibration_points = stages, certified, problem.ranges, len(chosen)
+    out.alternative = linear
+    return out
+
+
+def _linear(P: np.ndarray, X: np.ndarray, image_size):
+    """(H, K) of the linear estimate (linear_daq.py), or None."""
+    from geocert.solvers.autocalibration import direct
+    from geocert.solvers.reconstruction import linear_daq
+
+    if image_size is None:
+        return None
+    try:
+        Q = linear_daq.quadric(P, image_size)
+        if Q is None:
+            return None
+        H, _ = direct.upgrade(P, X, Q)
+        K = direct.mean_calibration(P, Q)
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    return None if K is None else (H, K / K[2, 2])
+
+
+def metric_from(cameras: list[np.ndarray | None], points: np.ndarray, H: np.ndarray, K: np.ndarray) -> Metric:
+    """The metric reconstruction an upgrade H gives: rotations and translations of every
+    registered camera P H ~ K_i [R | t] (K is the shared estimate), points H^-1 X."""
+    views = [v for v, P in enumerate(cameras) if P is not None]
+    n_tracks = len(points)
+    rotations: list = [None] * len(cameras)
+    translations: list = [None] * len(cameras)
+    for v in views:
+        _, R, t = decompose(cameras[v] @ H)
+        rotations[v], translations[v] = R, t
+    finite = np.isfinite(points[:, 0])
+    Xm = np.full((n_tracks, 3), np.nan)
+    Xh = np.linalg.solve(H, points[finite].T).T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Xm[finite] = Xh[:, :3] / Xh[:, 3:4]
+    # The upgrade may return the mirrored reconstruction (every depth negative: K [R | t] with
+    # det R = 1 is -P H there); (R, -t, -X) projects the same and puts the points in front.
+    signs = np.concatenate([np.sign((Xm[finite] @ rotations[v].T + translations[v])[:, 2]) for v in views])
+    if np.nanmean(signs) < 0:
+        Xm = -Xm
+        translations = [None if t is None else -t for t in translations]
+    return Metric(K, rotations, translations, Xm, [], False)
+
+
+def _stratified(problem: pr.Problem, options, intrinsics, callback):
+    from geocert.solvers.autocalibration import stratified
+
+    result = stratified.solve(problem, replace(options, intrinsics=intrinsics), callback)
+    stages = [_stage("affine", result.affine, result.affine_s), _stage("metric", result.metric, result.metric_s)]
+    if result.K_unit is None or result.p is None:
+        return None, None, stages
+    K = problem.K0 @ result.K_unit
+    K = K / K[2, 2]
+    return pr.upgrade(problem, result.p, np.linalg.solve(problem.K0, K)), K, stages
+
+
+def _direct(problem: pr.Problem, P: np.ndarray, X: np.ndarray, options):
+    from geocert.solvers.autocalibration import direct, direct_solve
+
+    start = time.perf_counter()
+    setup = direct.setup_for(problem, options.chirality)
+    result = direct_solve.solve_direct(setup, options, False)
+    stage = _stage("direct", result, time.perf_counter() - start)
+    if result.Q is None:
+        return None, None, [stage]
+    try:
+        Q_in = np.asarray(setup.to_input(result.Q))
+        H, _ = direct.upgrade(P, X, Q_in)
+        K = direct.mean_calibration(P, Q_in)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        stage.update(certified=False, status="not_certified", reason=f"no metric upgrade: {exc}")
+        return None, None, [stage]
+    if K is None:
+        return None, None, [stage]
+    return H, K / K[2, 2], [stage]
+
+
+def _stage(name: str, stage, elapsed: float) -> dict:
+    if stage is None:
+        return {"name": name, "status": "failed", "certified": False, "cost": None, "lower_bound": None, "gap": None,
+                "nodes": 0, "elapsed_s": elapsed, "reason": "not run"}
+    cost = float(stage.cost) if stage.cost is not None and math.isfinite(stage.cost) else None
+    lower = float(stage.lower_bound) if math.isfinite(stage.lower_bound) else None
+    return {"name": name, "status": stage.status, "certified": bool(stage.certified), "cost": cost, "lower_bound": lower,
+            "gap": None if cost is None or lower is None else max(0.0, cost - lower), "nodes": int(getattr(stage, "nodes", 0)),
+            "elapsed_s": elapsed, "reason": stage.reason}
+
+
+def K_of(metric: Metric, view: int) -> np.ndarray:
+    return metric.K if metric.Ks is None else metric.Ks[view]
+
+
+def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: np.ndarray, threshold_px: float,
+           max_iterations: int = 30, model: str = "simple") -> tuple[Metric, np.ndarray, dict]:
+    """Metric bundle adjustment (one shared K): Huber's loss, then plain least squares on the
+    observations within the threshold. Returns the adjusted reconstruction, the observations
+    kept, and figures."""
+    from geocert.solvers.reconstruction import bundle
+
+    start = time.perf_counter()
+    views = np.array([v for v, R in enumerate(metric.rotations) if R is not None])
+    vindex = -np.ones(len(metric.rotations), dtype=int)
+    vindex[views] = np.arange(len(views))
+    keep = (vindex[obs_view] >= 0) & np.isfinite(metric.points[obs_track, 0])
+    K, R, t, X = metric.K, np.array([metric.rotations[v] for v in views]), \
+        np.array([metric.translations[v] for v in views]), metric.points.copy()
+    focals = None if metric.Ks is None else np.array([metric.Ks[v][0, 0] for v in views])
+    rms_before = None
+    for round_ in range(2):
+        counts = np.bincount(obs_track[keep], minlength=len(X))
+        X[counts < 2] = np.nan
+        keep &= np.isfinite(X[obs_track, 0])
+        points = np.flatnonzero(np.isfinite(X[:, 0]))
+        pindex = -np.ones(len(X), dtype=int)
+        pindex[points] = np.arange(len(points))
+        use = np.flatnonzero(keep)
+        K, R, t, Xp, r = bundle.metric(K, R, t, X[points], vindex[obs_view[use]], pindex[obs_track[use]], pixels[use],
+                                       f_scale=threshold_px / 2 if round_ == 0 else None, max_iterations=max_iterations,
+                                       model=model, focals=focals)
+        if K.ndim == 3:  # one K per view: the middle focal length stands for them in K
+            focals = K[:, 0, 0]
+            K = K[int(np.argsort(focals)[len(focals) // 2])]
+        X[points] = Xp
+        errors = np.linalg.norm(r, axis=1)
+        if rms_before is None:
+            rms_before = float(np.sqrt(np.mean(errors ** 2)))
+        keep[use[~(errors < threshold_px)]] = False
+    adjusted = replace(metric, K=K, points=X)
+    if focals is not None:
+        adjusted.Ks = [None] * len(metric.rotations)
+        for k, v in enumerate(views):
+            adjusted.Ks[v] = np.array([[focals[k], 0.0, K[0, 2]], [0.0, focals[k], K[1, 2]], [0.0, 0.0, 1.0]])
+    adjusted.rotations = [None] * len(metric.rotations)
+    adjusted.translations = [None] * len(metric.rotations)
+    for k, v in enumerate(views):
+        adjusted.rotations[v], adjusted.translations[v] = R[k], t[k]
+    return adjusted, keep, {"elapsed_s": time.perf_counter() - start, "observations_kept": int(keep.sum()),
+                            "K": K.tolist()}

@@ -1,0 +1,212 @@
+"""The reconstruction kind in-process: bad input is refused naming the item, the result fits its
+model with every stage's figures, its full certificate verifies (points) beside a resection
+certificate (cameras), a cancelled run keeps its stages, and the exports parse."""
+
+from __future__ import annotations
+
+import copy
+import io
+import json
+import math
+import struct
+import zipfile
+
+import numpy as np
+import pytest
+
+from geocert.batch import parse_job, solve_job
+from geocert.kinds import get_kind
+from geocert.solvers.core.geometry import InputError
+from geocert.solvers.reconstruction import export
+from geocert.solvers.verify import verify_any, verify_document
+
+KIND = get_kind("reconstruction")
+
+
+def job(**changes) -> dict:
+    body = copy.deepcopy(KIND.example)
+    body["data"].update(changes.pop("data", {}))
+    body["options"].update(changes)
+    return body
+
+
+@pytest.fixture(scope="module")
+def solved():
+    return solve_job(job(certificate="full"))
+
+
+class TestBadInput:
+    @pytest.mark.parametrize("data, field", [
+        ({"tracks": [{"views": [0, 7], "points": [[1.0, 2.0], [3.0, 4.0]]}]}, "data/tracks/0/views/1"),
+        ({"tracks": [{"views": [0, 1], "points": [[1.0, 2.0], [float("nan"), 4.0]]}]}, "data/tracks/0/points/1/0"),
+        ({"tracks": [{"views": [0, 1], "points": [[1.0, 2.0]]}]}, "data/tracks/0"),
+        ({"tracks": [{"views": [0, 0], "points": [[1.0, 2.0], [3.0, 4.0]]}]}, "data/tracks/0/views"),
+        ({"views": [{"image_size": [640, -1]}] * 6}, "data/views/0/image_size"),
+        ({"cameras": []}, "data/cameras"),
+    ])
+    def test_names_the_item(self, data, field):
+        with pytest.raises(InputError) as error:
+            parse_job(job(data=data))
+        assert error.value.field == field, error.value
+
+    def test_the_api_models_options_are_taken(self):
+        """The API validates a job with its model and passes model_dump's options on: ranges not
+        given are null there (a regression: they reached the upgrade as None)."""
+        from geocert.batch import solve_job
+
+        body = KIND.request_model.model_validate(job(resect_cameras=False)).model_dump(mode="json")
+        assert body["options"]["intrinsics"]["focal"] is None
+        assert solve_job(body)["summary"]["views_registered"] == 6
+
+    def test_fewer_than_two_views_with_matches(self):
+        tracks = [{"views": [0, 0 + 1], "points": [[1.0, 2.0], [3.0, 4.0]]}]
+        parse_job(job(data={"tracks": tracks}))  # two views: accepted
+        with pytest.raises(InputError) as error:
+            parse_job(job(data={"tracks": [{"views": [2], "points": [[1.0, 2.0]]}]}))
+        assert error.value.field.startswith("data/tracks/0")
+
+    def test_images_of_different_sizes_as_one_camera(self):
+        views = [{"image_size": [640, 480]}] * 5 + [{"image_size": [800, 600]}]
+        with pytest.raises(InputError) as error:
+            parse_job(job(data={"views": views}))
+        assert error.value.field == "data/views/5/image_size"
+        parse_job(job(data={"views": views}, camera_model="varying"))  # one focal length per view: allowed
+
+    @pytest.mark.parametrize("options, field", [
+        ({"intrinsics": {"K": [[800, 0, 320], [0, 800, 240]]}}, "options/intrinsics/K"),
+        ({"intrinsics": {"focal": [10, 5]}}, "options/intrinsics/focal"),
+        ({"autocalibration": "sometimes"}, "options/autocalibration"),
+        ({"threshold_px": 0}, "options/threshold_px"),
+    ])
+    def test_bad_options(self, options, field):
+        with pytest.raises(InputError) as error:
+            parse_job(job(**options))
+        assert error.value.field == field
+
+
+class TestResult:
+    def test_fits_the_model_and_recovers_the_scene(self, solved):
+        KIND.result_model.model_validate(solved)
+        summary = solved["summary"]
+        assert summary["views_registered"] == 6 and summary["points"] == 24
+        assert summary["points_certified_fraction"] == 1.0 and summary["autocalibration_certified"]
+        assert summary["rms_reprojection_px"] < 1e-5  # pixels rounded to 1e-6
+        assert [stage["name"] for stage in solved["stages"]] == ["projective", "autocalibration",
+                                                                 "bundle_adjustment", "structure", "cameras"]
+        assert all(stage["status"] == "done" for stage in solved["stages"])
+        assert abs(solved["cameras"][0]["K"][0][0] / 800 - 1) < 1e-6
+        for point in solved["points"]:
+            assert point["observations"] and all(len(o) == 3 for o in point["observations"])
+
+    def test_points_certificate_verifies_and_is_about_the_returned_cameras(self, solved):
+        report = verify_any(solved)
+        assert report.valid, report.first_failure
+        data = solved["certificate"]["data"]
+        registered = [c for c in solved["cameras"] if c["registered"]]
+        assert data["cameras"] == [c["P"] for c in registered]
+        moved = json.loads(json.dumps(solved))  # as a client reads it (the claims are separate copies)
+        moved["points"][3]["point"][0] += 1e-3
+        assert verify_any(moved).first_failure["check"] == "returned"
+        other = copy.deepcopy(solved)
+        other["certificate"]["data"]["cameras"][0][0][0] *= 1.001  # a camera the points were not solved in
+        assert not verify_any(other).valid
+
+    def test_camera_bounds_come_with_a_resection_certificate(self, solved):
+        document = solved["camera_certificate"]
+        assert document["kind"] == "resection" and len(document["items"]) == 6
+        assert verify_document(document).valid
+        for camera, claim in zip(solved["cameras"], document["items"]):
+            assert camera["certified"] and camera["cost"] >= claim["lower_bound"] * (1 - 1e-9)
+            assert camera["lower_bound"] <= camera["cost"]
+
+    def test_a_cancelled_run_keeps_the_stages_before(self):
+        from geocert.batch import solve_items
+
+        parsed = KIND.parse(KIND.example["data"])
+        options = parse_job(KIND.example)[2]
+        calls = []
+
+        def stop():
+            calls.append(1)
+            return len(calls) > 40  # part way through
+
+        items = solve_items(KIND, parsed, options, range(1), should_stop=stop)
+        statuses = [stage["status"] for stage in items[0]["stages"]]
+        assert "cancelled" in statuses and statuses[0] == "done", statuses
+
+
+class TestExports:
+    def test_colmap_text_model(self, solved):
+        files = zipfile.ZipFile(io.BytesIO(export.colmap_zip(solved)))
+        cameras = [l for l in files.read("cameras.txt").decode().splitlines() if not l.startswith("#")]
+        images = [l for l in files.read("images.txt").decode().splitlines() if not l.startswith("#")]
+        points = [l for l in files.read("points3D.txt").decode().splitlines() if not l.startswith("#")]
+        assert len(cameras) == 6 and all(l.split()[1] == "SIMPLE_PINHOLE" for l in cameras)
+        assert abs(float(cameras[0].split()[4]) - solved["cameras"][0]["K"][0][0]) < 1e-9
+        assert len(images) == 12 and len(points) == 24
+        # The pose round-trips: the quaternion is the returned R, and each POINTS2D entry's
+        # 3D point projects onto its pixel.
+        from scipy.spatial.transform import Rotation
+
+        xyz = {int(l.split()[0]): np.array([float(v) for v in l.split()[1:4]]) for l in points}
+        for k in range(6):
+            head = images[2 * k].split()
+            qw, qx, qy, qz = map(float, head[1:5])
+            R = Rotation.from_quat([qx, qy, qz, qw]).as_matrix()
+            assert np.allclose(R, solved["cameras"][k]["R"], atol=1e-12)
+            t = np.array([float(v) for v in head[5:8]])
+            f, cx, cy = map(float, cameras[k].split()[4:7])
+            entries = images[2 * k + 1].split()
+            for u, v, pid in zip(entries[0::3], entries[1::3], entries[2::3]):
+                cam = R @ xyz[int(pid)] + t
+                assert math.hypot(f * cam[0] / cam[2] + cx - float(u), f * cam[1] / cam[2] + cy - float(v)) < 1e-4
+
+    def test_ply_ascii_and_binary(self, solved):
+        text = export.ply(solved).decode()
+        header, body = text.split("end_header\n")
+        assert "element vertex 24" in header and len(body.splitlines()) == 24
+        assert np.allclose([float(v) for v in body.splitlines()[0].split()[:3]], solved["points"][0]["point"])
+        raw = export.ply(solved, binary=True)
+        head, payload = raw.split(b"end_header\n")
+        assert b"binary_little_endian" in head and len(payload) == 24 * struct.calcsize("<ddddB")
+        assert np.allclose(struct.unpack_from("<ddd", payload, 0), solved["points"][0]["point"])
+
+    def test_a_camera_with_skew_is_written_without_it_and_says_so(self, solved):
+        result = copy.deepcopy(solved)
+        result["cameras"][0]["K"][0][1] = 3.0
+        text = export.colmap_files(result)["cameras.txt"]
+        assert "skew 3 px dropped" in text and text.splitlines()[4].split()[1] == "PINHOLE"
+
+
+@pytest.mark.slow
+class TestPhotos:
+    def test_rendered_photos_with_their_K_and_without(self):
+        """Stage 1 from photos (a rendered textured box, 8 views over 120 degrees): with K given the
+        calibrated path registers every view; without, the upgrade and the "simple" adjustment
+        recover f = 700 px."""
+        import base64
+
+        import cv2
+
+        from geocert.solvers.reconstruction import render
+        from tests.solvers.test_reconstruction import aligned_rotation_errors
+
+        scene = render.box_scene(n_views=8, arc_deg=120, seed=1)
+        images = [{"name": f"v{k}", "content": base64.b64encode(cv2.imencode(".png", scene.render(c))[1]).decode()}
+                  for k, c in enumerate(scene.cameras)]
+        K = scene.cameras[0].K
+        for options in ({"intrinsics": {"K": K.tolist()}}, {"autocalibration_time_limit_s": 5}):
+            result = solve_job({"kind": "reconstruction", "data": {"images": images},
+                                "options": {**options, "resect_cameras": False}})
+            KIND.result_model.model_validate(result)
+            assert result["stages"][0]["name"] == "matches" and result["images"]["images"] == 8
+            assert result["summary"]["views_registered"] == 8 and result["summary"]["points"] > 500
+            assert result["summary"]["points_certified_fraction"] == 1.0
+            assert abs(result["cameras"][0]["K"][0][0] / 700 - 1) < 0.01
+            errors = aligned_rotation_errors([np.array(c["R"]) for c in result["cameras"]], [c.R for c in scene.cameras])
+            assert errors.max() < 0.5
+
+    def test_an_undecodable_image_names_the_item(self):
+        with pytest.raises(InputError) as error:
+            parse_job({"kind": "reconstruction", "data": {"images": [{"content": "aGVsbG8="}] * 2}})
+        assert error.value.field == "data/images/0/content"

@@ -1,0 +1,66 @@
+"""Reconstruction through HTTP: a real `geocert serve` takes tracks, streams progress by stage,
+returns cameras and certified points whose full certificate the verify route accepts, and
+exports them as COLMAP text (a zip) and PLY that parse; wrong jobs and formats are problems."""
+
+from __future__ import annotations
+
+import io
+import zipfile
+
+import numpy as np
+import pytest
+
+from geocert.kinds import get_kind
+from tests.service.test_service import service, sse_events, wait_for  # noqa: F401 (the fixture)
+
+pytestmark = pytest.mark.slow  # real servers: the full run only
+
+
+class TestReconstructionThroughTheService:
+    def test_submit_result_certificate_and_exports(self, service):
+        body = {**get_kind("reconstruction").example, "options": {"certificate": "full"}}
+        response = service.post("/v1/jobs", json=body)
+        assert response.status_code == 202, response.text
+        job_id = response.json()["id"]
+        assert service.get(f"/v1/jobs/{job_id}/export", params={"format": "ply"}).status_code in (200, 409)
+        stages = {data.get("stage", "").split()[0] for _, event, data in sse_events(service, job_id, limit_s=120)
+                  if event == "progress" and data.get("stage")}
+        job = wait_for(service, job_id)
+        assert job["status"] == "succeeded", job.get("error")
+        result = job["result"]
+        assert {"projective", "structure"} <= stages
+        assert result["summary"]["views_registered"] == 6 and result["summary"]["points"] == 24
+        assert all(point["certified"] for point in result["points"])
+        assert abs(result["cameras"][0]["K"][0][0] / 800 - 1) < 1e-4
+        report = service.post("/v1/certificates/verify", json=result).json()
+        assert report["valid"] is True, report["first_failure"]
+        assert service.post("/v1/certificates/verify", json=result["camera_certificate"]).json()["valid"] is True
+
+        archive = service.get(f"/v1/jobs/{job_id}/export", params={"format": "colmap"})
+        assert archive.status_code == 200 and archive.headers["content-type"] == "application/zip"
+        files = zipfile.ZipFile(io.BytesIO(archive.content))
+        assert sorted(files.namelist()) == ["cameras.txt", "images.txt", "points3D.txt"]
+        points = [line for line in files.read("points3D.txt").decode().splitlines() if not line.startswith("#")]
+        assert len(points) == 24
+        xyz = np.array([[float(x) for x in line.split()[1:4]] for line in points])
+        assert np.allclose(xyz, [p["point"] for p in result["points"]])
+        cloud = service.get(f"/v1/jobs/{job_id}/export", params={"format": "ply"}).text
+        assert "element vertex 24" in cloud and len(cloud.split("end_header\n")[1].splitlines()) == 24
+
+        wrong = service.get(f"/v1/jobs/{job_id}/export", params={"format": "obj"})
+        assert wrong.status_code == 422 and wrong.headers["content-type"].startswith("application/problem+json")
+        assert service.get("/v1/jobs/nope/export", params={"format": "ply"}).status_code == 404
+
+    def test_a_track_naming_an_unknown_view_is_a_422(self, service):
+        data = get_kind("reconstruction").example["data"]
+        data = {**data, "tracks": [*data["tracks"][:3], {"views": [0, 9], "points": [[1.0, 2.0], [3.0, 4.0]]}]}
+        response = service.post("/v1/jobs", json={"kind": "reconstruction", "data": data})
+        assert response.status_code == 422
+        assert any(error["field"] == "data/tracks/3/views/1" for error in response.json()["errors"])
+
+    def test_another_kind_is_not_exported(self, service):
+        body = get_kind("triangulation").example
+        job_id = service.post("/v1/jobs", json=body).json()["id"]
+        wait_for(service, job_id)
+        response = service.get(f"/v1/jobs/{job_id}/export", params={"format": "colmap"})
+        assert response.status_code == 422
