@@ -187,3 +187,28 @@ class TestPSDCones:
         projected = project_dual(z, ConeSpec(nonneg=1, soc=(2,), psd=(2, 3)))[3:]
         assert np.linalg.eigvalsh(smat(projected[:3], 2))[0] >= -1e-12
         assert np.linalg.eigvalsh(smat(projected[3:], 3))[0] >= -1e-12
+
+
+class TestSafeBoundOfAnyIterate:
+    """The last iterate of a failed solve can hold huge or non-finite entries: it gives no bound
+    (-inf) and proves nothing, silently, never NaN or an overflowed +inf."""
+
+    @pytest.mark.parametrize("spoil", [np.inf, np.nan, 1e300])
+    def test_a_spoiled_dual_bounds_nothing(self, spoil):
+        import warnings
+
+        from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
+
+        centre = np.array([0.5, -0.2, 0.1])
+        A, b = ball(centre, 1.0)
+        q = np.array([1.0, 2.0, -1.0])
+        lower, upper = np.full(3, -10.0), np.full(3, 10.0)
+        result = solve_conic(q, A, b, BALL)
+        assert result.status is ConicStatus.OPTIMAL
+        z = np.full_like(result.z, spoil)
+        z[0] = -spoil if np.isfinite(spoil) else spoil
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # no overflow or invalid-value warning escapes
+            assert safe_lower_bound(q, A, b, BALL, z, lower, upper) == -np.inf
+            assert not proves_infeasible(A, b, BALL, z, lower, upper)
+        assert safe_lower_bound(q, A, b, BALL, result.z, lower, upper) <= minimum(q, centre, 1.0) + 1e-7

@@ -15,6 +15,7 @@ bound a certificate claims is exactly the one a verifier recomputes.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -124,24 +125,32 @@ def safe_lower_bound(q: np.ndarray, A, b: np.ndarray, cones: ConeSpec, z: np.nda
     and that ``lower[:d], upper[:d]`` bound ``y`` instead: the residual of those variables is
     charged through it (boxes of branching functionals are boxes in y, not in x).
     """
-    z = project_dual(z, cones)
-    residual = q + _transposed_product(A, z)
-    if transform is not None:
-        d = transform.shape[0]
-        residual = np.concatenate([transform.T @ residual[:d], residual[d:]])
-    bound = float(-b @ z) + _box_minimum(residual, lower, upper)
-    # A dual vector of huge entries can make the sum inf - inf: no bound at all, never NaN
-    # (a NaN compares false with everything, and min() keeps or drops it by position).
-    return bound if bound == bound else -np.inf
+    if not np.all(np.isfinite(z)):
+        return -np.inf
+    # A dual vector of huge entries (the last iterate of a solve that failed) can overflow:
+    # whatever is not a finite number then is no bound at all, never NaN (a NaN compares false
+    # with everything, and min() keeps or drops it by position) nor an overflowed +inf.
+    with np.errstate(over="ignore", invalid="ignore"):
+        z = project_dual(z, cones)
+        residual = q + _transposed_product(A, z)
+        if transform is not None:
+            d = transform.shape[0]
+            residual = np.concatenate([transform.T @ residual[:d], residual[d:]])
+        bound = float(-b @ z) + _box_minimum(residual, lower, upper)
+    return bound if math.isfinite(bound) else -np.inf
 
 
 def proves_infeasible(A, b: np.ndarray, cones: ConeSpec, z: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                       transform: np.ndarray | None = None) -> bool:
     """Whether ``z`` (a Farkas vector) proves that no ``x`` within the bounds is feasible:
     ``z's >= 0`` gives ``b'z >= (A'z)'x >= min over the bounds``, impossible when ``b'z`` is smaller."""
-    z = project_dual(z, cones)
-    a = _transposed_product(A, z)
-    if transform is not None:
-        d = transform.shape[0]
-        a = np.concatenate([transform.T @ a[:d], a[d:]])
-    return float(b @ z) < _box_minimum(a, lower, upper)
+    if not np.all(np.isfinite(z)):
+        return False
+    with np.errstate(over="ignore", invalid="ignore"):
+        z = project_dual(z, cones)
+        a = _transposed_product(A, z)
+        if transform is not None:
+            d = transform.shape[0]
+            a = np.concatenate([transform.T @ a[:d], a[d:]])
+        left, right = float(b @ z), _box_minimum(a, lower, upper)
+    return math.isfinite(left) and math.isfinite(right) and left < right
