@@ -14,7 +14,10 @@ moment matrix, numerical failures (no clean solve or no answer), and the time pe
 max); the thesis's numbers beside ours. With --stratified, the stratified method on the same
 fixed-focal scenes in a last column (intrinsics ranges: focal [0.5, 2], the same small ranges).
 
-    .venv/bin/python -m bench.direct_autocalibration [--trials 10] [--stratified] [--time-limit 10]
+    .venv/bin/python -m bench.direct_autocalibration [--trials 10] [--stratified] [--time-limit 10] [--jobs 1]
+
+--jobs runs that many solves at once (each single-threaded); the load average is printed before
+and after, since times on a shared machine are inflated by the other work on it.
 """
 
 from __future__ import annotations
@@ -94,21 +97,35 @@ def column(rows: list[dict]) -> dict:
     return summary
 
 
+def _run(task: tuple) -> dict:
+    return trial(*task)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--trials", type=int, default=10)
     parser.add_argument("--stratified", action="store_true")
     parser.add_argument("--time-limit", type=float, default=10.0, help="per stratified stage (s)")
+    parser.add_argument("--jobs", type=int, default=1, help="solves run at once")
     args = parser.parse_args()
-    names, results = [], []
-    for focal, varying, chirality in COLUMNS:
-        rows = [trial(1000 + i, varying, chirality) for i in range(args.trials)]
-        names.append(f"{focal}/{'chir' if chirality == 'points' else 'no chir'}")
-        results.append(column(rows))
+    print(f"load average before: {' '.join(f'{x:.1f}' for x in os.getloadavg())} ({os.cpu_count()} cores)", flush=True)
+    tasks = [(1000 + i, varying, chirality) for _, varying, chirality in COLUMNS for i in range(args.trials)]
     if args.stratified:
-        rows = [trial(1000 + i, False, "none", "stratified", args.time_limit) for i in range(args.trials)]
+        tasks += [(1000 + i, False, "none", "stratified", args.time_limit) for i in range(args.trials)]
+    if args.jobs > 1:
+        from multiprocessing import Pool
+
+        with Pool(args.jobs) as pool:
+            rows = pool.map(_run, tasks, chunksize=1)
+    else:
+        rows = [_run(task) for task in tasks]
+    names, results = [], []
+    for k, (focal, _, chirality) in enumerate(COLUMNS):
+        names.append(f"{focal}/{'chir' if chirality == 'points' else 'no chir'}")
+        results.append(column(rows[k * args.trials:(k + 1) * args.trials]))
+    if args.stratified:
         names.append("stratified fixed")
-        results.append(column(rows))
+        results.append(column(rows[len(COLUMNS) * args.trials:]))
     print(f"Table 7.1 in miniature: {args.trials} trials per column (thesis: 100), 12 views, 15 points, 0.2% noise")
     print(f"{'quantity':<12}" + "".join(f"{n:>18}" for n in names))
     for key in ("df", "dr", "dp", "ds", "chirality"):
@@ -129,6 +146,7 @@ def main() -> None:
         print(line)
     print("(thesis's Table 7.1 in parentheses; rank_one and certified are ours: the thesis reports neither. "
           "Times are wall seconds per solve on this machine, shared.)")
+    print(f"load average after: {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
 
 
 if __name__ == "__main__":
