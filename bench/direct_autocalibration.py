@@ -15,6 +15,7 @@ max); the thesis's numbers beside ours. With --stratified, the stratified method
 fixed-focal scenes in a last column (intrinsics ranges: focal [0.5, 2], the same small ranges).
 
     .venv/bin/python -m bench.direct_autocalibration [--trials 10] [--stratified] [--time-limit 10] [--jobs 1]
+        [--rows rows.jsonl]   (or --from-rows rows.jsonl: the table of the trials run so far)
 
 --jobs runs that many solves at once (each single-threaded); the load average is printed before
 and after, since times on a shared machine are inflated by the other work on it.
@@ -28,6 +29,7 @@ for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
 import argparse  # noqa: E402
+import json  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -98,7 +100,13 @@ def column(rows: list[dict]) -> dict:
 
 
 def _run(task: tuple) -> dict:
-    return trial(*task)
+    return {"task": list(task), **trial(*task)}
+
+
+def _column_of(task: list) -> str:
+    if len(task) > 3 and task[3] == "stratified":
+        return "stratified fixed"
+    return f"{'varying' if task[1] else 'fixed'}/{'chir' if task[2] == 'points' else 'no chir'}"
 
 
 def main() -> None:
@@ -107,25 +115,44 @@ def main() -> None:
     parser.add_argument("--stratified", action="store_true")
     parser.add_argument("--time-limit", type=float, default=10.0, help="per stratified stage (s)")
     parser.add_argument("--jobs", type=int, default=1, help="solves run at once")
+    parser.add_argument("--rows", help="append each trial's row to this JSON-lines file as it ends")
+    parser.add_argument("--from-rows", help="print the table of the trials in this file, solving nothing")
     args = parser.parse_args()
-    print(f"load average before: {' '.join(f'{x:.1f}' for x in os.getloadavg())} ({os.cpu_count()} cores)", flush=True)
-    tasks = [(1000 + i, varying, chirality) for _, varying, chirality in COLUMNS for i in range(args.trials)]
-    if args.stratified:
-        tasks += [(1000 + i, False, "none", "stratified", args.time_limit) for i in range(args.trials)]
-    if args.jobs > 1:
-        from multiprocessing import Pool
-
-        with Pool(args.jobs) as pool:
-            rows = pool.map(_run, tasks, chunksize=1)
+    if args.from_rows:
+        with open(args.from_rows) as handle:
+            rows = [json.loads(line) for line in handle if line.strip()]
     else:
-        rows = [_run(task) for task in tasks]
-    names, results = [], []
-    for k, (focal, _, chirality) in enumerate(COLUMNS):
-        names.append(f"{focal}/{'chir' if chirality == 'points' else 'no chir'}")
-        results.append(column(rows[k * args.trials:(k + 1) * args.trials]))
-    if args.stratified:
+        print(f"load average before: {' '.join(f'{x:.1f}' for x in os.getloadavg())} ({os.cpu_count()} cores)",
+              flush=True)
+        # seed-major, so that an interrupted run (--rows) has every column about equally far
+        tasks = []
+        for i in range(args.trials):
+            tasks += [(1000 + i, varying, chirality) for _, varying, chirality in COLUMNS]
+            if args.stratified:
+                tasks.append((1000 + i, False, "none", "stratified", args.time_limit))
+        out = open(args.rows, "a") if args.rows else None
+        rows = []
+        if args.jobs > 1:
+            from multiprocessing import Pool
+
+            pool = Pool(args.jobs)
+            results = pool.imap_unordered(_run, tasks, chunksize=1)
+        else:
+            results = map(_run, tasks)
+        for row in results:
+            rows.append(row)
+            if out:
+                out.write(json.dumps(row) + "\n")
+                out.flush()
+        if args.jobs > 1:
+            pool.close()
+    names = [f"{focal}/{'chir' if chirality == 'points' else 'no chir'}" for focal, _, chirality in COLUMNS]
+    if any(_column_of(row["task"]) == "stratified fixed" for row in rows):
         names.append("stratified fixed")
-        results.append(column(rows[len(COLUMNS) * args.trials:]))
+    grouped = {name: [row for row in rows if _column_of(row["task"]) == name] for name in names}
+    results = [column(grouped[name]) for name in names]
+    counts = sorted({len(group) for group in grouped.values()})
+    args.trials = "/".join(map(str, counts))
     print(f"Table 7.1 in miniature: {args.trials} trials per column (thesis: 100), 12 views, 15 points, 0.2% noise")
     print(f"{'quantity':<12}" + "".join(f"{n:>18}" for n in names))
     for key in ("df", "dr", "dp", "ds", "chirality"):
@@ -146,7 +173,8 @@ def main() -> None:
         print(line)
     print("(thesis's Table 7.1 in parentheses; rank_one and certified are ours: the thesis reports neither. "
           "Times are wall seconds per solve on this machine, shared.)")
-    print(f"load average after: {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
+    if not args.from_rows:
+        print(f"load average after: {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
 
 
 if __name__ == "__main__":
