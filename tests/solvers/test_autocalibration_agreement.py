@@ -104,7 +104,8 @@ class TestDinosaur:
     WIDE = {"focal": [100, 5000], "aspect": [0.2, 5], "skew": [-200, 200], "principal_point": [[0, 720], [0, 576]]}
 
     @pytest.fixture(scope="class")
-    def results(self):
+    @classmethod
+    def results(cls):
         from geocert.solvers.datasets import load_dinosaur
 
         cameras, tracks = load_dinosaur(SHARED / "oxford_dinosaur")
@@ -115,8 +116,8 @@ class TestDinosaur:
                 rows += [y * cameras[v][2] - cameras[v][1] for v, (x, y) in zip(track.views, track.points)]
                 points.append(np.linalg.svd(np.array(rows))[2][-1])
         data = {"cameras": cameras.tolist(), "points": np.array(points).tolist(), "image_size": [720, 576]}
-        return {"stratified": solve(data, "stratified", intrinsics=self.WIDE),
-                "direct": solve(data, "direct", intrinsics=self.WIDE, chirality="centers")}
+        return {"stratified": solve(data, "stratified", intrinsics=cls.WIDE),
+                "direct": solve(data, "direct", intrinsics=cls.WIDE, chirality="centers")}
 
     def test_both_certify(self, results):
         for method, result in results.items():
@@ -170,7 +171,8 @@ class TestModelHouse:
     RANGES = {"focal": [400, 1000], "aspect": [0.9, 1.1], "skew": [-30, 30], "principal_point": [[300, 500], [200, 380]]}
 
     @pytest.fixture(scope="class")
-    def house(self):
+    @classmethod
+    def house(cls):
         from geocert.solvers.datasets import load_house
 
         cameras, points, _ = load_house(SHARED / "oxford_house")
@@ -178,9 +180,9 @@ class TestModelHouse:
         data = {"cameras": [(P @ frame).tolist() for P in cameras],
                 "points": np.linalg.solve(frame, np.c_[points, np.ones(len(points))].T).T.tolist(),
                 "image_size": [768, 576]}
-        results = {"stratified": solve(data, "stratified", intrinsics=self.RANGES, time_limit_s=15.0),
-                   "direct": solve(data, "direct", intrinsics=self.RANGES, chirality="centers")}
-        problem = pr.prepare(np.array(data["cameras"]), np.array(data["points"]), (768, 576), self.RANGES)
+        results = {"stratified": solve(data, "stratified", intrinsics=cls.RANGES, time_limit_s=15.0),
+                   "direct": solve(data, "direct", intrinsics=cls.RANGES, chirality="centers")}
+        problem = pr.prepare(np.array(data["cameras"]), np.array(data["points"]), (768, 576), cls.RANGES)
         vgg = {"plane_at_infinity": frame.T @ np.array([0.0, 0.0, 0.0, 1.0]),
                "dual_absolute_quadric": np.linalg.solve(frame, np.linalg.solve(frame, np.diag([1.0, 1, 1, 0])).T)}
         return problem, results, vgg
