@@ -77,7 +77,7 @@ def trial(seed: int, varying: bool, chirality: str, method: str = "direct", time
     stages = result["stages"]
     estimates = result["Ks"] if varying else [result["K"]] * len(Ks)
     if any(K is None for K in (estimates or [None])):
-        return {"failed": True, "time": elapsed}
+        return {"failed": True, "time": elapsed, "cpu": cpu, "error": f"no K ({stages[-1].get('reason')})"}
     rows = [errors(np.array(K), truth) for K, truth in zip(estimates, Ks)]
     out = {key: float(np.mean([row[key] for row in rows])) for key in rows[0]}
     last = stages[-1]
@@ -96,8 +96,8 @@ def column(rows: list[dict]) -> dict:
     summary.update(certified=float(np.mean([r.get("certified", False) for r in rows])),
                    rank_one=float(np.mean([r.get("rank_one", False) for r in rows])),
                    failed=sum(bool(r.get("failed")) for r in rows), median_s=float(np.median(times)),
-                   max_s=float(max(times)), median_cpu_s=float(np.median([r.get("cpu", np.nan) for r in rows])),
-                   max_cpu_s=float(max(r.get("cpu", np.nan) for r in rows)))
+                   max_s=float(max(times)), median_cpu_s=float(np.median([r["cpu"] for r in rows if "cpu" in r] or [np.nan])),
+                   max_cpu_s=float(max([r["cpu"] for r in rows if "cpu" in r] or [np.nan])))
     return summary
 
 
