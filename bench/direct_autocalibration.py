@@ -14,7 +14,11 @@ moment matrix, numerical failures (no clean solve or no answer), and the time pe
 max); the thesis's numbers beside ours. With --stratified, the stratified method on the same
 fixed-focal scenes in a last column (intrinsics ranges: focal [0.5, 2], the same small ranges).
 
-    .venv/bin/python -m bench.direct_autocalibration [--trials 10] [--stratified] [--time-limit 10]
+    .venv/bin/python -m bench.direct_autocalibration [--trials 10] [--stratified] [--time-limit 10] [--jobs 1]
+        [--rows rows.jsonl]   (or --from-rows rows.jsonl: the table of the trials run so far)
+
+--jobs runs that many solves at once (each single-threaded); the load average is printed before
+and after, since times on a shared machine are inflated by the other work on it.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
 import argparse  # noqa: E402
+import json  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -62,20 +67,21 @@ def trial(seed: int, varying: bool, chirality: str, method: str = "direct", time
         options.update(chirality=chirality, varying_focal=varying)
     else:
         options.update(time_limit_s=time_limit)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     try:
         result = solve_job({"kind": "autocalibration", "data": data, "options": options})
     except Exception as exc:  # a crash counts as a numerical failure
-        return {"failed": True, "time": time.perf_counter() - start, "error": str(exc)}
-    elapsed = time.perf_counter() - start
+        return {"failed": True, "time": time.perf_counter() - start, "cpu": time.process_time() - cpu,
+                "error": str(exc)}
+    elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu
     stages = result["stages"]
     estimates = result["Ks"] if varying else [result["K"]] * len(Ks)
     if any(K is None for K in (estimates or [None])):
-        return {"failed": True, "time": elapsed}
+        return {"failed": True, "time": elapsed, "cpu": cpu, "error": f"no K ({stages[-1].get('reason')})"}
     rows = [errors(np.array(K), truth) for K, truth in zip(estimates, Ks)]
     out = {key: float(np.mean([row[key] for row in rows])) for key in rows[0]}
     last = stages[-1]
-    out.update(time=elapsed, certified=all(s["certified"] for s in stages), chirality=in_front(result),
+    out.update(time=elapsed, cpu=cpu, certified=all(s["certified"] for s in stages), chirality=in_front(result),
                rank_one=(last.get("certificate") or {}).get("moment_rank") == 1,
                failed=any(s["status"] == "failed" for s in stages) or "AlmostSolved" in str(
                    (last.get("certificate") or {}).get("conic_status")))
@@ -90,8 +96,19 @@ def column(rows: list[dict]) -> dict:
     summary.update(certified=float(np.mean([r.get("certified", False) for r in rows])),
                    rank_one=float(np.mean([r.get("rank_one", False) for r in rows])),
                    failed=sum(bool(r.get("failed")) for r in rows), median_s=float(np.median(times)),
-                   max_s=float(max(times)))
+                   max_s=float(max(times)), median_cpu_s=float(np.median([r["cpu"] for r in rows if "cpu" in r] or [np.nan])),
+                   max_cpu_s=float(max([r["cpu"] for r in rows if "cpu" in r] or [np.nan])))
     return summary
+
+
+def _run(task: tuple) -> dict:
+    return {"task": list(task), **trial(*task)}
+
+
+def _column_of(task: list) -> str:
+    if len(task) > 3 and task[3] == "stratified":
+        return "stratified fixed"
+    return f"{'varying' if task[1] else 'fixed'}/{'chir' if task[2] == 'points' else 'no chir'}"
 
 
 def main() -> None:
@@ -99,16 +116,45 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=10)
     parser.add_argument("--stratified", action="store_true")
     parser.add_argument("--time-limit", type=float, default=10.0, help="per stratified stage (s)")
+    parser.add_argument("--jobs", type=int, default=1, help="solves run at once")
+    parser.add_argument("--rows", help="append each trial's row to this JSON-lines file as it ends")
+    parser.add_argument("--from-rows", help="print the table of the trials in this file, solving nothing")
     args = parser.parse_args()
-    names, results = [], []
-    for focal, varying, chirality in COLUMNS:
-        rows = [trial(1000 + i, varying, chirality) for i in range(args.trials)]
-        names.append(f"{focal}/{'chir' if chirality == 'points' else 'no chir'}")
-        results.append(column(rows))
-    if args.stratified:
-        rows = [trial(1000 + i, False, "none", "stratified", args.time_limit) for i in range(args.trials)]
+    if args.from_rows:
+        with open(args.from_rows) as handle:
+            rows = [json.loads(line) for line in handle if line.strip()]
+    else:
+        print(f"load average before: {' '.join(f'{x:.1f}' for x in os.getloadavg())} ({os.cpu_count()} cores)",
+              flush=True)
+        # seed-major, so that an interrupted run (--rows) has every column about equally far
+        tasks = []
+        for i in range(args.trials):
+            tasks += [(1000 + i, varying, chirality) for _, varying, chirality in COLUMNS]
+            if args.stratified:
+                tasks.append((1000 + i, False, "none", "stratified", args.time_limit))
+        out = open(args.rows, "a") if args.rows else None
+        rows = []
+        if args.jobs > 1:
+            from multiprocessing import Pool
+
+            pool = Pool(args.jobs)
+            results = pool.imap_unordered(_run, tasks, chunksize=1)
+        else:
+            results = map(_run, tasks)
+        for row in results:
+            rows.append(row)
+            if out:
+                out.write(json.dumps(row) + "\n")
+                out.flush()
+        if args.jobs > 1:
+            pool.close()
+    names = [f"{focal}/{'chir' if chirality == 'points' else 'no chir'}" for focal, _, chirality in COLUMNS]
+    if any(_column_of(row["task"]) == "stratified fixed" for row in rows):
         names.append("stratified fixed")
-        results.append(column(rows))
+    grouped = {name: [row for row in rows if _column_of(row["task"]) == name] for name in names}
+    results = [column(grouped[name]) for name in names]
+    counts = sorted({len(group) for group in grouped.values()})
+    args.trials = "/".join(map(str, counts))
     print(f"Table 7.1 in miniature: {args.trials} trials per column (thesis: 100), 12 views, 15 points, 0.2% noise")
     print(f"{'quantity':<12}" + "".join(f"{n:>18}" for n in names))
     for key in ("df", "dr", "dp", "ds", "chirality"):
@@ -119,7 +165,7 @@ def main() -> None:
             line += f"{text:>18}"
         print(line)
     for key, fmt in (("certified", "{:.2f}"), ("rank_one", "{:.2f}"), ("failed", "{:d}"), ("median_s", "{:.1f}"),
-                     ("max_s", "{:.1f}")):
+                     ("max_s", "{:.1f}"), ("median_cpu_s", "{:.1f}"), ("max_cpu_s", "{:.1f}")):
         line = f"{key:<12}"
         for i, summary in enumerate(results):
             text = fmt.format(summary[key])
@@ -128,7 +174,10 @@ def main() -> None:
             line += f"{text:>18}"
         print(line)
     print("(thesis's Table 7.1 in parentheses; rank_one and certified are ours: the thesis reports neither. "
-          "Times are wall seconds per solve on this machine, shared.)")
+          "median_s/max_s are wall seconds per solve on this machine, shared; "
+          "*_cpu_s the solve's own processor seconds, what it takes on an idle core.)")
+    if not args.from_rows:
+        print(f"load average after: {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
 
 
 if __name__ == "__main__":

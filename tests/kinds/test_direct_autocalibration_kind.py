@@ -9,7 +9,6 @@ import json
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 from pydantic import ValidationError
 
@@ -89,17 +88,3 @@ class TestVaryingFocal:
                                  capture_output=True, text=True, timeout=300)
         assert checked.returncode == 0, checked.stdout + checked.stderr
 
-
-def test_stratified_and_direct_agree_on_a_scene():
-    """The same noisy scene (the stratified tests' protocol) calibrated by both methods."""
-    scene = scenes.make_scene(10, 0.1, seed=21)
-    K = {}
-    for method in ("stratified", "direct"):
-        result = solve_job({"kind": "autocalibration", "data": scene.job_data(), "options": {"method": method}})
-        K[method] = np.array(result["K"])
-        determinacy = result["stages"][-1]["determinacy"]  # issue 19: well posed, the truth inside
-        assert determinacy["determined"], determinacy
-        focal = next(i for i in determinacy["intervals"] if i["name"] == "focal_x")
-        assert focal["lower"] <= scene.K[0, 0] <= focal["upper"]
-    assert abs(K["direct"][0, 0] / K["stratified"][0, 0] - 1) < 0.03
-    assert np.abs(K["direct"][:2, 2] - K["stratified"][:2, 2]).max() < 30

@@ -1,12 +1,21 @@
 """The moment (Lasserre) relaxation of direct autocalibration (thesis 7.4, 4.4), numpy only: the
 verifier rebuilds the same conic program from the raw cameras.
 
-The unknown is the absolute dual quadric Q (symmetric 4x4) as x = its 10 upper-triangular entries
-(ENTRIES' order). The polynomial program (thesis 7.11 with the objective 7.12):
+The unknown is the absolute dual quadric Q (symmetric 4x4, trace 1) as x = its 9 free upper-
+triangular entries (ENTRIES' order) measured from the centre Q0 = diag(1, 1, 1, 0) / 3, the classic
+linear estimate in the program's frame (direct_relaxation.conditioning_frame): x = Q_ab - Q0_ab.
+The polynomial program (thesis 7.11 with the objective 7.12):
 
     min  f(x) = sum_i (w_i11 - w_i22)^2 + w_i12^2 + w_i13^2 + w_i23^2,   w_i = P_i Q P_i^T
-    s.t. trace Q = 1 (Q_33 = 1 - Q_00 - Q_11 - Q_22, so x has 9 entries),  det Q = 0,  Q PSD,
+    s.t. trace Q = 1 (Q_33 = 1 - Q_00 - Q_11 - Q_22 = -x_0 - x_4 - x_7),  det Q = 0,  Q PSD,
          chirality (optional): R_k' adj(Q) R_l >= 0 for the chosen pairs of rows (k, l).
+
+Why centred: a moment relaxation is the same set under an affine change of variables, but not
+the same data for the solver. Measured from Q = e_4 e_4' (x = Q's entries themselves) the objective
+is a constant near 4 minus a linear term near 4 whose difference, the optimum, is near 1e-3: the
+interior-point solver's relative gap then needs 1e-9 to place the bound within 1e-4 of the optimum,
+and stalled ("AlmostSolved") on a third of Table 7.1's scenes; from Q0 the constant is the linear
+estimate's cost (1e-3 to 1e-1), and the same scenes solve cleanly (measured on five of them).
 
 For Q positive semidefinite of rank 3, adj(Q) = c u u' with c >= 0 and u the plane at infinity (Q's
 null vector), so R_k' adj(Q) R_l = c (u.R_k)(u.R_l): two rows on the same side of the plane. The
@@ -22,11 +31,13 @@ Order-d relaxation, variables y_a (the moments of degree 1..2d; y_0 = 1):
 - det Q's moment: an equality (trace Q = 1 is substituted, no rows).
 Conic form (Clarabel's, geocert.solvers.core.cones): minimise q'y s.t. A y + s = b, s in the cones.
 
-Safe bound (safe_bound): every entry of a PSD Q with trace 1 lies in [-1, 1] (|Q_ab| <=
-sqrt(Q_aa Q_bb) <= 1), so every moment y_a of a feasible Q lies in [-1, 1], and in [0, 1] when every
-exponent is even; the dual is projected into the cones but the moment matrix's block, which is
-corrected to zero the residual and whose negative eigenvalue is charged against tr M_d(y): a bound
-on f over the polynomial program's feasible set, whatever the solver.
+Safe bound (safe_bound): for Q PSD with trace 1, Q_aa lies in [0, 1] and |Q_ab| <= sqrt(Q_aa Q_bb)
+<= 1/2, so every x_k lies in [-1/3, 2/3] or [-1/2, 1/2], every moment y_a of a feasible Q in [-1, 1],
+and in [0, 1] when every exponent is even; and sum_k x_k^2 <= ||Q - Q0||_F^2 = ||Q||_F^2 -
+(2/3)(1 - Q_33) + 1/3 <= 4/3 (||Q||_F <= trace Q = 1), so tr M_d(y) = sum over the basis of x^(2 alpha)
+<= sum_{j <= d} (4/3)^j (TRACE_RATIO). The dual is projected into the cones but the moment matrix's
+block, which is corrected to zero the residual and whose negative eigenvalue is charged against
+tr M_d(y): a bound on f over the polynomial program's feasible set, whatever the solver.
 """
 
 from __future__ import annotations
@@ -41,6 +52,8 @@ import scipy.sparse as sp
 from geocert.solvers.core.cones import ConeSpec
 
 ENTRIES = tuple((a, b) for a in range(4) for b in range(a, 4))[:-1]  # x's order; Q_33 = 1 - Q_00 - Q_11 - Q_22
+CENTRE = np.array([1.0 / 3.0 if a == b else 0.0 for a, b in ENTRIES])  # Q0 = diag(1, 1, 1, 0) / 3's free entries
+TRACE_RATIO = 4.0 / 3.0  # sum_k x_k^2 over the feasible set is at most this (module docstring)
 N = len(ENTRIES)  # 9
 INDEX = {pair: k for k, pair in enumerate(ENTRIES)}
 INDEX.update({(b, a): k for (a, b), k in list(INDEX.items())})
@@ -48,18 +61,19 @@ MAX_ORDER = 3
 
 
 def q_of(x: np.ndarray) -> np.ndarray:
-    """Q (trace 1) from its 9 free entries."""
+    """Q (trace 1) from its 9 free entries' offsets from the centre."""
+    entries = np.asarray(x, dtype=float) + CENTRE
     Q = np.empty((4, 4))
     for k, (a, b) in enumerate(ENTRIES):
-        Q[a, b] = Q[b, a] = x[k]
-    Q[3, 3] = 1.0 - x[0] - x[4] - x[7]
+        Q[a, b] = Q[b, a] = entries[k]
+    Q[3, 3] = 1.0 - entries[0] - entries[4] - entries[7]
     return Q
 
 
 def x_of(Q: np.ndarray) -> np.ndarray:
-    """The free entries of Q scaled to trace 1."""
+    """The free entries of Q scaled to trace 1, less the centre's."""
     Q = Q / np.trace(Q)
-    return np.array([Q[a, b] for a, b in ENTRIES])
+    return np.array([Q[a, b] for a, b in ENTRIES]) - CENTRE
 
 
 # --- polynomials: (exponents (t, N) int, coefficients (t,)) ------------------------------------
@@ -80,17 +94,22 @@ def _mul(p: dict, q: dict) -> dict:
 
 
 def _entry(a: int, b: int) -> dict:
-    """Q_ab as a polynomial in x (Q_33 = 1 - Q_00 - Q_11 - Q_22)."""
+    """Q_ab as a polynomial in x: Q0_ab + x_k, and Q_33 = 1 - Q_00 - Q_11 - Q_22 = -x_0 - x_4 - x_7
+    (Q0's trace is 1)."""
     if (a, b) == (3, 3):
-        out = {tuple([0] * N): 1.0}
+        out = {}
         for k in (0, 4, 7):
             e = [0] * N
             e[k] = 1
             out[tuple(e)] = -1.0
         return out
     e = [0] * N
-    e[INDEX[(a, b)]] = 1
-    return {tuple(e): 1.0}
+    k = INDEX[(a, b)]
+    e[k] = 1
+    out = {tuple(e): 1.0}
+    if CENTRE[k]:
+        out[tuple([0] * N)] = float(CENTRE[k])
+    return out
 
 
 def _add(p: dict, q: dict, scale: float = 1.0) -> dict:
@@ -346,8 +365,8 @@ def safe_bound(program: Program, z: np.ndarray) -> tuple[float, float]:
     block Z is then changed, one svec entry per moment, so that q + A'z = 0 exactly (every moment
     has an entry in M_d), and only Z's PSD-ness is left to pay for: for y the moments of a
     feasible Q, q'y = -b'z + r'y + sum_cones <z, s> >= -b'z + r'y + min(0, lambda_min(Z)) tr M_d(y),
-    with tr M_d(y) = sum over the basis of x^(2 alpha) <= order + 1 (|x|^2 <= ||Q||_F^2 <= trace(Q)^2
-    = 1 for Q PSD, so each degree's sum is at most 1), and r'y charged to the box (rounding only)."""
+    with tr M_d(y) = sum over the basis of x^(2 alpha) <= sum_{j <= order} TRACE_RATIO^j (each degree
+    j's sum is at most (sum_k x_k^2)^j, module docstring), and r'y charged to the box (rounding only)."""
     from geocert.solvers.core.cones import project_dual, smat
 
     cones = program.cones
@@ -368,7 +387,8 @@ def safe_bound(program: Program, z: np.ndarray) -> tuple[float, float]:
     r = program.q + np.asarray(A.T @ z).ravel()
     with np.errstate(invalid="ignore"):
         charge = float(np.sum(np.minimum(r * program.lower, r * program.upper)))
-    bound = program.constant - float(program.b @ z) + charge + min(0.0, lam) * (program.moments.order + 1)
+    trace = sum(TRACE_RATIO ** j for j in range(program.moments.order + 1))
+    bound = program.constant - float(program.b @ z) + charge + min(0.0, lam) * trace
     return (bound if bound == bound else -np.inf), lam
 
 

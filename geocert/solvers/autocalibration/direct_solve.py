@@ -3,15 +3,31 @@ one SDP for Clarabel (assembled directly, sparse: no cvxpy, whose compilation of
 program with a 55 x 55 PSD block would only add to the solve), its safe bound, the quadric from
 the first-order moments, rounded to the feasible set and polished locally, and the rank test.
 
-Clarabel's KKT system carries the moment matrix's cone as a dense block (1540 svec rows at order
-2), so one solve takes seconds, not milliseconds; the supernodal "faer" factorisation is used
-(about half the time of the default's, measured), at tolerance 1e-9 with more static
-regularisation (1e-6): measured on four 12-view scenes (0.2% noise with each chirality option,
-and one without noise), the default 1e-8 ends "AlmostSolved" (stalled at iteration 11), 1e-7 on
-three of the four, 1e-6 "Solved" on all four in 14 to 19 iterations with bounds within 1e-9 of
-the optimum. Only "Solved" certifies (conic.py's status map); the bound is safe either way.
-"""
+Where a solve's time goes (order 2, Table 7.1's 12 views, profiled 2026-11-23): assembling the
+program takes 0.02 s and Clarabel's setup 0.1 s; the rest is 12 to 22 interior-point iterations,
+each dominated by the factorisation of the KKT system, in which the moment matrix's cone is a dense
+1540-row block and the other cones (Q's 40 x 40 localizer, six 10 x 10 ones) fill in around it:
+per iteration about the time of a dense Cholesky factorisation of order 2250 (0.44 s with numpy on
+this machine's one core, against 0.27 to 0.5 s measured per iteration when idle). The supernodal
+"faer" factorisation is about ten times faster than the default QDLDL on it (4.0 s against 44.5 s,
+one solve); a second thread did not help on the shared machine. Dropping the six 2 x 2 minors'
+localizers saves a third of each iteration but leaves the relaxation far from tight (gap 26%,
+moment rank 46 on seed 1000): they stay.
 
+Attempts (ATTEMPTS, in order, each Clarabel with more static regularisation than its default,
+1e-6: the default stalls at iteration 11 on these programs): tolerance 1e-8 first, which with the
+centred program (direct_relaxation's docstring) places the bound within about 1e-5 of the
+optimum relative, then 1e-9, then 1e-8 with regularisation 1e-7. The next attempt runs when a solve
+is not clean ("AlmostSolved" or worse), or when it is clean with a rank-one moment matrix but its
+gap misses the tolerance (the solver's accuracy, not the relaxation, is then at fault). Only
+"Solved" certifies (conic.py's status map); the bound is safe either way. Measured on Table 7.1's
+scenes (centred program): most end at the first attempt (13 to 17 iterations, 5 to 7 processor
+seconds under load); seed 1004 stalled "AlmostSolved" at both tolerances with regularisation 1e-6
+(16 and 17 s) and ended "Solved" with 1e-7 (5 s); seed 1006 (varying focal) is rank one with the
+second eigenvalue 1.9e-5 of the first and a gap of 1.1e-4 to 1.5e-4 relative at all three
+attempts: the order-2 relaxation is not quite tight there, and it is reported not certified.
+Regularisation 1e-7 first was no faster on four other scenes (13 to 17 iterations either way).
+"""
 from __future__ import annotations
 
 import math
@@ -44,15 +60,15 @@ class DirectStage:
     elapsed_s: float = 0.0
 
 
-TOLERANCES = (1e-9, 1e-8)
+ATTEMPTS = ((1e-8, 1e-6), (1e-9, 1e-6), (1e-8, 1e-7))  # (tolerance, static regularisation)
 
 
-def _settings(tolerance: float) -> clarabel.DefaultSettings:
+def _settings(tolerance: float, regularisation: float = 1e-6) -> clarabel.DefaultSettings:
     settings = clarabel.DefaultSettings()
     settings.verbose = False
     settings.max_iter = 60
     settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = tolerance
-    settings.static_regularization_constant = 1e-6
+    settings.static_regularization_constant = regularisation
     settings.max_threads = 1
     try:
         settings.direct_solve_method = "faer"
@@ -61,25 +77,26 @@ def _settings(tolerance: float) -> clarabel.DefaultSettings:
     return settings
 
 
-def solve_program(program: dr.Program) -> tuple[ConicStatus, np.ndarray | None, np.ndarray | None, str]:
-    """(status, y, z, raw status) of the first clean solve at TOLERANCES (an "AlmostSolved" solve
-    is repeated at the next, looser tolerance: the safe bound does not rest on the solver's
-    accuracy, only the status gate does); never raises on solver trouble."""
+def solve_program(program: dr.Program, enough=None) -> tuple[ConicStatus, np.ndarray | None, np.ndarray | None, str]:
+    """(status, y, z, raw status) of the first clean solve among ATTEMPTS that ``enough(y, z)``
+    accepts (default: any clean solve), else the last clean one, else the last with a dual (still a
+    safe bound); never raises on solver trouble."""
     answer = (ConicStatus.FAILED, None, None, "not solved")
-    for tolerance in TOLERANCES:
-        retry = _solve_once(program, tolerance)
-        if retry[2] is not None or answer[2] is None:  # a failed retry keeps the earlier dual (still a safe bound)
+    for tolerance, regularisation in ATTEMPTS:
+        retry = _solve_once(program, tolerance, regularisation)
+        clean = answer[0] is ConicStatus.OPTIMAL
+        if retry[0] is ConicStatus.OPTIMAL or (not clean and retry[2] is not None) or answer[2] is None:
             answer = retry
-        if answer[0] is ConicStatus.OPTIMAL:
+        if answer[0] is ConicStatus.OPTIMAL and (enough is None or enough(answer[1], answer[2])):
             break
     return answer
 
 
-def _solve_once(program: dr.Program, tolerance: float):
+def _solve_once(program: dr.Program, tolerance: float, regularisation: float):
     try:
         P = sp.csc_matrix((len(program.q), len(program.q)))
         solution = clarabel.DefaultSolver(P, program.q, program.A, program.b, clarabel_cones(program.cones),
-                                          _settings(tolerance)).solve()
+                                          _settings(tolerance, regularisation)).solve()
         raw = str(solution.status)
         status = map_clarabel_status(raw)
         y, z = np.array(solution.x, dtype=float), np.array(solution.z, dtype=float)
@@ -147,7 +164,18 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -
     clean = True
     for orientation in setup.orientations:
         program = dr.build(setup.cameras, orientation.pairs, order)
-        status, y, z, raw = solve_program(program)
+
+        def enough(y, z, program=program, orientation=orientation):
+            """A rank-one solve whose gap misses the tolerance is worth a more accurate attempt."""
+            if rank_test(program, y)[0] != 1:
+                return True
+            found = [dr.cost(setup.cameras, Q) for Q in candidates(setup, y, orientation)]
+            if not found:
+                return True
+            best = min(found)
+            return best - dr.safe_bound(program, z)[0] <= max(options.abs_gap, options.metric_rel_gap * abs(best))
+
+        status, y, z, raw = solve_program(program, enough)
         statuses.append(raw)
         if z is None:
             return DirectStage("failed", False, None, math.inf, -math.inf, order, conic_status=statuses,
