@@ -193,8 +193,8 @@ class TestWebPages:
         base = str(service.base_url).rstrip("/")
         page.get(base + "/")
         wait(page, lambda d: len(Select(d.find_element(By.ID, "template-kind")).options) > 1, 20)
-        assert not page.find_element(By.ID, "source-images").is_enabled()  # no reconstruction kind served yet
-        assert "reconstruction" in page.find_element(By.ID, "images-note").text
+        assert page.find_element(By.ID, "source-images").is_enabled()  # the reconstruction kind takes images
+        assert "sent as a reconstruction job" in page.find_element(By.ID, "images-note").text
         Select(page.find_element(By.ID, "template-kind")).select_by_value("triangulation")
         template = json.loads(page.find_element(By.ID, "job-json").get_attribute("value"))
         assert template["kind"] == "triangulation" and template["options"]["norm"] == "L2L2"
