@@ -15,6 +15,7 @@ from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.autocalibration.problem import (AutocalibrationOptions, Problem, StageProgress, bnb_options,
                                                      plane_from_input, plane_in_input, stage_callback,
                                                      upper_triangular_root)
+from geocert.solvers.core.bnb import asks_to_stop
 
 
 @dataclass
@@ -31,12 +32,7 @@ class Stratified:
 
 def announce(callback, stage: str, upper: float = math.inf) -> bool:
     """Progress at a stage's start (a search that certifies at its root reports nothing else)."""
-    if callback is None:
-        return False
-    try:
-        return bool(callback(StageProgress(0, 0, -math.inf, upper, math.inf, math.inf, 0.0, stage=stage)))
-    except StopIteration:
-        return True
+    return asks_to_stop(callback, StageProgress(0, 0, -math.inf, upper, math.inf, math.inf, 0.0, stage=stage))
 
 
 def solve(problem: Problem, options: AutocalibrationOptions, callback=None) -> Stratified:

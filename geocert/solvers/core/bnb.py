@@ -18,6 +18,17 @@ from typing import Any, Callable, Protocol
 import numpy as np
 
 
+def asks_to_stop(callback: Callable[[Any], Any] | None, progress: Any) -> bool:
+    """Report progress to a callback; True when it asks to stop, by returning a true value or
+    raising StopIteration (scipy.optimize's pattern). Every solver's progress goes through here."""
+    if callback is None:
+        return False
+    try:
+        return bool(callback(progress))
+    except StopIteration:
+        return True
+
+
 class BoxStatus:
     BOUNDED = "bounded"  # a trustworthy lower bound
     EMPTY = "empty"  # no point of the box can beat the incumbent (or no point at all)
@@ -183,18 +194,10 @@ def branch_and_bound(
             status = "not_certified"
             break
         elapsed = time.perf_counter() - start
-        if callback is not None:
-            progress = Progress(
-                nodes, len(heap), lower, upper_bound, upper_bound - lower,
-                relative_gap(upper_bound, lower), elapsed,
-            )
-            try:
-                if callback(progress):
-                    status = "cancelled"
-                    break
-            except StopIteration:
-                status = "cancelled"
-                break
+        if callback is not None and asks_to_stop(callback, Progress(
+                nodes, len(heap), lower, upper_bound, upper_bound - lower, relative_gap(upper_bound, lower), elapsed)):
+            status = "cancelled"
+            break
         if nodes >= options.max_nodes:
             status = "node_limit"
             break

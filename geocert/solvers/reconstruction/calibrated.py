@@ -41,6 +41,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 from scipy.spatial.transform import Rotation
 
+from geocert.solvers.core.bnb import asks_to_stop
 from geocert.solvers.core.geometry import InputError
 
 
@@ -524,12 +525,24 @@ def _register_by_essential(state: _State, options: CalibratedOptions) -> int | N
     return None
 
 
+def _triangulate_and_adjust(state, fixed: int, max_nfev: int, options, stats: dict, timing: dict) -> None:
+    """Triangulate the tracks the registered views now allow, adjust everything (view ``fixed``
+    held as the gauge) and drop the observations that end as outliers, timing both steps."""
+    start = time.perf_counter()
+    _triangulate_new(state, options)
+    timing["triangulation"] += time.perf_counter() - start
+    start = time.perf_counter()
+    stats["ba_nfev"].append(_bundle_adjust(state, fixed, max_nfev, options))
+    _remove_outliers(state, options)
+    timing["bundle_adjustment"] += time.perf_counter() - start
+
+
 def _grow(state: _State, fixed: int, options: CalibratedOptions, stats: dict, timing: dict,
           reasons_by_view: dict, callback) -> bool:
     """Steps 2-4 until no view can be added; True when the callback asked to stop."""
     last_tried: dict[int, int] = {}
     while not state.registered.all():
-        if _stop(callback, {"stage": "registration", "done": int(state.registered.sum()), "total": state.n_views}):
+        if asks_to_stop(callback, {"stage": "registration", "done": int(state.registered.sum()), "total": state.n_views}):
             return True
         start = time.perf_counter()
         v, failed = _register_next(state, options, last_tried)
@@ -543,13 +556,7 @@ def _grow(state: _State, fixed: int, options: CalibratedOptions, stats: dict, ti
         if v is None:
             return False
         reasons_by_view.pop(v, None)
-        start = time.perf_counter()
-        _triangulate_new(state, options)
-        timing["triangulation"] += time.perf_counter() - start
-        start = time.perf_counter()
-        stats["ba_nfev"].append(_bundle_adjust(state, fixed, options.ba_max_nfev, options))
-        _remove_outliers(state, options)
-        timing["bundle_adjustment"] += time.perf_counter() - start
+        _triangulate_and_adjust(state, fixed, options.ba_max_nfev, options, stats, timing)
     return False
 
 
@@ -638,15 +645,6 @@ def _merge(state: _State, tracks, Ks, fixed: int, options: CalibratedOptions, re
             "shared_views": [int(v) for v in shared], "common_points": int(len(common))}
 
 
-def _stop(callback, progress: dict) -> bool:
-    if callback is None:
-        return False
-    try:
-        return bool(callback(progress))
-    except StopIteration:
-        return True
-
-
 def _check_inputs(tracks, Ks) -> None:
     """InputError naming the item for a K that is not an invertible upper-triangular 3x3 with
     positive focal lengths, or a track whose views or points do not fit."""
@@ -711,13 +709,7 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
     stats["registered_by"].update({i: "initial pair", j: "initial pair"})
     state.R[i], state.t[i] = np.eye(3), np.zeros(3)
     state.R[j], state.t[j] = R, t
-    start = time.perf_counter()
-    _triangulate_new(state, options)
-    timing["triangulation"] += time.perf_counter() - start
-    start = time.perf_counter()
-    stats["ba_nfev"].append(_bundle_adjust(state, i, options.ba_max_nfev, options))
-    _remove_outliers(state, options)
-    timing["bundle_adjustment"] += time.perf_counter() - start
+    _triangulate_and_adjust(state, i, options.ba_max_nfev, options, stats, timing)
 
     if _grow(state, i, options, stats, timing, reasons_by_view, callback):
         status = "cancelled"
@@ -733,19 +725,13 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
         for v in merged["views_added"]:
             stats["registered_by"][v] = "merged"
             reasons_by_view.pop(v, None)
-        start = time.perf_counter()
-        _triangulate_new(state, options)
-        timing["triangulation"] += time.perf_counter() - start
-        start = time.perf_counter()
-        stats["ba_nfev"].append(_bundle_adjust(state, i, options.final_ba_max_nfev, options))
-        _remove_outliers(state, options)
-        timing["bundle_adjustment"] += time.perf_counter() - start
+        _triangulate_and_adjust(state, i, options.final_ba_max_nfev, options, stats, timing)
         if _grow(state, i, options, stats, timing, reasons_by_view, callback):
             status = "cancelled"
             return result()
 
     for _ in range(options.final_rounds):
-        if _stop(callback, {"stage": "bundle_adjustment", "done": _, "total": options.final_rounds}):
+        if asks_to_stop(callback, {"stage": "bundle_adjustment", "done": _, "total": options.final_rounds}):
             status = "cancelled"
             return result()
         start = time.perf_counter()

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from geocert.solvers.core.bnb import asks_to_stop
 from geocert.solvers.core.geometry import InputError
 
 # Limits on one image. The encoded size bounds the work of decoding and the memory a request can
@@ -216,15 +217,6 @@ def build_tracks(pair_matches: dict[tuple[int, int], np.ndarray], features_per_v
                   "dropped_short": short, "tracks_kept": len(kept)}
 
 
-def _stop(callback, progress: dict) -> bool:
-    if callback is None:
-        return False
-    try:
-        return bool(callback(progress))
-    except StopIteration:
-        return True
-
-
 def _match(desc_a: np.ndarray, desc_b: np.ndarray, options: FeatureOptions) -> np.ndarray:
     """Ratio-test (and mutual) matches as (m, 2) keypoint indices.
 
@@ -273,7 +265,7 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
                            edgeThreshold=options.edge_threshold)
     keypoints, descriptors = [], []
     for k, image in enumerate(images):
-        if _stop(callback, {"stage": "features", "done": k, "total": len(images)}):
+        if asks_to_stop(callback, {"stage": "features", "done": k, "total": len(images)}):
             return ImageTracks([], sizes, stats, "cancelled")
         if image.ndim == 3:
             image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
@@ -289,7 +281,7 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
     pair_matches: dict[tuple[int, int], np.ndarray] = {}
     verified: list[dict] = []
     for k, (i, j) in enumerate(pairs):
-        if _stop(callback, {"stage": "matches", "done": k, "total": len(pairs)}):
+        if asks_to_stop(callback, {"stage": "matches", "done": k, "total": len(pairs)}):
             return ImageTracks([], sizes, stats, "cancelled")
         rows = _match(descriptors[i], descriptors[j], options)
         inliers = verify_pair(keypoints[i][rows[:, 0]], keypoints[j][rows[:, 1]], options)
@@ -297,7 +289,7 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
             pair_matches[(i, j)] = rows[inliers]
             verified.append({"views": [i, j], "matches": len(rows), "inliers": int(inliers.sum())})
     stats["verified_pairs"] = verified
-    _stop(callback, {"stage": "matches", "done": len(pairs), "total": len(pairs)})
+    asks_to_stop(callback, {"stage": "matches", "done": len(pairs), "total": len(pairs)})
     timing["matches"] = time.perf_counter() - start
 
     start = time.perf_counter()

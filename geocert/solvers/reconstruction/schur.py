@@ -17,29 +17,24 @@ import numpy as np
 from scipy.sparse import coo_matrix
 
 
+def _central_columns(evaluate, values: np.ndarray, step: float) -> np.ndarray:
+    """d evaluate / d values by central differences, one coordinate at a time: ``values`` is
+    (M, k) (a row per observation) or (k,) (shared), ``evaluate`` maps it to (M, 2); (M, 2, k)."""
+    columns = []
+    for k in range(values.shape[-1]):
+        h = step * np.maximum(1.0, np.abs(values[..., k]))
+        plus, minus = values.copy(), values.copy()
+        plus[..., k] += h
+        minus[..., k] -= h
+        columns.append((evaluate(plus) - evaluate(minus)) / (2 * np.reshape(h, (-1, 1))))
+    return np.stack(columns, axis=-1) if columns else np.zeros(evaluate(values).shape + (0,))
+
+
 def _jacobians(residual, A, S, B, view, track, step=1e-6):
     Am, Bm = A[view], B[track]
-    ja = np.empty((len(view), 2, A.shape[1]))
-    for k in range(A.shape[1]):
-        h = step * np.maximum(1.0, np.abs(Am[:, k]))
-        plus, minus = Am.copy(), Am.copy()
-        plus[:, k] += h
-        minus[:, k] -= h
-        ja[:, :, k] = (residual(plus, S, Bm) - residual(minus, S, Bm)) / (2 * h)[:, None]
-    js = np.empty((len(view), 2, len(S)))
-    for k in range(len(S)):
-        h = step * max(1.0, abs(S[k]))
-        plus, minus = S.copy(), S.copy()
-        plus[k] += h
-        minus[k] -= h
-        js[:, :, k] = (residual(Am, plus, Bm) - residual(Am, minus, Bm)) / (2 * h)
-    jb = np.empty((len(view), 2, B.shape[1]))
-    for k in range(B.shape[1]):
-        h = step * np.maximum(1.0, np.abs(Bm[:, k]))
-        plus, minus = Bm.copy(), Bm.copy()
-        plus[:, k] += h
-        minus[:, k] -= h
-        jb[:, :, k] = (residual(Am, S, plus) - residual(Am, S, minus)) / (2 * h)[:, None]
+    ja = _central_columns(lambda a: residual(a, S, Bm), Am, step)
+    js = _central_columns(lambda shared: residual(Am, shared, Bm), S, step)
+    jb = _central_columns(lambda b: residual(Am, S, b), Bm, step)
     return ja, js, jb
 
 
