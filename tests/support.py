@@ -96,3 +96,21 @@ def service_job(rng, tracks: int, views: int = 4, **options) -> dict:
         body_tracks.append({"views": chosen, "points": points.tolist()})
     return {"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": body_tracks},
             "options": options}
+
+
+HOUSE_RANGES = {"focal": [400, 1000], "aspect": [0.9, 1.1], "skew": [-30, 30],
+                "principal_point": [[300, 500], [200, 380]]}
+
+
+def house_in_projective_frame(seed: int = 0) -> tuple[dict, np.ndarray]:
+    """The Oxford Model House (credit: Oxford VGG) as an autocalibration job's data: its 10
+    cameras and 672 points moved by a random projective frame H (cameras P H, points H^-1 X),
+    with H returned beside it."""
+    from geocert.solvers.datasets import load_house
+
+    cameras, points, _ = load_house(SHARED / "data" / "oxford_house")
+    frame = np.eye(4) + 0.3 * np.random.default_rng(seed).standard_normal((4, 4))
+    data = {"cameras": [(P @ frame).tolist() for P in cameras],
+            "points": np.linalg.solve(frame, np.c_[points, np.ones(len(points))].T).T.tolist(),
+            "image_size": [768, 576]}
+    return data, frame

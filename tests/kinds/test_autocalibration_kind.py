@@ -17,7 +17,7 @@ from geocert.kinds import get_kind
 from geocert.solvers.autocalibration import scenes
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.verify import verify_any
-from tests.support import ROOT
+from tests.support import HOUSE_RANGES, ROOT, house_in_projective_frame
 
 KIND = get_kind("autocalibration")
 SHARED = ROOT.parent / "shared" / "data"
@@ -220,19 +220,12 @@ class TestOxfordModelHouse:
     What must hold whatever the data: bounds below costs, the affine answer no worse than many
     local starts, nothing claimed that the verifier refuses."""
 
-    RANGES = {"focal": [400, 1000], "aspect": [0.9, 1.1], "skew": [-30, 30],
-              "principal_point": [[300, 500], [200, 380]]}
+    RANGES = HOUSE_RANGES
 
     @pytest.fixture(scope="class")
     @classmethod
     def house(cls):
-        from geocert.solvers.datasets import load_house
-
-        cameras, points, _ = load_house(SHARED / "oxford_house")
-        frame = np.eye(4) + 0.3 * np.random.default_rng(0).standard_normal((4, 4))
-        data = {"cameras": [(P @ frame).tolist() for P in cameras],
-                "points": np.linalg.solve(frame, np.c_[points, np.ones(len(points))].T).T.tolist(),
-                "image_size": [768, 576]}
+        data, frame = house_in_projective_frame()
         result = solve_job(job(data, intrinsics=cls.RANGES, time_limit_s=15.0, certificate="full"))
         return data, frame, result
 

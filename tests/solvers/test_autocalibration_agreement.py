@@ -23,7 +23,7 @@ from geocert.batch import solve_job
 from geocert.solvers.autocalibration import direct, scenes
 from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.autocalibration import problem as pr
-from tests.support import ROOT
+from tests.support import HOUSE_RANGES, ROOT, house_in_projective_frame
 
 SHARED = ROOT.parent / "shared" / "data"
 
@@ -168,18 +168,12 @@ class TestModelHouse:
     the stratified quadric's (1.8e-4 against 4.3e-2), the stratified plane's modulus cost 50
     times lower than the direct plane's (2.7e-8 against 1.3e-6)."""
 
-    RANGES = {"focal": [400, 1000], "aspect": [0.9, 1.1], "skew": [-30, 30], "principal_point": [[300, 500], [200, 380]]}
+    RANGES = HOUSE_RANGES
 
     @pytest.fixture(scope="class")
     @classmethod
     def house(cls):
-        from geocert.solvers.datasets import load_house
-
-        cameras, points, _ = load_house(SHARED / "oxford_house")
-        frame = np.eye(4) + 0.3 * np.random.default_rng(0).standard_normal((4, 4))
-        data = {"cameras": [(P @ frame).tolist() for P in cameras],
-                "points": np.linalg.solve(frame, np.c_[points, np.ones(len(points))].T).T.tolist(),
-                "image_size": [768, 576]}
+        data, frame = house_in_projective_frame()
         results = {"stratified": solve(data, "stratified", intrinsics=cls.RANGES, time_limit_s=15.0),
                    "direct": solve(data, "direct", intrinsics=cls.RANGES, chirality="centers")}
         problem = pr.prepare(np.array(data["cameras"]), np.array(data["points"]), (768, 576), cls.RANGES)
