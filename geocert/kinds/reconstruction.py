@@ -24,8 +24,8 @@ from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats,
 from geocert.kinds.triangulation import TrackOut, track_document
 from geocert.solvers.autocalibration.problem import StageProgress
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
-from geocert.solvers.fractional.items import TRACKS
 from geocert.solvers.reconstruction.options import ReconstructionOptions
+from geocert.solvers.reconstruction.verification import RECONSTRUCTION
 
 MAX_VIEWS = 1000
 MAX_TRACKS = 200_000
@@ -240,7 +240,7 @@ class ReconstructionKind:
     request_model = ReconstructionJob
     result_model = ReconstructionResult
     solution_fields = ("point", "at_infinity")
-    verification = TRACKS  # the claims are triangulations in the cameras the certificate's data states
+    verification = RECONSTRUCTION  # points as triangulations in the cameras stated; the returned cameras checked
     example = {"kind": "reconstruction", "options": {}, "data": _example_data()}
 
     def parse(self, data: Any, items: range | None = None) -> Parsed:

@@ -210,9 +210,16 @@ def _verify(document: Any, returned: dict | None) -> Report:
     if returned is not None and first is None:
         try:
             _check_returned(returned, document)
+            # What else a kind's result returns on the strength of its certificates (e.g. a
+            # reconstruction's cameras, against the camera certificate beside its points').
+            check_result = getattr(_adapter(document["kind"]), "check_result", None)
+            if check_result is not None:
+                check_result(returned, document, lambda other: _verify(other, None))
             tallies["returned"][0] += 1
         except Invalid as exc:
             fail(exc.check, None, exc.detail)
+        except Exception as exc:  # a malformed result is invalid, never a crash
+            fail("returned", None, f"{type(exc).__name__}: {exc}")
     report.first_failure = first
     report.valid = first is None and report.items_checked > 0
     if first is None and report.items_checked == 0:

@@ -119,6 +119,21 @@ class TestResult:
             assert camera["certified"] and camera["cost"] >= claim["lower_bound"] * (1 - 1e-9)
             assert camera["lower_bound"] <= camera["cost"]
 
+    def test_the_returned_cameras_are_checked_against_the_camera_certificate(self, solved):
+        camera = next(k for k, c in enumerate(solved["cameras"]) if c["certified"])
+        for change, check in [
+            (lambda r: r["cameras"][camera]["P"][0].__setitem__(3, r["cameras"][camera]["P"][0][3] + 1e-3), "returned"),
+            (lambda r: r["cameras"][camera].__setitem__("lower_bound", r["cameras"][camera]["lower_bound"] * 1.5 + 1),
+             "returned"),
+            (lambda r: r["cameras"][camera].__setitem__("cost", r["cameras"][camera]["cost"] + 1.0), "returned"),
+            (lambda r: r["camera_certificate"]["items"][camera].__setitem__("lower_bound", 1e9), "returned"),
+            (lambda r: r.pop("camera_certificate"), "returned"),
+        ]:
+            forged = json.loads(json.dumps(solved))
+            change(forged)
+            report = verify_any(forged)
+            assert not report.valid and report.first_failure["check"] == check, report.first_failure
+
     def test_a_cancelled_run_keeps_the_stages_before(self):
         from geocert.batch import solve_items
 
