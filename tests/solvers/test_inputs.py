@@ -86,3 +86,31 @@ class TestSolveTimeStatuses:
             {"views": [0, 1], "points": [[330.0, 250.0], [330.0, 250.0]]}]}}
         track = solve_job(body)["tracks"][0]
         assert track["certified"] and track["cost"] == pytest.approx(0.0, abs=1e-9)
+
+
+class TestNumberArray:
+    """The strict reader checks rows of floats in bulk and any other row entry by entry; either
+    way the first offending entry is named."""
+
+    @pytest.mark.parametrize("value, field", [
+        ([[1.0, 2.0], [3.0, float("nan")]], "x/1/1"),
+        ([[1.0, 2.0], [3.0, float("inf")]], "x/1/1"),
+        ([[1.0, 2.0], [3.0, True]], "x/1/1"),
+        ([[1.0, 2.0], [3, "4"]], "x/1/1"),
+        ([[1.0, 2.0], [3, 2**1100]], "x/1/1"),
+        ([[1.0, 2.0], [5e9, 1.0]], "x/1/0"),
+    ])
+    def test_the_first_bad_entry_is_named(self, value, field):
+        from geocert.solvers.core.geometry import number_array
+
+        with pytest.raises(InputError) as raised:
+            number_array(value, "x", "pairs", 2, limit=1e9)
+        assert raised.value.field == field
+
+    def test_good_rows_of_floats_and_ints_are_read(self):
+        from geocert.solvers.core.geometry import number_array
+
+        array = number_array([[1.0, 2], [3, 4.5]], "x", "pairs", 2, limit=1e9)
+        assert array.tolist() == [[1.0, 2.0], [3.0, 4.5]]
+        with pytest.raises(InputError, match="rows of one length"):
+            number_array([[1.0, 2.0], [3.0]], "x", "pairs", 2)

@@ -648,3 +648,42 @@ class TestHostileReviewRoundTwo:
         assert uncovered_part(Box(lo, hi), full, full_hi) is None
         monkeypatch.setattr(proof_module, "MAX_WORK", 3)
         assert uncovered_part(Box(lo, hi), full, full_hi) is not None
+
+
+class TestProgramCheck:
+    """The verifier compares the program it rebuilds with the raw data at the solution and at
+    points around it, all at once: a program differing from the data in one residual, or in one
+    depth's sign, is refused (a defect of the chart code could otherwise certify another problem)."""
+
+    @staticmethod
+    def altered(monkeypatch, change) -> None:
+        from geocert.solvers.fractional.items import TrackItem
+
+        original = TrackItem.__init__
+
+        def init(self, arrays, norm):
+            original(self, arrays, norm)
+            self.program.num, self.program.den = self.program.num.copy(), self.program.den.copy()
+            change(self.program)
+
+        monkeypatch.setattr(TrackItem, "__init__", init)
+
+    def test_the_genuine_program_passes(self, genuine):
+        assert failed_check(copy.deepcopy(genuine["certificate"])) is None
+
+    def test_a_residual_differing_from_the_data_is_refused(self, genuine, monkeypatch):
+        def change(program):
+            program.num[-1, 0, :] *= 1 + 1e-5
+        self.altered(monkeypatch, change)
+        assert failed_check(copy.deepcopy(genuine["certificate"])) == "program"
+
+    def test_a_depth_of_the_wrong_sign_is_refused(self, monkeypatch):
+        document = solve_job(six_view_job("L2L2", None))["certificate"]  # depths that vary (the README's don't)
+        assert failed_check(document) is None
+
+        def change(program):  # numerator and depth both negated: the residuals stay the data's
+            varying = np.flatnonzero(~program.exact)[0]  # an exact (constant) depth is not compared
+            program.num[varying] *= -1
+            program.den[varying] *= -1
+        self.altered(monkeypatch, change)
+        assert failed_check(document) == "program"

@@ -33,34 +33,51 @@ def number_array(value, field: str, what: str, ndim: int, limit: float | None = 
     """A JSON value of nested lists of numbers, taken strictly: no strings, no booleans, no
     non-finite values, exactly ``ndim`` levels, rows of one length; with ``limit``, every entry
     within +-limit. Raises InputError naming the first offending entry."""
-    if ndim == 1:
-        rows = [value]
-    else:
-        if not isinstance(value, list):
-            raise InputError(field, f"must be {what}")
-        rows = value
-    for i, row in enumerate(rows):
-        where = field if ndim == 1 else f"{field}/{i}"
-        if ndim == 3:
-            number_array(row, where, what, 2, limit)
-            continue
-        if not isinstance(row, list):
-            raise InputError(where, f"must be {what}")
-        for j, x in enumerate(row):
-            if not is_number(x):
-                kind = "a string" if isinstance(x, str) else "a boolean" if isinstance(x, bool) else \
-                    "not finite" if isinstance(x, float) else f"a {type(x).__name__}"
-                raise InputError(f"{where}/{j}", f"must be a finite number, got {kind}")
-            if limit is not None and abs(x) > limit:
-                raise InputError(f"{where}/{j}", f"magnitude {abs(x):g} exceeds the limit {limit:g} "
-                                                 "(rescale the coordinates, e.g. to pixels or metres)")
+    rows = _rows(value, field, what, ndim)
+    # Rows of floats only (the common case) are checked in bulk, by type here and by value below;
+    # any other row, and any failure below, goes through the entry-by-entry check, which names
+    # the first offending entry.
+    slow = [(where, row) for where, row in rows if not _FLOATS_ONLY.issuperset(map(type, row))]
+    for where, row in slow:
+        _check_entries(where, row, what, limit)
     try:
         array = np.array(value, dtype=float)
     except ValueError as exc:  # ragged
         raise InputError(field, f"must be {what} (rows of one length)") from exc
     if array.ndim != ndim:
         raise InputError(field, f"must be {what}")
+    if not (np.isfinite(array).all() and (limit is None or (np.abs(array) <= limit).all())):
+        for where, row in rows:
+            _check_entries(where, row, what, limit)
     return array
+
+
+_FLOATS_ONLY = frozenset((float,))
+
+
+def _rows(value, field: str, what: str, ndim: int) -> list[tuple[str, list]]:
+    """The innermost lists of a value of ``ndim`` levels, each with its field path."""
+    if ndim == 1:
+        if not isinstance(value, list):
+            raise InputError(field, f"must be {what}")
+        return [(field, value)]
+    if not isinstance(value, list):
+        raise InputError(field, f"must be {what}")
+    rows = []
+    for i, row in enumerate(value):
+        rows.extend(_rows(row, f"{field}/{i}", what, ndim - 1))
+    return rows
+
+
+def _check_entries(where: str, row: list, what: str, limit: float | None) -> None:
+    for j, x in enumerate(row):
+        if not is_number(x):
+            kind = "a string" if isinstance(x, str) else "a boolean" if isinstance(x, bool) else \
+                "not finite" if isinstance(x, float) else f"a {type(x).__name__}"
+            raise InputError(f"{where}/{j}", f"must be a finite number, got {kind}")
+        if limit is not None and abs(x) > limit:
+            raise InputError(f"{where}/{j}", f"magnitude {abs(x):g} exceeds the limit {limit:g} "
+                                             "(rescale the coordinates, e.g. to pixels or metres)")
 
 
 def normalised_cameras(cameras: np.ndarray) -> np.ndarray:

@@ -54,7 +54,9 @@ def nesting_depth(value: Any, limit: int) -> int:
             deepest = max(deepest, depth)
             if depth > limit:
                 return depth
-            stack.extend((x, depth + 1) for x in (v.values() if isinstance(v, dict) else v))
+            # Only containers go on the stack: a list of numbers is passed over in C.
+            stack.extend([(x, depth + 1) for x in (v.values() if isinstance(v, dict) else v)
+                          if type(x) is list or type(x) is dict or isinstance(x, (list, dict))])
     return deepest
 
 

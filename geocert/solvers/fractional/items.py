@@ -46,10 +46,12 @@ class TrackItem:
         image = proj[:, :2] / proj[:, 2:3]
         return image - self.points, proj[:, 2], 1e-12 * (np.abs(image) + np.abs(self.points))
 
-    def raw_parts(self, solution) -> tuple[np.ndarray, np.ndarray]:
-        """Each residual as numerator / depth, from the raw data only."""
-        proj = self.cameras @ solution
-        return proj[:, :2] - self.points * proj[:, 2:3], proj[:, 2]
+    def raw_parts_many(self, vs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each residual as numerator / depth, from the raw data only, at the points of the
+        program's variables ``vs`` (n, 3), at once."""
+        solutions = np.hstack([vs, np.ones((len(vs), 1))]) @ self.chart.T.T  # (n, 4)
+        proj = np.einsum("Nij,nj->nNi", self.cameras, solutions)  # (n, N, 3)
+        return proj[..., :2] - self.points * proj[..., 2:3], proj[..., 2]
 
     def depths_agree(self, depths: np.ndarray) -> bool:
         return bool(np.all(depths > 0))
@@ -84,6 +86,11 @@ class MapItem:
         proj = homogeneous @ solution.T
         return self.target * proj[:, -1:] - proj[:, :-1], proj[:, -1]
 
+    def raw_parts_many(self, vs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each residual as numerator / depth, from the raw data only, at each of ``vs``."""
+        parts = [self.raw_parts(self.from_program(v)) for v in vs]
+        return np.array([p[0] for p in parts]), np.array([p[1] for p in parts])
+
     def depths_agree(self, depths: np.ndarray) -> bool:
         return bool(np.all(depths > 0) or np.all(depths < 0))  # a map is defined up to its sign
 
@@ -102,10 +109,25 @@ class TrackItems:
     domain = ("every point in front of every camera (positive depth in every view, last homogeneous "
               "coordinate >= 0)")
 
+    def __init__(self):
+        # The cameras of the document read last (the list object itself, kept alive so that its
+        # identity cannot be reused, and its array): every track of a document shares them, so
+        # they are read once, not once per track.
+        self._cameras: tuple[object, np.ndarray] | None = None
+
+    def _read_cameras(self, value) -> np.ndarray:
+        remembered = self._cameras
+        if remembered is not None and remembered[0] is value:
+            return remembered[1]
+        cameras = numbers(value, "data/cameras", (None, 3, 4), "data")
+        cameras.setflags(write=False)
+        self._cameras = (value, cameras)
+        return cameras
+
     def read(self, data: dict, index: int) -> tuple:
         if not isinstance(data, dict):
             raise Invalid("data", "data must be an object")
-        cameras = numbers(data.get("cameras"), "data/cameras", (None, 3, 4), "data")
+        cameras = self._read_cameras(data.get("cameras"))
         tracks = data.get("tracks")
         if not isinstance(tracks, list) or not 0 <= index < len(tracks) or not isinstance(tracks[index], dict):
             raise Invalid("data", f"data/tracks/{index}: no such track")

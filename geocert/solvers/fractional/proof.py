@@ -102,26 +102,32 @@ def _sample_steps(d: int) -> tuple[np.ndarray, ...]:
 def _check_program(item, solution, scale: float) -> None:
     """The program rebuilt from the data is the data's problem: at the solution and at points
     around it, its residuals and depth signs are the raw data's. A program is a ratio of affine
-    maps, so agreement at generic points means agreement everywhere."""
+    maps, so agreement at generic points means agreement everywhere. All the points are compared
+    at once (arrays over points, observations and residual coordinates)."""
     v0 = item.to_program(solution)
     if v0 is None:
         raise Invalid("program", "the solution lies outside the program's chart")
-    samples = [v0] + [v0 + step * (1 + np.abs(v0)) for step in _sample_steps(len(v0))]
-    for v in samples:
-        numerators, depths = item.raw_parts(item.from_program(v))
-        V = np.append(v, 1.0)
-        ours, ours_depth = (item.program.num @ V) / scale, item.program.den @ V
-        # Where a point is (nearly) on a camera's centre, numerator and depth are both round-off:
-        # such observations are compared at the other points.
-        clear = np.abs(depths) > 1e-6 * np.max(np.abs(depths))
-        theirs, ours = numerators[clear] / depths[clear, None], ours[clear] / ours_depth[clear, None]
-        # np.allclose's test, |ours - theirs| <= atol + rtol |theirs|, without its overhead.
-        tolerance = 1e-9 * (1 + np.max(np.abs(theirs), initial=0)) + 1e-6 * np.abs(theirs)
-        if not (np.abs(ours - theirs) <= tolerance).all():
-            raise Invalid("program", "the program's residuals differ from the data's")
-        varying = ~item.program.exact & clear
-        relative = np.sign(ours_depth[varying]) * np.sign(depths[varying])
-        if relative.size and not item.depths_agree(relative):
+    samples = np.vstack([v0] + [v0 + step * (1 + np.abs(v0)) for step in _sample_steps(len(v0))])
+    numerators, depths = item.raw_parts_many(samples)  # (n, N, m), (n, N)
+    V = np.hstack([samples, np.ones((len(samples), 1))])
+    program = item.program
+    ours = np.einsum("Nmk,nk->nNm", program.num, V) / scale
+    ours_depth = V @ program.den.T
+    # Where a point is (nearly) on a camera's centre, numerator and depth are both round-off:
+    # such observations are compared at the other points.
+    clear = np.abs(depths) > 1e-6 * np.max(np.abs(depths), axis=1, keepdims=True)
+    safe_depths, safe_ours_depth = np.where(clear, depths, 1.0), np.where(clear, ours_depth, 1.0)
+    theirs = np.where(clear[..., None], numerators / safe_depths[..., None], 0.0)
+    ours = np.where(clear[..., None], ours / safe_ours_depth[..., None], 0.0)
+    # np.allclose's test, |ours - theirs| <= atol + rtol |theirs|, without its overhead; atol
+    # scaled by each point's largest residual.
+    largest = np.max(np.abs(theirs), axis=(1, 2), keepdims=True)
+    if not (np.abs(ours - theirs) <= 1e-9 * (1 + largest) + 1e-6 * np.abs(theirs)).all():
+        raise Invalid("program", "the program's residuals differ from the data's")
+    varying = ~program.exact & clear
+    relative = np.sign(ours_depth) * np.sign(depths)
+    for row, mask in zip(relative, varying):
+        if mask.any() and not item.depths_agree(row[mask]):
             raise Invalid("program", "the program's depth signs differ from the data's")
 
 
