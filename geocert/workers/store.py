@@ -15,6 +15,7 @@ import json
 import math
 import time
 import uuid
+import zlib
 from typing import Any, AsyncIterator
 
 import redis
@@ -34,6 +35,10 @@ class JobStore:
     def __init__(self, client: redis.Redis, result_ttl_s: int = 7 * 24 * 3600):
         self.r = client
         self.ttl = result_ttl_s
+        # The same server without decoding, for the values kept compressed (results).
+        pool = client.connection_pool
+        self.binary = redis.Redis(connection_pool=redis.ConnectionPool(
+            connection_class=pool.connection_class, **{**pool.connection_kwargs, "decode_responses": False}))
 
     @classmethod
     def from_url(cls, url: str, result_ttl_s: int = 7 * 24 * 3600, **options: Any) -> "JobStore":
@@ -104,7 +109,7 @@ class JobStore:
     def document(self, meta: dict) -> dict:
         """The job as the API shows it (and as webhooks deliver it)."""
         document = {key: meta.get(key) for key in self._SUMMARY + ("error", "webhook")}
-        document["result"] = self.result(meta["id"]) if meta["status"] in TERMINAL else None
+        document["result"] = self.result(meta["id"], meta) if meta["status"] in TERMINAL else None
         document["links"] = self.links(meta["id"])
         return document
 
@@ -183,9 +188,23 @@ class JobStore:
             return None
         return {name: None if value is None else json.loads(value) for name, value in zip(("status",) + names, raw)}
 
-    def result(self, job_id: str) -> dict | None:
-        raw = self.r.get(self.key(job_id, "result"))
-        return None if raw is None else json.loads(raw)
+    def result(self, job_id: str, meta: dict | None = None) -> dict | None:
+        text = self.result_text(job_id, meta)
+        return None if text is None else json.loads(text)
+
+    # A result is kept compressed (zlib, marked by the job's ``result_encoding``): a track's
+    # result is about 12 times its request, so the stored result is most of what a job leaves in
+    # Redis for result_ttl_s and most of what every read of it moves; compressed it is about a
+    # fifth (numbers' digits compress about 2x, the repeated names and explanations far more).
+    RESULT_COMPRESSION_LEVEL = 1  # zlib's fastest: most of the gain at a few ms per MB
+
+    def result_text(self, job_id: str, meta: dict | None = None) -> str | None:
+        """The stored result as JSON text (None when there is none)."""
+        encoding = meta.get("result_encoding") if meta is not None else self.field(job_id, "result_encoding")
+        if encoding == "zlib":
+            raw = self.binary.get(self.key(job_id, "result"))
+            return None if raw is None else zlib.decompress(raw).decode()
+        return self.r.get(self.key(job_id, "result"))  # stored before results were compressed
 
     # --- events ------------------------------------------------------------------------------
     def publish(self, job_id: str, event: str, data: dict, pipe=None) -> str | None:
@@ -284,7 +303,7 @@ class JobStore:
         gap = progress.get("gap_rel")
         pipe = self.r.pipeline()  # one round trip for the writes and reads, one for the aggregate
         if items:
-            pipe.hset(self.key(job_id, "items"), mapping={str(i): json.dumps(item) for i, item in items.items()})
+            pipe.hset(self.key(job_id, "items"), mapping=self._packed(items))
         pipe.eval(self._ADD_PROGRESS, 3, self.key(job_id, "chunkprogress"), self.key(job_id, "progressparts"),
                   self.key(job_id, "gaps"), str(start), figures, *self._SUMS,
                   repr(float(gap)) if gap is not None and math.isfinite(gap) else "")
@@ -322,7 +341,7 @@ class JobStore:
         so nothing is counted twice); returns how many items of the job are stored."""
         pipe = self.r.pipeline()
         if items:
-            pipe.hset(self.key(job_id, "items"), mapping={str(i): json.dumps(item) for i, item in items.items()})
+            pipe.hset(self.key(job_id, "items"), mapping=self._packed(items))
         pipe.hlen(self.key(job_id, "items"))
         pipe.zadd(self.RUNNING, {job_id: now()})  # touch()
         return pipe.execute()[-2]
@@ -332,9 +351,18 @@ class JobStore:
         or one that failed; False when another already has the claim."""
         return bool(self.r.set(self.key(job_id, "final"), "1", nx=True, ex=self.ttl))
 
+    # Items wait in Redis compressed too, one by one (zlib; an item stored as JSON text by an
+    # earlier version starts with "{" and is read as it is): the end reads them all.
+    def _packed(self, items: dict[int, dict]) -> dict[str, bytes]:
+        return {str(i): zlib.compress(json.dumps(item).encode(), self.RESULT_COMPRESSION_LEVEL) for i, item in items.items()}
+
+    @staticmethod
+    def _unpacked(raw: bytes) -> dict:
+        return json.loads(raw if raw[:1] == b"{" else zlib.decompress(raw))
+
     def all_items(self, job_id: str, total: int) -> list[dict]:
-        raw = self.r.hgetall(self.key(job_id, "items"))
-        return [json.loads(raw[str(index)]) for index in range(total)]
+        raw = self.binary.hgetall(self.key(job_id, "items"))
+        return [self._unpacked(raw[str(index).encode()]) for index in range(total)]
 
     def end(self, job_id: str, status: str, result: dict | None = None, error: dict | None = None,
             result_text: str | None = None) -> None:
@@ -344,11 +372,12 @@ class JobStore:
         result as its kind's model writes it (``batch.result_json``), stored in place of our own
         JSON of ``result`` and marked so (``result_form``) for the API to send as it is."""
         pipe = self.r.pipeline()
-        if result is not None and result_text is not None:
-            pipe.set(self.key(job_id, "result"), result_text)
-            pipe.hset(self.key(job_id), "result_form", json.dumps("model"))
-        elif result is not None:
-            pipe.set(self.key(job_id, "result"), json.dumps(result))
+        if result is not None:
+            if result_text is not None:
+                pipe.hset(self.key(job_id), "result_form", json.dumps("model"))
+            text = result_text if result_text is not None else json.dumps(result)
+            pipe.set(self.key(job_id, "result"), zlib.compress(text.encode(), self.RESULT_COMPRESSION_LEVEL))
+            pipe.hset(self.key(job_id), "result_encoding", json.dumps("zlib"))
         pipe.hset(self.key(job_id), mapping={"status": json.dumps(status), "finished_at": json.dumps(now()),
                                               "error": json.dumps(error)})
         pipe.delete(self.key(job_id, "items"), self.key(job_id, "chunkprogress"), self.key(job_id, "progressparts"),

@@ -94,3 +94,40 @@ class TestProgressSums:
             gaps = [p["gap_rel"] for p in last.values() if p["gap_rel"] is not None]
             assert aggregate["gap_rel"] == (max(gaps) if gaps else None)
         assert json.loads(jobs.r.hget(jobs.key(meta["id"]), "progress")) == aggregate
+
+
+class TestResultKeptCompressed:
+    """A finished job's result is kept compressed: what Redis holds and sends for it is a
+    fraction of its text, and it reads back exactly."""
+
+    def test_the_result_reads_back_exactly_and_is_stored_small(self, jobs):
+        request = request_of(300)
+        meta = jobs.create("triangulation", request, 300, 100, "someone", chunk_key="tracks")
+        items = [{"point": np.random.default_rng(i).normal(size=3).tolist(), "status": "optimal",
+                  "certificate": {"meaning": "lower <= (F X) / (d . X) <= upper for every point X of the scope"}}
+                 for i in range(300)]
+        result = {"kind": "triangulation", "tracks": items}
+        text = json.dumps(result, separators=(",", ":"))
+        jobs.end(meta["id"], "succeeded", result=result, result_text=text)
+        assert jobs.result_text(meta["id"]) == text
+        assert jobs.result(meta["id"]) == result
+        assert jobs.document(jobs.get(meta["id"]))["result"] == result
+        stored = jobs.r.strlen(jobs.key(meta["id"], "result"))
+        assert stored < 0.6 * len(text)  # the floats' digits alone compress about 2x
+
+    def test_a_result_stored_as_text_before_compression_still_reads(self, jobs):
+        meta = jobs.create("triangulation", request_of(3), 3, 100, "someone", chunk_key="tracks")
+        jobs.r.set(jobs.key(meta["id"], "result"), json.dumps({"kind": "triangulation", "tracks": []}))
+        assert jobs.result(meta["id"]) == {"kind": "triangulation", "tracks": []}
+
+    def test_items_wait_compressed_and_read_back_exactly(self, jobs):
+        meta = jobs.create("triangulation", request_of(40), 40, 20, "someone", chunk_key="tracks")
+        items = {i: {"point": [float(i), 0.5, -1.25], "status": "optimal", "reason": None,
+                     "determinacy": {"level": "parameters whose squared residuals exceed the optimum's by at most"}}
+                 for i in range(40)}
+        jobs.save_items(meta["id"], {i: items[i] for i in range(20)})
+        # an item stored as JSON text (by an earlier version, during an upgrade) reads as well
+        jobs.r.hset(jobs.key(meta["id"], "items"), "20", json.dumps(items[20]))
+        assert jobs.save_items(meta["id"], {i: items[i] for i in range(21, 40)}) == 40
+        assert jobs.all_items(meta["id"], 40) == [items[i] for i in range(40)]
+        assert jobs.r.hstrlen(jobs.key(meta["id"], "items"), "0") < len(json.dumps(items[0]))

@@ -243,7 +243,7 @@ def job_document(store: JobStore, job: dict) -> dict | Response:
     again took most of a large job's GET: over 1 s for 5,000 tracks on this machine under load."""
     if job["status"] not in TERMINAL or job.get("result_form") != "model":
         return store.document(job)
-    raw = store.r.get(store.key(job["id"], "result"))
+    raw = store.result_text(job["id"], job)
     shell = {key: job.get(key) for key in store._SUMMARY + ("error", "webhook")}
     text = Job.model_validate(shell | {"result": None, "links": store.links(job["id"])}).model_dump_json(by_alias=True)
     head, marker, tail = text.partition('"result":null')  # the one top-level key of that name (strings escape quotes)
