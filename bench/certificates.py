@@ -6,7 +6,12 @@ For each item, in one run: the solve with a summary certificate, the solve with 
 JSON size of its certificate, and the time `solvers.verify` takes to check it. Prints totals,
 medians and the ratio of verification to solve time (target: at most 1).
 
-    .venv/bin/python -m bench.certificates [--norm L2L2] [--tracks N] [--cameras N] [--rel-gap-maps 1e-2]
+``--job``: instead, the tracks as one triangulation job with ``certificate: "full"`` under each
+norm, as the service returns it: the whole result document's bytes per track (the certificate
+with the job's data, and the items; issue 18's target: at most 5 KiB on average) and the
+verifier's rate on it, tracks per second of one core's processor time (target: at least 2,000).
+
+    .venv/bin/python -m bench.certificates [--norm L2L2] [--tracks N] [--cameras N] [--rel-gap-maps 1e-2] [--job]
 """
 
 from __future__ import annotations
@@ -67,17 +72,46 @@ def report(name: str, figures: dict) -> None:
           f"per item: full {f['full_median_ms']:.1f} ms, verify {f['verify_median_ms']:.1f} ms (medians)")
 
 
+def job_figures(norm: str, cameras, tracks) -> None:
+    """One full-certificate job of the tracks: document bytes per track, verification rate."""
+    from geocert.batch import solve_job
+    from geocert.solvers.verify import verify_any
+
+    job = {"kind": "triangulation", "options": {"norm": norm, "certificate": "full"},
+           "data": {"cameras": cameras.tolist(),
+                    "tracks": [{"views": [int(v) for v in t.views], "points": t.points.tolist()} for t in tracks]}}
+    started = time.process_time()
+    result = solve_job(job)
+    solve_cpu = time.process_time() - started
+    text = json.dumps(result, separators=(",", ":"))
+    certificate = json.dumps(result["certificate"], separators=(",", ":"))
+    document = json.loads(text)
+    started = time.process_time()
+    report = verify_any(document)
+    verify_cpu = time.process_time() - started
+    n = len(tracks)
+    print(f"{norm}: {n} tracks, {report.items_checked} certified claims checked, valid {report.valid}; "
+          f"result document {len(text) / n / 1024:.2f} KiB/track (certificate {len(certificate) / n / 1024:.2f}, "
+          f"target <= 5); verify {verify_cpu:.1f} s CPU = {n / verify_cpu:.0f} tracks/s (target >= 2000); "
+          f"solve {solve_cpu:.1f} s CPU = {n / solve_cpu:.0f} tracks/s", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--norm", default="L2L2")
     parser.add_argument("--tracks", type=int, default=0, help="evenly spaced tracks (0: all 4983)")
     parser.add_argument("--cameras", type=int, default=0, help="evenly spaced cameras (0: all 36)")
     parser.add_argument("--rel-gap-maps", type=float, default=1e-2)
+    parser.add_argument("--job", action="store_true", help="the tracks as one job per norm (see above)")
     args = parser.parse_args()
     os.environ["GEOCERT_SELF_VERIFY"] = "0"  # time the solver alone; the verifier is timed on its own
     cameras, tracks = load_dinosaur(DATA / "oxford_dinosaur")
     if args.tracks:
         tracks = [tracks[i] for i in np.linspace(0, len(tracks) - 1, args.tracks).astype(int)]
+    if args.job:
+        for norm in ("L2L2", "L2L1", "L1L1"):
+            job_figures(norm, cameras, tracks)
+        return
     items = [(cameras[t.views], t.points) for t in tracks]
     report(f"Dinosaur tracks {args.norm}", measure("triangulation", items, triangulate, TriangulationOptions(norm=args.norm),
                                                    lambda r: {"point": r.point, "at_infinity": r.at_infinity}))

@@ -74,8 +74,11 @@ def main() -> None:
         read_job = output_bytes(redis_client) - read_before
         api_peak = peak_rss_kib(running.api.pid)
         before_result = output_bytes(redis_client)
-        result = running.client.get(f"/v1/jobs/{job_id}", timeout=600).json()["result"]
+        response = running.client.get(f"/v1/jobs/{job_id}", timeout=600)
         read_result = output_bytes(redis_client) - before_result
+        result_text_bytes = len(response.content)
+        result = response.json()["result"]
+        stored_result = int(redis_client.strlen(f"geocert:job:{job_id}:result"))
         certified = sum(1 for item in result["tracks"] if item["certified"]) if result else None
     growth = (api_peak - api_before) * 1024
     print(f"  status {document['status']}, {certified} of {args.tracks} certified")
@@ -83,6 +86,8 @@ def main() -> None:
     print(f"  Redis bytes read, submit to end: {read_job / 2**20:.1f} MiB = {read_job / size:.2f} x the request "
           f"(target <= 3x)")
     print(f"  Redis bytes read, fetching the result: {read_result / 2**20:.1f} MiB = {read_result / size:.2f} x the request")
+    print(f"  the job document sent: {result_text_bytes / 2**20:.1f} MiB = {result_text_bytes / size:.2f} x the request; "
+          f"its result as stored in Redis: {stored_result / 2**20:.1f} MiB")
     print(f"  API peak memory growth: {growth / 2**20:.0f} MiB = {growth / size:.2f} x the body (target <= 2x)")
 
 
