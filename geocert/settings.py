@@ -25,6 +25,10 @@ class Settings(BaseSettings):
     api_keys: str = ""
     # Largest request body accepted, in bytes (413 beyond it).
     max_body_bytes: int = 32 * 1024 * 1024
+    # A job body larger than this, of a kind with an item list, is read item by item (its items
+    # checked and stored a batch at a time), so that the API holds about the body's size, not
+    # Python objects for every number (app.streamed).
+    stream_threshold_bytes: int = 1 << 20
     # Most items (tracks or maps) in one job (413 beyond it).
     max_items_per_job: int = 200_000
     # Most observations or correspondences, summed over a job's items (413 beyond it).

@@ -51,7 +51,7 @@ class JobStore:
     # --- creation and reads ------------------------------------------------------------------
     def create(self, kind: str, request: dict, items_total: int, chunk_size: int, owner: str,
                callback_url: str | None = None, active_limit: int = 0, task_ids=None,
-               chunk_key: str | None = None) -> dict | None:
+               chunk_key: str | None = None, items_key: str | None = None) -> dict | None:
         """Record a new queued job, counted among the owner's active jobs, with its ``status``
         event and the ids its tasks will have (one per chunk; made here unless given), in one
         round trip. None when the owner already has ``active_limit`` jobs queued or running (0:
@@ -60,7 +60,11 @@ class JobStore:
         ``chunk_key``: the data list whose entries are the job's items one to one (a kind's
         ``chunk_key``). Those entries are kept one per element of a Redis list beside the rest of
         the request, so that a task reads its own items (``chunk_request``), not the whole request:
-        read traffic stays about the request's size whatever the number of chunks."""
+        read traffic stays about the request's size whatever the number of chunks.
+
+        ``items_key``: a Redis list already holding those entries' JSON texts (a large body's
+        items, written a batch at a time: app.streamed); it becomes the job's item list, and the
+        request's own list is ignored."""
         job_id = uuid.uuid4().hex
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
@@ -77,7 +81,7 @@ class JobStore:
         pipe = self.r.pipeline()
         pipe.eval(self._ADMIT, 1, self.owner_key(owner, "active"), job_id, active_limit)
         pipe.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in meta.items() if k != "task_ids"})
-        self._put_request(pipe, job_id, request, chunk_key)
+        self._put_request(pipe, job_id, request, chunk_key, items_key)
         pipe.zadd(self.owner_key(owner, "jobs"), {job_id: meta["created_at"]})
         self.publish(job_id, "status", {"status": "queued"}, pipe)
         if meta["task_ids"]:
@@ -136,15 +140,19 @@ class JobStore:
 
     _ITEMS_PER_PUSH = 10_000
 
-    def _put_request(self, pipe, job_id: str, request: dict, chunk_key: str | None) -> None:
+    def _put_request(self, pipe, job_id: str, request: dict, chunk_key: str | None, items_key: str | None) -> None:
         data = request.get("data")
         items = data.get(chunk_key) if chunk_key and isinstance(data, dict) else None
-        if not isinstance(items, list) or not items:
+        if (not isinstance(items, list) or not items) and items_key is None:
             pipe.set(self.key(job_id, "request"), json.dumps(request))
             return
         head = {**request, "data": {**data, chunk_key: f"geocert-items-{job_id}"}}
         pipe.set(self.key(job_id, "request"), json.dumps(head))
         pipe.hset(self.key(job_id), "request_items", json.dumps(chunk_key))
+        if items_key is not None:
+            pipe.rename(items_key, self.key(job_id, "request:items"))
+            pipe.persist(self.key(job_id, "request:items"))  # the job's keys expire when it ends
+            return
         for begin in range(0, len(items), self._ITEMS_PER_PUSH):
             pipe.rpush(self.key(job_id, "request:items"),
                        *(json.dumps(item) for item in items[begin:begin + self._ITEMS_PER_PUSH]))

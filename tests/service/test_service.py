@@ -20,6 +20,7 @@ from tests.servers import free_port
 from tests.support import random_cameras, service_job as triangulation_job
 
 BODY_LIMIT = 2_000_000
+STREAM_THRESHOLD = 20_000  # bodies over this are taken item by item (TestLargeBodies)
 
 
 pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run only
@@ -31,7 +32,8 @@ def service(tmp_path_factory):
     env = os.environ.copy()
     env.pop("GEOCERT_REDIS_URL", None)
     env.update(GEOCERT_DATA_DIR=str(tmp_path_factory.mktemp("geocert")), GEOCERT_MAX_BODY_BYTES=str(BODY_LIMIT),
-               GEOCERT_CHUNK_SIZES='{"triangulation": 40}', GEOCERT_PROGRESS_INTERVAL_S="0.05")
+               GEOCERT_CHUNK_SIZES='{"triangulation": 40}', GEOCERT_PROGRESS_INTERVAL_S="0.05",
+               GEOCERT_STREAM_THRESHOLD_BYTES=str(STREAM_THRESHOLD))
     process = subprocess.Popen([sys.executable, "-m", "geocert.app.cli", "serve", "--port", str(port), "--workers", "1",
                                 "--concurrency", "1"], env=env)
     base = f"http://127.0.0.1:{port}"
@@ -449,3 +451,47 @@ class TestStereoLines:
         body["data"]["rig"]["R"] = [[1, 0, 0], [0, 2, 0], [0, 0, 1]]
         problem = service.post("/v1/jobs", json=body).json()
         assert problem["status"] == 422 and problem["errors"][0]["field"] == "data/rig/R"
+
+
+class TestLargeBodies:
+    """A body over GEOCERT_STREAM_THRESHOLD_BYTES is taken item by item (app.streamed): the same
+    job, kept as the ordinary path keeps it, and the same errors naming the item."""
+
+    @staticmethod
+    def large_body(seed: int = 31) -> dict:
+        body = triangulation_job(np.random.default_rng(seed), tracks=150)
+        body["data"]["tracks"][5]["points"][0] = [320, 240]  # ints, which the model makes floats
+        assert len(json.dumps(body)) > STREAM_THRESHOLD
+        return body
+
+    def test_a_large_job_is_solved_and_its_request_kept_as_checked(self, service):
+        from geocert.app.schemas import JOB_REQUEST
+
+        body = self.large_body()
+        headers = {"Idempotency-Key": "large-31"}
+        response = service.post("/v1/jobs", json=body, headers=headers)
+        assert response.status_code == 202
+        job_id = response.json()["id"]
+        again = service.post("/v1/jobs", json=body, headers=headers)  # the same key and body: a replay
+        assert again.status_code == 200 and again.json()["id"] == job_id
+        job = wait_for(service, job_id)
+        assert job["status"] == "succeeded"
+        tracks = job["result"]["tracks"]
+        assert len(tracks) == 150 and all(t["certified"] for t in tracks)
+        for remote, mine in zip(tracks, solve_job(body)["tracks"]):
+            assert remote["cost"] == pytest.approx(mine["cost"], rel=1e-9, abs=1e-12)
+        kept = service.get(f"/v1/jobs/{job_id}/request").json()
+        assert kept == JOB_REQUEST.validate_python(body).model_dump(mode="json")
+        assert kept["data"]["tracks"][5]["points"][0] == [320.0, 240.0]
+
+    @pytest.mark.parametrize("change, field", [
+        (lambda tracks: tracks[120]["points"].__setitem__(1, ["x", 2]), "data/tracks/120/points/1/0"),
+        (lambda tracks: tracks[130]["views"].__setitem__(0, 99), "data/tracks/130/views/0"),
+        (lambda tracks: tracks.__setitem__(140, {"views": [0], "points": [[1.0, 2.0]]}), "data/tracks/140/views"),
+    ])
+    def test_a_bad_item_of_a_large_body_is_named(self, service, change, field):
+        body = self.large_body(32)
+        change(body["data"]["tracks"])
+        listed = [job["id"] for job in service.get("/v1/jobs", params={"limit": 100}).json()["jobs"]]
+        TestBadInput.assert_problem(None, service.post("/v1/jobs", json=body), 422, field)
+        assert [job["id"] for job in service.get("/v1/jobs", params={"limit": 100}).json()["jobs"]] == listed

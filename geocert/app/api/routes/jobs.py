@@ -13,14 +13,16 @@ import re
 from typing import Annotated
 from urllib.parse import urlencode
 
-from fastapi import APIRouter, Depends, Header, Query, Response
+from fastapi import APIRouter, Depends, Header, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
+from fastapi.routing import APIRoute
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
 from geocert.app.api.deps import Caller, JobStoreDep, error_responses, get_async_redis, rate_limited, stream_slot
 from geocert.settings import chunk_size_for, get_settings
 from geocert.app import lifecycle
-from geocert.app.errors import ApiProblem
+from geocert.app import streamed
+from geocert.app.errors import ApiProblem, is_json_media_type
 from geocert.app.schemas import JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
 from geocert.batch import parse_job
@@ -28,17 +30,52 @@ from geocert.workers import logs
 from geocert.workers.queue import submit_chunks, withdraw_queued
 from geocert.workers.store import REDIS_GONE, TERMINAL, JobStore, events, read_job
 
-router = APIRouter(prefix="/v1/jobs", tags=["jobs"], dependencies=[Depends(rate_limited)])
+class StreamedItemsRoute(APIRoute):
+    """POST routes of this router take a large JSON body of an itemised kind item by item
+    (app.streamed): the route's model checks the body's head, the items are checked and stored a
+    batch at a time by ``_submit``. Every other request is handled as usual."""
+
+    def get_route_handler(self):
+        handler = super().get_route_handler()
+        if "POST" not in self.methods:
+            return handler
+
+        async def route_handler(request: Request) -> Response:
+            length = request.headers.get("content-length", "")
+            if (length.isdigit() and int(length) > get_settings().stream_threshold_bytes
+                    and is_json_media_type(request.headers.get("content-type"))):
+                body = await request.body()
+                try:
+                    split = streamed.split_items(body.decode())
+                except UnicodeDecodeError:
+                    split = None
+                if split is not None:
+                    del body
+                    request._body = split.head.encode()  # what the route's model reads and checks
+                    request.state.streamed = split
+            return await handler(request)
+
+        return route_handler
 
 
-def _check_limits(kind, parsed, body, request: dict) -> int:
-    """Raises on a limit passed (lowering default options to the server's maxima); returns the item count."""
+router = APIRouter(prefix="/v1/jobs", tags=["jobs"], dependencies=[Depends(rate_limited)],
+                   route_class=StreamedItemsRoute)
+
+
+def _check_count(kind, items: int) -> None:
     settings = get_settings()
-    items = kind.count(parsed)
     if items > settings.max_items_per_job:
         raise ApiProblem(413, f"{items} {kind.item_key} exceed the limit of {settings.max_items_per_job} per job "
                               "(GEOCERT_MAX_ITEMS_PER_JOB)", f"data/{kind.item_key}")
-    points = kind.observations(parsed)
+
+
+def _check_limits(kind, parsed, body, request: dict, counts: tuple[int, int] | None = None) -> int:
+    """Raises on a limit passed (lowering default options to the server's maxima); returns the
+    item count. ``counts``: the items and observations, when not all of them are in ``parsed``
+    (a large body's, checked a batch at a time)."""
+    settings = get_settings()
+    items, points = counts if counts is not None else (kind.count(parsed), kind.observations(parsed))
+    _check_count(kind, items)
     if points > settings.max_points_per_job:
         raise ApiProblem(413, f"{points} observations exceed the limit of {settings.max_points_per_job} per job "
                               "(GEOCERT_MAX_POINTS_PER_JOB)", f"data/{kind.item_key}")
@@ -97,6 +134,7 @@ async def wait_for_end(job_id: str, seconds: float) -> bool:
     **error_responses(400, 409, 413, 415, 422)})
 async def submit_job(
     body: JobRequest,
+    request: Request,
     response: Response,
     store: JobStoreDep,
     owner: Caller,
@@ -110,7 +148,9 @@ async def submit_job(
     """Queue a job; answers 202 with its id and a Location to poll. With ``Prefer: wait=N`` the
     answer waits up to N seconds (at most 60) for the job to end: a job that ends in time comes
     back whole (200, its result or error), one that does not as the usual 202."""
-    document = await run_in_threadpool(_submit, body, response, store, owner, idempotency_key)
+    document = await run_in_threadpool(_submit, body, response, store, owner, idempotency_key,
+                                       getattr(request.state, "streamed", None))
+    request.state.streamed = None  # the body's text, not kept while waiting
     wait = preferred_wait(prefer)
     if wait is None:
         return document
@@ -128,34 +168,46 @@ async def submit_job(
     return finished
 
 
-def _submit(body, response: Response, store: JobStore, owner: str, idempotency_key: str | None) -> dict:
-    """The submission itself (synchronous Redis calls: run in FastAPI's thread pool)."""
+def _submit(body, response: Response, store: JobStore, owner: str, idempotency_key: str | None,
+            split: streamed.Split | None = None) -> dict:
+    """The submission itself (synchronous Redis calls: run in FastAPI's thread pool). ``split``:
+    a large body's items, when ``body`` is its head (StreamedItemsRoute)."""
     request = body.model_dump(mode="json")  # validated by its kind's model (discriminated on "kind")
     kind, parsed, _ = parse_job(request)  # the solvers' own checks: rank, indices, duplicates
-    items = _check_limits(kind, parsed, body, request)
-    digest = None
-    if idempotency_key is not None:  # the body's digest only for a key (a whole body hashed: not on every submit)
-        digest = hashlib.sha256(json.dumps(request, sort_keys=True).encode()).hexdigest()
-        earlier = store.remember_idempotent(owner, idempotency_key, digest)
-        if earlier is not None:
-            return _replay(store, earlier, digest, response)
+    upload = None
+    if split is not None:
+        _check_count(kind, split.count)  # before any item is read
+        upload = streamed.upload_items(store.r, split, request)
     try:
-        meta = _create(store, owner, kind, request, items)
-    except BaseException:
-        if idempotency_key is not None:
-            store.settle_idempotent(owner, idempotency_key, digest, None)  # free the key for a retry
-        raise
+        items = _check_limits(kind, parsed, body, request,
+                              (upload.count, upload.observations) if upload is not None else None)
+        digest = None
+        if idempotency_key is not None:  # the body's digest only for a key (a whole body hashed: not on every submit)
+            digest = upload.digest if upload is not None else \
+                hashlib.sha256(json.dumps(request, sort_keys=True).encode()).hexdigest()
+            earlier = store.remember_idempotent(owner, idempotency_key, digest)
+            if earlier is not None:
+                return _replay(store, earlier, digest, response)
+        try:
+            meta = _create(store, owner, kind, request, items, upload.key if upload is not None else None)
+        except BaseException:
+            if idempotency_key is not None:
+                store.settle_idempotent(owner, idempotency_key, digest, None)  # free the key for a retry
+            raise
+    finally:
+        if upload is not None:
+            store.r.delete(upload.key)  # gone already once it became a job's item list
     if idempotency_key is not None:
         store.settle_idempotent(owner, idempotency_key, digest, meta["id"])
     response.headers["Location"] = f"/v1/jobs/{meta['id']}"
     return store.document(meta)
 
 
-def _create(store: JobStore, owner: str, kind, request: dict, items: int) -> dict:
+def _create(store: JobStore, owner: str, kind, request: dict, items: int, items_key: str | None = None) -> dict:
     settings = get_settings()
     chunk = chunk_size_for(kind)
     meta = store.create(kind.name, request, items, chunk, owner, request.get("callback_url"),
-                        settings.max_active_jobs_per_key, chunk_key=kind.chunk_key)
+                        settings.max_active_jobs_per_key, chunk_key=kind.chunk_key, items_key=items_key)
     if meta is None:
         raise ApiProblem(429, f"this key already has {settings.max_active_jobs_per_key} jobs queued or running "
                               "(GEOCERT_MAX_ACTIVE_JOBS_PER_KEY); wait for one to end", headers={"Retry-After": "5"})

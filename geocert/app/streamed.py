@@ -1,0 +1,212 @@
+"""Large job bodies taken item by item, so that the API's memory stays near the body's size.
+
+A job of 200,000 tracks is a 26 MiB body; parsed whole (a dict, then a pydantic model, then its
+dump, then the parsed arrays), it took about 25 times that in Python objects. For a kind whose
+items sit in one list of its data (its ``chunk_key``), a body over ``stream_threshold_bytes`` (a
+setting) is instead:
+
+1. scanned once (``split_items``): the top-level object and its ``data`` member are walked, the
+   item list's elements located (their offsets only) without keeping them;
+2. handed to the route as its *head*, the body with that list cut to its first item, so that the
+   kind's request model checks everything but the items as for any body (the same errors, the
+   same defaults);
+3. the items then validated by the same model's item type, checked by the kind's own parser and
+   written to Redis a batch at a time (``upload_items``), under a temporary key that becomes the
+   job's item list when the job is created (``JobStore.create(items_key=...)``).
+
+Anything unexpected in the scan (not JSON, a repeated key, no item list) leaves the body to the
+ordinary path, which then answers as it always does. Errors name the item as the ordinary path
+does (``data/tracks/123/points``).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import re
+import uuid
+from array import array
+from dataclasses import dataclass, field
+from typing import Any
+
+from fastapi.exceptions import RequestValidationError
+from pydantic import TypeAdapter, ValidationError
+
+from geocert.kinds import KINDS
+
+BATCH = 2000  # items validated, parsed and written at a time
+UPLOAD_TTL_S = 3600  # a temporary item list outlives an API process that died mid-upload by this
+
+_WHITESPACE = re.compile(r"[ \t\n\r]*")
+_DECODER = json.JSONDecoder()  # what json.loads uses, so values decode as on the ordinary path
+
+
+@dataclass
+class Split:
+    """A body split into its head and its items' places."""
+
+    text: str
+    kind: str
+    chunk_key: str
+    head: str  # the body with the item list cut to its first item
+    spans: array  # start, end of each item in ``text``, flattened
+    count: int = field(init=False)
+
+    def __post_init__(self):
+        self.count = len(self.spans) // 2
+
+    def item_text(self, index: int) -> str:
+        return self.text[self.spans[2 * index]:self.spans[2 * index + 1]]
+
+
+class _Unexpected(Exception):
+    """The scan met something it does not handle: the ordinary path takes the body."""
+
+
+def _skip(text: str, i: int) -> int:
+    return _WHITESPACE.match(text, i).end()
+
+
+def _expect(text: str, i: int, char: str) -> int:
+    if i >= len(text) or text[i] != char:
+        raise _Unexpected
+    return i + 1
+
+
+def _value_end(text: str, i: int) -> int:
+    try:
+        return _DECODER.raw_decode(text, i)[1]
+    except (ValueError, RecursionError) as exc:
+        raise _Unexpected from exc
+
+
+def _object(text: str, i: int, member) -> int:
+    """Walks the object at ``i`` (``{``), calling ``member(key, start)`` for each member, which
+    returns where the value ends; returns where the object ends. Repeated keys are refused (the
+    ordinary parser keeps the last, which a single pass would have to undo)."""
+    i = _skip(text, _expect(text, i, "{"))
+    seen = set()
+    if i < len(text) and text[i] == "}":
+        return i + 1
+    while True:
+        if i >= len(text) or text[i] != '"':
+            raise _Unexpected
+        key, i = _DECODER.raw_decode(text, i)
+        if key in seen:
+            raise _Unexpected
+        seen.add(key)
+        i = _skip(text, _expect(text, _skip(text, i), ":"))
+        i = _skip(text, member(key, i))
+        if i < len(text) and text[i] == ",":
+            i = _skip(text, i + 1)
+            continue
+        return _expect(text, i, "}")
+
+
+def _array_spans(text: str, i: int) -> tuple[array, int]:
+    """The spans of the elements of the array at ``i`` (``[``), and where it ends."""
+    spans = array("q")
+    i = _skip(text, _expect(text, i, "["))
+    if i < len(text) and text[i] == "]":
+        return spans, i + 1
+    while True:
+        end = _value_end(text, i)
+        spans.append(i)
+        spans.append(end)
+        i = _skip(text, end)
+        if i < len(text) and text[i] == ",":
+            i = _skip(text, i + 1)
+            continue
+        return spans, _expect(text, i, "]")
+
+
+def split_items(text: str) -> Split | None:
+    """The body's head and its items' places, or None when the body is not a job of a kind with
+    an item list (or is anything the scan does not handle)."""
+    top: dict[str, tuple[int, int]] = {}
+    lists: dict[str, tuple[int, int, array]] = {}  # data's arrays: opening, end, element spans
+
+    def data_member(key: str, start: int) -> int:
+        if start < len(text) and text[start] == "[":
+            spans, end = _array_spans(text, start)
+            lists[key] = (start, end, spans)
+            return end
+        return _value_end(text, start)
+
+    def top_member(key: str, start: int) -> int:
+        end = _object(text, start, data_member) if key == "data" and text.startswith("{", start) \
+            else _value_end(text, start)
+        top[key] = (start, end)
+        return end
+
+    try:
+        end = _object(text, _skip(text, 0), top_member)
+        if _skip(text, end) != len(text) or "kind" not in top:
+            return None
+        name = json.loads(text[slice(*top["kind"])])
+    except (_Unexpected, ValueError, RecursionError):
+        return None
+    kind = KINDS.get(name) if isinstance(name, str) and name in KINDS else None
+    chunk_key = getattr(kind, "chunk_key", None)
+    if chunk_key is None or chunk_key not in lists or len(lists[chunk_key][2]) < 4:  # two items at least
+        return None
+    start, end, spans = lists[chunk_key]
+    head = text[:start] + "[" + text[spans[0]:spans[1]] + "]" + text[end:]
+    return Split(text, name, chunk_key, head, spans)
+
+
+@functools.cache
+def _items_adapter(kind_name: str) -> TypeAdapter:
+    """The kind's request model's type for its item list (e.g. list[TrackIn])."""
+    kind = KINDS.get(kind_name)
+    data_model = kind.request_model.model_fields["data"].annotation
+    return TypeAdapter(data_model.model_fields[kind.chunk_key].annotation)
+
+
+@dataclass
+class Upload:
+    key: str  # the Redis list holding the items' JSON texts, in order
+    count: int
+    observations: int
+    digest: str  # of the whole request (head with its items), for Idempotency-Key
+
+
+def upload_items(redis_client, split: Split, request: dict) -> Upload:
+    """Every item validated by the kind's model, checked by its parser (with the rest of the
+    request, whose ``data`` holds the checked head) and written as JSON to a temporary list, a
+    batch at a time. Raises RequestValidationError or InputError naming the item, after removing
+    what was written."""
+    kind = KINDS.get(split.kind)
+    adapter = _items_adapter(split.kind)
+    key = f"geocert:upload:{uuid.uuid4().hex}"
+    placeholder = {**request, "data": {**request["data"], split.chunk_key: None}}
+    digest = hashlib.sha256(json.dumps(placeholder, sort_keys=True).encode())
+    slots: list[Any] = [None] * split.count
+    data = {**request["data"], split.chunk_key: slots}
+    observations = 0
+    try:
+        for begin in range(0, split.count, BATCH):
+            stop = min(begin + BATCH, split.count)
+            raw = [_DECODER.decode(split.item_text(i)) for i in range(begin, stop)]
+            try:
+                items = adapter.dump_python(adapter.validate_python(raw), mode="json")
+            except ValidationError as exc:
+                raise RequestValidationError([
+                    {**error, "loc": ("body", "data", split.chunk_key, begin + error["loc"][0], *error["loc"][1:])}
+                    for error in exc.errors(include_url=False)]) from None
+            slots[begin:stop] = items
+            parsed = kind.parse(data, range(begin, stop))  # raises InputError naming the item
+            observations += kind.observations(parsed)
+            slots[begin:stop] = [None] * (stop - begin)
+            texts = [json.dumps(item) for item in items]
+            for item in items:
+                digest.update(json.dumps(item, sort_keys=True).encode())
+            pipe = redis_client.pipeline()
+            pipe.rpush(key, *texts)
+            pipe.expire(key, UPLOAD_TTL_S)
+            pipe.execute()
+    except BaseException:
+        redis_client.delete(key)
+        raise
+    return Upload(key, split.count, observations, digest.hexdigest())

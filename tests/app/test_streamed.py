@@ -1,0 +1,100 @@
+"""Large bodies taken item by item (app.streamed), against a real Redis: the scan finds exactly
+the items json.loads would, refuses what it does not handle, and the upload stores each item as
+the ordinary path would, naming a bad item as it would."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import redis
+from fastapi.exceptions import RequestValidationError
+
+from geocert.app.errors import field_path
+from geocert.app.schemas import JOB_REQUEST
+from geocert.app.streamed import split_items, upload_items
+from geocert.solvers.core.geometry import InputError
+from tests.support import triangulation_job
+
+
+@pytest.fixture(scope="module")
+def client(tmp_path_factory):
+    from geocert.workers.redis_server import start_embedded_redis
+
+    process, url = start_embedded_redis(tmp_path_factory.mktemp("redis"))
+    try:
+        yield redis.Redis.from_url(url, decode_responses=True)
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
+
+
+def body_of(tracks: int = 30, indent=None) -> tuple[dict, str]:
+    job = triangulation_job(np.random.default_rng(7), tracks=tracks, views=4, norm="L2L2")
+    job["data"]["tracks"][3]["points"][0] = [320, 240]  # ints, as a client may send them
+    return job, json.dumps(job, indent=indent)
+
+
+def head_request(split) -> dict:
+    return JOB_REQUEST.validate_json(split.head).model_dump(mode="json")
+
+
+class TestSplitItems:
+    @pytest.mark.parametrize("indent", [None, 2])
+    def test_the_items_and_the_head_are_what_the_parser_reads(self, indent):
+        job, text = body_of(indent=indent)
+        split = split_items(text)
+        assert split is not None and (split.kind, split.chunk_key, split.count) == ("triangulation", "tracks", 30)
+        assert [json.loads(split.item_text(i)) for i in range(30)] == job["data"]["tracks"]
+        head = json.loads(split.head)
+        assert head["data"]["tracks"] == job["data"]["tracks"][:1]
+        assert {k: v for k, v in head["data"].items() if k != "tracks"} == \
+            {k: v for k, v in job["data"].items() if k != "tracks"}
+        assert head["options"] == job["options"] and head["kind"] == job["kind"]
+
+    @pytest.mark.parametrize("text", [
+        "",
+        "[1, 2]",
+        '{"kind": "triangulation", "data": {"cameras": [], "tracks": [{}, {}]}',  # unclosed
+        '{"kind": "triangulation", "kind": "triangulation", "data": {"tracks": [{}, {}]}}',  # repeated key
+        '{"kind": "triangulation", "data": {"tracks": [{}, {}], "tracks": [{}, {}]}}',
+        '{"kind": "triangulation", "data": {"tracks": [{}]}}',  # one item: nothing to gain
+        '{"kind": "bogus", "data": {"tracks": [{}, {}]}}',
+        '{"kind": "triangulation", "data": {"tracks": [{}, {},]}}',  # a trailing comma
+        '{"kind": "triangulation", "data": {"tracks": [{}, {}]}} trailing',
+        '{"data": {"tracks": [{}, {}]}}',
+    ])
+    def test_what_the_scan_does_not_handle_goes_the_ordinary_way(self, text):
+        assert split_items(text) is None
+
+
+class TestUploadItems:
+    def test_items_are_stored_as_the_ordinary_path_stores_them(self, client):
+        job, text = body_of()
+        split = split_items(text)
+        upload = upload_items(client, split, head_request(split))
+        ordinary = JOB_REQUEST.validate_python(job).model_dump(mode="json")
+        assert client.lrange(upload.key, 0, -1) == [json.dumps(item) for item in ordinary["data"]["tracks"]]
+        assert (upload.count, upload.observations) == (30, 120)
+        assert 0 < client.ttl(upload.key) <= 3600  # gone by itself if the API dies before the job is made
+        client.delete(upload.key)
+
+    def test_a_bad_item_is_named_and_nothing_is_left(self, client):
+        job, _ = body_of()
+        job["data"]["tracks"][17]["points"][2] = ["a", 1]
+        split = split_items(json.dumps(job))
+        before = set(client.scan_iter("geocert:upload:*"))
+        with pytest.raises(RequestValidationError) as raised:
+            upload_items(client, split, head_request(split))
+        assert field_path(raised.value.errors()[0]["loc"]).startswith("data/tracks/17/points/2")
+        assert set(client.scan_iter("geocert:upload:*")) == before
+
+    def test_the_kinds_own_checks_name_the_item(self, client):
+        job, _ = body_of()
+        job["data"]["tracks"][25]["views"] = [0, 1, 2, 9]  # no camera 9
+        split = split_items(json.dumps(job))
+        with pytest.raises(InputError) as raised:
+            upload_items(client, split, head_request(split))
+        assert raised.value.field == "data/tracks/25/views/3"
+        assert not list(client.scan_iter("geocert:upload:*"))
