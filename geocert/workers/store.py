@@ -16,7 +16,7 @@ import math
 import time
 import uuid
 import zlib
-from typing import Any, AsyncIterator
+from typing import Any, AsyncIterator, Iterator
 
 import redis
 import redis.asyncio
@@ -205,6 +205,31 @@ class JobStore:
     # Redis for result_ttl_s and most of what every read of it moves; compressed it is about a
     # fifth (numbers' digits compress about 2x, the repeated names and explanations far more).
     RESULT_COMPRESSION_LEVEL = 1  # zlib's fastest: most of the gain at a few ms per MB
+
+    RESULT_PIECE_BYTES = 1 << 20  # compressed bytes read at a time when a result is sent
+
+    def result_pieces(self, job_id: str, meta: dict | None = None) -> Iterator[bytes] | None:
+        """The stored result's JSON text as UTF-8 pieces, read and decompressed a piece at a
+        time (GETRANGE), so that sending a large result holds one piece, not the whole (None
+        when there is none). A result removed while it is read ends with an error."""
+        encoding = meta.get("result_encoding") if meta is not None else self.field(job_id, "result_encoding")
+        key = self.key(job_id, "result")
+        if encoding != "zlib":
+            text = self.r.get(key)
+            return None if text is None else iter([text.encode()])
+        length = self.binary.strlen(key)
+        if not length:
+            return None
+
+        def pieces() -> Iterator[bytes]:
+            decompressor = zlib.decompressobj()
+            for start in range(0, length, self.RESULT_PIECE_BYTES):
+                yield decompressor.decompress(self.binary.getrange(key, start, start + self.RESULT_PIECE_BYTES - 1))
+            yield decompressor.flush()
+            if not decompressor.eof:
+                raise RuntimeError(f"the result of job {job_id} changed while it was sent")
+
+        return pieces()
 
     def result_text(self, job_id: str, meta: dict | None = None) -> str | None:
         """The stored result as JSON text (None when there is none)."""

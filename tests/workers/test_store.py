@@ -115,6 +115,15 @@ class TestResultKeptCompressed:
         stored = jobs.r.strlen(jobs.key(meta["id"], "result"))
         assert stored < 0.6 * len(text)  # the floats' digits alone compress about 2x
 
+    def test_the_result_is_sent_in_pieces_that_join_to_its_text(self, jobs, monkeypatch):
+        meta = jobs.create("triangulation", request_of(3), 3, 100, "someone", chunk_key="tracks")
+        result = {"kind": "triangulation", "tracks": [{"point": [float(i), 1.0 / (i + 1)]} for i in range(2000)]}
+        jobs.end(meta["id"], "succeeded", result=result)
+        monkeypatch.setattr(JobStore, "RESULT_PIECE_BYTES", 1000)  # many pieces
+        pieces = list(jobs.result_pieces(meta["id"]))
+        assert len(pieces) > 10 and b"".join(pieces).decode() == json.dumps(result)
+        assert jobs.result_pieces("no-such-job") is None
+
     def test_a_result_stored_as_text_before_compression_still_reads(self, jobs):
         meta = jobs.create("triangulation", request_of(3), 3, 100, "someone", chunk_key="tracks")
         jobs.r.set(jobs.key(meta["id"], "result"), json.dumps({"kind": "triangulation", "tracks": []}))
