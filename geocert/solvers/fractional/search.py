@@ -286,7 +286,10 @@ class BoxProblem:
         self.relaxation = Relaxation(program, B, complement, root_proof.functionals)
         self.tightening: list[TighteningProof] = []
         self.interior: np.ndarray | None = None  # a point of the domain (the first incumbent)
-        self._solver = ReusableConicProgram()
+        # Lean settings (no equilibration, no iterative refinement) at every size: relaxations are
+        # built well scaled (a normalised chart, costs scaled to about 1), and a lean solve that does
+        # not end cleanly is repeated with the full settings (core.conic._retried).
+        self._solver = ReusableConicProgram(lean=True)
 
     # --- BranchProblem interface -------------------------------------------------------------
     def root_box(self) -> Box:
@@ -340,7 +343,7 @@ class BoxProblem:
         relaxation under-estimates the cost. The tighter box makes the envelopes tighter, so a
         round can shrink it again. A solve that is not accurate leaves its side as it was. Each
         side is the safe bound of its dual, recorded in ``self.tightening``."""
-        solver = ReusableConicProgram()  # 2k objectives over one feasible set per round
+        solver = ReusableConicProgram(lean=True)  # 2k objectives over one feasible set per round
         for _ in range(rounds):
             data = self.conic_data(box, upper_bound, envelope=False)
             if data is None:
