@@ -238,3 +238,15 @@ def test_root_region_from_a_subset_of_points_is_proven_for_all(norm, monkeypatch
     assert result.certified, result.reason
     verify.verify_arrays("resection", (source, target), dataclasses.asdict(options),
                          verify.claim_of(result, matrix=result.matrix))
+
+
+@pytest.mark.parametrize("kind, count", [("resection", 5), ("resection", 6), ("resection", 40), ("homography2", 4),
+                                         ("homography2", 30), ("homography3", 5)])
+def test_dlt_fits_exact_data_with_few_or_many_points(kind, count):
+    """dlt's rows are built in one array operation and its null vector is taken from the thin SVD
+    when the rows are at least as many as the unknowns (the full one otherwise): on exact data,
+    with fewer equations than unknowns (5 points for a camera) or many, its map fits every point."""
+    rng = np.random.default_rng(seed("dlt", kind, str(count)))
+    _, source, target = scene(rng, kind, count)
+    M = dlt(source, target)
+    assert np.abs(apply(M, source) - target).max() < 1e-6
