@@ -14,6 +14,8 @@ for six points, so only --scip-cameras of each dataset); and the DLT + LM baseli
 from __future__ import annotations
 
 import argparse
+import os
+import pickle
 import time
 from pathlib import Path
 
@@ -21,7 +23,7 @@ import numpy as np
 
 from geocert.solvers.datasets import load_dinosaur, load_house
 from geocert.solvers.core.geometry import norm_cost
-from bench.mapfits import apply, fit_all
+from bench.mapfits import apply
 from geocert.solvers.fractional.maps import MapOptions, fit_map
 from geocert.solvers.fractional.triangulation import NORMS, triangulate
 
@@ -52,26 +54,56 @@ def main() -> None:
     parser.add_argument("--scip-cameras", type=int, default=3)
     parser.add_argument("--time-limit", type=float, default=60.0, help="per camera, seconds")
     parser.add_argument("--cameras", type=int, default=0, help="evenly spaced cameras per dataset (0: all)")
+    parser.add_argument("--problems", default="", help="a pickle of the problems: read when it exists, else "
+                        "written (so that runs of two versions resect the same points)")
     args = parser.parse_args()
-    datasets = {"Dinosaur": dinosaur_problems(), "House": house_problems()}
+    if args.problems and Path(args.problems).exists():
+        with open(args.problems, "rb") as f:
+            datasets = pickle.load(f)
+    else:
+        datasets = {"Dinosaur": dinosaur_problems(), "House": house_problems()}
+        if args.problems:
+            with open(args.problems, "wb") as f:
+                pickle.dump(datasets, f)
     if args.cameras:
         datasets = {name: [problems[i] for i in np.linspace(0, len(problems) - 1, args.cameras).astype(int)]
                     for name, problems in datasets.items()}
+    print(f"load average {load()}; time limit {args.time_limit} s a camera")
     print(f"{'data':9} {'norm':5} {'gap':>6} {'cams':>4} {'points med':>10} {'median s':>9} {'p95 s':>7} "
-          f"{'nodes med/p95':>14} {'certified':>9}")
+          f"{'nodes med/p95':>14} {'certified':>9} {'CPU s med/p95':>14}  load")
     for name, problems in datasets.items():
         sizes = [len(s) for s, _ in problems]
         best_l2 = [np.inf] * len(problems)  # the best certified L2L2 cost seen per camera
         for norm in args.norms.split(","):
             for gap in (float(g) for g in args.gaps.split(",")):
-                times, nodes, certified = fit_all(problems, norm, gap, best_l2, time_limit_s=args.time_limit)
+                times, cpu, nodes, certified = fit_timed(problems, norm, gap, best_l2, args.time_limit)
                 print(f"{name:9} {norm:5} {gap:6.0e} {len(problems):4d} {int(np.median(sizes)):10d} "
                       f"{np.median(times):9.2f} {np.percentile(times, 95):7.2f} "
-                      f"{np.median(nodes):6.0f}/{np.percentile(nodes, 95):<7.0f} {certified:5d}/{len(problems)}")
+                      f"{np.median(nodes):6.0f}/{np.percentile(nodes, 95):<7.0f} {certified:5d}/{len(problems)} "
+                      f"{np.median(cpu):6.2f}/{np.percentile(cpu, 95):<7.2f}  {load()}", flush=True)
         if "L2L2" in args.norms.split(","):
             baseline(name, problems, best_l2)
         if args.scip_cameras:
             scip_subsets(name, problems, args.scip_cameras)
+
+
+def load() -> str:
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def fit_timed(problems, norm: str, gap: float, best_l2: list[float], time_limit: float):
+    """bench.mapfits.fit_all with each camera's process (CPU) time beside its wall time."""
+    times, cpu, nodes, certified = [], [], [], 0
+    for index, (source, target) in enumerate(problems):
+        start, start_cpu = time.perf_counter(), time.process_time()
+        result = fit_map(source, target, MapOptions(norm=norm, rel_gap=gap, time_limit_s=time_limit))
+        cpu.append(time.process_time() - start_cpu)
+        times.append(time.perf_counter() - start)
+        nodes.append(result.nodes)
+        certified += result.certified
+        if norm == "L2L2" and result.certified:
+            best_l2[index] = min(best_l2[index], result.cost)
+    return times, cpu, nodes, certified
 
 
 def baseline(name: str, problems, certified_costs: list[float]) -> None:

@@ -33,6 +33,11 @@ from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions
 DINOSAUR = Path(__file__).resolve().parents[2] / "shared" / "data" / "oxford_dinosaur"
 
 
+def load() -> str:
+    """The 1, 5 and 15 minute load averages (the machine is shared: other work inflates wall time)."""
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
 def percentiles(values) -> tuple[float, float, float]:
     values = np.asarray(values, dtype=float)
     return tuple(float(np.percentile(values, q)) for q in (50, 95, 99))
@@ -40,16 +45,17 @@ def percentiles(values) -> tuple[float, float, float]:
 
 def solve_all(cameras, tracks, norm: str, indices) -> dict:
     options = TriangulationOptions(norm=norm, rel_gap=1e-3)
-    times, nodes, certified, results = [], [], 0, {}
+    times, cpu, nodes, certified, results = [], [], [], 0, {}
     for i in indices:
         track = tracks[i]
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         result = triangulate(cameras[track.views], track.points, options)
+        cpu.append(time.process_time() - start_cpu)
         times.append(time.perf_counter() - start)
         nodes.append(result.nodes)
         certified += result.certified
         results[i] = result
-    return {"times": times, "nodes": nodes, "certified": certified, "results": results}
+    return {"times": times, "cpu": cpu, "nodes": nodes, "certified": certified, "results": results}
 
 
 def scip_sample(cameras, tracks, norm: str, sample, ours: dict) -> dict:
@@ -77,12 +83,13 @@ def scip_sample(cameras, tracks, norm: str, sample, ours: dict) -> dict:
 def dlt_lm_sample(cameras, tracks, sample, ours: dict) -> dict:
     from bench.baselines import dlt_lm
 
-    behind, worse, below, times = 0, 0, 0, []
+    behind, worse, below, times, cpu = 0, 0, 0, [], []
     for i in sample:
         track = tracks[i]
         cams = cameras[track.views]
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         X = dlt_lm(cams, track.points)
+        cpu.append(time.process_time() - start_cpu)
         times.append(time.perf_counter() - start)
         depth = cams[:, 2] @ X
         proj = cams @ X
@@ -93,7 +100,7 @@ def dlt_lm_sample(cameras, tracks, sample, ours: dict) -> dict:
             below += cost < optimum * (1 - 1e-6)
         elif cost > optimum * (1 + 1e-6) + 1e-9:
             worse += 1
-    return {"behind": behind, "worse": worse, "below_optimum_behind": below, "times": times}
+    return {"behind": behind, "worse": worse, "below_optimum_behind": below, "times": times, "cpu": cpu}
 
 
 def service_batch(cameras, tracks, workers: int) -> dict:
@@ -153,7 +160,7 @@ def main() -> None:
     everything = range(len(tracks))
     sample = np.random.default_rng(0).choice(len(tracks), size=args.sample, replace=False).tolist()
     print(f"Dinosaur: {len(tracks)} tracks, {len(cameras)} cameras, rel_gap 1e-3, one process; "
-          f"machine speed (a fixed Python loop) {machine_speed_ms():.0f} ms")
+          f"machine speed (a fixed Python loop) {machine_speed_ms():.0f} ms; load average {load()}")
     print(f"{'norm':6} {'solver':8} {'tracks':>6} {'median ms':>10} {'p95 ms':>8} {'p99 ms':>8} "
           f"{'nodes med/p95/p99':>18} {'certified':>10}")
     solved = {}
@@ -161,9 +168,11 @@ def main() -> None:
         ours = solve_all(cameras, tracks, norm, everything)
         solved[norm] = ours
         t = [1e3 * v for v in percentiles(ours["times"])]
+        c = [1e3 * v for v in percentiles(ours["cpu"])]
         n = percentiles(ours["nodes"])
         print(f"{norm:6} {'geocert':8} {len(tracks):6d} {t[0]:10.2f} {t[1]:8.2f} {t[2]:8.2f} "
-              f"{n[0]:6.0f}/{n[1]:.0f}/{n[2]:.0f}".ljust(75) + f"{ours['certified'] / len(tracks):10.2%}")
+              f"{n[0]:6.0f}/{n[1]:.0f}/{n[2]:.0f}".ljust(75) + f"{ours['certified'] / len(tracks):10.2%}"
+              f"   CPU ms median/p95/p99 {c[0]:.2f}/{c[1]:.2f}/{c[2]:.2f}")
         if not args.no_scip:
             scip = scip_sample(cameras, tracks, norm, sample, ours)
             s = [1e3 * v for v in percentiles(scip["times"])]
@@ -179,13 +188,20 @@ def main() -> None:
               f"{1e3 * np.median(base['times']):.2f} ms; point behind a camera {base['behind']}, of which "
               f"{base['below_optimum_behind']} cost less than the certified optimum in front; costs more than "
               f"the certified optimum {base['worse']}")
+        ours_wall = [1e3 * solved["L2L2"]["times"][i] for i in sample]
+        ours_cpu = [1e3 * solved["L2L2"]["cpu"][i] for i in sample]
+        print(f"Same {len(sample)} tracks, median wall / CPU ms: geocert L2L2 {np.median(ours_wall):.3f} / "
+              f"{np.median(ours_cpu):.3f}, DLT + LM {1e3 * np.median(base['times']):.3f} / "
+              f"{1e3 * np.median(base['cpu']):.3f}: ratio {np.median(ours_wall) / (1e3 * np.median(base['times'])):.2f}x "
+              f"wall, {np.median(ours_cpu) / (1e3 * np.median(base['cpu'])):.2f}x CPU (target 2x); geocert p99 over all "
+              f"tracks {1e3 * np.percentile(solved['L2L2']['times'], 99):.2f} ms wall (target 5 ms); load average {load()}")
         if not args.no_service:
             total = sum(solved["L2L2"]["times"])
             batch = service_batch(cameras, tracks, args.workers)
             print(f"\nService, {args.workers} workers: {batch['tracks']} tracks ({batch['body_mb']:.1f} MB) submit to "
                   f"result {batch['wall']:.2f} s, status {batch['status']}, certified {batch['certified']}; "
                   f"in-process single-core solve time {total:.2f} s")
-    print(f"\nMachine speed at the end (the same loop): {machine_speed_ms():.0f} ms")
+    print(f"\nMachine speed at the end (the same loop): {machine_speed_ms():.0f} ms; load average {load()}")
 
 
 if __name__ == "__main__":

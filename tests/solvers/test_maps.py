@@ -214,3 +214,39 @@ class TestAgainstSCIP:
                 assert scip_cost == pytest.approx(ours.cost, rel=2.1e-3, abs=1e-7)
         assert checked >= instances - 1, f"SCIP answered on only {checked} of {instances}"
         assert closed >= must_close, f"SCIP reached its gap on only {closed} of {instances}"
+
+
+@pytest.mark.parametrize("norm", NORMS)
+def test_root_region_from_a_subset_of_points_is_proven_for_all(norm, monkeypatch):
+    """A map of many points bounds its root region by a subset of them first (search.ROOT_SUBSET),
+    each dual padded with zeros on the other points' cones: the proof still holds for the whole
+    region, the verifier accepts the full certificate, and the subset holds the reference point."""
+    import dataclasses
+
+    from geocert.solvers import verify
+    from geocert.solvers.fractional import search
+
+    monkeypatch.setattr(search, "ROOT_SUBSET", 12)
+    rng = np.random.default_rng(seed("root subset", norm))
+    _, source, target = scene(rng, "resection", 60)
+    target = target + rng.normal(size=target.shape) * 1e-3
+    chart = MapChart.build(source, target, norm)
+    subset = search._root_subset(chart.program)
+    assert len(subset) == 12 and chart.reference in subset
+    options = MapOptions(norm=norm, certificate="full")
+    result = fit_map(source, target, options)
+    assert result.certified, result.reason
+    verify.verify_arrays("resection", (source, target), dataclasses.asdict(options),
+                         verify.claim_of(result, matrix=result.matrix))
+
+
+@pytest.mark.parametrize("kind, count", [("resection", 5), ("resection", 6), ("resection", 40), ("homography2", 4),
+                                         ("homography2", 30), ("homography3", 5)])
+def test_dlt_fits_exact_data_with_few_or_many_points(kind, count):
+    """dlt's rows are built in one array operation and its null vector is taken from the thin SVD
+    when the rows are at least as many as the unknowns (the full one otherwise): on exact data,
+    with fewer equations than unknowns (5 points for a camera) or many, its map fits every point."""
+    rng = np.random.default_rng(seed("dlt", kind, str(count)))
+    _, source, target = scene(rng, kind, count)
+    M = dlt(source, target)
+    assert np.abs(apply(M, source) - target).max() < 1e-6

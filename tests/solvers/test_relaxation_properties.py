@@ -88,3 +88,36 @@ def test_dense_and_sparse_assembly_build_the_same_matrix(seed, views, norm, enve
     assert isinstance(dense.A, np.ndarray) and sp.issparse(sparse.A)
     assert np.array_equal(sparse.A.toarray(), dense.A)
     assert np.array_equal(sparse.b, dense.b) and sparse.cones == dense.cones
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), views=st.integers(2, 6), spoil=st.floats(0.0, 3.0))
+def test_root_bounds_are_each_duals_safe_bound(seed, views, spoil):
+    """relaxation.root_bounds takes every root dual's safe bound at once: each equals
+    cones.safe_lower_bound of that dual alone, also for duals pushed out of the dual cone, and a
+    dual holding inf or NaN bounds nothing (-inf below, +inf above), the others unaffected."""
+    from geocert.solvers.core.cones import safe_lower_bound
+
+    rng = np.random.default_rng(seed)
+    cameras = random_cameras(rng, views)
+    _, points = noisy_track(rng, cameras, noise_px=3.0)
+    _, prepared = prepare_track(cameras, points, TriangulationOptions())
+    if not isinstance(prepared, Prepared):
+        return
+    proof = prepared.root_proof
+    region = relaxation.residual_region(prepared.problem.program, proof.gamma)
+    F = proof.functionals
+    duals = [np.asarray(z) + spoil * rng.normal(size=len(z)) * np.abs(z).max() for z in proof.duals]
+    if rng.uniform() < 0.5:
+        duals[int(rng.integers(len(duals)))][int(rng.integers(len(duals[0])))] = rng.choice([np.inf, np.nan])
+    lower, upper = relaxation.root_bounds(region, F, duals, proof.claim_lower, proof.claim_upper)
+    A, b, cones = region
+    transform = np.linalg.inv(F)
+    for j in range(len(F)):
+        alone = [safe_lower_bound(F[j], A, b, cones, duals[2 * j], proof.claim_lower, proof.claim_upper, transform),
+                 -safe_lower_bound(-F[j], A, b, cones, duals[2 * j + 1], proof.claim_lower, proof.claim_upper, transform)]
+        for ours, theirs in zip((lower[j], upper[j]), alone):
+            if np.isinf(theirs):
+                assert ours == theirs
+            else:
+                assert abs(ours - theirs) <= 1e-12 * (1 + abs(theirs))

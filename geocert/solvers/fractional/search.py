@@ -86,12 +86,19 @@ def root_region(program: FractionalProgram, B: np.ndarray, gamma: float) -> tupl
     gives a region holding every better point, and a different problem often solves cleanly.
     """
     rows = complete_functionals(B)
+    subset = _root_subset(program)
     # Inflated a little from the start: every point whose residuals are within gamma (the
     # incumbent, and so the solution returned) is then strictly inside the region, which is the
     # witness a verifier asks for (verify._check_root).
     for inflation in (1 + 1e-6, 1.001, 1.01):
         region = residual_region(program, gamma * inflation)
-        state, lo, hi, duals = _root_region_once(region, rows)
+        state = "not_certified"
+        if subset is not None:
+            state, lo, hi, duals = _root_region_once(residual_region(_restricted(program, subset), gamma * inflation), rows)
+            if state == "ok":
+                duals = [_padded(z, subset, program) for z in duals]
+        if state != "ok":
+            state, lo, hi, duals = _root_region_once(region, rows)
         if state != "not_certified":
             break
     if state != "ok":
@@ -101,6 +108,44 @@ def root_region(program: FractionalProgram, B: np.ndarray, gamma: float) -> tupl
     if proof is None:
         return "not_certified", None, None
     return "ok", Box(proof.lower[:k].copy(), proof.upper[:k].copy()), proof
+
+
+# Programs of more observations than this bound their root region by a subset of them first.
+ROOT_SUBSET = 64
+
+
+def _root_subset(program: FractionalProgram) -> np.ndarray | None:
+    """Observations whose residual region holds the whole program's (it has fewer constraints):
+    the exact ones and, greedily, the varying ones farthest apart in their depth rows (the
+    region's extent along the depths is set by its extreme points). None for small programs."""
+    count = len(program.den)
+    if count <= ROOT_SUBSET:
+        return None
+    rows = program.den / np.maximum(lengths(program.den, 1), 1e-300)[:, None]
+    chosen = list(np.flatnonzero(program.exact)) or [0]
+    distance = np.min(lengths(rows[:, None, :] - rows[None, chosen, :], 2), axis=1)
+    while len(chosen) < ROOT_SUBSET:
+        best = int(np.argmax(distance))
+        if distance[best] <= 0:
+            break
+        chosen.append(best)
+        distance = np.minimum(distance, lengths(rows - rows[best], 1))
+    return np.sort(np.array(chosen))
+
+
+def _restricted(program: FractionalProgram, subset: np.ndarray) -> FractionalProgram:
+    return FractionalProgram(program.num[subset], program.den[subset], program.exact[subset], program.linear,
+                             program.norm, program.max_residual)
+
+
+def _padded(z: np.ndarray, subset: np.ndarray, program: FractionalProgram) -> np.ndarray:
+    """A dual vector of the subset's residual region as one of the whole program's: zero on the
+    other observations' cones (a point of their dual cone), so it proves the same bound."""
+    L, per = len(program.linear), program.num.shape[1] + 1
+    full = np.zeros(L + per * len(program.den))
+    full[:L] = z[:L]
+    full[L:].reshape(-1, per)[subset] = z[L:].reshape(-1, per)
+    return full
 
 
 def _root_region_once(region: tuple[np.ndarray, np.ndarray, ConeSpec], rows: np.ndarray):
@@ -241,7 +286,10 @@ class BoxProblem:
         self.relaxation = Relaxation(program, B, complement, root_proof.functionals)
         self.tightening: list[TighteningProof] = []
         self.interior: np.ndarray | None = None  # a point of the domain (the first incumbent)
-        self._solver = ReusableConicProgram()
+        # Lean settings (no equilibration, no iterative refinement) at every size: relaxations are
+        # built well scaled (a normalised chart, costs scaled to about 1), and a lean solve that does
+        # not end cleanly is repeated with the full settings (core.conic._retried).
+        self._solver = ReusableConicProgram(lean=True)
 
     # --- BranchProblem interface -------------------------------------------------------------
     def root_box(self) -> Box:
@@ -295,7 +343,7 @@ class BoxProblem:
         relaxation under-estimates the cost. The tighter box makes the envelopes tighter, so a
         round can shrink it again. A solve that is not accurate leaves its side as it was. Each
         side is the safe bound of its dual, recorded in ``self.tightening``."""
-        solver = ReusableConicProgram()  # 2k objectives over one feasible set per round
+        solver = ReusableConicProgram(lean=True)  # 2k objectives over one feasible set per round
         for _ in range(rounds):
             data = self.conic_data(box, upper_bound, envelope=False)
             if data is None:
