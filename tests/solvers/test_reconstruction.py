@@ -60,6 +60,27 @@ class TestSynthetic:
         errors = aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations))
         assert errors.max() < 1e-5  # degrees: arccos near 1 resolves about 1e-6
         assert out.summary["rms_reprojection_px"] < 1e-8
+        # A general motion: the upgrade is determined, and the result says so.
+        assert out.stages[1]["critical_motion"] is None and out.stages[1]["determined"] is True
+        assert out.summary["autocalibration_determined"] is True and out.summary["critical_motion"] is None
+
+    def test_a_turntable_is_reported_as_a_critical_motion(self):
+        """Constant intrinsics are not determined by a turntable's tracks (Sturm 1997): whatever
+        the certified upgrade does, the result must say plainly that the data cannot fix K."""
+        scene = synthetic.turntable(views=10, points=40, seed=3, noise_px=0.3)
+        out = pipeline.reconstruct(scene.tracks, [scene.image_size] * 10, ReconstructionOptions(
+            resect_cameras=False, autocalibration_time_limit_s=2))
+        assert out.summary["views_registered"] == 10
+        stage = out.stages[1]
+        assert stage["critical_motion"] == "orbital_motion" and stage["determined"] is False
+        assert stage["motion_warnings"][0]["code"] == "orbital_motion"
+        assert stage["reason"].startswith("critical motion (orbital_motion)") or \
+            "; critical motion (orbital_motion)" in stage["reason"]
+        assert "do not determine a constant K" in stage["reason"] and "not from a certificate" in stage["reason"]
+        assert out.summary["critical_motion"] == "orbital_motion"
+        assert out.summary["autocalibration_determined"] is False
+        # The motion itself is recovered: the rotations, against the turntable's, after alignment.
+        assert aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations)).max() < 0.5
 
     def test_outliers_are_removed_and_counted(self):
         scene = synthetic.scene(views=8, points=120, seed=7, noise_px=0.3)
@@ -131,3 +152,4 @@ class TestDinosaur:
         axis = axes.mean(axis=0) / np.linalg.norm(axes.mean(axis=0))
         assert abs(angles.mean() - 10.0) < 0.1 and angles.std() < 0.15
         assert np.degrees(np.arccos(np.clip(axes @ axis, -1, 1))).max() < 3.0
+        assert upgrade.motion(adjusted)[1] == "orbital_motion"  # the result says K is not determined

@@ -230,7 +230,28 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             name, metric = starts[0]
             stage.update(status="skipped", reason="options.bundle_adjustment is false", started_from=name)
         out.metric = metric = _normalise_frame(metric)
+    _judge_motion(stages["autocalibration"], metric)
     _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
+
+
+def _judge_motion(stage: dict, metric: upgrade.Metric) -> None:
+    """The motion of the metric reconstruction returned, judged as the autocalibration kind
+    judges it (determinacy.motion_warnings). On a critical motion (a turntable, an orbit, a
+    translating camera) the tracks do not determine constant intrinsics: whatever the stage
+    certified, it is said plainly that the upgrade is not determined by these data."""
+    warnings, critical = upgrade.motion(metric)
+    stage.update(motion_warnings=warnings, critical_motion=critical, determined=critical is None)
+    if critical is None:
+        return
+    detail = next((w["detail"] for w in warnings if w["code"] == critical), "")
+    if stage.get("certified"):
+        proved = ("both stages certified their optimum, but it is one of many upgrades these tracks fit equally well, "
+                  "so the certificate fixes no calibration")
+    else:
+        proved = "no certificate can separate the upgrades the motion leaves open (the cost is flat along them)"
+    said = (f"critical motion ({critical}): {detail}. The tracks do not determine a constant K (Sturm 1997): {proved}; "
+            "K comes from the bundle adjustment's camera model, not from a certificate")
+    stage["reason"] = said if not stage.get("reason") else f"{stage['reason']}; {said}"
 
 
 def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs, metric, keep) -> None:
@@ -345,5 +366,9 @@ def _summarise(out: Reconstruction, tracks, n_views: int) -> None:
         "cameras_certified": sum(1 for c in bounded if c.bound.certified),
         "cameras_certified_fraction": (sum(1 for c in bounded if c.bound.certified) / len(bounded) if bounded else None),
         "autocalibration_certified": bool(out.stages[1].get("certified")),
+        # Whether the tracks determine the upgrade at all (False on a critical motion: then a
+        # certified autocalibration proves an optimum, not the calibration; see the stage's reason).
+        "autocalibration_determined": out.stages[1].get("determined"),
+        "critical_motion": out.stages[1].get("critical_motion"),
         "time_s": {stage["name"]: stage["elapsed_s"] for stage in out.stages},
     }

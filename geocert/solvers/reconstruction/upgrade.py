@@ -93,6 +93,28 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
     return out
 
 
+CRITICAL = ("pure_translation", "orbital_motion", "rotation_about_one_axis")
+
+
+def motion(metric: Metric) -> tuple[list[dict], str | None]:
+    """The autocalibration kind's motion warnings (determinacy.motion_warnings: Sturm's critical
+    motions for constant intrinsics) for a metric reconstruction: the rotations relative to the
+    first registered view (an infinite homography K R_j R_1^T K^-1 less its K) and the camera
+    centres. Returns the warnings and the code of the critical one (None for a general motion)."""
+    from geocert.solvers.autocalibration import determinacy
+
+    views = [v for v, R in enumerate(metric.rotations) if R is not None]
+    if len(views) < 3:
+        return [], None
+    R = np.array([metric.rotations[v] for v in views])
+    centres = np.array([-metric.rotations[v].T @ metric.translations[v] for v in views])
+    try:
+        warnings = determinacy.motion_warnings(R[1:] @ R[0].T, centres)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        return [], None
+    return warnings, next((w["code"] for w in warnings if w["code"] in CRITICAL), None)
+
+
 def _linear(P: np.ndarray, X: np.ndarray, image_size):
     """(H, K) of the linear estimate (linear_daq.py), or None."""
     from geocert.solvers.autocalibration import direct
@@ -140,10 +162,24 @@ def _stratified(problem: pr.Problem, options, intrinsics, callback):
 
     result = stratified.solve(problem, replace(options, intrinsics=intrinsics), callback)
     stages = [_stage("affine", result.affine, result.affine_s), _stage("metric", result.metric, result.metric_s)]
+    if result.p is not None and stages[0]["certified"] and not pr.allowed_by_chirality(problem, result.p):
+        # As the autocalibration kind judges it: the plane as returned must be one chirality allows.
+        stages[0].update(certified=False, status="not_certified",
+                         reason="the plane returned is not strictly inside the chirality polytope")
     if result.K_unit is None or result.p is None:
         return None, None, stages
     K = problem.K0 @ result.K_unit
     K = K / K[2, 2]
+    K[1, 0] = K[2, 0] = K[2, 1] = 0.0
+    K[2, 2] = 1.0
+    if stages[1]["certified"]:  # the K returned, as rounded, must lie in the metric stage's domain (as the kind's)
+        from geocert.solvers.autocalibration import metric_relaxation as mrelax
+
+        setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, result.p, problem.unit_ranges)
+        lo, hi = mrelax.omega_box(problem.unit_ranges)
+        if not mrelax.in_domain(setup, pr.w_of_K(problem, K), lo, hi):
+            stages[1].update(certified=False, status="not_certified",
+                             reason="the DIAC returned left its domain by rounding")
     return pr.upgrade(problem, result.p, np.linalg.solve(problem.K0, K)), K, stages
 
 
