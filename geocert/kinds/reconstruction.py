@@ -89,6 +89,9 @@ class ReconstructionOptionsIn(Strict):
     resect_cameras: bool = _D.resect_cameras
     camera_rel_gap: Finite = Field(_D.camera_rel_gap, **_R["camera_rel_gap"],
                                    description="each camera's resection, and the returned camera's tolerance")
+    bound_every_camera: bool = Field(_D.bound_every_camera,
+                                     description="false: no certified resection for a camera a free camera found "
+                                                 "locally proves uncertifiable (it is reported without a bound)")
     seed: int = Field(_D.seed, **_R["seed"])
 
 

@@ -102,6 +102,29 @@ class TestSynthetic:
         assert 0.3 < out.summary["rms_reprojection_px"] < 0.45  # sqrt(2) * 0.3 px, less the fitted part
 
 
+class TestCameraBounds:
+    def test_only_uncertifiable_cameras_skip_the_certified_resection(self):
+        """A camera is not searched only when a free camera found locally beats it by more than the
+        tolerance: the certified cameras are those of the full run, and each skipped camera's
+        full-run bound is no higher than the free camera's cost and leaves a gap over the tolerance."""
+        scene = synthetic.scene(views=8, points=60, seed=3, noise_px=0.5)
+        runs = {every: pipeline.reconstruct(scene.tracks, [scene.image_size] * 8, ReconstructionOptions(
+            bound_every_camera=every, camera_rel_gap=0.05, autocalibration_time_limit_s=5)) for every in (False, True)}
+        quick = {c.view: c.bound for c in runs[False].cameras}
+        full = {c.view: c.bound for c in runs[True].cameras}
+        assert {v for v, b in quick.items() if b.certified} == {v for v, b in full.items() if b.certified}
+        skipped = [v for v, b in quick.items() if b.result is None]
+        assert skipped and len(skipped) < 8  # some of each at this noise
+        assert runs[False].stages[4]["searched"] == 8 - len(skipped)
+        for v in skipped:
+            b = quick[v]
+            assert not b.certified and b.lower_bound is None and "free 3x4 camera" in b.reason
+            assert b.cost == pytest.approx(full[v].cost, rel=1e-9)
+            free = float(b.reason.split("found locally (")[1].split(")")[0])
+            assert full[v].result.lower_bound <= free * (1 + 1e-3)  # the free camera bounds the optimum
+            assert full[v].gap is None or full[v].gap > 0.05 * full[v].cost
+
+
 @pytest.mark.slow
 class TestModelHouse:
     def test_from_tracks_alone_against_vgg(self):

@@ -43,6 +43,9 @@ class ReconstructionOptions(FractionalOptions):
     camera_model: str = "simple"
     resect_cameras: bool = True  # the certified resection of every camera
     camera_rel_gap: float = 1e-2  # the resections' (and the returned camera's tolerance against their bound)
+    # False: no certified resection for a camera that cannot be certified (a point behind it, or a
+    # free 3x4 camera found locally beats it by more than camera_rel_gap); True: every camera's bound.
+    bound_every_camera: bool = False
     time_limit_s: float = 10.0
     seed: int = 0
 

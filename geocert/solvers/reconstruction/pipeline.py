@@ -293,10 +293,12 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
         map_options = MapOptions(norm=options.norm, rel_gap=options.camera_rel_gap, abs_gap=options.abs_gap,
                                  max_nodes=options.max_nodes, time_limit_s=options.time_limit_s,
                                  max_residual=options.max_residual, certificate=options.certificate)
-        bounds = structure.resect_cameras(P, arrays, map_options, lambda d, total: tell("cameras", d, total))
+        bounds = structure.resect_cameras(P, arrays, map_options, lambda d, total: tell("cameras", d, total),
+                                          bound_every_camera=options.bound_every_camera)
         for v, bound in bounds.items():
             out.cameras[v].bound = bound
-        stage.update(cameras=len(bounds), certified=sum(1 for b in bounds.values() if b.certified))
+        stage.update(cameras=len(bounds), certified=sum(1 for b in bounds.values() if b.certified),
+                     searched=sum(1 for b in bounds.values() if b.result is not None))
 
 
 def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px: float, model: str):
