@@ -96,11 +96,12 @@ def _timed(stages: dict, name: str):
     class Timer:
         def __enter__(self):
             stages[name]["status"] = "running"
-            self.start = time.perf_counter()
+            self.start, self.cpu = time.perf_counter(), time.process_time()
             return stages[name]
 
         def __exit__(self, *exc):
             stages[name]["elapsed_s"] = time.perf_counter() - self.start
+            stages[name]["cpu_s"] = time.process_time() - self.cpu  # this process's CPU time (wall is shared)
             if stages[name]["status"] == "running" and exc[0] is None:
                 stages[name]["status"] = "done"
             return False
@@ -373,4 +374,5 @@ def _summarise(out: Reconstruction, tracks, n_views: int) -> None:
         "autocalibration_determined": out.stages[1].get("determined"),
         "critical_motion": out.stages[1].get("critical_motion"),
         "time_s": {stage["name"]: stage["elapsed_s"] for stage in out.stages},
+        "cpu_s": {stage["name"]: stage.get("cpu_s", 0.0) for stage in out.stages},
     }
