@@ -82,6 +82,10 @@ class ReconstructionOptionsIn(Strict):
     autocalibration_max_nodes: int = Field(_D.autocalibration_max_nodes, **_R["autocalibration_max_nodes"])
     autocalibration_time_limit_s: Finite = Field(_D.autocalibration_time_limit_s, **_R["autocalibration_time_limit_s"])
     autocalibration_points: int = Field(_D.autocalibration_points, **_R["autocalibration_points"])
+    autocalibration_on_critical_motion: Literal["skip", "search"] = Field(
+        _D.autocalibration_on_critical_motion,
+        description='"skip": no certified upgrade search when the linear estimate\'s motion is critical (a turntable, '
+                    'an orbit, a translating camera: the tracks do not determine K); "search": run it anyway')
     chirality: Literal["points", "centers", "none"] = _D.chirality
     threshold_px: Finite = Field(_D.threshold_px, **_R["threshold_px"], description="outlier threshold, pixels")
     min_inliers: int = Field(_D.min_inliers, **_R["min_inliers"])

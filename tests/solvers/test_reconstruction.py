@@ -68,10 +68,19 @@ class TestSynthetic:
         """Constant intrinsics are not determined by a turntable's tracks (Sturm 1997): whatever
         the certified upgrade does, the result must say plainly that the data cannot fix K."""
         scene = synthetic.turntable(views=10, points=40, seed=3, noise_px=0.3)
+        searched = pipeline.reconstruct(scene.tracks, [scene.image_size] * 10, ReconstructionOptions(
+            resect_cameras=False, autocalibration_time_limit_s=2, autocalibration_on_critical_motion="search"))
+        assert [s["name"] for s in searched.stages[1]["stages"]] == ["affine", "metric"]
+        assert searched.stages[1]["critical_motion"] == "orbital_motion"
+        assert searched.stages[1]["determined"] is False
+        # By default the certified search is not run on a critical motion, and the stage says why.
         out = pipeline.reconstruct(scene.tracks, [scene.image_size] * 10, ReconstructionOptions(
             resect_cameras=False, autocalibration_time_limit_s=2))
         assert out.summary["views_registered"] == 10
         stage = out.stages[1]
+        assert stage["status"] == "skipped" and stage["stages"] == [] and not stage["certified"]
+        assert stage["reason"].startswith("the linear estimate's motion is critical (")
+        assert out.stages[2]["started_from"] == "linear"
         assert stage["critical_motion"] == "orbital_motion" and stage["determined"] is False
         assert stage["motion_warnings"][0]["code"] == "orbital_motion"
         assert stage["reason"].startswith("critical motion (orbital_motion)") or \

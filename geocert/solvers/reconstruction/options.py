@@ -33,6 +33,9 @@ class ReconstructionOptions(FractionalOptions):
     autocalibration_max_nodes: int = 20_000
     autocalibration_time_limit_s: float = 60.0
     autocalibration_points: int = 300  # points whose chirality bounds the plane at infinity
+    # "skip": no certified upgrade search when the linear estimate's motion is critical (the tracks
+    # do not determine K there; the adjustment starts from the linear estimate); "search": run it.
+    autocalibration_on_critical_motion: str = "skip"
     chirality: str = "centers"  # the direct method's
     threshold_px: float = 2.0  # an observation farther than this from its reprojection is an outlier
     min_inliers: int = 12  # 3D-2D inliers a view needs to register
@@ -64,6 +67,8 @@ class ReconstructionOptions(FractionalOptions):
             self.intrinsics = {name: value for name, value in self.intrinsics.items() if value is not None}
         if self.camera_model not in CAMERA_MODELS:
             raise InputError("options/camera_model", f"must be one of {', '.join(CAMERA_MODELS)}")
+        if self.autocalibration_on_critical_motion not in ("skip", "search"):
+            raise InputError("options/autocalibration_on_critical_motion", 'must be "skip" or "search"')
         if self.autocalibration not in AUTOCALIBRATION_METHODS:
             raise InputError("options/autocalibration", f"must be one of {', '.join(AUTOCALIBRATION_METHODS)}")
         for name in ("metric_rel_gap", "camera_rel_gap", "autocalibration_rel_gap", "autocalibration_max_nodes",

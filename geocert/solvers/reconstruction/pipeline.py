@@ -198,7 +198,8 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
         metric = upgrade.autocalibrate(proj.cameras, proj.points, image_size, options.ranges(image_size),
                                        options.autocalibration_options(image_size), options.autocalibration_points,
                                        method, lambda p: tell(f"autocalibration {getattr(p, 'stage', '')}".strip(),
-                                                              0, 1, p))
+                                                              0, 1, p),
+                                       skip_critical=options.autocalibration_on_critical_motion == "skip")
         stage.update(method=method, stages=metric.stages, certified=metric.certified, intrinsics=metric.ranges,
                      points_used=metric.autocalibration_points, K=None if metric.K is None else metric.K.tolist())
         starts = []
@@ -208,7 +209,9 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             alternative = upgrade.metric_from(proj.cameras, proj.points, *metric.alternative)
             starts.append(("linear", alternative))
             stage["linear_K"] = alternative.K.tolist()
-        if metric.K is None:
+        if metric.skipped is not None:
+            stage.update(status="skipped", reason=metric.skipped + "; the adjustment starts from the linear estimate")
+        elif metric.K is None:
             stage.update(status="failed", reason=metric.reason + (
                 "; the adjustment starts from the linear estimate" if starts else ""))
         if not starts:

@@ -31,6 +31,7 @@ class Metric:
     autocalibration_points: int = 0
     Ks: list | None = None  # one K per view (the "varying" adjustment), else K for every view
     alternative: tuple | None = None  # (H, K) of the linear estimate: a second start for the adjustment
+    skipped: str | None = None  # why the certified search was not run (a critical motion), if it was not
 
 
 def decompose(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -57,9 +58,13 @@ def choose_points(points: np.ndarray, limit: int) -> np.ndarray:
 
 def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_size, intrinsics: dict,
                   options: pr.AutocalibrationOptions, max_points: int, method: str = "stratified",
-                  callback=None) -> Metric:
+                  callback=None, skip_critical: bool = False) -> Metric:
     """The metric upgrade by the stratified method (thesis ch. 6), the direct one (ch. 7), or
-    "auto": stratified, and the direct method when the stratified one finds no upgrade."""
+    "auto": stratified, and the direct method when the stratified one finds no upgrade. With
+    ``skip_critical``, the certified search is not run when the linear estimate's motion is
+    critical (motion(): a turntable, an orbit, a translating camera): there the tracks do not
+    determine constant intrinsics, and a certified optimum would be one of many equally good
+    upgrades; ``skipped`` then says why, and the linear estimate is the adjustment's start."""
     views = [v for v, P in enumerate(cameras) if P is not None]
     n_tracks = len(points)
     empty = Metric(None, [None] * len(cameras), [None] * len(cameras), np.full((n_tracks, 3), np.nan), [], False)
@@ -71,6 +76,18 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
     X = points[chosen]
     problem = pr.prepare(P, X, image_size, intrinsics)
     empty.ranges, empty.autocalibration_points = problem.ranges, len(chosen)
+    if skip_critical:
+        linear = _linear(P, X, image_size)
+        if linear is not None:
+            warnings, critical = motion(metric_from(cameras, points, *linear))
+            if critical is not None:
+                detail = next(w["detail"] for w in warnings if w["code"] == critical)
+                empty.alternative = linear
+                empty.skipped = (f"the linear estimate's motion is critical ({critical}: {detail}): the certified "
+                                 "search was not run, since it could only certify one of many upgrades these tracks "
+                                 "fit equally well (options.autocalibration_on_critical_motion: \"search\" runs it)")
+                empty.reason = empty.skipped
+                return empty
     stages: list[dict] = []
     H = K = None
     if method in ("stratified", "auto"):
