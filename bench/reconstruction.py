@@ -8,8 +8,15 @@ Oxford. Run: .venv/bin/python -m bench.reconstruction [--data DIR] [--only house
 
 from __future__ import annotations
 
-import argparse
 import os
+
+# One BLAS thread: the stages are single-threaded, and OpenBLAS's spinning threads on this shared
+# 2-core machine cost more than they gain (measured: a 432 x 432 Cholesky 150 ms of CPU with the
+# default threads under load, the Dinosaur's projective stage 25.5 s CPU against 13.2 s with one).
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
+import argparse
 import time
 from pathlib import Path
 
@@ -23,9 +30,9 @@ from tests.solvers.test_reconstruction import aligned_rotation_errors, house_tra
 
 
 def run(name: str, tracks, sizes, options: ReconstructionOptions):
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     out = pipeline.reconstruct(tracks, sizes, options)
-    return out, time.perf_counter() - start
+    return out, f"{time.perf_counter() - start:.1f}/{time.process_time() - cpu:.1f}"
 
 
 def row(name, out, total, focal_ref, rotation_errors, extra=""):
@@ -34,11 +41,14 @@ def row(name, out, total, focal_ref, rotation_errors, extra=""):
         if any(c.K is not None for c in out.cameras) else float("nan")
     focal = f"{f:.1f} / {focal_ref:.1f} ({100 * (f / focal_ref - 1):+.2f}%)" if focal_ref else f"{f:.1f} / -"
     rot = f"{np.max(rotation_errors):.3f}" if rotation_errors is not None else "-"
-    times = " ".join(f"{k[:5]} {v:.1f}" for k, v in s["time_s"].items())
+    times = " ".join(f"{k[:5]} {v:.1f}/{s['cpu_s'][k]:.1f}" for k, v in s["time_s"].items())
     cams = "-" if s["cameras_certified_fraction"] is None else f"{s['cameras_certified_fraction']:.2f}"
+    auto = "yes" if s["autocalibration_certified"] else "no"
+    if s.get("critical_motion"):
+        auto += f" ({s['critical_motion']}: K not determined)"
     print(f"| {name} | {s['views_registered']}/{s['views']} | {s['points']} | {s['rms_reprojection_px']:.3f} | "
           f"{focal} | {rot} | {s['points_certified_fraction']:.3f} | {cams} | "
-          f"{'yes' if s['autocalibration_certified'] else 'no'} | {times} | {total:.1f} |{extra}")
+          f"{auto} | {times} | {total} |{extra}")
 
 
 def main() -> None:
@@ -50,7 +60,7 @@ def main() -> None:
     only = args.only.split(",")
     print(f"load average at start: {os.getloadavg()[0]:.2f} (2 cores; times are wall clock, shared machine)")
     print("| data | views | points | RMS px | focal ours / reference | rotation error max, deg | points certified "
-          "| cameras certified | autocalibration certified | time per stage, s | total s |")
+          "| cameras certified | autocalibration certified | time per stage, wall/CPU s | total wall/CPU s |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     if "synthetic" in only:
         scene = synthetic.scene(views=10, points=200, seed=11, noise_px=0.5)

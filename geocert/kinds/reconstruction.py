@@ -82,6 +82,10 @@ class ReconstructionOptionsIn(Strict):
     autocalibration_max_nodes: int = Field(_D.autocalibration_max_nodes, **_R["autocalibration_max_nodes"])
     autocalibration_time_limit_s: Finite = Field(_D.autocalibration_time_limit_s, **_R["autocalibration_time_limit_s"])
     autocalibration_points: int = Field(_D.autocalibration_points, **_R["autocalibration_points"])
+    autocalibration_on_critical_motion: Literal["skip", "search"] = Field(
+        _D.autocalibration_on_critical_motion,
+        description='"skip": no certified upgrade search when the linear estimate\'s motion is critical (a turntable, '
+                    'an orbit, a translating camera: the tracks do not determine K); "search": run it anyway')
     chirality: Literal["points", "centers", "none"] = _D.chirality
     threshold_px: Finite = Field(_D.threshold_px, **_R["threshold_px"], description="outlier threshold, pixels")
     min_inliers: int = Field(_D.min_inliers, **_R["min_inliers"])
@@ -89,6 +93,9 @@ class ReconstructionOptionsIn(Strict):
     resect_cameras: bool = _D.resect_cameras
     camera_rel_gap: Finite = Field(_D.camera_rel_gap, **_R["camera_rel_gap"],
                                    description="each camera's resection, and the returned camera's tolerance")
+    bound_every_camera: bool = Field(_D.bound_every_camera,
+                                     description="false: no certified resection for a camera a free camera found "
+                                                 "locally proves uncertifiable (it is reported without a bound)")
     seed: int = Field(_D.seed, **_R["seed"])
 
 

@@ -60,6 +60,36 @@ class TestSynthetic:
         errors = aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations))
         assert errors.max() < 1e-5  # degrees: arccos near 1 resolves about 1e-6
         assert out.summary["rms_reprojection_px"] < 1e-8
+        # A general motion: the upgrade is determined, and the result says so.
+        assert out.stages[1]["critical_motion"] is None and out.stages[1]["determined"] is True
+        assert out.summary["autocalibration_determined"] is True and out.summary["critical_motion"] is None
+
+    def test_a_turntable_is_reported_as_a_critical_motion(self):
+        """Constant intrinsics are not determined by a turntable's tracks (Sturm 1997): whatever
+        the certified upgrade does, the result must say plainly that the data cannot fix K."""
+        scene = synthetic.turntable(views=10, points=40, seed=3, noise_px=0.3)
+        searched = pipeline.reconstruct(scene.tracks, [scene.image_size] * 10, ReconstructionOptions(
+            resect_cameras=False, autocalibration_time_limit_s=2, autocalibration_on_critical_motion="search"))
+        assert [s["name"] for s in searched.stages[1]["stages"]] == ["affine", "metric"]
+        assert searched.stages[1]["critical_motion"] == "orbital_motion"
+        assert searched.stages[1]["determined"] is False
+        # By default the certified search is not run on a critical motion, and the stage says why.
+        out = pipeline.reconstruct(scene.tracks, [scene.image_size] * 10, ReconstructionOptions(
+            resect_cameras=False, autocalibration_time_limit_s=2))
+        assert out.summary["views_registered"] == 10
+        stage = out.stages[1]
+        assert stage["status"] == "skipped" and stage["stages"] == [] and not stage["certified"]
+        assert stage["reason"].startswith("the linear estimate's motion is critical (")
+        assert out.stages[2]["started_from"] == "linear"
+        assert stage["critical_motion"] == "orbital_motion" and stage["determined"] is False
+        assert stage["motion_warnings"][0]["code"] == "orbital_motion"
+        assert stage["reason"].startswith("critical motion (orbital_motion)") or \
+            "; critical motion (orbital_motion)" in stage["reason"]
+        assert "do not determine a constant K" in stage["reason"] and "not from a certificate" in stage["reason"]
+        assert out.summary["critical_motion"] == "orbital_motion"
+        assert out.summary["autocalibration_determined"] is False
+        # The motion itself is recovered: the rotations, against the turntable's, after alignment.
+        assert aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations)).max() < 0.5
 
     def test_outliers_are_removed_and_counted(self):
         scene = synthetic.scene(views=8, points=120, seed=7, noise_px=0.3)
@@ -79,6 +109,29 @@ class TestSynthetic:
         assert abs(out.cameras[0].K[0, 0] / 800 - 1) < 0.01
         assert aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations)).max() < 0.3
         assert 0.3 < out.summary["rms_reprojection_px"] < 0.45  # sqrt(2) * 0.3 px, less the fitted part
+
+
+class TestCameraBounds:
+    def test_only_uncertifiable_cameras_skip_the_certified_resection(self):
+        """A camera is not searched only when a free camera found locally beats it by more than the
+        tolerance: the certified cameras are those of the full run, and each skipped camera's
+        full-run bound is no higher than the free camera's cost and leaves a gap over the tolerance."""
+        scene = synthetic.scene(views=8, points=60, seed=3, noise_px=0.5)
+        runs = {every: pipeline.reconstruct(scene.tracks, [scene.image_size] * 8, ReconstructionOptions(
+            bound_every_camera=every, camera_rel_gap=0.05, autocalibration_time_limit_s=5)) for every in (False, True)}
+        quick = {c.view: c.bound for c in runs[False].cameras}
+        full = {c.view: c.bound for c in runs[True].cameras}
+        assert {v for v, b in quick.items() if b.certified} == {v for v, b in full.items() if b.certified}
+        skipped = [v for v, b in quick.items() if b.result is None]
+        assert skipped and len(skipped) < 8  # some of each at this noise
+        assert runs[False].stages[4]["searched"] == 8 - len(skipped)
+        for v in skipped:
+            b = quick[v]
+            assert not b.certified and b.lower_bound is None and "free 3x4 camera" in b.reason
+            assert b.cost == pytest.approx(full[v].cost, rel=1e-9)
+            free = float(b.reason.split("found locally (")[1].split(")")[0])
+            assert full[v].result.lower_bound <= free * (1 + 1e-3)  # the free camera bounds the optimum
+            assert full[v].gap is None or full[v].gap > 0.05 * full[v].cost
 
 
 @pytest.mark.slow
@@ -131,3 +184,4 @@ class TestDinosaur:
         axis = axes.mean(axis=0) / np.linalg.norm(axes.mean(axis=0))
         assert abs(angles.mean() - 10.0) < 0.1 and angles.std() < 0.15
         assert np.degrees(np.arccos(np.clip(axes @ axis, -1, 1))).max() < 3.0
+        assert upgrade.motion(adjusted)[1] == "orbital_motion"  # the result says K is not determined

@@ -28,7 +28,22 @@ def projective(cameras: np.ndarray, points: np.ndarray, view: np.ndarray, track:
         proj = (Am.reshape(-1, 3, 4) @ Bm[:, :, None])[:, :, 0]
         return (proj[:, :2] / proj[:, 2:3] - pixels) * inv_scale
 
-    A, _, B, r, _ = schur.solve(residual, A, np.zeros(0), B, view, track, f_scale, max_iterations)
+    def jacobian(Am, S, Bm):  # analytic: r = (P0 X / P2 X, P1 X / P2 X) - x, over the view's scale
+        proj = (Am.reshape(-1, 3, 4) @ Bm[:, :, None])[:, :, 0]
+        w = proj[:, 2:3]
+        u, v = proj[:, 0:1] / w, proj[:, 1:2] / w
+        ja = np.zeros((len(Am), 2, 12))
+        ja[:, 0, 0:4] = Bm / w
+        ja[:, 0, 8:12] = -u * Bm / w
+        ja[:, 1, 4:8] = Bm / w
+        ja[:, 1, 8:12] = -v * Bm / w
+        rows = Am.reshape(-1, 3, 4)
+        jb = np.stack([(rows[:, 0] - u * rows[:, 2]) / w, (rows[:, 1] - v * rows[:, 2]) / w], axis=1)
+        scale = inv_scale[:, :, None]
+        return ja * scale, np.zeros((len(Am), 2, 0)), jb * scale
+
+    A, _, B, r, _ = schur.solve(residual, A, np.zeros(0), B, view, track, f_scale, max_iterations,
+                                jacobian=jacobian)
     P = A.reshape(n, 3, 4)
     P = P / np.linalg.norm(A, axis=1)[:, None, None]
     X = B / np.linalg.norm(B, axis=1)[:, None]

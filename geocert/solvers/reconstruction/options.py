@@ -33,6 +33,9 @@ class ReconstructionOptions(FractionalOptions):
     autocalibration_max_nodes: int = 20_000
     autocalibration_time_limit_s: float = 60.0
     autocalibration_points: int = 300  # points whose chirality bounds the plane at infinity
+    # "skip": no certified upgrade search when the linear estimate's motion is critical (the tracks
+    # do not determine K there; the adjustment starts from the linear estimate); "search": run it.
+    autocalibration_on_critical_motion: str = "skip"
     chirality: str = "centers"  # the direct method's
     threshold_px: float = 2.0  # an observation farther than this from its reprojection is an outlier
     min_inliers: int = 12  # 3D-2D inliers a view needs to register
@@ -43,6 +46,9 @@ class ReconstructionOptions(FractionalOptions):
     camera_model: str = "simple"
     resect_cameras: bool = True  # the certified resection of every camera
     camera_rel_gap: float = 1e-2  # the resections' (and the returned camera's tolerance against their bound)
+    # False: no certified resection for a camera that cannot be certified (a point behind it, or a
+    # free 3x4 camera found locally beats it by more than camera_rel_gap); True: every camera's bound.
+    bound_every_camera: bool = False
     time_limit_s: float = 10.0
     seed: int = 0
 
@@ -61,6 +67,8 @@ class ReconstructionOptions(FractionalOptions):
             self.intrinsics = {name: value for name, value in self.intrinsics.items() if value is not None}
         if self.camera_model not in CAMERA_MODELS:
             raise InputError("options/camera_model", f"must be one of {', '.join(CAMERA_MODELS)}")
+        if self.autocalibration_on_critical_motion not in ("skip", "search"):
+            raise InputError("options/autocalibration_on_critical_motion", 'must be "skip" or "search"')
         if self.autocalibration not in AUTOCALIBRATION_METHODS:
             raise InputError("options/autocalibration", f"must be one of {', '.join(AUTOCALIBRATION_METHODS)}")
         for name in ("metric_rel_gap", "camera_rel_gap", "autocalibration_rel_gap", "autocalibration_max_nodes",

@@ -96,11 +96,12 @@ def _timed(stages: dict, name: str):
     class Timer:
         def __enter__(self):
             stages[name]["status"] = "running"
-            self.start = time.perf_counter()
+            self.start, self.cpu = time.perf_counter(), time.process_time()
             return stages[name]
 
         def __exit__(self, *exc):
             stages[name]["elapsed_s"] = time.perf_counter() - self.start
+            stages[name]["cpu_s"] = time.process_time() - self.cpu  # this process's CPU time (wall is shared)
             if stages[name]["status"] == "running" and exc[0] is None:
                 stages[name]["status"] = "done"
             return False
@@ -197,7 +198,8 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
         metric = upgrade.autocalibrate(proj.cameras, proj.points, image_size, options.ranges(image_size),
                                        options.autocalibration_options(image_size), options.autocalibration_points,
                                        method, lambda p: tell(f"autocalibration {getattr(p, 'stage', '')}".strip(),
-                                                              0, 1, p))
+                                                              0, 1, p),
+                                       skip_critical=options.autocalibration_on_critical_motion == "skip")
         stage.update(method=method, stages=metric.stages, certified=metric.certified, intrinsics=metric.ranges,
                      points_used=metric.autocalibration_points, K=None if metric.K is None else metric.K.tolist())
         starts = []
@@ -207,7 +209,9 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             alternative = upgrade.metric_from(proj.cameras, proj.points, *metric.alternative)
             starts.append(("linear", alternative))
             stage["linear_K"] = alternative.K.tolist()
-        if metric.K is None:
+        if metric.skipped is not None:
+            stage.update(status="skipped", reason=metric.skipped + "; the adjustment starts from the linear estimate")
+        elif metric.K is None:
             stage.update(status="failed", reason=metric.reason + (
                 "; the adjustment starts from the linear estimate" if starts else ""))
         if not starts:
@@ -230,7 +234,28 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             name, metric = starts[0]
             stage.update(status="skipped", reason="options.bundle_adjustment is false", started_from=name)
         out.metric = metric = _normalise_frame(metric)
+    _judge_motion(stages["autocalibration"], metric)
     _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
+
+
+def _judge_motion(stage: dict, metric: upgrade.Metric) -> None:
+    """The motion of the metric reconstruction returned, judged as the autocalibration kind
+    judges it (determinacy.motion_warnings). On a critical motion (a turntable, an orbit, a
+    translating camera) the tracks do not determine constant intrinsics: whatever the stage
+    certified, it is said plainly that the upgrade is not determined by these data."""
+    warnings, critical = upgrade.motion(metric)
+    stage.update(motion_warnings=warnings, critical_motion=critical, determined=critical is None)
+    if critical is None:
+        return
+    detail = next((w["detail"] for w in warnings if w["code"] == critical), "")
+    if stage.get("certified"):
+        proved = ("both stages certified their optimum, but it is one of many upgrades these tracks fit equally well, "
+                  "so the certificate fixes no calibration")
+    else:
+        proved = "no certificate can separate the upgrades the motion leaves open (the cost is flat along them)"
+    said = (f"critical motion ({critical}): {detail}. The tracks do not determine a constant K (Sturm 1997): {proved}; "
+            "K comes from the bundle adjustment's camera model, not from a certificate")
+    stage["reason"] = said if not stage.get("reason") else f"{stage['reason']}; {said}"
 
 
 def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs, metric, keep) -> None:
@@ -272,10 +297,12 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
         map_options = MapOptions(norm=options.norm, rel_gap=options.camera_rel_gap, abs_gap=options.abs_gap,
                                  max_nodes=options.max_nodes, time_limit_s=options.time_limit_s,
                                  max_residual=options.max_residual, certificate=options.certificate)
-        bounds = structure.resect_cameras(P, arrays, map_options, lambda d, total: tell("cameras", d, total))
+        bounds = structure.resect_cameras(P, arrays, map_options, lambda d, total: tell("cameras", d, total),
+                                          bound_every_camera=options.bound_every_camera)
         for v, bound in bounds.items():
             out.cameras[v].bound = bound
-        stage.update(cameras=len(bounds), certified=sum(1 for b in bounds.values() if b.certified))
+        stage.update(cameras=len(bounds), certified=sum(1 for b in bounds.values() if b.certified),
+                     searched=sum(1 for b in bounds.values() if b.result is not None))
 
 
 def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px: float, model: str):
@@ -345,5 +372,10 @@ def _summarise(out: Reconstruction, tracks, n_views: int) -> None:
         "cameras_certified": sum(1 for c in bounded if c.bound.certified),
         "cameras_certified_fraction": (sum(1 for c in bounded if c.bound.certified) / len(bounded) if bounded else None),
         "autocalibration_certified": bool(out.stages[1].get("certified")),
+        # Whether the tracks determine the upgrade at all (False on a critical motion: then a
+        # certified autocalibration proves an optimum, not the calibration; see the stage's reason).
+        "autocalibration_determined": out.stages[1].get("determined"),
+        "critical_motion": out.stages[1].get("critical_motion"),
         "time_s": {stage["name"]: stage["elapsed_s"] for stage in out.stages},
+        "cpu_s": {stage["name"]: stage.get("cpu_s", 0.0) for stage in out.stages},
     }

@@ -14,7 +14,6 @@ differences, vectorised the same way (one perturbed copy per parameter coordinat
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
 
 
 def _central_columns(evaluate, values: np.ndarray, step: float) -> np.ndarray:
@@ -55,9 +54,11 @@ def _cost(r, f_scale):
 
 
 def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iterations: int = 50,
-          tolerance: float = 1e-10):
+          tolerance: float = 1e-10, jacobian=None):
     """Minimise sum_m rho(|residual_m|^2) over A (n, c), S (s,), B (p, d); returns A, S, B,
-    the residuals (M, 2) and the number of iterations. Every point must be observed."""
+    the residuals (M, 2) and the number of iterations. Every point must be observed.
+    ``jacobian(A_m, S, B_m)``, when given, returns the analytic (ja, js, jb) instead of central
+    differences."""
     n, c = A.shape
     s = len(S)
     p, d = B.shape
@@ -77,18 +78,18 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
             second.append(order[starts[pts] + l - 1])
     first = np.concatenate(first) if first else np.zeros(0, dtype=int)
     second = np.concatenate(second) if second else np.zeros(0, dtype=int)
-    # Where each block of the reduced system goes (the same every iteration).
-    diag_rows = np.repeat(cam_cols, c + s, axis=1).ravel()
-    diag_cols = np.tile(cam_cols, (1, c + s)).ravel()
-    pair_rows = np.repeat(cam_cols[first], c + s, axis=1).ravel()
-    pair_cols = np.tile(cam_cols[second], (1, c + s)).ravel()
+    # Where each block of the reduced system goes (the same every iteration), as flat indices of
+    # the nc x nc matrix: blocks are summed into it by one bincount.
+    diag_at = (np.repeat(cam_cols, c + s, axis=1) * nc + np.tile(cam_cols, (1, c + s))).ravel()
+    pair_at = (np.repeat(cam_cols[first], c + s, axis=1) * nc + np.tile(cam_cols[second], (1, c + s))).ravel()
     r = residual(A[view], S, B[track])
     cost = _cost(r, f_scale)
     lam = 1e-3
     iterations = 0
     for iterations in range(1, max_iterations + 1):
         w = _robust_weights(r, f_scale)
-        ja, js, jb = _jacobians(residual, A, S, B, view, track)
+        ja, js, jb = (_jacobians(residual, A, S, B, view, track) if jacobian is None
+                      else jacobian(A[view], S, B[track]))
         je = np.concatenate([ja, js], axis=2) * np.sqrt(w)[:, None, None]  # (M, 2, c + s)
         jb = jb * np.sqrt(w)[:, None, None]
         rw = r * np.sqrt(w)[:, None]
@@ -103,20 +104,23 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
         np.add.at(gb, track, (jb.transpose(0, 2, 1) @ rw[:, :, None])[:, :, 0])
         diag_u = np.zeros(nc)
         np.add.at(diag_u, cam_cols.ravel(), np.einsum("mii->mi", U).ravel())
+        U_dense = np.bincount(diag_at, weights=U.ravel(), minlength=nc * nc).reshape(nc, nc)
         while True:
             Vd = V + lam * (np.einsum("pii->pi", V)[:, :, None] * np.eye(d) + 1e-12 * np.eye(d))
             Vinv = np.linalg.inv(Vd)
             # Reduced system: (U - W V^-1 W^T) da = -(ga - W V^-1 gb).
-            Ured = coo_matrix((U.ravel(), (diag_rows, diag_cols)), shape=(nc, nc)).toarray()
-            Ured[np.diag_indices(nc)] += lam * diag_u + 1e-12
             WV = Wm @ Vinv[track]  # (M, c+s, d)
             blocks = WV[first] @ Wm[second].transpose(0, 2, 1)  # (pairs, c+s, c+s)
-            Ured -= coo_matrix((blocks.ravel(), (pair_rows, pair_cols)), shape=(nc, nc)).toarray()
+            Ured = U_dense - np.bincount(pair_at, weights=blocks.ravel(), minlength=nc * nc).reshape(nc, nc)
+            Ured[np.diag_indices(nc)] += lam * diag_u + 1e-12
             rhs = np.zeros(nc)
             np.add.at(rhs, cam_cols.ravel(), (ga - (WV @ gb[track][:, :, None])[:, :, 0]).ravel())
             try:
                 da = -np.linalg.solve(Ured, rhs)
             except np.linalg.LinAlgError:
+                lam *= 10
+                continue
+            if not np.all(np.isfinite(da)):
                 lam *= 10
                 continue
             # Back substitution: db_j = -V_j^-1 (gb_j + sum_m W_m^T da_m).

@@ -58,10 +58,39 @@ def triangulate_tracks(cameras: dict[int, np.ndarray], tracks: list[tuple[np.nda
     return out
 
 
+def free_camera_cost(P: np.ndarray, X: np.ndarray, x: np.ndarray, norm: str) -> float | None:
+    """The cost (under ``norm``) of a 3x4 camera refined locally from P with all 12 entries free
+    (Levenberg-Marquardt on the pixel residuals), when it puts every point in front; else None.
+    Any camera putting every point in front costs at least the certified resection's optimum, so
+    this cost is an upper bound on it (and on any lower bound the resection could prove)."""
+    from scipy.optimize import least_squares
+
+    Xh = np.hstack([X, np.ones((len(X), 1))])
+
+    def residual(m):
+        proj = Xh @ m.reshape(3, 4).T
+        return (proj[:, :2] / proj[:, 2:3] - x).ravel()
+
+    try:
+        found = least_squares(residual, (P / np.linalg.norm(P)).ravel(), method="lm", x_scale="jac", max_nfev=200)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    proj = Xh @ found.x.reshape(3, 4).T
+    if not (np.all(proj[:, 2] > 0) or np.all(proj[:, 2] < 0)) or not np.all(np.isfinite(proj)):
+        return None  # -M is the same camera with every depth of the other sign
+    cost = norm_cost(x - proj[:, :2] / proj[:, 2:3], norm)
+    return cost if np.isfinite(cost) else None
+
+
 def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.ndarray, np.ndarray]],
-                   options: MapOptions, progress=None, should_stop=None) -> dict[int, CameraBound]:
+                   options: MapOptions, progress=None, should_stop=None,
+                   bound_every_camera: bool = False) -> dict[int, CameraBound]:
     """For each view: its points (3D) and pixels; the certified resection's bound, stated for
-    the camera returned."""
+    the camera returned. Unless ``bound_every_camera``, the search is not run for a camera that
+    cannot be certified whatever it proves: one with a point behind it, or one a free 3x4 camera
+    found locally beats by more than the tolerance (the bound is at most that camera's cost, so
+    the returned camera's gap would exceed the tolerance); such a camera is reported with its
+    cost and the reason, and no bound."""
     from geocert.solvers.fractional.maps import fit_map
 
     out = {}
@@ -75,14 +104,31 @@ def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.n
             out[view] = CameraBound(view, None, None, None, None, False, "degenerate", len(X), 0.0,
                                     f"{len(X)} points: a camera needs at least 6")
             continue
-        result = fit_map(X, x, options)
         proj = np.hstack([X, np.ones((len(X), 1))]) @ P.T
         depths_positive = bool(np.all(proj[:, 2] > 0))
         residuals = x - proj[:, :2] / proj[:, 2:3]
         cost = norm_cost(residuals, options.norm)
+        tolerance = max(options.abs_gap, options.rel_gap * cost)
+        if not bound_every_camera:
+            reason = None
+            if not depths_positive:
+                reason = "a point is behind the camera returned: outside the bound's scope"
+            else:
+                free = free_camera_cost(P, X, x, options.norm)
+                if free is not None and cost - free > tolerance:
+                    reason = (f"the camera returned costs {cost:.4g}, {(cost - free) / max(cost, 1e-300):.2%} above a "
+                              f"free 3x4 camera found locally ({free:.4g}), more than the tolerance "
+                              f"{options.rel_gap:.2g}: no bound can certify it, so the certified resection was not "
+                              "run (options.bound_every_camera runs it)")
+            if reason is not None:
+                out[view] = CameraBound(view, cost if math.isfinite(cost) else None, None, None, None, False,
+                                        "not_certified", len(X), time.perf_counter() - start, reason)
+                if progress is not None:
+                    progress(done + 1, len(cameras))
+                continue
+        result = fit_map(X, x, options)
         lower = result.lower_bound if result.certified else None
         gap = None if lower is None else max(0.0, cost - lower)
-        tolerance = max(options.abs_gap, options.rel_gap * cost)
         certified = bool(result.certified and depths_positive and gap is not None and gap <= tolerance)
         if certified:
             status, reason = "optimal", None

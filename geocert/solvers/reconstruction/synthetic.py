@@ -59,3 +59,35 @@ def scene(views: int = 8, points: int = 60, focal: float = 800.0, image_size=(64
         pixels = image[:, :2] / image[:, 2:3] + noise_px * rng.standard_normal((len(vs), 2))
         tracks.append((vs, pixels))
     return Scene(K, rotations, translations, X, tracks, (w, h))
+
+
+def turntable(views: int = 12, points: int = 80, focal: float = 800.0, image_size=(640, 480), noise_px: float = 0.0,
+              step_degrees: float = 10.0, elevation_degrees: float = 20.0, distance: float = 6.0,
+              seed: int = 0) -> Scene:
+    """An object turning on a turntable before a still camera (the Oxford Dinosaur's motion):
+    equivalently the camera's centre on a circle about the vertical axis, looking at the axis
+    from a fixed elevation, no roll. Every rotation shares one axis and the centres are coplanar:
+    a critical motion for constant intrinsics (Sturm 1997)."""
+    rng = np.random.default_rng(seed)
+    w, h = image_size
+    K = np.array([[focal, 0.0, w / 2], [0.0, focal, h / 2], [0.0, 0.0, 1.0]])
+    X = rng.uniform(-1.0, 1.0, (points, 3))
+    up = np.array([0.0, -1.0, 0.0])  # image y points down the axis
+    rotations, translations = [], []
+    elevation = np.radians(elevation_degrees)
+    for k in range(views):
+        angle = np.radians(step_degrees * k)
+        centre = distance * np.array([np.cos(elevation) * np.sin(angle), -np.sin(elevation),
+                                      -np.cos(elevation) * np.cos(angle)])
+        R, t = look_at(centre, np.zeros(3), up)
+        rotations.append(R)
+        translations.append(t)
+    rotations, translations = np.array(rotations), np.array(translations)
+    tracks = []
+    for j in range(points):
+        vs = np.arange(views)
+        cam = X[j] @ rotations.transpose(0, 2, 1) + translations
+        image = cam @ K.T
+        pixels = image[:, :2] / image[:, 2:3] + noise_px * rng.standard_normal((views, 2))
+        tracks.append((vs, pixels))
+    return Scene(K, rotations, translations, X, tracks, (w, h))

@@ -31,6 +31,7 @@ class Metric:
     autocalibration_points: int = 0
     Ks: list | None = None  # one K per view (the "varying" adjustment), else K for every view
     alternative: tuple | None = None  # (H, K) of the linear estimate: a second start for the adjustment
+    skipped: str | None = None  # why the certified search was not run (a critical motion), if it was not
 
 
 def decompose(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -57,9 +58,13 @@ def choose_points(points: np.ndarray, limit: int) -> np.ndarray:
 
 def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_size, intrinsics: dict,
                   options: pr.AutocalibrationOptions, max_points: int, method: str = "stratified",
-                  callback=None) -> Metric:
+                  callback=None, skip_critical: bool = False) -> Metric:
     """The metric upgrade by the stratified method (thesis ch. 6), the direct one (ch. 7), or
-    "auto": stratified, and the direct method when the stratified one finds no upgrade."""
+    "auto": stratified, and the direct method when the stratified one finds no upgrade. With
+    ``skip_critical``, the certified search is not run when the linear estimate's motion is
+    critical (motion(): a turntable, an orbit, a translating camera): there the tracks do not
+    determine constant intrinsics, and a certified optimum would be one of many equally good
+    upgrades; ``skipped`` then says why, and the linear estimate is the adjustment's start."""
     views = [v for v, P in enumerate(cameras) if P is not None]
     n_tracks = len(points)
     empty = Metric(None, [None] * len(cameras), [None] * len(cameras), np.full((n_tracks, 3), np.nan), [], False)
@@ -71,6 +76,18 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
     X = points[chosen]
     problem = pr.prepare(P, X, image_size, intrinsics)
     empty.ranges, empty.autocalibration_points = problem.ranges, len(chosen)
+    if skip_critical:
+        linear = _linear(P, X, image_size)
+        if linear is not None:
+            warnings, critical = motion(metric_from(cameras, points, *linear))
+            if critical is not None:
+                detail = next(w["detail"] for w in warnings if w["code"] == critical)
+                empty.alternative = linear
+                empty.skipped = (f"the linear estimate's motion is critical ({critical}: {detail}): the certified "
+                                 "search was not run, since it could only certify one of many upgrades these tracks "
+                                 "fit equally well (options.autocalibration_on_critical_motion: \"search\" runs it)")
+                empty.reason = empty.skipped
+                return empty
     stages: list[dict] = []
     H = K = None
     if method in ("stratified", "auto"):
@@ -91,6 +108,28 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
     out.stages, out.certified, out.ranges, out.autocalibration_points = stages, certified, problem.ranges, len(chosen)
     out.alternative = linear
     return out
+
+
+CRITICAL = ("pure_translation", "orbital_motion", "rotation_about_one_axis")
+
+
+def motion(metric: Metric) -> tuple[list[dict], str | None]:
+    """The autocalibration kind's motion warnings (determinacy.motion_warnings: Sturm's critical
+    motions for constant intrinsics) for a metric reconstruction: the rotations relative to the
+    first registered view (an infinite homography K R_j R_1^T K^-1 less its K) and the camera
+    centres. Returns the warnings and the code of the critical one (None for a general motion)."""
+    from geocert.solvers.autocalibration import determinacy
+
+    views = [v for v, R in enumerate(metric.rotations) if R is not None]
+    if len(views) < 3:
+        return [], None
+    R = np.array([metric.rotations[v] for v in views])
+    centres = np.array([-metric.rotations[v].T @ metric.translations[v] for v in views])
+    try:
+        warnings = determinacy.motion_warnings(R[1:] @ R[0].T, centres)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        return [], None
+    return warnings, next((w["code"] for w in warnings if w["code"] in CRITICAL), None)
 
 
 def _linear(P: np.ndarray, X: np.ndarray, image_size):
@@ -140,10 +179,24 @@ def _stratified(problem: pr.Problem, options, intrinsics, callback):
 
     result = stratified.solve(problem, replace(options, intrinsics=intrinsics), callback)
     stages = [_stage("affine", result.affine, result.affine_s), _stage("metric", result.metric, result.metric_s)]
+    if result.p is not None and stages[0]["certified"] and not pr.allowed_by_chirality(problem, result.p):
+        # As the autocalibration kind judges it: the plane as returned must be one chirality allows.
+        stages[0].update(certified=False, status="not_certified",
+                         reason="the plane returned is not strictly inside the chirality polytope")
     if result.K_unit is None or result.p is None:
         return None, None, stages
     K = problem.K0 @ result.K_unit
     K = K / K[2, 2]
+    K[1, 0] = K[2, 0] = K[2, 1] = 0.0
+    K[2, 2] = 1.0
+    if stages[1]["certified"]:  # the K returned, as rounded, must lie in the metric stage's domain (as the kind's)
+        from geocert.solvers.autocalibration import metric_relaxation as mrelax
+
+        setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, result.p, problem.unit_ranges)
+        lo, hi = mrelax.omega_box(problem.unit_ranges)
+        if not mrelax.in_domain(setup, pr.w_of_K(problem, K), lo, hi):
+            stages[1].update(certified=False, status="not_certified",
+                             reason="the DIAC returned left its domain by rounding")
     return pr.upgrade(problem, result.p, np.linalg.solve(problem.K0, K)), K, stages
 
 
