@@ -309,6 +309,11 @@ def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px:
     """A short adjustment (8 iterations) from each upgrade (name, Metric); the one with the
     smaller RMS goes on to a full adjustment. Returns its name, the adjusted reconstruction, the
     observations kept, the RMS before, and each start's figures."""
+    if len(starts) == 1:  # nothing to choose between: straight to the full adjustment
+        name, start = starts[0]
+        before = _rms(start, obs, keep)
+        metric, keep, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, threshold_px, model=model)
+        return name, metric, keep, before, [{"from": name, "rms_px_before": before}]
     tried, trials = [], []
     for name, start in starts:
         adjusted, kept, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, threshold_px, max_iterations=8,
