@@ -268,8 +268,11 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
             P[v] = cam.P
     with _timed(stages, "structure") as stage:
         kept_tracks = []
+        usable = np.flatnonzero(keep & np.isin(obs.view, list(P)))
+        usable = usable[np.argsort(obs.track[usable], kind="stable")]  # grouped by track, in observation order
+        bounds = np.searchsorted(obs.track[usable], np.arange(len(tracks) + 1))
         for t in range(len(tracks)):
-            m = np.flatnonzero((obs.track == t) & keep & np.isin(obs.view, list(P)))
+            m = usable[bounds[t]:bounds[t + 1]]
             if len(m) >= 2 and np.isfinite(metric.points[t, 0]):
                 kept_tracks.append((t, obs.view[m], obs.pixel[m]))
         tri_options = TriangulationOptions(norm=options.norm, rel_gap=options.rel_gap, abs_gap=options.abs_gap,
@@ -309,6 +312,11 @@ def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px:
     """A short adjustment (8 iterations) from each upgrade (name, Metric); the one with the
     smaller RMS goes on to a full adjustment. Returns its name, the adjusted reconstruction, the
     observations kept, the RMS before, and each start's figures."""
+    if len(starts) == 1:  # nothing to choose between: straight to the full adjustment
+        name, start = starts[0]
+        before = _rms(start, obs, keep)
+        metric, keep, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, threshold_px, model=model)
+        return name, metric, keep, before, [{"from": name, "rms_px_before": before}]
     tried, trials = [], []
     for name, start in starts:
         adjusted, kept, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, threshold_px, max_iterations=8,
@@ -339,15 +347,18 @@ def _normalise_frame(metric: upgrade.Metric) -> upgrade.Metric:
 
 
 def _rms(metric: upgrade.Metric, obs: Observations, keep: np.ndarray) -> float | None:
-    errors = []
-    for m in np.flatnonzero(keep):
-        v, t = obs.view[m], obs.track[m]
-        if metric.rotations[v] is None or not np.isfinite(metric.points[t, 0]):
-            continue
-        cam = metric.rotations[v] @ metric.points[t] + metric.translations[v]
-        image = upgrade.K_of(metric, v) @ cam
-        errors.append(np.sum((image[:2] / image[2] - obs.pixel[m]) ** 2))
-    return float(np.sqrt(np.mean(errors))) if errors else None
+    registered = np.array([R is not None for R in metric.rotations])
+    m = np.flatnonzero(keep & registered[obs.view] & np.isfinite(metric.points[obs.track, 0]))
+    if len(m) == 0:
+        return None
+    eye = np.eye(3)
+    R = np.array([eye if r is None else r for r in metric.rotations])
+    t = np.array([np.zeros(3) if x is None else x for x in metric.translations])
+    K = np.array([eye if r is None else upgrade.K_of(metric, v) for v, r in enumerate(metric.rotations)])
+    cam = np.einsum("mij,mj->mi", R[obs.view[m]], metric.points[obs.track[m]]) + t[obs.view[m]]
+    image = np.einsum("mij,mj->mi", K[obs.view[m]], cam)
+    errors = np.sum((image[:, :2] / image[:, 2:3] - obs.pixel[m]) ** 2, axis=1)
+    return float(np.sqrt(np.mean(errors)))
 
 
 def _summarise(out: Reconstruction, tracks, n_views: int) -> None:
