@@ -10,7 +10,14 @@ each dominated by the factorisation of the KKT system, in which the moment matri
 per iteration about the time of a dense Cholesky factorisation of order 2250 (0.44 s with numpy on
 this machine's one core, against 0.27 to 0.5 s measured per iteration when idle). The supernodal
 "faer" factorisation is about ten times faster than the default QDLDL on it (4.0 s against 44.5 s,
-one solve); a second thread did not help on the shared machine. Dropping the six 2 x 2 minors'
+one solve); a second thread did not help on the shared machine. Clarabel's iterative refinement
+(up to 10 steps per KKT solve by default) took a quarter of each iteration: one step is used
+(REFINEMENT_STEPS). Measured without gain (2026-11-23, seeds 1000 and 1006): equilibration off,
+chordal decomposition off, presolve off (setup 0.2 s either way), a step fraction of 0.995;
+tolerance 1e-7 saves one iteration but leaves the bound 1.3e-4 below the optimum (seed 1000), too
+far for the 1e-4 certification; Q's localizer replaced by Q >= 0 and its diagonal's localizers
+(0.24 s an iteration against 0.42) took 17 to 60 iterations and stalled "AlmostSolved" on 3 of 5
+scenes. Dropping the six 2 x 2 minors'
 localizers saves a third of each iteration but leaves the relaxation far from tight (gap 26%,
 moment rank 46 on seed 1000): they stay.
 
