@@ -17,11 +17,18 @@ if [ ! -f "$stamp" ] || [ "$root/pyproject.toml" -nt "$stamp" ]; then
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -e "$target"
   touch "$stamp"
 fi
-# The web page's browser tests (tests/service/test_web.py) need Debian's chromium and its driver:
-# installed here when missing, so the test command and CI run those tests rather than skip them.
-if [ "$extras" = "test" ] && { ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; }; then
-  sudo=""
-  [ "$(id -u)" -ne 0 ] && sudo="sudo"
-  $sudo apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq chromium chromium-driver >/dev/null
+# The web page's browser tests (tests/service/test_web.py) need Debian's chromium and its driver,
+# and the TLS proxy tests (tests/service/test_proxy.py) nginx and openssl: installed here when
+# missing, so the test command and CI run those tests rather than skip them.
+if [ "$extras" = "test" ]; then
+  missing=""
+  for tool in chromium chromedriver nginx openssl; do
+    command -v "$tool" >/dev/null 2>&1 || [ -x "/usr/sbin/$tool" ] || missing="yes"
+  done
+  if [ -n "$missing" ]; then
+    sudo=""
+    [ "$(id -u)" -ne 0 ] && sudo="sudo"
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq chromium chromium-driver nginx openssl >/dev/null
+  fi
 fi
