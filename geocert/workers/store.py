@@ -206,7 +206,7 @@ class JobStore:
     # fifth (numbers' digits compress about 2x, the repeated names and explanations far more).
     RESULT_COMPRESSION_LEVEL = 1  # zlib's fastest: most of the gain at a few ms per MB
 
-    RESULT_PIECE_BYTES = 1 << 20  # compressed bytes read at a time when a result is sent
+    RESULT_PIECE_BYTES = 1 << 16  # compressed bytes read at a time when a result is sent (about 4x that decompressed)
 
     def result_pieces(self, job_id: str, meta: dict | None = None) -> Iterator[bytes] | None:
         """The stored result's JSON text as UTF-8 pieces, read and decompressed a piece at a
