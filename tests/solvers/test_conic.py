@@ -212,3 +212,26 @@ class TestSafeBoundOfAnyIterate:
             assert safe_lower_bound(q, A, b, BALL, z, lower, upper) == -np.inf
             assert not proves_infeasible(A, b, BALL, z, lower, upper)
         assert safe_lower_bound(q, A, b, BALL, result.z, lower, upper) <= minimum(q, centre, 1.0) + 1e-7
+
+
+class TestSafeLowerBoundsOfRows:
+    """cones.safe_lower_bounds (many dual vectors over one feasible set, as the root region
+    uses) gives each row safe_lower_bound's bound, for every cone kind, and nothing for a row that
+    is not finite."""
+
+    def test_each_row_is_the_single_bound(self):
+        from geocert.solvers.core.cones import safe_lower_bound, safe_lower_bounds
+
+        rng = np.random.default_rng(4)
+        cones = ConeSpec(zero=2, nonneg=3, soc=(3, 4, 3), psd=(3,))
+        rows, n = cones.rows, 5
+        A, b = rng.normal(size=(rows, n)), rng.normal(size=rows)
+        Q, Z = rng.normal(size=(6, n)), rng.normal(size=(6, rows))
+        lower, upper = -rng.uniform(1, 2, n), rng.uniform(1, 2, n)
+        transform = rng.normal(size=(2, 2))
+        Z[4, 3] = np.inf
+        together = safe_lower_bounds(Q, A, b, cones, Z, lower, upper, transform)
+        alone = [safe_lower_bound(q, A, b, cones, z, lower, upper, transform) for q, z in zip(Q, Z)]
+        assert together[4] == -np.inf and alone[4] == -np.inf
+        assert np.allclose(np.delete(together, 4), np.delete(alone, 4), rtol=1e-12, atol=1e-12)
+        assert np.isfinite(np.delete(together, 4)).all()

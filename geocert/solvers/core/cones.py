@@ -39,8 +39,10 @@ class ConeSpec:
 
 def project_dual(z: np.ndarray, cones: ConeSpec) -> np.ndarray:
     """The nearest point of the dual cone (free on the zero cone; the orthant and second-order
-    cones are self-dual)."""
+    cones are self-dual); of each row when ``z`` is a matrix of dual vectors."""
     z = np.array(z, dtype=float)
+    if z.ndim == 2:
+        return np.array([project_dual(row, cones) for row in z]) if cones.psd else _project_rows(z, cones)
     start = cones.zero
     z[start:start + cones.nonneg] = np.maximum(z[start:start + cones.nonneg], 0.0)
     start += cones.nonneg
@@ -53,6 +55,19 @@ def project_dual(z: np.ndarray, cones: ConeSpec) -> np.ndarray:
         z[start:start + size] = svec(_project_psd(smat(z[start:start + size], n)))
         start += size
     return z
+
+
+def _project_rows(Z: np.ndarray, cones: ConeSpec) -> np.ndarray:
+    """project_dual of every row of ``Z`` (a copy) without PSD cones: each cone size's blocks of
+    every row projected at once."""
+    start = cones.zero
+    Z[:, start:start + cones.nonneg] = np.maximum(Z[:, start:start + cones.nonneg], 0.0)
+    start += cones.nonneg
+    if cones.soc:
+        for rows in _soc_rows(start, cones.soc):  # (cones, size)
+            block = Z[:, rows]
+            Z[:, rows] = _project_soc(block.reshape(-1, rows.shape[1])).reshape(block.shape)
+    return Z
 
 
 def svec(S: np.ndarray) -> np.ndarray:
@@ -138,6 +153,27 @@ def safe_lower_bound(q: np.ndarray, A, b: np.ndarray, cones: ConeSpec, z: np.nda
             residual = np.concatenate([transform.T @ residual[:d], residual[d:]])
         bound = float(-b @ z) + _box_minimum(residual, lower, upper)
     return bound if math.isfinite(bound) else -np.inf
+
+
+def safe_lower_bounds(Q: np.ndarray, A, b: np.ndarray, cones: ConeSpec, Z: np.ndarray,
+                      lower: np.ndarray, upper: np.ndarray, transform: np.ndarray | None = None) -> np.ndarray:
+    """safe_lower_bound for each row of ``Q`` with the dual vector in the same row of ``Z``, over
+    one feasible set: one projection and one matrix product for all of them (the root region's
+    2d bounds of a track). A row whose dual is not finite, or whose bound is not, bounds nothing
+    (-inf)."""
+    Z = np.array(Z, dtype=float)
+    finite = np.isfinite(Z).all(axis=1)
+    Z[~finite] = 0.0  # no bound from them (below), whatever they hold
+    with np.errstate(over="ignore", invalid="ignore"):
+        Z = project_dual(Z, cones)
+        residual = Q + np.asarray(Z @ A)
+        if transform is not None:
+            d = transform.shape[0]
+            residual = np.hstack([residual[:, :d] @ transform, residual[:, d:]])
+        terms = np.minimum(residual * lower, residual * upper)
+        terms[residual == 0] = 0.0
+        bounds = -(Z @ b) + terms.sum(axis=1)
+    return np.where(finite & np.isfinite(bounds), bounds, -np.inf)
 
 
 def proves_infeasible(A, b: np.ndarray, cones: ConeSpec, z: np.ndarray, lower: np.ndarray, upper: np.ndarray,
