@@ -182,25 +182,14 @@ def _verify(document: Any, returned: dict | None) -> Report:
     except (TypeError, ValueError, RecursionError) as exc:  # e.g. NaN in the data: not canonical JSON
         fail("data_hash", None, f"the data cannot be hashed: {type(exc).__name__}: {exc}")
         items = []
-    for position, claim in enumerate(items):
-        if not isinstance(claim, dict) or claim.get("index") != position:
-            fail("format", position, "each item must be an object whose index is its position")
-            continue
-        certified = claim.get("certified")
-        if certified is not True:
-            if certified is not False:
-                fail("claim", position, "certified must be true or false")
-            report.items_skipped += 1
-            continue
-        report.items_checked += 1
-        try:
-            for name in verify_item(document["kind"], document["data"], options, claim):
-                tallies[name][0] += 1
-        except Invalid as exc:
-            fail(exc.check, position, exc.detail)
-        except Exception as exc:  # a malformed document is invalid, never a crash
-            fail("format", position, f"{type(exc).__name__}: {exc}")
-    together = getattr(_adapter(document["kind"]), "check_claims", None) if first is None and items else None
+    adapter = _adapter(document["kind"]) if items else None
+    forget = getattr(adapter, "forget", lambda: None)  # what an adapter remembers of one document
+    forget()
+    try:
+        _verify_items(document, options, items, report, tallies, fail)
+    finally:
+        forget()
+    together = getattr(adapter, "check_claims", None) if first is None and items else None
     if together is not None:  # what ties a kind's claims to each other (e.g. the stages of one solve)
         try:
             together(items)
@@ -227,6 +216,28 @@ def _verify(document: Any, returned: dict | None) -> Report:
     report.checks = [{"name": name, "passed": passed, "failed": failed}
                      for name, (passed, failed) in tallies.items() if passed or failed]
     return report
+
+
+def _verify_items(document: dict, options: dict, items: list, report: Report, tallies: dict, fail) -> None:
+    """Every claim of the document checked in turn (failures counted through ``fail``)."""
+    for position, claim in enumerate(items):
+        if not isinstance(claim, dict) or claim.get("index") != position:
+            fail("format", position, "each item must be an object whose index is its position")
+            continue
+        certified = claim.get("certified")
+        if certified is not True:
+            if certified is not False:
+                fail("claim", position, "certified must be true or false")
+            report.items_skipped += 1
+            continue
+        report.items_checked += 1
+        try:
+            for name in verify_item(document["kind"], document["data"], options, claim):
+                tallies[name][0] += 1
+        except Invalid as exc:
+            fail(exc.check, position, exc.detail)
+        except Exception as exc:  # a malformed document is invalid, never a crash
+            fail("format", position, f"{type(exc).__name__}: {exc}")
 
 
 def _document_items(document: Any) -> list[dict]:

@@ -687,3 +687,15 @@ class TestProgramCheck:
             program.den[varying] *= -1
         self.altered(monkeypatch, change)
         assert failed_check(document) == "program"
+
+
+class TestCamerasReadPerDocument:
+    """The verifier reads a document's cameras once for all its tracks, and anew for each
+    document: cameras changed in place between two verifications are the ones checked."""
+
+    def test_cameras_changed_in_place_are_read_anew(self, genuine):
+        doc = copy.deepcopy(genuine["certificate"])
+        assert failed_check(doc) is None
+        doc["data"]["cameras"][1][0][3] = -700.0  # the same list object, another camera
+        rehash(doc)
+        assert failed_check(doc) is not None

@@ -110,10 +110,14 @@ class TrackItems:
               "coordinate >= 0)")
 
     def __init__(self):
-        # The cameras of the document read last (the list object itself, kept alive so that its
-        # identity cannot be reused, and its array): every track of a document shares them, so
-        # they are read once, not once per track.
+        # The cameras of the document being verified (the list object itself, kept alive so that
+        # its identity cannot be reused, and its array): every track of a document shares them, so
+        # they are read once, not once per track. The verifier forgets them at the start and end
+        # of each document (forget()), so a list changed between two verifications is read anew.
         self._cameras: tuple[object, np.ndarray] | None = None
+
+    def forget(self) -> None:
+        self._cameras = None
 
     def _read_cameras(self, value) -> np.ndarray:
         remembered = self._cameras
