@@ -203,8 +203,13 @@ class JobStore:
     # A result is kept compressed (zlib, marked by the job's ``result_encoding``): a track's
     # result is about 12 times its request, so the stored result is most of what a job leaves in
     # Redis for result_ttl_s and most of what every read of it moves; compressed it is about a
-    # fifth (numbers' digits compress about 2x, the repeated names and explanations far more).
+    # quarter (measured: 358 MiB of JSON kept as 95 MiB for 200,000 tracks).
     RESULT_COMPRESSION_LEVEL = 1  # zlib's fastest: most of the gain at a few ms per MB
+
+    def _compressed(self, job_id: str, meta: dict | None) -> bool:
+        """Whether the job's result is stored compressed (not, if stored before results were)."""
+        encoding = meta.get("result_encoding") if meta is not None else self.field(job_id, "result_encoding")
+        return encoding == "zlib"
 
     RESULT_PIECE_BYTES = 1 << 16  # compressed bytes read at a time when a result is sent (about 4x that decompressed)
 
@@ -212,9 +217,8 @@ class JobStore:
         """The stored result's JSON text as UTF-8 pieces, read and decompressed a piece at a
         time (GETRANGE), so that sending a large result holds one piece, not the whole (None
         when there is none). A result removed while it is read ends with an error."""
-        encoding = meta.get("result_encoding") if meta is not None else self.field(job_id, "result_encoding")
         key = self.key(job_id, "result")
-        if encoding != "zlib":
+        if not self._compressed(job_id, meta):
             text = self.r.get(key)
             return None if text is None else iter([text.encode()])
         length = self.binary.strlen(key)
@@ -232,9 +236,8 @@ class JobStore:
         return pieces()
 
     def result_text(self, job_id: str, meta: dict | None = None) -> str | None:
-        """The stored result as JSON text (None when there is none)."""
-        encoding = meta.get("result_encoding") if meta is not None else self.field(job_id, "result_encoding")
-        if encoding == "zlib":
+        """The stored result as JSON text (None when there is none), read in one piece."""
+        if self._compressed(job_id, meta):
             raw = self.binary.get(self.key(job_id, "result"))
             return None if raw is None else zlib.decompress(raw).decode()
         return self.r.get(self.key(job_id, "result"))  # stored before results were compressed

@@ -56,7 +56,7 @@ def nesting_depth(value: Any, limit: int) -> int:
                 return depth
             # Only containers go on the stack: a list of numbers is passed over in C.
             stack.extend([(x, depth + 1) for x in (v.values() if isinstance(v, dict) else v)
-                          if type(x) is list or type(x) is dict or isinstance(x, (list, dict))])
+                          if isinstance(x, (list, dict))])
     return deepest
 
 

@@ -38,8 +38,9 @@ def dlt(source: np.ndarray, target: np.ndarray) -> np.ndarray:
         blocks[:, k, m] = x[:, k:k + 1] * X
     rows = blocks.reshape(len(X) * m, (m + 1) * n1)
     # The thin SVD when there are at least as many rows as unknowns (its last right singular
-    # vector is the same; the full one also builds a square U of side 2k: a third of a second
-    # for a 580-point camera); the full one otherwise, whose last row spans part of the null space.
+    # vector is the same; the full one also builds a square U of side 2k: 0.045 s of CPU against
+    # 0.002 s for a 581-point camera); the full one otherwise, whose last row spans part of the
+    # null space.
     Mn = np.linalg.svd(rows, full_matrices=rows.shape[0] < rows.shape[1])[2][-1].reshape(m + 1, n1)
     M = np.linalg.inv(T) @ Mn @ S
     depths = M[m] @ np.hstack([source, np.ones((len(source), 1))]).T

@@ -76,18 +76,17 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
     X = points[chosen]
     problem = pr.prepare(P, X, image_size, intrinsics)
     empty.ranges, empty.autocalibration_points = problem.ranges, len(chosen)
-    if skip_critical:
-        linear = _linear(P, X, image_size)
-        if linear is not None:
-            warnings, critical = motion(metric_from(cameras, points, *linear))
-            if critical is not None:
-                detail = next(w["detail"] for w in warnings if w["code"] == critical)
-                empty.alternative = linear
-                empty.skipped = (f"the linear estimate's motion is critical ({critical}: {detail}): the certified "
-                                 "search was not run, since it could only certify one of many upgrades these tracks "
-                                 "fit equally well (options.autocalibration_on_critical_motion: \"search\" runs it)")
-                empty.reason = empty.skipped
-                return empty
+    linear = _linear(P, X, image_size)  # the adjustment's second start, and the motion's first judge
+    empty.alternative = linear
+    if skip_critical and linear is not None:
+        warnings, critical = motion(metric_from(cameras, points, *linear))
+        if critical is not None:
+            detail = next(w["detail"] for w in warnings if w["code"] == critical)
+            empty.skipped = (f"the linear estimate's motion is critical ({critical}: {detail}): the certified "
+                             "search was not run, since it could only certify one of many upgrades these tracks "
+                             "fit equally well (options.autocalibration_on_critical_motion: \"search\" runs it)")
+            empty.reason = empty.skipped
+            return empty
     stages: list[dict] = []
     H = K = None
     if method in ("stratified", "auto"):
@@ -97,8 +96,6 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
         H, K, found = _direct(problem, P, X, options)
         stages += found
     empty.stages = stages
-    linear = _linear(P, X, image_size)
-    empty.alternative = linear
     if H is None:
         reasons = "; ".join(f"{stage['name']}: {stage['reason']}" for stage in stages if stage.get("reason"))
         empty.reason = f"autocalibration found no metric upgrade ({reasons or 'no answer'})"
