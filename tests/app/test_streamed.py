@@ -9,10 +9,11 @@ import json
 import numpy as np
 import pytest
 import redis
+from fastapi import Request
 from fastapi.exceptions import RequestValidationError
 
 from geocert.app.errors import field_path
-from geocert.app.schemas import JOB_REQUEST
+from geocert.app.schemas import JOB_REQUEST, JobRequest
 from geocert.app.streamed import split_items, upload_items
 from geocert.solvers.core.geometry import InputError
 from tests.support import triangulation_job
@@ -98,3 +99,54 @@ class TestUploadItems:
             upload_items(client, split, head_request(split))
         assert raised.value.field == "data/tracks/25/views/3"
         assert not list(client.scan_iter("geocert:upload:*"))
+
+
+class TestStreamedItemsRoute:
+    """The jobs router's route class hands a body over the threshold to the route as its head,
+    with the items' places on request.state; a smaller body, or one the scan leaves alone, goes
+    through untouched."""
+
+    @pytest.fixture
+    def client(self, monkeypatch):
+        import asyncio
+
+        import httpx
+        from fastapi import APIRouter, FastAPI
+
+        from geocert.app.api.routes.jobs import StreamedItemsRoute
+        from geocert.settings import get_settings
+
+        monkeypatch.setenv("GEOCERT_STREAM_THRESHOLD_BYTES", "4000")
+        get_settings.cache_clear()
+        router = APIRouter(route_class=StreamedItemsRoute)
+
+        @router.post("/jobs")
+        def submit(body: JobRequest, request: Request):
+            split = getattr(request.state, "streamed", None)
+            return {"tracks_in_model": len(body.data.tracks), "streamed": None if split is None else split.count}
+
+        app = FastAPI()
+        app.include_router(router)
+
+        def post(text: str) -> dict:
+            async def send():
+                async with httpx.AsyncClient(transport=httpx.ASGITransport(app=app), base_url="http://test") as client:
+                    return (await client.post("/jobs", content=text, headers={"content-type": "application/json"})).json()
+            return asyncio.run(send())
+
+        yield post
+        get_settings.cache_clear()
+
+    def test_a_large_body_reaches_the_route_as_its_head_and_its_items(self, client):
+        job, text = body_of(30)
+        assert len(text) > 4000
+        answer = client(text)
+        assert answer == {"tracks_in_model": 1, "streamed": 30}
+
+    def test_a_small_body_goes_through_whole(self, client):
+        job, text = body_of(30)
+        job["data"]["tracks"] = job["data"]["tracks"][:3]
+        text = json.dumps(job)
+        assert len(text) < 4000
+        answer = client(text)
+        assert answer == {"tracks_in_model": 3, "streamed": None}

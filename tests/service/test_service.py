@@ -48,6 +48,7 @@ def service(tmp_path_factory):
             assert process.poll() is None, "geocert serve exited"
             assert time.monotonic() < deadline, "service not ready within 90 s"
             time.sleep(0.3)
+        client.serve_pid = process.pid  # for TestWorkerProcesses
         yield client
     process.terminate()
     process.wait(timeout=30)
@@ -495,3 +496,17 @@ class TestLargeBodies:
         listed = [job["id"] for job in service.get("/v1/jobs", params={"limit": 100}).json()["jobs"]]
         TestBadInput.assert_problem(None, service.post("/v1/jobs", json=body), 422, field)
         assert [job["id"] for job in service.get("/v1/jobs", params={"limit": 100}).json()["jobs"]] == listed
+
+
+class TestWorkerProcesses:
+    def test_workers_run_blas_on_one_thread(self, service):
+        """geocert serve starts its workers with OPENBLAS_NUM_THREADS=1 (cli.worker_environment)
+        unless the operator set it: read from the worker processes' own environment."""
+        assert "OPENBLAS_NUM_THREADS" not in os.environ  # else the test says nothing
+        pid = service.serve_pid
+        children = open(f"/proc/{pid}/task/{pid}/children").read().split()
+        workers = [c for c in children if b"celery" in open(f"/proc/{c}/cmdline", "rb").read()]
+        assert workers
+        for worker in workers:
+            environment = open(f"/proc/{worker}/environ", "rb").read().split(b"\0")
+            assert b"OPENBLAS_NUM_THREADS=1" in environment and b"OMP_NUM_THREADS=1" in environment
