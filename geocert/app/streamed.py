@@ -170,19 +170,20 @@ class Upload:
     key: str  # the Redis list holding the items' JSON texts, in order
     count: int
     observations: int
-    digest: str  # of the whole request (head with its items), for Idempotency-Key
+    digest: str | None  # of the whole request (head with its items), when asked for (Idempotency-Key)
 
 
-def upload_items(redis_client, split: Split, request: dict) -> Upload:
+def upload_items(redis_client, split: Split, request: dict, with_digest: bool = False) -> Upload:
     """Every item validated by the kind's model, checked by its parser (with the rest of the
     request, whose ``data`` holds the checked head) and written as JSON to a temporary list, a
-    batch at a time. Raises RequestValidationError or InputError naming the item, after removing
-    what was written."""
+    batch at a time; with ``with_digest``, the request's digest too (as for every body, only for
+    an Idempotency-Key: hashing is not done on every submit). Raises RequestValidationError or
+    InputError naming the item, after removing what was written."""
     kind = KINDS.get(split.kind)
     adapter = _items_adapter(split.kind)
     key = f"geocert:upload:{uuid.uuid4().hex}"
     placeholder = {**request, "data": {**request["data"], split.chunk_key: None}}
-    digest = hashlib.sha256(json.dumps(placeholder, sort_keys=True).encode())
+    digest = hashlib.sha256(json.dumps(placeholder, sort_keys=True).encode()) if with_digest else None
     slots: list[Any] = [None] * split.count
     data = {**request["data"], split.chunk_key: slots}
     observations = 0
@@ -201,7 +202,7 @@ def upload_items(redis_client, split: Split, request: dict) -> Upload:
             observations += kind.observations(parsed)
             slots[begin:stop] = [None] * (stop - begin)
             texts = [json.dumps(item) for item in items]
-            for item in items:
+            for item in items if digest is not None else ():
                 digest.update(json.dumps(item, sort_keys=True).encode())
             pipe = redis_client.pipeline()
             pipe.rpush(key, *texts)
@@ -210,4 +211,4 @@ def upload_items(redis_client, split: Split, request: dict) -> Upload:
     except BaseException:
         redis_client.delete(key)
         raise
-    return Upload(key, split.count, observations, digest.hexdigest())
+    return Upload(key, split.count, observations, None if digest is None else digest.hexdigest())

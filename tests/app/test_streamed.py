@@ -81,6 +81,21 @@ class TestUploadItems:
         assert 0 < client.ttl(upload.key) <= 3600  # gone by itself if the API dies before the job is made
         client.delete(upload.key)
 
+    def test_the_digest_is_made_only_when_asked_and_names_the_request(self, client):
+        job, compact = body_of()
+        _, indented = body_of(indent=2)
+
+        def digest(text: str, asked: bool = True) -> str | None:
+            split = split_items(text)
+            upload = upload_items(client, split, head_request(split), with_digest=asked)
+            client.delete(upload.key)
+            return upload.digest
+
+        assert digest(compact, asked=False) is None
+        assert digest(compact) == digest(indented)  # the request, not its spelling
+        job["data"]["tracks"][29]["points"][0][0] += 1.0
+        assert digest(json.dumps(job)) != digest(compact)
+
     def test_a_bad_item_is_named_and_nothing_is_left(self, client):
         job, _ = body_of()
         job["data"]["tracks"][17]["points"][2] = ["a", 1]

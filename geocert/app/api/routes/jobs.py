@@ -179,7 +179,7 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
     upload = None
     if split is not None:
         _check_count(kind, split.count)  # before any item is read
-        upload = streamed.upload_items(store.r, split, request)
+        upload = streamed.upload_items(store.r, split, request, with_digest=idempotency_key is not None)
     try:
         items = _check_limits(kind, parsed, body, request,
                               (upload.count, upload.observations) if upload is not None else None)
