@@ -12,7 +12,7 @@ import heapq
 import itertools
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable, Protocol
 
 import numpy as np
@@ -52,6 +52,12 @@ class BoxBound:
     candidate: Any = None  # a point of the domain to try as incumbent (problem-specific)
     split_hint: Any = None  # e.g. the relaxation's point, for the split rule
     proof: Any = None  # what proves lower_bound (or emptiness) to a third party, when asked for
+    # Node tightening: the problem may shrink the box it was asked to bound. ``box`` is then the
+    # part the bound is for, and ``excluded`` the rest as (box, proof) pairs, each proven to hold
+    # no point cheaper than the incumbent of the moment; together they cover the asked box. EMPTY
+    # with ``excluded`` and no ``box``: the excluded parts are the whole box.
+    box: Box | None = None
+    excluded: list = field(default_factory=list)
 
 
 class BranchProblem(Protocol):
@@ -150,7 +156,14 @@ def branch_and_bound(
     def consider(box: Box, parent_bound: float, parent_proof: Any) -> None:
         nonlocal nodes, incumbent, upper_bound, unresolved
         nodes += 1
+        asked = upper_bound
         result = problem.bound(box, upper_bound)
+        for part, part_proof in result.excluded:
+            close(part, max(parent_bound, asked), part_proof)
+        if result.box is not None:
+            box = result.box
+        elif result.excluded and result.status == BoxStatus.EMPTY:
+            return  # the excluded parts are the whole box
         if result.candidate is not None:
             value = problem.objective(result.candidate)
             if value < upper_bound - tolerance(upper_bound, options):
