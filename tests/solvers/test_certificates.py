@@ -176,6 +176,60 @@ class TestTamperingIsCaught:
         assert failed_check(doc) == "lower_bound"
 
 
+@pytest.fixture(scope="module")
+def tightened() -> dict:
+    """A map certificate whose search cut boxes by node tightening (forced on for a small map)."""
+    import geocert.solvers.fractional.maps as maps
+
+    saved, maps.NODE_TIGHTENING_POINTS = maps.NODE_TIGHTENING_POINTS, 0
+    try:
+        rng = np.random.default_rng(seed("node tightening"))
+        for _ in range(20):
+            document = solve_job(map_job(rng, "resection", 7, "L2L2", maps=1, noise=3.0))["certificate"]
+            item = document["items"][0]
+            if item["certified"] and any(p["kind"] == "tightened" for p in item["proof"].get("proofs", [])):
+                return document
+    finally:
+        maps.NODE_TIGHTENING_POINTS = saved
+    pytest.fail("no instance with node tightening")
+
+
+def cut_leaf(document: dict) -> tuple[list, dict]:
+    """A leaf closed by a tightened proof, and that proof."""
+    proof = document["items"][0]["proof"]
+    for leaf in proof["leaves"]:
+        if leaf[2] is not None and proof["proofs"][leaf[2]]["kind"] == "tightened":
+            return leaf, proof["proofs"][leaf[2]]
+    raise AssertionError("no leaf closed by node tightening")
+
+
+class TestNodeTightening:
+    def test_verifies_and_is_strict_json(self, tightened):
+        assert verify_document(tightened).valid
+        # Infinite bounds (tightened, depth, farkas) are written as null, not as Infinity.
+        json.dumps(tightened, allow_nan=False)
+
+    def test_a_cut_part_grown_into_the_proven_range_is_refused(self, tightened):
+        doc = copy.deepcopy(tightened)
+        leaf, proof = cut_leaf(doc)
+        leaf[0], leaf[1] = copy.deepcopy(proof["box"])  # the whole node's box: coverage still holds
+        assert failed_check(doc) == "leaf_bounds"
+
+    def test_a_cut_part_without_its_duals_is_refused(self, tightened):
+        doc = copy.deepcopy(tightened)
+        _, proof = cut_leaf(doc)
+        proof["duals"] = [None] * len(proof["duals"])
+        assert failed_check(doc) == "leaf_bounds"
+
+    def test_negated_tightening_duals_are_refused(self, tightened):
+        doc = copy.deepcopy(tightened)
+        _, proof = cut_leaf(doc)
+        for i, z in enumerate(proof["duals"]):
+            if z is not None:
+                proof["duals"][i] = pack(-unpack(z))  # the opposite direction proves nothing useful
+        assert failed_check(doc) == "leaf_bounds"
+
+
 class TestCoverage:
     def test_partition_covers_and_a_missing_sliver_is_found(self):
         root = Box(np.zeros(2), np.ones(2))

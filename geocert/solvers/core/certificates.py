@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import hashlib
 import json
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -63,13 +64,16 @@ class TighteningProof:
 class LeafProof:
     """Why no point of ``box`` costing at most ``upper_bound`` costs less than ``bound``:
     ``dual`` (a dual vector of the box's relaxation), ``farkas`` (the relaxation is infeasible:
-    bound is infinite) or ``depth`` (some depth is at most 0 on the whole box)."""
+    bound is infinite), ``depth`` (some depth is at most 0 on the whole box) or ``tightened``
+    (node tightening: ``duals`` prove the range of ``B v`` over the box's points costing at most
+    ``upper_bound``; the leaves using it lie outside that range, so their bound is infinite)."""
 
     box: Box
     upper_bound: float
     kind: str
     z: np.ndarray | None
     bound: float
+    duals: list[np.ndarray | None] | None = None  # tightened: 2 per functional, as TighteningProof's
 
 
 @dataclass
@@ -107,8 +111,11 @@ def encode(proof: SearchProof) -> dict:
     for box, leaf in proof.leaves:
         if leaf is not None and id(leaf) not in index:
             index[id(leaf)] = len(proofs)
-            proofs.append({"box": _box(leaf.box), "upper_bound": leaf.upper_bound, "kind": leaf.kind,
-                           "z": pack(leaf.z), "bound": leaf.bound})
+            record = {"box": _box(leaf.box), "upper_bound": leaf.upper_bound, "kind": leaf.kind,
+                      "z": pack(leaf.z), "bound": leaf.bound if math.isfinite(leaf.bound) else None}
+            if leaf.duals is not None:
+                record["duals"] = [pack(z) for z in leaf.duals]
+            proofs.append(record)
         leaves.append(_box(box) + [index[id(leaf)] if leaf is not None else None])
     root = proof.root
     return {

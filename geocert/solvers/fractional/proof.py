@@ -187,25 +187,40 @@ def _check_round(relaxation: Relaxation, round_: Any, box: Box, cap: float, numb
         if not (np.array_equal(box_out.lo, box_in.lo) and np.array_equal(box_out.hi, box_in.hi)):
             raise Invalid("tightening", f"round {number}: sides moved without a dual vector")
         return box_out
-    data = relaxation.conic_data(box_in, ub, envelope=False)
+    low, high = _proven_sides(relaxation, box_in, ub, duals, f"tightening round {number}", "tightening")
+    for i in range(k):
+        proven_lo, proven_hi = max(box_in.lo[i], low[i]), min(box_in.hi[i], high[i])
+        if box_out.lo[i] > proven_lo or box_out.hi[i] < proven_hi:
+            raise Invalid("tightening", f"round {number}, functional {i}: sides [{box_out.lo[i]!r}, {box_out.hi[i]!r}] "
+                                        f"are beyond the proven [{proven_lo!r}, {proven_hi!r}]")
+    return box_out
+
+
+def _proven_sides(relaxation: Relaxation, box: Box, ub: float, duals: list, where: str,
+                  check: str) -> tuple[np.ndarray, np.ndarray]:
+    """The range of each ``B_i v`` over the relaxation's points of ``box`` costing at most
+    ``ub``, as the dual vectors prove it (``duals[2 i]`` the low side, ``duals[2 i + 1]`` the
+    high one); a side without a dual is unbounded."""
+    k = len(box.lo)
+    data = relaxation.conic_data(box, ub, envelope=False)
     if data is None:
-        raise Invalid("tightening", f"round {number}: no depth is positive on its box")
-    _finite_bounds(data, f"tightening round {number}")
+        raise Invalid(check, f"{where}: no depth is positive on its box")
+    _finite_bounds(data, where)
     data = with_cost_cap(data, ub)
+    low, high = np.full(k, -np.inf), np.full(k, np.inf)
     for i in range(k):
         for side, sign in ((0, 1.0), (1, -1.0)):
             z = duals[2 * i + side]
-            proven = box_in.lo[i] if sign > 0 else box_in.hi[i]
-            if z is not None:
-                objective = tightening_objective(data, relaxation.B[i], sign)
-                value = sign * safe_lower_bound(objective, data.A, data.b, data.cones, dual_vector(z, len(data.b)),
-                                                data.lower, data.upper, data.transform)
-                proven = max(proven, value) if sign > 0 else min(proven, value)
-            claimed = box_out.lo[i] if sign > 0 else box_out.hi[i]
-            if (sign > 0 and claimed > proven) or (sign < 0 and claimed < proven):
-                raise Invalid("tightening", f"round {number}, functional {i}: side {claimed!r} is beyond "
-                                            f"the proven {proven!r}")
-    return box_out
+            if z is None:
+                continue
+            objective = tightening_objective(data, relaxation.B[i], sign)
+            value = sign * safe_lower_bound(objective, data.A, data.b, data.cones, dual_vector(z, len(data.b)),
+                                            data.lower, data.upper, data.transform)
+            if sign > 0:
+                low[i] = value
+            else:
+                high[i] = value
+    return low, high
 
 
 def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_lo, leaf_hi,
@@ -213,6 +228,7 @@ def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_
     """Each proof's bound, recomputed; each leaf's box inside its proof's box."""
     proven: list[float] = []
     boxes: list[Box] = []
+    ranges: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # tightened proofs' proven ranges
     for number, proof in enumerate(proofs):
         if not isinstance(proof, dict):
             raise Invalid("format", f"proof {number} must be an object")
@@ -222,6 +238,13 @@ def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_
         if not ub >= cap:
             raise Invalid("leaf_bounds", f"proof {number} assumed a cost cap below the claimed lower bound")
         kind = proof.get("kind")
+        if kind == "tightened":  # node tightening: its leaves lie outside the range it proves
+            duals = proof.get("duals")
+            if not isinstance(duals, list) or len(duals) != 2 * k:
+                raise Invalid("leaf_bounds", f"proof {number}: {k} functionals need {2 * k} dual vectors")
+            ranges[number] = _proven_sides(relaxation, box, ub, duals, f"proof {number}", "leaf_bounds")
+            proven.append(math.inf)
+            continue
         if kind == "depth":  # the depth ranges alone decide it (what conic_data tests first)
             if not np.any(relaxation.depth_range(box)[1] <= 0):
                 raise Invalid("leaf_bounds", f"proof {number}: the depths are not all negative on its box")
@@ -253,5 +276,10 @@ def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_
         box = boxes[index]
         if not (np.all(box.lo <= leaf_lo[number]) and np.all(box.hi >= leaf_hi[number])):
             raise Invalid("leaf_bounds", f"leaf {number} is not inside the box of its proof {index}")
+        if index in ranges:
+            low, high = ranges[index]
+            # Strictly outside: a point on a proven side may cost at most the proof's upper_bound.
+            if not np.any((leaf_hi[number] < low) | (leaf_lo[number] > high) | (low > high)):
+                raise Invalid("leaf_bounds", f"leaf {number} is not outside the range its proof {index} proves")
         bounds.append(proven[index])
     return bounds

@@ -28,6 +28,8 @@ from geocert.solvers.fractional.relaxation import (EPS_DEPTH, ConicData, Fractio
                          cost_unit, gamma_for, residual_region, root_bounds, tightening_objective, with_cost_cap)
 
 MAX_SCALE = 1e3
+NODE_CUT = 0.05  # node tightening cuts a side off when that shrinks the box by this much of its width
+NODE_MARGIN = 1e-9  # and cuts that much of the width short of the proven side
 
 
 def branch_directions(program: FractionalProgram, subspace: np.ndarray) -> np.ndarray:
@@ -290,6 +292,8 @@ class BoxProblem:
         # built well scaled (a normalised chart, costs scaled to about 1), and a lean solve that does
         # not end cleanly is repeated with the full settings (core.conic._retried).
         self._solver = ReusableConicProgram(lean=True)
+        self.node_tightening = False  # a round of bound tightening at every node below the root (maps)
+        self._tightener = ReusableConicProgram(lean=True)
 
     # --- BranchProblem interface -------------------------------------------------------------
     def root_box(self) -> Box:
@@ -305,6 +309,20 @@ class BoxProblem:
         return self.relaxation.conic_data(box, upper_bound, envelope)
 
     def bound(self, box: Box, upper_bound: float) -> BoxBound:
+        """The box's relaxation bound; with node tightening (below the root, once an incumbent
+        is known), the box is first cut to the range its points costing at most ``upper_bound``
+        can have, and the rest is bounded: fewer, smaller boxes for 6 small solves a node."""
+        if not (self.node_tightening and box is not self.root and math.isfinite(upper_bound)):
+            return self._bound(box, upper_bound)
+        tightened, excluded = self._tighten_node(box, upper_bound)
+        if tightened is None:
+            return BoxBound(BoxStatus.EMPTY, excluded=excluded)
+        result = self._bound(tightened, upper_bound)
+        if tightened is not box:
+            result.box, result.excluded = tightened, excluded
+        return result
+
+    def _bound(self, box: Box, upper_bound: float) -> BoxBound:
         data = self.conic_data(box, upper_bound)
         if data is None:  # some depth is negative on the whole box
             return BoxBound(BoxStatus.EMPTY, proof=LeafProof(box, upper_bound, "depth", None, math.inf))
@@ -348,23 +366,10 @@ class BoxProblem:
             data = self.conic_data(box, upper_bound, envelope=False)
             if data is None:
                 return box
-            data = with_cost_cap(data, upper_bound)
-            lo, hi = box.lo.copy(), box.hi.copy()
-            duals: list[np.ndarray | None] = []
-            for i in range(len(self.B)):
-                for sign, side in ((1.0, lo), (-1.0, hi)):
-                    objective = tightening_objective(data, self.B[i], sign)
-                    result = (solver.solve(objective, data.A, data.b, data.cones) if not duals
-                              else solver.solve_objective(objective))
-                    if result.status is ConicStatus.INFEASIBLE:
-                        return box  # cannot happen with the incumbent inside; keep what is proven
-                    duals.append(result.z if result.status is ConicStatus.OPTIMAL else None)
-                    if result.status is not ConicStatus.OPTIMAL:
-                        continue
-                    value = sign * safe_lower_bound(objective, data.A, data.b, data.cones, result.z,
-                                                    data.lower, data.upper, data.transform)
-                    if math.isfinite(value):
-                        side[i] = max(side[i], value) if sign > 0 else min(side[i], value)
+            low, high, duals = self._proven_range(solver, with_cost_cap(data, upper_bound))
+            if duals is None:
+                return box  # infeasible: cannot happen with the incumbent inside; keep what is proven
+            lo, hi = np.maximum(box.lo, low), np.minimum(box.hi, high)
             hi = np.maximum(hi, lo)
             ratio = float(np.prod((hi - lo) / np.maximum(box.width, 1e-300)))
             self.tightening.append(TighteningProof(upper_bound, box, Box(lo, hi), duals))
@@ -372,6 +377,67 @@ class BoxProblem:
             if ratio > 0.5:
                 break
         return box
+
+    def _proven_range(self, solver: ReusableConicProgram, data: ConicData):
+        """The range of each ``B_i v`` over a relaxation with its cost cap: proven sides (-inf or
+        inf where a solve was not clean) and their dual vectors, lower then upper side of each
+        (None: not proven); duals None when the relaxation is infeasible."""
+        k = len(self.B)
+        low, high = np.full(k, -np.inf), np.full(k, np.inf)
+        duals: list[np.ndarray | None] = []
+        for i in range(k):
+            for sign, side in ((1.0, low), (-1.0, high)):
+                objective = tightening_objective(data, self.B[i], sign)
+                result = (solver.solve(objective, data.A, data.b, data.cones) if not duals
+                          else solver.solve_objective(objective))
+                if result.status is ConicStatus.INFEASIBLE:
+                    return low, high, None
+                value = -math.inf
+                if result.status is ConicStatus.OPTIMAL:
+                    value = safe_lower_bound(objective, data.A, data.b, data.cones, result.z,
+                                             data.lower, data.upper, data.transform)
+                duals.append(result.z if math.isfinite(value) else None)
+                if math.isfinite(value):
+                    side[i] = sign * value
+        return low, high, duals
+
+    def _tighten_node(self, box: Box, upper_bound: float) -> tuple[Box | None, list[tuple[Box, LeafProof]]]:
+        """One round of bound tightening on a node's box: the range of each ``z_i = B_i v`` over
+        the relaxation's points of ``box`` costing at most ``upper_bound``, proven by the duals.
+        Returns the box left to bound (None: nothing left) and the parts cut off, each with a
+        ``tightened`` proof: a part lies strictly outside a proven range, so no point of it costs
+        at most ``upper_bound``. A side is only cut when that shrinks it by NODE_CUT of its width."""
+        data = self.conic_data(box, upper_bound, envelope=False)
+        if data is None:
+            return box, []
+        low, high, duals = self._proven_range(self._tightener, with_cost_cap(data, upper_bound))
+        if duals is None:
+            return box, []
+        proven = np.vstack([np.maximum(box.lo, low), np.minimum(box.hi, high)])
+        proof = LeafProof(box, upper_bound, "tightened", None, math.inf, duals)
+        lo, hi = box.lo.copy(), box.hi.copy()
+        parts: list[tuple[Box, LeafProof]] = []
+        width = box.width
+        for i in range(len(self.B)):
+            low, high = proven[0, i], proven[1, i]
+            if low > high:  # no point of the box costs at most upper_bound
+                return None, [(box, proof)]
+            # Cut just short of the proven side, so that each part lies strictly outside it.
+            cut = low - NODE_MARGIN * width[i]
+            if cut < low and cut - lo[i] > NODE_CUT * width[i]:
+                part_hi = hi.copy()
+                part_hi[i] = cut
+                parts.append((Box(lo.copy(), part_hi), proof))
+                lo[i] = cut
+            cut = high + NODE_MARGIN * width[i]
+            if cut > high and hi[i] - cut > NODE_CUT * width[i]:
+                part_lo = lo.copy()
+                part_lo[i] = cut
+                parts.append((Box(part_lo, hi.copy()), proof))
+                hi[i] = cut
+        if not parts:
+            return box, []
+        return Box(lo, hi), parts
 
     def split(self, box: Box, bound: BoxBound) -> list[Box]:
         """Split where the depths vary most relative to their size, at the relaxation's point."""
