@@ -9,6 +9,7 @@ numbers returned."""
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import dataclass
 
@@ -17,6 +18,9 @@ import numpy as np
 from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
 from geocert.solvers.fractional.results import MapResult, TrackResult
+
+
+CAMERA_THREADS = 2  # cameras resected at once (see resect_cameras)
 
 
 @dataclass
@@ -84,66 +88,98 @@ def free_camera_cost(P: np.ndarray, X: np.ndarray, x: np.ndarray, norm: str) -> 
 
 def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.ndarray, np.ndarray]],
                    options: MapOptions, progress=None, should_stop=None,
-                   bound_every_camera: bool = False) -> dict[int, CameraBound]:
+                   bound_every_camera: bool = False, threads: int | None = None) -> dict[int, CameraBound]:
     """For each view: its points (3D) and pixels; the certified resection's bound, stated for
     the camera returned. Unless ``bound_every_camera``, the search is not run for a camera that
     cannot be certified whatever it proves: one with a point behind it, or one a free 3x4 camera
     found locally beats by more than the tolerance (the bound is at most that camera's cost, so
     the returned camera's gap would exceed the tolerance); such a camera is reported with its
-    cost and the reason, and no bound."""
+    cost and the reason, and no bound.
+
+    Cameras are resected ``threads`` at a time (None: CAMERA_THREADS, at most the processors):
+    the conic solver, most of a resection's time, releases the interpreter's lock. Each camera's
+    search is the same as alone; the largest start first, so the last to finish is a small one."""
+    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+    threads = max(1, min(CAMERA_THREADS, os.cpu_count() or 1) if threads is None else threads)
+    order = sorted(cameras, key=lambda view: (-len(sources.get(view, ((),))[0]), view))
+    out: dict[int, CameraBound] = {}
+
+    def points(view: int):
+        return sources.get(view, (np.zeros((0, 3)), np.zeros((0, 2))))
+
+    # At most ``threads`` cameras in flight: a cancel seen between two stops the ones not started.
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        running: set = set()
+        queue = iter(order)
+        stopped = False
+        while True:
+            while not stopped and len(running) < threads:
+                view = next(queue, None)
+                if view is None:
+                    break
+                running.add(pool.submit(_bound_camera, view, cameras[view], *points(view), options,
+                                        bound_every_camera))
+            if not running:
+                break
+            finished, running = wait(running, return_when=FIRST_COMPLETED)
+            for future in finished:
+                bound = future.result()
+                out[bound.view] = bound
+                if progress is not None:
+                    progress(len(out), len(cameras))
+            if not stopped and should_stop is not None and should_stop():
+                stopped = True
+    for view in order:
+        if view not in out:
+            out[view] = CameraBound(view, None, None, None, None, False, "cancelled", len(points(view)[0]), 0.0,
+                                    "the job was cancelled")
+    return dict(sorted(out.items()))
+
+
+def _bound_camera(view: int, P: np.ndarray, X: np.ndarray, x: np.ndarray, options: MapOptions,
+                  bound_every_camera: bool) -> CameraBound:
+    """One camera's figures and bound (see resect_cameras)."""
     from geocert.solvers.fractional.maps import fit_map
 
-    out = {}
-    for done, (view, P) in enumerate(sorted(cameras.items())):
-        X, x = sources.get(view, (np.zeros((0, 3)), np.zeros((0, 2))))
-        start = time.perf_counter()
-        if should_stop is not None and should_stop():
-            out[view] = CameraBound(view, None, None, None, None, False, "cancelled", len(X), 0.0, "the job was cancelled")
-            continue
-        if len(X) < 6:
-            out[view] = CameraBound(view, None, None, None, None, False, "degenerate", len(X), 0.0,
-                                    f"{len(X)} points: a camera needs at least 6")
-            continue
-        proj = np.hstack([X, np.ones((len(X), 1))]) @ P.T
-        depths_positive = bool(np.all(proj[:, 2] > 0))
-        residuals = x - proj[:, :2] / proj[:, 2:3]
-        cost = norm_cost(residuals, options.norm)
-        tolerance = max(options.abs_gap, options.rel_gap * cost)
-        if not bound_every_camera:
-            reason = None
-            if not depths_positive:
-                reason = "a point is behind the camera returned: outside the bound's scope"
-            else:
-                free = free_camera_cost(P, X, x, options.norm)
-                if free is not None and cost - free > tolerance:
-                    reason = (f"the camera returned costs {cost:.4g}, {(cost - free) / max(cost, 1e-300):.2%} above a "
-                              f"free 3x4 camera found locally ({free:.4g}), more than the tolerance "
-                              f"{options.rel_gap:.2g}: no bound can certify it, so the certified resection was not "
-                              "run (options.bound_every_camera runs it)")
-            if reason is not None:
-                out[view] = CameraBound(view, cost if math.isfinite(cost) else None, None, None, None, False,
-                                        "not_certified", len(X), time.perf_counter() - start, reason)
-                if progress is not None:
-                    progress(done + 1, len(cameras))
-                continue
-        result = fit_map(X, x, options)
-        lower = result.lower_bound if result.certified else None
-        gap = None if lower is None else max(0.0, cost - lower)
-        certified = bool(result.certified and depths_positive and gap is not None and gap <= tolerance)
-        if certified:
-            status, reason = "optimal", None
-        elif not result.certified:
-            status, reason = result.status, f"the resection was not certified: {result.reason}"
-        elif not depths_positive:
-            status, reason = "not_certified", "a point is behind the camera returned: outside the bound's scope"
+    start = time.perf_counter()
+    if len(X) < 6:
+        return CameraBound(view, None, None, None, None, False, "degenerate", len(X), 0.0,
+                           f"{len(X)} points: a camera needs at least 6")
+    proj = np.hstack([X, np.ones((len(X), 1))]) @ P.T
+    depths_positive = bool(np.all(proj[:, 2] > 0))
+    residuals = x - proj[:, :2] / proj[:, 2:3]
+    cost = norm_cost(residuals, options.norm)
+    tolerance = max(options.abs_gap, options.rel_gap * cost)
+    if not bound_every_camera:
+        reason = None
+        if not depths_positive:
+            reason = "a point is behind the camera returned: outside the bound's scope"
         else:
-            status, reason = "not_certified", (f"the camera returned costs {cost:.4g}, {gap / max(cost, 1e-300):.2%} "
-                                               "above the certified bound (a shared K is a constraint the "
-                                               "unconstrained resection does not have)")
-        if certified:
-            lower = cost - gap
-        out[view] = CameraBound(view, cost if math.isfinite(cost) else None, result.cost, lower, gap, certified, status,
-                                len(X), time.perf_counter() - start, reason, result)
-        if progress is not None:
-            progress(done + 1, len(cameras))
-    return out
+            free = free_camera_cost(P, X, x, options.norm)
+            if free is not None and cost - free > tolerance:
+                reason = (f"the camera returned costs {cost:.4g}, {(cost - free) / max(cost, 1e-300):.2%} above a "
+                          f"free 3x4 camera found locally ({free:.4g}), more than the tolerance "
+                          f"{options.rel_gap:.2g}: no bound can certify it, so the certified resection was not "
+                          "run (options.bound_every_camera runs it)")
+        if reason is not None:
+            return CameraBound(view, cost if math.isfinite(cost) else None, None, None, None, False,
+                               "not_certified", len(X), time.perf_counter() - start, reason)
+    result = fit_map(X, x, options)
+    lower = result.lower_bound if result.certified else None
+    gap = None if lower is None else max(0.0, cost - lower)
+    certified = bool(result.certified and depths_positive and gap is not None and gap <= tolerance)
+    if certified:
+        status, reason = "optimal", None
+    elif not result.certified:
+        status, reason = result.status, f"the resection was not certified: {result.reason}"
+    elif not depths_positive:
+        status, reason = "not_certified", "a point is behind the camera returned: outside the bound's scope"
+    else:
+        status, reason = "not_certified", (f"the camera returned costs {cost:.4g}, {gap / max(cost, 1e-300):.2%} "
+                                           "above the certified bound (a shared K is a constraint the "
+                                           "unconstrained resection does not have)")
+    if certified:
+        lower = cost - gap
+    return CameraBound(view, cost if math.isfinite(cost) else None, result.cost, lower, gap, certified, status,
+                       len(X), time.perf_counter() - start, reason, result)
