@@ -250,3 +250,46 @@ def test_dlt_fits_exact_data_with_few_or_many_points(kind, count):
     _, source, target = scene(rng, kind, count)
     M = dlt(source, target)
     assert np.abs(apply(M, source) - target).max() < 1e-6
+
+
+@pytest.mark.parametrize("norm", NORMS)
+@pytest.mark.parametrize("kind", ["resection", "homography2"])
+def test_node_tightening_cuts_off_no_map_within_the_cap(norm, kind):
+    """A node's box cut by search.BoxProblem._tighten_node: every sampled map costing at most the
+    cap whose B v lies in the node's box lies in the box left, never in a part cut off; the parts
+    and the box left tile the node's box."""
+    rng = np.random.default_rng(seed("node tightening", norm, kind))
+    cuts = 0
+    for _ in range(6):
+        _, source, target = scene(rng, kind, 8)
+        target = target + rng.normal(size=target.shape) * 2.0
+        n = source.shape[1]
+        chart = MapChart.build(source, target, norm)
+        prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n],
+                           1e-7, None, _REASONS)
+        if not isinstance(prepared, Prepared):
+            continue
+        problem = prepared.problem
+        cap = 1.5 * prepared.upper
+        root = problem.root
+        # A node: the root box's half (along its widest side) holding the incumbent.
+        z0 = problem.B @ prepared.incumbent
+        side = int(np.argmax(root.width))
+        lo, hi = root.lo.copy(), root.hi.copy()
+        middle = 0.5 * (lo[side] + hi[side])
+        (hi if z0[side] <= middle else lo)[side] = middle
+        node = Box(lo, hi)
+        left, parts = problem._tighten_node(node, cap)
+        cuts += len(parts)
+        volume = sum(np.prod(part.width) for part, _ in parts) + (np.prod(left.width) if left is not None else 0.0)
+        assert volume == pytest.approx(np.prod(node.width), rel=1e-9)
+        scales = 10.0 ** rng.uniform(-6, 0, size=(3000, 1))
+        samples = prepared.incumbent + rng.normal(size=(3000, chart.program.dim)) * scales
+        costs = np.array([problem.objective(v) for v in samples])
+        z = samples @ problem.B.T
+        inside = np.all((z >= node.lo) & (z <= node.hi), axis=1) & (costs <= cap)
+        assert inside.sum() >= 10
+        for part, proof in parts:
+            assert proof.kind == "tightened" and proof.box is node
+            assert not np.any(inside & np.all((z >= part.lo) & (z <= part.hi), axis=1))
+    assert cuts > 0  # the test saw cuts
