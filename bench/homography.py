@@ -12,6 +12,7 @@ points, then Levenberg-Marquardt) with how often its L2L2 cost exceeds our certi
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import cv2
@@ -52,15 +53,18 @@ def main() -> None:
     parser.add_argument("--noise", type=float, default=1.0, help="pixels")
     args = parser.parse_args()
     sizes = [int(s) for s in args.sizes.split(",")]
-    print(f"{'points':>6} {'norm':5} {'gap':>6} {'median ms':>10} {'p95 ms':>8} {'nodes med/p95':>14} {'certified':>9}")
+    print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print(f"{'points':>6} {'norm':5} {'gap':>6} {'median ms':>10} {'p95 ms':>8} {'nodes med/p95':>14} {'certified':>9} "
+          f"{'CPU ms med/p95':>15}")
     for size in sizes:
         problems = list(instances(size, args.instances, args.noise))
         best_l2 = [np.inf] * len(problems)
         for norm in args.norms.split(","):
             for gap in (float(g) for g in args.gaps.split(",")):
-                times, nodes, certified = fit_all(problems, norm, gap, best_l2)
+                times, nodes, certified, cpu = fit_all(problems, norm, gap, best_l2)
                 print(f"{size:6d} {norm:5} {gap:6.0e} {1e3 * np.median(times):10.1f} {1e3 * np.percentile(times, 95):8.1f} "
-                      f"{np.median(nodes):6.0f}/{np.percentile(nodes, 95):<7.0f} {certified:5d}/{len(problems)}")
+                      f"{np.median(nodes):6.0f}/{np.percentile(nodes, 95):<7.0f} {certified:5d}/{len(problems)} "
+                      f"{1e3 * np.median(cpu):7.1f}/{1e3 * np.percentile(cpu, 95):<7.1f}", flush=True)
         if "L2L2" in args.norms.split(","):
             opencv_baseline(size, problems, best_l2)
 
