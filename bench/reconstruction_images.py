@@ -46,7 +46,25 @@ def load_ring():
     return [r[0] for r in rows], images, [v[:9].reshape(3, 3) for v in values], [v[9:18].reshape(3, 3) for v in values]
 
 
-def run(name, images, Ks, Rs, feature_options, calibrated_options):
+def print_per_view(names, tracks_stats, per_view, errors, reasons):
+    """One line per view: where it stands at each stage. Features (SIFT keypoints); the views it
+    has a verified pair with (inliers); tracks through it; linked: those tracks also observed (as
+    inliers) by another, registered view; points: those with a triangulated point it observes
+    (what PnP works from); then the rotation error, or the reason it is not registered."""
+    partners = {v: [] for v in range(len(per_view))}
+    for pair in tracks_stats["verified_pairs"]:
+        i, j = pair["views"]
+        partners[i].append(f"{j}:{pair['inliers']}")
+        partners[j].append(f"{i}:{pair['inliers']}")
+    print(f"  {'view':<18} {'features':>8} {'tracks':>6} {'linked':>6} {'points':>6}  outcome / verified pairs (view:inliers)")
+    for v, figures in enumerate(per_view):
+        label = f"{v} {names[v]}" if names else str(v)
+        outcome = (f"{errors[v]:.2f} deg ({figures['registered_by']})" if v in errors else f"unregistered: {reasons[v]}")
+        print(f"  {label:<18} {tracks_stats['features_per_image'][v]:>8} {figures['tracks']:>6} {figures['linked']:>6} "
+              f"{figures['points']:>6}  {outcome}\n  {'':<18} {'':>8} {'':>6} {'':>6} {'':>6}  pairs {' '.join(partners[v]) or '-'}")
+
+
+def run(name, images, Ks, Rs, feature_options, calibrated_options, names=None):
     start = time.perf_counter()
     tracks = tracks_from_images(images, feature_options)
     tracks_s = time.perf_counter() - start
@@ -69,9 +87,7 @@ def run(name, images, Ks, Rs, feature_options, calibrated_options):
         print(f"rotation error deg   median {np.median(errors):.3f}   max {errors.max():.3f}   "
               f"within 1 deg: {int(np.sum(errors < 1.0))} / {len(images)}")
         print("  per view           " + "  ".join(f"{v}:{e:.2f}" for v, e in zip(registered, errors)))
-    for v, reason in enumerate(result.reasons):
-        if reason:
-            print(f"  view {v} not registered: {reason}")
+    print_per_view(names, s, c["per_view"], dict(zip(registered, errors)), result.reasons)
     times = {**{f"tracks.{k}": t for k, t in s["time_s"].items()}, **{f"recon.{k}": t for k, t in c["time_s"].items()}}
     print("time s               " + "  ".join(f"{k} {t:.2f}" for k, t in times.items())
           + f"   (total tracks {tracks_s:.1f}, reconstruction {recon_s:.1f})")
@@ -86,11 +102,11 @@ def main():
     print(f"machine speed: {machine_speed_ms():.0f} ms for the reference loop (shared machine: timings inflated)")
     if not args.no_ring:
         if RING.exists():
-            _, images, Ks, Rs = load_ring()
-            run("Middlebury dinoSparseRing (K given)", images, Ks, Rs, RING_FEATURES, RING_CALIBRATED)
+            names, images, Ks, Rs = load_ring()
+            run("Middlebury dinoSparseRing (K given)", images, Ks, Rs, RING_FEATURES, RING_CALIBRATED, names)
             if args.merge:
                 run("Middlebury dinoSparseRing (K given, merge_components=True)", images, Ks, Rs, RING_FEATURES,
-                    CalibratedOptions(pnp_min_inliers=10, merge_components=True))
+                    CalibratedOptions(pnp_min_inliers=10, merge_components=True), names)
         else:
             print(f"{RING} not found: ring skipped")
     if not args.no_render:

@@ -217,6 +217,26 @@ class TestCalibrated:
         assert result.reasons[3] == "sees 0 triangulated points; PnP needs 15"
         assert result.reasons[:3] == [None, None, None]
 
+    def test_per_view_figures_say_where_a_view_stopped(self, box):
+        # View 4 shares 20 two-view tracks with view 3 (linked, but no point: only one registered
+        # view sees them) and 5 three-view tracks with 2 and 3 (points); 5 points are too few for
+        # PnP. View 5 shares nothing. Views 0-3 see 100 four-view tracks.
+        scene, _ = box
+        rng = np.random.default_rng(5)
+        X = rng.uniform([-0.5, -0.4, 0.0], [0.5, 0.4, 0.6], size=(125, 3))
+        groups = [(0, 1, 2, 3)] * 100 + [(3, 4)] * 20 + [(2, 3, 4)] * 5
+        tracks = [(np.array(g), np.array([scene.cameras[v].project(x)[0] for v in g])) for g, x in zip(groups, X)]
+        result = calibrated_reconstruction(tracks, [c.K for c in scene.cameras[:6]])
+        assert result.stats["registered"] == 4
+        per_view = result.stats["per_view"]
+        assert [f["view"] for f in per_view] == list(range(6))
+        assert [f["tracks"] for f in per_view] == [100, 100, 105, 125, 25, 0]
+        assert [f["linked"] for f in per_view] == [100, 100, 105, 105, 25, 0]
+        assert [f["points"] for f in per_view] == [100, 100, 105, 105, 5, 0]
+        assert [f["registered_by"] for f in per_view][4:] == [None, None]
+        assert sorted(f["registered_by"] for f in per_view[:4]) == ["initial pair", "initial pair", "pnp", "pnp"]
+        assert result.reasons[4] == "sees 5 triangulated points; PnP needs 15"
+
     def test_components_merged(self, box):
         # Views 0-3 and 4-7 share only 6 tracks (seen by 2, 3, 4, 5): too few for PnP (15), so one
         # reconstruction stops at a half; merging a second one started in the other half, by the
@@ -229,6 +249,16 @@ class TestCalibrated:
         Ks = [c.K for c in scene.cameras]
         alone = calibrated_reconstruction(tracks, Ks)
         assert alone.stats["registered"] == 4 and alone.stats["merged"] == []
+        # Per view, where it stopped: views 4 and 5 see the 6 linking points (too few for PnP);
+        # 6 and 7 share no track with the registered half.
+        per_view = {f["view"]: f for f in alone.stats["per_view"]}
+        registered_half = [v for v in range(8) if alone.rotations[v] is not None]
+        assert registered_half == [0, 1, 2, 3]
+        assert [per_view[v]["registered_by"] is not None for v in range(8)] == [True] * 4 + [False] * 4
+        assert [per_view[v]["tracks"] for v in range(8)] == [100, 100, 106, 106, 106, 106, 100, 100]
+        assert [per_view[v]["linked"] for v in (4, 5, 6, 7)] == [6, 6, 0, 0]
+        assert [per_view[v]["points"] for v in (4, 5, 6, 7)] == [6, 6, 0, 0]
+        assert all(per_view[v]["points"] == per_view[v]["tracks"] for v in range(4))
         joined = calibrated_reconstruction(tracks, Ks, CalibratedOptions(merge_components=True))
         assert joined.stats["registered"] == 8
         assert joined.stats["merged"][0]["common_points"] == 6

@@ -645,6 +645,28 @@ def _merge(state: _State, tracks, Ks, fixed: int, options: CalibratedOptions, re
             "shared_views": [int(v) for v in shared], "common_points": int(len(common))}
 
 
+def _per_view(state: _State, registered_by: dict) -> list[dict]:
+    """Per view, the figures that say where it stands (and, unregistered, at which step it
+    stopped): ``tracks`` through it; ``linked``, those of them with an inlier observation in
+    another, registered view; ``points``, those with a triangulated point it observes as an
+    inlier (what PnP works from, for an unregistered view); ``registered_by``, the step that
+    registered it (None when unregistered)."""
+    registered = state.registered
+    valid = np.isfinite(state.points[:, 0])
+    in_registered = state.inlier & registered[state.obs_view]
+    # per track, how many inlier observations registered views have
+    seen = np.bincount(state.obs_track[in_registered], minlength=len(state.points))
+    others = seen[state.obs_track] - in_registered.astype(np.int64)  # excluding the observation itself
+    figures = []
+    for v in range(state.n_views):
+        mine = state.obs_view == v
+        figures.append({"view": v, "tracks": int(mine.sum()),
+                        "linked": int((mine & state.inlier & (others > 0)).sum()),
+                        "points": int((mine & state.inlier & valid[state.obs_track]).sum()),
+                        "registered_by": registered_by.get(v)})
+    return figures
+
+
 def _check_inputs(tracks, Ks) -> None:
     """InputError naming the item for a K that is not an invertible upper-triangular 3x3 with
     positive focal lengths, or a track whose views or points do not fit."""
@@ -687,6 +709,7 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
                    & valid[k] for k in range(len(tracks))]
         obs = np.flatnonzero(np.concatenate(inliers)) if inliers else np.zeros(0, np.int64)
         err, _ = state.reprojection(obs)
+        stats["per_view"] = _per_view(state, stats["registered_by"])
         stats.update({"registered": int(registered.sum()), "points": int(valid.sum()),
                       "observations": int(len(obs)), "outliers_removed": state.outliers_removed,
                       "rms_reprojection_px": float(np.sqrt(np.mean(err ** 2))) if len(obs) else math.nan,
