@@ -14,11 +14,12 @@ import zlib
 import cv2
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.reconstruction import features
 from geocert.solvers.reconstruction.calibrated import (CalibratedOptions, align_rotations,
-                                                       calibrated_reconstruction)
+                                                       calibrated_reconstruction, refine_cameras)
 from geocert.solvers.reconstruction.features import (FeatureOptions, build_tracks, decode_image,
                                                      tracks_from_images)
 from geocert.solvers.reconstruction.render import box_scene
@@ -265,6 +266,37 @@ class TestCalibrated:
         _, errors = align_rotations(joined.rotations, [c.R for c in scene.cameras])
         assert errors.max() < 1e-6
         assert _centres_error(joined, scene.cameras) < 1e-8
+
+    def test_refine_cameras_from_a_start(self, box):
+        # Exact tracks; cameras given 0.1 degree and 2 mm off (view 0 exact, held as the gauge; the
+        # observations then reproject within max_reprojection_px), one left out: the adjustment
+        # returns the scene (similarity-aligned).
+        scene, _ = box
+        rng = np.random.default_rng(6)
+        X = rng.uniform([-0.5, -0.4, 0.0], [0.5, 0.4, 0.6], size=(200, 3))
+        tracks = []
+        for x in X:
+            views = np.array([v for v in range(8) if rng.random() < 0.6 or v in (0, 1)])
+            tracks.append((views, np.array([scene.cameras[v].project(x)[0] for v in views])))
+        Rs, ts = [], []
+        for v, c in enumerate(scene.cameras):
+            turn = Rotation.from_rotvec(np.radians(0.1) * rng.normal(size=3) / np.sqrt(3)).as_matrix() if v else np.eye(3)
+            Rs.append(turn @ c.R)
+            ts.append(c.t + (0.002 * rng.normal(size=3) if v else 0.0))
+        Rs[5], ts[5] = None, None
+        start = [R for R in Rs if R is not None]
+        _, before = align_rotations(start, [c.R for v, c in enumerate(scene.cameras) if v != 5])
+        assert before.max() > 0.05
+        result = refine_cameras(tracks, [c.K for c in scene.cameras], Rs, ts)
+        assert result.rotations[5] is None and result.reasons[5] == "no camera given"
+        assert result.stats["registered"] == 7 and result.stats["per_view"][0]["registered_by"] == "given"
+        _, after = align_rotations([R for R in result.rotations if R is not None],
+                                   [c.R for v, c in enumerate(scene.cameras) if v != 5])
+        assert after.max() < 1e-5
+        assert result.stats["rms_reprojection_px"] < 1e-5
+        with pytest.raises(InputError):
+            refine_cameras(tracks, [c.K for c in scene.cameras], [scene.cameras[0].R] + [None] * 7,
+                           [scene.cameras[0].t] + [None] * 7)
 
     def test_callback_stops(self, box):
         scene, _ = box
