@@ -7,12 +7,13 @@ geocert.solvers.reconstruction.render). Prints per dataset: features per image, 
 tracks, views registered, rotation error after aligning to the truth (median / max degrees),
 RMS reprojection error and time per step.
 
-    .venv/bin/python -m bench.reconstruction_images [--no-ring] [--no-render] [--merge] [--truth]
+    .venv/bin/python -m bench.reconstruction_images [--no-ring] [--no-render] [--merge] [--truth] [--guided R]
 
 --truth adds, per dataset, what the tracks allow whatever the reconstruction does: per view the
 tracks that agree with the ground-truth cameras (triangulated by them, every observation within
 2 px), and the final bundle adjustment started from the ground-truth cameras
 (calibrated.refine_cameras): its rotation errors are what these tracks' optimum gives.
+--guided R runs each dataset again with guided matching (FeatureOptions.guided_ratio = R).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 
@@ -134,6 +136,8 @@ def main():
     parser.add_argument("--no-ring", action="store_true")
     parser.add_argument("--no-render", action="store_true")
     parser.add_argument("--merge", action="store_true", help="the ring again with merge_components=True")
+    parser.add_argument("--guided", type=float, default=0.0, help="each dataset again with guided matching, "
+                        "FeatureOptions.guided_ratio = this")
     parser.add_argument("--truth", action="store_true", help="tracks against the true cameras, and the bundle "
                         "adjustment started from them (see the docstring)")
     args = parser.parse_args()
@@ -143,6 +147,9 @@ def main():
             names, images, Ks, Rs, ts = load_ring()
             truth = ts if args.truth else None
             run("Middlebury dinoSparseRing (K given)", images, Ks, Rs, RING_FEATURES, RING_CALIBRATED, names, truth)
+            if args.guided:
+                run(f"Middlebury dinoSparseRing (K given, guided_ratio={args.guided})", images, Ks, Rs,
+                    dataclasses.replace(RING_FEATURES, guided_ratio=args.guided), RING_CALIBRATED, names, truth)
             if args.merge:
                 run("Middlebury dinoSparseRing (K given, merge_components=True)", images, Ks, Rs, RING_FEATURES,
                     CalibratedOptions(pnp_min_inliers=10, merge_components=True), names, truth)
@@ -150,9 +157,12 @@ def main():
             print(f"{RING} not found: ring skipped")
     if not args.no_render:
         scene = box_scene(n_views=8, arc_deg=150.0, seed=0)
-        run("synthetic render (textured box, K given)", scene.images(), [c.K for c in scene.cameras],
-            [c.R for c in scene.cameras], FeatureOptions(), CalibratedOptions(),
-            ts=[c.t for c in scene.cameras] if args.truth else None)
+        images, Ks, Rs = scene.images(), [c.K for c in scene.cameras], [c.R for c in scene.cameras]
+        truth = [c.t for c in scene.cameras] if args.truth else None
+        run("synthetic render (textured box, K given)", images, Ks, Rs, FeatureOptions(), CalibratedOptions(), ts=truth)
+        if args.guided:
+            run(f"synthetic render (textured box, K given, guided_ratio={args.guided})", images, Ks, Rs,
+                FeatureOptions(guided_ratio=args.guided), CalibratedOptions(), ts=truth)
 
 
 if __name__ == "__main__":

@@ -144,6 +144,49 @@ class TestSyntheticTracks:
         assert seen[-1]["stage"] == "matches"
 
 
+class TestGuidedMatching:
+    # Cameras translated along x: F = [e]x with e = (1, 0, 0), epipolar lines are the rows (y_b = y_a).
+    F = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+    def test_epipolar_distances(self):
+        d = features.epipolar_distances(self.F, np.array([[10.0, 50.0]]), np.array([[30.0, 80.0], [40.0, 50.5]]))
+        assert np.allclose(d, [[30.0, 0.5]])
+
+    def test_candidates_only_near_the_epipolar_line(self):
+        # Feature 0 of a: its nearest descriptor in b (feature 0) lies 30 px off its epipolar line;
+        # feature 1 lies on it (0.5 px), feature 2 just beyond the threshold (1.2 px). Feature 1 of a
+        # has two allowed candidates with nearly equal descriptors: the ratio test refuses it.
+        keypoints_a = np.array([[10.0, 50.0], [10.0, 200.0]])
+        keypoints_b = np.array([[30.0, 80.0], [40.0, 50.5], [60.0, 51.2], [20.0, 200.2], [90.0, 199.9]])
+        desc_a = np.zeros((2, 128), np.float32)
+        desc_a[0, 0], desc_a[1, 1] = 100.0, 100.0
+        desc_b = np.zeros((5, 128), np.float32)
+        desc_b[0, 0], desc_b[1, 0], desc_b[1, 2], desc_b[2, 0] = 99.0, 90.0, 20.0, 100.0
+        desc_b[3, 1], desc_b[3, 3], desc_b[4, 1], desc_b[4, 4] = 100.0, 10.0, 100.0, 10.5
+        options = FeatureOptions(guided_ratio=0.8, ransac_threshold_px=1.0)
+        matches = features.guided_matches(keypoints_a, desc_a, keypoints_b, desc_b, self.F, options)
+        assert matches.tolist() == [[0, 1]]
+        loose = FeatureOptions(guided_ratio=0.8, ransac_threshold_px=1.0, guided_threshold_px=2.0)
+        assert features.guided_matches(keypoints_a, desc_a, keypoints_b, desc_b, self.F, loose).tolist() == [[0, 2]]
+
+    def test_rendered_pairs_gain_matches_that_fit_the_scene(self, box, box_tracks):
+        scene, images = box
+        guided = tracks_from_images(images, FeatureOptions(guided_ratio=0.8))
+        plain = {tuple(p["views"]): p for p in box_tracks.stats["verified_pairs"]}
+        strong = [p for p in guided.stats["verified_pairs"] if plain[tuple(p["views"])]["inliers"] >= 30]
+        assert strong and all("guided" in p for p in strong)
+        assert all("guided" not in p for p in guided.stats["verified_pairs"] if p not in strong)
+        # measured (seed 0): 11 pairs from 69-486 inliers to 150-655
+        assert all(p["inliers"] > plain[tuple(p["views"])]["inliers"] for p in strong)
+        assert guided.stats["tracks_kept"] > box_tracks.stats["tracks_kept"]
+        errors = []
+        for views, points in guided.tracks:
+            X = scene.surface_point(scene.cameras[views[0]], points[0])
+            if np.all(np.isfinite(X)):
+                errors += [np.linalg.norm(scene.cameras[v].project(X)[0] - p) for v, p in zip(views[1:], points[1:])]
+        assert np.median(errors) < 0.7
+
+
 # ---------------------------------------------------------------------------------------------
 # K-known reconstruction
 
