@@ -7,7 +7,13 @@ geocert.solvers.reconstruction.render). Prints per dataset: features per image, 
 tracks, views registered, rotation error after aligning to the truth (median / max degrees),
 RMS reprojection error and time per step.
 
-    .venv/bin/python -m bench.reconstruction_images [--no-ring] [--no-render] [--merge]
+    .venv/bin/python -m bench.reconstruction_images [--no-ring] [--no-render] [--merge] [--truth] [--guided R]
+
+--truth adds, per dataset, what the tracks allow whatever the reconstruction does: per view the
+tracks that agree with the ground-truth cameras (triangulated by them, every observation within
+2 px), and the final bundle adjustment started from the ground-truth cameras
+(calibrated.refine_cameras): its rotation errors are what these tracks' optimum gives.
+--guided R runs each dataset again with guided matching (FeatureOptions.guided_ratio = R).
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 
@@ -29,7 +36,7 @@ import numpy as np
 
 from bench import machine_speed_ms
 from geocert.solvers.reconstruction.calibrated import (CalibratedOptions, align_rotations,
-                                                       calibrated_reconstruction)
+                                                       calibrated_reconstruction, refine_cameras, triangulate)
 from geocert.solvers.reconstruction.features import FeatureOptions, tracks_from_images
 from geocert.solvers.reconstruction.render import box_scene
 
@@ -43,10 +50,45 @@ def load_ring():
     rows = [line.split() for line in (RING / "dinoSR_par.txt").read_text().splitlines()[1:] if line.strip()]
     values = [np.array(r[1:], dtype=float) for r in rows]
     images = [cv2.imread(str(RING / r[0]), cv2.IMREAD_GRAYSCALE) for r in rows]
-    return [r[0] for r in rows], images, [v[:9].reshape(3, 3) for v in values], [v[9:18].reshape(3, 3) for v in values]
+    return ([r[0] for r in rows], images, [v[:9].reshape(3, 3) for v in values], [v[9:18].reshape(3, 3) for v in values],
+            [v[18:21] for v in values])
 
 
-def run(name, images, Ks, Rs, feature_options, calibrated_options):
+def agrees_with_truth(views, points, Ks, Rs, ts, limit_px=2.0) -> bool:
+    """Whether a track, triangulated by the true cameras, reprojects within limit_px in every view."""
+    rays = np.array([(np.linalg.inv(Ks[v]) @ np.r_[x, 1.0])[:2] for v, x in zip(views, points)])
+    X = triangulate(np.array([Rs[v] for v in views]), np.array([ts[v] for v in views]), rays)
+    if not np.all(np.isfinite(X)):
+        return False
+    for v, x in zip(views, points):
+        h = Ks[v] @ (Rs[v] @ X + ts[v])
+        if not (h[2] > 0 and np.linalg.norm(h[:2] / h[2] - x) <= limit_px):
+            return False
+    return True
+
+
+def print_per_view(names, tracks_stats, per_view, errors, reasons, true_tracks=None):
+    """One line per view: where it stands at each stage. Features (SIFT keypoints); the views it
+    has a verified pair with (inliers); tracks through it; linked: those tracks also observed (as
+    inliers) by another, registered view; points: those with a triangulated point it observes
+    (what PnP works from); then the rotation error, or the reason it is not registered."""
+    partners = {v: [] for v in range(len(per_view))}
+    for pair in tracks_stats["verified_pairs"]:
+        i, j = pair["views"]
+        partners[i].append(f"{j}:{pair['inliers']}")
+        partners[j].append(f"{i}:{pair['inliers']}")
+    true = f" {'true':>6}" if true_tracks is not None else ""
+    print(f"  {'view':<18} {'features':>8} {'tracks':>6}{true} {'linked':>6} {'points':>6}  outcome / verified pairs (view:inliers)")
+    for v, figures in enumerate(per_view):
+        label = f"{v} {names[v]}" if names else str(v)
+        outcome = (f"{errors[v]:.2f} deg ({figures['registered_by']})" if v in errors else f"unregistered: {reasons[v]}")
+        true = f" {true_tracks[v]:>6}" if true_tracks is not None else ""
+        pad = " " * (7 if true_tracks is not None else 0)
+        print(f"  {label:<18} {tracks_stats['features_per_image'][v]:>8} {figures['tracks']:>6}{true} {figures['linked']:>6} "
+              f"{figures['points']:>6}  {outcome}\n  {'':<18} {'':>8} {'':>6}{pad} {'':>6} {'':>6}  pairs {' '.join(partners[v]) or '-'}")
+
+
+def run(name, images, Ks, Rs, feature_options, calibrated_options, names=None, ts=None):
     start = time.perf_counter()
     tracks = tracks_from_images(images, feature_options)
     tracks_s = time.perf_counter() - start
@@ -69,9 +111,21 @@ def run(name, images, Ks, Rs, feature_options, calibrated_options):
         print(f"rotation error deg   median {np.median(errors):.3f}   max {errors.max():.3f}   "
               f"within 1 deg: {int(np.sum(errors < 1.0))} / {len(images)}")
         print("  per view           " + "  ".join(f"{v}:{e:.2f}" for v, e in zip(registered, errors)))
-    for v, reason in enumerate(result.reasons):
-        if reason:
-            print(f"  view {v} not registered: {reason}")
+    true_tracks = None
+    if ts is not None:
+        true_tracks = np.zeros(len(images), dtype=int)
+        for views, points in tracks.tracks:
+            if agrees_with_truth(views, points, Ks, Rs, ts):
+                true_tracks[views] += 1
+    print_per_view(names, s, c["per_view"], dict(zip(registered, errors)), result.reasons, true_tracks)
+    if ts is not None:
+        start = time.perf_counter()
+        refined = refine_cameras(tracks.tracks, Ks, Rs, ts, calibrated_options)
+        _, from_truth = align_rotations(refined.rotations, Rs)
+        print(f"from the truth       bundle adjustment started at the true cameras ({time.perf_counter() - start:.1f} s): "
+              f"rotation error median {np.median(from_truth):.3f} max {from_truth.max():.3f}   within 1 deg: "
+              f"{int(np.sum(from_truth < 1.0))} / {len(images)}")
+        print("  per view           " + "  ".join(f"{v}:{e:.2f}" for v, e in enumerate(from_truth)))
     times = {**{f"tracks.{k}": t for k, t in s["time_s"].items()}, **{f"recon.{k}": t for k, t in c["time_s"].items()}}
     print("time s               " + "  ".join(f"{k} {t:.2f}" for k, t in times.items())
           + f"   (total tracks {tracks_s:.1f}, reconstruction {recon_s:.1f})")
@@ -82,21 +136,33 @@ def main():
     parser.add_argument("--no-ring", action="store_true")
     parser.add_argument("--no-render", action="store_true")
     parser.add_argument("--merge", action="store_true", help="the ring again with merge_components=True")
+    parser.add_argument("--guided", type=float, default=0.0, help="each dataset again with guided matching, "
+                        "FeatureOptions.guided_ratio = this")
+    parser.add_argument("--truth", action="store_true", help="tracks against the true cameras, and the bundle "
+                        "adjustment started from them (see the docstring)")
     args = parser.parse_args()
     print(f"machine speed: {machine_speed_ms():.0f} ms for the reference loop (shared machine: timings inflated)")
     if not args.no_ring:
         if RING.exists():
-            _, images, Ks, Rs = load_ring()
-            run("Middlebury dinoSparseRing (K given)", images, Ks, Rs, RING_FEATURES, RING_CALIBRATED)
+            names, images, Ks, Rs, ts = load_ring()
+            truth = ts if args.truth else None
+            run("Middlebury dinoSparseRing (K given)", images, Ks, Rs, RING_FEATURES, RING_CALIBRATED, names, truth)
+            if args.guided:
+                run(f"Middlebury dinoSparseRing (K given, guided_ratio={args.guided})", images, Ks, Rs,
+                    dataclasses.replace(RING_FEATURES, guided_ratio=args.guided), RING_CALIBRATED, names, truth)
             if args.merge:
                 run("Middlebury dinoSparseRing (K given, merge_components=True)", images, Ks, Rs, RING_FEATURES,
-                    CalibratedOptions(pnp_min_inliers=10, merge_components=True))
+                    CalibratedOptions(pnp_min_inliers=10, merge_components=True), names, truth)
         else:
             print(f"{RING} not found: ring skipped")
     if not args.no_render:
         scene = box_scene(n_views=8, arc_deg=150.0, seed=0)
-        run("synthetic render (textured box, K given)", scene.images(), [c.K for c in scene.cameras],
-            [c.R for c in scene.cameras], FeatureOptions(), CalibratedOptions())
+        images, Ks, Rs = scene.images(), [c.K for c in scene.cameras], [c.R for c in scene.cameras]
+        truth = [c.t for c in scene.cameras] if args.truth else None
+        run("synthetic render (textured box, K given)", images, Ks, Rs, FeatureOptions(), CalibratedOptions(), ts=truth)
+        if args.guided:
+            run(f"synthetic render (textured box, K given, guided_ratio={args.guided})", images, Ks, Rs,
+                FeatureOptions(guided_ratio=args.guided), CalibratedOptions(), ts=truth)
 
 
 if __name__ == "__main__":

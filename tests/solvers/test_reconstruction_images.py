@@ -14,11 +14,12 @@ import zlib
 import cv2
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.reconstruction import features
 from geocert.solvers.reconstruction.calibrated import (CalibratedOptions, align_rotations,
-                                                       calibrated_reconstruction)
+                                                       calibrated_reconstruction, refine_cameras)
 from geocert.solvers.reconstruction.features import (FeatureOptions, build_tracks, decode_image,
                                                      tracks_from_images)
 from geocert.solvers.reconstruction.render import box_scene
@@ -143,6 +144,49 @@ class TestSyntheticTracks:
         assert seen[-1]["stage"] == "matches"
 
 
+class TestGuidedMatching:
+    # Cameras translated along x: F = [e]x with e = (1, 0, 0), epipolar lines are the rows (y_b = y_a).
+    F = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+    def test_epipolar_distances(self):
+        d = features.epipolar_distances(self.F, np.array([[10.0, 50.0]]), np.array([[30.0, 80.0], [40.0, 50.5]]))
+        assert np.allclose(d, [[30.0, 0.5]])
+
+    def test_candidates_only_near_the_epipolar_line(self):
+        # Feature 0 of a: its nearest descriptor in b (feature 0) lies 30 px off its epipolar line;
+        # feature 1 lies on it (0.5 px), feature 2 just beyond the threshold (1.2 px). Feature 1 of a
+        # has two allowed candidates with nearly equal descriptors: the ratio test refuses it.
+        keypoints_a = np.array([[10.0, 50.0], [10.0, 200.0]])
+        keypoints_b = np.array([[30.0, 80.0], [40.0, 50.5], [60.0, 51.2], [20.0, 200.2], [90.0, 199.9]])
+        desc_a = np.zeros((2, 128), np.float32)
+        desc_a[0, 0], desc_a[1, 1] = 100.0, 100.0
+        desc_b = np.zeros((5, 128), np.float32)
+        desc_b[0, 0], desc_b[1, 0], desc_b[1, 2], desc_b[2, 0] = 99.0, 90.0, 20.0, 100.0
+        desc_b[3, 1], desc_b[3, 3], desc_b[4, 1], desc_b[4, 4] = 100.0, 10.0, 100.0, 10.5
+        options = FeatureOptions(guided_ratio=0.8, ransac_threshold_px=1.0)
+        matches = features.guided_matches(keypoints_a, desc_a, keypoints_b, desc_b, self.F, options)
+        assert matches.tolist() == [[0, 1]]
+        loose = FeatureOptions(guided_ratio=0.8, ransac_threshold_px=1.0, guided_threshold_px=2.0)
+        assert features.guided_matches(keypoints_a, desc_a, keypoints_b, desc_b, self.F, loose).tolist() == [[0, 2]]
+
+    def test_rendered_pairs_gain_matches_that_fit_the_scene(self, box, box_tracks):
+        scene, images = box
+        guided = tracks_from_images(images, FeatureOptions(guided_ratio=0.8))
+        plain = {tuple(p["views"]): p for p in box_tracks.stats["verified_pairs"]}
+        strong = [p for p in guided.stats["verified_pairs"] if plain[tuple(p["views"])]["inliers"] >= 30]
+        assert strong and all("guided" in p for p in strong)
+        assert all("guided" not in p for p in guided.stats["verified_pairs"] if p not in strong)
+        # measured (seed 0): 11 pairs from 69-486 inliers to 150-655
+        assert all(p["inliers"] > plain[tuple(p["views"])]["inliers"] for p in strong)
+        assert guided.stats["tracks_kept"] > box_tracks.stats["tracks_kept"]
+        errors = []
+        for views, points in guided.tracks:
+            X = scene.surface_point(scene.cameras[views[0]], points[0])
+            if np.all(np.isfinite(X)):
+                errors += [np.linalg.norm(scene.cameras[v].project(X)[0] - p) for v, p in zip(views[1:], points[1:])]
+        assert np.median(errors) < 0.7
+
+
 # ---------------------------------------------------------------------------------------------
 # K-known reconstruction
 
@@ -217,6 +261,26 @@ class TestCalibrated:
         assert result.reasons[3] == "sees 0 triangulated points; PnP needs 15"
         assert result.reasons[:3] == [None, None, None]
 
+    def test_per_view_figures_say_where_a_view_stopped(self, box):
+        # View 4 shares 20 two-view tracks with view 3 (linked, but no point: only one registered
+        # view sees them) and 5 three-view tracks with 2 and 3 (points); 5 points are too few for
+        # PnP. View 5 shares nothing. Views 0-3 see 100 four-view tracks.
+        scene, _ = box
+        rng = np.random.default_rng(5)
+        X = rng.uniform([-0.5, -0.4, 0.0], [0.5, 0.4, 0.6], size=(125, 3))
+        groups = [(0, 1, 2, 3)] * 100 + [(3, 4)] * 20 + [(2, 3, 4)] * 5
+        tracks = [(np.array(g), np.array([scene.cameras[v].project(x)[0] for v in g])) for g, x in zip(groups, X)]
+        result = calibrated_reconstruction(tracks, [c.K for c in scene.cameras[:6]])
+        assert result.stats["registered"] == 4
+        per_view = result.stats["per_view"]
+        assert [f["view"] for f in per_view] == list(range(6))
+        assert [f["tracks"] for f in per_view] == [100, 100, 105, 125, 25, 0]
+        assert [f["linked"] for f in per_view] == [100, 100, 105, 105, 25, 0]
+        assert [f["points"] for f in per_view] == [100, 100, 105, 105, 5, 0]
+        assert [f["registered_by"] for f in per_view][4:] == [None, None]
+        assert sorted(f["registered_by"] for f in per_view[:4]) == ["initial pair", "initial pair", "pnp", "pnp"]
+        assert result.reasons[4] == "sees 5 triangulated points; PnP needs 15"
+
     def test_components_merged(self, box):
         # Views 0-3 and 4-7 share only 6 tracks (seen by 2, 3, 4, 5): too few for PnP (15), so one
         # reconstruction stops at a half; merging a second one started in the other half, by the
@@ -229,12 +293,53 @@ class TestCalibrated:
         Ks = [c.K for c in scene.cameras]
         alone = calibrated_reconstruction(tracks, Ks)
         assert alone.stats["registered"] == 4 and alone.stats["merged"] == []
+        # Per view, where it stopped: views 4 and 5 see the 6 linking points (too few for PnP);
+        # 6 and 7 share no track with the registered half.
+        per_view = {f["view"]: f for f in alone.stats["per_view"]}
+        registered_half = [v for v in range(8) if alone.rotations[v] is not None]
+        assert registered_half == [0, 1, 2, 3]
+        assert [per_view[v]["registered_by"] is not None for v in range(8)] == [True] * 4 + [False] * 4
+        assert [per_view[v]["tracks"] for v in range(8)] == [100, 100, 106, 106, 106, 106, 100, 100]
+        assert [per_view[v]["linked"] for v in (4, 5, 6, 7)] == [6, 6, 0, 0]
+        assert [per_view[v]["points"] for v in (4, 5, 6, 7)] == [6, 6, 0, 0]
+        assert all(per_view[v]["points"] == per_view[v]["tracks"] for v in range(4))
         joined = calibrated_reconstruction(tracks, Ks, CalibratedOptions(merge_components=True))
         assert joined.stats["registered"] == 8
         assert joined.stats["merged"][0]["common_points"] == 6
         _, errors = align_rotations(joined.rotations, [c.R for c in scene.cameras])
         assert errors.max() < 1e-6
         assert _centres_error(joined, scene.cameras) < 1e-8
+
+    def test_refine_cameras_from_a_start(self, box):
+        # Exact tracks; cameras given 0.1 degree and 2 mm off (view 0 exact, held as the gauge; the
+        # observations then reproject within max_reprojection_px), one left out: the adjustment
+        # returns the scene (similarity-aligned).
+        scene, _ = box
+        rng = np.random.default_rng(6)
+        X = rng.uniform([-0.5, -0.4, 0.0], [0.5, 0.4, 0.6], size=(200, 3))
+        tracks = []
+        for x in X:
+            views = np.array([v for v in range(8) if rng.random() < 0.6 or v in (0, 1)])
+            tracks.append((views, np.array([scene.cameras[v].project(x)[0] for v in views])))
+        Rs, ts = [], []
+        for v, c in enumerate(scene.cameras):
+            turn = Rotation.from_rotvec(np.radians(0.1) * rng.normal(size=3) / np.sqrt(3)).as_matrix() if v else np.eye(3)
+            Rs.append(turn @ c.R)
+            ts.append(c.t + (0.002 * rng.normal(size=3) if v else 0.0))
+        Rs[5], ts[5] = None, None
+        start = [R for R in Rs if R is not None]
+        _, before = align_rotations(start, [c.R for v, c in enumerate(scene.cameras) if v != 5])
+        assert before.max() > 0.05
+        result = refine_cameras(tracks, [c.K for c in scene.cameras], Rs, ts)
+        assert result.rotations[5] is None and result.reasons[5] == "no camera given"
+        assert result.stats["registered"] == 7 and result.stats["per_view"][0]["registered_by"] == "given"
+        _, after = align_rotations([R for R in result.rotations if R is not None],
+                                   [c.R for v, c in enumerate(scene.cameras) if v != 5])
+        assert after.max() < 1e-5
+        assert result.stats["rms_reprojection_px"] < 1e-5
+        with pytest.raises(InputError):
+            refine_cameras(tracks, [c.K for c in scene.cameras], [scene.cameras[0].R] + [None] * 7,
+                           [scene.cameras[0].t] + [None] * 7)
 
     def test_callback_stops(self, box):
         scene, _ = box
@@ -289,9 +394,12 @@ def test_dino_sparse_ring():
     _, errors = align_rotations([result.rotations[v] for v in registered], [Rs[v] for v in registered])
     print(len(registered), np.round(errors, 3))
     # Measured: 7 views registered (0007-0013, the ring's best-textured stretch), rotation errors
-    # 0.08-0.24 degrees. The other 7 see too few triangulated points for PnP: the dark views
-    # 0013-0015 share only two-view tracks with their neighbours (the target of 12 within
-    # 1 degree is missed; see the README's figures).
+    # 0.08-0.24 degrees. The other 7 see too few triangulated points for PnP: the views form one
+    # chain (0007 ... 0016, 0001 ... 0004), and view 0014 shares 40 tracks with the registered
+    # 0013 but only 4 have a point (two-view tracks), so the chain stops there (the target
+    # of 12 within 1 degree is missed; bench.reconstruction_images --truth prints the per-view
+    # figures, and that the adjustment of these tracks started at the true cameras ends 0.8-1.3
+    # degrees off: the tracks do not determine the ring to 1 degree).
     assert len(registered) >= RING_REGISTERED
     assert errors.max() < 0.6
     assert all(result.reasons[v] for v in range(14) if v not in registered)

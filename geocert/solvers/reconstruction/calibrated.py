@@ -645,6 +645,28 @@ def _merge(state: _State, tracks, Ks, fixed: int, options: CalibratedOptions, re
             "shared_views": [int(v) for v in shared], "common_points": int(len(common))}
 
 
+def _per_view(state: _State, registered_by: dict) -> list[dict]:
+    """Per view, the figures that say where it stands (and, unregistered, at which step it
+    stopped): ``tracks`` through it; ``linked``, those of them with an inlier observation in
+    another, registered view; ``points``, those with a triangulated point it observes as an
+    inlier (what PnP works from, for an unregistered view); ``registered_by``, the step that
+    registered it (None when unregistered)."""
+    registered = state.registered
+    valid = np.isfinite(state.points[:, 0])
+    in_registered = state.inlier & registered[state.obs_view]
+    # per track, how many inlier observations registered views have
+    seen = np.bincount(state.obs_track[in_registered], minlength=len(state.points))
+    others = seen[state.obs_track] - in_registered.astype(np.int64)  # excluding the observation itself
+    figures = []
+    for v in range(state.n_views):
+        mine = state.obs_view == v
+        figures.append({"view": v, "tracks": int(mine.sum()),
+                        "linked": int((mine & state.inlier & (others > 0)).sum()),
+                        "points": int((mine & state.inlier & valid[state.obs_track]).sum()),
+                        "registered_by": registered_by.get(v)})
+    return figures
+
+
 def _check_inputs(tracks, Ks) -> None:
     """InputError naming the item for a K that is not an invertible upper-triangular 3x3 with
     positive focal lengths, or a track whose views or points do not fit."""
@@ -680,20 +702,7 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
     status = "ok"
 
     def result() -> CalibratedReconstruction:
-        registered = state.registered
-        reasons = [None if registered[v] else reasons_by_view.get(v, "not reached") for v in range(state.n_views)]
-        valid = np.isfinite(state.points[:, 0])
-        inliers = [state.inlier[state.start[k]:state.start[k + 1]] & registered[state.obs_view[state.start[k]:state.start[k + 1]]]
-                   & valid[k] for k in range(len(tracks))]
-        obs = np.flatnonzero(np.concatenate(inliers)) if inliers else np.zeros(0, np.int64)
-        err, _ = state.reprojection(obs)
-        stats.update({"registered": int(registered.sum()), "points": int(valid.sum()),
-                      "observations": int(len(obs)), "outliers_removed": state.outliers_removed,
-                      "rms_reprojection_px": float(np.sqrt(np.mean(err ** 2))) if len(obs) else math.nan,
-                      "ba_iterations": int(sum(stats["ba_nfev"]))})
-        return CalibratedReconstruction([None if R is None else R.copy() for R in state.R],
-                                        [None if t is None else t.copy() for t in state.t],
-                                        reasons, state.points.copy(), inliers, stats, status)
+        return _result(state, stats, reasons_by_view, status)
 
     reasons_by_view: dict[int, str] = {}
     start = time.perf_counter()
@@ -730,12 +739,20 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
             status = "cancelled"
             return result()
 
-    for _ in range(options.final_rounds):
-        if asks_to_stop(callback, {"stage": "bundle_adjustment", "done": _, "total": options.final_rounds}):
-            status = "cancelled"
-            return result()
+    if _final_rounds(state, i, options, stats, timing, callback):
+        status = "cancelled"
+    return result()
+
+
+def _final_rounds(state: _State, fixed: int, options: CalibratedOptions, stats: dict, timing: dict, callback) -> bool:
+    """Step 4's final bundle adjustments (view ``fixed`` held), each followed by the outlier
+    removal and the triangulation of the tracks that now fit, until nothing changes or
+    ``final_rounds``; True when the callback asked to stop."""
+    for k in range(options.final_rounds):
+        if asks_to_stop(callback, {"stage": "bundle_adjustment", "done": k, "total": options.final_rounds}):
+            return True
         start = time.perf_counter()
-        stats["ba_nfev"].append(_bundle_adjust(state, i, options.final_ba_max_nfev, options))
+        stats["ba_nfev"].append(_bundle_adjust(state, fixed, options.final_ba_max_nfev, options))
         removed = _remove_outliers(state, options)
         timing["bundle_adjustment"] += time.perf_counter() - start
         start = time.perf_counter()
@@ -743,4 +760,51 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
         timing["triangulation"] += time.perf_counter() - start
         if removed == 0 and made == 0:
             break
-    return result()
+    return False
+
+
+def _result(state: _State, stats: dict, reasons_by_view: dict, status: str) -> CalibratedReconstruction:
+    registered = state.registered
+    n_tracks = len(state.points)
+    reasons = [None if registered[v] else reasons_by_view.get(v, "not reached") for v in range(state.n_views)]
+    valid = np.isfinite(state.points[:, 0])
+    inliers = [state.inlier[state.start[k]:state.start[k + 1]] & registered[state.obs_view[state.start[k]:state.start[k + 1]]]
+               & valid[k] for k in range(n_tracks)]
+    obs = np.flatnonzero(np.concatenate(inliers)) if inliers else np.zeros(0, np.int64)
+    err, _ = state.reprojection(obs)
+    stats["per_view"] = _per_view(state, stats["registered_by"])
+    stats.update({"registered": int(registered.sum()), "points": int(valid.sum()),
+                  "observations": int(len(obs)), "outliers_removed": state.outliers_removed,
+                  "rms_reprojection_px": float(np.sqrt(np.mean(err ** 2))) if len(obs) else math.nan,
+                  "ba_iterations": int(sum(stats["ba_nfev"]))})
+    return CalibratedReconstruction([None if R is None else R.copy() for R in state.R],
+                                    [None if t is None else t.copy() for t in state.t],
+                                    reasons, state.points.copy(), inliers, stats, status)
+
+
+def refine_cameras(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: list[np.ndarray], rotations: list, translations: list,
+                   options: CalibratedOptions | None = None) -> CalibratedReconstruction:
+    """Step 4 alone from the cameras given (R, t per view, None for a view left out): the tracks
+    triangulated (step 2) and the final bundle adjustments with their outlier removal, the first
+    given view held fixed. The start must be close: an observation farther than
+    ``max_reprojection_px`` from its point's image is marked an outlier from the start. Started
+    from ground-truth cameras it says what the tracks themselves determine: where their optimum
+    lies, whatever a reconstruction's start."""
+    options = options or CalibratedOptions()
+    _check_inputs(tracks, Ks)
+    state = _State(tracks, Ks)
+    given = []
+    for v, (R, t) in enumerate(zip(rotations, translations)):
+        if R is not None:
+            state.R[v], state.t[v] = np.array(R, dtype=np.float64), np.array(t, dtype=np.float64).ravel()
+            given.append(v)
+    if len(given) < 2:
+        raise InputError("rotations", "give at least two cameras")
+    timing = {"initial_pair": 0.0, "registration": 0.0, "triangulation": 0.0, "bundle_adjustment": 0.0}
+    stats: dict = {"views": state.n_views, "tracks": len(tracks), "time_s": timing, "ba_nfev": [],
+                   "registered_by": {v: "given" for v in given}}
+    start = time.perf_counter()
+    _triangulate_new(state, options)
+    timing["triangulation"] += time.perf_counter() - start
+    _final_rounds(state, given[0], options, stats, timing, None)
+    return _result(state, stats, {v: "no camera given" for v in range(state.n_views)}, "ok")

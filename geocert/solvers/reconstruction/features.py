@@ -13,6 +13,15 @@ is cheap next to what follows for sets of that size); beyond that, each image wi
 ``neighbour_window`` successors in the order given (photos of a sequence or a ring), the last
 wrapping round to the first when ``ring`` is set.
 
+Guided matching (off by default: ``guided_ratio`` 0): a verified pair with at least
+``guided_min_inliers`` inliers is matched again among the feature pairs that lie within
+``guided_threshold_px`` of each other's epipolar lines of its fundamental matrix, the ratio test
+taken among those candidates only (so a looser ``guided_ratio`` than the unguided one can keep
+matches whose descriptors are only somewhat distinctive: an untextured surface seen from 20
+degrees apart). The guided matches are verified again by RANSAC and replace the pair's matches
+when more of them are inliers. Pairs with fewer inliers are left alone: their fundamental matrix
+is too loosely determined (or wrong) to guide anything.
+
 Tracks: the verified inlier matches link features (view, keypoint) into groups, found by
 union-find. A group holding two different features of one view is inconsistent (one scene point
 cannot appear twice in an image: some match in it is wrong, and which one is unknown), so it is
@@ -60,6 +69,9 @@ class FeatureOptions:
     exhaustive_limit: int = 30  # match all pairs for at most this many images
     neighbour_window: int = 5  # otherwise each image with this many successors
     ring: bool = False  # the successors wrap round (a turntable or a closed loop)
+    guided_ratio: float = 0.0  # guided matching's ratio test (0: no guided matching; see the module docstring)
+    guided_min_inliers: int = 30  # a pair is matched again, guided, when it has at least this many inliers
+    guided_threshold_px: float | None = None  # epipolar distance of a guided candidate (None: ransac_threshold_px)
 
 
 @dataclass
@@ -239,15 +251,62 @@ def _match(desc_a: np.ndarray, desc_b: np.ndarray, options: FeatureOptions) -> n
     return np.c_[rows[keep], nearest[keep]].astype(np.int64)
 
 
-def verify_pair(points_a: np.ndarray, points_b: np.ndarray, options: FeatureOptions) -> np.ndarray:
-    """Inlier mask of a RANSAC fundamental matrix (all False when none is found)."""
+def fit_fundamental(points_a: np.ndarray, points_b: np.ndarray,
+                    options: FeatureOptions) -> tuple[np.ndarray | None, np.ndarray]:
+    """A RANSAC fundamental matrix (x_b^T F x_a = 0) and its inlier mask (None and all False when
+    none is found)."""
+    none = np.zeros(len(points_a), dtype=bool)
     if len(points_a) < max(8, options.min_inliers):
-        return np.zeros(len(points_a), dtype=bool)
+        return None, none
     F, mask = cv2.findFundamentalMat(points_a, points_b, cv2.USAC_MAGSAC, options.ransac_threshold_px,
                                      options.ransac_confidence, options.ransac_max_iters)
     if F is None or mask is None or F.shape != (3, 3):
-        return np.zeros(len(points_a), dtype=bool)
-    return mask.ravel().astype(bool)
+        return None, none
+    return F, mask.ravel().astype(bool)
+
+
+def verify_pair(points_a: np.ndarray, points_b: np.ndarray, options: FeatureOptions) -> np.ndarray:
+    """Inlier mask of a RANSAC fundamental matrix (all False when none is found)."""
+    return fit_fundamental(points_a, points_b, options)[1]
+
+
+def epipolar_distances(F: np.ndarray, points_a: np.ndarray, points_b: np.ndarray) -> np.ndarray:
+    """(n_a, n_b): for every point of a and point of b, the larger of the two pixel distances, of
+    b's point to a's epipolar line F x_a and of a's point to b's line F^T x_b."""
+    ha = np.c_[points_a, np.ones(len(points_a))]
+    hb = np.c_[points_b, np.ones(len(points_b))]
+    la, lb = ha @ F.T, hb @ F  # a's lines in b, b's lines in a
+    algebraic = np.abs(ha @ lb.T)  # |x_b^T F x_a|
+    norm_a = np.maximum(np.hypot(la[:, 0], la[:, 1]), 1e-300)
+    norm_b = np.maximum(np.hypot(lb[:, 0], lb[:, 1]), 1e-300)
+    return np.maximum(algebraic / norm_a[:, None], algebraic / norm_b[None, :])
+
+
+def guided_matches(keypoints_a: np.ndarray, desc_a: np.ndarray, keypoints_b: np.ndarray, desc_b: np.ndarray,
+                   F: np.ndarray, options: FeatureOptions) -> np.ndarray:
+    """Matches (m, 2) among the feature pairs within the guided threshold of each other's epipolar
+    lines: each feature of a with its nearest allowed descriptor of b, kept when it is nearer than
+    ``guided_ratio`` times the second-nearest allowed one (a single candidate passes) and, with
+    ``mutual``, when the two are each other's nearest allowed feature."""
+    if len(desc_a) == 0 or len(desc_b) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    threshold = options.guided_threshold_px or options.ransac_threshold_px
+    allowed = epipolar_distances(F, keypoints_a, keypoints_b) <= threshold
+    a, b = desc_a.astype(np.float32), desc_b.astype(np.float32)
+    d2 = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T)
+    d2 = np.where(allowed, np.maximum(d2, 0.0), np.inf)
+    rows = np.arange(len(a))
+    if d2.shape[1] >= 2:
+        two = np.argpartition(d2, 1, axis=1)[:, :2]
+        first, second = d2[rows, two[:, 0]], d2[rows, two[:, 1]]
+        nearest = np.where(second < first, two[:, 1], two[:, 0])
+        d_first, d_second = np.minimum(first, second), np.maximum(first, second)
+    else:
+        nearest, d_first, d_second = np.zeros(len(a), dtype=np.int64), d2[:, 0], np.full(len(a), np.inf)
+    keep = np.isfinite(d_first) & (d_first < (options.guided_ratio ** 2) * d_second)
+    if options.mutual:
+        keep &= np.argmin(d2, axis=0)[nearest] == rows
+    return np.c_[rows[keep], nearest[keep]].astype(np.int64)
 
 
 def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None = None,
@@ -284,10 +343,18 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
         if asks_to_stop(callback, {"stage": "matches", "done": k, "total": len(pairs)}):
             return ImageTracks([], sizes, stats, "cancelled")
         rows = _match(descriptors[i], descriptors[j], options)
-        inliers = verify_pair(keypoints[i][rows[:, 0]], keypoints[j][rows[:, 1]], options)
+        F, inliers = fit_fundamental(keypoints[i][rows[:, 0]], keypoints[j][rows[:, 1]], options)
         if inliers.sum() >= options.min_inliers:
+            figures = {"views": [i, j], "matches": len(rows), "inliers": int(inliers.sum())}
             pair_matches[(i, j)] = rows[inliers]
-            verified.append({"views": [i, j], "matches": len(rows), "inliers": int(inliers.sum())})
+            if options.guided_ratio > 0 and inliers.sum() >= options.guided_min_inliers:
+                guided = guided_matches(keypoints[i], descriptors[i], keypoints[j], descriptors[j], F, options)
+                _, again = fit_fundamental(keypoints[i][guided[:, 0]], keypoints[j][guided[:, 1]], options)
+                figures["guided"] = int(again.sum())
+                if again.sum() > inliers.sum():
+                    pair_matches[(i, j)] = guided[again]
+                    figures["inliers"] = int(again.sum())
+            verified.append(figures)
     stats["verified_pairs"] = verified
     asks_to_stop(callback, {"stage": "matches", "done": len(pairs), "total": len(pairs)})
     timing["matches"] = time.perf_counter() - start
