@@ -293,3 +293,35 @@ def test_node_tightening_cuts_off_no_map_within_the_cap(norm, kind):
             assert proof.kind == "tightened" and proof.box is node
             assert not np.any(inside & np.all((z >= part.lo) & (z <= part.hi), axis=1))
     assert cuts > 0  # the test saw cuts
+
+
+def test_a_cut_box_whose_bound_fails_is_bounded_as_it_was(monkeypatch):
+    """A box cut to hug the maps within the cap can leave a relaxation the conic solver does not
+    end cleanly (seen on a Dinosaur camera: 21 nodes instead of 5). Then the node is bounded
+    uncut, and nothing is excluded."""
+    from geocert.solvers.core.bnb import BoxBound
+
+    rng = np.random.default_rng(seed("node tightening fallback"))
+    for _ in range(10):
+        _, source, target = scene(rng, "resection", 8)
+        target = target + rng.normal(size=target.shape) * 2.0
+        chart = MapChart.build(source, target, "L2L2")
+        prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:3],
+                           1e-7, None, _REASONS)
+        if not isinstance(prepared, Prepared):
+            continue
+        problem = prepared.problem
+        problem.node_tightening = True
+        root = problem.root
+        node = Box(root.lo.copy(), root.hi.copy())  # not the root object: below the root
+        cut, parts = problem._tighten_node(node, 1.2 * prepared.upper)
+        if cut is None or not parts:
+            continue
+        uncut = problem._bound
+        monkeypatch.setattr(problem, "_bound", lambda box, ub: BoxBound(BoxStatus.UNRESOLVED) if box is not node
+                            else uncut(box, ub))
+        result = problem.bound(node, 1.2 * prepared.upper)
+        assert result.box is None and result.excluded == []
+        assert result.status == BoxStatus.BOUNDED and result.proof.box is node
+        return
+    pytest.fail("no node was cut")

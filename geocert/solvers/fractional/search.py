@@ -29,7 +29,7 @@ from geocert.solvers.fractional.relaxation import (EPS_DEPTH, ConicData, Fractio
 
 MAX_SCALE = 1e3
 NODE_CUT = 0.05  # node tightening cuts a side off when that shrinks the box by this much of its width
-NODE_MARGIN = 1e-9  # and cuts that much of the width short of the proven side
+NODE_MARGIN = 0.01  # and cuts that much of the width short of the proven side (an interior left)
 
 
 def branch_directions(program: FractionalProgram, subspace: np.ndarray) -> np.ndarray:
@@ -318,8 +318,13 @@ class BoxProblem:
         if tightened is None:
             return BoxBound(BoxStatus.EMPTY, excluded=excluded)
         result = self._bound(tightened, upper_bound)
-        if tightened is not box:
-            result.box, result.excluded = tightened, excluded
+        if tightened is box:
+            return result
+        if result.status == BoxStatus.UNRESOLVED:
+            # A box cut to hug the points within the cap can leave a relaxation with almost no
+            # interior, which the conic solver may not end cleanly: then the box as it was.
+            return self._bound(box, upper_bound)
+        result.box, result.excluded = tightened, excluded
         return result
 
     def _bound(self, box: Box, upper_bound: float) -> BoxBound:
