@@ -46,6 +46,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from geocert.solvers.autocalibration import direct
+from geocert.solvers.autocalibration import direct_ipm
 from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.core.certificates import pack
 from geocert.solvers.core.conic import ConicStatus, clarabel_cones, map_clarabel_status
@@ -67,7 +68,9 @@ class DirectStage:
     elapsed_s: float = 0.0
 
 
-ATTEMPTS = ((1e-8, 1e-6), (1e-9, 1e-6), (1e-8, 1e-7))  # (tolerance, static regularisation)
+# (tolerance, Clarabel's static regularisation; None: direct_ipm, the structured interior-point method)
+ATTEMPTS = ((1e-9, None), (1e-8, 1e-6), (1e-9, 1e-6), (1e-8, 1e-7))
+IPM_MAX_ITER = 50
 # Iterative refinement steps per KKT solve (Clarabel's default: up to 10, to 1e-13 relative).
 # Each step is a product with the KKT matrix, whose moment-matrix block is dense (1540 x 1540),
 # and a solve with its factor: measured 2026-11-23 (seed 1000, fixed focal, 14 iterations either
@@ -94,17 +97,41 @@ def _settings(tolerance: float, regularisation: float = 1e-6) -> clarabel.Defaul
 
 def solve_program(program: dr.Program, enough=None) -> tuple[ConicStatus, np.ndarray | None, np.ndarray | None, str]:
     """(status, y, z, raw status) of the first clean solve among ATTEMPTS that ``enough(y, z)``
-    accepts (default: any clean solve), else the last clean one, else the last with a dual (still a
-    safe bound); never raises on solver trouble."""
+    accepts (default: any clean solve), else the clean one with the highest safe bound, else the
+    last with a dual (still a safe bound); never raises on solver trouble."""
     answer = (ConicStatus.FAILED, None, None, "not solved")
     for tolerance, regularisation in ATTEMPTS:
-        retry = _solve_once(program, tolerance, regularisation)
+        if regularisation is None:
+            retry = _solve_ipm(program, tolerance)
+        else:
+            retry = _solve_once(program, tolerance, regularisation)
         clean = answer[0] is ConicStatus.OPTIMAL
-        if retry[0] is ConicStatus.OPTIMAL or (not clean and retry[2] is not None) or answer[2] is None:
+        if retry[0] is ConicStatus.OPTIMAL:
+            # of two clean solves the one with the higher safe bound (a later attempt is not
+            # necessarily the more accurate: Clarabel's regularised solves stop further from the
+            # optimum than direct_ipm's)
+            if not clean or dr.safe_bound(program, retry[2])[0] > dr.safe_bound(program, answer[2])[0]:
+                answer = retry
+        elif (not clean and retry[2] is not None) or answer[2] is None:
             answer = retry
         if answer[0] is ConicStatus.OPTIMAL and (enough is None or enough(answer[1], answer[2])):
             break
     return answer
+
+
+def _solve_ipm(program: dr.Program, tolerance: float):
+    """direct_ipm's solve as (status, y, z, raw status): "Solved" only when its residuals and gap
+    met the tolerance."""
+    try:
+        result = direct_ipm.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
+                                  program.cones.psd, tolerance=tolerance, max_iter=IPM_MAX_ITER)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+        return ConicStatus.FAILED, None, None, f"ipm exception: {exc}"
+    raw = f"ipm {result.status}"
+    if result.y is None or not (np.all(np.isfinite(result.y)) and np.all(np.isfinite(result.z))):
+        return ConicStatus.FAILED, None, None, raw
+    status = ConicStatus.OPTIMAL if result.status == "Solved" else ConicStatus.INACCURATE
+    return status, result.y, result.z, raw
 
 
 def _solve_once(program: dr.Program, tolerance: float, regularisation: float):
