@@ -1,10 +1,19 @@
 """Direct autocalibration solved (thesis chapter 7): the moment relaxation of each orientation as
-one SDP for Clarabel (assembled directly, sparse: no cvxpy, whose compilation of a 714-variable
-program with a 55 x 55 PSD block would only add to the solve), its safe bound, the quadric from
-the first-order moments, rounded to the feasible set and polished locally, and the rank test.
+one SDP, first by direct_ipm (a structured interior-point method, numpy: 1.2 to 2 processor
+seconds a solve on Table 7.1's scenes, 2026-11-23) and, when its solve is not clean, by Clarabel
+(assembled directly, sparse: no cvxpy); its safe bound, the quadric from the first-order moments,
+rounded to the feasible set and polished locally, the rank test, and where the relaxation is not
+tight, a split of the program (MAX_SPLITS).
 
-Where a solve's time goes (order 2, Table 7.1's 12 views, profiled 2026-11-23): assembling the
-program takes 0.02 s and Clarabel's setup 0.1 s; the rest is 12 to 22 interior-point iterations,
+Why direct_ipm first: besides its speed (its docstring), Clarabel's clean ("Solved") answers with
+the static regularisation below stopped measurably short of the relaxation's value. On seed 1006
+(varying focal) Clarabel's bound was 2.270649e-4 with the moment matrix's second eigenvalue 1.9e-5
+of the first, so reported not certified (gap 1.2e-4 relative, at all three attempts) as "order 2
+not quite tight"; direct_ipm's is 2.2709252e-4 against the best quadric's 2.2709250e-4, ratio
+3.4e-8: the relaxation is tight there, the gap was the solver's.
+
+The rest of this docstring is the Clarabel path, as measured before direct_ipm. Where a solve's
+time goes (order 2, Table 7.1's 12 views, profiled 2026-11-23): assembling the program takes 0.02 s and Clarabel's setup 0.1 s; the rest is 12 to 22 interior-point iterations,
 each dominated by the factorisation of the KKT system, in which the moment matrix's cone is a dense
 1540-row block and the other cones (Q's 40 x 40 localizer, six 10 x 10 ones) fill in around it:
 per iteration about the time of a dense Cholesky factorisation of order 2250 (0.44 s with numpy on
