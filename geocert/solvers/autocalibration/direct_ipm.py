@@ -284,7 +284,9 @@ def solve(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: int, 
         ad = min(1.0, max_step(zz))
         # Mehrotra's centring: the affine step's gap
         gap_aff = float((s + ap * ds) @ (zK + ad * dz))
-        sigma = min(1.0, max(0.0, gap_aff / gap)) ** 3
+        # (SDPT3's exponent: 3 after long affine steps, down to 1 after short ones, when the iterates
+        # have lost the central path; the cube alone stalled the halves of some splits)
+        sigma = min(1.0, max(0.0, gap_aff / gap)) ** max(1.0, 3.0 * min(ap, ad) ** 2)
         # corrector
         rc_n = -lamn * lamn - ss[0] * zz[0] + sigma * mu
         rc_psd = []
@@ -292,8 +294,9 @@ def solve(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: int, 
             rc_psd.append(-np.diag(lam * lam) - (S1 @ Z1 + Z1 @ S1) / 2.0 + sigma * mu * np.eye(len(lam)))
         dy, ds, dz, dl = newton(rc_n, rc_psd)
         ss, zz = scaled(ds, dz)
-        ap = min(1.0, 0.99 * max_step(ss))
-        ad = min(1.0, 0.99 * max_step(zz))
+        ap, ad = max_step(ss), max_step(zz)
+        fraction = 0.9 + 0.09 * min(1.0, ap, ad)  # SDPT3's step fraction: shorter after short steps
+        ap, ad = min(1.0, fraction * ap), min(1.0, fraction * ad)
         if ap < 1e-10 and ad < 1e-10:
             status = "Stalled"
             break
