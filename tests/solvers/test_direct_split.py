@@ -7,6 +7,7 @@ split and verified end to end."""
 from __future__ import annotations
 
 import copy
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -108,3 +109,32 @@ class TestSeed1012:
         stage = solve_job(copy.deepcopy(document))["stages"][0]
         assert not stage["certified"] and stage["certificate"]["moment_rank"] == 2
         assert stage["gap"] > 1e-4 * stage["cost"]
+
+
+def test_a_split_that_lowers_the_bound_is_not_kept(monkeypatch):
+    """Every splitting's smallest bound is a bound; the proof is the best one's (clean first). Root:
+    clean, bound 1.0, rank 2, the best quadric costs 1.5. Its halves: one clean at 2.0, one not
+    clean at 0.5: the root alone is kept (bound 1.0, one program without cuts)."""
+    orientation = direct.Orientation(None, None, None)
+    setup = direct.DirectSetup(None, np.eye(4), np.zeros((1, 3, 4)), [orientation], [])
+    z = np.zeros(3)
+
+    def leaf(cuts, status, bound, rank):
+        return direct_solve.Leaf(orientation, cuts, None, status, np.zeros(3), z, "fake", bound, (rank, 0.5, None))
+
+    from geocert.solvers.core.conic import ConicStatus
+
+    def fake_leaf(setup, options, order, orientation, cuts):
+        if not cuts:
+            return leaf(cuts, ConicStatus.OPTIMAL, 1.0, 2)
+        return leaf(cuts, ConicStatus.OPTIMAL if cuts[-1][2] == 1 else ConicStatus.INACCURATE,
+                    2.0 if cuts[-1][2] == 1 else 0.5, 1)
+
+    monkeypatch.setattr(direct_solve, "_solve_leaf", fake_leaf)
+    monkeypatch.setattr(direct_solve, "split_of", lambda leaf: (0, 0.0))
+    monkeypatch.setattr(direct_solve, "candidates", lambda *args, **kwargs: [np.eye(4)])
+    monkeypatch.setattr(dr, "cost", lambda cameras, Q: 1.5)
+    options = SimpleNamespace(relaxation_order=2, metric_rel_gap=1e-4, abs_gap=1e-12)
+    stage = direct_solve.solve_direct(setup, options, True)
+    assert stage.lower_bound == 1.0 and not stage.certified and stage.rank == 2
+    assert [p.get("cuts") for p in stage.proof["programs"]] == [None]

@@ -346,6 +346,10 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -
                                reason=f"the conic solver failed ({leaf.raw})")
         leaves.append(leaf)
         consider(leaf)
+    def standing(leaves):
+        return all(leaf.status is ConicStatus.OPTIMAL for leaf in leaves), min(leaf.bound for leaf in leaves)
+
+    kept = list(leaves)
     for _ in range(MAX_SPLITS):
         lowest = min(leaves, key=lambda leaf: leaf.bound)
         tight = best is not None and best_cost - lowest.bound <= max(options.abs_gap, options.metric_rel_gap * abs(best_cost))
@@ -361,10 +365,15 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -
         if any(half.z is None for half in halves):
             statuses += [half.raw for half in halves]
             break
-        leaves.remove(lowest)
+        leaves = [leaf for leaf in leaves if leaf is not lowest] + halves
         for half in halves:
-            leaves.append(half)
             consider(half)
+        if standing(leaves) > standing(kept):
+            kept = list(leaves)
+    # every splitting's smallest bound is a bound; the proof is the splitting with the best (clean
+    # first): a half whose solve stalled can charge its dual residual far below its parent's bound
+    # (seed 1008, varying focal: 7.5e-1 relative below the best quadric against 1.3e-1 unsplit)
+    leaves = kept
     lowest = min(leaves, key=lambda leaf: leaf.bound)
     bound = lowest.bound
     clean = all(leaf.status is ConicStatus.OPTIMAL for leaf in leaves)
