@@ -138,7 +138,7 @@ class TestSafeBound:
 
     def test_certified_and_rank_one(self, noisy):
         setup, stage = noisy
-        assert stage.certified and stage.conic_status == ["Solved"]
+        assert stage.certified and stage.conic_status == ["ipm Solved"]
         assert stage.rank == 1 and stage.eigenvalue_ratio < 1e-4
         assert stage.lower_bound <= stage.cost <= stage.lower_bound + 1e-4 * stage.cost
 

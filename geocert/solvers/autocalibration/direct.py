@@ -256,15 +256,50 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
         if o.delta in gone:
             continue
         match = [p for p in programs if isinstance(p, dict) and p.get("delta") == o.delta]
-        if len(match) != 1:
-            raise Invalid("root_region", f"orientation {o.delta!r} needs exactly one program or an exclusion")
-        program = dr.build(setup.cameras, o.pairs, order)
-        z = dual_vector(match[0].get("z"), len(program.b), f"programs/{o.delta}/z", "leaf_bounds")
-        value, _ = dr.safe_bound(program, z)
-        bound = min(bound, value)
+        leaves = [_cuts(p.get("cuts", [])) for p in match]
+        if not match or not covers(leaves):
+            raise Invalid("root_region", f"orientation {o.delta!r} needs one program, or the leaves of a split "
+                                         "covering its feasible set, or an exclusion")
+        for item, cuts in zip(match, leaves):
+            program = dr.build(setup.cameras, o.pairs, order, cuts)
+            z = dual_vector(item.get("z"), len(program.b), f"programs/{o.delta}/z", "leaf_bounds")
+            value, _ = dr.safe_bound(program, z)
+            bound = min(bound, value)
     if bound == math.inf:
         raise Invalid("root_region", "every orientation is excluded: nothing to bound")
     return bound, tuple(gone)
+
+
+def _cuts(raw) -> tuple:
+    """A program's cuts as ((k, c, sign), ...), checked: k an entry of x, c finite, sign +-1."""
+    if not isinstance(raw, list):
+        raise Invalid("format", "a program's cuts are a list of [k, c, sign]")
+    out = []
+    for cut in raw:
+        if not (isinstance(cut, list) and len(cut) == 3):
+            raise Invalid("format", "a cut is [k, c, sign]")
+        k, c, sign = cut
+        if not (isinstance(k, int) and not isinstance(k, bool) and 0 <= k < dr.N and isinstance(c, (int, float))
+                and not isinstance(c, bool) and math.isfinite(c) and sign in (1, -1) and not isinstance(sign, bool)):
+            raise Invalid("format", "a cut is [k (0 to 8), c (finite), sign (1 or -1)]")
+        out.append((k, float(c), float(sign)))
+    return tuple(out)
+
+
+def covers(leaves: list[tuple]) -> bool:
+    """Whether leaves (each a path of cuts from the root) are the leaves of one binary splitting
+    of the whole set: a single empty path, or every path starting with a cut on one (k, c), the
+    sign +1 paths and the sign -1 paths (that cut removed) each covering in turn. (x_k <= c and
+    x_k >= c cover the line; each path's cuts are its leaf's program's constraints.)"""
+    if len(leaves) == 1 and not leaves[0]:
+        return True
+    if not leaves or any(not path for path in leaves):
+        return False
+    k, c = leaves[0][0][0], leaves[0][0][1]
+    if any(path[0][:2] != (k, c) for path in leaves):
+        return False
+    halves = [[path[1:] for path in leaves if path[0][2] == sign] for sign in (1.0, -1.0)]
+    return all(covers(half) for half in halves)
 
 
 def check_options(chirality, varying_focal, order) -> None:

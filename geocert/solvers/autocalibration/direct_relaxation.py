@@ -317,8 +317,19 @@ def chirality_pairs(rows: np.ndarray, centres: int) -> np.ndarray:
     return (out + out.transpose(0, 2, 1)) / 2
 
 
-def build(cameras: np.ndarray, pairs: np.ndarray | None, order: int) -> Program:
-    """The order-``order`` relaxation of the program (module docstring) for the cameras as given."""
+def cut_polynomial(cut) -> dict:
+    """sign (c - x_k) for a cut (k, c, sign): the half of the feasible set a branch keeps."""
+    k, c, sign = cut
+    e = [0] * N
+    e[int(k)] = 1
+    return {tuple([0] * N): float(sign) * float(c), tuple(e): -float(sign)}
+
+
+def build(cameras: np.ndarray, pairs: np.ndarray | None, order: int, cuts=()) -> Program:
+    """The order-``order`` relaxation of the program (module docstring) for the cameras as given,
+    restricted by ``cuts`` ((k, c, sign): sign (c - x_k) >= 0, each with its localizing matrix
+    over the monomials of degree <= order - 1, before the moment matrix): a branch of
+    direct_solve's splitting, whose leaves' halves cover the feasible set (direct.check_proof)."""
     if order not in range(2, MAX_ORDER + 1):
         raise ValueError(f"relaxation order {order} is not served (2 to {MAX_ORDER})")
     moments = Moments(order)
@@ -334,7 +345,7 @@ def build(cameras: np.ndarray, pairs: np.ndarray | None, order: int) -> Program:
     psd_blocks, sizes = [], []
     Qmat = [[_entry(a, b) for b in range(4)] for a in range(4)]
     for matrix, degree in [(Qmat, order - 1)] + [([[m]], order - 1) for m in polys["minors2"]] + [
-            ([[{tuple([0] * N): 1.0}]], order)]:
+            ([[cut_polynomial(cut)]], order - 1) for cut in cuts] + [([[{tuple([0] * N): 1.0}]], order)]:
         block, size = localizing(moments, matrix, degree)
         psd_blocks.append(block)
         sizes.append(size)

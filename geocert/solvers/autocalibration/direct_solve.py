@@ -1,10 +1,19 @@
 """Direct autocalibration solved (thesis chapter 7): the moment relaxation of each orientation as
-one SDP for Clarabel (assembled directly, sparse: no cvxpy, whose compilation of a 714-variable
-program with a 55 x 55 PSD block would only add to the solve), its safe bound, the quadric from
-the first-order moments, rounded to the feasible set and polished locally, and the rank test.
+one SDP, first by direct_ipm (a structured interior-point method, numpy: 1.2 to 2 processor
+seconds a solve on Table 7.1's scenes, 2026-11-23) and, when its solve is not clean, by Clarabel
+(assembled directly, sparse: no cvxpy); its safe bound, the quadric from the first-order moments,
+rounded to the feasible set and polished locally, the rank test, and where the relaxation is not
+tight, a split of the program (MAX_SPLITS).
 
-Where a solve's time goes (order 2, Table 7.1's 12 views, profiled 2026-11-23): assembling the
-program takes 0.02 s and Clarabel's setup 0.1 s; the rest is 12 to 22 interior-point iterations,
+Why direct_ipm first: besides its speed (its docstring), Clarabel's clean ("Solved") answers with
+the static regularisation below stopped measurably short of the relaxation's value. On seed 1006
+(varying focal) Clarabel's bound was 2.270649e-4 with the moment matrix's second eigenvalue 1.9e-5
+of the first, so reported not certified (gap 1.2e-4 relative, at all three attempts) as "order 2
+not quite tight"; direct_ipm's is 2.2709252e-4 against the best quadric's 2.2709250e-4, ratio
+3.4e-8: the relaxation is tight there, the gap was the solver's.
+
+The rest of this docstring is the Clarabel path, as measured before direct_ipm. Where a solve's
+time goes (order 2, Table 7.1's 12 views, profiled 2026-11-23): assembling the program takes 0.02 s and Clarabel's setup 0.1 s; the rest is 12 to 22 interior-point iterations,
 each dominated by the factorisation of the KKT system, in which the moment matrix's cone is a dense
 1540-row block and the other cones (Q's 40 x 40 localizer, six 10 x 10 ones) fill in around it:
 per iteration about the time of a dense Cholesky factorisation of order 2250 (0.44 s with numpy on
@@ -46,6 +55,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from geocert.solvers.autocalibration import direct
+from geocert.solvers.autocalibration import direct_ipm
 from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.core.certificates import pack
 from geocert.solvers.core.conic import ConicStatus, clarabel_cones, map_clarabel_status
@@ -67,7 +77,9 @@ class DirectStage:
     elapsed_s: float = 0.0
 
 
-ATTEMPTS = ((1e-8, 1e-6), (1e-9, 1e-6), (1e-8, 1e-7))  # (tolerance, static regularisation)
+# (tolerance, Clarabel's static regularisation; None: direct_ipm, the structured interior-point method)
+ATTEMPTS = ((1e-9, None), (1e-8, 1e-6), (1e-9, 1e-6), (1e-8, 1e-7))
+IPM_MAX_ITER = 50
 # Iterative refinement steps per KKT solve (Clarabel's default: up to 10, to 1e-13 relative).
 # Each step is a product with the KKT matrix, whose moment-matrix block is dense (1540 x 1540),
 # and a solve with its factor: measured 2026-11-23 (seed 1000, fixed focal, 14 iterations either
@@ -92,19 +104,43 @@ def _settings(tolerance: float, regularisation: float = 1e-6) -> clarabel.Defaul
     return settings
 
 
-def solve_program(program: dr.Program, enough=None) -> tuple[ConicStatus, np.ndarray | None, np.ndarray | None, str]:
+def solve_program(program: dr.Program, enough=None, attempts=None) -> tuple[ConicStatus, np.ndarray | None, np.ndarray | None, str]:
     """(status, y, z, raw status) of the first clean solve among ATTEMPTS that ``enough(y, z)``
-    accepts (default: any clean solve), else the last clean one, else the last with a dual (still a
-    safe bound); never raises on solver trouble."""
+    accepts (default: any clean solve), else the clean one with the highest safe bound, else the
+    last with a dual (still a safe bound); never raises on solver trouble."""
     answer = (ConicStatus.FAILED, None, None, "not solved")
-    for tolerance, regularisation in ATTEMPTS:
-        retry = _solve_once(program, tolerance, regularisation)
+    for tolerance, regularisation in ATTEMPTS if attempts is None else attempts:
+        if regularisation is None:
+            retry = _solve_ipm(program, tolerance)
+        else:
+            retry = _solve_once(program, tolerance, regularisation)
         clean = answer[0] is ConicStatus.OPTIMAL
-        if retry[0] is ConicStatus.OPTIMAL or (not clean and retry[2] is not None) or answer[2] is None:
+        if retry[0] is ConicStatus.OPTIMAL:
+            # of two clean solves the one with the higher safe bound (a later attempt is not
+            # necessarily the more accurate: Clarabel's regularised solves stop further from the
+            # optimum than direct_ipm's)
+            if not clean or dr.safe_bound(program, retry[2])[0] > dr.safe_bound(program, answer[2])[0]:
+                answer = retry
+        elif (not clean and retry[2] is not None) or answer[2] is None:
             answer = retry
         if answer[0] is ConicStatus.OPTIMAL and (enough is None or enough(answer[1], answer[2])):
             break
     return answer
+
+
+def _solve_ipm(program: dr.Program, tolerance: float):
+    """direct_ipm's solve as (status, y, z, raw status): "Solved" only when its residuals and gap
+    met the tolerance."""
+    try:
+        result = direct_ipm.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
+                                  program.cones.psd, tolerance=tolerance, max_iter=IPM_MAX_ITER)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+        return ConicStatus.FAILED, None, None, f"ipm exception: {exc}"
+    raw = f"ipm {result.status}"
+    if result.y is None or not (np.all(np.isfinite(result.y)) and np.all(np.isfinite(result.z))):
+        return ConicStatus.FAILED, None, None, raw
+    status = ConicStatus.OPTIMAL if result.status == "Solved" else ConicStatus.INACCURATE
+    return status, result.y, result.z, raw
 
 
 def _solve_once(program: dr.Program, tolerance: float, regularisation: float):
@@ -202,9 +238,12 @@ def candidates(setup: direct.DirectSetup, y: np.ndarray, orientation: direct.Ori
     if program is not None and rank > 1:
         for r in range(2, EXTRACTED_RANKS + 1):
             starts += extract(program, y, r)
-    out = []
+    out, seen = [], []
     for x in starts:
         rounded = direct.rank_three_projection(dr.q_of(x))
+        if any(np.linalg.norm(rounded - other) <= 1e-6 for other in seen):
+            continue  # the same start again (extracted mixtures repeat their points): its polish is known
+        seen.append(rounded)
         if direct.chirality_holds(orientation, rounded):
             out.append(rounded)
         polished = polish(setup.cameras, rounded)
@@ -224,39 +263,124 @@ def solve_direct(setup: direct.DirectSetup, options, record: bool) -> DirectStag
     return stage
 
 
+@dataclass
+class Leaf:
+    """One program of the split: an orientation's relaxation restricted by cuts."""
+    orientation: direct.Orientation
+    cuts: tuple
+    program: dr.Program
+    status: ConicStatus
+    y: np.ndarray
+    z: np.ndarray
+    raw: str
+    bound: float
+    rank: tuple
+
+
+# Splits of the lowest-bound program when the gap misses the tolerance (each solves two programs).
+# Order 2 is not tight on some of Table 7.1's scenes (varying focal, seeds 1008, 1010 and 1012 of
+# the first 13: the moment matrix a mixture of two points, the relaxation 3e-5 to 13% below the
+# best quadric, which 300-start local searches confirm). Cutting between the two points the
+# moment matrix mixes (x_k <= c and x_k >= c, each with its localizing matrix) made the half
+# holding the optimum rank one and tight on seeds 1010 and 1012 (gaps 6e-8 and 3e-8 relative).
+MAX_SPLITS = 3
+
+
+def _solve_leaf(setup, options, order, orientation, cuts) -> Leaf | None:
+    program = dr.build(setup.cameras, orientation.pairs, order, cuts)
+
+    def enough(y, z):
+        """A rank-one solve whose gap misses the tolerance is worth a more accurate attempt (the
+        unsplit programs only: a half's own rounding may leave the half)."""
+        if cuts or rank_test(program, y)[0] != 1:
+            return True
+        found = [dr.cost(setup.cameras, Q) for Q in candidates(setup, y, orientation)]
+        if not found:
+            return True
+        best = min(found)
+        return best - dr.safe_bound(program, z)[0] <= max(options.abs_gap, options.metric_rel_gap * abs(best))
+
+    # a half is solved by direct_ipm only: where it stalled (seeds 1008, 1012 and 1042, varying focal),
+    # Clarabel's attempts took 6 to 20 s each and ended "AlmostSolved" too (the result is then not certified)
+    status, y, z, raw = solve_program(program, enough, ATTEMPTS[:1] if cuts else ATTEMPTS)
+    if z is None:
+        return Leaf(orientation, cuts, program, status, y, z, raw, -math.inf, (0, math.nan, None))
+    return Leaf(orientation, cuts, program, status, y, z, raw, dr.safe_bound(program, z)[0], rank_test(program, y))
+
+
+def split_of(leaf: Leaf) -> tuple[int, float] | None:
+    """(k, c) to cut a program at: between the two points its moment matrix mixes (the entry
+    where they differ most, halfway), or, without two such points, at the mean of the entry of
+    largest variance."""
+    if leaf.rank[0] >= 2:
+        points = extract(leaf.program, leaf.y, 2)
+        if len(points) == 2:
+            k = int(np.argmax(np.abs(points[0] - points[1])))
+            if abs(points[0][k] - points[1][k]) > 1e-6:
+                return k, float((points[0][k] + points[1][k]) / 2)
+    M = dr.moment_matrix(leaf.program, leaf.y)
+    mean = M[0, 1:1 + dr.N]
+    variance = np.diag(M)[1:1 + dr.N] - mean ** 2
+    k = int(np.argmax(variance))
+    if not variance[k] > 1e-12:
+        return None
+    return k, float(mean[k])
+
+
 def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -> DirectStage:
-    bound, best, best_cost = math.inf, None, math.inf
-    statuses, programs, ranks = [], [], []
-    clean = True
-    for orientation in setup.orientations:
-        program = dr.build(setup.cameras, orientation.pairs, order)
+    best, best_cost = None, math.inf
+    statuses, leaves = [], []
 
-        def enough(y, z, program=program, orientation=orientation):
-            """A rank-one solve whose gap misses the tolerance is worth a more accurate attempt."""
-            if rank_test(program, y)[0] != 1:
-                return True
-            found = [dr.cost(setup.cameras, Q) for Q in candidates(setup, y, orientation)]
-            if not found:
-                return True
-            best = min(found)
-            return best - dr.safe_bound(program, z)[0] <= max(options.abs_gap, options.metric_rel_gap * abs(best))
-
-        status, y, z, raw = solve_program(program, enough)
-        statuses.append(raw)
-        if z is None:
-            return DirectStage("failed", False, None, math.inf, -math.inf, order, conic_status=statuses,
-                               reason=f"the conic solver failed ({raw})")
-        clean = clean and status is ConicStatus.OPTIMAL
-        value, _ = dr.safe_bound(program, z)
-        bound = min(bound, value)
-        programs.append({"delta": orientation.delta, "z": pack(z), "bound": value})
-        ranks.append(rank_test(program, y))
-        for Q in candidates(setup, y, orientation, program, ranks[-1][0]):
+    def consider(leaf):
+        nonlocal best, best_cost
+        statuses.append(leaf.raw)
+        for Q in candidates(setup, leaf.y, leaf.orientation, leaf.program, leaf.rank[0]):
             c = dr.cost(setup.cameras, Q)
             if c < best_cost:
                 best, best_cost = Q, c
-    rank = max(r[0] for r in ranks)
-    ratio = max(r[1] for r in ranks)
+
+    for orientation in setup.orientations:
+        leaf = _solve_leaf(setup, options, order, orientation, ())
+        if leaf.z is None:
+            return DirectStage("failed", False, None, math.inf, -math.inf, order, conic_status=statuses + [leaf.raw],
+                               reason=f"the conic solver failed ({leaf.raw})")
+        leaves.append(leaf)
+        consider(leaf)
+    def standing(leaves):
+        return all(leaf.status is ConicStatus.OPTIMAL for leaf in leaves), min(leaf.bound for leaf in leaves)
+
+    kept = list(leaves)
+    for _ in range(MAX_SPLITS):
+        lowest = min(leaves, key=lambda leaf: leaf.bound)
+        tight = best is not None and best_cost - lowest.bound <= max(options.abs_gap, options.metric_rel_gap * abs(best_cost))
+        if best is None or (tight and lowest.rank[0] == 1) or any(leaf.status is not ConicStatus.OPTIMAL for leaf in leaves):
+            # (a gap within the tolerance with a moment matrix of rank above one is split too, for the rank; a
+            # half whose solve was not clean stops the splitting: split again, such halves stalled again, 24 s)
+            break
+        cut = split_of(lowest)
+        if cut is None:
+            break
+        halves = [_solve_leaf(setup, options, order, lowest.orientation, lowest.cuts + ((cut[0], cut[1], sign),))
+                  for sign in (1, -1)]
+        if any(half.z is None for half in halves):
+            statuses += [half.raw for half in halves]
+            break
+        leaves = [leaf for leaf in leaves if leaf is not lowest] + halves
+        for half in halves:
+            consider(half)
+        if standing(leaves) > standing(kept):
+            kept = list(leaves)
+    # every splitting's smallest bound is a bound; the proof is the splitting with the best (clean
+    # first): a half whose solve stalled can charge its dual residual far below its parent's bound
+    # (seed 1008, varying focal: 7.5e-1 relative below the best quadric against 1.3e-1 unsplit)
+    leaves = kept
+    lowest = min(leaves, key=lambda leaf: leaf.bound)
+    bound = lowest.bound
+    clean = all(leaf.status is ConicStatus.OPTIMAL for leaf in leaves)
+    rank, ratio = lowest.rank[0], lowest.rank[1]  # of the program the bound is from
+    programs = [{"delta": leaf.orientation.delta, "z": pack(leaf.z), "bound": leaf.bound,
+                 **({"cuts": [[int(k), float(c), int(sign)] for k, c, sign in leaf.cuts]} if leaf.cuts else {})}
+                for leaf in leaves]
     proof = {"type": "direct_moment", "order": order, "programs": programs, "excluded": setup.excluded,
              "moment_rank": rank, "eigenvalue_ratio": ratio} if record else None
     if best is None:
@@ -265,10 +389,11 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -
     tolerance = max(options.abs_gap, options.metric_rel_gap * abs(best_cost))
     certified = clean and best_cost - bound <= tolerance
     reason = None
+    split = f" split into {len(leaves)} programs" if len(leaves) > len(setup.orientations) else ""
     if not clean:
         reason = f"the conic solve was not clean ({', '.join(statuses)}): its bound is reported, not certified"
     elif not certified:
-        reason = (f"the relaxation is not tight at order {order} (gap {best_cost - bound:.3g}, moment matrix rank "
-                  f"{rank}); the bound and the rounded solution are returned")
+        reason = (f"the relaxation is not tight at order {order}{split} (gap {best_cost - bound:.3g}, moment matrix "
+                  f"rank {rank}); the bound and the rounded solution are returned")
     return DirectStage("optimal" if certified else "not_certified", certified, best, best_cost, bound, order, rank,
                        ratio, statuses, proof, reason)

@@ -1,0 +1,140 @@
+"""The direct method's split (direct_solve.MAX_SPLITS): where order 2 is not tight, the program is
+cut between the two points its moment matrix mixes, x_k <= c and x_k >= c, each half with its
+localizing matrix; the bound is the halves' smaller one. The cut's block, the coverage check the
+verifier runs, and Table 7.1's seed 1012 (varying focal), not certified unsplit, certified rank one
+split and verified end to end."""
+
+from __future__ import annotations
+
+import copy
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from geocert.batch import solve_job
+from geocert.solvers.autocalibration import direct, direct_solve, scenes
+from geocert.solvers.autocalibration import direct_relaxation as dr
+from geocert.solvers.core.certificates import pack, unpack
+from geocert.solvers.core.cones import smat
+from geocert.solvers.core.strict import Invalid
+from geocert.solvers.verify import verify_any
+
+UNIT = {"aspect": [0.95, 1.05], "skew": [-0.01, 0.01], "principal_point": [[-0.1, 0.1], [-0.1, 0.1]]}
+
+
+def test_a_cuts_block_is_its_localizing_matrix_at_a_point():
+    """The block before the moment matrix is sign (c - x_k) v v' (v the monomials of degree <= 1)."""
+    rng = np.random.default_rng(0)
+    scene, _ = scenes.table71_scene(1, 0.0)
+    cameras = dr.framed_cameras(scene.cameras, np.eye(4))
+    plain = dr.build(cameras, None, 2)
+    for k, c, sign in ((3, 0.1, 1), (8, -0.2, -1)):
+        program = dr.build(cameras, None, 2, ((k, c, sign),))
+        assert program.cones.psd == plain.cones.psd[:-1] + (1 + dr.N, plain.cones.psd[-1])
+        B = rng.normal(size=(4, 3))
+        x = dr.x_of(B @ B.T)
+        y = program.moments.vector(x)
+        s = program.b - program.A @ y[1:]
+        m = program.cones.psd[-1] * (program.cones.psd[-1] + 1) // 2
+        n = 1 + dr.N
+        block = s[len(s) - m - n * (n + 1) // 2:len(s) - m]
+        v = y[:n]
+        assert np.allclose(smat(block, n), sign * (c - x[k]) * np.outer(v, v), atol=1e-12)
+        # the rest of the program is unchanged
+        assert np.allclose(s[len(s) - m:], (plain.b - plain.A @ y[1:])[-m:])
+
+
+class TestCovers:
+    def test_whole_splittings_cover(self):
+        assert direct.covers([()])
+        a, b = (2, 0.5), (4, -0.1)
+        assert direct.covers([(a + (1.0,),), (a + (-1.0,),)])
+        assert direct.covers([(a + (1.0,),), (a + (-1.0,), b + (1.0,)), (a + (-1.0,), b + (-1.0,))])
+
+    @pytest.mark.parametrize("leaves", [
+        [],
+        [((2, 0.5, 1.0),)],  # one half only
+        [((2, 0.5, 1.0),), ((2, 0.6, -1.0),)],  # the halves of two different cuts
+        [((2, 0.5, 1.0),), ((3, 0.5, -1.0),)],
+        [((2, 0.5, 1.0),), ((2, 0.5, -1.0), (4, -0.1, 1.0))],  # a quarter missing
+        [(), ((2, 0.5, 1.0),)],
+    ])
+    def test_gaps_are_refused(self, leaves):
+        assert not direct.covers(leaves)
+
+
+@pytest.fixture(scope="module")
+def seed_1012():
+    scene, Ks = scenes.table71_scene(1012, 0.2, True)
+    data = {"cameras": scene.cameras.tolist(), "points": scene.points.tolist()}
+    document = {"kind": "autocalibration", "data": data,
+                "options": {"method": "direct", "chirality": "none", "varying_focal": True, "certificate": "full",
+                            "intrinsics": {**UNIT, "focal": [0.05, 1.0]}}}
+    return document, solve_job(copy.deepcopy(document))
+
+
+class TestSeed1012:
+    def test_split_certifies_rank_one_and_verifies(self, seed_1012):
+        """Unsplit, the relaxation is 2.7e-4 (relative) below the best quadric with the moment
+        matrix of rank 2 (a 300-start local search finds nothing better than that quadric)."""
+        _, result = seed_1012
+        stage = result["stages"][0]
+        assert stage["certified"], stage["reason"]
+        assert stage["certificate"]["moment_rank"] == 1
+        assert stage["gap"] <= 1e-6 * stage["cost"]
+        programs = result["certificate"]["items"][0]["proof"]["programs"]
+        assert len(programs) == 2 and all(len(p["cuts"]) == 1 for p in programs)
+        report = verify_any(result)
+        assert report.valid, report.first_failure
+
+    @pytest.mark.parametrize("tamper", ["drop_half", "move_cut", "flip_sign"])
+    def test_a_split_that_does_not_cover_is_refused(self, seed_1012, tamper):
+        _, result = seed_1012
+        document = copy.deepcopy(result["certificate"])
+        programs = document["items"][0]["proof"]["programs"]
+        low = min(range(2), key=lambda i: programs[i]["bound"])
+        if tamper == "drop_half":  # keep the half with the higher bound only
+            del programs[low]
+        elif tamper == "move_cut":  # the low half's cut moved: the two no longer meet
+            programs[low]["cuts"][0][1] += 0.01
+        else:  # both halves on one side
+            programs[low]["cuts"][0][2] = -programs[low]["cuts"][0][2]
+        report = verify_any(document)
+        assert not report.valid
+
+    def test_without_the_split_it_is_not_certified(self, seed_1012, monkeypatch):
+        document, _ = seed_1012
+        monkeypatch.setattr(direct_solve, "MAX_SPLITS", 0)
+        stage = solve_job(copy.deepcopy(document))["stages"][0]
+        assert not stage["certified"] and stage["certificate"]["moment_rank"] == 2
+        assert stage["gap"] > 1e-4 * stage["cost"]
+
+
+def test_a_split_that_lowers_the_bound_is_not_kept(monkeypatch):
+    """Every splitting's smallest bound is a bound; the proof is the best one's (clean first). Root:
+    clean, bound 1.0, rank 2, the best quadric costs 1.5. Its halves: one clean at 2.0, one not
+    clean at 0.5: the root alone is kept (bound 1.0, one program without cuts)."""
+    orientation = direct.Orientation(None, None, None)
+    setup = direct.DirectSetup(None, np.eye(4), np.zeros((1, 3, 4)), [orientation], [])
+    z = np.zeros(3)
+
+    def leaf(cuts, status, bound, rank):
+        return direct_solve.Leaf(orientation, cuts, None, status, np.zeros(3), z, "fake", bound, (rank, 0.5, None))
+
+    from geocert.solvers.core.conic import ConicStatus
+
+    def fake_leaf(setup, options, order, orientation, cuts):
+        if not cuts:
+            return leaf(cuts, ConicStatus.OPTIMAL, 1.0, 2)
+        return leaf(cuts, ConicStatus.OPTIMAL if cuts[-1][2] == 1 else ConicStatus.INACCURATE,
+                    2.0 if cuts[-1][2] == 1 else 0.5, 1)
+
+    monkeypatch.setattr(direct_solve, "_solve_leaf", fake_leaf)
+    monkeypatch.setattr(direct_solve, "split_of", lambda leaf: (0, 0.0))
+    monkeypatch.setattr(direct_solve, "candidates", lambda *args, **kwargs: [np.eye(4)])
+    monkeypatch.setattr(dr, "cost", lambda cameras, Q: 1.5)
+    options = SimpleNamespace(relaxation_order=2, metric_rel_gap=1e-4, abs_gap=1e-12)
+    stage = direct_solve.solve_direct(setup, options, True)
+    assert stage.lower_bound == 1.0 and not stage.certified and stage.rank == 2
+    assert [p.get("cuts") for p in stage.proof["programs"]] == [None]
