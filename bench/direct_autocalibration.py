@@ -15,7 +15,7 @@ solve or no answer), and the time per solve (median, max); the thesis's numbers 
 issue 13's targets, each named met or MISSED. With --stratified, the stratified method on the same
 fixed-focal scenes in a last column (intrinsics ranges: focal [0.5, 2], the same small ranges).
 
-    .venv/bin/python -m bench.direct_autocalibration [--trials 10] [--stratified] [--time-limit 10] [--jobs 1]
+    .venv/bin/python -m bench.direct_autocalibration [--trials 10] [--first-trial 0] [--stratified] [--time-limit 10] [--jobs 1]
         [--rows rows.jsonl]   (or --from-rows rows.jsonl: the table of the trials run so far)
 
 --jobs runs that many solves at once (each single-threaded); the load average is printed before
@@ -135,6 +135,8 @@ def _column_of(task: list) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--trials", type=int, default=10)
+    parser.add_argument("--first-trial", type=int, default=0,
+                        help="trials are seeds 1000 + first-trial onwards (to extend a --rows file)")
     parser.add_argument("--stratified", action="store_true")
     parser.add_argument("--time-limit", type=float, default=10.0, help="per stratified stage (s)")
     parser.add_argument("--jobs", type=int, default=1, help="solves run at once")
@@ -149,7 +151,7 @@ def main() -> None:
               flush=True)
         # seed-major, so that an interrupted run (--rows) has every column about equally far
         tasks = []
-        for i in range(args.trials):
+        for i in range(args.first_trial, args.first_trial + args.trials):
             tasks += [(1000 + i, varying, chirality) for _, varying, chirality in COLUMNS]
             if args.stratified:
                 tasks.append((1000 + i, False, "none", "stratified", args.time_limit))
