@@ -299,3 +299,23 @@ class TestNodeTighteningHostile:
         _, proof = cut_leaf(doc)
         proof["upper_bound"] = None  # no cap: its duals prove nothing outside the box
         assert failed_check(doc) == "leaf_bounds"
+
+    def test_a_cut_part_reaching_its_proven_side_exactly_is_refused(self, tightened, monkeypatch):
+        # A point on a proven side may cost the cap: the leaf must lie strictly outside.
+        import geocert.solvers.fractional.proof as proof_module
+
+        ranges, original = {}, proof_module._proven_sides
+        monkeypatch.setattr(proof_module, "_proven_sides",
+                            lambda *args: ranges.setdefault(args[4], original(*args)))
+        assert verify_document(tightened).valid
+        leaf, _ = cut_leaf(tightened)
+        low, high = ranges[f"proof {leaf[2]}"]
+        below = np.flatnonzero(np.asarray(leaf[1]) < low)
+        axis, upper = (int(below[0]), 1) if below.size else (int(np.flatnonzero(np.asarray(leaf[0]) > high)[0]), 0)
+        side = low[axis] if upper else high[axis]
+        results = []
+        for value in (float(np.nextafter(side, -np.inf if upper else np.inf)), float(side)):
+            doc = copy.deepcopy(tightened)
+            cut_leaf(doc)[0][upper][axis] = value  # grown (or shrunk) up to the side
+            results.append(failed_check(doc))
+        assert results == [None, "leaf_bounds"]  # one float short of the side: accepted
