@@ -273,3 +273,49 @@ class TestCommandLine:
         assert self.run("verify", str(tmp_path / "missing.json")).returncode == 2
         assert self.run("verify", "-", stdin="{not json").returncode == 2
         assert self.run("verify", "-", stdin='{"kind": "triangulation"}').returncode == 2
+
+
+class TestNodeTighteningHostile:
+    """A hostile review of node tightening (3bb336f) and strict JSON for maps' certificates."""
+
+    def test_a_box_closed_before_any_incumbent_is_strict_json_and_verifies(self):
+        # max_residual a hair above the smallest largest residual of any camera: no start point
+        # is in scope (prepare's region search asks for 1 - 1e-6 of it), the search closes boxes
+        # with no cost cap (upper_bound inf), then finds an incumbent and certifies. Those proofs'
+        # upper_bound was written as the non-JSON Infinity, and the verifier refused it.
+        rng = np.random.default_rng(seed("hrev scope", "L2L2"))
+        for _ in range(3):
+            job = map_job(rng, "resection", 7, "L2L2", maps=1, noise=3.0)
+        job["options"].update(max_residual=4.365090983853207, time_limit_s=10)
+        document = solve_job(job)["certificate"]
+        item = document["items"][0]
+        assert item["certified"]
+        assert any(p["upper_bound"] is None for p in item["proof"]["proofs"])  # the path is taken
+        json.dumps(document, allow_nan=False)
+        assert verify_document(document).valid
+
+    def test_a_tightened_proof_without_its_cost_cap_is_refused(self, tightened):
+        doc = copy.deepcopy(tightened)
+        _, proof = cut_leaf(doc)
+        proof["upper_bound"] = None  # no cap: its duals prove nothing outside the box
+        assert failed_check(doc) == "leaf_bounds"
+
+    def test_a_cut_part_reaching_its_proven_side_exactly_is_refused(self, tightened, monkeypatch):
+        # A point on a proven side may cost the cap: the leaf must lie strictly outside.
+        import geocert.solvers.fractional.proof as proof_module
+
+        ranges, original = {}, proof_module._proven_sides
+        monkeypatch.setattr(proof_module, "_proven_sides",
+                            lambda *args: ranges.setdefault(args[4], original(*args)))
+        assert verify_document(tightened).valid
+        leaf, _ = cut_leaf(tightened)
+        low, high = ranges[f"proof {leaf[2]}"]
+        below = np.flatnonzero(np.asarray(leaf[1]) < low)
+        axis, upper = (int(below[0]), 1) if below.size else (int(np.flatnonzero(np.asarray(leaf[0]) > high)[0]), 0)
+        side = low[axis] if upper else high[axis]
+        results = []
+        for value in (float(np.nextafter(side, -np.inf if upper else np.inf)), float(side)):
+            doc = copy.deepcopy(tightened)
+            cut_leaf(doc)[0][upper][axis] = value  # grown (or shrunk) up to the side
+            results.append(failed_check(doc))
+        assert results == [None, "leaf_bounds"]  # one float short of the side: accepted

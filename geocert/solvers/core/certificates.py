@@ -111,7 +111,10 @@ def encode(proof: SearchProof) -> dict:
     for box, leaf in proof.leaves:
         if leaf is not None and id(leaf) not in index:
             index[id(leaf)] = len(proofs)
-            record = {"box": _box(leaf.box), "upper_bound": leaf.upper_bound, "kind": leaf.kind,
+            # Infinite numbers as null (strict JSON): a bound, or the cost cap of a box closed
+            # before any incumbent was known (no cap: the proof holds for every point of the scope).
+            record = {"box": _box(leaf.box),
+                      "upper_bound": leaf.upper_bound if math.isfinite(leaf.upper_bound) else None, "kind": leaf.kind,
                       "z": pack(leaf.z), "bound": leaf.bound if math.isfinite(leaf.bound) else None}
             if leaf.duals is not None:
                 record["duals"] = [pack(z) for z in leaf.duals]

@@ -234,7 +234,10 @@ def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_
             raise Invalid("format", f"proof {number} must be an object")
         box = _box(proof.get("box"), f"proofs/{number}/box", k)
         boxes.append(box)
-        ub = _number(proof.get("upper_bound"), f"proofs/{number}/upper_bound")
+        # null: no cost cap (a box closed before any incumbent): the relaxation of every point
+        # of the scope, valid whatever the cap; unbounded variables without max_residual are refused.
+        raw = proof.get("upper_bound")
+        ub = math.inf if raw is None else _number(raw, f"proofs/{number}/upper_bound")
         if not ub >= cap:
             raise Invalid("leaf_bounds", f"proof {number} assumed a cost cap below the claimed lower bound")
         kind = proof.get("kind")
