@@ -63,6 +63,16 @@ class TestCovers:
     def test_gaps_are_refused(self, leaves):
         assert not direct.covers(leaves)
 
+    def test_paths_deeper_than_the_solver_splits_are_refused(self):
+        """A hostile document cannot ask for programs of any number of cuts (each one more
+        localizing block to build) or a splitting of any depth: at most direct.MAX_CUTS, as many as
+        the solver makes (direct_solve.MAX_SPLITS is it)."""
+        assert direct_solve.MAX_SPLITS == direct.MAX_CUTS
+        deepest = [[2, 0.5, 1]] * direct.MAX_CUTS
+        assert len(direct._cuts(deepest)) == direct.MAX_CUTS
+        with pytest.raises(Invalid, match="at most"):
+            direct._cuts(deepest + [[3, 0.1, -1]])
+
 
 @pytest.fixture(scope="module")
 def seed_1012():

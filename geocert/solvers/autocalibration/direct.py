@@ -270,10 +270,16 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
     return bound, tuple(gone)
 
 
+# Cuts on one program's path from its orientation's root: the solver splits at most this often
+# (direct_solve.MAX_SPLITS is this), and a bound keeps a hostile document from asking the verifier
+# for programs with any number of localizing blocks, or a splitting of any depth.
+MAX_CUTS = 3
+
+
 def _cuts(raw) -> tuple:
     """A program's cuts as ((k, c, sign), ...), checked: k an entry of x, c finite, sign +-1."""
-    if not isinstance(raw, list):
-        raise Invalid("format", "a program's cuts are a list of [k, c, sign]")
+    if not isinstance(raw, list) or len(raw) > MAX_CUTS:
+        raise Invalid("format", f"a program's cuts are a list of at most {MAX_CUTS} [k, c, sign]")
     out = []
     for cut in raw:
         if not (isinstance(cut, list) and len(cut) == 3):

@@ -283,7 +283,7 @@ class Leaf:
 # best quadric, which 300-start local searches confirm). Cutting between the two points the
 # moment matrix mixes (x_k <= c and x_k >= c, each with its localizing matrix) made the half
 # holding the optimum rank one and tight on seeds 1010 and 1012 (gaps 6e-8 and 3e-8 relative).
-MAX_SPLITS = 3
+MAX_SPLITS = direct.MAX_CUTS  # the verifier refuses deeper paths
 
 
 def _solve_leaf(setup, options, order, orientation, cuts) -> Leaf | None:
