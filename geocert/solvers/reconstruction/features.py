@@ -236,17 +236,29 @@ def _match(desc_a: np.ndarray, desc_b: np.ndarray, options: FeatureOptions) -> n
     both directions' nearest neighbours at once (brute force, exact as cv2.BFMatcher with NORM_L2)."""
     if len(desc_a) < 2 or len(desc_b) < 2:
         return np.zeros((0, 2), dtype=np.int64)
+    return _ratio_matches(_squared_distances(desc_a, desc_b), options.ratio, options.mutual)
+
+
+def _squared_distances(desc_a: np.ndarray, desc_b: np.ndarray) -> np.ndarray:
     a, b = desc_a.astype(np.float32), desc_b.astype(np.float32)
     d2 = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T)
-    np.maximum(d2, 0.0, out=d2)
-    two = np.argpartition(d2, 1, axis=1)[:, :2]
-    rows = np.arange(len(a))
-    first, second = d2[rows, two[:, 0]], d2[rows, two[:, 1]]
-    swap = second < first
-    nearest = np.where(swap, two[:, 1], two[:, 0])
-    d_first, d_second = np.minimum(first, second), np.maximum(first, second)
-    keep = d_first < (options.ratio ** 2) * d_second
-    if options.mutual:
+    return np.maximum(d2, 0.0, out=d2)
+
+
+def _ratio_matches(d2: np.ndarray, ratio: float, mutual: bool) -> np.ndarray:
+    """Each row's nearest column, kept when nearer than ``ratio`` times the second-nearest (a
+    single column passes; an infinite distance, a pair not allowed, never does) and, with
+    ``mutual``, when the two are each other's nearest."""
+    rows = np.arange(d2.shape[0])
+    if d2.shape[1] >= 2:
+        two = np.argpartition(d2, 1, axis=1)[:, :2]
+        first, second = d2[rows, two[:, 0]], d2[rows, two[:, 1]]
+        nearest = np.where(second < first, two[:, 1], two[:, 0])
+        d_first, d_second = np.minimum(first, second), np.maximum(first, second)
+    else:
+        nearest, d_first, d_second = np.zeros(len(rows), dtype=np.int64), d2[:, 0], np.full(len(rows), np.inf)
+    keep = np.isfinite(d_first) & (d_first < (ratio ** 2) * d_second)
+    if mutual:
         keep &= np.argmin(d2, axis=0)[nearest] == rows
     return np.c_[rows[keep], nearest[keep]].astype(np.int64)
 
@@ -292,21 +304,8 @@ def guided_matches(keypoints_a: np.ndarray, desc_a: np.ndarray, keypoints_b: np.
         return np.zeros((0, 2), dtype=np.int64)
     threshold = options.guided_threshold_px or options.ransac_threshold_px
     allowed = epipolar_distances(F, keypoints_a, keypoints_b) <= threshold
-    a, b = desc_a.astype(np.float32), desc_b.astype(np.float32)
-    d2 = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T)
-    d2 = np.where(allowed, np.maximum(d2, 0.0), np.inf)
-    rows = np.arange(len(a))
-    if d2.shape[1] >= 2:
-        two = np.argpartition(d2, 1, axis=1)[:, :2]
-        first, second = d2[rows, two[:, 0]], d2[rows, two[:, 1]]
-        nearest = np.where(second < first, two[:, 1], two[:, 0])
-        d_first, d_second = np.minimum(first, second), np.maximum(first, second)
-    else:
-        nearest, d_first, d_second = np.zeros(len(a), dtype=np.int64), d2[:, 0], np.full(len(a), np.inf)
-    keep = np.isfinite(d_first) & (d_first < (options.guided_ratio ** 2) * d_second)
-    if options.mutual:
-        keep &= np.argmin(d2, axis=0)[nearest] == rows
-    return np.c_[rows[keep], nearest[keep]].astype(np.int64)
+    d2 = np.where(allowed, _squared_distances(desc_a, desc_b), np.inf)
+    return _ratio_matches(d2, options.guided_ratio, options.mutual)
 
 
 def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None = None,
