@@ -657,9 +657,12 @@ class TestProgramCheck:
 
     @staticmethod
     def altered(monkeypatch, change) -> None:
-        from geocert.solvers.fractional.items import TrackItem
+        from geocert.solvers.fractional.items import TrackItem, TrackItems
 
         original = TrackItem.__init__
+        # The per-item path is under test: the stacked one (tests/solvers/test_stacked_verification.py)
+        # proves nothing here.
+        monkeypatch.setattr(TrackItems, "proven_together", lambda self, data, options, claims: (set(), ()))
 
         def init(self, arrays, norm):
             original(self, arrays, norm)
@@ -699,3 +702,25 @@ class TestCamerasReadPerDocument:
         doc["data"]["cameras"][1][0][3] = -700.0  # the same list object, another camera
         rehash(doc)
         assert failed_check(doc) is not None
+
+
+class TestNestingDepth:
+    """The verifier's nesting check walks a document level by level, passing over lists of
+    scalars in C: every container is still found, wherever it hides among scalars."""
+
+    def test_depths(self):
+        from geocert.solvers.core.strict import nesting_depth
+
+        assert nesting_depth(1.0, 64) == 0
+        assert nesting_depth({}, 64) == 1
+        assert nesting_depth([[1.0, 2]], 64) == 2
+        assert nesting_depth({"a": [1, "x", None, True, {"b": []}]}, 64) == 4
+        assert nesting_depth([1.0, 2.0, 3.0, [[[]]]], 64) == 4  # behind scalars
+
+    def test_a_deep_document_stops_past_the_limit(self):
+        from geocert.solvers.core.strict import nesting_depth
+
+        deep: list = [0.0]
+        for _ in range(10_000):
+            deep = [1.0, deep]
+        assert nesting_depth({"items": deep}, 64) == 65

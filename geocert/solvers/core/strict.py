@@ -44,20 +44,26 @@ def box(value: Any, name: str, k: int) -> Box:
     return Box(lo, hi)
 
 
+_SCALARS = frozenset((int, float, str, bool, type(None)))
+
+
 def nesting_depth(value: Any, limit: int) -> int:
-    """How deeply lists and objects nest, up to ``limit`` + 1 (iterative: a hostile document
-    cannot overflow a stack)."""
-    deepest, stack = 0, [(value, 1)]
-    while stack:
-        v, depth = stack.pop()
-        if isinstance(v, (list, dict)):
-            deepest = max(deepest, depth)
-            if depth > limit:
-                return depth
-            # Only containers go on the stack: a list of numbers is passed over in C.
-            stack.extend([(x, depth + 1) for x in (v.values() if isinstance(v, dict) else v)
-                          if isinstance(x, (list, dict))])
-    return deepest
+    """How deeply lists and objects nest, up to ``limit`` + 1 (iterative, level by level: a
+    hostile document cannot overflow a stack)."""
+    depth, level = 0, [value] if isinstance(value, (list, dict)) else []
+    while level:
+        depth += 1
+        if depth > limit:
+            return depth
+        below: list = []
+        for v in level:
+            members = v.values() if isinstance(v, dict) else v
+            # Members of JSON's scalar types only (the common case: a list of numbers) are passed
+            # over in C; otherwise the containers among them go on to the next level.
+            if not _SCALARS.issuperset(map(type, members)):
+                below.extend([x for x in members if isinstance(x, (list, dict))])
+        level = below
+    return depth
 
 
 def dual_vector(text: Any, rows: int, where: str = "a dual vector", check: str = "format") -> np.ndarray:

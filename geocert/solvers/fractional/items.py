@@ -10,6 +10,7 @@ from geocert.solvers.core.geometry import normalised_cameras
 from geocert.solvers.core.strict import Invalid, numbers
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.proof import verify_search
+from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
 
 MAX_VIEWS = 1000  # views in a track, for the parser too: a chart's choice of reference takes views^2 work
 MAX_POINTS = 1_000_000
@@ -145,6 +146,10 @@ class TrackItems:
 
     def item(self, arrays: tuple, norm: str) -> TrackItem:
         return TrackItem(arrays, norm)
+
+    def proven_together(self, data: dict, options: dict, claims: list) -> tuple[set[int], tuple[str, ...]]:
+        """The claims proven many at once (stacked.py), and the checks each passed."""
+        return proven_tracks(data, options, claims, MAX_VIEWS), CHECKS
 
 
 class MapItems:

@@ -1,0 +1,517 @@
+"""The verifier's fast path for triangulation documents: the tracks whose proof has the common
+shape (the root region, no tightening round, one leaf closed by one dual vector, no scope
+limit) checked many at once, their arrays stacked by number of views and branched functionals.
+
+Each check is the per-item check (items.py, proof.py, verify.py) on stacked arrays, with the
+same tolerances; the relaxation is rebuilt here with a leading axis over tracks, row for row as
+``Relaxation.relaxation`` builds it (tests/solvers/test_stacked_verification.py compares the
+two). A track any check here refuses, or whose document does not have that shape, is not
+reported proven: the verifier then checks it alone, and its report names the failure. So this
+path can only ever accept what it has checked; it never decides a refusal.
+
+Why: one track's check is some two hundred small numpy calls, about 3 ms of which the arrays'
+arithmetic is a small part; stacked, the calls are shared by every track of a group.
+"""
+
+from __future__ import annotations
+
+import binascii
+from collections import defaultdict
+
+import numpy as np
+
+from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
+from geocert.solvers.core.cones import ConeSpec, _project_rows
+from geocert.solvers.fractional.proof import SCALE_RANGE, _sample_steps
+
+D = 3  # a track's program has 3 variables
+CHECKS = ("data", "claim", "objective", "scope", "program", "root_region", "tightening", "coverage",
+          "leaf_bounds", "lower_bound", "gap")  # what verify_item reports for such a track
+MAX_ENTRIES = 4_000_000  # floats of one chunk's relaxation matrices (32 MB)
+
+
+_NUMBERS = frozenset((int, float))
+
+
+def _flat(value, sizes: tuple[int, ...], out: list) -> bool:
+    """Append nested lists of numbers (ints or floats; their values are checked in bulk by
+    _check_group) of exactly these sizes to ``out``; False if not so."""
+    if type(value) is not list or len(value) != sizes[0]:
+        return False
+    if len(sizes) == 1:
+        if not _NUMBERS.issuperset(map(type, value)):
+            return False
+        out.extend(value)
+        return True
+    return all(_flat(row, sizes[1:], out) for row in value)
+
+
+def _dual(text, rows: int) -> np.ndarray | None:
+    """A dual vector as certificates.unpack reads it (strict base64 of little-endian float64),
+    of ``rows`` entries; None if not so (finiteness is checked in bulk)."""
+    if not isinstance(text, str):
+        return None
+    try:
+        raw = binascii.a2b_base64(text, strict_mode=True)
+    except (ValueError, binascii.Error):
+        return None
+    return np.frombuffer(raw, dtype="<f8") if len(raw) == 8 * rows else None
+
+
+class _Track:
+    """One track's claim and data read strictly, in the common proof's shape."""
+
+    __slots__ = ("position", "views", "values", "root_duals", "leaf_dual", "k")
+
+
+def _read(position: int, claim: dict, tracks: list, n_cameras: int, max_views: int) -> _Track | None:
+    if claim.get("status") != "optimal" or claim.get("at_infinity") is not False:
+        return None
+    proof = claim.get("proof")
+    if not isinstance(proof, dict) or proof.get("type") != "branch_and_bound":
+        return None
+    root, proofs, leaves = proof.get("root"), proof.get("proofs"), proof.get("leaves")
+    if (not isinstance(root, dict) or proof.get("tightening") != [] or not isinstance(proofs, list)
+            or len(proofs) != 1 or not isinstance(proofs[0], dict) or proofs[0].get("kind") != "dual"
+            or not isinstance(leaves, list) or len(leaves) != 1 or not isinstance(leaves[0], list)
+            or len(leaves[0]) != 3 or type(leaves[0][2]) is not int or leaves[0][2] != 0):
+        return None
+    search_box = proof.get("search_box")
+    k = len(search_box[0]) if isinstance(search_box, list) and search_box and isinstance(search_box[0], list) else 0
+    if not 0 < k <= D or position >= len(tracks) or not isinstance(tracks[position], dict):
+        return None
+    track = tracks[position]
+    views = track.get("views")
+    if (not isinstance(views, list) or not 2 <= len(views) <= max_views
+            or not all(type(v) is int and 0 <= v < n_cameras for v in views) or len(set(views)) != len(views)):
+        return None
+    n = len(views)
+    leaf = proofs[0]
+    values: list = []
+    for name in ("cost", "gap", "lower_bound"):
+        if not _flat([claim.get(name)], (1,), values):
+            return None
+    if not (_flat(claim.get("point"), (3,), values) and _flat([proof.get("scale"), root.get("gamma"),
+                                                                leaf.get("upper_bound"), leaf.get("bound")], (4,), values)
+            and _flat(root.get("functionals"), (D, D), values) and _flat(root.get("claim"), (2, D), values)
+            and _flat(root.get("bounds"), (2, D), values) and _flat(search_box, (2, k), values)
+            and _flat(leaf.get("box"), (2, k), values) and _flat(leaves[0][:2], (2, k), values)
+            and _flat(track.get("points"), (n, 2), values)):
+        return None
+    duals = root.get("duals")
+    if not isinstance(duals, list) or len(duals) != 2 * D:
+        return None
+    rows = 1 + 3 * n
+    root_duals = [_dual(text, rows) for text in duals]
+    if any(z is None for z in root_duals):
+        return None
+    result = _Track()
+    result.position, result.views, result.k = position, views, k
+    result.values = values
+    result.root_duals = root_duals
+    result.leaf_dual = leaf.get("z")  # decoded once its relaxation's size is known
+    return result
+
+
+def proven_tracks(data: dict, options: dict, claims: list, max_views: int) -> set[int]:
+    """The positions of the certified claims this path proves (see the module's docstring)."""
+    if options["max_residual"] is not None or not isinstance(data, dict):
+        return set()
+    from geocert.solvers.core.strict import numbers  # the per-item path's strict reader of cameras
+    cameras = _normalised(numbers(data.get("cameras"), "data/cameras", (None, 3, 4), "data"))
+    tracks = data.get("tracks")
+    if not isinstance(tracks, list):
+        return set()
+    groups: dict[tuple[int, int], list[_Track]] = defaultdict(list)
+    for position, claim in enumerate(claims):
+        if isinstance(claim, dict) and claim.get("certified") is True and claim.get("index") == position:
+            track = _read(position, claim, tracks, len(cameras), max_views)
+            if track is not None:
+                groups[(len(track.views), track.k)].append(track)
+    proven: set[int] = set()
+    for (n, k), members in groups.items():
+        rows, cols = _relaxation_size(n, k, options["norm"])
+        step = max(1, MAX_ENTRIES // (rows * cols))
+        for start in range(0, len(members), step):
+            chunk = members[start:start + step]
+            try:
+                with np.errstate(all="ignore"):  # a NaN fails every check below (each asks a comparison to hold)
+                    ok = _check_group(cameras, chunk, n, k, options)
+            except Exception:  # e.g. a singular chart: the per-item path checks these, and says why
+                continue
+            proven.update(t.position for t, good in zip(chunk, ok) if good)
+    return proven
+
+
+def _normalised(cameras: np.ndarray) -> np.ndarray:
+    """geometry.normalised_cameras for every camera at once (a power of two, exact)."""
+    largest = np.max(np.abs(cameras), axis=(1, 2))
+    exponent = np.frexp(largest)[1]
+    change = (largest > 0) & np.isfinite(largest) & (np.abs(exponent) > 64)
+    factor = np.where(change, np.ldexp(1.0, np.where(change, -exponent, 0)), 1.0)
+    return cameras * factor[:, None, None]
+
+
+def _lengths(x: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.sqrt((x * x).sum(axis=axis))
+
+
+def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int, options: dict) -> np.ndarray:
+    """Every check of the common proof for ``members`` (n views, k branched functionals each):
+    a boolean per track, true when every check passes."""
+    norm = options["norm"]
+    G = len(members)
+    try:
+        values = np.array([t.values for t in members], dtype=float)  # (G, fields)
+    except OverflowError:  # an int past the float range (the per-item reader names it)
+        return np.zeros(G, dtype=bool)
+    # What geometry.is_number asks of each number (and a little more: no float beyond 2^1023).
+    ok = np.all(np.abs(values) < 2.0**1023, axis=1)
+    values = np.where(ok[:, None], values, 1.0)
+    columns = iter(np.split(values, np.cumsum([1, 1, 1, 3, 1, 1, 1, 1, 9, 6, 6, 2 * k, 2 * k, 2 * k]), axis=1))
+    cost, gap, lower_claimed = (next(columns)[:, 0] for _ in range(3))
+    point = next(columns)
+    scale, gamma, ub, leaf_claimed = (next(columns)[:, 0] for _ in range(4))
+    F = next(columns).reshape(G, D, D)
+    claim_box, bounds, search_box, proof_box, leaf_box = (next(columns).reshape(G, 2, -1) for _ in range(5))
+    points = next(columns).reshape(G, n, 2)
+    cams = all_cameras[np.array([t.views for t in members])]  # (G, n, 3, 4)
+
+    # The claim's numbers (verify_arrays).
+    ok &= (0 <= gap) & (lower_claimed <= cost) & (
+        np.abs((cost - gap) - lower_claimed) <= 1e-12 * np.maximum(np.abs(cost), np.abs(lower_claimed)))
+
+    # The chart (charts.Chart.build).
+    num, den, T, reference, charted = _charts(cams, points)
+    ok &= charted
+
+    # The solution's cost and depths from the raw data (_check_residual_claim).
+    X = np.concatenate([point, np.ones((G, 1))], axis=1)
+    proj = np.einsum("gnij,gj->gni", cams, X)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        image = proj[..., :2] / proj[..., 2:3]
+    residuals = image - points
+    rounding = 1e-12 * (np.abs(image) + np.abs(points))
+    ok &= np.all(proj[..., 2] > 0, axis=1)
+    if norm == "L2L2":
+        recomputed = (residuals * residuals).sum(axis=(1, 2))
+        slack = np.sum(2 * np.abs(residuals) * rounding + rounding * rounding, axis=(1, 2))
+    elif norm == "L2L1":
+        recomputed = _lengths(residuals).sum(axis=1)
+        slack = np.sum(_lengths(rounding), axis=1)
+    else:
+        recomputed = np.abs(residuals).sum(axis=(1, 2))
+        slack = np.sum(rounding, axis=(1, 2))
+    ok &= np.abs(recomputed - cost) <= OBJECTIVE_TOLERANCE * np.abs(recomputed) + slack
+
+    # The program at the claimed scale (verify_search) and its agreement with the data.
+    ok &= (SCALE_RANGE[0] <= scale) & (scale <= SCALE_RANGE[1])
+    num = num * scale[:, None, None, None]
+    unit = scale**2 if norm == "L2L2" else scale
+    cap = np.maximum(0.0, lower_claimed * unit * (1 - BOUND_TOLERANCE))
+    w = np.linalg.solve(T, X[..., None])[..., 0]
+    ok &= w[:, 3] > 0
+    v0 = w[:, :3] / np.where(w[:, 3] > 0, w[:, 3], 1.0)[:, None]
+    ok &= _program_agrees(cams, points, num, den, T, scale, v0, reference)
+
+    # The root region (proof._check_root).
+    k_ok = np.linalg.cond(F) <= 1e6
+    ok &= k_ok
+    F = np.where(k_ok[:, None, None], F, np.eye(D))
+    needed = np.sqrt(cap) if norm == "L2L2" else cap
+    ok &= gamma >= needed
+    linear = T[:, 3][:, None, :]  # (G, 1, 4): the last homogeneous coordinate >= 0
+    ok &= _root_holds(num, den, linear, gamma, F, claim_box, bounds, v0, members, n)
+
+    # The searched box, the leaf, its proof's box and cap (tightening, coverage, leaf_bounds).
+    box_lo, box_hi = bounds[:, 0, :k], bounds[:, 1, :k]
+    ok &= np.all(search_box[:, 0] <= box_lo, axis=1) & np.all(search_box[:, 1] >= box_hi, axis=1)
+    ok &= np.all(search_box[:, 1] > search_box[:, 0], axis=1)
+    ok &= np.all(leaf_box[:, 0] <= search_box[:, 0], axis=1) & np.all(leaf_box[:, 1] >= search_box[:, 1], axis=1)
+    ok &= np.all(proof_box[:, 0] <= leaf_box[:, 0], axis=1) & np.all(proof_box[:, 1] >= leaf_box[:, 1], axis=1)
+    ok &= ub >= cap
+    leaf_bound = _leaf_bounds(num, den, linear, F, k, bounds, proof_box, ub, norm, members, ok, reference)
+    ok &= leaf_bound >= leaf_claimed - BOUND_TOLERANCE * np.abs(leaf_claimed)
+
+    # The bound against the claim, and the gap (verify_arrays).
+    with np.errstate(invalid="ignore", over="ignore"):
+        proven = leaf_bound / unit
+    ok &= proven >= lower_claimed - BOUND_TOLERANCE * np.abs(lower_claimed)
+    tolerance = np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
+    ok &= gap <= tolerance * (1 + 1e-12)
+    return ok
+
+
+def _charts(cams: np.ndarray, points: np.ndarray):
+    """charts.Chart.build for every track of a group: (num, den, T, reference, ok). ``ok`` is
+    false where this path does not build the chart (a centre at infinity, or a depth row that
+    may be parallel to the reference's: the per-item path decides those)."""
+    G, n = cams.shape[:2]
+    centres = np.linalg.svd(cams)[2][..., -1, :]
+    centres = centres * np.where(centres[..., 3:4] < 0, -1.0, 1.0)
+    # The reference: the camera whose centre projects farthest from the other views' observations.
+    proj = np.einsum("gjab,grb->grja", cams, centres)
+    depth = proj[..., 2]
+    safe = np.where(depth > 1e-12 * _lengths(proj), depth, np.nan)
+    with np.errstate(invalid="ignore"):
+        distance = _lengths(proj[..., :2] / safe[..., None] - points[:, None])
+    distance = np.where(np.isnan(distance), np.inf, distance)
+    distance[:, np.arange(n), np.arange(n)] = np.inf
+    reference = np.argmax(distance.min(axis=2), axis=1)
+    # The frame: every centre finite here.
+    ok = np.all(np.abs(centres[..., 3]) > 1e-9 * _lengths(centres), axis=1)
+    euclid = centres[..., :3] / np.where(ok[:, None], centres[..., 3], 1.0)[..., None]
+    middle = euclid.sum(axis=1) / n
+    spread = _lengths(euclid - middle[:, None]).sum(axis=1) / n
+    spread = np.where(spread > 0, spread, 1.0)
+    H = np.tile(np.eye(4), (G, 1, 1))
+    H[:, :3, :3] *= spread[:, None, None]
+    H[:, :3, 3] = middle
+    framed = cams @ H[:, None]
+    framed = framed / _lengths(framed[:, :, 2, :3])[..., None, None]
+    every = np.arange(G)
+    depth_row = framed[every, reference, 2]
+    vt = np.linalg.svd(depth_row[:, None, :])[2]
+    T = np.empty((G, 4, 4))
+    T[:, :, :3] = vt[:, 1:].transpose(0, 2, 1)
+    T[:, :, 3] = depth_row / np.einsum("gi,gi->g", depth_row, depth_row)[:, None]
+    shifted = framed.copy()
+    shifted[:, :, 0] -= points[..., 0:1] * framed[:, :, 2]
+    shifted[:, :, 1] -= points[..., 1:2] * framed[:, :, 2]
+    M = shifted @ T[:, None]
+    grad, row = _lengths(M[..., 2, :3]), _lengths(M[..., 2, :])
+    # Exact views: only the reference here (a float test rules out any other parallel depth row).
+    rows = cams[:, :, 2]
+    d = rows[every, reference]
+    minors = rows[..., :, None] * d[:, None, None, :] - rows[..., None, :] * d[:, None, :, None]
+    size = _lengths(rows) * _lengths(d)[:, None]
+    maybe = np.all(np.abs(minors) <= 1e-12 * size[..., None, None], axis=(2, 3))
+    exact = np.zeros((G, n), dtype=bool)
+    exact[every, reference] = True
+    ok &= ~np.any(maybe & ~exact, axis=1)
+    scale = np.where(exact, M[..., 2, 3], np.where(grad > 1e-9 * row, grad, row))
+    ok &= ~np.any(exact & (scale <= 0), axis=1)
+    scale = np.where(scale == 0, 1.0, np.abs(scale))
+    M = M / scale[..., None, None]
+    den = M[..., 2, :].copy()
+    den[exact] = np.array([0.0, 0.0, 0.0, 1.0])
+    return M[..., :2, :].copy(), den, H @ T, reference, ok
+
+
+def _program_agrees(cams, points, num, den, T, scale, v0, reference) -> np.ndarray:
+    """proof._check_program for every track: the program's residuals and depth signs are the
+    raw data's at the solution and at eight fixed points around it."""
+    steps = np.array(_sample_steps(D))
+    samples = np.concatenate([v0[:, None], v0[:, None] + steps[None] * (1 + np.abs(v0))[:, None]], axis=1)
+    V = np.concatenate([samples, np.ones(samples.shape[:2] + (1,))], axis=2)  # (G, 9, 4)
+    solutions = np.einsum("gsk,gjk->gsj", V, T)
+    proj = np.einsum("gNij,gsj->gsNi", cams, solutions)
+    numerators = proj[..., :2] - points[:, None] * proj[..., 2:3]
+    depths = proj[..., 2]
+    ours = np.einsum("gNmk,gsk->gsNm", num, V) / scale[:, None, None, None]
+    ours_depth = np.einsum("gsk,gNk->gsN", V, den)
+    clear = np.abs(depths) > 1e-6 * np.max(np.abs(depths), axis=2, keepdims=True)
+    safe_depths, safe_ours_depth = np.where(clear, depths, 1.0), np.where(clear, ours_depth, 1.0)
+    theirs = np.where(clear[..., None], numerators / safe_depths[..., None], 0.0)
+    ours = np.where(clear[..., None], ours / safe_ours_depth[..., None], 0.0)
+    largest = np.max(np.abs(theirs), axis=(2, 3), keepdims=True)
+    agree = np.all(np.abs(ours - theirs) <= 1e-9 * (1 + largest) + 1e-6 * np.abs(theirs), axis=(1, 2, 3))
+    exact = np.zeros(den.shape[:2], dtype=bool)
+    exact[np.arange(len(den)), reference] = True
+    varying = ~exact[:, None] & clear
+    relative = np.sign(ours_depth) * np.sign(depths)
+    return agree & ~np.any(varying & ~(relative > 0), axis=(1, 2))
+
+
+def _safe_bounds(Q, A, b, Z, cones: ConeSpec, lower, upper, transform) -> np.ndarray:
+    """cones.safe_lower_bounds with a leading axis over tracks: Q (G, p, cols), A (G, rows, cols),
+    b (G, rows), Z (G, p, rows), lower and upper (G, cols), transform (G, d, d)."""
+    G, p, rows = Z.shape
+    with np.errstate(over="ignore", invalid="ignore"):
+        Z = _project_rows(Z.reshape(G * p, rows).copy(), cones).reshape(G, p, rows)
+        residual = Q + np.einsum("gpr,grc->gpc", Z, A)
+        d = transform.shape[1]
+        residual = np.concatenate([np.einsum("gpc,gcd->gpd", residual[..., :d], transform), residual[..., d:]], axis=2)
+        terms = np.minimum(residual * lower[:, None], residual * upper[:, None])
+        terms[residual == 0] = 0.0
+        bounds = -np.einsum("gpr,gr->gp", Z, b) + terms.sum(axis=2)
+    return np.where(np.isfinite(bounds), bounds, -np.inf)
+
+
+def _root_holds(num, den, linear, gamma, F, claim_box, bounds, v0, members, n) -> np.ndarray:
+    """proof._check_root for every track."""
+    G = len(num)
+    per_observation = np.concatenate([gamma[:, None, None, None] * den[:, :, None, :], num], axis=2)
+    E = np.concatenate([linear, per_observation.reshape(G, 3 * n, 4)], axis=1)
+    A, b = -E[..., :-1], E[..., -1]
+    claim_lo, claim_hi = claim_box[:, 0], claim_box[:, 1]
+    V = np.concatenate([v0, np.ones((G, 1))], axis=1)
+    numerators = np.einsum("gNmk,gk->gNm", num, V)
+    depths = np.einsum("gNk,gk->gN", den, V)
+    linear_value = np.einsum("gk,gk->g", linear[:, 0], V)
+    inside = (np.all(_lengths(numerators) <= gamma[:, None] * depths, axis=1)
+              & (linear_value >= -1e-12 * np.einsum("gk,gk->g", np.abs(linear[:, 0]), np.abs(V))))
+    y = np.einsum("gij,gj->gi", F, v0)
+    margin = 1e-9 * (1 + np.abs(claim_lo) + np.abs(claim_hi))
+    inside &= np.all(claim_lo + margin < y, axis=1) & np.all(y < claim_hi - margin, axis=1)
+    Q = np.empty((G, 2 * D, D))
+    Q[:, 0::2], Q[:, 1::2] = F, -F
+    Z = np.array([t.root_duals for t in members])
+    finite = np.all(np.isfinite(Z), axis=(1, 2))
+    Z[~finite] = 0.0
+    proven = _safe_bounds(Q, A, b, Z, ConeSpec(nonneg=1, soc=(3,) * n), claim_lo, claim_hi, np.linalg.inv(F))
+    low, high = proven[:, 0::2], -proven[:, 1::2]
+    return (finite & inside & np.all((claim_lo < low) & (low <= high) & (high < claim_hi), axis=1)
+            & np.all((bounds[:, 0] <= low) & (bounds[:, 1] >= high), axis=1))
+
+
+def _relaxation_size(n: int, k: int, norm: str) -> tuple[int, int]:
+    nE, m = n - 1, 2
+    rows = 2 * k + 1 + 5 * nE + 3 * nE + {"L2L2": (m + 2) * n + (m + 1) * n, "L2L1": 2 * (m + 1) * n,
+                                          "L1L1": (2 * m + 2) * n}[norm]
+    return rows, D + 3 * nE + 1 + (m * n if norm == "L1L1" else 0)
+
+
+def _leaf_bounds(num, den, linear, F, k, bounds, proof_box, ub, norm, members, ok, reference) -> np.ndarray:
+    """Each leaf proof's safe bound (proof._check_leaf_proofs, one "dual" proof), -inf where a
+    check fails."""
+    E, cones, q, lower, upper, transform, built = leaf_relaxations(num, den, linear, F, k, bounds, proof_box, ub,
+                                                                   norm, reference)
+    G, rows, cols = len(E), E.shape[1], E.shape[2] - 1
+    ok = ok & built
+    Z = np.zeros((G, 1, rows))
+    for i, track in enumerate(members):
+        z = _dual(track.leaf_dual, rows)
+        if z is None or not np.all(np.isfinite(z)):
+            ok[i] = False
+        else:
+            Z[i, 0] = z
+    bound = _safe_bounds(np.broadcast_to(q, (G, 1, cols)), -E[..., :cols], E[..., cols], Z, cones, lower, upper,
+                         transform)[:, 0]
+    return np.where(ok, bound, -np.inf)
+
+
+def leaf_relaxations(num, den, linear, F, k, bounds, proof_box, ub, norm, reference):
+    """Relaxation.conic_data of each track's proof box for points costing at most ``ub``,
+    rebuilt with a leading axis over tracks, row for row (the reference the one exact view;
+    no scope limit): (E, cones, q, lower, upper, transform, built), where E = [-A | b] and
+    ``built`` is false where no point of the box has every depth positive."""
+    G, n = den.shape[:2]
+    nE, m = n - 1, 2
+    every = np.arange(G)[:, None]
+    exact_index = reference  # the one exact view
+    order = np.argsort(np.arange(n)[None, :] == exact_index[:, None], axis=1, kind="stable")  # env, then exact
+    env = order[:, :nE]
+    transform = np.linalg.inv(F)
+    depth_y = np.einsum("gNk,gkj->gNj", den[every, env, :D], transform)
+    coef, coef_c = depth_y[..., :k], depth_y[..., k:]
+    offset = den[every, env, D]
+    box_lo, box_hi = proof_box[:, 0], proof_box[:, 1]
+    comp_lo, comp_hi = bounds[:, 0, k:], bounds[:, 1, k:]
+    # Relaxation.depth_range, rounded outwards.
+    low, high, size = offset.copy(), offset.copy(), np.abs(offset)
+    ranges = [(coef, box_lo, box_hi)] + ([(coef_c, comp_lo, comp_hi)] if k < D else [])
+    for c, lo, hi in ranges:
+        pos, neg = np.clip(c, 0, None), np.clip(c, None, 0)
+        low = low + (np.einsum("gNj,gj->gN", pos, lo) + np.einsum("gNj,gj->gN", neg, hi))
+        high = high + (np.einsum("gNj,gj->gN", pos, hi) + np.einsum("gNj,gj->gN", neg, lo))
+        size = size + np.einsum("gNj,gj->gN", np.abs(c), np.maximum(np.abs(lo), np.abs(hi)))
+    low, high = low - 1e-12 * size, high + 1e-12 * size
+    built = np.all(high > 0, axis=1)  # else no point of the box has every depth positive
+    low = np.maximum(low, 0.0)
+    high = np.maximum(high, low * (1 + 1e-9) + 1e-15)
+    # Relaxation.gammas and relaxation(): no scope limit, a finite cap.
+    cost_gamma = np.sqrt(ub) if norm == "L2L2" else ub
+    if norm == "L2L2":
+        gamma, term = cost_gamma, cost_gamma**2
+    elif norm == "L2L1":
+        gamma = term = cost_gamma
+    else:
+        gamma, term = None, cost_gamma
+    u = term[:, None] * high
+    rows, cols = _relaxation_size(n, k, norm)
+    t_idx = D + np.arange(nE)
+    w_idx, r_idx = t_idx + nE, t_idx + 2 * nE
+    q_idx = D + 3 * nE
+    top = np.append(t_idx, q_idx)
+    a_idx = (q_idx + 1 + np.arange(m * n)).reshape(n, m) if norm == "L1L1" else None
+    obs = np.concatenate([env, exact_index[:, None]], axis=1)
+    depth = den[every, obs]  # (G, n, 4)
+    numo = num[every, obs]  # (G, n, m, 4)
+    g = den[every, env]
+    E = np.zeros((G, rows, cols + 1))  # the last column holds the constants c
+    r = 0
+    B = F[:, :k]
+    E[:, r:r + k, :D], E[:, r:r + k, cols] = B, -box_lo
+    E[:, r + k:r + 2 * k, :D], E[:, r + k:r + 2 * k, cols] = -B, box_hi
+    E[:, r + 2 * k, :D], E[:, r + 2 * k, cols] = linear[:, 0, :D], linear[:, 0, D]
+    r += 2 * k + 1
+    env_rows = r + 5 * np.arange(nE)  # the envelope of t / s, five rows per view
+    lu, hu = low / u, high / u
+    E[:, env_rows, w_idx], E[:, env_rows, t_idx] = 1.0, -lu
+    E[:, env_rows + 1, t_idx], E[:, env_rows + 1, w_idx] = hu, -1.0
+    E[:, env_rows + 2, :D], E[:, env_rows + 2, cols] = g[..., :D], g[..., D] - low
+    E[:, env_rows + 2, w_idx], E[:, env_rows + 2, t_idx] = -1.0, lu
+    E[:, env_rows + 3, :D], E[:, env_rows + 3, cols] = -g[..., :D], high - g[..., D]
+    E[:, env_rows + 3, w_idx], E[:, env_rows + 3, t_idx] = 1.0, -hu
+    E[:, env_rows + 4, t_idx], E[:, env_rows + 4, cols] = -1.0, u
+    r += 5 * nE
+    socs: list[int] = []
+    if norm == "L1L1":
+        per = 2 * m + 2
+        base = r + per * np.arange(n)
+        for a in range(m):
+            E[:, base + 2 * a, :D], E[:, base + 2 * a, cols] = -numo[:, :, a, :D], -numo[:, :, a, D]
+            E[:, base + 2 * a, a_idx[:, a]] = 1.0
+            E[:, base + 2 * a + 1, :D], E[:, base + 2 * a + 1, cols] = numo[:, :, a, :D], numo[:, :, a, D]
+            E[:, base + 2 * a + 1, a_idx[:, a]] = 1.0
+            E[:, base + 2 * m, a_idx[:, a]] = -1.0
+            E[:, base + 2 * m + 1, a_idx[:, a]] = -1.0
+        E[:, base + 2 * m, top] = 1.0
+        E[:, base + 2 * m + 1, :D] = cost_gamma[:, None, None] * depth[..., :D]
+        E[:, base + 2 * m + 1, cols] = cost_gamma[:, None] * depth[..., D]
+        r += per * n
+    n_lin = r
+    if norm == "L2L2":
+        base = r + (m + 2) * np.arange(n)
+        E[:, base, top] = 1.0
+        E[:, base, :D], E[:, base, cols] = depth[..., :D], depth[..., D]
+        for a in range(m):
+            E[:, base + 1 + a, :D], E[:, base + 1 + a, cols] = 2 * numo[:, :, a, :D], 2 * numo[:, :, a, D]
+        E[:, base + m + 1, top] = 1.0
+        E[:, base + m + 1, :D], E[:, base + m + 1, cols] = -depth[..., :D], -depth[..., D]
+        r += (m + 2) * n
+        socs += [m + 2] * n
+    elif norm == "L2L1":
+        base = r + (m + 1) * np.arange(n)
+        E[:, base, top] = 1.0
+        for a in range(m):
+            E[:, base + 1 + a, :D], E[:, base + 1 + a, cols] = numo[:, :, a, :D], numo[:, :, a, D]
+        r += (m + 1) * n
+        socs += [m + 1] * n
+    if gamma is not None:
+        base = r + (m + 1) * np.arange(n)
+        E[:, base, :D] = gamma[:, None, None] * depth[..., :D]
+        E[:, base, cols] = gamma[:, None] * depth[..., D]
+        for a in range(m):
+            E[:, base + 1 + a, :D], E[:, base + 1 + a, cols] = numo[:, :, a, :D], numo[:, :, a, D]
+        r += (m + 1) * n
+        socs += [m + 1] * n
+    base = r + 3 * np.arange(nE)  # the envelope's cone r (u w) >= t^2, divided by u
+    E[:, base, r_idx], E[:, base, w_idx] = 1.0, 1.0 / u
+    E[:, base + 1, t_idx] = 2.0 / u
+    E[:, base + 2, r_idx], E[:, base + 2, w_idx] = 1.0, -1.0 / u
+    socs += [3] * nE
+    assert r + 3 * nE == rows
+    q = np.zeros(cols)
+    q[q_idx], q[r_idx] = 1.0, 1.0
+    lower = np.zeros((G, cols))
+    upper = np.repeat(np.minimum(ub, term)[:, None], cols, axis=1)
+    lower[:, :k], lower[:, k:D] = box_lo, comp_lo
+    upper[:, :k], upper[:, k:D] = box_hi, comp_hi
+    upper[:, t_idx] = np.minimum(u, high * ub[:, None])
+    upper[:, w_idx] = high
+    if a_idx is not None:
+        upper[:, a_idx] = upper[:, top][:, :, None]
+    built = built & np.all(np.isfinite(lower), axis=1) & np.all(np.isfinite(upper), axis=1)
+    return E, ConeSpec(nonneg=n_lin, soc=tuple(socs)), q, lower, upper, transform, built
