@@ -1,6 +1,7 @@
 """The verifier's fast path for triangulation documents: the tracks whose proof has the common
-shape (the root region, no tightening round, one leaf closed by one dual vector, no scope
-limit) checked many at once, their arrays stacked by number of views and branched functionals.
+shape (the root region, no tightening round, up to MAX_LEAVES leaves each closed by a dual
+vector, no scope limit) checked many at once, their arrays stacked by number of views and
+branched functionals (the leaves' relaxations by leaf).
 
 Each check is the per-item check (items.py, proof.py, verify.py) on stacked arrays, with the
 same tolerances; the relaxation is rebuilt here with a leading axis over tracks, row for row as
@@ -21,13 +22,16 @@ from collections import defaultdict
 import numpy as np
 
 from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
+from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import ConeSpec, _project_rows
+from geocert.solvers.core.coverage import uncovered_part
 from geocert.solvers.fractional.proof import SCALE_RANGE, _sample_steps
 
 D = 3  # a track's program has 3 variables
 CHECKS = ("data", "claim", "objective", "scope", "program", "root_region", "tightening", "coverage",
           "leaf_bounds", "lower_bound", "gap")  # what verify_item reports for such a track
 MAX_ENTRIES = 4_000_000  # floats of one chunk's relaxation matrices (32 MB)
+MAX_LEAVES = 64  # leaves and proofs of one track on this path (more: checked alone)
 
 
 _NUMBERS = frozenset((int, float))
@@ -61,7 +65,8 @@ def _dual(text, rows: int) -> np.ndarray | None:
 class _Track:
     """One track's claim and data read strictly, in the common proof's shape."""
 
-    __slots__ = ("position", "views", "values", "root_duals", "leaf_dual", "k")
+    __slots__ = ("position", "views", "k", "values", "root_duals", "proof_values", "proof_duals", "leaf_values",
+                 "leaf_proofs")
 
 
 def _read(position: int, claim: dict, tracks: list, n_cameras: int, max_views: int) -> _Track | None:
@@ -72,9 +77,13 @@ def _read(position: int, claim: dict, tracks: list, n_cameras: int, max_views: i
         return None
     root, proofs, leaves = proof.get("root"), proof.get("proofs"), proof.get("leaves")
     if (not isinstance(root, dict) or proof.get("tightening") != [] or not isinstance(proofs, list)
-            or len(proofs) != 1 or not isinstance(proofs[0], dict) or proofs[0].get("kind") != "dual"
-            or not isinstance(leaves, list) or len(leaves) != 1 or not isinstance(leaves[0], list)
-            or len(leaves[0]) != 3 or type(leaves[0][2]) is not int or leaves[0][2] != 0):
+            or not 1 <= len(proofs) <= MAX_LEAVES or not isinstance(leaves, list)
+            or not 1 <= len(leaves) <= MAX_LEAVES):
+        return None
+    if not all(isinstance(p, dict) and p.get("kind") == "dual" for p in proofs):
+        return None
+    if not all(isinstance(leaf, list) and len(leaf) == 3 and type(leaf[2]) is int and 0 <= leaf[2] < len(proofs)
+               for leaf in leaves):
         return None
     search_box = proof.get("search_box")
     k = len(search_box[0]) if isinstance(search_box, list) and search_box and isinstance(search_box[0], list) else 0
@@ -86,17 +95,19 @@ def _read(position: int, claim: dict, tracks: list, n_cameras: int, max_views: i
             or not all(type(v) is int and 0 <= v < n_cameras for v in views) or len(set(views)) != len(views)):
         return None
     n = len(views)
-    leaf = proofs[0]
     values: list = []
-    for name in ("cost", "gap", "lower_bound"):
-        if not _flat([claim.get(name)], (1,), values):
-            return None
-    if not (_flat(claim.get("point"), (3,), values) and _flat([proof.get("scale"), root.get("gamma"),
-                                                                leaf.get("upper_bound"), leaf.get("bound")], (4,), values)
-            and _flat(root.get("functionals"), (D, D), values) and _flat(root.get("claim"), (2, D), values)
-            and _flat(root.get("bounds"), (2, D), values) and _flat(search_box, (2, k), values)
-            and _flat(leaf.get("box"), (2, k), values) and _flat(leaves[0][:2], (2, k), values)
-            and _flat(track.get("points"), (n, 2), values)):
+    if not (_flat([claim.get("cost"), claim.get("gap"), claim.get("lower_bound"), proof.get("scale"),
+                   root.get("gamma")], (5,), values)
+            and _flat(claim.get("point"), (3,), values) and _flat(root.get("functionals"), (D, D), values)
+            and _flat(root.get("claim"), (2, D), values) and _flat(root.get("bounds"), (2, D), values)
+            and _flat(search_box, (2, k), values) and _flat(track.get("points"), (n, 2), values)):
+        return None
+    proof_values: list = []
+    if not all(_flat(p.get("box"), (2, k), proof_values) and _flat([p.get("upper_bound"), p.get("bound")], (2,),
+                                                                    proof_values) for p in proofs):
+        return None
+    leaf_values: list = []
+    if not all(_flat(leaf[:2], (2, k), leaf_values) for leaf in leaves):
         return None
     duals = root.get("duals")
     if not isinstance(duals, list) or len(duals) != 2 * D:
@@ -107,9 +118,10 @@ def _read(position: int, claim: dict, tracks: list, n_cameras: int, max_views: i
         return None
     result = _Track()
     result.position, result.views, result.k = position, views, k
-    result.values = values
-    result.root_duals = root_duals
-    result.leaf_dual = leaf.get("z")  # decoded once its relaxation's size is known
+    result.values, result.root_duals = values, root_duals
+    result.proof_values, result.leaf_values = proof_values, leaf_values
+    result.proof_duals = [p.get("z") for p in proofs]  # decoded once their relaxation's size is known
+    result.leaf_proofs = [leaf[2] for leaf in leaves]
     return result
 
 
@@ -131,9 +143,7 @@ def proven_tracks(data: dict, options: dict, claims: list, max_views: int) -> se
     proven: set[int] = set()
     for (n, k), members in groups.items():
         rows, cols = _relaxation_size(n, k, options["norm"])
-        step = max(1, MAX_ENTRIES // (rows * cols))
-        for start in range(0, len(members), step):
-            chunk = members[start:start + step]
+        for chunk in _chunks(members, max(1, MAX_ENTRIES // (rows * cols))):
             try:
                 with np.errstate(all="ignore"):  # a NaN fails every check below (each asks a comparison to hold)
                     ok = _check_group(cameras, chunk, n, k, options)
@@ -141,6 +151,19 @@ def proven_tracks(data: dict, options: dict, claims: list, max_views: int) -> se
                 continue
             proven.update(t.position for t, good in zip(chunk, ok) if good)
     return proven
+
+
+def _chunks(members: list[_Track], proofs: int):
+    """Consecutive runs of tracks with at most ``proofs`` leaf proofs between them (at least one
+    track each): what bounds the memory of one stacked relaxation."""
+    start, count = 0, 0
+    for i, track in enumerate(members):
+        if count and count + len(track.proof_duals) > proofs:
+            yield members[start:i]
+            start, count = i, 0
+        count += len(track.proof_duals)
+    if start < len(members):
+        yield members[start:]
 
 
 def _normalised(cameras: np.ndarray) -> np.ndarray:
@@ -168,12 +191,11 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     # What geometry.is_number asks of each number (and a little more: no float beyond 2^1023).
     ok = np.all(np.abs(values) < 2.0**1023, axis=1)
     values = np.where(ok[:, None], values, 1.0)
-    columns = iter(np.split(values, np.cumsum([1, 1, 1, 3, 1, 1, 1, 1, 9, 6, 6, 2 * k, 2 * k, 2 * k]), axis=1))
-    cost, gap, lower_claimed = (next(columns)[:, 0] for _ in range(3))
+    columns = iter(np.split(values, np.cumsum([1, 1, 1, 1, 1, 3, 9, 6, 6, 2 * k]), axis=1))
+    cost, gap, lower_claimed, scale, gamma = (next(columns)[:, 0] for _ in range(5))
     point = next(columns)
-    scale, gamma, ub, leaf_claimed = (next(columns)[:, 0] for _ in range(4))
     F = next(columns).reshape(G, D, D)
-    claim_box, bounds, search_box, proof_box, leaf_box = (next(columns).reshape(G, 2, -1) for _ in range(5))
+    claim_box, bounds, search_box = (next(columns).reshape(G, 2, -1) for _ in range(3))
     points = next(columns).reshape(G, n, 2)
     cams = all_cameras[np.array([t.views for t in members])]  # (G, n, 3, 4)
 
@@ -223,19 +245,13 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     linear = T[:, 3][:, None, :]  # (G, 1, 4): the last homogeneous coordinate >= 0
     ok &= _root_holds(num, den, linear, gamma, F, claim_box, bounds, v0, members, n)
 
-    # The searched box, the leaf, its proof's box and cap (tightening, coverage, leaf_bounds).
+    # The searched box, the leaves and their proofs (tightening, coverage, leaf_bounds).
     box_lo, box_hi = bounds[:, 0, :k], bounds[:, 1, :k]
     ok &= np.all(search_box[:, 0] <= box_lo, axis=1) & np.all(search_box[:, 1] >= box_hi, axis=1)
-    ok &= np.all(search_box[:, 1] > search_box[:, 0], axis=1)
-    ok &= np.all(leaf_box[:, 0] <= search_box[:, 0], axis=1) & np.all(leaf_box[:, 1] >= search_box[:, 1], axis=1)
-    ok &= np.all(proof_box[:, 0] <= leaf_box[:, 0], axis=1) & np.all(proof_box[:, 1] >= leaf_box[:, 1], axis=1)
-    ok &= ub >= cap
-    leaf_bound = _leaf_bounds(num, den, linear, F, k, bounds, proof_box, ub, norm, members, ok, reference)
-    ok &= leaf_bound >= leaf_claimed - BOUND_TOLERANCE * np.abs(leaf_claimed)
-
+    proven = _leaves_hold(members, num, den, linear, F, k, bounds, search_box, cap, norm, reference, ok)
     # The bound against the claim, and the gap (verify_arrays).
     with np.errstate(invalid="ignore", over="ignore"):
-        proven = leaf_bound / unit
+        proven = proven / unit
     ok &= proven >= lower_claimed - BOUND_TOLERANCE * np.abs(lower_claimed)
     tolerance = np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
     ok &= gap <= tolerance * (1 + 1e-12)
@@ -372,23 +388,51 @@ def _relaxation_size(n: int, k: int, norm: str) -> tuple[int, int]:
     return rows, D + 3 * nE + 1 + (m * n if norm == "L1L1" else 0)
 
 
-def _leaf_bounds(num, den, linear, F, k, bounds, proof_box, ub, norm, members, ok, reference) -> np.ndarray:
-    """Each leaf proof's safe bound (proof._check_leaf_proofs, one "dual" proof), -inf where a
-    check fails."""
-    E, cones, q, lower, upper, transform, built = leaf_relaxations(num, den, linear, F, k, bounds, proof_box, ub,
-                                                                   norm, reference)
-    G, rows, cols = len(E), E.shape[1], E.shape[2] - 1
-    ok = ok & built
-    Z = np.zeros((G, 1, rows))
-    for i, track in enumerate(members):
-        z = _dual(track.leaf_dual, rows)
+def _leaves_hold(members, num, den, linear, F, k, bounds, search_box, cap, norm, reference, ok) -> np.ndarray:
+    """proof._check_leaf_proofs and the coverage check for every track: each proof's bound
+    recomputed (each must hold), each leaf inside its proof's box, the leaves covering the
+    searched box; the track's bound is its leaves' smallest (-inf where a check fails)."""
+    counts = np.array([len(t.proof_duals) for t in members])
+    owner = np.repeat(np.arange(len(members)), counts)  # the track of each proof
+    proofs = np.array([v for t in members for v in t.proof_values], dtype=float).reshape(len(owner), 2 * k + 2)
+    proof_box, ub, claimed = proofs[:, :2 * k].reshape(-1, 2, k), proofs[:, 2 * k], proofs[:, 2 * k + 1]
+    good = (np.all(np.abs(proofs) < 2.0**1023, axis=1) & (ub >= cap[owner])) & ok[owner]
+    E, cones, q, lower, upper, transform, built = leaf_relaxations(
+        num[owner], den[owner], linear[owner], F[owner], k, bounds[owner], proof_box, ub, norm, reference[owner])
+    R, rows, cols = len(E), E.shape[1], E.shape[2] - 1
+    good &= built
+    Z = np.zeros((R, 1, rows))
+    for i, text in enumerate(z for t in members for z in t.proof_duals):
+        z = _dual(text, rows)
         if z is None or not np.all(np.isfinite(z)):
-            ok[i] = False
+            good[i] = False
         else:
             Z[i, 0] = z
-    bound = _safe_bounds(np.broadcast_to(q, (G, 1, cols)), -E[..., :cols], E[..., cols], Z, cones, lower, upper,
+    bound = _safe_bounds(np.broadcast_to(q, (R, 1, cols)), -E[..., :cols], E[..., cols], Z, cones, lower, upper,
                          transform)[:, 0]
-    return np.where(ok, bound, -np.inf)
+    good &= bound >= claimed - BOUND_TOLERANCE * np.abs(claimed)
+    # Every proof of a track must hold, whether a leaf names it or not (as the per-item check asks).
+    held = np.bincount(owner, weights=good, minlength=len(members)) == counts
+    first = np.concatenate([[0], np.cumsum(counts)[:-1]])  # each track's first proof
+    leaves = np.array([v for t in members for v in t.leaf_values], dtype=float)
+    leaf_count = np.array([len(t.leaf_proofs) for t in members])
+    leaf_owner = np.repeat(np.arange(len(members)), leaf_count)
+    leaves = leaves.reshape(len(leaf_owner), 2, k)
+    named = first[leaf_owner] + np.array([i for t in members for i in t.leaf_proofs])
+    inside = np.all(proof_box[named, 0] <= leaves[:, 0], axis=1) & np.all(proof_box[named, 1] >= leaves[:, 1], axis=1)
+    held &= np.bincount(leaf_owner, weights=inside, minlength=len(members)) == leaf_count
+    result = np.full(len(members), np.inf)
+    np.minimum.at(result, leaf_owner, bound[named])  # a track's bound: its leaves' smallest
+    # Coverage: one leaf covers a box of positive width by containing it; several are checked as
+    # the per-item path checks them (core.coverage).
+    single = leaf_count == 1
+    lone = np.concatenate([[0], np.cumsum(leaf_count)[:-1]])  # each track's first leaf
+    covers = (np.all(search_box[:, 1] > search_box[:, 0], axis=1)
+              & np.all(leaves[lone, 0] <= search_box[:, 0], axis=1) & np.all(leaves[lone, 1] >= search_box[:, 1], axis=1))
+    for i in np.flatnonzero(~single & held & ok):
+        mine = leaf_owner == i
+        covers[i] = uncovered_part(Box(search_box[i, 0], search_box[i, 1]), leaves[mine, 0], leaves[mine, 1]) is None
+    return np.where(held & covers, result, -np.inf)
 
 
 def leaf_relaxations(num, den, linear, F, k, bounds, proof_box, ub, norm, reference):
