@@ -419,7 +419,8 @@ def _leaves_hold(members, num, den, linear, F, k, bounds, search_box, cap, norm,
     leaf_owner = np.repeat(np.arange(len(members)), leaf_count)
     leaves = leaves.reshape(len(leaf_owner), 2, k)
     named = first[leaf_owner] + np.array([i for t in members for i in t.leaf_proofs])
-    inside = np.all(proof_box[named, 0] <= leaves[:, 0], axis=1) & np.all(proof_box[named, 1] >= leaves[:, 1], axis=1)
+    inside = (np.all(np.abs(leaves) < 2.0**1023, axis=(1, 2)) & np.all(proof_box[named, 0] <= leaves[:, 0], axis=1)
+              & np.all(proof_box[named, 1] >= leaves[:, 1], axis=1))
     held &= np.bincount(leaf_owner, weights=inside, minlength=len(members)) == leaf_count
     result = np.full(len(members), np.inf)
     np.minimum.at(result, leaf_owner, bound[named])  # a track's bound: its leaves' smallest
