@@ -111,6 +111,11 @@ _LEAN_SETTINGS = _settings(1e-9, lean=True)
 _LEAN_ROWS = 400
 
 
+@functools.lru_cache(maxsize=8)
+def _lean_settings(tolerance: float) -> clarabel.DefaultSettings:
+    return _LEAN_SETTINGS if tolerance == 1e-9 else _settings(tolerance, lean=True)
+
+
 @functools.lru_cache(maxsize=64)
 def _zero_quadratic(n: int) -> sp.csc_matrix:
     return sp.csc_matrix((n, n))
@@ -230,10 +235,13 @@ class ReusableConicProgram:
     can never alter the problem solved.
     """
 
-    def __init__(self, lean: bool | None = None) -> None:
+    def __init__(self, lean: bool | None = None, tolerance: float = 1e-9) -> None:
         """``lean``: the lean settings (no equilibration) for small programs (None: by size);
-        False for programs not built well scaled, where a lean solve fails and is repeated."""
+        False for programs not built well scaled, where a lean solve fails and is repeated.
+        ``tolerance``: the lean solves' (the full settings' stay at 1e-9), e.g. looser for bound
+        tightening, whose sides are safe bounds of whatever dual the solve returns."""
         self._lean = lean
+        self._tolerance = tolerance
         self._token = next(_TOKENS)
         self._key = None
         self._mask: np.ndarray | None = None
@@ -258,13 +266,13 @@ class ReusableConicProgram:
                 same = key == self._key and self._mask is not None and np.array_equal(mask, self._mask)
                 entry = self._entry if same else None
                 if entry is None and lean:
-                    pool_key = (key, mask.tobytes())
+                    pool_key = (key, mask.tobytes(), self._tolerance)
                     entry = _POOL.get(pool_key)
             if entry is not None:
                 entry = _updated(entry, q, data, b)
             if entry is None:
                 csc = A.copy() if mask is None else dense_to_csc(A)
-                solver = _new_solver(q, csc, b, cones, _LEAN_SETTINGS if lean else _SETTINGS)
+                solver = _new_solver(q, csc, b, cones, _lean_settings(self._tolerance) if lean else _SETTINGS)
                 entry = _Loaded(csc, solver, lean)
                 if pool_key is not None:
                     _POOL.put(pool_key, entry)
