@@ -1,0 +1,114 @@
+"""Hostile documents against the verifier's stacked path (geocert/solvers/fractional/stacked.py):
+each is refused by the per-item path, and must not be proven together either; or costs the stacked
+path far more than the per-item path would."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from geocert.batch import solve_job
+from geocert.solvers.core.certificates import pack
+from geocert.solvers.fractional import stacked
+from geocert.solvers.fractional.items import TrackItems
+from geocert.solvers.verify import checked_options, verify_any
+
+from tests.solvers.test_stacked_verification import scene_job
+from tests.support import project, random_cameras
+
+NORMS = ("L2L2", "L2L1", "L1L1")
+
+
+@pytest.fixture(scope="module")
+def documents() -> dict:
+    return {norm: solve_job(scene_job(norm))["certificate"] for norm in NORMS}
+
+
+def proven(document: dict) -> set[int]:
+    options = checked_options("triangulation", document["options"])
+    return stacked.proven_tracks(document["data"], options, document["items"], 1000)
+
+
+def reports(document: dict, monkeypatch) -> tuple[dict, dict]:
+    """verify_any's report with the stacked path, and without it (the per-item path alone)."""
+    together = verify_any(copy.deepcopy(document)).as_dict()
+    with monkeypatch.context() as m:
+        m.setattr(TrackItems, "proven_together", lambda self, data, options, claims: (set(), ()))
+        alone = verify_any(copy.deepcopy(document)).as_dict()
+    return together, alone
+
+
+class TestIndex:
+    def test_an_index_that_is_not_an_int_is_not_proven(self, documents, monkeypatch):
+        # 1.0 == 1, so the verifier's "index is its position" test passes it; the per-item path
+        # then fails reading data/tracks[1.0] (a TypeError, reported as format). The stacked path
+        # read the track at the claim's position and proved it: the document was valid with the
+        # stacked path, invalid without.
+        document = copy.deepcopy(documents["L2L2"])
+        assert 1 in proven(document)
+        document["items"][1]["index"] = 1.0
+        assert 1 not in proven(document)
+        together, alone = reports(document, monkeypatch)
+        assert not alone["valid"] and not together["valid"]
+        assert together == alone
+
+
+def forged_track(n: int, norm: str, leaves: int = 1) -> tuple[dict, dict, list]:
+    """A document of one n-view track whose claim has the common proof's shape (every field of
+    the right type and size, its numbers nonsense), for the stacked path's cost."""
+    rng = np.random.default_rng(2)
+    cameras = random_cameras(rng, n, spread=20.0)
+    points = project(cameras, np.array([0.1, 0.0, 0.2, 1.0]))
+    box = [[-1.0] * 3, [1.0] * 3]
+    claim = {"index": 0, "certified": True, "status": "optimal", "at_infinity": False, "cost": 0.0, "gap": 0.0,
+             "lower_bound": 0.0, "point": [0.1, 0.0, 0.2],
+             "proof": {"type": "branch_and_bound", "scale": 1.0, "search_box": box, "tightening": [],
+                       "root": {"gamma": 1.0, "functionals": np.eye(3).tolist(), "claim": box, "bounds": box,
+                                "duals": [pack(np.zeros(1 + 3 * n))] * 6},
+                       "leaves": [[box[0], box[1], i] for i in range(leaves)],
+                       "proofs": [{"kind": "dual", "box": box, "upper_bound": 1.0, "bound": 0.0, "z": "AAAA"}] * leaves}}
+    data = {"cameras": cameras.tolist(), "tracks": [{"views": list(range(n)), "points": points.tolist()}]}
+    options = {"norm": norm, "rel_gap": 1e-3, "abs_gap": 1e-7, "max_residual": None}
+    return data, options, [claim]
+
+
+class TestSize:
+    def test_a_track_too_large_for_a_chunk_is_left_to_the_per_item_path(self, documents, monkeypatch):
+        # A chunk holds MAX_ENTRIES entries of dense relaxation matrices; a track whose one
+        # relaxation exceeds that was still checked alone, densely (see the test below).
+        document = documents["L2L2"]
+        entries = {}
+        for i, track in enumerate(document["data"]["tracks"]):
+            proof = document["items"][i].get("proof") or {}
+            if proof.get("type") == "branch_and_bound":
+                rows, cols = stacked._relaxation_size(len(track["views"]), len(proof["search_box"][0]), "L2L2")
+                entries[i] = len(proof["proofs"]) * rows * cols
+        everything = proven(document)
+        limit = 1000
+        small = {i for i in everything if entries[i] <= limit}
+        assert small and small != everything
+        monkeypatch.setattr(stacked, "MAX_ENTRIES", limit)
+        assert proven(document) == small
+        together, alone = reports(document, monkeypatch)
+        assert together["valid"] and together == alone
+
+    @pytest.mark.parametrize("views, leaves", [(600, 1), (100, 64)])
+    def test_a_hostile_track_costs_no_dense_relaxation_beyond_a_chunk(self, views, leaves):
+        # 600 views (about 0.2 MB of document, nothing in it true): the stacked path built the
+        # dense 9000 x 1800 relaxation, peaking at 260 MB (measured; 1.1 GB for 1000 views,
+        # L1L1), before any check could refuse it. The per-item path's relaxations are sparse.
+        # 100 views and 64 leaves, each with its own proof: 64 relaxations of 1500 x 300 in one
+        # chunk (a chunk holds at least one track, whatever its proofs).
+        import tracemalloc
+
+        data, options, claims = forged_track(views, "L2L2", leaves)
+        tracemalloc.start()
+        try:
+            result = stacked.proven_tracks(data, options, claims, 1000)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert result == set()
+        assert peak < 40e6
