@@ -22,8 +22,13 @@ NORMS = ("L2L2", "L2L1", "L1L1")
 
 
 @pytest.fixture(scope="module")
-def documents() -> dict:
-    return {norm: solve_job(scene_job(norm))["certificate"] for norm in NORMS}
+def results() -> dict:
+    return {norm: solve_job(scene_job(norm)) for norm in NORMS}
+
+
+@pytest.fixture(scope="module")
+def documents(results) -> dict:
+    return {norm: results[norm]["certificate"] for norm in NORMS}
 
 
 def proven(document: dict) -> set[int]:
@@ -112,3 +117,62 @@ class TestSize:
             tracemalloc.stop()
         assert result == set()
         assert peak < 40e6
+
+
+def _shrunk(box: list, factor: float) -> list:
+    lo, hi = np.array(box[0]), np.array(box[1])
+    middle, half = (lo + hi) / 2, (hi - lo) / 2 * factor
+    return [(middle - half).tolist(), (middle + half).tolist()]
+
+
+def _proof_box(claim: dict) -> None:
+    leaf = claim["proof"]["proofs"][0]
+    leaf["box"] = _shrunk(leaf["box"], 0.25)
+
+
+def _leaf(claim: dict) -> None:
+    leaf = claim["proof"]["leaves"][0]
+    leaf[0], leaf[1] = _shrunk(leaf[:2], 0.25)
+
+
+def _search_box(claim: dict) -> None:
+    claim["proof"]["search_box"] = _shrunk(claim["proof"]["search_box"], 0.99)
+
+
+class TestBoxes:
+    """The boxes only the containment checks tie together: the leaf's proof box (the relaxation's),
+    the leaf, the searched box and the root's proven box. Each forgery is refused by the per-item
+    path; with the stacked path's containment check removed, it was proven together: a proof box
+    shrunk to a quarter still proves its claim on some tracks (a smaller box, a larger bound), and
+    a leaf or searched box is read for nothing else."""
+
+    @pytest.mark.parametrize("forge, check", [(_proof_box, "leaf_bounds"), (_leaf, "coverage"),
+                                              (_search_box, "tightening")])
+    @pytest.mark.parametrize("norm", ["L2L2", "L1L1"])
+    def test_a_box_outside_the_one_it_must_contain_is_refused(self, documents, monkeypatch, forge, check, norm):
+        document = copy.deepcopy(documents[norm])
+        positions = proven(document)
+        assert len(positions) >= 15
+        for position in positions:
+            forge(document["items"][position])
+        assert proven(document) == set()
+        together, alone = reports(document, monkeypatch)
+        assert not together["valid"] and together == alone
+        assert together["first_failure"]["check"] == check
+        failed = {c["name"]: c["failed"] for c in together["checks"]}
+        assert failed[check] == len(positions)
+
+
+class TestNestingOfAResult:
+    def test_a_certificate_nesting_too_deep_inside_its_result_is_refused(self, results):
+        # A result holding its certificate is walked once (the result): the certificate's own
+        # walk is skipped, and the result's must still find what nests in the certificate.
+        result = copy.deepcopy(results["L2L2"])
+        assert verify_any(copy.deepcopy(result)).valid
+        nested: list = []
+        for _ in range(70):
+            nested = [nested]
+        result["certificate"]["note"] = nested  # nothing hashes or reads it
+        report = verify_any(result).as_dict()
+        assert not report["valid"] and report["first_failure"]["check"] == "format"
+        assert "nests deeper" in report["first_failure"]["detail"]
