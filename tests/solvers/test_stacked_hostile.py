@@ -176,3 +176,42 @@ class TestNestingOfAResult:
         report = verify_any(result).as_dict()
         assert not report["valid"] and report["first_failure"]["check"] == "format"
         assert "nests deeper" in report["first_failure"]["detail"]
+
+
+def _leaves_name_the_last_proof(proof: dict) -> None:
+    for leaf in proof["leaves"]:
+        leaf[2] = len(proof["proofs"]) - 1
+
+
+def _a_leaf_dropped(proof: dict) -> None:
+    proof["leaves"].pop(0)
+
+
+def _an_unnamed_proof_that_fails(proof: dict) -> None:
+    extra = copy.deepcopy(proof["proofs"][0])
+    extra["bound"] = extra["bound"] * 2 + 1.0  # more than its dual proves
+    proof["proofs"].append(extra)
+
+
+class TestLeaves:
+    """Tracks of several leaves: each leaf inside the box of the proof it names, the leaves
+    covering the searched box, every proof holding (named or not). Each forgery of every proven
+    track of several leaves is refused by the per-item path and not proven together; with the
+    stacked check removed it was (the leaves' bounds are the last proof's, or the smallest of the
+    leaves left, or the failing proof is never read)."""
+
+    @pytest.mark.parametrize("forge, check", [(_leaves_name_the_last_proof, "leaf_bounds"),
+                                              (_a_leaf_dropped, "coverage"),
+                                              (_an_unnamed_proof_that_fails, "leaf_bounds")])
+    @pytest.mark.parametrize("norm", ["L2L2", "L1L1"])
+    def test_leaves_and_proofs_that_do_not_fit_are_refused(self, documents, monkeypatch, forge, check, norm):
+        document = copy.deepcopy(documents[norm])
+        positions = {i for i in proven(document) if len(document["items"][i]["proof"]["leaves"]) > 1}
+        assert len(positions) >= 5
+        for position in positions:
+            forge(document["items"][position]["proof"])
+        assert proven(document) & positions == set()
+        together, alone = reports(document, monkeypatch)
+        assert not together["valid"] and together == alone
+        failed = {c["name"]: c["failed"] for c in together["checks"]}
+        assert failed[check] == len(positions)
