@@ -9,7 +9,10 @@ each camera is DLT-resected, a random projective frame. Each scene is solved thr
 Prints, per column (as Table 7.1): mean errors of (7.17) against ground truth (df = |f1/f1' - 1|
 + |f2/f2' - 1|, dr = max(r/r', r'/r) with r = f1/f2, dp = (|u| + |v|)/2 - (|u'| + |v'|)/2,
 ds = |s - s'|; per view and averaged when the focal length varies), the fraction of cameras with
-every point in front (the chirality check), the certified fraction, the rank-one fraction of the
+every point in front (the chirality check), the median trial's df, the errors of the K the same
+noisy input cameras give with the scene's true quadric (*_true_Q: what the true quadric itself
+scores, i.e. the error that is the cameras' own noise; with varying focal each view's K carries its
+own camera's), the certified fraction, the rank-one fraction of the
 moment matrix, the fraction both rank one and certified (rank1_cert), numerical failures (no clean
 solve or no answer), and the time per solve (median, max); the thesis's numbers beside ours; then
 issue 13's targets, each named met or MISSED. With --stratified, the stratified method on the same
@@ -60,7 +63,7 @@ def true_quadric_errors(seed: int, varying: bool) -> dict:
     """(7.17)'s errors of the K the result would state if it returned the scene's true quadric
     (Hp^-1 diag(1, 1, 1, 0) Hp^-T, read from the same noisy input cameras as ours: one K, the mean
     of the views' normalised P_i Q P_i', with constant focal; each view's own with varying focal):
-    the floor the camera noise alone puts under any estimate of Q (no solve; from the seed)."""
+    the error the camera noise alone makes (no solve; from the seed)."""
     from geocert.solvers.autocalibration import direct
 
     scene, Ks = scenes.table71_scene(seed, 0.2, varying)
@@ -224,7 +227,7 @@ def main() -> None:
             line += f"{text:>18}"
         print(line)
     print("(df_median: the median trial's df; *_true_Q: the mean errors of the K read from the same noisy input "
-          "cameras with the scene's true quadric, what camera noise alone costs any estimate of Q: with varying "
+          "cameras with the scene's true quadric, the error camera noise alone makes: with varying "
           "focal each view's K carries its own camera's noise, with constant focal one K averages 12 views)")
     print("(thesis's Table 7.1 in parentheses; rank_one and certified are ours: the thesis reports neither. "
           "median_s/max_s are wall seconds per solve on this machine, shared; "
