@@ -9,7 +9,10 @@ each camera is DLT-resected, a random projective frame. Each scene is solved thr
 Prints, per column (as Table 7.1): mean errors of (7.17) against ground truth (df = |f1/f1' - 1|
 + |f2/f2' - 1|, dr = max(r/r', r'/r) with r = f1/f2, dp = (|u| + |v|)/2 - (|u'| + |v'|)/2,
 ds = |s - s'|; per view and averaged when the focal length varies), the fraction of cameras with
-every point in front (the chirality check), the certified fraction, the rank-one fraction of the
+every point in front (the chirality check), the median trial's df, the errors of the K the same
+noisy input cameras give with the scene's true quadric (*_true_Q: what the true quadric itself
+scores, i.e. the error that is the cameras' own noise; with varying focal each view's K carries its
+own camera's), the certified fraction, the rank-one fraction of the
 moment matrix, the fraction both rank one and certified (rank1_cert), numerical failures (no clean
 solve or no answer), and the time per solve (median, max); the thesis's numbers beside ours; then
 issue 13's targets, each named met or MISSED. With --stratified, the stratified method on the same
@@ -30,6 +33,7 @@ for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
 import argparse  # noqa: E402
+import functools  # noqa: E402
 import json  # noqa: E402
 import time  # noqa: E402
 
@@ -52,6 +56,22 @@ def errors(K: np.ndarray, truth: np.ndarray) -> dict:
     r, rt = f1 / f2, t1 / t2
     return {"df": abs(f1 / t1 - 1) + abs(f2 / t2 - 1), "dr": max(r / rt, rt / r),
             "dp": (abs(u) + abs(v)) / 2 - (abs(truth[0, 2]) + abs(truth[1, 2])) / 2, "ds": abs(s - truth[0, 1])}
+
+
+@functools.lru_cache(maxsize=None)
+def true_quadric_errors(seed: int, varying: bool) -> dict:
+    """(7.17)'s errors of the K the result would state if it returned the scene's true quadric
+    (Hp^-1 diag(1, 1, 1, 0) Hp^-T, read from the same noisy input cameras as ours: one K, the mean
+    of the views' normalised P_i Q P_i', with constant focal; each view's own with varying focal):
+    the error the camera noise alone makes (no solve; from the seed)."""
+    from geocert.solvers.autocalibration import direct
+
+    scene, Ks = scenes.table71_scene(seed, 0.2, varying)
+    Hinv = np.linalg.inv(scene.projective)
+    Q = Hinv @ np.diag([1.0, 1.0, 1.0, 0.0]) @ Hinv.T
+    estimates = direct.calibrations(scene.cameras, Q) if varying else [direct.mean_calibration(scene.cameras, Q)] * len(Ks)
+    rows = [errors(K, truth) for K, truth in zip(estimates, Ks)]
+    return {key: float(np.mean([row[key] for row in rows])) for key in rows[0]}
 
 
 def in_front(result: dict) -> float:
@@ -94,6 +114,10 @@ def column(rows: list[dict]) -> dict:
     times = [r["time"] for r in rows]
     summary = {key: float(np.mean([r[key] for r in ok])) if ok else float("nan")
                for key in ("df", "dr", "dp", "ds", "chirality")}
+    floors = [true_quadric_errors(r["task"][0], bool(r["task"][1])) for r in ok]
+    summary["df_median"] = float(np.median([r["df"] for r in ok])) if ok else float("nan")
+    summary.update({f"{key}_true_Q": float(np.mean([f[key] for f in floors])) if ok else float("nan")
+                    for key in ("df", "dr", "dp", "ds")})
     summary.update(certified=float(np.mean([r.get("certified", False) for r in rows])),
                    rank_one=float(np.mean([r.get("rank_one", False) for r in rows])),
                    rank1_cert=float(np.mean([r.get("rank_one", False) and r.get("certified", False)
@@ -108,9 +132,12 @@ def targets(names: list[str], results: list[dict]) -> None:
     """Issue 13's targets, each named met or MISSED, per direct column."""
     direct = list(zip(names[:4], results[:4]))
     print("Targets (issue 13), direct columns:")
-    worse = [f"{key} {name} {summary[key]:.4f} > {THESIS[key][i]:.4f}" for i, (name, summary) in enumerate(direct)
-             for key in ("df", "dr", "dp", "ds") if summary[key] > THESIS[key][i]]
-    print(f"  accuracy at least Table 7.1's: {'met' if not worse else 'MISSED: ' + '; '.join(worse)}")
+    # compared at Table 7.1's printed precision (4 decimals): its 0.0086 is any mean in [0.00855, 0.00865)
+    worse = [f"{key} {name} {summary[key]:.4f} > {THESIS[key][i]:.4f}"
+             + f" (the true quadric's own: {summary[key + '_true_Q']:.4f})"
+             for i, (name, summary) in enumerate(direct)
+             for key in ("df", "dr", "dp", "ds") if round(summary[key], 4) > THESIS[key][i]]
+    print(f"  accuracy at least Table 7.1's (4 decimals): {'met' if not worse else 'MISSED: ' + '; '.join(worse)}")
     fails = [f"{name} {summary['failed']}" for name, summary in direct if summary["failed"]]
     print(f"  zero numerical failures: {'met' if not fails else 'MISSED: ' + ', '.join(fails)}")
     low = [f"{name} {summary['rank1_cert']:.2f}" for name, summary in direct
@@ -187,6 +214,8 @@ def main() -> None:
             text = f"{summary[key]:.4f}" + (f" ({thesis:.4f})" if thesis is not None else " (n/a)" if i < 4 else "")
             line += f"{text:>18}"
         print(line)
+    for key in ("df_median", "df_true_Q", "dr_true_Q", "dp_true_Q", "ds_true_Q"):
+        print(f"{key:<12}" + "".join(f"{summary[key]:.4f}".rjust(18) for summary in results))
     for key, fmt in (("certified", "{:.2f}"), ("rank_one", "{:.2f}"), ("rank1_cert", "{:.2f}"),
                      ("failed", "{:d}"), ("median_s", "{:.1f}"),
                      ("max_s", "{:.1f}"), ("median_cpu_s", "{:.1f}"), ("max_cpu_s", "{:.1f}")):
@@ -197,6 +226,9 @@ def main() -> None:
                 text += f" ({THESIS['failed'][i]})"
             line += f"{text:>18}"
         print(line)
+    print("(df_median: the median trial's df; *_true_Q: the mean errors of the K read from the same noisy input "
+          "cameras with the scene's true quadric, the error camera noise alone makes: with varying "
+          "focal each view's K carries its own camera's noise, with constant focal one K averages 12 views)")
     print("(thesis's Table 7.1 in parentheses; rank_one and certified are ours: the thesis reports neither. "
           "median_s/max_s are wall seconds per solve on this machine, shared; "
           "*_cpu_s the solve's own processor seconds, what it takes on an idle core.)")

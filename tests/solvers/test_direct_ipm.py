@@ -181,3 +181,45 @@ def test_table71_seed_1008_varying_focal_ends_clean():
                               program.cones.psd)
     assert result.status == "Solved"
     assert dr.safe_bound(program, result.z)[0] == pytest.approx(2.8062e-4, rel=1e-3)
+
+
+SEED_1012_HALF = """
+import json
+import numpy as np
+from geocert.solvers.autocalibration import direct, direct_ipm, direct_solve, scenes
+from geocert.solvers.autocalibration import direct_relaxation as dr
+from geocert.solvers.autocalibration import problem as pr
+UNIT = {"aspect": [0.95, 1.05], "skew": [-0.01, 0.01], "principal_point": [[-0.1, 0.1], [-0.1, 0.1]]}
+scene, _ = scenes.table71_scene(1012, 0.2, True)
+problem = pr.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
+setup = direct.setup_for(problem, "points")
+program = dr.build(setup.cameras, setup.orientations[0].pairs, 2, ((8, 0.05772124305830394, -1.0),))
+result = direct_ipm.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
+                          program.cones.psd, max_iter=direct_solve.IPM_MAX_ITER)
+print(json.dumps({"status": result.status, "bound": dr.safe_bound(program, result.z)[0],
+                  "dual_residual": float(np.linalg.norm(program.A.T @ result.z + program.q)
+                                         / max(1.0, np.linalg.norm(program.q)))}))
+"""
+
+
+def test_table71_seed_1012_chirality_split_half_ends_clean_on_one_blas_thread():
+    """The half x_8 <= c of seed 1012's split (varying focal, chirality "points"; c where the
+    solver cuts it), solved as the service and the bench do, BLAS on one thread (a subprocess: the
+    rounding differs with more threads, where this half still stalls). Late in the solve H's
+    condition number passes 1e16; three refinement steps left an error the step carried into the
+    dual residual (1e-15 to 7e-7 in five iterations, "Stalled", the bound 7.31e-4). Refined up to
+    MAX_REFINEMENT steps while the error is above a tenth of the tolerance, it ends "Solved", the
+    bound 7.717e-4, above the other half's optimum (3.755e-4): the stage certifies."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    out = subprocess.run([sys.executable, "-c", SEED_1012_HALF], env=env, capture_output=True, text=True,
+                         cwd=os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                         check=True)
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    assert result["status"] == "Solved"
+    assert result["dual_residual"] <= 1e-8  # direct_ipm.solve's acceptable tolerance
+    assert result["bound"] == pytest.approx(7.717e-4, rel=1e-3)

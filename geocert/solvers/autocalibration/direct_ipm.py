@@ -33,6 +33,14 @@ import scipy.sparse as sp
 
 
 REFINEMENT = 3  # refinement steps per Newton solve (1 left the dual residual at 1e-9 late in some solves; 2-4 at 1e-12)
+# ... and up to this many while the equations' error is above a tenth of the tolerance (of |q|, |b|):
+# late in some splits' halves H's condition number passes 1e16 and three steps left an error that the
+# step carried into the dual residual (seed 1012, varying focal, chirality, one BLAS thread: 1e-15 to
+# 7e-7 in five iterations, then "Stalled", the gap 1.6e-7 relative; with up to ten, "Solved" at
+# iteration 32). Not a cure: with H that ill-conditioned the refinement need not converge at all
+# (with two BLAS threads the same half still stalls; GMRES preconditioned by H's factorisation, with
+# or without a shift of 1e-10 of its diagonal, did worse: measured 2026-11-23).
+MAX_REFINEMENT = 10
 STALL = 8  # iterations without progress before giving up
 
 
@@ -247,11 +255,14 @@ def solve(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: int, 
             rhs = r_d - AK.T @ t
             dy, dl = schur(rhs, r_e)
             dz = inverse_scale(AK @ dy) + t
-            for _ in range(REFINEMENT):
+            for step in range(MAX_REFINEMENT):
                 # refined against the operator itself (H is its rounded product): the dual
                 # equations' and the equalities' residuals, solved for again with no centring part
                 e_d = r_d - (AK.T @ dz + Ae.T @ dl)
                 e_e = r_e - Ae @ dy
+                if (step >= REFINEMENT and np.linalg.norm(e_d) <= 0.1 * tolerance * qnorm
+                        and np.linalg.norm(e_e) <= 0.1 * tolerance * bnorm):
+                    break
                 cy, cl = schur(e_d, e_e)
                 dy, dl = dy + cy, dl + cl
                 dz = dz + inverse_scale(AK @ cy)

@@ -283,6 +283,14 @@ class Leaf:
 # best quadric, which 300-start local searches confirm). Cutting between the two points the
 # moment matrix mixes (x_k <= c and x_k >= c, each with its localizing matrix) made the half
 # holding the optimum rank one and tight on seeds 1010 and 1012 (gaps 6e-8 and 3e-8 relative).
+# Seed 1008 (varying focal) is not certified either way, for a reason splitting does not reach
+# (measured 2026-11-24): without chirality the global minimum of (7.12) (3.23e-4) puts cameras behind
+# the scene (df 1.87), and the half holding it stalls at 3.13e-4; with chirality the best quadric
+# (4.64e-4, rank one in its half) is separated from a lower half whose relaxation stays at 3.27e-4
+# through three splits on entries 7, 8, 8 (rank one, ratio 3.5e-6), because its minimiser is a nearly
+# degenerate quadric (eigenvalues 4.6e-6, 1.7e-4, 1.1e-3, 0.999 at trace 1) at which the chirality
+# products R_k' adj(Q) R_l are at most 2.3e-8 in size (some negative at the first moments' quadric, while
+# the moments satisfy them): the order-2 relaxation barely sees them there.
 MAX_SPLITS = direct.MAX_CUTS  # the verifier refuses deeper paths
 
 
