@@ -132,7 +132,8 @@ def test_dino_sparse_ring():
     _, errors = align_rotations([result.rotations[v] for v in registered], [Rs[v] for v in registered])
     print(len(registered), np.round(errors, 3))
     # Measured: all 14 registered (0007-0013 by PnP, the rest merged), rotation errors median
-    # MEDIAN, max MAX degrees against the ground truth (the target: 12 of 14 within 1).
+    # 0.46, max 0.61 degrees against the ground truth (the target: 12 of 14 within 1).
+    # With final_min_views=2 the median is 1.72 and none is within 1 degree.
     assert len(registered) == 14
     assert int(np.sum(errors < 1.0)) >= 12
     assert errors.max() < 0.8
