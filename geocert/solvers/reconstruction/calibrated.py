@@ -222,11 +222,56 @@ def _triangulate_track(state: _State, track: int, options: CalibratedOptions) ->
 
 
 def _triangulate_new(state: _State, options: CalibratedOptions) -> int:
-    """Triangulate every track without a point that has two inlier observations in registered views."""
+    """Triangulate every track without a point that has two inlier observations in registered views.
+
+    ``_triangulate_track``'s first pass for all of them at once (grouped by their number of
+    observations: one stacked SVD per group); the tracks it does not accept outright (a wide
+    enough angle, every observation within ``max_reprojection_px`` and in front) go through
+    ``_triangulate_track`` itself, which repeats that pass and drops the observations that
+    disagree."""
     registered = state.registered
-    seen = np.bincount(state.obs_track[state.inlier & registered[state.obs_view]], minlength=len(state.points))
+    use = state.inlier & registered[state.obs_view]
+    seen = np.bincount(state.obs_track[use], minlength=len(state.points))
+    todo = np.flatnonzero((seen >= 2) & np.isnan(state.points[:, 0]))
+    if len(todo) == 0:
+        return 0
+    wanted = np.zeros(len(state.points), dtype=bool)
+    wanted[todo] = True
+    obs_all = np.flatnonzero(use & wanted[state.obs_track])  # grouped by track, tracks ascending
+    R_all = np.array([state.R[v] if registered[v] else np.eye(3) for v in range(state.n_views)])
+    t_all = np.array([state.t[v] if registered[v] else np.zeros(3) for v in range(state.n_views)])
+    K_all = np.array(state.Ks)
     made = 0
-    for track in np.flatnonzero((seen >= 2) & np.isnan(state.points[:, 0])):
+    retry = []
+    for k in np.unique(seen[todo]):
+        group = todo[seen[todo] == k]
+        in_group = np.zeros(len(state.points), dtype=bool)
+        in_group[group] = True
+        obs = obs_all[in_group[state.obs_track[obs_all]]].reshape(len(group), k)
+        views = state.obs_view[obs]
+        R, t, rays = R_all[views], t_all[views], state.obs_ray[obs]
+        P = np.concatenate([R, t[..., None]], axis=3)  # (n, k, 3, 4)
+        A = np.concatenate([rays[..., 0:1] * P[:, :, 2] - P[:, :, 0], rays[..., 1:2] * P[:, :, 2] - P[:, :, 1]], axis=1)
+        A /= np.linalg.norm(A, axis=2, keepdims=True)
+        X = np.linalg.svd(A)[2][:, -1]
+        ok = np.abs(X[:, 3]) >= 1e-12
+        X = X[:, :3] / np.where(ok, X[:, 3], 1.0)[:, None]
+        centres = -np.einsum("nkji,nkj->nki", R, t)
+        d = X[:, None, :] - centres
+        d /= np.linalg.norm(d, axis=2, keepdims=True)
+        cos = np.clip(np.einsum("nai,nbi->nab", d, d), -1.0, 1.0)
+        angle = np.degrees(np.arccos(cos.reshape(len(group), -1).min(axis=1)))
+        xc = np.einsum("nkij,nj->nki", R, X) + t
+        h = np.einsum("nkij,nkj->nki", K_all[views], xc)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            err = np.linalg.norm(h[..., :2] / h[..., 2:3] - state.obs_px[obs], axis=2)
+        err = np.nan_to_num(err, nan=np.inf)
+        good = (ok & np.all(np.isfinite(X), axis=1) & (angle >= options.min_triangulation_angle_deg)
+                & np.all((err <= options.max_reprojection_px) & (xc[..., 2] > 0), axis=1))
+        state.points[group[good]] = X[good]
+        made += int(good.sum())
+        retry.extend(group[~good].tolist())
+    for track in sorted(retry):
         made += _triangulate_track(state, int(track), options)
     return made
 
