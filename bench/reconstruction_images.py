@@ -1,11 +1,11 @@
 """Image stage and K-known reconstruction (issue 14): photos -> tracks -> cameras, against truth.
 
 Datasets: Middlebury dinoSparseRing (Seitz, Curless, Diebel, Scharstein and Szeliski, CVPR 2006;
-14 photos 640x480 of an untextured object, ground-truth K, R, t) with the tuned options the test
-uses, and a synthetic render (a textured box on a textured ground, 8 views over 150 degrees,
-geocert.solvers.reconstruction.render). Prints per dataset: features per image, verified pairs,
-tracks, views registered, rotation error after aligning to the truth (median / max degrees),
-RMS reprojection error and time per step.
+14 photos 640x480 of an untextured object, ground-truth K, R, t) with the tuned options
+tests/solvers/test_reconstruction_ring.py uses, and a synthetic render (a textured box on a
+textured ground, 8 views over 150 degrees, geocert.solvers.reconstruction.render). Prints per
+dataset: features per image, verified pairs, tracks, views registered, rotation error after
+aligning to the truth (median / max degrees), RMS reprojection error and time per step.
 
     .venv/bin/python -m bench.reconstruction_images [--no-ring] [--no-render] [--merge] [--unguided] [--truth] [--guided R]
 
@@ -13,7 +13,8 @@ RMS reprojection error and time per step.
 tracks that agree with the ground-truth cameras (triangulated by them, every observation within
 2 px), and the final bundle adjustment started from the ground-truth cameras
 (calibrated.refine_cameras): its rotation errors are what these tracks' optimum gives.
---guided R runs each dataset again with guided matching (FeatureOptions.guided_ratio = R).
+--guided R runs each dataset again with guided matching (FeatureOptions.guided_ratio = R);
+--unguided the ring again without it, --merge the ring again without merge_components.
 """
 
 from __future__ import annotations
