@@ -133,7 +133,12 @@ def test_dino_sparse_ring():
     print(len(registered), np.round(errors, 3))
     # Measured: all 14 registered (0007-0013 by PnP, the rest merged), rotation errors median
     # 0.46, max 0.61 degrees against the ground truth (the target: 12 of 14 within 1).
-    # With final_min_views=2 the median is 1.72 and none is within 1 degree.
+    # With final_min_views=2 the median is 1.72 and none is within 1 degree. The result is fragile
+    # against the options, not the code: the ring's common tilt against the turntable axis is
+    # barely determined by these tracks, and the start and the inlier marks decide where it ends.
+    # Measured: guided_ratio 0.75, all 14 registered but 2.8 degrees off; 0.85, the merge fails
+    # (7 registered); max_reprojection_px 3, 11 within 1 degree; 2, none. Adjusted from the true
+    # cameras every one of those ends within 0.74 degrees.
     assert len(registered) == 14
     assert int(np.sum(errors < 1.0)) >= 12
     assert errors.max() < 0.8
