@@ -24,9 +24,6 @@ from geocert.solvers.reconstruction.features import (FeatureOptions, build_track
                                                      tracks_from_images)
 from geocert.solvers.reconstruction.render import box_scene
 
-from tests.support import SHARED
-
-DINO_RING = SHARED / "data" / "middlebury_dinoSparseRing"
 
 
 def _b64(data: bytes) -> str:
@@ -231,7 +228,8 @@ class TestCalibrated:
         result = calibrated_reconstruction(box_tracks.tracks, [c.K for c in scene.cameras])
         assert result.stats["registered"] == 8 and all(r is None for r in result.reasons)
         _, errors = align_rotations(result.rotations, [c.R for c in scene.cameras])
-        # measured: largest 0.05 degrees, RMS reprojection 0.28 px, 62 observations removed
+        # measured: largest 0.048 degrees, RMS reprojection 0.285 px, 89 observations marked outliers
+        # (counted after the final restart)
         assert errors.max() < 0.2
         assert _centres_error(result, scene.cameras) < 0.01
         assert result.stats["rms_reprojection_px"] < 0.5
@@ -307,7 +305,9 @@ class TestCalibrated:
         assert joined.stats["registered"] == 8
         assert joined.stats["merged"][0]["common_points"] == 6
         _, errors = align_rotations(joined.rotations, [c.R for c in scene.cameras])
-        assert errors.max() < 1e-6
+        # 1e-5: an angle from arccos of the trace cannot resolve much below 1e-6 degrees (one
+        # rounding of the trace is ~1e-8 rad); the centres show the fit exact to 1e-8.
+        assert errors.max() < 1e-5
         assert _centres_error(joined, scene.cameras) < 1e-8
 
     def test_refine_cameras_from_a_start(self, box):
@@ -373,40 +373,4 @@ class TestCalibrated:
 
 
 # ---------------------------------------------------------------------------------------------
-# Real photos: Middlebury dinoSparseRing
-
-
-def load_ring():
-    rows = [line.split() for line in (DINO_RING / "dinoSR_par.txt").read_text().splitlines()[1:] if line.strip()]
-    values = [np.array(r[1:], dtype=float) for r in rows]
-    images = [cv2.imread(str(DINO_RING / r[0]), cv2.IMREAD_GRAYSCALE) for r in rows]
-    return images, [v[:9].reshape(3, 3) for v in values], [v[9:18].reshape(3, 3) for v in values]
-
-
-@pytest.mark.slow
-def test_dino_sparse_ring():
-    if not DINO_RING.exists():
-        pytest.skip("shared/data is not beside this checkout")
-    images, Ks, Rs = load_ring()
-    tracks = tracks_from_images(images, RING_FEATURES)
-    result = calibrated_reconstruction(tracks.tracks, Ks, RING_CALIBRATED)
-    registered = [v for v in range(14) if result.rotations[v] is not None]
-    _, errors = align_rotations([result.rotations[v] for v in registered], [Rs[v] for v in registered])
-    print(len(registered), np.round(errors, 3))
-    # Measured: 7 views registered (0007-0013, the ring's best-textured stretch), rotation errors
-    # 0.08-0.24 degrees. The other 7 see too few triangulated points for PnP: the views form one
-    # chain (0007 ... 0016, 0001 ... 0004), and view 0014 shares 40 tracks with the registered
-    # 0013 but only 4 have a point (two-view tracks), so the chain stops there (the target
-    # of 12 within 1 degree is missed; bench.reconstruction_images --truth prints the per-view
-    # figures, and that the adjustment of these tracks started at the true cameras ends 0.8-1.3
-    # degrees off: the tracks do not determine the ring to 1 degree).
-    assert len(registered) >= RING_REGISTERED
-    assert errors.max() < 0.6
-    assert all(result.reasons[v] for v in range(14) if v not in registered)
-
-
-# What the ring needs (untextured, dark, 22.5 degrees between neighbours): more, fainter SIFT
-# keypoints than OpenCV's defaults keep, a looser ratio test and a 2 px epipolar threshold.
-RING_FEATURES = FeatureOptions(max_features=0, contrast_threshold=0.005, ratio=0.85, ransac_threshold_px=2.0)
-RING_CALIBRATED = CalibratedOptions(pnp_min_inliers=10)
-RING_REGISTERED = 6
+# Real photos: Middlebury dinoSparseRing, in tests/solvers/test_reconstruction_ring.py
