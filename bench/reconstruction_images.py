@@ -137,6 +137,37 @@ def run(name, images, Ks, Rs, feature_options, calibrated_options, names=None, t
           + f"   (total tracks {tracks_s:.1f}, reconstruction {recon_s:.1f})")
 
 
+# The ring's options as a reconstruction job states them (RING_FEATURES and RING_CALIBRATED).
+RING_JOB_OPTIONS = {"min_inliers": RING_CALIBRATED.pnp_min_inliers, "merge_components": True,
+                    "features": {"max_features": 0, "contrast_threshold": 0.005, "ratio": 0.85,
+                                 "ransac_threshold_px": 2.0, "guided_ratio": 0.8}}
+
+
+def ring_through_the_kind(names, Ks, Rs) -> None:
+    """The ring as a user sends it: one reconstruction job of the 14 photos (base64) with K, run
+    by the kind (stage 1 to the certified structure), as the API and the CLI run it."""
+    import base64
+
+    from geocert.batch import solve_job
+
+    images = [{"name": n, "content": base64.b64encode((RING / n).read_bytes()).decode()} for n in names]
+    job = {"kind": "reconstruction", "data": {"images": images},
+           "options": {"intrinsics": {"K": Ks[0].tolist()}, **RING_JOB_OPTIONS}}
+    start, cpu = time.perf_counter(), time.process_time()
+    result = solve_job(job)
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
+    registered = [i for i, camera in enumerate(result["cameras"]) if camera["registered"]]
+    _, errors = align_rotations([np.array(result["cameras"][i]["R"]) for i in registered], [Rs[i] for i in registered])
+    summary = result["summary"]
+    print(f"== Middlebury dinoSparseRing through the reconstruction kind (K given, options {RING_JOB_OPTIONS})")
+    print(f"views registered     {len(registered)} / {len(names)}   points {summary['points']}   RMS reprojection "
+          f"{summary['rms_reprojection_px']:.3f} px   points certified {summary['points_certified_fraction']:.3f}   "
+          f"cameras certified {summary['cameras_certified']}")
+    print(f"rotation error deg   median {np.median(errors):.3f}   max {np.max(errors):.3f}   within 1 deg: "
+          f"{int(np.sum(np.asarray(errors) <= 1.0))} / {len(names)}")
+    print(f"time s               wall {wall:.1f}   CPU {cpu:.1f}", flush=True)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--no-ring", action="store_true")
@@ -147,6 +178,8 @@ def main():
                         "FeatureOptions.guided_ratio = this")
     parser.add_argument("--truth", action="store_true", help="tracks against the true cameras, and the bundle "
                         "adjustment started from them (see the docstring)")
+    parser.add_argument("--kind", action="store_true", help="the ring also as one reconstruction job through the "
+                        "kind (what the API and the CLI run)")
     args = parser.parse_args()
     print(f"machine speed: {machine_speed_ms():.0f} ms for the reference loop (shared machine: timings inflated)")
     if not args.no_ring:
@@ -163,6 +196,8 @@ def main():
             if args.merge:
                 run("Middlebury dinoSparseRing (K given, merge_components=False)", images, Ks, Rs, RING_FEATURES,
                     dataclasses.replace(RING_CALIBRATED, merge_components=False), names, truth)
+            if args.kind:
+                ring_through_the_kind(names, Ks, Rs)
         else:
             print(f"{RING} not found: ring skipped")
     if not args.no_render:

@@ -61,6 +61,25 @@ class KnownCalibration(Strict):
 
 _D = ReconstructionOptions()
 _R = ReconstructionOptions.OPTION_RANGES
+_F = ReconstructionOptions.FEATURE_RANGES
+
+
+class FeaturesIn(Strict):
+    """Stage 1's matching, photos only (null: the default; the defaults are OpenCV's SIFT's and
+    suit textured scenes)."""
+
+    max_features: int | None = Field(None, **_F["max_features"], description="keypoints kept per image, the "
+                                     "strongest (0: all; default 4000)")
+    contrast_threshold: Finite | None = Field(None, **_F["contrast_threshold"],
+                                              description="SIFT's contrast threshold (default 0.04; lower finds "
+                                                          "fainter keypoints)")
+    ratio: Finite | None = Field(None, **_F["ratio"], description="Lowe's ratio test (default 0.8)")
+    ransac_threshold_px: Finite | None = Field(None, **_F["ransac_threshold_px"],
+                                               description="epipolar distance of a verified match, pixels "
+                                                           "(default 1)")
+    guided_ratio: Finite | None = Field(None, **_F["guided_ratio"],
+                                        description="after a pair is verified, match it again along its epipolar "
+                                                    "lines with this ratio test (default 0: off)")
 
 
 class ReconstructionOptionsIn(Strict):
@@ -96,6 +115,10 @@ class ReconstructionOptionsIn(Strict):
     bound_every_camera: bool = Field(_D.bound_every_camera,
                                      description="false: no certified resection for a camera a free camera found "
                                                  "locally proves uncertifiable (it is reported without a bound)")
+    features: FeaturesIn = Field(default_factory=FeaturesIn)
+    merge_components: bool = Field(_D.merge_components,
+                                   description="K known only: views that do not register from the first start are "
+                                               "reconstructed from a second start and merged")
     seed: int = Field(_D.seed, **_R["seed"])
 
 
@@ -307,7 +330,7 @@ class ReconstructionKind:
             def matching(progress: dict) -> bool:
                 return report("matches", progress.get("done", 0), progress.get("total", 1))
 
-            found = features.tracks_from_images(parsed.images_stats["images"], None, matching)
+            found = features.tracks_from_images(parsed.images_stats["images"], options.feature_options(), matching)
             tracks = [(np.asarray(v, dtype=int), np.asarray(p, dtype=float)) for v, p in found.tracks]
             images_document = _jsonable(dict(found.stats))
             if found.status == "cancelled" or len({int(v) for views, _ in tracks for v in views}) < 2:

@@ -77,6 +77,9 @@ class TestBadInput:
         ({"intrinsics": {"focal": [10, 5]}}, "options/intrinsics/focal"),
         ({"autocalibration": "sometimes"}, "options/autocalibration"),
         ({"threshold_px": 0}, "options/threshold_px"),
+        ({"features": {"guided_ratio": 1.0}}, "options/features/guided_ratio"),
+        ({"features": {"max_features": 1.5}}, "options/features/max_features"),
+        ({"features": {"edge": 3}}, "options/features/edge"),
     ])
     def test_bad_options(self, options, field):
         with pytest.raises(InputError) as error:
@@ -220,6 +223,41 @@ class TestPhotos:
             assert abs(result["cameras"][0]["K"][0][0] / 700 - 1) < 0.01
             errors = aligned_rotation_errors([np.array(c["R"]) for c in result["cameras"]], [c.R for c in scene.cameras])
             assert errors.max() < 0.5
+
+    def test_the_matching_options_reach_stage_one_and_the_calibrated_path(self, monkeypatch):
+        """options.features sets stage 1's FeatureOptions (null keeps a default), merge_components
+        the calibrated path's (what the Middlebury ring needs: bench/reconstruction_images.py)."""
+        import base64
+
+        import cv2
+
+        from geocert.solvers.reconstruction import calibrated, features, render
+
+        seen = {}
+        original_tracks, original_calibrated = features.tracks_from_images, calibrated.calibrated_reconstruction
+
+        def tracks(images, options=None, callback=None):
+            seen["features"] = options
+            return original_tracks(images, options, callback)
+
+        def reconstruction(tracks, Ks, options=None, callback=None):
+            seen["calibrated"] = options
+            return original_calibrated(tracks, Ks, options, callback)
+
+        monkeypatch.setattr(features, "tracks_from_images", tracks)
+        monkeypatch.setattr(calibrated, "calibrated_reconstruction", reconstruction)
+        scene = render.box_scene(n_views=4, arc_deg=60, seed=1)
+        images = [{"name": f"v{k}", "content": base64.b64encode(cv2.imencode(".png", scene.render(c))[1]).decode()}
+                  for k, c in enumerate(scene.cameras)]
+        body = {"kind": "reconstruction", "data": {"images": images},
+                "options": {"intrinsics": {"K": scene.cameras[0].K.tolist()}, "resect_cameras": False,
+                            "merge_components": True, "features": {"guided_ratio": 0.8, "ratio": 0.85}}}
+        body = KIND.request_model.model_validate(body).model_dump(mode="json")  # as the API passes it on
+        result = solve_job(body)
+        assert result["summary"]["views_registered"] == 4
+        assert seen["features"].guided_ratio == 0.8 and seen["features"].ratio == 0.85
+        assert seen["features"].contrast_threshold == features.FeatureOptions().contrast_threshold
+        assert seen["calibrated"].merge_components is True
 
     def test_an_undecodable_image_names_the_item(self):
         with pytest.raises(InputError) as error:

@@ -49,8 +49,21 @@ class ReconstructionOptions(FractionalOptions):
     # False: no certified resection for a camera that cannot be certified (a point behind it, or a
     # free 3x4 camera found locally beats it by more than camera_rel_gap); True: every camera's bound.
     bound_every_camera: bool = False
+    # Photos only: stage 1's matching (features.FeatureOptions; the names of FEATURE_RANGES).
+    features: dict = field(default_factory=dict)
+    # K known only: when the views split into groups that do not register from one start, start
+    # again among the unregistered views and merge (calibrated.CalibratedOptions.merge_components).
+    # Off by default, as guided matching is: the Middlebury ring needs both to register 14 of 14
+    # views within a degree, and its figures depend on them (bench/reconstruction_images.py).
+    merge_components: bool = False
     time_limit_s: float = 10.0
     seed: int = 0
+
+    # What a user may set of stage 1's matching, and where (for untextured objects: fainter
+    # keypoints, a looser ratio test, a wider epipolar threshold, guided matching).
+    FEATURE_RANGES = {"max_features": {"ge": 0, "le": 1_000_000}, "contrast_threshold": {"gt": 0, "le": 1},
+                      "ratio": {"gt": 0, "le": 1}, "ransac_threshold_px": {"gt": 0, "le": 100},
+                      "guided_ratio": {"ge": 0, "lt": 1}}
 
     OPTION_RANGES = {**FractionalOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": 1},
                      "camera_rel_gap": {"ge": 0, "le": 1},
@@ -78,7 +91,29 @@ class ReconstructionOptions(FractionalOptions):
                     and value <= bounds.get("le", math.inf)):
                 raise InputError(f"options/{name}", f"must be a finite number within {bounds}")
         self.known_K()  # validates {"K": ...}
+        self.feature_options()  # validates the matching's
         self.autocalibration_options().check()  # validates the ranges and the direct method's options
+
+    def feature_options(self):
+        """Stage 1's options: FeatureOptions with the ones given in ``features`` (None: default)."""
+        from geocert.solvers.reconstruction.features import FeatureOptions
+
+        if not isinstance(self.features, dict):
+            raise InputError("options/features", "must be an object")
+        given = {name: value for name, value in self.features.items() if value is not None}
+        for name, value in given.items():
+            bounds = self.FEATURE_RANGES.get(name)
+            if bounds is None:
+                raise InputError(f"options/features/{name}", f"unknown (known: {', '.join(self.FEATURE_RANGES)})")
+            integer = name == "max_features"
+            if (isinstance(value, bool) or not isinstance(value, int if integer else (int, float))
+                    or not math.isfinite(value) or not (value >= bounds.get("ge", -math.inf)
+                                                        and value > bounds.get("gt", -math.inf)
+                                                        and value <= bounds.get("le", math.inf)
+                                                        and value < bounds.get("lt", math.inf))):
+                raise InputError(f"options/features/{name}",
+                                 f"must be {'an integer' if integer else 'a finite number'} within {bounds}")
+        return FeatureOptions(**given)
 
     def known_K(self) -> np.ndarray | None:
         if self.intrinsics == "unknown" or not isinstance(self.intrinsics, dict) or "K" not in self.intrinsics:

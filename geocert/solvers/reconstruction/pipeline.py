@@ -130,7 +130,8 @@ def _calibrated(tracks, n_views: int, K: np.ndarray, options: ReconstructionOpti
         tell("projective", 0, n_views)
         found = calibrated_reconstruction(
             tracks, [K] * n_views, CalibratedOptions(max_reprojection_px=2 * options.threshold_px,
-                                                      pnp_min_inliers=options.min_inliers, seed=options.seed),
+                                                      pnp_min_inliers=options.min_inliers, seed=options.seed,
+                                                      merge_components=options.merge_components),
             lambda progress: tell("projective", progress.get("done", 0), progress.get("total", 1)))
         stage.update(_plain(found.stats))
         for v in range(n_views):
