@@ -231,7 +231,7 @@ def _verify_items(document: dict, options: dict, items: list, report: Report, ta
         except Exception:  # nothing proven together: each claim is checked alone, and says why
             proven = set()
     for position, claim in enumerate(items):
-        if not isinstance(claim, dict) or claim.get("index") != position:
+        if not isinstance(claim, dict) or type(claim.get("index")) is not int or claim["index"] != position:
             fail("format", position, "each item must be an object whose index is its position")
             continue
         certified = claim.get("certified")

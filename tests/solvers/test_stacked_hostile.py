@@ -58,6 +58,9 @@ class TestIndex:
         together, alone = reports(document, monkeypatch)
         assert not alone["valid"] and not together["valid"]
         assert together == alone
+        # Refused by name: an index must be an integer (it was a TypeError reading the data).
+        assert alone["first_failure"] == {"check": "format", "item": 1,
+                                          "detail": "each item must be an object whose index is its position"}
 
 
 def forged_track(n: int, norm: str, leaves: int = 1) -> tuple[dict, dict, list]:
