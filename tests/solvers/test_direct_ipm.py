@@ -152,17 +152,23 @@ def test_table71_seed_1006_varying_focal_is_certified_rank_one():
         stage.lower_bound, rel=1e-12)
 
 
+def _varying_focal_solve(seed: int):
+    """Table 7.1's varying-focal scene of ``seed`` without chirality: its order-2 program and
+    direct_ipm's solve of it."""
+    scene, _ = scenes.table71_scene(seed, 0.2, True)
+    problem = pr.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
+    setup = direct.setup_for(problem, "none")
+    program = dr.build(setup.cameras, None, 2)
+    return program, direct_ipm.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
+                                     program.cones.psd)
+
+
 def test_the_dual_equations_hold_to_rounding_on_table71_seed_1006():
     """Late in a solve the Schur complement is too ill-conditioned for its own solution: the
     Newton step is refined against the operator itself (direct_ipm.REFINEMENT). Without it the
     dual residual |A'z + q| was 3.4e-8 here (7.7e-7 on seed 1012 with chirality, where the safe
     bound then lost 5e-5 relative to charge it); with it, 6e-14."""
-    scene, _ = scenes.table71_scene(1006, 0.2, True)
-    problem = pr.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
-    setup = direct.setup_for(problem, "none")
-    program = dr.build(setup.cameras, None, 2)
-    result = direct_ipm.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
-                              program.cones.psd)
+    program, result = _varying_focal_solve(1006)
     assert result.status == "Solved"
     assert np.linalg.norm(program.A.T @ result.z + program.q) <= 1e-11 * max(1.0, np.linalg.norm(program.q))
     bound, _ = dr.safe_bound(program, result.z)
@@ -173,12 +179,7 @@ def test_table71_seed_1008_varying_focal_ends_clean():
     """Not tight (the bound 13% below the best quadric, moment rank 3), and with Mehrotra's cube
     and a fixed 0.99 step fraction the iterates lost the central path (steps of 0.01, "Stalled"
     at iteration 25); SDPT3's adaptive exponent and step fraction end it "Solved"."""
-    scene, _ = scenes.table71_scene(1008, 0.2, True)
-    problem = pr.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
-    setup = direct.setup_for(problem, "none")
-    program = dr.build(setup.cameras, None, 2)
-    result = direct_ipm.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
-                              program.cones.psd)
+    program, result = _varying_focal_solve(1008)
     assert result.status == "Solved"
     assert dr.safe_bound(program, result.z)[0] == pytest.approx(2.8062e-4, rel=1e-3)
 

@@ -30,7 +30,8 @@ from geocert.solvers.fractional.relaxation import (EPS_DEPTH, ConicData, Fractio
 MAX_SCALE = 1e3
 # Bound tightening's solves stop at this gap instead of 1e-9: each side is the safe bound of the
 # dual returned, so a looser solve can only move a side by about this much of the cost scale
-# (about 1), while the 1000-point homographies' tightening solves take a tenth less time.
+# (about 1). Measured side by side: 1000-point homographies 19% (L2L2), 10% (L2L1) and 2% (L1L1)
+# less CPU, the Dinosaur cameras that branch 20% at the median, the same nodes or fewer.
 TIGHTENING_TOLERANCE = 1e-7
 NODE_CUT = 0.05  # node tightening cuts a side off when that shrinks the box by this much of its width
 NODE_MARGIN = 0.01  # and cuts that much of the width short of the proven side (an interior left)

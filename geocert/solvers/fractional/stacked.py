@@ -16,7 +16,6 @@ arithmetic is a small part; stacked, the calls are shared by every track of a gr
 
 from __future__ import annotations
 
-import binascii
 from collections import defaultdict
 
 import numpy as np
@@ -25,6 +24,8 @@ from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERAN
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import ConeSpec, _project_rows
 from geocert.solvers.core.coverage import uncovered_part
+from geocert.solvers.core.geometry import lengths, normalised_cameras
+from geocert.solvers.core.strict import Invalid, dual_vector, numbers
 from geocert.solvers.fractional.proof import SCALE_RANGE, _sample_steps
 
 D = 3  # a track's program has 3 variables
@@ -51,15 +52,12 @@ def _flat(value, sizes: tuple[int, ...], out: list) -> bool:
 
 
 def _dual(text, rows: int) -> np.ndarray | None:
-    """A dual vector as certificates.unpack reads it (strict base64 of little-endian float64),
-    of ``rows`` entries; None if not so (finiteness is checked in bulk)."""
-    if not isinstance(text, str):
-        return None
+    """strict.dual_vector's reading (base64 of float64, ``rows`` finite entries), None where it
+    refuses."""
     try:
-        raw = binascii.a2b_base64(text, strict_mode=True)
-    except (ValueError, binascii.Error):
+        return dual_vector(text, rows)
+    except Invalid:
         return None
-    return np.frombuffer(raw, dtype="<f8") if len(raw) == 8 * rows else None
 
 
 class _Track:
@@ -129,8 +127,7 @@ def proven_tracks(data: dict, options: dict, claims: list, max_views: int) -> se
     """The positions of the certified claims this path proves (see the module's docstring)."""
     if options["max_residual"] is not None or not isinstance(data, dict):
         return set()
-    from geocert.solvers.core.strict import numbers  # the per-item path's strict reader of cameras
-    cameras = _normalised(numbers(data.get("cameras"), "data/cameras", (None, 3, 4), "data"))
+    cameras = normalised_cameras(numbers(data.get("cameras"), "data/cameras", (None, 3, 4), "data"))
     tracks = data.get("tracks")
     if not isinstance(tracks, list):
         return set()
@@ -171,19 +168,6 @@ def _chunks(members: list[_Track], proofs: int):
         yield members[start:]
 
 
-def _normalised(cameras: np.ndarray) -> np.ndarray:
-    """geometry.normalised_cameras for every camera at once (a power of two, exact)."""
-    largest = np.max(np.abs(cameras), axis=(1, 2))
-    exponent = np.frexp(largest)[1]
-    change = (largest > 0) & np.isfinite(largest) & (np.abs(exponent) > 64)
-    factor = np.where(change, np.ldexp(1.0, np.where(change, -exponent, 0)), 1.0)
-    return cameras * factor[:, None, None]
-
-
-def _lengths(x: np.ndarray, axis: int = -1) -> np.ndarray:
-    return np.sqrt((x * x).sum(axis=axis))
-
-
 def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int, options: dict) -> np.ndarray:
     """Every check of the common proof for ``members`` (n views, k branched functionals each):
     a boolean per track, true when every check passes."""
@@ -215,8 +199,7 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     # The solution's cost and depths from the raw data (_check_residual_claim).
     X = np.concatenate([point, np.ones((G, 1))], axis=1)
     proj = np.einsum("gnij,gj->gni", cams, X)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        image = proj[..., :2] / proj[..., 2:3]
+    image = proj[..., :2] / proj[..., 2:3]
     residuals = image - points
     rounding = 1e-12 * (np.abs(image) + np.abs(points))
     ok &= np.all(proj[..., 2] > 0, axis=1)
@@ -224,8 +207,8 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
         recomputed = (residuals * residuals).sum(axis=(1, 2))
         slack = np.sum(2 * np.abs(residuals) * rounding + rounding * rounding, axis=(1, 2))
     elif norm == "L2L1":
-        recomputed = _lengths(residuals).sum(axis=1)
-        slack = np.sum(_lengths(rounding), axis=1)
+        recomputed = lengths(residuals).sum(axis=1)
+        slack = np.sum(lengths(rounding), axis=1)
     else:
         recomputed = np.abs(residuals).sum(axis=(1, 2))
         slack = np.sum(rounding, axis=(1, 2))
@@ -255,8 +238,7 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     ok &= np.all(search_box[:, 0] <= box_lo, axis=1) & np.all(search_box[:, 1] >= box_hi, axis=1)
     proven = _leaves_hold(members, num, den, linear, F, k, bounds, search_box, cap, norm, reference, ok)
     # The bound against the claim, and the gap (verify_arrays).
-    with np.errstate(invalid="ignore", over="ignore"):
-        proven = proven / unit
+    proven = proven / unit
     ok &= proven >= lower_claimed - BOUND_TOLERANCE * np.abs(lower_claimed)
     tolerance = np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
     ok &= gap <= tolerance * (1 + 1e-12)
@@ -273,23 +255,22 @@ def _charts(cams: np.ndarray, points: np.ndarray):
     # The reference: the camera whose centre projects farthest from the other views' observations.
     proj = np.einsum("gjab,grb->grja", cams, centres)
     depth = proj[..., 2]
-    safe = np.where(depth > 1e-12 * _lengths(proj), depth, np.nan)
-    with np.errstate(invalid="ignore"):
-        distance = _lengths(proj[..., :2] / safe[..., None] - points[:, None])
+    safe = np.where(depth > 1e-12 * lengths(proj), depth, np.nan)
+    distance = lengths(proj[..., :2] / safe[..., None] - points[:, None])
     distance = np.where(np.isnan(distance), np.inf, distance)
     distance[:, np.arange(n), np.arange(n)] = np.inf
     reference = np.argmax(distance.min(axis=2), axis=1)
     # The frame: every centre finite here.
-    ok = np.all(np.abs(centres[..., 3]) > 1e-9 * _lengths(centres), axis=1)
+    ok = np.all(np.abs(centres[..., 3]) > 1e-9 * lengths(centres), axis=1)
     euclid = centres[..., :3] / np.where(ok[:, None], centres[..., 3], 1.0)[..., None]
     middle = euclid.sum(axis=1) / n
-    spread = _lengths(euclid - middle[:, None]).sum(axis=1) / n
+    spread = lengths(euclid - middle[:, None]).sum(axis=1) / n
     spread = np.where(spread > 0, spread, 1.0)
     H = np.tile(np.eye(4), (G, 1, 1))
     H[:, :3, :3] *= spread[:, None, None]
     H[:, :3, 3] = middle
     framed = cams @ H[:, None]
-    framed = framed / _lengths(framed[:, :, 2, :3])[..., None, None]
+    framed = framed / lengths(framed[:, :, 2, :3])[..., None, None]
     every = np.arange(G)
     depth_row = framed[every, reference, 2]
     vt = np.linalg.svd(depth_row[:, None, :])[2]
@@ -300,12 +281,12 @@ def _charts(cams: np.ndarray, points: np.ndarray):
     shifted[:, :, 0] -= points[..., 0:1] * framed[:, :, 2]
     shifted[:, :, 1] -= points[..., 1:2] * framed[:, :, 2]
     M = shifted @ T[:, None]
-    grad, row = _lengths(M[..., 2, :3]), _lengths(M[..., 2, :])
+    grad, row = lengths(M[..., 2, :3]), lengths(M[..., 2, :])
     # Exact views: only the reference here (a float test rules out any other parallel depth row).
     rows = cams[:, :, 2]
     d = rows[every, reference]
     minors = rows[..., :, None] * d[:, None, None, :] - rows[..., None, :] * d[:, None, :, None]
-    size = _lengths(rows) * _lengths(d)[:, None]
+    size = lengths(rows) * lengths(d)[:, None]
     maybe = np.all(np.abs(minors) <= 1e-12 * size[..., None, None], axis=(2, 3))
     exact = np.zeros((G, n), dtype=bool)
     exact[every, reference] = True
@@ -370,19 +351,17 @@ def _root_holds(num, den, linear, gamma, F, claim_box, bounds, v0, members, n) -
     numerators = np.einsum("gNmk,gk->gNm", num, V)
     depths = np.einsum("gNk,gk->gN", den, V)
     linear_value = np.einsum("gk,gk->g", linear[:, 0], V)
-    inside = (np.all(_lengths(numerators) <= gamma[:, None] * depths, axis=1)
+    inside = (np.all(lengths(numerators) <= gamma[:, None] * depths, axis=1)
               & (linear_value >= -1e-12 * np.einsum("gk,gk->g", np.abs(linear[:, 0]), np.abs(V))))
     y = np.einsum("gij,gj->gi", F, v0)
     margin = 1e-9 * (1 + np.abs(claim_lo) + np.abs(claim_hi))
     inside &= np.all(claim_lo + margin < y, axis=1) & np.all(y < claim_hi - margin, axis=1)
     Q = np.empty((G, 2 * D, D))
     Q[:, 0::2], Q[:, 1::2] = F, -F
-    Z = np.array([t.root_duals for t in members])
-    finite = np.all(np.isfinite(Z), axis=(1, 2))
-    Z[~finite] = 0.0
+    Z = np.array([t.root_duals for t in members])  # finite: read by strict.dual_vector
     proven = _safe_bounds(Q, A, b, Z, ConeSpec(nonneg=1, soc=(3,) * n), claim_lo, claim_hi, np.linalg.inv(F))
     low, high = proven[:, 0::2], -proven[:, 1::2]
-    return (finite & inside & np.all((claim_lo < low) & (low <= high) & (high < claim_hi), axis=1)
+    return (inside & np.all((claim_lo < low) & (low <= high) & (high < claim_hi), axis=1)
             & np.all((bounds[:, 0] <= low) & (bounds[:, 1] >= high), axis=1))
 
 
@@ -409,7 +388,7 @@ def _leaves_hold(members, num, den, linear, F, k, bounds, search_box, cap, norm,
     Z = np.zeros((R, 1, rows))
     for i, text in enumerate(z for t in members for z in t.proof_duals):
         z = _dual(text, rows)
-        if z is None or not np.all(np.isfinite(z)):
+        if z is None:
             good[i] = False
         else:
             Z[i, 0] = z
