@@ -172,6 +172,8 @@ def certificate_document(kind, data: Any, options, items: list[dict]) -> dict:
     claimed = kind.claimed_items(items)
     for index, item in enumerate(claimed):
         proof = (item.get("certificate") or {}).pop("proof", None)
+        if item.get("certificate") == {}:  # a brief item's member held the proof alone
+            item["certificate"] = None
         solution = {key: item[key] for key in kind.solution_fields if key in item}
         claims.append({"index": index, "status": item["status"], "certified": item["certified"] and proof is not None,
                        "cost": item["cost"], "lower_bound": item["lower_bound"], "gap": item["gap"],

@@ -35,6 +35,13 @@ def certificate_summary(result: ItemResult, region: dict, meaning: str, scope: s
     return None
 
 
+def brief_certificate(result: ItemResult) -> dict | None:
+    """An item's ``certificate`` member with ``options.detail = "brief"``: nothing, or with a full
+    certificate only the proof, which the job's certificate document then takes (leaving None)."""
+    proof = proof_of(result)
+    return {"proof": proof} if proof is not None else None
+
+
 def outcome_document(result: ItemResult) -> dict:
     """The fields every item (track, map) reports about its solve."""
     return {

@@ -9,7 +9,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
-from geocert.kinds.documents import certificate_summary, outcome_document
+from geocert.kinds.documents import brief_certificate, certificate_summary, outcome_document
 from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
 from geocert.solvers.fractional.inputs import check_correspondences
@@ -62,9 +62,9 @@ class ParsedMaps:
     maps: list[tuple[np.ndarray, np.ndarray] | None]
 
 
-def map_document(result: MapResult) -> dict:
+def map_document(result: MapResult, detail: str = "full") -> dict:
     region = {"reference_point": result.certificate.reference} if result.certificate else {}
-    certificate = certificate_summary(
+    certificate = brief_certificate(result) if detail == "brief" else certificate_summary(
         result, region,
         "lower <= (F l) / (d . l) <= upper for the last row l of every map in the scope, "
         "F = functionals, d = denominator (the reference point, homogeneous)",
@@ -129,9 +129,11 @@ class MapKind:
 
         source, target = parsed.maps[index]
         result = fit_map(source, target, options, callback)
-        return {**map_document(result),
-                "determinacy": safely(determinacy.map_, source, target, result.matrix, result.cost,
-                                      result.lower_bound)}
+        document = map_document(result, options.detail)
+        if options.detail == "full":
+            document["determinacy"] = safely(determinacy.map_, source, target, result.matrix, result.cost,
+                                             result.lower_bound)
+        return document
 
     def cancelled_item(self) -> dict:
         return map_document(MapResult("cancelled", False, reason="the job was cancelled before this map started"))

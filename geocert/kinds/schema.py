@@ -38,6 +38,10 @@ def options_model(name: str, defaults, residual_units: str) -> type[BaseModel]:
         certificate=(Literal["summary", "full"], Field(
             defaults.certificate, description="full: every bound's proof (dual vectors), checkable without "
                                               "a conic solver; see GET /v1/jobs/{id}/certificate")),
+        detail=(Literal["full", "brief"], Field(
+            defaults.detail, description="brief: each item carries its solution, bounds and status only "
+                                         "(certificate and determinacy null, determinacy not computed): "
+                                         "for large jobs; what is proven is the same")),
     )
 
 

@@ -8,7 +8,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
-from geocert.kinds.documents import certificate_summary, outcome_document
+from geocert.kinds.documents import brief_certificate, certificate_summary, outcome_document
 from geocert.kinds.schema import Camera, CertificateDocument, ItemOutcome, JobBase, JobStats, Pixel, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, check_cameras, number_array
 from geocert.solvers.fractional.items import MAX_VIEWS, TRACKS
@@ -55,9 +55,9 @@ class ParsedTracks:
     tracks: list[tuple[list[int], np.ndarray] | None]
 
 
-def track_document(result: TrackResult) -> dict:
+def track_document(result: TrackResult, detail: str = "full") -> dict:
     region = {"reference_view": result.certificate.reference} if result.certificate else {}
-    certificate = certificate_summary(
+    certificate = brief_certificate(result) if detail == "brief" else certificate_summary(
         result, region,
         "lower <= (F X) / (d . X) <= upper for every point X of the scope, "
         "F = functionals (one per direction the other views' depths vary along), "
@@ -137,9 +137,11 @@ class TriangulationKind:
 
         views, points = parsed.tracks[index]
         result = triangulate(parsed.cameras[views], points, options, callback)
-        return {**track_document(result),
-                "determinacy": safely(determinacy.track, parsed.cameras[views], points, result.point,
-                                      result.at_infinity, result.cost, result.lower_bound)}
+        document = track_document(result, options.detail)
+        if options.detail == "full":  # brief: not computed (a third of a track's time on the Dinosaur)
+            document["determinacy"] = safely(determinacy.track, parsed.cameras[views], points, result.point,
+                                             result.at_infinity, result.cost, result.lower_bound)
+        return document
 
     def cancelled_item(self) -> dict:
         return track_document(TrackResult("cancelled", False, reason="the job was cancelled before this track started"))

@@ -11,6 +11,9 @@ from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.relaxation import NORMS
 
 CERTIFICATE_MODES = ("summary", "full")  # the option certificate: the proof returned or not
+# The option detail: "brief" items carry the solution and its bounds only (no certificate summary
+# and no determinacy, which is then not computed): a large job's result about a sixth of the size.
+DETAIL_MODES = ("full", "brief")
 
 
 @dataclass
@@ -56,9 +59,13 @@ class ResidualOptions:
 class FractionalOptions(ResidualOptions, SearchOptions):
     """Options every fractional-program kind shares (each kind sets its own defaults)."""
 
+    detail: str = "full"  # what each item's document carries (DETAIL_MODES); never what is proven
+
     def check(self) -> None:
         ResidualOptions.check(self)
         SearchOptions.check(self)
+        if self.detail not in DETAIL_MODES:
+            raise InputError("options/detail", f"must be one of {', '.join(DETAIL_MODES)}")
 
 
 @dataclass
