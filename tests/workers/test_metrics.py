@@ -1,0 +1,53 @@
+"""Job metrics in a real Redis: a chunk's items are counted together (a few commands per chunk,
+not one per item and bucket) into the same figures /metrics shows."""
+
+from __future__ import annotations
+
+import pytest
+import redis
+
+from geocert.workers import metrics
+
+
+@pytest.fixture(scope="module")
+def client(tmp_path_factory):
+    from geocert.workers.redis_server import start_embedded_redis
+
+    process, url = start_embedded_redis(tmp_path_factory.mktemp("redis"))
+    try:
+        yield redis.Redis.from_url(url, decode_responses=True)
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
+
+
+def families(client) -> dict:
+    return {family.name: family for family in metrics.RedisCollector(client).collect()}
+
+
+class TestRecordItems:
+    def test_counts_statuses_and_a_cumulative_histogram(self, client):
+        client.delete(metrics.METRICS_KEY)
+        items = ([{"status": "optimal", "elapsed_s": 0.002}] * 3 + [{"status": "optimal", "elapsed_s": 0.02}] * 2
+                 + [{"status": "node_limit", "elapsed_s": 2.0}] + [{"status": "cancelled", "elapsed_s": 0.0}] * 4)
+        metrics.record_items(client, "triangulation", items[:5])
+        metrics.record_items(client, "triangulation", items[5:])
+        found = families(client)
+        counted = {sample.labels["status"]: sample.value for sample in found["geocert_items"].samples
+                   if sample.name == "geocert_items_total"}
+        assert counted == {"optimal": 5, "node_limit": 1, "cancelled": 4}
+        buckets = {sample.labels["le"]: sample.value for sample in found["geocert_item_solve_seconds"].samples
+                   if sample.name.endswith("_bucket")}
+        assert (buckets["0.001"], buckets["0.003"], buckets["0.03"], buckets["1.0"], buckets["3.0"], buckets["+Inf"]) \
+            == (0, 3, 5, 5, 6, 6)  # cancelled items are not timed
+        total = [sample.value for sample in found["geocert_item_solve_seconds"].samples if sample.name.endswith("_sum")]
+        assert total == [pytest.approx(3 * 0.002 + 2 * 0.02 + 2.0)]
+
+    def test_a_chunk_costs_a_few_commands_whatever_its_size(self, client):
+        def commands(count: int) -> int:
+            before = client.info("stats")["total_commands_processed"]
+            metrics.record_items(client, "triangulation", [{"status": "optimal", "elapsed_s": 0.01 * (i % 50)}
+                                                           for i in range(count)])
+            return client.info("stats")["total_commands_processed"] - before
+
+        assert commands(500) == commands(50) <= 20
