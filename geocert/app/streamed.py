@@ -6,8 +6,11 @@ bench.large_job; taken item by item, 2.2 times). For a kind whose
 items sit in one list of its data (its ``chunk_key``), a body over ``stream_threshold_bytes`` (a
 setting) is instead:
 
-1. scanned once (``split_items``): the top-level object and its ``data`` member are walked, the
-   item list's elements located (their offsets only) without keeping them;
+1. read into one buffer of its announced length (``read_body``), then scanned once
+   (``split_items``): the top-level object and its ``data`` member are walked, the item list's
+   elements located (their offsets only) without keeping them. An ASCII body (any JSON whose
+   strings are ASCII or escaped) is scanned as bytes, decoded a window at a time, so the API holds
+   the body once, not its bytes and their text;
 2. handed to the route as its *head*, the body with that list cut to its first item, so that the
    kind's request model checks everything but the items as for any body (the same errors, the
    same defaults);
@@ -40,14 +43,106 @@ BATCH = 2000  # items validated, parsed and written at a time
 UPLOAD_TTL_S = 3600  # a temporary item list outlives an API process that died mid-upload by this
 
 _WHITESPACE = re.compile(r"[ \t\n\r]*")
+_WHITESPACE_BYTES = re.compile(rb"[ \t\n\r]*")
 _DECODER = json.JSONDecoder()  # what json.loads uses, so values decode as on the ordinary path
+
+
+class _Text:
+    """A body as text, to the scan."""
+
+    def __init__(self, text: str):
+        self.text = text
+
+    def __len__(self) -> int:
+        return len(self.text)
+
+    def char(self, i: int) -> str:
+        return self.text[i:i + 1]  # "" past the end
+
+    def skip(self, i: int) -> int:
+        return _WHITESPACE.match(self.text, i).end()
+
+    def decode(self, i: int) -> tuple[Any, int]:
+        return _DECODER.raw_decode(self.text, i)
+
+    def slice(self, start: int, end: int) -> str:
+        return self.text[start:end]
+
+
+class _AsciiBytes(_Text):
+    """An ASCII body as bytes, decoded a window at a time (in ASCII, byte and character offsets
+    agree): the scan never holds the body's text beside its bytes."""
+
+    WINDOW = 1 << 16
+
+    def __init__(self, data: bytes | bytearray):
+        self.data, self.start, self.window = data, 0, ""
+
+    def __len__(self) -> int:
+        return len(self.data)
+
+    def char(self, i: int) -> str:
+        return chr(self.data[i]) if i < len(self.data) else ""
+
+    def skip(self, i: int) -> int:
+        return _WHITESPACE_BYTES.match(self.data, i).end()
+
+    def decode(self, i: int) -> tuple[Any, int]:
+        size = self.WINDOW
+        while True:
+            offset = i - self.start
+            if 0 <= offset < len(self.window):
+                whole = self.start + len(self.window) >= len(self.data)  # the window runs to the body's end
+                try:
+                    value, end = _DECODER.raw_decode(self.window, offset)
+                except ValueError:
+                    if whole:
+                        raise
+                else:
+                    # A value ending at the window's edge may go on past it (a number cut short).
+                    if end < len(self.window) or whole:
+                        return value, self.start + end
+                # The value may run past the window: a new one from i, longer than what was left.
+                size = max(self.WINDOW, 2 * (len(self.window) - offset))
+            self.start, self.window = i, self.data[i:i + size].decode("ascii")
+
+    def slice(self, start: int, end: int) -> str:
+        return self.data[start:end].decode("ascii")
+
+
+def _source(body: str | bytes | bytearray) -> _Text | None:
+    if isinstance(body, str):
+        return _Text(body)
+    if body.isascii():
+        return _AsciiBytes(body)
+    try:  # UTF-8 beyond ASCII: byte and character offsets differ, so scanned as text
+        return _Text(body.decode())
+    except UnicodeDecodeError:
+        return None
+
+
+async def read_body(request, length: int) -> bytearray:
+    """The request's body in one buffer of its announced ``length``, filled as it arrives
+    (Starlette's ``body()`` joins a list of its chunks: twice the body at that moment)."""
+    buffer = bytearray(length)
+    filled = 0
+    async for chunk in request.stream():
+        end = filled + len(chunk)
+        if end <= length:
+            buffer[filled:end] = chunk
+        else:  # more than announced (the server refuses that first; kept anyway)
+            del buffer[filled:]
+            buffer += chunk
+        filled = end
+    del buffer[filled:]
+    return buffer
 
 
 @dataclass
 class Split:
     """A body split into its head and its items' places."""
 
-    text: str
+    source: _Text
     kind: str
     chunk_key: str
     head: str  # the body with the item list cut to its first item
@@ -58,85 +153,88 @@ class Split:
         self.count = len(self.spans) // 2
 
     def item_text(self, index: int) -> str:
-        return self.text[self.spans[2 * index]:self.spans[2 * index + 1]]
+        return self.source.slice(self.spans[2 * index], self.spans[2 * index + 1])
 
 
 class _Unexpected(Exception):
     """The scan met something it does not handle: the ordinary path takes the body."""
 
 
-def _skip(text: str, i: int) -> int:
-    return _WHITESPACE.match(text, i).end()
+def _skip(text: _Text, i: int) -> int:
+    return text.skip(i)
 
 
-def _expect(text: str, i: int, char: str) -> int:
-    if i >= len(text) or text[i] != char:
+def _expect(text: _Text, i: int, char: str) -> int:
+    if text.char(i) != char:
         raise _Unexpected
     return i + 1
 
 
-def _value_end(text: str, i: int) -> int:
+def _value_end(text: _Text, i: int) -> int:
     try:
-        return _DECODER.raw_decode(text, i)[1]
+        return text.decode(i)[1]
     except (ValueError, RecursionError) as exc:
         raise _Unexpected from exc
 
 
-def _object(text: str, i: int, member) -> int:
+def _object(text: _Text, i: int, member) -> int:
     """Walks the object at ``i`` (``{``), calling ``member(key, start)`` for each member, which
     returns where the value ends; returns where the object ends. Repeated keys are refused (the
     ordinary parser keeps the last, which a single pass would have to undo)."""
     i = _skip(text, _expect(text, i, "{"))
     seen = set()
-    if i < len(text) and text[i] == "}":
+    if text.char(i) == "}":
         return i + 1
     while True:
-        if i >= len(text) or text[i] != '"':
+        if text.char(i) != '"':
             raise _Unexpected
-        key, i = _DECODER.raw_decode(text, i)
+        key, i = text.decode(i)
         if key in seen:
             raise _Unexpected
         seen.add(key)
         i = _skip(text, _expect(text, _skip(text, i), ":"))
         i = _skip(text, member(key, i))
-        if i < len(text) and text[i] == ",":
+        if text.char(i) == ",":
             i = _skip(text, i + 1)
             continue
         return _expect(text, i, "}")
 
 
-def _array_spans(text: str, i: int) -> tuple[array, int]:
+def _array_spans(text: _Text, i: int) -> tuple[array, int]:
     """The spans of the elements of the array at ``i`` (``[``), and where it ends."""
     spans = array("q")
     i = _skip(text, _expect(text, i, "["))
-    if i < len(text) and text[i] == "]":
+    if text.char(i) == "]":
         return spans, i + 1
     while True:
         end = _value_end(text, i)
         spans.append(i)
         spans.append(end)
         i = _skip(text, end)
-        if i < len(text) and text[i] == ",":
+        if text.char(i) == ",":
             i = _skip(text, i + 1)
             continue
         return spans, _expect(text, i, "]")
 
 
-def split_items(text: str) -> Split | None:
+def split_items(body: str | bytes | bytearray) -> Split | None:
     """The body's head and its items' places, or None when the body is not a job of a kind with
-    an item list (or is anything the scan does not handle)."""
+    an item list (or is anything the scan does not handle, or not UTF-8)."""
+    text = _source(body)
+    if text is None:
+        return None
     top: dict[str, tuple[int, int]] = {}
     lists: dict[str, tuple[int, int, array]] = {}  # data's arrays: opening, end, element spans
 
     def data_member(key: str, start: int) -> int:
-        if start < len(text) and text[start] == "[":
+        if text.char(start) == "[":
             spans, end = _array_spans(text, start)
             lists[key] = (start, end, spans)
             return end
         return _value_end(text, start)
 
     def top_member(key: str, start: int) -> int:
-        end = _object(text, start, data_member) if key == "data" and text.startswith("{", start) \
+        end = _object(text, start, data_member) if key == "data" and text.char(start) == "{" \
             else _value_end(text, start)
         top[key] = (start, end)
         return end
@@ -145,7 +243,7 @@ def split_items(text: str) -> Split | None:
         end = _object(text, _skip(text, 0), top_member)
         if _skip(text, end) != len(text) or "kind" not in top:
             return None
-        name = json.loads(text[slice(*top["kind"])])
+        name = json.loads(text.slice(*top["kind"]))
     except (_Unexpected, ValueError, RecursionError):
         return None
     kind = KINDS.get(name) if isinstance(name, str) and name in KINDS else None
@@ -153,7 +251,7 @@ def split_items(text: str) -> Split | None:
     if chunk_key is None or chunk_key not in lists or len(lists[chunk_key][2]) < 4:  # two items at least
         return None
     start, end, spans = lists[chunk_key]
-    head = text[:start] + "[" + text[spans[0]:spans[1]] + "]" + text[end:]
+    head = text.slice(0, start) + "[" + text.slice(spans[0], spans[1]) + "]" + text.slice(end, len(text))
     return Split(text, name, chunk_key, head, spans)
 
 

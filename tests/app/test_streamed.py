@@ -14,6 +14,7 @@ from fastapi.exceptions import RequestValidationError
 
 from geocert.app.errors import field_path
 from geocert.app.schemas import JOB_REQUEST, JobRequest
+from geocert.app import streamed
 from geocert.app.streamed import split_items, upload_items
 from geocert.solvers.core.geometry import InputError
 from tests.support import triangulation_job
@@ -41,11 +42,18 @@ def head_request(split) -> dict:
     return JOB_REQUEST.validate_json(split.head).model_dump(mode="json")
 
 
+def as_given(text: str, form: str):
+    return text if form == "str" else text.encode() if form == "bytes" else bytearray(text.encode())
+
+
 class TestSplitItems:
+    @pytest.mark.parametrize("form", ["str", "bytes", "bytearray"])
+    @pytest.mark.parametrize("window", [1 << 16, 7])  # 7: values cut at a window's edge all the time
     @pytest.mark.parametrize("indent", [None, 2])
-    def test_the_items_and_the_head_are_what_the_parser_reads(self, indent):
+    def test_the_items_and_the_head_are_what_the_parser_reads(self, indent, window, form, monkeypatch):
+        monkeypatch.setattr(streamed._AsciiBytes, "WINDOW", window)
         job, text = body_of(indent=indent)
-        split = split_items(text)
+        split = split_items(as_given(text, form))
         assert split is not None and (split.kind, split.chunk_key, split.count) == ("triangulation", "tracks", 30)
         assert [json.loads(split.item_text(i)) for i in range(30)] == job["data"]["tracks"]
         head = json.loads(split.head)
@@ -68,6 +76,31 @@ class TestSplitItems:
     ])
     def test_what_the_scan_does_not_handle_goes_the_ordinary_way(self, text):
         assert split_items(text) is None
+        assert split_items(text.encode()) is None
+
+    def test_a_body_beyond_ascii_is_scanned_as_text(self):
+        job, _ = body_of()
+        job["data"]["tracks"][4]["label"] = "caf\u00e9 \u2013 north"  # not a field of a track: the model refuses it later
+        text = json.dumps(job, ensure_ascii=False)
+        split = split_items(text.encode())
+        assert split is not None and json.loads(split.item_text(4)) == job["data"]["tracks"][4]
+        assert [json.loads(split.item_text(i)) for i in range(30)] == job["data"]["tracks"]
+        assert split_items(b'{"kind": "triangulation", "data": {"tracks": [{}, {"x": "\xff"}]}}') is None  # not UTF-8
+
+    def test_an_ascii_body_is_never_held_as_text_too(self):
+        import tracemalloc
+
+        _, text = body_of(tracks=10000)  # 2 MB
+        body = bytearray(text.encode())
+        tracemalloc.start()
+        try:
+            split = split_items(body)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert split is not None and split.count == 10000
+        # The spans (16 bytes an item), the head and a window or two (64 KiB): not the body's text.
+        assert peak < 16 * 10000 + 4 * streamed._AsciiBytes.WINDOW + 50_000 < 0.25 * len(body)
 
 
 class TestUploadItems:

@@ -46,15 +46,14 @@ class StreamedItemsRoute(APIRoute):
             length = request.headers.get("content-length", "")
             if (length.isdigit() and int(length) > get_settings().stream_threshold_bytes
                     and is_json_media_type(request.headers.get("content-type"))):
-                body = await request.body()
-                try:
-                    split = streamed.split_items(body.decode())
-                except UnicodeDecodeError:
-                    split = None
+                body = await streamed.read_body(request, int(length))
+                split = streamed.split_items(body)
                 if split is not None:
-                    del body
                     request._body = split.head.encode()  # what the route's model reads and checks
                     request.state.streamed = split
+                else:
+                    request._body = bytes(body)  # the ordinary path reads it whole
+                del body
             return await handler(request)
 
         return route_handler
