@@ -11,7 +11,7 @@ cameras, 1 px noise), waits for it to end and fetches its result. Prints:
     request's size;
   - the API process's peak memory growth (VmHWM, after a warm-up job) over the body's size.
 
-    .venv/bin/python -m bench.large_job [--tracks 200000] [--workers 2] [--chunk 100]
+    .venv/bin/python -m bench.large_job [--tracks 200000] [--workers 2] [--chunk 100] [--detail brief]
 
 Nothing here asserts: tests/workers/test_store.py checks behaviour, this prints figures.
 """
@@ -27,7 +27,7 @@ import numpy as np
 from bench.faults import camera, cluster, peak_rss_kib, wait_end
 
 
-def job_body(tracks: int, views: int = 10, per_track: int = 5, seed: int = 0) -> bytes:
+def job_body(tracks: int, views: int = 10, per_track: int = 5, seed: int = 0, options: dict | None = None) -> bytes:
     rng = np.random.default_rng(seed)
     cameras = np.array([camera(rng) for _ in range(views)])
     chosen = np.argsort(rng.uniform(size=(tracks, views)), axis=1)[:, :per_track]
@@ -37,7 +37,7 @@ def job_body(tracks: int, views: int = 10, per_track: int = 5, seed: int = 0) ->
     pixels = x[..., :2] / x[..., 2:] + rng.normal(size=(tracks, per_track, 2))
     pixels = np.round(pixels, 3)
     entries = [{"views": c.tolist(), "points": p.tolist()} for c, p in zip(chosen, pixels)]
-    job = {"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": entries}, "options": {}}
+    job = {"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": entries}, "options": options or {}}
     return json.dumps(job).encode()
 
 
@@ -50,11 +50,12 @@ def main() -> None:
     parser.add_argument("--tracks", type=int, default=200_000)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--chunk", type=int, default=100, help="tracks per task (GEOCERT_CHUNK_SIZES)")
+    parser.add_argument("--detail", choices=("full", "brief"), default="full", help="the job's options.detail")
     args = parser.parse_args()
-    body = job_body(args.tracks)
+    body = job_body(args.tracks, options={"detail": args.detail})
     size = len(body)
     print(f"{args.tracks} tracks of 5 views, request {size / 2**20:.1f} MiB; {args.workers} workers, "
-          f"{args.chunk} tracks a task", flush=True)
+          f"{args.chunk} tracks a task; detail {args.detail}", flush=True)
     headers = {"content-type": "application/json"}
     env = {"geocert_max_body_bytes": str(4 * size), "geocert_max_items_per_job": str(max(args.tracks, 200_000)),
            "geocert_chunk_sizes": json.dumps({"triangulation": args.chunk}), "geocert_progress_interval_s": "1.0"}

@@ -106,18 +106,47 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
     return items
 
 
-def job_stats(items: list[dict], elapsed_s: float) -> dict:
+def item_sums(items: list[dict]) -> dict:
+    """What a job's stats and final progress take from its items, as sums: a task stores these
+    for the run of items it solved (a fragment of a streamed result), and the end adds them."""
     statuses: dict[str, int] = {}
     for item in items:
         statuses[item["status"]] = statuses.get(item["status"], 0) + 1
+    bounded = [item for item in items if item.get("cost") is not None and item.get("lower_bound") is not None]
     return {
         "items": len(items),
         "certified": sum(1 for item in items if item["certified"]),
         "nodes": sum(item["nodes"] for item in items),
         "solve_s": sum(item["elapsed_s"] for item in items),
-        "elapsed_s": elapsed_s,
         "statuses": statuses,
+        "ran": sum(1 for item in items if item["status"] != "cancelled"),  # ended on their own
+        "bounded": len(bounded),  # items with both bounds: what the sums below add
+        "lower": sum(item["lower_bound"] for item in bounded),
+        "upper": sum(item["cost"] for item in bounded),
+        "gap_rel": max(((item["cost"] - item["lower_bound"]) / item["cost"] for item in bounded if item["cost"] > 0),
+                       default=0.0),
     }
+
+
+def merged_sums(parts: list[dict]) -> dict:
+    """item_sums of runs of items, added up (as item_sums of all of them, up to rounding)."""
+    statuses: dict[str, int] = {}
+    for part in parts:
+        for status, count in part["statuses"].items():
+            statuses[status] = statuses.get(status, 0) + count
+    merged = {name: sum(part[name] for part in parts)
+              for name in ("items", "certified", "nodes", "solve_s", "ran", "bounded", "lower", "upper")}
+    return {**merged, "statuses": statuses, "gap_rel": max((part["gap_rel"] for part in parts), default=0.0)}
+
+
+def stats_from(sums: dict, elapsed_s: float) -> dict:
+    """The result's ``stats`` from item_sums."""
+    return {"items": sums["items"], "certified": sums["certified"], "nodes": sums["nodes"], "solve_s": sums["solve_s"],
+            "elapsed_s": elapsed_s, "statuses": sums["statuses"]}
+
+
+def job_stats(items: list[dict], elapsed_s: float) -> dict:
+    return stats_from(item_sums(items), elapsed_s)
 
 
 def solve_job(job: dict, sink: ProgressSink | None = None, should_stop: StopCheck | None = None) -> dict:
@@ -162,6 +191,44 @@ def result_json(kind, result: dict) -> str | None:
         return None
 
 
+def streams_result(kind, options) -> bool:
+    """Whether the job's result is stored a run of items at a time (``result_fragment``) and
+    never assembled whole: for a kind whose result is its items in order plus members that depend
+    on the options and stats alone (``streamed_result``), unless a full certificate must gather
+    every item's proof."""
+    return kind.streamed_result and not (kind.certifies and options.certificate == "full")
+
+
+@functools.cache
+def _items_adapter(kind):
+    from pydantic import TypeAdapter
+
+    return TypeAdapter(kind.result_model.model_fields[kind.item_key].annotation)
+
+
+def result_fragment(kind, items: list[dict]) -> str | None:
+    """Items as the result model writes them inside its item list (comma-separated, no
+    brackets): the fragments of a streamed result, joined by commas between result_shell's two
+    halves, are byte for byte result_json of the result assembled whole. None if the model does
+    not take them."""
+    adapter = _items_adapter(kind)
+    try:
+        return adapter.dump_json(adapter.validate_python(items), by_alias=True).decode()[1:-1]
+    except ValueError:
+        return None
+
+
+def result_shell(kind, options, stats: dict) -> tuple[str, str] | None:
+    """The result's JSON before and after its items (streamed results); None if its model does
+    not write it, or the item list cannot be told apart."""
+    text = result_json(kind, kind.assemble(options, [], stats))
+    marker = f'"{kind.item_key}":[]'
+    if text is None or text.count(marker) != 1:
+        return None
+    head, _, tail = text.partition(marker)
+    return head + marker[:-1], "]" + tail
+
+
 def certificate_document(kind, data: Any, options, items: list[dict]) -> dict:
     """The certificate document (docs/certificate.md): the problem data and its hash, the options,
     and each item's claim (solution, cost, gap) with its proof, taken out of the item's
@@ -195,4 +262,5 @@ def parse_job(job: Any):
     return kind, parsed, options
 
 
-__all__ = ["parse_job", "solve_job", "solve_items", "job_stats", "assemble", "ItemProgress"]
+__all__ = ["parse_job", "solve_job", "solve_items", "job_stats", "assemble", "ItemProgress", "item_sums", "merged_sums",
+           "stats_from", "streams_result", "result_fragment", "result_shell"]

@@ -66,8 +66,11 @@ def _data_as_given(data: Any, items: list[dict]) -> Any:
 # which the job store keeps item by item so that a task reads only its chunk's); its certificate's
 # data are the job's (a kind whose claims are about what an earlier stage found, e.g.
 # reconstruction's points in the cameras it returns, states those instead).
+# streamed_result: its result is its items in order (under item_key) plus members that depend on
+# the options and stats alone, so a large job's result is stored a task's run of items at a time
+# and never assembled whole (batch.streams_result).
 OPTIONAL_MEMBERS: dict[str, Any] = {"certifies": True, "check_options": _no_check, "claimed_items": _every_item,
-                                    "chunk_key": None, "certificate_data": _data_as_given}
+                                    "chunk_key": None, "certificate_data": _data_as_given, "streamed_result": False}
 
 
 class Registry:

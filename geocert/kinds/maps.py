@@ -78,6 +78,7 @@ class MapKind:
 
     item_key = "maps"
     chunk_key = "maps"  # data["maps"][i] is item i: a task reads only its chunk's
+    streamed_result = True  # the result: its items, the norm and stats (batch.streams_result)
     chunk_size = 1
     options_type = MapOptions
     result_model = MapsResult

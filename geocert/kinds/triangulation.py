@@ -72,6 +72,7 @@ class TriangulationKind:
     description = "N-view triangulation: the 3D point minimising reprojection error, certified globally optimal."
     item_key = "tracks"
     chunk_key = "tracks"  # data["tracks"][i] is item i: a task reads only its chunk's
+    streamed_result = True  # the result: its items, the norm and stats (batch.streams_result)
     chunk_size = 100
     options_type = TriangulationOptions
     request_model = TriangulationJob

@@ -49,9 +49,9 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
             done.append((job_id, "failed"))
             continue
         missing = set(jobs.missing_items(job_id, meta["items_total"]))
-        chunks = [(start, stop) for start, stop in meta["chunks"] if missing.intersection(range(start, stop))]
+        chunks = [(start, stop) for start, stop in jobs.chunks(meta) if missing.intersection(range(start, stop))]
         if not chunks:  # every item stored, but the task that was to end it is gone
-            chunks = [tuple(meta["chunks"][-1])]
+            chunks = jobs.chunks(meta)[-1:]
         jobs.reopen_end(job_id)
         jobs.touch(job_id)  # give the re-queued tasks a full period before the next look
         for start, stop in chunks:

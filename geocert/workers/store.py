@@ -69,7 +69,7 @@ class JobStore:
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
             "id": job_id, "kind": kind, "owner": owner, "status": "queued", "created_at": now(), "started_at": None,
-            "finished_at": None, "items_total": items_total, "chunks": chunks,
+            "finished_at": None, "items_total": items_total, "chunk_size": chunk_size,
             "progress": {"nodes": 0, "open_boxes": 0, "lower_bound": None, "upper_bound": None, "gap_abs": None,
                          "gap_rel": None, "items_done": 0, "items_total": items_total,
                          "tracks_done": 0, "tracks_total": items_total, "elapsed_s": 0.0},  # tracks_*: deprecated names
@@ -81,6 +81,7 @@ class JobStore:
         pipe = self.r.pipeline()
         pipe.eval(self._ADMIT, 1, self.owner_key(owner, "active"), job_id, active_limit)
         pipe.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in meta.items() if k != "task_ids"})
+        meta["chunks"] = chunks  # not stored: every read of the job (each poll) would read them (JobStore.chunks)
         self._put_request(pipe, job_id, request, chunk_key, items_key)
         pipe.zadd(self.owner_key(owner, "jobs"), {job_id: meta["created_at"]})
         self.publish(job_id, "status", {"status": "queued"}, pipe)
@@ -90,6 +91,15 @@ class JobStore:
             self.delete(job_id)
             return None
         return meta
+
+    @staticmethod
+    def chunks(meta: dict) -> list[tuple[int, int]]:
+        """The job's chunks (start, stop), one task each: from its chunk size (a job stored by an
+        earlier version lists them)."""
+        if "chunks" in meta:
+            return [tuple(chunk) for chunk in meta["chunks"]]
+        total, size = meta["items_total"], meta["chunk_size"]
+        return [(start, min(start + size, total)) for start in range(0, total, size)]
 
     def get(self, job_id: str) -> dict | None:
         raw = self.r.hgetall(self.key(job_id))
@@ -206,10 +216,10 @@ class JobStore:
     # quarter (measured: 358 MiB of JSON kept as 95 MiB for 200,000 tracks).
     RESULT_COMPRESSION_LEVEL = 1  # zlib's fastest: most of the gain at a few ms per MB
 
-    def _compressed(self, job_id: str, meta: dict | None) -> bool:
-        """Whether the job's result is stored compressed (not, if stored before results were)."""
-        encoding = meta.get("result_encoding") if meta is not None else self.field(job_id, "result_encoding")
-        return encoding == "zlib"
+    def _encoding(self, job_id: str, meta: dict | None) -> str | None:
+        """How the job's result is stored: "zlib" (compressed), "zlib-fragments" (a streamed
+        result: save_fragment), None (plain JSON, stored before results were compressed)."""
+        return meta.get("result_encoding") if meta is not None else self.field(job_id, "result_encoding")
 
     RESULT_PIECE_BYTES = 1 << 16  # compressed bytes read at a time when a result is sent (about 4x that decompressed)
 
@@ -218,7 +228,10 @@ class JobStore:
         time (GETRANGE), so that sending a large result holds one piece, not the whole (None
         when there is none). A result removed while it is read ends with an error."""
         key = self.key(job_id, "result")
-        if not self._compressed(job_id, meta):
+        encoding = self._encoding(job_id, meta)
+        if encoding == "zlib-fragments":
+            return self._fragment_pieces(job_id)
+        if encoding != "zlib":
             text = self.r.get(key)
             return None if text is None else iter([text.encode()])
         length = self.binary.strlen(key)
@@ -235,9 +248,30 @@ class JobStore:
 
         return pieces()
 
+    def _fragment_pieces(self, job_id: str) -> Iterator[bytes] | None:
+        raw = self.binary.get(self.key(job_id, "result"))
+        if raw is None:
+            return None
+        head, tail, starts = json.loads(zlib.decompress(raw))
+
+        def pieces() -> Iterator[bytes]:
+            yield head.encode()
+            for number, start in enumerate(starts):
+                fragment = self.binary.hget(self.key(job_id, "fragments"), str(start))
+                if fragment is None:
+                    raise RuntimeError(f"the result of job {job_id} was removed while it was sent")
+                yield (b"," if number else b"") + zlib.decompress(fragment)
+            yield tail.encode()
+
+        return pieces()
+
     def result_text(self, job_id: str, meta: dict | None = None) -> str | None:
         """The stored result as JSON text (None when there is none), read in one piece."""
-        if self._compressed(job_id, meta):
+        encoding = self._encoding(job_id, meta)
+        if encoding == "zlib-fragments":
+            pieces = self._fragment_pieces(job_id)
+            return None if pieces is None else b"".join(pieces).decode()
+        if encoding == "zlib":
             raw = self.binary.get(self.key(job_id, "result"))
             return None if raw is None else zlib.decompress(raw).decode()
         return self.r.get(self.key(job_id, "result"))  # stored before results were compressed
@@ -328,18 +362,22 @@ class JobStore:
     return {sums, worst}
     """
 
-    def save_progress(self, job_id: str, start: int, progress: dict, items: dict[int, dict] | None = None) -> dict:
+    def save_progress(self, job_id: str, start: int, progress: dict, items: dict[int, dict] | None = None,
+                      fragment: tuple[int, dict, str] | None = None) -> dict:
         """Store the items given (index -> item) and the progress of the task that started at item
         ``start``, and return (and publish) the job's aggregate over all its tasks. Its
         ``items_done`` is the number of items stored, read after this call's items are written:
         progress never counts an item whose result is not stored (a task that dies loses only
-        items it had not counted)."""
+        items it had not counted). ``fragment``: see save_fragment (written in the same
+        transaction, so whoever sees the last item counted sees its fragment too)."""
         figures = ",".join(repr(float(v)) if math.isfinite(v := float(progress.get(name) or 0.0)) else "0.0"
                            for name in self._SUMS)
         gap = progress.get("gap_rel")
         pipe = self.r.pipeline()  # one round trip for the writes and reads, one for the aggregate
         if items:
             pipe.hset(self.key(job_id, "items"), mapping=self._packed(items))
+        if fragment is not None:
+            self.save_fragment(job_id, *fragment, pipe=pipe)
         pipe.eval(self._ADD_PROGRESS, 3, self.key(job_id, "chunkprogress"), self.key(job_id, "progressparts"),
                   self.key(job_id, "gaps"), str(start), figures, *self._SUMS,
                   repr(float(gap)) if gap is not None and math.isfinite(gap) else "")
@@ -372,15 +410,45 @@ class JobStore:
         pipe.execute()
         return aggregate
 
-    def save_items(self, job_id: str, items: dict[int, dict]) -> int:
+    def save_items(self, job_id: str, items: dict[int, dict], fragment: tuple[int, dict, str] | None = None) -> int:
         """Store items (index -> item; idempotent: a redelivered task overwrites the same fields,
-        so nothing is counted twice); returns how many items of the job are stored."""
+        so nothing is counted twice), and a fragment (save_fragment); returns how many items of
+        the job are stored."""
         pipe = self.r.pipeline()
         if items:
             pipe.hset(self.key(job_id, "items"), mapping=self._packed(items))
+        if fragment is not None:
+            self.save_fragment(job_id, *fragment, pipe=pipe)
         pipe.hlen(self.key(job_id, "items"))
         pipe.zadd(self.RUNNING, {job_id: now()})  # touch()
         return pipe.execute()[-2]
+
+    # A streamed result (batch.streams_result) is kept as its tasks wrote it: each task's run of
+    # items as one compressed fragment of the result's JSON (keyed by its first index), with the
+    # sums the end needs (batch.item_sums). The end then reads those sums, not the items, and the
+    # result is read a fragment at a time when it is sent: a large job's result is read once.
+    def save_fragment(self, job_id: str, start: int, sums: dict, text: str, pipe=None) -> None:
+        """Store the fragment of the result holding items ``start`` to ``start + sums["items"] - 1``
+        (a redelivered task overwrites its own)."""
+        target = pipe if pipe is not None else self.r.pipeline()
+        target.hset(self.key(job_id, "fragments"), str(start), zlib.compress(text.encode(), self.RESULT_COMPRESSION_LEVEL))
+        target.hset(self.key(job_id, "fragmentsums"), str(start), json.dumps(sums))
+        if pipe is None:
+            target.execute()
+
+    def fragment_plan(self, job_id: str, total: int) -> list[tuple[int, dict]] | None:
+        """The fragments that hold items 0 to ``total - 1`` once each, in order, with their sums;
+        None when the stored ones do not (a task redelivered with another split, a chunk queued
+        again by the reaper, an item stored without its fragment): the end then reads every item."""
+        stored = {int(start): json.loads(sums) for start, sums in self.r.hgetall(self.key(job_id, "fragmentsums")).items()}
+        plan, at = [], 0
+        while at < total:
+            sums = stored.get(at)
+            if sums is None or sums["items"] < 1:
+                return None
+            plan.append((at, sums))
+            at += sums["items"]
+        return plan if at == total else None
 
     def claim_end(self, job_id: str) -> bool:
         """Become the one caller that ends this job (``end``): the task that stored its last items,
@@ -401,14 +469,20 @@ class JobStore:
         return [self._unpacked(raw[str(index).encode()]) for index in range(total)]
 
     def end(self, job_id: str, status: str, result: dict | None = None, error: dict | None = None,
-            result_text: str | None = None) -> None:
+            result_text: str | None = None, fragments: tuple[str, str, list[int]] | None = None) -> None:
         """The job ends (the caller holds ``claim_end``): its status becomes ``status`` (one of
         TERMINAL) with its result or error, its working state is dropped, the end event is
         published and every key of it expires ``result_ttl_s`` from now. ``result_text``: the
         result as its kind's model writes it (``batch.result_json``), stored in place of our own
-        JSON of ``result`` and marked so (``result_form``) for the API to send as it is."""
+        JSON of ``result`` and marked so (``result_form``) for the API to send as it is.
+        ``fragments`` (head, tail, first indices): the result is the stored fragments between
+        that head and tail (batch.result_shell), kept as they are."""
         pipe = self.r.pipeline()
-        if result is not None:
+        if fragments is not None:
+            pipe.set(self.key(job_id, "result"), zlib.compress(json.dumps(list(fragments)).encode()))
+            pipe.hset(self.key(job_id), mapping={"result_form": json.dumps("model"),
+                                                  "result_encoding": json.dumps("zlib-fragments")})
+        elif result is not None:
             if result_text is not None:
                 pipe.hset(self.key(job_id), "result_form", json.dumps("model"))
             text = result_text if result_text is not None else json.dumps(result)
@@ -417,7 +491,9 @@ class JobStore:
         pipe.hset(self.key(job_id), mapping={"status": json.dumps(status), "finished_at": json.dumps(now()),
                                               "error": json.dumps(error)})
         pipe.delete(self.key(job_id, "items"), self.key(job_id, "chunkprogress"), self.key(job_id, "progressparts"),
-                    self.key(job_id, "gaps"))
+                    self.key(job_id, "gaps"), self.key(job_id, "fragmentsums"))
+        if fragments is None:
+            pipe.delete(self.key(job_id, "fragments"))
         pipe.srem(self.owner_key(self.field(job_id, "owner") or "", "active"), job_id)
         pipe.zrem(self.RUNNING, job_id)
         pipe.execute()
@@ -428,7 +504,7 @@ class JobStore:
         self.expire(job_id)
 
     _PARTS = ("", "request", "request:items", "result", "events", "cancel", "final", "items", "chunkprogress",
-              "progressparts", "gaps", "tasks")
+              "progressparts", "gaps", "tasks", "fragments", "fragmentsums")
 
     def expire(self, job_id: str) -> None:
         pipe = self.r.pipeline()

@@ -21,7 +21,8 @@ import traceback
 
 from geocert.settings import get_settings
 from geocert.solvers.core.geometry import InputError
-from geocert.batch import assemble, item_counts, job_stats, result_json, solve_items
+from geocert.batch import (assemble, item_counts, item_sums, merged_sums, result_fragment, result_json,
+                           result_shell, solve_items, stats_from, streams_result)
 from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
@@ -34,27 +35,46 @@ class ProgressPublisher:
     """Stores a task's items as they end and publishes its progress, both at most every
     ``interval`` seconds (and always at the last item), in the same round trip: the job's
     progress counts stored items only, so a task that dies never leaves progress counting items
-    that are not stored (they would be solved again, and progress would fall back)."""
+    that are not stored (they would be solved again, and progress would fall back).
 
-    def __init__(self, jobs: JobStore, job_id: str, start: int, interval: float):
+    With ``kind`` (a streamed result: batch.streams_result), the run of items the task solved is
+    also stored as one fragment of the result, with the store of its last item."""
+
+    def __init__(self, jobs: JobStore, job_id: str, start: int, interval: float, kind=None):
         self.jobs, self.job_id, self.start, self.interval = jobs, job_id, start, interval
         self.last = 0.0
         self.cancel_checked = 0.0
         self.cancelled = False
         self.unsaved: dict[int, dict] = {}
+        self.kind = kind
+        self.ended: list[dict] = []  # the task's items in order (streamed results only)
 
     def item_ended(self, index: int, item: dict) -> None:
         self.unsaved[index] = item
+        if self.kind is not None:
+            self.ended.append(item)
+
+    def _fragment(self) -> tuple[int, dict, str] | None:
+        """The task's fragment, once (None when stored already, or when the model refuses it:
+        the end then reads every item)."""
+        if self.kind is None or not self.ended:
+            return None
+        text = result_fragment(self.kind, self.ended)
+        fragment = None if text is None else (self.start, item_sums(self.ended), text)
+        self.kind, self.ended = None, []
+        return fragment
 
     def __call__(self, progress: dict) -> None:
-        if time.monotonic() - self.last >= self.interval or progress["items_done"] == progress["items_total"]:
+        last = progress["items_done"] == progress["items_total"]
+        if time.monotonic() - self.last >= self.interval or last:
             self.last = time.monotonic()
-            self.jobs.save_progress(self.job_id, self.start, progress, self.unsaved)
+            self.jobs.save_progress(self.job_id, self.start, progress, self.unsaved,
+                                    self._fragment() if last else None)
             self.unsaved = {}
 
     def flush(self) -> int:
-        """Store the items not stored yet; returns how many items of the job are stored."""
-        done = self.jobs.save_items(self.job_id, self.unsaved)
+        """Store the items not stored yet (and the fragment); returns how many items of the job are stored."""
+        done = self.jobs.save_items(self.job_id, self.unsaved, self._fragment())
         self.unsaved = {}
         return done
 
@@ -104,7 +124,8 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
         kind = get_kind(request["kind"])
         options = options_from(kind.options_type, request.get("options"))
         parsed = kind.parse(request["data"], items=range(start, stop))
-        publisher = ProgressPublisher(jobs, job_id, start, settings.progress_interval_s)
+        publisher = ProgressPublisher(jobs, job_id, start, settings.progress_interval_s,
+                                      kind if streams_result(kind, options) else None)
         began = time.monotonic()
         items = solve_items(kind, parsed, options, range(start, stop), publisher, publisher.should_stop,
                             stop_at=began + settings.chunk_time_budget_s, on_item=publisher.item_ended)
@@ -131,34 +152,53 @@ def end_with_result(jobs: JobStore, job_id: str, kind, options) -> None:
     stopped) with its result document. The caller holds the job's ``claim_end``. The whole
     request is read only when the result carries it (a full certificate holds the data)."""
     meta = jobs.fields(job_id, "items_total", "started_at", "created_at")
+    elapsed = time.time() - (meta["started_at"] or meta["created_at"])
+    if streams_result(kind, options) and _end_with_fragments(jobs, job_id, kind, options, meta["items_total"], elapsed):
+        return
     request = jobs.request(job_id) if kind.certifies and options.certificate == "full" else None
     items = jobs.all_items(job_id, meta["items_total"])
-    elapsed = time.time() - (meta["started_at"] or meta["created_at"])
-    stats = job_stats(items, elapsed)
+    sums = item_sums(items)
+    stats = stats_from(sums, elapsed)
+    result = assemble(kind, request, options, items, stats)
+    _end(jobs, job_id, sums, stats, result=result, result_text=result_json(kind, result))
+
+
+def _end_with_fragments(jobs: JobStore, job_id: str, kind, options, total: int, elapsed: float) -> bool:
+    """End a streamed result from its tasks' fragments and sums, reading no item; False (nothing
+    done) when the fragments do not hold every item once."""
+    plan = jobs.fragment_plan(job_id, total)
+    if plan is None:
+        return False
+    sums = merged_sums([part for _, part in plan])
+    stats = stats_from(sums, elapsed)
+    shell = result_shell(kind, options, stats)
+    if shell is None:
+        return False
+    _end(jobs, job_id, sums, stats, fragments=(*shell, [start for start, _ in plan]))
+    return True
+
+
+def _end(jobs: JobStore, job_id: str, sums: dict, stats: dict, **stored) -> None:
     # The last progress of each task may be throttled away or, after a cancel, stop short of
     # its items: the job's final progress is computed from the very items of the result.
-    progress = final_progress(items, stats)
-    result = assemble(kind, request, options, items, stats)
-    status = "cancelled" if any(item["status"] == "cancelled" for item in items) else "succeeded"
+    progress = final_progress(sums, stats)
+    status = "cancelled" if sums["statuses"].get("cancelled") else "succeeded"
     jobs.set_fields(job_id, progress=progress)
     jobs.publish(job_id, "progress", progress)
-    jobs.end(job_id, status, result=result, result_text=result_json(kind, result))
+    jobs.end(job_id, status, **stored)
     after_end(jobs, job_id)
 
 
-def final_progress(items: list[dict], stats: dict) -> dict:
-    """A finished job's progress, from its items: ``items_done`` counts the items that ran to an
-    end of their own (every status but ``cancelled``), ``nodes`` is ``stats.nodes``, the bounds
-    sum the lower bounds and costs of the items that have both."""
-    bounded = [item for item in items if item.get("cost") is not None and item.get("lower_bound") is not None]
-    lower = sum(item["lower_bound"] for item in bounded)
-    upper = sum(item["cost"] for item in bounded)
-    gaps = [(item["cost"] - item["lower_bound"]) / item["cost"] for item in bounded if item["cost"] > 0]
+def final_progress(sums: dict, stats: dict) -> dict:
+    """A finished job's progress, from its items' sums (batch.item_sums): ``items_done`` counts
+    the items that ran to an end of their own (every status but ``cancelled``), ``nodes`` is
+    ``stats.nodes``, the bounds sum the lower bounds and costs of the items that have both."""
+    bounded = sums["bounded"] > 0
     return {"nodes": stats["nodes"], "open_boxes": 0,
-            "lower_bound": lower if bounded else None, "upper_bound": upper if bounded else None,
-            "gap_abs": max(0.0, upper - lower) if bounded else None,
-            "gap_rel": max(gaps, default=0.0) if bounded else None,
-            **item_counts(sum(1 for item in items if item["status"] != "cancelled"), len(items)),
+            "lower_bound": sums["lower"] if bounded else None, "upper_bound": sums["upper"] if bounded else None,
+            "gap_abs": max(0.0, sums["upper"] - sums["lower"]) if bounded else None,
+            "gap_rel": sums["gap_rel"] if bounded else None,
+            **item_counts(sums["ran"], sums["items"]),
             "items_certified": stats["certified"],
             "elapsed_s": stats["elapsed_s"]}
 

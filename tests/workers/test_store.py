@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import redis
 
+from geocert.kinds import get_kind
 from geocert.workers.store import JobStore
 
 
@@ -140,3 +141,91 @@ class TestResultKeptCompressed:
         assert jobs.save_items(meta["id"], {i: items[i] for i in range(21, 40)}) == 40
         assert jobs.all_items(meta["id"], 40) == [items[i] for i in range(40)]
         assert jobs.r.hstrlen(jobs.key(meta["id"], "items"), "0") < len(json.dumps(items[0]))
+
+
+class TestStreamedResult:
+    """A streamed result (batch.streams_result) is stored as its tasks' runs of items, each one
+    compressed fragment with its sums: the end reads the sums, not the items, and the result
+    read back is byte for byte the result assembled whole."""
+
+    @staticmethod
+    def solved_items(count: int) -> tuple:
+        from geocert.batch import parse_job, solve_job
+
+        kind, _, options = parse_job(get_kind("triangulation").example)
+        one = solve_job(kind.example)["tracks"]
+        items = [dict(one[i % len(one)], nodes=i + 1) for i in range(count - 1)] + [kind.cancelled_item()]
+        return kind, options, items
+
+    def store_runs(self, jobs, job_id, kind, items, cuts) -> None:
+        from geocert.batch import item_sums, result_fragment
+
+        for begin, end in zip(cuts[:-1], cuts[1:]):
+            jobs.save_fragment(job_id, begin, item_sums(items[begin:end]), result_fragment(kind, items[begin:end]))
+
+    def test_fragments_join_to_the_result_assembled_whole(self, jobs, monkeypatch):
+        from geocert.batch import assemble, merged_sums, result_json, result_shell, stats_from
+
+        kind, options, items = self.solved_items(12)
+        meta = jobs.create("triangulation", request_of(12), 12, 5, "someone", chunk_key="tracks")
+        self.store_runs(jobs, meta["id"], kind, items, [0, 5, 9, 12])
+        plan = jobs.fragment_plan(meta["id"], 12)
+        assert [start for start, _ in plan] == [0, 5, 9]
+        stats = stats_from(merged_sums([sums for _, sums in plan]), 1.5)
+        assert stats["items"] == 12 and stats["nodes"] == sum(item["nodes"] for item in items)
+        assert stats["statuses"] == {"optimal": 11, "cancelled": 1}
+        jobs.end(meta["id"], "cancelled", fragments=(*result_shell(kind, options, stats), [0, 5, 9]))
+        whole = result_json(kind, assemble(kind, None, options, items, stats))
+        assert jobs.result_text(meta["id"]) == whole
+        assert b"".join(jobs.result_pieces(meta["id"])).decode() == whole
+        assert jobs.document(jobs.get(meta["id"]))["result"] == json.loads(whole)
+        assert jobs.r.exists(jobs.key(meta["id"], "items"), jobs.key(meta["id"], "fragmentsums")) == 0
+        jobs.delete(meta["id"])
+        assert jobs.r.exists(jobs.key(meta["id"], "fragments")) == 0
+
+    @pytest.mark.parametrize("cuts, plan", [
+        ([0, 5, 9, 12], [0, 5, 9]),
+        ([0, 5, 12], [0, 5]),
+        ([0, 5], None),  # items 5 to 11 without a fragment
+        ([5, 12], None),  # nothing from 0
+    ])
+    def test_a_plan_holds_every_item_once_or_is_none(self, jobs, cuts, plan):
+        kind, _, items = self.solved_items(12)
+        meta = jobs.create("triangulation", request_of(12), 12, 5, "someone", chunk_key="tracks")
+        self.store_runs(jobs, meta["id"], kind, items, cuts)
+        found = jobs.fragment_plan(meta["id"], 12)
+        assert (None if found is None else [start for start, _ in found]) == plan
+
+    def test_runs_that_overlap_are_no_plan(self, jobs):
+        kind, _, items = self.solved_items(12)
+        meta = jobs.create("triangulation", request_of(12), 12, 5, "someone", chunk_key="tracks")
+        self.store_runs(jobs, meta["id"], kind, items, [0, 7, 12])  # a first split ...
+        self.store_runs(jobs, meta["id"], kind, items, [0, 5])  # ... and a redelivered task's shorter run
+        assert jobs.fragment_plan(meta["id"], 12) is None  # 5 leads to no fragment; 7 is never reached
+
+    def test_reading_the_result_reads_its_fragments_once(self, jobs):
+        from geocert.batch import merged_sums, result_shell, stats_from
+
+        kind, options, items = self.solved_items(400)
+        meta = jobs.create("triangulation", request_of(400), 400, 100, "someone", chunk_key="tracks")
+        self.store_runs(jobs, meta["id"], kind, items, [0, 100, 200, 300, 400])
+        plan = jobs.fragment_plan(meta["id"], 400)
+        stats = stats_from(merged_sums([sums for _, sums in plan]), 1.0)
+        jobs.end(meta["id"], "cancelled", fragments=(*result_shell(kind, options, stats), [s for s, _ in plan]))
+        stored = sum(jobs.r.hstrlen(jobs.key(meta["id"], "fragments"), str(start)) for start, _ in plan)
+        before = output_bytes(jobs)
+        text = jobs.result_text(meta["id"])
+        read = output_bytes(jobs) - before
+        assert stored < read < stored + 2000 and stored < 0.2 * len(text)
+
+
+class TestJobRecord:
+    def test_the_record_a_poll_reads_does_not_grow_with_the_chunks(self, jobs):
+        small = jobs.create("triangulation", request_of(3), 3, 100, "someone", chunk_key="tracks")
+        large = jobs.create("triangulation", request_of(3), 200_000, 100, "someone", chunk_key="tracks")
+        size = lambda meta: sum(len(k) + len(v) for k, v in jobs.r.hgetall(jobs.key(meta["id"])).items())
+        assert size(large) < size(small) + 20  # 2,000 chunks: none of them in the record
+        assert large["chunks"][:2] == [(0, 100), (100, 200)] and len(large["chunks"]) == 2000
+        assert JobStore.chunks(jobs.get(large["id"])) == large["chunks"]
+        assert JobStore.chunks({"items_total": 250, "chunk_size": 100}) == [(0, 100), (100, 200), (200, 250)]
+        assert JobStore.chunks({"chunks": [[0, 7], [7, 9]]}) == [(0, 7), (7, 9)]  # as an earlier version stored them
