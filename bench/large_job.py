@@ -79,7 +79,9 @@ def main() -> None:
         read_result = output_bytes(redis_client) - before_result
         result_text_bytes = len(response.content)
         result = response.json()["result"]
-        stored_result = int(redis_client.strlen(f"geocert:job:{job_id}:result"))
+        fragments = f"geocert:job:{job_id}:fragments"  # a streamed result's (JobStore.save_fragment)
+        stored_result = int(redis_client.strlen(f"geocert:job:{job_id}:result")) + sum(
+            int(redis_client.hstrlen(fragments, field)) for field in redis_client.hkeys(fragments))
         certified = sum(1 for item in result["tracks"] if item["certified"]) if result else None
     growth = (api_peak - api_before) * 1024
     print(f"  status {document['status']}, {certified} of {args.tracks} certified")

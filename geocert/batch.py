@@ -89,20 +89,29 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
     ``on_item(index, item)`` sees each item as it ends, before the progress that counts it."""
     tracker = ItemProgress(total if total is not None else len(indices), sink, should_stop)
     items = []
-    for index in indices:
+    # A kind that solves many items at once (solve_batch) takes them a group at a time: the
+    # budget and a cancel are seen between groups, progress at each item of a group.
+    group = kind.batch_size if kind.solve_batch is not None else 1
+    for begin in range(0, len(indices), group):
         if stop_at is not None and items and not tracker.stopped and time.monotonic() > stop_at:
             break
+        chosen = indices[begin:begin + group]
         if tracker.stopped or (should_stop is not None and should_stop()):
             tracker.stopped = True
-            items.append(kind.cancelled_item())
-            if on_item is not None:
-                on_item(index, items[-1])
+            for index in chosen:  # never started: not counted as done
+                items.append(kind.cancelled_item())
+                if on_item is not None:
+                    on_item(index, items[-1])
             continue
-        item = kind.solve_item(parsed, index, options, tracker.engine_callback)
-        items.append(item)
-        if on_item is not None:
-            on_item(index, item)
-        tracker.finished(item)
+        if group == 1:
+            solved = [kind.solve_item(parsed, chosen[0], options, tracker.engine_callback)]
+        else:
+            solved = kind.solve_batch(parsed, list(chosen), options)
+        for index, item in zip(chosen, solved):
+            items.append(item)
+            if on_item is not None:
+                on_item(index, item)
+            tracker.finished(item)
     return items
 
 

@@ -66,11 +66,14 @@ def _data_as_given(data: Any, items: list[dict]) -> Any:
 # which the job store keeps item by item so that a task reads only its chunk's); its certificate's
 # data are the job's (a kind whose claims are about what an earlier stage found, e.g.
 # reconstruction's points in the cameras it returns, states those instead).
+# solve_batch(parsed, indices, options) -> documents: many items solved at once (as solve_item
+# would solve each, in order), batch_size of them at a time, when that shares work (triangulation).
 # streamed_result: its result is its items in order (under item_key) plus members that depend on
 # the options and stats alone, so a large job's result is stored a task's run of items at a time
 # and never assembled whole (batch.streams_result).
 OPTIONAL_MEMBERS: dict[str, Any] = {"certifies": True, "check_options": _no_check, "claimed_items": _every_item,
-                                    "chunk_key": None, "certificate_data": _data_as_given, "streamed_result": False}
+                                    "chunk_key": None, "certificate_data": _data_as_given, "streamed_result": False,
+                                    "solve_batch": None, "batch_size": 1}
 
 
 class Registry:

@@ -1,0 +1,55 @@
+"""batch.solve_items with a kind that solves many items at once (solve_batch): groups of
+batch_size in order, progress per item, a cancel or the time budget seen between groups."""
+
+from __future__ import annotations
+
+import time
+
+from geocert.batch import solve_items
+
+
+class CountingKind:
+    """Items are numbers; an item's document is its square. Records each batch it is given."""
+
+    def __init__(self, batch_size: int):
+        self.batch_size = batch_size
+        self.batches: list[list[int]] = []
+
+    def solve_batch(self, parsed, indices, options):
+        self.batches.append(list(indices))
+        return [{"value": parsed[i] ** 2, "status": "optimal", "certified": True, "nodes": 1, "cost": 1.0,
+                 "lower_bound": 1.0} for i in indices]
+
+    def solve_item(self, parsed, index, options, callback):
+        raise AssertionError("a batching kind is given batches")
+
+    @staticmethod
+    def cancelled_item():
+        return {"status": "cancelled", "certified": False, "nodes": 0, "cost": None, "lower_bound": None}
+
+
+class TestSolveBatch:
+    def test_groups_in_order_and_progress_per_item(self):
+        kind = CountingKind(batch_size=4)
+        seen, progress = [], []
+        items = solve_items(kind, list(range(20)), None, range(3, 13), sink=progress.append,
+                            on_item=lambda index, item: seen.append((index, item["value"])))
+        assert kind.batches == [[3, 4, 5, 6], [7, 8, 9, 10], [11, 12]]
+        assert [item["value"] for item in items] == [i * i for i in range(3, 13)]
+        assert seen == [(i, i * i) for i in range(3, 13)]
+        assert [p["items_done"] for p in progress] == list(range(1, 11))
+
+    def test_a_cancel_is_seen_between_groups(self):
+        kind = CountingKind(batch_size=4)
+        checks = iter([False, False, True])
+        progress = []
+        items = solve_items(kind, list(range(10)), None, range(10), sink=progress.append,
+                            should_stop=lambda: next(checks, True))
+        assert kind.batches == [[0, 1, 2, 3], [4, 5, 6, 7]]
+        assert [item["status"] for item in items] == ["optimal"] * 8 + ["cancelled"] * 2
+        assert progress[-1]["items_done"] == 8  # the cancelled were never started
+
+    def test_the_budget_stops_between_groups(self):
+        kind = CountingKind(batch_size=3)
+        items = solve_items(kind, list(range(10)), None, range(10), stop_at=time.monotonic() - 1)
+        assert kind.batches == [[0, 1, 2]] and len(items) == 3  # one group at least, then the caller goes on
