@@ -202,7 +202,7 @@ def _object(text: _Text, i: int, member) -> int:
 
 def _array_spans(text: _Text, i: int) -> tuple[array, int]:
     """The spans of the elements of the array at ``i`` (``[``), and where it ends."""
-    spans = array("q")
+    spans = array("i" if len(text) < 2**31 else "q")  # 4-byte offsets where they fit: 8 bytes an item
     i = _skip(text, _expect(text, i, "["))
     if text.char(i) == "]":
         return spans, i + 1

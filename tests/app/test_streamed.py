@@ -99,8 +99,8 @@ class TestSplitItems:
         finally:
             tracemalloc.stop()
         assert split is not None and split.count == 10000
-        # The spans (16 bytes an item), the head and a window or two (64 KiB): not the body's text.
-        assert peak < 16 * 10000 + 4 * streamed._AsciiBytes.WINDOW + 50_000 < 0.25 * len(body)
+        # The spans (8 bytes an item), the head and a window or two (64 KiB): not the body's text.
+        assert peak < 8 * 10000 + 4 * streamed._AsciiBytes.WINDOW + 50_000 < 0.25 * len(body)
 
 
 class TestUploadItems:
