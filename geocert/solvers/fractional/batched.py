@@ -36,9 +36,10 @@ from geocert.solvers.core.geometry import normalised_cameras
 from geocert.solvers.fractional import stacked
 from geocert.solvers.fractional.charts import Chart
 from geocert.solvers.fractional.options import TriangulationOptions
-from geocert.solvers.fractional.relaxation import FractionalProgram, complete_functionals, cost_unit, gamma_for
+from geocert.solvers.fractional.relaxation import FractionalProgram, cost_unit, gamma_for
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult
-from geocert.solvers.fractional.search import MAX_SCALE, branch_directions, depth_subspace, local_refine
+from geocert.solvers.fractional.search import (MAX_SCALE, ROOT_SUBSET, branch_directions, depth_subspace,
+                                               local_refine)
 from geocert.solvers.fractional.triangulation import _track_result, triangulate
 from geocert.solvers.verify import self_check, self_check_enabled
 from geocert.solvers.fractional.results import claim_of
@@ -75,17 +76,32 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
     groups: dict[int, list[int]] = defaultdict(list)
     for i, (views, points) in enumerate(tracks):
         groups[len(views)].append(i)
+    started = time.perf_counter()
     if run.max_residual is None:  # with a scope limit every track is solved alone (rare, not stacked)
+        entries: list[Entry] = []
         for n, members in groups.items():
+            if n > ROOT_SUBSET:
+                continue  # search.root_region bounds these by a subset of their views
             for start in range(0, len(members), MAX_GROUP):
                 chunk = members[start:start + MAX_GROUP]
-                started = time.perf_counter()
-                solved = _solve_group(cameras, [tracks[i] for i in chunk], n, run)
-                share = (time.perf_counter() - started) / len(chunk)
-                for i, result in zip(chunk, solved):
-                    if result is not None:
-                        result.elapsed_s = share
-                        results[i] = result
+                ended, ready = _prepare_group(cameras, [tracks[i] for i in chunk], n, run)
+                for i, result in zip(chunk, ended):
+                    results[i] = result
+                for entry in ready:
+                    entry.index = chunk[entry.index]
+                    entries.append(entry)
+        proofs = _root_regions(entries)
+        by_shape: dict[tuple[int, int], list] = defaultdict(list)
+        for entry, proof in zip(entries, proofs):
+            if proof is not None:
+                by_shape[(len(entry.points), len(entry.B))].append((entry, proof))
+        for (n, k), closing in by_shape.items():
+            for start in range(0, len(closing), MAX_GROUP):
+                for index, result in _root_nodes(closing[start:start + MAX_GROUP], k, run):
+                    results[index] = result
+    batched = [result for result in results if result is not None]
+    for result in batched:
+        result.elapsed_s = (time.perf_counter() - started) / len(batched)
     for i, result in enumerate(results):
         views, points = tracks[i]
         if result is None:
@@ -100,14 +116,15 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
     return results
 
 
-def _solve_group(all_cameras: np.ndarray, tracks: list, n: int, options: TriangulationOptions) -> list:
-    """Results of the tracks of one group (n views each) closed on this path; None for the rest."""
+def _prepare_group(all_cameras: np.ndarray, tracks: list, n: int, options: TriangulationOptions):
+    """search.prepare for the tracks of one group (n views each): (results of the tracks that end
+    here, None for the rest; the Entries of the tracks ready for a root region)."""
     G = len(tracks)
     out: list = [None] * G
     cams = all_cameras[np.array([list(views) for views, _ in tracks])]  # (G, n, 3, 4)
     points = np.array([np.asarray(p, dtype=float) for _, p in tracks])  # (G, n, 2)
     if n < 2 or points.shape != (G, n, 2) or not np.all(np.isfinite(points)):
-        return out
+        return out, []
     with np.errstate(all="ignore"):
         num, den, T, reference, ok = stacked._charts(cams, points)
         ok &= np.all(np.isfinite(num), axis=(1, 2, 3)) & np.all(np.isfinite(den), axis=(1, 2))
@@ -116,38 +133,107 @@ def _solve_group(all_cameras: np.ndarray, tracks: list, n: int, options: Triangu
         v0, ok_lm = _refine_l2l2(num, den, T[:, 3], v0, ok)
         ok &= ok_lm
     norm = options.norm
-    prepared = []  # (index, chart, v0, scale, upper, gamma, B)
-    for g in np.flatnonzero(ok):
-        exact = np.zeros(n, dtype=bool)
-        exact[reference[g]] = True
-        program = FractionalProgram(num[g].copy(), den[g].copy(), exact, T[g, 3][None, :].copy(), norm)
+    exact = np.zeros((G, n), dtype=bool)
+    exact[np.arange(G), reference] = True
+    cost0 = _l2l2_cost(num, den, T[:, 3], v0)[0]
+    ok &= np.isfinite(cost0)
+    programs: dict[int, FractionalProgram] = {}
+    if norm != "L2L2":  # refined again under the norm, as search.prepare does (scipy's LM, per track)
+        for g in np.flatnonzero(ok):
+            programs[g] = FractionalProgram(num[g].copy(), den[g].copy(), exact[g], T[g, 3][None, :].copy(), norm)
+            v0[g], cost0[g] = local_refine(programs[g], v0[g])
+        ok &= np.isfinite(cost0)
+    trivial = ok & (cost0 <= options.abs_gap)  # within tolerance of the trivial bound 0
+    for g in np.flatnonzero(trivial):
+        program = programs.get(g) or FractionalProgram(num[g].copy(), den[g].copy(), exact[g], T[g, 3][None, :].copy(),
+                                                       norm)
         chart = Chart(program, T[g], int(reference[g]), False)
-        start = v0[g]
-        cost0 = program.cost(start)
-        if not math.isfinite(cost0):
+        out[g] = _track_result(chart, cams[g], points[g], v0[g], options, "optimal", 0.0, 0, None)
+    ok &= ~trivial
+    with np.errstate(all="ignore"):
+        factor = np.minimum(MAX_SCALE, 1.0 / np.sqrt(cost0) if norm == "L2L2" else 1.0 / cost0)
+        scaled = num * factor[:, None, None, None]
+        upper = _costs(scaled, den, T[:, 3], v0, norm)
+    ok &= np.isfinite(upper)
+    B = _branching(den, exact, ok)
+    entries = []
+    for g in np.flatnonzero(ok):
+        program = FractionalProgram(scaled[g], den[g].copy(), exact[g], T[g, 3][None, :].copy(), norm)
+        chart = Chart(program, T[g], int(reference[g]), False)
+        entries.append(Entry(g, chart, v0[g], float(factor[g]), float(upper[g]), gamma_for(float(upper[g]), norm),
+                             B[g], cams[g], points[g]))
+    return out, entries
+
+
+@dataclasses.dataclass
+class Entry:
+    """A track ready for its root region: search.prepare's state after the scaling."""
+
+    index: int  # in its group, then in the batch
+    chart: Chart  # its program scaled (residuals times ``factor``)
+    v0: np.ndarray  # the incumbent (chart coordinates)
+    factor: float
+    upper: float  # the incumbent's scaled cost
+    gamma: float
+    B: np.ndarray  # the branched functionals (search.branch_directions)
+    cams: np.ndarray
+    points: np.ndarray
+
+
+def _costs(num, den, linear, v, norm: str) -> np.ndarray:
+    """FractionalProgram.cost of every track at ``v`` (inf outside the domain)."""
+    V = np.concatenate([v, np.ones((len(v), 1))], axis=1)
+    g = np.einsum("gnk,gk->gn", den, V)
+    r = np.einsum("gnmk,gk->gnm", num, V) / g[..., None]
+    lin = np.einsum("gk,gk->g", linear, V)
+    inside = np.all(g > 0, axis=1) & ((lin >= 0) | (lin >= -1e-12 * np.linalg.norm(linear, axis=1)
+                                                    * np.linalg.norm(V, axis=1)))
+    if norm == "L2L2":
+        cost = np.sum(r * r, axis=(1, 2))
+    elif norm == "L2L1":
+        cost = np.sum(np.sqrt(np.sum(r * r, axis=2)), axis=1)
+    else:
+        cost = np.sum(np.abs(r), axis=(1, 2))
+    cost = np.where(inside, cost, np.inf)
+    return np.where(np.isfinite(cost), cost, np.inf)
+
+
+def _branching(den: np.ndarray, exact: np.ndarray, ok: np.ndarray) -> list:
+    """search.branch_directions(program, depth_subspace(program)) for every track: the
+    depth subspace's rank k, then k best-conditioned depth gradients by greedy Gram-Schmidt.
+    Tracks where the greedy choice stops short (a gradient below 0.25 after projection, or
+    none left) take search's own functions."""
+    G, n = exact.shape
+    gradients = den[~exact].reshape(G, n - 1, 4)[..., :3]
+    out: list = [None] * G
+    with np.errstate(all="ignore"):
+        singular = np.linalg.svd(gradients, compute_uv=False)
+        rank = np.sum(singular > 1e-12 * np.maximum(1.0, singular[:, :1]), axis=1)
+        sizes = np.linalg.norm(gradients, axis=2)
+        candidates = gradients / np.where(sizes > 0, sizes, 1.0)[..., None]
+        residuals = candidates.copy()
+        used = ~(sizes > 0)
+        chosen = np.zeros((G, 3, 3))
+        fine = ok & (rank > 0)
+        every = np.arange(G)
+        for j in range(int(rank.max(initial=0))):
+            going = j < rank
+            norms = np.where(used, -1.0, np.linalg.norm(residuals, axis=2))
+            best = np.argmax(norms, axis=1)
+            top = norms[every, best]
+            fine &= ~going | (top >= 0.25)
+            chosen[every, j] = candidates[every, best]
+            basis = residuals[every, best] / np.where(top > 0, top, 1.0)[:, None]
+            used[every, best] |= going
+            residuals = residuals - np.einsum("gi,gj->gij", np.einsum("gij,gj->gi", residuals, basis), basis)
+    for g in range(G):
+        if not ok[g]:
             continue
-        if norm != "L2L2":
-            start, cost0 = local_refine(program, start)
-        if cost0 <= options.abs_gap:  # within tolerance of the trivial bound 0
-            out[g] = _track_result(chart, cams[g], points[g], start, options, "optimal", 0.0, 0, None)
-            continue
-        factor = min(MAX_SCALE, 1.0 / math.sqrt(cost0) if norm == "L2L2" else 1.0 / cost0)
-        program.rescale(factor)
-        upper = program.cost(start)
-        if not math.isfinite(upper):
-            continue
-        B = branch_directions(program, depth_subspace(program))
-        prepared.append((g, chart, start, factor, upper, gamma_for(upper, norm), B))
-    # Root regions, then root relaxations, by number of branched functionals.
-    by_k: dict[int, list] = defaultdict(list)
-    for entry in prepared:
-        by_k[len(entry[6])].append(entry)
-    for k, entries in by_k.items():
-        roots = _root_regions(entries)
-        closing = [(entry, root) for entry, root in zip(entries, roots) if root is not None]
-        if closing:
-            for g, result in _root_nodes(closing, cams, points, k, options):
-                out[g] = result
+        if fine[g]:
+            out[g] = chosen[g, :rank[g]].copy()
+        else:
+            program = FractionalProgram(np.zeros((n, 2, 4)), den[g], exact[g], np.zeros((0, 4)), "L2L2")
+            out[g] = branch_directions(program, depth_subspace(program))
     return out
 
 
@@ -208,35 +294,84 @@ def _refine_l2l2(num, den, linear, v, ok, iterations: int = 40) -> tuple[np.ndar
 
 # --- the root region ------------------------------------------------------------------------
 
+def _bucket(n: int) -> int:
+    """Root regions of tracks of nearby lengths are bounded together (the shorter padded)."""
+    return n if n <= 4 else 5 if n <= 6 else 7 if n <= 9 else 10 if n <= 14 else 15 if n <= 22 else 23
+
+
 def _root_regions(entries: list) -> list:
     """Each track's RootProof, proven as search.root_region and prove_root prove it (the same
     region, inflated by 1 + 1e-6, the same claimed box and padding), or None where not proven
     (the track is then solved alone). The 2d bounds of a track are found by the batched barrier
     method instead of 2d Clarabel solves; each is the safe bound of its own dual vector."""
+    roots: list = [None] * len(entries)
+    buckets: dict[int, list[int]] = defaultdict(list)
+    for i, entry in enumerate(entries):
+        buckets[_bucket(len(entry.points))].append(i)
+    for members in buckets.values():
+        for start in range(0, len(members), 2 * MAX_GROUP):
+            chunk = members[start:start + 2 * MAX_GROUP]
+            for i, root in zip(chunk, _root_regions_of([entries[i] for i in chunk])):
+                roots[i] = root
+    return roots
+
+
+def _root_regions_of(entries: list) -> list:
     G = len(entries)
-    n = len(entries[0][1].program.den)
-    programs = [entry[1].program for entry in entries]
-    F = np.array([complete_functionals(entry[6]) for entry in entries])  # (G, D, D)
-    gamma = np.array([entry[5] for entry in entries]) * (1 + 1e-6)
-    num = np.array([p.num for p in programs])
-    den = np.array([p.den for p in programs])
-    linear = np.array([p.linear for p in programs])  # (G, 1, 4)
-    per_observation = np.concatenate([gamma[:, None, None, None] * den[:, :, None, :], num], axis=2)
-    E = np.concatenate([linear, per_observation.reshape(G, 3 * n, 4)], axis=1)
+    sizes = [len(entry.points) for entry in entries]
+    n = max(sizes)
+    F = _functionals([entry.B for entry in entries])  # (G, D, D)
+    gamma = np.array([entry.gamma for entry in entries]) * (1 + 1e-6)
+    # Shorter tracks padded with constant cones (1, 0, 0): no coefficient, no effect on x.
+    E = np.zeros((G, 1 + 3 * n, 4))
+    E[:, 1::3, 3] = 1.0
+    for g, entry in enumerate(entries):
+        program = entry.chart.program
+        E[g, 0] = program.linear[0]
+        per_observation = np.concatenate([gamma[g] * program.den[:, None, :], program.num], axis=1)
+        E[g, 1:1 + 3 * sizes[g]] = per_observation.reshape(-1, 4)
     A, b = -E[..., :-1], E[..., -1]
-    cones = ConeSpec(nonneg=1, soc=(3,) * n)
     Q = np.empty((G, 2 * D, D))
     Q[:, 0::2], Q[:, 1::2] = F, -F
     P = 2 * D
-    x0 = np.repeat(np.array([entry[2] for entry in entries]), P, axis=0)
+    x0 = np.repeat(np.array([entry.v0 for entry in entries]), P, axis=0)
     with np.errstate(all="ignore"):
-        x, z, solved = _barrier(Q.reshape(G * P, D), np.repeat(A, P, axis=0), np.repeat(b, P, axis=0), cones, x0)
+        x, z, solved = _barrier(Q.reshape(G * P, D), np.repeat(A, P, axis=0), np.repeat(b, P, axis=0), n, x0)
         x, z, solved = x.reshape(G, P, D), z.reshape(G, P, -1), solved.reshape(G, P).all(axis=1)
+    roots: list = [None] * G
+    for size in sorted(set(sizes)):  # each length proven on its own rows
+        rows = 1 + 3 * size
+        group = np.flatnonzero(np.array(sizes) == size)
+        for g, root in zip(group, _proven_roots(Q[group], A[group, :rows], b[group, :rows], x[group],
+                                                z[group, :, :rows], solved[group], F[group], gamma[group], size)):
+            roots[g] = root
+    return roots
+
+
+def _functionals(Bs: list) -> np.ndarray:
+    """relaxation.complete_functionals of every B: its rows, then an orthonormal basis of the
+    complement of their span (from one batched SVD per number of rows)."""
+    F = np.empty((len(Bs), D, D))
+    by_k: dict[int, list[int]] = defaultdict(list)
+    for g, B in enumerate(Bs):
+        by_k[len(B)].append(g)
+    for k, members in by_k.items():
+        stack = np.array([Bs[g] for g in members])
+        F[members, :k] = stack
+        if k < D:
+            F[members, k:] = np.linalg.svd(stack)[2][:, k:D]
+    return F
+
+
+def _proven_roots(Q, A, b, x, z, solved, F, gamma, n) -> list:
+    """search.prove_root for every track, from the barrier's points and dual vectors."""
+    cones = ConeSpec(nonneg=1, soc=(3,) * n)
+    with np.errstate(all="ignore"):
         primal = np.einsum("gpd,gpd->gp", Q, x)
         dual = -np.einsum("gpr,gr->gp", z, b)
         values = np.minimum(primal, dual)
         lo, hi = values[:, 0::2], -values[:, 1::2]
-        solved &= np.all(np.isfinite(values), axis=1) & np.all(lo <= hi, axis=1)
+        solved = solved & np.all(np.isfinite(values), axis=1) & np.all(lo <= hi, axis=1)
         pad = 0.5 * (hi - lo) + 1e-6 * (1 + np.abs(lo) + np.abs(hi))
         claim_lo, claim_hi = lo - pad, hi + pad
         transform = np.linalg.inv(F)
@@ -246,70 +381,82 @@ def _root_regions(entries: list) -> list:
         solved &= np.all((claim_lo < lower) & (upper < claim_hi) & (lower <= upper), axis=1)
         pad = 1e-7 * (1 + np.abs(lower) + np.abs(upper))
     roots = []
-    for g in range(G):
-        if not solved[g]:
-            roots.append(None)
-            continue
+    for g in range(len(Q)):
         roots.append(RootProof(float(gamma[g]), F[g], claim_lo[g], claim_hi[g], lower[g] - pad[g], upper[g] + pad[g],
-                               list(z[g])))
+                               list(z[g])) if solved[g] else None)
     return roots
 
 
-def _barrier(q: np.ndarray, A: np.ndarray, b: np.ndarray, cones: ConeSpec, x: np.ndarray,
-             t_end: float = 1e8, t_start: float = 1.0, factor: float = 30.0, final: float = 1e-6):
-    """``min q'x`` subject to ``b - A x`` in ``cones`` (a nonnegative orthant and second-order
-    cones) for P problems at once, ``q`` (P, n), ``A`` (P, rows, n), ``b`` (P, rows), by the
-    log-barrier method from strictly feasible points ``x`` (P, n). Returns (x, z, ok): the
-    last central point, its dual point ``z = -grad(barrier)(b - A x) / t`` (strictly inside the
-    dual cone; its duality gap is about deg / t_end) and whether the problem's iterates stayed
-    finite and strictly feasible. Nothing here needs to be exact: a bound is only ever the safe
-    bound of the dual returned (cones.safe_lower_bound), which holds whatever z is."""
-    P, rows, nv = A.shape
-    nonneg = cones.nonneg
-    runs = _runs(nonneg, cones.soc)  # (start, count, size): consecutive cones of one size
-    At = A.transpose(0, 2, 1)
+def _barrier(q: np.ndarray, A: np.ndarray, b: np.ndarray, n: int, x: np.ndarray,
+             t_end: float = 1e8, t_start: float = 1.0, factor: float = 100.0, final: float = 1e-6):
+    """``min q'x`` subject to ``b - A x`` in the cones of a residual region (one nonnegative row,
+    then ``n`` second-order cones of size 3) for P problems in 3 unknowns at once, ``q`` (P, 3),
+    ``A`` (P, rows, 3), ``b`` (P, rows), by the log-barrier method from strictly feasible points
+    ``x`` (P, 3). Returns (x, z, ok): the last central point, its dual point
+    ``z = -grad(barrier)(b - A x) / t`` (strictly inside the dual cone; its duality gap is about
+    deg / t_end) and whether the problem's iterates stayed finite and strictly feasible.
+
+    Nothing here needs to be exact: a bound is only ever the safe bound of the dual returned
+    (cones.safe_lower_bound), which holds whatever z is. Arrays are held component-major
+    (A as (3, P, rows)) so that every product is a handful of elementwise operations over all
+    problems (numpy's stacked 3x3 matrix products are ten times slower)."""
+    P = len(q)
+    Ac = np.ascontiguousarray(A.transpose(2, 0, 1))  # (3, P, rows)
+    pairs = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
     def barrier(s):
-        """Barrier value and strict feasibility per problem."""
-        sn = s[:, :nonneg]
-        feasible = np.all(sn > 0, axis=1)
-        value = -np.sum(np.log(np.where(sn > 0, sn, 1.0)), axis=1)
-        for start, count, size in runs:
-            S = s[:, start:start + count * size].reshape(len(s), count, size)
-            w = S[..., 0] ** 2 - np.sum(S[..., 1:] ** 2, axis=2)
-            good = (S[..., 0] > 0) & (w > 0)
-            feasible &= np.all(good, axis=1)
-            value -= np.sum(np.log(np.where(good, w, 1.0)), axis=1)
+        lin = s[:, 0]
+        S = s[:, 1:].reshape(len(s), n, 3)
+        w = S[..., 0] ** 2 - S[..., 1] ** 2 - S[..., 2] ** 2
+        good = (S[..., 0] > 0) & (w > 0)
+        feasible = (lin > 0) & np.all(good, axis=1)
+        value = -np.log(np.where(lin > 0, lin, 1.0)) - np.sum(np.log(np.where(good, w, 1.0)), axis=1)
         return value, feasible
 
-    def derivatives(s, A, At):
-        """grad phi (p, rows) and A' hess(phi) A (p, n, n) of the problems given: hess(phi) is
-        diag(weight) plus, per cone, 4 (J S)(J S)' / w^2."""
-        p = len(s)
-        gphi = np.empty_like(s)
-        weight = np.empty_like(s)
-        sn = s[:, :nonneg]
-        gphi[:, :nonneg] = -1.0 / sn
-        weight[:, :nonneg] = 1.0 / (sn * sn)
-        H = None
-        for start, count, size in runs:
-            block = slice(start, start + count * size)
-            S = s[:, block].reshape(p, count, size)
-            w = S[..., 0] ** 2 - np.sum(S[..., 1:] ** 2, axis=2)
-            JS = S.copy()
-            JS[..., 1:] *= -1.0
-            gphi[:, block] = (-2.0 * JS / w[..., None]).reshape(p, -1)
-            wt = np.empty_like(S)
-            wt[..., 0] = -2.0 / w
-            wt[..., 1:] = (2.0 / w)[..., None]
-            weight[:, block] = wt.reshape(p, -1)
-            u = (At[:, :, block].reshape(p, nv, count, size) * ((2.0 / w)[..., None] * JS)[:, None]).sum(axis=3)
-            part = u @ u.transpose(0, 2, 1)
-            H = part if H is None else H + part
-        full = (At * weight[:, None, :]) @ A
-        return gphi, full if H is None else H + full
+    def times(Ac, x):  # A x, (p, rows)
+        return Ac[0] * x[:, 0:1] + Ac[1] * x[:, 1:2] + Ac[2] * x[:, 2:3]
 
-    s = b - (A @ x[..., None])[..., 0]
+    def derivatives(s, Ac):
+        """grad phi (p, rows) and the 6 entries of A' hess(phi) A: hess(phi) is diag(weight)
+        plus, per cone, 4 (J S)(J S)' / w^2."""
+        p = len(s)
+        lin = s[:, 0]
+        S = s[:, 1:].reshape(p, n, 3)
+        w = S[..., 0] ** 2 - S[..., 1] ** 2 - S[..., 2] ** 2
+        JS = S.copy()
+        JS[..., 1:] *= -1.0
+        gphi = np.empty_like(s)
+        gphi[:, 0] = -1.0 / lin
+        gphi[:, 1:] = (-2.0 / w[..., None] * JS).reshape(p, -1)
+        weight = np.empty_like(s)
+        weight[:, 0] = 1.0 / (lin * lin)
+        wt = np.empty_like(S)
+        wt[..., 0] = -2.0 / w
+        wt[..., 1:] = (2.0 / w)[..., None]
+        weight[:, 1:] = wt.reshape(p, -1)
+        coef = (-gphi[:, 1:]).reshape(p, n, 3)  # 2 J S / w
+        u = [np.sum(Ac[a][:, 1:].reshape(p, n, 3) * coef, axis=2) for a in range(3)]  # (p, n) each
+        H = {}
+        for a, c in pairs:
+            H[a, c] = np.sum(Ac[a] * weight * Ac[c], axis=1) + np.sum(u[a] * u[c], axis=1)
+        return gphi, H
+
+    def newton(H, grad):
+        """-H^-1 grad for symmetric 3x3 H (cofactors)."""
+        h00, h01, h02, h11, h12, h22 = (H[pair] for pair in pairs)
+        c00 = h11 * h22 - h12 * h12
+        c01 = h02 * h12 - h01 * h22
+        c02 = h01 * h12 - h02 * h11
+        c11 = h00 * h22 - h02 * h02
+        c12 = h01 * h02 - h00 * h12
+        c22 = h00 * h11 - h01 * h01
+        det = h00 * c00 + h01 * c01 + h02 * c02
+        g0, g1, g2 = grad[:, 0], grad[:, 1], grad[:, 2]
+        dx = np.stack([c00 * g0 + c01 * g1 + c02 * g2, c01 * g0 + c11 * g1 + c12 * g2,
+                       c02 * g0 + c12 * g1 + c22 * g2], axis=1)
+        return -dx / det[:, None]
+
+    s = b - times(Ac, x)
     phi, ok = barrier(s)
     t = t_start
     while True:
@@ -320,28 +467,27 @@ def _barrier(q: np.ndarray, A: np.ndarray, b: np.ndarray, cones: ConeSpec, x: np
             sel = np.flatnonzero(active)
             if not len(sel):
                 break
-            As, Ats, ss, xs = A[sel], At[sel], s[sel], x[sel]
-            gphi, H = derivatives(ss, As, Ats)
-            grad = t * q[sel] - (Ats @ gphi[..., None])[..., 0]
-            try:
-                dx = -np.linalg.solve(H, grad[..., None])[..., 0]
-            except np.linalg.LinAlgError:
-                return x, None, np.zeros(P, dtype=bool)
-            slope = np.einsum("pn,pn->p", grad, dx)
+            every = len(sel) == P
+            As = Ac if every else Ac[:, sel]
+            ss, xs = s[sel], x[sel]
+            gphi, H = derivatives(ss, As)
+            grad = t * q[sel] - np.stack([np.sum(As[a] * gphi, axis=1) for a in range(3)], axis=1)
+            dx = newton(H, grad)
+            slope = np.sum(grad * dx, axis=1)
             going = np.isfinite(slope) & (-slope > 2 * threshold)
             active[sel[~going]] = False
             if not going.any():
                 break
-            sel, As, ss, xs, dx, slope = sel[going], As[going], ss[going], xs[going], dx[going], slope[going]
+            sel, As, ss, xs, dx, slope = sel[going], As[:, going], ss[going], xs[going], dx[going], slope[going]
             qs = q[sel]
-            ds = -(As @ dx[..., None])[..., 0]
-            f0 = t * np.einsum("pn,pn->p", qs, xs) + phi[sel]
+            ds = -times(As, dx)
+            f0 = t * np.sum(qs * xs, axis=1) + phi[sel]
             alpha = np.ones(len(sel))
             pending = np.ones(len(sel), dtype=bool)
             for _ in range(60):
                 s_new = ss + alpha[:, None] * ds
                 phi_new, feasible = barrier(s_new)
-                f_new = t * np.einsum("pn,pn->p", qs, xs + alpha[:, None] * dx) + phi_new
+                f_new = t * np.sum(qs * (xs + alpha[:, None] * dx), axis=1) + phi_new
                 accept = pending & feasible & (f_new <= f0 + 0.25 * alpha * slope)
                 took = sel[accept]
                 x[took] = xs[accept] + alpha[accept, None] * dx[accept]
@@ -357,27 +503,15 @@ def _barrier(q: np.ndarray, A: np.ndarray, b: np.ndarray, cones: ConeSpec, x: np
         if last:
             break
         t = min(t * factor, t_end)
-    gphi, _ = derivatives(s, A, At)
+    gphi, _ = derivatives(s, Ac)
     z = -gphi / t
     ok &= np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(x), axis=1)
     return x, z, ok
 
 
-def _runs(start: int, soc: tuple[int, ...]) -> list[tuple[int, int, int]]:
-    """The second-order cones as runs (start row, count, size) of consecutive cones of one size."""
-    runs: list[list[int]] = []
-    for size in soc:
-        if runs and runs[-1][2] == size:
-            runs[-1][1] += 1
-        else:
-            runs.append([start, 1, size])
-        start += size
-    return [tuple(run) for run in runs]
-
-
 # --- the root node --------------------------------------------------------------------------
 
-def _root_nodes(closing: list, cams, points, k: int, options: TriangulationOptions) -> list:
+def _root_nodes(closing: list, k: int, options: TriangulationOptions) -> list:
     """The one-node search of ``triangulate`` (bnb.branch_and_bound's root node, bounded as
     BoxProblem._bound bounds it) for tracks with a proven root region: (index, TrackResult) of
     those whose root closes the gap. The relaxations are assembled for all of them at once
@@ -387,14 +521,14 @@ def _root_nodes(closing: list, cams, points, k: int, options: TriangulationOptio
     entries = [entry for entry, _ in closing]
     proofs = [root for _, root in closing]
     G = len(entries)
-    num = np.array([entry[1].program.num for entry in entries])
-    den = np.array([entry[1].program.den for entry in entries])
-    linear = np.array([entry[1].program.linear for entry in entries])
+    num = np.array([entry.chart.program.num for entry in entries])
+    den = np.array([entry.chart.program.den for entry in entries])
+    linear = np.array([entry.chart.program.linear for entry in entries])
     F = np.array([proof.functionals for proof in proofs])
     bounds = np.array([[proof.lower, proof.upper] for proof in proofs])  # (G, 2, D)
     box = bounds[:, :, :k].copy()
-    ub = np.array([entry[4] for entry in entries])
-    reference = np.array([entry[1].reference for entry in entries])
+    ub = np.array([entry.upper for entry in entries])
+    reference = np.array([entry.chart.reference for entry in entries])
     with np.errstate(all="ignore"):
         E, cones, q, lower, upper, transform, built = stacked.leaf_relaxations(
             num, den, linear, F, k, bounds, box, ub, norm, reference)
@@ -412,9 +546,12 @@ def _root_nodes(closing: list, cams, points, k: int, options: TriangulationOptio
         Z[g, 0], X[g] = result.z, result.x
     with np.errstate(all="ignore"):
         safe = stacked._safe_bounds(np.broadcast_to(q, (G, 1, cols)), A, b, Z, cones, lower, upper, transform)[:, 0]
+    with np.errstate(all="ignore"):
+        relaxed = _costs(num, den, linear[:, 0], X[:, :D], norm)  # the relaxation's points' costs
     done = []
     for g in np.flatnonzero(solved & np.isfinite(safe) & (safe >= 0)):
-        index, chart, v0, factor, upper_bound, gamma, B = entries[g]
+        entry = entries[g]
+        chart, v0, factor, upper_bound, B = entry.chart, entry.v0, entry.factor, entry.upper, entry.B
         program = chart.program
         unit = cost_unit(factor, norm)
         abs_gap = options.abs_gap * unit
@@ -424,9 +561,10 @@ def _root_nodes(closing: list, cams, points, k: int, options: TriangulationOptio
 
         root = Box(box[g, 0].copy(), box[g, 1].copy())
         incumbent = v0
-        candidate = _candidate(program, X[g, :D], v0)
+        inside = math.isfinite(relaxed[g])
+        candidate = X[g, :D] if inside else _candidate(program, X[g, :D], v0)
         if candidate is not None:  # bnb's use of the relaxation's point
-            value = program.cost(candidate)
+            value = float(relaxed[g]) if inside else program.cost(candidate)
             if value < upper_bound - tolerance(upper_bound):
                 candidate, value = local_refine(program, candidate)
             if value < upper_bound:
@@ -441,8 +579,8 @@ def _root_nodes(closing: list, cams, points, k: int, options: TriangulationOptio
         if options.certificate == "full":
             certificate.proof = encode(SearchProof(factor, proofs[g], [], root, [(root, leaf)]))
         lower_bound = min(bound, upper_bound) / unit
-        done.append((index, _track_result(chart, cams[index], points[index], incumbent, options, "optimal",
-                                          lower_bound, 1, certificate)))
+        done.append((entry.index, _track_result(chart, entry.cams, entry.points, incumbent, options, "optimal",
+                                                lower_bound, 1, certificate)))
     return done
 
 
