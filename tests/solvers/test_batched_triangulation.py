@@ -38,12 +38,19 @@ def solve_both(cameras, tracks, options):
     return ours, theirs
 
 
-def assert_same(ours, theirs):
+# How much higher than triangulate's a cost may be: L2L2 is smooth and both refinements converge
+# to its minimum; L2L1 and L1L1 have kinks (a residual at 0), where two refinements from starts a
+# few ulps apart stop at points whose costs differ in the 8th digit (measured: at most 6.4e-9
+# relative on these tracks; both within the certified gap, 1e-3).
+EXCESS = {"L2L2": 1e-9, "L2L1": 2e-8, "L1L1": 2e-8}
+
+
+def assert_same(ours, theirs, norm="L2L2"):
     assert len(ours) == len(theirs)
     for i, (a, b) in enumerate(zip(ours, theirs)):
         assert (a.status, a.certified) == (b.status, b.certified), i
         if b.cost is not None:
-            assert a.cost <= b.cost * (1 + 1e-9), (i, a.cost, b.cost)
+            assert a.cost <= b.cost * (1 + EXCESS[norm]), (i, a.cost, b.cost)
             assert a.lower_bound <= a.cost and a.gap == a.cost - a.lower_bound
         if b.certified:
             assert a.cost - a.lower_bound <= max(1e-7, 1e-3 * a.cost) * (1 + 1e-12)
@@ -73,11 +80,11 @@ def verified(cameras, tracks, results, options) -> set[int]:
 def test_dinosaur_tracks_as_triangulate_returns_them(dinosaur, norm):
     cameras, tracks = dinosaur
     ours, theirs = solve_both(cameras, tracks, TriangulationOptions(norm=norm))
-    assert_same(ours, theirs)
+    assert_same(ours, theirs, norm)
     assert sum(r.certified for r in ours) >= 295
-    # The cost is triangulate's to about 1e-9 (a converged refinement may find it a little lower).
+    # Nor much lower: the same optimum (a refinement converged further may find it a little lower).
     costs = np.array([(a.cost, b.cost) for a, b in zip(ours, theirs) if b.cost is not None])
-    assert np.all(np.abs(costs[:, 0] - costs[:, 1]) <= 1e-8 * costs[:, 1])
+    assert np.all(costs[:, 1] - costs[:, 0] <= 1e-8 * costs[:, 1])
     assert {len(views) for views, _ in tracks} >= {2, 3, 4, 5, 6, 7, 8}
 
 
@@ -139,7 +146,7 @@ def test_hard_cases_in_one_batch_as_triangulate_returns_them(norm):
     cameras, tracks = hard_scene()
     options = TriangulationOptions(norm=norm, certificate="full")
     ours, theirs = solve_both(cameras, tracks, options)
-    assert_same(ours, theirs)
+    assert_same(ours, theirs, norm)
     assert sum(r.certified for r in ours[:24]) == 24
     certified = {i for i, r in enumerate(ours) if r.certified}
     verified(cameras, tracks, ours, options)  # raises on any certified claim it refuses

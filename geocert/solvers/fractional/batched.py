@@ -130,18 +130,23 @@ def _prepare_group(all_cameras: np.ndarray, tracks: list, n: int, options: Trian
         ok &= np.all(np.isfinite(num), axis=(1, 2, 3)) & np.all(np.isfinite(den), axis=(1, 2))
         v0, ok_start = _dlt(num)
         ok &= ok_start
-        v0, ok_lm = _refine_l2l2(num, den, T[:, 3], v0, ok)
-        ok &= ok_lm
-    norm = options.norm
+        norm = options.norm
+        if norm == "L2L2":
+            v0, ok_lm = _refine_l2l2(num, den, T[:, 3], v0, ok)
+            ok &= ok_lm
     exact = np.zeros((G, n), dtype=bool)
     exact[np.arange(G), reference] = True
     cost0 = _l2l2_cost(num, den, T[:, 3], v0)[0]
     ok &= np.isfinite(cost0)
     programs: dict[int, FractionalProgram] = {}
-    if norm != "L2L2":  # refined again under the norm, as search.prepare does (scipy's LM, per track)
+    if norm != "L2L2":
+        # Refined as search.prepare refines them, per track (scipy's LM under L2L2, then under the
+        # norm): on these costs' kinks a refinement converged further stops elsewhere, at a cost
+        # that can differ in the 8th digit.
         for g in np.flatnonzero(ok):
             programs[g] = FractionalProgram(num[g].copy(), den[g].copy(), exact[g], T[g, 3][None, :].copy(), norm)
-            v0[g], cost0[g] = local_refine(programs[g], v0[g])
+            start, _ = local_refine(programs[g], v0[g], "L2L2")
+            v0[g], cost0[g] = local_refine(programs[g], start)
         ok &= np.isfinite(cost0)
     trivial = ok & (cost0 <= options.abs_gap)  # within tolerance of the trivial bound 0
     for g in np.flatnonzero(trivial):
