@@ -346,9 +346,25 @@ def _refine_l2l2(num, den, linear, v, ok, iterations: int = 40) -> tuple[np.ndar
 
 # --- the root region ------------------------------------------------------------------------
 
-def _bucket(n: int) -> int:
-    """Root regions of tracks of nearby lengths are bounded together (the shorter padded)."""
-    return n if n <= 4 else 5 if n <= 6 else 7 if n <= 9 else 10 if n <= 14 else 15 if n <= 22 else 23
+def _buckets(sizes: list[int]) -> list[list[int]]:
+    """Positions of the tracks whose root regions are bounded together: by length, shortest
+    first, a bucket closing once it holds MIN_BUCKET tracks, or a few and the next length is
+    half as long again (every pass of the barrier costs some fifty numpy calls whatever the
+    bucket's size, and a track padded to the bucket's length costs in proportion to it)."""
+    order = sorted(range(len(sizes)), key=lambda i: sizes[i])
+    buckets: list[list[int]] = []
+    current: list[int] = []
+    for position, i in enumerate(order):
+        current.append(i)
+        following = sizes[order[position + 1]] if position + 1 < len(order) else None
+        if following is None or (following != sizes[i] and (
+                len(current) >= MIN_BUCKET or (len(current) >= 16 and following > 1.5 * sizes[current[0]]))):
+            buckets.append(current)
+            current = []
+    return buckets
+
+
+MIN_BUCKET = 96
 
 
 def _root_regions(entries: list) -> list:
@@ -357,10 +373,7 @@ def _root_regions(entries: list) -> list:
     (the track is then solved alone). The 2d bounds of a track are found by the batched barrier
     method instead of 2d Clarabel solves; each is the safe bound of its own dual vector."""
     roots: list = [None] * len(entries)
-    buckets: dict[int, list[int]] = defaultdict(list)
-    for i, entry in enumerate(entries):
-        buckets[_bucket(len(entry.points))].append(i)
-    for members in buckets.values():
+    for members in _buckets([len(entry.points) for entry in entries]):
         for start in range(0, len(members), 2 * MAX_GROUP):
             chunk = members[start:start + 2 * MAX_GROUP]
             for i, root in zip(chunk, _root_regions_of([entries[i] for i in chunk])):
