@@ -129,17 +129,24 @@ def _batched(cameras, tracks, groups: dict, options: TriangulationOptions, resul
     """Fill ``results`` with the tracks this path closes: search.prepare per group, the root
     regions of every track, then the root nodes per (views, branched functionals)."""
     entries: list[Entry] = []
+    charted = []  # (members, the group's charts and starts)
     for n, members in groups.items():
         if n > ROOT_SUBSET:
             continue  # search.root_region bounds these by a subset of their views
         for start in range(0, len(members), MAX_GROUP):
             chunk = members[start:start + MAX_GROUP]
-            ended, ready = _prepare_group(cameras, [tracks[i] for i in chunk], n, options)
-            for i, result in zip(chunk, ended):
-                results[i] = result
-            for entry in ready:
-                entry.index = chunk[entry.index]
-                entries.append(entry)
+            group = _chart_group(cameras, [tracks[i] for i in chunk], n)
+            if group is not None:
+                charted.append((chunk, group))
+    if options.norm == "L2L2":
+        _refine_groups([group for _, group in charted])
+    for chunk, group in charted:
+        ended, ready = _prepare_group(group, options)
+        for i, result in zip(chunk, ended):
+            results[i] = result
+        for entry in ready:
+            entry.index = chunk[entry.index]
+            entries.append(entry)
     if options.norm == "L2L2":
         proofs = _root_regions(entries)
     else:
@@ -158,24 +165,68 @@ def _batched(cameras, tracks, groups: dict, options: TriangulationOptions, resul
                 results[index] = result
 
 
-def _prepare_group(all_cameras: np.ndarray, tracks: list, n: int, options: TriangulationOptions):
-    """search.prepare for the tracks of one group (n views each): (results of the tracks that end
-    here, None for the rest; the Entries of the tracks ready for a root region)."""
+def _chart_group(all_cameras: np.ndarray, tracks: list, n: int) -> dict | None:
+    """The charts and DLT starts of one group's tracks (n views each), None for data this path
+    does not take."""
     G = len(tracks)
-    out: list = [None] * G
     cams = all_cameras[np.array([list(views) for views, _ in tracks])]  # (G, n, 3, 4)
     points = np.array([np.asarray(p, dtype=float) for _, p in tracks])  # (G, n, 2)
     if n < 2 or points.shape != (G, n, 2) or not np.all(np.isfinite(points)):
-        return out, []
+        return None
     with np.errstate(all="ignore"):
         num, den, T, reference, ok = stacked._charts(cams, points)
         ok &= np.all(np.isfinite(num), axis=(1, 2, 3)) & np.all(np.isfinite(den), axis=(1, 2))
         v0, ok_start = _dlt(num)
-        ok &= ok_start
-        norm = options.norm
-        if norm == "L2L2":
-            v0, ok_lm = _refine_l2l2(num, den, T[:, 3], v0, ok)
-            ok &= ok_lm
+    return {"cams": cams, "points": points, "num": num, "den": den, "T": T, "reference": reference,
+            "ok": ok & ok_start, "v0": v0}
+
+
+def _refine_groups(groups: list[dict]) -> None:
+    """_refine_l2l2 on the starts of every group, groups of nearby lengths together (views
+    padded with a residual of 0 and a depth of 1: no cost, no derivative)."""
+    sizes = [group["num"].shape[1] for group in groups]
+    # Buckets of whole groups, by length, shortest first (as _buckets forms them for tracks).
+    order = sorted(range(len(groups)), key=lambda g: sizes[g])
+    bucket: list[int] = []
+    for position, g in enumerate(order):
+        bucket.append(g)
+        count = sum(len(groups[h]["num"]) for h in bucket)
+        following = sizes[order[position + 1]] if position + 1 < len(order) else None
+        if following is None or count >= MIN_BUCKET or following > 1.5 * sizes[bucket[0]]:
+            _refine_padded([groups[h] for h in bucket])
+            bucket = []
+
+
+def _refine_padded(groups: list[dict]) -> None:
+    n = max(group["num"].shape[1] for group in groups)
+    num, den, linear, v0, ok = [], [], [], [], []
+    for group in groups:
+        G, own = group["num"].shape[:2]
+        padded_num = np.zeros((G, n, 2, 4))
+        padded_den = np.zeros((G, n, 4))
+        padded_den[:, :, 3] = 1.0
+        padded_num[:, :own], padded_den[:, :own] = group["num"], group["den"]
+        num.append(padded_num), den.append(padded_den), linear.append(group["T"][:, 3])
+        v0.append(group["v0"]), ok.append(group["ok"])
+    with np.errstate(all="ignore"):
+        v, good = _refine_l2l2(np.concatenate(num), np.concatenate(den), np.concatenate(linear),
+                               np.concatenate(v0), np.concatenate(ok))
+    start = 0
+    for group in groups:
+        G = len(group["num"])
+        group["v0"], group["ok"] = v[start:start + G], good[start:start + G]
+        start += G
+
+
+def _prepare_group(group: dict, options: TriangulationOptions):
+    """search.prepare for the tracks of one group (n views each) from their charts and starts
+    (refined under L2L2): (results of the tracks that end here, None for the rest; the Entries
+    of the tracks ready for a root region)."""
+    cams, points, num, den, T = group["cams"], group["points"], group["num"], group["den"], group["T"]
+    reference, ok, v0 = group["reference"], group["ok"].copy(), group["v0"].copy()
+    G, n = den.shape[:2]
+    out: list = [None] * G
+    norm = options.norm
     exact = np.zeros((G, n), dtype=bool)
     exact[np.arange(G), reference] = True
     cost0 = _l2l2_cost(num, den, T[:, 3], v0)[0]
