@@ -536,7 +536,7 @@ def _barrier(q: np.ndarray, A: np.ndarray, b: np.ndarray, n: int, x: np.ndarray,
         w = S[..., 0] ** 2 - S[..., 1] ** 2 - S[..., 2] ** 2
         good = (S[..., 0] > 0) & (w > 0)
         feasible = (lin > 0) & np.all(good, axis=1)
-        value = -np.log(np.where(lin > 0, lin, 1.0)) - np.sum(np.log(np.where(good, w, 1.0)), axis=1)
+        value = -np.log(np.where(lin > 0, lin, 1.0)) - np.log(np.where(good, w, 1.0)).sum(axis=1)
         return value, feasible
 
     def times(Ac, x):  # A x, (p, rows)
@@ -561,10 +561,11 @@ def _barrier(q: np.ndarray, A: np.ndarray, b: np.ndarray, n: int, x: np.ndarray,
         wt[..., 1:] = (2.0 / w)[..., None]
         weight[:, 1:] = wt.reshape(p, -1)
         coef = (-gphi[:, 1:]).reshape(p, n, 3)  # 2 J S / w
-        u = [np.sum(Ac[a][:, 1:].reshape(p, n, 3) * coef, axis=2) for a in range(3)]  # (p, n) each
+        u = [(Ac[a][:, 1:].reshape(p, n, 3) * coef).sum(axis=2) for a in range(3)]  # (p, n) each
+        weighted = [Ac[a] * weight for a in range(3)]
         H = {}
         for a, c in pairs:
-            H[a, c] = np.sum(Ac[a] * weight * Ac[c], axis=1) + np.sum(u[a] * u[c], axis=1)
+            H[a, c] = (weighted[a] * Ac[c]).sum(axis=1) + (u[a] * u[c]).sum(axis=1)
         return gphi, H
 
     def newton(H, grad):
@@ -594,26 +595,27 @@ def _barrier(q: np.ndarray, A: np.ndarray, b: np.ndarray, n: int, x: np.ndarray,
             if not len(sel):
                 break
             every = len(sel) == P
-            As = Ac if every else Ac[:, sel]
-            ss, xs = s[sel], x[sel]
+            As, ss, xs, qs = (Ac, s, x, q) if every else (Ac[:, sel], s[sel], x[sel], q[sel])
             gphi, H = derivatives(ss, As)
-            grad = t * q[sel] - np.stack([np.sum(As[a] * gphi, axis=1) for a in range(3)], axis=1)
+            grad = t * qs - np.stack([(As[a] * gphi).sum(axis=1) for a in range(3)], axis=1)
             dx = newton(H, grad)
-            slope = np.sum(grad * dx, axis=1)
+            slope = (grad * dx).sum(axis=1)
             going = np.isfinite(slope) & (-slope > 2 * threshold)
             active[sel[~going]] = False
             if not going.any():
                 break
-            sel, As, ss, xs, dx, slope = sel[going], As[:, going], ss[going], xs[going], dx[going], slope[going]
-            qs = q[sel]
+            if not going.all():
+                sel, As, ss, xs, qs = sel[going], As[:, going], ss[going], xs[going], qs[going]
+                dx, slope = dx[going], slope[going]
+            ss, xs = ss.copy(), xs.copy()  # (views of s and x when every problem goes on)
             ds = -times(As, dx)
-            f0 = t * np.sum(qs * xs, axis=1) + phi[sel]
+            f0 = t * (qs * xs).sum(axis=1) + phi[sel]
             alpha = np.ones(len(sel))
             pending = np.ones(len(sel), dtype=bool)
             for _ in range(60):
                 s_new = ss + alpha[:, None] * ds
                 phi_new, feasible = barrier(s_new)
-                f_new = t * np.sum(qs * (xs + alpha[:, None] * dx), axis=1) + phi_new
+                f_new = t * (qs * (xs + alpha[:, None] * dx)).sum(axis=1) + phi_new
                 accept = pending & feasible & (f_new <= f0 + 0.25 * alpha * slope)
                 took = sel[accept]
                 x[took] = xs[accept] + alpha[accept, None] * dx[accept]
