@@ -676,6 +676,7 @@ def _root_nodes(closing: list, k: int, options: TriangulationOptions) -> list:
         safe = stacked._safe_bounds(np.broadcast_to(q, (G, 1, cols)), A, b, Z, cones, lower, upper, transform)[:, 0]
     with np.errstate(all="ignore"):
         relaxed = _costs(num, den, linear[:, 0], X[:, :D], norm)  # the relaxation's points' costs
+    to_charts = np.linalg.inv(np.array([entry.chart.T for entry in entries]))  # triangulate's inv(chart.T)
     done = []
     for g in np.flatnonzero(solved & np.isfinite(safe) & (safe >= 0)):
         entry = entries[g]
@@ -701,7 +702,7 @@ def _root_nodes(closing: list, k: int, options: TriangulationOptions) -> list:
         if not bound >= upper_bound - tolerance(upper_bound):
             continue  # not closed at the root: the track is solved alone
         leaf = LeafProof(root, float(ub[g]), "dual", Z[g, 0].copy(), bound)
-        to_chart = np.linalg.inv(chart.T)
+        to_chart = to_charts[g]
         certificate = SearchCertificate(SCOPE, chart.reference, (B @ to_chart[:3]).tolist(), to_chart[3].tolist(),
                                         root.lo.tolist(), root.hi.tolist(), tolerance(upper_bound) / unit, True, 1)
         if options.certificate == "full":
