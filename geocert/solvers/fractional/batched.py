@@ -27,9 +27,9 @@ centre at infinity, a start outside the domain, a root region not proven, ...) i
 ``triangulate`` itself.
 
 Measured (bench/triangulation.py, all 4,983 Dinosaur tracks under L2L2, CPU ms a track, median,
-on a shared machine at load 1 to 5): in chunks of 500, 1.11 to 1.14 against 3.9 to 4.0 for
-triangulate track by track and 1.05 to 1.14 for OpenCV DLT + LM (0.99x to 1.06x); in chunks of
-100, 1.73 to 1.92 against 3.75 to 3.90 and 1.19 to 1.20 (each batched stage has a cost per
+on a shared machine at load 1 to 5, last runs at 742b228/c25c52f): in chunks of 500, 0.89 against
+4.11 for triangulate track by track and 1.02 for OpenCV DLT + LM (0.87x; earlier runs 0.99x to
+1.06x); in chunks of 100, 1.38 against 3.90 and 0.90 (1.53x; each batched stage has a cost per
 group, whatever its size). A batched barrier for the root relaxation too was tried and not
 kept: its ~50 Newton passes of stacked 7x7 to 31x31 systems cost more than Clarabel's solves
 (0.86 against about 0.4 ms a track).
