@@ -6,9 +6,13 @@ Prints, in one run and side by side:
   2. on a 200-track sample, SCIP at the same tolerance (per-track wall time, model building
      included, capped at 10 s a track; its box is +-0.05 around the DLT+LM point, a help), and OpenCV DLT followed by Levenberg-Marquardt (how often its point is behind a
      camera, or costs more than the certified optimum);
-  3. the whole L2L2 batch through a running service (`geocert serve`, 2 workers), submit to result.
+  3. the whole L2L2 batch through a running service (`geocert serve`, 2 workers), submit to result;
+  4. per norm, side by side on every track: the batched solver (fractional.batched.triangulate_many,
+     called on chunks of --chunk tracks as the service's kind calls it) against triangulate track by
+     track, and (L2L2) OpenCV DLT + LM, CPU time per track.
 
     .venv/bin/python -m bench.triangulation [--norms L2L2,L2L1,L1L1] [--sample 200] [--no-scip] [--no-service]
+                                            [--chunk 500]
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ import numpy as np
 from bench import machine_speed_ms
 from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.core.geometry import norm_cost
+from geocert.solvers.fractional.batched import triangulate_many
 from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, triangulate
 
 DINOSAUR = Path(__file__).resolve().parents[2] / "shared" / "data" / "oxford_dinosaur"
@@ -56,6 +61,55 @@ def solve_all(cameras, tracks, norm: str, indices) -> dict:
         certified += result.certified
         results[i] = result
     return {"times": times, "cpu": cpu, "nodes": nodes, "certified": certified, "results": results}
+
+
+def solve_batched(cameras, tracks, norm: str, chunk: int) -> dict:
+    """Every track through triangulate_many in chunks of ``chunk`` consecutive tracks: each
+    chunk's CPU and wall time shared by its tracks (what a track costs in a batch)."""
+    options = TriangulationOptions(norm=norm, rel_gap=1e-3)
+    cpu, wall, results = [], [], []
+    for start in range(0, len(tracks), chunk):
+        part = tracks[start:start + chunk]
+        started, started_cpu = time.perf_counter(), time.process_time()
+        results += triangulate_many(cameras, [(t.views, t.points) for t in part], options)
+        share_cpu, share = (time.process_time() - started_cpu) / len(part), (time.perf_counter() - started) / len(part)
+        cpu += [share_cpu] * len(part)
+        wall += [share] * len(part)
+    return {"cpu": cpu, "wall": wall, "results": results}
+
+
+def dlt_lm_all(cameras, tracks) -> list[float]:
+    """OpenCV DLT + LM's CPU time on every track."""
+    from bench.baselines import dlt_lm
+
+    cpu = []
+    for track in tracks:
+        start = time.process_time()
+        dlt_lm(cameras[track.views], track.points)
+        cpu.append(time.process_time() - start)
+    return cpu
+
+
+def side_by_side(cameras, tracks, norm: str, ours: dict, chunk: int) -> None:
+    batched = solve_batched(cameras, tracks, norm, chunk)
+    theirs = [ours["results"][i] for i in range(len(tracks))]
+    same = sum((a.status, a.certified) == (b.status, b.certified) for a, b in zip(batched["results"], theirs))
+    alone = sum(r.nodes != 1 for r in batched["results"])  # not closed at the root: solved by triangulate
+    rows = [("batched", batched["cpu"]), ("per-track", ours["cpu"])]
+    if norm == "L2L2":
+        rows.append(("DLT + LM", dlt_lm_all(cameras, tracks)))
+    print(f"\n{norm} side by side on all {len(tracks)} tracks, CPU ms per track (batched: chunks of {chunk}, each "
+          f"chunk's CPU shared by its tracks; {alone} tracks ended off the root path; status and certified as "
+          f"triangulate's for {same}/{len(tracks)}; certified {sum(r.certified for r in batched['results'])}):")
+    print(f"  {'solver':10} {'median':>8} {'p95':>8} {'p99':>8} {'mean':>8} {'total s':>8}")
+    for name, values in rows:
+        c = [1e3 * v for v in percentiles(values)]
+        print(f"  {name:10} {c[0]:8.3f} {c[1]:8.3f} {c[2]:8.3f} {1e3 * np.mean(values):8.3f} {np.sum(values):8.2f}")
+    if norm == "L2L2":
+        dlt = np.median(rows[2][1])
+        print(f"  ratios of medians to DLT + LM: batched {np.median(batched['cpu']) / dlt:.2f}x, per-track "
+              f"{np.median(ours['cpu']) / dlt:.2f}x (target 2x); batched wall total {np.sum(batched['wall']):.2f} s; "
+              f"load average {load()}")
 
 
 def scip_sample(cameras, tracks, norm: str, sample, ours: dict) -> dict:
@@ -154,6 +208,7 @@ def main() -> None:
     parser.add_argument("--no-scip", action="store_true")
     parser.add_argument("--no-service", action="store_true")
     parser.add_argument("--workers", default="2", help="comma-separated worker counts, e.g. 1,2 (each a run)")
+    parser.add_argument("--chunk", type=int, default=500, help="tracks per triangulate_many call (side by side)")
     args = parser.parse_args()
 
     cameras, tracks = load_dinosaur(DINOSAUR)
@@ -208,6 +263,8 @@ def main() -> None:
                 for workers, wall in walls.items():
                     if workers != 1:
                         print(f"Throughput {workers} workers / 1 worker: {walls[1] / wall:.2f}x (target 1.8x with 2)")
+    for norm, ours in solved.items():
+        side_by_side(cameras, tracks, norm, ours, args.chunk)
     print(f"\nMachine speed at the end (the same loop): {machine_speed_ms():.0f} ms; load average {load()}")
 
 
