@@ -194,3 +194,18 @@ def test_the_batched_refinement_reaches_scipys_minimum(dinosaur):
             assert ours[g] <= theirs * (1 + 1e-10), (n, g, ours[g], theirs)
             compared += 1
     assert compared >= 150
+
+
+@pytest.mark.parametrize("norm, index", [("L1L1", 3433), ("L1L1", 3542), ("L2L1", 3542)])
+def test_a_root_node_claim_holds_when_the_verifier_rebuilds_the_track_alone(norm, index):
+    """The root node's bound is computed on stacked arrays; the per-item verifier rebuilds the
+    track's chart and relaxation alone, whose last bits differ. On these tracks (solved in their
+    chunk of 500) the bound as computed was 2e-11 to 5e-10 above what the verifier recomputes from
+    the same dual, and was refused: the claim sits LEAF_MARGIN below it."""
+    cameras, loaded = load_dinosaur(DINOSAUR)
+    start = index - index % 500
+    chunk = [(track.views, track.points) for track in loaded[start:start + 500]]
+    options = TriangulationOptions(norm=norm, certificate="full")
+    results = batched.triangulate_many(cameras, chunk, options)
+    assert results[index - start].certified
+    verified(cameras, chunk, results, options)  # raises at a claim refused
