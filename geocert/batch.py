@@ -106,7 +106,7 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
         if group == 1:
             solved = [kind.solve_item(parsed, chosen[0], options, tracker.engine_callback)]
         else:
-            solved = kind.solve_batch(parsed, list(chosen), options)
+            solved = kind.solve_batch(parsed, list(chosen), options, tracker.engine_callback)
         for index, item in zip(chosen, solved):
             items.append(item)
             if on_item is not None:

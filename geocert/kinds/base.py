@@ -66,8 +66,9 @@ def _data_as_given(data: Any, items: list[dict]) -> Any:
 # which the job store keeps item by item so that a task reads only its chunk's); its certificate's
 # data are the job's (a kind whose claims are about what an earlier stage found, e.g.
 # reconstruction's points in the cameras it returns, states those instead).
-# solve_batch(parsed, indices, options) -> documents: many items solved at once (as solve_item
-# would solve each, in order), batch_size of them at a time, when that shares work (triangulation).
+# solve_batch(parsed, indices, options, callback) -> documents: many items solved at once (as
+# solve_item would solve each, in order), batch_size of them at a time, when that shares work
+# (triangulation); ``callback`` as solve_item's, for what runs long inside.
 # streamed_result: its result is its items in order (under item_key) plus members that depend on
 # the options and stats alone, so a large job's result is stored a task's run of items at a time
 # and never assembled whole (batch.streams_result).

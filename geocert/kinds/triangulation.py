@@ -73,7 +73,10 @@ class TriangulationKind:
     item_key = "tracks"
     chunk_key = "tracks"  # data["tracks"][i] is item i: a task reads only its chunk's
     streamed_result = True  # the result: its items, the norm and stats (batch.streams_result)
-    chunk_size = 100
+    # Tracks are solved together (solvers.fractional.batched): most of a track's work is shared
+    # by the tracks of a group, about 0.9 ms a track in groups of 500 against 1.4 in groups of 100.
+    chunk_size = 500
+    batch_size = 500
     options_type = TriangulationOptions
     request_model = TriangulationJob
     result_model = TriangulationResult
@@ -133,16 +136,27 @@ class TriangulationKind:
     def solve_item(self, parsed: ParsedTracks, index: int, options: TriangulationOptions, callback) -> dict:
         from geocert.solvers.fractional.triangulation import triangulate  # the conic solver, only to solve
 
+        views, points = parsed.tracks[index]
+        return self._document(parsed, views, points, triangulate(parsed.cameras[views], points, options, callback),
+                              options)
+
+    @staticmethod
+    def _document(parsed: ParsedTracks, views, points, result: TrackResult, options: TriangulationOptions) -> dict:
         from geocert.solvers.core.determinacy import safely
         from geocert.solvers.fractional import determinacy
 
-        views, points = parsed.tracks[index]
-        result = triangulate(parsed.cameras[views], points, options, callback)
         document = track_document(result, options.detail)
-        if options.detail == "full":  # brief: not computed (a third of a track's time on the Dinosaur)
+        if options.detail == "full":  # brief: not computed (0.6 ms a Dinosaur track, more than its solve)
             document["determinacy"] = safely(determinacy.track, parsed.cameras[views], points, result.point,
                                              result.at_infinity, result.cost, result.lower_bound)
         return document
+
+    def solve_batch(self, parsed: ParsedTracks, indices: list[int], options: TriangulationOptions, callback) -> list[dict]:
+        from geocert.solvers.fractional.batched import triangulate_many  # the conic solver, only to solve
+
+        tracks = [parsed.tracks[index] for index in indices]
+        results = triangulate_many(parsed.cameras, tracks, options, callback)
+        return [self._document(parsed, views, points, result, options) for (views, points), result in zip(tracks, results)]
 
     def cancelled_item(self) -> dict:
         return track_document(TrackResult("cancelled", False, reason="the job was cancelled before this track started"))

@@ -15,7 +15,7 @@ class CountingKind:
         self.batch_size = batch_size
         self.batches: list[list[int]] = []
 
-    def solve_batch(self, parsed, indices, options):
+    def solve_batch(self, parsed, indices, options, callback):
         self.batches.append(list(indices))
         return [{"value": parsed[i] ** 2, "status": "optimal", "certified": True, "nodes": 1, "cost": 1.0,
                  "lower_bound": 1.0} for i in indices]
