@@ -35,10 +35,11 @@ def certificate_summary(result: ItemResult, region: dict, meaning: str, scope: s
     return None
 
 
-def brief_certificate(result: ItemResult) -> dict | None:
+def brief_certificate(result: ItemResult, full: bool) -> dict | None:
     """An item's ``certificate`` member with ``options.detail = "brief"``: nothing, or with a full
-    certificate only the proof, which the job's certificate document then takes (leaving None)."""
-    proof = proof_of(result)
+    certificate (``full``) only the proof, which the job's certificate document then takes
+    (leaving None). A trivial bound's proof exists in every mode: only a full certificate keeps it."""
+    proof = proof_of(result) if full else None
     return {"proof": proof} if proof is not None else None
 
 

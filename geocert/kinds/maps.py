@@ -62,9 +62,9 @@ class ParsedMaps:
     maps: list[tuple[np.ndarray, np.ndarray] | None]
 
 
-def map_document(result: MapResult, detail: str = "full") -> dict:
+def map_document(result: MapResult, detail: str = "full", full_certificate: bool = False) -> dict:
     region = {"reference_point": result.certificate.reference} if result.certificate else {}
-    certificate = brief_certificate(result) if detail == "brief" else certificate_summary(
+    certificate = brief_certificate(result, full_certificate) if detail == "brief" else certificate_summary(
         result, region,
         "lower <= (F l) / (d . l) <= upper for the last row l of every map in the scope, "
         "F = functionals, d = denominator (the reference point, homogeneous)",
@@ -130,7 +130,7 @@ class MapKind:
 
         source, target = parsed.maps[index]
         result = fit_map(source, target, options, callback)
-        document = map_document(result, options.detail)
+        document = map_document(result, options.detail, options.certificate == "full")
         if options.detail == "full":
             document["determinacy"] = safely(determinacy.map_, source, target, result.matrix, result.cost,
                                              result.lower_bound)

@@ -55,9 +55,9 @@ class ParsedTracks:
     tracks: list[tuple[list[int], np.ndarray] | None]
 
 
-def track_document(result: TrackResult, detail: str = "full") -> dict:
+def track_document(result: TrackResult, detail: str = "full", full_certificate: bool = False) -> dict:
     region = {"reference_view": result.certificate.reference} if result.certificate else {}
-    certificate = brief_certificate(result) if detail == "brief" else certificate_summary(
+    certificate = brief_certificate(result, full_certificate) if detail == "brief" else certificate_summary(
         result, region,
         "lower <= (F X) / (d . X) <= upper for every point X of the scope, "
         "F = functionals (one per direction the other views' depths vary along), "
@@ -145,7 +145,7 @@ class TriangulationKind:
         from geocert.solvers.core.determinacy import safely
         from geocert.solvers.fractional import determinacy
 
-        document = track_document(result, options.detail)
+        document = track_document(result, options.detail, options.certificate == "full")
         if options.detail == "full":  # brief: not computed (0.6 ms a Dinosaur track, more than its solve)
             document["determinacy"] = safely(determinacy.track, parsed.cameras[views], points, result.point,
                                              result.at_infinity, result.cost, result.lower_bound)

@@ -60,6 +60,19 @@ class TestBriefDetail:
         forged[kind.item_key][0]["cost"] = 0.0
         assert verify_any(forged).first_failure["check"] == "returned"
 
+    def test_an_item_at_the_trivial_bound_has_no_certificate_member(self, name):
+        """An item whose cost is within abs_gap of 0 is certified by the trivial bound, whose proof
+        exists in every mode: a brief item still carries none (its result fits the model)."""
+        kind = get_kind(name)
+        example = job(name, detail="brief", abs_gap=1e9)  # every item then meets the trivial bound
+        for certificate in ("summary", "full"):
+            result = solve_job({**example, "options": {**example["options"], "certificate": certificate}})
+            kind.result_model.model_validate(result)
+            assert all(item["certified"] and item["certificate"] is None for item in result[kind.item_key])
+            if certificate == "full":
+                assert {claim["proof"]["type"] for claim in result["certificate"]["items"]} == {"trivial"}
+                assert verify_any(result).valid
+
     def test_unknown_detail_is_named(self, name):
         kind = get_kind(name)
         with pytest.raises(InputError) as error:
