@@ -157,7 +157,7 @@ def dlt_lm_sample(cameras, tracks, sample, ours: dict) -> dict:
     return {"behind": behind, "worse": worse, "below_optimum_behind": below, "times": times, "cpu": cpu}
 
 
-def service_batch(cameras, tracks, workers: int) -> dict:
+def service_batch(cameras, tracks, workers: int, detail: str = "full") -> dict:
     import httpx
 
     with socket.socket() as s:
@@ -182,7 +182,7 @@ def service_batch(cameras, tracks, workers: int) -> dict:
                 if time.monotonic() > deadline:
                     raise RuntimeError("service not ready")
                 time.sleep(0.3)
-            body = {"kind": "triangulation", "options": {"norm": "L2L2", "rel_gap": 1e-3},
+            body = {"kind": "triangulation", "options": {"norm": "L2L2", "rel_gap": 1e-3, "detail": detail},
                     "data": {"cameras": cameras.tolist(),
                              "tracks": [{"views": t.views, "points": t.points.tolist()} for t in tracks]}}
             payload = json.dumps(body)
@@ -209,6 +209,7 @@ def main() -> None:
     parser.add_argument("--no-service", action="store_true")
     parser.add_argument("--workers", default="2", help="comma-separated worker counts, e.g. 1,2 (each a run)")
     parser.add_argument("--chunk", type=int, default=500, help="tracks per triangulate_many call (side by side)")
+    parser.add_argument("--details", default="full,brief", help="the service runs' options.detail, each a run")
     args = parser.parse_args()
 
     cameras, tracks = load_dinosaur(DINOSAUR)
@@ -252,17 +253,20 @@ def main() -> None:
               f"tracks {1e3 * np.percentile(solved['L2L2']['times'], 99):.2f} ms wall (target 5 ms); load average {load()}")
         if not args.no_service:
             total = sum(solved["L2L2"]["times"])
-            walls = {}
-            for workers in (int(w) for w in args.workers.split(",")):
-                batch = service_batch(cameras, tracks, workers)
-                walls[workers] = batch["wall"]
-                print(f"\nService, {workers} workers: {batch['tracks']} tracks ({batch['body_mb']:.1f} MB) submit to "
-                      f"result {batch['wall']:.2f} s (target 2.5 s with 2), status {batch['status']}, certified "
-                      f"{batch['certified']}; in-process single-core solve time {total:.2f} s; load average {load()}")
-            if 1 in walls and len(walls) > 1:
-                for workers, wall in walls.items():
-                    if workers != 1:
-                        print(f"Throughput {workers} workers / 1 worker: {walls[1] / wall:.2f}x (target 1.8x with 2)")
+            for detail in args.details.split(","):
+                walls = {}
+                for workers in (int(w) for w in args.workers.split(",")):
+                    batch = service_batch(cameras, tracks, workers, detail)
+                    walls[workers] = batch["wall"]
+                    print(f"\nService, {workers} workers, detail {detail}: {batch['tracks']} tracks "
+                          f"({batch['body_mb']:.1f} MB) submit to result {batch['wall']:.2f} s (target 2.5 s with 2), "
+                          f"status {batch['status']}, certified {batch['certified']}; in-process single-core solve "
+                          f"time track by track {total:.2f} s; load average {load()}")
+                if 1 in walls and len(walls) > 1:
+                    for workers, wall in walls.items():
+                        if workers != 1:
+                            print(f"Throughput {workers} workers / 1 worker, detail {detail}: {walls[1] / wall:.2f}x "
+                                  "(target 1.8x with 2)")
     for norm, ours in solved.items():
         side_by_side(cameras, tracks, norm, ours, args.chunk)
     print(f"\nMachine speed at the end (the same loop): {machine_speed_ms():.0f} ms; load average {load()}")
