@@ -11,6 +11,7 @@ complement of the reference point.
 
 from __future__ import annotations
 
+import os
 import time
 from typing import Callable
 
@@ -20,7 +21,7 @@ from geocert.solvers.core.bnb import Progress
 from geocert.solvers.fractional.charts import MapChart, normaliser
 from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.fractional.results import MapResult
-from geocert.solvers.fractional.search import Early, Reasons, prepare, recomputed_status, search
+from geocert.solvers.fractional.search import LARGE_BOUND_TOLERANCE, Early, Reasons, prepare, recomputed_status, search
 from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.verify import checked_solve
 
@@ -90,6 +91,9 @@ def _fit_map(source, target, options: MapOptions, callback, start: float) -> Map
             result.reason = result.reason or prepared.reason
     else:
         prepared.problem.node_tightening = len(source) >= NODE_TIGHTENING_POINTS
+        if len(source) >= NODE_TIGHTENING_POINTS:
+            prepared.problem.use_bound_tolerance(LARGE_BOUND_TOLERANCE)
+            prepared.problem.capping = os.environ.get("GEOCERT_CAPS", "1") == "1"
         # Root region on the caller's last row l: z = B w with w = N' S^-T l / (l . X_ref).
         functionals = prepared.problem.B[:, :n] @ chart.last_row_basis.T @ np.linalg.inv(chart.source_norm).T
         searched = search(prepared, options, "every map that puts every point at positive depth", chart.reference,
