@@ -11,7 +11,6 @@ complement of the reference point.
 
 from __future__ import annotations
 
-import os
 import time
 from typing import Callable
 
@@ -93,7 +92,7 @@ def _fit_map(source, target, options: MapOptions, callback, start: float) -> Map
         prepared.problem.node_tightening = len(source) >= NODE_TIGHTENING_POINTS
         if len(source) >= NODE_TIGHTENING_POINTS:
             prepared.problem.use_bound_tolerance(LARGE_BOUND_TOLERANCE)
-            prepared.problem.capping = os.environ.get("GEOCERT_CAPS", "1") == "1"
+            prepared.problem.capping = True
         # Root region on the caller's last row l: z = B w with w = N' S^-T l / (l . X_ref).
         functionals = prepared.problem.B[:, :n] @ chart.last_row_basis.T @ np.linalg.inv(chart.source_norm).T
         searched = search(prepared, options, "every map that puts every point at positive depth", chart.reference,
