@@ -146,3 +146,26 @@ def test_the_verifier_accepts_a_capped_certificate_and_recomputes_its_caps(cappe
         proof["proofs"][0]["caps"] = 3
 
     assert refused(no_such_round).check == "format"
+
+
+def test_caps_wait_for_a_wide_gap_below_the_root():
+    """Caps are computed before the box after the root and its two children, and only when one
+    of those children left a gap of at least cap_gap times the upper bound."""
+    counts = []
+    for cap_gap in (1e9, 0.0):
+        _, _, prepared = prepared_problem("L2L2", "trigger")
+        problem = prepared.problem
+        problem.capping, problem.cap_gap = True, cap_gap
+        ub = prepared.upper
+        root = problem.root
+        assert problem.bound(root, ub).status == BoxStatus.BOUNDED
+        side = int(np.argmax(root.width))
+        middle = 0.5 * (root.lo[side] + root.hi[side])
+        left_hi, right_lo = root.hi.copy(), root.lo.copy()
+        left_hi[side], right_lo[side] = middle, middle
+        for child in (Box(root.lo.copy(), left_hi), Box(right_lo, root.hi.copy())):
+            problem.bound(child, ub)
+        assert problem.caps == []  # not before the fourth box
+        problem.bound(Box(root.lo.copy(), left_hi), ub)
+        counts.append(len(problem.caps))
+    assert counts == [0, 2]

@@ -317,7 +317,11 @@ class BoxProblem:
         self.interior: np.ndarray | None = None  # a point of the domain: the cheapest seen (first the incumbent)
         self._best = math.inf
         self._nodes = 0  # boxes bounded so far
-        self.capping = False  # per-term caps (cap_terms) on the root box once CAP_AFTER boxes did not close (maps)
+        # Per-term caps (cap_terms) on the root box before the box after CAP_AFTER (maps), when some
+        # box below the root so far had a gap of at least cap_gap times the upper bound.
+        self.capping = False
+        self.cap_gap = 0.0
+        self._widest_gap = 0.0
         # Lean settings (no equilibration, no iterative refinement) at every size: relaxations are
         # built well scaled (a normalised chart, costs scaled to about 1), and a lean solve that does
         # not end cleanly is repeated with the full settings (core.conic._retried).
@@ -358,10 +362,16 @@ class BoxProblem:
         is known), the box is first cut to the range its points costing at most ``upper_bound``
         can have, and the rest is bounded: fewer, smaller boxes for 6 small solves a node."""
         self._nodes += 1
-        if (self.capping and self._nodes > CAP_AFTER and math.isfinite(upper_bound)
-                and self.interior is not None):
+        if self.capping and self._nodes > CAP_AFTER and math.isfinite(upper_bound) and self.interior is not None:
             self.capping = False
-            self.cap_terms(self.root, upper_bound, self.interior)
+            if self._widest_gap >= self.cap_gap * upper_bound:
+                self.cap_terms(self.root, upper_bound, self.interior)
+        result = self._tightened_bound(box, upper_bound)
+        if result.status == BoxStatus.BOUNDED and self._nodes > 1:
+            self._widest_gap = max(self._widest_gap, upper_bound - result.lower_bound)
+        return result
+
+    def _tightened_bound(self, box: Box, upper_bound: float) -> BoxBound:
         if not (self.node_tightening and box is not self.root and math.isfinite(upper_bound)):
             return self._bound(box, upper_bound)
         tightened, excluded = self._tighten_node(box, upper_bound)
