@@ -314,7 +314,8 @@ class BoxProblem:
         self.relaxation = Relaxation(program, B, complement, root_proof.functionals)
         self.tightening: list[TighteningProof] = []
         self.caps: list[CapProof] = []  # rounds of per-term caps (cap_terms), after the root's tightening
-        self.interior: np.ndarray | None = None  # a point of the domain: the cheapest seen (first the incumbent)
+        self.interior: np.ndarray | None = None  # a point of the domain (the first incumbent)
+        self._cheapest: np.ndarray | None = None  # the cheapest point seen (_seen) and its cost
         self._best = math.inf
         self._nodes = 0  # boxes bounded so far
         # Per-term caps (cap_terms) on the root box before the box after CAP_AFTER (maps), when some
@@ -348,11 +349,11 @@ class BoxProblem:
         return v, value
 
     def _seen(self, v: np.ndarray, value: float) -> None:
-        """Keep the cheapest point seen (the search's incumbent, once it is below the first)."""
-        if self.interior is not None and math.isinf(self._best):
-            self._best = self.program.cost(self.interior)
-        if self.interior is not None and value < self._best:
-            self.interior, self._best = v, value
+        """Keep the cheapest point seen, from the first incumbent on (the search's incumbent)."""
+        if self._cheapest is None and self.interior is not None:
+            self._cheapest, self._best = self.interior, self.program.cost(self.interior)
+        if self._cheapest is not None and value < self._best:
+            self._cheapest, self._best = v, value
 
     def conic_data(self, box: Box, upper_bound: float, envelope: bool = True) -> ConicData | None:
         return self.relaxation.conic_data(box, upper_bound, envelope)
@@ -365,7 +366,8 @@ class BoxProblem:
         if self.capping and self._nodes > CAP_AFTER and math.isfinite(upper_bound) and self.interior is not None:
             self.capping = False
             if self._widest_gap >= self.cap_gap * upper_bound:
-                self.cap_terms(self.root, upper_bound, self.interior)
+                self._seen(self.interior, self.program.cost(self.interior))
+                self.cap_terms(self.root, upper_bound, self._cheapest)
         result = self._tightened_bound(box, upper_bound)
         if result.status == BoxStatus.BOUNDED and self._nodes > 1:
             self._widest_gap = max(self._widest_gap, upper_bound - result.lower_bound)
