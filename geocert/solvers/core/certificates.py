@@ -61,6 +61,19 @@ class TighteningProof:
 
 
 @dataclass
+class CapProof:
+    """One round of per-term caps: over ``box``, for every point costing at most
+    ``upper_bound``, the terms of the observations other than ``observations[j]`` sum to at least
+    what ``duals[j]`` proves (None: nothing proven), over the relaxation built with the caps of
+    the rounds before."""
+
+    upper_bound: float
+    box: Box
+    observations: np.ndarray
+    duals: list[np.ndarray | None]
+
+
+@dataclass
 class LeafProof:
     """Why no point of ``box`` costing at most ``upper_bound`` costs less than ``bound``:
     ``dual`` (a dual vector of the box's relaxation), ``farkas`` (the relaxation is infeasible:
@@ -74,6 +87,7 @@ class LeafProof:
     z: np.ndarray | None
     bound: float
     duals: list[np.ndarray | None] | None = None  # tightened: 2 per functional, as TighteningProof's
+    caps: int = 0  # rounds of per-term caps (SearchProof.caps) its relaxation was built with
 
 
 @dataclass
@@ -85,6 +99,7 @@ class SearchProof:
     tightening: list[TighteningProof] = field(default_factory=list)
     search_box: Box | None = None
     leaves: list[tuple[Box, LeafProof | None]] = field(default_factory=list)
+    caps: list[CapProof] = field(default_factory=list)  # rounds of per-term caps, after the tightening
 
 
 def pack(array: np.ndarray | None) -> str | None:
@@ -118,10 +133,12 @@ def encode(proof: SearchProof) -> dict:
                       "z": pack(leaf.z), "bound": leaf.bound if math.isfinite(leaf.bound) else None}
             if leaf.duals is not None:
                 record["duals"] = [pack(z) for z in leaf.duals]
+            if leaf.caps:
+                record["caps"] = leaf.caps
             proofs.append(record)
         leaves.append(_box(box) + [index[id(leaf)] if leaf is not None else None])
     root = proof.root
-    return {
+    encoded = {
         "type": "branch_and_bound",
         "scale": proof.scale,
         "root": {"gamma": root.gamma, "functionals": root.functionals.tolist(),
@@ -134,6 +151,11 @@ def encode(proof: SearchProof) -> dict:
         "proofs": proofs,
         "leaves": leaves,  # [lower corner, upper corner, index into proofs or null (trivial bound 0)]
     }
+    if proof.caps:  # only when the search capped terms (maps that branch)
+        encoded["caps"] = [{"upper_bound": c.upper_bound, "box": _box(c.box),
+                            "observations": [int(i) for i in c.observations], "duals": [pack(z) for z in c.duals]}
+                           for c in proof.caps]
+    return encoded
 
 
 def canonical_json(value: Any) -> bytes:

@@ -70,6 +70,7 @@ def verify_search(item, options: dict, proof: dict, lower_claimed: float, soluti
         box = _check_round(relaxation, round_, box, cap, number)
     if not (np.all(search_box.lo <= box.lo) and np.all(search_box.hi >= box.hi)):
         raise Invalid("tightening", "the searched box does not contain the proven root box")
+    others = _check_caps(relaxation, proof.get("caps", []), box, cap)
     passed.append("tightening")
 
     leaves, proofs = proof.get("leaves"), proof.get("proofs")
@@ -86,7 +87,7 @@ def verify_search(item, options: dict, proof: dict, lower_claimed: float, soluti
         raise Invalid("coverage", f"no leaf covers the box {gap[0].tolist()} .. {gap[1].tolist()}")
     passed.append("coverage")
 
-    bounds = _check_leaf_proofs(relaxation, proofs, leaves, leaf_lo, leaf_hi, cap, k)
+    bounds = _check_leaf_proofs(relaxation, proofs, leaves, leaf_lo, leaf_hi, cap, k, others)
     passed.append("leaf_bounds")
     return min(bounds) / unit if bounds else math.inf
 
@@ -196,6 +197,58 @@ def _check_round(relaxation: Relaxation, round_: Any, box: Box, cap: float, numb
     return box_out
 
 
+MAX_CAP_ROUNDS = 8  # rounds of per-term caps (the solver makes 2)
+
+
+def _check_caps(relaxation: Relaxation, rounds: Any, box: Box, cap: float) -> list[np.ndarray | None]:
+    """Rounds of per-term caps (maps): each proves, over a box holding the proven root box and
+    for every point costing at most its upper_bound, a lower bound on the sum of the terms other
+    than each of its observations'. Returns the bounds in force after each round (the first,
+    None: no caps), which the relaxations of the leaves that name that round are built with."""
+    if not isinstance(rounds, list):
+        raise Invalid("format", "proof/caps must be a list")
+    if len(rounds) > MAX_CAP_ROUNDS:
+        raise Invalid("tightening", f"{len(rounds)} rounds of caps: at most {MAX_CAP_ROUNDS}")
+    count = len(relaxation.program.den)
+    in_force: list[np.ndarray | None] = [None]
+    others = np.zeros(count)
+    for number, round_ in enumerate(rounds):
+        where = f"caps round {number}"
+        if not isinstance(round_, dict):
+            raise Invalid("format", f"{where} must be an object")
+        ub = _number(round_.get("upper_bound"), f"caps/{number}/upper_bound")
+        if not ub >= cap:
+            raise Invalid("tightening", f"{where} assumed a cost cap below the claimed lower bound")
+        round_box = _box(round_.get("box"), f"caps/{number}/box", len(box.lo))
+        # Every point the leaves must answer for lies in the proven root box.
+        if not (np.all(round_box.lo <= box.lo) and np.all(round_box.hi >= box.hi)):
+            raise Invalid("tightening", f"{where}: its box does not contain the proven root box")
+        observations, duals = round_.get("observations"), round_.get("duals")
+        if not (isinstance(observations, list) and all(type(i) is int and 0 <= i < count for i in observations)
+                and len(set(observations)) == len(observations)):
+            raise Invalid("format", f"{where}: observations must be distinct indices of observations")
+        if not isinstance(duals, list) or len(duals) != len(observations):
+            raise Invalid("tightening", f"{where}: one dual vector (or null) per observation")
+        relaxation.others = in_force[-1]
+        data = relaxation.conic_data(round_box, ub)
+        if data is None:
+            raise Invalid("tightening", f"{where}: no depth is positive on its box")
+        _finite_bounds(data, where)
+        data = with_cost_cap(data, ub)
+        others = others.copy()
+        for i, index, z in zip(observations, relaxation.term_variables(np.array(observations, dtype=int)), duals):
+            if z is None:
+                continue
+            objective = data.q.copy()
+            objective[index] = 0.0  # the sum of the other terms
+            value = safe_lower_bound(objective, data.A, data.b, data.cones, dual_vector(z, len(data.b)),
+                                     data.lower, data.upper, data.transform)
+            others[i] = max(others[i], value)
+        in_force.append(others)
+    relaxation.others = None
+    return in_force
+
+
 def _proven_sides(relaxation: Relaxation, box: Box, ub: float, duals: list, where: str,
                   check: str) -> tuple[np.ndarray, np.ndarray]:
     """The range of each ``B_i v`` over the relaxation's points of ``box`` costing at most
@@ -224,8 +277,9 @@ def _proven_sides(relaxation: Relaxation, box: Box, ub: float, duals: list, wher
 
 
 def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_lo, leaf_hi,
-                       cap: float, k: int) -> list[float]:
-    """Each proof's bound, recomputed; each leaf's box inside its proof's box."""
+                       cap: float, k: int, others: list[np.ndarray | None]) -> list[float]:
+    """Each proof's bound, recomputed (its relaxation with the caps in force after the round it
+    names, ``others``); each leaf's box inside its proof's box."""
     proven: list[float] = []
     boxes: list[Box] = []
     ranges: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # tightened proofs' proven ranges
@@ -241,6 +295,10 @@ def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_
         if not ub >= cap:
             raise Invalid("leaf_bounds", f"proof {number} assumed a cost cap below the claimed lower bound")
         kind = proof.get("kind")
+        rounds = proof.get("caps", 0)
+        if not (type(rounds) is int and 0 <= rounds < len(others)):
+            raise Invalid("format", f"proof {number}: caps must name a round of caps (0: none)")
+        relaxation.others = others[rounds]
         if kind == "tightened":  # node tightening: its leaves lie outside the range it proves
             duals = proof.get("duals")
             if not isinstance(duals, list) or len(duals) != 2 * k:

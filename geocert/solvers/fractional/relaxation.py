@@ -223,6 +223,18 @@ class Relaxation:
         self.coef = depth_y[:, :len(B)]
         self.coef_complement = depth_y[:, len(B):]
         self.offset = program.den[self.env, -1]
+        # Per observation (program order), a proven lower bound on the sum of the other terms
+        # over the points the relaxations are asked about (None: 0 for all); see relaxation().
+        self.others: np.ndarray | None = None
+
+    def term_variables(self, observations: np.ndarray) -> np.ndarray:
+        """The index, in the relaxation's variables (with the envelope), of the variable whose
+        sum is the objective: each observation's ``r`` (envelope) or epigraph (exact)."""
+        d, nE = self.program.dim, len(self.env)
+        position = np.empty(len(self.program.den), dtype=int)
+        position[self.env] = d + 2 * nE + np.arange(nE)
+        position[self.exact] = d + 3 * nE + np.arange(len(self.exact))
+        return position[observations]
 
     def gammas(self, upper_bound: float) -> tuple[float, float]:
         """(cost_gamma, scope_gamma): every residual of a point of the scope costing at most
@@ -289,17 +301,23 @@ class Relaxation:
         w_idx, r_idx = t_idx + nE, t_idx + 2 * nE
         q_idx = d + per_env * nE + np.arange(nX)
         a_idx = (d + per_env * nE + nX + np.arange(n_abs)).reshape(V, m if n_abs else 0)
-        # The largest cost term of one observation (its t / s) and the 2-norm bound on its residual.
+        obs = np.concatenate([env, exact])
+        # Each observation's largest cost term (its t / s) and the 2-norm bound on its residual.
+        # A point costing at most upper_bound has each term within upper_bound less what the
+        # other terms cost at least (self.others: proven lower bounds, 0 when unknown).
+        cost_gamma = np.full(V, cost_gamma)
+        if self.others is not None and math.isfinite(upper_bound):
+            budget = np.maximum(upper_bound - self.others[obs], 0.0)
+            cost_gamma = np.minimum(cost_gamma, np.sqrt(budget) if norm == "L2L2" else budget)
         if norm == "L2L2":
-            gamma = min(cost_gamma, scope_gamma)
+            gamma = np.minimum(cost_gamma, scope_gamma)
             term = gamma**2
         elif norm == "L2L1":
-            gamma = term = min(cost_gamma, scope_gamma)
+            gamma = term = np.minimum(cost_gamma, scope_gamma)
         else:  # the term is the 1-norm: at most cost_gamma, and sqrt(m) times the 2-norm
-            gamma = scope_gamma
-            term = min(cost_gamma, math.sqrt(m) * scope_gamma)
-        u = term * high if math.isfinite(term) else 1e12 * high
-        obs = np.concatenate([env, exact])
+            gamma = np.full(V, scope_gamma)
+            term = np.minimum(cost_gamma, math.sqrt(m) * scope_gamma)
+        u = np.where(np.isfinite(term[:nE]), term[:nE] * high, 1e12 * high)
         top_idx = np.concatenate([t_idx, q_idx])  # the variable above each observation's numerator
         depth = program.den[obs]
         num = program.num[obs]  # (V, m, d + 1)
@@ -328,7 +346,7 @@ class Relaxation:
             B.c[:, 4] = u
         socs: list[int] = []
         if norm == "L1L1":  # a_a >= |n_a|, top >= sum a_a, and sum a_a <= cost_gamma * depth
-            finite_cost = math.isfinite(cost_gamma)
+            finite_cost = bool(np.all(np.isfinite(cost_gamma)))
             B = block(V, 2 * m + 1 + finite_cost)
             for a in range(m):
                 B.v[:, 2 * a], B.c[:, 2 * a] = -num[:, a, :-1], -num[:, a, -1]
@@ -340,7 +358,7 @@ class Relaxation:
                     B.set(2 * m + 1, a_idx[:, a], -1.0)
             B.set(2 * m, top_idx, 1.0)
             if finite_cost:
-                B.v[:, 2 * m + 1], B.c[:, 2 * m + 1] = cost_gamma * depth[:, :-1], cost_gamma * depth[:, -1]
+                B.v[:, 2 * m + 1], B.c[:, 2 * m + 1] = cost_gamma[:, None] * depth[:, :-1], cost_gamma * depth[:, -1]
         n_lin = sum(b.c.size for b in blocks)
         if norm == "L2L2":  # top * depth >= |n|^2: (top + depth, 2 n, top - depth) in the SOC
             B = block(V, m + 2)
@@ -355,9 +373,9 @@ class Relaxation:
             B.set(0, top_idx, 1.0)
             B.v[:, 1:], B.c[:, 1:] = num[:, :, :-1], num[:, :, -1]
             socs += [m + 1] * V
-        if math.isfinite(gamma):  # every residual's 2-norm (of a better point, or in scope) within gamma
+        if np.all(np.isfinite(gamma)):  # every residual's 2-norm (of a better point, or in scope) within gamma
             B = block(V, m + 1)
-            B.v[:, 0], B.c[:, 0] = gamma * depth[:, :-1], gamma * depth[:, -1]
+            B.v[:, 0], B.c[:, 0] = gamma[:, None] * depth[:, :-1], gamma * depth[:, -1]
             B.v[:, 1:], B.c[:, 1:] = num[:, :, :-1], num[:, :, -1]
             socs += [m + 1] * V
         q = np.zeros(n)
@@ -376,11 +394,14 @@ class Relaxation:
         # (its smallest feasible value), w = s t / u in [0, high], r = term <= ub, epigraphs <= ub.
         # r and the epigraphs are one observation's term: at most the upper bound and ``term``
         # (finite whenever either is, so that every variable is bounded in a safe bound).
-        lower, upper = np.zeros(n), np.full(n, min(upper_bound, term))
+        top = np.minimum(upper_bound, term)  # each observation's term
+        lower, upper = np.zeros(n), np.full(n, float(np.max(top)))
         lower[:d], upper[:d] = self.y_bounds(box)
         upper[t_idx] = np.minimum(u, high * upper_bound)
+        upper[q_idx] = top[nE:]
         if envelope:
             upper[w_idx] = high
+            upper[r_idx] = top[:nE]
         if n_abs:  # a_a <= sum a = the observation's top variable, at the smallest lift
             upper[a_idx] = upper[top_idx][:, None]
         return ConicData(q, A, c, ConeSpec(nonneg=n_lin, soc=tuple(socs)), lower, upper, self.transform)
