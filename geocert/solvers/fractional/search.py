@@ -296,6 +296,19 @@ def _terms(residuals: np.ndarray, norm: str) -> np.ndarray:
     return lengths(residuals, 1) if norm == "L2L1" else np.abs(residuals).sum(axis=1)
 
 
+def _proven_minimum(solver: ReusableConicProgram, data: ConicData, objective: np.ndarray, first: bool):
+    """Minimise ``objective`` over the relaxation ``data`` (set up by the first call, the
+    objective alone changed after): the solve's result, and the safe bound of its dual (-inf
+    when the solve is not clean)."""
+    result = (solver.solve(objective, data.A, data.b, data.cones) if first
+              else solver.solve_objective(objective))
+    value = -math.inf
+    if result.status is ConicStatus.OPTIMAL:
+        value = safe_lower_bound(objective, data.A, data.b, data.cones, result.z, data.lower, data.upper,
+                                 data.transform)
+    return result, value
+
+
 class BoxProblem:
     """The branch-and-bound problem of a fractional program over boxes of ``z = B v``.
 
@@ -474,12 +487,7 @@ class BoxProblem:
             for number, (i, index) in enumerate(zip(chosen, variables)):
                 objective = data.q.copy()
                 objective[index] = 0.0
-                result = (solver.solve(objective, data.A, data.b, data.cones) if not duals
-                          else solver.solve_objective(objective))
-                value = -math.inf
-                if result.status is ConicStatus.OPTIMAL:
-                    value = safe_lower_bound(objective, data.A, data.b, data.cones, result.z,
-                                             data.lower, data.upper, data.transform)
+                result, value = _proven_minimum(solver, data, objective, first=not duals)
                 duals.append(result.z if math.isfinite(value) else None)
                 if math.isfinite(value):
                     proven[number] = max(proven[number], value)
@@ -497,14 +505,9 @@ class BoxProblem:
         for i in range(k):
             for sign, side in ((1.0, low), (-1.0, high)):
                 objective = tightening_objective(data, self.B[i], sign)
-                result = (solver.solve(objective, data.A, data.b, data.cones) if not duals
-                          else solver.solve_objective(objective))
+                result, value = _proven_minimum(solver, data, objective, first=not duals)
                 if result.status is ConicStatus.INFEASIBLE:
                     return low, high, None
-                value = -math.inf
-                if result.status is ConicStatus.OPTIMAL:
-                    value = safe_lower_bound(objective, data.A, data.b, data.cones, result.z,
-                                             data.lower, data.upper, data.transform)
                 duals.append(result.z if math.isfinite(value) else None)
                 if math.isfinite(value):
                     side[i] = sign * value
