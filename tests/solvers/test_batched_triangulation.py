@@ -183,7 +183,7 @@ def test_the_batched_refinement_reaches_scipys_minimum(dinosaur):
         group = [(views, points) for views, points in tracks if len(views) == n]
         cams = np.array([cameras[views] for views, _ in group])
         points = np.array([points for _, points in group])
-        num, den, T, reference, ok = stacked._charts(cams, points)
+        num, den, T, reference, ok = stacked.chart_arrays(cams, points)
         start, ok_start = batched._dlt(num)
         refined, ok_lm = batched._refine_l2l2(num, den, T[:, 3], start, ok & ok_start)
         ours = batched._costs(num, den, T[:, 3], refined, "L2L2")

@@ -70,7 +70,7 @@ class TestCharts:
             indices = [i for i, t in enumerate(document["data"]["tracks"]) if len(t["views"]) == n]
             cams = np.array([track_arrays(document, i)[0] for i in indices])
             points = np.array([track_arrays(document, i)[1] for i in indices])
-            num, den, T, reference, ok = stacked._charts(cams, points)
+            num, den, T, reference, ok = stacked.chart_arrays(cams, points)
             assert ok.all()
             for g, i in enumerate(indices):
                 chart = Chart.build(cams[g], points[g], "L2L2")
@@ -84,7 +84,7 @@ class TestCharts:
         cams = np.array([[[[800, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]],
                           [[800, 0, 320, -800], [0, 800, 240, 0], [0, 0, 1, 0]]]], dtype=float)
         points = np.array([[[330.0, 250.0], [250.0, 251.0]]])
-        assert not stacked._charts(cams, points)[4][0]
+        assert not stacked.chart_arrays(cams, points)[4][0]
 
 
 class TestLeafRelaxations:
@@ -150,7 +150,7 @@ class TestProvenTogether:
     def test_a_program_differing_from_the_data_is_not_proven(self, documents, monkeypatch):
         document = documents["L2L2"]
         assert proven(document)
-        original = stacked._charts
+        original = stacked.chart_arrays
 
         def negated(cams, points):  # a varying view's numerator and depth negated: residuals unchanged
             num, den, T, reference, ok = original(cams, points)
@@ -159,7 +159,7 @@ class TestProvenTogether:
             den[np.arange(len(den)), varying] *= -1
             return num, den, T, reference, ok
 
-        monkeypatch.setattr(stacked, "_charts", negated)
+        monkeypatch.setattr(stacked, "chart_arrays", negated)
         assert proven(document) == set()
 
 

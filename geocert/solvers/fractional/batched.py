@@ -5,7 +5,7 @@ One track's solve is some 1,500 small Python-level calls around little arithmeti
 local refinement, the root region's 2d small SOCPs, the root node's relaxation); 99.5% of the
 Dinosaur's tracks close at the root node. Here each stage runs on stacked arrays:
 
-* search.prepare for a group: the charts (stacked._charts, the verifier's stacked
+* search.prepare for a group: the charts (stacked.chart_arrays, the verifier's stacked
   Chart.build), the DLT starts, a batched Levenberg-Marquardt on the L2L2 residuals (under
   L2L1 and L1L1 the per-track refinement of search.prepare), the scaling, and the branched
   functionals (search.branch_directions' greedy choice, vectorised);
@@ -57,7 +57,7 @@ from geocert.solvers.fractional.relaxation import FractionalProgram, cost_unit, 
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult, claim_of
 from geocert.solvers.fractional.search import (MAX_SCALE, ROOT_SUBSET, branch_directions, depth_subspace,
                                                local_refine, root_region)
-from geocert.solvers.fractional.triangulation import _track_result, triangulate
+from geocert.solvers.fractional.triangulation import track_result, triangulate
 from geocert.solvers.verify import self_check, self_check_enabled
 
 D = 3
@@ -180,7 +180,7 @@ def _chart_group(all_cameras: np.ndarray, tracks: list, n: int) -> dict | None:
     if n < 2 or points.shape != (G, n, 2) or not np.all(np.isfinite(points)):
         return None
     with np.errstate(all="ignore"):
-        num, den, T, reference, ok = stacked._charts(cams, points)
+        num, den, T, reference, ok = stacked.chart_arrays(cams, points)
         ok &= np.all(np.isfinite(num), axis=(1, 2, 3)) & np.all(np.isfinite(den), axis=(1, 2))
         v0, ok_start = _dlt(num)
     return {"cams": cams, "points": points, "num": num, "den": den, "T": T, "reference": reference,
@@ -252,7 +252,7 @@ def _prepare_group(group: dict, options: TriangulationOptions):
         program = programs.get(g) or FractionalProgram(num[g].copy(), den[g].copy(), exact[g], T[g, 3][None, :].copy(),
                                                        norm)
         chart = Chart(program, T[g], int(reference[g]), False)
-        out[g] = _track_result(chart, cams[g], points[g], v0[g], options, "optimal", 0.0, 0, None)
+        out[g] = track_result(chart, cams[g], points[g], v0[g], options, "optimal", 0.0, 0, None)
     ok &= ~trivial
     with np.errstate(all="ignore"):
         factor = np.minimum(MAX_SCALE, 1.0 / np.sqrt(cost0) if norm == "L2L2" else 1.0 / cost0)
@@ -497,7 +497,7 @@ def _proven_roots(Q, A, b, x, z, solved, F, gamma, n) -> list:
         pad = 0.5 * (hi - lo) + 1e-6 * (1 + np.abs(lo) + np.abs(hi))
         claim_lo, claim_hi = lo - pad, hi + pad
         transform = np.linalg.inv(F)
-        proven = stacked._safe_bounds(Q, A, b, np.where(solved[:, None, None], z, 0.0), cones, claim_lo, claim_hi,
+        proven = stacked.safe_bounds(Q, A, b, np.where(solved[:, None, None], z, 0.0), cones, claim_lo, claim_hi,
                                       transform)
         lower, upper = proven[:, 0::2], -proven[:, 1::2]
         solved &= np.all((claim_lo < lower) & (upper < claim_hi) & (lower <= upper), axis=1)
@@ -677,7 +677,7 @@ def _root_nodes(closing: list, k: int, options: TriangulationOptions) -> list:
             continue
         Z[g, 0], X[g] = result.z, result.x
     with np.errstate(all="ignore"):
-        safe = stacked._safe_bounds(np.broadcast_to(q, (G, 1, cols)), A, b, Z, cones, lower, upper, transform)[:, 0]
+        safe = stacked.safe_bounds(np.broadcast_to(q, (G, 1, cols)), A, b, Z, cones, lower, upper, transform)[:, 0]
     with np.errstate(all="ignore"):
         relaxed = _costs(num, den, linear[:, 0], X[:, :D], norm)  # the relaxation's points' costs
     to_charts = np.linalg.inv(np.array([entry.chart.T for entry in entries]))  # triangulate's inv(chart.T)
@@ -717,7 +717,7 @@ def _root_nodes(closing: list, k: int, options: TriangulationOptions) -> list:
         if options.certificate == "full":
             certificate.proof = encode(SearchProof(factor, proofs[g], [], root, [(root, leaf)]))
         lower_bound = min(bound, upper_bound) / unit
-        done.append((entry.index, _track_result(chart, entry.cams, entry.points, incumbent, options, "optimal",
+        done.append((entry.index, track_result(chart, entry.cams, entry.points, incumbent, options, "optimal",
                                                 lower_bound, 1, certificate)))
     return done
 

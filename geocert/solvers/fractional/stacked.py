@@ -193,7 +193,7 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
         np.abs((cost - gap) - lower_claimed) <= 1e-12 * np.maximum(np.abs(cost), np.abs(lower_claimed)))
 
     # The chart (charts.Chart.build).
-    num, den, T, reference, charted = _charts(cams, points)
+    num, den, T, reference, charted = chart_arrays(cams, points)
     ok &= charted
 
     # The solution's cost and depths from the raw data (_check_residual_claim).
@@ -245,7 +245,7 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     return ok
 
 
-def _charts(cams: np.ndarray, points: np.ndarray):
+def chart_arrays(cams: np.ndarray, points: np.ndarray):
     """charts.Chart.build for every track of a group: (num, den, T, reference, ok). ``ok`` is
     false where this path does not build the chart (a centre at infinity, or a depth row that
     may be parallel to the reference's: the per-item path decides those)."""
@@ -325,7 +325,7 @@ def _program_agrees(cams, points, num, den, T, scale, v0, reference) -> np.ndarr
     return agree & ~np.any(varying & ~(relative > 0), axis=(1, 2))
 
 
-def _safe_bounds(Q, A, b, Z, cones: ConeSpec, lower, upper, transform) -> np.ndarray:
+def safe_bounds(Q, A, b, Z, cones: ConeSpec, lower, upper, transform) -> np.ndarray:
     """cones.safe_lower_bounds with a leading axis over tracks: Q (G, p, cols), A (G, rows, cols),
     b (G, rows), Z (G, p, rows), lower and upper (G, cols), transform (G, d, d)."""
     G, p, rows = Z.shape
@@ -359,7 +359,7 @@ def _root_holds(num, den, linear, gamma, F, claim_box, bounds, v0, members, n) -
     Q = np.empty((G, 2 * D, D))
     Q[:, 0::2], Q[:, 1::2] = F, -F
     Z = np.array([t.root_duals for t in members])  # finite: read by strict.dual_vector
-    proven = _safe_bounds(Q, A, b, Z, ConeSpec(nonneg=1, soc=(3,) * n), claim_lo, claim_hi, np.linalg.inv(F))
+    proven = safe_bounds(Q, A, b, Z, ConeSpec(nonneg=1, soc=(3,) * n), claim_lo, claim_hi, np.linalg.inv(F))
     low, high = proven[:, 0::2], -proven[:, 1::2]
     return (inside & np.all((claim_lo < low) & (low <= high) & (high < claim_hi), axis=1)
             & np.all((bounds[:, 0] <= low) & (bounds[:, 1] >= high), axis=1))
@@ -392,7 +392,7 @@ def _leaves_hold(members, num, den, linear, F, k, bounds, search_box, cap, norm,
             good[i] = False
         else:
             Z[i, 0] = z
-    bound = _safe_bounds(np.broadcast_to(q, (R, 1, cols)), -E[..., :cols], E[..., cols], Z, cones, lower, upper,
+    bound = safe_bounds(np.broadcast_to(q, (R, 1, cols)), -E[..., :cols], E[..., cols], Z, cones, lower, upper,
                          transform)[:, 0]
     good &= bound >= claimed - BOUND_TOLERANCE * np.abs(claimed)
     # Every proof of a track must hold, whether a leaf names it or not (as the per-item check asks).

@@ -48,7 +48,7 @@ def prepare_track(cameras: np.ndarray, points: np.ndarray, options: Triangulatio
     if isinstance(prepared, Early):
         if prepared.incumbent is None:
             return chart, TrackResult(prepared.status, False, reason=prepared.reason)
-        result = _track_result(chart, cameras, points, prepared.incumbent, options, prepared.status,
+        result = track_result(chart, cameras, points, prepared.incumbent, options, prepared.status,
                                0.0 if prepared.status == "optimal" else None, 0, None)
         result.reason = result.reason or prepared.reason
         return chart, result
@@ -84,13 +84,13 @@ def _triangulate(cameras, points, options: TriangulationOptions, callback, start
     if searched.solution is None:
         result = TrackResult(searched.status, False, nodes=searched.nodes, reason=searched.reason)
     else:
-        result = _track_result(chart, cameras, points, searched.solution, options, searched.status,
+        result = track_result(chart, cameras, points, searched.solution, options, searched.status,
                                searched.lower_bound, searched.nodes, searched.certificate)
     result.elapsed_s = time.perf_counter() - start
     return result
 
 
-def _track_result(chart: Chart, cameras, points, y, options, status, lower, nodes, certificate) -> TrackResult:
+def track_result(chart: Chart, cameras, points, y, options, status, lower, nodes, certificate) -> TrackResult:
     X = chart.T @ np.append(y, 1.0)
     X = X / np.linalg.norm(X)
     # The chart keeps X[3] >= 0 up to round-off; a point this close to the plane at infinity is
