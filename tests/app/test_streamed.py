@@ -8,7 +8,6 @@ import json
 
 import numpy as np
 import pytest
-import redis
 from fastapi import Request
 from fastapi.exceptions import RequestValidationError
 
@@ -17,19 +16,12 @@ from geocert.app.schemas import JOB_REQUEST, JobRequest
 from geocert.app import streamed
 from geocert.app.streamed import split_items, upload_items
 from geocert.solvers.core.geometry import InputError
-from tests.support import triangulation_job
+from tests.support import embedded_redis_client, triangulation_job
 
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory):
-    from geocert.workers.redis_server import start_embedded_redis
-
-    process, url = start_embedded_redis(tmp_path_factory.mktemp("redis"))
-    try:
-        yield redis.Redis.from_url(url, decode_responses=True)
-    finally:
-        process.terminate()
-        process.wait(timeout=10)
+    yield from embedded_redis_client(tmp_path_factory, decode_responses=True)
 
 
 def body_of(tracks: int = 30, indent=None) -> tuple[dict, str]:

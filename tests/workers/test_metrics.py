@@ -4,21 +4,15 @@ not one per item and bucket) into the same figures /metrics shows."""
 from __future__ import annotations
 
 import pytest
-import redis
+
 
 from geocert.workers import metrics
+from tests.support import embedded_redis_client
 
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory):
-    from geocert.workers.redis_server import start_embedded_redis
-
-    process, url = start_embedded_redis(tmp_path_factory.mktemp("redis"))
-    try:
-        yield redis.Redis.from_url(url, decode_responses=True)
-    finally:
-        process.terminate()
-        process.wait(timeout=10)
+    yield from embedded_redis_client(tmp_path_factory, decode_responses=True)
 
 
 def families(client) -> dict:

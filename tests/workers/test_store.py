@@ -9,22 +9,16 @@ import math
 
 import numpy as np
 import pytest
-import redis
 
 from geocert.kinds import get_kind
 from geocert.workers.store import JobStore
+from tests.support import embedded_redis_client
 
 
 @pytest.fixture(scope="module")
 def jobs(tmp_path_factory):
-    from geocert.workers.redis_server import start_embedded_redis
-
-    process, url = start_embedded_redis(tmp_path_factory.mktemp("redis"))
-    try:
-        yield JobStore(redis.Redis.from_url(url, decode_responses=True))
-    finally:
-        process.terminate()
-        process.wait(timeout=10)
+    for client in embedded_redis_client(tmp_path_factory, decode_responses=True):
+        yield JobStore(client)
 
 
 def request_of(tracks: int, seed: int = 0) -> dict:
