@@ -355,8 +355,15 @@ def _check_residual_claim(kind: str, adapter, arrays: tuple, options: dict, clai
     if not item.depths_agree(depths):
         raise Invalid("objective", "the solution puts a point at non-positive depth")
     cost = norm_cost(residuals, norm)
-    if not abs(cost - claimed) <= OBJECTIVE_TOLERANCE * abs(cost) + _cost_rounding(residuals, rounding, norm):
+    if not abs(cost - claimed) <= OBJECTIVE_TOLERANCE * abs(cost) + cost_rounding(residuals, rounding, norm):
         raise Invalid("objective", f"the solution costs {cost!r}, the certificate claims {claimed!r}")
+    uncertainty = getattr(item, "residual_uncertainty", None)
+    if uncertainty is not None:
+        spread = cost_rounding(residuals, uncertainty(solution), norm)
+        tolerance = max(options["abs_gap"], options["rel_gap"] * abs(claimed))
+        if not spread <= tolerance:
+            raise Invalid("objective", f"the data determine the solution's cost only to within {spread!r}, more than "
+                                       f"the tolerance {tolerance!r} (a point nearly on a view's principal plane)")
     passed.append("objective")
     if options["max_residual"] is not None:
         longest = float(np.max(np.sqrt((residuals * residuals).sum(axis=1))))
@@ -376,7 +383,7 @@ def _check_residual_claim(kind: str, adapter, arrays: tuple, options: dict, clai
     return bound
 
 
-def _cost_rounding(residuals: np.ndarray, rounding: np.ndarray, norm: str) -> float:
+def cost_rounding(residuals: np.ndarray, rounding: np.ndarray, norm: str) -> float:
     """How much the cost can change when each residual coordinate moves by its rounding bound:
     the only slack beside the relative OBJECTIVE_TOLERANCE, tied to the data, not the document."""
     if norm == "L2L2":

@@ -57,7 +57,8 @@ from geocert.solvers.fractional.relaxation import FractionalProgram, cost_unit, 
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult, claim_of
 from geocert.solvers.fractional.search import (MAX_SCALE, ROOT_SUBSET, branch_directions, depth_subspace,
                                                local_refine, root_region)
-from geocert.solvers.fractional.triangulation import track_result, triangulate
+from geocert.solvers.fractional.proof import residual_uncertainty
+from geocert.solvers.fractional.triangulation import PROGRAM_REFUSED, refused_by_verifier, track_result, triangulate
 from geocert.solvers.verify import self_check, self_check_enabled
 
 D = 3
@@ -717,9 +718,45 @@ def _root_nodes(closing: list, k: int, options: TriangulationOptions) -> list:
         if options.certificate == "full":
             certificate.proof = encode(SearchProof(factor, proofs[g], [], root, [(root, leaf)]))
         lower_bound = min(bound, upper_bound) / unit
-        done.append((entry.index, track_result(chart, entry.cams, entry.points, incumbent, options, "optimal",
-                                                lower_bound, 1, certificate)))
-    return done
+        # Checked below as the verifier would check it, all at once.
+        done.append((g, track_result(chart, entry.cams, entry.points, incumbent, options, "optimal",
+                                     lower_bound, 1, certificate, checked=False)))
+    _check_results(entries, num, den, [result for _, result in done], [g for g, _ in done], reference, options)
+    return [(entries[g].index, result) for g, result in done]
+
+
+def _check_results(entries: list, num, den, results: list, rows: list[int], reference,
+                   options: TriangulationOptions) -> None:
+    """triangulation.track_result's checks (its _refused_by_verifier: depths, the cost's
+    uncertainty, the program against the data with half the verifier's tolerance) for the
+    certified ``results`` of rows ``rows`` of one root-node group, at once (stacked's forms)."""
+    certified = [(row, result) for row, result in zip(rows, results) if result.status == "optimal"]
+    if not certified:
+        return
+    chosen = np.array([row for row, _ in certified])
+    solutions = np.array([result.point if result.at_infinity else result.point + [1.0] for _, result in certified])
+    cams = np.array([entries[row].cams for row in chosen])
+    points = np.array([entries[row].points for row in chosen])
+    residuals = np.array([result.residuals for _, result in certified])
+    costs = np.array([result.cost for _, result in certified])
+    T = np.array([entries[row].chart.T for row in chosen])
+    w = np.linalg.solve(T, solutions[..., None])[..., 0]
+    inside = w[:, 3] > 0  # the verifier reads the solution in the chart: its reference depth is positive
+    v0 = w[:, :3] / np.where(inside, w[:, 3], 1.0)[:, None]
+    factors = np.array([entries[row].factor for row in chosen])
+    with np.errstate(all="ignore"):
+        in_front = np.all(np.einsum("gnj,gj->gn", cams[:, :, 2], solutions) > 0, axis=1)
+        spread = stacked.cost_roundings(residuals, residual_uncertainty(cams, points, solutions), options.norm)
+        determined = spread <= 0.5 * np.maximum(options.abs_gap, options.rel_gap * np.abs(costs))
+        agree = inside & stacked.program_agrees(cams, points, num[chosen], den[chosen], T, factors, v0,
+                                                reference[chosen], strictness=0.5)
+    for (row, result), solution, passed in zip(certified, solutions, in_front & determined & agree):
+        if not passed:  # rare: the reason in track_result's words, from its own checks
+            entry = entries[row]
+            result.status, result.certified = "not_certified", False
+            result.reason = refused_by_verifier(entry.chart, entry.cams, entry.points, solution,
+                                                np.array(result.residuals), result.cost, options, entry.factor) \
+                or PROGRAM_REFUSED.format("the program's residuals or depth signs differ from the data's")
 
 
 def _candidate(program: FractionalProgram, v: np.ndarray, interior: np.ndarray) -> np.ndarray | None:

@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from geocert.solvers.core.geometry import normalised_cameras
+from geocert.solvers.core.geometry import lengths, normalised_cameras
 from geocert.solvers.core.strict import Invalid, numbers
 from geocert.solvers.fractional.charts import Chart, MapChart
-from geocert.solvers.fractional.proof import verify_search
+from geocert.solvers.fractional.proof import raw_sizes, residual_uncertainty, verify_search
 from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
 
 MAX_VIEWS = 1000  # views in a track, for the parser too: a chart's choice of reference takes views^2 work
@@ -19,10 +19,12 @@ MAX_POINTS = 1_000_000
 class TrackItem:
     """One track's program and the maps between its point and the program's variables."""
 
-    def __init__(self, arrays: tuple, norm: str):
+    def __init__(self, arrays: tuple, norm: str, chart: Chart | None = None):
+        """``chart``: the one the solver built from these arrays, when a solver checks its own
+        result as the verifier will (the verifier always rebuilds it)."""
         self.norm = norm
         self.cameras, self.points = arrays
-        self.chart = Chart.build(self.cameras, self.points, norm)
+        self.chart = chart if chart is not None else Chart.build(self.cameras, self.points, norm)
         self.program = self.chart.program
 
     def solution(self, claim: dict) -> np.ndarray:
@@ -53,6 +55,15 @@ class TrackItem:
         solutions = np.hstack([vs, np.ones((len(vs), 1))]) @ self.chart.T.T  # (n, 4)
         proj = np.einsum("Nij,nj->nNi", self.cameras, solutions)  # (n, N, 3)
         return proj[..., :2] - self.points * proj[..., 2:3], proj[..., 2]
+
+    def residual_uncertainty(self, solution: np.ndarray) -> np.ndarray:
+        return residual_uncertainty(self.cameras, self.points, solution)
+
+    def raw_sizes_many(self, vs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The size of the terms behind each numerator and depth of raw_parts_many (the norms of
+        the camera rows they take times the point's norm): their round-off is a tiny part of it."""
+        solutions = np.hstack([vs, np.ones((len(vs), 1))]) @ self.chart.T.T
+        return raw_sizes(self.cameras, self.points, lengths(solutions))
 
     def depths_agree(self, depths: np.ndarray) -> bool:
         return bool(np.all(depths > 0))

@@ -26,7 +26,7 @@ from geocert.solvers.core.cones import ConeSpec, _project_rows
 from geocert.solvers.core.coverage import uncovered_part
 from geocert.solvers.core.geometry import lengths, normalised_cameras
 from geocert.solvers.core.strict import Invalid, dual_vector, numbers
-from geocert.solvers.fractional.proof import SCALE_RANGE, _sample_steps
+from geocert.solvers.fractional.proof import SCALE_RANGE, _sample_steps, raw_sizes, residual_uncertainty
 
 D = 3  # a track's program has 3 variables
 CHECKS = ("data", "claim", "objective", "scope", "program", "root_region", "tightening", "coverage",
@@ -205,14 +205,15 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     ok &= np.all(proj[..., 2] > 0, axis=1)
     if norm == "L2L2":
         recomputed = (residuals * residuals).sum(axis=(1, 2))
-        slack = np.sum(2 * np.abs(residuals) * rounding + rounding * rounding, axis=(1, 2))
     elif norm == "L2L1":
         recomputed = lengths(residuals).sum(axis=1)
-        slack = np.sum(lengths(rounding), axis=1)
     else:
         recomputed = np.abs(residuals).sum(axis=(1, 2))
-        slack = np.sum(rounding, axis=(1, 2))
+    slack = cost_roundings(residuals, rounding, norm)
     ok &= np.abs(recomputed - cost) <= OBJECTIVE_TOLERANCE * np.abs(recomputed) + slack
+    with np.errstate(all="ignore"):
+        spread = cost_roundings(residuals, residual_uncertainty(cams, points, X), norm)
+    ok &= spread <= np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
 
     # The program at the claimed scale (verify_search) and its agreement with the data.
     ok &= (SCALE_RANGE[0] <= scale) & (scale <= SCALE_RANGE[1])
@@ -222,7 +223,7 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     w = np.linalg.solve(T, X[..., None])[..., 0]
     ok &= w[:, 3] > 0
     v0 = w[:, :3] / np.where(w[:, 3] > 0, w[:, 3], 1.0)[:, None]
-    ok &= _program_agrees(cams, points, num, den, T, scale, v0, reference)
+    ok &= program_agrees(cams, points, num, den, T, scale, v0, reference)
 
     # The root region (proof._check_root).
     k_ok = np.linalg.cond(F) <= 1e6
@@ -243,6 +244,15 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     tolerance = np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
     ok &= gap <= tolerance * (1 + 1e-12)
     return ok
+
+
+def cost_roundings(residuals: np.ndarray, rounding: np.ndarray, norm: str) -> np.ndarray:
+    """verify.cost_rounding for every track: residuals and rounding (G, n, 2)."""
+    if norm == "L2L2":
+        return np.sum(2 * np.abs(residuals) * rounding + rounding * rounding, axis=(1, 2))
+    if norm == "L2L1":
+        return np.sum(lengths(rounding), axis=1)
+    return np.sum(rounding, axis=(1, 2))
 
 
 def chart_arrays(cams: np.ndarray, points: np.ndarray):
@@ -300,9 +310,9 @@ def chart_arrays(cams: np.ndarray, points: np.ndarray):
     return M[..., :2, :].copy(), den, H @ T, reference, ok
 
 
-def _program_agrees(cams, points, num, den, T, scale, v0, reference) -> np.ndarray:
-    """proof._check_program for every track: the program's residuals and depth signs are the
-    raw data's at the solution and at eight fixed points around it."""
+def program_agrees(cams, points, num, den, T, scale, v0, reference, strictness: float = 1.0) -> np.ndarray:
+    """proof.check_program for every track: the program's residuals and depth signs are the
+    raw data's at the solution and at eight fixed points around it (``strictness`` as there)."""
     steps = np.array(_sample_steps(D))
     samples = np.concatenate([v0[:, None], v0[:, None] + steps[None] * (1 + np.abs(v0))[:, None]], axis=1)
     V = np.concatenate([samples, np.ones(samples.shape[:2] + (1,))], axis=2)  # (G, 9, 4)
@@ -310,14 +320,17 @@ def _program_agrees(cams, points, num, den, T, scale, v0, reference) -> np.ndarr
     proj = np.einsum("gNij,gsj->gsNi", cams, solutions)
     numerators = proj[..., :2] - points[:, None] * proj[..., 2:3]
     depths = proj[..., 2]
+    numerator_size, depth_size = raw_sizes(cams, points, lengths(solutions))
     ours = np.einsum("gNmk,gsk->gsNm", num, V) / scale[:, None, None, None]
     ours_depth = np.einsum("gsk,gNk->gsN", V, den)
-    clear = np.abs(depths) > 1e-6 * np.max(np.abs(depths), axis=2, keepdims=True)
+    clear = np.abs(depths) > 1e-6 * depth_size
     safe_depths, safe_ours_depth = np.where(clear, depths, 1.0), np.where(clear, ours_depth, 1.0)
     theirs = np.where(clear[..., None], numerators / safe_depths[..., None], 0.0)
     ours = np.where(clear[..., None], ours / safe_ours_depth[..., None], 0.0)
     largest = np.max(np.abs(theirs), axis=(2, 3), keepdims=True)
-    agree = np.all(np.abs(ours - theirs) <= 1e-9 * (1 + largest) + 1e-6 * np.abs(theirs), axis=(1, 2, 3))
+    tolerance = 1e-9 * (1 + largest) + 1e-6 * np.abs(theirs) \
+        + 1e-13 * (numerator_size + np.abs(theirs) * depth_size[..., None]) / np.abs(safe_depths)[..., None]
+    agree = np.all(np.abs(ours - theirs) <= strictness * tolerance, axis=(1, 2, 3))
     exact = np.zeros(den.shape[:2], dtype=bool)
     exact[np.arange(len(den)), reference] = True
     varying = ~exact[:, None] & clear

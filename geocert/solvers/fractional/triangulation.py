@@ -21,10 +21,14 @@ from geocert.solvers.fractional.options import NORMS, TriangulationOptions
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult
 from geocert.solvers.fractional.search import Early, Reasons, depth_subspace, prepare, recomputed_status, search
 from geocert.solvers.core.geometry import norm_cost, normalised_cameras, reprojection_residuals
-from geocert.solvers.verify import checked_solve
+from geocert.solvers.core.strict import Invalid
+from geocert.solvers.fractional.items import TrackItem
+from geocert.solvers.fractional.proof import check_program, residual_uncertainty
+from geocert.solvers.verify import checked_solve, cost_rounding
 
 
 
+PROGRAM_REFUSED = "the verifier could not check the proof against the data at this solution ({})"
 AT_INFINITY = 1e-12  # |X[3]| of a unit-norm X below which the point is returned at infinity
 
 _REASONS = Reasons(
@@ -85,31 +89,65 @@ def _triangulate(cameras, points, options: TriangulationOptions, callback, start
         result = TrackResult(searched.status, False, nodes=searched.nodes, reason=searched.reason)
     else:
         result = track_result(chart, cameras, points, searched.solution, options, searched.status,
-                               searched.lower_bound, searched.nodes, searched.certificate)
+                               searched.lower_bound, searched.nodes, searched.certificate, prepared.scale)
     result.elapsed_s = time.perf_counter() - start
     return result
 
 
-def track_result(chart: Chart, cameras, points, y, options, status, lower, nodes, certificate) -> TrackResult:
+def track_result(chart: Chart, cameras, points, y, options, status, lower, nodes, certificate,
+                 scale: float | None = None, checked: bool = True) -> TrackResult:
+    """The result of chart point ``y``. ``scale``: the residual factor of a search's proof (its
+    program is checked against the data as the verifier checks it); None for the trivial bound.
+    ``checked=False``: the caller checks the result as the verifier would (batched, many at once)."""
     X = chart.T @ np.append(y, 1.0)
     X = X / np.linalg.norm(X)
-    # The chart keeps X[3] >= 0 up to round-off; a point this close to the plane at infinity is
-    # returned on it, with X[3] exactly 0, so that solver and verifier read one point, signed so
-    # that its depths are positive (X and -X differ there).
-    at_infinity = abs(X[3]) <= AT_INFINITY
+    # The chart keeps X[3] >= 0 up to round-off (the domain allows a relative 1e-12 below); a
+    # point this close to the plane at infinity, or just beyond it, is returned on it with X[3]
+    # exactly 0, so that solver and verifier read one point, signed so that its depths are
+    # positive (X and -X differ there). Divided by a negative X[3], it would be the point behind
+    # every camera.
+    at_infinity = X[3] <= AT_INFINITY
     if at_infinity:
         X[3] = 0.0
-    point = X.tolist() if at_infinity else (X[:3] / X[3]).tolist()
+    solution = X if at_infinity else np.append(X[:3] / X[3], 1.0)
+    point = solution.tolist() if at_infinity else solution[:3].tolist()
     # The cost of the point as returned (what anyone recomputing it gets, to the last bit).
-    residuals = reprojection_residuals(cameras, X if at_infinity else np.append(point, 1.0), points)
+    residuals = reprojection_residuals(cameras, solution, points)
     cost = norm_cost(residuals, options.norm)  # recomputed in pixels from the original data
     if lower is not None:
         lower = min(lower, cost)
     status, reason = recomputed_status(status, residuals, cost, lower, options)
+    if status == "optimal" and checked:
+        reason = refused_by_verifier(chart, cameras, points, solution, residuals, cost, options, scale)
+        status = "not_certified" if reason else status
     return TrackResult(status=status, certified=status == "optimal" and lower is not None, point=point, reason=reason,
                        at_infinity=bool(at_infinity), cost=cost, lower_bound=lower,
                        gap=cost - lower if lower is not None else None, nodes=nodes,
                        certificate=certificate, residuals=residuals.tolist())
+
+
+def refused_by_verifier(chart: Chart, cameras, points, solution: np.ndarray, residuals, cost: float,
+                         options: TriangulationOptions, scale: float | None) -> str | None:
+    """Why the verifier would refuse this solution of a certified search, if it would: a depth
+    that is not positive once recomputed from the data; a cost the data determine only to more
+    than the tolerance (a point nearly on a view's principal plane, where a residual is the
+    difference of far larger numbers); a program that does not agree with the data (checked with
+    half the verifier's tolerance; only with ``scale``, the search's, for the trivial bound needs
+    no program)."""
+    if not np.all(cameras[:, 2] @ solution > 0):
+        return "the solution as returned puts the point at non-positive depth once recomputed from the data"
+    spread = cost_rounding(residuals, residual_uncertainty(cameras, points, solution), options.norm)
+    tolerance = max(options.abs_gap, options.rel_gap * abs(cost))
+    if not spread <= 0.5 * tolerance:
+        return (f"the data determine the solution's cost only to within {spread!r}, too near the tolerance "
+                f"{tolerance!r} (a point nearly on a view's principal plane)")
+    if scale is None:
+        return None
+    try:
+        check_program(TrackItem((cameras, points), chart.program.norm, chart), solution, scale, strictness=0.5)
+    except Invalid as exc:
+        return PROGRAM_REFUSED.format(exc.detail)
+    return None
 
 
 __all__ = ["NORMS", "TriangulationOptions", "TrackResult", "SearchCertificate", "triangulate", "prepare_track",
