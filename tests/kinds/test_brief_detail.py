@@ -36,7 +36,7 @@ class TestBriefDetail:
 
     def test_determinacy_is_not_computed(self, name, monkeypatch):
         calls = []
-        for function in ("track", "map_"):
+        for function in ("track", "tracks_many", "map_"):
             original = getattr(determinacy, function)
             monkeypatch.setattr(determinacy, function,
                                 lambda *args, _original=original, **kwargs: calls.append(1) or _original(*args, **kwargs))

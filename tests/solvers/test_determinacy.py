@@ -256,3 +256,64 @@ class TestBilinear:
         item = self.solve(basis, points)
         document = item["determinacy"]
         assert "near_dependent_basis" in codes(document) and not document["determined"]
+
+
+class TestTracksMany:
+    """fractional.determinacy.tracks_many: for every track the document ``track`` gives."""
+
+    @staticmethod
+    def same(a, b) -> bool:
+        if isinstance(a, dict):
+            return isinstance(b, dict) and a.keys() == b.keys() and all(TestTracksMany.same(a[k], b[k]) for k in a)
+        if isinstance(a, list):
+            return isinstance(b, list) and len(a) == len(b) and all(TestTracksMany.same(x, y) for x, y in zip(a, b))
+        if isinstance(a, float) and isinstance(b, float):
+            return abs(a - b) <= 1e-9 * max(abs(a), abs(b), 1e-300)
+        return a == b
+
+    def scene(self):
+        from geocert.solvers.fractional.results import TrackResult
+
+        rng = np.random.default_rng(7)
+        centres = np.array([[0.0, 0, 10], [0.05, 0, 10], [7.0, 0, 7], [10.0, 0, 0], [0.1, 0, 10]])
+        cameras = cameras_looking_at_origin(centres)
+        affine = cameras[0].copy()
+        affine[2] = [0.0, 0.0, 0.0, 1.0]  # a camera whose centre is at infinity
+        cameras = np.concatenate([cameras, affine[None]])
+        X = np.array([0.3, -0.2, 0.1])
+        tracks, results = [], []
+        for views in ([0, 1], [0, 1, 4], [0, 2, 3], [2, 3], [5, 2, 3], [0, 1, 2, 3, 4], [1, 2]):
+            points = project(cameras[views], X) + rng.normal(size=(len(views), 2))
+            tracks.append((views, points))
+            point = (X + rng.normal(size=3) * 0.01).tolist()
+            # One gap wider than the curvature's delta (track 3's), which then sets the widths.
+            lower = -100.0 if views == [2, 3] else 1.999
+            results.append(TrackResult("optimal", True, cost=2.0, lower_bound=lower, point=point))
+        tracks += [([0, 2], tracks[0][1]), ([0, 3], tracks[0][1]), ([2, 3], tracks[3][1])]
+        results += [TrackResult("time_limit", False),  # no point
+                    TrackResult("optimal", True, cost=1.0, lower_bound=1.0, point=[0.0, 0.0, 1.0, 0.0],
+                                at_infinity=True),
+                    TrackResult("optimal", True, cost=1.0, lower_bound=0.5, point=centres[2].tolist())]  # at a centre
+        # Rays from a centre at infinity are not compared: one ray left (no warning), or two
+        # nearly parallel ones (a warning); and rays meeting on one line (J'J singular along it).
+        for views, point in (([5, 2], X), ([5, 0, 1], X), ([0, 3], np.array([5.0, 0.0, 5.0]))):
+            tracks.append((views, project(cameras[views], point) + rng.normal(size=(len(views), 2))))
+            results.append(TrackResult("optimal", True, cost=2.0, lower_bound=1.999, point=point.tolist()))
+        return cameras, tracks, results
+
+    def test_the_same_documents_as_track_by_track(self):
+        from geocert.solvers.core.determinacy import safely
+
+        cameras, tracks, results = self.scene()
+        many = fractional.tracks_many(cameras, tracks, results)
+        alone = [safely(fractional.track, cameras[v], p, r.point, r.at_infinity, r.cost, r.lower_bound)
+                 for (v, p), r in zip(tracks, results)]
+        assert all(self.same(a, b) for a, b in zip(alone, many)), [i for i, (a, b) in enumerate(zip(alone, many))
+                                                                    if not self.same(a, b)]
+        # The scene holds what it is meant to: warnings, a missing depth, unbounded intervals, none.
+        assert many[7] is None and codes(many[8]) == ["at_infinity"]
+        assert "near_zero_parallax" in codes(many[0]) and codes(many[2]) == []
+        assert [i["name"] for i in many[4]["intervals"]] == ["x", "y", "z"]  # view 0's centre at infinity
+        assert any(i["lower"] is None for i in many[9]["intervals"])
+        assert codes(many[10]) == [] and "near_zero_parallax" in codes(many[11])
+        assert "near_zero_parallax" in codes(many[12]) and interval(many[12], "x")["lower"] is None
