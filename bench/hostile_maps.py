@@ -16,6 +16,18 @@ checkable; this prints the count and the verifier's reasons.
 
     .venv/bin/python -m bench.hostile_maps [--seeds 1,2,3] [--norms L2L2,L2L1,L1L1] [--problems 24]
     .venv/bin/python -m bench.hostile_maps --show 2:5   # seed 2, problem 5: its ingredients and data
+    .venv/bin/python -m bench.hostile_maps --verbose    # also each row's statuses and reasons
+    .venv/bin/python -m bench.hostile_maps --forge      # genuine certificates perturbed (below)
+
+--forge takes genuine certificates of maps whose searches branch (and one with per-term caps) and
+perturbs the claim (cost, lower_bound, matrix: negated, scaled by 1e+-300, a slightly costlier one)
+and every part of the proof (scale, gamma, root bounds and duals, tightening rounds, search box,
+leaves, leaf proofs' bounds, duals, kinds and cost caps, caps rounds), alone and with a false lower
+bound; it prints what the verifier accepts and whether that is false (a lower bound above the cost
+of a map known to exist, or a cost that is not its matrix's).
+
+Targets scaled by 1e6 and offset by 1e6 of that lie beyond the clip: such problems have every
+target at the same corner and are degenerate or trivially fitted (kept: hostile too).
 
 Nothing here asserts; tests/solvers/test_hostile_maps.py holds the checked cases.
 """
@@ -154,7 +166,8 @@ def _proof_forgeries(proof: dict) -> dict:
         "no tightening": lambda p: p.update(tightening=[]),
         "search box shrunk 1%": lambda p: p.update(search_box=_shrunk(p["search_box"], 0.01)),
         "last leaf dropped": lambda p: p.update(leaves=p["leaves"][:-1]),
-        "a leaf shrunk 1%": lambda p: p["leaves"].__setitem__(0, _shrunk(p["leaves"][0][:2], 0.01) + p["leaves"][0][2:]),
+        "a leaf shrunk 1%": lambda p: p["leaves"].__setitem__(0, _shrunk(p["leaves"][0][:2], 0.01)
+                                                              + p["leaves"][0][2:]),
         "every leaf to the best proof": lambda p: [leaf.__setitem__(2, best) for leaf in p["leaves"]],
         "a leaf's proof null": lambda p: p["leaves"][0].__setitem__(2, None),
         "bounds x (1 + 1e-6)": each(lambda r: r.update(bound=r["bound"] * (1 + 1e-6)) if r.get("bound") else None),
@@ -167,8 +180,10 @@ def _proof_forgeries(proof: dict) -> dict:
         "upper_bound x 0.5": each(lambda r: r.update(upper_bound=r["upper_bound"] * 0.5)
                                   if r.get("upper_bound") else None),
         "upper_bound null": each(lambda r: r.update(upper_bound=None)),
-        "tightening upper_bound x 0.5": lambda p: [t.update(upper_bound=t["upper_bound"] * 0.5) for t in p["tightening"]],
-        "tightening box_out shrunk 10%": lambda p: [t.update(box_out=_shrunk(t["box_out"], 0.1)) for t in p["tightening"]],
+        "tightening upper_bound x 0.5": lambda p: [t.update(upper_bound=t["upper_bound"] * 0.5)
+                                                   for t in p["tightening"]],
+        "tightening box_out shrunk 10%": lambda p: [t.update(box_out=_shrunk(t["box_out"], 0.1))
+                                                    for t in p["tightening"]],
     }
     if proof.get("caps"):
         forgeries.update({
@@ -242,8 +257,8 @@ def forge(cases) -> None:
                                                                  lower_bound=worse_cost),
         }
         for label, change in _proof_forgeries(genuine["proof"]).items():
-            for base_label, base in (("", genuine),
-                                     (" + worse matrix, lower = its cost", claims["a worse matrix, lower_bound = its cost"])):
+            false_base = claims["a worse matrix, lower_bound = its cost"]
+            for base_label, base in (("", genuine), (" + worse matrix, lower = its cost", false_base)):
                 claim = copy.deepcopy(base)
                 try:
                     change(claim["proof"])
