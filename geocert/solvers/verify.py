@@ -20,7 +20,7 @@ import numpy as np
 
 from geocert.solvers.core.certificates import (BOUND_TOLERANCE, FORMAT, OBJECTIVE_TOLERANCE, VERSION, data_hash,
                                                problem_hash)
-from geocert.solvers.core.geometry import InputError, norm_cost
+from geocert.solvers.core.geometry import InputError, cost_rounding, norm_cost
 from geocert.solvers.core.strict import Invalid, nesting_depth, number as _number
 from geocert.solvers.fractional.results import claim_of
 
@@ -355,12 +355,18 @@ def _check_residual_claim(kind: str, adapter, arrays: tuple, options: dict, clai
     if not item.depths_agree(depths):
         raise Invalid("objective", "the solution puts a point at non-positive depth")
     cost = norm_cost(residuals, norm)
-    if not abs(cost - claimed) <= OBJECTIVE_TOLERANCE * abs(cost) + cost_rounding(residuals, rounding, norm):
+    slack = cost_rounding(residuals, rounding, norm)
+    if not abs(cost - claimed) <= OBJECTIVE_TOLERANCE * abs(cost) + slack:
         raise Invalid("objective", f"the solution costs {cost!r}, the certificate claims {claimed!r}")
+    tolerance = max(options["abs_gap"], options["rel_gap"] * abs(claimed))
+    # The gap from the cost the data give (and its rounding), not the claimed one: a claim may
+    # round its cost, never its gap.
+    if not (cost + slack) - lower_claimed <= tolerance * (1 + 1e-12):
+        raise Invalid("gap", f"the solution costs {cost!r} (to within {slack!r}), more than the tolerance "
+                             f"{tolerance!r} above lower_bound {lower_claimed!r}")
     uncertainty = getattr(item, "residual_uncertainty", None)
     if uncertainty is not None:
         spread = cost_rounding(residuals, uncertainty(solution), norm)
-        tolerance = max(options["abs_gap"], options["rel_gap"] * abs(claimed))
         if not spread <= tolerance:
             raise Invalid("objective", f"the data determine the solution's cost only to within {spread!r}, more than "
                                        f"the tolerance {tolerance!r} (a point nearly on a view's principal plane)")
@@ -381,16 +387,6 @@ def _check_residual_claim(kind: str, adapter, arrays: tuple, options: dict, clai
     else:
         raise Invalid("format", f"proof type {proof.get('type')!r} is not one {kind} takes")
     return bound
-
-
-def cost_rounding(residuals: np.ndarray, rounding: np.ndarray, norm: str) -> float:
-    """How much the cost can change when each residual coordinate moves by its rounding bound:
-    the only slack beside the relative OBJECTIVE_TOLERANCE, tied to the data, not the document."""
-    if norm == "L2L2":
-        return float(np.sum(2 * np.abs(residuals) * rounding + rounding * rounding))
-    if norm == "L2L1":
-        return float(np.sum(np.sqrt((rounding * rounding).sum(axis=1))))
-    return float(np.sum(rounding))
 
 
 class SelfCheckFailed(AssertionError):

@@ -26,6 +26,11 @@ FORMAT = "geocert-certificate"
 # same fraction applies to cost caps and to the claimed lower bound; the objective has its own.
 BOUND_TOLERANCE = 1e-9
 OBJECTIVE_TOLERANCE = 1e-9
+# How far a residual coordinate recomputed from the data may be from anyone else's computation of
+# it: this fraction of |image| + |observed| (about 45 units in their last place). The cost's slack
+# from it counts against the gap: a claim is certified only when its cost plus that slack is within
+# the tolerance of its lower bound (at coordinates of 5e7, 1e-12 let a map costing 9e-4 claim 0).
+ROUNDING = 1e-14
 VERSION = 2  # 2: problem_sha256 covers the options a claim depends on; strict numbers throughout
 # The options a claim depends on: the cost (norm), the scope (max_residual) and the tolerance.
 CLAIM_OPTIONS = ("norm", "max_residual", "rel_gap", "abs_gap")

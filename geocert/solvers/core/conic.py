@@ -223,6 +223,13 @@ class _Pool(threading.local):
 
 
 _POOL = _Pool()
+
+
+def forget_pooled_solvers() -> None:
+    """Empty this thread's pool. A pooled solver loaded with new data solves the same problem as a
+    new one, but not always to the same last bits (what Clarabel keeps between solves): a job run
+    from an empty pool gets the same numbers whatever ran before it in the process."""
+    _POOL.entries.clear()
 _TOKENS = itertools.count(1)
 
 

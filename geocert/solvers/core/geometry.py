@@ -141,6 +141,16 @@ def depths(cameras: np.ndarray, X: np.ndarray) -> np.ndarray:
     return cameras[:, 2, :] @ X
 
 
+def cost_rounding(residuals: np.ndarray, rounding: np.ndarray, norm: str) -> float:
+    """How much the cost can change when each residual coordinate moves by its rounding bound:
+    the only slack beside the relative OBJECTIVE_TOLERANCE, tied to the data, not the document."""
+    if norm == "L2L2":
+        return float(np.sum(2 * np.abs(residuals) * rounding + rounding * rounding))
+    if norm == "L2L1":
+        return float(np.sum(np.sqrt((rounding * rounding).sum(axis=1))))
+    return float(np.sum(rounding))
+
+
 def lengths(x: np.ndarray, axis: int = -1) -> np.ndarray:
     """np.linalg.norm(x, axis=axis) for real x (the same sums), without its argument handling:
     the hot paths call it on small arrays."""

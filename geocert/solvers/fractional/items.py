@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from geocert.solvers.core.certificates import ROUNDING
 from geocert.solvers.core.geometry import lengths, normalised_cameras
 from geocert.solvers.core.strict import Invalid, numbers
 from geocert.solvers.fractional.charts import Chart, MapChart
@@ -44,10 +45,10 @@ class TrackItem:
     def raw_residuals(self, solution) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Residuals and depths of the solution from the raw data, computed as the solver
         computes them (projection minus observation), and a bound on each residual coordinate's
-        rounding error (a few thousand units in the last place of the larger of the two)."""
+        rounding error (certificates.ROUNDING of the two's sizes)."""
         proj = self.cameras @ solution
         image = proj[:, :2] / proj[:, 2:3]
-        return image - self.points, proj[:, 2], 1e-12 * (np.abs(image) + np.abs(self.points))
+        return image - self.points, proj[:, 2], ROUNDING * (np.abs(image) + np.abs(self.points))
 
     def raw_parts_many(self, vs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each residual as numerator / depth, from the raw data only, at the points of the
@@ -91,7 +92,7 @@ class MapItem:
     def raw_residuals(self, solution) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         proj = np.hstack([self.source, np.ones((len(self.source), 1))]) @ solution.T
         image = proj[:, :-1] / proj[:, -1:]
-        return self.target - image, proj[:, -1], 1e-12 * (np.abs(image) + np.abs(self.target))
+        return self.target - image, proj[:, -1], ROUNDING * (np.abs(image) + np.abs(self.target))
 
     def raw_parts(self, solution) -> tuple[np.ndarray, np.ndarray]:
         homogeneous = np.hstack([self.source, np.ones((len(self.source), 1))])

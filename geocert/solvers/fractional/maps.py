@@ -21,6 +21,7 @@ from geocert.solvers.fractional.charts import MapChart, normaliser
 from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.fractional.results import MapResult
 from geocert.solvers.fractional.search import LARGE_BOUND_TOLERANCE, Early, Reasons, prepare, recomputed_status, search
+from geocert.solvers.core.certificates import ROUNDING
 from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.fractional.items import MapItem
@@ -129,7 +130,8 @@ def _map_result(chart: MapChart, source, target, v, options, status, lower, node
     cost = norm_cost(residuals, options.norm)  # recomputed from the caller's data
     if lower is not None:
         lower = min(lower, cost)
-    status, reason = recomputed_status(status, residuals, cost, lower, options)
+    rounding = ROUNDING * (np.abs(target - residuals) + np.abs(target))  # the verifier's (target - image = residuals)
+    status, reason = recomputed_status(status, residuals, cost, lower, options, rounding)
     if status == "optimal":
         reason = refused_by_verifier(source, target, M, options.norm, scale)
         status = "not_certified" if reason else status

@@ -21,7 +21,7 @@ from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, Progr
 from geocert.solvers.core.certificates import CapProof, LeafProof, RootProof, SearchProof, TighteningProof, encode
 from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram, solve_conic
 from geocert.solvers.core.cones import ConeSpec, proves_infeasible, safe_lower_bound
-from geocert.solvers.core.geometry import lengths, norm_cost
+from geocert.solvers.core.geometry import cost_rounding, lengths, norm_cost
 from geocert.solvers.fractional.options import FractionalOptions
 from geocert.solvers.fractional.results import SearchCertificate
 from geocert.solvers.fractional.relaxation import (EPS_DEPTH, ConicData, FractionalProgram, Relaxation, complete_functionals,
@@ -673,16 +673,18 @@ def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.n
 
 
 def recomputed_status(status: str, residuals: np.ndarray, cost: float, lower: float | None,
-                      options: FractionalOptions) -> tuple[str, str | None]:
+                      options: FractionalOptions, rounding: np.ndarray | None = None) -> tuple[str, str | None]:
     """The status of a solution whose residuals and cost were recomputed from the raw data at
     the point as returned (rounded from the search's variables), as the verifier recomputes
-    them: "optimal" stays only when that cost is still within the tolerance of the proven bound
-    and every residual still within max_residual."""
+    them: "optimal" stays only when that cost, plus what each residual coordinate's ``rounding``
+    (the verifier's: certificates.ROUNDING of the sizes of image and observation) can add, is
+    still within the tolerance of the proven bound, and every residual still within max_residual."""
     if status != "optimal" or lower is None:
         return status, None
-    if cost - lower > max(options.abs_gap, options.rel_gap * cost):
-        return "not_certified", (f"the solution's cost recomputed from the data, {cost!r}, is not within the "
-                                 f"tolerance of the proven bound {lower!r}")
+    slack = 0.0 if rounding is None else cost_rounding(residuals, rounding, options.norm) * (1 + 1e-6)
+    if cost + slack - lower > max(options.abs_gap, options.rel_gap * cost):
+        return "not_certified", (f"the solution's cost recomputed from the data, {cost!r} (to within {slack!r}), is "
+                                 f"not within the tolerance of the proven bound {lower!r}")
     if options.max_residual is not None and not np.all(lengths(residuals, 1) <= options.max_residual):
         return "not_certified", ("the solution as returned has a residual beyond max_residual "
                                  f"{options.max_residual!r} once recomputed from the data")

@@ -20,7 +20,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
+from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE, ROUNDING
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import ConeSpec, _project_rows
 from geocert.solvers.core.coverage import uncovered_part
@@ -201,7 +201,7 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     proj = np.einsum("gnij,gj->gni", cams, X)
     image = proj[..., :2] / proj[..., 2:3]
     residuals = image - points
-    rounding = 1e-12 * (np.abs(image) + np.abs(points))
+    rounding = ROUNDING * (np.abs(image) + np.abs(points))
     ok &= np.all(proj[..., 2] > 0, axis=1)
     if norm == "L2L2":
         recomputed = (residuals * residuals).sum(axis=(1, 2))
@@ -211,6 +211,8 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
         recomputed = np.abs(residuals).sum(axis=(1, 2))
     slack = cost_roundings(residuals, rounding, norm)
     ok &= np.abs(recomputed - cost) <= OBJECTIVE_TOLERANCE * np.abs(recomputed) + slack
+    tolerance = np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
+    ok &= (recomputed + slack) - lower_claimed <= tolerance * (1 + 1e-12)  # the gap, from the data's cost
     with np.errstate(all="ignore"):
         spread = cost_roundings(residuals, residual_uncertainty(cams, points, X), norm)
     ok &= spread <= np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
@@ -247,7 +249,7 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
 
 
 def cost_roundings(residuals: np.ndarray, rounding: np.ndarray, norm: str) -> np.ndarray:
-    """verify.cost_rounding for every track: residuals and rounding (G, n, 2)."""
+    """geometry.cost_rounding for every track: residuals and rounding (G, n, 2)."""
     if norm == "L2L2":
         return np.sum(2 * np.abs(residuals) * rounding + rounding * rounding, axis=(1, 2))
     if norm == "L2L1":

@@ -20,11 +20,12 @@ from geocert.solvers.fractional.charts import Chart, camera_centres
 from geocert.solvers.fractional.options import NORMS, TriangulationOptions
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult
 from geocert.solvers.fractional.search import Early, Reasons, depth_subspace, prepare, recomputed_status, search
-from geocert.solvers.core.geometry import norm_cost, normalised_cameras, reprojection_residuals
+from geocert.solvers.core.certificates import ROUNDING
+from geocert.solvers.core.geometry import cost_rounding, norm_cost, normalised_cameras, reprojection_residuals
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.fractional.items import TrackItem
 from geocert.solvers.fractional.proof import check_program, residual_uncertainty
-from geocert.solvers.verify import checked_solve, cost_rounding
+from geocert.solvers.verify import checked_solve
 
 
 
@@ -116,7 +117,8 @@ def track_result(chart: Chart, cameras, points, y, options, status, lower, nodes
     cost = norm_cost(residuals, options.norm)  # recomputed in pixels from the original data
     if lower is not None:
         lower = min(lower, cost)
-    status, reason = recomputed_status(status, residuals, cost, lower, options)
+    rounding = ROUNDING * (np.abs(residuals + points) + np.abs(points))  # the verifier's (image - points = residuals)
+    status, reason = recomputed_status(status, residuals, cost, lower, options, rounding)
     if status == "optimal" and checked:
         reason = refused_by_verifier(chart, cameras, points, solution, residuals, cost, options, scale)
         status = "not_certified" if reason else status
