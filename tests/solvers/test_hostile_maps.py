@@ -48,36 +48,58 @@ class TestEveryCertifiedMapVerifies:
             assert result.cost - result.lower_bound <= 1e-3 * result.cost
 
     @pytest.mark.parametrize("seed, index, norm", REFUSED)
-    def test_the_verifier_refuses_them_as_certified_for_the_program_alone(self, seed, index, norm):
-        """Forced to certified, the claim fails the program check and nothing else: every other
-        check passes with check_program skipped (what the xfail tests below rely on)."""
+    def test_certified_now_and_verified(self, seed, index, norm):
+        # Refused before for the program check's tolerance alone (no allowance for raw terms far
+        # larger than the residual); the map's residuals now get the round-off of their terms.
         p, result = solved(seed, index, norm)
-        forced = dataclasses.replace(result, status="optimal", certified=True)
-        why = refused(p["kind"], p["source"], p["target"], forced, options_for(norm))
-        assert why == "program: the program's residuals differ from the data's"
-        original = proof.check_program
-        try:
-            proof.check_program = lambda *args, **kwargs: None
-            assert refused(p["kind"], p["source"], p["target"], forced, options_for(norm)) is None
-        finally:
-            proof.check_program = original
+        assert result.certified
+        assert refused(p["kind"], p["source"], p["target"], result, options_for(norm)) is None
 
 
-class TestKnownVerifierDefects:  # and one mended (a claimed cost's rounding counted in its gap)
-    @pytest.mark.xfail(strict=True, reason=(
-        "proof.check_program judges a map's residuals with 1e-9 (1 + largest) + 1e-6 |residual| only: "
-        "MapItem has no raw_sizes_many, so the round-off of raw terms far larger than the residual "
-        "(sources or targets offset 1e3-1e6 times their spread) is not allowed for, as it is for tracks. "
-        "The program agrees with the exact residuals of the claimed matrix as well as the raw "
-        "computation does (bench.hostile_maps; items.py/proof.py are the lead's)"))
-    @pytest.mark.parametrize("seed, index, norm", REFUSED)
-    def test_a_genuine_claim_of_far_offset_data_verifies(self, seed, index, norm):
-        p, result = solved(seed, index, norm)
-        forced = dataclasses.replace(result, status="optimal", certified=True)
-        assert refused(p["kind"], p["source"], p["target"], forced, options_for(norm)) is None
+def georeferenced_resection(seed: int):
+    """A camera 150 m from 60 points given in UTM-like coordinates (about 5e5, 4.3e6): the data's
+    residuals are differences of terms 1e5 times larger than themselves."""
+    rng = np.random.default_rng(seed)
+    offset = np.array([5.1e5, 4.3e6, 120.0])
+    X = rng.uniform(-50, 50, size=(60, 3)) * [1, 1, 0.2] + offset
+    C = offset + np.array([0, -150, 40.0]) + rng.normal(size=3)
+    z = (offset - C) / np.linalg.norm(offset - C)
+    x = np.cross(z, [0, 0, 1.0])
+    x /= np.linalg.norm(x)
+    P = np.array([[1500, 0, 960], [0, 1500, 540], [0, 0, 1.0]]) @ np.hstack(
+        [np.stack([x, np.cross(z, x), z]), -np.stack([x, np.cross(z, x), z]) @ C[:, None]])
+    proj = np.hstack([X, np.ones((60, 1))]) @ P.T
+    return X, proj[:, :2] / proj[:, 2:] + rng.normal(size=(60, 2)) * 0.5
 
-    # The larger offsets are refused for the claimed cost (certificates.ROUNDING, 1e-14, no longer
-    # 1e-12); the smaller ones, whose cost is within that rounding of 0, for the gap it leaves.
+
+class TestGeoreferencedResection:
+    @pytest.mark.parametrize("norm", ["L2L2", "L1L1"])
+    @pytest.mark.parametrize("seed", [0, 1])
+    def test_certified_and_verified(self, seed, norm):
+        X, u = georeferenced_resection(seed)
+        result = fit_map(X, u, options_for(norm))
+        assert result.certified
+        assert refused("resection", X, u, result, options_for(norm)) is None
+
+    @pytest.mark.parametrize("wrong", [1e-6, -1e-6])
+    def test_a_program_wrong_in_its_millionth_part_is_refused(self, wrong):
+        # The allowance for the terms' round-off (certificates.TERMS_ROUNDING) must not hide a
+        # program built wrong: one coefficient of one observation off by a millionth of itself.
+        from geocert.solvers.core.strict import Invalid
+        from geocert.solvers.fractional.items import MapItem
+
+        X, u = georeferenced_resection(0)
+        result = fit_map(X, u, options_for("L2L2"))
+        item = MapItem((X, u), "L2L2")
+        M = np.array(result.matrix)
+        proof.check_program(item, M, 1.0)  # as built: accepted
+        largest = int(np.argmax(np.abs(item.program.num[7, 0])))
+        item.program.num[7, 0, largest] *= 1 + wrong
+        with pytest.raises(Invalid, match="residuals differ"):
+            proof.check_program(item, M, 1.0)
+
+
+class TestForgedCosts:
     @pytest.mark.parametrize("norm, offset", [("L1L1", 9e-5), ("L2L1", 9e-5), ("L2L2", 2.2e-4), ("L1L1", 5e-7),
                                               ("L2L1", 5e-7)])
     def test_a_cost_of_zero_for_a_map_that_costs_more_is_refused(self, norm, offset):

@@ -31,6 +31,12 @@ OBJECTIVE_TOLERANCE = 1e-9
 # from it counts against the gap: a claim is certified only when its cost plus that slack is within
 # the tolerance of its lower bound (at coordinates of 5e7, 1e-12 let a map costing 9e-4 claim 0).
 ROUNDING = 1e-14
+# How far a residual computed from a program and from the raw data may differ when its terms are
+# far larger than itself (a point near a principal plane, data offset far from the origin): this
+# fraction of the terms' size over the depth. Each computation rounds by a few 1e-16 of it
+# (measured: 0.1 to 0.6 of 1e-16 on hostile tracks and maps), so 1e-14 leaves a margin of 20 or
+# more, and a program wrong in its 1e-6th part is still refused on data offset 1e4 times their spread.
+TERMS_ROUNDING = 1e-14
 VERSION = 2  # 2: problem_sha256 covers the options a claim depends on; strict numbers throughout
 # The options a claim depends on: the cost (norm), the scope (max_residual) and the tolerance.
 CLAIM_OPTIONS = ("norm", "max_residual", "rel_gap", "abs_gap")

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from geocert.solvers.core.certificates import ROUNDING
-from geocert.solvers.core.geometry import lengths, normalised_cameras
+from geocert.solvers.core.geometry import normalised_cameras
 from geocert.solvers.core.strict import Invalid, numbers
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.proof import raw_sizes, residual_uncertainty, verify_search
@@ -64,7 +64,7 @@ class TrackItem:
         """The size of the terms behind each numerator and depth of raw_parts_many (the norms of
         the camera rows they take times the point's norm): their round-off is a tiny part of it."""
         solutions = np.hstack([vs, np.ones((len(vs), 1))]) @ self.chart.T.T
-        return raw_sizes(self.cameras, self.points, lengths(solutions))
+        return raw_sizes(self.cameras, self.points, solutions)
 
     def depths_agree(self, depths: np.ndarray) -> bool:
         return bool(np.all(depths > 0))
@@ -103,6 +103,13 @@ class MapItem:
         """Each residual as numerator / depth, from the raw data only, at each of ``vs``."""
         parts = [self.raw_parts(self.from_program(v)) for v in vs]
         return np.array([p[0] for p in parts]), np.array([p[1] for p in parts])
+
+    def raw_sizes_many(self, vs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The size of the terms behind each numerator ``target * depth - row . X`` and depth
+        ``last row . X`` of raw_parts_many: the sums of their products' magnitudes."""
+        homogeneous = np.abs(np.hstack([self.source, np.ones((len(self.source), 1))]))
+        terms = np.array([homogeneous @ np.abs(self.from_program(v)).T for v in vs])  # (n, count, m + 1)
+        return np.abs(self.target)[None] * terms[..., -1:] + terms[..., :-1], terms[..., -1]
 
     def depths_agree(self, depths: np.ndarray) -> bool:
         return bool(np.all(depths > 0) or np.all(depths < 0))  # a map is defined up to its sign

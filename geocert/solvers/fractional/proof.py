@@ -12,8 +12,7 @@ from typing import Any
 import numpy as np
 
 from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.geometry import lengths
-from geocert.solvers.core.certificates import BOUND_TOLERANCE
+from geocert.solvers.core.certificates import BOUND_TOLERANCE, TERMS_ROUNDING
 from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
 from geocert.solvers.core.coverage import uncovered_part
 from geocert.solvers.core.strict import Invalid, box as _box, dual_vector, number as _number, numbers as _numbers
@@ -101,25 +100,25 @@ def _sample_steps(d: int) -> tuple[np.ndarray, ...]:
     return tuple(rng.normal(size=d) * 10.0 ** rng.uniform(-4, 0) for _ in range(8))
 
 
-def raw_sizes(cameras: np.ndarray, points: np.ndarray, norms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For cameras (..., N, 3, 4), observations (..., N, 2) and points of norms (..., n): the sizes
-    (..., n, N, 2) and (..., n, N) of the terms of each ``row . X - x * depth`` and depth."""
-    rows = lengths(cameras)  # (..., N, 3)
-    numerator = rows[..., :2] + np.abs(points) * rows[..., 2:3]
-    return numerator[..., None, :, :] * norms[..., None, None], rows[..., None, :, 2] * norms[..., None]
+def raw_sizes(cameras: np.ndarray, points: np.ndarray, solutions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For cameras (..., N, 3, 4), observations (..., N, 2) and points (..., n, 4): the sizes
+    (..., n, N, 2) and (..., n, N) of the terms of each ``row . X - x * depth`` and depth, the sums
+    of their products' magnitudes (a dot product rounds by a few 1e-16 of that sum)."""
+    terms = np.einsum("...Nij,...sj->...sNi", np.abs(cameras), np.abs(solutions))  # (..., n, N, 3)
+    return terms[..., :2] + np.abs(points)[..., None, :, :] * terms[..., 2:3], terms[..., 2]
 
 
 def residual_uncertainty(cameras: np.ndarray, points: np.ndarray, solution: np.ndarray) -> np.ndarray:
     """How far the data determine each residual coordinate of ``solution`` (..., 4), for cameras
     (..., N, 3, 4) and observations (..., N, 2): the round-off of ``row . X / depth``, 1e-15 of the
-    terms' size over the depth (a 4-term product rounds by under 5e-16 of it). Tiny unless the
-    point is nearly on a view's principal plane, where the residual is a difference of numbers far
-    larger than itself and no frame computes it better."""
-    rows = lengths(cameras)  # (..., N, 3)
+    terms' size (the sum of their products' magnitudes) over the depth (a 4-term product rounds by
+    under 5e-16 of it). Tiny unless the point is nearly on a view's principal plane, where the
+    residual is a difference of numbers far larger than itself and no frame computes it better."""
+    terms = np.einsum("...nij,...j->...ni", np.abs(cameras), np.abs(solution))  # (..., N, 3)
     proj = np.einsum("...nij,...j->...ni", cameras, solution)
     depth = np.abs(proj[..., 2:3])
     image = proj[..., :2] / np.where(depth > 0, proj[..., 2:3], 1.0)
-    size = (rows[..., :2] + np.abs(image) * rows[..., 2:3]) * lengths(solution)[..., None, None]
+    size = terms[..., :2] + np.abs(image) * terms[..., 2:3]
     return np.where(depth > 0, 1e-15 * size / np.where(depth > 0, depth, 1.0), np.inf)
 
 
@@ -141,29 +140,21 @@ def check_program(item, solution, scale: float, strictness: float = 1.0) -> None
     program = item.program
     ours = np.einsum("Nmk,nk->nNm", program.num, V) / scale
     ours_depth = V @ program.den.T
-    sizes = getattr(item, "raw_sizes_many", None)
-    if sizes is not None:  # tracks: each view on its own (a camera is defined up to its scale)
-        numerator_size, depth_size = sizes(samples)
-        # Where a point is (nearly) on a view's principal plane, or its centre, the depth is
-        # round-off: that observation is compared at the other points.
-        clear = np.abs(depths) > 1e-6 * depth_size
-    else:
-        # Where a point is (nearly) on a camera's centre, numerator and depth are both round-off:
-        # such observations are compared at the other points.
-        clear = np.abs(depths) > 1e-6 * np.max(np.abs(depths), axis=1, keepdims=True)
+    # Each observation on its own (a camera is defined up to its scale): where a point is (nearly)
+    # on a view's principal plane, or its centre (a map's point, on the map's), the depth is
+    # round-off, and that observation is compared at the other points.
+    numerator_size, depth_size = item.raw_sizes_many(samples)
+    clear = np.abs(depths) > 1e-6 * depth_size
     safe_depths, safe_ours_depth = np.where(clear, depths, 1.0), np.where(clear, ours_depth, 1.0)
     theirs = np.where(clear[..., None], numerators / safe_depths[..., None], 0.0)
     ours = np.where(clear[..., None], ours / safe_ours_depth[..., None], 0.0)
     # np.allclose's test, |ours - theirs| <= atol + rtol |theirs|, without its overhead; atol
     # scaled by each point's largest residual.
     largest = np.max(np.abs(theirs), axis=(1, 2), keepdims=True)
-    tolerance = 1e-9 * (1 + largest) + 1e-6 * np.abs(theirs)
-    if sizes is not None:
-        # A ratio whose terms are far larger than its denominator (a point near a principal plane,
-        # an observation far outside the image) is known to the round-off of those terms, about
-        # 1e-16 of their size over the depth, in each frame it is computed in: 1e-13 of it.
-        tolerance = tolerance + 1e-13 * (numerator_size + np.abs(theirs) * depth_size[..., None]) \
-            / np.abs(safe_depths)[..., None]
+    # A ratio whose terms are far larger than itself (a point near a principal plane, data far
+    # from the origin) is known in either frame only to the round-off of those terms.
+    tolerance = 1e-9 * (1 + largest) + 1e-6 * np.abs(theirs) + TERMS_ROUNDING * (
+        numerator_size + np.abs(theirs) * depth_size[..., None]) / np.abs(safe_depths)[..., None]
     if not (np.abs(ours - theirs) <= strictness * tolerance).all():
         raise Invalid("program", "the program's residuals differ from the data's")
     varying = ~program.exact & clear

@@ -20,7 +20,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE, ROUNDING
+from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE, ROUNDING, TERMS_ROUNDING
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import ConeSpec, _project_rows
 from geocert.solvers.core.coverage import uncovered_part
@@ -322,7 +322,7 @@ def program_agrees(cams, points, num, den, T, scale, v0, reference, strictness: 
     proj = np.einsum("gNij,gsj->gsNi", cams, solutions)
     numerators = proj[..., :2] - points[:, None] * proj[..., 2:3]
     depths = proj[..., 2]
-    numerator_size, depth_size = raw_sizes(cams, points, lengths(solutions))
+    numerator_size, depth_size = raw_sizes(cams, points, solutions)
     ours = np.einsum("gNmk,gsk->gsNm", num, V) / scale[:, None, None, None]
     ours_depth = np.einsum("gsk,gNk->gsN", V, den)
     clear = np.abs(depths) > 1e-6 * depth_size
@@ -331,7 +331,7 @@ def program_agrees(cams, points, num, den, T, scale, v0, reference, strictness: 
     ours = np.where(clear[..., None], ours / safe_ours_depth[..., None], 0.0)
     largest = np.max(np.abs(theirs), axis=(2, 3), keepdims=True)
     tolerance = 1e-9 * (1 + largest) + 1e-6 * np.abs(theirs) \
-        + 1e-13 * (numerator_size + np.abs(theirs) * depth_size[..., None]) / np.abs(safe_depths)[..., None]
+        + TERMS_ROUNDING * (numerator_size + np.abs(theirs) * depth_size[..., None]) / np.abs(safe_depths)[..., None]
     agree = np.all(np.abs(ours - theirs) <= strictness * tolerance, axis=(1, 2, 3))
     exact = np.zeros(den.shape[:2], dtype=bool)
     exact[np.arange(len(den)), reference] = True
