@@ -87,9 +87,6 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
     After the ``time.monotonic()`` value ``stop_at`` no new item is started (at least one is
     always solved): the list returned is then shorter, and the caller solves the rest later.
     ``on_item(index, item)`` sees each item as it ends, before the progress that counts it."""
-    from geocert.solvers.core.conic import forget_pooled_solvers  # the conic solver, only to solve
-
-    forget_pooled_solvers()  # the same numbers for the same items, whatever the process solved before
     tracker = ItemProgress(total if total is not None else len(indices), sink, should_stop)
     items = []
     # A kind that solves many items at once (solve_batch) takes them a group at a time: the

@@ -72,8 +72,14 @@ class TestEveryModeIsSafe:
     def test_summary_and_full_prove_the_same_bound(self, u, norm):
         summary = solve_job(readme_job(u, "summary", norm))["tracks"][0]
         full = solve_job(readme_job(u, "full", norm))["tracks"][0]
-        assert (summary["status"], summary["lower_bound"], summary["cost"]) == \
-            (full["status"], full["lower_bound"], full["cost"])
+        assert (summary["status"], summary["cost"]) == (full["status"], full["cost"])
+        # The same search; its bounds agree to the verifier's BOUND_TOLERANCE, not to the last bit
+        # (pooled conic solvers, conic._Pool, leave differences of about 1e-11 with what the process
+        # solved before: one run after the hostile test files gave 0.9999999999461883 against ...624).
+        if full["lower_bound"] is None:  # nothing proven (coordinates beyond the limit): in both modes
+            assert summary["lower_bound"] is None
+        else:
+            assert summary["lower_bound"] == pytest.approx(full["lower_bound"], rel=1e-9)
 
     @pytest.mark.parametrize("u", [1e6, 1e9, -1e9])
     def test_extreme_coordinates_within_the_limit_never_overstate(self, u):
