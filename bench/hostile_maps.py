@@ -313,6 +313,7 @@ def forge_cases() -> list:
         cases.append((f"hostile {seed}:{index} {norm}", p["kind"], p["source"], p["target"], norm))
     return cases
 
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--seeds", default="1,2,3")

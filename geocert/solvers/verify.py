@@ -364,12 +364,11 @@ def _check_residual_claim(kind: str, adapter, arrays: tuple, options: dict, clai
     if not (cost + slack) - lower_claimed <= tolerance * (1 + 1e-12):
         raise Invalid("gap", f"the solution costs {cost!r} (to within {slack!r}), more than the tolerance "
                              f"{tolerance!r} above lower_bound {lower_claimed!r}")
-    uncertainty = getattr(item, "residual_uncertainty", None)
-    if uncertainty is not None:
-        spread = cost_rounding(residuals, uncertainty(solution), norm)
-        if not spread <= tolerance:
-            raise Invalid("objective", f"the data determine the solution's cost only to within {spread!r}, more than "
-                                       f"the tolerance {tolerance!r} (a point nearly on a view's principal plane)")
+    spread = cost_rounding(residuals, item.residual_uncertainty(solution), norm)
+    if not spread <= tolerance:
+        raise Invalid("objective", f"the data determine the solution's cost only to within {spread!r}, more than "
+                                   f"the tolerance {tolerance!r} (a point nearly on a principal plane, or data far "
+                                   "from the origin)")
     passed.append("objective")
     if options["max_residual"] is not None:
         longest = float(np.max(np.sqrt((residuals * residuals).sum(axis=1))))

@@ -18,6 +18,7 @@ import pytest
 from bench.hostile_maps import options_for, problem, refused
 from geocert.solvers import verify
 from geocert.solvers.fractional import proof
+from geocert.solvers.fractional.items import MapItem, refused_by_verifier
 from geocert.solvers.fractional.maps import fit_map
 from geocert.solvers.fractional.options import MapOptions
 
@@ -115,3 +116,39 @@ class TestForgedCosts:
                  "matrix": M.tolist(), "proof": {"type": "trivial"}}
         with pytest.raises(verify.Invalid, match="the solution costs"):
             verify.verify_arrays("homography", (source, target), dataclasses.asdict(options), claim)
+
+
+class TestTheSolverRefusesWhatTheVerifierWould:
+    """items.refused_by_verifier (the solvers' own check before certifying) and the verifier agree
+    on a map whose depths change sign and on one whose cost the data cannot determine."""
+
+    source = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [2.0, 1.0], [-1.0 + 1e-9, 0.5]])
+    M = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, 1.0]])  # depth x + 1: the last point's is 1e-9
+
+    def claim(self, M, target, norm):
+        item = MapItem((self.source, target), norm)
+        residuals = item.raw_residuals(M)[0]
+        cost = {"L1L1": np.abs(residuals).sum(), "L2L2": (residuals ** 2).sum()}[norm]
+        return item, residuals, float(cost), {"index": 0, "status": "optimal", "certified": True, "cost": float(cost),
+                                              "lower_bound": 0.0, "gap": float(cost), "matrix": M.tolist(),
+                                              "proof": {"type": "trivial"}}
+
+    def test_a_point_behind_the_map(self):
+        M = self.M.copy()
+        M[2] = [-1.0, 0.0, 1.5]  # depth 1.5 - x: negative at x = 2, positive elsewhere
+        target = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 1.0], [2.0, 2.0], [-4.0, -2.0], [-0.4, 0.2]])
+        options = MapOptions(norm="L2L2", abs_gap=1e6)
+        item, residuals, cost, claim = self.claim(M, target, "L2L2")
+        assert "non-positive depth" in refused_by_verifier(item, M, residuals, cost, options, None)
+        with pytest.raises(verify.Invalid, match="non-positive depth"):
+            verify.verify_arrays("homography", (self.source, target), dataclasses.asdict(options), claim)
+
+    def test_a_cost_the_data_do_not_determine(self):
+        homogeneous = np.hstack([self.source, np.ones((len(self.source), 1))]) @ self.M.T
+        target = homogeneous[:, :2] / homogeneous[:, 2:]  # exact: the last point's image near -1e9
+        options = MapOptions(norm="L1L1", abs_gap=1.0)  # a tolerance far above the cost's rounding
+        item, residuals, cost, claim = self.claim(self.M, target, "L1L1")
+        assert cost < 1e-3
+        assert "determine the solution's cost" in refused_by_verifier(item, self.M, residuals, cost, options, None)
+        with pytest.raises(verify.Invalid, match="determine the solution's cost"):
+            verify.verify_arrays("homography", (self.source, target), dataclasses.asdict(options), claim)

@@ -141,14 +141,27 @@ def depths(cameras: np.ndarray, X: np.ndarray) -> np.ndarray:
     return cameras[:, 2, :] @ X
 
 
-def cost_rounding(residuals: np.ndarray, rounding: np.ndarray, norm: str) -> float:
-    """How much the cost can change when each residual coordinate moves by its rounding bound:
-    the only slack beside the relative OBJECTIVE_TOLERANCE, tied to the data, not the document."""
+def norm_terms(residuals: np.ndarray, norm: str) -> np.ndarray:
+    """Each observation's cost term, residuals (..., n, m) -> (..., n): norm_cost is their sum."""
     if norm == "L2L2":
-        return float(np.sum(2 * np.abs(residuals) * rounding + rounding * rounding))
+        return (residuals * residuals).sum(axis=-1)
+    return lengths(residuals) if norm == "L2L1" else np.abs(residuals).sum(axis=-1)
+
+
+def cost_roundings(residuals: np.ndarray, rounding: np.ndarray, norm: str) -> np.ndarray:
+    """How much a cost can change when each residual coordinate moves by its ``rounding`` bound,
+    residuals and rounding (..., n, m) -> (...): the only slack beside the relative
+    OBJECTIVE_TOLERANCE, tied to the data, not the document."""
+    if norm == "L2L2":
+        return np.sum(2 * np.abs(residuals) * rounding + rounding * rounding, axis=(-2, -1))
     if norm == "L2L1":
-        return float(np.sum(np.sqrt((rounding * rounding).sum(axis=1))))
-    return float(np.sum(rounding))
+        return lengths(rounding).sum(axis=-1)
+    return np.sum(rounding, axis=(-2, -1))
+
+
+def cost_rounding(residuals: np.ndarray, rounding: np.ndarray, norm: str) -> float:
+    """cost_roundings of one item."""
+    return float(cost_roundings(residuals, rounding, norm))
 
 
 def lengths(x: np.ndarray, axis: int = -1) -> np.ndarray:

@@ -49,7 +49,7 @@ from geocert.solvers.core.bnb import Box, Progress
 from geocert.solvers.core.certificates import LeafProof, RootProof, SearchProof, encode
 from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
 from geocert.solvers.core.cones import ConeSpec
-from geocert.solvers.core.geometry import normalised_cameras
+from geocert.solvers.core.geometry import cost_roundings, normalised_cameras
 from geocert.solvers.fractional import stacked
 from geocert.solvers.fractional.charts import Chart
 from geocert.solvers.fractional.options import TriangulationOptions
@@ -57,8 +57,9 @@ from geocert.solvers.fractional.relaxation import FractionalProgram, cost_unit, 
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult, claim_of
 from geocert.solvers.fractional.search import (MAX_SCALE, ROOT_SUBSET, branch_directions, depth_subspace,
                                                local_refine, root_region)
-from geocert.solvers.fractional.proof import residual_uncertainty
-from geocert.solvers.fractional.triangulation import PROGRAM_REFUSED, refused_by_verifier, track_result, triangulate
+from geocert.solvers.fractional.items import PROGRAM_REFUSED, TrackItem, refused_by_verifier
+from geocert.solvers.fractional.proof import track_uncertainty
+from geocert.solvers.fractional.triangulation import track_result, triangulate
 from geocert.solvers.verify import self_check, self_check_enabled
 
 D = 3
@@ -727,7 +728,7 @@ def _root_nodes(closing: list, k: int, options: TriangulationOptions) -> list:
 
 def _check_results(entries: list, num, den, results: list, rows: list[int], reference,
                    options: TriangulationOptions) -> None:
-    """triangulation.track_result's checks (its _refused_by_verifier: depths, the cost's
+    """triangulation.track_result's checks (items.refused_by_verifier: depths, the cost's
     uncertainty, the program against the data with half the verifier's tolerance) for the
     certified ``results`` of rows ``rows`` of one root-node group, at once (stacked's forms)."""
     certified = [(row, result) for row, result in zip(rows, results) if result.status == "optimal"]
@@ -746,7 +747,7 @@ def _check_results(entries: list, num, den, results: list, rows: list[int], refe
     factors = np.array([entries[row].factor for row in chosen])
     with np.errstate(all="ignore"):
         in_front = np.all(np.einsum("gnj,gj->gn", cams[:, :, 2], solutions) > 0, axis=1)
-        spread = stacked.cost_roundings(residuals, residual_uncertainty(cams, points, solutions), options.norm)
+        spread = cost_roundings(residuals, track_uncertainty(cams, solutions), options.norm)
         determined = spread <= 0.5 * np.maximum(options.abs_gap, options.rel_gap * np.abs(costs))
         agree = inside & stacked.program_agrees(cams, points, num[chosen], den[chosen], T, factors, v0,
                                                 reference[chosen], strictness=0.5)
@@ -754,8 +755,9 @@ def _check_results(entries: list, num, den, results: list, rows: list[int], refe
         if not passed:  # rare: the reason in track_result's words, from its own checks
             entry = entries[row]
             result.status, result.certified = "not_certified", False
-            result.reason = refused_by_verifier(entry.chart, entry.cams, entry.points, solution,
-                                                np.array(result.residuals), result.cost, options, entry.factor) \
+            item = TrackItem((entry.cams, entry.points), options.norm, entry.chart)
+            result.reason = refused_by_verifier(item, solution, np.array(result.residuals), result.cost, options,
+                                                entry.factor) \
                 or PROGRAM_REFUSED.format("the program's residuals or depth signs differ from the data's")
 
 

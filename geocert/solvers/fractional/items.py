@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from geocert.solvers.core.certificates import ROUNDING
-from geocert.solvers.core.geometry import normalised_cameras
+from geocert.solvers.core.certificates import residual_rounding
+from geocert.solvers.core.geometry import cost_rounding, normalised_cameras
 from geocert.solvers.core.strict import Invalid, numbers
 from geocert.solvers.fractional.charts import Chart, MapChart
-from geocert.solvers.fractional.proof import raw_sizes, residual_uncertainty, verify_search
+from geocert.solvers.fractional.proof import check_program, raw_sizes, residual_uncertainty, track_uncertainty, verify_search
 from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
 
 MAX_VIEWS = 1000  # views in a track, for the parser too: a chart's choice of reference takes views^2 work
@@ -48,7 +48,7 @@ class TrackItem:
         rounding error (certificates.ROUNDING of the two's sizes)."""
         proj = self.cameras @ solution
         image = proj[:, :2] / proj[:, 2:3]
-        return image - self.points, proj[:, 2], ROUNDING * (np.abs(image) + np.abs(self.points))
+        return image - self.points, proj[:, 2], residual_rounding(image, self.points)
 
     def raw_parts_many(self, vs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each residual as numerator / depth, from the raw data only, at the points of the
@@ -58,11 +58,11 @@ class TrackItem:
         return proj[..., :2] - self.points * proj[..., 2:3], proj[..., 2]
 
     def residual_uncertainty(self, solution: np.ndarray) -> np.ndarray:
-        return residual_uncertainty(self.cameras, self.points, solution)
+        return track_uncertainty(self.cameras, solution)
 
     def raw_sizes_many(self, vs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The size of the terms behind each numerator and depth of raw_parts_many (the norms of
-        the camera rows they take times the point's norm): their round-off is a tiny part of it."""
+        """The size of the terms behind each numerator and depth of raw_parts_many (the sums of
+        their products' magnitudes): their round-off is a tiny part of it."""
         solutions = np.hstack([vs, np.ones((len(vs), 1))]) @ self.chart.T.T
         return raw_sizes(self.cameras, self.points, solutions)
 
@@ -80,10 +80,11 @@ class TrackItem:
 class MapItem:
     """One map's program and the maps between its matrix and the program's variables."""
 
-    def __init__(self, arrays: tuple, norm: str):
+    def __init__(self, arrays: tuple, norm: str, chart: MapChart | None = None):
+        """``chart``: as TrackItem's."""
         self.norm = norm
         self.source, self.target = arrays
-        self.chart = MapChart.build(self.source, self.target, norm)
+        self.chart = chart if chart is not None else MapChart.build(self.source, self.target, norm)
         self.program = self.chart.program
 
     def solution(self, claim: dict) -> np.ndarray:
@@ -92,7 +93,7 @@ class MapItem:
     def raw_residuals(self, solution) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         proj = np.hstack([self.source, np.ones((len(self.source), 1))]) @ solution.T
         image = proj[:, :-1] / proj[:, -1:]
-        return self.target - image, proj[:, -1], ROUNDING * (np.abs(image) + np.abs(self.target))
+        return self.target - image, proj[:, -1], residual_rounding(image, self.target)
 
     def raw_parts(self, solution) -> tuple[np.ndarray, np.ndarray]:
         homogeneous = np.hstack([self.source, np.ones((len(self.source), 1))])
@@ -103,6 +104,10 @@ class MapItem:
         """Each residual as numerator / depth, from the raw data only, at each of ``vs``."""
         parts = [self.raw_parts(self.from_program(v)) for v in vs]
         return np.array([p[0] for p in parts]), np.array([p[1] for p in parts])
+
+    def residual_uncertainty(self, solution: np.ndarray) -> np.ndarray:
+        homogeneous = np.hstack([self.source, np.ones((len(self.source), 1))])
+        return residual_uncertainty(homogeneous @ solution.T, np.abs(homogeneous) @ np.abs(solution).T)
 
     def raw_sizes_many(self, vs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The size of the terms behind each numerator ``target * depth - row . X`` and depth
@@ -120,6 +125,33 @@ class MapItem:
 
     def from_program(self, v: np.ndarray):
         return self.chart.matrix(v)
+
+
+PROGRAM_REFUSED = "the verifier could not check the proof against the data at this solution ({})"
+
+
+def refused_by_verifier(item, solution: np.ndarray, residuals: np.ndarray, cost: float, options,
+                        scale: float | None) -> str | None:
+    """Why the verifier would refuse this solution of a certified solve of ``item`` (built on the
+    solver's own chart), if it would: its depths from the raw data; a cost the data determine
+    only to more than half the tolerance (a point nearly on a principal plane: a residual is the
+    difference of far larger numbers); a program that does not agree with the data (half the
+    verifier's tolerance; only with ``scale``, the search's: the trivial bound needs no program)."""
+    _, depths, _ = item.raw_residuals(solution)
+    if not item.depths_agree(depths):
+        return "the solution as returned puts a point at non-positive depth once recomputed from the data"
+    spread = cost_rounding(residuals, item.residual_uncertainty(solution), options.norm)
+    tolerance = max(options.abs_gap, options.rel_gap * abs(cost))
+    if not spread <= 0.5 * tolerance:
+        return (f"the data determine the solution's cost only to within {spread!r}, too near the tolerance "
+                f"{tolerance!r} (a point nearly on a principal plane, or data far from the origin)")
+    if scale is None:
+        return None
+    try:
+        check_program(item, solution, scale, strictness=0.5)
+    except Invalid as exc:
+        return PROGRAM_REFUSED.format(exc.detail)
+    return None
 
 
 class TrackItems:

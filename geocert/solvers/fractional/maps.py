@@ -21,14 +21,10 @@ from geocert.solvers.fractional.charts import MapChart, normaliser
 from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.fractional.results import MapResult
 from geocert.solvers.fractional.search import LARGE_BOUND_TOLERANCE, Early, Reasons, prepare, recomputed_status, search
-from geocert.solvers.core.certificates import ROUNDING
+from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import norm_cost
-from geocert.solvers.core.strict import Invalid
-from geocert.solvers.fractional.items import MapItem
-from geocert.solvers.fractional.proof import check_program
+from geocert.solvers.fractional.items import MapItem, refused_by_verifier
 from geocert.solvers.verify import checked_solve
-
-PROGRAM_REFUSED = "the verifier could not check the proof against the data at this map ({})"
 
 
 def dlt(source: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -130,29 +126,11 @@ def _map_result(chart: MapChart, source, target, v, options, status, lower, node
     cost = norm_cost(residuals, options.norm)  # recomputed from the caller's data
     if lower is not None:
         lower = min(lower, cost)
-    rounding = ROUNDING * (np.abs(target - residuals) + np.abs(target))  # the verifier's (target - image = residuals)
+    rounding = residual_rounding(target - residuals, target)  # the verifier's (target - image = residuals)
     status, reason = recomputed_status(status, residuals, cost, lower, options, rounding)
     if status == "optimal":
-        reason = refused_by_verifier(source, target, M, options.norm, scale)
+        reason = refused_by_verifier(MapItem((source, target), options.norm, chart), M, residuals, cost, options, scale)
         status = "not_certified" if reason else status
     return MapResult(status=status, certified=status == "optimal" and lower is not None, matrix=M.tolist(), reason=reason,
                      residuals=residuals.tolist(), cost=cost, lower_bound=lower,
                      gap=cost - lower if lower is not None else None, nodes=nodes, certificate=certificate)
-
-
-def refused_by_verifier(source, target, M: np.ndarray, norm: str, scale: float | None) -> str | None:
-    """Why the verifier would refuse this map of a certified search, if it would: a program that
-    does not agree with the data at the map (proof.check_program on the program the verifier
-    rebuilds, with half its tolerance; only with ``scale``, the search's: the trivial bound needs
-    no program). Sources or targets offset far from the origin (1e3 to 1e6 times their spread)
-    make each raw residual a difference of terms 1e8 to 1e12 times larger than itself, whose
-    round-off check_program's tolerance for maps does not allow (bench.hostile_maps)."""
-    if scale is None:
-        return None
-    item = MapItem((source, target), norm)  # as the verifier rebuilds it (verify_search's order)
-    item.program.rescale(scale)
-    try:
-        check_program(item, M, scale, strictness=0.5)
-    except Invalid as exc:
-        return PROGRAM_REFUSED.format(exc.detail)
-    return None

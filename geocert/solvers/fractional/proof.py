@@ -108,18 +108,23 @@ def raw_sizes(cameras: np.ndarray, points: np.ndarray, solutions: np.ndarray) ->
     return terms[..., :2] + np.abs(points)[..., None, :, :] * terms[..., 2:3], terms[..., 2]
 
 
-def residual_uncertainty(cameras: np.ndarray, points: np.ndarray, solution: np.ndarray) -> np.ndarray:
-    """How far the data determine each residual coordinate of ``solution`` (..., 4), for cameras
-    (..., N, 3, 4) and observations (..., N, 2): the round-off of ``row . X / depth``, 1e-15 of the
-    terms' size (the sum of their products' magnitudes) over the depth (a 4-term product rounds by
-    under 5e-16 of it). Tiny unless the point is nearly on a view's principal plane, where the
-    residual is a difference of numbers far larger than itself and no frame computes it better."""
-    terms = np.einsum("...nij,...j->...ni", np.abs(cameras), np.abs(solution))  # (..., N, 3)
-    proj = np.einsum("...nij,...j->...ni", cameras, solution)
-    depth = np.abs(proj[..., 2:3])
-    image = proj[..., :2] / np.where(depth > 0, proj[..., 2:3], 1.0)
-    size = terms[..., :2] + np.abs(image) * terms[..., 2:3]
+def residual_uncertainty(proj: np.ndarray, terms: np.ndarray) -> np.ndarray:
+    """How far the data determine each residual coordinate ``proj[..., :-1] / proj[..., -1]`` (a
+    projection, its depth last) given ``terms``, the sums of the magnitudes of the products behind
+    each of proj's entries: 1e-15 of the terms' size over the depth (a 4-term product rounds by
+    under 5e-16 of it). Tiny unless a point is nearly on a principal plane, or the data lie far
+    from the origin, where a residual is a difference of numbers far larger than itself and no
+    frame computes it better."""
+    depth = np.abs(proj[..., -1:])
+    image = proj[..., :-1] / np.where(depth > 0, proj[..., -1:], 1.0)
+    size = terms[..., :-1] + np.abs(image) * terms[..., -1:]
     return np.where(depth > 0, 1e-15 * size / np.where(depth > 0, depth, 1.0), np.inf)
+
+
+def track_uncertainty(cameras: np.ndarray, solution: np.ndarray) -> np.ndarray:
+    """residual_uncertainty of a track's solution (..., 4) in its cameras (..., N, 3, 4)."""
+    return residual_uncertainty(np.einsum("...nij,...j->...ni", cameras, solution),
+                                np.einsum("...nij,...j->...ni", np.abs(cameras), np.abs(solution)))
 
 
 def check_program(item, solution, scale: float, strictness: float = 1.0) -> None:

@@ -21,7 +21,7 @@ from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, Progr
 from geocert.solvers.core.certificates import CapProof, LeafProof, RootProof, SearchProof, TighteningProof, encode
 from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram, solve_conic
 from geocert.solvers.core.cones import ConeSpec, proves_infeasible, safe_lower_bound
-from geocert.solvers.core.geometry import cost_rounding, lengths, norm_cost
+from geocert.solvers.core.geometry import cost_rounding, lengths, norm_cost, norm_terms
 from geocert.solvers.fractional.options import FractionalOptions
 from geocert.solvers.fractional.results import SearchCertificate
 from geocert.solvers.fractional.relaxation import (EPS_DEPTH, ConicData, FractionalProgram, Relaxation, complete_functionals,
@@ -289,13 +289,6 @@ def _cost_in(program: FractionalProgram, v: np.ndarray, norm: str) -> float:
     return value if not math.isfinite(value) else norm_cost(program.residuals(v), norm)
 
 
-def _terms(residuals: np.ndarray, norm: str) -> np.ndarray:
-    """Each observation's cost term (norm_cost is their sum)."""
-    if norm == "L2L2":
-        return (residuals * residuals).sum(axis=1)
-    return lengths(residuals, 1) if norm == "L2L1" else np.abs(residuals).sum(axis=1)
-
-
 def _proven_minimum(solver: ReusableConicProgram, data: ConicData, objective: np.ndarray, first: bool):
     """Minimise ``objective`` over the relaxation ``data`` (set up by the first call, the
     objective alone changed after): the solve's result, and the safe bound of its dual (-inf
@@ -468,7 +461,7 @@ class BoxProblem:
         bound of its dual. Each term of a better point is then within ``upper_bound`` less it,
         which tightens its envelope (u_i) and its residual cone (gamma_i) at every node in
         ``box``. Repeated ``rounds`` times (each round's relaxation has the previous caps)."""
-        terms = _terms(self.program.residuals(incumbent), self.norm)
+        terms = norm_terms(self.program.residuals(incumbent), self.norm)
         order = np.argsort(-terms)[:limit]
         chosen = order[terms[order] >= share * upper_bound]
         if not len(chosen):

@@ -20,13 +20,13 @@ from collections import defaultdict
 
 import numpy as np
 
-from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE, ROUNDING, TERMS_ROUNDING
+from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE, TERMS_ROUNDING, residual_rounding
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import ConeSpec, _project_rows
 from geocert.solvers.core.coverage import uncovered_part
-from geocert.solvers.core.geometry import lengths, normalised_cameras
+from geocert.solvers.core.geometry import cost_roundings, lengths, norm_terms, normalised_cameras
 from geocert.solvers.core.strict import Invalid, dual_vector, numbers
-from geocert.solvers.fractional.proof import SCALE_RANGE, _sample_steps, raw_sizes, residual_uncertainty
+from geocert.solvers.fractional.proof import SCALE_RANGE, _sample_steps, raw_sizes, track_uncertainty
 
 D = 3  # a track's program has 3 variables
 CHECKS = ("data", "claim", "objective", "scope", "program", "root_region", "tightening", "coverage",
@@ -201,20 +201,14 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     proj = np.einsum("gnij,gj->gni", cams, X)
     image = proj[..., :2] / proj[..., 2:3]
     residuals = image - points
-    rounding = ROUNDING * (np.abs(image) + np.abs(points))
     ok &= np.all(proj[..., 2] > 0, axis=1)
-    if norm == "L2L2":
-        recomputed = (residuals * residuals).sum(axis=(1, 2))
-    elif norm == "L2L1":
-        recomputed = lengths(residuals).sum(axis=1)
-    else:
-        recomputed = np.abs(residuals).sum(axis=(1, 2))
-    slack = cost_roundings(residuals, rounding, norm)
+    recomputed = norm_terms(residuals, norm).sum(axis=1)
+    slack = cost_roundings(residuals, residual_rounding(image, points), norm)
     ok &= np.abs(recomputed - cost) <= OBJECTIVE_TOLERANCE * np.abs(recomputed) + slack
     tolerance = np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
     ok &= (recomputed + slack) - lower_claimed <= tolerance * (1 + 1e-12)  # the gap, from the data's cost
     with np.errstate(all="ignore"):
-        spread = cost_roundings(residuals, residual_uncertainty(cams, points, X), norm)
+        spread = cost_roundings(residuals, track_uncertainty(cams, X), norm)
     ok &= spread <= np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
 
     # The program at the claimed scale (verify_search) and its agreement with the data.
@@ -246,15 +240,6 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     tolerance = np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
     ok &= gap <= tolerance * (1 + 1e-12)
     return ok
-
-
-def cost_roundings(residuals: np.ndarray, rounding: np.ndarray, norm: str) -> np.ndarray:
-    """geometry.cost_rounding for every track: residuals and rounding (G, n, 2)."""
-    if norm == "L2L2":
-        return np.sum(2 * np.abs(residuals) * rounding + rounding * rounding, axis=(1, 2))
-    if norm == "L2L1":
-        return np.sum(lengths(rounding), axis=1)
-    return np.sum(rounding, axis=(1, 2))
 
 
 def chart_arrays(cams: np.ndarray, points: np.ndarray):

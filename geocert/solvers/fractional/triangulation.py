@@ -20,16 +20,13 @@ from geocert.solvers.fractional.charts import Chart, camera_centres
 from geocert.solvers.fractional.options import NORMS, TriangulationOptions
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult
 from geocert.solvers.fractional.search import Early, Reasons, depth_subspace, prepare, recomputed_status, search
-from geocert.solvers.core.certificates import ROUNDING
-from geocert.solvers.core.geometry import cost_rounding, norm_cost, normalised_cameras, reprojection_residuals
-from geocert.solvers.core.strict import Invalid
-from geocert.solvers.fractional.items import TrackItem
-from geocert.solvers.fractional.proof import check_program, residual_uncertainty
+from geocert.solvers.core.certificates import residual_rounding
+from geocert.solvers.core.geometry import norm_cost, normalised_cameras, reprojection_residuals
+from geocert.solvers.fractional.items import TrackItem, refused_by_verifier
 from geocert.solvers.verify import checked_solve
 
 
 
-PROGRAM_REFUSED = "the verifier could not check the proof against the data at this solution ({})"
 AT_INFINITY = 1e-12  # |X[3]| of a unit-norm X below which the point is returned at infinity
 
 _REASONS = Reasons(
@@ -117,39 +114,16 @@ def track_result(chart: Chart, cameras, points, y, options, status, lower, nodes
     cost = norm_cost(residuals, options.norm)  # recomputed in pixels from the original data
     if lower is not None:
         lower = min(lower, cost)
-    rounding = ROUNDING * (np.abs(residuals + points) + np.abs(points))  # the verifier's (image - points = residuals)
+    rounding = residual_rounding(residuals + points, points)  # the verifier's (image - points = residuals)
     status, reason = recomputed_status(status, residuals, cost, lower, options, rounding)
     if status == "optimal" and checked:
-        reason = refused_by_verifier(chart, cameras, points, solution, residuals, cost, options, scale)
+        reason = refused_by_verifier(TrackItem((cameras, points), options.norm, chart), solution, residuals, cost,
+                                     options, scale)
         status = "not_certified" if reason else status
     return TrackResult(status=status, certified=status == "optimal" and lower is not None, point=point, reason=reason,
                        at_infinity=bool(at_infinity), cost=cost, lower_bound=lower,
                        gap=cost - lower if lower is not None else None, nodes=nodes,
                        certificate=certificate, residuals=residuals.tolist())
-
-
-def refused_by_verifier(chart: Chart, cameras, points, solution: np.ndarray, residuals, cost: float,
-                         options: TriangulationOptions, scale: float | None) -> str | None:
-    """Why the verifier would refuse this solution of a certified search, if it would: a depth
-    that is not positive once recomputed from the data; a cost the data determine only to more
-    than the tolerance (a point nearly on a view's principal plane, where a residual is the
-    difference of far larger numbers); a program that does not agree with the data (checked with
-    half the verifier's tolerance; only with ``scale``, the search's, for the trivial bound needs
-    no program)."""
-    if not np.all(cameras[:, 2] @ solution > 0):
-        return "the solution as returned puts the point at non-positive depth once recomputed from the data"
-    spread = cost_rounding(residuals, residual_uncertainty(cameras, points, solution), options.norm)
-    tolerance = max(options.abs_gap, options.rel_gap * abs(cost))
-    if not spread <= 0.5 * tolerance:
-        return (f"the data determine the solution's cost only to within {spread!r}, too near the tolerance "
-                f"{tolerance!r} (a point nearly on a view's principal plane)")
-    if scale is None:
-        return None
-    try:
-        check_program(TrackItem((cameras, points), chart.program.norm, chart), solution, scale, strictness=0.5)
-    except Invalid as exc:
-        return PROGRAM_REFUSED.format(exc.detail)
-    return None
 
 
 __all__ = ["NORMS", "TriangulationOptions", "TrackResult", "SearchCertificate", "triangulate", "prepare_track",
