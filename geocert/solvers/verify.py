@@ -364,7 +364,10 @@ def _check_residual_claim(kind: str, adapter, arrays: tuple, options: dict, clai
     if not (cost + slack) - lower_claimed <= tolerance * (1 + 1e-12):
         raise Invalid("gap", f"the solution costs {cost!r} (to within {slack!r}), more than the tolerance "
                              f"{tolerance!r} above lower_bound {lower_claimed!r}")
-    spread = cost_rounding(residuals, item.residual_uncertainty(solution), norm)
+    # An item that can say how far its data determine each residual (tracks and maps do; a kind
+    # added later need not) must have a cost the data determine to within the tolerance.
+    uncertainty = getattr(item, "residual_uncertainty", None)
+    spread = 0.0 if uncertainty is None else cost_rounding(residuals, uncertainty(solution), norm)
     if not spread <= tolerance:
         raise Invalid("objective", f"the data determine the solution's cost only to within {spread!r}, more than "
                                    f"the tolerance {tolerance!r} (a point nearly on a principal plane, or data far "

@@ -10,6 +10,7 @@ import pytest
 
 from geocert.solvers import verify
 from geocert.solvers.core.bnb import Box, BoxStatus
+from geocert.solvers.core.geometry import norm_terms
 from geocert.solvers.fractional import search
 from geocert.solvers.fractional.charts import MapChart
 from geocert.solvers.fractional.maps import _REASONS, dlt, fit_map
@@ -65,7 +66,7 @@ def test_caps_bound_the_other_terms_of_every_map_within_the_cap(norm):
     assert np.all(others[:4] > 0.5 * prepared.upper)
     samples, costs = samples_within(rng, chart, prepared, cap, problem.root)
     assert len(samples) >= 50
-    terms = np.array([search._terms(problem.program.residuals(v), norm) for v in samples])
+    terms = np.array([norm_terms(problem.program.residuals(v), norm) for v in samples])
     rest = costs[:, None] - terms[:, chosen]
     assert np.all(rest >= others[chosen] - 1e-9 * (1 + np.abs(others[chosen])))
 
