@@ -42,23 +42,35 @@ def camera_matrix(K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     return K @ np.hstack([R, t[:, None]])
 
 
+TRACK_CHUNK = 500  # tracks triangulated at once: progress and a cancel are seen between chunks
+
+
 def triangulate_tracks(cameras: dict[int, np.ndarray], tracks: list[tuple[np.ndarray, np.ndarray]],
                        options: TriangulationOptions, progress=None, should_stop=None) -> list[TrackResult | None]:
     """One certified triangulation per track (views, pixels) over the given cameras; None for a
-    track with fewer than two views."""
-    from geocert.solvers.fractional.triangulation import triangulate
+    track with fewer than two views. Tracks are solved in chunks by the batched solver
+    (fractional.batched.triangulate_many: each track's result is what the certified solver
+    returns for it alone, its root relaxations solved many at a time; 4,952 Dinosaur tracks in
+    19.7 s one by one)."""
+    from geocert.solvers.fractional.batched import triangulate_many
 
-    out: list[TrackResult | None] = []
-    for index, (views, pixels) in enumerate(tracks):
+    views = sorted(cameras)
+    index = {view: i for i, view in enumerate(views)}
+    stacked = np.array([cameras[view] for view in views], dtype=float).reshape(-1, 3, 4)
+    out: list[TrackResult | None] = [None] * len(tracks)
+    solvable = [i for i, (seen, _) in enumerate(tracks) if len(seen) >= 2]
+    for first in range(0, len(solvable), TRACK_CHUNK):
+        chunk = solvable[first:first + TRACK_CHUNK]
         if should_stop is not None and should_stop():
-            out.append(TrackResult("cancelled", False, reason="the job was cancelled"))
-            continue
-        if len(views) < 2:
-            out.append(None)
-            continue
-        out.append(triangulate(np.array([cameras[v] for v in views]), pixels, options))
-        if progress is not None and (index % 50 == 0 or index == len(tracks) - 1):
-            progress(index + 1, len(tracks))
+            for i in solvable[first:]:
+                out[i] = TrackResult("cancelled", False, reason="the job was cancelled")
+            break
+        found = triangulate_many(stacked, [([index[int(v)] for v in tracks[i][0]], np.asarray(tracks[i][1], float))
+                                           for i in chunk], options)
+        for i, result in zip(chunk, found):
+            out[i] = result
+        if progress is not None:
+            progress(first + len(chunk), len(solvable))
     return out
 
 
