@@ -95,6 +95,7 @@ def test_map_relaxation_never_exceeds_the_cost_in_its_box(seed, norm, kind, shri
     if not isinstance(prepared, Prepared):
         return
     problem = prepared.problem
+    problem.relaxation.quadratic = True  # what fit_map searches L2L2 maps with (a no-op otherwise)
     # Random maps near the incumbent, and a random box (inside the root) around one of them.
     samples = prepared.incumbent + rng.normal(size=(100, chart.program.dim)) * 0.02 * shrink
     costs = np.array([problem.objective(v) for v in samples])
@@ -325,3 +326,39 @@ def test_a_cut_box_whose_bound_fails_is_bounded_as_it_was(monkeypatch):
         assert result.status == BoxStatus.BOUNDED and result.proof.box is node
         return
     pytest.fail("no node was cut")
+
+
+def test_an_l2l2_proof_says_its_relaxation_and_the_verifier_holds_it_to_it():
+    """L2L2 maps are bounded with the quadratic envelope (Relaxation.quadratic); the proof says
+    so, and its duals prove nothing for the envelope of t / s (absent field) or another norm."""
+    import copy
+    import dataclasses
+
+    from geocert.solvers import verify
+
+    rng = np.random.default_rng(seed("maps", "quadratic"))
+    _, source, target = scene(rng, "resection", 40)
+    target = target + rng.normal(size=target.shape)
+    options = MapOptions(norm="L2L2", certificate="full")
+    result = fit_map(source, target, options)
+    assert result.certified and result.certificate.proof["relaxation"] == "quadratic"
+    claim = verify.claim_of(result, matrix=result.matrix)
+    verify.verify_arrays("resection", (source, target), dataclasses.asdict(options), claim)
+    without = copy.deepcopy(claim)
+    del without["proof"]["relaxation"]
+    with pytest.raises(verify.Invalid) as error:
+        verify.verify_arrays("resection", (source, target), dataclasses.asdict(options), without)
+    assert error.value.check == "format" and "dual vector" in str(error.value)  # another relaxation's size
+    unknown = copy.deepcopy(claim)
+    unknown["proof"]["relaxation"] = "tighter"
+    with pytest.raises(verify.Invalid) as error:
+        verify.verify_arrays("resection", (source, target), dataclasses.asdict(options), unknown)
+    assert error.value.check == "format"
+    l1 = MapOptions(norm="L2L1", certificate="full")
+    other = fit_map(source, target, l1)
+    assert other.certified and "relaxation" not in other.certificate.proof
+    claimed = verify.claim_of(other, matrix=other.matrix)
+    claimed["proof"]["relaxation"] = "quadratic"
+    with pytest.raises(verify.Invalid) as error:
+        verify.verify_arrays("resection", (source, target), dataclasses.asdict(l1), claimed)
+    assert error.value.check == "format"

@@ -23,9 +23,11 @@ from tests.support import noisy_track, random_cameras
     shrink=st.floats(0.01, 1.0),
     slack=st.floats(1.0, 4.0),
     full=st.booleans(),
+    quadratic=st.booleans(),
 )
-def test_box_bound_never_exceeds_cost_inside_the_box(seed, views, norm, shrink, slack, full):
-    """Also with full certificates, where the bound is the safe bound of the dual vector."""
+def test_box_bound_never_exceeds_cost_inside_the_box(seed, views, norm, shrink, slack, full, quadratic):
+    """Also with full certificates, where the bound is the safe bound of the dual vector, and
+    under L2L2 with the quadratic envelope (Relaxation.quadratic, what maps search with)."""
     rng = np.random.default_rng(seed)
     cameras = random_cameras(rng, views)
     _, points = noisy_track(rng, cameras, noise_px=3.0)
@@ -33,6 +35,7 @@ def test_box_bound_never_exceeds_cost_inside_the_box(seed, views, norm, shrink, 
     if not isinstance(prepared, Prepared):
         return  # closed before any box exists (noiseless or degenerate): nothing to bound
     problem = prepared.problem
+    problem.relaxation.quadratic = quadratic and norm == "L2L2"
     root = problem.root
     k = len(problem.B)  # branched directions: as many as the depths vary along (1 to 3)
     # A random sub-box of the root region, and random points inside it: z = B y in the box, and
@@ -72,8 +75,9 @@ def dense_limit(value: int):
 
 
 @settings(max_examples=30, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), views=st.integers(2, 6), norm=st.sampled_from(NORMS), envelope=st.booleans())
-def test_dense_and_sparse_assembly_build_the_same_matrix(seed, views, norm, envelope):
+@given(seed=st.integers(0, 2**32 - 1), views=st.integers(2, 6), norm=st.sampled_from(NORMS), envelope=st.booleans(),
+       quadratic=st.booleans())
+def test_dense_and_sparse_assembly_build_the_same_matrix(seed, views, norm, envelope, quadratic):
     """Small relaxations are assembled dense, large ones sparse: both paths give the same A."""
     rng = np.random.default_rng(seed)
     cameras = random_cameras(rng, views)
@@ -82,6 +86,7 @@ def test_dense_and_sparse_assembly_build_the_same_matrix(seed, views, norm, enve
     if not isinstance(prepared, Prepared):
         return
     problem = prepared.problem
+    problem.relaxation.quadratic = quadratic and norm == "L2L2"
     dense = problem.conic_data(problem.root, prepared.upper, envelope)
     with dense_limit(0):
         sparse = problem.conic_data(problem.root, prepared.upper, envelope)
@@ -121,3 +126,18 @@ def test_root_bounds_are_each_duals_safe_bound(seed, views, spoil):
                 assert ours == theirs
             else:
                 assert abs(ours - theirs) <= 1e-12 * (1 + abs(theirs))
+
+
+@settings(max_examples=200, deadline=None)
+@given(low=st.floats(1e-3, 10.0), ratio=st.floats(1.0, 100.0), where=st.floats(0.0, 1.0),
+       n=st.floats(-1e3, 1e3), m=st.floats(-1e3, 1e3))
+def test_the_quadratic_envelope_is_below_the_term_and_exact_on_the_faces(low, ratio, where, n, m):
+    """|n|^2 / (s (L + U) - L U) <= |n|^2 / s^2 on [L, U], equal at s = L and s = U: what
+    Relaxation.quadratic's cone holds each L2L2 term above."""
+    high = low * ratio
+    s = low + where * (high - low)
+    square = n * n + m * m
+    envelope = square / (s * (low + high) - low * high)
+    assert envelope <= square / s**2 * (1 + 1e-12)
+    for face in (low, high):
+        assert np.isclose(square / (face * (low + high) - low * high), square / face**2, rtol=1e-12, atol=0)

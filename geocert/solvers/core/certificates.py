@@ -121,6 +121,7 @@ class SearchProof:
     search_box: Box | None = None
     leaves: list[tuple[Box, LeafProof | None]] = field(default_factory=list)
     caps: list[CapProof] = field(default_factory=list)  # rounds of per-term caps, after the tightening
+    quadratic: bool = False  # L2L2 terms over the envelope of |n|^2 / s^2 (Relaxation.quadratic)
 
 
 def pack(array: np.ndarray | None) -> str | None:
@@ -172,6 +173,8 @@ def encode(proof: SearchProof) -> dict:
         "proofs": proofs,
         "leaves": leaves,  # [lower corner, upper corner, index into proofs or null (trivial bound 0)]
     }
+    if proof.quadratic:  # the relaxation the leaves' duals are for (absent: the envelope of t / s)
+        encoded["relaxation"] = "quadratic"
     if proof.caps:  # only when the search capped terms (maps that branch)
         encoded["caps"] = [{"upper_bound": c.upper_bound, "box": _box(c.box),
                             "observations": [int(i) for i in c.observations], "duals": [pack(z) for z in c.duals]}

@@ -96,6 +96,9 @@ def _fit_map(source, target, options: MapOptions, callback, start: float) -> Map
                                  0.0 if prepared.status == "optimal" else None, 0, None)
             result.reason = result.reason or prepared.reason
     else:
+        # Maps branch (triangulation mostly closes at the root, batched: fractional.stacked builds
+        # its relaxations row for row with the envelope of t / s).
+        prepared.problem.relaxation.quadratic = options.norm == "L2L2"
         prepared.problem.node_tightening = len(source) >= NODE_TIGHTENING_POINTS
         if len(source) >= NODE_TIGHTENING_POINTS:
             prepared.problem.use_bound_tolerance(LARGE_BOUND_TOLERANCE)

@@ -60,7 +60,10 @@ def verify_search(item, options: dict, proof: dict, lower_claimed: float, soluti
     passed.append("root_region")
 
     box = Box(lower[:k], upper[:k])
-    relaxation = Relaxation(program, F[:k], (lower[k:], upper[k:]), F)
+    form = proof.get("relaxation", "envelope")
+    if form not in ("envelope", "quadratic") or (form == "quadratic" and norm != "L2L2"):
+        raise Invalid("format", 'proof/relaxation must be "quadratic" (L2L2 only) or absent')
+    relaxation = Relaxation(program, F[:k], (lower[k:], upper[k:]), F, quadratic=form == "quadratic")
     rounds = proof.get("tightening")
     if not isinstance(rounds, list):
         raise Invalid("format", "proof/tightening must be a list")

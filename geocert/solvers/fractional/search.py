@@ -727,5 +727,6 @@ def search(prepared: Prepared, options: FractionalOptions, scope: str, reference
                                     bnb.leaves)
     if options.certificate == "full":
         certificate.proof = encode(SearchProof(prepared.scale, prepared.root_proof, prepared.problem.tightening,
-                                               root, leaves, prepared.problem.caps))
+                                               root, leaves, prepared.problem.caps,
+                                               prepared.problem.relaxation.quadratic))
     return Searched(bnb.status, bnb.candidate, bnb.lower_bound / unit, bnb.nodes, certificate)

@@ -71,8 +71,8 @@ def _read(position: int, claim: dict, tracks: list, n_cameras: int, max_views: i
     if claim.get("status") != "optimal" or claim.get("at_infinity") is not False:
         return None
     proof = claim.get("proof")
-    if not isinstance(proof, dict) or proof.get("type") != "branch_and_bound":
-        return None
+    if not isinstance(proof, dict) or proof.get("type") != "branch_and_bound" or "relaxation" in proof:
+        return None  # (the per-item path reads a proof whose relaxation is not the envelope of t / s)
     root, proofs, leaves = proof.get("root"), proof.get("proofs"), proof.get("leaves")
     if (not isinstance(root, dict) or proof.get("tightening") != [] or not isinstance(proofs, list)
             or not 1 <= len(proofs) <= MAX_LEAVES or not isinstance(leaves, list)
