@@ -352,7 +352,10 @@ class ReconstructionKind:
         camera_maps = {c.view: c.bound for c in out.cameras if c.bound is not None and c.bound.result is not None}
         return {"cameras": cameras, "points": points, "stages": stages, "summary": _jsonable(out.summary),
                 "images": images_document, "camera_results": self._camera_items(out, options, camera_maps),
-                "status": "optimal" if all(p["certified"] for p in points) and points else "not_certified",
+                # A cancelled run keeps what it did (pipeline.reconstruct); the item says it was
+                # stopped, so the job ends "cancelled" (workers.tasks._end), not "succeeded".
+                "status": "cancelled" if out.cancelled else (
+                    "optimal" if all(p["certified"] for p in points) and points else "not_certified"),
                 "certified": bool(points) and all(p["certified"] for p in points),
                 "nodes": sum(p["nodes"] for p in points), "elapsed_s": time.perf_counter() - start,
                 "cost": None, "lower_bound": None}

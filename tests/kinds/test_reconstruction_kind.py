@@ -153,6 +153,67 @@ class TestResult:
         assert "cancelled" in statuses and statuses[0] == "done", statuses
 
 
+def run_cancelled_at(stage: str, monkeypatch=None, **options) -> tuple[dict, list[str]]:
+    """The example job solved as the service solves it (batch.solve_items), cancelled once a
+    progress label of ``stage`` has been published (the cancel is then seen at the next check,
+    and stays requested, as the worker's ProgressPublisher.should_stop does)."""
+    from geocert.batch import solve_items
+
+    body = job(**options)
+    kind, parsed, parsed_options = parse_job(body)
+    labels: list[str] = []
+
+    def stop() -> bool:
+        return any(label.startswith(stage) for label in labels)
+
+    items = solve_items(kind, parsed, parsed_options, range(1), sink=lambda p: labels.append(p.get("stage", "")),
+                        should_stop=stop)
+    return items[0], labels
+
+
+class TestCancel:
+    """A cancelled reconstruction ends "cancelled" (the item's status: workers.tasks._end ends a
+    job cancelled when an item is) and keeps what was done before the cancel."""
+
+    def test_during_the_projective_stage_keeps_the_views_registered(self):
+        item, labels = run_cancelled_at("projective")
+        assert item["status"] == "cancelled"
+        from geocert.batch import item_sums
+
+        assert item_sums([item])["statuses"] == {"cancelled": 1}
+        statuses = {stage["name"]: stage["status"] for stage in item["stages"]}
+        assert statuses == {"projective": "cancelled", "autocalibration": "cancelled",
+                            "bundle_adjustment": "cancelled", "structure": "cancelled", "cameras": "cancelled"}
+        registered = [c for c in item["cameras"] if c["registered"]]
+        assert len(registered) == item["summary"]["views_registered"] >= 2
+        assert all(c["P"] is not None for c in registered)
+        KIND.result_model.model_validate({**KIND.assemble(parse_job(job())[2], [dict(item)], {
+            "items": 1, "certified": 0, "nodes": 0, "solve_s": 0.0, "elapsed_s": 0.0, "statuses": {}})})
+
+    def test_during_the_structure_stage_keeps_the_points_done(self, monkeypatch):
+        from geocert.solvers.reconstruction import structure
+
+        monkeypatch.setattr(structure, "TRACK_CHUNK", 10)  # 24 tracks: 3 chunks, the cancel after the first
+        item, labels = run_cancelled_at("structure", certificate="full")
+        assert item["status"] == "cancelled"
+        statuses = {stage["name"]: stage["status"] for stage in item["stages"]}
+        assert statuses["projective"] == statuses["bundle_adjustment"] == "done"
+        assert statuses["structure"] == statuses["cameras"] == "cancelled"
+        assert len(item["points"]) == item["summary"]["points"] == 10
+        assert all(point["certified"] for point in item["points"])
+        assert item["summary"]["views_registered"] == 6 and all(c["K"] is not None for c in item["cameras"])
+        structure_stage = next(stage for stage in item["stages"] if stage["name"] == "structure")
+        assert structure_stage["points"] == 10 and structure_stage["tracks_not_started"] == 14
+
+    def test_during_the_cameras_stage_keeps_the_cameras_resected(self):
+        item, labels = run_cancelled_at("cameras")
+        assert item["status"] == "cancelled"
+        assert len(item["points"]) == 24
+        statuses = [c["status"] for c in item["cameras"]]
+        assert 1 <= sum(s != "cancelled" for s in statuses) < 6, statuses
+        assert next(stage for stage in item["stages"] if stage["name"] == "cameras")["status"] == "cancelled"
+
+
 class TestExports:
     def test_colmap_text_model(self, solved):
         files = zipfile.ZipFile(io.BytesIO(export.colmap_zip(solved)))
