@@ -147,6 +147,9 @@ class ReconstructionCamera(BaseModel):
     certified: bool
     status: str
     points: int = Field(description="points the resection used")
+    searched: bool = Field(False, description="the certified resection ran for this camera: with certificate "
+                                              "\"full\", its map is in camera_certificate (one per searched camera, "
+                                              "in view order); a camera not searched claims no bound")
 
 
 class ReconstructionPoint(TrackOut):
@@ -371,7 +374,7 @@ class ReconstructionKind:
                 "cost": None if b is None else b.cost, "lower_bound": None if b is None else b.lower_bound,
                 "gap": None if b is None else b.gap, "optimal_cost": None if b is None else b.optimal_cost,
                 "certified": bool(b is not None and b.certified), "status": "not_run" if b is None else b.status,
-                "points": 0 if b is None else b.points}
+                "points": 0 if b is None else b.points, "searched": bool(b is not None and b.result is not None)}
 
     @staticmethod
     def _camera_items(out, options, bounds: dict) -> list[dict]:

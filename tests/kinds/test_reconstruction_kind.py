@@ -153,6 +153,82 @@ class TestResult:
         assert "cancelled" in statuses and statuses[0] == "done", statuses
 
 
+def forgeries_refused(result: dict) -> None:
+    """A result whose cameras are not all searched (some claim no bound): honest, it verifies;
+    every way of claiming a bound without its map, or dropping a searched camera's map, is refused."""
+    from geocert.solvers.verify import verify_any
+
+    honest = json.loads(json.dumps(result))
+    report = verify_any(honest)
+    assert report.valid, report.first_failure
+    cameras = honest["cameras"]
+    skipped = next(k for k, c in enumerate(cameras) if not c["searched"])
+    searched = [k for k, c in enumerate(cameras) if c["searched"]]
+    certified = next(k for k in searched if cameras[k]["certified"])
+    assert len(honest["camera_certificate"]["items"]) == len(searched) < len(cameras)
+
+    def claims_certified(r):
+        r["cameras"][skipped].update(certified=True, lower_bound=r["cameras"][skipped]["cost"], gap=0.0)
+
+    def claims_a_bound(r):
+        r["cameras"][skipped]["lower_bound"] = r["cameras"][skipped]["cost"]
+
+    def claims_searched(r):
+        r["cameras"][skipped]["searched"] = True
+
+    def swaps_searched(r):  # the certified camera's map said to be the skipped one's
+        r["cameras"][skipped]["searched"], r["cameras"][certified]["searched"] = True, False
+
+    def drops_a_map(r):
+        k = searched.index(certified)
+        r["camera_certificate"]["items"].pop(k)
+        r["camera_certificate"]["data"]["maps"].pop(k)
+
+    def forgets_searched(r):  # read as before: one map per registered camera
+        for camera in r["cameras"]:
+            camera.pop("searched")
+
+    for change in (claims_certified, claims_a_bound, claims_searched, swaps_searched, drops_a_map, forgets_searched):
+        forged = json.loads(json.dumps(honest))
+        change(forged)
+        report = verify_any(forged)
+        assert not report.valid and report.first_failure["check"] == "returned", (change.__name__,
+                                                                                 report.first_failure)
+
+
+class TestCamerasNotSearched:
+    """certificate "full" with cameras the search skipped (structure.resect_cameras: no bound could
+    certify them): the camera certificate holds the searched cameras' maps, the verifier accepts
+    the honest result and refuses a claim without its map (it asked for one map per registered
+    camera, so the House's own result failed its verifier)."""
+
+    def test_synthetic_scene_with_two_cameras_skipped(self, monkeypatch):
+        from geocert.solvers.reconstruction import structure
+
+        searched = structure._bound_camera
+
+        def bound(view, P, X, x, options, every):
+            if view in (1, 4):  # as the free-camera test skips a camera: its cost, no bound, the reason
+                return structure.CameraBound(view, 1.0, None, None, None, False, "not_certified", len(X), 0.0,
+                                             "skipped by the test")
+            return searched(view, P, X, x, options, every)
+
+        monkeypatch.setattr(structure, "_bound_camera", bound)
+        result = solve_job(job(certificate="full"))
+        assert [c["searched"] for c in result["cameras"]] == [True, False, True, True, False, True]
+        forgeries_refused(result)
+
+    def test_model_house_from_tracks(self):
+        from tests.solvers.test_reconstruction import house_tracks
+
+        _, _, tracks = house_tracks()
+        result = solve_job({"kind": "reconstruction", "options": {"certificate": "full"}, "data": {
+            "views": [{"image_size": [768, 576]}] * 10,
+            "tracks": [{"views": [int(v) for v in views], "points": pixels.tolist()} for views, pixels in tracks]}})
+        assert result["summary"]["views_registered"] == 10 and 0 < result["summary"]["cameras_certified"] < 10
+        forgeries_refused(result)
+
+
 def run_cancelled_at(stage: str, monkeypatch=None, **options) -> tuple[dict, list[str]]:
     """The example job solved as the service solves it (batch.solve_items), cancelled once a
     progress label of ``stage`` has been published (the cancel is then seen at the next check,
