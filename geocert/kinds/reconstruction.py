@@ -132,7 +132,7 @@ class ReconstructionCamera(BaseModel):
     view: int
     name: str | None
     registered: bool
-    reason: str | None
+    reason: str | None = Field(description="why the view is not registered (null when it is)")
     image_size: list[float] | None
     K: Matrix3 | None
     R: Matrix3 | None
@@ -146,6 +146,9 @@ class ReconstructionCamera(BaseModel):
     optimal_cost: float | None = Field(description="the certified resection's own optimum")
     certified: bool
     status: str
+    bound_reason: str | None = Field(None, description="why the camera has no bound or is not certified (not "
+                                                       "searched, not certified by the search, a point behind it, "
+                                                       "a gap beyond the tolerance, cancelled); null when certified")
     points: int = Field(description="points the resection used")
     searched: bool = Field(False, description="the certified resection ran for this camera: with certificate "
                                               "\"full\", its map is in camera_certificate (one per searched camera, "
@@ -374,6 +377,7 @@ class ReconstructionKind:
                 "cost": None if b is None else b.cost, "lower_bound": None if b is None else b.lower_bound,
                 "gap": None if b is None else b.gap, "optimal_cost": None if b is None else b.optimal_cost,
                 "certified": bool(b is not None and b.certified), "status": "not_run" if b is None else b.status,
+                "bound_reason": None if b is None else b.reason,
                 "points": 0 if b is None else b.points, "searched": bool(b is not None and b.result is not None)}
 
     @staticmethod

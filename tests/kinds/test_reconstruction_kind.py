@@ -216,6 +216,10 @@ class TestCamerasNotSearched:
         monkeypatch.setattr(structure, "_bound_camera", bound)
         result = solve_job(job(certificate="full"))
         assert [c["searched"] for c in result["cameras"]] == [True, False, True, True, False, True]
+        # Why a camera has no bound is said beside its bound; reason stays the registration's.
+        assert [c["bound_reason"] for c in result["cameras"]] == [None, "skipped by the test", None, None,
+                                                                  "skipped by the test", None]
+        assert all(c["reason"] is None and c["registered"] for c in result["cameras"])
         forgeries_refused(result)
 
     def test_model_house_from_tracks(self):
@@ -226,6 +230,10 @@ class TestCamerasNotSearched:
             "views": [{"image_size": [768, 576]}] * 10,
             "tracks": [{"views": [int(v) for v in views], "points": pixels.tolist()} for views, pixels in tracks]}})
         assert result["summary"]["views_registered"] == 10 and 0 < result["summary"]["cameras_certified"] < 10
+        for camera in result["cameras"]:  # every camera not certified says why (it was null: issue 14's trial)
+            assert (camera["bound_reason"] is None) == camera["certified"], camera
+            if not camera["searched"]:
+                assert "free 3x4 camera" in camera["bound_reason"] and camera["lower_bound"] is None
         forgeries_refused(result)
 
 
