@@ -157,7 +157,8 @@ class ReconstructionCamera(BaseModel):
 
 class ReconstructionPoint(TrackOut):
     track: int = Field(description="index into data.tracks")
-    observations: list[list[float]] = Field(description="[[view, u, v], ...] the observations the point was solved from")
+    observations: list[tuple[int, float, float]] = Field(
+        description="[[view, u, v], ...] the observations the point was solved from (view: an index into data.views)")
 
 
 class ReconstructionResult(BaseModel):

@@ -101,6 +101,18 @@ class TestResult:
         for point in solved["points"]:
             assert point["observations"] and all(len(o) == 3 for o in point["observations"])
 
+    def test_observations_name_their_view_by_an_integer(self, solved):
+        """As the API writes the result (batch.result_json: the result model's JSON): [view, u, v]
+        with view an integer (the model typed it float: [[0.0, 554.369, 163.897], ...])."""
+        from geocert.batch import result_json
+
+        written = json.loads(result_json(KIND, solved))
+        for point in written["points"]:
+            assert all(type(view) is int and type(u) is float for view, u, _ in point["observations"])
+        schema = KIND.result_model.model_json_schema()
+        items = schema["$defs"]["ReconstructionPoint"]["properties"]["observations"]["items"]
+        assert [item["type"] for item in items["prefixItems"]] == ["integer", "number", "number"]
+
     def test_points_certificate_verifies_and_is_about_the_returned_cameras(self, solved):
         report = verify_any(solved)
         assert report.valid, report.first_failure
