@@ -329,7 +329,7 @@ class ReconstructionKind:
             return bool(callback(StageProgress(0, 0, -math.inf, math.inf, math.inf, math.inf,
                                                time.perf_counter() - start, stage=label)))
 
-        images_document = None
+        images_document = matches = out = None
         tracks = parsed.tracks
         if tracks is None:  # photos: stage 1
             from geocert.solvers.reconstruction import features
@@ -337,25 +337,31 @@ class ReconstructionKind:
             def matching(progress: dict) -> bool:
                 return report("matches", progress.get("done", 0), progress.get("total", 1))
 
+            began, cpu = time.perf_counter(), time.process_time()
             found = features.tracks_from_images(parsed.images_stats["images"], options.feature_options(), matching)
             tracks = [(np.asarray(v, dtype=int), np.asarray(p, dtype=float)) for v, p in found.tracks]
             images_document = _jsonable(dict(found.stats))
+            matches = {"name": "matches", **images_document, "status": "done", "reason": None,
+                       "elapsed_s": time.perf_counter() - began,
+                       "cpu_s": time.process_time() - cpu}  # this process's CPU time, as the other stages'
             if found.status == "cancelled" or len({int(v) for views, _ in tracks for v in views}) < 2:
                 reason = ("the job was cancelled" if found.status == "cancelled"
                           else "fewer than 2 images have verified matches")
-                return {**self.cancelled_item(), "images": images_document,
-                        "stages": [{"name": "matches", "status": "cancelled" if found.status == "cancelled"
-                                    else "failed", "reason": reason, **images_document}],
+                matches.update(status="cancelled" if found.status == "cancelled" else "failed", reason=reason)
+                return {**self.cancelled_item(), "images": images_document, "stages": [_jsonable(matches)],
                         "status": "cancelled" if found.status == "cancelled" else "not_certified"}
-
-        out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
+        if out is None:
+            out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
         cameras = [self._camera(camera, parsed) for camera in out.cameras]
         points = [{"track": p.track, **track_document(p.result), "observations": p.observations} for p in out.points]
         for point in points:
             point["determinacy"] = None
         stages = [_jsonable(stage) for stage in out.stages]
-        if images_document is not None:
-            stages.insert(0, {"name": "matches", "status": "done", **_jsonable(images_document)})
+        if matches is not None:
+            stages.insert(0, _jsonable(matches))
+            # the matches stage first, as in stages
+            out.summary["time_s"] = {"matches": matches["elapsed_s"], **out.summary["time_s"]}
+            out.summary["cpu_s"] = {"matches": matches["cpu_s"], **out.summary["cpu_s"]}
         camera_maps = {c.view: c.bound for c in out.cameras if c.bound is not None and c.bound.result is not None}
         return {"cameras": cameras, "points": points, "stages": stages, "summary": _jsonable(out.summary),
                 "images": images_document, "camera_results": self._camera_items(out, options, camera_maps),

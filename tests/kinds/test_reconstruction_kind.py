@@ -375,6 +375,12 @@ class TestPhotos:
                                 "options": {**options, "resect_cameras": False}})
             KIND.result_model.model_validate(result)
             assert result["stages"][0]["name"] == "matches" and result["images"]["images"] == 8
+            matches = result["stages"][0]  # timed like the other stages, and in the summary's times
+            assert matches["elapsed_s"] > 0 and matches["cpu_s"] > 0
+            assert list(result["summary"]["time_s"]) == list(result["summary"]["cpu_s"]) == [
+                stage["name"] for stage in result["stages"]]
+            assert result["summary"]["time_s"]["matches"] == matches["elapsed_s"]
+            assert result["summary"]["cpu_s"]["matches"] == matches["cpu_s"]
             assert result["summary"]["views_registered"] == 8 and result["summary"]["points"] > 500
             assert result["summary"]["points_certified_fraction"] == 1.0
             assert abs(result["cameras"][0]["K"][0][0] / 700 - 1) < 0.01
