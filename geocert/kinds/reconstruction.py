@@ -344,12 +344,18 @@ class ReconstructionKind:
             matches = {"name": "matches", **images_document, "status": "done", "reason": None,
                        "elapsed_s": time.perf_counter() - began,
                        "cpu_s": time.process_time() - cpu}  # this process's CPU time, as the other stages'
-            if found.status == "cancelled" or len({int(v) for views, _ in tracks for v in views}) < 2:
-                reason = ("the job was cancelled" if found.status == "cancelled"
-                          else "fewer than 2 images have verified matches")
-                matches.update(status="cancelled" if found.status == "cancelled" else "failed", reason=reason)
-                return {**self.cancelled_item(), "images": images_document, "stages": [_jsonable(matches)],
-                        "status": "cancelled" if found.status == "cancelled" else "not_certified"}
+            matched = len({int(v) for views, _ in tracks for v in views})
+            if found.status == "cancelled":
+                matches.update(status="cancelled", reason="the job was cancelled")
+                out = pipeline.not_reconstructed(len(parsed.image_sizes), "cancelled", "the job was cancelled",
+                                                 "the job was cancelled before the views were matched")
+            elif matched < 2:
+                # As a projective stage that fails (pipeline._run): the job succeeds with a
+                # result whose failed stage says why, the later stages skipped, the summary filled.
+                reason = f"fewer than 2 images have verified matches ({matched})"
+                matches.update(status="failed", reason=reason)
+                out = pipeline.not_reconstructed(len(parsed.image_sizes), "skipped", "the matches stage failed: "
+                                                 + reason, "no verified matches with another image")
         if out is None:
             out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
         cameras = [self._camera(camera, parsed) for camera in out.cameras]

@@ -387,6 +387,46 @@ class TestPhotos:
             errors = aligned_rotation_errors([np.array(c["R"]) for c in result["cameras"]], [c.R for c in scene.cameras])
             assert errors.max() < 0.5
 
+    def test_fewer_than_two_images_with_matches_fail_the_matches_stage_and_keep_the_result(self):
+        """A rendered photo and an all-black one of the same size: no verified pair. As when the
+        projective stage fails: the job's result says why (the matches stage failed, with its
+        figures and time), the later stages skipped with that reason, every camera not
+        registered with its reason, and the summary filled (it was {}, with cameras [])."""
+        import base64
+
+        import cv2
+
+        from geocert.solvers.reconstruction import render
+
+        scene = render.box_scene(n_views=2, arc_deg=20, seed=1)
+        photo = scene.render(scene.cameras[0])
+        images = [{"name": name, "content": base64.b64encode(cv2.imencode(".png", image)[1]).decode()}
+                  for name, image in (("photo", photo), ("black", np.zeros_like(photo)))]
+        body = {"kind": "reconstruction", "data": {"images": images}, "options": {}}
+        kind, parsed, options = parse_job(body)
+        item = kind.solve_item(parsed, 0, options, None)
+        assert item["status"] == "not_certified" and not item["certified"]
+        stopped = kind.solve_item(parsed, 0, options, lambda progress: True)  # a cancel during the matching
+        assert stopped["status"] == "cancelled" and stopped["summary"]["views"] == 2
+        assert {stage["status"] for stage in stopped["stages"]} == {"cancelled"} and len(stopped["stages"]) == 6
+        result = solve_job(body)
+        KIND.result_model.model_validate(result)
+        stages = {stage["name"]: stage for stage in result["stages"]}
+        assert list(stages) == ["matches", "projective", "autocalibration", "bundle_adjustment", "structure",
+                                "cameras"]
+        assert stages["matches"]["status"] == "failed"
+        assert stages["matches"]["reason"] == "fewer than 2 images have verified matches (0)"
+        assert stages["matches"]["elapsed_s"] > 0 and stages["matches"]["images"] == 2
+        for name in list(stages)[1:]:
+            assert stages[name]["status"] == "skipped", stages[name]
+            assert stages[name]["reason"] == "the matches stage failed: fewer than 2 images have verified matches (0)"
+        summary = result["summary"]
+        assert (summary["views"], summary["views_registered"], summary["points"], summary["tracks"]) == (2, 0, 0, 0)
+        assert summary["time_s"]["matches"] == stages["matches"]["elapsed_s"]
+        assert [(c["name"], c["registered"], c["reason"]) for c in result["cameras"]] == [
+            ("photo", False, "no verified matches with another image"),
+            ("black", False, "no verified matches with another image")]
+
     def test_the_matching_options_reach_stage_one_and_the_calibrated_path(self, monkeypatch):
         """options.features sets stage 1's FeatureOptions (null keeps a default), merge_components
         the calibrated path's (what the Middlebury ring needs: bench/reconstruction_images.py)."""

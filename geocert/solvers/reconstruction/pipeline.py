@@ -95,6 +95,17 @@ def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], image_sizes: list, 
     return out
 
 
+def not_reconstructed(n_views: int, status: str, reason: str, camera_reason: str) -> Reconstruction:
+    """The reconstruction when no tracks reach it (photos: the matches stage failed, or was
+    cancelled): every stage ``status`` ("skipped" or "cancelled") with ``reason``, every view not
+    registered with ``camera_reason``, the summary filled (0 views registered, 0 points)."""
+    stages = [{**_stage(name), "status": status, "reason": reason} for name in STAGES]
+    out = Reconstruction([Camera(v, False, camera_reason) for v in range(n_views)], [], stages,
+                         cancelled=status == "cancelled")
+    _summarise(out, [], n_views)
+    return out
+
+
 def _cancel(stages: dict, at: str) -> None:
     hit = False
     for name in STAGES:
