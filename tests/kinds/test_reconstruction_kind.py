@@ -242,6 +242,9 @@ class TestCamerasNotSearched:
             "views": [{"image_size": [768, 576]}] * 10,
             "tracks": [{"views": [int(v) for v in views], "points": pixels.tolist()} for views, pixels in tracks]}})
         assert result["summary"]["views_registered"] == 10 and 0 < result["summary"]["cameras_certified"] < 10
+        projective = result["stages"][0]  # every observation counted once (27 outliers but 52 not kept)
+        assert projective["observations"] - projective["observations_kept"] == projective["outliers_removed"] + \
+            projective["observations_of_dropped_tracks"] + projective["observations_of_unregistered_views"]
         for camera in result["cameras"]:  # every camera not certified says why (it was null: issue 14's trial)
             assert (camera["bound_reason"] is None) == camera["certified"], camera
             if not camera["searched"]:

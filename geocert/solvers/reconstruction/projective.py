@@ -145,9 +145,16 @@ def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], n_views: int, optio
                            for v in range(n_views)])
     oriented_cameras, oriented_points = _orient(cameras_px, X, obs, inlier, registered)
     kept = inlier & registered[obs.view] & np.isfinite(oriented_points[obs.track, 0])
+    # Every observation is counted once: kept, an outlier (farther than the threshold from its
+    # reprojection, or a pair no signs put in front), one of a track dropped (its point left with
+    # fewer than two inlier views: its other observations are inliers, not kept), or of a view
+    # not registered.
+    seen_by = registered[obs.view]
     stats.update({"views_registered": int(registered.sum()), "points": int(np.isfinite(oriented_points[:, 0]).sum()),
                   "observations": int(len(obs.view)), "observations_kept": int(kept.sum()),
-                  "outliers_removed": int((~inlier & registered[obs.view]).sum())})
+                  "outliers_removed": int((~inlier & seen_by).sum()),
+                  "observations_of_dropped_tracks": int((inlier & seen_by & ~kept).sum()),
+                  "observations_of_unregistered_views": int((~seen_by).sum())})
     if stopped:
         stats["cancelled"] = True
     for v in range(n_views):
