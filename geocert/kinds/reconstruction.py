@@ -132,7 +132,7 @@ class ReconstructionCamera(BaseModel):
     view: int
     name: str | None
     registered: bool
-    reason: str | None
+    reason: str | None = Field(description="why the view is not registered (null when it is)")
     image_size: list[float] | None
     K: Matrix3 | None
     R: Matrix3 | None
@@ -146,12 +146,19 @@ class ReconstructionCamera(BaseModel):
     optimal_cost: float | None = Field(description="the certified resection's own optimum")
     certified: bool
     status: str
+    bound_reason: str | None = Field(None, description="why the camera has no bound or is not certified (not "
+                                                       "searched, not certified by the search, a point behind it, "
+                                                       "a gap beyond the tolerance, cancelled); null when certified")
     points: int = Field(description="points the resection used")
+    searched: bool = Field(False, description="the certified resection ran for this camera: with certificate "
+                                              "\"full\", its map is in camera_certificate (one per searched camera, "
+                                              "in view order); a camera not searched claims no bound")
 
 
 class ReconstructionPoint(TrackOut):
     track: int = Field(description="index into data.tracks")
-    observations: list[list[float]] = Field(description="[[view, u, v], ...] the observations the point was solved from")
+    observations: list[tuple[int, float, float]] = Field(
+        description="[[view, u, v], ...] the observations the point was solved from (view: an index into data.views)")
 
 
 class ReconstructionResult(BaseModel):
@@ -322,7 +329,7 @@ class ReconstructionKind:
             return bool(callback(StageProgress(0, 0, -math.inf, math.inf, math.inf, math.inf,
                                                time.perf_counter() - start, stage=label)))
 
-        images_document = None
+        images_document = matches = out = None
         tracks = parsed.tracks
         if tracks is None:  # photos: stage 1
             from geocert.solvers.reconstruction import features
@@ -330,29 +337,44 @@ class ReconstructionKind:
             def matching(progress: dict) -> bool:
                 return report("matches", progress.get("done", 0), progress.get("total", 1))
 
+            began, cpu = time.perf_counter(), time.process_time()
             found = features.tracks_from_images(parsed.images_stats["images"], options.feature_options(), matching)
             tracks = [(np.asarray(v, dtype=int), np.asarray(p, dtype=float)) for v, p in found.tracks]
             images_document = _jsonable(dict(found.stats))
-            if found.status == "cancelled" or len({int(v) for views, _ in tracks for v in views}) < 2:
-                reason = ("the job was cancelled" if found.status == "cancelled"
-                          else "fewer than 2 images have verified matches")
-                return {**self.cancelled_item(), "images": images_document,
-                        "stages": [{"name": "matches", "status": "cancelled" if found.status == "cancelled"
-                                    else "failed", "reason": reason, **images_document}],
-                        "status": "cancelled" if found.status == "cancelled" else "not_certified"}
-
-        out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
+            matches = {"name": "matches", **images_document, "status": "done", "reason": None,
+                       "elapsed_s": time.perf_counter() - began,
+                       "cpu_s": time.process_time() - cpu}  # this process's CPU time, as the other stages'
+            matched = len({int(v) for views, _ in tracks for v in views})
+            if found.status == "cancelled":
+                matches.update(status="cancelled", reason="the job was cancelled")
+                out = pipeline.not_reconstructed(len(parsed.image_sizes), "cancelled", "the job was cancelled",
+                                                 "the job was cancelled before the views were matched")
+            elif matched < 2:
+                # As a projective stage that fails (pipeline._run): the job succeeds with a
+                # result whose failed stage says why, the later stages skipped, the summary filled.
+                reason = f"fewer than 2 images have verified matches ({matched})"
+                matches.update(status="failed", reason=reason)
+                out = pipeline.not_reconstructed(len(parsed.image_sizes), "skipped", "the matches stage failed: "
+                                                 + reason, "no verified matches with another image")
+        if out is None:
+            out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
         cameras = [self._camera(camera, parsed) for camera in out.cameras]
         points = [{"track": p.track, **track_document(p.result), "observations": p.observations} for p in out.points]
         for point in points:
             point["determinacy"] = None
         stages = [_jsonable(stage) for stage in out.stages]
-        if images_document is not None:
-            stages.insert(0, {"name": "matches", "status": "done", **_jsonable(images_document)})
+        if matches is not None:
+            stages.insert(0, _jsonable(matches))
+            # the matches stage first, as in stages
+            out.summary["time_s"] = {"matches": matches["elapsed_s"], **out.summary["time_s"]}
+            out.summary["cpu_s"] = {"matches": matches["cpu_s"], **out.summary["cpu_s"]}
         camera_maps = {c.view: c.bound for c in out.cameras if c.bound is not None and c.bound.result is not None}
         return {"cameras": cameras, "points": points, "stages": stages, "summary": _jsonable(out.summary),
                 "images": images_document, "camera_results": self._camera_items(out, options, camera_maps),
-                "status": "optimal" if all(p["certified"] for p in points) and points else "not_certified",
+                # A cancelled run keeps what it did (pipeline.reconstruct); the item says it was
+                # stopped, so the job ends "cancelled" (workers.tasks._end), not "succeeded".
+                "status": "cancelled" if out.cancelled else (
+                    "optimal" if all(p["certified"] for p in points) and points else "not_certified"),
                 "certified": bool(points) and all(p["certified"] for p in points),
                 "nodes": sum(p["nodes"] for p in points), "elapsed_s": time.perf_counter() - start,
                 "cost": None, "lower_bound": None}
@@ -368,7 +390,8 @@ class ReconstructionKind:
                 "cost": None if b is None else b.cost, "lower_bound": None if b is None else b.lower_bound,
                 "gap": None if b is None else b.gap, "optimal_cost": None if b is None else b.optimal_cost,
                 "certified": bool(b is not None and b.certified), "status": "not_run" if b is None else b.status,
-                "points": 0 if b is None else b.points}
+                "bound_reason": None if b is None else b.reason,
+                "points": 0 if b is None else b.points, "searched": bool(b is not None and b.result is not None)}
 
     @staticmethod
     def _camera_items(out, options, bounds: dict) -> list[dict]:

@@ -101,6 +101,18 @@ class TestResult:
         for point in solved["points"]:
             assert point["observations"] and all(len(o) == 3 for o in point["observations"])
 
+    def test_observations_name_their_view_by_an_integer(self, solved):
+        """As the API writes the result (batch.result_json: the result model's JSON): [view, u, v]
+        with view an integer (the model typed it float: [[0.0, 554.369, 163.897], ...])."""
+        from geocert.batch import result_json
+
+        written = json.loads(result_json(KIND, solved))
+        for point in written["points"]:
+            assert all(type(view) is int and type(u) is float for view, u, _ in point["observations"])
+        schema = KIND.result_model.model_json_schema()
+        items = schema["$defs"]["ReconstructionPoint"]["properties"]["observations"]["items"]
+        assert [item["type"] for item in items["prefixItems"]] == ["integer", "number", "number"]
+
     def test_points_certificate_verifies_and_is_about_the_returned_cameras(self, solved):
         report = verify_any(solved)
         assert report.valid, report.first_failure
@@ -151,6 +163,154 @@ class TestResult:
         items = solve_items(KIND, parsed, options, range(1), should_stop=stop)
         statuses = [stage["status"] for stage in items[0]["stages"]]
         assert "cancelled" in statuses and statuses[0] == "done", statuses
+
+
+def forgeries_refused(result: dict) -> None:
+    """A result whose cameras are not all searched (some claim no bound): honest, it verifies;
+    every way of claiming a bound without its map, or dropping a searched camera's map, is refused."""
+    from geocert.solvers.verify import verify_any
+
+    honest = json.loads(json.dumps(result))
+    report = verify_any(honest)
+    assert report.valid, report.first_failure
+    cameras = honest["cameras"]
+    skipped = next(k for k, c in enumerate(cameras) if not c["searched"])
+    searched = [k for k, c in enumerate(cameras) if c["searched"]]
+    certified = next(k for k in searched if cameras[k]["certified"])
+    assert len(honest["camera_certificate"]["items"]) == len(searched) < len(cameras)
+
+    def claims_certified(r):
+        r["cameras"][skipped].update(certified=True, lower_bound=r["cameras"][skipped]["cost"], gap=0.0)
+
+    def claims_a_bound(r):
+        r["cameras"][skipped]["lower_bound"] = r["cameras"][skipped]["cost"]
+
+    def claims_searched(r):
+        r["cameras"][skipped]["searched"] = True
+
+    def swaps_searched(r):  # the certified camera's map said to be the skipped one's
+        r["cameras"][skipped]["searched"], r["cameras"][certified]["searched"] = True, False
+
+    def drops_a_map(r):
+        k = searched.index(certified)
+        r["camera_certificate"]["items"].pop(k)
+        r["camera_certificate"]["data"]["maps"].pop(k)
+
+    def forgets_searched(r):  # read as before: one map per registered camera
+        for camera in r["cameras"]:
+            camera.pop("searched")
+
+    for change in (claims_certified, claims_a_bound, claims_searched, swaps_searched, drops_a_map, forgets_searched):
+        forged = json.loads(json.dumps(honest))
+        change(forged)
+        report = verify_any(forged)
+        assert not report.valid and report.first_failure["check"] == "returned", (change.__name__,
+                                                                                 report.first_failure)
+
+
+class TestCamerasNotSearched:
+    """certificate "full" with cameras the search skipped (structure.resect_cameras: no bound could
+    certify them): the camera certificate holds the searched cameras' maps, the verifier accepts
+    the honest result and refuses a claim without its map (it asked for one map per registered
+    camera, so the House's own result failed its verifier)."""
+
+    def test_synthetic_scene_with_two_cameras_skipped(self, monkeypatch):
+        from geocert.solvers.reconstruction import structure
+
+        searched = structure._bound_camera
+
+        def bound(view, P, X, x, options, every):
+            if view in (1, 4):  # as the free-camera test skips a camera: its cost, no bound, the reason
+                return structure.CameraBound(view, 1.0, None, None, None, False, "not_certified", len(X), 0.0,
+                                             "skipped by the test")
+            return searched(view, P, X, x, options, every)
+
+        monkeypatch.setattr(structure, "_bound_camera", bound)
+        result = solve_job(job(certificate="full"))
+        assert [c["searched"] for c in result["cameras"]] == [True, False, True, True, False, True]
+        # Why a camera has no bound is said beside its bound; reason stays the registration's.
+        assert [c["bound_reason"] for c in result["cameras"]] == [None, "skipped by the test", None, None,
+                                                                  "skipped by the test", None]
+        assert all(c["reason"] is None and c["registered"] for c in result["cameras"])
+        forgeries_refused(result)
+
+    def test_model_house_from_tracks(self):
+        from tests.solvers.test_reconstruction import house_tracks
+
+        _, _, tracks = house_tracks()
+        result = solve_job({"kind": "reconstruction", "options": {"certificate": "full"}, "data": {
+            "views": [{"image_size": [768, 576]}] * 10,
+            "tracks": [{"views": [int(v) for v in views], "points": pixels.tolist()} for views, pixels in tracks]}})
+        assert result["summary"]["views_registered"] == 10 and 0 < result["summary"]["cameras_certified"] < 10
+        projective = result["stages"][0]  # every observation counted once (27 outliers but 52 not kept)
+        assert projective["observations"] - projective["observations_kept"] == projective["outliers_removed"] + \
+            projective["observations_of_dropped_tracks"] + projective["observations_of_unregistered_views"]
+        for camera in result["cameras"]:  # every camera not certified says why (it was null: issue 14's trial)
+            assert (camera["bound_reason"] is None) == camera["certified"], camera
+            if not camera["searched"]:
+                assert "free 3x4 camera" in camera["bound_reason"] and camera["lower_bound"] is None
+        forgeries_refused(result)
+
+
+def run_cancelled_at(stage: str, monkeypatch=None, **options) -> tuple[dict, list[str]]:
+    """The example job solved as the service solves it (batch.solve_items), cancelled once a
+    progress label of ``stage`` has been published (the cancel is then seen at the next check,
+    and stays requested, as the worker's ProgressPublisher.should_stop does)."""
+    from geocert.batch import solve_items
+
+    body = job(**options)
+    kind, parsed, parsed_options = parse_job(body)
+    labels: list[str] = []
+
+    def stop() -> bool:
+        return any(label.startswith(stage) for label in labels)
+
+    items = solve_items(kind, parsed, parsed_options, range(1), sink=lambda p: labels.append(p.get("stage", "")),
+                        should_stop=stop)
+    return items[0], labels
+
+
+class TestCancel:
+    """A cancelled reconstruction ends "cancelled" (the item's status: workers.tasks._end ends a
+    job cancelled when an item is) and keeps what was done before the cancel."""
+
+    def test_during_the_projective_stage_keeps_the_views_registered(self):
+        item, labels = run_cancelled_at("projective")
+        assert item["status"] == "cancelled"
+        from geocert.batch import item_sums
+
+        assert item_sums([item])["statuses"] == {"cancelled": 1}
+        statuses = {stage["name"]: stage["status"] for stage in item["stages"]}
+        assert statuses == {"projective": "cancelled", "autocalibration": "cancelled",
+                            "bundle_adjustment": "cancelled", "structure": "cancelled", "cameras": "cancelled"}
+        registered = [c for c in item["cameras"] if c["registered"]]
+        assert len(registered) == item["summary"]["views_registered"] >= 2
+        assert all(c["P"] is not None for c in registered)
+        KIND.result_model.model_validate({**KIND.assemble(parse_job(job())[2], [dict(item)], {
+            "items": 1, "certified": 0, "nodes": 0, "solve_s": 0.0, "elapsed_s": 0.0, "statuses": {}})})
+
+    def test_during_the_structure_stage_keeps_the_points_done(self, monkeypatch):
+        from geocert.solvers.reconstruction import structure
+
+        monkeypatch.setattr(structure, "TRACK_CHUNK", 10)  # 24 tracks: 3 chunks, the cancel after the first
+        item, labels = run_cancelled_at("structure", certificate="full")
+        assert item["status"] == "cancelled"
+        statuses = {stage["name"]: stage["status"] for stage in item["stages"]}
+        assert statuses["projective"] == statuses["bundle_adjustment"] == "done"
+        assert statuses["structure"] == statuses["cameras"] == "cancelled"
+        assert len(item["points"]) == item["summary"]["points"] == 10
+        assert all(point["certified"] for point in item["points"])
+        assert item["summary"]["views_registered"] == 6 and all(c["K"] is not None for c in item["cameras"])
+        structure_stage = next(stage for stage in item["stages"] if stage["name"] == "structure")
+        assert structure_stage["points"] == 10 and structure_stage["tracks_not_started"] == 14
+
+    def test_during_the_cameras_stage_keeps_the_cameras_resected(self):
+        item, labels = run_cancelled_at("cameras")
+        assert item["status"] == "cancelled"
+        assert len(item["points"]) == 24
+        statuses = [c["status"] for c in item["cameras"]]
+        assert 1 <= sum(s != "cancelled" for s in statuses) < 6, statuses
+        assert next(stage for stage in item["stages"] if stage["name"] == "cameras")["status"] == "cancelled"
 
 
 class TestExports:
@@ -218,11 +378,57 @@ class TestPhotos:
                                 "options": {**options, "resect_cameras": False}})
             KIND.result_model.model_validate(result)
             assert result["stages"][0]["name"] == "matches" and result["images"]["images"] == 8
+            matches = result["stages"][0]  # timed like the other stages, and in the summary's times
+            assert matches["elapsed_s"] > 0 and matches["cpu_s"] > 0
+            assert list(result["summary"]["time_s"]) == list(result["summary"]["cpu_s"]) == [
+                stage["name"] for stage in result["stages"]]
+            assert result["summary"]["time_s"]["matches"] == matches["elapsed_s"]
+            assert result["summary"]["cpu_s"]["matches"] == matches["cpu_s"]
             assert result["summary"]["views_registered"] == 8 and result["summary"]["points"] > 500
             assert result["summary"]["points_certified_fraction"] == 1.0
             assert abs(result["cameras"][0]["K"][0][0] / 700 - 1) < 0.01
             errors = aligned_rotation_errors([np.array(c["R"]) for c in result["cameras"]], [c.R for c in scene.cameras])
             assert errors.max() < 0.5
+
+    def test_fewer_than_two_images_with_matches_fail_the_matches_stage_and_keep_the_result(self):
+        """A rendered photo and an all-black one of the same size: no verified pair. As when the
+        projective stage fails: the job's result says why (the matches stage failed, with its
+        figures and time), the later stages skipped with that reason, every camera not
+        registered with its reason, and the summary filled (it was {}, with cameras [])."""
+        import base64
+
+        import cv2
+
+        from geocert.solvers.reconstruction import render
+
+        scene = render.box_scene(n_views=2, arc_deg=20, seed=1)
+        photo = scene.render(scene.cameras[0])
+        images = [{"name": name, "content": base64.b64encode(cv2.imencode(".png", image)[1]).decode()}
+                  for name, image in (("photo", photo), ("black", np.zeros_like(photo)))]
+        body = {"kind": "reconstruction", "data": {"images": images}, "options": {}}
+        kind, parsed, options = parse_job(body)
+        item = kind.solve_item(parsed, 0, options, None)
+        assert item["status"] == "not_certified" and not item["certified"]
+        stopped = kind.solve_item(parsed, 0, options, lambda progress: True)  # a cancel during the matching
+        assert stopped["status"] == "cancelled" and stopped["summary"]["views"] == 2
+        assert {stage["status"] for stage in stopped["stages"]} == {"cancelled"} and len(stopped["stages"]) == 6
+        result = solve_job(body)
+        KIND.result_model.model_validate(result)
+        stages = {stage["name"]: stage for stage in result["stages"]}
+        assert list(stages) == ["matches", "projective", "autocalibration", "bundle_adjustment", "structure",
+                                "cameras"]
+        assert stages["matches"]["status"] == "failed"
+        assert stages["matches"]["reason"] == "fewer than 2 images have verified matches (0)"
+        assert stages["matches"]["elapsed_s"] > 0 and stages["matches"]["images"] == 2
+        for name in list(stages)[1:]:
+            assert stages[name]["status"] == "skipped", stages[name]
+            assert stages[name]["reason"] == "the matches stage failed: fewer than 2 images have verified matches (0)"
+        summary = result["summary"]
+        assert (summary["views"], summary["views_registered"], summary["points"], summary["tracks"]) == (2, 0, 0, 0)
+        assert summary["time_s"]["matches"] == stages["matches"]["elapsed_s"]
+        assert [(c["name"], c["registered"], c["reason"]) for c in result["cameras"]] == [
+            ("photo", False, "no verified matches with another image"),
+            ("black", False, "no verified matches with another image")]
 
     def test_the_matching_options_reach_stage_one_and_the_calibrated_path(self, monkeypatch):
         """options.features sets stage 1's FeatureOptions (null keeps a default), merge_components

@@ -51,6 +51,39 @@ class TestReconstructionThroughTheService:
         assert wrong.status_code == 422 and wrong.headers["content-type"].startswith("application/problem+json")
         assert service.get("/v1/jobs/nope/export", params={"format": "ply"}).status_code == 404
 
+    def test_a_cancel_during_the_structure_stage_ends_cancelled_keeping_the_points_done(self, service):
+        """Through the worker: a cancel seen between two chunks of tracks ends the job
+        "cancelled" (not "succeeded"), with the stages before it done, the points solved before
+        it kept (certified), and the tracks not started left out; a cancelled job is not exported."""
+        from geocert.solvers.reconstruction import synthetic
+
+        scene = synthetic.scene(views=6, points=3000, seed=3, noise_px=0.3)
+        body = {"kind": "reconstruction", "options": {},
+                "data": {"views": [{"image_size": list(scene.image_size)}] * 6,
+                         "tracks": [{"views": [int(v) for v in views],
+                                     "points": [[round(float(u), 3), round(float(w), 3)] for u, w in pixels]}
+                                    for views, pixels in scene.tracks]}}
+        response = service.post("/v1/jobs", json=body)
+        assert response.status_code == 202, response.text
+        job_id = response.json()["id"]
+        for _, event, data in sse_events(service, job_id, limit_s=120):
+            if event == "progress" and data.get("stage", "").startswith("structure"):
+                break  # 3000 tracks in chunks of 500: the cancel is seen after the first chunk or so
+        assert service.post(f"/v1/jobs/{job_id}/cancel").status_code == 202
+        job = wait_for(service, job_id, limit_s=120)
+        assert job["status"] == "cancelled", job.get("error")
+        result = job["result"]
+        stages = {stage["name"]: stage for stage in result["stages"]}
+        assert [stages[name]["status"] for name in ("projective", "bundle_adjustment", "structure", "cameras")] == [
+            "done", "done", "cancelled", "cancelled"]
+        points = result["summary"]["points"]
+        assert 0 < points < 3000 and points == len(result["points"]) == stages["structure"]["points"]
+        assert stages["structure"]["tracks_not_started"] == 3000 - points
+        assert all(point["certified"] for point in result["points"])
+        assert result["summary"]["views_registered"] == 6
+        assert all(camera["registered"] and camera["K"] is not None for camera in result["cameras"])
+        assert service.get(f"/v1/jobs/{job_id}/export", params={"format": "ply"}).status_code == 409
+
     def test_a_track_naming_an_unknown_view_is_a_422(self, service):
         data = get_kind("reconstruction").example["data"]
         data = {**data, "tracks": [*data["tracks"][:3], {"views": [0, 9], "points": [[1.0, 2.0], [3.0, 4.0]]}]}

@@ -118,6 +118,9 @@ class TestSynthetic:
         kept = {(p.track, int(o[0])) for p in out.points for o in p.observations}
         assert not kept & corrupted  # every corrupted observation is out
         assert out.stages[0]["outliers_removed"] >= 0.9 * len(corrupted)
+        stage = out.stages[0]  # every observation counted once (the House's 27 outliers were not its 52 dropped)
+        assert stage["observations"] == sum(len(v) for v, _ in scene.tracks) == stage["observations_kept"] + stage[
+            "outliers_removed"] + stage["observations_of_dropped_tracks"] + stage["observations_of_unregistered_views"]
         assert out.summary["observations"] >= 0.93 * sum(len(v) for v, _ in scene.tracks)
         assert abs(out.cameras[0].K[0, 0] / 800 - 1) < 0.01
         assert aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations)).max() < 0.3

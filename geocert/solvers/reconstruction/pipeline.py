@@ -8,7 +8,11 @@
 
 A stage that fails keeps what the earlier stages found and says why. ``report(stage, done,
 total, progress=None)`` sees each stage's progress; when it returns True the run stops (the
-stage running and those after it are marked cancelled)."""
+stage running and those after it are marked cancelled, ``Reconstruction.cancelled`` is True)
+and keeps what is done: the views the projective stage registered so far (finished as usual),
+the metric cameras once an upgrade was found, the points triangulated and the cameras resected
+before the cancel (structure and cameras are cancellable between chunks of tracks and between
+cameras)."""
 
 from __future__ import annotations
 
@@ -59,6 +63,7 @@ class Reconstruction:
     stages: list[dict]
     summary: dict = field(default_factory=dict)
     metric: upgrade.Metric | None = None
+    cancelled: bool = False  # the run was stopped (report returned True); what was done is kept
 
 
 def _stage(name: str) -> dict:
@@ -72,15 +77,32 @@ def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], image_sizes: list, 
     cameras = [Camera(v, False, "not registered") for v in range(n_views)]
     out = Reconstruction(cameras, [], list(stages.values()))
 
+    def asks(stage: str, done: int, total: int, progress=None) -> bool:
+        """Progress; True when the run is to stop (a cancel)."""
+        return bool(report is not None and report(stage, done, total, progress))
+
     def tell(stage: str, done: int, total: int, progress=None) -> None:
-        if report is not None and report(stage, done, total, progress):
+        if asks(stage, done, total, progress):
             raise Cancelled(stage.split()[0])
 
+    tell.asks = asks
     try:
         _run(tracks, image_sizes, options, stages, out, tell)
     except Cancelled as stop:
         _cancel(stages, str(stop))
+    out.cancelled = any(stage["status"] == "cancelled" for stage in out.stages)
     _summarise(out, tracks, n_views)
+    return out
+
+
+def not_reconstructed(n_views: int, status: str, reason: str, camera_reason: str) -> Reconstruction:
+    """The reconstruction when no tracks reach it (photos: the matches stage failed, or was
+    cancelled): every stage ``status`` ("skipped" or "cancelled") with ``reason``, every view not
+    registered with ``camera_reason``, the summary filled (0 views registered, 0 points)."""
+    stages = [{**_stage(name), "status": status, "reason": reason} for name in STAGES]
+    out = Reconstruction([Camera(v, False, camera_reason) for v in range(n_views)], [], stages,
+                         cancelled=status == "cancelled")
+    _summarise(out, [], n_views)
     return out
 
 
@@ -132,13 +154,20 @@ def _calibrated(tracks, n_views: int, K: np.ndarray, options: ReconstructionOpti
             tracks, [K] * n_views, CalibratedOptions(max_reprojection_px=2 * options.threshold_px,
                                                       pnp_min_inliers=options.min_inliers, seed=options.seed,
                                                       merge_components=options.merge_components),
-            lambda progress: tell("projective", progress.get("done", 0), progress.get("total", 1)))
+            lambda progress: tell.asks("projective", progress.get("done", 0), progress.get("total", 1)))
         stage.update(_plain(found.stats))
         for v in range(n_views):
             out.cameras[v].registered = found.rotations[v] is not None
             out.cameras[v].reason = found.reasons[v]
-        if found.status == "cancelled":
-            raise Cancelled("projective")
+        if found.status == "cancelled":  # the views registered so far are kept, with their metric cameras
+            stage.update(status="cancelled", reason="the job was cancelled: the views registered before it are kept")
+            if sum(R is not None for R in found.rotations) >= 2:
+                out.metric = _normalise_frame(upgrade.Metric(
+                    K, list(found.rotations), [None if t is None else np.asarray(t, dtype=float)
+                                               for t in found.translations],
+                    np.asarray(found.points, dtype=float), [], False))
+                _metric_cameras(out, out.metric, n_views)
+            raise Cancelled("bundle_adjustment")
         if sum(R is not None for R in found.rotations) < 2:
             stage.update(status="failed", reason=found.stats.get("reason") or "fewer than 2 views registered")
             _skip(stages, "projective", "the calibrated reconstruction failed")
@@ -165,7 +194,8 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
         metric, keep = found
         with _timed(stages, "bundle_adjustment") as stage:
             if options.bundle_adjustment:
-                tell("bundle_adjustment", 0, 1)
+                if tell.asks("bundle_adjustment", 0, 1):
+                    _keep_metric(out, metric, n_views, stage)
                 before = _rms(metric, obs, keep)
                 metric, keep, figures = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, options.threshold_px,
                                                        model="fixed")
@@ -180,13 +210,17 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
     with _timed(stages, "projective") as stage:
         tell("projective", 0, n_views)
         proj = projective.reconstruct(tracks, n_views, projective.ProjectiveOptions(
-            options.threshold_px, options.min_inliers, seed=options.seed), lambda s, d, t: tell("projective", d, t))
-        stage.update({key: value for key, value in proj.stats.items() if key != "reason"})
+            options.threshold_px, options.min_inliers, seed=options.seed),
+            lambda s, d, t: tell.asks("projective", d, t))
+        stage.update({key: value for key, value in proj.stats.items() if key not in ("reason", "cancelled")})
         for v, P in enumerate(proj.cameras):
             out.cameras[v].registered = P is not None
             out.cameras[v].reason = proj.reasons[v]
             out.cameras[v].P = P
         registered = sum(P is not None for P in proj.cameras)
+        if proj.stats.get("cancelled"):  # the views registered so far are kept (projective cameras)
+            stage.update(status="cancelled", reason="the job was cancelled: the views registered before it are kept")
+            raise Cancelled("autocalibration")
         if registered < 2:
             stage.update(status="failed", reason=proj.stats.get("reason") or "fewer than 2 views registered")
             _skip(stages, "projective", "the projective reconstruction failed")
@@ -226,7 +260,8 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
                 f = float(np.sqrt(abs(start.K[0, 0] * start.K[1, 1])))
                 start.K = np.array([[f, 0.0, image_size[0] / 2], [0.0, f, image_size[1] / 2], [0.0, 0.0, 1.0]])
         if options.bundle_adjustment:
-            tell("bundle_adjustment", 0, 1)
+            if tell.asks("bundle_adjustment", 0, 1):
+                _keep_metric(out, starts[0][1], n_views, stage)
             name, metric, keep, before, trials = adjust_best(starts, obs, keep, options.threshold_px, model)
             stage["starts"] = trials
             stage.update(started_from=name, model=model, rms_px_before=before, rms_px_after=_rms(metric, obs, keep),
@@ -259,7 +294,8 @@ def _judge_motion(stage: dict, metric: upgrade.Metric) -> None:
     stage["reason"] = said if not stage.get("reason") else f"{stage['reason']}; {said}"
 
 
-def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs, metric, keep) -> None:
+def _metric_cameras(out: Reconstruction, metric: upgrade.Metric, n_views: int) -> dict[int, np.ndarray]:
+    """The metric cameras (K, R, t, P) on out.cameras; returns P per registered view."""
     P = {}
     for v in range(n_views):
         cam = out.cameras[v]
@@ -267,6 +303,27 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
             cam.K, cam.R, cam.t = upgrade.K_of(metric, v), metric.rotations[v], metric.translations[v]
             cam.P = structure.camera_matrix(cam.K, cam.R, cam.t)
             P[v] = cam.P
+    return P
+
+
+def _keep_metric(out: Reconstruction, metric: upgrade.Metric, n_views: int, stage: dict) -> None:
+    """A cancel before the metric adjustment: the upgrade found is kept (its cameras returned,
+    unadjusted), and the run stops."""
+    out.metric = metric = _normalise_frame(metric)
+    _metric_cameras(out, metric, n_views)
+    stage.update(status="cancelled", reason="the job was cancelled: the cameras returned are the upgrade's, "
+                                            "not adjusted")
+    raise Cancelled("bundle_adjustment")
+
+
+def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs, metric, keep) -> None:
+    P = _metric_cameras(out, metric, n_views)
+    stop = {"asked": False}
+
+    def seen(name: str, done: int, total: int) -> bool:  # progress; a cancel is kept until the next check
+        stop["asked"] = stop["asked"] or tell.asks(name, done, total)
+        return stop["asked"]
+
     with _timed(stages, "structure") as stage:
         kept_tracks = []
         usable = np.flatnonzero(keep & np.isin(obs.view, list(P)))
@@ -279,12 +336,24 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
         tri_options = TriangulationOptions(norm=options.norm, rel_gap=options.rel_gap, abs_gap=options.abs_gap,
                                            max_nodes=options.max_nodes, time_limit_s=options.time_limit_s,
                                            max_residual=options.max_residual, certificate=options.certificate)
+        seen("structure", 0, len(kept_tracks))
         results = structure.triangulate_tracks(P, [(v, x) for _, v, x in kept_tracks], tri_options,
-                                               lambda d, total: tell("structure", d, total))
+                                               lambda d, total: seen("structure", d, total),
+                                               should_stop=lambda: stop["asked"])
+        not_started = 0
         for (t, views, pixels), result in zip(kept_tracks, results):
+            if result.status == "cancelled" and result.point is None:  # a cancel came first: not solved
+                not_started += 1
+                continue
             out.points.append(Point(t, result, [[int(v), float(x[0]), float(x[1])] for v, x in zip(views, pixels)]))
         stage.update(tracks=len(tracks), points=len(out.points),
                      certified=sum(1 for p in out.points if p.result.certified))
+        if not_started:
+            stage.update(status="cancelled", tracks_not_started=not_started,
+                         reason=f"the job was cancelled: {len(out.points)} points solved before it are kept, "
+                                f"{not_started} tracks were not started")
+    if not_started:
+        raise Cancelled("cameras")
     with _timed(stages, "cameras") as stage:
         if not options.resect_cameras:
             stage.update(status="skipped", reason="options.resect_cameras is false")
@@ -301,12 +370,20 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
         map_options = MapOptions(norm=options.norm, rel_gap=options.camera_rel_gap, abs_gap=options.abs_gap,
                                  max_nodes=options.max_nodes, time_limit_s=options.time_limit_s,
                                  max_residual=options.max_residual, certificate=options.certificate)
-        bounds = structure.resect_cameras(P, arrays, map_options, lambda d, total: tell("cameras", d, total),
+        if seen("cameras", 0, len(P)):
+            raise Cancelled("cameras")
+        bounds = structure.resect_cameras(P, arrays, map_options, lambda d, total: seen("cameras", d, total),
+                                          should_stop=lambda: stop["asked"],
                                           bound_every_camera=options.bound_every_camera)
         for v, bound in bounds.items():
             out.cameras[v].bound = bound
+        not_started = sum(1 for b in bounds.values() if b.status == "cancelled")
         stage.update(cameras=len(bounds), certified=sum(1 for b in bounds.values() if b.certified),
                      searched=sum(1 for b in bounds.values() if b.result is not None))
+        if not_started:
+            stage.update(status="cancelled", cameras_not_started=not_started,
+                         reason=f"the job was cancelled: the {len(bounds) - not_started} cameras resected before it "
+                                f"are kept, {not_started} were not started")
 
 
 def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px: float, model: str):
@@ -374,7 +451,7 @@ def _summarise(out: Reconstruction, tracks, n_views: int) -> None:
             squared += (proj[0] / proj[2] - u) ** 2 + (proj[1] / proj[2] - w) ** 2
             count += 1
     registered = [c for c in out.cameras if c.registered]
-    bounded = [c for c in out.cameras if c.bound is not None]
+    bounded = [c for c in out.cameras if c.bound is not None and c.bound.status != "cancelled"]
     out.summary = {
         "views": n_views, "views_registered": len(registered), "tracks": len(tracks), "points": len(out.points),
         "observations": count, "rms_reprojection_px": float(np.sqrt(squared / count)) if count else None,

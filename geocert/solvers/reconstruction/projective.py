@@ -36,9 +36,9 @@ class Projective:
     stats: dict = field(default_factory=dict)
 
 
-def _report(callback, done: int, total: int) -> None:
-    if callback is not None:
-        callback("projective", done, total)
+def _report(callback, done: int, total: int) -> bool:
+    """Progress; True when the callback asks to stop (a cancel)."""
+    return bool(callback is not None and callback("projective", done, total))
 
 
 def choose_pair(obs: Observations, xn: np.ndarray, scales: np.ndarray, options: ProjectiveOptions,
@@ -68,6 +68,9 @@ def choose_pair(obs: Observations, xn: np.ndarray, scales: np.ndarray, options: 
 
 def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], n_views: int, options: ProjectiveOptions,
                 callback=None) -> Projective:
+    """``callback("projective", done, total)`` sees each view registered; when it returns True
+    (a cancel) no more views are added, and the views registered so far are finished as usual
+    (the last triangulation, adjustment and orientation), with ``stats["cancelled"]`` True."""
     obs = Observations.from_tracks(tracks, n_views)
     T = np.array([hartley(obs.pixel[obs.view == v]) if np.sum(obs.view == v) >= 2 else np.eye(3)
                   for v in range(n_views)])
@@ -102,8 +105,8 @@ def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], n_views: int, optio
         inlier[lookup[(t, i)]] = inlier[lookup[(t, j)]] = False
     stats = {"initial_pair": [int(i), int(j)], "initial_inliers": int(mask.sum()), "bundle_adjustments": 0}
     last_ba = 2
-    _report(callback, 2, n_views)
-    while True:
+    stopped = _report(callback, 2, n_views)
+    while not stopped:
         state = _adjust_if_grown(P, X, registered, obs, xn, scales, inlier, options, last_ba, stats)
         last_ba = state
         candidates = _resection_candidates(obs, X, registered, inlier, reasons)
@@ -124,7 +127,7 @@ def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], n_views: int, optio
             inlier[where[~ok]] = False
             _triangulate_new(P, X, registered, obs, xn, scales, inlier, options)
             added = True
-            _report(callback, int(registered.sum()), n_views)
+            stopped = _report(callback, int(registered.sum()), n_views)
             break
         if not added:
             break
@@ -142,12 +145,22 @@ def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], n_views: int, optio
                            for v in range(n_views)])
     oriented_cameras, oriented_points = _orient(cameras_px, X, obs, inlier, registered)
     kept = inlier & registered[obs.view] & np.isfinite(oriented_points[obs.track, 0])
+    # Every observation is counted once: kept, an outlier (farther than the threshold from its
+    # reprojection, or a pair no signs put in front), one of a track dropped (its point left with
+    # fewer than two inlier views: its other observations are inliers, not kept), or of a view
+    # not registered.
+    seen_by = registered[obs.view]
     stats.update({"views_registered": int(registered.sum()), "points": int(np.isfinite(oriented_points[:, 0]).sum()),
                   "observations": int(len(obs.view)), "observations_kept": int(kept.sum()),
-                  "outliers_removed": int((~inlier & registered[obs.view]).sum())})
+                  "outliers_removed": int((~inlier & seen_by).sum()),
+                  "observations_of_dropped_tracks": int((inlier & seen_by & ~kept).sum()),
+                  "observations_of_unregistered_views": int((~seen_by).sum())})
+    if stopped:
+        stats["cancelled"] = True
     for v in range(n_views):
         if not registered[v] and reasons[v] is None:
-            reasons[v] = "too few of its tracks were triangulated"
+            reasons[v] = "the job was cancelled before this view was tried" if stopped else \
+                "too few of its tracks were triangulated"
     return Projective([oriented_cameras[v] if registered[v] else None for v in range(n_views)], reasons,
                       oriented_points, kept, (int(i), int(j)), stats)
 

@@ -7,7 +7,14 @@ the result calls certified must be backed by the camera certificate beside it (a
 document over the returned points): that certificate valid, its map for the camera built from the
 returned points, the returned camera's cost recomputed from it, every point in front of that
 camera (the resection bound's scope), its lower bound no higher than the proven one, and its gap
-within the resection's tolerance."""
+within the resection's tolerance.
+
+The camera certificate holds one map per *searched* camera (``searched``: the certified
+resection ran for it), in view order: a camera no bound could certify is not searched (see
+structure.resect_cameras) and claims no bound, so it has no map; a camera called certified, or
+stating a lower bound, must be searched. Every searched camera's map must be built from the
+returned points. (A result without ``searched`` on its cameras, from before it was stated, is
+read as every registered camera searched.)"""
 
 from __future__ import annotations
 
@@ -53,7 +60,16 @@ class ReconstructionItems(TrackItems):
         stated = certificate.get("data", {}).get("cameras")
         if stated != [camera["P"] for camera in registered]:
             raise Invalid("returned", "the cameras the points are certified in are not the cameras returned")
-        certified = [k for k, camera in enumerate(registered) if camera.get("certified") is True]
+        if any("searched" in camera for camera in registered):
+            for camera in registered:
+                if camera.get("searched") is not True and (camera.get("certified") is not False
+                                                           or camera.get("lower_bound") is not None):
+                    raise Invalid("returned", f"cameras/{camera.get('view')}: claims a bound (certified or a lower "
+                                              "bound) but was not searched: no map of the camera certificate backs it")
+            searched = [camera for camera in registered if camera.get("searched") is True]
+        else:  # a result from before ``searched`` was stated: every registered camera has a map
+            searched = registered
+        certified = [k for k, camera in enumerate(searched) if camera.get("certified") is True]
         if not certified:
             return
         document = result.get("camera_certificate")
@@ -63,17 +79,20 @@ class ReconstructionItems(TrackItems):
         if not getattr(report, "valid", False):
             raise Invalid("returned", f"the camera certificate is invalid: {getattr(report, 'first_failure', None)}")
         claims, maps = document.get("items"), document.get("data", {}).get("maps")
-        if not isinstance(claims, list) or not isinstance(maps, list) or len(claims) != len(registered) \
-                or len(maps) != len(registered):
-            raise Invalid("returned", "the camera certificate must hold one map per registered camera")
-        expected = camera_maps(result.get("points") or [], [int(camera["view"]) for camera in registered])
+        if not isinstance(claims, list) or not isinstance(maps, list) or len(claims) != len(searched) \
+                or len(maps) != len(searched):
+            raise Invalid("returned", f"the camera certificate must hold one map per searched camera ({len(searched)}, "
+                                      "in view order)")
+        expected = camera_maps(result.get("points") or [], [int(camera["view"]) for camera in searched])
+        for k, camera in enumerate(searched):
+            if maps[k] != expected[k]:
+                raise Invalid("returned", f"cameras/{camera.get('view')}: the camera certificate's map is not the "
+                                          "returned points")
         options = document.get("options", {})
         norm = result.get("norm")
         for k in certified:
-            camera, claim = registered[k], claims[k]
+            camera, claim = searched[k], claims[k]
             where = f"cameras/{camera.get('view')}"
-            if maps[k] != expected[k]:
-                raise Invalid("returned", f"{where}: the camera certificate's map is not the returned points")
             if claim.get("certified") is not True:
                 raise Invalid("returned", f"{where}: called certified, but its resection is not")
             source = np.asarray(maps[k]["source"], dtype=float)
