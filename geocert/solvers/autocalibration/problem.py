@@ -29,8 +29,8 @@ class AutocalibrationOptions(SearchOptions):
     ("points", "centers" or "none"), ``varying_focal`` (one K, or one per view) and
     ``relaxation_order``; its one stage returns the metric upgrade and is certified with
     ``metric_rel_gap`` and ``abs_gap`` (its conic solves reach about 1e-5 relative: measured, the
-    safe bound 1.3e-5 below the polished optimum on a 0.2% noise scene); the intrinsics ranges only
-    precondition it."""
+    safe bound 1.3e-5 below the polished optimum on a 0.2% noise scene); the intrinsics ranges
+    precondition it and bound each view's focal length (direct.focal_rows)."""
 
     method: str = "stratified"
     intrinsics: dict = field(default_factory=dict)
@@ -182,8 +182,7 @@ def metric_cameras(cameras: np.ndarray, H: np.ndarray) -> list[dict]:
         t = np.linalg.solve(K, Q[:, 3])
         if np.linalg.det(R) < 0:
             R, t = -R, -t
-        K = K / scale
-        t = t / scale if scale > 0 else t
+        K = K / scale  # (t = K^-1 Q[:, 3] does not depend on Q's scale: dividing it by K's moved each centre)
         out.append({"K": K.tolist(), "R": R.tolist(), "t": t.tolist(), "center": (-R.T @ t).tolist()})
     return out
 
