@@ -147,6 +147,24 @@ class TestExactScene:
         assert np.abs(np.array(result["K"]) - K_TRUE).max() < 1e-4
 
 
+class TestDefaultTolerance:
+    def test_the_direct_default_abs_gap_and_the_stratified_one(self):
+        assert pr.AutocalibrationOptions(method="direct").abs_gap == pr.DIRECT_ABS_GAP == 1e-9
+        assert pr.AutocalibrationOptions().abs_gap == pr.STRATIFIED_ABS_GAP == 1e-12
+        assert pr.AutocalibrationOptions(method="direct", abs_gap=1e-12).abs_gap == 1e-12
+
+    def test_a_low_noise_scene_certifies_at_the_default(self):
+        """0.02 px: cost 7.7e-8, the bound 2.2e-10 below it at rank one (the interior point's
+        accuracy). Mutation: abs_gap 1e-12 (the former default) leaves it not certified, the reason
+        naming the gap's tolerance, not the rank (measured before the change)."""
+        result = solve_job(job(pixel_scene(1, 0.02), chirality="points"))
+        stage = result["stages"][0]
+        assert stage["certified"], stage["reason"]
+        assert stage["certificate"]["tolerance"] == pytest.approx(1e-9)
+        K = np.array(result["K"])
+        assert abs(K[0, 0] - 800) < 1 and abs(K[1, 1] - 800) < 1
+
+
 class TestVerifierMessage:
     def test_a_direct_result_not_certified_is_not_called_two_stages(self, noisy):
         _, result = noisy
