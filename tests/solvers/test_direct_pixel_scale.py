@@ -176,6 +176,25 @@ class TestVerifierMessage:
         assert "affine" not in report.first_failure["detail"]
         assert report.first_failure["detail"] == "no certified item to check"
 
+    def test_a_result_without_a_quadric_says_nothing_was_certified(self, noisy):
+        """A not-certified result with no quadric (as the user's scene gave before the focal rows):
+        the verifier said "autocalibration certifies two stages", then (with that fixed) failed
+        reading the null quadric as returned. Mutation: either fix undone."""
+        _, result = noisy
+        result = copy.deepcopy(result)
+        stage, claim = result["stages"][0], result["certificate"]["items"][0]
+        for item in (stage, claim):
+            item.update({"status": "not_certified", "certified": False, "cost": None, "gap": None,
+                         "plane_at_infinity": None, "K": None, "dual_absolute_quadric": None})
+        claim["proof"] = None
+        for name in ("plane_at_infinity", "K", "Ks", "dual_absolute_quadric", "upgrade", "cameras", "points"):
+            result[name] = None
+        report = verify_any(result)
+        assert not report.valid
+        assert report.first_failure["detail"] == "no certified item to check"
+        result["K"] = K_TRUE.tolist()
+        assert verify_any(result).first_failure["detail"] == "K is given, but the direct stage claims no quadric"
+
     def test_two_items_for_the_direct_method(self, noisy):
         _, result = noisy
         document = copy.deepcopy(result["certificate"])

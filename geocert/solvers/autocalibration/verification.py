@@ -239,6 +239,11 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
         raise Invalid("returned", "method or intrinsics differ from what the options give")
     if result.get("dual_absolute_quadric") != claim.get("dual_absolute_quadric"):
         raise Invalid("returned", "dual_absolute_quadric differs from the direct stage's claim")
+    if claim.get("dual_absolute_quadric") is None:  # a stage that found no quadric (not certified)
+        for name in ("plane_at_infinity", "K", "Ks", "upgrade", "cameras", "points"):
+            if result.get(name) is not None:
+                raise Invalid("returned", f"{name} is given, but the direct stage claims no quadric")
+        return
     Q_in = _numbers(claim.get("dual_absolute_quadric"), "dual_absolute_quadric", (4, 4), "returned")
     expected = direct.derived(cameras, points, Q_in, bool(options.get("varying_focal")))
     for name, value in expected.items():
