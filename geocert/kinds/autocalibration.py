@@ -52,7 +52,9 @@ class AutocalibrationOptionsIn(Strict):
     rel_gap: Finite = Field(_DEFAULTS.rel_gap, **_RANGES["rel_gap"], description="the affine stage's")
     metric_rel_gap: Finite = Field(_DEFAULTS.metric_rel_gap, **_RANGES["metric_rel_gap"],
                                    description="the metric stage's")
-    abs_gap: Finite = Field(_DEFAULTS.abs_gap, **_RANGES["abs_gap"])
+    abs_gap: Finite | None = Field(None, **_RANGES["abs_gap"],
+                                   description=f"default {pr.STRATIFIED_ABS_GAP:g} (stratified), "
+                                               f"{pr.DIRECT_ABS_GAP:g} (direct: its cost's units, problem.py)")
     max_nodes: int = Field(_DEFAULTS.max_nodes, **_RANGES["max_nodes"], description="per stage")
     time_limit_s: Finite = Field(_DEFAULTS.time_limit_s, **_RANGES["time_limit_s"], description="per stage")
     certificate: Literal["summary", "full"] = "summary"

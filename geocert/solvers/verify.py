@@ -194,7 +194,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
     together = getattr(adapter, "check_claims", None) if first is None and items else None
     if together is not None:  # what ties a kind's claims to each other (e.g. the stages of one solve)
         try:
-            together(items)
+            together(items, options)
             tallies["claim"][0] += 1
         except Invalid as exc:
             fail(exc.check, None, exc.detail)

@@ -128,9 +128,11 @@ class TestSafeBound:
     def test_the_solvers_dual_and_its_perturbations_bound_random_feasible_quadrics(self, noisy):
         setup, stage = noisy
         rng = np.random.default_rng(2)
-        program = dr.build(setup.cameras, None, 2)
+        program = dr.build(setup.cameras, None, 2, (), setup.focal)
         z = unpack(stage.proof["programs"][0]["z"])
-        costs = [dr.cost(setup.cameras, random_feasible(rng)) for _ in range(2000)]
+        feasible = [Q for Q in (random_feasible(rng) for _ in range(2000)) if direct.within_focal(setup, Q)]
+        assert len(feasible) >= 20
+        costs = [dr.cost(setup.cameras, Q) for Q in feasible]
         costs.append(dr.cost(setup.cameras, stage.Q))
         for scale in (0.0, 1e-6, 1e-3):
             bound, _ = dr.safe_bound(program, z + scale * rng.normal(size=z.shape))
@@ -145,7 +147,10 @@ class TestSafeBound:
     def test_never_above_many_start_local_minimisation(self, noisy):
         setup, stage = noisy
         rng = np.random.default_rng(3)
-        local = min(dr.cost(setup.cameras, direct_solve.polish(setup.cameras, random_feasible(rng))) for _ in range(40))
+        polished = [direct_solve.polish(setup.cameras, random_feasible(rng)) for _ in range(40)]
+        kept = [Q for Q in polished if direct.within_focal(setup, Q)]  # the program's feasible set
+        assert len(kept) >= 10
+        local = min(dr.cost(setup.cameras, Q) for Q in kept)
         assert stage.cost <= local * (1 + 1e-9)
         assert stage.lower_bound <= local
 
@@ -171,12 +176,14 @@ class TestExtraction:
         for x in points:
             assert min(np.abs(f - x).max() for f in found) < 1e-8
 
-    def test_a_loose_relaxation_still_returns_a_quadric_keeping_chirality(self):
-        """Table 7.1's seed 1008, varying focal, chirality "points": the order-2 relaxation is rank
+    def test_a_loose_relaxation_still_returns_a_quadric_keeping_chirality(self, monkeypatch):
+        """Table 7.1's seed 1008, varying focal, chirality "points", without the focal rows (with
+        them the scene certifies: the next test): the order-2 relaxation is rank
         3 (not tight), and its first moments round and polish to quadrics putting cameras behind
         the scene; one of the points extracted from its moment matrix polishes to one that keeps
         every point in front. Without the extraction (EXTRACTED_RANKS = 1) no quadric is returned
         and the trial counts as a numerical failure (the mutation checked)."""
+        monkeypatch.setattr(direct, "focal_rows", lambda cameras, ranges: None)
         scene, Ks = scenes.table71_scene(1008, 0.2, True)
         data = {"cameras": scene.cameras.tolist(), "points": scene.points.tolist()}
         intrinsics = {**UNIT, "focal": [0.05, 1.0]}
@@ -193,6 +200,24 @@ class TestExtraction:
 
 
 # --- end to end ---------------------------------------------------------------------------------
+
+def test_the_focal_rows_make_seed_1008_certify():
+    """The same scene with the focal rows (direct.focal_rows): the nearly degenerate quadric that
+    kept the lower half's relaxation at 3.27e-4 (eigenvalues 4.6e-6 to 0.999) breaks them, and the
+    unsplit order-2 relaxation is rank one and tight at the best quadric (4.6433e-4, gap 1.7e-10,
+    measured 2026-11-24). Mutation: without the rows (focal_rows -> None) it is not certified."""
+    scene, Ks = scenes.table71_scene(1008, 0.2, True)
+    data = {"cameras": scene.cameras.tolist(), "points": scene.points.tolist()}
+    result = solve_job(job(data, {**UNIT, "focal": [0.05, 1.0]}, chirality="points", varying_focal=True))
+    stage = result["stages"][0]
+    assert stage["certified"], stage["reason"]
+    assert stage["cost"] == pytest.approx(4.6433e-4, rel=1e-4)
+    focal, truth = [K[0][0] for K in result["Ks"]], [K[0, 0] for K in Ks]
+    assert np.allclose(focal, truth, rtol=0.05)
+    points = np.array(result["points"])
+    for camera in result["cameras"]:
+        assert np.all((points - np.array(camera["center"])) @ np.array(camera["R"])[2] > 0)
+
 
 def job(data, intrinsics, **options):
     return {"kind": "autocalibration", "data": copy.deepcopy(data),

@@ -9,6 +9,16 @@ estimate of Q becomes diag(1, 1, 1, 0)) and scaled to Frobenius norm sqrt(3); Q 
 trace 1; the objective is (7.12). Q in the input frame is T0 T Q T' T0', scaled to unit Frobenius
 norm in the result.
 
+Focal length (always): every view's DIAC w_i = P_i Q P_i' keeps (w_11 + w_22) / w_33 within what
+the intrinsics ranges allow (focal_rows), two constraints linear in Q a view. Why: (7.12) measures
+w's entries unnormalised, so a quadric whose views all see f -> 0 costs next to nothing. When the
+cameras' principal axes meet in one point X0 (cameras looking at the scene's centre, the usual
+capture), X0 projects to every principal point and Q = X0 X0' + e Q* (rank-3 rounded) costs ~0
+for any scene: measured on a pixel-scale scene (12 views of 20 points, K = 800 px, 640 x 480, 0.5
+px noise, cameras at distance 4 looking at the origin, 2026-11-24), the unconstrained global
+minimum was such a quadric, cost 2.4e-7 and f = 7.3 px, against 4.8e-5 at the true K's polished
+quadric (f = 800.5 px); with the focal rows the order-2 bound is 4.769087e-5, tight at the latter.
+
 Chirality (options.chirality): "none"; "centers": every pair of signed camera centres on one side
 of the plane at infinity; "points": also every point on the side of the centres (times an
 orientation delta = +1 or -1 of the reconstruction, unknown: each orientation is either excluded
@@ -54,6 +64,7 @@ class DirectSetup:
     cameras: np.ndarray  # the program's data
     orientations: list[Orientation]
     excluded: list[dict]  # {"delta", "rows"}: orientations with no quasi-affine plane (Gordan)
+    focal: np.ndarray | None = None  # (2 m, 4, 4) focal_rows of the program's cameras: tr(S Q) >= 0
 
     def to_input(self, Q: np.ndarray) -> np.ndarray:
         """Q of the program's frame in the input frame, unit Frobenius norm."""
@@ -73,6 +84,33 @@ class DirectSetup:
 def _centres(cameras: np.ndarray) -> np.ndarray:
     c = np.array([frames.signed_centre(P) for P in cameras])
     return c / np.linalg.norm(c, axis=1)[:, None]
+
+
+def focal_rows(cameras: np.ndarray, unit_ranges: dict) -> np.ndarray:
+    """(2 m, 4, 4) symmetric S, unit Frobenius norm, with tr(S Q) >= 0 for every Q whose views'
+    calibrations lie within the (preconditioned) intrinsics ranges. For K = [[f, s, u], [0, a f, v],
+    [0, 0, 1]], w = K K' has w_11 + w_22 = (1 + a^2) f^2 + s^2 + u^2 + v^2 and w_33 = 1, so
+        (1 + a_lo^2) f_lo^2 w_33 <= w_11 + w_22 <= ((1 + a_hi^2) f_hi^2 + max s^2 + max u^2 + max v^2) w_33,
+    and with w = P Q P' (up to a positive scale: w_33 >= 0 for Q PSD) both are linear in Q:
+    tr((p0 p0' + p1 p1' - c p2 p2') Q) >= 0 and tr((C p2 p2' - p0 p0' - p1 p1') Q) >= 0."""
+    r = unit_ranges
+    low = (1.0 + r["aspect"][0] ** 2) * r["focal"][0] ** 2
+    high = ((1.0 + r["aspect"][1] ** 2) * r["focal"][1] ** 2 + max(abs(v) for v in r["skew"]) ** 2
+            + max(abs(v) for v in r["u"]) ** 2 + max(abs(v) for v in r["v"]) ** 2)
+    out = []
+    for P in cameras:
+        top = np.outer(P[0], P[0]) + np.outer(P[1], P[1])
+        third = np.outer(P[2], P[2])
+        out += [top - low * third, high * third - top]
+    out = np.array(out)
+    return out / np.linalg.norm(out, axis=(1, 2))[:, None, None]
+
+
+def within_focal(setup: "DirectSetup", Q: np.ndarray, tolerance: float = 0.0) -> bool:
+    """Whether Q (program frame, trace 1) meets every focal row, within ``tolerance``."""
+    if setup.focal is None:
+        return True
+    return bool(np.all(np.einsum("kab,ab->k", setup.focal, Q) >= -tolerance))
 
 
 def setup_for(problem: pr.Problem, chirality: str, exclude: bool = True) -> DirectSetup:
@@ -106,7 +144,7 @@ def setup_for(problem: pr.Problem, chirality: str, exclude: bool = True) -> Dire
                 continue
             rows = framed(ref_rows)
             orientations.append(Orientation(delta, dr.chirality_pairs(rows, len(centres)), rows, len(centres)))
-    return DirectSetup(problem, T, cameras, orientations, excluded)
+    return DirectSetup(problem, T, cameras, orientations, excluded, focal_rows(cameras, problem.unit_ranges))
 
 
 def _gordan_rows(rows: np.ndarray) -> list[int] | None:
@@ -134,11 +172,14 @@ def adjugate(Q: np.ndarray) -> np.ndarray:
 
 
 def in_domain(setup: DirectSetup, Q: np.ndarray, excluded: tuple = ()) -> bool:
-    """Q (program frame, trace 1) PSD of rank 3 within PSD_TOLERANCE, and allowed by chirality
-    in some orientation not excluded."""
+    """Q (program frame, trace 1) PSD of rank 3 within PSD_TOLERANCE, every view's focal length
+    within the ranges (focal_rows, within PSD_TOLERANCE), and allowed by chirality in some
+    orientation not excluded."""
     values = np.linalg.eigvalsh(Q)
     scale = np.abs(values).max()
     if not (values[0] >= -PSD_TOLERANCE * scale and abs(values[0]) <= PSD_TOLERANCE * scale and values[1] > 0):
+        return False
+    if not within_focal(setup, Q / np.trace(Q), PSD_TOLERANCE):
         return False
     return any(chirality_holds(o, Q, 1e-9) for o in setup.orientations if o.delta not in excluded)
 
@@ -261,7 +302,7 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
             raise Invalid("root_region", f"orientation {o.delta!r} needs one program, or the leaves of a split "
                                          "covering its feasible set, or an exclusion")
         for item, cuts in zip(match, leaves):
-            program = dr.build(setup.cameras, o.pairs, order, cuts)
+            program = dr.build(setup.cameras, o.pairs, order, cuts, setup.focal)
             z = dual_vector(item.get("z"), len(program.b), f"programs/{o.delta}/z", "leaf_bounds")
             value, _ = dr.safe_bound(program, z)
             bound = min(bound, value)

@@ -8,7 +8,9 @@ The polynomial program (thesis 7.11 with the objective 7.12):
 
     min  f(x) = sum_i (w_i11 - w_i22)^2 + w_i12^2 + w_i13^2 + w_i23^2,   w_i = P_i Q P_i^T
     s.t. trace Q = 1 (Q_33 = 1 - Q_00 - Q_11 - Q_22 = -x_0 - x_4 - x_7),  det Q = 0,  Q PSD,
-         chirality (optional): R_k' adj(Q) R_l >= 0 for the chosen pairs of rows (k, l).
+         chirality (optional): R_k' adj(Q) R_l >= 0 for the chosen pairs of rows (k, l),
+         each view's focal length within the intrinsics ranges: tr(S_i Q) >= 0, linear in Q
+         (direct.focal_rows: without them the objective has a degenerate minimum at f -> 0).
 
 Why centred: a moment relaxation is the same set under an affine change of variables, but not
 the same data for the solver. Measured from Q = e_4 e_4' (x = Q's entries themselves) the objective
@@ -27,7 +29,7 @@ Order-d relaxation, variables y_a (the moments of degree 1..2d; y_0 = 1):
 - Q's localizing matrix, [Q_ab(x) m_i m_j] over monomials of degree <= d - 1, positive semidefinite
   (Q >= 0 times a square);
 - each 2x2 principal minor's localizing matrix (degree <= d - 1) positive semidefinite, each 3x3
-  principal minor's moment >= 0 and each chirality pair's moment >= 0;
+  principal minor's moment >= 0, each chirality pair's moment >= 0 and each focal row's >= 0;
 - det Q's moment: an equality (trace Q = 1 is substituted, no rows).
 Conic form (Clarabel's, geocert.solvers.core.cones): minimise q'y s.t. A y + s = b, s in the cones.
 
@@ -325,9 +327,21 @@ def cut_polynomial(cut) -> dict:
     return {tuple([0] * N): float(sign) * float(c), tuple(e): -float(sign)}
 
 
-def build(cameras: np.ndarray, pairs: np.ndarray | None, order: int, cuts=()) -> Program:
+def trace_polynomial(S: np.ndarray) -> dict:
+    """tr(S Q) = sum_ab S_ab Q_ab as a polynomial in x (degree 1)."""
+    out: dict = {}
+    for a in range(4):
+        for b in range(4):
+            for e, c in _entry(a, b).items():
+                out[e] = out.get(e, 0.0) + float(S[a, b]) * c
+    return out
+
+
+def build(cameras: np.ndarray, pairs: np.ndarray | None, order: int, cuts=(), linear: np.ndarray | None = None
+          ) -> Program:
     """The order-``order`` relaxation of the program (module docstring) for the cameras as given,
-    restricted by ``cuts`` ((k, c, sign): sign (c - x_k) >= 0, each with its localizing matrix
+    with ``linear`` ((k, 4, 4) symmetric S: tr(S Q) >= 0, one moment row each; direct.focal_rows,
+    the intrinsics ranges' bound on each view's focal length) and restricted by ``cuts`` ((k, c, sign): sign (c - x_k) >= 0, each with its localizing matrix
     over the monomials of degree <= order - 1, before the moment matrix): a branch of
     direct_solve's splitting, whose leaves' halves cover the feasible set (direct.check_proof)."""
     if order not in range(2, MAX_ORDER + 1):
@@ -342,6 +356,8 @@ def build(cameras: np.ndarray, pairs: np.ndarray | None, order: int, cuts=()) ->
     nonneg = [scalar_rows(moments, polys["minors3"])]
     if pairs is not None and len(pairs):
         nonneg.append(linear_rows(moments, pairs))
+    if linear is not None and len(linear):
+        nonneg.append(scalar_rows(moments, [trace_polynomial(S) for S in linear]))
     psd_blocks, sizes = [], []
     Qmat = [[_entry(a, b) for b in range(4)] for a in range(4)]
     for matrix, degree in [(Qmat, order - 1)] + [([[m]], order - 1) for m in polys["minors2"]] + [
@@ -377,7 +393,8 @@ def safe_bound(program: Program, z: np.ndarray) -> tuple[float, float]:
     has an entry in M_d), and only Z's PSD-ness is left to pay for: for y the moments of a
     feasible Q, q'y = -b'z + r'y + sum_cones <z, s> >= -b'z + r'y + min(0, lambda_min(Z)) tr M_d(y),
     with tr M_d(y) = sum over the basis of x^(2 alpha) <= sum_{j <= order} TRACE_RATIO^j (each degree
-    j's sum is at most (sum_k x_k^2)^j, module docstring), and r'y charged to the box (rounding only)."""
+    j's sum is at most (sum_k x_k^2)^j, module docstring), and r'y charged to the box (rounding only);
+    never below 0, since f >= 0 everywhere."""
     from geocert.solvers.core.cones import project_dual, smat
 
     cones = program.cones
@@ -400,7 +417,12 @@ def safe_bound(program: Program, z: np.ndarray) -> tuple[float, float]:
         charge = float(np.sum(np.minimum(r * program.lower, r * program.upper)))
     trace = sum(TRACE_RATIO ** j for j in range(program.moments.order + 1))
     bound = program.constant - float(program.b @ z) + charge + min(0.0, lam) * trace
-    return (bound if bound == bound else -np.inf), lam
+    if not bound == bound:
+        return -np.inf, lam
+    # f is a sum of squares (7.12), so 0 bounds it everywhere: where the optimum is 0 (an exact
+    # scene) the dual's charges leave its bound a little below (-3.4e-8 measured, make_scene without
+    # noise), which would keep a zero-cost quadric from ever certifying at any abs_gap below that
+    return max(bound, 0.0), lam
 
 
 def conditioning_frame(cameras: np.ndarray) -> np.ndarray:

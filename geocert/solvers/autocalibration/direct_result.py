@@ -13,8 +13,9 @@ from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.autocalibration import problem as pr
 
 SCOPE = ("every absolute dual quadric Q (trace 1 in the program's frame) positive semidefinite of rank 3 "
-         "that the chirality option allows (its chosen rows strictly on one side of its null plane, none on "
-         "it: an orientation excluded by Gordan's alternative holds no such plane)")
+         "whose views' DIACs w = P Q P' keep (w11 + w22) / w33 within what the intrinsics ranges allow (each "
+         "view's focal length in range) and that the chirality option allows (its chosen rows strictly on one "
+         "side of its null plane, none on it: an orientation excluded by Gordan's alternative holds no such plane)")
 
 
 def returned_quadric(setup: direct.DirectSetup, Q: np.ndarray) -> tuple[list, float]:

@@ -225,10 +225,15 @@ def extract(program: dr.Program, y: np.ndarray, rank: int) -> list[np.ndarray]:
 EXTRACTED_RANKS = 4  # mixtures of 2 .. this many points are tried when the moment matrix is not rank one
 
 
+def allowed(setup: direct.DirectSetup, orientation: direct.Orientation, Q: np.ndarray) -> bool:
+    """Chirality and the focal rows (the polish is unconstrained: it can slide towards f -> 0)."""
+    return direct.chirality_holds(orientation, Q) and direct.within_focal(setup, Q)
+
+
 def candidates(setup: direct.DirectSetup, y: np.ndarray, orientation: direct.Orientation,
                program: dr.Program | None = None, rank: int = 1) -> list[np.ndarray]:
     """Feasible quadrics from a relaxation's moments: the first moments rounded, and rounded then
-    polished (the polish kept only when chirality still holds); when the moment matrix's rank is
+    polished (each kept only when chirality and the focal rows hold); when the moment matrix's rank is
     above one (and ``program`` is given), also the points extracted for mixtures of 2 to
     EXTRACTED_RANKS points, each rounded and polished the same way. A relaxation that is not tight
     can put its first moments (the mixture's mean) where every rounding breaks chirality (Table
@@ -244,10 +249,10 @@ def candidates(setup: direct.DirectSetup, y: np.ndarray, orientation: direct.Ori
         if any(np.linalg.norm(rounded - other) <= 1e-6 for other in seen):
             continue  # the same start again (extracted mixtures repeat their points): its polish is known
         seen.append(rounded)
-        if direct.chirality_holds(orientation, rounded):
+        if allowed(setup, orientation, rounded):
             out.append(rounded)
         polished = polish(setup.cameras, rounded)
-        if direct.chirality_holds(orientation, polished):
+        if allowed(setup, orientation, polished):
             out.append(polished)
     return out
 
@@ -295,7 +300,7 @@ MAX_SPLITS = direct.MAX_CUTS  # the verifier refuses deeper paths
 
 
 def _solve_leaf(setup, options, order, orientation, cuts) -> Leaf | None:
-    program = dr.build(setup.cameras, orientation.pairs, order, cuts)
+    program = dr.build(setup.cameras, orientation.pairs, order, cuts, setup.focal)
 
     def enough(y, z):
         """A rank-one solve whose gap misses the tolerance is worth a more accurate attempt (the
@@ -361,9 +366,13 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -
     for _ in range(MAX_SPLITS):
         lowest = min(leaves, key=lambda leaf: leaf.bound)
         tight = best is not None and best_cost - lowest.bound <= max(options.abs_gap, options.metric_rel_gap * abs(best_cost))
-        if best is None or (tight and lowest.rank[0] == 1) or any(leaf.status is not ConicStatus.OPTIMAL for leaf in leaves):
-            # (a gap within the tolerance with a moment matrix of rank above one is split too, for the rank; a
-            # half whose solve was not clean stops the splitting: split again, such halves stalled again, 24 s)
+        exact = best is not None and best_cost - lowest.bound <= options.abs_gap
+        if best is None or (tight and (lowest.rank[0] == 1 or exact)) or any(
+                leaf.status is not ConicStatus.OPTIMAL for leaf in leaves):
+            # (a gap within the tolerance with a moment matrix of rank above one is split too, for the rank,
+            # unless the gap is within abs_gap: a noise-free scene, cost ~0 and the bound 0, whose halves'
+            # solves stalled (the user's scene without noise: 30 s more, nothing to gain); a half whose solve
+            # was not clean stops the splitting: split again, such halves stalled again, 24 s)
             break
         cut = split_of(lowest)
         if cut is None:
@@ -393,15 +402,22 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -
              "moment_rank": rank, "eigenvalue_ratio": ratio} if record else None
     if best is None:
         return DirectStage("not_certified", False, None, math.inf, bound, order, rank, ratio, statuses, None,
-                           "no feasible quadric rounded from the relaxation satisfies chirality")
+                           "no feasible quadric rounded from the relaxation satisfies chirality and the focal ranges")
     tolerance = max(options.abs_gap, options.metric_rel_gap * abs(best_cost))
     certified = clean and best_cost - bound <= tolerance
     reason = None
     split = f" split into {len(leaves)} programs" if len(leaves) > len(setup.orientations) else ""
     if not clean:
         reason = f"the conic solve was not clean ({', '.join(statuses)}): its bound is reported, not certified"
+    elif not certified and rank == 1:
+        # the moment matrix's rank says the relaxation is tight; what failed is the gap's tolerance
+        reason = (f"the gap {best_cost - bound:.3g} misses the tolerance {tolerance:.3g} (max of abs_gap and "
+                  f"metric_rel_gap times the cost) though the moment matrix is rank one at order {order}{split} "
+                  f"(eigenvalue ratio {ratio:.3g}): the conic solve's accuracy, not the relaxation, limits the "
+                  "bound; the bound and the rounded solution are returned")
     elif not certified:
-        reason = (f"the relaxation is not tight at order {order}{split} (gap {best_cost - bound:.3g}, moment matrix "
-                  f"rank {rank}); the bound and the rounded solution are returned")
+        reason = (f"the relaxation is not tight at order {order}{split}: moment matrix rank {rank}, gap "
+                  f"{best_cost - bound:.3g} against the tolerance {tolerance:.3g}; the bound and the rounded "
+                  "solution are returned")
     return DirectStage("optimal" if certified else "not_certified", certified, best, best_cost, bound, order, rank,
                        ratio, statuses, proof, reason)

@@ -15,6 +15,17 @@ from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.options import SearchOptions
 
 METHODS = ("stratified", "direct")
+STRATIFIED_ABS_GAP = 1e-12
+# The direct stage's default abs_gap. Its cost (7.12) is dimensionless (image coordinates
+# preconditioned so that K ~ I, cameras scaled to Frobenius norm sqrt 3, Q of trace 1): about
+# 1.9e-4 per px^2 of image noise on an 800 px camera (measured: 4.8e-5 at 0.5 px). The
+# interior-point bound is accurate to a few 1e-10 in these units whatever the cost (gaps of 4e-11 to
+# 5.5e-10 at rank one, measured 2026-11-24 on 0.5 px, 0.02 px and Table 7.1 scenes), so 1e-12 left
+# every scene with a cost below about 1e-6 uncertifiable (0.02 px: costs 3e-8 and 8e-8, gaps 8e-11
+# and 2.2e-10, "not certified" at the tolerances 3e-12 and 8e-12). 1e-9 is the cost of about 0.002 px
+# of noise there: a quadric certified with it is within that of the optimum, far below any
+# measurement's noise. (The bound itself stays safe at any tolerance: the verifier recomputes it.)
+DIRECT_ABS_GAP = 1e-9
 RANGE_NAMES = ("focal", "aspect", "skew", "principal_point")
 
 
@@ -29,8 +40,8 @@ class AutocalibrationOptions(SearchOptions):
     ("points", "centers" or "none"), ``varying_focal`` (one K, or one per view) and
     ``relaxation_order``; its one stage returns the metric upgrade and is certified with
     ``metric_rel_gap`` and ``abs_gap`` (its conic solves reach about 1e-5 relative: measured, the
-    safe bound 1.3e-5 below the polished optimum on a 0.2% noise scene); the intrinsics ranges only
-    precondition it."""
+    safe bound 1.3e-5 below the polished optimum on a 0.2% noise scene); the intrinsics ranges
+    precondition it and bound each view's focal length (direct.focal_rows)."""
 
     method: str = "stratified"
     intrinsics: dict = field(default_factory=dict)
@@ -39,11 +50,15 @@ class AutocalibrationOptions(SearchOptions):
     relaxation_order: int = 2
     rel_gap: float = 1e-5
     metric_rel_gap: float = 1e-4
-    abs_gap: float = 1e-12
+    abs_gap: float | None = None  # None: STRATIFIED_ABS_GAP or DIRECT_ABS_GAP, by the method
     max_nodes: int = 20_000
     time_limit_s: float = 60.0
 
     OPTION_RANGES = {**SearchOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": 1}}
+
+    def __post_init__(self) -> None:
+        if self.abs_gap is None:
+            self.abs_gap = DIRECT_ABS_GAP if self.method == "direct" else STRATIFIED_ABS_GAP
 
     def check(self) -> None:
         SearchOptions.check(self)
@@ -182,8 +197,7 @@ def metric_cameras(cameras: np.ndarray, H: np.ndarray) -> list[dict]:
         t = np.linalg.solve(K, Q[:, 3])
         if np.linalg.det(R) < 0:
             R, t = -R, -t
-        K = K / scale
-        t = t / scale if scale > 0 else t
+        K = K / scale  # (t = K^-1 Q[:, 3] does not depend on Q's scale: dividing it by K's moved each centre)
         out.append({"K": K.tolist(), "R": R.tolist(), "t": t.tolist(), "center": (-R.T @ t).tolist()})
     return out
 

@@ -73,8 +73,9 @@ class AutocalibrationVerification:
             return {"kind": "autocalibration", "method": "direct", "intrinsics": options["intrinsics"],
                     "chirality": options["chirality"], "relaxation_order": options["relaxation_order"],
                     "metric_rel_gap": options["metric_rel_gap"], "abs_gap": options["abs_gap"],
-                    "statement": "stage 0 (direct): no absolute dual quadric Q positive semidefinite of rank 3 allowed "
-                                 "by the chirality option (its chosen rows strictly on one side of Q's null plane, "
+                    "statement": "stage 0 (direct): no absolute dual quadric Q positive semidefinite of rank 3 whose "
+                                 "views' focal lengths the intrinsics ranges allow ((w11 + w22) / w33 of each "
+                                 "view's DIAC w = P Q P' within their bounds) and allowed by the chirality option (its chosen rows strictly on one side of Q's null plane, "
                                  "none on it; in the program's frame, trace 1) costs less than "
                                  "lower_bound in (7.12); the quadric returned is one of them and costs cost"}
         return {"kind": "autocalibration", "method": options["method"], "intrinsics": options["intrinsics"],
@@ -85,10 +86,12 @@ class AutocalibrationVerification:
                              "calibration K within the intrinsics ranges gives a DIAC K K^T costing less than "
                              "lower_bound; each solution returned is in its scope and costs cost"}
 
-    def check_claims(self, items: list) -> None:
+    def check_claims(self, items: list, options: dict) -> None:
         """The metric stage's claim is about the plane the affine stage returns (the direct method
-        has one stage)."""
-        if len(items) == 1 and (items[0].get("proof") or {}).get("type") == "direct_moment":
+        has one stage, "direct": nothing ties it to another)."""
+        if options.get("method") == "direct":
+            if len(items) != 1:
+                raise Invalid("format", "the direct method certifies one stage: direct")
             return
         if len(items) != 2:
             raise Invalid("format", "autocalibration certifies two stages: affine, then metric")
@@ -208,7 +211,8 @@ def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, p
     passed.append("objective")
     bound, excluded = direct.check_proof(setup, proof, options["relaxation_order"])
     if not direct.in_domain(setup, Q, excluded):
-        raise Invalid("scope", "the quadric returned is not PSD of rank 3 or not allowed by chirality")
+        raise Invalid("scope", "the quadric returned is not PSD of rank 3, or breaks a view's focal range, or is not "
+                               "allowed by chirality")
     cameras, points, _ = arrays
     try:
         given = direct.derived(cameras, points, Q_in, bool(options["varying_focal"]))
@@ -235,6 +239,11 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
         raise Invalid("returned", "method or intrinsics differ from what the options give")
     if result.get("dual_absolute_quadric") != claim.get("dual_absolute_quadric"):
         raise Invalid("returned", "dual_absolute_quadric differs from the direct stage's claim")
+    if claim.get("dual_absolute_quadric") is None:  # a stage that found no quadric (not certified)
+        for name in ("plane_at_infinity", "K", "Ks", "upgrade", "cameras", "points"):
+            if result.get(name) is not None:
+                raise Invalid("returned", f"{name} is given, but the direct stage claims no quadric")
+        return
     Q_in = _numbers(claim.get("dual_absolute_quadric"), "dual_absolute_quadric", (4, 4), "returned")
     expected = direct.derived(cameras, points, Q_in, bool(options.get("varying_focal")))
     for name, value in expected.items():
