@@ -187,6 +187,41 @@ def polish(cameras: np.ndarray, Q: np.ndarray) -> np.ndarray:
     return direct.rank_three_projection(S)
 
 
+# A polish held to the focal rows keeps each this far inside its row (trace-1 units), well within
+# direct.PSD_TOLERANCE of the domain check, so the returned Q (rounded to JSON) meets them there too.
+FOCAL_MARGIN = 1e-10
+
+
+def polish_within(cameras: np.ndarray, Q: np.ndarray, focal: np.ndarray) -> np.ndarray | None:
+    """The polish with the focal rows (direct.focal_rows) as constraints: f over Q = B B' / trace
+    subject to tr(S_k Q) >= FOCAL_MARGIN (SLSQP; 12 unknowns). Used when the free polish slides
+    past a range's end, where the optimum of a relaxation that is not tight rounds to a Q just
+    outside a row (Table 7.1's seed 1072, varying focal: a view whose focal length, 0.053, is near
+    the range's 0.05). None when SLSQP ends without meeting every row."""
+    from scipy.optimize import minimize
+
+    values, V = np.linalg.eigh(Q)
+    B0 = V[:, 1:] * np.sqrt(np.maximum(values[1:], 1e-12))
+
+    def normalised(b):
+        B = b.reshape(4, 3)
+        S = B @ B.T
+        return S / np.trace(S)
+
+    def cost(b):
+        S = normalised(b)
+        w = np.einsum("iab,bc,idc->iad", cameras, S, cameras)
+        return float(np.sum(np.concatenate([w[:, 0, 0] - w[:, 1, 1], w[:, 0, 1], w[:, 0, 2], w[:, 1, 2]]) ** 2))
+
+    def rows(b):
+        return np.einsum("kab,ab->k", focal, normalised(b)) - FOCAL_MARGIN
+
+    found = minimize(cost, B0.ravel(), method="SLSQP", constraints=[{"type": "ineq", "fun": rows}],
+                     options={"maxiter": 500, "ftol": 1e-16})
+    S = direct.rank_three_projection(normalised(found.x))
+    return S if np.all(np.einsum("kab,ab->k", focal, S / np.trace(S)) >= 0) else None
+
+
 def extract(program: dr.Program, y: np.ndarray, rank: int) -> list[np.ndarray]:
     """The ``rank`` points x whose moments the moment matrix M_d(y) would be a mixture of, if it
     were (Henrion and Lasserre's extraction, 2005): M = V V' with V's columns the top eigenvectors
@@ -226,8 +261,12 @@ EXTRACTED_RANKS = 4  # mixtures of 2 .. this many points are tried when the mome
 
 
 def allowed(setup: direct.DirectSetup, orientation: direct.Orientation, Q: np.ndarray) -> bool:
-    """Chirality and the focal rows (the polish is unconstrained: it can slide towards f -> 0)."""
-    return direct.chirality_holds(orientation, Q) and direct.within_focal(setup, Q)
+    """Chirality and the focal rows (the polish is unconstrained: it can slide towards f -> 0). The
+    rows within direct.PSD_TOLERANCE of Q's trace, as the domain check (direct.in_domain) and the
+    verifier hold them: a relaxation whose optimum has a focal length at a range's end rounds to a
+    Q on that row, by round-off on either side of it (Table 7.1's seed 1072, varying focal)."""
+    return direct.chirality_holds(orientation, Q) and direct.within_focal(setup, Q / np.trace(Q),
+                                                                          direct.PSD_TOLERANCE)
 
 
 def candidates(setup: direct.DirectSetup, y: np.ndarray, orientation: direct.Orientation,
@@ -254,6 +293,10 @@ def candidates(setup: direct.DirectSetup, y: np.ndarray, orientation: direct.Ori
         polished = polish(setup.cameras, rounded)
         if allowed(setup, orientation, polished):
             out.append(polished)
+        elif setup.focal is not None and direct.chirality_holds(orientation, polished):
+            held = polish_within(setup.cameras, rounded, setup.focal)
+            if held is not None and allowed(setup, orientation, held):
+                out.append(held)
     return out
 
 
