@@ -14,9 +14,10 @@ from geocert.solvers.autocalibration import problem as pr
 
 SCOPE = ("every absolute dual quadric Q (trace 1 in the program's frame) positive semidefinite of rank 3 "
          "whose views' DIACs w = P Q P' keep (w11 + w22) / w33 within what the intrinsics ranges allow "
-         "(their combination (1 + aspect^2) focal^2 + skew^2 + u^2 + v^2 between its least and greatest over the "
-         "ranges, preconditioned; each intrinsic is not held to its own range) and that the chirality option allows (its chosen rows strictly on one "
-         "side of its null plane, none on it: an orientation excluded by Gordan's alternative holds no such plane)")
+         "(their combination (1 + aspect^2) focal^2 + skew^2 + u^2 + v^2 between its least and greatest over "
+         "the ranges, preconditioned; each intrinsic is not held to its own range) and that the chirality "
+         "option allows (its chosen rows strictly on one side of its null plane, none on it: an orientation "
+         "excluded by Gordan's alternative holds no such plane)")
 
 
 def returned_quadric(setup: direct.DirectSetup, Q: np.ndarray) -> tuple[list, float]:

@@ -41,7 +41,7 @@ class AutocalibrationOptions(SearchOptions):
     ``relaxation_order``; its one stage returns the metric upgrade and is certified with
     ``metric_rel_gap`` and ``abs_gap`` (its conic solves reach about 1e-5 relative: measured, the
     safe bound 1.3e-5 below the polished optimum on a 0.2% noise scene); the intrinsics ranges
-    precondition it and bound each view's focal length (direct.focal_rows)."""
+    precondition it and bound a combination of each view's intrinsics (direct.focal_rows)."""
 
     method: str = "stratified"
     intrinsics: dict = field(default_factory=dict)

@@ -74,8 +74,9 @@ class AutocalibrationVerification:
                     "chirality": options["chirality"], "relaxation_order": options["relaxation_order"],
                     "metric_rel_gap": options["metric_rel_gap"], "abs_gap": options["abs_gap"],
                     "statement": "stage 0 (direct): no absolute dual quadric Q positive semidefinite of rank 3 whose "
-                                 "views' focal lengths the intrinsics ranges allow ((w11 + w22) / w33 of each "
-                                 "view's DIAC w = P Q P' within their bounds) and allowed by the chirality option (its chosen rows strictly on one side of Q's null plane, "
+                                 "views' DIACs w = P Q P' keep (w11 + w22) / w33 within what the intrinsics ranges "
+                                 "allow (a combination of the ranges, not each intrinsic in its own) and allowed by "
+                                 "the chirality option (its chosen rows strictly on one side of Q's null plane, "
                                  "none on it; in the program's frame, trace 1) costs less than "
                                  "lower_bound in (7.12); the quadric returned is one of them and costs cost"}
         return {"kind": "autocalibration", "method": options["method"], "intrinsics": options["intrinsics"],
