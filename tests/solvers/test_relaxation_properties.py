@@ -126,18 +126,3 @@ def test_root_bounds_are_each_duals_safe_bound(seed, views, spoil):
                 assert ours == theirs
             else:
                 assert abs(ours - theirs) <= 1e-12 * (1 + abs(theirs))
-
-
-@settings(max_examples=200, deadline=None)
-@given(low=st.floats(1e-3, 10.0), ratio=st.floats(1.0, 100.0), where=st.floats(0.0, 1.0),
-       n=st.floats(-1e3, 1e3), m=st.floats(-1e3, 1e3))
-def test_the_quadratic_envelope_is_below_the_term_and_exact_on_the_faces(low, ratio, where, n, m):
-    """|n|^2 / (s (L + U) - L U) <= |n|^2 / s^2 on [L, U], equal at s = L and s = U: what
-    Relaxation.quadratic's cone holds each L2L2 term above."""
-    high = low * ratio
-    s = low + where * (high - low)
-    square = n * n + m * m
-    envelope = square / (s * (low + high) - low * high)
-    assert envelope <= square / s**2 * (1 + 1e-12)
-    for face in (low, high):
-        assert np.isclose(square / (face * (low + high) - low * high), square / face**2, rtol=1e-12, atol=0)
