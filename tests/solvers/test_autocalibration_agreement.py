@@ -23,9 +23,7 @@ from geocert.batch import solve_job
 from geocert.solvers.autocalibration import direct, scenes
 from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.autocalibration import problem as pr
-from tests.support import HOUSE_RANGES, ROOT, house_in_projective_frame
-
-SHARED = ROOT.parent / "shared" / "data"
+from tests.support import HOUSE_RANGES, house_in_projective_frame, shared_data
 
 
 def solve(data: dict, method: str, **options) -> dict:
@@ -94,7 +92,7 @@ def rotation_steps(result: dict) -> tuple[np.ndarray, np.ndarray]:
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not (SHARED / "oxford_dinosaur").exists(), reason="needs ../shared/data")
+@pytest.mark.shared_data("oxford_dinosaur")
 class TestDinosaur:
     """Measured (2026-11-23): both certify (direct: moment rank 1, cost 7.27e-5, gap 7e-11; stratified:
     both stages at cost ~1e-27); the direct K has f = 2870 px, the stratified f = 100 px with aspect
@@ -108,7 +106,7 @@ class TestDinosaur:
     def results(cls):
         from geocert.solvers.datasets import load_dinosaur
 
-        cameras, tracks = load_dinosaur(SHARED / "oxford_dinosaur")
+        cameras, tracks = load_dinosaur(shared_data("oxford_dinosaur"))
         points = []
         for track in tracks:  # the tracks seen in six views or more, triangulated linearly
             if len(track.views) >= 6:
@@ -154,7 +152,7 @@ class TestDinosaur:
 # --- the Oxford Model House: 10 views whose own cameras do not share one K ------------------------
 
 @pytest.mark.slow
-@pytest.mark.skipif(not (SHARED / "oxford_house").exists(), reason="needs ../shared/data")
+@pytest.mark.shared_data("oxford_house")
 class TestModelHouse:
     """VGG's cameras have focal lengths 594 to 666 px, aspect 0.99 to 1.08, principal point u 388 to
     480: no constant K fits them, (7.12) is not zero at VGG's quadric (2.1e-3), nor the modulus
