@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Creates .venv beside the checkout and installs geocert into it (with test extras when asked).
-# Idempotent: re-installs only when pyproject.toml changed since the last install.
+# Creates .venv beside the checkout and installs geocert into it (with test extras when asked),
+# every package at the version constraints.txt pins (the versions the tests were run with).
+# Idempotent: re-installs only when pyproject.toml or constraints.txt changed since the last install.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 extras="${1:-}"
@@ -11,10 +12,10 @@ if [ ! -x "$venv/bin/python" ]; then
   "$python" -m venv "$venv"
   "$venv/bin/python" -m pip install --quiet --upgrade pip
 fi
-if [ ! -f "$stamp" ] || [ "$root/pyproject.toml" -nt "$stamp" ]; then
+if [ ! -f "$stamp" ] || [ "$root/pyproject.toml" -nt "$stamp" ] || [ "$root/constraints.txt" -nt "$stamp" ]; then
   target="$root"
   [ -n "$extras" ] && target="$root[$extras]"
-  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -e "$target"
+  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -c "$root/constraints.txt" -e "$target"
   touch "$stamp"
 fi
 # System packages, for the test extras only: the web page's browser tests (tests/service/test_web.py)
