@@ -36,9 +36,19 @@ def blas_kernels() -> list[str]:
                   f"{i.get('num_threads')} threads" for i in threadpool_info() if i.get("internal_api") == "openblas")
 
 
+def numpy_simd() -> str:
+    """The SIMD extensions numpy's own loops dispatch to (NPY_DISABLE_CPU_FEATURES removes some)."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    except ImportError:  # numpy 1.x
+        from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    return " ".join(name for name in __cpu_dispatch__ if __cpu_features__.get(name)) or "baseline only"
+
+
 def pytest_report_header(config):
     found = "found" if SHARED_DATA.is_dir() else "MISSING: the tests that need it skip"
     return [f"BLAS: {'; '.join(blas_kernels())} (OPENBLAS_CORETYPE={os.environ.get('OPENBLAS_CORETYPE', '')})",
+            f"numpy SIMD: {numpy_simd()}",
             f"shared data: {SHARED_DATA} ({found}{', required' if SHARED_DATA_REQUIRED else ''})"]
 
 
