@@ -97,7 +97,9 @@ class TestDinosaur:
     """Measured (2026-11-23): both certify (direct: moment rank 1, cost 7.27e-5, gap 7e-11; stratified:
     both stages at cost ~1e-27); the direct K has f = 2870 px, the stratified f = 100 px with aspect
     0.52 (the ranges' edge), because the turntable leaves K undetermined (Sturm 1997), which both
-    results report; the 35 rotation steps agree to 1.3e-4 degrees (mean 9.987, sd 0.040)."""
+    results report; the 35 rotation steps agree to 1.3e-4 degrees (mean 9.987, sd 0.040). Which
+    member of the undetermined family each method returns is the path its solver took (the
+    stratified f was 380 px with OpenBLAS's SkylakeX kernels): the tests assert what holds for any."""
 
     WIDE = {"focal": [100, 5000], "aspect": [0.2, 5], "skew": [-200, 200], "principal_point": [[0, 720], [0, 576]]}
 
@@ -132,21 +134,22 @@ class TestDinosaur:
 
     def test_both_planes_lie_in_the_turntables_family(self, results):
         """The critical family: every plane through the rotation axis's line at infinity (in this
-        frame the planes (0, 0, a, b)); the two methods pick different members."""
+        frame the planes (0, 0, a, b)). Which member each method picks is its solver's path (they
+        differed here; two kernels could make them meet), so only the family is asserted."""
         planes = {method: np.array(result["plane_at_infinity"]) for method, result in results.items()}
         for plane in planes.values():
             assert np.abs(plane[:2]).max() < 1e-4
-        assert abs(abs(planes["direct"] @ planes["stratified"]) - 1) > 0.1  # not the same member
 
     def test_K_is_reported_undetermined_by_both(self, results):
         """Agreement on K is not to be had: both say the data do not fix it (null interval ends,
-        orbital motion), and their Ks differ by more than an order of magnitude in focal length."""
+        orbital motion), each K within the ranges searched (their focal lengths differed by 7.5
+        to 29 times, by machine)."""
         for result in results.values():
             stage = result["stages"][-1]
             assert "orbital_motion" in [warning["code"] for warning in stage["determinacy"]["warnings"]]
             assert interval(result, "focal_x") == (None, None)
-        focal = {method: np.array(result["K"])[0, 0] for method, result in results.items()}
-        assert focal["direct"] / focal["stratified"] > 10
+            K = np.array(result["K"])
+            assert self.WIDE["focal"][0] * (1 - 1e-6) <= K[0, 0] <= self.WIDE["focal"][1] * (1 + 1e-6)
 
 
 # --- the Oxford Model House: 10 views whose own cameras do not share one K ------------------------
