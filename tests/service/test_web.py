@@ -373,6 +373,9 @@ class TestTheResultAsItIs:
         assert response.status_code == 200 and response.content[:2] == b"PK"
         assert service.get(links["Export: Points (PLY)"]).text.startswith("ply")
         shot(page, "reconstruction")
+        page.get(base + "/")  # one job item stands for the whole reconstruction: the list sends you to its page
+        row = wait(page, lambda d: d.find_elements(By.CSS_SELECTOR, f"tr[data-job='{job_id}']"), 20)[0]
+        assert row.find_elements(By.TAG_NAME, "td")[4].text == "see job"  # was "100 %" with 0 of 8 cameras certified
 
     def test_an_autocalibration_shows_its_K_stages_and_what_the_data_do_not_fix(self, page, service):
         base = str(service.base_url).rstrip("/")

@@ -92,16 +92,25 @@
     }
   }
 
-  // The certified fraction of a job's items. A kind of estimates certifies nothing; a job of one
-  // item (a reconstruction, an autocalibration) has parts that one flag does not describe (its
-  // cameras, its stages, what the data do not determine): its page says what is certified.
+  // Whether a kind's job items are its data's own list (tracks, maps, frames), one claim each; a
+  // reconstruction or an autocalibration is one job item whose claims (points, cameras, stages)
+  // one flag does not describe.
+  function itemsAreClaims(info) {
+    const schema = info.request_schema || {};
+    const ref = schema.properties && schema.properties.data && schema.properties.data.$ref;
+    const data = ref ? ref.replace(/^#\//, "").split("/").reduce((node, part) => node && node[part], schema) : null;
+    return Boolean(data && data.properties && info.item_name in data.properties);
+  }
+
+  // The certified fraction of a job's items. A kind of estimates certifies nothing; a job whose
+  // one item is the whole reconstruction has its page say what is certified and what is not.
   function certifiedCell(job) {
     const p = job.progress || {};
     const total = p.items_total || 0;
     const info = kindInfo(job.kind);
     if (info && info.certifies === false) return {text: "estimates", title: "this kind returns estimates, not certificates"};
     if (p.items_certified === null || p.items_certified === undefined || !total) return {text: "—"};
-    if (total === 1) return {text: "see job", title: "one item: its page says what is certified and what is not"};
+    if (info && !itemsAreClaims(info)) return {text: "see job", title: `its ${info.item_name} and what the data do not fix are on its page`};
     return {text: `${(100 * p.items_certified / total).toFixed(total >= 1000 ? 1 : 0)} %`};
   }
 

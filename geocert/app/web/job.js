@@ -265,7 +265,9 @@
     }
     const items = key ? result[key] : [];
     const certified = items.filter((it) => it && it.certified).length;
-    $("summary").textContent = `${items.length} ${key || "items"}${certifies ? `, ${certified} certified` : " (estimates)"}, ` +
+    const name = key || "items";
+    $("summary").textContent = `${items.length} ${items.length === 1 ? name.replace(/s$/, "") : name}` +
+      `${certifies ? `, ${certified} certified` : " (estimates)"}, ` +
       `${num(result.stats && result.stats.nodes)} nodes, ${duration(result.stats && result.stats.elapsed_s)}.`;
     $("answer").replaceChildren(...Answer.figures(job.kind, result));
     $("items-title").textContent = key ? key[0].toUpperCase() + key.slice(1) : "Items";
@@ -284,6 +286,8 @@
       $("view-reset").addEventListener("click", () => state.view.reset());
       window.GC_STATE.view = {points: points.length, cameras: cameras.length};
       $("view-note").textContent = "Drag, or focus the view and use the arrow keys, to rotate; the wheel or + and − zoom.";
+    } else {
+      $("panels").classList.add("single");  // the histogram alone: the whole width
     }
     window.GC_STATE.rendered = performance.now();
   }

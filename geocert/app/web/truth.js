@@ -112,7 +112,9 @@ const Truth = (() => {
     // "4 of 6 cameras certified; not certified: box0.jpg (not_certified), ..." (reasons are in the tables)
     const describe = (g) => {
       const n = g.entries.length, missing = g.entries.filter((e) => !e.certified), yes = n - missing.length;
-      if (!missing.length) return `${yes} of ${n} ${g.label} certified`;
+      const only = n === 1 ? nameOf(g.entries[0].owner) : null;  // one named entry: say which
+      if (!missing.length) return only && !only.startsWith("#") ? `${g.label.replace(/s$/, "")} ${only}: certified`
+                                                               : `${yes} of ${n} ${g.label} certified`;
       if (!yes) {
         const statuses = new Map();
         for (const e of missing) statuses.set(e.status || "no status", (statuses.get(e.status || "no status") || 0) + 1);
