@@ -72,6 +72,20 @@ class TestTheFiles:
             parse_job(JOB_REQUEST.dump_python(JOB_REQUEST.validate_python(body), mode="json"))
 
 
+def test_the_openapi_document_carries_an_example_job_per_kind():
+    """Swagger UI's "Examples" menu of POST /v1/jobs: each kind's own small example (the one
+    GET /v1/problems gives and the page's template is), valid as it stands."""
+    from geocert.app.schemas import JOB_REQUEST
+    from geocert.kinds import KINDS
+
+    spec = json.loads((ROOT / "openapi" / "openapi.json").read_text())
+    examples = spec["paths"]["/v1/jobs"]["post"]["requestBody"]["content"]["application/json"]["examples"]
+    assert set(examples) == set(KINDS.names())
+    for kind in KINDS:
+        assert examples[kind.name]["value"] == json.loads(json.dumps(kind.example))
+        JOB_REQUEST.validate_python(examples[kind.name]["value"])
+
+
 @pytest.mark.skipif(not REAL_DATA.exists(), reason="needs ../shared/data (the real datasets): CI has it")
 def test_the_real_data_examples_are_written_from_the_datasets(tmp_path, monkeypatch):
     from geocert.app.schemas import JOB_REQUEST
