@@ -18,6 +18,11 @@ JOB_REQUEST = TypeAdapter(JobRequest)
 RESULT_MODELS = tuple(dict.fromkeys(kind.result_model for kind in KINDS))  # kinds may share one
 JobResult = Union[RESULT_MODELS]
 
+# One example per kind for the API documentation (Swagger UI's example menu): each kind's own
+# small example job, which solves in seconds as given (the contract tests run every one).
+JOB_EXAMPLES = {kind.name: {"summary": kind.name, "description": kind.description, "value": kind.example}
+                for kind in KINDS}
+
 JOB_STATUSES = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 
 
@@ -164,6 +169,9 @@ class ProblemKindInfo(BaseModel):
     kind: str
     description: str
     item_name: str
+    certifies: bool = Field(description="false: the kind returns estimates, with no certificate (stereo_lines)")
     request_schema: dict[str, Any]
     default_options: dict[str, Any]
+    example: dict[str, Any] = Field(description="a small job of this kind that solves in seconds, as it could be "
+                                                "submitted (POST /v1/jobs)")
 

@@ -14,7 +14,7 @@ import re
 from typing import Annotated
 from urllib.parse import urlencode
 
-from fastapi import APIRouter, Depends, Header, Query, Request, Response
+from fastapi import APIRouter, Body, Depends, Header, Query, Request, Response
 from fastapi.responses import StreamingResponse
 from fastapi.concurrency import run_in_threadpool
 from fastapi.routing import APIRoute
@@ -25,7 +25,7 @@ from geocert.settings import chunk_size_for, get_settings
 from geocert.app import lifecycle
 from geocert.app import streamed
 from geocert.app.errors import ApiProblem, is_json_media_type
-from geocert.app.schemas import JOB_STATUSES, Job, JobList, JobRequest
+from geocert.app.schemas import JOB_EXAMPLES, JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
 from geocert.batch import parse_job
 from geocert.workers import logs
@@ -134,7 +134,7 @@ async def wait_for_end(job_id: str, seconds: float) -> bool:
                                        "with Prefer: wait=N, the job, finished within N seconds"},
     **error_responses(400, 409, 413, 415, 422)})
 async def submit_job(
-    body: JobRequest,
+    body: Annotated[JobRequest, Body(openapi_examples=JOB_EXAMPLES)],
     request: Request,
     response: Response,
     store: JobStoreDep,
