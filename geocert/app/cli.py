@@ -62,7 +62,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
 def cmd_verify(args: argparse.Namespace) -> int:
     """Exit 0 when the certificate is valid, 1 when it is not, 2 when the input cannot be read
     (unreadable, not JSON, nested too deeply, or carrying no certificate)."""
-    from geocert.solvers.verify import find_certificate, verify_any
+    from geocert.solvers.verify import estimates_kind, find_certificate, verify_any
 
     try:
         text = sys.stdin.read() if args.file == "-" else Path(args.file).read_text()
@@ -74,8 +74,10 @@ def cmd_verify(args: argparse.Namespace) -> int:
     # A result (geocert solve's output) or a job document carry the certificate inside; then the
     # items they return are checked against it too.
     if find_certificate(document) is None:
-        print(f"geocert verify: {args.file} holds no certificate (solve with options.certificate = \"full\")",
-              file=sys.stderr)
+        uncertified = estimates_kind(document)  # a kind with no certificate option: say so, suggest nothing
+        print(f"geocert verify: {args.file} holds no certificate " + (
+              f"({uncertified} results are estimates, never certified: there is nothing to verify)"
+              if uncertified is not None else "(solve with options.certificate = \"full\")"), file=sys.stderr)
         return 2
     report = verify_any(document).as_dict()
     json.dump(report, sys.stdout, indent=None if args.compact else 2)
