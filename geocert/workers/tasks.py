@@ -21,7 +21,7 @@ import traceback
 
 from geocert.settings import get_settings
 from geocert.solvers.core.geometry import InputError
-from geocert.batch import (assemble, item_counts, item_sums, merged_sums, result_fragment, result_json,
+from geocert.batch import (abs_gap_of, assemble, item_counts, item_sums, merged_sums, result_fragment, result_json,
                            result_shell, solve_items, stats_from, streams_result)
 from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
@@ -40,8 +40,9 @@ class ProgressPublisher:
     With ``kind`` (a streamed result: batch.streams_result), the run of items the task solved is
     also stored as one fragment of the result, with the store of its last item."""
 
-    def __init__(self, jobs: JobStore, job_id: str, start: int, interval: float, kind=None):
+    def __init__(self, jobs: JobStore, job_id: str, start: int, interval: float, kind=None, abs_gap: float = 0.0):
         self.jobs, self.job_id, self.start, self.interval = jobs, job_id, start, interval
+        self.abs_gap = abs_gap
         self.last = 0.0
         self.cancel_checked = 0.0
         self.cancelled = False
@@ -60,7 +61,7 @@ class ProgressPublisher:
         if self.kind is None or not self.ended:
             return None
         text = result_fragment(self.kind, self.ended)
-        fragment = None if text is None else (self.start, item_sums(self.ended), text)
+        fragment = None if text is None else (self.start, item_sums(self.ended, self.abs_gap), text)
         self.kind, self.ended = None, []
         return fragment
 
@@ -125,7 +126,7 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
         options = options_from(kind.options_type, request.get("options"))
         parsed = kind.parse(request["data"], items=range(start, stop))
         publisher = ProgressPublisher(jobs, job_id, start, settings.progress_interval_s,
-                                      kind if streams_result(kind, options) else None)
+                                      kind if streams_result(kind, options) else None, abs_gap_of(options))
         began = time.monotonic()
         items = solve_items(kind, parsed, options, range(start, stop), publisher, publisher.should_stop,
                             stop_at=began + settings.chunk_time_budget_s, on_item=publisher.item_ended)
@@ -157,7 +158,7 @@ def end_with_result(jobs: JobStore, job_id: str, kind, options) -> None:
         return
     request = jobs.request(job_id) if kind.certifies and options.certificate == "full" else None
     items = jobs.all_items(job_id, meta["items_total"])
-    sums = item_sums(items)
+    sums = item_sums(items, abs_gap_of(options))
     stats = stats_from(sums, elapsed)
     result = assemble(kind, request, options, items, stats)
     _end(jobs, job_id, sums, stats, result=result, result_text=result_json(kind, result))
