@@ -181,9 +181,12 @@ def _end_with_fragments(jobs: JobStore, job_id: str, kind, options, total: int, 
 
 def _end(jobs: JobStore, job_id: str, sums: dict, stats: dict, **stored) -> None:
     # The last progress of each task may be throttled away or, after a cancel, stop short of
-    # its items: the job's final progress is computed from the very items of the result.
+    # its items: the job's final progress is computed from the very items of the result. A job
+    # cancelled while it ran ends "cancelled", with everything it finished, even when its last
+    # stage ended before it saw the cancel.
     progress = final_progress(sums, stats)
-    status = "cancelled" if sums["statuses"].get("cancelled") else "succeeded"
+    cancelled = sums["statuses"].get("cancelled") or jobs.cancel_requested(job_id)
+    status = "cancelled" if cancelled else "succeeded"
     jobs.set_fields(job_id, progress=progress)
     jobs.publish(job_id, "progress", progress)
     jobs.end(job_id, status, **stored)
