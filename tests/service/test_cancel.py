@@ -1,11 +1,12 @@
 """A cancel through a real `geocert serve` (embedded Redis, a real Celery worker) ends a running job
 ``cancelled``, whatever its kind and stage, keeping everything it finished: the autocalibration's
 affine stage (it ended "failed" with a numpy error), its metric stage, the direct method (it
-ignored the cancel), and a reconstruction's adjustment (it ran to its end)
-(tests/workers/test_job_end.py: a cancel no solver saw still ends the job "cancelled"). Waits are bounded generously: no wall-clock outcome is asserted."""
+ignored the cancel), a reconstruction's adjustment (it ran to its end), and a sequence of stereo
+frame pairs (tests/workers/test_job_end.py: a cancel no solver saw still ends the job "cancelled"). Waits are bounded generously: no wall-clock outcome is asserted."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from geocert.solvers.autocalibration import scenes
@@ -75,3 +76,26 @@ def test_reconstruction_cancelled_in_its_bundle_adjustment_keeps_the_cameras(ser
     assert "adjusted as far as the adjustment went" in stages["bundle_adjustment"]["reason"]
     registered = [camera for camera in result["cameras"] if camera["registered"]]
     assert len(registered) == 8 and all(camera["K"] is not None for camera in registered)
+
+
+def test_stereo_lines_cancelled_keeps_the_pairs_done(service):
+    from geocert.solvers.lines.scenes import pair_scene
+
+    rig = pair_scene(np.random.default_rng(7), 2).rig
+    pairs = [np.round(pair_scene(np.random.default_rng(seed), 200, noise_px=0.5, outlier_fraction=0.9).segments,
+                      4).tolist() for seed in range(6)]
+    body = {"kind": "stereo_lines", "data": {"rig": {"K_left": rig.K_left.tolist(), "K_right": rig.K_right.tolist(),
+                                                     "R": rig.R.tolist(), "t": rig.t.tolist()}, "matches": pairs},
+            "options": {"solver": "polynomial", "sample_size": 2, "time_limit_s": 2,
+                        "ransac": {"max_iterations": 100_000, "confidence": 0.9999999}}}
+    response = service.post("/v1/jobs", json=body)
+    job_id = response.json()["id"]
+    for _, event, data in sse_events(service, job_id, limit_s=300):
+        if event == "progress" and data["items_done"] >= 1:
+            break
+    assert service.post(f"/v1/jobs/{job_id}/cancel").status_code == 202
+    job = wait_for(service, job_id, limit_s=120)
+    assert job["status"] == "cancelled"
+    statuses = [pair["status"] for pair in job["result"]["pairs"]]
+    assert statuses[0] != "cancelled" and statuses[-1] == "cancelled"
+    assert job["result"]["pairs"][0]["reason"].startswith("time_limit")  # each pair ends at its own limit
