@@ -131,6 +131,15 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
     return items
 
 
+def task_time_bound_s(kind, item_bound_s: float, items: int, budget_s: float) -> float:
+    """The longest a task solving ``items`` items of a job runs when every item keeps its own
+    time limits (``item_bound_s`` each: the kind's ``time_bound_s``): it starts no new group of
+    items after ``budget_s`` (solve_items's ``stop_at``), and the group started last runs its
+    limits. The work between the solvers' clock checks is not counted."""
+    group = min(items, kind.batch_size if kind.solve_batch is not None else 1)
+    return min(items * item_bound_s, budget_s + group * item_bound_s)
+
+
 def item_sums(items: list[dict], abs_gap: float = 0.0) -> dict:
     """What a job's stats and final progress take from its items, as sums: a task stores these
     for the run of items it solved (a fragment of a streamed result), and the end adds them.
@@ -289,4 +298,4 @@ def parse_job(job: Any):
 
 
 __all__ = ["parse_job", "solve_job", "solve_items", "job_stats", "assemble", "ItemProgress", "item_sums", "merged_sums",
-           "stats_from", "streams_result", "result_fragment", "result_shell"]
+           "stats_from", "streams_result", "result_fragment", "result_shell", "task_time_bound_s"]

@@ -207,6 +207,9 @@ class AutocalibrationKind:
         queued: the solve cannot start without them)."""
         pr.resolve_ranges(options.intrinsics, parsed.image_size)
 
+    def time_bound_s(self, parsed: Parsed, options: pr.AutocalibrationOptions) -> float:
+        return options.time_limit_s * (1 if options.method == "direct" else 2)  # per stage
+
     def count(self, parsed: Parsed) -> int:
         return 1
 

@@ -25,13 +25,44 @@ def _solve_chunk_task():
     return _SOLVE_CHUNK
 
 
+# After the cooperative stop a task is given (``task_deadline_s``), Celery's soft time limit
+# (SoftTimeLimitExceeded raised in the task), and after that its hard one (the process killed).
+SOFT_AFTER_S = 30.0
+HARD_AFTER_S = 30.0
+
+
+def task_deadline_s(kind_name: str, item_bound_s: float | None, items: int) -> float:
+    """Seconds after which a task solving ``items`` items of a job is stopped as a last resort:
+    what the job's own time limits allow it (batch.task_time_bound_s) plus GEOCERT_TASK_TIME_MARGIN_S.
+    ``item_bound_s`` None: a job recorded without it, held to the server's per-item maximum."""
+    from geocert.batch import task_time_bound_s
+    from geocert.kinds import get_kind
+    from geocert.settings import get_settings
+
+    settings = get_settings()
+    bound = settings.max_item_time_limit_s if item_bound_s is None else item_bound_s
+    return task_time_bound_s(get_kind(kind_name), bound, items, settings.chunk_time_budget_s) + settings.task_time_margin_s
+
+
+def task_options(kind_name: str, item_bound_s: float | None, items: int) -> dict:
+    """Celery's options for such a task: soft and hard time limits after its deadline, and the
+    errback that ends its job ``failed`` (keeping what it finished) when the hard limit kills it,
+    so that a killed task is never delivered again."""
+    from geocert.workers.tasks import solve_chunk_failed
+
+    soft = task_deadline_s(kind_name, item_bound_s, items) + SOFT_AFTER_S
+    return {"soft_time_limit": soft, "time_limit": soft + HARD_AFTER_S, "link_error": solve_chunk_failed.s()}
+
+
 def submit_chunks(meta: dict, request_id: str | None) -> None:
     """One task per chunk, so a batch runs in parallel across every worker (a Celery group), each
-    under the id ``JobStore.create`` recorded for it (``meta["task_ids"]``)."""
+    under the id ``JobStore.create`` recorded for it (``meta["task_ids"]``), with time limits
+    sized from the job's own (task_options)."""
     from celery import group
 
     solve_chunk = _solve_chunk_task()
-    signatures = [solve_chunk.s(meta["id"], start, stop, request_id).set(task_id=task_id)
+    signatures = [solve_chunk.s(meta["id"], start, stop, request_id).set(
+                      task_id=task_id, **task_options(meta["kind"], meta.get("item_time_bound_s"), stop - start))
                   for (start, stop), task_id in zip(meta["chunks"], meta["task_ids"])]
     group(signatures).apply_async()
 
