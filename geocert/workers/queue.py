@@ -9,18 +9,22 @@ from geocert.workers.store import JobStore
 
 _LOCK = threading.Lock()
 _SOLVE_CHUNK = None
+_SOLVE_CHUNK_FAILED = None
 
 
 def _solve_chunk_task():
     """The solve task, resolved once under a lock: Celery's task objects are lazy proxies whose
     first evaluation is not thread-safe, and the API submits from many threads at once (a burst
-    of first submissions answered 500 with AttributeError: 'PromiseProxy' ... '_Proxy__local')."""
-    global _SOLVE_CHUNK
+    of first submissions answered 500 with AttributeError: 'PromiseProxy' ... '_Proxy__local').
+    Its errback (``solve_chunk_failed``) is resolved with it."""
+    global _SOLVE_CHUNK, _SOLVE_CHUNK_FAILED
     with _LOCK:
         if _SOLVE_CHUNK is None:
-            from geocert.workers.tasks import solve_chunk
+            from geocert.workers.tasks import solve_chunk, solve_chunk_failed
 
-            solve_chunk.name  # noqa: B018 (evaluates the proxy here, under the lock)
+            solve_chunk_failed.name  # noqa: B018 (evaluates the proxies here, under the lock)
+            solve_chunk.name  # noqa: B018
+            _SOLVE_CHUNK_FAILED = solve_chunk_failed
             _SOLVE_CHUNK = solve_chunk
     return _SOLVE_CHUNK
 
@@ -48,10 +52,9 @@ def task_options(kind_name: str, item_bound_s: float | None, items: int) -> dict
     """Celery's options for such a task: soft and hard time limits after its deadline, and the
     errback that ends its job ``failed`` (keeping what it finished) when the hard limit kills it,
     so that a killed task is never delivered again."""
-    from geocert.workers.tasks import solve_chunk_failed
-
+    _solve_chunk_task()
     soft = task_deadline_s(kind_name, item_bound_s, items) + SOFT_AFTER_S
-    return {"soft_time_limit": soft, "time_limit": soft + HARD_AFTER_S, "link_error": solve_chunk_failed.s()}
+    return {"soft_time_limit": soft, "time_limit": soft + HARD_AFTER_S, "link_error": _SOLVE_CHUNK_FAILED.s()}
 
 
 def submit_chunks(meta: dict, request_id: str | None) -> None:
