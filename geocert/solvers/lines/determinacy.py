@@ -56,8 +56,9 @@ def motion(lines: LineSet, R: np.ndarray, t: np.ndarray) -> dict | None:
     gradient = np.zeros(6)
     gradient[:3] = np.degrees(axis)  # d angle / d rotation vector (left perturbation), first order
     quantities = {"rotation_angle_deg": (angle, gradient)}
+    length = float(np.linalg.norm(t))  # the translation known to a tenth of its length
     for k, name in enumerate(("t_x", "t_y", "t_z")):
-        quantities[name] = (float(t[k]), np.eye(6)[3 + k])
+        quantities[name] = (float(t[k]), np.eye(6)[3 + k], length)
     out = information_intervals(schur, float((r0 * r0).sum()), 8 * n - 6 - 4 * n, quantities)
     # Parallel 3D lines meet at one vanishing point: their image lines (normalised by K) then have
     # a near-null vector (measured, 0.03-0.05 of the next singular value for parallel lines at
