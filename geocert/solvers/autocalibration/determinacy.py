@@ -20,8 +20,7 @@ turntable:
   moves by more than ``RELATIVE_WIDTH``, the plane at infinity is not fixed well enough to fix K.
 
 The warning's code names the motion (what it looks like; the decision is the conditioning's):
-``pure_translation`` (every direction of omega free: the rotations are too small for the noise; or
-the views turn by under 3 degrees),
+``pure_translation`` (the views turn by under 3 degrees from the reference, median),
 ``orbital_motion`` (the camera centres spread over a plane, not along a line nor all round: rings,
 turntables and arcs round an object), ``rotation_about_one_axis`` (the rotations' axes nearly one), ``critical_motion`` (any other
 free family, e.g. half-turns about perpendicular axes).
@@ -47,7 +46,8 @@ from geocert.solvers.core.determinacy import (RELATIVE_WIDTH, SIGMAS, certified_
 ROTATION_NOISE = 1e-3  # radians: a rotation is not taken as known better than 0.06 degrees
 STILL_DEGREES = 3.0  # naming only: views turning less than this from the reference (median) translate
 AXIS = 0.15  # naming only: rotations whose axes fit one axis this well (_axis_fit) share it
-ORBIT = 0.25  # naming only: centres spread along two directions (this fraction of the widest), not the third: an orbit
+PATH = 0.1  # naming only: centres spread across their widest direction by less than this fraction lie on a path
+ORBIT = 0.25  # naming only: centres on no path, thinner than this fraction of their second spread: an orbit
 NAMES = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")
 CRITICAL_CODES = ("pure_translation", "orbital_motion", "rotation_about_one_axis", "critical_motion")
 _ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
@@ -188,21 +188,22 @@ def _axis_fit(H: np.ndarray) -> float:
     return float(s[2] / max(float(s[1]), 1e-300))
 
 
-def motion_name(H: np.ndarray, centres: np.ndarray | None, free: int, still: bool = True) -> tuple[str, str]:
-    """(code, what the motion looks like) for a motion whose DIAC or plane is free along ``free``
-    directions (5: all of omega's; ``still``: the rotations within the noise of none)."""
+def motion_name(H: np.ndarray, centres: np.ndarray | None) -> tuple[str, str]:
+    """(code, what the motion looks like): named by its geometry alone (the rotation angles are
+    K's conjugates', read off H's eigenvalues), whatever the noise made of the decision."""
     angles = rotation_angles(H)
     looks = f"the views rotate by {np.median(angles):.3g} degrees from the reference (median; {angles.max():.3g} at most)"
     fit = _axis_fit(H)
     if math.isfinite(fit):
         looks += f", their axes fit one axis to {fit:.2g}"
-    if (free >= 5 and still) or np.median(angles) < STILL_DEGREES:
+    if np.median(angles) < STILL_DEGREES:
         return "pure_translation", looks
     if centres is not None and len(centres) >= 4 and np.all(np.isfinite(centres)):
         widths = spread(centres)
+        orbit = widths[1] >= PATH and widths[2] < ORBIT * widths[1]
         looks += (f", the camera centres' spreads are {widths[1]:.2g} and {widths[2]:.2g} of their widest "
-                  f"({'a path' if widths[1] < ORBIT else 'a ring or an arc' if widths[2] < ORBIT else 'all round'})")
-        if widths[2] < ORBIT <= widths[1]:
+                  f"({'a path' if widths[1] < PATH else 'a ring or an arc' if orbit else 'all round'})")
+        if orbit:
             return "orbital_motion", looks
     return ("rotation_about_one_axis" if fit < AXIS else "critical_motion"), looks
 
@@ -284,7 +285,7 @@ def motion_warnings(H: np.ndarray, centres: np.ndarray | None, noise: float | No
     if reference is not None and centres is not None and (family is None or family["free"] == 0):
         planes = rotation_plane_family(H, reference, centres, noise)
         if planes is not None and planes["largest_move"] > RELATIVE_WIDTH:
-            code, looks = motion_name(H, centres, 1)
+            code, looks = motion_name(H, centres)
             move = planes["largest_move"]
             moved = "to no calibration at all" if not math.isfinite(move) else f"by {100 * move:.3g}% of the focal length"
             return [{"code": code,
@@ -299,7 +300,7 @@ def motion_warnings(H: np.ndarray, centres: np.ndarray | None, noise: float | No
     still = bool(np.median(np.radians(rotation_angles(H))) < SIGMAS * family["sigma"])
     if family["free"] >= 5 and not still:
         return []
-    code, looks = motion_name(H, centres, family["free"], still)
+    code, looks = motion_name(H, centres)
     move = family["largest_move"]
     moved = "to no calibration at all" if not math.isfinite(move) else f"by {100 * move:.3g}% of the focal length"
     return [{"code": code,
@@ -384,7 +385,7 @@ def _plane_warning(family: dict, H: np.ndarray, centres: np.ndarray | None, name
     focal = [k[0] for k in family["Ks"] if k is not None and np.isfinite(k[0])]
     reach = ("to planes with no calibration at all" if not math.isfinite(move) or len(focal) < len(family["Ks"])
              else f"over planes whose constant-K fit has a focal length from {min(focal):.4g} to {max(focal):.4g} px")
-    code, looks = motion_name(H, centres, 1)
+    code, looks = motion_name(H, centres)
     if named:
         code = named[0]["code"]
     return [{"code": code,
