@@ -137,8 +137,11 @@ class TestRotationsOnly:
 
     @pytest.mark.parametrize("kind,expected", [("turntable", ["orbital_motion"]), ("arc", ["orbital_motion"]),
                                                ("forward", ["pure_translation"]), ("sideways", ["pure_translation"]),
-                                               ("ring", []), ("sphere", [])])
+                                               ("ring", ["orbital_motion"]), ("sphere", [])])
     def test_synthetic_layouts(self, kind, expected):
+        """The ring (its height varying by 10% of its radius, aims scattered) is near-critical for
+        rotations known to ROTATION_NOISE (0.6 degrees): its plane at infinity's family moves K by
+        more than 10% (test_the_decision_follows_the_noise: not so for rotations known to 1e-3)."""
         for seed in range(3):
             _, R, centres = layout(kind, seed=seed)
             assert judged(R, centres) == expected, seed
