@@ -274,7 +274,8 @@ class AutocalibrationKind:
         centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
         if result.p is not None and math.isfinite(affine_cost):
             affine_stage["determinacy"] = safely(determinacy.affine_stage, problem, result.p, affine_stage["cost"],
-                                                 affine_stage["lower_bound"], centres)
+                                                 affine_stage["lower_bound"], centres,
+                                                 None if document["K"] is None else np.array(document["K"]))
         if document["K"] is not None:
             metric_stage["determinacy"] = safely(determinacy.metric_stage, problem, result.p, np.array(document["K"]),
                                                  metric_stage["cost"], metric_stage["lower_bound"], centres)

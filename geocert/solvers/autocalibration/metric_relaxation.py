@@ -34,6 +34,7 @@ WIDEN = 1e-12
 ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2))  # the free entries of omega, in w's order
 ALL = ENTRIES + ((2, 2),)
 WEIGHTS = np.array([1.0, np.sqrt(2), np.sqrt(2), 1.0, np.sqrt(2), 1.0])  # Frobenius over 6 entries
+_ROWS, _COLUMNS = np.array(ALL).T
 
 
 def omega_of(w: np.ndarray) -> np.ndarray:
@@ -79,7 +80,7 @@ def residuals(setup: MetricSetup, w: np.ndarray) -> np.ndarray:
     images = np.einsum("jka,ab,jlb->jkl", setup.H, omega, setup.H)
     q = images[:, 2, 2]
     diff = omega[None] - images / q[:, None, None]
-    return np.concatenate([WEIGHTS * np.array([d[a, b] for a, b in ALL]) for d in diff])
+    return (WEIGHTS * diff[:, _ROWS, _COLUMNS]).ravel()
 
 
 def intrinsics_of(w: np.ndarray) -> dict | None:
