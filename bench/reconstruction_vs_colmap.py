@@ -127,7 +127,11 @@ def geocert_figures(result: dict) -> dict:
         warnings += [str(w) for w in stage.get("warnings") or []]
     flagged = sum(1 for c in result.get("cameras", []) if c.get("flags") or c.get("warnings") or c.get("flagged"))
     certified = sum(1 for c in result.get("cameras", []) if c.get("certified"))
-    return {"cameras": cameras, "points": summary.get("points"), "registered": len(cameras),
+    failed = [f"{stage.get('name')} stage {stage.get('status')}: {stage.get('reason')}"
+              for stage in result.get("stages", []) if stage.get("status") in ("failed", "error")]
+    reasons = sorted({c.get("reason") for c in result.get("cameras", []) if not c.get("registered") and c.get("reason")})
+    return {"cameras": cameras, "points": summary.get("points"), "registered": len(cameras), "failed": failed,
+            "unregistered_reasons": reasons,
             "cameras_certified": certified / len(cameras) if cameras else None,
             "points_certified": summary.get("points_certified_fraction"),
             "determined": summary.get("autocalibration_determined"), "critical_motion": summary.get("critical_motion"),
@@ -245,6 +249,8 @@ def bench_set(set_key: str, args, root: Path, records: list) -> None:
             print(row(set_key, label, run_name + (" (cached)" if run.get("cached") else ""), len(names), figures,
                       errors, run.get("cpu_s"), run.get("wall_s"), (baseline or {}).get("cpu_s"), load, note),
                   flush=True)
+            for failure in figures.get("failed") or []:
+                print(f"|  | | {run_name}: {failure[:300]} |" + " |" * 13, flush=True)
             records.append({"set": set_key, "order": order, "seed": args.seed, "run": run_name, "photos": len(names),
                             "errors": errors, "cpu_s": run.get("cpu_s"), "wall_s": run.get("wall_s"), "load": load,
                             **{k: v for k, v in figures.items() if k != "cameras"}})
