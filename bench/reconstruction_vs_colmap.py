@@ -51,7 +51,9 @@ import numpy as np
 from bench import camera_errors, colmap_baseline, photo_sets
 
 # The README's options for the dinoSparseRing (README, "Photos to tracks, and the K-known path"),
-# the only set the README gives options for.
+# the only set the README gives options for: bench.reconstruction_images.RING_JOB_OPTIONS, not
+# imported from there because that module sets one BLAS thread in this process's environment,
+# which COLMAP's child process would inherit.
 README_OPTIONS = {"min_inliers": 10, "merge_components": True,
                   "features": {"max_features": 0, "contrast_threshold": 0.005, "ratio": 0.85,
                                "ransac_threshold_px": 2.0, "guided_ratio": 0.8}}
