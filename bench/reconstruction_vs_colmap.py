@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import camera_errors, colmap_baseline, photo_sets
+from bench import camera_errors, colmap_baseline, machine_speed_ms, photo_sets
 
 # The README's options for the dinoSparseRing (README, "Photos to tracks, and the K-known path"),
 # the only set the README gives options for: bench.reconstruction_images.RING_JOB_OPTIONS, not
@@ -281,13 +281,14 @@ def main() -> None:
     except ImportError:
         version = "not installed (pip install -e '.[bench]'): COLMAP not run"
         args.runs = [r for r in args.runs if not r.startswith("colmap")]
-    print(f"data {root}; pycolmap {version}; {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f} at start; "
+    print(f"data {root}; pycolmap {version}; {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f} at start, "
+          f"machine speed {machine_speed_ms():.0f} ms (bench.machine_speed_ms); "
           f"geocert's BLAS threads (the workers' environment) {threads}; COLMAP every core; shuffled seed {args.seed}")
     print(HEADER, flush=True)
     records: list = []
     for set_key in args.sets.split(","):
         bench_set(set_key, args, root, records)
-    print(f"load {os.getloadavg()[0]:.1f} at end")
+    print(f"load {os.getloadavg()[0]:.1f} at end, machine speed {machine_speed_ms():.0f} ms")
     if args.json:
         Path(args.json).write_text(json.dumps(records, indent=1, default=float))
 
