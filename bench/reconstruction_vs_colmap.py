@@ -27,10 +27,10 @@ with geocert; a set whose files are missing is reported with where to get it.
         [--orders file,shuffled,every2] [--seed 0] [--runs colmap,geocert,geocert-readme,geocert-K]
         [--no-colmap | --reuse-colmap] [--timeout 1800] [--json OUT.json]
 
-COLMAP's results are stored in DATA/colmap_cache.json (keyed by set, the photos in their order,
-pycolmap's version and options): --reuse-colmap takes them from there where they are and runs
-COLMAP for the rest; --no-colmap never runs COLMAP (its rows and the CPU ratios come from the
-cache when there).
+COLMAP's results are stored in DATA/colmap_cache.json (keyed by set, the photos in their order
+and a hash of their bytes, pycolmap's version and options): --reuse-colmap takes them from there
+where they are and runs COLMAP for the rest; --no-colmap never runs COLMAP (its rows and the CPU
+ratios come from the cache when there).
 """
 
 from __future__ import annotations
@@ -150,7 +150,7 @@ def colmap_run(photo_set, key: str, names, root: Path, known: bool, args) -> dic
     --no-colmap and nothing is cached."""
     K = photo_set.K
     known_K = (K[0, 0], K[1, 1], K[0, 2], K[1, 2]) if known else None
-    cache_key = f"{key}|{len(names)} photos|{'|'.join(names)}|{colmap_baseline.options_key(known_K)}"
+    cache_key = f"{key}|{colmap_baseline.photos_key(photo_set, names)}|{colmap_baseline.options_key(known_K)}"
     if args.reuse_colmap or args.no_colmap:
         if (hit := colmap_baseline.cached(root, cache_key)) is not None:
             return {**hit, "cached": True}
