@@ -2,10 +2,10 @@
 
 Per set and order of the photos (file order; shuffled with a stated seed; every 2nd photo of a
 dense ring), in one run: COLMAP with K unknown (pycolmap's defaults on the CPU: SIFT, exhaustive
-matching, incremental mapping, EXIF focal length when present; bench/colmap_baseline.py), and
-geocert through ``geocert solve`` (the CLI's path, the code a user's job takes) with K unknown and
-its defaults, with the README's ring options where the README gives them (dinoSparseRing), and
-with K known. Each run is a child process with a time limit. Printed per run: views registered,
+matching, incremental mapping, EXIF focal length when present; bench/colmap_baseline.py) and with
+K known ("colmap-K"), and geocert through ``geocert solve`` (the CLI's path, the code a user's
+job takes) with K unknown and its defaults, with the README's ring options where the README
+gives them (dinoSparseRing), and with K known. Each run is a child process with a time limit. Printed per run: views registered,
 rotation error against the ground truth after the best global rotation (median, max, views above
 5 degrees), camera centre error after a similarity alignment (% of the scene's size), focal length
 error (%), principal point error (px), cameras certified (of the views registered) and points
@@ -24,7 +24,8 @@ with geocert; a set whose files are missing is reported with where to get it.
 
     .venv/bin/pip install -e '.[bench]'       # pycolmap
     .venv/bin/python -m bench.reconstruction_vs_colmap [--data DIR] [--sets dinoSparseRing,templeRing]
-        [--orders file,shuffled,every2] [--seed 0] [--runs colmap,geocert,geocert-readme,geocert-K]
+        [--orders file,shuffled,every2] [--seed 0] [--runs colmap,colmap-K,geocert,geocert-readme,
+        geocert-K,geocert-K-readme]
         [--no-colmap | --reuse-colmap] [--timeout 1800] [--json OUT.json]
 
 COLMAP's results are stored in DATA/colmap_cache.json (keyed by set, the photos in their order
@@ -60,7 +61,6 @@ README_OPTIONS = {"min_inliers": 10, "merge_components": True,
 README_SETS = ("dinoSparseRing",)
 SETS = ("dinoSparseRing", "templeRing", "templeSparseRing", "corridor", "corridor-matches", "sceaux")
 RUNS = ("colmap", "colmap-K", "geocert", "geocert-readme", "geocert-K", "geocert-K-readme")
-DEFAULT_RUNS = ("colmap", "geocert", "geocert-readme", "geocert-K", "geocert-K-readme")
 
 
 def geocert_job(photo_set, names: list[str], options: dict, matches: bool) -> dict:
@@ -264,7 +264,7 @@ def main() -> None:
     parser.add_argument("--sets", default=",".join(SETS), help=f"comma-separated, of {', '.join(SETS)}")
     parser.add_argument("--orders", default="file,shuffled,every2", help="file, shuffled, every2 (dense rings only)")
     parser.add_argument("--seed", type=int, default=0, help="the shuffled order's seed (random.Random(seed))")
-    parser.add_argument("--runs", default=",".join(DEFAULT_RUNS), help=f"comma-separated, of {', '.join(RUNS)}")
+    parser.add_argument("--runs", default=",".join(RUNS), help=f"comma-separated, of {', '.join(RUNS)}")
     parser.add_argument("--no-colmap", action="store_true", help="never run COLMAP: its cached results only")
     parser.add_argument("--reuse-colmap", action="store_true", help="COLMAP's cached results where there are, "
                         "COLMAP run for the others")
