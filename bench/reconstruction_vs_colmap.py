@@ -2,17 +2,17 @@
 
 Per set and order of the photos (file order; shuffled with a stated seed; every 2nd photo of a
 dense ring), in one run: COLMAP with K unknown (pycolmap's defaults on the CPU: SIFT, exhaustive
-matching, incremental mapping, EXIF focal length when present; bench/colmap_baseline.py) and with
-K known ("colmap-K"), and geocert through ``geocert solve`` (the CLI's path, the code a user's
-job takes) with K unknown and its defaults, with the README's ring options where the README
-gives them (dinoSparseRing), and with K known. Each run is a child process with a time limit. Printed per run: views registered,
-rotation error against the ground truth after the best global rotation (median, max, views above
-5 degrees), camera centre error after a similarity alignment (% of the scene's size), focal length
-error (%), principal point error (px), cameras certified (of the views registered) and points
-certified, what the result claims (``determined``, its warnings, cameras it flags), CPU seconds
-(the child's user + system time, every thread) and wall seconds, and geocert's CPU over COLMAP's
-on the same photos. The machine's load is printed with each run: the timings are only comparable
-within one run of this bench.
+matching, incremental mapping, EXIF focal length when present; bench/colmap_baseline.py) and with K
+known ("colmap-K"), and geocert through ``geocert solve`` (the CLI's path, the code a user's job
+takes) with K unknown and its defaults, with the README's ring options where the README gives them
+(dinoSparseRing), and with K known. Each run is a child process with a time limit. Printed per run:
+views registered, rotation error against the ground truth after the best global rotation (median,
+max, views above 5 degrees), camera centre error after a similarity alignment (% of the scene's
+size), focal length error (%), principal point error (px), cameras certified (of the views
+registered) and points certified, what the result claims (``determined``, its warnings, cameras it
+flags), CPU seconds (the child's user + system time, every thread) and wall seconds, and geocert's
+CPU over COLMAP's on the same photos. The machine's load is printed with each run: the timings are
+only comparable within one run of this bench.
 
 Sets (bench/photo_sets.py says where each comes from, its format, and how a test can use it):
 Middlebury multi-view stereo data, dinoSparseRing, templeRing and templeSparseRing (Seitz,
