@@ -117,16 +117,20 @@ def run_geocert(job: dict, timeout_s: float) -> dict:
         return {"result": json.loads(done.stdout), "wall_s": wall, "cpu_s": cpu}
 
 
+def codes(warnings) -> list[str]:
+    """A list of warnings as their codes (a warning is {"code": ..., ...} or a string)."""
+    return [w.get("code", str(w)) if isinstance(w, dict) else str(w) for w in warnings or []]
+
+
 def geocert_figures(result: dict) -> dict:
     """What a geocert result returns and claims: cameras per name, counts, certified fractions,
     ``determined``, warnings (the stages' and the summary's) and cameras it flags."""
     summary = result.get("summary") or {}
     cameras = {c["name"]: (np.array(c["K"]), np.array(c["R"]), np.array(c["t"]))
                for c in result.get("cameras", []) if c.get("registered") and c.get("R") is not None}
-    warnings = [w.get("code", str(w)) if isinstance(w, dict) else str(w) for w in summary.get("warnings") or []]
+    warnings = codes(summary.get("warnings"))
     for stage in result.get("stages", []):
-        warnings += [w.get("code", str(w)) if isinstance(w, dict) else str(w) for w in stage.get("motion_warnings") or []]
-        warnings += [str(w) for w in stage.get("warnings") or []]
+        warnings += codes(stage.get("motion_warnings")) + codes(stage.get("warnings"))
     flagged = sum(1 for c in result.get("cameras", []) if c.get("flags") or c.get("warnings") or c.get("flagged"))
     certified = sum(1 for c in result.get("cameras", []) if c.get("certified"))
     failed = [f"{stage.get('name')} stage {stage.get('status')}: {stage.get('reason')}"
