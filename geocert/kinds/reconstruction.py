@@ -1,5 +1,5 @@
 """The reconstruction kind (issue 14): from tracks (matches, no cameras) or photos to a metric
-reconstruction, stage by stage (geocert.solvers.reconstruction.pipeline), with the certified
+reconstruction, stage by stage (geocert.pipelines.reconstruction.pipeline), with the certified
 solvers where the thesis gives them: the metric upgrade (autocalibration, ch. 6-7), every
 point (triangulation, ch. 5) and a bound for every camera (resection, ch. 5).
 
@@ -24,7 +24,7 @@ from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats,
 from geocert.kinds.triangulation import TrackOut, track_document
 from geocert.solvers.autocalibration.problem import StageProgress
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
-from geocert.solvers.reconstruction.options import ReconstructionOptions
+from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.verification import RECONSTRUCTION
 
 MAX_VIEWS = 1000
@@ -249,7 +249,7 @@ def _read_tracks(data: dict, n_views: int) -> list:
 
 def _read_images(data: dict):
     try:  # stage 1 (features.py): matches from photos
-        from geocert.solvers.reconstruction import features
+        from geocert.pipelines.reconstruction import features
     except ImportError as exc:  # pragma: no cover - until the features module is merged
         raise InputError("data/images", "photos are not read by this build: give tracks and views") from exc
     images = data["images"]
@@ -316,7 +316,7 @@ class ReconstructionKind:
         return sum(len(v) for v, _ in parsed.tracks) if parsed.tracks is not None else len(parsed.image_sizes)
 
     def solve_item(self, parsed: Parsed, index: int, options: ReconstructionOptions, callback) -> dict:
-        from geocert.solvers.reconstruction import pipeline
+        from geocert.pipelines.reconstruction import pipeline
 
         start = time.perf_counter()
 
@@ -332,7 +332,7 @@ class ReconstructionKind:
         images_document = matches = out = None
         tracks = parsed.tracks
         if tracks is None:  # photos: stage 1
-            from geocert.solvers.reconstruction import features
+            from geocert.pipelines.reconstruction import features
 
             def matching(progress: dict) -> bool:
                 return report("matches", progress.get("done", 0), progress.get("total", 1))

@@ -437,7 +437,8 @@ class TestPhotos:
 
         import cv2
 
-        from geocert.solvers.reconstruction import calibrated, features, render
+        from geocert.pipelines.reconstruction import features
+        from geocert.solvers.reconstruction import calibrated, render
 
         seen = {}
         original_tracks, original_calibrated = features.tracks_from_images, calibrated.calibrated_reconstruction

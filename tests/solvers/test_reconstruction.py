@@ -12,8 +12,9 @@ from scipy.linalg import rq
 from scipy.spatial.transform import Rotation
 
 from geocert.solvers.datasets import load_dinosaur, load_house
-from geocert.solvers.reconstruction import pipeline, projective, synthetic, upgrade
-from geocert.solvers.reconstruction.options import ReconstructionOptions
+from geocert.pipelines.reconstruction import pipeline
+from geocert.solvers.reconstruction import projective, synthetic, upgrade
+from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.tracks import Observations
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data"

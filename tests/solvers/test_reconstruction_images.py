@@ -17,10 +17,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.reconstruction import features
+from geocert.pipelines.reconstruction import features
 from geocert.solvers.reconstruction.calibrated import (CalibratedOptions, align_rotations,
                                                        calibrated_reconstruction, refine_cameras)
-from geocert.solvers.reconstruction.features import (FeatureOptions, build_tracks, decode_image,
+from geocert.pipelines.reconstruction.features import (FeatureOptions, build_tracks, decode_image,
                                                      tracks_from_images)
 from geocert.solvers.reconstruction.render import box_scene
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
 from geocert.solvers.reconstruction import projective, structure, upgrade
-from geocert.solvers.reconstruction.options import ReconstructionOptions
+from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.tracks import Observations
 
 STAGES = ("projective", "autocalibration", "bundle_adjustment", "structure", "cameras")

@@ -96,7 +96,7 @@ class ReconstructionOptions(FractionalOptions):
 
     def feature_options(self):
         """Stage 1's options: FeatureOptions with the ones given in ``features`` (None: default)."""
-        from geocert.solvers.reconstruction.features import FeatureOptions
+        from geocert.pipelines.reconstruction.features import FeatureOptions
 
         if not isinstance(self.features, dict):
             raise InputError("options/features", "must be an object")
