@@ -80,6 +80,22 @@ class FeaturesIn(Strict):
     guided_ratio: Finite | None = Field(None, **_F["guided_ratio"],
                                         description="after a pair is verified, match it again along its epipolar "
                                                     "lines with this ratio test (default 0: off)")
+    pairs: Literal["auto", "exhaustive", "retrieval", "sequential"] | None = Field(
+        None, description='which image pairs are matched: "exhaustive" every pair, "retrieval" each image with the '
+                          'images most alike it (a bag of visual words), "auto" (default) exhaustive up to '
+                          'exhaustive_limit images and retrieval beyond, "sequential" each image with its '
+                          'neighbour_window successors in the order given (video)')
+    exhaustive_limit: int | None = Field(None, **_F["exhaustive_limit"],
+                                         description='"auto": every pair up to this many images (default 40)')
+    retrieval_neighbours: int | None = Field(None, **_F["retrieval_neighbours"],
+                                             description='"retrieval": images matched with each (default 20)')
+    vocabulary_size: int | None = Field(None, **_F["vocabulary_size"],
+                                        description='"retrieval": visual words, clustered from the images\' own '
+                                                    'descriptors (default 1024)')
+    neighbour_window: int | None = Field(None, **_F["neighbour_window"],
+                                         description='"sequential": successors matched with each (default 5)')
+    ring: bool | None = Field(None, description='"sequential": the last images wrap round to the first (default '
+                                                'false)')
 
 
 class ReconstructionOptionsIn(Strict):

@@ -141,6 +141,55 @@ class TestSyntheticTracks:
         assert seen[-1]["stage"] == "matches"
 
 
+def _ring_gap(a: int, b: int, n: int) -> int:
+    return min((a - b) % n, (b - a) % n)
+
+
+@pytest.fixture(scope="module")
+def shuffled_ring():
+    """16 rendered views round the box, in a shuffled file order: (scene, images, order), image k
+    being view order[k] of the ring."""
+    scene = box_scene(n_views=16, arc_deg=360.0, seed=0)
+    order = np.random.default_rng(0).permutation(16)
+    images = scene.images()
+    return scene, [images[i] for i in order], order
+
+
+class TestPairChoice:
+    def test_retrieval_finds_the_ring_neighbours_in_any_file_order(self, shuffled_ring):
+        # The ring's neighbours (16 pairs one step apart) are all among the pairs retrieval
+        # chooses with 2 neighbours an image; the sequential rule reads the file order and, the
+        # files shuffled, matches few of them.
+        _, images, order = shuffled_ring
+        sift = cv2.SIFT_create(nfeatures=1500)
+        descriptors = [sift.detectAndCompute(image, None)[1] for image in images]
+        options = FeatureOptions(pairs="retrieval", retrieval_neighbours=2)
+        pairs, rule = features.candidate_pairs(16, options, descriptors)
+        assert rule == "retrieval" and len(pairs) <= 32
+        neighbours = {(min(i, j), max(i, j)) for i in range(16) for j in range(16) if _ring_gap(order[i], order[j], 16) == 1}
+        assert neighbours <= set(pairs)
+        sequential, _ = features.candidate_pairs(16, FeatureOptions(pairs="sequential", neighbour_window=2))
+        assert len(neighbours & set(sequential)) < len(neighbours) / 2
+
+    def test_auto_is_exhaustive_up_to_the_limit_then_retrieval(self):
+        rng = np.random.default_rng(0)
+        descriptors = [rng.random((50, 128)).astype(np.float32) * 100 for _ in range(6)]
+        pairs, rule = features.candidate_pairs(6, FeatureOptions(exhaustive_limit=6), descriptors)
+        assert rule == "exhaustive" and len(pairs) == 15
+        pairs, rule = features.candidate_pairs(6, FeatureOptions(exhaustive_limit=5, retrieval_neighbours=2),
+                                               descriptors)
+        assert rule == "retrieval" and len(pairs) < 15 and all(i < j for i, j in pairs)
+
+    def test_a_shuffled_ring_registers_every_view(self, shuffled_ring):
+        scene, images, order = shuffled_ring
+        found = tracks_from_images(images, FeatureOptions(max_features=1500, pairs="retrieval", retrieval_neighbours=3))
+        assert found.stats["pairs_chosen_by"] == "retrieval"
+        result = calibrated_reconstruction(found.tracks, [scene.cameras[i].K for i in order])
+        assert result.stats["registered"] == 16
+        _, errors = align_rotations(result.rotations, [scene.cameras[i].R for i in order])
+        assert errors.max() < 0.5
+
+
 class TestGuidedMatching:
     # Cameras translated along x: F = [e]x with e = (1, 0, 0), epipolar lines are the rows (y_b = y_a).
     F = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])

@@ -14,6 +14,7 @@ from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.options import FractionalOptions
 
 AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")
+MAX_EXHAUSTIVE = 200  # images matched every pair with every other at most (19,900 pairs)
 CAMERA_MODELS = ("simple", "varying", "full")
 
 
@@ -63,7 +64,13 @@ class ReconstructionOptions(FractionalOptions):
     # keypoints, a looser ratio test, a wider epipolar threshold, guided matching).
     FEATURE_RANGES = {"max_features": {"ge": 0, "le": 1_000_000}, "contrast_threshold": {"gt": 0, "le": 1},
                       "ratio": {"gt": 0, "le": 1}, "ransac_threshold_px": {"gt": 0, "le": 100},
-                      "guided_ratio": {"ge": 0, "lt": 1}}
+                      "guided_ratio": {"ge": 0, "lt": 1}, "exhaustive_limit": {"ge": 2, "le": MAX_EXHAUSTIVE},
+                      "retrieval_neighbours": {"ge": 1, "le": 1000}, "vocabulary_size": {"ge": 8, "le": 100_000},
+                      "neighbour_window": {"ge": 1, "le": 1000}}
+    FEATURE_INTEGERS = ("max_features", "exhaustive_limit", "retrieval_neighbours", "vocabulary_size",
+                        "neighbour_window")
+    # Stage 1's options that are not numbers: their allowed values.
+    FEATURE_CHOICES = {"pairs": ("auto", "exhaustive", "retrieval", "sequential"), "ring": (True, False)}
 
     OPTION_RANGES = {**FractionalOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": 1},
                      "camera_rel_gap": {"ge": 0, "le": 1},
@@ -102,10 +109,17 @@ class ReconstructionOptions(FractionalOptions):
             raise InputError("options/features", "must be an object")
         given = {name: value for name, value in self.features.items() if value is not None}
         for name, value in given.items():
+            if name in self.FEATURE_CHOICES:
+                if not any(value is choice or (isinstance(value, str) and value == choice)
+                           for choice in self.FEATURE_CHOICES[name]):
+                    raise InputError(f"options/features/{name}",
+                                     f"must be one of {', '.join(map(str, self.FEATURE_CHOICES[name]))}")
+                continue
             bounds = self.FEATURE_RANGES.get(name)
             if bounds is None:
-                raise InputError(f"options/features/{name}", f"unknown (known: {', '.join(self.FEATURE_RANGES)})")
-            integer = name == "max_features"
+                known = [*self.FEATURE_RANGES, *self.FEATURE_CHOICES]
+                raise InputError(f"options/features/{name}", f"unknown (known: {', '.join(known)})")
+            integer = name in self.FEATURE_INTEGERS
             if (isinstance(value, bool) or not isinstance(value, int if integer else (int, float))
                     or not math.isfinite(value) or not (value >= bounds.get("ge", -math.inf)
                                                         and value > bounds.get("gt", -math.inf)
