@@ -528,3 +528,27 @@ class TestInitialPair:
 
 # ---------------------------------------------------------------------------------------------
 # Real photos: Middlebury dinoSparseRing, in tests/solvers/test_reconstruction_ring.py
+
+
+def _jpeg_with_focal_35mm(f35: int, order: str = "<") -> bytes:
+    """A JPEG's first segments: SOI and an APP1 EXIF block whose EXIF IFD states
+    FocalLengthIn35mmFilm (tag 0xA405, SHORT) = f35 (no image data: only the EXIF is read)."""
+    mark = b"II" if order == "<" else b"MM"
+    tiff = mark + struct.pack(order + "HI", 42, 8)
+    ifd0 = struct.pack(order + "H", 1) + struct.pack(order + "HHII", 0x8769, 4, 1, 26) + struct.pack(order + "I", 0)
+    exif = struct.pack(order + "H", 1) + struct.pack(order + "HHI", 0xA405, 3, 1) + struct.pack(order + "HH", f35, 0) \
+        + struct.pack(order + "I", 0)
+    body = b"Exif\x00\x00" + tiff + ifd0 + exif
+    return b"\xff\xd8" + b"\xff\xe1" + struct.pack(">H", len(body) + 2) + body + b"\xff\xda\x00\x02"
+
+
+class TestExifFocal:
+    @pytest.mark.parametrize("order", ["<", ">"])
+    def test_the_35mm_equivalent_gives_the_prior_in_pixels(self, order):
+        # 36 mm equivalent on a 3000 px wide photo: 3000 px.
+        assert features.exif_focal_px(_jpeg_with_focal_35mm(36, order), (3000, 2000)) == pytest.approx(3000.0)
+        assert features.exif_focal_px(_jpeg_with_focal_35mm(0, order), (3000, 2000)) is None
+
+    def test_no_exif_no_prior(self):
+        assert features.exif_focal_px(b"\xff\xd8\xff\xda\x00\x02", (640, 480)) is None
+        assert features.exif_focal_px(b"\x89PNG\r\n\x1a\n", (640, 480)) is None

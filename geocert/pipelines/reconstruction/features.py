@@ -131,6 +131,52 @@ def _jpeg_size(data: bytes) -> tuple[int, int] | None:
     return None
 
 
+def _exif_entries(tiff: bytes, offset: int, order: str) -> dict[int, tuple[int, int, bytes]]:
+    """One IFD's entries: tag -> (type, count, the 4 value-or-offset bytes)."""
+    if offset + 2 > len(tiff):
+        return {}
+    (n,) = struct.unpack(order + "H", tiff[offset:offset + 2])
+    entries = {}
+    for k in range(min(n, 512)):
+        at = offset + 2 + 12 * k
+        if at + 12 > len(tiff):
+            break
+        tag, kind, count = struct.unpack(order + "HHI", tiff[at:at + 8])
+        entries[tag] = (kind, count, tiff[at + 8:at + 12])
+    return entries
+
+
+def exif_focal_px(data: bytes, size: tuple[int, int]) -> float | None:
+    """The focal length in pixels a JPEG's EXIF states, or None: its 35 mm equivalent
+    (FocalLengthIn35mmFilm) times the larger image side over 36 mm. A prior, not a fact (a crop,
+    a resize or a converter can make it wrong): the reconstruction refines it."""
+    if data[:2] != b"\xff\xd8":
+        return None
+    i = 2
+    while i + 4 <= len(data) and data[i] == 0xFF:
+        marker = data[i + 1]
+        (length,) = struct.unpack(">H", data[i + 2:i + 4])
+        if marker == 0xE1 and data[i + 4:i + 10] == b"Exif\x00\x00":
+            tiff = data[i + 10:i + 2 + length]
+            order = {b"II": "<", b"MM": ">"}.get(tiff[:2])
+            if order is None or len(tiff) < 8:
+                return None
+            (first,) = struct.unpack(order + "I", tiff[4:8])
+            pointer = _exif_entries(tiff, first, order).get(0x8769)
+            if pointer is None:
+                return None
+            (exif,) = struct.unpack(order + "I", pointer[2])
+            entry = _exif_entries(tiff, exif, order).get(0xA405)
+            if entry is None or entry[0] != 3:
+                return None
+            (f35,) = struct.unpack(order + "H", entry[2][:2])
+            return float(f35) * max(size) / 36.0 if 0 < f35 < 10_000 else None
+        if marker == 0xDA:
+            return None
+        i += 2 + length
+    return None
+
+
 def decode_image(content_b64: str, field: str) -> np.ndarray:
     """A base64 PNG or JPEG (optionally a ``data:image/...;base64,`` URL) as a grayscale uint8 array.
 
@@ -365,6 +411,27 @@ def guided_matches(keypoints_a: np.ndarray, desc_a: np.ndarray, keypoints_b: np.
     return _ratio_matches(d2, options.guided_ratio, options.mutual)
 
 
+def match_pair(keypoints_a: np.ndarray, desc_a: np.ndarray, keypoints_b: np.ndarray, desc_b: np.ndarray,
+               options: FeatureOptions) -> tuple[np.ndarray, dict] | None:
+    """One pair's verified matches ((m, 2) keypoint indices) and figures, or None when fewer than
+    ``min_inliers`` fit one fundamental matrix. A pure function of the pair's features: the pairs
+    are independent work items (a runner may spread them over workers)."""
+    rows = _match(desc_a, desc_b, options)
+    F, inliers = fit_fundamental(keypoints_a[rows[:, 0]], keypoints_b[rows[:, 1]], options)
+    if inliers.sum() < options.min_inliers:
+        return None
+    figures = {"matches": len(rows), "inliers": int(inliers.sum())}
+    kept = rows[inliers]
+    if options.guided_ratio > 0 and inliers.sum() >= options.guided_min_inliers:
+        guided = guided_matches(keypoints_a, desc_a, keypoints_b, desc_b, F, options)
+        _, again = fit_fundamental(keypoints_a[guided[:, 0]], keypoints_b[guided[:, 1]], options)
+        figures["guided"] = int(again.sum())
+        if again.sum() > inliers.sum():
+            kept = guided[again]
+            figures["inliers"] = int(again.sum())
+    return kept, figures
+
+
 def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None = None,
                        callback=None) -> ImageTracks:
     """Features, verified matches and tracks for grayscale uint8 images (see the module docstring).
@@ -399,19 +466,10 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
     for k, (i, j) in enumerate(pairs):
         if asks_to_stop(callback, {"stage": "matches", "done": k, "total": len(pairs)}):
             return ImageTracks([], sizes, stats, "cancelled")
-        rows = _match(descriptors[i], descriptors[j], options)
-        F, inliers = fit_fundamental(keypoints[i][rows[:, 0]], keypoints[j][rows[:, 1]], options)
-        if inliers.sum() >= options.min_inliers:
-            figures = {"views": [i, j], "matches": len(rows), "inliers": int(inliers.sum())}
-            pair_matches[(i, j)] = rows[inliers]
-            if options.guided_ratio > 0 and inliers.sum() >= options.guided_min_inliers:
-                guided = guided_matches(keypoints[i], descriptors[i], keypoints[j], descriptors[j], F, options)
-                _, again = fit_fundamental(keypoints[i][guided[:, 0]], keypoints[j][guided[:, 1]], options)
-                figures["guided"] = int(again.sum())
-                if again.sum() > inliers.sum():
-                    pair_matches[(i, j)] = guided[again]
-                    figures["inliers"] = int(again.sum())
-            verified.append(figures)
+        found = match_pair(keypoints[i], descriptors[i], keypoints[j], descriptors[j], options)
+        if found is not None:
+            pair_matches[(i, j)], figures = found
+            verified.append({"views": [i, j], **figures})
     stats["verified_pairs"] = verified
     asks_to_stop(callback, {"stage": "matches", "done": len(pairs), "total": len(pairs)})
     timing["matches"] = time.perf_counter() - start
