@@ -132,6 +132,17 @@ class ReconstructionOptionsIn(Strict):
                                      description="false: no certified resection for a camera a free camera found "
                                                  "locally proves uncertifiable (it is reported without a bound)")
     features: FeaturesIn = Field(default_factory=FeaturesIn)
+    registration: Literal["incremental", "projective"] = Field(
+        _D.registration, description='K unknown: "incremental" (COLMAP\'s way: the K-known path from a prior focal '
+                                     'length, refined by bundle adjustment; its cameras start the certified upgrade) '
+                                     'or "projective" (a projective reconstruction from the tracks alone)')
+    focal_prior_px: Finite | None = Field(None, gt=0, le=1e6, description='"incremental": the prior focal length '
+                                          '(pixels; a prior, refined, not a fact: e.g. from the photos\' EXIF)')
+    focal_prior_factor: Finite = Field(_D.focal_prior_factor, **_R["focal_prior_factor"],
+                                       description='"incremental" without focal_prior_px: the prior focal length '
+                                                   'as this times the larger image side (COLMAP\'s 1.2)')
+    focal_prior_rounds: int = Field(_D.focal_prior_rounds, **_R["focal_prior_rounds"],
+                                    description='"incremental": runs from a refined focal length, at most')
     merge_components: bool = Field(_D.merge_components,
                                    description="K known only: views that do not register from the first start are "
                                                "reconstructed from a second start and merged")
@@ -282,6 +293,31 @@ def _read_images(data: dict):
     return arrays, names
 
 
+def _exif_focal_prior(images: list[dict], arrays: list) -> dict | None:
+    """The photos' EXIF focal lengths (pixels, from the 35 mm equivalent) and their median, when
+    every photo states one and they agree within 1% (one camera and zoom); else None."""
+    import base64
+
+    from geocert.pipelines.reconstruction import features
+
+    found = []
+    for image, array in zip(images, arrays):
+        text = image["content"].strip()
+        text = text.partition(",")[2] if text.startswith("data:") else text
+        try:
+            data = base64.b64decode("".join(text.split()), validate=True)
+        except ValueError:
+            return None
+        focal = features.exif_focal_px(data, (array.shape[1], array.shape[0]))
+        if focal is None:
+            return None
+        found.append(focal)
+    median = float(np.median(found))
+    if not found or max(abs(f / median - 1) for f in found) > 0.01:
+        return None
+    return {"focal_px": median, "images": len(found)}
+
+
 class ReconstructionKind:
     name = "reconstruction"
     description = ("From matches (tracks across views, no cameras) or photos to a metric reconstruction: a "
@@ -306,7 +342,8 @@ class ReconstructionKind:
             if data.get("tracks") is not None:
                 raise InputError("data/images", "give images, or tracks and views, not both")
             arrays, names = _read_images(data)
-            return Parsed(None, [(float(a.shape[1]), float(a.shape[0])) for a in arrays], names, {"images": arrays})
+            return Parsed(None, [(float(a.shape[1]), float(a.shape[0])) for a in arrays], names,
+                          {"images": arrays, "exif_focal": _exif_focal_prior(data["images"], arrays)})
         if "tracks" not in data:
             raise InputError("data/tracks", "is required (or data/images)")
         sizes, names = _read_views(data) if "views" in data else (None, None)
@@ -373,6 +410,12 @@ class ReconstructionKind:
                 out = pipeline.not_reconstructed(len(parsed.image_sizes), "skipped", "the matches stage failed: "
                                                  + reason, "no verified matches with another image")
         if out is None:
+            exif = (parsed.images_stats or {}).get("exif_focal")
+            if exif is not None and options.focal_prior_px is None and options.known_K() is None:
+                from dataclasses import replace
+
+                options = replace(options, focal_prior_px=exif["focal_px"])  # a prior the adjustment refines
+                images_document["focal_prior_from_exif"] = exif
             out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
         cameras = [self._camera(camera, parsed) for camera in out.cameras]
         points = [{"track": p.track, **track_document(p.result), "observations": p.observations} for p in out.points]

@@ -16,6 +16,7 @@ from geocert.solvers.fractional.options import FractionalOptions
 AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")
 MAX_EXHAUSTIVE = 200  # images matched every pair with every other at most (19,900 pairs)
 CAMERA_MODELS = ("simple", "varying", "full")
+REGISTRATIONS = ("incremental", "projective")
 
 
 @dataclass
@@ -57,6 +58,15 @@ class ReconstructionOptions(FractionalOptions):
     # Off by default, as guided matching is: the Middlebury ring needs both to register 14 of 14
     # views within a degree, and its figures depend on them (bench/reconstruction_images.py).
     merge_components: bool = False
+    # K unknown: how the views are registered. "incremental", COLMAP's way: the K-known path from a
+    # prior focal length (focal_prior_px, or focal_prior_factor times the larger image side, COLMAP's
+    # default 1.2), refined by bundle adjustment and the path run again from it (at most
+    # focal_prior_rounds times); its cameras then go to the certified upgrade as a projective
+    # reconstruction. "projective": a projective reconstruction from the tracks alone (projective.py).
+    registration: str = "incremental"
+    focal_prior_px: float | None = None
+    focal_prior_factor: float = 1.2
+    focal_prior_rounds: int = 3
     time_limit_s: float = 10.0
     seed: int = 0
 
@@ -79,6 +89,7 @@ class ReconstructionOptions(FractionalOptions):
                      "autocalibration_time_limit_s": {"gt": 0, "le": 3600},
                      "autocalibration_points": {"ge": 10, "le": 100_000},
                      "threshold_px": {"gt": 0, "le": 1000}, "min_inliers": {"ge": 6, "le": 100_000},
+                     "focal_prior_factor": {"gt": 0, "le": 100}, "focal_prior_rounds": {"ge": 1, "le": 10},
                      "seed": {"ge": 0, "le": 2**31 - 1}}
 
     def check(self) -> None:
@@ -91,8 +102,15 @@ class ReconstructionOptions(FractionalOptions):
             raise InputError("options/autocalibration_on_critical_motion", 'must be "skip" or "search"')
         if self.autocalibration not in AUTOCALIBRATION_METHODS:
             raise InputError("options/autocalibration", f"must be one of {', '.join(AUTOCALIBRATION_METHODS)}")
+        if self.registration not in REGISTRATIONS:
+            raise InputError("options/registration", f"must be one of {', '.join(REGISTRATIONS)}")
+        if self.focal_prior_px is not None and not (isinstance(self.focal_prior_px, (int, float))
+                                                    and math.isfinite(self.focal_prior_px)
+                                                    and 0 < self.focal_prior_px <= 1e6):
+            raise InputError("options/focal_prior_px", "must be a positive number of pixels (at most 1e6), or null")
         for name in ("metric_rel_gap", "camera_rel_gap", "autocalibration_rel_gap", "autocalibration_max_nodes",
-                     "autocalibration_time_limit_s", "autocalibration_points", "threshold_px", "min_inliers", "seed"):
+                     "autocalibration_time_limit_s", "autocalibration_points", "threshold_px", "min_inliers",
+                     "focal_prior_factor", "focal_prior_rounds", "seed"):
             value, bounds = getattr(self, name), self.OPTION_RANGES[name]
             if not (math.isfinite(value) and value >= bounds.get("ge", -math.inf) and value > bounds.get("gt", -math.inf)
                     and value <= bounds.get("le", math.inf)):
