@@ -202,12 +202,14 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
         registered = sum(R is not None for R in found.rotations)
         step = {"focal_px": float(focal), "registered": int(registered)}
         history.append(step)
-        if registered < 2 or found.status == "cancelled":
+        if registered < 2:
             break
         start = upgrade.Metric(Ks[0], list(found.rotations), [None if t is None else np.asarray(t, dtype=float)
                                                                for t in found.translations],
                                np.asarray(found.points, dtype=float), [], False)
-        keep = np.concatenate(found.inliers) if found.inliers else np.zeros(0, dtype=bool)
+        if found.status == "cancelled":  # the views registered so far are kept, at the focal length they had
+            metric = start
+            break
         metric, _, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, options.threshold_px, model="simple")
         refined = float(metric.K[0, 0])
         step["refined_focal_px"] = refined
@@ -225,10 +227,17 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
         finite = np.isfinite(metric.points[:, 0])
         points[finite] = np.c_[metric.points[finite], np.ones(int(finite.sum()))]
         inlier = np.concatenate(found.inliers) if found.inliers else inlier
-        inlier &= np.isfinite(points[obs.track, 0])
+        finite = np.isfinite(points[obs.track, 0])
+        inlier &= finite
+        seen_by = np.isin(obs.view, registered)
+        # Every observation counted once, as the projective path counts them.
+        stats.update({"observations": int(len(obs.view)), "observations_kept": int(inlier.sum()),
+                      "outliers_removed": int((seen_by & finite & ~inlier).sum()),
+                      "observations_of_dropped_tracks": int((seen_by & ~finite).sum()),
+                      "observations_of_unregistered_views": int((~seen_by).sum())})
         stats.update({key: value for key, value in found.stats.items()
-                      if key in ("initial_pair", "initial_pair_search", "points", "outliers_removed",
-                                 "rms_reprojection_px", "merged")})
+                      if key in ("initial_pair", "initial_pair_search", "points", "rms_reprojection_px",
+                                 "merged")})
     elif found is not None and found.stats.get("reason"):
         stats["reason"] = found.stats["reason"]
     if found is not None and found.status == "cancelled":
