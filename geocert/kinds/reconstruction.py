@@ -136,6 +136,9 @@ class ReconstructionOptionsIn(Strict):
         _D.registration, description='K unknown: "incremental" (COLMAP\'s way: the K-known path from a prior focal '
                                      'length, refined by bundle adjustment; its cameras start the certified upgrade) '
                                      'or "projective" (a projective reconstruction from the tracks alone)')
+    principal_point: Literal["auto", "centre"] = Field(
+        _D.principal_point, description='K unknown, camera_model "simple": "auto" frees the principal point when the '
+                                        'data fix it (a chi-square test), "centre" holds it at the image centre')
     focal_prior_px: Finite | None = Field(None, gt=0, le=1e6, description='"incremental": the prior focal length '
                                           '(pixels; a prior, refined, not a fact: e.g. from the photos\' EXIF)')
     focal_prior_factor: Finite = Field(_D.focal_prior_factor, **_R["focal_prior_factor"],

@@ -302,3 +302,21 @@ class TestUnknownIntrinsics:
         assert aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations)).max() < 0.5
         rounds = out.stages[0]["focal_rounds"]
         assert rounds[0]["focal_px"] == pytest.approx(768.0) and len(rounds) >= 2
+
+    def test_the_principal_point_is_estimated_when_the_data_fix_it(self):
+        # The principal point 40 px right of and 25 px above the centre, a general motion: freed
+        # by the test, it lands within 3 px; held at the centre ("centre"), the cost is higher.
+        scene = synthetic.scene(views=10, points=200, seed=6, noise_px=0.3, spread_degrees=50.0)
+        K = scene.K.copy()
+        K[0, 2] += 40.0
+        K[1, 2] -= 25.0
+        tracks = [(views, pixels + np.array([40.0, -25.0])) for views, pixels in scene.tracks]  # the moved centre
+        out = pipeline.reconstruct(tracks, [scene.image_size] * 10, ReconstructionOptions(resect_cameras=False))
+        test = out.stages[2]["principal_point"]
+        assert test["estimated"] and test["chi2"] > 13.8
+        pp = np.array(out.summary["calibration"]["K"])[:2, 2]
+        assert np.abs(pp - K[:2, 2]).max() < 3.0
+        held = pipeline.reconstruct(tracks, [scene.image_size] * 10, ReconstructionOptions(
+            resect_cameras=False, principal_point="centre"))
+        assert "principal_point" not in held.stages[2]
+        assert np.abs(np.array(held.summary["calibration"]["K"])[:2, 2] - [320.0, 240.0]).max() < 1e-9

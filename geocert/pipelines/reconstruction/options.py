@@ -64,6 +64,10 @@ class ReconstructionOptions(FractionalOptions):
     # focal_prior_rounds times); its cameras then go to the certified upgrade as a projective
     # reconstruction. "projective": a projective reconstruction from the tracks alone (projective.py).
     registration: str = "incremental"
+    # K unknown, camera_model "simple": "auto" frees the principal point in the adjustment when the
+    # data fix it (a chi-square test on the cost it saves; pipeline._principal_point), "centre"
+    # holds it at the image centre (COLMAP's default).
+    principal_point: str = "auto"
     focal_prior_px: float | None = None
     focal_prior_factor: float = 1.2
     focal_prior_rounds: int = 3
@@ -102,6 +106,8 @@ class ReconstructionOptions(FractionalOptions):
             raise InputError("options/autocalibration_on_critical_motion", 'must be "skip" or "search"')
         if self.autocalibration not in AUTOCALIBRATION_METHODS:
             raise InputError("options/autocalibration", f"must be one of {', '.join(AUTOCALIBRATION_METHODS)}")
+        if self.principal_point not in ("auto", "centre"):
+            raise InputError("options/principal_point", 'must be "auto" or "centre"')
         if self.registration not in REGISTRATIONS:
             raise InputError("options/registration", f"must be one of {', '.join(REGISTRATIONS)}")
         if self.focal_prior_px is not None and not (isinstance(self.focal_prior_px, (int, float))

@@ -249,6 +249,33 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
     return out, metric
 
 
+PRINCIPAL_POINT_CHI2 = 13.8  # chi-square with 2 degrees of freedom at p = 0.001
+
+
+def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold_px: float, image_size):
+    """The principal point estimated when the data fix it: the adjustment again with it free
+    (bundle model "principal"), kept when it lowers the cost on the observations both keep by
+    more than PRINCIPAL_POINT_CHI2 noise variances (the residuals' own, from the freer fit) and
+    lands in the middle half of the image; else the image centre stays. Returns the
+    reconstruction, the observations kept and the test's figures."""
+    trial, trial_keep, _ = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, threshold_px, model="principal")
+    common = keep & trial_keep
+    n = int(common.sum())
+    figures = {"estimated": False, "observations": n, "K_free": trial.K.tolist()}
+    if n < 20:
+        return metric, keep, {**figures, "reason": "too few observations to test"}
+    held, free = _rms(metric, obs, common) ** 2 * n, _rms(trial, obs, common) ** 2 * n
+    variance = max(free / max(2 * n - 3, 1), 1e-4)  # residuals below 0.01 px are rounding, not noise
+    statistic = (held - free) / max(variance, 1e-300)
+    u, v = trial.K[0, 2], trial.K[1, 2]
+    inside = abs(u - image_size[0] / 2) <= image_size[0] / 4 and abs(v - image_size[1] / 2) <= image_size[1] / 4
+    figures.update(chi2=float(statistic), threshold=PRINCIPAL_POINT_CHI2, inside_middle_half=bool(inside))
+    if statistic > PRINCIPAL_POINT_CHI2 and inside:
+        figures["estimated"] = True
+        return trial, trial_keep, figures
+    return metric, keep, figures
+
+
 def _plain(stats: dict) -> dict:
     return {key: value for key, value in stats.items() if key not in ("ba_nfev",)}
 
@@ -345,6 +372,9 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
                 _keep_metric(out, starts[0][1], n_views, stage)
             name, metric, keep, before, trials = adjust_best(starts, obs, keep, options.threshold_px, model)
             stage["starts"] = trials
+            if model == "simple" and options.principal_point == "auto" and image_size is not None:
+                metric, keep, stage["principal_point"] = _principal_point(metric, obs, keep, options.threshold_px,
+                                                                          image_size)
             stage.update(started_from=name, model=model, rms_px_before=before, rms_px_after=_rms(metric, obs, keep),
                          K=metric.K.tolist(), observations_kept=int(keep.sum()))
         else:
