@@ -1,7 +1,7 @@
 """COLMAP (pycolmap, the ``bench`` extra) on a list of photos, in a child process so that its CPU
-time (every thread) is measured and a run past its time limit can be stopped; results cached per
-set, order and configuration in a JSON file under the data root, keyed by pycolmap's version and
-the options used.
+time (every thread) is measured and a run past its time limit can be stopped; results cached in
+a JSON file under the data root, keyed by the photos (names, order and bytes), pycolmap's
+version and the options used.
 
 What runs is COLMAP's default pipeline on the CPU: SIFT extraction (``extract_features``, camera
 mode AUTO, SIMPLE_RADIAL with EXIF focal length when the photo has one, else 1.2 x the larger
@@ -14,6 +14,7 @@ entries, shared by every photo, and the mapper refines none of them.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import resource
 import subprocess
@@ -31,6 +32,15 @@ def version() -> str:
     import pycolmap
 
     return pycolmap.__version__
+
+
+def photos_key(photo_set, names: list[str]) -> str:
+    """The photos in their order: names and a SHA-1 of their bytes (a set whose files were
+    replaced no longer matches its cached results)."""
+    digest = hashlib.sha1()
+    for name in names:
+        digest.update(photo_set.path(name).read_bytes())
+    return f"{len(names)} photos|{'|'.join(names)}|sha1 {digest.hexdigest()}"
 
 
 def options_key(known_K) -> str:

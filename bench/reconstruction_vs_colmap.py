@@ -27,10 +27,10 @@ with geocert; a set whose files are missing is reported with where to get it.
         [--orders file,shuffled,every2] [--seed 0] [--runs colmap,geocert,geocert-readme,geocert-K]
         [--no-colmap | --reuse-colmap] [--timeout 1800] [--json OUT.json]
 
-COLMAP's results are stored in DATA/colmap_cache.json (keyed by set, the photos in their order,
-pycolmap's version and options): --reuse-colmap takes them from there where they are and runs
-COLMAP for the rest; --no-colmap never runs COLMAP (its rows and the CPU ratios come from the
-cache when there).
+COLMAP's results are stored in DATA/colmap_cache.json (keyed by set, the photos in their order
+and a hash of their bytes, pycolmap's version and options): --reuse-colmap takes them from there
+where they are and runs COLMAP for the rest; --no-colmap never runs COLMAP (its rows and the CPU
+ratios come from the cache when there).
 """
 
 from __future__ import annotations
@@ -48,10 +48,12 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import camera_errors, colmap_baseline, photo_sets
+from bench import camera_errors, colmap_baseline, machine_speed_ms, photo_sets
 
 # The README's options for the dinoSparseRing (README, "Photos to tracks, and the K-known path"),
-# the only set the README gives options for.
+# the only set the README gives options for: bench.reconstruction_images.RING_JOB_OPTIONS, not
+# imported from there because that module sets one BLAS thread in this process's environment,
+# which COLMAP's child process would inherit.
 README_OPTIONS = {"min_inliers": 10, "merge_components": True,
                   "features": {"max_features": 0, "contrast_threshold": 0.005, "ratio": 0.85,
                                "ransac_threshold_px": 2.0, "guided_ratio": 0.8}}
@@ -148,7 +150,7 @@ def colmap_run(photo_set, key: str, names, root: Path, known: bool, args) -> dic
     --no-colmap and nothing is cached."""
     K = photo_set.K
     known_K = (K[0, 0], K[1, 1], K[0, 2], K[1, 2]) if known else None
-    cache_key = f"{key}|{len(names)} photos|{'|'.join(names)}|{colmap_baseline.options_key(known_K)}"
+    cache_key = f"{key}|{colmap_baseline.photos_key(photo_set, names)}|{colmap_baseline.options_key(known_K)}"
     if args.reuse_colmap or args.no_colmap:
         if (hit := colmap_baseline.cached(root, cache_key)) is not None:
             return {**hit, "cached": True}
@@ -279,13 +281,14 @@ def main() -> None:
     except ImportError:
         version = "not installed (pip install -e '.[bench]'): COLMAP not run"
         args.runs = [r for r in args.runs if not r.startswith("colmap")]
-    print(f"data {root}; pycolmap {version}; {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f} at start; "
+    print(f"data {root}; pycolmap {version}; {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f} at start, "
+          f"machine speed {machine_speed_ms():.0f} ms (bench.machine_speed_ms); "
           f"geocert's BLAS threads (the workers' environment) {threads}; COLMAP every core; shuffled seed {args.seed}")
     print(HEADER, flush=True)
     records: list = []
     for set_key in args.sets.split(","):
         bench_set(set_key, args, root, records)
-    print(f"load {os.getloadavg()[0]:.1f} at end")
+    print(f"load {os.getloadavg()[0]:.1f} at end, machine speed {machine_speed_ms():.0f} ms")
     if args.json:
         Path(args.json).write_text(json.dumps(records, indent=1, default=float))
 

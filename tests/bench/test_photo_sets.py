@@ -2,6 +2,7 @@
 comparison is tested on synthetic cameras; the loaders on the sets' files when they are present
 (they do not ship with geocert: those tests skip naming the missing folder)."""
 
+import cv2
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -64,6 +65,15 @@ def test_orders():
     assert ring.order("every2") == ["0.png", "2.png", "4.png", "6.png", "8.png"]
     assert sorted(ring.order("shuffled", seed=5)) == sorted(ring.names) != ring.order("shuffled", seed=5)
     assert ring.order("shuffled", seed=5) == ring.order("shuffled", seed=5)
+
+
+@pytest.mark.parametrize("key", ["dinoSparseRing", "templeRing", "templeSparseRing"])
+def test_middlebury_photos_are_as_published(key):
+    """640 x 480, as the ground truth's K is for: a copy turned 90 degrees (one public copy of
+    templeRing is) keeps K's numbers but not their meaning."""
+    ring = loaded(key)
+    for name in ring.names:
+        assert cv2.imread(str(ring.path(name)), cv2.IMREAD_UNCHANGED).shape[:2] == (480, 640), name
 
 
 def test_templering_ground_truth():
