@@ -637,14 +637,8 @@ def _rms(metric: upgrade.Metric, obs: Observations, keep: np.ndarray) -> float |
     m = np.flatnonzero(keep & registered[obs.view] & np.isfinite(metric.points[obs.track, 0]))
     if len(m) == 0:
         return None
-    eye = np.eye(3)
-    R = np.array([eye if r is None else r for r in metric.rotations])
-    t = np.array([np.zeros(3) if x is None else x for x in metric.translations])
-    K = np.array([eye if r is None else upgrade.K_of(metric, v) for v, r in enumerate(metric.rotations)])
-    cam = np.einsum("mij,mj->mi", R[obs.view[m]], metric.points[obs.track[m]]) + t[obs.view[m]]
-    image = np.einsum("mij,mj->mi", K[obs.view[m]], cam)
-    errors = np.sum((image[:, :2] / image[:, 2:3] - obs.pixel[m]) ** 2, axis=1)
-    return float(np.sqrt(np.mean(errors)))
+    _, errors = _depths_and_errors(metric, obs, m)
+    return float(np.sqrt(np.mean(errors ** 2)))
 
 
 def _summarise(out: Reconstruction, tracks, n_views: int) -> None:
