@@ -54,6 +54,11 @@ class AutocalibrationVerification:
     proofs: dict = {}
     domain = "every plane at infinity chirality allows, then every K within the intrinsics ranges"
 
+    @staticmethod
+    def rel_gap_of(options: dict, index: int) -> float:
+        """A stage's tolerance: the affine stage's rel_gap, the metric or direct stage's metric_rel_gap."""
+        return options["rel_gap"] if index == 0 and options.get("method") != "direct" else options["metric_rel_gap"]
+
     def checked_options(self, options: dict) -> dict:
         checked = {name: options.get(name) for name in CLAIM_OPTIONS}
         for name in ("rel_gap", "metric_rel_gap", "abs_gap"):
@@ -167,7 +172,7 @@ class AutocalibrationVerification:
             if not pr.allowed_by_chirality(problem, p):
                 raise Invalid("scope", "the plane at infinity returned is not one chirality allows")
             passed.append("scope")
-            return proofs.check_affine(problem, proof, lower_claimed, passed), options["rel_gap"]
+            return proofs.check_affine(problem, proof, lower_claimed, claimed, passed), options["rel_gap"]
         if proof.get("type") != "stratified_metric":
             raise Invalid("format", "stage 1 takes a stratified_metric proof")
         K = _numbers(claim.get("K"), "K", (3, 3), "claim")
@@ -181,7 +186,7 @@ class AutocalibrationVerification:
         if not mrelax.in_domain(setup, w, lo, hi):
             raise Invalid("scope", "the DIAC returned is outside the domain (box, PSD, or a view's scale range)")
         passed.append("scope")
-        return proofs.check_metric(problem, p, proof, lower_claimed, passed), options["metric_rel_gap"]
+        return proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed), options["metric_rel_gap"]
 
 
 def _direct_setup(problem, options: dict):

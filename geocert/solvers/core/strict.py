@@ -12,6 +12,8 @@ from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import unpack
 from geocert.solvers.core.geometry import InputError, is_number, number_array
 
+SMALLEST_NORMAL = 2.0 ** -1022  # as cones.SMALLEST_NORMAL (this module imports no cone code)
+
 
 class Invalid(Exception):
     """A check failed: ``check`` names it, the message says why."""
@@ -67,14 +69,19 @@ def nesting_depth(value: Any, limit: int) -> int:
 
 
 def dual_vector(text: Any, rows: int, where: str = "a dual vector", check: str = "format") -> np.ndarray:
-    """A dual vector stored as base64 of little-endian float64: exactly ``rows`` finite entries."""
+    """A dual vector stored as base64 of little-endian float64: exactly ``rows`` finite entries,
+    none subnormal (every product of one underflows: the solver writes 0 instead)."""
     if not isinstance(text, str):
         raise Invalid(check, f"{where} must be a base64 string")
+    if len(text) != 4 * ((8 * rows + 2) // 3):  # before decoding: a hostile length costs nothing
+        raise Invalid(check, f"{where} must have {rows} entries")
     try:
         z = unpack(text)
     except ValueError as exc:
         raise Invalid(check, f"{where} is not base64 of float64: {exc}") from exc
     if z is None or z.shape != (rows,) or not np.all(np.isfinite(z)):
         raise Invalid(check, f"{where} must have {rows} finite entries")
+    if np.any((z != 0) & (np.abs(z) < SMALLEST_NORMAL)):
+        raise Invalid(check, f"{where} has a subnormal entry (every product of one underflows)")
     return z
 

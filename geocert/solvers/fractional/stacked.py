@@ -22,7 +22,7 @@ import numpy as np
 
 from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE, TERMS_ROUNDING, residual_rounding
 from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.cones import ConeSpec, _project_rows
+from geocert.solvers.core.cones import ConeSpec, _project_rows, stacked_rounding_margin, subnormal
 from geocert.solvers.core.coverage import uncovered_part
 from geocert.solvers.core.geometry import cost_roundings, lengths, norm_terms, normalised_cameras
 from geocert.solvers.core.strict import Invalid, dual_vector, numbers
@@ -327,16 +327,22 @@ def program_agrees(cams, points, num, den, T, scale, v0, reference, strictness: 
 
 def safe_bounds(Q, A, b, Z, cones: ConeSpec, lower, upper, transform) -> np.ndarray:
     """cones.safe_lower_bounds with a leading axis over tracks: Q (G, p, cols), A (G, rows, cols),
-    b (G, rows), Z (G, p, rows), lower and upper (G, cols), transform (G, d, d)."""
+    b (G, rows), Z (G, p, rows), lower and upper (G, cols), transform (G, d, d); each bound less
+    its rounding (cones.stacked_rounding_margin), subnormal entries of Z read as 0."""
     G, p, rows = Z.shape
+    Z = Z.copy()
+    Z[subnormal(Z)] = 0.0
     with np.errstate(over="ignore", invalid="ignore"):
-        Z = _project_rows(Z.reshape(G * p, rows).copy(), cones).reshape(G, p, rows)
+        Z = _project_rows(Z.reshape(G * p, rows), cones).reshape(G, p, rows)
         residual = Q + np.einsum("gpr,grc->gpc", Z, A)
         d = transform.shape[1]
         residual = np.concatenate([np.einsum("gpc,gcd->gpd", residual[..., :d], transform), residual[..., d:]], axis=2)
         terms = np.minimum(residual * lower[:, None], residual * upper[:, None])
         terms[residual == 0] = 0.0
         bounds = -np.einsum("gpr,gr->gp", Z, b) + terms.sum(axis=2)
+        reach = np.maximum(np.abs(lower), np.abs(upper))
+        bounds = bounds - stacked_rounding_margin(np.abs(np.broadcast_to(Q, residual.shape)), np.abs(A), np.abs(b), Z,
+                                                  reach, np.abs(transform), terms)
     return np.where(np.isfinite(bounds), bounds, -np.inf)
 
 
