@@ -198,6 +198,13 @@ class AutocalibrationKind:
     def parse(self, data: Any, items: range | None = None) -> Parsed:
         return Parsed(*read_data(data))
 
+    def check_options(self, parsed: Parsed, options: pr.AutocalibrationOptions) -> None:
+        if options.method == "direct":  # the programs' chirality pairs, before anything is built
+            from geocert.solvers.autocalibration import direct
+
+            direct.check_size(len(parsed.cameras), 0 if parsed.points is None else len(parsed.points),
+                              options.chirality)
+
     def count(self, parsed: Parsed) -> int:
         return 1
 

@@ -22,7 +22,8 @@ from geocert.solvers.core.cones import rounding_uncounted
 from geocert.solvers.core.certificates import (BOUND_TOLERANCE, FORMAT, OBJECTIVE_TOLERANCE, VERSION, data_hash,
                                                problem_hash)
 from geocert.solvers.core.geometry import InputError, cost_rounding, norm_cost
-from geocert.solvers.core.strict import Invalid, nesting_depth, number as _number
+from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
+                                         informational, number as _number, record, work_budget)
 from geocert.solvers.fractional.results import claim_of
 
 MAX_DEPTH = 64
@@ -172,12 +173,16 @@ def _verify(document: Any, returned: dict | None) -> Report:
 
     items: list = []
     options: dict = {}
+    size = 0
     try:
         # A result holding its certificate is walked once: the certificate nests less deeply.
         holds = returned is not None and returned.get("certificate") is document
         if (not holds and nesting_depth(document, MAX_DEPTH) > MAX_DEPTH) or (
                 returned is not None and nesting_depth(returned, MAX_DEPTH) > MAX_DEPTH):
             raise Invalid("format", f"the document nests deeper than {MAX_DEPTH} levels")
+        size = document_size(returned if returned is not None else document)
+        if returned is not None and not holds:
+            size += document_size(document)
         items = _document_items(document)
         tallies["format"][0] += 1
         options = checked_options(document["kind"], document["options"])
@@ -192,35 +197,9 @@ def _verify(document: Any, returned: dict | None) -> Report:
         fail("data_hash", None, f"the data cannot be hashed: {type(exc).__name__}: {exc}")
         items = []
     adapter = _adapter(document["kind"]) if items else None
-    forget = getattr(adapter, "forget", lambda: None)  # what an adapter remembers of one document
-    forget()
-    try:
-        _verify_items(document, options, items, report, tallies, fail)
-    finally:
-        forget()
-    together = getattr(adapter, "check_claims", None) if first is None and items else None
-    if together is not None:  # what ties a kind's claims to each other (e.g. the stages of one solve)
-        try:
-            together(items, options)
-            tallies["claim"][0] += 1
-        except Invalid as exc:
-            fail(exc.check, None, exc.detail)
-    scoped = getattr(adapter, "scope_of_items", None) if first is None and items else None
-    if scoped is not None and report.scope is not None:  # numbers of the scope each item's proof states
-        report.scope.update(scoped(items))
-    if returned is not None and first is None:
-        try:
-            _check_returned(returned, document)
-            # What else a kind's result returns on the strength of its certificates (e.g. a
-            # reconstruction's cameras, against the camera certificate beside its points').
-            check_result = getattr(_adapter(document["kind"]), "check_result", None)
-            if check_result is not None:
-                check_result(returned, document, lambda other: _verify(other, None))
-            tallies["returned"][0] += 1
-        except Invalid as exc:
-            fail(exc.check, None, exc.detail)
-        except Exception as exc:  # a malformed result is invalid, never a crash
-            fail("returned", None, f"{type(exc).__name__}: {exc}")
+    # The work the document may ask for, in proportion to its size (strict.charge).
+    with work_budget(WORK_PER_UNIT * size + WORK_BASE):
+        _verify_all(document, returned, adapter, options, items, report, tallies, fail)
     report.first_failure = first
     report.valid = first is None and report.items_checked > 0
     if report.discounted and report.scope is not None:
@@ -234,6 +213,47 @@ def _verify(document: Any, returned: dict | None) -> Report:
     report.checks = [{"name": name, "passed": passed, "failed": failed}
                      for name, (passed, failed) in tallies.items() if passed or failed]
     return report
+
+
+def _verify_all(document: dict, returned: dict | None, adapter, options: dict, items: list, report: Report,
+                tallies: dict, fail) -> None:
+    """_verify's checks of the items, of what ties them together, and of the result returning
+    them (failures counted through ``fail``)."""
+    forget = getattr(adapter, "forget", lambda: None)  # what an adapter remembers of one document
+    forget()
+    try:
+        _verify_items(document, options, items, report, tallies, fail)
+    finally:
+        forget()
+    valid = _clean(tallies)
+    together = getattr(adapter, "check_claims", None) if valid and items else None
+    if together is not None:  # what ties a kind's claims to each other (e.g. the stages of one solve)
+        try:
+            together(items, options)
+            tallies["claim"][0] += 1
+        except Invalid as exc:
+            fail(exc.check, None, exc.detail)
+    scoped = getattr(adapter, "scope_of_items", None) if _clean(tallies) and items else None
+    if scoped is not None and report.scope is not None:  # numbers of the scope each item's proof states
+        report.scope.update(scoped(items))
+    if returned is not None and _clean(tallies):
+        try:
+            _check_returned(returned, document)
+            # What else a kind's result returns on the strength of its certificates (e.g. a
+            # reconstruction's cameras, against the camera certificate beside its points').
+            check_result = getattr(_adapter(document["kind"]), "check_result", None)
+            if check_result is not None:
+                check_result(returned, document, lambda other: _verify(other, None))
+            tallies["returned"][0] += 1
+        except Invalid as exc:
+            fail(exc.check, None, exc.detail)
+        except Exception as exc:  # a malformed result is invalid, never a crash
+            fail("returned", None, f"{type(exc).__name__}: {exc}")
+
+
+def _clean(tallies: dict) -> bool:
+    """Whether no check has failed yet."""
+    return not any(failed for _, failed in tallies.values())
 
 
 def _verify_items(document: dict, options: dict, items: list, report: Report, tallies: dict, fail) -> None:
@@ -325,6 +345,11 @@ def _check_returned(result: dict, certificate: dict) -> None:
     _check_summaries(kind, result, certificate)
 
 
+# A summary's fields that explain a result but prove nothing (docs/certificate.md), each of a type.
+SUMMARY_NOTES = {"scope": "text", "note": "text", "order": "integer", "moment_rank": "integer",
+                 "eigenvalue_ratio": "number"}
+
+
 def _check_summaries(kind, result: dict, certificate: dict) -> None:
     """A certified item's certificate summary (its ``certificate`` member) says what its proof
     does: its tolerance is max(abs_gap, rel_gap * cost) with the item's rel_gap, met, and its
@@ -342,6 +367,9 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
         if not isinstance(summary, dict) or claim.get("certified") is not True:
             continue
         where = f"{kind.item_key}/{index}/certificate"
+        for name, what in SUMMARY_NOTES.items():  # what explains a result but proves nothing: typed
+            if name in summary:
+                informational(summary[name], f"{where}/{name}", what)
         if "tolerance" in summary:
             expected = max(float(options.get("abs_gap")), float(rel_gap_of(options, index)) * abs(float(claim["cost"])))
             given = summary["tolerance"]
@@ -457,6 +485,7 @@ def _check_residual_claim(kind: str, adapter, arrays: tuple, options: dict, clai
     if not isinstance(proof, dict):
         raise Invalid("format", "a certified item needs a proof")
     if proof.get("type") == "trivial":  # every cost is a sum of norms, so 0 bounds it
+        record(proof, "proof", ("type",))
         bound = 0.0
     elif proof.get("type") in adapter.proofs:
         bound = adapter.proofs[proof["type"]](item, options, proof, lower_claimed, solution, passed)

@@ -379,3 +379,109 @@ class TestDeterminacyWithinScope:
             assert low <= interval["lower"] <= interval["value"] <= interval["upper"] <= high
             clipped += interval.get("clipped", False)
         assert clipped >= 1
+
+
+class TestVerifierCost:
+    """Class 7: the direct method's verifier built one polynomial row per (point, centre) pair
+    before any size check (10,060 points: 36 s and 1.7 GB). Now every size is checked against its
+    limit before anything is built (direct.MAX_CHIRALITY_PAIRS, the dual vector's length, the
+    autocalibration and bilinear data limits), and a verification pays for the programs it builds
+    from a budget in proportion to the document's size (strict.charge)."""
+
+    @staticmethod
+    def many_points(count: int) -> dict:
+        """The direct certificate with ``count`` copies of its points put first (the same
+        geometry: its exclusion's rows, shifted, still exclude the same orientation)."""
+        document = stored("autocalibration_direct_points")["certificate"]
+        points = document["data"]["points"]
+        document["data"]["points"] = [points[i % len(points)] for i in range(count)] + points
+        for excluded in document["items"][0]["proof"]["excluded"]:
+            excluded["rows"] = [row + count for row in excluded["rows"]]
+        return rehash(document)
+
+    def test_ten_thousand_points_are_refused_before_any_program_is_built(self, monkeypatch):
+        from geocert.solvers.autocalibration import direct_relaxation as dr
+
+        built = []
+        original = dr.build
+        monkeypatch.setattr(dr, "build", lambda cameras, pairs, *a, **k: built.append(
+            0 if pairs is None else len(pairs)) or original(cameras, pairs, *a, **k))
+        document = self.many_points(10_060)
+        failure = refused(document)
+        assert failure["check"] in ("options", "data", "format")
+        assert not [count for count in built if count > 1000], built
+
+    def test_a_short_dual_vector_is_refused_before_its_program_is_built(self, monkeypatch):
+        from geocert.solvers.autocalibration import direct_relaxation as dr
+
+        built = []
+        original = dr.build
+        monkeypatch.setattr(dr, "build", lambda cameras, pairs, *a, **k: built.append(
+            0 if pairs is None else len(pairs)) or original(cameras, pairs, *a, **k))
+        document = self.many_points(1_500)  # within the pair limit
+        for program in document["items"][0]["proof"]["programs"]:
+            program["z"] = pack(np.ones(10))
+        assert refused(document)["check"] == "leaf_bounds"
+        assert not [count for count in built if count > 1000], built
+
+    def test_every_program_is_paid_for_before_it_is_built(self, monkeypatch):
+        """With no budget beyond the document's bare size, a genuine certificate of each kind is
+        refused for its work, never after building a program it could not pay for."""
+        from geocert.solvers.core import strict
+
+        monkeypatch.setattr(strict, "WORK_PER_UNIT", 0)
+        monkeypatch.setattr(strict, "WORK_BASE", 10)
+        import geocert.solvers.verify as verify
+
+        monkeypatch.setattr(verify, "WORK_PER_UNIT", 0)
+        monkeypatch.setattr(verify, "WORK_BASE", 10)
+        for name in ("resection_caps", "bilinear_l1l1", "autocalibration_stratified", "autocalibration_direct"):
+            report = verify_any(stored(name))
+            assert not report.valid and "more work than its size pays for" in report.first_failure["detail"], name
+
+    def test_a_basis_beyond_the_limits_is_refused(self):
+        from geocert.solvers.bilinear import problem as pb
+        from geocert.solvers.core.geometry import InputError
+
+        with pytest.raises(InputError, match="limit"):
+            pb.read_basis([[[0.0, 0.0, float(i)]] * 2 for i in range(pb.MAX_SHAPES + 1)])
+
+
+class TestUnreadFields:
+    """Class 8: fields no check reads (a leaf's own bound beside the recomputed one, sign on a proof
+    that is not a cut, the moment matrix's rank) took NaN, strings, booleans. Now every number in a
+    document must be finite, a proof record has its fields and no other, and each field no check
+    reads is null or of its type (docs/certificate.md lists them as informational)."""
+
+    @staticmethod
+    def cut_proof(result: dict) -> dict:
+        return next(p for region in result["certificate"]["items"][0]["proof"]["regions"] for p in region["proofs"]
+                    if p["kind"] == "cut")
+
+    @pytest.mark.parametrize("value", [float("nan"), "0.5", True, float("inf")])
+    def test_an_affine_proofs_bound(self, value):
+        result = stored("autocalibration_five_views")
+        self.cut_proof(result)["bound"] = value
+        assert refused(result)["check"] == "format"
+
+    @pytest.mark.parametrize("value", [float("nan"), "x", True])
+    def test_sign_on_a_proof_that_is_not_a_cut(self, value):
+        result = stored("autocalibration_stratified")
+        result["certificate"]["items"][1]["proof"]["proofs"][0]["sign"] = value
+        assert refused(result)["check"] == "format"
+
+    @pytest.mark.parametrize("value", [float("nan"), "1", True, 1.5])
+    def test_the_moment_rank(self, value):
+        result = stored("autocalibration_direct")
+        result["certificate"]["items"][0]["proof"]["moment_rank"] = value
+        assert refused(result)["check"] == "format"
+        result = stored("autocalibration_direct")
+        result["stages"][0]["certificate"]["moment_rank"] = value
+        assert refused(result)["check"] in ("format", "returned")
+
+    @pytest.mark.parametrize("name", ["bound", "z"])
+    def test_a_fractional_proofs_unread_fields(self, name):
+        result = stored("resection_node_tightening")
+        proof = next(p for p in result["certificate"]["items"][0]["proof"]["proofs"] if p["kind"] == "tightened")
+        proof[name] = True
+        assert refused(result)["check"] == "format"

@@ -246,17 +246,32 @@ def scalar_rows(moments: Moments, polys: list[dict], degree: int = 0) -> sp.coo_
 
 
 def linear_rows(moments: Moments, coefficients: np.ndarray) -> sp.coo_matrix:
-    """Rows of cubic forms given by (k, 4, 4) symmetric matrices S_k: sum_ab S_k,ab adj(Q)_ab."""
+    """Rows of cubic forms given by (k, 4, 4) symmetric matrices S_k: sum_ab S_k,ab adj(Q)_ab:
+    the weights (S_ab, or S_ab + S_ba off the diagonal) of adj(Q)'s ten upper entries times their
+    polynomials' coefficients, summed in that order (one sparse product for all k rows: a row
+    costs about a hundred nonzeros, not a polynomial built term by term)."""
+    a, b, C = _adjugate_matrix(moments.order)
+    weights = coefficients[:, a, b] + np.where(a == b, 0.0, coefficients[:, b, a])
+    rows = (sp.csr_matrix(weights) @ C).tocoo()
+    keep = rows.data != 0
+    return sp.coo_matrix((rows.data[keep], (rows.row[keep], rows.col[keep])), shape=rows.shape)
+
+
+@functools.lru_cache(maxsize=4)
+def _adjugate_matrix(order: int) -> tuple[np.ndarray, np.ndarray, sp.csr_matrix]:
+    """adj(Q)'s upper entries (a, b) and the (10, moments) matrix of their polynomials."""
+    moments = Moments(order)
     adj = polynomials()["adj"]
-    polys = []
-    for S in coefficients:
-        p: dict = {}
-        for (a, b), entry in adj.items():
-            weight = S[a, b] if a == b else S[a, b] + S[b, a]
-            for e, c in entry.items():
-                p[e] = p.get(e, 0.0) + weight * c
-        polys.append(p)
-    return scalar_rows(moments, polys)
+    rows, cols, values = [], [], []
+    for t, entry in enumerate(adj.values()):
+        exps, coefs = poly(entry)
+        rows.append(np.full(len(coefs), t))
+        cols.append(moments.index(exps))
+        values.append(coefs)
+    C = sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(len(adj), len(moments.exps)))
+    keys = np.array(list(adj))
+    return keys[:, 0], keys[:, 1], C
 
 
 # --- the program ----------------------------------------------------------------------------

@@ -25,7 +25,8 @@ from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import pack
 from geocert.solvers.core.cones import SMALLEST_NORMAL, proves_infeasible, safe_lower_bound
-from geocert.solvers.core.strict import Invalid, dual_vector, number as _number, numbers as _numbers
+from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
+                                         numbers as _numbers, record)
 from geocert.solvers.core.coverage import SIDE_TOLERANCE, extended, uncovered_part, widened
 
 MAX_LEAVES = 200_000
@@ -86,14 +87,15 @@ def _read_box(value: Any, where: str, d: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, unit: float, d: int,
-                 build_capped=None, proven: Box | None = None) -> float:
+                 build_capped=None, proven: Box | None = None, size: int = 1) -> float:
     """The smallest bound the leaves prove over the root box, in cost units: they must cover it,
     and each leaf's proof is rebuilt and rechecked. ``build(lo, hi, cap)`` gives the leaf's
     program (or None: no point of the domain in that box); ``build_capped`` the same with the
     cost capped, for "cut" proofs (a box's tightening: no point of it costing at most the cap
     lies beyond ``value`` along ``axis``, so the leaves beyond it are closed at the cap).
     ``proven``: the root box as its tightening proves it (the claimed one widened by rounding),
-    to whose faces the boxes on the claimed root box's faces reach (coverage.extended). A leaf
+    to whose faces the boxes on the claimed root box's faces reach (coverage.extended). ``size``:
+    the work a program costs (strict.charge: its views and rows), paid before each is built. A leaf
     beyond its cut but for the cut's rounding (within coverage.SIDE_TOLERANCE of the root box's
     size: certificates written before the cut counted it) is cut back to the proven value, and
     the boxes on its inner face are extended over the sliver (_moved_faces)."""
@@ -104,8 +106,11 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
         raise Invalid("format", f"proofs and leaves must be lists (1 to {MAX_LEAVES} leaves)")
     boxes, caps = [], []
     for i, item in enumerate(proofs):
-        if not isinstance(item, dict):
-            raise Invalid("format", f"proofs/{i} must be an object")
+        record(item, f"proofs/{i}", ("box", "upper_bound", "kind", "z", "bound"),
+               ("axis", "sign") if isinstance(item, dict) and item.get("kind") == "cut" else ())
+        # Not read: a leaf's bound is recomputed, a box without the domain needs no vector.
+        informational(item.get("bound"), f"proofs/{i}/bound")
+        informational(item.get("z"), f"proofs/{i}/z", "text")
         boxes.append(extended(*_read_box(item.get("box"), f"proofs/{i}/box", d), claimed, proven))
         caps.append(_number(item.get("upper_bound"), f"proofs/{i}/upper_bound", "format"))
     leaf_lo = np.empty((len(leaves), d))
@@ -121,6 +126,7 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
     if uncovered_part(claimed, leaf_lo, leaf_hi) is not None:
         raise Invalid("coverage", "the leaves do not cover the box searched")
     leaf_lo, leaf_hi = extended(leaf_lo, leaf_hi, claimed, proven)
+    charge(size * len(proofs), "the leaves' programs")
     cuts = {i: _cut_value(item, boxes[i], caps[i], d, build_capped) for i, item in enumerate(proofs)
             if isinstance(item, dict) and item.get("kind") == "cut"}
     size = float(np.max(np.abs(np.concatenate([proven.lo, proven.hi, proven.hi - proven.lo]))))
@@ -232,6 +238,7 @@ def _moved_faces(leaves: list, cuts: dict, boxes: list, leaf_lo: np.ndarray, lea
 def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
     """The bound an affine proof establishes over every plane chirality allows."""
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
+    record(proof, "proof", ("type", "regions", "excluded"))
     regions, excluded = proof.get("regions"), proof.get("excluded")
     if not isinstance(regions, list) or not isinstance(excluded, list):
         raise Invalid("format", "an affine proof has regions and excluded")
@@ -239,12 +246,14 @@ def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float
                     + [e.get("delta") for e in excluded if isinstance(e, dict)])
     if deltas != [-1.0, 1.0]:
         raise Invalid("root_region", "each orientation (delta = +1 and -1) needs a region or an exclusion")
-    for item in excluded:
+    for i, item in enumerate(excluded):
+        record(item, f"excluded/{i}", ("delta", "rows"))
         rows = frames.chirality_rows(problem.norm, float(item["delta"]))
         if not frames.exact_gordan(rows, _int_list(item.get("rows"), "excluded/rows")):
             raise Invalid("root_region", f"orientation {item['delta']:+g}: the rows do not exclude it")
     bound = math.inf
     for i, region in enumerate(regions):
+        record(region, f"regions/{i}", ("delta", "frame", "rows", "box", "basis", "unit", "proofs", "leaves"))
         delta = float(region["delta"])
         G = _numbers(region.get("frame"), f"regions/{i}/frame", (4, 4))
         if not np.linalg.cond(G) < 1e12:
@@ -274,13 +283,15 @@ def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float
         unit = checked_unit(region.get("unit"), f"regions/{i}/unit", claimed_cost)
         setup = arelax.AffineSetup(coef, frames.plane_map(G, delta), a[used], b[used], unit)
         bound = min(bound, check_leaves(region, lo, hi, lambda l, h, c: arelax.build(setup, l, h, c), unit, 3,
-                                        lambda l, h, c: arelax.build(setup, l, h, c, cap_row=True)))
+                                        lambda l, h, c: arelax.build(setup, l, h, c, cap_row=True),
+                                        size=len(problem.norm.cameras) + len(used)))
     passed += ["root_region", "coverage", "leaf_bounds"]
     return bound
 
 
 def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
     """The bound a metric proof establishes over every omega of the domain, for the plane p."""
+    record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"))
     setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
     setup.unit = checked_unit(proof.get("unit"), "unit", claimed_cost)
     lo, hi = mrelax.omega_box(problem.unit_ranges)
@@ -289,8 +300,7 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
     if not isinstance(rounds, list):
         raise Invalid("format", "tightening must be a list")
     for n, round_ in enumerate(rounds):
-        if not isinstance(round_, dict):
-            raise Invalid("format", f"tightening/{n} must be an object")
+        record(round_, f"tightening/{n}", ("cap", "box_in", "box_out", "duals"))
         lo_in, hi_in = _read_box(round_.get("box_in"), f"tightening/{n}/box_in", 5)
         if not (np.array_equal(lo_in, lo) and np.array_equal(hi_in, hi)):
             raise Invalid("tightening", f"tightening/{n} does not start from the box before it")
@@ -298,6 +308,7 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
         if not cap >= lower_claimed:
             raise Invalid("tightening", f"tightening/{n}: its cap is below the lower bound claimed")
         lo_out, hi_out = _read_box(round_.get("box_out"), f"tightening/{n}/box_out", 5)
+        charge(len(problem.norm.cameras), f"tightening/{n}")
         program = mrelax.build(setup, proven_lo, proven_hi, cap, cap_row=True)
         duals = round_.get("duals")
         if program is None or not isinstance(duals, list) or len(duals) != 10:
@@ -330,7 +341,8 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
         raise Invalid("root_region", "the box searched is not the last tightening's")
     passed += ["root_region", "tightening"]
     bound = check_leaves(proof, lo, hi, lambda l, h, c: mrelax.build(setup, l, h, c), setup.unit, 5,
-                         lambda l, h, c: mrelax.build(setup, l, h, c, cap_row=True), Box(proven_lo, proven_hi))
+                         lambda l, h, c: mrelax.build(setup, l, h, c, cap_row=True), Box(proven_lo, proven_hi),
+                         len(problem.norm.cameras))
     passed += ["coverage", "leaf_bounds"]
     return bound
 

@@ -13,10 +13,16 @@ from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.autocalibration import proofs
 from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.geometry import InputError, number_array
-from geocert.solvers.core.strict import Invalid, number as _number, numbers as _numbers
+from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers
 
 CLAIM_OPTIONS = ("method", "intrinsics", "rel_gap", "metric_rel_gap", "abs_gap", "chirality", "varying_focal",
                  "relaxation_order")
+# Sizes served (the parser's and the verifier's, checked before anything is built): the stages
+# build programs of a few rows a camera and one chirality row a point, and a result's upgrade is
+# judged on every point in every camera.
+MAX_CAMERAS = 1000
+MAX_POINTS = 100_000
+MAX_OBSERVATIONS = 2_000_000  # cameras times points
 
 
 def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, float] | None]:
@@ -30,6 +36,13 @@ def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, fl
             raise InputError(f"data/{key}", "unknown field (known: cameras, points, image_size)")
     if "cameras" not in data:
         raise InputError("data/cameras", "is required")
+    counts = [len(data[name]) if isinstance(data.get(name), list) else 0 for name in ("cameras", "points")]
+    for name, count, limit in (("cameras", counts[0], MAX_CAMERAS), ("points", counts[1], MAX_POINTS)):
+        if count > limit:
+            raise InputError(f"data/{name}", f"{count} {name} exceed the limit of {limit:,}")
+    if counts[0] * counts[1] > MAX_OBSERVATIONS:
+        raise InputError("data/points", f"{counts[0]} cameras times {counts[1]} points exceed the limit of "
+                                        f"{MAX_OBSERVATIONS:,}")
     cameras = number_array(data["cameras"], "data/cameras", "a list of 3x4 numeric matrices", 3)
     check_reconstruction(cameras)
     points = None
@@ -193,6 +206,9 @@ def _direct_setup(problem, options: dict):
     from geocert.solvers.autocalibration import direct
 
     try:
+        points = 0 if problem.norm.points is None else len(problem.norm.points)
+        direct.check_size(len(problem.norm.cameras), points, options["chirality"])
+        charge(direct.chirality_pair_count(len(problem.norm.cameras), points, options["chirality"]), "chirality pairs")
         return direct.setup_for(problem, options["chirality"], exclude=False)
     except InputError as exc:
         raise Invalid("options", f"{exc.field}: {exc.reason}") from exc

@@ -18,7 +18,8 @@ from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERAN
 from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
 from geocert.solvers.core.coverage import extended, uncovered_part, widened
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.core.strict import Invalid, dual_vector, number as _number, numbers as _numbers
+from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
+                                         numbers as _numbers, record as _record)
 
 CLAIM_OPTIONS = ("norm", "coefficients", "camera", "coefficient_bound", "camera_bound", "rel_gap", "abs_gap")
 MAX_ROUNDS = 64  # the solver's half rounds (search.TIGHTENING_ROUNDS) with room
@@ -60,14 +61,31 @@ class BilinearVerification:
                              f"and coefficients returned are in that scope and cost cost (within a relative "
                              f"{OBJECTIVE_TOLERANCE:g})"}
 
+    def __init__(self):
+        # The basis of the document being verified (its list, kept alive so that its identity is
+        # not reused, and its array): every frame shares it, so it is read once, not once a frame
+        # (the verifier forgets it at the start and end of each document, as TrackItems does).
+        self._basis: tuple[object, np.ndarray] | None = None
+
+    def forget(self) -> None:
+        self._basis = None
+
     def read(self, data: Any, index: int):
+        if not isinstance(data, dict) or not isinstance(index, int):
+            raise Invalid("data", "data must be an object with basis and frames")
+        frames = data.get("frames")
+        if not isinstance(frames, list) or not 0 <= index < len(frames):
+            raise Invalid("format", f"item {index} is not a frame of the data")
         try:
-            basis, frames = pb.read_data(data, range(index, index + 1) if isinstance(index, int) else None)
+            remembered = self._basis
+            if remembered is None or remembered[0] is not data.get("basis"):
+                basis, _ = pb.read_data(data, range(0))
+                basis.setflags(write=False)
+                self._basis = remembered = (data.get("basis"), basis)
+            basis = remembered[1]
+            return basis, pb.read_frame(frames[index], index, basis.shape[1], basis.shape[0])
         except InputError as exc:
             raise Invalid("data", f"{exc.field}: {exc.reason}") from exc
-        except IndexError:
-            raise Invalid("format", f"item {index} is not a frame of the data") from None
-        return basis, frames[index]
 
     def check_claim(self, arrays, options: dict, claim: dict, claimed: float, lower_claimed: float,
                     passed: list) -> tuple[float, float]:
@@ -86,6 +104,7 @@ class BilinearVerification:
         if not isinstance(proof, dict):
             raise Invalid("format", "a certified item needs a proof")
         if proof.get("type") == "trivial":  # every cost is a sum of non-negative terms
+            _record(proof, "proof", ("type",))
             passed.append("scope")
             return 0.0, options["rel_gap"]
         if proof.get("type") != "bilinear_bnb":
@@ -146,6 +165,7 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
                  lower_claimed: float, passed: list) -> float:
     """The lower bound (caller's units) a bilinear_bnb proof establishes."""
     norm, K = options["norm"], basis.shape[0]
+    _record(proof, "proof", ("type", "camera_box", "tightening", "node_tightening", "proofs", "leaves"))
     frame = pb.normalise(basis, points)
     unit = pb.cost_unit(frame, norm)
     # Only points costing less than the claimed lower bound need excluding (as for the other kinds).
@@ -162,6 +182,7 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
         raise Invalid("scope", "the camera returned is outside the camera box of the scope")
     passed.append("scope")
     relaxation = Relaxation(frame.X, frame.u, norm, options["coefficients"], options["coefficient_bound"])
+    size = frame.X.shape[0] * frame.X.shape[1]  # basis shapes times points seen: a relaxation's rows
     passed.append("program")
 
     box_lo = np.concatenate([scope_lo, np.full(K, relaxation.alpha_range[0])])
@@ -173,6 +194,7 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
     # widened to its sides' proven values: coverage.widened), on which the next is built.
     proven = (box_lo, box_hi)
     for number, round_ in enumerate(rounds):
+        charge(size, f"tightening round {number}")
         (box_lo, box_hi), proven = _check_round(relaxation, round_, (box_lo, box_hi), proven, cap, number)
     search, alpha_lo, alpha_hi = Box(box_lo[:6], box_hi[:6]), proven[0][6:], proven[1][6:]
     searched = Box(proven[0][:6], proven[1][:6])
@@ -198,8 +220,9 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
 
     proven, boxes = [], []
     for number, record in enumerate(proofs):
-        if not isinstance(record, dict):
-            raise Invalid("format", f"proof {number} must be an object")
+        _record(record, f"proofs/{number}", ("box", "upper_bound", "kind", "z", "bound", "alpha_from"))
+        informational(record.get("bound"), f"proofs/{number}/bound")  # read for a dual proof only
+        informational(record.get("z"), f"proofs/{number}/z", "text")  # read with a vector only
         # Boxes on the searched box's faces reach its proven faces (coverage.extended).
         lo, hi = extended(*_numbers(record.get("box"), f"proofs/{number}/box", (2, 6)), search, searched)
         boxes.append((lo, hi))
@@ -217,6 +240,7 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
             raise Invalid("leaf_bounds", f"proof {number}: its box is not inside the box its coefficients' range "
                                          "was proven for")
         kind = record.get("kind")
+        charge(size, f"proof {number}")
         if kind == "alpha_empty":  # the tightening proved that no coefficient vector fits within the cap
             if np.all(a_lo <= a_hi):
                 raise Invalid("leaf_bounds", f"proof {number}: its coefficients' range is not empty")
@@ -277,8 +301,7 @@ def _check_node_tightening(relaxation: Relaxation, records: Any, search: tuple[B
     out: list = []
     records_alpha: list = []  # each record's coefficients' box as claimed
     for number, record in enumerate(records):
-        if not isinstance(record, dict):
-            raise Invalid("format", f"node tightening {number} must be an object")
+        _record(record, f"node_tightening/{number}", ("parent", "upper_bound", "box_in", "box_out", "duals"))
         parent = record.get("parent")
         if parent is None:
             within, (a_lo, a_hi) = (proven.lo, proven.hi), alpha
@@ -305,6 +328,7 @@ def _check_node_tightening(relaxation: Relaxation, records: Any, search: tuple[B
         duals = record.get("duals")
         if not isinstance(duals, list) or len(duals) != 2 * K:
             raise Invalid("tightening", f"node tightening {number}: {K} coefficients need {2 * K} dual vectors")
+        charge(relaxation.X.shape[0] * relaxation.X.shape[1], f"node tightening {number}")
         data = relaxation.conic_data(camera[0], camera[1], ub, a_lo, a_hi)
         if data is None:
             raise Invalid("tightening", f"node tightening {number}: its box holds no point within its cap")
@@ -323,8 +347,7 @@ def _check_round(relaxation: Relaxation, round_: Any, box: tuple, proven: tuple,
     ``proven``, as proven), every point costing at most upper_bound has (M, alpha) within box_out;
     each side moved is the safe bound of its dual vector. Returns box_out as claimed and as
     proven (coverage.widened)."""
-    if not isinstance(round_, dict):
-        raise Invalid("format", f"tightening round {number} must be an object")
+    _record(round_, f"tightening/{number}", ("upper_bound", "box_in", "box_out", "duals"))
     box_lo, box_hi = box
     d = len(box_lo)
     ub = _number(round_.get("upper_bound"), f"tightening/{number}/upper_bound")

@@ -15,7 +15,8 @@ from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import BOUND_TOLERANCE, TERMS_ROUNDING
 from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
 from geocert.solvers.core.coverage import extended, uncovered_part, widened
-from geocert.solvers.core.strict import Invalid, box as _box, dual_vector, number as _number, numbers as _numbers
+from geocert.solvers.core.strict import (Invalid, box as _box, charge, dual_vector, informational, number as _number,
+                                         numbers as _numbers, record)
 from geocert.solvers.fractional.relaxation import (Relaxation, cost_unit, gamma_for, residual_region, root_bounds,
                                                    tightening_objective, with_cost_cap)
 
@@ -32,6 +33,8 @@ def verify_search(item, options: dict, proof: dict, lower_claimed: float, soluti
                    passed: list[str]) -> float:
     """The lower bound (caller's units) the search's proof establishes."""
     program, norm = item.program, item.norm
+    record(proof, "proof", ("type", "scale", "root", "tightening", "search_box", "proofs", "leaves"),
+           ("relaxation", "caps"))
     scale = _number(proof.get("scale"), "proof/scale")
     if not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]:
         raise Invalid("program", f"scale must lie in {SCALE_RANGE}")
@@ -45,9 +48,7 @@ def verify_search(item, options: dict, proof: dict, lower_claimed: float, soluti
     check_program(item, solution, scale)
     passed.append("program")
 
-    root = proof.get("root")
-    if not isinstance(root, dict):
-        raise Invalid("format", "proof/root must be an object")
+    root = record(proof.get("root"), "proof/root", ("gamma", "functionals", "claim", "bounds", "duals"))
     d = program.dim
     F = _numbers(root.get("functionals"), "proof/root/functionals", (d, d))
     search_box_raw = proof.get("search_box")
@@ -153,6 +154,7 @@ def check_program(item, solution, scale: float, strictness: float = 1.0) -> None
     v0 = item.to_program(solution)
     if v0 is None:
         raise Invalid("program", "the solution lies outside the program's chart")
+    charge(9 * len(item.program.den), "the program check")
     samples = np.vstack([v0] + [v0 + step * (1 + np.abs(v0)) for step in _sample_steps(len(v0))])
     numerators, depths = item.raw_parts_many(samples)  # (n, N, m), (n, N)
     V = np.hstack([samples, np.ones((len(samples), 1))])
@@ -191,6 +193,7 @@ def _check_root(program, F: np.ndarray, gamma: float, needed: float, root: dict,
     must be a point of R well inside ``claim``."""
     if not gamma >= needed:
         raise Invalid("root_region", f"gamma {gamma!r} is below the residual bound {needed!r} of the claimed lower bound")
+    charge(len(program.den), "the root region")
     region = residual_region(program, gamma)
     claim_lo, claim_hi = _numbers(root.get("claim"), "proof/root/claim", (2, len(F)))
     V = np.append(witness, 1.0)
@@ -229,8 +232,7 @@ def _check_round(relaxation: Relaxation, round_: Any, box: Box, proven_box: Box,
     """A tightening round from the previous round's box (``box`` as claimed, ``proven_box`` as
     proven): its box_out as claimed, and as proven (its relaxation is built on the proven box in,
     and each side claimed is widened to the proven one: coverage.widened)."""
-    if not isinstance(round_, dict):
-        raise Invalid("format", f"tightening round {number} must be an object")
+    record(round_, f"tightening round {number}", ("upper_bound", "box_in", "box_out", "duals"))
     k = len(box.lo)
     ub = _number(round_.get("upper_bound"), f"tightening/{number}/upper_bound")
     box_in = _box(round_.get("box_in"), f"tightening/{number}/box_in", k)
@@ -272,8 +274,7 @@ def _check_caps(relaxation: Relaxation, rounds: Any, box: Box, proven_box: Box, 
     others = np.zeros(count)
     for number, round_ in enumerate(rounds):
         where = f"caps round {number}"
-        if not isinstance(round_, dict):
-            raise Invalid("format", f"{where} must be an object")
+        record(round_, where, ("upper_bound", "box", "observations", "duals"))
         ub = _number(round_.get("upper_bound"), f"caps/{number}/upper_bound")
         if not ub >= cap:
             raise Invalid("tightening", f"{where} assumed a cost cap below the claimed lower bound")
@@ -289,6 +290,7 @@ def _check_caps(relaxation: Relaxation, rounds: Any, box: Box, proven_box: Box, 
         if not isinstance(duals, list) or len(duals) != len(observations):
             raise Invalid("tightening", f"{where}: one dual vector (or null) per observation")
         relaxation.others = in_force[-1]
+        charge(len(relaxation.program.den), where)
         data = relaxation.conic_data(round_box, ub)
         if data is None:
             raise Invalid("tightening", f"{where}: no depth is positive on its box")
@@ -314,6 +316,7 @@ def _proven_sides(relaxation: Relaxation, box: Box, ub: float, duals: list, wher
     ``ub``, as the dual vectors prove it (``duals[2 i]`` the low side, ``duals[2 i + 1]`` the
     high one); a side without a dual is unbounded."""
     k = len(box.lo)
+    charge(len(relaxation.program.den), where)
     data = relaxation.conic_data(box, ub, envelope=False)
     if data is None:
         raise Invalid(check, f"{where}: no depth is positive on its box")
@@ -344,8 +347,11 @@ def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_
     boxes: list[Box] = []
     ranges: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # tightened proofs' proven ranges
     for number, proof in enumerate(proofs):
-        if not isinstance(proof, dict):
-            raise Invalid("format", f"proof {number} must be an object")
+        record(proof, f"proofs/{number}", ("box", "upper_bound", "kind", "z", "bound"),
+               ("duals", "caps") if proof.get("kind") == "tightened" else ("caps",))
+        # Read only for a dual proof (its bound) or with a dual vector (z): otherwise informational.
+        informational(proof.get("bound"), f"proofs/{number}/bound")
+        informational(proof.get("z"), f"proofs/{number}/z", "text")
         box = _box(proof.get("box"), f"proofs/{number}/box", k)
         box = Box(*extended(box.lo, box.hi, *faces))
         boxes.append(box)
@@ -356,6 +362,7 @@ def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_
         if not ub >= cap:
             raise Invalid("leaf_bounds", f"proof {number} assumed a cost cap below the claimed lower bound")
         kind = proof.get("kind")
+        charge(len(relaxation.program.den), f"proof {number}")
         rounds = proof.get("caps", 0)
         if not (type(rounds) is int and 0 <= rounds < len(others)):
             raise Invalid("format", f"proof {number}: caps must name a round of caps (0: none)")
