@@ -485,3 +485,56 @@ class TestUnreadFields:
         proof = next(p for p in result["certificate"]["items"][0]["proof"]["proofs"] if p["kind"] == "tightened")
         proof[name] = True
         assert refused(result)["check"] == "format"
+
+
+def exact_homography_minimum(source: np.ndarray, target: np.ndarray, matrix: np.ndarray, offset: np.ndarray) -> float:
+    """The L2L2 minimum of a homography whose source lies near ``offset``, computed on the source
+    moved to the origin (exact: the coordinates are within a factor 2 of the offset) from the
+    matrix given, polished by Levenberg-Marquardt: an independent judge of a claimed bound."""
+    import scipy.optimize
+
+    shifted = source - offset
+    move = np.eye(3)
+    move[:2, 2] = offset
+
+    def residuals(h):
+        p = np.c_[shifted, np.ones(len(shifted))] @ h.reshape(3, 3).T
+        return (target - p[:, :2] / p[:, 2:]).ravel()
+
+    start = matrix @ move
+    fit = scipy.optimize.least_squares(residuals, (start / np.linalg.norm(start)).ravel(), method="lm", xtol=1e-15,
+                                       ftol=1e-15, gtol=1e-15)
+    return float((fit.fun ** 2).sum())
+
+
+class TestFarFromTheOrigin:
+    """Class 9: a verified homography claim 1.1e-8 (relative) above the exact minimum, its source
+    1e6 from the origin: a proof bounds the program the verifier builds, which is the data's
+    problem only up to rounding. Now the bound is lowered by the program's distance from the data
+    at the solution (proof.program_discount), in the verifier and the solvers alike."""
+
+    OFFSET = np.array([1e6, 1.3e6])
+
+    def test_the_stored_over_claim_is_read_as_what_is_proven(self):
+        result = stored("homography_far_from_origin")  # as the solver wrote it before
+        claim = result["certificate"]["items"][0]
+        data = result["certificate"]["data"]["maps"][0]
+        exact = exact_homography_minimum(np.array(data["source"]), np.array(data["target"]),
+                                         np.array(claim["matrix"]), self.OFFSET)
+        assert claim["lower_bound"] > exact * (1 + 1e-9)  # the over-claim
+        report = verify_any(result)
+        standing = {entry["item"]: entry["proven"] for entry in (report.scope or {}).get("discounted", [])}
+        assert not report.valid or standing.get(0, claim["lower_bound"]) <= exact
+
+    def test_a_new_claim_is_below_the_exact_minimum_and_verifies(self):
+        from geocert.batch import solve_job
+
+        data = stored("homography_far_from_origin")["certificate"]["data"]
+        result = solve_job({"kind": "homography", "data": data, "options": {"norm": "L2L2", "certificate": "full"}})
+        claim = result["certificate"]["items"][0]
+        assert claim["certified"]
+        exact = exact_homography_minimum(np.array(data["maps"][0]["source"]), np.array(data["maps"][0]["target"]),
+                                         np.array(claim["matrix"]), self.OFFSET)
+        assert claim["lower_bound"] <= exact
+        report = verify_any(result)
+        assert report.valid and not report.scope.get("discounted"), report.first_failure

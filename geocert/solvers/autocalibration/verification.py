@@ -68,6 +68,12 @@ class AutocalibrationVerification:
     domain = "every plane at infinity chirality allows, then every K within the intrinsics ranges"
 
     @staticmethod
+    def job_outcomes(result: dict) -> list:
+        """One item, certified when every stage is (its status is the job's own)."""
+        stages = result.get("stages") or []
+        return [(None, bool(stages) and all(isinstance(s, dict) and s.get("certified") is True for s in stages))]
+
+    @staticmethod
     def rel_gap_of(options: dict, index: int) -> float:
         """A stage's tolerance: the affine stage's rel_gap, the metric or direct stage's metric_rel_gap."""
         return options["rel_gap"] if index == 0 and options.get("method") != "direct" else options["metric_rel_gap"]

@@ -59,6 +59,11 @@ def rounding_uncounted():
         _COUNTED.reset(token)
 
 
+def rounding_counted() -> bool:
+    """Whether bounds count their rounding here (always, but within rounding_uncounted)."""
+    return _COUNTED.get()
+
+
 def gamma(n: int) -> float:
     """Higham's gamma_n: a sum of n products in floating point (any order) differs from the
     exact sum by at most gamma_n times the sum of the products' magnitudes, plus underflow."""

@@ -13,7 +13,8 @@ import numpy as np
 
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import BOUND_TOLERANCE, TERMS_ROUNDING
-from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
+from geocert.solvers.core.geometry import cost_rounding
+from geocert.solvers.core.cones import proves_infeasible, rounding_counted, safe_lower_bound
 from geocert.solvers.core.coverage import extended, uncovered_part, widened
 from geocert.solvers.core.strict import (Invalid, box as _box, charge, dual_vector, informational, number as _number,
                                          numbers as _numbers, record)
@@ -45,7 +46,7 @@ def verify_search(item, options: dict, proof: dict, lower_claimed: float, soluti
     # hold for them, so its cost cap may be anything not below that bound (less the relative
     # tolerance: a cap of 0 would prove nothing of a positive bound, whatever the scale).
     cap = max(0.0, lower_claimed * unit * (1 - BOUND_TOLERANCE))
-    check_program(item, solution, scale)
+    allowed = check_program(item, solution, scale)
     passed.append("program")
 
     root = record(proof.get("root"), "proof/root", ("gamma", "functionals", "claim", "bounds", "duals"))
@@ -104,7 +105,12 @@ def verify_search(item, options: dict, proof: dict, lower_claimed: float, soluti
     leaf_lo, leaf_hi = extended(leaf_lo, leaf_hi, search_box, searched)
     bounds = _check_leaf_proofs(relaxation, proofs, leaves, leaf_lo, leaf_hi, cap, k, others, (search_box, searched))
     passed.append("leaf_bounds")
-    return min(bounds) / unit if bounds else math.inf
+    if not bounds:
+        return math.inf
+    # The program's bound, for the data's problem: lowered by the program's distance from it.
+    with np.errstate(invalid="ignore"):  # an observation not compared: no bound beyond the program's
+        discount = program_discount(item, solution, item.raw_residuals(solution)[0], allowed)
+    return min(bounds) / unit - (discount if math.isfinite(discount) else math.inf)
 
 
 @functools.lru_cache(maxsize=32)
@@ -142,7 +148,7 @@ def track_uncertainty(cameras: np.ndarray, solution: np.ndarray) -> np.ndarray:
                                 np.einsum("...nij,...j->...ni", np.abs(cameras), np.abs(solution)))
 
 
-def check_program(item, solution, scale: float, strictness: float = 1.0) -> None:
+def check_program(item, solution, scale: float, strictness: float = 1.0) -> np.ndarray:
     """The program rebuilt from the data is the data's problem: at the solution and at points
     around it, its residuals and depth signs are the raw data's. A program is a ratio of affine
     maps, so agreement at generic points means agreement everywhere. All the points are compared
@@ -150,7 +156,8 @@ def check_program(item, solution, scale: float, strictness: float = 1.0) -> None
 
     ``strictness`` scales the tolerances: the solvers ask this of their own results with 0.5
     before certifying them, so that a verifier whose rebuilt program differs in its last bits
-    (the batched path builds its charts on stacked arrays) still accepts every claim made."""
+    (the batched path builds its charts on stacked arrays) still accepts every claim made.
+    Returns the allowance at the solution (what program_discount reads)."""
     v0 = item.to_program(solution)
     if v0 is None:
         raise Invalid("program", "the solution lies outside the program's chart")
@@ -183,6 +190,47 @@ def check_program(item, solution, scale: float, strictness: float = 1.0) -> None
     for row, mask in zip(relative, varying):
         if mask.any() and not item.depths_agree(row[mask]):
             raise Invalid("program", "the program's depth signs differ from the data's")
+    return allowance(ours[0], theirs[0], numerator_size[0], depth_size[0], depths[0], clear[0])
+
+
+# How far a residual computed from the raw data in floating point may lie from its exact value:
+# this fraction of its terms' size over its depth (a dot product of a few terms rounds by a few
+# units in the last place of their magnitudes' sum; 1e-15 is some 9).
+RAW_ROUNDING = 1e-15
+
+
+def allowance(ours, theirs, numerator_size, depth_size, depths, clear) -> np.ndarray:
+    """How far the program's residuals (``ours``, caller's units) may lie from the data's exact
+    ones at a point: their distance from the raw residuals (``theirs``) plus the raw ones'
+    rounding (RAW_ROUNDING); infinite for an observation whose depth is round-off there."""
+    safe = np.where(clear, np.abs(depths), 1.0)[..., None]
+    rounding = RAW_ROUNDING * (numerator_size + np.abs(theirs) * depth_size[..., None]) / safe
+    return np.where(clear[..., None], np.abs(ours - theirs) + rounding, np.inf)
+
+
+def program_discount(item, solution, residuals: np.ndarray, allowed: np.ndarray) -> float:
+    """What the bound a proof establishes for the program is lowered by, for the data's problem
+    (caller's units): the cost's change at the solution when each residual moves by its
+    ``allowed`` distance between program and data (allowance). A bound holds for the program
+    the verifier builds, which is the data's problem only up to its rounding: for data far from
+    the origin (a homography's source at 1e6 times its spread) that reaches 1e-8 of the cost."""
+    if not rounding_counted():  # as certificates written before it was counted computed a bound
+        return 0.0
+    return cost_rounding(residuals, allowed, item.norm)
+
+
+def program_allowance(item, solution, scale: float) -> np.ndarray:
+    """allowance at the solution alone (what the solvers lower their claimed bound by, as the
+    verifier does: program_discount)."""
+    v0 = item.to_program(solution)
+    V = np.append(v0, 1.0)[None]
+    numerators, depths = item.raw_parts_many(v0[None])
+    numerator_size, depth_size = item.raw_sizes_many(v0[None])
+    ours = np.einsum("Nmk,nk->nNm", item.program.num, V)[0] / scale
+    ours = ours / (item.program.den @ V[0])[:, None]
+    clear = np.abs(depths[0]) > 1e-6 * depth_size[0]
+    theirs = numerators[0] / np.where(clear, depths[0], 1.0)[:, None]
+    return allowance(ours, theirs, numerator_size[0], depth_size[0], depths[0], clear)
 
 
 def _check_root(program, F: np.ndarray, gamma: float, needed: float, root: dict, lower, upper,

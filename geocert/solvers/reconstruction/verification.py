@@ -235,6 +235,12 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
 class ReconstructionItems(TrackItems):
     """Points as triangulations (TrackItems), plus ``check_result``: the rest of the result."""
 
+    @staticmethod
+    def job_outcomes(result: dict) -> list:
+        """One item, certified when it has points and every one is (its status is the job's own)."""
+        points = result.get("points") or []
+        return [(None, bool(points) and all(isinstance(p, dict) and p.get("certified") is True for p in points))]
+
     def checked_options(self, options: dict) -> dict:
         """The points' options (a triangulation's), and the cameras' tolerance (stated in the
         scope; the camera certificate hashes it as its rel_gap)."""
