@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 from geocert.solvers.core.certificates import data_hash, pack, problem_hash
-from geocert.solvers.core.bnb import Box
 from geocert.solvers.verify import verify_any, verify_document
 
 STORED = Path(__file__).resolve().parents[1] / "data" / "certificates"

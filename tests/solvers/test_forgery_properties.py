@@ -14,9 +14,9 @@ calls informational."""
 
 from __future__ import annotations
 
+import base64
 import copy
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +24,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unpack
+from geocert.solvers.core.certificates import data_hash, problem_hash, unpack
 from geocert.solvers.verify import verify_any
 
 STORED = Path(__file__).resolve().parents[1] / "data" / "certificates"
@@ -101,7 +101,7 @@ def _mutate_number(result: dict, path: tuple, how: str, nearby: float, entry: in
         z = unpack(target[key]).copy()
         if len(z):
             z[entry % len(z)] = _new_value(float(z[entry % len(z)]), how, nearby)
-        target[key] = __import__("base64").b64encode(z.astype("<f8").tobytes()).decode("ascii")
+        target[key] = base64.b64encode(z.astype("<f8").tobytes()).decode("ascii")
     else:
         target, key = _at(result, path)
         target[key] = _new_value(target[key], how, nearby)

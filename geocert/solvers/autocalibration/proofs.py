@@ -123,8 +123,7 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
         if index is not None and (not isinstance(index, int) or isinstance(index, bool)
                                   or not 0 <= index < len(proofs)):
             raise Invalid("format", f"leaves/{i}: no proof {index!r}")
-    if uncovered_part(claimed, leaf_lo, leaf_hi) is not None:
-        raise Invalid("coverage", "the leaves do not cover the box searched")
+    covering = (leaf_lo, leaf_hi)  # as claimed: their coverage is checked last, as the proofs' are first
     leaf_lo, leaf_hi = extended(leaf_lo, leaf_hi, claimed, proven)
     charge(size * len(proofs), "the leaves' programs")
     cuts = {i: _cut_value(item, boxes[i], caps[i], d, build_capped) for i, item in enumerate(proofs)
@@ -176,6 +175,8 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
             if not (value == value and beyond):
                 raise Invalid("leaf_bounds", f"leaves/{i} is not beyond the cut of its proof {index}")
         bounds.append(proven_bounds[index])
+    if uncovered_part(claimed, *covering) is not None:
+        raise Invalid("coverage", "the leaves do not cover the box searched")
     if not all(value == value for value in bounds):
         raise Invalid("leaf_bounds", "a leaf's bound is not a number")
     return float(min(bounds))

@@ -28,7 +28,6 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import functools
-import math
 from dataclasses import dataclass
 
 import numpy as np
