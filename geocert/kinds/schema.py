@@ -86,8 +86,6 @@ class DeterminacyInterval(BaseModel):
     value: float | None
     lower: float | None = Field(description="null: not fixed by the data (unbounded)")
     upper: float | None
-    clipped: bool = Field(False, description="true: the curvature's interval reached beyond the answer's scope "
-                                             "and is clipped to it (a stratified metric stage's intrinsics ranges)")
 
 
 class DeterminacyWarning(BaseModel):

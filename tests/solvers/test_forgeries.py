@@ -355,10 +355,12 @@ class TestBilinearScopeStated:
 
 class TestDeterminacyWithinScope:
     """Class 6: a metric stage's intervals reached outside its scope's ranges (here a skew of
-    [-35, 55] px beside a scope of [-10, 10], as stored). Now each is clipped to its range, and
-    says so."""
+    [-35, 55] px beside a scope of [-10, 10], as stored). Each must lie within its range (the
+    stratified scope: K within the intrinsics ranges, so f_x, f_x times the aspect, the skew and
+    the principal point within theirs). Fixed by the determinacy work of issue 37 (its clip); this
+    test stands for issue 33's class on the stored certificate."""
 
-    def test_the_metric_stages_intervals_are_clipped_to_the_intrinsics_ranges(self):
+    def test_the_metric_stages_intervals_lie_within_the_intrinsics_ranges(self):
         from geocert.solvers.autocalibration import determinacy
         from geocert.solvers.autocalibration import problem as pr
         from geocert.solvers.autocalibration.verification import read_data
@@ -371,13 +373,14 @@ class TestDeterminacyWithinScope:
         problem = pr.prepare(cameras, points, size, {})
         p = pr.plane_from_input(problem, np.array(stage["plane_at_infinity"]))
         document = determinacy.metric_stage(problem, p, np.array(stage["K"]), stage["cost"], stage["lower_bound"], None)
-        scope = determinacy.intrinsics_scope(problem.ranges)
-        clipped = 0
+        r = problem.ranges
+        (u_lo, u_hi), (v_lo, v_hi) = r["principal_point"]
+        scope = {"focal_x": tuple(r["focal"]), "focal_y": (r["focal"][0] * r["aspect"][0], r["focal"][1] * r["aspect"][1]),
+                 "skew": tuple(r["skew"]), "principal_u": (u_lo, u_hi), "principal_v": (v_lo, v_hi)}
         for interval in document["intervals"]:
             low, high = scope[interval["name"]]
-            assert low <= interval["lower"] <= interval["value"] <= interval["upper"] <= high
-            clipped += interval.get("clipped", False)
-        assert clipped >= 1
+            for end in (interval["lower"], interval["upper"]):
+                assert end is None or low <= end <= high, (interval, (low, high))
 
 
 class TestVerifierCost:

@@ -22,7 +22,7 @@ import numpy as np
 
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
-from geocert.solvers.core.determinacy import certified_gap, clip_to_scope, curvature_intervals, numeric_jacobian, spread
+from geocert.solvers.core.determinacy import certified_gap, curvature_intervals, numeric_jacobian, spread
 
 STILL_DEGREES = 3.0
 AXIS_RATIO = 0.15
@@ -78,16 +78,8 @@ def affine_stage(problem, p: np.ndarray, cost: float | None, lower: float | None
     return out.document()
 
 
-# Why the direct method's intervals are not clipped to the intrinsics ranges as the stratified
-# metric stage's are (clip_to_scope): its scope bounds a combination of them.
-DIRECT_SCOPE = ("; not clipped to the intrinsics ranges: the direct method's scope bounds a combination of them "
-                "((1 + a^2) f^2 + s^2 + u^2 + v^2 per view), not each in its own range")
-
-
 def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | None, lower: float | None,
-                 centres: np.ndarray | None, clip: bool = True) -> dict:
-    """``clip``: each interval clipped to the intrinsics ranges (the stratified metric stage's
-    scope: K within them)."""
+                 centres: np.ndarray | None) -> dict:
     from geocert.solvers.autocalibration.problem import upper_triangular_root, w_of_K
 
     setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
@@ -137,19 +129,8 @@ def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | Non
         extra = float(plane_part.cost_increase or 0.0) * float(moved @ Sa @ moved)
         half = math.hypot(interval["upper"] - val, math.sqrt(max(extra, 0.0)))
         interval["lower"], interval["upper"] = val - half, val + half
-    if clip:
-        clip_to_scope(out.intervals, intrinsics_scope(problem.ranges))
     out.warnings += motion_warnings(setup.H, centres)
     return out.document()
-
-
-def intrinsics_scope(ranges: dict) -> dict[str, tuple[float, float]]:
-    """Each intrinsic's range in the metric stage's scope (pixels): K within the ranges, so the
-    focal length f, f times the aspect, the skew and the principal point within theirs."""
-    focal, aspect = ranges["focal"], ranges["aspect"]
-    (u_lo, u_hi), (v_lo, v_hi) = ranges["principal_point"]
-    return {"focal_x": (focal[0], focal[1]), "focal_y": (focal[0] * aspect[0], focal[1] * aspect[1]),
-            "skew": tuple(ranges["skew"]), "principal_u": (u_lo, u_hi), "principal_v": (v_lo, v_hi)}
 
 
 def varying_focal_stage(problem, p: np.ndarray, Ks: list, centres: np.ndarray | None) -> dict | None:

@@ -75,9 +75,7 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
             stage["determinacy"] = safely(determinacy.varying_focal_stage, problem, p, document["Ks"], centres)
         elif p is not None:
             stage["determinacy"] = safely(determinacy.metric_stage, problem, p, np.array(document["K"]), None, None,
-                                          centres, clip=False)
-        if stage.get("determinacy") is not None:
-            stage["determinacy"]["level"] += determinacy.DIRECT_SCOPE
+                                          centres)
     stages = [stage]
     if checking:
         self_check_stages(parsed, dataclasses.replace(options), stages)

@@ -43,19 +43,6 @@ class Determinacy:
                 "intervals": self.intervals, "warnings": self.warnings}
 
 
-def clip_to_scope(intervals: list[dict], scope: dict[str, tuple[float, float]]) -> None:
-    """Clip each bounded interval named in ``scope`` to its range there: a certified answer's
-    scope holds every answer it speaks of, and the curvature's ellipsoid may reach beyond it (a
-    skew of [-91, 71] px beside a scope of [-10, 10]). A clipped interval says so (``clipped``)."""
-    for interval in intervals:
-        if interval["name"] not in scope or interval["lower"] is None or interval["upper"] is None:
-            continue
-        low, high = scope[interval["name"]]
-        lower, upper = max(interval["lower"], low), min(interval["upper"], high)
-        if (lower, upper) != (interval["lower"], interval["upper"]):
-            interval.update(lower=float(lower), upper=float(max(lower, upper)), clipped=True)
-
-
 def safely(function, *args, **kwargs) -> dict | None:
     """A determinacy document, or None when the data defeat the estimate's own linear algebra (it
     is an estimate beside the answer: it never fails a solve)."""
