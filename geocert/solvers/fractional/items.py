@@ -129,8 +129,8 @@ class MapItem:
 
 
 PROGRAM_REFUSED = "the verifier could not check the proof against the data at this solution ({})"
-UNDISCOUNTABLE = ("an observation's depth is round-off at the solution (a point on a view's principal plane or at its centre): "
-                  "the search's bound does not carry over to the data's problem, only the trivial bound 0 does")
+UNDISCOUNTABLE = ("an observation's depth is round-off at the solution (a point on a view's principal plane "
+                  "or at its centre): the search's bound does not carry over to the data's problem, only the trivial bound 0 does")
 
 
 def discounted(item, solution: np.ndarray, residuals: np.ndarray, lower: float,
