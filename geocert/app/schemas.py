@@ -18,6 +18,11 @@ JOB_REQUEST = TypeAdapter(JobRequest)
 RESULT_MODELS = tuple(dict.fromkeys(kind.result_model for kind in KINDS))  # kinds may share one
 JobResult = Union[RESULT_MODELS]
 
+# One example per kind for the API documentation (Swagger UI's example menu): each kind's own
+# small example job, which solves in seconds as given (the contract tests run every one).
+JOB_EXAMPLES = {kind.name: {"summary": kind.name, "description": kind.description, "value": kind.example}
+                for kind in KINDS}
+
 JOB_STATUSES = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 
 
@@ -52,7 +57,9 @@ class JobProgress(BaseModel):
     lower_bound: float | None = None
     upper_bound: float | None = None
     gap_abs: float | None = None
-    gap_rel: float | None = Field(None, description="worst relative gap over the items finished or running")
+    gap_rel: float | None = Field(None, description="worst relative gap over the items finished or running: each "
+                                                    "item's gap beyond the absolute tolerance (abs_gap), relative "
+                                                    "to its cost (0 for an item within abs_gap)")
     items_done: int = Field(0, description="items (tracks, maps) finished")
     items_total: int = Field(0, description="items (tracks, maps) in the job")
     items_certified: int | None = Field(None, description="items certified: set once the job has ended (with a result)")
@@ -164,6 +171,9 @@ class ProblemKindInfo(BaseModel):
     kind: str
     description: str
     item_name: str
+    certifies: bool = Field(description="false: the kind returns estimates, with no certificate (stereo_lines)")
     request_schema: dict[str, Any]
     default_options: dict[str, Any]
+    example: dict[str, Any] = Field(description="a small job of this kind that solves in seconds, as it could be "
+                                                "submitted (POST /v1/jobs)")
 

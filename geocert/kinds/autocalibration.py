@@ -106,6 +106,10 @@ class Baseline(BaseModel):
 class AutocalibrationResult(BaseModel):
     kind: Literal["autocalibration"]
     method: str
+    status: str = Field(description='"optimal" when every stage is certified; "failed" (or "cancelled") when no '
+                                    "metric upgrade was found (K and the quadric null); else the status of the "
+                                    "first stage not certified (time_limit, node_limit, not_certified)")
+    reason: str | None = Field(description="why the status is not optimal: the stage and its reason")
     plane_at_infinity: list[float] | None = Field(description="in the input frame, unit norm")
     K: Matrix3 | None
     Ks: list[Matrix3 | None] | None = Field(None, description="direct method with varying_focal: one K per view")
@@ -198,6 +202,20 @@ class AutocalibrationKind:
     def parse(self, data: Any, items: range | None = None) -> Parsed:
         return Parsed(*read_data(data))
 
+    def check_options(self, parsed: Parsed, options: pr.AutocalibrationOptions) -> None:
+        """Every intrinsics range given or defaulted from data/image_size, and the direct method's
+        chirality pairs counted (before the job is queued: the solve cannot start without them,
+        and nothing is built past the size limits)."""
+        pr.resolve_ranges(options.intrinsics, parsed.image_size)
+        if options.method == "direct":
+            from geocert.solvers.autocalibration import direct
+
+            direct.check_size(len(parsed.cameras), 0 if parsed.points is None else len(parsed.points),
+                              options.chirality)
+
+    def time_bound_s(self, parsed: Parsed, options: pr.AutocalibrationOptions) -> float:
+        return options.time_limit_s * (1 if options.method == "direct" else 2)  # per stage
+
     def count(self, parsed: Parsed) -> int:
         return 1
 
@@ -262,7 +280,8 @@ class AutocalibrationKind:
         centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
         if result.p is not None and math.isfinite(affine_cost):
             affine_stage["determinacy"] = safely(determinacy.affine_stage, problem, result.p, affine_stage["cost"],
-                                                 affine_stage["lower_bound"], centres)
+                                                 affine_stage["lower_bound"], centres,
+                                                 None if document["K"] is None else np.array(document["K"]))
         if document["K"] is not None:
             metric_stage["determinacy"] = safely(determinacy.metric_stage, problem, result.p, np.array(document["K"]),
                                                  metric_stage["cost"], metric_stage["lower_bound"], centres)
@@ -298,7 +317,21 @@ class AutocalibrationKind:
             item.pop(key, None)
         for stage in item["stages"]:
             (stage.get("certificate") or {}).pop("proof", None)
-        return {"kind": self.name, **item, "stats": stats}
+        return {"kind": self.name, "method": item.pop("method"), **outcome(item), **item, "stats": stats}
+
+
+def outcome(item: dict) -> dict:
+    """The result's own ``status`` and ``reason``, where a reader looks first: a job that found no
+    metric upgrade says so here, not only in its stages."""
+    pending = next((stage for stage in item["stages"] if not stage["certified"]), None)
+    if pending is None:
+        return {"status": "optimal", "reason": None}
+    said = f"the {pending['name']} stage ended {pending['status']}" + (f": {pending['reason']}" if pending.get("reason")
+                                                                        else "")
+    if item.get("dual_absolute_quadric") is None:  # no K, no quadric: nothing solved
+        return {"status": "cancelled" if pending["status"] == "cancelled" else "failed",
+                "reason": f"no metric upgrade was found ({said})"}
+    return {"status": pending["status"], "reason": f"not certified: {said}"}
 
 
 KIND = AutocalibrationKind()

@@ -4,8 +4,12 @@
 Submit a job from the form and watch its bound chart move while it runs, cancel one, open a
 finished triangulation's and an autocalibration's 3D view, page, filter and sort the items, verify
 a certificate, use the pages at a phone's width and from the keyboard, and give an API key once.
-Every test ends by reading the browser's console log: any error there fails it. Screenshots go to
-tests/service/screenshots/ (printed at the end of the run) for a person to look at.
+The page tells the truth (TestTheResultAsItIs): what is not certified, not determined or warned
+about is said first; a reconstruction's and an autocalibration's own figures, the answers in the
+item tables, a finished job's status and bounds as they were, a failed job's error in words, and
+templates that run as given. Every test ends by reading the browser's console log: any error there
+fails it. Screenshots go to tests/service/screenshots/ (printed at the end of the run) for a
+person to look at.
 
 `scripts/test` installs chromium and chromium-driver when missing (scripts/bootstrap.sh), so these
 tests run wherever the suite runs; they are not skipped for want of a browser."""
@@ -31,8 +35,8 @@ from selenium.webdriver.common.keys import Keys
 from selenium.webdriver.support.ui import Select, WebDriverWait
 
 from geocert.solvers.autocalibration import scenes
-from tests.servers import free_port, wait_ready
-from tests.support import service_job
+from tests.servers import cluster, free_port, wait_ready
+from tests.support import ROOT, service_job
 
 pytestmark = pytest.mark.slow  # real servers and a browser: the full run only
 
@@ -130,6 +134,25 @@ def finished_page(driver, base: str, job_id: str) -> dict:
     driver.get(f"{base}/jobs/{job_id}")
     wait(driver, lambda d: state(d)["rendered"], 30, "the finished job's page did not render")
     return state(driver)
+
+
+def example(name: str) -> dict:
+    return json.loads((ROOT / "examples" / f"{name}.json").read_text())
+
+
+def solved(client: httpx.Client, body: dict) -> tuple[str, dict]:
+    job_id = client.post("/v1/jobs", json=body).json()["id"]
+    job = wait_job(client, job_id, limit_s=600)
+    assert job["status"] == "succeeded", job.get("error")
+    return job_id, job
+
+
+def verdict(driver) -> dict:
+    return driver.execute_script("return window.GC_STATE.verdict;")
+
+
+def text(driver, element_id: str) -> str:
+    return driver.find_element(By.ID, element_id).text
 
 
 class TestWebPages:
@@ -283,6 +306,194 @@ class TestWebPages:
         assert page.execute_script(overflow) <= 1, "the job's page is wider than a phone"
         page.find_element(By.ID, "view3d").send_keys(Keys.ARROW_LEFT)  # focusable: rotates from the keyboard
         shot(page, "phone-job")
+
+
+# Records every text the status badge is given, from the document's first moment (before the
+# page's own scripts run), so a test sees a flicker that ends before it could look: each text set
+# is a mutation record of its own, even when several come in one task.
+BADGE_OBSERVER = """
+window.__badges = [];
+document.addEventListener("DOMContentLoaded", () => {
+  const badge = document.getElementById("status");
+  if (badge) new MutationObserver((records) => {
+    for (const record of records) for (const node of record.addedNodes) window.__badges.push(node.textContent);
+  }).observe(badge, {childList: true});
+});
+"""
+
+
+def progress_events(client: httpx.Client, job_id: str) -> list[dict]:
+    """The job's progress events as its stream replays them (a finished job's stream ends)."""
+    events, name = [], None
+    with client.stream("GET", f"/v1/jobs/{job_id}/events", timeout=30) as response:
+        for line in response.iter_lines():
+            if line.startswith("event:"):
+                name = line.split(":", 1)[1].strip()
+            elif line.startswith("data:") and name == "progress":
+                events.append(json.loads(line.split(":", 1)[1]))
+    return events
+
+
+def numbers(text_block: str) -> list[float]:
+    return [float(x) for x in text_block.replace("[", " ").replace("]", " ").replace(",", " ").split()]
+
+
+class TestTheResultAsItIs:
+    """The page says first what is not certified, not determined or warned about, and shows the
+    answer itself; each test fails on the page as it was before (issue 34, item 7)."""
+
+    def test_a_reconstruction_reads_its_points_cameras_summary_and_exports(self, page, service):
+        base = str(service.base_url).rstrip("/")
+        job_id, job = solved(service, example("reconstruction-tracks"))
+        result = job["result"]
+        finished_page(page, base, job_id)
+        points, cameras = result["points"], result["cameras"]
+        certified = sum(point["certified"] for point in points)
+        assert text(page, "summary").startswith(f"{len(points)} points, {certified} certified")  # was "1 points, 1 certified"
+        registered = [camera for camera in cameras if camera["registered"]]
+        figures = text(page, "answer")
+        assert f"Views registered\n{len(registered)} of {len(cameras)}" in figures
+        rms = page.execute_script("return GC.num(arguments[0], 4);", result["summary"]["rms_reprojection_px"])
+        assert f"RMS reprojection\n{rms} px" in figures
+        rows = page.find_elements(By.CSS_SELECTOR, "#cameras tbody tr")
+        assert [row.find_elements(By.TAG_NAME, "td")[3].text for row in rows] == [
+            "yes" if camera["certified"] else "no" for camera in cameras]
+        # the K returned is the adjustment's, and the page says it is not a certified quantity
+        assert "not certified" in text(page, "k-note")
+        cameras_certified = sum(camera["certified"] for camera in cameras)
+        lines = verdict(page)["lines"]
+        assert f"{cameras_certified} of {len(cameras)} cameras certified" in " ".join(lines)
+        if cameras_certified < len(cameras):
+            assert verdict(page)["level"] != "yes"
+        # the exports the API offers, linked and working
+        links = {a.text: a.get_attribute("href") for a in page.find_elements(By.CSS_SELECTOR, "#links a")}
+        colmap = links["Export: COLMAP model (zip)"]
+        assert colmap.endswith(f"/v1/jobs/{job_id}/export?format=colmap")
+        response = service.get(colmap)
+        assert response.status_code == 200 and response.content[:2] == b"PK"
+        assert service.get(links["Export: Points (PLY)"]).text.startswith("ply")
+        shot(page, "reconstruction")
+        page.get(base + "/")  # one job item stands for the whole reconstruction: the list sends you to its page
+        row = wait(page, lambda d: d.find_elements(By.CSS_SELECTOR, f"tr[data-job='{job_id}']"), 20)[0]
+        assert row.find_elements(By.TAG_NAME, "td")[4].text == "see job"  # was "100 %" with 0 of 8 cameras certified
+
+    def test_an_autocalibration_shows_its_K_stages_and_what_the_data_do_not_fix(self, page, service):
+        base = str(service.base_url).rstrip("/")
+        job_id, job = solved(service, example("autocalibration-turntable"))
+        result = job["result"]
+        finished_page(page, base, job_id)
+        stages = result["stages"]
+        certified = sum(stage["certified"] for stage in stages)
+        assert text(page, "summary").startswith(f"{len(stages)} stages, {certified} certified")  # was "1 stages"
+        now = verdict(page)
+        assert now["level"] != "yes"
+        codes = {w["code"] for stage in stages for w in stage["determinacy"]["warnings"]}
+        assert codes, "a turntable is a critical motion: the result warns"
+        for code in codes:
+            assert any(code in line for line in now["lines"]), (code, now["lines"])
+        assert any(line.startswith("Not determined by the data") for line in now["lines"])
+        note = text(page, "k-note")
+        assert "NOT determined" in note and ("NOT certified" in note) == (not stages[-1]["certified"])
+        K = page.find_element(By.CSS_SELECTOR, "#answer pre.matrix").text
+        assert np.allclose(numbers(K), np.ravel(result["K"]), rtol=1e-4, atol=1e-4)
+        shot(page, "autocalibration-turntable")
+
+        # a well-posed scene: green only when every stage is certified, determined and unwarned
+        job_id, job = solved(service, example("autocalibration-stratified"))
+        finished_page(page, base, job_id)
+        clean = all(stage["certified"] and stage["determinacy"]["determined"] and not stage["determinacy"]["warnings"]
+                    for stage in job["result"]["stages"])
+        assert (verdict(page)["level"] == "yes") == clean
+
+    def test_a_finished_jobs_page_keeps_its_status_and_shows_its_bounds_history(self, page, service):
+        base = str(service.base_url).rstrip("/")
+        job_id, job = solved(service, example("triangulation"))
+        script = page.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": BADGE_OBSERVER})
+        try:
+            finished_page(page, base, job_id)
+            wait(page, lambda d: d.find_element(By.ID, "chart-note").text, 30, "the chart never said it was complete")
+            badges = page.execute_script("return window.__badges;")
+        finally:
+            page.execute_cdp_cmd("Page.removeScriptToEvaluateOnNewDocument", {"identifier": script["identifier"]})
+        assert badges and set(badges) == {"succeeded"}, badges  # was succeeded -> queued/running -> succeeded
+        assert not page.find_element(By.ID, "cancel").is_displayed()  # nothing to cancel
+        events = progress_events(service, job_id)
+        distinct = {(e["elapsed_s"], e["upper_bound"], e["lower_bound"], e["gap_abs"]) for e in events}
+        assert int(page.find_element(By.ID, "chart").get_attribute("data-points")) == len(distinct)
+        drawable = {p for p in distinct if any(v is not None and v > 0 for v in p[1:])}
+        assert text(page, "chart-note").startswith(f"{len(drawable)} progress report")
+        # the table shows each track's point
+        first = page.find_element(By.CSS_SELECTOR, "#items tbody tr[data-item='0'] td.answer").text
+        assert np.allclose(numbers(first), job["result"]["tracks"][0]["point"], rtol=1e-4, atol=1e-4)
+
+    def test_estimates_say_so_and_a_chart_without_bounds_says_why(self, page, service):
+        base = str(service.base_url).rstrip("/")
+        job_id, job = solved(service, example("stereo-lines-pair"))
+        finished_page(page, base, job_id)
+        wait(page, lambda d: d.find_element(By.ID, "chart-note").text, 30, "the chart still waits for progress")
+        now = verdict(page)
+        assert now["level"] == "estimate" and "not certified" in now["headline"]
+        assert not page.find_element(By.ID, "chart").is_displayed()  # was "Waiting for progress…" for ever
+        assert text(page, "chart-note").startswith("No bounds")
+        assert not page.find_element(By.ID, "verify").is_displayed()  # was: "submit with certificate full", refused
+        pair = job["result"]["pairs"][0]
+        angle = np.degrees(np.arccos(np.clip((np.trace(pair["R"]) - 1) / 2, -1, 1)))
+        cell = page.find_element(By.CSS_SELECTOR, "#items tbody tr[data-item='0'] td.answer").text
+        assert abs(numbers(cell.split("°")[0].replace("R:", ""))[0] - angle) < 1e-3 * max(1, angle)
+        shot(page, "stereo-lines")
+        page.get(base + "/")  # the list says so too (was "0 %" certified)
+        row = wait(page, lambda d: d.find_elements(By.CSS_SELECTOR, f"tr[data-job='{job_id}']"), 20)[0]
+        assert row.find_elements(By.TAG_NAME, "td")[4].text == "estimates"
+
+    def test_the_item_tables_show_the_matrices(self, page, service):
+        base = str(service.base_url).rstrip("/")
+        job_id, job = solved(service, example("homography-plane"))
+        finished_page(page, base, job_id)
+        headers = [th.text for th in page.find_elements(By.CSS_SELECTOR, "#items thead th")]
+        assert "matrix" in headers
+        for index, item in enumerate(job["result"]["maps"]):
+            shown = page.find_element(By.CSS_SELECTOR, f"#items tbody tr[data-item='{index}'] td.answer pre.matrix").text
+            assert np.allclose(numbers(shown), np.ravel(item["matrix"]), rtol=1e-4, atol=1e-5)
+
+    def test_a_failed_job_says_what_failed_in_words(self, page, tmp_path):
+        from geocert.app.core.security import PUBLIC_OWNER
+        from geocert.workers.store import JobStore
+
+        with cluster(tmp_path, workers=0) as (running, client):
+            store = JobStore.from_url(running.redis_url)
+            body = service_job(np.random.default_rng(2), tracks=3)
+            job_id = store.create("triangulation", body, 3, 3, PUBLIC_OWNER)["id"]
+            assert store.mark_running(job_id) and store.claim_end(job_id)
+            # the error as the worker records a solver's exception (workers/tasks.py, end_with_error)
+            store.end(job_id, "failed", error={
+                "type": "about:blank", "title": "Solver failure", "status": 500,
+                "detail": "ValueError: matmul: Input operand 1 does not have enough dimensions",
+                "trace": "Traceback (most recent call last):\n  File \"kinds/autocalibration.py\"\nValueError: matmul"})
+            assert client.get(f"/v1/jobs/{job_id}").json()["status"] == "failed"
+            finished_page(page, running.base, job_id)
+            now = verdict(page)
+            assert now["level"] == "no" and now["headline"].startswith("Failed")
+            assert text(page, "failure-title") == "Solver failure (500)"
+            failure = text(page, "failure")
+            assert "internal error" in failure and "not of your data" in failure
+            assert "0 of 3 items" in failure
+            assert "The error reported: ValueError: matmul" in failure  # after the words, for a bug report
+            assert not page.find_element(By.ID, "error").is_displayed()  # was the raw exception in the page's error box
+            assert not page.find_element(By.ID, "cancel").is_displayed()
+            shot(page, "failed")
+
+    def test_every_template_runs_as_given(self, page, service):
+        base = str(service.base_url).rstrip("/")
+        for info in service.get("/v1/problems").json():
+            page.get(base + "/")
+            wait(page, lambda d: len(Select(d.find_element(By.ID, "template-kind")).options) > 1, 20)
+            Select(page.find_element(By.ID, "template-kind")).select_by_value(info["kind"])
+            template = json.loads(page.find_element(By.ID, "job-json").get_attribute("value"))
+            assert template == info["example"] and template["data"]  # was: every data field an empty list
+            page.find_element(By.ID, "submit-button").click()
+            wait(page, lambda d: "/jobs/" in d.current_url, 20, f"the {info['kind']} template was refused")
+            wait(page, lambda d: state(d)["status"] in ("succeeded", "failed", "cancelled") and state(d)["rendered"], 300)
+            assert state(page)["status"] == "succeeded", info["kind"]
 
 
 class TestApiKeys:

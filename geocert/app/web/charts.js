@@ -7,25 +7,57 @@ const Charts = (() => {
 
   function niceExp(value) { return Math.floor(Math.log10(value)); }
 
-  // Upper bound, lower bound and gap over time, on a log scale (values <= 0 are not drawable and skipped).
+  // A stage's name without its count ("structure 2450/4983" -> "structure").
+  const stageName = (stage) => (stage ? String(stage).replace(/\s*\d+\s*\/\s*\d+\s*$/, "") : "");
+
+  // Upper bound, lower bound and gap over time, on a log scale (values <= 0 are not drawable and
+  // skipped), with a marker where a staged solve's stage changes (each stage bounds its own cost).
   class BoundChart {
     constructor(canvas) {
       this.canvas = canvas;
-      this.points = [];  // {t, upper, lower, gap}
+      this.points = [];  // {t, upper, lower, gap, stage}
       this.pending = false;
+      this.ended = null;  // the message to show when a finished job reported no bounds
       window.addEventListener("resize", () => this.draw());
     }
 
-    add(t, upper, lower, gap) {
-      const last = this.points[this.points.length - 1];
-      if (last && last.t === t && last.upper === upper && last.lower === lower && last.gap === gap) return;
-      this.points.push({t, upper, lower, gap});
-      if (last && t < last.t) this.points.sort((a, b) => a.t - b.t);  // a finished job's final progress came first
+    add(t, upper, lower, gap, stage) {
+      const same = (p) => p.t === t && p.upper === upper && p.lower === lower && p.gap === gap;
+      if (this.points.slice(-3).some(same)) return;
+      this.points.push({t, upper, lower, gap, stage: stageName(stage)});
+      const last = this.points[this.points.length - 2];
+      if (last && t < last.t) this.points.sort((a, b) => a.t - b.t);
       this.canvas.dataset.points = String(this.points.length);
+      this.schedule();
+    }
+
+    schedule() {
       if (!this.pending) {
         this.pending = true;
         requestAnimationFrame(() => { this.pending = false; this.draw(); });
       }
+    }
+
+    // The job has ended: no more points will come.
+    finish(message) {
+      this.ended = message;
+      this.canvas.dataset.ended = "true";
+      this.schedule();
+    }
+
+    drawable() {
+      return this.points.filter((p) => ["upper", "lower", "gap"].some((k) => p[k] > 0 && Number.isFinite(p[k])));
+    }
+
+    // In words, for the note under the chart.
+    summary() {
+      const n = this.drawable().length;
+      if (!n) return "";
+      const last = this.points[this.points.length - 1];
+      const stages = [...new Set(this.points.map((p) => p.stage).filter(Boolean))];
+      return `${n} progress report${n === 1 ? "" : "s"} with bounds over ${last.t.toFixed(1)} s` +
+             (n === 1 ? " (the job ended within one report's interval)" : "") +
+             (stages.length > 1 ? `; stages: ${stages.join(", ")} (each bounds its own cost)` : "") + ".";
     }
 
     draw() {
@@ -40,7 +72,8 @@ const Charts = (() => {
       ctx.font = "12px system-ui, sans-serif";
       ctx.fillStyle = css("--muted");
       if (!values.length) {
-        ctx.fillText("Waiting for progress…", left, top + 20);
+        ctx.fillText(this.ended || "Waiting for progress…", left, top + 20);
+        this.canvas.setAttribute("aria-label", this.ended || "Waiting for progress");
         return;
       }
       // (loops, not Math.min(...values): a long job's thousands of points would overflow the call's arguments)
@@ -66,6 +99,19 @@ const Charts = (() => {
         ctx.fillText(`${t.toFixed(t1 < 10 ? 1 : 0)} s`, Math.min(xx - 10, width - 40), top + h + 16);
       }
       ctx.fillText("elapsed", left + w / 2 - 20, height - 4);
+      // stage changes: a dashed line and the new stage's name
+      ctx.save();
+      ctx.strokeStyle = css("--muted");
+      ctx.setLineDash([3, 3]);
+      let previous = null, labelled = -Infinity;
+      for (const p of this.points) {
+        if (!p.stage || p.stage === previous) continue;
+        const xx = x(p.t);
+        if (previous !== null) { ctx.beginPath(); ctx.moveTo(xx, top); ctx.lineTo(xx, top + h); ctx.stroke(); }
+        if (xx - labelled > 70) { ctx.fillText(p.stage, xx + 3, top + 12); labelled = xx; }
+        previous = p.stage;
+      }
+      ctx.restore();
       for (const [name, color] of series) {
         ctx.strokeStyle = color;
         ctx.fillStyle = color;

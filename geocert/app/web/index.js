@@ -20,24 +20,12 @@
       : "Images: needs the reconstruction kind, which this service does not serve yet.";
   }
 
+  // A kind's template is its example job, as /v1/problems gives it: it runs as given.
   function template(name) {
     const info = kindInfo(name);
     if (!info) return;
-    const data = {};
-    for (const field of (info.request_schema.properties && info.request_schema.properties.data &&
-                         resolve(info.request_schema, info.request_schema.properties.data).required) || []) data[field] = [];
-    document.getElementById("job-json").value = JSON.stringify({kind: name, data, options: info.default_options}, null, 2);
-  }
-
-  function resolve(schema, node) {
-    if (node && node.$ref) {
-      const path = node.$ref.replace(/^#\//, "").split("/");
-      let target = schema;
-      for (const part of path) target = target && target[part];
-      return target || {};
-    }
-    if (node && node.allOf && node.allOf.length === 1) return resolve(schema, node.allOf[0]);
-    return node || {};
+    const job = info.example || {kind: name, data: {}, options: {}};
+    document.getElementById("job-json").value = JSON.stringify(job, null, 2);
   }
 
   function source() { return document.querySelector("input[name=source]:checked").value; }
@@ -104,17 +92,38 @@
     }
   }
 
+  // Whether a kind's job items are its data's own list (tracks, maps, frames), one claim each; a
+  // reconstruction or an autocalibration is one job item whose claims (points, cameras, stages)
+  // one flag does not describe.
+  function itemsAreClaims(info) {
+    const schema = info.request_schema || {};
+    const ref = schema.properties && schema.properties.data && schema.properties.data.$ref;
+    const data = ref ? ref.replace(/^#\//, "").split("/").reduce((node, part) => node && node[part], schema) : null;
+    return Boolean(data && data.properties && info.item_name in data.properties);
+  }
+
+  // The certified fraction of a job's items. A kind of estimates certifies nothing; a job whose
+  // one item is the whole reconstruction has its page say what is certified and what is not.
+  function certifiedCell(job) {
+    const p = job.progress || {};
+    const total = p.items_total || 0;
+    const info = kindInfo(job.kind);
+    if (info && info.certifies === false) return {text: "estimates", title: "this kind returns estimates, not certificates"};
+    if (p.items_certified === null || p.items_certified === undefined || !total) return {text: "—"};
+    if (info && !itemsAreClaims(info)) return {text: "see job", title: `its ${info.item_name} and what the data do not fix are on its page`};
+    return {text: `${(100 * p.items_certified / total).toFixed(total >= 1000 ? 1 : 0)} %`};
+  }
+
   function row(job) {
     const p = job.progress || {};
     const total = p.items_total || 0;
-    const certified = p.items_certified === null || p.items_certified === undefined || !total ? "—"
-      : `${(100 * p.items_certified / total).toFixed(total >= 1000 ? 1 : 0)} %`;
+    const certified = certifiedCell(job);
     return el("tr", {"data-job": job.id},
       el("td", {}, el("a", {href: `/jobs/${job.id}`, text: job.id.slice(0, 12), title: job.id})),
       el("td", {text: job.kind}),
       el("td", {}, el("span", {class: `status ${job.status}`, text: job.status})),
       el("td", {class: "num", text: `${p.items_done || 0} / ${total}`}),
-      el("td", {class: "num", text: certified}),
+      el("td", {class: "num", text: certified.text, title: certified.title || null}),
       el("td", {class: "num", text: duration(GC.elapsed(job))}),
       el("td", {class: "hide-narrow", text: new Date(job.created_at * 1000).toLocaleString()}));
   }

@@ -14,7 +14,7 @@ import re
 from typing import Annotated
 from urllib.parse import urlencode
 
-from fastapi import APIRouter, Depends, Header, Query, Request, Response
+from fastapi import APIRouter, Body, Depends, Header, Query, Request, Response
 from fastapi.responses import StreamingResponse
 from fastapi.concurrency import run_in_threadpool
 from fastapi.routing import APIRoute
@@ -25,7 +25,7 @@ from geocert.settings import chunk_size_for, get_settings
 from geocert.app import lifecycle
 from geocert.app import streamed
 from geocert.app.errors import ApiProblem, is_json_media_type
-from geocert.app.schemas import JOB_STATUSES, Job, JobList, JobRequest
+from geocert.app.schemas import JOB_EXAMPLES, JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
 from geocert.batch import parse_job
 from geocert.workers import logs
@@ -134,7 +134,7 @@ async def wait_for_end(job_id: str, seconds: float) -> bool:
                                        "with Prefer: wait=N, the job, finished within N seconds"},
     **error_responses(400, 409, 413, 415, 422)})
 async def submit_job(
-    body: JobRequest,
+    body: Annotated[JobRequest, Body(openapi_examples=JOB_EXAMPLES)],
     request: Request,
     response: Response,
     store: JobStoreDep,
@@ -190,7 +190,10 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
             if earlier is not None:
                 return _replay(store, earlier, digest, response)
         try:
-            meta = _create(store, owner, kind, request, items, upload.key if upload is not None else None)
+            # Its tasks' last-resort time limits follow from its own limits (options lowered to the
+            # server's maxima by _check_limits, so parsed again from the request as it will run).
+            bound = kind.time_bound_s(parsed, parse_options(kind, request))
+            meta = _create(store, owner, kind, request, items, upload.key if upload is not None else None, bound)
         except BaseException:
             if idempotency_key is not None:
                 store.settle_idempotent(owner, idempotency_key, digest, None)  # free the key for a retry
@@ -204,11 +207,19 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
     return store.document(meta)
 
 
-def _create(store: JobStore, owner: str, kind, request: dict, items: int, items_key: str | None = None) -> dict:
+def parse_options(kind, request: dict):
+    from geocert.kinds import options_from
+
+    return options_from(kind.options_type, request.get("options"))
+
+
+def _create(store: JobStore, owner: str, kind, request: dict, items: int, items_key: str | None = None,
+            item_time_bound_s: float | None = None) -> dict:
     settings = get_settings()
     chunk = chunk_size_for(kind)
     meta = store.create(kind.name, request, items, chunk, owner, request.get("callback_url"),
-                        settings.max_active_jobs_per_key, chunk_key=kind.chunk_key, items_key=items_key)
+                        settings.max_active_jobs_per_key, chunk_key=kind.chunk_key, items_key=items_key,
+                        item_time_bound_s=item_time_bound_s)
     if meta is None:
         raise ApiProblem(429, f"this key already has {settings.max_active_jobs_per_key} jobs queued or running "
                               "(GEOCERT_MAX_ACTIVE_JOBS_PER_KEY); wait for one to end", headers={"Retry-After": "5"})

@@ -18,11 +18,12 @@ router = APIRouter()
 @router.get("/v1/problems", response_model=list[ProblemKindInfo], tags=["problems"],
             dependencies=[Depends(rate_limited)], responses=error_responses())
 def list_problems():
-    """The problem kinds served, with the JSON schema of a job and the default options."""
+    """The problem kinds served, with the JSON schema of a job, the default options and a small
+    example job of each."""
     return [
         ProblemKindInfo(kind=kind.name, description=kind.description, item_name=kind.item_key,
-                        request_schema=kind.request_model.model_json_schema(),
-                        default_options=default_options(kind))
+                        certifies=kind.certifies, request_schema=kind.request_model.model_json_schema(),
+                        default_options=default_options(kind), example=kind.example)
         for kind in KINDS
     ]
 

@@ -1,0 +1,181 @@
+// What a result proves and what it does not, read generically: every boolean `certified` (and
+// `*_certified`), every `determined: false` (and `*_determined`) and every `warnings` list found
+// anywhere in the result is collected and grouped, so the page can say first what is not
+// certified, not determined or warned about, whatever kind the result is and whatever fields a
+// kind adds later. Certificates, proofs and observations are not read (they hold no verdicts).
+"use strict";
+
+const Truth = (() => {
+  const SKIP = new Set(["certificate", "camera_certificate", "proof", "root_region", "observations", "intervals",
+                        "images", "baseline"]);
+  const words = (key) => key.replace(/_/g, " ");
+
+  // A list of numbers (or of lists of numbers): a point, a matrix; nothing to read inside.
+  function numeric(list) {
+    const first = list.find((v) => v !== null);
+    return first === undefined || typeof first === "number" || (Array.isArray(first) && numeric(first));
+  }
+
+  // An entry of a list, for saying which one: its own name, else its view, else its index.
+  function nameOf(owner) {
+    if (typeof owner === "string") return owner;  // a path outside lists
+    const node = owner.node;
+    if (node && typeof node.name === "string" && node.name) return node.name;
+    if (node && Number.isInteger(node.view)) return `view ${node.view}`;
+    return `#${owner.index}`;
+  }
+
+  function warningOf(w) {
+    if (typeof w === "string") return {code: w, detail: ""};
+    if (w && typeof w === "object") return {code: String(w.code || w.name || "warning"), detail: String(w.detail || w.message || "")};
+    return {code: String(w), detail: ""};
+  }
+
+  // Walks the result once. pattern: the path with list indices as "*" (what groups entries);
+  // where: the path outside lists (what a flag there is called); owner: the list entry a value
+  // sits in ({index, node}; its name is made only when shown). Strings are built per list and
+  // per key, never per entry: 10^5 tracks are walked in well under a second.
+  function scan(result) {
+    const groups = new Map();   // pattern -> {label, entries: [{owner, certified, status, reason}]}
+    const flags = [];           // {where, key}: "*_certified" false outside lists of entries
+    const undetermined = new Map();  // pattern -> {label, where: [owner or path]}
+    const warnings = new Map();      // pattern + code -> {code, detail, label, where: [owner or path]}
+
+    function group(map, pattern, label) {
+      let g = map.get(pattern);
+      if (!g) map.set(pattern, g = {label, entries: [], where: []});
+      return g;
+    }
+
+    function visit(node, pattern, where, label, owner) {
+      if (Array.isArray(node)) {
+        if (numeric(node)) return;
+        const inner = pattern + "/*";
+        for (let i = 0; i < node.length; i++) {
+          if (node[i] && typeof node[i] === "object") visit(node[i], inner, null, label, {index: i, node: node[i]});
+        }
+        return;
+      }
+      if (typeof node.certified === "boolean" && owner) {
+        group(groups, pattern, label).entries.push({owner, certified: node.certified, status: node.status});
+      }
+      for (const key in node) {
+        const value = node[key];
+        if (value === false) {
+          if (key === "determined" || key.endsWith("_determined")) {
+            group(undetermined, pattern + "/" + key, key === "determined" ? label
+              : `${label ? label + ": " : ""}${words(key.replace(/_determined$/, ""))}`).where.push(owner || where);
+          } else if (key.endsWith("_certified")) flags.push({where, key});
+          continue;
+        }
+        if (value === null || typeof value !== "object" || SKIP.has(key)) continue;
+        if (Array.isArray(value) && (key === "warnings" || key.endsWith("_warnings"))) {
+          for (const w of value) {
+            const {code, detail} = warningOf(w);
+            const g = group(warnings, `${pattern}|${code}`, label);
+            g.code = code;
+            if (!g.detail) g.detail = detail;
+            g.where.push(owner || where);
+          }
+          continue;
+        }
+        // a list's label is its key, qualified by the entry it sits in when nested (autocalibration stages)
+        const list = Array.isArray(value);
+        const next = list && !numeric(value) ? (owner && label ? `${nameOf(owner)} ${words(key)}` : words(key)) : label;
+        visit(value, pattern + "/" + key, where === null ? null : where + "/" + key, next, list ? null : owner);
+      }
+    }
+
+    visit(result, "", "", "", null);
+    return {groups: [...groups.entries()].map(([pattern, g]) => ({pattern, ...g})),
+            flags, undetermined: [...undetermined.values()], warnings: [...warnings.values()]};
+  }
+
+  // The first few of a list of entries (or names), and how many there are.
+  function listNames(entries, total, limit = 6) {
+    const unique = [...new Set(entries)];
+    const shown = unique.slice(0, limit).map(nameOf).join(", ");
+    return unique.length > limit ? `${shown}, … (${unique.length}${total ? " of " + total : ""})` : shown;
+  }
+
+  // The verdict: {level: "yes" | "warn" | "no" | "estimate" | "failed", headline, lines: [{level, text}]}
+  // itemKey: the kind's list of claims (tracks, maps, stages, points, frames, pairs).
+  function verdict(job, result, itemKey, certifies) {
+    const lines = [];
+    if (!result) {
+      return {level: "no", lines, headline: job.status === "failed" ? "Failed: this job returned no answer."
+                                                                   : `${job.status[0].toUpperCase()}${job.status.slice(1)}: no result.`};
+    }
+    const found = scan(result);
+    const main = found.groups.find((g) => g.pattern === `/${itemKey}/*`);
+    const others = found.groups.filter((g) => g !== main);
+    // "4 of 6 cameras certified; not certified: box0.jpg (not_certified), ..." (reasons are in the tables)
+    const describe = (g) => {
+      const n = g.entries.length, missing = g.entries.filter((e) => !e.certified), yes = n - missing.length;
+      const only = n === 1 ? nameOf(g.entries[0].owner) : null;  // one named entry: say which
+      if (!missing.length) return only && !only.startsWith("#") ? `${g.label.replace(/s$/, "")} ${only}: certified`
+                                                               : `${yes} of ${n} ${g.label} certified`;
+      if (!yes) {
+        const statuses = new Map();
+        for (const e of missing) statuses.set(e.status || "no status", (statuses.get(e.status || "no status") || 0) + 1);
+        return `0 of ${n} ${g.label} certified (${[...statuses].map(([status, count]) => `${count} ${status}`).join(", ")})`;
+      }
+      const named = missing.slice(0, 6).map((e) => `${nameOf(e.owner)}${e.status ? ` (${e.status})` : ""}`).join(", ");
+      return `${yes} of ${n} ${g.label} certified; not certified: ${named}${missing.length > 6 ? `, … (${missing.length})` : ""}`;
+    };
+    let allCertified = true, noneCertified = true, anyClaims = false;
+    for (const g of [main, ...others].filter(Boolean)) {
+      const yes = g.entries.filter((e) => e.certified).length;
+      anyClaims = anyClaims || g.entries.length > 0;
+      if (yes < g.entries.length) allCertified = false;
+      if (g === main && yes > 0) noneCertified = false;
+      if (certifies !== false) lines.push({level: yes === g.entries.length ? "yes" : yes ? "warn" : "no", text: describe(g), kind: "certified"});
+    }
+    const stages = Array.isArray(result.stages) ? result.stages : [];
+    for (const f of found.flags) {
+      const subject = f.key.replace(/_certified$/, "");
+      const stage = stages.find((s) => s && s.name === subject && s.status && !["done", "optimal"].includes(s.status));
+      if (stage) lines.push({level: "info", text: `${words(subject)}: ${stage.status}${stage.reason ? ` (${stage.reason})` : ""}`, kind: "flag"});
+      else {
+        allCertified = false;
+        lines.push({level: "no", text: `${words(subject)}: not certified`, kind: "flag"});
+      }
+    }
+    for (const u of found.undetermined) {
+      lines.push({level: "warn", kind: "determined",
+                  text: `Not determined by the data: ${u.label ? u.label + " " : ""}${listNames(u.where)}` +
+                        " (the answer is one of many that fit as well; see the warnings)"});
+    }
+    for (const w of found.warnings) {
+      lines.push({level: "warn", kind: "warning",
+                  text: `Warning ${w.code}${w.label ? ` (${w.label} ${listNames(w.where)})` : ""}${w.detail ? ": " + w.detail : ""}`});
+    }
+    const troubled = found.undetermined.length + found.warnings.length > 0;
+    let level, headline;
+    const cancelled = job.status === "cancelled" ? "Cancelled: what finished is kept. "
+                    : job.status === "failed" ? "Failed: what finished before the failure is kept. " : "";
+    if (certifies === false) {
+      level = "estimate";
+      headline = `${cancelled}Estimates, not certified: this kind returns estimates with their statistics; nothing in this result is proven.`;
+    } else if (!anyClaims) {
+      level = "no";
+      headline = `${cancelled}Nothing in this result is certified.`;
+    } else if (allCertified && !troubled) {
+      level = cancelled ? "warn" : "yes";
+      headline = cancelled ? `${cancelled}Everything it returned is certified.`
+                           : "Certified: every answer below is proven optimal within its tolerance.";
+    } else if (allCertified) {
+      level = "warn";
+      headline = `${cancelled}Certified optimum, but read the warnings: the data may not fix the answer.`;
+    } else if (noneCertified && main) {
+      level = "no";
+      headline = `${cancelled}Not certified: no ${main.label.replace(/s$/, "")} has a proven bound within its tolerance.`;
+    } else {
+      level = "warn";
+      headline = `${cancelled}Partly certified: see what is not.`;
+    }
+    return {level, headline, lines, found};
+  }
+
+  return {scan, verdict};
+})();
