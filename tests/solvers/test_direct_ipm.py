@@ -113,13 +113,13 @@ class TestSolveProgram:
         """A later clean attempt with a lower bound does not replace an earlier one."""
         high, low = np.array([2.0]), np.array([1.0])
         monkeypatch.setattr(direct_solve, "ATTEMPTS", ((1e-9, None), (1e-8, 1e-6)))
-        monkeypatch.setattr(direct_solve, "_solve_ipm", lambda program, tol: (ConicStatus.OPTIMAL, high, high, "ipm Solved"))
+        monkeypatch.setattr(direct_solve, "_solve_ipm", lambda program, tolerance, check=None: (ConicStatus.OPTIMAL, high, high, "ipm Solved"))
         monkeypatch.setattr(direct_solve, "_solve_once", lambda program, tol, reg: (ConicStatus.OPTIMAL, low, low, "Solved"))
         monkeypatch.setattr(dr, "safe_bound", lambda program, z: (float(z[0]), 0.0))
         status, y, z, raw = direct_solve.solve_program(None, lambda y, z: False)
         assert raw == "ipm Solved" and z[0] == 2.0
         # and the other way round: the later, higher one replaces the earlier
-        monkeypatch.setattr(direct_solve, "_solve_ipm", lambda program, tol: (ConicStatus.OPTIMAL, low, low, "ipm Solved"))
+        monkeypatch.setattr(direct_solve, "_solve_ipm", lambda program, tolerance, check=None: (ConicStatus.OPTIMAL, low, low, "ipm Solved"))
         monkeypatch.setattr(direct_solve, "_solve_once", lambda program, tol, reg: (ConicStatus.OPTIMAL, high, high, "Solved"))
         status, y, z, raw = direct_solve.solve_program(None, lambda y, z: False)
         assert raw == "Solved" and z[0] == 2.0
@@ -128,7 +128,7 @@ class TestSolveProgram:
         calls = []
         bad = (ConicStatus.INACCURATE, np.zeros(1), np.zeros(1), "ipm Stalled")
         good = (ConicStatus.OPTIMAL, np.ones(1), np.ones(1), "Solved")
-        monkeypatch.setattr(direct_solve, "_solve_ipm", lambda program, tol: calls.append("ipm") or bad)
+        monkeypatch.setattr(direct_solve, "_solve_ipm", lambda program, tolerance, check=None: calls.append("ipm") or bad)
         monkeypatch.setattr(direct_solve, "_solve_once", lambda program, tol, reg: calls.append("clarabel") or good)
         status, y, z, raw = direct_solve.solve_program(None)
         assert calls == ["ipm", "clarabel"] and status is ConicStatus.OPTIMAL and raw == "Solved"
