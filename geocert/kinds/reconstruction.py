@@ -248,6 +248,8 @@ def _read_tracks(data: dict, n_views: int) -> list:
 
 
 def _read_images(data: dict):
+    """The photos' sizes from their headers, and their bytes (decoded into pixels only when the
+    reconstruction runs: ``_decode``), refused as ``features.image_header`` refuses."""
     try:  # stage 1 (features.py): matches from photos
         from geocert.solvers.reconstruction import features
     except ImportError as exc:  # pragma: no cover - until the features module is merged
@@ -257,13 +259,33 @@ def _read_images(data: dict):
         raise InputError("data/images", "must be a list of at least 2 {name, content} objects")
     if len(images) > MAX_VIEWS:
         raise InputError("data/images", f"{len(images)} images exceed the limit of {MAX_VIEWS}")
-    arrays, names = [], []
+    sizes, names = [], []
     for i, image in enumerate(images):
         if not isinstance(image, dict) or not isinstance(image.get("content"), str):
             raise InputError(f"data/images/{i}", "must be an object with content (base64 PNG or JPEG)")
-        arrays.append(features.decode_image(image["content"], f"data/images/{i}/content"))
+        w, h, _ = features.image_header(image["content"], f"data/images/{i}/content")
+        sizes.append((float(w), float(h)))
         names.append(image.get("name"))
-    return arrays, names
+    return sizes, names
+
+
+def _decode(images: list) -> list:
+    from geocert.solvers.reconstruction import features
+
+    return [features.decode_image(image["content"], f"data/images/{i}/content") for i, image in enumerate(images)]
+
+
+def request_figures(data: dict) -> dict:
+    """What the job asks of the service, from its request alone (its photos' headers): views (or
+    photos), and the photos' pixels in all and of the largest."""
+    if data.get("images") is not None:
+        sizes, _ = _read_images(data)
+        pixels = [int(w) * int(h) for w, h in sizes]
+        return {"reconstruction_views": (len(sizes), "data/images"),
+                "image_pixels": (sum(pixels), "data/images"),
+                "largest_image_pixels": (max(pixels), f"data/images/{pixels.index(max(pixels))}/content")}
+    views = data.get("views")
+    return {"reconstruction_views": (len(views) if isinstance(views, list) else 0, "data/views")}
 
 
 class ReconstructionKind:
@@ -279,6 +301,7 @@ class ReconstructionKind:
     solution_fields = ("point", "at_infinity")
     verification = RECONSTRUCTION  # points as triangulations in the cameras stated; the returned cameras checked
     example = {"kind": "reconstruction", "options": {}, "data": _example_data()}
+    request_figures = staticmethod(request_figures)
 
     def parse(self, data: Any, items: range | None = None) -> Parsed:
         if not isinstance(data, dict):
@@ -289,8 +312,8 @@ class ReconstructionKind:
         if data.get("images") is not None:
             if data.get("tracks") is not None:
                 raise InputError("data/images", "give images, or tracks and views, not both")
-            arrays, names = _read_images(data)
-            return Parsed(None, [(float(a.shape[1]), float(a.shape[0])) for a in arrays], names, {"images": arrays})
+            sizes, names = _read_images(data)
+            return Parsed(None, sizes, names, {"images": data["images"]})
         if "tracks" not in data:
             raise InputError("data/tracks", "is required (or data/images)")
         sizes, names = _read_views(data) if "views" in data else (None, None)
@@ -344,7 +367,8 @@ class ReconstructionKind:
                 return report("matches", progress.get("done", 0), progress.get("total", 1))
 
             began, cpu = time.perf_counter(), time.process_time()
-            found = features.tracks_from_images(parsed.images_stats["images"], options.feature_options(), matching)
+            found = features.tracks_from_images(_decode(parsed.images_stats["images"]), options.feature_options(),
+                                                matching)
             tracks = [(np.asarray(v, dtype=int), np.asarray(p, dtype=float)) for v, p in found.tracks]
             images_document = _jsonable(dict(found.stats))
             matches = {"name": "matches", **images_document, "status": "done", "reason": None,

@@ -123,12 +123,63 @@ def _jpeg_size(data: bytes) -> tuple[int, int] | None:
     return None
 
 
-def decode_image(content_b64: str, field: str) -> np.ndarray:
-    """A base64 PNG or JPEG (optionally a ``data:image/...;base64,`` URL) as a grayscale uint8 array.
+# Deflate (PNG's compression) never packs more than 1032 bytes into one: a PNG whose compressed
+# data is smaller than its pixels over that cannot hold them. A Huffman-coded JPEG spends at least
+# a bit on each 8x8 block's DC coefficient. Decoders fill what is missing (a 400-byte JPEG whose
+# header claims 5000x5000 decodes to 25 MB of grey), so such images are refused from their sizes.
+_DEFLATE_MAX_RATIO = 1032
+_PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}
+_ARITHMETIC_SOF = {0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
+
+
+def _png_fills(data: bytes, w: int, h: int) -> bool:
+    """Whether the PNG's chunks are whole, end with IEND, and hold enough compressed data for its pixels."""
+    depth, colour = data[24], data[25]
+    raw = h * (1 + -(-w * _PNG_CHANNELS.get(colour, 4) * depth // 8))  # bytes a row, plus its filter byte
+    i, compressed = 8, 0
+    while i + 12 <= len(data):
+        (length,) = struct.unpack(">I", data[i:i + 4])
+        kind = data[i + 4:i + 8]
+        if i + 12 + length > len(data):
+            return False
+        if kind == b"IDAT":
+            compressed += length
+        if kind == b"IEND":
+            return compressed * _DEFLATE_MAX_RATIO >= raw
+        i += 12 + length
+    return False
+
+
+def _jpeg_fills(data: bytes, w: int, h: int) -> bool:
+    """Whether the JPEG's segments lead to a scan, an end-of-image marker follows it, and at least
+    a bit per 8x8 block lies between them (Huffman coding; arithmetic coding: the marker only)."""
+    i, frame = 2, None
+    while i + 4 <= len(data):
+        if data[i] != 0xFF:
+            return False
+        marker = data[i + 1]
+        if marker == 0xFF or marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
+            i += 1 if marker == 0xFF else 2
+            continue
+        if marker in _SOF_MARKERS and frame is None:
+            frame = marker
+        if marker == 0xDA:
+            end = data.rfind(b"\xff\xd9")
+            if frame is None or end <= i:
+                return False
+            return frame in _ARITHMETIC_SOF or 8 * (end - i) >= -(-w // 8) * -(-h // 8)
+        (length,) = struct.unpack(">H", data[i + 2:i + 4])
+        i += 2 + length
+    return False
+
+
+def image_header(content_b64: str, field: str) -> tuple[int, int, bytes]:
+    """A base64 PNG or JPEG's width, height and bytes, read from its header without decoding its
+    pixels (what the API checks of a photo: ``decode_image`` starts here).
 
     Refused with ``InputError(field, reason)``: content that is not a string, not base64, empty,
     not a PNG or JPEG, larger than the limits above (encoded bytes, sides, pixels), smaller than
-    ``MIN_IMAGE_SIDE`` on a side, or that OpenCV cannot decode.
+    ``MIN_IMAGE_SIDE`` on a side, or whose data cannot fill the size its header declares (truncated).
     """
     if not isinstance(content_b64, str):
         raise InputError(field, "an image's content must be a base64 string (PNG or JPEG)")
@@ -148,7 +199,8 @@ def decode_image(content_b64: str, field: str) -> np.ndarray:
         raise InputError(field, "the content is not valid base64") from None
     if not data:
         raise InputError(field, "the image is empty")
-    size = _png_size(data) or _jpeg_size(data)
+    png = _png_size(data)
+    size = png or _jpeg_size(data)
     if size is None:
         raise InputError(field, "the content is not a PNG or JPEG image (or its header is damaged)")
     w, h = size
@@ -157,6 +209,16 @@ def decode_image(content_b64: str, field: str) -> np.ndarray:
                                 f"and {MAX_IMAGE_PIXELS} pixels in all")
     if w < MIN_IMAGE_SIDE or h < MIN_IMAGE_SIDE:
         raise InputError(field, f"the image is {w}x{h}; at least {MIN_IMAGE_SIDE} pixels a side are needed")
+    if not (_png_fills(data, w, h) if png else _jpeg_fills(data, w, h)):
+        raise InputError(field, f"the image could not be decoded: its data ({len(data)} bytes) cannot fill the "
+                                f"{w}x{h} pixels its header declares (truncated or corrupt)")
+    return w, h, data
+
+
+def decode_image(content_b64: str, field: str) -> np.ndarray:
+    """A base64 PNG or JPEG (optionally a ``data:image/...;base64,`` URL) as a grayscale uint8
+    array, refused as ``image_header`` refuses, or when OpenCV cannot decode it."""
+    w, h, data = image_header(content_b64, field)
     image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
     if image is None or image.size == 0:
         raise InputError(field, "the image could not be decoded (truncated or corrupt)")
