@@ -267,7 +267,13 @@ def _replay(store: JobStore, earlier: dict, digest: str, response: Response) -> 
     return store.document(meta)
 
 
-async def _owned(job_id: str, owner: Caller) -> dict:
+_JOB_ID = re.compile(r"[0-9a-f]{32}")  # JobStore.create's ids
+
+
+async def _owned(job_id: Annotated[str, Path(max_length=100, description="the job's id (32 hex digits)")],
+                 owner: Caller) -> dict:
+    if not _JOB_ID.fullmatch(job_id):  # no such job; never a Redis key made of what the client sent
+        raise ApiProblem(404, f"no job {job_id}")
     meta = await read_job(get_async_redis(), job_id)  # on the loop: every job route reads the job first
     if meta is None or meta.get("owner") != owner:  # another key's job does not exist for this one
         raise ApiProblem(404, f"no job {job_id}")
@@ -402,11 +408,16 @@ def delete_job(job: OwnedJob, store: JobStoreDep):
     return Response(status_code=204)
 
 
-def _resume_point(last_event_id: Annotated[str | None, Header()] = None) -> str:
+_STREAM_ID_PART_MAX = 2**64 - 1  # a Redis stream id: two unsigned 64-bit numbers
+
+
+def _resume_point(last_event_id: Annotated[str | None, Header(max_length=41)] = None) -> str:
     if not last_event_id:
         return "0-0"
-    if not re.fullmatch(r"\d{1,20}-\d{1,20}", last_event_id):
-        raise InputError("Last-Event-ID", "must be an event id this stream sent (digits-digits)")
+    parts = re.fullmatch(r"(\d{1,20})-(\d{1,20})", last_event_id)
+    if parts is None or any(int(part) > _STREAM_ID_PART_MAX for part in parts.groups()):
+        raise InputError("Last-Event-ID", "must be an event id this stream sent (two numbers below 2^64, "
+                                          "joined by '-')")
     return last_event_id
 
 
