@@ -39,13 +39,17 @@ class ReconstructionTrack(Strict):
     points: list[Pixel] = Field(min_length=2, description="one observation per view, in the same order")
 
 
+# A view's name: no control characters (a line break would end a record of an exported file).
+ViewName = Annotated[str, Field(max_length=200, pattern=r"^[^\x00-\x1f\x7f]*$")]
+
+
 class ReconstructionView(Strict):
-    name: str | None = Field(None, max_length=200)
+    name: ViewName | None = None
     image_size: Size
 
 
 class ReconstructionImage(Strict):
-    name: str | None = Field(None, max_length=200)
+    name: ViewName | None = None
     content: str = Field(description="base64 PNG or JPEG")
 
 
