@@ -157,4 +157,7 @@ def options_from(options_type: type, given: dict | None, field: str = "options")
 
 
 def default_options(kind: ProblemKind) -> dict:
-    return dataclasses.asdict(kind.options_type())
+    """The options a job of this kind gets when it gives none, as its request model writes them:
+    what GET /v1/problems advertises, which the API accepts back as they are (the solver's options
+    dataclass may hold more, e.g. the reconstruction's ``detail``, which the API does not take)."""
+    return kind.request_model.model_fields["options"].get_default(call_default_factory=True).model_dump(mode="json")
