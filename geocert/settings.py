@@ -60,9 +60,10 @@ class Settings(BaseSettings):
     # needs more fails its job with the reason, and that process goes on with the next task.
     # 0: no limit.
     worker_memory_mb: int = 4096
-    # Fairness: one key's tasks run on every live solver process but this many (at least one),
-    # so that another key's job starts at once however many jobs the first has queued; a task
-    # over its key's share waits in the queue, its job queued. 0: no share (first come, first served).
+    # Fairness, with API keys: one key's tasks run on every live solver process but this many (at
+    # least one), so that another key's job starts at once however many jobs the first has queued;
+    # a task over its key's share waits in the queue, its job queued. 0: no share (first come,
+    # first served). Without keys (one user, on loopback) there is no share.
     solvers_kept_for_others: int = 1
     # Server-side maxima of the per-item options time_limit_s and max_nodes (422 beyond them).
     max_item_time_limit_s: float = 60.0

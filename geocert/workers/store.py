@@ -22,6 +22,7 @@ import redis
 import redis.asyncio
 
 TERMINAL = ("succeeded", "failed", "cancelled")
+PUBLIC_OWNER = "public"  # the owner of every job when no API keys are configured (loopback only)
 # Redis restarting, loading its append-only file or unreachable (BusyLoadingError is a ConnectionError).
 REDIS_GONE = (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError)
 _STREAM_MAXLEN = 2000
@@ -352,7 +353,9 @@ class JobStore:
     # Solver slots: the solve tasks running, each by its task id, with the last sign of its
     # life (renewed by its worker's heartbeat) and its job's owner. A key holds at most every live
     # solver process (the workers' heartbeats say how many) but ``kept_for_others``, and at
-    # least one; a slot not renewed for SLOT_LAPSE_S (its worker gone) lapses.
+    # least one; a slot not renewed for SLOT_LAPSE_S (its worker gone) lapses. Without keys
+    # (every job PUBLIC_OWNER's: one user, on loopback) there is no one to keep solvers for: a
+    # short job then runs beside a long one as the solvers allow.
     SLOTS = "geocert:slots"
     SLOT_OWNERS = "geocert:slots:owners"
     SLOT_LAPSE_S = 30.0
@@ -368,7 +371,7 @@ class JobStore:
         return 1
     end
     local kept = tonumber(ARGV[5])
-    if kept > 0 then
+    if kept > 0 and owner ~= ARGV[6] then
         local solvers = 0
         local names = redis.call('ZRANGEBYSCORE', KEYS[3], ARGV[4], '+inf')
         if #names > 0 then
@@ -392,7 +395,8 @@ class JobStore:
 
         moment = now()
         return bool(self.r.eval(self._TAKE_SLOT, 5, self.SLOTS, self.SLOT_OWNERS, KEY, SOLVERS, self.key(job_id),
-                                slot, moment, moment - self.SLOT_LAPSE_S, moment - FRESH_S, kept_for_others))
+                                slot, moment, moment - self.SLOT_LAPSE_S, moment - FRESH_S, kept_for_others,
+                                json.dumps(PUBLIC_OWNER)))
 
     def free_slot(self, slot: str) -> None:
         pipe = self.r.pipeline()
