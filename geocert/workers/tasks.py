@@ -23,6 +23,8 @@ the task is never delivered again.
 from __future__ import annotations
 
 import logging
+import re
+import signal
 import time
 
 from geocert.settings import get_settings
@@ -245,15 +247,17 @@ def end_over_time(jobs: JobStore, job_id: str, kind, options, ran_s: float, limi
 @celery_app.task(name="geocert.solve_chunk_failed")
 def solve_chunk_failed(request, exc, traceback) -> None:
     """Celery's errback for a solve task that failed outside its own handling (run by the worker's
-    main process): killed at its hard time limit, or out of retries. Its job ends ``failed`` with
-    the reason and what it finished; the task is not delivered again (it is acknowledged)."""
+    main process): killed at its hard time limit, its solver process dead (out of memory, a
+    crash), or out of retries. Its job ends ``failed`` with the reason and what it finished; the
+    task is not delivered again (it is acknowledged). Only a solver process stopped with its
+    worker (``_stopped_by_shutdown``) has its task queued again."""
     from billiard.exceptions import WorkerLostError
     from celery.exceptions import TimeLimitExceeded
 
     job_id = request.args[0]
     jobs = store()
     jobs.free_slot(request.id)
-    fields = jobs.fields(job_id, "kind")
+    fields = jobs.fields(job_id, "kind", "item_time_bound_s")
     if fields is None or fields["status"] in ("succeeded", "failed", "cancelled"):
         return
     kind, options = _kind_and_options(jobs, job_id)
@@ -263,6 +267,10 @@ def solve_chunk_failed(request, exc, traceback) -> None:
                        f"a task of this job was killed at Celery's hard time limit ({limit} s), the last resort after "
                        "its own time limits and GEOCERT_TASK_TIME_MARGIN_S; what it finished is kept in the result",
                        None, kind=kind, options=options)
+    elif isinstance(exc, WorkerLostError) and _stopped_by_shutdown(exc):
+        log.warning("job %s: its solver process was stopped with its worker (%s): queued again", job_id, exc)
+        solve_chunk.apply_async(tuple(request.args), task_id=request.id,
+                                **task_options(fields["kind"], fields["item_time_bound_s"], request.args[2] - request.args[1]))
     elif isinstance(exc, WorkerLostError):  # its process died under it: never run again (celery_app)
         end_with_error(jobs, job_id, 500, PROCESS_DIED_TITLE,
                        f"the solver process running a task of this job died ({exc}): most likely killed for "
@@ -272,6 +280,18 @@ def solve_chunk_failed(request, exc, traceback) -> None:
     else:
         end_with_error(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
                        kind=kind, options=options)
+
+
+# A solver process stopped by these signals went down with its worker (a deploy, systemd stopping
+# the worker's control group): its task is queued again, as a task whose whole worker died is
+# delivered again. Any other death (SIGKILL from the kernel's out-of-memory killer, a crash) fails
+# the job: run again, it would die again.
+_SHUTDOWN_SIGNALS = {signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGQUIT}
+
+
+def _stopped_by_shutdown(exc) -> bool:
+    found = re.search(r"signal (\d+)", str(exc))
+    return found is not None and int(found.group(1)) in _SHUTDOWN_SIGNALS
 
 
 def _kind_and_options(jobs: JobStore, job_id: str):
