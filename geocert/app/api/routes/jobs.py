@@ -270,7 +270,7 @@ def _replay(store: JobStore, earlier: dict, digest: str, response: Response) -> 
 _JOB_ID = re.compile(r"[0-9a-f]{32}")  # JobStore.create's ids
 
 
-async def _owned(job_id: Annotated[str, Path(max_length=100, description="the job's id (32 hex digits)")],
+async def _owned(job_id: Annotated[str, Path(description="the job's id (32 hex digits)")],
                  owner: Caller) -> dict:
     if not _JOB_ID.fullmatch(job_id):  # no such job; never a Redis key made of what the client sent
         raise ApiProblem(404, f"no job {job_id}")
