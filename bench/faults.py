@@ -427,8 +427,9 @@ SECTIONS = {"submit": bench_submit, "streams": bench_streams, "redelivery": benc
             "restart": bench_restart, "body": bench_body}
 
 
-def run(sections: dict, description: str, first_column: str = "figure") -> None:
-    """Run the sections named on the command line (--only), then print every figure as one table."""
+def run(sections: dict, description: str, first_column: str = "figure", third_column: str = "target") -> None:
+    """Run the sections named on the command line (--only), then print every figure as one table
+    (its third column, when any figure has one: ``report``'s ``target``)."""
     parser = argparse.ArgumentParser(description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--only", default=",".join(sections), help="comma-separated sections: " + ", ".join(sections))
     args = parser.parse_args()
@@ -438,7 +439,7 @@ def run(sections: dict, description: str, first_column: str = "figure") -> None:
         except Exception as exc:  # one section failing does not hide the others' figures
             report(f"section {name} failed", f"{type(exc).__name__}: {exc}")
     targets = any(target for _, _, target in FIGURES)
-    print(f"\n{first_column} | measured" + (" | target" if targets else ""))
+    print(f"\n{first_column} | measured" + (f" | {third_column}" if targets else ""))
     print("---|---" + ("|---" if targets else ""))
     for what, measured, target in FIGURES:
         print(f"{what} | {measured}" + (f" | {target}" if targets else ""))
