@@ -40,7 +40,8 @@ class ReconstructionTrack(Strict):
 
 
 # A view's name: no control characters (a line break would end a record of an exported file).
-ViewName = Annotated[str, Field(max_length=200, pattern=r"^[^\x00-\x1f\x7f]*$")]
+NO_CONTROL_CHARACTERS = r"^[^\x00-\x1f\x7f]*$"
+ViewName = Annotated[str, Field(max_length=200, pattern=NO_CONTROL_CHARACTERS)]
 
 
 class ReconstructionView(Strict):

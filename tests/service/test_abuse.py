@@ -200,7 +200,7 @@ def test_11_exported_names_are_refused_or_made_safe(plain):
                                                              "image_size": [640, 480]}] * 2,
                                                   "tracks": [{"views": [0, 1], "points": [[1, 2], [3, 4]]}]}}
     answer = problem(client.post("/v1/jobs", json=request), 422)
-    assert answer["errors"][0]["field"] == "data/views/0/name"
+    assert answer["errors"][0]["field"] == "data/views/0/name" and "control characters" in answer["detail"]
     names = ["../../etc/passwd", "two words.png", "a\nb"]  # the last as stored by an earlier version
     cameras = [{"view": v, "name": name, "registered": True, "image_size": [640, 480],
                 "K": [[800, 0, 320], [0, 800, 240], [0, 0, 1]], "R": np.eye(3).tolist(), "t": [0.0, 0.0, float(v)]}
