@@ -101,6 +101,10 @@ class FeaturesIn(Strict):
                                          description='"sequential": successors matched with each (default 5)')
     ring: bool | None = Field(None, description='"sequential": the last images wrap round to the first (default '
                                                 'false)')
+    time_limit_s: Finite | None = Field(None, **_F["time_limit_s"],
+                                        description="seconds for reading features and matching (default 300): past "
+                                                    "it the images and pairs not yet done are left out, and the "
+                                                    "matches stage says time_limit")
 
 
 class ReconstructionOptionsIn(Strict):
@@ -436,6 +440,8 @@ class ReconstructionKind:
                        "elapsed_s": time.perf_counter() - began,
                        "cpu_s": time.process_time() - cpu}  # this process's CPU time, as the other stages'
             matched = len({int(v) for views, _ in tracks for v in views})
+            if found.status == "time_limit":
+                matches.update(status="time_limit", reason="time_limit: " + found.stats["stopped"])
             if found.status == "cancelled":
                 matches.update(status="cancelled", reason="the job was cancelled")
                 out = pipeline.not_reconstructed(len(parsed.image_sizes), "cancelled", "the job was cancelled",
@@ -444,6 +450,8 @@ class ReconstructionKind:
                 # As a projective stage that fails (pipeline._run): the job succeeds with a
                 # result whose failed stage says why, the later stages skipped, the summary filled.
                 reason = f"fewer than 2 images have verified matches ({matched})"
+                if found.status == "time_limit":
+                    reason += "; " + matches["reason"]
                 matches.update(status="failed", reason=reason)
                 out = pipeline.not_reconstructed(len(parsed.image_sizes), "skipped", "the matches stage failed: "
                                                  + reason, "no verified matches with another image")

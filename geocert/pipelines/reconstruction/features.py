@@ -80,6 +80,9 @@ class FeatureOptions:
     guided_ratio: float = 0.0  # guided matching's ratio test (0: no guided matching; see the module docstring)
     guided_min_inliers: int = 30  # a pair is matched again, guided, when it has at least this many inliers
     guided_threshold_px: float | None = None  # epipolar distance of a guided candidate (None: ransac_threshold_px)
+    # Features and matching stop past this many seconds (the clock checked between images and
+    # between pairs); the tracks of what was matched by then are kept.
+    time_limit_s: float = 300.0
 
 
 @dataclass
@@ -87,7 +90,9 @@ class ImageTracks:
     tracks: list[tuple[np.ndarray, np.ndarray]]  # (views int array, points (n, 2) float64 pixels)
     image_sizes: list[tuple[int, int]]  # (width, height) per image
     stats: dict = field(default_factory=dict)
-    status: str = "ok"  # "ok" or "cancelled" (the callback asked to stop; tracks then empty)
+    # "ok", "cancelled" (the callback asked to stop; tracks then empty) or "time_limit" (stopped at
+    # options.time_limit_s: the tracks of the images and pairs done by then)
+    status: str = "ok"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -499,28 +504,45 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
     """Features, verified matches and tracks for grayscale uint8 images (see the module docstring).
 
     ``callback(progress)`` gets {"stage": "features" | "matches", "done": k, "total": n} and may
-    return True to stop (the result then has status "cancelled" and no tracks)."""
+    return True to stop (the result then has status "cancelled" and no tracks). Past
+    ``options.time_limit_s`` the images not yet read and the pairs not yet matched are left out:
+    status "time_limit", ``stats["stopped"]`` says where."""
     options = options or FeatureOptions()
     sizes = [(int(im.shape[1]), int(im.shape[0])) for im in images]  # grayscale or BGR uint8
     timing: dict[str, float] = {}
     stats: dict = {"images": len(images), "time_s": timing}
-    start = time.perf_counter()
+    start = began = time.perf_counter()
+    status = "ok"
+
+    def over_time(where: str) -> bool:
+        nonlocal status
+        if time.perf_counter() - began <= options.time_limit_s:
+            return False
+        if status == "ok":
+            status = "time_limit"
+            stats["stopped"] = f"{where}, at options.features.time_limit_s ({options.time_limit_s:g} s)"
+        return True
+
     sift = cv2.SIFT_create(nfeatures=options.max_features, contrastThreshold=options.contrast_threshold,
                            edgeThreshold=options.edge_threshold)
     keypoints, descriptors = [], []
     for k, image in enumerate(images):
         if asks_to_stop(callback, {"stage": "features", "done": k, "total": len(images)}):
             return ImageTracks([], sizes, stats, "cancelled")
+        if over_time(f"features read of {k} of {len(images)} images"):
+            break
         if image.ndim == 3:
             image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
         kps, desc = sift.detectAndCompute(np.ascontiguousarray(image, dtype=np.uint8), None)
         keypoints.append(np.array([kp.pt for kp in kps], dtype=np.float64).reshape(-1, 2))
         descriptors.append(desc if desc is not None else np.zeros((0, 128), np.float32))
-    stats["features_per_image"] = [len(k) for k in keypoints]
+    stats["features_per_image"] = [len(k) for k in keypoints] + [0] * (len(images) - len(keypoints))
     timing["features"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    pairs, rule = candidate_pairs(len(images), options, descriptors)
+    # nothing matched once the time is up (choosing pairs by retrieval clusters descriptors)
+    pairs, rule = ([], "none") if over_time("no image pairs matched") else \
+        candidate_pairs(len(descriptors), options, descriptors)
     stats["candidate_pairs"] = len(pairs)
     stats["pairs_chosen_by"] = rule
     pair_matches: dict[tuple[int, int], np.ndarray] = {}
@@ -528,6 +550,8 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
     for k, (i, j) in enumerate(pairs):
         if asks_to_stop(callback, {"stage": "matches", "done": k, "total": len(pairs)}):
             return ImageTracks([], sizes, stats, "cancelled")
+        if over_time(f"{k} of {len(pairs)} image pairs matched"):
+            break
         found = match_pair(keypoints[i], descriptors[i], keypoints[j], descriptors[j], options)
         if found is not None:
             pair_matches[(i, j)], figures = found
@@ -545,4 +569,4 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
         points = np.array([keypoints[v][f] for v, f in members], dtype=np.float64).reshape(-1, 2)
         tracks.append((views, points))
     timing["tracks"] = time.perf_counter() - start
-    return ImageTracks(tracks, sizes, stats)
+    return ImageTracks(tracks, sizes, stats, status)
