@@ -345,6 +345,15 @@ def test_9_a_job_deleted_while_its_webhook_is_delivered_leaves_nothing(small):
         meta = store.hget(key, "status") if store.type(key) == "hash" and key.count(":") == 2 else None
         if meta is None or json.loads(meta) in TERMINAL:
             assert store.ttl(key) > 0 or store.type(key) == "none", key
+    # Every other key without an expiry is one of the service's own, each kept small by an owner:
+    # the workers' heartbeats and slots (entries lapse when a worker stops beating), the running
+    # jobs (ended jobs leave it), metrics (one field per label), the signing key, the reaper's
+    # lock, and each API key's index and active set (ended or expired jobs leave them).
+    owned = {"geocert:workers", "geocert:workers:solvers", "geocert:slots", "geocert:slots:owners",
+             "geocert:running", "geocert:metrics", "geocert:webhook_secret", "geocert:reaper"}
+    for key in store.scan_iter("geocert:*"):
+        if not key.startswith("geocert:job:") and store.ttl(key) == -1:
+            assert key in owned or (key.startswith("geocert:owner:") and key.rsplit(":", 1)[1] in ("jobs", "active")), key
 
 
 # ---------------------------------------------------------------------------------------------
