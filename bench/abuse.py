@@ -1,9 +1,9 @@
 """What a hostile client can do to the service, attack by attack (issue 36), against real servers
-on loopback (a real redis-server, the API, `geocert worker` processes), with two API keys: the
-attacker's and another client's. For each attack it prints the API's peak memory growth, the
-peak memory of any worker process, what the attacker got and how long until its job ended, and
-how long the other key's small job (one track) waited to start and took to end, submitted right
-after the attack.
+on loopback (an embedded redis-server, the API, `geocert worker` processes), with two API keys:
+the attacker's and another client's. For each attack it prints the API's peak memory growth and
+CPU, the other key's slowest GET /v1/jobs while the API answered it, the peak memory of any
+worker process, what the attacker got and how long until its job ended, and how long the other
+key's small job (one track) waited to start and took to end, submitted right after the attack.
 
     .venv/bin/python -m bench.abuse [--only api,worker,webhooks,fairness]
 
@@ -196,14 +196,40 @@ def other_keys_job(client) -> tuple[float, float]:
     return job["started_at"] - job["created_at"], job["finished_at"] - job["created_at"]
 
 
+class OtherKeysReads:
+    """The other key listing its jobs (GET /v1/jobs) every 0.1 s while an attack is answered: the
+    slowest answer."""
+
+    def __init__(self, running):
+        self.client = httpx.Client(base_url=str(running.client.base_url), timeout=120)
+        self.slowest, self.stopped = 0.0, threading.Event()
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+
+    def _read(self):
+        while not self.stopped.is_set():
+            began = time.monotonic()
+            self.client.get("/v1/jobs", headers=OTHER)
+            self.slowest = max(self.slowest, time.monotonic() - began)
+            self.stopped.wait(0.1)
+
+    def stop(self) -> float:
+        self.stopped.set()
+        self.thread.join()
+        self.client.close()
+        return self.slowest
+
+
 def attack(running, name: str, send, limit_s: float = 900) -> None:
     """Send an attack (``send(client)`` -> the response), then the other key's small job; report."""
     client = running.client
     api_before, api_cpu = peak_rss_kib(running.api.pid), cpu_seconds(running.api.pid)
     workers = WorkerPeak(running)
+    reads = OtherKeysReads(running)
     began = time.monotonic()
     response = send(client)
     answered = time.monotonic() - began
+    slowest_read = reads.stop()
     outcome = f"{response.status_code} in {answered:.1f} s"
     job_id = response.json().get("id") if response.status_code in (200, 202) and "jobs" in str(response.url) else None
     started, finished = other_keys_job(client)
@@ -221,7 +247,7 @@ def attack(running, name: str, send, limit_s: float = 900) -> None:
         outcome += f": {detail}"
     api_grew = (peak_rss_kib(running.api.pid) - api_before) / 1024
     report(name, f"{outcome}; API peak +{api_grew:.0f} MiB, {cpu_seconds(running.api.pid) - api_cpu:.1f} s CPU; "
-                 f"largest worker process {workers.stop():.0f} MiB; the other key's job started after "
+                 f"the other key's GET /v1/jobs meanwhile at most {slowest_read:.2f} s; largest worker process {workers.stop():.0f} MiB; the other key's job started after "
                  f"{started:.1f} s, ended after {finished:.1f} s")
 
 
