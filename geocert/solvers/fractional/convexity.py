@@ -1,0 +1,143 @@
+"""A lower bound on a track's L2L2 triangulation cost from convexity around a local optimum (in
+the manner of Hartley and Seo, "Verifying global minima for L2 minimization problems", 2008):
+no search, a few 3x3 matrices a track, every track at once on flat arrays (fractional.flat).
+
+Let x be a point in front of every camera (Euclidean coordinates of the caller's frame), c its
+cost f(x) = sum_i |r_i(x)|^2 and rho = sqrt(c). Any point X of the scope (every point in front
+of every camera, points at infinity included) with f(X) <= c has every residual |r_i| <= rho:
+it lies in the convex region C = {every depth > 0, every |r_i| <= rho}. With a radius R:
+
+(E) C lies inside the ball |X - x| < R. With M_i = P_i[:2, :3] - m_i d_i' (m_i the image of
+    x in view i, d_i = P_i[2, :3] its depth gradient, w_i its depth), the exact identity
+    r_i(X) - r_i(x) = M_i (X - x) / w_i(X) bounds, for X on the sphere |X - x| = R inside C,
+    |M_i u| <= tau_i = e_i (w_i + R |d_i|) / R with u the unit direction and e_i = rho + |r_i(x)|;
+    so sum_i |M_i u|^2 / tau_i^2 <= n, which lambda_min(sum_i M_i' M_i / tau_i^2) > n refutes.
+    C is convex and holds x, so it meets no sphere around x: it lies inside the ball. A point at
+    infinity in C would put the whole ray from x towards it in C (each residual along the ray is
+    a convex combination of its two ends'), so none is in C.
+(V) f is convex on the ball's part of C: there the depths lie in [lo_i, hi_i] = w_i -+ R |d_i|
+    (lo_i > 0), and f's second derivative along any direction v is
+        sum_i 2 |G_i v|^2 - 4 (d_i . v / w_i)(r_i . G_i v),   G_i = (M_i - (r_i(X) - r_i(x)) d_i') / w_i(X),
+    which is at least v' S v with
+        S = sum_i M_i' M_i / (2 hi_i^2) - (e_i^2 / hi_i^2 + 4 rho^2 / lo_i^2) d_i d_i'
+    (|r_i(X)| <= rho, 2ab <= a^2 / t + t b^2, (a - b)_+^2 >= a^2 / 2 - b^2); S positive definite
+    proves it.
+
+Then every point of the scope costs at least f(x) - |grad f(x)| R: outside C more than
+rho^2 = c, inside C (within the ball, where f is convex) at least its tangent plane at x. The
+smallest R of a ladder that passes (E) is taken (the gradient's term is smallest, and (V) is
+easiest, there).
+
+Round-off (docs/certificate.md states the assumptions): every quantity is recomputed from the
+data and x in floating point, and each bound is widened by a generous multiple of the unit
+round-off u times the size of the terms behind it (the sums of their products' magnitudes).
+A matrix is proven positive definite with a margin by a Cholesky factorisation of it less the
+margin and its allowance (positive_definite).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from geocert.solvers.fractional.flat import PAIRS, FlatTracks
+
+U = 2.0 ** -52
+# R as fractions of the distance to the nearest principal plane (half of it at most, so that
+# every depth stays above half its value on the ball).
+RADII = (2.0 ** -10, 2.0 ** -5, 0.5)
+DIAGONAL = [0, 3, 5]  # the diagonal's places in PAIRS order
+
+
+def convexity_bounds(flat: FlatTracks, x: np.ndarray, radii=RADII):
+    """For every track t with point ``x[t]`` (T, 3): (lower, radius, cost), lower the proven
+    bound on every point's cost in the scope (-inf where this test proves none), radius the R
+    used (nan where none), cost the point's sum of squared residuals as computed here."""
+    owner = flat.owner
+    n = flat.sizes.astype(float)
+    P, y = flat.rows, flat.points
+    X = np.concatenate([x, np.ones((len(x), 1))], axis=1)[owner].T  # (4, m)
+    proj = (P * X[None]).sum(axis=1)  # (3, m)
+    size = (np.abs(P) * np.abs(X)[None]).sum(axis=1)  # the sizes of the terms behind proj
+    w, size_w = proj[2], size[2]
+    with np.errstate(all="ignore"):
+        image = proj[:2] / w
+        r = image - y
+        err_w = 16 * U * size_w
+        # Each residual coordinate's error: the projection's terms, the division, the subtraction.
+        err_r = 32 * U * ((size[:2] + np.abs(image) * size_w) / np.abs(w) + np.abs(image) + np.abs(y))
+        r_len = np.sqrt((r * r).sum(axis=0))
+        err_len = np.sqrt((err_r * err_r).sum(axis=0))
+        d = P[2, :3]  # (3, m)
+        d_up = np.sqrt((d * d).sum(axis=0)) * (1 + 8 * U)
+        M = P[:2, :3] - image[:, None] * d[None]  # (2, 3, m)
+        M_size = np.sqrt((M * M).sum(axis=(0, 1)))
+        # |computed M - exact M|_F: the image's error times |d|, and the subtraction's rounding.
+        err_M = err_len * d_up + 4 * U * (np.sqrt((P[:2, :3] ** 2).sum(axis=(0, 1)))
+                                          + np.sqrt((image * image).sum(axis=0)) * d_up)
+        MtM = np.stack([(M[:, a] * M[:, b]).sum(axis=0) for a, b in PAIRS])  # (6, m)
+        # |computed M'M - exact M'M|_2, with the products' rounding.
+        slack = 2 * M_size * err_M + err_M ** 2 + 8 * U * M_size ** 2
+        grad_terms = (M * (r / w)[:, None]).sum(axis=0) * 2  # (3, m): 2 M' r / w
+        grad_err = 2 / np.abs(w) * (M_size * err_len + err_M * r_len) + 2 * M_size * r_len / np.abs(w) \
+            * (err_w / np.abs(w) + 16 * U)
+        sums = flat.per_track(np.concatenate([
+            np.stack([r_len ** 2, (2 * r_len + err_len) * err_len, (~(w > err_w)).astype(float), grad_err,
+                      2 * M_size * r_len / np.abs(w)]), grad_terms]))
+        c, c_err, behind, g_err, g_size = sums[:5]
+        c_err = c_err + 8 * U * n * c
+        c_lo, c_hi = c - c_err, c + c_err
+        rho = np.sqrt(c_hi) * (1 + 4 * U)
+        g_up = (np.sqrt((sums[5:] ** 2).sum(axis=0)) + g_err + 8 * U * n * g_size) * (1 + 4 * U)
+        e = (rho[owner] + (r_len + err_len) * (1 + 4 * U)) * (1 + 1e-12)
+        w_lo, w_hi = w - err_w, w + err_w
+        reach = np.minimum.reduceat(np.where(w_lo > 0, w_lo / d_up, 0.0), flat.starts[:-1])
+        usable = (behind == 0) & (c > 0) & np.isfinite(c) & (reach > 0) & np.isfinite(reach) & np.isfinite(g_up)
+
+        # (E) at every radius of the ladder at once; the smallest that passes.
+        MtM_size = np.sqrt((MtM * MtM).sum(axis=0) + (MtM[[1, 2, 4]] ** 2).sum(axis=0))
+        R = np.asarray(radii, dtype=float)[:, None] * reach[None]  # (K, T)
+        Rm = R[:, owner]
+        tau = e * (w_hi + Rm * d_up) / Rm  # (K, m)
+        weight = 1 / (tau * tau) * (1 + 8 * U)
+        K = len(radii)
+        A = flat.per_track(MtM[None] * weight[:, None])  # (K, 6, T)
+        allowance = flat.per_track(weight * (slack + (n[owner] + 8) * U * MtM_size))  # (K, T)
+        enclosed = positive_definite(A, n * (1 + 1e-12), allowance)  # (K, T)
+        first = np.argmax(enclosed, axis=0)
+        enclosed = usable & enclosed.any(axis=0)
+        R = R[first, np.arange(len(x))]
+
+        # (V) at that radius.
+        Rm = R[owner]
+        lo, hi = w_lo - Rm * d_up, w_hi + Rm * d_up
+        negative = (e * e / (hi * hi) + 4 * rho[owner] ** 2 / (lo * lo)) * (1 + 16 * U)
+        half = 1 / (2 * hi * hi) * (1 - 8 * U)
+        dd = np.stack([d[a] * d[b] for a, b in PAIRS])
+        S = flat.per_track(np.concatenate([MtM * half - negative * dd, (~(lo > 0)).astype(float)[None]]))
+        allowance = flat.per_track(half * (slack + (n[owner] + 8) * U * MtM_size)
+                                   + (n[owner] + 8) * U * negative * d_up ** 2)
+        convex = (S[6] == 0) & positive_definite(S[:6], 0.0, allowance)
+
+        lower = c_lo - g_up * R
+        lower = lower - 4 * U * np.abs(lower)
+        proven = enclosed & convex & np.isfinite(lower)
+    return np.where(proven, lower, -np.inf), np.where(proven, R, np.nan), c
+
+
+def positive_definite(A: np.ndarray, margin, allowance) -> np.ndarray:
+    """Whether the exact symmetric matrices whose entries (in PAIRS order, A (..., 6, T)) are
+    within ``allowance`` (..., T) of A's (each entry) all have their smallest eigenvalue above
+    ``margin``. The test: a Cholesky factorisation of A - shift I with
+    shift = margin + 3 allowance + 8 u (trace + margin) (3 allowance bounds the entries' error's
+    spectral norm; a Cholesky factorisation computed in floating point is exact for a matrix
+    within about 4 u trace of the one factored, Demmel's bound), each pivot positive."""
+    a00, a01, a02, a11, a12, a22 = np.moveaxis(A, -2, 0)
+    with np.errstate(all="ignore"):
+        trace = np.abs(a00) + np.abs(a11) + np.abs(a22)
+        shift = (margin + 3 * allowance + 8 * U * (trace + np.abs(margin))) * (1 + 8 * U)
+        p0 = a00 - shift
+        l10, l20 = a01 / np.sqrt(p0), a02 / np.sqrt(p0)
+        p1 = a11 - shift - l10 * l10
+        l21 = (a12 - l20 * l10) / np.sqrt(p1)
+        p2 = a22 - shift - l20 * l20 - l21 * l21
+    return (p0 > 0) & (p1 > 0) & (p2 > 0) & np.isfinite(trace) & np.isfinite(shift)
