@@ -15,7 +15,7 @@ import scipy.optimize
 from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.fractional import flat as flat_tracks
 from geocert.solvers.fractional.batched import triangulate_many
-from geocert.solvers.fractional.convexity import PAIRS, convexity_bounds, positive_definite
+from geocert.solvers.fractional.convexity import PAIRS, bounds_at, convexity_bounds, positive_definite
 from geocert.solvers.fractional.triangulation import TriangulationOptions
 
 from tests.support import noisy_track, random_cameras, seed
@@ -217,3 +217,17 @@ def test_positive_definite_agrees_with_eigenvalues():
     assert np.all(said[clear])  # a clear yes is seen
     allowed = positive_definite(entries, margin, 0.2 * np.abs(smallest))
     assert np.all(smallest[allowed] > margin[allowed] + 0.6 * np.abs(smallest[allowed]) * (1 - 1e-9))
+
+
+def test_a_bound_at_a_given_radius_is_the_ladders_and_needs_a_radius_that_encloses(dinosaur):
+    """bounds_at (what a checker of a claimed radius computes) gives the ladder's bound at the
+    ladder's radius, none at a radius too small to enclose the region or not a positive number."""
+    cameras, tracks = dinosaur
+    flat, x, _, _ = solve(cameras, tracks)
+    lower, radius, cost = convexity_bounds(flat, x)
+    proven = np.isfinite(lower)
+    again, cost_again = bounds_at(flat, x, np.where(proven, radius, 1.0))
+    assert np.array_equal(again[proven], lower[proven]) and np.array_equal(cost_again, cost)
+    assert np.all(np.isneginf(bounds_at(flat, x, np.where(proven, radius * 1e-6, 1.0))[0][proven]))
+    for bad in (0.0, -1.0, np.nan, np.inf):
+        assert np.all(np.isneginf(bounds_at(flat, x, np.full(len(x), bad))[0]))

@@ -51,9 +51,38 @@ DIAGONAL = [0, 3, 5]  # the diagonal's places in PAIRS order
 def convexity_bounds(flat: FlatTracks, x: np.ndarray, radii=RADII):
     """For every track t with point ``x[t]`` (T, 3): (lower, radius, cost), lower the proven
     bound on every point's cost in the scope (-inf where this test proves none), radius the R
-    used (nan where none), cost the point's sum of squared residuals as computed here."""
+    used (nan where none: the smallest of ``radii`` times the distance to the nearest principal
+    plane that passes (E)), cost the point's sum of squared residuals as computed here."""
+    terms = _terms(flat, x)
+    with np.errstate(all="ignore"):
+        R = np.asarray(radii, dtype=float)[:, None] * terms.reach[None]  # (K, T)
+        enclosed = _encloses(flat, terms, R)
+        first = np.argmax(enclosed, axis=0)
+        R = R[first, np.arange(len(x))]
+        return _bound(flat, terms, R, enclosed.any(axis=0))
+
+
+def bounds_at(flat: FlatTracks, x: np.ndarray, radius: np.ndarray):
+    """(lower, cost) of every track at its own radius (T,): lower -inf where (E) or (V) fails
+    there (or the radius is not a positive number)."""
+    terms = _terms(flat, x)
+    radius = np.asarray(radius, dtype=float)
+    with np.errstate(all="ignore"):
+        good = (radius > 0) & np.isfinite(radius)
+        R = np.where(good, radius, 1.0)
+        lower, _, cost = _bound(flat, terms, R, good & _encloses(flat, terms, R[None])[0])
+    return lower, cost
+
+
+class _Terms:
+    """What (E), (V) and the bound read at the tracks' points: per observation (m,) and per
+    track (T,), each with the round-off allowance of its computation."""
+
+
+def _terms(flat: FlatTracks, x: np.ndarray) -> _Terms:
+    t = _Terms()
     owner = flat.owner
-    n = flat.sizes.astype(float)
+    t.n = n = flat.sizes.astype(float)
     P, y = flat.rows, flat.points
     X = np.concatenate([x, np.ones((len(x), 1))], axis=1)[owner].T  # (4, m)
     proj = (P * X[None]).sum(axis=1)  # (3, m)
@@ -67,61 +96,62 @@ def convexity_bounds(flat: FlatTracks, x: np.ndarray, radii=RADII):
         err_r = 32 * U * ((size[:2] + np.abs(image) * size_w) / np.abs(w) + np.abs(image) + np.abs(y))
         r_len = np.sqrt((r * r).sum(axis=0))
         err_len = np.sqrt((err_r * err_r).sum(axis=0))
-        d = P[2, :3]  # (3, m)
-        d_up = np.sqrt((d * d).sum(axis=0)) * (1 + 8 * U)
+        t.d = d = P[2, :3]  # (3, m)
+        t.d_up = d_up = np.sqrt((d * d).sum(axis=0)) * (1 + 8 * U)
         M = P[:2, :3] - image[:, None] * d[None]  # (2, 3, m)
         M_size = np.sqrt((M * M).sum(axis=(0, 1)))
         # |computed M - exact M|_F: the image's error times |d|, and the subtraction's rounding.
         err_M = err_len * d_up + 4 * U * (np.sqrt((P[:2, :3] ** 2).sum(axis=(0, 1)))
                                           + np.sqrt((image * image).sum(axis=0)) * d_up)
-        MtM = np.stack([(M[:, a] * M[:, b]).sum(axis=0) for a, b in PAIRS])  # (6, m)
-        # |computed M'M - exact M'M|_2, with the products' rounding.
-        slack = 2 * M_size * err_M + err_M ** 2 + 8 * U * M_size ** 2
+        t.MtM = MtM = np.stack([(M[:, a] * M[:, b]).sum(axis=0) for a, b in PAIRS])  # (6, m)
+        # |computed M'M - exact M'M|_2 with the products' rounding, and the sums' rounding.
+        MtM_size = np.sqrt((MtM * MtM).sum(axis=0) + (MtM[[1, 2, 4]] ** 2).sum(axis=0))
+        t.slack = 2 * M_size * err_M + err_M ** 2 + 8 * U * M_size ** 2 + (n[owner] + 8) * U * MtM_size
         grad_terms = (M * (r / w)[:, None]).sum(axis=0) * 2  # (3, m): 2 M' r / w
         grad_err = 2 / np.abs(w) * (M_size * err_len + err_M * r_len) + 2 * M_size * r_len / np.abs(w) \
             * (err_w / np.abs(w) + 16 * U)
         sums = flat.per_track(np.concatenate([
             np.stack([r_len ** 2, (2 * r_len + err_len) * err_len, (~(w > err_w)).astype(float), grad_err,
                       2 * M_size * r_len / np.abs(w)]), grad_terms]))
-        c, c_err, behind, g_err, g_size = sums[:5]
-        c_err = c_err + 8 * U * n * c
-        c_lo, c_hi = c - c_err, c + c_err
-        rho = np.sqrt(c_hi) * (1 + 4 * U)
-        g_up = (np.sqrt((sums[5:] ** 2).sum(axis=0)) + g_err + 8 * U * n * g_size) * (1 + 4 * U)
-        e = (rho[owner] + (r_len + err_len) * (1 + 4 * U)) * (1 + 1e-12)
-        w_lo, w_hi = w - err_w, w + err_w
-        reach = np.minimum.reduceat(np.where(w_lo > 0, w_lo / d_up, 0.0), flat.starts[:-1])
-        usable = (behind == 0) & (c > 0) & np.isfinite(c) & (reach > 0) & np.isfinite(reach) & np.isfinite(g_up)
+        t.c, c_err, behind, g_err, g_size = sums[:5]
+        c_err = c_err + 8 * U * n * t.c
+        t.c_lo, c_hi = t.c - c_err, t.c + c_err
+        t.rho = np.sqrt(c_hi) * (1 + 4 * U)
+        t.g_up = (np.sqrt((sums[5:] ** 2).sum(axis=0)) + g_err + 8 * U * n * g_size) * (1 + 4 * U)
+        t.e = (t.rho[owner] + (r_len + err_len) * (1 + 4 * U)) * (1 + 1e-12)
+        t.w_lo, t.w_hi = w - err_w, w + err_w
+        t.reach = np.minimum.reduceat(np.where(t.w_lo > 0, t.w_lo / d_up, 0.0), flat.starts[:-1])
+        t.usable = (behind == 0) & (t.c > 0) & np.isfinite(t.c) & (t.reach > 0) & np.isfinite(t.reach) \
+            & np.isfinite(t.g_up)
+    return t
 
-        # (E) at every radius of the ladder at once; the smallest that passes.
-        MtM_size = np.sqrt((MtM * MtM).sum(axis=0) + (MtM[[1, 2, 4]] ** 2).sum(axis=0))
-        R = np.asarray(radii, dtype=float)[:, None] * reach[None]  # (K, T)
-        Rm = R[:, owner]
-        tau = e * (w_hi + Rm * d_up) / Rm  # (K, m)
-        weight = 1 / (tau * tau) * (1 + 8 * U)
-        K = len(radii)
-        A = flat.per_track(MtM[None] * weight[:, None])  # (K, 6, T)
-        allowance = flat.per_track(weight * (slack + (n[owner] + 8) * U * MtM_size))  # (K, T)
-        enclosed = positive_definite(A, n * (1 + 1e-12), allowance)  # (K, T)
-        first = np.argmax(enclosed, axis=0)
-        enclosed = usable & enclosed.any(axis=0)
-        R = R[first, np.arange(len(x))]
 
-        # (V) at that radius.
-        Rm = R[owner]
-        lo, hi = w_lo - Rm * d_up, w_hi + Rm * d_up
-        negative = (e * e / (hi * hi) + 4 * rho[owner] ** 2 / (lo * lo)) * (1 + 16 * U)
-        half = 1 / (2 * hi * hi) * (1 - 8 * U)
-        dd = np.stack([d[a] * d[b] for a, b in PAIRS])
-        S = flat.per_track(np.concatenate([MtM * half - negative * dd, (~(lo > 0)).astype(float)[None]]))
-        allowance = flat.per_track(half * (slack + (n[owner] + 8) * U * MtM_size)
-                                   + (n[owner] + 8) * U * negative * d_up ** 2)
-        convex = (S[6] == 0) & positive_definite(S[:6], 0.0, allowance)
+def _encloses(flat: FlatTracks, t: _Terms, R: np.ndarray) -> np.ndarray:
+    """(E) at radii R (K, T): lambda_min(sum_i M_i' M_i / tau_i^2) > n, (K, T)."""
+    Rm = R[:, flat.owner]
+    tau = t.e * (t.w_hi + Rm * t.d_up) / Rm  # (K, m)
+    weight = 1 / (tau * tau) * (1 + 8 * U)
+    A = flat.per_track(t.MtM[None] * weight[:, None])  # (K, 6, T)
+    allowance = flat.per_track(weight * t.slack)  # (K, T)
+    return t.usable & positive_definite(A, t.n * (1 + 1e-12), allowance)
 
-        lower = c_lo - g_up * R
-        lower = lower - 4 * U * np.abs(lower)
-        proven = enclosed & convex & np.isfinite(lower)
-    return np.where(proven, lower, -np.inf), np.where(proven, R, np.nan), c
+
+def _bound(flat: FlatTracks, t: _Terms, R: np.ndarray, enclosed: np.ndarray):
+    """(V) at radii R (T,) and the bound where (E) and (V) hold: (lower, R, cost)."""
+    owner = flat.owner
+    Rm = R[owner]
+    lo, hi = t.w_lo - Rm * t.d_up, t.w_hi + Rm * t.d_up
+    negative = (t.e * t.e / (hi * hi) + 4 * t.rho[owner] ** 2 / (lo * lo)) * (1 + 16 * U)
+    half = 1 / (2 * hi * hi) * (1 - 8 * U)
+    d = t.d
+    dd = np.stack([d[a] * d[b] for a, b in PAIRS])
+    S = flat.per_track(np.concatenate([t.MtM * half - negative * dd, (~(lo > 0)).astype(float)[None]]))
+    allowance = flat.per_track(half * t.slack + (t.n[owner] + 8) * U * negative * t.d_up ** 2)
+    convex = (S[6] == 0) & positive_definite(S[:6], 0.0, allowance)
+    lower = t.c_lo - t.g_up * R
+    lower = lower - 4 * U * np.abs(lower)
+    proven = enclosed & convex & np.isfinite(lower)
+    return np.where(proven, lower, -np.inf), np.where(proven, R, np.nan), t.c
 
 
 def positive_definite(A: np.ndarray, margin, allowance) -> np.ndarray:
