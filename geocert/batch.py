@@ -27,11 +27,27 @@ def item_counts(done: int, total: int | None) -> dict:
     return {"items_done": done, "items_total": total, "tracks_done": done, "tracks_total": total}
 
 
+def abs_gap_of(options: Any) -> float:
+    """The job's absolute gap tolerance (0 for a kind without one)."""
+    return float(getattr(options, "abs_gap", None) or 0.0)
+
+
+def gap_beyond_tolerance(cost: float, lower: float, abs_gap: float) -> float:
+    """An item's relative gap as the job's worst counts it: the part of its gap beyond the
+    absolute tolerance, relative to its cost. A near-zero cost certified by the absolute tolerance
+    (the Dinosaur's exact two-view tracks: cost 1e-13, bound 0) counts 0, not a relative gap of 1
+    that says nothing; any item not within its tolerance counts what it misses by."""
+    if not cost > 0:
+        return 0.0
+    return max(0.0, cost - lower - abs_gap) / cost
+
+
 class ItemProgress:
     """Aggregates progress over the items of a chunk: finished items plus the one running."""
 
-    def __init__(self, total: int, sink: ProgressSink | None, should_stop: StopCheck | None):
+    def __init__(self, total: int, sink: ProgressSink | None, should_stop: StopCheck | None, abs_gap: float = 0.0):
         self.total = total
+        self.abs_gap = abs_gap
         self.sink = sink
         self.should_stop = should_stop
         self.done = 0
@@ -48,8 +64,8 @@ class ItemProgress:
         if item.get("cost") is not None and item.get("lower_bound") is not None:
             self.lower_done += item["lower_bound"]
             self.upper_done += item["cost"]
-            if item["cost"] > 0:
-                self.worst_gap_rel = max(self.worst_gap_rel, (item["cost"] - item["lower_bound"]) / item["cost"])
+            self.worst_gap_rel = max(self.worst_gap_rel,
+                                     gap_beyond_tolerance(item["cost"], item["lower_bound"], self.abs_gap))
         self.emit(None)
 
     def emit(self, running: Progress | None) -> None:
@@ -62,7 +78,7 @@ class ItemProgress:
             if math.isfinite(running.lower_bound) and math.isfinite(running.upper_bound):
                 lower += running.lower_bound
                 upper += running.upper_bound
-                gap_rel = max(gap_rel, running.gap_rel)
+                gap_rel = max(gap_rel, gap_beyond_tolerance(running.upper_bound, running.lower_bound, self.abs_gap))
         stage = {"stage": running.stage} if getattr(running, "stage", None) else {}
         self.sink({
             **stage,
@@ -87,7 +103,7 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
     After the ``time.monotonic()`` value ``stop_at`` no new item is started (at least one is
     always solved): the list returned is then shorter, and the caller solves the rest later.
     ``on_item(index, item)`` sees each item as it ends, before the progress that counts it."""
-    tracker = ItemProgress(total if total is not None else len(indices), sink, should_stop)
+    tracker = ItemProgress(total if total is not None else len(indices), sink, should_stop, abs_gap_of(options))
     items = []
     # A kind that solves many items at once (solve_batch) takes them a group at a time: the
     # budget and a cancel are seen between groups, progress at each item of a group.
@@ -115,9 +131,19 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
     return items
 
 
-def item_sums(items: list[dict]) -> dict:
+def task_time_bound_s(kind, item_bound_s: float, items: int, budget_s: float) -> float:
+    """The longest a task solving ``items`` items of a job runs when every item keeps its own
+    time limits (``item_bound_s`` each: the kind's ``time_bound_s``): it starts no new group of
+    items after ``budget_s`` (solve_items's ``stop_at``), and the group started last runs its
+    limits. The work between the solvers' clock checks is not counted."""
+    group = min(items, kind.batch_size if kind.solve_batch is not None else 1)
+    return min(items * item_bound_s, budget_s + group * item_bound_s)
+
+
+def item_sums(items: list[dict], abs_gap: float = 0.0) -> dict:
     """What a job's stats and final progress take from its items, as sums: a task stores these
-    for the run of items it solved (a fragment of a streamed result), and the end adds them."""
+    for the run of items it solved (a fragment of a streamed result), and the end adds them.
+    ``gap_rel``: the worst item's gap beyond ``abs_gap`` relative to its cost (gap_beyond_tolerance)."""
     statuses: dict[str, int] = {}
     for item in items:
         statuses[item["status"]] = statuses.get(item["status"], 0) + 1
@@ -132,7 +158,7 @@ def item_sums(items: list[dict]) -> dict:
         "bounded": len(bounded),  # items with both bounds: what the sums below add
         "lower": sum(item["lower_bound"] for item in bounded),
         "upper": sum(item["cost"] for item in bounded),
-        "gap_rel": max(((item["cost"] - item["lower_bound"]) / item["cost"] for item in bounded if item["cost"] > 0),
+        "gap_rel": max((gap_beyond_tolerance(item["cost"], item["lower_bound"], abs_gap) for item in bounded),
                        default=0.0),
     }
 
@@ -155,7 +181,7 @@ def stats_from(sums: dict, elapsed_s: float) -> dict:
 
 
 def job_stats(items: list[dict], elapsed_s: float) -> dict:
-    return stats_from(item_sums(items), elapsed_s)
+    return stats_from(item_sums(items), elapsed_s)  # the stats hold no gap: no tolerance needed
 
 
 def solve_job(job: dict, sink: ProgressSink | None = None, should_stop: StopCheck | None = None) -> dict:
@@ -272,4 +298,4 @@ def parse_job(job: Any):
 
 
 __all__ = ["parse_job", "solve_job", "solve_items", "job_stats", "assemble", "ItemProgress", "item_sums", "merged_sums",
-           "stats_from", "streams_result", "result_fragment", "result_shell"]
+           "stats_from", "streams_result", "result_fragment", "result_shell", "task_time_bound_s"]

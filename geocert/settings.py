@@ -44,8 +44,15 @@ class Settings(BaseSettings):
     # its own default (100 tracks, 1 map); GEOCERT_CHUNK_SIZES (JSON, by kind) overrides it.
     chunk_sizes: dict[str, int] = {}
     # A task starts no new item after this many seconds; the rest of its chunk is queued as a
-    # new task. With max_item_time_limit_s it bounds a task's length below the visibility timeout.
+    # new task (so that a large batch is shared between workers as it runs).
     chunk_time_budget_s: float = 20.0
+    # A job ends by its own time limits (each kind's time_limit_s: per item, per stage, per point),
+    # keeping its best answer. A task running this many seconds past what those limits allow it
+    # (the work between the solvers' clock checks: setup, checks, storing) is stopped as a last
+    # resort and its job fails with the reason, keeping what it finished: first cooperatively (at
+    # the solvers' next check), then by Celery's soft time limit 30 s later, then by its hard one
+    # (the process killed) 30 s after that. Never re-queued.
+    task_time_margin_s: float = 120.0
     # Seconds after its worker's last heartbeat (every 2 s) before Redis hands a task the worker
     # held to another worker (the worker died). A live worker's tasks are never handed on.
     visibility_timeout_s: int = 10
@@ -78,12 +85,6 @@ class Settings(BaseSettings):
             raise ValueError(f"GEOCERT_VISIBILITY_TIMEOUT_S ({self.visibility_timeout_s}) must be at least 6: three "
                              "of the workers' 2 s heartbeats, which renew their tasks' leases")
         return self
-
-    @property
-    def longest_task_s(self) -> float:
-        """The longest a task runs: it starts no item after the chunk budget, and an item stops at
-        its time limit (then Celery's soft and hard time limits, a little later, stop a runaway)."""
-        return self.chunk_time_budget_s + self.max_item_time_limit_s + 5
 
 
 def chunk_size_for(kind) -> int:

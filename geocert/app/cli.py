@@ -62,7 +62,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
 def cmd_verify(args: argparse.Namespace) -> int:
     """Exit 0 when the certificate is valid, 1 when it is not, 2 when the input cannot be read
     (unreadable, not JSON, nested too deeply, or carrying no certificate)."""
-    from geocert.solvers.verify import find_certificate, verify_any
+    from geocert.solvers.verify import estimates_kind, find_certificate, verify_any
 
     try:
         text = sys.stdin.read() if args.file == "-" else Path(args.file).read_text()
@@ -74,13 +74,23 @@ def cmd_verify(args: argparse.Namespace) -> int:
     # A result (geocert solve's output) or a job document carry the certificate inside; then the
     # items they return are checked against it too.
     if find_certificate(document) is None:
-        print(f"geocert verify: {args.file} holds no certificate (solve with options.certificate = \"full\")",
-              file=sys.stderr)
+        uncertified = estimates_kind(document)  # a kind with no certificate option: say so, suggest nothing
+        print(f"geocert verify: {args.file} holds no certificate " + (
+              f"({uncertified} results are estimates, never certified: there is nothing to verify)"
+              if uncertified is not None else "(solve with options.certificate = \"full\")"), file=sys.stderr)
         return 2
     report = verify_any(document).as_dict()
     json.dump(report, sys.stdout, indent=None if args.compact else 2)
     sys.stdout.write("\n")
     return 0 if report["valid"] else 1
+
+
+def default_concurrency() -> int:
+    """Solver processes of `geocert serve`'s worker: one per core, so that jobs use the machine, and
+    at least two, so that one long job never holds every solver while short ones wait (on one core
+    the two share it). Each is a process of its own (about 150 MB with numpy, scipy and the conic
+    solver loaded)."""
+    return max(2, os.cpu_count() or 1)
 
 
 def _worker_command(concurrency: int, name: str) -> list[str]:
@@ -124,16 +134,28 @@ def cmd_serve(args: argparse.Namespace) -> int:
         print(f"geocert serve: refusing to listen on {args.host} without API keys: set GEOCERT_API_KEYS, "
               "or listen on loopback (127.0.0.1)", file=sys.stderr)
         return 2
+    if not _port_free(args.host, args.port):
+        print(f"geocert serve: {args.host}:{args.port} is in use (another geocert serve?): stop it, or give this one "
+              "--port", file=sys.stderr)
+        return 2
     print("geocert: API keys required on /v1" if keys else
           "geocert: no API keys configured (GEOCERT_API_KEYS): serving loopback only, without authentication",
           file=sys.stderr)
     redis_process = None
     if not os.environ.get("GEOCERT_REDIS_URL"):
-        from geocert.workers.redis_server import start_embedded_redis
+        from geocert.workers.redis_server import DataDirInUse, claim_data_dir, start_embedded_redis
 
-        redis_process, url = start_embedded_redis(get_settings().data_dir, preexec_fn=_die_with_parent)
+        data_dir = get_settings().data_dir
+        try:
+            lock = claim_data_dir(data_dir)  # held while this process runs (closed when it exits)
+        except DataDirInUse as exc:
+            print(f"geocert serve: {exc}, with its embedded Redis: stop it, or give this one another directory "
+                  "(GEOCERT_DATA_DIR)", file=sys.stderr)
+            return 2
+        redis_process, url = start_embedded_redis(data_dir, preexec_fn=_die_with_parent)
         os.environ["GEOCERT_REDIS_URL"] = url
-        print(f"geocert: embedded Redis at {url}", file=sys.stderr)
+        print(f"geocert: embedded Redis at {url} (data in {Path(data_dir).resolve()}, lock {lock.name})",
+              file=sys.stderr)
     get_settings.cache_clear()
     workers = [subprocess.Popen(_worker_command(args.concurrency, f"geocert-{i}"), env=worker_environment(dict(os.environ)),
                                 preexec_fn=_die_with_parent)
@@ -141,9 +163,11 @@ def cmd_serve(args: argparse.Namespace) -> int:
     # uvicorn re-raises SIGTERM after its own shutdown; make that an ordinary exit so that the
     # workers and the embedded Redis below are stopped too.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
-    print(f"geocert: {args.workers} worker process(es), concurrency {args.concurrency} each", file=sys.stderr)
+    print(f"geocert: {args.workers} worker process(es), {args.concurrency} solver process(es) each: up to "
+          f"{args.workers * args.concurrency} jobs' tasks at once", file=sys.stderr)
     stopping = threading.Event()
     _watch_workers(workers, stopping)
+    _announce_when_ready(args.host, args.port, args.workers > 0, stopping)
     try:
         from geocert.app import lifecycle
 
@@ -161,6 +185,56 @@ def cmd_serve(args: argparse.Namespace) -> int:
             redis_process.terminate()
             redis_process.wait(timeout=10)
     return 0
+
+
+def _port_free(host: str, port: int) -> bool:
+    """Whether the API could listen on host:port (checked before Redis and the workers start, so a
+    second serve on a taken port leaves nothing of the first's touched)."""
+    import socket
+
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn binds
+        try:
+            probe.bind((host, port))
+        except OSError:
+            return False
+    return True
+
+
+def service_url(host: str, port: int) -> str:
+    shown = "127.0.0.1" if host in ("0.0.0.0", "") else f"[{host}]" if ":" in host else host
+    return f"http://{shown}:{port}/"
+
+
+def _announce_when_ready(host: str, port: int, workers: bool, stopping: threading.Event, limit_s: float = 300) -> None:
+    """Print the service's address on standard error once it answers (/readyz: Redis and a
+    worker; /healthz without workers), or say what it still waits for."""
+    import httpx
+
+    url = service_url(host, port)
+
+    def wait() -> None:
+        deadline = time.monotonic() + limit_s
+        said_waiting = False
+        with httpx.Client(base_url=url, timeout=5) as client:
+            while not stopping.is_set() and time.monotonic() < deadline:
+                try:
+                    if client.get("readyz" if workers else "healthz").status_code == 200:
+                        print(f"geocert: ready at {url} (the web page; API documentation at {url}docs). "
+                              "Ctrl-C stops it.", file=sys.stderr, flush=True)
+                        return
+                    if not said_waiting:
+                        said_waiting = True
+                        print(f"geocert: the API answers at {url}; waiting for a worker to start...", file=sys.stderr,
+                              flush=True)
+                except httpx.TransportError:
+                    pass
+                stopping.wait(0.5)
+        if not stopping.is_set():
+            print(f"geocert: {url} is not ready after {limit_s:.0f} s (see the messages above)", file=sys.stderr)
+
+    threading.Thread(target=wait, name="geocert-ready", daemon=True).start()
 
 
 def _watch_workers(workers: list[subprocess.Popen], stopping: threading.Event) -> None:
@@ -229,7 +303,8 @@ def main(argv: list[str] | None = None) -> int:
     serve.add_argument("--host", default="127.0.0.1")
     serve.add_argument("--port", type=int, default=8000)
     serve.add_argument("--workers", type=int, default=1, help="worker processes to start (0 allowed)")
-    serve.add_argument("--concurrency", type=int, default=1, help="solver processes per worker")
+    serve.add_argument("--concurrency", type=int, default=default_concurrency(),
+                       help="solver processes per worker (default: one per core, at least 2)")
     serve.set_defaults(func=cmd_serve)
     worker = sub.add_parser("worker", help="run one Celery worker against GEOCERT_REDIS_URL")
     worker.add_argument("--concurrency", type=int, default=os.cpu_count() or 1)

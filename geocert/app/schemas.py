@@ -57,7 +57,9 @@ class JobProgress(BaseModel):
     lower_bound: float | None = None
     upper_bound: float | None = None
     gap_abs: float | None = None
-    gap_rel: float | None = Field(None, description="worst relative gap over the items finished or running")
+    gap_rel: float | None = Field(None, description="worst relative gap over the items finished or running: each "
+                                                    "item's gap beyond the absolute tolerance (abs_gap), relative "
+                                                    "to its cost (0 for an item within abs_gap)")
     items_done: int = Field(0, description="items (tracks, maps) finished")
     items_total: int = Field(0, description="items (tracks, maps) in the job")
     items_certified: int | None = Field(None, description="items certified: set once the job has ended (with a result)")

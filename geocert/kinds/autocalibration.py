@@ -106,6 +106,10 @@ class Baseline(BaseModel):
 class AutocalibrationResult(BaseModel):
     kind: Literal["autocalibration"]
     method: str
+    status: str = Field(description='"optimal" when every stage is certified; "failed" (or "cancelled") when no '
+                                    "metric upgrade was found (K and the quadric null); else the status of the "
+                                    "first stage not certified (time_limit, node_limit, not_certified)")
+    reason: str | None = Field(description="why the status is not optimal: the stage and its reason")
     plane_at_infinity: list[float] | None = Field(description="in the input frame, unit norm")
     K: Matrix3 | None
     Ks: list[Matrix3 | None] | None = Field(None, description="direct method with varying_focal: one K per view")
@@ -197,6 +201,14 @@ class AutocalibrationKind:
 
     def parse(self, data: Any, items: range | None = None) -> Parsed:
         return Parsed(*read_data(data))
+
+    def check_options(self, parsed: Parsed, options: pr.AutocalibrationOptions) -> None:
+        """Every intrinsics range given or defaulted from data/image_size (before the job is
+        queued: the solve cannot start without them)."""
+        pr.resolve_ranges(options.intrinsics, parsed.image_size)
+
+    def time_bound_s(self, parsed: Parsed, options: pr.AutocalibrationOptions) -> float:
+        return options.time_limit_s * (1 if options.method == "direct" else 2)  # per stage
 
     def count(self, parsed: Parsed) -> int:
         return 1
@@ -298,7 +310,21 @@ class AutocalibrationKind:
             item.pop(key, None)
         for stage in item["stages"]:
             (stage.get("certificate") or {}).pop("proof", None)
-        return {"kind": self.name, **item, "stats": stats}
+        return {"kind": self.name, "method": item.pop("method"), **outcome(item), **item, "stats": stats}
+
+
+def outcome(item: dict) -> dict:
+    """The result's own ``status`` and ``reason``, where a reader looks first: a job that found no
+    metric upgrade says so here, not only in its stages."""
+    pending = next((stage for stage in item["stages"] if not stage["certified"]), None)
+    if pending is None:
+        return {"status": "optimal", "reason": None}
+    said = f"the {pending['name']} stage ended {pending['status']}" + (f": {pending['reason']}" if pending.get("reason")
+                                                                        else "")
+    if item.get("dual_absolute_quadric") is None:  # no K, no quadric: nothing solved
+        return {"status": "cancelled" if pending["status"] == "cancelled" else "failed",
+                "reason": f"no metric upgrade was found ({said})"}
+    return {"status": pending["status"], "reason": f"not certified: {said}"}
 
 
 KIND = AutocalibrationKind()

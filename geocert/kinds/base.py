@@ -59,6 +59,10 @@ def _data_as_given(data: Any, items: list[dict]) -> Any:
     return data
 
 
+def _item_time_limit(parsed: Any, options: Any) -> float:
+    return float(getattr(options, "time_limit_s", 0.0) or 0.0)
+
+
 # Members a kind may leave out, with what they mean then: it issues certificates (a kind of
 # estimates sets certifies = False: no certificate option, nothing for the verifier); nothing to
 # check between its data and options beyond each alone; every item is a claim of its certificate;
@@ -72,9 +76,12 @@ def _data_as_given(data: Any, items: list[dict]) -> Any:
 # streamed_result: its result is its items in order (under item_key) plus members that depend on
 # the options and stats alone, so a large job's result is stored a task's run of items at a time
 # and never assembled whole (batch.streams_result).
+# time_bound_s(parsed, options) -> seconds: the longest one item runs when every time limit of
+# the job is kept (its options' time_limit_s, per item, unless the kind says otherwise: per stage,
+# per point); the service sizes a task's last-resort limits from it (batch.task_time_bound_s).
 OPTIONAL_MEMBERS: dict[str, Any] = {"certifies": True, "check_options": _no_check, "claimed_items": _every_item,
                                     "chunk_key": None, "certificate_data": _data_as_given, "streamed_result": False,
-                                    "solve_batch": None, "batch_size": 1}
+                                    "solve_batch": None, "batch_size": 1, "time_bound_s": _item_time_limit}
 
 
 class Registry:

@@ -309,6 +309,12 @@ class ReconstructionKind:
                                      "images of different sizes claimed as one camera (give options.intrinsics "
                                      "ranges, or camera_model \"varying\")")
 
+    def time_bound_s(self, parsed: Parsed, options: ReconstructionOptions) -> float:
+        """Its limits: time_limit_s per point and per camera, autocalibration_time_limit_s per
+        autocalibration stage (photos: as many tracks as a job may hold)."""
+        tracks = len(parsed.tracks) if parsed.tracks is not None else MAX_TRACKS
+        return (tracks + len(parsed.image_sizes)) * options.time_limit_s + 2 * options.autocalibration_time_limit_s
+
     def count(self, parsed: Parsed) -> int:
         return 1
 

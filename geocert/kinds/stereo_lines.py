@@ -96,6 +96,9 @@ class StereoLinesOptionsIn(Strict):
     incremental_iterations: int = Field(_DEFAULTS.incremental_iterations, ge=1, le=20,
                                         description="the incremental solver's relinearisations (1: the thesis's)")
     matching: MatchingIn = Field(default_factory=MatchingIn)
+    time_limit_s: Finite = Field(_DEFAULTS.time_limit_s, **StereoLinesOptions.OPTION_RANGES["time_limit_s"],
+                                 description="per frame pair: RANSAC draws no sample after it, and the pair keeps "
+                                             "its best motion so far (its reason says so)")
 
 
 class StereoLinesJob(JobBase):
@@ -285,13 +288,15 @@ class StereoLinesKind:
 
     def solve_item(self, parsed: ParsedLines, index: int, options: StereoLinesOptions, callback) -> dict:
         start = time.perf_counter()
-        stopped = []
+        stopped, timed_out = [], []
 
         def should_stop() -> bool:
             if callback is not None and not stopped and callback(Progress(0, 0, 0.0, 0.0, 0.0, 0.0,
                                                                           time.perf_counter() - start)):
                 stopped.append(True)
-            return bool(stopped)
+            if not timed_out and time.perf_counter() - start > options.time_limit_s:
+                timed_out.append(True)  # the pair's own limit: what was found so far is kept
+            return bool(stopped or timed_out)
 
         if parsed.matches is not None:
             estimate, quads, seconds = estimate_pair(parsed.rig, None, None, parsed.matches[index], options,
@@ -302,6 +307,9 @@ class StereoLinesKind:
         status, reason = estimate.status, estimate.reason
         if stopped:
             status, reason = "cancelled", "the job was cancelled while this pair was solved"
+        elif timed_out:
+            reason = (f"time_limit: stopped at options.time_limit_s ({options.time_limit_s:g} s) after "
+                      f"{estimate.iterations} RANSAC samples" + (f"; {reason}" if reason else ""))
         determinacy = None
         if status == "estimate" and estimate.R is not None and estimate.inliers:
             determinacy = safely(_motion_determinacy, parsed, index, quads, estimate)

@@ -37,9 +37,9 @@ def make_celery() -> Celery:
         # worker's last beat.
         broker_transport_options={"visibility_timeout": settings.visibility_timeout_s,
                                   "unacked_restore_interval": 5, "unacked_restore_throttle": 1},
-        # A runaway task fails (and its job keeps the error).
-        task_soft_time_limit=settings.longest_task_s + 5,
-        task_time_limit=settings.longest_task_s + 15,
+        # No global time limits: each solve task carries its own, sized from its job's limits
+        # (queue.task_options); one killed at its hard limit is acknowledged, not delivered again.
+        task_acks_on_failure_or_timeout=True,
     )
     return app
 

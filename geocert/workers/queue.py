@@ -9,29 +9,63 @@ from geocert.workers.store import JobStore
 
 _LOCK = threading.Lock()
 _SOLVE_CHUNK = None
+_SOLVE_CHUNK_FAILED = None
 
 
 def _solve_chunk_task():
     """The solve task, resolved once under a lock: Celery's task objects are lazy proxies whose
     first evaluation is not thread-safe, and the API submits from many threads at once (a burst
-    of first submissions answered 500 with AttributeError: 'PromiseProxy' ... '_Proxy__local')."""
-    global _SOLVE_CHUNK
+    of first submissions answered 500 with AttributeError: 'PromiseProxy' ... '_Proxy__local').
+    Its errback (``solve_chunk_failed``) is resolved with it."""
+    global _SOLVE_CHUNK, _SOLVE_CHUNK_FAILED
     with _LOCK:
         if _SOLVE_CHUNK is None:
-            from geocert.workers.tasks import solve_chunk
+            from geocert.workers.tasks import solve_chunk, solve_chunk_failed
 
-            solve_chunk.name  # noqa: B018 (evaluates the proxy here, under the lock)
+            solve_chunk_failed.name  # noqa: B018 (evaluates the proxies here, under the lock)
+            solve_chunk.name  # noqa: B018
+            _SOLVE_CHUNK_FAILED = solve_chunk_failed
             _SOLVE_CHUNK = solve_chunk
     return _SOLVE_CHUNK
 
 
+# After the cooperative stop a task is given (``task_deadline_s``), Celery's soft time limit
+# (SoftTimeLimitExceeded raised in the task), and after that its hard one (the process killed).
+SOFT_AFTER_S = 30.0
+HARD_AFTER_S = 30.0
+
+
+def task_deadline_s(kind_name: str, item_bound_s: float | None, items: int) -> float:
+    """Seconds after which a task solving ``items`` items of a job is stopped as a last resort:
+    what the job's own time limits allow it (batch.task_time_bound_s) plus GEOCERT_TASK_TIME_MARGIN_S.
+    ``item_bound_s`` None: a job recorded without it, held to the server's per-item maximum."""
+    from geocert.batch import task_time_bound_s
+    from geocert.kinds import get_kind
+    from geocert.settings import get_settings
+
+    settings = get_settings()
+    bound = settings.max_item_time_limit_s if item_bound_s is None else item_bound_s
+    return task_time_bound_s(get_kind(kind_name), bound, items, settings.chunk_time_budget_s) + settings.task_time_margin_s
+
+
+def task_options(kind_name: str, item_bound_s: float | None, items: int) -> dict:
+    """Celery's options for such a task: soft and hard time limits after its deadline, and the
+    errback that ends its job ``failed`` (keeping what it finished) when the hard limit kills it,
+    so that a killed task is never delivered again."""
+    _solve_chunk_task()
+    soft = task_deadline_s(kind_name, item_bound_s, items) + SOFT_AFTER_S
+    return {"soft_time_limit": soft, "time_limit": soft + HARD_AFTER_S, "link_error": _SOLVE_CHUNK_FAILED.s()}
+
+
 def submit_chunks(meta: dict, request_id: str | None) -> None:
     """One task per chunk, so a batch runs in parallel across every worker (a Celery group), each
-    under the id ``JobStore.create`` recorded for it (``meta["task_ids"]``)."""
+    under the id ``JobStore.create`` recorded for it (``meta["task_ids"]``), with time limits
+    sized from the job's own (task_options)."""
     from celery import group
 
     solve_chunk = _solve_chunk_task()
-    signatures = [solve_chunk.s(meta["id"], start, stop, request_id).set(task_id=task_id)
+    signatures = [solve_chunk.s(meta["id"], start, stop, request_id).set(
+                      task_id=task_id, **task_options(meta["kind"], meta.get("item_time_bound_s"), stop - start))
                   for (start, stop), task_id in zip(meta["chunks"], meta["task_ids"])]
     group(signatures).apply_async()
 

@@ -26,6 +26,7 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
     """One round: returns (job id, what was done) for each stranded job found."""
     if not jobs.r.set(LOCK, "1", nx=True, ex=max(1, int(every_s))):
         return []  # another worker reaps this round
+    from geocert.workers.queue import task_options
     from geocert.workers.tasks import end_with_error, solve_chunk
 
     done = []
@@ -55,7 +56,9 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
         jobs.reopen_end(job_id)
         jobs.touch(job_id)  # give the re-queued tasks a full period before the next look
         for start, stop in chunks:
-            jobs.add_task_ids(job_id, solve_chunk.delay(job_id, start, stop).id)
+            task = solve_chunk.apply_async((job_id, start, stop), **task_options(
+                meta["kind"], meta.get("item_time_bound_s"), stop - start))
+            jobs.add_task_ids(job_id, task.id)
         log.warning("job %s had no live task for %.0f s: re-queued %d chunk(s), %d item(s) missing (round %d)",
                     job_id, stale_after_s, len(chunks), len(missing), reaps)
         done.append((job_id, f"requeued {len(chunks)}"))

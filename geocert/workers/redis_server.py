@@ -21,6 +21,33 @@ def redis_server_binary() -> str:
     return path
 
 
+class DataDirInUse(RuntimeError):
+    """Another process serves from this data directory (its embedded Redis, socket and files)."""
+
+
+def claim_data_dir(directory: Path):
+    """An exclusive lock on ``directory`` for this process's life (the open file returned must be
+    kept): a second ``geocert serve`` in the same directory would delete the first's Redis socket
+    and write the same append-only file. Raises DataDirInUse, naming the holder's pid."""
+    import fcntl
+
+    directory = Path(directory).resolve()
+    directory.mkdir(parents=True, exist_ok=True)
+    lock = open(directory / "serve.lock", "a+")
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        lock.seek(0)
+        holder = lock.read().strip() or "unknown"
+        lock.close()
+        raise DataDirInUse(f"another geocert serve (pid {holder}) runs from {directory}") from None
+    lock.seek(0)
+    lock.truncate()
+    lock.write(f"{os.getpid()}\n")
+    lock.flush()
+    return lock
+
+
 def start_embedded_redis(directory: Path, preexec_fn=None) -> tuple[subprocess.Popen, str]:
     """Start redis-server on a unix socket in ``directory``; returns the process and its URL."""
     directory = Path(directory).resolve()

@@ -51,7 +51,8 @@ class JobStore:
     # --- creation and reads ------------------------------------------------------------------
     def create(self, kind: str, request: dict, items_total: int, chunk_size: int, owner: str,
                callback_url: str | None = None, active_limit: int = 0, task_ids=None,
-               chunk_key: str | None = None, items_key: str | None = None) -> dict | None:
+               chunk_key: str | None = None, items_key: str | None = None,
+               item_time_bound_s: float | None = None) -> dict | None:
         """Record a new queued job, counted among the owner's active jobs, with its ``status``
         event and the ids its tasks will have (one per chunk; made here unless given), in one
         round trip. None when the owner already has ``active_limit`` jobs queued or running (0:
@@ -64,7 +65,10 @@ class JobStore:
 
         ``items_key``: a Redis list already holding those entries' JSON texts (a large body's
         items, written a batch at a time: app.streamed); it becomes the job's item list, and the
-        request's own list is ignored."""
+        request's own list is ignored.
+
+        ``item_time_bound_s``: the longest one of its items runs while the job's own time limits
+        hold (its kind's ``time_bound_s``), from which its tasks' last-resort limits are sized."""
         job_id = uuid.uuid4().hex
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
@@ -73,7 +77,7 @@ class JobStore:
             "progress": {"nodes": 0, "open_boxes": 0, "lower_bound": None, "upper_bound": None, "gap_abs": None,
                          "gap_rel": None, "items_done": 0, "items_total": items_total,
                          "tracks_done": 0, "tracks_total": items_total, "elapsed_s": 0.0},  # tracks_*: deprecated names
-            "error": None,
+            "error": None, "item_time_bound_s": item_time_bound_s,
             "webhook": {"url": callback_url, "state": "waiting", "attempts": 0, "last_error": None,
                         "delivered_at": None} if callback_url else None,
         }
@@ -463,6 +467,10 @@ class JobStore:
     @staticmethod
     def _unpacked(raw: bytes) -> dict:
         return json.loads(raw if raw[:1] == b"{" else zlib.decompress(raw))
+
+    def stored_items(self, job_id: str) -> dict[int, dict]:
+        """The items stored so far, by index (a job that fails keeps these)."""
+        return {int(index): self._unpacked(raw) for index, raw in self.binary.hgetall(self.key(job_id, "items")).items()}
 
     def all_items(self, job_id: str, total: int) -> list[dict]:
         raw = self.binary.hgetall(self.key(job_id, "items"))

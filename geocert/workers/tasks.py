@@ -11,6 +11,13 @@ A job ends in one place, ``JobStore.end``, under the job's ``claim_end`` (one ca
 ``end_with_result`` when the last items are stored, ``end_with_error`` when a task fails (or the
 reaper gives up). A queued job cancelled ends in ``JobStore.cancel_if_queued`` instead. Either
 way ``after_end`` then counts the job and queues its webhook.
+
+Time limits: a job's own (each kind's time_limit_s) end it, keeping its best answers. A task
+still running past what those allow plus GEOCERT_TASK_TIME_MARGIN_S (queue.task_deadline_s) is
+stopped as a last resort, at the solvers' next check (the cancel's path), else by Celery's soft
+time limit, else by its hard one (the process killed; ``solve_chunk_failed`` runs in the
+worker's main process): its job ends ``failed`` with the reason and the items it finished, and
+the task is never delivered again.
 """
 
 from __future__ import annotations
@@ -21,12 +28,14 @@ import traceback
 
 from geocert.settings import get_settings
 from geocert.solvers.core.geometry import InputError
-from geocert.batch import (assemble, item_counts, item_sums, merged_sums, result_fragment, result_json,
+from geocert.batch import (abs_gap_of, assemble, item_counts, item_sums, merged_sums, result_fragment, result_json,
                            result_shell, solve_items, stats_from, streams_result)
 from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
+from geocert.workers.queue import SOFT_AFTER_S, task_deadline_s, task_options
 from geocert.workers.store import REDIS_GONE, JobStore, shared_store as store
+from celery.exceptions import SoftTimeLimitExceeded
 
 log = logging.getLogger("geocert.worker")
 
@@ -40,8 +49,12 @@ class ProgressPublisher:
     With ``kind`` (a streamed result: batch.streams_result), the run of items the task solved is
     also stored as one fragment of the result, with the store of its last item."""
 
-    def __init__(self, jobs: JobStore, job_id: str, start: int, interval: float, kind=None):
+    def __init__(self, jobs: JobStore, job_id: str, start: int, interval: float, kind=None, abs_gap: float = 0.0,
+                 stop_by: float = float("inf")):
         self.jobs, self.job_id, self.start, self.interval = jobs, job_id, start, interval
+        self.abs_gap = abs_gap
+        self.stop_by = stop_by  # time.monotonic() past which the task is stopped as a last resort
+        self.overrun = False
         self.last = 0.0
         self.cancel_checked = 0.0
         self.cancelled = False
@@ -60,7 +73,7 @@ class ProgressPublisher:
         if self.kind is None or not self.ended:
             return None
         text = result_fragment(self.kind, self.ended)
-        fragment = None if text is None else (self.start, item_sums(self.ended), text)
+        fragment = None if text is None else (self.start, item_sums(self.ended, self.abs_gap), text)
         self.kind, self.ended = None, []
         return fragment
 
@@ -79,10 +92,13 @@ class ProgressPublisher:
         return done
 
     def should_stop(self) -> bool:
+        """A cancel (read from Redis at most every 50 ms), or the task past its last-resort deadline."""
         if not self.cancelled and time.monotonic() - self.cancel_checked >= 0.05:
             self.cancel_checked = time.monotonic()
             self.cancelled = self.jobs.cancel_requested(self.job_id)
-        return self.cancelled
+        if not self.overrun and time.monotonic() > self.stop_by:
+            self.overrun = True
+        return self.cancelled or self.overrun
 
 
 @celery_app.task(name="geocert.solve_chunk", bind=True, max_retries=5)
@@ -115,28 +131,40 @@ def _wait_for_redis(jobs: JobStore, limit_s: float) -> None:
 
 def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> None:
     jobs = store()
-    meta = jobs.fields(job_id, "items_total")
+    meta = jobs.fields(job_id, "items_total", "kind", "item_time_bound_s")
     if meta is None or not jobs.mark_running(job_id):
         return  # expired, deleted, or ended (cancelled) before it started: nothing to do
     settings = get_settings()
+    began = time.monotonic()
+    deadline_s = task_deadline_s(meta["kind"], meta["item_time_bound_s"], stop - start)
+    publisher = kind = options = None
     try:
         request = jobs.chunk_request(job_id, start, stop)  # its own items only (see JobStore.create)
         kind = get_kind(request["kind"])
         options = options_from(kind.options_type, request.get("options"))
         parsed = kind.parse(request["data"], items=range(start, stop))
         publisher = ProgressPublisher(jobs, job_id, start, settings.progress_interval_s,
-                                      kind if streams_result(kind, options) else None)
-        began = time.monotonic()
+                                      kind if streams_result(kind, options) else None, abs_gap_of(options),
+                                      stop_by=began + deadline_s)
         items = solve_items(kind, parsed, options, range(start, stop), publisher, publisher.should_stop,
                             stop_at=began + settings.chunk_time_budget_s, on_item=publisher.item_ended)
         done = publisher.flush()
         metrics.record_items(jobs.r, kind.name, items)
         cut = start + len(items)
-        if cut < stop:  # over the budget: the rest of the chunk becomes a task of its own
+        if publisher.overrun and not publisher.cancelled:  # stopped by the clock, not by the job's own limits
+            end_over_time(jobs, job_id, kind, options, time.monotonic() - began, deadline_s, "stopped at its next check")
+        elif cut < stop:  # over the budget: the rest of the chunk becomes a task of its own
             log.info("continuing items %d-%d in a new task", cut, stop)
-            jobs.add_task_ids(job_id, solve_chunk.delay(job_id, cut, stop, request_id).id)
+            task = solve_chunk.apply_async((job_id, cut, stop, request_id),
+                                           **task_options(kind.name, meta["item_time_bound_s"], stop - cut))
+            jobs.add_task_ids(job_id, task.id)
         elif done == meta["items_total"] and jobs.claim_end(job_id):
             end_with_result(jobs, job_id, kind, options)
+    except SoftTimeLimitExceeded:  # Celery's soft limit: the solvers did not reach a check in time
+        if publisher is not None:
+            publisher.flush()
+        end_over_time(jobs, job_id, kind, options, time.monotonic() - began, deadline_s + SOFT_AFTER_S,
+                      "stopped by Celery's soft time limit")
     except InputError as exc:  # the API validates first, so this is a stored job gone bad
         end_with_error(jobs, job_id, 422, "Invalid job data", str(exc), exc.field)
     except REDIS_GONE:
@@ -144,7 +172,54 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
     except Exception as exc:  # never lose the reason: the job keeps its error
         log.exception("items %d-%d of job %s failed", start, stop, job_id)
         end_with_error(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
-             traceback.format_exc(limit=5))
+             traceback.format_exc(limit=5), kind=kind, options=options)
+
+
+TIME_LIMIT_TITLE = "Task time limit exceeded"
+
+
+def end_over_time(jobs: JobStore, job_id: str, kind, options, ran_s: float, limit_s: float, how: str) -> None:
+    """A task ran past the last resort its job's own limits allow (queue.task_deadline_s): the job
+    ends ``failed`` with the reason, keeping what it finished."""
+    log.warning("job %s: a task ran %.0f s, past its limit of %.0f s (%s)", job_id, ran_s, limit_s, how)
+    end_with_error(jobs, job_id, 500, TIME_LIMIT_TITLE,
+                   f"a task of this job ran {ran_s:.0f} s, past the {limit_s:.0f} s its own time limits allow it "
+                   f"(with GEOCERT_TASK_TIME_MARGIN_S for the work between the solvers' clock checks), and was "
+                   f"{how}; what it finished is kept in the result (what was stopped reads cancelled there)",
+                   None, kind=kind, options=options)
+
+
+@celery_app.task(name="geocert.solve_chunk_failed")
+def solve_chunk_failed(request, exc, traceback) -> None:
+    """Celery's errback for a solve task that failed outside its own handling (run by the worker's
+    main process): killed at its hard time limit, or out of retries. Its job ends ``failed`` with
+    the reason and what it finished; the task is not delivered again (it is acknowledged)."""
+    from celery.exceptions import TimeLimitExceeded
+
+    job_id = request.args[0]
+    jobs = store()
+    fields = jobs.fields(job_id, "kind")
+    if fields is None or fields["status"] in ("succeeded", "failed", "cancelled"):
+        return
+    kind, options = _kind_and_options(jobs, job_id)
+    if isinstance(exc, TimeLimitExceeded):
+        limit = exc.args[0] if exc.args else None
+        end_with_error(jobs, job_id, 500, TIME_LIMIT_TITLE,
+                       f"a task of this job was killed at Celery's hard time limit ({limit} s), the last resort after "
+                       "its own time limits and GEOCERT_TASK_TIME_MARGIN_S; what it finished is kept in the result",
+                       None, kind=kind, options=options)
+    else:
+        end_with_error(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
+                       kind=kind, options=options)
+
+
+def _kind_and_options(jobs: JobStore, job_id: str):
+    try:
+        request = jobs.chunk_request(job_id, 0, 0)
+        kind = get_kind(request["kind"])
+        return kind, options_from(kind.options_type, request.get("options"))
+    except Exception:  # noqa: BLE001 (the failure is recorded without the partial result then)
+        return None, None
 
 
 def end_with_result(jobs: JobStore, job_id: str, kind, options) -> None:
@@ -157,7 +232,7 @@ def end_with_result(jobs: JobStore, job_id: str, kind, options) -> None:
         return
     request = jobs.request(job_id) if kind.certifies and options.certificate == "full" else None
     items = jobs.all_items(job_id, meta["items_total"])
-    sums = item_sums(items)
+    sums = item_sums(items, abs_gap_of(options))
     stats = stats_from(sums, elapsed)
     result = assemble(kind, request, options, items, stats)
     _end(jobs, job_id, sums, stats, result=result, result_text=result_json(kind, result))
@@ -180,9 +255,12 @@ def _end_with_fragments(jobs: JobStore, job_id: str, kind, options, total: int, 
 
 def _end(jobs: JobStore, job_id: str, sums: dict, stats: dict, **stored) -> None:
     # The last progress of each task may be throttled away or, after a cancel, stop short of
-    # its items: the job's final progress is computed from the very items of the result.
+    # its items: the job's final progress is computed from the very items of the result. A job
+    # cancelled while it ran ends "cancelled", with everything it finished, even when its last
+    # stage ended before it saw the cancel.
     progress = final_progress(sums, stats)
-    status = "cancelled" if sums["statuses"].get("cancelled") else "succeeded"
+    cancelled = sums["statuses"].get("cancelled") or jobs.cancel_requested(job_id)
+    status = "cancelled" if cancelled else "succeeded"
     jobs.set_fields(job_id, progress=progress)
     jobs.publish(job_id, "progress", progress)
     jobs.end(job_id, status, **stored)
@@ -204,17 +282,45 @@ def final_progress(sums: dict, stats: dict) -> dict:
 
 
 def end_with_error(jobs: JobStore, job_id: str, http_status: int, title: str, detail: str, field: str | None,
-                   trace: str | None = None) -> None:
+                   trace: str | None = None, kind=None, options=None) -> None:
     """The job ends ``failed`` with this error (problem details), unless another caller already
-    holds its ``claim_end``."""
+    holds its ``claim_end``. With its ``kind`` and ``options``, the items it finished are kept
+    as its result (partial_result)."""
     error = {"type": "about:blank", "title": title, "status": http_status, "detail": detail}
     if field is not None:
         error["errors"] = [{"field": field, "reason": detail}]
     if trace:
         error["trace"] = trace
     if jobs.claim_end(job_id):
-        jobs.end(job_id, "failed", error=error)
+        jobs.request_cancel(job_id)  # the job's other tasks stop at their next check
+        result = None
+        if kind is not None and options is not None:
+            try:
+                result = partial_result(jobs, job_id, kind, options, f"not solved: the job failed ({title})")
+            except Exception:  # noqa: BLE001 (the error is what must be kept)
+                log.exception("job %s: its finished items could not be assembled", job_id)
+        jobs.end(job_id, "failed", error=error, result=result,
+                 result_text=None if result is None else result_json(kind, result))
         after_end(jobs, job_id)
+
+
+def partial_result(jobs: JobStore, job_id: str, kind, options, reason: str) -> dict | None:
+    """The result of the items a failed job stored (None when it stored none): every other item
+    is its kind's unsolved item, saying why."""
+    stored = jobs.stored_items(job_id)
+    if not stored:
+        return None
+    meta = jobs.fields(job_id, "items_total", "started_at", "created_at")
+
+    def unsolved() -> dict:  # one each: assembling may write into an item
+        item = kind.cancelled_item()
+        return {**item, "reason": reason} if "reason" in item else item
+
+    items = [stored[index] if index in stored else unsolved() for index in range(meta["items_total"])]
+    sums = item_sums(items, abs_gap_of(options))
+    stats = stats_from(sums, time.time() - (meta["started_at"] or meta["created_at"]))
+    request = jobs.request(job_id) if kind.certifies and options.certificate == "full" else None
+    return assemble(kind, request, options, items, stats)
 
 
 def after_end(jobs: JobStore, job_id: str) -> None:

@@ -77,7 +77,8 @@ class TestEveryKind:
     def check_estimates_kind(kind):
         """A kind that issues estimates, never certificates (``certifies = False``): its result fits
         its model, every item says it is not certified, asking for a certificate is refused naming
-        the option, and the verifier answers that there is nothing to verify."""
+        the option, and the verifier answers that there is nothing to verify; so does ``geocert
+        verify``, without suggesting the option the kind refuses."""
         result = solve_job(kind.example)
         kind.result_model.model_validate(result)
         assert result[kind.item_key] and not any(item["certified"] for item in result[kind.item_key])
@@ -86,6 +87,10 @@ class TestEveryKind:
         assert error.value.field == "options/certificate"
         report = verify_any(result)
         assert not report.valid and "nothing to verify" in report.first_failure["detail"]
+        command = subprocess.run([sys.executable, "-m", "geocert.app.cli", "verify", "-"], input=json.dumps(result),
+                                 capture_output=True, text=True)
+        assert command.returncode == 2 and "nothing to verify" in command.stderr
+        assert "certificate" not in command.stderr.split("holds no certificate", 1)[1]
 
 
 def certifies(kind) -> bool:

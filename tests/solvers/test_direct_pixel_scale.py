@@ -45,7 +45,9 @@ def pixel_scene(seed: int, noise_px: float, views: int = 12, points: int = 20, d
 
 
 def job(data, **options):
-    return {"kind": "autocalibration", "data": copy.deepcopy(data), "options": {"method": "direct", **options}}
+    # the direct method keeps time_limit_s (60 s by default): outcomes must not depend on the machine's speed
+    return {"kind": "autocalibration", "data": copy.deepcopy(data),
+            "options": {"method": "direct", "time_limit_s": 3600, **options}}
 
 
 @pytest.fixture(scope="module")

@@ -120,12 +120,13 @@ def _scaling_psd(S: np.ndarray, Z: np.ndarray):
 
 
 def solve(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: int, psd: tuple,
-          tolerance: float = 1e-9, max_iter: int = 60, acceptable: float = 1e-8) -> Result:
+          tolerance: float = 1e-9, max_iter: int = 60, acceptable: float = 1e-8, check=None) -> Result:
     """Stops when the primal residual (relative to max(1, |b|)), the dual one (to max(1, |q|)) and
     the gap s'z (absolute, or relative to |q'y|) are all within ``tolerance`` ("Solved"); when
     the iterations end otherwise (a limit, a stall: the worst of the three not halved in STALL
     iterations, a numerical failure), the last iterate within ``acceptable`` is returned as
-    "Solved", else the last iterate with the reason."""
+    "Solved", else the last iterate with the reason. ``check()``, when given, is called before
+    each iteration and may raise to abandon the solve (a cancel, a time limit)."""
     A = sp.csr_matrix(A)
     n = A.shape[1]
     Ae, be = A[:zero], b[:zero]
@@ -176,6 +177,8 @@ def solve(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: int, 
     history: list[float] = []
     kept = None
     for it in range(1, max_iter + 1):
+        if check is not None:
+            check()
         sp_, zp = split(s), split(zK)
         # residuals
         r_p = bK - AK @ y - s

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 
 import numpy as np
 
@@ -31,7 +32,19 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
     from geocert.kinds.autocalibration import _stage, self_check_stages
     from geocert.solvers.autocalibration import direct_solve
     from geocert.solvers.autocalibration.stratified import announce
+    from geocert.solvers.core.bnb import asks_to_stop
     from geocert.solvers.verify import self_check_enabled
+
+    began = time.perf_counter()
+
+    def check() -> None:
+        """Between programs and interior-point iterations: a cancel, or the stage's time limit."""
+        elapsed = time.perf_counter() - began
+        if asks_to_stop(callback, pr.StageProgress(0, 0, -math.inf, math.inf, math.inf, math.inf, elapsed,
+                                                   stage="direct")):
+            raise direct_solve.Stopped("cancelled", "the job was cancelled")
+        if elapsed > options.time_limit_s:
+            raise direct_solve.Stopped("time_limit", f"stopped at options.time_limit_s ({options.time_limit_s:g} s)")
 
     problem = pr.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
     setup = direct.setup_for(problem, options.chirality)
@@ -44,7 +57,7 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
         result = direct_solve.DirectStage("cancelled", False, None, math.inf, -math.inf, options.relaxation_order,
                                           reason="the job was cancelled")
     else:
-        result = direct_solve.solve_direct(setup, options, full)
+        result = direct_solve.solve_direct(setup, options, full, check)
     cost = math.inf
     if result.Q is not None:
         Q_in, cost = returned_quadric(setup, result.Q)

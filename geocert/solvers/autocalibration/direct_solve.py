@@ -77,6 +77,14 @@ class DirectStage:
     elapsed_s: float = 0.0
 
 
+class Stopped(Exception):
+    """Raised by a solve's ``check`` to end the search: ``status`` "cancelled" or "time_limit"."""
+
+    def __init__(self, status: str, reason: str):
+        super().__init__(reason)
+        self.status, self.reason = status, reason
+
+
 # (tolerance, Clarabel's static regularisation; None: direct_ipm, the structured interior-point method)
 ATTEMPTS = ((1e-9, None), (1e-8, 1e-6), (1e-9, 1e-6), (1e-8, 1e-7))
 IPM_MAX_ITER = 50
@@ -104,14 +112,17 @@ def _settings(tolerance: float, regularisation: float = 1e-6) -> clarabel.Defaul
     return settings
 
 
-def solve_program(program: dr.Program, enough=None, attempts=None) -> tuple[ConicStatus, np.ndarray | None, np.ndarray | None, str]:
+def solve_program(program: dr.Program, enough=None, attempts=None, check=None) -> tuple[ConicStatus, np.ndarray | None, np.ndarray | None, str]:
     """(status, y, z, raw status) of the first clean solve among ATTEMPTS that ``enough(y, z)``
     accepts (default: any clean solve), else the clean one with the highest safe bound, else the
-    last with a dual (still a safe bound); never raises on solver trouble."""
+    last with a dual (still a safe bound); never raises on solver trouble. ``check()`` is called
+    before each attempt and each interior-point iteration: it may raise Stopped."""
     answer = (ConicStatus.FAILED, None, None, "not solved")
     for tolerance, regularisation in ATTEMPTS if attempts is None else attempts:
+        if check is not None:
+            check()
         if regularisation is None:
-            retry = _solve_ipm(program, tolerance)
+            retry = _solve_ipm(program, tolerance, check)
         else:
             retry = _solve_once(program, tolerance, regularisation)
         clean = answer[0] is ConicStatus.OPTIMAL
@@ -128,12 +139,12 @@ def solve_program(program: dr.Program, enough=None, attempts=None) -> tuple[Coni
     return answer
 
 
-def _solve_ipm(program: dr.Program, tolerance: float):
+def _solve_ipm(program: dr.Program, tolerance: float, check=None):
     """direct_ipm's solve as (status, y, z, raw status): "Solved" only when its residuals and gap
     met the tolerance."""
     try:
         result = direct_ipm.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
-                                  program.cones.psd, tolerance=tolerance, max_iter=IPM_MAX_ITER)
+                                  program.cones.psd, tolerance=tolerance, max_iter=IPM_MAX_ITER, check=check)
     except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
         return ConicStatus.FAILED, None, None, f"ipm exception: {exc}"
     raw = f"ipm {result.status}"
@@ -155,7 +166,7 @@ def _solve_once(program: dr.Program, tolerance: float, regularisation: float):
             return ConicStatus.FAILED, None, None, raw
         return status, y, z, raw
     except BaseException as exc:
-        if isinstance(exc, (KeyboardInterrupt, SystemExit)):
+        if isinstance(exc, (KeyboardInterrupt, SystemExit, Stopped)):
             raise
         return ConicStatus.FAILED, None, None, f"exception: {exc}"
 
@@ -300,13 +311,16 @@ def candidates(setup: direct.DirectSetup, y: np.ndarray, orientation: direct.Ori
     return out
 
 
-def solve_direct(setup: direct.DirectSetup, options, record: bool) -> DirectStage:
+def solve_direct(setup: direct.DirectSetup, options, record: bool, check=None) -> DirectStage:
+    """``check()``, called between programs and between interior-point iterations, may raise
+    Stopped: the stage then ends with that status, keeping the best quadric found and, once every
+    orientation's program is solved, their bound."""
     start = time.perf_counter()
     if not setup.orientations:
         return DirectStage("failed", False, None, math.inf, -math.inf, options.relaxation_order,
                            reason="no plane at infinity is consistent with chirality (both orientations excluded)",
                            elapsed_s=time.perf_counter() - start)
-    stage = _solve_order(setup, options, options.relaxation_order, record)
+    stage = _solve_order(setup, options, options.relaxation_order, record, check)
     stage.elapsed_s = time.perf_counter() - start
     return stage
 
@@ -342,7 +356,7 @@ class Leaf:
 MAX_SPLITS = direct.MAX_CUTS  # the verifier refuses deeper paths
 
 
-def _solve_leaf(setup, options, order, orientation, cuts) -> Leaf | None:
+def _solve_leaf(setup, options, order, orientation, cuts, check=None) -> Leaf | None:
     program = dr.build(setup.cameras, orientation.pairs, order, cuts, setup.focal)
 
     def enough(y, z):
@@ -358,7 +372,7 @@ def _solve_leaf(setup, options, order, orientation, cuts) -> Leaf | None:
 
     # a half is solved by direct_ipm only: where it stalled (seeds 1008, 1012 and 1042, varying focal),
     # Clarabel's attempts took 6 to 20 s each and ended "AlmostSolved" too (the result is then not certified)
-    status, y, z, raw = solve_program(program, enough, ATTEMPTS[:1] if cuts else ATTEMPTS)
+    status, y, z, raw = solve_program(program, enough, ATTEMPTS[:1] if cuts else ATTEMPTS, check)
     if z is None:
         return Leaf(orientation, cuts, program, status, y, z, raw, -math.inf, (0, math.nan, None))
     return Leaf(orientation, cuts, program, status, y, z, raw, dr.safe_bound(program, z)[0], rank_test(program, y))
@@ -383,9 +397,10 @@ def split_of(leaf: Leaf) -> tuple[int, float] | None:
     return k, float(mean[k])
 
 
-def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -> DirectStage:
+def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool, check=None) -> DirectStage:
     best, best_cost = None, math.inf
     statuses, leaves = [], []
+    stopped: Stopped | None = None
 
     def consider(leaf):
         nonlocal best, best_cost
@@ -395,13 +410,18 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -
             if c < best_cost:
                 best, best_cost = Q, c
 
-    for orientation in setup.orientations:
-        leaf = _solve_leaf(setup, options, order, orientation, ())
-        if leaf.z is None:
-            return DirectStage("failed", False, None, math.inf, -math.inf, order, conic_status=statuses + [leaf.raw],
-                               reason=f"the conic solver failed ({leaf.raw})")
-        leaves.append(leaf)
-        consider(leaf)
+    try:
+        for orientation in setup.orientations:
+            leaf = _solve_leaf(setup, options, order, orientation, (), check)
+            if leaf.z is None:
+                return DirectStage("failed", False, None, math.inf, -math.inf, order,
+                                   conic_status=statuses + [leaf.raw], reason=f"the conic solver failed ({leaf.raw})")
+            leaves.append(leaf)
+            consider(leaf)
+    except Stopped as stop:  # not every orientation bounded: no bound, the best quadric so far
+        return DirectStage(stop.status, False, best, best_cost, -math.inf, order, conic_status=statuses,
+                           reason=stop.reason)
+
     def standing(leaves):
         return all(leaf.status is ConicStatus.OPTIMAL for leaf in leaves), min(leaf.bound for leaf in leaves)
 
@@ -420,8 +440,12 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -
         cut = split_of(lowest)
         if cut is None:
             break
-        halves = [_solve_leaf(setup, options, order, lowest.orientation, lowest.cuts + ((cut[0], cut[1], sign),))
-                  for sign in (1, -1)]
+        try:
+            halves = [_solve_leaf(setup, options, order, lowest.orientation, lowest.cuts + ((cut[0], cut[1], sign),),
+                                  check) for sign in (1, -1)]
+        except Stopped as stop:  # the splitting so far stands (its leaves cover every orientation)
+            stopped = stop
+            break
         if any(half.z is None for half in halves):
             statuses += [half.raw for half in halves]
             break
@@ -444,8 +468,9 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -
     proof = {"type": "direct_moment", "order": order, "programs": programs, "excluded": setup.excluded,
              "moment_rank": rank, "eigenvalue_ratio": ratio} if record else None
     if best is None:
-        return DirectStage("not_certified", False, None, math.inf, bound, order, rank, ratio, statuses, None,
-                           "no feasible quadric rounded from the relaxation satisfies chirality and the focal ranges")
+        return DirectStage("not_certified" if stopped is None else stopped.status, False, None, math.inf, bound, order,
+                           rank, ratio, statuses, None, "no feasible quadric rounded from the relaxation satisfies "
+                           "chirality and the focal ranges" + ("" if stopped is None else f" ({stopped.reason})"))
     tolerance = max(options.abs_gap, options.metric_rel_gap * abs(best_cost))
     certified = clean and best_cost - bound <= tolerance
     reason = None
@@ -462,5 +487,7 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool) -
         reason = (f"the relaxation is not tight at order {order}{split}: moment matrix rank {rank}, gap "
                   f"{best_cost - bound:.3g} against the tolerance {tolerance:.3g}; the bound and the rounded "
                   "solution are returned")
-    return DirectStage("optimal" if certified else "not_certified", certified, best, best_cost, bound, order, rank,
-                       ratio, statuses, proof, reason)
+    status = "optimal" if certified else "not_certified"
+    if stopped is not None and not certified:
+        status, reason = stopped.status, f"{stopped.reason}; {reason}" if reason else stopped.reason
+    return DirectStage(status, certified, best, best_cost, bound, order, rank, ratio, statuses, proof, reason)

@@ -44,8 +44,9 @@ def solve(problem: Problem, options: AutocalibrationOptions, callback=None) -> S
     stage = affine.solve_affine(problem.norm, bnb_options(options, options.rel_gap), record,
                                 stage_callback(callback, "affine"))
     affine_s = time.perf_counter() - start
-    if stage.plane is None or (stage.status == "cancelled"):
-        return Stratified(problem, stage, affine_s, None, 0.0, None, None)
+    if stage.plane is None or (stage.status == "cancelled"):  # a cancelled stage keeps the plane it had
+        p = None if stage.plane is None else plane_from_input(problem, plane_in_input(problem, stage.plane[:3]))
+        return Stratified(problem, stage, affine_s, None, 0.0, None, None, p)
     if announce(callback, "metric"):
         cancelled = metric.MetricStage("cancelled", False, None, math.inf, -math.inf, 0, np.zeros(5), np.zeros(5),
                                        reason="the job was cancelled")

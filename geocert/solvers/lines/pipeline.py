@@ -77,8 +77,11 @@ class StereoLinesOptions:
     refine: bool = True
     incremental_iterations: int = 3
     matching: MatchingOptions = field(default_factory=MatchingOptions)
+    # Per frame pair: RANSAC draws no sample after it and the pair keeps its best motion so far.
+    time_limit_s: float = 10.0
 
-    OPTION_RANGES = {"sample_size": {"ge": 2, "le": 10}, "incremental_iterations": {"ge": 1, "le": 20}}
+    OPTION_RANGES = {"sample_size": {"ge": 2, "le": 10}, "incremental_iterations": {"ge": 1, "le": 20},
+                     "time_limit_s": {"gt": 0, "le": 3600}}
 
     def __post_init__(self):
         self.ransac = _nested(RansacOptions, self.ransac, "options/ransac")
@@ -96,6 +99,9 @@ class StereoLinesOptions:
                                                     f"lines per sample, got {self.sample_size}")
         if not 1 <= self.incremental_iterations <= 20:
             raise InputError("options/incremental_iterations", "must be between 1 and 20")
+        if not (isinstance(self.time_limit_s, (int, float)) and math.isfinite(self.time_limit_s)
+                and 0 < self.time_limit_s <= 3600):
+            raise InputError("options/time_limit_s", "must be a finite number > 0 and <= 3600")
 
     @property
     def minimum_lines(self) -> int:

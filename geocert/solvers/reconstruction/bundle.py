@@ -15,7 +15,7 @@ from geocert.solvers.reconstruction import schur
 
 
 def projective(cameras: np.ndarray, points: np.ndarray, view: np.ndarray, track: np.ndarray, pixels: np.ndarray,
-               scales: np.ndarray, f_scale: float | None = None, max_iterations: int = 30):
+               scales: np.ndarray, f_scale: float | None = None, max_iterations: int = 30, should_stop=None):
     """Refine cameras (n, 3, 4) and homogeneous points (p, 4) over observations (view, track,
     pixel): pixels are normalised image coordinates and ``scales`` each view's normalisation
     scale, so residual / scale is in pixels. Returns cameras, points, pixel residuals (M, 2)."""
@@ -43,7 +43,7 @@ def projective(cameras: np.ndarray, points: np.ndarray, view: np.ndarray, track:
         return ja * scale, np.zeros((len(Am), 2, 0)), jb * scale
 
     A, _, B, r, _ = schur.solve(residual, A, np.zeros(0), B, view, track, f_scale, max_iterations,
-                                jacobian=jacobian)
+                                jacobian=jacobian, should_stop=should_stop)
     P = A.reshape(n, 3, 4)
     P = P / np.linalg.norm(A, axis=1)[:, None, None]
     X = B / np.linalg.norm(B, axis=1)[:, None]
@@ -58,7 +58,7 @@ MODELS = ("simple", "full", "fixed", "varying")
 
 def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, points: np.ndarray, view: np.ndarray,
            track: np.ndarray, pixels: np.ndarray, f_scale: float | None = None, max_iterations: int = 30,
-           model: str = "simple", focals: np.ndarray | None = None):
+           model: str = "simple", focals: np.ndarray | None = None, should_stop=None):
     """Refine one shared K (``model``: "simple" f with square pixels, no skew and cx, cy fixed; "full"
     fx, fy, skew, cx, cy; "fixed" K as given), rotations (n, 3, 3), translations (n, 3) and
     points (p, 3) against pixel observations. Returns K, rotations, translations, points,
@@ -88,7 +88,8 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
 
     start = {"fixed": np.zeros(0), "varying": np.zeros(0), "simple": np.array([np.sqrt(abs(given[0] * given[1]))]),
              "full": given.copy()}[model]
-    A, S, B, r, _ = schur.solve(residual, A, start, points.copy(), view, track, f_scale, max_iterations)
+    A, S, B, r, _ = schur.solve(residual, A, start, points.copy(), view, track, f_scale, max_iterations,
+                                should_stop=should_stop)
     k = entries(S)
     K = np.array([[k[0], k[2], k[3]], [0.0, k[1], k[4]], [0.0, 0.0, 1.0]])
     if model == "varying":  # one K per view

@@ -262,7 +262,15 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
         if options.bundle_adjustment:
             if tell.asks("bundle_adjustment", 0, 1):
                 _keep_metric(out, starts[0][1], n_views, stage)
-            name, metric, keep, before, trials = adjust_best(starts, obs, keep, options.threshold_px, model)
+            stop = {"asked": False}  # asked each iteration of the adjustment; a cancel ends it where it is
+
+            def stopping() -> bool:
+                stop["asked"] = stop["asked"] or tell.asks("bundle_adjustment", 0, 1)
+                return stop["asked"]
+
+            name, metric, keep, before, trials = adjust_best(starts, obs, keep, options.threshold_px, model, stopping)
+            if stop["asked"]:
+                _keep_metric(out, metric, n_views, stage, "adjusted as far as the adjustment went")
             stage["starts"] = trials
             stage.update(started_from=name, model=model, rms_px_before=before, rms_px_after=_rms(metric, obs, keep),
                          K=metric.K.tolist(), observations_kept=int(keep.sum()))
@@ -306,13 +314,13 @@ def _metric_cameras(out: Reconstruction, metric: upgrade.Metric, n_views: int) -
     return P
 
 
-def _keep_metric(out: Reconstruction, metric: upgrade.Metric, n_views: int, stage: dict) -> None:
-    """A cancel before the metric adjustment: the upgrade found is kept (its cameras returned,
-    unadjusted), and the run stops."""
+def _keep_metric(out: Reconstruction, metric: upgrade.Metric, n_views: int, stage: dict,
+                 how: str = "not adjusted") -> None:
+    """A cancel before (or during) the metric adjustment: the upgrade found is kept (its cameras
+    returned, ``how``), and the run stops."""
     out.metric = metric = _normalise_frame(metric)
     _metric_cameras(out, metric, n_views)
-    stage.update(status="cancelled", reason="the job was cancelled: the cameras returned are the upgrade's, "
-                                            "not adjusted")
+    stage.update(status="cancelled", reason=f"the job was cancelled: the cameras returned are the upgrade's, {how}")
     raise Cancelled("bundle_adjustment")
 
 
@@ -386,24 +394,28 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
                                 f"are kept, {not_started} were not started")
 
 
-def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px: float, model: str):
+def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px: float, model: str,
+                should_stop=None):
     """A short adjustment (8 iterations) from each upgrade (name, Metric); the one with the
     smaller RMS goes on to a full adjustment. Returns its name, the adjusted reconstruction, the
-    observations kept, the RMS before, and each start's figures."""
+    observations kept, the RMS before, and each start's figures. ``should_stop()`` (asked each
+    iteration) ends the adjustments where they are."""
     if len(starts) == 1:  # nothing to choose between: straight to the full adjustment
         name, start = starts[0]
         before = _rms(start, obs, keep)
-        metric, keep, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, threshold_px, model=model)
+        metric, keep, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, threshold_px, model=model,
+                                         should_stop=should_stop)
         return name, metric, keep, before, [{"from": name, "rms_px_before": before}]
     tried, trials = [], []
     for name, start in starts:
         adjusted, kept, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, threshold_px, max_iterations=8,
-                                           model=model)
+                                           model=model, should_stop=should_stop)
         before = _rms(start, obs, keep)
         tried.append((_rms(adjusted, obs, kept), name, adjusted, before))
         trials.append({"from": name, "rms_px_before": before, "rms_px_after_8_iterations": tried[-1][0]})
     rms, name, metric, before = min(tried, key=lambda item: (item[0] is None, item[0] or 0.0))
-    metric, keep, _ = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, threshold_px, model=model)
+    metric, keep, _ = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, threshold_px, model=model,
+                                     should_stop=should_stop)
     return name, metric, keep, before, trials
 
 

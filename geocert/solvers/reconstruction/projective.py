@@ -68,9 +68,10 @@ def choose_pair(obs: Observations, xn: np.ndarray, scales: np.ndarray, options: 
 
 def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], n_views: int, options: ProjectiveOptions,
                 callback=None) -> Projective:
-    """``callback("projective", done, total)`` sees each view registered; when it returns True
-    (a cancel) no more views are added, and the views registered so far are finished as usual
-    (the last triangulation, adjustment and orientation), with ``stats["cancelled"]`` True."""
+    """``callback("projective", done, total)`` sees each view registered and each iteration of
+    an adjustment; when it returns True (a cancel) no more views are added and the adjustment
+    running ends where it is, and the views registered so far are finished as usual but for the
+    final adjustment (the last triangulation and orientation), with ``stats["cancelled"]`` True."""
     obs = Observations.from_tracks(tracks, n_views)
     T = np.array([hartley(obs.pixel[obs.view == v]) if np.sum(obs.view == v) >= 2 else np.eye(3)
                   for v in range(n_views)])
@@ -106,9 +107,17 @@ def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], n_views: int, optio
     stats = {"initial_pair": [int(i), int(j)], "initial_inliers": int(mask.sum()), "bundle_adjustments": 0}
     last_ba = 2
     stopped = _report(callback, 2, n_views)
+
+    def stopping() -> bool:  # asked by the adjustments, once an iteration
+        nonlocal stopped
+        stopped = stopped or _report(callback, int(registered.sum()), n_views)
+        return stopped
+
     while not stopped:
-        state = _adjust_if_grown(P, X, registered, obs, xn, scales, inlier, options, last_ba, stats)
+        state = _adjust_if_grown(P, X, registered, obs, xn, scales, inlier, options, last_ba, stats, stopping)
         last_ba = state
+        if stopped:
+            break
         candidates = _resection_candidates(obs, X, registered, inlier, reasons)
         if not candidates:
             break
@@ -136,7 +145,8 @@ def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], n_views: int, optio
     untriangulated = ~np.isfinite(X[obs.track, 0])
     inlier[untriangulated] = True
     _triangulate_new(P, X, registered, obs, xn, scales, inlier, options)
-    _adjust(P, X, registered, obs, xn, scales, inlier, options, stats, final=True)
+    if not stopped:
+        _adjust(P, X, registered, obs, xn, scales, inlier, options, stats, final=True, should_stop=stopping)
     finite = np.isfinite(X[:, 0])
     # Tracks left with fewer than two inlier views are not reconstructed.
     counts = np.bincount(obs.track[inlier & registered[obs.view] & finite[obs.track]], minlength=obs.n_tracks)
@@ -195,19 +205,20 @@ def _triangulate_new(P, X, registered, obs, xn, scales, inlier, options) -> None
             X[t] = point
 
 
-def _adjust_if_grown(P, X, registered, obs, xn, scales, inlier, options, last: int, stats) -> int:
+def _adjust_if_grown(P, X, registered, obs, xn, scales, inlier, options, last: int, stats, should_stop=None) -> int:
     """Bundle adjust when the registered views have grown by a half (and at 3 views) since the
     last adjustment: a few adjustments in all, each over everything."""
     n = int(registered.sum())
     if n >= max(3, math.ceil(1.5 * last)) or (n == 2 and last == 2 and stats["bundle_adjustments"] == 0):
-        _adjust(P, X, registered, obs, xn, scales, inlier, options, stats, final=False)
+        _adjust(P, X, registered, obs, xn, scales, inlier, options, stats, final=False, should_stop=should_stop)
         return n
     return last
 
 
-def _adjust(P, X, registered, obs, xn, scales, inlier, options, stats, final: bool) -> None:
+def _adjust(P, X, registered, obs, xn, scales, inlier, options, stats, final: bool, should_stop=None) -> None:
     """Bundle adjust every registered view and triangulated point over the inlier observations
-    (Huber's loss first, then plain least squares), then judge every observation again."""
+    (Huber's loss first, then plain least squares), then judge every observation again.
+    ``should_stop()``, asked each iteration, ends it where it is."""
     views = np.flatnonzero(registered)
     view_index = -np.ones(len(registered), dtype=int)
     view_index[views] = np.arange(len(views))
@@ -227,7 +238,7 @@ def _adjust(P, X, registered, obs, xn, scales, inlier, options, stats, final: bo
         cams, pts, _ = bundle.projective(P[views], X[points], view_index[obs.view[use]], point_index[obs.track[use]],
                                          xn[use], scales[views],
                                          f_scale=options.threshold_px / 2 if round_ == 0 else None,
-                                         max_iterations=50 if final else 10)
+                                         max_iterations=50 if final else 10, should_stop=should_stop)
         P[views], X[points] = cams, pts
         stats["bundle_adjustments"] += 1
         # Every observation of a registered view and a triangulated point is judged again at the

@@ -54,11 +54,12 @@ def _cost(r, f_scale):
 
 
 def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iterations: int = 50,
-          tolerance: float = 1e-10, jacobian=None):
+          tolerance: float = 1e-10, jacobian=None, should_stop=None):
     """Minimise sum_m rho(|residual_m|^2) over A (n, c), S (s,), B (p, d); returns A, S, B,
     the residuals (M, 2) and the number of iterations. Every point must be observed.
     ``jacobian(A_m, S, B_m)``, when given, returns the analytic (ja, js, jb) instead of central
-    differences."""
+    differences. ``should_stop()``, asked before each iteration, ends the solve where it is
+    (a cancel, a time limit)."""
     n, c = A.shape
     s = len(S)
     p, d = B.shape
@@ -87,6 +88,8 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
     lam = 1e-3
     iterations = 0
     for iterations in range(1, max_iterations + 1):
+        if should_stop is not None and should_stop():
+            break
         w = _robust_weights(r, f_scale)
         ja, js, jb = (_jacobians(residual, A, S, B, view, track) if jacobian is None
                       else jacobian(A[view], S, B[track]))

@@ -234,10 +234,10 @@ def K_of(metric: Metric, view: int) -> np.ndarray:
 
 
 def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: np.ndarray, threshold_px: float,
-           max_iterations: int = 30, model: str = "simple") -> tuple[Metric, np.ndarray, dict]:
+           max_iterations: int = 30, model: str = "simple", should_stop=None) -> tuple[Metric, np.ndarray, dict]:
     """Metric bundle adjustment (one shared K): Huber's loss, then plain least squares on the
     observations within the threshold. Returns the adjusted reconstruction, the observations
-    kept, and figures."""
+    kept, and figures. ``should_stop()`` (asked each iteration) ends it where it is."""
     from geocert.solvers.reconstruction import bundle
 
     start = time.perf_counter()
@@ -259,7 +259,7 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
         use = np.flatnonzero(keep)
         K, R, t, Xp, r = bundle.metric(K, R, t, X[points], vindex[obs_view[use]], pindex[obs_track[use]], pixels[use],
                                        f_scale=threshold_px / 2 if round_ == 0 else None, max_iterations=max_iterations,
-                                       model=model, focals=focals)
+                                       model=model, focals=focals, should_stop=should_stop)
         if K.ndim == 3:  # one K per view: the middle focal length stands for them in K
             focals = K[:, 0, 0]
             K = K[int(np.argsort(focals)[len(focals) // 2])]

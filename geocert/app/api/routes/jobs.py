@@ -190,7 +190,10 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
             if earlier is not None:
                 return _replay(store, earlier, digest, response)
         try:
-            meta = _create(store, owner, kind, request, items, upload.key if upload is not None else None)
+            # Its tasks' last-resort time limits follow from its own limits (options lowered to the
+            # server's maxima by _check_limits, so parsed again from the request as it will run).
+            bound = kind.time_bound_s(parsed, parse_options(kind, request))
+            meta = _create(store, owner, kind, request, items, upload.key if upload is not None else None, bound)
         except BaseException:
             if idempotency_key is not None:
                 store.settle_idempotent(owner, idempotency_key, digest, None)  # free the key for a retry
@@ -204,11 +207,19 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
     return store.document(meta)
 
 
-def _create(store: JobStore, owner: str, kind, request: dict, items: int, items_key: str | None = None) -> dict:
+def parse_options(kind, request: dict):
+    from geocert.kinds import options_from
+
+    return options_from(kind.options_type, request.get("options"))
+
+
+def _create(store: JobStore, owner: str, kind, request: dict, items: int, items_key: str | None = None,
+            item_time_bound_s: float | None = None) -> dict:
     settings = get_settings()
     chunk = chunk_size_for(kind)
     meta = store.create(kind.name, request, items, chunk, owner, request.get("callback_url"),
-                        settings.max_active_jobs_per_key, chunk_key=kind.chunk_key, items_key=items_key)
+                        settings.max_active_jobs_per_key, chunk_key=kind.chunk_key, items_key=items_key,
+                        item_time_bound_s=item_time_bound_s)
     if meta is None:
         raise ApiProblem(429, f"this key already has {settings.max_active_jobs_per_key} jobs queued or running "
                               "(GEOCERT_MAX_ACTIVE_JOBS_PER_KEY); wait for one to end", headers={"Retry-After": "5"})

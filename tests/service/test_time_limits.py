@@ -1,0 +1,132 @@
+"""A job's own time limits decide when it ends, through real servers (embedded Redis, the API and
+Celery workers, each a process): a job whose limits allow longer than the server's per-item
+maximum ends by those limits with its best answer; a task that runs past them by
+GEOCERT_TASK_TIME_MARGIN_S is stopped as a last resort, its job failed with the reason and what it
+finished; and one killed by Celery's hard limit is failed the same way, never delivered again."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import pytest
+import redis
+
+from geocert.solvers.autocalibration import scenes
+from geocert.workers.redis_server import broker_url
+from tests.servers import cluster
+
+pytestmark = pytest.mark.slow  # real servers: the full run only
+
+TERMINAL = ("succeeded", "failed", "cancelled")
+
+
+def ended(client, job_id: str, limit_s: float = 300) -> dict:
+    deadline = time.monotonic() + limit_s
+    while (job := client.get(f"/v1/jobs/{job_id}").json())["status"] not in TERMINAL:
+        assert time.monotonic() < deadline, f"job still {job['status']} after {limit_s} s"
+        time.sleep(0.3)
+    return job
+
+
+def unbounded_autocalibration(time_limit_s: float) -> dict:
+    """Four cameras without points: chirality leaves the plane at infinity free enough that
+    neither stage closes its gap, so each runs to its time limit (and the job to twice that)."""
+    data = scenes.make_scene(4, 0.1, seed=5).job_data()
+    data.pop("points")
+    return {"kind": "autocalibration", "data": data, "options": {"time_limit_s": time_limit_s, "max_nodes": 100_000}}
+
+
+def small_reconstruction() -> dict:
+    from geocert.solvers.reconstruction import synthetic
+
+    scene = synthetic.scene(views=6, points=1500, seed=3, noise_px=0.3)
+    return {"kind": "reconstruction", "options": {"time_limit_s": 0.001, "autocalibration_time_limit_s": 0.05},
+            "data": {"views": [{"image_size": list(scene.image_size)}] * 6,
+                     "tracks": [{"views": [int(v) for v in views],
+                                 "points": [[round(float(u), 3), round(float(w), 3)] for u, w in pixels]}
+                                for views, pixels in scene.tracks]}}
+
+
+def queued_time_limits(store: redis.Redis) -> list[tuple[float, float]]:
+    """The (soft, hard) time limits of the tasks waiting in the queue, as Celery's messages carry them."""
+    limits = []
+    for raw in store.lrange("celery", 0, -1):
+        hard, soft = json.loads(raw)["headers"]["timelimit"]
+        limits.append((soft, hard))
+    return limits
+
+
+def test_a_jobs_tasks_are_limited_by_its_own_limits_and_it_ends_by_them(tmp_path):
+    """A task's Celery limits follow from its job's own (they were 90 s for every task, whatever
+    the job: a reconstruction allowed 10 s per point, or two autocalibration stages of 60 s, was
+    killed, "SoftTimeLimitExceeded", its work lost). Then the job ends by its own limits: the
+    affine stage at its time limit, its best plane kept."""
+    reconstruction = small_reconstruction()
+    reconstruction["options"] = {"time_limit_s": 10, "autocalibration_time_limit_s": 60}
+    with cluster(tmp_path, workers=0) as (running, client):
+        store = redis.Redis.from_url(running.redis_url, decode_responses=True)
+        margin = 120  # GEOCERT_TASK_TIME_MARGIN_S's default
+        assert client.post("/v1/jobs", json=reconstruction).status_code == 202
+        (soft, hard), = queued_time_limits(store)
+        own = (1500 + 6) * 10 + 2 * 60  # per point and camera, and the two autocalibration stages
+        assert soft >= own + margin and hard > soft
+        store.delete("celery")
+        response = client.post("/v1/jobs", json=unbounded_autocalibration(8))
+        assert response.status_code == 202, response.text
+        (soft, hard), = queued_time_limits(store)
+        assert soft >= 2 * 8 + margin and hard > soft  # two stages of 8 s
+        running.start_worker()
+        job = ended(client, response.json()["id"])
+        assert job["status"] == "succeeded", job["error"]
+        affine = job["result"]["stages"][0]
+        assert affine["status"] == "time_limit" and affine["elapsed_s"] >= 8
+        assert job["result"]["plane_at_infinity"] is not None
+
+
+def test_a_task_past_its_limits_and_margin_fails_keeping_what_it_finished(tmp_path):
+    """Per point 1 ms and per autocalibration stage 50 ms: the job's own limits allow it about 2 s,
+    and with a margin of 1 s its task is stopped at the pipeline's next check. The job fails with
+    the reason, its result keeps the stages finished, and nothing is queued again."""
+    with cluster(tmp_path, workers=1, geocert_task_time_margin_s="1") as (running, client):
+        job_id = client.post("/v1/jobs", json=small_reconstruction()).json()["id"]
+        job = ended(client, job_id)
+        assert job["status"] == "failed"
+        assert job["error"]["title"] == "Task time limit exceeded"
+        assert "GEOCERT_TASK_TIME_MARGIN_S" in job["error"]["detail"]
+        stages = {stage["name"]: stage["status"] for stage in job["result"]["stages"]}
+        assert "cancelled" in stages.values()  # the stage it was stopped in, and those after it
+        store = redis.Redis.from_url(running.redis_url, decode_responses=True)
+        assert store.llen(f"geocert:job:{job_id}:tasks") == 1
+        time.sleep(20)  # beyond the visibility timeout and a reaper round: nothing ran it again
+        again = client.get(f"/v1/jobs/{job_id}").json()
+        assert again["status"] == "failed" and again["finished_at"] == job["finished_at"]
+        assert store.hget(f"geocert:job:{job_id}", "reaps") is None and store.llen("celery") == 0
+
+
+def test_a_task_killed_at_its_hard_limit_fails_its_job_and_is_not_delivered_again(tmp_path):
+    """A task sent with a hard time limit of 2 s alone (as if its solver ignored every check and
+    Celery's soft limit): the worker kills its process, the errback fails the job with the reason
+    (it used to stay running until the reaper re-queued it three times: "Tasks lost"), and the
+    worker goes on to solve the next job."""
+    from celery import Celery
+
+    with cluster(tmp_path, workers=0) as (running, client):
+        job_id = client.post("/v1/jobs", json=unbounded_autocalibration(30)).json()["id"]
+        store = redis.Redis.from_url(running.redis_url, decode_responses=True)
+        store.delete("celery")  # its queued task replaced by one with a short hard limit
+        app = Celery("test", broker=broker_url(running.redis_url))
+        app.send_task("geocert.solve_chunk", args=[job_id, 0, 1, None], time_limit=2,
+                      link_error=app.signature("geocert.solve_chunk_failed"))
+        running.start_worker()
+        job = ended(client, job_id, limit_s=120)
+        assert job["status"] == "failed", job
+        assert job["error"]["title"] == "Task time limit exceeded" and "hard time limit" in job["error"]["detail"]
+        time.sleep(20)  # beyond the visibility timeout and a reaper round
+        assert client.get(f"/v1/jobs/{job_id}").json()["status"] == "failed"
+        assert store.hget(f"geocert:job:{job_id}", "reaps") is None
+        assert json.loads(store.hget(f"geocert:job:{job_id}", "status")) == "failed"
+        follower = client.post("/v1/jobs", json={"kind": "triangulation", "data": {
+            "cameras": [[[800, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]], [[800, 0, 320, -800], [0, 800, 240, 0], [0, 0, 1, 0]]],
+            "tracks": [{"views": [0, 1], "points": [[330, 250], [250, 251]]}]}}).json()["id"]
+        assert ended(client, follower, limit_s=120)["status"] == "succeeded"

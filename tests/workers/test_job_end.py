@@ -1,0 +1,46 @@
+"""How a job ends, in a real Redis (a subprocess: the task module needs GEOCERT_REDIS_URL when it
+is imported): a job cancelled after its solvers' last check ends "cancelled", its result whole."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+from geocert.workers.redis_server import start_embedded_redis
+
+CODE = """
+import json
+import os
+from geocert.batch import parse_job, solve_job
+from geocert.kinds import get_kind
+from geocert.workers import tasks
+from geocert.workers.store import JobStore
+
+jobs = JobStore.from_url(os.environ["GEOCERT_REDIS_URL"])
+job = get_kind("triangulation").example
+meta = jobs.create("triangulation", job, 2, 100, "someone", chunk_key="tracks")
+items = solve_job(job)["tracks"]
+assert jobs.mark_running(meta["id"])
+jobs.save_items(meta["id"], dict(enumerate(items)))
+jobs.request_cancel(meta["id"])  # as the last item ended: no solver saw it (a stage that ended at its root)
+kind, _, options = parse_job(job)
+assert jobs.claim_end(meta["id"])
+tasks.end_with_result(jobs, meta["id"], kind, options)
+ended = jobs.get(meta["id"])
+print(json.dumps({"status": ended["status"], "items": [item["status"] for item in jobs.result(meta["id"])["tracks"]]}))
+"""
+
+
+def test_a_job_cancelled_after_its_last_check_ends_cancelled_with_its_result_whole(tmp_path):
+    redis_process, url = start_embedded_redis(tmp_path)
+    try:
+        env = {**os.environ, "GEOCERT_REDIS_URL": url}
+        out = subprocess.run([sys.executable, "-c", CODE], capture_output=True, text=True, env=env, timeout=120)
+        assert out.returncode == 0, out.stderr[-3000:]
+        ended = json.loads(out.stdout.strip().splitlines()[-1])
+        assert ended == {"status": "cancelled", "items": ["optimal", "optimal"]}
+    finally:
+        redis_process.terminate()
+        redis_process.wait(timeout=10)
