@@ -231,3 +231,48 @@ def test_a_bound_at_a_given_radius_is_the_ladders_and_needs_a_radius_that_enclos
     assert np.all(np.isneginf(bounds_at(flat, x, np.where(proven, radius * 1e-6, 1.0))[0][proven]))
     for bad in (0.0, -1.0, np.nan, np.inf):
         assert np.all(np.isneginf(bounds_at(flat, x, np.full(len(x), bad))[0]))
+
+
+def test_the_convexity_paths_results_hold_against_the_branch_and_bound(dinosaur):
+    """convexity_path.certify_tracks: each result it certifies has the cost its point and
+    residuals give, a lower bound below the branch and bound's certified optimum and within the
+    tolerance of its cost; it certifies nearly every Dinosaur track."""
+    from geocert.solvers.core.geometry import norm_cost, normalised_cameras, reprojection_residuals
+    from geocert.solvers.fractional.convexity_path import certify_tracks
+
+    cameras, tracks = dinosaur
+    options = TriangulationOptions(norm="L2L2", rel_gap=1e-3)
+    ours = certify_tracks(normalised_cameras(cameras), tracks, options)
+    theirs = triangulate_many(cameras, tracks, options)
+    assert sum(r is not None for r in ours) >= 0.99 * len(tracks)
+    for (views, points), mine, other in zip(tracks, ours, theirs):
+        if mine is None:
+            continue
+        residuals = reprojection_residuals(cameras[views], np.append(mine.point, 1.0), points)
+        assert np.allclose(mine.residuals, residuals, rtol=0, atol=1e-9)
+        assert abs(mine.cost - norm_cost(residuals, "L2L2")) <= 1e-9 * mine.cost  # the verifier's OBJECTIVE_TOLERANCE
+        assert mine.certified and mine.status == "optimal" and mine.nodes == 0
+        assert mine.lower_bound <= other.cost and mine.lower_bound <= mine.cost
+        assert mine.cost <= other.cost * (1 + 1e-9)
+        assert mine.gap <= max(options.abs_gap, options.rel_gap * mine.cost)
+
+
+@pytest.mark.parametrize("noise", [(1.0,), (30.0, 300.0)])
+def test_the_convexity_path_certifies_nothing_the_branch_and_bound_refutes(noise):
+    """Noisy tracks of 2 to 4 views (several local minima at 30-300 px): every lower bound the
+    path certifies lies below the branch and bound's certified optimum of the track, and a
+    track it leaves is left whole (None)."""
+    from geocert.solvers.core.geometry import normalised_cameras
+    from geocert.solvers.fractional.convexity_path import certify_tracks
+
+    rng = np.random.default_rng(seed("path", str(noise)))
+    cams, tracks = scene(rng, 120, (2, 4), noise, cameras=6)
+    options = TriangulationOptions(norm="L2L2", rel_gap=1e-3)
+    ours = certify_tracks(normalised_cameras(cams), tracks, options)
+    theirs = triangulate_many(cams, tracks, options)
+    checked = 0
+    for mine, other in zip(ours, theirs):
+        if mine is not None and other.certified:
+            assert mine.lower_bound <= other.cost * (1 + 1e-12)
+            checked += 1
+    assert checked > 10

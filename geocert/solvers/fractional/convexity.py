@@ -48,18 +48,21 @@ RADII = (2.0 ** -10, 2.0 ** -5, 0.5)
 DIAGONAL = [0, 3, 5]  # the diagonal's places in PAIRS order
 
 
-def convexity_bounds(flat: FlatTracks, x: np.ndarray, radii=RADII):
+def convexity_bounds(flat: FlatTracks, x: np.ndarray, radii=RADII, strictness: float = 1.0):
     """For every track t with point ``x[t]`` (T, 3): (lower, radius, cost), lower the proven
     bound on every point's cost in the scope (-inf where this test proves none), radius the R
     used (nan where none: the smallest of ``radii`` times the distance to the nearest principal
-    plane that passes (E)), cost the point's sum of squared residuals as computed here."""
+    plane that passes (E)), cost the point's sum of squared residuals as computed here.
+    ``strictness`` > 1 asks each test to pass with its round-off allowances that many times over
+    and a relative margin besides: a solver's claims then pass a checker's tests (strictness 1)
+    whose sums differ from its own in their last bits."""
     terms = _terms(flat, x)
     with np.errstate(all="ignore"):
         R = np.asarray(radii, dtype=float)[:, None] * terms.reach[None]  # (K, T)
-        enclosed = _encloses(flat, terms, R)
+        enclosed = _encloses(flat, terms, R, strictness)
         first = np.argmax(enclosed, axis=0)
         R = R[first, np.arange(len(x))]
-        return _bound(flat, terms, R, enclosed.any(axis=0))
+        return _bound(flat, terms, R, enclosed.any(axis=0), strictness)
 
 
 def bounds_at(flat: FlatTracks, x: np.ndarray, radius: np.ndarray):
@@ -126,17 +129,17 @@ def _terms(flat: FlatTracks, x: np.ndarray) -> _Terms:
     return t
 
 
-def _encloses(flat: FlatTracks, t: _Terms, R: np.ndarray) -> np.ndarray:
+def _encloses(flat: FlatTracks, t: _Terms, R: np.ndarray, strictness: float = 1.0) -> np.ndarray:
     """(E) at radii R (K, T): lambda_min(sum_i M_i' M_i / tau_i^2) > n, (K, T)."""
     Rm = R[:, flat.owner]
     tau = t.e * (t.w_hi + Rm * t.d_up) / Rm  # (K, m)
     weight = 1 / (tau * tau) * (1 + 8 * U)
     A = flat.per_track(t.MtM[None] * weight[:, None])  # (K, 6, T)
     allowance = flat.per_track(weight * t.slack)  # (K, T)
-    return t.usable & positive_definite(A, t.n * (1 + 1e-12), allowance)
+    return t.usable & positive_definite(A, t.n * (1 + 1e-12 + 1e-6 * (strictness - 1)), strictness * allowance)
 
 
-def _bound(flat: FlatTracks, t: _Terms, R: np.ndarray, enclosed: np.ndarray):
+def _bound(flat: FlatTracks, t: _Terms, R: np.ndarray, enclosed: np.ndarray, strictness: float = 1.0):
     """(V) at radii R (T,) and the bound where (E) and (V) hold: (lower, R, cost)."""
     owner = flat.owner
     Rm = R[owner]
@@ -147,24 +150,24 @@ def _bound(flat: FlatTracks, t: _Terms, R: np.ndarray, enclosed: np.ndarray):
     dd = np.stack([d[a] * d[b] for a, b in PAIRS])
     S = flat.per_track(np.concatenate([t.MtM * half - negative * dd, (~(lo > 0)).astype(float)[None]]))
     allowance = flat.per_track(half * t.slack + (t.n[owner] + 8) * U * negative * t.d_up ** 2)
-    convex = (S[6] == 0) & positive_definite(S[:6], 0.0, allowance)
+    convex = (S[6] == 0) & positive_definite(S[:6], 0.0, strictness * allowance, 1e-9 * (strictness - 1))
     lower = t.c_lo - t.g_up * R
     lower = lower - 4 * U * np.abs(lower)
     proven = enclosed & convex & np.isfinite(lower)
     return np.where(proven, lower, -np.inf), np.where(proven, R, np.nan), t.c
 
 
-def positive_definite(A: np.ndarray, margin, allowance) -> np.ndarray:
+def positive_definite(A: np.ndarray, margin, allowance, relative: float = 0.0) -> np.ndarray:
     """Whether the exact symmetric matrices whose entries (in PAIRS order, A (..., 6, T)) are
     within ``allowance`` (..., T) of A's (each entry) all have their smallest eigenvalue above
-    ``margin``. The test: a Cholesky factorisation of A - shift I with
-    shift = margin + 3 allowance + 8 u (trace + margin) (3 allowance bounds the entries' error's
+    ``margin`` (plus ``relative`` times the trace). The test: a Cholesky factorisation of
+    A - shift I with shift = margin + 3 allowance + 8 u (trace + margin) (3 allowance bounds the entries' error's
     spectral norm; a Cholesky factorisation computed in floating point is exact for a matrix
     within about 4 u trace of the one factored, Demmel's bound), each pivot positive."""
     a00, a01, a02, a11, a12, a22 = np.moveaxis(A, -2, 0)
     with np.errstate(all="ignore"):
         trace = np.abs(a00) + np.abs(a11) + np.abs(a22)
-        shift = (margin + 3 * allowance + 8 * U * (trace + np.abs(margin))) * (1 + 8 * U)
+        shift = (margin + relative * trace + 3 * allowance + 8 * U * (trace + np.abs(margin))) * (1 + 8 * U)
         p0 = a00 - shift
         l10, l20 = a01 / np.sqrt(p0), a02 / np.sqrt(p0)
         p1 = a11 - shift - l10 * l10
