@@ -276,3 +276,24 @@ def test_the_convexity_path_certifies_nothing_the_branch_and_bound_refutes(noise
             assert mine.lower_bound <= other.cost * (1 + 1e-12)
             checked += 1
     assert checked > 10
+
+
+def test_every_bound_the_path_claims_is_one_a_checker_proves_track_by_track(dinosaur):
+    """convexity.track_bound, one track at a time from the claim's point and radius (as a
+    verifier computes it), proves at least the lower bound the batched path claimed, for every
+    certified Dinosaur track (the solver's doubled allowances absorb the sums' last bits)."""
+    from geocert.solvers.core.geometry import normalised_cameras
+    from geocert.solvers.fractional.convexity import track_bound
+    from geocert.solvers.fractional.convexity_path import certify_tracks
+
+    cameras, tracks = dinosaur
+    cameras = normalised_cameras(cameras)
+    results = certify_tracks(cameras, tracks, TriangulationOptions(norm="L2L2", certificate="full"))
+    checked = 0
+    for (views, points), result in zip(tracks, results):
+        if result is None:
+            continue
+        radius = result.certificate.proof["radius"]
+        assert track_bound(cameras[views], points, result.point, radius) >= result.lower_bound
+        checked += 1
+    assert checked >= 0.99 * len(tracks)

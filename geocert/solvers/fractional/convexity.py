@@ -174,3 +174,12 @@ def positive_definite(A: np.ndarray, margin, allowance, relative: float = 0.0) -
         l21 = (a12 - l20 * l10) / np.sqrt(p1)
         p2 = a22 - shift - l20 * l20 - l21 * l21
     return (p0 > 0) & (p1 > 0) & (p2 > 0) & np.isfinite(trace) & np.isfinite(shift)
+
+
+def track_bound(cameras: np.ndarray, points: np.ndarray, point: np.ndarray, radius: float) -> float:
+    """A checker's bound for one track: the bound bounds_at proves at ``point`` (x, y, z) with
+    ``radius``, for ``cameras`` (k, 3, 4) and ``points`` (k, 2) as the problem's data give them;
+    -inf where (E) or (V) fails there."""
+    flat = FlatTracks.build(cameras, [(list(range(len(cameras))), points)])
+    lower, _ = bounds_at(flat, np.asarray(point, dtype=float).reshape(1, 3), np.array([radius], dtype=float))
+    return float(lower[0])
