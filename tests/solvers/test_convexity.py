@@ -297,3 +297,20 @@ def test_every_bound_the_path_claims_is_one_a_checker_proves_track_by_track(dino
         assert track_bound(cameras[views], points, result.point, radius) >= result.lower_bound
         checked += 1
     assert checked >= 0.99 * len(tracks)
+
+
+def test_a_track_within_abs_gap_of_zero_is_left_to_the_trivial_bound():
+    """Exact observations: the cost is within abs_gap of 0, which the trivial bound certifies
+    (the search's first step); the convexity path leaves such a track."""
+    from geocert.solvers.core.geometry import normalised_cameras
+    from geocert.solvers.fractional.convexity_path import certify_tracks
+
+    rng = np.random.default_rng(seed("exact"))
+    cams = random_cameras(rng, 6)
+    tracks = []
+    for noise in [0.0] * 20 + [1.0] * 20:
+        chosen = sorted(rng.choice(6, size=3, replace=False).tolist())
+        tracks.append((chosen, noisy_track(rng, cams[chosen], noise_px=noise)[1]))
+    results = certify_tracks(normalised_cameras(cams), tracks, TriangulationOptions(norm="L2L2"))
+    assert all(r is None for r in results[:20])
+    assert all(r is not None for r in results[20:])

@@ -52,7 +52,8 @@ def certify_tracks(cameras: np.ndarray, tracks: list, options: TriangulationOpti
     cost, slack, spread, behind = sums
     tolerance = np.maximum(options.abs_gap, options.rel_gap * np.abs(cost))
     claimed = np.minimum(lower - CLAIM_MARGIN * np.abs(lower), cost)
-    certified = ok & np.isfinite(lower) & (behind == 0) & np.isfinite(cost) \
+    # A cost within abs_gap of 0 is certified by the trivial bound (the search's first step).
+    certified = ok & np.isfinite(lower) & (behind == 0) & np.isfinite(cost) & (cost > options.abs_gap) \
         & (cost + slack * (1 + 1e-6) - claimed <= tolerance * (1 - 1e-9)) & (spread <= 0.5 * tolerance)
     full = options.certificate == "full"
     # Python lists made once for the whole batch (one tolist each), then sliced per track.
