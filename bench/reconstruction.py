@@ -24,8 +24,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from geocert.solvers.datasets import load_dinosaur
-from geocert.solvers.reconstruction import pipeline, synthetic
-from geocert.solvers.reconstruction.options import ReconstructionOptions
+from geocert.pipelines.reconstruction import pipeline
+from geocert.solvers.reconstruction import synthetic
+from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from tests.solvers.test_reconstruction import aligned_rotation_errors, house_tracks, vgg_pose, vgg_refit
 
 

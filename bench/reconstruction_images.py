@@ -38,7 +38,7 @@ import numpy as np
 from bench import machine_speed_ms
 from geocert.solvers.reconstruction.calibrated import (CalibratedOptions, align_rotations,
                                                        calibrated_reconstruction, refine_cameras, triangulate)
-from geocert.solvers.reconstruction.features import FeatureOptions, tracks_from_images
+from geocert.pipelines.reconstruction.features import FeatureOptions, tracks_from_images
 from geocert.solvers.reconstruction.render import box_scene
 
 RING = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "middlebury_dinoSparseRing"

@@ -12,9 +12,11 @@ view), lines 2 to 6 m away, frame-to-frame motions of 3 degrees and 10 cm. Print
 3b. the thesis's own synthetic protocol (Figure 9.4: 0.1 baseline, lines in [-1, 1]^3, minimal
    samples, lower quartile);
 4. frames per second end to end (matching from segments included) with 100 lines per frame;
-5. a room of 30 boxes walked round once (180 frames, 0.5 px noise): the loop's drift.
+5. a room of 30 boxes walked round once (180 frames, 0.5 px noise): the loop's drift;
+6. a narrow-baseline corridor walk (issue 37): translations within 10%, marked, or neither; drift;
+7. the defaults' throughput in fresh processes, beside another checkout's (--baseline-source).
 
-    .venv/bin/python -m bench.stereo_lines [--instances 20] [--quick]
+    .venv/bin/python -m bench.stereo_lines [--instances 20] [--quick] [--baseline-source DIR] [--only 6,7]
 
 Targets (issue 16): the polynomial minimal solver at most 100 us median; at least 30 frame pairs
 per second end to end with 100 lines; rotation error at most 0.1 degrees per frame pair at 0.5 px.
@@ -30,7 +32,7 @@ import numpy as np
 
 from geocert.solvers.lines import align, incremental, linear, polynomial, scenes
 from geocert.solvers.lines.geometry import line_set, rotation_error_deg
-from geocert.solvers.lines.matching import MatchingOptions
+from geocert.solvers.lines.matching import STEREO_CACHE, MatchingOptions
 from geocert.solvers.lines.pipeline import StereoLinesOptions, estimate_motion, estimate_pair
 from geocert.solvers.lines.results import Degenerate
 
@@ -173,6 +175,13 @@ def thesis_setting(instances: int, noises=(0.0, 0.25, 0.5, 1.0, 2.0)) -> None:
         print(f"| {noise} | " + " | ".join(cells) + " |")
 
 
+def forget_matches(sequence: list[dict]) -> None:
+    """Drop the left-right matches a previous configuration kept in the frames (each
+    configuration is timed from the segments)."""
+    for frame in sequence:
+        frame.pop(STEREO_CACHE, None)
+
+
 def end_to_end(frames: int) -> None:
     print(f"\n4. End to end from segments (matching, RANSAC, refinement), 100 lines per frame, 0.5 px noise, "
           f"{frames} frames, one core")
@@ -186,6 +195,7 @@ def end_to_end(frames: int) -> None:
                                          ("polynomial", 3, False, True)):
         options = StereoLinesOptions(solver=name, sample_size=sample, refine=refine,
                                      matching=MatchingOptions(guided=guided))
+        forget_matches(sequence)
         times, matched, rotation = [], [], []
         for k in range(frames - 1):
             estimate, quads, seconds = estimate_pair(rig, sequence[k], sequence[k + 1], None, options)
@@ -211,6 +221,7 @@ def room(frames: int) -> None:
                                  ("incremental", True, False), ("polynomial", True, True)):
         options = StereoLinesOptions(solver=name, sample_size=3, refine=refine,
                                      matching=MatchingOptions(guided=guided))
+        forget_matches(sequence)
         R, t = np.eye(3), np.zeros(3)
         failed, matched, wrong, seconds = 0, [], 0, 0.0
         for k in range(len(sequence) - 1):
@@ -234,6 +245,89 @@ def room(frames: int) -> None:
               f"{(len(sequence) - 1) / seconds:.1f} |")
 
 
+def corridor(frames: int) -> None:
+    """Issue 37's corridor walk (scenes.corridor_walk): 8 cm a frame, segments 2 to 8 m away, 0.5 px,
+    30% of the lines matched wrongly. Per solver: how many pairs have their translation within 10%
+    of its length, how many are marked as not determining it, and how many are neither (wrong and
+    unmarked: the failure to avoid); the rotation errors; and the walk's drift (every pair's motion
+    composed, marked or not, as a robot trusting them would)."""
+    print(f"\n6. A corridor walk ({frames} frames, 8 cm a frame, segments 2 to 8 m away, 0.5 px, 30% wrong matches)")
+    print("| solver | sample | pairs | t within 10% | t marked not determined | wrong and unmarked | rotation deg "
+          "(median / max) | t error / length (median) | drift: position cm, % of the walk | drift: rotation deg |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    from geocert.batch import solve_job
+
+    rig, poses, pairs = scenes.corridor_walk(np.random.default_rng(8), frames=frames)
+    length = 0.08 * (frames - 1)
+    for name, sample in (("incremental", 3), ("polynomial", 3)):
+        result = solve_job({"kind": "stereo_lines", "options": {"solver": name, "sample_size": sample},
+                            "data": {"rig": {"K_left": rig.K_left.tolist(), "K_right": rig.K_right.tolist(),
+                                             "R": rig.R.tolist(), "t": rig.t.tolist()},
+                                     "matches": [p.tolist() for p in pairs]}})
+        within = marked = wrong = 0
+        rotation, ratio = [], []
+        R, t = np.eye(3), np.zeros(3)
+        for k, item in enumerate(result["pairs"]):
+            (Ra, ta), (Rb, tb) = poses[k], poses[k + 1]
+            R_true, t_true = Rb @ Ra.T, tb - Rb @ Ra.T @ ta
+            if item["status"] != "estimate":
+                marked += 1
+                continue
+            Rk, tk = np.array(item["R"]), np.array(item["t"])
+            error = float(np.linalg.norm(tk - t_true) / np.linalg.norm(t_true))
+            rotation.append(rotation_error_deg(Rk, R_true))
+            ratio.append(error)
+            within += error <= 0.1
+            marked += error > 0.1 and item["translation_determined"] is False
+            wrong += error > 0.1 and item["translation_determined"] is not False
+            R, t = Rk @ R, Rk @ t + tk
+        R_end, t_end = poses[-1]
+        drift = float(np.linalg.norm(-R.T @ t - (-R_end.T @ t_end)))
+        print(f"| {name} | {sample} | {len(result['pairs'])} | {within} | {marked} | {wrong} | "
+              f"{np.median(rotation):.3f} / {max(rotation):.3f} | {np.median(ratio):.2f} | "
+              f"{100 * drift:.1f}, {100 * drift / length:.0f}% | {rotation_error_deg(R, R_end):.2f} |")
+
+
+def throughput(baseline: str | None, frames: int, rounds: int = 3) -> None:
+    """Section 4's default configuration timed in fresh processes, this checkout's and (with
+    --baseline-source) another's, alternately, ``rounds`` times each: pairs per second of wall time
+    and of the process's CPU time (less sensitive to what else runs), medians, and their ratio."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import time, numpy as np\n"
+            "from geocert.solvers.lines import scenes\n"
+            "from geocert.solvers.lines.pipeline import StereoLinesOptions, estimate_pair\n"
+            f"rig, poses, seq = scenes.sequence(np.random.default_rng(5), {frames}, 100, noise_px=0.5, degrees=1.0, "
+            "metres=0.03)\n"
+            "options = StereoLinesOptions()\n"
+            "wall, cpu = time.perf_counter(), time.process_time()\n"
+            f"for k in range({frames - 1}):\n"
+            "    estimate_pair(rig, seq[k], seq[k + 1], None, options)\n"
+            f"print({frames - 1} / (time.perf_counter() - wall), {frames - 1} / (time.process_time() - cpu))\n")
+    here = str(Path(__file__).resolve().parents[1])
+    sources = {"this checkout": here, **({"baseline": baseline} if baseline else {})}
+    found: dict[str, list] = {name: [] for name in sources}
+    for _ in range(rounds):
+        for name, source in sources.items():
+            env = {**os.environ, "PYTHONPATH": source, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+            out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=source,
+                                 check=True)
+            found[name].append([float(x) for x in out.stdout.split()])
+    print(f"\n7. Throughput with the defaults ({frames - 1} frame pairs of section 4's sequence, fresh processes, "
+          f"one BLAS thread, medians of {rounds})")
+    print("| code | frame pairs/s (wall) | frame pairs per CPU second |")
+    print("|---|---|---|")
+    for name, rows in found.items():
+        rows = np.array(rows)
+        print(f"| {name} | {np.median(rows[:, 0]):.1f} | {np.median(rows[:, 1]):.1f} |")
+    if baseline:
+        mine, theirs = np.array(found["this checkout"]), np.array(found["baseline"])
+        print(f"ratio (this checkout / baseline): wall {np.median(mine[:, 0]) / np.median(theirs[:, 0]):.2f}, "
+              f"CPU {np.median(mine[:, 1]) / np.median(theirs[:, 1]):.2f}")
+
+
 def machine() -> str:
     """The load and a fixed workload's time: this 2-core machine is shared, and every time above
     scales with what else runs (the figures of one run are comparable with each other only)."""
@@ -248,16 +342,23 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--instances", type=int, default=20)
     parser.add_argument("--quick", action="store_true", help="fewer instances and frames")
+    parser.add_argument("--baseline-source", help="another checkout (e.g. main's) whose defaults section 7 times "
+                                                  "beside this one's")
+    parser.add_argument("--only", help="comma-separated sections to run (e.g. 6,7)")
     args = parser.parse_args()
     instances = 5 if args.quick else args.instances
     began = time.time()
     print(f"machine at the start: {machine()}")
-    minimal_times(60 if args.quick else 300)
-    ransac_table(instances)
-    noise_table(instances)
-    thesis_setting(40 if args.quick else 200)
-    end_to_end(10 if args.quick else 40)
-    room(180)  # 2 degrees and 4 cm a frame: a slower walk is not faster to bench
+    only = set(args.only.split(",")) if args.only else None
+    sections = [("1", lambda: minimal_times(60 if args.quick else 300)), ("2", lambda: ransac_table(instances)),
+                ("3", lambda: noise_table(instances)), ("3b", lambda: thesis_setting(40 if args.quick else 200)),
+                ("4", lambda: end_to_end(10 if args.quick else 40)),
+                ("5", lambda: room(180)),  # 2 degrees and 4 cm a frame: a slower walk is not faster to bench
+                ("6", lambda: corridor(12 if args.quick else 40)),
+                ("7", lambda: throughput(args.baseline_source, 11 if args.quick else 41))]
+    for name, run in sections:
+        if only is None or name in only:
+            run()
     print(f"\nmachine at the end: {machine()} (ran in {time.time() - began:.0f} s)")
 
 

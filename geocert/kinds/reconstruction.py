@@ -1,5 +1,5 @@
 """The reconstruction kind (issue 14): from tracks (matches, no cameras) or photos to a metric
-reconstruction, stage by stage (geocert.solvers.reconstruction.pipeline), with the certified
+reconstruction, stage by stage (geocert.pipelines.reconstruction.pipeline), with the certified
 solvers where the thesis gives them: the metric upgrade (autocalibration, ch. 6-7), every
 point (triangulation, ch. 5) and a bound for every camera (resection, ch. 5).
 
@@ -24,7 +24,7 @@ from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats,
 from geocert.kinds.triangulation import TrackOut, track_document
 from geocert.solvers.autocalibration.problem import StageProgress
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
-from geocert.solvers.reconstruction.options import ReconstructionOptions
+from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.verification import RECONSTRUCTION
 
 MAX_VIEWS = 1000
@@ -80,6 +80,22 @@ class FeaturesIn(Strict):
     guided_ratio: Finite | None = Field(None, **_F["guided_ratio"],
                                         description="after a pair is verified, match it again along its epipolar "
                                                     "lines with this ratio test (default 0: off)")
+    pairs: Literal["auto", "exhaustive", "retrieval", "sequential"] | None = Field(
+        None, description='which image pairs are matched: "exhaustive" every pair, "retrieval" each image with the '
+                          'images most alike it (a bag of visual words), "auto" (default) exhaustive up to '
+                          'exhaustive_limit images and retrieval beyond, "sequential" each image with its '
+                          'neighbour_window successors in the order given (video)')
+    exhaustive_limit: int | None = Field(None, **_F["exhaustive_limit"],
+                                         description='"auto": every pair up to this many images (default 40)')
+    retrieval_neighbours: int | None = Field(None, **_F["retrieval_neighbours"],
+                                             description='"retrieval": images matched with each (default 20)')
+    vocabulary_size: int | None = Field(None, **_F["vocabulary_size"],
+                                        description='"retrieval": visual words, clustered from the images\' own '
+                                                    'descriptors (default 1024)')
+    neighbour_window: int | None = Field(None, **_F["neighbour_window"],
+                                         description='"sequential": successors matched with each (default 5)')
+    ring: bool | None = Field(None, description='"sequential": the last images wrap round to the first (default '
+                                                'false)')
 
 
 class ReconstructionOptionsIn(Strict):
@@ -116,6 +132,20 @@ class ReconstructionOptionsIn(Strict):
                                      description="false: no certified resection for a camera a free camera found "
                                                  "locally proves uncertifiable (it is reported without a bound)")
     features: FeaturesIn = Field(default_factory=FeaturesIn)
+    registration: Literal["incremental", "projective"] = Field(
+        _D.registration, description='K unknown: "incremental" (COLMAP\'s way: the K-known path from a prior focal '
+                                     'length, refined by bundle adjustment; its cameras start the certified upgrade) '
+                                     'or "projective" (a projective reconstruction from the tracks alone)')
+    principal_point: Literal["auto", "centre"] = Field(
+        _D.principal_point, description='K unknown, camera_model "simple": "auto" frees the principal point when the '
+                                        'data fix it (a chi-square test), "centre" holds it at the image centre')
+    focal_prior_px: Finite | None = Field(None, gt=0, le=1e6, description='"incremental": the prior focal length '
+                                          '(pixels; a prior, refined, not a fact: e.g. from the photos\' EXIF)')
+    focal_prior_factor: Finite = Field(_D.focal_prior_factor, **_R["focal_prior_factor"],
+                                       description='"incremental" without focal_prior_px: the prior focal length '
+                                                   'as this times the larger image side (COLMAP\'s 1.2)')
+    focal_prior_rounds: int = Field(_D.focal_prior_rounds, **_R["focal_prior_rounds"],
+                                    description='"incremental": runs from a refined focal length, at most')
     merge_components: bool = Field(_D.merge_components,
                                    description="K known only: views that do not register from the first start are "
                                                "reconstructed from a second start and merged")
@@ -249,7 +279,7 @@ def _read_tracks(data: dict, n_views: int) -> list:
 
 def _read_images(data: dict):
     try:  # stage 1 (features.py): matches from photos
-        from geocert.solvers.reconstruction import features
+        from geocert.pipelines.reconstruction import features
     except ImportError as exc:  # pragma: no cover - until the features module is merged
         raise InputError("data/images", "photos are not read by this build: give tracks and views") from exc
     images = data["images"]
@@ -264,6 +294,31 @@ def _read_images(data: dict):
         arrays.append(features.decode_image(image["content"], f"data/images/{i}/content"))
         names.append(image.get("name"))
     return arrays, names
+
+
+def _exif_focal_prior(images: list[dict], arrays: list) -> dict | None:
+    """The photos' EXIF focal lengths (pixels, from the 35 mm equivalent) and their median, when
+    every photo states one and they agree within 1% (one camera and zoom); else None."""
+    import base64
+
+    from geocert.pipelines.reconstruction import features
+
+    found = []
+    for image, array in zip(images, arrays):
+        text = image["content"].strip()
+        text = text.partition(",")[2] if text.startswith("data:") else text
+        try:
+            data = base64.b64decode("".join(text.split()), validate=True)
+        except ValueError:
+            return None
+        focal = features.exif_focal_px(data, (array.shape[1], array.shape[0]))
+        if focal is None:
+            return None
+        found.append(focal)
+    median = float(np.median(found))
+    if not found or max(abs(f / median - 1) for f in found) > 0.01:
+        return None
+    return {"focal_px": median, "images": len(found)}
 
 
 class ReconstructionKind:
@@ -290,7 +345,8 @@ class ReconstructionKind:
             if data.get("tracks") is not None:
                 raise InputError("data/images", "give images, or tracks and views, not both")
             arrays, names = _read_images(data)
-            return Parsed(None, [(float(a.shape[1]), float(a.shape[0])) for a in arrays], names, {"images": arrays})
+            return Parsed(None, [(float(a.shape[1]), float(a.shape[0])) for a in arrays], names,
+                          {"images": arrays, "exif_focal": _exif_focal_prior(data["images"], arrays)})
         if "tracks" not in data:
             raise InputError("data/tracks", "is required (or data/images)")
         sizes, names = _read_views(data) if "views" in data else (None, None)
@@ -322,7 +378,7 @@ class ReconstructionKind:
         return sum(len(v) for v, _ in parsed.tracks) if parsed.tracks is not None else len(parsed.image_sizes)
 
     def solve_item(self, parsed: Parsed, index: int, options: ReconstructionOptions, callback) -> dict:
-        from geocert.solvers.reconstruction import pipeline
+        from geocert.pipelines.reconstruction import pipeline
 
         start = time.perf_counter()
 
@@ -338,7 +394,7 @@ class ReconstructionKind:
         images_document = matches = out = None
         tracks = parsed.tracks
         if tracks is None:  # photos: stage 1
-            from geocert.solvers.reconstruction import features
+            from geocert.pipelines.reconstruction import features
 
             def matching(progress: dict) -> bool:
                 return report("matches", progress.get("done", 0), progress.get("total", 1))
@@ -363,6 +419,12 @@ class ReconstructionKind:
                 out = pipeline.not_reconstructed(len(parsed.image_sizes), "skipped", "the matches stage failed: "
                                                  + reason, "no verified matches with another image")
         if out is None:
+            exif = (parsed.images_stats or {}).get("exif_focal")
+            if exif is not None and options.focal_prior_px is None and options.known_K() is None:
+                from dataclasses import replace
+
+                options = replace(options, focal_prior_px=exif["focal_px"])  # a prior the adjustment refines
+                images_document["focal_prior_from_exif"] = exif
             out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
         cameras = [self._camera(camera, parsed) for camera in out.cameras]
         points = [{"track": p.track, **track_document(p.result), "observations": p.observations} for p in out.points]

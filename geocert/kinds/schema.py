@@ -86,12 +86,15 @@ class DeterminacyInterval(BaseModel):
     value: float | None
     lower: float | None = Field(description="null: not fixed by the data (unbounded)")
     upper: float | None
+    tolerance: float | None = Field(None, description="the half-width `determined` allows: 10% of the quantity's "
+                                                      "scale (a length's or focal length's value, a principal "
+                                                      "point's focal length); null: bounded suffices")
 
 
 class DeterminacyWarning(BaseModel):
     code: str = Field(description="near_zero_parallax, at_infinity, near_coplanar_points, "
                                   "near_critical_configuration, near_collinear_points, pure_translation, "
-                                  "rotation_about_one_axis, orbital_motion, ...")
+                                  "rotation_about_one_axis, orbital_motion, critical_motion, ...")
     detail: str
 
 
@@ -102,7 +105,8 @@ class Determinacy(BaseModel):
 
     method: Literal["curvature"]
     proven: bool = Field(description="false: estimated from the local curvature, not proved")
-    determined: bool = Field(description="every interval bounded and no warning")
+    determined: bool = Field(description="every interval bounded, within its tolerance of the value on both sides, "
+                                         "and no warning")
     level: str
     cost_increase: float | None
     redundancy: int = Field(description="residuals beyond the parameters (0: no noise estimate)")

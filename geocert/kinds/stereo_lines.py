@@ -124,6 +124,9 @@ class PairOut(BaseModel):
     time_ms: float = Field(description="matching, RANSAC and refinement of this pair")
     rms_px: float | None = Field(description="RMS reprojection distance of the inliers' endpoints (pixels)")
     refined: bool
+    translation_determined: bool | None = Field(
+        None, description="whether the inlier lines fix t to within 10% of its length (its determinacy intervals, 3 "
+                          "standard errors); false: the reason says how far they leave it open (null: no estimate)")
     reason: str | None
     nodes: int = 0
     elapsed_s: float
@@ -310,9 +313,12 @@ class StereoLinesKind:
         elif timed_out:
             reason = (f"time_limit: stopped at options.time_limit_s ({options.time_limit_s:g} s) after "
                       f"{estimate.iterations} RANSAC samples" + (f"; {reason}" if reason else ""))
-        determinacy = None
+        determinacy = translation_determined = None
         if status == "estimate" and estimate.R is not None and estimate.inliers:
             determinacy = safely(_motion_determinacy, parsed, index, quads, estimate)
+            translation_determined, why = translation_judged(determinacy, estimate.t)
+            if why is not None:
+                reason = why if reason is None else f"{reason}; {why}"
         return {
             "frames": [index, index + 1], "status": status, "certified": False,
             "R": None if estimate.R is None or status == "cancelled" else estimate.R.tolist(),
@@ -320,7 +326,8 @@ class StereoLinesKind:
             "inliers": estimate.inliers, "inlier_ratio": estimate.inlier_ratio, "lines": estimate.lines,
             "matches": None if quads is None else quads.tolist(), "degenerate": estimate.degenerate,
             "solver": options.solver, "iterations": estimate.iterations, "time_ms": 1000 * seconds,
-            "rms_px": estimate.rms_px, "refined": estimate.refined, "reason": reason,
+            "rms_px": estimate.rms_px, "refined": estimate.refined, "translation_determined": translation_determined,
+            "reason": reason,
             "nodes": 0, "elapsed_s": seconds, "cost": None, "lower_bound": None, "determinacy": determinacy,
         }
 
@@ -354,6 +361,26 @@ class NoCertificates:
 
     def item(self, arrays, norm):  # pragma: no cover - read refuses first
         raise Invalid("format", NOT_CERTIFIED)
+
+
+def translation_judged(determinacy: dict | None, t) -> tuple[bool, str | None]:
+    """Whether the pair's determinacy fixes t to 10% of its length, and if not, why (a narrow
+    baseline seeing distant lines fixes the rotation long before the translation)."""
+    from geocert.solvers.core.determinacy import fixes
+
+    if determinacy is None:
+        return False, "the translation's determinacy could not be estimated: it is not known to be fixed"
+    found = [i for i in determinacy["intervals"] if i["name"] in ("t_x", "t_y", "t_z")]
+    if found and all(fixes(i) for i in found):
+        return True, None
+    length = float(np.linalg.norm(t))
+    if any(i["lower"] is None for i in found):
+        spans = "unbounded along some direction"
+    else:
+        spans = "; ".join(f"{i['name']} {i['lower']:.3g} to {i['upper']:.3g}" for i in found)
+    return False, (f"the translation is not determined: the inlier lines leave it open to within 3 standard errors "
+                   f"({spans}) against a length of {length:.3g}, beyond 10% of it (the rotation may still be fixed: "
+                   "see determinacy)")
 
 
 def _motion_determinacy(parsed: ParsedLines, index: int, quads, estimate) -> dict | None:

@@ -154,13 +154,13 @@ class TestResult:
 
         parsed = KIND.parse(KIND.example["data"])
         options = parse_job(KIND.example)[2]
-        calls = []
+        labels = []
 
-        def stop():
-            calls.append(1)
-            return len(calls) > 40  # part way through
+        def stop():  # part way through: once the first stage is done
+            return any(not label.startswith("projective") for label in labels)
 
-        items = solve_items(KIND, parsed, options, range(1), should_stop=stop)
+        items = solve_items(KIND, parsed, options, range(1), sink=lambda p: labels.append(p.get("stage", "")),
+                            should_stop=stop)
         statuses = [stage["status"] for stage in items[0]["stages"]]
         assert "cancelled" in statuses and statuses[0] == "done", statuses
 
@@ -437,7 +437,8 @@ class TestPhotos:
 
         import cv2
 
-        from geocert.solvers.reconstruction import calibrated, features, render
+        from geocert.pipelines.reconstruction import features
+        from geocert.solvers.reconstruction import calibrated, render
 
         seen = {}
         original_tracks, original_calibrated = features.tracks_from_images, calibrated.calibrated_reconstruction

@@ -202,7 +202,9 @@ class TestStereoLines:
         for _ in range(8):
             scene, pair = self.pair(rng, 0.5)
             document = pair["determinacy"]
-            assert document["determined"], document
+            # Bounded; not `determined`: 40 lines at 0.5 px do not fix a 10 cm step to 10% of itself
+            # (test_stereo_translation.py holds the pairs that claim it to it).
+            assert all(i["lower"] is not None for i in document["intervals"]), document
             angle = np.degrees(np.arccos((np.trace(scene.R) - 1) / 2))
             truths = {"rotation_angle_deg": angle, "t_x": scene.t[0], "t_y": scene.t[1], "t_z": scene.t[2]}
             inside += sum(interval(document, k)["lower"] <= v <= interval(document, k)["upper"]

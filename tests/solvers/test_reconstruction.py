@@ -12,8 +12,9 @@ from scipy.linalg import rq
 from scipy.spatial.transform import Rotation
 
 from geocert.solvers.datasets import load_dinosaur, load_house
-from geocert.solvers.reconstruction import pipeline, projective, synthetic, upgrade
-from geocert.solvers.reconstruction.options import ReconstructionOptions
+from geocert.pipelines.reconstruction import pipeline
+from geocert.solvers.reconstruction import projective, synthetic, upgrade
+from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.tracks import Observations
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
@@ -93,7 +94,7 @@ class TestSynthetic:
         stage = out.stages[1]
         assert stage["status"] == "skipped" and stage["stages"] == [] and not stage["certified"]
         assert stage["reason"].startswith("the linear estimate's motion is critical (")
-        assert out.stages[2]["started_from"] == "linear"
+        assert out.stages[2]["started_from"] in ("linear", "incremental")  # no certified upgrade to start from
         assert stage["critical_motion"] == "orbital_motion" and stage["determined"] is False
         assert stage["motion_warnings"][0]["code"] == "orbital_motion"
         assert stage["reason"].startswith("critical motion (orbital_motion)") or \
@@ -114,7 +115,7 @@ class TestSynthetic:
                     pixels[k] += rng.choice([-1, 1], 2) * rng.uniform(20, 40, 2)
                     corrupted.add((t, int(views[k])))
         out = pipeline.reconstruct(scene.tracks, [scene.image_size] * 8, ReconstructionOptions(
-            resect_cameras=False, autocalibration_time_limit_s=5))
+            resect_cameras=False, autocalibration_time_limit_s=5, registration="projective"))
         kept = {(p.track, int(o[0])) for p in out.points for o in p.observations}
         assert not kept & corrupted  # every corrupted observation is out
         assert out.stages[0]["outliers_removed"] >= 0.9 * len(corrupted)
@@ -157,8 +158,9 @@ class TestModelHouse:
         principal point to 480 px, skew to -26 px), so one shared K cannot match them within 2%:
         the adjustment started from VGG's own cameras reaches the same reconstruction as ours."""
         cameras, points, tracks = house_tracks()
+        # The reference is refitted with the principal point at the centre: ours too, to compare alike.
         out = pipeline.reconstruct(tracks, [(768, 576)] * 10, ReconstructionOptions(
-            resect_cameras=False, autocalibration_time_limit_s=5))
+            resect_cameras=False, autocalibration_time_limit_s=5, principal_point="centre"))
         assert out.summary["views_registered"] == 10 and out.summary["points"] >= 650
         assert out.summary["rms_reprojection_px"] < 0.5 and out.summary["points_certified_fraction"] == 1.0
         f = np.mean([vgg_pose(P)[0][0, 0] for P in cameras])
@@ -197,3 +199,125 @@ class TestDinosaur:
         assert abs(angles.mean() - 10.0) < 0.1 and angles.std() < 0.15
         assert np.degrees(np.arccos(np.clip(axes @ axis, -1, 1))).max() < 3.0
         assert upgrade.motion(adjusted)[1] == "orbital_motion"  # the result says K is not determined
+
+
+class TestSanityLayer:
+    """No returned camera or point may be wrong without the result saying so (issue 35)."""
+
+    def _metric(self, scene):
+        return upgrade.Metric(scene.K.copy(), list(scene.rotations.copy()), list(scene.translations.copy()),
+                              scene.points.copy(), [], False)
+
+    def test_a_flipped_camera_is_dropped_and_counted(self):
+        scene = synthetic.scene(views=6, points=40, seed=2)
+        metric = self._metric(scene)
+        # View 3 turned half round about its own y axis: its points now lie behind it.
+        flip = np.diag([-1.0, 1.0, -1.0])
+        centre = -metric.rotations[3].T @ metric.translations[3]
+        metric.rotations[3] = flip @ metric.rotations[3]
+        metric.translations[3] = -metric.rotations[3] @ centre
+        obs = Observations.from_tracks(scene.tracks, 6)
+        out = pipeline.Reconstruction([pipeline.Camera(v, True) for v in range(6)], [], [])
+        keep = pipeline._check_cameras(out, metric, obs, np.ones(len(obs.view), dtype=bool), 2.0)
+        dropped = out.checks["cameras_dropped"]
+        assert [d["view"] for d in dropped] == [3] and "flipped" in dropped[0]["reason"]
+        assert not out.cameras[3].registered and "flipped" in out.cameras[3].reason
+        assert metric.rotations[3] is None and not keep[obs.view == 3].any()
+        assert keep[obs.view != 3].all()  # the other cameras' observations all fit
+
+    def test_an_outlier_observation_is_removed_before_the_structure(self):
+        scene = synthetic.scene(views=6, points=40, seed=2)
+        tracks = [(v, p.copy()) for v, p in scene.tracks]
+        tracks[5][1][0] += [60.0, -45.0]
+        obs = Observations.from_tracks(tracks, 6)
+        out = pipeline.Reconstruction([pipeline.Camera(v, True) for v in range(6)], [], [])
+        keep = pipeline._check_cameras(out, self._metric(scene), obs, np.ones(len(obs.view), dtype=bool), 2.0)
+        bad = (obs.track == 5) & (obs.view == tracks[5][0][0])
+        assert not keep[bad].any() and keep[~bad & (obs.track != 5)].all()
+        assert out.checks["observations_removed"] == 1 and out.checks["cameras_dropped"] == []
+
+    def test_an_outlier_track_is_caught_before_the_structure_is_certified(self):
+        scene = synthetic.scene(views=6, points=40, seed=2, noise_px=0.2)
+        views, pixels = scene.tracks[5]
+        pixels[0] += [60.0, -45.0]  # one observation far off: it must not reach the certified point
+        out = pipeline.reconstruct(scene.tracks, [scene.image_size] * 6, ReconstructionOptions(
+            intrinsics={"K": scene.K.tolist()}, resect_cameras=False))
+        assert out.summary["views_registered"] == 6
+        point = next((p for p in out.points if p.track == 5), None)
+        assert point is None or int(views[0]) not in [int(o[0]) for o in point.observations]
+        for p in out.points:  # every returned point reprojects within the threshold where it is seen
+            X = np.array([*p.result.point, 1.0])
+            for v, u, w in p.observations:
+                image = out.cameras[int(v)].P @ X
+                assert image[2] > 0 and np.hypot(image[0] / image[2] - u, image[1] / image[2] - w) < 2.0 * np.sqrt(6)
+
+
+class TestCalibrationClaim:
+    def _out(self, certified_K, returned_K, ranges, critical=None):
+        stage = {"name": "autocalibration", "status": "done", "certified": True, "K": certified_K,
+                 "intrinsics": ranges, "critical_motion": critical, "determined": critical is None}
+        metric = upgrade.Metric(np.array(returned_K, dtype=float), [np.eye(3)], [np.zeros(3)], np.zeros((0, 3)),
+                                [], True)
+        return pipeline.Reconstruction([], [], [{"name": "projective"}, stage], metric=metric)
+
+    RANGES = {"focal": [192.0, 3200.0], "aspect": [0.95, 1.05], "skew": [-6.4, 6.4],
+              "principal_point": [[160.0, 480.0], [120.0, 360.0]]}
+
+    def test_a_certified_K_on_its_range_edge_is_a_warning_and_not_determined(self):
+        K = [[3200.0, 0.0, 320.0], [0.0, 3200.0, 240.0], [0.0, 0.0, 1.0]]  # the focal range's upper end
+        claim = pipeline.calibration_claim(self._out(K, K, self.RANGES))
+        assert claim.certified and claim.on_range_edge == ("focal",) and claim.determined is False
+        assert "certified_K_on_range_edge" in [w["code"] for w in claim.warnings]
+        inside = [[1000.0, 0.0, 320.0], [0.0, 1000.0, 240.0], [0.0, 0.0, 1.0]]
+        claim = pipeline.calibration_claim(self._out(inside, inside, self.RANGES))
+        assert claim.on_range_edge == () and claim.determined is True and claim.returned_is_certified
+
+    def test_a_K_moved_by_the_adjustment_returns_both_and_says_which_is_certified(self):
+        certified = [[1000.0, 0.0, 320.0], [0.0, 1000.0, 240.0], [0.0, 0.0, 1.0]]
+        adjusted = [[1040.0, 0.0, 322.0], [0.0, 1040.0, 240.0], [0.0, 0.0, 1.0]]
+        claim = pipeline.calibration_claim(self._out(certified, adjusted, self.RANGES))
+        assert claim.K == adjusted and claim.certified_K == certified and claim.certified
+        assert not claim.returned_is_certified and claim.source == "bundle_adjustment"
+        assert abs(claim.difference["focal_percent"] - 4.0) < 1e-9 and abs(claim.difference["principal_point_px"] - 2.0) < 1e-9
+        assert "returned_K_not_certified" in [w["code"] for w in claim.warnings]
+
+    def test_a_claim_about_a_K_not_returned_is_impossible(self):
+        with pytest.raises(ValueError):
+            pipeline.CalibrationClaim(None, "none", None, True, False, None, (), None, ())
+        with pytest.raises(ValueError):  # the returned K called certified with no certified K beside it
+            pipeline.CalibrationClaim([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]], "autocalibration", None, False, True,
+                                      None, (), None, ())
+        with pytest.raises(ValueError):
+            pipeline.CalibrationClaim(None, "none", None, False, False, None, (), True, ())
+
+
+class TestUnknownIntrinsics:
+    def test_a_long_lens_is_found_from_a_prior_four_times_too_short(self):
+        # f = 3000 px on 640 x 480 images (a 12 degree field of view); the prior is COLMAP's 1.2 x 640.
+        scene = synthetic.scene(views=8, points=150, focal=3000.0, seed=4, noise_px=0.3, spread_degrees=25.0,
+                                distance=20.0)
+        out = pipeline.reconstruct(scene.tracks, [scene.image_size] * 8, ReconstructionOptions(resect_cameras=False))
+        assert out.summary["views_registered"] == 8
+        f = out.summary["calibration"]["K"][0][0]
+        assert abs(f / 3000.0 - 1) < 0.03
+        assert aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations)).max() < 0.5
+        rounds = out.stages[0]["focal_rounds"]
+        assert rounds[0]["focal_px"] == pytest.approx(768.0) and len(rounds) >= 2
+
+    def test_the_principal_point_is_estimated_when_the_data_fix_it(self):
+        # The principal point 40 px right of and 25 px above the centre, a general motion: freed
+        # by the test, it lands within 3 px; held at the centre ("centre"), the cost is higher.
+        scene = synthetic.scene(views=10, points=200, seed=6, noise_px=0.3, spread_degrees=50.0)
+        K = scene.K.copy()
+        K[0, 2] += 40.0
+        K[1, 2] -= 25.0
+        tracks = [(views, pixels + np.array([40.0, -25.0])) for views, pixels in scene.tracks]  # the moved centre
+        out = pipeline.reconstruct(tracks, [scene.image_size] * 10, ReconstructionOptions(resect_cameras=False))
+        test = out.stages[2]["principal_point"]
+        assert test["estimated"] and test["chi2"] > 13.8
+        pp = np.array(out.summary["calibration"]["K"])[:2, 2]
+        assert np.abs(pp - K[:2, 2]).max() < 3.0
+        held = pipeline.reconstruct(tracks, [scene.image_size] * 10, ReconstructionOptions(
+            resect_cameras=False, principal_point="centre"))
+        assert "principal_point" not in held.stages[2]
+        assert np.abs(np.array(held.summary["calibration"]["K"])[:2, 2] - [320.0, 240.0]).max() < 1e-9

@@ -17,10 +17,11 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.reconstruction import features
+from geocert.pipelines.reconstruction import features
+from geocert.solvers.reconstruction import calibrated
 from geocert.solvers.reconstruction.calibrated import (CalibratedOptions, align_rotations,
                                                        calibrated_reconstruction, refine_cameras)
-from geocert.solvers.reconstruction.features import (FeatureOptions, build_tracks, decode_image,
+from geocert.pipelines.reconstruction.features import (FeatureOptions, build_tracks, decode_image,
                                                      tracks_from_images)
 from geocert.solvers.reconstruction.render import box_scene
 
@@ -139,6 +140,55 @@ class TestSyntheticTracks:
         assert result.status == "cancelled" and result.tracks == []
         assert seen[0] == {"stage": "features", "done": 0, "total": 3}
         assert seen[-1]["stage"] == "matches"
+
+
+def _ring_gap(a: int, b: int, n: int) -> int:
+    return min((a - b) % n, (b - a) % n)
+
+
+@pytest.fixture(scope="module")
+def shuffled_ring():
+    """16 rendered views round the box, in a shuffled file order: (scene, images, order), image k
+    being view order[k] of the ring."""
+    scene = box_scene(n_views=16, arc_deg=360.0, seed=0)
+    order = np.random.default_rng(0).permutation(16)
+    images = scene.images()
+    return scene, [images[i] for i in order], order
+
+
+class TestPairChoice:
+    def test_retrieval_finds_the_ring_neighbours_in_any_file_order(self, shuffled_ring):
+        # The ring's neighbours (16 pairs one step apart) are all among the pairs retrieval
+        # chooses with 2 neighbours an image; the sequential rule reads the file order and, the
+        # files shuffled, matches few of them.
+        _, images, order = shuffled_ring
+        sift = cv2.SIFT_create(nfeatures=1500)
+        descriptors = [sift.detectAndCompute(image, None)[1] for image in images]
+        options = FeatureOptions(pairs="retrieval", retrieval_neighbours=2)
+        pairs, rule = features.candidate_pairs(16, options, descriptors)
+        assert rule == "retrieval" and len(pairs) <= 32
+        neighbours = {(min(i, j), max(i, j)) for i in range(16) for j in range(16) if _ring_gap(order[i], order[j], 16) == 1}
+        assert neighbours <= set(pairs)
+        sequential, _ = features.candidate_pairs(16, FeatureOptions(pairs="sequential", neighbour_window=2))
+        assert len(neighbours & set(sequential)) < len(neighbours) / 2
+
+    def test_auto_is_exhaustive_up_to_the_limit_then_retrieval(self):
+        rng = np.random.default_rng(0)
+        descriptors = [rng.random((50, 128)).astype(np.float32) * 100 for _ in range(6)]
+        pairs, rule = features.candidate_pairs(6, FeatureOptions(exhaustive_limit=6), descriptors)
+        assert rule == "exhaustive" and len(pairs) == 15
+        pairs, rule = features.candidate_pairs(6, FeatureOptions(exhaustive_limit=5, retrieval_neighbours=2),
+                                               descriptors)
+        assert rule == "retrieval" and len(pairs) < 15 and all(i < j for i, j in pairs)
+
+    def test_a_shuffled_ring_registers_every_view(self, shuffled_ring):
+        scene, images, order = shuffled_ring
+        found = tracks_from_images(images, FeatureOptions(max_features=1500, pairs="retrieval", retrieval_neighbours=3))
+        assert found.stats["pairs_chosen_by"] == "retrieval"
+        result = calibrated_reconstruction(found.tracks, [scene.cameras[i].K for i in order])
+        assert result.stats["registered"] == 16
+        _, errors = align_rotations(result.rotations, [scene.cameras[i].R for i in order])
+        assert errors.max() < 0.5
 
 
 class TestGuidedMatching:
@@ -373,4 +423,132 @@ class TestCalibrated:
 
 
 # ---------------------------------------------------------------------------------------------
+# The initial pair and the registration order on synthetic tracks (f = 800 px, 640 x 480, 0.3 px noise)
+
+K800 = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
+
+
+def _observe(cameras, X, facing_deg=None, seed=0):
+    """Tracks of points X in cameras (R, t): each point in every camera it projects into (and,
+    with ``facing_deg``, whose ray meets the point's outward normal within that angle)."""
+    rng = np.random.default_rng(seed)
+    tracks = []
+    for x in X:
+        views, pixels = [], []
+        for v, (R, t) in enumerate(cameras):
+            h = K800 @ (R @ x + t)
+            p = h[:2] / h[2]
+            centre = -R.T @ t
+            ray = (x - centre) / np.linalg.norm(x - centre)
+            if h[2] <= 0.1 or not (0 <= p[0] < 640 and 0 <= p[1] < 480):
+                continue
+            if facing_deg is not None and np.degrees(np.arccos(np.clip(-ray @ x / np.linalg.norm(x), -1, 1))) > facing_deg:
+                continue
+            views.append(v)
+            pixels.append(p + rng.normal(0.0, 0.3, 2))
+        if len(views) >= 2:
+            tracks.append((np.array(views), np.array(pixels)))
+    return tracks
+
+
+def _ring(n: int, radius: float, points: int, facing_deg: float = 60.0, seed: int = 0):
+    """n cameras round a ring of radius 6 looking at a ball of points of the given radius, each
+    point seen from within ``facing_deg`` of its outward normal."""
+    from geocert.solvers.reconstruction.render import look_at
+
+    rng = np.random.default_rng(seed)
+    cameras = [look_at(np.array([6 * np.cos(a), 6 * np.sin(a), 1.0]), np.zeros(3))
+               for a in 2 * np.pi * np.arange(n) / n]
+    d = rng.normal(size=(points, 3))
+    X = d / np.linalg.norm(d, axis=1, keepdims=True) * rng.uniform(0.6, 1.0, (points, 1)) * radius
+    return cameras, _observe(cameras, X, facing_deg=facing_deg, seed=seed)
+
+
+def _registered_errors(result, cameras):
+    registered = [v for v in range(len(cameras)) if result.rotations[v] is not None]
+    _, errors = align_rotations([result.rotations[v] for v in registered], [cameras[v][0] for v in registered])
+    return registered, errors
+
+
+class TestInitialPair:
+    def test_a_dense_ring_starts_from_a_relaxed_angle(self):
+        # 24 views 15 degrees apart round a small object: no pair's rays meet at COLMAP's 16
+        # degrees median among the candidates sharing the most tracks, so the angle is halved.
+        cameras, tracks = _ring(24, 0.5, 300)
+        result = calibrated_reconstruction(tracks, [K800] * 24)
+        registered, errors = _registered_errors(result, cameras)
+        assert len(registered) == 24 and errors.max() < 1.0
+        search = result.stats["initial_pair_search"]
+        assert search["thresholds"]["relaxations"] >= 1 and search["pair"]["median_angle_deg"] >= 8.0
+
+    def test_a_wide_baseline_ring(self):
+        # 8 views 45 degrees apart: each point is seen by two or three of them.
+        cameras, tracks = _ring(8, 1.0, 600, facing_deg=80.0)
+        result = calibrated_reconstruction(tracks, [K800] * 8)
+        registered, errors = _registered_errors(result, cameras)
+        assert len(registered) == 8 and errors.max() < 0.5
+        assert result.stats["initial_pair_search"]["thresholds"]["relaxations"] == 0
+
+    def test_forward_motion_down_a_corridor(self):
+        # 11 cameras stepping 0.5 along a corridor's axis, looking down it, points on its walls:
+        # every pair's baseline is straight ahead (|t_z| = 1), which only the last relaxation allows.
+        from geocert.solvers.reconstruction.render import look_at
+
+        rng = np.random.default_rng(0)
+        cameras = [look_at(np.array([0.0, 0.5 * k, 0.0]), np.array([0.0, 0.5 * k + 10, 0.0])) for k in range(11)]
+        side = rng.choice([-1.0, 1.0], 600)
+        X = np.c_[2.0 * side, rng.uniform(2, 30, 600), rng.uniform(-1.5, 1.5, 600)]
+        result = calibrated_reconstruction(_observe(cameras, X), [K800] * 11)
+        registered, errors = _registered_errors(result, cameras)
+        assert len(registered) == 11 and errors.max() < 0.2
+        assert result.stats["initial_pair_search"]["pair"]["forward_motion"] > 0.95
+
+    def test_no_baseline_gives_the_true_reason(self):
+        # Cameras turning about one centre: plenty of shared tracks, no parallax. The reason says
+        # so (the pairs share the tracks; their rays meet at 0 degrees), not that none shares tracks.
+        from geocert.solvers.reconstruction.render import look_at
+
+        rng = np.random.default_rng(1)
+        cameras = [look_at(np.zeros(3), np.array([np.cos(a), np.sin(a), 0.0])) for a in np.radians([0, 5, 10, 15])]
+        X = rng.normal(size=(300, 3)) + np.array([10.0, 1.0, 0.0])
+        result = calibrated_reconstruction(_observe(cameras, X), [K800] * 4)
+        assert result.status == "failed"
+        reason = result.stats["reason"]
+        assert "median angle 0.0" in reason and "shares" not in reason.split(":")[0]
+        assert all(r == reason for r in result.reasons)
+
+    def test_registration_prefers_points_spread_over_the_image(self):
+        # Two views see as many points; one has them all in a corner: the other scores higher.
+        state = calibrated._State([(np.array([0, 1]), np.array([[10.0 + k, 10.0], [20.0 * (k % 30) + 5, 15.0 * (k // 30) + 5]]))
+                                   for k in range(300)], [K800, K800])
+        usable = state.obs_view >= 0
+        scores = calibrated._visibility_scores(state, usable)
+        assert scores[1] > 2 * scores[0]
+
+
+# ---------------------------------------------------------------------------------------------
 # Real photos: Middlebury dinoSparseRing, in tests/solvers/test_reconstruction_ring.py
+
+
+def _jpeg_with_focal_35mm(f35: int, order: str = "<") -> bytes:
+    """A JPEG's first segments: SOI and an APP1 EXIF block whose EXIF IFD states
+    FocalLengthIn35mmFilm (tag 0xA405, SHORT) = f35 (no image data: only the EXIF is read)."""
+    mark = b"II" if order == "<" else b"MM"
+    tiff = mark + struct.pack(order + "HI", 42, 8)
+    ifd0 = struct.pack(order + "H", 1) + struct.pack(order + "HHII", 0x8769, 4, 1, 26) + struct.pack(order + "I", 0)
+    exif = struct.pack(order + "H", 1) + struct.pack(order + "HHI", 0xA405, 3, 1) + struct.pack(order + "HH", f35, 0) \
+        + struct.pack(order + "I", 0)
+    body = b"Exif\x00\x00" + tiff + ifd0 + exif
+    return b"\xff\xd8" + b"\xff\xe1" + struct.pack(">H", len(body) + 2) + body + b"\xff\xda\x00\x02"
+
+
+class TestExifFocal:
+    @pytest.mark.parametrize("order", ["<", ">"])
+    def test_the_35mm_equivalent_gives_the_prior_in_pixels(self, order):
+        # 36 mm equivalent on a 3000 px wide photo: 3000 px.
+        assert features.exif_focal_px(_jpeg_with_focal_35mm(36, order), (3000, 2000)) == pytest.approx(3000.0)
+        assert features.exif_focal_px(_jpeg_with_focal_35mm(0, order), (3000, 2000)) is None
+
+    def test_no_exif_no_prior(self):
+        assert features.exif_focal_px(b"\xff\xd8\xff\xda\x00\x02", (640, 480)) is None
+        assert features.exif_focal_px(b"\x89PNG\r\n\x1a\n", (640, 480)) is None

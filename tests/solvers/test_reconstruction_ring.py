@@ -15,7 +15,7 @@ import pytest
 from geocert.solvers.reconstruction import calibrated
 from geocert.solvers.reconstruction.calibrated import (CalibratedOptions, align_rotations,
                                                        calibrated_reconstruction)
-from geocert.solvers.reconstruction.features import FeatureOptions, tracks_from_images
+from geocert.pipelines.reconstruction.features import FeatureOptions, tracks_from_images
 from geocert.solvers.reconstruction.render import box_scene
 
 from tests.support import SHARED

@@ -1,18 +1,35 @@
 """How well a projective reconstruction fixes its metric upgrade (core/determinacy.py).
 
 Critical motions (Sturm 1997; Kahl, Triggs and Astrom 2000) leave constant intrinsics
-undetermined whatever the solver does. They are read off the infinite homographies of the plane
-found, H_j ~ K R_j K^-1 (the reference view to view j): the angle of R_j is that of H_j's complex
-eigenvalues (K cancels), and R_j's axis is K^-1 times H_j's real eigenvector, so views rotating
-about one axis share that eigenvector a: (H_j / det(H_j)^(1/3) - I) a = 0 for every j. Warnings:
-``pure_translation`` (the median angle below 3 degrees), ``rotation_about_one_axis`` (the stacked
-H_j / det^(1/3) - I have their smallest singular value below 0.15 of the next: measured, 0.004 to
-0.08 for turntable rings at 0.1% to 1% noise, 0.6 to 0.96 for cameras all round) and
-``orbital_motion`` (one axis, and the camera centres nearly coplanar: a turntable or a ring).
+undetermined whatever the solver does; near-critical ones leave them undetermined at the data's
+noise level. Both are judged here by how flat a cost is along the family of answers the motion
+leaves open, against the noise the data carry, not by how closely the motion resembles an ideal
+turntable:
+
+- ``motion_warnings`` (the DIAC, the plane at infinity fixed): with H_j the infinite homographies
+  (scaled to unit determinant: K R_j K^-1 up to noise), every DIAC omega obeys
+  H_j omega H_j^T = omega, a linear map L of omega's six entries. Its least-squares misfit at the
+  DIAC found estimates the noise (sigma, per entry: never below ``ROTATION_NOISE``, since
+  rotations given exactly carry no estimate of their own); its singular values across the
+  directions orthogonal to that DIAC say how far omega may move, 3 sigma / s_k along direction k,
+  before the misfit grows by the noise. Where that moves K by more than ``RELATIVE_WIDTH`` of the
+  focal length (core/determinacy.py: what ``determined`` allows), the motion does not fix K.
+- ``plane_family`` (the affine stage): the modulus cost walked along its own ellipsoid's axes
+  until it rises by cost_increase (3^2 times its residual variance, or the certified gap) or
+  chirality ends the walk, the metric fit redone at each plane reached. Where the focal length
+  moves by more than ``RELATIVE_WIDTH``, the plane at infinity is not fixed well enough to fix K.
+
+The warning's code names the motion (what it looks like; the decision is the conditioning's):
+``pure_translation`` (the views turn by under 3 degrees from the reference, median),
+``orbital_motion`` (the camera centres spread over a plane, not along a line nor all round: rings,
+turntables and arcs round an object), ``rotation_about_one_axis`` (the rotations' axes nearly one), ``critical_motion`` (any other
+free family, e.g. half-turns about perpendicular axes).
 
 Intervals: the affine stage's plane at infinity (input frame, unit norm) over the planes whose
 modulus residuals cost at most ``cost_increase`` more; the metric stage's focal lengths, skew and
-principal point (pixels) over the omega doing so for the metric cost."""
+principal point (pixels) over the omega doing so for the metric cost, combined with the range
+the plane's own family gives, clipped to the intrinsics ranges (the certified scope) and to
+positive focal lengths."""
 
 from __future__ import annotations
 
@@ -22,11 +39,23 @@ import numpy as np
 
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
-from geocert.solvers.core.determinacy import certified_gap, curvature_intervals, numeric_jacobian, spread
+from geocert.solvers.core.determinacy import (RELATIVE_WIDTH, SIGMAS, certified_gap, clip, cost_increase,
+                                              curvature_intervals, interval, numeric_jacobian, ranges_at, spread,
+                                              sublevel_rays)
 
-STILL_DEGREES = 3.0
-AXIS_RATIO = 0.15
-FLAT = 1e-2
+# Radians: rotations given exactly (a metric reconstruction's) carry no noise estimate, and are not
+# taken as known better than 0.6 degrees. Adjusted along a critical family they scatter by that
+# much: the Oxford Dinosaur's bundle-adjusted axes lie within 3 degrees of one, and at 1e-3 its
+# turntable, or any exact turntable perturbed by 0.5 degrees, was judged general. A caller that
+# knows its rotations' standard error passes it as ``noise``.
+ROTATION_NOISE = 1e-2
+STILL_DEGREES = 3.0  # naming only: views turning less than this from the reference (median) translate
+AXIS = 0.15  # naming only: rotations whose axes fit one axis this well (_axis_fit) share it
+PATH = 0.1  # naming only: centres spread across their widest direction by less than this fraction lie on a path
+ORBIT = 0.25  # naming only: centres on no path, thinner than this fraction of their second spread: an orbit
+NAMES = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")
+CRITICAL_CODES = ("pure_translation", "orbital_motion", "rotation_about_one_axis", "critical_motion")
+_ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
 def rotation_angles(H: np.ndarray) -> np.ndarray:
@@ -39,60 +68,384 @@ def rotation_angles(H: np.ndarray) -> np.ndarray:
     return np.array(angles)
 
 
-def motion_warnings(H: np.ndarray, centres: np.ndarray | None) -> list[dict]:
+def _symmetric(coords: np.ndarray) -> np.ndarray:
+    """The symmetric matrix of orthonormal coordinates (off-diagonal entries weighted 1/sqrt 2)."""
+    S = np.zeros((3, 3))
+    for c, (a, b) in zip(coords, _ENTRIES):
+        S[a, b] = S[b, a] = c if a == b else c / math.sqrt(2.0)
+    return S
+
+
+def _coords(S: np.ndarray) -> np.ndarray:
+    return np.array([S[a, b] if a == b else math.sqrt(2.0) * S[a, b] for a, b in _ENTRIES])
+
+
+def invariance_operator(H: np.ndarray) -> np.ndarray:
+    """L (6m x 6): the coordinates of H_j S H_j^T - S for every view, as a linear map of S's
+    (H_j scaled to unit determinant)."""
+    basis = [_symmetric(e) for e in np.eye(6)]
+    blocks = []
+    for Hj in H:
+        det = np.linalg.det(Hj)
+        if not det != 0 or not np.isfinite(det):
+            continue
+        Hn = Hj / np.cbrt(det)
+        blocks.append(np.array([_coords(Hn @ E @ Hn.T - E) for E in basis]).T)
+    return np.vstack(blocks) if blocks else np.zeros((0, 6))
+
+
+def intrinsics(omega: np.ndarray) -> np.ndarray:
+    """(fx, fy, skew, u, v) of the K with K K^T ~ omega (omega33 scaled to 1), NaN unless omega
+    is positive definite."""
+    omega = np.asarray(omega, dtype=float)
+    if not (np.all(np.isfinite(omega)) and omega[2, 2] > 0):
+        return np.full(5, np.nan)
+    J = np.eye(3)[::-1]
+    try:
+        L = np.linalg.cholesky(J @ (omega / omega[2, 2]) @ J)
+    except np.linalg.LinAlgError:
+        return np.full(5, np.nan)
+    K = J @ L @ J
+    K = K * np.sign(np.diag(K))[None, :]
+    K = K / K[2, 2]
+    return np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]])
+
+
+def change(reference: np.ndarray, other: np.ndarray) -> float:
+    """How far other intrinsics are from reference ones, as ``determined`` measures it: the
+    focal lengths relative to themselves, the skew and principal point relative to the focal
+    length (inf when either is not a calibration)."""
+    if not (np.all(np.isfinite(reference)) and np.all(np.isfinite(other))):
+        return math.inf
+    f = 0.5 * (abs(reference[0]) + abs(reference[1]))
+    return float(max(abs(other[0] / reference[0] - 1), abs(other[1] / reference[1] - 1),
+                     *(abs(other[k] - reference[k]) / f for k in (2, 3, 4))))
+
+
+def _best_calibration(L: np.ndarray) -> np.ndarray | None:
+    """The DIAC (coordinates) L fits best, as a calibration: on a critical motion the best fit
+    alone may be any member of the family, a calibration or not. Candidates: the plane of L's two
+    best fitting directions, and the identity (a camera whose image coordinates are its rays);
+    among the positive definite ones fitting within the noise of the best fit, the one farthest
+    from singular, else the best fitting."""
+    _, singular, vt = np.linalg.svd(L, full_matrices=False)
+    noise = singular[-1] / math.sqrt(max(len(L) - 5, 1))
+    allowed = singular[-1] ** 2 + (SIGMAS * noise) ** 2
+    candidates = [math.cos(a) * vt[-1] + math.sin(a) * vt[-2] for a in np.linspace(0.0, math.pi, 181)[:-1]]
+    candidates.append(_coords(np.eye(3)) / math.sqrt(3.0))
+    fitting, best, best_misfit = [], None, math.inf
+    for candidate in candidates:
+        candidate = candidate if np.trace(_symmetric(candidate)) >= 0 else -candidate
+        smallest = float(np.linalg.eigvalsh(_symmetric(candidate))[0])
+        if not smallest > 0:
+            continue
+        misfit = float(np.linalg.norm(L @ candidate))
+        if misfit ** 2 <= allowed:
+            fitting.append((smallest, candidate))
+        if misfit < best_misfit:
+            best, best_misfit = candidate, misfit
+    return max(fitting, key=lambda pair: pair[0])[1] if fitting else best
+
+
+def diac_family(H: np.ndarray, omega: np.ndarray | None = None, noise: float | None = None) -> dict | None:
+    """The directions along which the DIAC is free at the noise level (module docstring): their
+    count, the largest move of K within 3 standard errors along any direction, sigma and the
+    singular values. None when no DIAC positive definite fits (nothing to measure around)."""
+    L = invariance_operator(H)
+    if len(L) < 6:
+        return None
+    if omega is None:
+        best = _best_calibration(L)
+        if best is None:
+            return None
+    else:
+        best = _coords(np.asarray(omega, dtype=float))
+    best = best / np.linalg.norm(best)
+    if np.trace(_symmetric(best)) < 0:
+        best = -best
+    here = intrinsics(_symmetric(best))
+    if not np.all(np.isfinite(here)):
+        return None
+    redundancy = max(len(L) - 5, 1)
+    misfit = float(np.linalg.norm(L @ best))
+    sigma = float(noise) if noise is not None else max(misfit / math.sqrt(redundancy), ROTATION_NOISE)
+    basis = np.linalg.svd(best[None, :])[2][1:].T  # (6, 5): omega's directions that are not its scale
+    _, singular, vt = np.linalg.svd(L @ basis, full_matrices=False)
+    moves = []
+    for s, v in zip(singular, vt):
+        step = SIGMAS * sigma / s if s > 0 else math.inf
+        if not math.isfinite(step):
+            moves.append(math.inf)
+            continue
+        moves.append(max(change(here, intrinsics(_symmetric(best + sign * step * (basis @ v)))) for sign in (1, -1)))
+    moves = np.array(moves)
+    return {"free": int(np.sum(moves > RELATIVE_WIDTH)), "largest_move": float(moves.max()), "sigma": sigma,
+            "singular": singular, "moves": moves}
+
+
+def _axis_fit(H: np.ndarray) -> float:
+    """How nearly the rotations share one axis (0: exactly): the stacked H_j / det^(1/3) - I's
+    smallest singular value over the next (for the warning's detail only)."""
+    stacked = [Hj / np.cbrt(np.linalg.det(Hj)) - np.eye(3) for Hj in H if np.linalg.det(Hj) != 0]
+    if not stacked:
+        return math.nan
+    s = np.linalg.svd(np.vstack(stacked), compute_uv=False)
+    return float(s[2] / max(float(s[1]), 1e-300))
+
+
+def motion_name(H: np.ndarray, centres: np.ndarray | None) -> tuple[str, str]:
+    """(code, what the motion looks like): named by its geometry alone (the rotation angles are
+    K's conjugates', read off H's eigenvalues), whatever the noise made of the decision."""
     angles = rotation_angles(H)
-    if np.median(angles) < STILL_DEGREES:  # the median: noise alone turns a few views by degrees
-        return [{"code": "pure_translation",
-                 "detail": f"the views rotate by {np.median(angles):.2g} degrees from the reference (median; "
-                           f"{angles.max():.2g} at most): the intrinsics are not fixed by a translating camera"}]
-    stacked = np.vstack([Hj / np.cbrt(np.linalg.det(Hj)) - np.eye(3) for Hj in H if np.linalg.det(Hj) != 0])
-    singular = np.linalg.svd(stacked, compute_uv=False)
-    ratio = float(singular[2] / max(float(singular[1]), 1e-300))
-    if len(H) < 2 or not ratio < AXIS_RATIO:
+    looks = f"the views rotate by {np.median(angles):.3g} degrees from the reference (median; {angles.max():.3g} at most)"
+    fit = _axis_fit(H)
+    if math.isfinite(fit):
+        looks += f", their axes fit one axis to {fit:.2g}"
+    if np.median(angles) < STILL_DEGREES:
+        return "pure_translation", looks
+    if centres is not None and len(centres) >= 4 and np.all(np.isfinite(centres)):
+        widths = spread(centres)
+        orbit = widths[1] >= PATH and widths[2] < ORBIT * widths[1]
+        looks += (f", the camera centres' spreads are {widths[1]:.2g} and {widths[2]:.2g} of their widest "
+                  f"({'a path' if widths[1] < PATH else 'a ring or an arc' if orbit else 'all round'})")
+        if orbit:
+            return "orbital_motion", looks
+    return ("rotation_about_one_axis" if fit < AXIS else "critical_motion"), looks
+
+
+def rotation_plane_family(rotations: np.ndarray, reference: np.ndarray, centres: np.ndarray,
+                          noise: float | None = None) -> dict | None:
+    """``plane_family`` for a metric reconstruction: rotations R_j R_0^T relative to the
+    reference view (rotation ``reference``, R_0), the centres (m + 1 rows, the reference's
+    first). In the reference camera's frame the cameras are [H_j | -H_j c_j] and the plane at
+    infinity is p = 0; the modulus cost is walked from there to the noise level (each camera's
+    left 3x3 entries known to ``noise``, default ``ROTATION_NOISE``: the residuals' standard
+    errors are that times their gradients in those entries), chirality keeping every centre on
+    one side, and the DIAC refitted (linearly) on each plane reached. Returns the largest move of
+    K from the identity and how many walks ended beyond any calibration; None when the data are
+    not a metric reconstruction of at least 3 views."""
+    R = np.asarray(rotations, dtype=float)
+    C = np.asarray(centres, dtype=float)
+    if len(R) < 2 or len(C) != len(R) + 1 or not np.all(np.isfinite(C)):
+        return None
+    sigma = ROTATION_NOISE if noise is None else float(noise)
+    c = (np.asarray(reference, dtype=float) @ (C[1:] - C[0]).T).T  # the centres in the reference's frame
+    size = max(float(np.abs(c).max()), 1e-300)
+    c = c / size  # the translations' scale is arbitrary: unit size keeps p of order one
+    cameras = np.concatenate([np.concatenate([np.eye(3), np.zeros((3, 1))], axis=1)[None],
+                              np.concatenate([R, -np.einsum("jab,jb->ja", R, c)[:, :, None]], axis=2)])
+    coef, _ = frames.modulus_coefficients(cameras, 0)
+
+    def residuals(q):
+        return frames.modulus_residuals(coef, q)
+
+    zero = np.zeros(3)
+    J = numeric_jacobian(residuals, zero)
+    per_view = np.array([np.linalg.norm(numeric_jacobian(lambda a, j=j: _view_residual(coef, cameras, j, a),
+                                                         cameras[j + 1, :, :3].ravel())) for j in range(len(R))])
+    delta = SIGMAS ** 2 * float(np.mean((sigma * per_view) ** 2)) * len(R) / max(len(R) - 3, 1)
+    rows = np.concatenate([c, np.ones((len(c), 1))], axis=1)
+
+    def allowed(q):
+        return bool(np.all(rows @ np.append(q, 1.0) > 0))
+
+    points = sublevel_rays(lambda q: float(residuals(q) @ residuals(q)), zero, J.T @ J,
+                           float(residuals(zero) @ residuals(zero)) + delta, [], allowed=allowed)
+    here = intrinsics(np.eye(3))
+    moves = []
+    for q in points:
+        if q is None:
+            moves.append(math.inf)
+            continue
+        H = R - np.einsum("ja,b->jab", -np.einsum("jab,jb->ja", R, c), q)
+        L = invariance_operator(H)
+        best = _best_calibration(L) if len(L) >= 6 else None
+        moves.append(math.inf if best is None else change(here, intrinsics(_symmetric(best))))
+    return {"largest_move": max(moves), "cost_increase": delta, "sigma": sigma}
+
+
+def _view_residual(coef, cameras, j, entries):
+    """View j's modulus residual at p = 0 as a function of its left 3x3 block's entries."""
+    A = entries.reshape(3, 3)
+    tr = np.trace(A)
+    minors = (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0] + A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]
+              + A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
+    return np.array([np.cbrt(np.linalg.det(A)) * tr - minors])
+
+
+def motion_warnings(H: np.ndarray, centres: np.ndarray | None, noise: float | None = None,
+                    omega: np.ndarray | None = None, reference: np.ndarray | None = None) -> list[dict]:
+    """The critical motion, if any, of views whose infinite homographies are H (m, 3, 3; for a
+    metric reconstruction, the rotations relative to one view) and whose centres are ``centres``
+    (m or m + 1 rows, or None). ``noise``: the standard error of the H's entries (radians for
+    rotations), when the caller knows it; ``omega``: the DIAC in H's frame to measure around
+    (default: the one the H fit best); ``reference``: for a metric reconstruction, the reference
+    view's rotation R_0 (H = R_j R_0^T), with the centres of every view, the reference's first:
+    then the plane at infinity's own family is judged too (``rotation_plane_family``), as the
+    autocalibration kind's affine stage judges it. Returns [] or one warning {code, detail}."""
+    H = np.asarray(H, dtype=float)
+    if len(H) < 2:
         return []
-    if centres is not None and len(centres) >= 4 and np.all(np.isfinite(centres)) and spread(centres)[-1] < FLAT:
-        return [{"code": "orbital_motion",
-                 "detail": f"every rotation shares one axis (fit {ratio:.2g}) and the centres are nearly coplanar "
-                           "(a turntable or a ring): a critical motion for constant intrinsics"}]
-    return [{"code": "rotation_about_one_axis",
-             "detail": f"every rotation shares one axis (fit {ratio:.2g}): a critical motion for constant intrinsics"}]
+    family = diac_family(H, omega, noise)
+    if reference is not None and centres is not None and (family is None or family["free"] == 0):
+        planes = rotation_plane_family(H, reference, centres, noise)
+        if planes is not None and planes["largest_move"] > RELATIVE_WIDTH:
+            code, looks = motion_name(H, centres)
+            move = planes["largest_move"]
+            moved = "to no calibration at all" if not math.isfinite(move) else f"by {100 * move:.3g}% of the focal length"
+            return [{"code": code,
+                     "detail": f"the modulus cost rises by no more than the noise ({SIGMAS:g} standard errors, each "
+                               f"camera known to {planes['sigma']:.2g}) along a family of planes at infinity that "
+                               f"moves K {moved} (more than {100 * RELATIVE_WIDTH:g}%); {looks}: a near-critical "
+                               "motion for constant intrinsics (the plane at infinity is not fixed)"}]
+    if family is None or family["free"] == 0:
+        return []
+    # Every direction free although the views turn by more than the noise: the H do not fit one
+    # K at all (a wrong plane at infinity, varying intrinsics), which is not a motion's doing.
+    still = bool(np.median(np.radians(rotation_angles(H))) < SIGMAS * family["sigma"])
+    if family["free"] >= 5 and not still:
+        return []
+    code, looks = motion_name(H, centres)
+    move = family["largest_move"]
+    moved = "to no calibration at all" if not math.isfinite(move) else f"by {100 * move:.3g}% of the focal length"
+    return [{"code": code,
+             "detail": f"the DIAC is free along {family['free']} of its 5 directions at the data's noise level "
+                       f"(sigma {family['sigma']:.2g}): {SIGMAS:g} standard errors along them move K {moved} "
+                       f"(more than {100 * RELATIVE_WIDTH:g}%); {looks}: a critical motion for constant intrinsics"}]
 
 
-def affine_stage(problem, p: np.ndarray, cost: float | None, lower: float | None, centres: np.ndarray | None) -> dict:
-    from geocert.solvers.autocalibration.problem import plane_in_input
+def _merge(warnings: list[dict], more: list[dict]) -> list[dict]:
+    """One warning per code, the details of a repeated code joined."""
+    out = [dict(w) for w in warnings]
+    for w in more:
+        same = next((o for o in out if o["code"] == w["code"]), None)
+        if same is None:
+            out.append(dict(w))
+        else:
+            same["detail"] += "; and " + w["detail"]
+    return out
 
+
+def refit(problem, p: np.ndarray, w: np.ndarray) -> np.ndarray | None:
+    """The metric cost's local minimum over omega for the plane (p, 1), started at w (the
+    intrinsics ranges not imposed: the interval is clipped to them afterwards)."""
+    from scipy.optimize import least_squares
+
+    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+    try:
+        fit = least_squares(lambda x: mrelax.residuals(setup, x), w, method="lm", xtol=1e-12, ftol=1e-12)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    return fit.x if np.all(np.isfinite(fit.x)) else None
+
+
+def _K_of_w(problem, w: np.ndarray | None) -> np.ndarray:
+    """(fx, fy, skew, u, v) in pixels for preconditioned omega entries w (NaN when not a K)."""
+    if w is None:
+        return np.full(5, np.nan)
+    k = intrinsics(mrelax.omega_of(w))
+    if not np.all(np.isfinite(k)):
+        return k
+    K = problem.K0 @ np.array([[k[0], k[2], k[3]], [0.0, k[1], k[4]], [0.0, 0.0, 1.0]])
+    return np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]])
+
+
+def plane_family(problem, p: np.ndarray, w: np.ndarray | None, gap: float | None, extra: list | None = None) -> dict:
+    """The planes the modulus cost cannot tell from p at its noise level (module docstring),
+    walked along its ellipsoid's axes and the directions extreme for ``extra`` gradients; with the
+    metric fit redone at each (w: the fit at p; None: the linear method's, refined)."""
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
+    rows = [frames.chirality_rows(problem.norm, delta) for delta in (1.0, -1.0)]
+
+    def allowed(q):  # problem.allowed_by_chirality, its rows made once
+        values = [r @ np.append(q, 1.0) for r in rows]
+        return any(bool(np.all(v > 0) or np.all(v < 0)) for v in values)
+
+    def residuals(q):
+        return frames.modulus_residuals(coef, q)
+
+    J = numeric_jacobian(residuals, p)
+    r = residuals(p)
+    cost = float(r @ r)
+    delta = cost_increase(cost, len(r) - 3, gap)
+    points = sublevel_rays(lambda q: float(residuals(q) @ residuals(q)), p, J.T @ J, cost + delta, extra or [],
+                           allowed=allowed)
+    if w is None:
+        setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+        w = refit(problem, p, mrelax.linear_baseline(setup)[0])
+    here = _K_of_w(problem, w)
+    Ks = [None if q is None else _K_of_w(problem, refit(problem, q, w)) if w is not None else np.full(5, np.nan)
+          for q in points]
+    moves = [math.inf if k is None else change(here, k) for k in Ks]
+    return {"J": J, "residuals": r, "cost_increase": delta, "points": points, "K": here, "Ks": Ks, "w": w,
+            "largest_move": max(moves) if moves else 0.0}
+
+
+def _plane_warning(family: dict, H: np.ndarray, centres: np.ndarray | None, named: list[dict]) -> list[dict]:
+    """The warning when the plane's family moves K by more than ``determined`` allows; its code
+    the motion warnings' (``named``) when they name the motion, else by the centres' shape."""
+    move = family["largest_move"]
+    if not move > RELATIVE_WIDTH or not np.all(np.isfinite(family["K"])):
+        return []
+    focal = [k[0] for k in family["Ks"] if k is not None and np.isfinite(k[0])]
+    reach = ("to planes with no calibration at all" if not math.isfinite(move) or len(focal) < len(family["Ks"])
+             else f"over planes whose constant-K fit has a focal length from {min(focal):.4g} to {max(focal):.4g} px")
+    code, looks = motion_name(H, centres)
+    if named:
+        code = named[0]["code"]
+    return [{"code": code,
+             "detail": f"the modulus cost rises by at most {family['cost_increase']:.3g} (the noise level: "
+                       f"{SIGMAS:g} standard errors of its own residuals) {reach}, against "
+                       f"{family['K'][0]:.4g} px at the plane found (more than {100 * RELATIVE_WIDTH:g}% apart): the "
+                       f"motion does not fix the plane at infinity; {looks}: a critical or near-critical motion for "
+                       "constant intrinsics"}]
+
+
+def affine_stage(problem, p: np.ndarray, cost: float | None, lower: float | None, centres: np.ndarray | None,
+                 K_pixels: np.ndarray | None = None) -> dict:
+    from geocert.solvers.autocalibration.problem import plane_in_input, w_of_K
+
     plane = plane_in_input(problem, p)  # as the result states it
 
     def plane_of(q):  # nearby planes with the returned plane's sign
         out = plane_in_input(problem, q)
         return out if out @ plane >= 0 else -out
 
-    J = numeric_jacobian(lambda q: frames.modulus_residuals(coef, q), p)
     gradient = numeric_jacobian(plane_of, p)
+    w = None if K_pixels is None else w_of_K(problem, np.asarray(K_pixels, dtype=float))
+    family = plane_family(problem, p, w, certified_gap(cost, lower), list(gradient))
     value = plane_of(p)
     quantities = {f"plane_at_infinity[{k}]": (float(value[k]), gradient[k]) for k in range(4)}
-    out = curvature_intervals(J, frames.modulus_residuals(coef, p), quantities, certified_gap(cost, lower))
+    out = curvature_intervals(family["J"], family["residuals"], quantities, certified_gap(cost, lower))
+    lo, hi = ranges_at(value, [None if q is None else plane_of(q) for q in family["points"]])
+    out.intervals = [interval(name, value[k], lo[k], hi[k]) for k, name in enumerate(quantities)]
     H = mrelax.homographies(problem.norm.cameras, problem.norm.reference, p)
-    out.warnings += motion_warnings(H, centres)
+    omega = None if family["w"] is None or not np.all(np.isfinite(family["K"])) else mrelax.omega_of(family["w"])
+    named = motion_warnings(H, centres, omega=omega)
+    out.warnings = _merge(_merge(out.warnings, named), _plane_warning(family, H, centres, named))
     return out.document()
 
 
+def _scope(problem, scoped: bool) -> list[tuple[float | None, float | None]]:
+    """Each of NAMES' clip: the intrinsics ranges (the certified scope) when ``scoped``, else
+    only positive focal lengths."""
+    if not scoped:
+        return [(0.0, None), (0.0, None), (None, None), (None, None), (None, None)]
+    r = problem.ranges
+    (fl, fu), (al, au), (sl, su) = r["focal"], r["aspect"], r["skew"]
+    (ul, uu), (vl, vu) = r["principal_point"]
+    return [(max(fl, 0.0), fu), (max(fl * al, 0.0), fu * au), (sl, su), (ul, uu), (vl, vu)]
+
+
 def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | None, lower: float | None,
-                 centres: np.ndarray | None) -> dict:
-    from geocert.solvers.autocalibration.problem import upper_triangular_root, w_of_K
+                 centres: np.ndarray | None, scoped: bool = True) -> dict:
+    """``scoped``: the metric stage's scope is every K within the intrinsics ranges (the
+    stratified method's), and the intervals are clipped to it; the direct method's scope is a
+    combination of the ranges, and only focal lengths' positivity clips."""
+    from geocert.solvers.autocalibration.problem import w_of_K
 
     setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
     w = w_of_K(problem, K_pixels)
-
-    def intrinsics(x):
-        omega = mrelax.omega_of(x)
-        if np.linalg.eigvalsh(omega)[0] <= 0:
-            return np.full(5, np.nan)
-        K = problem.K0 @ upper_triangular_root(omega)
-        K = K / K[2, 2]
-        return np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]])
-
     informative = np.concatenate([np.arange(5) + 6 * j for j in range(len(setup.H))])  # the 33 entry is 0
 
     def residuals(x, q=p):
@@ -101,35 +454,33 @@ def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | Non
         return mrelax.residuals(here, x)[informative]
 
     J = numeric_jacobian(residuals, w)
-    value = intrinsics(w)
-    gradient = numeric_jacobian(intrinsics, w)
-    names = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")
-    quantities = {name: (float(value[k]), gradient[k]) for k, name in enumerate(names)}
+    value = _K_of_w(problem, w)
+    gradient = numeric_jacobian(lambda x: _K_of_w(problem, x), w)
+    f = 0.5 * (abs(value[0]) + abs(value[1]))
+    scales = (value[0], value[1], f, f, f)
+    quantities = {name: (float(value[k]), gradient[k], scales[k]) for k, name in enumerate(NAMES)}
     out = curvature_intervals(J, residuals(w), quantities, certified_gap(cost, lower))
-    # The plane is an estimate too: its uncertainty moves the optimum, w*(p) ~ w - (J'J)^-1 J' J_p dp
-    # (Gauss-Newton), with dp over the affine stage's own ellipsoid; the two added in quadrature.
-    coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
-    Ja = numeric_jacobian(lambda q: frames.modulus_residuals(coef, q), p)
-    ra = frames.modulus_residuals(coef, p)
-    plane_part = curvature_intervals(Ja, ra, {}, None)
+    # omega's own uncertainty: the metric cost walked to cost + delta along its ellipsoid.
+    r = residuals(w)
+    points = sublevel_rays(lambda x: float(residuals(x) @ residuals(x)), w, J.T @ J,
+                           float(r @ r) + float(out.cost_increase or 0.0), list(gradient))
+    lo_w, hi_w = ranges_at(value, [None if x is None else _K_of_w(problem, x) for x in points])
+    # The plane is an estimate too: its family (the modulus cost's, to its own noise level) moves
+    # the optimum; the metric fit is redone on each plane reached. The two added in quadrature.
     Jp = numeric_jacobian(lambda q: residuals(w, q), p)
     try:
-        D = -np.linalg.lstsq(J, Jp, rcond=None)[0]  # dw*/dp, 5 x 3
-        Sa = np.linalg.pinv(Ja.T @ Ja)
-        singular_plane = np.linalg.matrix_rank(Ja.T @ Ja, tol=1e-10 * np.abs(Ja.T @ Ja).max()) < 3
+        D = -np.linalg.lstsq(J, Jp, rcond=None)[0]  # dw*/dp, 5 x 3: the directions extreme for K
+        extra = list(gradient @ D)
     except np.linalg.LinAlgError:
-        D, Sa, singular_plane = None, None, True
-    for interval, (name, (val, g)) in zip(out.intervals, quantities.items()):
-        if interval["lower"] is None or D is None:
-            continue
-        moved = D.T @ g
-        if singular_plane and np.abs(moved).max() > 0:
-            interval["lower"] = interval["upper"] = None
-            continue
-        extra = float(plane_part.cost_increase or 0.0) * float(moved @ Sa @ moved)
-        half = math.hypot(interval["upper"] - val, math.sqrt(max(extra, 0.0)))
-        interval["lower"], interval["upper"] = val - half, val + half
-    out.warnings += motion_warnings(setup.H, centres)
+        extra = []
+    family = plane_family(problem, p, w, None, extra)
+    lo_p, hi_p = ranges_at(value, family["Ks"])
+    lower_end = value - np.hypot(value - lo_w, value - lo_p)
+    upper_end = value + np.hypot(hi_w - value, hi_p - value)
+    out.intervals = [clip(interval(name, value[k], lower_end[k], upper_end[k], scales[k]), *bounds)
+                     for k, (name, bounds) in enumerate(zip(NAMES, _scope(problem, scoped)))]
+    named = motion_warnings(setup.H, centres, omega=mrelax.omega_of(w))
+    out.warnings = _merge(_merge(out.warnings, named), _plane_warning(family, setup.H, centres, named))
     return out.document()
 
 
@@ -158,7 +509,9 @@ def varying_focal_stage(problem, p: np.ndarray, Ks: list, centres: np.ndarray | 
 
     theta = np.concatenate([a, p])
     J = numeric_jacobian(residuals, theta)
-    quantities = {f"focal[{i}]": (f0 * a[i], f0 * np.eye(len(theta))[i]) for i in range(m)}
+    quantities = {f"focal[{i}]": (f0 * a[i], f0 * np.eye(len(theta))[i], f0 * a[i]) for i in range(m)}
     out = curvature_intervals(J, residuals(theta), quantities)
+    for found in out.intervals:
+        clip(found, 0.0, None)
     out.warnings += motion_warnings(mrelax.homographies(problem.norm.cameras, reference, p), centres)
     return out.document()

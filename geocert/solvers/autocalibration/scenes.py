@@ -109,6 +109,45 @@ def make_scene(views: int, noise_percent: float = 0.0, points: int = 100, seed: 
                  np.array(centres), X, Hp, image_size)
 
 
+def from_cameras(cameras: np.ndarray, box: tuple[np.ndarray, np.ndarray], noise_px: float, seed: int = 0,
+                 points: int = 100, image_size: tuple[int, int] = (640, 480)) -> Scene:
+    """A projective reconstruction of real cameras (m, 3, 4; pixels, e.g. a dataset's ground
+    truth): ``points`` points drawn in the box they look at, projected, ``noise_px`` pixels of
+    noise added, each camera resected (DLT) from its noisy points in a random projective frame, as
+    make_scene does. The scene is first moved by a similarity (centred, the box's half-diagonal
+    10) so that the random frame is of the same size whatever the dataset's units."""
+    rng = np.random.default_rng(seed)
+    lo, hi = (np.asarray(b, dtype=float) for b in box)
+    centre, scale = (lo + hi) / 2, 10.0 / (np.linalg.norm(hi - lo) / 2)
+    S = np.diag([scale, scale, scale, 1.0])
+    S[:3, 3] = -scale * centre
+    metric = np.array([P @ np.linalg.inv(S) for P in cameras])
+    X = (rng.uniform(lo, hi, size=(points, 3)) - centre) * scale
+    Ks, rotations, centres = [], [], []
+    from scipy.linalg import rq
+
+    for P in metric:
+        K, R = rq(P[:, :3] * np.sign(np.linalg.det(P[:, :3])))
+        D = np.diag(np.sign(np.diag(K)))
+        Ks.append((K @ D) / (K @ D)[2, 2])
+        rotations.append(D @ R)
+        centres.append(-np.linalg.solve(P[:, :3], P[:, 3]))
+    Hp = np.eye(4)
+    Hp[:3, :3] += 0.3 * rng.normal(size=(3, 3))
+    Hp[:3, 3] = rng.normal(size=3)
+    Hp[3, :3] = 0.03 * rng.normal(size=3)
+    Xh = np.hstack([X, np.ones((points, 1))])
+    Xin = Xh @ np.linalg.inv(Hp).T
+    inputs = []
+    for P in metric:
+        x = Xh @ P.T
+        x = x[:, :2] / x[:, 2:3] + rng.normal(scale=noise_px, size=(points, 2))
+        Pin = dlt_resection(Xin, x) if noise_px > 0 else P @ Hp
+        inputs.append(Pin / np.linalg.norm(Pin))
+    return Scene(np.array(inputs), Xin / np.linalg.norm(Xin, axis=1)[:, None], Ks[0], np.array(rotations),
+                 np.array(centres), X, Hp, image_size)
+
+
 def orthogonal_grids(size: int = 5, spacing: float = 4.0) -> tuple[np.ndarray, list[list[int]]]:
     """Three mutually orthogonal size x size grids (thesis Table 6.2) and their lines (indices
     of the points on each grid line)."""

@@ -45,7 +45,7 @@ def frame(basis: np.ndarray, points: np.ndarray, camera, coefficients, cost: flo
             g[8 + i] = 1.0
         else:
             g[8:] = -1.0
-        quantities[f"coefficient[{i}]"] = (float(alpha[i]), g)
+        quantities[f"coefficient[{i}]"] = (float(alpha[i]), g, 1.0)  # they sum to 1: each known to 0.1
     out = curvature_intervals(J, residuals(theta), quantities, certified_gap(cost, lower))
     if k > 1:
         differences = (X[1:] - X[0]).reshape(k - 1, -1)

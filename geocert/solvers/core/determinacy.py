@@ -11,6 +11,17 @@ the data do not fix the answer at all: a quantity with a component there is unbo
 the usual least-squares standard error; 3 by default, so an interval is 3 standard errors), and
 never less than the certified gap (cost - lower_bound). These intervals are estimates (the
 curvature is the local one), not proofs; the result says so.
+
+``determined`` is what a user may rely on: every interval bounded, each within
+``RELATIVE_WIDTH`` (10%) of its quantity's scale on either side of the value (a quantity given
+a scale: a length's is its value, a focal length's its value, a principal point's the focal
+length; a quantity without one need only be bounded; the interval's ``tolerance`` states the
+half-width allowed), and no warning.
+
+Where the cost is far from quadratic over the ellipsoid (autocalibration's plane at infinity,
+whose cost is a quartic), ``sublevel_rays`` walks the actual cost along the ellipsoid's axes
+and the quantities' extreme directions until it rises by ``delta`` (or leaves the scope), and the
+quantities are evaluated there, not extrapolated from their gradients.
 """
 
 from __future__ import annotations
@@ -22,6 +33,7 @@ import numpy as np
 
 SIGMAS = 3.0
 SINGULAR = 1e-10  # an eigenvalue of J'J below this fraction of the largest: a direction the data do not fix
+RELATIVE_WIDTH = 0.1  # `determined`: every interval within this fraction of its quantity's scale of the value
 
 
 @dataclass
@@ -34,13 +46,46 @@ class Determinacy:
     proven: bool = False
 
     def document(self) -> dict:
-        determined = all(i["lower"] is not None and i["upper"] is not None for i in self.intervals)
+        determined = all(fixes(i) for i in self.intervals)
         return {"method": self.method, "proven": self.proven, "determined": determined and not self.warnings,
                 "level": (f"parameters whose squared residuals exceed the optimum's by at most cost_increase "
                           f"(max of {SIGMAS:g}^2 times the fit's residual variance and the certified gap), "
                           "by the local curvature (Gauss-Newton)"),
                 "cost_increase": _finite(self.cost_increase), "redundancy": self.redundancy,
                 "intervals": self.intervals, "warnings": self.warnings}
+
+
+def fixes(interval: dict) -> bool:
+    """Whether an interval fixes its quantity: bounded, and within its tolerance (when it has one)
+    of the value on both sides."""
+    lower, upper, value = interval["lower"], interval["upper"], interval.get("value")
+    if lower is None or upper is None:
+        return False
+    tolerance = interval.get("tolerance")
+    if tolerance is None:
+        return True
+    return value is not None and upper - value <= tolerance and value - lower <= tolerance
+
+
+def tolerance(scale: float | None) -> float | None:
+    """The half-width ``determined`` allows a quantity of this scale (None: bounded suffices)."""
+    return None if scale is None or not math.isfinite(scale) else RELATIVE_WIDTH * abs(float(scale))
+
+
+def interval(name: str, value: float | None, lower: float | None, upper: float | None,
+             scale: float | None = None) -> dict:
+    """One interval as documents carry it (None ends: not fixed by the data)."""
+    return {"name": name, "value": _finite(value), "lower": _finite(lower), "upper": _finite(upper),
+            "tolerance": tolerance(scale)}
+
+
+def clip(found: dict, lowest: float | None = None, highest: float | None = None) -> dict:
+    """An interval clipped to what the scope (or physics) allows; the value is left alone."""
+    if found["lower"] is not None and lowest is not None:
+        found["lower"] = max(found["lower"], lowest)
+    if found["upper"] is not None and highest is not None:
+        found["upper"] = min(found["upper"], highest)
+    return found
 
 
 def safely(function, *args, **kwargs) -> dict | None:
@@ -76,10 +121,10 @@ def numeric_jacobian(function, theta: np.ndarray, step: float = 1e-6) -> np.ndar
     return np.array(columns).T
 
 
-def curvature_intervals(J: np.ndarray, residuals: np.ndarray, quantities: dict[str, tuple[float, np.ndarray]],
+def curvature_intervals(J: np.ndarray, residuals: np.ndarray, quantities: dict[str, tuple],
                         gap: float | None = None, sigmas: float = SIGMAS) -> Determinacy:
-    """Intervals for quantities (name -> (value, gradient in the parameters)) around an optimum
-    with residual Jacobian J (n x p) and residuals r."""
+    """Intervals for quantities (name -> (value, gradient in the parameters[, scale])) around an
+    optimum with residual Jacobian J (n x p) and residuals r."""
     J = np.asarray(J, dtype=float)
     r = np.asarray(residuals, dtype=float)
     n, p = J.shape
@@ -87,32 +132,107 @@ def curvature_intervals(J: np.ndarray, residuals: np.ndarray, quantities: dict[s
     return information_intervals(information, float(r @ r), n - p, quantities, gap, sigmas)
 
 
-def information_intervals(information: np.ndarray, cost: float, redundancy: int,
-                          quantities: dict[str, tuple[float, np.ndarray]], gap: float | None = None,
-                          sigmas: float = SIGMAS) -> Determinacy:
-    """The same from J'J itself (or a Schur complement of it, for parameters of interest with the
-    others eliminated), the squared residuals' sum and n - p."""
+def cost_increase(cost: float, redundancy: int, gap: float | None = None, sigmas: float = SIGMAS) -> float:
+    """delta: sigmas^2 times the fit's residual variance, never less than the certified gap."""
     delta = sigmas ** 2 * cost / redundancy if redundancy > 0 else 0.0
     if gap is not None and math.isfinite(gap):
         delta = max(delta, gap)
+    return delta
+
+
+def information_intervals(information: np.ndarray, cost: float, redundancy: int,
+                          quantities: dict[str, tuple], gap: float | None = None,
+                          sigmas: float = SIGMAS) -> Determinacy:
+    """The same from J'J itself (or a Schur complement of it, for parameters of interest with the
+    others eliminated), the squared residuals' sum and n - p."""
+    delta = cost_increase(cost, redundancy, gap, sigmas)
     out = Determinacy(cost_increase=delta, redundancy=redundancy)
     if not (np.all(np.isfinite(information)) and math.isfinite(delta)):
-        for name, (value, _) in quantities.items():
-            out.intervals.append({"name": name, "value": _finite(value), "lower": None, "upper": None})
+        for name, (value, _, *scale) in quantities.items():
+            out.intervals.append(interval(name, value, None, None, *scale))
         return out
     values, vectors = np.linalg.eigh(0.5 * (information + information.T))
     largest = max(float(values[-1]), 1e-300)
     fixed = values > SINGULAR * largest
-    for name, (value, gradient) in quantities.items():
+    for name, (value, gradient, *scale) in quantities.items():
         g = vectors.T @ np.asarray(gradient, dtype=float)
         free = np.abs(g[~fixed]).max(initial=0.0)
         if free > 1e-6 * max(np.abs(g).max(), 1e-300) or not math.isfinite(value):
-            out.intervals.append({"name": name, "value": _finite(value), "lower": None, "upper": None})
+            out.intervals.append(interval(name, value, None, None, *scale))
             continue
         half = math.sqrt(delta * float(np.sum(g[fixed] ** 2 / values[fixed])))
-        out.intervals.append({"name": name, "value": float(value), "lower": float(value - half),
-                              "upper": float(value + half)})
+        out.intervals.append(interval(name, value, value - half, value + half, *scale))
     return out
+
+
+def sublevel_rays(cost, theta: np.ndarray, information: np.ndarray, limit: float, gradients: list[np.ndarray],
+                  allowed=None, doublings: int = 40) -> list[np.ndarray | None]:
+    """Points on the boundary of the set {cost <= limit} (the parameters within delta of the
+    optimum theta), walked along rays from theta: both ways along each axis of J'J's ellipsoid and
+    each gradient's extreme direction (S g, S the pseudo-inverse; a singular axis gives None both
+    ways, as ``information_intervals`` leaves such a direction unbounded). Each ray starts where the
+    quadratic model puts the boundary, doubles while the cost stays below the limit, then bisects;
+    ``allowed(theta)`` False (outside the scope) ends a ray as the limit does. None for a ray
+    still below the limit after ``doublings`` doublings (the set is unbounded that way)."""
+    theta = np.asarray(theta, dtype=float)
+    values, vectors = np.linalg.eigh(0.5 * (information + information.T))
+    largest = max(float(values[-1]), 1e-300)
+    base = float(cost(theta))
+    room = max(limit - base, 0.0)
+    directions: list[np.ndarray | None] = []
+    for k in range(len(values)):  # a singular direction (as information_intervals judges): unbounded
+        fixed = values[k] > SINGULAR * largest
+        directions.append(None if not fixed else vectors[:, k] * math.sqrt(room / values[k]) if room > 0
+                          else vectors[:, k] * 1e-12)
+    inverse = np.linalg.pinv(information, rcond=SINGULAR, hermitian=True)
+    for g in gradients:
+        d = inverse @ np.asarray(g, dtype=float)
+        norm = float(np.sqrt(max(d @ information @ d, 0.0)))
+        if norm > 0 and np.all(np.isfinite(d)):
+            directions.append(d * math.sqrt(room) / norm if room > 0 else d / norm * 1e-12)
+
+    def inside(s, d):
+        point = theta + s * d
+        if allowed is not None and not allowed(point):
+            return False
+        value = cost(point)
+        return bool(np.isfinite(value) and value <= limit)
+
+    points: list[np.ndarray | None] = []
+    for d in directions:
+        if d is None:
+            points += [None, None]
+            continue
+        for sign in (1.0, -1.0):
+            step = sign * d
+            lo, hi = 0.0, 1.0
+            while inside(hi, step):
+                lo, hi = hi, 2.0 * hi
+                if hi > 2.0 ** doublings:
+                    break
+            if hi > 2.0 ** doublings:
+                points.append(None)
+                continue
+            for _ in range(30):
+                middle = 0.5 * (lo + hi)
+                lo, hi = (middle, hi) if inside(middle, step) else (lo, middle)
+            points.append(theta + lo * step)
+    return points
+
+
+def ranges_at(values: np.ndarray, samples: list[np.ndarray | None]) -> tuple[np.ndarray, np.ndarray]:
+    """The hull of each quantity's value and its samples (rows; a None or non-finite sample
+    makes every quantity it leaves undefined unbounded): (lower, upper), NaN when unbounded."""
+    values = np.asarray(values, dtype=float)
+    lower, upper = values.copy(), values.copy()
+    for sample in samples:
+        if sample is None:
+            return np.full_like(values, np.nan), np.full_like(values, np.nan)
+        sample = np.asarray(sample, dtype=float)
+        bad = ~np.isfinite(sample)
+        lower = np.where(bad, np.nan, np.minimum(lower, sample))
+        upper = np.where(bad, np.nan, np.maximum(upper, sample))
+    return lower, upper
 
 
 def spread(points: np.ndarray) -> np.ndarray:

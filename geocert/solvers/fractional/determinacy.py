@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from geocert.solvers.core.determinacy import (SIGMAS, SINGULAR, Determinacy, certified_gap, curvature_intervals,
-                                               numeric_jacobian, safely, spread)
+                                               interval, numeric_jacobian, safely, spread)
 from geocert.solvers.fractional.charts import camera_centres
 
 PARALLAX_DEGREES = 1.0  # rays meeting at less than this: near-zero parallax
@@ -57,12 +57,12 @@ def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at
     J = ((cameras[:, :2, :3] - (proj[:, :2] / proj[:, 2:3])[:, :, None] * cameras[:, 2:3, :3])
          / proj[:, 2:3, None]).reshape(-1, 3)
     centres = _centres(cameras)
-    quantities = {name: (float(X[k]), np.eye(3)[k]) for k, name in enumerate(("x", "y", "z"))}
-    if np.all(np.isfinite(centres[0])):
-        ray = X - centres[0]
-        length = float(np.linalg.norm(ray))
-        if length > 0:
-            quantities["depth_view0"] = (length, ray / length)
+    ray = X - centres[0]
+    length = float(np.linalg.norm(ray)) if np.all(np.isfinite(centres[0])) else math.nan
+    scale = length if length > 0 else None  # the point is fixed when known to a tenth of its depth
+    quantities = {name: (float(X[k]), np.eye(3)[k], scale) for k, name in enumerate(("x", "y", "z"))}
+    if scale is not None:
+        quantities["depth_view0"] = (length, ray / length, length)
     out = curvature_intervals(J, residuals(X), quantities, certified_gap(cost, lower))
     rays = X[None, :] - centres
     rays = rays[np.all(np.isfinite(rays), axis=1)]
@@ -153,14 +153,13 @@ def _finite_tracks(cameras, all_centres, tracks: list, results: list, n: int) ->
     documents = []
     for i, result in enumerate(results):
         out = Determinacy(cost_increase=float(delta[i]), redundancy=redundancy)
+        scale = float(length[i]) if has_depth[i] else None
         for k in range(4 if has_depth[i] else 3):
             value = float(quantity[i, k])
             if determined[i, k]:
-                out.intervals.append({"name": names[k], "value": value, "lower": float(value - half[i, k]),
-                                      "upper": float(value + half[i, k])})
+                out.intervals.append(interval(names[k], value, value - half[i, k], value + half[i, k], scale))
             else:
-                out.intervals.append({"name": names[k], "value": value if math.isfinite(value) else None,
-                                      "lower": None, "upper": None})
+                out.intervals.append(interval(names[k], value, None, None, scale))
         if usable[i].sum() >= 2 and widest[i] < PARALLAX_DEGREES:
             out.warnings.append({"code": "near_zero_parallax",
                                  "detail": f"the rays meet at {float(widest[i]):.3g} degrees at most (< "
@@ -219,8 +218,9 @@ def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | Non
 
         value = centre(zero)
         gradient = numeric_jacobian(centre, zero)
+        distance = float(np.linalg.norm(value - source.mean(axis=0)))  # the centre known to a tenth of it
         for k, name in enumerate(("centre_x", "centre_y", "centre_z")):
-            quantities[name] = (float(value[k]), gradient[k])
+            quantities[name] = (float(value[k]), gradient[k], distance)
     else:  # a homography: where the source points' centroid goes
         centroid = np.append(source.mean(axis=0), 1.0)
 
@@ -231,8 +231,9 @@ def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | Non
         value = transfer(zero)
         gradient = numeric_jacobian(transfer, zero)
         names = ("centroid_image_x", "centroid_image_y", "centroid_image_z")
+        extent = float(np.sqrt(((target - target.mean(axis=0)) ** 2).sum(axis=1).mean()))  # the targets' spread
         for k in range(len(value)):
-            quantities[names[k]] = (float(value[k]), gradient[k])
+            quantities[names[k]] = (float(value[k]), gradient[k], extent)
     out = curvature_intervals(J, residuals(zero), quantities, certified_gap(cost, lower))
     if m == 3 and n1 == 4:
         flat = spread(source)

@@ -49,16 +49,30 @@ def motion(lines: LineSet, R: np.ndarray, t: np.ndarray) -> dict | None:
     U = Jl.transpose(0, 2, 1) @ Jl + 1e-12 * np.eye(4)
     W = Jm.transpose(0, 2, 1) @ Jl
     V = Jm.reshape(-1, 6).T @ Jm.reshape(-1, 6)
-    schur = V - np.einsum("nab,nbc,ndc->ad", W, np.linalg.inv(U), W)
+    U_inv = np.linalg.inv(U)
+    schur = V - np.einsum("nab,nbc,ndc->ad", W, U_inv, W)
+    # How far the motion is from the optimum of these residuals (the lines re-optimised for it):
+    # the reduced gradient's Gauss-Newton decrease, in the cost's units.
+    gm = Jm.reshape(-1, 6).T @ r0.reshape(-1)
+    gl = (Jl.transpose(0, 2, 1) @ r0[:, :, None])[:, :, 0]
+    reduced = gm - np.einsum("nab,nbc,nc->a", W, U_inv, gl)
+    step = -np.linalg.lstsq(schur, reduced, rcond=None)[0]  # to that optimum, Gauss-Newton
     angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(R) - 1) / 2))))
     axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
     axis = axis / np.linalg.norm(axis) if np.linalg.norm(axis) > 1e-12 else np.zeros(3)
     gradient = np.zeros(6)
     gradient[:3] = np.degrees(axis)  # d angle / d rotation vector (left perturbation), first order
     quantities = {"rotation_angle_deg": (angle, gradient)}
+    length = float(np.linalg.norm(t))  # the translation known to a tenth of its length
     for k, name in enumerate(("t_x", "t_y", "t_z")):
-        quantities[name] = (float(t[k]), np.eye(6)[3 + k])
+        quantities[name] = (float(t[k]), np.eye(6)[3 + k], length)
     out = information_intervals(schur, float((r0 * r0).sum()), 8 * n - 6 - 4 * n, quantities)
+    # The intervals are about the optimum; an estimate short of it (RANSAC's start, a refinement
+    # that stopped early) is held to the interval stretched to take in the step to it.
+    for found, (_, g, *_) in zip(out.intervals, quantities.values()):
+        moved = float(np.asarray(g) @ step)
+        if found["lower"] is not None and math.isfinite(moved):
+            found["lower"], found["upper"] = found["lower"] + min(moved, 0.0), found["upper"] + max(moved, 0.0)
     # Parallel 3D lines meet at one vanishing point: their image lines (normalised by K) then have
     # a near-null vector (measured, 0.03-0.05 of the next singular value for parallel lines at
     # 0.5 px, 0.25-0.33 for random ones).

@@ -168,6 +168,24 @@ def rotated(segments: np.ndarray, H: np.ndarray) -> np.ndarray:
     return (ends[:, :2] / ends[:, 2:]).reshape(-1, 4)
 
 
+STEREO_CACHE = "stereo_matches"  # the frame's member keeping its left-right matches
+
+
+def frame_stereo_matches(rig: Rig, frame: dict, options: MatchingOptions) -> np.ndarray:
+    """stereo_matches of a frame ({"left", "right"}), made once and kept in the frame (under
+    ``STEREO_CACHE``, with what they depend on): every frame of a sequence is matched left to right
+    in two frame pairs, each twice when guided, and that matching is half the cost of a pair."""
+    made_of = (rig, frame["left"], frame["right"])  # the very objects (compared by identity)
+    settings = (options.min_overlap, options.max_stereo_angle_deg, options.min_epipolar_angle_deg,
+                options.ambiguity_margin)
+    kept = frame.get(STEREO_CACHE)
+    if kept is not None and all(a is b for a, b in zip(kept[0], made_of)) and kept[1] == settings:
+        return kept[2]
+    pairs = stereo_matches(rig, frame["left"], frame["right"], options)
+    frame[STEREO_CACHE] = (made_of, settings, pairs)
+    return pairs
+
+
 def four_view_matches(rig: Rig, frame_a: dict, frame_b: dict, options: MatchingOptions,
                       rotation: np.ndarray | None = None) -> np.ndarray:
     """(K, 4) indices [left a, right a, left b, right b] of the lines seen in the four views.
@@ -180,8 +198,8 @@ def four_view_matches(rig: Rig, frame_a: dict, frame_b: dict, options: MatchingO
     if rotation is not None:
         left_a = rotated(left_a, rig.K_left @ rotation @ np.linalg.inv(rig.K_left))
         right_a = rotated(right_a, rig.K_right @ rig.R @ rotation @ rig.R.T @ np.linalg.inv(rig.K_right))
-    stereo_a = dict(map(tuple, stereo_matches(rig, frame_a["left"], frame_a["right"], options)))
-    stereo_b = dict(map(tuple, stereo_matches(rig, frame_b["left"], frame_b["right"], options)))
+    stereo_a = dict(map(tuple, frame_stereo_matches(rig, frame_a, options)))
+    stereo_b = dict(map(tuple, frame_stereo_matches(rig, frame_b, options)))
     right_track = dict(map(tuple, track(right_a, frame_b["right"], options)))
     # A line is kept when the right images' tracker agrees with the left's (the loop left a ->
     # left b -> right b closes through right a): one check that removes most of the

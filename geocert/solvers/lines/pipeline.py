@@ -178,8 +178,12 @@ def estimate_pair(rig: Rig, frame_a: dict | None, frame_b: dict | None, matches:
 
     quads, lines = matched(None)
     guided = options.matching.guided
-    # Guided, the first estimate only guides the tracker: no refinement for it.
-    estimate = estimate_motion(lines, dataclasses.replace(options, refine=False) if guided else options, should_stop)
+    # Guided, the first estimate only guides the tracker (its rotation warps frame a's segments,
+    # and the tracker's window is tens of pixels): no refinement, one round of local optimisation.
+    guide = dataclasses.replace(options, refine=False,
+                                ransac=dataclasses.replace(options.ransac,
+                                                           local_optimisation=min(1, options.ransac.local_optimisation)))
+    estimate = estimate_motion(lines, guide if guided else options, should_stop)
     if guided and estimate.status == "estimate" and not (should_stop and should_stop()):
         # Guided matching: the segments tracked again with the rotation found, and the motion
         # estimated again from those matches, from scratch (RANSAC seeded with the first

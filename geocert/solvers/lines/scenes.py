@@ -60,11 +60,11 @@ class PairScene:
 
 
 def pair_scene(rng, count: int, noise_px: float = 0.0, outlier_fraction: float = 0.0, degrees: float = 3.0,
-               metres: float = 0.1, rig: Rig | None = None) -> PairScene:
+               metres: float = 0.1, rig: Rig | None = None, depth: tuple[float, float] = (2.0, 6.0)) -> PairScene:
     """Lines matched across a frame pair; an outlier's frame-b views are another 3D line's."""
     rig = rig or thesis_rig()
     R, t = random_motion(rng, degrees, metres)
-    X = random_lines(rng, count)
+    X = random_lines(rng, count, depth=depth)
     la, ra = project(rig, X)
     lb, rb = project(rig, X, R, t)
     outliers = np.zeros(count, dtype=bool)
@@ -136,6 +136,17 @@ def room_of_boxes(rng, boxes: int = 12, size=(8.0, 2.6, 8.0)) -> np.ndarray:
     return np.array(edges, dtype=float)
 
 
+def _where_positive(lo: float, hi: float, ca: float, cb: float) -> tuple[float, float]:
+    """[lo, hi] narrowed to where ca + s (cb - ca) >= 0 (s in [0, 1]; empty: lo > hi)."""
+    if ca < 0 and cb < 0:
+        return 1.0, 0.0
+    if ca < 0:
+        return max(lo, ca / (ca - cb)), hi
+    if cb < 0:
+        return lo, min(hi, ca / (ca - cb))
+    return lo, hi
+
+
 def visible_segments(rig: Rig, X: np.ndarray, R: np.ndarray, t: np.ndarray, near: float = 0.2,
                      min_length_px: float = 15.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The parts of the 3D segments X (N, 2, 3; world) in front of both cameras of the rig at pose
@@ -152,12 +163,7 @@ def visible_segments(rig: Rig, X: np.ndarray, R: np.ndarray, t: np.ndarray, near
             # constraints linear in s after multiplying by depth: depth(s) > near, 0 < u < W, 0 < v < H
             for ca, cb in ((pa[2] - near, pb[2] - near), (pa[0], pb[0]), (WIDTH * pa[2] - pa[0], WIDTH * pb[2] - pb[0]),
                            (pa[1], pb[1]), (HEIGHT * pa[2] - pa[1], HEIGHT * pb[2] - pb[1])):
-                if ca < 0 and cb < 0:
-                    lo, hi = 1.0, 0.0
-                elif ca < 0:
-                    lo = max(lo, ca / (ca - cb))
-                elif cb < 0:
-                    hi = min(hi, ca / (ca - cb))
+                lo, hi = _where_positive(lo, hi, ca, cb)
         if hi - lo < 1e-6:
             continue
         p, q = a + lo * (b - a), a + hi * (b - a)
@@ -202,3 +208,79 @@ def room_loop(rng, frames: int = 120, radius: float = 1.2, noise_px: float = 0.0
         order = rng.permutation(len(left))  # detections come in no particular order
         out.append({"left": left[order], "right": right[order], "ids": ids[order]})  # ids: the room's edge seen
     return rig, poses, out, 2 * np.pi * radius
+
+
+def corridor_edges(rng, length: float = 40.0, width: float = 2.0, height: float = 2.6, eye: float = 1.3
+                   ) -> np.ndarray:
+    """(N, 2, 3) the edges of a corridor (camera axes: x right, y down, z along the corridor;
+    the rig at the origin, ``eye`` above the floor): its four long edges, door frames on both walls
+    (two uprights and a lintel each) and ceiling lights (rectangles) every 1.5 to 3.5 m, and floor
+    tiles' joints across the floor every 0.6 m. Most of what a
+    corridor shows runs along the walk, parallel to the translation."""
+    floor, ceiling, x = eye, eye - height, width / 2
+    edges = [((-x, floor, 0.0), (-x, floor, length)), ((x, floor, 0.0), (x, floor, length)),
+             ((-x, ceiling, 0.0), (-x, ceiling, length)), ((x, ceiling, 0.0), (x, ceiling, length))]
+    z = rng.uniform(0.5, 1.5)
+    while z < length - 1:
+        side = rng.choice([-x, x])
+        top = floor - 2.0
+        edges += [((side, floor, z), (side, top, z)), ((side, floor, z + 0.9), (side, top, z + 0.9)),
+                  ((side, top, z), (side, top, z + 0.9))]
+        z += rng.uniform(1.5, 3.0)
+    z = rng.uniform(0.5, 2.0)
+    while z < length - 1:  # a ceiling light: 0.6 x 1.2 m
+        lo, hi = (-0.3, z), (0.3, z + 1.2)
+        edges += [((lo[0], ceiling, lo[1]), (hi[0], ceiling, lo[1])), ((lo[0], ceiling, hi[1]), (hi[0], ceiling, hi[1])),
+                  ((lo[0], ceiling, lo[1]), (lo[0], ceiling, hi[1])), ((hi[0], ceiling, lo[1]), (hi[0], ceiling, hi[1]))]
+        z += rng.uniform(2.0, 3.5)
+    z = 0.6
+    while z < length:  # joints across the floor
+        edges.append(((-x, floor, z), (x, floor, z)))
+        z += 0.6
+    return np.array(edges, dtype=float)
+
+
+def corridor_walk(rng, frames: int = 6, step: float = 0.08, noise_px: float = 0.5, clutter: float = 0.3,
+                  near: float = 2.0, far: float = 8.0, jitter_deg: float = 0.2, rig: Rig | None = None
+                  ) -> tuple[Rig, list[tuple[np.ndarray, np.ndarray]], list[np.ndarray]]:
+    """A rig walking ``step`` a frame down ``corridor_edges`` (turning by ``jitter_deg`` at random
+    a frame), and per frame pair the lines matched across its four views: the parts of the
+    corridor's edges ``near`` to ``far`` ahead of frame k's rig (the segments 2 to 8 m away),
+    ``noise_px`` on the endpoints, and ``clutter`` (a fraction of the lines) matched wrongly (their
+    frame k+1 views another line's). Returns the rig, the poses (X_k = R_k X_0 + t_k) and the
+    (N, 4, 4) matches of each pair."""
+    rig = rig or thesis_rig()
+    world = corridor_edges(rng)
+    poses = [(np.eye(3), np.zeros(3))]
+    for _ in range(frames - 1):
+        R = rodrigues(np.radians(jitter_deg) * rng.normal(size=3) / np.sqrt(3))
+        t = -R @ np.array([0.0, 0.0, step])  # the world moves back as the rig walks forward
+        R0, t0 = poses[-1]
+        poses.append((R @ R0, R @ t0 + t))
+    pairs = []
+    for k in range(frames - 1):
+        (Ra, ta), (Rb, tb) = poses[k], poses[k + 1]
+        R, t = Rb @ Ra.T, tb - Rb @ Ra.T @ ta  # frame k to frame k+1
+        X = world @ Ra.T + ta  # frame k's coordinates
+        X = _clip_depth(X, near, far)
+        la, ra = project(rig, X)
+        lb, rb = project(rig, X, R, t)
+        count = len(X)
+        bad = rng.choice(count, int(round(clutter * count)), replace=False)
+        if len(bad) > 1:  # each wrong match takes the next wrong one's frame k+1 views
+            lb[bad], rb[bad] = lb[np.roll(bad, 1)], rb[np.roll(bad, 1)]
+        segments = np.stack([la, ra, lb, rb], axis=1) + rng.normal(scale=noise_px, size=(count, 4, 4))
+        pairs.append(segments)
+    return rig, poses, pairs
+
+
+def _clip_depth(X: np.ndarray, near: float, far: float) -> np.ndarray:
+    """The parts of segments X (N, 2, 3) with depth z within [near, far] (segments outside dropped)."""
+    out = []
+    for a, b in X:
+        lo, hi = 0.0, 1.0
+        lo, hi = _where_positive(lo, hi, a[2] - near, b[2] - near)
+        lo, hi = _where_positive(lo, hi, far - a[2], far - b[2])
+        if hi - lo > 1e-6:
+            out.append((a + lo * (b - a), a + hi * (b - a)))
+    return np.array(out, dtype=float).reshape(-1, 2, 3)

@@ -52,8 +52,9 @@ def projective(cameras: np.ndarray, points: np.ndarray, view: np.ndarray, track:
 
 # The shared K's free entries: "simple" the focal length (square pixels, no skew, the principal
 # point held where K has it: the image centre, as COLMAP's default of not refining it), "full" all
-# five, "fixed" none, "varying" one focal length per view (principal point held, square pixels).
-MODELS = ("simple", "full", "fixed", "varying")
+# five, "fixed" none, "varying" one focal length per view (principal point held, square pixels),
+# "principal" the focal length and the principal point (square pixels, no skew).
+MODELS = ("simple", "full", "fixed", "varying", "principal")
 
 
 def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, points: np.ndarray, view: np.ndarray,
@@ -73,6 +74,8 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
             return given
         if model == "simple":
             return np.array([S[0], S[0], 0.0, given[3], given[4]])
+        if model == "principal":
+            return np.array([S[0], S[0], 0.0, S[1], S[2]])
         if model == "varying":
             return given
         return S
@@ -87,7 +90,7 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         return np.stack([k[0] * u + k[2] * v + k[3] - pixels[:, 0], k[1] * v + k[4] - pixels[:, 1]], axis=1)
 
     start = {"fixed": np.zeros(0), "varying": np.zeros(0), "simple": np.array([np.sqrt(abs(given[0] * given[1]))]),
-             "full": given.copy()}[model]
+             "full": given.copy(), "principal": np.array([np.sqrt(abs(given[0] * given[1])), given[3], given[4]])}[model]
     A, S, B, r, _ = schur.solve(residual, A, start, points.copy(), view, track, f_scale, max_iterations,
                                 should_stop=should_stop)
     k = entries(S)

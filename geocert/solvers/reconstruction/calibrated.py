@@ -4,16 +4,19 @@ Used when the user gives K (then no projective stage and no autocalibration are 
 essential matrix fixes the pair's geometry up to scale). The steps, incremental as in COLMAP
 (Schönberger and Frahm 2016) and Hartley and Zisserman's chapters 9-12 and 18:
 
-1. Initial pair: among the pairs sharing the most tracks, an essential matrix by RANSAC (five
-   points, Nistér 2004; ``cv2.findEssentialMat`` on normalised coordinates) and the relative pose
-   that puts the points in front of both cameras (``cv2.recoverPose``). The pair kept has the most
-   inliers whose rays meet at ``init_min_angle_deg`` or more: many matches and a baseline wide
-   enough to place them.
+1. Initial pair: among the pairs sharing the most tracks (up to ``init_candidates``), an
+   essential matrix by RANSAC (five points, Nistér 2004; ``cv2.findEssentialMat`` on normalised
+   coordinates) and the relative pose that puts the points in front of both cameras
+   (``cv2.recoverPose``). A pair qualifies, as in COLMAP, with enough inliers, a median
+   triangulation angle of ``init_min_angle_deg`` and a baseline not straight ahead; the
+   qualifying pair with the most inliers is kept, and when none qualifies the thresholds are
+   relaxed (see ``_initial_pair``).
 2. Triangulation of the tracks seen by the registered views (linear, then refined by the bundle
    adjustments), kept when the rays' widest angle is at least ``min_triangulation_angle_deg``,
    every used observation reprojects within ``max_reprojection_px`` and the point lies in front of
    every camera that sees it (chirality).
-3. Views added one at a time, the one seeing the most triangulated points first, by PnP RANSAC
+3. Views added one at a time, the one seeing the most and best-spread triangulated points first
+   (COLMAP's visibility pyramid), by PnP RANSAC
    (``cv2.solvePnPRansac``) on those points, then the tracks they complete triangulated.
 4. Metric bundle adjustment (``scipy.optimize.least_squares``, each rotation as a rotation
    vector w in exp(w) R0, an analytic sparse Jacobian, soft-L1 loss) after each view and at the
@@ -52,10 +55,16 @@ from geocert.solvers.reconstruction import schur
 
 @dataclass
 class CalibratedOptions:
-    min_pair_tracks: int = 30  # tracks two views must share to be tried as the initial pair
-    init_candidates: int = 12  # initial pairs tried (those sharing the most tracks)
+    min_pair_tracks: int = 15  # tracks two views must share to be tried as the initial pair
+    init_candidates: int = 200  # initial pairs tried (those sharing the most tracks), as COLMAP's init_num_trials
     essential_threshold_px: float = 1.0  # RANSAC threshold of the essential matrix (pixels)
-    init_min_angle_deg: float = 16.0  # an initial-pair inlier counts when its rays meet at least this wide
+    # An initial pair qualifies with this many inliers, whose rays meet at this median angle, and
+    # a baseline with |t_z| at most this (COLMAP's init_min_num_inliers, init_min_tri_angle,
+    # init_max_forward_motion); the first two are halved this many times before giving up.
+    init_min_inliers: int = 100
+    init_min_angle_deg: float = 16.0
+    init_max_forward_motion: float = 0.95
+    init_relaxations: int = 4
     min_triangulation_angle_deg: float = 1.0
     max_reprojection_px: float = 4.0  # an observation farther than this from its point's image is an outlier
     pnp_threshold_px: float = 4.0
@@ -459,56 +468,152 @@ def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options
 # Steps
 
 
-def _initial_pair(state: _State, options: CalibratedOptions,
-                  allowed: np.ndarray | None = None) -> tuple[int, int, np.ndarray, np.ndarray] | None:
+def _pair_observations(state: _State) -> dict[tuple[int, int], np.ndarray]:
+    """Per pair of views (i < j), the (observation in i, observation in j) rows of the tracks both see."""
+    lengths = np.diff(state.start)
+    rows = []
+    for k in np.unique(lengths[lengths >= 2]):
+        first = state.start[:-1][lengths == k]
+        a, b = np.triu_indices(int(k), 1)
+        rows.append(np.stack([(first[:, None] + a).ravel(), (first[:, None] + b).ravel()], axis=1))
+    if not rows:
+        return {}
+    obs = np.concatenate(rows)
+    swap = state.obs_view[obs[:, 0]] > state.obs_view[obs[:, 1]]
+    obs[swap] = obs[swap][:, ::-1]
+    key = state.obs_view[obs[:, 0]] * state.n_views + state.obs_view[obs[:, 1]]
+    order = np.argsort(key, kind="stable")
+    key, obs = key[order], obs[order]
+    cuts = np.flatnonzero(np.diff(key)) + 1
+    return {(int(k // state.n_views), int(k % state.n_views)): group
+            for k, group in zip(key[np.r_[0, cuts]], np.split(obs, cuts))}
+
+
+@dataclass
+class PairGeometry:
+    """One candidate initial pair: its relative pose and what COLMAP's initial-pair test reads."""
+
+    views: tuple[int, int]
+    shared: int  # tracks both views see
+    inliers: int  # of the essential matrix, in front of both cameras
+    median_angle_deg: float  # the inliers' median triangulation angle
+    forward_motion: float  # |t_z| of the unit baseline in the first camera's frame (1: straight ahead)
+    R: np.ndarray | None = None
+    t: np.ndarray | None = None
+
+    def passes(self, min_inliers: int, min_angle_deg: float, max_forward_motion: float) -> bool:
+        return (self.inliers >= min_inliers and self.median_angle_deg >= min_angle_deg
+                and self.forward_motion <= max_forward_motion)
+
+
+def _pair_geometry(state: _State, i: int, j: int, pairs: np.ndarray, options: CalibratedOptions) -> PairGeometry:
+    """The essential matrix of views i, j by RANSAC on the tracks both see, its pose, inliers and
+    their median triangulation angle."""
+    ra, rb = state.obs_ray[pairs[:, 0]], state.obs_ray[pairs[:, 1]]
+    focal = 0.25 * (state.Ks[i][0, 0] + state.Ks[j][1, 1] + state.Ks[i][1, 1] + state.Ks[j][0, 0])
+    none = PairGeometry((i, j), len(pairs), 0, 0.0, 1.0)
+    if len(pairs) < 5:
+        return none
+    E, mask = cv2.findEssentialMat(ra, rb, np.eye(3), method=cv2.RANSAC, prob=0.9999,
+                                   threshold=options.essential_threshold_px / focal)
+    if E is None or mask is None or E.shape[0] < 3:
+        return none
+    _, R, t, pose_mask = cv2.recoverPose(E[:3], ra, rb, np.eye(3), mask=mask.copy())
+    inl = pose_mask.ravel() > 0
+    t = t.ravel() / np.linalg.norm(t)
+    if not inl.any():
+        return PairGeometry((i, j), len(pairs), 0, 0.0, float(abs(t[2])), R, t)
+    X = cv2.triangulatePoints(np.eye(3, 4), np.c_[R, t], ra[inl].T, rb[inl].T)
+    X = (X[:3] / np.where(np.abs(X[3]) < 1e-12, 1e-12, X[3])).T
+    d1 = X / np.linalg.norm(X, axis=1, keepdims=True)
+    d2 = X - (-R.T @ t)
+    d2 /= np.linalg.norm(d2, axis=1, keepdims=True)
+    angles = np.degrees(np.arccos(np.clip(np.sum(d1 * d2, axis=1), -1.0, 1.0)))
+    return PairGeometry((i, j), len(pairs), int(inl.sum()), float(np.median(angles)), float(abs(t[2])), R, t)
+
+
+def _initial_pair(state: _State, options: CalibratedOptions, allowed: np.ndarray | None = None,
+                  found: dict | None = None) -> tuple[int, int, np.ndarray, np.ndarray] | None:
     """The initial pair (both views ``allowed``, when given) and its relative pose (R, t with
-    |t| = 1), or None (step 1)."""
-    shared: dict[tuple[int, int], list[tuple[int, int]]] = {}
-    for track in range(len(state.points)):
-        obs = np.arange(state.start[track], state.start[track + 1])
-        for a in range(len(obs)):
-            for b in range(a + 1, len(obs)):
-                i, j = state.obs_view[obs[a]], state.obs_view[obs[b]]
-                key, pair = ((i, j), (obs[a], obs[b])) if i < j else ((j, i), (obs[b], obs[a]))
-                shared.setdefault((int(key[0]), int(key[1])), []).append(pair)
+    |t| = 1), or None (step 1).
+
+    As COLMAP's incremental mapper: the pairs sharing at least ``min_pair_tracks`` tracks, the
+    ``init_candidates`` sharing most, each with its essential matrix; a pair qualifies with
+    ``init_min_inliers`` inliers, a median triangulation angle of ``init_min_angle_deg`` and a
+    baseline not straighter ahead than ``init_max_forward_motion``. The qualifying pair with the
+    most inliers is taken; when none qualifies, the inlier count and the angle are halved
+    (``init_relaxations`` times, the count not below ``min_pair_tracks``) and the search made
+    again, and last a baseline straight ahead allowed, rather than giving up (a dense ring's or a
+    corridor's pairs are all narrow). ``found``,
+    when given, receives the figures: candidates, the thresholds the pair passed (or the last
+    tried), the best candidate's figures and the reason when none qualified."""
+    shared = _pair_observations(state)
     candidates = sorted((p for p in shared if len(shared[p]) >= max(options.min_pair_tracks, 5)
                          and (allowed is None or (allowed[p[0]] and allowed[p[1]]))),
-                        key=lambda p: -len(shared[p]))[:options.init_candidates]
-    best, best_score = None, 0
-    for i, j in candidates:
-        pairs = np.array(shared[(i, j)])
-        ra, rb = state.obs_ray[pairs[:, 0]], state.obs_ray[pairs[:, 1]]
-        focal = 0.5 * (state.Ks[i][0, 0] + state.Ks[j][1, 1] + state.Ks[i][1, 1] + state.Ks[j][0, 0]) / 2
-        E, mask = cv2.findEssentialMat(ra, rb, np.eye(3), method=cv2.RANSAC, prob=0.9999,
-                                       threshold=options.essential_threshold_px / focal)
-        if E is None or mask is None:
-            continue
-        E = E[:3]
-        _, R, t, pose_mask = cv2.recoverPose(E, ra, rb, np.eye(3), mask=mask.copy())
-        inl = pose_mask.ravel() > 0
-        t = t.ravel() / np.linalg.norm(t)
-        # Rays' angles at the triangulated points (two-view midpoint geometry).
-        c2 = -R.T @ t
-        score = 0
-        for a, b in zip(ra[inl], rb[inl]):
-            X = triangulate(np.array([np.eye(3), R]), np.array([np.zeros(3), t]), np.array([a, b]))
-            if np.all(np.isfinite(X)) and max_ray_angle_deg(np.array([np.zeros(3), c2]), X) >= options.init_min_angle_deg:
-                score += 1
-        if score > best_score:
-            best, best_score = (i, j, R, t), score
-    return best
+                        key=lambda p: (-len(shared[p]), p))[:options.init_candidates]
+    found = {} if found is None else found
+    found["candidates"] = len(candidates)
+    if not candidates:
+        most = max((len(v) for p, v in shared.items() if allowed is None or (allowed[p[0]] and allowed[p[1]])),
+                   default=0)
+        found["reason"] = (f"no pair of views shares {options.min_pair_tracks} tracks (the most any pair shares: "
+                           f"{most})")
+        return None
+    geometries = [_pair_geometry(state, i, j, shared[(i, j)], options) for i, j in candidates]
+    levels, min_inliers, min_angle = [], options.init_min_inliers, options.init_min_angle_deg
+    for _ in range(options.init_relaxations + 1):
+        levels.append((min_inliers, min_angle, options.init_max_forward_motion))
+        min_inliers, min_angle = max(options.min_pair_tracks, min_inliers // 2), min_angle / 2
+    # Last, a baseline straight ahead is allowed (a camera moving forward down a corridor: its
+    # pairs' parallax is off the axis, and no other pair exists).
+    levels.append((*levels[-1][:2], 1.0))
+    for relaxation, (min_inliers, min_angle, max_forward) in enumerate(levels):
+        passing = [g for g in geometries if g.passes(min_inliers, min_angle, max_forward)]
+        found["thresholds"] = {"min_inliers": min_inliers, "min_median_angle_deg": min_angle,
+                               "max_forward_motion": max_forward, "relaxations": relaxation}
+        if passing:
+            best = max(passing, key=lambda g: (g.inliers, -g.views[0], -g.views[1]))
+            found["pair"] = {"views": list(best.views), "inliers": best.inliers, "shared": best.shared,
+                             "median_angle_deg": best.median_angle_deg, "forward_motion": best.forward_motion}
+            return best.views[0], best.views[1], best.R, best.t
+    widest = max(geometries, key=lambda g: (g.median_angle_deg if g.inliers >= min_inliers else -1.0, g.inliers))
+    found["reason"] = (f"no initial pair among the {len(candidates)} pairs sharing the most tracks: none has "
+                       f"{min_inliers} essential-matrix inliers whose rays meet at a median {min_angle:.2g} degrees "
+                       f"or more (thresholds relaxed from {options.init_min_inliers} and "
+                       f"{options.init_min_angle_deg:g}); the widest, views {list(widest.views)}: {widest.inliers} "
+                       f"inliers of {widest.shared} shared tracks, median angle {widest.median_angle_deg:.2f} degrees")
+    return None
+
+
+VISIBILITY_LEVELS = 6  # COLMAP's visibility pyramid: grids of 2x2 up to 64x64 cells
+
+
+def _visibility_scores(state: _State, usable: np.ndarray) -> np.ndarray:
+    """Per view, how many triangulated points it sees and how well spread they are over the image
+    (COLMAP's visibility pyramid: at each level l the cells of a 2^l x 2^l grid holding a point,
+    weighted 2^l): a view seeing many points all in one corner is a poor resection."""
+    scores = np.zeros(state.n_views)
+    for v in np.unique(state.obs_view[usable]):
+        px = state.obs_px[usable & (state.obs_view == v)]
+        size = np.maximum(2.0 * state.Ks[v][:2, 2], 1.0)  # the image, from its principal point
+        unit = np.clip(px / size, 0.0, 1.0 - 1e-9)
+        for level in range(1, VISIBILITY_LEVELS + 1):
+            cells = np.floor(unit * 2 ** level).astype(np.int64)
+            scores[v] += 2 ** level * len(np.unique(cells[:, 0] * 2 ** level + cells[:, 1]))
+    return scores
 
 
 def _register_next(state: _State, options: CalibratedOptions, last_tried: dict) -> tuple[int | None, dict]:
-    """PnP RANSAC on the unregistered view seeing the most triangulated points (step 3). Views whose
+    """PnP RANSAC on the unregistered view with the best visibility score (step 3). Views whose
     count has not grown since they last failed are skipped. Returns the view added (or None) and
     the reasons of the views that failed this round."""
     registered = state.registered
     valid = np.isfinite(state.points[:, 0])
     usable = state.inlier & valid[state.obs_track] & ~registered[state.obs_view]
     counts = np.bincount(state.obs_view[usable], minlength=state.n_views)
+    scores = _visibility_scores(state, usable)
     reasons = {}
-    for v in np.argsort(-counts, kind="stable"):
+    for v in np.lexsort((np.arange(state.n_views), -counts, -scores)):
         v = int(v)
         if registered[v] or counts[v] <= last_tried.get(v, -1):
             continue
@@ -836,12 +941,15 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
 
     reasons_by_view: dict[int, str] = {}
     start = time.perf_counter()
-    pair = _initial_pair(state, options)
+    search: dict = {}
+    pair = _initial_pair(state, options, found=search)
+    stats["initial_pair_search"] = search
     timing["initial_pair"] += time.perf_counter() - start
     if pair is None:
         status = "failed"
+        stats["reason"] = search["reason"]
         for v in range(state.n_views):
-            reasons_by_view[v] = f"no pair of views shares {options.min_pair_tracks} tracks with a valid essential matrix"
+            reasons_by_view[v] = search["reason"]
         return result()
     i, j, R, t = pair
     stats["initial_pair"] = [i, j]

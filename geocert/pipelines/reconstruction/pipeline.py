@@ -23,7 +23,7 @@ import numpy as np
 
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
 from geocert.solvers.reconstruction import projective, structure, upgrade
-from geocert.solvers.reconstruction.options import ReconstructionOptions
+from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.tracks import Observations
 
 STAGES = ("projective", "autocalibration", "bundle_adjustment", "structure", "cameras")
@@ -64,6 +64,7 @@ class Reconstruction:
     summary: dict = field(default_factory=dict)
     metric: upgrade.Metric | None = None
     cancelled: bool = False  # the run was stopped (report returned True); what was done is kept
+    checks: dict = field(default_factory=dict)  # the sanity layer's figures (_check_cameras, _drop_outlier_points)
 
 
 def _stage(name: str) -> dict:
@@ -179,6 +180,102 @@ def _calibrated(tracks, n_views: int, K: np.ndarray, options: ReconstructionOpti
     return metric, keep
 
 
+def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Observations, asks):
+    """K unknown, COLMAP's way: the K-known path (calibrated.py) from a prior K (focal length
+    ``focal_prior_factor`` times the larger image side, or ``focal_prior_px``; the principal point
+    at the image's centre), then a metric adjustment refining one focal length; when it moves the
+    focal length by more than 2%, the K-known path again from the refined K (at most
+    ``focal_prior_rounds`` times). Returns the reconstruction as a projective.Projective (P = K [R | t]
+    and the points, for the certified upgrade) and as the upgrade.Metric the adjustment found."""
+    from geocert.solvers.reconstruction.calibrated import CalibratedOptions, calibrated_reconstruction
+
+    n_views = len(image_sizes)
+    side = max(max(size) for size in image_sizes)
+    focal = options.focal_prior_px or options.focal_prior_factor * side
+    history, metric, found = [], None, None
+    for _ in range(options.focal_prior_rounds):
+        Ks = [np.array([[focal, 0.0, (w - 1) / 2], [0.0, focal, (h - 1) / 2], [0.0, 0.0, 1.0]]) for w, h in image_sizes]
+        found = calibrated_reconstruction(tracks, Ks, CalibratedOptions(
+            max_reprojection_px=2 * options.threshold_px, pnp_min_inliers=options.min_inliers, seed=options.seed,
+            merge_components=options.merge_components), lambda progress: asks(progress.get("done", 0),
+                                                                               progress.get("total", 1)))
+        registered = sum(R is not None for R in found.rotations)
+        step = {"focal_px": float(focal), "registered": int(registered)}
+        history.append(step)
+        if registered < 2:
+            break
+        start = upgrade.Metric(Ks[0], list(found.rotations), [None if t is None else np.asarray(t, dtype=float)
+                                                               for t in found.translations],
+                               np.asarray(found.points, dtype=float), [], False)
+        if found.status == "cancelled":  # the views registered so far are kept, at the focal length they had
+            metric = start
+            break
+        metric, _, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, options.threshold_px, model="simple")
+        refined = float(metric.K[0, 0])
+        step["refined_focal_px"] = refined
+        if not (refined > 0 and np.isfinite(refined)) or abs(refined / focal - 1) <= 0.02:
+            break
+        focal = refined
+    registered = [v for v in range(n_views) if found is not None and found.rotations[v] is not None]
+    cameras: list = [None] * n_views
+    points = np.full((len(tracks), 4), np.nan)
+    inlier = np.zeros(len(obs.view), dtype=bool)
+    stats = {"focal_rounds": history, "views_registered": len(registered)}
+    if metric is not None:
+        for v in registered:
+            cameras[v] = structure.camera_matrix(upgrade.K_of(metric, v), metric.rotations[v], metric.translations[v])
+        finite = np.isfinite(metric.points[:, 0])
+        points[finite] = np.c_[metric.points[finite], np.ones(int(finite.sum()))]
+        inlier = np.concatenate(found.inliers) if found.inliers else inlier
+        finite = np.isfinite(points[obs.track, 0])
+        inlier &= finite
+        seen_by = np.isin(obs.view, registered)
+        # Every observation counted once, as the projective path counts them.
+        stats.update({"observations": int(len(obs.view)), "observations_kept": int(inlier.sum()),
+                      "outliers_removed": int((seen_by & finite & ~inlier).sum()),
+                      "observations_of_dropped_tracks": int((seen_by & ~finite).sum()),
+                      "observations_of_unregistered_views": int((~seen_by).sum())})
+        stats.update({key: value for key, value in found.stats.items()
+                      if key in ("initial_pair", "initial_pair_search", "points", "rms_reprojection_px",
+                                 "merged")})
+    elif found is not None and found.stats.get("reason"):
+        stats["reason"] = found.stats["reason"]
+    if found is not None and found.status == "cancelled":
+        stats["cancelled"] = True
+    reasons = [None if cameras[v] is not None else (found.reasons[v] if found is not None else "not reached")
+               for v in range(n_views)]
+    out = projective.Projective(cameras, reasons, points, inlier,
+                                None if found is None else found.stats.get("initial_pair"), stats)
+    return out, metric
+
+
+PRINCIPAL_POINT_CHI2 = 13.8  # chi-square with 2 degrees of freedom at p = 0.001
+
+
+def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold_px: float, image_size):
+    """The principal point estimated when the data fix it: the adjustment again with it free
+    (bundle model "principal"), kept when it lowers the cost on the observations both keep by
+    more than PRINCIPAL_POINT_CHI2 noise variances (the residuals' own, from the freer fit) and
+    lands in the middle half of the image; else the image centre stays. Returns the
+    reconstruction, the observations kept and the test's figures."""
+    trial, trial_keep, _ = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, threshold_px, model="principal")
+    common = keep & trial_keep
+    n = int(common.sum())
+    figures = {"estimated": False, "observations": n, "K_free": trial.K.tolist()}
+    if n < 20:
+        return metric, keep, {**figures, "reason": "too few observations to test"}
+    held, free = _rms(metric, obs, common) ** 2 * n, _rms(trial, obs, common) ** 2 * n
+    variance = max(free / max(2 * n - 3, 1), 1e-4)  # residuals below 0.01 px are rounding, not noise
+    statistic = (held - free) / max(variance, 1e-300)
+    u, v = trial.K[0, 2], trial.K[1, 2]
+    inside = abs(u - image_size[0] / 2) <= image_size[0] / 4 and abs(v - image_size[1] / 2) <= image_size[1] / 4
+    figures.update(chi2=float(statistic), threshold=PRINCIPAL_POINT_CHI2, inside_middle_half=bool(inside))
+    if statistic > PRINCIPAL_POINT_CHI2 and inside:
+        figures["estimated"] = True
+        return trial, trial_keep, figures
+    return metric, keep, figures
+
+
 def _plain(stats: dict) -> dict:
     return {key: value for key, value in stats.items() if key not in ("ba_nfev",)}
 
@@ -205,13 +302,22 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             else:
                 stage.update(status="skipped", reason="options.bundle_adjustment is false")
         out.metric = metric = _normalise_frame(metric)
+        keep = _check_cameras(out, metric, obs, keep, options.threshold_px)
         _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
         return
+    incremental = None
     with _timed(stages, "projective") as stage:
         tell("projective", 0, n_views)
-        proj = projective.reconstruct(tracks, n_views, projective.ProjectiveOptions(
-            options.threshold_px, options.min_inliers, seed=options.seed),
-            lambda s, d, t: tell.asks("projective", d, t))
+        if options.registration == "incremental":
+            stage["method"] = ("incremental (K unknown: a focal prior, essential matrices, PnP, the focal length "
+                               "refined by bundle adjustment; the cameras P = K [R | t] are the projective "
+                               "reconstruction the certified upgrade starts from)")
+            proj, incremental = _incremental(tracks, image_sizes, options, obs,
+                                             lambda d, t: tell.asks("projective", d, t))
+        else:
+            proj = projective.reconstruct(tracks, n_views, projective.ProjectiveOptions(
+                options.threshold_px, options.min_inliers, seed=options.seed),
+                lambda s, d, t: tell.asks("projective", d, t))
         stage.update({key: value for key, value in proj.stats.items() if key not in ("reason", "cancelled")})
         for v, P in enumerate(proj.cameras):
             out.cameras[v].registered = P is not None
@@ -240,6 +346,8 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
         starts = []
         if metric.K is not None:
             starts.append(("autocalibration", metric))
+        if incremental is not None:
+            starts.append(("incremental", incremental))
         if metric.alternative is not None:
             alternative = upgrade.metric_from(proj.cameras, proj.points, *metric.alternative)
             starts.append(("linear", alternative))
@@ -272,14 +380,87 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             if stop["asked"]:
                 _keep_metric(out, metric, n_views, stage, "adjusted as far as the adjustment went")
             stage["starts"] = trials
+            if model == "simple" and options.principal_point == "auto" and image_size is not None:
+                metric, keep, stage["principal_point"] = _principal_point(metric, obs, keep, options.threshold_px,
+                                                                          image_size)
             stage.update(started_from=name, model=model, rms_px_before=before, rms_px_after=_rms(metric, obs, keep),
                          K=metric.K.tolist(), observations_kept=int(keep.sum()))
         else:
             name, metric = starts[0]
             stage.update(status="skipped", reason="options.bundle_adjustment is false", started_from=name)
         out.metric = metric = _normalise_frame(metric)
+    keep = _check_cameras(out, metric, obs, keep, options.threshold_px)
     _judge_motion(stages["autocalibration"], metric)
     _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
+
+
+MIN_CAMERA_POINTS = 6  # a camera is checked (and certified) on at least this many points
+
+
+def _check_cameras(out: Reconstruction, metric: upgrade.Metric, obs: Observations, keep: np.ndarray,
+                   threshold_px: float) -> np.ndarray:
+    """The sanity layer between the adjustment and the certified structure: every returned camera
+    must agree with its own observations. Each observation behind its camera or farther than
+    ``threshold_px`` from its point's image is removed (an outlier: a track is certified only on
+    the observations that fit); a camera with most of its points behind it (flipped), or left with
+    fewer than MIN_CAMERA_POINTS that fit, is dropped: not registered, with the reason, and counted
+    in ``out.checks``; then a track left with fewer than two observations is dropped. Repeated
+    until nothing changes (a dropped camera takes its observations with it). Returns the
+    observations kept."""
+    keep = keep.copy()
+    dropped, removed = [], 0
+    for _ in range(5):
+        registered = np.array([R is not None for R in metric.rotations])
+        finite = np.isfinite(metric.points[:, 0])
+        use = np.flatnonzero(keep & registered[obs.view] & finite[obs.track])
+        depth, error = _depths_and_errors(metric, obs, use)
+        changed = False
+        for v in np.flatnonzero(registered):
+            mine = obs.view[use] == v
+            n, behind = int(mine.sum()), int((depth[mine] <= 0).sum())
+            fit = int((mine & (depth > 0) & (error <= threshold_px)).sum())
+            reason = None
+            if n and behind > n / 2:
+                reason = (f"dropped: {behind} of the {n} points it sees lie behind it (a flipped camera), so no "
+                          "pose it is given can be trusted")
+            elif fit < MIN_CAMERA_POINTS:
+                reason = (f"dropped: {fit} of the {n} points it sees reproject within {threshold_px:g} px in front "
+                          f"of it; at least {MIN_CAMERA_POINTS} are needed (a camera contradicting its own "
+                          "observations)")
+            if reason is not None:
+                dropped.append({"view": int(v), "reason": reason, "points": n, "behind": behind, "fit": fit})
+                metric.rotations[v] = metric.translations[v] = None
+                camera = out.cameras[int(v)]
+                camera.registered, camera.reason, camera.K, camera.R, camera.t, camera.P = \
+                    False, reason, None, None, None, None
+                changed = True
+        bad = use[(depth <= 0) | ~(error <= threshold_px)]
+        if len(bad):
+            keep[bad] = False
+            removed += len(bad)
+            changed = True
+        registered = np.array([R is not None for R in metric.rotations])
+        keep &= registered[obs.view]
+        counts = np.bincount(obs.track[keep], minlength=len(metric.points))
+        keep &= counts[obs.track] >= 2
+        if not changed:
+            break
+    out.checks = {"cameras_dropped": dropped, "observations_removed": int(removed),
+                  "threshold_px": threshold_px}
+    return keep
+
+
+def _depths_and_errors(metric: upgrade.Metric, obs: Observations, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per observation m: its point's depth in its camera and its reprojection error (pixels)."""
+    eye = np.eye(3)
+    R = np.array([eye if r is None else r for r in metric.rotations])
+    t = np.array([np.zeros(3) if x is None else x for x in metric.translations])
+    K = np.array([eye if r is None else upgrade.K_of(metric, v) for v, r in enumerate(metric.rotations)])
+    cam = np.einsum("mij,mj->mi", R[obs.view[m]], metric.points[obs.track[m]]) + t[obs.view[m]]
+    image = np.einsum("mij,mj->mi", K[obs.view[m]], cam)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        error = np.linalg.norm(image[:, :2] / image[:, 2:3] - obs.pixel[m], axis=1)
+    return cam[:, 2], np.nan_to_num(error, nan=np.inf)
 
 
 def _judge_motion(stage: dict, metric: upgrade.Metric) -> None:
@@ -354,7 +535,9 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
                 not_started += 1
                 continue
             out.points.append(Point(t, result, [[int(v), float(x[0]), float(x[1])] for v, x in zip(views, pixels)]))
-        stage.update(tracks=len(tracks), points=len(out.points),
+        out.points, dropped = _drop_outlier_points(out.points, P, options.threshold_px)
+        out.checks["points_dropped"] = dropped
+        stage.update(tracks=len(tracks), points=len(out.points), points_dropped=dropped,
                      certified=sum(1 for p in out.points if p.result.certified))
         if not_started:
             stage.update(status="cancelled", tracks_not_started=not_started,
@@ -392,6 +575,31 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
             stage.update(status="cancelled", cameras_not_started=not_started,
                          reason=f"the job was cancelled: the {len(bounds) - not_started} cameras resected before it "
                                 f"are kept, {not_started} were not started")
+
+
+def _drop_outlier_points(points: list[Point], P: dict[int, np.ndarray], threshold_px: float) -> tuple[list, int]:
+    """The safety net after the certified triangulation: a point is dropped when it lies behind a
+    camera that sees it or reprojects farther than threshold_px * sqrt(its observations) from one
+    (each observation it was solved from fit within threshold_px at the adjusted point, so its
+    optimum cannot be farther unless something is wrong). Returns the points kept and the count
+    dropped; a point not solved (no point) is kept as it is, with its status."""
+    kept, dropped = [], 0
+    for point in points:
+        r = point.result
+        if r.point is None:
+            kept.append(point)
+            continue
+        X = np.array(r.point if r.at_infinity else [*r.point, 1.0])
+        cams = np.array([P[int(v)] for v, _, _ in point.observations])
+        image = cams @ X
+        with np.errstate(divide="ignore", invalid="ignore"):
+            error = np.linalg.norm(image[:, :2] / image[:, 2:3] - np.array(point.observations)[:, 1:], axis=1)
+        if (not r.at_infinity and np.any(image[:, 2] <= 0)) or not np.all(
+                np.nan_to_num(error, nan=np.inf) <= threshold_px * np.sqrt(len(point.observations))):
+            dropped += 1
+            continue
+        kept.append(point)
+    return kept, dropped
 
 
 def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px: float, model: str,
@@ -441,14 +649,8 @@ def _rms(metric: upgrade.Metric, obs: Observations, keep: np.ndarray) -> float |
     m = np.flatnonzero(keep & registered[obs.view] & np.isfinite(metric.points[obs.track, 0]))
     if len(m) == 0:
         return None
-    eye = np.eye(3)
-    R = np.array([eye if r is None else r for r in metric.rotations])
-    t = np.array([np.zeros(3) if x is None else x for x in metric.translations])
-    K = np.array([eye if r is None else upgrade.K_of(metric, v) for v, r in enumerate(metric.rotations)])
-    cam = np.einsum("mij,mj->mi", R[obs.view[m]], metric.points[obs.track[m]]) + t[obs.view[m]]
-    image = np.einsum("mij,mj->mi", K[obs.view[m]], cam)
-    errors = np.sum((image[:, :2] / image[:, 2:3] - obs.pixel[m]) ** 2, axis=1)
-    return float(np.sqrt(np.mean(errors)))
+    _, errors = _depths_and_errors(metric, obs, m)
+    return float(np.sqrt(np.mean(errors ** 2)))
 
 
 def _summarise(out: Reconstruction, tracks, n_views: int) -> None:
@@ -472,11 +674,117 @@ def _summarise(out: Reconstruction, tracks, n_views: int) -> None:
                                       if out.points else None),
         "cameras_certified": sum(1 for c in bounded if c.bound.certified),
         "cameras_certified_fraction": (sum(1 for c in bounded if c.bound.certified) / len(bounded) if bounded else None),
-        "autocalibration_certified": bool(out.stages[1].get("certified")),
-        # Whether the tracks determine the upgrade at all (False on a critical motion: then a
-        # certified autocalibration proves an optimum, not the calibration; see the stage's reason).
-        "autocalibration_determined": out.stages[1].get("determined"),
         "critical_motion": out.stages[1].get("critical_motion"),
+        "cameras_dropped": len(out.checks.get("cameras_dropped", [])),
+        "observations_removed": out.checks.get("observations_removed", 0),
+        "points_dropped": out.checks.get("points_dropped", 0),
         "time_s": {stage["name"]: stage["elapsed_s"] for stage in out.stages},
         "cpu_s": {stage["name"]: stage.get("cpu_s", 0.0) for stage in out.stages},
     }
+    claim = calibration_claim(out)
+    out.summary.update(calibration=claim.as_dict(),
+                       # the claims about K, as the calibration object states them (about its certified_K)
+                       autocalibration_certified=claim.certified, autocalibration_determined=claim.determined)
+    warnings = list(claim.warnings)
+    for dropped in out.checks.get("cameras_dropped", []):
+        warnings.append({"code": "camera_dropped", "detail": f"view {dropped['view']}: {dropped['reason']}"})
+    if out.checks.get("points_dropped"):
+        warnings.append({"code": "points_dropped", "detail": f"{out.checks['points_dropped']} certified points lay "
+                                                             "behind a camera or far from an observation: dropped"})
+    out.summary["warnings"] = warnings
+
+
+EDGE_FRACTION = 0.01  # a certified intrinsic within this fraction of its range's width from an end is on the edge
+
+
+@dataclass(frozen=True)
+class CalibrationClaim:
+    """What the result says about K, built so that every claim is about a K it returns.
+
+    ``K`` is the calibration the returned cameras use (their common K; None when no metric
+    reconstruction was found); ``certified_K`` the K the certified autocalibration proved optimal
+    for its upgrade (None when none was certified). ``certified`` is about ``certified_K`` only, and
+    cannot be True without it; ``returned_is_certified`` says whether the cameras use it, and
+    ``difference`` how far the returned K moved from it (the adjustment's work). ``determined`` is
+    True only when the tracks fix K: certified, no critical motion, and no certified intrinsic on
+    its range's edge (an optimum on the edge is the range's, not the data's)."""
+
+    K: list | None
+    source: str  # "given", "autocalibration", "bundle_adjustment" or "none"
+    certified_K: list | None
+    certified: bool
+    returned_is_certified: bool
+    difference: dict | None
+    on_range_edge: tuple
+    determined: bool | None
+    warnings: tuple
+
+    def __post_init__(self):
+        if self.certified and self.certified_K is None:
+            raise ValueError("a certified calibration claim needs the certified K it is about")
+        if self.returned_is_certified and (self.K is None or self.certified_K is None or not self.certified):
+            raise ValueError("the returned K can be called certified only when a certified K was returned")
+        if self.determined and not self.certified:
+            raise ValueError("K is determined only when certified")
+
+    def as_dict(self) -> dict:
+        return {"K": self.K, "source": self.source, "certified_K": self.certified_K, "certified": self.certified,
+                "returned_is_certified": self.returned_is_certified, "difference": self.difference,
+                "on_range_edge": list(self.on_range_edge), "determined": self.determined}
+
+
+def _intrinsics(K: np.ndarray) -> dict:
+    return {"focal": float(K[0, 0]), "aspect": float(K[1, 1] / K[0, 0]), "skew": float(K[0, 1]),
+            "principal_point": [float(K[0, 2]), float(K[1, 2])]}
+
+
+def on_range_edge(K: np.ndarray, ranges: dict) -> list[str]:
+    """The intrinsics of K within EDGE_FRACTION of an end of their range (ranges as the
+    autocalibration states them: focal, aspect, skew [lo, hi], principal_point [[u], [v]])."""
+    values, edges = _intrinsics(K), []
+    pairs = [(name, values[name], ranges.get(name)) for name in ("focal", "aspect", "skew")]
+    pp = ranges.get("principal_point")
+    if pp is not None:
+        pairs += [("principal_point_u", values["principal_point"][0], pp[0]),
+                  ("principal_point_v", values["principal_point"][1], pp[1])]
+    for name, value, bounds in pairs:
+        if bounds is None or not bounds[1] > bounds[0]:
+            continue
+        where = (value - bounds[0]) / (bounds[1] - bounds[0])
+        if where <= EDGE_FRACTION or where >= 1 - EDGE_FRACTION:
+            edges.append(name)
+    return edges
+
+
+def calibration_claim(out: Reconstruction) -> CalibrationClaim:
+    stage = out.stages[1]
+    K = None if out.metric is None or out.metric.K is None else np.asarray(out.metric.K, dtype=float)
+    known = stage.get("status") == "skipped" and "K is known" in (stage.get("reason") or "")
+    certified = bool(stage.get("certified")) and stage.get("K") is not None and K is not None
+    cert = np.asarray(stage["K"], dtype=float) if certified else None
+    warnings, edges, difference, same = [], [], None, False
+    if cert is not None:
+        same = bool(np.allclose(K, cert, rtol=1e-9, atol=1e-9) and out.metric.Ks is None)
+        a, b = _intrinsics(K), _intrinsics(cert)
+        difference = {"focal_percent": 100.0 * (a["focal"] / b["focal"] - 1.0),
+                      "principal_point_px": float(np.hypot(a["principal_point"][0] - b["principal_point"][0],
+                                                           a["principal_point"][1] - b["principal_point"][1])),
+                      "aspect": a["aspect"] - b["aspect"], "skew_px": a["skew"] - b["skew"]}
+        if not same:
+            warnings.append({"code": "returned_K_not_certified", "detail": (
+                f"the bundle adjustment moved K from the certified one (focal {difference['focal_percent']:+.2f}%, "
+                f"principal point {difference['principal_point_px']:.1f} px): the cameras returned use the adjusted "
+                "K; the certificate is about calibration.certified_K")})
+        edges = on_range_edge(cert, stage.get("intrinsics") or {})
+        if edges:
+            warnings.append({"code": "certified_K_on_range_edge", "detail": (
+                f"the certified K's {', '.join(edges)} lies on the edge of its search range: the range, not the "
+                "tracks, stops it there; widen options.intrinsics to let the data decide")})
+    critical = stage.get("critical_motion")
+    if critical:
+        warnings.append({"code": "critical_motion", "detail": f"{critical}: the tracks do not determine a constant K"})
+    determined = None if known or K is None else bool(certified and not critical and not edges
+                                                      and stage.get("determined") is not False)
+    source = "given" if known else "none" if K is None else "autocalibration" if same else "bundle_adjustment"
+    return CalibrationClaim(None if K is None else K.tolist(), source, None if cert is None else cert.tolist(),
+                            certified, same, difference, tuple(edges), determined, tuple(warnings))

@@ -14,7 +14,9 @@ from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.options import FractionalOptions
 
 AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")
+MAX_EXHAUSTIVE = 200  # images matched every pair with every other at most (19,900 pairs)
 CAMERA_MODELS = ("simple", "varying", "full")
+REGISTRATIONS = ("incremental", "projective")
 
 
 @dataclass
@@ -56,6 +58,19 @@ class ReconstructionOptions(FractionalOptions):
     # Off by default, as guided matching is: the Middlebury ring needs both to register 14 of 14
     # views within a degree, and its figures depend on them (bench/reconstruction_images.py).
     merge_components: bool = False
+    # K unknown: how the views are registered. "incremental", COLMAP's way: the K-known path from a
+    # prior focal length (focal_prior_px, or focal_prior_factor times the larger image side, COLMAP's
+    # default 1.2), refined by bundle adjustment and the path run again from it (at most
+    # focal_prior_rounds times); its cameras then go to the certified upgrade as a projective
+    # reconstruction. "projective": a projective reconstruction from the tracks alone (projective.py).
+    registration: str = "incremental"
+    # K unknown, camera_model "simple": "auto" frees the principal point in the adjustment when the
+    # data fix it (a chi-square test on the cost it saves; pipeline._principal_point), "centre"
+    # holds it at the image centre (COLMAP's default).
+    principal_point: str = "auto"
+    focal_prior_px: float | None = None
+    focal_prior_factor: float = 1.2
+    focal_prior_rounds: int = 3
     time_limit_s: float = 10.0
     seed: int = 0
 
@@ -63,7 +78,13 @@ class ReconstructionOptions(FractionalOptions):
     # keypoints, a looser ratio test, a wider epipolar threshold, guided matching).
     FEATURE_RANGES = {"max_features": {"ge": 0, "le": 1_000_000}, "contrast_threshold": {"gt": 0, "le": 1},
                       "ratio": {"gt": 0, "le": 1}, "ransac_threshold_px": {"gt": 0, "le": 100},
-                      "guided_ratio": {"ge": 0, "lt": 1}}
+                      "guided_ratio": {"ge": 0, "lt": 1}, "exhaustive_limit": {"ge": 2, "le": MAX_EXHAUSTIVE},
+                      "retrieval_neighbours": {"ge": 1, "le": 1000}, "vocabulary_size": {"ge": 8, "le": 100_000},
+                      "neighbour_window": {"ge": 1, "le": 1000}}
+    FEATURE_INTEGERS = ("max_features", "exhaustive_limit", "retrieval_neighbours", "vocabulary_size",
+                        "neighbour_window")
+    # Stage 1's options that are not numbers: their allowed values.
+    FEATURE_CHOICES = {"pairs": ("auto", "exhaustive", "retrieval", "sequential"), "ring": (True, False)}
 
     OPTION_RANGES = {**FractionalOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": 1},
                      "camera_rel_gap": {"ge": 0, "le": 1},
@@ -72,6 +93,7 @@ class ReconstructionOptions(FractionalOptions):
                      "autocalibration_time_limit_s": {"gt": 0, "le": 3600},
                      "autocalibration_points": {"ge": 10, "le": 100_000},
                      "threshold_px": {"gt": 0, "le": 1000}, "min_inliers": {"ge": 6, "le": 100_000},
+                     "focal_prior_factor": {"gt": 0, "le": 100}, "focal_prior_rounds": {"ge": 1, "le": 10},
                      "seed": {"ge": 0, "le": 2**31 - 1}}
 
     def check(self) -> None:
@@ -84,8 +106,17 @@ class ReconstructionOptions(FractionalOptions):
             raise InputError("options/autocalibration_on_critical_motion", 'must be "skip" or "search"')
         if self.autocalibration not in AUTOCALIBRATION_METHODS:
             raise InputError("options/autocalibration", f"must be one of {', '.join(AUTOCALIBRATION_METHODS)}")
+        if self.principal_point not in ("auto", "centre"):
+            raise InputError("options/principal_point", 'must be "auto" or "centre"')
+        if self.registration not in REGISTRATIONS:
+            raise InputError("options/registration", f"must be one of {', '.join(REGISTRATIONS)}")
+        if self.focal_prior_px is not None and not (isinstance(self.focal_prior_px, (int, float))
+                                                    and math.isfinite(self.focal_prior_px)
+                                                    and 0 < self.focal_prior_px <= 1e6):
+            raise InputError("options/focal_prior_px", "must be a positive number of pixels (at most 1e6), or null")
         for name in ("metric_rel_gap", "camera_rel_gap", "autocalibration_rel_gap", "autocalibration_max_nodes",
-                     "autocalibration_time_limit_s", "autocalibration_points", "threshold_px", "min_inliers", "seed"):
+                     "autocalibration_time_limit_s", "autocalibration_points", "threshold_px", "min_inliers",
+                     "focal_prior_factor", "focal_prior_rounds", "seed"):
             value, bounds = getattr(self, name), self.OPTION_RANGES[name]
             if not (math.isfinite(value) and value >= bounds.get("ge", -math.inf) and value > bounds.get("gt", -math.inf)
                     and value <= bounds.get("le", math.inf)):
@@ -96,16 +127,23 @@ class ReconstructionOptions(FractionalOptions):
 
     def feature_options(self):
         """Stage 1's options: FeatureOptions with the ones given in ``features`` (None: default)."""
-        from geocert.solvers.reconstruction.features import FeatureOptions
+        from geocert.pipelines.reconstruction.features import FeatureOptions
 
         if not isinstance(self.features, dict):
             raise InputError("options/features", "must be an object")
         given = {name: value for name, value in self.features.items() if value is not None}
         for name, value in given.items():
+            if name in self.FEATURE_CHOICES:
+                if not any(value is choice or (isinstance(value, str) and value == choice)
+                           for choice in self.FEATURE_CHOICES[name]):
+                    raise InputError(f"options/features/{name}",
+                                     f"must be one of {', '.join(map(str, self.FEATURE_CHOICES[name]))}")
+                continue
             bounds = self.FEATURE_RANGES.get(name)
             if bounds is None:
-                raise InputError(f"options/features/{name}", f"unknown (known: {', '.join(self.FEATURE_RANGES)})")
-            integer = name == "max_features"
+                known = [*self.FEATURE_RANGES, *self.FEATURE_CHOICES]
+                raise InputError(f"options/features/{name}", f"unknown (known: {', '.join(known)})")
+            integer = name in self.FEATURE_INTEGERS
             if (isinstance(value, bool) or not isinstance(value, int if integer else (int, float))
                     or not math.isfinite(value) or not (value >= bounds.get("ge", -math.inf)
                                                         and value > bounds.get("gt", -math.inf)

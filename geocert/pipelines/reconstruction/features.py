@@ -8,10 +8,15 @@ fundamental matrix is fitted by RANSAC (OpenCV's USAC MAGSAC++), and a pair whos
 fewer than ``min_inliers`` contributes nothing (two views of a scene share a fundamental matrix;
 chance matches do not).
 
-Which pairs are matched: every pair when there are at most ``exhaustive_limit`` images (matching
-is cheap next to what follows for sets of that size); beyond that, each image with its
-``neighbour_window`` successors in the order given (photos of a sequence or a ring), the last
-wrapping round to the first when ``ring`` is set.
+Which pairs are matched (``pairs``), chosen from the images, never from their order unless asked:
+"exhaustive" every pair; "retrieval" each image with the ``retrieval_neighbours`` images most
+alike it by a bag of visual words (a vocabulary of ``vocabulary_size`` words clustered from the
+images' own descriptors, tf-idf weighted histograms compared by their cosine: Sivic and
+Zisserman 2003, Nistér and Stewénius 2006; COLMAP's vocabulary-tree matching does the same with
+a vocabulary trained beforehand); "auto" (the default) exhaustive up to ``exhaustive_limit``
+images and retrieval beyond. "sequential" (video, or photos known to be in order) matches each
+image with its ``neighbour_window`` successors in the order given, the last wrapping round to the
+first when ``ring`` is set.
 
 Guided matching (off by default: ``guided_ratio`` 0): a verified pair with at least
 ``guided_min_inliers`` inliers is matched again among the feature pairs that lie within
@@ -66,9 +71,12 @@ class FeatureOptions:
     ransac_max_iters: int = 5_000
     min_inliers: int = 15  # a verified pair has at least this many inliers
     min_track_length: int = 2  # views per kept track
-    exhaustive_limit: int = 30  # match all pairs for at most this many images
-    neighbour_window: int = 5  # otherwise each image with this many successors
-    ring: bool = False  # the successors wrap round (a turntable or a closed loop)
+    pairs: str = "auto"  # "auto", "exhaustive", "retrieval" or "sequential" (see the module docstring)
+    exhaustive_limit: int = 40  # "auto": every pair for at most this many images, retrieval beyond
+    retrieval_neighbours: int = 20  # "retrieval": each image with this many most alike
+    vocabulary_size: int = 1024  # "retrieval": visual words clustered from the images' descriptors
+    neighbour_window: int = 5  # "sequential": each image with this many successors
+    ring: bool = False  # "sequential": the successors wrap round (a turntable or a closed loop)
     guided_ratio: float = 0.0  # guided matching's ratio test (0: no guided matching; see the module docstring)
     guided_min_inliers: int = 30  # a pair is matched again, guided, when it has at least this many inliers
     guided_threshold_px: float | None = None  # epipolar distance of a guided candidate (None: ransac_threshold_px)
@@ -123,6 +131,52 @@ def _jpeg_size(data: bytes) -> tuple[int, int] | None:
     return None
 
 
+def _exif_entries(tiff: bytes, offset: int, order: str) -> dict[int, tuple[int, int, bytes]]:
+    """One IFD's entries: tag -> (type, count, the 4 value-or-offset bytes)."""
+    if offset + 2 > len(tiff):
+        return {}
+    (n,) = struct.unpack(order + "H", tiff[offset:offset + 2])
+    entries = {}
+    for k in range(min(n, 512)):
+        at = offset + 2 + 12 * k
+        if at + 12 > len(tiff):
+            break
+        tag, kind, count = struct.unpack(order + "HHI", tiff[at:at + 8])
+        entries[tag] = (kind, count, tiff[at + 8:at + 12])
+    return entries
+
+
+def exif_focal_px(data: bytes, size: tuple[int, int]) -> float | None:
+    """The focal length in pixels a JPEG's EXIF states, or None: its 35 mm equivalent
+    (FocalLengthIn35mmFilm) times the larger image side over 36 mm. A prior, not a fact (a crop,
+    a resize or a converter can make it wrong): the reconstruction refines it."""
+    if data[:2] != b"\xff\xd8":
+        return None
+    i = 2
+    while i + 4 <= len(data) and data[i] == 0xFF:
+        marker = data[i + 1]
+        (length,) = struct.unpack(">H", data[i + 2:i + 4])
+        if marker == 0xE1 and data[i + 4:i + 10] == b"Exif\x00\x00":
+            tiff = data[i + 10:i + 2 + length]
+            order = {b"II": "<", b"MM": ">"}.get(tiff[:2])
+            if order is None or len(tiff) < 8:
+                return None
+            (first,) = struct.unpack(order + "I", tiff[4:8])
+            pointer = _exif_entries(tiff, first, order).get(0x8769)
+            if pointer is None:
+                return None
+            (exif,) = struct.unpack(order + "I", pointer[2])
+            entry = _exif_entries(tiff, exif, order).get(0xA405)
+            if entry is None or entry[0] != 3:
+                return None
+            (f35,) = struct.unpack(order + "H", entry[2][:2])
+            return float(f35) * max(size) / 36.0 if 0 < f35 < 10_000 else None
+        if marker == 0xDA:
+            return None
+        i += 2 + length
+    return None
+
+
 def decode_image(content_b64: str, field: str) -> np.ndarray:
     """A base64 PNG or JPEG (optionally a ``data:image/...;base64,`` URL) as a grayscale uint8 array.
 
@@ -170,10 +224,23 @@ def decode_image(content_b64: str, field: str) -> np.ndarray:
 # Tracks
 
 
-def candidate_pairs(n: int, options: FeatureOptions) -> list[tuple[int, int]]:
-    """The image pairs to match (the rule in the module docstring)."""
-    if n <= options.exhaustive_limit:
-        return [(i, j) for i in range(n) for j in range(i + 1, n)]
+PAIR_CHOICES = ("auto", "exhaustive", "retrieval", "sequential")
+
+
+def candidate_pairs(n: int, options: FeatureOptions, descriptors: list[np.ndarray] | None = None,
+                    seed: int = 0) -> tuple[list[tuple[int, int]], str]:
+    """The image pairs to match and the rule that chose them (see the module docstring);
+    ``descriptors`` (per image) are needed for retrieval."""
+    rule = options.pairs
+    if rule == "auto":
+        rule = "exhaustive" if n <= options.exhaustive_limit or descriptors is None else "retrieval"
+    if rule == "exhaustive" or (rule == "retrieval" and n <= options.retrieval_neighbours + 1):
+        return [(i, j) for i in range(n) for j in range(i + 1, n)], "exhaustive"
+    if rule == "retrieval":
+        if descriptors is None:
+            raise ValueError("retrieval needs the images' descriptors")
+        similar = retrieval_neighbours(descriptors, options.retrieval_neighbours, options.vocabulary_size, seed)
+        return sorted({(min(i, j), max(i, j)) for i, row in enumerate(similar) for j in row}), "retrieval"
     pairs = set()
     for i in range(n):
         for step in range(1, options.neighbour_window + 1):
@@ -184,7 +251,43 @@ def candidate_pairs(n: int, options: FeatureOptions) -> list[tuple[int, int]]:
                 j -= n
             if j != i:
                 pairs.add((min(i, j), max(i, j)))
-    return sorted(pairs)
+    return sorted(pairs), "sequential"
+
+
+def word_histograms(descriptors: list[np.ndarray], vocabulary_size: int, seed: int = 0,
+                    sample: int = 20_000, iterations: int = 2) -> np.ndarray:
+    """(n, words) tf-idf bag-of-words vectors, L2-normalised: a vocabulary by k-means (OpenCV's,
+    k-means++ seeded) on at most ``sample`` of the images' RootSIFT descriptors, each descriptor
+    its nearest word, each word weighted by log(n / images holding it)."""
+    root = [np.sqrt(d / np.maximum(d.sum(axis=1, keepdims=True), 1e-12)).astype(np.float32) if len(d) else
+            np.zeros((0, 128), np.float32) for d in descriptors]
+    every = np.concatenate(root) if root else np.zeros((0, 128), np.float32)
+    n = len(descriptors)
+    words = int(min(vocabulary_size, max(1, len(every) // 4)))
+    if len(every) == 0:
+        return np.zeros((n, 1))
+    rng = np.random.default_rng(seed)
+    pick = every if len(every) <= sample else every[rng.choice(len(every), sample, replace=False)]
+    cv2.setRNGSeed(seed)
+    _, _, centres = cv2.kmeans(pick, words, None, (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, iterations, 1e-3),
+                               1, cv2.KMEANS_PP_CENTERS)
+    counts = np.zeros((n, words))
+    for i, d in enumerate(root):
+        if len(d):
+            nearest = np.argmin((centres * centres).sum(1)[None, :] - 2.0 * d @ centres.T, axis=1)
+            counts[i] = np.bincount(nearest, minlength=words)
+    idf = np.log(n / np.maximum((counts > 0).sum(axis=0), 1))
+    vectors = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1) * idf
+    return vectors / np.maximum(np.linalg.norm(vectors, axis=1, keepdims=True), 1e-12)
+
+
+def retrieval_neighbours(descriptors: list[np.ndarray], k: int, vocabulary_size: int, seed: int = 0) -> list[list[int]]:
+    """Per image, the ``k`` other images whose word histograms are most alike (cosine)."""
+    vectors = word_histograms(descriptors, vocabulary_size, seed)
+    similarity = vectors @ vectors.T
+    np.fill_diagonal(similarity, -np.inf)
+    k = min(k, len(descriptors) - 1)
+    return [list(map(int, np.argsort(-row, kind="stable")[:k])) for row in similarity]
 
 
 def build_tracks(pair_matches: dict[tuple[int, int], np.ndarray], features_per_view: list[int],
@@ -308,6 +411,27 @@ def guided_matches(keypoints_a: np.ndarray, desc_a: np.ndarray, keypoints_b: np.
     return _ratio_matches(d2, options.guided_ratio, options.mutual)
 
 
+def match_pair(keypoints_a: np.ndarray, desc_a: np.ndarray, keypoints_b: np.ndarray, desc_b: np.ndarray,
+               options: FeatureOptions) -> tuple[np.ndarray, dict] | None:
+    """One pair's verified matches ((m, 2) keypoint indices) and figures, or None when fewer than
+    ``min_inliers`` fit one fundamental matrix. A pure function of the pair's features: the pairs
+    are independent work items (a runner may spread them over workers)."""
+    rows = _match(desc_a, desc_b, options)
+    F, inliers = fit_fundamental(keypoints_a[rows[:, 0]], keypoints_b[rows[:, 1]], options)
+    if inliers.sum() < options.min_inliers:
+        return None
+    figures = {"matches": len(rows), "inliers": int(inliers.sum())}
+    kept = rows[inliers]
+    if options.guided_ratio > 0 and inliers.sum() >= options.guided_min_inliers:
+        guided = guided_matches(keypoints_a, desc_a, keypoints_b, desc_b, F, options)
+        _, again = fit_fundamental(keypoints_a[guided[:, 0]], keypoints_b[guided[:, 1]], options)
+        figures["guided"] = int(again.sum())
+        if again.sum() > inliers.sum():
+            kept = guided[again]
+            figures["inliers"] = int(again.sum())
+    return kept, figures
+
+
 def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None = None,
                        callback=None) -> ImageTracks:
     """Features, verified matches and tracks for grayscale uint8 images (see the module docstring).
@@ -334,26 +458,18 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
     timing["features"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    pairs = candidate_pairs(len(images), options)
+    pairs, rule = candidate_pairs(len(images), options, descriptors)
     stats["candidate_pairs"] = len(pairs)
+    stats["pairs_chosen_by"] = rule
     pair_matches: dict[tuple[int, int], np.ndarray] = {}
     verified: list[dict] = []
     for k, (i, j) in enumerate(pairs):
         if asks_to_stop(callback, {"stage": "matches", "done": k, "total": len(pairs)}):
             return ImageTracks([], sizes, stats, "cancelled")
-        rows = _match(descriptors[i], descriptors[j], options)
-        F, inliers = fit_fundamental(keypoints[i][rows[:, 0]], keypoints[j][rows[:, 1]], options)
-        if inliers.sum() >= options.min_inliers:
-            figures = {"views": [i, j], "matches": len(rows), "inliers": int(inliers.sum())}
-            pair_matches[(i, j)] = rows[inliers]
-            if options.guided_ratio > 0 and inliers.sum() >= options.guided_min_inliers:
-                guided = guided_matches(keypoints[i], descriptors[i], keypoints[j], descriptors[j], F, options)
-                _, again = fit_fundamental(keypoints[i][guided[:, 0]], keypoints[j][guided[:, 1]], options)
-                figures["guided"] = int(again.sum())
-                if again.sum() > inliers.sum():
-                    pair_matches[(i, j)] = guided[again]
-                    figures["inliers"] = int(again.sum())
-            verified.append(figures)
+        found = match_pair(keypoints[i], descriptors[i], keypoints[j], descriptors[j], options)
+        if found is not None:
+            pair_matches[(i, j)], figures = found
+            verified.append({"views": [i, j], **figures})
     stats["verified_pairs"] = verified
     asks_to_stop(callback, {"stage": "matches", "done": len(pairs), "total": len(pairs)})
     timing["matches"] = time.perf_counter() - start

@@ -1,0 +1,301 @@
+"""Photos to cameras, geocert against COLMAP, on real photo sets with known cameras (issue 35).
+
+Per set and order of the photos (file order; shuffled with a stated seed; every 2nd photo of a
+dense ring), in one run: COLMAP with K unknown (pycolmap's defaults on the CPU: SIFT, exhaustive
+matching, incremental mapping, EXIF focal length when present; bench/colmap_baseline.py) and with K
+known ("colmap-K"), and geocert through ``geocert solve`` (the CLI's path, the code a user's job
+takes) with K unknown and its defaults, with the README's ring options where the README gives them
+(dinoSparseRing), and with K known. Each run is a child process with a time limit. Printed per run:
+views registered, rotation error against the ground truth after the best global rotation (median,
+max, views above 5 degrees), camera centre error after a similarity alignment (% of the scene's
+size), focal length error (%), principal point error (px), cameras certified (of the views
+registered) and points certified, what the result claims (``determined``, its warnings, cameras it
+flags), CPU seconds (the child's user + system time, every thread) and wall seconds, and geocert's
+CPU over COLMAP's on the same photos. The machine's load is printed with each run: the timings are
+only comparable within one run of this bench.
+
+Sets (bench/photo_sets.py says where each comes from, its format, and how a test can use it):
+Middlebury multi-view stereo data, dinoSparseRing, templeRing and templeSparseRing (Seitz,
+Curless, Diebel, Scharstein and Szeliski, "A comparison and evaluation of multi-view stereo
+reconstruction algorithms", CVPR 2006); the Oxford Corridor sequence and its matches (Visual
+Geometry Group, University of Oxford); Sceaux Castle (photographs (c) 2012 Pierre Moulon, openMVG's
+sample data; K only, so its rotations are compared with COLMAP's, marked "vs COLMAP"). None ships
+with geocert; a set whose files are missing is reported with where to get it.
+
+    .venv/bin/pip install -e '.[bench]'       # pycolmap
+    .venv/bin/python -m bench.reconstruction_vs_colmap [--data DIR] [--sets dinoSparseRing,templeRing]
+        [--orders file,shuffled,every2] [--seed 0] [--runs colmap,colmap-K,geocert,geocert-readme,
+        geocert-K,geocert-K-readme]
+        [--no-colmap | --reuse-colmap] [--timeout 1800] [--json OUT.json]
+
+COLMAP's results are stored in DATA/colmap_cache.json (keyed by set, the photos in their order
+and a hash of their bytes, pycolmap's version and options): --reuse-colmap takes them from there
+where they are and runs COLMAP for the rest; --no-colmap never runs COLMAP (its rows and the CPU
+ratios come from the cache when there).
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench import camera_errors, colmap_baseline, machine_speed_ms, photo_sets
+
+# The README's options for the dinoSparseRing (README, "Photos to tracks, and the K-known path"),
+# the only set the README gives options for: bench.reconstruction_images.RING_JOB_OPTIONS, not
+# imported from there because that module sets one BLAS thread in this process's environment,
+# which COLMAP's child process would inherit.
+README_OPTIONS = {"min_inliers": 10, "merge_components": True,
+                  "features": {"max_features": 0, "contrast_threshold": 0.005, "ratio": 0.85,
+                               "ransac_threshold_px": 2.0, "guided_ratio": 0.8}}
+README_SETS = ("dinoSparseRing",)
+SETS = ("dinoSparseRing", "templeRing", "templeSparseRing", "corridor", "corridor-matches", "sceaux")
+RUNS = ("colmap", "colmap-K", "geocert", "geocert-readme", "geocert-K", "geocert-K-readme")
+
+
+def geocert_job(photo_set, names: list[str], options: dict, matches: bool) -> dict:
+    """The reconstruction job a user sends: the photos (base64; PNG and JPEG as published, any
+    other format losslessly as PNG), or for the corridor's matches VGG's tracks with the views."""
+    import cv2
+
+    if matches:
+        index = {n: i for i, n in enumerate(photo_set.names)}
+        position = {index[n]: p for p, n in enumerate(names)}
+        tracks = []
+        for views, points in photo_sets.corridor_tracks(photo_set):
+            kept = [(position[int(v)], x) for v, x in zip(views, points) if int(v) in position]
+            if len(kept) >= 2:
+                tracks.append({"views": [v for v, _ in kept], "points": [list(map(float, x)) for _, x in kept]})
+        size = cv2.imread(str(photo_set.path(names[0])), cv2.IMREAD_UNCHANGED).shape
+        data = {"tracks": tracks, "views": [{"name": n, "image_size": [size[1], size[0]]} for n in names]}
+    else:
+        images = []
+        for n in names:
+            raw = photo_set.path(n).read_bytes()
+            if Path(n).suffix.lower() not in (".png", ".jpg", ".jpeg"):
+                raw = cv2.imencode(".png", cv2.imread(str(photo_set.path(n)), cv2.IMREAD_UNCHANGED))[1].tobytes()
+            images.append({"name": n, "content": base64.b64encode(raw).decode()})
+        data = {"images": images}
+    return {"kind": "reconstruction", "data": data, "options": options}
+
+
+def run_geocert(job: dict, timeout_s: float) -> dict:
+    """``geocert solve`` on the job in a child process, in the environment the service's workers
+    get (one BLAS thread unless the environment says otherwise): the result with wall and CPU
+    seconds."""
+    from geocert.app.cli import worker_environment
+
+    geocert = Path(sys.executable).with_name("geocert")
+    with tempfile.TemporaryDirectory(prefix="geocert-bench-") as work:
+        path = Path(work) / "job.json"
+        path.write_text(json.dumps(job))
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.perf_counter()
+        try:
+            done = subprocess.run([str(geocert), "solve", "--compact", str(path)], capture_output=True, text=True,
+                                  timeout=timeout_s, env=worker_environment(dict(os.environ)))
+        except subprocess.TimeoutExpired:
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            return {"error": f"time limit {timeout_s:.0f} s", "wall_s": time.perf_counter() - start,
+                    "cpu_s": after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime}
+        wall = time.perf_counter() - start
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+        if done.returncode != 0:
+            return {"error": f"exit {done.returncode}: {(done.stderr or done.stdout).strip()[-500:]}", "wall_s": wall,
+                    "cpu_s": cpu}
+        return {"result": json.loads(done.stdout), "wall_s": wall, "cpu_s": cpu}
+
+
+def codes(warnings) -> list[str]:
+    """A list of warnings as their codes (a warning is {"code": ..., ...} or a string)."""
+    return [w.get("code", str(w)) if isinstance(w, dict) else str(w) for w in warnings or []]
+
+
+def geocert_figures(result: dict) -> dict:
+    """What a geocert result returns and claims: cameras per name, counts, certified fractions,
+    ``determined``, warnings (the stages' and the summary's) and cameras it flags."""
+    summary = result.get("summary") or {}
+    cameras = {c["name"]: (np.array(c["K"]), np.array(c["R"]), np.array(c["t"]))
+               for c in result.get("cameras", []) if c.get("registered") and c.get("R") is not None}
+    warnings = codes(summary.get("warnings"))
+    for stage in result.get("stages", []):
+        warnings += codes(stage.get("motion_warnings")) + codes(stage.get("warnings"))
+    flagged = sum(1 for c in result.get("cameras", []) if c.get("flags") or c.get("warnings") or c.get("flagged"))
+    certified = sum(1 for c in result.get("cameras", []) if c.get("certified"))
+    failed = [f"{stage.get('name')} stage {stage.get('status')}: {stage.get('reason')}"
+              for stage in result.get("stages", []) if stage.get("status") in ("failed", "error")]
+    reasons = sorted({c.get("reason") for c in result.get("cameras", []) if not c.get("registered") and c.get("reason")})
+    return {"cameras": cameras, "points": summary.get("points"), "registered": len(cameras), "failed": failed,
+            "unregistered_reasons": reasons,
+            "cameras_certified": certified / len(cameras) if cameras else None,
+            "points_certified": summary.get("points_certified_fraction"),
+            "determined": summary.get("autocalibration_determined"), "critical_motion": summary.get("critical_motion"),
+            "warnings": sorted(set(warnings)), "flagged": flagged, "rms_px": summary.get("rms_reprojection_px")}
+
+
+def colmap_figures(run: dict) -> dict:
+    cameras = {n: (np.array(c["K"]), np.array(c["R"]), np.array(c["t"])) for n, c in run["cameras"].items()}
+    return {"cameras": cameras, "points": run.get("points"), "registered": len(cameras), "models": run.get("models")}
+
+
+def colmap_run(photo_set, key: str, names, root: Path, known: bool, args) -> dict | None:
+    """COLMAP on the photos, or its cached result (--reuse-colmap, --no-colmap); None when
+    --no-colmap and nothing is cached."""
+    K = photo_set.K
+    known_K = (K[0, 0], K[1, 1], K[0, 2], K[1, 2]) if known else None
+    cache_key = f"{key}|{colmap_baseline.photos_key(photo_set, names)}|{colmap_baseline.options_key(known_K)}"
+    if args.reuse_colmap or args.no_colmap:
+        if (hit := colmap_baseline.cached(root, cache_key)) is not None:
+            return {**hit, "cached": True}
+        if args.no_colmap:
+            return None
+    run = colmap_baseline.run_in_child(photo_set, names, known_K, args.timeout)
+    run["load"] = os.getloadavg()[0]
+    if "error" not in run:
+        colmap_baseline.store(root, cache_key, run)
+    return run
+
+
+def reference(photo_set, colmap: dict | None) -> tuple[dict, str]:
+    """The cameras to compare against: the ground truth; for a set with K only, COLMAP's
+    rotations and centres (when it registered 3 photos or more) with the set's K."""
+    if photo_set.truth:
+        return photo_set.truth, ""
+    if colmap and colmap.get("registered", 0) >= 3:
+        return ({n: photo_sets.Camera(photo_set.K, R, t) for n, (_, R, t) in colmap["cameras"].items()}, "vs COLMAP")
+    return {n: photo_sets.Camera(photo_set.K, None, None) for n in photo_set.names}, ""
+
+
+def fmt(value, spec: str, missing: str = "-") -> str:
+    return missing if value is None else format(value, spec)
+
+
+def row(set_key, order, run_name, total, figures, errors, cpu, wall, colmap_cpu, load, note="") -> str:
+    if "error" in figures:
+        return (f"| {set_key} | {order} | {run_name} | failed: {figures['error'][:120]} | | | | | | | | | "
+                f"{fmt(cpu, '.1f')} | {fmt(wall, '.1f')} | | {load:.1f} |")
+    rot = (f"{errors['rotation_median_deg']:.2f} / {errors['rotation_max_deg']:.2f}{' ' + note if note else ''}"
+           if "rotation_median_deg" in errors else "-")
+    centre = (f"{errors['center_median_pct']:.1f} / {errors['center_max_pct']:.1f}"
+              if "center_median_pct" in errors else "-")
+    over = str(errors.get("rotation_over_5deg", "-"))
+    claims = "-"
+    if "warnings" in figures:
+        det = {True: "yes", False: "no", None: "-"}[figures["determined"]]
+        claims = f"determined {det}; warnings {len(figures['warnings'])}" + (
+            f" ({', '.join(figures['warnings'])})" if figures["warnings"] else "") + f"; flags {figures['flagged']}"
+    elif figures.get("models"):
+        claims = f"models {figures['models']}"
+    ratio = f"{cpu / colmap_cpu:.2f}" if cpu is not None and colmap_cpu and run_name.startswith("geocert") else "-"
+    return (f"| {set_key} | {order} | {run_name} | {figures['registered']}/{total} | {rot} | {over} | {centre} | "
+            f"{fmt(errors.get('focal_error_pct'), '+.1f')} | {fmt(errors.get('principal_point_error_px'), '.1f')} | "
+            f"{fmt(figures.get('cameras_certified'), '.2f')} | {fmt(figures.get('points_certified'), '.3f')} | "
+            f"{claims} | {fmt(cpu, '.1f')} | {fmt(wall, '.1f')} | {ratio} | {load:.1f} |")
+
+
+HEADER = ("| set | order | run | registered | rotation error median / max, deg | views > 5 deg | centre error "
+          "median / max, % of scene | focal error % | principal point error px | cameras certified | points "
+          "certified | claims | CPU s | wall s | CPU / COLMAP's | load |\n" + "|---" * 16 + "|")
+
+
+def geocert_options(run_name: str, photo_set) -> dict | None:
+    """The job's options for a geocert run, None when the run does not apply to the set."""
+    options = {}
+    if run_name.endswith("readme"):
+        if photo_set.key not in README_SETS:
+            return None
+        options.update(json.loads(json.dumps(README_OPTIONS)))
+    if run_name.startswith("geocert-K"):
+        options["intrinsics"] = {"K": np.asarray(photo_set.K, dtype=float).tolist()}
+    return options
+
+
+def bench_set(set_key: str, args, root: Path, records: list) -> None:
+    matches = set_key == "corridor-matches"
+    try:
+        photo_set = photo_sets.load("corridor" if matches else set_key, root)
+    except photo_sets.MissingSet as missing:
+        print(f"| {set_key} | | missing: {missing} |" + " |" * 13, flush=True)
+        return
+    orders = [o for o in args.orders if o != "every2" or photo_set.dense_ring]
+    for order in orders:
+        names = photo_set.order(order, args.seed)
+        label = f"{order} (seed {args.seed})" if order == "shuffled" else order
+        colmap = {}
+        for run_name in args.runs:
+            load = os.getloadavg()[0]
+            if run_name.startswith("colmap"):
+                run = None if matches else colmap_run(photo_set, set_key, names, root, run_name == "colmap-K", args)
+                if run is None:
+                    continue
+                figures = {"error": run["error"]} if "error" in run else colmap_figures(run)
+                colmap[run_name] = {**figures, "cpu_s": run.get("cpu_s")}
+                load = run.get("load", load)
+            else:
+                options = geocert_options(run_name, photo_set)
+                if options is None:
+                    continue
+                run = run_geocert(geocert_job(photo_set, names, options, matches), args.timeout)
+                figures = {"error": run["error"]} if "error" in run else geocert_figures(run["result"])
+            # COLMAP's own rows against the ground truth (its K only, for a set without poses)
+            truth, note = reference(photo_set, None if run_name.startswith("colmap") else colmap.get("colmap"))
+            errors = {} if "error" in figures else camera_errors.compare(figures["cameras"], truth)
+            baseline = colmap.get("colmap-K" if run_name.startswith("geocert-K") and "colmap-K" in colmap else "colmap")
+            print(row(set_key, label, run_name + (" (cached)" if run.get("cached") else ""), len(names), figures,
+                      errors, run.get("cpu_s"), run.get("wall_s"), (baseline or {}).get("cpu_s"), load, note),
+                  flush=True)
+            for failure in figures.get("failed") or []:
+                print(f"|  | | {run_name}: {failure[:300]} |" + " |" * 13, flush=True)
+            records.append({"set": set_key, "order": order, "seed": args.seed, "run": run_name, "photos": len(names),
+                            "errors": errors, "cpu_s": run.get("cpu_s"), "wall_s": run.get("wall_s"), "load": load,
+                            **{k: v for k, v in figures.items() if k != "cameras"}})
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", default=None, help="data root (default $GEOCERT_BENCH_DATA or /work/bench-data)")
+    parser.add_argument("--sets", default=",".join(SETS), help=f"comma-separated, of {', '.join(SETS)}")
+    parser.add_argument("--orders", default="file,shuffled,every2", help="file, shuffled, every2 (dense rings only)")
+    parser.add_argument("--seed", type=int, default=0, help="the shuffled order's seed (random.Random(seed))")
+    parser.add_argument("--runs", default=",".join(RUNS), help=f"comma-separated, of {', '.join(RUNS)}")
+    parser.add_argument("--no-colmap", action="store_true", help="never run COLMAP: its cached results only")
+    parser.add_argument("--reuse-colmap", action="store_true", help="COLMAP's cached results where there are, "
+                        "COLMAP run for the others")
+    parser.add_argument("--timeout", type=float, default=1800.0, help="seconds per run (each a child process)")
+    parser.add_argument("--json", default=None, help="also write every run's figures here")
+    args = parser.parse_args()
+    args.orders, args.runs = args.orders.split(","), args.runs.split(",")
+    root = photo_sets.data_root(args.data)
+    from geocert.app.cli import worker_environment
+
+    threads = {k: v for k, v in worker_environment(dict(os.environ)).items() if k.endswith("_NUM_THREADS")}
+    try:
+        version = colmap_baseline.version()
+    except ImportError:
+        version = "not installed (pip install -e '.[bench]'): COLMAP not run"
+        args.runs = [r for r in args.runs if not r.startswith("colmap")]
+    print(f"data {root}; pycolmap {version}; {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f} at start, "
+          f"machine speed {machine_speed_ms():.0f} ms (bench.machine_speed_ms); "
+          f"geocert's BLAS threads (the workers' environment) {threads}; COLMAP every core; shuffled seed {args.seed}")
+    print(HEADER, flush=True)
+    records: list = []
+    for set_key in args.sets.split(","):
+        bench_set(set_key, args, root, records)
+    print(f"load {os.getloadavg()[0]:.1f} at end, machine speed {machine_speed_ms():.0f} ms")
+    if args.json:
+        Path(args.json).write_text(json.dumps(records, indent=1, default=float))
+
+
+if __name__ == "__main__":
+    main()
