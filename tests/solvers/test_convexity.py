@@ -15,7 +15,8 @@ import scipy.optimize
 from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.fractional import flat as flat_tracks
 from geocert.solvers.fractional.batched import triangulate_many
-from geocert.solvers.fractional.convexity import PAIRS, bounds_at, convexity_bounds, positive_definite
+from geocert.solvers.fractional.convexity import (PAIRS, bounds_at, convexity_bounds, outside_range, positive_definite,
+                                                  track_bound)
 from geocert.solvers.fractional.triangulation import TriangulationOptions
 
 from tests.support import noisy_track, random_cameras, seed
@@ -314,3 +315,27 @@ def test_a_track_within_abs_gap_of_zero_is_left_to_the_trivial_bound():
     results = certify_tracks(normalised_cameras(cams), tracks, TriangulationOptions(norm="L2L2"))
     assert all(r is None for r in results[:20])
     assert all(r is not None for r in results[20:])
+
+
+def test_numbers_outside_the_range_prove_nothing():
+    """The bound's round-off is counted for numbers 0 or within 2^+-128 (no product but a
+    cancelled difference's underflows): a subnormal or huge number in the data, the point or
+    the radius proves nothing, where the same track in range is proven."""
+    rng = np.random.default_rng(seed("convexity range"))
+    cams, tracks = scene(rng, 1, (3, 3), (1.0,), cameras=3)
+    (views, points), = tracks
+    cams[views[0], 0, 1] = 0.0  # an entry that a subnormal can take the place of
+    flat, x, _, _ = solve(cams, tracks)
+    _, radius, _ = convexity_bounds(flat, x)
+    cameras = cams[views]
+    assert np.isfinite(track_bound(cameras, points, x[0], radius[0]))
+    subnormal = cameras.copy()
+    subnormal[0, 0, 1] = 5e-324
+    far = x[0].copy()
+    far[0] = 1e40
+    for args in ((subnormal, points, x[0], radius[0]), (cameras, points * 1e39, x[0], radius[0]),
+                 (cameras, points, far, radius[0]), (cameras, points, x[0], 5e-324),
+                 (cameras, points, x[0], 1e40)):
+        assert track_bound(*args) == -np.inf
+        assert outside_range(*args) is not None
+    assert outside_range(cameras, points, x[0], radius[0]) is None

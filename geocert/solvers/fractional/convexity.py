@@ -32,7 +32,13 @@ Round-off (docs/certificate.md states the assumptions): every quantity is recomp
 data and x in floating point, and each bound is widened by a generous multiple of the unit
 round-off u times the size of the terms behind it (the sums of their products' magnitudes).
 A matrix is proven positive definite with a margin by a Cholesky factorisation of it less the
-margin and its allowance (positive_definite).
+margin and its allowance (positive_definite). Those relative allowances hold while no product
+underflows or overflows: the proof is therefore made only for numbers of a moderate range
+(every camera entry, observation, point coordinate and the radius 0 or of magnitude within
+2^+-128, the cost at least 2^-128), where the only products that can underflow are those of a
+difference that cancelled, each losing at most half a subnormal: an absolute UNDERFLOW, far
+above their sum, is taken off the bound and added to every positive-definiteness margin. An
+overflow makes a number infinite, which no test passes.
 """
 
 from __future__ import annotations
@@ -46,6 +52,14 @@ U = 2.0 ** -52
 # every depth stays above half its value on the ball).
 RADII = (2.0 ** -10, 2.0 ** -5, 0.5)
 DIAGONAL = [0, 3, 5]  # the diagonal's places in PAIRS order
+SMALLEST, LARGEST = 2.0 ** -128, 2.0 ** 128  # the range a proof's numbers keep to (0 apart)
+UNDERFLOW = 2.0 ** -900  # what products that underflow can lose, at most, in any test or bound
+
+
+def in_range(values: np.ndarray) -> np.ndarray:
+    """Entries that are 0 or of magnitude within [SMALLEST, LARGEST] (not nan)."""
+    size = np.abs(values)
+    return (size == 0) | ((size >= SMALLEST) & (size <= LARGEST))
 
 
 def convexity_bounds(flat: FlatTracks, x: np.ndarray, radii=RADII, strictness: float = 1.0):
@@ -124,8 +138,10 @@ def _terms(flat: FlatTracks, x: np.ndarray) -> _Terms:
         t.e = (t.rho[owner] + (r_len + err_len) * (1 + 4 * U)) * (1 + 1e-12)
         t.w_lo, t.w_hi = w - err_w, w + err_w
         t.reach = np.minimum.reduceat(np.where(t.w_lo > 0, t.w_lo / d_up, 0.0), flat.starts[:-1])
-        t.usable = (behind == 0) & (t.c > 0) & np.isfinite(t.c) & (t.reach > 0) & np.isfinite(t.reach) \
-            & np.isfinite(t.g_up)
+        # Numbers outside the moderate range (subnormal, huge, nan) are left unproven.
+        outside = ~(in_range(P).all(axis=(0, 1)) & in_range(y).all(axis=0))
+        t.usable = (behind == 0) & (t.c >= SMALLEST) & np.isfinite(t.c) & (t.reach > 0) & np.isfinite(t.reach) \
+            & np.isfinite(t.g_up) & (flat.per_track(outside.astype(float)) == 0) & in_range(x).all(axis=1)
     return t
 
 
@@ -152,8 +168,8 @@ def _bound(flat: FlatTracks, t: _Terms, R: np.ndarray, enclosed: np.ndarray, str
     allowance = flat.per_track(half * t.slack + (t.n[owner] + 8) * U * negative * t.d_up ** 2)
     convex = (S[6] == 0) & positive_definite(S[:6], 0.0, strictness * allowance, 1e-9 * (strictness - 1))
     lower = t.c_lo - t.g_up * R
-    lower = lower - 4 * U * np.abs(lower)
-    proven = enclosed & convex & np.isfinite(lower)
+    lower = lower - 4 * U * np.abs(lower) - UNDERFLOW
+    proven = enclosed & convex & np.isfinite(lower) & (R >= SMALLEST) & (R <= LARGEST)
     return np.where(proven, lower, -np.inf), np.where(proven, R, np.nan), t.c
 
 
@@ -161,19 +177,32 @@ def positive_definite(A: np.ndarray, margin, allowance, relative: float = 0.0) -
     """Whether the exact symmetric matrices whose entries (in PAIRS order, A (..., 6, T)) are
     within ``allowance`` (..., T) of A's (each entry) all have their smallest eigenvalue above
     ``margin`` (plus ``relative`` times the trace). The test: a Cholesky factorisation of
-    A - shift I with shift = margin + 3 allowance + 8 u (trace + margin) (3 allowance bounds the entries' error's
-    spectral norm; a Cholesky factorisation computed in floating point is exact for a matrix
-    within about 4 u trace of the one factored, Demmel's bound), each pivot positive."""
+    A - shift I with shift = margin + 3 allowance + 8 u (trace + margin) + UNDERFLOW (3 allowance
+    bounds the entries' error's spectral norm; a Cholesky factorisation computed in floating
+    point is exact for a matrix within about 4 u trace of the one factored, Demmel's bound), each
+    pivot positive."""
     a00, a01, a02, a11, a12, a22 = np.moveaxis(A, -2, 0)
     with np.errstate(all="ignore"):
         trace = np.abs(a00) + np.abs(a11) + np.abs(a22)
-        shift = (margin + relative * trace + 3 * allowance + 8 * U * (trace + np.abs(margin))) * (1 + 8 * U)
+        shift = (margin + relative * trace + 3 * allowance + 8 * U * (trace + np.abs(margin)) + UNDERFLOW) \
+            * (1 + 8 * U)
         p0 = a00 - shift
         l10, l20 = a01 / np.sqrt(p0), a02 / np.sqrt(p0)
         p1 = a11 - shift - l10 * l10
         l21 = (a12 - l20 * l10) / np.sqrt(p1)
         p2 = a22 - shift - l20 * l20 - l21 * l21
     return (p0 > 0) & (p1 > 0) & (p2 > 0) & np.isfinite(trace) & np.isfinite(shift)
+
+
+def outside_range(cameras: np.ndarray, points: np.ndarray, point: np.ndarray, radius: float) -> str | None:
+    """What of one track's numbers lies outside the range a convexity proof is made for (None:
+    nothing): its cameras' entries, observations, point and radius."""
+    for name, values in (("a camera entry", cameras), ("an observation", points), ("the point", point),
+                         ("the radius", radius)):
+        if not np.all(in_range(np.asarray(values, dtype=float))):
+            return (f"{name} is subnormal, huge or not a number: a convexity proof is checked only for numbers "
+                    f"that are 0 or of magnitude within [2^-128, 2^128]")
+    return None
 
 
 def track_bound(cameras: np.ndarray, points: np.ndarray, point: np.ndarray, radius: float) -> float:
