@@ -58,7 +58,7 @@ from geocert.solvers.fractional.relaxation import FractionalProgram, cost_unit, 
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult, claim_of
 from geocert.solvers.fractional.search import (MAX_SCALE, ROOT_SUBSET, branch_directions, depth_subspace,
                                                local_refine, recomputed_status, root_region)
-from geocert.solvers.fractional.items import PROGRAM_REFUSED, TrackItem, refused_by_verifier
+from geocert.solvers.fractional.items import PROGRAM_REFUSED, UNDISCOUNTABLE, TrackItem, refused_by_verifier
 from geocert.solvers.fractional.proof import track_uncertainty
 from geocert.solvers.fractional.triangulation import track_result, triangulate
 from geocert.solvers.verify import self_check, self_check_enabled
@@ -775,6 +775,10 @@ def _check_results(entries: list, num, den, results: list, rows: list[int], refe
             result.status, result.reason = recomputed_status("optimal", np.asarray(result.residuals), result.cost,
                                                              result.lower_bound, options, rounding)
             result.certified = result.status == "optimal"
+        else:  # the proof's bound is not the data's: only the trivial bound 0 is (items.discounted)
+            result.lower_bound = min(result.lower_bound, 0.0)
+            result.gap = result.cost - result.lower_bound
+            result.status, result.certified, result.reason = "not_certified", False, UNDISCOUNTABLE
     for (row, result), solution, passed in zip(certified, solutions, in_front & determined & agree):
         if result.status != "optimal":
             continue

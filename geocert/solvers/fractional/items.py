@@ -130,18 +130,23 @@ class MapItem:
 
 
 PROGRAM_REFUSED = "the verifier could not check the proof against the data at this solution ({})"
+UNDISCOUNTABLE = ("an observation's depth is round-off at the solution (a point on a view's principal plane "
+                  "or at its centre): the search's bound does not carry over to the data's problem, only the trivial bound 0 does")
 
 
-def discounted(item, solution: np.ndarray, residuals: np.ndarray, lower: float, scale: float | None) -> float:
+def discounted(item, solution: np.ndarray, residuals: np.ndarray, lower: float,
+               scale: float | None) -> tuple[float, str | None]:
     """A search's lower bound (caller's units) as the verifier proves it for the data's problem:
     less the program's distance from it at the solution (proof.program_discount); the trivial
     bound (``scale`` None) needs no program. A solution outside the chart keeps the bound: the
-    verifier refuses it anyway."""
+    verifier refuses it anyway. Where the distance is unbounded (an observation whose depth is
+    round-off there) the verifier proves nothing beyond the trivial bound 0: that bound is
+    returned, with the reason (the second value; None otherwise)."""
     if scale is None or item.to_program(solution) is None:
-        return lower
+        return lower, None
     with np.errstate(all="ignore"):
         discount = program_discount(item, solution, residuals, program_allowance(item, solution, scale))
-    return lower - discount if np.isfinite(discount) else lower
+    return (lower - discount, None) if np.isfinite(discount) else (min(lower, 0.0), UNDISCOUNTABLE)
 
 
 def refused_by_verifier(item, solution: np.ndarray, residuals: np.ndarray, cost: float, options,

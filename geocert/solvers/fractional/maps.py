@@ -128,10 +128,13 @@ def _map_result(chart: MapChart, source, target, v, options, status, lower, node
     residuals = target - proj[:, :-1] / proj[:, -1:]
     cost = norm_cost(residuals, options.norm)  # recomputed from the caller's data
     item = MapItem((source, target), options.norm, chart)
+    undiscountable = None
     if lower is not None:
-        lower = discounted(item, M, residuals, min(lower, cost), scale)
+        lower, undiscountable = discounted(item, M, residuals, min(lower, cost), scale)
     rounding = residual_rounding(target - residuals, target)  # the verifier's (target - image = residuals)
     status, reason = recomputed_status(status, residuals, cost, lower, options, rounding)
+    if undiscountable:  # the proof's bound is not the data's (the verifier reads it as -inf)
+        status, reason = "not_certified", undiscountable
     if status == "optimal":
         reason = refused_by_verifier(item, M, residuals, cost, options, scale)
         status = "not_certified" if reason else status

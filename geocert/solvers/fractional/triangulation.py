@@ -113,10 +113,13 @@ def track_result(chart: Chart, cameras, points, y, options, status, lower, nodes
     residuals = reprojection_residuals(cameras, solution, points)
     cost = norm_cost(residuals, options.norm)  # recomputed in pixels from the original data
     item = TrackItem((cameras, points), options.norm, chart)
+    undiscountable = None
     if lower is not None:
-        lower = discounted(item, solution, residuals, min(lower, cost), scale)
+        lower, undiscountable = discounted(item, solution, residuals, min(lower, cost), scale)
     rounding = residual_rounding(residuals + points, points)  # the verifier's (image - points = residuals)
     status, reason = recomputed_status(status, residuals, cost, lower, options, rounding)
+    if undiscountable:  # the proof's bound is not the data's (the verifier reads it as -inf)
+        status, reason = "not_certified", undiscountable
     if status == "optimal" and checked:
         reason = refused_by_verifier(item, solution, residuals, cost, options, scale)
         status = "not_certified" if reason else status
