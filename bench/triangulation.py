@@ -13,10 +13,11 @@ Prints, in one run and side by side:
   5. the floor (L2L2): on the Dinosaur and on synthetic scenes of 2 to 20 views, CPU per track of
      the vectorised local solve (fractional.flat: linear start and Levenberg-Marquardt on every
      track at once, uncertified), of per-track scipy (OpenCV DLT, then MINPACK's leastsq), of the
-     certified batched solver, of the convexity bound alone (the vectorised local solve and the
-     bound of fractional.convexity, arrays only) and of the convexity path (the solver's
-     fractional.convexity_path: a TrackResult for every track it certifies, triangulate_many for
-     the tracks it leaves), each repeated --repeats times, interleaved, with the ratios to the floor.
+     certified batched solver (triangulate_many: the convexity path, fractional.convexity_path,
+     then the search for the tracks it leaves), of the same with every track searched (the
+     convexity path switched off: the solver before it), and of the convexity bound alone (the
+     vectorised local solve and the bound of fractional.convexity, arrays only), each repeated
+     --repeats times, interleaved, with the ratios to the floor.
 
     .venv/bin/python -m bench.triangulation [--norms L2L2,L2L1,L1L1] [--sample 200] [--no-scip] [--no-service]
                                             [--chunk 500] [--floor-only] [--repeats 3]
@@ -243,17 +244,15 @@ def convexity_bound_only(cameras, tracks) -> int:
     return int((ok & (computed - lower <= np.maximum(options.abs_gap, options.rel_gap * computed))).sum())
 
 
-def convexity_path(cameras, tracks) -> int:
-    """The solver's convexity path (convexity_path.certify_tracks: TrackResults of the tracks it
-    certifies), then triangulate_many for the tracks it leaves."""
-    from geocert.solvers.core.geometry import normalised_cameras
-    from geocert.solvers.fractional.convexity_path import certify_tracks
+def search_only(cameras, tracks, chunk: int = 500) -> int:
+    """triangulate_many as it was before the convexity path: every track searched (the path
+    switched off for the call)."""
+    from unittest import mock
 
-    options = TriangulationOptions(norm="L2L2", rel_gap=1e-3)
-    results = certify_tracks(normalised_cameras(cameras), tracks, options)
-    rest = [tracks[i] for i, result in enumerate(results) if result is None]
-    return sum(r is not None for r in results) + (sum(r.certified for r in triangulate_many(cameras, rest, options))
-                                                  if rest else 0)
+    from geocert.solvers.fractional import batched
+
+    with mock.patch.object(batched, "certify_tracks", lambda cameras, tracks, options: [None] * len(tracks)):
+        return batched_certified(cameras, tracks, chunk)
 
 
 def synthetic_scenes(views: list[int], points: int) -> list[tuple[str, np.ndarray, list]]:
@@ -270,12 +269,12 @@ def synthetic_scenes(views: list[int], points: int) -> list[tuple[str, np.ndarra
 def floor_table(datasets, repeats: int) -> None:
     """Section 5: every solver on every dataset, CPU per track, interleaved repeats (the order
     rotates each repeat); the median repeat's figure."""
-    solvers = [("floor", floor_solve), ("bound only", convexity_bound_only), ("convexity", convexity_path),
-               ("batched", batched_certified), ("scipy/track", per_track_scipy)]
+    solvers = [("floor", floor_solve), ("bound only", convexity_bound_only), ("batched", batched_certified),
+               ("search only", search_only), ("scipy/track", per_track_scipy)]
     print(f"\nThe floor (L2L2, rel_gap 1e-3): CPU microseconds per track, median of {repeats} interleaved "
           f"repeats; ratio = solver / floor (vectorised local solve, uncertified); load average {load()}")
     print(f"  {'dataset':22} {'tracks':>6} " + " ".join(f"{name:>12}" for name, _ in solvers)
-          + "  certified (convexity / batched)   ratios: bound only, convexity, batched, scipy/track")
+          + "  certified (batched / search only)   ratios: bound only, batched, search only, scipy/track")
     for label, cameras, tracks in datasets:
         cpu = {name: [] for name, _ in solvers}
         counts = {}
@@ -287,9 +286,9 @@ def floor_table(datasets, repeats: int) -> None:
                 cpu[name].append(time.process_time() - start)
         per = {name: 1e6 * float(np.median(v)) / len(tracks) for name, v in cpu.items()}
         print(f"  {label:22} {len(tracks):6d} " + " ".join(f"{per[name]:12.1f}" for name, _ in solvers)
-              + f"  {counts['convexity']:5d} / {counts['batched']:5d}"
-              + f"{'':18} {per['bound only'] / per['floor']:.2f}x, {per['convexity'] / per['floor']:.2f}x, "
-              f"{per['batched'] / per['floor']:.1f}x, "
+              + f"  {counts['batched']:5d} / {counts['search only']:5d}"
+              + f"{'':18} {per['bound only'] / per['floor']:.2f}x, {per['batched'] / per['floor']:.2f}x, "
+              f"{per['search only'] / per['floor']:.1f}x, "
               f"{per['scipy/track'] / per['floor']:.1f}x")
     print(f"  load average {load()}")
 
