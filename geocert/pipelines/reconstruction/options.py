@@ -80,7 +80,7 @@ class ReconstructionOptions(FractionalOptions):
                       "ratio": {"gt": 0, "le": 1}, "ransac_threshold_px": {"gt": 0, "le": 100},
                       "guided_ratio": {"ge": 0, "lt": 1}, "exhaustive_limit": {"ge": 2, "le": MAX_EXHAUSTIVE},
                       "retrieval_neighbours": {"ge": 1, "le": 1000}, "vocabulary_size": {"ge": 8, "le": 100_000},
-                      "neighbour_window": {"ge": 1, "le": 1000}}
+                      "neighbour_window": {"ge": 1, "le": 1000}, "time_limit_s": {"gt": 0, "le": 3600}}
     FEATURE_INTEGERS = ("max_features", "exhaustive_limit", "retrieval_neighbours", "vocabulary_size",
                         "neighbour_window")
     # Stage 1's options that are not numbers: their allowed values.
