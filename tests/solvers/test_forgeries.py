@@ -540,3 +540,62 @@ class TestFarFromTheOrigin:
         assert claim["lower_bound"] <= exact
         report = verify_any(result)
         assert report.valid and not report.scope.get("discounted"), report.first_failure
+
+
+@pytest.fixture(scope="module")
+def thin_cut_metric():
+    """The stratified metric stage "proved" by one leaf closed by a cut whose dual vector is 0,
+    over the omega box of intrinsics whose principal point is pinned to +-1e-6 px (the middle of
+    its default range, so the affine stage's genuine proof stands): a K of focal 600 px claimed
+    optimal where the scene's own (focal 1000 px, in the same box) costs almost nothing."""
+    from geocert.solvers.autocalibration import metric_relaxation as mrelax
+    from geocert.solvers.autocalibration import problem as pr
+    from geocert.solvers.autocalibration.verification import read_data
+
+    result = stored("autocalibration_stratified")
+    document = result["certificate"]
+    cameras, points, image_size = read_data(document["data"])
+    (ul, uu), (vl, vu) = pr.resolve_ranges({}, image_size)["principal_point"]
+    u0, v0 = (ul + uu) / 2, (vl + vu) / 2
+    document["options"]["intrinsics"] = {"principal_point": [[u0 - 1e-6, u0 + 1e-6], [v0 - 1e-6, v0 + 1e-6]]}
+    problem = pr.prepare(cameras, points, image_size, document["options"]["intrinsics"])
+    claim = document["items"][1]
+    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference,
+                             pr.plane_from_input(problem, np.array(claim["plane_at_infinity"])), problem.unit_ranges)
+    lo, hi = mrelax.omega_box(problem.unit_ranges)
+
+    def w(focal):
+        return pr.w_of_K(problem, np.array([[focal, 0.0, u0], [0.0, focal, v0], [0.0, 0.0, 1.0]]))
+
+    cost = mrelax.cost(setup, w(600.0))
+    setup.unit = 1.0 / cost
+    rows = len(mrelax.build(setup, lo, hi, cost, cap_row=True).b)
+    claim.update(K=[[600.0, 0.0, u0], [0.0, 600.0, v0], [0.0, 0.0, 1.0]], cost=cost, lower_bound=cost * (1 - 1e-5),
+                 gap=cost * 1e-5)
+    claim["proof"] = {"type": "stratified_metric", "unit": 1.0 / cost, "tightening": [],
+                      "search_box": [lo.tolist(), hi.tolist()],
+                      "proofs": [{"box": [lo.tolist(), hi.tolist()], "upper_bound": cost, "kind": "cut",
+                                  "z": pack(np.zeros(rows)), "bound": None, "axis": 2, "sign": 1.0}],
+                      "leaves": [[lo.tolist(), hi.tolist(), 0]]}
+    rehash(document)
+    truth = w(1000.0)
+    assert mrelax.in_domain(setup, truth, lo, hi) and mrelax.cost(setup, truth) < 1e-6 * claim["lower_bound"]
+    return only(document, 1)
+
+
+class TestCutMovedOverTheBox:
+    """A cut leaf beyond its cut by at most coverage.SIDE_TOLERANCE of the root box's size was
+    moved back to the cut's proven value, the boxes on its inner face extended over the sliver,
+    and the coverage check read the leaves as claimed. Where a coordinate's range is narrower than
+    that tolerance, a cut proving nothing (z = 0: the box's own side) moved the only leaf off the
+    whole box, which still read as covered, and closed it at the cap the forger chose. Now the
+    leaves must cover the box as the checks read them (moved and extended)."""
+
+    def test_one_cut_leaf_over_a_thin_box_is_refused(self, thin_cut_metric):
+        assert refused(thin_cut_metric)["check"] in ("coverage", "leaf_bounds")
+
+    def test_the_thin_box_is_thinner_than_the_tolerance(self, thin_cut_metric):
+        from geocert.solvers.core.coverage import SIDE_TOLERANCE
+
+        lo, hi = (np.array(side) for side in thin_cut_metric["items"][1]["proof"]["search_box"])
+        assert (hi - lo).min() < SIDE_TOLERANCE * np.abs(np.r_[lo, hi]).max()

@@ -97,8 +97,8 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
     to whose faces the boxes on the claimed root box's faces reach (coverage.extended). ``size``:
     the work a program costs (strict.charge: its views and rows), paid before each is built. A leaf
     beyond its cut but for the cut's rounding (within coverage.SIDE_TOLERANCE of the root box's
-    size: certificates written before the cut counted it) is cut back to the proven value, and
-    the boxes on its inner face are extended over the sliver (_moved_faces)."""
+    size: certificates written before the cut counted it) is read as ending at the cut's value,
+    and the boxes on its inner face are extended over the sliver (_moved_faces)."""
     claimed = Box(root_lo, root_hi)
     proven = claimed if proven is None else proven
     proofs, leaves = proof.get("proofs"), proof.get("leaves")
@@ -123,13 +123,17 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
         if index is not None and (not isinstance(index, int) or isinstance(index, bool)
                                   or not 0 <= index < len(proofs)):
             raise Invalid("format", f"leaves/{i}: no proof {index!r}")
-    covering = (leaf_lo, leaf_hi)  # as claimed: their coverage is checked last, as the proofs' are first
     leaf_lo, leaf_hi = extended(leaf_lo, leaf_hi, claimed, proven)
     charge(size * len(proofs), "the leaves' programs")
-    cuts = {i: _cut_value(item, boxes[i], caps[i], d, build_capped) for i, item in enumerate(proofs)
-            if isinstance(item, dict) and item.get("kind") == "cut"}
-    size = float(np.max(np.abs(np.concatenate([proven.lo, proven.hi, proven.hi - proven.lo]))))
-    boxes, leaf_lo, leaf_hi = _moved_faces(leaves, cuts, boxes, leaf_lo, leaf_hi, SIDE_TOLERANCE * size)
+    tolerance = SIDE_TOLERANCE * float(np.max(np.abs(np.concatenate([proven.lo, proven.hi, proven.hi - proven.lo]))))
+
+    def cut_value(i: int, box: tuple) -> tuple[int, float, float]:
+        return _cut_value(proofs[i], box, caps[i], d, build_capped)
+
+    def pay(count: int) -> None:
+        charge(size * count, "the cuts' programs over the slivers")
+
+    boxes, leaf_lo, leaf_hi, cuts = _moved_faces(leaves, proofs, cut_value, pay, boxes, leaf_lo, leaf_hi, tolerance)
     proven_bounds = []
     for i, item in enumerate(proofs):
         lo, hi = boxes[i]
@@ -175,7 +179,10 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
             if not (value == value and beyond):
                 raise Invalid("leaf_bounds", f"leaves/{i} is not beyond the cut of its proof {index}")
         bounds.append(proven_bounds[index])
-    if uncovered_part(claimed, *covering) is not None:
+    # The leaves as the bounds above hold over them (extended to the proven box's faces, moved to
+    # their cuts): read as claimed, a cut leaf moved off its side left a sliver no bound holds
+    # over, the whole box where a coordinate's range is narrower than the tolerance.
+    if uncovered_part(proven, leaf_lo, leaf_hi) is not None:
         raise Invalid("coverage", "the leaves do not cover the box searched")
     if not all(value == value for value in bounds):
         raise Invalid("leaf_bounds", "a leaf's bound is not a number")
@@ -201,39 +208,60 @@ def _cut_value(item: dict, box: tuple, cap: float, d: int, build_capped) -> tupl
     return axis, sign, value
 
 
-def _moved_faces(leaves: list, cuts: dict, boxes: list, leaf_lo: np.ndarray, leaf_hi: np.ndarray, tolerance: float):
-    """Leaves beyond their cut but for at most ``tolerance`` are cut back to its proven value;
-    every other leaf and proof box whose side lies on such a leaf's inner face, and meets it, is
-    extended to the proven value over the sliver between. A cut splits a box: the leaves of the
-    part it keeps cover its face, so with their sides so moved they cover the sliver too."""
+MOVE_ROUNDS = 64  # rounds of moved cut leaves: each cut extended over a sliver may move its own leaves
+
+
+def _moved_faces(leaves: list, proofs: list, cut_value, pay, boxes: list, leaf_lo: np.ndarray, leaf_hi: np.ndarray,
+                 tolerance: float):
+    """The proofs' boxes, the leaves and the cuts' (axis, sign, value) as the checks read them.
+
+    A leaf beyond its cut but for at most ``tolerance`` (the cut's rounding, which certificates
+    written before the cut counted it did not) is read as ending at the cut's value, and every
+    leaf and proof box with a side on its face, meeting the leaf, is extended to there over the
+    sliver: a cut splits a box, and the leaves of the part it keeps cover its face. A cut whose
+    box is so extended is recomputed over it (``cut_value(i, box)``, paid for by ``pay(count)``),
+    which may move its own leaves in a next round. Nothing here is trusted: the leaves as read must
+    cover the box, lie in their proofs' boxes and beyond their cuts (check_leaves), and every bound
+    is computed over the boxes as read."""
     leaf_lo, leaf_hi = leaf_lo.copy(), leaf_hi.copy()
-    moves = []  # (axis, upper: the kept part lies above, face, value, the cut leaf's box)
-    for i, leaf in enumerate(leaves):
-        if leaf[2] not in cuts:
-            continue
-        axis, sign, value = cuts[leaf[2]]
-        if sign > 0 and value < leaf_hi[i][axis] <= value + tolerance:
-            moves.append((axis, True, leaf_hi[i][axis], value, leaf_lo[i].copy(), leaf_hi[i].copy()))
-            leaf_hi[i][axis] = value
-        elif sign < 0 and -value > leaf_lo[i][axis] >= -value - tolerance:
-            moves.append((axis, False, leaf_lo[i][axis], -value, leaf_lo[i].copy(), leaf_hi[i].copy()))
-            leaf_lo[i][axis] = -value
-    if not moves:
-        return boxes, leaf_lo, leaf_hi
-    keep = np.array([leaf[2] not in cuts for leaf in leaves])
-    boxes = [(lo.copy(), hi.copy()) for lo, hi in boxes]
     box_lo = np.array([lo for lo, _ in boxes]).reshape(-1, leaf_lo.shape[1])
     box_hi = np.array([hi for _, hi in boxes]).reshape(-1, leaf_lo.shape[1])
-    for axis, upper, face, value, lo, hi in moves:
-        not_cuts = np.array([i not in cuts for i in range(len(box_lo))], dtype=bool)
-        for L, H, mask in ((leaf_lo, leaf_hi, keep), (box_lo, box_hi, not_cuts)):
-            others = np.arange(L.shape[1]) != axis
-            meets = mask & np.all((L[:, others] <= hi[others]) & (H[:, others] >= lo[others]), axis=1)
-            if upper:
-                L[meets & (L[:, axis] == face), axis] = value
-            else:
-                H[meets & (H[:, axis] == face), axis] = value
-    return [(box_lo[i], box_hi[i]) for i in range(len(boxes))], leaf_lo, leaf_hi
+    cuts = {i: cut_value(i, (box_lo[i], box_hi[i])) for i, item in enumerate(proofs)
+            if isinstance(item, dict) and item.get("kind") == "cut"}
+    for _ in range(MOVE_ROUNDS):
+        moves = []  # (axis, upper: the kept part lies above, face, the cut's value, the leaf's box)
+        for i, leaf in enumerate(leaves):
+            if leaf[2] not in cuts:
+                continue
+            axis, sign, value = cuts[leaf[2]]
+            if sign > 0 and value < leaf_hi[i][axis] <= value + tolerance:
+                moves.append((axis, True, leaf_hi[i][axis], value, leaf_lo[i].copy(), leaf_hi[i].copy()))
+                leaf_hi[i][axis] = value
+            elif sign < 0 and -value > leaf_lo[i][axis] >= -value - tolerance:
+                moves.append((axis, False, leaf_lo[i][axis], -value, leaf_lo[i].copy(), leaf_hi[i].copy()))
+                leaf_lo[i][axis] = -value
+        if not moves:
+            return [(box_lo[i], box_hi[i]) for i in range(len(proofs))], leaf_lo, leaf_hi, cuts
+        before = leaf_lo.copy(), leaf_hi.copy()
+        for axis, upper, face, side, lo, hi in moves:
+            others = np.arange(leaf_lo.shape[1]) != axis
+            meets = np.all((leaf_lo[:, others] <= hi[others]) & (leaf_hi[:, others] >= lo[others]), axis=1)
+            ends = leaf_lo if upper else leaf_hi
+            ends[meets & (ends[:, axis] == face), axis] = side
+        # Each proof's box grown to hold its leaves so extended (and only those).
+        grown = [i for i in np.flatnonzero(np.any((leaf_lo != before[0]) | (leaf_hi != before[1]), axis=1))
+                 if leaves[i][2] is not None]
+        stale = set()
+        for i in grown:
+            p = leaves[i][2]
+            lo, hi = np.minimum(box_lo[p], leaf_lo[i]), np.maximum(box_hi[p], leaf_hi[i])
+            if not (np.array_equal(lo, box_lo[p]) and np.array_equal(hi, box_hi[p])):
+                box_lo[p], box_hi[p] = lo, hi
+                stale.add(p)
+        stale = sorted(stale & cuts.keys())
+        pay(len(stale))
+        cuts.update({i: cut_value(i, (box_lo[i], box_hi[i])) for i in stale})
+    raise Invalid("leaf_bounds", f"cut leaves moved over their cuts' rounding in more than {MOVE_ROUNDS} rounds")
 
 
 def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
