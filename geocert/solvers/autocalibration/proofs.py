@@ -217,51 +217,72 @@ def _moved_faces(leaves: list, proofs: list, cut_value, pay, boxes: list, leaf_l
 
     A leaf beyond its cut but for at most ``tolerance`` (the cut's rounding, which certificates
     written before the cut counted it did not) is read as ending at the cut's value, and every
-    leaf and proof box with a side on its face, meeting the leaf, is extended to there over the
-    sliver: a cut splits a box, and the leaves of the part it keeps cover its face. A cut whose
-    box is so extended is recomputed over it (``cut_value(i, box)``, paid for by ``pay(count)``),
-    which may move its own leaves in a next round. Nothing here is trusted: the leaves as read must
-    cover the box, lie in their proofs' boxes and beyond their cuts (check_leaves), and every bound
-    is computed over the boxes as read."""
+    leaf with a side on its face, meeting it, is extended to there over the sliver (a cut splits
+    a box, and the leaves of the part it keeps cover its face), its proof's box grown to hold it.
+    A cut whose box grows is recomputed over it (``cut_value(i, box)``, paid for by
+    ``pay(count)``), which may move its own leaves in a next round. Nothing here is trusted: the
+    leaves as read must cover the box, lie in their proofs' boxes and beyond their cuts
+    (check_leaves), and every bound is computed over the boxes as read. Time: linear in the leaves
+    per round, plus the tests of moved leaves against the leaves on their faces (charged)."""
+    n, d = leaf_lo.shape
     leaf_lo, leaf_hi = leaf_lo.copy(), leaf_hi.copy()
-    box_lo = np.array([lo for lo, _ in boxes]).reshape(-1, leaf_lo.shape[1])
-    box_hi = np.array([hi for _, hi in boxes]).reshape(-1, leaf_lo.shape[1])
+    box_lo = np.array([lo for lo, _ in boxes]).reshape(-1, d)
+    box_hi = np.array([hi for _, hi in boxes]).reshape(-1, d)
     cuts = {i: cut_value(i, (box_lo[i], box_hi[i])) for i, item in enumerate(proofs)
             if isinstance(item, dict) and item.get("kind") == "cut"}
+    index = np.array([-1 if leaf[2] is None else leaf[2] for leaf in leaves], dtype=np.int64)
+    rows = np.arange(n)
     for _ in range(MOVE_ROUNDS):
-        moves = []  # (axis, upper: the kept part lies above, face, the cut's value, the leaf's box)
-        for i, leaf in enumerate(leaves):
-            if leaf[2] not in cuts:
-                continue
-            axis, sign, value = cuts[leaf[2]]
-            if sign > 0 and value < leaf_hi[i][axis] <= value + tolerance:
-                moves.append((axis, True, leaf_hi[i][axis], value, leaf_lo[i].copy(), leaf_hi[i].copy()))
-                leaf_hi[i][axis] = value
-            elif sign < 0 and -value > leaf_lo[i][axis] >= -value - tolerance:
-                moves.append((axis, False, leaf_lo[i][axis], -value, leaf_lo[i].copy(), leaf_hi[i].copy()))
-                leaf_lo[i][axis] = -value
-        if not moves:
+        # Each leaf's cut: (axis, sign, value); sign 0 for a leaf closed otherwise.
+        axis, sign, value = np.zeros(len(proofs) + 1, np.int64), np.zeros(len(proofs) + 1), np.zeros(len(proofs) + 1)
+        for i, (a, s, v) in cuts.items():
+            axis[i], sign[i], value[i] = a, s, v
+        a, s, v = axis[index], sign[index], value[index]  # index -1: the last, no cut
+        with np.errstate(invalid="ignore"):
+            up = (s > 0) & (v < leaf_hi[rows, a]) & (leaf_hi[rows, a] <= v + tolerance)
+            down = (s < 0) & (-v > leaf_lo[rows, a]) & (leaf_lo[rows, a] >= -v - tolerance)
+        moved = np.flatnonzero(up | down)
+        if not len(moved):
             return [(box_lo[i], box_hi[i]) for i in range(len(proofs))], leaf_lo, leaf_hi, cuts
-        before = leaf_lo.copy(), leaf_hi.copy()
-        for axis, upper, face, side, lo, hi in moves:
-            others = np.arange(leaf_lo.shape[1]) != axis
-            meets = np.all((leaf_lo[:, others] <= hi[others]) & (leaf_hi[:, others] >= lo[others]), axis=1)
-            ends = leaf_lo if upper else leaf_hi
-            ends[meets & (ends[:, axis] == face), axis] = side
-        # Each proof's box grown to hold its leaves so extended (and only those).
-        grown = [i for i in np.flatnonzero(np.any((leaf_lo != before[0]) | (leaf_hi != before[1]), axis=1))
-                 if leaves[i][2] is not None]
-        stale = set()
-        for i in grown:
-            p = leaves[i][2]
-            lo, hi = np.minimum(box_lo[p], leaf_lo[i]), np.maximum(box_hi[p], leaf_hi[i])
-            if not (np.array_equal(lo, box_lo[p]) and np.array_equal(hi, box_hi[p])):
-                box_lo[p], box_hi[p] = lo, hi
-                stale.add(p)
-        stale = sorted(stale & cuts.keys())
+        was_lo, was_hi = leaf_lo.copy(), leaf_hi.copy()
+        leaf_hi[up, a[up]] = v[up]
+        leaf_lo[down, a[down]] = -v[down]
+        _extend_over_slivers(moved, up, a, was_lo, was_hi, leaf_lo, leaf_hi)
+        # Each proof's box grown to hold its leaves as now read.
+        changed = np.flatnonzero(np.any((leaf_lo != was_lo) | (leaf_hi != was_hi), axis=1) & (index >= 0))
+        old_lo, old_hi = box_lo.copy(), box_hi.copy()
+        np.minimum.at(box_lo, index[changed], leaf_lo[changed])
+        np.maximum.at(box_hi, index[changed], leaf_hi[changed])
+        grown = np.any((box_lo != old_lo) | (box_hi != old_hi), axis=1)
+        stale = [i for i in cuts if grown[i]]
         pay(len(stale))
         cuts.update({i: cut_value(i, (box_lo[i], box_hi[i])) for i in stale})
     raise Invalid("leaf_bounds", f"cut leaves moved over their cuts' rounding in more than {MOVE_ROUNDS} rounds")
+
+
+def _extend_over_slivers(moved: np.ndarray, up: np.ndarray, axis: np.ndarray, was_lo: np.ndarray, was_hi: np.ndarray,
+                         leaf_lo: np.ndarray, leaf_hi: np.ndarray) -> None:
+    """Each leaf with a side on a moved leaf's face (as it was), meeting that leaf, extended to
+    the moved leaf's side as now read; the leaves on a face are found by sorting."""
+    d = leaf_lo.shape[1]
+    for k in range(d):
+        for upper, ends, moved_side, face_side in ((True, was_lo, leaf_hi, was_hi), (False, was_hi, leaf_lo, was_lo)):
+            mine = moved[(axis[moved] == k) & (up[moved] == upper)]
+            if not len(mine):
+                continue
+            order = np.argsort(ends[:, k], kind="stable")
+            sorted_ends = ends[order, k]
+            first = np.searchsorted(sorted_ends, face_side[mine, k], "left")
+            last = np.searchsorted(sorted_ends, face_side[mine, k], "right")
+            charge(len(mine) + int(np.sum(last - first)), "the leaves on the moved faces")  # a unit a test
+            others = np.arange(d) != k
+            target = leaf_lo if upper else leaf_hi
+            for i, start, stop in zip(mine, first, last):
+                on_face = order[start:stop]
+                meets = np.all((was_lo[on_face][:, others] <= was_hi[i, others])
+                               & (was_hi[on_face][:, others] >= was_lo[i, others]), axis=1)
+                on_face = on_face[meets & (on_face != i)]
+                target[on_face, k] = moved_side[i, k]
 
 
 def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
