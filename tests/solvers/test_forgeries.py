@@ -611,3 +611,51 @@ class TestCutMovedOverTheBox:
         flat[0][2] = flat[1][2]  # a leaf of no width on the moved leaves' face
         proof["leaves"] = [leaf] * 3000 + [flat] * 3000
         assert "more work than its size pays for" in refused(document)["detail"]
+
+
+@pytest.fixture(scope="module")
+def calibrated_reconstruction():
+    """A reconstruction result as the solver writes it today (its summary states the calibration:
+    the stored one predates it): make_fixtures' scene, its autocalibration certified, the cameras
+    returned using the K the bundle adjustment moved from the certified one."""
+    import sys
+
+    sys.path.insert(0, str(STORED))
+    from make_fixtures import reconstruction
+
+    result = reconstruction()
+    calibration = result["summary"]["calibration"]
+    assert calibration["certified"] and not calibration["returned_is_certified"]
+    return result
+
+
+class TestCalibrationTied:
+    """The summary's calibration (the K the returned cameras use, the certified K, whether they
+    are the same, how far apart) was read by no check: a K of focal 5,000 px called the returned
+    cameras' and the certified one, their cameras using 797 px, verified. Now it is recomputed
+    from the cameras returned, and tied to the autocalibration stage and the summary's flags (the
+    metric upgrade's own certification stays the pipeline's statement, as the scope says)."""
+
+    @staticmethod
+    def forged(result: dict, **changes) -> dict:
+        result = copy.deepcopy(result)
+        result["summary"]["calibration"].update(changes)
+        return result
+
+    def test_a_calibration_the_cameras_do_not_use_is_refused(self, calibrated_reconstruction):
+        K = [[5000.0, 0.0, 10.0], [0.0, 5000.0, 10.0], [0.0, 0.0, 1.0]]
+        forged = self.forged(calibrated_reconstruction, K=K, certified_K=K, returned_is_certified=True,
+                             source="autocalibration",
+                             difference={"focal_percent": 0.0, "principal_point_px": 0.0, "aspect": 0.0, "skew_px": 0.0})
+        assert refused(forged)["check"] == "returned"
+
+    @pytest.mark.parametrize("changes", [{"returned_is_certified": True, "source": "autocalibration"},
+                                         {"certified": False}, {"determined": False},
+                                         {"difference": {"focal_percent": 0.0, "principal_point_px": 0.0,
+                                                         "aspect": 0.0, "skew_px": 0.0}},
+                                         {"certified_K": [[700.0, 0.0, 320.0], [0.0, 700.0, 240.0], [0, 0, 1.0]]}])
+    def test_an_edited_calibration_is_refused(self, calibrated_reconstruction, changes):
+        assert refused(self.forged(calibrated_reconstruction, **changes))["check"] == "returned"
+
+    def test_the_genuine_result_verifies(self, calibrated_reconstruction):
+        assert verify_any(calibrated_reconstruction).valid
