@@ -659,3 +659,28 @@ class TestCalibrationTied:
 
     def test_the_genuine_result_verifies(self, calibrated_reconstruction):
         assert verify_any(calibrated_reconstruction).valid
+
+
+class TestIntegerEntriesReadInBulk:
+    """Rows holding an integer were read entry by entry (6 microseconds each): a metric proof of
+    200,000 leaves with integer corners (8.4 MB) took 25 s before its coverage was refused, 9 s
+    read in bulk. Integers are now read in bulk as floats are; an entry that is not a finite JSON
+    number is still named."""
+
+    def test_integer_rows_are_not_checked_entry_by_entry(self, monkeypatch):
+        from geocert.solvers.core import geometry
+
+        def entry_by_entry(*args, **kwargs):
+            raise AssertionError("read entry by entry")
+
+        monkeypatch.setattr(geometry, "_check_entries", entry_by_entry)
+        array = geometry.number_array([[0, 1, 2.5]] * 1000, "x", "rows", 2)
+        assert array.shape == (1000, 3) and array.dtype == float
+
+    @pytest.mark.parametrize("bad", [True, "1", 2 ** 1023, 10 ** 400, float("nan")])
+    def test_a_bad_entry_is_named(self, bad):
+        from geocert.solvers.core.geometry import InputError, number_array
+
+        with pytest.raises(InputError) as caught:
+            number_array([[0, 1, 2]] * 3 + [[0, bad, 2]], "x", "rows", 2)
+        assert caught.value.field == "x/3/1"

@@ -113,16 +113,19 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
         informational(item.get("z"), f"proofs/{i}/z", "text")
         boxes.append(extended(*_read_box(item.get("box"), f"proofs/{i}/box", d), claimed, proven))
         caps.append(_number(item.get("upper_bound"), f"proofs/{i}/upper_bound", "format"))
-    leaf_lo = np.empty((len(leaves), d))
-    leaf_hi = np.empty((len(leaves), d))
     for i, leaf in enumerate(leaves):
         if not isinstance(leaf, list) or len(leaf) != 3:
             raise Invalid("format", f"leaves/{i} must be [lower corner, upper corner, proof index or null]")
-        leaf_lo[i], leaf_hi[i] = _read_box(leaf[:2], f"leaves/{i}", d)
         index = leaf[2]
         if index is not None and (not isinstance(index, int) or isinstance(index, bool)
                                   or not 0 <= index < len(proofs)):
             raise Invalid("format", f"leaves/{i}: no proof {index!r}")
+    # All corners read at once (a leaf at a time took 70 microseconds: 200,000 leaves, 14 s).
+    leaf_lo = _numbers([leaf[0] for leaf in leaves], "leaves (lower corners)", (len(leaves), d))
+    leaf_hi = _numbers([leaf[1] for leaf in leaves], "leaves (upper corners)", (len(leaves), d))
+    empty = np.flatnonzero(~np.all(leaf_lo <= leaf_hi, axis=1))
+    if len(empty):
+        raise Invalid("format", f"leaves/{empty[0]} is empty")
     leaf_lo, leaf_hi = extended(leaf_lo, leaf_hi, claimed, proven)
     charge(size * len(proofs), "the leaves' programs")
     tolerance = SIDE_TOLERANCE * float(np.max(np.abs(np.concatenate([proven.lo, proven.hi, proven.hi - proven.lo]))))
