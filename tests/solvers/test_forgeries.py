@@ -633,8 +633,9 @@ class TestCalibrationTied:
     """The summary's calibration (the K the returned cameras use, the certified K, whether they
     are the same, how far apart) was read by no check: a K of focal 5,000 px called the returned
     cameras' and the certified one, their cameras using 797 px, verified. Now it is recomputed
-    from the cameras returned, and tied to the autocalibration stage and the summary's flags (the
-    metric upgrade's own certification stays the pipeline's statement, as the scope says)."""
+    from the cameras returned, and tied to the autocalibration stage, the summary's flags and its
+    warnings (the metric upgrade's own certification stays the pipeline's statement, as the scope
+    says)."""
 
     @staticmethod
     def forged(result: dict, **changes) -> dict:
@@ -656,6 +657,13 @@ class TestCalibrationTied:
                                          {"certified_K": [[700.0, 0.0, 320.0], [0.0, 700.0, 240.0], [0, 0, 1.0]]}])
     def test_an_edited_calibration_is_refused(self, calibrated_reconstruction, changes):
         assert refused(self.forged(calibrated_reconstruction, **changes))["check"] == "returned"
+
+    def test_a_warning_about_the_calibration_removed_is_refused(self, calibrated_reconstruction):
+        forged = copy.deepcopy(calibrated_reconstruction)
+        warnings = forged["summary"]["warnings"]
+        assert any(w["code"] == "returned_K_not_certified" for w in warnings)
+        forged["summary"]["warnings"] = [w for w in warnings if w["code"] != "returned_K_not_certified"]
+        assert refused(forged)["check"] == "returned"
 
     def test_the_genuine_result_verifies(self, calibrated_reconstruction):
         assert verify_any(calibrated_reconstruction).valid

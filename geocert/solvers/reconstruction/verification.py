@@ -207,6 +207,17 @@ def _check_calibration(result: dict, registered: list[dict], options: dict) -> N
                                   f"the cameras returned use {'the' if same else 'not the'} certified K")
     if (calibration.get("source") == "autocalibration") is not same:
         raise Invalid("returned", f"{where}/source is autocalibration exactly when the cameras use the certified K")
+    # What may be wrong about K is said where a user looks first: the summary's warnings.
+    edges = calibration.get("on_range_edge")
+    if not isinstance(edges, list) or (edges and cert is None):
+        raise Invalid("returned", f"{where}/on_range_edge must be a list (empty without a certified K)")
+    needed = {"returned_K_not_certified": cert is not None and not same, "certified_K_on_range_edge": bool(edges),
+              "critical_motion": bool(summary.get("critical_motion"))}
+    warnings = summary.get("warnings")
+    codes = {w.get("code") for w in warnings if isinstance(w, dict)} if isinstance(warnings, list) else set()
+    missing = [code for code, due in needed.items() if due and code not in codes]
+    if missing:
+        raise Invalid("returned", f"summary/warnings lacks {', '.join(missing)}, which the calibration it states is due")
     difference = calibration.get("difference")
     if cert is None:
         if difference is not None:
