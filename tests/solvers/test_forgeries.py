@@ -692,3 +692,24 @@ class TestIntegerEntriesReadInBulk:
         with pytest.raises(InputError) as caught:
             number_array([[0, 1, 2]] * 3 + [[0, bad, 2]], "x", "rows", 2)
         assert caught.value.field == "x/3/1"
+
+
+class TestMetricRoundsBounded:
+    """A metric proof's tightening rounds were unbounded, and each builds its program whatever its
+    duals: 1,000 rounds proving nothing (every dual null, 560 KB) added 6 s and verified, some 6
+    minutes within the 32 MB body limit. Now at most proofs.MAX_ROUNDS (the solver makes 12)."""
+
+    def test_rounds_beyond_the_limit_are_refused_before_any_is_built(self, monkeypatch):
+        from geocert.solvers.autocalibration import metric_relaxation as mrelax
+        from geocert.solvers.autocalibration.proofs import MAX_ROUNDS
+
+        result = stored("autocalibration_five_views")
+        proof = result["certificate"]["items"][1]["proof"]
+        box = proof["search_box"]
+        cap = proof["tightening"][-1]["cap"] if proof["tightening"] else result["certificate"]["items"][1]["cost"]
+        proof["tightening"] += [{"cap": cap, "box_in": box, "box_out": box, "duals": [None] * 10}] * (MAX_ROUNDS + 1)
+        built = []
+        original = mrelax.build
+        monkeypatch.setattr(mrelax, "build", lambda *a, **k: built.append(1) or original(*a, **k))
+        assert refused(only(result["certificate"], 1))["check"] == "format"
+        assert not built

@@ -30,6 +30,9 @@ from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informati
 from geocert.solvers.core.coverage import SIDE_TOLERANCE, extended, uncovered_part, widened
 
 MAX_LEAVES = 200_000
+# Tightening rounds of a metric proof (metric.tighten makes at most 12). Each builds a program
+# whatever its duals: 57,000 rounds with every dual null (32 MB) took some 6 minutes.
+MAX_ROUNDS = 16
 
 
 def _box(lo: np.ndarray, hi: np.ndarray) -> list:
@@ -350,8 +353,8 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
     lo, hi = mrelax.omega_box(problem.unit_ranges)
     proven_lo, proven_hi = lo, hi  # each round's box as proven: the claimed one widened by rounding
     rounds = proof.get("tightening")
-    if not isinstance(rounds, list):
-        raise Invalid("format", "tightening must be a list")
+    if not isinstance(rounds, list) or len(rounds) > MAX_ROUNDS:
+        raise Invalid("format", f"tightening must be a list of at most {MAX_ROUNDS} rounds")
     for n, round_ in enumerate(rounds):
         record(round_, f"tightening/{n}", ("cap", "box_in", "box_out", "duals"))
         lo_in, hi_in = _read_box(round_.get("box_in"), f"tightening/{n}/box_in", 5)
