@@ -33,6 +33,9 @@ class Settings(BaseSettings):
     max_items_per_job: int = 200_000
     # Most observations or correspondences, summed over a job's items (413 beyond it).
     max_points_per_job: int = 2_000_000
+    # Certificate verifications (POST /v1/certificates/verify) running at once in one API
+    # process (429 beyond it; 0: unlimited): each may hold some 25 times its body in memory.
+    max_concurrent_verifications: int = 2
     # Requests per minute one key may make to /v1 (429 beyond it; 0: unlimited).
     rate_limit_per_minute: int = 1200
     # Jobs one key may have queued or running at once (429 beyond it; 0: unlimited).

@@ -161,6 +161,76 @@ def _check_summary(result: dict, registered: list[dict]) -> None:
                 raise Invalid("returned", f"stages/{stage['name']}/{name} is {stage[name]!r}, the items give {value!r}")
 
 
+def _check_calibration(result: dict, registered: list[dict], options: dict) -> None:
+    """The summary's calibration (pipeline.calibration_claim), where it is stated: its K is the
+    returned cameras' (every one's, or with one focal length per view the middle one's), its
+    certified K the autocalibration stage's, whether they are the same and how far apart
+    recomputed from the two, its flags the summary's. The stage's own certification is the
+    pipeline's statement (the scope says so); what the returned cameras use is checked here."""
+    summary = result["summary"]
+    calibration = summary.get("calibration")
+    if calibration is None:  # a result from before it was stated
+        return
+    if not isinstance(calibration, dict):
+        raise Invalid("returned", "summary/calibration must be an object")
+    where = "summary/calibration"
+    K = None if calibration.get("K") is None else numbers(calibration["K"], f"{where}/K", (3, 3), "returned")
+    Ks = [np.asarray(camera["K"], dtype=float) for camera in registered]
+    if (K is None) != (not Ks):
+        raise Invalid("returned", f"{where}/K is stated only with registered cameras")
+    varying = options.get("camera_model") == "varying"
+    if K is not None:
+        uses = [bool(np.abs(k - K).max() <= ROUNDING * np.abs(K).max()) for k in Ks]
+        if not (any(uses) if varying else all(uses)):
+            raise Invalid("returned", f"{where}/K is not the K the returned cameras use")
+    stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "autocalibration"),
+                 {})
+    certified = calibration.get("certified")
+    stated_K = calibration.get("certified_K")
+    if certified is not summary.get("autocalibration_certified") or type(certified) is not bool:
+        raise Invalid("returned", f"{where}/certified is not summary/autocalibration_certified")
+    if calibration.get("determined") != summary.get("autocalibration_determined") or (
+            calibration.get("determined") is True and not (certified and not summary.get("critical_motion")
+                                                           and not calibration.get("on_range_edge"))):
+        raise Invalid("returned", f"{where}/determined: K is determined only when certified, with no critical motion "
+                                  "and no intrinsic on its range's edge, as summary/autocalibration_determined says")
+    cert = None
+    if certified:
+        cert = numbers(stated_K, f"{where}/certified_K", (3, 3), "returned")
+        if stage.get("certified") is not True or stage.get("K") != stated_K or K is None:
+            raise Invalid("returned", f"{where}/certified_K is not the K the autocalibration stage certified")
+    elif stated_K is not None:
+        raise Invalid("returned", f"{where}/certified_K is stated only when certified")
+    same = cert is not None and not varying and bool(np.allclose(K, cert, rtol=1e-9, atol=1e-9))
+    if calibration.get("returned_is_certified") is not same:
+        raise Invalid("returned", f"{where}/returned_is_certified is {calibration.get('returned_is_certified')!r}: "
+                                  f"the cameras returned use {'the' if same else 'not the'} certified K")
+    if (calibration.get("source") == "autocalibration") is not same:
+        raise Invalid("returned", f"{where}/source is autocalibration exactly when the cameras use the certified K")
+    # What may be wrong about K is said where a user looks first: the summary's warnings.
+    edges = calibration.get("on_range_edge")
+    if not isinstance(edges, list) or (edges and cert is None):
+        raise Invalid("returned", f"{where}/on_range_edge must be a list (empty without a certified K)")
+    needed = {"returned_K_not_certified": cert is not None and not same, "certified_K_on_range_edge": bool(edges),
+              "critical_motion": bool(summary.get("critical_motion"))}
+    warnings = summary.get("warnings")
+    codes = {w.get("code") for w in warnings if isinstance(w, dict)} if isinstance(warnings, list) else set()
+    missing = [code for code, due in needed.items() if due and code not in codes]
+    if missing:
+        raise Invalid("returned", f"summary/warnings lacks {', '.join(missing)}, which the calibration it states is due")
+    difference = calibration.get("difference")
+    if cert is None:
+        if difference is not None:
+            raise Invalid("returned", f"{where}/difference is stated only with a certified K")
+        return
+    expected = {"focal_percent": 100.0 * (K[0, 0] / cert[0, 0] - 1.0),
+                "principal_point_px": float(np.hypot(*(K[:2, 2] - cert[:2, 2]))),
+                "aspect": K[1, 1] / K[0, 0] - cert[1, 1] / cert[0, 0], "skew_px": K[0, 1] - cert[0, 1]}
+    if not isinstance(difference, dict) or not all(_close(difference.get(name), value, 1e-6)
+                                                   for name, value in expected.items()):
+        raise Invalid("returned", f"{where}/difference is not the returned K's from the certified one")
+
+
 def _check_camera_certificate(result: dict, certificate: dict, searched: list[dict], certified: list[int],
                               verify: Callable[[dict], object]) -> None:
     """The camera certificate backs the certified cameras, and is about this result: the
@@ -280,6 +350,7 @@ class ReconstructionItems(TrackItems):
         certified = [k for k, camera in enumerate(searched) if camera.get("certified") is True]
         _check_camera_certificate(result, certificate, searched, certified, verify)
         _check_summary(result, registered)
+        _check_calibration(result, registered, certificate.get("options") or {})
 
 
 RECONSTRUCTION = ReconstructionItems()
