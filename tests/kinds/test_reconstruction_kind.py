@@ -149,6 +149,21 @@ class TestResult:
             report = verify_any(forged)
             assert not report.valid and report.first_failure["check"] == check, report.first_failure
 
+    def test_progress_carries_no_placeholder_bounds(self):
+        """A reconstruction's stages report counts, not bounds: its progress events carry null
+        bounds (they carried 0, which the page drew), except a running search's own (the
+        autocalibration's branch and bound)."""
+        events = []
+        solve_job(job(), sink=events.append)
+        stages = {event.get("stage", "").split(" ")[0] for event in events}
+        assert {"projective", "bundle_adjustment", "structure", "cameras"} <= stages
+        for event in events:
+            if event.get("stage", "").startswith("autocalibration"):
+                assert event["lower_bound"] is None or event["lower_bound"] <= event["upper_bound"]
+                continue
+            assert (event["lower_bound"], event["upper_bound"], event["gap_abs"], event["gap_rel"]) == (
+                None, None, None, None), event
+
     def test_a_cancelled_run_keeps_the_stages_before(self):
         from geocert.batch import solve_items
 
