@@ -321,3 +321,71 @@ class TestUnknownIntrinsics:
             resect_cameras=False, principal_point="centre"))
         assert "principal_point" not in held.stages[2]
         assert np.abs(np.array(held.summary["calibration"]["K"])[:2, 2] - [320.0, 240.0]).max() < 1e-9
+
+
+class TestMotion:
+    """The motion of the returned cameras, judged whatever the order of the photos, and at the
+    noise the adjustment's residuals give (upgrade.motion, upgrade.rotation_noise)."""
+
+    @staticmethod
+    def _metric(R, centres):
+        return upgrade.Metric(np.eye(3), list(R), [-r @ c for r, c in zip(R, centres)], np.zeros((0, 3)), [], False)
+
+    @staticmethod
+    def _orders(count: int, seed: int = 0):
+        rng = np.random.default_rng(seed)
+        return [np.arange(count)] + [rng.permutation(count) for _ in range(7)]
+
+    def test_the_judgement_does_not_follow_the_order_of_the_views(self):
+        """An arc round an object: judged "orbital_motion" in every order (the first view as the
+        reference judged one order of it general)."""
+        from tests.solvers.test_critical_motions import layout
+
+        _, R, centres = layout("arc", seed=1)
+        judged = {tuple(w["code"] for w in upgrade.motion(self._metric(R[p], centres[p]))[0])
+                  for p in self._orders(len(R))}
+        assert judged == {("orbital_motion",)}
+
+    @pytest.mark.parametrize("name", ["corridor", "dinoSparseRing"])
+    def test_real_cameras_are_judged_alike_in_any_order(self, name):
+        """VGG's Corridor (a forward walk: it was judged "pure_translation", general or "rotation
+        about one axis" by the order of its frames) and Middlebury's dinoSparseRing (a ring)."""
+        from tests.solvers.test_critical_motions import corridor, dino_sparse_ring
+
+        views = corridor() if name == "corridor" else dino_sparse_ring()
+        judged = {tuple(w["code"] for w in upgrade.motion(self._metric(views.R[p], views.centres[p]))[0])
+                  for p in self._orders(len(views.R))}
+        assert judged == {("pure_translation",) if name == "corridor" else ("orbital_motion",)}
+
+    def test_the_rotation_noise_is_the_poses_scatter(self):
+        """rotation_noise against the scatter of each camera's pose refitted to fresh noise (its
+        points held): within 30%, and in proportion to the pixels' noise."""
+        from scipy.optimize import least_squares
+
+        scene = synthetic.scene(views=6, points=80, seed=11)
+        truth = upgrade.Metric(scene.K, list(scene.rotations), list(scene.translations), scene.points, [], False)
+        rng = np.random.default_rng(0)
+        estimates = {}
+        for sigma in (0.5, 1.0):
+            tracks = [(v, x + sigma * rng.standard_normal(x.shape)) for v, x in scene.tracks]
+            obs = Observations.from_tracks(tracks, 6)
+            estimates[sigma] = upgrade.rotation_noise(truth, obs.view, obs.track, obs.pixel,
+                                                      np.ones(len(obs.view), dtype=bool))
+        assert 1.7 < estimates[1.0] / estimates[0.5] < 2.3
+        X, R0, t0 = scene.points, scene.rotations[0], scene.translations[0]
+        exact = (X @ R0.T + t0) @ scene.K.T
+        exact = exact[:, :2] / exact[:, 2:]
+
+        def pixels(pose):
+            R = Rotation.from_rotvec(pose[:3]).as_matrix() @ R0
+            image = (X @ R.T + t0 + pose[3:]) @ scene.K.T
+            return image[:, :2] / image[:, 2:]
+
+        angles = []
+        for _ in range(200):
+            seen = exact + rng.standard_normal(exact.shape)
+            fit = least_squares(lambda pose: (pixels(pose) - seen).ravel(), np.zeros(6), method="lm")
+            angles.append(fit.x[:3])
+        scatter = float(np.sqrt(np.linalg.eigvalsh(np.cov(np.array(angles).T)).max()))
+        # rotation_noise is a relative rotation's: sqrt(2) times one camera's (the median camera's).
+        assert 0.7 < estimates[1.0] / np.sqrt(2) / scatter < 1.3

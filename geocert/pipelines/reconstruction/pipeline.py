@@ -390,7 +390,8 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             stage.update(status="skipped", reason="options.bundle_adjustment is false", started_from=name)
         out.metric = metric = _normalise_frame(metric)
     keep = _check_cameras(out, metric, obs, keep, options.threshold_px)
-    _judge_motion(stages["autocalibration"], metric)
+    _judge_motion(stages["autocalibration"], metric, upgrade.rotation_noise(metric, obs.view, obs.track, obs.pixel,
+                                                                            keep))
     _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
 
 
@@ -463,13 +464,22 @@ def _depths_and_errors(metric: upgrade.Metric, obs: Observations, m: np.ndarray)
     return cam[:, 2], np.nan_to_num(error, nan=np.inf)
 
 
-def _judge_motion(stage: dict, metric: upgrade.Metric) -> None:
+def _judge_motion(stage: dict, metric: upgrade.Metric, noise: float | None = None) -> None:
     """The motion of the metric reconstruction returned, judged as the autocalibration kind
-    judges it (determinacy.motion_warnings). On a critical motion (a turntable, an orbit, a
-    translating camera) the tracks do not determine constant intrinsics: whatever the stage
-    certified, it is said plainly that the upgrade is not determined by these data."""
-    warnings, critical = upgrade.motion(metric)
-    stage.update(motion_warnings=warnings, critical_motion=critical, determined=critical is None)
+    judges it (determinacy.motion_warnings: the DIAC's family, and the plane at infinity's).
+    ``noise``: the rotations' standard error the adjustment's residuals give
+    (upgrade.rotation_noise). The DIAC's family is judged at no less than
+    determinacy.ROTATION_NOISE (an adjustment drifts along a critical family by more than its
+    residuals' noise: the Dinosaur's turntable axes scatter by 3 degrees), the plane's at that
+    noise. On a critical motion (a turntable, an orbit, a translating camera) the tracks do not
+    determine constant intrinsics: whatever the stage certified, it is said plainly that the
+    upgrade is not determined by these data."""
+    from geocert.solvers.autocalibration.determinacy import ROTATION_NOISE
+
+    diac = max(noise, ROTATION_NOISE) if noise is not None else ROTATION_NOISE
+    warnings, critical = upgrade.motion(metric, diac, noise)
+    stage.update(motion_warnings=warnings, critical_motion=critical, determined=critical is None,
+                 rotation_noise_rad={"estimated": noise, "diac_family": diac, "plane_family": noise})
     if critical is None:
         return
     detail = next((w["detail"] for w in warnings if w["code"] == critical), "")
