@@ -234,11 +234,11 @@ class TestCamerasNotSearched:
 
         searched = structure._bound_camera
 
-        def bound(view, P, X, x, options, every):
+        def bound(view, P, X, x, options, every, dof):
             if view in (1, 4):  # as the free-camera test skips a camera: its cost, no bound, the reason
                 return structure.CameraBound(view, 1.0, None, None, None, False, "not_certified", len(X), 0.0,
-                                             "skipped by the test")
-            return searched(view, P, X, x, options, every)
+                                             "skipped by the test", dof=dof)
+            return searched(view, P, X, x, options, every, dof)
 
         monkeypatch.setattr(structure, "_bound_camera", bound)
         result = solve_job(job(certificate="full"))
@@ -256,15 +256,80 @@ class TestCamerasNotSearched:
         result = solve_job({"kind": "reconstruction", "options": {"certificate": "full"}, "data": {
             "views": [{"image_size": [768, 576]}] * 10,
             "tracks": [{"views": [int(v) for v in views], "points": pixels.tolist()} for views, pixels in tracks]}})
-        assert result["summary"]["views_registered"] == 10 and 0 < result["summary"]["cameras_certified"] < 10
+        # Every camera certified against its tolerance (camera_claim; 1 to 9 of 10 when held to
+        # camera_rel_gap alone, as a 3x4 camera is).
+        assert result["summary"]["views_registered"] == 10 and result["summary"]["cameras_certified"] == 10
         projective = result["stages"][0]  # every observation counted once (27 outliers but 52 not kept)
         assert projective["observations"] - projective["observations_kept"] == projective["outliers_removed"] + \
             projective["observations_of_dropped_tracks"] + projective["observations_of_unregistered_views"]
         for camera in result["cameras"]:  # every camera not certified says why (it was null: issue 14's trial)
             assert (camera["bound_reason"] is None) == camera["certified"], camera
-            if not camera["searched"]:
-                assert "free 3x4 camera" in camera["bound_reason"] and camera["lower_bound"] is None
-        forgeries_refused(result)
+        report = verify_any(json.loads(json.dumps(result)))
+        assert report.valid, report.first_failure
+
+
+
+def refused_as_returned(result: dict, change) -> dict:
+    """The result edited by ``change``: the verifier refuses it, on the returned fields."""
+    forged = json.loads(json.dumps(result))
+    change(forged)
+    report = verify_any(forged)
+    assert not report.valid and report.first_failure["check"] == "returned", report.first_failure
+    return report.first_failure
+
+
+class TestCertifiedFieldsTied:
+    """What a certified camera claims is what the verifier checks: each camera's degrees of
+    freedom from the returned K, its tolerance from its points (camera_claim), its cost within
+    that tolerance of the proven bound."""
+
+    def test_the_honest_result_verifies(self, solved):
+        report = verify_any(json.loads(json.dumps(solved)))
+        assert report.valid, report.first_failure
+        assert all(c["certified"] and c["degrees_of_freedom"] == 6 for c in solved["cameras"])
+
+    @pytest.mark.parametrize("field, value", [("degrees_of_freedom", 5), ("degrees_of_freedom", 11),
+                                              ("tolerance", 0.9)])
+    def test_an_edited_camera_claim_is_refused(self, solved, field, value):
+        refused_as_returned(solved, lambda r: r["cameras"][2].update({field: value}))
+
+    def test_a_camera_beyond_its_tolerance_is_refused(self, monkeypatch):
+        """A wrong camera (view 3 turned by 0.1 degree, about 1.4 px, before the structure stage: the points are
+        certified in it) certified by a solver whose tolerance was forged (1e12: anything passes):
+        refused for the stated tolerance, for none stated (then held to a 3x4 camera's), and for
+        the true figures stated (its cost beyond them)."""
+        from scipy.spatial.transform import Rotation
+
+        from geocert.pipelines.reconstruction import pipeline
+        from geocert.solvers.reconstruction import camera_claim, structure
+
+        metric_cameras = pipeline._metric_cameras
+
+        def turned(out, metric, n_views):
+            R = metric.rotations[3]
+            metric.rotations[3] = Rotation.from_rotvec([np.radians(0.1), 0.0, 0.0]).as_matrix() @ R
+            metric.translations[3] = metric.rotations[3] @ (R.T @ metric.translations[3])  # the same centre
+            return metric_cameras(out, metric, n_views)
+
+        true_tolerance = camera_claim.tolerance
+        monkeypatch.setattr(pipeline, "_metric_cameras", turned)
+        monkeypatch.setattr(camera_claim, "tolerance", lambda *a: 1e12)
+        result = solve_job(job(certificate="full", bound_every_camera=True))
+        monkeypatch.undo()
+        camera = result["cameras"][3]
+        assert camera["certified"] and camera["cost"] > 2 * camera["lower_bound"] > 0, json.dumps({k: v for k, v in camera.items() if k not in ("K", "R", "t", "P", "center")})
+        assert "tolerance" in refused_as_returned(result, lambda r: None)["detail"]
+
+        def unstated(r):
+            for c in r["cameras"]:
+                c.pop("tolerance"), c.pop("degrees_of_freedom")
+
+        def true_figures(r):
+            for c in r["cameras"]:
+                c["tolerance"] = true_tolerance(c["points"], 6, "L2L2", r["certificate"]["options"]["camera_rel_gap"])
+
+        for change in (unstated, true_figures):
+            assert "beyond (1 + tolerance" in refused_as_returned(result, change)["detail"]
 
 
 def run_cancelled_at(stage: str, monkeypatch=None, **options) -> tuple[dict, list[str]]:

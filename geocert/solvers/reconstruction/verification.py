@@ -14,7 +14,9 @@ a result to them (docs/certificate.md, "Reconstruction"):
   abs_gap and camera_rel_gap, one map per searched camera built from the returned points, in
   view order; a certified camera's cost is recomputed from its P, every point lies in front of
   it (the resection bound's scope), its lower bound is at most the proven one and its cost, its
-  gap is cost - lower_bound and within the camera tolerance of the proven bound;
+  gap is cost - lower_bound, and its cost at most (1 + tolerance) times the proven bound plus
+  abs_gap, the tolerance recomputed (camera_claim) from its points, the norm, camera_rel_gap and
+  its degrees of freedom, which the returned cameras' K give;
 - the summary's counts and RMS are recomputed from the items.
 
 A camera no bound could certify is not searched (structure.resect_cameras) and claims no bound.
@@ -34,6 +36,7 @@ import numpy as np
 from geocert.solvers.core.geometry import is_number, norm_cost
 from geocert.solvers.core.strict import Invalid, number, numbers
 from geocert.solvers.fractional.items import TrackItems
+from geocert.solvers.reconstruction import camera_claim
 
 ROUNDING = 1e-9  # relative: what JSON round trips and a recomputed cost may differ by
 CAMERA_FIELDS = ("K", "R", "t", "center", "P")
@@ -154,7 +157,7 @@ def _check_summary(result: dict, registered: list[dict]) -> None:
         if not isinstance(stage, dict):
             continue
         counts = {"structure": {"points": len(points), "certified": certified_points},
-                  "cameras": {"cameras": len(cameras), "certified": certified_cameras,
+                  "cameras": {"cameras": len(registered), "certified": certified_cameras,
                               "searched": sum(1 for c in cameras if c.get("searched") is True)}}.get(stage.get("name"))
         for name, value in (counts or {}).items():
             if name in stage and stage[name] != value:
@@ -197,6 +200,7 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
             raise Invalid("returned", f"cameras/{camera.get('view')}: the camera certificate's map is not the "
                                       "returned points")
     norm = result.get("norm")
+    dof = camera_claim.degrees_of_freedom([camera["K"] for camera in _views_of(result["cameras"])])
     for k, camera in enumerate(searched):
         claim, where = claims[k], f"cameras/{camera.get('view')}"
         proven = discounted.get(k, claim.get("lower_bound"))
@@ -226,10 +230,30 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
             raise Invalid("returned", f"{where}: gap or optimal_cost is not what its cost and its proof give")
         if camera.get("status") != "optimal":
             raise Invalid("returned", f"{where}: a certified camera's status is optimal")
-        tolerance_abs = max(float(options["abs_gap"]), float(options["rel_gap"]) * cost)
-        if not cost - proven <= tolerance_abs * (1 + ROUNDING) + ROUNDING * max(1.0, abs(cost)):
-            raise Invalid("returned", f"{where}: costs {cost:.6g}, beyond the tolerance {tolerance_abs:.3g} above the "
-                                      f"proven bound {proven:.6g}")
+        tolerance = _camera_tolerance(camera, dof, len(source), norm, float(options["rel_gap"]), where)
+        allowed = (1.0 + tolerance) * proven + float(options["abs_gap"])
+        if not cost <= allowed * (1 + ROUNDING) + ROUNDING * max(1.0, abs(cost)):
+            raise Invalid("returned", f"{where}: costs {cost:.6g}, beyond (1 + tolerance {tolerance:.3g}) times the "
+                                      f"proven bound {proven:.6g} plus abs_gap")
+
+
+def _camera_tolerance(camera: dict, dof: int, points: int, norm: str, rel_gap: float, where: str) -> float:
+    """A certified camera's tolerance (camera_claim.tolerance), recomputed from its points, the
+    norm, camera_rel_gap and its degrees of freedom, which the returned cameras' K give
+    (camera_claim.degrees_of_freedom); the camera's stated figures must be these. A camera that
+    states none (a result from before they were stated) is held to a 3x4 camera's: no allowance."""
+    stated = camera.get("degrees_of_freedom")
+    if stated is None and camera.get("tolerance") is None:
+        dof = camera_claim.PROJECTIVE_DOF
+    elif stated != dof:
+        raise Invalid("returned", f"{where}: degrees_of_freedom {stated!r}, the returned cameras' K give {dof}")
+    tolerance = camera_claim.tolerance(points, dof, norm, rel_gap)
+    if tolerance is None:
+        raise Invalid("returned", f"{where}: {points} points and camera_rel_gap {rel_gap!r} allow no tolerance")
+    if "tolerance" in camera and not _close(camera["tolerance"], tolerance):
+        raise Invalid("returned", f"{where}: tolerance {camera['tolerance']!r}, its points and degrees of freedom "
+                                  f"give {tolerance!r}")
+    return tolerance
 
 
 class ReconstructionItems(TrackItems):
@@ -261,8 +285,12 @@ class ReconstructionItems(TrackItems):
             "for each certified point, in the cameras returned (the certificate's data): " + statement["statement"]
             + "; for each certified camera, by the camera certificate (a resection document over the returned points, "
               "with the result's norm, max_residual, abs_gap and camera_rel_gap): no 3x4 camera in front of every point "
-              "costs less than its lower_bound, and the camera returned costs cost; the metric upgrade's "
-              "certification (autocalibration_certified) is the pipeline's statement: no proof of it is carried here")
+              "costs less than its lower_bound, and the camera returned costs cost, at most (1 + tolerance) lower_bound "
+              "+ abs_gap, its tolerance the allowance for its fewer degrees of freedom than a 3x4 camera's (what they "
+              "cost at the 99.9% level under Gaussian noise: a statistical allowance, not a bound) and camera_rel_gap; "
+              "the metric upgrade's certification "
+              "(autocalibration_certified) is the pipeline's statement: no proof of it is "
+              "carried here")
         return statement
 
     def check_result(self, result: dict, certificate: dict, verify: Callable[[dict], object]) -> None:
