@@ -279,13 +279,16 @@ def refused_as_returned(result: dict, change) -> dict:
 
 
 class TestCertifiedFieldsTied:
-    """What a certified camera claims is what the verifier checks: each camera's degrees of
-    freedom from the returned K, its tolerance from its points (camera_claim), its cost within
-    that tolerance of the proven bound."""
+    """What a certified camera and summary.calibration claim is what the verifier checks: each
+    camera's degrees of freedom from the returned K, its tolerance from its points
+    (camera_claim), its cost within that tolerance of the proven bound; the calibration's K the
+    cameras' own, the certified K's difference, edges, determined and warnings recomputed."""
 
     def test_the_honest_result_verifies(self, solved):
         report = verify_any(json.loads(json.dumps(solved)))
         assert report.valid, report.first_failure
+        calibration = solved["summary"]["calibration"]
+        assert calibration["certified"] and not calibration["returned_is_certified"]  # the adjustment moved K
         assert all(c["certified"] and c["degrees_of_freedom"] == 6 for c in solved["cameras"])
 
     @pytest.mark.parametrize("field, value", [("degrees_of_freedom", 5), ("degrees_of_freedom", 11),
@@ -330,6 +333,53 @@ class TestCertifiedFieldsTied:
 
         for change in (unstated, true_figures):
             assert "beyond (1 + tolerance" in refused_as_returned(result, change)["detail"]
+
+    @pytest.mark.parametrize("change", [
+        lambda c: c["K"][0].__setitem__(0, c["K"][0][0] * 1.01),  # not the cameras' K
+        lambda c: c.update(certified_K=c["K"], returned_is_certified=True, source="autocalibration",
+                           difference={"focal_percent": 0.0, "principal_point_px": 0.0, "aspect": 0.0,
+                                       "skew_px": 0.0}),  # the returned K called the one the stage certified
+        lambda c: c.update(returned_is_certified=True),
+        lambda c: c.update(source="autocalibration"),
+        lambda c: c["difference"].update(focal_percent=0.0),
+        lambda c: c.update(certified=False, certified_K=None, difference=None),  # then determined is false
+        lambda c: c.update(on_range_edge=["focal"]),
+    ])
+    def test_an_edited_calibration_is_refused(self, solved, change):
+        refused_as_returned(solved, lambda r: change(r["summary"]["calibration"]))
+
+    def test_determined_on_the_range_edge_is_refused(self, solved):
+        """The autocalibration's focal range ending at the certified focal length: the K is on its
+        range's edge, so determined true (and no warning) is refused."""
+        def edge(r):
+            stage = next(s for s in r["stages"] if s["name"] == "autocalibration")
+            stage["intrinsics"]["focal"][1] = r["summary"]["calibration"]["certified_K"][0][0]
+        refused_as_returned(solved, edge)
+
+        def edge_stated(r):
+            edge(r)
+            r["summary"]["calibration"]["on_range_edge"] = ["focal"]
+        assert "determined" in refused_as_returned(solved, edge_stated)["detail"]
+
+    @pytest.mark.parametrize("change", [
+        lambda s: s.update(autocalibration_determined=None),
+        lambda s: s.update(autocalibration_certified=False),
+        lambda s: s.update(warnings=[]),  # the returned K not the certified one, unsaid
+        lambda s: s.update(critical_motion="orbital_motion"),  # determined under a critical motion
+    ])
+    def test_an_edited_summary_claim_is_refused(self, solved, change):
+        refused_as_returned(solved, lambda r: change(r["summary"]))
+
+    def test_views_not_registered_are_said_first(self):
+        """A view no track reaches is not registered: the first warning says so, and a result
+        without that warning is refused."""
+        body = job(certificate="full")
+        body["data"]["views"].append({"name": "unseen", "image_size": [640, 480]})
+        result = solve_job(body)
+        assert result["summary"]["views_registered"] == 6 and result["summary"]["warnings"][0]["code"] == \
+            "views_not_registered"
+        assert verify_any(json.loads(json.dumps(result))).valid
+        refused_as_returned(result, lambda r: r["summary"]["warnings"].pop(0))
 
 
 def run_cancelled_at(stage: str, monkeypatch=None, **options) -> tuple[dict, list[str]]:

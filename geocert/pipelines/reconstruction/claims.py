@@ -50,6 +50,14 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
                        # the claims about K, as the calibration object states them (about its certified_K)
                        autocalibration_certified=claim.certified, autocalibration_determined=claim.determined)
     warnings = []
+    missing = [c for c in out.cameras if not c.registered]
+    if missing:  # first: how much of what was sent the result covers
+        why: dict[str, list[int]] = {}
+        for c in missing:
+            why.setdefault(c.reason or "no reason recorded", []).append(c.view)
+        warnings.append({"code": "views_not_registered", "detail": (
+            f"{len(missing)} of {n_views} views not registered (no camera returned for them): " + "; ".join(
+                f"views {', '.join(map(str, views))}: {reason}" for reason, views in why.items()))})
     warnings += list(claim.warnings)
     if out.metric is None and registered:
         warnings.append({"code": "no_metric_upgrade", "detail": (
