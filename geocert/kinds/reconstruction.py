@@ -136,7 +136,7 @@ class ReconstructionOptionsIn(Strict):
     bundle_adjustment: bool = _D.bundle_adjustment
     resect_cameras: bool = _D.resect_cameras
     camera_rel_gap: Finite = Field(_D.camera_rel_gap, **_R["camera_rel_gap"],
-                                   description="each camera's resection, and the returned camera's tolerance")
+                                   description="each camera's resection's gap, a part of the returned camera's tolerance")
     bound_every_camera: bool = Field(_D.bound_every_camera,
                                      description="false: no certified resection for a camera a free camera found "
                                                  "locally proves uncertifiable (it is reported without a bound)")
@@ -180,7 +180,7 @@ class ReconstructionCamera(BaseModel):
     P: list[list[float]] | None = Field(description="3x4 pixels: K [R | t] (the projective camera when no metric "
                                                     "upgrade was found)")
     cost: float | None = Field(description="the camera's reprojection cost on the returned points (the norm's)")
-    lower_bound: float | None = Field(description="certified: no 3x4 camera putting those points in front costs less")
+    lower_bound: float | None = Field(description="proven: no 3x4 camera putting those points in front costs less")
     gap: float | None
     optimal_cost: float | None = Field(description="the certified resection's own optimum")
     certified: bool
@@ -189,6 +189,13 @@ class ReconstructionCamera(BaseModel):
                                                        "searched, not certified by the search, a point behind it, "
                                                        "a gap beyond the tolerance, cancelled); null when certified")
     points: int = Field(description="points the resection used")
+    degrees_of_freedom: int | None = Field(None, description="the returned camera's own: its pose (6) plus each "
+                                                             "intrinsic the registered cameras do not share")
+    tolerance: float | None = Field(None, description="certified means cost <= (1 + tolerance) lower_bound + abs_gap: "
+                                                      "(1 + chi2_0.999(11 - degrees_of_freedom) / (k (2 points - 11))) "
+                                                      "/ (1 - camera_rel_gap) - 1, k 1 for L2L2 and 2 for the L1 "
+                                                      "norms (what its fewer degrees of freedom than a 3x4 camera's "
+                                                      "cost); null when too few points allow none")
     searched: bool = Field(False, description="the certified resection ran for this camera: with certificate "
                                               "\"full\", its map is in camera_certificate (one per searched camera, "
                                               "in view order); a camera not searched claims no bound")
@@ -496,7 +503,8 @@ class ReconstructionKind:
                 "gap": None if b is None else b.gap, "optimal_cost": None if b is None else b.optimal_cost,
                 "certified": bool(b is not None and b.certified), "status": "not_run" if b is None else b.status,
                 "bound_reason": None if b is None else b.reason,
-                "points": 0 if b is None else b.points, "searched": bool(b is not None and b.result is not None)}
+                "points": 0 if b is None else b.points, "searched": bool(b is not None and b.result is not None),
+                "degrees_of_freedom": None if b is None else b.dof, "tolerance": None if b is None else b.tolerance}
 
     @staticmethod
     def _camera_items(out, options, bounds: dict) -> list[dict]:

@@ -423,7 +423,10 @@ class JobStore:
     # figures are kept, and the sums moved by the change, in Redis, so that storing a task's
     # progress costs the same however many chunks the job has (reading every task's progress at
     # every save made a large job's traffic grow with the square of its chunks).
-    _SUMS = ("nodes", "open_boxes", "lower_bound", "upper_bound", "gap_abs")
+    # "bounded" counts the tasks whose progress has bounds: with none, the bounds are null (a
+    # reconstruction's stages, or a search not started), not the 0 or rounding residue the sums
+    # hold (1e-17 once a stage's bounds were added and taken away again), which a chart would draw.
+    _SUMS = ("nodes", "open_boxes", "lower_bound", "upper_bound", "gap_abs", "bounded")
     _ADD_PROGRESS = """
     local status = redis.call('HGET', KEYS[4], 'status')
     if status ~= '"queued"' and status ~= '"running"' then return false end
@@ -437,8 +440,8 @@ class JobStore:
         local change = tonumber(v) - (before[i] or 0)
         if change ~= 0 then redis.call('HINCRBYFLOAT', KEYS[2], ARGV[2 + i], change) end
     end
-    if ARGV[8] == '' then redis.call('ZREM', KEYS[3], ARGV[1]) else redis.call('ZADD', KEYS[3], ARGV[8], ARGV[1]) end
-    local sums = redis.call('HMGET', KEYS[2], ARGV[3], ARGV[4], ARGV[5], ARGV[6], ARGV[7])
+    if ARGV[9] == '' then redis.call('ZREM', KEYS[3], ARGV[1]) else redis.call('ZADD', KEYS[3], ARGV[9], ARGV[1]) end
+    local sums = redis.call('HMGET', KEYS[2], ARGV[3], ARGV[4], ARGV[5], ARGV[6], ARGV[7], ARGV[8])
     local worst = redis.call('ZREVRANGE', KEYS[3], 0, 0, 'WITHSCORES')
     return {sums, worst}
     """
@@ -452,8 +455,9 @@ class JobStore:
         items it had not counted). ``fragment``: see save_fragment (written in the same
         transaction, so whoever sees the last item counted sees its fragment too). None, writing
         nothing, once the job has ended or is gone (``_SAVE``)."""
+        bounded = progress.get("lower_bound") is not None and progress.get("upper_bound") is not None
         figures = ",".join(repr(float(v)) if math.isfinite(v := float(progress.get(name) or 0.0)) else "0.0"
-                           for name in self._SUMS)
+                           for name in self._SUMS[:-1]) + (",1.0" if bounded else ",0.0")
         gap = progress.get("gap_rel")
         pipe = self.r.pipeline()  # one round trip for the writes and reads, one for the aggregate
         self._save(pipe, job_id, items or {}, fragment)
@@ -468,12 +472,13 @@ class JobStore:
         total = None if raw_total is None else json.loads(raw_total)
         started = (None if raw_started is None else json.loads(raw_started)) or now()
         sums = [float(v) if v is not None else 0.0 for v in sums]
+        bounded = sums[5] > 0.5
         aggregate = {
             "nodes": int(round(sums[0])),
             "open_boxes": int(round(sums[1])),
-            "lower_bound": sums[2],
-            "upper_bound": sums[3],
-            "gap_abs": sums[4],
+            "lower_bound": sums[2] if bounded else None,
+            "upper_bound": sums[3] if bounded else None,
+            "gap_abs": sums[4] if bounded else None,
             "gap_rel": float(worst[1]) if worst else None,
             "items_done": done,
             "items_total": total,

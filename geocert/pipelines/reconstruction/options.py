@@ -47,9 +47,9 @@ class ReconstructionOptions(FractionalOptions):
     # one K with all five entries free.
     camera_model: str = "simple"
     resect_cameras: bool = True  # the certified resection of every camera
-    camera_rel_gap: float = 1e-2  # the resections' (and the returned camera's tolerance against their bound)
+    camera_rel_gap: float = 1e-2  # the resections' gap (a part of the returned camera's tolerance: camera_claim)
     # False: no certified resection for a camera that cannot be certified (a point behind it, or a
-    # free 3x4 camera found locally beats it by more than camera_rel_gap); True: every camera's bound.
+    # free 3x4 camera found locally beats it by more than its tolerance); True: every camera's bound.
     bound_every_camera: bool = False
     # Photos only: stage 1's matching (features.FeatureOptions; the names of FEATURE_RANGES).
     features: dict = field(default_factory=dict)
