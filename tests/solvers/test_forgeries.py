@@ -651,7 +651,7 @@ class TestCalibrationTied:
         assert refused(forged)["check"] == "returned"
 
     @pytest.mark.parametrize("changes", [{"returned_is_certified": True, "source": "autocalibration"},
-                                         {"certified": False}, {"determined": False},
+                                         {"certified": False}, {"determined": True},
                                          {"difference": {"focal_percent": 0.0, "principal_point_px": 0.0,
                                                          "aspect": 0.0, "skew_px": 0.0}},
                                          {"certified_K": [[700.0, 0.0, 320.0], [0.0, 700.0, 240.0], [0, 0, 1.0]]}])
