@@ -42,6 +42,7 @@ def scip_triangulate(cameras: np.ndarray, points: np.ndarray, norm: str, centre:
     model.hideOutput(quiet)
     model.setParam("numerics/feastol", 1e-9)
     model.setParam("limits/gap", gap)
+    model.setParam("timing/clocktype", 1)  # the limit in CPU seconds, which other processes cannot use up
     model.setParam("limits/time", time_limit)
     X = [model.addVar(lb=centre[k] - radius, ub=centre[k] + radius, name=f"x{k}") for k in range(3)]
 
@@ -153,6 +154,7 @@ def scip_map(source: np.ndarray, target: np.ndarray, norm: str, box: float = 10.
     model.hideOutput()
     model.setParam("numerics/feastol", 1e-9)
     model.setParam("limits/gap", gap)
+    model.setParam("timing/clocktype", 1)  # the limit in CPU seconds, which other processes cannot use up
     model.setParam("limits/time", time_limit)
     M = [[model.addVar(lb=-box, ub=box, name=f"M{r}{c}") for c in range(n + 1)] for r in range(m + 1)]
 

@@ -17,10 +17,9 @@ from geocert.kinds import get_kind
 from geocert.solvers.autocalibration import scenes
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.verify import verify_any
-from tests.support import HOUSE_RANGES, ROOT, house_in_projective_frame
+from tests.support import HOUSE_RANGES, house_in_projective_frame, shared_data
 
 KIND = get_kind("autocalibration")
-SHARED = ROOT.parent / "shared" / "data"
 
 
 def job(data=None, **options) -> dict:
@@ -147,7 +146,7 @@ class TestCommandLine:
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not (SHARED / "oxford_dinosaur").exists(), reason="needs ../shared/data")
+@pytest.mark.shared_data("oxford_dinosaur")
 class TestOxfordDinosaur:
     """The turntable is a critical motion for constant intrinsics (ALGORITHMS.md section 3): the
     modulus constraints vanish on a family of planes, and K is not determined. What a metric
@@ -156,7 +155,7 @@ class TestOxfordDinosaur:
     def test_rotations_share_one_axis_and_step_equally(self):
         from geocert.solvers.datasets import load_dinosaur
 
-        cameras, tracks = load_dinosaur(SHARED / "oxford_dinosaur")
+        cameras, tracks = load_dinosaur(shared_data("oxford_dinosaur"))
         points = []
         for track in tracks:
             if len(track.views) >= 6:
@@ -210,7 +209,7 @@ class TestSelfCheck:
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not (SHARED / "oxford_house").exists(), reason="needs ../shared/data")
+@pytest.mark.shared_data("oxford_house")
 class TestOxfordModelHouse:
     """The Model House (credit: Oxford VGG), its 10 cameras and 672 points moved to a projective
     frame. VGG's cameras do not share one K (focal 594 to 666 px, principal point u 388 to 480,

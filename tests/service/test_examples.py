@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 
 from tests.servers import cluster
-from tests.support import ROOT, SHARED
+from tests.support import ROOT, SHARED_DATA
 
 EXAMPLES = ROOT / "examples"
-REAL_DATA = SHARED / "data"
+REAL_DATA = SHARED_DATA
 SERVICE_TIME_LIMIT_S = 600  # what a job may take under a loaded machine; they take seconds
 
 
@@ -86,7 +86,7 @@ def test_the_openapi_document_carries_an_example_job_per_kind():
         JOB_REQUEST.validate_python(examples[kind.name]["value"])
 
 
-@pytest.mark.skipif(not REAL_DATA.exists(), reason="needs ../shared/data (the real datasets): CI has it")
+@pytest.mark.shared_data("oxford_house", "oxford_dinosaur", "middlebury_dinoSparseRing")
 def test_the_real_data_examples_are_written_from_the_datasets(tmp_path, monkeypatch):
     from geocert.app.schemas import JOB_REQUEST
     from geocert.batch import parse_job
@@ -275,7 +275,7 @@ def test_the_service_solves_the_example_and_the_cli_gives_the_same_answer(servic
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not REAL_DATA.exists(), reason="needs ../shared/data (the real datasets): CI has it")
+@pytest.mark.shared_data("oxford_house")
 def test_the_real_house_triangulation_through_the_service_and_the_cli(service, tmp_path):
     """The Oxford Model House's tracks in VGG's cameras (credit: Oxford VGG)."""
     path = tmp_path / "house-triangulation.json"

@@ -23,9 +23,7 @@ from geocert.batch import solve_job
 from geocert.solvers.autocalibration import direct, scenes
 from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.autocalibration import problem as pr
-from tests.support import HOUSE_RANGES, ROOT, house_in_projective_frame
-
-SHARED = ROOT.parent / "shared" / "data"
+from tests.support import HOUSE_RANGES, house_in_projective_frame, shared_data
 
 
 def solve(data: dict, method: str, **options) -> dict:
@@ -96,12 +94,14 @@ def rotation_steps(result: dict) -> tuple[np.ndarray, np.ndarray]:
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not (SHARED / "oxford_dinosaur").exists(), reason="needs ../shared/data")
+@pytest.mark.shared_data("oxford_dinosaur")
 class TestDinosaur:
     """Measured (2026-11-23): both certify (direct: moment rank 1, cost 7.27e-5, gap 7e-11; stratified:
     both stages at cost ~1e-27); the direct K has f = 2870 px, the stratified f = 100 px with aspect
     0.52 (the ranges' edge), because the turntable leaves K undetermined (Sturm 1997), which both
-    results report; the 35 rotation steps agree to 1.3e-4 degrees (mean 9.987, sd 0.040)."""
+    results report; the 35 rotation steps agree to 1.3e-4 degrees (mean 9.987, sd 0.040). Which
+    member of the undetermined family each method returns is the path its solver took (the
+    stratified f was 380 px with OpenBLAS's SkylakeX kernels): the tests assert what holds for any."""
 
     WIDE = {"focal": [100, 5000], "aspect": [0.2, 5], "skew": [-200, 200], "principal_point": [[0, 720], [0, 576]]}
 
@@ -110,7 +110,7 @@ class TestDinosaur:
     def results(cls):
         from geocert.solvers.datasets import load_dinosaur
 
-        cameras, tracks = load_dinosaur(SHARED / "oxford_dinosaur")
+        cameras, tracks = load_dinosaur(shared_data("oxford_dinosaur"))
         points = []
         for track in tracks:  # the tracks seen in six views or more, triangulated linearly
             if len(track.views) >= 6:
@@ -136,27 +136,28 @@ class TestDinosaur:
 
     def test_both_planes_lie_in_the_turntables_family(self, results):
         """The critical family: every plane through the rotation axis's line at infinity (in this
-        frame the planes (0, 0, a, b)); the two methods pick different members."""
+        frame the planes (0, 0, a, b)). Which member each method picks is its solver's path (they
+        differed here; two kernels could make them meet), so only the family is asserted."""
         planes = {method: np.array(result["plane_at_infinity"]) for method, result in results.items()}
         for plane in planes.values():
             assert np.abs(plane[:2]).max() < 1e-4
-        assert abs(abs(planes["direct"] @ planes["stratified"]) - 1) > 0.1  # not the same member
 
     def test_K_is_reported_undetermined_by_both(self, results):
         """Agreement on K is not to be had: both say the data do not fix it (null interval ends,
-        orbital motion), and their Ks differ by more than an order of magnitude in focal length."""
+        orbital motion), each K within the ranges searched (their focal lengths differed by 7.5
+        to 29 times, by machine)."""
         for result in results.values():
             stage = result["stages"][-1]
             assert "orbital_motion" in [warning["code"] for warning in stage["determinacy"]["warnings"]]
             assert interval(result, "focal_x") == (None, None)
-        focal = {method: np.array(result["K"])[0, 0] for method, result in results.items()}
-        assert focal["direct"] / focal["stratified"] > 10
+            K = np.array(result["K"])
+            assert self.WIDE["focal"][0] * (1 - 1e-6) <= K[0, 0] <= self.WIDE["focal"][1] * (1 + 1e-6)
 
 
 # --- the Oxford Model House: 10 views whose own cameras do not share one K ------------------------
 
 @pytest.mark.slow
-@pytest.mark.skipif(not (SHARED / "oxford_house").exists(), reason="needs ../shared/data")
+@pytest.mark.shared_data("oxford_house")
 class TestModelHouse:
     """VGG's cameras have focal lengths 594 to 666 px, aspect 0.99 to 1.08, principal point u 388 to
     480: no constant K fits them, (7.12) is not zero at VGG's quadric (2.1e-3), nor the modulus
@@ -195,14 +196,16 @@ class TestModelHouse:
     def test_only_the_direct_method_certifies_and_bounds_stay_below_costs(self, house):
         """The direct method certifies its quadric since its program is split (direct_solve.MAX_SPLITS):
         unsplit, order 2 was 1.7% below it with moment rank 2; split once, the half holding it is
-        rank one and the gap 2.9e-8 relative (measured 2026-11-23)."""
+        rank one and the gap 2.9e-8 relative (measured 2026-11-23). The certified bound now also
+        charges its own rounding (cones.rounding_margin, from the dual's magnitudes: 2.2e-6 of the
+        cost here, on any kernel), so the gap is asked to close to 1e-5, not 1e-6."""
         _, results, _ = house
         for method, result in results.items():
             for stage in result["stages"]:
                 assert stage["certified"] == (method == "direct"), (method, stage["name"])
                 assert stage["lower_bound"] <= stage["cost"], (method, stage["name"])
         stage = results["direct"]["stages"][0]
-        assert stage["certificate"]["moment_rank"] == 1 and stage["gap"] <= 1e-6 * stage["cost"]
+        assert stage["certificate"]["moment_rank"] == 1 and stage["gap"] <= 1e-5 * stage["cost"]
 
     def test_each_answer_is_the_better_by_its_own_cost(self, house):
         problem, results, vgg = house

@@ -16,17 +16,16 @@ from geocert.solvers.fractional.results import LocalCertificate, claim_of
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 from geocert.solvers.verify import checked_options, verify_arrays
 
-from tests.support import project, random_cameras
+from tests.support import project, random_cameras, shared_data
 
-DINOSAUR = Path("/work/shared/data/oxford_dinosaur")
 NORMS = ("L2L2", "L2L1", "L1L1")
 
-pytestmark = pytest.mark.skipif(not DINOSAUR.exists(), reason="the Oxford Dinosaur data are not here")
+pytestmark = pytest.mark.shared_data("oxford_dinosaur")
 
 
 @pytest.fixture(scope="module")
 def dinosaur():
-    cameras, tracks = load_dinosaur(DINOSAUR)
+    cameras, tracks = load_dinosaur(shared_data("oxford_dinosaur"))
     # 300 tracks of every length: the first 150, then the next 150 of 4 views or more.
     chosen = list(range(150)) + [i for i in range(150, len(tracks)) if len(tracks[i].views) >= 4][:150]
     return cameras, [(tracks[i].views, tracks[i].points) for i in chosen]
@@ -209,7 +208,7 @@ def test_a_root_node_claim_holds_when_the_verifier_rebuilds_the_track_alone(norm
     track's chart and relaxation alone, whose last bits differ. On these tracks (solved in their
     chunk of 500) the bound as computed was 2e-11 to 5e-10 above what the verifier recomputes from
     the same dual, and was refused: the claim sits LEAF_MARGIN below it."""
-    cameras, loaded = load_dinosaur(DINOSAUR)
+    cameras, loaded = load_dinosaur(shared_data("oxford_dinosaur"))
     start = index - index % 500
     chunk = [(track.views, track.points) for track in loaded[start:start + 500]]
     options = TriangulationOptions(norm=norm, certificate="full")

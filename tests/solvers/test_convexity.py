@@ -6,8 +6,6 @@ enough."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import scipy.optimize
@@ -19,9 +17,8 @@ from geocert.solvers.fractional.convexity import (PAIRS, bounds_at, convexity_bo
                                                   track_bound)
 from geocert.solvers.fractional.triangulation import TriangulationOptions
 
-from tests.support import noisy_track, random_cameras, seed
+from tests.support import noisy_track, random_cameras, seed, shared_data
 
-DINOSAUR = Path("/work/shared/data/oxford_dinosaur")
 
 
 def scene(rng, tracks: int, views: tuple[int, int], noise: tuple[float, ...], cameras: int = 20):
@@ -61,9 +58,7 @@ def test_the_local_solve_finds_scipys_optimum(views):
 
 @pytest.fixture(scope="module")
 def dinosaur():
-    if not DINOSAUR.exists():
-        pytest.skip("the Oxford Dinosaur data are not here")
-    cameras, tracks = load_dinosaur(DINOSAUR)
+    cameras, tracks = load_dinosaur(shared_data("oxford_dinosaur"))
     chosen = list(range(0, len(tracks), 10))  # 499 tracks, every length
     return cameras, [(tracks[i].views, tracks[i].points) for i in chosen]
 

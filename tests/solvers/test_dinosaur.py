@@ -6,9 +6,7 @@ import pytest
 from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 
-from tests.support import SHARED
-
-DINOSAUR = SHARED / "data" / "oxford_dinosaur"
+from tests.support import shared_data
 
 
 pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run only
@@ -16,9 +14,7 @@ pytestmark = pytest.mark.slow  # real servers, real data or SCIP: the full run o
 
 @pytest.fixture(scope="module")
 def dinosaur():
-    if not DINOSAUR.exists():
-        pytest.skip("shared/data is not beside this checkout")
-    return load_dinosaur(DINOSAUR)
+    return load_dinosaur(shared_data("oxford_dinosaur"))
 
 
 class TestDinosaur:

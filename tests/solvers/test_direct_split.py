@@ -137,7 +137,7 @@ def test_a_split_that_lowers_the_bound_is_not_kept(monkeypatch):
 
     from geocert.solvers.core.conic import ConicStatus
 
-    def fake_leaf(setup, options, order, orientation, cuts):
+    def fake_leaf(setup, options, order, orientation, cuts, check=None):
         if not cuts:
             return leaf(cuts, ConicStatus.OPTIMAL, 1.0, 2)
         return leaf(cuts, ConicStatus.OPTIMAL if cuts[-1][2] == 1 else ConicStatus.INACCURATE,

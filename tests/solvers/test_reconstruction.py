@@ -4,8 +4,6 @@ VGG's cameras, and the Oxford Dinosaur's turntable (Oxford Visual Geometry Group
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from scipy.linalg import rq
@@ -17,9 +15,7 @@ from geocert.solvers.reconstruction import projective, synthetic, upgrade
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.tracks import Observations
 
-DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
-if not DATA.exists():
-    DATA = Path("/work/shared/data")
+from tests.support import shared_data
 
 
 def aligned_rotation_errors(estimated: list[np.ndarray], truth: list[np.ndarray]) -> np.ndarray:
@@ -32,7 +28,7 @@ def aligned_rotation_errors(estimated: list[np.ndarray], truth: list[np.ndarray]
 
 
 def house_tracks():
-    cameras, points, views = load_house(DATA / "oxford_house")
+    cameras, points, views = load_house(shared_data("oxford_house"))
     by_point: dict[int, list] = {}
     for v, seen in enumerate(views):
         for index, pixel in zip(seen.point_indices, seen.pixels):
@@ -170,7 +166,7 @@ class TestModelHouse:
 @pytest.mark.slow
 class TestDinosaur:
     def test_every_view_registers_and_the_turntable_steps_by_ten_degrees(self):
-        _, loaded = load_dinosaur(DATA / "oxford_dinosaur")
+        _, loaded = load_dinosaur(shared_data("oxford_dinosaur"))
         tracks = [(np.array(t.views), t.points) for t in loaded]
         options = ReconstructionOptions(autocalibration_time_limit_s=10)
         proj = projective.reconstruct(tracks, 36, projective.ProjectiveOptions())

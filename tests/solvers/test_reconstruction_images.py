@@ -20,7 +20,8 @@ from geocert.solvers.core.geometry import InputError
 from geocert.pipelines.reconstruction import features
 from geocert.solvers.reconstruction import calibrated
 from geocert.solvers.reconstruction.calibrated import (CalibratedOptions, align_rotations,
-                                                       calibrated_reconstruction, refine_cameras)
+                                                       calibrated_reconstruction, refine_cameras,
+                                                       rotation_angle_deg)
 from geocert.pipelines.reconstruction.features import (FeatureOptions, build_tracks, decode_image,
                                                      tracks_from_images)
 from geocert.solvers.reconstruction.render import box_scene
@@ -278,6 +279,15 @@ def _centres_error(result, cameras) -> float:
     Q = U @ D @ Vt
     s = np.trace(np.diag(S) @ D) / (E ** 2).sum()
     return float(np.abs(s * E @ Q.T - T).max() / np.abs(T).max())
+
+
+@pytest.mark.parametrize("degrees", [1e-9, 1e-6, 0.3, 90.0, 179.9])
+def test_rotation_angles_are_right_however_small(degrees):
+    """The angles align_rotations reports; exact reconstructions are judged by them to 1e-6
+    degrees, below what the arccos of the trace resolves (1e-9 degrees read 0)."""
+    R = Rotation.from_rotvec(np.radians(degrees) * np.array([0.36, 0.48, 0.8])).as_matrix()
+    assert rotation_angle_deg(R) == pytest.approx(degrees, rel=1e-9)
+    assert rotation_angle_deg(R.T @ R) < 1e-12
 
 
 class TestCalibrated:

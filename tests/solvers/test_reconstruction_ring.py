@@ -18,9 +18,7 @@ from geocert.solvers.reconstruction.calibrated import (CalibratedOptions, align_
 from geocert.pipelines.reconstruction.features import FeatureOptions, tracks_from_images
 from geocert.solvers.reconstruction.render import box_scene
 
-from tests.support import SHARED
-
-DINO_RING = SHARED / "data" / "middlebury_dinoSparseRing"
+from tests.support import shared_data
 
 # What the ring needs (bench/reconstruction_images.py uses the same): faint SIFT keypoints, a
 # loose ratio test, a 2 px epipolar threshold, guided matching, and a second reconstruction merged.
@@ -115,16 +113,15 @@ class TestFinalAdjustment:
 
 
 def load_ring():
-    rows = [line.split() for line in (DINO_RING / "dinoSR_par.txt").read_text().splitlines()[1:] if line.strip()]
+    ring = shared_data("middlebury_dinoSparseRing")
+    rows = [line.split() for line in (ring / "dinoSR_par.txt").read_text().splitlines()[1:] if line.strip()]
     values = [np.array(r[1:], dtype=float) for r in rows]
-    images = [cv2.imread(str(DINO_RING / r[0]), cv2.IMREAD_GRAYSCALE) for r in rows]
+    images = [cv2.imread(str(ring / r[0]), cv2.IMREAD_GRAYSCALE) for r in rows]
     return images, [v[:9].reshape(3, 3) for v in values], [v[9:18].reshape(3, 3) for v in values]
 
 
 @pytest.mark.slow
 def test_dino_sparse_ring():
-    if not DINO_RING.exists():
-        pytest.skip("shared/data is not beside this checkout")
     images, Ks, Rs = load_ring()
     tracks = tracks_from_images(images, RING_FEATURES)
     result = calibrated_reconstruction(tracks.tracks, Ks, RING_CALIBRATED)

@@ -136,7 +136,11 @@ def max_ray_angle_deg(centres: np.ndarray, X: np.ndarray) -> float:
 
 
 def rotation_angle_deg(R: np.ndarray) -> float:
-    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
+    """R's angle of rotation in degrees: atan2 of its sine (half the skew part's size) and cosine
+    (from the trace). The cosine alone cannot resolve angles below 8.5e-7 degrees (one rounding of
+    a trace near 3): rotations right to 1e-16 read 0 or 1.2e-6 degrees by the rounding's path."""
+    sine = 0.5 * np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    return float(np.degrees(np.arctan2(sine, 0.5 * (np.trace(R) - 1.0))))
 
 
 def align_rotations(estimated: list[np.ndarray], truth: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
