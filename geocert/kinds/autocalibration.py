@@ -203,9 +203,15 @@ class AutocalibrationKind:
         return Parsed(*read_data(data))
 
     def check_options(self, parsed: Parsed, options: pr.AutocalibrationOptions) -> None:
-        """Every intrinsics range given or defaulted from data/image_size (before the job is
-        queued: the solve cannot start without them)."""
+        """Every intrinsics range given or defaulted from data/image_size, and the direct method's
+        chirality pairs counted (before the job is queued: the solve cannot start without them,
+        and nothing is built past the size limits)."""
         pr.resolve_ranges(options.intrinsics, parsed.image_size)
+        if options.method == "direct":
+            from geocert.solvers.autocalibration import direct
+
+            direct.check_size(len(parsed.cameras), 0 if parsed.points is None else len(parsed.points),
+                              options.chirality)
 
     def time_bound_s(self, parsed: Parsed, options: pr.AutocalibrationOptions) -> float:
         return options.time_limit_s * (1 if options.method == "direct" else 2)  # per stage

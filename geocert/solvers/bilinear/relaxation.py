@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from geocert.solvers.core.cones import ConeSpec, safe_lower_bound
+from geocert.solvers.core.cones import UNIT_ROUNDOFF, ConeSpec, safe_lower_bound
 
 PAD = 1e-9  # relative widening of the translation's derived interval (outward rounding)
 
@@ -205,8 +205,8 @@ class Relaxation:
     def bound(self, data: ConicData, z: np.ndarray) -> float:
         """The safe lower bound on the cost (normalised units) a dual vector proves on the box."""
         value = safe_lower_bound(data.q, data.A, data.b, data.cones, z, data.lower, data.upper)
-        if self.norm == "L2L2":
-            return max(value, 0.0) ** 2 if value > 0 else 0.0
+        if self.norm == "L2L2":  # the square rounded down: it may round up by half a unit in the last place
+            return value * value * (1.0 - 2.0 * UNIT_ROUNDOFF) if value > 0 else 0.0
         return max(value, 0.0)
 
     def split_variables(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -16,12 +16,14 @@ from geocert.solvers.bilinear.relaxation import Relaxation, tightening_objective
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
 from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
-from geocert.solvers.core.coverage import uncovered_part
+from geocert.solvers.core.coverage import extended, uncovered_part, widened
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.core.strict import Invalid, dual_vector, number as _number, numbers as _numbers
+from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
+                                         numbers as _numbers, record as _record)
 
 CLAIM_OPTIONS = ("norm", "coefficients", "camera", "coefficient_bound", "camera_bound", "rel_gap", "abs_gap")
 MAX_ROUNDS = 64  # the solver's half rounds (search.TIGHTENING_ROUNDS) with room
+LEAF_CLAIM_TOLERANCE = 1e-6  # as the fractional kinds' (fractional.proof): the recomputed bound counts
 
 
 class BilinearVerification:
@@ -49,7 +51,7 @@ class BilinearVerification:
         coefficients = ("alpha >= 0, sum alpha = 1" if options["coefficients"] == "convex" else
                         f"sum alpha = 1, |alpha_i| <= {options['coefficient_bound']!r}")
         box = ("|M_rk| <= " + repr(options["camera_bound"]) if options["camera_bound"] is not None
-               else "the camera box stated in the item's proof (camera_box)")
+               else "the camera box its proof states (camera_boxes below, raw units)")
         return {"kind": "bilinear", "norm": options["norm"], "coefficients": options["coefficients"],
                 "coefficient_bound": options["coefficient_bound"], "camera_bound": options["camera_bound"],
                 "rel_gap": options["rel_gap"], "abs_gap": options["abs_gap"],
@@ -59,14 +61,31 @@ class BilinearVerification:
                              f"and coefficients returned are in that scope and cost cost (within a relative "
                              f"{OBJECTIVE_TOLERANCE:g})"}
 
+    def __init__(self):
+        # The basis of the document being verified (its list, kept alive so that its identity is
+        # not reused, and its array): every frame shares it, so it is read once, not once a frame
+        # (the verifier forgets it at the start and end of each document, as TrackItems does).
+        self._basis: tuple[object, np.ndarray] | None = None
+
+    def forget(self) -> None:
+        self._basis = None
+
     def read(self, data: Any, index: int):
+        if not isinstance(data, dict) or not isinstance(index, int):
+            raise Invalid("data", "data must be an object with basis and frames")
+        frames = data.get("frames")
+        if not isinstance(frames, list) or not 0 <= index < len(frames):
+            raise Invalid("format", f"item {index} is not a frame of the data")
         try:
-            basis, frames = pb.read_data(data, range(index, index + 1) if isinstance(index, int) else None)
+            remembered = self._basis
+            if remembered is None or remembered[0] is not data.get("basis"):
+                basis, _ = pb.read_data(data, range(0))
+                basis.setflags(write=False)
+                self._basis = remembered = (data.get("basis"), basis)
+            basis = remembered[1]
+            return basis, pb.read_frame(frames[index], index, basis.shape[1], basis.shape[0])
         except InputError as exc:
             raise Invalid("data", f"{exc.field}: {exc.reason}") from exc
-        except IndexError:
-            raise Invalid("format", f"item {index} is not a frame of the data") from None
-        return basis, frames[index]
 
     def check_claim(self, arrays, options: dict, claim: dict, claimed: float, lower_claimed: float,
                     passed: list) -> tuple[float, float]:
@@ -85,14 +104,40 @@ class BilinearVerification:
         if not isinstance(proof, dict):
             raise Invalid("format", "a certified item needs a proof")
         if proof.get("type") == "trivial":  # every cost is a sum of non-negative terms
+            _record(proof, "proof", ("type",))
             passed.append("scope")
             return 0.0, options["rel_gap"]
         if proof.get("type") != "bilinear_bnb":
             raise Invalid("format", f"proof type {proof.get('type')!r} is not one bilinear takes")
         return check_search(basis, points, camera, options, proof, lower_claimed, passed), options["rel_gap"]
 
+    @staticmethod
+    def scope_of_items(claims: list) -> dict:
+        """Each certified frame's camera box (raw units), as its proof states it: the scope."""
+        boxes = []
+        for claim in claims:
+            proof = claim.get("proof") if claim.get("certified") is True else None
+            if isinstance(proof, dict) and proof.get("type") == "bilinear_bnb":
+                lo, hi = proof["camera_box"]
+                boxes.append({"item": claim["index"], "camera_lower": [lo[:3], lo[3:]], "camera_upper": [hi[:3], hi[3:]]})
+        return {"camera_boxes": boxes}
+
     def check_returned(self, result: dict, certificate: dict) -> None:
-        """Each frame's shape and residuals are what its camera and coefficients give."""
+        """Each frame's shape and residuals are what its camera and coefficients give, and a
+        certified frame's summary states the camera box its proof covers (the scope)."""
+        for claim, item in zip(certificate["items"], result["frames"]):
+            proof = claim.get("proof")
+            if claim.get("certified") is not True or not isinstance(item, dict):
+                continue
+            summary = item.get("certificate")
+            region = summary.get("root_region") if isinstance(summary, dict) else None
+            if isinstance(proof, dict) and proof.get("type") == "bilinear_bnb":
+                lo, hi = proof["camera_box"]
+                expected = {"camera_lower": [lo[:3], lo[3:]], "camera_upper": [hi[:3], hi[3:]],
+                            "coefficients": certificate["options"].get("coefficients"), "translation": "any"}
+                if not isinstance(region, dict) or any(region.get(k) != v for k, v in expected.items()):
+                    raise Invalid("returned", f"frames/{claim['index']}/certificate/root_region is not the camera box its "
+                                              "proof covers (the scope)")
         try:
             basis, frames = pb.read_data(certificate["data"])
         except InputError as exc:
@@ -120,6 +165,7 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
                  lower_claimed: float, passed: list) -> float:
     """The lower bound (caller's units) a bilinear_bnb proof establishes."""
     norm, K = options["norm"], basis.shape[0]
+    _record(proof, "proof", ("type", "camera_box", "tightening", "node_tightening", "proofs", "leaves"))
     frame = pb.normalise(basis, points)
     unit = pb.cost_unit(frame, norm)
     # Only points costing less than the claimed lower bound need excluding (as for the other kinds).
@@ -136,6 +182,7 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
         raise Invalid("scope", "the camera returned is outside the camera box of the scope")
     passed.append("scope")
     relaxation = Relaxation(frame.X, frame.u, norm, options["coefficients"], options["coefficient_bound"])
+    size = frame.X.shape[0] * frame.X.shape[1]  # basis shapes times points seen: a relaxation's rows
     passed.append("program")
 
     box_lo = np.concatenate([scope_lo, np.full(K, relaxation.alpha_range[0])])
@@ -143,9 +190,15 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
     rounds = proof.get("tightening")
     if not isinstance(rounds, list) or len(rounds) > MAX_ROUNDS:
         raise Invalid("format", f"proof/tightening must be a list of at most {MAX_ROUNDS} rounds")
+    # Each round's box as claimed (what the next must start from) and as proven (the claimed one
+    # widened to its sides' proven values: coverage.widened), on which the next is built.
+    proven = (box_lo, box_hi)
     for number, round_ in enumerate(rounds):
-        box_lo, box_hi = _check_round(relaxation, round_, box_lo, box_hi, cap, number)
-    search, alpha_lo, alpha_hi = Box(box_lo[:6], box_hi[:6]), box_lo[6:], box_hi[6:]
+        charge(size, f"tightening round {number}")
+        (box_lo, box_hi), proven = _check_round(relaxation, round_, (box_lo, box_hi), proven, cap, number)
+    search, alpha_lo, alpha_hi = Box(box_lo[:6], box_hi[:6]), proven[0][6:], proven[1][6:]
+    searched = Box(proven[0][:6], proven[1][:6])
+    root_alpha = (box_lo[6:], box_hi[6:])  # the coefficients' box as claimed
 
     leaves, proofs = proof.get("leaves"), proof.get("proofs")
     if not isinstance(leaves, list) or not leaves or not isinstance(proofs, list):
@@ -161,21 +214,24 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
         raise Invalid("coverage", f"no leaf covers the box {gap[0].tolist()} .. {gap[1].tolist()}")
     passed.append("coverage")
 
-    nodes = _check_node_tightening(relaxation, proof.get("node_tightening"), search, alpha_lo, alpha_hi, cap)
+    nodes = _check_node_tightening(relaxation, proof.get("node_tightening"), (search, searched), root_alpha,
+                                   (alpha_lo, alpha_hi), cap)
     passed.append("tightening")
 
     proven, boxes = [], []
     for number, record in enumerate(proofs):
-        if not isinstance(record, dict):
-            raise Invalid("format", f"proof {number} must be an object")
-        lo, hi = _numbers(record.get("box"), f"proofs/{number}/box", (2, 6))
+        _record(record, f"proofs/{number}", ("box", "upper_bound", "kind", "z", "bound", "alpha_from"))
+        informational(record.get("bound"), f"proofs/{number}/bound")  # read for a dual proof only
+        informational(record.get("z"), f"proofs/{number}/z", "text")  # read with a vector only
+        # Boxes on the searched box's faces reach its proven faces (coverage.extended).
+        lo, hi = extended(*_numbers(record.get("box"), f"proofs/{number}/box", (2, 6)), search, searched)
         boxes.append((lo, hi))
         ub = _number(record.get("upper_bound"), f"proofs/{number}/upper_bound")
         if not ub >= cap:
             raise Invalid("leaf_bounds", f"proof {number} assumed a cost cap below the claimed lower bound")
         source = record.get("alpha_from")
         if source is None:
-            within, a_lo, a_hi = (search.lo, search.hi), alpha_lo, alpha_hi
+            within, a_lo, a_hi = (searched.lo, searched.hi), alpha_lo, alpha_hi
         elif type(source) is int and 0 <= source < len(nodes):
             within, a_lo, a_hi = nodes[source]
         else:
@@ -184,6 +240,7 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
             raise Invalid("leaf_bounds", f"proof {number}: its box is not inside the box its coefficients' range "
                                          "was proven for")
         kind = record.get("kind")
+        charge(size, f"proof {number}")
         if kind == "alpha_empty":  # the tightening proved that no coefficient vector fits within the cap
             if np.all(a_lo <= a_hi):
                 raise Invalid("leaf_bounds", f"proof {number}: its coefficients' range is not empty")
@@ -209,10 +266,11 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
             raise Invalid("format", f"proof {number}: unknown kind {kind!r}")
         bound = relaxation.bound(data, z)
         claimed = _number(record.get("bound"), f"proofs/{number}/bound")
-        if not bound >= claimed - BOUND_TOLERANCE * abs(claimed):
+        if not bound >= claimed - LEAF_CLAIM_TOLERANCE * (abs(claimed) + abs(bound)):
             raise Invalid("leaf_bounds", f"proof {number}: its dual proves {bound!r}, it claims {claimed!r}")
         proven.append(min(bound, ub))  # points costing more than the cap are bounded by it
     bounds = []
+    leaf_lo, leaf_hi = extended(leaf_lo, leaf_hi, search, searched)
     for number, leaf in enumerate(leaves):
         if leaf[2] is None:
             bounds.append(0.0)
@@ -225,24 +283,28 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
     return min(bounds) * unit
 
 
-def _check_node_tightening(relaxation: Relaxation, records: Any, search: Box, alpha_lo: np.ndarray,
-                           alpha_hi: np.ndarray, cap: float) -> list:
+def _check_node_tightening(relaxation: Relaxation, records: Any, search: tuple[Box, Box], root_alpha: tuple,
+                           alpha: tuple, cap: float) -> list:
     """The node tightening records, in order: each over a camera box inside its parent's (the
-    root's searched box for parent null), starting from the coefficients' box its parent proved,
-    and proving its own coefficients' box (2K dual vectors, the camera box unchanged). Returns per
-    record (camera box, coefficients' lower, upper) as proven."""
+    root's searched box for parent null, ``search`` as claimed and as proven), starting from the
+    coefficients' box its parent proved (the root's: ``root_alpha`` as claimed, ``alpha`` as
+    proven), and proving its own coefficients' box (2K dual vectors,
+    the camera box unchanged). Returns per record (camera box, coefficients' lower, upper) as
+    proven: a camera box on the searched box's faces reaches its proven faces, and each side
+    is widened to its proven value (coverage.extended, widened)."""
     if records is None:
         records = []
     if not isinstance(records, list):
         raise Invalid("format", "proof/node_tightening must be a list")
     K = relaxation.K
+    claimed, proven = search
     out: list = []
+    records_alpha: list = []  # each record's coefficients' box as claimed
     for number, record in enumerate(records):
-        if not isinstance(record, dict):
-            raise Invalid("format", f"node tightening {number} must be an object")
+        _record(record, f"node_tightening/{number}", ("parent", "upper_bound", "box_in", "box_out", "duals"))
         parent = record.get("parent")
         if parent is None:
-            within, a_lo, a_hi = (search.lo, search.hi), alpha_lo, alpha_hi
+            within, (a_lo, a_hi) = (proven.lo, proven.hi), alpha
         elif type(parent) is int and 0 <= parent < number:
             within, a_lo, a_hi = out[parent]
         else:
@@ -250,12 +312,14 @@ def _check_node_tightening(relaxation: Relaxation, records: Any, search: Box, al
         d = 6 + K
         lo_in, hi_in = _numbers(record.get("box_in"), f"node_tightening/{number}/box_in", (2, d))
         lo_out, hi_out = _numbers(record.get("box_out"), f"node_tightening/{number}/box_out", (2, d))
-        if not (np.all(within[0] <= lo_in[:6]) and np.all(hi_in[:6] <= within[1])):
-            raise Invalid("tightening", f"node tightening {number}: its camera box is not inside its parent's")
-        if not (np.array_equal(lo_in[6:], a_lo) and np.array_equal(hi_in[6:], a_hi)):
-            raise Invalid("tightening", f"node tightening {number} does not start from its parent's coefficients' box")
         if not (np.array_equal(lo_out[:6], lo_in[:6]) and np.array_equal(hi_out[:6], hi_in[:6])):
             raise Invalid("tightening", f"node tightening {number} moves the camera box")
+        camera = extended(lo_in[:6], hi_in[:6], claimed, proven)
+        if not (np.all(within[0] <= camera[0]) and np.all(camera[1] <= within[1])):
+            raise Invalid("tightening", f"node tightening {number}: its camera box is not inside its parent's")
+        parent_claimed = root_alpha if parent is None else records_alpha[parent]
+        if not (np.array_equal(lo_in[6:], parent_claimed[0]) and np.array_equal(hi_in[6:], parent_claimed[1])):
+            raise Invalid("tightening", f"node tightening {number} does not start from its parent's coefficients' box")
         if not np.all(a_lo <= a_hi):
             raise Invalid("tightening", f"node tightening {number}: its parent left no coefficient")
         ub = _number(record.get("upper_bound"), f"node_tightening/{number}/upper_bound")
@@ -264,21 +328,27 @@ def _check_node_tightening(relaxation: Relaxation, records: Any, search: Box, al
         duals = record.get("duals")
         if not isinstance(duals, list) or len(duals) != 2 * K:
             raise Invalid("tightening", f"node tightening {number}: {K} coefficients need {2 * K} dual vectors")
-        data = relaxation.conic_data(lo_in[:6], hi_in[:6], ub, a_lo, a_hi)
+        charge(relaxation.X.shape[0] * relaxation.X.shape[1], f"node tightening {number}")
+        data = relaxation.conic_data(camera[0], camera[1], ub, a_lo, a_hi)
         if data is None:
             raise Invalid("tightening", f"node tightening {number}: its box holds no point within its cap")
-        _check_sides(relaxation, with_cost_cap(relaxation, data, ub), range(6, d), lo_in, hi_in, lo_out, hi_out,
-                     duals, f"node tightening {number}")
-        out.append(((lo_in[:6], hi_in[:6]), lo_out[6:], hi_out[6:]))
+        lo_proven = np.concatenate([camera[0], a_lo])
+        hi_proven = np.concatenate([camera[1], a_hi])
+        sides = _check_sides(relaxation, with_cost_cap(relaxation, data, ub), range(6, d), lo_proven, hi_proven,
+                             lo_out, hi_out, duals, f"node tightening {number}")
+        out.append((camera, sides[0][6:], sides[1][6:]))
+        records_alpha.append((lo_out[6:], hi_out[6:]))
     return out
 
 
-def _check_round(relaxation: Relaxation, round_: Any, box_lo: np.ndarray, box_hi: np.ndarray, cap: float,
-                 number: int) -> tuple[np.ndarray, np.ndarray]:
-    """One round of bound tightening: over box_in, every point costing at most upper_bound has
-    (M, alpha) within box_out; each side moved is the safe bound of its dual vector."""
-    if not isinstance(round_, dict):
-        raise Invalid("format", f"tightening round {number} must be an object")
+def _check_round(relaxation: Relaxation, round_: Any, box: tuple, proven: tuple, cap: float,
+                 number: int) -> tuple[tuple, tuple]:
+    """One round of bound tightening: over box_in (the previous box: ``box`` as claimed, built on
+    ``proven``, as proven), every point costing at most upper_bound has (M, alpha) within box_out;
+    each side moved is the safe bound of its dual vector. Returns box_out as claimed and as
+    proven (coverage.widened)."""
+    _record(round_, f"tightening/{number}", ("upper_bound", "box_in", "box_out", "duals"))
+    box_lo, box_hi = box
     d = len(box_lo)
     ub = _number(round_.get("upper_bound"), f"tightening/{number}/upper_bound")
     lo_in, hi_in = _numbers(round_.get("box_in"), f"tightening/{number}/box_in", (2, d))
@@ -290,34 +360,44 @@ def _check_round(relaxation: Relaxation, round_: Any, box_lo: np.ndarray, box_hi
     duals = round_.get("duals")
     if not isinstance(duals, list) or len(duals) != 2 * d:
         raise Invalid("tightening", f"round {number}: {d} variables need {2 * d} dual vectors (or null)")
-    data = relaxation.conic_data(lo_in[:6], hi_in[:6], ub, lo_in[6:], hi_in[6:])
+    data = relaxation.conic_data(proven[0][:6], proven[1][:6], ub, proven[0][6:], proven[1][6:])
     if data is None:
         raise Invalid("tightening", f"round {number}: its box holds no point within its cap")
-    _check_sides(relaxation, with_cost_cap(relaxation, data, ub), range(d), lo_in, hi_in, lo_out, hi_out, duals,
-                 f"round {number}")
+    sides = _check_sides(relaxation, with_cost_cap(relaxation, data, ub), range(d), proven[0], proven[1], lo_out,
+                         hi_out, duals, f"round {number}")
     if not np.all(lo_out <= hi_out):
         raise Invalid("tightening", f"round {number} leaves an empty box (the solver never does: its incumbent is in it)")
-    return lo_out, hi_out
+    return (lo_out, hi_out), sides
 
 
 def _check_sides(relaxation: Relaxation, data, entries: range, lo_in: np.ndarray, hi_in: np.ndarray,
-                 lo_out: np.ndarray, hi_out: np.ndarray, duals: list, where: str) -> None:
+                 lo_out: np.ndarray, hi_out: np.ndarray, duals: list, where: str) -> tuple[np.ndarray, np.ndarray]:
     """Each side of box_out over ``entries`` (index into the (M, alpha) box; duals 2 per entry,
-    counted from the first) is no tighter than max(side in, safe bound of its dual): ``data`` is
-    the relaxation with its cost cap (the tightening's feasible set)."""
+    counted from the first) is no tighter than max(side in, safe bound of its dual), but for
+    rounding: ``data`` is the relaxation with its cost cap (the tightening's feasible set) over
+    the box in as proven (lo_in, hi_in). Returns box_out with those entries as proven (each
+    claimed side widened to the proven one: coverage.widened), the others as box_in's."""
+    proven_lo, proven_hi = lo_in.copy(), hi_in.copy()
     for n, entry in enumerate(entries):
         for side, sign in ((0, 1.0), (1, -1.0)):
             z = duals[2 * n + side]
-            proven = lo_in[entry] if sign > 0 else hi_in[entry]
-            if z is not None:
-                q = tightening_objective(relaxation, entry, sign)
-                value = sign * safe_lower_bound(q, data.A, data.b, data.cones, dual_vector(z, len(data.b)),
-                                                data.lower, data.upper)
-                proven = max(proven, value) if sign > 0 else min(proven, value)
-            claimed = lo_out[entry] if sign > 0 else hi_out[entry]
-            if (sign > 0 and claimed > proven) or (sign < 0 and claimed < proven):
-                raise Invalid("tightening", f"{where}, variable {entry}: side {claimed!r} is beyond the "
-                                            f"proven {proven!r}")
+            if z is None:
+                continue
+            q = tightening_objective(relaxation, entry, sign)
+            value = sign * safe_lower_bound(q, data.A, data.b, data.cones, dual_vector(z, len(data.b)),
+                                            data.lower, data.upper)
+            if sign > 0:
+                proven_lo[entry] = max(proven_lo[entry], value)
+            else:
+                proven_hi[entry] = min(proven_hi[entry], value)
+    chosen = np.asarray(entries)
+    sides = widened(lo_out[chosen], hi_out[chosen], proven_lo[chosen], proven_hi[chosen])
+    if sides is None:
+        raise Invalid("tightening", f"{where}: sides {lo_out[chosen].tolist()}, {hi_out[chosen].tolist()} are beyond "
+                                    f"the proven {proven_lo[chosen].tolist()}, {proven_hi[chosen].tolist()}")
+    out_lo, out_hi = lo_in.copy(), hi_in.copy()
+    out_lo[chosen], out_hi[chosen] = sides
+    return out_lo, out_hi
 
 
 FRAMES = BilinearVerification()

@@ -125,9 +125,14 @@ class SearchProof:
 
 
 def pack(array: np.ndarray | None) -> str | None:
+    """Base64 of little-endian float64, subnormal entries written as 0: a verifier refuses them
+    (strict.dual_vector), and every bound computed from the vector reads them as 0 too
+    (cones.safe_lower_bounds), so the bound recorded is the one recomputed."""
     if array is None:
         return None
-    return base64.b64encode(np.asarray(array, dtype="<f8").tobytes()).decode("ascii")
+    array = np.array(array, dtype="<f8")
+    array[(array != 0) & (np.abs(array) < 2.0 ** -1022)] = 0.0
+    return base64.b64encode(array.tobytes()).decode("ascii")
 
 
 def unpack(text: str | None) -> np.ndarray | None:

@@ -100,3 +100,37 @@ def _subtracted(root_lo: np.ndarray, root_hi: np.ndarray, lo: np.ndarray, hi: np
         if len(pieces) > MAX_PIECES:
             return root_lo, root_hi
     return pieces[0] if pieces else None
+
+
+# A side a proof claims may lie beyond the side its dual proves by this fraction of the box's
+# size (its largest coordinate or width) when the proof counts its rounding (cones.
+# rounding_margin): certificates written before it did claim the value computed without it,
+# about 1e-11 beyond. Such a side is widened to the proven one (``widened``), and every box the
+# proof's leaves and proofs give on the claimed box's faces is extended to the widened faces
+# (``extended``), so that the points between the two are bounded as the rest.
+SIDE_TOLERANCE = 1e-9
+
+
+def widened(claimed_lo: np.ndarray, claimed_hi: np.ndarray, proven_lo: np.ndarray, proven_hi: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The box a proof establishes where it claims [claimed_lo, claimed_hi] and its duals prove
+    [proven_lo, proven_hi] (every point lies within it): the claimed sides, each moved out to
+    the proven side when that lies beyond it; None when a claimed side lies beyond the proven one
+    by more than SIDE_TOLERANCE of the box's size, its largest coordinate and width (not
+    rounding: a side the proof does not give)."""
+    size = max(float(np.max(np.abs(claimed_lo), initial=0.0)), float(np.max(np.abs(claimed_hi), initial=0.0)),
+               float(np.max(np.abs(claimed_hi - claimed_lo), initial=0.0)))
+    slack = SIDE_TOLERANCE * size
+    if not (np.all(claimed_lo <= proven_lo + slack) and np.all(claimed_hi >= proven_hi - slack)):
+        return None
+    return np.minimum(claimed_lo, proven_lo), np.maximum(claimed_hi, proven_hi)
+
+
+def extended(lo: np.ndarray, hi: np.ndarray, claimed: Box, proven: Box) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes (lo[i], hi[i]) with every side on or beyond a face of ``claimed`` moved out to the
+    face of ``proven`` (a box holding ``claimed``). Boxes covering ``claimed`` then cover
+    ``proven``: a point of ``proven`` moved into ``claimed`` (each coordinate clipped) lies in
+    some box, which reaches the clipped coordinates' faces and so, extended, the point."""
+    lo = np.where(lo <= claimed.lo, np.minimum(lo, proven.lo), lo)
+    hi = np.where(hi >= claimed.hi, np.maximum(hi, proven.hi), hi)
+    return lo, hi

@@ -4,6 +4,9 @@ naming the verifier's check and what was wrong."""
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import math
 from typing import Any
 
 import numpy as np
@@ -11,6 +14,8 @@ import numpy as np
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import unpack
 from geocert.solvers.core.geometry import InputError, is_number, number_array
+
+SMALLEST_NORMAL = 2.0 ** -1022  # as cones.SMALLEST_NORMAL (this module imports no cone code)
 
 
 class Invalid(Exception):
@@ -67,14 +72,121 @@ def nesting_depth(value: Any, limit: int) -> int:
 
 
 def dual_vector(text: Any, rows: int, where: str = "a dual vector", check: str = "format") -> np.ndarray:
-    """A dual vector stored as base64 of little-endian float64: exactly ``rows`` finite entries."""
+    """A dual vector stored as base64 of little-endian float64: exactly ``rows`` finite entries,
+    none subnormal (every product of one underflows: the solver writes 0 instead)."""
     if not isinstance(text, str):
         raise Invalid(check, f"{where} must be a base64 string")
+    if len(text) != 4 * ((8 * rows + 2) // 3):  # before decoding: a hostile length costs nothing
+        raise Invalid(check, f"{where} must have {rows} entries")
     try:
         z = unpack(text)
     except ValueError as exc:
         raise Invalid(check, f"{where} is not base64 of float64: {exc}") from exc
     if z is None or z.shape != (rows,) or not np.all(np.isfinite(z)):
         raise Invalid(check, f"{where} must have {rows} finite entries")
+    if np.any((z != 0) & (np.abs(z) < SMALLEST_NORMAL)):
+        raise Invalid(check, f"{where} has a subnormal entry (every product of one underflows)")
     return z
 
+
+
+# --- the verifier's work, paid for by the document's size ---------------------------------------
+#
+# A verification may build, in total, at most WORK_PER_UNIT units of work per unit of the
+# document's size (document_size: a JSON number, a string's 8 characters) plus WORK_BASE. A unit
+# of work is one observation, point, view or chirality pair of a relaxation or program built
+# (each a bounded number of rows and nonzeros), charged before it is built (charge). A proof
+# with a dual vector pays for its own relaxation (its vector has a row per row); one without
+# (a box behind a camera, a box without the domain) pays only its box, so a document cannot ask
+# for work out of proportion to its size: time and memory stay linear in it.
+WORK_PER_UNIT = 4
+WORK_BASE = 2_000_000
+_WORK: contextvars.ContextVar = contextvars.ContextVar("verification_work", default=None)
+
+
+def document_size(value: Any) -> int:
+    """The document's size in units: every number, boolean or null 1, every string its length
+    over 8 (a dual vector's entry is about 1.3), every container 1 (iterative). Refuses a number
+    that is not finite anywhere in it (JSON has none; a NaN compares false with everything, so
+    a field no check reads could hold one unnoticed)."""
+    size, level = 0, [value]
+    while level:
+        below: list = []
+        for v in level:
+            if isinstance(v, dict):
+                size += 1
+                below.extend(v.values())
+                size += sum(len(k) // 8 for k in v)
+            elif isinstance(v, list):
+                size += 1
+                if _NUMBERS.issuperset(map(type, v)):  # numbers only (the common case): in C
+                    size += len(v)
+                    if not math.isfinite(sum(x for x in v if type(x) is float)):
+                        _finite_all(v)
+                else:
+                    below.extend(v)
+            elif isinstance(v, str):
+                size += 1 + len(v) // 8
+            else:
+                if type(v) is float and not math.isfinite(v):
+                    _finite_all([v])
+                size += 1
+        level = below
+    return size
+
+
+_NUMBERS = frozenset((int, float, bool, type(None)))
+
+
+def _finite_all(values: list) -> None:
+    """Refuse a list holding a float that is not finite (a finite list's sum may overflow)."""
+    for x in values:
+        if type(x) is float and not math.isfinite(x):
+            raise Invalid("format", f"the document holds the number {x!r}: every number must be finite (JSON has "
+                                    "no NaN or Infinity)")
+
+
+@contextlib.contextmanager
+def work_budget(units: int):
+    """Charges within this context (this thread or task) draw on ``units`` of work."""
+    token = _WORK.set([units])
+    try:
+        yield
+    finally:
+        _WORK.reset(token)
+
+
+def charge(units: int, what: str) -> None:
+    """Pay for ``units`` of work before doing it (nothing outside a verification's budget: a
+    solver checking its own claim)."""
+    left = _WORK.get()
+    if left is None:
+        return
+    left[0] -= units
+    if left[0] < 0:
+        raise Invalid("format", f"the document asks for more work than its size pays for ({what}): at most "
+                                f"{WORK_PER_UNIT} units of work per unit of size, plus {WORK_BASE:,}")
+
+
+def record(value: Any, where: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict:
+    """An object with the ``required`` keys and perhaps the ``optional`` ones, no other: a field no
+    check reads is not a place to hide what a reader might take for part of the proof."""
+    if not isinstance(value, dict):
+        raise Invalid("format", f"{where} must be an object")
+    missing = [key for key in required if key not in value]
+    unknown = [key for key in value if key not in required and key not in optional]
+    if missing or unknown:
+        raise Invalid("format", f"{where}: " + "; ".join(
+            part for part in (f"missing {missing}" if missing else "", f"unknown {unknown}" if unknown else "") if part))
+    return value
+
+
+def informational(value: Any, where: str, kind: str = "number") -> None:
+    """A field no proof check reads (a solver's note: a leaf's own bound beside the one recomputed,
+    a moment matrix's rank): null or of its type, a number finite."""
+    if value is None:
+        return
+    ok = {"number": is_number(value), "integer": type(value) is int, "text": isinstance(value, str)}[kind]
+    if not ok:
+        what = {"number": "a finite number", "integer": "an integer", "text": "a string"}[kind]
+        raise Invalid("format", f"{where} must be null or {what} (informational: no check reads it), got {value!r:.40}")

@@ -46,7 +46,7 @@ from typing import Callable
 import numpy as np
 
 from geocert.solvers.core.bnb import Box, Progress
-from geocert.solvers.core.certificates import LeafProof, RootProof, SearchProof, encode
+from geocert.solvers.core.certificates import LeafProof, RootProof, SearchProof, encode, residual_rounding
 from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
 from geocert.solvers.core.cones import ConeSpec
 from geocert.solvers.core.geometry import cost_roundings, normalised_cameras
@@ -56,8 +56,8 @@ from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.fractional.relaxation import FractionalProgram, cost_unit, gamma_for
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult, claim_of
 from geocert.solvers.fractional.search import (MAX_SCALE, ROOT_SUBSET, branch_directions, depth_subspace,
-                                               local_refine, root_region)
-from geocert.solvers.fractional.items import PROGRAM_REFUSED, TrackItem, refused_by_verifier
+                                               local_refine, recomputed_status, root_region)
+from geocert.solvers.fractional.items import PROGRAM_REFUSED, UNDISCOUNTABLE, TrackItem, refused_by_verifier
 from geocert.solvers.fractional.proof import track_uncertainty
 from geocert.solvers.fractional.triangulation import track_result, triangulate
 from geocert.solvers.verify import self_check, self_check_enabled
@@ -749,9 +749,26 @@ def _check_results(entries: list, num, den, results: list, rows: list[int], refe
         in_front = np.all(np.einsum("gnj,gj->gn", cams[:, :, 2], solutions) > 0, axis=1)
         spread = cost_roundings(residuals, track_uncertainty(cams, solutions), options.norm)
         determined = spread <= 0.5 * np.maximum(options.abs_gap, options.rel_gap * np.abs(costs))
-        agree = inside & stacked.program_agrees(cams, points, num[chosen], den[chosen], T, factors, v0,
+        agree, allowed = stacked.program_agrees(cams, points, num[chosen], den[chosen], T, factors, v0,
                                                 reference[chosen], strictness=0.5)
+        agree &= inside
+        # The bound as the verifier proves it for the data's problem (proof.program_discount).
+        discounts = cost_roundings(residuals, allowed, options.norm)
+    for (row, result), discount in zip(certified, discounts):
+        if np.isfinite(discount):
+            result.lower_bound -= float(discount)
+            result.gap = result.cost - result.lower_bound
+            rounding = residual_rounding(np.asarray(result.residuals) + entries[row].points, entries[row].points)
+            result.status, result.reason = recomputed_status("optimal", np.asarray(result.residuals), result.cost,
+                                                             result.lower_bound, options, rounding)
+            result.certified = result.status == "optimal"
+        else:  # the proof's bound is not the data's: only the trivial bound 0 is (items.discounted)
+            result.lower_bound = min(result.lower_bound, 0.0)
+            result.gap = result.cost - result.lower_bound
+            result.status, result.certified, result.reason = "not_certified", False, UNDISCOUNTABLE
     for (row, result), solution, passed in zip(certified, solutions, in_front & determined & agree):
+        if result.status != "optimal":
+            continue
         if not passed:  # rare: the reason in track_result's words, from its own checks
             entry = entries[row]
             result.status, result.certified = "not_certified", False

@@ -10,7 +10,8 @@ from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import cost_rounding, normalised_cameras
 from geocert.solvers.core.strict import Invalid, numbers
 from geocert.solvers.fractional.charts import Chart, MapChart
-from geocert.solvers.fractional.proof import check_program, raw_sizes, residual_uncertainty, track_uncertainty, verify_search
+from geocert.solvers.fractional.proof import (check_program, program_allowance, program_discount, raw_sizes,
+                                              residual_uncertainty, track_uncertainty, verify_search)
 from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
 
 MAX_VIEWS = 1000  # views in a track, for the parser too: a chart's choice of reference takes views^2 work
@@ -128,6 +129,23 @@ class MapItem:
 
 
 PROGRAM_REFUSED = "the verifier could not check the proof against the data at this solution ({})"
+UNDISCOUNTABLE = ("an observation's depth is round-off at the solution (a point on a view's principal plane): "
+                  "the search's bound does not carry over to the data's problem, only the trivial bound 0 does")
+
+
+def discounted(item, solution: np.ndarray, residuals: np.ndarray, lower: float,
+               scale: float | None) -> tuple[float, str | None]:
+    """A search's lower bound (caller's units) as the verifier proves it for the data's problem:
+    less the program's distance from it at the solution (proof.program_discount); the trivial
+    bound (``scale`` None) needs no program. A solution outside the chart keeps the bound: the
+    verifier refuses it anyway. Where the distance is unbounded (an observation whose depth is
+    round-off there) the verifier proves nothing beyond the trivial bound 0: that bound is
+    returned, with the reason (the second value; None otherwise)."""
+    if scale is None or item.to_program(solution) is None:
+        return lower, None
+    with np.errstate(all="ignore"):
+        discount = program_discount(item, solution, residuals, program_allowance(item, solution, scale))
+    return (lower - discount, None) if np.isfinite(discount) else (min(lower, 0.0), UNDISCOUNTABLE)
 
 
 def refused_by_verifier(item, solution: np.ndarray, residuals: np.ndarray, cost: float, options,

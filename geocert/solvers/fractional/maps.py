@@ -23,7 +23,7 @@ from geocert.solvers.fractional.results import MapResult
 from geocert.solvers.fractional.search import LARGE_BOUND_TOLERANCE, Early, Reasons, prepare, recomputed_status, search
 from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import norm_cost
-from geocert.solvers.fractional.items import MapItem, refused_by_verifier
+from geocert.solvers.fractional.items import MapItem, discounted, refused_by_verifier
 from geocert.solvers.verify import checked_solve
 
 
@@ -127,12 +127,16 @@ def _map_result(chart: MapChart, source, target, v, options, status, lower, node
     proj = homogeneous @ M.T
     residuals = target - proj[:, :-1] / proj[:, -1:]
     cost = norm_cost(residuals, options.norm)  # recomputed from the caller's data
+    item = MapItem((source, target), options.norm, chart)
+    undiscountable = None
     if lower is not None:
-        lower = min(lower, cost)
+        lower, undiscountable = discounted(item, M, residuals, min(lower, cost), scale)
     rounding = residual_rounding(target - residuals, target)  # the verifier's (target - image = residuals)
     status, reason = recomputed_status(status, residuals, cost, lower, options, rounding)
+    if undiscountable:  # the proof's bound is not the data's (the verifier reads it as -inf)
+        status, reason = "not_certified", undiscountable
     if status == "optimal":
-        reason = refused_by_verifier(MapItem((source, target), options.norm, chart), M, residuals, cost, options, scale)
+        reason = refused_by_verifier(item, M, residuals, cost, options, scale)
         status = "not_certified" if reason else status
     return MapResult(status=status, certified=status == "optimal" and lower is not None, matrix=M.tolist(), reason=reason,
                      residuals=residuals.tolist(), cost=cost, lower_bound=lower,

@@ -13,13 +13,20 @@ import numpy as np
 
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import BOUND_TOLERANCE, TERMS_ROUNDING
-from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
-from geocert.solvers.core.coverage import uncovered_part
-from geocert.solvers.core.strict import Invalid, box as _box, dual_vector, number as _number, numbers as _numbers
+from geocert.solvers.core.geometry import cost_rounding
+from geocert.solvers.core.cones import proves_infeasible, rounding_counted, safe_lower_bound
+from geocert.solvers.core.coverage import extended, uncovered_part, widened
+from geocert.solvers.core.strict import (Invalid, box as _box, charge, dual_vector, informational, number as _number,
+                                         numbers as _numbers, record)
 from geocert.solvers.fractional.relaxation import (Relaxation, cost_unit, gamma_for, residual_region, root_bounds,
                                                    tightening_objective, with_cost_cap)
 
 MAX_ROUNDS = 16  # bound-tightening rounds (the solver makes at most 4)
+# A dual proof's recorded ``bound`` may exceed the bound the verifier recomputes by this fraction:
+# the recomputed one is what counts (the leaves' smallest is the proven bound), the recorded one
+# only has to be the solver's. Its relaxation may be built on boxes and caps widened by their
+# proofs' rounding (coverage.widened), which moves a bound by up to about 2e-9 of it.
+LEAF_CLAIM_TOLERANCE = 1e-6
 SCALE_RANGE = (1e-15, 1e3)  # the solver's residual factor lies in it (search.MAX_SCALE above)
 
 
@@ -27,6 +34,8 @@ def verify_search(item, options: dict, proof: dict, lower_claimed: float, soluti
                    passed: list[str]) -> float:
     """The lower bound (caller's units) the search's proof establishes."""
     program, norm = item.program, item.norm
+    record(proof, "proof", ("type", "scale", "root", "tightening", "search_box", "proofs", "leaves"),
+           ("relaxation", "caps"))
     scale = _number(proof.get("scale"), "proof/scale")
     if not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]:
         raise Invalid("program", f"scale must lie in {SCALE_RANGE}")
@@ -37,12 +46,10 @@ def verify_search(item, options: dict, proof: dict, lower_claimed: float, soluti
     # hold for them, so its cost cap may be anything not below that bound (less the relative
     # tolerance: a cap of 0 would prove nothing of a positive bound, whatever the scale).
     cap = max(0.0, lower_claimed * unit * (1 - BOUND_TOLERANCE))
-    check_program(item, solution, scale)
+    allowed = check_program(item, solution, scale)
     passed.append("program")
 
-    root = proof.get("root")
-    if not isinstance(root, dict):
-        raise Invalid("format", "proof/root must be an object")
+    root = record(proof.get("root"), "proof/root", ("gamma", "functionals", "claim", "bounds", "duals"))
     d = program.dim
     F = _numbers(root.get("functionals"), "proof/root/functionals", (d, d))
     search_box_raw = proof.get("search_box")
@@ -56,24 +63,27 @@ def verify_search(item, options: dict, proof: dict, lower_claimed: float, soluti
     needed = gamma_for(cap, norm)
     if program.max_residual is not None:
         needed = min(needed, program.max_residual)
-    _check_root(program, F, gamma, needed, root, lower, upper, item.to_program(solution))
+    # The bounds as proven: the claimed ones, each side widened to its proven value where that
+    # lies beyond it by rounding (coverage.widened); every box below is built on proven boxes.
+    proven_lower, proven_upper = _check_root(program, F, gamma, needed, root, lower, upper, item.to_program(solution))
     passed.append("root_region")
 
-    box = Box(lower[:k], upper[:k])
+    box, proven_box = Box(lower[:k], upper[:k]), Box(proven_lower[:k], proven_upper[:k])
     form = proof.get("relaxation", "envelope")
     if form not in ("envelope", "quadratic") or (form == "quadratic" and norm != "L2L2"):
         raise Invalid("format", 'proof/relaxation must be "quadratic" (L2L2 only) or absent')
-    relaxation = Relaxation(program, F[:k], (lower[k:], upper[k:]), F, quadratic=form == "quadratic")
+    relaxation = Relaxation(program, F[:k], (proven_lower[k:], proven_upper[k:]), F, quadratic=form == "quadratic")
     rounds = proof.get("tightening")
     if not isinstance(rounds, list):
         raise Invalid("format", "proof/tightening must be a list")
     if len(rounds) > MAX_ROUNDS:
         raise Invalid("tightening", f"{len(rounds)} tightening rounds: at most {MAX_ROUNDS}")
     for number, round_ in enumerate(rounds):
-        box = _check_round(relaxation, round_, box, cap, number)
+        box, proven_box = _check_round(relaxation, round_, box, proven_box, cap, number)
     if not (np.all(search_box.lo <= box.lo) and np.all(search_box.hi >= box.hi)):
         raise Invalid("tightening", "the searched box does not contain the proven root box")
-    others = _check_caps(relaxation, proof.get("caps", []), box, cap)
+    searched = Box(np.minimum(search_box.lo, proven_box.lo), np.maximum(search_box.hi, proven_box.hi))
+    others = _check_caps(relaxation, proof.get("caps", []), box, proven_box, cap)
     passed.append("tightening")
 
     leaves, proofs = proof.get("leaves"), proof.get("proofs")
@@ -90,9 +100,17 @@ def verify_search(item, options: dict, proof: dict, lower_claimed: float, soluti
         raise Invalid("coverage", f"no leaf covers the box {gap[0].tolist()} .. {gap[1].tolist()}")
     passed.append("coverage")
 
-    bounds = _check_leaf_proofs(relaxation, proofs, leaves, leaf_lo, leaf_hi, cap, k, others)
+    # The points between the claimed searched box and the proven one are answered for by the
+    # leaves and proofs on its faces, extended to the proven faces (coverage.extended).
+    leaf_lo, leaf_hi = extended(leaf_lo, leaf_hi, search_box, searched)
+    bounds = _check_leaf_proofs(relaxation, proofs, leaves, leaf_lo, leaf_hi, cap, k, others, (search_box, searched))
     passed.append("leaf_bounds")
-    return min(bounds) / unit if bounds else math.inf
+    if not bounds:
+        return math.inf
+    # The program's bound, for the data's problem: lowered by the program's distance from it.
+    with np.errstate(invalid="ignore"):  # an observation not compared: no bound beyond the program's
+        discount = program_discount(item, solution, item.raw_residuals(solution)[0], allowed)
+    return min(bounds) / unit - (discount if math.isfinite(discount) else math.inf)
 
 
 @functools.lru_cache(maxsize=32)
@@ -130,7 +148,7 @@ def track_uncertainty(cameras: np.ndarray, solution: np.ndarray) -> np.ndarray:
                                 np.einsum("...nij,...j->...ni", np.abs(cameras), np.abs(solution)))
 
 
-def check_program(item, solution, scale: float, strictness: float = 1.0) -> None:
+def check_program(item, solution, scale: float, strictness: float = 1.0) -> np.ndarray:
     """The program rebuilt from the data is the data's problem: at the solution and at points
     around it, its residuals and depth signs are the raw data's. A program is a ratio of affine
     maps, so agreement at generic points means agreement everywhere. All the points are compared
@@ -138,10 +156,12 @@ def check_program(item, solution, scale: float, strictness: float = 1.0) -> None
 
     ``strictness`` scales the tolerances: the solvers ask this of their own results with 0.5
     before certifying them, so that a verifier whose rebuilt program differs in its last bits
-    (the batched path builds its charts on stacked arrays) still accepts every claim made."""
+    (the batched path builds its charts on stacked arrays) still accepts every claim made.
+    Returns the allowance at the solution (what program_discount reads)."""
     v0 = item.to_program(solution)
     if v0 is None:
         raise Invalid("program", "the solution lies outside the program's chart")
+    charge(9 * len(item.program.den), "the program check")
     samples = np.vstack([v0] + [v0 + step * (1 + np.abs(v0)) for step in _sample_steps(len(v0))])
     numerators, depths = item.raw_parts_many(samples)  # (n, N, m), (n, N)
     V = np.hstack([samples, np.ones((len(samples), 1))])
@@ -170,15 +190,58 @@ def check_program(item, solution, scale: float, strictness: float = 1.0) -> None
     for row, mask in zip(relative, varying):
         if mask.any() and not item.depths_agree(row[mask]):
             raise Invalid("program", "the program's depth signs differ from the data's")
+    return allowance(ours[0], theirs[0], numerator_size[0], depth_size[0], depths[0], clear[0])
+
+
+# How far a residual computed from the raw data in floating point may lie from its exact value:
+# this fraction of its terms' size over its depth (a dot product of a few terms rounds by a few
+# units in the last place of their magnitudes' sum; 1e-15 is some 9).
+RAW_ROUNDING = 1e-15
+
+
+def allowance(ours, theirs, numerator_size, depth_size, depths, clear) -> np.ndarray:
+    """How far the program's residuals (``ours``, caller's units) may lie from the data's exact
+    ones at a point: their distance from the raw residuals (``theirs``) plus the raw ones'
+    rounding (RAW_ROUNDING); infinite for an observation whose depth is round-off there."""
+    safe = np.where(clear, np.abs(depths), 1.0)[..., None]
+    rounding = RAW_ROUNDING * (numerator_size + np.abs(theirs) * depth_size[..., None]) / safe
+    return np.where(clear[..., None], np.abs(ours - theirs) + rounding, np.inf)
+
+
+def program_discount(item, solution, residuals: np.ndarray, allowed: np.ndarray) -> float:
+    """What the bound a proof establishes for the program is lowered by, for the data's problem
+    (caller's units): the cost's change at the solution when each residual moves by its
+    ``allowed`` distance between program and data (allowance). A bound holds for the program
+    the verifier builds, which is the data's problem only up to its rounding: for data far from
+    the origin (a homography's source at 1e6 times its spread) that reaches 1e-8 of the cost."""
+    if not rounding_counted():  # as certificates written before it was counted computed a bound
+        return 0.0
+    return cost_rounding(residuals, allowed, item.norm)
+
+
+def program_allowance(item, solution, scale: float) -> np.ndarray:
+    """allowance at the solution alone (what the solvers lower their claimed bound by, as the
+    verifier does: program_discount)."""
+    v0 = item.to_program(solution)
+    V = np.append(v0, 1.0)[None]
+    numerators, depths = item.raw_parts_many(v0[None])
+    numerator_size, depth_size = item.raw_sizes_many(v0[None])
+    ours = np.einsum("Nmk,nk->nNm", item.program.num, V)[0] / scale
+    ours = ours / (item.program.den @ V[0])[:, None]
+    clear = np.abs(depths[0]) > 1e-6 * depth_size[0]
+    theirs = numerators[0] / np.where(clear, depths[0], 1.0)[:, None]
+    return allowance(ours, theirs, numerator_size[0], depth_size[0], depths[0], clear)
 
 
 def _check_root(program, F: np.ndarray, gamma: float, needed: float, root: dict, lower, upper,
-                witness: np.ndarray) -> None:
-    """The root region's bounds. Dual bounds hold on R ∩ claim; they hold on all of R (R convex)
-    only when R meets the inside of ``claim``: the returned solution (``witness``, in the
-    program's variables) must be a point of R well inside ``claim``."""
+                witness: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The root region's bounds, as proven (the claimed ones widened by rounding: coverage.
+    widened). Dual bounds hold on R ∩ claim; they hold on all of R (R convex) only when R meets
+    the inside of ``claim``: the returned solution (``witness``, in the program's variables)
+    must be a point of R well inside ``claim``."""
     if not gamma >= needed:
         raise Invalid("root_region", f"gamma {gamma!r} is below the residual bound {needed!r} of the claimed lower bound")
+    charge(len(program.den), "the root region")
     region = residual_region(program, gamma)
     claim_lo, claim_hi = _numbers(root.get("claim"), "proof/root/claim", (2, len(F)))
     V = np.append(witness, 1.0)
@@ -199,9 +262,11 @@ def _check_root(program, F: np.ndarray, gamma: float, needed: float, root: dict,
     for j, (low, high) in enumerate(zip(proven_lower, proven_upper)):
         if not (claim_lo[j] < low <= high < claim_hi[j]):
             raise Invalid("root_region", f"functional {j}: proven range [{low}, {high}] not inside the claimed box")
-        if not (lower[j] <= low and upper[j] >= high):
-            raise Invalid("root_region", f"functional {j}: bounds [{lower[j]}, {upper[j]}] are tighter than "
-                                         f"the proven [{low}, {high}]")
+    proven = widened(lower, upper, proven_lower, proven_upper)
+    if proven is None:
+        raise Invalid("root_region", f"bounds {lower.tolist()}, {upper.tolist()} are tighter than the proven "
+                                     f"{proven_lower.tolist()}, {proven_upper.tolist()}")
+    return proven
 
 
 def _finite_bounds(data, where: str) -> None:
@@ -210,9 +275,12 @@ def _finite_bounds(data, where: str) -> None:
         raise Invalid("leaf_bounds", f"{where}: a relaxation variable has an infinite bound")
 
 
-def _check_round(relaxation: Relaxation, round_: Any, box: Box, cap: float, number: int) -> Box:
-    if not isinstance(round_, dict):
-        raise Invalid("format", f"tightening round {number} must be an object")
+def _check_round(relaxation: Relaxation, round_: Any, box: Box, proven_box: Box, cap: float,
+                 number: int) -> tuple[Box, Box]:
+    """A tightening round from the previous round's box (``box`` as claimed, ``proven_box`` as
+    proven): its box_out as claimed, and as proven (its relaxation is built on the proven box in,
+    and each side claimed is widened to the proven one: coverage.widened)."""
+    record(round_, f"tightening round {number}", ("upper_bound", "box_in", "box_out", "duals"))
     k = len(box.lo)
     ub = _number(round_.get("upper_bound"), f"tightening/{number}/upper_bound")
     box_in = _box(round_.get("box_in"), f"tightening/{number}/box_in", k)
@@ -227,20 +295,20 @@ def _check_round(relaxation: Relaxation, round_: Any, box: Box, cap: float, numb
     if all(z is None for z in duals):  # nothing proven: every side must stay as it was
         if not (np.array_equal(box_out.lo, box_in.lo) and np.array_equal(box_out.hi, box_in.hi)):
             raise Invalid("tightening", f"round {number}: sides moved without a dual vector")
-        return box_out
-    low, high = _proven_sides(relaxation, box_in, ub, duals, f"tightening round {number}", "tightening")
-    for i in range(k):
-        proven_lo, proven_hi = max(box_in.lo[i], low[i]), min(box_in.hi[i], high[i])
-        if box_out.lo[i] > proven_lo or box_out.hi[i] < proven_hi:
-            raise Invalid("tightening", f"round {number}, functional {i}: sides [{box_out.lo[i]!r}, {box_out.hi[i]!r}] "
-                                        f"are beyond the proven [{proven_lo!r}, {proven_hi!r}]")
-    return box_out
+        return box_out, proven_box
+    low, high = _proven_sides(relaxation, proven_box, ub, duals, f"tightening round {number}", "tightening")
+    proven_lo, proven_hi = np.maximum(proven_box.lo, low), np.minimum(proven_box.hi, high)
+    sides = widened(box_out.lo, box_out.hi, proven_lo, proven_hi)
+    if sides is None:
+        raise Invalid("tightening", f"round {number}: sides [{box_out.lo.tolist()}, {box_out.hi.tolist()}] are "
+                                    f"beyond the proven [{proven_lo.tolist()}, {proven_hi.tolist()}]")
+    return box_out, Box(*sides)
 
 
 MAX_CAP_ROUNDS = 8  # rounds of per-term caps (the solver makes 2)
 
 
-def _check_caps(relaxation: Relaxation, rounds: Any, box: Box, cap: float) -> list[np.ndarray | None]:
+def _check_caps(relaxation: Relaxation, rounds: Any, box: Box, proven_box: Box, cap: float) -> list[np.ndarray | None]:
     """Rounds of per-term caps (maps): each proves, over a box holding the proven root box and
     for every point costing at most its upper_bound, a lower bound on the sum of the terms other
     than each of its observations'. Returns the bounds in force after each round (the first,
@@ -254,8 +322,7 @@ def _check_caps(relaxation: Relaxation, rounds: Any, box: Box, cap: float) -> li
     others = np.zeros(count)
     for number, round_ in enumerate(rounds):
         where = f"caps round {number}"
-        if not isinstance(round_, dict):
-            raise Invalid("format", f"{where} must be an object")
+        record(round_, where, ("upper_bound", "box", "observations", "duals"))
         ub = _number(round_.get("upper_bound"), f"caps/{number}/upper_bound")
         if not ub >= cap:
             raise Invalid("tightening", f"{where} assumed a cost cap below the claimed lower bound")
@@ -263,6 +330,7 @@ def _check_caps(relaxation: Relaxation, rounds: Any, box: Box, cap: float) -> li
         # Every point the leaves must answer for lies in the proven root box.
         if not (np.all(round_box.lo <= box.lo) and np.all(round_box.hi >= box.hi)):
             raise Invalid("tightening", f"{where}: its box does not contain the proven root box")
+        round_box = Box(np.minimum(round_box.lo, proven_box.lo), np.maximum(round_box.hi, proven_box.hi))
         observations, duals = round_.get("observations"), round_.get("duals")
         if not (isinstance(observations, list) and all(type(i) is int and 0 <= i < count for i in observations)
                 and len(set(observations)) == len(observations)):
@@ -270,6 +338,7 @@ def _check_caps(relaxation: Relaxation, rounds: Any, box: Box, cap: float) -> li
         if not isinstance(duals, list) or len(duals) != len(observations):
             raise Invalid("tightening", f"{where}: one dual vector (or null) per observation")
         relaxation.others = in_force[-1]
+        charge(len(relaxation.program.den), where)
         data = relaxation.conic_data(round_box, ub)
         if data is None:
             raise Invalid("tightening", f"{where}: no depth is positive on its box")
@@ -295,6 +364,7 @@ def _proven_sides(relaxation: Relaxation, box: Box, ub: float, duals: list, wher
     ``ub``, as the dual vectors prove it (``duals[2 i]`` the low side, ``duals[2 i + 1]`` the
     high one); a side without a dual is unbounded."""
     k = len(box.lo)
+    charge(len(relaxation.program.den), where)
     data = relaxation.conic_data(box, ub, envelope=False)
     if data is None:
         raise Invalid(check, f"{where}: no depth is positive on its box")
@@ -317,16 +387,21 @@ def _proven_sides(relaxation: Relaxation, box: Box, ub: float, duals: list, wher
 
 
 def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_lo, leaf_hi,
-                       cap: float, k: int, others: list[np.ndarray | None]) -> list[float]:
+                       cap: float, k: int, others: list[np.ndarray | None], faces: tuple[Box, Box]) -> list[float]:
     """Each proof's bound, recomputed (its relaxation with the caps in force after the round it
-    names, ``others``); each leaf's box inside its proof's box."""
+    names, ``others``) on its box extended to the proven searched box (``faces``: the searched
+    box as claimed and as proven, coverage.extended); each leaf's box inside its proof's box."""
     proven: list[float] = []
     boxes: list[Box] = []
     ranges: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # tightened proofs' proven ranges
     for number, proof in enumerate(proofs):
-        if not isinstance(proof, dict):
-            raise Invalid("format", f"proof {number} must be an object")
+        record(proof, f"proofs/{number}", ("box", "upper_bound", "kind", "z", "bound"),
+               ("duals", "caps") if proof.get("kind") == "tightened" else ("caps",))
+        # Read only for a dual proof (its bound) or with a dual vector (z): otherwise informational.
+        informational(proof.get("bound"), f"proofs/{number}/bound")
+        informational(proof.get("z"), f"proofs/{number}/z", "text")
         box = _box(proof.get("box"), f"proofs/{number}/box", k)
+        box = Box(*extended(box.lo, box.hi, *faces))
         boxes.append(box)
         # null: no cost cap (a box closed before any incumbent): the relaxation of every point
         # of the scope, valid whatever the cap; unbounded variables without max_residual are refused.
@@ -335,6 +410,7 @@ def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_
         if not ub >= cap:
             raise Invalid("leaf_bounds", f"proof {number} assumed a cost cap below the claimed lower bound")
         kind = proof.get("kind")
+        charge(len(relaxation.program.den), f"proof {number}")
         rounds = proof.get("caps", 0)
         if not (type(rounds) is int and 0 <= rounds < len(others)):
             raise Invalid("format", f"proof {number}: caps must name a round of caps (0: none)")
@@ -365,7 +441,7 @@ def _check_leaf_proofs(relaxation: Relaxation, proofs: list, leaves: list, leaf_
             raise Invalid("format", f"proof {number}: unknown kind {kind!r}")
         bound = safe_lower_bound(data.q, data.A, data.b, data.cones, z, data.lower, data.upper, data.transform)
         claimed = _number(proof.get("bound"), f"proofs/{number}/bound")
-        if not bound >= claimed - BOUND_TOLERANCE * abs(claimed):
+        if not bound >= claimed - LEAF_CLAIM_TOLERANCE * (abs(claimed) + abs(bound)):
             raise Invalid("leaf_bounds", f"proof {number}: its dual proves {bound!r}, it claims {claimed!r}")
         proven.append(bound)
     bounds = []

@@ -22,11 +22,11 @@ import numpy as np
 
 from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE, TERMS_ROUNDING, residual_rounding
 from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.cones import ConeSpec, _project_rows
+from geocert.solvers.core.cones import ConeSpec, _project_rows, rounding_counted, stacked_rounding_margin, subnormal
 from geocert.solvers.core.coverage import uncovered_part
 from geocert.solvers.core.geometry import cost_roundings, lengths, norm_terms, normalised_cameras
 from geocert.solvers.core.strict import Invalid, dual_vector, numbers
-from geocert.solvers.fractional.proof import SCALE_RANGE, _sample_steps, raw_sizes, track_uncertainty
+from geocert.solvers.fractional.proof import SCALE_RANGE, _sample_steps, allowance, raw_sizes, track_uncertainty
 
 D = 3  # a track's program has 3 variables
 CHECKS = ("data", "claim", "objective", "scope", "program", "root_region", "tightening", "coverage",
@@ -219,7 +219,8 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     w = np.linalg.solve(T, X[..., None])[..., 0]
     ok &= w[:, 3] > 0
     v0 = w[:, :3] / np.where(w[:, 3] > 0, w[:, 3], 1.0)[:, None]
-    ok &= program_agrees(cams, points, num, den, T, scale, v0, reference)
+    agree, allowed = program_agrees(cams, points, num, den, T, scale, v0, reference)
+    ok &= agree
 
     # The root region (proof._check_root).
     k_ok = np.linalg.cond(F) <= 1e6
@@ -234,8 +235,11 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     box_lo, box_hi = bounds[:, 0, :k], bounds[:, 1, :k]
     ok &= np.all(search_box[:, 0] <= box_lo, axis=1) & np.all(search_box[:, 1] >= box_hi, axis=1)
     proven = _leaves_hold(members, num, den, linear, F, k, bounds, search_box, cap, norm, reference, ok)
-    # The bound against the claim, and the gap (verify_arrays).
-    proven = proven / unit
+    # The bound against the claim, and the gap (verify_arrays): the program's bound lowered by
+    # its distance from the data's problem (proof.program_discount).
+    with np.errstate(invalid="ignore"):
+        discount = cost_roundings(residuals, allowed, norm) if rounding_counted() else 0.0
+    proven = proven / unit - np.where(np.isfinite(discount), discount, np.inf)
     ok &= proven >= lower_claimed - BOUND_TOLERANCE * np.abs(lower_claimed)
     tolerance = np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
     ok &= gap <= tolerance * (1 + 1e-12)
@@ -297,9 +301,11 @@ def chart_arrays(cams: np.ndarray, points: np.ndarray):
     return M[..., :2, :].copy(), den, H @ T, reference, ok
 
 
-def program_agrees(cams, points, num, den, T, scale, v0, reference, strictness: float = 1.0) -> np.ndarray:
+def program_agrees(cams, points, num, den, T, scale, v0, reference, strictness: float = 1.0
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """proof.check_program for every track: the program's residuals and depth signs are the
-    raw data's at the solution and at eight fixed points around it (``strictness`` as there)."""
+    raw data's at the solution and at eight fixed points around it (``strictness`` as there);
+    and the allowance at the solution (proof.allowance, (G, n, 2))."""
     steps = np.array(_sample_steps(D))
     samples = np.concatenate([v0[:, None], v0[:, None] + steps[None] * (1 + np.abs(v0))[:, None]], axis=1)
     V = np.concatenate([samples, np.ones(samples.shape[:2] + (1,))], axis=2)  # (G, 9, 4)
@@ -322,21 +328,28 @@ def program_agrees(cams, points, num, den, T, scale, v0, reference, strictness: 
     exact[np.arange(len(den)), reference] = True
     varying = ~exact[:, None] & clear
     relative = np.sign(ours_depth) * np.sign(depths)
-    return agree & ~np.any(varying & ~(relative > 0), axis=(1, 2))
+    allowed = allowance(ours[:, 0], theirs[:, 0], numerator_size[:, 0], depth_size[:, 0], depths[:, 0], clear[:, 0])
+    return agree & ~np.any(varying & ~(relative > 0), axis=(1, 2)), allowed
 
 
 def safe_bounds(Q, A, b, Z, cones: ConeSpec, lower, upper, transform) -> np.ndarray:
     """cones.safe_lower_bounds with a leading axis over tracks: Q (G, p, cols), A (G, rows, cols),
-    b (G, rows), Z (G, p, rows), lower and upper (G, cols), transform (G, d, d)."""
+    b (G, rows), Z (G, p, rows), lower and upper (G, cols), transform (G, d, d); each bound less
+    its rounding (cones.stacked_rounding_margin), subnormal entries of Z read as 0."""
     G, p, rows = Z.shape
+    Z = Z.copy()
+    Z[subnormal(Z)] = 0.0
     with np.errstate(over="ignore", invalid="ignore"):
-        Z = _project_rows(Z.reshape(G * p, rows).copy(), cones).reshape(G, p, rows)
+        Z = _project_rows(Z.reshape(G * p, rows), cones).reshape(G, p, rows)
         residual = Q + np.einsum("gpr,grc->gpc", Z, A)
         d = transform.shape[1]
         residual = np.concatenate([np.einsum("gpc,gcd->gpd", residual[..., :d], transform), residual[..., d:]], axis=2)
         terms = np.minimum(residual * lower[:, None], residual * upper[:, None])
         terms[residual == 0] = 0.0
         bounds = -np.einsum("gpr,gr->gp", Z, b) + terms.sum(axis=2)
+        reach = np.maximum(np.abs(lower), np.abs(upper))
+        bounds = bounds - stacked_rounding_margin(np.abs(np.broadcast_to(Q, residual.shape)), np.abs(A), np.abs(b), Z,
+                                                  reach, np.abs(transform), terms)
     return np.where(np.isfinite(bounds), bounds, -np.inf)
 
 

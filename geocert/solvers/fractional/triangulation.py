@@ -22,7 +22,7 @@ from geocert.solvers.fractional.results import SearchCertificate, TrackResult
 from geocert.solvers.fractional.search import Early, Reasons, depth_subspace, prepare, recomputed_status, search
 from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import norm_cost, normalised_cameras, reprojection_residuals
-from geocert.solvers.fractional.items import TrackItem, refused_by_verifier
+from geocert.solvers.fractional.items import TrackItem, discounted, refused_by_verifier
 from geocert.solvers.verify import checked_solve
 
 
@@ -112,13 +112,16 @@ def track_result(chart: Chart, cameras, points, y, options, status, lower, nodes
     # The cost of the point as returned (what anyone recomputing it gets, to the last bit).
     residuals = reprojection_residuals(cameras, solution, points)
     cost = norm_cost(residuals, options.norm)  # recomputed in pixels from the original data
+    item = TrackItem((cameras, points), options.norm, chart)
+    undiscountable = None
     if lower is not None:
-        lower = min(lower, cost)
+        lower, undiscountable = discounted(item, solution, residuals, min(lower, cost), scale)
     rounding = residual_rounding(residuals + points, points)  # the verifier's (image - points = residuals)
     status, reason = recomputed_status(status, residuals, cost, lower, options, rounding)
+    if undiscountable:  # the proof's bound is not the data's (the verifier reads it as -inf)
+        status, reason = "not_certified", undiscountable
     if status == "optimal" and checked:
-        reason = refused_by_verifier(TrackItem((cameras, points), options.norm, chart), solution, residuals, cost,
-                                     options, scale)
+        reason = refused_by_verifier(item, solution, residuals, cost, options, scale)
         status = "not_certified" if reason else status
     return TrackResult(status=status, certified=status == "optimal" and lower is not None, point=point, reason=reason,
                        at_infinity=bool(at_infinity), cost=cost, lower_bound=lower,

@@ -1,33 +1,42 @@
 """The reconstruction kind's verification adapter (numpy only).
 
 Its claims are the points, each a triangulation in the cameras the certificate's data state, so
-they are checked as the triangulation kind's are (TrackItems). What ties them to the result:
-the cameras the certificate's data state must be the cameras the result returns, and every camera
-the result calls certified must be backed by the camera certificate beside it (a resection
-document over the returned points): that certificate valid, its map for the camera built from the
-returned points, the returned camera's cost recomputed from it, every point in front of that
-camera (the resection bound's scope), its lower bound no higher than the proven one, and its gap
-within the resection's tolerance.
+they are checked as the triangulation kind's are (TrackItems). ``check_result`` ties the rest of
+a result to them (docs/certificate.md, "Reconstruction"):
 
-The camera certificate holds one map per *searched* camera (``searched``: the certified
-resection ran for it), in view order: a camera no bound could certify is not searched (see
-structure.resect_cameras) and claims no bound, so it has no map; a camera called certified, or
-stating a lower bound, must be searched. Every searched camera's map must be built from the
-returned points. (A result without ``searched`` on its cameras, from before it was stated, is
-read as every registered camera searched.)"""
+- the cameras: one per view in view order; the registered ones (the views the certificate's data
+  list) return the P the points are certified in, and K, R, t and the centre that P gives
+  (P = K [R | t], K upper triangular with K[2][2] = 1 and a positive diagonal, R a rotation,
+  centre -R' t); the others return none of them and claim nothing;
+- each point's observations are the track the certificate's data hold for it;
+- every camera the result calls certified, or gives a lower bound, is backed by the camera
+  certificate beside it: a valid resection document solved with the result's norm, max_residual,
+  abs_gap and camera_rel_gap, one map per searched camera built from the returned points, in
+  view order; a certified camera's cost is recomputed from its P, every point lies in front of
+  it (the resection bound's scope), its lower bound is at most the proven one and its cost, its
+  gap is cost - lower_bound and within the camera tolerance of the proven bound;
+- the summary's counts and RMS are recomputed from the items.
+
+A camera no bound could certify is not searched (structure.resect_cameras) and claims no bound.
+(A result without ``searched`` on its cameras, from before it was stated, is read as every
+registered camera searched.) The metric upgrade's own certification (the autocalibration stage's
+``certified``, the summary's ``autocalibration_certified``) is the pipeline's statement: this
+document carries no proof of it, and the report's scope says so.
+"""
 
 from __future__ import annotations
 
 import math
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
-from geocert.solvers.core.geometry import norm_cost
-from geocert.solvers.core.strict import Invalid
+from geocert.solvers.core.geometry import is_number, norm_cost
+from geocert.solvers.core.strict import Invalid, number, numbers
 from geocert.solvers.fractional.items import TrackItems
 
 ROUNDING = 1e-9  # relative: what JSON round trips and a recomputed cost may differ by
+CAMERA_FIELDS = ("K", "R", "t", "center", "P")
 
 
 def _views_of(cameras: list[dict]) -> list[dict]:
@@ -49,17 +58,216 @@ def camera_maps(points: list[dict], views: list[int]) -> list[dict]:
     return [maps[view] for view in views]
 
 
+def _close(value: Any, expected: float, scale: float = 1.0) -> bool:
+    return is_number(value) and abs(value - expected) <= ROUNDING * max(scale, abs(expected))
+
+
+def _check_camera_fields(camera: dict, where: str) -> None:
+    """K, R, t and the centre are what the camera's P gives (they fix each other: P's third row is
+    R's, of unit norm, so K [R | t] = P with K[2][2] = 1 leaves no scale free)."""
+    P = numbers(camera.get("P"), f"{where}/P", (3, 4), "returned")
+    K = numbers(camera.get("K"), f"{where}/K", (3, 3), "returned")
+    R = numbers(camera.get("R"), f"{where}/R", (3, 3), "returned")
+    t = numbers(camera.get("t"), f"{where}/t", (3,), "returned")
+    centre = numbers(camera.get("center"), f"{where}/center", (3,), "returned")
+    if not (K[1, 0] == K[2, 0] == K[2, 1] == 0 and K[2, 2] == 1 and K[0, 0] > 0 and K[1, 1] > 0):
+        raise Invalid("returned", f"{where}/K must be upper triangular with K[2][2] = 1 and a positive diagonal")
+    if not (np.abs(R @ R.T - np.eye(3)).max() <= ROUNDING and np.linalg.det(R) > 0):
+        raise Invalid("returned", f"{where}/R is not a rotation")
+    scale = np.abs(P).max()
+    if not np.abs(K @ np.column_stack([R, t]) - P).max() <= ROUNDING * scale:
+        raise Invalid("returned", f"{where}: K [R | t] is not its P")
+    if not np.abs(centre + R.T @ t).max() <= ROUNDING * max(1.0, np.abs(t).max()):
+        raise Invalid("returned", f"{where}/center is not -R' t")
+
+
+def _check_cameras(cameras: Any, stated: list) -> tuple[list[dict], list[int]]:
+    """The cameras in view order, the registered ones those the certificate's data state."""
+    if not isinstance(cameras, list) or not all(isinstance(c, dict) for c in cameras):
+        raise Invalid("returned", "the result's cameras must be a list of objects")
+    if [camera.get("view") for camera in cameras] != list(range(len(cameras))):
+        raise Invalid("returned", "the result's cameras must be one per view, in view order")
+    registered = _views_of(cameras)
+    views = [camera["view"] for camera in registered]
+    if stated.get("cameras") != [camera["P"] for camera in registered] or stated.get("views", views) != views:
+        raise Invalid("returned", "the cameras the points are certified in are not the cameras returned")
+    chosen = {id(camera) for camera in registered}
+    for camera in cameras:
+        where = f"cameras/{camera['view']}"
+        if id(camera) in chosen:
+            _check_camera_fields(camera, where)
+            if camera.get("registered") is not True:
+                raise Invalid("returned", f"{where}: a camera with a P is registered")
+            continue
+        if any(camera.get(name) is not None for name in CAMERA_FIELDS + ("cost", "lower_bound", "gap")) or \
+                camera.get("certified") is not False or camera.get("registered") is not False or \
+                camera.get("searched", False) is not False:
+            raise Invalid("returned", f"{where}: a camera not registered returns no camera and claims nothing")
+    return registered, views
+
+
+def _check_points(points: Any, tracks: Any, views: list[int]) -> None:
+    """Each point's observations are its track in the certificate's data (views by position)."""
+    if not isinstance(points, list) or not isinstance(tracks, list) or len(points) != len(tracks):
+        raise Invalid("returned", "the result's points are not the certificate's tracks")
+    for index, (point, track) in enumerate(zip(points, tracks)):
+        observations = point.get("observations") if isinstance(point, dict) else None
+        if not isinstance(observations, list) or not all(isinstance(o, list) and len(o) == 3 for o in observations):
+            raise Invalid("returned", f"points/{index}/observations must be [view, u, v] triples")
+        stated = [[views[k], u, v] for k, (u, v) in zip(track["views"], track["points"])]
+        if observations != stated:
+            raise Invalid("returned", f"points/{index}/observations are not the track its certificate is about")
+
+
+def _check_summary(result: dict, registered: list[dict]) -> None:
+    """The summary's counts and RMS, recomputed from the items (pipeline._summarise's)."""
+    summary = result.get("summary")
+    if not isinstance(summary, dict):
+        raise Invalid("returned", "the result's summary must be an object")
+    cameras, points = result["cameras"], result["points"]
+    placed = [p for p in points if p.get("point") is not None]
+    count, squared = 0, 0.0
+    by_view = {camera["view"]: np.asarray(camera["P"], dtype=float) for camera in registered}
+    for point in placed:
+        X = np.asarray(point["point"] if point.get("at_infinity") else [*point["point"], 1.0], dtype=float)
+        for view, u, v in point["observations"]:
+            proj = by_view[int(view)] @ X
+            squared += (proj[0] / proj[2] - u) ** 2 + (proj[1] / proj[2] - v) ** 2
+            count += 1
+    bounded = [c for c in cameras if c.get("status") not in ("not_run", "cancelled")]
+    certified_points = sum(1 for p in points if p.get("certified") is True)
+    certified_cameras = sum(1 for c in cameras if c.get("certified") is True)
+    expected = {"views": len(cameras), "views_registered": len(registered), "points": len(points),
+                "observations": count, "points_certified": certified_points,
+                "points_certified_fraction": certified_points / len(points) if points else None,
+                "cameras_certified": certified_cameras,
+                "cameras_certified_fraction": certified_cameras / len(bounded) if bounded else None}
+    for name, value in expected.items():
+        given = summary.get(name)
+        if not (given == value or (value is not None and _close(given, value))):
+            raise Invalid("returned", f"summary/{name} is {given!r}, the items give {value!r}")
+    rms = math.sqrt(squared / count) if count else None
+    given = summary.get("rms_reprojection_px")
+    if not (given is rms or (rms is not None and _close(given, rms, 1e-6))):
+        raise Invalid("returned", f"summary/rms_reprojection_px is {given!r}, the cameras and points give {rms!r}")
+    for stage in result.get("stages") or []:  # the stages' counts of the same items
+        if not isinstance(stage, dict):
+            continue
+        counts = {"structure": {"points": len(points), "certified": certified_points},
+                  "cameras": {"cameras": len(cameras), "certified": certified_cameras,
+                              "searched": sum(1 for c in cameras if c.get("searched") is True)}}.get(stage.get("name"))
+        for name, value in (counts or {}).items():
+            if name in stage and stage[name] != value:
+                raise Invalid("returned", f"stages/{stage['name']}/{name} is {stage[name]!r}, the items give {value!r}")
+
+
+def _check_camera_certificate(result: dict, certificate: dict, searched: list[dict], certified: list[int],
+                              verify: Callable[[dict], object]) -> None:
+    """The camera certificate backs the certified cameras, and is about this result: the
+    resection kind, the result's norm, max_residual, abs_gap and camera tolerance, and one map
+    per searched camera built from the returned points."""
+    document = result.get("camera_certificate")
+    if not certified and document is None:
+        return
+    if not isinstance(document, dict):
+        raise Invalid("returned", "cameras are called certified without a camera certificate")
+    options, own = document.get("options"), certificate["options"]
+    if document.get("kind") != "resection" or not isinstance(options, dict):
+        raise Invalid("returned", "the camera certificate must be a resection certificate")
+    tolerance = own.get("camera_rel_gap", own.get("rel_gap"))  # the raw options: as the pipeline passed them
+    expected = {"norm": result.get("norm"), "max_residual": own.get("max_residual"), "abs_gap": own.get("abs_gap"),
+                "rel_gap": tolerance}
+    for name, value in expected.items():
+        given = options.get(name)
+        if not (given == value and type(given) is type(value)) and not (is_number(given) and is_number(value)
+                                                                        and float(given) == float(value)):
+            raise Invalid("returned", f"the camera certificate's {name} is {given!r}, the result's is {value!r}")
+    report = verify(document)
+    if not getattr(report, "valid", False):
+        raise Invalid("returned", f"the camera certificate is invalid: {getattr(report, 'first_failure', None)}")
+    discounted = {entry["item"]: entry["proven"] for entry in (report.scope or {}).get("discounted", [])}
+    claims, maps = document.get("items"), document.get("data", {}).get("maps")
+    if not isinstance(claims, list) or not isinstance(maps, list) or len(claims) != len(searched) \
+            or len(maps) != len(searched):
+        raise Invalid("returned", f"the camera certificate must hold one map per searched camera ({len(searched)}, "
+                                  "in view order)")
+    expected_maps = camera_maps(result.get("points") or [], [int(camera["view"]) for camera in searched])
+    for k, camera in enumerate(searched):
+        if maps[k] != expected_maps[k]:
+            raise Invalid("returned", f"cameras/{camera.get('view')}: the camera certificate's map is not the "
+                                      "returned points")
+    norm = result.get("norm")
+    for k, camera in enumerate(searched):
+        claim, where = claims[k], f"cameras/{camera.get('view')}"
+        proven = discounted.get(k, claim.get("lower_bound"))
+        source = np.asarray(maps[k]["source"], dtype=float).reshape(-1, 3)
+        target = np.asarray(maps[k]["target"], dtype=float).reshape(-1, 2)
+        lower = camera.get("lower_bound")
+        if lower is not None and claim.get("certified") is True and not (is_number(lower) and lower <= proven):
+            raise Invalid("returned", f"{where}: lower bound {lower!r} above the proven {proven!r}")
+        if camera.get("points") is not None and camera["points"] != len(source):
+            raise Invalid("returned", f"{where}: points {camera['points']!r}, its map has {len(source)}")
+        if k not in certified:
+            continue
+        if claim.get("certified") is not True:
+            raise Invalid("returned", f"{where}: called certified, but its resection is not")
+        P = np.asarray(camera["P"], dtype=float)
+        projected = np.hstack([source, np.ones((len(source), 1))]) @ P.T
+        if not np.all(projected[:, 2] > 0):
+            raise Invalid("returned", f"{where}: a point is behind the camera returned, outside the bound's scope")
+        cost = norm_cost(target - projected[:, :2] / projected[:, 2:3], norm)
+        claimed_cost = camera.get("cost")
+        if not math.isfinite(cost) or not _close(claimed_cost, cost):
+            raise Invalid("returned", f"{where}: cost {claimed_cost!r}, but the returned camera costs {cost!r}")
+        if not (is_number(lower) and lower <= cost * (1 + ROUNDING)):
+            raise Invalid("returned", f"{where}: lower bound {lower!r} is not a number at most its cost {cost!r}")
+        if not (_close(camera.get("gap"), claimed_cost - lower, abs(claimed_cost))
+                and _close(camera.get("optimal_cost"), claim.get("cost"))):
+            raise Invalid("returned", f"{where}: gap or optimal_cost is not what its cost and its proof give")
+        if camera.get("status") != "optimal":
+            raise Invalid("returned", f"{where}: a certified camera's status is optimal")
+        tolerance_abs = max(float(options["abs_gap"]), float(options["rel_gap"]) * cost)
+        if not cost - proven <= tolerance_abs * (1 + ROUNDING) + ROUNDING * max(1.0, abs(cost)):
+            raise Invalid("returned", f"{where}: costs {cost:.6g}, beyond the tolerance {tolerance_abs:.3g} above the "
+                                      f"proven bound {proven:.6g}")
+
+
 class ReconstructionItems(TrackItems):
-    """Points as triangulations (TrackItems), plus ``check_result``: the returned cameras."""
+    """Points as triangulations (TrackItems), plus ``check_result``: the rest of the result."""
+
+    @staticmethod
+    def job_outcomes(result: dict) -> list:
+        """One item, certified when it has points and every one is (its status is the job's own)."""
+        points = result.get("points") or []
+        return [(None, bool(points) and all(isinstance(p, dict) and p.get("certified") is True for p in points))]
+
+    def checked_options(self, options: dict) -> dict:
+        """The points' options (a triangulation's), and the cameras' tolerance (stated in the
+        scope; the camera certificate hashes it as its rel_gap)."""
+        from geocert.solvers.verify import residual_options
+
+        checked = residual_options("reconstruction", options)
+        if options.get("camera_rel_gap") is not None:
+            checked["camera_rel_gap"] = number(options["camera_rel_gap"], "options/camera_rel_gap", "options")
+        return checked
+
+    def scope_statement(self, options: dict) -> dict:
+        from geocert.solvers.verify import scope_statement
+
+        statement = scope_statement("triangulation", options)
+        statement["kind"] = "reconstruction"
+        statement["camera_rel_gap"] = options.get("camera_rel_gap")
+        statement["statement"] = (
+            "for each certified point, in the cameras returned (the certificate's data): " + statement["statement"]
+            + "; for each certified camera, by the camera certificate (a resection document over the returned points, "
+              "with the result's norm, max_residual, abs_gap and camera_rel_gap): no 3x4 camera in front of every point "
+              "costs less than its lower_bound, and the camera returned costs cost; the metric upgrade's "
+              "certification (autocalibration_certified) is the pipeline's statement: no proof of it is carried here")
+        return statement
 
     def check_result(self, result: dict, certificate: dict, verify: Callable[[dict], object]) -> None:
-        cameras = result.get("cameras")
-        if not isinstance(cameras, list) or not all(isinstance(c, dict) for c in cameras):
-            raise Invalid("returned", "the result's cameras must be a list of objects")
-        registered = _views_of(cameras)
-        stated = certificate.get("data", {}).get("cameras")
-        if stated != [camera["P"] for camera in registered]:
-            raise Invalid("returned", "the cameras the points are certified in are not the cameras returned")
+        registered, views = _check_cameras(result.get("cameras"), certificate.get("data", {}))
+        _check_points(result.get("points"), certificate.get("data", {}).get("tracks"), views)
         if any("searched" in camera for camera in registered):
             for camera in registered:
                 if camera.get("searched") is not True and (camera.get("certified") is not False
@@ -70,50 +278,8 @@ class ReconstructionItems(TrackItems):
         else:  # a result from before ``searched`` was stated: every registered camera has a map
             searched = registered
         certified = [k for k, camera in enumerate(searched) if camera.get("certified") is True]
-        if not certified:
-            return
-        document = result.get("camera_certificate")
-        if not isinstance(document, dict):
-            raise Invalid("returned", "cameras are called certified without a camera certificate")
-        report = verify(document)
-        if not getattr(report, "valid", False):
-            raise Invalid("returned", f"the camera certificate is invalid: {getattr(report, 'first_failure', None)}")
-        claims, maps = document.get("items"), document.get("data", {}).get("maps")
-        if not isinstance(claims, list) or not isinstance(maps, list) or len(claims) != len(searched) \
-                or len(maps) != len(searched):
-            raise Invalid("returned", f"the camera certificate must hold one map per searched camera ({len(searched)}, "
-                                      "in view order)")
-        expected = camera_maps(result.get("points") or [], [int(camera["view"]) for camera in searched])
-        for k, camera in enumerate(searched):
-            if maps[k] != expected[k]:
-                raise Invalid("returned", f"cameras/{camera.get('view')}: the camera certificate's map is not the "
-                                          "returned points")
-        options = document.get("options", {})
-        norm = result.get("norm")
-        for k in certified:
-            camera, claim = searched[k], claims[k]
-            where = f"cameras/{camera.get('view')}"
-            if claim.get("certified") is not True:
-                raise Invalid("returned", f"{where}: called certified, but its resection is not")
-            source = np.asarray(maps[k]["source"], dtype=float)
-            target = np.asarray(maps[k]["target"], dtype=float)
-            P = np.asarray(camera["P"], dtype=float)
-            projected = np.hstack([source, np.ones((len(source), 1))]) @ P.T
-            if not np.all(projected[:, 2] > 0):
-                raise Invalid("returned", f"{where}: a point is behind the camera returned, outside the bound's scope")
-            cost = norm_cost(target - projected[:, :2] / projected[:, 2:3], norm)
-            claimed_cost, lower = camera.get("cost"), camera.get("lower_bound")
-            if not isinstance(claimed_cost, (int, float)) or not isinstance(lower, (int, float)) \
-                    or abs(cost - claimed_cost) > ROUNDING * max(1.0, abs(cost)):
-                raise Invalid("returned", f"{where}: cost {claimed_cost!r}, but the returned camera costs {cost!r}")
-            if lower > claim["lower_bound"] + ROUNDING * max(1.0, abs(claim["lower_bound"])):
-                raise Invalid("returned", f"{where}: lower bound {lower!r} above the proven {claim['lower_bound']!r}")
-            tolerance = max(float(options.get("abs_gap", 0.0)), float(options.get("rel_gap", 0.0)) * cost)
-            if not cost - claim["lower_bound"] <= tolerance * (1 + ROUNDING) + ROUNDING * max(1.0, abs(cost)):
-                raise Invalid("returned", f"{where}: costs {cost:.6g}, beyond the tolerance {tolerance:.3g} above the "
-                                          f"proven bound {claim['lower_bound']:.6g}")
-            if not math.isfinite(cost):
-                raise Invalid("returned", f"{where}: the returned camera's cost is not finite")
+        _check_camera_certificate(result, certificate, searched, certified, verify)
+        _check_summary(result, registered)
 
 
 RECONSTRUCTION = ReconstructionItems()
