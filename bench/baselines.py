@@ -91,6 +91,30 @@ def dlt_lm(cameras: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.append(fit.x, 1.0)
 
 
+def dlt_leastsq(cameras: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """dlt_lm's start (OpenCV's linear triangulation), then MINPACK's Levenberg-Marquardt
+    (scipy.optimize.leastsq, lmder with the analytic Jacobian): the cheapest good local solve of
+    one track in plain scipy."""
+    if len(cameras) == 2:
+        X = cv2.triangulatePoints(cameras[0], cameras[1], points[0].reshape(2, 1), points[1].reshape(2, 1)).ravel()
+    else:
+        rows = np.concatenate([points[:, 0:1] * cameras[:, 2] - cameras[:, 0],
+                               points[:, 1:2] * cameras[:, 2] - cameras[:, 1]])
+        X = np.linalg.svd(rows)[2][-1]
+    A, b = cameras[:, :, :3], cameras[:, :, 3]
+
+    def residuals(x):
+        proj = A @ x + b
+        return (proj[:, :2] / proj[:, 2:3] - points).ravel()
+
+    def jacobian(x):
+        proj = A @ x + b
+        image = proj[:, :2] / proj[:, 2:3]
+        return ((A[:, :2] - image[:, :, None] * A[:, 2:3]) / proj[:, 2:3, None]).reshape(-1, 3)
+
+    return np.append(scipy.optimize.leastsq(residuals, X[:3] / X[3], Dfun=jacobian)[0], 1.0)
+
+
 def map_dlt_lm(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     """The usual pipeline for a projective map: normalised DLT, then LM on the reprojection
     error (OpenCV's findHomography does the same for 2D homographies)."""

@@ -98,8 +98,9 @@ def peak_rss_kib(pid: int) -> int:
 
 
 class Cluster:
-    def __init__(self, directory: Path, workers: int, env: dict[str, str], nice_workers: bool = False):
-        self.directory, self.nice_workers = directory, nice_workers
+    def __init__(self, directory: Path, workers: int, env: dict[str, str], nice_workers: bool = False,
+                 concurrency: int = 1):
+        self.directory, self.nice_workers, self.concurrency = directory, nice_workers, concurrency
         self.redis, self.redis_url = start_embedded_redis(directory)
         self.env = {**os.environ, "GEOCERT_RATE_LIMIT_PER_MINUTE": "0", **env,
                     "GEOCERT_REDIS_URL": self.redis_url, "GEOCERT_DATA_DIR": str(directory)}
@@ -124,7 +125,8 @@ class Cluster:
         # At nice 10 when NICE_WORKERS is set: on this one machine the workers then take the CPU the
         # API leaves, as on machines of their own (the production layout), instead of competing for it.
         nice = ["nice", "-n", "10"] if self.nice_workers else []
-        return subprocess.Popen(nice + [sys.executable, "-m", "geocert.app.cli", "worker", "--concurrency", "1"],
+        return subprocess.Popen(nice + [sys.executable, "-m", "geocert.app.cli", "worker", "--concurrency",
+                                        str(self.concurrency)],
                                 env=self.env, start_new_session=True, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL)
 
@@ -153,9 +155,10 @@ class Cluster:
 
 
 @contextmanager
-def cluster(workers: int = 0, nice_workers: bool = False, **env: str):
+def cluster(workers: int = 0, nice_workers: bool = False, concurrency: int = 1, **env: str):
     with tempfile.TemporaryDirectory(prefix="geocert-bench-") as directory:
-        running = Cluster(Path(directory), workers, {key.upper(): value for key, value in env.items()}, nice_workers)
+        running = Cluster(Path(directory), workers, {key.upper(): value for key, value in env.items()}, nice_workers,
+                          concurrency)
         try:
             yield running
         finally:
@@ -424,19 +427,26 @@ SECTIONS = {"submit": bench_submit, "streams": bench_streams, "redelivery": benc
             "restart": bench_restart, "body": bench_body}
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--only", default=",".join(SECTIONS), help="comma-separated sections: " + ", ".join(SECTIONS))
+def run(sections: dict, description: str, first_column: str = "figure", third_column: str = "target") -> None:
+    """Run the sections named on the command line (--only), then print every figure as one table
+    (its third column, when any figure has one: ``report``'s ``target``)."""
+    parser = argparse.ArgumentParser(description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--only", default=",".join(sections), help="comma-separated sections: " + ", ".join(sections))
     args = parser.parse_args()
     for name in args.only.split(","):
         try:
-            SECTIONS[name.strip()]()
+            sections[name.strip()]()
         except Exception as exc:  # one section failing does not hide the others' figures
             report(f"section {name} failed", f"{type(exc).__name__}: {exc}")
-    print("\nfigure | measured | target")
-    print("---|---|---")
+    targets = any(target for _, _, target in FIGURES)
+    print(f"\n{first_column} | measured" + (f" | {third_column}" if targets else ""))
+    print("---|---" + ("|---" if targets else ""))
     for what, measured, target in FIGURES:
-        print(f"{what} | {measured} | {target}")
+        print(f"{what} | {measured}" + (f" | {target}" if targets else ""))
+
+
+def main() -> None:
+    run(SECTIONS, __doc__)
 
 
 if __name__ == "__main__":

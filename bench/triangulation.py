@@ -9,10 +9,18 @@ Prints, in one run and side by side:
   3. the whole L2L2 batch through a running service (`geocert serve`, 2 workers), submit to result;
   4. per norm, side by side on every track: the batched solver (fractional.batched.triangulate_many,
      called on chunks of --chunk tracks as the service's kind calls it) against triangulate track by
-     track, and (L2L2) OpenCV DLT + LM, CPU time per track.
+     track, and (L2L2) OpenCV DLT + LM, CPU time per track;
+  5. the floor (L2L2): on the Dinosaur and on synthetic scenes of 2 to 20 views, CPU per track of
+     the vectorised local solve (fractional.flat: linear start and Levenberg-Marquardt on every
+     track at once, uncertified), of per-track scipy (OpenCV DLT, then MINPACK's leastsq), of the
+     certified batched solver (triangulate_many: the convexity path, fractional.convexity_path,
+     then the search for the tracks it leaves), of the same with every track searched (the
+     convexity path switched off: the solver before it), and of the convexity bound alone (the
+     vectorised local solve and the bound of fractional.convexity, arrays only), each repeated
+     --repeats times, interleaved, with the ratios to the floor.
 
     .venv/bin/python -m bench.triangulation [--norms L2L2,L2L1,L1L1] [--sample 200] [--no-scip] [--no-service]
-                                            [--chunk 500]
+                                            [--chunk 500] [--floor-only] [--repeats 3]
 """
 
 from __future__ import annotations
@@ -34,8 +42,12 @@ from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.fractional.batched import triangulate_many
 from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, triangulate
+from geocert.solvers.fractional import flat as flat_tracks
+from geocert.solvers.fractional.convexity import convexity_bounds
 
-DINOSAUR = Path(__file__).resolve().parents[2] / "shared" / "data" / "oxford_dinosaur"
+# shared/ beside the checkout (or beside the folder of worktrees that holds it).
+DINOSAUR = next((folder / "shared" / "data" / "oxford_dinosaur" for folder in Path(__file__).resolve().parents[2:4]
+                 if (folder / "shared").is_dir()), Path("shared") / "data" / "oxford_dinosaur")
 
 
 def load() -> str:
@@ -201,6 +213,86 @@ def service_batch(cameras, tracks, workers: int, detail: str = "full") -> dict:
         server.wait(timeout=60)
 
 
+def floor_solve(cameras, tracks) -> int:
+    """The vectorised local solve (uncertified): how many tracks it ended in front of every camera."""
+    flat = flat_tracks.FlatTracks.build(cameras, tracks)
+    x, cost = flat_tracks.refine(flat, flat_tracks.linear(flat)[0])
+    return int(np.isfinite(cost).sum())
+
+
+def per_track_scipy(cameras, tracks) -> int:
+    from bench.baselines import dlt_leastsq
+
+    for views, points in tracks:
+        dlt_leastsq(cameras[views], points)
+    return len(tracks)
+
+
+def batched_certified(cameras, tracks, chunk: int = 500) -> int:
+    options = TriangulationOptions(norm="L2L2", rel_gap=1e-3)
+    return sum(r.certified for start in range(0, len(tracks), chunk)
+               for r in triangulate_many(cameras, tracks[start:start + chunk], options))
+
+
+def convexity_bound_only(cameras, tracks) -> int:
+    """The vectorised local solve and the convexity bound, arrays only: how many tracks it closes."""
+    options = TriangulationOptions(norm="L2L2", rel_gap=1e-3)
+    flat = flat_tracks.FlatTracks.build(cameras, tracks)
+    x0, ok = flat_tracks.linear(flat)
+    x, cost = flat_tracks.refine(flat, x0)
+    lower, _, computed = convexity_bounds(flat, x)
+    return int((ok & (computed - lower <= np.maximum(options.abs_gap, options.rel_gap * computed))).sum())
+
+
+def search_only(cameras, tracks, chunk: int = 500) -> int:
+    """triangulate_many as it was before the convexity path: every track searched (the path
+    switched off for the call)."""
+    from unittest import mock
+
+    from geocert.solvers.fractional import batched
+
+    with mock.patch.object(batched, "certify_tracks", lambda cameras, tracks, options: [None] * len(tracks)):
+        return batched_certified(cameras, tracks, chunk)
+
+
+def synthetic_scenes(views: list[int], points: int) -> list[tuple[str, np.ndarray, list]]:
+    from geocert.solvers.reconstruction.synthetic import scene
+
+    out = []
+    for n in views:
+        s = scene(views=n, points=points, noise_px=0.5, seed=n)
+        cameras = np.array([s.K @ np.hstack([R, t[:, None]]) for R, t in zip(s.rotations, s.translations)])
+        out.append((f"synthetic {n} views", cameras, [(list(map(int, v)), p) for v, p in s.tracks]))
+    return out
+
+
+def floor_table(datasets, repeats: int) -> None:
+    """Section 5: every solver on every dataset, CPU per track, interleaved repeats (the order
+    rotates each repeat); the median repeat's figure."""
+    solvers = [("floor", floor_solve), ("bound only", convexity_bound_only), ("batched", batched_certified),
+               ("search only", search_only), ("scipy/track", per_track_scipy)]
+    print(f"\nThe floor (L2L2, rel_gap 1e-3): CPU microseconds per track, median of {repeats} interleaved "
+          f"repeats; ratio = solver / floor (vectorised local solve, uncertified); load average {load()}")
+    print(f"  {'dataset':22} {'tracks':>6} " + " ".join(f"{name:>12}" for name, _ in solvers)
+          + "  certified (batched / search only)   ratios: bound only, batched, search only, scipy/track")
+    for label, cameras, tracks in datasets:
+        cpu = {name: [] for name, _ in solvers}
+        counts = {}
+        for rep in range(repeats):
+            for k in range(len(solvers)):
+                name, solve = solvers[(k + rep) % len(solvers)]
+                start = time.process_time()
+                counts[name] = solve(cameras, tracks)
+                cpu[name].append(time.process_time() - start)
+        per = {name: 1e6 * float(np.median(v)) / len(tracks) for name, v in cpu.items()}
+        print(f"  {label:22} {len(tracks):6d} " + " ".join(f"{per[name]:12.1f}" for name, _ in solvers)
+              + f"  {counts['batched']:5d} / {counts['search only']:5d}"
+              + f"{'':18} {per['bound only'] / per['floor']:.2f}x, {per['batched'] / per['floor']:.2f}x, "
+              f"{per['search only'] / per['floor']:.1f}x, "
+              f"{per['scipy/track'] / per['floor']:.1f}x")
+    print(f"  load average {load()}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--norms", default=",".join(NORMS))
@@ -210,9 +302,20 @@ def main() -> None:
     parser.add_argument("--workers", default="2", help="comma-separated worker counts, e.g. 1,2 (each a run)")
     parser.add_argument("--chunk", type=int, default=500, help="tracks per triangulate_many call (side by side)")
     parser.add_argument("--details", default="full,brief", help="the service runs' options.detail, each a run")
+    parser.add_argument("--floor-only", action="store_true", help="only section 5 (the floor)")
+    parser.add_argument("--repeats", type=int, default=3, help="section 5's interleaved repeats")
+    parser.add_argument("--synthetic", default="2,3,5,10,20", help="section 5's synthetic scenes' view counts")
+    parser.add_argument("--synthetic-points", type=int, default=500)
     args = parser.parse_args()
 
     cameras, tracks = load_dinosaur(DINOSAUR)
+    floor_data = [("Oxford Dinosaur", cameras, [(t.views, t.points) for t in tracks])]
+    floor_data += synthetic_scenes([int(n) for n in args.synthetic.split(",")], args.synthetic_points)
+    if args.floor_only:
+        print(f"machine speed (a fixed Python loop) {machine_speed_ms():.0f} ms; load average {load()}")
+        floor_table(floor_data, args.repeats)
+        print(f"machine speed at the end {machine_speed_ms():.0f} ms; load average {load()}")
+        return
     everything = range(len(tracks))
     sample = np.random.default_rng(0).choice(len(tracks), size=args.sample, replace=False).tolist()
     print(f"Dinosaur: {len(tracks)} tracks, {len(cameras)} cameras, rel_gap 1e-3, one process; "
@@ -269,6 +372,7 @@ def main() -> None:
                                   "(target 1.8x with 2)")
     for norm, ours in solved.items():
         side_by_side(cameras, tracks, norm, ours, args.chunk)
+    floor_table(floor_data, args.repeats)
     print(f"\nMachine speed at the end (the same loop): {machine_speed_ms():.0f} ms; load average {load()}")
 
 

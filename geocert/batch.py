@@ -54,6 +54,7 @@ class ItemProgress:
         self.nodes_done = 0
         self.lower_done = 0.0
         self.upper_done = 0.0
+        self.bounded_done = 0  # finished items with both bounds: what lower_done and upper_done add
         self.worst_gap_rel = 0.0
         self.start = time.perf_counter()
         self.stopped = False
@@ -64,18 +65,24 @@ class ItemProgress:
         if item.get("cost") is not None and item.get("lower_bound") is not None:
             self.lower_done += item["lower_bound"]
             self.upper_done += item["cost"]
+            self.bounded_done += 1
             self.worst_gap_rel = max(self.worst_gap_rel,
                                      gap_beyond_tolerance(item["cost"], item["lower_bound"], self.abs_gap))
         self.emit(None)
 
     def emit(self, running: Progress | None) -> None:
+        """Sends the progress. The bounds sum real figures only (the finished items' and the
+        running search's); with none (an item with no bounds, as a reconstruction, or a stage
+        that reports its count only) they are null, not 0, which a chart would draw."""
         if self.sink is None:
             return
         lower, upper, nodes, gap_rel, open_boxes = self.lower_done, self.upper_done, self.nodes_done, self.worst_gap_rel, 0
+        bounded = self.bounded_done > 0
         if running is not None:
             nodes += running.nodes
             open_boxes = running.open_boxes
             if math.isfinite(running.lower_bound) and math.isfinite(running.upper_bound):
+                bounded = True
                 lower += running.lower_bound
                 upper += running.upper_bound
                 gap_rel = max(gap_rel, gap_beyond_tolerance(running.upper_bound, running.lower_bound, self.abs_gap))
@@ -83,8 +90,9 @@ class ItemProgress:
         self.sink({
             **stage,
             "nodes": nodes, "open_boxes": open_boxes,
-            "lower_bound": lower, "upper_bound": upper, "gap_abs": max(0.0, upper - lower),
-            "gap_rel": finite_or_none(gap_rel), **item_counts(self.done, self.total),
+            "lower_bound": lower if bounded else None, "upper_bound": upper if bounded else None,
+            "gap_abs": max(0.0, upper - lower) if bounded else None,
+            "gap_rel": finite_or_none(gap_rel) if bounded else None, **item_counts(self.done, self.total),
             "elapsed_s": time.perf_counter() - self.start,
         })
 

@@ -33,10 +33,42 @@ class Settings(BaseSettings):
     max_items_per_job: int = 200_000
     # Most observations or correspondences, summed over a job's items (413 beyond it).
     max_points_per_job: int = 2_000_000
+    # Certificate verifications (POST /v1/certificates/verify) running at once in one API
+    # process (429 beyond it; 0: unlimited): each may hold some 25 times its body in memory.
+    max_concurrent_verifications: int = 2
     # Requests per minute one key may make to /v1 (429 beyond it; 0: unlimited).
     rate_limit_per_minute: int = 1200
     # Jobs one key may have queued or running at once (429 beyond it; 0: unlimited).
     max_active_jobs_per_key: int = 100
+    # A job's budget, computed from its request before anything of it is decoded or built (each
+    # kind's request_figures; 413 naming the figure and its limit beyond one). See the README's
+    # Operations section, "Limits", for what each bounds.
+    # Pixels of a reconstruction's photos, from their headers: all of them (the worker holds them
+    # decoded, a byte each), and the largest (feature detection holds about 240 bytes a pixel of
+    # one image at a time: 12 Mpx is about 2.9 GB).
+    max_image_pixels_per_job: int = 100_000_000
+    max_image_pixels: int = 12_000_000
+    # Views (cameras) of an autocalibration (each adds rows to every conic program of both stages),
+    # and of a reconstruction (its views or photos).
+    max_autocalibration_views: int = 50
+    max_reconstruction_views: int = 300
+    # Cameras times points: an autocalibration's chirality rows, /v1/orient's dense arrays.
+    max_view_points_per_job: int = 4_000_000
+    # A bilinear job's basis: shapes times points (each frame's programs grow with both).
+    max_basis_points_per_job: int = 50_000
+    # stereo_lines: segments in one image of a frame, or lines matched in one frame pair. Matching
+    # compares every pair of segments and solves an assignment (cubic) before RANSAC first looks
+    # at the clock: about 0.4 s of CPU a pair at 500 segments, 2 s at 1000, 11 s at 2000.
+    max_segments_per_frame: int = 1000
+    # Memory of one solver process, in MiB (its address space, set when it starts): a task that
+    # needs more fails its job with the reason, and that process goes on with the next task.
+    # 0: no limit.
+    worker_memory_mb: int = 4096
+    # Fairness, with API keys: one key's tasks run on every live solver process but this many (at
+    # least one), so that another key's job starts at once however many jobs the first has queued;
+    # a task over its key's share waits in the queue, its job queued. 0: no share (first come,
+    # first served). Without keys (one user, on loopback) there is no share.
+    solvers_kept_for_others: int = 1
     # Server-side maxima of the per-item options time_limit_s and max_nodes (422 beyond them).
     max_item_time_limit_s: float = 60.0
     max_item_nodes: int = 100_000
@@ -66,7 +98,12 @@ class Settings(BaseSettings):
     # Webhook delivery attempts and the first retry delay (doubling each time).
     webhook_attempts: int = 6
     webhook_backoff_s: float = 2.0
+    # Each attempt ends within this many seconds in all (connecting, sending, the answer's status),
+    # however slowly the receiver sends.
     webhook_timeout_s: float = 10.0
+    # Webhooks go only to public addresses; networks (comma-separated addresses or CIDR blocks,
+    # e.g. "127.0.0.1/32,10.1.0.0/16") the operator allows besides.
+    webhook_allowed_networks: str = ""
     # A connection must complete a request's headers within this many seconds of opening (or of
     # its previous response), else it is closed (slow-header clients).
     header_timeout_s: float = 10.0
@@ -85,6 +122,31 @@ class Settings(BaseSettings):
             raise ValueError(f"GEOCERT_VISIBILITY_TIMEOUT_S ({self.visibility_timeout_s}) must be at least 6: three "
                              "of the workers' 2 s heartbeats, which renew their tasks' leases")
         return self
+
+
+# The figures kinds report of a request (their request_figures: kinds/base.py), what each counts,
+# and the setting that bounds it.
+BUDGETS = {
+    "image_pixels": ("max_image_pixels_per_job", "pixels in the job's photos (read from their headers)"),
+    "largest_image_pixels": ("max_image_pixels", "pixels in one photo (read from its header)"),
+    "autocalibration_views": ("max_autocalibration_views", "views in one job"),
+    "reconstruction_views": ("max_reconstruction_views", "views in one job"),
+    "view_points": ("max_view_points_per_job", "views times points in one job"),
+    "basis_points": ("max_basis_points_per_job", "basis shapes times points in one job"),
+    "segments_per_frame": ("max_segments_per_frame", "segments in one image of a frame (or lines in one pair)"),
+}
+
+
+def over_budget(figures: dict[str, tuple[int, str]]) -> tuple[str, str] | None:
+    """The first figure over its limit: (the reason, naming the figure, its value, the limit and its
+    variable; the field it comes from). None when every figure is within its limit."""
+    settings = get_settings()
+    for figure, (value, field) in figures.items():
+        name, counted = BUDGETS[figure]
+        limit = getattr(settings, name)
+        if value > limit:
+            return f"{value} {counted}: over this server's limit of {limit} (GEOCERT_{name.upper()})", field
+    return None
 
 
 def chunk_size_for(kind) -> int:

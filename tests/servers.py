@@ -62,11 +62,11 @@ class Cluster:
         self.base = f"http://127.0.0.1:{self.port}"
         self.workers: list[subprocess.Popen] = []
 
-    def start_worker(self) -> subprocess.Popen:
-        # A session of its own, so that a kill takes the worker's pool processes too (as when a
-        # machine or container dies).
-        worker = subprocess.Popen([sys.executable, "-m", "geocert.app.cli", "worker", "--concurrency", "1"], env=self.env,
-                                  start_new_session=True)
+    def start_worker(self, concurrency: int = 1) -> subprocess.Popen:
+        # A session of its own, so that a kill takes the worker's pool processes (and its webhook
+        # worker) too, as when a machine or container dies.
+        worker = subprocess.Popen([sys.executable, "-m", "geocert.app.cli", "worker", "--concurrency", str(concurrency)],
+                                  env=self.env, start_new_session=True)
         self.workers.append(worker)
         return worker
 

@@ -3,6 +3,7 @@ maps with their exact images), stable seeds, and jobs built from them."""
 
 from __future__ import annotations
 
+import contextlib
 import zlib
 from pathlib import Path
 
@@ -129,3 +130,17 @@ def embedded_redis_client(tmp_path_factory, **options):
     finally:
         process.terminate()
         process.wait(timeout=10)
+
+
+
+@contextlib.contextmanager
+def every_track_searched():
+    """triangulate_many searching every track within (its convexity path, L2L2's usual way to
+    certify, certifies none): for tests of a search's proof."""
+    import pytest
+
+    from geocert.solvers.fractional import batched
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(batched, "certify_tracks", lambda cameras, tracks, options: [None] * len(tracks))
+        yield

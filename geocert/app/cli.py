@@ -93,10 +93,18 @@ def default_concurrency() -> int:
     return max(2, os.cpu_count() or 1)
 
 
-def _worker_command(concurrency: int, name: str) -> list[str]:
+WEBHOOK_THREADS = 8  # deliveries at once per webhook worker: each mostly waits on its receiver
+
+
+def _worker_command(concurrency: int, name: str, role: str = "solve") -> list[str]:
+    """A Celery worker of one role: ``solve`` (the solve queue, one process per solver) or
+    ``webhooks`` (the webhook queue, threads: deliveries wait on the network, not the CPU)."""
+    from geocert.workers.celery_app import SOLVE_QUEUE, WEBHOOK_QUEUE
+
+    pool = ["--concurrency", str(concurrency), "--pool", "prefork", "-Q", SOLVE_QUEUE] if role == "solve" else \
+        ["--concurrency", str(WEBHOOK_THREADS), "--pool", "threads", "-Q", WEBHOOK_QUEUE]
     return [sys.executable, "-m", "celery", "-A", "geocert.workers.celery_app", "worker", "--loglevel", "WARNING",
-            "--concurrency", str(concurrency), "--pool", "prefork", "-n", f"{name}@%h", "--without-gossip",
-            "--without-mingle"]
+            *pool, "-n", f"{name}@%h", "--without-gossip", "--without-mingle"]
 
 
 # A worker solves one item at a time on small matrices; the BLAS libraries' own threads then
@@ -160,6 +168,9 @@ def cmd_serve(args: argparse.Namespace) -> int:
     workers = [subprocess.Popen(_worker_command(args.concurrency, f"geocert-{i}"), env=worker_environment(dict(os.environ)),
                                 preexec_fn=_die_with_parent)
                for i in range(args.workers)]
+    if args.workers:  # and one for webhooks (their own queue: a slow receiver never holds a solver)
+        workers.append(subprocess.Popen(_worker_command(0, "geocert-webhooks", "webhooks"),
+                                        env=worker_environment(dict(os.environ)), preexec_fn=_die_with_parent))
     # uvicorn re-raises SIGTERM after its own shutdown; make that an ordinary exit so that the
     # workers and the embedded Redis below are stopped too.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
@@ -258,7 +269,12 @@ def cmd_worker(args: argparse.Namespace) -> int:
     if not os.environ.get("GEOCERT_REDIS_URL"):
         print("geocert worker: set GEOCERT_REDIS_URL to the Redis the API uses", file=sys.stderr)
         return 2
-    os.execve(sys.executable, _worker_command(args.concurrency, "geocert"), worker_environment(dict(os.environ)))
+    environment = worker_environment(dict(os.environ))
+    if args.role == "webhooks":
+        os.execve(sys.executable, _worker_command(0, "geocert-webhooks", "webhooks"), environment)
+    if args.role == "both":  # the webhook worker dies with this one (a signal from the kernel)
+        subprocess.Popen(_worker_command(0, "geocert-webhooks", "webhooks"), env=environment, preexec_fn=_die_with_parent)
+    os.execve(sys.executable, _worker_command(args.concurrency, "geocert"), environment)
     return 0  # not reached
 
 
@@ -307,7 +323,9 @@ def main(argv: list[str] | None = None) -> int:
                        help="solver processes per worker (default: one per core, at least 2)")
     serve.set_defaults(func=cmd_serve)
     worker = sub.add_parser("worker", help="run one Celery worker against GEOCERT_REDIS_URL")
-    worker.add_argument("--concurrency", type=int, default=os.cpu_count() or 1)
+    worker.add_argument("--concurrency", type=int, default=os.cpu_count() or 1, help="solver processes")
+    worker.add_argument("--role", choices=("both", "solve", "webhooks"), default="both",
+                        help="solve jobs, deliver webhooks (their own queue and threads), or both (default)")
     worker.set_defaults(func=cmd_worker)
     secret = sub.add_parser("webhook-secret", help="print the key that signs webhook deliveries")
     secret.set_defaults(func=cmd_webhook_secret)

@@ -12,6 +12,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from geocert.solvers.core.geometry import InputError
 from geocert.kinds import KINDS
+from geocert.kinds.reconstruction import NO_CONTROL_CHARACTERS
 from geocert.workers.store import REDIS_GONE
 
 PROBLEM_JSON = "application/problem+json"
@@ -53,9 +54,17 @@ _JSON_TYPES = {str: "a string", bool: "a boolean", float: "a decimal number", ty
                list: "an array", dict: "an object"}
 
 
+# What a pattern of the wire contract asks, in words (pydantic's message quotes the expression).
+_PATTERN_REASONS = {NO_CONTROL_CHARACTERS: "must not contain control characters (a line break, a tab, ...): names "
+                                           "are written into exported files"}
+
+
 def _reason(error: dict) -> str:
-    """pydantic's message, and for a strict type error what the JSON held instead."""
+    """pydantic's message (a pattern's in words), and for a strict type error what the JSON held
+    instead."""
     reason = error.get("msg", "invalid")
+    if error.get("type") == "string_pattern_mismatch":
+        reason = _PATTERN_REASONS.get((error.get("ctx") or {}).get("pattern"), reason)
     if error.get("type") in ("float_type", "int_type", "int_from_float", "bool_type", "string_type"):
         given = error.get("input")
         if type(given) in _JSON_TYPES:

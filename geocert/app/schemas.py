@@ -105,9 +105,12 @@ class VerifyReport(BaseModel):
 
 class WebhookState(BaseModel):
     url: str
-    state: Literal["waiting", "retrying", "delivered", "failed"]
+    state: Literal["waiting", "retrying", "delivered", "failed", "refused"] = Field(
+        description="refused: the destination is not a public address (nothing sent, not retried); failed: no "
+                    "attempt was answered with a 2xx")
     attempts: int
-    last_error: str | None = None
+    last_error: str | None = Field(None, description='"refused: ..." or "failed: ..." (never how the destination '
+                                                     "failed: a closed port, a timeout, an HTTP status)")
     delivered_at: float | None = None
 
 

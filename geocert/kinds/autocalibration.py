@@ -202,6 +202,12 @@ class AutocalibrationKind:
     def parse(self, data: Any, items: range | None = None) -> Parsed:
         return Parsed(*read_data(data))
 
+    @staticmethod
+    def request_figures(data: dict) -> dict:
+        """Views, and views times points (the chirality rows of both stages' programs)."""
+        views, points = len(data.get("cameras") or ()), len(data.get("points") or ())
+        return {"autocalibration_views": (views, "data/cameras"), "view_points": (views * points, "data/points")}
+
     def check_options(self, parsed: Parsed, options: pr.AutocalibrationOptions) -> None:
         """Every intrinsics range given or defaulted from data/image_size, and the direct method's
         chirality pairs counted (before the job is queued: the solve cannot start without them,

@@ -59,6 +59,10 @@ def _data_as_given(data: Any, items: list[dict]) -> Any:
     return data
 
 
+def _no_figures(data: Any) -> dict:
+    return {}
+
+
 def _item_time_limit(parsed: Any, options: Any) -> float:
     return float(getattr(options, "time_limit_s", 0.0) or 0.0)
 
@@ -79,9 +83,14 @@ def _item_time_limit(parsed: Any, options: Any) -> float:
 # time_bound_s(parsed, options) -> seconds: the longest one item runs when every time limit of
 # the job is kept (its options' time_limit_s, per item, unless the kind says otherwise: per stage,
 # per point); the service sizes a task's last-resort limits from it (batch.task_time_bound_s).
+# request_figures(data) -> {figure: (value, field)}: what the job asks of the service beyond its
+# items and observations, computed cheaply from the request's data as validated by its model,
+# before anything is decoded or built (a photo's pixels from its header, shapes times points): the
+# API refuses a job over a limit of settings.BUDGETS (413 naming the figure, its field and limit).
 OPTIONAL_MEMBERS: dict[str, Any] = {"certifies": True, "check_options": _no_check, "claimed_items": _every_item,
                                     "chunk_key": None, "certificate_data": _data_as_given, "streamed_result": False,
-                                    "solve_batch": None, "batch_size": 1, "time_bound_s": _item_time_limit}
+                                    "solve_batch": None, "batch_size": 1, "time_bound_s": _item_time_limit,
+                                    "request_figures": _no_figures}
 
 
 class Registry:
@@ -148,4 +157,7 @@ def options_from(options_type: type, given: dict | None, field: str = "options")
 
 
 def default_options(kind: ProblemKind) -> dict:
-    return dataclasses.asdict(kind.options_type())
+    """The options a job of this kind gets when it gives none, as its request model writes them:
+    what GET /v1/problems advertises, which the API accepts back as they are (the solver's options
+    dataclass may hold more, e.g. the reconstruction's ``detail``, which the API does not take)."""
+    return kind.request_model.model_fields["options"].get_default(call_default_factory=True).model_dump(mode="json")

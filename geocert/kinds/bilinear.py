@@ -139,6 +139,12 @@ class BilinearKind:
     def parse(self, data: Any, items: range | None = None) -> ParsedFrames:
         return ParsedFrames(*pb.read_data(data, items))
 
+    @staticmethod
+    def request_figures(data: dict) -> dict:
+        """Shapes times points of the basis (every frame's programs grow with both)."""
+        basis = data.get("basis") or []
+        return {"basis_points": (len(basis) * max((len(shape) for shape in basis), default=0), "data/basis")}
+
     def count(self, parsed: ParsedFrames) -> int:
         return len(parsed.frames)
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from geocert.solvers.fractional.results import ItemResult, proof_of
+from geocert.solvers.fractional.results import ItemResult, LocalCertificate, proof_of
 
 
 def finite_or_none(value: float | None) -> float | None:
@@ -21,6 +21,11 @@ def certificate_summary(result: ItemResult, region: dict, meaning: str, scope: s
     c = result.certificate
     proof = proof_of(result)
     extra = {"proof": proof} if proof is not None else {}
+    if isinstance(c, LocalCertificate):
+        return {"scope": c.scope, "root_region": None, "tolerance": finite_or_none(c.tolerance),
+                "tolerance_met": c.tolerance_met, "leaves": 0,
+                "note": f"no search: the cost is convex on the ball of radius {c.radius!r} about the solution, which "
+                        "holds every point of the scope costing as little (convexity bound)", **extra}
     if c is not None:
         return {**extra,
                 "scope": c.scope,

@@ -39,13 +39,18 @@ class ReconstructionTrack(Strict):
     points: list[Pixel] = Field(min_length=2, description="one observation per view, in the same order")
 
 
+# A view's name: no control characters (a line break would end a record of an exported file).
+NO_CONTROL_CHARACTERS = r"^[^\x00-\x1f\x7f]*$"
+ViewName = Annotated[str, Field(max_length=200, pattern=NO_CONTROL_CHARACTERS)]
+
+
 class ReconstructionView(Strict):
-    name: str | None = Field(None, max_length=200)
+    name: ViewName | None = None
     image_size: Size
 
 
 class ReconstructionImage(Strict):
-    name: str | None = Field(None, max_length=200)
+    name: ViewName | None = None
     content: str = Field(description="base64 PNG or JPEG")
 
 
@@ -96,6 +101,10 @@ class FeaturesIn(Strict):
                                          description='"sequential": successors matched with each (default 5)')
     ring: bool | None = Field(None, description='"sequential": the last images wrap round to the first (default '
                                                 'false)')
+    time_limit_s: Finite | None = Field(None, **_F["time_limit_s"],
+                                        description="seconds for reading features and matching (default 300): past "
+                                                    "it the images and pairs not yet done are left out, and the "
+                                                    "matches stage says time_limit")
 
 
 class ReconstructionOptionsIn(Strict):
@@ -127,7 +136,7 @@ class ReconstructionOptionsIn(Strict):
     bundle_adjustment: bool = _D.bundle_adjustment
     resect_cameras: bool = _D.resect_cameras
     camera_rel_gap: Finite = Field(_D.camera_rel_gap, **_R["camera_rel_gap"],
-                                   description="each camera's resection, and the returned camera's tolerance")
+                                   description="each camera's resection's gap, a part of the returned camera's tolerance")
     bound_every_camera: bool = Field(_D.bound_every_camera,
                                      description="false: no certified resection for a camera a free camera found "
                                                  "locally proves uncertifiable (it is reported without a bound)")
@@ -171,7 +180,7 @@ class ReconstructionCamera(BaseModel):
     P: list[list[float]] | None = Field(description="3x4 pixels: K [R | t] (the projective camera when no metric "
                                                     "upgrade was found)")
     cost: float | None = Field(description="the camera's reprojection cost on the returned points (the norm's)")
-    lower_bound: float | None = Field(description="certified: no 3x4 camera putting those points in front costs less")
+    lower_bound: float | None = Field(description="proven: no 3x4 camera putting those points in front costs less")
     gap: float | None
     optimal_cost: float | None = Field(description="the certified resection's own optimum")
     certified: bool
@@ -180,6 +189,13 @@ class ReconstructionCamera(BaseModel):
                                                        "searched, not certified by the search, a point behind it, "
                                                        "a gap beyond the tolerance, cancelled); null when certified")
     points: int = Field(description="points the resection used")
+    degrees_of_freedom: int | None = Field(None, description="the returned camera's own: its pose (6) plus each "
+                                                             "intrinsic the registered cameras do not share")
+    tolerance: float | None = Field(None, description="certified means cost <= (1 + tolerance) lower_bound + abs_gap: "
+                                                      "(1 + chi2_0.999(11 - degrees_of_freedom) / (k (2 points - 11))) "
+                                                      "/ (1 - camera_rel_gap) - 1, k 1 for L2L2 and 2 for the L1 "
+                                                      "norms (what its fewer degrees of freedom than a 3x4 camera's "
+                                                      "cost); null when too few points allow none")
     searched: bool = Field(False, description="the certified resection ran for this camera: with certificate "
                                               "\"full\", its map is in camera_certificate (one per searched camera, "
                                               "in view order); a camera not searched claims no bound")
@@ -278,6 +294,8 @@ def _read_tracks(data: dict, n_views: int) -> list:
 
 
 def _read_images(data: dict):
+    """The photos' sizes from their headers, and their bytes (decoded into pixels only when the
+    reconstruction runs: ``_decode``), refused as ``features.image_header`` refuses."""
     try:  # stage 1 (features.py): matches from photos
         from geocert.pipelines.reconstruction import features
     except ImportError as exc:  # pragma: no cover - until the features module is merged
@@ -287,16 +305,36 @@ def _read_images(data: dict):
         raise InputError("data/images", "must be a list of at least 2 {name, content} objects")
     if len(images) > MAX_VIEWS:
         raise InputError("data/images", f"{len(images)} images exceed the limit of {MAX_VIEWS}")
-    arrays, names = [], []
+    sizes, names = [], []
     for i, image in enumerate(images):
         if not isinstance(image, dict) or not isinstance(image.get("content"), str):
             raise InputError(f"data/images/{i}", "must be an object with content (base64 PNG or JPEG)")
-        arrays.append(features.decode_image(image["content"], f"data/images/{i}/content"))
+        w, h, _ = features.image_header(image["content"], f"data/images/{i}/content")
+        sizes.append((float(w), float(h)))
         names.append(image.get("name"))
-    return arrays, names
+    return sizes, names
 
 
-def _exif_focal_prior(images: list[dict], arrays: list) -> dict | None:
+def _decode(images: list) -> list:
+    from geocert.pipelines.reconstruction import features
+
+    return [features.decode_image(image["content"], f"data/images/{i}/content") for i, image in enumerate(images)]
+
+
+def request_figures(data: dict) -> dict:
+    """What the job asks of the service, from its request alone (its photos' headers): views (or
+    photos), and the photos' pixels in all and of the largest."""
+    if data.get("images") is not None:
+        sizes, _ = _read_images(data)
+        pixels = [int(w) * int(h) for w, h in sizes]
+        return {"reconstruction_views": (len(sizes), "data/images"),
+                "image_pixels": (sum(pixels), "data/images"),
+                "largest_image_pixels": (max(pixels), f"data/images/{pixels.index(max(pixels))}/content")}
+    views = data.get("views")
+    return {"reconstruction_views": (len(views) if isinstance(views, list) else 0, "data/views")}
+
+
+def _exif_focal_prior(images: list[dict], sizes: list[tuple[float, float]]) -> dict | None:
     """The photos' EXIF focal lengths (pixels, from the 35 mm equivalent) and their median, when
     every photo states one and they agree within 1% (one camera and zoom); else None."""
     import base64
@@ -304,14 +342,14 @@ def _exif_focal_prior(images: list[dict], arrays: list) -> dict | None:
     from geocert.pipelines.reconstruction import features
 
     found = []
-    for image, array in zip(images, arrays):
+    for image, (width, height) in zip(images, sizes):
         text = image["content"].strip()
         text = text.partition(",")[2] if text.startswith("data:") else text
         try:
             data = base64.b64decode("".join(text.split()), validate=True)
         except ValueError:
             return None
-        focal = features.exif_focal_px(data, (array.shape[1], array.shape[0]))
+        focal = features.exif_focal_px(data, (int(width), int(height)))
         if focal is None:
             return None
         found.append(focal)
@@ -334,6 +372,7 @@ class ReconstructionKind:
     solution_fields = ("point", "at_infinity")
     verification = RECONSTRUCTION  # points as triangulations in the cameras stated; the returned cameras checked
     example = {"kind": "reconstruction", "options": {}, "data": _example_data()}
+    request_figures = staticmethod(request_figures)
 
     def parse(self, data: Any, items: range | None = None) -> Parsed:
         if not isinstance(data, dict):
@@ -344,9 +383,9 @@ class ReconstructionKind:
         if data.get("images") is not None:
             if data.get("tracks") is not None:
                 raise InputError("data/images", "give images, or tracks and views, not both")
-            arrays, names = _read_images(data)
-            return Parsed(None, [(float(a.shape[1]), float(a.shape[0])) for a in arrays], names,
-                          {"images": arrays, "exif_focal": _exif_focal_prior(data["images"], arrays)})
+            sizes, names = _read_images(data)
+            return Parsed(None, sizes, names, {"images": data["images"],
+                                               "exif_focal": _exif_focal_prior(data["images"], sizes)})
         if "tracks" not in data:
             raise InputError("data/tracks", "is required (or data/images)")
         sizes, names = _read_views(data) if "views" in data else (None, None)
@@ -400,13 +439,16 @@ class ReconstructionKind:
                 return report("matches", progress.get("done", 0), progress.get("total", 1))
 
             began, cpu = time.perf_counter(), time.process_time()
-            found = features.tracks_from_images(parsed.images_stats["images"], options.feature_options(), matching)
+            found = features.tracks_from_images(_decode(parsed.images_stats["images"]), options.feature_options(),
+                                                matching)
             tracks = [(np.asarray(v, dtype=int), np.asarray(p, dtype=float)) for v, p in found.tracks]
             images_document = _jsonable(dict(found.stats))
             matches = {"name": "matches", **images_document, "status": "done", "reason": None,
                        "elapsed_s": time.perf_counter() - began,
                        "cpu_s": time.process_time() - cpu}  # this process's CPU time, as the other stages'
             matched = len({int(v) for views, _ in tracks for v in views})
+            if found.status == "time_limit":
+                matches.update(status="time_limit", reason="time_limit: " + found.stats["stopped"])
             if found.status == "cancelled":
                 matches.update(status="cancelled", reason="the job was cancelled")
                 out = pipeline.not_reconstructed(len(parsed.image_sizes), "cancelled", "the job was cancelled",
@@ -415,6 +457,8 @@ class ReconstructionKind:
                 # As a projective stage that fails (pipeline._run): the job succeeds with a
                 # result whose failed stage says why, the later stages skipped, the summary filled.
                 reason = f"fewer than 2 images have verified matches ({matched})"
+                if found.status == "time_limit":
+                    reason += "; " + matches["reason"]
                 matches.update(status="failed", reason=reason)
                 out = pipeline.not_reconstructed(len(parsed.image_sizes), "skipped", "the matches stage failed: "
                                                  + reason, "no verified matches with another image")
@@ -459,7 +503,8 @@ class ReconstructionKind:
                 "gap": None if b is None else b.gap, "optimal_cost": None if b is None else b.optimal_cost,
                 "certified": bool(b is not None and b.certified), "status": "not_run" if b is None else b.status,
                 "bound_reason": None if b is None else b.reason,
-                "points": 0 if b is None else b.points, "searched": bool(b is not None and b.result is not None)}
+                "points": 0 if b is None else b.points, "searched": bool(b is not None and b.result is not None),
+                "degrees_of_freedom": None if b is None else b.dof, "tolerance": None if b is None else b.tolerance}
 
     @staticmethod
     def _camera_items(out, options, bounds: dict) -> list[dict]:

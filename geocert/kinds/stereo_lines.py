@@ -265,6 +265,20 @@ class StereoLinesKind:
             parsed_matches.append(np.stack(quads))
         return ParsedLines(rig, None, parsed_matches)
 
+    @staticmethod
+    def request_figures(data: dict) -> dict:
+        """The most segments in one image of a frame (matching compares every pair of them), or
+        lines matched in one frame pair."""
+        largest, field = 0, "data/frames"
+        for k, frame in enumerate(data.get("frames") or ()):
+            for side in ("left", "right"):
+                if len(frame.get(side) or ()) > largest:
+                    largest, field = len(frame[side]), f"data/frames/{k}/{side}"
+        for k, pair in enumerate(data.get("matches") or ()):
+            if len(pair) > largest:
+                largest, field = len(pair), f"data/matches/{k}"
+        return {"segments_per_frame": (largest, field)}
+
     def check_options(self, parsed: ParsedLines, options: StereoLinesOptions) -> None:
         """What the data must give the solver chosen: enough lines per frame pair (a 422 naming
         the field, rather than a pair that cannot but fail)."""

@@ -13,7 +13,7 @@ from geocert.kinds.schema import Camera, CertificateDocument, ItemOutcome, JobBa
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, check_cameras, number_array
 from geocert.solvers.fractional.items import MAX_VIEWS, TRACKS
 from geocert.solvers.fractional.options import TriangulationOptions
-from geocert.solvers.fractional.results import TrackResult
+from geocert.solvers.fractional.results import SearchCertificate, TrackResult
 
 
 
@@ -56,7 +56,8 @@ class ParsedTracks:
 
 
 def track_document(result: TrackResult, detail: str = "full", full_certificate: bool = False) -> dict:
-    region = {"reference_view": result.certificate.reference} if result.certificate else {}
+    region = {"reference_view": result.certificate.reference} if isinstance(result.certificate, SearchCertificate) \
+        else {}
     certificate = brief_certificate(result, full_certificate) if detail == "brief" else certificate_summary(
         result, region,
         "lower <= (F X) / (d . X) <= upper for every point X of the scope, "

@@ -26,6 +26,7 @@ import redis
 from geocert.workers.store import JobStore
 
 KEY = "geocert:workers"
+SOLVERS = "geocert:workers:solvers"  # worker name -> its solver processes (JobStore.take_slot reads it)
 INTERVAL_S = 2.0
 FRESH_S = 10.0
 FORGET_S = 3600.0  # entries older than this are removed by the next beat of any worker
@@ -58,16 +59,31 @@ def held_tasks() -> list[tuple[str, str | None]]:
     return held
 
 
-def beat(client: redis.Redis, name: str, held: list[tuple[str, str | None]] = ()) -> None:
-    """Beat, and renew the leases of the tasks held (only entries that exist are updated: XX)."""
+def held_solve_tasks() -> list[str]:
+    """The ids of the solve tasks this worker process holds: their solver slots (JobStore.take_slot)."""
+    from celery.worker import state
+
+    return [request.id for request in list(state.requests.values()) if request.name == SOLVE_TASK]
+
+
+def beat(client: redis.Redis, name: str, held: list[tuple[str, str | None]] = (), solvers: int | None = 0,
+         slots: list[str] = ()) -> None:
+    """Beat, and renew the leases of the tasks held (only entries that exist are updated: XX) and
+    the solver ``slots`` of its solve tasks. ``solvers``: the worker's solver processes (counted by
+    /readyz and the per-key share); None for a worker that solves nothing (webhooks), which only
+    renews leases."""
     now = time.time()
     pipe = client.pipeline()
-    pipe.zadd(KEY, {name: now})
+    if solvers is not None:
+        pipe.zadd(KEY, {name: now})
+        pipe.hset(SOLVERS, name, solvers)
     pipe.zremrangebyscore(KEY, "-inf", now - FORGET_S)
     tags = {tag: now for tag, _ in held}
     jobs = {job: now for _, job in held if job}
     if tags:
         pipe.zadd(UNACKED_INDEX, tags, xx=True)
+    if slots:
+        pipe.zadd(JobStore.SLOTS, {slot: now for slot in slots}, xx=True)
     if jobs:
         pipe.zadd(JobStore.RUNNING, jobs, xx=True)
     pipe.execute()
@@ -78,9 +94,9 @@ class Heartbeat:
     until ``stop()``."""
 
     def __init__(self, url: str, name: str, interval_s: float = INTERVAL_S, reaper=None, reap_every_s: float = 5.0,
-                 held=held_tasks):
+                 held=held_tasks, solvers: int | None = 0):
         self.client = redis.Redis.from_url(url, socket_timeout=5, socket_connect_timeout=5)
-        self.name, self.interval_s = name, interval_s
+        self.name, self.interval_s, self.solvers = name, interval_s, solvers
         self.reaper, self.reap_every_s, self.reaped_at = reaper, reap_every_s, 0.0
         self.held = held
         self.stopped = threading.Event()
@@ -93,7 +109,8 @@ class Heartbeat:
     def _run(self) -> None:
         while not self.stopped.is_set():
             try:
-                beat(self.client, self.name, self.held())
+                beat(self.client, self.name, self.held(), self.solvers,
+                     held_solve_tasks() if self.solvers else ())
             except redis.RedisError as exc:  # Redis away for a moment: beat again next time
                 log.warning("heartbeat not written: %s", exc)
             if self.reaper is not None and time.monotonic() - self.reaped_at >= self.reap_every_s:
@@ -109,5 +126,6 @@ class Heartbeat:
         self.thread.join(timeout=5)
         try:
             self.client.zrem(KEY, self.name)
+            self.client.hdel(SOLVERS, self.name)
         except redis.RedisError:
             pass

@@ -55,7 +55,7 @@ def record_webhook(client, state: str) -> None:
 class RedisCollector:
     """A prometheus_client collector reading the shared figures (registered by the API)."""
 
-    def __init__(self, client, queue_names=("celery",)):
+    def __init__(self, client, queue_names=("celery", "webhooks")):  # celery_app.SOLVE_QUEUE, WEBHOOK_QUEUE
         self.client = client
         self.queue_names = queue_names
 

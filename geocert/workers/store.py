@@ -22,6 +22,7 @@ import redis
 import redis.asyncio
 
 TERMINAL = ("succeeded", "failed", "cancelled")
+PUBLIC_OWNER = "public"  # the owner of every job when no API keys are configured (loopback only)
 # Redis restarting, loading its append-only file or unreachable (BusyLoadingError is a ConnectionError).
 REDIS_GONE = (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError)
 _STREAM_MAXLEN = 2000
@@ -115,8 +116,17 @@ class JobStore:
         raw = self.r.hget(self.key(job_id), name)
         return None if raw is None else json.loads(raw)
 
-    def set_fields(self, job_id: str, **fields: Any) -> None:
-        self.r.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in fields.items()})
+    _SET_IF_EXISTS = """
+    if redis.call('EXISTS', KEYS[1]) == 0 then return 0 end
+    redis.call('HSET', KEYS[1], unpack(ARGV))
+    return 1
+    """
+
+    def set_fields(self, job_id: str, **fields: Any) -> bool:
+        """Set fields of an existing job (False: it is gone, e.g. deleted while a webhook was being
+        delivered, and nothing is written: an HSET would re-create it without an expiry)."""
+        pairs = [part for name, value in fields.items() for part in (name, json.dumps(value))]
+        return bool(self.r.eval(self._SET_IF_EXISTS, 1, self.key(job_id), *pairs))
 
     _SUMMARY = ("id", "kind", "status", "created_at", "started_at", "finished_at", "progress")
 
@@ -136,9 +146,19 @@ class JobStore:
         base = f"/v1/jobs/{job_id}"
         return {"self": base, "events": f"{base}/events", "cancel": f"{base}/cancel"}
 
+    # The list lives as long as its job: not written for a job that is gone, and given the job's
+    # expiry when the job has one (it has ended).
+    _ADD_TASK_IDS = """
+    local ttl = redis.call('TTL', KEYS[1])
+    if ttl == -2 then return 0 end
+    redis.call('RPUSH', KEYS[2], unpack(ARGV))
+    if ttl > 0 then redis.call('EXPIRE', KEYS[2], ttl) end
+    return 1
+    """
+
     def add_task_ids(self, job_id: str, *task_ids: str) -> None:
         if task_ids:
-            self.r.rpush(self.key(job_id, "tasks"), *task_ids)
+            self.r.eval(self._ADD_TASK_IDS, 2, self.key(job_id), self.key(job_id, "tasks"), *task_ids)
 
     def task_ids(self, job_id: str) -> list[str]:
         return self.r.lrange(self.key(job_id, "tasks"), 0, -1)
@@ -294,16 +314,17 @@ class JobStore:
         """Queued -> cancelled atomically (so a worker cannot start it meanwhile); True if done.
         The one way a job ends other than ``end``: nothing of it ran, so there is nothing to store."""
         script = """
-        if redis.call('HGET', KEYS[1], 'status') == '"queued"' then
-            redis.call('HSET', KEYS[1], 'status', '"cancelled"', 'finished_at', ARGV[1])
-            return 1
-        end
-        return 0
+        if redis.call('HGET', KEYS[1], 'status') ~= '"queued"' then return 0 end
+        redis.call('HSET', KEYS[1], 'status', '"cancelled"', 'finished_at', ARGV[1])
+        redis.call('XADD', KEYS[2], 'MAXLEN', '~', ARGV[2], '*', 'event', 'end', 'data', ARGV[3])
+        for i = 3, #KEYS do redis.call('EXPIRE', KEYS[i], ARGV[4]) end
+        return 1
         """
-        if self.r.eval(script, 1, self.key(job_id), json.dumps(now())) != 1:
+        keys = [self.key(job_id), self.key(job_id, "events"), *(self.key(job_id, part) for part in self._PARTS)]
+        if self.r.eval(script, len(keys), *keys, json.dumps(now()), _STREAM_MAXLEN,
+                       json.dumps({"status": "cancelled", "error": None}), self.ttl) != 1:
             return False
         self.release(self.field(job_id, "owner") or "", job_id)
-        self._announce_end(job_id, "cancelled", None)
         return True
 
     def cancel_requested(self, job_id: str) -> bool:
@@ -329,6 +350,60 @@ class JobStore:
 
     RUNNING = "geocert:running"  # running job id -> the last time a task of it showed life
 
+    # Solver slots: the solve tasks running, each by its task id, with the last sign of its
+    # life (renewed by its worker's heartbeat) and its job's owner. A key holds at most every live
+    # solver process (the workers' heartbeats say how many) but ``kept_for_others``, and at
+    # least one; a slot not renewed for SLOT_LAPSE_S (its worker gone) lapses. Without keys
+    # (every job PUBLIC_OWNER's: one user, on loopback) there is no one to keep solvers for: a
+    # short job then runs beside a long one as the solvers allow.
+    SLOTS = "geocert:slots"
+    SLOT_OWNERS = "geocert:slots:owners"
+    SLOT_LAPSE_S = 30.0
+    _TAKE_SLOT = """
+    local owner = redis.call('HGET', KEYS[5], 'owner')
+    if not owner then return 1 end
+    for _, id in ipairs(redis.call('ZRANGEBYSCORE', KEYS[1], '-inf', ARGV[3])) do
+        redis.call('ZREM', KEYS[1], id)
+        redis.call('HDEL', KEYS[2], id)
+    end
+    if redis.call('ZSCORE', KEYS[1], ARGV[1]) then
+        redis.call('ZADD', KEYS[1], ARGV[2], ARGV[1])
+        return 1
+    end
+    local kept = tonumber(ARGV[5])
+    if kept > 0 and owner ~= ARGV[6] then
+        local solvers = 0
+        local names = redis.call('ZRANGEBYSCORE', KEYS[3], ARGV[4], '+inf')
+        if #names > 0 then
+            for _, n in ipairs(redis.call('HMGET', KEYS[4], unpack(names))) do solvers = solvers + (tonumber(n) or 0) end
+        end
+        if solvers > 0 then
+            local held = 0
+            for _, o in ipairs(redis.call('HVALS', KEYS[2])) do if o == owner then held = held + 1 end end
+            if held >= math.max(1, solvers - kept) then return 0 end
+        end
+    end
+    redis.call('ZADD', KEYS[1], ARGV[2], ARGV[1])
+    redis.call('HSET', KEYS[2], ARGV[1], owner)
+    return 1
+    """
+
+    def take_slot(self, job_id: str, slot: str, kept_for_others: int) -> bool:
+        """Take a solver slot for a task of this job (True), unless the job's key holds its share
+        already (False: the task waits). A job that is gone takes one (its task finds it gone)."""
+        from geocert.workers.heartbeat import FRESH_S, KEY, SOLVERS
+
+        moment = now()
+        return bool(self.r.eval(self._TAKE_SLOT, 5, self.SLOTS, self.SLOT_OWNERS, KEY, SOLVERS, self.key(job_id),
+                                slot, moment, moment - self.SLOT_LAPSE_S, moment - FRESH_S, kept_for_others,
+                                json.dumps(PUBLIC_OWNER)))
+
+    def free_slot(self, slot: str) -> None:
+        pipe = self.r.pipeline()
+        pipe.zrem(self.SLOTS, slot)
+        pipe.hdel(self.SLOT_OWNERS, slot)
+        pipe.execute()
+
     def touch(self, job_id: str) -> None:
         """A task of this job is alive (read by the reaper, ``workers.reaper``)."""
         self.r.zadd(self.RUNNING, {job_id: now()})
@@ -348,8 +423,13 @@ class JobStore:
     # figures are kept, and the sums moved by the change, in Redis, so that storing a task's
     # progress costs the same however many chunks the job has (reading every task's progress at
     # every save made a large job's traffic grow with the square of its chunks).
-    _SUMS = ("nodes", "open_boxes", "lower_bound", "upper_bound", "gap_abs")
+    # "bounded" counts the tasks whose progress has bounds: with none, the bounds are null (a
+    # reconstruction's stages, or a search not started), not the 0 or rounding residue the sums
+    # hold (1e-17 once a stage's bounds were added and taken away again), which a chart would draw.
+    _SUMS = ("nodes", "open_boxes", "lower_bound", "upper_bound", "gap_abs", "bounded")
     _ADD_PROGRESS = """
+    local status = redis.call('HGET', KEYS[4], 'status')
+    if status ~= '"queued"' and status ~= '"running"' then return false end
     local old = redis.call('HGET', KEYS[1], ARGV[1])
     redis.call('HSET', KEYS[1], ARGV[1], ARGV[2])
     local before = {}
@@ -360,44 +440,45 @@ class JobStore:
         local change = tonumber(v) - (before[i] or 0)
         if change ~= 0 then redis.call('HINCRBYFLOAT', KEYS[2], ARGV[2 + i], change) end
     end
-    if ARGV[8] == '' then redis.call('ZREM', KEYS[3], ARGV[1]) else redis.call('ZADD', KEYS[3], ARGV[8], ARGV[1]) end
-    local sums = redis.call('HMGET', KEYS[2], ARGV[3], ARGV[4], ARGV[5], ARGV[6], ARGV[7])
+    if ARGV[9] == '' then redis.call('ZREM', KEYS[3], ARGV[1]) else redis.call('ZADD', KEYS[3], ARGV[9], ARGV[1]) end
+    local sums = redis.call('HMGET', KEYS[2], ARGV[3], ARGV[4], ARGV[5], ARGV[6], ARGV[7], ARGV[8])
     local worst = redis.call('ZREVRANGE', KEYS[3], 0, 0, 'WITHSCORES')
     return {sums, worst}
     """
 
     def save_progress(self, job_id: str, start: int, progress: dict, items: dict[int, dict] | None = None,
-                      fragment: tuple[int, dict, str] | None = None) -> dict:
+                      fragment: tuple[int, dict, str] | None = None) -> dict | None:
         """Store the items given (index -> item) and the progress of the task that started at item
         ``start``, and return (and publish) the job's aggregate over all its tasks. Its
         ``items_done`` is the number of items stored, read after this call's items are written:
         progress never counts an item whose result is not stored (a task that dies loses only
         items it had not counted). ``fragment``: see save_fragment (written in the same
-        transaction, so whoever sees the last item counted sees its fragment too)."""
+        transaction, so whoever sees the last item counted sees its fragment too). None, writing
+        nothing, once the job has ended or is gone (``_SAVE``)."""
+        bounded = progress.get("lower_bound") is not None and progress.get("upper_bound") is not None
         figures = ",".join(repr(float(v)) if math.isfinite(v := float(progress.get(name) or 0.0)) else "0.0"
-                           for name in self._SUMS)
+                           for name in self._SUMS[:-1]) + (",1.0" if bounded else ",0.0")
         gap = progress.get("gap_rel")
         pipe = self.r.pipeline()  # one round trip for the writes and reads, one for the aggregate
-        if items:
-            pipe.hset(self.key(job_id, "items"), mapping=self._packed(items))
-        if fragment is not None:
-            self.save_fragment(job_id, *fragment, pipe=pipe)
-        pipe.eval(self._ADD_PROGRESS, 3, self.key(job_id, "chunkprogress"), self.key(job_id, "progressparts"),
-                  self.key(job_id, "gaps"), str(start), figures, *self._SUMS,
+        self._save(pipe, job_id, items or {}, fragment)
+        pipe.eval(self._ADD_PROGRESS, 4, self.key(job_id, "chunkprogress"), self.key(job_id, "progressparts"),
+                  self.key(job_id, "gaps"), self.key(job_id), str(start), figures, *self._SUMS,
                   repr(float(gap)) if gap is not None and math.isfinite(gap) else "")
-        pipe.zadd(self.RUNNING, {job_id: now()})  # touch()
-        pipe.hlen(self.key(job_id, "items"))
         pipe.hmget(self.key(job_id), "items_total", "started_at")
-        (sums, worst), _, done, (raw_total, raw_started) = pipe.execute()[-4:]
+        done, added, (raw_total, raw_started) = pipe.execute()
+        if done is None or added is None:
+            return None  # the job has ended (or is gone): nothing was written
+        sums, worst = added
         total = None if raw_total is None else json.loads(raw_total)
         started = (None if raw_started is None else json.loads(raw_started)) or now()
         sums = [float(v) if v is not None else 0.0 for v in sums]
+        bounded = sums[5] > 0.5
         aggregate = {
             "nodes": int(round(sums[0])),
             "open_boxes": int(round(sums[1])),
-            "lower_bound": sums[2],
-            "upper_bound": sums[3],
-            "gap_abs": sums[4],
+            "lower_bound": sums[2] if bounded else None,
+            "upper_bound": sums[3] if bounded else None,
+            "gap_abs": sums[4] if bounded else None,
             "gap_rel": float(worst[1]) if worst else None,
             "items_done": done,
             "items_total": total,
@@ -408,37 +489,63 @@ class JobStore:
         # A staged solve (autocalibration) says which stage runs: the latest task's.
         if progress.get("stage"):
             aggregate["stage"] = progress["stage"]
-        pipe = self.r.pipeline()
-        pipe.hset(self.key(job_id), "progress", json.dumps(aggregate))
-        self.publish(job_id, "progress", aggregate, pipe)
-        pipe.execute()
-        return aggregate
+        return aggregate if self.publish_progress(job_id, aggregate) else None
 
-    def save_items(self, job_id: str, items: dict[int, dict], fragment: tuple[int, dict, str] | None = None) -> int:
+    # What a task writes into its job, only while the job is queued or running: a task still
+    # running after its job ended (failed by another task, or deleted since) writes nothing, where
+    # it used to re-create the job's keys without an expiry. Items are index -> packed item pairs.
+    _SAVE = """
+    local status = redis.call('HGET', KEYS[1], 'status')
+    if status ~= '"queued"' and status ~= '"running"' then return false end
+    local last = 3 + 2 * tonumber(ARGV[3])
+    for first = 4, last, 2000 do
+        redis.call('HSET', KEYS[2], unpack(ARGV, first, math.min(first + 1999, last)))
+    end
+    if ARGV[last + 1] ~= '' then
+        redis.call('HSET', KEYS[3], ARGV[last + 1], ARGV[last + 2])
+        redis.call('HSET', KEYS[4], ARGV[last + 1], ARGV[last + 3])
+    end
+    redis.call('ZADD', KEYS[5], ARGV[2], ARGV[1])
+    return redis.call('HLEN', KEYS[2])
+    """
+
+    def _save(self, pipe, job_id: str, items: dict[int, dict], fragment: tuple[int, dict, str] | None) -> None:
+        """Queue ``_SAVE`` on ``pipe``: its answer is the number of the job's items stored, or None."""
+        pairs = [part for pair in self._packed(items).items() for part in pair]
+        extra = ("",) if fragment is None else (
+            str(fragment[0]), zlib.compress(fragment[2].encode(), self.RESULT_COMPRESSION_LEVEL), json.dumps(fragment[1]))
+        pipe.eval(self._SAVE, 5, self.key(job_id), self.key(job_id, "items"), self.key(job_id, "fragments"),
+                  self.key(job_id, "fragmentsums"), self.RUNNING, job_id, now(), len(items), *pairs, *extra)
+
+    def save_items(self, job_id: str, items: dict[int, dict], fragment: tuple[int, dict, str] | None = None) -> int | None:
         """Store items (index -> item; idempotent: a redelivered task overwrites the same fields,
         so nothing is counted twice), and a fragment (save_fragment); returns how many items of
-        the job are stored."""
+        the job are stored (None, writing nothing, once the job has ended or is gone)."""
         pipe = self.r.pipeline()
-        if items:
-            pipe.hset(self.key(job_id, "items"), mapping=self._packed(items))
-        if fragment is not None:
-            self.save_fragment(job_id, *fragment, pipe=pipe)
-        pipe.hlen(self.key(job_id, "items"))
-        pipe.zadd(self.RUNNING, {job_id: now()})  # touch()
-        return pipe.execute()[-2]
+        self._save(pipe, job_id, items, fragment)
+        return pipe.execute()[0]
 
     # A streamed result (batch.streams_result) is kept as its tasks wrote it: each task's run of
     # items as one compressed fragment of the result's JSON (keyed by its first index), with the
     # sums the end needs (batch.item_sums). The end then reads those sums, not the items, and the
     # result is read a fragment at a time when it is sent: a large job's result is read once.
-    def save_fragment(self, job_id: str, start: int, sums: dict, text: str, pipe=None) -> None:
+    def save_fragment(self, job_id: str, start: int, sums: dict, text: str) -> None:
         """Store the fragment of the result holding items ``start`` to ``start + sums["items"] - 1``
         (a redelivered task overwrites its own)."""
-        target = pipe if pipe is not None else self.r.pipeline()
-        target.hset(self.key(job_id, "fragments"), str(start), zlib.compress(text.encode(), self.RESULT_COMPRESSION_LEVEL))
-        target.hset(self.key(job_id, "fragmentsums"), str(start), json.dumps(sums))
-        if pipe is None:
-            target.execute()
+        self.save_items(job_id, {}, (start, sums, text))
+
+    _PUBLISH_PROGRESS = """
+    local status = redis.call('HGET', KEYS[1], 'status')
+    if status ~= '"queued"' and status ~= '"running"' then return false end
+    redis.call('HSET', KEYS[1], 'progress', ARGV[1])
+    return redis.call('XADD', KEYS[2], 'MAXLEN', '~', ARGV[2], '*', 'event', 'progress', 'data', ARGV[1])
+    """
+
+    def publish_progress(self, job_id: str, progress: dict) -> bool:
+        """Set the job's progress and publish it, while the job is queued or running (False: it
+        has ended or is gone, and nothing was written)."""
+        return bool(self.r.eval(self._PUBLISH_PROGRESS, 2, self.key(job_id), self.key(job_id, "events"),
+                                json.dumps(progress), _STREAM_MAXLEN))
 
     def fragment_plan(self, job_id: str, total: int) -> list[tuple[int, dict]] | None:
         """The fragments that hold items 0 to ``total - 1`` once each, in order, with their sums;
@@ -454,10 +561,18 @@ class JobStore:
             at += sums["items"]
         return plan if at == total else None
 
+    _CLAIM_END = """
+    local status = redis.call('HGET', KEYS[1], 'status')
+    if status ~= '"queued"' and status ~= '"running"' then return 0 end
+    if redis.call('SET', KEYS[2], '1', 'NX', 'EX', ARGV[1]) then return 1 end
+    return 0
+    """
+
     def claim_end(self, job_id: str) -> bool:
         """Become the one caller that ends this job (``end``): the task that stored its last items,
-        or one that failed; False when another already has the claim."""
-        return bool(self.r.set(self.key(job_id, "final"), "1", nx=True, ex=self.ttl))
+        or one that failed; False when another already has the claim, or the job has ended or is
+        gone (deleted: ending it would write it again)."""
+        return bool(self.r.eval(self._CLAIM_END, 2, self.key(job_id), self.key(job_id, "final"), self.ttl))
 
     # Items wait in Redis compressed too, one by one (zlib; an item stored as JSON text by an
     # earlier version starts with "{" and is read as it is): the end reads them all.
@@ -504,21 +619,18 @@ class JobStore:
             pipe.delete(self.key(job_id, "fragments"))
         pipe.srem(self.owner_key(self.field(job_id, "owner") or "", "active"), job_id)
         pipe.zrem(self.RUNNING, job_id)
+        self._announce_end(job_id, status, error, pipe)
         pipe.execute()
-        self._announce_end(job_id, status, error)
 
-    def _announce_end(self, job_id: str, status: str, error: dict | None) -> None:
-        self.publish(job_id, "end", {"status": status, "error": error})
-        self.expire(job_id)
+    def _announce_end(self, job_id: str, status: str, error: dict | None, pipe) -> None:
+        """Queue on ``pipe`` the end event and every key's expiry (with the end itself, in one
+        transaction: a job deleted as soon as it showed as ended is never written again)."""
+        self.publish(job_id, "end", {"status": status, "error": error}, pipe)
+        for part in self._PARTS:
+            pipe.expire(self.key(job_id, part), self.ttl)
 
     _PARTS = ("", "request", "request:items", "result", "events", "cancel", "final", "items", "chunkprogress",
               "progressparts", "gaps", "tasks", "fragments", "fragmentsums")
-
-    def expire(self, job_id: str) -> None:
-        pipe = self.r.pipeline()
-        for part in self._PARTS:
-            pipe.expire(self.key(job_id, part), self.ttl)
-        pipe.execute()
 
     def delete(self, job_id: str) -> None:
         owner = self.field(job_id, "owner")

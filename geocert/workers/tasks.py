@@ -23,8 +23,9 @@ the task is never delivered again.
 from __future__ import annotations
 
 import logging
+import re
+import signal
 import time
-import traceback
 
 from geocert.settings import get_settings
 from geocert.solvers.core.geometry import InputError
@@ -58,6 +59,7 @@ class ProgressPublisher:
         self.last = 0.0
         self.cancel_checked = 0.0
         self.cancelled = False
+        self.job_ended = False  # its writes were refused: the job ended (or is gone) under this task
         self.unsaved: dict[int, dict] = {}
         self.kind = kind
         self.ended: list[dict] = []  # the task's items in order (streamed results only)
@@ -81,42 +83,77 @@ class ProgressPublisher:
         last = progress["items_done"] == progress["items_total"]
         if time.monotonic() - self.last >= self.interval or last:
             self.last = time.monotonic()
-            self.jobs.save_progress(self.job_id, self.start, progress, self.unsaved,
-                                    self._fragment() if last else None)
+            if self.jobs.save_progress(self.job_id, self.start, progress, self.unsaved,
+                                       self._fragment() if last else None) is None:
+                self.job_ended = True
             self.unsaved = {}
 
-    def flush(self) -> int:
-        """Store the items not stored yet (and the fragment); returns how many items of the job are stored."""
+    def flush(self) -> int | None:
+        """Store the items not stored yet (and the fragment); returns how many items of the job
+        are stored (None: the job has ended or is gone, and nothing was stored)."""
         done = self.jobs.save_items(self.job_id, self.unsaved, self._fragment())
         self.unsaved = {}
+        if done is None:
+            self.job_ended = True
         return done
 
     def should_stop(self) -> bool:
-        """A cancel (read from Redis at most every 50 ms), or the task past its last-resort deadline."""
+        """A cancel (read from Redis at most every 50 ms), the job ended already (another task
+        failed it), or the task past its last-resort deadline."""
         if not self.cancelled and time.monotonic() - self.cancel_checked >= 0.05:
             self.cancel_checked = time.monotonic()
             self.cancelled = self.jobs.cancel_requested(self.job_id)
         if not self.overrun and time.monotonic() > self.stop_by:
             self.overrun = True
-        return self.cancelled or self.overrun
+        return self.cancelled or self.overrun or self.job_ended
 
 
 @celery_app.task(name="geocert.solve_chunk", bind=True, max_retries=5)
-def solve_chunk(self, job_id: str, start: int, stop: int, request_id: str | None = None) -> None:
+def solve_chunk(self, job_id: str, start: int, stop: int, request_id: str | None = None, deferrals: int = 0) -> None:
     """Solve items ``start`` to ``stop - 1`` of a job (or the first of them, within the budget).
+
+    Fairness: the task first takes one of its key's solver slots (``JobStore.take_slot``: a key's
+    tasks run on every live solver process but GEOCERT_SOLVERS_KEPT_FOR_OTHERS); with none free it
+    is put back on the queue to start later (``_defer``), its job still queued, so that another
+    key's job starts on the solver kept free.
 
     When Redis goes away under the task, the job is not failed (that needs Redis too): the task
     waits for Redis to come back and is retried (its items are stored per item, so solving them
     again counts nothing twice). Should even that fail, the reaper (``workers.reaper``) finds the
     job without a live task and queues its missing chunks again."""
     with logs.context(job_id=job_id, request_id=request_id, items=f"{start}-{stop}"):
+        slot = self.request.id
         try:
-            _solve_chunk(job_id, start, stop, request_id)
+            if not store().take_slot(job_id, slot, get_settings().solvers_kept_for_others):
+                _defer(self.request.id, job_id, start, stop, request_id, deferrals)
+                return
+            try:
+                _solve_chunk(job_id, start, stop, request_id)
+            finally:
+                _free_slot(slot)
         except REDIS_GONE as exc:
             log.warning("Redis went away under items %d-%d of job %s (%s): retrying", start, stop, job_id,
                         type(exc).__name__)
             _wait_for_redis(store(), limit_s=60)
             raise self.retry(exc=exc, countdown=1)
+
+
+def _defer(task_id: str, job_id: str, start: int, stop: int, request_id: str | None, deferrals: int) -> None:
+    """Queue the task again (the same id: a cancel still revokes it) to start after a delay that
+    doubles with each deferral, up to 5 s: its key holds all the solver slots it may."""
+    fields = store().fields(job_id, "kind", "item_time_bound_s")
+    if fields is None or fields["status"] not in ("queued", "running"):
+        return  # ended or gone meanwhile: nothing to run
+    solve_chunk.apply_async((job_id, start, stop, request_id, deferrals + 1), task_id=task_id,
+                            countdown=min(5.0, 0.25 * 2 ** deferrals),
+                            **task_options(fields["kind"], fields["item_time_bound_s"], stop - start))
+
+
+def _free_slot(slot: str) -> None:
+    try:
+        store().free_slot(slot)
+    except REDIS_GONE:
+        pass  # unrenewed, the slot lapses by itself (JobStore.take_slot)
 
 
 def _wait_for_redis(jobs: JobStore, limit_s: float) -> None:
@@ -151,7 +188,9 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
         done = publisher.flush()
         metrics.record_items(jobs.r, kind.name, items)
         cut = start + len(items)
-        if publisher.overrun and not publisher.cancelled:  # stopped by the clock, not by the job's own limits
+        if publisher.job_ended:
+            log.info("job %s ended under items %d-%d: nothing of them stored", job_id, start, stop)
+        elif publisher.overrun and not publisher.cancelled:  # stopped by the clock, not by the job's own limits
             end_over_time(jobs, job_id, kind, options, time.monotonic() - began, deadline_s, "stopped at its next check")
         elif cut < stop:  # over the budget: the rest of the chunk becomes a task of its own
             log.info("continuing items %d-%d in a new task", cut, stop)
@@ -170,12 +209,28 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
     except REDIS_GONE:
         raise  # not the job's fault: retried (solve_chunk), never recorded as its failure
     except Exception as exc:  # never lose the reason: the job keeps its error
-        log.exception("items %d-%d of job %s failed", start, stop, job_id)
-        end_with_error(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
-             traceback.format_exc(limit=5), kind=kind, options=options)
+        log.exception("items %d-%d of job %s failed", start, stop, job_id)  # the traceback: in the log only
+        if out_of_memory(exc):
+            end_with_error(jobs, job_id, 500, MEMORY_TITLE,
+                           f"a task of this job needed more memory than a solver process may hold "
+                           f"({settings.worker_memory_mb} MiB, GEOCERT_WORKER_MEMORY_MB): {type(exc).__name__}; "
+                           "what it finished is kept in the result", None, kind=kind, options=options)
+        else:
+            end_with_error(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
+                           kind=kind, options=options)
+
+
+MEMORY_TITLE = "Memory limit exceeded"
+
+
+def out_of_memory(exc: BaseException) -> bool:
+    """An allocation refused under the process's memory limit: Python's and numpy's MemoryError,
+    or OpenCV's error for it (cv2.error "Insufficient memory")."""
+    return isinstance(exc, MemoryError) or "Insufficient memory" in str(exc)
 
 
 TIME_LIMIT_TITLE = "Task time limit exceeded"
+PROCESS_DIED_TITLE = "Solver process died"
 
 
 def end_over_time(jobs: JobStore, job_id: str, kind, options, ran_s: float, limit_s: float, how: str) -> None:
@@ -192,13 +247,17 @@ def end_over_time(jobs: JobStore, job_id: str, kind, options, ran_s: float, limi
 @celery_app.task(name="geocert.solve_chunk_failed")
 def solve_chunk_failed(request, exc, traceback) -> None:
     """Celery's errback for a solve task that failed outside its own handling (run by the worker's
-    main process): killed at its hard time limit, or out of retries. Its job ends ``failed`` with
-    the reason and what it finished; the task is not delivered again (it is acknowledged)."""
+    main process): killed at its hard time limit, its solver process dead (out of memory, a
+    crash), or out of retries. Its job ends ``failed`` with the reason and what it finished; the
+    task is not delivered again (it is acknowledged). Only a solver process stopped with its
+    worker (``_stopped_by_shutdown``) has its task queued again."""
+    from billiard.exceptions import WorkerLostError
     from celery.exceptions import TimeLimitExceeded
 
     job_id = request.args[0]
     jobs = store()
-    fields = jobs.fields(job_id, "kind")
+    jobs.free_slot(request.id)
+    fields = jobs.fields(job_id, "kind", "item_time_bound_s")
     if fields is None or fields["status"] in ("succeeded", "failed", "cancelled"):
         return
     kind, options = _kind_and_options(jobs, job_id)
@@ -208,9 +267,31 @@ def solve_chunk_failed(request, exc, traceback) -> None:
                        f"a task of this job was killed at Celery's hard time limit ({limit} s), the last resort after "
                        "its own time limits and GEOCERT_TASK_TIME_MARGIN_S; what it finished is kept in the result",
                        None, kind=kind, options=options)
+    elif isinstance(exc, WorkerLostError) and _stopped_by_shutdown(exc):
+        log.warning("job %s: its solver process was stopped with its worker (%s): queued again", job_id, exc)
+        solve_chunk.apply_async(tuple(request.args), task_id=request.id,
+                                **task_options(fields["kind"], fields["item_time_bound_s"], request.args[2] - request.args[1]))
+    elif isinstance(exc, WorkerLostError):  # its process died under it: never run again (celery_app)
+        end_with_error(jobs, job_id, 500, PROCESS_DIED_TITLE,
+                       f"the solver process running a task of this job died ({exc}): most likely killed for "
+                       f"memory (each may hold {get_settings().worker_memory_mb} MiB, GEOCERT_WORKER_MEMORY_MB), "
+                       "or crashed; the task is not run again. What it finished is kept in the result",
+                       None, kind=kind, options=options)
     else:
         end_with_error(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
                        kind=kind, options=options)
+
+
+# A solver process stopped by these signals went down with its worker (a deploy, systemd stopping
+# the worker's control group): its task is queued again, as a task whose whole worker died is
+# delivered again. Any other death (SIGKILL from the kernel's out-of-memory killer, a crash) fails
+# the job: run again, it would die again.
+_SHUTDOWN_SIGNALS = {signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGQUIT}
+
+
+def _stopped_by_shutdown(exc) -> bool:
+    found = re.search(r"signal (\d+)", str(exc))
+    return found is not None and int(found.group(1)) in _SHUTDOWN_SIGNALS
 
 
 def _kind_and_options(jobs: JobStore, job_id: str):
@@ -261,8 +342,7 @@ def _end(jobs: JobStore, job_id: str, sums: dict, stats: dict, **stored) -> None
     progress = final_progress(sums, stats)
     cancelled = sums["statuses"].get("cancelled") or jobs.cancel_requested(job_id)
     status = "cancelled" if cancelled else "succeeded"
-    jobs.set_fields(job_id, progress=progress)
-    jobs.publish(job_id, "progress", progress)
+    jobs.publish_progress(job_id, progress)
     jobs.end(job_id, status, **stored)
     after_end(jobs, job_id)
 
@@ -282,15 +362,14 @@ def final_progress(sums: dict, stats: dict) -> dict:
 
 
 def end_with_error(jobs: JobStore, job_id: str, http_status: int, title: str, detail: str, field: str | None,
-                   trace: str | None = None, kind=None, options=None) -> None:
-    """The job ends ``failed`` with this error (problem details), unless another caller already
-    holds its ``claim_end``. With its ``kind`` and ``options``, the items it finished are kept
-    as its result (partial_result)."""
+                   kind=None, options=None) -> None:
+    """The job ends ``failed`` with this error (problem details: title and detail, never a server
+    traceback, which stays in the worker's log), unless another caller already holds its
+    ``claim_end``. With its ``kind`` and ``options``, the items it finished are kept as its result
+    (partial_result)."""
     error = {"type": "about:blank", "title": title, "status": http_status, "detail": detail}
     if field is not None:
         error["errors"] = [{"field": field, "reason": detail}]
-    if trace:
-        error["trace"] = trace
     if jobs.claim_end(job_id):
         jobs.request_cancel(job_id)  # the job's other tasks stop at their next check
         result = None
@@ -332,6 +411,6 @@ def after_end(jobs: JobStore, job_id: str) -> None:
     metrics.record_job_end(jobs.r, meta)
     log.info("job ended %s", meta["status"])
     if meta.get("webhook"):
-        from geocert.workers.webhooks import deliver_webhook
+        from geocert.workers.webhooks import queue_delivery
 
-        deliver_webhook.delay(job_id)
+        queue_delivery(job_id)

@@ -2,9 +2,16 @@
 
 Signature: ``X-Geocert-Signature: t=<unix seconds>,v1=<hex HMAC-SHA256 of "<t>.<body>">`` keyed
 by GEOCERT_WEBHOOK_SECRET (or the secret kept in Redis, printed by ``geocert webhook-secret``).
-Failed attempts are retried by Celery with doubling delays; every attempt's outcome is written
-on the job (``webhook``: state, attempts, last_error), so a delivery that never succeeds is
-visible there as ``failed``, never lost silently.
+
+Deliveries have a queue and worker processes of their own (``WEBHOOK_QUEUE``: a slow receiver
+never holds a solver). A delivery goes only to a public address, checked on the address connected
+to (``workers.destinations``), unless the operator allows networks; each attempt ends within
+GEOCERT_WEBHOOK_TIMEOUT_S in all. Failed attempts are retried by Celery with doubling delays;
+every attempt's outcome is written on the job (``webhook``: state, attempts, last_error), so a
+delivery that never succeeds is visible there as ``failed``, one to a destination not allowed as
+``refused`` (not retried), never lost silently. The record says only that: not how the
+destination failed (a closed port, a timeout, an HTTP status), which would make the service a
+port scanner's oracle; the worker's log has the detail.
 """
 
 from __future__ import annotations
@@ -16,9 +23,10 @@ import logging
 import secrets
 import time
 
-import httpx
+import httpcore
 
 from geocert.settings import get_settings
+from geocert.workers.destinations import CheckedBackend, Refused, allowed_networks
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
 from geocert.workers.store import shared_store as store
@@ -39,12 +47,45 @@ def sign(secret: str, timestamp: str, body: bytes) -> str:
     return hmac.new(secret.encode(), timestamp.encode() + b"." + body, hashlib.sha256).hexdigest()
 
 
-@celery_app.task(name="geocert.deliver_webhook", bind=True, max_retries=None)
+FINAL = ("delivered", "failed", "refused")
+
+
+def post(url: str, body: bytes, headers: dict[str, str]) -> tuple[str, str | None]:
+    """One attempt: ("delivered", None), ("refused", why) or ("failed", why), the reasons as the
+    record shows them. The whole exchange ends within GEOCERT_WEBHOOK_TIMEOUT_S; the receiver's
+    answer is not read beyond its status."""
+    settings = get_settings()
+    allowed = allowed_networks(settings.webhook_allowed_networks)
+    limit = settings.webhook_timeout_s
+    backend = CheckedBackend(time.monotonic() + limit, allowed)
+    try:
+        with httpcore.ConnectionPool(network_backend=backend, max_connections=1) as pool:
+            with pool.stream("POST", url, headers=list(headers.items()), content=body,
+                             extensions={"timeout": {"connect": limit, "read": limit, "write": limit, "pool": limit}}
+                             ) as response:
+                status = response.status
+    except Refused as exc:
+        log.warning("webhook refused: %s", exc)
+        return "refused", ("refused: the destination is not a public address (loopback, private, link-local, "
+                           "multicast and reserved addresses are refused unless the operator allows their network: "
+                           "GEOCERT_WEBHOOK_ALLOWED_NETWORKS); nothing was sent")
+    except (httpcore.TimeoutException, httpcore.NetworkError, httpcore.ProtocolError, httpcore.UnsupportedProtocol,
+            OSError) as exc:
+        log.warning("webhook attempt failed: %s: %s", type(exc).__name__, exc)
+        return "failed", f"failed: no 2xx answer within {limit:g} s"
+    if 200 <= status < 300:
+        return "delivered", None
+    log.warning("webhook attempt failed: the receiver answered HTTP %d", status)
+    return "failed", f"failed: no 2xx answer within {limit:g} s"
+
+
+@celery_app.task(name="geocert.deliver_webhook", bind=True, max_retries=None,
+                 soft_time_limit=get_settings().webhook_timeout_s + 20, time_limit=get_settings().webhook_timeout_s + 30)
 def deliver_webhook(self, job_id: str) -> None:
     with logs.context(job_id=job_id):
         jobs = store()
         meta = jobs.get(job_id)
-        if meta is None or not meta.get("webhook") or meta["webhook"]["state"] in ("delivered", "failed"):
+        if meta is None or not meta.get("webhook") or meta["webhook"]["state"] in FINAL:
             return
         settings = get_settings()
         hook = meta["webhook"]
@@ -54,20 +95,36 @@ def deliver_webhook(self, job_id: str) -> None:
         headers = {"Content-Type": "application/json", "User-Agent": "geocert-webhook",
                    "X-Geocert-Job": job_id, "X-Geocert-Attempt": str(attempt),
                    "X-Geocert-Signature": f"t={timestamp},v1={sign(webhook_secret(jobs.r), timestamp, body)}"}
-        try:
-            response = httpx.post(hook["url"], content=body, headers=headers, timeout=settings.webhook_timeout_s)
-            error = None if 200 <= response.status_code < 300 else f"the receiver answered HTTP {response.status_code}"
-        except httpx.HTTPError as exc:
-            error = f"{type(exc).__name__}: {exc}"
+        outcome, error = post(hook["url"], body, headers)
         hook.update(attempts=attempt, last_error=error, last_attempt_at=time.time())
-        if error is None:
+        if outcome == "delivered":
             hook.update(state="delivered", delivered_at=time.time())
-        elif attempt >= settings.webhook_attempts:
-            hook["state"] = "failed"
+        elif outcome == "refused" or attempt >= settings.webhook_attempts:
+            hook["state"] = outcome
         else:
             hook["state"] = "retrying"
-        jobs.set_fields(job_id, webhook=hook)
+        if not jobs.set_fields(job_id, webhook=hook):
+            return  # the job was deleted meanwhile: nothing of it is written again
         metrics.record_webhook(jobs.r, hook["state"])
         log.info("webhook attempt %d: %s", attempt, error or "delivered")
         if hook["state"] == "retrying":
             raise self.retry(countdown=settings.webhook_backoff_s * 2 ** (attempt - 1))
+
+
+@celery_app.task(name="geocert.deliver_webhook_failed")
+def deliver_webhook_failed(request, exc, traceback) -> None:
+    """Errback of a delivery that ended outside its own handling (killed at its time limit): the
+    record says ``failed``, never stays ``waiting`` for ever."""
+    job_id = request.args[0]
+    jobs = store()
+    hook = jobs.field(job_id, "webhook")
+    if hook and hook["state"] not in FINAL:
+        hook.update(state="failed", attempts=hook["attempts"] + 1, last_attempt_at=time.time(),
+                    last_error="failed: the attempt did not end within its time limit")
+        if jobs.set_fields(job_id, webhook=hook):
+            metrics.record_webhook(jobs.r, "failed")
+
+
+def queue_delivery(job_id: str) -> None:
+    """Queue a job's webhook on the webhook queue, with its errback."""
+    deliver_webhook.apply_async((job_id,), link_error=deliver_webhook_failed.s())

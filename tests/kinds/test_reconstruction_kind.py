@@ -149,6 +149,21 @@ class TestResult:
             report = verify_any(forged)
             assert not report.valid and report.first_failure["check"] == check, report.first_failure
 
+    def test_progress_carries_no_placeholder_bounds(self):
+        """A reconstruction's stages report counts, not bounds: its progress events carry null
+        bounds (they carried 0, which the page drew), except a running search's own (the
+        autocalibration's branch and bound)."""
+        events = []
+        solve_job(job(), sink=events.append)
+        stages = {event.get("stage", "").split(" ")[0] for event in events}
+        assert {"projective", "bundle_adjustment", "structure", "cameras"} <= stages
+        for event in events:
+            if event.get("stage", "").startswith("autocalibration"):
+                assert event["lower_bound"] is None or event["lower_bound"] <= event["upper_bound"]
+                continue
+            assert (event["lower_bound"], event["upper_bound"], event["gap_abs"], event["gap_rel"]) == (
+                None, None, None, None), event
+
     def test_a_cancelled_run_keeps_the_stages_before(self):
         from geocert.batch import solve_items
 
@@ -219,11 +234,11 @@ class TestCamerasNotSearched:
 
         searched = structure._bound_camera
 
-        def bound(view, P, X, x, options, every):
+        def bound(view, P, X, x, options, every, dof):
             if view in (1, 4):  # as the free-camera test skips a camera: its cost, no bound, the reason
                 return structure.CameraBound(view, 1.0, None, None, None, False, "not_certified", len(X), 0.0,
-                                             "skipped by the test")
-            return searched(view, P, X, x, options, every)
+                                             "skipped by the test", dof=dof)
+            return searched(view, P, X, x, options, every, dof)
 
         monkeypatch.setattr(structure, "_bound_camera", bound)
         result = solve_job(job(certificate="full"))
@@ -241,15 +256,130 @@ class TestCamerasNotSearched:
         result = solve_job({"kind": "reconstruction", "options": {"certificate": "full"}, "data": {
             "views": [{"image_size": [768, 576]}] * 10,
             "tracks": [{"views": [int(v) for v in views], "points": pixels.tolist()} for views, pixels in tracks]}})
-        assert result["summary"]["views_registered"] == 10 and 0 < result["summary"]["cameras_certified"] < 10
+        # Every camera certified against its tolerance (camera_claim; 1 to 9 of 10 when held to
+        # camera_rel_gap alone, as a 3x4 camera is).
+        assert result["summary"]["views_registered"] == 10 and result["summary"]["cameras_certified"] == 10
         projective = result["stages"][0]  # every observation counted once (27 outliers but 52 not kept)
         assert projective["observations"] - projective["observations_kept"] == projective["outliers_removed"] + \
             projective["observations_of_dropped_tracks"] + projective["observations_of_unregistered_views"]
         for camera in result["cameras"]:  # every camera not certified says why (it was null: issue 14's trial)
             assert (camera["bound_reason"] is None) == camera["certified"], camera
-            if not camera["searched"]:
-                assert "free 3x4 camera" in camera["bound_reason"] and camera["lower_bound"] is None
-        forgeries_refused(result)
+        report = verify_any(json.loads(json.dumps(result)))
+        assert report.valid, report.first_failure
+
+
+
+def refused_as_returned(result: dict, change) -> dict:
+    """The result edited by ``change``: the verifier refuses it, on the returned fields."""
+    forged = json.loads(json.dumps(result))
+    change(forged)
+    report = verify_any(forged)
+    assert not report.valid and report.first_failure["check"] == "returned", report.first_failure
+    return report.first_failure
+
+
+class TestCertifiedFieldsTied:
+    """What a certified camera and summary.calibration claim is what the verifier checks: each
+    camera's degrees of freedom from the returned K, its tolerance from its points
+    (camera_claim), its cost within that tolerance of the proven bound; the calibration's K the
+    cameras' own, the certified K's difference, edges, determined and warnings recomputed."""
+
+    def test_the_honest_result_verifies(self, solved):
+        report = verify_any(json.loads(json.dumps(solved)))
+        assert report.valid, report.first_failure
+        calibration = solved["summary"]["calibration"]
+        assert calibration["certified"] and not calibration["returned_is_certified"]  # the adjustment moved K
+        assert all(c["certified"] and c["degrees_of_freedom"] == 6 for c in solved["cameras"])
+
+    @pytest.mark.parametrize("field, value", [("degrees_of_freedom", 5), ("degrees_of_freedom", 11),
+                                              ("tolerance", 0.9)])
+    def test_an_edited_camera_claim_is_refused(self, solved, field, value):
+        refused_as_returned(solved, lambda r: r["cameras"][2].update({field: value}))
+
+    def test_a_camera_beyond_its_tolerance_is_refused(self, monkeypatch):
+        """A wrong camera (view 3 turned by 0.1 degree, about 1.4 px, before the structure stage: the points are
+        certified in it) certified by a solver whose tolerance was forged (1e12: anything passes):
+        refused for the stated tolerance, for none stated (then held to a 3x4 camera's), and for
+        the true figures stated (its cost beyond them)."""
+        from scipy.spatial.transform import Rotation
+
+        from geocert.pipelines.reconstruction import pipeline
+        from geocert.solvers.reconstruction import camera_claim, structure
+
+        metric_cameras = pipeline._metric_cameras
+
+        def turned(out, metric, n_views):
+            R = metric.rotations[3]
+            metric.rotations[3] = Rotation.from_rotvec([np.radians(0.1), 0.0, 0.0]).as_matrix() @ R
+            metric.translations[3] = metric.rotations[3] @ (R.T @ metric.translations[3])  # the same centre
+            return metric_cameras(out, metric, n_views)
+
+        true_tolerance = camera_claim.tolerance
+        monkeypatch.setattr(pipeline, "_metric_cameras", turned)
+        monkeypatch.setattr(camera_claim, "tolerance", lambda *a: 1e12)
+        result = solve_job(job(certificate="full", bound_every_camera=True))
+        monkeypatch.undo()
+        camera = result["cameras"][3]
+        assert camera["certified"] and camera["cost"] > 2 * camera["lower_bound"] > 0, json.dumps({k: v for k, v in camera.items() if k not in ("K", "R", "t", "P", "center")})
+        assert "tolerance" in refused_as_returned(result, lambda r: None)["detail"]
+
+        def unstated(r):
+            for c in r["cameras"]:
+                c.pop("tolerance"), c.pop("degrees_of_freedom")
+
+        def true_figures(r):
+            for c in r["cameras"]:
+                c["tolerance"] = true_tolerance(c["points"], 6, "L2L2", r["certificate"]["options"]["camera_rel_gap"])
+
+        for change in (unstated, true_figures):
+            assert "beyond (1 + tolerance" in refused_as_returned(result, change)["detail"]
+
+    @pytest.mark.parametrize("change", [
+        lambda c: c["K"][0].__setitem__(0, c["K"][0][0] * 1.01),  # not the cameras' K
+        lambda c: c.update(certified_K=c["K"], returned_is_certified=True, source="autocalibration",
+                           difference={"focal_percent": 0.0, "principal_point_px": 0.0, "aspect": 0.0,
+                                       "skew_px": 0.0}),  # the returned K called the one the stage certified
+        lambda c: c.update(returned_is_certified=True),
+        lambda c: c.update(source="autocalibration"),
+        lambda c: c["difference"].update(focal_percent=0.0),
+        lambda c: c.update(certified=False, certified_K=None, difference=None),  # then determined is false
+        lambda c: c.update(on_range_edge=["focal"]),
+    ])
+    def test_an_edited_calibration_is_refused(self, solved, change):
+        refused_as_returned(solved, lambda r: change(r["summary"]["calibration"]))
+
+    def test_determined_on_the_range_edge_is_refused(self, solved):
+        """The autocalibration's focal range ending at the certified focal length: the K is on its
+        range's edge, so determined true (and no warning) is refused."""
+        def edge(r):
+            stage = next(s for s in r["stages"] if s["name"] == "autocalibration")
+            stage["intrinsics"]["focal"][1] = r["summary"]["calibration"]["certified_K"][0][0]
+        refused_as_returned(solved, edge)
+
+        def edge_stated(r):
+            edge(r)
+            r["summary"]["calibration"]["on_range_edge"] = ["focal"]
+        assert "determined" in refused_as_returned(solved, edge_stated)["detail"]
+
+    @pytest.mark.parametrize("change", [
+        lambda s: s.update(autocalibration_determined=None),
+        lambda s: s.update(autocalibration_certified=False),
+        lambda s: s.update(warnings=[]),  # the returned K not the certified one, unsaid
+        lambda s: s.update(critical_motion="orbital_motion"),  # determined under a critical motion
+    ])
+    def test_an_edited_summary_claim_is_refused(self, solved, change):
+        refused_as_returned(solved, lambda r: change(r["summary"]))
+
+    def test_views_not_registered_are_said_first(self):
+        """A view no track reaches is not registered: the first warning says so, and a result
+        without that warning is refused."""
+        body = job(certificate="full")
+        body["data"]["views"].append({"name": "unseen", "image_size": [640, 480]})
+        result = solve_job(body)
+        assert result["summary"]["views_registered"] == 6 and result["summary"]["warnings"][0]["code"] == \
+            "views_not_registered"
+        assert verify_any(json.loads(json.dumps(result))).valid
+        refused_as_returned(result, lambda r: r["summary"]["warnings"].pop(0))
 
 
 def run_cancelled_at(stage: str, monkeypatch=None, **options) -> tuple[dict, list[str]]:

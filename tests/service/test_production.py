@@ -46,6 +46,7 @@ def keyed(tmp_path_factory):
     digest_b = hashlib.sha256(KEY_B.encode()).hexdigest()
     with cluster(tmp_path_factory.mktemp("keyed"), workers=1, geocert_api_keys=f"{KEY_A}, sha256:{digest_b}, {KEY_C}",
                  geocert_webhook_secret=SECRET, geocert_webhook_backoff_s="0.2", geocert_webhook_attempts="3",
+                 geocert_webhook_allowed_networks="127.0.0.1/32",  # the receivers below listen on loopback
                  geocert_progress_interval_s="0.05") as (_, client):
         yield client
 
@@ -250,7 +251,8 @@ class TestWebhooks:
                 time.sleep(0.1)
         finally:
             receiver.close()
-        assert hook["attempts"] == 3 and "HTTP 500" in hook["last_error"]
+        # The record says it failed, not how (an HTTP status, a closed port, a timeout: a port scanner's oracle).
+        assert hook["attempts"] == 3 and hook["last_error"].startswith("failed:") and "500" not in hook["last_error"]
         assert len(receiver.received) == 3
         assert keyed.get(f"/v1/jobs/{job['id']}", headers=A).json()["status"] == "succeeded"  # the job is intact
 

@@ -452,3 +452,22 @@ def test_the_cost_cap_row_is_inserted_where_stacking_puts_it():
         at = data.cones.zero + data.cones.nonneg
         expected = stacked(data.A, at, np.arange(relaxation.ie, relaxation.nvar))
         assert np.array_equal(capped.A.toarray(), expected.toarray())
+
+
+def test_the_basis_rank_check_is_one_decomposition_and_a_bisection(monkeypatch):
+    """One singular value decomposition per shape cost K^3 N (100 s of the API's time for 300
+    shapes of 400 points): a good basis takes one, a degenerate one a bisection, which still
+    names the first shape that depends on those before it."""
+    from geocert.solvers.bilinear import problem as pb
+
+    calls = []
+    svd = np.linalg.svd
+    monkeypatch.setattr(pb.np.linalg, "svd", lambda *a, **k: calls.append(1) or svd(*a, **k))
+    basis = np.random.default_rng(0).normal(size=(64, 30, 3))
+    pb.read_basis(basis.tolist())
+    assert len(calls) == 1
+    basis[41] = 0.25 * basis[3] + 0.75 * basis[17]
+    calls.clear()
+    with pytest.raises(InputError) as caught:
+        pb.read_basis(basis.tolist())
+    assert caught.value.field == "data/basis/41" and len(calls) <= 8

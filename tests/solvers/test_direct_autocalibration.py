@@ -345,3 +345,13 @@ class TestBadInput:
         with pytest.raises(InputError) as error:
             solve_job(job(data, intrinsics, chirality="points"))
         assert error.value.field == "options/chirality"
+
+
+@pytest.mark.parametrize("chirality, remedy", [("points", '"centers" or give fewer points'),
+                                               ("centers", '"none" or fewer cameras')])
+def test_a_program_too_large_names_a_remedy_that_shrinks_it(chirality, remedy):
+    from geocert.solvers.core.geometry import InputError
+
+    views = 2000 if chirality == "centers" else 300  # centres alone: views (views - 1) / 2 pairs
+    with pytest.raises(InputError, match=remedy):
+        direct.check_size(views, 1000, chirality)

@@ -540,3 +540,176 @@ class TestFarFromTheOrigin:
         assert claim["lower_bound"] <= exact
         report = verify_any(result)
         assert report.valid and not report.scope.get("discounted"), report.first_failure
+
+
+@pytest.fixture(scope="module")
+def thin_cut_metric():
+    """The stratified metric stage "proved" by one leaf closed by a cut whose dual vector is 0,
+    over the omega box of intrinsics whose principal point is pinned to +-1e-6 px (the middle of
+    its default range, so the affine stage's genuine proof stands): a K of focal 600 px claimed
+    optimal where the scene's own (focal 1000 px, in the same box) costs almost nothing."""
+    from geocert.solvers.autocalibration import metric_relaxation as mrelax
+    from geocert.solvers.autocalibration import problem as pr
+    from geocert.solvers.autocalibration.verification import read_data
+
+    result = stored("autocalibration_stratified")
+    document = result["certificate"]
+    cameras, points, image_size = read_data(document["data"])
+    (ul, uu), (vl, vu) = pr.resolve_ranges({}, image_size)["principal_point"]
+    u0, v0 = (ul + uu) / 2, (vl + vu) / 2
+    document["options"]["intrinsics"] = {"principal_point": [[u0 - 1e-6, u0 + 1e-6], [v0 - 1e-6, v0 + 1e-6]]}
+    problem = pr.prepare(cameras, points, image_size, document["options"]["intrinsics"])
+    claim = document["items"][1]
+    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference,
+                             pr.plane_from_input(problem, np.array(claim["plane_at_infinity"])), problem.unit_ranges)
+    lo, hi = mrelax.omega_box(problem.unit_ranges)
+
+    def w(focal):
+        return pr.w_of_K(problem, np.array([[focal, 0.0, u0], [0.0, focal, v0], [0.0, 0.0, 1.0]]))
+
+    cost = mrelax.cost(setup, w(600.0))
+    setup.unit = 1.0 / cost
+    rows = len(mrelax.build(setup, lo, hi, cost, cap_row=True).b)
+    claim.update(K=[[600.0, 0.0, u0], [0.0, 600.0, v0], [0.0, 0.0, 1.0]], cost=cost, lower_bound=cost * (1 - 1e-5),
+                 gap=cost * 1e-5)
+    claim["proof"] = {"type": "stratified_metric", "unit": 1.0 / cost, "tightening": [],
+                      "search_box": [lo.tolist(), hi.tolist()],
+                      "proofs": [{"box": [lo.tolist(), hi.tolist()], "upper_bound": cost, "kind": "cut",
+                                  "z": pack(np.zeros(rows)), "bound": None, "axis": 2, "sign": 1.0}],
+                      "leaves": [[lo.tolist(), hi.tolist(), 0]]}
+    rehash(document)
+    truth = w(1000.0)
+    assert mrelax.in_domain(setup, truth, lo, hi) and mrelax.cost(setup, truth) < 1e-6 * claim["lower_bound"]
+    return only(document, 1)
+
+
+class TestCutMovedOverTheBox:
+    """A cut leaf beyond its cut by at most coverage.SIDE_TOLERANCE of the root box's size was
+    moved back to the cut's proven value, the boxes on its inner face extended over the sliver,
+    and the coverage check read the leaves as claimed. Where a coordinate's range is narrower than
+    that tolerance, a cut proving nothing (z = 0: the box's own side) moved the only leaf off the
+    whole box, which still read as covered, and closed it at the cap the forger chose. Now the
+    leaves must cover the box as the checks read them (moved and extended)."""
+
+    def test_one_cut_leaf_over_a_thin_box_is_refused(self, thin_cut_metric):
+        assert refused(thin_cut_metric)["check"] in ("coverage", "leaf_bounds")
+
+    def test_the_thin_box_is_thinner_than_the_tolerance(self, thin_cut_metric):
+        from geocert.solvers.core.coverage import SIDE_TOLERANCE
+
+        lo, hi = (np.array(side) for side in thin_cut_metric["items"][1]["proof"]["search_box"])
+        assert (hi - lo).min() < SIDE_TOLERANCE * np.abs(np.r_[lo, hi]).max()
+
+    def test_the_leaves_on_moved_faces_are_paid_for(self, thin_cut_metric):
+        """Each moved leaf was tested against every leaf (O(moves x leaves), unpaid: 8,000 moved
+        leaves and 8,000 leaves on their face took 16 s and verified). Now the leaves on a moved
+        face are found by sorting, and each test of one against its moved leaf is paid for."""
+        document = copy.deepcopy(thin_cut_metric)
+        proof = document["items"][1]["proof"]
+        leaf = proof["leaves"][0]
+        flat = [list(leaf[0]), list(leaf[1]), 0]
+        flat[0][2] = flat[1][2]  # a leaf of no width on the moved leaves' face
+        proof["leaves"] = [leaf] * 3000 + [flat] * 3000
+        assert "more work than its size pays for" in refused(document)["detail"]
+
+
+@pytest.fixture(scope="module")
+def calibrated_reconstruction():
+    """A reconstruction result as the solver writes it today (its summary states the calibration:
+    the stored one predates it): make_fixtures' scene, its autocalibration certified, the cameras
+    returned using the K the bundle adjustment moved from the certified one."""
+    import sys
+
+    sys.path.insert(0, str(STORED))
+    from make_fixtures import reconstruction
+
+    result = reconstruction()
+    calibration = result["summary"]["calibration"]
+    assert calibration["certified"] and not calibration["returned_is_certified"]
+    return result
+
+
+class TestCalibrationTied:
+    """The summary's calibration (the K the returned cameras use, the certified K, whether they
+    are the same, how far apart) was read by no check: a K of focal 5,000 px called the returned
+    cameras' and the certified one, their cameras using 797 px, verified. Now it is recomputed
+    from the cameras returned, and tied to the autocalibration stage, the summary's flags and its
+    warnings (the metric upgrade's own certification stays the pipeline's statement, as the scope
+    says)."""
+
+    @staticmethod
+    def forged(result: dict, **changes) -> dict:
+        result = copy.deepcopy(result)
+        result["summary"]["calibration"].update(changes)
+        return result
+
+    def test_a_calibration_the_cameras_do_not_use_is_refused(self, calibrated_reconstruction):
+        K = [[5000.0, 0.0, 10.0], [0.0, 5000.0, 10.0], [0.0, 0.0, 1.0]]
+        forged = self.forged(calibrated_reconstruction, K=K, certified_K=K, returned_is_certified=True,
+                             source="autocalibration",
+                             difference={"focal_percent": 0.0, "principal_point_px": 0.0, "aspect": 0.0, "skew_px": 0.0})
+        assert refused(forged)["check"] == "returned"
+
+    @pytest.mark.parametrize("changes", [{"returned_is_certified": True, "source": "autocalibration"},
+                                         {"certified": False}, {"determined": True},
+                                         {"difference": {"focal_percent": 0.0, "principal_point_px": 0.0,
+                                                         "aspect": 0.0, "skew_px": 0.0}},
+                                         {"certified_K": [[700.0, 0.0, 320.0], [0.0, 700.0, 240.0], [0, 0, 1.0]]}])
+    def test_an_edited_calibration_is_refused(self, calibrated_reconstruction, changes):
+        assert refused(self.forged(calibrated_reconstruction, **changes))["check"] == "returned"
+
+    def test_a_warning_about_the_calibration_removed_is_refused(self, calibrated_reconstruction):
+        forged = copy.deepcopy(calibrated_reconstruction)
+        warnings = forged["summary"]["warnings"]
+        assert any(w["code"] == "returned_K_not_certified" for w in warnings)
+        forged["summary"]["warnings"] = [w for w in warnings if w["code"] != "returned_K_not_certified"]
+        assert refused(forged)["check"] == "returned"
+
+    def test_the_genuine_result_verifies(self, calibrated_reconstruction):
+        assert verify_any(calibrated_reconstruction).valid
+
+
+class TestIntegerEntriesReadInBulk:
+    """Rows holding an integer were read entry by entry (6 microseconds each): a metric proof of
+    200,000 leaves with integer corners (8.4 MB) took 25 s before its coverage was refused, 9 s
+    read in bulk. Integers are now read in bulk as floats are; an entry that is not a finite JSON
+    number is still named."""
+
+    def test_integer_rows_are_not_checked_entry_by_entry(self, monkeypatch):
+        from geocert.solvers.core import geometry
+
+        def entry_by_entry(*args, **kwargs):
+            raise AssertionError("read entry by entry")
+
+        monkeypatch.setattr(geometry, "_check_entries", entry_by_entry)
+        array = geometry.number_array([[0, 1, 2.5]] * 1000, "x", "rows", 2)
+        assert array.shape == (1000, 3) and array.dtype == float
+
+    @pytest.mark.parametrize("bad", [True, "1", 2 ** 1023, 10 ** 400, float("nan")])
+    def test_a_bad_entry_is_named(self, bad):
+        from geocert.solvers.core.geometry import InputError, number_array
+
+        with pytest.raises(InputError) as caught:
+            number_array([[0, 1, 2]] * 3 + [[0, bad, 2]], "x", "rows", 2)
+        assert caught.value.field == "x/3/1"
+
+
+class TestMetricRoundsBounded:
+    """A metric proof's tightening rounds were unbounded, and each builds its program whatever its
+    duals: 1,000 rounds proving nothing (every dual null, 560 KB) added 6 s and verified, some 6
+    minutes within the 32 MB body limit. Now at most proofs.MAX_ROUNDS (the solver makes 12)."""
+
+    def test_rounds_beyond_the_limit_are_refused_before_any_is_built(self, monkeypatch):
+        from geocert.solvers.autocalibration import metric_relaxation as mrelax
+        from geocert.solvers.autocalibration.proofs import MAX_ROUNDS
+
+        result = stored("autocalibration_five_views")
+        proof = result["certificate"]["items"][1]["proof"]
+        box = proof["search_box"]
+        cap = proof["tightening"][-1]["cap"] if proof["tightening"] else result["certificate"]["items"][1]["cost"]
+        proof["tightening"] += [{"cap": cap, "box_in": box, "box_out": box, "duals": [None] * 10}] * (MAX_ROUNDS + 1)
+        built = []
+        original = mrelax.build
+        monkeypatch.setattr(mrelax, "build", lambda *a, **k: built.append(1) or original(*a, **k))
+        assert refused(only(result["certificate"], 1))["check"] == "format"
+        assert not built

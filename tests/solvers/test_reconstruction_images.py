@@ -141,6 +141,34 @@ class TestSyntheticTracks:
         assert seen[0] == {"stage": "features", "done": 0, "total": 3}
         assert seen[-1]["stage"] == "matches"
 
+    @pytest.mark.parametrize("late", [False, True])
+    def test_features_and_matching_stop_at_their_time_limit(self, box, monkeypatch, late):
+        """Past options.time_limit_s no more images are read, and no more pairs matched: the
+        status says time_limit and where, and the tracks are those of the pairs matched by then
+        (no clock was checked: 300 photos matched exhaustively held a solver for as long as that
+        took). The clock is the test's: it jumps past the limit when the callback has seen the
+        first image read, or the second pair matched."""
+        from types import SimpleNamespace
+
+        from geocert.pipelines.reconstruction import features as module
+
+        clock = [0.0]
+        monkeypatch.setattr(module, "time", SimpleNamespace(perf_counter=lambda: clock[0]))
+
+        def callback(progress):
+            if (progress["stage"], progress["done"]) == (("matches", 2) if late else ("features", 1)):
+                clock[0] = 100.0
+
+        result = tracks_from_images(box[1][:4], FeatureOptions(time_limit_s=50.0), callback)
+        assert result.status == "time_limit"
+        if late:
+            assert result.stats["stopped"].startswith("2 of 6 image pairs matched")
+            assert len(result.stats["verified_pairs"]) <= 2 and result.tracks
+            assert {int(v) for views, _ in result.tracks for v in views} <= {0, 1, 2}
+        else:
+            assert result.stats["stopped"].startswith("features read of 1 of 4 images")
+            assert result.stats["features_per_image"][1:] == [0, 0, 0] and result.tracks == []
+
 
 def _ring_gap(a: int, b: int, n: int) -> int:
     return min((a - b) % n, (b - a) % n)

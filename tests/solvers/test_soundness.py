@@ -27,7 +27,7 @@ from geocert.solvers.verify import verify_any, verify_document
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import proves_infeasible
 
-from tests.support import project, random_cameras
+from tests.support import every_track_searched, project, random_cameras
 
 CAMERAS = [[[800, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]],
            [[800, 0, 320, -800], [0, 800, 240, 0], [0, 0, 1, 0]]]
@@ -175,12 +175,18 @@ class TestPointsAtInfinity:
         assert verify_document(result["certificate"]).valid
 
 
+def searched(job: dict) -> dict:
+    """solve_job with every track searched (none certified by its convexity, L2L2's usual path)."""
+    with every_track_searched():
+        return solve_job(job)
+
+
 @pytest.fixture(scope="module")
 def genuine() -> dict:
     """A full certificate of a track that needed a search (README cameras, 3 px of disparity noise)."""
     job = readme_job(mode="full")
     job["data"]["tracks"][0]["points"] = [[330, 250], [251.5, 253]]
-    result = solve_job(job)
+    result = searched(job)
     assert result["certificate"]["items"][0]["proof"]["type"] == "branch_and_bound"
     assert verify_document(result["certificate"]).valid
     return result
@@ -412,20 +418,32 @@ def _numbers_in(value, path=()):
 
 
 @pytest.fixture(scope="module")
-def genuine_documents(genuine) -> list[dict]:
-    """A branched track, and a resection with tightening rounds and several leaves."""
+def convexity() -> dict:
+    """A full certificate of a track certified by its convexity (the same track as genuine's)."""
+    job = readme_job(mode="full")
+    job["data"]["tracks"][0]["points"] = [[330, 250], [251.5, 253]]
+    result = solve_job(job)
+    assert result["certificate"]["items"][0]["proof"]["type"] == "convexity"
+    assert verify_document(result["certificate"]).valid
+    return result
+
+
+@pytest.fixture(scope="module")
+def genuine_documents(genuine, convexity) -> list[dict]:
+    """A branched track, a resection with tightening rounds and several leaves, and a track
+    certified by its convexity."""
     from .test_certificates import map_job
     rng = np.random.default_rng(5)
     for _ in range(20):
         document = solve_job(map_job(rng, "resection", 7, "L2L2", maps=1, noise=3.0))["certificate"]
         proof = document["items"][0]["proof"]
         if document["items"][0]["certified"] and proof.get("tightening") and len(proof["leaves"]) >= 3:
-            return [genuine["certificate"], document]
+            return [genuine["certificate"], document, convexity["certificate"]]
     pytest.fail("no branched resection")
 
 
 @settings(max_examples=150, deadline=None)
-@given(which=st.integers(0, 1), pick=st.integers(0, 10**6), how=st.integers(0, 4),
+@given(which=st.integers(0, 2), pick=st.integers(0, 10**6), how=st.integers(0, 4),
        amount=st.floats(1e-12, 0.5), section=st.sampled_from(["proof", "claim", "options"]))
 def test_a_perturbed_certificate_is_refused_or_still_true(genuine_documents, which, pick, how, amount, section):
     original = genuine_documents[which]
@@ -464,6 +482,113 @@ def test_a_perturbed_certificate_is_refused_or_still_true(genuine_documents, whi
     claim = doc["items"][0]
     assert claim["lower_bound"] <= original["items"][0]["cost"] * (1 + 1e-9)
     assert report.scope["max_residual"] == original["options"].get("max_residual")
+
+
+class TestConvexityProof:
+    """A convexity proof (fractional.convexity) is checked, not trusted: its radius must enclose
+    every point costing as little, keep every depth positive and leave the cost convex there;
+    it serves L2L2 with no max_residual only."""
+
+    def edited(self, convexity, **changes) -> dict:
+        doc = copy.deepcopy(convexity["certificate"])
+        doc["items"][0]["proof"].update(changes)
+        return doc
+
+    @pytest.mark.parametrize("radius", [1e-12, 1e6, 0.0, -1.0])
+    def test_a_radius_that_does_not_prove_is_refused(self, convexity, radius):
+        assert failed_check(self.edited(convexity, radius=radius)) == "convexity"
+
+    @pytest.mark.parametrize("field", ["scale", "root"])
+    def test_a_field_it_does_not_have_is_refused(self, convexity, field):
+        assert failed_check(self.edited(convexity, **{field: 1.0})) == "format"
+
+    @pytest.mark.parametrize("options", [{"norm": "L2L1"}, {"max_residual": 100.0}])
+    def test_it_serves_l2l2_over_the_whole_scope_only(self, convexity, options):
+        doc = copy.deepcopy(convexity["certificate"])
+        doc["options"].update(options)
+        rehash(doc)
+        assert failed_check(doc) is not None
+
+    def test_a_claimed_bound_above_the_proven_one_is_refused(self, convexity):
+        doc = copy.deepcopy(convexity["certificate"])
+        item = doc["items"][0]
+        item["lower_bound"] = item["cost"] * (1 - 1e-12)
+        item["gap"] = item["cost"] - item["lower_bound"]
+        assert failed_check(doc) == "lower_bound"
+
+    @staticmethod
+    def claimed_at(convexity, point, radius: float) -> tuple[dict, float]:
+        """The certificate moved to ``point``: its cost recomputed there, a bound claimed 1e-4
+        of it below (within the gap tolerance), the proof's radius ``radius``."""
+        doc = copy.deepcopy(convexity["certificate"])
+        item = doc["items"][0]
+        cameras = np.array(doc["data"]["cameras"], dtype=float)
+        proj = cameras @ np.append(point, 1.0)
+        cost = float(((proj[:, :2] / proj[:, 2:3] - np.array(doc["data"]["tracks"][0]["points"])) ** 2).sum())
+        item.update(point=[float(v) for v in point], cost=cost, lower_bound=cost * (1 - 1e-4), proof={
+            "type": "convexity", "radius": radius})
+        item["gap"] = cost - item["lower_bound"]
+        return doc, item["lower_bound"]
+
+    @pytest.mark.parametrize("along", [1.05, 1.2])
+    def test_a_point_off_the_optimum_is_refused(self, convexity, along):
+        """The point moved along its ray (to cost 18 and 176, the optimum costing 4.5): no radius
+        proves the bound claimed there."""
+        point = np.array(convexity["certificate"]["items"][0]["point"]) * along
+        for radius in (1e-3, 0.1, 1.0, 5.0, 50.0):
+            doc, claimed = self.claimed_at(convexity, point, radius)
+            assert claimed > convexity["certificate"]["items"][0]["cost"]  # a false claim
+            assert failed_check(doc) in ("convexity", "lower_bound"), radius
+
+    def test_a_point_where_the_cost_is_not_convex_is_refused(self, convexity):
+        """Twice as far along the ray the cost's Hessian has a negative eigenvalue (central
+        differences): the convexity test refuses every radius."""
+        point = np.array(convexity["certificate"]["items"][0]["point"]) * 2
+        doc, _ = self.claimed_at(convexity, point, 1.0)
+        cameras = np.array(doc["data"]["cameras"], dtype=float)
+        observed = np.array(doc["data"]["tracks"][0]["points"])
+
+        def cost(X):
+            proj = cameras @ np.append(X, 1.0)
+            return ((proj[:, :2] / proj[:, 2:3] - observed) ** 2).sum()
+
+        h, e = 1e-4, np.eye(3) * 1e-4
+        hessian = np.array([[(cost(point + e[i] + e[j]) - cost(point + e[i] - e[j]) - cost(point - e[i] + e[j])
+                              + cost(point - e[i] - e[j])) / (4 * h * h) for j in range(3)] for i in range(3)])
+        assert np.linalg.eigvalsh(hessian)[0] < -1  # not convex there
+        for radius in (1e-6, 1e-3, 0.1, 1.0, 10.0, 100.0):
+            assert failed_check(self.claimed_at(convexity, point, radius)[0]) == "convexity", radius
+
+    @pytest.mark.parametrize("radius", [5e-324, 2.0 ** -1022, 1e300])
+    def test_a_subnormal_or_huge_radius_is_refused(self, convexity, radius):
+        assert failed_check(self.edited(convexity, radius=radius)) == "convexity"
+
+    def test_a_subnormal_number_in_the_data_is_refused(self, convexity):
+        """A camera's zero entry made the smallest subnormal: the problem is the same to the last
+        bit of every residual, but its numbers leave the range the proof's round-off is counted
+        for (docs/certificate.md, "Floating point")."""
+        doc = copy.deepcopy(convexity["certificate"])
+        doc["data"]["cameras"][0][0][1] = 5e-324
+        rehash(doc)
+        report = verify_any(doc)
+        assert report.first_failure["check"] == "convexity" and "subnormal" in report.first_failure["detail"]
+
+    @pytest.mark.parametrize("scale", [2.0 ** 130, 2.0 ** -130])
+    def test_huge_or_tiny_data_are_refused(self, convexity, scale):
+        """The image plane scaled by a power of two (the cameras' first two rows and the
+        observations): exact, the claim scaled with it stays true, but the observations (or the
+        cost) leave the proof's range."""
+        doc = copy.deepcopy(convexity["certificate"])
+        for camera in doc["data"]["cameras"]:
+            camera[0] = [v * scale for v in camera[0]]
+            camera[1] = [v * scale for v in camera[1]]
+        track = doc["data"]["tracks"][0]
+        track["points"] = [[v * scale for v in p] for p in track["points"]]
+        item = doc["items"][0]
+        for name in ("cost", "lower_bound", "gap"):
+            item[name] *= scale * scale
+        rehash(doc)
+        assert failed_check(doc) == "convexity"
 
 
 class TestHostileReview:
@@ -687,7 +812,7 @@ class TestProgramCheck:
         assert failed_check(copy.deepcopy(genuine["certificate"])) == "program"
 
     def test_a_depth_of_the_wrong_sign_is_refused(self, monkeypatch):
-        document = solve_job(six_view_job("L2L2", None))["certificate"]  # depths that vary (the README's don't)
+        document = searched(six_view_job("L2L2", None))["certificate"]  # depths that vary (the README's don't)
         assert failed_check(document) is None
 
         def change(program):  # numerator and depth both negated: the residuals stay the data's

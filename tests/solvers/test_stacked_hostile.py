@@ -16,9 +16,17 @@ from geocert.solvers.fractional.items import TrackItems
 from geocert.solvers.verify import checked_options, verify_any
 
 from tests.solvers.test_stacked_verification import scene_job
-from tests.support import project, random_cameras
+from tests.support import every_track_searched, project, random_cameras
 
 NORMS = ("L2L2", "L2L1", "L1L1")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def searched_only():
+    """Every track searched, none certified by its convexity (L2L2's usual path): these tests
+    are of the stacked verifier's check of a search's proof."""
+    with every_track_searched():
+        yield
 
 
 @pytest.fixture(scope="module")

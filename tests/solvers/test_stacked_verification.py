@@ -22,7 +22,7 @@ from geocert.solvers.fractional.items import TrackItem, TrackItems
 from geocert.solvers.fractional.relaxation import Relaxation
 from geocert.solvers.verify import checked_options, verify_any, verify_item
 
-from tests.support import project, random_cameras
+from tests.support import every_track_searched, project, random_cameras
 
 NORMS = ("L2L2", "L2L1", "L1L1")
 
@@ -38,6 +38,14 @@ def scene_job(norm: str, tracks: int = 40, seed: int = 3) -> dict:
         entries.append({"views": views, "points": points.tolist()})
     return {"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": entries},
             "options": {"norm": norm, "certificate": "full"}}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def searched_only():
+    """Every track searched, none certified by its convexity (L2L2's usual path): these tests
+    are of the stacked verifier's check of a search's proof."""
+    with every_track_searched():
+        yield
 
 
 @pytest.fixture(scope="module")

@@ -90,6 +90,22 @@ class TestProgressSums:
             assert aggregate["gap_rel"] == (max(gaps) if gaps else None)
         assert json.loads(jobs.r.hget(jobs.key(meta["id"]), "progress")) == aggregate
 
+    def test_bounds_no_task_has_are_null_not_zero(self, jobs):
+        """A task reporting no bounds (a reconstruction's stages) leaves the aggregate's bounds
+        null: not 0, nor the residue of a stage's bounds added and taken away (1e-17), which the
+        page drew."""
+        meta = jobs.create("reconstruction", request_of(1), 1, 1, "someone")
+        none = {"nodes": 0, "open_boxes": 0, "lower_bound": None, "upper_bound": None, "gap_abs": None,
+                "gap_rel": None}
+        aggregate = jobs.save_progress(meta["id"], 0, none)
+        assert (aggregate["lower_bound"], aggregate["upper_bound"], aggregate["gap_abs"]) == (None, None, None)
+        staged = {**none, "lower_bound": 0.1, "upper_bound": 0.3, "gap_abs": 0.2, "gap_rel": 0.6}
+        aggregate = jobs.save_progress(meta["id"], 0, staged)
+        assert math.isclose(aggregate["lower_bound"], 0.1) and math.isclose(aggregate["upper_bound"], 0.3)
+        aggregate = jobs.save_progress(meta["id"], 0, none)
+        assert (aggregate["lower_bound"], aggregate["upper_bound"], aggregate["gap_abs"], aggregate["gap_rel"]) == (
+            None, None, None, None)
+
 
 class TestResultKeptCompressed:
     """A finished job's result is kept compressed: what Redis holds and sends for it is a

@@ -84,6 +84,9 @@ class FeatureOptions:
     guided_ratio: float = 0.0  # guided matching's ratio test (0: no guided matching; see the module docstring)
     guided_min_inliers: int = 30  # a pair is matched again, guided, when it has at least this many inliers
     guided_threshold_px: float | None = None  # epipolar distance of a guided candidate (None: ransac_threshold_px)
+    # Features and matching stop past this many seconds (the clock checked between images and
+    # between pairs); the tracks of what was matched by then are kept.
+    time_limit_s: float = 300.0
 
 
 @dataclass
@@ -91,7 +94,9 @@ class ImageTracks:
     tracks: list[tuple[np.ndarray, np.ndarray]]  # (views int array, points (n, 2) float64 pixels)
     image_sizes: list[tuple[int, int]]  # (width, height) per image
     stats: dict = field(default_factory=dict)
-    status: str = "ok"  # "ok" or "cancelled" (the callback asked to stop; tracks then empty)
+    # "ok", "cancelled" (the callback asked to stop; tracks then empty) or "time_limit" (stopped at
+    # options.time_limit_s: the tracks of the images and pairs done by then)
+    status: str = "ok"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -181,12 +186,63 @@ def exif_focal_px(data: bytes, size: tuple[int, int]) -> float | None:
     return None
 
 
-def decode_image(content_b64: str, field: str) -> np.ndarray:
-    """A base64 PNG or JPEG (optionally a ``data:image/...;base64,`` URL) as a grayscale uint8 array.
+# Deflate (PNG's compression) never packs more than 1032 bytes into one: a PNG whose compressed
+# data is smaller than its pixels over that cannot hold them. A Huffman-coded JPEG spends at least
+# a bit on each 8x8 block's DC coefficient. Decoders fill what is missing (a 400-byte JPEG whose
+# header claims 5000x5000 decodes to 25 MB of grey), so such images are refused from their sizes.
+_DEFLATE_MAX_RATIO = 1032
+_PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}
+_ARITHMETIC_SOF = {0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
+
+
+def _png_fills(data: bytes, w: int, h: int) -> bool:
+    """Whether the PNG's chunks are whole, end with IEND, and hold enough compressed data for its pixels."""
+    depth, colour = data[24], data[25]
+    raw = h * (1 + -(-w * _PNG_CHANNELS.get(colour, 4) * depth // 8))  # bytes a row, plus its filter byte
+    i, compressed = 8, 0
+    while i + 12 <= len(data):
+        (length,) = struct.unpack(">I", data[i:i + 4])
+        kind = data[i + 4:i + 8]
+        if i + 12 + length > len(data):
+            return False
+        if kind == b"IDAT":
+            compressed += length
+        if kind == b"IEND":
+            return compressed * _DEFLATE_MAX_RATIO >= raw
+        i += 12 + length
+    return False
+
+
+def _jpeg_fills(data: bytes, w: int, h: int) -> bool:
+    """Whether the JPEG's segments lead to a scan, an end-of-image marker follows it, and at least
+    a bit per 8x8 block lies between them (Huffman coding; arithmetic coding: the marker only)."""
+    i, frame = 2, None
+    while i + 4 <= len(data):
+        if data[i] != 0xFF:
+            return False
+        marker = data[i + 1]
+        if marker == 0xFF or marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
+            i += 1 if marker == 0xFF else 2
+            continue
+        if marker in _SOF_MARKERS and frame is None:
+            frame = marker
+        if marker == 0xDA:
+            end = data.rfind(b"\xff\xd9")
+            if frame is None or end <= i:
+                return False
+            return frame in _ARITHMETIC_SOF or 8 * (end - i) >= -(-w // 8) * -(-h // 8)
+        (length,) = struct.unpack(">H", data[i + 2:i + 4])
+        i += 2 + length
+    return False
+
+
+def image_header(content_b64: str, field: str) -> tuple[int, int, bytes]:
+    """A base64 PNG or JPEG's width, height and bytes, read from its header without decoding its
+    pixels (what the API checks of a photo: ``decode_image`` starts here).
 
     Refused with ``InputError(field, reason)``: content that is not a string, not base64, empty,
     not a PNG or JPEG, larger than the limits above (encoded bytes, sides, pixels), smaller than
-    ``MIN_IMAGE_SIDE`` on a side, or that OpenCV cannot decode.
+    ``MIN_IMAGE_SIDE`` on a side, or whose data cannot fill the size its header declares (truncated).
     """
     if not isinstance(content_b64, str):
         raise InputError(field, "an image's content must be a base64 string (PNG or JPEG)")
@@ -206,7 +262,8 @@ def decode_image(content_b64: str, field: str) -> np.ndarray:
         raise InputError(field, "the content is not valid base64") from None
     if not data:
         raise InputError(field, "the image is empty")
-    size = _png_size(data) or _jpeg_size(data)
+    png = _png_size(data)
+    size = png or _jpeg_size(data)
     if size is None:
         raise InputError(field, "the content is not a PNG or JPEG image (or its header is damaged)")
     w, h = size
@@ -215,6 +272,16 @@ def decode_image(content_b64: str, field: str) -> np.ndarray:
                                 f"and {MAX_IMAGE_PIXELS} pixels in all")
     if w < MIN_IMAGE_SIDE or h < MIN_IMAGE_SIDE:
         raise InputError(field, f"the image is {w}x{h}; at least {MIN_IMAGE_SIDE} pixels a side are needed")
+    if not (_png_fills(data, w, h) if png else _jpeg_fills(data, w, h)):
+        raise InputError(field, f"the image could not be decoded: its data ({len(data)} bytes) cannot fill the "
+                                f"{w}x{h} pixels its header declares (truncated or corrupt)")
+    return w, h, data
+
+
+def decode_image(content_b64: str, field: str) -> np.ndarray:
+    """A base64 PNG or JPEG (optionally a ``data:image/...;base64,`` URL) as a grayscale uint8
+    array, refused as ``image_header`` refuses, or when OpenCV cannot decode it."""
+    w, h, data = image_header(content_b64, field)
     image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
     if image is None or image.size == 0:
         raise InputError(field, "the image could not be decoded (truncated or corrupt)")
@@ -441,28 +508,45 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
     """Features, verified matches and tracks for grayscale uint8 images (see the module docstring).
 
     ``callback(progress)`` gets {"stage": "features" | "matches", "done": k, "total": n} and may
-    return True to stop (the result then has status "cancelled" and no tracks)."""
+    return True to stop (the result then has status "cancelled" and no tracks). Past
+    ``options.time_limit_s`` the images not yet read and the pairs not yet matched are left out:
+    status "time_limit", ``stats["stopped"]`` says where."""
     options = options or FeatureOptions()
     sizes = [(int(im.shape[1]), int(im.shape[0])) for im in images]  # grayscale or BGR uint8
     timing: dict[str, float] = {}
     stats: dict = {"images": len(images), "time_s": timing}
-    start = time.perf_counter()
+    start = began = time.perf_counter()
+    status = "ok"
+
+    def over_time(where: str) -> bool:
+        nonlocal status
+        if time.perf_counter() - began <= options.time_limit_s:
+            return False
+        if status == "ok":
+            status = "time_limit"
+            stats["stopped"] = f"{where}, at options.features.time_limit_s ({options.time_limit_s:g} s)"
+        return True
+
     sift = cv2.SIFT_create(nfeatures=options.max_features, contrastThreshold=options.contrast_threshold,
                            edgeThreshold=options.edge_threshold)
     keypoints, descriptors = [], []
     for k, image in enumerate(images):
         if asks_to_stop(callback, {"stage": "features", "done": k, "total": len(images)}):
             return ImageTracks([], sizes, stats, "cancelled")
+        if over_time(f"features read of {k} of {len(images)} images"):
+            break
         if image.ndim == 3:
             image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
         kps, desc = sift.detectAndCompute(np.ascontiguousarray(image, dtype=np.uint8), None)
         keypoints.append(np.array([kp.pt for kp in kps], dtype=np.float64).reshape(-1, 2))
         descriptors.append(desc if desc is not None else np.zeros((0, 128), np.float32))
-    stats["features_per_image"] = [len(k) for k in keypoints]
+    stats["features_per_image"] = [len(k) for k in keypoints] + [0] * (len(images) - len(keypoints))
     timing["features"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    pairs, rule = candidate_pairs(len(images), options, descriptors)
+    # nothing matched once the time is up (choosing pairs by retrieval clusters descriptors)
+    pairs, rule = ([], "none") if over_time("no image pairs matched") else \
+        candidate_pairs(len(descriptors), options, descriptors)
     stats["candidate_pairs"] = len(pairs)
     stats["pairs_chosen_by"] = rule
     pair_matches: dict[tuple[int, int], np.ndarray] = {}
@@ -470,6 +554,8 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
     for k, (i, j) in enumerate(pairs):
         if asks_to_stop(callback, {"stage": "matches", "done": k, "total": len(pairs)}):
             return ImageTracks([], sizes, stats, "cancelled")
+        if over_time(f"{k} of {len(pairs)} image pairs matched"):
+            break
         found = match_pair(keypoints[i], descriptors[i], keypoints[j], descriptors[j], options)
         if found is not None:
             pair_matches[(i, j)], figures = found
@@ -487,4 +573,4 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
         points = np.array([keypoints[v][f] for v, f in members], dtype=np.float64).reshape(-1, 2)
         tracks.append((views, points))
     timing["tracks"] = time.perf_counter() - start
-    return ImageTracks(tracks, sizes, stats)
+    return ImageTracks(tracks, sizes, stats, status)

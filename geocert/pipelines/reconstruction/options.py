@@ -47,9 +47,9 @@ class ReconstructionOptions(FractionalOptions):
     # one K with all five entries free.
     camera_model: str = "simple"
     resect_cameras: bool = True  # the certified resection of every camera
-    camera_rel_gap: float = 1e-2  # the resections' (and the returned camera's tolerance against their bound)
+    camera_rel_gap: float = 1e-2  # the resections' gap (a part of the returned camera's tolerance: camera_claim)
     # False: no certified resection for a camera that cannot be certified (a point behind it, or a
-    # free 3x4 camera found locally beats it by more than camera_rel_gap); True: every camera's bound.
+    # free 3x4 camera found locally beats it by more than its tolerance); True: every camera's bound.
     bound_every_camera: bool = False
     # Photos only: stage 1's matching (features.FeatureOptions; the names of FEATURE_RANGES).
     features: dict = field(default_factory=dict)
@@ -80,7 +80,7 @@ class ReconstructionOptions(FractionalOptions):
                       "ratio": {"gt": 0, "le": 1}, "ransac_threshold_px": {"gt": 0, "le": 100},
                       "guided_ratio": {"ge": 0, "lt": 1}, "exhaustive_limit": {"ge": 2, "le": MAX_EXHAUSTIVE},
                       "retrieval_neighbours": {"ge": 1, "le": 1000}, "vocabulary_size": {"ge": 8, "le": 100_000},
-                      "neighbour_window": {"ge": 1, "le": 1000}}
+                      "neighbour_window": {"ge": 1, "le": 1000}, "time_limit_s": {"gt": 0, "le": 3600}}
     FEATURE_INTEGERS = ("max_features", "exhaustive_limit", "retrieval_neighbours", "vocabulary_size",
                         "neighbour_window")
     # Stage 1's options that are not numbers: their allowed values.

@@ -22,7 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
-from geocert.solvers.reconstruction import projective, structure, upgrade
+from geocert.solvers.reconstruction import camera_claim, projective, structure, upgrade
+from geocert.pipelines.reconstruction import claims
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.tracks import Observations
 
@@ -92,7 +93,7 @@ def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], image_sizes: list, 
     except Cancelled as stop:
         _cancel(stages, str(stop))
     out.cancelled = any(stage["status"] == "cancelled" for stage in out.stages)
-    _summarise(out, tracks, n_views)
+    claims.summarise(out, len(tracks), n_views)
     return out
 
 
@@ -103,7 +104,7 @@ def not_reconstructed(n_views: int, status: str, reason: str, camera_reason: str
     stages = [{**_stage(name), "status": status, "reason": reason} for name in STAGES]
     out = Reconstruction([Camera(v, False, camera_reason) for v in range(n_views)], [], stages,
                          cancelled=status == "cancelled")
-    _summarise(out, [], n_views)
+    claims.summarise(out, 0, n_views)
     return out
 
 
@@ -390,7 +391,8 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             stage.update(status="skipped", reason="options.bundle_adjustment is false", started_from=name)
         out.metric = metric = _normalise_frame(metric)
     keep = _check_cameras(out, metric, obs, keep, options.threshold_px)
-    _judge_motion(stages["autocalibration"], metric)
+    _judge_motion(stages["autocalibration"], metric, upgrade.rotation_noise(metric, obs.view, obs.track, obs.pixel,
+                                                                            keep))
     _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
 
 
@@ -463,13 +465,22 @@ def _depths_and_errors(metric: upgrade.Metric, obs: Observations, m: np.ndarray)
     return cam[:, 2], np.nan_to_num(error, nan=np.inf)
 
 
-def _judge_motion(stage: dict, metric: upgrade.Metric) -> None:
+def _judge_motion(stage: dict, metric: upgrade.Metric, noise: float | None = None) -> None:
     """The motion of the metric reconstruction returned, judged as the autocalibration kind
-    judges it (determinacy.motion_warnings). On a critical motion (a turntable, an orbit, a
-    translating camera) the tracks do not determine constant intrinsics: whatever the stage
-    certified, it is said plainly that the upgrade is not determined by these data."""
-    warnings, critical = upgrade.motion(metric)
-    stage.update(motion_warnings=warnings, critical_motion=critical, determined=critical is None)
+    judges it (determinacy.motion_warnings: the DIAC's family, and the plane at infinity's).
+    ``noise``: the rotations' standard error the adjustment's residuals give
+    (upgrade.rotation_noise). The DIAC's family is judged at no less than
+    determinacy.ROTATION_NOISE (an adjustment drifts along a critical family by more than its
+    residuals' noise: the Dinosaur's turntable axes scatter by 3 degrees), the plane's at that
+    noise. On a critical motion (a turntable, an orbit, a translating camera) the tracks do not
+    determine constant intrinsics: whatever the stage certified, it is said plainly that the
+    upgrade is not determined by these data."""
+    from geocert.solvers.autocalibration.determinacy import ROTATION_NOISE
+
+    diac = max(noise, ROTATION_NOISE) if noise is not None else ROTATION_NOISE
+    warnings, critical = upgrade.motion(metric, diac, noise)
+    stage.update(motion_warnings=warnings, critical_motion=critical, determined=critical is None,
+                 rotation_noise_rad={"estimated": noise, "diac_family": diac, "plane_family": noise})
     if critical is None:
         return
     detail = next((w["detail"] for w in warnings if w["code"] == critical), "")
@@ -563,9 +574,13 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
                                  max_residual=options.max_residual, certificate=options.certificate)
         if seen("cameras", 0, len(P)):
             raise Cancelled("cameras")
+        # Each camera's own degrees of freedom (its pose, and the intrinsics the cameras do not
+        # share) set the allowance its tolerance gives it over a 3x4 camera (camera_claim).
+        dof = camera_claim.degrees_of_freedom([out.cameras[v].K for v in P])
+        stage.update(degrees_of_freedom=dof, claim=camera_claim.statement(options.norm, options.camera_rel_gap))
         bounds = structure.resect_cameras(P, arrays, map_options, lambda d, total: seen("cameras", d, total),
                                           should_stop=lambda: stop["asked"],
-                                          bound_every_camera=options.bound_every_camera)
+                                          bound_every_camera=options.bound_every_camera, dof=dof)
         for v, bound in bounds.items():
             out.cameras[v].bound = bound
         not_started = sum(1 for b in bounds.values() if b.status == "cancelled")
@@ -651,140 +666,3 @@ def _rms(metric: upgrade.Metric, obs: Observations, keep: np.ndarray) -> float |
         return None
     _, errors = _depths_and_errors(metric, obs, m)
     return float(np.sqrt(np.mean(errors ** 2)))
-
-
-def _summarise(out: Reconstruction, tracks, n_views: int) -> None:
-    squared, count = 0.0, 0
-    for point in out.points:
-        r = point.result
-        if r.point is None:
-            continue
-        X = np.array(r.point if r.at_infinity else [*r.point, 1.0])
-        for v, u, w in point.observations:
-            proj = out.cameras[int(v)].P @ X
-            squared += (proj[0] / proj[2] - u) ** 2 + (proj[1] / proj[2] - w) ** 2
-            count += 1
-    registered = [c for c in out.cameras if c.registered]
-    bounded = [c for c in out.cameras if c.bound is not None and c.bound.status != "cancelled"]
-    out.summary = {
-        "views": n_views, "views_registered": len(registered), "tracks": len(tracks), "points": len(out.points),
-        "observations": count, "rms_reprojection_px": float(np.sqrt(squared / count)) if count else None,
-        "points_certified": sum(1 for p in out.points if p.result.certified),
-        "points_certified_fraction": (sum(1 for p in out.points if p.result.certified) / len(out.points)
-                                      if out.points else None),
-        "cameras_certified": sum(1 for c in bounded if c.bound.certified),
-        "cameras_certified_fraction": (sum(1 for c in bounded if c.bound.certified) / len(bounded) if bounded else None),
-        "critical_motion": out.stages[1].get("critical_motion"),
-        "cameras_dropped": len(out.checks.get("cameras_dropped", [])),
-        "observations_removed": out.checks.get("observations_removed", 0),
-        "points_dropped": out.checks.get("points_dropped", 0),
-        "time_s": {stage["name"]: stage["elapsed_s"] for stage in out.stages},
-        "cpu_s": {stage["name"]: stage.get("cpu_s", 0.0) for stage in out.stages},
-    }
-    claim = calibration_claim(out)
-    out.summary.update(calibration=claim.as_dict(),
-                       # the claims about K, as the calibration object states them (about its certified_K)
-                       autocalibration_certified=claim.certified, autocalibration_determined=claim.determined)
-    warnings = list(claim.warnings)
-    for dropped in out.checks.get("cameras_dropped", []):
-        warnings.append({"code": "camera_dropped", "detail": f"view {dropped['view']}: {dropped['reason']}"})
-    if out.checks.get("points_dropped"):
-        warnings.append({"code": "points_dropped", "detail": f"{out.checks['points_dropped']} certified points lay "
-                                                             "behind a camera or far from an observation: dropped"})
-    out.summary["warnings"] = warnings
-
-
-EDGE_FRACTION = 0.01  # a certified intrinsic within this fraction of its range's width from an end is on the edge
-
-
-@dataclass(frozen=True)
-class CalibrationClaim:
-    """What the result says about K, built so that every claim is about a K it returns.
-
-    ``K`` is the calibration the returned cameras use (their common K; None when no metric
-    reconstruction was found); ``certified_K`` the K the certified autocalibration proved optimal
-    for its upgrade (None when none was certified). ``certified`` is about ``certified_K`` only, and
-    cannot be True without it; ``returned_is_certified`` says whether the cameras use it, and
-    ``difference`` how far the returned K moved from it (the adjustment's work). ``determined`` is
-    True only when the tracks fix K: certified, no critical motion, and no certified intrinsic on
-    its range's edge (an optimum on the edge is the range's, not the data's)."""
-
-    K: list | None
-    source: str  # "given", "autocalibration", "bundle_adjustment" or "none"
-    certified_K: list | None
-    certified: bool
-    returned_is_certified: bool
-    difference: dict | None
-    on_range_edge: tuple
-    determined: bool | None
-    warnings: tuple
-
-    def __post_init__(self):
-        if self.certified and self.certified_K is None:
-            raise ValueError("a certified calibration claim needs the certified K it is about")
-        if self.returned_is_certified and (self.K is None or self.certified_K is None or not self.certified):
-            raise ValueError("the returned K can be called certified only when a certified K was returned")
-        if self.determined and not self.certified:
-            raise ValueError("K is determined only when certified")
-
-    def as_dict(self) -> dict:
-        return {"K": self.K, "source": self.source, "certified_K": self.certified_K, "certified": self.certified,
-                "returned_is_certified": self.returned_is_certified, "difference": self.difference,
-                "on_range_edge": list(self.on_range_edge), "determined": self.determined}
-
-
-def _intrinsics(K: np.ndarray) -> dict:
-    return {"focal": float(K[0, 0]), "aspect": float(K[1, 1] / K[0, 0]), "skew": float(K[0, 1]),
-            "principal_point": [float(K[0, 2]), float(K[1, 2])]}
-
-
-def on_range_edge(K: np.ndarray, ranges: dict) -> list[str]:
-    """The intrinsics of K within EDGE_FRACTION of an end of their range (ranges as the
-    autocalibration states them: focal, aspect, skew [lo, hi], principal_point [[u], [v]])."""
-    values, edges = _intrinsics(K), []
-    pairs = [(name, values[name], ranges.get(name)) for name in ("focal", "aspect", "skew")]
-    pp = ranges.get("principal_point")
-    if pp is not None:
-        pairs += [("principal_point_u", values["principal_point"][0], pp[0]),
-                  ("principal_point_v", values["principal_point"][1], pp[1])]
-    for name, value, bounds in pairs:
-        if bounds is None or not bounds[1] > bounds[0]:
-            continue
-        where = (value - bounds[0]) / (bounds[1] - bounds[0])
-        if where <= EDGE_FRACTION or where >= 1 - EDGE_FRACTION:
-            edges.append(name)
-    return edges
-
-
-def calibration_claim(out: Reconstruction) -> CalibrationClaim:
-    stage = out.stages[1]
-    K = None if out.metric is None or out.metric.K is None else np.asarray(out.metric.K, dtype=float)
-    known = stage.get("status") == "skipped" and "K is known" in (stage.get("reason") or "")
-    certified = bool(stage.get("certified")) and stage.get("K") is not None and K is not None
-    cert = np.asarray(stage["K"], dtype=float) if certified else None
-    warnings, edges, difference, same = [], [], None, False
-    if cert is not None:
-        same = bool(np.allclose(K, cert, rtol=1e-9, atol=1e-9) and out.metric.Ks is None)
-        a, b = _intrinsics(K), _intrinsics(cert)
-        difference = {"focal_percent": 100.0 * (a["focal"] / b["focal"] - 1.0),
-                      "principal_point_px": float(np.hypot(a["principal_point"][0] - b["principal_point"][0],
-                                                           a["principal_point"][1] - b["principal_point"][1])),
-                      "aspect": a["aspect"] - b["aspect"], "skew_px": a["skew"] - b["skew"]}
-        if not same:
-            warnings.append({"code": "returned_K_not_certified", "detail": (
-                f"the bundle adjustment moved K from the certified one (focal {difference['focal_percent']:+.2f}%, "
-                f"principal point {difference['principal_point_px']:.1f} px): the cameras returned use the adjusted "
-                "K; the certificate is about calibration.certified_K")})
-        edges = on_range_edge(cert, stage.get("intrinsics") or {})
-        if edges:
-            warnings.append({"code": "certified_K_on_range_edge", "detail": (
-                f"the certified K's {', '.join(edges)} lies on the edge of its search range: the range, not the "
-                "tracks, stops it there; widen options.intrinsics to let the data decide")})
-    critical = stage.get("critical_motion")
-    if critical:
-        warnings.append({"code": "critical_motion", "detail": f"{critical}: the tracks do not determine a constant K"})
-    determined = None if known or K is None else bool(certified and not critical and not edges
-                                                      and stage.get("determined") is not False)
-    source = "given" if known else "none" if K is None else "autocalibration" if same else "bundle_adjustment"
-    return CalibrationClaim(None if K is None else K.tolist(), source, None if cert is None else cert.tolist(),
-                            certified, same, difference, tuple(edges), determined, tuple(warnings))

@@ -29,13 +29,16 @@ class CutProof(LeafProof):
     value: float = 0.0
 
 
-def side_bounds(program, dims: int) -> list[tuple[int, float, float, np.ndarray]]:
+def side_bounds(program, dims: int, stop: Callable[[], bool] | None = None) -> list[tuple[int, float, float, np.ndarray]]:
     """(k, sign, value, z) for each of the first ``dims`` variables and each sign whose solve
-    ended clean: sign * x_k >= value over the program's feasible set, a safe dual bound by z."""
+    ended clean: sign * x_k >= value over the program's feasible set, a safe dual bound by z.
+    ``stop()`` is asked before each solve: once true, the bounds found so far are returned."""
     solver = ReusableConicProgram(lean=False)
     out = []
     for k in range(dims):
         for sign in (1.0, -1.0):
+            if stop is not None and stop():
+                return out
             q = np.zeros_like(program.q)
             q[k] = sign
             result = solver.solve(q, program.A, program.b, program.cones) if not (k or sign < 0) \

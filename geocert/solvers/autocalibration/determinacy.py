@@ -274,7 +274,8 @@ def _view_residual(coef, cameras, j, entries):
 
 
 def motion_warnings(H: np.ndarray, centres: np.ndarray | None, noise: float | None = None,
-                    omega: np.ndarray | None = None, reference: np.ndarray | None = None) -> list[dict]:
+                    omega: np.ndarray | None = None, reference: np.ndarray | None = None,
+                    plane_noise: float | None = None) -> list[dict]:
     """The critical motion, if any, of views whose infinite homographies are H (m, 3, 3; for a
     metric reconstruction, the rotations relative to one view) and whose centres are ``centres``
     (m or m + 1 rows, or None). ``noise``: the standard error of the H's entries (radians for
@@ -282,13 +283,16 @@ def motion_warnings(H: np.ndarray, centres: np.ndarray | None, noise: float | No
     (default: the one the H fit best); ``reference``: for a metric reconstruction, the reference
     view's rotation R_0 (H = R_j R_0^T), with the centres of every view, the reference's first:
     then the plane at infinity's own family is judged too (``rotation_plane_family``), as the
-    autocalibration kind's affine stage judges it. Returns [] or one warning {code, detail}."""
+    autocalibration kind's affine stage judges it, with the rotations known to ``plane_noise``
+    (default ``noise``: a caller whose rotations were adjusted may hold the DIAC's judgement to
+    ROTATION_NOISE, the drift along a critical family, and the plane's to the residuals' own
+    noise). Returns [] or one warning {code, detail}."""
     H = np.asarray(H, dtype=float)
     if len(H) < 2:
         return []
     family = diac_family(H, omega, noise)
     if reference is not None and centres is not None and (family is None or family["free"] == 0):
-        planes = rotation_plane_family(H, reference, centres, noise)
+        planes = rotation_plane_family(H, reference, centres, noise if plane_noise is None else plane_noise)
         if planes is not None and planes["largest_move"] > RELATIVE_WIDTH:
             code, looks = motion_name(H, centres)
             move = planes["largest_move"]

@@ -65,9 +65,11 @@ def check_size(views: int, points: int, chirality: str) -> None:
     """InputError (options/chirality) when the program would hold more than MAX_CHIRALITY_PAIRS."""
     count = chirality_pair_count(views, points, chirality)
     if count > MAX_CHIRALITY_PAIRS:
+        remedy = ('"none" or fewer cameras' if chirality == "centers" else '"centers" or give fewer points')
         raise InputError("options/chirality", f'"{chirality}" with {views} cameras and {points} points gives {count:,} '
-                                              f"chirality pairs, more than {MAX_CHIRALITY_PAIRS:,}: choose "
-                                              '"centers" or give fewer points')
+                                              f"chirality pairs, more than {MAX_CHIRALITY_PAIRS:,}: choose {remedy}")
+
+
 PSD_TOLERANCE = 1e-9  # a returned Q (rounded to JSON) counts as PSD of rank 3 within this of its norm
 
 

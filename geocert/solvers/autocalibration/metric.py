@@ -8,13 +8,14 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from geocert.solvers.autocalibration import cuts
 from geocert.solvers.autocalibration import metric_relaxation as relax
-from geocert.solvers.core.bnb import BnbOptions, Box, branch_and_bound, tolerance
+from geocert.solvers.core.bnb import BnbOptions, Box, Progress, asks_to_stop, branch_and_bound, tolerance
 from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
 from geocert.solvers.core.cones import safe_lower_bound
 
@@ -122,14 +123,19 @@ class Tightening:
 
 
 def tighten(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float, tolerance: float = 0.0,
-            rounds: int = 12, progress: float = 0.02) -> tuple[np.ndarray, np.ndarray, list[Tightening]]:
+            rounds: int = 12, progress: float = 0.02, stop: Callable[[], bool] | None = None
+            ) -> tuple[np.ndarray, np.ndarray, list[Tightening]]:
     """Optimality-based bound tightening: each entry of omega minimised and maximised over the
     relaxation with the cost capped at the incumbent's, repeated while the box shrinks by more
     than ``progress`` of its volume a round, and until the relaxation's own bound on the box is
     within ``tolerance`` of the cap (the search then certifies at its root). Every new side is
-    a safe dual bound."""
+    a safe dual bound. ``stop()`` is asked before each program (the stage's time limit, a cancel:
+    with many views one round is ten programs of seconds each); once true, the box as tightened
+    so far is returned."""
     record: list[Tightening] = []
     for _ in range(rounds):
+        if stop is not None and stop():
+            break
         program = relax.build(setup, lo, hi, cap, cap_row=True)
         if program is None:
             break
@@ -141,7 +147,7 @@ def tighten(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float
                     program.upper) / setup.unit <= tolerance:
                 break
         new_lo, new_hi, duals = lo.copy(), hi.copy(), [None] * 10
-        for k, sign, value, z in cuts.side_bounds(program, 5):
+        for k, sign, value, z in cuts.side_bounds(program, 5, stop):
             if sign > 0 and value > new_lo[k]:
                 new_lo[k], duals[2 * k] = value, z.copy()
             if sign < 0 and -value < new_hi[k]:
@@ -174,7 +180,12 @@ def solve_metric(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, bnb: 
     search_lo, search_hi, rounds = lo, hi, []
     began = time.perf_counter()
     if math.isfinite(upper):
-        search_lo, search_hi, rounds = tighten(setup, lo, hi, upper, tolerance(upper, bnb))
+        def stop() -> bool:  # the stage's own time limit, or a cancel (asked of the callback as the search asks)
+            elapsed = time.perf_counter() - began
+            return elapsed > bnb.time_limit_s or asks_to_stop(
+                callback, Progress(0, 0, -math.inf, upper, math.inf, math.inf, elapsed))
+
+        search_lo, search_hi, rounds = tighten(setup, lo, hi, upper, tolerance(upper, bnb), stop=stop)
         problem.search_box = Box(search_lo, search_hi)
     bnb = dataclasses.replace(bnb, time_limit_s=max(1e-3, bnb.time_limit_s - (time.perf_counter() - began)))
     leaves: list | None = [] if record else None

@@ -87,14 +87,21 @@ def read_basis(value: Any) -> np.ndarray:
     # Each shape a vector of 3N numbers; the coefficients are identifiable (sum alpha = 1) only when
     # the differences to shape 0 are independent.
     flat = (basis / spread).reshape(len(basis), -1)
+
+    def dependent(i: int) -> bool:  # shapes 0..i: is some difference to shape 0 dependent on the others?
+        return not (i <= flat.shape[1] and _independent(flat[1:i + 1] - flat[0]))
+
     # One SVD when every difference passes at once: a prefix's smallest singular value is at least
     # the whole's and its largest at most the whole's (interlacing, rows <= columns), so each
-    # prefix passes too; the prefixes are searched only to name the first shape that fails.
-    if not (len(basis) - 1 <= flat.shape[1] and _independent(flat[1:] - flat[0])):
-        for i in range(1, len(basis)):
-            if not _independent(flat[1:i + 1] - flat[0]):
-                raise InputError(f"data/basis/{i}", "degenerate basis: this shape is an affine combination of "
-                                                    "the shapes before it (equal shapes included)")
+    # prefix passes too, and every prefix past the first that fails fails: a bisection names the
+    # first shape that fails (one decomposition per shape made this cost K^3 N).
+    if len(basis) > 1 and dependent(len(basis) - 1):
+        low, high = 1, len(basis) - 1  # the first dependent shape is in low..high
+        while low < high:
+            middle = (low + high) // 2
+            low, high = (low, middle) if dependent(middle) else (middle + 1, high)
+        raise InputError(f"data/basis/{low}", "degenerate basis: this shape is an affine combination of the "
+                                              "shapes before it (equal shapes included)")
     for i, shape in enumerate(basis):
         if not np.any(shape != shape[0]):
             raise InputError(f"data/basis/{i}", "degenerate: all its points coincide")

@@ -34,25 +34,32 @@ def number_array(value, field: str, what: str, ndim: int, limit: float | None = 
     non-finite values, exactly ``ndim`` levels, rows of one length; with ``limit``, every entry
     within +-limit. Raises InputError naming the first offending entry."""
     rows = _rows(value, field, what, ndim)
-    # Rows of floats only (the common case) are checked in bulk, by type here and by value below;
-    # any other row, and any failure below, goes through the entry-by-entry check, which names
-    # the first offending entry.
-    slow = [(where, row) for where, row in rows if not _FLOATS_ONLY.issuperset(map(type, row))]
+    # Rows of floats and ints only (the common case) are checked in bulk, by type here and by
+    # value below (an int beyond 2**1023, which is_number refuses, sends every row to the slow
+    # check); any other row, and any failure below, goes through the entry-by-entry check, which
+    # names the first offending entry. (Integers took the slow path: 6 microseconds an entry.)
+    slow = [(where, row) for where, row in rows if not _NUMBER_TYPES.issuperset(map(type, row))]
     for where, row in slow:
         _check_entries(where, row, what, limit)
     try:
         array = np.array(value, dtype=float)
+    except OverflowError:  # an int beyond any float
+        for where, row in rows:
+            _check_entries(where, row, what, limit)
+        raise
     except ValueError as exc:  # ragged
         raise InputError(field, f"must be {what} (rows of one length)") from exc
     if array.ndim != ndim:
         raise InputError(field, f"must be {what}")
-    if not (np.isfinite(array).all() and (limit is None or (np.abs(array) <= limit).all())):
+    magnitude = np.abs(array)
+    if not (np.isfinite(array).all() and (limit is None or (magnitude <= limit).all())
+            and (magnitude < 2.0 ** 1023).all()):
         for where, row in rows:
             _check_entries(where, row, what, limit)
     return array
 
 
-_FLOATS_ONLY = frozenset((float,))
+_NUMBER_TYPES = frozenset((float, int))  # exact types: a bool is neither
 
 
 def _rows(value, field: str, what: str, ndim: int) -> list[tuple[str, list]]:

@@ -52,6 +52,7 @@ from geocert.solvers.core.cones import ConeSpec
 from geocert.solvers.core.geometry import cost_roundings, normalised_cameras
 from geocert.solvers.fractional import stacked
 from geocert.solvers.fractional.charts import Chart
+from geocert.solvers.fractional.convexity_path import certify_tracks
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.fractional.relaxation import FractionalProgram, cost_unit, gamma_for
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult, claim_of
@@ -78,6 +79,12 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
     Inputs are taken as validated (as the triangulation kind validates them: finite numbers,
     view indices in range, no view twice in a track, at least two views).
 
+    Under L2L2 with no max_residual, a track first goes through the convexity path
+    (convexity_path.certify_tracks): certified at its local optimum by the convexity bound, with
+    a LocalCertificate and nodes 0 (what ``triangulate`` would certify by a search, within the
+    tolerance: the bound holds for every point of the scope). The contract below is that of
+    every other track.
+
     Contract: each result is what ``triangulate(cameras[views], points, options)`` returns
     for that track in its status, its certified flag and the form of its certificate (a
     SearchCertificate with the same scope, reference view and number of functionals; with
@@ -103,11 +110,17 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
     checking = self_check_enabled()
     run = dataclasses.replace(options, certificate="full") if checking else options
     cameras = normalised_cameras(cameras)
+    started = time.perf_counter()
     results: list[TrackResult | None] = [None] * len(tracks)
+    try:
+        # Under L2L2 most tracks are certified at their local optimum, without a search.
+        results = certify_tracks(cameras, tracks, run)
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError):
+        pass  # data this path does not handle: every track goes on to the search
     groups: dict[int, list[int]] = defaultdict(list)
     for i, (views, points) in enumerate(tracks):
-        groups[len(views)].append(i)
-    started = time.perf_counter()
+        if results[i] is None:
+            groups[len(views)].append(i)
     if run.max_residual is None:  # with a scope limit every track is solved alone (rare, not stacked)
         try:
             _batched(cameras, tracks, groups, run, results)

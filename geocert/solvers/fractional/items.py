@@ -8,8 +8,9 @@ import numpy as np
 
 from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import cost_rounding, normalised_cameras
-from geocert.solvers.core.strict import Invalid, numbers
+from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
+from geocert.solvers.fractional.convexity import outside_range, track_bound
 from geocert.solvers.fractional.proof import (check_program, program_allowance, program_discount, raw_sizes,
                                               residual_uncertainty, track_uncertainty, verify_search)
 from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
@@ -129,8 +130,8 @@ class MapItem:
 
 
 PROGRAM_REFUSED = "the verifier could not check the proof against the data at this solution ({})"
-UNDISCOUNTABLE = ("an observation's depth is round-off at the solution (a point on a view's principal plane): "
-                  "the search's bound does not carry over to the data's problem, only the trivial bound 0 does")
+UNDISCOUNTABLE = ("an observation's depth is round-off at the solution (a point on a view's principal plane "
+                  "or at its centre): the search's bound does not carry over to the data's problem, only the trivial bound 0 does")
 
 
 def discounted(item, solution: np.ndarray, residuals: np.ndarray, lower: float,
@@ -172,10 +173,33 @@ def refused_by_verifier(item, solution: np.ndarray, residuals: np.ndarray, cost:
     return None
 
 
+def verify_convexity(item, options: dict, proof: dict, lower_claimed: float, solution, passed: list[str]) -> float:
+    """The lower bound a convexity proof establishes (fractional.convexity.track_bound): an
+    L2L2 track with no max_residual, a finite solution, and a radius at which the cost is proven
+    convex on a ball holding every point of the scope that costs as little."""
+    record(proof, "proof", ("type", "radius"))
+    radius = _number(proof.get("radius"), "proof/radius")
+    if options["norm"] != "L2L2" or options["max_residual"] is not None:
+        raise Invalid("convexity", "a convexity proof is for L2L2 with no max_residual")
+    if not (radius > 0 and np.isfinite(radius)):
+        raise Invalid("convexity", "proof/radius must be a positive number")
+    if not (solution[3] == 1.0 and np.all(np.isfinite(solution))):
+        raise Invalid("convexity", "a convexity proof is for a finite solution [x, y, z]")
+    outside = outside_range(item.cameras, item.points, solution[:3], radius)
+    if outside is not None:
+        raise Invalid("convexity", outside)
+    bound = track_bound(item.cameras, item.points, solution[:3], radius)
+    if not np.isfinite(bound):
+        raise Invalid("convexity", f"nothing proven at radius {radius!r}: the ball about the solution is not shown "
+                                   "to hold every point costing as little, or the cost to be convex on it")
+    passed.append("convexity")
+    return bound
+
+
 class TrackItems:
     """The triangulation kind's verification adapter."""
 
-    proofs = {"branch_and_bound": verify_search}
+    proofs = {"branch_and_bound": verify_search, "convexity": verify_convexity}
     domain = ("every point in front of every camera (positive depth in every view, last homogeneous "
               "coordinate >= 0)")
 

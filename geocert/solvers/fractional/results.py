@@ -27,6 +27,20 @@ class SearchCertificate:
 
 
 @dataclass
+class LocalCertificate:
+    """A certificate with no search: a bound proven at the solution itself (the convexity
+    bound of fractional.convexity: the cost is convex on a ball of ``radius`` around the
+    solution that holds every point costing as little), the scope, the tolerance met."""
+
+    scope: str
+    tolerance: float
+    radius: float
+    proof: dict | None = None  # with options.certificate == "full": {"type": "convexity", "radius": R}
+    tolerance_met: bool = True
+    leaves: int = 0
+
+
+@dataclass
 class ItemResult:
     """One item's outcome: status (optimal, node_limit, time_limit, cancelled, not_certified,
     infeasible, degenerate), whether it is certified, its cost (recomputed from the raw data at the
@@ -40,7 +54,7 @@ class ItemResult:
     nodes: int = 0
     elapsed_s: float = 0.0
     reason: str | None = None
-    certificate: SearchCertificate | None = None
+    certificate: SearchCertificate | LocalCertificate | None = None
 
 
 @dataclass

@@ -7,7 +7,8 @@
   model with skew, so a K with skew is written as PINHOLE without it and the file's header says
   so. Image poses are the world-to-camera rotation as a quaternion (qw, qx, qy, qz) and t.
   Point and image ids start at 1; a point's track lists (image id, index of the observation in
-  that image's 2D list). Reprojection error per point: the RMS of its residuals, pixels.
+  that image's 2D list). Reprojection error per point: the RMS of its residuals, pixels. Image
+  names are the views' names made safe for the file (``colmap_names``).
 - PLY (ASCII or binary little-endian): the points as vertices with x, y, z and the point's cost
   and certified flag as properties.
 """
@@ -15,6 +16,7 @@
 from __future__ import annotations
 
 import io
+import re
 import struct
 import zipfile
 
@@ -22,6 +24,26 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 FORMATS = ("colmap", "ply")
+
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9._-]")
+
+
+def colmap_names(cameras: list[dict]) -> dict[int, str]:
+    """Each camera's image name as images.txt may hold it: one token on its line, naming a file
+    in the image folder. A character other than a letter, digit, '.', '_' or '-' (a space, a line
+    break that would start a record of its own, a path separator) becomes '_', a leading '.' too
+    (no '..' or hidden file), and a name taken already gets '-<view>'; no name: view<NNNN>."""
+    names: dict[int, str] = {}
+    taken: set[str] = set()
+    for c in cameras:
+        given = c.get("name") or ""
+        name = re.sub(r"^\.", "_", _UNSAFE.sub("_", given))[:200] or f"view{c['view']:04d}"
+        if name in taken:
+            name = f"{name}-{c['view']}"
+        taken.add(name)
+        names[c["view"]] = name
+    return names
 
 
 def _camera_line(camera_id: int, camera: dict) -> tuple[str, str | None]:
@@ -59,11 +81,12 @@ def colmap_files(result: dict) -> dict[str, str]:
                 keypoints[view].append((u, v, k + 1))
         tracks.append(track)
     image_lines = []
+    names = colmap_names(cameras)
     for c in cameras:
         R = np.array(c["R"], dtype=float)
         x, y, z, w = Rotation.from_matrix(R).as_quat()
         t = c["t"]
-        name = c.get("name") or f"view{c['view']:04d}"
+        name = names[c["view"]]
         image_lines.append(f"{image_id[c['view']]} {w:.17g} {x:.17g} {y:.17g} {z:.17g} {t[0]:.17g} {t[1]:.17g} "
                            f"{t[2]:.17g} {image_id[c['view']]} {name}")
         image_lines.append(" ".join(f"{u:.17g} {v:.17g} {pid}" for u, v, pid in keypoints[c["view"]]))

@@ -3,8 +3,9 @@ certified triangulation solver (thesis chapter 5) in the cameras returned, so it
 certified optimum itself; every registered camera is resected by the certified resection solver
 from the points returned, and the bound that search proves (no 3x4 camera putting those points
 in front fits them better) is stated for the camera returned: its own cost, the gap to that
-bound, and certified when the gap is within the tolerance. The certificates are for the
-numbers returned."""
+bound, and certified when its cost is within its tolerance of the bound (camera_claim: the
+allowance its fewer degrees of freedom need, and the search's gap). The certificates are for
+the numbers returned."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ import numpy as np
 from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
 from geocert.solvers.fractional.results import MapResult, TrackResult
+from geocert.solvers.reconstruction import camera_claim
 
 
 CAMERA_THREADS = 2  # cameras resected at once (see resect_cameras)
@@ -36,6 +38,9 @@ class CameraBound:
     elapsed_s: float
     reason: str | None
     result: MapResult | None = None
+    dof: int | None = None  # the returned camera's own degrees of freedom (camera_claim.degrees_of_freedom)
+    tolerance: float | None = None  # certified when cost <= (1 + tolerance) lower_bound + abs_gap (camera_claim)
+    beyond_tolerance: bool = False  # a 3x4 camera (found or bounded) beats it by more than its tolerance
 
 
 def camera_matrix(K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -100,13 +105,15 @@ def free_camera_cost(P: np.ndarray, X: np.ndarray, x: np.ndarray, norm: str) -> 
 
 def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.ndarray, np.ndarray]],
                    options: MapOptions, progress=None, should_stop=None,
-                   bound_every_camera: bool = False, threads: int | None = None) -> dict[int, CameraBound]:
+                   bound_every_camera: bool = False, threads: int | None = None,
+                   dof: int = camera_claim.PROJECTIVE_DOF) -> dict[int, CameraBound]:
     """For each view: its points (3D) and pixels; the certified resection's bound, stated for
-    the camera returned. Unless ``bound_every_camera``, the search is not run for a camera that
-    cannot be certified whatever it proves: one with a point behind it, or one a free 3x4 camera
-    found locally beats by more than the tolerance (the bound is at most that camera's cost, so
-    the returned camera's gap would exceed the tolerance); such a camera is reported with its
-    cost and the reason, and no bound.
+    the camera returned, which has ``dof`` degrees of freedom of its own (its tolerance:
+    camera_claim.tolerance). Unless ``bound_every_camera``, the search is not run for a camera
+    that cannot be certified whatever it proves: one with a point behind it, too few points for a
+    tolerance, or one a free 3x4 camera found locally beats by more than its tolerance (the bound
+    is at most that camera's cost); such a camera is reported with its cost and the reason, and
+    no bound.
 
     Cameras are resected ``threads`` at a time (None: CAMERA_THREADS, at most the processors):
     the conic solver, most of a resection's time, releases the interpreter's lock. Each camera's
@@ -131,7 +138,7 @@ def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.n
                 if view is None:
                     break
                 running.add(pool.submit(_bound_camera, view, cameras[view], *points(view), options,
-                                        bound_every_camera))
+                                        bound_every_camera, dof))
             if not running:
                 break
             finished, running = wait(running, return_when=FIRST_COMPLETED)
@@ -150,37 +157,49 @@ def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.n
 
 
 def _bound_camera(view: int, P: np.ndarray, X: np.ndarray, x: np.ndarray, options: MapOptions,
-                  bound_every_camera: bool) -> CameraBound:
+                  bound_every_camera: bool, dof: int = camera_claim.PROJECTIVE_DOF) -> CameraBound:
     """One camera's figures and bound (see resect_cameras)."""
     from geocert.solvers.fractional.maps import fit_map
 
     start = time.perf_counter()
     if len(X) < 6:
         return CameraBound(view, None, None, None, None, False, "degenerate", len(X), 0.0,
-                           f"{len(X)} points: a camera needs at least 6")
+                           f"{len(X)} points: a camera needs at least 6", dof=dof)
     proj = np.hstack([X, np.ones((len(X), 1))]) @ P.T
     depths_positive = bool(np.all(proj[:, 2] > 0))
     residuals = x - proj[:, :2] / proj[:, 2:3]
     cost = norm_cost(residuals, options.norm)
-    tolerance = max(options.abs_gap, options.rel_gap * cost)
+    tolerance = camera_claim.tolerance(len(X), dof, options.norm, options.rel_gap)
+    kept_cost = cost if math.isfinite(cost) else None
+
+    def unbounded(reason: str, beyond: bool = False) -> CameraBound:
+        return CameraBound(view, kept_cost, None, None, None, False, "not_certified", len(X),
+                           time.perf_counter() - start, reason, dof=dof, tolerance=tolerance, beyond_tolerance=beyond)
+
+    if tolerance is None:
+        return unbounded(f"camera_rel_gap {options.rel_gap:g} leaves no tolerance")
+    model = camera_claim.model_allowance(len(X), dof, options.norm)
+    withheld = camera_claim.allowance(len(X), dof, options.norm) != model
+    # A camera beyond what its degrees of freedom explain (allowance withheld or not) is flagged:
+    # a 3x4 camera beats it by more than the noise allows a sound one to be beaten.
+    flag_tolerance = (1.0 + model) / (1.0 - options.rel_gap) - 1.0
+    why = (f"; {len(X)} points are too few for an allowance for its {dof} degrees of freedom (it would exceed "
+           f"{camera_claim.MAX_ALLOWANCE:g}), so it is held to the bound as a 3x4 camera is" if withheld else "")
     if not bound_every_camera:
-        reason = None
         if not depths_positive:
-            reason = "a point is behind the camera returned: outside the bound's scope"
-        else:
-            free = free_camera_cost(P, X, x, options.norm)
-            if free is not None and cost - free > tolerance:
-                reason = (f"the camera returned costs {cost:.4g}, {(cost - free) / max(cost, 1e-300):.2%} above a "
-                          f"free 3x4 camera found locally ({free:.4g}), more than the tolerance "
-                          f"{options.rel_gap:.2g}: no bound can certify it, so the certified resection was not "
-                          "run (options.bound_every_camera runs it)")
-        if reason is not None:
-            return CameraBound(view, cost if math.isfinite(cost) else None, None, None, None, False,
-                               "not_certified", len(X), time.perf_counter() - start, reason)
+            return unbounded("a point is behind the camera returned: outside the bound's scope")
+        free = free_camera_cost(P, X, x, options.norm)
+        if free is not None and not camera_claim.within(cost, free, tolerance, options.abs_gap):
+            return unbounded(f"the camera returned costs {cost:.4g}, {(cost - free) / max(free, 1e-300):.2%} above a "
+                             f"free 3x4 camera found locally ({free:.4g}), more than its tolerance {tolerance:.2%}: "
+                             "no bound can certify it, so the certified resection was not run "
+                             "(options.bound_every_camera runs it)" + why,
+                             beyond=not camera_claim.within(cost, free, flag_tolerance, options.abs_gap))
     result = fit_map(X, x, options)
     lower = result.lower_bound if result.certified else None
     gap = None if lower is None else max(0.0, cost - lower)
-    certified = bool(result.certified and depths_positive and gap is not None and gap <= tolerance)
+    certified = bool(result.certified and depths_positive and lower is not None
+                     and camera_claim.within(cost, lower, tolerance, options.abs_gap))
     if certified:
         status, reason = "optimal", None
     elif not result.certified:
@@ -188,10 +207,12 @@ def _bound_camera(view: int, P: np.ndarray, X: np.ndarray, x: np.ndarray, option
     elif not depths_positive:
         status, reason = "not_certified", "a point is behind the camera returned: outside the bound's scope"
     else:
-        status, reason = "not_certified", (f"the camera returned costs {cost:.4g}, {gap / max(cost, 1e-300):.2%} "
-                                           "above the certified bound (a shared K is a constraint the "
-                                           "unconstrained resection does not have)")
-    if certified:
-        lower = cost - gap
-    return CameraBound(view, cost if math.isfinite(cost) else None, result.cost, lower, gap, certified, status,
-                       len(X), time.perf_counter() - start, reason, result)
+        status, reason = "not_certified", (f"the camera returned costs {cost:.4g}, {gap / max(lower, 1e-300):.2%} "
+                                           f"above the certified bound, more than its tolerance {tolerance:.2%} "
+                                           f"(what its {dof} degrees of freedom against 11 allow on {len(X)} points)"
+                                           + why)
+    beyond = bool(result.certified and depths_positive and lower is not None
+                  and not camera_claim.within(cost, lower, flag_tolerance, options.abs_gap))
+    return CameraBound(view, kept_cost, result.cost, lower, gap, certified, status, len(X),
+                       time.perf_counter() - start, reason, result, dof=dof, tolerance=tolerance,
+                       beyond_tolerance=beyond)

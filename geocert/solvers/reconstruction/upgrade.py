@@ -107,14 +107,19 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
     return out
 
 
-CRITICAL = ("pure_translation", "orbital_motion", "rotation_about_one_axis")
-
-
-def motion(metric: Metric) -> tuple[list[dict], str | None]:
+def motion(metric: Metric, noise: float | None = None, plane_noise: float | None = None
+           ) -> tuple[list[dict], str | None]:
     """The autocalibration kind's motion warnings (determinacy.motion_warnings: Sturm's critical
-    motions for constant intrinsics) for a metric reconstruction: the rotations relative to the
-    first registered view (an infinite homography K R_j R_1^T K^-1 less its K) and the camera
-    centres. Returns the warnings and the code of the critical one (None for a general motion)."""
+    motions for constant intrinsics, the DIAC's family and the plane at infinity's) for a metric
+    reconstruction: the rotations relative to a reference view (infinite homographies
+    K R_j R_0^T K^-1 less their K) and the camera centres. The reference is the view whose
+    rotation is nearest the others' (the least sum of chordal distances), not the first in the
+    file: the judgement is the motion's, whatever order the photos came in. ``noise``: the
+    rotations' standard error (radians) for the DIAC's family (None: determinacy's default);
+    ``plane_noise``: for the plane at infinity's family, which is judged only when given (the
+    adjustment's residuals' noise, rotation_noise: at the default ROTATION_NOISE, 0.6 degrees,
+    a general motion of exact cameras in a 60-degree cone was judged near-critical). Returns the
+    warnings and the code of the critical one (None for a general motion)."""
     from geocert.solvers.autocalibration import determinacy
 
     views = [v for v, R in enumerate(metric.rotations) if R is not None]
@@ -122,11 +127,66 @@ def motion(metric: Metric) -> tuple[list[dict], str | None]:
         return [], None
     R = np.array([metric.rotations[v] for v in views])
     centres = np.array([-metric.rotations[v].T @ metric.translations[v] for v in views])
+    chordal = np.linalg.norm(R[:, None] - R[None, :], axis=(2, 3)).sum(axis=1)
+    ref = int(np.argmin(chordal))
+    others = [k for k in range(len(views)) if k != ref]
     try:
-        warnings = determinacy.motion_warnings(R[1:] @ R[0].T, centres)
+        warnings = determinacy.motion_warnings(R[others] @ R[ref].T, centres[[ref, *others]], noise=noise,
+                                               reference=None if plane_noise is None else R[ref],
+                                               plane_noise=plane_noise)
     except (np.linalg.LinAlgError, ValueError, FloatingPointError):
         return [], None
-    return warnings, next((w["code"] for w in warnings if w["code"] in CRITICAL), None)
+    return warnings, next((w["code"] for w in warnings if w["code"] in determinacy.CRITICAL_CODES), None)
+
+
+def rotation_noise(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: np.ndarray,
+                   keep: np.ndarray) -> float | None:
+    """The standard error (radians) of a relative rotation R_j R_0^T of the adjusted
+    reconstruction, as its residuals give it: per camera, sigma^2 (J'J)^-1 of its pose with the
+    points and K held (J the pixels' derivatives in a small rotation and the translation; sigma
+    the residuals' RMS per coordinate), the largest standard deviation of its rotation; the
+    median over the cameras, times sqrt(2) (two cameras in each relative rotation). None when
+    fewer than 3 cameras have 6 points. It is conditional on the points, an estimate of the noise
+    alone: an adjustment drifting along a critical family moves the rotations by more (hence
+    determinacy.ROTATION_NOISE as the floor where it is used)."""
+    registered = np.array([R is not None for R in metric.rotations])
+    use = keep & registered[obs_view] & np.isfinite(metric.points[obs_track, 0])
+    if use.sum() < 12:
+        return None
+    sigmas, squared, count = [], 0.0, 0
+    per_view = []
+    for v in np.flatnonzero(registered):
+        m = np.flatnonzero(use & (obs_view == v))
+        if len(m) < 6:
+            continue
+        K, R, t = K_of(metric, v), metric.rotations[v], metric.translations[v]
+        turned = metric.points[obs_track[m]] @ R.T  # R X
+        cam = turned + t
+        x, y, z = cam[:, 0], cam[:, 1], cam[:, 2]
+        image = cam @ K.T
+        r = image[:, :2] / image[:, 2:3] - pixels[m]
+        squared += float((r * r).sum())
+        count += r.size
+        # d(x/z, y/z)/d cam, then K's 2x2 block; d cam / d(omega, t) = [-[R X]_x, I].
+        dproj = np.zeros((len(m), 2, 3))
+        dproj[:, 0, 0] = dproj[:, 1, 1] = 1 / z
+        dproj[:, 0, 2], dproj[:, 1, 2] = -x / z ** 2, -y / z ** 2
+        skew = np.zeros((len(m), 3, 3))
+        skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -turned[:, 2], turned[:, 1], -turned[:, 0]
+        skew -= skew.transpose(0, 2, 1)
+        dcam = np.concatenate([-skew, np.broadcast_to(np.eye(3), (len(m), 3, 3))], axis=2)
+        J = np.einsum("ab,mbc,mcd->mad", K[:2, :2], dproj, dcam).reshape(-1, 6)
+        per_view.append(J.T @ J)
+    if len(per_view) < 3 or count <= 6 * len(per_view):
+        return None
+    sigma2 = squared / (count - 6 * len(per_view))
+    for normal in per_view:
+        try:
+            covariance = sigma2 * np.linalg.inv(normal)
+        except np.linalg.LinAlgError:
+            continue
+        sigmas.append(math.sqrt(max(float(np.linalg.eigvalsh(covariance[:3, :3]).max()), 0.0)))
+    return float(math.sqrt(2.0) * np.median(sigmas)) if sigmas else None
 
 
 def _linear(P: np.ndarray, X: np.ndarray, image_size):

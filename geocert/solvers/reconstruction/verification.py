@@ -14,8 +14,14 @@ a result to them (docs/certificate.md, "Reconstruction"):
   abs_gap and camera_rel_gap, one map per searched camera built from the returned points, in
   view order; a certified camera's cost is recomputed from its P, every point lies in front of
   it (the resection bound's scope), its lower bound is at most the proven one and its cost, its
-  gap is cost - lower_bound and within the camera tolerance of the proven bound;
-- the summary's counts and RMS are recomputed from the items.
+  gap is cost - lower_bound, and its cost at most (1 + tolerance) times the proven bound plus
+  abs_gap, the tolerance recomputed (camera_claim) from its points, the norm, camera_rel_gap and
+  its degrees of freedom, which the returned cameras' K give;
+- the summary's counts and RMS are recomputed from the items;
+- summary.calibration is about the K returned: its K the cameras', its certified_K the one the
+  autocalibration stage states, the difference, the range edges and ``determined`` recomputed,
+  the summary's autocalibration_certified and autocalibration_determined its own, and each of
+  its warnings (and views not registered) said.
 
 A camera no bound could certify is not searched (structure.resect_cameras) and claims no bound.
 (A result without ``searched`` on its cameras, from before it was stated, is read as every
@@ -34,6 +40,7 @@ import numpy as np
 from geocert.solvers.core.geometry import is_number, norm_cost
 from geocert.solvers.core.strict import Invalid, number, numbers
 from geocert.solvers.fractional.items import TrackItems
+from geocert.solvers.reconstruction import calibration_claim, camera_claim
 
 ROUNDING = 1e-9  # relative: what JSON round trips and a recomputed cost may differ by
 CAMERA_FIELDS = ("K", "R", "t", "center", "P")
@@ -154,11 +161,98 @@ def _check_summary(result: dict, registered: list[dict]) -> None:
         if not isinstance(stage, dict):
             continue
         counts = {"structure": {"points": len(points), "certified": certified_points},
-                  "cameras": {"cameras": len(cameras), "certified": certified_cameras,
+                  "cameras": {"cameras": len(registered), "certified": certified_cameras,
                               "searched": sum(1 for c in cameras if c.get("searched") is True)}}.get(stage.get("name"))
         for name, value in (counts or {}).items():
             if name in stage and stage[name] != value:
                 raise Invalid("returned", f"stages/{stage['name']}/{name} is {stage[name]!r}, the items give {value!r}")
+
+
+def _warned(summary: dict, code: str) -> bool:
+    warnings = summary.get("warnings")
+    return isinstance(warnings, list) and any(isinstance(w, dict) and w.get("code") == code for w in warnings)
+
+
+def _check_calibration(result: dict, registered: list[dict]) -> None:
+    """summary.calibration is about the K the cameras return (claims.CalibrationClaim): its K is
+    every registered camera's (model "shared") or one focal length among theirs with their
+    principal point and skew ("varying"); certified_K is stated exactly when certified, and is
+    the returned K exactly when returned_is_certified (then source "autocalibration"); the
+    difference and the certified intrinsics on their range's edge (the autocalibration stage's
+    ranges) are recomputed; determined only when certified, off the edge and with no critical
+    motion; the summary's autocalibration_certified and autocalibration_determined are its own;
+    a returned K not the certified one, a certified K on the edge, a critical motion and views
+    not registered each have their warning. That the certified K is the autocalibration's
+    optimum is the pipeline's statement (the scope says so): no proof of it is carried here. A
+    result without summary.calibration (from before it was stated) makes none of these claims."""
+    summary = result["summary"]
+    missing = sum(1 for camera in result["cameras"] if camera.get("registered") is not True)
+    if missing and "calibration" in summary and not _warned(summary, "views_not_registered"):
+        raise Invalid("returned", f"summary: {missing} views not registered, and no views_not_registered warning "
+                                  "says so")
+    claim = summary.get("calibration")
+    if claim is None:
+        return
+    if not isinstance(claim, dict):
+        raise Invalid("returned", "summary/calibration must be an object")
+    where = "summary/calibration"
+    Ks = [numbers(camera["K"], f"cameras/{camera['view']}/K", (3, 3), "returned") for camera in registered]
+    K = None if claim.get("K") is None else numbers(claim["K"], f"{where}/K", (3, 3), "returned")
+    certified, model = claim.get("certified"), claim.get("model", "shared")
+    if (K is None) != (not Ks):
+        raise Invalid("returned", f"{where}/K must be stated exactly when cameras with a K are returned")
+    if K is not None and model == "shared" and not all(calibration_claim.same(k, K) for k in Ks):
+        raise Invalid("returned", f"{where}/K is not every registered camera's K (model shared)")
+    if K is not None and model == "varying":
+        rest = np.array([[k[0, 1], k[0, 2], k[1, 2], k[1, 1] / k[0, 0]] for k in Ks + [K]])
+        focals = [k[0, 0] for k in Ks]
+        if not (all(calibration_claim.same(r, rest[-1]) for r in rest) and min(focals) <= K[0, 0] <= max(focals)):
+            raise Invalid("returned", f"{where}/K is not one of the registered cameras' focal lengths with their "
+                                      "shared intrinsics (model varying)")
+    if model not in ("shared", "varying") or certified not in (True, False):
+        raise Invalid("returned", f"{where}: model must be shared or varying, certified a boolean")
+    cert = claim.get("certified_K")
+    if (cert is not None) != (certified is True) or (certified and K is None):
+        raise Invalid("returned", f"{where}/certified_K is stated exactly when a certified K is claimed beside a "
+                                  "returned one")
+    cert = None if cert is None else numbers(cert, f"{where}/certified_K", (3, 3), "returned")
+    stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "autocalibration"),
+                 {})
+    if cert is not None and not (stage.get("certified") is True and stage.get("K") is not None
+                                 and calibration_claim.same(numbers(stage["K"], "stages/autocalibration/K", (3, 3),
+                                                                    "returned"), cert)):
+        raise Invalid("returned", f"{where}/certified_K is not the K the autocalibration stage certified")
+    returned = bool(cert is not None and model == "shared" and calibration_claim.same(K, cert))
+    if claim.get("returned_is_certified") is not returned:
+        raise Invalid("returned", f"{where}/returned_is_certified is {claim.get('returned_is_certified')!r}: the "
+                                  f"returned K is {'' if returned else 'not '}the certified one")
+    source = claim.get("source")
+    if (source == "autocalibration") != returned or (source == "none") != (K is None):
+        raise Invalid("returned", f"{where}/source {source!r} is not where the returned K comes from")
+    expected = None if cert is None else calibration_claim.difference(K, cert)
+    given = claim.get("difference")
+    if (expected is None) != (given is None) or (expected is not None and not (
+            isinstance(given, dict) and all(_close(given.get(name), value, 1.0) for name, value in expected.items()))):
+        raise Invalid("returned", f"{where}/difference is {given!r}, the returned and certified K give {expected!r}")
+    ranges = stage.get("intrinsics") if isinstance(stage.get("intrinsics"), dict) else {}
+    edges = [] if cert is None else calibration_claim.on_range_edge(cert, ranges)
+    if claim.get("on_range_edge") != edges:
+        raise Invalid("returned", f"{where}/on_range_edge is {claim.get('on_range_edge')!r}, the certified K and "
+                                  f"the autocalibration's ranges give {edges!r}")
+    critical = summary.get("critical_motion") or stage.get("critical_motion")
+    determined = claim.get("determined")
+    if determined is True and (not certified or edges or critical):
+        raise Invalid("returned", f"{where}/determined is true, but K is "
+                                  + ("not certified" if not certified else "on its range's edge" if edges
+                                     else f"under a critical motion ({critical})"))
+    if summary.get("autocalibration_certified") is not certified or summary.get("autocalibration_determined") \
+            is not determined:
+        raise Invalid("returned", "summary: autocalibration_certified and autocalibration_determined must be "
+                                  "summary/calibration's certified and determined")
+    for code, due in (("returned_K_not_certified", certified and not returned), ("certified_K_on_range_edge", edges),
+                      ("critical_motion", critical)):
+        if due and not _warned(summary, code):
+            raise Invalid("returned", f"summary: no {code} warning, though the calibration calls for it")
 
 
 def _check_camera_certificate(result: dict, certificate: dict, searched: list[dict], certified: list[int],
@@ -197,6 +291,7 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
             raise Invalid("returned", f"cameras/{camera.get('view')}: the camera certificate's map is not the "
                                       "returned points")
     norm = result.get("norm")
+    dof = camera_claim.degrees_of_freedom([camera["K"] for camera in _views_of(result["cameras"])])
     for k, camera in enumerate(searched):
         claim, where = claims[k], f"cameras/{camera.get('view')}"
         proven = discounted.get(k, claim.get("lower_bound"))
@@ -226,10 +321,30 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
             raise Invalid("returned", f"{where}: gap or optimal_cost is not what its cost and its proof give")
         if camera.get("status") != "optimal":
             raise Invalid("returned", f"{where}: a certified camera's status is optimal")
-        tolerance_abs = max(float(options["abs_gap"]), float(options["rel_gap"]) * cost)
-        if not cost - proven <= tolerance_abs * (1 + ROUNDING) + ROUNDING * max(1.0, abs(cost)):
-            raise Invalid("returned", f"{where}: costs {cost:.6g}, beyond the tolerance {tolerance_abs:.3g} above the "
-                                      f"proven bound {proven:.6g}")
+        tolerance = _camera_tolerance(camera, dof, len(source), norm, float(options["rel_gap"]), where)
+        allowed = (1.0 + tolerance) * proven + float(options["abs_gap"])
+        if not cost <= allowed * (1 + ROUNDING) + ROUNDING * max(1.0, abs(cost)):
+            raise Invalid("returned", f"{where}: costs {cost:.6g}, beyond (1 + tolerance {tolerance:.3g}) times the "
+                                      f"proven bound {proven:.6g} plus abs_gap")
+
+
+def _camera_tolerance(camera: dict, dof: int, points: int, norm: str, rel_gap: float, where: str) -> float:
+    """A certified camera's tolerance (camera_claim.tolerance), recomputed from its points, the
+    norm, camera_rel_gap and its degrees of freedom, which the returned cameras' K give
+    (camera_claim.degrees_of_freedom); the camera's stated figures must be these. A camera that
+    states none (a result from before they were stated) is held to a 3x4 camera's: no allowance."""
+    stated = camera.get("degrees_of_freedom")
+    if stated is None and camera.get("tolerance") is None:
+        dof = camera_claim.PROJECTIVE_DOF
+    elif stated != dof:
+        raise Invalid("returned", f"{where}: degrees_of_freedom {stated!r}, the returned cameras' K give {dof}")
+    tolerance = camera_claim.tolerance(points, dof, norm, rel_gap)
+    if tolerance is None:
+        raise Invalid("returned", f"{where}: {points} points and camera_rel_gap {rel_gap!r} allow no tolerance")
+    if "tolerance" in camera and not _close(camera["tolerance"], tolerance):
+        raise Invalid("returned", f"{where}: tolerance {camera['tolerance']!r}, its points and degrees of freedom "
+                                  f"give {tolerance!r}")
+    return tolerance
 
 
 class ReconstructionItems(TrackItems):
@@ -261,8 +376,12 @@ class ReconstructionItems(TrackItems):
             "for each certified point, in the cameras returned (the certificate's data): " + statement["statement"]
             + "; for each certified camera, by the camera certificate (a resection document over the returned points, "
               "with the result's norm, max_residual, abs_gap and camera_rel_gap): no 3x4 camera in front of every point "
-              "costs less than its lower_bound, and the camera returned costs cost; the metric upgrade's "
-              "certification (autocalibration_certified) is the pipeline's statement: no proof of it is carried here")
+              "costs less than its lower_bound, and the camera returned costs cost, at most (1 + tolerance) lower_bound "
+              "+ abs_gap, its tolerance the allowance for its fewer degrees of freedom than a 3x4 camera's (what they "
+              "cost at the 99.9% level under Gaussian noise: a statistical allowance, not a bound) and camera_rel_gap; "
+              "summary.calibration is checked to be about the K returned; the metric upgrade's certification "
+              "(autocalibration_certified, calibration.certified_K) is the pipeline's statement: no proof of it is "
+              "carried here")
         return statement
 
     def check_result(self, result: dict, certificate: dict, verify: Callable[[dict], object]) -> None:
@@ -280,6 +399,7 @@ class ReconstructionItems(TrackItems):
         certified = [k for k, camera in enumerate(searched) if camera.get("certified") is True]
         _check_camera_certificate(result, certificate, searched, certified, verify)
         _check_summary(result, registered)
+        _check_calibration(result, registered)
 
 
 RECONSTRUCTION = ReconstructionItems()

@@ -12,23 +12,25 @@ import json
 import math
 import re
 from typing import Annotated
-from urllib.parse import urlencode
+from urllib.parse import urlencode, urlsplit
 
-from fastapi import APIRouter, Body, Depends, Header, Query, Request, Response
+from fastapi import APIRouter, Body, Depends, Header, Path, Query, Request, Response
 from fastapi.responses import StreamingResponse
 from fastapi.concurrency import run_in_threadpool
 from fastapi.routing import APIRoute
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
 from geocert.app.api.deps import Caller, JobStoreDep, error_responses, get_async_redis, rate_limited, stream_slot
-from geocert.settings import chunk_size_for, get_settings
+from geocert.settings import chunk_size_for, get_settings, over_budget
 from geocert.app import lifecycle
 from geocert.app import streamed
 from geocert.app.errors import ApiProblem, is_json_media_type
 from geocert.app.schemas import JOB_EXAMPLES, JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
 from geocert.batch import parse_job
+from geocert.kinds import get_kind
 from geocert.workers import logs
+from geocert.workers.destinations import allowed_networks, literal_refusal
 from geocert.workers.queue import submit_chunks, withdraw_queued
 from geocert.workers.store import REDIS_GONE, TERMINAL, JobStore, events, read_job
 
@@ -68,6 +70,26 @@ def _check_count(kind, items: int) -> None:
     if items > settings.max_items_per_job:
         raise ApiProblem(413, f"{items} {kind.item_key} exceed the limit of {settings.max_items_per_job} per job "
                               "(GEOCERT_MAX_ITEMS_PER_JOB)", f"data/{kind.item_key}")
+
+
+def _check_callback(request: dict) -> None:
+    """A callback_url whose host is written as an address webhooks may not go to (loopback,
+    private, link-local, multicast, reserved; localhost) is a 422 at once; a name is checked when
+    the webhook is delivered, on the address connected to (workers.destinations)."""
+    url = request.get("callback_url")
+    if url:
+        reason = literal_refusal(urlsplit(url).hostname or "", allowed_networks(get_settings().webhook_allowed_networks))
+        if reason is not None:
+            raise ApiProblem(422, f"webhooks go only to public addresses, and this one is {reason} (an operator may "
+                                  "allow networks: GEOCERT_WEBHOOK_ALLOWED_NETWORKS)", "callback_url")
+
+
+def _check_budget(request: dict) -> None:
+    """The job's figures (its kind's request_figures: from the request alone, photos read from
+    their headers) within the server's budget (settings.BUDGETS), else a 413 naming the figure."""
+    exceeded = over_budget(get_kind(request["kind"]).request_figures(request["data"]))
+    if exceeded is not None:
+        raise ApiProblem(413, *exceeded)
 
 
 def _check_limits(kind, parsed, body, request: dict, counts: tuple[int, int] | None = None) -> int:
@@ -174,6 +196,8 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
     """The submission itself (synchronous Redis calls: run in FastAPI's thread pool). ``split``:
     a large body's items, when ``body`` is its head (StreamedItemsRoute)."""
     request = body.model_dump(mode="json")  # validated by its kind's model (discriminated on "kind")
+    _check_callback(request)
+    _check_budget(request)  # before anything of the job is decoded or built
     kind, parsed, _ = parse_job(request)  # the solvers' own checks: rank, indices, duplicates
     upload = None
     if split is not None:
@@ -243,7 +267,13 @@ def _replay(store: JobStore, earlier: dict, digest: str, response: Response) -> 
     return store.document(meta)
 
 
-async def _owned(job_id: str, owner: Caller) -> dict:
+_JOB_ID = re.compile(r"[0-9a-f]{32}")  # JobStore.create's ids
+
+
+async def _owned(job_id: Annotated[str, Path(description="the job's id (32 hex digits)")],
+                 owner: Caller) -> dict:
+    if not _JOB_ID.fullmatch(job_id):  # no such job; never a Redis key made of what the client sent
+        raise ApiProblem(404, f"no job {job_id}")
     meta = await read_job(get_async_redis(), job_id)  # on the loop: every job route reads the job first
     if meta is None or meta.get("owner") != owner:  # another key's job does not exist for this one
         raise ApiProblem(404, f"no job {job_id}")
@@ -378,11 +408,16 @@ def delete_job(job: OwnedJob, store: JobStoreDep):
     return Response(status_code=204)
 
 
-def _resume_point(last_event_id: Annotated[str | None, Header()] = None) -> str:
+_STREAM_ID_PART_MAX = 2**64 - 1  # a Redis stream id: two unsigned 64-bit numbers
+
+
+def _resume_point(last_event_id: Annotated[str | None, Header(max_length=41)] = None) -> str:
     if not last_event_id:
         return "0-0"
-    if not re.fullmatch(r"\d{1,20}-\d{1,20}", last_event_id):
-        raise InputError("Last-Event-ID", "must be an event id this stream sent (digits-digits)")
+    parts = re.fullmatch(r"(\d{1,20})-(\d{1,20})", last_event_id)
+    if parts is None or any(int(part) > _STREAM_ID_PART_MAX for part in parts.groups()):
+        raise InputError("Last-Event-ID", "must be an event id this stream sent (two numbers below 2^64, "
+                                          "joined by '-')")
     return last_event_id
 
 

@@ -8,7 +8,7 @@ import numpy as np
 from fastapi import APIRouter, Depends
 
 from geocert.app.api.deps import error_responses, rate_limited
-from geocert.settings import get_settings
+from geocert.settings import get_settings, over_budget
 from geocert.app.errors import ApiProblem
 from geocert.app.schemas import OrientRequest, OrientResult
 from geocert.solvers.core.geometry import InputError, check_cameras
@@ -28,6 +28,10 @@ def orient_reconstruction(body: OrientRequest):
     if len(body.points) > settings.max_items_per_job:
         raise ApiProblem(413, f"{len(body.points)} points exceed the limit of {settings.max_items_per_job} "
                               "(GEOCERT_MAX_ITEMS_PER_JOB)", "points")
+    # The orientation works on dense cameras x points arrays, whichever pairs are observed.
+    exceeded = over_budget({"view_points": (len(body.cameras) * len(body.points), "points")})
+    if exceeded is not None:
+        raise ApiProblem(413, *exceeded)
     if observations > settings.max_points_per_job:
         raise ApiProblem(413, f"{observations} observations exceed the limit of {settings.max_points_per_job} "
                               "(GEOCERT_MAX_POINTS_PER_JOB)", "views" if body.views is not None else "points")

@@ -10,6 +10,7 @@ from fastapi.responses import JSONResponse
 from geocert.app.api.deps import error_responses, get_store, rate_limited
 from geocert.app.schemas import ProblemKindInfo
 from geocert.kinds import KINDS, default_options
+from geocert.settings import get_settings
 from geocert.workers.store import JobStore
 
 router = APIRouter()
@@ -23,9 +24,21 @@ def list_problems():
     return [
         ProblemKindInfo(kind=kind.name, description=kind.description, item_name=kind.item_key,
                         certifies=kind.certifies, request_schema=kind.request_model.model_json_schema(),
-                        default_options=default_options(kind), example=kind.example)
+                        default_options=served_defaults(kind), example=kind.example)
         for kind in KINDS
     ]
+
+
+def served_defaults(kind) -> dict:
+    """The options a job of this kind gets here when it gives none: its model's defaults, with
+    time_limit_s and max_nodes lowered to this server's maxima as a submission's are (so that
+    submitting them as they are is accepted)."""
+    settings = get_settings()
+    options = default_options(kind)
+    for name, maximum in (("time_limit_s", settings.max_item_time_limit_s), ("max_nodes", settings.max_item_nodes)):
+        if options.get(name) is not None and options[name] > maximum:
+            options[name] = type(options[name])(maximum)
+    return options
 
 
 @router.get("/healthz", tags=["service"])

@@ -1,0 +1,411 @@
+"""What a hostile client can do to the service, attack by attack (issue 36), against real servers
+on loopback (an embedded redis-server, the API, `geocert worker` processes), with two API keys:
+the attacker's and another client's. For each attack it prints the API's peak memory growth and
+CPU, the other key's slowest GET /v1/jobs while the API answered it, the peak memory of any
+worker process, what the attacker got and how long until its job ended, and how long the other
+key's small job (one track) waited to start and took to end, submitted right after the attack.
+
+    .venv/bin/python -m bench.abuse [--only api,worker,webhooks,fairness]
+
+  api       the attacks the API now refuses from the request alone (photo bombs, views, a bilinear
+            basis, /v1/orient, stereo segments, webhook destinations, Last-Event-ID, names), with
+            the default limits;
+  worker    the same jobs with the budgets raised so that they reach a worker: the worker's own
+            bounds (its memory limit, the solvers' clock checks) and the other key's wait;
+  webhooks  a tarpit receiver (a byte every 5 s) and a delete racing a delivery;
+  fairness  the attacker queues 12 long jobs on one worker of two solver processes; the other
+            key's wait with the per-key share and without it (GEOCERT_SOLVERS_KEPT_FOR_OTHERS=0:
+            first come, first served), in the same run.
+
+Each figure is printed beside what the review reproduced on the code before these limits (its
+report's figures, on its machine: measuring them again would mean holding gigabytes and minutes
+of this one); the fairness section measures both in the same run.
+
+Nothing here asserts (tests/service/test_abuse.py checks behaviour); figures depend on the
+machine and its load, printed with them.
+"""
+
+from __future__ import annotations
+
+import base64
+import http.server
+import json
+import os
+import threading
+import time
+
+import cv2
+import httpx
+import numpy as np
+
+from bench.faults import FIGURES, cluster, cpu_seconds, peak_rss_kib, run
+
+TERMINAL = ("succeeded", "failed", "cancelled")
+ATTACKER, OTHER = {"X-API-Key": "attacker"}, {"X-API-Key": "other"}
+KEYS = {"geocert_api_keys": "attacker,other", "geocert_max_active_jobs_per_key": "200"}
+SMALL = {"kind": "triangulation", "data": {
+    "cameras": [[[800, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]], [[800, 0, 320, -800], [0, 800, 240, 0], [0, 0, 1, 0]]],
+    "tracks": [{"views": [0, 1], "points": [[330, 250], [250, 251]]}]}}
+
+
+# What the review reproduced on the code before (one worker, embedded Redis, loopback).
+PHOTO_BOMB = "202, queued; the API held +2.4 GB (every photo decoded at submission)"
+WORKER_BOMB = ("a solver peaked at 5.9 GB, was killed at the 100 s hard limit and re-queued three times: 'Tasks "
+               "lost' after 440 s; another key's one-track job waited 102 s")
+DIRECT = "ran 205 s (killed, re-queued, then SoftTimeLimitExceeded); 1000 views: 7.8 GB"
+STRATIFIED = "ran 19 times its limit, reported time_limit"
+STEREO = "accepted; 2000 segments and 100,000 iterations held the worker 35 s a pair"
+BEFORE = {
+    "100 blank 5000x5000 PNGs (3.3 MB)": PHOTO_BOMB,
+    "100 truncated JPEGs claiming 5000x5000 (53 kB)": PHOTO_BOMB + ", the decoder filling the missing data",
+    "6 blank 5000x5000 PNGs, time_limit_s 1": WORKER_BOMB,
+    "6 blank 5000x5000 PNGs, time_limit_s 1 (worker memory limit 4096 MiB)": WORKER_BOMB,
+    "direct autocalibration, 300 views, time_limit_s 2": DIRECT,
+    "stratified autocalibration, 200 views, time_limit_s 2": STRATIFIED,
+    "bilinear, 300 shapes of 400 points (2.9 MB)": "100 s of the API's CPU before queueing; other keys' GET /v1/jobs "
+                                                   "took 1.7-5.6 s",
+    "/v1/orient, 300 cameras, 200k points": "the API held +2.1 GB",
+    "stereo_lines, 2000 segments an image": STEREO,
+    "stereo_lines, 2000 segments an image, 100000 iterations, time_limit_s 2": STEREO,
+    "callback_url http://169.254.169.254/latest/meta-data": "accepted, and delivered to; the record told a closed "
+                                                            "port from an open one",
+    "Last-Event-ID 18446744073709551616-0": "an ASGI exception, or a dropped connection",
+    "a view named 'a\\n1 0 0 0 ...' (a COLMAP record)": "accepted; the newline injected a record into images.txt",
+    "a tarpit receiver (a byte every 5 s), 3 attempts of 10 s": "held the only worker 89 s; the record stayed 'waiting', "
+                                                               "attempts 0, for ever",
+    "a job deleted while its webhook is delivered": "geocert:job:{id} re-created with the callback URL and no expiry",
+}
+
+
+def report(what: str, measured: str) -> None:
+    before = BEFORE.get(what, "")
+    FIGURES.append((what, measured, before))
+    print(f"  {what}: {measured}" + (f"\n    before: {before}" if before else ""), flush=True)
+
+
+# --- the attacks' bodies -----------------------------------------------------------------------
+def blank_png(side: int) -> str:
+    return base64.b64encode(cv2.imencode(".png", np.zeros((side, side), np.uint8))[1].tobytes()).decode()
+
+
+def truncated_jpeg(side: int) -> str:
+    """A JPEG whose header claims side x side, cut after its first 400 bytes."""
+    data = cv2.imencode(".jpg", np.random.default_rng(0).integers(0, 255, (64, 64), dtype=np.uint8))[1].tobytes()
+    at = data.find(b"\xff\xc0") + 5
+    data = data[:at] + side.to_bytes(2, "big") + side.to_bytes(2, "big") + data[at + 4:]
+    return base64.b64encode(data[:400]).decode()
+
+
+def photos(contents: list[str], **options) -> dict:
+    return {"kind": "reconstruction", "options": options,
+            "data": {"images": [{"name": f"p{i}", "content": c} for i, c in enumerate(contents)]}}
+
+
+def autocalibration(views: int, method: str, time_limit_s: float) -> dict:
+    from geocert.solvers.autocalibration import scenes
+
+    return {"kind": "autocalibration", "data": scenes.make_scene(views, 0.1, seed=5).job_data(),
+            "options": {"method": method, "time_limit_s": time_limit_s,
+                        **({"chirality": "none"} if method == "direct" else {})}}  # else too many pairs
+
+
+def bilinear(shapes: int, points: int) -> dict:
+    rng = np.random.default_rng(0)
+    return {"kind": "bilinear", "data": {"basis": np.round(rng.normal(size=(shapes, points, 3)), 4).tolist(),
+                                         "frames": [{"points": np.round(rng.normal(size=(points, 2)), 3).tolist()}]}}
+
+
+def orient(cameras: int, points: int) -> dict:
+    rng = np.random.default_rng(1)
+    return {"cameras": np.round(rng.normal(size=(cameras, 3, 4)), 4).tolist(),
+            "points": np.round(rng.normal(size=(points, 3)), 3).tolist(),
+            "views": [[0, 1]] * points}
+
+
+def stereo(segments: int, time_limit_s: float = 10.0) -> dict:
+    from pathlib import Path
+
+    job = json.loads((Path(__file__).parents[1] / "examples" / "stereo-lines-pair.json").read_text())
+    rng = np.random.default_rng(2)
+    for frame in job["data"]["frames"]:
+        for side in ("left", "right"):
+            frame[side] = np.round(rng.uniform(0, 640, size=(segments, 4)), 2).tolist()
+    job["options"] = {"ransac": {"max_iterations": 100_000}, "time_limit_s": time_limit_s}
+    return job
+
+
+# --- measuring ---------------------------------------------------------------------------------
+def tree(pid: int) -> list[int]:
+    """A process and its descendants."""
+    found, todo = [], [pid]
+    while todo:
+        current = todo.pop()
+        found.append(current)
+        try:
+            with open(f"/proc/{current}/task/{current}/children") as children:
+                todo.extend(int(child) for child in children.read().split())
+        except OSError:
+            pass
+    return found
+
+
+def rss_kib(pid: int) -> int:
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            return next(int(line.split()[1]) for line in status if line.startswith("VmRSS:"))
+    except (OSError, StopIteration):
+        return 0
+
+
+class WorkerPeak:
+    """The largest resident size of any one process of the workers, sampled every 0.1 s."""
+
+    def __init__(self, running):
+        self.running, self.peak, self.stopped = running, 0, threading.Event()
+        self.thread = threading.Thread(target=self._sample, daemon=True)
+        self.thread.start()
+
+    def _sample(self):
+        while not self.stopped.wait(0.1):
+            for worker in self.running.workers:
+                for pid in tree(worker.pid):
+                    self.peak = max(self.peak, rss_kib(pid))
+
+    def stop(self) -> float:
+        self.stopped.set()
+        self.thread.join()
+        return self.peak / 1024
+
+
+def wait_end(client, job_id: str, headers: dict, limit_s: float) -> dict | None:
+    deadline = time.monotonic() + limit_s
+    while time.monotonic() < deadline:
+        job = client.get(f"/v1/jobs/{job_id}", headers=headers).json()
+        if job["status"] in TERMINAL:
+            return job
+        time.sleep(0.2)
+    return None
+
+
+def other_keys_job(client) -> tuple[float, float]:
+    """The other key's one-track job, submitted now: seconds until it started and until it ended."""
+    job_id = client.post("/v1/jobs", json=SMALL, headers=OTHER).json()["id"]
+    job = wait_end(client, job_id, OTHER, 900)
+    if job is None:
+        return float("nan"), float("nan")
+    return job["started_at"] - job["created_at"], job["finished_at"] - job["created_at"]
+
+
+class OtherKeysReads:
+    """The other key listing its jobs (GET /v1/jobs) every 0.1 s while an attack is answered: the
+    slowest answer."""
+
+    def __init__(self, running):
+        self.client = httpx.Client(base_url=str(running.client.base_url), timeout=120)
+        self.slowest, self.stopped = 0.0, threading.Event()
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+
+    def _read(self):
+        while not self.stopped.is_set():
+            began = time.monotonic()
+            self.client.get("/v1/jobs", headers=OTHER)
+            self.slowest = max(self.slowest, time.monotonic() - began)
+            self.stopped.wait(0.1)
+
+    def stop(self) -> float:
+        self.stopped.set()
+        self.thread.join()
+        self.client.close()
+        return self.slowest
+
+
+def attack(running, name: str, send, limit_s: float = 900) -> None:
+    """Send an attack (``send(client)`` -> the response), then the other key's small job; report."""
+    client = running.client
+    api_before, api_cpu = peak_rss_kib(running.api.pid), cpu_seconds(running.api.pid)
+    workers = WorkerPeak(running)
+    reads = OtherKeysReads(running)
+    began = time.monotonic()
+    response = send(client)
+    answered = time.monotonic() - began
+    slowest_read = reads.stop()
+    outcome = f"{response.status_code} in {answered:.1f} s"
+    job_id = response.json().get("id") if response.status_code in (200, 202) and "jobs" in str(response.url) else None
+    started, finished = other_keys_job(client)
+    if job_id is not None:
+        job = wait_end(client, job_id, ATTACKER, limit_s)
+        if job is None:
+            outcome += f"; the job had not ended after {limit_s:.0f} s"
+            client.post(f"/v1/jobs/{job_id}/cancel", headers=ATTACKER)
+        else:
+            why = (job["error"] or {}).get("title") or ", ".join(
+                f"{s['name']} {s['status']}" for s in (job["result"] or {}).get("stages", [])[:3]) or ""
+            outcome += f"; the job ended {job['status']} ({why}) {time.monotonic() - began:.1f} s after it was sent"
+    else:
+        detail = (response.json().get("detail") or "")[:170] if response.headers.get("content-type", "").endswith("json") else ""
+        outcome += f": {detail}"
+    api_grew = (peak_rss_kib(running.api.pid) - api_before) / 1024
+    report(name, f"{outcome}; API peak +{api_grew:.0f} MiB, {cpu_seconds(running.api.pid) - api_cpu:.1f} s CPU; "
+                 f"the other key's GET /v1/jobs meanwhile at most {slowest_read:.2f} s; largest worker process {workers.stop():.0f} MiB; the other key's job started after "
+                 f"{started:.1f} s, ended after {finished:.1f} s")
+
+
+def post(path: str, body: dict, headers: dict | None = None):
+    return lambda client: client.post(path, json=body, headers=headers or ATTACKER, timeout=600)
+
+
+# --- sections ----------------------------------------------------------------------------------
+def bench_api() -> None:
+    print("api: refused from the request, default limits", flush=True)
+    with cluster(workers=1, concurrency=2, **KEYS) as running:
+        attack(running, "100 blank 5000x5000 PNGs (3.3 MB)", post("/v1/jobs", photos([blank_png(5000)] * 100)))
+        attack(running, "100 truncated JPEGs claiming 5000x5000 (53 kB)", post("/v1/jobs", photos([truncated_jpeg(5000)] * 100)))
+        attack(running, "6 blank 5000x5000 PNGs, time_limit_s 1", post("/v1/jobs", photos([blank_png(5000)] * 6, time_limit_s=1)))
+        attack(running, "direct autocalibration, 300 views, time_limit_s 2", post("/v1/jobs", autocalibration(300, "direct", 2)))
+        attack(running, "stratified autocalibration, 200 views, time_limit_s 2",
+               post("/v1/jobs", autocalibration(200, "stratified", 2)))
+        attack(running, "bilinear, 300 shapes of 400 points (2.9 MB)", post("/v1/jobs", bilinear(300, 400)))
+        attack(running, "/v1/orient, 300 cameras, 200k points", post("/v1/orient", orient(300, 200_000)))
+        attack(running, "stereo_lines, 2000 segments an image", post("/v1/jobs", stereo(2000)))
+        attack(running, "callback_url http://169.254.169.254/latest/meta-data",
+               post("/v1/jobs", {**SMALL, "callback_url": "http://169.254.169.254/latest/meta-data"}))
+        job_id = running.client.post("/v1/jobs", json=SMALL, headers=ATTACKER).json()["id"]
+        attack(running, "Last-Event-ID 18446744073709551616-0",
+               lambda client: client.get(f"/v1/jobs/{job_id}/events", headers={**ATTACKER,
+                                                                                "Last-Event-ID": "18446744073709551616-0"}))
+        attack(running, "a view named 'a\\n1 0 0 0 ...' (a COLMAP record)", post("/v1/jobs", {
+            "kind": "reconstruction", "data": {"views": [{"name": "a\n1 1 0 0 0 0 0 0 1 x.png", "image_size": [640, 480]}] * 2,
+                                               "tracks": [{"views": [0, 1], "points": [[1, 2], [3, 4]]}]}}))
+        report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
+def bench_worker() -> None:
+    print("worker: the same jobs with the budgets raised, so that they reach a worker", flush=True)
+    raised = {"geocert_max_image_pixels": "25000000", "geocert_max_image_pixels_per_job": "1000000000",
+              "geocert_max_autocalibration_views": "1000", "geocert_max_segments_per_frame": "100000"}
+    with cluster(workers=1, concurrency=2, **KEYS, **raised) as running:
+        attack(running, "6 blank 5000x5000 PNGs, time_limit_s 1 (worker memory limit 4096 MiB)",
+               post("/v1/jobs", photos([blank_png(5000)] * 6, time_limit_s=1)))
+        attack(running, "direct autocalibration, 300 views, time_limit_s 2", post("/v1/jobs", autocalibration(300, "direct", 2)))
+        attack(running, "stratified autocalibration, 200 views, time_limit_s 2",
+               post("/v1/jobs", autocalibration(200, "stratified", 2)))
+        attack(running, "stratified autocalibration, 50 views (the default limit), time_limit_s 2",
+               post("/v1/jobs", autocalibration(50, "stratified", 2)))
+        attack(running, "stereo_lines, 2000 segments an image, 100000 iterations, time_limit_s 2",
+               post("/v1/jobs", stereo(2000, 2)))
+        attack(running, "stereo_lines, 1000 segments an image (the default limit), 100000 iterations, time_limit_s 2",
+               post("/v1/jobs", stereo(1000, 2)))
+        report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
+class Receiver:
+    """A webhook receiver on loopback: ``answer(handler)`` answers each POST (tests use it too)."""
+
+    def __init__(self, answer):
+        outer = self
+        self.received = 0
+
+        class Handler(http.server.BaseHTTPRequestHandler):
+            protocol_version = "HTTP/1.1"
+
+            def do_POST(self):
+                self.rfile.read(int(self.headers["Content-Length"]))
+                outer.received += 1
+                answer(self)
+
+            def log_message(self, *args):
+                pass
+
+        self.server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.server.daemon_threads = True
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+        self.url = f"http://127.0.0.1:{self.server.server_address[1]}/hook"
+
+    def close(self):
+        self.server.shutdown()
+
+
+def bench_webhooks() -> None:
+    print("webhooks: a tarpit receiver, a delete racing a delivery", flush=True)
+    release = threading.Event()
+
+    def tarpit(handler):
+        while not release.wait(5.0):
+            try:
+                handler.wfile.write(b"H")
+                handler.wfile.flush()
+            except OSError:
+                return
+
+    with cluster(workers=1, concurrency=1, geocert_webhook_allowed_networks="127.0.0.1/32",
+                 geocert_webhook_attempts="3", **KEYS) as running:
+        receiver = Receiver(tarpit)
+        client = running.client
+        began = time.monotonic()
+        job_id = client.post("/v1/jobs", json={**SMALL, "callback_url": receiver.url}, headers=ATTACKER).json()["id"]
+        wait_end(client, job_id, ATTACKER, 120)
+        while receiver.received == 0 and time.monotonic() - began < 120:
+            time.sleep(0.1)
+        started, finished = other_keys_job(client)
+        hook = None
+        while time.monotonic() - began < 600:
+            hook = client.get(f"/v1/jobs/{job_id}", headers=ATTACKER).json()["webhook"]
+            if hook["state"] in ("failed", "delivered", "refused"):
+                break
+            time.sleep(0.5)
+        report("a tarpit receiver (a byte every 5 s), 3 attempts of 10 s",
+               f"the record said {hook['state']} after {hook['attempts']} attempts, {time.monotonic() - began:.0f} s "
+               f"after the job was sent ({hook['last_error']}); the other key's job meanwhile started after "
+               f"{started:.1f} s, ended after {finished:.1f} s")
+        release.set()
+        deleted = threading.Event()
+
+        def after_delete(handler):
+            deleted.wait(30)
+            handler.send_response(200)
+            handler.send_header("Content-Length", "0")
+            handler.end_headers()
+
+        receiver = Receiver(after_delete)
+        job_id = client.post("/v1/jobs", json={**SMALL, "callback_url": receiver.url}, headers=ATTACKER).json()["id"]
+        wait_end(client, job_id, ATTACKER, 120)
+        while receiver.received == 0:
+            time.sleep(0.05)
+        client.delete(f"/v1/jobs/{job_id}", headers=ATTACKER)
+        deleted.set()
+        time.sleep(3)
+        store = running.redis_client()
+        left = list(store.scan_iter(f"geocert:job:{job_id}*"))
+        unexpiring = [key for key in store.scan_iter("geocert:job:*") if store.ttl(key) == -1]
+        report("a job deleted while its webhook is delivered", f"{len(left)} keys of it left; {len(unexpiring)} job keys "
+                                                               "without an expiry in all")
+
+
+def bench_fairness(flood: int = 12) -> None:
+    print(f"fairness: {flood} long jobs of one key, one worker of two solver processes", flush=True)
+    for kept, label in (("1", "with the per-key share (GEOCERT_SOLVERS_KEPT_FOR_OTHERS=1)"),
+                        ("0", "first come, first served (GEOCERT_SOLVERS_KEPT_FOR_OTHERS=0)")):
+        with cluster(workers=1, concurrency=2, geocert_solvers_kept_for_others=kept, **KEYS) as running:
+            client = running.client
+            long_job = autocalibration(4, "stratified", 5)
+            long_job["data"].pop("points")  # neither stage closes its gap: each runs its 5 s
+            jobs = [client.post("/v1/jobs", json=long_job, headers=ATTACKER).json()["id"] for _ in range(flood)]
+            time.sleep(3)
+            started, finished = other_keys_job(client)
+            report(f"the other key's job behind {flood} jobs of 2 x 5 s, {label}",
+                   f"started after {started:.1f} s, ended after {finished:.1f} s")
+            for job_id in jobs:
+                client.post(f"/v1/jobs/{job_id}/cancel", headers=ATTACKER)
+    report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
+SECTIONS = {"api": bench_api, "worker": bench_worker, "webhooks": bench_webhooks, "fairness": bench_fairness}
+
+
+def main() -> None:
+    run(SECTIONS, __doc__, "attack", "before (the review's figure)")
+
+
+if __name__ == "__main__":
+    main()

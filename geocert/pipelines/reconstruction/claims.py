@@ -1,0 +1,158 @@
+"""What a reconstruction's summary claims about what it returns (issue 35: never silently
+wrong): its counts, the calibration claim (every statement about K is about a K the result
+returns), and the warnings a user reads first: cameras dropped, points dropped, cameras whose fit
+is beyond their tolerance, a K moved from the certified one, a certified K on its range's edge, a
+critical motion, no metric upgrade."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from geocert.solvers.reconstruction.calibration_claim import difference as k_difference, on_range_edge, same
+
+
+
+def summarise(out, n_tracks: int, n_views: int) -> None:
+    """out.summary (a pipeline.Reconstruction's) from its cameras, points, stages and checks."""
+    squared, count = 0.0, 0
+    for point in out.points:
+        r = point.result
+        if r.point is None:
+            continue
+        X = np.array(r.point if r.at_infinity else [*r.point, 1.0])
+        for v, u, w in point.observations:
+            proj = out.cameras[int(v)].P @ X
+            squared += (proj[0] / proj[2] - u) ** 2 + (proj[1] / proj[2] - w) ** 2
+            count += 1
+    registered = [c for c in out.cameras if c.registered]
+    bounded = [c for c in out.cameras if c.bound is not None and c.bound.status != "cancelled"]
+    out.summary = {
+        "views": n_views, "views_registered": len(registered), "tracks": n_tracks, "points": len(out.points),
+        "observations": count, "rms_reprojection_px": float(np.sqrt(squared / count)) if count else None,
+        "points_certified": sum(1 for p in out.points if p.result.certified),
+        "points_certified_fraction": (sum(1 for p in out.points if p.result.certified) / len(out.points)
+                                      if out.points else None),
+        "cameras_certified": sum(1 for c in bounded if c.bound.certified),
+        "cameras_certified_fraction": (sum(1 for c in bounded if c.bound.certified) / len(bounded) if bounded else None),
+        # What "certified" says of a camera (camera_claim.statement), when the cameras were bounded.
+        "camera_claim": out.stages[4].get("claim") if len(out.stages) > 4 else None,
+        "critical_motion": out.stages[1].get("critical_motion"),
+        "cameras_dropped": len(out.checks.get("cameras_dropped", [])),
+        "observations_removed": out.checks.get("observations_removed", 0),
+        "points_dropped": out.checks.get("points_dropped", 0),
+        "time_s": {stage["name"]: stage["elapsed_s"] for stage in out.stages},
+        "cpu_s": {stage["name"]: stage.get("cpu_s", 0.0) for stage in out.stages},
+    }
+    claim = calibration_claim(out)
+    out.summary.update(calibration=claim.as_dict(),
+                       # the claims about K, as the calibration object states them (about its certified_K)
+                       autocalibration_certified=claim.certified, autocalibration_determined=claim.determined)
+    warnings = []
+    missing = [c for c in out.cameras if not c.registered]
+    if missing:  # first: how much of what was sent the result covers
+        why: dict[str, list[int]] = {}
+        for c in missing:
+            why.setdefault(c.reason or "no reason recorded", []).append(c.view)
+        warnings.append({"code": "views_not_registered", "detail": (
+            f"{len(missing)} of {n_views} views not registered (no camera returned for them): " + "; ".join(
+                f"views {', '.join(map(str, views))}: {reason}" for reason, views in why.items()))})
+    warnings += list(claim.warnings)
+    if out.metric is None and registered:
+        warnings.append({"code": "no_metric_upgrade", "detail": (
+            f"no metric reconstruction was found: the {len(registered)} cameras returned are projective (P only, "
+            "no K, R, t), known up to a 3D projective transformation, and no point is returned")})
+    for dropped in out.checks.get("cameras_dropped", []):
+        warnings.append({"code": "camera_dropped", "detail": f"view {dropped['view']}: {dropped['reason']}"})
+    beyond = [c.view for c in bounded if c.bound.beyond_tolerance]
+    if beyond:
+        warnings.append({"code": "camera_fit_beyond_tolerance", "detail": (
+            f"views {', '.join(map(str, beyond))}: each costs more above a 3x4 camera on its own points than its "
+            "fewer degrees of freedom explain (its bound_reason says by how much): its pose, or the shared K, may "
+            "be off")})
+    if out.checks.get("points_dropped"):
+        warnings.append({"code": "points_dropped", "detail": f"{out.checks['points_dropped']} certified points lay "
+                                                             "behind a camera or far from an observation: dropped"})
+    out.summary["warnings"] = warnings
+
+
+@dataclass(frozen=True)
+class CalibrationClaim:
+    """What the result says about K, built so that every claim is about a K it returns.
+
+    ``K`` is the calibration the returned cameras use (every registered camera's, unless
+    ``model`` is "varying": then the camera with the middle focal length's, each camera carrying
+    its own; None when no metric reconstruction was found); ``certified_K`` the K the certified
+    autocalibration proved optimal for its upgrade (None when none was certified). ``certified``
+    is about ``certified_K`` only, and cannot be True without it; ``returned_is_certified`` says
+    whether the cameras use it (then K is certified_K), and ``difference`` how far the returned K
+    moved from it (the adjustment's work). ``determined`` is True only when the tracks fix K:
+    certified, no critical motion, and no certified intrinsic on its range's edge (an optimum on
+    the edge is the range's, not the data's)."""
+
+    K: list | None
+    source: str  # "given", "autocalibration", "bundle_adjustment" or "none"
+    certified_K: list | None
+    certified: bool
+    returned_is_certified: bool
+    difference: dict | None
+    on_range_edge: tuple
+    determined: bool | None
+    warnings: tuple
+    model: str = "shared"  # "shared" (one K, every registered camera's) or "varying" (one focal length per view)
+
+    def __post_init__(self):
+        if self.certified and self.certified_K is None:
+            raise ValueError("a certified calibration claim needs the certified K it is about")
+        if self.returned_is_certified and (self.K is None or self.certified_K is None or not self.certified):
+            raise ValueError("the returned K can be called certified only when a certified K was returned")
+        if self.returned_is_certified and (self.model != "shared" or not same(self.K, self.certified_K)):
+            raise ValueError("the returned K is called certified only when every camera uses the certified K")
+        if (self.source == "autocalibration") != self.returned_is_certified:
+            raise ValueError("K comes from the autocalibration exactly when the returned K is the certified one")
+        if (self.difference is not None) != (self.K is not None and self.certified_K is not None):
+            raise ValueError("the difference is stated exactly when both a returned and a certified K are")
+        if self.determined and (not self.certified or self.on_range_edge):
+            raise ValueError("K is determined only when certified, and not on its range's edge")
+
+    def as_dict(self) -> dict:
+        return {"K": self.K, "model": self.model, "source": self.source, "certified_K": self.certified_K,
+                "certified": self.certified, "returned_is_certified": self.returned_is_certified,
+                "difference": self.difference, "on_range_edge": list(self.on_range_edge), "determined": self.determined}
+
+
+def calibration_claim(out) -> CalibrationClaim:
+    """The calibration claim of a pipeline.Reconstruction: its metric K, the autocalibration
+    stage's (out.stages[1]) certified K, and the motion judged there."""
+    stage = out.stages[1]
+    K = None if out.metric is None or out.metric.K is None else np.asarray(out.metric.K, dtype=float)
+    varying = out.metric is not None and out.metric.Ks is not None
+    known = stage.get("status") == "skipped" and "K is known" in (stage.get("reason") or "")
+    certified = bool(stage.get("certified")) and stage.get("K") is not None and K is not None
+    cert = np.asarray(stage["K"], dtype=float) if certified else None
+    warnings, edges, difference, same_K = [], [], None, False
+    if cert is not None:
+        same_K = bool(same(K, cert) and not varying)
+        difference = k_difference(K, cert)
+        if not same_K:
+            which = ("each camera has its own focal length (camera_model \"varying\"), calibration.K the middle one's"
+                     if varying else "the cameras returned use the adjusted K")
+            warnings.append({"code": "returned_K_not_certified", "detail": (
+                f"the bundle adjustment moved K from the certified one (focal {difference['focal_percent']:+.2f}%, "
+                f"principal point {difference['principal_point_px']:.1f} px): {which}; the certificate is about "
+                "calibration.certified_K")})
+        edges = on_range_edge(cert, stage.get("intrinsics") or {})
+        if edges:
+            warnings.append({"code": "certified_K_on_range_edge", "detail": (
+                f"the certified K's {', '.join(edges)} lies on the edge of its search range: the range, not the "
+                "tracks, stops it there; widen options.intrinsics to let the data decide")})
+    critical = stage.get("critical_motion")
+    if critical:
+        warnings.append({"code": "critical_motion", "detail": f"{critical}: the tracks do not determine a constant K"})
+    determined = None if known or K is None else bool(certified and not critical and not edges
+                                                      and stage.get("determined") is not False)
+    source = "given" if known else "none" if K is None else "autocalibration" if same_K else "bundle_adjustment"
+    return CalibrationClaim(None if K is None else K.tolist(), source, None if cert is None else cert.tolist(),
+                            certified, same_K, difference, tuple(edges), determined, tuple(warnings),
+                            "varying" if varying else "shared")

@@ -1,0 +1,51 @@
+"""What a reconstruction's summary.calibration states about K, as figures the pipeline writes
+and the verifier recomputes from the returned cameras (numpy only): whether two K are the same,
+how far the returned K moved from the certified one, and which certified intrinsics lie on the
+edge of the autocalibration's search range (there the range, not the tracks, stops the optimum,
+so K is not determined by the data)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+EDGE_FRACTION = 0.01  # a certified intrinsic within this fraction of its range's width from an end is on the edge
+SAME = 1e-9  # relative to K's largest entry: the same K up to rounding and JSON round trips
+
+
+def same(a, b) -> bool:
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return bool(a.shape == b.shape and np.all(np.abs(a - b) <= SAME * max(1.0, float(np.abs(b).max()))))
+
+
+def intrinsics(K) -> dict:
+    K = np.asarray(K, dtype=float)
+    return {"focal": float(K[0, 0]), "aspect": float(K[1, 1] / K[0, 0]), "skew": float(K[0, 1]),
+            "principal_point": [float(K[0, 2]), float(K[1, 2])]}
+
+
+def difference(K, certified_K) -> dict:
+    """How far K is from certified_K: focal length (percent), principal point (pixels), aspect
+    and skew (pixels)."""
+    a, b = intrinsics(K), intrinsics(certified_K)
+    return {"focal_percent": 100.0 * (a["focal"] / b["focal"] - 1.0),
+            "principal_point_px": float(np.hypot(a["principal_point"][0] - b["principal_point"][0],
+                                                 a["principal_point"][1] - b["principal_point"][1])),
+            "aspect": a["aspect"] - b["aspect"], "skew_px": a["skew"] - b["skew"]}
+
+
+def on_range_edge(K, ranges: dict) -> list[str]:
+    """The intrinsics of K within EDGE_FRACTION of an end of their range (ranges as the
+    autocalibration states them: focal, aspect, skew [lo, hi], principal_point [[u], [v]])."""
+    values, edges = intrinsics(K), []
+    pairs = [(name, values[name], ranges.get(name)) for name in ("focal", "aspect", "skew")]
+    pp = ranges.get("principal_point")
+    if pp is not None:
+        pairs += [("principal_point_u", values["principal_point"][0], pp[0]),
+                  ("principal_point_v", values["principal_point"][1], pp[1])]
+    for name, value, bounds in pairs:
+        if bounds is None or not bounds[1] > bounds[0]:
+            continue
+        where = (value - bounds[0]) / (bounds[1] - bounds[0])
+        if where <= EDGE_FRACTION or where >= 1 - EDGE_FRACTION:
+            edges.append(name)
+    return edges

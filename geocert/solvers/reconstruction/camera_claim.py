@@ -1,0 +1,106 @@
+"""What a certified camera of a reconstruction claims, stated once for the pipeline and the
+verifier (numpy only).
+
+The certified resection (thesis 5.5.2) proves a lower bound on the cost of every 3x4 camera that
+puts the camera's points in front of it: 11 degrees of freedom. A returned camera P = K [R | t]
+has fewer of its own: its pose (6), plus the intrinsics the cameras do not share (the "varying"
+model's focal length: 7). Even the true camera therefore costs more than the 11-parameter optimum,
+by the part of the noise the d = 11 - dof extra parameters fit: with Gaussian pixel noise and the
+L2L2 cost, cost_returned - cost_free ~ sigma^2 chi^2(d) and cost_free ~ sigma^2 chi^2(2N - 11) for
+N points, so the returned camera's excess over the free one is about d / (2N - 11) of the cost
+(5 / 389 = 1.3% for 200 points, above a 1% gap: why no camera was certified against the bound
+alone). The L1 costs (L2L1, L1L1) are maximum likelihood under Laplace noise, where twice the
+excess over the noise's scale is chi^2(d) and the cost is about 2N - 11 scales: half the fraction.
+
+A camera is certified when
+
+    cost <= (1 + tolerance) * lower_bound + abs_gap,
+    1 + tolerance = (1 + allowance) / (1 - camera_rel_gap),
+    allowance = CHI2_999[d] / (k * (2N - 11)),   k = 1 for L2L2, 2 for L2L1 and L1L1,
+
+lower_bound the certified resection's proven bound on every 3x4 camera putting the points in
+front: the returned camera fits its points as well as the best 3x4 camera does, up to what its
+d missing degrees of freedom explain at the 99.9% level (the chi-square test of the returned
+camera against the free one) and the search's own gap. Where the allowance would exceed
+MAX_ALLOWANCE (fewer than 26 points for a shared K under L2L2: so few points cannot tell a sound
+camera from a wrong one by a ratio of costs) it is withheld (0): the camera is then certified
+only as a 3x4 camera would be, against the bound and the search's gap alone (exact data are).
+``dof`` is read from the cameras returned (``degrees_of_freedom``), so a verifier recomputes
+every figure from the result."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# Chi-square quantiles at 0.999 for 1 to 5 degrees of freedom (scipy.stats.chi2.ppf(0.999, d)).
+CHI2_999 = {1: 10.828, 2: 13.816, 3: 16.266, 4: 18.467, 5: 20.515}
+PROJECTIVE_DOF = 11  # a 3x4 camera up to scale
+POSE_DOF = 6
+MAX_ALLOWANCE = 0.5
+SAME = 1e-9  # relative: intrinsics equal up to JSON round trips are shared
+
+
+def _intrinsics(K) -> np.ndarray:
+    """(focal, aspect, skew, u, v) of a K (K[2][2] = 1)."""
+    K = np.asarray(K, dtype=float)
+    return np.array([K[0, 0], K[1, 1] / K[0, 0], K[0, 1], K[0, 2], K[1, 2]])
+
+
+def degrees_of_freedom(Ks: list) -> int:
+    """A returned camera's own degrees of freedom: its pose (6) plus one per intrinsic (focal,
+    aspect, skew, principal point u and v) that is not the same in every registered camera's K
+    (a shared K is fitted to every view, not to one camera)."""
+    if not Ks:
+        return POSE_DOF
+    values = np.array([_intrinsics(K) for K in Ks])
+    focal = max(float(np.abs(values[:, 0]).max()), 1.0)
+    scales = np.array([focal, 1.0, focal, focal, focal])  # pixels against the focal length; the aspect is a ratio
+    varying = np.any(np.abs(values - values[0]) > SAME * scales, axis=0)
+    return POSE_DOF + int(varying.sum())
+
+
+def model_allowance(points: int, dof: int, norm: str) -> float | None:
+    """The excess over the 11-parameter optimum the returned camera's fewer degrees of freedom
+    explain (module docstring), before MAX_ALLOWANCE; None when the points cannot carry the
+    comparison (2N - 11 < 1)."""
+    residual_dof = 2 * points - PROJECTIVE_DOF
+    if residual_dof < 1:
+        return None
+    d = PROJECTIVE_DOF - dof
+    if d <= 0:
+        return 0.0
+    return CHI2_999[min(d, 5)] / ((1.0 if norm == "L2L2" else 2.0) * residual_dof)
+
+
+def allowance(points: int, dof: int, norm: str) -> float | None:
+    """The allowance a camera is given: model_allowance, withheld (0) above MAX_ALLOWANCE."""
+    extra = model_allowance(points, dof, norm)
+    return None if extra is None else 0.0 if extra > MAX_ALLOWANCE else extra
+
+
+def tolerance(points: int, dof: int, norm: str, rel_gap: float) -> float | None:
+    """The relative tolerance of a camera seeing ``points`` points, with ``dof`` of its own,
+    against the resection's bound proven to ``rel_gap``; None when it cannot be certified
+    (fewer than 6 points, or a gap of 1 or more)."""
+    extra = allowance(points, dof, norm)
+    if extra is None or not 0 <= rel_gap < 1:
+        return None
+    return (1.0 + extra) / (1.0 - rel_gap) - 1.0
+
+
+def within(cost: float, lower_bound: float, tolerance_: float, abs_gap: float) -> bool:
+    """The certified camera's inequality: cost <= (1 + tolerance) * lower_bound + abs_gap."""
+    return bool(math.isfinite(cost) and cost <= (1.0 + tolerance_) * lower_bound + abs_gap)
+
+
+def statement(norm: str, rel_gap: float) -> str:
+    """What "certified" says of a camera, in words (the result's cameras stage and summary)."""
+    k = "" if norm == "L2L2" else "2 * "
+    return (f"a certified camera's cost on its points is at most (1 + tolerance) times the lower bound the certified "
+            f"resection proves for every 3x4 camera putting those points in front (plus abs_gap); 1 + tolerance = "
+            f"(1 + allowance) / (1 - camera_rel_gap {rel_gap:g}), allowance = chi2_0.999(11 - degrees_of_freedom) / "
+            f"({k}(2 * points - 11)): what the returned camera's fewer degrees of freedom (its pose, plus the "
+            f"intrinsics the cameras do not share) cost at the 99.9% level, not an error in it; withheld (0) where "
+            f"it would exceed {MAX_ALLOWANCE:g}")
