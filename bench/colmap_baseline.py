@@ -43,9 +43,11 @@ def photos_key(photo_set, names: list[str]) -> str:
     return f"{len(names)} photos|{'|'.join(names)}|sha1 {digest.hexdigest()}"
 
 
-def options_key(known_K) -> str:
-    """What the result depends on besides the photos and their order."""
-    camera = "PINHOLE fixed " + ",".join(f"{v:.6g}" for v in known_K) if known_K is not None else "defaults"
+def options_key(known_K, model: str | None = None) -> str:
+    """What the result depends on besides the photos and their order (``model``: a camera model
+    other than COLMAP's default with K unknown, e.g. "SIMPLE_PINHOLE")."""
+    camera = ("PINHOLE fixed " + ",".join(f"{v:.6g}" for v in known_K) if known_K is not None
+              else model if model else "defaults")
     return f"pycolmap {version()}; extract_features AUTO, match_exhaustive, incremental_mapping, cpu; camera {camera}"
 
 
@@ -67,7 +69,7 @@ def png_name(name: str) -> str:
     return name if Path(name).suffix.lower() in (".png", ".jpg", ".jpeg") else name + ".png"
 
 
-def run_in_child(photo_set, names: list[str], known_K, timeout_s: float) -> dict:
+def run_in_child(photo_set, names: list[str], known_K, timeout_s: float, model: str | None = None) -> dict:
     """One COLMAP run in a child process: its result (see reconstruct) with wall and CPU seconds
     (the child's user + system time, every thread), or {"error": ...}."""
     with tempfile.TemporaryDirectory(prefix="colmap-bench-") as work:
@@ -75,7 +77,7 @@ def run_in_child(photo_set, names: list[str], known_K, timeout_s: float) -> dict
         (work / "images").mkdir()
         stage_images(photo_set, names, work / "images")
         spec = {"images": str(work / "images"), "names": [png_name(n) for n in names], "work": str(work),
-                "K": None if known_K is None else [float(v) for v in known_K]}
+                "K": None if known_K is None else [float(v) for v in known_K], "model": model}
         (work / "spec.json").write_text(json.dumps(spec))
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         start = time.perf_counter()
@@ -96,9 +98,11 @@ def run_in_child(photo_set, names: list[str], known_K, timeout_s: float) -> dict
         return {**result, "wall_s": wall, "cpu_s": cpu}
 
 
-def reconstruct(images: str, names: list[str], work: str, known_K) -> dict:
+def reconstruct(images: str, names: list[str], work: str, known_K, camera_model: str | None = None) -> dict:
     """COLMAP on the photos (see the module's docstring): the largest model's cameras per photo
-    name (K, R, t as x = K [R | t] X; distortion ignored), points, models, CPU per stage."""
+    name (K, R, t as x = K [R | t] X; distortion ignored), points, models, CPU per stage.
+    ``camera_model`` (K unknown): the camera model instead of COLMAP's default (SIMPLE_RADIAL), e.g.
+    "SIMPLE_PINHOLE" (one focal length, no distortion: geocert's "simple")."""
     import pycolmap
 
     work = Path(work)
@@ -111,6 +115,8 @@ def reconstruct(images: str, names: list[str], work: str, known_K) -> dict:
         reader.camera_model, reader.camera_params = "PINHOLE", f"{fx},{fy},{cx},{cy}"
         mode = pycolmap.CameraMode.SINGLE
         mapper.ba_refine_focal_length = mapper.ba_refine_principal_point = mapper.ba_refine_extra_params = False
+    elif camera_model:
+        reader.camera_model = camera_model
     cpu = {}
     mark = time.process_time()
     pycolmap.extract_features(database, images, image_names=names, camera_mode=mode, reader_options=reader,
@@ -150,4 +156,5 @@ def store(root: Path, key: str, result: dict) -> None:
 
 if __name__ == "__main__":
     spec = json.loads(Path(sys.argv[1]).read_text())
-    Path(sys.argv[2]).write_text(json.dumps(reconstruct(spec["images"], spec["names"], spec["work"], spec["K"])))
+    Path(sys.argv[2]).write_text(json.dumps(reconstruct(spec["images"], spec["names"], spec["work"], spec["K"],
+                                                            spec.get("model"))))

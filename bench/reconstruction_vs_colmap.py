@@ -25,7 +25,7 @@ with geocert; a set whose files are missing is reported with where to get it.
     .venv/bin/pip install -e '.[bench]'       # pycolmap
     .venv/bin/python -m bench.reconstruction_vs_colmap [--data DIR] [--sets dinoSparseRing,templeRing]
         [--orders file,shuffled,every2] [--seed 0] [--runs colmap,colmap-K,geocert,geocert-readme,
-        geocert-K,geocert-K-readme]
+        geocert-K,geocert-K-readme; colmap-pinhole on request]
         [--no-colmap | --reuse-colmap] [--timeout 1800] [--json OUT.json]
 
 COLMAP's results are stored in DATA/colmap_cache.json (keyed by set, the photos in their order
@@ -61,6 +61,8 @@ README_OPTIONS = {"min_inliers": 10, "merge_components": True,
 README_SETS = ("dinoSparseRing",)
 SETS = ("dinoSparseRing", "templeRing", "templeSparseRing", "corridor", "corridor-matches", "sceaux")
 RUNS = ("colmap", "colmap-K", "geocert", "geocert-readme", "geocert-K", "geocert-K-readme")
+# Runs on request (--runs): COLMAP with SIMPLE_PINHOLE, no distortion term (what the radial term is worth).
+EXTRA_RUNS = ("colmap-pinhole",)
 
 
 def geocert_job(photo_set, names: list[str], options: dict, matches: bool) -> dict:
@@ -149,18 +151,22 @@ def colmap_figures(run: dict) -> dict:
     return {"cameras": cameras, "points": run.get("points"), "registered": len(cameras), "models": run.get("models")}
 
 
-def colmap_run(photo_set, key: str, names, root: Path, known: bool, args) -> dict | None:
+def colmap_run(photo_set, key: str, names, root: Path, run_name: str, args) -> dict | None:
     """COLMAP on the photos, or its cached result (--reuse-colmap, --no-colmap); None when
-    --no-colmap and nothing is cached."""
+    --no-colmap and nothing is cached. ``run_name``: "colmap" (K unknown, COLMAP's default camera
+    SIMPLE_RADIAL), "colmap-K" (K known) or "colmap-pinhole" (K unknown, SIMPLE_PINHOLE: no
+    distortion term, the camera geocert's adjustment has without one)."""
     K = photo_set.K
-    known_K = (K[0, 0], K[1, 1], K[0, 2], K[1, 2]) if known else None
-    cache_key = f"{key}|{colmap_baseline.photos_key(photo_set, names)}|{colmap_baseline.options_key(known_K)}"
+    known_K = (K[0, 0], K[1, 1], K[0, 2], K[1, 2]) if run_name == "colmap-K" else None
+    model = "SIMPLE_PINHOLE" if run_name == "colmap-pinhole" else None
+    cache_key = (f"{key}|{colmap_baseline.photos_key(photo_set, names)}|"
+                 f"{colmap_baseline.options_key(known_K, model)}")
     if args.reuse_colmap or args.no_colmap:
         if (hit := colmap_baseline.cached(root, cache_key)) is not None:
             return {**hit, "cached": True}
         if args.no_colmap:
             return None
-    run = colmap_baseline.run_in_child(photo_set, names, known_K, args.timeout)
+    run = colmap_baseline.run_in_child(photo_set, names, known_K, args.timeout, model)
     run["load"] = os.getloadavg()[0]
     if "error" not in run:
         colmap_baseline.store(root, cache_key, run)
@@ -236,7 +242,7 @@ def bench_set(set_key: str, args, root: Path, records: list) -> None:
         for run_name in args.runs:
             load = os.getloadavg()[0]
             if run_name.startswith("colmap"):
-                run = None if matches else colmap_run(photo_set, set_key, names, root, run_name == "colmap-K", args)
+                run = None if matches else colmap_run(photo_set, set_key, names, root, run_name, args)
                 if run is None:
                     continue
                 figures = {"error": run["error"]} if "error" in run else colmap_figures(run)
@@ -248,8 +254,8 @@ def bench_set(set_key: str, args, root: Path, records: list) -> None:
                     continue
                 run = run_geocert(geocert_job(photo_set, names, options, matches), args.timeout)
                 figures = {"error": run["error"]} if "error" in run else geocert_figures(run["result"])
-            # COLMAP's own rows against the ground truth (its K only, for a set without poses)
-            truth, note = reference(photo_set, None if run_name.startswith("colmap") else colmap.get("colmap"))
+            # COLMAP's colmap and colmap-K rows against the ground truth (its K only, for a set without poses)
+            truth, note = reference(photo_set, None if run_name in ("colmap", "colmap-K") else colmap.get("colmap"))
             errors = {} if "error" in figures else camera_errors.compare(figures["cameras"], truth)
             baseline = colmap.get("colmap-K" if run_name.startswith("geocert-K") and "colmap-K" in colmap else "colmap")
             print(row(set_key, label, run_name + (" (cached)" if run.get("cached") else ""), len(names), figures,
@@ -268,7 +274,7 @@ def main() -> None:
     parser.add_argument("--sets", default=",".join(SETS), help=f"comma-separated, of {', '.join(SETS)}")
     parser.add_argument("--orders", default="file,shuffled,every2", help="file, shuffled, every2 (dense rings only)")
     parser.add_argument("--seed", type=int, default=0, help="the shuffled order's seed (random.Random(seed))")
-    parser.add_argument("--runs", default=",".join(RUNS), help=f"comma-separated, of {', '.join(RUNS)}")
+    parser.add_argument("--runs", default=",".join(RUNS), help=f"comma-separated, of {', '.join(RUNS + EXTRA_RUNS)}")
     parser.add_argument("--no-colmap", action="store_true", help="never run COLMAP: its cached results only")
     parser.add_argument("--reuse-colmap", action="store_true", help="COLMAP's cached results where there are, "
                         "COLMAP run for the others")

@@ -62,7 +62,11 @@ MIN_IMAGE_SIDE = 16
 @dataclass
 class FeatureOptions:
     max_features: int = 4000  # keypoints kept per image (the strongest); 0 keeps all
-    contrast_threshold: float = 0.04  # SIFT's DoG contrast threshold (OpenCV's default); lower finds more
+    # SIFT's DoG contrast threshold; lower finds fainter keypoints. OpenCV keeps a keypoint whose
+    # contrast exceeds this over its 3 layers per octave (on intensities in [0, 1]); COLMAP's SIFT
+    # keeps it above 0.02 / 3, so 0.02 here is COLMAP's default (OpenCV's own, 0.04, loses the faint
+    # keypoints of untextured objects: 4 of templeSparseRing's 16 views register instead of 16).
+    contrast_threshold: float = 0.02
     edge_threshold: float = 10.0  # SIFT's edge-response threshold (OpenCV's default)
     ratio: float = 0.8  # Lowe's ratio test: nearest / second nearest descriptor distance below this
     mutual: bool = True  # keep a match only when the two features are each other's nearest
