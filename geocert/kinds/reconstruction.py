@@ -76,8 +76,8 @@ class FeaturesIn(Strict):
     max_features: int | None = Field(None, **_F["max_features"], description="keypoints kept per image, the "
                                      "strongest (0: all; default 4000)")
     contrast_threshold: Finite | None = Field(None, **_F["contrast_threshold"],
-                                              description="SIFT's contrast threshold (default 0.02, COLMAP's; lower finds "
-                                                          "fainter keypoints)")
+                                              description="SIFT's contrast threshold (default 0.02, COLMAP's; "
+                                                          "lower finds fainter keypoints)")
     ratio: Finite | None = Field(None, **_F["ratio"], description="Lowe's ratio test (default 0.8)")
     ransac_threshold_px: Finite | None = Field(None, **_F["ransac_threshold_px"],
                                                description="epipolar distance of a verified match, pixels "
