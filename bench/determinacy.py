@@ -5,7 +5,7 @@ degenerate scenes (and real critical layouts) are flagged.
 
     .venv/bin/python -m bench.determinacy [--scenes 40] [--autocalibration-scenes 10] [--no-real]
 
-Real sets: under $GEOCERT_BENCH_DATA (default /work/bench-data) and $GEOCERT_SHARED_DATA (default
+Real sets: under $GEOCERT_BENCH_DATA (default bench-data beside the checkout) and $GEOCERT_SHARED_DATA (default
 /work/shared/data); those absent are left out.
 
 The intervals are 3 standard errors from the local curvature (README, "Determinacy"): for a
@@ -26,7 +26,7 @@ from geocert.solvers.autocalibration import scenes
 from geocert.solvers.core.determinacy import fixes
 
 SHARED_DATA = Path(os.environ.get("GEOCERT_SHARED_DATA", "/work/shared/data"))
-BENCH_DATA = Path(os.environ.get("GEOCERT_BENCH_DATA", "/work/bench-data"))
+BENCH_DATA = Path(os.environ.get("GEOCERT_BENCH_DATA") or Path(__file__).resolve().parents[2] / "bench-data")
 
 
 def cameras_looking_at_origin(centres: np.ndarray) -> np.ndarray:

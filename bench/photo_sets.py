@@ -2,7 +2,7 @@
 no geocert import, so a test of any layer may use them).
 
 Each set lives in its own folder under a data root (``--data`` of the benches, else the
-``GEOCERT_BENCH_DATA`` environment variable, else /work/bench-data); the photos are used as
+``GEOCERT_BENCH_DATA`` environment variable, else bench-data beside the checkout); the photos are used as
 published, never downscaled. None of them ships with geocert: :func:`load` raises
 :class:`MissingSet` naming the folder and where the files come from, and a test that needs one
 skips with that message (``pytest.skip(str(error))``).
@@ -47,8 +47,10 @@ from pathlib import Path
 
 import numpy as np
 
-DEFAULT_ROOT = Path("/work/bench-data")
-SHARED = Path("/work/shared/data")
+# Where the fetched photo sets are (GEOCERT_BENCH_DATA or --data overrides), and the shared data
+# set beside the checkout (GEOCERT_SHARED_DATA overrides), as the tests find it.
+DEFAULT_ROOT = Path(__file__).resolve().parents[2] / "bench-data"
+SHARED = Path(os.environ.get("GEOCERT_SHARED_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data")
 MIDDLEBURY = "https://vision.middlebury.edu/mview/data/ (Seitz et al., CVPR 2006)"
 VGG = "https://www.robots.ox.ac.uk/~vgg/data/data-mview.html (Visual Geometry Group, University of Oxford)"
 

@@ -26,7 +26,7 @@ from geocert.solvers.autocalibration import determinacy, scenes
 from geocert.solvers.core.determinacy import fixes
 from tests.support import shared_data
 
-BENCH_DATA = Path(os.environ.get("GEOCERT_BENCH_DATA", "/work/bench-data"))
+BENCH_DATA = Path(os.environ.get("GEOCERT_BENCH_DATA") or Path(__file__).resolve().parents[3] / "bench-data")
 
 
 def needs(path: Path) -> Path:
