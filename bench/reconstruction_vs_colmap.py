@@ -270,7 +270,8 @@ def bench_set(set_key: str, args, root: Path, records: list) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", default=None, help="data root (default $GEOCERT_BENCH_DATA or bench-data beside the checkout)")
+    parser.add_argument("--data", default=None, help="data root (default $GEOCERT_BENCH_DATA, else bench-data "
+                        "beside the checkout)")
     parser.add_argument("--sets", default=",".join(SETS), help=f"comma-separated, of {', '.join(SETS)}")
     parser.add_argument("--orders", default="file,shuffled,every2", help="file, shuffled, every2 (dense rings only)")
     parser.add_argument("--seed", type=int, default=0, help="the shuffled order's seed (random.Random(seed))")
