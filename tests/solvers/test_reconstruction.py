@@ -243,12 +243,13 @@ class TestSanityLayer:
 
 
 class TestCalibrationClaim:
-    def _out(self, certified_K, returned_K, ranges, critical=None):
+    def _out(self, certified_K, returned_K, ranges, critical=None, adjusted=True):
         stage = {"name": "autocalibration", "status": "done", "certified": True, "K": certified_K,
                  "intrinsics": ranges, "critical_motion": critical, "determined": critical is None}
+        adjustment = {"name": "bundle_adjustment", "status": "done" if adjusted else "skipped"}
         metric = upgrade.Metric(np.array(returned_K, dtype=float), [np.eye(3)], [np.zeros(3)], np.zeros((0, 3)),
                                 [], True)
-        return pipeline.Reconstruction([], [], [{"name": "projective"}, stage], metric=metric)
+        return pipeline.Reconstruction([], [], [{"name": "projective"}, stage, adjustment], metric=metric)
 
     RANGES = {"focal": [192.0, 3200.0], "aspect": [0.95, 1.05], "skew": [-6.4, 6.4],
               "principal_point": [[160.0, 480.0], [120.0, 360.0]]}
@@ -270,6 +271,16 @@ class TestCalibrationClaim:
         assert not claim.returned_is_certified and claim.source == "bundle_adjustment"
         assert abs(claim.difference["focal_percent"] - 4.0) < 1e-9 and abs(claim.difference["principal_point_px"] - 2.0) < 1e-9
         assert "returned_K_not_certified" in [w["code"] for w in claim.warnings]
+
+    def test_without_an_adjustment_the_K_moved_by_the_camera_model_says_so(self):
+        # bundle_adjustment false, camera_model "simple": the principal point put at the image
+        # centre and the pixels made square moved K; no adjustment did.
+        certified = [[1000.0, 0.0, 320.7], [0.0, 1001.0, 240.0], [0.0, 0.0, 1.0]]
+        returned = [[1000.5, 0.0, 320.0], [0.0, 1000.5, 240.0], [0.0, 0.0, 1.0]]
+        claim = claims.calibration_claim(self._out(certified, returned, self.RANGES, adjusted=False))
+        assert claim.source == "camera_model" and not claim.returned_is_certified
+        warning = next(w for w in claim.warnings if w["code"] == "returned_K_not_certified")
+        assert "camera model" in warning["detail"] and "bundle adjustment" not in warning["detail"]
 
     def test_a_claim_about_a_K_not_returned_is_impossible(self):
         with pytest.raises(ValueError):

@@ -92,7 +92,10 @@ class CalibrationClaim:
     the edge is the range's, not the data's)."""
 
     K: list | None
-    source: str  # "given", "autocalibration", "bundle_adjustment" or "none"
+    # "given", "autocalibration", "bundle_adjustment" (it moved K), "camera_model" (no adjustment:
+    # the model's constraints, square pixels and the principal point at the image centre, moved
+    # the certified K) or "none"
+    source: str
     certified_K: list | None
     certified: bool
     returned_is_certified: bool
@@ -132,6 +135,7 @@ def calibration_claim(out) -> CalibrationClaim:
     certified = bool(stage.get("certified")) and stage.get("K") is not None and K is not None
     cert = np.asarray(stage["K"], dtype=float) if certified else None
     warnings, edges, difference, same_K = [], [], None, False
+    adjusted = any(s.get("name") == "bundle_adjustment" and s.get("status") != "skipped" for s in out.stages)
     if cert is not None:
         same_K = bool(same(K, cert) and not varying)
         difference = k_difference(K, cert)
@@ -139,7 +143,8 @@ def calibration_claim(out) -> CalibrationClaim:
             which = ("each camera has its own focal length (camera_model \"varying\"), calibration.K the middle one's"
                      if varying else "the cameras returned use the adjusted K")
             warnings.append({"code": "returned_K_not_certified", "detail": (
-                f"the bundle adjustment moved K from the certified one (focal {difference['focal_percent']:+.2f}%, "
+                f"{'the bundle adjustment' if adjusted else 'the camera model (no adjustment)'} moved K from the "
+                f"certified one (focal {difference['focal_percent']:+.2f}%, "
                 f"principal point {difference['principal_point_px']:.1f} px): {which}; the certificate is about "
                 "calibration.certified_K")})
         edges = on_range_edge(cert, stage.get("intrinsics") or {})
@@ -152,7 +157,8 @@ def calibration_claim(out) -> CalibrationClaim:
         warnings.append({"code": "critical_motion", "detail": f"{critical}: the tracks do not determine a constant K"})
     determined = None if known or K is None else bool(certified and not critical and not edges
                                                       and stage.get("determined") is not False)
-    source = "given" if known else "none" if K is None else "autocalibration" if same_K else "bundle_adjustment"
+    source = ("given" if known else "none" if K is None else "autocalibration" if same_K
+              else "bundle_adjustment" if adjusted else "camera_model")
     return CalibrationClaim(None if K is None else K.tolist(), source, None if cert is None else cert.tolist(),
                             certified, same_K, difference, tuple(edges), determined, tuple(warnings),
                             "varying" if varying else "shared")
