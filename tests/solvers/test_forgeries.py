@@ -807,7 +807,8 @@ class TestSummaryFieldsUntied:
     naming camera_rel_gap 0.25 verifies beside options of 0.999."""
 
     @pytest.mark.xfail(strict=True, reason="_check_summary recomputes views, points, observations, certified counts "
-                                           "and RMS only: tracks, points_dropped, cameras_dropped, observations_removed "
+                                           "and RMS only: tracks, points_dropped, cameras_dropped, "
+                                           "observations_removed "
                                            "and camera_claim are read by no check (nor said to be informational)")
     @pytest.mark.parametrize("changes", [{"tracks": 1000}, {"points_dropped": 7}, {"cameras_dropped": 5},
                                          {"observations_removed": 77},
@@ -829,7 +830,8 @@ class TestCalibrationClaimsBehindNoProof:
     flags are what a user reads first.)"""
 
     @pytest.mark.xfail(strict=True, reason="_check_calibration returns at once when summary.calibration is absent: the "
-                                           "summary's autocalibration_* flags and calibration warnings are then unchecked")
+                                           "summary's autocalibration_* flags and calibration warnings are then "
+                                           "unchecked")
     def test_determined_claimed_with_the_calibration_removed_is_refused(self, calibrated_reconstruction):
         forged = copy.deepcopy(calibrated_reconstruction)
         assert forged["summary"]["critical_motion"]
