@@ -870,9 +870,10 @@ def _moved_camera_result(result: dict, view: int, degrees: float, camera_rel_gap
     ``degrees`` about its centre (K kept): the points triangulated anew in the moved cameras, the
     camera certificate solved with ``camera_rel_gap`` on them, each searched camera called
     certified exactly when its claim holds (camera_claim), and the counts to match. The summary's
-    camera_claim text is left as it was. ``abs_gap``: the result solved with it instead. ``on_rays``: track 0 loses its observation in ``view``
-    (it stays certified), and every other point is returned uncertified, placed on the moved
-    camera's ray through its observation there."""
+    camera_claim text is left as it was. ``abs_gap``: the result solved with it instead.
+    ``on_rays``: track 0 loses its observation in ``view`` (it stays certified), and every other
+    point is returned uncertified, placed on the moved camera's ray through its observation
+    there."""
     from geocert.batch import solve_job
     from geocert.solvers.core.geometry import norm_cost
     from geocert.solvers.reconstruction import camera_claim
@@ -978,9 +979,9 @@ class TestCameraToleranceFromOptions:
         assert "camera_rel_gap 0.25" in forged["summary"]["camera_claim"]
         assert refused(forged)["check"] == "returned"
 
-    @pytest.mark.xfail(strict=True, reason="abs_gap is accepted unbounded (the kind's range: >= 0) and every point's and "
-                                           "camera's tolerance includes it: with abs_gap 1e6 every item is certified "
-                                           "whatever it costs, and nothing a user reads first says so")
+    @pytest.mark.xfail(strict=True, reason="abs_gap is accepted unbounded (the kind's range: >= 0) and every point's "
+                                           "and camera's tolerance includes it: with abs_gap 1e6 every item is "
+                                           "certified whatever it costs, and nothing a user reads first says so")
     def test_a_moved_camera_certified_by_a_huge_abs_gap_is_refused(self, calibrated_reconstruction):
         forged = _moved_camera_result(calibrated_reconstruction, 4, 20.0, 0.25, abs_gap=1e6)
         assert all(c["certified"] for c in forged["cameras"]) and forged["summary"]["points_certified"] == 16
