@@ -275,7 +275,13 @@ def allowed(setup: direct.DirectSetup, orientation: direct.Orientation, Q: np.nd
     """Chirality and the focal rows (the polish is unconstrained: it can slide towards f -> 0). The
     rows within direct.PSD_TOLERANCE of Q's trace, as the domain check (direct.in_domain) and the
     verifier hold them: a relaxation whose optimum has a focal length at a range's end rounds to a
-    Q on that row, by round-off on either side of it (Table 7.1's seed 1072, varying focal)."""
+    Q on that row, by round-off on either side of it (Table 7.1's seed 1072, varying focal). And
+    rank 3 beyond round-off: a polish can slide to a rank-1 Q (eigenvalues 1, 0, 0, 0 to 1e-17,
+    seed 1008 without the focal rows, on some BLAS kernels), which no metric upgrade comes from
+    and on which chirality's products hold trivially."""
+    values = np.linalg.eigvalsh(Q)
+    if not values[1] > direct.PSD_TOLERANCE * np.abs(values).max():
+        return False
     return direct.chirality_holds(orientation, Q) and direct.within_focal(setup, Q / np.trace(Q),
                                                                           direct.PSD_TOLERANCE)
 
