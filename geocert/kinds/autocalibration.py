@@ -232,7 +232,7 @@ class AutocalibrationKind:
         from geocert.solvers.autocalibration import determinacy, proofs, stratified  # the conic solver, only to solve
 
         if options.method == "direct":  # thesis ch. 7: one stage
-            from geocert.solvers.autocalibration.direct_result import solve_document
+            from geocert.kinds.direct_autocalibration import solve_document
 
             return solve_document(parsed, options, callback)
         problem = pr.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)

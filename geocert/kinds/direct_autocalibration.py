@@ -1,5 +1,6 @@
-"""The direct method's result document (the autocalibration kind dispatches here for
-options.method = "direct"): one stage, "direct", and the fields the stratified method returns."""
+"""The autocalibration kind's result document for options.method = "direct" (kinds/autocalibration
+dispatches here): one stage, "direct", and the fields the stratified method returns. It is wire
+contract, built from the estimators in solvers/autocalibration, so it lives with the kind."""
 
 from __future__ import annotations
 
