@@ -19,9 +19,8 @@ from scipy.spatial.transform import Rotation
 from geocert.solvers.core.geometry import InputError
 from geocert.pipelines.reconstruction import features
 from geocert.solvers.reconstruction import calibrated
-from geocert.solvers.reconstruction.calibrated import (CalibratedOptions, align_rotations,
-                                                       calibrated_reconstruction, refine_cameras,
-                                                       rotation_angle_deg)
+from bench.camera_errors import align_rotations, rotation_angle_deg
+from geocert.solvers.reconstruction.calibrated import CalibratedOptions, calibrated_reconstruction, refine_cameras
 from geocert.pipelines.reconstruction.features import (FeatureOptions, build_tracks, decode_image,
                                                      tracks_from_images)
 from geocert.solvers.reconstruction.render import box_scene

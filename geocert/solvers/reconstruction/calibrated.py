@@ -135,25 +135,6 @@ def max_ray_angle_deg(centres: np.ndarray, X: np.ndarray) -> float:
     return float(np.degrees(np.arccos(cos.min())))
 
 
-def rotation_angle_deg(R: np.ndarray) -> float:
-    """R's angle of rotation in degrees: atan2 of its sine (half the skew part's size) and cosine
-    (from the trace). The cosine alone cannot resolve angles below 8.5e-7 degrees (one rounding of
-    a trace near 3): rotations right to 1e-16 read 0 or 1.2e-6 degrees by the rounding's path."""
-    sine = 0.5 * np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    return float(np.degrees(np.arctan2(sine, 0.5 * (np.trace(R) - 1.0))))
-
-
-def align_rotations(estimated: list[np.ndarray], truth: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """The world rotation A with R_est A closest to R_true over the given views (chordal L2 mean of
-    R_est^T R_true, projected on SO(3)), and each view's angle (degrees) between R_est A and R_true.
-    Rotations are invariant to the world's translation and scale, so this is the rotation part of a
-    similarity alignment."""
-    M = sum(Re.T @ Rt for Re, Rt in zip(estimated, truth))
-    U, _, Vt = np.linalg.svd(M)
-    A = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
-    return A, np.array([rotation_angle_deg((Re @ A).T @ Rt) for Re, Rt in zip(estimated, truth)])
-
-
 # ---------------------------------------------------------------------------------------------
 # State
 
