@@ -273,6 +273,11 @@ def _view_residual(coef, cameras, j, entries):
     return np.array([np.cbrt(np.linalg.det(A)) * tr - minors])
 
 
+def _moved(move: float) -> str:
+    """How far a critical family moves K, in words (a relative move of the focal length)."""
+    return "to no calibration at all" if not math.isfinite(move) else f"by {100 * move:.3g}% of the focal length"
+
+
 def motion_warnings(H: np.ndarray, centres: np.ndarray | None, noise: float | None = None,
                     omega: np.ndarray | None = None, reference: np.ndarray | None = None,
                     plane_noise: float | None = None) -> list[dict]:
@@ -295,8 +300,7 @@ def motion_warnings(H: np.ndarray, centres: np.ndarray | None, noise: float | No
         planes = rotation_plane_family(H, reference, centres, noise if plane_noise is None else plane_noise)
         if planes is not None and planes["largest_move"] > RELATIVE_WIDTH:
             code, looks = motion_name(H, centres)
-            move = planes["largest_move"]
-            moved = "to no calibration at all" if not math.isfinite(move) else f"by {100 * move:.3g}% of the focal length"
+            moved = _moved(planes["largest_move"])
             return [{"code": code,
                      "detail": f"the modulus cost rises by no more than the noise ({SIGMAS:g} standard errors, each "
                                f"camera known to {planes['sigma']:.2g}) along a family of planes at infinity that "
@@ -310,8 +314,7 @@ def motion_warnings(H: np.ndarray, centres: np.ndarray | None, noise: float | No
     if family["free"] >= 5 and not still:
         return []
     code, looks = motion_name(H, centres)
-    move = family["largest_move"]
-    moved = "to no calibration at all" if not math.isfinite(move) else f"by {100 * move:.3g}% of the focal length"
+    moved = _moved(family["largest_move"])
     return [{"code": code,
              "detail": f"the DIAC is free along {family['free']} of its 5 directions at the data's noise level "
                        f"(sigma {family['sigma']:.2g}): {SIGMAS:g} standard errors along them move K {moved} "
