@@ -132,3 +132,31 @@ def test_a_bare_install_serves_the_readme_example(tmp_path):
     track = job["result"]["tracks"][0]
     assert track["certified"] and track["status"] == "optimal"
     assert track["cost"] == pytest.approx(0.5, rel=1e-3)
+
+
+# Distribution names whose import name differs.
+IMPORT_NAMES = {"opencv-python-headless": "cv2", "pydantic-settings": "pydantic_settings",
+                "prometheus-client": "prometheus_client", "fastapi-offline": "fastapi_offline"}
+
+
+def test_every_module_the_package_imports_is_declared():
+    """A module that comes along only as another package's dependency (starlette under fastapi,
+    billiard under celery) may leave with that package's next release: each third-party module
+    geocert imports is declared itself."""
+    import ast
+    import re
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    declared = set()
+    for requirement in project["dependencies"]:
+        name = re.match(r"[A-Za-z0-9_.-]+", requirement).group(0).lower()
+        declared.add(IMPORT_NAMES.get(name, name.replace("-", "_")))
+    imported = set()
+    for path in (ROOT / "geocert").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                imported.add(node.module.split(".")[0])
+            elif isinstance(node, ast.Import):
+                imported.update(alias.name.split(".")[0] for alias in node.names)
+    third_party = {name for name in imported if name not in sys.stdlib_module_names and name != "geocert"}
+    assert third_party - declared == set()
