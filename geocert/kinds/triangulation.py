@@ -8,11 +8,12 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
-from geocert.kinds.documents import brief_certificate, certificate_summary, outcome_document
+from geocert.kinds.documents import brief_certificate, certificate_summary, local_summary, outcome_document
 from geocert.kinds.schema import Camera, CertificateDocument, ItemOutcome, JobBase, JobStats, Pixel, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, check_cameras, number_array
 from geocert.solvers.fractional.items import MAX_VIEWS, TRACKS
 from geocert.solvers.fractional.options import TriangulationOptions
+from geocert.solvers.fractional.columns import SCOPE, TrackResults
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult
 
 
@@ -66,6 +67,29 @@ def track_document(result: TrackResult, detail: str = "full", full_certificate: 
         "every point in front of every camera")
     return {"point": result.point, "at_infinity": result.at_infinity, **outcome_document(result),
             "certificate": certificate}
+
+
+def track_documents(results: TrackResults, detail: str, full_certificate: bool) -> list[dict]:
+    """track_document of every result, the convexity path's columns read as arrays (no
+    TrackResult made for them): the same documents."""
+    documents: list = [None] * len(results)
+    local, rows = results.local, results.in_columns()
+    if local is not None and len(local.index):
+        proof = local.proof and (full_certificate or detail != "brief")
+        columns = zip(local.index.tolist(), local.point.tolist(), local.cost.tolist(), local.lower_bound.tolist(),
+                      local.gap.tolist(), local.tolerance.tolist(), local.radius.tolist())
+        for i, point, cost, lower, gap, tolerance, radius in columns:
+            if not rows[i]:
+                continue  # replaced by an object, made below
+            extra = {"proof": {"type": "convexity", "radius": radius}} if proof else {}
+            certificate = (extra or None) if detail == "brief" else \
+                local_summary(SCOPE, tolerance, radius, True, extra)
+            documents[i] = {"point": point, "at_infinity": False, "cost": cost, "lower_bound": lower, "gap": gap,
+                            "status": "optimal", "certified": True, "nodes": 0, "elapsed_s": local.elapsed_s,
+                            "reason": None, "certificate": certificate}
+    for i in np.flatnonzero(~rows).tolist():
+        documents[i] = track_document(results[i], detail, full_certificate)
+    return documents
 
 
 class TriangulationKind:
@@ -158,7 +182,7 @@ class TriangulationKind:
 
         tracks = [parsed.tracks[index] for index in indices]
         results = triangulate_many(parsed.cameras, tracks, options, callback)
-        documents = [track_document(result, options.detail, options.certificate == "full") for result in results]
+        documents = track_documents(results, options.detail, options.certificate == "full")
         if options.detail == "full":  # the same documents as _document's, for the whole batch at once
             for document, found in zip(documents, determinacy.tracks_many(parsed.cameras, tracks, results)):
                 document["determinacy"] = found
