@@ -107,7 +107,10 @@ def convexity_terms(flat: FlatTracks, x: np.ndarray) -> Terms:
     P, y = flat.rows, flat.points
     X = np.concatenate([x, np.ones((len(x), 1))], axis=1)[owner].T  # (4, m)
     proj = (P * X[None]).sum(axis=1)  # (3, m)
-    size = (np.abs(P) * np.abs(X)[None]).sum(axis=1)  # the sizes of the terms behind proj
+    # The sizes of the terms behind proj, summed in the order a sum over axis 1 takes (the same
+    # numbers), written out: the broadcast product with the transposed X is several times slower.
+    Pa, Xa = np.abs(P), np.abs(X)
+    size = Pa[:, 0] * Xa[0] + Pa[:, 1] * Xa[1] + Pa[:, 2] * Xa[2] + Pa[:, 3] * Xa[3]
     w, size_w = proj[2], size[2]
     t.w, t.size = w, size
     with np.errstate(all="ignore"):
