@@ -62,15 +62,17 @@ def in_range(values: np.ndarray) -> np.ndarray:
     return (size == 0) | ((size >= SMALLEST) & (size <= LARGEST))
 
 
-def convexity_bounds(flat: FlatTracks, x: np.ndarray, radii=RADII, strictness: float = 1.0):
+def convexity_bounds(flat: FlatTracks, x: np.ndarray, radii=RADII, strictness: float = 1.0,
+                     terms: "Terms | None" = None):
     """For every track t with point ``x[t]`` (T, 3): (lower, radius, cost), lower the proven
     bound on every point's cost in the scope (-inf where this test proves none), radius the R
     used (nan where none: the smallest of ``radii`` times the distance to the nearest principal
     plane that passes (E)), cost the point's sum of squared residuals as computed here.
     ``strictness`` > 1 asks each test to pass with its round-off allowances that many times over
     and a relative margin besides: a solver's claims then pass a checker's tests (strictness 1)
-    whose sums differ from its own in their last bits."""
-    terms = _terms(flat, x)
+    whose sums differ from its own in their last bits. ``terms``: convexity_terms(flat, x), when
+    the caller has them already."""
+    terms = terms if terms is not None else convexity_terms(flat, x)
     with np.errstate(all="ignore"):
         R = np.asarray(radii, dtype=float)[:, None] * terms.reach[None]  # (K, T)
         enclosed = _encloses(flat, terms, R, strictness)
@@ -82,7 +84,7 @@ def convexity_bounds(flat: FlatTracks, x: np.ndarray, radii=RADII, strictness: f
 def bounds_at(flat: FlatTracks, x: np.ndarray, radius: np.ndarray):
     """(lower, cost) of every track at its own radius (T,): lower -inf where (E) or (V) fails
     there (or the radius is not a positive number)."""
-    terms = _terms(flat, x)
+    terms = convexity_terms(flat, x)
     radius = np.asarray(radius, dtype=float)
     with np.errstate(all="ignore"):
         good = (radius > 0) & np.isfinite(radius)
@@ -91,23 +93,29 @@ def bounds_at(flat: FlatTracks, x: np.ndarray, radius: np.ndarray):
     return lower, cost
 
 
-class _Terms:
+class Terms:
     """What (E), (V) and the bound read at the tracks' points: per observation (m,) and per
-    track (T,), each with the round-off allowance of its computation."""
+    track (T,), each with the round-off allowance of its computation; and the projection
+    behind them (``image`` (2, m), the residuals ``r`` (2, m), the depths ``w`` (m,), the sizes
+    of the terms summed into each projected coordinate ``size`` (3, m)), which a caller reuses."""
 
 
-def _terms(flat: FlatTracks, x: np.ndarray) -> _Terms:
-    t = _Terms()
+def convexity_terms(flat: FlatTracks, x: np.ndarray) -> Terms:
+    t = Terms()
     owner = flat.owner
     t.n = n = flat.sizes.astype(float)
     P, y = flat.rows, flat.points
     X = np.concatenate([x, np.ones((len(x), 1))], axis=1)[owner].T  # (4, m)
     proj = (P * X[None]).sum(axis=1)  # (3, m)
-    size = (np.abs(P) * np.abs(X)[None]).sum(axis=1)  # the sizes of the terms behind proj
+    # The sizes of the terms behind proj, summed in the order a sum over axis 1 takes (the same
+    # numbers), written out: the broadcast product with the transposed X is several times slower.
+    Pa, Xa = np.abs(P), np.abs(X)
+    size = Pa[:, 0] * Xa[0] + Pa[:, 1] * Xa[1] + Pa[:, 2] * Xa[2] + Pa[:, 3] * Xa[3]
     w, size_w = proj[2], size[2]
+    t.w, t.size = w, size
     with np.errstate(all="ignore"):
-        image = proj[:2] / w
-        r = image - y
+        t.image = image = proj[:2] / w
+        t.r = r = image - y
         err_w = 16 * U * size_w
         # Each residual coordinate's error: the projection's terms, the division, the subtraction.
         err_r = 32 * U * ((size[:2] + np.abs(image) * size_w) / np.abs(w) + np.abs(image) + np.abs(y))
@@ -145,7 +153,7 @@ def _terms(flat: FlatTracks, x: np.ndarray) -> _Terms:
     return t
 
 
-def _encloses(flat: FlatTracks, t: _Terms, R: np.ndarray, strictness: float = 1.0) -> np.ndarray:
+def _encloses(flat: FlatTracks, t: Terms, R: np.ndarray, strictness: float = 1.0) -> np.ndarray:
     """(E) at radii R (K, T): lambda_min(sum_i M_i' M_i / tau_i^2) > n, (K, T)."""
     Rm = R[:, flat.owner]
     tau = t.e * (t.w_hi + Rm * t.d_up) / Rm  # (K, m)
@@ -155,7 +163,7 @@ def _encloses(flat: FlatTracks, t: _Terms, R: np.ndarray, strictness: float = 1.
     return t.usable & positive_definite(A, t.n * (1 + 1e-12 + 1e-6 * (strictness - 1)), strictness * allowance)
 
 
-def _bound(flat: FlatTracks, t: _Terms, R: np.ndarray, enclosed: np.ndarray, strictness: float = 1.0):
+def _bound(flat: FlatTracks, t: Terms, R: np.ndarray, enclosed: np.ndarray, strictness: float = 1.0):
     """(V) at radii R (T,) and the bound where (E) and (V) hold: (lower, R, cost)."""
     owner = flat.owner
     Rm = R[owner]
