@@ -173,6 +173,26 @@ def test_7_webhooks_go_only_to_public_addresses(plain):
         listener.close()
 
 
+def test_4_stereo_segment_matching_keeps_the_time_limit(plain):
+    """Segment matching (every pair of segments compared, four assignments solved) never asked
+    the clock: 2000 segments an image with time_limit_s 2 held a worker 35 s, 1000 (the default
+    limit) 6 s. Now a pair of 1000 random segments an image with a limit of 0.2 s stops within
+    its matching: the pair says time_limit and where it stopped."""
+    _, client = plain
+    job = json.loads((Path(__file__).parents[2] / "examples" / "stereo-lines-pair.json").read_text())
+    rng = np.random.default_rng(2)
+    for frame in job["data"]["frames"]:
+        for side in ("left", "right"):
+            frame[side] = np.round(rng.uniform(0, 640, size=(1000, 4)), 2).tolist()
+    job["options"] = {"time_limit_s": 0.2}
+    response = client.post("/v1/jobs", json=job)
+    assert response.status_code == 202, response.text
+    finished = ended(client, response.json()["id"])
+    pair = finished["result"]["pairs"][0]
+    assert pair["reason"].startswith("time_limit: stopped at options.time_limit_s (0.2 s)"), pair["reason"]
+    assert "stopped while matching segments" in pair["reason"] and pair["iterations"] == 0
+
+
 def test_10_an_out_of_range_last_event_id_is_a_422(plain):
     """Stream ids are two 64-bit numbers: ids past them passed the format check and broke the
     stream (an ASGI exception, or a dropped connection)."""
