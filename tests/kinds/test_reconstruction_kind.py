@@ -465,6 +465,27 @@ class TestStructureTimeLimit:
         KIND.result_model.model_validate(KIND.assemble(options, [dict(item)], {
             "items": 1, "certified": 0, "nodes": 0, "solve_s": 0.0, "elapsed_s": 0.0, "statuses": {}}))
 
+    def test_the_searches_of_a_chunk_of_tracks_ask_the_clock(self):
+        """Tracks are triangulated 500 at a time, and the clock was asked only between chunks: 500
+        searches of time_limit_s each ran past the stage's limit. Now every search asks it too:
+        told to stop after the chunk has begun, the searches still to run stop, keeping their
+        best point (cancelled, which the pipeline reads as time_limit)."""
+        from geocert.solvers.fractional.options import TriangulationOptions
+        from geocert.solvers.reconstruction import structure, synthetic
+
+        scene = synthetic.scene(views=4, points=12, seed=3, noise_px=2.0)
+        cameras = {v: scene.K @ np.hstack([scene.rotations[v], scene.translations[v][:, None]]) for v in range(4)}
+        asked = []
+
+        def after_the_first_ask() -> bool:
+            asked.append(True)
+            return len(asked) > 1
+
+        results = structure.triangulate_tracks(cameras, scene.tracks, TriangulationOptions(norm="L1L1", rel_gap=1e-9),
+                                               should_stop=after_the_first_ask)
+        assert len(asked) > 1
+        assert {r.status for r in results} >= {"cancelled"} and all(r.point is not None for r in results)
+
     def test_the_jobs_time_bound_does_not_grow_with_its_tracks(self):
         """What sizes its tasks' last-resort limits: its stages' own limits, not tracks times
         time_limit_s (photos: as many tracks as a job may hold, 200,000 times 10 s)."""
