@@ -5,7 +5,7 @@ CPU, the other key's slowest GET /v1/jobs while the API answered it, the peak me
 worker process, what the attacker got and how long until its job ended, and how long the other
 key's small job (one track) waited to start and took to end, submitted right after the attack.
 
-    .venv/bin/python -m bench.abuse [--only api,bodies,worker,webhooks,fairness]
+    .venv/bin/python -m bench.abuse [--only api,bodies,worker,stereo,webhooks,fairness]
 
   api       the attacks the API now refuses from the request alone (photo bombs, views, a bilinear
             basis, /v1/orient, stereo segments, webhook destinations, Last-Event-ID, names), with
@@ -15,6 +15,7 @@ key's small job (one track) waited to start and took to end, submitted right aft
             in the same run; then each sent to a server;
   worker    the same jobs with the budgets raised so that they reach a worker: the worker's own
             bounds (its memory limit, the solvers' clock checks) and the other key's wait;
+  stereo    the stereo_lines jobs of ``worker`` alone;
   webhooks  a tarpit receiver (a byte every 5 s) and a delete racing a delivery;
   fairness  the attacker queues 12 long jobs on one worker of two solver processes; the other
             key's wait with the per-key share and without it (GEOCERT_SOLVERS_KEPT_FOR_OTHERS=0:
@@ -301,6 +302,17 @@ def bench_worker() -> None:
         report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
 
 
+def bench_stereo() -> None:
+    """The stereo attacks of ``worker`` alone: random segments a frame pair, time_limit_s 2, with
+    the segment budget raised so that they reach a worker."""
+    print("stereo: random segments a pair, time_limit_s 2, the budget raised", flush=True)
+    with cluster(workers=1, concurrency=2, **KEYS, geocert_max_segments_per_frame="100000") as running:
+        for segments in (2000, 1000):
+            attack(running, f"stereo_lines, {segments} segments an image, 100000 iterations, time_limit_s 2, alone",
+                   post("/v1/jobs", stereo(segments, 2)))
+        report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
 class Receiver:
     """A webhook receiver on loopback: ``answer(handler)`` answers each POST (tests use it too)."""
 
@@ -469,8 +481,8 @@ def bench_bodies() -> None:
     report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
 
 
-SECTIONS = {"api": bench_api, "bodies": bench_bodies, "worker": bench_worker, "webhooks": bench_webhooks,
-            "fairness": bench_fairness}
+SECTIONS = {"api": bench_api, "bodies": bench_bodies, "worker": bench_worker, "stereo": bench_stereo,
+            "webhooks": bench_webhooks, "fairness": bench_fairness}
 
 
 def main() -> None:
