@@ -5,13 +5,17 @@ CPU, the other key's slowest GET /v1/jobs while the API answered it, the peak me
 worker process, what the attacker got and how long until its job ended, and how long the other
 key's small job (one track) waited to start and took to end, submitted right after the attack.
 
-    .venv/bin/python -m bench.abuse [--only api,worker,webhooks,fairness]
+    .venv/bin/python -m bench.abuse [--only api,bodies,worker,stereo,webhooks,fairness]
 
   api       the attacks the API now refuses from the request alone (photo bombs, views, a bilinear
             basis, /v1/orient, stereo segments, webhook destinations, Last-Event-ID, names), with
             the default limits;
+  bodies    the largest bodies over budget (about 32 MB of numbers each): the API's CPU and peak
+            memory before refusing them, parsed whole (as before) and read from their shape (now),
+            in the same run; then each sent to a server;
   worker    the same jobs with the budgets raised so that they reach a worker: the worker's own
             bounds (its memory limit, the solvers' clock checks) and the other key's wait;
+  stereo    the stereo_lines jobs of ``worker`` alone;
   webhooks  a tarpit receiver (a byte every 5 s) and a delete racing a delivery;
   fairness  the attacker queues 12 long jobs on one worker of two solver processes; the other
             key's wait with the per-key share and without it (GEOCERT_SOLVERS_KEPT_FOR_OTHERS=0:
@@ -33,6 +37,7 @@ import json
 import os
 import threading
 import time
+from pathlib import Path
 
 import cv2
 import httpx
@@ -123,8 +128,6 @@ def orient(cameras: int, points: int) -> dict:
 
 
 def stereo(segments: int, time_limit_s: float = 10.0) -> dict:
-    from pathlib import Path
-
     job = json.loads((Path(__file__).parents[1] / "examples" / "stereo-lines-pair.json").read_text())
     rng = np.random.default_rng(2)
     for frame in job["data"]["frames"]:
@@ -299,6 +302,17 @@ def bench_worker() -> None:
         report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
 
 
+def bench_stereo() -> None:
+    """The stereo attacks of ``worker`` alone: random segments a frame pair, time_limit_s 2, with
+    the segment budget raised so that they reach a worker."""
+    print("stereo: random segments a pair, time_limit_s 2, the budget raised", flush=True)
+    with cluster(workers=1, concurrency=2, **KEYS, geocert_max_segments_per_frame="100000") as running:
+        for segments in (2000, 1000):
+            attack(running, f"stereo_lines, {segments} segments an image, 100000 iterations, time_limit_s 2, alone",
+                   post("/v1/jobs", stereo(segments, 2)))
+        report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
 class Receiver:
     """A webhook receiver on loopback: ``answer(handler)`` answers each POST (tests use it too)."""
 
@@ -400,7 +414,75 @@ def bench_fairness(flood: int = 12) -> None:
     report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
 
 
-SECTIONS = {"api": bench_api, "worker": bench_worker, "webhooks": bench_webhooks, "fairness": bench_fairness}
+def _parse_cost(body: bytes, route: str, how: str, answer) -> None:
+    """In a child process: the CPU seconds and peak memory growth of what the API does with a
+    body before it can refuse it over budget, ``how``: "parsed" (the JSON parsed and validated by
+    the route's model, as the API did) or "shape" (app.shape, as it does now)."""
+    def peak_mib() -> float:
+        with open("/proc/self/status") as status:
+            return next(int(line.split()[1]) for line in status if line.startswith("VmHWM:")) / 1024
+
+    from geocert.app import shape
+    from geocert.app.schemas import JobRequest, OrientRequest
+    from pydantic import TypeAdapter
+
+    model = TypeAdapter(OrientRequest if route == "/v1/orient" else JobRequest)
+    figures = shape.orient_figures if route == "/v1/orient" else shape.job_figures
+    base, began = peak_mib(), time.process_time()
+    try:
+        if how == "parsed":
+            model.validate_python(json.loads(body))
+        refused = shape.over_budget_by_shape(body, figures) is not None  # the figure: from the shape, or once parsed
+    except Exception as exc:  # noqa: BLE001 - said in the figures, not a hang
+        answer.put((time.process_time() - began, peak_mib() - base, f"{type(exc).__name__}"[:80]))
+        return
+    answer.put((time.process_time() - began, peak_mib() - base, refused))
+
+
+def bench_bodies() -> None:
+    """The largest bodies the body limit lets through (about 32 MB of numbers), each over its
+    budget: what reading them costs the API before the refusal, parsed whole (as before) and read
+    from their shape (now), in the same run, each in a fresh process; then the attack itself on a
+    server (its API's CPU and peak memory)."""
+    import multiprocessing
+
+    print("bodies: the largest bodies over budget, parsed whole against read from their shape", flush=True)
+    rng = np.random.default_rng(4)
+    frames = [{"left": np.round(rng.uniform(0, 640, (160_000, 4)), 2).tolist(),
+               "right": np.round(rng.uniform(0, 640, (160_000, 4)), 2).tolist()} for _ in range(2)]
+    stereo_job = json.loads((Path(__file__).parents[1] / "examples" / "stereo-lines-pair.json").read_text())
+    stereo_job["data"]["frames"] = frames
+    from geocert.solvers.autocalibration import scenes
+
+    many_points = scenes.make_scene(50, 0.1, seed=5).job_data()
+    many_points["points"] = np.round(rng.normal(size=(800_000, 4)), 3).tolist()
+    bodies = {
+        "/v1/orient, 300 cameras, 1M points": ("/v1/orient", orient(300, 1_000_000)),
+        "bilinear, a basis of 2700 shapes of 400 points": ("/v1/jobs", bilinear(2700, 400)),
+        "autocalibration, 50 views, 800k points": ("/v1/jobs", {"kind": "autocalibration", "data": many_points}),
+        "stereo_lines, 160,000 segments an image": ("/v1/jobs", stereo_job),
+    }
+    context = multiprocessing.get_context("fork")
+    for name, (route, request) in bodies.items():
+        body = json.dumps(request).encode()
+        figures = []
+        for how in ("parsed", "shape"):
+            answer = context.Queue()
+            child = context.Process(target=_parse_cost, args=(body, route, how, answer))
+            child.start()
+            cpu, grew, refused = answer.get()
+            child.join()
+            said = "" if refused is True else " (not refused!)" if refused is False else f" ({refused})"
+            figures.append(f"{how}: {cpu:.2f} s CPU, +{grew:.0f} MiB{said}")
+        report(f"{name} ({len(body) / 1e6:.1f} MB)", "; ".join(figures))
+    with cluster(workers=1, concurrency=2, **KEYS) as running:
+        for name, (route, request) in bodies.items():
+            attack(running, f"{name}, sent", post(route, request))
+    report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
+SECTIONS = {"api": bench_api, "bodies": bench_bodies, "worker": bench_worker, "stereo": bench_stereo,
+            "webhooks": bench_webhooks, "fairness": bench_fairness}
 
 
 def main() -> None:

@@ -57,8 +57,9 @@ class Settings(BaseSettings):
     # A bilinear job's basis: shapes times points (each frame's programs grow with both).
     max_basis_points_per_job: int = 50_000
     # stereo_lines: segments in one image of a frame, or lines matched in one frame pair. Matching
-    # compares every pair of segments and solves an assignment (cubic) before RANSAC first looks
-    # at the clock: about 0.4 s of CPU a pair at 500 segments, 2 s at 1000, 11 s at 2000.
+    # compares every pair of segments and solves assignments (cubic): about 0.4 s of CPU a pair at
+    # 500 segments, 2 s at 1000, 11 s at 2000. It asks the clock between blocks and before each
+    # assignment, so a pair keeps its time_limit_s to within one assignment.
     max_segments_per_frame: int = 1000
     # Memory of one solver process, in MiB (its address space, set when it starts): a task that
     # needs more fails its job with the reason, and that process goes on with the next task.

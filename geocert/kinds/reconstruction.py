@@ -125,6 +125,10 @@ class ReconstructionOptionsIn(Strict):
     autocalibration_rel_gap: Finite = Field(_D.autocalibration_rel_gap, **_R["autocalibration_rel_gap"])
     autocalibration_max_nodes: int = Field(_D.autocalibration_max_nodes, **_R["autocalibration_max_nodes"])
     autocalibration_time_limit_s: Finite = Field(_D.autocalibration_time_limit_s, **_R["autocalibration_time_limit_s"])
+    structure_time_limit_s: Finite = Field(_D.structure_time_limit_s, **_R["structure_time_limit_s"],
+                                           description="seconds for the certified points and cameras together: past "
+                                                       "it the tracks and cameras not yet done are left out and the "
+                                                       "structure and cameras stages say time_limit")
     autocalibration_points: int = Field(_D.autocalibration_points, **_R["autocalibration_points"])
     autocalibration_on_critical_motion: Literal["skip", "search"] = Field(
         _D.autocalibration_on_critical_motion,
@@ -409,10 +413,13 @@ class ReconstructionKind:
                                      "ranges, or camera_model \"varying\")")
 
     def time_bound_s(self, parsed: Parsed, options: ReconstructionOptions) -> float:
-        """Its limits: time_limit_s per point and per camera, autocalibration_time_limit_s per
-        autocalibration stage (photos: as many tracks as a job may hold)."""
-        tracks = len(parsed.tracks) if parsed.tracks is not None else MAX_TRACKS
-        return (tracks + len(parsed.image_sizes)) * options.time_limit_s + 2 * options.autocalibration_time_limit_s
+        """Its limits, whatever its size: the features' time limit (photos), two autocalibration
+        stages, structure_time_limit_s for the points and cameras together, and time_limit_s for
+        each of the last point and camera searches started before it. (The registration and the
+        adjustments check a cancel between iterations; their length is the margin's to cover.)"""
+        matching = options.feature_options().time_limit_s if parsed.tracks is None else 0.0
+        return matching + 2 * options.autocalibration_time_limit_s + options.structure_time_limit_s \
+            + 2 * options.time_limit_s
 
     def count(self, parsed: Parsed) -> int:
         return 1

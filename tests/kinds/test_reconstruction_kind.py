@@ -454,6 +454,66 @@ class TestCancel:
         assert next(stage for stage in item["stages"] if stage["name"] == "cameras")["status"] == "cancelled"
 
 
+class TestStructureTimeLimit:
+    """The certified points and cameras keep one clock together, structure_time_limit_s (they had
+    only time_limit_s per point and per camera: a job's length grew with its tracks, and so did
+    its tasks' last-resort limits). Past it the job ends by its own limit, not cancelled: what
+    was done is kept, the stages say time_limit and how much was left out."""
+
+    def test_past_it_the_points_and_cameras_not_started_are_left_out(self):
+        from geocert.batch import solve_items
+
+        body = job(structure_time_limit_s=1e-9)
+        kind, parsed, options = parse_job(body)
+        item = solve_items(kind, parsed, options, range(1))[0]
+        assert item["status"] == "not_certified" and item["points"] == []
+        stages = {stage["name"]: stage for stage in item["stages"]}
+        assert stages["bundle_adjustment"]["status"] == "done"
+        assert stages["structure"]["status"] == stages["cameras"]["status"] == "time_limit"
+        assert stages["structure"]["tracks_not_started"] == 24 and stages["cameras"]["cameras_not_started"] == 6
+        assert stages["structure"]["reason"].startswith("time_limit: stopped at options.structure_time_limit_s")
+        assert item["summary"]["views_registered"] == 6 and all(c["K"] is not None for c in item["cameras"])
+        KIND.result_model.model_validate(KIND.assemble(options, [dict(item)], {
+            "items": 1, "certified": 0, "nodes": 0, "solve_s": 0.0, "elapsed_s": 0.0, "statuses": {}}))
+
+    def test_the_searches_of_a_chunk_of_tracks_ask_the_clock(self):
+        """Tracks are triangulated 500 at a time, and the clock was asked only between chunks: 500
+        searches of time_limit_s each ran past the stage's limit. Now every search asks it too:
+        told to stop after the chunk has begun, the searches still to run stop, keeping their
+        best point (cancelled, which the pipeline reads as time_limit)."""
+        from geocert.solvers.fractional.options import TriangulationOptions
+        from geocert.solvers.reconstruction import structure, synthetic
+
+        scene = synthetic.scene(views=4, points=12, seed=3, noise_px=2.0)
+        cameras = {v: scene.K @ np.hstack([scene.rotations[v], scene.translations[v][:, None]]) for v in range(4)}
+        asked = []
+
+        def after_the_first_ask() -> bool:
+            asked.append(True)
+            return len(asked) > 1
+
+        results = structure.triangulate_tracks(cameras, scene.tracks, TriangulationOptions(norm="L1L1", rel_gap=1e-9),
+                                               should_stop=after_the_first_ask)
+        assert len(asked) > 1
+        assert {r.status for r in results} >= {"cancelled"} and all(r.point is not None for r in results)
+
+    def test_the_jobs_time_bound_does_not_grow_with_its_tracks(self):
+        """What sizes its tasks' last-resort limits: its stages' own limits, not tracks times
+        time_limit_s (photos: as many tracks as a job may hold, 200,000 times 10 s)."""
+        import base64
+
+        import cv2
+
+        png = base64.b64encode(cv2.imencode(".png", np.zeros((48, 64), np.uint8))[1].tobytes()).decode()
+        body = job(time_limit_s=10, autocalibration_time_limit_s=60, structure_time_limit_s=300)
+        kind, parsed, options = parse_job(body)
+        assert kind.time_bound_s(parsed, options) == 2 * 60 + 300 + 2 * 10
+        photos = {"kind": "reconstruction", "options": {"time_limit_s": 10, "features": {"time_limit_s": 100}},
+                  "data": {"images": [{"name": f"p{i}", "content": png} for i in range(2)]}}
+        kind, parsed, options = parse_job(photos)
+        assert kind.time_bound_s(parsed, options) == 100 + 2 * 60 + 600 + 2 * 10
+
+
 class TestExports:
     def test_colmap_text_model(self, solved):
         files = zipfile.ZipFile(io.BytesIO(export.colmap_zip(solved)))

@@ -139,6 +139,31 @@ def test_1_photo_bombs_are_refused_from_their_headers_without_the_api_decoding_t
     assert peak_rss_mib(running.api.pid) - before < 100
 
 
+def test_5_6_a_large_body_over_budget_is_refused_from_its_shape_unparsed(plain):
+    """A body is parsed into Python objects some 25 times its size, and a job or /v1/orient
+    request over its budget was refused only once parsed (a 6.5 MB /v1/orient body: 0.65 s of the
+    API's CPU; 32 MiB: several seconds and gigabytes). Now a large body's figures are read from
+    its shape (its arrays' lengths; app.shape) and it is refused before any of its numbers is
+    built: 6.5 MB of /v1/orient points and 20 MB of a bilinear basis barely move the API's peak
+    memory (it grew by hundreds of MiB).
+    The refusal names the figure as before; a body within budget is parsed and answered as ever."""
+    running, client = plain
+    rng = np.random.default_rng(3)
+    cameras = np.round(rng.normal(size=(300, 3, 4)), 4).tolist()
+    points = np.round(rng.normal(size=(200_000, 3)), 3).tolist()
+    before = peak_rss_mib(running.api.pid)
+    answer = problem(client.post("/v1/orient", json={"cameras": cameras, "points": points}, timeout=300), 413)
+    assert "60000000 views times points" in answer["detail"] and "GEOCERT_MAX_VIEW_POINTS_PER_JOB" in answer["detail"]
+    assert answer["errors"][0]["field"] == "points"
+    basis = np.round(rng.normal(size=(2000, 400, 3)), 3).tolist()
+    job = {"kind": "bilinear", "data": {"basis": basis, "frames": [{"points": [[0.0, 0.0]] * 400}]}}
+    answer = problem(client.post("/v1/jobs", json=job, timeout=300), 413)
+    assert "800000 basis shapes times points" in answer["detail"] and answer["errors"][0]["field"] == "data/basis"
+    assert peak_rss_mib(running.api.pid) - before < 100
+    small = client.post("/v1/orient", json={"cameras": cameras[:2], "points": points[:5000]})
+    assert small.status_code == 200, small.text
+
+
 def test_7_webhooks_go_only_to_public_addresses(plain):
     """callback_url at loopback, private, link-local (the metadata service), IPv6 loopback or
     127.0.0.1 written as a number: a 422 naming callback_url, before anything is sent. A name
@@ -171,6 +196,26 @@ def test_7_webhooks_go_only_to_public_addresses(plain):
         assert listener.connections == 0
     finally:
         listener.close()
+
+
+def test_4_stereo_segment_matching_keeps_the_time_limit(plain):
+    """Segment matching (every pair of segments compared, four assignments solved) never asked
+    the clock: 2000 segments an image with time_limit_s 2 held a worker 35 s, 1000 (the default
+    limit) 6 s. Now a pair of 1000 random segments an image with a limit of 0.2 s stops within
+    its matching: the pair says time_limit and where it stopped."""
+    _, client = plain
+    job = json.loads((Path(__file__).parents[2] / "examples" / "stereo-lines-pair.json").read_text())
+    rng = np.random.default_rng(2)
+    for frame in job["data"]["frames"]:
+        for side in ("left", "right"):
+            frame[side] = np.round(rng.uniform(0, 640, size=(1000, 4)), 2).tolist()
+    job["options"] = {"time_limit_s": 0.2}
+    response = client.post("/v1/jobs", json=job)
+    assert response.status_code == 202, response.text
+    finished = ended(client, response.json()["id"])
+    pair = finished["result"]["pairs"][0]
+    assert pair["reason"].startswith("time_limit: stopped at options.time_limit_s (0.2 s)"), pair["reason"]
+    assert "stopped while matching segments" in pair["reason"] and pair["iterations"] == 0
 
 
 def test_10_an_out_of_range_last_event_id_is_a_422(plain):

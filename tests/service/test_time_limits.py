@@ -6,9 +6,12 @@ finished; and one killed by Celery's hard limit is failed the same way, never de
 
 from __future__ import annotations
 
+import base64
 import json
 import time
 
+import cv2
+import numpy as np
 import pytest
 import redis
 
@@ -41,7 +44,8 @@ def small_reconstruction() -> dict:
     from geocert.solvers.reconstruction import synthetic
 
     scene = synthetic.scene(views=6, points=1500, seed=3, noise_px=0.3)
-    return {"kind": "reconstruction", "options": {"time_limit_s": 0.001, "autocalibration_time_limit_s": 0.05},
+    return {"kind": "reconstruction", "options": {"time_limit_s": 0.001, "autocalibration_time_limit_s": 0.05,
+                                                  "structure_time_limit_s": 1.5},
             "data": {"views": [{"image_size": list(scene.image_size)}] * 6,
                      "tracks": [{"views": [int(v) for v in views],
                                  "points": [[round(float(u), 3), round(float(w), 3)] for u, w in pixels]}
@@ -60,18 +64,25 @@ def queued_time_limits(store: redis.Redis) -> list[tuple[float, float]]:
 def test_a_jobs_tasks_are_limited_by_its_own_limits_and_it_ends_by_them(tmp_path):
     """A task's Celery limits follow from its job's own (they were 90 s for every task, whatever
     the job: a reconstruction allowed 10 s per point, or two autocalibration stages of 60 s, was
-    killed, "SoftTimeLimitExceeded", its work lost). Then the job ends by its own limits: the
-    affine stage at its time limit, its best plane kept."""
+    killed, "SoftTimeLimitExceeded", its work lost), and do not grow with its size (a
+    reconstruction's were its tracks times 10 s, a photo job's 200,000 tracks times 10 s: 23
+    days). Then the job ends by its own limits: the affine stage at its time limit, its best
+    plane kept."""
     reconstruction = small_reconstruction()
     reconstruction["options"] = {"time_limit_s": 10, "autocalibration_time_limit_s": 60}
+    photos = {"kind": "reconstruction", "options": {"time_limit_s": 10, "features": {"time_limit_s": 100}},
+              "data": {"images": [{"name": f"p{i}", "content": base64.b64encode(
+                  cv2.imencode(".png", np.zeros((48, 64), np.uint8))[1].tobytes()).decode()} for i in range(2)]}}
     with cluster(tmp_path, workers=0) as (running, client):
         store = redis.Redis.from_url(running.redis_url, decode_responses=True)
-        margin = 120  # GEOCERT_TASK_TIME_MARGIN_S's default
-        assert client.post("/v1/jobs", json=reconstruction).status_code == 202
-        (soft, hard), = queued_time_limits(store)
-        own = (1500 + 6) * 10 + 2 * 60  # per point and camera, and the two autocalibration stages
-        assert soft >= own + margin and hard > soft
-        store.delete("celery")
+        margin, soft_after, hard_after = 120, 30, 30  # GEOCERT_TASK_TIME_MARGIN_S's default, workers.queue's
+        for body, own in ((reconstruction, 600 + 2 * 10 + 2 * 60),  # the points and cameras' clock, the last
+                          (photos, 100 + 600 + 2 * 10 + 2 * 60)):   # of each, two stages; photos: matching
+            response = client.post("/v1/jobs", json=body)
+            assert response.status_code == 202, response.text
+            (soft, hard), = queued_time_limits(store)
+            assert soft == pytest.approx(own + margin + soft_after) and hard == pytest.approx(soft + hard_after)
+            store.delete("celery")
         response = client.post("/v1/jobs", json=unbounded_autocalibration(8))
         assert response.status_code == 202, response.text
         (soft, hard), = queued_time_limits(store)

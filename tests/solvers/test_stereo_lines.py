@@ -14,8 +14,9 @@ from geocert.kinds.stereo_lines import KIND
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.lines import align, incremental, linear, polynomial, scenes
 from geocert.solvers.lines.geometry import line_set, log_rotation, rotation_error_deg
+from geocert.solvers.lines import matching
 from geocert.solvers.lines.matching import MatchingOptions, four_view_matches
-from geocert.solvers.lines.pipeline import StereoLinesOptions, estimate_motion
+from geocert.solvers.lines.pipeline import StereoLinesOptions, estimate_motion, estimate_pair
 from geocert.solvers.lines.results import Degenerate
 
 SOLVERS = {"polynomial": (polynomial.solve, 2), "linear": (linear.solve, 3), "incremental": (incremental.solve, 2),
@@ -147,6 +148,42 @@ class TestMatching:
         quads = four_view_matches(rig, frames[0], frames[1], MatchingOptions())
         correct = np.all(quads == quads[:, :1], axis=1)  # the sequence keeps one line order
         assert len(quads) >= 20 and correct.mean() >= 0.9
+
+    def test_matching_asks_the_clock_and_stops_before_its_assignments(self, monkeypatch):
+        """Matching compares every pair of segments and solves four assignments before RANSAC
+        first asked should_stop (2000 segments an image with a 2 s limit ran 35 s): now it asks
+        between blocks of its costs and before each assignment. Told to stop at once, no
+        assignment is solved and the pair fails saying so."""
+        rig, _, frames = scenes.sequence(np.random.default_rng(8), 2, 40, degrees=1.0, metres=0.03)
+        assignments, asked = [], []
+        solve = matching._assign
+        monkeypatch.setattr(matching, "_assign", lambda cost: assignments.append(cost.shape) or solve(cost))
+        estimate, quads, _ = estimate_pair(rig, frames[0], frames[1], None, StereoLinesOptions(),
+                                           lambda: asked.append(True) or True)
+        assert asked and assignments == [] and quads is None
+        assert estimate.status == "failed" and "stopped while matching segments" in estimate.reason
+
+    def test_a_stop_during_the_guided_matching_keeps_the_first_estimate(self, monkeypatch):
+        """Told to stop once the segments are tracked again with the first estimate's rotation,
+        the pair stops there (no assignment of the second matching is solved) and keeps that
+        estimate: the best so far."""
+        from geocert.solvers.lines import pipeline
+
+        rig, poses, frames = scenes.sequence(np.random.default_rng(9), 2, 60, degrees=1.0, metres=0.03)
+        guided, assignments = [], []
+        match, solve = pipeline.four_view_matches, matching._assign
+
+        def matched(*args, **kwargs):
+            guided.append(args[4] is not None)  # rotation given: the guided matching
+            return match(*args, **kwargs)
+
+        monkeypatch.setattr(pipeline, "four_view_matches", matched)
+        monkeypatch.setattr(matching, "_assign", lambda cost: assignments.append(guided[-1]) or solve(cost))
+        estimate, quads, _ = estimate_pair(rig, frames[0], frames[1], None, StereoLinesOptions(),
+                                           lambda: bool(guided and guided[-1]))
+        assert guided == [False, True] and True not in assignments
+        assert estimate.status == "estimate" and quads is not None and len(quads)
+        assert rotation_error_deg(estimate.R, poses[1][0]) < 0.5
 
     def test_a_sequence_from_segments_gives_its_trajectory(self):
         rig, poses, frames = scenes.sequence(np.random.default_rng(9), 4, 60, degrees=1.0, metres=0.03)

@@ -73,6 +73,10 @@ class ReconstructionOptions(FractionalOptions):
     focal_prior_factor: float = 1.2
     focal_prior_rounds: int = 3
     time_limit_s: float = 10.0
+    # The certified points and cameras together (each also within time_limit_s): past it the
+    # searches running stop at their next check, the tracks and cameras not started are left out,
+    # and the stages say time_limit. With the other stages' limits it bounds the job's length.
+    structure_time_limit_s: float = 600.0
     seed: int = 0
 
     # What a user may set of stage 1's matching, and where (for untextured objects: fainter
@@ -96,6 +100,7 @@ class ReconstructionOptions(FractionalOptions):
                      "autocalibration_rel_gap": {"ge": 0, "le": 1},
                      "autocalibration_max_nodes": {"ge": 1, "le": 1_000_000},
                      "autocalibration_time_limit_s": {"gt": 0, "le": 3600},
+                     "structure_time_limit_s": {"gt": 0, "le": 3600},
                      "autocalibration_points": {"ge": 10, "le": 100_000},
                      "threshold_px": {"gt": 0, "le": 1000}, "min_inliers": {"ge": 6, "le": 100_000},
                      "focal_prior_factor": {"gt": 0, "le": 100}, "focal_prior_rounds": {"ge": 1, "le": 10},
@@ -120,7 +125,7 @@ class ReconstructionOptions(FractionalOptions):
                                                     and 0 < self.focal_prior_px <= 1e6):
             raise InputError("options/focal_prior_px", "must be a positive number of pixels (at most 1e6), or null")
         for name in ("metric_rel_gap", "camera_rel_gap", "autocalibration_rel_gap", "autocalibration_max_nodes",
-                     "autocalibration_time_limit_s", "autocalibration_points", "threshold_px", "min_inliers",
+                     "autocalibration_time_limit_s", "structure_time_limit_s", "autocalibration_points", "threshold_px", "min_inliers",
                      "focal_prior_factor", "focal_prior_rounds", "seed"):
             value, bounds = getattr(self, name), self.OPTION_RANGES[name]
             if not (math.isfinite(value) and value >= bounds.get("ge", -math.inf) and value > bounds.get("gt", -math.inf)

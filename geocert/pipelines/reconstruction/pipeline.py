@@ -495,11 +495,20 @@ def _keep_metric(out: Reconstruction, metric: upgrade.Metric, n_views: int, stag
 
 def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs, metric, keep) -> None:
     P = _metric_cameras(out, metric, n_views)
-    stop = {"asked": False}
+    stop = {"asked": False, "timed_out": False}
+    deadline = time.perf_counter() + options.structure_time_limit_s
 
     def seen(name: str, done: int, total: int) -> bool:  # progress; a cancel is kept until the next check
         stop["asked"] = stop["asked"] or tell.asks(name, done, total)
         return stop["asked"]
+
+    def should_stop() -> bool:  # a cancel, or past structure_time_limit_s (the points and cameras together)
+        stop["timed_out"] = stop["timed_out"] or time.perf_counter() > deadline
+        return stop["asked"] or stop["timed_out"]
+
+    def timed_out(what: str, kept: int, not_started: int) -> str:
+        return (f"time_limit: stopped at options.structure_time_limit_s ({options.structure_time_limit_s:g} s): "
+                f"{kept} {what} done before it are kept, {not_started} were not started")
 
     with _timed(stages, "structure") as stage:
         kept_tracks = []
@@ -516,23 +525,28 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
         seen("structure", 0, len(kept_tracks))
         results = structure.triangulate_tracks(P, [(v, x) for _, v, x in kept_tracks], tri_options,
                                                lambda d, total: seen("structure", d, total),
-                                               should_stop=lambda: stop["asked"])
+                                               should_stop=should_stop)
         not_started = 0
         for (t, views, pixels), result in zip(kept_tracks, results):
             if result.status == "cancelled" and result.point is None:  # a cancel came first: not solved
                 not_started += 1
                 continue
+            if result.status == "cancelled" and not stop["asked"]:  # a search stopped by the stage's clock
+                result.status = "time_limit"
             out.points.append(Point(t, result, [[int(v), float(x[0]), float(x[1])] for v, x in zip(views, pixels)]))
         out.points, dropped = _drop_outlier_points(out.points, P, options.threshold_px)
         out.checks["points_dropped"] = dropped
         stage.update(tracks=len(tracks), points=len(out.points), points_dropped=dropped,
                      observations_removed=out.checks.get("observations_removed", 0),
                      certified=sum(1 for p in out.points if p.result.certified))
-        if not_started:
+        if not_started and not stop["asked"]:
+            stage.update(status="time_limit", tracks_not_started=not_started,
+                         reason=timed_out("points", len(out.points), not_started))
+        elif not_started:
             stage.update(status="cancelled", tracks_not_started=not_started,
                          reason=f"the job was cancelled: {len(out.points)} points solved before it are kept, "
                                 f"{not_started} tracks were not started")
-    if not_started:
+    if not_started and stop["asked"]:
         raise Cancelled("cameras")
     with _timed(stages, "cameras") as stage:
         if not options.resect_cameras:
@@ -547,19 +561,28 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
                                  max_residual=options.max_residual, certificate=options.certificate)
         if seen("cameras", 0, len(P)):
             raise Cancelled("cameras")
+        if should_stop():
+            stage.update(status="time_limit", cameras_not_started=len(P), reason=timed_out("cameras", 0, len(P)))
+            return
         # Each camera's own degrees of freedom (its pose, and the intrinsics the cameras do not
         # share) set the allowance its tolerance gives it over a 3x4 camera (camera_claim).
         dof = camera_claim.degrees_of_freedom([out.cameras[v].K for v in P])
         stage.update(degrees_of_freedom=dof, claim=camera_claim.statement(options.norm, options.camera_rel_gap))
         bounds = structure.resect_cameras(P, arrays, map_options, lambda d, total: seen("cameras", d, total),
-                                          should_stop=lambda: stop["asked"],
+                                          should_stop=should_stop,
                                           bound_every_camera=options.bound_every_camera, dof=dof)
         for v, bound in bounds.items():
             out.cameras[v].bound = bound
         not_started = sum(1 for b in bounds.values() if b.status == "cancelled")
         stage.update(cameras=len(bounds), certified=sum(1 for b in bounds.values() if b.certified),
                      searched=sum(1 for b in bounds.values() if b.result is not None))
-        if not_started:
+        if not_started and not stop["asked"]:  # stopped by the stage's clock, not by a cancel
+            reason = timed_out("cameras", len(bounds) - not_started, not_started)
+            for bound in bounds.values():
+                if bound.status == "cancelled":
+                    bound.status, bound.reason = "time_limit", reason
+            stage.update(status="time_limit", cameras_not_started=not_started, reason=reason)
+        elif not_started:
             stage.update(status="cancelled", cameras_not_started=not_started,
                          reason=f"the job was cancelled: the {len(bounds) - not_started} cameras resected before it "
                                 f"are kept, {not_started} were not started")

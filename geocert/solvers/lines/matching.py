@@ -17,11 +17,16 @@ frame b is a candidate for one of frame a when their orientations differ by at m
 and of its midpoint (``2 max_track_px``); the cost (normalised distance and angle) is minimised
 over one-to-one assignments. A line seen in the four views is a left-a segment tracked to a left-b
 segment, both with a stereo match, whose right segments are tracked to each other too.
+
+Matching compares every pair of segments (cubic in the assignment): with ``should_stop`` it asks
+the clock between blocks of rows of the costs and before each assignment, and raises
+``MatchingStopped`` when told to stop, so that a pair keeps its time limit whatever its segments.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -29,6 +34,16 @@ from scipy.optimize import linear_sum_assignment
 from geocert.solvers.lines.geometry import Rig, cross, skew
 
 _BIG = 1e6
+_BLOCK = 1 << 18  # pairs of segments costed at a time between clock checks (a few MB of arrays)
+
+
+class MatchingStopped(Exception):
+    """``should_stop`` said to stop before the matching was done."""
+
+
+def _check(should_stop: Callable[[], bool] | None) -> None:
+    if should_stop is not None and should_stop():
+        raise MatchingStopped
 
 
 @dataclass
@@ -65,11 +80,33 @@ def _angles(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(np.abs(da @ db.T), 0.0, 1.0)))
 
 
-def stereo_matches(rig: Rig, left: np.ndarray, right: np.ndarray, options: MatchingOptions) -> np.ndarray:
+def stereo_matches(rig: Rig, left: np.ndarray, right: np.ndarray, options: MatchingOptions,
+                   should_stop: Callable[[], bool] | None = None) -> np.ndarray:
     """(K, 2) index pairs (left, right) of matched segments."""
     if len(left) == 0 or len(right) == 0:
         return np.zeros((0, 2), int)
     F = fundamental(rig)
+    rows = max(1, _BLOCK // len(right))
+    blocks = []
+    for begin in range(0, len(left), rows):
+        _check(should_stop)
+        blocks.append(_stereo_costs(rig, F, left[begin:begin + rows], right, options))
+    cost = np.concatenate(blocks)
+    _check(should_stop)
+    pairs = _assign(cost)
+    if options.ambiguity_margin > 0 and len(pairs):
+        # Ambiguous: another candidate nearly as good for either segment (nearby parallel segments
+        # at other depths): a wrong match there is a wrong 3D line that small motions cannot expose.
+        chosen = cost[pairs[:, 0], pairs[:, 1]]
+        rival = cost.copy()
+        rival[pairs[:, 0], pairs[:, 1]] = _BIG
+        second = np.minimum(rival[pairs[:, 0]].min(axis=1), rival[:, pairs[:, 1]].min(axis=0))
+        pairs = pairs[second > chosen + options.ambiguity_margin]
+    return pairs
+
+
+def _stereo_costs(rig: Rig, F: np.ndarray, left: np.ndarray, right: np.ndarray, options: MatchingOptions) -> np.ndarray:
+    """(N, M) costs of matching left segments to right ones (_BIG where not allowed)."""
     a0, a1 = _homogeneous(left[:, :2]), _homogeneous(left[:, 2:])
     e0, e1 = a0 @ F.T, a1 @ F.T  # (N, 3) epipolar lines in the right image
     c0, c1 = right[:, :2], right[:, 2:]
@@ -103,17 +140,7 @@ def stereo_matches(rig: Rig, left: np.ndarray, right: np.ndarray, options: Match
     cost = 1.0 - overlap + angle / options.max_stereo_angle_deg
     allowed = (np.nan_to_num(overlap, nan=-1.0) >= options.min_overlap) & (angle <= options.max_stereo_angle_deg) \
         & (epipolar_angle >= options.min_epipolar_angle_deg) & depth_ok
-    cost = np.where(allowed, cost, _BIG)
-    pairs = _assign(cost)
-    if options.ambiguity_margin > 0 and len(pairs):
-        # Ambiguous: another candidate nearly as good for either segment (nearby parallel segments
-        # at other depths): a wrong match there is a wrong 3D line that small motions cannot expose.
-        chosen = cost[pairs[:, 0], pairs[:, 1]]
-        rival = cost.copy()
-        rival[pairs[:, 0], pairs[:, 1]] = _BIG
-        second = np.minimum(rival[pairs[:, 0]].min(axis=1), rival[:, pairs[:, 1]].min(axis=0))
-        pairs = pairs[second > chosen + options.ambiguity_margin]
-    return pairs
+    return np.where(allowed, cost, _BIG)
 
 
 def _positive_depths(rig: Rig, x_left: np.ndarray, x_right: np.ndarray) -> np.ndarray:
@@ -138,10 +165,12 @@ def _positive_depths(rig: Rig, x_left: np.ndarray, x_right: np.ndarray) -> np.nd
     return (np.nan_to_num(a, nan=-1.0) > 0) & (np.nan_to_num(b, nan=-1.0) > 0)
 
 
-def track(a: np.ndarray, b: np.ndarray, options: MatchingOptions) -> np.ndarray:
+def track(a: np.ndarray, b: np.ndarray, options: MatchingOptions,
+          should_stop: Callable[[], bool] | None = None) -> np.ndarray:
     """(K, 2) index pairs (segment of frame a, segment of frame b) in one image."""
     if len(a) == 0 or len(b) == 0:
         return np.zeros((0, 2), int)
+    _check(should_stop)
     line_a = cross(_homogeneous(a[:, :2]), _homogeneous(a[:, 2:]))
     line_a /= np.linalg.norm(line_a[:, :2], axis=1, keepdims=True)
     mid_a = (a[:, :2] + a[:, 2:]) / 2
@@ -153,6 +182,7 @@ def track(a: np.ndarray, b: np.ndarray, options: MatchingOptions) -> np.ndarray:
         + angle / options.max_track_angle_deg
     allowed = (perpendicular <= options.max_track_px) & (travel <= 2 * options.max_track_px) \
         & (angle <= options.max_track_angle_deg)
+    _check(should_stop)
     return _assign(np.where(allowed, cost, _BIG))
 
 
@@ -171,7 +201,8 @@ def rotated(segments: np.ndarray, H: np.ndarray) -> np.ndarray:
 STEREO_CACHE = "stereo_matches"  # the frame's member keeping its left-right matches
 
 
-def frame_stereo_matches(rig: Rig, frame: dict, options: MatchingOptions) -> np.ndarray:
+def frame_stereo_matches(rig: Rig, frame: dict, options: MatchingOptions,
+                         should_stop: Callable[[], bool] | None = None) -> np.ndarray:
     """stereo_matches of a frame ({"left", "right"}), made once and kept in the frame (under
     ``STEREO_CACHE``, with what they depend on): every frame of a sequence is matched left to right
     in two frame pairs, each twice when guided, and that matching is half the cost of a pair."""
@@ -181,13 +212,14 @@ def frame_stereo_matches(rig: Rig, frame: dict, options: MatchingOptions) -> np.
     kept = frame.get(STEREO_CACHE)
     if kept is not None and all(a is b for a, b in zip(kept[0], made_of)) and kept[1] == settings:
         return kept[2]
-    pairs = stereo_matches(rig, frame["left"], frame["right"], options)
+    pairs = stereo_matches(rig, frame["left"], frame["right"], options, should_stop)
     frame[STEREO_CACHE] = (made_of, settings, pairs)
     return pairs
 
 
 def four_view_matches(rig: Rig, frame_a: dict, frame_b: dict, options: MatchingOptions,
-                      rotation: np.ndarray | None = None) -> np.ndarray:
+                      rotation: np.ndarray | None = None,
+                      should_stop: Callable[[], bool] | None = None) -> np.ndarray:
     """(K, 4) indices [left a, right a, left b, right b] of the lines seen in the four views.
 
     With ``rotation`` (the frame pair's R, e.g. a first estimate's), frame a's segments are first
@@ -198,12 +230,12 @@ def four_view_matches(rig: Rig, frame_a: dict, frame_b: dict, options: MatchingO
     if rotation is not None:
         left_a = rotated(left_a, rig.K_left @ rotation @ np.linalg.inv(rig.K_left))
         right_a = rotated(right_a, rig.K_right @ rig.R @ rotation @ rig.R.T @ np.linalg.inv(rig.K_right))
-    stereo_a = dict(map(tuple, frame_stereo_matches(rig, frame_a, options)))
-    stereo_b = dict(map(tuple, frame_stereo_matches(rig, frame_b, options)))
-    right_track = dict(map(tuple, track(right_a, frame_b["right"], options)))
+    stereo_a = dict(map(tuple, frame_stereo_matches(rig, frame_a, options, should_stop)))
+    stereo_b = dict(map(tuple, frame_stereo_matches(rig, frame_b, options, should_stop)))
+    right_track = dict(map(tuple, track(right_a, frame_b["right"], options, should_stop)))
     # A line is kept when the right images' tracker agrees with the left's (the loop left a ->
     # left b -> right b closes through right a): one check that removes most of the
     # appearance-free matcher's confusions between nearby parallel segments.
-    quads = [(i, stereo_a[i], j, stereo_b[j]) for i, j in track(left_a, frame_b["left"], options)
+    quads = [(i, stereo_a[i], j, stereo_b[j]) for i, j in track(left_a, frame_b["left"], options, should_stop)
              if i in stereo_a and j in stereo_b and right_track.get(stereo_a[i]) == stereo_b[j]]
     return np.array(quads, dtype=int).reshape(-1, 4)

@@ -14,7 +14,7 @@ import numpy as np
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.lines import align, incremental, linear, polynomial
 from geocert.solvers.lines.geometry import LineSet, Rig, directions_and_points, line_set, reprojection_residuals
-from geocert.solvers.lines.matching import MatchingOptions, four_view_matches
+from geocert.solvers.lines.matching import MatchingOptions, MatchingStopped, four_view_matches
 from geocert.solvers.lines.ransac import RansacOptions, ransac
 from geocert.solvers.lines.refine import RefineOptions, refine
 from geocert.solvers.lines.results import PairEstimate
@@ -170,13 +170,17 @@ def estimate_pair(rig: Rig, frame_a: dict | None, frame_b: dict | None, matches:
         return estimate_motion(line_set(rig, matches), options, should_stop), None, time.perf_counter() - start
 
     def matched(rotation):
-        quads = four_view_matches(rig, frame_a, frame_b, options.matching, rotation)
+        quads = four_view_matches(rig, frame_a, frame_b, options.matching, rotation, should_stop)
         segments = np.stack([frame_a["left"][quads[:, 0]], frame_a["right"][quads[:, 1]],
                              frame_b["left"][quads[:, 2]], frame_b["right"][quads[:, 3]]], axis=1) \
             if len(quads) else np.zeros((0, 4, 4))
         return quads, line_set(rig, segments)
 
-    quads, lines = matched(None)
+    try:
+        quads, lines = matched(None)
+    except MatchingStopped:
+        return PairEstimate("failed", solver=options.solver, reason="stopped while matching segments: no lines yet"), \
+            None, time.perf_counter() - start
     guided = options.matching.guided
     # Guided, the first estimate only guides the tracker (its rotation warps frame a's segments,
     # and the tracker's window is tens of pixels): no refinement, one round of local optimisation.
@@ -192,7 +196,10 @@ def estimate_pair(rig: Rig, frame_a: dict | None, frame_b: dict | None, matches:
         # the tracks in the room walk of bench/stereo_lines.py, a consistent -0.085 degrees of yaw
         # a pair); guided, about 1%. The first matches' inlier count is no referee: the mistracked
         # lines are often within the threshold.
-        quads_again, lines_again = matched(estimate.R)
+        try:
+            quads_again, lines_again = matched(estimate.R)
+        except MatchingStopped:  # the first estimate is the best so far
+            return estimate, quads, time.perf_counter() - start
         again = estimate_motion(lines_again, options, should_stop)
         if again.status == "estimate":
             quads, estimate = quads_again, again

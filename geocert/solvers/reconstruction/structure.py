@@ -47,7 +47,7 @@ def camera_matrix(K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     return K @ np.hstack([R, t[:, None]])
 
 
-TRACK_CHUNK = 500  # tracks triangulated at once: progress and a cancel are seen between chunks
+TRACK_CHUNK = 500  # tracks triangulated at once: progress is told between chunks
 
 
 def triangulate_tracks(cameras: dict[int, np.ndarray], tracks: list[tuple[np.ndarray, np.ndarray]],
@@ -70,8 +70,12 @@ def triangulate_tracks(cameras: dict[int, np.ndarray], tracks: list[tuple[np.nda
             for i in solvable[first:]:
                 out[i] = TrackResult("cancelled", False, reason="the job was cancelled")
             break
+        # should_stop is asked by the searches too (between nodes), so a chunk of tracks that
+        # each search to their own time limit stops with the rest: those read cancelled, with the
+        # best point found.
         found = triangulate_many(stacked, [([index[int(v)] for v in tracks[i][0]], np.asarray(tracks[i][1], float))
-                                           for i in chunk], options)
+                                           for i in chunk], options,
+                                 None if should_stop is None else lambda progress: should_stop())
         for i, result in zip(chunk, found):
             out[i] = result
         if progress is not None:

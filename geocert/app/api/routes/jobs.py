@@ -23,8 +23,8 @@ from fastapi.sse import EventSourceResponse, ServerSentEvent
 from geocert.app.api.deps import Caller, JobStoreDep, error_responses, get_async_redis, rate_limited, stream_slot
 from geocert.settings import chunk_size_for, get_settings, over_budget
 from geocert.app import lifecycle
-from geocert.app import streamed
-from geocert.app.errors import ApiProblem, is_json_media_type
+from geocert.app import shape, streamed
+from geocert.app.errors import ApiProblem
 from geocert.app.schemas import JOB_EXAMPLES, JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
 from geocert.batch import parse_job
@@ -35,9 +35,10 @@ from geocert.workers.queue import submit_chunks, withdraw_queued
 from geocert.workers.store import REDIS_GONE, TERMINAL, JobStore, events, read_job
 
 class StreamedItemsRoute(APIRoute):
-    """POST routes of this router take a large JSON body of an itemised kind item by item
-    (app.streamed): the route's model checks the body's head, the items are checked and stored a
-    batch at a time by ``_submit``. Every other request is handled as usual."""
+    """POST routes of this router check a large JSON body's budget from its shape before parsing
+    it (app.shape), and take a large body of an itemised kind item by item (app.streamed): the
+    route's model checks the body's head, the items are checked and stored a batch at a time by
+    ``_submit``. Every other request is handled as usual."""
 
     def get_route_handler(self):
         handler = super().get_route_handler()
@@ -45,10 +46,12 @@ class StreamedItemsRoute(APIRoute):
             return handler
 
         async def route_handler(request: Request) -> Response:
-            length = request.headers.get("content-length", "")
-            if (length.isdigit() and int(length) > get_settings().stream_threshold_bytes
-                    and is_json_media_type(request.headers.get("content-type"))):
-                body = await streamed.read_body(request, int(length))
+            threshold = get_settings().stream_threshold_bytes
+            # A large body over budget: 413, unparsed; one to stream: read here either way.
+            body = await shape.check_body(request, shape.job_figures, min(shape.CHECK_ABOVE_BYTES, threshold))
+            if body is not None and len(body) <= threshold:
+                request._body = bytes(body)
+            elif body is not None:
                 split = streamed.split_items(body)
                 if split is not None:
                     request._body = split.head.encode()  # what the route's model reads and checks

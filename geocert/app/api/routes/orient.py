@@ -5,8 +5,10 @@ what an uncalibrated user means."""
 from __future__ import annotations
 
 import numpy as np
-from fastapi import APIRouter, Depends
+from fastapi import APIRouter, Depends, Request, Response
+from fastapi.routing import APIRoute
 
+from geocert.app import shape
 from geocert.app.api.deps import error_responses, rate_limited
 from geocert.settings import get_settings, over_budget
 from geocert.app.errors import ApiProblem
@@ -14,7 +16,22 @@ from geocert.app.schemas import OrientRequest, OrientResult
 from geocert.solvers.core.geometry import InputError, check_cameras
 from geocert.solvers.orientation import orient
 
-router = APIRouter(tags=["orientation"], dependencies=[Depends(rate_limited)])
+class ShapeCheckedRoute(APIRoute):
+    """A large body's cameras times points checked from its shape before it is parsed (app.shape)."""
+
+    def get_route_handler(self):
+        handler = super().get_route_handler()
+
+        async def route_handler(request: Request) -> Response:
+            body = await shape.check_body(request, shape.orient_figures)
+            if body is not None:
+                request._body = bytes(body)
+            return await handler(request)
+
+        return route_handler
+
+
+router = APIRouter(tags=["orientation"], dependencies=[Depends(rate_limited)], route_class=ShapeCheckedRoute)
 
 
 @router.post("/v1/orient", response_model=OrientResult, responses=error_responses(400, 413, 415, 422))
