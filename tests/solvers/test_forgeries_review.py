@@ -204,8 +204,9 @@ class TestUncertifiedItemFigures:
     lower_bound the solver does state) is skipped by _verify_items, and _check_returned only
     compares the result's cost, lower_bound and gap with the claim's, which no check reads: a
     triangulation track costing 13.8 verifies stating cost 1e-9 and lower_bound 40 (2.9 times its
-    minimum, 13.83); a reconstruction's point costing 0.86 verifies stating lower_bound 50 (58
-    times its cost) or cost 1e-9."""
+    minimum, 13.83), or with status "optimal" (certified false), cost 1e-9 and gap 0; a
+    reconstruction's point costing 0.86 verifies stating lower_bound 50 (58 times its cost) or
+    cost 1e-9."""
 
     @staticmethod
     def stopped(item: dict, claim: dict, **figures) -> None:
@@ -226,6 +227,18 @@ class TestUncertifiedItemFigures:
         self.stopped(item, claim, cost=cost, lower_bound=lower, gap=cost - lower)
         result["stats"].update(certified=result["stats"]["certified"] - 1,
                                statuses={"optimal": result["stats"]["items"] - 1, "node_limit": 1})
+        assert refused(result)["check"] in ("returned", "objective", "claim")
+
+    @pytest.mark.xfail(strict=True, reason="_verify_items skips an item with certified false whatever its status; "
+                                           "check claim ties status optimal to certified only for certified items")
+    def test_an_uncertified_track_called_optimal_is_refused(self):
+        result = stored("triangulation_l2l2")
+        item, claim = result["tracks"][0], result["certificate"]["items"][0]
+        for record in (item, claim):
+            record.update(certified=False, status="optimal", cost=1e-9, lower_bound=1e-9, gap=0.0)
+        claim.pop("proof")
+        item["certificate"] = None
+        result["stats"]["certified"] -= 1
         assert refused(result)["check"] in ("returned", "objective", "claim")
 
     @pytest.mark.xfail(strict=True, reason="_verify_items skips an uncertified item; _check_returned reads its "
