@@ -90,6 +90,53 @@ def _certified_K_from(result: dict, document: dict) -> dict:
     return result
 
 
+def _two_views_registered(result: dict) -> dict:
+    """``result`` with views 0 and 1 registered only, every certificate genuine: the points
+    triangulated anew in those two cameras (their tracks cut to them), the other views returned
+    not registered with a warning, the cameras unsearched, the counts to match. The calibration
+    (its certificate of the six views' projective reconstruction) is left as it was."""
+    from geocert.batch import solve_job
+
+    keep = [0, 1]
+    certificate = result["certificate"]
+    certificate["data"]["cameras"] = [result["cameras"][view]["P"] for view in keep]
+    certificate["data"]["views"] = keep
+    tracks = []
+    for point in result["points"]:
+        point["observations"] = [o for o in point["observations"] if o[0] in keep]
+        tracks.append({"views": [keep.index(o[0]) for o in point["observations"]],
+                       "points": [o[1:] for o in point["observations"]]})
+    certificate["data"]["tracks"] = tracks
+    own = {name: certificate["options"][name] for name in ("norm", "rel_gap", "abs_gap", "max_residual")}
+    solved = solve_job({"kind": "triangulation", "options": {**own, "certificate": "full"},
+                        "data": {"cameras": certificate["data"]["cameras"], "tracks": tracks}})
+    certificate["items"] = solved["certificate"]["items"]
+    for point, track in zip(result["points"], solved["tracks"]):
+        point.update({name: track[name] for name in ("point", "at_infinity", "cost", "lower_bound", "gap", "status",
+                                                     "certified", "certificate")})
+    rehash(certificate)
+    for camera in result["cameras"][len(keep):]:
+        camera.update({name: None for name in ("K", "R", "t", "center", "P", "cost", "lower_bound", "gap",
+                                               "optimal_cost", "degrees_of_freedom", "tolerance")})
+        camera.update(certified=False, registered=False, searched=False, status="not_run", reason="not registered",
+                      points=0)
+    result = _unsearch_cameras(result)
+    squared = []
+    for point in result["points"]:
+        X = np.array([*point["point"], 1.0])
+        for view, u, v in point["observations"]:
+            image = np.array(result["cameras"][view]["P"]) @ X
+            squared.append(float(((image[:2] / image[2] - [u, v]) ** 2).sum()))
+    count = sum(point["certified"] for point in result["points"])
+    result["summary"].update(views_registered=len(keep), observations=len(squared),
+                             rms_reprojection_px=float(np.sqrt(np.mean(squared))), points_certified=count,
+                             points_certified_fraction=count / len(result["points"]))
+    result["summary"]["warnings"].append({"code": "views_not_registered", "detail": "4 views not registered"})
+    _stage(result, "structure")["certified"] = count
+    _cameras_stage(result)["cameras"] = len(keep)
+    return result
+
+
 class TestCriticalMotionErasedByUncertifiedPoints:
     """The critical motion behind ``determined`` is judged again (_judged_motion,
     motion_claim.judge) on the certified points only, and the plane at infinity's family is judged
@@ -100,7 +147,10 @@ class TestCriticalMotionErasedByUncertifiedPoints:
     while its own autocalibration stage (and the genuine result) finds a near-critical motion
     whose family of planes at infinity moves K by 35.5% of the focal length. (The converse holds
     too: the weaker result that still warns of its critical motion is refused, "the returned
-    cameras' motion gives None".)"""
+    cameras' motion gives None".) Likewise with every point certified: views 0 and 1 registered
+    alone (the points triangulated anew in them, the other four views returned not registered),
+    no motion is judged at all (fewer than 3 cameras), and "determined" verifies beside the
+    certified K of the six views' reconstruction."""
 
     @pytest.mark.xfail(strict=True, reason="_judged_motion judges the motion on the certified points alone: "
                                            "motion_claim.rotation_noise gives None and the plane family is not judged")
@@ -111,6 +161,13 @@ class TestCriticalMotionErasedByUncertifiedPoints:
         forged = _claim_determined(weaker)
         assert forged["summary"]["calibration"]["certified"] and not forged["summary"]["calibration"]["on_range_edge"]
         assert refused(forged)["check"] == "returned"
+
+    @pytest.mark.xfail(strict=True, reason="_judged_motion judges no motion with fewer than 3 registered cameras, "
+                                           "and determined is then unchecked against the critical motion")
+    def test_determined_with_two_views_registered_is_refused(self, calibrated_reconstruction):
+        weaker = _two_views_registered(copy.deepcopy(calibrated_reconstruction))
+        assert weaker["summary"]["points_certified"] == 16 and verify_any(weaker).valid
+        assert refused(_claim_determined(weaker))["check"] == "returned"
 
 
 class TestCalibrationCertificateOptionsUntied:
