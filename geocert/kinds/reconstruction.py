@@ -481,6 +481,7 @@ class ReconstructionKind:
                 options = replace(options, focal_prior_px=exif["focal_px"])  # a prior the adjustment refines
                 images_document["focal_prior_from_exif"] = exif
             out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
+        calibration_proof = self._calibration_proof(out, options)
         cameras = [self._camera(camera, parsed) for camera in out.cameras]
         points = [{"track": p.track, **track_document(p.result), "observations": p.observations} for p in out.points]
         for point in points:
@@ -492,7 +493,7 @@ class ReconstructionKind:
             out.summary["time_s"] = {"matches": matches["elapsed_s"], **out.summary["time_s"]}
             out.summary["cpu_s"] = {"matches": matches["cpu_s"], **out.summary["cpu_s"]}
         camera_maps = {c.view: c.bound for c in out.cameras if c.bound is not None and c.bound.result is not None}
-        return {"calibration_proof": self._calibration_proof(out, options), "cameras": cameras, "points": points, "stages": stages, "summary": _jsonable(out.summary),
+        return {"calibration_proof": calibration_proof, "cameras": cameras, "points": points, "stages": stages, "summary": _jsonable(out.summary),
                 "images": images_document, "camera_results": self._camera_items(out, options, camera_maps),
                 # A cancelled run keeps what it did (pipeline.reconstruct); the item says it was
                 # stopped, so the job ends "cancelled" (workers.tasks._end), not "succeeded".
@@ -517,6 +518,9 @@ class ReconstructionKind:
                 "image_size": None if proven.image_size is None else list(proven.image_size)}
         item = stratified_item(Projective(proven.cameras, proven.points, proven.image_size), proven.options,
                                proven.problem, proven.result, True)
+        # The stage's figures are the certificate's claims (costs at the solution as returned)
+        for stated, claimed in zip(out.stages[1].get("stages") or [], item["stages"]):
+            stated.update({name: claimed[name] for name in ("cost", "lower_bound", "gap", "status", "certified")})
         return _jsonable({"data": data, "options": asdict(proven.options), "item": item})
 
     @staticmethod

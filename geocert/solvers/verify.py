@@ -115,13 +115,16 @@ def verify_document(document: Any) -> Report:
     return _verify(document, None)
 
 
+CERTIFICATE_MEMBERS = {"format", "version", "kind", "options", "data", "data_sha256", "problem_sha256", "items"}
+
+
 def find_certificate(document: Any) -> tuple[dict, dict | None] | None:
     """(certificate, the result that returns it or None) from a certificate, result or job
     document; None when the document carries no certificate."""
     if not isinstance(document, dict):
         return None
     if document.get("format") is not None:
-        return document, None
+        return document, None  # a bare certificate (_verify refuses members it has not)
     if isinstance(document.get("result"), dict):  # a job document
         document = document["result"]
     if isinstance(document.get("certificate"), dict):  # a result document
@@ -183,6 +186,10 @@ def _verify(document: Any, returned: dict | None) -> Report:
         size = document_size(returned if returned is not None else document)
         if returned is not None and not holds:
             size += document_size(document)
+        extra = sorted(str(name) for name in set(document) - CERTIFICATE_MEMBERS) if returned is None else []
+        if extra:  # a result carrying its certificate's members would be read as it, its fields unchecked
+            raise Invalid("format", f"a certificate (it has 'format') has no member {extra[0]!r:.40}: a result "
+                                    "carries its certificate in 'certificate'")
         items = _document_items(document)
         tallies["format"][0] += 1
         options = checked_options(document["kind"], document["options"])
@@ -366,6 +373,11 @@ def _check_stats(kind, result: dict) -> None:
             statuses[status] = statuses.get(status, 0) + 1
     if own is None or all(status is not None for status, _ in outcomes):
         expected["statuses"] = statuses
+    elif "statuses" in stats and not (isinstance(stats["statuses"], dict) and all(
+            isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in stats["statuses"].values())
+            and sum(stats["statuses"].values()) <= len(outcomes)):  # the job's own status, unread, counts one item
+        raise Invalid("returned", f"stats/statuses {stats['statuses']!r:.80} counts more than the job's "
+                                  f"{len(outcomes)} item(s)")
     for name, value in expected.items():
         if name in stats and stats[name] != value:
             raise Invalid("returned", f"stats/{name} is {stats[name]!r}, the items give {value!r}")

@@ -67,15 +67,20 @@ def _old_farkas_test(A, b, cones, z, lower, upper, transform) -> bool:
     return float(b @ z) < float(terms.sum())
 
 
+SEARCHED = "triangulation_l2l2"  # a stored certificate whose first track's proof is a search
+
+
 @pytest.fixture(scope="module")
 def forged_point():
-    """A reconstruction's point moved to cost about 200 times its optimum, claimed optimal:
-    its root region proven for its own cost, then one farkas leaf over the searched box."""
+    """A track's point moved to cost about 200 times its optimum, claimed optimal: its root
+    region proven for its own cost, then one farkas leaf over the searched box (a stored
+    triangulation certificate whose tracks were searched; a reconstruction's points are now
+    mostly certified by their convexity, with no search to forge)."""
     from geocert.solvers.fractional.items import TRACKS
     from geocert.solvers.fractional.relaxation import Relaxation
     from geocert.solvers.fractional.search import root_region
 
-    document = copy.deepcopy(stored("reconstruction")["certificate"])
+    document = copy.deepcopy(stored(SEARCHED)["certificate"])
     claim = document["items"][0]
     item = TRACKS.item(TRACKS.read(document["data"], 0), "L2L2")
 
@@ -113,7 +118,7 @@ def forged_point():
         "proofs": [{"box": [box.lo.tolist(), box.hi.tolist()], "upper_bound": lower, "kind": "farkas",
                     "z": raw_pack(z), "bound": None}],
         "leaves": [[box.lo.tolist(), box.hi.tolist(), 0]]}
-    assert bad_cost > 150 * stored("reconstruction")["certificate"]["items"][0]["cost"]
+    assert bad_cost > 150 * stored(SEARCHED)["certificate"]["items"][0]["cost"]
     return only(document, 0), data, z
 
 

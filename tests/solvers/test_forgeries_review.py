@@ -152,8 +152,6 @@ class TestCriticalMotionErasedByUncertifiedPoints:
     no motion is judged at all (fewer than 3 cameras), and "determined" verifies beside the
     certified K of the six views' reconstruction."""
 
-    @pytest.mark.xfail(strict=True, reason="_judged_motion judges the motion on the certified points alone: "
-                                           "motion_claim.rotation_noise gives None and the plane family is not judged")
     def test_determined_after_the_points_are_uncertified_is_refused(self, calibrated_reconstruction):
         genuine = calibrated_reconstruction
         assert genuine["summary"]["critical_motion"] == "critical_motion"
@@ -162,8 +160,6 @@ class TestCriticalMotionErasedByUncertifiedPoints:
         assert forged["summary"]["calibration"]["certified"] and not forged["summary"]["calibration"]["on_range_edge"]
         assert refused(forged)["check"] == "returned"
 
-    @pytest.mark.xfail(strict=True, reason="_judged_motion judges no motion with fewer than 3 registered cameras, "
-                                           "and determined is then unchecked against the critical motion")
     def test_determined_with_two_views_registered_is_refused(self, calibrated_reconstruction):
         weaker = _two_views_registered(copy.deepcopy(calibrated_reconstruction))
         assert weaker["summary"]["points_certified"] == 16 and verify_any(weaker).valid
@@ -193,25 +189,23 @@ class TestCalibrationCertificateOptionsUntied:
         return solve_job({"kind": "autocalibration", "data": document["data"],
                           "options": {**options, "intrinsics": pinned, "certificate": "full"}})["certificate"]
 
-    @pytest.mark.xfail(strict=True, reason="_proven_calibration does not compare the calibration certificate's "
-                                           "intrinsics ranges with the result's options")
     def test_a_calibration_certificate_with_pinned_intrinsics_is_refused(self, calibrated_reconstruction):
+        """Pinned ranges now count as the certified K's range edges (calibration_claim): the K is
+        the range's, not the tracks', and a claim that does not say so is refused."""
         document = self.pinned(calibrated_reconstruction)
         assert verify_any(document).valid and document["items"][1]["K"][0][0] == 1500.0
         forged = _certified_K_from(copy.deepcopy(calibrated_reconstruction), document)
-        assert forged["summary"]["calibration"]["on_range_edge"] == []
+        assert "focal" in forged["summary"]["calibration"]["on_range_edge"]
+        assert refused(forged)["check"] == "returned"  # no certified_K_on_range_edge warning
+        forged["summary"]["calibration"]["on_range_edge"] = []
         assert refused(forged)["check"] == "returned"
 
-    @pytest.mark.xfail(strict=True, reason="_proven_calibration does not compare the calibration certificate's "
-                                           "intrinsics ranges with the result's options")
     def test_pinned_and_called_determined_is_refused(self, calibrated_reconstruction):
         document = self.pinned(calibrated_reconstruction)
         forged = _certified_K_from(copy.deepcopy(calibrated_reconstruction), document)
         forged = _claim_determined(_unsearch_cameras(_uncertify_points(forged, {0})))
         assert refused(forged)["check"] == "returned"
 
-    @pytest.mark.xfail(strict=True, reason="_proven_calibration does not compare the calibration certificate's "
-                                           "metric_rel_gap and abs_gap with the result's")
     @pytest.mark.parametrize("options", [{"metric_rel_gap": 1.0}, {"abs_gap": 1e6}])
     def test_a_calibration_certificate_with_a_loose_gap_is_refused(self, calibrated_reconstruction, options):
         from geocert.solvers.autocalibration import metric_relaxation as mrelax
@@ -246,8 +240,6 @@ class TestCalibrationCertificateOfAnotherScene:
     scene's 796 (+25.6%), principal point (500, 500), outside this scene's default range
     ([160, 480] x [120, 360]) and 276 px from its own."""
 
-    @pytest.mark.xfail(strict=True, reason="_proven_calibration does not tie the calibration certificate's data "
-                                           "to the result's cameras or tracks")
     def test_another_scenes_calibration_certificate_is_refused(self, calibrated_reconstruction):
         document = stored("autocalibration_stratified")["certificate"]
         assert verify_any(document).valid
@@ -375,15 +367,11 @@ class TestResultReadAsItsCertificate:
             result.setdefault(name, value)
         return result
 
-    @pytest.mark.xfail(strict=True, reason="verify.find_certificate takes a document with a format member for a bare "
-                                           "certificate, even when it carries a result's items and certificate")
     def test_a_triangulation_result_with_its_certificates_members_is_refused(self):
         result = self.merged(stored("triangulation_l2l2"))
         result["tracks"][0].update(point=[100.0, 100.0, 100.0], cost=1e-9)
         assert refused(result)["check"] in ("format", "returned")
 
-    @pytest.mark.xfail(strict=True, reason="verify.find_certificate takes a document with a format member for a bare "
-                                           "certificate, even when it carries a result's items and certificate")
     def test_a_reconstruction_result_with_its_certificates_members_is_refused(self, calibrated_reconstruction):
         result = self.merged(copy.deepcopy(calibrated_reconstruction))
         camera = next(c for c in result["cameras"] if c["registered"] and not c["certified"])
@@ -400,8 +388,6 @@ class TestAutocalibrationStageFlags:
     critical motion its own motion_warnings describe (K moves by 35.5% along the family), or
     certified false beside a certified K, verifies."""
 
-    @pytest.mark.xfail(strict=True, reason="_check_calibration does not compare the autocalibration stage's "
-                                           "determined and certified with summary/calibration's")
     @pytest.mark.parametrize("flags", [{"determined": True}, {"certified": False}])
     def test_stage_flags_not_the_summarys_are_refused(self, calibrated_reconstruction, flags):
         forged = copy.deepcopy(calibrated_reconstruction)
@@ -416,8 +402,6 @@ class TestAutocalibrationStageBounds:
     but compared with them by no check. The metric stage said to cost 5 with a lower bound of 5
     (proven: 0, the calibration costs 1e-28), or the affine stage uncertified, verifies."""
 
-    @pytest.mark.xfail(strict=True, reason="_check_calibration does not compare the autocalibration stage's stages "
-                                           "with the calibration certificate's claims")
     @pytest.mark.parametrize("stage, changes", [(1, {"cost": 5.0, "lower_bound": 5.0, "gap": 0.0}),
                                                 (0, {"certified": False, "status": "node_limit"})])
     def test_stage_bounds_not_the_certificates_are_refused(self, calibrated_reconstruction, stage, changes):
@@ -458,7 +442,6 @@ class TestJobStatusesOfOneItem:
     autocalibration stages) states no status per item (job_outcomes gives None), so _check_stats
     leaves stats.statuses unchecked: {"optimal": 7} beside stats.items 1 verifies."""
 
-    @pytest.mark.xfail(strict=True, reason="_check_stats checks statuses only when every outcome states a status")
     @pytest.mark.parametrize("name", ["autocalibration_stratified", "autocalibration_direct"])
     def test_statuses_counting_more_items_than_the_job_has_are_refused(self, name):
         result = stored(name)

@@ -102,7 +102,9 @@ def judge_motion(out) -> None:
                                 np.array([o[1] for o in observations], dtype=int),
                                 np.array([o[2:] for o in observations], dtype=float).reshape(-1, 2))
     critical = judged["critical_motion"]
-    stage.update(judged, determined=critical is None)
+    # determined only by a full judgement: the plane at infinity's family is judged only when the
+    # residuals give the rotations' noise
+    stage.update(judged, determined=critical is None and judged["rotation_noise_rad"]["estimated"] is not None)
     if critical is None:
         return
     detail = next((w["detail"] for w in judged["motion_warnings"] if w["code"] == critical), "")

@@ -93,11 +93,11 @@ class ReconstructionOptions(FractionalOptions):
 
     # The gaps behind a certified point or camera are capped (camera_claim.MAX_REL_GAP and
     # MAX_ABS_GAP): at rel_gap 0.999 or abs_gap 1e6 "certified" would hold whatever an item costs.
-    OPTION_RANGES = {**FractionalOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": 1},
+    OPTION_RANGES = {**FractionalOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": camera_claim.MAX_REL_GAP},
                      "rel_gap": {"ge": 0, "le": camera_claim.MAX_REL_GAP},
                      "abs_gap": {"ge": 0, "le": camera_claim.MAX_ABS_GAP},
                      "camera_rel_gap": {"ge": 0, "le": camera_claim.MAX_REL_GAP},
-                     "autocalibration_rel_gap": {"ge": 0, "le": 1},
+                     "autocalibration_rel_gap": {"ge": 0, "le": camera_claim.MAX_REL_GAP},
                      "autocalibration_max_nodes": {"ge": 1, "le": 1_000_000},
                      "autocalibration_time_limit_s": {"gt": 0, "le": 3600},
                      "structure_time_limit_s": {"gt": 0, "le": 3600},

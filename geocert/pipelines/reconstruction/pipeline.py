@@ -350,8 +350,9 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             if metric.proven is None:  # the direct method's upgrade: no certificate of it is carried here
                 stage.update(certified=False, reason="the direct method certified this upgrade, but a reconstruction "
                                                      "carries only the stratified method's certificate: not claimed")
-            else:
+            else:  # which views and tracks the calibration certificate's cameras and points are
                 out.proven = metric.proven
+                stage.update(certificate_views=metric.proven.views, certificate_tracks=metric.proven.tracks)
         starts = []
         if metric.K is not None:
             starts.append(("autocalibration", metric))

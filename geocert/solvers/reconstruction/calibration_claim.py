@@ -43,7 +43,11 @@ def on_range_edge(K, ranges: dict) -> list[str]:
         pairs += [("principal_point_u", values["principal_point"][0], pp[0]),
                   ("principal_point_v", values["principal_point"][1], pp[1])]
     for name, value, bounds in pairs:
-        if bounds is None or not bounds[1] > bounds[0]:
+        if bounds is None:
+            continue
+        if not bounds[1] > bounds[0]:  # pinned: the range fixes it (aspect and skew are often fixed by assumption)
+            if name not in ("aspect", "skew"):
+                edges.append(name)
             continue
         where = (value - bounds[0]) / (bounds[1] - bounds[0])
         if where <= EDGE_FRACTION or where >= 1 - EDGE_FRACTION:

@@ -46,6 +46,8 @@ class Proven:
     cameras: np.ndarray
     points: np.ndarray
     image_size: tuple | None
+    views: list  # the view of each camera
+    tracks: list  # the track of each point
     options: pr.AutocalibrationOptions
     problem: pr.Problem
     result: object
@@ -111,7 +113,8 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
         H, K, found, solved = _stratified(problem, options, intrinsics, callback)
         stages += found
         if H is not None:
-            proven = Proven(P, X, None if image_size is None else tuple(image_size),
+            proven = Proven(P, X, None if image_size is None else tuple(image_size), list(views),
+                            [int(t) for t in chosen],
                             replace(options, intrinsics=intrinsics), problem, solved)
     if H is None and method in ("direct", "auto"):
         H, K, found = _direct(problem, P, X, options)

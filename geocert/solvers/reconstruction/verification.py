@@ -51,6 +51,11 @@ from geocert.solvers.fractional.items import TrackItems
 from geocert.solvers.reconstruction import calibration_claim, camera_claim, motion_claim
 
 ROUNDING = 1e-9  # relative: what JSON round trips and a recomputed cost may differ by
+MAX_CALIBRATION_ABS_GAP = 1e-9  # the autocalibration's costs are of order 1e-3 on real tracks (the pipeline's: 1e-12)
+# The calibration certificate's projective reconstruction must reproject the returned observations
+# it shares within TIE_PX (median), or TIE_RATIO times the returned cameras' own error there (the
+# returned cameras are refined further); a certificate of another scene is hundreds of pixels off.
+TIE_PX, TIE_RATIO, TIE_OBSERVATIONS = 10.0, 10.0, 12
 CAMERA_FIELDS = ("K", "R", "t", "center", "P")
 
 
@@ -284,12 +289,20 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
     if claim.get("on_range_edge") != edges:
         raise Invalid("returned", f"{where}/on_range_edge is {claim.get('on_range_edge')!r}, the certified K and "
                                   f"the autocalibration's ranges give {edges!r}")
-    critical = _judged_motion(result, registered, summary, stage)
+    critical, judged = _judged_motion(result, registered, summary, stage)
     determined = claim.get("determined")
-    if determined is True and (not certified or edges or critical):
+    if determined is True and (not certified or edges or critical or not judged):
         raise Invalid("returned", f"{where}/determined is true, but K is "
                                   + ("not certified" if not certified else "on its range's edge" if edges
-                                     else f"under a critical motion ({critical})"))
+                                     else f"under a critical motion ({critical})" if critical else
+                                     "not judged: too few cameras or certified points to judge its motion"))
+    if stage.get("determined") is True and (critical or not judged):
+        raise Invalid("returned", "stages/autocalibration/determined is true, but its motion is "
+                                  + (f"critical ({critical})" if critical else "not judged"))
+    if K is not None and "certified" in stage and (stage["certified"] is True and stage.get("K") is not None) \
+            is not certified:
+        raise Invalid("returned", f"stages/autocalibration/certified is {stage['certified']!r}, "
+                                  f"summary/calibration/certified {certified!r}")
     if summary.get("autocalibration_certified") is not certified or summary.get("autocalibration_determined") \
             is not determined:
         raise Invalid("returned", "summary: autocalibration_certified and autocalibration_determined must be "
@@ -333,17 +346,80 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
     if not calibration_claim.same(proven, cert):
         raise Invalid("returned", "summary/calibration/certified_K is not the K the calibration certificate proves")
     options, data = document.get("options") or {}, document.get("data") or {}
+    for name, cap in (("rel_gap", camera_claim.MAX_REL_GAP), ("metric_rel_gap", camera_claim.MAX_REL_GAP),
+                      ("abs_gap", MAX_CALIBRATION_ABS_GAP)):
+        if not (is_number(options.get(name)) and 0 <= options[name] <= cap):
+            raise Invalid("returned", f"the calibration certificate's {name} {options.get(name)!r} is beyond {cap}: "
+                                      "it would certify a K whatever it costs")
+    stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "autocalibration"),
+                 {})
+    for k, (given, claim) in enumerate(zip(stage.get("stages") or [], claims)):
+        if not isinstance(given, dict) or given.get("certified") is not True or not all(
+                (given.get(name) is None and claim.get(name) is None) or _close(given.get(name), claim.get(name))
+                for name in ("cost", "lower_bound")):
+            raise Invalid("returned", f"stages/autocalibration/stages/{k} is not the calibration certificate's claim")
+    _tie_calibration_data(result, stage, data)
     size = data.get("image_size")
     return pr.resolve_ranges(dict(options.get("intrinsics") or {}), None if size is None else tuple(size))
 
 
-def _judged_motion(result: dict, registered: list[dict], summary: dict, stage: dict) -> str | None:
+def _tie_calibration_data(result: dict, stage: dict, data: dict) -> None:
+    """The calibration certificate's projective reconstruction is this result's: its cameras are
+    the views the autocalibration stage names (certificate_views), its points the tracks it names
+    (certificate_tracks), and they reproject the returned observations they share (the median
+    error within TIE_PX, or TIE_RATIO times the returned cameras' own on those observations): a
+    certificate of another scene, or of a reconstruction these tracks do not fit, is refused."""
+    views, tracks = stage.get("certificate_views"), stage.get("certificate_tracks")
+    cameras = numbers(data.get("cameras"), "calibration_certificate/data/cameras", (None, 3, 4), "returned")
+    points = numbers(data.get("points"), "calibration_certificate/data/points", (None, 4), "returned")
+    n_views = len(result["cameras"])
+    if not (isinstance(views, list) and isinstance(tracks, list) and len(views) == len(cameras) == len(set(views))
+            and len(tracks) == len(points) == len(set(tracks))
+            and all(isinstance(v, int) and 0 <= v < n_views for v in views)
+            and all(isinstance(t, int) and t >= 0 for t in tracks)):
+        raise Invalid("returned", "stages/autocalibration must name the view of each calibration certificate camera "
+                                  "and the track of each point (certificate_views, certificate_tracks)")
+    size = data.get("image_size")
+    if size is not None and any(camera.get("image_size") not in (None, list(size)) for camera in result["cameras"]
+                                if camera.get("view") in views):
+        raise Invalid("returned", "the calibration certificate's image_size is not its views'")
+    camera_of, point_of = {v: k for k, v in enumerate(views)}, {t: k for k, t in enumerate(tracks)}
+    by_view = {int(c["view"]): np.asarray(c["P"], dtype=float) for c in result["cameras"] if c.get("P") is not None}
+    theirs, ours = [], []
+    for point in result["points"]:
+        j = point_of.get(point.get("track"))
+        if j is None:
+            continue
+        for view, u, v in point.get("observations") or []:
+            i = camera_of.get(int(view))
+            if i is None:
+                continue
+            with np.errstate(all="ignore"):
+                x = cameras[i] @ points[j]
+                theirs.append(math.hypot(x[0] / x[2] - u, x[1] / x[2] - v))
+                if point.get("point") is not None and int(view) in by_view:
+                    X = np.asarray(point["point"] if point.get("at_infinity") else [*point["point"], 1.0])
+                    y = by_view[int(view)] @ X
+                    ours.append(math.hypot(y[0] / y[2] - u, y[1] / y[2] - v))
+    if len(theirs) < TIE_OBSERVATIONS:
+        raise Invalid("returned", f"the calibration certificate's reconstruction shares {len(theirs)} observations "
+                                  f"with the result (at least {TIE_OBSERVATIONS} tie it to these tracks)")
+    error = float(np.median(np.nan_to_num(theirs, nan=np.inf)))
+    allowed = max(TIE_PX, TIE_RATIO * float(np.median(ours)) if ours else TIE_PX)
+    if not error <= allowed:
+        raise Invalid("returned", f"the calibration certificate's reconstruction reprojects the result's observations "
+                                  f"{error:.3g} px off (median; at most {allowed:.3g}): it is not these tracks'")
+
+
+def _judged_motion(result: dict, registered: list[dict], summary: dict, stage: dict) -> tuple[str | None, bool]:
     """The critical motion, recomputed (motion_claim.judge) from the registered cameras' K, R, t
-    and the certified points with their observations, as the pipeline judged it; the summary's
-    critical_motion, and the autocalibration stage's when it states one, must be it. Fewer than
-    3 cameras: not judged (None)."""
+    and the certified points with their observations, as the pipeline judged it: when it finds
+    one, the summary's critical_motion, and the autocalibration stage's when it states one, must
+    be it. Returns (the critical motion, stated or found; whether the motion was fully judged:
+    3 cameras and enough certified observations to estimate the rotations' noise, without which
+    the plane at infinity's family is not judged, and nothing may be called determined)."""
     if len(registered) < 3:
-        return None
+        return summary.get("critical_motion"), False
     by_view = {int(camera["view"]): camera for camera in registered}
     n = len(result["cameras"])
     cameras = [by_view.get(view) for view in range(n)]
@@ -358,10 +434,12 @@ def _judged_motion(result: dict, registered: list[dict], summary: dict, stage: d
         np.array([o[0] for o in observations], dtype=int), np.array([o[1] for o in observations], dtype=int),
         np.array([o[2:] for o in observations], dtype=float).reshape(-1, 2))
     critical = judged["critical_motion"]
-    if summary.get("critical_motion") != critical or stage.get("critical_motion", critical) != critical:
-        raise Invalid("returned", f"summary/critical_motion is {summary.get('critical_motion')!r}, the returned "
-                                  f"cameras' motion gives {critical!r} (motion_claim)")
-    return critical
+    stated = summary.get("critical_motion")
+    if critical is not None and (stated != critical or stage.get("critical_motion", critical) != critical):
+        raise Invalid("returned", f"summary/critical_motion is {stated!r}, the returned cameras' motion gives "
+                                  f"{critical!r} (motion_claim)")
+    # a critical motion stated where none is found is a cautious claim; "none" needs a full judgement
+    return stated or critical, judged["rotation_noise_rad"]["estimated"] is not None
 
 
 def _check_camera_certificate(result: dict, certificate: dict, searched: list[dict], certified: list[int],
