@@ -324,6 +324,44 @@ class TestUnknownIntrinsics:
         assert np.abs(np.array(held.summary["calibration"]["K"])[:2, 2] - [320.0, 240.0]).max() < 1e-9
 
 
+    @staticmethod
+    def _distorted(k1: float, seed: int = 6):
+        scene = synthetic.scene(views=10, points=200, seed=seed, noise_px=0.3, spread_degrees=50.0)
+        centre = np.array([320.0, 240.0])
+
+        def distort(pixels):
+            n = (pixels - centre) / 800.0
+            return centre + 800.0 * n * (1 + k1 * np.sum(n * n, axis=1))[:, None]
+
+        return scene, [(views, distort(pixels)) for views, pixels in scene.tracks]
+
+    def test_a_radial_distortion_is_recovered_and_the_certificates_say_they_rest_on_it(self):
+        # Barrel distortion k1 = -0.25 (18 px at the image's corner) about the centre, f = 800 px.
+        scene, tracks = self._distorted(-0.25)
+        out = pipeline.reconstruct(tracks, [scene.image_size] * 10, ReconstructionOptions())
+        f = out.summary["calibration"]["K"][0][0]
+        assert abs(f / 800.0 - 1) < 0.005
+        distortion = out.summary["distortion"]
+        assert distortion["k1"] == pytest.approx(-0.25, abs=0.01) and distortion["certified"] is False
+        assert "certificates_conditional_on_k1" in [w["code"] for w in out.summary["warnings"]]
+        for camera in out.cameras:  # each camera carries the k1 its pixels were undistorted with
+            assert camera.k1 == pytest.approx(-0.25, abs=0.01) and camera.distortion_centre == [320.0, 240.0]
+        # The points return the undistorted observations their certificates are about: the pinhole
+        # cameras returned reproject them within the threshold.
+        for point in out.points[:50]:
+            X = np.array([*point.result.point, 1.0])
+            for v, u, w in point.observations:
+                image = out.cameras[int(v)].P @ X
+                assert np.hypot(image[0] / image[2] - u, image[1] / image[2] - w) < 2.0
+        assert aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations)).max() < 0.2
+
+    def test_no_radial_term_is_kept_when_the_data_do_not_need_one(self):
+        scene, tracks = self._distorted(0.0)
+        out = pipeline.reconstruct(tracks, [scene.image_size] * 10, ReconstructionOptions(resect_cameras=False))
+        assert "distortion" not in out.summary and all(c.k1 is None for c in out.cameras)
+        assert not out.stages[0]["radial_distortion"]["estimated"]
+
+
 class TestMotion:
     """The motion of the returned cameras, judged whatever the order of the photos, and at the
     noise the adjustment's residuals give (upgrade.motion, upgrade.rotation_noise)."""

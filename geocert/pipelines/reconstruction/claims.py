@@ -59,6 +59,10 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
             f"{len(missing)} of {n_views} views not registered (no camera returned for them): " + "; ".join(
                 f"views {', '.join(map(str, views))}: {reason}" for reason, views in why.items()))})
     warnings += list(claim.warnings)
+    distortion = getattr(out, "distortion", None)
+    if distortion is not None:
+        out.summary["distortion"] = _distortion(out, distortion)
+        warnings.append({"code": "certificates_conditional_on_k1", "detail": out.summary["distortion"]["statement"]})
     if out.metric is None and registered:
         warnings.append({"code": "no_metric_upgrade", "detail": (
             f"no metric reconstruction was found: the {len(registered)} cameras returned are projective (P only, "
@@ -75,6 +79,20 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
         warnings.append({"code": "points_dropped", "detail": f"{out.checks['points_dropped']} certified points lay "
                                                              "behind a camera or far from an observation: dropped"})
     out.summary["warnings"] = warnings
+
+
+def _distortion(out, distortion: dict) -> dict:
+    """The radial term the observations were undistorted with, at the returned K's focal length
+    (each camera carries its own k1 at its own focal length), and what it means for the claims."""
+    K = out.metric.K if out.metric is not None and out.metric.K is not None else None
+    focal = float(K[0, 0]) if K is not None else distortion["k1_at_focal_px"]
+    k1 = distortion["k1"] * (focal / distortion["k1_at_focal_px"]) ** 2
+    return {"model": distortion["model"], "k1": k1, "focal_px": focal, "estimated_by": "bundle_adjustment",
+            "certified": False, "test": distortion.get("test"),
+            "statement": (f"the observations were undistorted with the radial term k1 = {k1:.4g} (at focal length "
+                          f"{focal:.1f} px, about each image's centre) that the bundle adjustment estimated, before any "
+                          "point or camera was certified: every certificate is about the undistorted observations "
+                          "the points return, so it is conditional on that k1, which is estimated, not certified")}
 
 
 @dataclass(frozen=True)
