@@ -140,6 +140,21 @@ class TestCameraBounds:
             assert b.certified and b.dof == 6 and b.lower_bound <= b.cost <= (1 + b.tolerance) * b.lower_bound
         assert sum(b.cost - b.lower_bound <= 1e-2 * b.cost for b in bounds) < 4
 
+        assert out.summary["doubtful"] is False
+        assert "reconstruction_doubtful" not in [w["code"] for w in out.summary["warnings"]]
+
+    def test_a_rig_built_on_a_wrong_K_is_reported_doubtful_first(self):
+        """A K 25% too long given as known: each camera still registers and the points
+        triangulate, but the rig cannot fit its tracks as a pinhole camera with that K should; the
+        summary's first warning says the reconstruction as a whole is doubtful."""
+        scene = synthetic.scene(views=8, points=60, seed=3, noise_px=0.5)
+        K = scene.K.copy()
+        K[0, 0] = K[1, 1] = 1.25 * K[0, 0]
+        out = pipeline.reconstruct(scene.tracks, [scene.image_size] * 8, ReconstructionOptions(
+            intrinsics={"K": K.tolist()}, bound_every_camera=True))
+        assert out.summary["views_registered"] >= 6
+        assert out.summary["doubtful"] is True
+        assert out.summary["warnings"][0]["code"] == "reconstruction_doubtful"
 
 @pytest.mark.slow
 class TestModelHouse:

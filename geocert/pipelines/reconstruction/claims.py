@@ -78,7 +78,40 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
     if out.checks.get("points_dropped"):
         warnings.append({"code": "points_dropped", "detail": f"{out.checks['points_dropped']} certified points lay "
                                                              "behind a camera or far from an observation: dropped"})
+    doubts = _doubts(out, registered, bounded, count)
+    out.summary["doubtful"] = bool(doubts)
+    if doubts:  # the first thing a user reads: a certified camera here may still be degrees off
+        warnings.insert(0, {"code": "reconstruction_doubtful", "detail": (
+            "the reconstruction as a whole is doubtful, whatever its single cameras and points certify (each "
+            "certificate is about the returned cameras and points fitting their own observations, not about the "
+            "rig being right): " + "; ".join(doubts))})
     out.summary["warnings"] = warnings
+
+
+DOUBTFUL_FRACTION = 0.5  # more than this share of the bounded cameras beyond their tolerance
+DOUBTFUL_REMOVED = 0.25  # more than this share of the registered views' observations rejected
+DOUBTFUL_DROPPED = 0.25  # more than this share of the cameras registered then dropped
+
+
+def _doubts(out, registered: list, bounded: list, observations: int) -> list[str]:
+    """Why the reconstruction as a whole is doubtful (empty when it is not): most bounded cameras
+    fit their points worse than their tolerance allows (the shared K or the rig, not one pose, is
+    off), a large share of the observations contradicts the returned rig, or the sanity layer
+    dropped many of the cameras registered."""
+    doubts = []
+    beyond = [c for c in bounded if c.bound.beyond_tolerance or not c.bound.certified]
+    if len(bounded) >= 2 and len(beyond) > DOUBTFUL_FRACTION * len(bounded):
+        doubts.append(f"{len(beyond)} of the {len(bounded)} cameras bounded are not certified or fit beyond their "
+                      "tolerance: the rig does not fit its own observations as its camera model should")
+    removed = out.checks.get("observations_removed", 0)
+    if removed and removed > DOUBTFUL_REMOVED * (removed + observations):
+        doubts.append(f"{removed} observations contradicted the returned cameras and were removed, against "
+                      f"{observations} kept: the rig is inconsistent with its tracks")
+    dropped = len(out.checks.get("cameras_dropped", []))
+    if dropped and dropped > DOUBTFUL_DROPPED * (dropped + len(registered)):
+        doubts.append(f"{dropped} cameras were dropped as contradicting their own observations, against "
+                      f"{len(registered)} kept")
+    return doubts
 
 
 def _distortion(out, distortion: dict) -> dict:
