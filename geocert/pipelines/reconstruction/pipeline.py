@@ -204,7 +204,7 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
     n_views = len(image_sizes)
     side = max(max(size) for size in image_sizes)
     focal = options.focal_prior_px or options.focal_prior_factor * side
-    centres = np.array([[w / 2, h / 2] for w, h in image_sizes])  # as the final adjustment holds it
+    centres = np.array([[(w - 1) / 2, (h - 1) / 2] for w, h in image_sizes])
     corner = max(np.hypot(w, h) / 2 for w, h in image_sizes)
     model = "simple" if options.radial_distortion == "off" else "radial"
     history, metric, found, k1 = [], None, None, 0.0
@@ -278,27 +278,36 @@ RADIAL_CHI2 = 10.8  # chi-square with 1 degree of freedom at p = 0.001
 
 
 def _radial_test(metric: upgrade.Metric, obs: Observations, options: ReconstructionOptions, radial: dict):
-    """Whether the radial term is kept: "on" always; "auto" when the adjustment without it (k1 = 0,
-    bundle model "simple") costs more, on the observations both keep, than RADIAL_CHI2 noise
-    variances (the residuals' own, from the fit with it). Returns the reconstruction kept and the
-    figures."""
+    """Whether the radial term is kept: "on" always; "auto" when the adjustment without it (k1 = 0;
+    bundle model "principal", the principal point free, when options.principal_point is "auto",
+    else "simple") costs more, on the observations both keep, than RADIAL_CHI2 noise variances
+    (the residuals' own, from the fit with it): a principal point off the image's centre, which a
+    radial term about the centre partly fits, is left to the principal point's own test. Returns
+    the reconstruction kept (the one without the term is adjusted again with the principal point
+    held, as the pipeline's later stages expect) and the figures."""
     if metric.k1 == 0.0:
         return metric, radial
     if options.radial_distortion == "auto":
         from dataclasses import replace
 
         with_keep = _kept(metric, obs, options.threshold_px)
+        rival = "principal" if options.principal_point == "auto" else "simple"
         trial, trial_keep, _ = upgrade.adjust(replace(metric, k1=0.0), obs.view, obs.track, obs.pixel,
-                                              options.threshold_px, model="simple")
+                                              options.threshold_px, model=rival)
         common = with_keep & trial_keep
         n = int(common.sum())
         if n < 20:
+            trial, _, _ = upgrade.adjust(replace(metric, k1=0.0), obs.view, obs.track, obs.pixel,
+                                         options.threshold_px, model="simple")
             return trial, {**radial, "reason": "too few observations to test"}
         free, held = _rms(metric, obs, common) ** 2 * n, _rms(trial, obs, common) ** 2 * n
         variance = max(free / max(2 * n - 2, 1), 1e-4)
         statistic = (held - free) / variance
-        radial.update(chi2=float(statistic), threshold=RADIAL_CHI2, k1_tested=metric.k1)
+        radial.update(chi2=float(statistic), threshold=RADIAL_CHI2, k1_tested=metric.k1, against=rival)
         if not statistic > RADIAL_CHI2:
+            if rival != "simple":
+                trial, _, _ = upgrade.adjust(replace(metric, k1=0.0), obs.view, obs.track, obs.pixel,
+                                             options.threshold_px, model="simple")
             return trial, radial
     return metric, {**radial, "estimated": True, "k1": float(metric.k1)}
 
@@ -469,7 +478,7 @@ def _undistorted(out: Reconstruction, obs: Observations, metric: upgrade.Metric,
     that k1 (out.distortion says so, and the points return the undistorted observations)."""
     from dataclasses import replace
 
-    centres = np.array([[w / 2, h / 2] for w, h in image_sizes])  # as the final adjustment holds it
+    centres = np.array([[(w - 1) / 2, (h - 1) / 2] for w, h in image_sizes])
     focal = float(metric.K[0, 0])
     out.distortion = {"model": "radial_k1", "k1_at_focal_px": focal, "k1": float(metric.k1),
                       "centres": centres.tolist(), "test": radial}
