@@ -356,7 +356,7 @@ class TestUnknownIntrinsics:
     def test_a_radial_distortion_is_recovered_and_the_certificates_say_they_rest_on_it(self):
         # Barrel distortion k1 = -0.25 (18 px at the image's corner) about the centre, f = 800 px.
         scene, tracks = self._distorted(-0.25)
-        out = pipeline.reconstruct(tracks, [scene.image_size] * 10, ReconstructionOptions())
+        out = pipeline.reconstruct(tracks, [scene.image_size] * 10, ReconstructionOptions(radial_distortion="auto"))
         f = out.summary["calibration"]["K"][0][0]
         assert abs(f / 800.0 - 1) < 0.005
         distortion = out.summary["distortion"]
@@ -375,7 +375,8 @@ class TestUnknownIntrinsics:
 
     def test_no_radial_term_is_kept_when_the_data_do_not_need_one(self):
         scene, tracks = self._distorted(0.0)
-        out = pipeline.reconstruct(tracks, [scene.image_size] * 10, ReconstructionOptions(resect_cameras=False))
+        out = pipeline.reconstruct(tracks, [scene.image_size] * 10, ReconstructionOptions(
+            resect_cameras=False, radial_distortion="auto"))
         assert "distortion" not in out.summary and all(c.k1 is None for c in out.cameras)
         assert not out.stages[0]["radial_distortion"]["estimated"]
 
