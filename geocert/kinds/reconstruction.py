@@ -152,6 +152,11 @@ class ReconstructionOptionsIn(Strict):
     principal_point: Literal["auto", "centre"] = Field(
         _D.principal_point, description='K unknown, camera_model "simple": "auto" frees the principal point when the '
                                         'data fix it (a chi-square test), "centre" holds it at the image centre')
+    radial_distortion: Literal["auto", "on", "off"] = Field(
+        _D.radial_distortion, description='K unknown, "incremental": one radial distortion term k1 (COLMAP\'s '
+                                          'SIMPLE_RADIAL) with the focal length; "auto" keeps it when the data fix it '
+                                          '(a chi-square test). When kept, the observations are undistorted with it '
+                                          'before the metric stages, and every certificate is conditional on that k1')
     focal_prior_px: Finite | None = Field(None, gt=0, le=1e6, description='"incremental": the prior focal length '
                                           '(pixels; a prior, refined, not a fact: e.g. from the photos\' EXIF)')
     focal_prior_factor: Finite = Field(_D.focal_prior_factor, **_R["focal_prior_factor"],
@@ -183,6 +188,12 @@ class ReconstructionCamera(BaseModel):
     center: list[float] | None
     P: list[list[float]] | None = Field(description="3x4 pixels: K [R | t] (the projective camera when no metric "
                                                     "upgrade was found)")
+    k1: float | None = Field(None, description="the radial distortion term the view's pixels were undistorted with "
+                                               "(null: none): the photo shows a point at normalised coordinates n "
+                                               "(of K [R | t]) at K's pixel of n (1 + k1 |n|^2) about "
+                                               "distortion_centre; P, the points' observations and every "
+                                               "certificate are about the undistorted pixels, so conditional on k1")
+    distortion_centre: list[float] | None = Field(None, description="pixels: the centre of the radial term k1")
     cost: float | None = Field(description="the camera's reprojection cost on the returned points (the norm's)")
     lower_bound: float | None = Field(description="proven: no 3x4 camera putting those points in front costs less")
     gap: float | None
@@ -531,6 +542,7 @@ class ReconstructionKind:
                 "registered": camera.registered, "reason": camera.reason,
                 "image_size": list(parsed.image_sizes[camera.view]), "K": lst(camera.K), "R": lst(camera.R),
                 "t": lst(camera.t), "center": lst(camera.center), "P": lst(camera.P),
+                "k1": camera.k1, "distortion_centre": camera.distortion_centre,
                 "cost": None if b is None else b.cost, "lower_bound": None if b is None else b.lower_bound,
                 "gap": None if b is None else b.gap, "optimal_cost": None if b is None else b.optimal_cost,
                 "certified": bool(b is not None and b.certified), "status": "not_run" if b is None else b.status,

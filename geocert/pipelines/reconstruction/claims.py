@@ -63,6 +63,10 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
             f"{len(missing)} of {n_views} views not registered (no camera returned for them): " + "; ".join(
                 f"views {', '.join(map(str, views))}: {reason}" for reason, views in why.items()))})
     warnings += list(claim.warnings)
+    distortion = getattr(out, "distortion", None)
+    if distortion is not None:
+        out.summary["distortion"] = _distortion(out, distortion)
+        warnings.append({"code": "certificates_conditional_on_k1", "detail": out.summary["distortion"]["statement"]})
     if out.metric is None and registered:
         warnings.append({"code": "no_metric_upgrade", "detail": (
             f"no metric reconstruction was found: the {len(registered)} cameras returned are projective (P only, "
@@ -78,6 +82,13 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
     if out.checks.get("points_dropped"):
         warnings.append({"code": "points_dropped", "detail": f"{out.checks['points_dropped']} certified points lay "
                                                              "behind a camera or far from an observation: dropped"})
+    doubts = _doubts(out, registered, bounded, count)
+    out.summary["doubtful"] = bool(doubts)
+    if doubts:  # the first thing a user reads: a certified camera here may still be degrees off
+        warnings.insert(0, {"code": "reconstruction_doubtful", "detail": (
+            "the reconstruction as a whole is doubtful, whatever its single cameras and points certify (each "
+            "certificate is about the returned cameras and points fitting their own observations, not about the "
+            "rig being right): " + "; ".join(doubts))})
     out.summary["warnings"] = warnings
 
 
@@ -116,6 +127,46 @@ def judge_motion(out) -> None:
     said = (f"critical motion ({critical}): {detail}. The tracks do not determine a constant K (Sturm 1997): {proved}; "
             "K comes from the bundle adjustment's camera model, not from a certificate")
     stage["reason"] = said if not stage.get("reason") else f"{stage['reason']}; {said}"
+
+
+DOUBTFUL_FRACTION = 0.5  # more than this share of the bounded cameras beyond their tolerance
+DOUBTFUL_REMOVED = 0.25  # more than this share of the registered views' observations rejected
+DOUBTFUL_DROPPED = 0.25  # more than this share of the cameras registered then dropped
+
+
+def _doubts(out, registered: list, bounded: list, observations: int) -> list[str]:
+    """Why the reconstruction as a whole is doubtful (empty when it is not): most bounded cameras
+    fit their points worse than their tolerance allows (the shared K or the rig, not one pose, is
+    off), a large share of the observations contradicts the returned rig, or the sanity layer
+    dropped many of the cameras registered."""
+    doubts = []
+    beyond = [c for c in bounded if c.bound.beyond_tolerance or not c.bound.certified]
+    if len(bounded) >= 2 and len(beyond) > DOUBTFUL_FRACTION * len(bounded):
+        doubts.append(f"{len(beyond)} of the {len(bounded)} cameras bounded are not certified or fit beyond their "
+                      "tolerance: the rig does not fit its own observations as its camera model should")
+    removed = out.checks.get("observations_removed", 0)
+    if removed and removed > DOUBTFUL_REMOVED * (removed + observations):
+        doubts.append(f"{removed} observations contradicted the returned cameras and were removed, against "
+                      f"{observations} kept: the rig is inconsistent with its tracks")
+    dropped = len(out.checks.get("cameras_dropped", []))
+    if dropped and dropped > DOUBTFUL_DROPPED * (dropped + len(registered)):
+        doubts.append(f"{dropped} cameras were dropped as contradicting their own observations, against "
+                      f"{len(registered)} kept")
+    return doubts
+
+
+def _distortion(out, distortion: dict) -> dict:
+    """The radial term the observations were undistorted with, at the returned K's focal length
+    (each camera carries its own k1 at its own focal length), and what it means for the claims."""
+    K = out.metric.K if out.metric is not None and out.metric.K is not None else None
+    focal = float(K[0, 0]) if K is not None else distortion["k1_at_focal_px"]
+    k1 = distortion["k1"] * (focal / distortion["k1_at_focal_px"]) ** 2
+    return {"model": distortion["model"], "k1": k1, "focal_px": focal, "estimated_by": "bundle_adjustment",
+            "certified": False, "test": distortion.get("test"),
+            "statement": (f"the observations were undistorted with the radial term k1 = {k1:.4g} (at focal length "
+                          f"{focal:.1f} px, about each image's centre) that the bundle adjustment estimated, before any "
+                          "point or camera was certified: every certificate is about the undistorted observations "
+                          "the points return, so it is conditional on that k1, which is estimated, not certified")}
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")
 MAX_EXHAUSTIVE = 200  # images matched every pair with every other at most (19,900 pairs)
 CAMERA_MODELS = ("simple", "varying", "full")
 REGISTRATIONS = ("incremental", "projective")
+RADIAL_DISTORTIONS = ("auto", "on", "off")
 
 
 @dataclass
@@ -69,6 +70,12 @@ class ReconstructionOptions(FractionalOptions):
     # data fix it (a chi-square test on the cost it saves; pipeline._principal_point), "centre"
     # holds it at the image centre (COLMAP's default).
     principal_point: str = "auto"
+    # K unknown, "incremental": one radial distortion term k1 (COLMAP's SIMPLE_RADIAL) estimated with
+    # the focal length. "auto" keeps it when the data fix it (a chi-square test on the cost it
+    # saves; pipeline._radial_test), "on" always, "off" never (the default: measured, "auto" helps
+    # Sceaux but moves templeSparseRing's focal from +1.0% to +3.9%). When kept, the observations are
+    # undistorted with it before the metric stages: every certificate is conditional on that k1.
+    radial_distortion: str = "off"
     focal_prior_px: float | None = None
     focal_prior_factor: float = 1.2
     focal_prior_rounds: int = 3
@@ -118,6 +125,8 @@ class ReconstructionOptions(FractionalOptions):
             raise InputError("options/autocalibration", f"must be one of {', '.join(AUTOCALIBRATION_METHODS)}")
         if self.principal_point not in ("auto", "centre"):
             raise InputError("options/principal_point", 'must be "auto" or "centre"')
+        if self.radial_distortion not in RADIAL_DISTORTIONS:
+            raise InputError("options/radial_distortion", f"must be one of {', '.join(RADIAL_DISTORTIONS)}")
         if self.registration not in REGISTRATIONS:
             raise InputError("options/registration", f"must be one of {', '.join(REGISTRATIONS)}")
         if self.focal_prior_px is not None and not (isinstance(self.focal_prior_px, (int, float))

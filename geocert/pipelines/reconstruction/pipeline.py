@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
-from geocert.solvers.reconstruction import camera_claim, projective, structure, upgrade
+from geocert.solvers.reconstruction import bundle, camera_claim, projective, structure, upgrade
 from geocert.pipelines.reconstruction import claims
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.tracks import Observations
@@ -44,6 +44,11 @@ class Camera:
     t: np.ndarray | None = None
     P: np.ndarray | None = None  # 3x4 pixels: K [R | t], or the projective camera when no upgrade was found
     bound: structure.CameraBound | None = None
+    # The radial term of the pixels this camera saw (Reconstruction.distortion), at this camera's
+    # focal length: a point at normalised coordinates n (of K [R | t]) is seen at K's pixel of
+    # n (1 + k1 |n|^2) about distortion_centre; None when no radial term was estimated.
+    k1: float | None = None
+    distortion_centre: list | None = None
 
     @property
     def center(self) -> np.ndarray | None:
@@ -68,6 +73,9 @@ class Reconstruction:
     checks: dict = field(default_factory=dict)  # the sanity layer's figures (_check_cameras, _drop_outlier_points)
     # The certified metric upgrade's solve, from which the kind builds the calibration certificate
     proven: upgrade.Proven | None = None
+    # The radial term the observations were undistorted with before the metric stages (None: none):
+    # {"model", "k1", "k1_at_focal_px", "centres", "test"}; every certificate is conditional on it.
+    distortion: dict | None = None
 
 
 def _stage(name: str) -> dict:
@@ -186,39 +194,53 @@ def _calibrated(tracks, n_views: int, K: np.ndarray, options: ReconstructionOpti
 def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Observations, asks):
     """K unknown, COLMAP's way: the K-known path (calibrated.py) from a prior K (focal length
     ``focal_prior_factor`` times the larger image side, or ``focal_prior_px``; the principal point
-    at the image's centre), then a metric adjustment refining one focal length; when it moves the
-    focal length by more than 2%, the K-known path again from the refined K (at most
-    ``focal_prior_rounds`` times). Returns the reconstruction as a projective.Projective (P = K [R | t]
-    and the points, for the certified upgrade) and as the upgrade.Metric the adjustment found."""
+    at the image's centre), then a metric adjustment refining one focal length (and, with
+    ``radial_distortion`` "auto" or "on", one radial term k1, bundle model "radial"); when it moves
+    the focal length by more than 2% or k1 by more than RADIAL_STEP_PX at the image's corner, the
+    K-known path again from the refined K on the observations undistorted with the refined k1 (at
+    most ``focal_prior_rounds`` times). Returns the reconstruction as a projective.Projective
+    (P = K [R | t] and the points, for the certified upgrade), the upgrade.Metric the adjustment
+    found (its k1 that of the pixels given) and the radial term's figures."""
     from geocert.solvers.reconstruction.calibrated import CalibratedOptions, calibrated_reconstruction
 
     n_views = len(image_sizes)
     side = max(max(size) for size in image_sizes)
     focal = options.focal_prior_px or options.focal_prior_factor * side
-    history, metric, found = [], None, None
+    centres = np.array([[(w - 1) / 2, (h - 1) / 2] for w, h in image_sizes])
+    corner = max(np.hypot(w, h) / 2 for w, h in image_sizes)
+    model = "simple" if options.radial_distortion == "off" else "radial"
+    history, metric, found, k1 = [], None, None, 0.0
     for _ in range(options.focal_prior_rounds):
-        Ks = [np.array([[focal, 0.0, (w - 1) / 2], [0.0, focal, (h - 1) / 2], [0.0, 0.0, 1.0]]) for w, h in image_sizes]
-        found = calibrated_reconstruction(tracks, Ks, CalibratedOptions(
+        Ks = [np.array([[focal, 0.0, c[0]], [0.0, focal, c[1]], [0.0, 0.0, 1.0]]) for c in centres]
+        used = tracks if k1 == 0.0 else [
+            (views, bundle.undistort(np.asarray(pixels, dtype=float).reshape(-1, 2), centres[np.asarray(views, dtype=int)],
+                                     focal, k1)) for views, pixels in tracks]
+        found = calibrated_reconstruction(used, Ks, CalibratedOptions(
             max_reprojection_px=2 * options.threshold_px, pnp_min_inliers=options.min_inliers, seed=options.seed,
             merge_components=options.merge_components), lambda progress: asks(progress.get("done", 0),
                                                                                progress.get("total", 1)))
         registered = sum(R is not None for R in found.rotations)
-        step = {"focal_px": float(focal), "registered": int(registered)}
+        step = {"focal_px": float(focal), "k1": k1, "registered": int(registered)}
         history.append(step)
         if registered < 2:
             break
         start = upgrade.Metric(Ks[0], list(found.rotations), [None if t is None else np.asarray(t, dtype=float)
                                                                for t in found.translations],
-                               np.asarray(found.points, dtype=float), [], False)
+                               np.asarray(found.points, dtype=float), [], False, k1=k1)
         if found.status == "cancelled":  # the views registered so far are kept, at the focal length they had
             metric = start
             break
-        metric, _, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, options.threshold_px, model="simple")
+        metric, _, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, options.threshold_px, model=model)
         refined = float(metric.K[0, 0])
-        step["refined_focal_px"] = refined
-        if not (refined > 0 and np.isfinite(refined)) or abs(refined / focal - 1) <= 0.02:
+        step.update(refined_focal_px=refined, refined_k1=metric.k1)
+        moved = abs(metric.k1 * (corner / refined) ** 3 * refined - k1 * (corner / focal) ** 3 * focal)
+        if not (refined > 0 and np.isfinite(refined) and np.isfinite(metric.k1)) or (
+                abs(refined / focal - 1) <= 0.02 and moved <= RADIAL_STEP_PX):
             break
-        focal = refined
+        focal, k1 = refined, metric.k1
+    radial = {"model": options.radial_distortion, "estimated": False, "k1": 0.0}
+    if metric is not None and model == "radial" and found.status != "cancelled":
+        metric, radial = _radial_test(metric, obs, options, radial)
     registered = [v for v in range(n_views) if found is not None and found.rotations[v] is not None]
     cameras: list = [None] * n_views
     points = np.full((len(tracks), 4), np.nan)
@@ -247,9 +269,59 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
         stats["cancelled"] = True
     reasons = [None if cameras[v] is not None else (found.reasons[v] if found is not None else "not reached")
                for v in range(n_views)]
+    stats["radial_distortion"] = radial
     out = projective.Projective(cameras, reasons, points, inlier,
                                 None if found is None else found.stats.get("initial_pair"), stats)
-    return out, metric
+    return out, metric, radial
+
+
+RADIAL_STEP_PX = 0.5  # k1 moved by less than this at the image's corner: no further registration round
+RADIAL_CHI2 = 10.8  # chi-square with 1 degree of freedom at p = 0.001
+
+
+def _radial_test(metric: upgrade.Metric, obs: Observations, options: ReconstructionOptions, radial: dict):
+    """Whether the radial term is kept: "on" always; "auto" when the adjustment without it (k1 = 0;
+    bundle model "principal", the principal point free, when options.principal_point is "auto",
+    else "simple") costs more, on the observations both keep, than RADIAL_CHI2 noise variances
+    (the residuals' own, from the fit with it): a principal point off the image's centre, which a
+    radial term about the centre partly fits, is left to the principal point's own test. Returns
+    the reconstruction kept (the one without the term is adjusted again with the principal point
+    held, as the pipeline's later stages expect) and the figures."""
+    if metric.k1 == 0.0:
+        return metric, radial
+    if options.radial_distortion == "auto":
+        from dataclasses import replace
+
+        with_keep = _kept(metric, obs, options.threshold_px)
+        rival = "principal" if options.principal_point == "auto" else "simple"
+        trial, trial_keep, _ = upgrade.adjust(replace(metric, k1=0.0), obs.view, obs.track, obs.pixel,
+                                              options.threshold_px, model=rival)
+        common = with_keep & trial_keep
+        n = int(common.sum())
+        if n < 20:
+            trial, _, _ = upgrade.adjust(replace(metric, k1=0.0), obs.view, obs.track, obs.pixel,
+                                         options.threshold_px, model="simple")
+            return trial, {**radial, "reason": "too few observations to test"}
+        free, held = _rms(metric, obs, common) ** 2 * n, _rms(trial, obs, common) ** 2 * n
+        variance = max(free / max(2 * n - 2, 1), 1e-4)
+        statistic = (held - free) / variance
+        radial.update(chi2=float(statistic), threshold=RADIAL_CHI2, k1_tested=metric.k1, against=rival)
+        if not statistic > RADIAL_CHI2:
+            if rival != "simple":
+                trial, _, _ = upgrade.adjust(replace(metric, k1=0.0), obs.view, obs.track, obs.pixel,
+                                             options.threshold_px, model="simple")
+            return trial, radial
+    return metric, {**radial, "estimated": True, "k1": float(metric.k1)}
+
+
+def _kept(metric: upgrade.Metric, obs: Observations, threshold_px: float) -> np.ndarray:
+    """The observations within threshold_px of their points' images in front of their cameras."""
+    registered = np.array([R is not None for R in metric.rotations])
+    use = np.flatnonzero(registered[obs.view] & np.isfinite(metric.points[obs.track, 0]))
+    keep = np.zeros(len(obs.view), dtype=bool)
+    depth, error = _depths_and_errors(metric, obs, use)
+    keep[use] = (depth > 0) & (error <= threshold_px)
+    return keep
 
 
 PRINCIPAL_POINT_CHI2 = 13.8  # chi-square with 2 degrees of freedom at p = 0.001
@@ -315,8 +387,10 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             stage["method"] = ("incremental (K unknown: a focal prior, essential matrices, PnP, the focal length "
                                "refined by bundle adjustment; the cameras P = K [R | t] are the projective "
                                "reconstruction the certified upgrade starts from)")
-            proj, incremental = _incremental(tracks, image_sizes, options, obs,
-                                             lambda d, t: tell.asks("projective", d, t))
+            proj, incremental, radial = _incremental(tracks, image_sizes, options, obs,
+                                                     lambda d, t: tell.asks("projective", d, t))
+            if radial["estimated"]:
+                obs = _undistorted(out, obs, incremental, image_sizes, radial)
         else:
             proj = projective.reconstruct(tracks, n_views, projective.ProjectiveOptions(
                 options.threshold_px, options.min_inliers, seed=options.seed),
@@ -403,6 +477,23 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
     _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
 
 
+def _undistorted(out: Reconstruction, obs: Observations, metric: upgrade.Metric, image_sizes,
+                 radial: dict) -> Observations:
+    """Every observation undistorted with the radial term the registration estimated (about the
+    image's centre, at the focal length it was estimated with): from here on the reconstruction is
+    a pinhole one on these pixels, and every certificate after it is about them, so conditional on
+    that k1 (out.distortion says so, and the points return the undistorted observations)."""
+    from dataclasses import replace
+
+    centres = np.array([[(w - 1) / 2, (h - 1) / 2] for w, h in image_sizes])
+    focal = float(metric.K[0, 0])
+    out.distortion = {"model": "radial_k1", "k1_at_focal_px": focal, "k1": float(metric.k1),
+                      "centres": centres.tolist(), "test": radial}
+    pixels = bundle.undistort(obs.pixel, centres[obs.view], focal, metric.k1)
+    metric.k1 = 0.0
+    return replace(obs, pixel=pixels)
+
+
 MIN_CAMERA_POINTS = 6  # a camera is checked (and certified) on at least this many points
 
 
@@ -466,7 +557,12 @@ def _depths_and_errors(metric: upgrade.Metric, obs: Observations, m: np.ndarray)
     t = np.array([np.zeros(3) if x is None else x for x in metric.translations])
     K = np.array([eye if r is None else upgrade.K_of(metric, v) for v, r in enumerate(metric.rotations)])
     cam = np.einsum("mij,mj->mi", R[obs.view[m]], metric.points[obs.track[m]]) + t[obs.view[m]]
-    image = np.einsum("mij,mj->mi", K[obs.view[m]], cam)
+    seen = cam
+    if metric.k1:  # the radial model's pixels (bundle.metric's "radial")
+        with np.errstate(divide="ignore", invalid="ignore"):
+            n = cam[:, :2] / cam[:, 2:3]
+        seen = np.c_[n * (1 + metric.k1 * np.sum(n * n, axis=1))[:, None], np.ones(len(n))]
+    image = np.einsum("mij,mj->mi", K[obs.view[m]], seen)
     with np.errstate(divide="ignore", invalid="ignore"):
         error = np.linalg.norm(image[:, :2] / image[:, 2:3] - obs.pixel[m], axis=1)
     return cam[:, 2], np.nan_to_num(error, nan=np.inf)
@@ -481,6 +577,9 @@ def _metric_cameras(out: Reconstruction, metric: upgrade.Metric, n_views: int) -
             cam.K, cam.R, cam.t = upgrade.K_of(metric, v), metric.rotations[v], metric.translations[v]
             cam.P = structure.camera_matrix(cam.K, cam.R, cam.t)
             P[v] = cam.P
+            if out.distortion is not None:  # the same mapping of pixels, stated at this camera's focal length
+                cam.k1 = out.distortion["k1"] * (float(cam.K[0, 0]) / out.distortion["k1_at_focal_px"]) ** 2
+                cam.distortion_centre = out.distortion["centres"][v]
     return P
 
 

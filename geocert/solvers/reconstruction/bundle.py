@@ -53,17 +53,19 @@ def projective(cameras: np.ndarray, points: np.ndarray, view: np.ndarray, track:
 # The shared K's free entries: "simple" the focal length (square pixels, no skew, the principal
 # point held where K has it: the image centre, as COLMAP's default of not refining it), "full" all
 # five, "fixed" none, "varying" one focal length per view (principal point held, square pixels),
-# "principal" the focal length and the principal point (square pixels, no skew).
-MODELS = ("simple", "full", "fixed", "varying", "principal")
+# "principal" the focal length and the principal point (square pixels, no skew), "radial" the focal
+# length and one radial distortion term k1 about the principal point held where K has it (COLMAP's
+# SIMPLE_RADIAL: a point at normalised image coordinates n is seen at K's pixel of n (1 + k1 |n|^2)).
+MODELS = ("simple", "full", "fixed", "varying", "principal", "radial")
 
 
 def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, points: np.ndarray, view: np.ndarray,
            track: np.ndarray, pixels: np.ndarray, f_scale: float | None = None, max_iterations: int = 30,
-           model: str = "simple", focals: np.ndarray | None = None, should_stop=None):
+           model: str = "simple", focals: np.ndarray | None = None, should_stop=None, k1: float = 0.0):
     """Refine one shared K (``model``: "simple" f with square pixels, no skew and cx, cy fixed; "full"
-    fx, fy, skew, cx, cy; "fixed" K as given), rotations (n, 3, 3), translations (n, 3) and
-    points (p, 3) against pixel observations. Returns K, rotations, translations, points,
-    residuals (M, 2)."""
+    fx, fy, skew, cx, cy; "fixed" K as given; "radial" f and the distortion term, from ``k1``),
+    rotations (n, 3, 3), translations (n, 3) and points (p, 3) against pixel observations. Returns
+    K, rotations, translations, points, residuals (M, 2), and k1 (``k1`` as given unless "radial")."""
     A = np.hstack([Rotation.from_matrix(rotations).as_rotvec(), translations])
     given = np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]])
     if model == "varying":
@@ -76,6 +78,8 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
             return np.array([S[0], S[0], 0.0, given[3], given[4]])
         if model == "principal":
             return np.array([S[0], S[0], 0.0, S[1], S[2]])
+        if model == "radial":
+            return np.array([S[0], S[0], 0.0, given[3], given[4]])
         if model == "varying":
             return given
         return S
@@ -87,14 +91,35 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         v = cam[:, 1] / cam[:, 2]
         if model == "varying":
             return np.stack([Am[:, 6] * u + k[3] - pixels[:, 0], Am[:, 6] * v + k[4] - pixels[:, 1]], axis=1)
+        if model == "radial":
+            scale = 1.0 + S[1] * (u * u + v * v)
+            u, v = u * scale, v * scale
         return np.stack([k[0] * u + k[2] * v + k[3] - pixels[:, 0], k[1] * v + k[4] - pixels[:, 1]], axis=1)
 
     start = {"fixed": np.zeros(0), "varying": np.zeros(0), "simple": np.array([np.sqrt(abs(given[0] * given[1]))]),
-             "full": given.copy(), "principal": np.array([np.sqrt(abs(given[0] * given[1])), given[3], given[4]])}[model]
+             "full": given.copy(), "principal": np.array([np.sqrt(abs(given[0] * given[1])), given[3], given[4]]),
+             "radial": np.array([np.sqrt(abs(given[0] * given[1])), k1])}[model]
     A, S, B, r, _ = schur.solve(residual, A, start, points.copy(), view, track, f_scale, max_iterations,
                                 should_stop=should_stop)
     k = entries(S)
     K = np.array([[k[0], k[2], k[3]], [0.0, k[1], k[4]], [0.0, 0.0, 1.0]])
     if model == "varying":  # one K per view
         K = np.array([[[f, 0.0, k[3]], [0.0, f, k[4]], [0.0, 0.0, 1.0]] for f in A[:, 6]])
-    return K, Rotation.from_rotvec(A[:, :3]).as_matrix(), A[:, 3:6], B, r
+    return K, Rotation.from_rotvec(A[:, :3]).as_matrix(), A[:, 3:6], B, r, float(S[1]) if model == "radial" else k1
+
+
+def undistort(pixels: np.ndarray, centre, focal: float, k1: float) -> np.ndarray:
+    """The pixels (M, 2) a pinhole camera with this focal length and principal point ``centre``
+    sees where the "radial" model's camera (the same K, distortion k1) saw ``pixels``: the
+    normalised radius r_d = r (1 + k1 r^2) solved for r by Newton's method."""
+    if k1 == 0.0 or len(pixels) == 0:
+        return np.array(pixels, dtype=float, copy=True)
+    centre = np.asarray(centre, dtype=float)
+    n = (np.asarray(pixels, dtype=float) - centre) / focal
+    rd = np.linalg.norm(n, axis=1)
+    r = rd.copy()
+    for _ in range(20):
+        r = r - (r * (1 + k1 * r * r) - rd) / (1 + 3 * k1 * r * r)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(rd > 0, r / rd, 1.0)
+    return centre + n * ratio[:, None] * focal

@@ -35,6 +35,7 @@ class Metric:
     skipped: str | None = None  # why the certified search was not run (a critical motion), if it was not
     # What a certificate of the stratified upgrade is built from (Proven), when one was solved
     proven: "Proven | None" = None
+    k1: float = 0.0  # radial distortion about K's principal point (bundle model "radial"), of the pixels fit
 
 
 @dataclass
@@ -266,6 +267,7 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
         np.array([metric.translations[v] for v in views]), metric.points.copy()
     focals = None if metric.Ks is None else np.array([metric.Ks[v][0, 0] for v in views])
     rms_before = None
+    k1 = metric.k1
     for round_ in range(2):
         counts = np.bincount(obs_track[keep], minlength=len(X))
         X[counts < 2] = np.nan
@@ -274,9 +276,10 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
         pindex = -np.ones(len(X), dtype=int)
         pindex[points] = np.arange(len(points))
         use = np.flatnonzero(keep)
-        K, R, t, Xp, r = bundle.metric(K, R, t, X[points], vindex[obs_view[use]], pindex[obs_track[use]], pixels[use],
-                                       f_scale=threshold_px / 2 if round_ == 0 else None, max_iterations=max_iterations,
-                                       model=model, focals=focals, should_stop=should_stop)
+        K, R, t, Xp, r, k1 = bundle.metric(K, R, t, X[points], vindex[obs_view[use]], pindex[obs_track[use]],
+                                           pixels[use], f_scale=threshold_px / 2 if round_ == 0 else None,
+                                           max_iterations=max_iterations, model=model, focals=focals,
+                                           should_stop=should_stop, k1=k1)
         if K.ndim == 3:  # one K per view: the middle focal length stands for them in K
             focals = K[:, 0, 0]
             K = K[int(np.argsort(focals)[len(focals) // 2])]
@@ -285,7 +288,7 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
         if rms_before is None:
             rms_before = float(np.sqrt(np.mean(errors ** 2)))
         keep[use[~(errors < threshold_px)]] = False
-    adjusted = replace(metric, K=K, points=X)
+    adjusted = replace(metric, K=K, points=X, k1=k1)
     if focals is not None:
         adjusted.Ks = [None] * len(metric.rotations)
         for k, v in enumerate(views):
