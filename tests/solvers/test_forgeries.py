@@ -1009,3 +1009,33 @@ class TestUnitOnExactData:
 
         with pytest.raises(Invalid):
             checked_unit(unit, "regions/0/unit", 1.3e-31)
+
+
+class TestDoubtfulTied:
+    """summary.doubtful and its warning (claims._doubts: most bounded cameras uncertified, many
+    observations rejected, many cameras dropped) were read by no check: the warning a user reads
+    first could be removed. Now recomputed from the cameras and the summary's counts."""
+
+    @staticmethod
+    def doubtful(result: dict) -> dict:
+        """The genuine result with its certified cameras called uncertified (a weaker claim, each
+        count to match): then most bounded cameras are not certified, which is doubtful."""
+        result = copy.deepcopy(result)
+        for camera in result["cameras"]:  # still bounded by their certified resections
+            if camera["certified"]:
+                camera.update(certified=False, status="not_certified")
+        result["summary"].update(cameras_certified=0, cameras_certified_fraction=0.0)
+        _cameras_stage(result)["certified"] = 0
+        return result
+
+    def test_the_genuine_result_says_whether_it_is_doubtful(self, calibrated_reconstruction):
+        assert calibrated_reconstruction["summary"]["doubtful"] is False
+        assert verify_any(calibrated_reconstruction).valid
+
+    def test_a_doubtful_result_unsaid_is_refused(self, calibrated_reconstruction):
+        forged = self.doubtful(calibrated_reconstruction)
+        assert "doubtful" in refused(forged)["detail"]
+        forged["summary"]["doubtful"] = True
+        forged["summary"]["warnings"].insert(0, {"code": "reconstruction_doubtful", "detail": "most cameras"})
+        report = verify_any(forged)
+        assert report.valid, report.first_failure

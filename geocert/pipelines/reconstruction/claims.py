@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from geocert.solvers.reconstruction import motion_claim
+from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
 from geocert.solvers.reconstruction.calibration_claim import difference as k_difference, on_range_edge, same
 
 
@@ -127,11 +128,6 @@ def judge_motion(out) -> None:
     said = (f"critical motion ({critical}): {detail}. The tracks do not determine a constant K (Sturm 1997): {proved}; "
             "K comes from the bundle adjustment's camera model, not from a certificate")
     stage["reason"] = said if not stage.get("reason") else f"{stage['reason']}; {said}"
-
-
-DOUBTFUL_FRACTION = 0.5  # more than this share of the bounded cameras beyond their tolerance
-DOUBTFUL_REMOVED = 0.25  # more than this share of the registered views' observations rejected
-DOUBTFUL_DROPPED = 0.25  # more than this share of the cameras registered then dropped
 
 
 def _doubts(out, registered: list, bounded: list, observations: int) -> list[str]:

@@ -45,6 +45,12 @@ MAX_ALLOWANCE = 0.5
 # L2L2, px under the L1 norms).
 MAX_REL_GAP = 0.5
 MAX_ABS_GAP = 1.0
+# A reconstruction is doubtful as a whole (the pipeline's claims._doubts, the verifier's check of
+# summary.doubtful) when more than these shares of its bounded cameras are not certified, of its
+# observations were rejected, or of its registered cameras were dropped.
+DOUBTFUL_FRACTION = 0.5
+DOUBTFUL_REMOVED = 0.25
+DOUBTFUL_DROPPED = 0.25
 SAME = 1e-9  # relative: intrinsics equal up to JSON round trips are shared
 
 

@@ -49,6 +49,7 @@ from geocert.solvers.core.geometry import is_number, norm_cost
 from geocert.solvers.core.strict import Invalid, number, numbers
 from geocert.solvers.fractional.items import TrackItems
 from geocert.solvers.reconstruction import calibration_claim, camera_claim, motion_claim
+from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
 
 ROUNDING = 1e-9  # relative: what JSON round trips and a recomputed cost may differ by
 MAX_CALIBRATION_ABS_GAP = 1e-9  # the autocalibration's costs are of order 1e-3 on real tracks (the pipeline's: 1e-12)
@@ -204,6 +205,18 @@ def _check_pipeline_counts(result: dict, rel_gap: float) -> None:
     if not summary.get("cameras_dropped") == dropped == warned:
         raise Invalid("returned", f"summary/cameras_dropped is {summary.get('cameras_dropped')!r}: {dropped} views are "
                                   f"dropped by their reason, {warned} by the warnings")
+    if "doubtful" in summary:  # claims._doubts, recomputed: the cameras bounded, the counts above
+        bounded = [c for c in cameras if c.get("registered") and c.get("status") not in ("not_run", "cancelled")]
+        beyond = sum(1 for c in bounded if c.get("certified") is not True)
+        removed, kept = summary["observations_removed"], summary.get("observations") or 0
+        registered = sum(1 for c in cameras if c.get("registered") is True)
+        doubtful = bool((len(bounded) >= 2 and beyond > DOUBTFUL_FRACTION * len(bounded))
+                        or (removed and removed > DOUBTFUL_REMOVED * (removed + kept))
+                        or (dropped and dropped > DOUBTFUL_DROPPED * (dropped + registered)))
+        if summary["doubtful"] is not doubtful or doubtful != _warned(summary, "reconstruction_doubtful"):
+            raise Invalid("returned", f"summary/doubtful is {summary['doubtful']!r}: its cameras and counts make the "
+                                      f"reconstruction {'' if doubtful else 'not '}doubtful, and the warning must say "
+                                      "so exactly then")
     judged = any(c.get("degrees_of_freedom") is not None or c.get("searched") is True for c in cameras)
     claim = camera_claim.statement(result.get("norm"), rel_gap)
     for where, given in (("summary/camera_claim", summary.get("camera_claim")),
