@@ -757,7 +757,7 @@ def _triangulate_and_adjust(state, fixed: int, max_nfev: int, options, stats: di
     _triangulate_new(state, options)
     timing["triangulation"] += time.perf_counter() - start
     start = time.perf_counter()
-    if options.ba_solver == "schur":
+    if options.ba_solver == "schur" and max_nfev < options.final_ba_max_nfev:
         stats["ba_nfev"].append(_bundle_adjust_schur(state, fixed, options.ba_max_iterations, options))
     else:
         stats["ba_nfev"].append(_bundle_adjust(state, fixed, max_nfev, options))
