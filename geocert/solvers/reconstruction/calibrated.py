@@ -82,8 +82,11 @@ class CalibratedOptions:
     # The adjustment after each view is added: "schur" (schur.solve, at most ba_max_iterations
     # Levenberg-Marquardt steps, Huber loss at ba_f_scale_px) or "lsmr" (least_squares, soft-L1,
     # ba_max_nfev). Both move every registered camera and point; "schur" solves each step's normal
-    # equations exactly, where LSMR's inner iterations took most of a small set's CPU.
-    ba_solver: str = "schur"
+    # equations exactly, where LSMR's inner iterations took most of a small set's CPU. "auto":
+    # "lsmr" with merge_components, "schur" without. The merged ring's path was measured with
+    # "lsmr" (dinoSparseRing, the README's ring options, K unknown: 14/14 views with "lsmr", 7/14
+    # with "schur"), so that path keeps it.
+    ba_solver: str = "auto"
     ba_max_iterations: int = 10
     final_ba_max_nfev: int = 300
     # The final adjustments' solver: "schur", Levenberg-Marquardt on the cameras' reduced system
@@ -757,7 +760,8 @@ def _triangulate_and_adjust(state, fixed: int, max_nfev: int, options, stats: di
     _triangulate_new(state, options)
     timing["triangulation"] += time.perf_counter() - start
     start = time.perf_counter()
-    if options.ba_solver == "schur" and max_nfev < options.final_ba_max_nfev:
+    solver = options.ba_solver if options.ba_solver != "auto" else ("lsmr" if options.merge_components else "schur")
+    if solver == "schur" and max_nfev < options.final_ba_max_nfev:
         stats["ba_nfev"].append(_bundle_adjust_schur(state, fixed, options.ba_max_iterations, options))
     else:
         stats["ba_nfev"].append(_bundle_adjust(state, fixed, max_nfev, options))
