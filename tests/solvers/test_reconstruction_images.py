@@ -219,6 +219,36 @@ class TestPairChoice:
         assert errors.max() < 0.5
 
 
+def _ratio_matches_row_by_row(d2: np.ndarray, ratio: float, mutual: bool) -> list[list[int]]:
+    """The ratio test and mutual check read off their definitions, one row at a time: a row's
+    nearest column (the first of equals), kept when strictly nearer than ratio times every other
+    column's distance, and (mutual) when the row is the first of the column's nearest rows."""
+    kept = []
+    for i, row in enumerate(d2):
+        j = int(np.argmin(row))
+        others = np.delete(row, j)
+        second = others.min() if len(others) else np.inf
+        if not (np.isfinite(row[j]) and row[j] < ratio ** 2 * second):
+            continue
+        if mutual and int(np.argmin(d2[:, j])) != i:
+            continue
+        kept.append([i, j])
+    return kept
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_ratio_matches_follow_their_definition(seed):
+    # Small integer distances make ties common (between a row's nearest two, and between rows
+    # nearest to one column); infinities are pairs guided matching forbids.
+    rng = np.random.default_rng(seed)
+    d2 = rng.integers(0, 5, size=(rng.integers(1, 9), rng.integers(1, 9))).astype(np.float32)
+    d2[rng.random(d2.shape) < 0.3] = np.inf
+    for ratio in (0.8, 1.0):
+        for mutual in (True, False):
+            found = features._ratio_matches(d2.copy(), ratio, mutual)
+            assert found.tolist() == _ratio_matches_row_by_row(d2, ratio, mutual)
+
+
 class TestGuidedMatching:
     # Cameras translated along x: F = [e]x with e = (1, 0, 0), epipolar lines are the rows (y_b = y_a).
     F = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -334,6 +364,20 @@ class TestCalibrated:
                 h = scene.cameras[v].K @ xc
                 worst = max(worst, float(np.linalg.norm(h[:2] / h[2] - p)))
         assert worst <= limit
+
+    def test_the_adjustment_after_each_view_agrees_with_least_squares(self, box, box_tracks):
+        # The Schur solver's few exact Levenberg-Marquardt steps and least_squares' LSMR steps,
+        # after each view is added, lead to the same registered views and rotations (the final
+        # adjustments, the same in both, end where the tracks put them).
+        scene, _ = box
+        Ks = [c.K for c in scene.cameras]
+        schur = calibrated_reconstruction(box_tracks.tracks, Ks, CalibratedOptions(ba_solver="schur"))
+        lsmr = calibrated_reconstruction(box_tracks.tracks, Ks, CalibratedOptions(ba_solver="lsmr"))
+        assert [R is not None for R in schur.rotations] == [R is not None for R in lsmr.rotations]
+        _, between = align_rotations(schur.rotations, lsmr.rotations)
+        _, errors = align_rotations(schur.rotations, [c.R for c in scene.cameras])
+        assert between.max() < 0.05 and errors.max() < 0.2
+        assert max(schur.stats["ba_nfev"][:-CalibratedOptions().final_rounds]) <= CalibratedOptions().ba_max_iterations
 
     def test_unlinked_view_has_a_reason(self, box):
         scene, _ = box

@@ -423,17 +423,28 @@ def _ratio_matches(d2: np.ndarray, ratio: float, mutual: bool) -> np.ndarray:
     """Each row's nearest column, kept when nearer than ``ratio`` times the second-nearest (a
     single column passes; an infinite distance, a pair not allowed, never does) and, with
     ``mutual``, when the two are each other's nearest."""
+    # Minima and argmins along rows, and minima along columns, are single passes over d2 (an
+    # argpartition, or an argmin down the columns, costs as much as the distances themselves).
     rows = np.arange(d2.shape[0])
+    nearest = np.argmin(d2, axis=1) if d2.shape[1] else np.zeros(len(rows), dtype=np.int64)
     if d2.shape[1] >= 2:
-        two = np.argpartition(d2, 1, axis=1)[:, :2]
-        first, second = d2[rows, two[:, 0]], d2[rows, two[:, 1]]
-        nearest = np.where(second < first, two[:, 1], two[:, 0])
-        d_first, d_second = np.minimum(first, second), np.maximum(first, second)
+        d_first = d2[rows, nearest]
+        d2[rows, nearest] = np.inf  # the second nearest is the nearest of the others
+        d_second = d2.min(axis=1)
+        d2[rows, nearest] = d_first
     else:
-        nearest, d_first, d_second = np.zeros(len(rows), dtype=np.int64), d2[:, 0], np.full(len(rows), np.inf)
+        d_first, d_second = d2[:, 0], np.full(len(rows), np.inf)
     keep = np.isfinite(d_first) & (d_first < (ratio ** 2) * d_second)
-    if mutual:
-        keep &= np.argmin(d2, axis=0)[nearest] == rows
+    if mutual and len(rows):
+        # Each other's nearest: the row's distance is its column's minimum, and where several rows
+        # reach that minimum, the row is the first of them (np.argmin's choice down the column).
+        column_min = d2.min(axis=0)
+        keep &= d_first == column_min[nearest]
+        tied = np.flatnonzero((d2 == column_min).sum(axis=0) > 1)
+        if len(tied):
+            first_row = np.full(d2.shape[1], -1)
+            first_row[tied] = np.argmin(d2[:, tied], axis=0)
+            keep &= ~np.isin(nearest, tied) | (first_row[nearest] == rows)
     return np.c_[rows[keep], nearest[keep]].astype(np.int64)
 
 

@@ -78,7 +78,16 @@ class CalibratedOptions:
     ba_loss: str = "soft_l1"  # least_squares' robust loss
     ba_f_scale_px: float = 1.0  # residual (pixels) where the robust loss starts to flatten
     ba_ftol: float = 1e-8  # least_squares' relative cost-decrease tolerance
-    ba_max_nfev: int = 50  # evaluations per bundle adjustment after a view is added
+    ba_max_nfev: int = 50  # evaluations per bundle adjustment after a view is added ("lsmr")
+    # The adjustment after each view is added: "schur" (schur.solve, at most ba_max_iterations
+    # Levenberg-Marquardt steps, Huber loss at ba_f_scale_px) or "lsmr" (least_squares, soft-L1,
+    # ba_max_nfev). Both move every registered camera and point; "schur" solves each step's normal
+    # equations exactly, where LSMR's inner iterations took most of a small set's CPU. "auto":
+    # "lsmr" with merge_components, "schur" without. The merged ring's path was measured with
+    # "lsmr" (dinoSparseRing, the README's ring options, K unknown: 14/14 views with "lsmr", 7/14
+    # with "schur"), so that path keeps it.
+    ba_solver: str = "auto"
+    ba_max_iterations: int = 10
     final_ba_max_nfev: int = 300
     # The final adjustments' solver: "schur", Levenberg-Marquardt on the cameras' reduced system
     # (schur.solve, Huber loss at ba_f_scale_px, run to convergence: final_ba_max_iterations);
@@ -751,7 +760,11 @@ def _triangulate_and_adjust(state, fixed: int, max_nfev: int, options, stats: di
     _triangulate_new(state, options)
     timing["triangulation"] += time.perf_counter() - start
     start = time.perf_counter()
-    stats["ba_nfev"].append(_bundle_adjust(state, fixed, max_nfev, options))
+    solver = options.ba_solver if options.ba_solver != "auto" else ("lsmr" if options.merge_components else "schur")
+    if solver == "schur" and max_nfev < options.final_ba_max_nfev:
+        stats["ba_nfev"].append(_bundle_adjust_schur(state, fixed, options.ba_max_iterations, options))
+    else:
+        stats["ba_nfev"].append(_bundle_adjust(state, fixed, max_nfev, options))
     _remove_outliers(state, options)
     timing["bundle_adjustment"] += time.perf_counter() - start
 

@@ -37,6 +37,28 @@ def _jacobians(residual, A, S, B, view, track, step=1e-6):
     return ja, js, jb
 
 
+def _sum_by(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Rows of ``values`` (M, ...) summed by ``index`` (M,) into n rows: np.add.at's sum, by one
+    bincount (several times faster than ufunc.at on the observations)."""
+    flat = values.reshape(len(index), -1)
+    k = flat.shape[1]
+    at = (index[:, None] * k + np.arange(k)[None, :]).ravel()
+    return np.bincount(at, weights=flat.ravel(), minlength=n * k).reshape((n,) + values.shape[1:])
+
+
+def _inverse(V: np.ndarray) -> np.ndarray:
+    """Inverses of a stack of square matrices (k, d, d); for d = 3 by cofactors (rows' cross
+    products over the determinant), several times faster than np.linalg.inv on small blocks. A
+    singular block gives non-finite entries (the step is then refused and the damping raised)."""
+    if V.shape[-1] != 3:
+        return np.linalg.inv(V)
+    r0, r1, r2 = V[:, 0], V[:, 1], V[:, 2]
+    columns = np.stack([np.cross(r1, r2), np.cross(r2, r0), np.cross(r0, r1)], axis=2)
+    det = np.einsum("ki,ki->k", r0, columns[:, :, 0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return columns / det[:, None, None]
+
+
 def _robust_weights(r: np.ndarray, f_scale: float | None) -> np.ndarray:
     """Per observation, the iteratively reweighted least squares weight of a Huber loss on the
     residual's length (None: plain least squares)."""
@@ -67,14 +89,16 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
     M = len(view)
     cam_cols = np.concatenate([c * view[:, None] + np.arange(c)[None, :],
                                np.broadcast_to(n * c + np.arange(s), (M, s))], axis=1)  # (M, c + s)
-    # Pairs of observations of the same point (for the reduced system's off-diagonal blocks).
+    # Pairs of different observations of the same point, each pair once (first before second in
+    # the point's observations): the reduced system's blocks between them, summed into C, give
+    # C + C^T (V^-1 is symmetric), and each observation's block with itself goes with U's.
     order = np.argsort(track, kind="stable")
     counts = np.bincount(track, minlength=p)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     first, second = [], []
     for k in range(1, counts.max() + 1 if len(counts) else 1):
-        for l in range(1, counts.max() + 1 if len(counts) else 1):
-            pts = np.flatnonzero((counts >= k) & (counts >= l))
+        for l in range(k + 1, counts.max() + 1 if len(counts) else 1):
+            pts = np.flatnonzero(counts >= l)
             first.append(order[starts[pts] + k - 1])
             second.append(order[starts[pts] + l - 1])
     first = np.concatenate(first) if first else np.zeros(0, dtype=int)
@@ -99,25 +123,24 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
         # Normal equations' blocks.
         jeT = je.transpose(0, 2, 1)
         U = jeT @ je  # (M, c+s, c+s)
-        V = np.zeros((p, d, d))
-        np.add.at(V, track, jb.transpose(0, 2, 1) @ jb)
+        V = _sum_by(track, jb.transpose(0, 2, 1) @ jb, p)
         Wm = jeT @ jb  # (M, c+s, d)
         ga = (jeT @ rw[:, :, None])[:, :, 0]  # (M, c+s)
-        gb = np.zeros((p, d))
-        np.add.at(gb, track, (jb.transpose(0, 2, 1) @ rw[:, :, None])[:, :, 0])
-        diag_u = np.zeros(nc)
-        np.add.at(diag_u, cam_cols.ravel(), np.einsum("mii->mi", U).ravel())
-        U_dense = np.bincount(diag_at, weights=U.ravel(), minlength=nc * nc).reshape(nc, nc)
+        gb = _sum_by(track, (jb.transpose(0, 2, 1) @ rw[:, :, None])[:, :, 0], p)
+        diag_u = np.bincount(cam_cols.ravel(), weights=np.einsum("mii->mi", U).ravel(), minlength=nc)
+        WmT = Wm.transpose(0, 2, 1)
         while True:
             Vd = V + lam * (np.einsum("pii->pi", V)[:, :, None] * np.eye(d) + 1e-12 * np.eye(d))
-            Vinv = np.linalg.inv(Vd)
+            Vinv = _inverse(Vd)
             # Reduced system: (U - W V^-1 W^T) da = -(ga - W V^-1 gb).
             WV = Wm @ Vinv[track]  # (M, c+s, d)
-            blocks = WV[first] @ Wm[second].transpose(0, 2, 1)  # (pairs, c+s, c+s)
-            Ured = U_dense - np.bincount(pair_at, weights=blocks.ravel(), minlength=nc * nc).reshape(nc, nc)
+            own = np.bincount(diag_at, weights=(U - WV @ WmT).ravel(), minlength=nc * nc).reshape(nc, nc)
+            cross = np.bincount(pair_at, weights=(WV[first] @ WmT[second]).ravel(),
+                                minlength=nc * nc).reshape(nc, nc)
+            Ured = own - cross - cross.T
             Ured[np.diag_indices(nc)] += lam * diag_u + 1e-12
-            rhs = np.zeros(nc)
-            np.add.at(rhs, cam_cols.ravel(), (ga - (WV @ gb[track][:, :, None])[:, :, 0]).ravel())
+            rhs = np.bincount(cam_cols.ravel(), weights=(ga - (WV @ gb[track][:, :, None])[:, :, 0]).ravel(),
+                              minlength=nc)
             try:
                 da = -np.linalg.solve(Ured, rhs)
             except np.linalg.LinAlgError:
@@ -125,10 +148,11 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
                 continue
             if not np.all(np.isfinite(da)):
                 lam *= 10
+                if lam > 1e12:
+                    return A, S, B, r, iterations
                 continue
             # Back substitution: db_j = -V_j^-1 (gb_j + sum_m W_m^T da_m).
-            wda = np.zeros((p, d))
-            np.add.at(wda, track, (Wm.transpose(0, 2, 1) @ da[cam_cols][:, :, None])[:, :, 0])
+            wda = _sum_by(track, (Wm.transpose(0, 2, 1) @ da[cam_cols][:, :, None])[:, :, 0], p)
             db = -(Vinv @ (gb + wda)[:, :, None])[:, :, 0]
             A_new = A + da[:n * c].reshape(n, c)
             S_new = S + da[n * c:]
