@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from geocert.solvers.core.certificates import residual_rounding
-from geocert.solvers.core.geometry import cost_rounding, normalised_cameras
+from geocert.solvers.core.geometry import cost_rounding, norm_cost, normalised_cameras
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.convexity import outside_range, track_bound
@@ -86,6 +86,8 @@ class MapItem:
         """``chart``: as TrackItem's."""
         self.norm = norm
         self.source, self.target = arrays
+        if chart is False:  # its residuals only: no program is built
+            return
         self.chart = chart if chart is not None else MapChart.build(self.source, self.target, norm)
         self.program = self.chart.program
 
@@ -270,6 +272,30 @@ class MapItems:
 
     def item(self, arrays: tuple, norm: str) -> MapItem:
         return MapItem(arrays, norm)
+
+    def check_returned(self, result: dict, certificate: dict) -> None:
+        """Each returned map's ``residuals`` are what its matrix leaves on the certificate's data
+        (target minus the map's image), certified or not, and an uncertified map's cost is their
+        norm: a residual or a cost no matrix gives is refused."""
+        norm = certificate["options"].get("norm")
+        for index, entry in enumerate(result.get("maps") or []):
+            if not isinstance(entry, dict) or entry.get("matrix") is None:
+                continue
+            where = f"maps/{index}"
+            source, target = self.read(certificate["data"], index)
+            matrix = numbers(entry["matrix"], f"{where}/matrix", (target.shape[1] + 1, source.shape[1] + 1),
+                             "returned")
+            residuals, _, rounding = MapItem((source, target), norm, chart=False).raw_residuals(matrix)
+            if "residuals" in entry:
+                given = numbers(entry["residuals"], f"{where}/residuals", residuals.shape, "returned")
+                if not np.all(np.abs(given - residuals) <= 1e-9 * np.maximum(1.0, np.abs(target)) + 2 * rounding):
+                    raise Invalid("returned", f"{where}/residuals are not what its matrix leaves on the data")
+            if entry.get("certified") is not True and entry.get("cost") is not None:
+                cost = norm_cost(residuals, norm)
+                if not abs(float(entry["cost"]) - cost) <= 1e-9 * max(1.0, abs(cost)):
+                    raise Invalid("returned", f"{where}/cost {entry['cost']!r}, its matrix costs {cost!r}")
+                if entry.get("status") == "optimal":
+                    raise Invalid("returned", f"{where}: an uncertified map's status is not optimal")
 
 
 TRACKS = TrackItems()
