@@ -28,6 +28,15 @@ rho^2 = c, inside C (within the ball, where f is convex) at least its tangent pl
 smallest R of a ladder that passes (E) is taken (the gradient's term is smallest, and (V) is
 easiest, there).
 
+The same test (E) at a higher level proves where the near-optimal points lie (a proven interval
+of every solution within ``increase`` of the optimum): every point of the scope costing at most
+f(x) + increase (the optimum costs at most f(x)) has every residual at most
+rho' = sqrt(f(x) + increase), so lies in C' = {every depth > 0, every |r_i| <= rho'}, convex
+and holding x; (E) with rho' in place of rho puts C' inside the ball |X - x| < R', so each
+coordinate lies within R' of x's. No convexity of f is needed for this (only (E)), and the test
+is monotone in R' (every weight R / (w_i + R |d_i|) grows with R), so the smallest R' passing is
+found by bisection (``sublevel_radii``).
+
 Round-off (docs/certificate.md states the assumptions): every quantity is recomputed from the
 data and x in floating point, and each bound is widened by a generous multiple of the unit
 round-off u times the size of the terms behind it (the sums of their products' magnitudes).
@@ -96,7 +105,9 @@ class _Terms:
     track (T,), each with the round-off allowance of its computation."""
 
 
-def _terms(flat: FlatTracks, x: np.ndarray) -> _Terms:
+def _terms(flat: FlatTracks, x: np.ndarray, increase: np.ndarray | None = None) -> _Terms:
+    """The terms at the tracks' points; with ``increase`` (T,), rho (and e) at the level
+    f(x) + increase instead of f(x) (only (E) reads them then)."""
     t = _Terms()
     owner = flat.owner
     t.n = n = flat.sizes.astype(float)
@@ -133,7 +144,8 @@ def _terms(flat: FlatTracks, x: np.ndarray) -> _Terms:
         t.c, c_err, behind, g_err, g_size = sums[:5]
         c_err = c_err + 8 * U * n * t.c
         t.c_lo, c_hi = t.c - c_err, t.c + c_err
-        t.rho = np.sqrt(c_hi) * (1 + 4 * U)
+        level = c_hi if increase is None else (c_hi + increase) * (1 + 4 * U)
+        t.rho = np.sqrt(level) * (1 + 4 * U)
         t.g_up = (np.sqrt((sums[5:] ** 2).sum(axis=0)) + g_err + 8 * U * n * g_size) * (1 + 4 * U)
         t.e = (t.rho[owner] + (r_len + err_len) * (1 + 4 * U)) * (1 + 1e-12)
         t.w_lo, t.w_hi = w - err_w, w + err_w
@@ -142,6 +154,8 @@ def _terms(flat: FlatTracks, x: np.ndarray) -> _Terms:
         outside = ~(in_range(P).all(axis=(0, 1)) & in_range(y).all(axis=0))
         t.usable = (behind == 0) & (t.c >= SMALLEST) & np.isfinite(t.c) & (t.reach > 0) & np.isfinite(t.reach) \
             & np.isfinite(t.g_up) & (flat.per_track(outside.astype(float)) == 0) & in_range(x).all(axis=1)
+        if increase is not None:
+            t.usable &= in_range(increase) & (increase >= 0)
     return t
 
 
@@ -212,3 +226,61 @@ def track_bound(cameras: np.ndarray, points: np.ndarray, point: np.ndarray, radi
     flat = FlatTracks.build(cameras, [(list(range(len(cameras))), points)])
     lower, _ = bounds_at(flat, np.asarray(point, dtype=float).reshape(1, 3), np.array([radius], dtype=float))
     return float(lower[0])
+
+
+def sublevel_radii(flat: FlatTracks, x: np.ndarray, increase: np.ndarray, strictness: float = 1.0,
+                   steps: int = 40) -> np.ndarray:
+    """For every track t: the smallest radius R' (to a relative 2^-steps, by bisection) at which
+    (E) at the level f(x[t]) + increase[t] holds, so that every point of the scope costing at
+    most that lies within R' of x[t]; nan where none up to 2^128 is found."""
+    terms = _terms(flat, x, np.asarray(increase, dtype=float))
+    n_tracks = len(x)
+    with np.errstate(all="ignore"):
+        # Below R0 = sqrt(n / lambda_min(sum_i M_i' M_i / (e_i w_i)^2)) the test fails (each
+        # weight is below R^2 / (e_i w_i)^2 there): the search starts at R0.
+        weight = 1 / (terms.e * terms.w_hi) ** 2
+        A = flat.per_track(terms.MtM * weight)
+        matrices = A[[0, 1, 2, 1, 3, 4, 2, 4, 5]].T.reshape(n_tracks, 3, 3)
+        smallest = np.linalg.eigvalsh(np.where(np.isfinite(matrices), matrices, 0.0))[:, 0]
+        lo = np.sqrt(terms.n / np.where(smallest > 0, smallest, np.nan))
+        lo = np.where(np.isfinite(lo) & (lo >= SMALLEST), lo, SMALLEST)
+
+        def passes(R):
+            return _encloses(flat, terms, R[None], strictness)[0] & (R <= LARGEST)
+
+        hi = lo.copy()
+        found = passes(hi)
+        for _ in range(260):  # doubling from R0 up to 2^128
+            if found.all():
+                break
+            hi = np.where(found, hi, 2 * hi)
+            found = passes(hi) | found
+            if (hi[~found] > LARGEST).all():
+                break
+        lo = np.where(found & (hi > lo), hi / 2, lo)
+        for _ in range(steps):
+            middle = np.sqrt(lo * hi)
+            ok = passes(middle)
+            hi, lo = np.where(ok, middle, hi), np.where(ok, lo, middle)
+        return np.where(found & terms.usable, hi, np.nan)
+
+
+def ball_intervals(point, radius: float) -> list[list[float]]:
+    """[lower, upper] of each coordinate over the open ball of ``radius`` about ``point``, rounded
+    outward (what a proven interval states, recomputed alike by the checker)."""
+    centre = np.asarray(point, dtype=float)
+    lower = np.nextafter(centre - radius, -np.inf)
+    upper = np.nextafter(centre + radius, np.inf)
+    return np.stack([lower, upper], axis=1).tolist()
+
+
+def sublevel_holds(cameras: np.ndarray, points: np.ndarray, point: np.ndarray, increase: float,
+                   radius: float) -> bool:
+    """A checker's test for one track: (E) at the level f(point) + ``increase`` holds at
+    ``radius`` (every point of the scope costing at most that lies within ``radius`` of
+    ``point``)."""
+    flat = FlatTracks.build(cameras, [(list(range(len(cameras))), points)])
+    x = np.asarray(point, dtype=float).reshape(1, 3)
+    terms = _terms(flat, x, np.array([increase], dtype=float))
+    with np.errstate(all="ignore"):
+        return bool(_encloses(flat, terms, np.array([[radius]], dtype=float))[0, 0])

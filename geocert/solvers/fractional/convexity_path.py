@@ -7,6 +7,11 @@ whose sums may differ in their last bits, passes too) and the bound is within th
 the cost as the verifier recomputes it: the cost plus its rounding slack (the verifier's
 residual_rounding), with the data determining it to within half the tolerance (the verifier's
 residual uncertainty). Every other track is left to the branch and bound (None).
+
+A certified track also gets a proven interval of every point of the scope within a cost
+increase of the optimum (fractional.convexity.sublevel_radii): the increase is the one its
+determinacy estimate uses (SIGMAS^2 times the fit's residual variance, at least the certified
+gap), so the estimate and the proof speak of one set.
 """
 
 from __future__ import annotations
@@ -14,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from geocert.solvers.core.certificates import ROUNDING
-from geocert.solvers.fractional.convexity import convexity_bounds
+from geocert.solvers.core.determinacy import SIGMAS
+from geocert.solvers.fractional.convexity import ball_intervals, convexity_bounds, sublevel_radii
 from geocert.solvers.fractional.flat import FlatTracks, linear, refine
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.fractional.results import LocalCertificate, TrackResult
@@ -56,13 +62,31 @@ def certify_tracks(cameras: np.ndarray, tracks: list, options: TriangulationOpti
     certified = ok & np.isfinite(lower) & (behind == 0) & np.isfinite(cost) & (cost > options.abs_gap) \
         & (cost + slack * (1 + 1e-6) - claimed <= tolerance * (1 - 1e-9)) & (spread <= 0.5 * tolerance)
     full = options.certificate == "full"
+    increase, reach = _sublevels(flat, x, cost, claimed, certified) if full or options.detail == "full" \
+        else (None, None)
     # Python lists made once for the whole batch (one tolist each), then sliced per track.
     residuals, points, starts = r.T.tolist(), x.tolist(), flat.starts.tolist()
     costs, claims, tolerances, radii = cost.tolist(), claimed.tolist(), tolerance.tolist(), radius.tolist()
     for t in np.flatnonzero(certified).tolist():
+        sublevel = None
+        if reach is not None and np.isfinite(reach[t]):
+            sublevel = {"cost_increase": float(increase[t]), "radius": float(reach[t]),
+                        "intervals": ball_intervals(points[t], float(reach[t]))}
         proof = {"type": "convexity", "radius": radii[t]} if full else None
+        if proof is not None and sublevel is not None:
+            proof["sublevel"] = sublevel
         out[t] = TrackResult(status="optimal", certified=True, cost=costs[t], lower_bound=claims[t],
                              gap=costs[t] - claims[t], nodes=0, point=points[t],
                              residuals=residuals[starts[t]:starts[t + 1]],
-                             certificate=LocalCertificate(SCOPE, tolerances[t], radii[t], proof))
+                             certificate=LocalCertificate(SCOPE, tolerances[t], radii[t], proof, sublevel=sublevel))
     return out
+
+
+def _sublevels(flat, x: np.ndarray, cost: np.ndarray, claimed: np.ndarray, certified: np.ndarray):
+    """(increase, radius) of every track: the cost increase (SIGMAS^2 cost / (2n - 3), at least
+    the certified gap) and the proven ball's radius (nan where none, or not certified)."""
+    redundancy = np.maximum(2 * flat.sizes - 3, 1)
+    increase = np.maximum(SIGMAS ** 2 * cost / redundancy, np.maximum(cost - claimed, 0.0))
+    # Solver's strictness: the checker's sums, differing in their last bits, pass at its radius.
+    reach = sublevel_radii(flat, x, np.where(certified, increase, np.nan), strictness=STRICTNESS)
+    return increase, reach

@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from geocert.solvers.core.determinacy import (SIGMAS, SINGULAR, Determinacy, certified_gap, curvature_intervals,
-                                               interval, numeric_jacobian, safely, spread)
+                                               interval, numeric_jacobian, proven_document, safely, spread)
 from geocert.solvers.fractional.charts import camera_centres
 
 PARALLAX_DEGREES = 1.0  # rays meeting at less than this: near-zero parallax
@@ -160,12 +160,24 @@ def _finite_tracks(cameras, all_centres, tracks: list, results: list, n: int) ->
                 out.intervals.append(interval(names[k], value, value - half[i, k], value + half[i, k], scale))
             else:
                 out.intervals.append(interval(names[k], value, None, None, scale))
+        out.proven_intervals = proven_track(result)
         if usable[i].sum() >= 2 and widest[i] < PARALLAX_DEGREES:
             out.warnings.append({"code": "near_zero_parallax",
                                  "detail": f"the rays meet at {float(widest[i]):.3g} degrees at most (< "
                                            f"{PARALLAX_DEGREES:g}): the depth along them is poorly fixed"})
         documents.append(out.document())
     return documents
+
+
+def proven_track(result) -> dict | None:
+    """The proven intervals of a track certified by the convexity bound (its certificate's
+    ``sublevel``), None for any other."""
+    sublevel = getattr(result.certificate, "sublevel", None)
+    if sublevel is None:
+        return None
+    return proven_document(sublevel["cost_increase"], ("x", "y", "z"), sublevel["intervals"],
+                           f"a ball of radius {sublevel['radius']:.6g} about the point, proven by the convexity "
+                           "path's enclosure test at that level (fractional.convexity)")
 
 
 def _complement(M: np.ndarray) -> np.ndarray:

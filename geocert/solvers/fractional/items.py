@@ -10,7 +10,7 @@ from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import cost_rounding, normalised_cameras
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
-from geocert.solvers.fractional.convexity import outside_range, track_bound
+from geocert.solvers.fractional.convexity import ball_intervals, outside_range, sublevel_holds, track_bound
 from geocert.solvers.fractional.proof import (check_program, program_allowance, program_discount, raw_sizes,
                                               residual_uncertainty, track_uncertainty, verify_search)
 from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
@@ -177,7 +177,7 @@ def verify_convexity(item, options: dict, proof: dict, lower_claimed: float, sol
     """The lower bound a convexity proof establishes (fractional.convexity.track_bound): an
     L2L2 track with no max_residual, a finite solution, and a radius at which the cost is proven
     convex on a ball holding every point of the scope that costs as little."""
-    record(proof, "proof", ("type", "radius"))
+    record(proof, "proof", ("type", "radius"), ("sublevel",))
     radius = _number(proof.get("radius"), "proof/radius")
     if options["norm"] != "L2L2" or options["max_residual"] is not None:
         raise Invalid("convexity", "a convexity proof is for L2L2 with no max_residual")
@@ -193,7 +193,32 @@ def verify_convexity(item, options: dict, proof: dict, lower_claimed: float, sol
         raise Invalid("convexity", f"nothing proven at radius {radius!r}: the ball about the solution is not shown "
                                    "to hold every point costing as little, or the cost to be convex on it")
     passed.append("convexity")
+    if "sublevel" in proof:
+        verify_sublevel(item, proof["sublevel"], solution)
+        passed.append("proven_interval")
     return bound
+
+
+def verify_sublevel(item, sublevel, solution) -> None:
+    """A proven interval (fractional.convexity, ``sublevel_radii``): every point of the scope
+    costing at most the optimum plus cost_increase lies in the intervals. Refused unless (E) at
+    that level holds at the radius and the intervals are exactly the ball's about the solution
+    (outward rounded): a narrower interval is not proven, a wider one is not the proof's."""
+    record(sublevel, "proof/sublevel", ("cost_increase", "radius", "intervals"))
+    increase = _number(sublevel.get("cost_increase"), "proof/sublevel/cost_increase")
+    radius = _number(sublevel.get("radius"), "proof/sublevel/radius")
+    intervals = numbers(sublevel.get("intervals"), "proof/sublevel/intervals", (3, 2))
+    if not (increase >= 0 and radius > 0):
+        raise Invalid("proven_interval", "proof/sublevel needs cost_increase >= 0 and radius > 0")
+    outside = outside_range(item.cameras, item.points, solution[:3], radius)
+    if outside is not None or not (increase == 0 or 2.0 ** -128 <= increase <= 2.0 ** 128):
+        raise Invalid("proven_interval", outside or "proof/sublevel/cost_increase is subnormal or huge")
+    if not np.array_equal(intervals, np.array(ball_intervals(solution[:3], radius))):
+        raise Invalid("proven_interval", "proof/sublevel/intervals are not the ball's of that radius about the point "
+                                         "(each coordinate's [x - radius, x + radius], rounded outward)")
+    if not sublevel_holds(item.cameras, item.points, solution[:3], increase, radius):
+        raise Invalid("proven_interval", f"not proven at radius {radius!r}: the points costing up to cost_increase "
+                                         f"{increase!r} more are not shown to lie within it")
 
 
 class TrackItems:
@@ -212,6 +237,32 @@ class TrackItems:
 
     def forget(self) -> None:
         self._cameras = None
+
+    @staticmethod
+    def check_returned(result: dict, certificate: dict) -> None:
+        """A track's determinacy may say proven only with the intervals its claim's proof proves
+        (the proof's sublevel, at its cost_increase). Triangulation results only: a kind that
+        reads its points as tracks (reconstruction) returns no such determinacy."""
+        if certificate.get("kind") != "triangulation":
+            return
+        for index, (item, claim) in enumerate(zip(result["tracks"], certificate["items"])):
+            determinacy = item.get("determinacy")
+            if not isinstance(determinacy, dict) or (determinacy.get("proven") is False
+                                                     and determinacy.get("proven_intervals") is None):
+                continue
+            proof = claim.get("proof") if claim.get("certified") is True else None
+            sublevel = proof.get("sublevel") if isinstance(proof, dict) else None
+            stated = determinacy.get("proven_intervals")
+            if sublevel is None or determinacy.get("proven") is not True or not isinstance(stated, dict):
+                raise Invalid("returned", f"tracks/{index}/determinacy says proven, and its certificate proves no "
+                                          "interval")
+            intervals = stated.get("intervals")
+            bounds = [[i.get("lower"), i.get("upper")] for i in intervals] if isinstance(intervals, list) and all(
+                isinstance(i, dict) for i in intervals) else None
+            if stated.get("cost_increase") != sublevel.get("cost_increase") or bounds != sublevel.get("intervals") \
+                    or [i.get("name") for i in intervals] != ["x", "y", "z"]:
+                raise Invalid("returned", f"tracks/{index}/determinacy/proven_intervals are not the ones its "
+                                          "certificate proves")
 
     def _read_cameras(self, value) -> np.ndarray:
         remembered = self._cameras

@@ -38,6 +38,9 @@ class LocalCertificate:
     proof: dict | None = None  # with options.certificate == "full": {"type": "convexity", "radius": R}
     tolerance_met: bool = True
     leaves: int = 0
+    # A proven interval: {"cost_increase": delta, "radius": R', "intervals": [[lo, hi]] * 3}, every
+    # point of the scope costing at most the optimum plus delta within R' of the solution.
+    sublevel: dict | None = None
 
 
 @dataclass
