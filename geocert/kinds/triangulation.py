@@ -149,7 +149,8 @@ class TriangulationKind:
         document = track_document(result, options.detail, options.certificate == "full")
         if options.detail == "full":  # brief: not computed
             document["determinacy"] = safely(determinacy.track, parsed.cameras[views], points, result.point,
-                                             result.at_infinity, result.cost, result.lower_bound)
+                                             result.at_infinity, result.cost, result.lower_bound,
+                                             getattr(result.certificate, "sublevel", None))
         return document
 
     def solve_batch(self, parsed: ParsedTracks, indices: list[int], options: TriangulationOptions, callback) -> list[dict]:

@@ -19,7 +19,7 @@ from geocert.solvers.fractional.triangulation import TriangulationOptions
 from geocert.solvers.verify import verify_any
 
 from tests.solvers.test_soundness import readme_job
-from tests.support import noisy_track, random_cameras, seed
+from tests.support import every_track_searched, noisy_track, random_cameras, seed
 
 
 def scene(rng, tracks: int, views: tuple[int, int], noise: float, cameras: int = 12):
@@ -34,25 +34,24 @@ def scene(rng, tracks: int, views: tuple[int, int], noise: float, cameras: int =
     return cams, out, np.array(truth)
 
 
-def solved(cams, tracks):
-    results = triangulate_many(cams, tracks, TriangulationOptions(certificate="full"))
+def solved(cams, tracks, norm: str = "L2L2"):
+    results = triangulate_many(cams, tracks, TriangulationOptions(norm=norm, certificate="full"))
     return results, tracks_many(cams, tracks, results)
 
 
-def costs_at(cams, points, X):
+def costs_at(cams, points, X, norm: str = "L2L2"):
     """The costs of points X (s, 3); inf outside the scope (not in front of every camera)."""
     proj = np.einsum("vij,sj->svi", cams[:, :, :3], X) + cams[:, :, 3]
-    cost = ((proj[..., :2] / proj[..., 2:3] - points) ** 2).sum(axis=(1, 2))
+    r = proj[..., :2] / proj[..., 2:3] - points
+    cost = {"L2L2": (r * r).sum(axis=(1, 2)), "L2L1": np.sqrt((r * r).sum(axis=2)).sum(axis=1),
+            "L1L1": np.abs(r).sum(axis=(1, 2))}[norm]
     return np.where(np.all(proj[..., 2] > 0, axis=1), cost, np.inf)
 
 
-@pytest.mark.parametrize("views,noise", [((2, 2), 1.0), ((3, 6), 0.5), ((3, 6), 3.0)])
-def test_every_point_within_the_increase_lies_in_the_proven_intervals(views, noise):
+def check_rays(rng, cams, tracks, results, documents, norm: str = "L2L2") -> int:
     """Along 40 rays from each solution (random directions and each camera's ray through it,
-    where the set is longest), the last point costing at most cost + cost_increase is inside."""
-    rng = np.random.default_rng(seed("proven", str(views), str(noise)))
-    cams, tracks, _ = scene(rng, 40, views, noise)
-    results, documents = solved(cams, tracks)
+    where the set is longest), every point costing at most cost + cost_increase is inside the
+    proven intervals; the number of tracks with proven intervals."""
     proven = 0
     for (chosen, points), result, document in zip(tracks, results, documents):
         found = document["proven_intervals"]
@@ -72,9 +71,29 @@ def test_every_point_within_the_increase_lies_in_the_proven_intervals(views, noi
         for u in directions:
             for sign in (1.0, -1.0):
                 X = x + sign * steps[:, None] * u
-                within = X[costs_at(cams[chosen], points, X) <= level]
+                within = X[costs_at(cams[chosen], points, X, norm) <= level]
                 assert np.all(lower <= within) and np.all(within <= upper), found
-    assert proven >= 0.9 * len(tracks)
+    return proven
+
+
+@pytest.mark.parametrize("views,noise", [((2, 2), 1.0), ((3, 6), 0.5), ((3, 6), 3.0)])
+def test_every_point_within_the_increase_lies_in_the_proven_intervals(views, noise):
+    rng = np.random.default_rng(seed("proven", str(views), str(noise)))
+    cams, tracks, _ = scene(rng, 40, views, noise)
+    results, documents = solved(cams, tracks)
+    assert check_rays(rng, cams, tracks, results, documents) >= 0.9 * len(tracks)
+
+
+@pytest.mark.parametrize("norm", ["L2L2", "L2L1", "L1L1"])
+def test_tracks_certified_by_a_search_have_proven_intervals_too(norm):
+    """Whatever proved the bound, the enclosure test at the level cost + cost_increase (under
+    the L1 norms every residual's length is at most the cost) proves the intervals."""
+    rng = np.random.default_rng(seed("proven", "searched", norm))
+    cams, tracks, _ = scene(rng, 8, (2, 4), 1.0)
+    with every_track_searched():
+        results, documents = solved(cams, tracks, norm)
+    assert all(r.certified and r.certificate.proof["type"] == "branch_and_bound" for r in results)
+    assert check_rays(rng, cams, tracks, results, documents, norm) == len(tracks)
 
 
 def test_the_proven_intervals_hold_the_truth_on_most_tracks():
@@ -153,3 +172,50 @@ class TestForgedIntervals:
         assert failed(result)["check"] == "returned"
         result["tracks"][0]["determinacy"]["proven_intervals"] = None
         assert failed(result)["check"] == "returned"  # proven: true with nothing proven
+
+
+@pytest.fixture(scope="module")
+def searched() -> dict:
+    """A full result of six tracks certified by a search (the stacked verifier's usual path),
+    each with a proven interval."""
+    rng = np.random.default_rng(seed("proven", "forged search"))
+    cams, tracks, _ = scene(rng, 6, (2, 4), 1.0)
+    job = {"kind": "triangulation", "options": {"certificate": "full"},
+           "data": {"cameras": cams.tolist(), "tracks": [{"views": v, "points": p.tolist()} for v, p in tracks]}}
+    with every_track_searched():
+        result = solve_job(job)
+    assert all(item["proof"]["type"] == "branch_and_bound" and "sublevel" in item["proof"]
+               for item in result["certificate"]["items"])
+    report = verify_any(result)
+    assert report.valid and {"name": "proven_interval", "passed": 6, "failed": 0} in report.checks
+    return result
+
+
+class TestForgedIntervalsOfASearch:
+    """The stacked verifier (many searches proven at once) reads no interval: the adapter checks
+    each stated one, and leaves a claim whose interval fails to the per-item check, which
+    refuses it."""
+
+    @pytest.mark.parametrize("end,change", [(0, 1e-6), (1, -1e-6), (0, -1e-6)])
+    def test_a_narrowed_or_widened_interval_is_refused(self, searched, end, change):
+        doc = copy.deepcopy(searched["certificate"])
+        intervals = doc["items"][3]["proof"]["sublevel"]["intervals"]
+        intervals[2][end] += change * max(abs(intervals[2][end]), 1.0)
+        first = failed(doc)
+        assert first["check"] == "proven_interval" and first["item"] == 3
+
+    def test_a_smaller_ball_is_refused(self, searched):
+        doc = copy.deepcopy(searched["certificate"])
+        item = doc["items"][2]
+        radius = item["proof"]["sublevel"]["radius"] * 0.5
+        item["proof"]["sublevel"].update(radius=radius, intervals=ball_intervals(item["point"], radius))
+        assert failed(doc)["check"] == "proven_interval"
+
+    def test_a_map_proof_stating_an_interval_is_refused(self, searched):
+        from tests.solvers.test_certificates import map_job
+
+        document = solve_job(map_job(np.random.default_rng(5), "resection", 7, "L2L2", maps=1,
+                                     noise=3.0))["certificate"]
+        assert document["items"][0]["proof"]["type"] == "branch_and_bound"
+        document["items"][0]["proof"]["sublevel"] = searched["certificate"]["items"][0]["proof"]["sublevel"]
+        assert failed(document)["check"] == "format"

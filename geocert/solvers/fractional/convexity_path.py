@@ -64,14 +64,16 @@ def certify_tracks(cameras: np.ndarray, tracks: list, options: TriangulationOpti
     full = options.certificate == "full"
     increase, reach = _sublevels(flat, x, cost, claimed, certified) if full or options.detail == "full" \
         else (None, None)
+    if reach is not None:  # Python lists made once for the whole batch, as below
+        balls = ball_intervals(x, np.where(np.isfinite(reach), reach, 0.0))
+        proven, increases, reaches = np.isfinite(reach).tolist(), increase.tolist(), reach.tolist()
     # Python lists made once for the whole batch (one tolist each), then sliced per track.
     residuals, points, starts = r.T.tolist(), x.tolist(), flat.starts.tolist()
     costs, claims, tolerances, radii = cost.tolist(), claimed.tolist(), tolerance.tolist(), radius.tolist()
     for t in np.flatnonzero(certified).tolist():
         sublevel = None
-        if reach is not None and np.isfinite(reach[t]):
-            sublevel = {"cost_increase": float(increase[t]), "radius": float(reach[t]),
-                        "intervals": ball_intervals(points[t], float(reach[t]))}
+        if reach is not None and proven[t]:
+            sublevel = {"cost_increase": increases[t], "radius": reaches[t], "intervals": balls[t]}
         proof = {"type": "convexity", "radius": radii[t]} if full else None
         if proof is not None and sublevel is not None:
             proof["sublevel"] = sublevel
@@ -82,11 +84,31 @@ def certify_tracks(cameras: np.ndarray, tracks: list, options: TriangulationOpti
     return out
 
 
+def cost_increase(cost, lower, views):
+    """The increase a proven interval is stated for: SIGMAS^2 times cost / (2 views - 3) (the
+    fit's residual variance, as the determinacy estimate's), at least the certified gap."""
+    redundancy = np.maximum(2 * np.asarray(views) - 3, 1)
+    return np.maximum(SIGMAS ** 2 * np.asarray(cost) / redundancy, np.maximum(np.asarray(cost) - lower, 0.0))
+
+
 def _sublevels(flat, x: np.ndarray, cost: np.ndarray, claimed: np.ndarray, certified: np.ndarray):
-    """(increase, radius) of every track: the cost increase (SIGMAS^2 cost / (2n - 3), at least
-    the certified gap) and the proven ball's radius (nan where none, or not certified)."""
-    redundancy = np.maximum(2 * flat.sizes - 3, 1)
-    increase = np.maximum(SIGMAS ** 2 * cost / redundancy, np.maximum(cost - claimed, 0.0))
+    """(increase, radius) of every track: the cost increase and the proven ball's radius (nan
+    where none, or not certified)."""
+    increase = cost_increase(cost, claimed, flat.sizes)
     # Solver's strictness: the checker's sums, differing in their last bits, pass at its radius.
     reach = sublevel_radii(flat, x, np.where(certified, increase, np.nan), strictness=STRICTNESS)
     return increase, reach
+
+
+def track_sublevel(cameras: np.ndarray, points: np.ndarray, point, cost: float, lower: float,
+                   norm: str) -> dict | None:
+    """One certified track's proven interval (whatever proved its bound), None where the
+    enclosure test proves none: what ``proof.sublevel`` carries."""
+    increase = float(cost_increase(cost, lower, len(points)))
+    flat = FlatTracks.build(cameras, [(list(range(len(points))), points)])
+    with np.errstate(all="ignore"):
+        radius = float(sublevel_radii(flat, np.asarray(point, dtype=float).reshape(1, 3), np.array([increase]),
+                                      strictness=STRICTNESS, norm=norm)[0])
+    if not np.isfinite(radius):
+        return None
+    return {"cost_increase": increase, "radius": radius, "intervals": ball_intervals(point, radius)}

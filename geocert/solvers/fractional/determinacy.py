@@ -37,7 +37,8 @@ def _centres(cameras: np.ndarray) -> np.ndarray:
 
 
 def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at_infinity: bool,
-          cost: float | None, lower: float | None) -> dict | None:
+          cost: float | None, lower: float | None, sublevel: dict | None = None) -> dict | None:
+    """``sublevel``: the proven interval its certificate carries, if any (proven_track)."""
     if point is None:
         return None
     cameras = np.asarray(cameras, dtype=float)
@@ -64,6 +65,7 @@ def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at
     if scale is not None:
         quantities["depth_view0"] = (length, ray / length, length)
     out = curvature_intervals(J, residuals(X), quantities, certified_gap(cost, lower))
+    out.proven_intervals = proven_track(sublevel)
     rays = X[None, :] - centres
     rays = rays[np.all(np.isfinite(rays), axis=1)]
     if len(rays) >= 2:
@@ -160,7 +162,7 @@ def _finite_tracks(cameras, all_centres, tracks: list, results: list, n: int) ->
                 out.intervals.append(interval(names[k], value, value - half[i, k], value + half[i, k], scale))
             else:
                 out.intervals.append(interval(names[k], value, None, None, scale))
-        out.proven_intervals = proven_track(result)
+        out.proven_intervals = proven_track(getattr(result.certificate, "sublevel", None))
         if usable[i].sum() >= 2 and widest[i] < PARALLAX_DEGREES:
             out.warnings.append({"code": "near_zero_parallax",
                                  "detail": f"the rays meet at {float(widest[i]):.3g} degrees at most (< "
@@ -169,15 +171,13 @@ def _finite_tracks(cameras, all_centres, tracks: list, results: list, n: int) ->
     return documents
 
 
-def proven_track(result) -> dict | None:
-    """The proven intervals of a track certified by the convexity bound (its certificate's
-    ``sublevel``), None for any other."""
-    sublevel = getattr(result.certificate, "sublevel", None)
+def proven_track(sublevel: dict | None) -> dict | None:
+    """The proven intervals of a certified track from its certificate's ``sublevel`` (None: none)."""
     if sublevel is None:
         return None
     return proven_document(sublevel["cost_increase"], ("x", "y", "z"), sublevel["intervals"],
-                           f"a ball of radius {sublevel['radius']:.6g} about the point, proven by the convexity "
-                           "path's enclosure test at that level (fractional.convexity)")
+                           f"a ball of radius {sublevel['radius']:.6g} about the point, proven by the enclosure "
+                           "test at that level (fractional.convexity)")
 
 
 def _complement(M: np.ndarray) -> np.ndarray:

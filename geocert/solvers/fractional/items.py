@@ -10,7 +10,7 @@ from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import cost_rounding, normalised_cameras
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
-from geocert.solvers.fractional.convexity import ball_intervals, outside_range, sublevel_holds, track_bound
+from geocert.solvers.fractional.convexity import outside_range, track_bound, verify_sublevel
 from geocert.solvers.fractional.proof import (check_program, program_allowance, program_discount, raw_sizes,
                                               residual_uncertainty, track_uncertainty, verify_search)
 from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
@@ -194,37 +194,25 @@ def verify_convexity(item, options: dict, proof: dict, lower_claimed: float, sol
                                    "to hold every point costing as little, or the cost to be convex on it")
     passed.append("convexity")
     if "sublevel" in proof:
-        verify_sublevel(item, proof["sublevel"], solution)
+        verify_sublevel(item.cameras, item.points, proof["sublevel"], solution, options["norm"])
         passed.append("proven_interval")
     return bound
 
 
-def verify_sublevel(item, sublevel, solution) -> None:
-    """A proven interval (fractional.convexity, ``sublevel_radii``): every point of the scope
-    costing at most the optimum plus cost_increase lies in the intervals. Refused unless (E) at
-    that level holds at the radius and the intervals are exactly the ball's about the solution
-    (outward rounded): a narrower interval is not proven, a wider one is not the proof's."""
-    record(sublevel, "proof/sublevel", ("cost_increase", "radius", "intervals"))
-    increase = _number(sublevel.get("cost_increase"), "proof/sublevel/cost_increase")
-    radius = _number(sublevel.get("radius"), "proof/sublevel/radius")
-    intervals = numbers(sublevel.get("intervals"), "proof/sublevel/intervals", (3, 2))
-    if not (increase >= 0 and radius > 0):
-        raise Invalid("proven_interval", "proof/sublevel needs cost_increase >= 0 and radius > 0")
-    outside = outside_range(item.cameras, item.points, solution[:3], radius)
-    if outside is not None or not (increase == 0 or 2.0 ** -128 <= increase <= 2.0 ** 128):
-        raise Invalid("proven_interval", outside or "proof/sublevel/cost_increase is subnormal or huge")
-    if not np.array_equal(intervals, np.array(ball_intervals(solution[:3], radius))):
-        raise Invalid("proven_interval", "proof/sublevel/intervals are not the ball's of that radius about the point "
-                                         "(each coordinate's [x - radius, x + radius], rounded outward)")
-    if not sublevel_holds(item.cameras, item.points, solution[:3], increase, radius):
-        raise Invalid("proven_interval", f"not proven at radius {radius!r}: the points costing up to cost_increase "
-                                         f"{increase!r} more are not shown to lie within it")
+def verify_track_search(item, options: dict, proof: dict, lower_claimed: float, solution, passed: list[str]) -> float:
+    """A track's search (proof.verify_search), and its proven interval when it states one."""
+    bound = verify_search(item, options, {key: value for key, value in proof.items() if key != "sublevel"},
+                          lower_claimed, solution, passed)
+    if "sublevel" in proof:
+        verify_sublevel(item.cameras, item.points, proof["sublevel"], solution, options["norm"])
+        passed.append("proven_interval")
+    return bound
 
 
 class TrackItems:
     """The triangulation kind's verification adapter."""
 
-    proofs = {"branch_and_bound": verify_search, "convexity": verify_convexity}
+    proofs = {"branch_and_bound": verify_track_search, "convexity": verify_convexity}
     domain = ("every point in front of every camera (positive depth in every view, last homogeneous "
               "coordinate >= 0)")
 
@@ -292,8 +280,12 @@ class TrackItems:
         return TrackItem(arrays, norm)
 
     def proven_together(self, data: dict, options: dict, claims: list) -> tuple[set[int], tuple[str, ...]]:
-        """The claims proven many at once (stacked.py), and the checks each passed."""
-        return proven_tracks(data, options, claims, MAX_VIEWS), CHECKS
+        """The claims proven many at once (stacked.py, which checks their proven intervals too),
+        and the checks each passed. A claim stating no interval is left to the per-item check
+        when others state one, so that every claim proven here passed the same checks."""
+        proven = proven_tracks(data, options, claims, MAX_VIEWS)
+        stating = {i for i in proven if "sublevel" in claims[i]["proof"]}
+        return (stating, CHECKS + ("proven_interval",)) if stating else (proven, CHECKS)
 
 
 class MapItems:

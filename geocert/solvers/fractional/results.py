@@ -24,6 +24,7 @@ class SearchCertificate:
     tolerance_met: bool
     leaves: int
     proof: dict | None = None  # with options.certificate == "full": certificates.encode's form
+    sublevel: dict | None = None  # a proven interval, as LocalCertificate's
 
 
 @dataclass
