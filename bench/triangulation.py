@@ -10,17 +10,22 @@ Prints, in one run and side by side:
   4. per norm, side by side on every track: the batched solver (fractional.batched.triangulate_many,
      called on chunks of --chunk tracks as the service's kind calls it) against triangulate track by
      track, and (L2L2) OpenCV DLT + LM, CPU time per track;
+  (--service-only: the job through the service with each number of workers against the batched
+  solve's CPU over the workers, the kind's solve_batch as a worker runs it, documents included)
   5. the floor (L2L2): on the Dinosaur and on synthetic scenes of 2 to 20 views, CPU per track of
      the vectorised local solve (fractional.flat: linear start and Levenberg-Marquardt on every
      track at once, uncertified), of per-track scipy (OpenCV DLT, then MINPACK's leastsq), of the
      certified batched solver (triangulate_many: the convexity path, fractional.convexity_path,
-     then the search for the tracks it leaves), of the same with every track searched (the
-     convexity path switched off: the solver before it), and of the convexity bound alone (the
+     then the search for the tracks it leaves; its certified tracks kept as columns,
+     fractional.columns), of the same with a TrackResult made for every track ("+ objects"), of
+     the same with every track searched (the convexity path switched off: the solver before it),
+     and of the convexity bound alone (the
      vectorised local solve and the bound of fractional.convexity, arrays only), each repeated
      --repeats times, interleaved, with the ratios to the floor.
 
     .venv/bin/python -m bench.triangulation [--norms L2L2,L2L1,L1L1] [--sample 200] [--no-scip] [--no-service]
                                             [--chunk 500] [--floor-only] [--repeats 3]
+    .venv/bin/python -m bench.triangulation --service-only --workers 1,2 [--details full,brief]
 """
 
 from __future__ import annotations
@@ -213,6 +218,44 @@ def service_batch(cameras, tracks, workers: int, detail: str = "full") -> dict:
         server.wait(timeout=60)
 
 
+def kind_solve_cpu(cameras, tracks, detail: str, repeats: int = 3) -> float:
+    """CPU seconds of the triangulation kind's solve_batch on every track, in the chunks a
+    worker takes (the kind's chunk_size), documents included: what a job's solve costs, median
+    of ``repeats``."""
+    from geocert.kinds.triangulation import KIND
+
+    parsed = KIND.parse({"cameras": cameras.tolist(),
+                         "tracks": [{"views": t.views, "points": t.points.tolist()} for t in tracks]})
+    options = TriangulationOptions(norm="L2L2", rel_gap=1e-3, detail=detail)
+    indices = list(range(len(tracks)))
+    cpu = []
+    for _ in range(repeats):
+        start = time.process_time()
+        for begin in range(0, len(indices), KIND.chunk_size):
+            KIND.solve_batch(parsed, indices[begin:begin + KIND.chunk_size], options, None)
+        cpu.append(time.process_time() - start)
+    return float(np.median(cpu))
+
+
+def service_table(cameras, tracks, workers: list[int], details: list[str]) -> None:
+    """The service near its solves: each detail's job through `geocert serve` with each number of
+    workers, submit to result, against the batched solve's CPU split over the workers (target
+    within 1.25x with 2 workers) and from 1 to 2 workers (target at least 1.8x)."""
+    for detail in details:
+        solve = kind_solve_cpu(cameras, tracks, detail)
+        walls = {}
+        for count in workers:
+            batch = service_batch(cameras, tracks, count, detail)
+            walls[count] = batch["wall"]
+            print(f"Service, detail {detail}, {count} workers: {batch['tracks']} tracks ({batch['body_mb']:.1f} MB) "
+                  f"submit to result {batch['wall']:.2f} s, status {batch['status']}, certified {batch['certified']}; "
+                  f"the batched solve's CPU (solve_batch in chunks, documents included) {solve:.3f} s, over "
+                  f"{count}: {solve / count:.3f} s; ratio {batch['wall'] / (solve / count):.1f}x (target 1.25x with 2); "
+                  f"load average {load()}", flush=True)
+        if 1 in walls and 2 in walls:
+            print(f"Service, detail {detail}: 1 -> 2 workers {walls[1] / walls[2]:.2f}x (target 1.8x)")
+
+
 def floor_solve(cameras, tracks) -> int:
     """The vectorised local solve (uncertified): how many tracks it ended in front of every camera."""
     flat = flat_tracks.FlatTracks.build(cameras, tracks)
@@ -229,6 +272,15 @@ def per_track_scipy(cameras, tracks) -> int:
 
 
 def batched_certified(cameras, tracks, chunk: int = 500) -> int:
+    """The certified solver's results as it returns them (the convexity path's tracks as
+    columns, fractional.columns): how many it certified."""
+    options = TriangulationOptions(norm="L2L2", rel_gap=1e-3)
+    return sum(triangulate_many(cameras, tracks[start:start + chunk], options).certified_count()
+               for start in range(0, len(tracks), chunk))
+
+
+def batched_objects(cameras, tracks, chunk: int = 500) -> int:
+    """The same, with every track's TrackResult made (what a caller reading them one by one pays)."""
     options = TriangulationOptions(norm="L2L2", rel_gap=1e-3)
     return sum(r.certified for start in range(0, len(tracks), chunk)
                for r in triangulate_many(cameras, tracks[start:start + chunk], options))
@@ -250,8 +302,9 @@ def search_only(cameras, tracks, chunk: int = 500) -> int:
     from unittest import mock
 
     from geocert.solvers.fractional import batched
+    from geocert.solvers.fractional.columns import TrackResults
 
-    with mock.patch.object(batched, "certify_tracks", lambda cameras, tracks, options: [None] * len(tracks)):
+    with mock.patch.object(batched, "certify_tracks", lambda cameras, tracks, options: TrackResults(len(tracks))):
         return batched_certified(cameras, tracks, chunk)
 
 
@@ -270,11 +323,11 @@ def floor_table(datasets, repeats: int) -> None:
     """Section 5: every solver on every dataset, CPU per track, interleaved repeats (the order
     rotates each repeat); the median repeat's figure."""
     solvers = [("floor", floor_solve), ("bound only", convexity_bound_only), ("batched", batched_certified),
-               ("search only", search_only), ("scipy/track", per_track_scipy)]
+               ("+ objects", batched_objects), ("search only", search_only), ("scipy/track", per_track_scipy)]
     print(f"\nThe floor (L2L2, rel_gap 1e-3): CPU microseconds per track, median of {repeats} interleaved "
           f"repeats; ratio = solver / floor (vectorised local solve, uncertified); load average {load()}")
     print(f"  {'dataset':22} {'tracks':>6} " + " ".join(f"{name:>12}" for name, _ in solvers)
-          + "  certified (batched / search only)   ratios: bound only, batched, search only, scipy/track")
+          + "  certified (batched / search only)   ratios: bound only, batched, + objects, search only, scipy/track")
     for label, cameras, tracks in datasets:
         cpu = {name: [] for name, _ in solvers}
         counts = {}
@@ -288,6 +341,7 @@ def floor_table(datasets, repeats: int) -> None:
         print(f"  {label:22} {len(tracks):6d} " + " ".join(f"{per[name]:12.1f}" for name, _ in solvers)
               + f"  {counts['batched']:5d} / {counts['search only']:5d}"
               + f"{'':18} {per['bound only'] / per['floor']:.2f}x, {per['batched'] / per['floor']:.2f}x, "
+              f"{per['+ objects'] / per['floor']:.2f}x, "
               f"{per['search only'] / per['floor']:.1f}x, "
               f"{per['scipy/track'] / per['floor']:.1f}x")
     print(f"  load average {load()}")
@@ -303,6 +357,8 @@ def main() -> None:
     parser.add_argument("--chunk", type=int, default=500, help="tracks per triangulate_many call (side by side)")
     parser.add_argument("--details", default="full,brief", help="the service runs' options.detail, each a run")
     parser.add_argument("--floor-only", action="store_true", help="only section 5 (the floor)")
+    parser.add_argument("--service-only", action="store_true",
+                        help="only the service against the batched solve's CPU (--workers, --details)")
     parser.add_argument("--repeats", type=int, default=3, help="section 5's interleaved repeats")
     parser.add_argument("--synthetic", default="2,3,5,10,20", help="section 5's synthetic scenes' view counts")
     parser.add_argument("--synthetic-points", type=int, default=500)
@@ -311,6 +367,11 @@ def main() -> None:
     cameras, tracks = load_dinosaur(DINOSAUR)
     floor_data = [("Oxford Dinosaur", cameras, [(t.views, t.points) for t in tracks])]
     floor_data += synthetic_scenes([int(n) for n in args.synthetic.split(",")], args.synthetic_points)
+    if args.service_only:
+        print(f"machine speed (a fixed Python loop) {machine_speed_ms():.0f} ms; load average {load()}")
+        service_table(cameras, tracks, [int(w) for w in args.workers.split(",")], args.details.split(","))
+        print(f"machine speed at the end {machine_speed_ms():.0f} ms; load average {load()}")
+        return
     if args.floor_only:
         print(f"machine speed (a fixed Python loop) {machine_speed_ms():.0f} ms; load average {load()}")
         floor_table(floor_data, args.repeats)

@@ -162,7 +162,8 @@ def every_track_searched():
     import pytest
 
     from geocert.solvers.fractional import batched
+    from geocert.solvers.fractional.columns import TrackResults
 
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(batched, "certify_tracks", lambda cameras, tracks, options: [None] * len(tracks))
+        patch.setattr(batched, "certify_tracks", lambda cameras, tracks, options: TrackResults(len(tracks)))
         yield

@@ -229,7 +229,7 @@ class AutocalibrationKind:
         return len(parsed.cameras) * (1 + (0 if parsed.points is None else len(parsed.points)))
 
     def solve_item(self, parsed: Parsed, index: int, options: pr.AutocalibrationOptions, callback) -> dict:
-        from geocert.solvers.autocalibration import determinacy, proofs, stratified  # the conic solver, only to solve
+        from geocert.solvers.autocalibration import stratified  # the conic solver, only to solve
 
         if options.method == "direct":  # thesis ch. 7: one stage
             from geocert.kinds.direct_autocalibration import solve_document
@@ -239,72 +239,10 @@ class AutocalibrationKind:
         checking = self_check_enabled()  # GEOCERT_SELF_VERIFY=1: proofs made, and checked below
         result = stratified.solve(problem, dataclasses.replace(options, certificate="full") if checking else options,
                                   callback)
-        full = options.certificate == "full" or checking
-        a = result.affine
-        document: dict = {"method": options.method, "intrinsics": problem.ranges, "plane_at_infinity": None,
-                          "K": None, "dual_absolute_quadric": None, "upgrade": None, "cameras": None, "points": None,
-                          "baseline": None}
-        plane = None
-        affine_cost = math.inf
-        if a.plane is not None:
-            plane = pr.plane_in_input(problem, a.plane[:3])
-            affine_cost = pr.affine_cost(problem, result.p)  # at the plane as returned
-            document["plane_at_infinity"] = plane.tolist()
-        affine_stage = _stage("affine", a.status, a.certified and pr.allowed_by_chirality(problem, result.p)
-                              if result.p is not None else False, affine_cost, a.lower_bound, a.nodes, result.affine_s,
-                              a.reason, options.rel_gap, options.abs_gap,
-                              "every plane at infinity chirality allows",
-                              proofs.encode_affine(a) if full and a.certified else None)
-        affine_stage["plane_at_infinity"] = document["plane_at_infinity"]
-        m = result.metric
-        not_run = "cancelled" if a.status == "cancelled" else "failed"
-        metric_stage = _stage("metric", not_run if m is None else m.status, False, math.inf, -math.inf,
-                              0 if m is None else m.nodes, result.metric_s,
-                              ("the job was cancelled" if not_run == "cancelled" else "no plane at infinity")
-                              if m is None else m.reason, options.metric_rel_gap, options.abs_gap, "", None)
-        if m is not None and result.K_unit is not None:
-            K = problem.K0 @ result.K_unit
-            K = K / K[2, 2]
-            K[1, 0] = K[2, 0] = K[2, 1] = 0.0
-            K[2, 2] = 1.0
-            setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, result.p, problem.unit_ranges)
-            w = pr.w_of_K(problem, K)
-            lo, hi = mrelax.omega_box(problem.unit_ranges)
-            inside = mrelax.in_domain(setup, w, lo, hi)
-            metric_stage = _stage("metric", m.status if inside or not m.certified else "not_certified",
-                                  m.certified and inside, mrelax.cost(setup, w), m.lower_bound, m.nodes,
-                                  result.metric_s, m.reason if inside else "the DIAC returned left its domain by rounding",
-                                  options.metric_rel_gap, options.abs_gap,
-                                  "every K within the intrinsics ranges, for the plane at infinity stated",
-                                  proofs.encode_metric(m) if full and m.certified else None)
-            metric_stage["K"] = K.tolist()
-            H = pr.upgrade(problem, result.p, np.linalg.solve(problem.K0, K))
-            document.update(K=K.tolist(), upgrade=H.tolist(), dual_absolute_quadric=pr.dual_absolute_quadric(H).tolist(),
-                            cameras=pr.metric_cameras(parsed.cameras, H))
-            document["points"] = pr.metric_points(H, parsed.points)
-        metric_stage["plane_at_infinity"] = document["plane_at_infinity"]
-        centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
-        if result.p is not None and math.isfinite(affine_cost):
-            affine_stage["determinacy"] = safely(determinacy.affine_stage, problem, result.p, affine_stage["cost"],
-                                                 affine_stage["lower_bound"], centres,
-                                                 None if document["K"] is None else np.array(document["K"]))
-        if document["K"] is not None:
-            metric_stage["determinacy"] = safely(determinacy.metric_stage, problem, result.p, np.array(document["K"]),
-                                                 metric_stage["cost"], metric_stage["lower_bound"], centres)
-        if result.baseline is not None:
-            Kb = problem.K0 @ pr.upper_triangular_root(mrelax.omega_of(result.baseline["w"])) \
-                if np.linalg.eigvalsh(mrelax.omega_of(result.baseline["w"]))[0] > 0 else None
-            document["baseline"] = {"method": "linear", "K": None if Kb is None else (Kb / Kb[2, 2]).tolist(),
-                                    "psd": result.baseline["psd"], "cost": finite_or_none(result.baseline["cost"])}
-        stages = [affine_stage, metric_stage]
+        item = stratified_item(parsed, options, problem, result, options.certificate == "full" or checking)
         if checking:
-            self_check_stages(parsed, options, stages)
-        # What the job's statistics count: both stages (certified only when both are).
-        return {**document, "stages": stages, "status": metric_stage["status"] if affine_stage["certified"]
-                else affine_stage["status"], "certified": affine_stage["certified"] and metric_stage["certified"],
-                "nodes": affine_stage["nodes"] + metric_stage["nodes"],
-                "elapsed_s": result.affine_s + result.metric_s,
-                "cost": metric_stage["cost"], "lower_bound": metric_stage["lower_bound"]}
+            self_check_stages(parsed, options, item["stages"])
+        return item
 
     def cancelled_item(self) -> dict:
         stage = {"cost": None, "lower_bound": None, "gap": None, "status": "cancelled", "certified": False,
@@ -324,6 +262,78 @@ class AutocalibrationKind:
         for stage in item["stages"]:
             (stage.get("certificate") or {}).pop("proof", None)
         return {"kind": self.name, "method": item.pop("method"), **outcome(item), **item, "stats": stats}
+
+
+def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem: pr.Problem, result, full: bool
+                    ) -> dict:
+    """The job's item (the result's stages and solution) from a stratified solve of ``problem``
+    (stratified.solve's result), with each certified stage's proof when ``full``: the kind's own
+    solve, and the reconstruction kind's calibration certificate (its pipeline's solve)."""
+    from geocert.solvers.autocalibration import determinacy, proofs
+
+    a = result.affine
+    document: dict = {"method": options.method, "intrinsics": problem.ranges, "plane_at_infinity": None,
+                      "K": None, "dual_absolute_quadric": None, "upgrade": None, "cameras": None, "points": None,
+                      "baseline": None}
+    plane = None
+    affine_cost = math.inf
+    if a.plane is not None:
+        plane = pr.plane_in_input(problem, a.plane[:3])
+        affine_cost = pr.affine_cost(problem, result.p)  # at the plane as returned
+        document["plane_at_infinity"] = plane.tolist()
+    affine_stage = _stage("affine", a.status, a.certified and pr.allowed_by_chirality(problem, result.p)
+                          if result.p is not None else False, affine_cost, a.lower_bound, a.nodes, result.affine_s,
+                          a.reason, options.rel_gap, options.abs_gap,
+                          "every plane at infinity chirality allows",
+                          proofs.encode_affine(a) if full and a.certified else None)
+    affine_stage["plane_at_infinity"] = document["plane_at_infinity"]
+    m = result.metric
+    not_run = "cancelled" if a.status == "cancelled" else "failed"
+    metric_stage = _stage("metric", not_run if m is None else m.status, False, math.inf, -math.inf,
+                          0 if m is None else m.nodes, result.metric_s,
+                          ("the job was cancelled" if not_run == "cancelled" else "no plane at infinity")
+                          if m is None else m.reason, options.metric_rel_gap, options.abs_gap, "", None)
+    if m is not None and result.K_unit is not None:
+        K = problem.K0 @ result.K_unit
+        K = K / K[2, 2]
+        K[1, 0] = K[2, 0] = K[2, 1] = 0.0
+        K[2, 2] = 1.0
+        setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, result.p, problem.unit_ranges)
+        w = pr.w_of_K(problem, K)
+        lo, hi = mrelax.omega_box(problem.unit_ranges)
+        inside = mrelax.in_domain(setup, w, lo, hi)
+        metric_stage = _stage("metric", m.status if inside or not m.certified else "not_certified",
+                              m.certified and inside, mrelax.cost(setup, w), m.lower_bound, m.nodes,
+                              result.metric_s, m.reason if inside else "the DIAC returned left its domain by rounding",
+                              options.metric_rel_gap, options.abs_gap,
+                              "every K within the intrinsics ranges, for the plane at infinity stated",
+                              proofs.encode_metric(m) if full and m.certified else None)
+        metric_stage["K"] = K.tolist()
+        H = pr.upgrade(problem, result.p, np.linalg.solve(problem.K0, K))
+        document.update(K=K.tolist(), upgrade=H.tolist(), dual_absolute_quadric=pr.dual_absolute_quadric(H).tolist(),
+                        cameras=pr.metric_cameras(parsed.cameras, H))
+        document["points"] = pr.metric_points(H, parsed.points)
+    metric_stage["plane_at_infinity"] = document["plane_at_infinity"]
+    centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
+    if result.p is not None and math.isfinite(affine_cost):
+        affine_stage["determinacy"] = safely(determinacy.affine_stage, problem, result.p, affine_stage["cost"],
+                                             affine_stage["lower_bound"], centres,
+                                             None if document["K"] is None else np.array(document["K"]))
+    if document["K"] is not None:
+        metric_stage["determinacy"] = safely(determinacy.metric_stage, problem, result.p, np.array(document["K"]),
+                                             metric_stage["cost"], metric_stage["lower_bound"], centres)
+    if result.baseline is not None:
+        Kb = problem.K0 @ pr.upper_triangular_root(mrelax.omega_of(result.baseline["w"])) \
+            if np.linalg.eigvalsh(mrelax.omega_of(result.baseline["w"]))[0] > 0 else None
+        document["baseline"] = {"method": "linear", "K": None if Kb is None else (Kb / Kb[2, 2]).tolist(),
+                                "psd": result.baseline["psd"], "cost": finite_or_none(result.baseline["cost"])}
+    stages = [affine_stage, metric_stage]
+    # What the job's statistics count: both stages (certified only when both are).
+    return {**document, "stages": stages, "status": metric_stage["status"] if affine_stage["certified"]
+            else affine_stage["status"], "certified": affine_stage["certified"] and metric_stage["certified"],
+            "nodes": affine_stage["nodes"] + metric_stage["nodes"],
+            "elapsed_s": result.affine_s + result.metric_s,
+            "cost": metric_stage["cost"], "lower_bound": metric_stage["lower_bound"]}
 
 
 def outcome(item: dict) -> dict:

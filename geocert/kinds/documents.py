@@ -22,10 +22,7 @@ def certificate_summary(result: ItemResult, region: dict, meaning: str, scope: s
     proof = proof_of(result)
     extra = {"proof": proof} if proof is not None else {}
     if isinstance(c, LocalCertificate):
-        return {"scope": c.scope, "root_region": None, "tolerance": finite_or_none(c.tolerance),
-                "tolerance_met": c.tolerance_met, "leaves": 0,
-                "note": f"no search: the cost is convex on the ball of radius {c.radius!r} about the solution, which "
-                        "holds every point of the scope costing as little (convexity bound)", **extra}
+        return local_summary(c.scope, c.tolerance, c.radius, c.tolerance_met, extra)
     if c is not None:
         return {**extra,
                 "scope": c.scope,
@@ -38,6 +35,14 @@ def certificate_summary(result: ItemResult, region: dict, meaning: str, scope: s
         return {"scope": scope, "root_region": None, "tolerance": 0.0, "tolerance_met": True, "leaves": 0,
                 "note": "the incumbent's cost is within abs_gap of the trivial bound 0", **extra}
     return None
+
+
+def local_summary(scope: str, tolerance: float, radius: float, tolerance_met: bool, extra: dict) -> dict:
+    """The certificate summary of an item certified by the convexity bound (no search)."""
+    return {"scope": scope, "root_region": None, "tolerance": finite_or_none(tolerance),
+            "tolerance_met": tolerance_met, "leaves": 0,
+            "note": f"no search: the cost is convex on the ball of radius {radius!r} about the solution, which "
+                    "holds every point of the scope costing as little (convexity bound)", **extra}
 
 
 def brief_certificate(result: ItemResult, full: bool) -> dict | None:

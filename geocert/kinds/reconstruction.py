@@ -219,6 +219,10 @@ class ReconstructionResult(BaseModel):
     certificate: CertificateDocument | None = Field(None, description='with options.certificate = "full": the points')
     camera_certificate: CertificateDocument | None = Field(
         None, description='with options.certificate = "full": the cameras\' bounds, a resection certificate')
+    calibration_certificate: CertificateDocument | None = Field(
+        None, description='with options.certificate = "full" and a certified K: the stratified autocalibration '
+                          "certificate proving summary.calibration.certified_K optimal for the projective "
+                          "reconstruction in its data")
 
 
 class Parsed:
@@ -481,7 +485,7 @@ class ReconstructionKind:
             out.summary["time_s"] = {"matches": matches["elapsed_s"], **out.summary["time_s"]}
             out.summary["cpu_s"] = {"matches": matches["cpu_s"], **out.summary["cpu_s"]}
         camera_maps = {c.view: c.bound for c in out.cameras if c.bound is not None and c.bound.result is not None}
-        return {"cameras": cameras, "points": points, "stages": stages, "summary": _jsonable(out.summary),
+        return {"calibration_proof": self._calibration_proof(out, options), "cameras": cameras, "points": points, "stages": stages, "summary": _jsonable(out.summary),
                 "images": images_document, "camera_results": self._camera_items(out, options, camera_maps),
                 # A cancelled run keeps what it did (pipeline.reconstruct); the item says it was
                 # stopped, so the job ends "cancelled" (workers.tasks._end), not "succeeded".
@@ -490,6 +494,23 @@ class ReconstructionKind:
                 "certified": bool(points) and all(p["certified"] for p in points),
                 "nodes": sum(p["nodes"] for p in points), "elapsed_s": time.perf_counter() - start,
                 "cost": None, "lower_bound": None}
+
+    @staticmethod
+    def _calibration_proof(out, options: ReconstructionOptions) -> dict | None:
+        """What the certified K's certificate is made of, as the autocalibration kind states it:
+        the data, options and item of the pipeline's stratified solve (plain JSON: an item may be
+        stored between solve and assembly), when the result claims a certified K and a full
+        certificate is asked for."""
+        proven, claim = out.proven, out.summary.get("calibration") or {}
+        if options.certificate != "full" or proven is None or not claim.get("certified"):
+            return None
+        from geocert.kinds.autocalibration import Parsed as Projective, stratified_item
+
+        data = {"cameras": proven.cameras.tolist(), "points": proven.points.tolist(),
+                "image_size": None if proven.image_size is None else list(proven.image_size)}
+        item = stratified_item(Projective(proven.cameras, proven.points, proven.image_size), proven.options,
+                               proven.problem, proven.result, True)
+        return _jsonable({"data": data, "options": asdict(proven.options), "item": item})
 
     @staticmethod
     def _camera(camera, parsed: Parsed) -> dict:
@@ -511,18 +532,13 @@ class ReconstructionKind:
         """Each camera's resection as a resection item (with its data), for the camera certificate."""
         from geocert.kinds.maps import map_document
 
-        items = []
-        for view, bound in sorted(bounds.items()):
-            source, target = [], []
-            for point in out.points:
-                if point.result.point is None or point.result.at_infinity:
-                    continue
-                for v, u, w in point.observations:
-                    if int(v) == view:
-                        source.append(list(point.result.point))
-                        target.append([u, w])
-            items.append({"view": view, "map": {"source": source, "target": target}, **map_document(bound.result)})
-        return items
+        from geocert.pipelines.reconstruction.pipeline import point_entries
+        from geocert.solvers.reconstruction.camera_claim import sources
+
+        views = sorted(bounds)
+        found = sources(point_entries(out.points), views)
+        return [{"view": view, "map": {"source": source, "target": target}, **map_document(bounds[view].result)}
+                for view, (source, target) in zip(views, found)]
 
     def cancelled_item(self) -> dict:
         return {"cameras": [], "points": [], "summary": {}, "images": None, "camera_results": [],
@@ -548,6 +564,7 @@ class ReconstructionKind:
     def assemble(self, options: ReconstructionOptions, items: list[dict], stats: dict) -> dict:
         item = dict(items[0])
         camera_results = item.pop("camera_results", [])
+        calibration_proof = item.pop("calibration_proof", None)
         for key in ("status", "certified", "nodes", "elapsed_s", "cost", "lower_bound"):
             item.pop(key, None)
         result = {"kind": self.name, "norm": options.norm, **item, "stats": stats}
@@ -564,6 +581,14 @@ class ReconstructionKind:
                                      max_nodes=options.max_nodes, time_limit_s=options.time_limit_s,
                                      max_residual=options.max_residual, certificate="full")
             result["camera_certificate"] = certificate_document(resection, {"maps": maps}, map_options, camera_results)
+        if options.certificate == "full" and calibration_proof is not None:
+            from geocert.batch import certificate_document
+            from geocert.kinds import get_kind
+
+            kind = get_kind("autocalibration")
+            result["calibration_certificate"] = certificate_document(
+                kind, calibration_proof["data"], kind.options_type(**calibration_proof["options"]),
+                [calibration_proof["item"]])
         return result
 
 

@@ -3,16 +3,18 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import chain, repeat
 from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, Field
 
-from geocert.kinds.documents import brief_certificate, certificate_summary, outcome_document
+from geocert.kinds.documents import brief_certificate, certificate_summary, local_summary, outcome_document
 from geocert.kinds.schema import Camera, CertificateDocument, ItemOutcome, JobBase, JobStats, Pixel, Strict, options_model
-from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, check_cameras, number_array
+from geocert.solvers.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, check_cameras, number_array
 from geocert.solvers.fractional.items import MAX_VIEWS, TRACKS
 from geocert.solvers.fractional.options import TriangulationOptions
+from geocert.solvers.fractional.columns import SCOPE, TrackResults
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult
 
 
@@ -68,6 +70,73 @@ def track_document(result: TrackResult, detail: str = "full", full_certificate: 
             "certificate": certificate}
 
 
+def track_documents(results: TrackResults, detail: str, full_certificate: bool) -> list[dict]:
+    """track_document of every result, the convexity path's columns read as arrays (no
+    TrackResult made for them): the same documents."""
+    documents: list = [None] * len(results)
+    local, rows = results.local, results.in_columns()
+    if local is not None and len(local.index):
+        proof = local.proof and (full_certificate or detail != "brief")
+        columns = zip(local.index.tolist(), local.point.tolist(), local.cost.tolist(), local.lower_bound.tolist(),
+                      local.gap.tolist(), local.tolerance.tolist(), local.radius.tolist(),
+                      local.sublevels() if proof else repeat(None))
+        for i, point, cost, lower, gap, tolerance, radius, sublevel in columns:
+            if not rows[i]:
+                continue  # replaced by an object, made below
+            extra = {"proof": {"type": "convexity", "radius": radius}} if proof else {}
+            if sublevel is not None:
+                extra["proof"]["sublevel"] = sublevel
+            certificate = (extra or None) if detail == "brief" else \
+                local_summary(SCOPE, tolerance, radius, True, extra)
+            documents[i] = {"point": point, "at_infinity": False, "cost": cost, "lower_bound": lower, "gap": gap,
+                            "status": "optimal", "certified": True, "nodes": 0, "elapsed_s": local.elapsed_s,
+                            "reason": None, "certificate": certificate}
+    for i in np.flatnonzero(~rows).tolist():
+        documents[i] = track_document(results[i], detail, full_certificate)
+    return documents
+
+
+def tracks_in_bulk(entries: list, chosen, cameras: int) -> list | None:
+    """The tracks ``chosen`` of ``entries`` (the request's data.tracks) as TriangulationKind.parse
+    reads them, ``(views, points (n, 2))``, every check of its per-track loop made on all of
+    them at once (a few passes over flat lists and one array, instead of a number_array call a
+    track); None when any check fails, and the per-track loop then names the entry."""
+    try:
+        picked = [entries[i] for i in chosen]
+        if not all(type(track) is dict for track in picked):
+            return None
+        views = [track["views"] for track in picked]
+        points = [track["points"] for track in picked]
+    except (KeyError, IndexError, TypeError):
+        return None
+    if not picked or not all(type(v) is list for v in views) or not all(type(p) is list for p in points):
+        return None
+    sizes = [len(v) for v in views]
+    if min(sizes) < 2 or max(sizes) > MAX_VIEWS or [len(p) for p in points] != sizes:
+        return None
+    indices = list(chain.from_iterable(views))
+    rows = list(chain.from_iterable(points))
+    if not all(type(v) is int for v in indices) or not all(type(row) is list and len(row) == 2 for row in rows):
+        return None
+    if not NUMBER_TYPES.issuperset(map(type, chain.from_iterable(rows))):
+        return None
+    try:
+        pixels = np.array(rows, dtype=float)  # (observations, 2)
+    except (OverflowError, ValueError):
+        return None
+    magnitude = np.abs(pixels)
+    if not (np.isfinite(pixels).all() and (magnitude <= COORDINATE_LIMIT).all()):
+        return None
+    index = np.array(indices, dtype=np.int64)
+    if not ((index >= 0) & (index < cameras)).all():
+        return None
+    owner = np.repeat(np.arange(len(sizes)), sizes)
+    order = np.lexsort((index, owner))  # each track's views sorted: a view twice sits next to itself
+    if ((owner[order][1:] == owner[order][:-1]) & (index[order][1:] == index[order][:-1])).any():
+        return None
+    return [(list(v), p) for v, p in zip(views, np.split(pixels, np.cumsum(sizes)[:-1]))]
+
+
 class TriangulationKind:
     name = "triangulation"
     description = "N-view triangulation: the 3D point minimising reprojection error, certified globally optimal."
@@ -103,7 +172,13 @@ class TriangulationKind:
         if not isinstance(data["tracks"], list) or not data["tracks"]:
             raise InputError("data/tracks", "must be a non-empty list")
         tracks: list = [None] * len(data["tracks"])
-        for i in items if items is not None else range(len(data["tracks"])):
+        chosen = items if items is not None else range(len(data["tracks"]))
+        bulk = tracks_in_bulk(data["tracks"], chosen, len(cameras))
+        if bulk is not None:
+            for i, track in zip(chosen, bulk):
+                tracks[i] = track
+            return ParsedTracks(cameras, tracks)
+        for i in chosen:  # some track fails a check: the first one is named
             track = data["tracks"][i]
             where = f"data/tracks/{i}"
             if not isinstance(track, dict) or "views" not in track or "points" not in track:
@@ -159,7 +234,7 @@ class TriangulationKind:
 
         tracks = [parsed.tracks[index] for index in indices]
         results = triangulate_many(parsed.cameras, tracks, options, callback)
-        documents = [track_document(result, options.detail, options.certificate == "full") for result in results]
+        documents = track_documents(results, options.detail, options.certificate == "full")
         if options.detail == "full":  # the same documents as _document's, for the whole batch at once
             for document, found in zip(documents, determinacy.tracks_many(parsed.cameras, tracks, results)):
                 document["determinacy"] = found

@@ -575,9 +575,21 @@ class JobStore:
         return bool(self.r.eval(self._CLAIM_END, 2, self.key(job_id), self.key(job_id, "final"), self.ttl))
 
     # Items wait in Redis compressed too, one by one (zlib; an item stored as JSON text by an
-    # earlier version starts with "{" and is read as it is): the end reads them all.
+    # earlier version starts with "{" and is read as it is): the end reads them all. An item is
+    # a few hundred bytes to a few KB: a 4 KB window and a small memory level compress it as
+    # well as zlib.compress's defaults (32 KB, level 8), whose set-up costs several times the
+    # compression itself (measured on a 272-byte track: 49 us a call against 7.6 us, both 168
+    # bytes); zlib.decompress reads either.
+    ITEM_WINDOW_BITS, ITEM_MEMORY_LEVEL = 12, 4
+
     def _packed(self, items: dict[int, dict]) -> dict[str, bytes]:
-        return {str(i): zlib.compress(json.dumps(item).encode(), self.RESULT_COMPRESSION_LEVEL) for i, item in items.items()}
+        return {str(i): self._compressed_item(json.dumps(item).encode()) for i, item in items.items()}
+
+    @classmethod
+    def _compressed_item(cls, text: bytes) -> bytes:
+        packer = zlib.compressobj(cls.RESULT_COMPRESSION_LEVEL, zlib.DEFLATED, cls.ITEM_WINDOW_BITS,
+                                  cls.ITEM_MEMORY_LEVEL)
+        return packer.compress(text) + packer.flush()
 
     @staticmethod
     def _unpacked(raw: bytes) -> dict:

@@ -5,6 +5,7 @@ certificate (cameras), a cancelled run keeps its stages, and the exports parse."
 from __future__ import annotations
 
 import copy
+import dataclasses
 import io
 import json
 import math
@@ -235,10 +236,11 @@ class TestCamerasNotSearched:
         searched = structure._bound_camera
 
         def bound(view, P, X, x, options, every, dof):
+            found = searched(view, P, X, x, options, every, dof)
             if view in (1, 4):  # as the free-camera test skips a camera: its cost, no bound, the reason
-                return structure.CameraBound(view, 1.0, None, None, None, False, "not_certified", len(X), 0.0,
-                                             "skipped by the test", dof=dof)
-            return searched(view, P, X, x, options, every, dof)
+                return dataclasses.replace(found, optimal_cost=None, lower_bound=None, gap=None, certified=False,
+                                           status="not_certified", reason="skipped by the test", result=None)
+            return found
 
         monkeypatch.setattr(structure, "_bound_camera", bound)
         result = solve_job(job(certificate="full"))
@@ -348,18 +350,27 @@ class TestCertifiedFieldsTied:
     def test_an_edited_calibration_is_refused(self, solved, change):
         refused_as_returned(solved, lambda r: change(r["summary"]["calibration"]))
 
-    def test_determined_on_the_range_edge_is_refused(self, solved):
-        """The autocalibration's focal range ending at the certified focal length: the K is on its
-        range's edge, so determined true (and no warning) is refused."""
+    def test_the_ranges_are_the_calibration_certificates(self, solved):
+        """The autocalibration stage's ranges edited to end at the certified focal length are
+        refused: the range edges are judged on the ranges the calibration certificate searched."""
         def edge(r):
             stage = next(s for s in r["stages"] if s["name"] == "autocalibration")
             stage["intrinsics"]["focal"][1] = r["summary"]["calibration"]["certified_K"][0][0]
-        refused_as_returned(solved, edge)
-
-        def edge_stated(r):
-            edge(r)
             r["summary"]["calibration"]["on_range_edge"] = ["focal"]
-        assert "determined" in refused_as_returned(solved, edge_stated)["detail"]
+        assert "intrinsics" in refused_as_returned(solved, edge)["detail"]
+
+    def test_determined_on_the_range_edge_is_refused(self, solved):
+        """A focal range ending below the scene's focal length: the certified K lies on its edge,
+        which the result says (a warning, not determined); determined true is refused."""
+        focal = solved["summary"]["calibration"]["certified_K"][0][0]
+        edged = solve_job(job(certificate="full", intrinsics={"focal": [0.5 * focal, 0.9 * focal]}))
+        calibration = edged["summary"]["calibration"]
+        assert calibration["certified"] and "focal" in calibration["on_range_edge"], calibration
+        assert not calibration["determined"] and verify_any(edged).valid
+
+        def determined(r):
+            r["summary"]["calibration"]["determined"] = r["summary"]["autocalibration_determined"] = True
+        assert "determined" in refused_as_returned(edged, determined)["detail"]
 
     @pytest.mark.parametrize("change", [
         lambda s: s.update(autocalibration_determined=None),

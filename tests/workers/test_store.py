@@ -152,6 +152,24 @@ class TestResultKeptCompressed:
         assert jobs.all_items(meta["id"], 40) == [items[i] for i in range(40)]
         assert jobs.r.hstrlen(jobs.key(meta["id"], "items"), "0") < len(json.dumps(items[0]))
 
+    def test_an_item_is_stored_about_as_small_as_zlibs_defaults_store_it(self, jobs):
+        """The items' small window (JobStore.ITEM_WINDOW_BITS) costs nothing in size on items of
+        a track document's sizes (a few hundred bytes to several KB)."""
+        import zlib
+
+        meta = jobs.create("triangulation", request_of(3), 3, 3, "someone", chunk_key="tracks")
+        rng = np.random.default_rng(7)
+        items = {i: {"point": rng.normal(size=3).tolist(), "status": "optimal",
+                     "intervals": [{"name": f"q{k}", "value": float(v), "lower": float(v) - 0.1, "upper": float(v) + 0.1}
+                                   for k, v in enumerate(rng.normal(size=size))]}
+                 for i, size in enumerate((2, 40, 200))}
+        jobs.save_items(meta["id"], items)
+        assert jobs.all_items(meta["id"], 3) == [items[i] for i in range(3)]
+        for i, item in items.items():
+            text = json.dumps(item).encode()
+            stored = jobs.r.hstrlen(jobs.key(meta["id"], "items"), str(i))
+            assert stored <= 1.02 * len(zlib.compress(text, jobs.RESULT_COMPRESSION_LEVEL)) + 8, (i, len(text))
+
 
 class TestStreamedResult:
     """A streamed result (batch.streams_result) is stored as its tasks' runs of items, each one

@@ -10,12 +10,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from geocert.solvers.reconstruction import motion_claim
 from geocert.solvers.reconstruction.calibration_claim import difference as k_difference, on_range_edge, same
 
 
 
 def summarise(out, n_tracks: int, n_views: int) -> None:
     """out.summary (a pipeline.Reconstruction's) from its cameras, points, stages and checks."""
+    judge_motion(out)
     squared, count = 0.0, 0
     for point in out.points:
         r = point.result
@@ -35,7 +37,9 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
         "points_certified_fraction": (sum(1 for p in out.points if p.result.certified) / len(out.points)
                                       if out.points else None),
         "cameras_certified": sum(1 for c in bounded if c.bound.certified),
-        "cameras_certified_fraction": (sum(1 for c in bounded if c.bound.certified) / len(bounded) if bounded else None),
+        # of the cameras returned (a camera not bounded is not certified)
+        "cameras_certified_fraction": (sum(1 for c in bounded if c.bound.certified) / len(registered)
+                                       if registered else None),
         # What "certified" says of a camera (camera_claim.statement), when the cameras were bounded.
         "camera_claim": out.stages[4].get("claim") if len(out.stages) > 4 else None,
         "critical_motion": out.stages[1].get("critical_motion"),
@@ -75,6 +79,41 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
         warnings.append({"code": "points_dropped", "detail": f"{out.checks['points_dropped']} certified points lay "
                                                              "behind a camera or far from an observation: dropped"})
     out.summary["warnings"] = warnings
+
+
+def judge_motion(out) -> None:
+    """The motion of what the result returns, judged (motion_claim.judge) on its registered
+    cameras and its certified points, as the verifier recomputes it, and recorded on the
+    autocalibration stage (out.stages[1]). On a critical motion (a turntable, an orbit, a
+    translating camera) the tracks do not determine constant intrinsics: whatever the stage
+    certified, it is said plainly that the upgrade is not determined by these data. Fewer than
+    3 metric cameras: not judged (and K not determined)."""
+    stage = out.stages[1]
+    cameras = [c if c.registered and c.K is not None and c.R is not None else None for c in out.cameras]
+    if sum(c is not None for c in cameras) < 3:
+        return
+    placed = [p for p in out.points if p.result.certified and p.result.point is not None and not p.result.at_infinity]
+    observations = [(int(v), k, u, w) for k, p in enumerate(placed) for v, u, w in p.observations]
+    judged = motion_claim.judge([None if c is None else c.K for c in cameras],
+                                [None if c is None else c.R for c in cameras],
+                                [None if c is None else c.t for c in cameras],
+                                np.array([p.result.point for p in placed], dtype=float).reshape(-1, 3),
+                                np.array([o[0] for o in observations], dtype=int),
+                                np.array([o[1] for o in observations], dtype=int),
+                                np.array([o[2:] for o in observations], dtype=float).reshape(-1, 2))
+    critical = judged["critical_motion"]
+    stage.update(judged, determined=critical is None)
+    if critical is None:
+        return
+    detail = next((w["detail"] for w in judged["motion_warnings"] if w["code"] == critical), "")
+    if stage.get("certified"):
+        proved = ("both stages certified their optimum, but it is one of many upgrades these tracks fit equally well, "
+                  "so the certificate fixes no calibration")
+    else:
+        proved = "no certificate can separate the upgrades the motion leaves open (the cost is flat along them)"
+    said = (f"critical motion ({critical}): {detail}. The tracks do not determine a constant K (Sturm 1997): {proved}; "
+            "K comes from the bundle adjustment's camera model, not from a certificate")
+    stage["reason"] = said if not stage.get("reason") else f"{stage['reason']}; {said}"
 
 
 @dataclass(frozen=True)
@@ -156,7 +195,7 @@ def calibration_claim(out) -> CalibrationClaim:
     if critical:
         warnings.append({"code": "critical_motion", "detail": f"{critical}: the tracks do not determine a constant K"})
     determined = None if known or K is None else bool(certified and not critical and not edges
-                                                      and stage.get("determined") is not False)
+                                                      and stage.get("determined") is True)
     source = ("given" if known else "none" if K is None else "autocalibration" if same_K
               else "bundle_adjustment" if adjusted else "camera_model")
     return CalibrationClaim(None if K is None else K.tolist(), source, None if cert is None else cert.tolist(),

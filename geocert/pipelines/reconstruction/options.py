@@ -12,6 +12,7 @@ import numpy as np
 from geocert.solvers.autocalibration.problem import AutocalibrationOptions
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.options import FractionalOptions
+from geocert.solvers.reconstruction import camera_claim
 
 AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")
 MAX_EXHAUSTIVE = 200  # images matched every pair with every other at most (19,900 pairs)
@@ -86,8 +87,12 @@ class ReconstructionOptions(FractionalOptions):
     # Stage 1's options that are not numbers: their allowed values.
     FEATURE_CHOICES = {"pairs": ("auto", "exhaustive", "retrieval", "sequential"), "ring": (True, False)}
 
+    # The gaps behind a certified point or camera are capped (camera_claim.MAX_REL_GAP and
+    # MAX_ABS_GAP): at rel_gap 0.999 or abs_gap 1e6 "certified" would hold whatever an item costs.
     OPTION_RANGES = {**FractionalOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": 1},
-                     "camera_rel_gap": {"ge": 0, "le": 1},
+                     "rel_gap": {"ge": 0, "le": camera_claim.MAX_REL_GAP},
+                     "abs_gap": {"ge": 0, "le": camera_claim.MAX_ABS_GAP},
+                     "camera_rel_gap": {"ge": 0, "le": camera_claim.MAX_REL_GAP},
                      "autocalibration_rel_gap": {"ge": 0, "le": 1},
                      "autocalibration_max_nodes": {"ge": 1, "le": 1_000_000},
                      "autocalibration_time_limit_s": {"gt": 0, "le": 3600},
@@ -182,4 +187,4 @@ class ReconstructionOptions(FractionalOptions):
             method="direct" if self.autocalibration == "direct" else "stratified",
             intrinsics=self.ranges(image_size), chirality=self.chirality, rel_gap=self.autocalibration_rel_gap,
             metric_rel_gap=self.metric_rel_gap, abs_gap=1e-12, max_nodes=self.autocalibration_max_nodes,
-            time_limit_s=self.autocalibration_time_limit_s)
+            time_limit_s=self.autocalibration_time_limit_s, certificate=self.certificate)

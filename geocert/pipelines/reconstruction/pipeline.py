@@ -66,6 +66,8 @@ class Reconstruction:
     metric: upgrade.Metric | None = None
     cancelled: bool = False  # the run was stopped (report returned True); what was done is kept
     checks: dict = field(default_factory=dict)  # the sanity layer's figures (_check_cameras, _drop_outlier_points)
+    # The certified metric upgrade's solve, from which the kind builds the calibration certificate
+    proven: upgrade.Proven | None = None
 
 
 def _stage(name: str) -> dict:
@@ -344,6 +346,12 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
                                        skip_critical=options.autocalibration_on_critical_motion == "skip")
         stage.update(method=method, stages=metric.stages, certified=metric.certified, intrinsics=metric.ranges,
                      points_used=metric.autocalibration_points, K=None if metric.K is None else metric.K.tolist())
+        if metric.certified and options.certificate == "full":
+            if metric.proven is None:  # the direct method's upgrade: no certificate of it is carried here
+                stage.update(certified=False, reason="the direct method certified this upgrade, but a reconstruction "
+                                                     "carries only the stratified method's certificate: not claimed")
+            else:
+                out.proven = metric.proven
         starts = []
         if metric.K is not None:
             starts.append(("autocalibration", metric))
@@ -391,8 +399,6 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             stage.update(status="skipped", reason="options.bundle_adjustment is false", started_from=name)
         out.metric = metric = _normalise_frame(metric)
     keep = _check_cameras(out, metric, obs, keep, options.threshold_px)
-    _judge_motion(stages["autocalibration"], metric, upgrade.rotation_noise(metric, obs.view, obs.track, obs.pixel,
-                                                                            keep))
     _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
 
 
@@ -465,35 +471,6 @@ def _depths_and_errors(metric: upgrade.Metric, obs: Observations, m: np.ndarray)
     return cam[:, 2], np.nan_to_num(error, nan=np.inf)
 
 
-def _judge_motion(stage: dict, metric: upgrade.Metric, noise: float | None = None) -> None:
-    """The motion of the metric reconstruction returned, judged as the autocalibration kind
-    judges it (determinacy.motion_warnings: the DIAC's family, and the plane at infinity's).
-    ``noise``: the rotations' standard error the adjustment's residuals give
-    (upgrade.rotation_noise). The DIAC's family is judged at no less than
-    determinacy.ROTATION_NOISE (an adjustment drifts along a critical family by more than its
-    residuals' noise: the Dinosaur's turntable axes scatter by 3 degrees), the plane's at that
-    noise. On a critical motion (a turntable, an orbit, a translating camera) the tracks do not
-    determine constant intrinsics: whatever the stage certified, it is said plainly that the
-    upgrade is not determined by these data."""
-    from geocert.solvers.autocalibration.determinacy import ROTATION_NOISE
-
-    diac = max(noise, ROTATION_NOISE) if noise is not None else ROTATION_NOISE
-    warnings, critical = upgrade.motion(metric, diac, noise)
-    stage.update(motion_warnings=warnings, critical_motion=critical, determined=critical is None,
-                 rotation_noise_rad={"estimated": noise, "diac_family": diac, "plane_family": noise})
-    if critical is None:
-        return
-    detail = next((w["detail"] for w in warnings if w["code"] == critical), "")
-    if stage.get("certified"):
-        proved = ("both stages certified their optimum, but it is one of many upgrades these tracks fit equally well, "
-                  "so the certificate fixes no calibration")
-    else:
-        proved = "no certificate can separate the upgrades the motion leaves open (the cost is flat along them)"
-    said = (f"critical motion ({critical}): {detail}. The tracks do not determine a constant K (Sturm 1997): {proved}; "
-            "K comes from the bundle adjustment's camera model, not from a certificate")
-    stage["reason"] = said if not stage.get("reason") else f"{stage['reason']}; {said}"
-
-
 def _metric_cameras(out: Reconstruction, metric: upgrade.Metric, n_views: int) -> dict[int, np.ndarray]:
     """The metric cameras (K, R, t, P) on out.cameras; returns P per registered view."""
     P = {}
@@ -549,6 +526,7 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
         out.points, dropped = _drop_outlier_points(out.points, P, options.threshold_px)
         out.checks["points_dropped"] = dropped
         stage.update(tracks=len(tracks), points=len(out.points), points_dropped=dropped,
+                     observations_removed=out.checks.get("observations_removed", 0),
                      certified=sum(1 for p in out.points if p.result.certified))
         if not_started:
             stage.update(status="cancelled", tracks_not_started=not_started,
@@ -560,15 +538,10 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
         if not options.resect_cameras:
             stage.update(status="skipped", reason="options.resect_cameras is false")
             return
-        sources: dict[int, tuple[list, list]] = {}
-        for point in out.points:
-            if point.result.point is None or point.result.at_infinity:
-                continue
-            for v, u, w in point.observations:
-                sources.setdefault(int(v), ([], []))
-                sources[int(v)][0].append(point.result.point)
-                sources[int(v)][1].append([u, w])
-        arrays = {v: (np.array(X, dtype=float), np.array(x, dtype=float)) for v, (X, x) in sources.items()}
+        views = sorted(P)
+        found = camera_claim.sources(point_entries(out.points), views)
+        arrays = {v: (np.array(X, dtype=float).reshape(-1, 3), np.array(x, dtype=float).reshape(-1, 2))
+                  for v, (X, x) in zip(views, found) if X}
         map_options = MapOptions(norm=options.norm, rel_gap=options.camera_rel_gap, abs_gap=options.abs_gap,
                                  max_nodes=options.max_nodes, time_limit_s=options.time_limit_s,
                                  max_residual=options.max_residual, certificate=options.certificate)
@@ -590,6 +563,12 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
             stage.update(status="cancelled", cameras_not_started=not_started,
                          reason=f"the job was cancelled: the {len(bounds) - not_started} cameras resected before it "
                                 f"are kept, {not_started} were not started")
+
+
+def point_entries(points: list[Point]) -> list[tuple]:
+    """The returned points as camera_claim.sources reads them (the cameras are resected on the
+    certified points only)."""
+    return [(p.result.point, p.result.at_infinity, p.result.certified, p.observations) for p in points]
 
 
 def _drop_outlier_points(points: list[Point], P: dict[int, np.ndarray], threshold_px: float) -> tuple[list, int]:

@@ -410,16 +410,19 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
 # millionfold would still be within it): bounds are divided by it, and a subnormal unit turned
 # a program bound of one rounding error into any bound at all.
 UNIT_RANGE = (1e-9, 1e3)
+# A unit of order 1 is accepted whatever the cost claimed: dividing a safe bound by it enlarges the
+# bound's rounding by at most PLAIN_UNITS[1]. On exact data the first incumbent costs about 1 and
+# the claim a rounding error (1e-31): the solver's unit is then near 1 and the cost far below it.
+PLAIN_UNITS = (1e-3, 1e3)
 
 
 def checked_unit(value: Any, where: str, claimed_cost: float) -> float:
     unit = _number(value, where, "format")
-    if claimed_cost > 0:
+    ok = PLAIN_UNITS[0] <= unit <= PLAIN_UNITS[1]
+    if claimed_cost > 0 and not ok:
         scaled = unit * claimed_cost
         ok = unit >= SMALLEST_NORMAL and UNIT_RANGE[0] <= scaled <= UNIT_RANGE[1]
-    else:
-        ok = unit == 1.0
     if not ok:
-        raise Invalid("program", f"{where} {unit!r} must put the claimed cost {claimed_cost!r} within {UNIT_RANGE} "
-                                 "in the programs' units (1 when the cost is 0)")
+        raise Invalid("program", f"{where} {unit!r} must be within {PLAIN_UNITS} or put the claimed cost "
+                                 f"{claimed_cost!r} within {UNIT_RANGE} in the programs' units")
     return unit

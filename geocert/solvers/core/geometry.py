@@ -38,7 +38,7 @@ def number_array(value, field: str, what: str, ndim: int, limit: float | None = 
     # value below (an int beyond 2**1023, which is_number refuses, sends every row to the slow
     # check); any other row, and any failure below, goes through the entry-by-entry check, which
     # names the first offending entry. (Integers took the slow path: 6 microseconds an entry.)
-    slow = [(where, row) for where, row in rows if not _NUMBER_TYPES.issuperset(map(type, row))]
+    slow = [(where, row) for where, row in rows if not NUMBER_TYPES.issuperset(map(type, row))]
     for where, row in slow:
         _check_entries(where, row, what, limit)
     try:
@@ -59,7 +59,7 @@ def number_array(value, field: str, what: str, ndim: int, limit: float | None = 
     return array
 
 
-_NUMBER_TYPES = frozenset((float, int))  # exact types: a bool is neither
+NUMBER_TYPES = frozenset((float, int))  # exact types: a bool is neither
 
 
 def _rows(value, field: str, what: str, ndim: int) -> list[tuple[str, list]]:

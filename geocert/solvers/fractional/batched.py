@@ -52,10 +52,11 @@ from geocert.solvers.core.cones import ConeSpec
 from geocert.solvers.core.geometry import cost_roundings, normalised_cameras
 from geocert.solvers.fractional import stacked
 from geocert.solvers.fractional.charts import Chart
+from geocert.solvers.fractional.columns import TrackResults
 from geocert.solvers.fractional.convexity_path import certify_tracks
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.fractional.relaxation import FractionalProgram, cost_unit, gamma_for
-from geocert.solvers.fractional.results import SearchCertificate, TrackResult, claim_of
+from geocert.solvers.fractional.results import SearchCertificate, claim_of
 from geocert.solvers.fractional.search import (MAX_SCALE, ROOT_SUBSET, branch_directions, depth_subspace,
                                                local_refine, recomputed_status, root_region)
 from geocert.solvers.fractional.items import PROGRAM_REFUSED, UNDISCOUNTABLE, TrackItem, refused_by_verifier
@@ -71,10 +72,12 @@ LEAF_MARGIN = 1e-8  # a root node's claimed bound below its computed safe bound 
 
 def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarray]],
                      options: TriangulationOptions | None = None,
-                     callback: Callable[[Progress], bool | None] | None = None) -> list[TrackResult]:
+                     callback: Callable[[Progress], bool | None] | None = None) -> TrackResults:
     """Certified global optimum of every track: ``cameras`` (N, 3, 4) of the whole scene,
     ``tracks`` a list of ``(views, points)`` with ``views`` indices into ``cameras`` and
-    ``points`` (len(views), 2). Returns one TrackResult per track, in order.
+    ``points`` (len(views), 2). Returns one TrackResult per track, in order, as a TrackResults
+    sequence (fractional.columns): the tracks the convexity path certifies are kept as columns,
+    each made into its TrackResult when it is read.
 
     Inputs are taken as validated (as the triangulation kind validates them: finite numbers,
     view indices in range, no view twice in a track, at least two views).
@@ -111,16 +114,16 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
     run = dataclasses.replace(options, certificate="full") if checking else options
     cameras = normalised_cameras(cameras)
     started = time.perf_counter()
-    results: list[TrackResult | None] = [None] * len(tracks)
+    results = TrackResults(len(tracks))
     try:
-        # Under L2L2 most tracks are certified at their local optimum, without a search.
+        # Under L2L2 most tracks are certified at their local optimum, without a search (kept
+        # as columns: no object a track).
         results = certify_tracks(cameras, tracks, run)
     except (ArithmeticError, ValueError, np.linalg.LinAlgError):
         pass  # data this path does not handle: every track goes on to the search
     groups: dict[int, list[int]] = defaultdict(list)
-    for i, (views, points) in enumerate(tracks):
-        if results[i] is None:
-            groups[len(views)].append(i)
+    for i in results.unsolved():
+        groups[len(tracks[i][0])].append(i)
     if run.max_residual is None:  # with a scope limit every track is solved alone (rare, not stacked)
         try:
             _batched(cameras, tracks, groups, run, results)
@@ -128,21 +131,34 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
             # Data this path does not handle (e.g. an SVD that does not converge on non-finite
             # numbers): what it finished stands, every other track is solved alone.
             pass
-    batched = [result for result in results if result is not None]
-    for result in batched:
-        result.elapsed_s = (time.perf_counter() - started) / len(batched)
-    for i, result in enumerate(results):
+    searched = dict(results.objects)  # the batched search's results (no column made into one yet)
+    local = results.local
+    share = (time.perf_counter() - started) / max(1, len(searched) + (len(local.index) if local else 0))
+    if local is not None:
+        local.elapsed_s = share
+    for result in searched.values():
+        result.elapsed_s = share
+    alone = results.unsolved()
+    for i in alone:
+        # triangulate self-checks its own results (and keeps the proof only when asked for).
+        # ``callback`` sees (and may stop) these searches, the only ones that run long.
         views, points = tracks[i]
-        if result is None:
-            # triangulate self-checks its own results (and keeps the proof only when asked for).
-            # ``callback`` sees (and may stop) these searches, the only ones that run long.
-            results[i] = triangulate(cameras[list(views)], points, options, callback)
-            continue
-        if checking and result.certified:
-            self_check("triangulation", (cameras[list(views)], np.asarray(points, dtype=float)),
-                       dataclasses.asdict(run), claim_of(result, point=result.point, at_infinity=result.at_infinity))
-        if options.certificate != "full" and result.certificate is not None:
-            result.certificate.proof = None
+        results[i] = triangulate(cameras[list(views)], points, options, callback)
+    if checking:  # the columns' rows checked as the objects they would make (not kept)
+        rows = [] if local is None else [(int(i), local.result(row)) for row, i in enumerate(local.index)]
+        for i, result in [*searched.items(), *rows]:
+            views, points = tracks[i]
+            if result.certified:
+                self_check("triangulation", (cameras[list(views)], np.asarray(points, dtype=float)),
+                           dataclasses.asdict(run),
+                           claim_of(result, point=result.point, at_infinity=result.at_infinity))
+    if options.certificate != "full":
+        if local is not None:
+            local.proof = False
+        alone = set(alone)
+        for i, result in results.objects.items():
+            if i not in alone and result.certificate is not None:
+                result.certificate.proof = None
     return results
 
 

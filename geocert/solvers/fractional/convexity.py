@@ -73,15 +73,17 @@ def in_range(values: np.ndarray) -> np.ndarray:
     return (size == 0) | ((size >= SMALLEST) & (size <= LARGEST))
 
 
-def convexity_bounds(flat: FlatTracks, x: np.ndarray, radii=RADII, strictness: float = 1.0):
+def convexity_bounds(flat: FlatTracks, x: np.ndarray, radii=RADII, strictness: float = 1.0,
+                     terms: "Terms | None" = None):
     """For every track t with point ``x[t]`` (T, 3): (lower, radius, cost), lower the proven
     bound on every point's cost in the scope (-inf where this test proves none), radius the R
     used (nan where none: the smallest of ``radii`` times the distance to the nearest principal
     plane that passes (E)), cost the point's sum of squared residuals as computed here.
     ``strictness`` > 1 asks each test to pass with its round-off allowances that many times over
     and a relative margin besides: a solver's claims then pass a checker's tests (strictness 1)
-    whose sums differ from its own in their last bits."""
-    terms = _terms(flat, x)
+    whose sums differ from its own in their last bits. ``terms``: convexity_terms(flat, x), when
+    the caller has them already."""
+    terms = terms if terms is not None else convexity_terms(flat, x)
     with np.errstate(all="ignore"):
         R = np.asarray(radii, dtype=float)[:, None] * terms.reach[None]  # (K, T)
         enclosed = _encloses(flat, terms, R, strictness)
@@ -93,7 +95,7 @@ def convexity_bounds(flat: FlatTracks, x: np.ndarray, radii=RADII, strictness: f
 def bounds_at(flat: FlatTracks, x: np.ndarray, radius: np.ndarray):
     """(lower, cost) of every track at its own radius (T,): lower -inf where (E) or (V) fails
     there (or the radius is not a positive number)."""
-    terms = _terms(flat, x)
+    terms = convexity_terms(flat, x)
     radius = np.asarray(radius, dtype=float)
     with np.errstate(all="ignore"):
         good = (radius > 0) & np.isfinite(radius)
@@ -102,26 +104,33 @@ def bounds_at(flat: FlatTracks, x: np.ndarray, radius: np.ndarray):
     return lower, cost
 
 
-class _Terms:
+class Terms:
     """What (E), (V) and the bound read at the tracks' points: per observation (m,) and per
-    track (T,), each with the round-off allowance of its computation."""
+    track (T,), each with the round-off allowance of its computation; and the projection
+    behind them (``image`` (2, m), the residuals ``r`` (2, m), the depths ``w`` (m,), the sizes
+    of the terms summed into each projected coordinate ``size`` (3, m)), which a caller reuses."""
 
 
-def _terms(flat: FlatTracks, x: np.ndarray, increase: np.ndarray | None = None, norm: str = "L2L2") -> _Terms:
+def convexity_terms(flat: FlatTracks, x: np.ndarray, increase: np.ndarray | None = None,
+                    norm: str = "L2L2") -> Terms:
     """The terms at the tracks' points; with ``increase`` (T,), rho (and e) at the level
     f(x) + increase instead of f(x) (only (E) reads them then), f the ``norm``'s cost: under
     L2L1 and L1L1 every residual's length is at most the whole cost, so rho is the level itself."""
-    t = _Terms()
+    t = Terms()
     owner = flat.owner
     t.n = n = flat.sizes.astype(float)
     P, y = flat.rows, flat.points
     X = np.concatenate([x, np.ones((len(x), 1))], axis=1)[owner].T  # (4, m)
     proj = (P * X[None]).sum(axis=1)  # (3, m)
-    size = (np.abs(P) * np.abs(X)[None]).sum(axis=1)  # the sizes of the terms behind proj
+    # The sizes of the terms behind proj, summed in the order a sum over axis 1 takes (the same
+    # numbers), written out: the broadcast product with the transposed X is several times slower.
+    Pa, Xa = np.abs(P), np.abs(X)
+    size = Pa[:, 0] * Xa[0] + Pa[:, 1] * Xa[1] + Pa[:, 2] * Xa[2] + Pa[:, 3] * Xa[3]
     w, size_w = proj[2], size[2]
+    t.w, t.size = w, size
     with np.errstate(all="ignore"):
-        image = proj[:2] / w
-        r = image - y
+        t.image = image = proj[:2] / w
+        t.r = r = image - y
         err_w = 16 * U * size_w
         # Each residual coordinate's error: the projection's terms, the division, the subtraction.
         err_r = 32 * U * ((size[:2] + np.abs(image) * size_w) / np.abs(w) + np.abs(image) + np.abs(y))
@@ -167,7 +176,7 @@ def _terms(flat: FlatTracks, x: np.ndarray, increase: np.ndarray | None = None, 
     return t
 
 
-def _encloses(flat: FlatTracks, t: _Terms, R: np.ndarray, strictness: float = 1.0) -> np.ndarray:
+def _encloses(flat: FlatTracks, t: Terms, R: np.ndarray, strictness: float = 1.0) -> np.ndarray:
     """(E) at radii R (K, T): lambda_min(sum_i M_i' M_i / tau_i^2) > n, (K, T)."""
     Rm = R[:, flat.owner]
     tau = t.e * (t.w_hi + Rm * t.d_up) / Rm  # (K, m)
@@ -177,7 +186,7 @@ def _encloses(flat: FlatTracks, t: _Terms, R: np.ndarray, strictness: float = 1.
     return t.usable & positive_definite(A, t.n * (1 + 1e-12 + 1e-6 * (strictness - 1)), strictness * allowance)
 
 
-def _bound(flat: FlatTracks, t: _Terms, R: np.ndarray, enclosed: np.ndarray, strictness: float = 1.0):
+def _bound(flat: FlatTracks, t: Terms, R: np.ndarray, enclosed: np.ndarray, strictness: float = 1.0):
     """(V) at radii R (T,) and the bound where (E) and (V) hold: (lower, R, cost)."""
     owner = flat.owner
     Rm = R[owner]
@@ -243,7 +252,7 @@ def sublevel_radii(flat: FlatTracks, x: np.ndarray, increase: np.ndarray, strict
     none up to 2^128 is found. R' is within a factor 1 / (1 - R0 q) (plus 1e-6) of the
     smallest (R0 below, q the largest |d_i| / w_i), or found by doubling and bisection (to a
     relative 2^-steps) where that first guess does not pass."""
-    terms = _terms(flat, x, np.asarray(increase, dtype=float), norm)
+    terms = convexity_terms(flat, x, np.asarray(increase, dtype=float), norm)
     n_tracks = len(x)
     usable = terms.usable
     with np.errstate(all="ignore"):
@@ -280,13 +289,18 @@ def sublevel_radii(flat: FlatTracks, x: np.ndarray, increase: np.ndarray, strict
         return np.where(found & usable, hi, np.nan)
 
 
-def ball_intervals(point, radius) -> list:
+def ball_bounds(point, radius) -> np.ndarray:
     """[lower, upper] of each coordinate over the open ball of ``radius`` about ``point``, rounded
-    outward (what a proven interval states, recomputed alike by the checker): (3, 2) nested lists
-    for one point (3,), or (T, 3, 2) for points (T, 3) and radii (T,)."""
+    outward (what a proven interval states, recomputed alike by the checker): (3, 2) for one
+    point (3,), or (T, 3, 2) for points (T, 3) and radii (T,)."""
     centre = np.asarray(point, dtype=float)
     radius = np.asarray(radius, dtype=float)[..., None] if centre.ndim == 2 else float(radius)
-    return np.stack([np.nextafter(centre - radius, -np.inf), np.nextafter(centre + radius, np.inf)], axis=-1).tolist()
+    return np.stack([np.nextafter(centre - radius, -np.inf), np.nextafter(centre + radius, np.inf)], axis=-1)
+
+
+def ball_intervals(point, radius) -> list:
+    """ball_bounds as nested lists (what a document states)."""
+    return ball_bounds(point, radius).tolist()
 
 
 def sublevel_holds(cameras: np.ndarray, points: np.ndarray, point: np.ndarray, increase: float,
@@ -296,7 +310,7 @@ def sublevel_holds(cameras: np.ndarray, points: np.ndarray, point: np.ndarray, i
     ``point``)."""
     flat = FlatTracks.build(cameras, [(list(range(len(cameras))), points)])
     x = np.asarray(point, dtype=float).reshape(1, 3)
-    terms = _terms(flat, x, np.array([increase], dtype=float), norm)
+    terms = convexity_terms(flat, x, np.array([increase], dtype=float), norm)
     with np.errstate(all="ignore"):
         return bool(_encloses(flat, terms, np.array([[radius]], dtype=float))[0, 0])
 

@@ -20,38 +20,32 @@ import numpy as np
 
 from geocert.solvers.core.certificates import ROUNDING
 from geocert.solvers.core.determinacy import SIGMAS
-from geocert.solvers.fractional.convexity import ball_intervals, convexity_bounds, sublevel_radii
+from geocert.solvers.fractional.columns import LocalColumns, TrackResults
+from geocert.solvers.fractional.convexity import (ball_bounds, ball_intervals, convexity_bounds, convexity_terms,
+                                                  sublevel_radii)
 from geocert.solvers.fractional.flat import FlatTracks, linear, refine
 from geocert.solvers.fractional.options import TriangulationOptions
-from geocert.solvers.fractional.results import LocalCertificate, TrackResult
 
-SCOPE = "every point in front of every camera"
 STRICTNESS = 2.0  # the solver's allowances over the verifier's
 CLAIM_MARGIN = 1e-12  # the bound claimed below the bound computed (relative)
 
 
-def certify_tracks(cameras: np.ndarray, tracks: list, options: TriangulationOptions) -> list[TrackResult | None]:
-    """The results of the tracks the convexity bound certifies (L2L2, no max_residual), None
-    for the others. ``cameras`` as normalised_cameras gives them; tracks as triangulate_many
-    takes them (validated)."""
-    out: list[TrackResult | None] = [None] * len(tracks)
+def certify_tracks(cameras: np.ndarray, tracks: list, options: TriangulationOptions) -> TrackResults:
+    """The results of the tracks the convexity bound certifies (L2L2, no max_residual), as
+    columns (TrackResults.local), None for the others. ``cameras`` as normalised_cameras gives
+    them; tracks as triangulate_many takes them (validated)."""
     if options.norm != "L2L2" or options.max_residual is not None or not tracks:
-        return out
+        return TrackResults(len(tracks))
     flat = FlatTracks.build(cameras, tracks)
     start, ok = linear(flat)
     with np.errstate(all="ignore"):
         x, _ = refine(flat, start)
-        lower, radius, _ = convexity_bounds(flat, x, strictness=STRICTNESS)
-        P, y = flat.rows, flat.points
-        X = np.concatenate([x, np.ones((len(x), 1))], axis=1)[flat.owner].T
-        proj = (P * X[None]).sum(axis=1)
-        terms = (np.abs(P) * np.abs(X)[None]).sum(axis=1)
-        depth = proj[2]
-        image = proj[:2] / depth
-        r = image - y
+        terms = convexity_terms(flat, x)
+        lower, radius, _ = convexity_bounds(flat, x, strictness=STRICTNESS, terms=terms)
+        y, image, r, depth = flat.points, terms.image, terms.r, terms.w
         rounding = ROUNDING * (np.abs(image) + np.abs(y))  # the verifier's residual_rounding
         # proof.residual_uncertainty: how far the data determine each residual coordinate.
-        uncertainty = 1e-15 * (terms[:2] + np.abs(image) * terms[2]) / np.abs(depth)
+        uncertainty = 1e-15 * (terms.size[:2] + np.abs(image) * terms.size[2]) / np.abs(depth)
         sums = flat.per_track(np.stack([
             (r * r).sum(axis=0), (2 * np.abs(r) * rounding + rounding * rounding).sum(axis=0),
             (2 * np.abs(r) * uncertainty + uncertainty * uncertainty).sum(axis=0), (~(depth > 0)).astype(float)]))
@@ -61,27 +55,19 @@ def certify_tracks(cameras: np.ndarray, tracks: list, options: TriangulationOpti
     # A cost within abs_gap of 0 is certified by the trivial bound (the search's first step).
     certified = ok & np.isfinite(lower) & (behind == 0) & np.isfinite(cost) & (cost > options.abs_gap) \
         & (cost + slack * (1 + 1e-6) - claimed <= tolerance * (1 - 1e-9)) & (spread <= 0.5 * tolerance)
-    full = options.certificate == "full"
-    increase, reach = _sublevels(flat, x, cost, claimed, certified) if full or options.detail == "full" \
-        else (None, None)
-    if reach is not None:  # Python lists made once for the whole batch, as below
-        balls = ball_intervals(x, np.where(np.isfinite(reach), reach, 0.0))
-        proven, increases, reaches = np.isfinite(reach).tolist(), increase.tolist(), reach.tolist()
-    # Python lists made once for the whole batch (one tolist each), then sliced per track.
-    residuals, points, starts = r.T.tolist(), x.tolist(), flat.starts.tolist()
-    costs, claims, tolerances, radii = cost.tolist(), claimed.tolist(), tolerance.tolist(), radius.tolist()
-    for t in np.flatnonzero(certified).tolist():
-        sublevel = None
-        if reach is not None and proven[t]:
-            sublevel = {"cost_increase": increases[t], "radius": reaches[t], "intervals": balls[t]}
-        proof = {"type": "convexity", "radius": radii[t]} if full else None
-        if proof is not None and sublevel is not None:
-            proof["sublevel"] = sublevel
-        out[t] = TrackResult(status="optimal", certified=True, cost=costs[t], lower_bound=claims[t],
-                             gap=costs[t] - claims[t], nodes=0, point=points[t],
-                             residuals=residuals[starts[t]:starts[t + 1]],
-                             certificate=LocalCertificate(SCOPE, tolerances[t], radii[t], proof, sublevel=sublevel))
-    return out
+    rows = np.flatnonzero(certified)
+    observations = np.repeat(certified, flat.sizes)
+    starts = np.zeros(len(rows) + 1, dtype=np.int64)
+    np.cumsum(flat.sizes[rows], out=starts[1:])
+    local = LocalColumns(index=rows, point=x[rows], cost=cost[rows], lower_bound=claimed[rows],
+                         tolerance=tolerance[rows], radius=radius[rows], residuals=r.T[observations],
+                         starts=starts, proof=options.certificate == "full")
+    if options.certificate == "full" or options.detail == "full":  # proven intervals, as columns
+        increase, reach = _sublevels(flat, x, cost, claimed, certified)
+        reach = reach[rows]
+        local.sublevel_increase, local.sublevel_radius = increase[rows], reach
+        local.sublevel_bounds = ball_bounds(x[rows], np.where(np.isfinite(reach), reach, 0.0))
+    return TrackResults(len(tracks), local)
 
 
 def cost_increase(cost, lower, views):

@@ -23,6 +23,7 @@ import numpy as np
 from geocert.solvers.core.determinacy import (SIGMAS, SINGULAR, Determinacy, certified_gap, curvature_intervals,
                                                interval, numeric_jacobian, proven_document, safely, spread)
 from geocert.solvers.fractional.charts import camera_centres
+from geocert.solvers.fractional.columns import solutions, sublevels
 
 PARALLAX_DEGREES = 1.0  # rays meeting at less than this: near-zero parallax
 FLAT = 1e-2  # points whose centred spread along a direction is below this fraction: (nearly) flat
@@ -89,32 +90,35 @@ def tracks_many(cameras: np.ndarray, tracks: list, results: list) -> list[dict |
     with np.errstate(divide="ignore", invalid="ignore"):
         centres = _centres(cameras)
     out: list[dict | None] = [None] * len(tracks)
+    X, finite, cost, lower = solutions(results)  # no object made for the convexity path's columns
+    proven = sublevels(results)
     groups: dict[int, list[int]] = {}
-    for i, ((views, _), result) in enumerate(zip(tracks, results)):
-        if result.point is None:
-            continue
-        if result.at_infinity:
-            out[i] = track(cameras[views], tracks[i][1], result.point, True, result.cost, result.lower_bound)
-        else:
-            groups.setdefault(len(views), []).append(i)
+    for i in np.flatnonzero(finite).tolist():
+        groups.setdefault(len(tracks[i][0]), []).append(i)
+    for i in np.flatnonzero(~finite).tolist():
+        result = results[i]
+        if result is not None and result.point is not None:  # at infinity
+            out[i] = track(cameras[tracks[i][0]], tracks[i][1], result.point, True, result.cost, result.lower_bound)
     for n, members in groups.items():
         try:
             with np.errstate(all="ignore"):
-                documents = _finite_tracks(cameras, centres, [tracks[i] for i in members],
-                                           [results[i] for i in members], n)
+                documents = _finite_tracks(cameras, centres, [tracks[i] for i in members], X[members], cost[members],
+                                           lower[members], [proven[i] for i in members], n)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):  # as safely(): never fails a solve
-            documents = [safely(track, cameras[tracks[i][0]], tracks[i][1], results[i].point, False, results[i].cost,
-                                results[i].lower_bound) for i in members]
+            documents = [safely(track, cameras[tracks[i][0]], tracks[i][1], X[i].tolist(), False, results[i].cost,
+                                results[i].lower_bound, proven[i]) for i in members]
         for i, document in zip(members, documents):
             out[i] = document
     return out
 
 
-def _finite_tracks(cameras, all_centres, tracks: list, results: list, n: int) -> list[dict]:
+def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.ndarray, lowers: np.ndarray,
+                   proven: list, n: int) -> list[dict]:
+    """The documents of tracks of n views each with finite points X (G, 3), their costs and lower
+    bounds (G,) (nan where none), and their certificates' sublevels (proven_track)."""
     views = np.array([v for v, _ in tracks])  # (G, n)
     cams = cameras[views]  # (G, n, 3, 4)
     points = np.array([p for _, p in tracks], dtype=float)  # (G, n, 2)
-    X = np.array([r.point for r in results], dtype=float)  # (G, 3)
     proj = np.einsum("gnij,gj->gni", cams, np.concatenate([X, np.ones((len(X), 1))], axis=1))
     image = proj[..., :2] / proj[..., 2:3]
     residuals = (image - points).reshape(len(X), -1)
@@ -143,7 +147,7 @@ def _finite_tracks(cameras, all_centres, tracks: list, results: list, n: int) ->
     cost = (residuals * residuals).sum(axis=1)
     redundancy = 2 * n - 3
     delta = SIGMAS ** 2 * cost / redundancy if redundancy > 0 else np.zeros(len(X))
-    gaps = np.array([np.nan if (gap := certified_gap(r.cost, r.lower_bound)) is None else gap for r in results])
+    gaps = np.maximum(costs - lowers, 0.0)  # certified_gap: nan unless both are finite
     delta = np.where(np.isfinite(gaps), np.maximum(delta, gaps), delta)
     bounded = finite & np.isfinite(delta)
     fixed = values > SINGULAR * np.maximum(values[:, -1:], 1e-300)  # (G, 3)
@@ -153,7 +157,7 @@ def _finite_tracks(cameras, all_centres, tracks: list, results: list, n: int) ->
     safe_values = np.where(fixed, values, 1.0)
     half = np.sqrt(delta[:, None] * np.where(fixed[:, None], g * g / safe_values[:, None], 0.0).sum(axis=2))
     documents = []
-    for i, result in enumerate(results):
+    for i in range(len(X)):
         out = Determinacy(cost_increase=float(delta[i]), redundancy=redundancy)
         scale = float(length[i]) if has_depth[i] else None
         for k in range(4 if has_depth[i] else 3):
@@ -162,7 +166,7 @@ def _finite_tracks(cameras, all_centres, tracks: list, results: list, n: int) ->
                 out.intervals.append(interval(names[k], value, value - half[i, k], value + half[i, k], scale))
             else:
                 out.intervals.append(interval(names[k], value, None, None, scale))
-        out.proven_intervals = proven_track(getattr(result.certificate, "sublevel", None))
+        out.proven_intervals = proven_track(proven[i])
         if usable[i].sum() >= 2 and widest[i] < PARALLAX_DEGREES:
             out.warnings.append({"code": "near_zero_parallax",
                                  "detail": f"the rays meet at {float(widest[i]):.3g} degrees at most (< "

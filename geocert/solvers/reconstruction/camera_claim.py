@@ -39,6 +39,12 @@ CHI2_999 = {1: 10.828, 2: 13.816, 3: 16.266, 4: 18.467, 5: 20.515}
 PROJECTIVE_DOF = 11  # a 3x4 camera up to scale
 POSE_DOF = 6
 MAX_ALLOWANCE = 0.5
+# The loosest gaps a reconstruction's certified claims may be made with: a camera or a point
+# "certified" at camera_rel_gap 0.999 or abs_gap 1e6 would be certified whatever it costs. With
+# these, a certified camera costs at most 2 (1 + allowance) times its bound plus 1 (px^2 under
+# L2L2, px under the L1 norms).
+MAX_REL_GAP = 0.5
+MAX_ABS_GAP = 1.0
 SAME = 1e-9  # relative: intrinsics equal up to JSON round trips are shared
 
 
@@ -83,9 +89,9 @@ def allowance(points: int, dof: int, norm: str) -> float | None:
 def tolerance(points: int, dof: int, norm: str, rel_gap: float) -> float | None:
     """The relative tolerance of a camera seeing ``points`` points, with ``dof`` of its own,
     against the resection's bound proven to ``rel_gap``; None when it cannot be certified
-    (fewer than 6 points, or a gap of 1 or more)."""
+    (fewer than 6 points, or a gap beyond MAX_REL_GAP)."""
     extra = allowance(points, dof, norm)
-    if extra is None or not 0 <= rel_gap < 1:
+    if extra is None or not 0 <= rel_gap <= MAX_REL_GAP:
         return None
     return (1.0 + extra) / (1.0 - rel_gap) - 1.0
 
@@ -104,3 +110,20 @@ def statement(norm: str, rel_gap: float) -> str:
             f"({k}(2 * points - 11)): what the returned camera's fewer degrees of freedom (its pose, plus the "
             f"intrinsics the cameras do not share) cost at the 99.9% level, not an error in it; withheld (0) where "
             f"it would exceed {MAX_ALLOWANCE:g}")
+
+
+def sources(points, views: list[int]) -> list[tuple[list, list]]:
+    """Each view's resection data: (source points, target pixels) from every observation in that
+    view of a certified finite point, in the points' order. ``points``: (point, at_infinity,
+    certified, observations) per returned point, observations [view, u, v]. Only certified
+    points: an uncertified point's position is backed by no proof, and a camera fitted to points
+    placed on its own rays would fit them exactly, whatever its pose."""
+    found = {view: ([], []) for view in views}
+    for point, at_infinity, certified, observations in points:
+        if point is None or at_infinity or certified is not True:
+            continue
+        for view, u, v in observations or []:
+            if int(view) in found:
+                found[int(view)][0].append([float(c) for c in point])
+                found[int(view)][1].append([u, v])
+    return [found[view] for view in views]

@@ -16,6 +16,7 @@ import numpy as np
 from scipy.linalg import rq
 
 from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.reconstruction import motion_claim
 
 
 @dataclass
@@ -32,6 +33,22 @@ class Metric:
     Ks: list | None = None  # one K per view (the "varying" adjustment), else K for every view
     alternative: tuple | None = None  # (H, K) of the linear estimate: a second start for the adjustment
     skipped: str | None = None  # why the certified search was not run (a critical motion), if it was not
+    # What a certificate of the stratified upgrade is built from (Proven), when one was solved
+    proven: "Proven | None" = None
+
+
+@dataclass
+class Proven:
+    """A stratified solve as an autocalibration job would state it: its data (the registered
+    views' projective cameras, the points used, the image size), the options it ran with, the
+    prepared problem and stratified.solve's result (proofs recorded when the options ask a full
+    certificate)."""
+    cameras: np.ndarray
+    points: np.ndarray
+    image_size: tuple | None
+    options: pr.AutocalibrationOptions
+    problem: pr.Problem
+    result: object
 
 
 def decompose(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -89,9 +106,13 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
             return empty
     stages: list[dict] = []
     H = K = None
+    proven = None
     if method in ("stratified", "auto"):
-        H, K, found = _stratified(problem, options, intrinsics, callback)
+        H, K, found, solved = _stratified(problem, options, intrinsics, callback)
         stages += found
+        if H is not None:
+            proven = Proven(P, X, None if image_size is None else tuple(image_size),
+                            replace(options, intrinsics=intrinsics), problem, solved)
     if H is None and method in ("direct", "auto"):
         H, K, found = _direct(problem, P, X, options)
         stages += found
@@ -103,90 +124,23 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
     certified = bool(stages) and all(stage["certified"] for stage in stages if stage["status"] != "skipped")
     out = metric_from(cameras, points, H, K)
     out.stages, out.certified, out.ranges, out.autocalibration_points = stages, certified, problem.ranges, len(chosen)
+    out.proven = proven
     out.alternative = linear
     return out
 
 
 def motion(metric: Metric, noise: float | None = None, plane_noise: float | None = None
            ) -> tuple[list[dict], str | None]:
-    """The autocalibration kind's motion warnings (determinacy.motion_warnings: Sturm's critical
-    motions for constant intrinsics, the DIAC's family and the plane at infinity's) for a metric
-    reconstruction: the rotations relative to a reference view (infinite homographies
-    K R_j R_0^T K^-1 less their K) and the camera centres. The reference is the view whose
-    rotation is nearest the others' (the least sum of chordal distances), not the first in the
-    file: the judgement is the motion's, whatever order the photos came in. ``noise``: the
-    rotations' standard error (radians) for the DIAC's family (None: determinacy's default);
-    ``plane_noise``: for the plane at infinity's family, which is judged only when given (the
-    adjustment's residuals' noise, rotation_noise: at the default ROTATION_NOISE, 0.6 degrees,
-    a general motion of exact cameras in a 60-degree cone was judged near-critical). Returns the
-    warnings and the code of the critical one (None for a general motion)."""
-    from geocert.solvers.autocalibration import determinacy
-
-    views = [v for v, R in enumerate(metric.rotations) if R is not None]
-    if len(views) < 3:
-        return [], None
-    R = np.array([metric.rotations[v] for v in views])
-    centres = np.array([-metric.rotations[v].T @ metric.translations[v] for v in views])
-    chordal = np.linalg.norm(R[:, None] - R[None, :], axis=(2, 3)).sum(axis=1)
-    ref = int(np.argmin(chordal))
-    others = [k for k in range(len(views)) if k != ref]
-    try:
-        warnings = determinacy.motion_warnings(R[others] @ R[ref].T, centres[[ref, *others]], noise=noise,
-                                               reference=None if plane_noise is None else R[ref],
-                                               plane_noise=plane_noise)
-    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
-        return [], None
-    return warnings, next((w["code"] for w in warnings if w["code"] in determinacy.CRITICAL_CODES), None)
+    """motion_claim.motion of a metric reconstruction's cameras."""
+    return motion_claim.motion(metric.rotations, metric.translations, noise, plane_noise)
 
 
 def rotation_noise(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: np.ndarray,
                    keep: np.ndarray) -> float | None:
-    """The standard error (radians) of a relative rotation R_j R_0^T of the adjusted
-    reconstruction, as its residuals give it: per camera, sigma^2 (J'J)^-1 of its pose with the
-    points and K held (J the pixels' derivatives in a small rotation and the translation; sigma
-    the residuals' RMS per coordinate), the largest standard deviation of its rotation; the
-    median over the cameras, times sqrt(2) (two cameras in each relative rotation). None when
-    fewer than 3 cameras have 6 points. It is conditional on the points, an estimate of the noise
-    alone: an adjustment drifting along a critical family moves the rotations by more (hence
-    determinacy.ROTATION_NOISE as the floor where it is used)."""
-    registered = np.array([R is not None for R in metric.rotations])
-    use = keep & registered[obs_view] & np.isfinite(metric.points[obs_track, 0])
-    if use.sum() < 12:
-        return None
-    sigmas, squared, count = [], 0.0, 0
-    per_view = []
-    for v in np.flatnonzero(registered):
-        m = np.flatnonzero(use & (obs_view == v))
-        if len(m) < 6:
-            continue
-        K, R, t = K_of(metric, v), metric.rotations[v], metric.translations[v]
-        turned = metric.points[obs_track[m]] @ R.T  # R X
-        cam = turned + t
-        x, y, z = cam[:, 0], cam[:, 1], cam[:, 2]
-        image = cam @ K.T
-        r = image[:, :2] / image[:, 2:3] - pixels[m]
-        squared += float((r * r).sum())
-        count += r.size
-        # d(x/z, y/z)/d cam, then K's 2x2 block; d cam / d(omega, t) = [-[R X]_x, I].
-        dproj = np.zeros((len(m), 2, 3))
-        dproj[:, 0, 0] = dproj[:, 1, 1] = 1 / z
-        dproj[:, 0, 2], dproj[:, 1, 2] = -x / z ** 2, -y / z ** 2
-        skew = np.zeros((len(m), 3, 3))
-        skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -turned[:, 2], turned[:, 1], -turned[:, 0]
-        skew -= skew.transpose(0, 2, 1)
-        dcam = np.concatenate([-skew, np.broadcast_to(np.eye(3), (len(m), 3, 3))], axis=2)
-        J = np.einsum("ab,mbc,mcd->mad", K[:2, :2], dproj, dcam).reshape(-1, 6)
-        per_view.append(J.T @ J)
-    if len(per_view) < 3 or count <= 6 * len(per_view):
-        return None
-    sigma2 = squared / (count - 6 * len(per_view))
-    for normal in per_view:
-        try:
-            covariance = sigma2 * np.linalg.inv(normal)
-        except np.linalg.LinAlgError:
-            continue
-        sigmas.append(math.sqrt(max(float(np.linalg.eigvalsh(covariance[:3, :3]).max()), 0.0)))
-    return float(math.sqrt(2.0) * np.median(sigmas)) if sigmas else None
+    """motion_claim.rotation_noise of a metric reconstruction (its points, each view's K)."""
+    Ks = [None if R is None else K_of(metric, v) for v, R in enumerate(metric.rotations)]
+    return motion_claim.rotation_noise(Ks, metric.rotations, metric.translations, metric.points, obs_view, obs_track,
+                                       pixels, keep)
 
 
 def _linear(P: np.ndarray, X: np.ndarray, image_size):
@@ -241,7 +195,7 @@ def _stratified(problem: pr.Problem, options, intrinsics, callback):
         stages[0].update(certified=False, status="not_certified",
                          reason="the plane returned is not strictly inside the chirality polytope")
     if result.K_unit is None or result.p is None:
-        return None, None, stages
+        return None, None, stages, result
     K = problem.K0 @ result.K_unit
     K = K / K[2, 2]
     K[1, 0] = K[2, 0] = K[2, 1] = 0.0
@@ -254,7 +208,7 @@ def _stratified(problem: pr.Problem, options, intrinsics, callback):
         if not mrelax.in_domain(setup, pr.w_of_K(problem, K), lo, hi):
             stages[1].update(certified=False, status="not_certified",
                              reason="the DIAC returned left its domain by rounding")
-    return pr.upgrade(problem, result.p, np.linalg.solve(problem.K0, K)), K, stages
+    return pr.upgrade(problem, result.p, np.linalg.solve(problem.K0, K)), K, stages, result
 
 
 def _direct(problem: pr.Problem, P: np.ndarray, X: np.ndarray, options):

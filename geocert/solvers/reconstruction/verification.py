@@ -19,15 +19,23 @@ a result to them (docs/certificate.md, "Reconstruction"):
   its degrees of freedom, which the returned cameras' K give;
 - the summary's counts and RMS are recomputed from the items;
 - summary.calibration is about the K returned: its K the cameras', its certified_K the one the
-  autocalibration stage states, the difference, the range edges and ``determined`` recomputed,
-  the summary's autocalibration_certified and autocalibration_determined its own, and each of
-  its warnings (and views not registered) said.
+  calibration certificate beside it proves (a valid stratified autocalibration certificate of
+  the projective reconstruction the pipeline upgraded), the difference, the range edges (the
+  ranges that certificate searched) and ``determined`` recomputed, the critical motion judged
+  again from the cameras and certified points returned (motion_claim), the summary's
+  autocalibration_certified and autocalibration_determined its own, and each of its warnings
+  (and views not registered) said;
+- the summary's counts of what the pipeline was given and set aside agree with the stages and
+  items that record them (the input is not in this document), and its camera claim is the
+  words camera_claim gives for the result's norm and camera_rel_gap;
+- every registered camera's figures (cost, points, degrees of freedom, tolerance, status) are
+  recomputed, whatever it claims; the cameras are resected on the certified points only.
 
 A camera no bound could certify is not searched (structure.resect_cameras) and claims no bound.
 (A result without ``searched`` on its cameras, from before it was stated, is read as every
-registered camera searched.) The metric upgrade's own certification (the autocalibration stage's
-``certified``, the summary's ``autocalibration_certified``) is the pipeline's statement: this
-document carries no proof of it, and the report's scope says so.
+registered camera searched.) The calibration certificate ties the certified K to the cameras
+returned through K alone: it proves K optimal for the projective reconstruction in its data,
+which the pipeline made from the same tracks; the report's scope says so.
 """
 
 from __future__ import annotations
@@ -40,7 +48,7 @@ import numpy as np
 from geocert.solvers.core.geometry import is_number, norm_cost
 from geocert.solvers.core.strict import Invalid, number, numbers
 from geocert.solvers.fractional.items import TrackItems
-from geocert.solvers.reconstruction import calibration_claim, camera_claim
+from geocert.solvers.reconstruction import calibration_claim, camera_claim, motion_claim
 
 ROUNDING = 1e-9  # relative: what JSON round trips and a recomputed cost may differ by
 CAMERA_FIELDS = ("K", "R", "t", "center", "P")
@@ -52,17 +60,11 @@ def _views_of(cameras: list[dict]) -> list[dict]:
 
 
 def camera_maps(points: list[dict], views: list[int]) -> list[dict]:
-    """Each view's resection data from the returned points: every observation of a finite point
-    in that view, as (source point, target pixel)."""
-    maps = {view: {"source": [], "target": []} for view in views}
-    for point in points:
-        if point.get("point") is None or point.get("at_infinity"):
-            continue
-        for view, u, v in point.get("observations") or []:
-            if int(view) in maps:
-                maps[int(view)]["source"].append(list(point["point"]))
-                maps[int(view)]["target"].append([u, v])
-    return [maps[view] for view in views]
+    """Each view's resection data from the returned points (camera_claim.sources: every
+    observation in that view of a certified finite point), as (source point, target pixel)."""
+    found = camera_claim.sources([(p.get("point"), p.get("at_infinity"), p.get("certified"), p.get("observations"))
+                                  for p in points if isinstance(p, dict)], views)
+    return [{"source": source, "target": target} for source, target in found]
 
 
 def _close(value: Any, expected: float, scale: float = 1.0) -> bool:
@@ -141,14 +143,13 @@ def _check_summary(result: dict, registered: list[dict]) -> None:
             proj = by_view[int(view)] @ X
             squared += (proj[0] / proj[2] - u) ** 2 + (proj[1] / proj[2] - v) ** 2
             count += 1
-    bounded = [c for c in cameras if c.get("status") not in ("not_run", "cancelled")]
     certified_points = sum(1 for p in points if p.get("certified") is True)
     certified_cameras = sum(1 for c in cameras if c.get("certified") is True)
     expected = {"views": len(cameras), "views_registered": len(registered), "points": len(points),
                 "observations": count, "points_certified": certified_points,
                 "points_certified_fraction": certified_points / len(points) if points else None,
                 "cameras_certified": certified_cameras,
-                "cameras_certified_fraction": certified_cameras / len(bounded) if bounded else None}
+                "cameras_certified_fraction": certified_cameras / len(registered) if registered else None}
     for name, value in expected.items():
         given = summary.get(name)
         if not (given == value or (value is not None and _close(given, value))):
@@ -168,12 +169,51 @@ def _check_summary(result: dict, registered: list[dict]) -> None:
                 raise Invalid("returned", f"stages/{stage['name']}/{name} is {stage[name]!r}, the items give {value!r}")
 
 
+def _check_pipeline_counts(result: dict, rel_gap: float) -> None:
+    """The summary's counts of what the pipeline was given and set aside (tracks, points_dropped,
+    cameras_dropped, observations_removed) and its camera claim: each agrees with the stage that
+    records it and with the items (the points' track numbers, the cameras dropped with their
+    reason, the warnings). The input itself is not in this document: a count of it is checked for
+    agreement, not against the input (the scope says so). The camera claim is the words
+    camera_claim.statement gives for the result's norm and camera_rel_gap."""
+    summary, points, cameras = result["summary"], result["points"], result["cameras"]
+    stages = {stage.get("name"): stage for stage in result.get("stages") or [] if isinstance(stage, dict)}
+    structure = stages.get("structure", {})
+    for name in ("tracks", "points_dropped", "observations_removed"):
+        given = summary.get(name)
+        if not (isinstance(given, int) and not isinstance(given, bool) and given >= 0):
+            raise Invalid("returned", f"summary/{name} must be a count, got {given!r}")
+        if name in structure and structure[name] != given:
+            raise Invalid("returned", f"summary/{name} is {given!r}, the structure stage's {structure[name]!r}")
+    numbers_ = [point.get("track") for point in points]
+    if not all(isinstance(t, int) and not isinstance(t, bool) and 0 <= t < summary["tracks"] for t in numbers_) \
+            or len(set(numbers_)) != len(numbers_) or summary["tracks"] < len(points) + summary["points_dropped"]:
+        raise Invalid("returned", f"summary/tracks {summary['tracks']!r}: the points' track numbers must be distinct, "
+                                  "below it, and it must count the points returned and dropped")
+    if bool(summary["points_dropped"]) != _warned(summary, "points_dropped") or (
+            summary["points_dropped"] and not any(str(w.get("detail", "")).startswith(f"{summary['points_dropped']} ")
+                                                  for w in summary["warnings"] if w.get("code") == "points_dropped")):
+        raise Invalid("returned", f"summary/points_dropped {summary['points_dropped']!r}: its warning must say it")
+    dropped = sum(1 for c in cameras if c.get("registered") is False and str(c.get("reason") or "").startswith("dropped"))
+    warned = sum(1 for w in summary.get("warnings") or [] if isinstance(w, dict) and w.get("code") == "camera_dropped")
+    if not summary.get("cameras_dropped") == dropped == warned:
+        raise Invalid("returned", f"summary/cameras_dropped is {summary.get('cameras_dropped')!r}: {dropped} views are "
+                                  f"dropped by their reason, {warned} by the warnings")
+    judged = any(c.get("degrees_of_freedom") is not None or c.get("searched") is True for c in cameras)
+    claim = camera_claim.statement(result.get("norm"), rel_gap)
+    for where, given in (("summary/camera_claim", summary.get("camera_claim")),
+                         ("stages/cameras/claim", stages.get("cameras", {}).get("claim"))):
+        if not (given == claim or (given is None and not judged)):
+            raise Invalid("returned", f"{where} is {given!r:.80}, not what the result's norm and camera_rel_gap say "
+                                      f"a certified camera is: {claim!r}")
+
+
 def _warned(summary: dict, code: str) -> bool:
     warnings = summary.get("warnings")
     return isinstance(warnings, list) and any(isinstance(w, dict) and w.get("code") == code for w in warnings)
 
 
-def _check_calibration(result: dict, registered: list[dict]) -> None:
+def _check_calibration(result: dict, registered: list[dict], verify: Callable[[dict], object]) -> None:
     """summary.calibration is about the K the cameras return (claims.CalibrationClaim): its K is
     every registered camera's (model "shared") or one focal length among theirs with their
     principal point and skew ("varying"); certified_K is stated exactly when certified, and is
@@ -191,7 +231,10 @@ def _check_calibration(result: dict, registered: list[dict]) -> None:
         raise Invalid("returned", f"summary: {missing} views not registered, and no views_not_registered warning "
                                   "says so")
     claim = summary.get("calibration")
-    if claim is None:
+    if claim is None:  # a result from before it was stated: then nothing is claimed about K
+        if summary.get("autocalibration_certified") or summary.get("autocalibration_determined"):
+            raise Invalid("returned", "summary: autocalibration_certified or autocalibration_determined is claimed "
+                                      "with no summary/calibration to say which K it is about")
         return
     if not isinstance(claim, dict):
         raise Invalid("returned", "summary/calibration must be an object")
@@ -218,10 +261,13 @@ def _check_calibration(result: dict, registered: list[dict]) -> None:
     cert = None if cert is None else numbers(cert, f"{where}/certified_K", (3, 3), "returned")
     stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "autocalibration"),
                  {})
-    if cert is not None and not (stage.get("certified") is True and stage.get("K") is not None
-                                 and calibration_claim.same(numbers(stage["K"], "stages/autocalibration/K", (3, 3),
-                                                                    "returned"), cert)):
-        raise Invalid("returned", f"{where}/certified_K is not the K the autocalibration stage certified")
+    ranges = {} if cert is None else _proven_calibration(result, cert, verify)
+    if cert is not None and stage.get("K") is not None and not calibration_claim.same(
+            numbers(stage["K"], "stages/autocalibration/K", (3, 3), "returned"), cert):
+        raise Invalid("returned", "stages/autocalibration/K is not the certified K")
+    if cert is not None and stage.get("intrinsics") is not None and stage["intrinsics"] != _plain(ranges):
+        raise Invalid("returned", "stages/autocalibration/intrinsics are not the ranges the calibration certificate "
+                                  "searched")
     returned = bool(cert is not None and model == "shared" and calibration_claim.same(K, cert))
     if claim.get("returned_is_certified") is not returned:
         raise Invalid("returned", f"{where}/returned_is_certified is {claim.get('returned_is_certified')!r}: the "
@@ -234,12 +280,11 @@ def _check_calibration(result: dict, registered: list[dict]) -> None:
     if (expected is None) != (given is None) or (expected is not None and not (
             isinstance(given, dict) and all(_close(given.get(name), value, 1.0) for name, value in expected.items()))):
         raise Invalid("returned", f"{where}/difference is {given!r}, the returned and certified K give {expected!r}")
-    ranges = stage.get("intrinsics") if isinstance(stage.get("intrinsics"), dict) else {}
     edges = [] if cert is None else calibration_claim.on_range_edge(cert, ranges)
     if claim.get("on_range_edge") != edges:
         raise Invalid("returned", f"{where}/on_range_edge is {claim.get('on_range_edge')!r}, the certified K and "
                                   f"the autocalibration's ranges give {edges!r}")
-    critical = summary.get("critical_motion") or stage.get("critical_motion")
+    critical = _judged_motion(result, registered, summary, stage)
     determined = claim.get("determined")
     if determined is True and (not certified or edges or critical):
         raise Invalid("returned", f"{where}/determined is true, but K is "
@@ -253,6 +298,70 @@ def _check_calibration(result: dict, registered: list[dict]) -> None:
                       ("critical_motion", critical)):
         if due and not _warned(summary, code):
             raise Invalid("returned", f"summary: no {code} warning, though the calibration calls for it")
+
+
+def _plain(value: Any) -> Any:
+    """``value`` as JSON states it (tuples as lists)."""
+    if isinstance(value, dict):
+        return {key: _plain(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(item) for item in value]
+    return float(value) if isinstance(value, (np.floating, np.integer)) else value
+
+
+def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict], object]) -> dict:
+    """The certified K is the one the calibration certificate proves: a valid autocalibration
+    certificate (stratified: both stages certified) whose metric stage states that K. Returns the
+    intrinsics ranges it was proven over (its options', completed from its image size), against
+    which the certified K's range edges are judged. The certificate's data is the projective
+    reconstruction the pipeline upgraded: it proves K optimal for that reconstruction, and is tied
+    to the cameras returned by K alone (the scope says so)."""
+    from geocert.solvers.autocalibration import problem as pr
+
+    document = result.get("calibration_certificate")
+    if not isinstance(document, dict) or document.get("kind") != "autocalibration":
+        raise Invalid("returned", "summary/calibration/certified_K is claimed without a calibration certificate (an "
+                                  "autocalibration certificate proving it)")
+    report = verify(document)
+    if not getattr(report, "valid", False):
+        raise Invalid("returned", f"the calibration certificate is invalid: {getattr(report, 'first_failure', None)}")
+    claims = document.get("items")
+    if not (isinstance(claims, list) and len(claims) == 2 and all(isinstance(c, dict) and c.get("certified") is True
+                                                                  for c in claims)):
+        raise Invalid("returned", "the calibration certificate must certify both stratified stages")
+    proven = numbers(claims[1].get("K"), "calibration_certificate/items/1/K", (3, 3), "returned")
+    if not calibration_claim.same(proven, cert):
+        raise Invalid("returned", "summary/calibration/certified_K is not the K the calibration certificate proves")
+    options, data = document.get("options") or {}, document.get("data") or {}
+    size = data.get("image_size")
+    return pr.resolve_ranges(dict(options.get("intrinsics") or {}), None if size is None else tuple(size))
+
+
+def _judged_motion(result: dict, registered: list[dict], summary: dict, stage: dict) -> str | None:
+    """The critical motion, recomputed (motion_claim.judge) from the registered cameras' K, R, t
+    and the certified points with their observations, as the pipeline judged it; the summary's
+    critical_motion, and the autocalibration stage's when it states one, must be it. Fewer than
+    3 cameras: not judged (None)."""
+    if len(registered) < 3:
+        return None
+    by_view = {int(camera["view"]): camera for camera in registered}
+    n = len(result["cameras"])
+    cameras = [by_view.get(view) for view in range(n)]
+    placed = [p for p in result["points"] if p.get("certified") is True and p.get("point") is not None
+              and not p.get("at_infinity")]
+    observations = [(int(o[0]), k, o[1], o[2]) for k, p in enumerate(placed) for o in p["observations"]]
+    judged = motion_claim.judge(
+        [None if c is None else np.asarray(c["K"], dtype=float) for c in cameras],
+        [None if c is None else np.asarray(c["R"], dtype=float) for c in cameras],
+        [None if c is None else np.asarray(c["t"], dtype=float) for c in cameras],
+        np.array([p["point"] for p in placed], dtype=float).reshape(-1, 3),
+        np.array([o[0] for o in observations], dtype=int), np.array([o[1] for o in observations], dtype=int),
+        np.array([o[2:] for o in observations], dtype=float).reshape(-1, 2))
+    critical = judged["critical_motion"]
+    if summary.get("critical_motion") != critical or stage.get("critical_motion", critical) != critical:
+        raise Invalid("returned", f"summary/critical_motion is {summary.get('critical_motion')!r}, the returned "
+                                  f"cameras' motion gives {critical!r} (motion_claim)")
+    return critical
 
 
 def _check_camera_certificate(result: dict, certificate: dict, searched: list[dict], certified: list[int],
@@ -291,60 +400,93 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
             raise Invalid("returned", f"cameras/{camera.get('view')}: the camera certificate's map is not the "
                                       "returned points")
     norm = result.get("norm")
-    dof = camera_claim.degrees_of_freedom([camera["K"] for camera in _views_of(result["cameras"])])
     for k, camera in enumerate(searched):
         claim, where = claims[k], f"cameras/{camera.get('view')}"
         proven = discounted.get(k, claim.get("lower_bound"))
-        source = np.asarray(maps[k]["source"], dtype=float).reshape(-1, 3)
-        target = np.asarray(maps[k]["target"], dtype=float).reshape(-1, 2)
-        lower = camera.get("lower_bound")
-        if lower is not None and claim.get("certified") is True and not (is_number(lower) and lower <= proven):
-            raise Invalid("returned", f"{where}: lower bound {lower!r} above the proven {proven!r}")
-        if camera.get("points") is not None and camera["points"] != len(source):
-            raise Invalid("returned", f"{where}: points {camera['points']!r}, its map has {len(source)}")
+        lower, cost = camera.get("lower_bound"), camera.get("cost")
+        if not _close(camera.get("optimal_cost"), claim.get("cost")) and not (
+                camera.get("optimal_cost") is None and claim.get("cost") is None):
+            raise Invalid("returned", f"{where}: optimal_cost {camera.get('optimal_cost')!r} is not its resection's "
+                                      f"{claim.get('cost')!r}")
+        if claim.get("certified") is not True:  # no bound is proven: none may be stated
+            if lower is not None or camera.get("gap") is not None or camera.get("certified") is not False:
+                raise Invalid("returned", f"{where}: its resection is not certified, so it states no lower bound or "
+                                          "gap and is not certified")
+            continue
+        if lower is not None and not (is_number(lower) and lower <= proven and is_number(cost)
+                                      and lower <= cost * (1 + ROUNDING)):
+            raise Invalid("returned", f"{where}: lower bound {lower!r} above the proven {proven!r} or its cost "
+                                      f"{cost!r}")
+        if lower is not None and not _close(camera.get("gap"), cost - lower, abs(cost)):
+            raise Invalid("returned", f"{where}: gap {camera.get('gap')!r} is not its cost less its lower bound")
         if k not in certified:
             continue
-        if claim.get("certified") is not True:
-            raise Invalid("returned", f"{where}: called certified, but its resection is not")
+        source = np.asarray(maps[k]["source"], dtype=float).reshape(-1, 3)
         P = np.asarray(camera["P"], dtype=float)
         projected = np.hstack([source, np.ones((len(source), 1))]) @ P.T
         if not np.all(projected[:, 2] > 0):
             raise Invalid("returned", f"{where}: a point is behind the camera returned, outside the bound's scope")
-        cost = norm_cost(target - projected[:, :2] / projected[:, 2:3], norm)
-        claimed_cost = camera.get("cost")
-        if not math.isfinite(cost) or not _close(claimed_cost, cost):
-            raise Invalid("returned", f"{where}: cost {claimed_cost!r}, but the returned camera costs {cost!r}")
-        if not (is_number(lower) and lower <= cost * (1 + ROUNDING)):
-            raise Invalid("returned", f"{where}: lower bound {lower!r} is not a number at most its cost {cost!r}")
-        if not (_close(camera.get("gap"), claimed_cost - lower, abs(claimed_cost))
-                and _close(camera.get("optimal_cost"), claim.get("cost"))):
-            raise Invalid("returned", f"{where}: gap or optimal_cost is not what its cost and its proof give")
-        if camera.get("status") != "optimal":
-            raise Invalid("returned", f"{where}: a certified camera's status is optimal")
-        tolerance = _camera_tolerance(camera, dof, len(source), norm, float(options["rel_gap"]), where)
+        if lower is None:
+            raise Invalid("returned", f"{where}: called certified with no lower bound")
+        # its degrees of freedom were checked (_check_camera_figures); none stated: a 3x4 camera's
+        dof = camera.get("degrees_of_freedom") or camera_claim.PROJECTIVE_DOF
+        tolerance = camera_claim.tolerance(len(source), dof, norm, float(options["rel_gap"]))
+        if tolerance is None:
+            raise Invalid("returned", f"{where}: {len(source)} points and camera_rel_gap {options['rel_gap']!r} allow "
+                                      "no tolerance")
         allowed = (1.0 + tolerance) * proven + float(options["abs_gap"])
         if not cost <= allowed * (1 + ROUNDING) + ROUNDING * max(1.0, abs(cost)):
             raise Invalid("returned", f"{where}: costs {cost:.6g}, beyond (1 + tolerance {tolerance:.3g}) times the "
                                       f"proven bound {proven:.6g} plus abs_gap")
 
 
-def _camera_tolerance(camera: dict, dof: int, points: int, norm: str, rel_gap: float, where: str) -> float:
-    """A certified camera's tolerance (camera_claim.tolerance), recomputed from its points, the
-    norm, camera_rel_gap and its degrees of freedom, which the returned cameras' K give
-    (camera_claim.degrees_of_freedom); the camera's stated figures must be these. A camera that
-    states none (a result from before they were stated) is held to a 3x4 camera's: no allowance."""
-    stated = camera.get("degrees_of_freedom")
-    if stated is None and camera.get("tolerance") is None:
-        dof = camera_claim.PROJECTIVE_DOF
-    elif stated != dof:
-        raise Invalid("returned", f"{where}: degrees_of_freedom {stated!r}, the returned cameras' K give {dof}")
-    tolerance = camera_claim.tolerance(points, dof, norm, rel_gap)
-    if tolerance is None:
-        raise Invalid("returned", f"{where}: {points} points and camera_rel_gap {rel_gap!r} allow no tolerance")
-    if "tolerance" in camera and not _close(camera["tolerance"], tolerance):
-        raise Invalid("returned", f"{where}: tolerance {camera['tolerance']!r}, its points and degrees of freedom "
-                                  f"give {tolerance!r}")
-    return tolerance
+def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) -> None:
+    """Every registered camera's own figures, whatever it claims: its points (its map from the
+    certified points), its cost recomputed from its P, its degrees of freedom (the returned
+    cameras' K give them) and tolerance (camera_claim), its status (``optimal`` exactly when
+    certified), and no bound unless searched. A camera the cameras stage did not judge
+    (``not_run``) states no figures."""
+    norm = result.get("norm")
+    views = [int(camera["view"]) for camera in registered]
+    dof = camera_claim.degrees_of_freedom([camera["K"] for camera in registered])
+    for camera, entry in zip(registered, camera_maps(result.get("points") or [], views)):
+        where = f"cameras/{camera['view']}"
+        certified, status = camera.get("certified"), camera.get("status")
+        if certified not in (True, False) or (status == "optimal") != (certified is True):
+            raise Invalid("returned", f"{where}: status {status!r} with certified {certified!r} (optimal exactly "
+                                      "when certified)")
+        if camera.get("searched", True) is not True and any(
+                camera.get(name) is not None for name in ("lower_bound", "gap", "optimal_cost")):
+            raise Invalid("returned", f"{where}: a camera not searched states no bound")
+        if status == "not_run":
+            if any(camera.get(name) is not None for name in ("cost", "lower_bound", "gap", "optimal_cost",
+                                                              "degrees_of_freedom", "tolerance")) \
+                    or camera.get("searched", False) is not False or camera.get("points") not in (0, None):
+                raise Invalid("returned", f"{where}: a camera not judged (not_run) states no figures")
+            continue
+        source = np.asarray(entry["source"], dtype=float).reshape(-1, 3)
+        target = np.asarray(entry["target"], dtype=float).reshape(-1, 2)
+        if camera.get("points") is not None and camera["points"] != len(source):
+            raise Invalid("returned", f"{where}: points {camera['points']!r}, its certified points number "
+                                      f"{len(source)}")
+        if camera.get("cost") is not None or camera.get("certified") is True:
+            P = np.asarray(camera["P"], dtype=float)
+            projected = np.hstack([source, np.ones((len(source), 1))]) @ P.T
+            with np.errstate(divide="ignore", invalid="ignore"):
+                cost = norm_cost(target - projected[:, :2] / projected[:, 2:3], norm) if len(source) else 0.0
+            if not (math.isfinite(cost) and _close(camera.get("cost"), cost)):
+                raise Invalid("returned", f"{where}: cost {camera.get('cost')!r}, but the returned camera costs "
+                                          f"{cost!r} on its certified points")
+        stated = camera.get("degrees_of_freedom")
+        if stated is None and camera.get("tolerance") is None:
+            continue  # a result from before they were stated: held to a 3x4 camera's (no allowance)
+        if stated != dof:
+            raise Invalid("returned", f"{where}: degrees_of_freedom {stated!r}, the returned cameras' K give {dof}")
+        tolerance = camera_claim.tolerance(len(source), dof, norm, rel_gap)
+        given = camera.get("tolerance")
+        if not (given is None and tolerance is None) and not (tolerance is not None and _close(given, tolerance)):
+            raise Invalid("returned", f"{where}: tolerance {given!r}, its points and degrees of freedom give "
+                                      f"{tolerance!r}")
 
 
 class ReconstructionItems(TrackItems):
@@ -361,9 +503,12 @@ class ReconstructionItems(TrackItems):
         scope; the camera certificate hashes it as its rel_gap)."""
         from geocert.solvers.verify import residual_options
 
-        checked = residual_options("reconstruction", options)
+        checked = residual_options("reconstruction", options)  # its ranges cap rel_gap and abs_gap
         if options.get("camera_rel_gap") is not None:
             checked["camera_rel_gap"] = number(options["camera_rel_gap"], "options/camera_rel_gap", "options")
+            if not 0 <= checked["camera_rel_gap"] <= camera_claim.MAX_REL_GAP:
+                raise Invalid("options", f"options/camera_rel_gap {checked['camera_rel_gap']!r} is beyond "
+                                         f"{camera_claim.MAX_REL_GAP}: a camera would be certified whatever it costs")
         return checked
 
     def scope_statement(self, options: dict) -> dict:
@@ -379,9 +524,14 @@ class ReconstructionItems(TrackItems):
               "costs less than its lower_bound, and the camera returned costs cost, at most (1 + tolerance) lower_bound "
               "+ abs_gap, its tolerance the allowance for its fewer degrees of freedom than a 3x4 camera's (what they "
               "cost at the 99.9% level under Gaussian noise: a statistical allowance, not a bound) and camera_rel_gap; "
-              "summary.calibration is checked to be about the K returned; the metric upgrade's certification "
-              "(autocalibration_certified, calibration.certified_K) is the pipeline's statement: no proof of it is "
-              "carried here")
+              "the summary's counts of what the pipeline was given and set aside (tracks, points_dropped, "
+              "cameras_dropped, observations_removed) are checked against the stages and items that record them, not "
+              "against the input, which this document does not hold; "
+              "summary.calibration is checked to be about the K returned; a certified K (calibration.certified_K) "
+              "is the one the calibration certificate beside it proves optimal for the projective reconstruction in "
+              "that certificate's data (the pipeline's, from the same tracks: it is tied to the cameras returned "
+              "through K alone); the critical motion behind `determined` is judged again from the cameras and "
+              "certified points returned")
         return statement
 
     def check_result(self, result: dict, certificate: dict, verify: Callable[[dict], object]) -> None:
@@ -397,9 +547,14 @@ class ReconstructionItems(TrackItems):
         else:  # a result from before ``searched`` was stated: every registered camera has a map
             searched = registered
         certified = [k for k, camera in enumerate(searched) if camera.get("certified") is True]
+        own = certificate["options"]
+        rel_gap = float(own.get("camera_rel_gap", own.get("rel_gap")))  # as the pipeline passed it
+        _check_camera_figures(result, registered, rel_gap)
         _check_camera_certificate(result, certificate, searched, certified, verify)
         _check_summary(result, registered)
-        _check_calibration(result, registered)
+        if "camera_claim" in result["summary"]:  # a result from before the counts were stated has none
+            _check_pipeline_counts(result, rel_gap)
+        _check_calibration(result, registered, verify)
 
 
 RECONSTRUCTION = ReconstructionItems()
