@@ -108,6 +108,28 @@ def test_the_proven_intervals_hold_the_truth_on_most_tracks():
     assert np.mean(held) >= 0.93
 
 
+def test_the_terms_moved_to_a_level_are_the_ones_computed_at_it():
+    """The convexity path reuses its terms at the sublevel's level (at_level): the radii are those
+    of the terms computed afresh at it, bit for bit, so the verifier's recomputation agrees."""
+    from geocert.solvers.core.geometry import normalised_cameras
+    from geocert.solvers.fractional.convexity import at_level, convexity_terms, sublevel_radii
+    from geocert.solvers.fractional.flat import FlatTracks, linear, refine
+
+    rng = np.random.default_rng(seed("proven", "at level"))
+    cams, tracks, _ = scene(rng, 200, (2, 10), 1.0)
+    flat = FlatTracks.build(normalised_cameras(cams), tracks)
+    x, _ = refine(flat, linear(flat)[0])
+    with np.errstate(all="ignore"):
+        terms = convexity_terms(flat, x)
+        increase = np.where(np.arange(len(tracks)) % 5 == 0, np.nan, 9 * terms.c * rng.uniform(0.1, 3, len(tracks)))
+        moved, fresh = at_level(flat, terms, increase), convexity_terms(flat, x, increase)
+        for name in ("rho", "e", "usable"):
+            assert np.array_equal(getattr(moved, name), getattr(fresh, name), equal_nan=name != "usable")
+        reused = sublevel_radii(flat, x, increase, strictness=2.0, terms=terms)
+    assert np.array_equal(reused, sublevel_radii(flat, x, increase, strictness=2.0), equal_nan=True)
+    assert np.isfinite(reused).sum() >= 100
+
+
 @pytest.fixture(scope="module")
 def convexity() -> dict:
     """A full result of a track certified by its convexity, with a proven interval."""

@@ -53,6 +53,8 @@ overflow makes a number infinite, which no test passes.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from geocert.solvers.core.strict import Invalid, number, numbers, record
@@ -164,7 +166,8 @@ def convexity_terms(flat: FlatTracks, x: np.ndarray, increase: np.ndarray | None
             cost_hi = flat.per_track(each * (1 + 4 * U)) * (1 + (n + 4) * U)
             t.rho = (cost_hi + increase) * (1 + 4 * U)
         t.g_up = (np.sqrt((sums[5:] ** 2).sum(axis=0)) + g_err + 8 * U * n * g_size) * (1 + 4 * U)
-        t.e = (t.rho[owner] + (r_len + err_len) * (1 + 4 * U)) * (1 + 1e-12)
+        t.c_hi, t.r_up = c_hi, (r_len + err_len) * (1 + 4 * U)  # at_level reads them
+        t.e = (t.rho[owner] + t.r_up) * (1 + 1e-12)
         t.w_lo, t.w_hi = w - err_w, w + err_w
         t.reach = np.minimum.reduceat(np.where(t.w_lo > 0, t.w_lo / d_up, 0.0), flat.starts[:-1])
         # Numbers outside the moderate range (subnormal, huge, nan) are left unproven.
@@ -245,14 +248,29 @@ def track_bound(cameras: np.ndarray, points: np.ndarray, point: np.ndarray, radi
     return float(lower[0])
 
 
+def at_level(flat: FlatTracks, t: Terms, increase: np.ndarray) -> Terms:
+    """L2L2 terms ``t`` (convexity_terms with no increase) moved to the level f(x) + ``increase``
+    (T,): the numbers convexity_terms(flat, x, increase) computes, without its passes over the
+    observations again (only rho, e and usable differ)."""
+    level = copy.copy(t)
+    level.rho = np.sqrt((t.c_hi + increase) * (1 + 4 * U)) * (1 + 4 * U)
+    level.e = (level.rho[flat.owner] + t.r_up) * (1 + 1e-12)
+    level.usable = t.usable & in_range(increase) & (increase >= 0)
+    return level
+
+
 def sublevel_radii(flat: FlatTracks, x: np.ndarray, increase: np.ndarray, strictness: float = 1.0,
-                   steps: int = 30, norm: str = "L2L2") -> np.ndarray:
+                   steps: int = 30, norm: str = "L2L2", terms: Terms | None = None) -> np.ndarray:
     """For every track t: a radius R' at which (E) at the level f(x[t]) + increase[t] holds,
     so that every point of the scope costing at most that lies within R' of x[t], nan where
     none up to 2^128 is found. R' is within a factor 1 / (1 - R0 q) (plus 1e-6) of the
     smallest (R0 below, q the largest |d_i| / w_i), or found by doubling and bisection (to a
-    relative 2^-steps) where that first guess does not pass."""
-    terms = convexity_terms(flat, x, np.asarray(increase, dtype=float), norm)
+    relative 2^-steps) where that first guess does not pass. ``terms``: L2L2's
+    convexity_terms(flat, x), when the caller has them."""
+    increase = np.asarray(increase, dtype=float)
+    with np.errstate(all="ignore"):
+        terms = at_level(flat, terms, increase) if terms is not None and norm == "L2L2" else \
+            convexity_terms(flat, x, increase, norm)
     n_tracks = len(x)
     usable = terms.usable
     with np.errstate(all="ignore"):

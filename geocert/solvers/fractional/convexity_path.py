@@ -63,7 +63,7 @@ def certify_tracks(cameras: np.ndarray, tracks: list, options: TriangulationOpti
                          tolerance=tolerance[rows], radius=radius[rows], residuals=r.T[observations],
                          starts=starts, proof=options.certificate == "full")
     if options.certificate == "full" or options.detail == "full":  # proven intervals, as columns
-        increase, reach = _sublevels(flat, x, cost, claimed, certified)
+        increase, reach = _sublevels(flat, x, cost, claimed, certified, terms)
         reach = reach[rows]
         local.sublevel_increase, local.sublevel_radius = increase[rows], reach
         local.sublevel_bounds = ball_bounds(x[rows], np.where(np.isfinite(reach), reach, 0.0))
@@ -77,12 +77,12 @@ def cost_increase(cost, lower, views):
     return np.maximum(SIGMAS ** 2 * np.asarray(cost) / redundancy, np.maximum(np.asarray(cost) - lower, 0.0))
 
 
-def _sublevels(flat, x: np.ndarray, cost: np.ndarray, claimed: np.ndarray, certified: np.ndarray):
+def _sublevels(flat, x: np.ndarray, cost: np.ndarray, claimed: np.ndarray, certified: np.ndarray, terms):
     """(increase, radius) of every track: the cost increase and the proven ball's radius (nan
-    where none, or not certified)."""
+    where none, or not certified). ``terms``: convexity_terms(flat, x), reused at the level."""
     increase = cost_increase(cost, claimed, flat.sizes)
     # Solver's strictness: the checker's sums, differing in their last bits, pass at its radius.
-    reach = sublevel_radii(flat, x, np.where(certified, increase, np.nan), strictness=STRICTNESS)
+    reach = sublevel_radii(flat, x, np.where(certified, increase, np.nan), strictness=STRICTNESS, terms=terms)
     return increase, reach
 
 
