@@ -98,13 +98,31 @@ class DeterminacyWarning(BaseModel):
     detail: str
 
 
+class ProvenInterval(BaseModel):
+    name: str
+    lower: float
+    upper: float
+
+
+class ProvenIntervals(BaseModel):
+    """Intervals a certificate proves (its verifier checks them): every solution of the scope
+    costing at most cost_increase more than the optimum lies in them."""
+
+    cost_increase: float
+    level: str
+    intervals: list[ProvenInterval]
+
+
 class Determinacy(BaseModel):
     """How well the data fix the answer (a certificate proves the optimum, not that it is unique):
     intervals of what a user reads off it over the answers costing at most cost_increase more,
     and the degeneracies recognised (README, "Determinacy")."""
 
     method: Literal["curvature"]
-    proven: bool = Field(description="false: estimated from the local curvature, not proved")
+    proven: bool = Field(description="true: proven_intervals holds intervals the certificate proves; the "
+                                     "intervals beside them are estimated from the local curvature either way")
+    proven_intervals: ProvenIntervals | None = Field(None, description="intervals proven within cost_increase of "
+                                                                       "the optimum (null: none proven)")
     determined: bool = Field(description="every interval bounded, within its tolerance of the value on both sides, "
                                          "and no warning")
     level: str

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from itertools import chain
+from itertools import chain, repeat
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -78,11 +78,14 @@ def track_documents(results: TrackResults, detail: str, full_certificate: bool) 
     if local is not None and len(local.index):
         proof = local.proof and (full_certificate or detail != "brief")
         columns = zip(local.index.tolist(), local.point.tolist(), local.cost.tolist(), local.lower_bound.tolist(),
-                      local.gap.tolist(), local.tolerance.tolist(), local.radius.tolist())
-        for i, point, cost, lower, gap, tolerance, radius in columns:
+                      local.gap.tolist(), local.tolerance.tolist(), local.radius.tolist(),
+                      local.sublevels() if proof else repeat(None))
+        for i, point, cost, lower, gap, tolerance, radius, sublevel in columns:
             if not rows[i]:
                 continue  # replaced by an object, made below
             extra = {"proof": {"type": "convexity", "radius": radius}} if proof else {}
+            if sublevel is not None:
+                extra["proof"]["sublevel"] = sublevel
             certificate = (extra or None) if detail == "brief" else \
                 local_summary(SCOPE, tolerance, radius, True, extra)
             documents[i] = {"point": point, "at_infinity": False, "cost": cost, "lower_bound": lower, "gap": gap,
@@ -221,7 +224,8 @@ class TriangulationKind:
         document = track_document(result, options.detail, options.certificate == "full")
         if options.detail == "full":  # brief: not computed
             document["determinacy"] = safely(determinacy.track, parsed.cameras[views], points, result.point,
-                                             result.at_infinity, result.cost, result.lower_bound)
+                                             result.at_infinity, result.cost, result.lower_bound,
+                                             getattr(result.certificate, "sublevel", None))
         return document
 
     def solve_batch(self, parsed: ParsedTracks, indices: list[int], options: TriangulationOptions, callback) -> list[dict]:

@@ -44,15 +44,28 @@ class Determinacy:
     redundancy: int = 0  # n - p: residuals beyond the parameters
     method: str = "curvature"
     proven: bool = False
+    # What a certificate proves beside the estimate (proven_document): None when nothing is.
+    proven_intervals: dict | None = None
 
     def document(self) -> dict:
         determined = all(fixes(i) for i in self.intervals)
-        return {"method": self.method, "proven": self.proven, "determined": determined and not self.warnings,
+        return {"method": self.method, "proven": self.proven or self.proven_intervals is not None,
+                "proven_intervals": self.proven_intervals, "determined": determined and not self.warnings,
                 "level": (f"parameters whose squared residuals exceed the optimum's by at most cost_increase "
                           f"(max of {SIGMAS:g}^2 times the fit's residual variance and the certified gap), "
                           "by the local curvature (Gauss-Newton)"),
                 "cost_increase": _finite(self.cost_increase), "redundancy": self.redundancy,
                 "intervals": self.intervals, "warnings": self.warnings}
+
+
+def proven_document(cost_increase: float, names: tuple[str, ...], bounds: list[list[float]], how: str) -> dict:
+    """Intervals a certificate proves: every solution of the scope whose cost is at most the
+    certified optimum's plus ``cost_increase`` has each quantity within its [lower, upper]."""
+    return {"cost_increase": float(cost_increase),
+            "level": ("every solution in the certificate's scope whose cost exceeds the optimum's by at most "
+                      f"cost_increase lies in these intervals; {how}"),
+            "intervals": [{"name": name, "lower": float(lo), "upper": float(hi)}
+                          for name, (lo, hi) in zip(names, bounds)]}
 
 
 def fixes(interval: dict) -> bool:

@@ -11,7 +11,7 @@ is held as the object its solver returned.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -34,19 +34,50 @@ class LocalColumns:
     starts: np.ndarray  # (k + 1,) row j's residuals at starts[j]:starts[j + 1]
     proof: bool = True  # whether each certificate carries its proof ({"type": "convexity", "radius": R})
     elapsed_s: float = 0.0  # each row's share of the batched work's time
+    # Each row's proven interval (LocalCertificate.sublevel), when they were computed: the cost
+    # increase (k,), the ball's radius (k,) (nan where none is proven) and its bounds (k, 3, 2).
+    sublevel_increase: np.ndarray | None = None
+    sublevel_radius: np.ndarray | None = None
+    sublevel_bounds: np.ndarray | None = None
+    _sublevels: list | None = field(default=None, repr=False, compare=False)  # sublevels(), once made
 
     @property
     def gap(self) -> np.ndarray:
         return self.cost - self.lower_bound
 
+    def sublevel(self, row: int) -> dict | None:
+        """Row ``row``'s proven interval, as LocalCertificate.sublevel states it (None: none)."""
+        if self.sublevel_radius is None or not np.isfinite(self.sublevel_radius[row]):
+            return None
+        return {"cost_increase": float(self.sublevel_increase[row]), "radius": float(self.sublevel_radius[row]),
+                "intervals": self.sublevel_bounds[row].tolist()}
+
+    def sublevels(self) -> list[dict | None]:
+        """Every row's sublevel, made once for all rows (one tolist a column)."""
+        if self._sublevels is None:
+            if self.sublevel_radius is None:
+                self._sublevels = [None] * len(self.index)
+            else:
+                proven = np.isfinite(self.sublevel_radius)
+                self._sublevels = [
+                    {"cost_increase": increase, "radius": radius, "intervals": bounds} if good else None
+                    for good, increase, radius, bounds in zip(proven.tolist(), self.sublevel_increase.tolist(),
+                                                              self.sublevel_radius.tolist(),
+                                                              self.sublevel_bounds.tolist())]
+        return self._sublevels
+
     def result(self, row: int) -> TrackResult:
         """Row ``row`` as the TrackResult the convexity path certifies."""
         cost, lower, radius = float(self.cost[row]), float(self.lower_bound[row]), float(self.radius[row])
+        sublevel = self.sublevel(row)
         proof = {"type": "convexity", "radius": radius} if self.proof else None
+        if proof is not None and sublevel is not None:
+            proof["sublevel"] = sublevel
         return TrackResult(status="optimal", certified=True, cost=cost, lower_bound=lower, gap=cost - lower,
                            nodes=0, elapsed_s=self.elapsed_s, point=self.point[row].tolist(),
                            residuals=self.residuals[self.starts[row]:self.starts[row + 1]].tolist(),
-                           certificate=LocalCertificate(SCOPE, float(self.tolerance[row]), radius, proof))
+                           certificate=LocalCertificate(SCOPE, float(self.tolerance[row]), radius, proof,
+                                                        sublevel=sublevel))
 
 
 class TrackResults(Sequence):
@@ -125,3 +156,22 @@ def solutions(results: Sequence) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
         if result.point is not None and not result.at_infinity:
             point[i], finite[i] = result.point, True
     return point, finite, cost, lower
+
+
+def sublevels(results: Sequence) -> list[dict | None]:
+    """Each track's proven interval (its certificate's sublevel, None where none), read without
+    making the columns' rows into objects."""
+    out: list[dict | None] = [None] * len(results)
+    if isinstance(results, TrackResults):
+        local, rows = results.local, results.in_columns()
+        if local is not None and rows.any():
+            found = local.sublevels()
+            for i, row in zip(np.flatnonzero(rows).tolist(), results._row[rows].tolist()):
+                out[i] = found[row]
+        others = results.objects.items()
+    else:
+        others = enumerate(results)
+    for i, result in others:
+        if result is not None:
+            out[i] = getattr(result.certificate, "sublevel", None)
+    return out

@@ -28,6 +28,16 @@ rho^2 = c, inside C (within the ball, where f is convex) at least its tangent pl
 smallest R of a ladder that passes (E) is taken (the gradient's term is smallest, and (V) is
 easiest, there).
 
+The same test (E) at a higher level proves where the near-optimal points lie (a proven interval
+of every solution within ``increase`` of the optimum): every point of the scope costing at most
+f(x) + increase (the optimum costs at most f(x)) has every residual at most
+rho' = sqrt(f(x) + increase), so lies in C' = {every depth > 0, every |r_i| <= rho'}, convex
+and holding x; (E) with rho' in place of rho puts C' inside the ball |X - x| < R', so each
+coordinate lies within R' of x's. No convexity of f is needed for this (only (E)), and the test
+is monotone in R' (every weight R / (w_i + R |d_i|) grows with R), so the smallest R' passing is
+found from a first guess near it, or by bisection (``sublevel_radii``). Under the L2L1 and L1L1 norms the same holds with
+rho' = f(x) + increase (each residual's length is at most the sum), whatever proved the optimum.
+
 Round-off (docs/certificate.md states the assumptions): every quantity is recomputed from the
 data and x in floating point, and each bound is widened by a generous multiple of the unit
 round-off u times the size of the terms behind it (the sums of their products' magnitudes).
@@ -43,8 +53,11 @@ overflow makes a number infinite, which no test passes.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
+from geocert.solvers.core.strict import Invalid, number, numbers, record
 from geocert.solvers.fractional.flat import PAIRS, FlatTracks
 
 U = 2.0 ** -52
@@ -100,7 +113,11 @@ class Terms:
     of the terms summed into each projected coordinate ``size`` (3, m)), which a caller reuses."""
 
 
-def convexity_terms(flat: FlatTracks, x: np.ndarray) -> Terms:
+def convexity_terms(flat: FlatTracks, x: np.ndarray, increase: np.ndarray | None = None,
+                    norm: str = "L2L2") -> Terms:
+    """The terms at the tracks' points; with ``increase`` (T,), rho (and e) at the level
+    f(x) + increase instead of f(x) (only (E) reads them then), f the ``norm``'s cost: under
+    L2L1 and L1L1 every residual's length is at most the whole cost, so rho is the level itself."""
     t = Terms()
     owner = flat.owner
     t.n = n = flat.sizes.astype(float)
@@ -141,15 +158,24 @@ def convexity_terms(flat: FlatTracks, x: np.ndarray) -> Terms:
         t.c, c_err, behind, g_err, g_size = sums[:5]
         c_err = c_err + 8 * U * n * t.c
         t.c_lo, c_hi = t.c - c_err, t.c + c_err
-        t.rho = np.sqrt(c_hi) * (1 + 4 * U)
+        if norm == "L2L2":
+            level = c_hi if increase is None else (c_hi + increase) * (1 + 4 * U)
+            t.rho = np.sqrt(level) * (1 + 4 * U)
+        else:  # the sum of the residuals' lengths (L2L1) or of their coordinates' sizes (L1L1), from above
+            each = r_len + err_len if norm == "L2L1" else np.abs(r).sum(axis=0) + err_r.sum(axis=0)
+            cost_hi = flat.per_track(each * (1 + 4 * U)) * (1 + (n + 4) * U)
+            t.rho = (cost_hi + increase) * (1 + 4 * U)
         t.g_up = (np.sqrt((sums[5:] ** 2).sum(axis=0)) + g_err + 8 * U * n * g_size) * (1 + 4 * U)
-        t.e = (t.rho[owner] + (r_len + err_len) * (1 + 4 * U)) * (1 + 1e-12)
+        t.c_hi, t.r_up = c_hi, (r_len + err_len) * (1 + 4 * U)  # at_level reads them
+        t.e = (t.rho[owner] + t.r_up) * (1 + 1e-12)
         t.w_lo, t.w_hi = w - err_w, w + err_w
         t.reach = np.minimum.reduceat(np.where(t.w_lo > 0, t.w_lo / d_up, 0.0), flat.starts[:-1])
         # Numbers outside the moderate range (subnormal, huge, nan) are left unproven.
         outside = ~(in_range(P).all(axis=(0, 1)) & in_range(y).all(axis=0))
         t.usable = (behind == 0) & (t.c >= SMALLEST) & np.isfinite(t.c) & (t.reach > 0) & np.isfinite(t.reach) \
             & np.isfinite(t.g_up) & (flat.per_track(outside.astype(float)) == 0) & in_range(x).all(axis=1)
+        if increase is not None:
+            t.usable &= in_range(increase) & (increase >= 0)
     return t
 
 
@@ -220,3 +246,112 @@ def track_bound(cameras: np.ndarray, points: np.ndarray, point: np.ndarray, radi
     flat = FlatTracks.build(cameras, [(list(range(len(cameras))), points)])
     lower, _ = bounds_at(flat, np.asarray(point, dtype=float).reshape(1, 3), np.array([radius], dtype=float))
     return float(lower[0])
+
+
+def at_level(flat: FlatTracks, t: Terms, increase: np.ndarray) -> Terms:
+    """L2L2 terms ``t`` (convexity_terms with no increase) moved to the level f(x) + ``increase``
+    (T,): the numbers convexity_terms(flat, x, increase) computes, without its passes over the
+    observations again (only rho, e and usable differ)."""
+    level = copy.copy(t)
+    level.rho = np.sqrt((t.c_hi + increase) * (1 + 4 * U)) * (1 + 4 * U)
+    level.e = (level.rho[flat.owner] + t.r_up) * (1 + 1e-12)
+    level.usable = t.usable & in_range(increase) & (increase >= 0)
+    return level
+
+
+def sublevel_radii(flat: FlatTracks, x: np.ndarray, increase: np.ndarray, strictness: float = 1.0,
+                   steps: int = 30, norm: str = "L2L2", terms: Terms | None = None) -> np.ndarray:
+    """For every track t: a radius R' at which (E) at the level f(x[t]) + increase[t] holds,
+    so that every point of the scope costing at most that lies within R' of x[t], nan where
+    none up to 2^128 is found. R' is within a factor 1 / (1 - R0 q) (plus 1e-6) of the
+    smallest (R0 below, q the largest |d_i| / w_i), or found by doubling and bisection (to a
+    relative 2^-steps) where that first guess does not pass. ``terms``: L2L2's
+    convexity_terms(flat, x), when the caller has them."""
+    increase = np.asarray(increase, dtype=float)
+    with np.errstate(all="ignore"):
+        terms = at_level(flat, terms, increase) if terms is not None and norm == "L2L2" else \
+            convexity_terms(flat, x, increase, norm)
+    n_tracks = len(x)
+    usable = terms.usable
+    with np.errstate(all="ignore"):
+        # Below R0 = sqrt(n / lambda_min(sum_i M_i' M_i / (e_i w_i)^2)) the test fails (each
+        # weight is below R^2 / (e_i w_i)^2 there); at R the weights are at least
+        # R^2 / (e_i w_i (1 + R q))^2, so R0 / (1 - R0 q) passes but for the test's margins.
+        weight = 1 / (terms.e * terms.w_hi) ** 2
+        A = flat.per_track(terms.MtM * weight)
+        matrices = A[[0, 1, 2, 1, 3, 4, 2, 4, 5]].T.reshape(n_tracks, 3, 3)
+        smallest = np.linalg.eigvalsh(np.where(np.isfinite(matrices), matrices, 0.0))[:, 0]
+        lo = np.sqrt(terms.n / np.where(smallest > 0, smallest, np.nan))
+        lo = np.where(np.isfinite(lo) & (lo >= SMALLEST), lo, SMALLEST)
+        q = np.maximum.reduceat(np.where(terms.w_hi > 0, terms.d_up / terms.w_hi, np.inf), flat.starts[:-1])
+        first = np.where(lo * q < 0.5, lo / (1 - lo * q) * (1 + 1e-6), 2 * lo)
+
+        def passes(R):
+            return _encloses(flat, terms, R[None], strictness)[0] & (R <= LARGEST)
+
+        found = passes(first) & usable
+        hi = np.where(found, first, lo)
+        if not (found | ~usable).all():  # the rest: doubling from R0, then bisection
+            done = found | ~usable
+            found = found | (passes(hi) & ~done)
+            for _ in range(260):  # up to 2^128
+                if (found | ~usable).all() or (hi[~found & usable] > LARGEST).all():
+                    break
+                hi = np.where(found | ~usable, hi, 2 * hi)
+                found = found | (passes(hi) & usable)
+            lo = np.where(found & ~done & (hi > lo), hi / 2, lo)
+            for _ in range(steps):
+                middle = np.where(done, hi, np.sqrt(lo * hi))
+                ok = passes(middle)
+                hi, lo = np.where(ok, middle, hi), np.where(ok, lo, middle)
+        return np.where(found & usable, hi, np.nan)
+
+
+def ball_bounds(point, radius) -> np.ndarray:
+    """[lower, upper] of each coordinate over the open ball of ``radius`` about ``point``, rounded
+    outward (what a proven interval states, recomputed alike by the checker): (3, 2) for one
+    point (3,), or (T, 3, 2) for points (T, 3) and radii (T,)."""
+    centre = np.asarray(point, dtype=float)
+    radius = np.asarray(radius, dtype=float)[..., None] if centre.ndim == 2 else float(radius)
+    return np.stack([np.nextafter(centre - radius, -np.inf), np.nextafter(centre + radius, np.inf)], axis=-1)
+
+
+def ball_intervals(point, radius) -> list:
+    """ball_bounds as nested lists (what a document states)."""
+    return ball_bounds(point, radius).tolist()
+
+
+def sublevel_holds(cameras: np.ndarray, points: np.ndarray, point: np.ndarray, increase: float,
+                   radius: float, norm: str = "L2L2") -> bool:
+    """A checker's test for one track: (E) at the level f(point) + ``increase`` holds at
+    ``radius`` (every point of the scope costing at most that lies within ``radius`` of
+    ``point``)."""
+    flat = FlatTracks.build(cameras, [(list(range(len(cameras))), points)])
+    x = np.asarray(point, dtype=float).reshape(1, 3)
+    terms = convexity_terms(flat, x, np.array([increase], dtype=float), norm)
+    with np.errstate(all="ignore"):
+        return bool(_encloses(flat, terms, np.array([[radius]], dtype=float))[0, 0])
+
+
+def verify_sublevel(cameras: np.ndarray, points: np.ndarray, sublevel, solution, norm: str) -> None:
+    """A proven interval (fractional.convexity, ``sublevel_radii``): every point of the scope
+    costing at most the optimum plus cost_increase lies in the intervals. Refused unless (E) at
+    that level holds at the radius and the intervals are exactly the ball's about the solution
+    (outward rounded): a narrower interval is not proven, a wider one is not the proof's."""
+    record(sublevel, "proof/sublevel", ("cost_increase", "radius", "intervals"))
+    increase = number(sublevel.get("cost_increase"), "proof/sublevel/cost_increase")
+    radius = number(sublevel.get("radius"), "proof/sublevel/radius")
+    intervals = numbers(sublevel.get("intervals"), "proof/sublevel/intervals", (3, 2))
+    if not (solution[3] == 1.0 and np.all(np.isfinite(solution))):
+        raise Invalid("proven_interval", "a proven interval is for a finite solution [x, y, z]")
+    if not (increase >= 0 and radius > 0):
+        raise Invalid("proven_interval", "proof/sublevel needs cost_increase >= 0 and radius > 0")
+    outside = outside_range(cameras, points, solution[:3], radius)
+    if outside is not None or not (increase == 0 or 2.0 ** -128 <= increase <= 2.0 ** 128):
+        raise Invalid("proven_interval", outside or "proof/sublevel/cost_increase is subnormal or huge")
+    if not np.array_equal(intervals, np.array(ball_intervals(solution[:3], radius))):
+        raise Invalid("proven_interval", "proof/sublevel/intervals are not the ball's of that radius about the point "
+                                         "(each coordinate's [x - radius, x + radius], rounded outward)")
+    if not sublevel_holds(cameras, points, solution[:3], increase, radius, norm):
+        raise Invalid("proven_interval", f"not proven at radius {radius!r}: the points costing up to cost_increase "
+                                         f"{increase!r} more are not shown to lie within it")

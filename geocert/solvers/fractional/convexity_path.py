@@ -7,6 +7,11 @@ whose sums may differ in their last bits, passes too) and the bound is within th
 the cost as the verifier recomputes it: the cost plus its rounding slack (the verifier's
 residual_rounding), with the data determining it to within half the tolerance (the verifier's
 residual uncertainty). Every other track is left to the branch and bound (None).
+
+A certified track also gets a proven interval of every point of the scope within a cost
+increase of the optimum (fractional.convexity.sublevel_radii): the increase is the one its
+determinacy estimate uses (SIGMAS^2 times the fit's residual variance, at least the certified
+gap), so the estimate and the proof speak of one set.
 """
 
 from __future__ import annotations
@@ -14,8 +19,10 @@ from __future__ import annotations
 import numpy as np
 
 from geocert.solvers.core.certificates import ROUNDING
+from geocert.solvers.core.determinacy import SIGMAS
 from geocert.solvers.fractional.columns import LocalColumns, TrackResults
-from geocert.solvers.fractional.convexity import convexity_bounds, convexity_terms
+from geocert.solvers.fractional.convexity import (ball_bounds, ball_intervals, convexity_bounds, convexity_terms,
+                                                  sublevel_radii)
 from geocert.solvers.fractional.flat import FlatTracks, linear, refine
 from geocert.solvers.fractional.options import TriangulationOptions
 
@@ -55,4 +62,39 @@ def certify_tracks(cameras: np.ndarray, tracks: list, options: TriangulationOpti
     local = LocalColumns(index=rows, point=x[rows], cost=cost[rows], lower_bound=claimed[rows],
                          tolerance=tolerance[rows], radius=radius[rows], residuals=r.T[observations],
                          starts=starts, proof=options.certificate == "full")
+    if options.certificate == "full" or options.detail == "full":  # proven intervals, as columns
+        increase, reach = _sublevels(flat, x, cost, claimed, certified, terms)
+        reach = reach[rows]
+        local.sublevel_increase, local.sublevel_radius = increase[rows], reach
+        local.sublevel_bounds = ball_bounds(x[rows], np.where(np.isfinite(reach), reach, 0.0))
     return TrackResults(len(tracks), local)
+
+
+def cost_increase(cost, lower, views):
+    """The increase a proven interval is stated for: SIGMAS^2 times cost / (2 views - 3) (the
+    fit's residual variance, as the determinacy estimate's), at least the certified gap."""
+    redundancy = np.maximum(2 * np.asarray(views) - 3, 1)
+    return np.maximum(SIGMAS ** 2 * np.asarray(cost) / redundancy, np.maximum(np.asarray(cost) - lower, 0.0))
+
+
+def _sublevels(flat, x: np.ndarray, cost: np.ndarray, claimed: np.ndarray, certified: np.ndarray, terms):
+    """(increase, radius) of every track: the cost increase and the proven ball's radius (nan
+    where none, or not certified). ``terms``: convexity_terms(flat, x), reused at the level."""
+    increase = cost_increase(cost, claimed, flat.sizes)
+    # Solver's strictness: the checker's sums, differing in their last bits, pass at its radius.
+    reach = sublevel_radii(flat, x, np.where(certified, increase, np.nan), strictness=STRICTNESS, terms=terms)
+    return increase, reach
+
+
+def track_sublevel(cameras: np.ndarray, points: np.ndarray, point, cost: float, lower: float,
+                   norm: str) -> dict | None:
+    """One certified track's proven interval (whatever proved its bound), None where the
+    enclosure test proves none: what ``proof.sublevel`` carries."""
+    increase = float(cost_increase(cost, lower, len(points)))
+    flat = FlatTracks.build(cameras, [(list(range(len(points))), points)])
+    with np.errstate(all="ignore"):
+        radius = float(sublevel_radii(flat, np.asarray(point, dtype=float).reshape(1, 3), np.array([increase]),
+                                      strictness=STRICTNESS, norm=norm)[0])
+    if not np.isfinite(radius):
+        return None
+    return {"cost_increase": increase, "radius": radius, "intervals": ball_intervals(point, radius)}

@@ -21,9 +21,9 @@ import math
 import numpy as np
 
 from geocert.solvers.core.determinacy import (SIGMAS, SINGULAR, Determinacy, certified_gap, curvature_intervals,
-                                               interval, numeric_jacobian, safely, spread)
+                                               interval, numeric_jacobian, proven_document, safely, spread)
 from geocert.solvers.fractional.charts import camera_centres
-from geocert.solvers.fractional.columns import solutions
+from geocert.solvers.fractional.columns import solutions, sublevels
 
 PARALLAX_DEGREES = 1.0  # rays meeting at less than this: near-zero parallax
 FLAT = 1e-2  # points whose centred spread along a direction is below this fraction: (nearly) flat
@@ -38,7 +38,8 @@ def _centres(cameras: np.ndarray) -> np.ndarray:
 
 
 def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at_infinity: bool,
-          cost: float | None, lower: float | None) -> dict | None:
+          cost: float | None, lower: float | None, sublevel: dict | None = None) -> dict | None:
+    """``sublevel``: the proven interval its certificate carries, if any (proven_track)."""
     if point is None:
         return None
     cameras = np.asarray(cameras, dtype=float)
@@ -65,6 +66,7 @@ def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at
     if scale is not None:
         quantities["depth_view0"] = (length, ray / length, length)
     out = curvature_intervals(J, residuals(X), quantities, certified_gap(cost, lower))
+    out.proven_intervals = proven_track(sublevel)
     rays = X[None, :] - centres
     rays = rays[np.all(np.isfinite(rays), axis=1)]
     if len(rays) >= 2:
@@ -89,6 +91,7 @@ def tracks_many(cameras: np.ndarray, tracks: list, results: list) -> list[dict |
         centres = _centres(cameras)
     out: list[dict | None] = [None] * len(tracks)
     X, finite, cost, lower = solutions(results)  # no object made for the convexity path's columns
+    proven = sublevels(results)
     groups: dict[int, list[int]] = {}
     for i in np.flatnonzero(finite).tolist():
         groups.setdefault(len(tracks[i][0]), []).append(i)
@@ -100,19 +103,19 @@ def tracks_many(cameras: np.ndarray, tracks: list, results: list) -> list[dict |
         try:
             with np.errstate(all="ignore"):
                 documents = _finite_tracks(cameras, centres, [tracks[i] for i in members], X[members], cost[members],
-                                           lower[members], n)
+                                           lower[members], [proven[i] for i in members], n)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):  # as safely(): never fails a solve
             documents = [safely(track, cameras[tracks[i][0]], tracks[i][1], X[i].tolist(), False, results[i].cost,
-                                results[i].lower_bound) for i in members]
+                                results[i].lower_bound, proven[i]) for i in members]
         for i, document in zip(members, documents):
             out[i] = document
     return out
 
 
 def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.ndarray, lowers: np.ndarray,
-                   n: int) -> list[dict]:
+                   proven: list, n: int) -> list[dict]:
     """The documents of tracks of n views each with finite points X (G, 3), their costs and lower
-    bounds (G,) (nan where none)."""
+    bounds (G,) (nan where none), and their certificates' sublevels (proven_track)."""
     views = np.array([v for v, _ in tracks])  # (G, n)
     cams = cameras[views]  # (G, n, 3, 4)
     points = np.array([p for _, p in tracks], dtype=float)  # (G, n, 2)
@@ -163,12 +166,22 @@ def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.
                 out.intervals.append(interval(names[k], value, value - half[i, k], value + half[i, k], scale))
             else:
                 out.intervals.append(interval(names[k], value, None, None, scale))
+        out.proven_intervals = proven_track(proven[i])
         if usable[i].sum() >= 2 and widest[i] < PARALLAX_DEGREES:
             out.warnings.append({"code": "near_zero_parallax",
                                  "detail": f"the rays meet at {float(widest[i]):.3g} degrees at most (< "
                                            f"{PARALLAX_DEGREES:g}): the depth along them is poorly fixed"})
         documents.append(out.document())
     return documents
+
+
+def proven_track(sublevel: dict | None) -> dict | None:
+    """The proven intervals of a certified track from its certificate's ``sublevel`` (None: none)."""
+    if sublevel is None:
+        return None
+    return proven_document(sublevel["cost_increase"], ("x", "y", "z"), sublevel["intervals"],
+                           f"a ball of radius {sublevel['radius']:.6g} about the point, proven by the enclosure "
+                           "test at that level (fractional.convexity)")
 
 
 def _complement(M: np.ndarray) -> np.ndarray:

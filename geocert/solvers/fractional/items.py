@@ -10,7 +10,7 @@ from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import cost_rounding, norm_cost, normalised_cameras
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
-from geocert.solvers.fractional.convexity import outside_range, track_bound
+from geocert.solvers.fractional.convexity import outside_range, track_bound, verify_sublevel
 from geocert.solvers.fractional.proof import (check_program, program_allowance, program_discount, raw_sizes,
                                               residual_uncertainty, track_uncertainty, verify_search)
 from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
@@ -179,7 +179,7 @@ def verify_convexity(item, options: dict, proof: dict, lower_claimed: float, sol
     """The lower bound a convexity proof establishes (fractional.convexity.track_bound): an
     L2L2 track with no max_residual, a finite solution, and a radius at which the cost is proven
     convex on a ball holding every point of the scope that costs as little."""
-    record(proof, "proof", ("type", "radius"))
+    record(proof, "proof", ("type", "radius"), ("sublevel",))
     radius = _number(proof.get("radius"), "proof/radius")
     if options["norm"] != "L2L2" or options["max_residual"] is not None:
         raise Invalid("convexity", "a convexity proof is for L2L2 with no max_residual")
@@ -195,13 +195,26 @@ def verify_convexity(item, options: dict, proof: dict, lower_claimed: float, sol
         raise Invalid("convexity", f"nothing proven at radius {radius!r}: the ball about the solution is not shown "
                                    "to hold every point costing as little, or the cost to be convex on it")
     passed.append("convexity")
+    if "sublevel" in proof:
+        verify_sublevel(item.cameras, item.points, proof["sublevel"], solution, options["norm"])
+        passed.append("proven_interval")
+    return bound
+
+
+def verify_track_search(item, options: dict, proof: dict, lower_claimed: float, solution, passed: list[str]) -> float:
+    """A track's search (proof.verify_search), and its proven interval when it states one."""
+    bound = verify_search(item, options, {key: value for key, value in proof.items() if key != "sublevel"},
+                          lower_claimed, solution, passed)
+    if "sublevel" in proof:
+        verify_sublevel(item.cameras, item.points, proof["sublevel"], solution, options["norm"])
+        passed.append("proven_interval")
     return bound
 
 
 class TrackItems:
     """The triangulation kind's verification adapter."""
 
-    proofs = {"branch_and_bound": verify_search, "convexity": verify_convexity}
+    proofs = {"branch_and_bound": verify_track_search, "convexity": verify_convexity}
     domain = ("every point in front of every camera (positive depth in every view, last homogeneous "
               "coordinate >= 0)")
 
@@ -214,6 +227,32 @@ class TrackItems:
 
     def forget(self) -> None:
         self._cameras = None
+
+    @staticmethod
+    def check_returned(result: dict, certificate: dict) -> None:
+        """A track's determinacy may say proven only with the intervals its claim's proof proves
+        (the proof's sublevel, at its cost_increase). Triangulation results only: a kind that
+        reads its points as tracks (reconstruction) returns no such determinacy."""
+        if certificate.get("kind") != "triangulation":
+            return
+        for index, (item, claim) in enumerate(zip(result["tracks"], certificate["items"])):
+            determinacy = item.get("determinacy")
+            if not isinstance(determinacy, dict) or (determinacy.get("proven") is False
+                                                     and determinacy.get("proven_intervals") is None):
+                continue
+            proof = claim.get("proof") if claim.get("certified") is True else None
+            sublevel = proof.get("sublevel") if isinstance(proof, dict) else None
+            stated = determinacy.get("proven_intervals")
+            if sublevel is None or determinacy.get("proven") is not True or not isinstance(stated, dict):
+                raise Invalid("returned", f"tracks/{index}/determinacy says proven, and its certificate proves no "
+                                          "interval")
+            intervals = stated.get("intervals")
+            bounds = [[i.get("lower"), i.get("upper")] for i in intervals] if isinstance(intervals, list) and all(
+                isinstance(i, dict) for i in intervals) else None
+            if stated.get("cost_increase") != sublevel.get("cost_increase") or bounds != sublevel.get("intervals") \
+                    or [i.get("name") for i in intervals] != ["x", "y", "z"]:
+                raise Invalid("returned", f"tracks/{index}/determinacy/proven_intervals are not the ones its "
+                                          "certificate proves")
 
     def _read_cameras(self, value) -> np.ndarray:
         remembered = self._cameras
@@ -243,8 +282,12 @@ class TrackItems:
         return TrackItem(arrays, norm)
 
     def proven_together(self, data: dict, options: dict, claims: list) -> tuple[set[int], tuple[str, ...]]:
-        """The claims proven many at once (stacked.py), and the checks each passed."""
-        return proven_tracks(data, options, claims, MAX_VIEWS), CHECKS
+        """The claims proven many at once (stacked.py, which checks their proven intervals too),
+        and the checks each passed. A claim stating no interval is left to the per-item check
+        when others state one, so that every claim proven here passed the same checks."""
+        proven = proven_tracks(data, options, claims, MAX_VIEWS)
+        stating = {i for i in proven if "sublevel" in claims[i]["proof"]}
+        return (stating, CHECKS + ("proven_interval",)) if stating else (proven, CHECKS)
 
 
 class MapItems:

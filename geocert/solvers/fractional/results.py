@@ -24,6 +24,7 @@ class SearchCertificate:
     tolerance_met: bool
     leaves: int
     proof: dict | None = None  # with options.certificate == "full": certificates.encode's form
+    sublevel: dict | None = None  # a proven interval, as LocalCertificate's
 
 
 @dataclass
@@ -38,6 +39,9 @@ class LocalCertificate:
     proof: dict | None = None  # with options.certificate == "full": {"type": "convexity", "radius": R}
     tolerance_met: bool = True
     leaves: int = 0
+    # A proven interval: {"cost_increase": delta, "radius": R', "intervals": [[lo, hi]] * 3}, every
+    # point of the scope costing at most the optimum plus delta within R' of the solution.
+    sublevel: dict | None = None
 
 
 @dataclass

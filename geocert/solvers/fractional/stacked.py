@@ -26,6 +26,7 @@ from geocert.solvers.core.cones import ConeSpec, _project_rows, rounding_counted
 from geocert.solvers.core.coverage import uncovered_part
 from geocert.solvers.core.geometry import cost_roundings, lengths, norm_terms, normalised_cameras
 from geocert.solvers.core.strict import Invalid, dual_vector, numbers
+from geocert.solvers.fractional.convexity import verify_sublevel
 from geocert.solvers.fractional.proof import SCALE_RANGE, _sample_steps, allowance, raw_sizes, track_uncertainty
 
 D = 3  # a track's program has 3 variables
@@ -152,7 +153,20 @@ def proven_tracks(data: dict, options: dict, claims: list, max_views: int) -> se
             except Exception:  # e.g. a singular chart: the per-item path checks these, and says why
                 continue
             proven.update(t.position for t, good in zip(chunk, ok) if good)
-    return proven
+    return {i for i in proven if _interval_holds(cameras, tracks[i], claims[i], options["norm"])}
+
+
+def _interval_holds(cameras: np.ndarray, track: dict, claim: dict, norm: str) -> bool:
+    """Whether a proven claim's proven interval, if it states one, is proven (checked alone,
+    as the per-item path checks it; one that is not leaves the claim to that path)."""
+    if "sublevel" not in claim["proof"]:
+        return True
+    try:
+        verify_sublevel(cameras[track["views"]], np.asarray(track["points"], dtype=float), claim["proof"]["sublevel"],
+                        np.append(np.asarray(claim["point"], dtype=float), 1.0), norm)
+    except Invalid:
+        return False
+    return True
 
 
 def _chunks(members: list[_Track], proofs: int):

@@ -17,6 +17,7 @@ import numpy as np
 
 from geocert.solvers.core.bnb import Progress
 from geocert.solvers.fractional.charts import Chart, camera_centres
+from geocert.solvers.fractional.convexity_path import track_sublevel
 from geocert.solvers.fractional.options import NORMS, TriangulationOptions
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult
 from geocert.solvers.fractional.search import Early, Reasons, depth_subspace, prepare, recomputed_status, search
@@ -123,7 +124,13 @@ def track_result(chart: Chart, cameras, points, y, options, status, lower, nodes
     if status == "optimal" and checked:
         reason = refused_by_verifier(item, solution, residuals, cost, options, scale)
         status = "not_certified" if reason else status
-    return TrackResult(status=status, certified=status == "optimal" and lower is not None, point=point, reason=reason,
+    certified = status == "optimal" and lower is not None
+    if certified and certificate is not None and not at_infinity and "full" in (options.detail, options.certificate):
+        sublevel = track_sublevel(cameras, points, solution[:3], cost, lower, options.norm)
+        certificate.sublevel = sublevel
+        if certificate.proof is not None and sublevel is not None:
+            certificate.proof["sublevel"] = sublevel
+    return TrackResult(status=status, certified=certified, point=point, reason=reason,
                        at_infinity=bool(at_infinity), cost=cost, lower_bound=lower,
                        gap=cost - lower if lower is not None else None, nodes=nodes,
                        certificate=certificate, residuals=residuals.tolist())
