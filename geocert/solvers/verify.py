@@ -349,8 +349,27 @@ def _check_returned(result: dict, certificate: dict) -> None:
     own = getattr(kind.verification, "check_returned", None)
     if own is not None:  # what else the result returns, derived from the claims
         own(result, certificate)
+    if certificate["kind"] != "triangulation":  # the one kind whose determinacy proves intervals (its own check)
+        _check_estimates(result)
     _check_summaries(kind, result, certificate)
     _check_stats(kind, result)
+
+
+def _check_estimates(value: Any, where: str = "") -> None:
+    """Every ``determinacy`` a result holds outside its certificate is an estimate: none may call
+    itself proven, or state proven intervals, where no proof of them is carried."""
+    if isinstance(value, dict):
+        for name, item in value.items():
+            if name in ("certificate", "camera_certificate", "calibration_certificate"):
+                continue
+            if name == "determinacy" and isinstance(item, dict) and (
+                    item.get("proven") not in (None, False) or item.get("proven_intervals") is not None):
+                raise Invalid("returned", f"{where}/determinacy says proven, and no proof of its intervals is "
+                                          "carried (an estimate is proven: false)")
+            _check_estimates(item, f"{where}/{name}")
+    elif isinstance(value, list):
+        for index, item in enumerate(value):
+            _check_estimates(item, f"{where}/{index}")
 
 
 def _check_stats(kind, result: dict) -> None:

@@ -937,6 +937,11 @@ def _moved_camera_result(result: dict, view: int, degrees: float, camera_rel_gap
     next(stage for stage in result["stages"] if stage["name"] == "structure")["certified"] = points_certified
     every = points_certified == len(result["points"])
     result["stats"].update(certified=int(every), statuses={"optimal": 1} if every else {})
+    bounded = [c for c in result["cameras"] if c["registered"] and c["status"] not in ("not_run", "cancelled")]
+    doubtful = len(bounded) >= 2 and sum(not c["certified"] for c in bounded) > 0.5 * len(bounded)
+    warnings = [w for w in result["summary"]["warnings"] if w["code"] != "reconstruction_doubtful"]
+    result["summary"].update(doubtful=doubtful, warnings=[{"code": "reconstruction_doubtful", "detail": "most"}]
+                             * doubtful + warnings)
     return result
 
 

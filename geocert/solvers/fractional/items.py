@@ -211,6 +211,29 @@ def verify_track_search(item, options: dict, proof: dict, lower_claimed: float, 
     return bound
 
 
+def uncertified_figures(item: dict, arrays: tuple, norm: str, where: str) -> None:
+    """An uncertified track's figures, which no proof backs, are still true: not called optimal,
+    its cost what its point costs on its observations, any lower bound it states at most that
+    cost, and its gap their difference (a search stopped at a limit states the bound it reached)."""
+    if item.get("status") == "optimal":
+        raise Invalid("returned", f"{where}: an uncertified item's status is not optimal")
+    cost, lower, point = item.get("cost"), item.get("lower_bound"), item.get("point")
+    if point is not None and cost is not None:
+        cameras, observed = arrays
+        X = np.append(numbers(point, f"{where}/point", (3,), "returned"), 0.0 if item.get("at_infinity") else 1.0)
+        with np.errstate(all="ignore"):
+            projected = cameras @ X
+            residuals = projected[:, :2] / projected[:, 2:3] - observed
+        true = norm_cost(residuals, norm)
+        if not (isinstance(cost, (int, float)) and abs(cost - true) <= 1e-9 * max(1.0, abs(true))):
+            raise Invalid("returned", f"{where}/cost {cost!r}, its point costs {true!r}")
+    if lower is not None and (not isinstance(lower, (int, float)) or cost is None or not lower <= cost * (1 + 1e-9)):
+        raise Invalid("returned", f"{where}/lower_bound {lower!r} is above its cost {cost!r}")
+    if lower is not None and item.get("gap") is not None and not abs(item["gap"] - (cost - lower)) <= 1e-9 * max(
+            1.0, abs(cost)):
+        raise Invalid("returned", f"{where}/gap {item['gap']!r} is not its cost less its lower bound")
+
+
 class TrackItems:
     """The triangulation kind's verification adapter."""
 
@@ -228,11 +251,16 @@ class TrackItems:
     def forget(self) -> None:
         self._cameras = None
 
-    @staticmethod
-    def check_returned(result: dict, certificate: dict) -> None:
+    def check_returned(self, result: dict, certificate: dict) -> None:
         """A track's determinacy may say proven only with the intervals its claim's proof proves
         (the proof's sublevel, at its cost_increase). Triangulation results only: a kind that
-        reads its points as tracks (reconstruction) returns no such determinacy."""
+        reads its points as tracks (reconstruction) returns no such determinacy. Every item its
+        result calls uncertified states true figures too (uncertified_figures)."""
+        key = "tracks" if certificate.get("kind") == "triangulation" else "points"
+        for index, (item, claim) in enumerate(zip(result.get(key) or [], certificate["items"])):
+            if claim.get("certified") is not True and isinstance(item, dict):
+                uncertified_figures(item, self.read(certificate["data"], index), certificate["options"].get("norm"),
+                                    f"{key}/{index}")
         if certificate.get("kind") != "triangulation":
             return
         for index, (item, claim) in enumerate(zip(result["tracks"], certificate["items"])):
