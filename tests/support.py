@@ -35,6 +35,14 @@ def shared_data(name: str) -> Path:
     return path
 
 
+def dinosaur_sample(step: int) -> tuple[np.ndarray, list]:
+    """The Oxford Dinosaur's cameras and every ``step``-th track (every length), as (views, points)."""
+    from geocert.solvers.datasets import load_dinosaur
+
+    cameras, tracks = load_dinosaur(shared_data("oxford_dinosaur"))
+    return cameras, [(tracks[i].views, tracks[i].points) for i in range(0, len(tracks), step)]
+
+
 def look_at(centre: np.ndarray, target: np.ndarray, focal: float = 800.0) -> np.ndarray:
     """A 3x4 camera K [R | -R c] at ``centre`` looking at ``target`` (640x480 image)."""
     z = target - centre

@@ -10,14 +10,13 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.fractional import flat as flat_tracks
 from geocert.solvers.fractional.batched import triangulate_many
 from geocert.solvers.fractional.convexity import (PAIRS, bounds_at, convexity_bounds, outside_range, positive_definite,
                                                   track_bound)
 from geocert.solvers.fractional.triangulation import TriangulationOptions
 
-from tests.support import noisy_track, random_cameras, seed, shared_data
+from tests.support import dinosaur_sample, noisy_track, random_cameras, seed
 
 
 
@@ -58,9 +57,7 @@ def test_the_local_solve_finds_scipys_optimum(views):
 
 @pytest.fixture(scope="module")
 def dinosaur():
-    cameras, tracks = load_dinosaur(shared_data("oxford_dinosaur"))
-    chosen = list(range(0, len(tracks), 10))  # 499 tracks, every length
-    return cameras, [(tracks[i].views, tracks[i].points) for i in chosen]
+    return dinosaur_sample(10)  # 499 tracks
 
 
 def test_dinosaur_bounds_lie_below_the_certified_optimum_and_close_the_gap(dinosaur):

@@ -13,7 +13,6 @@ import pytest
 
 from geocert.kinds.triangulation import track_document, track_documents
 from geocert.solvers.core.geometry import norm_cost, reprojection_residuals
-from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.fractional import determinacy
 from geocert.solvers.fractional.batched import triangulate_many
 from geocert.solvers.fractional.columns import TrackResults, solutions
@@ -21,16 +20,14 @@ from geocert.solvers.fractional.results import LocalCertificate, claim_of
 from geocert.solvers.fractional.triangulation import TriangulationOptions
 from geocert.solvers.verify import verify_arrays
 
-from tests.support import shared_data
+from tests.support import dinosaur_sample
 
 pytestmark = pytest.mark.shared_data("oxford_dinosaur")
 
 
 @pytest.fixture(scope="module")
 def dinosaur():
-    cameras, tracks = load_dinosaur(shared_data("oxford_dinosaur"))
-    chosen = list(range(0, len(tracks), 25))  # 200 tracks, every length
-    return cameras, [(tracks[i].views, tracks[i].points) for i in chosen]
+    return dinosaur_sample(25)  # 200 tracks
 
 
 def test_the_convexity_paths_tracks_stay_columns_until_asked_for_and_then_verify(dinosaur):
