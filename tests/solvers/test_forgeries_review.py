@@ -315,7 +315,6 @@ class TestBaselineUnread:
     K of focal 5,000 px (the genuine one: 1,000 px) or a baseline cost 1,000 times below the metric
     stage's proven bound."""
 
-    @pytest.mark.xfail(strict=True, reason="bilinear.verification.check_returned does not read a frame's baseline")
     def test_a_bilinear_baseline_below_the_proven_bound_is_refused(self):
         result = stored("bilinear_l1l1")
         frame = result["frames"][0]
@@ -324,7 +323,6 @@ class TestBaselineUnread:
         assert frame["baseline"]["cost"] < frame["lower_bound"] / 3
         assert refused(result)["check"] == "returned"
 
-    @pytest.mark.xfail(strict=True, reason="AutocalibrationVerification.check_returned does not read the baseline")
     @pytest.mark.parametrize("change", ["cost", "K"])
     def test_an_autocalibration_baseline_not_the_linear_estimate_is_refused(self, change):
         result = stored("autocalibration_stratified")

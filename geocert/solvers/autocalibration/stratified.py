@@ -55,11 +55,16 @@ def solve(problem: Problem, options: AutocalibrationOptions, callback=None) -> S
     # The metric stage starts from the plane as returned (in the input frame), so that what a
     # verifier reads back is exactly what was solved.
     p = plane_from_input(problem, plane_in_input(problem, stage.plane[:3]))
+    baseline = None
     try:
         setup = metric.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
         lo, hi = mrelax.omega_box(problem.unit_ranges)
         if not np.all(setup.q_lower > 0):
             raise ValueError("a view's scale is not bounded away from 0 over the intrinsics ranges")
+        # the linear estimate exists whenever the metric stage can be set up (what the verifier
+        # recomputes), whether or not its search then succeeds
+        w, psd = metric.linear_baseline(setup)
+        baseline = {"w": w, "psd": psd, "cost": mrelax.cost(setup, w)}
         result = metric.solve_metric(setup, lo, hi, bnb_options(options, options.metric_rel_gap), record,
                                      stage_callback(callback, "metric"))
     except (ValueError, np.linalg.LinAlgError) as exc:
@@ -70,8 +75,4 @@ def solve(problem: Problem, options: AutocalibrationOptions, callback=None) -> S
     K_unit = None
     if result.w is not None:
         K_unit = upper_triangular_root(mrelax.omega_of(result.w))
-    baseline = None
-    if setup is not None:
-        w, psd = metric.linear_baseline(setup)
-        baseline = {"w": w, "psd": psd, "cost": mrelax.cost(setup, w)}
     return Stratified(problem, stage, affine_s, result, metric_s, baseline, K_unit, p)

@@ -157,6 +157,7 @@ class AutocalibrationVerification:
         for name, expected in derived.items():
             if not _close(result.get(name), expected):
                 raise Invalid("returned", f"{name} is not what the plane at infinity and K give")
+        _check_baseline(result.get("baseline"), problem, p)
 
     def read(self, data: dict, index: int):
         if index not in (0, 1):
@@ -206,6 +207,49 @@ class AutocalibrationVerification:
             raise Invalid("scope", "the DIAC returned is outside the domain (box, PSD, or a view's scale range)")
         passed.append("scope")
         return proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed), options["metric_rel_gap"]
+
+
+# The linear baseline is recomputed here; a least-squares solution's rounding differs from one
+# machine's BLAS to another's by far less than this (relative to K's largest entry, and the cost).
+BASELINE_TOLERANCE = 1e-6
+
+
+def _check_baseline(given: Any, problem, p) -> None:
+    """``baseline``, when stated, is the thesis's linear estimate (6.30, 6.31) for the plane at
+    infinity returned: its K (None when the estimate is not a DIAC) and its cost what its DIAC
+    costs."""
+    if given is None:
+        return  # a result may leave the baseline out; one it states must be the estimate's
+    setup = None
+    if p is not None:
+        try:
+            setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+        except (ValueError, np.linalg.LinAlgError):
+            setup = None
+    if setup is None or not np.all(setup.q_lower > 0):
+        raise Invalid("returned", "baseline: no linear estimate exists without a metric stage to fit it for")
+    if not isinstance(given, dict) or set(given) != {"method", "K", "psd", "cost"} or given["method"] != "linear" \
+            or not isinstance(given["psd"], bool):
+        raise Invalid("returned", "baseline must be the linear estimate: method, K, psd, cost")
+    with np.errstate(all="ignore"):
+        w, psd = mrelax.linear_baseline(setup)
+        omega = mrelax.omega_of(w)
+        expected_cost = mrelax.cost(setup, w)
+    expected_K = None
+    if np.linalg.eigvalsh(omega)[0] > 0:
+        K = problem.K0 @ pr.upper_triangular_root(omega)
+        expected_K = K / K[2, 2]
+    if given["psd"] != psd or (given["K"] is None) != (expected_K is None):
+        raise Invalid("returned", "baseline: psd or K is not what the linear estimate gives")
+    cost = _number(given["cost"], "baseline/cost", "returned")
+    if expected_K is not None:
+        K = _numbers(given["K"], "baseline/K", (3, 3), "returned")
+        own = mrelax.cost(setup, pr.w_of_K(problem, K))
+        if not (np.all(np.abs(K - expected_K) <= BASELINE_TOLERANCE * float(np.max(np.abs(expected_K))))
+                and abs(cost - own) <= BASELINE_TOLERANCE * max(abs(own), 1e-12)):
+            raise Invalid("returned", "baseline: K is not the linear estimate, or its cost not what K costs")
+    if not abs(cost - expected_cost) <= BASELINE_TOLERANCE * max(abs(expected_cost), 1e-12):
+        raise Invalid("returned", f"baseline/cost is not the linear estimate's ({expected_cost!r})")
 
 
 def _direct_setup(problem, options: dict):

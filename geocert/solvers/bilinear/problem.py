@@ -216,6 +216,29 @@ def feasible_coefficients(alpha: np.ndarray, coefficients: str, bound: float) ->
     return bool(np.all(np.abs(alpha) <= bound))
 
 
+def linear_baseline(X: np.ndarray, u: np.ndarray, norm: str, coefficients: str,
+                    bound: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Thesis 8.3.3, in a frame's normalised units (X (K, n, 3) the basis, u (n, 2)): least squares
+    for beta_rki = M_rk alpha_i (and t), then the rank-1 SVD of the 6 x K matrix beta; coefficients
+    projected onto the scope's set (sum 1), translation refitted (mean, or median under L1L1)."""
+    K, n = X.shape[0], X.shape[1]
+    design = np.hstack([np.transpose(X, (1, 2, 0)).reshape(n, 3 * K), np.ones((n, 1))])
+    beta = np.linalg.lstsq(design, u, rcond=None)[0]  # (3K + 1, 2)
+    B = beta[:3 * K].T.reshape(6, K)  # row r*3 + k, column i
+    U, s, Vt = np.linalg.svd(B)
+    w = Vt[0]
+    total = float(w.sum())
+    if abs(total) < 1e-12 * np.abs(w).sum():
+        alpha = np.full(K, 1.0 / K)
+        M = B.sum(axis=1).reshape(2, 3)
+    else:
+        alpha = w / total
+        M = (U[:, 0] * s[0] * total).reshape(2, 3)
+    alpha = project_coefficients(alpha, coefficients, bound)
+    r = u - np.einsum("i,ijk->jk", alpha, X) @ M.T
+    return M, alpha, np.median(r, axis=0) if norm == "L1L1" else r.mean(axis=0)
+
+
 def project_coefficients(v: np.ndarray, coefficients: str, bound: float) -> np.ndarray:
     """The nearest coefficient vector of the scope (Euclidean): clip(v - tau, lo, hi) with tau
     such that the sum is 1, the last rounding put where there is room."""

@@ -132,23 +132,8 @@ def _l1_fit(design: np.ndarray, target: np.ndarray, bounds: list, equality: np.n
 
 
 def linear_baseline(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Thesis 8.3.3: least squares for beta_rki = M_rk alpha_i (and t), then the rank-1 SVD of the
-    6 x K matrix beta; coefficients projected onto the scope's set (sum 1), translation refitted."""
-    K, n = model.K, model.n
-    design = np.hstack([np.transpose(model.X, (1, 2, 0)).reshape(n, 3 * K), np.ones((n, 1))])
-    beta = np.linalg.lstsq(design, model.u, rcond=None)[0]  # (3K + 1, 2)
-    B = beta[:3 * K].T.reshape(6, K)  # row r*3 + k, column i
-    U, s, Vt = np.linalg.svd(B)
-    w = Vt[0]
-    total = float(w.sum())
-    if abs(total) < 1e-12 * np.abs(w).sum():
-        alpha = np.full(K, 1.0 / K)
-        M = B.sum(axis=1).reshape(2, 3)
-    else:
-        alpha = w / total
-        M = (U[:, 0] * s[0] * total).reshape(2, 3)
-    alpha = pb.project_coefficients(alpha, model.coefficients, model.bound)
-    return M, alpha, model.best_t(M, alpha)
+    """Thesis 8.3.3's linear estimate (problem.linear_baseline, which the verifier recomputes)."""
+    return pb.linear_baseline(model.X, model.u, model.norm, model.coefficients, model.bound)
 
 
 @dataclass

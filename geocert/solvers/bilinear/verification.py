@@ -145,6 +145,8 @@ class BilinearVerification:
         if result.get("coefficients") != certificate["options"].get("coefficients"):
             raise Invalid("returned", "the result's coefficient set differs from its certificate's")
         for index, (item, points) in enumerate(zip(result["frames"], frames)):
+            if item.get("baseline") is not None:
+                _check_baseline(index, item["baseline"], basis, points, certificate["options"])
             if item.get("camera") is None or item.get("coefficients") is None:
                 continue
             camera = _numbers(item["camera"], f"frames/{index}/camera", (2, 4), "returned")
@@ -159,6 +161,38 @@ class BilinearVerification:
                         isinstance(g, list) and len(g) == 2 and np.allclose(g, row, rtol=1e-9, atol=1e-9)))
                     for g, row in zip(given, r)):
                 raise Invalid("returned", f"frames/{index}/residuals are not the camera's")
+
+
+# The linear baseline is recomputed here; a least-squares and SVD solution's rounding differs from
+# one machine's BLAS to another's by far less than this (relative to the camera's largest entry,
+# and to the cost).
+BASELINE_TOLERANCE = 1e-6
+
+
+def _check_baseline(index: int, given: Any, basis: np.ndarray, points: np.ndarray, options: dict) -> None:
+    """A frame's ``baseline``, when stated (a result may leave it out), is the linear estimate
+    (thesis 8.3.3) for its data, and its cost is what its own camera and coefficients cost."""
+    where = f"frames/{index}/baseline"
+    if not isinstance(given, dict) or set(given) != {"method", "camera", "coefficients", "cost"} \
+            or given["method"] != "linear":
+        raise Invalid("returned", f"{where} must be the linear estimate: method, camera, coefficients, cost")
+    camera = _numbers(given["camera"], f"{where}/camera", (2, 4), "returned")
+    alpha = _numbers(given["coefficients"], f"{where}/coefficients", (basis.shape[0],), "returned")
+    cost = _number(given["cost"], f"{where}/cost", "returned")
+    own = pb.cost(pb.residuals(basis, points, camera, alpha), options["norm"])
+    if not abs(cost - own) <= 1e-9 * max(abs(own), 1.0):
+        raise Invalid("returned", f"{where}/cost is not what its camera and coefficients cost ({own!r})")
+    frame = pb.normalise(basis, points)
+    with np.errstate(all="ignore"):
+        M, a, t = pb.linear_baseline(frame.X, frame.u, options["norm"], options["coefficients"],
+                                     options["coefficient_bound"])
+    expected = pb.to_raw(frame, M, t)
+    expected_cost = pb.cost(pb.residuals(basis, points, expected, a), options["norm"])
+    scale = max(float(np.max(np.abs(expected))), 1.0)
+    if not (np.all(np.abs(camera - expected) <= BASELINE_TOLERANCE * scale)
+            and np.all(np.abs(alpha - a) <= BASELINE_TOLERANCE * max(float(np.max(np.abs(a))), 1.0))
+            and abs(cost - expected_cost) <= BASELINE_TOLERANCE * max(abs(expected_cost), 1.0)):
+        raise Invalid("returned", f"{where} is not the linear estimate for this frame's data")
 
 
 def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, options: dict, proof: dict,
