@@ -1044,3 +1044,45 @@ class TestDoubtfulTied:
         forged["summary"]["warnings"].insert(0, {"code": "reconstruction_doubtful", "detail": "most cameras"})
         report = verify_any(forged)
         assert report.valid, report.first_failure
+
+
+class TestCalibrationCertificateOfCalibratedCameras:
+    """The incremental registration builds its projective cameras as K [R | t] with one K, so the
+    calibration certificate proves that K upgrades cameras which already assume it, not that the
+    tracks fix K (metric cost about 1e-28). The result must say so: the autocalibration stage's
+    ``cameras_built_with_one_K``, recomputed from the certificate's cameras, and the
+    ``certified_K_of_calibrated_cameras`` warning beside it."""
+
+    def test_cameras_built_with_one_K_are_recognised_and_projective_ones_are_not(self):
+        from scipy.spatial.transform import Rotation
+
+        from geocert.solvers.reconstruction.calibration_claim import built_with_one_K
+
+        K = np.array([[800.0, 0.5, 320.0], [0.0, 790.0, 240.0], [0.0, 0.0, 1.0]])
+        rng = np.random.default_rng(4)
+        cameras = [K @ np.c_[Rotation.random(random_state=i).as_matrix(), rng.normal(size=3)] for i in range(5)]
+        assert built_with_one_K(cameras) and built_with_one_K([-2.0 * P for P in cameras])
+        H = rng.normal(size=(4, 4))
+        assert not built_with_one_K([P @ H for P in cameras])
+        other = np.diag([1.01, 1.0, 1.0]) @ K
+        assert not built_with_one_K(cameras[:4] + [other @ np.linalg.solve(K, cameras[4])])
+
+    def test_the_genuine_result_says_so(self, calibrated_reconstruction):
+        stage = next(s for s in calibrated_reconstruction["stages"] if s["name"] == "autocalibration")
+        assert stage["cameras_built_with_one_K"] is True
+        assert "certified_K_of_calibrated_cameras" in [w["code"] for w in calibrated_reconstruction["summary"]["warnings"]]
+        assert verify_any(copy.deepcopy(calibrated_reconstruction)).valid
+
+    def test_the_warning_left_out_is_refused(self, calibrated_reconstruction):
+        forged = copy.deepcopy(calibrated_reconstruction)
+        forged["summary"]["warnings"] = [w for w in forged["summary"]["warnings"]
+                                         if w["code"] != "certified_K_of_calibrated_cameras"]
+        assert refused(forged)["check"] == "returned"
+
+    def test_the_stage_denying_it_is_refused(self, calibrated_reconstruction):
+        forged = copy.deepcopy(calibrated_reconstruction)
+        stage = next(s for s in forged["stages"] if s["name"] == "autocalibration")
+        stage["cameras_built_with_one_K"] = False
+        forged["summary"]["warnings"] = [w for w in forged["summary"]["warnings"]
+                                         if w["code"] != "certified_K_of_calibrated_cameras"]
+        assert refused(forged)["check"] == "returned"

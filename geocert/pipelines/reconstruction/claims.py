@@ -235,6 +235,11 @@ def calibration_claim(out) -> CalibrationClaim:
                 f"certified one (focal {difference['focal_percent']:+.2f}%, "
                 f"principal point {difference['principal_point_px']:.1f} px): {which}; the certificate is about "
                 "calibration.certified_K")})
+        if stage.get("cameras_built_with_one_K"):
+            warnings.append({"code": "certified_K_of_calibrated_cameras", "detail": (
+                "the projective cameras the certified K upgrades are the registration's, built as K [R | t] with "
+                "one K: the certificate proves that this K upgrades them optimally, which they already assume, "
+                "not that the tracks alone fix K (calibration.determined says whether the motion does)")})
         edges = on_range_edge(cert, stage.get("intrinsics") or {})
         if edges:
             warnings.append({"code": "certified_K_on_range_edge", "detail": (

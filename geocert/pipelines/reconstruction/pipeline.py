@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
-from geocert.solvers.reconstruction import bundle, camera_claim, projective, structure, upgrade
+from geocert.solvers.reconstruction import bundle, calibration_claim, camera_claim, projective, structure, upgrade
 from geocert.pipelines.reconstruction import claims
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.tracks import Observations
@@ -419,7 +419,9 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
                                                               0, 1, p),
                                        skip_critical=options.autocalibration_on_critical_motion == "skip")
         stage.update(method=method, stages=metric.stages, certified=metric.certified, intrinsics=metric.ranges,
-                     points_used=metric.autocalibration_points, K=None if metric.K is None else metric.K.tolist())
+                     points_used=metric.autocalibration_points, K=None if metric.K is None else metric.K.tolist(),
+                     cameras_built_with_one_K=calibration_claim.built_with_one_K(
+                         [P for P in proj.cameras if P is not None]))
         if metric.certified and options.certificate == "full":
             if metric.proven is None:  # the direct method's upgrade: no certificate of it is carried here
                 stage.update(certified=False, reason="the direct method certified this upgrade, but a reconstruction "

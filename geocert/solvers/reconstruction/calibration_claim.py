@@ -10,6 +10,9 @@ import numpy as np
 
 EDGE_FRACTION = 0.01  # a certified intrinsic within this fraction of its range's width from an end is on the edge
 SAME = 1e-9  # relative to K's largest entry: the same K up to rounding and JSON round trips
+# Cameras built as K [R | t] for one K give it back to this (relative to its largest entry) after
+# rounding; cameras of a projective reconstruction do not share a K by chance.
+BUILT_WITH_ONE_K = 1e-6
 
 
 def same(a, b) -> bool:
@@ -53,3 +56,20 @@ def on_range_edge(K, ranges: dict) -> list[str]:
         if where <= EDGE_FRACTION or where >= 1 - EDGE_FRACTION:
             edges.append(name)
     return edges
+
+
+def built_with_one_K(cameras) -> bool:
+    """Whether projective cameras (n, 3, 4) are all K [R | t] for one K: then a certificate that
+    K upgrades them optimally proves what they were built with, not what their tracks fix."""
+    Ks = []
+    J = np.eye(3)[::-1]
+    for P in np.asarray(cameras, dtype=float):
+        omega = P[:, :3] @ P[:, :3].T
+        try:
+            L = np.linalg.cholesky(J @ (omega / omega[2, 2]) @ J)
+        except np.linalg.LinAlgError:
+            return False
+        K = J @ L @ J
+        Ks.append(K * np.sign(np.diag(K))[None, :] / abs(K[2, 2]))
+    return len(Ks) >= 2 and all(np.all(np.abs(K - Ks[0]) <= BUILT_WITH_ONE_K * float(np.abs(Ks[0]).max()))
+                                for K in Ks[1:])

@@ -321,9 +321,27 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
         raise Invalid("returned", "summary: autocalibration_certified and autocalibration_determined must be "
                                   "summary/calibration's certified and determined")
     for code, due in (("returned_K_not_certified", certified and not returned), ("certified_K_on_range_edge", edges),
-                      ("critical_motion", critical)):
+                      ("critical_motion", critical),
+                      ("certified_K_of_calibrated_cameras", cert is not None and _built_with_one_K(result, stage))):
         if due and not _warned(summary, code):
             raise Invalid("returned", f"summary: no {code} warning, though the calibration calls for it")
+
+
+def _built_with_one_K(result: dict, stage: dict) -> bool:
+    """Whether the calibration certificate's projective cameras (read and checked by
+    _proven_calibration) are all K [R | t] for one K, as the autocalibration stage's
+    ``cameras_built_with_one_K`` must say. A result written before the stage said so (a stored
+    version 2 document) lacks the field, and is not asked for the warning."""
+    cameras = result["calibration_certificate"]["data"]["cameras"]
+    built = calibration_claim.built_with_one_K(numbers(cameras, "calibration_certificate/data/cameras",
+                                                       (None, 3, 4), "returned"))
+    if "cameras_built_with_one_K" not in stage:
+        return False
+    if stage["cameras_built_with_one_K"] is not built:
+        raise Invalid("returned", f"stages/autocalibration/cameras_built_with_one_K is "
+                                  f"{stage['cameras_built_with_one_K']!r}: the calibration certificate's cameras "
+                                  f"are {'' if built else 'not '}all K [R | t] for one K")
+    return built
 
 
 def _plain(value: Any) -> Any:
