@@ -255,3 +255,33 @@ class TestStageCountsUntied:
         assert result["summary"]["views"] == 6
         stage.update(views_registered=19, points=49, observations=289)
         refused(result)
+
+
+class TestItemsDropped:
+    """A result and its certificate may hold fewer items than the certificate's data (the hashes
+    cover the data, not the items): the last tracks of a triangulation, or frames of a bilinear
+    job, dropped from both verify, and stats then counts only those left. A job of six tracks,
+    one of them not certified, verifies as "5 items, 5 certified" once that track is dropped.
+    Suggested fix (verify._verify or each adapter): the certificate's items are exactly the
+    data's (one per track, map or frame, index = position), and a result's stats.items that
+    count."""
+
+    @staticmethod
+    def one_uncertified(name: str, key: str) -> dict:
+        result = stored(name)
+        last = len(result[key]) - 1
+        return _uncertified(result, key, last, cost=result[key][last]["cost"], lower_bound=None, gap=None)
+
+    @pytest.mark.parametrize("name, key", [("triangulation_l2l2", "tracks"), ("bilinear_l2l2", "frames")])
+    def test_the_true_claim_verifies(self, name, key):
+        report = verify_any(self.one_uncertified(name, key))
+        assert report.valid, report.first_failure
+
+    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
+    @pytest.mark.parametrize("name, key", [("triangulation_l2l2", "tracks"), ("bilinear_l2l2", "frames")])
+    def test_an_item_dropped_is_refused(self, name, key):
+        forged = self.one_uncertified(name, key)
+        del forged[key][-1], forged["certificate"]["items"][-1]
+        left = len(forged[key])
+        forged["stats"].update(items=left, certified=left, statuses={"optimal": left})
+        refused(forged)
