@@ -330,3 +330,40 @@ class TestAutocalibrationStatusUntied:
         forged = self.metric_stopped(stratified_result)
         assert forged["status"] == "optimal" and forged["stats"]["statuses"] == {"optimal": 1}
         refused(forged)
+
+
+class TestBilinearDefaultBoxUnchecked:
+    """With camera_bound null the scope's camera box is derived per frame "from the incumbent (4
+    times its largest entry, rounded up to a power of two, at least 1 normalised)"
+    (bilinear.options, search.root_half_width), but the verifier takes any box the proof states
+    (check_search reads camera_bound only when it is set). A job solved with camera_bound 28 (the
+    best camera inside |M| <= 28) and its options then set to camera_bound null (hashes
+    recomputed) verifies: frame 0 "certified optimal" at cost 5,516, where the genuine
+    certificate of the same data and options (box +-512) proves 1.617 optimal. The report's scope
+    and the frame's root_region do state +-28, but nothing says it is not the box the options
+    give. Suggested fix (bilinear.verification.check_search): with camera_bound null, the box is
+    the symmetric cube root_half_width gives for the returned camera (or at least half a power
+    of two, >= 1 normalised and >= 4 times the returned camera's largest entry rounded up), the
+    solver deriving its final box from the camera it returns so that the two agree."""
+
+    @staticmethod
+    def solved(camera_bound) -> dict:
+        from geocert.batch import solve_job
+
+        document = stored("bilinear_l2l2")["certificate"]
+        options = {name: document["options"][name] for name in ("norm", "coefficients", "camera", "coefficient_bound",
+                                                                  "rel_gap", "abs_gap")}
+        return solve_job({"kind": "bilinear", "data": document["data"],
+                          "options": {**options, "camera_bound": camera_bound, "certificate": "full"}})
+
+    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
+    def test_a_box_narrower_than_the_default_is_refused(self):
+        from tests.solvers.test_forgeries import rehash
+
+        genuine = stored("bilinear_l2l2")
+        largest = max(abs(x) for row in genuine["frames"][0]["camera"] for x in row[:3])
+        forged = self.solved(0.3 * largest)
+        assert forged["frames"][0]["certified"] and forged["frames"][0]["cost"] > 1000 * genuine["frames"][0]["cost"]
+        forged["certificate"]["options"]["camera_bound"] = None
+        rehash(forged["certificate"])
+        refused(forged)
