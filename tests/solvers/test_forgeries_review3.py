@@ -103,6 +103,33 @@ class TestUncertifiedFiguresOfEveryKind:
         assert refused(forged)["check"] in ("returned", "claim", "objective")
 
 
+    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
+    def test_a_lower_bound_above_the_optimum_beside_a_worse_point_is_refused(self):
+        """uncertified_figures asks an uncertified track's lower_bound to be at most its own
+        point's cost: with the point moved to cost 65 times the optimum (13.83), it verifies
+        stating a lower_bound of 50 times the optimum. No proof is carried, so no check can
+        tell a true bound from this one."""
+        import numpy as np
+
+        from geocert.solvers.fractional.items import TRACKS
+
+        result = stored("triangulation_l2l2")
+        claim = result["certificate"]["items"][0]
+        item = TRACKS.item(TRACKS.read(result["certificate"]["data"], 0), "L2L2")
+
+        def cost(point):
+            return float((item.raw_residuals(np.append(point, 1.0))[0] ** 2).sum())
+
+        direction, step, start = np.array([0.6, -0.48, 0.64]), 1e-3, np.array(claim["point"])
+        while cost(start + step * direction) < 60 * claim["cost"]:
+            step *= 1.1
+        point = (start + step * direction).tolist()
+        lower = 50 * claim["cost"]
+        forged = _uncertified(result, "tracks", 0, point=point, cost=cost(point), lower_bound=lower,
+                              gap=cost(point) - lower)
+        assert refused(forged)["check"] in ("returned", "claim", "objective")
+
+
 def _job(result: dict) -> dict:
     """``result`` inside a job document as GET /v1/jobs/{id} returns it (app.schemas.Job)."""
     stats = result["stats"]
