@@ -428,3 +428,67 @@ class TestBilinearDefaultBoxUnchecked:
         forged["certificate"]["options"]["camera_bound"] = None
         rehash(forged["certificate"])
         refused(forged)
+
+
+@pytest.fixture(scope="module")
+def reconstruction_with_k1():
+    """make_fixtures' reconstruction scene solved with radial_distortion "on": every camera states
+    the k1 its observations were undistorted with, the summary its distortion statement and the
+    certificates_conditional_on_k1 warning."""
+    from geocert.batch import solve_job
+    from geocert.solvers.reconstruction import synthetic
+
+    scene = synthetic.scene(views=6, points=16, seed=3, noise_px=0.5)
+    data = {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
+            "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
+                       for views, pixels in scene.tracks]}
+    result = solve_job({"kind": "reconstruction", "data": data,
+                        "options": {"certificate": "full", "camera_rel_gap": 0.25, "radial_distortion": "on"}})
+    assert all(camera["k1"] for camera in result["cameras"] if camera["registered"])
+    assert any(w["code"] == "certificates_conditional_on_k1" for w in result["summary"]["warnings"])
+    return result
+
+
+class TestRadialTermUntied:
+    """With a radial term kept (radial_distortion "on" or "auto"), every certificate of a
+    reconstruction is about the observations undistorted with an estimated k1, and the result
+    says so: each camera's k1 and distortion_centre, summary.distortion ("certified": false, its
+    statement) and the certificates_conditional_on_k1 warning (pipelines.reconstruction.claims).
+    No check reads any of them: the genuine result verifies with the warning and
+    summary.distortion removed (the cameras still stating k1 -0.051, the certificate's options
+    radial_distortion "on"), with summary.distortion saying the k1 is certified, or saying
+    k1 = 0 beside cameras undistorted with -0.051; and a result solved without the term verifies
+    with a camera stating k1 0.3. Suggested fix (reconstruction.verification): summary.distortion
+    and the warning exactly when the cameras state a k1, its k1 theirs (one shared term), its
+    certified false, the projective stage's radial_distortion agreeing; no k1 on any camera
+    otherwise."""
+
+    @staticmethod
+    def unwarned(result: dict) -> dict:
+        result = copy.deepcopy(result)
+        result["summary"].pop("distortion")
+        result["summary"]["warnings"] = [w for w in result["summary"]["warnings"]
+                                         if w["code"] != "certificates_conditional_on_k1"]
+        return result
+
+    def test_the_genuine_result_verifies(self, reconstruction_with_k1):
+        report = verify_any(reconstruction_with_k1)
+        assert report.valid, report.first_failure
+
+    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
+    def test_the_k1_warning_removed_is_refused(self, reconstruction_with_k1):
+        refused(self.unwarned(reconstruction_with_k1))
+
+    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
+    @pytest.mark.parametrize("change", [{"certified": True}, {"k1": 0.0}])
+    def test_a_distortion_statement_not_the_cameras_is_refused(self, reconstruction_with_k1, change):
+        forged = copy.deepcopy(reconstruction_with_k1)
+        forged["summary"]["distortion"].update(change)
+        refused(forged)
+
+    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
+    def test_a_k1_stated_without_the_term_is_refused(self, calibrated_reconstruction):
+        forged = copy.deepcopy(calibrated_reconstruction)
+        assert forged["cameras"][0]["k1"] is None
+        forged["cameras"][0]["k1"] = 0.3
+        refused(forged)
