@@ -130,6 +130,26 @@ class TestUncertifiedFiguresOfEveryKind:
         assert refused(forged)["check"] in ("returned", "claim", "objective")
 
 
+class TestUncertifiedSummaries:
+    """verify._check_summaries reads the certificate summary of a certified item only: an item
+    the result calls uncertified verifies carrying a summary that says its tolerance was met
+    ("tolerance_met": true, with the leaves of a proof it does not carry), where the solvers write
+    tolerance_met = certified (kinds.bilinear, kinds.autocalibration, documents). A track and a
+    bilinear frame, not certified (their figures true), verify beside the summaries of their
+    certified selves. Suggested fix (_check_summaries): an uncertified item's summary, when it has
+    one, states tolerance_met false."""
+
+    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
+    @pytest.mark.parametrize("name, key", [("triangulation_l2l2", "tracks"), ("bilinear_l2l2", "frames")])
+    def test_an_uncertified_item_saying_its_tolerance_was_met_is_refused(self, name, key):
+        result = stored(name)
+        summary = copy.deepcopy(result[key][0]["certificate"])
+        assert summary["tolerance_met"] is True
+        forged = _uncertified(result, key, 0, cost=result[key][0]["cost"], lower_bound=None, gap=None)
+        forged[key][0]["certificate"] = summary
+        refused(forged)
+
+
 def _job(result: dict) -> dict:
     """``result`` inside a job document as GET /v1/jobs/{id} returns it (app.schemas.Job)."""
     stats = result["stats"]
