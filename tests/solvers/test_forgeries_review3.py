@@ -512,3 +512,44 @@ class TestRadialTermUntied:
         assert forged["cameras"][0]["k1"] is None
         forged["cameras"][0]["k1"] = 0.3
         refused(forged)
+
+
+def _K_signed(result: dict, signs: tuple) -> dict:
+    """The stratified result with its certified K times diag(signs) (K K^T, the DIAC whose cost
+    the metric stage proves, is unchanged), in the claim, the stage and the result, and the
+    upgrade, quadric, cameras and points recomputed from it as the verifier recomputes them."""
+    import numpy as np
+
+    from geocert.solvers.autocalibration import problem as pr
+    from geocert.solvers.autocalibration.verification import read_data
+
+    result = copy.deepcopy(result)
+    K = (np.array(result["K"]) @ np.diag(signs)).tolist()
+    result["K"] = result["stages"][1]["K"] = result["certificate"]["items"][1]["K"] = K
+    cameras, points, size = read_data(result["certificate"]["data"])
+    problem = pr.prepare(cameras, points, size, dict(result["certificate"]["options"].get("intrinsics") or {}))
+    H = pr.upgrade(problem, pr.plane_from_input(problem, np.array(result["plane_at_infinity"])),
+                   np.linalg.solve(problem.K0, np.array(K)))
+    result.update(upgrade=H.tolist(), dual_absolute_quadric=pr.dual_absolute_quadric(H).tolist(),
+                  cameras=pr.metric_cameras(cameras, H), points=pr.metric_points(H, points))
+    return result
+
+
+class TestCalibrationSigns:
+    """The metric stage proves a bound on the DIAC K K^T, and its claim's K is read through
+    w_of_K (K K^T) only: any K with the same K K^T passes, and K times diag(-1, 1, 1) or
+    diag(-1, -1, 1) is upper triangular with K[2][2] = 1 like the genuine one. The stored
+    stratified result verifies with its K's focal lengths negated (-1,000 px, outside the focal
+    range [300, 5,000] the scope states), its upgrade, cameras and points recomputed from it; with
+    one sign negated the returned metric reconstruction is mirrored, and every point lies behind
+    every camera it returns (K [R | t] X has negative depth: metric_cameras keeps R a rotation by
+    negating P). Suggested fix (AutocalibrationVerification.check_claim, stage 1): K's diagonal
+    positive (the one upper-triangular root of K K^T the ranges are about); and check_returned
+    asks the returned metric points to be in front of the returned cameras, as chirality says."""
+
+    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
+    @pytest.mark.parametrize("signs", [(-1.0, 1.0, 1.0), (-1.0, -1.0, 1.0)])
+    def test_a_K_with_negative_focal_lengths_is_refused(self, signs):
+        forged = _K_signed(stored("autocalibration_stratified"), signs)
+        assert forged["K"][0][0] < 0
+        refused(forged)
