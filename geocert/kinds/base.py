@@ -14,6 +14,7 @@ from typing import Any, Callable, Protocol, runtime_checkable
 
 from pydantic import BaseModel
 
+from geocert.solvers import verified_kinds
 from geocert.solvers.core.geometry import InputError
 
 ProgressCallback = Callable[[Any], "bool | None"]
@@ -108,6 +109,12 @@ class Registry:
         for name, default in OPTIONAL_MEMBERS.items():  # what a kind may leave out, filled in once here
             if not hasattr(kind, name):
                 setattr(kind, name, default)
+        # the verifier's registry holds the served kinds' contracts; a kind added here joins it
+        # (or, when served, must state the contract the verifier already checks it by)
+        verified_kinds.register(verified_kinds.VerifiedKind(
+            kind.name, kind.item_key, tuple(kind.solution_fields), kind.verification,
+            getattr(kind, "options_type", None) if not hasattr(kind.verification, "checked_options") else None,
+            kind.certifies))
         self._kinds[kind.name] = kind
         return kind
 

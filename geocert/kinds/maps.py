@@ -13,7 +13,7 @@ from geocert.kinds.documents import brief_certificate, certificate_summary, outc
 from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
 from geocert.solvers.fractional.inputs import check_correspondences
-from geocert.solvers.fractional.items import MapItems
+from geocert.solvers.verified_kinds import VERIFIED_KINDS
 from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.fractional.results import MapResult
 
@@ -88,7 +88,7 @@ class MapKind:
                  example: dict):
         self.name, self.dimensions, self.description = name, dimensions, description
         self.request_model, self.example = request_model, example
-        self.verification = MapItems(name, dimensions)
+        self.verification = VERIFIED_KINDS[name].verification
 
     def parse(self, data: Any, items: range | None = None) -> ParsedMaps:
         if not isinstance(data, dict) or "maps" not in data:

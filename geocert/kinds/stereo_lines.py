@@ -21,7 +21,7 @@ from geocert.kinds.schema import Determinacy, Finite, JobBase, JobStats, Strict
 from geocert.solvers.core.bnb import Progress
 from geocert.solvers.core.determinacy import safely
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
-from geocert.solvers.core.strict import Invalid
+from geocert.solvers.verified_kinds import NOT_CERTIFIED, VERIFIED_KINDS
 from geocert.solvers.lines.geometry import Rig
 from geocert.solvers.lines.matching import MatchingOptions
 from geocert.solvers.lines.pipeline import SOLVERS, StereoLinesOptions, compose, estimate_pair
@@ -32,9 +32,6 @@ Row3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 Matrix3 = Annotated[list[Row3], Field(min_length=3, max_length=3)]
 Quad = Annotated[list[Segment], Field(min_length=4, max_length=4,
                                       description="one line's segments: left k, right k, left k+1, right k+1")]
-
-NOT_CERTIFIED = ("stereo_lines results are estimates (RANSAC around algebraic solvers), never certified: there is "
-                 "no certificate to verify")
 
 
 class RigIn(Strict):
@@ -222,7 +219,7 @@ class StereoLinesKind:
     result_model = StereoLinesResult
     solution_fields = ("R", "t")
     certifies = False  # estimates only: no certificate, nothing for the verifier to check
-    verification = None  # set below
+    verification = VERIFIED_KINDS["stereo_lines"].verification  # refuses any certificate, saying why
     example: dict = {}  # set below (a synthetic scene)
 
     def parse(self, data: Any, items: range | None = None) -> ParsedLines:
@@ -361,22 +358,6 @@ class StereoLinesKind:
                 "trajectory": compose(motions), "stats": stats}
 
 
-class NoCertificates:
-    """The verifier's adapter for a kind that issues no certificate: any document claiming one
-    for this kind is refused, saying why."""
-
-    domain = "none: stereo_lines issues estimates, not certificates"
-
-    def checked_options(self, options: Any) -> dict:
-        raise Invalid("format", NOT_CERTIFIED)
-
-    def read(self, data: Any, index: int):
-        raise Invalid("format", NOT_CERTIFIED)
-
-    def item(self, arrays, norm):  # pragma: no cover - read refuses first
-        raise Invalid("format", NOT_CERTIFIED)
-
-
 def translation_judged(determinacy: dict | None, t) -> tuple[bool, str | None]:
     """Whether the pair's determinacy fixes t to 10% of its length, and if not, why (a narrow
     baseline seeing distant lines fixes the rotation long before the translation)."""
@@ -425,6 +406,5 @@ def example_job() -> dict:
 
 
 KIND = StereoLinesKind()
-KIND.verification = NoCertificates()
 KIND.example = example_job()
 __all__ = ["KIND", "NOT_CERTIFIED", "SOLVERS"]

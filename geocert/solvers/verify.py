@@ -3,7 +3,8 @@
 The checks every kind shares live here: the document's format and hashes, the options a claim
 depends on, each certified claim's fields, its solution's cost and scope recomputed from the raw
 data, and the agreement of a result with its certificate. What depends on the kind comes from its
-verification adapter in the registry (geocert.kinds): how to read an item's data and rebuild its
+verification adapter in the verifier's own registry (verified_kinds.py; the service's kinds take
+their verification contract from it, never the reverse): how to read an item's data and rebuild its
 program, and which proof types it takes ("trivial" for every kind; "branch_and_bound" for the
 fractional kinds, checked in geocert.solvers.fractional.proof; room for others, e.g. "sdp_dual").
 docs/certificate.md explains each step.
@@ -81,12 +82,13 @@ def residual_options(kind: str, options: dict) -> dict:
 
 
 def _kind(kind: Any):
-    """The kind, from the registry; a kind not served is invalid."""
-    from geocert.kinds import KINDS  # the registry imports no conic solver either
+    """The kind's verification contract, from the verifier's registry; a kind not served is invalid."""
+    # imported here: the adapters import modules (fractional.maps, .triangulation) that import this one
+    from geocert.solvers.verified_kinds import VERIFIED_KINDS
 
-    if kind not in KINDS:
-        raise Invalid("format", f"kind {kind!r} is not served (served: {', '.join(KINDS.names())})")
-    return KINDS.get(kind)
+    if not isinstance(kind, str) or kind not in VERIFIED_KINDS:
+        raise Invalid("format", f"kind {kind!r:.40} is not served (served: {', '.join(VERIFIED_KINDS)})")
+    return VERIFIED_KINDS[kind]
 
 
 def _adapter(kind: Any):
@@ -139,9 +141,9 @@ def estimates_kind(document: Any) -> str | None:
         return None
     inner = document["result"] if isinstance(document.get("result"), dict) else document
     name = inner.get("kind", document.get("kind"))
-    from geocert.kinds import KINDS
+    from geocert.solvers.verified_kinds import VERIFIED_KINDS
 
-    if isinstance(name, str) and name in KINDS and not KINDS.get(name).certifies:
+    if isinstance(name, str) and name in VERIFIED_KINDS and not VERIFIED_KINDS[name].certifies:
         return name
     return None
 

@@ -1,7 +1,6 @@
 """The estimators import nothing above them: no module of geocert/solvers imports the kinds, the
-app, the workers or the job runner (kinds call solvers, never the reverse). The verifier's module
-(solvers/verify.py) still finds each kind's adapter through the kinds' registry: the one exception,
-listed here until the verifier has a registry of its own."""
+app, the workers or the job runner (kinds call solvers, never the reverse). The verifier finds each
+kind's adapter in its own registry (solvers/verified_kinds.py), not the kinds'."""
 
 from __future__ import annotations
 
@@ -10,7 +9,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2] / "geocert"
 ABOVE = ("geocert.kinds", "geocert.app", "geocert.workers", "geocert.batch", "geocert.service", "geocert.pipelines")
-KNOWN = {"solvers/verify.py": {"geocert.kinds"}}
+KNOWN: dict = {}
 
 
 def imported(path: Path) -> set[str]:
@@ -30,3 +29,46 @@ def test_no_solver_module_imports_a_layer_above_it():
         if above:
             found[str(path.relative_to(ROOT))] = above
     assert found == KNOWN
+
+
+def test_the_verifier_checks_every_kind_without_the_service():
+    """A third party's verifier: stored certificates of every certifying kind verify, and a
+    stereo_lines document is refused saying why, without geocert.kinds (or anything above the
+    solvers) ever imported."""
+    import subprocess
+    import sys
+
+    code = """
+import json, sys
+from pathlib import Path
+from geocert.solvers.verify import verify_any
+folder = Path("tests/data/certificates")
+names = sorted(p.stem for p in folder.glob("*.json") if not p.stem.startswith("make"))
+valid = {name: verify_any(json.loads((folder / f"{name}.json").read_text())).valid for name in names}
+estimate = verify_any({"kind": "stereo_lines", "status": "estimate", "pairs": []})
+above = sorted({m.split(".")[1] for m in sys.modules if m.startswith("geocert.") and m.split(".")[1] in
+                ("kinds", "app", "workers", "batch", "service", "pipelines")})
+print(json.dumps({"valid": valid, "estimate": estimate.first_failure, "above": above}))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT.parent)
+    assert out.returncode == 0, out.stderr[-2000:]
+    import json
+
+    seen = json.loads(out.stdout.strip().splitlines()[-1])
+    assert len(seen["valid"]) >= 7 and all(seen["valid"].values()), seen["valid"]
+    assert seen["estimate"]["check"] == "format" and "never certified" in seen["estimate"]["detail"]
+    assert seen["above"] == []
+
+
+def test_a_served_kind_registered_with_another_contract_is_refused():
+    import dataclasses
+
+    import pytest
+
+    from geocert.solvers.verified_kinds import VERIFIED_KINDS, register
+
+    known = VERIFIED_KINDS["triangulation"]
+    assert register(known) is known
+    with pytest.raises(ValueError):
+        register(dataclasses.replace(known, item_key="points"))
+    assert VERIFIED_KINDS["triangulation"] is known

@@ -612,7 +612,12 @@ class ReconstructionItems(TrackItems):
         scope; the camera certificate hashes it as its rel_gap)."""
         from geocert.solvers.verify import residual_options
 
-        checked = residual_options("reconstruction", options)  # its ranges cap rel_gap and abs_gap
+        checked = residual_options("triangulation", options)
+        # the reconstruction's options cap the points' gaps too: at rel_gap 0.999 "certified"
+        # would hold whatever a point costs
+        for name, cap in (("rel_gap", camera_claim.MAX_REL_GAP), ("abs_gap", camera_claim.MAX_ABS_GAP)):
+            if not checked[name] <= cap:
+                raise Invalid("options", f"options/{name}: must be a finite number at most {cap!r}")
         if options.get("camera_rel_gap") is not None:
             checked["camera_rel_gap"] = number(options["camera_rel_gap"], "options/camera_rel_gap", "options")
             if not 0 <= checked["camera_rel_gap"] <= camera_claim.MAX_REL_GAP:
