@@ -141,3 +141,33 @@ def test_a_task_killed_at_its_hard_limit_fails_its_job_and_is_not_delivered_agai
             "cameras": [[[800, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]], [[800, 0, 320, -800], [0, 800, 240, 0], [0, 0, 1, 0]]],
             "tracks": [{"views": [0, 1], "points": [[330, 250], [250, 251]]}]}}).json()["id"]
         assert ended(client, follower, limit_s=120)["status"] == "succeeded"
+
+
+def test_a_large_triangulation_ends_at_its_job_time_limit_with_what_it_finished(tmp_path):
+    """3000 tracks, each a search of its own (max_residual), in 6 tasks of 500 solved as batches:
+    with job_time_limit_s 2 their tasks' Celery limits are sized from it (they were 500 times
+    time_limit_s: 4 hours), and the job ends succeeded, the tracks finished by then kept, the
+    rest time_limit, not started, uncertified."""
+    from tests.support import service_job
+
+    body = service_job(np.random.default_rng(7), 3000, views=4, max_residual=50.0, detail="brief",
+                       job_time_limit_s=2)
+    with cluster(tmp_path, workers=0) as (running, client):
+        store = redis.Redis.from_url(running.redis_url, decode_responses=True)
+        response = client.post("/v1/jobs", json=body)
+        assert response.status_code == 202, response.text
+        margin, soft_after, hard_after = 120, 30, 30
+        limits = queued_time_limits(store)
+        assert len(limits) == 6
+        assert all(soft == pytest.approx(2 + margin + soft_after) and hard == pytest.approx(soft + hard_after)
+                   for soft, hard in limits)
+        running.start_worker()
+        job = ended(client, response.json()["id"])
+    assert job["status"] == "succeeded", job["error"]
+    tracks = job["result"]["tracks"]
+    not_started = [track for track in tracks if "not started" in (track["reason"] or "")]
+    assert not_started and len(not_started) < len(tracks)
+    assert all(track["status"] == "time_limit" and not track["certified"] and track["point"] is None
+               for track in not_started)
+    assert any(track["certified"] for track in tracks)
+    assert not any(track["status"] == "cancelled" for track in tracks)

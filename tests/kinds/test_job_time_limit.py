@@ -1,0 +1,61 @@
+"""A many-item job's time limit in all (options.job_time_limit_s): its items share one clock, so a
+large triangulation (tracks solved 500 at a time, each batch's searches one after another) ends at
+it with the tracks it finished, the rest reading time_limit, not started, never certified. Before,
+a batch had no shared clock: 500 tracks each ran their own time_limit_s (about 4 hours a task)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from geocert.batch import solve_job
+from geocert.solvers.core.geometry import InputError
+from geocert.solvers.fractional.batched import triangulate_many
+from geocert.solvers.fractional.options import TriangulationOptions
+from tests.support import service_job
+
+NOT_STARTED = "not started"
+
+
+def searched_job(tracks: int, **options) -> dict:
+    """Tracks each solved by a search of its own (a scope limit, max_residual, sends every track
+    of a batch to the search alone: milliseconds each, one after another)."""
+    return service_job(np.random.default_rng(7), tracks, views=4, max_residual=50.0, detail="brief", **options)
+
+
+def test_a_large_triangulation_ends_at_its_job_time_limit_keeping_what_it_finished():
+    job = searched_job(3000, job_time_limit_s=0.5)
+    tracks = solve_job(job)["tracks"]
+    assert len(tracks) == 3000
+    finished = [track for track in tracks if NOT_STARTED not in (track["reason"] or "")]
+    not_started = [track for track in tracks if NOT_STARTED in (track["reason"] or "")]
+    assert finished and not_started  # the clock ended it part way (3000 searches take far longer)
+    assert tracks[:len(finished)] == finished  # in order: what was solved first is kept
+    assert all(track["status"] != "cancelled" for track in tracks)
+    assert any(track["certified"] and track["point"] is not None for track in finished)
+    for track in not_started:
+        assert track["status"] == "time_limit" and not track["certified"]
+        assert track["point"] is None and track["cost"] is None and track["lower_bound"] is None
+        assert "job_time_limit_s" in track["reason"]
+    for track in finished:  # a search stopped by the clock says so; nothing uncertified claims it
+        assert track["certified"] == (track["status"] == "optimal")
+
+
+def test_a_batch_given_a_past_deadline_starts_no_search():
+    job = searched_job(20)
+    cameras = np.asarray(job["data"]["cameras"], dtype=float)
+    tracks = [(track["views"], np.asarray(track["points"], dtype=float)) for track in job["data"]["tracks"]]
+    results = triangulate_many(cameras, tracks, TriangulationOptions(max_residual=50.0),
+                               deadline=time.monotonic() - 1, not_started="not started: past it")
+    assert [result.status for result in results] == ["time_limit"] * 20
+    assert not any(result.certified for result in results)
+    assert all(result.point is None and result.reason == "not started: past it" for result in results)
+
+
+@pytest.mark.parametrize("value", [0, -1, 1e6, float("nan")])
+def test_a_job_time_limit_out_of_range_is_refused_naming_it(value):
+    with pytest.raises(InputError) as refused:
+        solve_job({**searched_job(2), "options": {"job_time_limit_s": value}})
+    assert refused.value.field == "options/job_time_limit_s"
