@@ -116,7 +116,9 @@ def solve_chunk(self, job_id: str, start: int, stop: int, request_id: str | None
     Fairness: the task first takes one of its key's solver slots (``JobStore.take_slot``: a key's
     tasks run on every live solver process but GEOCERT_SOLVERS_KEPT_FOR_OTHERS); with none free it
     is put back on the queue to start later (``_defer``), its job still queued, so that another
-    key's job starts on the solver kept free.
+    key's job starts on the solver kept free. A task of a job past its time limit in all
+    (job_time_limit_s) takes no slot: it solves nothing, storing its items as not started, so a
+    job's tasks still queued end it within moments of its clock, not one slot's turn at a time.
 
     When Redis goes away under the task, the job is not failed (that needs Redis too): the task
     waits for Redis to come back and is retried (its items are stored per item, so solving them
@@ -125,7 +127,8 @@ def solve_chunk(self, job_id: str, start: int, stop: int, request_id: str | None
     with logs.context(job_id=job_id, request_id=request_id, items=f"{start}-{stop}"):
         slot = self.request.id
         try:
-            if not store().take_slot(job_id, slot, get_settings().solvers_kept_for_others):
+            if not _past_its_time_limit(store(), job_id) and \
+                    not store().take_slot(job_id, slot, get_settings().solvers_kept_for_others):
                 _defer(self.request.id, job_id, start, stop, request_id, deferrals)
                 return
             try:
@@ -222,6 +225,13 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
         else:
             end_with_error(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
                            kind=kind, options=options)
+
+
+def _past_its_time_limit(jobs: JobStore, job_id: str) -> bool:
+    """Whether the job's clock in all (its options' job_time_limit_s, from ``started_at``) has run out."""
+    fields = jobs.fields(job_id, "started_at", "job_time_limit_s")
+    return bool(fields and fields["started_at"] is not None and fields["job_time_limit_s"] is not None
+                and time.time() > fields["started_at"] + fields["job_time_limit_s"])
 
 
 def _ran_before(jobs: JobStore, job_id: str) -> float:
