@@ -97,19 +97,20 @@ def test_a_jobs_tasks_are_limited_by_its_own_limits_and_it_ends_by_them(tmp_path
 
 
 def test_a_reconstruction_past_its_limits_ends_by_its_own_clock_not_by_the_last_resort(tmp_path):
-    """Per point 1 ms and per autocalibration stage 50 ms: the job's own limits allow it about
-    1.6 s in all (time_bound_s), and with a margin of 1 s the last resort stops its task 1 s after
-    that. The registration and adjustments had no clock of their own, so the last resort always
-    came first: the job failed, "Task time limit exceeded". Now they stop at the job's own clock:
-    the job succeeds, its item and every stage it stopped read time_limit, and nothing is queued
-    again. (The last resort stays for work that runs past the margin between two checks.)"""
-    with cluster(tmp_path, workers=1, geocert_task_time_margin_s="1") as (running, client):
-        job_id = client.post("/v1/jobs", json=small_reconstruction()).json()["id"]
+    """40 views whose limits add up to 0.07 s in all (time_bound_s), less than their registration
+    takes: the registration and adjustments had no clock of their own, so the job ran its whole
+    registration and every stage, and its task was held to the last resort only. Now they stop at
+    the job's own clock: the job succeeds, its item and every stage it stopped read time_limit
+    (none cancelled), and nothing is queued again."""
+    from tests.kinds.test_job_time_limit import registration_past_its_limits
+
+    with cluster(tmp_path, workers=1) as (running, client):
+        job_id = client.post("/v1/jobs", json=registration_past_its_limits()).json()["id"]
         job = ended(client, job_id)
         assert job["status"] == "succeeded", job["error"]
         assert job["result"]["stats"]["statuses"] == {"time_limit": 1}
         stages = {stage["name"]: stage["status"] for stage in job["result"]["stages"]}
-        assert "time_limit" in stages.values() and "cancelled" not in stages.values()
+        assert stages["projective"] == "time_limit" and "cancelled" not in stages.values()
         store = redis.Redis.from_url(running.redis_url, decode_responses=True)
         assert store.llen(f"geocert:job:{job_id}:tasks") == 1
         time.sleep(20)  # beyond the visibility timeout and a reaper round: nothing ran it again
