@@ -5,7 +5,7 @@ CPU, the other key's slowest GET /v1/jobs while the API answered it, the peak me
 worker process, what the attacker got and how long until its job ended, and how long the other
 key's small job (one track) waited to start and took to end, submitted right after the attack.
 
-    .venv/bin/python -m bench.abuse [--only api,bodies,worker,stereo,webhooks,fairness]
+    .venv/bin/python -m bench.abuse [--only api,bodies,worker,stereo,clocks,webhooks,fairness]
 
   api       the attacks the API now refuses from the request alone (photo bombs, views, a bilinear
             basis, /v1/orient, stereo segments, webhook destinations, Last-Event-ID, names), with
@@ -16,6 +16,10 @@ key's small job (one track) waited to start and took to end, submitted right aft
   worker    the same jobs with the budgets raised so that they reach a worker: the worker's own
             bounds (its memory limit, the solvers' clock checks) and the other key's wait;
   stereo    the stereo_lines jobs of ``worker`` alone;
+  clocks    jobs whose size alone would hold a worker far past their time limits: a triangulation of
+            20,000 tracks each searched alone (tasks of 500, solved as batches), ended by its
+            job_time_limit_s; a reconstruction of 100 views whose registration outlasts its
+            limits in all (time_bound_s);
   webhooks  a tarpit receiver (a byte every 5 s) and a delete racing a delivery;
   fairness  the attacker queues 12 long jobs on one worker of two solver processes; the other
             key's wait with the per-key share and without it (GEOCERT_SOLVERS_KEPT_FOR_OTHERS=0:
@@ -53,6 +57,10 @@ SMALL = {"kind": "triangulation", "data": {
     "tracks": [{"views": [0, 1], "points": [[330, 250], [250, 251]]}]}}
 
 
+RECONSTRUCTION_100 = ("reconstruction from tracks, 100 views, 5000 points, time_limit_s 0.001, "
+                     "autocalibration_time_limit_s 0.05, structure_time_limit_s 1.5 (1.6 s in all)")
+
+
 # What the review reproduced on the code before (one worker, embedded Redis, loopback).
 PHOTO_BOMB = "202, queued; the API held +2.4 GB (every photo decoded at submission)"
 WORKER_BOMB = ("a solver peaked at 5.9 GB, was killed at the 100 s hard limit and re-queued three times: 'Tasks "
@@ -79,6 +87,13 @@ BEFORE = {
     "a tarpit receiver (a byte every 5 s), 3 attempts of 10 s": "held the only worker 89 s; the record stayed 'waiting', "
                                                                "attempts 0, for ever",
     "a job deleted while its webhook is delivered": "geocert:job:{id} re-created with the callback URL and no expiry",
+    # Not in the review: the batches' and the registration's missing clocks (from the code
+    # before: a task of 500 tracks was held to 500 times time_limit_s).
+    **{f"triangulation, 20,000 tracks each searched alone, time_limit_s 30, job_time_limit_s {limit}":
+       "no clock in all: each task of 500 tracks allowed 500 x 30 s (its Celery limits 15,000 s + 180 s); the "
+       "20,000 searches about 10 ms each: 200 s of a solver" for limit in (10, 2)},
+    RECONSTRUCTION_100: "no clock in the registration or the adjustments (they asked for a cancel only): they ran "
+                        "to their end whatever the job's limits in all",
 }
 
 
@@ -313,6 +328,61 @@ def bench_stereo() -> None:
         report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
 
 
+def searched_tracks(tracks: int, job_time_limit_s: float) -> dict:
+    """Tracks each solved by a search of its own (a scope limit, max_residual, sends every track
+    of a batch to the search alone): milliseconds each, one after another in its batch."""
+    from tests.support import service_job
+
+    return service_job(np.random.default_rng(7), tracks, views=4, max_residual=50.0, detail="brief",
+                       time_limit_s=30, job_time_limit_s=job_time_limit_s)
+
+
+def reconstruction_tracks(views: int, points: int) -> dict:
+    from geocert.solvers.reconstruction import synthetic
+
+    scene = synthetic.scene(views=views, points=points, seed=3, noise_px=0.3)
+    return {"kind": "reconstruction",
+            "options": {"time_limit_s": 0.001, "autocalibration_time_limit_s": 0.05, "structure_time_limit_s": 1.5},
+            "data": {"views": [{"image_size": list(scene.image_size)}] * views,
+                     "tracks": [{"views": [int(v) for v in seen], "points": np.round(pixels, 3).tolist()}
+                                for seen, pixels in scene.tracks]}}
+
+
+def kept_and_stopped(client, job_id: str) -> str:
+    """What a job the clock ended kept: its items' statuses (a triangulation's tracks), or its
+    stages' (a reconstruction's)."""
+    job = client.get(f"/v1/jobs/{job_id}", headers=ATTACKER).json()
+    ran = f"ran {job['finished_at'] - job['started_at']:.1f} s from its start; " if job.get("finished_at") else ""
+    result = job.get("result") or {}
+    if "tracks" in result:
+        not_started = sum("not started" in (track["reason"] or "") for track in result["tracks"])
+        return (f"{ran}tracks {result['stats']['statuses']}, {not_started} of them not started, "
+                f"{result['stats']['certified']} certified")
+    registered = sum(camera["registered"] for camera in result["cameras"])
+    return f"{ran}item {result['stats']['statuses']}, {registered} views registered, {len(result['points'])} points"
+
+
+def bench_clocks() -> None:
+    """Jobs whose size alone would hold a worker far past their limits, ended by their clock in
+    all: job_time_limit_s (a triangulation's tracks, solved 500 at a time) and a reconstruction's
+    time_bound_s (its registration and adjustments, which had no clock)."""
+    print("clocks: large jobs ended by their time limit in all", flush=True)
+    with cluster(workers=1, concurrency=2, **KEYS) as running:
+        jobs = [(f"triangulation, 20,000 tracks each searched alone, time_limit_s 30, job_time_limit_s {limit}",
+                 searched_tracks(20_000, limit)) for limit in (10, 2)]
+        jobs.append((RECONSTRUCTION_100, reconstruction_tracks(100, 5000)))
+        for name, body in jobs:
+            sent = {}
+
+            def send(client, body=body, sent=sent):
+                response = client.post("/v1/jobs", json=body, headers=ATTACKER, timeout=600)
+                sent["id"] = response.json().get("id")
+                return response
+            attack(running, name, send)
+            report("  what it kept", kept_and_stopped(running.client, sent["id"]))
+        report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
 class Receiver:
     """A webhook receiver on loopback: ``answer(handler)`` answers each POST (tests use it too)."""
 
@@ -482,7 +552,7 @@ def bench_bodies() -> None:
 
 
 SECTIONS = {"api": bench_api, "bodies": bench_bodies, "worker": bench_worker, "stereo": bench_stereo,
-            "webhooks": bench_webhooks, "fairness": bench_fairness}
+            "clocks": bench_clocks, "webhooks": bench_webhooks, "fairness": bench_fairness}
 
 
 def main() -> None:

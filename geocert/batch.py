@@ -104,17 +104,58 @@ class ItemProgress:
         return False
 
 
+def job_time_limit_of(options: Any) -> float | None:
+    """The job's own time limit in all (``job_time_limit_s``, the many-item kinds' option), None
+    for a kind without one (a one-item kind, bounded by its own stage limits: time_bound_s)."""
+    limit = getattr(options, "job_time_limit_s", None)
+    return None if limit is None else float(limit)
+
+
+def job_deadline(options: Any, started: float) -> float | None:
+    """The ``time.monotonic()`` value past which a job begun at ``started`` (the same clock)
+    starts no item and stops the running ones: None without a job time limit."""
+    limit = job_time_limit_of(options)
+    return None if limit is None else started + limit
+
+
+def not_started_item(kind, options) -> dict:
+    """An item the job's time limit ended before it started: status ``time_limit``, never
+    certified, no solution, saying so (the kind's unsolved item)."""
+    item = kind.cancelled_item()
+    reason = (f"not started: the job's time limit (options.job_time_limit_s, "
+              f"{job_time_limit_of(options):g} s) passed before this item started")
+    return {**item, "status": "time_limit", "reason": reason}
+
+
+def within_deadline(options: Any, deadline: float | None) -> Any:
+    """The options an item started now runs with: its ``time_limit_s`` no longer than what is
+    left before the job's deadline, so its search stops there with status ``time_limit`` and its
+    best answer so far."""
+    if deadline is None or not hasattr(options, "time_limit_s"):
+        return options
+    left = deadline - time.monotonic()
+    if left >= options.time_limit_s:
+        return options
+    return dataclasses.replace(options, time_limit_s=max(1e-3, left))
+
+
 def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None = None,
                 should_stop: StopCheck | None = None, total: int | None = None,
-                stop_at: float | None = None, on_item: Callable[[int, dict], None] | None = None) -> list[dict]:
+                stop_at: float | None = None, on_item: Callable[[int, dict], None] | None = None,
+                deadline: float | None = None) -> list[dict]:
     """Solve the given items in order; once stopped, the rest are marked cancelled unsolved.
     After the ``time.monotonic()`` value ``stop_at`` no new item is started (at least one is
     always solved): the list returned is then shorter, and the caller solves the rest later.
+    ``deadline`` (the same clock: the job's, job_deadline) is one clock every item shares: an
+    item started before it runs at most to it (within_deadline; a batch of items too), and the
+    items not started by then read ``time_limit``, not started (not_started_item): the job ends
+    there with what it finished.
     ``on_item(index, item)`` sees each item as it ends, before the progress that counts it."""
     tracker = ItemProgress(total if total is not None else len(indices), sink, should_stop, abs_gap_of(options))
     items = []
     # A kind that solves many items at once (solve_batch) takes them a group at a time: the
-    # budget and a cancel are seen between groups, progress at each item of a group.
+    # budget and a cancel are seen between groups, progress at each item of a group; the
+    # deadline inside a group too (solve_batch's own).
     group = kind.batch_size if kind.solve_batch is not None else 1
     for begin in range(0, len(indices), group):
         if stop_at is not None and items and not tracker.stopped and time.monotonic() > stop_at:
@@ -127,10 +168,12 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
                 if on_item is not None:
                     on_item(index, items[-1])
             continue
-        if group == 1:
-            solved = [kind.solve_item(parsed, chosen[0], options, tracker.engine_callback)]
+        if deadline is not None and time.monotonic() >= deadline:
+            solved = [not_started_item(kind, options) for _ in chosen]
+        elif group == 1:
+            solved = [kind.solve_item(parsed, chosen[0], within_deadline(options, deadline), tracker.engine_callback)]
         else:
-            solved = kind.solve_batch(parsed, list(chosen), options, tracker.engine_callback)
+            solved = kind.solve_batch(parsed, list(chosen), options, tracker.engine_callback, deadline=deadline)
         for index, item in zip(chosen, solved):
             items.append(item)
             if on_item is not None:
@@ -139,13 +182,16 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
     return items
 
 
-def task_time_bound_s(kind, item_bound_s: float, items: int, budget_s: float) -> float:
+def task_time_bound_s(kind, item_bound_s: float, items: int, budget_s: float, job_limit_s: float | None = None) -> float:
     """The longest a task solving ``items`` items of a job runs when every item keeps its own
     time limits (``item_bound_s`` each: the kind's ``time_bound_s``): it starts no new group of
     items after ``budget_s`` (solve_items's ``stop_at``), and the group started last runs its
-    limits. The work between the solvers' clock checks is not counted."""
+    limits; and no task of a job with a time limit in all (``job_limit_s``: its options'
+    job_time_limit_s) runs past it, however large its group. The work between the solvers'
+    clock checks is not counted."""
     group = min(items, kind.batch_size if kind.solve_batch is not None else 1)
-    return min(items * item_bound_s, budget_s + group * item_bound_s)
+    bound = min(items * item_bound_s, budget_s + group * item_bound_s)
+    return bound if job_limit_s is None else min(bound, job_limit_s)
 
 
 def item_sums(items: list[dict], abs_gap: float = 0.0) -> dict:
@@ -196,7 +242,8 @@ def solve_job(job: dict, sink: ProgressSink | None = None, should_stop: StopChec
     """Run a whole job in this process (the CLI's path): parse, solve every item, assemble."""
     kind, parsed, options = parse_job(job)
     start = time.perf_counter()
-    items = solve_items(kind, parsed, options, range(kind.count(parsed)), sink, should_stop)
+    items = solve_items(kind, parsed, options, range(kind.count(parsed)), sink, should_stop,
+                        deadline=job_deadline(options, time.monotonic()))
     return assemble(kind, job, options, items, job_stats(items, time.perf_counter() - start))
 
 
@@ -306,4 +353,5 @@ def parse_job(job: Any):
 
 
 __all__ = ["parse_job", "solve_job", "solve_items", "job_stats", "assemble", "ItemProgress", "item_sums", "merged_sums",
-           "stats_from", "streams_result", "result_fragment", "result_shell", "task_time_bound_s"]
+           "stats_from", "streams_result", "result_fragment", "result_shell", "task_time_bound_s",
+           "job_deadline", "job_time_limit_of", "not_started_item", "within_deadline"]

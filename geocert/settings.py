@@ -73,6 +73,10 @@ class Settings(BaseSettings):
     # Server-side maxima of the per-item options time_limit_s and max_nodes (422 beyond them).
     max_item_time_limit_s: float = 60.0
     max_item_nodes: int = 100_000
+    # Server-side maximum of a many-item job's time limit in all, the option job_time_limit_s of
+    # triangulation, resection, homography, bilinear and stereo_lines (422 beyond; a default above
+    # it is lowered to it): its items share that one clock, so a job of any size ends near it.
+    max_job_time_limit_s: float = 600.0
     # Items per queued task: batches are split into chunks that run in parallel. Each kind has
     # its own default (100 tracks, 1 map); GEOCERT_CHUNK_SIZES (JSON, by kind) overrides it.
     chunk_sizes: dict[str, int] = {}

@@ -75,9 +75,11 @@ def _item_time_limit(parsed: Any, options: Any) -> float:
 # which the job store keeps item by item so that a task reads only its chunk's); its certificate's
 # data are the job's (a kind whose claims are about what an earlier stage found, e.g.
 # reconstruction's points in the cameras it returns, states those instead).
-# solve_batch(parsed, indices, options, callback) -> documents: many items solved at once (as
-# solve_item would solve each, in order), batch_size of them at a time, when that shares work
-# (triangulation); ``callback`` as solve_item's, for what runs long inside.
+# solve_batch(parsed, indices, options, callback, deadline=None) -> documents: many items solved
+# at once (as solve_item would solve each, in order), batch_size of them at a time, when that
+# shares work (triangulation); ``callback`` as solve_item's, for what runs long inside; ``deadline``
+# (time.monotonic(), the job's: batch.job_deadline) one clock for the whole batch: each item's
+# search stops by it, and an item not started by then reads time_limit (batch.not_started_item).
 # streamed_result: its result is its items in order (under item_key) plus members that depend on
 # the options and stats alone, so a large job's result is stored a task's run of items at a time
 # and never assembled whole (batch.streams_result).

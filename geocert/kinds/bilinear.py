@@ -49,6 +49,9 @@ class BilinearOptionsIn(Strict):
     abs_gap: Finite = Field(_DEFAULTS.abs_gap, **_RANGES["abs_gap"], description="... or gap <= abs_gap (cost units)")
     max_nodes: int = Field(_DEFAULTS.max_nodes, **_RANGES["max_nodes"], description="per frame")
     time_limit_s: Finite = Field(_DEFAULTS.time_limit_s, **_RANGES["time_limit_s"], description="per frame")
+    job_time_limit_s: Finite = Field(_DEFAULTS.job_time_limit_s, **_DEFAULTS.JOB_LIMIT_RANGE, description=(
+        "the job in all: its frames share this one clock (past it the frame running stops with its best answer, "
+        "status time_limit, and the frames not started read time_limit, not started)"))
     certificate: Literal["summary", "full"] = Field(_DEFAULTS.certificate, description=(
         "full: every bound's proof (dual vectors), checkable without a conic solver"))
 

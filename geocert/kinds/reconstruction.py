@@ -426,8 +426,9 @@ class ReconstructionKind:
     def time_bound_s(self, parsed: Parsed, options: ReconstructionOptions) -> float:
         """Its limits, whatever its size: the features' time limit (photos), two autocalibration
         stages, structure_time_limit_s for the points and cameras together, and time_limit_s for
-        each of the last point and camera searches started before it. (The registration and the
-        adjustments check a cancel between iterations; their length is the margin's to cover.)"""
+        each of the last point and camera searches started before it. It is also the job's clock
+        in all (solve_item): the registration and the adjustments, which have no limit of their
+        own, stop at it between iterations, as every later stage does."""
         matching = options.feature_options().time_limit_s if parsed.tracks is None else 0.0
         return matching + 2 * options.autocalibration_time_limit_s + options.structure_time_limit_s \
             + 2 * options.time_limit_s
@@ -442,8 +443,13 @@ class ReconstructionKind:
         from geocert.pipelines.reconstruction import pipeline
 
         start = time.perf_counter()
+        limit_s = self.time_bound_s(parsed, options)
+        clock = {"passed": False}  # the job's time limit in all passed: the run stops where it is
 
         def report(stage: str, done: int, total: int, progress=None) -> bool:
+            if time.perf_counter() - start > limit_s:
+                clock["passed"] = True
+                return True
             if callback is None:
                 return False
             label = f"{stage} {done}/{total}" if total > 1 else stage
@@ -492,6 +498,8 @@ class ReconstructionKind:
                 options = replace(options, focal_prior_px=exif["focal_px"])  # a prior the adjustment refines
                 images_document["focal_prior_from_exif"] = exif
             out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
+        if clock["passed"]:
+            _stopped_by_clock(out, limit_s)
         calibration_proof = self._calibration_proof(out, options)
         cameras = [self._camera(camera, parsed) for camera in out.cameras]
         points = [{"track": p.track, **track_document(p.result), "observations": p.observations} for p in out.points]
@@ -508,7 +516,7 @@ class ReconstructionKind:
                 "images": images_document, "camera_results": self._camera_items(out, options, camera_maps),
                 # A cancelled run keeps what it did (pipeline.reconstruct); the item says it was
                 # stopped, so the job ends "cancelled" (workers.tasks._end), not "succeeded".
-                "status": "cancelled" if out.cancelled else (
+                "status": "cancelled" if out.cancelled else "time_limit" if clock["passed"] else (
                     "optimal" if all(p["certified"] for p in points) and points else "not_certified"),
                 "certified": bool(points) and all(p["certified"] for p in points),
                 "nodes": sum(p["nodes"] for p in points), "elapsed_s": time.perf_counter() - start,
@@ -632,3 +640,26 @@ def _jsonable(value):
 
 
 KIND = ReconstructionKind()
+
+
+def _stopped_by_clock(out, limit_s: float) -> None:
+    """A run the job's time limit in all stopped (the pipeline saw it as a cancel): what it
+    finished is kept, and every stage, point or camera it stopped says ``time_limit``, not
+    ``cancelled`` (the job was not cancelled: it ends succeeded, its item time_limit)."""
+    passed = (f"time_limit: the job's time limit in all ({limit_s:g} s: its matching, two autocalibration stages, "
+              "structure_time_limit_s and two time_limit_s) passed")
+    for stage in out.stages:
+        if stage.get("status") == "cancelled":
+            kept = (stage.get("reason") or "").partition(": ")[2]  # what the stage kept, as a cancel says it
+            stage.update(status="time_limit", reason=passed + (f": {kept}" if kept else ""))
+    for point in out.points:
+        if point.result.status == "cancelled":
+            point.result.status, point.result.reason = "time_limit", passed
+    for camera in out.cameras:
+        bound = camera.bound
+        if bound is not None and bound.status == "cancelled":
+            bound.status, bound.reason = "time_limit", passed
+        if bound is not None and bound.result is not None and bound.result.status == "cancelled":
+            bound.result.status, bound.result.reason = "time_limit", passed
+    out.cancelled = False
+

@@ -42,7 +42,18 @@ def options_model(name: str, defaults, residual_units: str) -> type[BaseModel]:
             defaults.detail, description="brief: each item carries its solution, bounds and status only "
                                          "(certificate and determinacy null, determinacy not computed): "
                                          "for large jobs; what is proven is the same")),
+        **job_time_limit_field(defaults),
     )
+
+
+def job_time_limit_field(defaults) -> dict:
+    """The option ``job_time_limit_s`` of a many-item kind whose options have it (solvers'
+    JobLimit), as a create_model field; none for a kind without."""
+    if not hasattr(defaults, "job_time_limit_s"):
+        return {}
+    return {"job_time_limit_s": (Finite, Field(defaults.job_time_limit_s, **defaults.JOB_LIMIT_RANGE, description=(
+        "the job in all, from when it starts: its items share this one clock; past it the item running stops "
+        "with its best answer (status time_limit) and the items not started read time_limit, not started")))}
 
 
 class JobBase(Strict):

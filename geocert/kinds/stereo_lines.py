@@ -96,6 +96,9 @@ class StereoLinesOptionsIn(Strict):
     time_limit_s: Finite = Field(_DEFAULTS.time_limit_s, **StereoLinesOptions.OPTION_RANGES["time_limit_s"],
                                  description="per frame pair: RANSAC draws no sample after it, and the pair keeps "
                                              "its best motion so far (its reason says so)")
+    job_time_limit_s: Finite = Field(_DEFAULTS.job_time_limit_s, **_DEFAULTS.JOB_LIMIT_RANGE, description=(
+        "the job in all: its pairs share this one clock (past it the pair running keeps its best motion so far, "
+        "and the pairs not started read time_limit, not started)"))
 
 
 class StereoLinesJob(JobBase):

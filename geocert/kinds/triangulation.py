@@ -228,12 +228,16 @@ class TriangulationKind:
                                              getattr(result.certificate, "sublevel", None))
         return document
 
-    def solve_batch(self, parsed: ParsedTracks, indices: list[int], options: TriangulationOptions, callback) -> list[dict]:
+    def solve_batch(self, parsed: ParsedTracks, indices: list[int], options: TriangulationOptions, callback,
+                    deadline: float | None = None) -> list[dict]:
         from geocert.solvers.fractional import determinacy
         from geocert.solvers.fractional.batched import triangulate_many  # the conic solver, only to solve
 
         tracks = [parsed.tracks[index] for index in indices]
-        results = triangulate_many(parsed.cameras, tracks, options, callback)
+        not_started = None if deadline is None else (
+            "not started: the job's time limit (options.job_time_limit_s, "
+            f"{options.job_time_limit_s:g} s) passed before this track started")
+        results = triangulate_many(parsed.cameras, tracks, options, callback, deadline=deadline, not_started=not_started)
         documents = track_documents(results, options.detail, options.certificate == "full")
         if options.detail == "full":  # the same documents as _document's, for the whole batch at once
             for document, found in zip(documents, determinacy.tracks_many(parsed.cameras, tracks, results)):

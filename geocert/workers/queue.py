@@ -35,9 +35,10 @@ SOFT_AFTER_S = 30.0
 HARD_AFTER_S = 30.0
 
 
-def task_deadline_s(kind_name: str, item_bound_s: float | None, items: int) -> float:
+def task_deadline_s(kind_name: str, item_bound_s: float | None, items: int, job_limit_s: float | None = None) -> float:
     """Seconds after which a task solving ``items`` items of a job is stopped as a last resort:
-    what the job's own time limits allow it (batch.task_time_bound_s) plus GEOCERT_TASK_TIME_MARGIN_S.
+    what the job's own time limits allow it (batch.task_time_bound_s: its items' and, with
+    ``job_limit_s``, its job_time_limit_s) plus GEOCERT_TASK_TIME_MARGIN_S.
     ``item_bound_s`` None: a job recorded without it, held to the server's per-item maximum."""
     from geocert.batch import task_time_bound_s
     from geocert.kinds import get_kind
@@ -45,15 +46,16 @@ def task_deadline_s(kind_name: str, item_bound_s: float | None, items: int) -> f
 
     settings = get_settings()
     bound = settings.max_item_time_limit_s if item_bound_s is None else item_bound_s
-    return task_time_bound_s(get_kind(kind_name), bound, items, settings.chunk_time_budget_s) + settings.task_time_margin_s
+    return task_time_bound_s(get_kind(kind_name), bound, items, settings.chunk_time_budget_s,
+                             job_limit_s) + settings.task_time_margin_s
 
 
-def task_options(kind_name: str, item_bound_s: float | None, items: int) -> dict:
+def task_options(kind_name: str, item_bound_s: float | None, items: int, job_limit_s: float | None = None) -> dict:
     """Celery's options for such a task: soft and hard time limits after its deadline, and the
     errback that ends its job ``failed`` (keeping what it finished) when the hard limit kills it,
     so that a killed task is never delivered again."""
     _solve_chunk_task()
-    soft = task_deadline_s(kind_name, item_bound_s, items) + SOFT_AFTER_S
+    soft = task_deadline_s(kind_name, item_bound_s, items, job_limit_s) + SOFT_AFTER_S
     return {"soft_time_limit": soft, "time_limit": soft + HARD_AFTER_S, "link_error": _SOLVE_CHUNK_FAILED.s()}
 
 
@@ -65,7 +67,8 @@ def submit_chunks(meta: dict, request_id: str | None) -> None:
 
     solve_chunk = _solve_chunk_task()
     signatures = [solve_chunk.s(meta["id"], start, stop, request_id).set(
-                      task_id=task_id, **task_options(meta["kind"], meta.get("item_time_bound_s"), stop - start))
+                      task_id=task_id, **task_options(meta["kind"], meta.get("item_time_bound_s"), stop - start,
+                                                      meta.get("job_time_limit_s")))
                   for (start, stop), task_id in zip(meta["chunks"], meta["task_ids"])]
     group(signatures).apply_async()
 

@@ -57,7 +57,7 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
         jobs.touch(job_id)  # give the re-queued tasks a full period before the next look
         for start, stop in chunks:
             task = solve_chunk.apply_async((job_id, start, stop), **task_options(
-                meta["kind"], meta.get("item_time_bound_s"), stop - start))
+                meta["kind"], meta.get("item_time_bound_s"), stop - start, meta.get("job_time_limit_s")))
             jobs.add_task_ids(job_id, task.id)
         log.warning("job %s had no live task for %.0f s: re-queued %d chunk(s), %d item(s) missing (round %d)",
                     job_id, stale_after_s, len(chunks), len(missing), reaps)

@@ -53,7 +53,7 @@ class JobStore:
     def create(self, kind: str, request: dict, items_total: int, chunk_size: int, owner: str,
                callback_url: str | None = None, active_limit: int = 0, task_ids=None,
                chunk_key: str | None = None, items_key: str | None = None,
-               item_time_bound_s: float | None = None) -> dict | None:
+               item_time_bound_s: float | None = None, job_time_limit_s: float | None = None) -> dict | None:
         """Record a new queued job, counted among the owner's active jobs, with its ``status``
         event and the ids its tasks will have (one per chunk; made here unless given), in one
         round trip. None when the owner already has ``active_limit`` jobs queued or running (0:
@@ -69,7 +69,8 @@ class JobStore:
         request's own list is ignored.
 
         ``item_time_bound_s``: the longest one of its items runs while the job's own time limits
-        hold (its kind's ``time_bound_s``), from which its tasks' last-resort limits are sized."""
+        hold (its kind's ``time_bound_s``), from which its tasks' last-resort limits are sized, with
+        ``job_time_limit_s`` (a many-item kind's option: the job's limit in all)."""
         job_id = uuid.uuid4().hex
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
@@ -78,7 +79,7 @@ class JobStore:
             "progress": {"nodes": 0, "open_boxes": 0, "lower_bound": None, "upper_bound": None, "gap_abs": None,
                          "gap_rel": None, "items_done": 0, "items_total": items_total,
                          "tracks_done": 0, "tracks_total": items_total, "elapsed_s": 0.0},  # tracks_*: deprecated names
-            "error": None, "item_time_bound_s": item_time_bound_s,
+            "error": None, "item_time_bound_s": item_time_bound_s, "job_time_limit_s": job_time_limit_s,
             "webhook": {"url": callback_url, "state": "waiting", "attempts": 0, "last_error": None,
                         "delivered_at": None} if callback_url else None,
         }

@@ -12,7 +12,8 @@ A job ends in one place, ``JobStore.end``, under the job's ``claim_end`` (one ca
 reaper gives up). A queued job cancelled ends in ``JobStore.cancel_if_queued`` instead. Either
 way ``after_end`` then counts the job and queues its webhook.
 
-Time limits: a job's own (each kind's time_limit_s) end it, keeping its best answers. A task
+Time limits: a job's own (each kind's time_limit_s; a many-item job's job_time_limit_s, one
+clock its tasks share from the job's ``started_at``) end it, keeping its best answers. A task
 still running past what those allow plus GEOCERT_TASK_TIME_MARGIN_S (queue.task_deadline_s) is
 stopped as a last resort, at the solvers' next check (the cancel's path), else by Celery's soft
 time limit, else by its hard one (the process killed; ``solve_chunk_failed`` runs in the
@@ -29,8 +30,8 @@ import time
 
 from geocert.settings import get_settings
 from geocert.solvers.core.geometry import InputError
-from geocert.batch import (abs_gap_of, assemble, item_counts, item_sums, merged_sums, result_fragment, result_json,
-                           result_shell, solve_items, stats_from, streams_result)
+from geocert.batch import (abs_gap_of, assemble, item_counts, item_sums, job_deadline, merged_sums, result_fragment,
+                           result_json, result_shell, solve_items, stats_from, streams_result)
 from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
@@ -115,7 +116,9 @@ def solve_chunk(self, job_id: str, start: int, stop: int, request_id: str | None
     Fairness: the task first takes one of its key's solver slots (``JobStore.take_slot``: a key's
     tasks run on every live solver process but GEOCERT_SOLVERS_KEPT_FOR_OTHERS); with none free it
     is put back on the queue to start later (``_defer``), its job still queued, so that another
-    key's job starts on the solver kept free.
+    key's job starts on the solver kept free. A task of a job past its time limit in all
+    (job_time_limit_s) takes no slot: it solves nothing, storing its items as not started, so a
+    job's tasks still queued end it within moments of its clock, not one slot's turn at a time.
 
     When Redis goes away under the task, the job is not failed (that needs Redis too): the task
     waits for Redis to come back and is retried (its items are stored per item, so solving them
@@ -124,7 +127,8 @@ def solve_chunk(self, job_id: str, start: int, stop: int, request_id: str | None
     with logs.context(job_id=job_id, request_id=request_id, items=f"{start}-{stop}"):
         slot = self.request.id
         try:
-            if not store().take_slot(job_id, slot, get_settings().solvers_kept_for_others):
+            if not _past_its_time_limit(store(), job_id) and \
+                    not store().take_slot(job_id, slot, get_settings().solvers_kept_for_others):
                 _defer(self.request.id, job_id, start, stop, request_id, deferrals)
                 return
             try:
@@ -141,12 +145,13 @@ def solve_chunk(self, job_id: str, start: int, stop: int, request_id: str | None
 def _defer(task_id: str, job_id: str, start: int, stop: int, request_id: str | None, deferrals: int) -> None:
     """Queue the task again (the same id: a cancel still revokes it) to start after a delay that
     doubles with each deferral, up to 5 s: its key holds all the solver slots it may."""
-    fields = store().fields(job_id, "kind", "item_time_bound_s")
+    fields = store().fields(job_id, "kind", "item_time_bound_s", "job_time_limit_s")
     if fields is None or fields["status"] not in ("queued", "running"):
         return  # ended or gone meanwhile: nothing to run
     solve_chunk.apply_async((job_id, start, stop, request_id, deferrals + 1), task_id=task_id,
                             countdown=min(5.0, 0.25 * 2 ** deferrals),
-                            **task_options(fields["kind"], fields["item_time_bound_s"], stop - start))
+                            **task_options(fields["kind"], fields["item_time_bound_s"], stop - start,
+                                           fields["job_time_limit_s"]))
 
 
 def _free_slot(slot: str) -> None:
@@ -168,12 +173,12 @@ def _wait_for_redis(jobs: JobStore, limit_s: float) -> None:
 
 def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> None:
     jobs = store()
-    meta = jobs.fields(job_id, "items_total", "kind", "item_time_bound_s")
+    meta = jobs.fields(job_id, "items_total", "kind", "item_time_bound_s", "job_time_limit_s")
     if meta is None or not jobs.mark_running(job_id):
         return  # expired, deleted, or ended (cancelled) before it started: nothing to do
     settings = get_settings()
     began = time.monotonic()
-    deadline_s = task_deadline_s(meta["kind"], meta["item_time_bound_s"], stop - start)
+    deadline_s = task_deadline_s(meta["kind"], meta["item_time_bound_s"], stop - start, meta["job_time_limit_s"])
     publisher = kind = options = None
     try:
         request = jobs.chunk_request(job_id, start, stop)  # its own items only (see JobStore.create)
@@ -184,7 +189,8 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
                                       kind if streams_result(kind, options) else None, abs_gap_of(options),
                                       stop_by=began + deadline_s)
         items = solve_items(kind, parsed, options, range(start, stop), publisher, publisher.should_stop,
-                            stop_at=began + settings.chunk_time_budget_s, on_item=publisher.item_ended)
+                            stop_at=began + settings.chunk_time_budget_s, on_item=publisher.item_ended,
+                            deadline=job_deadline(options, began - _ran_before(jobs, job_id)))
         done = publisher.flush()
         metrics.record_items(jobs.r, kind.name, items)
         cut = start + len(items)
@@ -195,7 +201,8 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
         elif cut < stop:  # over the budget: the rest of the chunk becomes a task of its own
             log.info("continuing items %d-%d in a new task", cut, stop)
             task = solve_chunk.apply_async((job_id, cut, stop, request_id),
-                                           **task_options(kind.name, meta["item_time_bound_s"], stop - cut))
+                                           **task_options(kind.name, meta["item_time_bound_s"], stop - cut,
+                                                          meta["job_time_limit_s"]))
             jobs.add_task_ids(job_id, task.id)
         elif done == meta["items_total"] and jobs.claim_end(job_id):
             end_with_result(jobs, job_id, kind, options)
@@ -218,6 +225,22 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
         else:
             end_with_error(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
                            kind=kind, options=options)
+
+
+def _past_its_time_limit(jobs: JobStore, job_id: str) -> bool:
+    """Whether the job's clock in all (its options' job_time_limit_s, from ``started_at``) has run out."""
+    fields = jobs.fields(job_id, "started_at", "job_time_limit_s")
+    return bool(fields and fields["started_at"] is not None and fields["job_time_limit_s"] is not None
+                and time.time() > fields["started_at"] + fields["job_time_limit_s"])
+
+
+def _ran_before(jobs: JobStore, job_id: str) -> float:
+    """Seconds since the job started (its first task: ``started_at``), 0 for this task's own
+    start: the job's time limit is one clock its tasks share, wherever and whenever they run."""
+    started = jobs.fields(job_id, "started_at")
+    if started is None or started["started_at"] is None:
+        return 0.0
+    return max(0.0, time.time() - started["started_at"])
 
 
 MEMORY_TITLE = "Memory limit exceeded"
@@ -257,7 +280,7 @@ def solve_chunk_failed(request, exc, traceback) -> None:
     job_id = request.args[0]
     jobs = store()
     jobs.free_slot(request.id)
-    fields = jobs.fields(job_id, "kind", "item_time_bound_s")
+    fields = jobs.fields(job_id, "kind", "item_time_bound_s", "job_time_limit_s")
     if fields is None or fields["status"] in ("succeeded", "failed", "cancelled"):
         return
     kind, options = _kind_and_options(jobs, job_id)
@@ -270,7 +293,8 @@ def solve_chunk_failed(request, exc, traceback) -> None:
     elif isinstance(exc, WorkerLostError) and _stopped_by_shutdown(exc):
         log.warning("job %s: its solver process was stopped with its worker (%s): queued again", job_id, exc)
         solve_chunk.apply_async(tuple(request.args), task_id=request.id,
-                                **task_options(fields["kind"], fields["item_time_bound_s"], request.args[2] - request.args[1]))
+                                **task_options(fields["kind"], fields["item_time_bound_s"], request.args[2] - request.args[1],
+                                               fields["job_time_limit_s"]))
     elif isinstance(exc, WorkerLostError):  # its process died under it: never run again (celery_app)
         end_with_error(jobs, job_id, 500, PROCESS_DIED_TITLE,
                        f"the solver process running a task of this job died ({exc}): most likely killed for "

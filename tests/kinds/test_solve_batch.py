@@ -1,9 +1,11 @@
 """batch.solve_items with a kind that solves many items at once (solve_batch): groups of
-batch_size in order, progress per item, a cancel or the time budget seen between groups."""
+batch_size in order, progress per item, a cancel or the time budget seen between groups, and the
+job's deadline given to every group and seen between them."""
 
 from __future__ import annotations
 
 import time
+from types import SimpleNamespace
 
 from geocert.batch import solve_items
 
@@ -11,12 +13,16 @@ from geocert.batch import solve_items
 class CountingKind:
     """Items are numbers; an item's document is its square. Records each batch it is given."""
 
-    def __init__(self, batch_size: int):
+    def __init__(self, batch_size: int, pause_s: float = 0.0):
         self.batch_size = batch_size
+        self.pause_s = pause_s
         self.batches: list[list[int]] = []
+        self.deadlines: list[float | None] = []
 
-    def solve_batch(self, parsed, indices, options, callback):
+    def solve_batch(self, parsed, indices, options, callback, deadline=None):
         self.batches.append(list(indices))
+        self.deadlines.append(deadline)
+        time.sleep(self.pause_s)
         return [{"value": parsed[i] ** 2, "status": "optimal", "certified": True, "nodes": 1, "cost": 1.0,
                  "lower_bound": 1.0} for i in indices]
 
@@ -25,7 +31,8 @@ class CountingKind:
 
     @staticmethod
     def cancelled_item():
-        return {"status": "cancelled", "certified": False, "nodes": 0, "cost": None, "lower_bound": None}
+        return {"status": "cancelled", "certified": False, "nodes": 0, "cost": None, "lower_bound": None,
+                "reason": "cancelled"}
 
 
 class TestSolveBatch:
@@ -53,3 +60,19 @@ class TestSolveBatch:
         kind = CountingKind(batch_size=3)
         items = solve_items(kind, list(range(10)), None, range(10), stop_at=time.monotonic() - 1)
         assert kind.batches == [[0, 1, 2]] and len(items) == 3  # one group at least, then the caller goes on
+
+    def test_the_jobs_deadline_is_one_clock_for_every_group(self):
+        """Each group is given the job's deadline (its searches stop by it), and once it has
+        passed no group starts: those items read time_limit, not started, uncertified, while
+        the items finished before it are kept."""
+        kind = CountingKind(batch_size=4, pause_s=0.2)
+        deadline = time.monotonic() + 0.1
+        progress = []
+        items = solve_items(kind, list(range(10)), SimpleNamespace(job_time_limit_s=0.1), range(10),
+                            sink=progress.append, deadline=deadline)
+        assert kind.batches == [[0, 1, 2, 3]] and kind.deadlines == [deadline]
+        assert [item["status"] for item in items] == ["optimal"] * 4 + ["time_limit"] * 6
+        assert [item["value"] for item in items[:4]] == [0, 1, 4, 9]
+        assert not any(item["certified"] for item in items[4:])
+        assert all("job_time_limit_s" in item["reason"] and "not started" in item["reason"] for item in items[4:])
+        assert progress[-1]["items_done"] == 10  # ended by the clock: counted, as a search's time_limit is

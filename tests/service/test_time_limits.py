@@ -1,8 +1,9 @@
 """A job's own time limits decide when it ends, through real servers (embedded Redis, the API and
 Celery workers, each a process): a job whose limits allow longer than the server's per-item
-maximum ends by those limits with its best answer; a task that runs past them by
-GEOCERT_TASK_TIME_MARGIN_S is stopped as a last resort, its job failed with the reason and what it
-finished; and one killed by Celery's hard limit is failed the same way, never delivered again."""
+maximum ends by those limits with its best answer, a reconstruction and a large triangulation
+by their clock in all (time_bound_s, job_time_limit_s) with what they finished; and a task
+killed by Celery's hard limit, the last resort, fails its job with the reason and what it
+finished, never delivered again."""
 
 from __future__ import annotations
 
@@ -95,23 +96,26 @@ def test_a_jobs_tasks_are_limited_by_its_own_limits_and_it_ends_by_them(tmp_path
         assert job["result"]["plane_at_infinity"] is not None
 
 
-def test_a_task_past_its_limits_and_margin_fails_keeping_what_it_finished(tmp_path):
-    """Per point 1 ms and per autocalibration stage 50 ms: the job's own limits allow it about 2 s,
-    and with a margin of 1 s its task is stopped at the pipeline's next check. The job fails with
-    the reason, its result keeps the stages finished, and nothing is queued again."""
-    with cluster(tmp_path, workers=1, geocert_task_time_margin_s="1") as (running, client):
-        job_id = client.post("/v1/jobs", json=small_reconstruction()).json()["id"]
+def test_a_reconstruction_past_its_limits_ends_by_its_own_clock_not_by_the_last_resort(tmp_path):
+    """40 views whose limits add up to 0.07 s in all (time_bound_s), less than their registration
+    takes: the registration and adjustments had no clock of their own, so the job ran its whole
+    registration and every stage, and its task was held to the last resort only. Now they stop at
+    the job's own clock: the job succeeds, its item and every stage it stopped read time_limit
+    (none cancelled), and nothing is queued again."""
+    from tests.kinds.test_job_time_limit import registration_past_its_limits
+
+    with cluster(tmp_path, workers=1) as (running, client):
+        job_id = client.post("/v1/jobs", json=registration_past_its_limits()).json()["id"]
         job = ended(client, job_id)
-        assert job["status"] == "failed"
-        assert job["error"]["title"] == "Task time limit exceeded"
-        assert "GEOCERT_TASK_TIME_MARGIN_S" in job["error"]["detail"]
+        assert job["status"] == "succeeded", job["error"]
+        assert job["result"]["stats"]["statuses"] == {"time_limit": 1}
         stages = {stage["name"]: stage["status"] for stage in job["result"]["stages"]}
-        assert "cancelled" in stages.values()  # the stage it was stopped in, and those after it
+        assert stages["projective"] == "time_limit" and "cancelled" not in stages.values()
         store = redis.Redis.from_url(running.redis_url, decode_responses=True)
         assert store.llen(f"geocert:job:{job_id}:tasks") == 1
         time.sleep(20)  # beyond the visibility timeout and a reaper round: nothing ran it again
         again = client.get(f"/v1/jobs/{job_id}").json()
-        assert again["status"] == "failed" and again["finished_at"] == job["finished_at"]
+        assert again["status"] == "succeeded" and again["finished_at"] == job["finished_at"]
         assert store.hget(f"geocert:job:{job_id}", "reaps") is None and store.llen("celery") == 0
 
 
@@ -141,3 +145,33 @@ def test_a_task_killed_at_its_hard_limit_fails_its_job_and_is_not_delivered_agai
             "cameras": [[[800, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]], [[800, 0, 320, -800], [0, 800, 240, 0], [0, 0, 1, 0]]],
             "tracks": [{"views": [0, 1], "points": [[330, 250], [250, 251]]}]}}).json()["id"]
         assert ended(client, follower, limit_s=120)["status"] == "succeeded"
+
+
+def test_a_large_triangulation_ends_at_its_job_time_limit_with_what_it_finished(tmp_path):
+    """3000 tracks, each a search of its own (max_residual), in 6 tasks of 500 solved as batches:
+    with job_time_limit_s 2 their tasks' Celery limits are sized from it (they were 500 times
+    time_limit_s: 4 hours), and the job ends succeeded, the tracks finished by then kept, the
+    rest time_limit, not started, uncertified."""
+    from tests.support import service_job
+
+    body = service_job(np.random.default_rng(7), 3000, views=4, max_residual=50.0, detail="brief",
+                       job_time_limit_s=2)
+    with cluster(tmp_path, workers=0) as (running, client):
+        store = redis.Redis.from_url(running.redis_url, decode_responses=True)
+        response = client.post("/v1/jobs", json=body)
+        assert response.status_code == 202, response.text
+        margin, soft_after, hard_after = 120, 30, 30
+        limits = queued_time_limits(store)
+        assert len(limits) == 6
+        assert all(soft == pytest.approx(2 + margin + soft_after) and hard == pytest.approx(soft + hard_after)
+                   for soft, hard in limits)
+        running.start_worker()
+        job = ended(client, response.json()["id"])
+    assert job["status"] == "succeeded", job["error"]
+    tracks = job["result"]["tracks"]
+    not_started = [track for track in tracks if "not started" in (track["reason"] or "")]
+    assert not_started and len(not_started) < len(tracks)
+    assert all(track["status"] == "time_limit" and not track["certified"] and track["point"] is None
+               for track in not_started)
+    assert any(track["certified"] for track in tracks)
+    assert not any(track["status"] == "cancelled" for track in tracks)

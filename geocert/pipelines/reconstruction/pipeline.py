@@ -230,7 +230,8 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
         if found.status == "cancelled":  # the views registered so far are kept, at the focal length they had
             metric = start
             break
-        metric, _, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, options.threshold_px, model=model)
+        metric, _, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, options.threshold_px, model=model,
+                                      should_stop=lambda: asks(0, 1))  # stopped: the next round's registration stops too
         refined = float(metric.K[0, 0])
         step.update(refined_focal_px=refined, refined_k1=metric.k1)
         moved = abs(metric.k1 * (corner / refined) ** 3 * refined - k1 * (corner / focal) ** 3 * focal)
@@ -369,8 +370,11 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
                 if tell.asks("bundle_adjustment", 0, 1):
                     _keep_metric(out, metric, n_views, stage)
                 before = _rms(metric, obs, keep)
+                stop, stopping = _stop_check(tell, "bundle_adjustment")
                 metric, keep, figures = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, options.threshold_px,
-                                                       model="fixed")
+                                                       model="fixed", should_stop=stopping)
+                if stop["asked"]:
+                    _keep_metric(out, metric, n_views, stage, "adjusted as far as the adjustment went")
                 stage.update(started_from="calibrated", model="fixed", rms_px_before=before,
                              rms_px_after=_rms(metric, obs, keep), K=metric.K.tolist(),
                              observations_kept=figures["observations_kept"])
@@ -456,12 +460,7 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
         if options.bundle_adjustment:
             if tell.asks("bundle_adjustment", 0, 1):
                 _keep_metric(out, starts[0][1], n_views, stage)
-            stop = {"asked": False}  # asked each iteration of the adjustment; a cancel ends it where it is
-
-            def stopping() -> bool:
-                stop["asked"] = stop["asked"] or tell.asks("bundle_adjustment", 0, 1)
-                return stop["asked"]
-
+            stop, stopping = _stop_check(tell, "bundle_adjustment")
             name, metric, keep, before, trials = adjust_best(starts, obs, keep, options.threshold_px, model, stopping)
             if stop["asked"]:
                 _keep_metric(out, metric, n_views, stage, "adjusted as far as the adjustment went")
@@ -477,6 +476,19 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
         out.metric = metric = _normalise_frame(metric)
     keep = _check_cameras(out, metric, obs, keep, options.threshold_px)
     _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
+
+
+def _stop_check(tell, name: str):
+    """An adjustment's ``should_stop`` in stage ``name``: asks ``tell`` (a cancel, or the job's
+    clock: the kind's report) each iteration, and a stop ends it where it is; the dict returned
+    says whether one was asked."""
+    stop = {"asked": False}
+
+    def stopping() -> bool:
+        stop["asked"] = stop["asked"] or tell.asks(name, 0, 1)
+        return stop["asked"]
+
+    return stop, stopping
 
 
 def _undistorted(out: Reconstruction, obs: Observations, metric: upgrade.Metric, image_sizes,

@@ -7,7 +7,7 @@ import math
 from dataclasses import dataclass
 
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.fractional.options import CERTIFICATE_MODES, _describe, _within
+from geocert.solvers.fractional.options import CERTIFICATE_MODES, JobLimit, _describe, _within
 
 NORMS = ("L1L1", "L2L2")
 COEFFICIENTS = ("convex", "affine")
@@ -15,7 +15,7 @@ CAMERAS = ("affine",)
 
 
 @dataclass
-class BilinearOptions:
+class BilinearOptions(JobLimit):
     """``norm``: L1L1 (sum of absolute coordinate residuals: an LP relaxation, thesis 8.7) or L2L2
     (sum of squared residuals: an SOCP, 8.9). ``coefficients``: convex (alpha >= 0, sum 1) or
     affine (sum 1, |alpha_i| <= coefficient_bound). ``camera_bound``: the scope's camera box,
@@ -43,6 +43,7 @@ class BilinearOptions:
                               ("certificate", CERTIFICATE_MODES)):
             if getattr(self, name) not in allowed:
                 raise InputError(f"options/{name}", f"must be one of {', '.join(allowed)}")
+        self.check_job_limit()
         for name in ("rel_gap", "abs_gap", "time_limit_s", "max_nodes", "coefficient_bound", "camera_bound"):
             value = getattr(self, name)
             if name == "camera_bound" and value is None:

@@ -56,7 +56,7 @@ from geocert.solvers.fractional.columns import TrackResults
 from geocert.solvers.fractional.convexity_path import certify_tracks
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.fractional.relaxation import FractionalProgram, cost_unit, gamma_for
-from geocert.solvers.fractional.results import SearchCertificate, claim_of
+from geocert.solvers.fractional.results import SearchCertificate, TrackResult, claim_of
 from geocert.solvers.fractional.search import (MAX_SCALE, ROOT_SUBSET, branch_directions, depth_subspace,
                                                local_refine, recomputed_status, root_region)
 from geocert.solvers.fractional.items import PROGRAM_REFUSED, UNDISCOUNTABLE, TrackItem, refused_by_verifier
@@ -72,7 +72,8 @@ LEAF_MARGIN = 1e-8  # a root node's claimed bound below its computed safe bound 
 
 def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarray]],
                      options: TriangulationOptions | None = None,
-                     callback: Callable[[Progress], bool | None] | None = None) -> TrackResults:
+                     callback: Callable[[Progress], bool | None] | None = None,
+                     deadline: float | None = None, not_started: str = "not started: past the deadline") -> TrackResults:
     """Certified global optimum of every track: ``cameras`` (N, 3, 4) of the whole scene,
     ``tracks`` a list of ``(views, points)`` with ``views`` indices into ``cameras`` and
     ``points`` (len(views), 2). Returns one TrackResult per track, in order, as a TrackResults
@@ -105,7 +106,12 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
       digits, and ``elapsed_s`` (the batched work's time shared by the tracks it closed).
 
     Tracks the batched path does not close are solved by ``triangulate`` itself, so every
-    status it returns is possible. With GEOCERT_SELF_VERIFY=1 every certified result is
+    status it returns is possible. ``deadline`` (a ``time.monotonic()`` value) is one clock the
+    batch shares: each of those searches stops by it (its time_limit_s no longer than what is
+    left, so it ends ``time_limit`` with its best point), and a track not started by then reads
+    ``time_limit`` with reason ``not_started``, uncertified and without a point. The work before
+    them (the convexity path, the stacked roots) is bounded by the batch's size and not timed.
+    With GEOCERT_SELF_VERIFY=1 every certified result is
     checked by the verifier, as ``triangulate`` checks its own; the proof is returned only
     with ``options.certificate == "full"``.
     """
@@ -142,8 +148,13 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
     for i in alone:
         # triangulate self-checks its own results (and keeps the proof only when asked for).
         # ``callback`` sees (and may stop) these searches, the only ones that run long.
+        left = math.inf if deadline is None else deadline - time.monotonic()
+        if left <= 0:
+            results[i] = TrackResult("time_limit", False, reason=not_started)
+            continue
         views, points = tracks[i]
-        results[i] = triangulate(cameras[list(views)], points, options, callback)
+        run_alone = options if left >= options.time_limit_s else dataclasses.replace(options, time_limit_s=left)
+        results[i] = triangulate(cameras[list(views)], points, run_alone, callback)
     if checking:  # the columns' rows checked as the objects they would make (not kept)
         rows = [] if local is None else [(int(i), local.result(row)) for row, i in enumerate(local.index)]
         for i, result in [*searched.items(), *rows]:

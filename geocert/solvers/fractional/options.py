@@ -69,16 +69,42 @@ class FractionalOptions(ResidualOptions, SearchOptions):
 
 
 @dataclass
-class TriangulationOptions(FractionalOptions):
-    """Residuals in pixels; limits per track."""
+class JobLimit:
+    """A many-item job's time limit in all, beside its items' own (per item): the items share one
+    clock from when the job starts (batch.solve_items), so a job of any size ends near it, its
+    items not started by then reading ``time_limit``."""
+
+    job_time_limit_s: float = 600.0
+
+    JOB_LIMIT_RANGE = {"gt": 0, "le": 86400}
+
+    def check_job_limit(self) -> None:
+        value = self.job_time_limit_s
+        if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+                and _within(value, self.JOB_LIMIT_RANGE)):
+            raise InputError("options/job_time_limit_s", f"must be a finite number {_describe(self.JOB_LIMIT_RANGE)}")
 
 
 @dataclass
-class MapOptions(FractionalOptions):
-    """Residuals in target units; limits per map (larger than a track's: more unknowns)."""
+class TriangulationOptions(FractionalOptions, JobLimit):
+    """Residuals in pixels; limits per track (and job_time_limit_s for the job)."""
+
+    def check(self) -> None:
+        FractionalOptions.check(self)
+        self.check_job_limit()
+
+
+@dataclass
+class MapOptions(FractionalOptions, JobLimit):
+    """Residuals in target units; limits per map (larger than a track's: more unknowns), and
+    job_time_limit_s for the job."""
 
     max_nodes: int = 5000
     time_limit_s: float = 60.0
+
+    def check(self) -> None:
+        FractionalOptions.check(self)
+        self.check_job_limit()
 
 
 def _within(value: float, bounds: dict) -> bool:

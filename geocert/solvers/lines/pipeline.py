@@ -12,6 +12,7 @@ from typing import Callable
 import numpy as np
 
 from geocert.solvers.core.geometry import InputError
+from geocert.solvers.fractional.options import JobLimit
 from geocert.solvers.lines import align, incremental, linear, polynomial
 from geocert.solvers.lines.geometry import LineSet, Rig, directions_and_points, line_set, reprojection_residuals
 from geocert.solvers.lines.matching import MatchingOptions, MatchingStopped, four_view_matches
@@ -63,7 +64,7 @@ def _nested(cls, value, field_name: str):
 
 
 @dataclass
-class StereoLinesOptions:
+class StereoLinesOptions(JobLimit):
     """The stereo_lines kind's options. Defaults: the incremental solver (frame-rate motion is
     small; the thesis's Figure 9.5 finds it the most accurate there) on samples of 3 lines (the
     thesis's real-data setting, 9.3.6: 2-line samples are minimal but far more noise-sensitive
@@ -102,6 +103,7 @@ class StereoLinesOptions:
         if not (isinstance(self.time_limit_s, (int, float)) and math.isfinite(self.time_limit_s)
                 and 0 < self.time_limit_s <= 3600):
             raise InputError("options/time_limit_s", "must be a finite number > 0 and <= 3600")
+        self.check_job_limit()
 
     @property
     def minimum_lines(self) -> int:

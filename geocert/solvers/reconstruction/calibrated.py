@@ -527,7 +527,7 @@ def _pair_geometry(state: _State, i: int, j: int, pairs: np.ndarray, options: Ca
 
 
 def _initial_pair(state: _State, options: CalibratedOptions, allowed: np.ndarray | None = None,
-                  found: dict | None = None) -> tuple[int, int, np.ndarray, np.ndarray] | None:
+                  found: dict | None = None, callback=None) -> tuple[int, int, np.ndarray, np.ndarray] | None:
     """The initial pair (both views ``allowed``, when given) and its relative pose (R, t with
     |t| = 1), or None (step 1).
 
@@ -540,7 +540,9 @@ def _initial_pair(state: _State, options: CalibratedOptions, allowed: np.ndarray
     again, and last a baseline straight ahead allowed, rather than giving up (a dense ring's or a
     corridor's pairs are all narrow). ``found``,
     when given, receives the figures: candidates, the thresholds the pair passed (or the last
-    tried), the best candidate's figures and the reason when none qualified."""
+    tried), the best candidate's figures and the reason when none qualified. ``callback`` is asked
+    between candidates (each an essential matrix: about 50 ms with many shared tracks): when it
+    asks to stop, the candidates done so far are chosen from (``found["stopped"]`` says so)."""
     shared = _pair_observations(state)
     candidates = sorted((p for p in shared if len(shared[p]) >= max(options.min_pair_tracks, 5)
                          and (allowed is None or (allowed[p[0]] and allowed[p[1]]))),
@@ -553,7 +555,12 @@ def _initial_pair(state: _State, options: CalibratedOptions, allowed: np.ndarray
         found["reason"] = (f"no pair of views shares {options.min_pair_tracks} tracks (the most any pair shares: "
                            f"{most})")
         return None
-    geometries = [_pair_geometry(state, i, j, shared[(i, j)], options) for i, j in candidates]
+    geometries = []
+    for i, j in candidates:
+        if geometries and asks_to_stop(callback, {"stage": "registration", "done": 0, "total": state.n_views}):
+            found["stopped"] = f"after {len(geometries)} of {len(candidates)} candidates"
+            break
+        geometries.append(_pair_geometry(state, i, j, shared[(i, j)], options))
     levels, min_inliers, min_angle = [], options.init_min_inliers, options.init_min_angle_deg
     for _ in range(options.init_relaxations + 1):
         levels.append((min_inliers, min_angle, options.init_max_forward_motion))
@@ -940,7 +947,7 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
     reasons_by_view: dict[int, str] = {}
     start = time.perf_counter()
     search: dict = {}
-    pair = _initial_pair(state, options, found=search)
+    pair = _initial_pair(state, options, found=search, callback=callback)
     stats["initial_pair_search"] = search
     timing["initial_pair"] += time.perf_counter() - start
     if pair is None:

@@ -106,12 +106,14 @@ def _check_limits(kind, parsed, body, request: dict, counts: tuple[int, int] | N
         raise ApiProblem(413, f"{points} observations exceed the limit of {settings.max_points_per_job} per job "
                               "(GEOCERT_MAX_POINTS_PER_JOB)", f"data/{kind.item_key}")
     options, given = request["options"], body.options.model_fields_set
-    for name, maximum, unit, variable in (("time_limit_s", settings.max_item_time_limit_s, " s", "MAX_ITEM_TIME_LIMIT_S"),
-                                          ("max_nodes", settings.max_item_nodes, " nodes", "MAX_ITEM_NODES")):
+    for name, maximum, unit, variable in (
+            ("time_limit_s", settings.max_item_time_limit_s, " s per item", "MAX_ITEM_TIME_LIMIT_S"),
+            ("max_nodes", settings.max_item_nodes, " nodes per item", "MAX_ITEM_NODES"),
+            ("job_time_limit_s", settings.max_job_time_limit_s, " s per job", "MAX_JOB_TIME_LIMIT_S")):
         if name not in options or options[name] <= maximum:  # a kind without the option (stereo_lines)
             continue
         if name in given:
-            raise ApiProblem(422, f"exceeds this server's maximum of {maximum:g}{unit} per item (GEOCERT_{variable})",
+            raise ApiProblem(422, f"exceeds this server's maximum of {maximum:g}{unit} (GEOCERT_{variable})",
                              f"options/{name}")
         options[name] = maximum  # a default above the server's maximum is lowered to it
     return items
@@ -246,7 +248,8 @@ def _create(store: JobStore, owner: str, kind, request: dict, items: int, items_
     chunk = chunk_size_for(kind)
     meta = store.create(kind.name, request, items, chunk, owner, request.get("callback_url"),
                         settings.max_active_jobs_per_key, chunk_key=kind.chunk_key, items_key=items_key,
-                        item_time_bound_s=item_time_bound_s)
+                        item_time_bound_s=item_time_bound_s,
+                        job_time_limit_s=request.get("options", {}).get("job_time_limit_s"))
     if meta is None:
         raise ApiProblem(429, f"this key already has {settings.max_active_jobs_per_key} jobs queued or running "
                               "(GEOCERT_MAX_ACTIVE_JOBS_PER_KEY); wait for one to end", headers={"Retry-After": "5"})

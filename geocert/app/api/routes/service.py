@@ -31,11 +31,12 @@ def list_problems():
 
 def served_defaults(kind) -> dict:
     """The options a job of this kind gets here when it gives none: its model's defaults, with
-    time_limit_s and max_nodes lowered to this server's maxima as a submission's are (so that
-    submitting them as they are is accepted)."""
+    time_limit_s, max_nodes and job_time_limit_s lowered to this server's maxima as a submission's
+    are (so that submitting them as they are is accepted)."""
     settings = get_settings()
     options = default_options(kind)
-    for name, maximum in (("time_limit_s", settings.max_item_time_limit_s), ("max_nodes", settings.max_item_nodes)):
+    for name, maximum in (("time_limit_s", settings.max_item_time_limit_s), ("max_nodes", settings.max_item_nodes),
+                          ("job_time_limit_s", settings.max_job_time_limit_s)):
         if options.get(name) is not None and options[name] > maximum:
             options[name] = type(options[name])(maximum)
     return options
