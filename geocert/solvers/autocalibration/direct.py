@@ -36,15 +36,10 @@ import numpy as np
 from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration.problem import CHIRALITY, ORDERS  # the options it reads (problem.py checks them)
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.strict import Invalid, charge, dual_vector, informational, record
 
-CHIRALITY = ("points", "centers", "none")
-# Relaxation orders served. Order 3 was measured not to fit: in 9 variables it has 5004 moments and
-# 57865 constraint rows (built in 0.07 s), with two 220 x 220 PSD cones (the moment matrix and Q's
-# localizing matrix), each a dense 24310-row block of Clarabel's KKT system (about 2.4 GB each as
-# a triangle, some 5e12 flops a factorisation); order 2 has 714 moments and a 55 x 55 moment matrix.
-ORDERS = (2,)
 RANK_TOLERANCE = 1e-4  # numerical rank: eigenvalues of the moment matrix above this times the largest
 # Chirality pairs a program holds (one moment row each, about a hundred nonzeros): the signed
 # centres with each other, and with "points" every point with every centre. Building 20,000
@@ -390,15 +385,5 @@ def covers(leaves: list[tuple]) -> bool:
         return False
     halves = [[path[1:] for path in leaves if path[0][2] == sign] for sign in (1.0, -1.0)]
     return all(covers(half) for half in halves)
-
-
-def check_options(chirality, varying_focal, order) -> None:
-    if chirality not in CHIRALITY:
-        raise InputError("options/chirality", f"must be one of {', '.join(CHIRALITY)}")
-    if not isinstance(varying_focal, bool):
-        raise InputError("options/varying_focal", "must be true or false")
-    if not (isinstance(order, int) and not isinstance(order, bool) and order in ORDERS):
-        raise InputError("options/relaxation_order", f"must be one of {', '.join(map(str, ORDERS))} (order 3's "
-                                                     "moment matrix is 220 x 220: too large to solve here)")
 
 

@@ -20,13 +20,32 @@ STRATIFIED_ABS_GAP = 1e-12
 # preconditioned so that K ~ I, cameras scaled to Frobenius norm sqrt 3, Q of trace 1): about
 # 1.9e-4 per px^2 of image noise on an 800 px camera (measured: 4.8e-5 at 0.5 px). The
 # interior-point bound is accurate to a few 1e-10 in these units whatever the cost (gaps of 4e-11 to
-# 5.5e-10 at rank one, measured 2026-11-24 on 0.5 px, 0.02 px and Table 7.1 scenes), so 1e-12 left
+# 5.5e-10 at rank one, measured on 0.5 px, 0.02 px and Table 7.1 scenes), so 1e-12 left
 # every scene with a cost below about 1e-6 uncertifiable (0.02 px: costs 3e-8 and 8e-8, gaps 8e-11
 # and 2.2e-10, "not certified" at the tolerances 3e-12 and 8e-12). 1e-9 is the cost of about 0.002 px
 # of noise there: a quadric certified with it is within that of the optimum, far below any
 # measurement's noise. (The bound itself stays safe at any tolerance: the verifier recomputes it.)
 DIRECT_ABS_GAP = 1e-9
 RANGE_NAMES = ("focal", "aspect", "skew", "principal_point")
+
+
+# The direct method's options (direct.py reads them).
+CHIRALITY = ("points", "centers", "none")
+# Relaxation orders served. Order 3 was measured not to fit: in 9 variables it has 5004 moments and
+# 57865 constraint rows (built in 0.07 s), with two 220 x 220 PSD cones (the moment matrix and Q's
+# localizing matrix), each a dense 24310-row block of Clarabel's KKT system (about 2.4 GB each as
+# a triangle, some 5e12 flops a factorisation); order 2 has 714 moments and a 55 x 55 moment matrix.
+ORDERS = (2,)
+
+
+def check_direct_options(chirality, varying_focal, order) -> None:
+    if chirality not in CHIRALITY:
+        raise InputError("options/chirality", f"must be one of {', '.join(CHIRALITY)}")
+    if not isinstance(varying_focal, bool):
+        raise InputError("options/varying_focal", "must be true or false")
+    if not (isinstance(order, int) and not isinstance(order, bool) and order in ORDERS):
+        raise InputError("options/relaxation_order", f"must be one of {', '.join(map(str, ORDERS))} (order 3's "
+                                                     "moment matrix is 220 x 220: too large to solve here)")
 
 
 @dataclass
@@ -64,9 +83,7 @@ class AutocalibrationOptions(SearchOptions):
         SearchOptions.check(self)
         if self.method not in METHODS:
             raise InputError("options/method", f"must be one of {', '.join(METHODS)}")
-        from geocert.solvers.autocalibration.direct import check_options
-
-        check_options(self.chirality, self.varying_focal, self.relaxation_order)
+        check_direct_options(self.chirality, self.varying_focal, self.relaxation_order)
         if not (isinstance(self.metric_rel_gap, (int, float)) and 0 <= self.metric_rel_gap <= 1):
             raise InputError("options/metric_rel_gap", "must be a finite number >= 0 and <= 1")
         if not isinstance(self.intrinsics, dict):
