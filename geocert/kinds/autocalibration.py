@@ -13,14 +13,14 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
+from geocert.kinds.autocalibration_stages import self_check_stages, stage_document
 from geocert.kinds.documents import finite_or_none
 from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finite, JobBase, JobStats, Strict
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.autocalibration.verification import STAGES, read_data
 from geocert.solvers.core.determinacy import safely
-from geocert.solvers.core.strict import Invalid
-from geocert.solvers.verify import SelfCheckFailed, self_check_enabled, verify_arrays
+from geocert.solvers.verify import self_check_enabled
 
 Range = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[lo, hi]")]
 Point4 = Annotated[list[Finite], Field(min_length=4, max_length=4, description="[X, Y, Z, W]")]
@@ -129,22 +129,6 @@ class Parsed:
         self.cameras, self.points, self.image_size = cameras, points, image_size
 
 
-def _stage(name: str, status: str, certified: bool, cost: float, lower: float, nodes: int, elapsed: float,
-           reason: str | None, rel_gap: float, abs_gap: float, scope: str, proof: dict | None) -> dict:
-    cost_out, lower_out = finite_or_none(cost), finite_or_none(lower)
-    gap = None if cost_out is None or lower_out is None else max(0.0, cost_out - lower_out)
-    if certified and gap is not None and not gap <= max(abs_gap, rel_gap * abs(cost_out)) * (1 + 1e-12):
-        certified, status, reason = False, "not_certified", "the gap at the solution as returned exceeds the tolerance"
-    if certified and gap is not None:
-        lower_out = cost_out - gap
-    summary = {"scope": scope, "tolerance": max(abs_gap, rel_gap * abs(cost_out)) if cost_out is not None else None,
-               "tolerance_met": certified}
-    if proof is not None:
-        summary["proof"] = proof
-    return {"name": name, "cost": cost_out, "lower_bound": lower_out, "gap": gap, "status": status,
-            "certified": certified, "nodes": nodes, "elapsed_s": elapsed, "reason": reason, "certificate": summary}
-
-
 # A small reconstruction (6 views of 12 points, synthetic: geocert.solvers.autocalibration.scenes, seed 11)
 EXAMPLE_DATA = {
     "cameras": [
@@ -165,24 +149,6 @@ EXAMPLE_DATA = {
     ],
     "image_size": [1000, 1000],
 }
-
-
-def self_check_stages(parsed: Parsed, options: pr.AutocalibrationOptions, stages: list[dict]) -> None:
-    """Every certified stage checked by the verifier before it is returned (GEOCERT_SELF_VERIFY=1),
-    as the other kinds' items are; the proofs are dropped afterwards unless asked for."""
-    arrays = (parsed.cameras, parsed.points, parsed.image_size)
-    for index, stage in enumerate(stages):
-        proof = (stage.get("certificate") or {}).get("proof")
-        if stage["certified"]:
-            claim = {"index": index, **{key: stage.get(key) for key in (
-                "status", "certified", "cost", "lower_bound", "gap", "plane_at_infinity", "K", "dual_absolute_quadric")},
-                "proof": proof}
-            try:
-                verify_arrays("autocalibration", arrays, dataclasses.asdict(options), claim)
-            except Invalid as exc:
-                raise SelfCheckFailed(f"autocalibration stage {index}: check {exc.check} failed: {exc.detail}") from exc
-        if options.certificate != "full" and proof is not None:
-            del stage["certificate"]["proof"]
 
 
 class AutocalibrationKind:
@@ -281,18 +247,18 @@ def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem:
         plane = pr.plane_in_input(problem, a.plane[:3])
         affine_cost = pr.affine_cost(problem, result.p)  # at the plane as returned
         document["plane_at_infinity"] = plane.tolist()
-    affine_stage = _stage("affine", a.status, a.certified and pr.allowed_by_chirality(problem, result.p)
-                          if result.p is not None else False, affine_cost, a.lower_bound, a.nodes, result.affine_s,
-                          a.reason, options.rel_gap, options.abs_gap,
-                          "every plane at infinity chirality allows",
-                          proofs.encode_affine(a) if full and a.certified else None)
+    affine_stage = stage_document("affine", a.status, a.certified and pr.allowed_by_chirality(problem, result.p)
+                                  if result.p is not None else False, affine_cost, a.lower_bound, a.nodes,
+                                  result.affine_s, a.reason, options.rel_gap, options.abs_gap,
+                                  "every plane at infinity chirality allows",
+                                  proofs.encode_affine(a) if full and a.certified else None)
     affine_stage["plane_at_infinity"] = document["plane_at_infinity"]
     m = result.metric
     not_run = "cancelled" if a.status == "cancelled" else "failed"
-    metric_stage = _stage("metric", not_run if m is None else m.status, False, math.inf, -math.inf,
-                          0 if m is None else m.nodes, result.metric_s,
-                          ("the job was cancelled" if not_run == "cancelled" else "no plane at infinity")
-                          if m is None else m.reason, options.metric_rel_gap, options.abs_gap, "", None)
+    metric_stage = stage_document("metric", not_run if m is None else m.status, False, math.inf, -math.inf,
+                                  0 if m is None else m.nodes, result.metric_s,
+                                  ("the job was cancelled" if not_run == "cancelled" else "no plane at infinity")
+                                  if m is None else m.reason, options.metric_rel_gap, options.abs_gap, "", None)
     if m is not None and result.K_unit is not None:
         K = problem.K0 @ result.K_unit
         K = K / K[2, 2]
@@ -302,12 +268,12 @@ def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem:
         w = pr.w_of_K(problem, K)
         lo, hi = mrelax.omega_box(problem.unit_ranges)
         inside = mrelax.in_domain(setup, w, lo, hi)
-        metric_stage = _stage("metric", m.status if inside or not m.certified else "not_certified",
-                              m.certified and inside, mrelax.cost(setup, w), m.lower_bound, m.nodes,
-                              result.metric_s, m.reason if inside else "the DIAC returned left its domain by rounding",
-                              options.metric_rel_gap, options.abs_gap,
-                              "every K within the intrinsics ranges, for the plane at infinity stated",
-                              proofs.encode_metric(m) if full and m.certified else None)
+        metric_stage = stage_document("metric", m.status if inside or not m.certified else "not_certified",
+                                      m.certified and inside, mrelax.cost(setup, w), m.lower_bound, m.nodes,
+                                      result.metric_s, m.reason if inside else "the DIAC returned left its domain by rounding",
+                                      options.metric_rel_gap, options.abs_gap,
+                                      "every K within the intrinsics ranges, for the plane at infinity stated",
+                                      proofs.encode_metric(m) if full and m.certified else None)
         metric_stage["K"] = K.tolist()
         H = pr.upgrade(problem, result.p, np.linalg.solve(problem.K0, K))
         document.update(K=K.tolist(), upgrade=H.tolist(), dual_absolute_quadric=pr.dual_absolute_quadric(H).tolist(),

@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 
+from geocert.kinds.autocalibration_stages import self_check_stages, stage_document
 from geocert.solvers.autocalibration import direct
 from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.autocalibration import problem as pr
@@ -30,7 +31,6 @@ def returned_quadric(setup: direct.DirectSetup, Q: np.ndarray) -> tuple[list, fl
 
 
 def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict:
-    from geocert.kinds.autocalibration import _stage, self_check_stages
     from geocert.solvers.autocalibration import direct_solve
     from geocert.solvers.autocalibration.stratified import announce
     from geocert.solvers.core.bnb import asks_to_stop
@@ -70,9 +70,9 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
             document.update(direct.derived(parsed.cameras, parsed.points, np.array(Q_in), options.varying_focal))
         except (np.linalg.LinAlgError, ValueError) as exc:
             result.certified, result.status, result.reason = False, "not_certified", f"no metric upgrade: {exc}"
-    stage = _stage("direct", result.status, result.certified, cost, result.lower_bound, 0, result.elapsed_s,
-                   result.reason, options.metric_rel_gap, options.abs_gap, SCOPE,
-                   result.proof if full and result.certified else None)
+    stage = stage_document("direct", result.status, result.certified, cost, result.lower_bound, 0, result.elapsed_s,
+                           result.reason, options.metric_rel_gap, options.abs_gap, SCOPE,
+                           result.proof if full and result.certified else None)
     stage["certificate"].update({"order": result.order, "moment_rank": result.rank,
                                  "eigenvalue_ratio": result.eigenvalue_ratio, "conic_status": result.conic_status})
     for key in ("plane_at_infinity", "K", "dual_absolute_quadric"):
