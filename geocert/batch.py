@@ -12,9 +12,8 @@ import time
 from typing import Any, Callable
 
 from geocert.kinds import get_kind, options_from
-from geocert.kinds.documents import finite_or_none
+from geocert.kinds.documents import certificate_document, finite_or_none
 from geocert.solvers.core.bnb import Progress
-from geocert.solvers.core.certificates import FORMAT, VERSION, data_hash, problem_hash
 from geocert.solvers.core.geometry import InputError
 
 ProgressSink = Callable[[dict], None]
@@ -317,29 +316,6 @@ def result_shell(kind, options, stats: dict) -> tuple[str, str] | None:
         return None
     head, _, tail = text.partition(marker)
     return head + marker[:-1], "]" + tail
-
-
-def certificate_document(kind, data: Any, options, items: list[dict]) -> dict:
-    """The certificate document (docs/certificate.md): the problem data and its hash, the options,
-    and each item's claim (solution, cost, gap) with its proof, taken out of the item's
-    certificate summary."""
-    claims = []
-    data = kind.certificate_data(data, items)  # the data the claims are about (the job's, for most kinds)
-    # A kind may prove several claims per item (autocalibration: one per stage).
-    claimed = kind.claimed_items(items)
-    for index, item in enumerate(claimed):
-        proof = (item.get("certificate") or {}).pop("proof", None)
-        if item.get("certificate") == {}:  # a brief item's member held the proof alone
-            item["certificate"] = None
-        solution = {key: item[key] for key in kind.solution_fields if key in item}
-        claims.append({"index": index, "status": item["status"], "certified": item["certified"] and proof is not None,
-                       "cost": item["cost"], "lower_bound": item["lower_bound"], "gap": item["gap"],
-                       **solution, "proof": proof})
-    options = dataclasses.asdict(options)
-    return {"format": FORMAT, "version": VERSION, "kind": kind.name, "options": options,
-            "data": data, "data_sha256": data_hash(kind.name, data),
-            "problem_sha256": problem_hash(kind.name, data, options, getattr(kind.verification, "claim_options", None)),
-            "items": claims}
 
 
 def parse_job(job: Any):

@@ -1,11 +1,15 @@
 """The parts of an item's result document that every fractional kind shares: its outcome (cost,
 bounds, status) and its certificate summary (with the proof, when a full certificate was asked
-for, until the job's certificate document takes it)."""
+for, until the job's certificate document takes it); and a kind's certificate document, built
+from its items (the job runner's, and a reconstruction's embedded ones)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from typing import Any
 
+from geocert.solvers.core.certificates import FORMAT, VERSION, data_hash, problem_hash
 from geocert.solvers.fractional.results import ItemResult, LocalCertificate, proof_of
 
 
@@ -65,3 +69,26 @@ def outcome_document(result: ItemResult) -> dict:
         "elapsed_s": result.elapsed_s,
         "reason": result.reason,
     }
+
+
+def certificate_document(kind, data: Any, options, items: list[dict]) -> dict:
+    """The certificate document (docs/certificate.md): the problem data and its hash, the options,
+    and each item's claim (solution, cost, gap) with its proof, taken out of the item's
+    certificate summary."""
+    claims = []
+    data = kind.certificate_data(data, items)  # the data the claims are about (the job's, for most kinds)
+    # A kind may prove several claims per item (autocalibration: one per stage).
+    claimed = kind.claimed_items(items)
+    for index, item in enumerate(claimed):
+        proof = (item.get("certificate") or {}).pop("proof", None)
+        if item.get("certificate") == {}:  # a brief item's member held the proof alone
+            item["certificate"] = None
+        solution = {key: item[key] for key in kind.solution_fields if key in item}
+        claims.append({"index": index, "status": item["status"], "certified": item["certified"] and proof is not None,
+                       "cost": item["cost"], "lower_bound": item["lower_bound"], "gap": item["gap"],
+                       **solution, "proof": proof})
+    options = dataclasses.asdict(options)
+    return {"format": FORMAT, "version": VERSION, "kind": kind.name, "options": options,
+            "data": data, "data_sha256": data_hash(kind.name, data),
+            "problem_sha256": problem_hash(kind.name, data, options, getattr(kind.verification, "claim_options", None)),
+            "items": claims}

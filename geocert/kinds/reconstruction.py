@@ -19,7 +19,9 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
-from geocert.kinds.autocalibration import IntrinsicsIn
+from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION, IntrinsicsIn
+from geocert.kinds.documents import certificate_document
+from geocert.kinds.maps import RESECTION, map_document
 from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict
 from geocert.kinds.triangulation import TrackOut, track_document
 from geocert.solvers.autocalibration.problem import StageProgress
@@ -561,8 +563,6 @@ class ReconstructionKind:
     @staticmethod
     def _camera_items(out, options, bounds: dict) -> list[dict]:
         """Each camera's resection as a resection item (with its data), for the camera certificate."""
-        from geocert.kinds.maps import map_document
-
         from geocert.pipelines.reconstruction.pipeline import point_entries
         from geocert.solvers.reconstruction.camera_claim import sources
 
@@ -600,25 +600,18 @@ class ReconstructionKind:
             item.pop(key, None)
         result = {"kind": self.name, "norm": options.norm, **item, "stats": stats}
         if options.certificate == "full" and camera_results:
-            from geocert.batch import certificate_document
-            from geocert.kinds import get_kind
             from geocert.solvers.fractional.options import MapOptions
 
-            resection = get_kind("resection")
             maps = [entry.pop("map") for entry in camera_results]
             for entry in camera_results:
                 entry.pop("view", None)
             map_options = MapOptions(norm=options.norm, rel_gap=options.camera_rel_gap, abs_gap=options.abs_gap,
                                      max_nodes=options.max_nodes, time_limit_s=options.time_limit_s,
                                      max_residual=options.max_residual, certificate="full")
-            result["camera_certificate"] = certificate_document(resection, {"maps": maps}, map_options, camera_results)
+            result["camera_certificate"] = certificate_document(RESECTION, {"maps": maps}, map_options, camera_results)
         if options.certificate == "full" and calibration_proof is not None:
-            from geocert.batch import certificate_document
-            from geocert.kinds import get_kind
-
-            kind = get_kind("autocalibration")
             result["calibration_certificate"] = certificate_document(
-                kind, calibration_proof["data"], kind.options_type(**calibration_proof["options"]),
+                AUTOCALIBRATION, calibration_proof["data"], AUTOCALIBRATION.options_type(**calibration_proof["options"]),
                 [calibration_proof["item"]])
         return result
 
