@@ -432,7 +432,6 @@ class TestBilinearDefaultBoxUnchecked:
         return solve_job({"kind": "bilinear", "data": document["data"],
                           "options": {**options, "camera_bound": camera_bound, "certificate": "full"}})
 
-    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
     def test_a_box_narrower_than_the_default_is_refused(self):
         from tests.solvers.test_forgeries import rehash
 
