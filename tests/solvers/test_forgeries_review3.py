@@ -538,7 +538,6 @@ class TestCalibrationSigns:
     positive (the one upper-triangular root of K K^T the ranges are about); and check_returned
     asks the returned metric points to be in front of the returned cameras, as chirality says."""
 
-    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
     @pytest.mark.parametrize("signs", [(-1.0, 1.0, 1.0), (-1.0, -1.0, 1.0)])
     def test_a_K_with_negative_focal_lengths_is_refused(self, signs):
         forged = _K_signed(stored("autocalibration_stratified"), signs)
