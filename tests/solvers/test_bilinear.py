@@ -263,9 +263,11 @@ def forged(result, change) -> dict:
     (lambda item: item.__setitem__("lower_bound", item["cost"]) or item.__setitem__("gap", 0.0), "lower_bound"),
     (lambda item: item["coefficients"].__setitem__(0, item["coefficients"][0] + 1e-3), "objective"),
     (lambda item: item["proof"]["leaves"].pop(), "coverage"),
-    # a smaller camera box stated (the camera still in it): the root's rounds no longer start from it
-    (lambda item: item["proof"]["camera_box"][0].__setitem__(0, item["proof"]["camera_box"][0][0] / 2),
+    # a wider camera box stated: the root's rounds no longer start from it (a narrower one is
+    # refused before, at scope: it no longer holds the returned camera's default box)
+    (lambda item: item["proof"]["camera_box"][0].__setitem__(0, item["proof"]["camera_box"][0][0] * 2),
      "tightening"),
+    (lambda item: item["proof"]["camera_box"][0].__setitem__(0, item["proof"]["camera_box"][0][0] / 2), "scope"),
     (lambda item: item["proof"]["tightening"][0]["box_out"][0].__setitem__(
         0, item["proof"]["tightening"][0]["box_out"][0][0] + 1e-3), "tightening"),
 ])
@@ -471,3 +473,36 @@ def test_the_basis_rank_check_is_one_decomposition_and_a_bisection(monkeypatch):
     with pytest.raises(InputError) as caught:
         pb.read_basis(basis.tolist())
     assert caught.value.field == "data/basis/41" and len(calls) <= 8
+
+
+def test_a_camera_beyond_its_incumbents_box_is_searched_again(monkeypatch):
+    """With camera_bound null the proof's box must hold the default box of the camera returned
+    (problem.default_half_width, which the verifier asks for). An incumbent an eighth of the
+    optimum's size gives a box the optimum lies outside: the search's camera then asks a wider
+    box, the solver searches that one, and the frame is certified over a box the verifier
+    accepts."""
+    from geocert.solvers.bilinear import search
+
+    basis, points, *_ = scene(3, 12, 0.01, 4)
+    found = search.root_incumbent
+
+    def small(model, *args, **kwargs):
+        M, alpha, t, _ = found(model, *args, **kwargs)
+        M = M / 8
+        t = model.best_t(M, alpha)
+        return M, alpha, t, model.cost(M, alpha, t)
+    monkeypatch.setattr(search, "root_incumbent", small)
+    searched = []
+    original = search._search
+
+    def counted(model, relaxation, frame, options, incumbent, half, *rest):
+        searched.append(half)
+        return original(model, relaxation, frame, options, incumbent, half, *rest)
+    monkeypatch.setattr(search, "_search", counted)
+    result = solve_job(job(basis.tolist(), [{"points": points.tolist()}], certificate="full"))
+    frame = pb.normalise(basis, points)
+    M = np.asarray(result["frames"][0]["camera"])[:, :3] / frame.camera_scale
+    assert len(searched) >= 2 and searched[-1] >= pb.default_half_width(M) > searched[0]
+    assert result["frames"][0]["certified"]
+    report = verify_any(result)
+    assert report.valid, report.first_failure

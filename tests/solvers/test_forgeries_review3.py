@@ -263,7 +263,6 @@ class TestOldResultAllowances:
     or determined, or a calibration_certificate carried, makes it a result that states its
     calibration). Or refuse results that lack these members, as version 1 is refused."""
 
-    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
     def test_a_doubtful_result_without_the_key_is_refused(self, calibrated_reconstruction):
         forged = TestDoubtfulTied.doubtful(calibrated_reconstruction)
         assert "doubtful" in refused(copy.deepcopy(forged))["detail"]
@@ -271,7 +270,6 @@ class TestOldResultAllowances:
         assert not any(w["code"] == "reconstruction_doubtful" for w in forged["summary"]["warnings"])
         refused(forged)
 
-    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
     def test_doubtful_false_without_the_camera_claim_is_refused(self, calibrated_reconstruction):
         forged = TestDoubtfulTied.doubtful(calibrated_reconstruction)
         assert forged["summary"]["doubtful"] is False
@@ -284,7 +282,6 @@ class TestOldResultAllowances:
         report = verify_any(result)
         assert report.valid, report.first_failure
 
-    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
     def test_the_critical_motion_erased_without_the_calibration_is_refused(self, calibrated_reconstruction):
         forged = _without_calibration_claims(calibrated_reconstruction)
         stage = next(stage for stage in forged["stages"] if stage["name"] == "autocalibration")
@@ -296,7 +293,6 @@ class TestOldResultAllowances:
                                if w["code"] not in ("critical_motion", "returned_K_not_certified")]
         refused(forged)
 
-    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
     def test_a_stage_K_not_the_certified_one_without_the_calibration_is_refused(self, calibrated_reconstruction):
         forged = _without_calibration_claims(calibrated_reconstruction)
         stage = next(stage for stage in forged["stages"] if stage["name"] == "autocalibration")
@@ -314,7 +310,6 @@ class TestStageCountsUntied:
     may exceed what is returned: views and points are dropped after it), or call them
     informational in the docs."""
 
-    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
     def test_projective_counts_beyond_the_data_are_refused(self):
         result = stored("reconstruction")
         stage = next(s for s in result["stages"] if s["name"] == "projective")
@@ -437,7 +432,6 @@ class TestBilinearDefaultBoxUnchecked:
         return solve_job({"kind": "bilinear", "data": document["data"],
                           "options": {**options, "camera_bound": camera_bound, "certificate": "full"}})
 
-    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
     def test_a_box_narrower_than_the_default_is_refused(self):
         from tests.solvers.test_forgeries import rehash
 
@@ -495,18 +489,15 @@ class TestRadialTermUntied:
         report = verify_any(reconstruction_with_k1)
         assert report.valid, report.first_failure
 
-    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
     def test_the_k1_warning_removed_is_refused(self, reconstruction_with_k1):
         refused(self.unwarned(reconstruction_with_k1))
 
-    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
     @pytest.mark.parametrize("change", [{"certified": True}, {"k1": 0.0}])
     def test_a_distortion_statement_not_the_cameras_is_refused(self, reconstruction_with_k1, change):
         forged = copy.deepcopy(reconstruction_with_k1)
         forged["summary"]["distortion"].update(change)
         refused(forged)
 
-    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
     def test_a_k1_stated_without_the_term_is_refused(self, calibrated_reconstruction):
         forged = copy.deepcopy(calibrated_reconstruction)
         assert forged["cameras"][0]["k1"] is None
@@ -547,7 +538,6 @@ class TestCalibrationSigns:
     positive (the one upper-triangular root of K K^T the ranges are about); and check_returned
     asks the returned metric points to be in front of the returned cameras, as chirality says."""
 
-    @pytest.mark.xfail(strict=True, reason=ACCEPTED)
     @pytest.mark.parametrize("signs", [(-1.0, 1.0, 1.0), (-1.0, -1.0, 1.0)])
     def test_a_K_with_negative_focal_lengths_is_refused(self, signs):
         forged = _K_signed(stored("autocalibration_stratified"), signs)

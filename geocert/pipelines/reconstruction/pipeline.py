@@ -547,6 +547,7 @@ def _check_cameras(out: Reconstruction, metric: upgrade.Metric, obs: Observation
                 camera = out.cameras[int(v)]
                 camera.registered, camera.reason, camera.K, camera.R, camera.t, camera.P = \
                     False, reason, None, None, None, None
+                camera.k1 = camera.distortion_centre = None  # no camera returned: no pixels of it undistorted
                 changed = True
         bad = use[(depth <= 0) | ~(error <= threshold_px)]
         if len(bad):

@@ -196,8 +196,10 @@ class AutocalibrationVerification:
         if proof.get("type") != "stratified_metric":
             raise Invalid("format", "stage 1 takes a stratified_metric proof")
         K = _numbers(claim.get("K"), "K", (3, 3), "claim")
-        if not (K[1, 0] == 0 and K[2, 0] == 0 and K[2, 1] == 0 and K[2, 2] == 1):
-            raise Invalid("claim", "K must be upper triangular with K[2][2] = 1")
+        if not (K[1, 0] == 0 and K[2, 0] == 0 and K[2, 1] == 0 and K[2, 2] == 1 and K[0, 0] > 0 and K[1, 1] > 0):
+            # the proof is about K K^T, whose one upper-triangular root with a positive diagonal is
+            # the K the intrinsics ranges (checked on K K^T by in_domain) are about
+            raise Invalid("claim", "K must be upper triangular with K[2][2] = 1 and a positive diagonal")
         w = pr.w_of_K(problem, K)
         setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
         lo, hi = mrelax.omega_box(problem.unit_ranges)

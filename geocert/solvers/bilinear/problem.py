@@ -41,6 +41,19 @@ class Frame:
         return self.image_scale / self.shape_scale
 
 
+# The default camera box (camera_bound null): |M'_rk| <= ROOT_FACTOR max |M'| of the camera, rounded
+# up to a power of two (at least 1: normalised images and shapes have unit spread).
+ROOT_FACTOR = 4.0
+
+
+def default_half_width(M: np.ndarray) -> float:
+    """The default camera box's half-width (normalised) for a camera whose 2x3 part is M
+    (normalised): the solver searches at least this box about the camera it returns, and the
+    verifier asks a proof made without camera_bound to cover it."""
+    largest = max(float(np.max(np.abs(M))), 0.25)
+    return math.ldexp(1.0, math.ceil(math.log2(ROOT_FACTOR * largest)))
+
+
 def _pow2(x: float) -> float:
     if not (x > 0 and math.isfinite(x)):
         return 1.0

@@ -26,7 +26,9 @@ from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
 from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
 from geocert.solvers.fractional.results import ItemResult
 
-ROOT_FACTOR = 4.0  # the default camera box: |M'_rk| <= 4 max |M'_incumbent| (rounded up to a power of two)
+# With camera_bound null the box is problem.default_half_width of the incumbent; when the camera the
+# search returns asks a wider one, the search runs again on it (at most this many times in all).
+BOX_ROUNDS = 3
 ALS_STARTS = 4  # random starts at the root, beside the baseline's and the mean shape's
 
 
@@ -374,13 +376,11 @@ def root_incumbent(model: Model, seed: int = 0, deadline: float = math.inf):
 
 
 def root_half_width(M: np.ndarray, camera_bound: float | None, frame: pb.Frame) -> float:
-    """The camera box's half-width (normalised): camera_bound when given, else ROOT_FACTOR times
-    the incumbent's largest entry, rounded up to a power of two (at least 1: normalised images
-    and shapes have unit spread)."""
+    """The camera box's half-width (normalised): camera_bound when given, else the default box of
+    the camera M (problem.default_half_width)."""
     if camera_bound is not None:
         return camera_bound / frame.camera_scale
-    largest = max(float(np.max(np.abs(M))), 0.25)
-    return math.ldexp(1.0, math.ceil(math.log2(ROOT_FACTOR * largest)))
+    return pb.default_half_width(M)
 
 
 def fit_frame(basis: np.ndarray, points: np.ndarray, options: BilinearOptions, callback=None) -> FrameResult:
@@ -402,6 +402,69 @@ def fit_frame(basis: np.ndarray, points: np.ndarray, options: BilinearOptions, c
     if incumbent is None:  # every start's first step failed (an LP solver refusing): the baseline
         incumbent = (Mb, ab, tb, model.cost(Mb, ab, tb))
     half = root_half_width(incumbent[0], options.camera_bound, frame)
+    relaxation = Relaxation(frame.X, frame.u, norm, options.coefficients, options.coefficient_bound)
+    for round_ in range(BOX_ROUNDS):
+        found = _search(model, relaxation, frame, options, incumbent, half, start, callback)
+        wider = pb.default_half_width(found.candidate[0])
+        if options.camera_bound is not None or wider <= half or round_ == BOX_ROUNDS - 1:
+            break
+        # the camera found asks a wider default box than the incumbent's: the proof must cover it
+        half, incumbent = wider, (*found.candidate, model.cost(*found.candidate))
+    status, lower, nodes, candidate, trivial = found.status, found.lower, found.nodes, found.candidate, found.trivial
+    M, alpha, t = candidate
+    camera = pb.to_raw(frame, M, t)
+    r = pb.residuals(basis, points, camera, alpha)
+    cost = pb.cost(r, norm)
+    lower_raw = lower * unit
+    gap = max(0.0, cost - lower_raw)
+    tolerance = max(options.abs_gap, options.rel_gap * abs(cost))
+    certified = status == "optimal" and gap <= tolerance * (1 + 1e-12) and \
+        pb.feasible_coefficients(alpha, options.coefficients, options.coefficient_bound)
+    reason = None
+    if certified and not trivial and options.camera_bound is None and wider > half:
+        certified, status = False, "not_certified"
+        reason = "the camera found lies beyond a quarter of every box searched: set camera_bound"
+    elif status == "optimal" and not certified:
+        status, reason = "not_certified", "the gap at the solution as returned exceeds the tolerance"
+    elif not certified:
+        reason = {"node_limit": "the node limit was reached", "time_limit": "the time limit was reached",
+                  "cancelled": "the job was cancelled", "not_certified": "some box could not be bounded"}.get(
+            status, status)
+    if certified:
+        lower_raw = cost - gap
+    shape = pb.shape_of(basis, alpha)
+    out = FrameResult(
+        status=status, certified=certified, cost=cost, lower_bound=lower_raw, gap=gap, nodes=nodes,
+        elapsed_s=time.perf_counter() - start, reason=reason, camera=camera.tolist(), coefficients=alpha.tolist(),
+        shape=shape.tolist(), residuals=[None if np.isnan(row[0]) else row.tolist() for row in r],
+        camera_box=None if trivial else found.box_raw, tolerance=tolerance, leaves=len(found.leaves),
+        baseline=baseline)
+    if certified and options.certificate == "full":
+        out.proof = {"type": "trivial"} if trivial else encode(found.box_raw, found.rounds, found.tightenings,
+                                                               found.leaves)
+    return out
+
+
+@dataclass
+class _Searched:
+    """One search of a camera box: the engine's outcome, and what the proof encodes."""
+
+    status: str
+    lower: float
+    nodes: int
+    candidate: tuple
+    trivial: bool
+    box_raw: tuple
+    rounds: list
+    tightenings: list
+    leaves: list
+
+
+def _search(model: Model, relaxation: Relaxation, frame: pb.Frame, options: BilinearOptions, incumbent: tuple,
+            half: float, start: float, callback) -> _Searched:
+    """The branch and bound over the camera box |M_rk| <= half (normalised) from ``incumbent``
+    (M, alpha, t, cost), within the frame's time limit counted from ``start``."""
+    norm, unit = model.norm, pb.cost_unit(frame, model.norm)
     lo, hi = np.full(6, -half), np.full(6, half)
     M, alpha, t, value = incumbent
     if np.any(np.abs(M) > half):  # a camera_bound below the incumbent: the best camera inside it
@@ -412,7 +475,6 @@ def fit_frame(basis: np.ndarray, points: np.ndarray, options: BilinearOptions, c
         value = model.cost(M, alpha, t)
     box_raw = ((lo * frame.camera_scale).tolist(), (hi * frame.camera_scale).tolist())
     abs_gap = options.abs_gap / unit
-    relaxation = Relaxation(frame.X, frame.u, norm, options.coefficients, options.coefficient_bound)
     if value > abs_gap:
         # at most half the time limit at the root: the search has the rest
         deadline = start + 0.5 * options.time_limit_s
@@ -436,33 +498,7 @@ def fit_frame(basis: np.ndarray, points: np.ndarray, options: BilinearOptions, c
             warnings.simplefilter("ignore")
             result = branch_and_bound(problem, (M, alpha, t), value, bnb_options, callback, 0.0, leaves)
         status, lower, nodes, candidate = result.status, result.lower_bound, result.nodes, result.candidate
-    M, alpha, t = candidate
-    camera = pb.to_raw(frame, M, t)
-    r = pb.residuals(basis, points, camera, alpha)
-    cost = pb.cost(r, norm)
-    lower_raw = lower * unit
-    gap = max(0.0, cost - lower_raw)
-    tolerance = max(options.abs_gap, options.rel_gap * abs(cost))
-    certified = status == "optimal" and gap <= tolerance * (1 + 1e-12) and \
-        pb.feasible_coefficients(alpha, options.coefficients, options.coefficient_bound)
-    reason = None
-    if status == "optimal" and not certified:
-        status, reason = "not_certified", "the gap at the solution as returned exceeds the tolerance"
-    elif not certified:
-        reason = {"node_limit": "the node limit was reached", "time_limit": "the time limit was reached",
-                  "cancelled": "the job was cancelled", "not_certified": "some box could not be bounded"}.get(
-            status, status)
-    if certified:
-        lower_raw = cost - gap
-    shape = pb.shape_of(basis, alpha)
-    out = FrameResult(
-        status=status, certified=certified, cost=cost, lower_bound=lower_raw, gap=gap, nodes=nodes,
-        elapsed_s=time.perf_counter() - start, reason=reason, camera=camera.tolist(), coefficients=alpha.tolist(),
-        shape=shape.tolist(), residuals=[None if np.isnan(row[0]) else row.tolist() for row in r],
-        camera_box=None if trivial else box_raw, tolerance=tolerance, leaves=len(leaves), baseline=baseline)
-    if certified and options.certificate == "full":
-        out.proof = {"type": "trivial"} if trivial else encode(box_raw, rounds, problem.tightenings, leaves)
-    return out
+    return _Searched(status, lower, nodes, candidate, trivial, box_raw, rounds, problem.tightenings, leaves)
 
 
 def encode(box_raw: tuple[list, list], rounds: list, node_tightening: list, leaves: list) -> dict:

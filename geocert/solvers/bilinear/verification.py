@@ -207,11 +207,13 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
     scale = frame.camera_scale
     scope_lo, scope_hi = _numbers(proof.get("camera_box"), "proof/camera_box", (2, 6), "scope")
     scope_lo, scope_hi = scope_lo / scale, scope_hi / scale  # powers of two: exact
-    if options["camera_bound"] is not None:
-        bound = options["camera_bound"] / scale
-        if not (np.all(scope_lo <= -bound) and np.all(scope_hi >= bound)):
-            raise Invalid("scope", "the camera box does not contain the box camera_bound states")
     M = camera[:, :3].ravel() / scale
+    # without camera_bound, the box the options give is the default box of the camera returned
+    bound = pb.default_half_width(M) if options["camera_bound"] is None else options["camera_bound"] / scale
+    if not (np.all(scope_lo <= -bound) and np.all(scope_hi >= bound)):
+        raise Invalid("scope", "the camera box does not contain the box camera_bound states" if
+                      options["camera_bound"] is not None else "the camera box does not contain the default box of "
+                      f"the camera returned (|M| <= {bound * scale!r}: camera_bound null)")
     if not (np.all(scope_lo <= M) and np.all(M <= scope_hi)):
         raise Invalid("scope", "the camera returned is outside the camera box of the scope")
     passed.append("scope")

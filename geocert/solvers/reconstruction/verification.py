@@ -205,18 +205,20 @@ def _check_pipeline_counts(result: dict, rel_gap: float) -> None:
     if not summary.get("cameras_dropped") == dropped == warned:
         raise Invalid("returned", f"summary/cameras_dropped is {summary.get('cameras_dropped')!r}: {dropped} views are "
                                   f"dropped by their reason, {warned} by the warnings")
-    if "doubtful" in summary:  # claims._doubts, recomputed: the cameras bounded, the counts above
-        bounded = [c for c in cameras if c.get("registered") and c.get("status") not in ("not_run", "cancelled")]
-        beyond = sum(1 for c in bounded if c.get("certified") is not True)
-        removed, kept = summary["observations_removed"], summary.get("observations") or 0
-        registered = sum(1 for c in cameras if c.get("registered") is True)
-        doubtful = bool((len(bounded) >= 2 and beyond > DOUBTFUL_FRACTION * len(bounded))
-                        or (removed and removed > DOUBTFUL_REMOVED * (removed + kept))
-                        or (dropped and dropped > DOUBTFUL_DROPPED * (dropped + registered)))
-        if summary["doubtful"] is not doubtful or doubtful != _warned(summary, "reconstruction_doubtful"):
-            raise Invalid("returned", f"summary/doubtful is {summary['doubtful']!r}: its cameras and counts make the "
-                                      f"reconstruction {'' if doubtful else 'not '}doubtful, and the warning must say "
-                                      "so exactly then")
+    # claims._doubts, recomputed: the cameras bounded, the counts above. A result from before the
+    # key was stated lacks it and its warning (they came together): read as "not doubtful", which
+    # it must then be, so a forger gains nothing by dropping them.
+    bounded = [c for c in cameras if c.get("registered") and c.get("status") not in ("not_run", "cancelled")]
+    beyond = sum(1 for c in bounded if c.get("certified") is not True)
+    removed, kept = summary["observations_removed"], summary.get("observations") or 0
+    registered = sum(1 for c in cameras if c.get("registered") is True)
+    doubtful = bool((len(bounded) >= 2 and beyond > DOUBTFUL_FRACTION * len(bounded))
+                    or (removed and removed > DOUBTFUL_REMOVED * (removed + kept))
+                    or (dropped and dropped > DOUBTFUL_DROPPED * (dropped + registered)))
+    if summary.get("doubtful", False) is not doubtful or doubtful != _warned(summary, "reconstruction_doubtful"):
+        raise Invalid("returned", f"summary/doubtful is {summary.get('doubtful')!r}: its cameras and counts make the "
+                                  f"reconstruction {'' if doubtful else 'not '}doubtful, and the warning must say "
+                                  "so exactly then")
     judged = any(c.get("degrees_of_freedom") is not None or c.get("searched") is True for c in cameras)
     claim = camera_claim.statement(result.get("norm"), rel_gap)
     for where, given in (("summary/camera_claim", summary.get("camera_claim")),
@@ -224,6 +226,68 @@ def _check_pipeline_counts(result: dict, rel_gap: float) -> None:
         if not (given == claim or (given is None and not judged)):
             raise Invalid("returned", f"{where} is {given!r:.80}, not what the result's norm and camera_rel_gap say "
                                       f"a certified camera is: {claim!r}")
+
+
+def _check_projective_counts(result: dict) -> None:
+    """The projective stage's counts of what it was given and kept are at most the totals the
+    summary states (each track holds at most one observation a view): the stage saw the views
+    and tracks sent, before any was dropped, so it may count more than is returned, never more
+    than was sent."""
+    summary = result["summary"]
+    stage = _stage(result, "projective")
+    totals = {"views_registered": summary.get("views"), "points": summary["tracks"],
+              "observations": summary["tracks"] * (summary.get("views") or 0)}
+    for name, total in totals.items():
+        given = stage.get(name)
+        if name in stage and not (isinstance(given, int) and not isinstance(given, bool) and 0 <= given <= total):
+            raise Invalid("returned", f"stages/projective/{name} is {given!r}: at most {total} (the summary's views "
+                                      "and tracks, each track one observation a view)")
+
+
+def _check_distortion(result: dict, registered: list[dict], options: dict) -> None:
+    """The radial term (pipelines.reconstruction.claims._distortion): with one kept, every
+    certificate is about the observations undistorted with an estimated k1, and the result says
+    so. summary.distortion and the certificates_conditional_on_k1 warning (its words the
+    statement, which names k1) are stated exactly when a camera states a k1, or the projective
+    stage's radial_distortion says it was estimated; then every registered camera states one
+    term (k1 / focal^2 the summary's, at a focal length one of theirs) and its centre, the
+    summary calls it not certified, the stage's k1 has its sign, and options radial_distortion
+    is not "off"; a camera not registered states none, nor does any camera without the term."""
+    summary, cameras = result["summary"], result["cameras"]
+    distortion = summary.get("distortion")
+    warned = [w for w in summary.get("warnings") or [] if isinstance(w, dict)
+              and w.get("code") == "certificates_conditional_on_k1"]
+    stage = _stage(result, "projective")
+    radial = stage.get("radial_distortion")
+    estimated = isinstance(radial, dict) and radial.get("estimated") is True
+    stated = [c for c in cameras if c.get("k1") is not None or c.get("distortion_centre") is not None]
+    if not (stated or warned or estimated or distortion is not None):
+        return
+    chosen = {id(camera) for camera in registered}
+    if options.get("radial_distortion", "off") == "off" or not registered or any(id(c) not in chosen for c in stated):
+        raise Invalid("returned", "a radial term is stated on a camera not registered, or with options "
+                                  "radial_distortion off (or absent)")
+    if not (isinstance(distortion, dict) and distortion.get("certified") is False
+            and distortion.get("model") == "radial_k1" and is_number(distortion.get("k1"))
+            and distortion["k1"] != 0 and is_number(distortion.get("focal_px")) and distortion["focal_px"] > 0):
+        raise Invalid("returned", "summary/distortion must state the radial term the cameras use (model radial_k1, a "
+                                  "nonzero k1 at a positive focal_px), not certified")
+    k1, focal, statement = distortion["k1"], distortion["focal_px"], distortion.get("statement")
+    if not (len(warned) == 1 and warned[0].get("detail") == statement and f"k1 = {k1:.4g}" in str(statement)):
+        raise Invalid("returned", "the certificates_conditional_on_k1 warning must state summary/distortion's "
+                                  "statement, naming its k1")
+    if not (estimated and is_number(radial.get("k1")) and radial["k1"] * k1 > 0):
+        raise Invalid("returned", "stages/projective/radial_distortion must say the term was estimated, with the "
+                                  "summary's k1's sign")
+    focals = [float(camera["K"][0][0]) for camera in registered]
+    if not any(_close(focal, f) for f in focals):
+        raise Invalid("returned", f"summary/distortion/focal_px {focal!r} is not a registered camera's focal length")
+    for camera, f in zip(registered, focals):
+        centre = camera.get("distortion_centre")
+        if not (_close(camera.get("k1"), k1 * (f / focal) ** 2, abs(k1)) and isinstance(centre, list)
+                and len(centre) == 2 and all(is_number(c) for c in centre)):
+            raise Invalid("returned", f"cameras/{camera['view']}: k1 {camera.get('k1')!r} is not summary/distortion's "
+                                      f"term at its focal length, or it states no distortion_centre")
 
 
 def _warned(summary: dict, code: str) -> bool:
@@ -242,18 +306,16 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
     a returned K not the certified one, a certified K on the edge, a critical motion and views
     not registered each have their warning. That the certified K is the autocalibration's
     optimum is the pipeline's statement (the scope says so): no proof of it is carried here. A
-    result without summary.calibration (from before it was stated) makes none of these claims."""
+    result without summary.calibration (from before it was stated) is read by
+    _check_unstated_calibration."""
     summary = result["summary"]
     missing = sum(1 for camera in result["cameras"] if camera.get("registered") is not True)
-    if missing and "calibration" in summary and not _warned(summary, "views_not_registered"):
+    if missing and not _warned(summary, "views_not_registered"):
         raise Invalid("returned", f"summary: {missing} views not registered, and no views_not_registered warning "
                                   "says so")
     claim = summary.get("calibration")
-    if claim is None:  # a result from before it was stated: then nothing is claimed about K
-        if summary.get("autocalibration_certified") or summary.get("autocalibration_determined"):
-            raise Invalid("returned", "summary: autocalibration_certified or autocalibration_determined is claimed "
-                                      "with no summary/calibration to say which K it is about")
-        return
+    if claim is None:
+        return _check_unstated_calibration(result, registered, summary, verify)
     if not isinstance(claim, dict):
         raise Invalid("returned", "summary/calibration must be an object")
     where = "summary/calibration"
@@ -277,15 +339,8 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
         raise Invalid("returned", f"{where}/certified_K is stated exactly when a certified K is claimed beside a "
                                   "returned one")
     cert = None if cert is None else numbers(cert, f"{where}/certified_K", (3, 3), "returned")
-    stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "autocalibration"),
-                 {})
-    ranges = {} if cert is None else _proven_calibration(result, cert, verify)
-    if cert is not None and stage.get("K") is not None and not calibration_claim.same(
-            numbers(stage["K"], "stages/autocalibration/K", (3, 3), "returned"), cert):
-        raise Invalid("returned", "stages/autocalibration/K is not the certified K")
-    if cert is not None and stage.get("intrinsics") is not None and stage["intrinsics"] != _plain(ranges):
-        raise Invalid("returned", "stages/autocalibration/intrinsics are not the ranges the calibration certificate "
-                                  "searched")
+    stage = _stage(result, "autocalibration")
+    ranges = _stage_calibration(result, stage, cert, verify)
     returned = bool(cert is not None and model == "shared" and calibration_claim.same(K, cert))
     if claim.get("returned_is_certified") is not returned:
         raise Invalid("returned", f"{where}/returned_is_certified is {claim.get('returned_is_certified')!r}: the "
@@ -302,16 +357,13 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
     if claim.get("on_range_edge") != edges:
         raise Invalid("returned", f"{where}/on_range_edge is {claim.get('on_range_edge')!r}, the certified K and "
                                   f"the autocalibration's ranges give {edges!r}")
-    critical, judged = _judged_motion(result, registered, summary, stage)
+    critical, judged = _stage_motion(result, registered, summary, stage)
     determined = claim.get("determined")
     if determined is True and (not certified or edges or critical or not judged):
         raise Invalid("returned", f"{where}/determined is true, but K is "
                                   + ("not certified" if not certified else "on its range's edge" if edges
                                      else f"under a critical motion ({critical})" if critical else
                                      "not judged: too few cameras or certified points to judge its motion"))
-    if stage.get("determined") is True and (critical or not judged):
-        raise Invalid("returned", "stages/autocalibration/determined is true, but its motion is "
-                                  + (f"critical ({critical})" if critical else "not judged"))
     if K is not None and "certified" in stage and (stage["certified"] is True and stage.get("K") is not None) \
             is not certified:
         raise Invalid("returned", f"stages/autocalibration/certified is {stage['certified']!r}, "
@@ -320,11 +372,76 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
             is not determined:
         raise Invalid("returned", "summary: autocalibration_certified and autocalibration_determined must be "
                                   "summary/calibration's certified and determined")
-    for code, due in (("returned_K_not_certified", certified and not returned), ("certified_K_on_range_edge", edges),
+    _require_warnings(result, stage, certified and not returned, cert, edges, critical)
+
+
+def _stage(result: dict, name: str) -> dict:
+    """The result's stage of that name ({} when it has none)."""
+    return next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == name), {})
+
+
+def _stage_calibration(result: dict, stage: dict, cert: np.ndarray | None, verify: Callable[[dict], object],
+                       where: str = "summary/calibration/certified_K") -> dict:
+    """A certified K (``cert``) is the one the calibration certificate proves (_proven_calibration),
+    and the autocalibration stage's K and ranges are its; returns those ranges ({} with no
+    certified K)."""
+    ranges = {} if cert is None else _proven_calibration(result, cert, verify, where)
+    if cert is not None and stage.get("K") is not None and not calibration_claim.same(
+            numbers(stage["K"], "stages/autocalibration/K", (3, 3), "returned"), cert):
+        raise Invalid("returned", "stages/autocalibration/K is not the certified K")
+    if cert is not None and stage.get("intrinsics") is not None and stage["intrinsics"] != _plain(ranges):
+        raise Invalid("returned", "stages/autocalibration/intrinsics are not the ranges the calibration certificate "
+                                  "searched")
+    return ranges
+
+
+def _stage_motion(result: dict, registered: list[dict], summary: dict, stage: dict) -> tuple[str | None, bool]:
+    """_judged_motion, and the autocalibration stage's ``determined`` only where it allows."""
+    critical, judged = _judged_motion(result, registered, summary, stage)
+    if stage.get("determined") is True and (critical or not judged):
+        raise Invalid("returned", "stages/autocalibration/determined is true, but its motion is "
+                                  + (f"critical ({critical})" if critical else "not judged"))
+    return critical, judged
+
+
+def _require_warnings(result: dict, stage: dict, not_returned: bool, cert: np.ndarray | None, edges: list,
+                      critical: str | None) -> None:
+    """The summary's warnings about K, wherever they apply: a certified K not the one returned,
+    on its range's edge, of cameras built with it, and a critical motion."""
+    for code, due in (("returned_K_not_certified", not_returned), ("certified_K_on_range_edge", edges),
                       ("critical_motion", critical),
                       ("certified_K_of_calibrated_cameras", cert is not None and _built_with_one_K(result, stage))):
-        if due and not _warned(summary, code):
+        if due and not _warned(result["summary"], code):
             raise Invalid("returned", f"summary: no {code} warning, though the calibration calls for it")
+
+
+def _check_unstated_calibration(result: dict, registered: list[dict], summary: dict,
+                                verify: Callable[[dict], object]) -> None:
+    """A result without summary.calibration (from before it was stated) states no K in its
+    summary (autocalibration_certified and autocalibration_determined are refused), but its
+    autocalibration stage still may, and each of its claims is checked as in _check_calibration:
+    a stage stating a certified K, or a calibration certificate carried, makes that K the
+    certified one (the certificate must prove it; the stage's ranges are the certificate's); the
+    motion is judged again (the summary's and the stage's critical_motion, the stage's
+    determined); and every warning due is asked for (returned_K_not_certified when the cameras
+    do not all use the certified K)."""
+    if summary.get("autocalibration_certified") or summary.get("autocalibration_determined"):
+        raise Invalid("returned", "summary: autocalibration_certified or autocalibration_determined is claimed "
+                                  "with no summary/calibration to say which K it is about")
+    stage = _stage(result, "autocalibration")
+    cert = None
+    if result.get("calibration_certificate") is not None or (stage.get("certified") is True
+                                                              and stage.get("K") is not None):
+        if stage.get("K") is None:
+            raise Invalid("returned", "a calibration certificate is carried, and stages/autocalibration states no K "
+                                      "it proves")
+        cert = numbers(stage["K"], "stages/autocalibration/K", (3, 3), "returned")
+    ranges = _stage_calibration(result, stage, cert, verify, "stages/autocalibration/K")
+    edges = [] if cert is None else calibration_claim.on_range_edge(cert, ranges)
+    critical, _ = _stage_motion(result, registered, summary, stage)
+    Ks = [numbers(camera["K"], f"cameras/{camera['view']}/K", (3, 3), "returned") for camera in registered]
+    not_returned = cert is not None and bool(Ks) and not all(calibration_claim.same(k, cert) for k in Ks)
+    _require_warnings(result, stage, not_returned, cert, edges, critical)
 
 
 def _built_with_one_K(result: dict, stage: dict) -> bool:
@@ -353,7 +470,8 @@ def _plain(value: Any) -> Any:
     return float(value) if isinstance(value, (np.floating, np.integer)) else value
 
 
-def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict], object]) -> dict:
+def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict], object],
+                        where: str = "summary/calibration/certified_K") -> dict:
     """The certified K is the one the calibration certificate proves: a valid autocalibration
     certificate (stratified: both stages certified) whose metric stage states that K. Returns the
     intrinsics ranges it was proven over (its options', completed from its image size), against
@@ -364,7 +482,7 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
 
     document = result.get("calibration_certificate")
     if not isinstance(document, dict) or document.get("kind") != "autocalibration":
-        raise Invalid("returned", "summary/calibration/certified_K is claimed without a calibration certificate (an "
+        raise Invalid("returned", f"{where} is claimed without a calibration certificate (an "
                                   "autocalibration certificate proving it)")
     report = verify(document)
     if not getattr(report, "valid", False):
@@ -375,15 +493,14 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
         raise Invalid("returned", "the calibration certificate must certify both stratified stages")
     proven = numbers(claims[1].get("K"), "calibration_certificate/items/1/K", (3, 3), "returned")
     if not calibration_claim.same(proven, cert):
-        raise Invalid("returned", "summary/calibration/certified_K is not the K the calibration certificate proves")
+        raise Invalid("returned", f"{where} is not the K the calibration certificate proves")
     options, data = document.get("options") or {}, document.get("data") or {}
     for name, cap in (("rel_gap", camera_claim.MAX_REL_GAP), ("metric_rel_gap", camera_claim.MAX_REL_GAP),
                       ("abs_gap", MAX_CALIBRATION_ABS_GAP)):
         if not (is_number(options.get(name)) and 0 <= options[name] <= cap):
             raise Invalid("returned", f"the calibration certificate's {name} {options.get(name)!r} is beyond {cap}: "
                                       "it would certify a K whatever it costs")
-    stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "autocalibration"),
-                 {})
+    stage = _stage(result, "autocalibration")
     for k, (given, claim) in enumerate(zip(stage.get("stages") or [], claims)):
         if not isinstance(given, dict) or given.get("certified") is not True or not all(
                 (given.get(name) is None and claim.get(name) is None) or _close(given.get(name), claim.get(name))
@@ -666,8 +783,9 @@ class ReconstructionItems(TrackItems):
         _check_camera_figures(result, registered, rel_gap)
         _check_camera_certificate(result, certificate, searched, certified, verify)
         _check_summary(result, registered)
-        if "camera_claim" in result["summary"]:  # a result from before the counts were stated has none
-            _check_pipeline_counts(result, rel_gap)
+        _check_pipeline_counts(result, rel_gap)
+        _check_projective_counts(result)
+        _check_distortion(result, registered, own)
         _check_calibration(result, registered, verify)
 
 
