@@ -10,9 +10,6 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 KNOWN = {
-    # the verifier's registry lists the reconstruction's adapter, which reads the triangulation's
-    # options and scope through verify.py
-    frozenset({"geocert.solvers.verify", "geocert.solvers.verified_kinds", "geocert.solvers.reconstruction.verification"}),
     # the store, queue, tasks, webhooks, heartbeat and reaper of the workers
     frozenset({"geocert.workers.celery_app", "geocert.workers.heartbeat", "geocert.workers.queue",
                "geocert.workers.reaper", "geocert.workers.store", "geocert.workers.tasks", "geocert.workers.webhooks"}),

@@ -22,9 +22,10 @@ import numpy as np
 from geocert.solvers.core.cones import rounding_uncounted
 from geocert.solvers.core.certificates import (BOUND_TOLERANCE, FORMAT, OBJECTIVE_TOLERANCE, VERSION, data_hash,
                                                problem_hash)
-from geocert.solvers.core.geometry import InputError, cost_rounding, norm_cost
+from geocert.solvers.core.geometry import cost_rounding, norm_cost
 from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
                                          informational, number as _number, record, work_budget)
+from geocert.solvers.fractional import residual_claims
 from geocert.solvers.fractional.results import claim_of
 
 MAX_DEPTH = 64
@@ -66,19 +67,7 @@ def checked_options(kind: str, options: Any) -> dict:
 
 def residual_options(kind: str, options: dict) -> dict:
     """checked_options of a kind whose cost is a norm of residuals: norm, gaps, max_residual."""
-    norm = options.get("norm")
-    if not isinstance(norm, str):
-        raise Invalid("options", f"options/norm must be a string, got {norm!r:.40}")
-    checked = {"norm": norm}
-    for name in ("rel_gap", "abs_gap"):
-        checked[name] = _number(options.get(name), f"options/{name}", "options")
-    max_residual = options.get("max_residual")
-    checked["max_residual"] = None if max_residual is None else _number(max_residual, "options/max_residual", "options")
-    try:
-        _kind(kind).options_type(**checked).check()
-    except InputError as exc:
-        raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
-    return checked
+    return residual_claims.checked_options(_kind(kind).options_type, options)
 
 
 def _kind(kind: Any):
@@ -101,14 +90,7 @@ def scope_statement(kind: str, options: dict) -> dict:
     own = getattr(_adapter(kind), "scope_statement", None)
     if own is not None:
         return own(options)
-    domain = _adapter(kind).domain
-    if options["max_residual"] is not None:
-        domain += f" with every residual's length (pixel distance) at most {options['max_residual']!r}"
-    return {"kind": kind, "norm": options["norm"], "max_residual": options["max_residual"],
-            "rel_gap": options["rel_gap"], "abs_gap": options["abs_gap"],
-            "statement": f"for each certified item: no solution in the scope ({domain}) costs less than "
-                         f"lower_bound * (1 - {BOUND_TOLERANCE:g}); the solution returned is in the scope and "
-                         f"costs cost (within a relative {OBJECTIVE_TOLERANCE:g})"}
+    return residual_claims.scope(kind, _adapter(kind).domain, options)
 
 
 def verify_document(document: Any) -> Report:

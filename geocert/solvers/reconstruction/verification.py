@@ -47,7 +47,9 @@ import numpy as np
 
 from geocert.solvers.core.geometry import is_number, norm_cost
 from geocert.solvers.core.strict import Invalid, number, numbers
-from geocert.solvers.fractional.items import TrackItems
+from geocert.solvers.fractional import residual_claims
+from geocert.solvers.fractional.items import TRACKS, TrackItems
+from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.reconstruction import calibration_claim, camera_claim, motion_claim
 from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
 
@@ -727,9 +729,7 @@ class ReconstructionItems(TrackItems):
     def checked_options(self, options: dict) -> dict:
         """The points' options (a triangulation's), and the cameras' tolerance (stated in the
         scope; the camera certificate hashes it as its rel_gap)."""
-        from geocert.solvers.verify import residual_options
-
-        checked = residual_options("triangulation", options)
+        checked = residual_claims.checked_options(TriangulationOptions, options)
         # the reconstruction's options cap the points' gaps too: at rel_gap 0.999 "certified"
         # would hold whatever a point costs
         for name, cap in (("rel_gap", camera_claim.MAX_REL_GAP), ("abs_gap", camera_claim.MAX_ABS_GAP)):
@@ -743,9 +743,7 @@ class ReconstructionItems(TrackItems):
         return checked
 
     def scope_statement(self, options: dict) -> dict:
-        from geocert.solvers.verify import scope_statement
-
-        statement = scope_statement("triangulation", options)
+        statement = residual_claims.scope("triangulation", TRACKS.domain, options)
         statement["kind"] = "reconstruction"
         statement["camera_rel_gap"] = options.get("camera_rel_gap")
         statement["statement"] = (

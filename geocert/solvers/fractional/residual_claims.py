@@ -1,0 +1,38 @@
+"""What a certificate of a kind whose cost is a norm of residuals (triangulation, resection,
+homography, and the reconstruction's points) depends on and states: its options read strictly and
+checked by the solver's own options class, and its scope in words. The verifier's, numpy only."""
+
+from __future__ import annotations
+
+from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
+from geocert.solvers.core.geometry import InputError
+from geocert.solvers.core.strict import Invalid, number
+
+
+def checked_options(options_type: type, options: dict) -> dict:
+    """norm, gaps and max_residual, read strictly and validated as the solver validates them."""
+    norm = options.get("norm")
+    if not isinstance(norm, str):
+        raise Invalid("options", f"options/norm must be a string, got {norm!r:.40}")
+    checked = {"norm": norm}
+    for name in ("rel_gap", "abs_gap"):
+        checked[name] = number(options.get(name), f"options/{name}", "options")
+    max_residual = options.get("max_residual")
+    checked["max_residual"] = None if max_residual is None else number(max_residual, "options/max_residual", "options")
+    try:
+        options_type(**checked).check()
+    except InputError as exc:
+        raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
+    return checked
+
+
+def scope(kind: str, domain: str, options: dict) -> dict:
+    """What a valid certificate proves: no solution in the domain (narrowed by max_residual)
+    costs less than each certified item's lower bound."""
+    if options["max_residual"] is not None:
+        domain += f" with every residual's length (pixel distance) at most {options['max_residual']!r}"
+    return {"kind": kind, "norm": options["norm"], "max_residual": options["max_residual"],
+            "rel_gap": options["rel_gap"], "abs_gap": options["abs_gap"],
+            "statement": f"for each certified item: no solution in the scope ({domain}) costs less than "
+                         f"lower_bound * (1 - {BOUND_TOLERANCE:g}); the solution returned is in the scope and "
+                         f"costs cost (within a relative {OBJECTIVE_TOLERANCE:g})"}
