@@ -208,8 +208,7 @@ def relaxation_capacity(N: int = 50, seed: int = 0, widths=(0.1, 0.01, 0.001)) -
     and only McCormick's envelopes keep the bound above 0; their slack is the product of the
     camera's and the coefficients' widths, so the gap falls only as the 6-dimensional camera box
     shrinks (boxes needed grow as (1/h)^6)."""
-    from geocert.solvers.bilinear.relaxation import Relaxation
-    from geocert.solvers.bilinear.search import Model, root_incumbent, tighten
+    from geocert.solvers.bilinear.search import tighten
     from geocert.solvers.core.conic import ReusableConicProgram
 
     print(f"\nrelaxation capacity: N = {N}, 0.5% noise, L2L2, one frame per K; the root relaxation's relative gap "
@@ -218,14 +217,9 @@ def relaxation_capacity(N: int = 50, seed: int = 0, widths=(0.1, 0.01, 0.001)) -
     print("| K | 6K - 4 | 2N | " + " | ".join(f"gap, h = {h:g}" for h in widths) + " | CPU s per box |")
     print("|---|---|---|" + "---|" * len(widths) + "---|")
     for K in (5, 10, 15, 17, 18, 20, 40):
-        basis, points, *_ = scene(K, N, 0.005, seed)
-        frame = pb.normalise(basis, points)
-        model = Model(frame, "L2L2", "convex", 10.0)
-        M0, a0, _, value = root_incumbent(model)
-        relaxation = Relaxation(frame.X, frame.u, "L2L2", "convex", 10.0)
+        _, relaxation, M0, value = _at_incumbent(K, N, seed)
         solver = ReusableConicProgram(lean=False)
         cap = value * (1 + 1e-9)
-        M0 = M0.ravel()
         cells, cpu = [], []
         for h in widths:
             started = time.process_time()
@@ -236,6 +230,84 @@ def relaxation_capacity(N: int = 50, seed: int = 0, widths=(0.1, 0.01, 0.001)) -
             cpu.append(time.process_time() - started)
         print(f"| {K} | {6 * K - 4} | {2 * N} | " + " | ".join(f"{c:.2%}" for c in cells)
               + f" | {np.median(cpu):.2f} |", flush=True)
+
+
+def _at_incumbent(K: int, N: int, seed: int):
+    """One frame (0.5% noise) in normalised units, its L2L2 relaxation (convex coefficients), the
+    root incumbent's camera (6 entries) and cost."""
+    from geocert.solvers.bilinear.relaxation import Relaxation
+    from geocert.solvers.bilinear.search import Model, root_incumbent
+
+    basis, points, *_ = scene(K, N, 0.005, seed)
+    frame = pb.normalise(basis, points)
+    M0, _, _, value = root_incumbent(Model(frame, "L2L2", "convex", 10.0))
+    return frame, Relaxation(frame.X, frame.u, "L2L2", "convex", 10.0), M0.ravel(), value
+
+
+def shor_capacity(N: int = 50, seed: int = 0, widths=(0.1, 0.01)) -> None:
+    """What a tighter relaxation would give: on the boxes of relaxation_capacity (half-width h
+    about the incumbent, the coefficients' box tightened for it), the root gap of the McCormick
+    relaxation the search uses beside the same relaxation with Shor's semidefinite constraint
+    added: the moment matrix of (1, m, alpha) (size 7 + K) positive semidefinite, its (m, alpha)
+    block the lifted products gamma, its other blocks tied by McCormick's (and, for convex
+    coefficients, the simplex's) product rows. Solved with cvxpy and Clarabel (the test extra's
+    cvxpy), not safe bounds: a measurement of the relaxation's strength, not a certificate."""
+    import cvxpy as cp
+
+    from geocert.solvers.bilinear.search import tighten
+    from geocert.solvers.core.conic import ReusableConicProgram
+
+    print(f"\nShor's relaxation against McCormick's: N = {N}, 0.5% noise, L2L2, one frame per K; the root gap on a "
+          "camera box of half-width h about the incumbent (coefficients tightened for it), and the CPU s of one "
+          "solve of each")
+    print("| K | h | McCormick gap | Shor + McCormick gap | McCormick s | Shor s |")
+    print("|---|---|---|---|---|---|")
+    for K in (5, 10, 20, 40):
+        frame, relaxation, M0, value = _at_incumbent(K, N, seed)
+        solver = ReusableConicProgram(lean=False)
+        cap = value * (1 + 1e-9)
+        for h in widths:
+            lo, hi, alo, ahi, _ = tighten(relaxation, M0 - h, M0 + h, cap)
+            started = time.process_time()
+            data = relaxation.conic_data(lo, hi, cap, alo, ahi)
+            res = solver.solve(data.q, data.A, data.b, data.cones)
+            mccormick = 1 - relaxation.bound(data, res.z) / value
+            mccormick_s = time.process_time() - started
+            started = time.process_time()
+            shor = _shor_bound(cp, frame.X, frame.u, lo, hi, alo, ahi)
+            shor_s = time.process_time() - started
+            print(f"| {K} | {h:g} | {mccormick:.2%} | {1 - shor / value:.2%} | {mccormick_s:.2f} | {shor_s:.2f} |",
+                  flush=True)
+
+
+def _shor_bound(cp, X: np.ndarray, u: np.ndarray, lo, hi, alo, ahi) -> float:
+    """min sum of squared residuals over the McCormick relaxation with Shor's PSD moment matrix
+    (convex coefficients), in normalised units."""
+    K, n, _ = X.shape
+    d = 7 + K
+    Y = cp.Variable((d, d), symmetric=True)
+    m, a = Y[0, 1:7], Y[0, 7:]
+    G = Y[1:7, 7:]  # gamma_{rk, i} = M_rk alpha_i
+    MM, AA = Y[1:7, 1:7], Y[7:, 7:]
+    t = cp.Variable(2)
+    lo, hi, alo, ahi = (np.asarray(v, float) for v in (lo, hi, alo, ahi))
+    cons = [Y >> 0, Y[0, 0] == 1, cp.sum(a) == 1, cp.sum(G, axis=1) == m, cp.sum(AA, axis=1) == a,
+            m >= lo, m <= hi, a >= alo, a <= ahi]
+    for P, x, xl, xu, y, yl, yu in ((G, m, lo, hi, a, alo, ahi), (MM, m, lo, hi, m, lo, hi),
+                                    (AA, a, alo, ahi, a, alo, ahi)):
+        X1, Y1 = cp.reshape(x, (len(xl), 1), order="F"), cp.reshape(y, (1, len(yl)), order="F")
+        cons += [P >= X1 @ yl[None, :] + xl[:, None] @ Y1 - np.outer(xl, yl),
+                 P >= X1 @ yu[None, :] + xu[:, None] @ Y1 - np.outer(xu, yu),
+                 P <= X1 @ yu[None, :] + xl[:, None] @ Y1 - np.outer(xl, yu),
+                 P <= X1 @ yl[None, :] + xu[:, None] @ Y1 - np.outer(xu, yl)]
+    prediction = []
+    for r in range(2):
+        # sum_k sum_i X[i, j, k] gamma_{3r + k, i} + t_r, for every point j
+        prediction.append(sum(X[:, :, k].T @ G[3 * r + k, :] for k in range(3)) + t[r])
+    residual = cp.hstack([u[:, 0] - prediction[0], u[:, 1] - prediction[1]])
+    problem = cp.Problem(cp.Minimize(cp.sum_squares(residual)), cons)
+    problem.solve(solver=cp.CLARABEL)
+    return float(problem.value)
 
 
 def _rotation(angle: float, tilt: float) -> np.ndarray:
@@ -308,11 +380,16 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=5)
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--capacity", action="store_true", help="only the relaxation's capacity table")
+    parser.add_argument("--shor", action="store_true",
+                        help="only the root gap with Shor's semidefinite constraint added (needs cvxpy, the test extra)")
     parser.add_argument("--nonrigid-service", type=int, default=0, metavar="WORKERS",
                         help="only the non-rigid sequence, through a real service with this many workers")
     args = parser.parse_args()
     if args.capacity:
         relaxation_capacity()
+        return
+    if args.shor:
+        shor_capacity()
         return
     if args.nonrigid_service:
         nonrigid(60 if args.quick else 240, service_workers=args.nonrigid_service)

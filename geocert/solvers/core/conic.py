@@ -96,8 +96,9 @@ def _settings(tolerance: float, lean: bool = False) -> clarabel.DefaultSettings:
 # duality gap near 3e-8 and answer AlmostSolved; such a solve is repeated once at 1e-7, and only
 # a clean "Solved" there is trusted. Both are far below the gaps searches stop at (1e-4 and up
 # on costs scaled to about 1), and the lower bound taken is the smaller objective anyway.
+_RETRY_TOLERANCE = 1e-7
 _SETTINGS = _settings(1e-9)
-_RETRY_SETTINGS = _settings(1e-7)
+_RETRY_SETTINGS = _settings(_RETRY_TOLERANCE)
 
 # Small programs (a track's relaxations and root region, a small map's) are built well scaled:
 # charts normalise the frame and costs are scaled so that the incumbent costs 1. For them
@@ -114,6 +115,11 @@ _LEAN_ROWS = 400
 @functools.lru_cache(maxsize=8)
 def _lean_settings(tolerance: float) -> clarabel.DefaultSettings:
     return _LEAN_SETTINGS if tolerance == 1e-9 else _settings(tolerance, lean=True)
+
+
+@functools.lru_cache(maxsize=8)
+def _full_settings(tolerance: float) -> clarabel.DefaultSettings:
+    return _SETTINGS if tolerance == 1e-9 else _settings(tolerance)
 
 
 @functools.lru_cache(maxsize=64)
@@ -147,11 +153,15 @@ def solve_conic(q: np.ndarray, A: np.ndarray | sp.csc_matrix, b: np.ndarray, con
         return ConicResult(ConicStatus.FAILED, None, None, np.nan, np.nan, f"exception: {exc}")
 
 
-def _retried(result: ConicResult, q, A: sp.csc_matrix, b, cones: ConeSpec, lean: bool) -> ConicResult:
+def _retried(result: ConicResult, q, A: sp.csc_matrix, b, cones: ConeSpec, lean: bool,
+             tolerance: float = 1e-9) -> ConicResult:
     """A lean solve that did not end cleanly solved again with the full settings; an inaccurate
-    answer solved again at the retry tolerance (see _RETRY_SETTINGS)."""
+    answer solved again at the retry tolerance (see _RETRY_SETTINGS), unless it was solved at
+    that tolerance or looser already (the same solve again would end the same way)."""
     if lean and result.status in (ConicStatus.INACCURATE, ConicStatus.FAILED):
         result = _result(_new_solver(q, A, b, cones, _SETTINGS).solve())
+    elif result.status is ConicStatus.INACCURATE and tolerance >= _RETRY_TOLERANCE:
+        return result
     if result.status is not ConicStatus.INACCURATE:
         return result
     return _result(_new_solver(q, A, b, cones, _RETRY_SETTINGS).solve())
@@ -242,8 +252,9 @@ class ReusableConicProgram:
     def __init__(self, lean: bool | None = None, tolerance: float = 1e-9) -> None:
         """``lean``: the lean settings (no equilibration) for small programs (None: by size);
         False for programs not built well scaled, where a lean solve fails and is repeated.
-        ``tolerance``: the lean solves' (the full settings' stay at 1e-9), e.g. looser for bound
-        tightening, whose sides are safe bounds of whatever dual the solve returns."""
+        ``tolerance``: the solves' (lean or full; a lean solve that fails is repeated with the full
+        settings at 1e-9), e.g. looser for bound tightening, whose sides are safe bounds of
+        whatever dual the solve returns."""
         self._lean = lean
         self._tolerance = tolerance
         self._token = next(_TOKENS)
@@ -276,14 +287,15 @@ class ReusableConicProgram:
                 entry = _updated(entry, q, data, b)
             if entry is None:
                 csc = A.copy() if mask is None else dense_to_csc(A)
-                solver = _new_solver(q, csc, b, cones, _lean_settings(self._tolerance) if lean else _SETTINGS)
+                solver = _new_solver(q, csc, b, cones, _lean_settings(self._tolerance) if lean
+                                     else _full_settings(self._tolerance))
                 entry = _Loaded(csc, solver, lean)
                 if pool_key is not None:
                     _POOL.put(pool_key, entry)
             entry.holder = self._token
             self._key, self._mask, self._entry = key, mask, entry
             self._data, self._b, self._cones = data, b, cones
-            return _retried(_result(entry.solver.solve()), q, entry.csc, b, cones, entry.lean)
+            return _retried(_result(entry.solver.solve()), q, entry.csc, b, cones, entry.lean, self._tolerance)
         except BaseException as exc:
             if isinstance(exc, (KeyboardInterrupt, SystemExit)):
                 raise
@@ -306,7 +318,8 @@ class ReusableConicProgram:
                 entry.holder = self._token
             else:
                 entry.solver.update(q=q)
-            return _retried(_result(entry.solver.solve()), q, entry.csc, self._b, self._cones, entry.lean)
+            return _retried(_result(entry.solver.solve()), q, entry.csc, self._b, self._cones, entry.lean,
+                            self._tolerance)
         except BaseException as exc:
             if isinstance(exc, (KeyboardInterrupt, SystemExit)):
                 raise
