@@ -381,6 +381,48 @@ class TestUnknownIntrinsics:
         assert not out.stages[0]["radial_distortion"]["estimated"]
 
 
+RING_VIEWS = 40
+
+
+@pytest.fixture(scope="module")
+def ring():
+    """A dense ring (40 photos 9 degrees apart round an object, each point seen over a stretch of
+    the ring, a 1500 px lens: Middlebury's templeRing's shape) in a shuffled file order."""
+    scene = synthetic.ring(views=RING_VIEWS, points=300, seed=1, noise_px=0.3)
+    order = np.random.default_rng(2).permutation(RING_VIEWS)  # file position -> view round the ring
+    position = np.argsort(order)
+    return scene, order, [(position[views], pixels) for views, pixels in scene.tracks]
+
+
+class TestDenseRing:
+    VIEWS = RING_VIEWS
+
+    def test_k_known_registers_every_view_in_any_order(self, ring):
+        from geocert.solvers.reconstruction.calibrated import calibrated_reconstruction
+
+        scene, order, tracks = ring
+        found = calibrated_reconstruction(tracks, [scene.K] * self.VIEWS)
+        assert found.stats["registered"] == self.VIEWS
+        errors = aligned_rotation_errors(found.rotations, list(scene.rotations[order]))
+        assert errors.max() < 0.5
+
+    def test_k_unknown_resumes_from_the_refined_focal_length(self, ring):
+        # The prior (1.2 x 640 = 768 px) is half the true focal length: the first round registers
+        # every view at 768 px, the adjustment refines it, and the next round resumes from the
+        # adjusted cameras rather than registering every view again from a new initial pair.
+        scene, order, tracks = ring
+        out = pipeline.reconstruct(tracks, [scene.image_size] * self.VIEWS,
+                                   ReconstructionOptions(resect_cameras=False))
+        assert out.summary["views_registered"] == self.VIEWS
+        assert abs(out.summary["calibration"]["K"][0][0] / 1500.0 - 1) < 0.02
+        errors = aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations[order]))
+        assert errors.max() < 0.5
+        rounds = out.stages[0]["focal_rounds"]
+        assert rounds[0]["focal_px"] == pytest.approx(768.0) and not rounds[0]["resumed"]
+        assert len(rounds) >= 2 and all(step["resumed"] for step in rounds[1:])
+        assert out.stages[0]["initial_pair"] is not None  # the first round's, kept
+
+
 class TestMotion:
     """The motion of the returned cameras, judged whatever the order of the photos, and at the
     noise the adjustment's residuals give (upgrade.motion, upgrade.rotation_noise)."""

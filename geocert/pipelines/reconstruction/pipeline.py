@@ -197,8 +197,10 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
     at the image's centre), then a metric adjustment refining one focal length (and, with
     ``radial_distortion`` "auto" or "on", one radial term k1, bundle model "radial"); when it moves
     the focal length by more than 2% or k1 by more than RADIAL_STEP_PX at the image's corner, the
-    K-known path again from the refined K on the observations undistorted with the refined k1 (at
-    most ``focal_prior_rounds`` times). Returns the reconstruction as a projective.Projective
+    K-known path again from the refined K on the observations undistorted with the refined k1,
+    resumed from the adjusted cameras (its views kept, those it lacks registered, the final
+    adjustments run again: not every view registered again from a new initial pair) (at most
+    ``focal_prior_rounds`` times). Returns the reconstruction as a projective.Projective
     (P = K [R | t] and the points, for the certified upgrade), the upgrade.Metric the adjustment
     found (its k1 that of the pixels given) and the radial term's figures."""
     from geocert.solvers.reconstruction.calibrated import CalibratedOptions, calibrated_reconstruction
@@ -209,7 +211,7 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
     centres = np.array([[(w - 1) / 2, (h - 1) / 2] for w, h in image_sizes])
     corner = max(np.hypot(w, h) / 2 for w, h in image_sizes)
     model = "simple" if options.radial_distortion == "off" else "radial"
-    history, metric, found, k1 = [], None, None, 0.0
+    history, metric, found, k1, resume, first = [], None, None, 0.0, None, {}
     for _ in range(options.focal_prior_rounds):
         Ks = [np.array([[focal, 0.0, c[0]], [0.0, focal, c[1]], [0.0, 0.0, 1.0]]) for c in centres]
         used = tracks if k1 == 0.0 else [
@@ -218,9 +220,13 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
         found = calibrated_reconstruction(used, Ks, CalibratedOptions(
             max_reprojection_px=2 * options.threshold_px, pnp_min_inliers=options.min_inliers, seed=options.seed,
             merge_components=options.merge_components), lambda progress: asks(progress.get("done", 0),
-                                                                               progress.get("total", 1)))
+                                                                               progress.get("total", 1)),
+            start_from=resume)
+        first = first or {key: found.stats[key] for key in ("initial_pair", "initial_pair_search")
+                          if key in found.stats}
+        found.stats.update(first)  # a resumed round's initial pair is the first round's
         registered = sum(R is not None for R in found.rotations)
-        step = {"focal_px": float(focal), "k1": k1, "registered": int(registered)}
+        step = {"focal_px": float(focal), "k1": k1, "registered": int(registered), "resumed": resume is not None}
         history.append(step)
         if registered < 2:
             break
@@ -239,6 +245,7 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
                 abs(refined / focal - 1) <= 0.02 and moved <= RADIAL_STEP_PX):
             break
         focal, k1 = refined, metric.k1
+        resume = (metric.rotations, metric.translations)
     radial = {"model": options.radial_distortion, "estimated": False, "k1": 0.0}
     if metric is not None and model == "radial" and found.status != "cancelled":
         metric, radial = _radial_test(metric, obs, options, radial)

@@ -927,11 +927,18 @@ def _check_inputs(tracks, Ks) -> None:
 
 
 def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: list[np.ndarray],
-                              options: CalibratedOptions | None = None, callback=None) -> CalibratedReconstruction:
+                              options: CalibratedOptions | None = None, callback=None,
+                              start_from: tuple[list, list] | None = None) -> CalibratedReconstruction:
     """Cameras and points from tracks (views, pixels) and each view's K (see the module docstring).
 
     ``callback(progress)`` gets {"stage": "registration", "done": k, "total": n} (and
-    "bundle_adjustment") and may return True to stop (status "cancelled", the views so far kept)."""
+    "bundle_adjustment") and may return True to stop (status "cancelled", the views so far kept).
+
+    ``start_from`` (rotations, translations per view, None for a view not placed) resumes from
+    cameras already found instead of an initial pair: every track triangulated in them, then
+    steps 3-4 as usual (the views they lack registered by PnP, the final adjustments). What the
+    K-unknown path does after refining the focal length: COLMAP refines it as it registers, and
+    registering every view again from a new initial pair cost most of a dense ring's time."""
     options = options or CalibratedOptions()
     _check_inputs(tracks, Ks)
     cv2.setRNGSeed(options.seed)
@@ -945,22 +952,33 @@ def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: l
         return _result(state, stats, reasons_by_view, status)
 
     reasons_by_view: dict[int, str] = {}
-    start = time.perf_counter()
-    search: dict = {}
-    pair = _initial_pair(state, options, found=search, callback=callback)
-    stats["initial_pair_search"] = search
-    timing["initial_pair"] += time.perf_counter() - start
-    if pair is None:
-        status = "failed"
-        stats["reason"] = search["reason"]
-        for v in range(state.n_views):
-            reasons_by_view[v] = search["reason"]
-        return result()
-    i, j, R, t = pair
-    stats["initial_pair"] = [i, j]
-    stats["registered_by"].update({i: "initial pair", j: "initial pair"})
-    state.R[i], state.t[i] = np.eye(3), np.zeros(3)
-    state.R[j], state.t[j] = R, t
+    if start_from is not None:
+        given = [v for v, R in enumerate(start_from[0]) if R is not None]
+        if len(given) < 2:
+            raise InputError("start_from", "give at least two cameras")
+        for v in given:
+            state.R[v] = np.array(start_from[0][v], dtype=np.float64)
+            state.t[v] = np.array(start_from[1][v], dtype=np.float64).ravel()
+            stats["registered_by"][v] = "given"
+        i = given[0]
+        stats["resumed_from"] = len(given)
+    else:
+        start = time.perf_counter()
+        search: dict = {}
+        pair = _initial_pair(state, options, found=search, callback=callback)
+        stats["initial_pair_search"] = search
+        timing["initial_pair"] += time.perf_counter() - start
+        if pair is None:
+            status = "failed"
+            stats["reason"] = search["reason"]
+            for v in range(state.n_views):
+                reasons_by_view[v] = search["reason"]
+            return result()
+        i, j, R, t = pair
+        stats["initial_pair"] = [i, j]
+        stats["registered_by"].update({i: "initial pair", j: "initial pair"})
+        state.R[i], state.t[i] = np.eye(3), np.zeros(3)
+        state.R[j], state.t[j] = R, t
     _triangulate_and_adjust(state, i, options.ba_max_nfev, options, stats, timing)
 
     if _grow(state, i, options, stats, timing, reasons_by_view, callback):

@@ -91,3 +91,45 @@ def turntable(views: int = 12, points: int = 80, focal: float = 800.0, image_siz
         pixels = image[:, :2] / image[:, 2:3] + noise_px * rng.standard_normal((views, 2))
         tracks.append((vs, pixels))
     return Scene(K, rotations, translations, X, tracks, (w, h))
+
+
+def ring(views: int = 48, points: int = 400, focal: float = 1500.0, image_size=(640, 480), noise_px: float = 0.0,
+         elevation_degrees: float = 25.0, distance: float = 6.0, visible_degrees: float = 60.0,
+         seed: int = 0) -> Scene:
+    """A dense ring of photos round an object (Middlebury's templeRing: 47 photos 7.5 degrees
+    apart, a long lens): camera centres evenly on a circle about the vertical axis, looking at
+    the axis from a fixed elevation, no roll. The points lie on a sphere of radius 1 and are seen
+    only from within ``visible_degrees`` of their outward normal (the object hides its far
+    side), so each point is tracked over a stretch of the ring and the views link only to their
+    neighbours round it."""
+    rng = np.random.default_rng(seed)
+    w, h = image_size
+    K = np.array([[focal, 0.0, w / 2], [0.0, focal, h / 2], [0.0, 0.0, 1.0]])
+    normal = rng.normal(size=(points, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    X = normal.copy()
+    up = np.array([0.0, -1.0, 0.0])
+    elevation = np.radians(elevation_degrees)
+    rotations, translations, centres = [], [], []
+    for k in range(views):
+        angle = 2 * np.pi * k / views
+        centre = distance * np.array([np.cos(elevation) * np.sin(angle), -np.sin(elevation),
+                                      -np.cos(elevation) * np.cos(angle)])
+        R, t = look_at(centre, np.zeros(3), up)
+        rotations.append(R)
+        translations.append(t)
+        centres.append(centre)
+    rotations, translations, centres = np.array(rotations), np.array(translations), np.array(centres)
+    towards = centres[None, :, :] - X[:, None, :]
+    towards /= np.linalg.norm(towards, axis=2, keepdims=True)
+    seen = np.einsum("pi,pvi->pv", normal, towards) > np.cos(np.radians(visible_degrees))
+    tracks = []
+    for j in range(points):
+        vs = np.flatnonzero(seen[j])
+        if len(vs) < 2:
+            continue
+        cam = X[j] @ rotations[vs].transpose(0, 2, 1) + translations[vs]
+        image = cam @ K.T
+        pixels = image[:, :2] / image[:, 2:3] + noise_px * rng.standard_normal((len(vs), 2))
+        tracks.append((vs, pixels))
+    return Scene(K, rotations, translations, X, tracks, (w, h))
