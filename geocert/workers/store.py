@@ -16,7 +16,7 @@ import math
 import time
 import uuid
 import zlib
-from typing import Any, AsyncIterator, Iterator
+from typing import Any, AsyncIterator, Callable, Iterator
 
 import redis
 import redis.asyncio
@@ -53,7 +53,8 @@ class JobStore:
     def create(self, kind: str, request: dict, items_total: int, chunk_size: int, owner: str,
                callback_url: str | None = None, active_limit: int = 0, task_ids=None,
                chunk_key: str | None = None, items_key: str | None = None,
-               item_time_bound_s: float | None = None, job_time_limit_s: float | None = None) -> dict | None:
+               item_time_bound_s: float | None = None, job_time_limit_s: float | None = None,
+               enqueue: Callable[[dict], list[tuple[str, tuple]]] | None = None) -> dict | None:
         """Record a new queued job, counted among the owner's active jobs, with its ``status``
         event and the ids its tasks will have (one per chunk; made here unless given), in one
         round trip. None when the owner already has ``active_limit`` jobs queued or running (0:
@@ -70,7 +71,11 @@ class JobStore:
 
         ``item_time_bound_s``: the longest one of its items runs while the job's own time limits
         hold (its kind's ``time_bound_s``), from which its tasks' last-resort limits are sized, with
-        ``job_time_limit_s`` (a many-item kind's option: the job's limit in all)."""
+        ``job_time_limit_s`` (a many-item kind's option: the job's limit in all).
+
+        ``enqueue``: given the job's record, the broker's Redis commands that queue its tasks
+        (workers.queue.task_commands); they run in the same transaction, only if the job is
+        admitted: a submission is one round trip, and no task is ever queued without its job."""
         job_id = uuid.uuid4().hex
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
@@ -93,6 +98,10 @@ class JobStore:
         self.publish(job_id, "status", {"status": "queued"}, pipe)
         if meta["task_ids"]:
             pipe.rpush(self.key(job_id, "tasks"), *meta["task_ids"])
+        if enqueue is not None:
+            commands = enqueue(meta)
+            pipe.eval(self._RUN_IF_ADMITTED, 1, self.owner_key(owner, "active"), job_id,
+                      *(part for name, args in commands for part in (name, len(args), *args)))
         if pipe.execute()[0] != 1:
             self.delete(job_id)
             return None
@@ -702,6 +711,19 @@ class JobStore:
     _ADMIT = """
     if tonumber(ARGV[2]) > 0 and redis.call('SCARD', KEYS[1]) >= tonumber(ARGV[2]) then return 0 end
     redis.call('SADD', KEYS[1], ARGV[1])
+    return 1
+    """
+
+    # Run the commands in ARGV[2:] (each its name, its argument count, its arguments) when the job
+    # ARGV[1] was admitted (_ADMIT, earlier in the same transaction).
+    _RUN_IF_ADMITTED = """
+    if redis.call('SISMEMBER', KEYS[1], ARGV[1]) == 0 then return 0 end
+    local at = 2
+    while at <= #ARGV do
+      local count = tonumber(ARGV[at + 1])
+      redis.call(ARGV[at], unpack(ARGV, at + 2, at + 1 + count))
+      at = at + 2 + count
+    end
     return 1
     """
 
