@@ -95,7 +95,9 @@ class _Collected:
 @functools.cache
 def can_collect() -> bool:
     """Whether the broker's channel hands each message's final Redis commands to a publish batch
-    (kombu's Redis transport since 5.7): then ``task_commands`` can collect them."""
+    (kombu's Redis transport since 5.7): then ``task_commands`` can collect them. They can run on
+    the job store's connection because the broker is the store's Redis and database
+    (celery_app.make_celery: broker_url(redis_url())), its keys unprefixed (no global_keyprefix)."""
     from geocert.workers.celery_app import celery_app
 
     with celery_app.producer_or_acquire() as producer:
