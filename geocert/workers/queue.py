@@ -3,6 +3,7 @@ importing the tasks' solver code at module level."""
 
 from __future__ import annotations
 
+import functools
 import threading
 
 from geocert.workers.store import JobStore
@@ -59,18 +60,66 @@ def task_options(kind_name: str, item_bound_s: float | None, items: int, job_lim
     return {"soft_time_limit": soft, "time_limit": soft + HARD_AFTER_S, "link_error": _SOLVE_CHUNK_FAILED.s()}
 
 
-def submit_chunks(meta: dict, request_id: str | None) -> None:
+def _chunk_group(meta: dict, request_id: str | None):
     """One task per chunk, so a batch runs in parallel across every worker (a Celery group), each
     under the id ``JobStore.create`` recorded for it (``meta["task_ids"]``), with time limits
     sized from the job's own (task_options)."""
     from celery import group
 
     solve_chunk = _solve_chunk_task()
-    signatures = [solve_chunk.s(meta["id"], start, stop, request_id).set(
+    return group([solve_chunk.s(meta["id"], start, stop, request_id).set(
                       task_id=task_id, **task_options(meta["kind"], meta.get("item_time_bound_s"), stop - start,
                                                       meta.get("job_time_limit_s")))
-                  for (start, stop), task_id in zip(meta["chunks"], meta["task_ids"])]
-    group(signatures).apply_async()
+                  for (start, stop), task_id in zip(meta["chunks"], meta["task_ids"])])
+
+
+def submit_chunks(meta: dict, request_id: str | None) -> None:
+    """Publish the job's chunk tasks now (each publish a round trip of its own to the broker)."""
+    _chunk_group(meta, request_id).apply_async()
+
+
+class _Collected:
+    """Stands where kombu's publish batch (``Producer.batch``) stands, and as the Redis transport's
+    batch does, takes each message's final Redis commands (``add``): kept here, not sent."""
+
+    def __init__(self):
+        self.commands: list[tuple[str, tuple]] = []
+
+    def publish(self, channel, message, **kwargs):
+        return channel.basic_publish(message, _publish_batch=self, **kwargs)
+
+    def add(self, name: str, *args) -> None:
+        self.commands.append((name, args))
+
+
+@functools.cache
+def can_collect() -> bool:
+    """Whether the broker's channel hands each message's final Redis commands to a publish batch
+    (kombu's Redis transport since 5.7): then ``task_commands`` can collect them. They can run on
+    the job store's connection because the broker is the store's Redis and database
+    (celery_app.make_celery: broker_url(redis_url())), its keys unprefixed (no global_keyprefix)."""
+    from geocert.workers.celery_app import celery_app
+
+    with celery_app.producer_or_acquire() as producer:
+        return callable(getattr(producer.channel, "create_publish_batch", None))
+
+
+def task_commands(meta: dict, request_id: str | None) -> list[tuple[str, tuple]]:
+    """The broker's Redis commands (name, arguments) that publish the job's chunk tasks, made by
+    Celery and kombu as a publish makes them (the same messages, queues and headers) but not
+    sent: JobStore.create runs them in the job's own transaction (``enqueue``), so a submission
+    is one round trip to Redis whatever its number of chunks, instead of one more a chunk."""
+    from geocert.workers.celery_app import celery_app
+
+    collected = _Collected()
+    with celery_app.producer_or_acquire() as producer:
+        # kombu's Producer publishes through its current batch (thread-local, as Producer.batch sets it).
+        producer._batch_local.current = collected
+        try:
+            _chunk_group(meta, request_id).apply_async(producer=producer)
+        finally:
+            del producer._batch_local.current
+    return collected.commands
 
 
 def withdraw_queued(store: JobStore, job_id: str) -> None:

@@ -16,7 +16,7 @@ import math
 import time
 import uuid
 import zlib
-from typing import Any, AsyncIterator, Iterator
+from typing import Any, AsyncIterator, Callable, Iterator
 
 import redis
 import redis.asyncio
@@ -53,7 +53,8 @@ class JobStore:
     def create(self, kind: str, request: dict, items_total: int, chunk_size: int, owner: str,
                callback_url: str | None = None, active_limit: int = 0, task_ids=None,
                chunk_key: str | None = None, items_key: str | None = None,
-               item_time_bound_s: float | None = None, job_time_limit_s: float | None = None) -> dict | None:
+               item_time_bound_s: float | None = None, job_time_limit_s: float | None = None,
+               enqueue: Callable[[dict], list[tuple[str, tuple]]] | None = None) -> dict | None:
         """Record a new queued job, counted among the owner's active jobs, with its ``status``
         event and the ids its tasks will have (one per chunk; made here unless given), in one
         round trip. None when the owner already has ``active_limit`` jobs queued or running (0:
@@ -70,7 +71,11 @@ class JobStore:
 
         ``item_time_bound_s``: the longest one of its items runs while the job's own time limits
         hold (its kind's ``time_bound_s``), from which its tasks' last-resort limits are sized, with
-        ``job_time_limit_s`` (a many-item kind's option: the job's limit in all)."""
+        ``job_time_limit_s`` (a many-item kind's option: the job's limit in all).
+
+        ``enqueue``: given the job's record, the broker's Redis commands that queue its tasks
+        (workers.queue.task_commands); they run in the same transaction, only if the job is
+        admitted: a submission is one round trip, and no task is ever queued without its job."""
         job_id = uuid.uuid4().hex
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
@@ -93,6 +98,10 @@ class JobStore:
         self.publish(job_id, "status", {"status": "queued"}, pipe)
         if meta["task_ids"]:
             pipe.rpush(self.key(job_id, "tasks"), *meta["task_ids"])
+        if enqueue is not None:
+            commands = enqueue(meta)
+            pipe.eval(self._RUN_IF_ADMITTED, 1, self.owner_key(owner, "active"), job_id,
+                      *(part for name, args in commands for part in (name, len(args), *args)))
         if pipe.execute()[0] != 1:
             self.delete(job_id)
             return None
@@ -211,11 +220,17 @@ class JobStore:
         others None, indices unchanged): what a task solving that chunk needs. The whole request
         when its items are not kept apart."""
         pipe = self.r.pipeline()
+        self._read_chunk(pipe, job_id, start, stop)
+        return self._chunk(start, *pipe.execute())
+
+    def _read_chunk(self, pipe, job_id: str, start: int, stop: int) -> None:
         pipe.get(self.key(job_id, "request"))
         pipe.hget(self.key(job_id), "request_items")
         pipe.llen(self.key(job_id, "request:items"))
         pipe.lrange(self.key(job_id, "request:items"), start, stop - 1)
-        head, chunk_key, total, items = pipe.execute()
+
+    @staticmethod
+    def _chunk(start: int, head: str, chunk_key: str | None, total: int, items: list[str]) -> dict:
         request = json.loads(head)
         if chunk_key is not None:
             chunk_key = json.loads(chunk_key)
@@ -227,9 +242,11 @@ class JobStore:
         """Some fields of the job (None when there is no such job): a task reads these, not the
         whole record (whose chunk list grows with the job)."""
         raw = self.r.hmget(self.key(job_id), "status", *names)
-        if raw[0] is None:
-            return None
-        return {name: None if value is None else json.loads(value) for name, value in zip(("status",) + names, raw)}
+        return None if raw[0] is None else self._decoded(("status",) + names, raw)
+
+    @staticmethod
+    def _decoded(names, raw) -> dict:
+        return {name: None if value is None else json.loads(value) for name, value in zip(names, raw)}
 
     def result(self, job_id: str, meta: dict | None = None) -> dict | None:
         text = self.result_text(job_id, meta)
@@ -332,22 +349,42 @@ class JobStore:
         return bool(self.r.exists(self.key(job_id, "cancel")))
 
     # --- worker side -------------------------------------------------------------------------
+    # Queued -> running once, with its status event (1); running already (2); ended or gone (0).
+    # A job queued or running is touched (its task shows life: the reaper reads RUNNING).
+    _MARK_RUNNING = """
+    local s = redis.call('HGET', KEYS[1], 'status')
+    local answer = 0
+    if s == '"queued"' then
+        redis.call('HSET', KEYS[1], 'status', '"running"', 'started_at', ARGV[1])
+        redis.call('XADD', KEYS[2], 'MAXLEN', '~', ARGV[2], '*', 'event', 'status', 'data', ARGV[3])
+        answer = 1
+    elseif s == '"running"' then answer = 2 end
+    if answer ~= 0 then redis.call('ZADD', KEYS[3], ARGV[4], ARGV[5]) end
+    return answer
+    """
+
+    def _mark_running(self, client, job_id: str):
+        """_MARK_RUNNING run by ``client`` (its answer) or queued on a pipeline."""
+        moment = now()
+        return client.eval(self._MARK_RUNNING, 3, self.key(job_id), self.key(job_id, "events"), self.RUNNING,
+                  json.dumps(moment), _STREAM_MAXLEN, json.dumps({"status": "running"}), moment, job_id)
+
     def mark_running(self, job_id: str) -> bool:
         """Queued -> running, once; False when the job already ended (e.g. cancelled while queued)."""
-        script = """
-        local s = redis.call('HGET', KEYS[1], 'status')
-        if s == '"queued"' then
-            redis.call('HSET', KEYS[1], 'status', '"running"', 'started_at', ARGV[1])
-            return 1
-        elseif s == '"running"' then return 2 end
-        return 0
-        """
-        answer = self.r.eval(script, 1, self.key(job_id), json.dumps(now()))
-        if answer == 1:
-            self.publish(job_id, "status", {"status": "running"})
-        if answer != 0:
-            self.touch(job_id)
-        return answer != 0
+        return self._mark_running(self.r, job_id) != 0
+
+    def start_chunk(self, job_id: str, start: int, stop: int, *names: str) -> tuple[dict, dict] | None:
+        """What a task needs to start items ``start`` to ``stop - 1``, in one round trip: the job's
+        fields ``names`` (as ``fields``), the job marked running (as ``mark_running``) and the
+        chunk's request (as ``chunk_request``). None when the job is gone or has ended."""
+        pipe = self.r.pipeline()
+        pipe.hmget(self.key(job_id), "status", *names)
+        self._mark_running(pipe, job_id)
+        self._read_chunk(pipe, job_id, start, stop)
+        raw, running, *chunk = pipe.execute()
+        if raw[0] is None or not running or chunk[0] is None:
+            return None
+        return self._decoded(("status",) + names, raw), self._chunk(start, *chunk)
 
     RUNNING = "geocert:running"  # running job id -> the last time a task of it showed life
 
@@ -702,6 +739,19 @@ class JobStore:
     _ADMIT = """
     if tonumber(ARGV[2]) > 0 and redis.call('SCARD', KEYS[1]) >= tonumber(ARGV[2]) then return 0 end
     redis.call('SADD', KEYS[1], ARGV[1])
+    return 1
+    """
+
+    # Run the commands in ARGV[2:] (each its name, its argument count, its arguments) when the job
+    # ARGV[1] was admitted (_ADMIT, earlier in the same transaction).
+    _RUN_IF_ADMITTED = """
+    if redis.call('SISMEMBER', KEYS[1], ARGV[1]) == 0 then return 0 end
+    local at = 2
+    while at <= #ARGV do
+      local count = tonumber(ARGV[at + 1])
+      redis.call(ARGV[at], unpack(ARGV, at + 2, at + 1 + count))
+      at = at + 2 + count
+    end
     return 1
     """
 

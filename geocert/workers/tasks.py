@@ -173,15 +173,16 @@ def _wait_for_redis(jobs: JobStore, limit_s: float) -> None:
 
 def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> None:
     jobs = store()
-    meta = jobs.fields(job_id, "items_total", "kind", "item_time_bound_s", "job_time_limit_s")
-    if meta is None or not jobs.mark_running(job_id):
+    # Its fields, the job marked running and its own items only (see JobStore.create): one round trip.
+    started = jobs.start_chunk(job_id, start, stop, "items_total", "kind", "item_time_bound_s", "job_time_limit_s")
+    if started is None:
         return  # expired, deleted, or ended (cancelled) before it started: nothing to do
+    meta, request = started
     settings = get_settings()
     began = time.monotonic()
     deadline_s = task_deadline_s(meta["kind"], meta["item_time_bound_s"], stop - start, meta["job_time_limit_s"])
     publisher = kind = options = None
     try:
-        request = jobs.chunk_request(job_id, start, stop)  # its own items only (see JobStore.create)
         kind = get_kind(request["kind"])
         options = options_from(kind.options_type, request.get("options"))
         parsed = kind.parse(request["data"], items=range(start, stop))

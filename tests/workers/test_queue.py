@@ -51,3 +51,71 @@ print(json.dumps({"errors": errors, "distinct": len(set(seen)), "count": len(see
     assert out.returncode == 0, out.stderr[-2000:]
     seen = json.loads(out.stdout.strip().splitlines()[-1])
     assert seen == {"errors": [], "distinct": 1, "count": 32, "most_inside": 1, "evaluations": 1}
+
+
+# In a process whose Celery broker is the test's Redis: a job of 3 chunks created with its tasks
+# collected into the job's transaction (JobStore.create's enqueue), another published the usual
+# way after its creation, and one refused by the active-job limit; then what the queue holds.
+_COLLECT = """
+import json, sys, redis
+import redis.connection
+from geocert.workers import queue
+from geocert.workers.store import JobStore
+store = JobStore.from_url(sys.argv[1])
+request = {"kind": "triangulation", "data": {"tracks": [{}] * 5}, "options": {}}
+writes = [0]
+send = redis.connection.AbstractConnection.send_packed_command
+def counted(self, *args, **kwargs):
+    writes[0] += 1
+    return send(self, *args, **kwargs)
+queue.task_commands({"id": "warm", "kind": "triangulation", "chunks": [(0, 1)], "task_ids": ["w"]}, None)
+store.r.ping()  # connections made before counting
+redis.connection.AbstractConnection.send_packed_command = counted
+collected = store.create("triangulation", request, 5, 2, "someone", active_limit=1, chunk_key="tracks",
+                         item_time_bound_s=2.0, enqueue=lambda meta: queue.task_commands(meta, "request-1"))
+writes_to_create = writes[0]
+redis.connection.AbstractConnection.send_packed_command = send
+refused = store.create("triangulation", request, 5, 2, "someone", active_limit=1, chunk_key="tracks",
+                       enqueue=lambda meta: queue.task_commands(meta, None))
+store.release("someone", collected["id"])
+published = store.create("triangulation", request, 5, 2, "someone", chunk_key="tracks", item_time_bound_s=2.0)
+queue.submit_chunks({**published, "id": collected["id"], "task_ids": [t + "-again" for t in collected["task_ids"]]},
+                    "request-1")
+print(json.dumps({"can_collect": queue.can_collect(), "collected": collected["task_ids"], "refused": refused,
+                  "writes_to_create": writes_to_create, "messages": store.r.lrange("celery", 0, -1)}))
+"""
+
+
+def _task(message: str) -> dict:
+    """A queued Celery message as a worker reads it: its headers and arguments, without what
+    differs between two publishes of the same task (its id and delivery tag, its group's id)."""
+    import base64
+
+    message = json.loads(message)
+    args, kwargs, embed = json.loads(base64.b64decode(message["body"]))
+    headers = {k: v for k, v in message["headers"].items() if k not in ("id", "root_id", "group", "origin")}
+    return {"id": message["headers"]["id"], "task": [headers, args, kwargs, embed,
+                                                      message["properties"]["delivery_info"]]}
+
+
+def test_tasks_collected_into_the_jobs_transaction_are_the_messages_a_publish_queues(tmp_path):
+    from geocert.workers.redis_server import start_embedded_redis
+
+    process, url = start_embedded_redis(tmp_path)
+    try:
+        env = {"GEOCERT_REDIS_URL": url, "PATH": "/usr/bin:/bin"}
+        out = subprocess.run([sys.executable, "-c", _COLLECT, url], capture_output=True, text=True, env=env, timeout=120)
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
+    assert out.returncode == 0, out.stderr[-2000:]
+    seen = json.loads(out.stdout.strip().splitlines()[-1])
+    assert seen["can_collect"] and seen["refused"] is None
+    assert seen["writes_to_create"] == 1  # the job and its tasks: one round trip to Redis
+    tasks = [_task(message) for message in seen["messages"]]
+    by_id = {task["id"]: task["task"] for task in tasks}
+    assert len(tasks) == 6 and set(by_id) == {*seen["collected"], *(t + "-again" for t in seen["collected"])}
+    for task_id in seen["collected"]:  # the refused job queued nothing; the admitted one its 3 chunks
+        assert by_id[task_id] == by_id[task_id + "-again"]
+    assert sorted(by_id[t][1] for t in seen["collected"]) == [
+        [by_id[seen["collected"][0]][1][0], start, stop, "request-1"] for start, stop in ((0, 2), (2, 4), (4, 5))]

@@ -70,6 +70,39 @@ class TestRequestByChunk:
         assert jobs.request_text(meta["id"]) == json.dumps(request)
 
 
+class TestChunkStart:
+    def test_a_task_starts_in_one_round_trip_with_what_the_separate_reads_give(self, jobs, monkeypatch):
+        import redis.connection
+
+        request = request_of(250)
+        meta = jobs.create("triangulation", request, 250, 100, "someone", chunk_key="tracks", item_time_bound_s=3.0)
+        jobs.r.ping()
+        writes = []
+        send = redis.connection.AbstractConnection.send_packed_command
+        monkeypatch.setattr(redis.connection.AbstractConnection, "send_packed_command",
+                            lambda self, *args, **kwargs: writes.append(1) or send(self, *args, **kwargs))
+        fields, chunk = jobs.start_chunk(meta["id"], 100, 200, "items_total", "kind", "item_time_bound_s")
+        assert len(writes) == 1
+        monkeypatch.undo()
+        assert fields == {"status": "queued", "items_total": 250, "kind": "triangulation", "item_time_bound_s": 3.0}
+        assert chunk == jobs.chunk_request(meta["id"], 100, 200)
+        assert jobs.field(meta["id"], "status") == "running" and jobs.field(meta["id"], "started_at") is not None
+        assert jobs.r.zscore(JobStore.RUNNING, meta["id"]) is not None  # touched: the reaper sees it alive
+        # A second task: the job stays running, with one running event in its stream.
+        assert jobs.start_chunk(meta["id"], 0, 100, "kind")[0] == {"status": "running", "kind": "triangulation"}
+        statuses = [json.loads(fields["data"])["status"] for _, fields in jobs.r.xrange(JobStore.key(meta["id"], "events"))
+                    if fields["event"] == "status"]
+        assert statuses == ["queued", "running"]
+
+    def test_a_task_of_an_ended_or_gone_job_starts_nothing(self, jobs):
+        meta = jobs.create("triangulation", request_of(10), 10, 5, "someone", chunk_key="tracks")
+        assert jobs.cancel_if_queued(meta["id"])
+        assert jobs.start_chunk(meta["id"], 0, 5, "kind") is None
+        assert jobs.field(meta["id"], "status") == "cancelled"
+        assert jobs.start_chunk("no-such-job", 0, 5, "kind") is None
+        assert jobs.r.zscore(JobStore.RUNNING, "no-such-job") is None
+
+
 class TestProgressSums:
     def test_the_aggregate_is_the_sum_of_each_tasks_last_figures(self, jobs):
         meta = jobs.create("triangulation", request_of(30), 30, 10, "someone", chunk_key="tracks")

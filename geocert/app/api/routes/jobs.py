@@ -31,7 +31,7 @@ from geocert.batch import parse_job
 from geocert.kinds import get_kind
 from geocert.workers import logs
 from geocert.workers.destinations import allowed_networks, literal_refusal
-from geocert.workers.queue import submit_chunks, withdraw_queued
+from geocert.workers.queue import can_collect, submit_chunks, task_commands, withdraw_queued
 from geocert.workers.store import REDIS_GONE, TERMINAL, JobStore, events, read_job
 
 class StreamedItemsRoute(APIRoute):
@@ -246,15 +246,24 @@ def _create(store: JobStore, owner: str, kind, request: dict, items: int, items_
             item_time_bound_s: float | None = None) -> dict:
     settings = get_settings()
     chunk = chunk_size_for(kind)
+    request_id = logs.current("request_id")
+
+    def enqueue(meta: dict) -> list[tuple[str, tuple]]:  # the tasks queued in the job's own transaction
+        with logs.context(job_id=meta["id"]):
+            return task_commands(meta, request_id)
+
+    collect = can_collect()
     meta = store.create(kind.name, request, items, chunk, owner, request.get("callback_url"),
                         settings.max_active_jobs_per_key, chunk_key=kind.chunk_key, items_key=items_key,
                         item_time_bound_s=item_time_bound_s,
-                        job_time_limit_s=request.get("options", {}).get("job_time_limit_s"))
+                        job_time_limit_s=request.get("options", {}).get("job_time_limit_s"),
+                        enqueue=enqueue if collect else None)
     if meta is None:
         raise ApiProblem(429, f"this key already has {settings.max_active_jobs_per_key} jobs queued or running "
                               "(GEOCERT_MAX_ACTIVE_JOBS_PER_KEY); wait for one to end", headers={"Retry-After": "5"})
-    with logs.context(job_id=meta["id"]):
-        submit_chunks(meta, logs.current("request_id"))
+    if not collect:  # a broker whose publishes cannot join the job's transaction: published after it
+        with logs.context(job_id=meta["id"]):
+            submit_chunks(meta, request_id)
     return meta
 
 

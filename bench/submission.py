@@ -1,0 +1,95 @@
+"""One submission's cost in the API, in-process: the route's own work (``jobs._submit``: the
+request's model dump, the kind's parse, the limits, ``JobStore.create`` and queueing the tasks)
+on a body already validated, against an embedded Redis, one thread, no HTTP. Prints per
+submission: CPU and wall milliseconds, the socket writes to Redis (each a round trip: the caller
+waits for its answer) and the Redis commands run, with the machine's load.
+
+    .venv/bin/python -m bench.submission [--tracks 3] [--count 300] [--profile]
+
+Run it against another checkout with PYTHONPATH=<that checkout> for a before and after in one
+session. Nothing here asserts (tests/workers/test_queue.py checks the behaviour).
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import json
+import os
+import pstats
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--tracks", type=int, default=3, help="tracks a job (the 3 of bench.faults' submissions)")
+    parser.add_argument("--count", type=int, default=300, help="submissions measured")
+    parser.add_argument("--profile", action="store_true", help="also print cProfile's top functions")
+    args = parser.parse_args()
+
+    from geocert.workers.redis_server import start_embedded_redis
+
+    server, url = start_embedded_redis(Path(tempfile.mkdtemp(prefix="geocert-bench-submission-")))
+    os.environ.update(GEOCERT_REDIS_URL=url, GEOCERT_MAX_ACTIVE_JOBS_PER_KEY="0")
+    try:
+        measure(url, args.tracks, args.count, args.profile)
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+
+
+def measure(url: str, tracks: int, count: int, profile: bool) -> None:
+    import redis
+    import redis.connection
+    from fastapi import Response
+    from pydantic import TypeAdapter
+
+    from bench.faults import triangulation_job
+    from geocert.app.api.deps import get_store
+    from geocert.app.api.routes import jobs as routes
+    from geocert.app.schemas import JobRequest
+
+    rng = np.random.default_rng(1)
+    adapter = TypeAdapter(JobRequest)
+    bodies = [adapter.validate_json(json.dumps(triangulation_job(rng, tracks=tracks))) for _ in range(20)]
+    store = get_store()
+
+    def submit(index: int) -> None:
+        routes._submit(bodies[index % len(bodies)], Response(), store, "public", None)
+
+    submit(0)  # first-use costs (connections, Celery's producer) out of the figures
+    counter = redis.Redis.from_url(url, decode_responses=True)
+    counter.config_resetstat()
+    writes = [0]
+    send = redis.connection.AbstractConnection.send_packed_command
+
+    def counted(self, *args, **kwargs):
+        writes[0] += 1
+        return send(self, *args, **kwargs)
+
+    redis.connection.AbstractConnection.send_packed_command = counted
+    cpu, wall = time.process_time(), time.perf_counter()
+    try:
+        for index in range(count):
+            submit(index)
+    finally:
+        redis.connection.AbstractConnection.send_packed_command = send
+    cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    commands = {name.removeprefix("cmdstat_"): stats["calls"] / count
+                for name, stats in sorted(counter.info("commandstats").items()) if name != "cmdstat_config"}
+    print(f"{count} submissions of a {tracks}-track job, in-process: {1e3 * cpu / count:.2f} ms CPU, "
+          f"{1e3 * wall / count:.2f} ms wall a submission; {writes[0] / count:.2f} socket writes to Redis a "
+          f"submission; load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print("Redis commands a submission: " + ", ".join(f"{name} {calls:g}" for name, calls in commands.items()))
+    if profile:
+        profiler = cProfile.Profile()
+        profiler.runcall(lambda: [submit(index) for index in range(count)])
+        pstats.Stats(profiler).sort_stats("cumulative").print_stats(30)
+
+
+if __name__ == "__main__":
+    main()
