@@ -98,6 +98,18 @@ class TestSynthetic:
         assert "do not determine a constant K" in stage["reason"] and "not from a certificate" in stage["reason"]
         assert out.summary["critical_motion"] == "orbital_motion"
         assert out.summary["autocalibration_determined"] is False
+
+    def test_a_turntable_with_K_given_says_K_was_given(self):
+        """With K given, the motion still cannot fix K from the tracks, but K is the user's: the
+        result must not say it came from the adjustment's camera model."""
+        scene = synthetic.turntable(views=10, points=40, seed=3, noise_px=0.3)
+        out = pipeline.reconstruct(scene.tracks, [scene.image_size] * 10, ReconstructionOptions(
+            intrinsics={"K": scene.K.tolist()}, resect_cameras=False))
+        stage = out.stages[1]
+        assert stage["critical_motion"] == "orbital_motion"
+        assert "K was given" in stage["reason"] and "not from a certificate" not in stage["reason"]
+        warning = next(w for w in out.summary["warnings"] if w["code"] == "critical_motion")
+        assert "K was given" in warning["detail"]
         # The motion itself is recovered: the rotations, against the turntable's, after alignment.
         assert aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations)).max() < 0.5
 

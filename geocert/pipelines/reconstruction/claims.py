@@ -120,6 +120,11 @@ def judge_motion(out) -> None:
     if critical is None:
         return
     detail = next((w["detail"] for w in judged["motion_warnings"] if w["code"] == critical), "")
+    if _K_given(stage):
+        said = (f"critical motion ({critical}): {detail}. The tracks alone would not determine a constant K "
+                "(Sturm 1997); K was given, so the metric reconstruction does not depend on them for it")
+        stage["reason"] = said if not stage.get("reason") else f"{stage['reason']}; {said}"
+        return
     if stage.get("certified"):
         proved = ("both stages certified their optimum, but it is one of many upgrades these tracks fit equally well, "
                   "so the certificate fixes no calibration")
@@ -128,6 +133,11 @@ def judge_motion(out) -> None:
     said = (f"critical motion ({critical}): {detail}. The tracks do not determine a constant K (Sturm 1997): {proved}; "
             "K comes from the bundle adjustment's camera model, not from a certificate")
     stage["reason"] = said if not stage.get("reason") else f"{stage['reason']}; {said}"
+
+
+def _K_given(stage: dict) -> bool:
+    """Whether the autocalibration stage was skipped because K was given."""
+    return stage.get("status") == "skipped" and "K is known" in (stage.get("reason") or "")
 
 
 def _doubts(out, registered: list, bounded: list, observations: int) -> list[str]:
@@ -219,7 +229,7 @@ def calibration_claim(out) -> CalibrationClaim:
     stage = out.stages[1]
     K = None if out.metric is None or out.metric.K is None else np.asarray(out.metric.K, dtype=float)
     varying = out.metric is not None and out.metric.Ks is not None
-    known = stage.get("status") == "skipped" and "K is known" in (stage.get("reason") or "")
+    known = _K_given(stage)
     certified = bool(stage.get("certified")) and stage.get("K") is not None and K is not None
     cert = np.asarray(stage["K"], dtype=float) if certified else None
     warnings, edges, difference, same_K = [], [], None, False
@@ -247,7 +257,8 @@ def calibration_claim(out) -> CalibrationClaim:
                 "tracks, stops it there; widen options.intrinsics to let the data decide")})
     critical = stage.get("critical_motion")
     if critical:
-        warnings.append({"code": "critical_motion", "detail": f"{critical}: the tracks do not determine a constant K"})
+        warnings.append({"code": "critical_motion", "detail": f"{critical}: the tracks do not determine a constant K"
+                         + ("; K was given, so the reconstruction does not rely on them for it" if known else "")})
     determined = None if known or K is None else bool(certified and not critical and not edges
                                                       and stage.get("determined") is True)
     source = ("given" if known else "none" if K is None else "autocalibration" if same_K
