@@ -48,7 +48,14 @@ def options_key(known_K, model: str | None = None) -> str:
     other than COLMAP's default with K unknown, e.g. "SIMPLE_PINHOLE")."""
     camera = ("PINHOLE fixed " + ",".join(f"{v:.6g}" for v in known_K) if known_K is not None
               else model if model else "defaults")
-    return f"pycolmap {version()}; extract_features AUTO, match_exhaustive, incremental_mapping, cpu; camera {camera}"
+    try:
+        which = version()
+    except ImportError:  # not installed: any version's cached result answers (see cached)
+        which = ANY_VERSION
+    return f"pycolmap {which}; extract_features AUTO, match_exhaustive, incremental_mapping, cpu; camera {camera}"
+
+
+ANY_VERSION = "(any version)"
 
 
 def stage_images(photo_set, names: list[str], directory: Path) -> None:
@@ -143,8 +150,17 @@ def reconstruct(images: str, names: list[str], work: str, known_K, camera_model:
 
 
 def cached(root: Path, key: str) -> dict | None:
+    """The cached result of ``key``; with pycolmap not installed (ANY_VERSION in the key), the
+    newest cached under any version."""
     path = root / CACHE_NAME
-    return json.loads(path.read_text()).get(key) if path.exists() else None
+    if not path.exists():
+        return None
+    cache = json.loads(path.read_text())
+    if ANY_VERSION not in key:
+        return cache.get(key)
+    head, tail = key.split(f"pycolmap {ANY_VERSION}")
+    found = [value for name, value in cache.items() if name.startswith(head + "pycolmap ") and name.endswith(tail)]
+    return found[-1] if found else None
 
 
 def store(root: Path, key: str, result: dict) -> None:

@@ -290,8 +290,11 @@ def main() -> None:
     try:
         version = colmap_baseline.version()
     except ImportError:
-        version = "not installed (pip install -e '.[bench]'): COLMAP not run"
-        args.runs = [r for r in args.runs if not r.startswith("colmap")]
+        # without pycolmap COLMAP cannot run, but its cached figures are still read (--no-colmap)
+        version = "not installed (pip install -e '.[bench]'): COLMAP not run" + (
+            ", its cached figures read" if args.no_colmap else "")
+        if not args.no_colmap:
+            args.runs = [r for r in args.runs if not r.startswith("colmap")]
     print(f"data {root}; pycolmap {version}; {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f} at start, "
           f"machine speed {machine_speed_ms():.0f} ms (bench.machine_speed_ms); "
           f"geocert's BLAS threads (the workers' environment) {threads}; COLMAP every core; shuffled seed {args.seed}")
