@@ -9,7 +9,7 @@ degenerate scenes (and real critical layouts) are flagged.
 Real sets: under $GEOCERT_BENCH_DATA (default bench-data beside the checkout) and $GEOCERT_SHARED_DATA (default
 /work/shared/data); those absent are left out.
 
-The intervals are 3 standard errors from the local curvature (README, "Determinacy"): for a
+The intervals are 3 standard errors from the local curvature (docs/kinds.md, "Determinacy"): for a
 linear fit with Gaussian noise each covers its quantity 99.7% of the time.
 """
 

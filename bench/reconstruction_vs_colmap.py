@@ -51,7 +51,7 @@ import numpy as np
 
 from bench import camera_errors, colmap_baseline, machine_speed_ms, photo_sets
 
-# The README's options for the dinoSparseRing (README, "Photos to tracks, and the K-known path"),
+# The README's options for the dinoSparseRing (docs/benchmarks.md, "Photos to tracks, and the K-known path"),
 # the only set the README gives options for: bench.reconstruction_images.RING_JOB_OPTIONS, not
 # imported from there because that module sets one BLAS thread in this process's environment,
 # which COLMAP's child process would inherit.

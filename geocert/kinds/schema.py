@@ -127,7 +127,7 @@ class ProvenIntervals(BaseModel):
 class Determinacy(BaseModel):
     """How well the data fix the answer (a certificate proves the optimum, not that it is unique):
     intervals of what a user reads off it over the answers costing at most cost_increase more,
-    and the degeneracies recognised (README, "Determinacy")."""
+    and the degeneracies recognised (docs/kinds.md, "Determinacy")."""
 
     method: Literal["curvature"]
     proven: bool = Field(description="true: proven_intervals holds intervals the certificate proves; the "

@@ -77,7 +77,7 @@ const Answer = (() => {
   function badge(ok, yes, no) { return el("span", {class: `status ${ok ? "yes" : "no"}`, text: ok ? yes : no}); }
 
   // The intrinsics read off a K, each against the ranges solved with: a value on a range's end
-  // means the ranges excluded what the data wanted (README, "The direct method").
+  // means the ranges excluded what the data wanted (docs/kinds.md, "The direct method").
   function intrinsics(K, ranges) {
     const values = {focal_x: K[0][0], focal_y: K[1][1], aspect: K[1][1] / K[0][0], skew: K[0][1], principal_u: K[0][2],
                     principal_v: K[1][2]};
