@@ -79,9 +79,11 @@ class RedisCollector:
         yield hooks
         yield from self._histograms(values, "item_solve_seconds", "Seconds to solve one item", SOLVE_BUCKETS)
         yield from self._histograms(values, "job_seconds", "Seconds from submission to the end of a job", JOB_BUCKETS)
+        from geocert.workers.queue import queue_lists
+
         depth = GaugeMetricFamily("geocert_queue_depth", "Tasks waiting in the queue", labels=["queue"])
         for queue in self.queue_names:
-            depth.add_metric([queue], float(self.client.llen(queue)))
+            depth.add_metric([queue], float(sum(self.client.llen(name) for name in queue_lists(queue))))
         yield depth
 
     @staticmethod

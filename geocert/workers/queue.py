@@ -8,6 +8,18 @@ import threading
 
 from geocert.workers.store import JobStore
 
+# Task priorities on kombu's Redis transport: one list per step, a worker taking from the list of
+# the lowest number first. A job's first task is queued FIRST, its others LATER (and a task
+# deferred for its key's share LATER again), so that another key's new job is taken before a
+# flood's queued tasks, not after each of them has been taken and deferred in turn.
+FIRST, LATER = 0, 9
+PRIORITY_STEPS = (0, 3, 6, 9)  # kombu's default steps
+
+
+def queue_lists(queue: str) -> list[str]:
+    """The Redis lists holding a queue's waiting tasks, one per priority step (kombu's names)."""
+    return [queue if step == 0 else f"{queue}\x06\x16{step}" for step in PRIORITY_STEPS]
+
 _LOCK = threading.Lock()
 _SOLVE_CHUNK = None
 _SOLVE_CHUNK_FAILED = None
@@ -63,14 +75,16 @@ def task_options(kind_name: str, item_bound_s: float | None, items: int, job_lim
 def _chunk_group(meta: dict, request_id: str | None):
     """One task per chunk, so a batch runs in parallel across every worker (a Celery group), each
     under the id ``JobStore.create`` recorded for it (``meta["task_ids"]``), with time limits
-    sized from the job's own (task_options)."""
+    sized from the job's own (task_options). The first is queued ahead of every job's later ones
+    (celery_app.FIRST, LATER): another key's job is not queued behind all of a large job's tasks."""
     from celery import group
 
     solve_chunk = _solve_chunk_task()
     return group([solve_chunk.s(meta["id"], start, stop, request_id).set(
-                      task_id=task_id, **task_options(meta["kind"], meta.get("item_time_bound_s"), stop - start,
-                                                      meta.get("job_time_limit_s")))
-                  for (start, stop), task_id in zip(meta["chunks"], meta["task_ids"])])
+                      task_id=task_id, priority=FIRST if index == 0 else LATER,
+                      **task_options(meta["kind"], meta.get("item_time_bound_s"), stop - start,
+                                     meta.get("job_time_limit_s")))
+                  for index, ((start, stop), task_id) in enumerate(zip(meta["chunks"], meta["task_ids"]))])
 
 
 def submit_chunks(meta: dict, request_id: str | None) -> None:

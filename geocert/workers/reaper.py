@@ -26,13 +26,15 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
     """One round: returns (job id, what was done) for each stranded job found."""
     if not jobs.r.set(LOCK, "1", nx=True, ex=max(1, int(every_s))):
         return []  # another worker reaps this round
-    from geocert.workers.queue import task_options
+    from geocert.workers.celery_app import SOLVE_QUEUE
+    from geocert.workers.queue import queue_lists, task_options
     from geocert.workers.tasks import end_with_error, solve_chunk
 
     done = []
     stale = jobs.stale_running(stale_after_s)
     if stale:  # a job with a task still queued, or delivered and due back (kombu's unacked), waits
-        pending = "\n".join(jobs.r.lrange("celery", 0, -1) + jobs.r.hvals("unacked"))
+        waiting = [task for name in queue_lists(SOLVE_QUEUE) for task in jobs.r.lrange(name, 0, -1)]
+        pending = "\n".join(waiting + jobs.r.hvals("unacked"))
     for job_id in stale:
         if job_id in pending:
             jobs.touch(job_id)

@@ -35,7 +35,7 @@ from geocert.batch import (abs_gap_of, assemble, item_counts, item_sums, job_dea
 from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
-from geocert.workers.queue import SOFT_AFTER_S, task_deadline_s, task_options
+from geocert.workers.queue import LATER, SOFT_AFTER_S, task_deadline_s, task_options
 from geocert.workers.store import REDIS_GONE, JobStore, shared_store as store
 from celery.exceptions import SoftTimeLimitExceeded
 
@@ -149,7 +149,7 @@ def _defer(task_id: str, job_id: str, start: int, stop: int, request_id: str | N
     if fields is None or fields["status"] not in ("queued", "running"):
         return  # ended or gone meanwhile: nothing to run
     solve_chunk.apply_async((job_id, start, stop, request_id, deferrals + 1), task_id=task_id,
-                            countdown=min(5.0, 0.25 * 2 ** deferrals),
+                            countdown=min(5.0, 0.25 * 2 ** deferrals), priority=LATER,
                             **task_options(fields["kind"], fields["item_time_bound_s"], stop - start,
                                            fields["job_time_limit_s"]))
 

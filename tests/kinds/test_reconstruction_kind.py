@@ -50,6 +50,40 @@ class TestBadInput:
             parse_job(job(data=data))
         assert error.value.field == field, error.value
 
+    @pytest.mark.parametrize("track, field", [
+        ({"views": [0, 7], "points": [[1.0, 2.0], [3.0, 4.0]]}, "data/tracks/1500/views/1"),
+        ({"views": [0, 1], "points": [[1.0, 2.0], [2e9, 4.0]]}, "data/tracks/1500/points/1/0"),
+        ({"views": [0, 1], "points": [[1.0, 2.0], [True, 4.0]]}, "data/tracks/1500/points/1/0"),
+        ({"views": [0, 1], "points": [[1.0, 2.0]]}, "data/tracks/1500"),
+        ({"views": [0, 1], "points": [[1.0, 2.0], [3.0, 4.0, 5.0]]}, "data/tracks/1500/points"),
+        ({"views": [0, 0], "points": [[1.0, 2.0], [3.0, 4.0]]}, "data/tracks/1500/views"),
+        ({"views": [0, 1.0], "points": [[1.0, 2.0], [3.0, 4.0]]}, "data/tracks/1500/views"),
+        ({"views": [0, 1]}, "data/tracks/1500"),
+    ])
+    def test_a_defect_deep_in_many_tracks_is_named(self, track, field):
+        """Many tracks are checked in bulk; a defect anywhere still gets its own field."""
+        tracks = [{"views": [0, 1, 2], "points": [[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]]}] * 2000
+        with pytest.raises(InputError) as error:
+            parse_job(job(data={"tracks": tracks[:1500] + [track] + tracks[1501:]}))
+        assert error.value.field == field, error.value
+
+    def test_many_tracks_are_read_in_bulk(self, monkeypatch):
+        """A large body's tracks are read by a few flat passes, not track by track (track by
+        track, each observation cost some microseconds of the API's Python): the per-entry
+        reader runs for the views only, and the tracks come back as they were."""
+        from geocert.kinds import reconstruction
+
+        calls = []
+        original = reconstruction.number_array
+        monkeypatch.setattr(reconstruction, "number_array", lambda *a, **k: calls.append(a[1]) or original(*a, **k))
+        rng = np.random.default_rng(1)
+        tracks = [{"views": [int(v) for v in rng.choice(6, size=3, replace=False)],
+                   "points": rng.uniform(0, 600, (3, 2)).tolist()} for _ in range(2000)]
+        parsed = parse_job(job(data={"tracks": tracks}))[1]
+        assert all(field.startswith("data/views/") for field in calls), calls[:3]
+        for (views, points), track in zip(parsed.tracks, tracks, strict=True):
+            assert views.tolist() == track["views"] and points.tolist() == track["points"]
+
     def test_the_api_models_options_are_taken(self):
         """The API validates a job with its model and passes model_dump's options on: ranges not
         given are null there (a regression: they reached the upgrade as None)."""

@@ -23,6 +23,7 @@ import redis
 
 from bench.abuse import Receiver
 from geocert.solvers.autocalibration import scenes
+from geocert.workers.queue import queue_lists
 from tests.servers import cluster
 
 pytestmark = pytest.mark.slow  # real servers: the full run only
@@ -39,6 +40,10 @@ def ended(client, job_id: str, limit_s: float = 240, headers: dict | None = None
         assert time.monotonic() < deadline, f"job still {job['status']} after {limit_s} s"
         time.sleep(0.2)
     return job
+
+
+def waiting_tasks(store: redis.Redis) -> int:
+    return sum(store.llen(name) for name in queue_lists("celery"))
 
 
 def problem(response, status: int) -> dict:
@@ -427,7 +432,7 @@ def test_2_a_photo_bomb_fails_its_job_alone_and_is_never_run_again(bounded):
     time.sleep(3)
     again = client.get(f"/v1/jobs/{job['id']}").json()
     assert again["status"] == "failed" and again["finished_at"] == job["finished_at"]
-    assert store.llen(f"geocert:job:{job['id']}:tasks") == 1 and store.llen("celery") == 0
+    assert store.llen(f"geocert:job:{job['id']}:tasks") == 1 and waiting_tasks(store) == 0
     assert ended(client, client.post("/v1/jobs", json=TRIANGULATION).json()["id"])["status"] == "succeeded"
 
 
@@ -453,7 +458,7 @@ def test_2_a_solver_process_killed_under_its_task_fails_its_job_and_is_not_run_a
     time.sleep(15)  # past the visibility timeout and a reaper round: nothing ran it again
     again = client.get(f"/v1/jobs/{job_id}").json()
     assert again["status"] == "failed" and again["finished_at"] == job["finished_at"]
-    assert store.hget(f"geocert:job:{job_id}", "reaps") is None and store.llen("celery") == 0
+    assert store.hget(f"geocert:job:{job_id}", "reaps") is None and waiting_tasks(store) == 0
     assert ended(client, client.post("/v1/jobs", json=TRIANGULATION).json()["id"])["status"] == "succeeded"
 
 
@@ -479,6 +484,29 @@ def test_one_keys_flood_leaves_a_solver_for_another_key(tmp_path):
         assert statuses.count("running") <= 1 and statuses.count("queued") >= 2, statuses
         for job_id in flood:
             client.post(f"/v1/jobs/{job_id}/cancel", headers=a)
+
+
+def test_another_keys_job_is_taken_before_a_floods_queued_tasks(tmp_path):
+    """Key A's job of five tasks, then key B's job of one: a worker takes A's first task, then
+    B's, then A's others (each job's first task is queued ahead of every job's later ones), where
+    first in first out had a worker take, and defer for A's share, each of A's tasks before B's."""
+    from tests.servers import SHORT_TASKS
+    from tests.support import triangulation_job
+
+    a, b = {"X-API-Key": "key-a"}, {"X-API-Key": "key-b"}
+    with cluster(tmp_path, workers=0, geocert_api_keys="key-a,key-b", **SHORT_TASKS) as (running, client):
+        store = redis.Redis.from_url(running.redis_url, decode_responses=True)
+        flood = client.post("/v1/jobs", json=triangulation_job(np.random.default_rng(5), 300, 3, "L2L2"),
+                            headers=a).json()["id"]
+        other = client.post("/v1/jobs", json=TRIANGULATION, headers=b).json()["id"]
+        # The order a worker takes them in: the lists by priority, each from its right end (BRPOP).
+        taken = [json.loads(task)["headers"]["argsrepr"] for name in queue_lists("celery")
+                 for task in reversed(store.lrange(name, 0, -1))]
+        owners = ["A" if flood in args else "B" if other in args else "?" for args in taken]
+        assert owners == ["A", "B", "A", "A", "A", "A"], owners
+        running.start_worker(concurrency=2)
+        assert ended(client, other, headers=b)["status"] == "succeeded"
+        assert ended(client, flood, headers=a)["status"] == "succeeded"
 
 
 def test_a_solver_process_stopped_with_its_worker_has_its_task_run_again(tmp_path):

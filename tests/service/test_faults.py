@@ -251,14 +251,15 @@ def test_the_reaper_requeues_a_stranded_job_and_fails_one_stranded_too_often(tmp
 
     import redis
 
+    from geocert.workers.queue import queue_lists
     from geocert.workers.reaper import MAX_REAPS
 
     with cluster(tmp_path, workers=0, **SHORT_TASKS) as (running, client):
         store = redis.Redis.from_url(running.redis_url, decode_responses=True)
         rescued = client.post("/v1/jobs", json=triangulation_job(np.random.default_rng(31), 150)).json()["id"]
         doomed = client.post("/v1/jobs", json=small_job(32)).json()["id"]
-        assert store.llen("celery") > 0
-        store.delete("celery")  # the tasks are lost
+        assert sum(store.llen(name) for name in queue_lists("celery")) > 0
+        store.delete(*queue_lists("celery"))  # the tasks are lost
         for job_id in (rescued, doomed):
             store.hset(f"geocert:job:{job_id}", mapping={"status": json.dumps("running"),
                                                          "started_at": json.dumps(time.time() - 100)})

@@ -17,6 +17,7 @@ import pytest
 import redis
 
 from geocert.solvers.autocalibration import scenes
+from geocert.workers.queue import queue_lists
 from geocert.workers.redis_server import broker_url
 from tests.servers import cluster
 
@@ -56,7 +57,7 @@ def small_reconstruction() -> dict:
 def queued_time_limits(store: redis.Redis) -> list[tuple[float, float]]:
     """The (soft, hard) time limits of the tasks waiting in the queue, as Celery's messages carry them."""
     limits = []
-    for raw in store.lrange("celery", 0, -1):
+    for raw in (task for name in queue_lists("celery") for task in store.lrange(name, 0, -1)):
         hard, soft = json.loads(raw)["headers"]["timelimit"]
         limits.append((soft, hard))
     return limits
@@ -116,7 +117,7 @@ def test_a_reconstruction_past_its_limits_ends_by_its_own_clock_not_by_the_last_
         time.sleep(20)  # beyond the visibility timeout and a reaper round: nothing ran it again
         again = client.get(f"/v1/jobs/{job_id}").json()
         assert again["status"] == "succeeded" and again["finished_at"] == job["finished_at"]
-        assert store.hget(f"geocert:job:{job_id}", "reaps") is None and store.llen("celery") == 0
+        assert store.hget(f"geocert:job:{job_id}", "reaps") is None and sum(store.llen(name) for name in queue_lists("celery")) == 0
 
 
 def test_a_task_killed_at_its_hard_limit_fails_its_job_and_is_not_delivered_again(tmp_path):
