@@ -70,6 +70,25 @@ class TestUncertifiedFiguresOfEveryKind:
         report = verify_any(_uncertified(result, key, index, cost=cost, lower_bound=None, gap=None))
         assert report.valid, report.first_failure
 
+    @pytest.mark.parametrize("kind", ["triangulation", "resection"])
+    def test_a_stopped_solve_states_only_what_is_checked(self, kind):
+        """The solver's own uncertified items (every search stopped at its first node) state no
+        bound, and every check passes: the report's only failure is that nothing is certified."""
+        import numpy as np
+
+        from geocert.batch import solve_job
+        from tests.support import map_job, seed, triangulation_job
+
+        rng = np.random.default_rng(seed("review3", "stopped", kind))
+        job = triangulation_job(rng, 4, 5, "L1L1") if kind == "triangulation" else map_job(rng, kind, 20, "L1L1")
+        job["options"].update(max_nodes=1, rel_gap=1e-6, abs_gap=0.0, certificate="full")
+        result = solve_job(job)
+        items = result["tracks" if kind == "triangulation" else "maps"]
+        assert items and all(item["certified"] is False and item["cost"] is not None for item in items)
+        assert all(item["lower_bound"] is None and item["gap"] is None for item in items)
+        report = verify_any(result)
+        assert report.first_failure["detail"] == "no certified item to check", report.first_failure
+
     @pytest.mark.parametrize("name, key, index", UNCERTIFIED)
     def test_a_lower_bound_above_the_cost_is_refused(self, name, key, index):
         result = stored(name)
