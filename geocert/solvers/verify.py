@@ -186,15 +186,19 @@ def check_job(job: dict, result: dict) -> None:
     result document); and its progress (when it has one) is the one the service recomputes from
     the result when the job ends (workers.tasks.final_progress): items_total, items_done (the
     items not cancelled), items_certified and nodes from stats, no open box, and the bounds the
-    sums of the lower bounds and costs of the items stating both."""
-    if job.get("kind") != result.get("kind"):
+    sums of the lower bounds and costs of the items stating both. A member the document does not
+    state claims nothing and is not asked for."""
+    if "kind" in job and job["kind"] != result.get("kind"):  # a member not stated claims nothing
         raise Invalid("returned", f"the job's kind {job.get('kind')!r:.40} is not its result's "
                                   f"{result.get('kind')!r:.40}")
+    if "status" not in job and job.get("progress") is None:
+        return
     stats = result.get("stats")
     if not isinstance(stats, dict) or not isinstance(stats.get("statuses"), dict):
-        raise Invalid("returned", "a job document's result states its stats (items, certified, nodes, statuses)")
+        raise Invalid("returned", "a job document stating its status or progress has a result stating its stats "
+                                  "(items, certified, nodes, statuses)")
     cancelled = stats["statuses"].get("cancelled", 0)
-    status = job.get("status")
+    status = job.get("status", "cancelled")  # none stated: read as the weakest (it claims nothing)
     if status not in ENDED_WITH_RESULT or (status == "succeeded" and cancelled):
         raise Invalid("returned", f"the job's status {status!r:.40} is not one a job ends with beside this result "
                                   f"({'cancelled' if cancelled else 'succeeded or cancelled'}; a failed job's partial "
