@@ -18,7 +18,7 @@ from geocert.kinds.documents import finite_or_none
 from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finite, JobBase, JobStats, Strict
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.autocalibration import problem as pr
-from geocert.solvers.autocalibration.verification import STAGES, read_data
+from geocert.solvers.autocalibration.verification import STAGES, outcome, read_data
 from geocert.solvers.core.determinacy import safely
 from geocert.solvers.verify import self_check_enabled
 
@@ -300,20 +300,6 @@ def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem:
             "nodes": affine_stage["nodes"] + metric_stage["nodes"],
             "elapsed_s": result.affine_s + result.metric_s,
             "cost": metric_stage["cost"], "lower_bound": metric_stage["lower_bound"]}
-
-
-def outcome(item: dict) -> dict:
-    """The result's own ``status`` and ``reason``, where a reader looks first: a job that found no
-    metric upgrade says so here, not only in its stages."""
-    pending = next((stage for stage in item["stages"] if not stage["certified"]), None)
-    if pending is None:
-        return {"status": "optimal", "reason": None}
-    said = f"the {pending['name']} stage ended {pending['status']}" + (f": {pending['reason']}" if pending.get("reason")
-                                                                        else "")
-    if item.get("dual_absolute_quadric") is None:  # no K, no quadric: nothing solved
-        return {"status": "cancelled" if pending["status"] == "cancelled" else "failed",
-                "reason": f"no metric upgrade was found ({said})"}
-    return {"status": pending["status"], "reason": f"not certified: {said}"}
 
 
 KIND = AutocalibrationKind()

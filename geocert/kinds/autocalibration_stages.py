@@ -15,13 +15,15 @@ from geocert.solvers.verify import SelfCheckFailed, verify_arrays
 def stage_document(name: str, status: str, certified: bool, cost: float, lower: float, nodes: int, elapsed: float,
                    reason: str | None, rel_gap: float, abs_gap: float, scope: str, proof: dict | None) -> dict:
     """A stage's figures as the result states them: certified only when its gap as returned meets
-    its tolerance, its lower bound the cost less that gap."""
+    its tolerance, its lower bound the cost less that gap; an uncertified stage states none."""
     cost_out, lower_out = finite_or_none(cost), finite_or_none(lower)
     gap = None if cost_out is None or lower_out is None else max(0.0, cost_out - lower_out)
     if certified and gap is not None and not gap <= max(abs_gap, rel_gap * abs(cost_out)) * (1 + 1e-12):
         certified, status, reason = False, "not_certified", "the gap at the solution as returned exceeds the tolerance"
     if certified and gap is not None:
         lower_out = cost_out - gap
+    if not certified:  # no proof the verifier checks backs the bound reached (verify.uncertified_claim)
+        lower_out = gap = None
     summary = {"scope": scope, "tolerance": max(abs_gap, rel_gap * abs(cost_out)) if cost_out is not None else None,
                "tolerance_met": certified}
     if proof is not None:

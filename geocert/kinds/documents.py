@@ -26,14 +26,16 @@ def certificate_summary(result: ItemResult, region: dict, meaning: str, scope: s
     proof = proof_of(result)
     extra = {"proof": proof} if proof is not None else {}
     if isinstance(c, LocalCertificate):
-        return local_summary(c.scope, c.tolerance, c.radius, c.tolerance_met, extra)
+        return local_summary(c.scope, c.tolerance, c.radius, c.tolerance_met and result.certified, extra)
     if c is not None:
         return {**extra,
                 "scope": c.scope,
                 "root_region": {**region, "functionals": c.functionals, "denominator": c.denominator,
                                 "lower": c.lower, "upper": c.upper, "meaning": meaning},
                 "tolerance": finite_or_none(c.tolerance),
-                "tolerance_met": c.tolerance_met,
+                # A search that met its tolerance and was not certified (the verifier would refuse
+                # its solution) has met nothing it can show: the summary says so.
+                "tolerance_met": c.tolerance_met and result.certified,
                 "leaves": c.leaves}
     if result.certified:
         return {"scope": scope, "root_region": None, "tolerance": 0.0, "tolerance_met": True, "leaves": 0,
@@ -58,11 +60,13 @@ def brief_certificate(result: ItemResult, full: bool) -> dict | None:
 
 
 def outcome_document(result: ItemResult) -> dict:
-    """The fields every item (track, map) reports about its solve."""
+    """The fields every item (track, map, frame) reports about its solve. An item not certified
+    states no lower bound or gap: no proof the verifier checks backs the bound its search reached
+    (verify.uncertified_claim)."""
     return {
         "cost": finite_or_none(result.cost),
-        "lower_bound": finite_or_none(result.lower_bound),
-        "gap": finite_or_none(result.gap),
+        "lower_bound": finite_or_none(result.lower_bound) if result.certified else None,
+        "gap": finite_or_none(result.gap) if result.certified else None,
         "status": result.status,
         "certified": result.certified,
         "nodes": result.nodes,

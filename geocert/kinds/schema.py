@@ -147,8 +147,9 @@ class ItemOutcome(BaseModel):
     """What every item (track, map) reports about its solve."""
 
     cost: float | None = Field(description="the upper bound, recomputed from the input: squared units (L2L2) or units")
-    lower_bound: float | None
-    gap: float | None
+    lower_bound: float | None = Field(description="the proven lower bound; null when the item is not certified (no "
+                                                  "proof the verifier checks backs a stopped search's bound)")
+    gap: float | None = Field(description="cost - lower_bound; null when the item is not certified")
     status: ItemStatus
     certified: bool
     nodes: int

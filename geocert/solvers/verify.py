@@ -144,7 +144,92 @@ def verify_any(document: Any) -> Report:
         report = Report(valid=False, first_failure={"check": "format", "item": None, "detail": detail})
         report.checks = [{"name": "format", "passed": 0, "failed": 1}]
         return report
-    return _verify(*found)
+    report = _verify(*found)
+    if report.valid and found[1] is not None and found[1] is not document:  # a job document
+        try:
+            check_job(document, found[1])
+        except Invalid as exc:
+            report.valid = False
+            report.first_failure = {"check": exc.check, "item": None, "detail": exc.detail}
+            tally = next((c for c in report.checks if c["name"] == exc.check), None)
+            if tally is None:
+                report.checks.append(tally := {"name": exc.check, "passed": 0, "failed": 0})
+            tally["failed"] += 1
+    return report
+
+
+# A job's statuses once it has ended with its result (service.jobs): "cancelled" when an item was
+# stopped (or a cancel came after every item had finished: a weaker claim, accepted).
+ENDED_WITH_RESULT = ("succeeded", "cancelled")
+
+
+def check_job(job: dict, result: dict) -> None:
+    """A job document's own fields, which a user of GET /v1/jobs/{id} reads first, say what its
+    result does: its kind is the result's; its status is one a job ends with beside its result
+    ("succeeded" only when no item was cancelled; a failed job's partial result is verified as a
+    result document); and its progress (when it has one) is the one the service recomputes from
+    the result when the job ends (workers.tasks.final_progress): items_total, items_done (the
+    items not cancelled), items_certified and nodes from stats, no open box, and the bounds the
+    sums of the lower bounds and costs of the items stating both. A member the document does not
+    state claims nothing and is not asked for."""
+    if "kind" in job and job["kind"] != result.get("kind"):  # a member not stated claims nothing
+        raise Invalid("returned", f"the job's kind {job.get('kind')!r:.40} is not its result's "
+                                  f"{result.get('kind')!r:.40}")
+    if "status" not in job and job.get("progress") is None:
+        return
+    stats = result.get("stats")
+    if not isinstance(stats, dict) or not isinstance(stats.get("statuses"), dict):
+        raise Invalid("returned", "a job document stating its status or progress has a result stating its stats "
+                                  "(items, certified, nodes, statuses)")
+    cancelled = stats["statuses"].get("cancelled", 0)
+    status = job.get("status", "cancelled")  # none stated: read as the weakest (it claims nothing)
+    if status not in ENDED_WITH_RESULT or (status == "succeeded" and cancelled):
+        raise Invalid("returned", f"the job's status {status!r:.40} is not one a job ends with beside this result "
+                                  f"({'cancelled' if cancelled else 'succeeded or cancelled'}; a failed job's partial "
+                                  "result is verified as a result document)")
+    progress = job.get("progress")
+    if progress is None:
+        return
+    if not isinstance(progress, dict):
+        raise Invalid("returned", "progress must be an object")
+    expected = {"items_total": stats.get("items"), "tracks_total": stats.get("items"),
+                "items_done": stats.get("items", 0) - cancelled, "tracks_done": stats.get("items", 0) - cancelled,
+                "items_certified": stats.get("certified"), "nodes": stats.get("nodes"), "open_boxes": 0}
+    for name, value in expected.items():
+        if name in progress and progress[name] != value:
+            raise Invalid("returned", f"progress/{name} is {progress[name]!r:.40}, its result gives {value!r:.40}")
+    _check_job_bounds(progress, result)
+
+
+def _check_job_bounds(progress: dict, result: dict) -> None:
+    """progress's bounds: the sums of the lower bounds and costs of the job's items that state
+    both (a one-item kind's item: its last stage's), their difference, and the worst item's gap
+    beyond abs_gap relative to its cost."""
+    kind = _kind(result.get("kind"))
+    if getattr(kind.verification, "job_outcomes", None) is not None:
+        stages = result.get("stages") if kind.name == "autocalibration" else None
+        items = stages[-1:] if isinstance(stages, list) else []
+    else:
+        items = result.get(kind.item_key) or []
+    abs_gap = float(result["certificate"]["options"].get("abs_gap") or 0.0)
+    bounded = [(item["cost"], item["lower_bound"]) for item in items
+               if isinstance(item, dict) and item.get("cost") is not None and item.get("lower_bound") is not None]
+    lower, upper = sum(b for _, b in bounded), sum(c for c, _ in bounded)
+    size = sum(abs(c) + abs(b) for c, b in bounded)
+    expected = {"lower_bound": lower, "upper_bound": upper, "gap_abs": max(0.0, upper - lower),
+                "gap_rel": max((max(0.0, c - b - abs_gap) / c for c, b in bounded if c > 0), default=0.0)}
+    for name, value in expected.items():
+        if name not in progress:
+            continue  # a bound not stated claims nothing
+        given = progress[name]
+        if not bounded:
+            if given is not None:
+                raise Invalid("returned", f"progress/{name} is {given!r:.40}: no item of its result states a bound")
+            continue
+        scale = 1.0 if name == "gap_rel" else size
+        if not (isinstance(given, (int, float)) and not isinstance(given, bool)
+                and abs(given - value) <= 1e-9 * max(scale, 1e-300)):
+            raise Invalid("returned", f"progress/{name} is {given!r:.40}, its result's items give {value!r}")
 
 
 def _verify(document: Any, returned: dict | None) -> Report:
@@ -180,6 +265,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
         tallies["options"][0] += 1
         _check_hashes(document, options)
         tallies["data_hash"][0] += 1
+        _check_item_count(document)
         report.scope = scope_statement(document["kind"], options)
     except Invalid as exc:
         fail(exc.check, None, exc.detail)
@@ -265,6 +351,13 @@ def _verify_items(document: dict, options: dict, items: list, report: Report, ta
         if certified is not True:
             if certified is not False:
                 fail("claim", position, "certified must be true or false")
+            else:
+                try:
+                    uncertified_claim(document["kind"], document["data"], options, claim)
+                except Invalid as exc:
+                    fail(exc.check, position, exc.detail)
+                except Exception as exc:  # a malformed document is invalid, never a crash
+                    fail("format", position, f"{type(exc).__name__}: {exc}")
             report.items_skipped += 1
             continue
         report.items_checked += 1
@@ -283,6 +376,46 @@ def _verify_items(document: dict, options: dict, items: list, report: Report, ta
             fail(exc.check, position, exc.detail)
         except Exception as exc:  # a malformed document is invalid, never a crash
             fail("format", position, f"{type(exc).__name__}: {exc}")
+
+
+def _check_item_count(document: dict) -> None:
+    """The certificate's items are the data's, one each (index = position): a result cannot leave
+    out the items it did not certify (the hashes cover the data, not the items)."""
+    key = getattr(_adapter(document["kind"]), "data_items", None)
+    if key is None:  # a kind whose items are its stages (autocalibration: check_claims counts them)
+        return
+    entries = document["data"].get(key) if isinstance(document["data"], dict) else None
+    if not isinstance(entries, list):
+        raise Invalid("data", f"data/{key} must be a list")
+    expected = len(entries)
+    if len(document["items"]) != expected:
+        raise Invalid("format", f"the certificate has {len(document['items'])} items, its data {expected}: one item "
+                                "for each item of the data")
+
+
+def uncertified_claim(kind: str, data: dict, options: dict, claim: dict) -> None:
+    """An item not certified states only figures the verifier checks without a proof: its status
+    is not optimal; its cost is what its solution costs on the data (none when it returns no
+    solution); and it states no lower_bound and no gap, since no proof the verifier checks backs
+    them (a bound at most the optimum's cost cannot be told from a larger one without one)."""
+    if claim.get("status") == "optimal":
+        raise Invalid("claim", "an uncertified item's status is not optimal")
+    for name in ("lower_bound", "gap"):
+        if claim.get(name) is not None:
+            raise Invalid("claim", f"{name} is {claim[name]!r:.40}: an uncertified item states none (no proof the "
+                                   "verifier checks backs it)")
+    cost = claim.get("cost")
+    solution_cost = getattr(_adapter(kind), "solution_cost", None)
+    true = solution_cost(data, claim, options) if solution_cost is not None else None
+    if true is None:
+        if cost is not None:
+            raise Invalid("objective", f"cost {cost!r:.40} is stated, and no solution is returned to cost it")
+        return
+    if cost is None:
+        return  # a solution returned without its cost says less
+    value, allowance = true
+    if not (isinstance(cost, (int, float)) and not isinstance(cost, bool) and abs(cost - value) <= allowance):
+        raise Invalid("objective", f"cost {cost!r:.40}, its solution costs {value!r}")
 
 
 def _document_items(document: Any) -> list[dict]:
@@ -392,7 +525,8 @@ SUMMARY_NOTES = {"scope": "text", "note": "text", "order": "integer", "moment_ra
 
 
 def _check_summaries(kind, result: dict, certificate: dict) -> None:
-    """A certified item's certificate summary (its ``certificate`` member) says what its proof
+    """An uncertified item's certificate summary, when it has one, says its tolerance was not met.
+    A certified item's certificate summary (its ``certificate`` member) says what its proof
     does: its tolerance is max(abs_gap, rel_gap * cost) with the item's rel_gap, met, and its
     leaves are the proof's. (Its root_region describes the proof's root box in the caller's
     terms: informational, but for a bilinear frame, where it is the scope: bilinear.verification.)"""
@@ -405,9 +539,13 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
     rel_gap_of = getattr(kind.verification, "rel_gap_of", lambda options, index: options.get("rel_gap"))
     for index, (item, claim) in enumerate(zip(items, certificate["items"])):
         summary = item.get("certificate") if isinstance(item, dict) else None
-        if not isinstance(summary, dict) or claim.get("certified") is not True:
-            continue
         where = f"{kind.item_key}/{index}/certificate"
+        if isinstance(summary, dict) and claim.get("certified") is not True:
+            if "tolerance_met" in summary and summary["tolerance_met"] is not False:
+                raise Invalid("returned", f"{where}/tolerance_met must be false for an uncertified item")
+            continue
+        if not isinstance(summary, dict):
+            continue
         for name, what in SUMMARY_NOTES.items():  # what explains a result but proves nothing: typed
             if name in summary:
                 informational(summary[name], f"{where}/{name}", what)

@@ -231,8 +231,9 @@ class TestOxfordModelHouse:
     def test_bounds_below_costs_and_the_certificate_verifies(self, house):
         _, _, result = house
         KIND.result_model.model_validate(result)
-        for stage in result["stages"]:
-            assert stage["lower_bound"] <= stage["cost"], stage["name"]
+        for stage in result["stages"]:  # an uncertified stage states no bound (verify.uncertified_claim)
+            assert stage["lower_bound"] <= stage["cost"] if stage["certified"] else stage["lower_bound"] is None, \
+                stage["name"]
         report = verify_any(result)
         if any(stage["certified"] for stage in result["stages"]):
             assert report.valid, report.first_failure

@@ -28,6 +28,7 @@ from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unp
 from geocert.solvers.core.cones import proves_infeasible
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.verify import verify_any
+from tests.solvers.test_forgeries import uncertify
 
 KIND = "autocalibration"
 
@@ -58,7 +59,7 @@ def refused(document, check_name: str | None = None, affine_only: bool = False) 
     check the certificate alone with the metric item uncertified (skipped: quicker)."""
     if affine_only:
         document = copy.deepcopy(document["certificate"])
-        document["items"][1]["certified"] = False
+        uncertify(document["items"][1])
     valid, failure = check(document)
     assert not valid
     if check_name is not None:
@@ -782,5 +783,5 @@ class TestClosedChiralityScope:
             plane_at_infinity=plane.tolist(), cost=cost, lower_bound=cost, gap=0.0,
             proof={"type": "stratified_affine", "regions": [],
                    "excluded": [{"delta": 1.0, "rows": [iX, iY]}, {"delta": -1.0, "rows": [iX, iY]}]})
-        document["items"][1]["certified"] = False
+        uncertify(document["items"][1])
         refused(document)

@@ -190,7 +190,7 @@ class TestExtraction:
         result = solve_job(job(data, intrinsics, chirality="points", varying_focal=True))
         stage = result["stages"][0]
         assert stage["status"] == "not_certified" and stage["certificate"]["moment_rank"] > 1
-        assert stage["lower_bound"] < stage["cost"]
+        assert stage["lower_bound"] is None and stage["gap"] is None  # not certified: no bound stated
         points = np.array(result["points"])
         for camera in result["cameras"]:
             assert np.all((points - np.array(camera["center"])) @ np.array(camera["R"])[2] > 0)

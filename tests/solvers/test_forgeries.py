@@ -39,11 +39,18 @@ def rehash(document: dict) -> dict:
     return document
 
 
+def uncertify(claim: dict) -> dict:
+    """``claim`` as a true claim of an item not certified: no bound stated (verify.uncertified_claim),
+    its solution and cost untouched."""
+    claim.update(certified=False, status="not_certified", lower_bound=None, gap=None)
+    return claim
+
+
 def only(document: dict, index: int) -> dict:
     """The document with every item but ``index`` uncertified (quicker; the rest untouched)."""
     for item in document["items"]:
         if item["index"] != index:
-            item["certified"] = False
+            uncertify(item)
     return document
 
 

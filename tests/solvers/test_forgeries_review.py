@@ -33,7 +33,7 @@ def _uncertify_points(result: dict, keep: set) -> dict:
     result["summary"].update(points_certified=count, points_certified_fraction=count / len(result["points"]))
     _stage(result, "structure")["certified"] = count
     every = count == len(result["points"])
-    result["stats"].update(certified=int(every), statuses={"optimal": 1} if every else {})
+    result["stats"].update(certified=int(every), statuses={"optimal" if every else "not_certified": 1})
     return result
 
 

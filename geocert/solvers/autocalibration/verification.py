@@ -69,9 +69,14 @@ class AutocalibrationVerification:
 
     @staticmethod
     def job_outcomes(result: dict) -> list:
-        """One item, certified when every stage is (its status is the job's own)."""
+        """One item, certified when every stage is, its status the first uncertified stage's
+        ("optimal" when every stage is certified), as the kind writes the job's item."""
         stages = result.get("stages") or []
-        return [(None, bool(stages) and all(isinstance(s, dict) and s.get("certified") is True for s in stages))]
+        if not all(isinstance(s, dict) for s in stages):
+            raise Invalid("returned", "each stage must be an object")
+        pending = next((stage for stage in stages if stage.get("certified") is not True), None)
+        status = None if not stages else "optimal" if pending is None else pending.get("status")
+        return [(status, bool(stages) and pending is None)]
 
     @staticmethod
     def rel_gap_of(options: dict, index: int) -> float:
@@ -127,8 +132,15 @@ class AutocalibrationVerification:
             raise Invalid("claim", "the affine stage states no calibration")
 
     def check_returned(self, result: dict, certificate: dict) -> None:
-        """The result's headline fields are the claims' (plane, K), and what follows from them
-        (upgrade, quadric, cameras, points, ranges, baseline) recomputed from the data."""
+        """The result's own status and reason are what its stages give (outcome: a result written
+        before they were stated has neither); its headline fields are the claims' (plane, K), and
+        what follows from them (upgrade, quadric, cameras, points, ranges, baseline) recomputed
+        from the data."""
+        if "status" in result or "reason" in result:
+            expected = outcome(result)
+            for name, value in expected.items():
+                if result.get(name) != value:
+                    raise Invalid("returned", f"{name} is {result.get(name)!r:.80}, its stages give {value!r:.80}")
         claims = certificate["items"]
         if certificate["options"].get("method") == "direct":
             return _check_returned_direct(result, certificate)
@@ -158,6 +170,41 @@ class AutocalibrationVerification:
             if not _close(result.get(name), expected):
                 raise Invalid("returned", f"{name} is not what the plane at infinity and K give")
         _check_baseline(result.get("baseline"), problem, p)
+
+    def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
+        """What an uncertified stage's solution costs (the affine stage's plane, the metric
+        stage's K for its plane, the direct stage's quadric), with the allowance a certified
+        stage's has; None when the stage returns none."""
+        try:
+            cameras, points, image_size = read_data(data)
+            problem = pr.prepare(cameras, points, image_size, dict(options["intrinsics"] or {}))
+        except InputError as exc:
+            raise Invalid("data", f"{exc.field}: {exc.reason}") from exc
+        with np.errstate(all="ignore"):
+            if options["method"] == "direct":
+                from geocert.solvers.autocalibration import direct_relaxation as dr
+
+                if claim.get("dual_absolute_quadric") is None:
+                    return None
+                Q = _numbers(claim["dual_absolute_quadric"], "dual_absolute_quadric", (4, 4), "claim")
+                setup = _direct_setup(problem, options)
+                cost = dr.cost(setup.cameras, setup.from_input(Q))
+            else:
+                if claim.get("plane_at_infinity") is None or (claim["index"] == 1 and claim.get("K") is None):
+                    return None
+                p = pr.plane_from_input(problem, _numbers(claim["plane_at_infinity"], "plane_at_infinity", (4,),
+                                                          "claim"))
+                if p is None:
+                    return None  # a plane through the reference camera's centre costs nothing: none is stated
+                if claim["index"] == 0:
+                    cost = pr.affine_cost(problem, p)
+                else:
+                    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+                    cost = mrelax.cost(setup, pr.w_of_K(problem, _numbers(claim["K"], "K", (3, 3), "claim")))
+        cost = float(cost)
+        if not np.isfinite(cost):
+            raise Invalid("objective", "the stage's solution has no finite cost")
+        return cost, OBJECTIVE_TOLERANCE * abs(cost) + 1e-300
 
     def read(self, data: dict, index: int):
         if index not in (0, 1):
@@ -209,6 +256,21 @@ class AutocalibrationVerification:
             raise Invalid("scope", "the DIAC returned is outside the domain (box, PSD, or a view's scale range)")
         passed.append("scope")
         return proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed), options["metric_rel_gap"]
+
+
+def outcome(item: dict) -> dict:
+    """The result's own ``status`` and ``reason``, where a reader looks first: a job that found no
+    metric upgrade says so here, not only in its stages (the kind writes them, the verifier asks
+    them)."""
+    pending = next((stage for stage in item["stages"] if not stage["certified"]), None)
+    if pending is None:
+        return {"status": "optimal", "reason": None}
+    said = f"the {pending['name']} stage ended {pending['status']}" + (f": {pending['reason']}" if pending.get("reason")
+                                                                        else "")
+    if item.get("dual_absolute_quadric") is None:  # no K, no quadric: nothing solved
+        return {"status": "cancelled" if pending["status"] == "cancelled" else "failed",
+                "reason": f"no metric upgrade was found ({said})"}
+    return {"status": pending["status"], "reason": f"not certified: {said}"}
 
 
 # The linear baseline is recomputed here; a least-squares solution's rounding differs from one

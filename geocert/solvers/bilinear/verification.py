@@ -29,6 +29,7 @@ LEAF_CLAIM_TOLERANCE = 1e-6  # as the fractional kinds' (fractional.proof): the 
 class BilinearVerification:
     claim_options = CLAIM_OPTIONS
     proofs: dict = {}
+    data_items = "frames"  # the certificate has one item per frame (verify._check_item_count)
     domain = ("every affine camera [M | t] whose 2x3 part M lies in the item's camera box (any translation t), "
               "with every coefficient vector of the coefficient set")
 
@@ -110,6 +111,20 @@ class BilinearVerification:
         if proof.get("type") != "bilinear_bnb":
             raise Invalid("format", f"proof type {proof.get('type')!r} is not one bilinear takes")
         return check_search(basis, points, camera, options, proof, lower_claimed, passed), options["rel_gap"]
+
+    def solution_cost(self, data: Any, claim: dict, options: dict) -> tuple[float, float] | None:
+        """What an uncertified frame's camera and coefficients cost on its points (and the
+        allowance for rounding, as a certified claim's); None when it returns no camera."""
+        if claim.get("camera") is None or claim.get("coefficients") is None:
+            return None
+        basis, points = self.read(data, claim["index"])
+        camera = _numbers(claim["camera"], "camera", (2, 4), "claim")
+        alpha = _numbers(claim["coefficients"], "coefficients", (basis.shape[0],), "claim")
+        with np.errstate(all="ignore"):
+            cost = float(pb.cost(pb.residuals(basis, points, camera, alpha), options["norm"]))
+        if not np.isfinite(cost):
+            raise Invalid("objective", "the camera returned has no finite cost on its points")
+        return cost, OBJECTIVE_TOLERANCE * abs(cost) + 1e-300
 
     @staticmethod
     def scope_of_items(claims: list) -> dict:

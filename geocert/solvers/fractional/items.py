@@ -11,6 +11,7 @@ from geocert.solvers.core.geometry import cost_rounding, norm_cost, normalised_c
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.convexity import outside_range, track_bound, verify_sublevel
+from geocert.solvers.fractional.determinacy import proven_track
 from geocert.solvers.fractional.proof import (check_program, program_allowance, program_discount, raw_sizes,
                                               residual_uncertainty, track_uncertainty, verify_search)
 from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
@@ -211,33 +212,17 @@ def verify_track_search(item, options: dict, proof: dict, lower_claimed: float, 
     return bound
 
 
-def uncertified_figures(item: dict, arrays: tuple, norm: str, where: str) -> None:
-    """An uncertified track's figures, which no proof backs, are still true: not called optimal,
-    its cost what its point costs on its observations, any lower bound it states at most that
-    cost, and its gap their difference (a search stopped at a limit states the bound it reached)."""
-    if item.get("status") == "optimal":
-        raise Invalid("returned", f"{where}: an uncertified item's status is not optimal")
-    cost, lower, point = item.get("cost"), item.get("lower_bound"), item.get("point")
-    if point is not None and cost is not None:
-        cameras, observed = arrays
-        X = np.append(numbers(point, f"{where}/point", (3,), "returned"), 0.0 if item.get("at_infinity") else 1.0)
-        with np.errstate(all="ignore"):
-            projected = cameras @ X
-            residuals = projected[:, :2] / projected[:, 2:3] - observed
-        true = norm_cost(residuals, norm)
-        if not (isinstance(cost, (int, float)) and abs(cost - true) <= 1e-9 * max(1.0, abs(true))):
-            raise Invalid("returned", f"{where}/cost {cost!r}, its point costs {true!r}")
-    if lower is not None and (not isinstance(lower, (int, float)) or cost is None or not lower <= cost * (1 + 1e-9)):
-        raise Invalid("returned", f"{where}/lower_bound {lower!r} is above its cost {cost!r}")
-    if lower is not None and item.get("gap") is not None and not abs(item["gap"] - (cost - lower)) <= 1e-9 * max(
-            1.0, abs(cost)):
-        raise Invalid("returned", f"{where}/gap {item['gap']!r} is not its cost less its lower bound")
+def figure_allowance(cost: float) -> float:
+    """How far a stated cost may be from the one the verifier recomputes for an uncertified item
+    (the solver's and the verifier's rounding of the same residuals)."""
+    return 1e-9 * max(1.0, abs(cost))
 
 
 class TrackItems:
     """The triangulation kind's verification adapter."""
 
     proofs = {"branch_and_bound": verify_track_search, "convexity": verify_convexity}
+    data_items = "tracks"  # the certificate has one item per entry (verify._check_item_count)
     domain = ("every point in front of every camera (positive depth in every view, last homogeneous "
               "coordinate >= 0)")
 
@@ -252,15 +237,10 @@ class TrackItems:
         self._cameras = None
 
     def check_returned(self, result: dict, certificate: dict) -> None:
-        """A track's determinacy may say proven only with the intervals its claim's proof proves
-        (the proof's sublevel, at its cost_increase). Triangulation results only: a kind that
-        reads its points as tracks (reconstruction) returns no such determinacy. Every item its
-        result calls uncertified states true figures too (uncertified_figures)."""
-        key = "tracks" if certificate.get("kind") == "triangulation" else "points"
-        for index, (item, claim) in enumerate(zip(result.get(key) or [], certificate["items"])):
-            if claim.get("certified") is not True and isinstance(item, dict):
-                uncertified_figures(item, self.read(certificate["data"], index), certificate["options"].get("norm"),
-                                    f"{key}/{index}")
+        """A track's determinacy may say proven only with the intervals its claim's proof proves:
+        determinacy.proven_track of the proof's sublevel, every member (its level's words too).
+        Triangulation results only: a kind that reads its points as tracks (reconstruction)
+        returns no such determinacy. (An uncertified item's figures: verify.uncertified_claim.)"""
         if certificate.get("kind") != "triangulation":
             return
         for index, (item, claim) in enumerate(zip(result["tracks"], certificate["items"])):
@@ -274,13 +254,27 @@ class TrackItems:
             if sublevel is None or determinacy.get("proven") is not True or not isinstance(stated, dict):
                 raise Invalid("returned", f"tracks/{index}/determinacy says proven, and its certificate proves no "
                                           "interval")
-            intervals = stated.get("intervals")
-            bounds = [[i.get("lower"), i.get("upper")] for i in intervals] if isinstance(intervals, list) and all(
-                isinstance(i, dict) for i in intervals) else None
-            if stated.get("cost_increase") != sublevel.get("cost_increase") or bounds != sublevel.get("intervals") \
-                    or [i.get("name") for i in intervals] != ["x", "y", "z"]:
+            # Every member, its words (level) too, as the solver builds them from the proof's sublevel.
+            if not isinstance(sublevel, dict) or stated != proven_track(sublevel):
                 raise Invalid("returned", f"tracks/{index}/determinacy/proven_intervals are not the ones its "
                                           "certificate proves")
+
+    def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
+        """What an uncertified track's point costs on its observations (and the allowance for its
+        rounding); None when it returns no point."""
+        point = claim.get("point")
+        if point is None:
+            return None
+        cameras, observed = self.read(data, claim["index"])
+        at_infinity = claim.get("at_infinity") is True
+        X = numbers(point, "point", (4,) if at_infinity else (3,), "claim")
+        X = X if at_infinity else np.append(X, 1.0)
+        with np.errstate(all="ignore"):
+            projected = cameras @ X
+            cost = norm_cost(projected[:, :2] / projected[:, 2:3] - observed, options["norm"])
+        if not np.isfinite(cost):
+            raise Invalid("objective", "the point returned has no finite cost on its observations")
+        return cost, figure_allowance(cost)
 
     def _read_cameras(self, value) -> np.ndarray:
         remembered = self._cameras
@@ -322,6 +316,7 @@ class MapItems:
     """A map kind's verification adapter (the (source, target) dimensions it serves)."""
 
     proofs = {"branch_and_bound": verify_search}
+    data_items = "maps"
     domain = "every map that puts every point at positive depth"
 
     def __init__(self, kind: str, dimensions: set[tuple[int, int]]):
@@ -344,10 +339,23 @@ class MapItems:
     def item(self, arrays: tuple, norm: str) -> MapItem:
         return MapItem(arrays, norm)
 
+    def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
+        """What an uncertified map's matrix costs on its points; None when it returns none."""
+        if claim.get("matrix") is None:
+            return None
+        source, target = self.read(data, claim["index"])
+        item = MapItem((source, target), options["norm"], chart=False)
+        with np.errstate(all="ignore"):
+            residuals, _, _ = item.raw_residuals(item.solution(claim))
+            cost = norm_cost(residuals, options["norm"])
+        if not np.isfinite(cost):
+            raise Invalid("objective", "the matrix returned has no finite cost on its points")
+        return cost, figure_allowance(cost)
+
     def check_returned(self, result: dict, certificate: dict) -> None:
         """Each returned map's ``residuals`` are what its matrix leaves on the certificate's data
         (target minus the map's image), certified or not, and an uncertified map's cost is their
-        norm: a residual or a cost no matrix gives is refused."""
+        norm (verify.uncertified_claim, on its claim): a residual or a cost no matrix gives is refused."""
         norm = certificate["options"].get("norm")
         for index, entry in enumerate(result.get("maps") or []):
             if not isinstance(entry, dict) or entry.get("matrix") is None:
@@ -361,12 +369,6 @@ class MapItems:
                 given = numbers(entry["residuals"], f"{where}/residuals", residuals.shape, "returned")
                 if not np.all(np.abs(given - residuals) <= 1e-9 * np.maximum(1.0, np.abs(target)) + 2 * rounding):
                     raise Invalid("returned", f"{where}/residuals are not what its matrix leaves on the data")
-            if entry.get("certified") is not True and entry.get("cost") is not None:
-                cost = norm_cost(residuals, norm)
-                if not abs(float(entry["cost"]) - cost) <= 1e-9 * max(1.0, abs(cost)):
-                    raise Invalid("returned", f"{where}/cost {entry['cost']!r}, its matrix costs {cost!r}")
-                if entry.get("status") == "optimal":
-                    raise Invalid("returned", f"{where}: an uncertified map's status is not optimal")
 
 
 TRACKS = TrackItems()

@@ -722,9 +722,15 @@ class ReconstructionItems(TrackItems):
 
     @staticmethod
     def job_outcomes(result: dict) -> list:
-        """One item, certified when it has points and every one is (its status is the job's own)."""
+        """One item, certified when it has points and every one is; its status "optimal" then,
+        "not_certified" otherwise, as the kind writes it, or "cancelled" when the job's statistics
+        say it was stopped (a stopped run keeps what it finished: a weaker claim)."""
         points = result.get("points") or []
-        return [(None, bool(points) and all(isinstance(p, dict) and p.get("certified") is True for p in points))]
+        certified = bool(points) and all(isinstance(p, dict) and p.get("certified") is True for p in points)
+        stats = result.get("stats")
+        if isinstance(stats, dict) and stats.get("statuses") == {"cancelled": 1}:
+            return [("cancelled", certified)]
+        return [("optimal" if certified else "not_certified", certified)]
 
     def checked_options(self, options: dict) -> dict:
         """The points' options (a triangulation's), and the cameras' tolerance (stated in the
