@@ -20,6 +20,7 @@ def queue_lists(queue: str) -> list[str]:
     """The Redis lists holding a queue's waiting tasks, one per priority step (kombu's names)."""
     return [queue if step == 0 else f"{queue}\x06\x16{step}" for step in PRIORITY_STEPS]
 
+
 _LOCK = threading.Lock()
 _SOLVE_CHUNK = None
 _SOLVE_CHUNK_FAILED = None

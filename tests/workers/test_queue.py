@@ -82,7 +82,8 @@ published = store.create("triangulation", request, 5, 2, "someone", chunk_key="t
 queue.submit_chunks({**published, "id": collected["id"], "task_ids": [t + "-again" for t in collected["task_ids"]]},
                     "request-1")
 print(json.dumps({"can_collect": queue.can_collect(), "collected": collected["task_ids"], "refused": refused,
-                  "writes_to_create": writes_to_create, "messages": store.r.lrange("celery", 0, -1)}))
+                  "writes_to_create": writes_to_create,
+                  "messages": [m for name in queue.queue_lists("celery") for m in store.r.lrange(name, 0, -1)]}))
 """
 
 
