@@ -79,7 +79,7 @@ class RedisCollector:
         yield hooks
         yield from self._histograms(values, "item_solve_seconds", "Seconds to solve one item", SOLVE_BUCKETS)
         yield from self._histograms(values, "job_seconds", "Seconds from submission to the end of a job", JOB_BUCKETS)
-        from geocert.workers.queue import queue_lists
+        from geocert.workers.priorities import queue_lists
 
         depth = GaugeMetricFamily("geocert_queue_depth", "Tasks waiting in the queue", labels=["queue"])
         for queue in self.queue_names:

@@ -6,20 +6,8 @@ from __future__ import annotations
 import functools
 import threading
 
+from geocert.workers.priorities import FIRST, LATER
 from geocert.workers.store import JobStore
-
-# Task priorities on kombu's Redis transport: one list per step, a worker taking from the list of
-# the lowest number first. A job's first task is queued FIRST, its others LATER (and a task
-# deferred for its key's share LATER again), so that another key's new job is taken before a
-# flood's queued tasks, not after each of them has been taken and deferred in turn.
-FIRST, LATER = 0, 9
-PRIORITY_STEPS = (0, 3, 6, 9)  # kombu's default steps
-
-
-def queue_lists(queue: str) -> list[str]:
-    """The Redis lists holding a queue's waiting tasks, one per priority step (kombu's names)."""
-    return [queue if step == 0 else f"{queue}\x06\x16{step}" for step in PRIORITY_STEPS]
-
 
 _LOCK = threading.Lock()
 _SOLVE_CHUNK = None
@@ -77,7 +65,7 @@ def _chunk_group(meta: dict, request_id: str | None):
     """One task per chunk, so a batch runs in parallel across every worker (a Celery group), each
     under the id ``JobStore.create`` recorded for it (``meta["task_ids"]``), with time limits
     sized from the job's own (task_options). The first is queued ahead of every job's later ones
-    (celery_app.FIRST, LATER): another key's job is not queued behind all of a large job's tasks."""
+    (priorities.FIRST, LATER): another key's job is not queued behind all of a large job's tasks."""
     from celery import group
 
     solve_chunk = _solve_chunk_task()

@@ -27,7 +27,8 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
     if not jobs.r.set(LOCK, "1", nx=True, ex=max(1, int(every_s))):
         return []  # another worker reaps this round
     from geocert.workers.celery_app import SOLVE_QUEUE
-    from geocert.workers.queue import queue_lists, task_options
+    from geocert.workers.priorities import queue_lists
+    from geocert.workers.queue import task_options
     from geocert.workers.tasks import end_with_error, solve_chunk
 
     done = []

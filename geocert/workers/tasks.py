@@ -35,7 +35,8 @@ from geocert.batch import (abs_gap_of, assemble, item_counts, item_sums, job_dea
 from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
-from geocert.workers.queue import LATER, SOFT_AFTER_S, task_deadline_s, task_options
+from geocert.workers.priorities import LATER
+from geocert.workers.queue import SOFT_AFTER_S, task_deadline_s, task_options
 from geocert.workers.store import REDIS_GONE, JobStore, shared_store as store
 from celery.exceptions import SoftTimeLimitExceeded
 

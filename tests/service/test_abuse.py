@@ -23,7 +23,7 @@ import redis
 
 from bench.abuse import Receiver
 from geocert.solvers.autocalibration import scenes
-from geocert.workers.queue import queue_lists
+from geocert.workers.priorities import queue_lists
 from tests.servers import cluster
 
 pytestmark = pytest.mark.slow  # real servers: the full run only

@@ -251,7 +251,7 @@ def test_the_reaper_requeues_a_stranded_job_and_fails_one_stranded_too_often(tmp
 
     import redis
 
-    from geocert.workers.queue import queue_lists
+    from geocert.workers.priorities import queue_lists
     from geocert.workers.reaper import MAX_REAPS
 
     with cluster(tmp_path, workers=0, **SHORT_TASKS) as (running, client):

@@ -17,7 +17,7 @@ import pytest
 import redis
 
 from geocert.solvers.autocalibration import scenes
-from geocert.workers.queue import queue_lists
+from geocert.workers.priorities import queue_lists
 from geocert.workers.redis_server import broker_url
 from tests.servers import cluster
 

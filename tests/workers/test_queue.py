@@ -60,6 +60,7 @@ _COLLECT = """
 import json, sys, redis
 import redis.connection
 from geocert.workers import queue
+from geocert.workers.priorities import queue_lists
 from geocert.workers.store import JobStore
 store = JobStore.from_url(sys.argv[1])
 request = {"kind": "triangulation", "data": {"tracks": [{}] * 5}, "options": {}}
@@ -83,7 +84,7 @@ queue.submit_chunks({**published, "id": collected["id"], "task_ids": [t + "-agai
                     "request-1")
 print(json.dumps({"can_collect": queue.can_collect(), "collected": collected["task_ids"], "refused": refused,
                   "writes_to_create": writes_to_create,
-                  "messages": [m for name in queue.queue_lists("celery") for m in store.r.lrange(name, 0, -1)]}))
+                  "messages": [m for name in queue_lists("celery") for m in store.r.lrange(name, 0, -1)]}))
 """
 
 
