@@ -700,4 +700,16 @@ def _stopped_by_clock(out, limit_s: float) -> None:
         if bound is not None and bound.result is not None and bound.result.status == "cancelled":
             bound.result.status, bound.result.reason = "time_limit", passed
     out.cancelled = False
+    stopped = next((stage["name"] for stage in out.stages if stage.get("status") == "time_limit"), None)
+    warnings = out.summary.setdefault("warnings", [])
+    for warning in warnings:
+        if warning.get("code") == "no_metric_upgrade":  # not "none was found": none was sought
+            warning["detail"] = warning["detail"].replace("no metric reconstruction was found",
+                                                          "the time limit passed before a metric reconstruction")
+    # first: the run did not finish, whatever else the result says
+    warnings.insert(0, {"code": "time_limit", "detail": (
+        f"the job's time limit in all ({limit_s:g} s) passed during the {stopped or 'last'} stage: what was "
+        "finished before it is returned, and each stage after it says it was not run. Send the job again with "
+        "larger limits (options.structure_time_limit_s, autocalibration_time_limit_s, features.time_limit_s) or "
+        "fewer photos")})
 

@@ -88,3 +88,8 @@ def test_a_reconstruction_stops_at_its_time_limit_in_all_keeping_the_views_regis
     assert all("time limit in all" in stage["reason"] for stage in stages.values() if stage["status"] == "time_limit")
     assert sum(camera["registered"] for camera in result["cameras"]) < 40  # stopped in the registration
     assert not any(point["certified"] and point["status"] != "optimal" for point in result["points"])
+    # where a user looks first, the result says it did not finish, and no warning says that
+    # nothing could be found when nothing was sought
+    warnings = result["summary"]["warnings"]
+    assert warnings[0]["code"] == "time_limit" and "projective" in warnings[0]["detail"]
+    assert not any("was found" in warning["detail"] for warning in warnings)
