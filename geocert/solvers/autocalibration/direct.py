@@ -15,7 +15,7 @@ w's entries unnormalised, so a quadric whose views all see f -> 0 costs next to 
 cameras' principal axes meet in one point X0 (cameras looking at the scene's centre, the usual
 capture), X0 projects to every principal point and Q = X0 X0' + e Q* (rank-3 rounded) costs ~0
 for any scene: measured on a pixel-scale scene (12 views of 20 points, K = 800 px, 640 x 480, 0.5
-px noise, cameras at distance 4 looking at the origin, 2026-11-24), the unconstrained global
+px noise, cameras at distance 4 looking at the origin), the unconstrained global
 minimum was such a quadric, cost 2.4e-7 and f = 7.3 px, against 4.8e-5 at the true K's polished
 quadric (f = 800.5 px); with the focal rows the order-2 bound is 4.769087e-5, tight at the latter.
 

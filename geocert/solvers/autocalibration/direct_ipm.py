@@ -13,7 +13,7 @@ Vandenberghe's CVXOPT notes, "The CVXOPT linear and quadratic cone program solve
     minimise q'y  s.t.  A y + s = b,  s in {0}^k x R+^m x S+^n1 x ...  (svec as Clarabel's)
 returning (status, y, z).
 
-Measured 2026-11-23 (Table 7.1's scenes, one BLAS thread): 19 to 38 iterations of 40 to 80 ms,
+Measured (Table 7.1's scenes, one BLAS thread): 19 to 38 iterations of 40 to 80 ms,
 1.2 to 2.2 processor seconds a solve (Clarabel: 4.8 to 7 s); the block operator's assembly is
 half of it. With OpenBLAS on two threads on the loaded shared machine, each 714 x 714 Cholesky
 took 0.33 s instead of 5 ms: the service's workers run BLAS on one thread, and so does the bench.
@@ -39,7 +39,7 @@ REFINEMENT = 3  # refinement steps per Newton solve (1 left the dual residual at
 # 7e-7 in five iterations, then "Stalled", the gap 1.6e-7 relative; with up to ten, "Solved" at
 # iteration 32). Not a cure: with H that ill-conditioned the refinement need not converge at all
 # (with two BLAS threads the same half still stalls; GMRES preconditioned by H's factorisation, with
-# or without a shift of 1e-10 of its diagonal, did worse: measured 2026-11-23).
+# or without a shift of 1e-10 of its diagonal, did worse: measured).
 MAX_REFINEMENT = 10
 STALL = 8  # iterations without progress before giving up
 

@@ -1,6 +1,6 @@
 """Direct autocalibration solved (thesis chapter 7): the moment relaxation of each orientation as
 one SDP, first by direct_ipm (a structured interior-point method, numpy: 1.2 to 2 processor
-seconds a solve on Table 7.1's scenes, 2026-11-23) and, when its solve is not clean, by Clarabel
+seconds a solve on Table 7.1's scenes) and, when its solve is not clean, by Clarabel
 (assembled directly, sparse: no cvxpy); its safe bound, the quadric from the first-order moments,
 rounded to the feasible set and polished locally, the rank test, and where the relaxation is not
 tight, a split of the program (MAX_SPLITS).
@@ -13,7 +13,7 @@ not quite tight"; direct_ipm's is 2.2709252e-4 against the best quadric's 2.2709
 3.4e-8: the relaxation is tight there, the gap was the solver's.
 
 The rest of this docstring is the Clarabel path, as measured before direct_ipm. Where a solve's
-time goes (order 2, Table 7.1's 12 views, profiled 2026-11-23): assembling the program takes 0.02 s and Clarabel's setup 0.1 s; the rest is 12 to 22 interior-point iterations,
+time goes (order 2, Table 7.1's 12 views, profiled): assembling the program takes 0.02 s and Clarabel's setup 0.1 s; the rest is 12 to 22 interior-point iterations,
 each dominated by the factorisation of the KKT system, in which the moment matrix's cone is a dense
 1540-row block and the other cones (Q's 40 x 40 localizer, six 10 x 10 ones) fill in around it:
 per iteration about the time of a dense Cholesky factorisation of order 2250 (0.44 s with numpy on
@@ -21,7 +21,7 @@ this machine's one core, against 0.27 to 0.5 s measured per iteration when idle)
 "faer" factorisation is about ten times faster than the default QDLDL on it (4.0 s against 44.5 s,
 one solve); a second thread did not help on the shared machine. Clarabel's iterative refinement
 (up to 10 steps per KKT solve by default) took a quarter of each iteration: one step is used
-(REFINEMENT_STEPS). Measured without gain (2026-11-23, seeds 1000 and 1006): equilibration off,
+(REFINEMENT_STEPS). Measured without gain (seeds 1000 and 1006): equilibration off,
 chordal decomposition off, presolve off (setup 0.2 s either way), a step fraction of 0.995;
 tolerance 1e-7 saves one iteration but leaves the bound 1.3e-4 below the optimum (seed 1000), too
 far for the 1e-4 certification; Q's localizer replaced by Q >= 0 and its diagonal's localizers
@@ -90,7 +90,7 @@ ATTEMPTS = ((1e-9, None), (1e-8, 1e-6), (1e-9, 1e-6), (1e-8, 1e-7))
 IPM_MAX_ITER = 50
 # Iterative refinement steps per KKT solve (Clarabel's default: up to 10, to 1e-13 relative).
 # Each step is a product with the KKT matrix, whose moment-matrix block is dense (1540 x 1540),
-# and a solve with its factor: measured 2026-11-23 (seed 1000, fixed focal, 14 iterations either
+# and a solve with its factor: measured (seed 1000, fixed focal, 14 iterations either
 # way, loaded machine, two runs each), 0.45-0.47 s of processor time per iteration with the
 # default, 0.33-0.38 s with one step, 0.30-0.34 s with none; one step leaves the safe bound within
 # 1e-10 relative of the default's, none moved it 5e-6 and doubled the iterations on seed 1006.
@@ -352,7 +352,7 @@ class Leaf:
 # moment matrix mixes (x_k <= c and x_k >= c, each with its localizing matrix) made the half
 # holding the optimum rank one and tight on seeds 1010 and 1012 (gaps 6e-8 and 3e-8 relative).
 # Seed 1008 (varying focal) is not certified either way, for a reason splitting does not reach
-# (measured 2026-11-24): without chirality the global minimum of (7.12) (3.23e-4) puts cameras behind
+# (measured): without chirality the global minimum of (7.12) (3.23e-4) puts cameras behind
 # the scene (df 1.87), and the half holding it stalls at 3.13e-4; with chirality the best quadric
 # (4.64e-4, rank one in its half) is separated from a lower half whose relaxation stays at 3.27e-4
 # through three splits on entries 7, 8, 8 (rank one, ratio 3.5e-6), because its minimiser is a nearly

@@ -399,7 +399,7 @@ class Relaxation:
                 # mix gives this), valid since s (L + U) - L U >= s^2 there. It replaces the cone
                 # over the envelope of t / s (Dinosaur camera 14, 533 points: the root's gap 3.6e-2 becomes
                 # 1.6e-3); with both cones on r, Clarabel stalls near a 1e-6 gap. t, w and their rows
-                # stay, though r no longer reads them: without them (measured 2026-11-24) the solves
+                # stay, though r no longer reads them: without them (measured) the solves
                 # were 7% faster with the same nodes, but the relaxation's minimisers moved onto the
                 # scope's edge, and a search whose start is out of scope (max_residual a hair above
                 # the least possible, test_certificates' TestNodeTighteningHostile) found no
