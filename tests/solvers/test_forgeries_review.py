@@ -1,8 +1,8 @@
-"""Hostile review of the verifier's new checks (issue 33): each class below is a false claim
-``verify_any`` accepts today, built from a genuine document (make_fixtures' reconstruction through
-test_forgeries' calibrated_reconstruction fixture, or a stored certificate). Each test asserts the
-forgery is refused, so it xfails (strict) until the verifier refuses it; each class's docstring
-says what is accepted and how false the claim is."""
+"""Hostile review of the verifier's checks (issue 33): each class below is a false claim
+``verify_any`` accepted when the review ran, built from a genuine document (make_fixtures'
+reconstruction through test_forgeries' calibrated_reconstruction fixture, or a stored
+certificate). Each test asserts the forgery is refused (each failed on the code the review read);
+each class's docstring says what was accepted and how false the claim was."""
 
 from __future__ import annotations
 

@@ -1,9 +1,9 @@
 """A third hostile review of the verifier (issue 33): each class below is a false claim
-``verify_any`` accepts today, built from a genuine document (a stored certificate, or
-make_fixtures' reconstruction through test_forgeries' calibrated_reconstruction fixture). Each
-forgery test asserts the forgery is refused, so it xfails (strict) until the verifier refuses it;
-beside it, where it matters, the true weaker claim the forgery starts from verifies. Each class's
-docstring says what is accepted and how false the claim is."""
+``verify_any`` accepted when the review ran, built from a genuine document (a stored
+certificate, or make_fixtures' reconstruction through test_forgeries' calibrated_reconstruction
+fixture). Each forgery test asserts the forgery is refused (each failed on the code the review
+read); beside it, where it matters, the true weaker claim the forgery starts from verifies. Each
+class's docstring says what was accepted and how false the claim was."""
 
 from __future__ import annotations
 
