@@ -1,0 +1,65 @@
+"""A fourth hostile review of the verifier (issue 33): each class below is a false claim (or a
+document the docs say is refused) that ``verify_any`` accepts today, built from a genuine stored
+certificate (tests/data/certificates). Each forgery test asserts the sound outcome, so it xfails
+(strict) until the verifier gives it; beside it, where it matters, the true claim the forgery
+starts from verifies. Each class's docstring says what is accepted, how false it is, and a fix."""
+
+from __future__ import annotations
+
+import pytest
+
+from geocert.solvers.verify import verify_any
+from tests.solvers.test_forgeries import stored
+from tests.solvers.test_forgeries_review3 import _uncertified
+
+ACCEPTED = "accepted today: see the class's docstring"
+XFAIL = {"strict": True, "reason": ACCEPTED, "raises": AssertionError}
+
+
+def _valid(document: dict) -> bool:
+    return verify_any(document).valid
+
+
+class TestUncertifiedStatusUnread:
+    """uncertified_claim asks only that an uncertified item's status is not "optimal": any other
+    word verifies, with no proof. docs/kinds.md says "`infeasible` is said only when proven" (no
+    point in front of every camera, or every box proven empty within max_residual), yet a
+    certified track (optimum 13.83, its point in front of every camera) verifies restated as
+    uncertified with status "infeasible", point null and the reason "no solution has every
+    residual within max_residual (proven by the search)", in a document with no max_residual at
+    all; likewise "degenerate" (a claim about the data), and words no kind writes ("garbage"). The
+    genuine solver's infeasible tracks carry no proof either (proof null), so the word is only
+    the solver's. Suggested fix: an uncertified item's status is one of the kind's statuses
+    (kinds.schema.ItemStatus); "infeasible" is stated only with a proof the verifier checks (the
+    search's leaves, each closed by a Farkas or depth proof over the root region: the same
+    records a branch-and-bound proof carries) and only where the scope allows it (max_residual
+    set, or a depth proof), and "degenerate" only where the verifier's own reading of the data
+    finds the degeneracy; otherwise the word is refused (or the report states that an
+    uncertified item's status is unchecked)."""
+
+    @staticmethod
+    def restated(status: str) -> dict:
+        result = stored("triangulation_l2l2")
+        assert result["tracks"][0]["certified"] is True
+        forged = _uncertified(result, "tracks", 0, status=status, point=None, cost=None, lower_bound=None,
+                              gap=None)
+        forged["tracks"][0]["reason"] = "no solution has every residual within max_residual (proven by the search)"
+        forged["tracks"][0]["determinacy"] = None
+        return forged
+
+    def test_the_genuine_document_verifies(self):
+        assert _valid(stored("triangulation_l2l2"))
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("status", ["infeasible", "degenerate", "garbage"])
+    def test_a_solvable_track_called_infeasible_is_refused(self, status):
+        assert not _valid(self.restated(status))
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_a_frame_called_infeasible_is_refused(self):
+        result = stored("bilinear_l2l2")
+        forged = _uncertified(result, "frames", 0, status="infeasible", camera=None, coefficients=None, cost=None,
+                              lower_bound=None, gap=None)
+        for name in ("shape", "residuals", "baseline", "determinacy"):
+            forged["frames"][0][name] = None
+        assert not _valid(forged)
