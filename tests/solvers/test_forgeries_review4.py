@@ -63,3 +63,56 @@ class TestUncertifiedStatusUnread:
         for name in ("shape", "residuals", "baseline", "determinacy"):
             forged["frames"][0][name] = None
         assert not _valid(forged)
+
+
+LINEAR_ESTIMATE = {"method": "linear", "K": [[1.0, 0.0, 0.5], [0.0, 1.0, 0.5], [0.0, 0.0, 1.0]], "psd": True,
+                   "cost": 0.0}
+
+
+class TestDirectBaselineUnread:
+    """A stratified result's baseline is recomputed (autocalibration.verification._check_baseline:
+    the thesis's linear estimate 6.30, 6.31), and docs/certificate.md says a result's baseline is
+    not informational: a result may be judged against it. A direct-method result's baseline is
+    read by no check (check_returned returns through _check_returned_direct before
+    _check_baseline): the genuine direct results state none, and one stating a made-up linear
+    estimate (K = [[1, 0, .5], [0, 1, .5], [0, 0, 1]], psd, cost 0: a linear method that fits
+    exactly) verifies, as does any other value (1.0). Suggested fix: a direct result's baseline
+    is null (the kind writes none), or, if one is ever stated, recomputed as the stratified one
+    is for the plane at infinity the quadric gives."""
+
+    @pytest.mark.parametrize("name", ["autocalibration_direct", "autocalibration_direct_points"])
+    def test_the_genuine_result_states_no_baseline_and_verifies(self, name):
+        result = stored(name)
+        assert result["baseline"] is None
+        assert _valid(result)
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("name", ["autocalibration_direct", "autocalibration_direct_points"])
+    @pytest.mark.parametrize("baseline", [LINEAR_ESTIMATE, 1.0])
+    def test_a_baseline_no_linear_method_gave_is_refused(self, name, baseline):
+        result = stored(name)
+        result["baseline"] = baseline
+        assert not _valid(result)
+
+
+class TestStageNamesUnread:
+    """An autocalibration result's stages are an affine and a metric stage (stratified) or one
+    direct stage, and each stage's ``name`` says which figures a user reads; no check reads it
+    (it is neither a claim field nor in RETURNED_FIELDS). The stratified result with its stages
+    renamed (stage 0 "metric", stage 1 "affine": the affine stage's cost and bound now read as the
+    metric one's), or a stage called "x", verifies. Suggested fix: AutocalibrationVerification.
+    check_returned asks each stage's name to be its position's (STAGES' names for the method)."""
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_stages_renamed_are_refused(self):
+        result = stored("autocalibration_stratified")
+        assert [stage["name"] for stage in result["stages"]] == ["affine", "metric"]
+        result["stages"][0]["name"], result["stages"][1]["name"] = "metric", "affine"
+        assert not _valid(result)
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("name", ["autocalibration_stratified", "autocalibration_direct"])
+    def test_a_stage_named_otherwise_is_refused(self, name):
+        result = stored(name)
+        result["stages"][0]["name"] = "x"
+        assert not _valid(result)
