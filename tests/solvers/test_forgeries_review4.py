@@ -144,3 +144,38 @@ class TestInformationalResultFieldsUntyped:
         result = stored("triangulation_l2l2")
         result["stats"]["nodes"] = -2
         assert not _valid(result)
+
+
+class TestGenuineUnregisteredReconstructionMisread:
+    """A genuine reconstruction with K given that registers no view (14 tracks: no pair of views
+    shares the 15 the initial pair needs) returns summary.calibration {"K": null, "source":
+    "given"}; the verifier's calibration check (reconstruction.verification, ``source == "none"``
+    exactly when K is null) refuses it with check "returned" ("source 'given' is not where the
+    returned K comes from"): the solver's own honest output is reported as a tampered field. The
+    document is refused anyway (nothing is certified), but its first failure should say that, as
+    a K-unknown run's does. Suggested fix: with K given, source "given" is the sound word whether
+    or not a camera was returned (K null when no view is registered), or the kind writes "none"
+    when it returns no K; either way solver and verifier agree, and a test solves the case."""
+
+    @staticmethod
+    def unregistered(**options) -> dict:
+        from geocert.batch import solve_job
+        from geocert.solvers.reconstruction import synthetic
+
+        scene = synthetic.scene(views=5, points=14, seed=7, noise_px=0.5)
+        data = {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(5)],
+                "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
+                           for views, pixels in scene.tracks]}
+        result = solve_job({"kind": "reconstruction", "data": data, "options": {"certificate": "full", **options}})
+        assert result["summary"]["views_registered"] == 0
+        return result
+
+    def test_k_unknown_says_nothing_is_certified(self):
+        report = verify_any(self.unregistered())
+        assert report.first_failure["detail"] == "no certified item to check", report.first_failure
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_k_given_says_nothing_is_certified(self):
+        K = [[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]]
+        report = verify_any(self.unregistered(intrinsics={"K": K}))
+        assert report.first_failure["detail"] == "no certified item to check", report.first_failure
