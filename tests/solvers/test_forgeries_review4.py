@@ -6,6 +6,8 @@ starts from verifies. Each class's docstring says what is accepted, how false it
 
 from __future__ import annotations
 
+import copy
+
 import pytest
 
 from geocert.solvers.verify import verify_any
@@ -18,6 +20,24 @@ XFAIL = {"strict": True, "reason": ACCEPTED, "raises": AssertionError}
 
 def _valid(document: dict) -> bool:
     return verify_any(document).valid
+
+
+@pytest.fixture(scope="module")
+def given_K_reconstruction() -> dict:
+    """Six views of 16 points with K given (synthetic.scene seed 3, as make_fixtures'
+    reconstruction): a genuine result, every point certified."""
+    from geocert.batch import solve_job
+    from geocert.solvers.reconstruction import synthetic
+
+    scene = synthetic.scene(views=6, points=16, seed=3, noise_px=0.5)
+    data = {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
+            "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
+                       for views, pixels in scene.tracks]}
+    K = [[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]]
+    result = solve_job({"kind": "reconstruction", "data": data,
+                        "options": {"certificate": "full", "intrinsics": {"K": K}}})
+    assert verify_any(result).valid and result["summary"]["calibration"]["source"] == "given"
+    return result
 
 
 class TestUncertifiedStatusUnread:
@@ -229,6 +249,33 @@ class TestProjectiveStageCountsPartlyRead:
         stage = next(stage for stage in result["stages"] if stage["name"] == "projective")
         assert stage["observations_kept"] == 96 and stage["outliers_removed"] == 0
         stage.update(counts)
+        assert not _valid(result)
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("counts", [{"views": 10, "registered": 10}, {"tracks": -16}])
+    def test_a_calibrated_runs_counts_beyond_the_data_are_refused(self, given_K_reconstruction, counts):
+        """With K given the projective stage states views, tracks and registered (not the names
+        _check_projective_counts reads): 10 of 6 views registered verifies."""
+        result = copy.deepcopy(given_K_reconstruction)
+        stage = next(stage for stage in result["stages"] if stage["name"] == "projective")
+        assert (stage["views"], stage["registered"], stage["tracks"]) == (6, 6, 16)
+        stage.update(counts)
+        assert not _valid(result)
+
+
+class TestImageSizeWithKGiven:
+    """A camera's image_size is checked against the calibration certificate's (K unknown); with
+    K given there is none, and no check reads it: a camera of the K-given reconstruction (image
+    640 x 480) verifies stating 961 x 480 or -640 x 480. Suggested fix: the certificate's data
+    carries each view's image size (it is input, hashed) and every camera's image_size is
+    compared with it whatever the calibration path."""
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("width", [961.0, -640.0])
+    def test_an_image_size_not_the_views_is_refused(self, given_K_reconstruction, width):
+        result = copy.deepcopy(given_K_reconstruction)
+        assert result["cameras"][0]["image_size"] == [640.0, 480.0]
+        result["cameras"][0]["image_size"][0] = width
         assert not _valid(result)
 
 
