@@ -289,9 +289,10 @@ class TestCameraStatusWordsUnread:
     (reconstruction.verification, claims._doubts) leaves cameras "cancelled" out of the cameras
     bounded, so in a result where more than half the bounded cameras are not certified, calling
     them "cancelled" makes "doubtful" false required (and its warning forbidden). Suggested fix:
-    a camera's status is the one its figures give (optimal when certified; not_certified when
-    judged and not certified; not_run when not judged; cancelled only when the job's stats say
-    the run was stopped, as job_outcomes reads a cancelled reconstruction)."""
+    a camera's status is the one its figures give, as the kind writes it (optimal when
+    certified; not_certified when judged and not certified; not_run when not judged; cancelled,
+    or a search's own stop, only for a camera whose bound search ran and was stopped: searched
+    true, as pipelines.reconstruction.claims reads c.bound.status)."""
 
     @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("status", ["cancelled", "node_limit", "x"])
