@@ -371,3 +371,38 @@ class TestReconstructionLabelsUntied:
         cameras = result["cameras"]
         cameras[0]["name"], cameras[1]["name"] = cameras[1]["name"], cameras[0]["name"]
         assert not _valid(result)
+
+
+@pytest.fixture(scope="module")
+def radial_reconstruction() -> dict:
+    """make_fixtures' six-view scene solved with radial_distortion "on" (K unknown): a genuine
+    result whose cameras state k1 and its centre, each image's centre."""
+    from geocert.batch import solve_job
+    from geocert.solvers.reconstruction import synthetic
+
+    scene = synthetic.scene(views=6, points=16, seed=3, noise_px=0.5)
+    data = {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
+            "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
+                       for views, pixels in scene.tracks]}
+    result = solve_job({"kind": "reconstruction", "data": data,
+                        "options": {"certificate": "full", "radial_distortion": "on"}})
+    assert verify_any(result).valid and result["cameras"][0]["k1"] is not None
+    return result
+
+
+class TestDistortionCentreUnread:
+    """_check_distortion asks every registered camera to state its radial term k1 (the summary's
+    at the camera's focal length) "and its centre", and reads the centre only for presence: the
+    summary's statement says the observations were undistorted "about each image's centre"
+    ((639/2, 479/2) = (319.5, 239.5) for a 640 x 480 view), yet camera 0 verifies stating the
+    centre (324.5, 244.5), a model that undistorts its pixels otherwise than the certificates
+    assume. Suggested fix: each camera's distortion_centre is its view's image centre
+    ((width - 1) / 2, (height - 1) / 2), the one the points were undistorted about."""
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_a_centre_not_the_images_is_refused(self, radial_reconstruction):
+        result = copy.deepcopy(radial_reconstruction)
+        camera = result["cameras"][0]
+        assert camera["distortion_centre"] == [319.5, 239.5]
+        camera["distortion_centre"] = [324.5, 244.5]
+        assert not _valid(result)
