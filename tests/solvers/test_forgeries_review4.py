@@ -84,6 +84,18 @@ class TestUncertifiedStatusUnread:
             forged["frames"][0][name] = None
         assert not _valid(forged)
 
+    @pytest.mark.xfail(**XFAIL)
+    def test_a_map_and_a_metric_stage_called_infeasible_are_refused(self):
+        result = stored("resection_l1l1")
+        forged = _uncertified(result, "maps", 0, status="infeasible", matrix=None, cost=None, lower_bound=None,
+                              gap=None)
+        forged["maps"][0]["residuals"] = None
+        assert not _valid(forged)
+        result = stored("autocalibration_stratified")
+        metric = _uncertified(result, "stages", 1, status="infeasible", cost=result["stages"][1]["cost"],
+                              lower_bound=None, gap=None)
+        assert not _valid(metric)
+
 
 LINEAR_ESTIMATE = {"method": "linear", "K": [[1.0, 0.0, 0.5], [0.0, 1.0, 0.5], [0.0, 0.0, 1.0]], "psd": True,
                    "cost": 0.0}
