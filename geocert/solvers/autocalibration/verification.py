@@ -15,6 +15,7 @@ from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers
 
+STAGE_NAMES = {"stratified": ["affine", "metric"], "direct": ["direct"]}
 CLAIM_OPTIONS = ("method", "intrinsics", "rel_gap", "metric_rel_gap", "abs_gap", "chirality", "varying_focal",
                  "relaxation_order")
 # Sizes served (the parser's and the verifier's, checked before anything is built): the stages
@@ -142,7 +143,15 @@ class AutocalibrationVerification:
                 if result.get(name) != value:
                     raise Invalid("returned", f"{name} is {result.get(name)!r:.80}, its stages give {value!r:.80}")
         claims = certificate["items"]
-        if certificate["options"].get("method") == "direct":
+        direct = certificate["options"].get("method") == "direct"
+        # each stage is the one its position names: its cost and bound are read as that stage's
+        names = STAGE_NAMES["direct" if direct else "stratified"]
+        stages = result.get("stages")
+        if not isinstance(stages, list) or [s.get("name") if isinstance(s, dict) else None for s in stages] != names:
+            raise Invalid("returned", f"stages must be named {', '.join(names)}, in that order")
+        if direct:
+            if result.get("baseline") is not None:  # the direct method has no linear estimate
+                raise Invalid("returned", "baseline: the direct method states no linear estimate")
             return _check_returned_direct(result, certificate)
         if result.get("plane_at_infinity") != claims[0].get("plane_at_infinity"):
             raise Invalid("returned", "plane_at_infinity differs from the affine stage's claim")

@@ -163,6 +163,12 @@ class BilinearVerification:
             if item.get("baseline") is not None:
                 _check_baseline(index, item["baseline"], basis, points, certificate["options"])
             if item.get("camera") is None or item.get("coefficients") is None:
+                # what derives from the solution is not stated without it (nor half a solution)
+                stated = [name for name in ("camera", "coefficients", "shape", "residuals")
+                          if item.get(name) not in (None, [])]
+                if stated:
+                    raise Invalid("returned", f"frames/{index}: {', '.join(stated)} given without the camera and "
+                                              "coefficients they belong to")
                 continue
             camera = _numbers(item["camera"], f"frames/{index}/camera", (2, 4), "returned")
             alpha = _numbers(item["coefficients"], f"frames/{index}/coefficients", (basis.shape[0],), "returned")

@@ -358,6 +358,8 @@ class MapItems:
         norm (verify.uncertified_claim, on its claim): a residual or a cost no matrix gives is refused."""
         norm = certificate["options"].get("norm")
         for index, entry in enumerate(result.get("maps") or []):
+            if isinstance(entry, dict) and entry.get("matrix") is None and entry.get("residuals") not in (None, []):
+                raise Invalid("returned", f"maps/{index}/residuals are given, but no matrix they derive from")
             if not isinstance(entry, dict) or entry.get("matrix") is None:
                 continue
             where = f"maps/{index}"

@@ -290,6 +290,12 @@ def _check_distortion(result: dict, registered: list[dict], options: dict) -> No
                 and len(centre) == 2 and all(is_number(c) for c in centre)):
             raise Invalid("returned", f"cameras/{camera['view']}: k1 {camera.get('k1')!r} is not summary/distortion's "
                                       f"term at its focal length, or it states no distortion_centre")
+        # the term is about the image's centre, as the pipeline undistorts ((w - 1) / 2, (h - 1) / 2)
+        size = camera.get("image_size")
+        if not (isinstance(size, list) and len(size) == 2 and all(is_number(v) for v in size)
+                and all(_close(c, (v - 1) / 2, 1.0) for c, v in zip(centre, size))):
+            raise Invalid("returned", f"cameras/{camera['view']}/distortion_centre {centre!r} is not its image's "
+                                      "centre")
 
 
 def _warned(summary: dict, code: str) -> bool:
