@@ -203,7 +203,6 @@ class TestGenuineUnregisteredReconstructionMisread:
         report = verify_any(self.unregistered())
         assert report.first_failure["detail"] == "no certified item to check", report.first_failure
 
-    @pytest.mark.xfail(**XFAIL)
     def test_k_given_says_nothing_is_certified(self):
         K = [[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]]
         report = verify_any(self.unregistered(intrinsics={"K": K}))
@@ -229,7 +228,6 @@ class TestCalibrationSourceUnread:
         assert result["summary"]["calibration"]["source"] == "bundle_adjustment"
         assert _valid(result)
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("source", ["given", "x"])
     def test_an_estimated_K_called_given_is_refused(self, source):
         result = stored("reconstruction")

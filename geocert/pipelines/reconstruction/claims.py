@@ -261,7 +261,7 @@ def calibration_claim(out) -> CalibrationClaim:
                          + ("; K was given, so the reconstruction does not rely on them for it" if known else "")})
     determined = None if known or K is None else bool(certified and not critical and not edges
                                                       and stage.get("determined") is True)
-    source = ("given" if known else "none" if K is None else "autocalibration" if same_K
+    source = ("none" if K is None else "given" if known else "autocalibration" if same_K
               else "bundle_adjustment" if adjusted else "camera_model")
     return CalibrationClaim(None if K is None else K.tolist(), source, None if cert is None else cert.tolist(),
                             certified, same_K, difference, tuple(edges), determined, tuple(warnings),

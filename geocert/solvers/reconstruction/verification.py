@@ -354,8 +354,14 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
         raise Invalid("returned", f"{where}/returned_is_certified is {claim.get('returned_is_certified')!r}: the "
                                   f"returned K is {'' if returned else 'not '}the certified one")
     source = claim.get("source")
-    if (source == "autocalibration") != returned or (source == "none") != (K is None):
-        raise Invalid("returned", f"{where}/source {source!r} is not where the returned K comes from")
+    intrinsics = ((result.get("certificate") or {}).get("options") or {}).get("intrinsics")
+    adjusted = any(isinstance(s, dict) and s.get("name") == "bundle_adjustment" and s.get("status") != "skipped"
+                   for s in result.get("stages") or [])
+    expected_source = ("none" if K is None else "given" if isinstance(intrinsics, dict) and "K" in intrinsics
+                       else "autocalibration" if returned else "bundle_adjustment" if adjusted else "camera_model")
+    if source != expected_source:
+        raise Invalid("returned", f"{where}/source {source!r} is not where the returned K comes from "
+                                  f"({expected_source!r})")
     expected = None if cert is None else calibration_claim.difference(K, cert)
     given = claim.get("difference")
     if (expected is None) != (given is None) or (expected is not None and not (
