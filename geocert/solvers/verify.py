@@ -22,7 +22,7 @@ import numpy as np
 from geocert.solvers.core.cones import rounding_uncounted
 from geocert.solvers.core.certificates import (BOUND_TOLERANCE, FORMAT, OBJECTIVE_TOLERANCE, VERSION, data_hash,
                                                problem_hash)
-from geocert.solvers.core.geometry import cost_rounding, norm_cost
+from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost
 from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
                                          informational, number as _number, record, work_budget)
 from geocert.solvers.fractional import residual_claims
@@ -463,6 +463,10 @@ def _check_returned(result: dict, certificate: dict) -> None:
             if (name in item or name in claim) and item.get(name) != claim.get(name):
                 raise Invalid("returned", f"{key}/{index}/{name} is {item.get(name)!r}, its certificate proves "
                                           f"{claim.get(name)!r}")
+        _check_item_notes(item, f"{key}/{index}")
+    stats = result.get("stats")
+    if isinstance(stats, dict):
+        _check_item_notes({"nodes": stats.get("nodes")}, "stats")
     own = getattr(kind.verification, "check_returned", None)
     if own is not None:  # what else the result returns, derived from the claims
         own(result, certificate)
@@ -517,6 +521,18 @@ def _check_stats(kind, result: dict) -> None:
     for name, value in expected.items():
         if name in stats and stats[name] != value:
             raise Invalid("returned", f"stats/{name} is {stats[name]!r}, the items give {value!r}")
+
+
+def _check_item_notes(item: dict, where: str) -> None:
+    """An item's informational fields are of their types (docs/certificate.md): ``nodes`` a
+    count, ``reason`` words, ``elapsed_s`` a duration; each may be null."""
+    nodes, reason, elapsed = item.get("nodes"), item.get("reason"), item.get("elapsed_s")
+    if nodes is not None and not (type(nodes) is int and nodes >= 0):
+        raise Invalid("returned", f"{where}/nodes must be null or a count (an integer >= 0), got {nodes!r:.40}")
+    if reason is not None and not isinstance(reason, str):
+        raise Invalid("returned", f"{where}/reason must be null or a string, got {reason!r:.40}")
+    if elapsed is not None and not (is_number(elapsed) and elapsed >= 0):
+        raise Invalid("returned", f"{where}/elapsed_s must be null or a number >= 0, got {elapsed!r:.40}")
 
 
 # A summary's fields that explain a result but prove nothing (docs/certificate.md), each of a type.

@@ -161,14 +161,12 @@ class TestInformationalResultFieldsUntyped:
              ("resection_l2l2", "maps", "nodes", 2.5), ("bilinear_l2l2", "frames", "reason", 1.0),
              ("autocalibration_stratified", "stages", "nodes", -1)]
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("name, key, field, value", CASES)
     def test_an_item_field_not_of_its_type_is_refused(self, name, key, field, value):
         result = stored(name)
         result[key][0][field] = value
         assert not _valid(result)
 
-    @pytest.mark.xfail(**XFAIL)
     def test_a_negative_node_count_is_refused(self):
         result = stored("triangulation_l2l2")
         result["stats"]["nodes"] = -2
@@ -248,7 +246,6 @@ class TestProjectiveStageCountsPartlyRead:
     the summary's observations_removed where both say the same thing (or each is documented as
     an informational figure)."""
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("counts", [{"observations_kept": 200, "outliers_removed": 7},
                                         {"observations_kept": -96}])
     def test_counts_beyond_the_data_are_refused(self, counts):
@@ -258,7 +255,6 @@ class TestProjectiveStageCountsPartlyRead:
         stage.update(counts)
         assert not _valid(result)
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("counts", [{"views": 10, "registered": 10}, {"tracks": -16}])
     def test_a_calibrated_runs_counts_beyond_the_data_are_refused(self, given_K_reconstruction, counts):
         """With K given the projective stage states views, tracks and registered (not the names

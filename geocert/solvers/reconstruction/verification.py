@@ -237,13 +237,24 @@ def _check_projective_counts(result: dict) -> None:
     than was sent."""
     summary = result["summary"]
     stage = _stage(result, "projective")
-    totals = {"views_registered": summary.get("views"), "points": summary["tracks"],
-              "observations": summary["tracks"] * (summary.get("views") or 0)}
+    observations = summary["tracks"] * (summary.get("views") or 0)
+    # each count, under each name the registration paths state it by (the projective path's, the
+    # incremental one's, the K-known one's)
+    totals = {"views_registered": summary.get("views"), "registered": summary.get("views"),
+              "views": summary.get("views"), "points": summary["tracks"], "tracks": summary["tracks"],
+              "observations": observations, "observations_kept": observations,
+              "outliers_removed": observations, "observations_of_dropped_tracks": observations,
+              "observations_of_unregistered_views": observations}
     for name, total in totals.items():
         given = stage.get(name)
         if name in stage and not (isinstance(given, int) and not isinstance(given, bool) and 0 <= given <= total):
             raise Invalid("returned", f"stages/projective/{name} is {given!r}: at most {total} (the summary's views "
                                       "and tracks, each track one observation a view)")
+    given = [stage.get(name) for name in ("observations_kept", "outliers_removed", "observations_of_dropped_tracks",
+                                          "observations_of_unregistered_views")]
+    if all(isinstance(g, int) for g in given) and "observations" in stage and sum(given) > stage["observations"]:
+        raise Invalid("returned", "stages/projective: the observations kept, removed, of dropped tracks and of "
+                                  "unregistered views add up to more than its observations")
 
 
 def _check_distortion(result: dict, registered: list[dict], options: dict) -> None:
