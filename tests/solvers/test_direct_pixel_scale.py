@@ -173,6 +173,7 @@ class TestVerifierMessage:
         document = copy.deepcopy(result["certificate"])
         claim = document["items"][0]
         claim["certified"], claim["status"], claim["proof"] = False, "not_certified", None
+        claim["lower_bound"] = claim["gap"] = None  # an uncertified claim states no bound (verify.uncertified_claim)
         report = verify_any(document)
         assert not report.valid
         assert "affine" not in report.first_failure["detail"]
@@ -186,12 +187,17 @@ class TestVerifierMessage:
         result = copy.deepcopy(result)
         stage, claim = result["stages"][0], result["certificate"]["items"][0]
         for item in (stage, claim):
-            item.update({"status": "not_certified", "certified": False, "cost": None, "gap": None,
+            item.update({"status": "not_certified", "certified": False, "cost": None, "lower_bound": None, "gap": None,
                          "plane_at_infinity": None, "K": None, "dual_absolute_quadric": None})
         claim["proof"] = None
+        stage["certificate"]["tolerance_met"] = False
         for name in ("plane_at_infinity", "K", "Ks", "dual_absolute_quadric", "upgrade", "cameras", "points"):
             result[name] = None
         result["stats"]["certified"] = 0  # the job's counts as such a result gives them (verify._check_stats)
+        result["stats"]["statuses"] = {"not_certified": 1}
+        from geocert.solvers.autocalibration.verification import outcome
+
+        result.update(outcome(result))  # and its own status, as its stages give it
         report = verify_any(result)
         assert not report.valid
         assert report.first_failure["detail"] == "no certified item to check"
@@ -201,7 +207,8 @@ class TestVerifierMessage:
     def test_two_items_for_the_direct_method(self, noisy):
         _, result = noisy
         document = copy.deepcopy(result["certificate"])
-        document["items"].append({**copy.deepcopy(document["items"][0]), "index": 1, "certified": False})
+        document["items"].append({**copy.deepcopy(document["items"][0]), "index": 1, "certified": False,
+                                  "status": "not_certified", "lower_bound": None, "gap": None, "proof": None})
         report = verify_any(document)
         assert not report.valid
         assert report.first_failure["detail"] == "the direct method certifies one stage: direct"

@@ -121,7 +121,8 @@ class TestSeed1012:
         monkeypatch.setattr(direct_solve, "MAX_SPLITS", 0)
         stage = solve_job(copy.deepcopy(document))["stages"][0]
         assert not stage["certified"] and stage["certificate"]["moment_rank"] == 2
-        assert stage["gap"] > 1e-4 * stage["cost"]
+        # an uncertified stage states no bound (verify.uncertified_claim): its reason says why
+        assert stage["lower_bound"] is None and stage["gap"] is None and stage["reason"]
 
 
 def test_a_split_that_lowers_the_bound_is_not_kept(monkeypatch):
