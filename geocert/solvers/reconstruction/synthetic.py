@@ -49,15 +49,7 @@ def scene(views: int = 8, points: int = 60, focal: float = 800.0, image_size=(64
         translations.append(t)
     rotations, translations = np.array(rotations), np.array(translations)
     seen = rng.uniform(size=(points, views)) < visibility
-    tracks = []
-    for j in range(points):
-        vs = np.flatnonzero(seen[j])
-        if len(vs) < 2:
-            continue
-        cam = X[j] @ rotations[vs].transpose(0, 2, 1) + translations[vs]
-        image = cam @ K.T
-        pixels = image[:, :2] / image[:, 2:3] + noise_px * rng.standard_normal((len(vs), 2))
-        tracks.append((vs, pixels))
+    tracks = observed(X, rotations, translations, K, seen, noise_px, rng)
     return Scene(K, rotations, translations, X, tracks, (w, h))
 
 
@@ -123,8 +115,15 @@ def ring(views: int = 48, points: int = 400, focal: float = 1500.0, image_size=(
     towards = centres[None, :, :] - X[:, None, :]
     towards /= np.linalg.norm(towards, axis=2, keepdims=True)
     seen = np.einsum("pi,pvi->pv", normal, towards) > np.cos(np.radians(visible_degrees))
+    tracks = observed(X, rotations, translations, K, seen, noise_px, rng)
+    return Scene(K, rotations, translations, X, tracks, (w, h))
+
+
+def observed(X, rotations, translations, K, seen, noise_px: float, rng) -> list:
+    """Each point's track: the views ``seen`` marks (at least two), its pixels there with
+    Gaussian noise of ``noise_px`` drawn from ``rng`` in point order."""
     tracks = []
-    for j in range(points):
+    for j in range(len(X)):
         vs = np.flatnonzero(seen[j])
         if len(vs) < 2:
             continue
@@ -132,4 +131,4 @@ def ring(views: int = 48, points: int = 400, focal: float = 1500.0, image_size=(
         image = cam @ K.T
         pixels = image[:, :2] / image[:, 2:3] + noise_px * rng.standard_normal((len(vs), 2))
         tracks.append((vs, pixels))
-    return Scene(K, rotations, translations, X, tracks, (w, h))
+    return tracks
