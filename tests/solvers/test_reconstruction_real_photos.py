@@ -50,3 +50,26 @@ def test_a_sparse_ring_with_k_unknown_registers_and_is_as_accurate_as_colmap(tem
     assert abs(errors["focal_error_pct"]) < 3.0
     adjusted = next(stage for stage in out.stages if stage["name"] == "bundle_adjustment")
     assert adjusted["status"] == "done" and adjusted["rms_px_after"] < 1.0
+
+
+@pytest.fixture(scope="module")
+def dino():
+    try:
+        return photo_sets.load("dinoSparseRing")
+    except photo_sets.MissingSet as missing:
+        pytest.skip(str(missing))
+
+
+def test_a_resumed_focal_round_does_not_lose_views_a_new_registration_places(dino):
+    """K unknown from a prior focal length 4 times too short (768 px against 3310): the focal
+    rounds resumed from the first round's cameras register 5 of the 14 photos, a registration
+    from a new initial pair at the refined focal length 6 (COLMAP: 3). The pipeline tries the
+    new registration when views are missing and keeps the one placing more."""
+    names = dino.order("file")
+    images = [cv2.imread(str(dino.path(n)), cv2.IMREAD_GRAYSCALE) for n in names]
+    found = features.tracks_from_images(images, features.FeatureOptions())
+    out = pipeline.reconstruct(found.tracks, found.image_sizes, ReconstructionOptions(resect_cameras=False),
+                               lambda stage, *progress: stage.startswith("structure"))
+    rounds = out.stages[0]["focal_rounds"]
+    assert any(step["resumed"] for step in rounds) and rounds[-1].get("again_from_a_new_pair")
+    assert sum(c.registered for c in out.cameras) >= 6

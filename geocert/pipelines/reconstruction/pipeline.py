@@ -212,7 +212,11 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
     corner = max(np.hypot(w, h) / 2 for w, h in image_sizes)
     model = "simple" if options.radial_distortion == "off" else "radial"
     history, metric, found, k1, resume, first = [], None, None, 0.0, None, {}
-    for _ in range(options.focal_prior_rounds):
+
+    def register(focal: float, k1: float, resume):
+        """One round: the K-known path at this focal length (resumed from cameras, or from a new
+        initial pair), then the adjustment; returns (found, its metric start, the adjusted metric
+        or None when it stopped or found fewer than 2 views, the round's figures)."""
         Ks = [np.array([[focal, 0.0, c[0]], [0.0, focal, c[1]], [0.0, 0.0, 1.0]]) for c in centres]
         used = tracks if k1 == 0.0 else [
             (views, bundle.undistort(np.asarray(pixels, dtype=float).reshape(-1, 2), centres[np.asarray(views, dtype=int)],
@@ -222,30 +226,49 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
             merge_components=options.merge_components), lambda progress: asks(progress.get("done", 0),
                                                                                progress.get("total", 1)),
             start_from=resume)
-        first = first or {key: found.stats[key] for key in ("initial_pair", "initial_pair_search")
-                          if key in found.stats}
+        first.update({key: found.stats[key] for key in ("initial_pair", "initial_pair_search")
+                      if key in found.stats and key not in first})
         found.stats.update(first)  # a resumed round's initial pair is the first round's
         registered = sum(R is not None for R in found.rotations)
         step = {"focal_px": float(focal), "k1": k1, "registered": int(registered), "resumed": resume is not None}
-        history.append(step)
         if registered < 2:
-            break
+            return found, None, None, step
         start = upgrade.Metric(Ks[0], list(found.rotations), [None if t is None else np.asarray(t, dtype=float)
                                                                for t in found.translations],
                                np.asarray(found.points, dtype=float), [], False, k1=k1)
-        if found.status == "cancelled":  # the views registered so far are kept, at the focal length they had
+        if found.status == "cancelled":
+            return found, start, None, step
+        adjusted, _, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, options.threshold_px, model=model,
+                                        should_stop=lambda: asks(0, 1))  # stopped: the next round's stops too
+        step.update(refined_focal_px=float(adjusted.K[0, 0]), refined_k1=adjusted.k1)
+        return found, start, adjusted, step
+
+    for _ in range(options.focal_prior_rounds):
+        found, start, metric, step = register(focal, k1, resume)
+        history.append(step)
+        if start is None:
+            break
+        if metric is None:  # cancelled: the views registered so far are kept, at the focal length they had
             metric = start
             break
-        metric, _, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, options.threshold_px, model=model,
-                                      should_stop=lambda: asks(0, 1))  # stopped: the next round's registration stops too
         refined = float(metric.K[0, 0])
-        step.update(refined_focal_px=refined, refined_k1=metric.k1)
         moved = abs(metric.k1 * (corner / refined) ** 3 * refined - k1 * (corner / focal) ** 3 * focal)
         if not (refined > 0 and np.isfinite(refined) and np.isfinite(metric.k1)) or (
                 abs(refined / focal - 1) <= 0.02 and moved <= RADIAL_STEP_PX):
             break
         focal, k1 = refined, metric.k1
         resume = (metric.rotations, metric.translations)
+    # A resumed round keeps the views a wrong prior focal length placed and adds those PnP finds;
+    # when views are still missing, one new registration at the refined K may place more (on the
+    # dinoSparseRing: 6 of 14 against 5 resumed); the one registering more views is kept.
+    seen = len({int(v) for views, _ in tracks for v in views})
+    if history and history[-1]["resumed"] and found.status != "cancelled" and metric is not None \
+            and history[-1]["registered"] < seen:
+        again, again_start, again_metric, step = register(float(metric.K[0, 0]), metric.k1, None)
+        step["again_from_a_new_pair"] = True
+        history.append(step)
+        if again_metric is not None and step["registered"] > history[-2]["registered"]:
+            found, metric = again, again_metric
     radial = {"model": options.radial_distortion, "estimated": False, "k1": 0.0}
     if metric is not None and model == "radial" and found.status != "cancelled":
         metric, radial = _radial_test(metric, obs, options, radial)
