@@ -6,7 +6,8 @@ publishes progress, and with every heartbeat of a worker holding a task of it
 timeout, with no task queued or delivered and due back, has no live task: its tasks were lost,
 e.g. with a Redis restart that dropped them from the queue. The
 reaper (run by every worker's heartbeat thread, one at a time through a lock in Redis) queues the
-chunks of such a job that still miss items again; results are stored per item, so solving a chunk
+chunks of such a job that still miss items again, when a second round finds it so (a first could
+fall in the moment a task is between its queue and its worker); results are stored per item, so solving a chunk
 again overwrites what was stored and counts nothing twice. After ``MAX_REAPS`` rounds without the
 job ending, it is failed with the reason.
 """
@@ -19,6 +20,7 @@ from geocert.workers.store import JobStore
 
 log = logging.getLogger("geocert.worker")
 LOCK = "geocert:reaper"
+STRANDED = "stranded_since"  # a job's field: its last sign of life when a round first found it stranded
 MAX_REAPS = 3
 
 
@@ -34,8 +36,7 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
     done = []
     stale = jobs.stale_running(stale_after_s)
     if stale:  # a job with a task still queued, or delivered and due back (kombu's unacked), waits
-        waiting = [task for name in queue_lists(SOLVE_QUEUE) for task in jobs.r.lrange(name, 0, -1)]
-        pending = "\n".join(waiting + jobs.r.hvals("unacked"))
+        pending = _pending_tasks(jobs, queue_lists(SOLVE_QUEUE))
     for job_id in stale:
         if job_id in pending:
             jobs.touch(job_id)
@@ -44,6 +45,9 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
         if meta is None or meta["status"] != "running":
             jobs.r.zrem(jobs.RUNNING, job_id)
             continue
+        if not _seen_stranded_before(jobs, job_id):
+            continue
+        jobs.r.hdel(jobs.key(job_id), STRANDED)
         reaps = int(jobs.r.hincrby(jobs.key(job_id), "reaps", 1))
         if reaps > MAX_REAPS:
             jobs.reopen_end(job_id)
@@ -66,3 +70,30 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
                     job_id, stale_after_s, len(chunks), len(missing), reaps)
         done.append((job_id, f"requeued {len(chunks)}"))
     return done
+
+
+def _pending_tasks(jobs: JobStore, lists: list[str]) -> str:
+    """Every waiting and delivered task's message, read in one transaction: kombu's restore sweep
+    moves a task from its delivered hash back to a queue list atomically, and a read of the lists
+    then of the hash, apart, could fall between and see it in neither."""
+    pipe = jobs.r.pipeline(transaction=True)
+    for name in lists:
+        pipe.lrange(name, 0, -1)
+    pipe.hvals("unacked")
+    return "\n".join(task for tasks in pipe.execute() for task in tasks)
+
+
+def _seen_stranded_before(jobs: JobStore, job_id: str) -> bool:
+    """Whether an earlier round found this job stranded with the same last sign of life. A task
+    taken from a queue is in neither the queue nor kombu's delivered hash until its worker has
+    recorded the delivery; a round falling in that moment would re-queue a job whose task is
+    starting. So a job is re-queued on its second sighting, a round later: a task delivered in
+    between has started and marked the job alive (a new sign of life), and it is left alone."""
+    last_life = jobs.r.zscore(jobs.RUNNING, job_id)
+    if last_life is None:  # it ended meanwhile
+        return False
+    seen = jobs.r.hget(jobs.key(job_id), STRANDED)
+    if seen is not None and float(seen) == last_life:
+        return True
+    jobs.set_fields(job_id, **{STRANDED: last_life})  # not on a job deleted meanwhile
+    return False

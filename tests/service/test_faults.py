@@ -244,7 +244,7 @@ def test_the_reaper_requeues_a_stranded_job_and_fails_one_stranded_too_often(tmp
     """Two jobs stranded on purpose, as a lost task leaves them: marked running, with no task
     queued, delivered or alive (their queued messages deleted, their last sign of life long ago).
     A worker then starts; its reaper re-queues the first job's chunks (the job succeeds, every item
-    once, after one reaper round) and fails the second, already re-queued MAX_REAPS times, with
+    once, on the reaper's second sighting) and fails the second, already re-queued MAX_REAPS times, with
     the reason. Neither Celery nor the broker could have recovered them: nothing of them is left
     in the queue."""
     import json
