@@ -1,11 +1,13 @@
 """The solvers' CPU against another revision's, in one run: the stratified autocalibration stages
 at 20 views (Table 6.1's scenes, 0.1% noise, seeds 1 to 3, the bench's gaps) and bilinear
-frames (N = 50, 0.5% noise, L2L2, K = 5 and 10 to certification, K = 20 for 10 s), each solved
+frames (N = 50, 0.5% noise, L2L2, K = 5 and 10 to certification, K = 20 for 10 s) and certified
+resections (the Oxford Model House's 10 cameras from its 3D points, L2L2 at the gaps 1e-2, the
+reconstruction's cameras', and 1e-3; needs ../shared/data), each solved
 by this checkout and by a copy of ``--against`` (``git archive``), in separate processes
 alternating round by round, so that both see the same load. Prints per workload the median CPU
 of each, their ratio, nodes and certified counts, and the load average at each round.
 
-    .venv/bin/python -m bench.solver_revisions --against main [--rounds 3] [--only stratified|bilinear]
+    .venv/bin/python -m bench.solver_revisions --against main [--rounds 3] [--only stratified|bilinear|resection]
 """
 
 from __future__ import annotations
@@ -66,6 +68,29 @@ def bilinear_rows() -> list[dict]:
     return rows
 
 
+def resection_rows() -> list[dict]:
+    from geocert.solvers.datasets import load_house
+    from geocert.solvers.fractional.maps import MapOptions, fit_map
+
+    _, points, views = load_house(Path(os.environ.get("GEOCERT_SHARED_DATA", ROOT.parent / "shared" / "data"))
+                                  / "oxford_house")
+    problems = [(points[view.point_indices], view.pixels) for view in views]
+    rows = []
+    for gap in (1e-2, 1e-3):
+        started, nodes, certified = time.process_time(), [], []
+        for source, target in problems:
+            result = fit_map(source, target, MapOptions(norm="L2L2", rel_gap=gap))
+            nodes.append(result.nodes)
+            certified.append(result.certified)
+        rows.append({"workload": f"Model House's {len(problems)} resections, gap {gap:g}",
+                     "cpu": time.process_time() - started, "nodes": sum(nodes), "certified": all(certified),
+                     "status": "optimal" if all(certified) else f"{len(certified) - sum(certified)} not certified"})
+    return rows
+
+
+WORKLOADS = {"stratified": stratified_rows, "bilinear": bilinear_rows, "resection": resection_rows}
+
+
 def measure(tree: Path, only: str) -> list[dict]:
     """One round of the workloads, solved by the code in ``tree`` (a fresh interpreter)."""
     env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
@@ -79,7 +104,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--against", default="main", help="the revision to compare with (git)")
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--only", choices=("stratified", "bilinear", "both"), default="both")
+    parser.add_argument("--only", choices=(*WORKLOADS, "all"), default="all")
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     parser.add_argument("--tree", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -88,8 +113,7 @@ def main() -> None:
 
         # the tree's own code, not the checkout installed in the environment
         assert Path(geocert.__file__).resolve().is_relative_to(Path(args.tree).resolve()), geocert.__file__
-        rows = (stratified_rows() if args.worker in ("stratified", "both") else []) + \
-            (bilinear_rows() if args.worker in ("bilinear", "both") else [])
+        rows = [row for name, workload in WORKLOADS.items() if args.worker in (name, "all") for row in workload()]
         print(json.dumps(rows))
         return
     with tempfile.TemporaryDirectory() as other:

@@ -34,8 +34,9 @@ def prepared_problem(norm: str, name: str):
     source, target = outlier_scene(rng)
     chart = MapChart.build(source, target, norm)
     prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:3],
-                       1e-7, None, _REASONS, tighten_rounds=4)
+                       1e-7, None, _REASONS)
     assert isinstance(prepared, Prepared)
+    prepared.problem.root = prepared.problem.tighten(prepared.problem.root, prepared.upper, 4)  # as fit_map's rounds
     return rng, chart, prepared
 
 

@@ -364,3 +364,38 @@ def test_an_l2l2_proof_says_its_relaxation_and_the_verifier_holds_it_to_it():
     with pytest.raises(verify.Invalid) as error:
         verify.verify_arrays("resection", (source, target), dataclasses.asdict(l1), claimed)
     assert error.value.check == "format"
+
+
+@pytest.mark.parametrize("norm", NORMS)
+def test_root_tightening_stops_once_the_root_bound_closes_and_the_proof_still_verifies(norm, monkeypatch):
+    """Bound tightening on the root box (BoxProblem.tighten) stops once the root's bound is within
+    the closing share of the gap: with a share that any bound meets, no round is made, the search
+    closes on the bound kept from that check (one root bound, not two), and the claim verifies;
+    with none, the rounds are made."""
+    import dataclasses
+
+    from geocert.solvers import verify
+    from geocert.solvers.fractional import maps, search
+
+    rng = np.random.default_rng(seed("maps", "closing root", norm))
+    _, source, target = scene(rng, "resection", 60)
+    target = target + rng.normal(size=target.shape)
+    options = MapOptions(norm=norm, certificate="full", rel_gap=1e-2)
+    bounds = []  # the relaxations built to bound a box (with the envelope: not a tightening round's)
+    real_data = search.BoxProblem.conic_data
+    monkeypatch.setattr(search.BoxProblem, "conic_data", lambda self, box, upper, envelope=True: (
+        bounds.append(box) if envelope else None) or real_data(self, box, upper, envelope))
+    results = {}
+    for share in (1.0 / options.rel_gap, 0.0):  # closes at once; never closes (the rounds run)
+        monkeypatch.setattr(maps, "CLOSING_SHARE", share)
+        bounds.clear()
+        result = fit_map(source, target, options)
+        assert result.certified, result.reason
+        claim = verify.claim_of(result, matrix=result.matrix)
+        verify.verify_arrays("resection", (source, target), dataclasses.asdict(options), claim)
+        results[share] = (result, len(result.certificate.proof["tightening"]), list(bounds))
+    (closed, rounds_closed, bounds_closed), (full, rounds_full, _) = results.values()
+    assert rounds_closed == 0 and rounds_full >= 1
+    if closed.nodes == 1:  # the search ended at its root: bounded once, by the check, not again
+        assert len(bounds_closed) == 1
+    assert closed.lower_bound <= full.cost * (1 + 1e-9) and full.lower_bound <= closed.cost * (1 + 1e-9)

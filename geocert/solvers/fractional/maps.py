@@ -11,6 +11,7 @@ complement of the reference point.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Callable
 
@@ -71,6 +72,11 @@ def fit_map(
                          lambda result: {"matrix": result.matrix})
 
 
+# Rounds of bound tightening on the root box (search.BoxProblem.tighten), ended early once the
+# root's bound is within CLOSING_SHARE of the gap asked for (a share, so that the rounding the
+# verifier allows the returned cost does not take a just-closed root outside the tolerance).
+TIGHTEN_ROUNDS = 4
+CLOSING_SHARE = 0.5
 # Maps of at least this many correspondences tighten every node's box (search.BoxProblem.bound).
 # Measured on the Dinosaur's cameras (100 to 1,000 points, rel_gap 1e-3): 3-5 times fewer nodes,
 # 1.1-1.6 times less processor time where the search branches; on 7-point maps the solves are
@@ -87,7 +93,7 @@ def _fit_map(source, target, options: MapOptions, callback, start: float) -> Map
     chart = MapChart.build(source, target, options.norm)
     n = source.shape[1]
     prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n],
-                       options.abs_gap, options.max_residual, _REASONS, tighten_rounds=4)
+                       options.abs_gap, options.max_residual, _REASONS)
     if isinstance(prepared, Early):
         if prepared.incumbent is None:
             result = MapResult(prepared.status, False, reason=prepared.reason)
@@ -104,6 +110,9 @@ def _fit_map(source, target, options: MapOptions, callback, start: float) -> Map
             prepared.problem.use_bound_tolerance(LARGE_BOUND_TOLERANCE)
             prepared.problem.capping = True
             prepared.problem.cap_gap = CAP_GAP * options.rel_gap
+        if math.isfinite(prepared.upper):  # with the settings above, so that the root's bound is the search's
+            prepared.problem.root = prepared.problem.tighten(prepared.problem.root, prepared.upper, TIGHTEN_ROUNDS,
+                                                             closing_gap=CLOSING_SHARE * options.rel_gap)
         # Root region on the caller's last row l: z = B w with w = N' S^-T l / (l . X_ref).
         functionals = prepared.problem.B[:, :n] @ chart.last_row_basis.T @ np.linalg.inv(chart.source_norm).T
         searched = search(prepared, options, "every map that puts every point at positive depth", chart.reference,

@@ -335,6 +335,7 @@ class BoxProblem:
         self._solver = ReusableConicProgram(lean=True)
         self.node_tightening = False  # a round of bound tightening at every node below the root (maps)
         self._tightener = ReusableConicProgram(lean=True, tolerance=TIGHTENING_TOLERANCE)
+        self._kept_bound: tuple[Box, float, BoxBound] | None = None  # (box, upper bound, its bound): tighten's last
 
     def use_bound_tolerance(self, tolerance: float) -> None:
         """Node bounds solved to ``tolerance`` (lean settings) instead of 1e-9."""
@@ -395,7 +396,18 @@ class BoxProblem:
         result.box, result.excluded = tightened, excluded
         return result
 
+    def _closes(self, box: Box, upper_bound: float, gap: float) -> bool:
+        """Whether ``box``'s bound is within ``gap`` of ``upper_bound`` (relative); the bound is
+        kept for the search's first look at that box."""
+        result = self._bound(box, upper_bound)
+        self._kept_bound = (box, upper_bound, result)
+        return result.status == BoxStatus.BOUNDED and upper_bound - result.lower_bound <= gap * upper_bound
+
     def _bound(self, box: Box, upper_bound: float) -> BoxBound:
+        kept = self._kept_bound
+        if kept is not None and kept[0] is box and kept[1] == upper_bound:
+            self._kept_bound = None
+            return kept[2]
         data = self.conic_data(box, upper_bound)
         if data is None:  # some depth is negative on the whole box
             return BoxBound(BoxStatus.EMPTY, proof=LeafProof(box, upper_bound, "depth", None, math.inf))
@@ -428,15 +440,24 @@ class BoxProblem:
                     return w
         return None
 
-    def tighten(self, box: Box, upper_bound: float, rounds: int) -> Box:
+    def tighten(self, box: Box, upper_bound: float, rounds: int, closing_gap: float | None = None) -> Box:
         """Shrink ``box`` to the range of ``z = B v`` over the relaxation's points costing at most
         ``upper_bound`` (optimality-based bound tightening), repeated while it shrinks the volume
         by half. Valid: every point costing at most ``upper_bound`` is such a point, because the
         relaxation under-estimates the cost. The tighter box makes the envelopes tighter, so a
         round can shrink it again. A solve that is not accurate leaves its side as it was. Each
-        side is the safe bound of its dual, recorded in ``self.tightening``."""
+        side is the safe bound of its dual, recorded in ``self.tightening``.
+
+        ``closing_gap``: the box is bounded before each round (one solve, against a round's 2k),
+        and tightening stops once that bound is within ``closing_gap`` of ``upper_bound``
+        (relative): the search then closes at its root, whose bound is the one kept here.
+        Measured on resections of 30 to 800 points (0.5 px noise): the untightened root left
+        0.1% to 1.6%, one round closed every one, and the three more rounds made before this
+        stop were 60% to 70% of the solve."""
         solver = ReusableConicProgram(lean=True, tolerance=TIGHTENING_TOLERANCE)  # 2k objectives, one feasible set
         for _ in range(rounds):
+            if closing_gap is not None and self._closes(box, upper_bound, closing_gap):
+                return box
             data = self.conic_data(box, upper_bound, envelope=False)
             if data is None:
                 return box
@@ -611,14 +632,13 @@ def _in_scope_start(program: FractionalProgram, v: np.ndarray) -> np.ndarray | N
 
 
 def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.ndarray,
-            abs_gap: float, max_residual: float | None, reasons: Reasons,
-            tighten_rounds: int = 0) -> Prepared | Early:
+            abs_gap: float, max_residual: float | None, reasons: Reasons) -> Prepared | Early:
     """Incumbent, scaling and root region. ``start``: an initial point (None or infeasible: one
     is searched for); ``subspace``: rows spanning the directions the depths depend on;
     ``max_residual``: the scope (every residual's 2-norm within it; None: no limit); incumbents
-    are always in it. ``tighten_rounds``: rounds of bound tightening on the root region (worth
-    it when nodes are many and costly, as for maps; not for triangulation, whose searches take a
-    few nodes). Every bound is proven (Prepared.root_proof, leaves' proofs), in every mode."""
+    are always in it. The root region is not tightened here: a caller whose nodes are many and
+    costly (maps) tightens it (BoxProblem.tighten); triangulation's searches take a few nodes.
+    Every bound is proven (Prepared.root_proof, leaves' proofs), in every mode."""
     norm = program.norm
     if start is None or not math.isfinite(program.cost(start)):
         start = feasible_point(program)
@@ -660,8 +680,6 @@ def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.n
         return Early(state, v0, upper / unit, reason)
     problem = BoxProblem(program, B, root, root_proof)
     problem.interior = v0
-    if tighten_rounds and math.isfinite(upper):
-        problem.root = problem.tighten(root, upper, tighten_rounds)
     return Prepared(problem, v0, upper, factor, root_proof, reasons)
 
 
