@@ -2,12 +2,13 @@
 at 20 views (Table 6.1's scenes, 0.1% noise, seeds 1 to 3, the bench's gaps) and bilinear
 frames (N = 50, 0.5% noise, L2L2, K = 5 and 10 to certification, K = 20 for 10 s) and certified
 resections (the Oxford Model House's 10 cameras from its 3D points, L2L2 at the gaps 1e-2, the
-reconstruction's cameras', and 1e-3; needs ../shared/data), each solved
+reconstruction's cameras', and 1e-3; needs ../shared/data) and 1000-point homographies (L1L1
+and L2L2, gap 1e-3), each solved
 by this checkout and by a copy of ``--against`` (``git archive``), in separate processes
 alternating round by round, so that both see the same load. Prints per workload the median CPU
 of each, their ratio, nodes and certified counts, and the load average at each round.
 
-    .venv/bin/python -m bench.solver_revisions --against main [--rounds 3] [--only stratified|bilinear|resection]
+    .venv/bin/python -m bench.solver_revisions --against main [--rounds 3] [--only stratified|bilinear|resection|homography]
 """
 
 from __future__ import annotations
@@ -88,7 +89,23 @@ def resection_rows() -> list[dict]:
     return rows
 
 
-WORKLOADS = {"stratified": stratified_rows, "bilinear": bilinear_rows, "resection": resection_rows}
+def homography_rows() -> list[dict]:
+    """docs/benchmarks.md's L1L1 homography target: 1000 points, gap 1e-3 (bench.homography's planes)."""
+    from bench.homography import instances
+    from geocert.solvers.fractional.maps import MapOptions, fit_map
+
+    rows = []
+    for norm in ("L1L1", "L2L2"):
+        for number, (source, target) in enumerate(instances(1000, 3, 1.0)):
+            started = time.process_time()
+            result = fit_map(source, target, MapOptions(norm=norm, rel_gap=1e-3))
+            rows.append({"workload": f"{norm} homography, 1000 points, gap 1e-3", "cpu": time.process_time() - started,
+                         "nodes": result.nodes, "certified": result.certified, "status": result.status})
+    return rows
+
+
+WORKLOADS = {"stratified": stratified_rows, "bilinear": bilinear_rows, "resection": resection_rows,
+             "homography": homography_rows}
 
 
 def measure(tree: Path, only: str) -> list[dict]:
