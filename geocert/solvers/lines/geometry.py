@@ -15,6 +15,7 @@ degeneracy).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,12 +51,18 @@ def skew(v: np.ndarray) -> np.ndarray:
 
 
 def rodrigues(w: np.ndarray) -> np.ndarray:
-    """exp([w]x)."""
-    theta = float(np.linalg.norm(w))
+    """exp([w]x): cos I + sin [k]x + (1 - cos) k k^T for the unit axis k (in scalars: the hot loops
+    call it for every step)."""
+    x, y, z = float(w[0]), float(w[1]), float(w[2])
+    theta = math.sqrt(x * x + y * y + z * z)
     if theta < 1e-12:
-        return np.eye(3) + skew(w)
-    k = skew(w / theta)
-    return np.eye(3) + np.sin(theta) * k + (1 - np.cos(theta)) * (k @ k)
+        return np.array([[1.0, -z, y], [z, 1.0, -x], [-y, x, 1.0]])
+    x, y, z = x / theta, y / theta, z / theta
+    c, s = math.cos(theta), math.sin(theta)
+    v = 1.0 - c
+    return np.array([[c + x * x * v, x * y * v - z * s, x * z * v + y * s],
+                     [y * x * v + z * s, c + y * y * v, y * z * v - x * s],
+                     [z * x * v - y * s, z * y * v + x * s, c + z * z * v]])
 
 
 def log_rotation(R: np.ndarray) -> np.ndarray:
