@@ -118,19 +118,16 @@ class _Problem:
         X = np.stack([points, rotated + t])  # (2 frames, 2 points, N, 3)
         x = X[:, None] @ self.Mt[:, None, 0] + self.m[:, None, 0]  # (2 frames, 2 cameras, 2 points, N, 3)
         d, g = self._distances(cross(x[:, :, 0], x[:, :, 1]), gradient=True)  # g: (2, 2, N, 2 endpoints, 3)
-        # d(x_P x x_Q) / dx_P = -[x_Q]x, / dx_Q = [x_P]x: gradients in the projected points
-        g_P = cross(x[:, :, 1][:, :, :, None], g)  # (2, 2, N, 2, 3)
-        g_Q = cross(g, x[:, :, 0][:, :, :, None])
-        M = self.Mt[:, 0].transpose(0, 2, 1)  # (2 cameras, 3, 3): x = M X + m
-        G_P = (g_P @ M[None, :, None]).copy()  # in the 3D points of each frame (frame b: moved ones)
-        G_Q = g_Q @ M[None, :, None]
+        # d(x_P x x_Q) / dx_P = -[x_Q]x, / dx_Q = [x_P]x: gradients in the projected points,
+        # then (x = M X + m) in the 3D points of each frame (frame b: the moved ones)
+        g = np.stack([cross(x[:, :, 1, :, None], g), cross(g, x[:, :, 0, :, None])])  # (2 points, 2, 2, N, 2, 3)
+        G = g @ self.Mt[:, 0].transpose(0, 2, 1)[:, None]
         jm = np.zeros((2, 2, n, 2, 6))
         # frame b: X' = R X + t, dX'/dw = -[R X]x (left perturbation), dX'/dt = I
-        jm[1, ..., :3] = cross(rotated[0][None, :, None], G_P[1]) + cross(rotated[1][None, :, None], G_Q[1])
-        jm[1, ..., 3:] = G_P[1] + G_Q[1]
-        G_P[1], G_Q = G_P[1] @ R, np.stack([G_Q[0], G_Q[1] @ R])  # in frame a's points
-        jl = np.concatenate([np.einsum("fcnej,nkj->fcnek", G_P, basis), np.einsum("fcnej,nkj->fcnek", G_Q, basis)],
-                            axis=-1)
+        jm[1, ..., :3] = cross(rotated[:, None, :, None], G[:, 1]).sum(axis=0)
+        jm[1, ..., 3:] = G[0, 1] + G[1, 1]
+        G[:, 1] = G[:, 1] @ R  # in frame a's points
+        jl = (G @ basis.transpose(0, 2, 1)).transpose(1, 2, 3, 4, 0, 5).reshape(2, 2, n, 2, 4)
         order = (2, 0, 1, 3)  # (frame, camera, N, endpoint) -> (N, frame, camera, endpoint)
         return (d.transpose(order).reshape(n, 8), jm.transpose(*order, 4).reshape(n, 8, 6),
                 jl.transpose(*order, 4).reshape(n, 8, 4))
@@ -165,13 +162,11 @@ def refine(lines: LineSet, motion: Motion, options: RefineOptions | None = None)
     eye4 = np.eye(4)
     for _ in range(options.max_iterations):
         _, Jm, Jl = problem.jacobian(R, t, P, Q, basis)  # (N, 8, 6), (N, 8, 4)
-        Jm, Jl = Jm * sw[:, :, None], Jl * sw[:, :, None]
-        rw = r * sw
-        U = Jl.transpose(0, 2, 1) @ Jl  # (N, 4, 4)
-        W = Jm.transpose(0, 2, 1) @ Jl  # (N, 6, 4)
-        V = Jm.reshape(-1, 6).T @ Jm.reshape(-1, 6)  # (6, 6)
-        gm = Jm.reshape(-1, 6).T @ rw.reshape(-1)
-        gl = (Jl.transpose(0, 2, 1) @ rw[:, :, None])[:, :, 0]
+        J = np.concatenate([Jm, Jl], axis=2) * sw[:, :, None]  # (N, 8, 10): motion, then the line's own
+        H = J.transpose(0, 2, 1) @ J  # (N, 10, 10): each line's share of the normal equations
+        g = (J.transpose(0, 2, 1) @ (r * sw)[:, :, None])[:, :, 0]  # (N, 10)
+        U, W, V = H[:, 6:, 6:], H[:, :6, 6:], H[:, :6, :6].sum(axis=0)  # (N, 4, 4), (N, 6, 4), (6, 6)
+        gm, gl = g[:, :6].sum(axis=0), g[:, 6:]
         diagonal = np.einsum("nii->ni", U)[:, :, None] * eye4 + 1e-12 * eye4
         improved = converged = False
         for _ in range(8):
