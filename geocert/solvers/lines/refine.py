@@ -91,7 +91,8 @@ class _Problem:
         (..., 2, 2, N, 3); with ``gradient``, also their gradients in the lines (..., 2, 2, N, 2, 3)."""
         norm = np.hypot(line[..., 0], line[..., 1])
         norm[norm == 0] = 1e-300
-        scale = np.where((line[..., :2] * self.orientation).sum(axis=-1) < 0, -1.0, 1.0) / norm
+        o = self.orientation
+        scale = np.where(line[..., 0] * o[..., 0] + line[..., 1] * o[..., 1] < 0, -1.0, 1.0) / norm
         unit = line * scale[..., None]
         s = self.segments
         d0 = unit[..., 0] * s[..., 0] + unit[..., 1] * s[..., 1] + unit[..., 2]
