@@ -76,15 +76,27 @@ class _Problem:
         self.segments = lines.segments.transpose(1, 0, 2).reshape(2, 2, n, 4)
         observed = segment_lines(lines.segments.reshape(-1, 4)).reshape(n, 4, 3)
         self.orientation = observed[:, :, :2].transpose(1, 0, 2).reshape(2, 2, n, 2)
+        self._kept = None
+
+    def _projected(self, R: np.ndarray, t: np.ndarray, P: np.ndarray, Q: np.ndarray):
+        """The lines' points (2 points, N, 3) rotated by R, their projections (2 frames, 2 cameras,
+        2 points, N, 3) and the projected lines (2, 2, N, 3); the last state's kept, since the
+        Jacobian is asked for at the state whose residuals were just accepted."""
+        kept = self._kept
+        if kept is not None and kept[0] is R and kept[1] is t and kept[2] is P and kept[3] is Q:
+            return kept[4]
+        points = np.stack([P, Q])  # (2 points, N, 3)
+        rotated = points @ R.T
+        X = np.stack([points, rotated + t])  # (2 frames, 2 points, N, 3)
+        x = X[:, None] @ self.Mt[:, None, 0] + self.m[:, None, 0]
+        out = rotated, x, cross(x[:, :, 0], x[:, :, 1])
+        self._kept = (R, t, P, Q, out)
+        return out
 
     def residuals(self, R: np.ndarray, t: np.ndarray, P: np.ndarray, Q: np.ndarray) -> np.ndarray:
-        """(B, N, 8) endpoint distances (left a, right a, left b, right b; 2 endpoints each) for
-        states R (B, 3, 3), t (B, 3), P and Q (B, N, 3)."""
-        points = np.stack([P, Q], axis=1)  # (B, 2 points, N, 3)
-        moved = points @ R[:, None].transpose(0, 1, 3, 2) + t[:, None, None, :]
-        X = np.stack([points, moved], axis=1)  # (B, 2 frames, 2 points, N, 3)
-        x = X[:, :, None] @ self.Mt + self.m  # (B, 2 frames, 2 cameras, 2 points, N, 3)
-        return self._distances(cross(x[:, :, :, 0], x[:, :, :, 1])).transpose(0, 3, 1, 2, 4).reshape(len(R), -1, 8)
+        """(N, 8) endpoint distances (left a, right a, left b, right b; 2 endpoints each) for the
+        motion (R, t) and the lines through P and Q (N, 3 each)."""
+        return self._distances(self._projected(R, t, P, Q)[2]).transpose(2, 0, 1, 3).reshape(len(P), 8)
 
     def _distances(self, line: np.ndarray, gradient: bool = False):
         """The endpoint distances (..., 2 frames, 2 cameras, N, 2) to the image lines
@@ -114,11 +126,8 @@ class _Problem:
         vector applied on the left, then t) and in each line's own parameters (N, 8, 4: P and Q
         moved along ``basis`` (N, 2, 3))."""
         n = len(P)
-        points = np.stack([P, Q])  # (2 points, N, 3)
-        rotated = points @ R.T
-        X = np.stack([points, rotated + t])  # (2 frames, 2 points, N, 3)
-        x = X[:, None] @ self.Mt[:, None, 0] + self.m[:, None, 0]  # (2 frames, 2 cameras, 2 points, N, 3)
-        d, g = self._distances(cross(x[:, :, 0], x[:, :, 1]), gradient=True)  # g: (2, 2, N, 2 endpoints, 3)
+        rotated, x, line = self._projected(R, t, P, Q)
+        d, g = self._distances(line, gradient=True)  # g: (2, 2, N, 2 endpoints, 3)
         # d(x_P x x_Q) / dx_P = -[x_Q]x, / dx_Q = [x_P]x: gradients in the projected points,
         # then (x = M X + m) in the 3D points of each frame (frame b: the moved ones)
         g = np.stack([cross(x[:, :, 1, :, None], g), cross(g, x[:, :, 0, :, None])])  # (2 points, 2, 2, N, 2, 3)
@@ -141,14 +150,13 @@ def refine(lines: LineSet, motion: Motion, options: RefineOptions | None = None)
     problem = _Problem(lines)
     R, t = motion.R.copy(), motion.t.copy()
     P, Q = _points_on_lines(lines, triangulated_lines(lines, R, t))
-    basis = _normal_basis(P, Q)  # fixed: small moves stay normal to the line to first order
+    basis = _normal_basis(P, Q)  # remade after each step: small moves stay normal to the line to first order
 
     def states(dm: np.ndarray, dl: np.ndarray):
-        """The motion and lines after a step dm (6: rotation vector, t) and dl (N, 4), as
-        batches of one."""
+        """The motion and lines after a step dm (6: rotation vector, t) and dl (N, 4)."""
         P1 = P + dl[:, 0, None] * basis[:, 0] + dl[:, 1, None] * basis[:, 1]
         Q1 = Q + dl[:, 2, None] * basis[:, 0] + dl[:, 3, None] * basis[:, 1]
-        return (rodrigues(dm[:3]) @ R)[None], (t + dm[3:])[None], P1[None], Q1[None]
+        return rodrigues(dm[:3]) @ R, t + dm[3:], P1, Q1
 
     def weighted(r: np.ndarray) -> tuple[np.ndarray, float]:
         a = np.abs(r)
@@ -157,7 +165,7 @@ def refine(lines: LineSet, motion: Motion, options: RefineOptions | None = None)
                         options.loss_scale_px * (a - 0.5 * options.loss_scale_px)).sum()
         return np.sqrt(w), float(cost)
 
-    r = problem.residuals(R[None], t[None], P[None], Q[None])[0]
+    r = problem.residuals(R, t, P, Q)
     sw, cost = weighted(r)
     damping = 1e-3
     eye4 = np.eye(4)
@@ -177,11 +185,11 @@ def refine(lines: LineSet, motion: Motion, options: RefineOptions | None = None)
             dm = -np.linalg.solve(S, gm - np.tensordot(WUi, gl, axes=([0, 2], [0, 1])))
             dl = -(Ui @ (gl + (dm @ W))[:, :, None])[:, :, 0]
             R1, t1, P1, Q1 = states(dm, dl)
-            r1 = problem.residuals(R1, t1, P1, Q1)[0]
+            r1 = problem.residuals(R1, t1, P1, Q1)
             sw1, cost1 = weighted(r1)
             if np.isfinite(cost1) and cost1 < cost:
                 converged = cost - cost1 < options.tolerance * cost
-                R, t, P, Q, r, sw, cost = R1[0], t1[0], P1[0], Q1[0], r1, sw1, cost1
+                R, t, P, Q, r, sw, cost = R1, t1, P1, Q1, r1, sw1, cost1
                 basis = _normal_basis(P, Q)
                 damping = max(damping / 10, 1e-9)
                 improved = True
