@@ -13,7 +13,8 @@ from geocert.batch import parse_job, solve_job
 from geocert.kinds.stereo_lines import KIND
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.lines import align, incremental, linear, polynomial, scenes
-from geocert.solvers.lines.geometry import line_set, log_rotation, rotation_error_deg
+from geocert.solvers.lines import refine as refinement
+from geocert.solvers.lines.geometry import line_set, log_rotation, rodrigues, rotation_error_deg, triangulated_lines
 from geocert.solvers.lines import matching
 from geocert.solvers.lines.matching import MatchingOptions, four_view_matches
 from geocert.solvers.lines.pipeline import StereoLinesOptions, estimate_motion, estimate_pair
@@ -140,6 +141,33 @@ class TestRansac:
         assert refined.refined and not plain.refined
         assert rotation_error_deg(refined.R, scene.R) < 2.0
         assert len(refined.inliers) >= 0.8 * len(plain.inliers)
+
+    def test_the_refinements_jacobian_is_the_residuals_derivative(self):
+        """The exact Jacobian (motion: a rotation vector on the left, then t; each line: its two
+        points moved along the basis normal to it) against central differences of the residuals,
+        away from the optimum (a wrong Jacobian would still converge, slower or elsewhere)."""
+        scene = scenes.pair_scene(np.random.default_rng(31), 20, noise_px=0.5)
+        lines = line_set(scene.rig, scene.segments)
+        R, t = rodrigues(np.array([0.01, -0.02, 0.015])) @ scene.R, scene.t + 0.01
+        problem = refinement._Problem(lines)
+        P, Q = refinement._points_on_lines(lines, triangulated_lines(lines, R, t))
+        basis = refinement._normal_basis(P, Q)
+        r, Jm, Jl = problem.jacobian(R, t, P, Q, basis)
+        np.testing.assert_allclose(r, problem.residuals(R.copy(), t.copy(), P.copy(), Q.copy()), atol=1e-12)
+        h = 1e-6
+
+        def moved(k, sign):
+            step = np.zeros(10)
+            step[k] = sign * h
+            return problem.residuals(rodrigues(step[:3]) @ R, t + step[3:6],
+                                     P + step[6] * basis[:, 0] + step[7] * basis[:, 1],
+                                     Q + step[8] * basis[:, 0] + step[9] * basis[:, 1])
+
+        numeric = np.stack([(moved(k, 1) - moved(k, -1)) / (2 * h) for k in range(10)], axis=2)
+        exact = np.concatenate([Jm, Jl], axis=2)
+        for columns in (slice(0, 3), slice(3, 6), slice(6, 10)):
+            scale = np.abs(numeric[:, :, columns]).max()
+            np.testing.assert_allclose(exact[:, :, columns], numeric[:, :, columns], atol=1e-6 * scale)
 
 
 class TestMatching:

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from geocert.solvers.core.determinacy import information_intervals
-from geocert.solvers.lines.geometry import LineSet, rodrigues, segment_lines, triangulated_lines
+from geocert.solvers.lines.geometry import LineSet, segment_lines, triangulated_lines
 from geocert.solvers.lines.refine import _normal_basis, _points_on_lines, _Problem
 
 VANISHING = 0.1
@@ -27,25 +27,7 @@ def motion(lines: LineSet, R: np.ndarray, t: np.ndarray) -> dict | None:
     problem = _Problem(lines)
     P, Q = _points_on_lines(lines, triangulated_lines(lines, R, t))
     basis = _normal_basis(P, Q)
-    scale = max(1e-6, float(np.median(np.linalg.norm(P, axis=1))))
-
-    # The Jacobian as the refinement builds it: each motion parameter, then each line parameter of
-    # every line at once (lines do not interact): 10 batched evaluations, central differences.
-    h_m = np.array([1e-7] * 3 + [1e-7 * scale] * 3)
-    h_l = 1e-7 * scale
-    dm = np.zeros((20, 6))
-    dl = np.zeros((20, n, 4))
-    for k in range(6):
-        dm[2 * k, k], dm[2 * k + 1, k] = h_m[k], -h_m[k]
-    for k in range(4):
-        dl[12 + 2 * k, :, k], dl[13 + 2 * k, :, k] = h_l, -h_l
-    Rs = np.array([rodrigues(d[:3]) @ R for d in dm])
-    P1 = P + dl[..., 0, None] * basis[:, 0] + dl[..., 1, None] * basis[:, 1]
-    Q1 = Q + dl[..., 2, None] * basis[:, 0] + dl[..., 3, None] * basis[:, 1]
-    r = problem.residuals(Rs, t + dm[:, 3:], P1, Q1)  # (20, N, 8)
-    r0 = problem.residuals(R[None], t[None], P[None], Q[None])[0]
-    Jm = ((r[0:12:2] - r[1:12:2]) / (2 * h_m[:, None, None])).transpose(1, 2, 0)  # (N, 8, 6)
-    Jl = ((r[12::2] - r[13::2]) / (2 * h_l)).transpose(1, 2, 0)  # (N, 8, 4)
+    r0, Jm, Jl = problem.jacobian(R, t, P, Q, basis)  # as the refinement builds it: (N, 8), (N, 8, 6), (N, 8, 4)
     U = Jl.transpose(0, 2, 1) @ Jl + 1e-12 * np.eye(4)
     W = Jm.transpose(0, 2, 1) @ Jl
     V = Jm.reshape(-1, 6).T @ Jm.reshape(-1, 6)

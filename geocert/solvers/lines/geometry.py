@@ -15,6 +15,7 @@ degeneracy).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,10 +40,15 @@ class Rig:
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """np.cross of (..., 3) arrays without its per-call overhead (the hot loops call it often)."""
+    """np.cross of (..., 3) arrays without its per-call overhead (the hot loops call it often),
+    written into one array (stacking the components copied them again)."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
+    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
+    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
+    return out
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -50,12 +56,18 @@ def skew(v: np.ndarray) -> np.ndarray:
 
 
 def rodrigues(w: np.ndarray) -> np.ndarray:
-    """exp([w]x)."""
-    theta = float(np.linalg.norm(w))
+    """exp([w]x): cos I + sin [k]x + (1 - cos) k k^T for the unit axis k (in scalars: the hot loops
+    call it for every step)."""
+    x, y, z = float(w[0]), float(w[1]), float(w[2])
+    theta = math.sqrt(x * x + y * y + z * z)
     if theta < 1e-12:
-        return np.eye(3) + skew(w)
-    k = skew(w / theta)
-    return np.eye(3) + np.sin(theta) * k + (1 - np.cos(theta)) * (k @ k)
+        return np.array([[1.0, -z, y], [z, 1.0, -x], [-y, x, 1.0]])
+    x, y, z = x / theta, y / theta, z / theta
+    c, s = math.cos(theta), math.sin(theta)
+    v = 1.0 - c
+    return np.array([[c + x * x * v, x * y * v - z * s, x * z * v + y * s],
+                     [y * x * v + z * s, c + y * y * v, y * z * v - x * s],
+                     [z * x * v - y * s, z * y * v + x * s, c + z * z * v]])
 
 
 def log_rotation(R: np.ndarray) -> np.ndarray:
@@ -188,41 +200,31 @@ def transform_points(R: np.ndarray, t: np.ndarray, X: np.ndarray) -> np.ndarray:
     return out
 
 
-def _projected_lines(rig: Rig, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Image lines (N, 3) in the left and right cameras of the 3D lines spanned by X (N, 2, 4)."""
-    P_left, P_right = rig.cameras()
-    lines = []
-    for P in (P_left, P_right):
-        x = X @ P.T  # (N, 2, 3)
-        line = cross(x[:, 0], x[:, 1])
-        norm = np.linalg.norm(line[:, :2], axis=1, keepdims=True)
-        norm[norm == 0] = 1e-300
-        lines.append(line / norm)
-    return lines[0], lines[1]
-
-
-def _endpoint_distances(line: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """Signed distances (N, 2) of segments' endpoints (N, 4) to lines (N, 3), each line oriented
-    like the segment's own (p0 x p1), so that the sign does not flip with the line's (a
-    projected line's sign is arbitrary; a least-squares solver differentiates these)."""
-    own = segments[:, 1] - segments[:, 3], segments[:, 2] - segments[:, 0]  # (a, b) of p0 x p1
-    sign = np.where(line[:, 0] * own[0] + line[:, 1] * own[1] < 0, -1.0, 1.0)
-    line = line * sign[:, None]
-    return np.stack([line[:, 0] * segments[:, 0] + line[:, 1] * segments[:, 1] + line[:, 2],
-                     line[:, 0] * segments[:, 2] + line[:, 1] * segments[:, 3] + line[:, 2]], axis=1)
+def _view_distances(rig: Rig, X: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """(N, 8) the signed distances of the segments' endpoints (2 frames, 2 cameras, N, 4) to the
+    projections of the 3D lines X (2 frames, N, 2, 4: two homogeneous points, each frame's left
+    camera coordinates) into each frame's left and right cameras; views in the order (frame,
+    camera), two endpoints each. Every view at once: these are the hot loops' residuals."""
+    cameras = np.stack(rig.cameras()).transpose(0, 2, 1)  # (2 cameras, 4, 3)
+    x = X[:, None] @ cameras[None, :, None]  # (2 frames, 2 cameras, N, 2 points, 3)
+    line = cross(x[..., 0, :], x[..., 1, :])
+    a, b, c = line[..., 0], line[..., 1], line[..., 2]
+    norm = np.hypot(a, b)
+    norm[norm == 0] = 1e-300
+    s0, s1, s2, s3 = segments[..., 0], segments[..., 1], segments[..., 2], segments[..., 3]
+    # oriented like the segment's own line (p0 x p1): a projected line's sign is arbitrary
+    scale = np.where(a * (s1 - s3) + b * (s2 - s0) < 0, -1.0, 1.0) / norm
+    out = np.stack([(a * s0 + b * s1 + c) * scale, (a * s2 + b * s3 + c) * scale], axis=-1)
+    return out.transpose(2, 0, 1, 3).reshape(-1, 8)
 
 
 def transfer_residuals(lines: LineSet, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """(N, 8) pixel residuals of a motion: frame a's 3D lines moved into frame b and projected
     (distances of frame b's segment endpoints, left and right), and frame b's 3D lines moved back
     into frame a (frame a's endpoints)."""
-    rig = lines.rig
-    forward_left, forward_right = _projected_lines(rig, transform_points(R, t, lines.points_a))
-    back = transform_points(R.T, -R.T @ t, lines.points_b)
-    back_left, back_right = _projected_lines(rig, back)
+    X = np.stack([transform_points(R, t, lines.points_a), transform_points(R.T, -R.T @ t, lines.points_b)])
     s = lines.segments
-    return np.concatenate([_endpoint_distances(forward_left, s[:, 2]), _endpoint_distances(forward_right, s[:, 3]),
-                           _endpoint_distances(back_left, s[:, 0]), _endpoint_distances(back_right, s[:, 1])], axis=1)
+    return _view_distances(lines.rig, X, np.stack([s[:, 2:], s[:, :2]]).transpose(0, 2, 1, 3))
 
 
 def line_errors(lines: LineSet, R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -271,9 +273,5 @@ def reprojection_residuals(lines: LineSet, R: np.ndarray, t: np.ndarray) -> np.n
     """(N, 8) pixel distances of the segments' endpoints in the four views to the projections of
     the line triangulated from all four views under the motion."""
     X = triangulated_lines(lines, R, t)
-    rig = lines.rig
-    s = lines.segments
-    left_a, right_a = _projected_lines(rig, X)
-    left_b, right_b = _projected_lines(rig, transform_points(R, t, X))
-    return np.concatenate([_endpoint_distances(left_a, s[:, 0]), _endpoint_distances(right_a, s[:, 1]),
-                           _endpoint_distances(left_b, s[:, 2]), _endpoint_distances(right_b, s[:, 3])], axis=1)
+    return _view_distances(lines.rig, np.stack([X, transform_points(R, t, X)]),
+                           lines.segments.reshape(-1, 2, 2, 4).transpose(1, 2, 0, 3))

@@ -35,16 +35,17 @@ def solve(lines: LineSet, options: IncrementalOptions | None = None, start: np.n
     d = lines.planes_b[:, :, 3]
     R = np.eye(3) if start is None else start
     t = np.zeros(3)
-    residual = np.inf
+    w = X[:, :, 3]
+    # n . (Y + s x Y + t w) + d w = 0  ->  s . (Y x n) + w n . t = -(n . Y + d w); the t columns
+    # and d w do not change with R
+    rows_t = n[:, :, None, :] * w[:, None, :, None]
+    dw = d[:, :, None] * w[:, None, :]
     for _ in range(max(1, options.iterations)):
         Y = X[:, :, :3] @ R.T  # (N, 2, 3): frame a's points rotated by the current R
-        w = X[:, :, 3]
-        # n . (Y + s x Y + t w) + d w = 0  ->  s . (Y x n) + w n . t = -(n . Y + d w)
         rows_s = cross(Y[:, None, :, :], n[:, :, None, :])  # (N, plane, point, 3)
-        rows_t = n[:, :, None, :] * w[:, None, :, None]
         M = np.concatenate([rows_s, rows_t], axis=3).reshape(-1, 6)
-        rhs = -(np.einsum("nkc,njc->nkj", n, Y) + d[:, :, None] * w[:, None, :]).reshape(-1)
-        scale = np.linalg.norm(M, axis=1)
+        rhs = -(n @ Y.transpose(0, 2, 1) + dw).reshape(-1)
+        scale = np.sqrt((M * M).sum(axis=1))
         scale[scale == 0] = 1.0
         M, rhs = M / scale[:, None], rhs / scale
         U, sv, Vt = np.linalg.svd(M, full_matrices=False)
@@ -53,7 +54,7 @@ def solve(lines: LineSet, options: IncrementalOptions | None = None, start: np.n
         step = Vt.T @ ((U.T @ rhs) / sv)
         R = rodrigues(step[:3]) @ R
         t = step[3:]
-        residual = float(np.linalg.norm(M @ step - rhs))
         if np.linalg.norm(step[:3]) < 1e-13:
             break
+    residual = float(np.linalg.norm(M @ step - rhs))
     return [Motion(R, t, residual)]

@@ -118,8 +118,8 @@ def _stereo_costs(rig: Rig, F: np.ndarray, left: np.ndarray, right: np.ndarray, 
     def parameter(e: np.ndarray) -> np.ndarray:
         p = cross(m[None, :, :], e[:, None, :])  # (N, M, 3)
         with np.errstate(divide="ignore", invalid="ignore"):
-            xy = p[..., :2] / p[..., 2:]
-            return ((xy - c0[None]) * span[None]).sum(axis=2) / length2[None]
+            x, y = p[..., 0] / p[..., 2], p[..., 1] / p[..., 2]
+            return ((x - c0[:, 0]) * span[:, 0] + (y - c0[:, 1]) * span[:, 1]) / length2
 
     s0, s1 = parameter(e0), parameter(e1)
     lo, hi = np.minimum(s0, s1), np.maximum(s0, s1)
@@ -148,16 +148,16 @@ def _positive_depths(rig: Rig, x_left: np.ndarray, x_right: np.ndarray) -> np.nd
     both cameras (midpoint method on the normalised rays)."""
     ray_l = x_left @ np.linalg.inv(rig.K_left).T  # (N, 3), left frame
     with np.errstate(divide="ignore", invalid="ignore"):
-        ray_r = (x_right @ np.linalg.inv(rig.K_right).T) @ rig.R  # right rays in the left frame (R^T r)
+        ray_r = x_right @ (np.linalg.inv(rig.K_right).T @ rig.R)  # right rays in the left frame (R^T r)
         ray_r = ray_r * np.sign(x_right[..., 2:])  # homogeneous sign: a ray, not its opposite
     centre_r = -rig.R.T @ rig.t
-    # Solve a ray_l - b ray_r = centre_r in least squares for every pair.
-    u = np.broadcast_to(ray_l[:, None, :], ray_r.shape)
-    uu = (u * u).sum(-1)
-    vv = (ray_r * ray_r).sum(-1)
-    uv = (u * ray_r).sum(-1)
-    uc = (u * centre_r).sum(-1)
-    vc = (ray_r * centre_r).sum(-1)
+    # Solve a ray_l - b ray_r = centre_r in least squares for every pair (the (N, M) products as
+    # matrix products: numpy's sums over a last axis of 3 are slow).
+    uu = (ray_l * ray_l).sum(axis=1)[:, None]
+    uc = (ray_l @ centre_r)[:, None]
+    vv = (ray_r[..., None, :] @ ray_r[..., :, None])[..., 0, 0]
+    uv = (ray_r @ ray_l[:, :, None])[..., 0]
+    vc = ray_r @ centre_r
     det = uu * vv - uv * uv
     with np.errstate(divide="ignore", invalid="ignore"):
         a = (vv * uc - uv * vc) / det
@@ -176,7 +176,7 @@ def track(a: np.ndarray, b: np.ndarray, options: MatchingOptions,
     mid_a = (a[:, :2] + a[:, 2:]) / 2
     mid_b = (b[:, :2] + b[:, 2:]) / 2
     perpendicular = np.abs(line_a[:, :2] @ mid_b.T + line_a[:, 2:3])  # (N, M)
-    travel = np.linalg.norm(mid_a[:, None, :] - mid_b[None, :, :], axis=2)
+    travel = np.hypot(mid_a[:, None, 0] - mid_b[None, :, 0], mid_a[:, None, 1] - mid_b[None, :, 1])
     angle = _angles(a, b)
     cost = perpendicular / options.max_track_px + travel / (4 * options.max_track_px) \
         + angle / options.max_track_angle_deg

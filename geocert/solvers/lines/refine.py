@@ -3,9 +3,9 @@ lines. Unknowns: the motion (a rotation vector about the estimate, and t) and ea
 points, each moving in the plane normal to the line: 4 parameters, the line's own degrees of
 freedom); residuals: the distances of the segments' endpoints in the four views to the projected
 lines (pixels), Huber-weighted at the RANSAC threshold. Levenberg-Marquardt on the normal
-equations with the lines eliminated (Schur complement, 4x4 blocks); the Jacobian by forward
-differences, every line's block at once (lines do not interact), so an iteration costs 11 residual
-evaluations (one batched call) whatever the number of lines. The lines start from their triangulation from all four
+equations with the lines eliminated (Schur complement, 4x4 blocks); the Jacobian exact (the chain
+rule through the projected lines, every line's block at once: lines do not interact), at about
+the cost of two residual evaluations where forward differences took eleven. The lines start from their triangulation from all four
 views under the RANSAC motion (geometry.triangulated_lines)."""
 
 from __future__ import annotations
@@ -64,8 +64,8 @@ def _normal_basis(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
 
 
 class _Problem:
-    """The residuals, evaluated for a batch of states at once (the Jacobian's 10 perturbations in
-    one call: the per-call overhead of numpy dominates at a hundred lines)."""
+    """The residuals and their Jacobian, every line at once (the per-call overhead of numpy
+    dominates at a hundred lines)."""
 
     def __init__(self, lines: LineSet):
         cameras = np.stack(lines.rig.cameras())  # (2, 3, 4): left, right
@@ -76,24 +76,71 @@ class _Problem:
         self.segments = lines.segments.transpose(1, 0, 2).reshape(2, 2, n, 4)
         observed = segment_lines(lines.segments.reshape(-1, 4)).reshape(n, 4, 3)
         self.orientation = observed[:, :, :2].transpose(1, 0, 2).reshape(2, 2, n, 2)
+        self._kept = None
+
+    def _projected(self, R: np.ndarray, t: np.ndarray, P: np.ndarray, Q: np.ndarray):
+        """The lines' points (2 points, N, 3) rotated by R, their projections (2 frames, 2 cameras,
+        2 points, N, 3) and the projected lines (2, 2, N, 3); the last state's kept, since the
+        Jacobian is asked for at the state whose residuals were just accepted."""
+        kept = self._kept
+        if kept is not None and kept[0] is R and kept[1] is t and kept[2] is P and kept[3] is Q:
+            return kept[4]
+        points = np.stack([P, Q])  # (2 points, N, 3)
+        rotated = points @ R.T
+        X = np.stack([points, rotated + t])  # (2 frames, 2 points, N, 3)
+        x = X[:, None] @ self.Mt[:, None, 0] + self.m[:, None, 0]
+        out = rotated, x, cross(x[:, :, 0], x[:, :, 1])
+        self._kept = (R, t, P, Q, out)
+        return out
 
     def residuals(self, R: np.ndarray, t: np.ndarray, P: np.ndarray, Q: np.ndarray) -> np.ndarray:
-        """(B, N, 8) endpoint distances (left a, right a, left b, right b; 2 endpoints each) for
-        states R (B, 3, 3), t (B, 3), P and Q (B, N, 3)."""
-        points = np.stack([P, Q], axis=1)  # (B, 2 points, N, 3)
-        moved = points @ R[:, None].transpose(0, 1, 3, 2) + t[:, None, None, :]
-        X = np.stack([points, moved], axis=1)  # (B, 2 frames, 2 points, N, 3)
-        x = X[:, :, None] @ self.Mt + self.m  # (B, 2 frames, 2 cameras, 2 points, N, 3)
-        line = cross(x[:, :, :, 0], x[:, :, :, 1])  # (B, 2, 2, N, 3)
+        """(N, 8) endpoint distances (left a, right a, left b, right b; 2 endpoints each) for the
+        motion (R, t) and the lines through P and Q (N, 3 each)."""
+        return self._distances(self._projected(R, t, P, Q)[2]).transpose(2, 0, 1, 3).reshape(len(P), 8)
+
+    def _distances(self, line: np.ndarray, gradient: bool = False):
+        """The endpoint distances (..., 2 frames, 2 cameras, N, 2) to the image lines
+        (..., 2, 2, N, 3); with ``gradient``, also their gradients in the lines (..., 2, 2, N, 2, 3)."""
         norm = np.hypot(line[..., 0], line[..., 1])
         norm[norm == 0] = 1e-300
-        sign = np.where((line[..., :2] * self.orientation).sum(axis=-1) < 0, -1.0, 1.0)
-        line = line * (sign / norm)[..., None]
+        o = self.orientation
+        scale = np.where(line[..., 0] * o[..., 0] + line[..., 1] * o[..., 1] < 0, -1.0, 1.0) / norm
+        unit = line * scale[..., None]
         s = self.segments
-        d0 = line[..., 0] * s[..., 0] + line[..., 1] * s[..., 1] + line[..., 2]
-        d1 = line[..., 0] * s[..., 2] + line[..., 1] * s[..., 3] + line[..., 2]
-        out = np.stack([d0, d1], axis=-1)  # (B, 2, 2, N, 2)
-        return out.transpose(0, 3, 1, 2, 4).reshape(len(R), -1, 8)
+        d0 = unit[..., 0] * s[..., 0] + unit[..., 1] * s[..., 1] + unit[..., 2]
+        d1 = unit[..., 0] * s[..., 2] + unit[..., 1] * s[..., 3] + unit[..., 2]
+        d = np.stack([d0, d1], axis=-1)
+        if not gradient:
+            return d
+        # d = sign (line . h) / |line[:2]| for the endpoint h = (x, y, 1): its gradient in the line
+        # is (sign / |line[:2]|) (h - d (unit[:2], 0)), unit the signed normalised line.
+        g = np.empty(d.shape + (3,))
+        g[..., 0, :2] = s[..., 0:2] - unit[..., :2] * d0[..., None]
+        g[..., 1, :2] = s[..., 2:4] - unit[..., :2] * d1[..., None]
+        g[..., 2] = 1.0
+        return d, g * scale[..., None, None]
+
+    def jacobian(self, R: np.ndarray, t: np.ndarray, P: np.ndarray, Q: np.ndarray,
+                 basis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The residuals (N, 8) and their exact derivatives: in the motion (N, 8, 6: a rotation
+        vector applied on the left, then t) and in each line's own parameters (N, 8, 4: P and Q
+        moved along ``basis`` (N, 2, 3))."""
+        n = len(P)
+        rotated, x, line = self._projected(R, t, P, Q)
+        d, g = self._distances(line, gradient=True)  # g: (2, 2, N, 2 endpoints, 3)
+        # d(x_P x x_Q) / dx_P = -[x_Q]x, / dx_Q = [x_P]x: gradients in the projected points,
+        # then (x = M X + m) in the 3D points of each frame (frame b: the moved ones)
+        g = np.stack([cross(x[:, :, 1, :, None], g), cross(g, x[:, :, 0, :, None])])  # (2 points, 2, 2, N, 2, 3)
+        G = g @ self.Mt[:, 0].transpose(0, 2, 1)[:, None]
+        jm = np.zeros((2, 2, n, 2, 6))
+        # frame b: X' = R X + t, dX'/dw = -[R X]x (left perturbation), dX'/dt = I
+        jm[1, ..., :3] = cross(rotated[:, None, :, None], G[:, 1]).sum(axis=0)
+        jm[1, ..., 3:] = G[0, 1] + G[1, 1]
+        G[:, 1] = G[:, 1] @ R  # in frame a's points
+        jl = (G @ basis.transpose(0, 2, 1)).transpose(1, 2, 3, 4, 0, 5).reshape(2, 2, n, 2, 4)
+        order = (2, 0, 1, 3)  # (frame, camera, N, endpoint) -> (N, frame, camera, endpoint)
+        return (d.transpose(order).reshape(n, 8), jm.transpose(*order, 4).reshape(n, 8, 6),
+                jl.transpose(*order, 4).reshape(n, 8, 4))
 
 
 def refine(lines: LineSet, motion: Motion, options: RefineOptions | None = None) -> Motion:
@@ -103,17 +150,13 @@ def refine(lines: LineSet, motion: Motion, options: RefineOptions | None = None)
     problem = _Problem(lines)
     R, t = motion.R.copy(), motion.t.copy()
     P, Q = _points_on_lines(lines, triangulated_lines(lines, R, t))
-    basis = _normal_basis(P, Q)  # fixed: small moves stay normal to the line to first order
-    scale = max(1e-6, float(np.median(np.linalg.norm(P, axis=1))))
+    basis = _normal_basis(P, Q)  # remade after each step: small moves stay normal to the line to first order
 
     def states(dm: np.ndarray, dl: np.ndarray):
-        """Motions and lines after steps dm (B, 6: rotation vector, t) and dl (B, N, 4)."""
-        R1 = np.repeat(R[None], len(dm), axis=0)
-        for k in np.flatnonzero(np.any(dm[:, :3] != 0, axis=1)):  # the Jacobian's line rows keep R
-            R1[k] = rodrigues(dm[k, :3]) @ R
-        P1 = P + dl[..., 0, None] * basis[:, 0] + dl[..., 1, None] * basis[:, 1]
-        Q1 = Q + dl[..., 2, None] * basis[:, 0] + dl[..., 3, None] * basis[:, 1]
-        return R1, t + dm[:, 3:], P1, Q1
+        """The motion and lines after a step dm (6: rotation vector, t) and dl (N, 4)."""
+        P1 = P + dl[:, 0, None] * basis[:, 0] + dl[:, 1, None] * basis[:, 1]
+        Q1 = Q + dl[:, 2, None] * basis[:, 0] + dl[:, 3, None] * basis[:, 1]
+        return rodrigues(dm[:3]) @ R, t + dm[3:], P1, Q1
 
     def weighted(r: np.ndarray) -> tuple[np.ndarray, float]:
         a = np.abs(r)
@@ -122,30 +165,17 @@ def refine(lines: LineSet, motion: Motion, options: RefineOptions | None = None)
                         options.loss_scale_px * (a - 0.5 * options.loss_scale_px)).sum()
         return np.sqrt(w), float(cost)
 
-    n = len(lines)
-    h_m = np.array([1e-7] * 3 + [1e-7 * scale] * 3)
-    h_l = 1e-7 * scale
-    # The Jacobian's perturbations: each motion parameter (all lines fixed), then each line
-    # parameter of every line at once.
-    dm_fd = np.zeros((10, 6))
-    dm_fd[np.arange(6), np.arange(6)] = h_m
-    dl_fd = np.zeros((10, n, 4))
-    for k in range(4):
-        dl_fd[6 + k, :, k] = h_l
-    r = problem.residuals(*states(np.zeros((1, 6)), np.zeros((1, n, 4))))[0]
+    r = problem.residuals(R, t, P, Q)
     sw, cost = weighted(r)
     damping = 1e-3
     eye4 = np.eye(4)
     for _ in range(options.max_iterations):
-        J = (problem.residuals(*states(dm_fd, dl_fd)) - r) * sw  # (10, N, 8)
-        Jm = J[:6].transpose(1, 2, 0) / h_m  # (N, 8, 6)
-        Jl = J[6:].transpose(1, 2, 0) / h_l  # (N, 8, 4)
-        rw = r * sw
-        U = Jl.transpose(0, 2, 1) @ Jl  # (N, 4, 4)
-        W = Jm.transpose(0, 2, 1) @ Jl  # (N, 6, 4)
-        V = Jm.reshape(-1, 6).T @ Jm.reshape(-1, 6)  # (6, 6)
-        gm = Jm.reshape(-1, 6).T @ rw.reshape(-1)
-        gl = (Jl.transpose(0, 2, 1) @ rw[:, :, None])[:, :, 0]
+        _, Jm, Jl = problem.jacobian(R, t, P, Q, basis)  # (N, 8, 6), (N, 8, 4)
+        J = np.concatenate([Jm, Jl], axis=2) * sw[:, :, None]  # (N, 8, 10): motion, then the line's own
+        H = J.transpose(0, 2, 1) @ J  # (N, 10, 10): each line's share of the normal equations
+        g = (J.transpose(0, 2, 1) @ (r * sw)[:, :, None])[:, :, 0]  # (N, 10)
+        U, W, V = H[:, 6:, 6:], H[:, :6, 6:], H[:, :6, :6].sum(axis=0)  # (N, 4, 4), (N, 6, 4), (6, 6)
+        gm, gl = g[:, :6].sum(axis=0), g[:, 6:]
         diagonal = np.einsum("nii->ni", U)[:, :, None] * eye4 + 1e-12 * eye4
         improved = converged = False
         for _ in range(8):
@@ -154,12 +184,12 @@ def refine(lines: LineSet, motion: Motion, options: RefineOptions | None = None)
             S = V + damping * np.diag(np.diag(V)) - np.tensordot(WUi, W, axes=([0, 2], [0, 2]))  # Schur
             dm = -np.linalg.solve(S, gm - np.tensordot(WUi, gl, axes=([0, 2], [0, 1])))
             dl = -(Ui @ (gl + (dm @ W))[:, :, None])[:, :, 0]
-            R1, t1, P1, Q1 = states(dm[None], dl[None])
-            r1 = problem.residuals(R1, t1, P1, Q1)[0]
+            R1, t1, P1, Q1 = states(dm, dl)
+            r1 = problem.residuals(R1, t1, P1, Q1)
             sw1, cost1 = weighted(r1)
             if np.isfinite(cost1) and cost1 < cost:
                 converged = cost - cost1 < options.tolerance * cost
-                R, t, P, Q, r, sw, cost = R1[0], t1[0], P1[0], Q1[0], r1, sw1, cost1
+                R, t, P, Q, r, sw, cost = R1, t1, P1, Q1, r1, sw1, cost1
                 basis = _normal_basis(P, Q)
                 damping = max(damping / 10, 1e-9)
                 improved = True
