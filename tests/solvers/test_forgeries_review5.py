@@ -84,3 +84,53 @@ class TestDerivedFieldsAbsoluteFloor:
     @pytest.mark.xfail(**XFAIL)
     def test_points_and_centres_not_the_upgrades_are_refused(self, small_world):
         assert not _valid(self.forged(small_world))
+
+
+def _one_track_uncertified() -> dict:
+    """The stored L2L2 triangulation with track 0 restated, truly, as not certified (its point
+    and cost kept, no bound): a genuine weaker result that verifies."""
+    from tests.solvers.test_forgeries_review3 import _uncertified
+
+    result = stored("triangulation_l2l2")
+    track = result["tracks"][0]
+    return _uncertified(result, "tracks", 0, point=track["point"], cost=track["cost"], lower_bound=None, gap=None)
+
+
+class TestMembersNoKindWrites:
+    """A certificate document's members, and every proof record's, are a closed set (verify.
+    CERTIFICATE_MEMBERS, strict.record: "a field no check reads is not a place to hide what a
+    reader might take for part of the proof"). A result's and its items' are not: any member the
+    kind never writes is carried unread. A triangulation result with track 0 not certified
+    verifies with a top-level `"status": "optimal"`, `"certified": true` and `"summary":
+    {"points": 6, "points_certified": 6}` (5 of 6 are), with track 0 stating `"verified": true`
+    and `"proven_lower_bound"` equal to its cost (nothing proves any bound of it); and with a
+    `maps` list holding a "certified, optimal" identity homography of cost 0 that no certificate
+    item proves. Each is the shape of a member other kinds write and the verifier ties there
+    (autocalibration's `status`, reconstruction's `summary` and cameras' `certified`), so a reader
+    of one kind's results has every reason to trust it in another's. Suggested fix: a result's
+    members, and its items', are the kind's (the kinds' result schemas, listed in the verifier's
+    registry), any other refused as strict.record refuses one in a proof; or the report lists
+    the members it did not read."""
+
+    def test_the_genuine_weaker_result_verifies(self):
+        assert _valid(_one_track_uncertified())
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_a_headline_no_kind_writes_is_refused(self):
+        forged = _one_track_uncertified()
+        forged.update(status="optimal", certified=True, summary={"points": 6, "points_certified": 6})
+        assert not _valid(forged)
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_an_items_proven_bound_no_kind_writes_is_refused(self):
+        forged = _one_track_uncertified()
+        track = forged["tracks"][0]
+        track.update(verified=True, proven_lower_bound=track["cost"])
+        assert not _valid(forged)
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_items_of_another_kind_beside_the_proven_ones_are_refused(self):
+        forged = stored("triangulation_l2l2")
+        forged["maps"] = [{"matrix": [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], "certified": True,
+                           "status": "optimal", "cost": 0.0, "lower_bound": 0.0, "gap": 0.0}]
+        assert not _valid(forged)
