@@ -190,3 +190,40 @@ class TestGapsUncapped:
     @pytest.mark.parametrize("abs_gap, rel_gap", [(1e300, 1e-3), (1e-7, 1.0)])
     def test_optimal_at_any_cost_is_refused(self, abs_gap, rel_gap):
         assert not _valid(self.forged(abs_gap, rel_gap))
+
+
+class TestRepeatedNames:
+    """`geocert verify` (cli.cmd_verify) and POST /v1/certificates/verify parse with json.loads,
+    which keeps the last of a repeated member name silently. RFC 8259 (4) leaves a repeated name's
+    meaning to each parser ("many implementations report the last name/value pair only", others
+    the first or an error), so one text can hold two results: the stored L2L2 triangulation's
+    text with a first `tracks` member prepended, each track "certified optimal" at a tenth of its
+    true cost and with a lower bound 0, verifies (exit 0): the verifier read the second `tracks`,
+    a reader keeping the first reads claims nothing proves. A trust boundary should not depend
+    on which of two parsers a reader uses. Suggested fix: parse documents (CLI, API body of the
+    verify route) with an object_pairs_hook refusing a repeated name (exit 2; 422 naming it),
+    as streamed.split_items already treats a repeated key as unexpected."""
+
+    @staticmethod
+    def text() -> str:
+        import json
+
+        result = stored("triangulation_l2l2")
+        first = copy.deepcopy(result["tracks"])
+        for track in first:
+            track.update(cost=track["cost"] / 10, lower_bound=0.0, gap=track["cost"] / 10)
+        return '{"tracks": ' + json.dumps(first) + ", " + json.dumps(result)[1:]
+
+    def test_the_verifier_reads_the_last(self, tmp_path):
+        import json
+
+        document = json.loads(self.text())
+        assert document["tracks"] == stored("triangulation_l2l2")["tracks"]
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_a_repeated_name_is_refused(self, tmp_path, capsys):
+        from geocert.app.cli import main
+
+        path = tmp_path / "repeated.json"
+        path.write_text(self.text())
+        assert main(["verify", str(path)]) != 0
