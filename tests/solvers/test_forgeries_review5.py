@@ -406,7 +406,8 @@ def looser_cameras() -> dict:
     loose = 0.5
     forged["certificate"]["options"]["camera_rel_gap"] = loose
     cameras = forged["camera_certificate"]
-    other = solve_job({"kind": "resection", "data": cameras["data"], "options": {**cameras["options"], "rel_gap": loose}})
+    other = solve_job({"kind": "resection", "data": cameras["data"],
+                       "options": {**cameras["options"], "rel_gap": loose}})
     forged["camera_certificate"] = other["certificate"]
     searched = [camera for camera in forged["cameras"] if camera.get("searched")]
     for camera, claim in zip(searched, other["certificate"]["items"]):
@@ -442,7 +443,8 @@ class TestCameraToleranceUnhashed:
     the report that these options are unhashed)."""
 
     def test_the_hash_is_the_requests(self, looser_cameras):
-        assert looser_cameras["certificate"]["problem_sha256"] == stored("reconstruction")["certificate"]["problem_sha256"]
+        genuine = stored("reconstruction")["certificate"]
+        assert looser_cameras["certificate"]["problem_sha256"] == genuine["problem_sha256"]
         tolerances = [c["tolerance"] for c in looser_cameras["cameras"] if c.get("certified")]
         assert tolerances and all(t == pytest.approx(1.0) for t in tolerances)
 
@@ -503,10 +505,11 @@ class TestMotionJudgedInSquareMemory:
     cameras list is not). The stored reconstruction with registered cameras added that claim
     nothing verifies, and its peak memory grows with the square of the cameras: 8 MB at 200
     cameras, 27 MB at 400, 100 MB at 800 (tracemalloc; the test's 300 and 900: 14 and 124 MB for
-    a document twice the size), so some 6,000 cameras (a 4 MB document) ask for about 5 GB. Suggested fix: pick the reference view in linear memory (the chordal sum
-    of each rotation to the others is n x 9 work through the mean rotation matrix: sum_j |R_i -
-    R_j|^2 = 2n * 3 - 2 tr(R_i' sum_j R_j), or a loop of n x 9 rows), charge the motion judgement
-    to the budget, and bound a reconstruction's cameras (as the autocalibration kind's 1,000)."""
+    a document twice the size), so some 6,000 cameras (a 4 MB document) ask for about 5 GB.
+    Suggested fix: pick the reference view in linear memory (a loop over the views, each an n x 9
+    difference; or squared chordal sums, 6n - 2 tr(R_i' sum_j R_j), a slightly different rule),
+    charge the motion judgement to the budget, and bound a reconstruction's cameras (as the
+    autocalibration kind bounds its cameras at 1,000)."""
 
     @pytest.mark.xfail(**XFAIL)
     def test_memory_is_linear_in_the_cameras(self):
