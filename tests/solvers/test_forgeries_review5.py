@@ -105,7 +105,8 @@ class TestMembersNoKindWrites:
     {"points": 6, "points_certified": 6}` (5 of 6 are), with track 0 stating `"verified": true`
     and `"proven_lower_bound"` equal to its cost (nothing proves any bound of it); and with a
     `maps` list holding a "certified, optimal" identity homography of cost 0 that no certificate
-    item proves. Each is the shape of a member other kinds write and the verifier ties there
+    item proves; and a job document whose status is "succeeded" with an `error` saying the
+    solve failed. Each is the shape of a member other kinds write and the verifier ties there
     (autocalibration's `status`, reconstruction's `summary` and cameras' `certified`), so a reader
     of one kind's results has every reason to trust it in another's. Suggested fix: a result's
     members, and its items', are the kind's (the kinds' result schemas, listed in the verifier's
@@ -127,6 +128,16 @@ class TestMembersNoKindWrites:
         track = forged["tracks"][0]
         track.update(verified=True, proven_lower_bound=track["cost"])
         assert not _valid(forged)
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_a_succeeded_job_stating_an_error_is_refused(self):
+        """check_job reads a job document's kind, status and progress; its `error` (the
+        service's, null for a job that succeeded) is not read: a succeeded job saying the solver
+        failed and the certificate is not valid verifies."""
+        job = {"id": "job", "kind": "triangulation", "status": "succeeded", "result": stored("triangulation_l2l2"),
+               "error": {"type": "about:blank", "title": "Solver failed", "status": 500,
+                         "detail": "the certificate did not verify"}}
+        assert not _valid(job)
 
     @pytest.mark.xfail(**XFAIL)
     def test_items_of_another_kind_beside_the_proven_ones_are_refused(self):
