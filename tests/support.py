@@ -175,3 +175,30 @@ def every_track_searched():
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(batched, "certify_tracks", lambda cameras, tracks, options: TrackResults(len(tracks)))
         yield
+
+
+@contextlib.contextmanager
+def loose_gaps():
+    """The solvers take any gap while a forger builds a document with gaps beyond the caps
+    (fractional.options.MAX_REL_GAP, MAX_ABS_GAP), which the kinds refuse as input and the
+    verifier as a document: a forger's solver need not refuse them."""
+    from geocert.solvers.bilinear.options import BilinearOptions
+    from geocert.solvers.fractional.options import SearchOptions
+
+    def classes(root):
+        yield root
+        for sub in root.__subclasses__():
+            yield from classes(sub)
+
+    saved = []
+    for owner in {*classes(SearchOptions), BilinearOptions}:
+        ranges = owner.__dict__.get("OPTION_RANGES")
+        for name in ("rel_gap", "abs_gap", "metric_rel_gap"):
+            if ranges is not None and name in ranges:
+                saved.append((ranges, name, ranges[name]))
+                ranges[name] = {"ge": 0}
+    try:
+        yield
+    finally:
+        for ranges, name, value in saved:
+            ranges[name] = value

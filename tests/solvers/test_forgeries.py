@@ -16,6 +16,7 @@ import pytest
 
 from geocert.solvers.core.certificates import data_hash, pack, problem_hash
 from geocert.solvers.verify import verify_any, verify_document
+from tests.support import loose_gaps
 
 STORED = Path(__file__).resolve().parents[1] / "data" / "certificates"
 TINY = 5e-324  # the smallest subnormal
@@ -276,7 +277,7 @@ class TestEmbeddedCertificatesTied:
         assert any(c["lower_bound"] is not None and c["lower_bound"] > c["cost"] for c in result["cameras"])
         assert refused(result)["check"] == "returned"
 
-    @pytest.mark.parametrize("options", [{"rel_gap": 0.9}, {"abs_gap": 10.0}, {"max_residual": 50.0}])
+    @pytest.mark.parametrize("options", [{"rel_gap": 0.4}, {"abs_gap": 0.5}, {"max_residual": 50.0}])
     def test_a_camera_certificate_with_other_options_is_refused(self, options):
         result = stored("reconstruction")
         other = self.camera_certificate(result, **options)
@@ -889,8 +890,9 @@ def _moved_camera_result(result: dict, view: int, degrees: float, camera_rel_gap
     registered = [c for c in result["cameras"] if c["registered"]]
     certificate["data"]["cameras"] = [c["P"] for c in registered]
     own = {name: options[name] for name in ("norm", "rel_gap", "abs_gap", "max_residual")}
-    points = solve_job({"kind": "triangulation", "options": {**own, "certificate": "full"},
-                        "data": {"cameras": certificate["data"]["cameras"], "tracks": certificate["data"]["tracks"]}})
+    with loose_gaps():
+        points = solve_job({"kind": "triangulation", "options": {**own, "certificate": "full"},
+                            "data": {"cameras": certificate["data"]["cameras"], "tracks": certificate["data"]["tracks"]}})
     certificate["items"] = points["certificate"]["items"]
     for point, solved in zip(result["points"], points["tracks"]):
         point.update({name: solved[name] for name in ("point", "at_infinity", "cost", "lower_bound", "gap", "status",
@@ -914,8 +916,9 @@ def _moved_camera_result(result: dict, view: int, degrees: float, camera_rel_gap
                             for o in p["observations"] if o[0] == c["view"]]} for c in registered]
     else:
         maps = camera_maps(result["points"], [c["view"] for c in registered])
-    cameras = solve_job({"kind": "resection", "data": {"maps": maps},
-                         "options": {**own, "rel_gap": camera_rel_gap, "certificate": "full"}})["certificate"]
+    with loose_gaps():
+        cameras = solve_job({"kind": "resection", "data": {"maps": maps},
+                             "options": {**own, "rel_gap": camera_rel_gap, "certificate": "full"}})["certificate"]
     result["camera_certificate"] = cameras
     dof = camera_claim.degrees_of_freedom([c["K"] for c in registered])
     for c, entry, claim in zip(registered, maps, cameras["items"]):

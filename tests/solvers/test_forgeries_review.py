@@ -234,7 +234,8 @@ class TestCalibrationCertificateOptionsUntied:
         claim.update(K=K, cost=cost, gap=cost - claim["lower_bound"])
         claim["proof"].update(unit=1.0 / cost, tightening=[])
         rehash(document)
-        assert verify_any(document).valid
+        alone = verify_any(document)  # valid on its own, or refused for a gap beyond every kind's cap
+        assert alone.valid or alone.first_failure["check"] == "options"
         forged = _certified_K_from(result, document)
         assert refused(forged)["check"] == "returned"
 

@@ -137,7 +137,7 @@ class TestTheSolverRefusesWhatTheVerifierWould:
         M = self.M.copy()
         M[2] = [-1.0, 0.0, 1.5]  # depth 1.5 - x: negative at x = 2, positive elsewhere
         target = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 1.0], [2.0, 2.0], [-4.0, -2.0], [-0.4, 0.2]])
-        options = MapOptions(norm="L2L2", abs_gap=1e6)
+        options = MapOptions(norm="L2L2", abs_gap=1.0)
         item, residuals, cost, claim = self.claim(M, target, "L2L2")
         assert "non-positive depth" in refused_by_verifier(item, M, residuals, cost, options, None)
         with pytest.raises(verify.Invalid, match="non-positive depth"):

@@ -12,7 +12,7 @@ from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.core.bnb import BnbOptions, Progress
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.fractional.options import SearchOptions
+from geocert.solvers.fractional.options import MAX_REL_GAP, SearchOptions
 
 METHODS = ("stratified", "direct")
 STRATIFIED_ABS_GAP = 1e-12
@@ -73,7 +73,7 @@ class AutocalibrationOptions(SearchOptions):
     max_nodes: int = 20_000
     time_limit_s: float = 60.0
 
-    OPTION_RANGES = {**SearchOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": 1}}
+    OPTION_RANGES = {**SearchOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": MAX_REL_GAP}}
 
     def __post_init__(self) -> None:
         if self.abs_gap is None:

@@ -7,7 +7,8 @@ import math
 from dataclasses import dataclass
 
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.fractional.options import CERTIFICATE_MODES, JobLimit, _describe, _within
+from geocert.solvers.fractional.options import (CERTIFICATE_MODES, MAX_ABS_GAP, MAX_REL_GAP, JobLimit, _describe,
+                                               _within)
 
 NORMS = ("L1L1", "L2L2")
 COEFFICIENTS = ("convex", "affine")
@@ -34,7 +35,8 @@ class BilinearOptions(JobLimit):
     time_limit_s: float = 60.0
     certificate: str = "summary"
 
-    OPTION_RANGES = {"rel_gap": {"ge": 0, "le": 1}, "abs_gap": {"ge": 0}, "max_nodes": {"ge": 1, "le": 1_000_000},
+    OPTION_RANGES = {"rel_gap": {"ge": 0, "le": MAX_REL_GAP}, "abs_gap": {"ge": 0, "le": MAX_ABS_GAP},
+                     "max_nodes": {"ge": 1, "le": 1_000_000},
                      "time_limit_s": {"gt": 0, "le": 3600}, "coefficient_bound": {"ge": 1, "le": 1e6},
                      "camera_bound": {"gt": 0, "le": 1e12}}
 

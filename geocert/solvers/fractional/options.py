@@ -10,6 +10,13 @@ from dataclasses import dataclass
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.relaxation import NORMS
 
+# The gaps a certificate may be asked for, every kind alike: at rel_gap near 1, or an abs_gap as
+# large as the costs, "certified optimal" would hold of a solution whatever it costs (a
+# triangulation asked abs_gap 1e300 called points 35,000 times their optimum's cost optimal).
+# The costs are squared pixels, pixels, or autocalibration's residuals (about 1e-3): an abs_gap of
+# 1 is already loose in every unit; the default is 1e-7.
+MAX_REL_GAP = 0.5
+MAX_ABS_GAP = 1.0
 CERTIFICATE_MODES = ("summary", "full")  # the option certificate: the proof returned or not
 # The option detail: "brief" items carry the solution and its bounds only (no certificate summary
 # and no determinacy, which is then not computed): a large job's result about a sixth of the size.
@@ -29,7 +36,8 @@ class SearchOptions:
     certificate: str = "summary"  # "full": every bound's proof, checkable by geocert.solvers.verify
 
     # pydantic Field keywords per option: the one statement of each range.
-    OPTION_RANGES = {"rel_gap": {"ge": 0, "le": 1}, "abs_gap": {"ge": 0}, "max_nodes": {"ge": 1, "le": 1_000_000},
+    OPTION_RANGES = {"rel_gap": {"ge": 0, "le": MAX_REL_GAP}, "abs_gap": {"ge": 0, "le": MAX_ABS_GAP},
+                     "max_nodes": {"ge": 1, "le": 1_000_000},
                      "time_limit_s": {"gt": 0, "le": 3600}, "max_residual": {"gt": 0}}
 
     def check(self) -> None:
