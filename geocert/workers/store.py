@@ -227,7 +227,8 @@ class JobStore:
         pipe.get(self.key(job_id, "request"))
         pipe.hget(self.key(job_id), "request_items")
         pipe.llen(self.key(job_id, "request:items"))
-        pipe.lrange(self.key(job_id, "request:items"), start, stop - 1)
+        # An empty range reads nothing: LRANGE's stop -1 (for start 0) would read to the list's end.
+        pipe.lrange(self.key(job_id, "request:items"), *((start, stop - 1) if stop > start else (1, 0)))
 
     @staticmethod
     def _chunk(start: int, head: str, chunk_key: str | None, total: int, items: list[str]) -> dict:
