@@ -11,8 +11,9 @@ the error), a few hundred bytes.
 The route still runs its dependencies (the caller's key, its rate limit, its headers) with a
 small stand-in body in place of the large one (StreamedItemsRoute); the submission process then
 does what ``_submit`` does with the body itself, with the API process's settings (its GEOCERT_*
-environment), so the job it
-makes, the request stored and the errors answered are those of a body submitted in process.
+environment), so the job it makes, the request stored and the errors answered are those of a
+body submitted in process. A submission process that dies (killed for memory, say) fails the
+submission it held with a 503 to retry; the next large body starts new ones.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import multiprocessing
 import os
 import threading
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 
 import redis
 from fastapi import Response
@@ -53,11 +55,26 @@ def _pool() -> ProcessPoolExecutor:
         return _POOL
 
 
+def _forget(pool: ProcessPoolExecutor) -> None:
+    """Drop a pool whose process died (every later submission to it would fail)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is pool:
+            _POOL = None
+    pool.shutdown(wait=False, cancel_futures=True)
+
+
 async def submit(body: bytes, owner: str, idempotency_key: str | None, response: Response) -> dict:
     """Submit the job whose JSON body is ``body`` in a submission process: the job's document
     (``response`` given its headers and status), or the error raised here as it would be in process."""
-    outcome = await asyncio.wrap_future(_pool().submit(_submit_body, bytes(body), owner, idempotency_key,
-                                                       _environment()))
+    pool = _pool()
+    try:
+        outcome = await asyncio.wrap_future(pool.submit(_submit_body, bytes(body), owner, idempotency_key,
+                                                        _environment()))
+    except BrokenProcessPool:
+        _forget(pool)
+        raise ApiProblem(503, "the process taking this large body stopped before it was stored; send it again",
+                         headers={"Retry-After": "1"}) from None
     what = outcome[0]
     if what == "json":
         _, position, message = outcome

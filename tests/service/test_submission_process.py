@@ -2,7 +2,8 @@
 validated and stored in a submission process (app.submissions), not on the API's event loop:
 against real servers, with that process stopped (SIGSTOP) while it holds such a body, another
 key's requests are answered, and the submission ends once it runs again, its request stored as
-a body submitted in process stores it. Errors in such a body read as they do in process."""
+a body submitted in process stores it. Errors in such a body read as they do in process; a
+submission process killed fails the body it held with a 503, and the next body is taken."""
 
 from __future__ import annotations
 
@@ -77,6 +78,15 @@ def test_another_keys_requests_are_answered_while_a_large_body_is_submitted(tmp_
                 os.kill(pid, signal.SIGCONT)
         sender.join(timeout=120)
         assert submitted["answer"].status_code == 202, submitted["answer"].text
+
+        # The submission processes killed (for memory, say): the body sent then is refused, to be
+        # sent again, and new processes take the next.
+        for pid in submission_processes(running.api.pid):
+            os.kill(pid, signal.SIGKILL)
+        lost = client.post("/v1/jobs", json=second, headers=ONE, timeout=120)
+        assert lost.status_code == 503 and lost.headers["Retry-After"], lost.text
+        again = client.post("/v1/jobs", json=second, headers=ONE, timeout=120)
+        assert again.status_code == 202, again.text
 
         bad = json.loads(json.dumps(second))
         bad["data"]["tracks"][7]["views"] = "many"
