@@ -12,7 +12,9 @@ The route still runs its dependencies (the caller's key, its rate limit, its hea
 small stand-in body in place of the large one (StreamedItemsRoute); the submission process then
 does what ``_submit`` does with the body itself, with the API process's settings (its GEOCERT_*
 environment), so the job it makes, the request stored and the errors answered are those of a
-body submitted in process. A submission process that dies (killed for memory, say) fails the
+body submitted in process. The processes start with the first large body, which is taken in a
+thread of the API process while they do (seconds: they import what a submission needs). A
+submission process that dies (killed for memory, say) fails the
 submission it held with a 503 to retry; the next large body starts new ones.
 """
 
@@ -23,11 +25,12 @@ import json
 import multiprocessing
 import os
 import threading
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 
 import redis
 from fastapi import Response
+from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
 
 from geocert.app.errors import ApiProblem
@@ -43,16 +46,32 @@ STAND_IN = json.dumps({"kind": "triangulation", "data": {
     "tracks": [{"views": [0, 1], "points": [[0, 0], [-1, 0]]}]}}).encode()
 
 _POOL: ProcessPoolExecutor | None = None
+_STARTING: list[Future] = []  # each process's first task: its imports (_ready)
 _POOL_LOCK = threading.Lock()
 
 
-def _pool() -> ProcessPoolExecutor:
+def _ready() -> None:
+    """A submission process's first task: what a submission imports, imported."""
+    from geocert.app.api.routes import jobs  # noqa: F401
+
+
+def _pool() -> ProcessPoolExecutor | None:
+    """The submission processes once they have started; None while they start (begun by the
+    first call: a process takes seconds to import what it needs, and the first large body is
+    not held that long)."""
     global _POOL
     with _POOL_LOCK:
         if _POOL is None:
             # spawned, not forked: the API process has an event loop and threads a fork would copy
             _POOL = ProcessPoolExecutor(PROCESSES, mp_context=multiprocessing.get_context("spawn"))
-        return _POOL
+            _STARTING[:] = [_POOL.submit(_ready) for _ in range(PROCESSES)]
+        pool = _POOL
+    if not all(started.done() for started in _STARTING):
+        return None
+    if any(started.exception() is not None for started in _STARTING):
+        _forget(pool)
+        return None
+    return pool
 
 
 def _forget(pool: ProcessPoolExecutor) -> None:
@@ -68,6 +87,9 @@ async def submit(body: bytes, owner: str, idempotency_key: str | None, response:
     """Submit the job whose JSON body is ``body`` in a submission process: the job's document
     (``response`` given its headers and status), or the error raised here as it would be in process."""
     pool = _pool()
+    if pool is None:  # starting: taken in a thread of this process, as before there were any
+        outcome = await run_in_threadpool(_submit_body, bytes(body), owner, idempotency_key, _environment())
+        return _answer(outcome, body, response)
     try:
         outcome = await asyncio.wrap_future(pool.submit(_submit_body, bytes(body), owner, idempotency_key,
                                                         _environment()))
@@ -75,6 +97,11 @@ async def submit(body: bytes, owner: str, idempotency_key: str | None, response:
         _forget(pool)
         raise ApiProblem(503, "the process taking this large body stopped before it was stored; send it again",
                          headers={"Retry-After": "1"}) from None
+    return _answer(outcome, body, response)
+
+
+def _answer(outcome: tuple, body: bytes, response: Response) -> dict:
+    """The job's document from ``_submit_body``'s outcome, or its error raised."""
     what = outcome[0]
     if what == "json":
         _, position, message = outcome
