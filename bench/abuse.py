@@ -5,7 +5,7 @@ CPU, the other key's slowest GET /v1/jobs while the API answered it, the peak me
 worker process, what the attacker got and how long until its job ended, and how long the other
 key's small job (one track) waited to start and took to end, submitted right after the attack.
 
-    .venv/bin/python -m bench.abuse [--only api,bodies,worker,stereo,clocks,webhooks,fairness]
+    .venv/bin/python -m bench.abuse [--only api,bodies,whole,worker,stereo,clocks,webhooks,fairness]
 
   api       the attacks the API now refuses from the request alone (photo bombs, views, a bilinear
             basis, /v1/orient, stereo segments, webhook destinations, Last-Event-ID, names), with
@@ -13,6 +13,10 @@ key's small job (one track) waited to start and took to end, submitted right aft
   bodies    the largest bodies over budget (about 32 MB of numbers each): the API's CPU and peak
             memory before refusing them, parsed whole (as before) and read from their shape (now),
             in the same run; then each sent to a server;
+  whole     an 11.9 MB body of a kind without an item list to stream (a reconstruction's tracks),
+            within budget, sent three times: what taking it whole costs the API (its CPU, peak
+            memory and another key's slowest GET /v1/jobs meanwhile); the first spawns the API's
+            submission processes;
   worker    the same jobs with the budgets raised so that they reach a worker: the worker's own
             bounds (its memory limit, the solvers' clock checks) and the other key's wait;
   stereo    the stereo_lines jobs of ``worker`` alone;
@@ -551,7 +555,17 @@ def bench_bodies() -> None:
     report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
 
 
-SECTIONS = {"api": bench_api, "bodies": bench_bodies, "worker": bench_worker, "stereo": bench_stereo,
+def bench_whole() -> None:
+    print("whole: a large body taken whole, three times", flush=True)
+    body = reconstruction_tracks(100, 5000)
+    with cluster(workers=1, concurrency=2, **KEYS) as running:
+        for which in ("first", "second", "third"):
+            attack(running, f"reconstruction from tracks, 100 views, 5000 points (11.9 MB), sent whole, {which}",
+                   post("/v1/jobs", body))
+    report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
+SECTIONS = {"api": bench_api, "bodies": bench_bodies, "whole": bench_whole, "worker": bench_worker, "stereo": bench_stereo,
             "clocks": bench_clocks, "webhooks": bench_webhooks, "fairness": bench_fairness}
 
 

@@ -106,17 +106,21 @@ def orient_figures(document: LazyObject) -> dict:
 
 
 async def check_body(request, figures, above: int = CHECK_ABOVE_BYTES) -> bytearray | None:
-    """A JSON body of more than ``above`` bytes with a content-length is read here (the caller
-    hands its bytes on as the request's body) and refused with a 413 naming the figure when its
-    shape is over budget. Returns the body read, or None when it was left to be read as usual."""
+    """A JSON body of more than ``above`` bytes with a content-length, or any sent in chunks
+    without one, is read here (the caller hands its bytes on as the request's body) and refused
+    with a 413 naming the figure when its shape is over budget. Returns the body read, or None when
+    it was left to be read as usual."""
     from geocert.app import streamed
     from geocert.app.errors import ApiProblem, is_json_media_type
 
-    length = request.headers.get("content-length", "")
-    if not (length.isdigit() and int(length) > above
-            and is_json_media_type(request.headers.get("content-type"))):
+    if not is_json_media_type(request.headers.get("content-type")):
         return None
-    body = await streamed.read_body(request, int(length))
+    length = request.headers.get("content-length")
+    if length is not None and not (length.isdigit() and int(length) > above):
+        return None
+    # Without a length (chunked), its size is known once read: read here, so that a large one
+    # takes the large bodies' ways too (the server's body limit bounds it as it arrives).
+    body = await streamed.read_body(request, int(length) if length is not None else 0)
     exceeded = over_budget_by_shape(body, figures)
     if exceeded is not None:
         raise ApiProblem(413, *exceeded)

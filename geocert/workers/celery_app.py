@@ -90,6 +90,7 @@ def _start_heartbeat(sender=None, **_) -> None:
 
     from geocert.workers.reaper import reap
     from geocert.workers.store import JobStore
+    from geocert.workers.tasks import end_jobs_past_clock
 
     name = getattr(sender, "hostname", None) or "geocert@unknown"
     settings = get_settings()
@@ -100,7 +101,7 @@ def _start_heartbeat(sender=None, **_) -> None:
     every_s = 5.0
     solvers = getattr(getattr(sender, "controller", None), "concurrency", None) or 1
     _HEARTBEAT = Heartbeat(redis_url(), name, reaper=lambda: reap(jobs, settings.visibility_timeout_s, every_s),
-                           reap_every_s=every_s, solvers=solvers).start()
+                           reap_every_s=every_s, solvers=solvers, clock=lambda: end_jobs_past_clock(jobs)).start()
 
 
 @worker_shutdown.connect

@@ -91,14 +91,16 @@ def beat(client: redis.Redis, name: str, held: list[tuple[str, str | None]] = ()
 
 class Heartbeat:
     """A daemon thread beating for one worker (and renewing the leases of what ``held()`` lists)
-    until ``stop()``."""
+    until ``stop()``; with each beat it also calls ``clock()`` (ending the jobs past their clock
+    in all that no task works on: tasks.end_jobs_past_clock), and ``reaper()`` every ``reap_every_s``."""
 
     def __init__(self, url: str, name: str, interval_s: float = INTERVAL_S, reaper=None, reap_every_s: float = 5.0,
-                 held=held_tasks, solvers: int | None = 0):
+                 held=held_tasks, solvers: int | None = 0, clock=None):
         self.client = redis.Redis.from_url(url, socket_timeout=5, socket_connect_timeout=5)
         self.name, self.interval_s, self.solvers = name, interval_s, solvers
         self.reaper, self.reap_every_s, self.reaped_at = reaper, reap_every_s, 0.0
         self.held = held
+        self.clock = clock
         self.stopped = threading.Event()
         self.thread = threading.Thread(target=self._run, name="geocert-heartbeat", daemon=True)
 
@@ -113,6 +115,11 @@ class Heartbeat:
                      held_solve_tasks() if self.solvers else ())
             except redis.RedisError as exc:  # Redis away for a moment: beat again next time
                 log.warning("heartbeat not written: %s", exc)
+            if self.clock is not None:
+                try:
+                    self.clock()
+                except Exception as exc:  # Redis away, say: look again next time
+                    log.warning("ending the jobs past their clock failed: %s", exc)
             if self.reaper is not None and time.monotonic() - self.reaped_at >= self.reap_every_s:
                 self.reaped_at = time.monotonic()
                 try:

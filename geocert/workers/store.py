@@ -227,7 +227,8 @@ class JobStore:
         pipe.get(self.key(job_id, "request"))
         pipe.hget(self.key(job_id), "request_items")
         pipe.llen(self.key(job_id, "request:items"))
-        pipe.lrange(self.key(job_id, "request:items"), start, stop - 1)
+        # An empty range reads nothing: LRANGE's stop -1 (for start 0) would read to the list's end.
+        pipe.lrange(self.key(job_id, "request:items"), *((start, stop - 1) if stop > start else (1, 0)))
 
     @staticmethod
     def _chunk(start: int, head: str, chunk_key: str | None, total: int, items: list[str]) -> dict:
@@ -350,36 +351,47 @@ class JobStore:
 
     # --- worker side -------------------------------------------------------------------------
     # Queued -> running once, with its status event (1); running already (2); ended or gone (0).
-    # A job queued or running is touched (its task shows life: the reaper reads RUNNING).
+    # A job queued or running is touched (its task shows life: the reaper reads RUNNING), and the
+    # task starting it, when named, counted among its busy ones (``claim_past_clock``). A job with
+    # a clock in all (job_time_limit_s) has its deadline kept in DEADLINES from its start.
     _MARK_RUNNING = """
     local s = redis.call('HGET', KEYS[1], 'status')
     local answer = 0
     if s == '"queued"' then
         redis.call('HSET', KEYS[1], 'status', '"running"', 'started_at', ARGV[1])
         redis.call('XADD', KEYS[2], 'MAXLEN', '~', ARGV[2], '*', 'event', 'status', 'data', ARGV[3])
+        local limit = tonumber(redis.call('HGET', KEYS[1], 'job_time_limit_s'))
+        if limit then redis.call('ZADD', KEYS[4], tonumber(ARGV[1]) + limit, ARGV[5]) end
         answer = 1
     elseif s == '"running"' then answer = 2 end
-    if answer ~= 0 then redis.call('ZADD', KEYS[3], ARGV[4], ARGV[5]) end
+    if answer ~= 0 then
+        redis.call('ZADD', KEYS[3], ARGV[4], ARGV[5])
+        if ARGV[6] ~= '' then redis.call('SADD', KEYS[5], ARGV[6]) end
+    end
     return answer
     """
 
-    def _mark_running(self, client, job_id: str):
+    def _mark_running(self, client, job_id: str, task_id: str | None = None):
         """_MARK_RUNNING run by ``client`` (its answer) or queued on a pipeline."""
         moment = now()
-        return client.eval(self._MARK_RUNNING, 3, self.key(job_id), self.key(job_id, "events"), self.RUNNING,
-                  json.dumps(moment), _STREAM_MAXLEN, json.dumps({"status": "running"}), moment, job_id)
+        return client.eval(self._MARK_RUNNING, 5, self.key(job_id), self.key(job_id, "events"), self.RUNNING,
+                           self.DEADLINES, self.key(job_id, "busy"),
+                           json.dumps(moment), _STREAM_MAXLEN, json.dumps({"status": "running"}), moment, job_id,
+                           task_id or "")
 
     def mark_running(self, job_id: str) -> bool:
         """Queued -> running, once; False when the job already ended (e.g. cancelled while queued)."""
         return self._mark_running(self.r, job_id) != 0
 
-    def start_chunk(self, job_id: str, start: int, stop: int, *names: str) -> tuple[dict, dict] | None:
+    def start_chunk(self, job_id: str, start: int, stop: int, *names: str,
+                    task_id: str | None = None) -> tuple[dict, dict] | None:
         """What a task needs to start items ``start`` to ``stop - 1``, in one round trip: the job's
-        fields ``names`` (as ``fields``), the job marked running (as ``mark_running``) and the
-        chunk's request (as ``chunk_request``). None when the job is gone or has ended."""
+        fields ``names`` (as ``fields``), the job marked running (as ``mark_running``, the task
+        ``task_id`` counted busy on it until it ``leave``s) and the chunk's request (as
+        ``chunk_request``). None when the job is gone or has ended."""
         pipe = self.r.pipeline()
         pipe.hmget(self.key(job_id), "status", *names)
-        self._mark_running(pipe, job_id)
+        self._mark_running(pipe, job_id, task_id)
         self._read_chunk(pipe, job_id, start, stop)
         raw, running, *chunk = pipe.execute()
         if raw[0] is None or not running or chunk[0] is None:
@@ -387,6 +399,39 @@ class JobStore:
         return self._decoded(("status",) + names, raw), self._chunk(start, *chunk)
 
     RUNNING = "geocert:running"  # running job id -> the last time a task of it showed life
+    DEADLINES = "geocert:deadlines"  # running job id -> when its clock in all (job_time_limit_s) runs out
+
+    def leave(self, job_id: str, task_id: str) -> None:
+        """The task ``task_id`` no longer works on the job (its items stored, or it stopped)."""
+        self.r.srem(self.key(job_id, "busy"), task_id)
+
+    # A job past its clock in all ends as soon as no task of it is busy (each stores the item its
+    # clock stopped, with its best answer, before it leaves): the busy tasks whose solver slot
+    # lapsed (their worker gone) do not count.
+    _CLAIM_PAST_CLOCK = """
+    if redis.call('HGET', KEYS[1], 'status') ~= '"running"' then return 0 end
+    local deadline = redis.call('ZSCORE', KEYS[3], ARGV[1])
+    if not deadline or tonumber(deadline) > tonumber(ARGV[2]) then return 0 end
+    for _, task in ipairs(redis.call('SMEMBERS', KEYS[2])) do
+        local seen = redis.call('ZSCORE', KEYS[4], task)
+        if seen and tonumber(seen) >= tonumber(ARGV[3]) then return 0 end
+    end
+    if redis.call('SET', KEYS[5], '1', 'NX', 'EX', ARGV[4]) then return 1 end
+    return 0
+    """
+
+    def claim_past_clock(self, job_id: str) -> bool:
+        """``claim_end`` for a running job past its clock in all with no task of it busy (True:
+        the caller ends it); False while it is within its clock, a task of it still runs, or
+        another caller has the claim."""
+        moment = now()
+        return bool(self.r.eval(self._CLAIM_PAST_CLOCK, 5, self.key(job_id), self.key(job_id, "busy"), self.DEADLINES,
+                                self.SLOTS, self.key(job_id, "final"), job_id, moment, moment - self.SLOT_LAPSE_S,
+                                self.ttl))
+
+    def past_clock(self) -> list[str]:
+        """The running jobs whose clock in all has run out."""
+        return self.r.zrangebyscore(self.DEADLINES, "-inf", now())
 
     # Solver slots: the solve tasks running, each by its task id, with the last sign of its
     # life (renewed by its worker's heartbeat) and its job's owner. A key holds at most every live
@@ -669,6 +714,7 @@ class JobStore:
             pipe.delete(self.key(job_id, "fragments"))
         pipe.srem(self.owner_key(self.field(job_id, "owner") or "", "active"), job_id)
         pipe.zrem(self.RUNNING, job_id)
+        pipe.zrem(self.DEADLINES, job_id)
         self._announce_end(job_id, status, error, pipe)
         pipe.execute()
 
@@ -680,13 +726,14 @@ class JobStore:
             pipe.expire(self.key(job_id, part), self.ttl)
 
     _PARTS = ("", "request", "request:items", "result", "events", "cancel", "final", "items", "chunkprogress",
-              "progressparts", "gaps", "tasks", "fragments", "fragmentsums")
+              "progressparts", "gaps", "tasks", "fragments", "fragmentsums", "busy")
 
     def delete(self, job_id: str) -> None:
         owner = self.field(job_id, "owner")
         pipe = self.r.pipeline()
         pipe.delete(*(self.key(job_id, part) for part in self._PARTS))
         pipe.zrem(self.RUNNING, job_id)
+        pipe.zrem(self.DEADLINES, job_id)
         if owner is not None:
             pipe.zrem(self.owner_key(owner, "jobs"), job_id)
         pipe.execute()

@@ -13,7 +13,11 @@ reaper gives up). A queued job cancelled ends in ``JobStore.cancel_if_queued`` i
 way ``after_end`` then counts the job and queues its webhook.
 
 Time limits: a job's own (each kind's time_limit_s; a many-item job's job_time_limit_s, one
-clock its tasks share from the job's ``started_at``) end it, keeping its best answers. A task
+clock its tasks share from the job's ``started_at``) end it, keeping its best answers. A job past
+its clock in all ends as soon as none of its tasks is busy (``end_past_clock``): the tasks
+running then stop their item at the clock, store it and leave, the last to leave ends the job
+(its items not stored read "not started"), or a worker's heartbeat does when no task was running
+(``end_jobs_past_clock``); its tasks still queued then drop out, solving and storing nothing. A task
 still running past what those allow plus GEOCERT_TASK_TIME_MARGIN_S (queue.task_deadline_s) is
 stopped as a last resort, at the solvers' next check (the cancel's path), else by Celery's soft
 time limit, else by its hard one (the process killed; ``solve_chunk_failed`` runs in the
@@ -30,8 +34,8 @@ import time
 
 from geocert.settings import get_settings
 from geocert.solvers.core.geometry import InputError
-from geocert.batch import (abs_gap_of, assemble, item_counts, item_sums, job_deadline, merged_sums, result_fragment,
-                           result_json, result_shell, solve_items, stats_from, streams_result)
+from geocert.batch import (abs_gap_of, assemble, item_counts, item_sums, job_deadline, merged_sums, not_started_item,
+                           result_fragment, result_json, result_shell, solve_items, stats_from, streams_result)
 from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
@@ -118,8 +122,8 @@ def solve_chunk(self, job_id: str, start: int, stop: int, request_id: str | None
     tasks run on every live solver process but GEOCERT_SOLVERS_KEPT_FOR_OTHERS); with none free it
     is put back on the queue to start later (``_defer``), its job still queued, so that another
     key's job starts on the solver kept free. A task of a job past its time limit in all
-    (job_time_limit_s) takes no slot: it solves nothing, storing its items as not started, so a
-    job's tasks still queued end it within moments of its clock, not one slot's turn at a time.
+    (job_time_limit_s) takes no slot and solves and stores nothing: it ends the job when no task of
+    it is busy (``end_past_clock``), else drops out (the last busy one ends it).
 
     When Redis goes away under the task, the job is not failed (that needs Redis too): the task
     waits for Redis to come back and is retried (its items are stored per item, so solving them
@@ -128,12 +132,14 @@ def solve_chunk(self, job_id: str, start: int, stop: int, request_id: str | None
     with logs.context(job_id=job_id, request_id=request_id, items=f"{start}-{stop}"):
         slot = self.request.id
         try:
-            if not _past_its_time_limit(store(), job_id) and \
-                    not store().take_slot(job_id, slot, get_settings().solvers_kept_for_others):
+            if _past_its_time_limit(store(), job_id):
+                end_past_clock(store(), job_id)
+                return
+            if not store().take_slot(job_id, slot, get_settings().solvers_kept_for_others):
                 _defer(self.request.id, job_id, start, stop, request_id, deferrals)
                 return
             try:
-                _solve_chunk(job_id, start, stop, request_id)
+                _solve_chunk(job_id, start, stop, request_id, slot)
             finally:
                 _free_slot(slot)
         except REDIS_GONE as exc:
@@ -172,13 +178,32 @@ def _wait_for_redis(jobs: JobStore, limit_s: float) -> None:
             time.sleep(0.5)
 
 
-def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> None:
+def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None, task_id: str | None = None) -> None:
     jobs = store()
-    # Its fields, the job marked running and its own items only (see JobStore.create): one round trip.
-    started = jobs.start_chunk(job_id, start, stop, "items_total", "kind", "item_time_bound_s", "job_time_limit_s")
+    # Its fields, the job marked running (this task busy on it) and its own items only (see
+    # JobStore.create): one round trip.
+    started = jobs.start_chunk(job_id, start, stop, "items_total", "kind", "item_time_bound_s", "job_time_limit_s",
+                               task_id=task_id)
     if started is None:
         return  # expired, deleted, or ended (cancelled) before it started: nothing to do
-    meta, request = started
+    try:
+        _solve_started_chunk(jobs, job_id, start, stop, request_id, *started)
+    finally:
+        if task_id is not None:
+            _leave(jobs, job_id, task_id)
+
+
+def _leave(jobs: JobStore, job_id: str, task_id: str) -> None:
+    """The task leaves the job (its items stored): past its clock in all, the last to leave ends it."""
+    try:
+        jobs.leave(job_id, task_id)
+        end_past_clock(jobs, job_id)
+    except REDIS_GONE:
+        pass  # its slot lapses unrenewed, and a worker's heartbeat ends the job (end_jobs_past_clock)
+
+
+def _solve_started_chunk(jobs: JobStore, job_id: str, start: int, stop: int, request_id: str | None,
+                         meta: dict, request: dict) -> None:
     settings = get_settings()
     began = time.monotonic()
     deadline_s = task_deadline_s(meta["kind"], meta["item_time_bound_s"], stop - start, meta["job_time_limit_s"])
@@ -200,7 +225,7 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
             log.info("job %s ended under items %d-%d: nothing of them stored", job_id, start, stop)
         elif publisher.overrun and not publisher.cancelled:  # stopped by the clock, not by the job's own limits
             end_over_time(jobs, job_id, kind, options, time.monotonic() - began, deadline_s, "stopped at its next check")
-        elif cut < stop:  # over the budget: the rest of the chunk becomes a task of its own
+        elif cut < stop and not _past_its_time_limit(jobs, job_id):  # over the budget: the rest, a task of its own
             log.info("continuing items %d-%d in a new task", cut, stop)
             task = solve_chunk.apply_async((job_id, cut, stop, request_id),
                                            **task_options(kind.name, meta["item_time_bound_s"], stop - cut,
@@ -227,6 +252,36 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None) -> 
         else:
             end_with_error(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
                            kind=kind, options=options)
+
+
+def end_past_clock(jobs: JobStore, job_id: str) -> bool:
+    """End a running job past its clock in all (job_time_limit_s) once no task of it is busy
+    (``JobStore.claim_past_clock``): ``succeeded`` with the items stored, every other item its
+    kind's not started item (status ``time_limit``, uncertified). True when this call ended it."""
+    if not jobs.claim_past_clock(job_id):
+        return False
+    kind, options = _kind_and_options(jobs, job_id)
+    try:
+        assembled = _stored_result(jobs, job_id, kind, options, lambda: not_started_item(kind, options))
+        if assembled is None:
+            return False  # deleted meanwhile: writing its end would make it again
+        result, sums, stats = assembled
+    except Exception as exc:  # noqa: BLE001 - the job must end all the same, saying why
+        log.exception("job %s: past its clock, its result could not be assembled", job_id)
+        jobs.end(job_id, "failed", error={"type": "about:blank", "title": "Solver failure", "status": 500,
+                                          "detail": f"the job's clock in all ran out and its result could not be "
+                                                    f"assembled: {type(exc).__name__}"})
+        after_end(jobs, job_id)
+        return True
+    log.info("job %s: past its clock in all, ended", job_id)
+    _end(jobs, job_id, sums, stats, result=result, result_text=result_json(kind, result))
+    return True
+
+
+def end_jobs_past_clock(jobs: JobStore) -> list[str]:
+    """A worker's heartbeat: end the running jobs past their clock in all that no task works on
+    (their tasks queued behind others, or gone); returns their ids."""
+    return [job_id for job_id in jobs.past_clock() if end_past_clock(jobs, job_id)]
 
 
 def _past_its_time_limit(jobs: JobStore, job_id: str) -> bool:
@@ -412,20 +467,27 @@ def end_with_error(jobs: JobStore, job_id: str, http_status: int, title: str, de
 def partial_result(jobs: JobStore, job_id: str, kind, options, reason: str) -> dict | None:
     """The result of the items a failed job stored (None when it stored none): every other item
     is its kind's unsolved item, saying why."""
-    stored = jobs.stored_items(job_id)
-    if not stored:
-        return None
-    meta = jobs.fields(job_id, "items_total", "started_at", "created_at")
-
-    def unsolved() -> dict:  # one each: assembling may write into an item
+    def unsolved() -> dict:
         item = kind.cancelled_item()
         return {**item, "reason": reason} if "reason" in item else item
 
+    assembled = _stored_result(jobs, job_id, kind, options, unsolved, none_stored=None)
+    return None if assembled is None else assembled[0]
+
+
+def _stored_result(jobs: JobStore, job_id: str, kind, options, unsolved, none_stored: str | None = "assembled"):
+    """(result, sums, stats) of the job's items stored, ``unsolved()`` for every other (one each:
+    assembling may write into an item); None when the job is gone, or when it stored no item and
+    ``none_stored`` is None."""
+    stored = jobs.stored_items(job_id)
+    meta = jobs.fields(job_id, "items_total", "started_at", "created_at")
+    if meta is None or (not stored and none_stored is None):
+        return None
     items = [stored[index] if index in stored else unsolved() for index in range(meta["items_total"])]
     sums = item_sums(items, abs_gap_of(options))
     stats = stats_from(sums, time.time() - (meta["started_at"] or meta["created_at"]))
     request = jobs.request(job_id) if kind.certifies and options.certificate == "full" else None
-    return assemble(kind, request, options, items, stats)
+    return assemble(kind, request, options, items, stats), sums, stats
 
 
 def after_end(jobs: JobStore, job_id: str) -> None:

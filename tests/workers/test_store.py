@@ -53,6 +53,14 @@ class TestRequestByChunk:
         last = jobs.chunk_request(meta["id"], 200, 250)["data"]["tracks"]
         assert len(last) == 250 and last[249] == request["data"]["tracks"][249]
 
+    def test_an_empty_chunk_reads_the_requests_head_and_no_item(self, jobs):
+        """What reads a job's kind and options (an ending job's: tasks._kind_and_options) asks for
+        no item; it read every one (LRANGE 0 -1), 20,000 tracks decoded to end a job."""
+        request = request_of(250)
+        meta = jobs.create("triangulation", request, 250, 100, "someone", chunk_key="tracks")
+        head = jobs.chunk_request(meta["id"], 0, 0)
+        assert head["data"]["tracks"] == [None] * 250 and head["options"] == request["options"]
+
     def test_a_chunk_reads_about_its_share_of_the_request(self, jobs):
         request = request_of(4000)
         size = len(json.dumps(request))

@@ -23,7 +23,7 @@ from fastapi.sse import EventSourceResponse, ServerSentEvent
 from geocert.app.api.deps import Caller, JobStoreDep, error_responses, get_async_redis, rate_limited, stream_slot
 from geocert.settings import chunk_size_for, get_settings, over_budget
 from geocert.app import lifecycle
-from geocert.app import shape, streamed
+from geocert.app import shape, streamed, submissions
 from geocert.app.errors import ApiProblem
 from geocert.app.schemas import JOB_EXAMPLES, JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
@@ -38,7 +38,8 @@ class StreamedItemsRoute(APIRoute):
     """POST routes of this router check a large JSON body's budget from its shape before parsing
     it (app.shape), and take a large body of an itemised kind item by item (app.streamed): the
     route's model checks the body's head, the items are checked and stored a batch at a time by
-    ``_submit``. Every other request is handled as usual."""
+    ``_submit``; a large body of any other kind is submitted whole in a process of its own
+    (app.submissions). Every other request is handled as usual."""
 
     def get_route_handler(self):
         handler = super().get_route_handler()
@@ -56,6 +57,9 @@ class StreamedItemsRoute(APIRoute):
                 if split is not None:
                     request._body = split.head.encode()  # what the route's model reads and checks
                     request.state.streamed = split
+                elif self.endpoint is submit_job:  # taken whole in a submission process: the model reads a stand-in
+                    request._body = submissions.STAND_IN
+                    request.state.whole_body = bytes(body)
                 else:
                     request._body = bytes(body)  # the ordinary path reads it whole
                 del body
@@ -176,8 +180,14 @@ async def submit_job(
     """Queue a job; answers 202 with its id and a Location to poll. With ``Prefer: wait=N`` the
     answer waits up to N seconds (at most 60) for the job to end: a job that ends in time comes
     back whole (200, its result or error), one that does not as the usual 202."""
-    document = await run_in_threadpool(_submit, body, response, store, owner, idempotency_key,
-                                       getattr(request.state, "streamed", None))
+    whole = getattr(request.state, "whole_body", None)
+    if whole is not None:  # a large body of a kind without an item list to stream
+        request.state.whole_body = None  # not kept while waiting
+        document = await submissions.submit(whole, owner, idempotency_key, response)
+        del whole
+    else:
+        document = await run_in_threadpool(_submit, body, response, store, owner, idempotency_key,
+                                           getattr(request.state, "streamed", None))
     request.state.streamed = None  # the body's text, not kept while waiting
     wait = preferred_wait(prefer)
     if wait is None:
