@@ -37,7 +37,13 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
     stale = jobs.stale_running(stale_after_s)
     if stale:  # a job with a task still queued, or delivered and due back (kombu's unacked), waits
         pending = _pending_tasks(jobs, queue_lists(SOLVE_QUEUE))
+        # A job past its clock in all is ended by the heartbeat (tasks.end_jobs_past_clock), its
+        # items not stored reading "not started": a re-queued chunk would only drop out, and
+        # dropping the claim to end it could take it from a heartbeat assembling its result.
+        past_clock = set(jobs.past_clock())
     for job_id in stale:
+        if job_id in past_clock:
+            continue
         if job_id in pending:
             jobs.touch(job_id)
             continue

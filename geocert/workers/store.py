@@ -26,6 +26,7 @@ PUBLIC_OWNER = "public"  # the owner of every job when no API keys are configure
 # Redis restarting, loading its append-only file or unreachable (BusyLoadingError is a ConnectionError).
 REDIS_GONE = (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError)
 _STREAM_MAXLEN = 2000
+PAST_CLOCK_CLAIM_S = 300  # how long a claim to end a job past its clock holds (JobStore.claim_past_clock)
 
 
 def now() -> float:
@@ -423,11 +424,13 @@ class JobStore:
     def claim_past_clock(self, job_id: str) -> bool:
         """``claim_end`` for a running job past its clock in all with no task of it busy (True:
         the caller ends it); False while it is within its clock, a task of it still runs, or
-        another caller has the claim."""
+        another caller has the claim. The claim lapses after PAST_CLOCK_CLAIM_S: the reaper
+        leaves such a job alone, so a claim whose holder died is not dropped by it, and a
+        later heartbeat ends the job (an end takes seconds, 2.5 s for 20,000 items)."""
         moment = now()
         return bool(self.r.eval(self._CLAIM_PAST_CLOCK, 5, self.key(job_id), self.key(job_id, "busy"), self.DEADLINES,
                                 self.SLOTS, self.key(job_id, "final"), job_id, moment, moment - self.SLOT_LAPSE_S,
-                                self.ttl))
+                                min(self.ttl, PAST_CLOCK_CLAIM_S)))
 
     def past_clock(self) -> list[str]:
         """The running jobs whose clock in all has run out."""

@@ -46,6 +46,8 @@ def a_round():
 
 case = sys.argv[1]
 job_id = stranded_job()
+if case == "past its clock":  # its deadline long past: the heartbeat's to end (tasks.end_jobs_past_clock)
+    jobs.r.zadd(JobStore.DEADLINES, {job_id: time.time() - 5 * STALE_AFTER_S})
 rounds = [a_round()]
 if case == "started between":
     jobs.touch(job_id)  # the task being delivered starts...
@@ -81,3 +83,8 @@ def test_a_task_starting_between_two_sightings_makes_the_next_a_first_again(tmp_
     job = seen["job"]
     assert seen["rounds"] == [[], [], [[job, "requeued 2"]]]
     assert seen["reaps"] == 1
+
+
+def test_a_stranded_job_past_its_clock_is_left_to_the_heartbeat(tmp_path):
+    seen = run_rounds(tmp_path, "past its clock")
+    assert seen["rounds"] == [[], []] and seen["requeued"] == [] and seen["reaps"] is None
