@@ -279,6 +279,23 @@ class TestCertificates:
         assert response.status_code == 422
         assert response.headers["content-type"].startswith("application/problem+json")
 
+    def test_a_document_naming_a_member_twice_is_refused_and_one_not_sent_as_json_too(self, service):
+        """Which of two values of one name a reader takes is its parser's choice: a text holding
+        two results (a first "tracks" with claims no proof backs, then a genuine result) is refused,
+        naming the member, where the last was read and verified. A body not sent as JSON is a 415."""
+        body = triangulation_job(np.random.default_rng(30), tracks=2, views=3, certificate="full")
+        result = wait_for(service, service.post("/v1/jobs", json=body).json()["id"])["result"]
+        forged = [{**track, "cost": 0.0, "lower_bound": 0.0, "gap": 0.0} for track in result["tracks"]]
+        text = '{"tracks": ' + json.dumps(forged) + ", " + json.dumps(result)[1:]
+        assert service.post("/v1/certificates/verify", json=result).json()["valid"] is True
+        response = service.post("/v1/certificates/verify", content=text.encode(),
+                                headers={"content-type": "application/json"})
+        assert response.status_code == 422 and response.headers["content-type"].startswith("application/problem+json")
+        assert [e["field"] for e in response.json()["errors"]] == ["tracks"], response.json()
+        response = service.post("/v1/certificates/verify", content=json.dumps(result).encode(),
+                                headers={"content-type": "text/plain"})
+        assert response.status_code == 415 and "content-type: application/json" in response.json()["detail"]
+
 
 class TestBadInput:
     def assert_problem(self, response, status: int, field: str | None = None):
