@@ -37,7 +37,9 @@ def motion(rotations: list, translations: list, noise: float | None = None, plan
     R = np.array([rotations[v] for v in views], dtype=float)
     centres = np.array([-np.asarray(rotations[v], dtype=float).T @ np.asarray(translations[v], dtype=float)
                         for v in views])
-    chordal = np.linalg.norm(R[:, None] - R[None, :], axis=(2, 3)).sum(axis=1)
+    # one view at a time: the n x n x 3 x 3 differences at once asked 72 bytes a pair (5 GB for
+    # the 6,000 cameras a 4 MB document can list); row by row, memory linear in the views
+    chordal = np.array([np.linalg.norm(R - R[k], axis=(1, 2)).sum() for k in range(len(R))])
     ref = int(np.argmin(chordal))
     others = [k for k in range(len(views)) if k != ref]
     try:
