@@ -136,6 +136,48 @@ def _check_points(points: Any, tracks: Any, views: list[int]) -> None:
             raise Invalid("returned", f"points/{index}/observations are not the track its certificate is about")
 
 
+LABELS_UNSTATED = ("unchecked: the certificate's data state no input_labels (a document written before they were), so "
+                   "which input track each point is, and each camera's name and image size, are the result's word only")
+LABELS_STATED = ("each point's track number and each camera's name and image size are the certificate's "
+                 "input_labels, hashed with the observations and cameras its claims are about (a holder of the input "
+                 "checks data_sha256's data against it: data.tracks[i] is input track input_labels.track_numbers[i])")
+
+
+def _check_labels(result: dict, data: dict) -> str:
+    """The result's labels tied to the input the certificate's data state (input_labels, hashed
+    with them): each camera's name and image size are its view's, each point's track number its
+    track's. Without input_labels (a document from before they were stated) they are unchecked,
+    and the report's scope says so (the returned words)."""
+    labels = data.get("input_labels")
+    if labels is None:
+        return LABELS_UNSTATED
+    cameras, points = result["cameras"], result["points"]
+    names, sizes, tracks = (labels.get(name) if isinstance(labels, dict) else None
+                            for name in ("view_names", "image_sizes", "track_numbers"))
+    if not (isinstance(labels, dict) and set(labels) == {"view_names", "image_sizes", "track_numbers"}
+            and isinstance(names, list) and isinstance(sizes, list) and isinstance(tracks, list)
+            and len(names) == len(sizes) == len(cameras) and len(tracks) == len(data.get("tracks") or [])):
+        raise Invalid("data", "data/input_labels must be {view_names, image_sizes, track_numbers}: one name and one "
+                              "image size for each view, one track number for each track of the data")
+    for view, (name, size) in enumerate(zip(names, sizes)):
+        if not (name is None or isinstance(name, str)) or not (
+                isinstance(size, list) and len(size) == 2 and all(is_number(v) and v > 0 for v in size)):
+            raise Invalid("data", f"data/input_labels/{view}: a name (a string or null) and an image size [width, "
+                                  "height], both positive")
+    if not (all(type(t) is int and t >= 0 for t in tracks) and len(set(tracks)) == len(tracks)):
+        raise Invalid("data", "data/input_labels/track_numbers must be distinct track numbers (integers >= 0)")
+    for camera, name, size in zip(cameras, names, sizes):
+        if camera.get("name") != name or camera.get("image_size") != size:
+            raise Invalid("returned", f"cameras/{camera['view']}: name {camera.get('name')!r:.40} and image_size "
+                                      f"{camera.get('image_size')!r:.40} are not its view's in the certificate's "
+                                      f"data ({name!r:.40}, {size!r:.40})")
+    for index, (point, track) in enumerate(zip(points, tracks)):
+        if point.get("track") != track or type(point.get("track")) is not int:
+            raise Invalid("returned", f"points/{index}/track is {point.get('track')!r:.40}: the certificate's data "
+                                      f"say its observations are input track {track}")
+    return LABELS_STATED
+
+
 def _check_summary(result: dict, registered: list[dict]) -> None:
     """The summary's counts and RMS, recomputed from the items (pipeline._summarise's)."""
     summary = result.get("summary")
@@ -792,9 +834,12 @@ class ReconstructionItems(TrackItems):
               "certified points returned")
         return statement
 
-    def check_result(self, result: dict, certificate: dict, verify: Callable[[dict], object]) -> None:
+    def check_result(self, result: dict, certificate: dict, verify: Callable[[dict], object]) -> dict:
+        """Every check of the result beyond its points' claims; returns what the report's scope
+        adds (whether the labels are tied to the input the data state)."""
         registered, views = _check_cameras(result.get("cameras"), certificate.get("data", {}))
         _check_points(result.get("points"), certificate.get("data", {}).get("tracks"), views)
+        labels = _check_labels(result, certificate["data"])
         if any("searched" in camera for camera in registered):
             for camera in registered:
                 if camera.get("searched") is not True and (camera.get("certified") is not False
@@ -814,6 +859,7 @@ class ReconstructionItems(TrackItems):
         _check_projective_counts(result)
         _check_distortion(result, registered, own)
         _check_calibration(result, registered, verify)
+        return {"labels": labels}
 
 
 RECONSTRUCTION = ReconstructionItems()
