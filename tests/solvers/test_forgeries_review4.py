@@ -307,7 +307,6 @@ class TestCameraStatusWordsUnread:
     or a search's own stop, only for a camera whose bound search ran and was stopped: searched
     true, as pipelines.reconstruction.claims reads c.bound.status)."""
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("status", ["cancelled", "node_limit", "x"])
     def test_a_camera_not_certifiable_called_otherwise_is_refused(self, status):
         result = stored("reconstruction")

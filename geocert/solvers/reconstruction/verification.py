@@ -663,7 +663,11 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
     resection kind, the result's norm, max_residual, abs_gap and camera tolerance, and one map
     per searched camera built from the returned points."""
     document = result.get("camera_certificate")
+    stopped = [c.get("view") for c in searched if c.get("status") in CAMERA_STOPS]
     if not certified and document is None:
+        if stopped:
+            raise Invalid("returned", f"cameras/{stopped[0]}: says its search stopped, and no camera certificate "
+                                      "holds its resection")
         return
     if not isinstance(document, dict):
         raise Invalid("returned", "cameras are called certified without a camera certificate")
@@ -701,6 +705,9 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
                 camera.get("optimal_cost") is None and claim.get("cost") is None):
             raise Invalid("returned", f"{where}: optimal_cost {camera.get('optimal_cost')!r} is not its resection's "
                                       f"{claim.get('cost')!r}")
+        if camera.get("status") in CAMERA_STOPS and claim.get("status") != camera.get("status"):
+            raise Invalid("returned", f"{where}: status {camera.get('status')!r} says its search stopped so; its "
+                                      f"resection's status is {claim.get('status')!r:.40}")
         if claim.get("certified") is not True:  # no bound is proven: none may be stated
             if lower is not None or camera.get("gap") is not None or camera.get("certified") is not False:
                 raise Invalid("returned", f"{where}: its resection is not certified, so it states no lower bound or "
@@ -751,6 +758,7 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) 
         if camera.get("searched", True) is not True and any(
                 camera.get(name) is not None for name in ("lower_bound", "gap", "optimal_cost")):
             raise Invalid("returned", f"{where}: a camera not searched states no bound")
+        _check_camera_status(result, camera, where)
         if status == "not_run":
             if any(camera.get(name) is not None for name in ("cost", "lower_bound", "gap", "optimal_cost",
                                                               "degrees_of_freedom", "tolerance")) \
@@ -762,6 +770,9 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) 
         if camera.get("points") is not None and camera["points"] != len(source):
             raise Invalid("returned", f"{where}: points {camera['points']!r}, its certified points number "
                                       f"{len(source)}")
+        if status == "degenerate" and not len(source) < camera_claim.MIN_POINTS:
+            raise Invalid("returned", f"{where}: status degenerate, and its {len(source)} certified points are enough "
+                                      f"for a camera (degenerate: fewer than {camera_claim.MIN_POINTS})")
         if camera.get("cost") is not None or camera.get("certified") is True:
             P = np.asarray(camera["P"], dtype=float)
             projected = np.hstack([source, np.ones((len(source), 1))]) @ P.T
@@ -780,6 +791,33 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) 
         if not (given is None and tolerance is None) and not (tolerance is not None and _close(given, tolerance)):
             raise Invalid("returned", f"{where}: tolerance {given!r}, its points and degrees of freedom give "
                                       f"{tolerance!r}")
+
+
+# A camera's status, as the kind writes it (structure.resect_cameras): "optimal" when certified;
+# "not_certified" when judged and not certified; "not_run" when not judged; "degenerate" when its
+# certified points are too few for a camera; a stop word only for a camera whose search stopped
+# so (its resection claim in the camera certificate says the same) or that was never started
+# (not searched, no figures, the cameras stage stopped with that word).
+CAMERA_STOPS = ("cancelled", "time_limit", "node_limit")
+CAMERA_STATUSES = ("optimal", "not_certified", "not_run", "degenerate") + CAMERA_STOPS
+
+
+def _check_camera_status(result: dict, camera: dict, where: str) -> None:
+    """A registered camera's status is a word the kind writes, and one its figures give (the
+    stop words of a search are read against the camera certificate in _check_camera_certificate)."""
+    status = camera.get("status")
+    if status not in CAMERA_STATUSES:
+        raise Invalid("returned", f"{where}: status {status!r:.40} is not a camera's ({', '.join(CAMERA_STATUSES)})")
+    searched = camera.get("searched", True) is True
+    unfigured = all(camera.get(name) is None for name in ("cost", "lower_bound", "gap", "optimal_cost"))
+    if status == "degenerate" and (searched or not unfigured):
+        raise Invalid("returned", f"{where}: a degenerate camera (too few points) is not searched and states no cost")
+    if status in CAMERA_STOPS and not searched:
+        stage = _stage(result, "cameras").get("status")
+        if not (status in ("cancelled", "time_limit") and unfigured and stage == status):
+            raise Invalid("returned", f"{where}: status {status!r} for a camera not searched says it was never started: "
+                                      f"then it states no cost and the cameras stage stopped so (its status: "
+                                      f"{stage!r:.40})")
 
 
 class ReconstructionItems(TrackItems):
