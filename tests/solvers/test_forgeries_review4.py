@@ -425,3 +425,63 @@ class TestDistortionCentreUnread:
         assert camera["distortion_centre"] == [319.5, 239.5]
         camera["distortion_centre"] = [324.5, 244.5]
         assert not _valid(result)
+
+
+class TestLabelsAndCameraWordsDodged:
+    """Attacks on the checks that fixed TestReconstructionLabelsUntied, TestImageSizeWithKGiven and
+    TestCameraStatusWordsUnread, as a hostile user would dodge them; each is refused (or, for a
+    document without labels, its report says they are unchecked)."""
+
+    @staticmethod
+    def rehashed(result: dict) -> dict:
+        from tests.solvers.test_forgeries import rehash
+
+        rehash(result["certificate"])
+        return result
+
+    def test_labels_stripped_from_the_data_are_said_unchecked(self):
+        result = stored("reconstruction_labelled")
+        del result["certificate"]["data"]["input_labels"]
+        points = result["points"]
+        points[0]["track"], points[1]["track"] = 1, 0
+        report = verify_any(self.rehashed(result))
+        assert report.scope["labels"].startswith("unchecked")  # valid, and says what it did not check
+
+    @pytest.mark.parametrize("change", [
+        lambda labels: labels.pop("track_numbers"),  # one label left out, the others kept
+        lambda labels: labels["track_numbers"].__setitem__(1, labels["track_numbers"][0]),  # a duplicate
+        lambda labels: labels["view_names"].pop(),  # a view short
+        lambda labels: labels["image_sizes"].__setitem__(0, [True, 480.0]),  # a boolean width
+        lambda labels: labels.__setitem__("extra", 1)])
+    def test_malformed_labels_are_refused(self, change):
+        result = stored("reconstruction_labelled")
+        change(result["certificate"]["data"]["input_labels"])
+        assert not _valid(self.rehashed(result))
+
+    def test_a_track_number_as_a_boolean_is_refused(self):
+        result = stored("reconstruction_labelled")
+        assert result["points"][1]["track"] == 1
+        result["points"][1]["track"] = True
+        assert not _valid(result)
+
+    def test_an_image_size_as_booleans_is_refused(self):
+        result = stored("reconstruction_labelled")
+        labels = result["certificate"]["data"]["input_labels"]
+        labels["image_sizes"][0] = [1.0, 1.0]
+        result["cameras"][0]["image_size"] = [True, True]
+        assert not _valid(self.rehashed(result))
+
+    def test_cameras_called_never_started_in_a_finished_stage_are_refused(self):
+        result = stored("reconstruction_labelled")
+        next(s for s in result["stages"] if s["name"] == "cameras")["status"] = "cancelled"
+        for view in (1, 2):  # not certifiable, not searched; cost withheld
+            result["cameras"][view].update(status="cancelled", cost=None)
+        assert not _valid(result)
+
+    def test_the_last_cameras_called_cancelled_in_a_job_not_cancelled_are_refused(self):
+        result = stored("reconstruction_labelled")
+        next(s for s in result["stages"] if s["name"] == "cameras")["status"] = "cancelled"
+        for view in (4, 5):  # the last the stage starts (16 points each, the latest views)
+            result["cameras"][view].update(status="cancelled", certified=False, searched=False, **dict.fromkeys(
+                ("cost", "lower_bound", "gap", "optimal_cost")))
+        assert not _valid(result)

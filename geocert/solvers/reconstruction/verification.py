@@ -167,7 +167,9 @@ def _check_labels(result: dict, data: dict) -> str:
     if not (all(type(t) is int and t >= 0 for t in tracks) and len(set(tracks)) == len(tracks)):
         raise Invalid("data", "data/input_labels/track_numbers must be distinct track numbers (integers >= 0)")
     for camera, name, size in zip(cameras, names, sizes):
-        if camera.get("name") != name or camera.get("image_size") != size:
+        given = camera.get("image_size")  # numbers, not booleans (True == 1 in Python)
+        if camera.get("name") != name or not (isinstance(given, list) and all(is_number(v) for v in given)
+                                              and given == size):
             raise Invalid("returned", f"cameras/{camera['view']}: name {camera.get('name')!r:.40} and image_size "
                                       f"{camera.get('image_size')!r:.40} are not its view's in the certificate's "
                                       f"data ({name!r:.40}, {size!r:.40})")
@@ -820,6 +822,26 @@ def _check_camera_status(result: dict, camera: dict, where: str) -> None:
                                       f"{stage!r:.40})")
 
 
+def _check_unstarted(result: dict, registered: list[dict]) -> None:
+    """The cameras a stop left unstarted are the last in the order the cameras stage starts them
+    (structure.resect_cameras: most points first, then by view; every camera started finishes),
+    and a cancel is the job's too (its stats say it was cancelled)."""
+    judged = [c for c in registered if c.get("status") != "not_run"]
+    unstarted = [c for c in judged if c.get("status") in CAMERA_STOPS and c.get("searched", True) is not True]
+    if not unstarted:
+        return
+    order = sorted(judged, key=lambda c: (-(c.get("points") or 0), c["view"]))
+    if {id(c) for c in order[len(order) - len(unstarted):]} != {id(c) for c in unstarted}:
+        raise Invalid("returned", f"cameras/{unstarted[0]['view']}: called never started ({unstarted[0]['status']!r}), "
+                                  "but a camera the cameras stage starts after it (fewer points, or as many and a "
+                                  "later view) finished")
+    stats = result.get("stats")
+    if any(c.get("status") == "cancelled" for c in unstarted) and not (
+            isinstance(stats, dict) and stats.get("statuses") == {"cancelled": 1}):
+        raise Invalid("returned", f"cameras/{unstarted[0]['view']}: called cancelled, and the job's stats do not say "
+                                  "it was cancelled")
+
+
 class ReconstructionItems(TrackItems):
     """Points as triangulations (TrackItems), plus ``check_result``: the rest of the result."""
 
@@ -891,6 +913,7 @@ class ReconstructionItems(TrackItems):
         own = certificate["options"]
         rel_gap = float(own.get("camera_rel_gap", own.get("rel_gap")))  # as the pipeline passed it
         _check_camera_figures(result, registered, rel_gap)
+        _check_unstarted(result, registered)
         _check_camera_certificate(result, certificate, searched, certified, verify)
         _check_summary(result, registered)
         _check_pipeline_counts(result, rel_gap)
