@@ -395,8 +395,9 @@ def _check_item_count(document: dict) -> None:
 
 
 # An uncertified item's status (docs/certificate.md, "Uncertified items"): how its search stopped
-# (node_limit, time_limit, cancelled) or not_certified, words that claim nothing about the data;
-# "infeasible" only where the verifier proves it from the data (the kind's proves_infeasible).
+# (node_limit, time_limit, cancelled) or not_certified, words that claim nothing about the data
+# (a kind may add its own such words: its adapter's uncertified_statuses); "infeasible" only
+# where the verifier proves it from the data (the kind's proves_infeasible).
 UNCERTIFIED_STATUSES = ("not_certified", "node_limit", "time_limit", "cancelled")
 CHECKED_STATUSES = ("infeasible",)
 
@@ -414,9 +415,9 @@ def uncertified_claim(kind: str, data: dict, options: dict, claim: dict) -> None
         if proves is None or not proves(data, claim, options):
             raise Invalid("claim", "status 'infeasible' is said only where the verifier proves it from the data (a "
                                    "track with a view whose depth is a non-positive constant); this item's is not")
-    elif status not in UNCERTIFIED_STATUSES:
-        raise Invalid("claim", f"an uncertified item's status is one of {', '.join(UNCERTIFIED_STATUSES)} (or "
-                               f"'infeasible' where the data prove it), not {status!r:.40}")
+    elif status not in (words := getattr(_adapter(kind), "uncertified_statuses", UNCERTIFIED_STATUSES)):
+        raise Invalid("claim", f"an uncertified item's status is one of {', '.join(words)} (or 'infeasible' where "
+                               f"the data prove it), not {status!r:.40}")
     for name in ("lower_bound", "gap"):
         if claim.get(name) is not None:
             raise Invalid("claim", f"{name} is {claim[name]!r:.40}: an uncertified item states none (no proof the "
