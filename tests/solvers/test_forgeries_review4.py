@@ -485,3 +485,34 @@ class TestLabelsAndCameraWordsDodged:
             result["cameras"][view].update(status="cancelled", certified=False, searched=False, **dict.fromkeys(
                 ("cost", "lower_bound", "gap", "optimal_cost")))
         assert not _valid(result)
+
+
+class TestFinishedRunRestatedAsCancelled:
+    """No document proves whether a cancel came. A finished run restated as cancelled (the job's
+    stats {"cancelled": 1}, the cameras stage cancelled, its last two cameras (views 4 and 5, the
+    last it starts) never started: no figures, their maps dropped from the camera certificate and
+    it rehashed, the summary's and stage's counts to match) verified, and the doubtful test left
+    cameras called cancelled out of the cameras it counts: in a result whose last cameras are the
+    uncertified ones, such a restatement turned a doubtful reconstruction sound. Fixed so: every
+    camera the cameras stage took up counts (a stopped one as not certified), in the writer
+    (claims._doubts) and the verifier alike; here 4 of the 6 cameras taken up are then not
+    certified, so the forged summary's "doubtful": false is refused. (The false history itself
+    stays unprovable either way: it only withholds claims.)"""
+
+    def test_a_stop_does_not_make_the_rig_look_sounder(self):
+        result = stored("reconstruction_labelled")
+        assert result["summary"]["doubtful"] is False
+        for view in (4, 5):
+            result["cameras"][view].update(status="cancelled", certified=False, searched=False, **dict.fromkeys(
+                ("cost", "lower_bound", "gap", "optimal_cost", "degrees_of_freedom", "tolerance")),
+                bound_reason="the job was cancelled")
+        camera_certificate = result["camera_certificate"]
+        camera_certificate["items"] = camera_certificate["items"][:2]
+        camera_certificate["data"]["maps"] = camera_certificate["data"]["maps"][:2]
+        TestLabelsAndCameraWordsDodged.rehashed({"certificate": camera_certificate})
+        stage = next(s for s in result["stages"] if s["name"] == "cameras")
+        stage.update(status="cancelled", certified=2, searched=2, cameras_not_started=2)
+        result["summary"].update(cameras_certified=2, cameras_certified_fraction=2 / 6)
+        result["stats"]["statuses"] = {"cancelled": 1}
+        report = verify_any(result)
+        assert not report.valid and "doubtful" in report.first_failure["detail"], report.first_failure

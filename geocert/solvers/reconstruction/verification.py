@@ -254,7 +254,8 @@ def _check_pipeline_counts(result: dict, rel_gap: float) -> None:
     # claims._doubts, recomputed: the cameras bounded, the counts above. A result from before the
     # key was stated lacks it and its warning (they came together): read as "not doubtful", which
     # it must then be, so a forger gains nothing by dropping them.
-    bounded = [c for c in cameras if c.get("registered") and c.get("status") not in ("not_run", "cancelled")]
+    # every camera the stage took up, a stopped one too (a stop never makes the rig look sounder)
+    bounded = [c for c in cameras if c.get("registered") and c.get("status") != "not_run"]
     beyond = sum(1 for c in bounded if c.get("certified") is not True)
     removed, kept = summary["observations_removed"], summary.get("observations") or 0
     registered = sum(1 for c in cameras if c.get("registered") is True)
