@@ -429,6 +429,8 @@ def uncertified_claim(kind: str, data: dict, options: dict, claim: dict) -> None
         if cost is not None:
             raise Invalid("objective", f"cost {cost!r:.40} is stated, and no solution is returned to cost it")
         return
+    if status == "failed":
+        raise Invalid("claim", "status 'failed' says no solution was found, and this item returns one")
     if cost is None:
         return  # a solution returned without its cost says less
     value, allowance = true

@@ -516,3 +516,16 @@ class TestFinishedRunRestatedAsCancelled:
         result["stats"]["statuses"] = {"cancelled": 1}
         report = verify_any(result)
         assert not report.valid and "doubtful" in report.first_failure["detail"], report.first_failure
+
+
+class TestFailedStageWithItsSolution:
+    """An autocalibration stage may say "failed" (a word about the solver: no plane, K or
+    quadric found), and the status rule lets it. A certified metric stage restated as failed,
+    its K kept and its cost stated, verified with the rule alone: "failed" over a solution the
+    verifier costs is false. Fixed so: a failed item returns no solution."""
+
+    def test_a_failed_stage_returning_its_solution_is_refused(self):
+        result = stored("autocalibration_stratified")
+        forged = _uncertified(result, "stages", 1, status="failed", cost=result["stages"][1]["cost"],
+                              lower_bound=None, gap=None)
+        assert not _valid(forged)
