@@ -529,3 +529,21 @@ class TestFailedStageWithItsSolution:
         forged = _uncertified(result, "stages", 1, status="failed", cost=result["stages"][1]["cost"],
                               lower_bound=None, gap=None)
         assert not _valid(forged)
+
+
+class TestUnregisteredCameraStatusUnread:
+    """A camera not registered returns no camera and claims nothing, and its status was read by
+    no check: one of the K-given run that registers no view verified (as far as its cameras go)
+    saying "optimal". Fixed so: its status is not_run, as the kind writes it."""
+
+    def test_an_unregistered_camera_called_optimal_is_refused(self):
+        from geocert.solvers.reconstruction.verification import _check_cameras
+        from geocert.solvers.core.strict import Invalid
+
+        result = TestGenuineUnregisteredReconstructionMisread.unregistered()
+        cameras = result["cameras"]
+        assert all(c["status"] == "not_run" for c in cameras)
+        _check_cameras(cameras, result["certificate"]["data"])  # the genuine cameras pass
+        cameras[0]["status"] = "optimal"
+        with pytest.raises(Invalid):
+            _check_cameras(cameras, result["certificate"]["data"])

@@ -118,8 +118,9 @@ def _check_cameras(cameras: Any, stated: list) -> tuple[list[dict], list[int]]:
             continue
         if any(camera.get(name) is not None for name in CAMERA_FIELDS + ("cost", "lower_bound", "gap")) or \
                 camera.get("certified") is not False or camera.get("registered") is not False or \
-                camera.get("searched", False) is not False:
-            raise Invalid("returned", f"{where}: a camera not registered returns no camera and claims nothing")
+                camera.get("searched", False) is not False or camera.get("status", "not_run") != "not_run":
+            raise Invalid("returned", f"{where}: a camera not registered returns no camera and claims nothing (status "
+                                      "not_run)")
     return registered, views
 
 
