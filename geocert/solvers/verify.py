@@ -399,7 +399,6 @@ def _check_item_count(document: dict) -> None:
 # (a kind may add its own such words: its adapter's uncertified_statuses); "infeasible" only
 # where the verifier proves it from the data (the kind's proves_infeasible).
 UNCERTIFIED_STATUSES = ("not_certified", "node_limit", "time_limit", "cancelled")
-CHECKED_STATUSES = ("infeasible",)
 
 
 def uncertified_claim(kind: str, data: dict, options: dict, claim: dict) -> None:

@@ -70,6 +70,14 @@ class TestUncertifiedStatusUnread:
     def test_the_genuine_document_verifies(self):
         assert _valid(stored("triangulation_l2l2"))
 
+    def test_the_wire_contract_states_the_words_the_verifier_takes(self):
+        from typing import get_args
+
+        from geocert.kinds.schema import ItemStatus
+        from geocert.solvers.verify import UNCERTIFIED_STATUSES
+
+        assert set(get_args(ItemStatus)) == {"optimal", "infeasible", *UNCERTIFIED_STATUSES}
+
     def test_a_track_behind_a_camera_is_infeasible_and_verifies(self):
         """The one "infeasible" the verifier proves from the data: a camera whose depth row is
         the reference's negated (no point in front of both), beside a certified track."""
