@@ -8,7 +8,9 @@ a result to them (docs/certificate.md, "Reconstruction"):
   list) return the P the points are certified in, and K, R, t and the centre that P gives
   (P = K [R | t], K upper triangular with K[2][2] = 1 and a positive diagonal, R a rotation,
   centre -R' t); the others return none of them and claim nothing;
-- each point's observations are the track the certificate's data hold for it;
+- each point's observations are the track the certificate's data hold for it, and the labels
+  (each camera's name and image size, each point's input track number) those the data's
+  input_labels state (a document without them: unchecked, and the report's scope says so);
 - every camera the result calls certified, or gives a lower bound, is backed by the camera
   certificate beside it: a valid resection document solved with the result's norm, max_residual,
   abs_gap and camera_rel_gap, one map per searched camera built from the returned points, in
@@ -29,7 +31,9 @@ a result to them (docs/certificate.md, "Reconstruction"):
   items that record them (the input is not in this document), and its camera claim is the
   words camera_claim gives for the result's norm and camera_rel_gap;
 - every registered camera's figures (cost, points, degrees of freedom, tolerance, status) are
-  recomputed, whatever it claims; the cameras are resected on the certified points only.
+  recomputed, whatever it claims, its status a word the kind writes that its figures give (a
+  stop word only as its search, or a stop before it started, gave it); the cameras are resected
+  on the certified points only.
 
 A camera no bound could certify is not searched (structure.resect_cameras) and claims no bound.
 (A result without ``searched`` on its cameras, from before it was stated, is read as every
