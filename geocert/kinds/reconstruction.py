@@ -627,7 +627,9 @@ class ReconstructionKind:
 
     def certificate_data(self, data: Any, items: list[dict]) -> dict:
         """The data the points' claims are about: the metric cameras returned (registered views,
-        in view order) and each point's kept observations as a triangulation track."""
+        in view order) and each point's kept observations as a triangulation track; and the
+        input's labels (every view's name and image size, each point's input track number),
+        hashed with them, which the verifier ties the result's labels to."""
         item = items[0]
         views = [c["view"] for c in item["cameras"] if c["P"] is not None and c["K"] is not None]
         index = {v: k for k, v in enumerate(views)}
@@ -635,7 +637,10 @@ class ReconstructionKind:
         tracks = [{"views": [index[int(o[0])] for o in p["observations"]], "points": [[o[1], o[2]]
                                                                                      for o in p["observations"]]}
                   for p in item["points"]]
-        return {"cameras": cameras, "views": views, "tracks": tracks}
+        labels = {"view_names": [c["name"] for c in item["cameras"]],
+                  "image_sizes": [list(c["image_size"]) for c in item["cameras"]],
+                  "track_numbers": [p["track"] for p in item["points"]]}
+        return {"cameras": cameras, "views": views, "tracks": tracks, "input_labels": labels}
 
     def assemble(self, options: ReconstructionOptions, items: list[dict], stats: dict) -> dict:
         item = dict(items[0])

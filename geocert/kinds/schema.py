@@ -61,7 +61,7 @@ class JobBase(Strict):
         None, description="receives the job document once it ends (POST, signed: X-Geocert-Signature)")
 
 
-ItemStatus = Literal["optimal", "node_limit", "time_limit", "cancelled", "not_certified", "infeasible", "degenerate"]
+ItemStatus = Literal["optimal", "node_limit", "time_limit", "cancelled", "not_certified", "infeasible"]
 
 
 class CertificateDocument(BaseModel):

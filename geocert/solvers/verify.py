@@ -319,8 +319,9 @@ def _verify_all(document: dict, returned: dict | None, adapter, options: dict, i
             # What else a kind's result returns on the strength of its certificates (e.g. a
             # reconstruction's cameras, against the camera certificate beside its points').
             check_result = getattr(_adapter(document["kind"]), "check_result", None)
-            if check_result is not None:
-                check_result(returned, document, lambda other: _verify(other, None))
+            scoped = check_result(returned, document, lambda other: _verify(other, None)) if check_result else None
+            if isinstance(scoped, dict) and report.scope is not None:  # e.g. which labels are tied to the input
+                report.scope.update(scoped)
             tallies["returned"][0] += 1
         except Invalid as exc:
             fail(exc.check, None, exc.detail)
@@ -393,13 +394,29 @@ def _check_item_count(document: dict) -> None:
                                 "for each item of the data")
 
 
+# An uncertified item's status (docs/certificate.md, "Uncertified items"): how its search stopped
+# (node_limit, time_limit, cancelled) or not_certified, words that claim nothing about the data
+# (a kind may add its own such words: its adapter's uncertified_statuses); "infeasible" only
+# where the verifier proves it from the data (the kind's proves_infeasible).
+UNCERTIFIED_STATUSES = ("not_certified", "node_limit", "time_limit", "cancelled")
+
+
 def uncertified_claim(kind: str, data: dict, options: dict, claim: dict) -> None:
     """An item not certified states only figures the verifier checks without a proof: its status
-    is not optimal; its cost is what its solution costs on the data (none when it returns no
-    solution); and it states no lower_bound and no gap, since no proof the verifier checks backs
-    them (a bound at most the optimum's cost cannot be told from a larger one without one)."""
-    if claim.get("status") == "optimal":
-        raise Invalid("claim", "an uncertified item's status is not optimal")
+    is one of UNCERTIFIED_STATUSES, or "infeasible" where the verifier proves it from the data
+    (then with no solution); its cost is what its solution costs on the data (none when it
+    returns no solution); and it states no lower_bound and no gap, since no proof the verifier
+    checks backs them (a bound at most the optimum's cost cannot be told from a larger one
+    without one)."""
+    status = claim.get("status")
+    if status == "infeasible":
+        proves = getattr(_adapter(kind), "proves_infeasible", None)
+        if proves is None or not proves(data, claim, options):
+            raise Invalid("claim", "status 'infeasible' is said only where the verifier proves it from the data (a "
+                                   "track with a view whose depth is a non-positive constant); this item's is not")
+    elif status not in (words := getattr(_adapter(kind), "uncertified_statuses", UNCERTIFIED_STATUSES)):
+        raise Invalid("claim", f"an uncertified item's status is one of {', '.join(words)} (or 'infeasible' where "
+                               f"the data prove it), not {status!r:.40}")
     for name in ("lower_bound", "gap"):
         if claim.get(name) is not None:
             raise Invalid("claim", f"{name} is {claim[name]!r:.40}: an uncertified item states none (no proof the "
@@ -411,6 +428,8 @@ def uncertified_claim(kind: str, data: dict, options: dict, claim: dict) -> None
         if cost is not None:
             raise Invalid("objective", f"cost {cost!r:.40} is stated, and no solution is returned to cost it")
         return
+    if status == "failed":
+        raise Invalid("claim", "status 'failed' says no solution was found, and this item returns one")
     if cost is None:
         return  # a solution returned without its cost says less
     value, allowance = true

@@ -68,7 +68,8 @@ class TestSolveTimeStatuses:
 
     def test_rays_from_one_centre_are_degenerate_not_wrong(self):
         # Two views from the same centre whose rays disagree: every depth along them fits as
-        # badly, so the region within the residual bound is unbounded. Say so; never guess a point.
+        # badly, so the region within the residual bound is unbounded. Say so in the reason (the
+        # status is not_certified: "degenerate" would be a claim the verifier cannot check).
         K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
         c, s = np.cos(0.2), np.sin(0.2)
         R = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
@@ -76,7 +77,7 @@ class TestSolveTimeStatuses:
         body = {"kind": "triangulation", "data": {"cameras": cameras, "tracks": [
             {"views": [0, 1], "points": [[330.0, 250.0], [300.0, 240.0]]}]}}
         track = solve_job(body)["tracks"][0]
-        assert track["status"] == "degenerate" and not track["certified"]
+        assert track["status"] == "not_certified" and not track["certified"]
         assert "parallel" in track["reason"]
         assert track["lower_bound"] is None
 

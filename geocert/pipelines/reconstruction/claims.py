@@ -83,7 +83,9 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
     if out.checks.get("points_dropped"):
         warnings.append({"code": "points_dropped", "detail": f"{out.checks['points_dropped']} certified points lay "
                                                              "behind a camera or far from an observation: dropped"})
-    doubts = _doubts(out, registered, bounded, count)
+    # Every camera the cameras stage took up, a stopped one too: a stop never makes the rig look
+    # sounder (a camera a cancel left unbounded counts as not certified; the verifier's reading).
+    doubts = _doubts(out, registered, [c for c in out.cameras if c.bound is not None], count)
     out.summary["doubtful"] = bool(doubts)
     if doubts:  # the first thing a user reads: a certified camera here may still be degrees off
         warnings.insert(0, {"code": "reconstruction_doubtful", "detail": (
@@ -141,14 +143,15 @@ def _K_given(stage: dict) -> bool:
 
 
 def _doubts(out, registered: list, bounded: list, observations: int) -> list[str]:
-    """Why the reconstruction as a whole is doubtful (empty when it is not): most bounded cameras
-    fit their points worse than their tolerance allows (the shared K or the rig, not one pose, is
+    """Why the reconstruction as a whole is doubtful (empty when it is not): most cameras taken up
+    (``bounded``: every camera the cameras stage judged, or stopped before judging) are not
+    certified or fit their points worse than their tolerance allows (the shared K or the rig, not one pose, is
     off), a large share of the observations contradicts the returned rig, or the sanity layer
     dropped many of the cameras registered."""
     doubts = []
     beyond = [c for c in bounded if c.bound.beyond_tolerance or not c.bound.certified]
     if len(bounded) >= 2 and len(beyond) > DOUBTFUL_FRACTION * len(bounded):
-        doubts.append(f"{len(beyond)} of the {len(bounded)} cameras bounded are not certified or fit beyond their "
+        doubts.append(f"{len(beyond)} of the {len(bounded)} cameras taken up are not certified or fit beyond their "
                       "tolerance: the rig does not fit its own observations as its camera model should")
     removed = out.checks.get("observations_removed", 0)
     if removed and removed > DOUBTFUL_REMOVED * (removed + observations):

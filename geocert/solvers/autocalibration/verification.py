@@ -66,6 +66,9 @@ def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, fl
 class AutocalibrationVerification:
     claim_options = CLAIM_OPTIONS
     proofs: dict = {}
+    # A stage that found no solution (no plane, K or quadric) says "failed": a word about the
+    # solver, not the data (verify.uncertified_claim).
+    uncertified_statuses = ("not_certified", "node_limit", "time_limit", "cancelled", "failed")
     domain = "every plane at infinity chirality allows, then every K within the intrinsics ranges"
 
     @staticmethod

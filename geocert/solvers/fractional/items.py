@@ -303,6 +303,15 @@ class TrackItems:
     def item(self, arrays: tuple, norm: str) -> TrackItem:
         return TrackItem(arrays, norm)
 
+    def proves_infeasible(self, data: dict, claim: dict, options: dict) -> bool:
+        """Whether the data prove the track has no point in front of every camera, as the solver
+        tests it (Chart.constant_depth_behind: a view's depth row exactly parallel to the
+        reference's with a non-positive ratio), for a claim returning no point."""
+        if claim.get("point") is not None or claim.get("cost") is not None:
+            return False
+        cameras, points = self.read(data, claim["index"])
+        return Chart.build(cameras, points, options["norm"]).constant_depth_behind
+
     def proven_together(self, data: dict, options: dict, claims: list) -> tuple[set[int], tuple[str, ...]]:
         """The claims proven many at once (stacked.py, which checks their proven intervals too),
         and the checks each passed. A claim stating no interval is left to the per-item check

@@ -616,7 +616,8 @@ class Reasons:
     no_domain_found: str  # no point of the domain (every depth positive) was found
     degenerate: str  # the data do not bound the solutions within the residual bound
     over_max_residual: str = "no solution with every residual within max_residual was found"
-    proven_over_max_residual: str = "no solution has every residual within max_residual (proven by the search)"
+    proven_over_max_residual: str = ("no solution has every residual within max_residual (every box of the search "
+                                     "closed empty; the proof is not carried, so the item reads not_certified)")
     not_certified: str = "the root region's bounds could not be computed accurately"
 
 
@@ -671,10 +672,12 @@ def prepare(program: FractionalProgram, start: np.ndarray | None, subspace: np.n
     B = branch_directions(program, subspace)
     state, root, root_proof = root_region(program, B, gamma)
     if root is None:
-        if state == "infeasible":  # a solver's word, not a proof
-            state = "not_certified"
+        # The conic solver's words, not proofs a verifier checks: the item is not certified,
+        # and its reason says what the solver found (docs/certificate.md, "Uncertified items").
+        reason_state = "not_certified" if state == "infeasible" else state
+        state = "not_certified"
         reason = {"degenerate": reasons.degenerate, "not_certified":
-                  reasons.not_certified if math.isfinite(upper) else reasons.over_max_residual}[state]
+                  reasons.not_certified if math.isfinite(upper) else reasons.over_max_residual}[reason_state]
         if not math.isfinite(upper):
             return Early(state, None, None, reason)
         return Early(state, v0, upper / unit, reason)
@@ -733,7 +736,9 @@ def search(prepared: Prepared, options: FractionalOptions, scope: str, reference
     if not math.isfinite(bnb.upper_bound):  # no point of the scope was found
         if all(proof is not None and math.isinf(proof.bound) for _, proof in leaves):
             # Every box of the root region (which holds the whole scope) proven to hold none.
-            return Searched("infeasible", None, None, bnb.nodes, None, prepared.reasons.proven_over_max_residual)
+            # Status not_certified: "infeasible" is said only where the verifier checks it
+            # (docs/certificate.md), and this proof is not carried.
+            return Searched("not_certified", None, None, bnb.nodes, None, prepared.reasons.proven_over_max_residual)
         status = bnb.status if bnb.status != "optimal" else "not_certified"
         return Searched(status, None, None, bnb.nodes, None, prepared.reasons.over_max_residual)
     if options.max_residual is not None:

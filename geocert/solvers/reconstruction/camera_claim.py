@@ -37,6 +37,7 @@ import numpy as np
 # Chi-square quantiles at 0.999 for 1 to 5 degrees of freedom (scipy.stats.chi2.ppf(0.999, d)).
 CHI2_999 = {1: 10.828, 2: 13.816, 3: 16.266, 4: 18.467, 5: 20.515}
 PROJECTIVE_DOF = 11  # a 3x4 camera up to scale
+MIN_POINTS = 6  # fewer cannot fix a 3x4 camera: such a camera is not searched (status degenerate)
 POSE_DOF = 6
 MAX_ALLOWANCE = 0.5
 # The loosest gaps a reconstruction's certified claims may be made with: a camera or a point

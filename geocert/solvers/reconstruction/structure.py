@@ -166,9 +166,9 @@ def _bound_camera(view: int, P: np.ndarray, X: np.ndarray, x: np.ndarray, option
     from geocert.solvers.fractional.maps import fit_map
 
     start = time.perf_counter()
-    if len(X) < 6:
+    if len(X) < camera_claim.MIN_POINTS:
         return CameraBound(view, None, None, None, None, False, "degenerate", len(X), 0.0,
-                           f"{len(X)} points: a camera needs at least 6", dof=dof)
+                           f"{len(X)} points: a camera needs at least {camera_claim.MIN_POINTS}", dof=dof)
     proj = np.hstack([X, np.ones((len(X), 1))]) @ P.T
     depths_positive = bool(np.all(proj[:, 2] > 0))
     residuals = x - proj[:, :2] / proj[:, 2:3]

@@ -8,7 +8,9 @@ a result to them (docs/certificate.md, "Reconstruction"):
   list) return the P the points are certified in, and K, R, t and the centre that P gives
   (P = K [R | t], K upper triangular with K[2][2] = 1 and a positive diagonal, R a rotation,
   centre -R' t); the others return none of them and claim nothing;
-- each point's observations are the track the certificate's data hold for it;
+- each point's observations are the track the certificate's data hold for it, and the labels
+  (each camera's name and image size, each point's input track number) those the data's
+  input_labels state (a document without them: unchecked, and the report's scope says so);
 - every camera the result calls certified, or gives a lower bound, is backed by the camera
   certificate beside it: a valid resection document solved with the result's norm, max_residual,
   abs_gap and camera_rel_gap, one map per searched camera built from the returned points, in
@@ -29,7 +31,9 @@ a result to them (docs/certificate.md, "Reconstruction"):
   items that record them (the input is not in this document), and its camera claim is the
   words camera_claim gives for the result's norm and camera_rel_gap;
 - every registered camera's figures (cost, points, degrees of freedom, tolerance, status) are
-  recomputed, whatever it claims; the cameras are resected on the certified points only.
+  recomputed, whatever it claims, its status a word the kind writes that its figures give (a
+  stop word only as its search, or a stop before it started, gave it); the cameras are resected
+  on the certified points only.
 
 A camera no bound could certify is not searched (structure.resect_cameras) and claims no bound.
 (A result without ``searched`` on its cameras, from before it was stated, is read as every
@@ -118,8 +122,9 @@ def _check_cameras(cameras: Any, stated: list) -> tuple[list[dict], list[int]]:
             continue
         if any(camera.get(name) is not None for name in CAMERA_FIELDS + ("cost", "lower_bound", "gap")) or \
                 camera.get("certified") is not False or camera.get("registered") is not False or \
-                camera.get("searched", False) is not False:
-            raise Invalid("returned", f"{where}: a camera not registered returns no camera and claims nothing")
+                camera.get("searched", False) is not False or camera.get("status", "not_run") != "not_run":
+            raise Invalid("returned", f"{where}: a camera not registered returns no camera and claims nothing (status "
+                                      "not_run)")
     return registered, views
 
 
@@ -134,6 +139,50 @@ def _check_points(points: Any, tracks: Any, views: list[int]) -> None:
         stated = [[views[k], u, v] for k, (u, v) in zip(track["views"], track["points"])]
         if observations != stated:
             raise Invalid("returned", f"points/{index}/observations are not the track its certificate is about")
+
+
+LABELS_UNSTATED = ("unchecked: the certificate's data state no input_labels (a document written before they were), so "
+                   "which input track each point is, and each camera's name and image size, are the result's word only")
+LABELS_STATED = ("each point's track number and each camera's name and image size are the certificate's "
+                 "input_labels, hashed with the observations and cameras its claims are about (a holder of the input "
+                 "checks data_sha256's data against it: data.tracks[i] is input track input_labels.track_numbers[i])")
+
+
+def _check_labels(result: dict, data: dict) -> str:
+    """The result's labels tied to the input the certificate's data state (input_labels, hashed
+    with them): each camera's name and image size are its view's, each point's track number its
+    track's. Without input_labels (a document from before they were stated) they are unchecked,
+    and the report's scope says so (the returned words)."""
+    labels = data.get("input_labels")
+    if labels is None:
+        return LABELS_UNSTATED
+    cameras, points = result["cameras"], result["points"]
+    names, sizes, tracks = (labels.get(name) if isinstance(labels, dict) else None
+                            for name in ("view_names", "image_sizes", "track_numbers"))
+    if not (isinstance(labels, dict) and set(labels) == {"view_names", "image_sizes", "track_numbers"}
+            and isinstance(names, list) and isinstance(sizes, list) and isinstance(tracks, list)
+            and len(names) == len(sizes) == len(cameras) and len(tracks) == len(data.get("tracks") or [])):
+        raise Invalid("data", "data/input_labels must be {view_names, image_sizes, track_numbers}: one name and one "
+                              "image size for each view, one track number for each track of the data")
+    for view, (name, size) in enumerate(zip(names, sizes)):
+        if not (name is None or isinstance(name, str)) or not (
+                isinstance(size, list) and len(size) == 2 and all(is_number(v) and v > 0 for v in size)):
+            raise Invalid("data", f"data/input_labels/{view}: a name (a string or null) and an image size [width, "
+                                  "height], both positive")
+    if not (all(type(t) is int and t >= 0 for t in tracks) and len(set(tracks)) == len(tracks)):
+        raise Invalid("data", "data/input_labels/track_numbers must be distinct track numbers (integers >= 0)")
+    for camera, name, size in zip(cameras, names, sizes):
+        given = camera.get("image_size")  # numbers, not booleans (True == 1 in Python)
+        if camera.get("name") != name or not (isinstance(given, list) and all(is_number(v) for v in given)
+                                              and given == size):
+            raise Invalid("returned", f"cameras/{camera['view']}: name {camera.get('name')!r:.40} and image_size "
+                                      f"{camera.get('image_size')!r:.40} are not its view's in the certificate's "
+                                      f"data ({name!r:.40}, {size!r:.40})")
+    for index, (point, track) in enumerate(zip(points, tracks)):
+        if point.get("track") != track or type(point.get("track")) is not int:
+            raise Invalid("returned", f"points/{index}/track is {point.get('track')!r:.40}: the certificate's data "
+                                      f"say its observations are input track {track}")
+    return LABELS_STATED
 
 
 def _check_summary(result: dict, registered: list[dict]) -> None:
@@ -210,7 +259,8 @@ def _check_pipeline_counts(result: dict, rel_gap: float) -> None:
     # claims._doubts, recomputed: the cameras bounded, the counts above. A result from before the
     # key was stated lacks it and its warning (they came together): read as "not doubtful", which
     # it must then be, so a forger gains nothing by dropping them.
-    bounded = [c for c in cameras if c.get("registered") and c.get("status") not in ("not_run", "cancelled")]
+    # every camera the stage took up, a stopped one too (a stop never makes the rig look sounder)
+    bounded = [c for c in cameras if c.get("registered") and c.get("status") != "not_run"]
     beyond = sum(1 for c in bounded if c.get("certified") is not True)
     removed, kept = summary["observations_removed"], summary.get("observations") or 0
     registered = sum(1 for c in cameras if c.get("registered") is True)
@@ -621,7 +671,11 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
     resection kind, the result's norm, max_residual, abs_gap and camera tolerance, and one map
     per searched camera built from the returned points."""
     document = result.get("camera_certificate")
+    stopped = [c.get("view") for c in searched if c.get("status") in CAMERA_STOPS]
     if not certified and document is None:
+        if stopped:
+            raise Invalid("returned", f"cameras/{stopped[0]}: says its search stopped, and no camera certificate "
+                                      "holds its resection")
         return
     if not isinstance(document, dict):
         raise Invalid("returned", "cameras are called certified without a camera certificate")
@@ -659,6 +713,9 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
                 camera.get("optimal_cost") is None and claim.get("cost") is None):
             raise Invalid("returned", f"{where}: optimal_cost {camera.get('optimal_cost')!r} is not its resection's "
                                       f"{claim.get('cost')!r}")
+        if camera.get("status") in CAMERA_STOPS and claim.get("status") != camera.get("status"):
+            raise Invalid("returned", f"{where}: status {camera.get('status')!r} says its search stopped so; its "
+                                      f"resection's status is {claim.get('status')!r:.40}")
         if claim.get("certified") is not True:  # no bound is proven: none may be stated
             if lower is not None or camera.get("gap") is not None or camera.get("certified") is not False:
                 raise Invalid("returned", f"{where}: its resection is not certified, so it states no lower bound or "
@@ -709,6 +766,7 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) 
         if camera.get("searched", True) is not True and any(
                 camera.get(name) is not None for name in ("lower_bound", "gap", "optimal_cost")):
             raise Invalid("returned", f"{where}: a camera not searched states no bound")
+        _check_camera_status(result, camera, where)
         if status == "not_run":
             if any(camera.get(name) is not None for name in ("cost", "lower_bound", "gap", "optimal_cost",
                                                               "degrees_of_freedom", "tolerance")) \
@@ -720,6 +778,9 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) 
         if camera.get("points") is not None and camera["points"] != len(source):
             raise Invalid("returned", f"{where}: points {camera['points']!r}, its certified points number "
                                       f"{len(source)}")
+        if status == "degenerate" and not len(source) < camera_claim.MIN_POINTS:
+            raise Invalid("returned", f"{where}: status degenerate, and its {len(source)} certified points are enough "
+                                      f"for a camera (degenerate: fewer than {camera_claim.MIN_POINTS})")
         if camera.get("cost") is not None or camera.get("certified") is True:
             P = np.asarray(camera["P"], dtype=float)
             projected = np.hstack([source, np.ones((len(source), 1))]) @ P.T
@@ -738,6 +799,53 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) 
         if not (given is None and tolerance is None) and not (tolerance is not None and _close(given, tolerance)):
             raise Invalid("returned", f"{where}: tolerance {given!r}, its points and degrees of freedom give "
                                       f"{tolerance!r}")
+
+
+# A camera's status, as the kind writes it (structure.resect_cameras): "optimal" when certified;
+# "not_certified" when judged and not certified; "not_run" when not judged; "degenerate" when its
+# certified points are too few for a camera; a stop word only for a camera whose search stopped
+# so (its resection claim in the camera certificate says the same) or that was never started
+# (not searched, no figures, the cameras stage stopped with that word).
+CAMERA_STOPS = ("cancelled", "time_limit", "node_limit")
+CAMERA_STATUSES = ("optimal", "not_certified", "not_run", "degenerate") + CAMERA_STOPS
+
+
+def _check_camera_status(result: dict, camera: dict, where: str) -> None:
+    """A registered camera's status is a word the kind writes, and one its figures give (the
+    stop words of a search are read against the camera certificate in _check_camera_certificate)."""
+    status = camera.get("status")
+    if status not in CAMERA_STATUSES:
+        raise Invalid("returned", f"{where}: status {status!r:.40} is not a camera's ({', '.join(CAMERA_STATUSES)})")
+    searched = camera.get("searched", True) is True
+    unfigured = all(camera.get(name) is None for name in ("cost", "lower_bound", "gap", "optimal_cost"))
+    if status == "degenerate" and (searched or not unfigured):
+        raise Invalid("returned", f"{where}: a degenerate camera (too few points) is not searched and states no cost")
+    if status in CAMERA_STOPS and not searched:
+        stage = _stage(result, "cameras").get("status")
+        if not (status in ("cancelled", "time_limit") and unfigured and stage == status):
+            raise Invalid("returned", f"{where}: status {status!r} for a camera not searched says it was never started: "
+                                      f"then it states no cost and the cameras stage stopped so (its status: "
+                                      f"{stage!r:.40})")
+
+
+def _check_unstarted(result: dict, registered: list[dict]) -> None:
+    """The cameras a stop left unstarted are the last in the order the cameras stage starts them
+    (structure.resect_cameras: most points first, then by view; every camera started finishes),
+    and a cancel is the job's too (its stats say it was cancelled)."""
+    judged = [c for c in registered if c.get("status") != "not_run"]
+    unstarted = [c for c in judged if c.get("status") in CAMERA_STOPS and c.get("searched", True) is not True]
+    if not unstarted:
+        return
+    order = sorted(judged, key=lambda c: (-(c.get("points") or 0), c["view"]))
+    if {id(c) for c in order[len(order) - len(unstarted):]} != {id(c) for c in unstarted}:
+        raise Invalid("returned", f"cameras/{unstarted[0]['view']}: called never started ({unstarted[0]['status']!r}), "
+                                  "but a camera the cameras stage starts after it (fewer points, or as many and a "
+                                  "later view) finished")
+    stats = result.get("stats")
+    if any(c.get("status") == "cancelled" for c in unstarted) and not (
+            isinstance(stats, dict) and stats.get("statuses") == {"cancelled": 1}):
+        raise Invalid("returned", f"cameras/{unstarted[0]['view']}: called cancelled, and the job's stats do not say "
+                                  "it was cancelled")
 
 
 class ReconstructionItems(TrackItems):
@@ -792,9 +900,12 @@ class ReconstructionItems(TrackItems):
               "certified points returned")
         return statement
 
-    def check_result(self, result: dict, certificate: dict, verify: Callable[[dict], object]) -> None:
+    def check_result(self, result: dict, certificate: dict, verify: Callable[[dict], object]) -> dict:
+        """Every check of the result beyond its points' claims; returns what the report's scope
+        adds (whether the labels are tied to the input the data state)."""
         registered, views = _check_cameras(result.get("cameras"), certificate.get("data", {}))
         _check_points(result.get("points"), certificate.get("data", {}).get("tracks"), views)
+        labels = _check_labels(result, certificate["data"])
         if any("searched" in camera for camera in registered):
             for camera in registered:
                 if camera.get("searched") is not True and (camera.get("certified") is not False
@@ -808,12 +919,14 @@ class ReconstructionItems(TrackItems):
         own = certificate["options"]
         rel_gap = float(own.get("camera_rel_gap", own.get("rel_gap")))  # as the pipeline passed it
         _check_camera_figures(result, registered, rel_gap)
+        _check_unstarted(result, registered)
         _check_camera_certificate(result, certificate, searched, certified, verify)
         _check_summary(result, registered)
         _check_pipeline_counts(result, rel_gap)
         _check_projective_counts(result)
         _check_distortion(result, registered, own)
         _check_calibration(result, registered, verify)
+        return {"labels": labels}
 
 
 RECONSTRUCTION = ReconstructionItems()

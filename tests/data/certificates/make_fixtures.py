@@ -173,10 +173,17 @@ def reconstruction() -> dict:
                                                                                      "camera_rel_gap": 0.25}})
 
 
+def reconstruction_labelled() -> dict:
+    """reconstruction's scene and options, written once the certificate's data state the input's
+    labels (input_labels: every view's name and image size, each point's track number)."""
+    return reconstruction()
+
+
 CASES = {f.__name__: f for f in (triangulation_l2l2, triangulation_l1l1_max_residual, triangulation_l2l1,
                                  resection_l2l2, resection_node_tightening, resection_l1l1, resection_caps, homography2_l2l2,
                                  homography3_l2l1, homography_far_from_origin, autocalibration_stratified, autocalibration_five_views, autocalibration_direct,
-                                 autocalibration_direct_points, bilinear_l1l1, bilinear_l2l2, reconstruction)}
+                                 autocalibration_direct_points, bilinear_l1l1, bilinear_l2l2, reconstruction,
+                                 reconstruction_labelled)}
 
 
 def main(names: list[str]) -> None:
