@@ -48,7 +48,8 @@ def small_world() -> dict:
 
 
 class TestDerivedFieldsAbsoluteFloor:
-    """An autocalibration result's `cameras` and `points` (and `upgrade`, `Ks` for the direct
+    """(Refused now: each array is compared at its own scale, a list of records' fields each at
+    its largest over the records, autocalibration.verification._close.) An autocalibration result's `cameras` and `points` (and `upgrade`, `Ks` for the direct
     method) must be what the certified plane and K (or quadric) give, compared by
     autocalibration.verification._close: within 1e-9 of max(|expected entry|, 1.0). The floor 1.0
     makes it an absolute 1e-9 for every entry smaller than 1, and the world's scale is the data's
@@ -81,7 +82,6 @@ class TestDerivedFieldsAbsoluteFloor:
         given, forged = np.asarray(small_world["points"]), np.asarray(self.forged(small_world)["points"])
         assert np.max(np.abs(forged - given) / np.abs(given)) > 1.0  # some coordinate's sign flipped
 
-    @pytest.mark.xfail(**XFAIL)
     def test_points_and_centres_not_the_upgrades_are_refused(self, small_world):
         assert not _valid(self.forged(small_world))
 

@@ -4,6 +4,8 @@ metric stage's (conditional on the plane at infinity it states)."""
 
 from __future__ import annotations
 
+import math
+
 from typing import Any
 
 import numpy as np
@@ -399,20 +401,44 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
             raise Invalid("returned", f"{name} is not what the quadric gives")
 
 
-def _close(value: Any, expected: Any) -> bool:
-    """Equal structure, numbers within 1e-9 of their scale (recomputed on another machine)."""
+def _close(value: Any, expected: Any, scale: float | None = None) -> bool:
+    """Equal structure, numbers within 1e-9 of their array's scale (recomputed on another
+    machine). An array's scale is its largest entry (a list of records': each field's largest
+    over the records, so that a camera centre at the origin is read at the layout's scale): no
+    absolute floor, which a document could choose its world's size to fall under (centres and
+    points 1e-8 across, read within 1e-9, moved by half their size and verified)."""
     if expected is None or value is None:
         return value is None and expected is None
     if isinstance(expected, dict):
         return isinstance(value, dict) and value.keys() == expected.keys() and all(
-            _close(value[key], expected[key]) for key in expected)
+            _close(value[key], expected[key], scale if scale is not None else _largest(expected[key]))
+            for key in expected)
     if isinstance(expected, list):
-        return isinstance(value, list) and len(value) == len(expected) and all(
-            _close(v, e) for v, e in zip(value, expected))
+        if not (isinstance(value, list) and len(value) == len(expected)):
+            return False
+        if expected and all(isinstance(e, dict) for e in expected):  # records: each field at its own scale
+            keys = set().union(*(e.keys() for e in expected))
+            scales = {key: max(_largest(e.get(key)) for e in expected) for key in keys}
+            return all(isinstance(v, dict) and v.keys() == e.keys() and all(
+                _close(v[key], e[key], scales[key]) for key in e) for v, e in zip(value, expected))
+        scale = scale if scale is not None else _largest(expected)
+        return all(_close(v, e, scale) for v, e in zip(value, expected))
     if isinstance(expected, float) or isinstance(expected, int):
+        scale = scale if scale is not None else abs(expected)
         return isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value - expected) <= (
-            1e-9 * max(abs(expected), 1.0))
+            1e-9 * max(scale, abs(expected)))
     return value == expected
+
+
+def _largest(expected: Any) -> float:
+    """The largest magnitude of the numbers in ``expected`` (0 when none)."""
+    if isinstance(expected, dict):
+        return max((_largest(v) for v in expected.values()), default=0.0)
+    if isinstance(expected, list):
+        return max((_largest(v) for v in expected), default=0.0)
+    if isinstance(expected, (int, float)) and not isinstance(expected, bool) and math.isfinite(expected):
+        return abs(float(expected))
+    return 0.0
 
 
 def _check_cost(cost: float, claimed: float) -> None:
