@@ -854,13 +854,15 @@ class ReconstructionItems(TrackItems):
     @staticmethod
     def job_outcomes(result: dict) -> list:
         """One item, certified when it has points and every one is; its status "optimal" then,
-        "not_certified" otherwise, as the kind writes it, or "cancelled" when the job's statistics
-        say it was stopped (a stopped run keeps what it finished: a weaker claim)."""
+        "not_certified" otherwise, as the kind writes it, or "cancelled" or "time_limit" when the
+        job's statistics say it was stopped, by a cancel or by its clock in all (a stopped run
+        keeps what it finished: a weaker claim)."""
         points = result.get("points") or []
         certified = bool(points) and all(isinstance(p, dict) and p.get("certified") is True for p in points)
         stats = result.get("stats")
-        if isinstance(stats, dict) and stats.get("statuses") == {"cancelled": 1}:
-            return [("cancelled", certified)]
+        for stop in ("cancelled", "time_limit"):
+            if isinstance(stats, dict) and stats.get("statuses") == {stop: 1}:
+                return [(stop, certified)]
         return [("optimal" if certified else "not_certified", certified)]
 
     def checked_options(self, options: dict) -> dict:
