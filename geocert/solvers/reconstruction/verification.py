@@ -305,6 +305,42 @@ def _check_projective_counts(result: dict) -> None:
     if all(isinstance(g, int) for g in given) and "observations" in stage and sum(given) > stage["observations"]:
         raise Invalid("returned", "stages/projective: the observations kept, removed, of dropped tracks and of "
                                   "unregistered views add up to more than its observations")
+    _check_nested_counts(stage, summary.get("views") or 0, summary["tracks"])
+
+
+def _count(value: Any, where: str, total: int) -> None:
+    if not (isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= total):
+        raise Invalid("returned", f"stages/projective/{where} is {value!r:.40}: at most {total}")
+
+
+def _view_numbers(value: Any, where: str, views: int) -> None:
+    if not (isinstance(value, list) and all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v < views
+                                            for v in value)):
+        raise Invalid("returned", f"stages/projective/{where} is {value!r:.60}: not views of the {views} sent")
+
+
+def _check_nested_counts(stage: dict, views: int, tracks: int) -> None:
+    """The counts and view numbers the stage states inside its records: each focal round's views
+    registered, the initial pair's views, shared tracks and inliers (inliers <= shared <= the
+    tracks: a track is shared by a pair at most once), and the views each merge added."""
+    for k, round_ in enumerate(stage.get("focal_rounds") or []):
+        if isinstance(round_, dict) and "registered" in round_:
+            _count(round_["registered"], f"focal_rounds/{k}/registered", views)
+    if "initial_pair" in stage and stage["initial_pair"] is not None:
+        _view_numbers(stage["initial_pair"], "initial_pair", views)
+    search = stage.get("initial_pair_search")
+    pair = search.get("pair") if isinstance(search, dict) else None
+    if isinstance(pair, dict):
+        if "views" in pair:
+            _view_numbers(pair["views"], "initial_pair_search/pair/views", views)
+        if "shared" in pair:
+            _count(pair["shared"], "initial_pair_search/pair/shared", tracks)
+        if "inliers" in pair:
+            _count(pair["inliers"], "initial_pair_search/pair/inliers",
+                   pair["shared"] if isinstance(pair.get("shared"), int) else tracks)
+    for k, merge in enumerate(stage.get("merged") or []):
+        if isinstance(merge, dict) and "views_added" in merge:
+            _view_numbers(merge["views_added"], f"merged/{k}/views_added", views)
 
 
 def _check_distortion(result: dict, registered: list[dict], options: dict) -> None:
@@ -576,10 +612,18 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
             raise Invalid("returned", f"the calibration certificate's {name} {options.get(name)!r} is beyond {cap}: "
                                       "it would certify a K whatever it costs")
     stage = _stage(result, "autocalibration")
-    for k, (given, claim) in enumerate(zip(stage.get("stages") or [], claims)):
+    if stage.get("method") != options.get("method", "stratified"):
+        raise Invalid("returned", f"stages/autocalibration/method is {stage.get('method')!r:.40}, the calibration "
+                                  f"certificate's is {options.get('method', 'stratified')!r}")
+    restated = stage.get("stages")
+    if not (isinstance(restated, list) and len(restated) == len(claims)):
+        raise Invalid("returned", "stages/autocalibration/stages must restate the calibration certificate's two stages")
+    for k, (given, claim) in enumerate(zip(restated, claims)):
+        # every figure the stage restates, its name by position (as the autocalibration kind's own)
         if not isinstance(given, dict) or given.get("certified") is not True or not all(
                 (given.get(name) is None and claim.get(name) is None) or _close(given.get(name), claim.get(name))
-                for name in ("cost", "lower_bound")):
+                for name in ("cost", "lower_bound", "gap")) or given.get("status") != claim.get("status") \
+                or given.get("name") != ("affine", "metric")[k]:
             raise Invalid("returned", f"stages/autocalibration/stages/{k} is not the calibration certificate's claim")
     _tie_calibration_data(result, stage, data)
     size = data.get("image_size")
@@ -757,6 +801,10 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) 
     norm = result.get("norm")
     views = [int(camera["view"]) for camera in registered]
     dof = camera_claim.degrees_of_freedom([camera["K"] for camera in registered])
+    stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "cameras"), None)
+    if stage is not None and "degrees_of_freedom" in stage and stage["degrees_of_freedom"] != dof:
+        raise Invalid("returned", f"stages/cameras/degrees_of_freedom is {stage['degrees_of_freedom']!r:.40}, the "
+                                  f"returned cameras' K give {dof}")
     for camera, entry in zip(registered, camera_maps(result.get("points") or [], views)):
         where = f"cameras/{camera['view']}"
         certified, status = camera.get("certified"), camera.get("status")
