@@ -224,17 +224,20 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
                                      focal, k1)) for views, pixels in tracks]
         found = calibrated_reconstruction(used, Ks, CalibratedOptions(
             max_reprojection_px=2 * options.threshold_px, pnp_min_inliers=options.min_inliers, seed=options.seed,
-            merge_components=options.merge_components), lambda progress: asks(progress.get("done", 0),
+            merge_components=options.merge_components, refine_focal=True), lambda progress: asks(progress.get("done", 0),
                                                                                progress.get("total", 1)),
             start_from=resume)
         first.update({key: found.stats[key] for key in ("initial_pair", "initial_pair_search")
                       if key in found.stats and key not in first})
         found.stats.update(first)  # a resumed round's initial pair is the first round's
         registered = sum(R is not None for R in found.rotations)
-        step = {"focal_px": float(focal), "k1": k1, "registered": int(registered), "resumed": resume is not None}
+        # the focal length the registration refined as it went (Ks[0]'s when it did not: "lsmr")
+        K = found.Ks[0] if found.Ks else Ks[0]
+        step = {"focal_px": float(focal), "registration_focal_px": float(K[0, 0]), "k1": k1,
+                "registered": int(registered), "resumed": resume is not None}
         if registered < 2:
             return found, None, None, step
-        start = upgrade.Metric(Ks[0], list(found.rotations), [None if t is None else np.asarray(t, dtype=float)
+        start = upgrade.Metric(K, list(found.rotations), [None if t is None else np.asarray(t, dtype=float)
                                                                for t in found.translations],
                                np.asarray(found.points, dtype=float), [], False, k1=k1)
         if found.status == "cancelled":
@@ -253,6 +256,7 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
             metric = start
             unadjusted = True
             break
+        focal = step["registration_focal_px"]  # what this round's views were registered at
         refined = float(metric.K[0, 0])
         moved = abs(metric.k1 * (corner / refined) ** 3 * refined - k1 * (corner / focal) ** 3 * focal)
         if not (refined > 0 and np.isfinite(refined) and np.isfinite(metric.k1)) or (
