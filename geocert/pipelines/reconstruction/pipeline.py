@@ -194,7 +194,8 @@ def _calibrated(tracks, n_views: int, K: np.ndarray, options: ReconstructionOpti
 def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Observations, asks):
     """K unknown, COLMAP's way: the K-known path (calibrated.py) from a prior K (focal length
     ``focal_prior_factor`` times the larger image side, or ``focal_prior_px``; the principal point
-    at the image's centre), then a metric adjustment refining one focal length (and, with
+    at the image's centre) refining one shared focal length in its adjustments as it places the
+    views (CalibratedOptions.refine_focal), then a metric adjustment refining it (and, with
     ``radial_distortion`` "auto" or "on", one radial term k1, bundle model "radial"); when it moves
     the focal length by more than 2% or k1 by more than RADIAL_STEP_PX at the image's corner, the
     K-known path again from the refined K on the observations undistorted with the refined k1,
