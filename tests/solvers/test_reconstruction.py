@@ -335,6 +335,14 @@ class TestUnknownIntrinsics:
         rounds = out.stages[0]["focal_rounds"]  # the registration refined it as it placed the views
         assert rounds[0]["focal_px"] == pytest.approx(768.0) and abs(rounds[0]["registration_focal_px"] / 3000 - 1) < 0.03
 
+    def test_a_view_pnp_refused_at_the_prior_is_tried_again_at_the_refined_focal_length(self):
+        # 6 views of 16 points: at the prior focal length (768 px against 800) PnP places 3, and
+        # the others see no more points after the focal length is refined; they are tried again.
+        scene = synthetic.scene(views=6, points=16, seed=3, noise_px=0.5)
+        out = pipeline.reconstruct(scene.tracks, [scene.image_size] * 6, ReconstructionOptions(resect_cameras=False))
+        assert out.summary["views_registered"] == 6
+        assert aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations)).max() < 1.0
+
     def test_the_principal_point_is_estimated_when_the_data_fix_it(self):
         # The principal point 40 px right of and 25 px above the centre, a general motion: freed
         # by the test, it lands within 3 px; held at the centre ("centre"), the cost is higher.

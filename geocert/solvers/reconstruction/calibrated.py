@@ -829,9 +829,13 @@ def _grow(state: _State, fixed: int, options: CalibratedOptions, stats: dict, ti
           reasons_by_view: dict, callback) -> bool:
     """Steps 2-4 until no view can be added; True when the callback asked to stop."""
     last_tried: dict[int, int] = {}
+    scale = state.focal_scale
     while not state.registered.all():
         if asks_to_stop(callback, {"stage": "registration", "done": int(state.registered.sum()), "total": state.n_views}):
             return True
+        if state.focal_scale != scale:  # refine_focal moved K: a view PnP failed at the old K is tried again
+            last_tried.clear()
+            scale = state.focal_scale
         start = time.perf_counter()
         v, failed = _register_next(state, options, last_tried)
         reasons_by_view.update(failed)
