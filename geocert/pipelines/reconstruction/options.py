@@ -62,8 +62,9 @@ class ReconstructionOptions(FractionalOptions):
     merge_components: bool = False
     # K unknown: how the views are registered. "incremental", COLMAP's way: the K-known path from a
     # prior focal length (focal_prior_px, or focal_prior_factor times the larger image side, COLMAP's
-    # default 1.2), refined by bundle adjustment and the path run again from it (at most
-    # focal_prior_rounds times); its cameras then go to the certified upgrade as a projective
+    # default 1.2), refined by its adjustments as views are placed and by a bundle adjustment after,
+    # the path run again from it when that moved it (at most focal_prior_rounds times); its cameras
+    # then go to the certified upgrade as a projective
     # reconstruction. "projective": a projective reconstruction from the tracks alone (projective.py).
     registration: str = "incremental"
     # K unknown, camera_model "simple": "auto" frees the principal point in the adjustment when the

@@ -194,7 +194,8 @@ def _calibrated(tracks, n_views: int, K: np.ndarray, options: ReconstructionOpti
 def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Observations, asks):
     """K unknown, COLMAP's way: the K-known path (calibrated.py) from a prior K (focal length
     ``focal_prior_factor`` times the larger image side, or ``focal_prior_px``; the principal point
-    at the image's centre), then a metric adjustment refining one focal length (and, with
+    at the image's centre) refining one shared focal length in its adjustments as it places the
+    views (CalibratedOptions.refine_focal), then a metric adjustment refining it (and, with
     ``radial_distortion`` "auto" or "on", one radial term k1, bundle model "radial"); when it moves
     the focal length by more than 2% or k1 by more than RADIAL_STEP_PX at the image's corner, the
     K-known path again from the refined K on the observations undistorted with the refined k1,
@@ -212,6 +213,7 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
     corner = max(np.hypot(w, h) / 2 for w, h in image_sizes)
     model = "simple" if options.radial_distortion == "off" else "radial"
     history, metric, found, k1, resume, first = [], None, None, 0.0, None, {}
+    unadjusted = False  # the cameras kept are the last round's, at its focal length, not adjusted (a stop)
 
     def register(focal: float, k1: float, resume):
         """One round: the K-known path at this focal length (resumed from cameras, or from a new
@@ -223,17 +225,20 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
                                      focal, k1)) for views, pixels in tracks]
         found = calibrated_reconstruction(used, Ks, CalibratedOptions(
             max_reprojection_px=2 * options.threshold_px, pnp_min_inliers=options.min_inliers, seed=options.seed,
-            merge_components=options.merge_components), lambda progress: asks(progress.get("done", 0),
+            merge_components=options.merge_components, refine_focal=True), lambda progress: asks(progress.get("done", 0),
                                                                                progress.get("total", 1)),
             start_from=resume)
         first.update({key: found.stats[key] for key in ("initial_pair", "initial_pair_search")
                       if key in found.stats and key not in first})
         found.stats.update(first)  # a resumed round's initial pair is the first round's
         registered = sum(R is not None for R in found.rotations)
-        step = {"focal_px": float(focal), "k1": k1, "registered": int(registered), "resumed": resume is not None}
+        # the focal length the registration refined as it went (Ks[0]'s when it did not: "lsmr")
+        K = found.Ks[0] if found.Ks else Ks[0]
+        step = {"focal_px": float(focal), "registration_focal_px": float(K[0, 0]), "k1": k1,
+                "registered": int(registered), "resumed": resume is not None}
         if registered < 2:
             return found, None, None, step
-        start = upgrade.Metric(Ks[0], list(found.rotations), [None if t is None else np.asarray(t, dtype=float)
+        start = upgrade.Metric(K, list(found.rotations), [None if t is None else np.asarray(t, dtype=float)
                                                                for t in found.translations],
                                np.asarray(found.points, dtype=float), [], False, k1=k1)
         if found.status == "cancelled":
@@ -250,7 +255,9 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
             break
         if metric is None:  # cancelled: the views registered so far are kept, at the focal length they had
             metric = start
+            unadjusted = True
             break
+        focal = step["registration_focal_px"]  # what this round's views were registered at
         refined = float(metric.K[0, 0])
         moved = abs(metric.k1 * (corner / refined) ** 3 * refined - k1 * (corner / focal) ** 3 * focal)
         if not (refined > 0 and np.isfinite(refined) and np.isfinite(metric.k1)) or (
@@ -298,6 +305,7 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
         stats["reason"] = found.stats["reason"]
     if found is not None and found.status == "cancelled":
         stats["cancelled"] = True
+        stats["stopped_before_adjustment"] = unadjusted
     reasons = [None if cameras[v] is not None else (found.reasons[v] if found is not None else "not reached")
                for v in range(n_views)]
     stats["radial_distortion"] = radial
@@ -437,6 +445,8 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
         registered = sum(P is not None for P in proj.cameras)
         if proj.stats.get("cancelled"):  # the views registered so far are kept (projective cameras)
             stage.update(status="cancelled", reason="the job was cancelled: the views registered before it are kept")
+            if incremental is not None:
+                _keep_registration(out, incremental, obs, proj.inlier, options.threshold_px, n_views, stage)
             raise Cancelled("autocalibration")
         if registered < 2:
             stage.update(status="failed", reason=proj.stats.get("reason") or "fewer than 2 views registered")
@@ -445,13 +455,20 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
     sizes = {tuple(image_sizes[v]) for v, P in enumerate(proj.cameras) if P is not None}
     image_size = next(iter(sizes)) if len(sizes) == 1 else None
     with _timed(stages, "autocalibration") as stage:
-        tell("autocalibration", 0, 1)
         method = options.autocalibration
-        metric = upgrade.autocalibrate(proj.cameras, proj.points, image_size, options.ranges(image_size),
-                                       options.autocalibration_options(image_size), options.autocalibration_points,
-                                       method, lambda p: tell(f"autocalibration {getattr(p, 'stage', '')}".strip(),
-                                                              0, 1, p),
-                                       skip_critical=options.autocalibration_on_critical_motion == "skip")
+        try:
+            tell("autocalibration", 0, 1)
+            metric = upgrade.autocalibrate(proj.cameras, proj.points, image_size, options.ranges(image_size),
+                                           options.autocalibration_options(image_size),
+                                           options.autocalibration_points, method,
+                                           lambda p: tell(f"autocalibration {getattr(p, 'stage', '')}".strip(),
+                                                          0, 1, p),
+                                           skip_critical=options.autocalibration_on_critical_motion == "skip")
+        except Cancelled:
+            if incremental is not None:
+                stage.update(status="cancelled", reason="the job was cancelled: no certified upgrade was found")
+                _keep_registration(out, incremental, obs, proj.inlier, options.threshold_px, n_views, stage)
+            raise
         stage.update(method=method, stages=metric.stages, certified=metric.certified, intrinsics=metric.ranges,
                      points_used=metric.autocalibration_points, K=None if metric.K is None else metric.K.tolist(),
                      cameras_built_with_one_K=calibration_claim.built_with_one_K(
@@ -626,6 +643,23 @@ def _metric_cameras(out: Reconstruction, metric: upgrade.Metric, n_views: int) -
                 cam.k1 = out.distortion["k1"] * (float(cam.K[0, 0]) / out.distortion["k1_at_focal_px"]) ** 2
                 cam.distortion_centre = out.distortion["centres"][v]
     return P
+
+
+def _keep_registration(out: Reconstruction, metric: upgrade.Metric, obs: Observations, keep: np.ndarray,
+                       threshold_px: float, n_views: int, stage: dict) -> None:
+    """A stop (a cancel, or the job's clock) after the K-unknown registration placed views and
+    before the adjustment: its metric cameras (K [R | t] at the focal length its last round had,
+    refined by that round's adjustment when it ran) are kept rather than only their projective
+    P, after the sanity layer (_check_cameras), and the stage says they are the registration's,
+    not upgraded by the certified autocalibration and not certified."""
+    out.metric = metric = _normalise_frame(metric)
+    _check_cameras(out, metric, obs, keep, threshold_px)
+    _metric_cameras(out, metric, n_views)
+    how = ("its last round's, not adjusted" if stage.get("stopped_before_adjustment")
+           else "refined by the registration's bundle adjustment")
+    stage["reason"] = (f"{stage['reason']}; the cameras returned are the registration's metric cameras (focal length "
+                       f"{float(metric.K[0, 0]):.1f} px, {how}), not upgraded by the certified autocalibration, "
+                       "adjusted again or certified")
 
 
 def _keep_metric(out: Reconstruction, metric: upgrade.Metric, n_views: int, stage: dict,

@@ -96,11 +96,59 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
             u, v = u * scale, v * scale
         return np.stack([k[0] * u + k[2] * v + k[3] - pixels[:, 0], k[1] * v + k[4] - pixels[:, 1]], axis=1)
 
+    def jacobian(Am, S, Bm):
+        """Analytic (ja, js, jb) of ``residual``: pixels = M n' + c with n = cam[:2] / cam[2],
+        n' = n (1 + k1 |n|^2) ("radial") or n, M = [[fx, skew], [0, fy]] (each view's f I for
+        "varying"), cam = exp(w) B + t (a rotation vector's derivative by SO(3)'s left Jacobian)."""
+        from geocert.solvers.reconstruction.calibrated import _left_jacobian, _skew
+
+        k = entries(S)
+        m = len(Am)
+        R = Rotation.from_rotvec(Am[:, :3]).as_matrix()
+        cam = np.einsum("mij,mj->mi", R, Bm) + Am[:, 3:6]
+        z = cam[:, 2]
+        n = cam[:, :2] / z[:, None]
+        dn = np.zeros((m, 2, 3))  # d n / d cam
+        dn[:, 0, 0] = dn[:, 1, 1] = 1.0 / z
+        dn[:, :, 2] = -n / z[:, None]
+        seen, dseen = n, dn  # n' and d n' / d cam
+        if model == "radial":
+            r2 = np.sum(n * n, axis=1)
+            scale = 1.0 + S[1] * r2
+            seen = n * scale[:, None]
+            stretch = scale[:, None, None] * np.eye(2) + 2 * S[1] * n[:, :, None] * n[:, None, :]
+            dseen = stretch @ dn
+        M = np.zeros((m, 2, 2))
+        if model == "varying":
+            M[:, 0, 0] = M[:, 1, 1] = Am[:, 6]
+        else:
+            M[:, 0, 0], M[:, 0, 1], M[:, 1, 1] = k[0], k[2], k[1]
+        du_dcam = M @ dseen
+        d_w = -du_dcam @ _skew(cam - Am[:, 3:6]) @ _left_jacobian(Am[:, :3])
+        ja = np.concatenate([d_w, du_dcam], axis=2)
+        ones, zeros = np.ones(m), np.zeros(m)
+        if model == "varying":
+            ja = np.concatenate([ja, seen[:, :, None]], axis=2)
+        if model in ("simple", "principal", "radial"):  # d / d f: both focal terms move with f
+            columns = [seen]
+            if model == "principal":
+                columns += [np.stack([ones, zeros], axis=1), np.stack([zeros, ones], axis=1)]
+            if model == "radial":
+                columns.append(np.einsum("mij,mj->mi", M, n * np.sum(n * n, axis=1)[:, None]))
+            js = np.stack(columns, axis=2)
+        elif model == "full":  # fx, fy, skew, cx, cy
+            u, v = seen[:, 0], seen[:, 1]
+            js = np.stack([np.stack([u, zeros, v, ones, zeros], axis=1),
+                           np.stack([zeros, v, zeros, zeros, ones], axis=1)], axis=1)
+        else:
+            js = np.zeros((m, 2, 0))
+        return ja, js, du_dcam @ R
+
     start = {"fixed": np.zeros(0), "varying": np.zeros(0), "simple": np.array([np.sqrt(abs(given[0] * given[1]))]),
              "full": given.copy(), "principal": np.array([np.sqrt(abs(given[0] * given[1])), given[3], given[4]]),
              "radial": np.array([np.sqrt(abs(given[0] * given[1])), k1])}[model]
     A, S, B, r, _ = schur.solve(residual, A, start, points.copy(), view, track, f_scale, max_iterations,
-                                should_stop=should_stop)
+                                jacobian=jacobian, should_stop=should_stop)
     k = entries(S)
     K = np.array([[k[0], k[2], k[3]], [0.0, k[1], k[4]], [0.0, 0.0, 1.0]])
     if model == "varying":  # one K per view

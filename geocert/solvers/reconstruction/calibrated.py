@@ -105,6 +105,13 @@ class CalibratedOptions:
     # Then, this many times: every observation's outlier mark cleared, every track triangulated
     # again in the cameras so far, and the final rounds run again (see _restart).
     final_restarts: int = 1
+    # K unknown, COLMAP's way: one focal length shared by every view, refined by each "schur"
+    # adjustment once refine_focal_min_views views are placed (every K's focal terms scaled
+    # alike, the principal points held), so that the views registered later are resected at the
+    # refined focal length rather than at a prior that may be far off. A scale leaving
+    # [1 / MAX_FOCAL_SCALE, MAX_FOCAL_SCALE] of the prior is refused (COLMAP's bogus-camera check).
+    refine_focal: bool = False
+    refine_focal_min_views: int = 3
     seed: int = 0  # OpenCV's RANSAC generator
 
 
@@ -117,6 +124,7 @@ class CalibratedReconstruction:
     inliers: list[np.ndarray]  # per track, bool per observation
     stats: dict = field(default_factory=dict)
     status: str = "ok"  # "ok", "failed" (no initial pair: every view unregistered) or "cancelled"
+    Ks: list | None = None  # each view's K at the end (the ones given, unless refine_focal refined them)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -173,6 +181,19 @@ class _State:
         self.t = [None] * self.n_views
         self.points = np.full((len(tracks), 3), np.nan)
         self.outliers_removed = 0
+        self.focal_scale = 1.0  # the focal length refined so far over the one given (refine_focal)
+
+    def scale_focal(self, scale: float) -> None:
+        """Every K's focal terms (its upper-left 2x2) times ``scale``, the rays made again."""
+        for v in range(self.n_views):
+            self.Ks[v] = self.Ks[v].copy()
+            self.Ks[v][:2, :2] *= scale
+            self.Kinv[v] = np.linalg.inv(self.Ks[v])
+        self.focal_scale *= scale
+        for v in range(self.n_views):
+            sel = self.obs_view == v
+            h = np.c_[self.obs_px[sel], np.ones(sel.sum())] @ self.Kinv[v].T
+            self.obs_ray[sel] = h[:, :2] / h[:, 2:3]
 
     @property
     def registered(self) -> np.ndarray:
@@ -396,6 +417,9 @@ def _bundle_adjust(state: _State, fixed: int, max_nfev: int, options: Calibrated
     return int(result.nfev)
 
 
+MAX_FOCAL_SCALE = 10.0  # refine_focal: the refined focal length within this factor of the one given
+
+
 def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options: CalibratedOptions,
                          track_mask: np.ndarray | None = None) -> int:
     """The metric bundle adjustment of ``_bundle_adjust`` by Levenberg-Marquardt on the cameras'
@@ -422,31 +446,40 @@ def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options
     o_cam, o_pt = cam_of_view[state.obs_view[obs]], pt_of_track[state.obs_track[obs]]
     Ks = np.array(state.Ks)[state.obs_view[obs]]
     px = state.obs_px[obs]
+    # refine_focal: one shared scale s of every K's focal terms (pixels = c + s F xc[:2] / xc[2])
+    focal = options.refine_focal and len(views) >= options.refine_focal_min_views
+    F, centre = Ks[:, :2, :2], Ks[:, :2, 2]
 
-    def project(Am, Bm):
+    def project(Am, S, Bm):
         R = Rotation.from_rotvec(Am[:, :3]).as_matrix()
         xc = np.einsum("nij,nj->ni", R, Bm) + Am[:, 3:6]
-        h = np.einsum("nij,nj->ni", Ks, xc)
-        z = np.where(np.abs(h[:, 2]) < 1e-12, 1e-12, h[:, 2])
-        return R, xc, h, z
+        z = np.where(np.abs(xc[:, 2]) < 1e-12, 1e-12, xc[:, 2])
+        seen = np.einsum("nij,nj->ni", F, xc[:, :2] / z[:, None])  # the pixel's offset at scale 1
+        return R, xc, z, seen, (S[0] if focal else 1.0)
 
     def residual(Am, S, Bm):
-        _, _, h, z = project(Am, Bm)
-        return h[:, :2] / z[:, None] - px
+        _, _, _, seen, scale = project(Am, S, Bm)
+        return centre + scale * seen - px
 
     def jacobian(Am, S, Bm):
-        R, xc, h, z = project(Am, Bm)
-        dh = np.zeros((len(Am), 2, 3))
-        dh[:, 0, 0] = dh[:, 1, 1] = 1.0 / z
-        dh[:, :, 2] = -h[:, :2] / (z ** 2)[:, None]
-        du_dxc = dh @ Ks
+        R, xc, z, seen, scale = project(Am, S, Bm)
+        dn = np.zeros((len(Am), 2, 3))  # d (xc[:2] / z) / d xc
+        dn[:, 0, 0] = dn[:, 1, 1] = 1.0 / z
+        dn[:, :, 2] = -xc[:, :2] / (z ** 2)[:, None]
+        du_dxc = scale * F @ dn
         d_w = -du_dxc @ _skew(xc - Am[:, 3:6]) @ _left_jacobian(Am[:, :3])
-        return np.concatenate([d_w, du_dxc], axis=2), np.zeros((len(Am), 2, 0)), du_dxc @ R
+        d_s = seen[:, :, None] if focal else np.zeros((len(Am), 2, 0))
+        return np.concatenate([d_w, du_dxc], axis=2), d_s, du_dxc @ R
 
     A = np.array([np.r_[Rotation.from_matrix(state.R[v]).as_rotvec(), state.t[v]] for v in views])
-    A, _, B, _, iterations = schur.solve(residual, A, np.zeros(0), state.points[tracks].copy(), o_cam, o_pt,
+    A, S, B, _, iterations = schur.solve(residual, A, np.ones(1) if focal else np.zeros(0),
+                                         state.points[tracks].copy(), o_cam, o_pt,
                                          f_scale=options.ba_f_scale_px, max_iterations=max_iterations,
                                          jacobian=jacobian)
+    if focal:
+        if not (np.isfinite(S[0]) and 1 / MAX_FOCAL_SCALE <= state.focal_scale * S[0] <= MAX_FOCAL_SCALE):
+            return int(iterations)  # a bogus focal length: the adjustment is not taken
+        state.scale_focal(float(S[0]))
     Rs = Rotation.from_rotvec(A[:, :3]).as_matrix()
     k = int(cam_of_view[fixed]) if registered[fixed] else 0
     Rf, tf = Rs[k], A[k, 3:6].copy()  # the world moved by X' = Rf X + tf: view k at R = I, t = 0
@@ -796,9 +829,13 @@ def _grow(state: _State, fixed: int, options: CalibratedOptions, stats: dict, ti
           reasons_by_view: dict, callback) -> bool:
     """Steps 2-4 until no view can be added; True when the callback asked to stop."""
     last_tried: dict[int, int] = {}
+    scale = state.focal_scale
     while not state.registered.all():
         if asks_to_stop(callback, {"stage": "registration", "done": int(state.registered.sum()), "total": state.n_views}):
             return True
+        if state.focal_scale != scale:  # refine_focal moved K: a view PnP failed at the old K is tried again
+            last_tried.clear()
+            scale = state.focal_scale
         start = time.perf_counter()
         v, failed = _register_next(state, options, last_tried)
         reasons_by_view.update(failed)
@@ -1090,13 +1127,15 @@ def _result(state: _State, stats: dict, reasons_by_view: dict, status: str) -> C
     obs = np.flatnonzero(np.concatenate(inliers)) if inliers else np.zeros(0, np.int64)
     err, _ = state.reprojection(obs)
     stats["per_view"] = _per_view(state, stats["registered_by"])
+    stats["focal_scale"] = state.focal_scale
     stats.update({"registered": int(registered.sum()), "points": int(valid.sum()),
                   "observations": int(len(obs)), "outliers_removed": state.outliers_removed,
                   "rms_reprojection_px": float(np.sqrt(np.mean(err ** 2))) if len(obs) else math.nan,
                   "ba_iterations": int(sum(stats["ba_nfev"]))})
     return CalibratedReconstruction([None if R is None else R.copy() for R in state.R],
                                     [None if t is None else t.copy() for t in state.t],
-                                    reasons, state.points.copy(), inliers, stats, status)
+                                    reasons, state.points.copy(), inliers, stats, status,
+                                    [K.copy() for K in state.Ks])
 
 
 def refine_cameras(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: list[np.ndarray], rotations: list, translations: list,
