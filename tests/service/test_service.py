@@ -333,6 +333,10 @@ class TestBadInput:
             service.post("/v1/certificates/verify", content=b"{not json", headers={"content-type": "application/json"}),
             400, "body")
         assert (problem["line"], problem["column"]) == (1, 2) and "double quotes" in problem["detail"]
+        problem = self.assert_problem(  # bytes that are not UTF-8 text (found by schemathesis: a 500)
+            service.post("/v1/certificates/verify", content=b'{"a": "\xff\xfe"}',
+                         headers={"content-type": "application/json"}), 400, "body")
+        assert "UTF-8" in problem["detail"]
 
     @pytest.mark.parametrize("headers", [{}, {"content-type": "text/plain"}, {"content-type": "application/x-www-form-urlencoded"}])
     def test_a_body_not_sent_as_json_gets_a_415_naming_the_header(self, service, headers):

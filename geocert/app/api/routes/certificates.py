@@ -62,8 +62,9 @@ async def verify_certificate(request: Request):
     text = await request.body()
     try:  # parsed once, by the verifier's reader, off the event loop (a body becomes ~25 times its size)
         return await run_in_threadpool(_verified, text)
-    except json.JSONDecodeError as exc:
-        syntax = {"loc": ("body", exc.pos), "ctx": {"error": exc.msg}}
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:  # not JSON, or not UTF-8 text
+        syntax = ({"loc": ("body", exc.pos), "ctx": {"error": exc.msg}} if isinstance(exc, json.JSONDecodeError)
+                  else {"loc": ("body", exc.start), "ctx": {"error": f"not UTF-8 ({exc.reason})"}})
         return JSONResponse(json_syntax_problem(syntax, text, str(request.url.path)), status_code=400,
                             media_type=PROBLEM_JSON)
 
