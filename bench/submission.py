@@ -1,4 +1,4 @@
-"""One submission's cost in the API, in-process: the route's own work (``jobs._submit``: the
+"""One submission's cost in the API, in-process: the route's own work (``job_submission._submit``: the
 request's model dump, the kind's parse, the limits, ``JobStore.create`` and queueing the tasks)
 on a body already validated, against an embedded Redis, one thread, no HTTP. Prints per
 submission: CPU and wall milliseconds, the socket writes to Redis (each a round trip: the caller
@@ -50,7 +50,7 @@ def measure(url: str, tracks: int, count: int, profile: bool) -> None:
 
     from bench.faults import triangulation_job
     from geocert.app.api.deps import get_store
-    from geocert.app.api.routes import jobs as routes
+    from geocert.app import job_submission as submission
     from geocert.app.schemas import JobRequest
 
     rng = np.random.default_rng(1)
@@ -59,7 +59,7 @@ def measure(url: str, tracks: int, count: int, profile: bool) -> None:
     store = get_store()
 
     def submit(index: int) -> None:
-        routes._submit(bodies[index % len(bodies)], Response(), store, "public", None)
+        submission._submit(bodies[index % len(bodies)], Response(), store, "public", None)
 
     submit(0)  # first-use costs (connections, Celery's producer) out of the figures
     counter = redis.Redis.from_url(url, decode_responses=True)

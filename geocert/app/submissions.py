@@ -52,7 +52,7 @@ _POOL_LOCK = threading.Lock()
 
 def _ready() -> None:
     """A submission process's first task: what a submission imports, imported."""
-    from geocert.app.api.routes import jobs  # noqa: F401
+    from geocert.app import job_submission  # noqa: F401
 
 
 def _pool() -> ProcessPoolExecutor | None:
@@ -131,7 +131,7 @@ def _submit_body(body: bytes, owner: str, idempotency_key: str | None, environme
     from pydantic import ValidationError
 
     from geocert.app.api.deps import get_store
-    from geocert.app.api.routes.jobs import _submit
+    from geocert.app.job_submission import _submit
     from geocert.app.schemas import JOB_REQUEST
 
     _use(environment)

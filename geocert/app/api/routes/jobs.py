@@ -6,13 +6,11 @@ from __future__ import annotations
 import asyncio
 import base64
 import contextlib
-import hashlib
 import itertools
-import json
 import math
 import re
 from typing import Annotated
-from urllib.parse import urlencode, urlsplit
+from urllib.parse import urlencode
 
 from fastapi import APIRouter, Body, Depends, Header, Path, Query, Request, Response
 from fastapi.responses import StreamingResponse
@@ -21,17 +19,14 @@ from fastapi.routing import APIRoute
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
 from geocert.app.api.deps import Caller, JobStoreDep, error_responses, get_async_redis, rate_limited, stream_slot
-from geocert.settings import chunk_size_for, get_settings, over_budget
+from geocert.settings import get_settings
 from geocert.app import lifecycle
 from geocert.app import shape, streamed, submissions
+from geocert.app.job_submission import _submit
 from geocert.app.errors import ApiProblem
 from geocert.app.schemas import JOB_EXAMPLES, JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
-from geocert.batch import parse_job
-from geocert.kinds import get_kind
-from geocert.workers import logs
-from geocert.workers.destinations import allowed_networks, literal_refusal
-from geocert.workers.queue import can_collect, submit_chunks, task_commands, withdraw_queued
+from geocert.workers.queue import withdraw_queued
 from geocert.workers.store import REDIS_GONE, TERMINAL, JobStore, events, read_job
 
 class StreamedItemsRoute(APIRoute):
@@ -70,57 +65,6 @@ class StreamedItemsRoute(APIRoute):
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"], dependencies=[Depends(rate_limited)],
                    route_class=StreamedItemsRoute)
-
-
-def _check_count(kind, items: int) -> None:
-    settings = get_settings()
-    if items > settings.max_items_per_job:
-        raise ApiProblem(413, f"{items} {kind.item_key} exceed the limit of {settings.max_items_per_job} per job "
-                              "(GEOCERT_MAX_ITEMS_PER_JOB)", f"data/{kind.item_key}")
-
-
-def _check_callback(request: dict) -> None:
-    """A callback_url whose host is written as an address webhooks may not go to (loopback,
-    private, link-local, multicast, reserved; localhost) is a 422 at once; a name is checked when
-    the webhook is delivered, on the address connected to (workers.destinations)."""
-    url = request.get("callback_url")
-    if url:
-        reason = literal_refusal(urlsplit(url).hostname or "", allowed_networks(get_settings().webhook_allowed_networks))
-        if reason is not None:
-            raise ApiProblem(422, f"webhooks go only to public addresses, and this one is {reason} (an operator may "
-                                  "allow networks: GEOCERT_WEBHOOK_ALLOWED_NETWORKS)", "callback_url")
-
-
-def _check_budget(request: dict) -> None:
-    """The job's figures (its kind's request_figures: from the request alone, photos read from
-    their headers) within the server's budget (settings.BUDGETS), else a 413 naming the figure."""
-    exceeded = over_budget(get_kind(request["kind"]).request_figures(request["data"]))
-    if exceeded is not None:
-        raise ApiProblem(413, *exceeded)
-
-
-def _check_limits(kind, parsed, body, request: dict, counts: tuple[int, int] | None = None) -> int:
-    """Raises on a limit passed (lowering default options to the server's maxima); returns the
-    item count. ``counts``: the items and observations, when not all of them are in ``parsed``
-    (a large body's, checked a batch at a time)."""
-    settings = get_settings()
-    items, points = counts if counts is not None else (kind.count(parsed), kind.observations(parsed))
-    _check_count(kind, items)
-    if points > settings.max_points_per_job:
-        raise ApiProblem(413, f"{points} observations exceed the limit of {settings.max_points_per_job} per job "
-                              "(GEOCERT_MAX_POINTS_PER_JOB)", f"data/{kind.item_key}")
-    options, given = request["options"], body.options.model_fields_set
-    for name, maximum, unit, variable in (
-            ("time_limit_s", settings.max_item_time_limit_s, " s per item", "MAX_ITEM_TIME_LIMIT_S"),
-            ("max_nodes", settings.max_item_nodes, " nodes per item", "MAX_ITEM_NODES"),
-            ("job_time_limit_s", settings.max_job_time_limit_s, " s per job", "MAX_JOB_TIME_LIMIT_S")):
-        if name not in options or options[name] <= maximum:  # a kind without the option (stereo_lines)
-            continue
-        if name in given:
-            raise ApiProblem(422, f"exceeds this server's maximum of {maximum:g}{unit} (GEOCERT_{variable})",
-                             f"options/{name}")
-        options[name] = maximum  # a default above the server's maximum is lowered to it
-    return items
 
 
 MAX_WAIT_S = 60  # the longest Prefer: wait honoured (a larger N waits this long)
@@ -204,92 +148,6 @@ async def submit_job(
         finished.status_code = 200
         finished.headers.update({k: v for k, v in response.headers.items() if k != "content-length"})
     return finished
-
-
-def _submit(body, response: Response, store: JobStore, owner: str, idempotency_key: str | None,
-            split: streamed.Split | None = None) -> dict:
-    """The submission itself (synchronous Redis calls: run in FastAPI's thread pool). ``split``:
-    a large body's items, when ``body`` is its head (StreamedItemsRoute)."""
-    request = body.model_dump(mode="json")  # validated by its kind's model (discriminated on "kind")
-    _check_callback(request)
-    _check_budget(request)  # before anything of the job is decoded or built
-    kind, parsed, _ = parse_job(request)  # the solvers' own checks: rank, indices, duplicates
-    upload = None
-    if split is not None:
-        _check_count(kind, split.count)  # before any item is read
-        upload = streamed.upload_items(store.r, split, request, with_digest=idempotency_key is not None)
-    try:
-        items = _check_limits(kind, parsed, body, request,
-                              (upload.count, upload.observations) if upload is not None else None)
-        digest = None
-        if idempotency_key is not None:  # the body's digest only for a key (a whole body hashed: not on every submit)
-            digest = upload.digest if upload is not None else \
-                hashlib.sha256(json.dumps(request, sort_keys=True).encode()).hexdigest()
-            earlier = store.remember_idempotent(owner, idempotency_key, digest)
-            if earlier is not None:
-                return _replay(store, earlier, digest, response)
-        try:
-            # Its tasks' last-resort time limits follow from its own limits (options lowered to the
-            # server's maxima by _check_limits, so parsed again from the request as it will run).
-            bound = kind.time_bound_s(parsed, parse_options(kind, request))
-            meta = _create(store, owner, kind, request, items, upload.key if upload is not None else None, bound)
-        except BaseException:
-            if idempotency_key is not None:
-                store.settle_idempotent(owner, idempotency_key, digest, None)  # free the key for a retry
-            raise
-    finally:
-        if upload is not None:
-            store.r.delete(upload.key)  # gone already once it became a job's item list
-    if idempotency_key is not None:
-        store.settle_idempotent(owner, idempotency_key, digest, meta["id"])
-    response.headers["Location"] = f"/v1/jobs/{meta['id']}"
-    return store.document(meta)
-
-
-def parse_options(kind, request: dict):
-    from geocert.kinds import options_from
-
-    return options_from(kind.options_type, request.get("options"))
-
-
-def _create(store: JobStore, owner: str, kind, request: dict, items: int, items_key: str | None = None,
-            item_time_bound_s: float | None = None) -> dict:
-    settings = get_settings()
-    chunk = chunk_size_for(kind)
-    request_id = logs.current("request_id")
-
-    def enqueue(meta: dict) -> list[tuple[str, tuple]]:  # the tasks queued in the job's own transaction
-        with logs.context(job_id=meta["id"]):
-            return task_commands(meta, request_id)
-
-    collect = can_collect()
-    meta = store.create(kind.name, request, items, chunk, owner, request.get("callback_url"),
-                        settings.max_active_jobs_per_key, chunk_key=kind.chunk_key, items_key=items_key,
-                        item_time_bound_s=item_time_bound_s,
-                        job_time_limit_s=request.get("options", {}).get("job_time_limit_s"),
-                        enqueue=enqueue if collect else None)
-    if meta is None:
-        raise ApiProblem(429, f"this key already has {settings.max_active_jobs_per_key} jobs queued or running "
-                              "(GEOCERT_MAX_ACTIVE_JOBS_PER_KEY); wait for one to end", headers={"Retry-After": "5"})
-    if not collect:  # a broker whose publishes cannot join the job's transaction: published after it
-        with logs.context(job_id=meta["id"]):
-            submit_chunks(meta, request_id)
-    return meta
-
-
-def _replay(store: JobStore, earlier: dict, digest: str, response: Response) -> dict:
-    if earlier["body"] != digest:
-        raise ApiProblem(422, "this Idempotency-Key was used with a different body", "Idempotency-Key")
-    if earlier["job"] is None:
-        raise ApiProblem(409, "a request with this Idempotency-Key is still being processed; retry shortly",
-                         "Idempotency-Key", headers={"Retry-After": "1"})
-    meta = store.get(earlier["job"])
-    if meta is None:
-        raise ApiProblem(404, f"the job made for this Idempotency-Key ({earlier['job']}) no longer exists")
-    response.status_code = 200
-    response.headers["Location"] = f"/v1/jobs/{meta['id']}"
-    response.headers["Idempotent-Replayed"] = "true"
-    return store.document(meta)
 
 
 _JOB_ID = re.compile(r"[0-9a-f]{32}")  # JobStore.create's ids
