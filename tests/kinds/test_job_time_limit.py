@@ -96,11 +96,14 @@ def test_a_reconstruction_stops_at_its_time_limit_in_all_keeping_the_views_regis
 
 
 def test_a_reconstruction_stopped_by_its_clock_after_certified_points_verifies(monkeypatch):
-    """Its clock in all passing in the cameras stage (the first camera's search made to outlast
-    it), its points certified before: the item and the job's statistics read time_limit, and the
-    full certificate verifies. The verifier read a stopped run's item as "cancelled" or by its
-    points only, so it refused this genuine result ("stats/statuses is {'time_limit': 1}, the
-    items give {'optimal': 1}")."""
+    """Its clock in all passing in the cameras stage (a fake clock jumps ahead as the first camera
+    is bounded, standing in for a slow machine), its points certified before: the item and the
+    job's statistics read time_limit, and the full certificate verifies. The verifier read a
+    stopped run's item as "cancelled" or by its points only, so it refused this genuine result
+    ("stats/statuses is {'time_limit': 1}, the items give {'optimal': 1}")."""
+    from types import SimpleNamespace
+
+    from geocert.kinds import reconstruction as kind
     from geocert.solvers.reconstruction import structure, synthetic
     from geocert.solvers.verify import verify_any
 
@@ -108,15 +111,17 @@ def test_a_reconstruction_stopped_by_its_clock_after_certified_points_verifies(m
     data = {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
             "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
                        for views, pixels in scene.tracks]}
-    options = {"certificate": "full", "intrinsics": {"K": [[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]]},
-               "structure_time_limit_s": 2.0, "time_limit_s": 0.5, "autocalibration_time_limit_s": 0.5}
+    options = {"certificate": "full", "intrinsics": {"K": [[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]]}}
+    late = {"s": 0.0}
+    monkeypatch.setattr(kind, "time", SimpleNamespace(perf_counter=lambda: time.perf_counter() + late["s"],
+                                                      process_time=time.process_time))
     bound_camera = structure._bound_camera
 
-    def outlasting(*args, **kwargs):
-        time.sleep(5.0)  # past the clock in all (2 + 2 x 0.5 + 2 x 0.5 = 4 s)
+    def past_the_clock(*args, **kwargs):
+        late["s"] = 1e6
         return bound_camera(*args, **kwargs)
 
-    monkeypatch.setattr(structure, "_bound_camera", outlasting)
+    monkeypatch.setattr(structure, "_bound_camera", past_the_clock)
     result = solve_job({"kind": "reconstruction", "data": data, "options": options})
     assert result["stats"]["statuses"] == {"time_limit": 1}
     assert result["points"] and all(point["certified"] for point in result["points"])

@@ -23,12 +23,17 @@ COLMAP_REGISTERED = 13
 COLMAP_ROTATION_MEDIAN_DEG = 0.53
 
 
-@pytest.fixture(scope="module")
-def temple():
+def photo_set(name: str):
+    """A bench photo set, or the test skipped naming where it comes from (bench/photo_sets.py)."""
     try:
-        return photo_sets.load("templeSparseRing")
+        return photo_sets.load(name)
     except photo_sets.MissingSet as missing:
         pytest.skip(str(missing))
+
+
+@pytest.fixture(scope="module")
+def temple():
+    return photo_set("templeSparseRing")
 
 
 def test_a_sparse_ring_with_k_unknown_registers_and_is_as_accurate_as_colmap(temple):
@@ -54,10 +59,7 @@ def test_a_sparse_ring_with_k_unknown_registers_and_is_as_accurate_as_colmap(tem
 
 @pytest.fixture(scope="module")
 def dino():
-    try:
-        return photo_sets.load("dinoSparseRing")
-    except photo_sets.MissingSet as missing:
-        pytest.skip(str(missing))
+    return photo_set("dinoSparseRing")
 
 
 def test_a_resumed_focal_round_does_not_lose_views_a_new_registration_places(dino):
