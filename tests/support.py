@@ -162,6 +162,27 @@ def embedded_redis_client(tmp_path_factory, **options):
         process.wait(timeout=10)
 
 
+def run_with_redis(tmp_path, code: str, *args: str, timeout: float = 120) -> dict:
+    """Run ``code`` in a Python subprocess beside a real Redis (the task module reads
+    GEOCERT_REDIS_URL when it is imported, so the process must start with it set) and return the
+    JSON object its last printed line holds; the subprocess's error output when it fails."""
+    import json
+    import subprocess
+    import sys
+
+    from geocert.workers.redis_server import start_embedded_redis
+
+    process, url = start_embedded_redis(tmp_path)
+    try:
+        env = {**os.environ, "GEOCERT_REDIS_URL": url}
+        done = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, env=env,
+                              timeout=timeout)
+        assert done.returncode == 0, done.stderr[-3000:]
+        return json.loads(done.stdout.strip().splitlines()[-1])
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
+
 
 @contextlib.contextmanager
 def every_track_searched():

@@ -8,12 +8,7 @@ waited for, never an outcome timed."""
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
-
-from geocert.workers.redis_server import start_embedded_redis
+from tests.support import run_with_redis
 
 CODE = """
 import copy
@@ -99,15 +94,7 @@ print(json.dumps(out))
 
 
 def test_a_job_past_its_clock_ends_once_no_task_of_it_is_busy(tmp_path):
-    redis_process, url = start_embedded_redis(tmp_path)
-    try:
-        env = {**os.environ, "GEOCERT_REDIS_URL": url}
-        done = subprocess.run([sys.executable, "-c", CODE], capture_output=True, text=True, env=env, timeout=300)
-        assert done.returncode == 0, done.stderr[-3000:]
-        out = json.loads(done.stdout.strip().splitlines()[-1])
-    finally:
-        redis_process.terminate()
-        redis_process.wait(timeout=10)
+    out = run_with_redis(tmp_path, CODE, timeout=300)
     kept, not_started = ["optimal", False], ["time_limit", True]
     assert out["heartbeat_while_busy"] == [] and out["status_while_busy"] == "running"
     assert out["ended_by_last_task"] == "succeeded"

@@ -3,12 +3,7 @@ is imported): a job cancelled after its solvers' last check ends "cancelled", it
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
-
-from geocert.workers.redis_server import start_embedded_redis
+from tests.support import run_with_redis
 
 CODE = """
 import json
@@ -34,13 +29,5 @@ print(json.dumps({"status": ended["status"], "items": [item["status"] for item i
 
 
 def test_a_job_cancelled_after_its_last_check_ends_cancelled_with_its_result_whole(tmp_path):
-    redis_process, url = start_embedded_redis(tmp_path)
-    try:
-        env = {**os.environ, "GEOCERT_REDIS_URL": url}
-        out = subprocess.run([sys.executable, "-c", CODE], capture_output=True, text=True, env=env, timeout=120)
-        assert out.returncode == 0, out.stderr[-3000:]
-        ended = json.loads(out.stdout.strip().splitlines()[-1])
-        assert ended == {"status": "cancelled", "items": ["optimal", "optimal"]}
-    finally:
-        redis_process.terminate()
-        redis_process.wait(timeout=10)
+    ended = run_with_redis(tmp_path, CODE)
+    assert ended == {"status": "cancelled", "items": ["optimal", "optimal"]}

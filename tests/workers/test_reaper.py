@@ -6,12 +6,7 @@ killed worker's task delivered again, not re-queued: tests/service/test_durabili
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
-
-from geocert.workers.redis_server import start_embedded_redis
+from tests.support import run_with_redis
 
 CODE = """
 import json, os, sys, time
@@ -59,15 +54,7 @@ print(json.dumps({"job": job_id, "rounds": rounds, "requeued": requeued, "reaps"
 
 
 def run_rounds(tmp_path, case: str) -> dict:
-    redis_process, url = start_embedded_redis(tmp_path)
-    try:
-        env = {**os.environ, "GEOCERT_REDIS_URL": url}
-        out = subprocess.run([sys.executable, "-c", CODE, case], capture_output=True, text=True, env=env, timeout=120)
-        assert out.returncode == 0, out.stderr[-3000:]
-        return json.loads(out.stdout.strip().splitlines()[-1])
-    finally:
-        redis_process.terminate()
-        redis_process.wait(timeout=10)
+    return run_with_redis(tmp_path, CODE, case)
 
 
 def test_a_stranded_job_is_requeued_on_its_second_sighting_not_its_first(tmp_path):

@@ -6,8 +6,8 @@ from __future__ import annotations
 import json
 
 from fastapi import APIRouter, Depends, Request
+from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
-from starlette.concurrency import run_in_threadpool
 
 from geocert.app.api.deps import JobStoreDep, error_responses, rate_limited
 from geocert.app.api.routes.jobs import OwnedJob
