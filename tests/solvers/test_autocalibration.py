@@ -448,3 +448,34 @@ def test_the_metric_stage_tightening_stops_at_a_cancel_or_its_time_limit():
     result = stratified.solve(pr.prepare(cameras, points, image_size, options.intrinsics), options,
                               cancel_in_the_metric_stage)
     assert result.metric.status == "cancelled" and result.metric.rounds == []
+
+
+class TestSplitClock:
+    """A box's tightening before its split is ten programs (each entry of omega minimised and
+    maximised); with many views each takes a tenth of a second or more, and the engine reads its
+    clock only between boxes. Past the stage's deadline a split halves the box untightened."""
+
+    def _problem(self):
+        scene, norm = normalised_scene(6, 0.5, 1)
+        setup = metric.setup_for(norm.cameras, norm.reference, true_plane(scene, norm), RANGES)
+        lo, hi = metric_relaxation.omega_box(RANGES)
+        problem = metric.MetricProblem(setup, lo, hi, record=False)
+        w, value = problem.improve(0.5 * (lo + hi))
+        setup.unit = 1.0 / value
+        problem.upper = value
+        return problem, Box(lo.copy(), hi.copy())
+
+    def test_a_split_before_its_deadline_tightens(self):
+        problem, box = self._problem()
+        children = problem.split(box, None)
+        assert len(children) > 2 or not np.allclose(
+            np.min([c.lo for c in children], axis=0), box.lo) or not np.allclose(
+            np.max([c.hi for c in children], axis=0), box.hi)
+
+    def test_a_split_past_its_deadline_only_halves(self):
+        problem, box = self._problem()
+        problem.deadline = 0.0
+        children = problem.split(box, None)
+        assert len(children) == 2
+        assert np.allclose(np.min([c.lo for c in children], axis=0), box.lo)
+        assert np.allclose(np.max([c.hi for c in children], axis=0), box.hi)

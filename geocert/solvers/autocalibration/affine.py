@@ -152,6 +152,7 @@ def regions_of(norm: frames.Normalised, coef: np.ndarray) -> tuple[list[Region],
 
 
 def solve_affine(norm: frames.Normalised, bnb: BnbOptions, record: bool, callback=None) -> AffineStage:
+    began = time.perf_counter()  # the stage's clock covers its set-up and first fits too
     coef, _ = frames.modulus_coefficients(norm.cameras, norm.reference)
     regions, excluded, reason = regions_of(norm, coef)
     if reason is not None:
@@ -162,6 +163,7 @@ def solve_affine(norm: frames.Normalised, bnb: BnbOptions, record: bool, callbac
         rows = frames.chirality_rows(norm, region.delta)
         all_a, all_b = frames.frame_rows(region.G, rows)
         problem = AffineProblem(region, all_a, all_b, record)
+        problem.deadline = began + bnb.time_limit_s
         problems.append(problem)
         centre = np.zeros(3) if problem.in_domain(np.zeros(3)) else 0.5 * (region.lo + region.hi)
         v, value = problem.improve(centre)
@@ -171,7 +173,6 @@ def solve_affine(norm: frames.Normalised, bnb: BnbOptions, record: bool, callbac
     for problem in problems:
         problem.region.setup.unit = unit
     lower_bounds, nodes, statuses = [], 0, []
-    began = time.perf_counter()
     for problem in problems:
         region = problem.region
         start = best_v if best_region is region else np.zeros(3)

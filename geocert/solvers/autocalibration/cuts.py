@@ -7,6 +7,7 @@ dual bound), which the verifier rebuilds (proofs.check_leaves)."""
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from typing import Callable
 
@@ -62,12 +63,13 @@ def side_bounds(program, dims: int, stop: Callable[[], bool] | None = None) -> l
     return [(k, sign, float(value), z) for (k, sign, _, z), value in zip(solved, values) if math.isfinite(value)]
 
 
-def tighten_box(build_capped: Callable, box: Box, cap: float, record: bool
+def tighten_box(build_capped: Callable, box: Box, cap: float, record: bool, stop: Callable[[], bool] | None = None
                 ) -> tuple[list[tuple[Box, CutProof]], Box | None]:
     """The slabs of the box its tightening cuts off, each with its cut, in a guillotine order
     (they and what remains partition the box), and what remains (None when nothing does).
     ``build_capped(lo, hi, cap)`` is the relaxation with the cost capped; its first variables are
-    the box's coordinates."""
+    the box's coordinates. ``stop()`` ends the tightening early (side_bounds): the cuts found so
+    far stand, and what remains is only less tight."""
     try:
         program = build_capped(box.lo, box.hi, cap)
     except ValueError:
@@ -76,7 +78,7 @@ def tighten_box(build_capped: Callable, box: Box, cap: float, record: bool
         return [], box
     current_lo, current_hi = box.lo.copy(), box.hi.copy()
     slabs: list[tuple[Box, CutProof]] = []
-    for k, sign, value, z in side_bounds(program, len(box.lo)):
+    for k, sign, value, z in side_bounds(program, len(box.lo), stop):
         side = value if sign > 0 else -value  # points costing <= cap: x_k >= side (or <= side)
         if sign > 0 and side > current_lo[k]:
             slab_hi = current_hi.copy()
@@ -101,9 +103,13 @@ class BoxSearch:
     """The bound and split of a stage's branch-and-bound problem (core.bnb.BranchProblem); a
     stage supplies ``build(lo, hi, cap, cap_row=False)`` (its relaxation, or None where the box
     holds no point of the domain), ``unit`` (the programs' cost scale), ``root_lo``/``root_hi``
-    (the widths splits are relative to), ``record`` and ``objective``/``improve``."""
+    (the widths splits are relative to), ``record`` and ``objective``/``improve``; and
+    ``deadline`` (time.perf_counter's clock), past which a split tightens no further: with many
+    views a box's tightening is ten programs of a tenth of a second or more, which the engine's
+    clock, read between boxes, would not stop."""
 
     tightening = True  # tighten a box before splitting it
+    deadline = math.inf
 
     def __init__(self, root_lo: np.ndarray, root_hi: np.ndarray, record: bool):
         self.root_lo, self.root_hi, self.record = root_lo, root_hi, record
@@ -148,12 +154,15 @@ class BoxSearch:
         status = BoxStatus.EMPTY if bound >= upper_bound else BoxStatus.BOUNDED
         return BoxBound(status, bound, candidate=candidate, proof=proof)
 
+    def past_deadline(self) -> bool:
+        return time.perf_counter() > self.deadline
+
     def split(self, box: Box, bound: BoxBound) -> list[Box]:
         """Tighten the box, then halve what remains along its widest side relative to the root's."""
         slabs: list[Box] = []
         if self.tightening and math.isfinite(self.upper):
             cut_off, box = tighten_box(lambda lo, hi, cap: self.build(lo, hi, cap, cap_row=True), box, self.upper,
-                                       self.record)
+                                       self.record, self.past_deadline)
             for slab, proof in cut_off:
                 self.cuts[id(slab)] = proof
             slabs = [slab for slab, _ in cut_off]

@@ -167,7 +167,9 @@ linear_baseline = relax.linear_baseline
 
 def solve_metric(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, bnb: BnbOptions, record: bool,
                  callback=None) -> MetricStage:
+    began = time.perf_counter()  # the stage's clock covers its first fits too
     problem = MetricProblem(setup, lo, hi, record)
+    problem.deadline = began + bnb.time_limit_s
     best, upper = None, math.inf
     baseline, _ = linear_baseline(setup)
     centre = relax.w_of_intrinsics({name: 0.5 * (a + b) for name, (a, b) in setup.ranges.items()}) \
@@ -178,7 +180,6 @@ def solve_metric(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, bnb: 
             best, upper = w, value
     setup.unit = 1.0 / upper if 0 < upper < math.inf else 1.0
     search_lo, search_hi, rounds = lo, hi, []
-    began = time.perf_counter()
     if math.isfinite(upper):
         def stop() -> bool:  # the stage's own time limit, or a cancel (asked of the callback as the search asks)
             elapsed = time.perf_counter() - began
