@@ -360,3 +360,44 @@ class TestStageCountsPastTheNestedCheck:
         result = stored("reconstruction")
         UNREAD_COUNTS[edit](result)
         assert not _valid(result)
+
+
+# --- a reconstruction's restated calibration stages, read with an absolute floor ------------------
+
+def _restated(stage: int, **fields) -> dict:
+    result = stored("reconstruction")
+    restated = _stage(result, "autocalibration")["stages"]
+    restated[stage].update(fields)
+    return result
+
+
+class TestRestatedCalibrationStagesAbsoluteFloor:
+    """The last round's fix compares every figure a reconstruction's autocalibration stage
+    restates of its calibration certificate (cost, lower_bound, gap) with the claim, through
+    reconstruction.verification._close: within ROUNDING (1e-9) of max(scale=1.0, |claim|), an
+    absolute 1e-9 for every figure below 1, and the calibration's costs are far below it (the
+    stored reconstruction: affine 9.05e-30, metric 9.63e-29, both lower bounds 0; the module's own
+    MAX_CALIBRATION_ABS_GAP comment: "of order 1e-3 on real tracks"). The stored reconstruction
+    verifies with its restated metric stage stating lower_bound 9e-10 and gap -9e-10 (a bound 9.3e18
+    times the stage's cost, and the negative gap the fix refuses at -1), or cost and lower_bound
+    9e-10 with gap 0 (a calibration said to cost 9.3e18 times what it costs, proven optimal); the
+    affine stage likewise. The same floor reads a camera's cost and optimal_cost (_close with its
+    default scale 1.0), absolute for a camera costing below 1 px^2. Suggested fix: a restated
+    figure is a copy, so compare it exactly (or within 1e-9 of its own magnitude, no floor), and
+    refuse a restated gap below 0 or a lower bound above its cost, as the claim check does; give
+    _close no default scale, each caller naming the magnitude its figure is read at."""
+
+    def test_the_genuine_result_verifies(self):
+        assert _valid(stored("reconstruction"))
+
+    def test_the_forgery_is_false(self):
+        claim = stored("reconstruction")["calibration_certificate"]["items"][1]
+        assert claim["lower_bound"] == 0.0 and claim["cost"] < 1e-27  # 9e-10 is 9.3e18 times its cost
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("stage", [0, 1])
+    @pytest.mark.parametrize("fields", [{"lower_bound": 9e-10, "gap": -9e-10},
+                                        {"cost": 9e-10, "lower_bound": 9e-10, "gap": 0.0}],
+                             ids=["bound_above_cost_negative_gap", "cost_and_bound_restated"])
+    def test_a_restated_figure_not_the_claims_is_refused(self, stage, fields):
+        assert not _valid(_restated(stage, **fields))
