@@ -81,22 +81,23 @@ class TestAbsoluteGapCapInTheCostsUnits:
     metric optimum K of focal 1,015.6 px, proven lower bound 0.0214838, its K costing 0.0214843)
     asking abs_gap 1 (rehashed; 1 is within the cap) verifies with a K of focal 1,188.2 px (17%
     off) "certified optimal": that K costs 0.794, 37 times the proven minimum, and the genuine
-    proof is untouched (the claim gap 0.77 < abs_gap). Likewise in pixels: three tracks of the
-    stored cameras observed with 0.05 px noise, solved genuinely with abs_gap 1, return a trivial
-    proof (lower bound 0) for each; their points moved to cost 0.41 and 0.69 px^2 (optima 0.00061
-    and 0.0131, 662 and 52 times) verify "certified optimal" (TestAbsoluteGapCapInPixels). In calibrated (normalised) image
-    coordinates, the thesis's setting, a cost of 1 is a residual of a radian. The direct method
-    (stored: optimum quadric cost 1.42e-4) at abs_gap 1 verifies a quadric A Q A' (A the identity
-    plus 0.1 of a seeded normal matrix) costing 0.196, 1,380 times the proven minimum, its twelve
-    focal lengths up to 34% from the certified ones. The reconstruction's own check caps its
-    calibration certificate's abs_gap at 1e-9 (reconstruction.verification.MAX_CALIBRATION_ABS_GAP:
-    "the autocalibration's costs are of order 1e-3 on real tracks"); the autocalibration kind
-    takes 1. Suggested fix: make
-    abs_gap serve only where the cost is near 0, as its default (1e-7) intends: an item certified
-    through abs_gap (gap > rel_gap * cost) must still have lower_bound >= (1 - MAX_REL_GAP) * cost,
-    or cap abs_gap per kind in the kind's own units (autocalibration's costs are dimensionless
-    ratios), or state in the report's scope, and in the item's status, that its tolerance is not
-    below its cost (proven nothing beyond 0)."""
+    proof is untouched (the claim's gap 0.77 < abs_gap). The direct method (stored: optimum
+    quadric cost 1.42e-4) at abs_gap 1 verifies a quadric A Q A' (A the identity plus 0.1 of a
+    seeded normal matrix) costing 0.196, 1,380 times the proven minimum, its twelve focal lengths
+    up to 34% from the certified ones. Likewise in pixels (TestAbsoluteGapCapInPixels): three
+    tracks of the stored cameras observed with 0.05 px of noise, solved genuinely with abs_gap 1,
+    return a trivial proof (lower bound 0) for each; their points moved to cost 0.41 and 0.69 px^2
+    (optima 0.00061 and 0.0131: 662 and 52 times) verify "certified optimal". In calibrated
+    (normalised) image coordinates, the thesis's setting, a cost of 1 is a residual of a radian;
+    a bilinear frame costing below 1 is certified by the trivial proof alike. The reconstruction's
+    own check caps its calibration certificate's abs_gap at 1e-9
+    (reconstruction.verification.MAX_CALIBRATION_ABS_GAP: "the autocalibration's costs are of
+    order 1e-3 on real tracks"); the autocalibration kind takes 1. Suggested fix: cap abs_gap per
+    kind at what its cost's units make negligible (autocalibration 1e-9, as the reconstruction
+    already does; the pixel kinds far below a squared pixel), and since a document chooses its
+    coordinates' units, say in the report's scope, beside each item certified through abs_gap
+    (gap above rel_gap * cost), that its proof bounds its cost only to within abs_gap, i.e. that
+    "optimal" there means "costs at most abs_gap more than the optimum"."""
 
     @staticmethod
     def forged() -> tuple[dict, dict]:
@@ -273,9 +274,10 @@ class TestDerivedArrayReadAtItsLargestEntry:
     solved genuinely (both stages certified, the far point returned at 1.03e12), verifies with
     every other point replaced by [500, 0, 0], or mirrored through the origin, or scaled tenfold:
     the structure returned is not what the certified plane and K give (a scene point moved by up
-    to 6e5 times the scene's size), and _close allows 1e-9 x 1.03e12 = 1,030 units a coordinate. The cameras' centre
-    and t (a list of records, each field read at its largest over the cameras) fall the same way
-    beside one far camera; the direct method's points and Ks through the same _close. Suggested
+    to 6e5 times the scene's size), and _close allows 1e-9 x 1.03e12 = 1,030 units a
+    coordinate. By the same reading (not built here), the cameras' centres and t, a list of
+    records each field read at its largest over the cameras, would move beside one far camera,
+    and the direct method's points through the same _close. Suggested
     fix: compare each point (each row) at its own scale, best as a homogeneous vector (H times
     the returned point parallel to the data's point, within 1e-9 in angle), and each camera's
     fields at that camera's scale (its P = K [R | t] parallel to the data's camera times H), so
