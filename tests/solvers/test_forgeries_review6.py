@@ -398,6 +398,15 @@ LONG_INTEGER = _genuine_text()[:-1] + ', "note": ' + "1" * 5000 + "}"
 REPEATED_SURROGATE = '{"\\ud800": 1, "\\ud800": 2}'
 
 
+def _surrogate_data_key() -> str:
+    """The stored stratified autocalibration with a member "\\ud800" in its certificate's data
+    (rehashed), which the kind's reader names in its refusal."""
+    result = stored("autocalibration_stratified")
+    result["certificate"]["data"]["\ud800"] = 1
+    rehash(result["certificate"])
+    return json.dumps(result)  # ASCII: the surrogate written as its escape
+
+
 class TestTextsTheReaderCannotRead:
     """Not a forgery: bad input answered with a crash where docs/certificate.md promises a refusal
     ("geocert verify ... exits ... 2 when it cannot read the input"; the project's rule: "bad input
@@ -410,12 +419,17 @@ class TestTextsTheReaderCannotRead:
     500 "Internal error". (2) A member name holding a lone surrogate (\\ud800, valid JSON escape)
     repeated in one object is refused as RepeatedName, whose 422 names the member as its field:
     the problem document cannot be encoded as UTF-8, and the route answers 500
-    (UnicodeEncodeError). Also seen, not wrong but inconsistent: the route reads a body in UTF-16,
-    UTF-32 or with a UTF-8 byte-order mark (json.loads detects them from bytes) and verifies it,
-    while the CLI refuses the same file (exit 2: it reads the text as UTF-8). Suggested fix: catch
+    (UnicodeEncodeError). (3) A certificate whose data names a member "\\ud800" (autocalibration:
+    read_data refuses "data/<key>: unknown field", the key written raw) gets a report whose
+    failure detail holds the lone surrogate: the route answers 500 (PydanticSerializationError)
+    where the CLI prints the report (json.dump escapes it). Also seen, not wrong but
+    inconsistent: the route reads a body in UTF-16, UTF-32 or with a UTF-8 byte-order mark
+    (json.loads detects them from bytes) and verifies it, while the CLI refuses the same file
+    (exit 2: it reads the text as UTF-8). Suggested fix: catch
     ValueError in load_document and refuse it as unreadable (exit 2, 400 naming the position),
-    and write a refused member name with its non-ASCII characters escaped (as the verifier's own
-    details do with repr), or answer problem documents with ensure_ascii."""
+    and write a member name or any other text from the document with its non-ASCII characters
+    escaped (as most of the verifier's details do with repr), or refuse lone surrogates when
+    reading the text."""
 
     def test_the_genuine_text_verifies_through_the_route(self):
         response = _verify_route_client().post("/v1/certificates/verify", content=_genuine_text().encode(),
@@ -440,6 +454,12 @@ class TestTextsTheReaderCannotRead:
                                                headers={"content-type": "application/json"})
         assert response.status_code in (400, 422), response.text[:300]
         assert response.headers["content-type"].startswith("application/problem+json")
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_a_report_naming_a_surrogate_is_answered(self):
+        response = _verify_route_client().post("/v1/certificates/verify", content=_surrogate_data_key().encode(),
+                                               headers={"content-type": "application/json"})
+        assert response.status_code == 200 and response.json()["valid"] is False, response.text[:300]
 
 
 # --- a reconstruction's stage counts, past the nested-count check ---------------------------------
