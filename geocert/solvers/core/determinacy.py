@@ -46,14 +46,16 @@ class Determinacy:
     proven: bool = False
     # What a certificate proves beside the estimate (proven_document): None when nothing is.
     proven_intervals: dict | None = None
+    level: str | None = None  # how cost_increase was chosen, when not the default's way
+
 
     def document(self) -> dict:
         determined = all(fixes(i) for i in self.intervals)
         return {"method": self.method, "proven": self.proven or self.proven_intervals is not None,
                 "proven_intervals": self.proven_intervals, "determined": determined and not self.warnings,
-                "level": (f"parameters whose squared residuals exceed the optimum's by at most cost_increase "
-                          f"(max of {SIGMAS:g}^2 times the fit's residual variance and the certified gap), "
-                          "by the local curvature (Gauss-Newton)"),
+                "level": self.level or (f"parameters whose squared residuals exceed the optimum's by at most "
+                                        f"cost_increase (max of {SIGMAS:g}^2 times the fit's residual variance and "
+                                        "the certified gap), by the local curvature (Gauss-Newton)"),
                 "cost_increase": _finite(self.cost_increase), "redundancy": self.redundancy,
                 "intervals": self.intervals, "warnings": self.warnings}
 

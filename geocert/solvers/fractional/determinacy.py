@@ -38,8 +38,10 @@ def _centres(cameras: np.ndarray) -> np.ndarray:
 
 
 def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at_infinity: bool,
-          cost: float | None, lower: float | None, sublevel: dict | None = None) -> dict | None:
-    """``sublevel``: the proven interval its certificate carries, if any (proven_track)."""
+          cost: float | None, lower: float | None, sublevel: dict | None = None,
+          pooled: tuple[float, int] | None = None) -> dict | None:
+    """``sublevel``: the proven interval its certificate carries, if any (proven_track);
+    ``pooled``: the job's pooled cost increase (pooled_increase), None for the track's own."""
     if point is None:
         return None
     cameras = np.asarray(cameras, dtype=float)
@@ -65,7 +67,11 @@ def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at
     quantities = {name: (float(X[k]), np.eye(3)[k], scale) for k, name in enumerate(("x", "y", "z"))}
     if scale is not None:
         quantities["depth_view0"] = (length, ray / length, length)
-    out = curvature_intervals(J, residuals(X), quantities, certified_gap(cost, lower))
+    gap = certified_gap(cost, lower)
+    if pooled is not None:  # a floor on delta, as the gap is
+        gap = pooled[0] if gap is None else max(gap, pooled[0])
+    out = curvature_intervals(J, residuals(X), quantities, gap)
+    out.level = None if pooled is None else pooled_level(pooled)
     out.proven_intervals = proven_track(sublevel)
     rays = X[None, :] - centres
     rays = rays[np.all(np.isfinite(rays), axis=1)]
@@ -99,29 +105,90 @@ def tracks_many(cameras: np.ndarray, tracks: list, results: list) -> list[dict |
         result = results[i]
         if result is not None and result.point is not None:  # at infinity
             out[i] = track(cameras[tracks[i][0]], tracks[i][1], result.point, True, result.cost, result.lower_bound)
+    projected = {}
+    with np.errstate(all="ignore"):
+        for n, members in groups.items():
+            try:
+                projected[n] = _project(cameras, [tracks[i] for i in members], X[members])
+            except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+                pass
+        pooled = pooled_increase({n: (p[-1] * p[-1]).sum(axis=1) for n, p in projected.items()})
     for n, members in groups.items():
         try:
+            if n not in projected:
+                raise ValueError("not projected")
             with np.errstate(all="ignore"):
                 documents = _finite_tracks(cameras, centres, [tracks[i] for i in members], X[members], cost[members],
-                                           lower[members], [proven[i] for i in members], n)
+                                           lower[members], [proven[i] for i in members], n, projected[n], pooled)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):  # as safely(): never fails a solve
             documents = [safely(track, cameras[tracks[i][0]], tracks[i][1], X[i].tolist(), False, results[i].cost,
-                                results[i].lower_bound, proven[i]) for i in members]
+                                results[i].lower_bound, proven[i], pooled) for i in members]
         for i, document in zip(members, documents):
             out[i] = document
     return out
 
 
-def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.ndarray, lowers: np.ndarray,
-                   proven: list, n: int) -> list[dict]:
-    """The documents of tracks of n views each with finite points X (G, 3), their costs and lower
-    bounds (G,) (nan where none), and their certificates' sublevels (proven_track)."""
-    views = np.array([v for v, _ in tracks])  # (G, n)
-    cams = cameras[views]  # (G, n, 3, 4)
-    points = np.array([p for _, p in tracks], dtype=float)  # (G, n, 2)
+def _project(cameras: np.ndarray, tracks: list, X: np.ndarray) -> tuple:
+    """Tracks of one length: their views (G, n), cameras (G, n, 3, 4), projections (G, n, 3), image
+    points (G, n, 2) and residuals (G, 2n) at the points X (G, 3)."""
+    views = np.array([v for v, _ in tracks])
+    cams = cameras[views]
+    points = np.array([p for _, p in tracks], dtype=float)
     proj = np.einsum("gnij,gj->gni", cams, np.concatenate([X, np.ones((len(X), 1))], axis=1))
     image = proj[..., :2] / proj[..., 2:3]
-    residuals = (image - points).reshape(len(X), -1)
+    return views, cams, proj, image, (image - points).reshape(len(X), -1)
+
+
+# Two-sided, as 3 standard errors of a normal estimate: the Student quantile used for a pooled
+# variance of finitely many degrees of freedom covers as often.
+COVERAGE = math.erf(SIGMAS / math.sqrt(2.0))
+OUTLIER_TAIL = 1e-3  # a track whose squared residuals exceed their chi-square's 99.9% point is not pooled
+
+
+def pooled_increase(costs_by_views: dict[int, np.ndarray]) -> tuple[float, int] | None:
+    """cost_increase from the residual variance of all a job's tracks together (``costs_by_views``:
+    their sums of squared residuals, by track length): the image noise is the detector's, shared
+    by every track, and one track of few views estimates it from one or a few degrees of freedom
+    (a 2-view track from one: 3 standard errors of such an estimate cover the truth about 85% of
+    the time, not 99.7%). Robustly: the variance's first estimate is the median of each track's
+    own over its chi-square's median; tracks beyond that chi-square's 99.9% point are left out;
+    the rest pooled (sum of squares over degrees of freedom D), times the squared Student quantile
+    of D degrees of freedom at 3 standard errors' coverage. (increase, D), or None without a
+    track of 2 views or more with a finite cost."""
+    from scipy.special import chdtri, stdtrit
+
+    dof = np.concatenate([np.full(len(c), 2 * n - 3) for n, c in costs_by_views.items()]) if costs_by_views \
+        else np.zeros(0)
+    cost = np.concatenate(list(costs_by_views.values())) if costs_by_views else np.zeros(0)
+    use = (dof > 0) & np.isfinite(cost)
+    dof, cost = dof[use].astype(float), cost[use]
+    if not len(cost):
+        return None
+    first = float(np.median(cost / chdtri(dof, 0.5)))
+    if not first > 0:
+        return None
+    inliers = cost <= chdtri(dof, OUTLIER_TAIL) * first
+    total = int(dof[inliers].sum())
+    variance = float(cost[inliers].sum()) / total
+    quantile = float(stdtrit(total, 0.5 + COVERAGE / 2))
+    return quantile * quantile * variance, total
+
+
+def pooled_level(pooled: tuple[float, int]) -> str:
+    """The documents' ``level`` when cost_increase comes from the pooled variance."""
+    return (f"parameters whose squared residuals exceed the optimum's by at most cost_increase: the largest of the "
+            f"residual variance pooled over the job's tracks ({pooled[1]} degrees of freedom, tracks beyond their "
+            f"chi-square's {1 - OUTLIER_TAIL:.1%} point left out) times the squared Student quantile of "
+            f"{SIGMAS:g} standard errors' coverage, {SIGMAS:g}^2 times the track's own residual variance, and the "
+            "certified gap; by the local curvature (Gauss-Newton)")
+
+
+def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.ndarray, lowers: np.ndarray,
+                   proven: list, n: int, projected: tuple, pooled: tuple[float, int] | None) -> list[dict]:
+    """The documents of tracks of n views each with finite points X (G, 3), their costs and lower
+    bounds (G,) (nan where none), their certificates' sublevels (proven_track), their projections
+    (_project) and the job's pooled cost increase (pooled_increase)."""
+    views, cams, proj, image, residuals = projected
     J = ((cams[..., :2, :3] - image[..., None] * cams[..., 2:3, :3]) / proj[..., 2:3, None]).reshape(len(X), -1, 3)
     information = np.einsum("gki,gkj->gij", J, J)
     finite = np.all(np.isfinite(J), axis=(1, 2))
@@ -147,6 +214,8 @@ def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.
     cost = (residuals * residuals).sum(axis=1)
     redundancy = 2 * n - 3
     delta = SIGMAS ** 2 * cost / redundancy if redundancy > 0 else np.zeros(len(X))
+    if pooled is not None:
+        delta = np.maximum(delta, pooled[0])
     gaps = np.maximum(costs - lowers, 0.0)  # certified_gap: nan unless both are finite
     delta = np.where(np.isfinite(gaps), np.maximum(delta, gaps), delta)
     bounded = finite & np.isfinite(delta)
@@ -158,7 +227,8 @@ def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.
     half = np.sqrt(delta[:, None] * np.where(fixed[:, None], g * g / safe_values[:, None], 0.0).sum(axis=2))
     documents = []
     for i in range(len(X)):
-        out = Determinacy(cost_increase=float(delta[i]), redundancy=redundancy)
+        out = Determinacy(cost_increase=float(delta[i]), redundancy=redundancy,
+                          level=None if pooled is None else pooled_level(pooled))
         scale = float(length[i]) if has_depth[i] else None
         for k in range(4 if has_depth[i] else 3):
             value = float(quantity[i, k])
