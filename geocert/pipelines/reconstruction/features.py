@@ -524,7 +524,7 @@ def select_keypoints(keypoints, max_features: int) -> list:
     high-resolution photo are mostly at the finest scales: foliage, gravel, sensor and JPEG noise,
     which the next photo, taken from elsewhere, does not repeat. On Sceaux Castle's 6 Mpx photos
     the 4000 strongest of a close-up under foliage (94,000 detected) matched no other photo
-    (9-12 chance inliers), where its 4000 largest-scale keypoints have 312 inliers with the next
+    (10-12 chance inliers), where its 4000 largest-scale keypoints have 312 inliers with the next
     photo. COLMAP's SIFT keeps the coarsest octaves the same way (dropping the finest first).
     Images with fewer keypoints than the limit keep them all, as before."""
     if not max_features or len(keypoints) <= max_features:
@@ -559,7 +559,7 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
             stats["stopped"] = f"{where}, at options.features.time_limit_s ({options.time_limit_s:g} s)"
         return True
 
-    # every keypoint detected (nfeatures 0), then select_keypoints' choice described
+    # nfeatures 0: every keypoint detected, then select_keypoints keeps the largest-scale ones
     sift = cv2.SIFT_create(nfeatures=0, contrastThreshold=options.contrast_threshold,
                            edgeThreshold=options.edge_threshold)
     keypoints, descriptors = [], []
