@@ -78,7 +78,7 @@ class FeaturesIn(Strict):
     suit textured scenes)."""
 
     max_features: int | None = Field(None, **_F["max_features"], description="keypoints kept per image, the "
-                                     "strongest (0: all; default 4000)")
+                                     "largest-scale (0: all; default 4000)")
     contrast_threshold: Finite | None = Field(None, **_F["contrast_threshold"],
                                               description="SIFT's contrast threshold (default 0.02, COLMAP's; "
                                                           "lower finds fainter keypoints)")

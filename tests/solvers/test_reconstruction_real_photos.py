@@ -75,3 +75,24 @@ def test_a_resumed_focal_round_does_not_lose_views_a_new_registration_places(din
     rounds = out.stages[0]["focal_rounds"]
     assert any(step["resumed"] for step in rounds) and rounds[-1].get("again_from_a_new_pair")
     assert sum(c.registered for c in out.cameras) >= 6
+
+
+@pytest.fixture(scope="module")
+def sceaux():
+    return photo_set("sceaux")
+
+
+def test_high_resolution_photos_with_k_known_register_as_many_views_as_colmap(sceaux):
+    """Sceaux Castle (photographs (c) 2012 Pierre Moulon, openMVG's sample data): 11 JPEGs of 6 Mpx,
+    openMVG's K. COLMAP registers all 11 (K known or not). 100_7110.JPG, a close-up under
+    foliage, detects 94,000 keypoints; when the 4000 kept were the strongest responses (foliage,
+    gravel) it verified no pair and stayed unregistered, "sees 0 triangulated points"."""
+    names = sceaux.order("file")
+    images = [cv2.imread(str(sceaux.path(n)), cv2.IMREAD_GRAYSCALE) for n in names]
+    found = features.tracks_from_images(images, features.FeatureOptions())
+    last = len(names) - 1
+    assert any(last in pair["views"] for pair in found.stats["verified_pairs"])
+    options = ReconstructionOptions(intrinsics={"K": sceaux.K.tolist()}, resect_cameras=False)
+    out = pipeline.reconstruct(found.tracks, found.image_sizes, options,
+                               lambda stage, *progress: stage.startswith("structure"))
+    assert [names[c.view] for c in out.cameras if not c.registered] == []
