@@ -170,11 +170,14 @@ def check_job(job: dict, result: dict) -> None:
     result document); and its progress (when it has one) is the one the service recomputes from
     the result when the job ends (workers.tasks.final_progress): items_total, items_done (the
     items not cancelled), items_certified and nodes from stats, no open box, and the bounds the
-    sums of the lower bounds and costs of the items stating both. A member the document does not
-    state claims nothing and is not asked for."""
+    sums of the lower bounds and costs of the items stating both; a succeeded job states no error.
+    A member the document does not state claims nothing and is not asked for."""
     if "kind" in job and job["kind"] != result.get("kind"):  # a member not stated claims nothing
         raise Invalid("returned", f"the job's kind {job.get('kind')!r:.40} is not its result's "
                                   f"{result.get('kind')!r:.40}")
+    if job.get("status") == "succeeded" and job.get("error") is not None:
+        raise Invalid("returned", "a succeeded job's error is null (the service states one only for a job that "
+                                  f"failed), this job's is {job['error']!r:.80}")
     if "status" not in job and job.get("progress") is None:
         return
     stats = result.get("stats")
@@ -467,9 +470,26 @@ def _check_hashes(document: dict, options: dict) -> None:
 RETURNED_FIELDS = ("status", "certified", "cost", "lower_bound", "gap")
 
 
+def check_members(kind, result: dict) -> None:
+    """A result holds only the members its kind writes, and so does each object it nests one level
+    down (its items, cameras, stats: VerifiedKind.members). A member no check reads is not a place
+    to hide what a reader might take for part of the proof (a top-level ``certified``, an item's
+    ``verified``, a list of items of another kind), as strict.record refuses one in a proof."""
+    for where, names in kind.members:
+        value = result if where == "" else result.get(where)
+        for index, entry in enumerate(value if isinstance(value, list) else [value]):
+            extra = sorted(str(name) for name in set(entry) - set(names)) if isinstance(entry, dict) else []
+            if extra:
+                place = "the result" if where == "" else f"{where}/{index}" if isinstance(value, list) else where
+                raise Invalid("returned", f"{place} has a member {extra[0]!r:.40} no {kind.name} result writes "
+                                          f"(its members: {', '.join(names)}); a member no check reads claims "
+                                          "nothing, so it is refused")
+
+
 def _check_returned(result: dict, certificate: dict) -> None:
     kind = _kind(certificate["kind"])
     key = kind.item_key
+    check_members(kind, result)
     if result.get("kind") != certificate["kind"] or result.get("norm") != certificate["options"].get("norm"):
         raise Invalid("returned", "the result's kind or norm differs from its certificate's")
     items = result.get(key)
