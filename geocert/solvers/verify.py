@@ -20,8 +20,8 @@ from typing import Any, Callable
 import numpy as np
 
 from geocert.solvers.core.cones import rounding_uncounted
-from geocert.solvers.core.certificates import (BOUND_TOLERANCE, FORMAT, OBJECTIVE_TOLERANCE, VERSION, data_hash,
-                                               problem_hash)
+from geocert.solvers.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
+                                               data_hash, problem_hash)
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost
 from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
                                          informational, number as _number, record, work_budget)
@@ -266,10 +266,12 @@ def _verify(document: Any, returned: dict | None) -> Report:
         tallies["format"][0] += 1
         options = checked_options(document["kind"], document["options"])
         tallies["options"][0] += 1
-        _check_hashes(document, options)
+        earlier_form = _check_hashes(document, options)
         tallies["data_hash"][0] += 1
         _check_item_count(document)
         report.scope = scope_statement(document["kind"], options)
+        if earlier_form is not None:
+            report.scope["problem_sha256"] = earlier_form
     except Invalid as exc:
         fail(exc.check, None, exc.detail)
         items = []
@@ -454,15 +456,23 @@ def _document_items(document: Any) -> list[dict]:
     return document["items"]
 
 
-def _check_hashes(document: dict, options: dict) -> None:
+def _check_hashes(document: dict, options: dict) -> str | None:
+    """The data's and the problem's hashes; returns what the report's scope says of a problem hash
+    of a kind's earlier form (None for the current one)."""
     expected = data_hash(document["kind"], document["data"])
     if expected != document["data_sha256"]:
         raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
-    expected = problem_hash(document["kind"], document["data"], options,
-                            getattr(_adapter(document["kind"]), "claim_options", None))
-    if expected != document["problem_sha256"]:
-        raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and "
-                                   f"options (norm, max_residual, rel_gap, abs_gap) hash to {expected!r}")
+    adapter = _adapter(document["kind"])
+    names = getattr(adapter, "claim_options", None)
+    expected = problem_hash(document["kind"], document["data"], options, names)
+    if expected == document["problem_sha256"]:
+        return None
+    earlier = getattr(adapter, "earlier_claim_options", None)  # a kind whose hash came to cover more options
+    if earlier is not None and problem_hash(document["kind"], document["data"], options, earlier) \
+            == document["problem_sha256"]:
+        return adapter.check_earlier_form(options)  # refuses what that form cannot tell apart
+    raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and options "
+                               f"({', '.join(names or CLAIM_OPTIONS)}) hash to {expected!r}")
 
 
 # What a result returns of each item, which must equal what its certificate proves (and the

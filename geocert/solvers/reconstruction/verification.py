@@ -54,7 +54,7 @@ from geocert.solvers.core.strict import Invalid, number, numbers
 from geocert.solvers.fractional import residual_claims
 from geocert.solvers.fractional.items import TRACKS, TrackItems
 from geocert.solvers.fractional.options import TriangulationOptions
-from geocert.solvers.reconstruction import calibration_claim, camera_claim, motion_claim
+from geocert.solvers.reconstruction import calibration_claim, camera_claim, hashed_options, motion_claim
 from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
 
 ROUNDING = 1e-9  # relative: what JSON round trips and a recomputed cost may differ by
@@ -611,6 +611,7 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
         if not (is_number(options.get(name)) and 0 <= options[name] <= cap):
             raise Invalid("returned", f"the calibration certificate's {name} {options.get(name)!r} is beyond {cap}: "
                                       "it would certify a K whatever it costs")
+    hashed_options.check_calibration_options(options, (result.get("certificate") or {}).get("options") or {})
     stage = _stage(result, "autocalibration")
     if stage.get("method") != options.get("method", "stratified"):
         raise Invalid("returned", f"stages/autocalibration/method is {stage.get('method')!r:.40}, the calibration "
@@ -899,6 +900,12 @@ def _check_unstarted(result: dict, registered: list[dict]) -> None:
 class ReconstructionItems(TrackItems):
     """Points as triangulations (TrackItems), plus ``check_result``: the rest of the result."""
 
+    # problem_sha256 covers every option a claim or check reads; the earlier form (the points'
+    # options only) is read as hashed_options says
+    claim_options = hashed_options.CLAIM_OPTIONS
+    earlier_claim_options = hashed_options.EARLIER_CLAIM_OPTIONS
+    check_earlier_form = staticmethod(hashed_options.check_earlier_form)
+
     @staticmethod
     def job_outcomes(result: dict) -> list:
         """One item, certified when it has points and every one is; its status "optimal" then,
@@ -927,6 +934,7 @@ class ReconstructionItems(TrackItems):
             if not 0 <= checked["camera_rel_gap"] <= camera_claim.MAX_REL_GAP:
                 raise Invalid("options", f"options/camera_rel_gap {checked['camera_rel_gap']!r} is beyond "
                                          f"{camera_claim.MAX_REL_GAP}: a camera would be certified whatever it costs")
+        checked.update(hashed_options.checked(options))
         return checked
 
     def scope_statement(self, options: dict) -> dict:
