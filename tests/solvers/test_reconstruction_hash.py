@@ -90,3 +90,19 @@ def test_a_calibration_certificate_at_other_gaps_than_the_options_is_refused():
     result["calibration_certificate"] = other["certificate"]
     report = verify_any(result)
     assert not report.valid and "metric_rel_gap" in report.first_failure["detail"]
+
+
+def test_an_earlier_form_without_the_calibration_gaps_is_held_to_their_defaults(at_defaults):
+    """The earlier form's hash does not cover whether metric_rel_gap is stated: removed, it is
+    read as its default, so a calibration certificate at another gap is still refused."""
+    from geocert.batch import solve_job
+
+    result = copy.deepcopy(at_defaults)
+    calibration = result["calibration_certificate"]
+    other = solve_job({"kind": "autocalibration", "data": calibration["data"],
+                       "options": {**calibration["options"], "metric_rel_gap": 0.5}})
+    assert all(stage["certified"] for stage in other["stages"])
+    result["calibration_certificate"] = other["certificate"]
+    del result["certificate"]["options"]["metric_rel_gap"]
+    report = verify_any(_earlier_form(result))
+    assert not report.valid and "metric_rel_gap" in report.first_failure["detail"]

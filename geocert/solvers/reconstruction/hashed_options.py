@@ -82,11 +82,13 @@ def check_calibration_options(calibration: dict, options: dict) -> None:
     """The calibration certificate was solved with the gaps and ranges the reconstruction's options
     (which its hash covers) ask for: its rel_gap the autocalibration_rel_gap, its metric_rel_gap
     the metric_rel_gap, its intrinsics the ranges (none for "unknown" or a known K). An option the
-    reconstruction's document does not state (the earlier form's) is not compared."""
-    intrinsics = options.get("intrinsics")
-    ranges = None if intrinsics is None else {} if intrinsics == "unknown" or "K" in intrinsics else intrinsics
-    for name, expected in (("rel_gap", options.get("autocalibration_rel_gap")),
-                           ("metric_rel_gap", options.get("metric_rel_gap")), ("intrinsics", ranges)):
-        if expected is not None and calibration.get(name) != expected:
+    reconstruction's document does not state is read as its default (every document the kind
+    writes states them; the earlier form's hash does not cover their absence)."""
+    stated = {name: default if options.get(name) is None else options[name] for name, default in EARLIER_DEFAULTS.items()}
+    intrinsics = stated["intrinsics"]
+    ranges = {} if intrinsics == "unknown" or "K" in intrinsics else intrinsics
+    for name, expected in (("rel_gap", stated["autocalibration_rel_gap"]), ("metric_rel_gap", stated["metric_rel_gap"]),
+                           ("intrinsics", ranges)):
+        if calibration.get(name) != expected:
             raise Invalid("returned", f"the calibration certificate's {name} is {calibration.get(name)!r:.80}, the "
                                       f"reconstruction's options ask for {expected!r:.80}")
