@@ -106,3 +106,14 @@ def test_an_earlier_form_without_the_calibration_gaps_is_held_to_their_defaults(
     del result["certificate"]["options"]["metric_rel_gap"]
     report = verify_any(_earlier_form(result))
     assert not report.valid and "metric_rel_gap" in report.first_failure["detail"]
+
+
+def test_an_earlier_form_without_camera_rel_gap_is_read_at_rel_gap_only_below_its_default(at_defaults):
+    """camera_rel_gap absent is read as rel_gap (documents from before it was an option); in the
+    earlier form, whose hash does not cover its absence, only where rel_gap is at most its
+    default."""
+    result = copy.deepcopy(at_defaults)
+    del result["certificate"]["options"]["camera_rel_gap"]
+    result["certificate"]["options"]["rel_gap"] = 0.4
+    report = verify_any(_earlier_form(result))
+    assert not report.valid and "options/camera_rel_gap is absent" in report.first_failure["detail"]

@@ -74,6 +74,13 @@ def check_earlier_form(options: dict) -> str:
                                        f"{EARLIER_DEFAULTS[name]!r}: a document of that form cannot be told from one "
                                        f"whose {name} was changed after it was written (solve it again for a hash "
                                        "covering every option a claim reads)")
+    # camera_rel_gap absent is read as rel_gap (documents from before it was an option): only where
+    # that is no looser than its default, since the earlier form does not cover its absence
+    if options.get("camera_rel_gap") is None and not options["rel_gap"] <= EARLIER_DEFAULTS["camera_rel_gap"]:
+        raise Invalid("data_hash", f"problem_sha256 has the earlier form, options/camera_rel_gap is absent and "
+                                   f"rel_gap {options['rel_gap']!r} (read in its place) exceeds its default "
+                                   f"{EARLIER_DEFAULTS['camera_rel_gap']!r}: a document of that form cannot be told "
+                                   "from one whose camera_rel_gap was removed after it was written")
     return (f"the earlier form: it covers the kind, the data and {', '.join(EARLIER_CLAIM_OPTIONS)} only; the options "
             f"it leaves out ({', '.join(EARLIER_DEFAULTS)}) were checked to be at their defaults or absent")
 
