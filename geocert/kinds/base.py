@@ -10,6 +10,7 @@ one module (or package) defining a ProblemKind and one line in ``geocert/kinds/_
 from __future__ import annotations
 
 import dataclasses
+import typing
 from typing import Any, Callable, Protocol, runtime_checkable
 
 from pydantic import BaseModel
@@ -116,7 +117,7 @@ class Registry:
         verified_kinds.register(verified_kinds.VerifiedKind(
             kind.name, kind.item_key, tuple(kind.solution_fields), kind.verification,
             getattr(kind, "options_type", None) if not hasattr(kind.verification, "checked_options") else None,
-            kind.certifies))
+            kind.certifies, result_members(kind.result_model) if kind.certifies else ()))
         self._kinds[kind.name] = kind
         return kind
 
@@ -133,6 +134,29 @@ class Registry:
 
     def names(self) -> list[str]:
         return list(self._kinds)
+
+
+def result_members(model: type[BaseModel]) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """A result model's members, and those of each model (or list of models) it nests one level
+    down, as the verifier's registry lists them (VerifiedKind.members); a model keeping members
+    beyond its own (a certificate document: the verifier closes those itself) is left open."""
+    members = [("", tuple(sorted(model.model_fields)))]
+    for name, field in sorted(model.model_fields.items()):
+        nested = _model_in(field.annotation)
+        if nested is not None and nested.model_config.get("extra") != "allow":
+            members.append((name, tuple(sorted(nested.model_fields))))
+    return tuple(members)
+
+
+def _model_in(annotation: Any) -> type[BaseModel] | None:
+    """The model an annotation holds (itself, a list's, an optional's), or None."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for argument in typing.get_args(annotation):
+        found = _model_in(argument)
+        if found is not None:
+            return found
+    return None
 
 
 def options_from(options_type: type, given: dict | None, field: str = "options"):

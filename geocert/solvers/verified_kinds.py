@@ -46,16 +46,51 @@ class VerifiedKind:
     verification: Any  # the adapter (read, item, domain, proofs, and optional hooks)
     options_type: type | None = None  # for kinds whose cost is a norm of residuals (verify.residual_options)
     certifies: bool = True
+    # The members its result may hold, and those of each object (or list's objects) it nests one
+    # level down: ((where, names), ...), where "" is the result itself. Exactly the kind's result
+    # model's (geocert.kinds checks the two agree when it registers the kind): a member no kind
+    # writes is refused, never carried unread (verify.check_members).
+    members: tuple[tuple[str, tuple[str, ...]], ...] = ()
+
+
+def _members(**nested: tuple[str, ...]) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """A result's members (``nested[""]``, the certificates added) and its nested objects'."""
+    own = nested.pop("result") + ("certificate",)
+    return (("", tuple(sorted(own + tuple(nested)))),) + tuple(
+        (where, tuple(sorted(names))) for where, names in sorted(nested.items()) if names)
+
+
+# What every item (track, map, frame) reports about its solve, and a job's counts.
+OUTCOME = ("cost", "lower_bound", "gap", "status", "certified", "nodes", "elapsed_s", "reason", "certificate",
+           "determinacy")
+STATS = ("items", "certified", "nodes", "solve_s", "elapsed_s", "statuses")
+TRACK = OUTCOME + ("point", "at_infinity")
+MAP_MEMBERS = _members(result=("kind", "norm"), maps=OUTCOME + ("matrix", "residuals"), stats=STATS)
 
 
 VERIFIED_KINDS: dict[str, VerifiedKind] = {kind.name: kind for kind in (
-    VerifiedKind("triangulation", "tracks", ("point", "at_infinity"), TRACKS, TriangulationOptions),
-    VerifiedKind("resection", "maps", ("matrix",), MapItems("resection", {(3, 2)}), MapOptions),
-    VerifiedKind("homography", "maps", ("matrix",), MapItems("homography", {(2, 2), (3, 3)}), MapOptions),
-    VerifiedKind("autocalibration", "stages", ("plane_at_infinity", "K", "dual_absolute_quadric"), STAGES),
-    VerifiedKind("bilinear", "frames", ("camera", "coefficients"), FRAMES),
+    VerifiedKind("triangulation", "tracks", ("point", "at_infinity"), TRACKS, TriangulationOptions,
+                 members=_members(result=("kind", "norm"), tracks=TRACK, stats=STATS)),
+    VerifiedKind("resection", "maps", ("matrix",), MapItems("resection", {(3, 2)}), MapOptions, members=MAP_MEMBERS),
+    VerifiedKind("homography", "maps", ("matrix",), MapItems("homography", {(2, 2), (3, 3)}), MapOptions,
+                 members=MAP_MEMBERS),
+    VerifiedKind("autocalibration", "stages", ("plane_at_infinity", "K", "dual_absolute_quadric"), STAGES,
+                 members=_members(
+                     result=("kind", "method", "status", "reason", "plane_at_infinity", "K", "Ks",
+                             "dual_absolute_quadric", "upgrade", "points", "intrinsics"),
+                     stages=OUTCOME + ("name", "plane_at_infinity", "K", "dual_absolute_quadric"),
+                     cameras=("K", "R", "t", "center"), baseline=("method", "K", "psd", "cost"), stats=STATS)),
+    VerifiedKind("bilinear", "frames", ("camera", "coefficients"), FRAMES, members=_members(
+        result=("kind", "norm", "coefficients"),
+        frames=OUTCOME + ("camera", "coefficients", "shape", "residuals", "baseline"), stats=STATS)),
     VerifiedKind("stereo_lines", "pairs", ("R", "t"), NoCertificates(), certifies=False),
-    VerifiedKind("reconstruction", "points", ("point", "at_infinity"), RECONSTRUCTION),
+    VerifiedKind("reconstruction", "points", ("point", "at_infinity"), RECONSTRUCTION, members=_members(
+        result=("kind", "norm", "stages", "summary", "images", "camera_certificate", "calibration_certificate"),
+        points=TRACK + ("track", "observations"),
+        cameras=("view", "name", "registered", "reason", "image_size", "K", "R", "t", "center", "P", "k1",
+                 "distortion_centre", "cost", "lower_bound", "gap", "optimal_cost", "certified", "status",
+                 "bound_reason", "points", "degrees_of_freedom", "tolerance", "searched"),
+        stats=STATS)),
 )}
 
 

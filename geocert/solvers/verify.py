@@ -20,8 +20,8 @@ from typing import Any, Callable
 import numpy as np
 
 from geocert.solvers.core.cones import rounding_uncounted
-from geocert.solvers.core.certificates import (BOUND_TOLERANCE, FORMAT, OBJECTIVE_TOLERANCE, VERSION, data_hash,
-                                               problem_hash)
+from geocert.solvers.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
+                                               data_hash, problem_hash)
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost
 from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
                                          informational, number as _number, record, work_budget)
@@ -170,11 +170,14 @@ def check_job(job: dict, result: dict) -> None:
     result document); and its progress (when it has one) is the one the service recomputes from
     the result when the job ends (workers.tasks.final_progress): items_total, items_done (the
     items not cancelled), items_certified and nodes from stats, no open box, and the bounds the
-    sums of the lower bounds and costs of the items stating both. A member the document does not
-    state claims nothing and is not asked for."""
+    sums of the lower bounds and costs of the items stating both; a succeeded job states no error.
+    A member the document does not state claims nothing and is not asked for."""
     if "kind" in job and job["kind"] != result.get("kind"):  # a member not stated claims nothing
         raise Invalid("returned", f"the job's kind {job.get('kind')!r:.40} is not its result's "
                                   f"{result.get('kind')!r:.40}")
+    if job.get("status") == "succeeded" and job.get("error") is not None:
+        raise Invalid("returned", "a succeeded job's error is null (the service states one only for a job that "
+                                  f"failed), this job's is {job['error']!r:.80}")
     if "status" not in job and job.get("progress") is None:
         return
     stats = result.get("stats")
@@ -263,10 +266,12 @@ def _verify(document: Any, returned: dict | None) -> Report:
         tallies["format"][0] += 1
         options = checked_options(document["kind"], document["options"])
         tallies["options"][0] += 1
-        _check_hashes(document, options)
+        earlier_form = _check_hashes(document, options)
         tallies["data_hash"][0] += 1
         _check_item_count(document)
         report.scope = scope_statement(document["kind"], options)
+        if earlier_form is not None:
+            report.scope["problem_sha256"] = earlier_form
     except Invalid as exc:
         fail(exc.check, None, exc.detail)
         items = []
@@ -451,15 +456,23 @@ def _document_items(document: Any) -> list[dict]:
     return document["items"]
 
 
-def _check_hashes(document: dict, options: dict) -> None:
+def _check_hashes(document: dict, options: dict) -> str | None:
+    """The data's and the problem's hashes; returns what the report's scope says of a problem hash
+    of a kind's earlier form (None for the current one)."""
     expected = data_hash(document["kind"], document["data"])
     if expected != document["data_sha256"]:
         raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
-    expected = problem_hash(document["kind"], document["data"], options,
-                            getattr(_adapter(document["kind"]), "claim_options", None))
-    if expected != document["problem_sha256"]:
-        raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and "
-                                   f"options (norm, max_residual, rel_gap, abs_gap) hash to {expected!r}")
+    adapter = _adapter(document["kind"])
+    names = getattr(adapter, "claim_options", None)
+    expected = problem_hash(document["kind"], document["data"], options, names)
+    if expected == document["problem_sha256"]:
+        return None
+    earlier = getattr(adapter, "earlier_claim_options", None)  # a kind whose hash came to cover more options
+    if earlier is not None and problem_hash(document["kind"], document["data"], options, earlier) \
+            == document["problem_sha256"]:
+        return adapter.check_earlier_form(options)  # refuses what that form cannot tell apart
+    raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and options "
+                               f"({', '.join(names or CLAIM_OPTIONS)}) hash to {expected!r}")
 
 
 # What a result returns of each item, which must equal what its certificate proves (and the
@@ -467,9 +480,26 @@ def _check_hashes(document: dict, options: dict) -> None:
 RETURNED_FIELDS = ("status", "certified", "cost", "lower_bound", "gap")
 
 
+def check_members(kind, result: dict) -> None:
+    """A result holds only the members its kind writes, and so does each object it nests one level
+    down (its items, cameras, stats: VerifiedKind.members). A member no check reads is not a place
+    to hide what a reader might take for part of the proof (a top-level ``certified``, an item's
+    ``verified``, a list of items of another kind), as strict.record refuses one in a proof."""
+    for where, names in kind.members:
+        value = result if where == "" else result.get(where)
+        for index, entry in enumerate(value if isinstance(value, list) else [value]):
+            extra = sorted(str(name) for name in set(entry) - set(names)) if isinstance(entry, dict) else []
+            if extra:
+                place = "the result" if where == "" else f"{where}/{index}" if isinstance(value, list) else where
+                raise Invalid("returned", f"{place} has a member {extra[0]!r:.40} no {kind.name} result writes "
+                                          f"(its members: {', '.join(names)}); a member no check reads claims "
+                                          "nothing, so it is refused")
+
+
 def _check_returned(result: dict, certificate: dict) -> None:
     kind = _kind(certificate["kind"])
     key = kind.item_key
+    check_members(kind, result)
     if result.get("kind") != certificate["kind"] or result.get("norm") != certificate["options"].get("norm"):
         raise Invalid("returned", "the result's kind or norm differs from its certificate's")
     items = result.get(key)

@@ -72,3 +72,25 @@ def test_a_served_kind_registered_with_another_contract_is_refused():
     with pytest.raises(ValueError):
         register(dataclasses.replace(known, item_key="points"))
     assert VERIFIED_KINDS["triangulation"] is known
+
+
+def test_the_verifiers_result_members_are_the_kinds_result_models():
+    """The members the verifier lets a result hold (VerifiedKind.members) are its kind's result
+    model's, one level down included; a model with one more member is refused at registration."""
+    import dataclasses
+
+    import pytest
+    from pydantic import create_model
+
+    from geocert.kinds import KINDS
+    from geocert.kinds.base import result_members
+    from geocert.solvers.verified_kinds import VERIFIED_KINDS, register
+
+    for kind in KINDS:
+        expected = result_members(kind.result_model) if kind.certifies else ()
+        assert VERIFIED_KINDS[kind.name].members == expected, kind.name
+    model = KINDS.get("triangulation").result_model
+    wider = create_model("WiderResult", __base__=model, certified=(bool, True))
+    known = VERIFIED_KINDS["triangulation"]
+    with pytest.raises(ValueError):
+        register(dataclasses.replace(known, members=result_members(wider)))

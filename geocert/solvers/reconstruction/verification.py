@@ -37,9 +37,10 @@ a result to them (docs/certificate.md, "Reconstruction"):
 
 A camera no bound could certify is not searched (structure.resect_cameras) and claims no bound.
 (A result without ``searched`` on its cameras, from before it was stated, is read as every
-registered camera searched.) The calibration certificate ties the certified K to the cameras
-returned through K alone: it proves K optimal for the projective reconstruction in its data,
-which the pipeline made from the same tracks; the report's scope says so.
+registered camera searched.) The calibration certificate proves K optimal for the projective
+reconstruction in its data, which the pipeline made from the same tracks before the bundle
+adjustment; calibration_tie ties it to the result by its images of every shared observation, and
+the report's scope states how close they are.
 """
 
 from __future__ import annotations
@@ -54,15 +55,12 @@ from geocert.solvers.core.strict import Invalid, number, numbers
 from geocert.solvers.fractional import residual_claims
 from geocert.solvers.fractional.items import TRACKS, TrackItems
 from geocert.solvers.fractional.options import TriangulationOptions
-from geocert.solvers.reconstruction import calibration_claim, camera_claim, motion_claim
+from geocert.solvers.reconstruction import (calibration_claim, calibration_tie, camera_claim, hashed_options,
+                                           motion_claim)
 from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
 
 ROUNDING = 1e-9  # relative: what JSON round trips and a recomputed cost may differ by
 MAX_CALIBRATION_ABS_GAP = 1e-9  # the autocalibration's costs are of order 1e-3 on real tracks (the pipeline's: 1e-12)
-# The calibration certificate's projective reconstruction must reproject the returned observations
-# it shares within TIE_PX (median), or TIE_RATIO times the returned cameras' own error there (the
-# returned cameras are refined further); a certificate of another scene is hundreds of pixels off.
-TIE_PX, TIE_RATIO, TIE_OBSERVATIONS = 10.0, 10.0, 12
 CAMERA_FIELDS = ("K", "R", "t", "center", "P")
 
 
@@ -587,8 +585,8 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
     certificate (stratified: both stages certified) whose metric stage states that K. Returns the
     intrinsics ranges it was proven over (its options', completed from its image size), against
     which the certified K's range edges are judged. The certificate's data is the projective
-    reconstruction the pipeline upgraded: it proves K optimal for that reconstruction, and is tied
-    to the cameras returned by K alone (the scope says so)."""
+    reconstruction the pipeline upgraded: it proves K optimal for that reconstruction, which
+    calibration_tie ties to the result (the scope states how closely)."""
     from geocert.solvers.autocalibration import problem as pr
 
     document = result.get("calibration_certificate")
@@ -611,6 +609,7 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
         if not (is_number(options.get(name)) and 0 <= options[name] <= cap):
             raise Invalid("returned", f"the calibration certificate's {name} {options.get(name)!r} is beyond {cap}: "
                                       "it would certify a K whatever it costs")
+    hashed_options.check_calibration_options(options, (result.get("certificate") or {}).get("options") or {})
     stage = _stage(result, "autocalibration")
     if stage.get("method") != options.get("method", "stratified"):
         raise Invalid("returned", f"stages/autocalibration/method is {stage.get('method')!r:.40}, the calibration "
@@ -625,57 +624,9 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
                 for name in ("cost", "lower_bound", "gap")) or given.get("status") != claim.get("status") \
                 or given.get("name") != ("affine", "metric")[k]:
             raise Invalid("returned", f"stages/autocalibration/stages/{k} is not the calibration certificate's claim")
-    _tie_calibration_data(result, stage, data)
+    calibration_tie.tie(result, stage, data)
     size = data.get("image_size")
     return pr.resolve_ranges(dict(options.get("intrinsics") or {}), None if size is None else tuple(size))
-
-
-def _tie_calibration_data(result: dict, stage: dict, data: dict) -> None:
-    """The calibration certificate's projective reconstruction is this result's: its cameras are
-    the views the autocalibration stage names (certificate_views), its points the tracks it names
-    (certificate_tracks), and they reproject the returned observations they share (the median
-    error within TIE_PX, or TIE_RATIO times the returned cameras' own on those observations): a
-    certificate of another scene, or of a reconstruction these tracks do not fit, is refused."""
-    views, tracks = stage.get("certificate_views"), stage.get("certificate_tracks")
-    cameras = numbers(data.get("cameras"), "calibration_certificate/data/cameras", (None, 3, 4), "returned")
-    points = numbers(data.get("points"), "calibration_certificate/data/points", (None, 4), "returned")
-    n_views = len(result["cameras"])
-    if not (isinstance(views, list) and isinstance(tracks, list) and len(views) == len(cameras) == len(set(views))
-            and len(tracks) == len(points) == len(set(tracks))
-            and all(isinstance(v, int) and 0 <= v < n_views for v in views)
-            and all(isinstance(t, int) and t >= 0 for t in tracks)):
-        raise Invalid("returned", "stages/autocalibration must name the view of each calibration certificate camera "
-                                  "and the track of each point (certificate_views, certificate_tracks)")
-    size = data.get("image_size")
-    if size is not None and any(camera.get("image_size") not in (None, list(size)) for camera in result["cameras"]
-                                if camera.get("view") in views):
-        raise Invalid("returned", "the calibration certificate's image_size is not its views'")
-    camera_of, point_of = {v: k for k, v in enumerate(views)}, {t: k for k, t in enumerate(tracks)}
-    by_view = {int(c["view"]): np.asarray(c["P"], dtype=float) for c in result["cameras"] if c.get("P") is not None}
-    theirs, ours = [], []
-    for point in result["points"]:
-        j = point_of.get(point.get("track"))
-        if j is None:
-            continue
-        for view, u, v in point.get("observations") or []:
-            i = camera_of.get(int(view))
-            if i is None:
-                continue
-            with np.errstate(all="ignore"):
-                x = cameras[i] @ points[j]
-                theirs.append(math.hypot(x[0] / x[2] - u, x[1] / x[2] - v))
-                if point.get("point") is not None and int(view) in by_view:
-                    X = np.asarray(point["point"] if point.get("at_infinity") else [*point["point"], 1.0])
-                    y = by_view[int(view)] @ X
-                    ours.append(math.hypot(y[0] / y[2] - u, y[1] / y[2] - v))
-    if len(theirs) < TIE_OBSERVATIONS:
-        raise Invalid("returned", f"the calibration certificate's reconstruction shares {len(theirs)} observations "
-                                  f"with the result (at least {TIE_OBSERVATIONS} tie it to these tracks)")
-    error = float(np.median(np.nan_to_num(theirs, nan=np.inf)))
-    allowed = max(TIE_PX, TIE_RATIO * float(np.median(ours)) if ours else TIE_PX)
-    if not error <= allowed:
-        raise Invalid("returned", f"the calibration certificate's reconstruction reprojects the result's observations "
-                                  f"{error:.3g} px off (median; at most {allowed:.3g}): it is not these tracks'")
 
 
 def _judged_motion(result: dict, registered: list[dict], summary: dict, stage: dict) -> tuple[str | None, bool]:
@@ -899,6 +850,12 @@ def _check_unstarted(result: dict, registered: list[dict]) -> None:
 class ReconstructionItems(TrackItems):
     """Points as triangulations (TrackItems), plus ``check_result``: the rest of the result."""
 
+    # problem_sha256 covers every option a claim or check reads; the earlier form (the points'
+    # options only) is read as hashed_options says
+    claim_options = hashed_options.CLAIM_OPTIONS
+    earlier_claim_options = hashed_options.EARLIER_CLAIM_OPTIONS
+    check_earlier_form = staticmethod(hashed_options.check_earlier_form)
+
     @staticmethod
     def job_outcomes(result: dict) -> list:
         """One item, certified when it has points and every one is; its status "optimal" then,
@@ -927,6 +884,7 @@ class ReconstructionItems(TrackItems):
             if not 0 <= checked["camera_rel_gap"] <= camera_claim.MAX_REL_GAP:
                 raise Invalid("options", f"options/camera_rel_gap {checked['camera_rel_gap']!r} is beyond "
                                          f"{camera_claim.MAX_REL_GAP}: a camera would be certified whatever it costs")
+        checked.update(hashed_options.checked(options))
         return checked
 
     def scope_statement(self, options: dict) -> dict:
@@ -945,8 +903,10 @@ class ReconstructionItems(TrackItems):
               "against the input, which this document does not hold; "
               "summary.calibration is checked to be about the K returned; a certified K (calibration.certified_K) "
               "is the one the calibration certificate beside it proves optimal for the projective reconstruction in "
-              "that certificate's data (the pipeline's, from the same tracks: it is tied to the cameras returned "
-              "through K alone); the critical motion behind `determined` is judged again from the cameras and "
+              "that certificate's data (the pipeline's, from the same tracks, before the bundle adjustment: it images every "
+              "observation it shares with the returned points within calibration_tie.allowed_px of where the returned "
+              "cameras do, TIE_RATIO times their RMS error there, calibration_tie.largest_px at most; so K is proven "
+              "optimal for a reconstruction that close to the result's, not for the result's own); the critical motion behind `determined` is judged again from the cameras and "
               "certified points returned")
         return statement
 
@@ -976,7 +936,12 @@ class ReconstructionItems(TrackItems):
         _check_projective_counts(result)
         _check_distortion(result, registered, own)
         _check_calibration(result, registered, verify)
-        return {"labels": labels}
+        scoped = {"labels": labels}
+        calibration = result.get("calibration_certificate")
+        if isinstance(calibration, dict):  # carried with a certified K: how far its reconstruction lies
+            scoped["calibration_tie"] = calibration_tie.tie(result, _stage(result, "autocalibration"),
+                                                            calibration.get("data") or {})
+        return scoped
 
 
 RECONSTRUCTION = ReconstructionItems()

@@ -1,0 +1,95 @@
+"""What ties a reconstruction's calibration certificate to the result carrying it (numpy only).
+
+The calibration certificate proves its K optimal for the projective reconstruction in its own
+data: the pipeline's, from the same tracks, which the returned cameras refine by bundle
+adjustment. Its cameras must be the views the autocalibration stage names (certificate_views),
+its points the tracks it names (certificate_tracks), and it must image every observation it
+shares with the result's placed points where the returned cameras image it, to within TIE_RATIO
+times the returned cameras' own RMS error on those observations, plus CONVERGENCE of the
+observations' largest coordinate. A median, or a floor of 10 px, let half the observations lie
+anywhere, or a reconstruction 8% off in focal length pass on tracks whose own error is 0.5 px.
+
+CONVERGENCE is what the projective stage's own convergence leaves on tracks the returned cameras
+fit exactly: on the kind's example (pixels rounded to 1e-6, the returned cameras' RMS error
+3e-7 px) the two images of a shared observation are up to 0.020 px apart, 3.5e-5 of the largest
+coordinate (571); 2e-4 (0.11 px there) leaves a margin of 5.8, and widens the allowance by about
+what a focal length 0.05% off moves these images (8% moves the stored scene's up to 20 px).
+
+TIE_RATIO, measured on genuine results (the largest distance between the two images of a shared
+observation over the returned cameras' RMS error there; docs/certificate.md): 0.03 on the stored
+synthetic reconstruction, 0.90 on templeSparseRing's photos, 2.9 on the Oxford Corridor's and the
+Oxford Dinosaur's tracks, 3.1 on the Oxford Model House's; a certificate of the stored scene's reconstruction with its
+focal lengths scaled by 8%: 37. The pipeline's projective cameras are the registered cameras
+before the adjustment, so what separates the two images is the adjustment's step; 10 leaves a
+margin of 3 over the House.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from geocert.solvers.core.strict import Invalid, numbers
+
+TIE_RATIO, TIE_OBSERVATIONS = 10.0, 12
+CONVERGENCE = 2e-4  # relative to the observations' largest coordinate (above)
+
+
+def tie(result: dict, stage: dict, data: dict) -> dict:
+    """Refuses a calibration certificate whose reconstruction is not the result's (as above);
+    returns the figures the report's scope states of the tie."""
+    views, tracks = stage.get("certificate_views"), stage.get("certificate_tracks")
+    cameras = numbers(data.get("cameras"), "calibration_certificate/data/cameras", (None, 3, 4), "returned")
+    points = numbers(data.get("points"), "calibration_certificate/data/points", (None, 4), "returned")
+    n_views = len(result["cameras"])
+    if not (isinstance(views, list) and isinstance(tracks, list) and len(views) == len(cameras) == len(set(views))
+            and len(tracks) == len(points) == len(set(tracks))
+            and all(isinstance(v, int) and 0 <= v < n_views for v in views)
+            and all(isinstance(t, int) and t >= 0 for t in tracks)):
+        raise Invalid("returned", "stages/autocalibration must name the view of each calibration certificate camera "
+                                  "and the track of each point (certificate_views, certificate_tracks)")
+    size = data.get("image_size")
+    if size is not None and any(camera.get("image_size") not in (None, list(size)) for camera in result["cameras"]
+                                if camera.get("view") in views):
+        raise Invalid("returned", "the calibration certificate's image_size is not its views'")
+    apart, own, largest = _shared(result, views, tracks, cameras, points)
+    if len(apart) < TIE_OBSERVATIONS:
+        raise Invalid("returned", f"the calibration certificate's reconstruction shares {len(apart)} observations "
+                                  f"with the result's placed points (at least {TIE_OBSERVATIONS} tie it to them)")
+    apart = np.nan_to_num(np.asarray(apart), nan=np.inf)
+    rms = math.sqrt(float(np.mean(np.square(own))))
+    allowed = TIE_RATIO * rms + CONVERGENCE * largest
+    worst = float(np.max(apart))
+    if not worst <= allowed:
+        raise Invalid("returned", f"the calibration certificate's reconstruction images an observation {worst:.3g} px "
+                                  f"from where the returned cameras do (at most {allowed:.3g}: {TIE_RATIO:g} times "
+                                  f"their RMS error {rms:.3g} px on the {len(apart)} observations shared, plus "
+                                  f"{CONVERGENCE:g} of the largest coordinate {largest:.4g}): it is not "
+                                  "these tracks' reconstruction")
+    return {"observations": len(apart), "largest_px": worst, "allowed_px": allowed, "returned_rms_px": rms}
+
+
+def _shared(result: dict, views: list, tracks: list, cameras: np.ndarray, points: np.ndarray
+            ) -> tuple[list, list, float]:
+    """For each observation of a placed point in a registered view that the certificate's data
+    hold too: the distance between its images through the certificate's camera and point and
+    through the returned ones, and the returned ones' error; and the largest coordinate."""
+    camera_of, point_of = {v: k for k, v in enumerate(views)}, {t: k for k, t in enumerate(tracks)}
+    by_view = {int(c["view"]): np.asarray(c["P"], dtype=float) for c in result["cameras"] if c.get("P") is not None}
+    apart, own, largest = [], [], 0.0
+    for point in result["points"]:
+        j = point_of.get(point.get("track"))
+        if j is None or point.get("point") is None:
+            continue
+        X = np.asarray(point["point"] if point.get("at_infinity") else [*point["point"], 1.0], dtype=float)
+        for view, u, v in point.get("observations") or []:
+            i = camera_of.get(int(view))
+            if i is None or int(view) not in by_view:
+                continue
+            with np.errstate(all="ignore"):
+                x, y = cameras[i] @ points[j], by_view[int(view)] @ X
+                apart.append(math.hypot(x[0] / x[2] - y[0] / y[2], x[1] / x[2] - y[1] / y[2]))
+                own.append(math.hypot(y[0] / y[2] - u, y[1] / y[2] - v))
+            largest = max(largest, abs(float(u)), abs(float(v)))
+    return apart, own, largest

@@ -1,0 +1,101 @@
+"""The options a reconstruction's problem_sha256 covers (numpy only, the verifier's).
+
+A reconstruction's claims and checks read more than the points' options (norm, max_residual,
+rel_gap, abs_gap): ``camera_rel_gap`` gives every certified camera's tolerance, ``intrinsics`` a
+known K (the returned K's source) and the ranges the calibration certificate searched,
+``radial_distortion`` whether a radial term may be stated, and ``autocalibration``,
+``autocalibration_rel_gap`` and ``metric_rel_gap`` the calibration certificate's method and gaps.
+The hash covers them all (CLAIM_OPTIONS), so a user hashing their own request learns that the
+document is about their tolerance too.
+
+Documents written before it covered them (format version 2, the earlier form: the points' four
+options only) are still read, but only with every option the earlier form leaves out at the value
+a request naming none of them gets (EARLIER_DEFAULTS, or absent): a document of the earlier form
+with any other value cannot be told from one whose value was changed after it was written (a
+camera_rel_gap of 0.5 in place of the 0.25 asked for doubles the cost a certified camera may
+have), so it is refused, naming the option; the report's scope says which form the hash has.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from geocert.solvers.core.certificates import CLAIM_OPTIONS as EARLIER_CLAIM_OPTIONS
+from geocert.solvers.core.strict import Invalid, number
+
+# What the earlier form left out, at the value a request naming none of them gets
+# (ReconstructionOptions' defaults; tests/solvers/test_forgeries_review5.py checks they agree).
+EARLIER_DEFAULTS: dict[str, Any] = {"camera_rel_gap": 1e-2, "intrinsics": {}, "radial_distortion": "off",
+                                    "autocalibration": "stratified", "autocalibration_rel_gap": 1e-5,
+                                    "metric_rel_gap": 1e-4}
+CLAIM_OPTIONS = EARLIER_CLAIM_OPTIONS + tuple(EARLIER_DEFAULTS)
+RADIAL_DISTORTIONS = ("auto", "on", "off")
+AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")
+
+
+def checked(options: dict) -> dict:
+    """The hashed options beyond the points', each of its type (a number, the words the kind
+    takes, an object or "unknown" for intrinsics), as stated (absent: None)."""
+    out: dict[str, Any] = {}
+    for name in ("autocalibration_rel_gap", "metric_rel_gap"):
+        if options.get(name) is not None:
+            out[name] = number(options[name], f"options/{name}", "options")
+            if not 0 <= out[name] <= 0.5:
+                raise Invalid("options", f"options/{name} {out[name]!r} is beyond 0.5")
+    for name, words in (("radial_distortion", RADIAL_DISTORTIONS), ("autocalibration", AUTOCALIBRATION_METHODS)):
+        if options.get(name) is not None:
+            if options[name] not in words:
+                raise Invalid("options", f"options/{name} must be one of {', '.join(words)}, not {options[name]!r:.40}")
+            out[name] = options[name]
+    intrinsics = options.get("intrinsics")
+    if intrinsics is not None and not (intrinsics == "unknown" or isinstance(intrinsics, dict)):
+        raise Invalid("options", "options/intrinsics must be \"unknown\" or an object")
+    if intrinsics is not None:
+        out["intrinsics"] = intrinsics
+    return out
+
+
+def _at_default(name: str, value: Any) -> bool:
+    """Whether an option the earlier form leaves out is what a request naming none gets."""
+    if value is None:  # absent: read as the earlier form read it
+        return True
+    if name == "intrinsics":  # ranges from the image size: "unknown", or no K and no range stated
+        return value == "unknown" or (isinstance(value, dict) and all(v is None for v in value.values()))
+    return value == EARLIER_DEFAULTS[name]
+
+
+def check_earlier_form(options: dict) -> str:
+    """A document hashed the earlier way: accepted only with every option that form leaves out at
+    its default (refused otherwise, naming it); returns what the report's scope says of the hash."""
+    for name in EARLIER_DEFAULTS:
+        if not _at_default(name, options.get(name)):
+            raise Invalid("data_hash", f"problem_sha256 has the earlier form (it covers {', '.join(EARLIER_CLAIM_OPTIONS)} "
+                                       f"only), and options/{name} is {options[name]!r:.60}, not its default "
+                                       f"{EARLIER_DEFAULTS[name]!r}: a document of that form cannot be told from one "
+                                       f"whose {name} was changed after it was written (solve it again for a hash "
+                                       "covering every option a claim reads)")
+    # camera_rel_gap absent is read as rel_gap (documents from before it was an option): only where
+    # that is no looser than its default, since the earlier form does not cover its absence
+    if options.get("camera_rel_gap") is None and not options["rel_gap"] <= EARLIER_DEFAULTS["camera_rel_gap"]:
+        raise Invalid("data_hash", f"problem_sha256 has the earlier form, options/camera_rel_gap is absent and "
+                                   f"rel_gap {options['rel_gap']!r} (read in its place) exceeds its default "
+                                   f"{EARLIER_DEFAULTS['camera_rel_gap']!r}: a document of that form cannot be told "
+                                   "from one whose camera_rel_gap was removed after it was written")
+    return (f"the earlier form: it covers the kind, the data and {', '.join(EARLIER_CLAIM_OPTIONS)} only; the options "
+            f"it leaves out ({', '.join(EARLIER_DEFAULTS)}) were checked to be at their defaults or absent")
+
+
+def check_calibration_options(calibration: dict, options: dict) -> None:
+    """The calibration certificate was solved with the gaps and ranges the reconstruction's options
+    (which its hash covers) ask for: its rel_gap the autocalibration_rel_gap, its metric_rel_gap
+    the metric_rel_gap, its intrinsics the ranges (none for "unknown" or a known K). An option the
+    reconstruction's document does not state is read as its default (every document the kind
+    writes states them; the earlier form's hash does not cover their absence)."""
+    stated = {name: default if options.get(name) is None else options[name] for name, default in EARLIER_DEFAULTS.items()}
+    intrinsics = stated["intrinsics"]
+    ranges = {} if intrinsics == "unknown" or "K" in intrinsics else intrinsics
+    for name, expected in (("rel_gap", stated["autocalibration_rel_gap"]), ("metric_rel_gap", stated["metric_rel_gap"]),
+                           ("intrinsics", ranges)):
+        if calibration.get(name) != expected:
+            raise Invalid("returned", f"the calibration certificate's {name} is {calibration.get(name)!r:.80}, the "
+                                      f"reconstruction's options ask for {expected!r:.80}")

@@ -1,0 +1,79 @@
+"""The calibration certificate's projective reconstruction is tied to the result carrying it in
+every shared observation (reconstruction.calibration_tie), not by a median: built on the stored
+reconstruction (tests/data/certificates), and on the Oxford Model House's tracks (Visual Geometry
+Group, University of Oxford) when the shared data are there."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from geocert.solvers.reconstruction import calibration_tie
+from geocert.solvers.verify import verify_any
+from tests.solvers.test_forgeries import stored
+
+
+def carrying(result: dict, data: dict) -> dict:
+    """The result carrying the genuine calibration certificate of ``data`` (solved with the stored
+    certificate's options), its calibration fields made that certificate's."""
+    from geocert.batch import solve_job
+    from geocert.solvers.reconstruction import calibration_claim
+
+    options = dict(result["calibration_certificate"]["options"])
+    other = solve_job({"kind": "autocalibration", "data": data, "options": options})
+    assert all(stage["certified"] for stage in other["stages"]) and verify_any(other).valid
+    forged = copy.deepcopy(result)
+    forged["calibration_certificate"] = other["certificate"]
+    stage = next(s for s in forged["stages"] if s["name"] == "autocalibration")
+    stage["K"] = other["K"]
+    for given, claim in zip(stage["stages"], other["certificate"]["items"]):
+        given.update({name: claim[name] for name in ("cost", "lower_bound", "gap", "status", "certified")})
+    summary = forged["summary"]["calibration"]
+    summary["certified_K"] = other["K"]
+    summary["difference"] = calibration_claim.difference(np.asarray(summary["K"]), np.asarray(other["K"]))
+    return forged
+
+
+def test_the_genuine_tie_is_stated_in_the_scope():
+    report = verify_any(stored("reconstruction"))
+    assert report.valid
+    tie = report.scope["calibration_tie"]
+    assert tie["observations"] == 96 and tie["largest_px"] <= tie["allowed_px"]
+    assert tie["allowed_px"] == pytest.approx(calibration_tie.TIE_RATIO * tie["returned_rms_px"], rel=0.1)
+
+
+def test_one_point_elsewhere_is_refused_whatever_the_median():
+    """The stored calibration data with one point moved (its images 16 to 38 px from the
+    returned ones in its 6 views; the other 90 observations as they were): the median of the
+    shared observations' errors does not move, and every observation is held to the tie."""
+    result = stored("reconstruction")
+    data = copy.deepcopy(result["calibration_certificate"]["data"])
+    points = np.asarray(data["points"])
+    points[0, :3] += 0.05 * np.linalg.norm(points[0, :3]) * np.array([1.0, -1.0, 0.5]) / 1.5
+    data["points"] = points.tolist()
+    report = verify_any(carrying(result, data))
+    assert not report.valid
+    assert "not these tracks' reconstruction" in report.first_failure["detail"]
+
+
+@pytest.mark.slow
+def test_the_model_houses_genuine_reconstruction_is_tied():
+    """VGG's House tracks (10 views, K unknown; the upgrade searched through its orbital motion):
+    the largest distance is about 3 times the returned cameras' RMS error, within TIE_RATIO."""
+    from geocert.batch import solve_job
+    from tests.solvers.test_reconstruction import house_tracks
+
+    _, _, tracks = house_tracks()
+    data = {"views": [{"name": f"view{v}", "image_size": [768.0, 576.0]} for v in range(10)],
+            "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
+                       for views, pixels in tracks]}
+    result = solve_job({"kind": "reconstruction", "data": data,
+                        "options": {"certificate": "full", "autocalibration_on_critical_motion": "search",
+                                    "resect_cameras": False}})
+    assert result.get("calibration_certificate") is not None
+    report = verify_any(result)
+    assert report.valid, report.first_failure
+    tie = report.scope["calibration_tie"]
+    assert tie["largest_px"] <= 0.5 * tie["allowed_px"]

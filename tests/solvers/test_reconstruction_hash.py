@@ -1,0 +1,119 @@
+"""A reconstruction's problem_sha256 covers every option a claim or check reads
+(reconstruction.hashed_options), and documents hashed the earlier way (the points' four options
+only) are read only with every option that form leaves out at its default."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import pytest
+
+from geocert.solvers.core.certificates import problem_hash
+from geocert.solvers.reconstruction import hashed_options
+from geocert.solvers.verify import checked_options, verify_any
+from tests.solvers.test_forgeries import stored
+
+
+def _earlier_form(result: dict) -> dict:
+    """The result with its certificate's problem_sha256 computed the earlier way."""
+    result = copy.deepcopy(result)
+    document = result["certificate"]
+    options = checked_options("reconstruction", document["options"])
+    document["problem_sha256"] = problem_hash("reconstruction", document["data"], options,
+                                              hashed_options.EARLIER_CLAIM_OPTIONS)
+    return result
+
+
+@pytest.fixture(scope="module")
+def at_defaults() -> dict:
+    """A genuine reconstruction of the kind's example scene, every option at its default."""
+    from geocert.batch import solve_job
+    from geocert.kinds import get_kind
+
+    return solve_job({"kind": "reconstruction", "data": get_kind("reconstruction").example["data"],
+                      "options": {"certificate": "full"}})
+
+
+def test_the_earlier_forms_defaults_are_the_options_defaults():
+    from geocert.pipelines.reconstruction.options import ReconstructionOptions
+
+    defaults = dataclasses.asdict(ReconstructionOptions())
+    assert {name: defaults[name] for name in hashed_options.EARLIER_DEFAULTS} == hashed_options.EARLIER_DEFAULTS
+
+
+def test_the_hash_covers_every_option_a_claim_reads():
+    document = stored("reconstruction")["certificate"]
+    options = checked_options("reconstruction", document["options"])
+    for name, value in (("camera_rel_gap", 0.5), ("radial_distortion", "on"), ("intrinsics", "unknown"),
+                        ("metric_rel_gap", 0.5), ("autocalibration_rel_gap", 0.5)):
+        changed = checked_options("reconstruction", {**document["options"], name: value})
+        assert problem_hash("reconstruction", document["data"], changed, hashed_options.CLAIM_OPTIONS) \
+            != problem_hash("reconstruction", document["data"], options, hashed_options.CLAIM_OPTIONS), name
+
+
+def test_an_earlier_form_at_the_defaults_verifies_and_says_so(at_defaults):
+    assert verify_any(at_defaults).valid
+    report = verify_any(_earlier_form(at_defaults))
+    assert report.valid, report.first_failure
+    assert "earlier form" in report.scope["problem_sha256"]
+
+
+@pytest.mark.parametrize("name, value", [("camera_rel_gap", 0.25), ("radial_distortion", "on"),
+                                         ("metric_rel_gap", 1e-3)])
+def test_an_earlier_form_with_an_option_it_leaves_out_changed_is_refused(at_defaults, name, value):
+    result = copy.deepcopy(at_defaults)
+    result["certificate"]["options"][name] = value
+    report = verify_any(_earlier_form(result))
+    assert not report.valid
+    assert report.first_failure["check"] == "data_hash" and f"options/{name}" in report.first_failure["detail"]
+
+
+def test_the_stored_reconstruction_in_the_earlier_form_is_refused_naming_its_camera_rel_gap():
+    """Asked for with camera_rel_gap 0.25: in the earlier form it cannot be told from the same
+    document with 0.5 (test_forgeries_review5.TestCameraToleranceUnhashed)."""
+    report = verify_any(_earlier_form(stored("reconstruction")))
+    assert not report.valid and "options/camera_rel_gap" in report.first_failure["detail"]
+
+
+def test_a_calibration_certificate_at_other_gaps_than_the_options_is_refused():
+    """The stored reconstruction carrying a genuine calibration certificate of its own projective
+    reconstruction solved at metric_rel_gap 0.5 (the options ask for 1e-4)."""
+    from geocert.batch import solve_job
+
+    result = stored("reconstruction")
+    calibration = result["calibration_certificate"]
+    other = solve_job({"kind": "autocalibration", "data": calibration["data"],
+                       "options": {**calibration["options"], "metric_rel_gap": 0.5}})
+    assert all(stage["certified"] for stage in other["stages"])
+    assert verify_any(other).valid
+    result["calibration_certificate"] = other["certificate"]
+    report = verify_any(result)
+    assert not report.valid and "metric_rel_gap" in report.first_failure["detail"]
+
+
+def test_an_earlier_form_without_the_calibration_gaps_is_held_to_their_defaults(at_defaults):
+    """The earlier form's hash does not cover whether metric_rel_gap is stated: removed, it is
+    read as its default, so a calibration certificate at another gap is still refused."""
+    from geocert.batch import solve_job
+
+    result = copy.deepcopy(at_defaults)
+    calibration = result["calibration_certificate"]
+    other = solve_job({"kind": "autocalibration", "data": calibration["data"],
+                       "options": {**calibration["options"], "metric_rel_gap": 0.5}})
+    assert all(stage["certified"] for stage in other["stages"])
+    result["calibration_certificate"] = other["certificate"]
+    del result["certificate"]["options"]["metric_rel_gap"]
+    report = verify_any(_earlier_form(result))
+    assert not report.valid and "metric_rel_gap" in report.first_failure["detail"]
+
+
+def test_an_earlier_form_without_camera_rel_gap_is_read_at_rel_gap_only_below_its_default(at_defaults):
+    """camera_rel_gap absent is read as rel_gap (documents from before it was an option); in the
+    earlier form, whose hash does not cover its absence, only where rel_gap is at most its
+    default."""
+    result = copy.deepcopy(at_defaults)
+    del result["certificate"]["options"]["camera_rel_gap"]
+    result["certificate"]["options"]["rel_gap"] = 0.4
+    report = verify_any(_earlier_form(result))
+    assert not report.valid and "options/camera_rel_gap is absent" in report.first_failure["detail"]
