@@ -9,11 +9,12 @@ The hash covers them all (CLAIM_OPTIONS), so a user hashing their own request le
 document is about their tolerance too.
 
 Documents written before it covered them (format version 2, the earlier form: the points' four
-options only) are still read, but only with every option the earlier form leaves out at the value
-a request naming none of them gets (EARLIER_DEFAULTS, or absent): a document of the earlier form
-with any other value cannot be told from one whose value was changed after it was written (a
-camera_rel_gap of 0.5 in place of the 0.25 asked for doubles the cost a certified camera may
-have), so it is refused, naming the option; the report's scope says which form the hash has.
+options only) still verify, as a third party's stored certificates must: such a document cannot
+be told from one whose camera_rel_gap (or another option the form leaves out) was changed after it
+was written, so the report's scope states that the hash does not cover those options and what the
+document states for each, for the user to compare with their request. Every claim is then read at
+the values stated (a certified camera's tolerance from the camera_rel_gap stated, which its camera
+certificate must prove), so what the report says is true of the document.
 """
 
 from __future__ import annotations
@@ -65,24 +66,21 @@ def _at_default(name: str, value: Any) -> bool:
 
 
 def check_earlier_form(options: dict) -> str:
-    """A document hashed the earlier way: accepted only with every option that form leaves out at
-    its default (refused otherwise, naming it); returns what the report's scope says of the hash."""
+    """What the report's scope says of a document hashed the earlier way: the options that form
+    does not cover, each as the document states it (absent: read as its default; camera_rel_gap
+    absent is read as rel_gap, as documents from before it was an option are)."""
+    stated = []
     for name in EARLIER_DEFAULTS:
-        if not _at_default(name, options.get(name)):
-            raise Invalid("data_hash", f"problem_sha256 has the earlier form (it covers {', '.join(EARLIER_CLAIM_OPTIONS)} "
-                                       f"only), and options/{name} is {options[name]!r:.60}, not its default "
-                                       f"{EARLIER_DEFAULTS[name]!r}: a document of that form cannot be told from one "
-                                       f"whose {name} was changed after it was written (solve it again for a hash "
-                                       "covering every option a claim reads)")
-    # camera_rel_gap absent is read as rel_gap (documents from before it was an option): only where
-    # that is no looser than its default, since the earlier form does not cover its absence
-    if options.get("camera_rel_gap") is None and not options["rel_gap"] <= EARLIER_DEFAULTS["camera_rel_gap"]:
-        raise Invalid("data_hash", f"problem_sha256 has the earlier form, options/camera_rel_gap is absent and "
-                                   f"rel_gap {options['rel_gap']!r} (read in its place) exceeds its default "
-                                   f"{EARLIER_DEFAULTS['camera_rel_gap']!r}: a document of that form cannot be told "
-                                   "from one whose camera_rel_gap was removed after it was written")
-    return (f"the earlier form: it covers the kind, the data and {', '.join(EARLIER_CLAIM_OPTIONS)} only; the options "
-            f"it leaves out ({', '.join(EARLIER_DEFAULTS)}) were checked to be at their defaults or absent")
+        value = options.get(name)
+        if name == "camera_rel_gap" and value is None:
+            stated.append(f"camera_rel_gap absent, read as rel_gap {options['rel_gap']!r}")
+        elif value is None:
+            stated.append(f"{name} absent, read as {EARLIER_DEFAULTS[name]!r}")
+        else:
+            stated.append(f"{name} {value!r:.80}" + ("" if _at_default(name, value) else " (not its default)"))
+    return (f"the earlier form: it covers the kind, the data and {', '.join(EARLIER_CLAIM_OPTIONS)} only, not the "
+            f"options these claims also read, which the document states as: {'; '.join(stated)}. Compare them with "
+            "your request: a hash of this form does not tell them from values changed after it was written")
 
 
 def check_calibration_options(calibration: dict, options: dict) -> None:
