@@ -112,6 +112,15 @@ class CalibratedOptions:
     # [1 / MAX_FOCAL_SCALE, MAX_FOCAL_SCALE] of the prior is refused (COLMAP's bogus-camera check).
     refine_focal: bool = False
     refine_focal_min_views: int = 3
+    # With "schur" after each view, COLMAP's schedule (ba_global_images_ratio, ba_local_num_images):
+    # every registered camera and point is adjusted only once the registered views have grown by
+    # this factor since the last such adjustment; in between, the new view and the
+    # local_adjustment_views - 1 registered views sharing most points with it, with the points
+    # they see (the other views' observations of those points held, which fixes the gauge). A
+    # whole adjustment after each view made the registration quadratic in the views. 1.0: every
+    # adjustment whole.
+    global_adjustment_growth: float = 1.1
+    local_adjustment_views: int = 6
     seed: int = 0  # OpenCV's RANSAC generator
 
 
@@ -420,15 +429,40 @@ def _bundle_adjust(state: _State, fixed: int, max_nfev: int, options: Calibrated
 MAX_FOCAL_SCALE = 10.0  # refine_focal: the refined focal length within this factor of the one given
 
 
+def _local_views(state: _State, view: int, count: int) -> np.ndarray:
+    """``view`` and the ``count`` - 1 registered views sharing most triangulated points with it."""
+    valid = np.isfinite(state.points[:, 0])
+    mine = state.obs_track[(state.obs_view == view) & state.inlier & valid[state.obs_track]]
+    shared_obs = np.isin(state.obs_track, mine) & state.inlier & state.registered[state.obs_view]
+    counts = np.bincount(state.obs_view[shared_obs], minlength=state.n_views)
+    counts[view] = 0
+    others = [v for v in np.argsort(-counts, kind="stable")[:max(count - 1, 0)] if counts[v] > 0]
+    return np.array([view, *others], dtype=int)
+
+
 def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options: CalibratedOptions,
-                         track_mask: np.ndarray | None = None) -> int:
+                         track_mask: np.ndarray | None = None, free_views: np.ndarray | None = None) -> int:
     """The metric bundle adjustment of ``_bundle_adjust`` by Levenberg-Marquardt on the cameras'
     reduced system (schur.solve: the points eliminated, the normal equations solved exactly, Huber
     loss at ``ba_f_scale_px``) until the cost stops falling; returns the iterations used. Every
     camera is free (the damping holds the gauge's seven free directions); the world is then moved
     rigidly so view ``fixed`` is back at R = I, t = 0. Each camera is a rotation vector and a
-    translation, with the Jacobian analytic. Only the tracks in ``track_mask`` (all when None) take part."""
+    translation, with the Jacobian analytic. Only the tracks in ``track_mask`` (all when None) take part.
+
+    ``free_views`` (a local adjustment): only those cameras move, never view ``fixed``, and only
+    the points they see; every registered view's observations of those points count, the others'
+    cameras held (their Jacobian columns zero, so their steps are zero), and the shared focal
+    length is held."""
     registered = state.registered
+    local = None
+    if free_views is not None:
+        local = np.zeros(state.n_views, dtype=bool)
+        local[free_views] = True
+        local &= registered
+        local[fixed] = False
+        near = np.zeros(len(state.points), dtype=bool)
+        near[state.obs_track[state.inlier & local[state.obs_view]]] = True
+        track_mask = near if track_mask is None else (track_mask & near)
     valid = np.isfinite(state.points[:, 0]) & (True if track_mask is None else track_mask)
     obs = np.flatnonzero(state.inlier & registered[state.obs_view] & valid[state.obs_track])
     if len(obs) == 0:
@@ -447,8 +481,9 @@ def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options
     Ks = np.array(state.Ks)[state.obs_view[obs]]
     px = state.obs_px[obs]
     # refine_focal: one shared scale s of every K's focal terms (pixels = c + s F xc[:2] / xc[2])
-    focal = options.refine_focal and len(views) >= options.refine_focal_min_views
+    focal = options.refine_focal and len(views) >= options.refine_focal_min_views and local is None
     F, centre = Ks[:, :2, :2], Ks[:, :2, 2]
+    held = None if local is None else ~local[state.obs_view[obs]]  # observations by held cameras
 
     def project(Am, S, Bm):
         R = Rotation.from_rotvec(Am[:, :3]).as_matrix()
@@ -469,7 +504,10 @@ def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options
         du_dxc = scale * F @ dn
         d_w = -du_dxc @ _skew(xc - Am[:, 3:6]) @ _left_jacobian(Am[:, :3])
         d_s = seen[:, :, None] if focal else np.zeros((len(Am), 2, 0))
-        return np.concatenate([d_w, du_dxc], axis=2), d_s, du_dxc @ R
+        d_camera = np.concatenate([d_w, du_dxc], axis=2)
+        if held is not None:
+            d_camera[held] = 0.0
+        return d_camera, d_s, du_dxc @ R
 
     A = np.array([np.r_[Rotation.from_matrix(state.R[v]).as_rotvec(), state.t[v]] for v in views])
     A, S, B, _, iterations = schur.solve(residual, A, np.ones(1) if focal else np.zeros(0),
@@ -481,6 +519,12 @@ def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options
             return int(iterations)  # a bogus focal length: the adjustment is not taken
         state.scale_focal(float(S[0]))
     Rs = Rotation.from_rotvec(A[:, :3]).as_matrix()
+    if local is not None:  # view ``fixed`` held: no gauge to restore; the held cameras kept exactly
+        for c, v in enumerate(views):
+            if local[v]:
+                state.R[v], state.t[v] = Rs[c], A[c, 3:6].copy()
+        state.points[tracks] = B
+        return int(iterations)
     k = int(cam_of_view[fixed]) if registered[fixed] else 0
     Rf, tf = Rs[k], A[k, 3:6].copy()  # the world moved by X' = Rf X + tf: view k at R = I, t = 0
     for c, v in enumerate(views):
@@ -809,16 +853,30 @@ def _register_by_essential(state: _State, options: CalibratedOptions) -> int | N
     return None
 
 
-def _triangulate_and_adjust(state, fixed: int, max_nfev: int, options, stats: dict, timing: dict) -> None:
+def _triangulate_and_adjust(state, fixed: int, max_nfev: int, options, stats: dict, timing: dict,
+                            added: int | None = None) -> None:
     """Triangulate the tracks the registered views now allow, adjust everything (view ``fixed``
-    held as the gauge) and drop the observations that end as outliers, timing both steps."""
+    held as the gauge) and drop the observations that end as outliers, timing both steps. After
+    view ``added`` is registered, with "schur", the adjustment is local unless the registered
+    views have grown by ``global_adjustment_growth`` since the last whole one (stats
+    ``adjustments``)."""
     start = time.perf_counter()
     _triangulate_new(state, options)
     timing["triangulation"] += time.perf_counter() - start
     start = time.perf_counter()
     solver = options.ba_solver if options.ba_solver != "auto" else ("lsmr" if options.merge_components else "schur")
     if solver == "schur" and max_nfev < options.final_ba_max_nfev:
-        stats["ba_nfev"].append(_bundle_adjust_schur(state, fixed, options.ba_max_iterations, options))
+        count = int(state.registered.sum())
+        adjustments = stats.setdefault("adjustments", {"whole": 0, "local": 0, "whole_at": 0})
+        free = None
+        if added is not None and count < options.global_adjustment_growth * adjustments["whole_at"]:
+            free = _local_views(state, added, options.local_adjustment_views)
+            adjustments["local"] += 1
+        else:
+            adjustments["whole"] += 1
+            adjustments["whole_at"] = count
+        stats["ba_nfev"].append(_bundle_adjust_schur(state, fixed, options.ba_max_iterations, options,
+                                                     free_views=free))
     else:
         stats["ba_nfev"].append(_bundle_adjust(state, fixed, max_nfev, options))
     _remove_outliers(state, options)
@@ -848,7 +906,7 @@ def _grow(state: _State, fixed: int, options: CalibratedOptions, stats: dict, ti
         if v is None:
             return False
         reasons_by_view.pop(v, None)
-        _triangulate_and_adjust(state, fixed, options.ba_max_nfev, options, stats, timing)
+        _triangulate_and_adjust(state, fixed, options.ba_max_nfev, options, stats, timing, added=v)
     return False
 
 
