@@ -553,7 +553,6 @@ class TestRestatedCalibrationStagesAbsoluteFloor:
         claim = stored("reconstruction")["calibration_certificate"]["items"][1]
         assert claim["lower_bound"] == 0.0 and claim["cost"] < 1e-27  # 9e-10 is 9.3e18 times its cost
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("stage", [0, 1])
     @pytest.mark.parametrize("fields", [{"lower_bound": 9e-10, "gap": -9e-10},
                                         {"cost": 9e-10, "lower_bound": 9e-10, "gap": 0.0}],

@@ -77,7 +77,9 @@ def camera_maps(points: list[dict], views: list[int]) -> list[dict]:
     return [{"source": source, "target": target} for source, target in found]
 
 
-def _close(value: Any, expected: float, scale: float = 1.0) -> bool:
+def _close(value: Any, expected: float, scale: float) -> bool:
+    """``value`` is a number within rounding of ``expected``, read at the magnitude ``scale`` or
+    its own, whichever is larger (0: a copy or a recomputation of the same sum, at its own)."""
     return is_number(value) and abs(value - expected) <= ROUNDING * max(scale, abs(expected))
 
 
@@ -207,7 +209,7 @@ def _check_summary(result: dict, registered: list[dict]) -> None:
                 "cameras_certified_fraction": certified_cameras / len(registered) if registered else None}
     for name, value in expected.items():
         given = summary.get(name)
-        if not (given == value or (value is not None and _close(given, value))):
+        if not (given == value or (value is not None and _close(given, value, 0.0))):
             raise Invalid("returned", f"summary/{name} is {given!r}, the items give {value!r}")
     rms = math.sqrt(squared / count) if count else None
     given = summary.get("rms_reprojection_px")
@@ -377,7 +379,7 @@ def _check_distortion(result: dict, registered: list[dict], options: dict) -> No
         raise Invalid("returned", "stages/projective/radial_distortion must say the term was estimated, with the "
                                   "summary's k1's sign")
     focals = [float(camera["K"][0][0]) for camera in registered]
-    if not any(_close(focal, f) for f in focals):
+    if not any(_close(focal, f, 0.0) for f in focals):
         raise Invalid("returned", f"summary/distortion/focal_px {focal!r} is not a registered camera's focal length")
     for camera, f in zip(registered, focals):
         centre = camera.get("distortion_centre")
@@ -620,9 +622,11 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
     for k, (given, claim) in enumerate(zip(restated, claims)):
         # every figure the stage restates, its name by position (as the autocalibration kind's own)
         if not isinstance(given, dict) or given.get("certified") is not True or not all(
-                (given.get(name) is None and claim.get(name) is None) or _close(given.get(name), claim.get(name))
+                (given.get(name) is None and claim.get(name) is None) or _close(given.get(name), claim.get(name), 0.0)
                 for name in ("cost", "lower_bound", "gap")) or given.get("status") != claim.get("status") \
-                or given.get("name") != ("affine", "metric")[k]:
+                or given.get("name") != ("affine", "metric")[k] or not (is_number(given.get("gap"))
+                                                                        and given["gap"] >= 0
+                                                                        and given["lower_bound"] <= given["cost"]):
             raise Invalid("returned", f"stages/autocalibration/stages/{k} is not the calibration certificate's claim")
     calibration_tie.tie(result, stage, data)
     size = data.get("image_size")
@@ -704,7 +708,7 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
         claim, where = claims[k], f"cameras/{camera.get('view')}"
         proven = discounted.get(k, claim.get("lower_bound"))
         lower, cost = camera.get("lower_bound"), camera.get("cost")
-        if not _close(camera.get("optimal_cost"), claim.get("cost")) and not (
+        if not _close(camera.get("optimal_cost"), claim.get("cost"), 0.0) and not (
                 camera.get("optimal_cost") is None and claim.get("cost") is None):
             raise Invalid("returned", f"{where}: optimal_cost {camera.get('optimal_cost')!r} is not its resection's "
                                       f"{claim.get('cost')!r}")
@@ -785,7 +789,8 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) 
             projected = np.hstack([source, np.ones((len(source), 1))]) @ P.T
             with np.errstate(divide="ignore", invalid="ignore"):
                 cost = norm_cost(target - projected[:, :2] / projected[:, 2:3], norm) if len(source) else 0.0
-            if not (math.isfinite(cost) and _close(camera.get("cost"), cost)):
+            # the pixels' round-off (about 1e-13 px a residual) bounds how far two sums may differ
+            if not (math.isfinite(cost) and _close(camera.get("cost"), cost, 1e-6)):
                 raise Invalid("returned", f"{where}: cost {camera.get('cost')!r}, but the returned camera costs "
                                           f"{cost!r} on its certified points")
         stated = camera.get("degrees_of_freedom")
@@ -795,7 +800,7 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) 
             raise Invalid("returned", f"{where}: degrees_of_freedom {stated!r}, the returned cameras' K give {dof}")
         tolerance = camera_claim.tolerance(len(source), dof, norm, rel_gap)
         given = camera.get("tolerance")
-        if not (given is None and tolerance is None) and not (tolerance is not None and _close(given, tolerance)):
+        if not (given is None and tolerance is None) and not (tolerance is not None and _close(given, tolerance, 0.0)):
             raise Invalid("returned", f"{where}: tolerance {given!r}, its points and degrees of freedom give "
                                       f"{tolerance!r}")
 
