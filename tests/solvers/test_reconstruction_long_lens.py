@@ -7,12 +7,16 @@ depth-reversed twin (ambiguity.check), saying so when the twin fits about as wel
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from geocert.pipelines.reconstruction import pipeline
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction import depth_reversal, synthetic, upgrade
+from geocert.solvers.verify import verify_any
 
+from tests.solvers.test_forgeries import calibrated_reconstruction, refused  # noqa: F401 (a fixture, used by name)
 from tests.solvers.test_reconstruction import aligned_rotation_errors
 
 
@@ -91,3 +95,45 @@ def test_the_depth_reversed_twin_keeps_each_view_of_the_points_up_to_perspective
         assert np.allclose(mirror[:, :2], seen[:, :2])
         centre = seen[:, 2].mean()
         assert np.allclose(mirror[:, 2] - centre, -(seen[:, 2] - centre))
+
+
+class TestPosesDeterminedTied:
+    """The verifier cannot run the twin's adjustment, so it takes the depth-reversal verdict as
+    stated, but stated consistently (the summary, its warning, every registered camera), and a
+    rig whose poses are not determined must be called doubtful."""
+
+    @staticmethod
+    def not_determined(result: dict, warn: bool = True, cameras: bool = True, doubtful: bool = True) -> dict:
+        result = copy.deepcopy(result)
+        summary = result["summary"]
+        summary["poses_determined"] = False
+        if warn:
+            summary["warnings"].append({"code": "poses_not_determined", "detail": "stated"})
+        if cameras:
+            for camera in result["cameras"]:
+                if camera["registered"]:
+                    camera["pose_determined"] = False
+        if doubtful and not summary.get("doubtful"):
+            summary["doubtful"] = True
+            summary["warnings"].insert(0, {"code": "reconstruction_doubtful", "detail": "stated"})
+        return result
+
+    def test_the_genuine_result_states_its_poses_and_verifies(self, calibrated_reconstruction):
+        summary = calibrated_reconstruction["summary"]
+        assert summary["poses_determined"] is True and summary["depth_reversal"]["checked"]
+        assert all(c["pose_determined"] is True for c in calibrated_reconstruction["cameras"] if c["registered"])
+        report = verify_any(copy.deepcopy(calibrated_reconstruction))
+        assert report.valid, report.first_failure
+
+    def test_poses_said_not_determined_everywhere_verifies(self, calibrated_reconstruction):
+        report = verify_any(self.not_determined(calibrated_reconstruction))
+        assert report.valid, report.first_failure
+
+    def test_poses_not_determined_without_its_warning_is_refused(self, calibrated_reconstruction):
+        assert "poses_determined" in refused(self.not_determined(calibrated_reconstruction, warn=False))["detail"]
+
+    def test_a_camera_claiming_a_determined_pose_against_the_summary_is_refused(self, calibrated_reconstruction):
+        assert "poses_determined" in refused(self.not_determined(calibrated_reconstruction, cameras=False))["detail"]
+
+    def test_poses_not_determined_in_a_rig_not_called_doubtful_is_refused(self, calibrated_reconstruction):
+        assert "doubtful" in refused(self.not_determined(calibrated_reconstruction, doubtful=False))["detail"]
