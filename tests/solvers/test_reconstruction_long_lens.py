@@ -137,3 +137,22 @@ class TestPosesDeterminedTied:
 
     def test_poses_not_determined_in_a_rig_not_called_doubtful_is_refused(self, calibrated_reconstruction):
         assert "doubtful" in refused(self.not_determined(calibrated_reconstruction, doubtful=False))["detail"]
+
+
+def test_an_adjustment_settled_in_the_worse_twin_gets_the_better_one_back():
+    # The depth-reversed twin of the true rig, adjusted, is a rig that fits worse (its focal
+    # length runs off making the view more affine); checked, its own twin is the true rig again,
+    # which fits better by far: that one is returned, and the figures say so.
+    from geocert.pipelines.reconstruction import ambiguity
+    from geocert.solvers.reconstruction.tracks import Observations
+
+    scene = dino_like(focal=3300.0, distance=20.0, noise_px=0.3)
+    obs = Observations.from_tracks(scene.tracks, 6)
+    truth = upgrade.Metric(scene.K.copy(), list(scene.rotations), list(scene.translations), scene.points.copy(), [],
+                           False)
+    worse, keep, _ = upgrade.adjust(depth_reversal.mirrored(truth, reference=0), obs.view, obs.track, obs.pixel, 2.0)
+    assert aligned_rotation_errors(worse.rotations, list(scene.rotations)).max() > 10.0
+    kept, _, figures = ambiguity.check(worse, obs, keep, 2.0, "simple")
+    assert figures["adopted"] and not figures["ambiguous"] and figures["cost_ratio"] < 1 / (1 + figures["margin"])
+    assert aligned_rotation_errors(kept.rotations, list(scene.rotations)).max() < 0.5
+    assert abs(kept.K[0, 0] / 3300.0 - 1) < 0.03

@@ -4,7 +4,9 @@ mirror image in depth project nearly alike (solvers/reconstruction/depth_reversa
 adjustment may settle in either, and its own residuals cannot say which is right. So the twin is
 built in the frame of the view that sees most, adjusted with the same camera model, and the two
 compared by MSAC's capped cost over every observation (fit.fit_cost), in units of the returned
-reconstruction's noise variance:
+reconstruction's noise variance. Each is compared at its best: the twin, and (for the comparison
+only) the returned rig, are adjusted again after every track is triangulated anew in their
+cameras, and the returned rig's cost is the lower of its own and that refit's:
 
 - the twin costs more by more than MIRROR_CHI2 variances and by more than MIRROR_MARGIN of the
   cost: the data reject it, the poses stand;
@@ -48,9 +50,20 @@ def check(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold
     twin = depth_reversal.mirrored(metric, reference)
     adjusted, twin_keep, _ = upgrade.adjust(twin, obs.view, obs.track, obs.pixel, threshold_px, model=model,
                                             should_stop=should_stop)
+    # The adjustment drops the observations its start did not fit, for good (a point left with
+    # fewer than two is lost): every track is triangulated again in the adjusted twin's cameras
+    # and adjusted once more, so the twin is judged on all it can explain, as the returned rig was
+    # built (its registration triangulated each track as its views were placed).
+    adjusted, twin_keep, _ = upgrade.adjust(retriangulated(adjusted, obs), obs.view, obs.track, obs.pixel,
+                                            threshold_px, model=model, should_stop=should_stop)
+    # The returned rig gets the same second chance (for the comparison only): the two are
+    # compared each at its best, so neither wins by what the other was not offered.
+    refit, _, _ = upgrade.adjust(retriangulated(metric, obs), obs.view, obs.track, obs.pixel, threshold_px,
+                                 model=model, should_stop=should_stop)
     if should_stop is not None and should_stop():
         return metric, keep, {"checked": False, "reason": "stopped before the twin's adjustment ended"}
-    cost, twin_cost = fit_cost(metric, obs, threshold_px), fit_cost(adjusted, obs, threshold_px)
+    cost = min(fit_cost(metric, obs, threshold_px), fit_cost(refit, obs, threshold_px))
+    twin_cost = fit_cost(adjusted, obs, threshold_px)
     kept = int(keep.sum())
     points = int(np.count_nonzero(np.bincount(obs.track[keep], minlength=len(metric.points)) >= 2))
     # Residual degrees of freedom: 2 per observation less the poses (6 each), the points (3 each)
@@ -78,3 +91,31 @@ def check(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold
         "focal_px": float(metric.K[0, 0]), "mirror_focal_px": float(adjusted.K[0, 0]),
         "mirror_rotation_deg": angles, "ambiguous": bool(ambiguous), "adopted": bool(adopted)}
     return kept_metric, kept_obs, figures
+
+
+def retriangulated(metric: upgrade.Metric, obs: Observations) -> upgrade.Metric:
+    """``metric`` with every track seen by two or more of its registered views triangulated again
+    (linear, calibrated.triangulate) in its cameras; a track that triangulates behind a camera or
+    at infinity keeps its point."""
+    from dataclasses import replace
+
+    from geocert.solvers.reconstruction.calibrated import triangulate
+
+    registered = np.array([R is not None for R in metric.rotations])
+    use = np.flatnonzero(registered[obs.view])
+    use = use[np.argsort(obs.track[use], kind="stable")]
+    bounds = np.searchsorted(obs.track[use], np.arange(len(metric.points) + 1))
+    Kinv = {v: np.linalg.inv(upgrade.K_of(metric, v)) for v in np.flatnonzero(registered)}
+    points = metric.points.copy()
+    for track in range(len(metric.points)):
+        m = use[bounds[track]:bounds[track + 1]]
+        if len(m) < 2:
+            continue
+        views = obs.view[m]
+        rays = np.array([(Kinv[v] @ [u, w, 1.0])[:2] for v, (u, w) in zip(views, obs.pixel[m])])
+        Rs = np.array([metric.rotations[v] for v in views])
+        ts = np.array([metric.translations[v] for v in views])
+        X = triangulate(Rs, ts, rays)
+        if np.all(np.isfinite(X)) and np.all((Rs @ X + ts)[:, 2] > 0):
+            points[track] = X
+    return replace(metric, points=points)
