@@ -10,7 +10,8 @@ views registered, rotation error against the ground truth after the best global 
 max, views above 5 degrees), camera centre error after a similarity alignment (% of the scene's
 size), focal length error (%), principal point error (px), cameras certified (of the views
 registered) and points certified, what the result claims (``determined``, its warnings, cameras it
-flags), CPU seconds (the child's user + system time, every thread) and wall seconds, and geocert's
+flags, whether its poses are determined against their depth-reversed twin and the twin's cost over
+theirs), CPU seconds (the child's user + system time, every thread) and wall seconds, and geocert's
 CPU over COLMAP's on the same photos. The machine's load is printed with each run: the timings are
 only comparable within one run of this bench.
 
@@ -133,7 +134,9 @@ def geocert_figures(result: dict) -> dict:
     warnings = codes(summary.get("warnings"))
     for stage in result.get("stages", []):
         warnings += codes(stage.get("motion_warnings")) + codes(stage.get("warnings"))
-    flagged = sum(1 for c in result.get("cameras", []) if c.get("flags") or c.get("warnings") or c.get("flagged"))
+    flagged = sum(1 for c in result.get("cameras", []) if c.get("flags") or c.get("warnings") or c.get("flagged")
+                  or c.get("pose_determined") is False)
+    reversal = summary.get("depth_reversal") or {}
     certified = sum(1 for c in result.get("cameras", []) if c.get("certified"))
     failed = [f"{stage.get('name')} stage {stage.get('status')}: {stage.get('reason')}"
               for stage in result.get("stages", []) if stage.get("status") in ("failed", "error")]
@@ -143,7 +146,9 @@ def geocert_figures(result: dict) -> dict:
             "cameras_certified": certified / len(cameras) if cameras else None,
             "points_certified": summary.get("points_certified_fraction"),
             "determined": summary.get("autocalibration_determined"), "critical_motion": summary.get("critical_motion"),
-            "warnings": sorted(set(warnings)), "flagged": flagged, "rms_px": summary.get("rms_reprojection_px")}
+            "warnings": sorted(set(warnings)), "flagged": flagged, "rms_px": summary.get("rms_reprojection_px"),
+            "poses_determined": summary.get("poses_determined"), "mirror_cost_ratio": reversal.get("cost_ratio"),
+            "mirror_statistic": reversal.get("statistic")}
 
 
 def colmap_figures(run: dict) -> dict:
@@ -201,6 +206,9 @@ def row(set_key, order, run_name, total, figures, errors, cpu, wall, colmap_cpu,
         det = {True: "yes", False: "no", None: "-"}[figures["determined"]]
         claims = f"determined {det}; warnings {len(figures['warnings'])}" + (
             f" ({', '.join(figures['warnings'])})" if figures["warnings"] else "") + f"; flags {figures['flagged']}"
+        if figures.get("mirror_cost_ratio") is not None:  # the depth-reversed twin's cost over the returned rig's
+            poses = {True: "yes", False: "no", None: "-"}[figures.get("poses_determined")]
+            claims += f"; poses determined {poses} (twin cost x{figures['mirror_cost_ratio']:.2f})"
     elif figures.get("models"):
         claims = f"models {figures['models']}"
     ratio = f"{cpu / colmap_cpu:.2f}" if cpu is not None and colmap_cpu and run_name.startswith("geocert") else "-"

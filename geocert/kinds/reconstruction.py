@@ -202,7 +202,19 @@ class ReconstructionCamera(BaseModel):
     lower_bound: float | None = Field(description="proven: no 3x4 camera putting those points in front costs less")
     gap: float | None
     optimal_cost: float | None = Field(description="the certified resection's own optimum")
-    certified: bool
+    certified: bool = Field(description="the certified resection bounds this camera's fit to its own certified points: "
+                                        "no 3x4 camera putting them in front costs less than lower_bound, and this one "
+                                        "costs within its tolerance of it. It says the camera agrees with its points, "
+                                        "not that its pose is right in a rig that might be wrong as a whole "
+                                        "(pose_determined and summary.warnings say that)")
+    pose_determined: bool | None = Field(None, description="false when the depth-reversed twin of the returned rig "
+                                                           "(a long lens sees nearly affinely) fits the observations "
+                                                           "about as well: this pose is then one of two the data "
+                                                           "cannot tell apart, certified or not; null when not checked "
+                                                           "(summary.depth_reversal)")
+    mirror_rotation_deg: float | None = Field(None, description="by how much the twin's rotation of this camera, "
+                                                                "relative to the reference view, differs from the "
+                                                                "returned one, degrees")
     status: str
     bound_reason: str | None = Field(None, description="why the camera has no bound or is not certified (not "
                                                        "searched, not certified by the search, a point behind it, "
@@ -601,6 +613,7 @@ class ReconstructionKind:
                 "cost": None if b is None else b.cost, "lower_bound": None if b is None else b.lower_bound,
                 "gap": None if b is None else b.gap, "optimal_cost": None if b is None else b.optimal_cost,
                 "certified": bool(b is not None and b.certified), "status": "not_run" if b is None else b.status,
+                "pose_determined": camera.pose_determined, "mirror_rotation_deg": camera.mirror_rotation_deg,
                 "bound_reason": None if b is None else b.reason,
                 "points": 0 if b is None else b.points, "searched": bool(b is not None and b.result is not None),
                 "degrees_of_freedom": None if b is None else b.dof, "tolerance": None if b is None else b.tolerance}

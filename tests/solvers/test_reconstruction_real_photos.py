@@ -62,16 +62,24 @@ def dino():
     return photo_set("dinoSparseRing")
 
 
-def test_a_resumed_focal_round_does_not_lose_views_a_new_registration_places(dino):
-    """K unknown from a prior focal length 4 times too short (768 px against 3310): the focal
-    rounds resumed from the first round's cameras register 5 of the 14 photos, a registration
-    from a new initial pair at the refined focal length 6 (COLMAP: 3). The pipeline tries the
-    new registration when views are missing and keeps the one placing more."""
+@pytest.fixture(scope="module")
+def dino_k_unknown(dino):
+    """The dinoSparseRing (file order) with K unknown and the defaults, stopped where the
+    certified structure starts: (names, reconstruction)."""
     names = dino.order("file")
     images = [cv2.imread(str(dino.path(n)), cv2.IMREAD_GRAYSCALE) for n in names]
     found = features.tracks_from_images(images, features.FeatureOptions())
     out = pipeline.reconstruct(found.tracks, found.image_sizes, ReconstructionOptions(resect_cameras=False),
                                lambda stage, *progress: stage.startswith("structure"))
+    return names, out
+
+
+def test_a_resumed_focal_round_does_not_lose_views_a_new_registration_places(dino_k_unknown):
+    """K unknown from a prior focal length 4 times too short (768 px against 3310): the focal
+    rounds resumed from the first round's cameras register 5 of the 14 photos, a registration
+    from a new initial pair at the refined focal length 6 (COLMAP: 3). The pipeline tries the
+    new registration when views are missing."""
+    _, out = dino_k_unknown
     rounds = out.stages[0]["focal_rounds"]
     assert any(step["resumed"] for step in rounds) and rounds[-1].get("again_from_a_new_pair")
     assert sum(c.registered for c in out.cameras) >= 6
@@ -96,3 +104,23 @@ def test_high_resolution_photos_with_k_known_register_as_many_views_as_colmap(sc
     out = pipeline.reconstruct(found.tracks, found.image_sizes, options,
                                lambda stage, *progress: stage.startswith("structure"))
     assert [names[c.view] for c in out.cameras if not c.registered] == []
+
+
+def test_a_long_lens_ring_with_k_unknown_returns_right_poses_or_says_they_are_not(dino, dino_k_unknown):
+    """The dinoSparseRing's 11-degree field of view, K unknown: the poses returned are within a
+    few degrees of the ground truth, or the result says they are not determined. Before the
+    registration and the adjustment's start were chosen by how well each explains every
+    observation, six cameras came back 20.9 degrees off (median; 72 at most) with every camera's
+    pose_determined unstated and no warning about the poses."""
+    names, out = dino_k_unknown
+    estimated = {names[c.view]: (c.K, c.R, c.t) for c in out.cameras if c.registered and c.R is not None}
+    errors = camera_errors.compare(estimated, dino.truth)
+    assert len(estimated) >= 6
+    right = errors["rotation_median_deg"] <= 3.0 and errors["rotation_max_deg"] <= 5.0
+    flagged = out.summary["poses_determined"] is False and "poses_not_determined" in [
+        w["code"] for w in out.summary["warnings"]]
+    assert right or flagged
+    # a pose claimed determined is never far off: no camera both wrong and unflagged
+    for c in out.cameras:
+        if c.registered and c.R is not None and errors["rotation_errors_deg"][names[c.view]] > 5.0:
+            assert c.pose_determined is False

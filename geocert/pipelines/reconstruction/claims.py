@@ -64,6 +64,9 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
             f"{len(missing)} of {n_views} views not registered (no camera returned for them): " + "; ".join(
                 f"views {', '.join(map(str, views))}: {reason}" for reason, views in why.items()))})
     warnings += list(claim.warnings)
+    reversal = _depth_reversal(out, registered)
+    if reversal is not None:
+        warnings.append(reversal)
     distortion = getattr(out, "distortion", None)
     if distortion is not None:
         out.summary["distortion"] = _distortion(out, distortion)
@@ -86,6 +89,8 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
     # Every camera the cameras stage took up, a stopped one too: a stop never makes the rig look
     # sounder (a camera a cancel left unbounded counts as not certified; the verifier's reading).
     doubts = _doubts(out, registered, [c for c in out.cameras if c.bound is not None], count)
+    if reversal is not None and reversal["code"] == "poses_not_determined":
+        doubts.insert(0, "the poses are not determined: " + reversal["detail"])
     out.summary["doubtful"] = bool(doubts)
     if doubts:  # the first thing a user reads: a certified camera here may still be degrees off
         warnings.insert(0, {"code": "reconstruction_doubtful", "detail": (
@@ -140,6 +145,42 @@ def judge_motion(out) -> None:
 def _K_given(stage: dict) -> bool:
     """Whether the autocalibration stage was skipped because K was given."""
     return stage.get("status") == "skipped" and "K is known" in (stage.get("reason") or "")
+
+
+def _depth_reversal(out, registered: list) -> dict | None:
+    """The depth-reversal check's claim (ambiguity.check): each registered camera's
+    ``pose_determined`` and ``mirror_rotation_deg``, ``summary.poses_determined`` (None when not
+    checked) and ``summary.depth_reversal`` (its figures); returns the warning to give, if any: the
+    twin fits about as well (the poses are not determined), or it fitted better and was returned."""
+    figures = out.checks.get("depth_reversal")
+    checked = bool(figures and figures.get("checked"))
+    out.summary["depth_reversal"] = figures
+    out.summary["poses_determined"] = (not figures["ambiguous"]) if checked else None
+    for camera in out.cameras:
+        camera.pose_determined = camera.mirror_rotation_deg = None
+        if checked and camera.registered and camera.R is not None:
+            camera.pose_determined = not figures["ambiguous"]
+            camera.mirror_rotation_deg = figures["mirror_rotation_deg"].get(camera.view)
+    if not checked:
+        return None
+    turned = [a for c in registered if (a := figures["mirror_rotation_deg"].get(c.view)) is not None]
+    most = max(turned, default=0.0)
+    if figures["ambiguous"]:
+        return {"code": "poses_not_determined", "detail": (
+            f"the depth-reversed twin of the returned rig (every point mirrored in depth in view "
+            f"{figures['reference_view']}'s frame, each relative rotation's axis mirrored, then adjusted: focal "
+            f"{figures['mirror_focal_px']:.1f} px against {figures['focal_px']:.1f}) fits the observations about as well "
+            f"(its capped cost {figures['mirror_cost_px2']:.1f} against {figures['cost_px2']:.1f} px^2, "
+            f"{figures['statistic']:+.1f} noise variances, ratio {figures['cost_ratio'] or 0:.3f}: not more than "
+            f"{figures['threshold']:g} variances and {100 * figures['margin']:g}% apart), and its cameras point up to "
+            f"{most:.1f} degrees differently: the observations do not say which is right (a long lens sees nearly "
+            "affinely), so no camera's pose is determined, certified or not (each camera's pose_determined is false)")}
+    if figures["adopted"]:
+        return {"code": "depth_reversed_twin_returned", "detail": (
+            f"the adjustment had settled in the depth-reversed twin of a rig that fits better "
+            f"({-figures['statistic']:.1f} noise variances better): that rig is returned, its cameras up to "
+            f"{most:.1f} degrees from the adjustment's")}
+    return None
 
 
 def _doubts(out, registered: list, bounded: list, observations: int) -> list[str]:

@@ -264,9 +264,18 @@ def _check_pipeline_counts(result: dict, rel_gap: float) -> None:
     beyond = sum(1 for c in bounded if c.get("certified") is not True)
     removed, kept = summary["observations_removed"], summary.get("observations") or 0
     registered = sum(1 for c in cameras if c.get("registered") is True)
+    # The depth-reversal check (pipelines/reconstruction/ambiguity.py) needs an adjustment this
+    # verifier does not run: its verdict is taken as stated, but stated consistently (the summary,
+    # its warning and every registered camera), and poses not determined make the rig doubtful.
+    poses = summary.get("poses_determined")
+    if poses not in (True, False, None) or (poses is False) != _warned(summary, "poses_not_determined") or any(
+            c.get("pose_determined") != poses for c in cameras if c.get("registered") is True and "pose_determined" in c):
+        raise Invalid("returned", f"summary/poses_determined is {poses!r}: its warning (poses_not_determined) and "
+                                  "every registered camera's pose_determined must say the same")
     doubtful = bool((len(bounded) >= 2 and beyond > DOUBTFUL_FRACTION * len(bounded))
                     or (removed and removed > DOUBTFUL_REMOVED * (removed + kept))
-                    or (dropped and dropped > DOUBTFUL_DROPPED * (dropped + registered)))
+                    or (dropped and dropped > DOUBTFUL_DROPPED * (dropped + registered))
+                    or poses is False)
     if summary.get("doubtful", False) is not doubtful or doubtful != _warned(summary, "reconstruction_doubtful"):
         raise Invalid("returned", f"summary/doubtful is {summary.get('doubtful')!r}: its cameras and counts make the "
                                   f"reconstruction {'' if doubtful else 'not '}doubtful, and the warning must say "
