@@ -24,7 +24,8 @@ from geocert.solvers.core.certificates import (BOUND_TOLERANCE, FORMAT, OBJECTIV
                                                problem_hash)
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost
 from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
-                                         informational, number as _number, record, work_budget)
+                                         informational, number as _number, printable_tree, record,
+                                         work_budget)
 from geocert.solvers.fractional import residual_claims
 from geocert.solvers.fractional.results import claim_of
 
@@ -47,8 +48,11 @@ class Report:
     discounted: list = field(default_factory=list)  # {"item", "lower_bound", "proven"}: see verify_arrays
 
     def as_dict(self) -> dict:
-        return {"valid": self.valid, "checks": self.checks, "first_failure": self.first_failure,
-                "items_checked": self.items_checked, "items_skipped": self.items_skipped, "scope": self.scope}
+        """The report as JSON writes it; its texts quote the document (a member name in a
+        failure's detail), so a lone surrogate there is written as its escape (printable_tree)."""
+        return printable_tree({"valid": self.valid, "checks": self.checks, "first_failure": self.first_failure,
+                               "items_checked": self.items_checked, "items_skipped": self.items_skipped,
+                               "scope": self.scope})
 
 
 # --- the problem: options, data, one item ---------------------------------------------------
