@@ -527,14 +527,12 @@ class TestStageCountsPastTheNestedCheck:
     def test_the_genuine_result_verifies(self):
         assert _valid(stored("reconstruction"))
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("edit", sorted(UNREAD_COUNTS))
     def test_a_count_beyond_its_total_is_refused(self, edit):
         result = stored("reconstruction")
         UNREAD_COUNTS[edit](result)
         assert not _valid(result)
 
-    @pytest.mark.xfail(**XFAIL)
     def test_a_stage_failed_beside_its_certified_output_is_refused(self):
         result = stored("reconstruction")
         structure = _stage(result, "structure")
