@@ -393,7 +393,6 @@ class TestDerivedArrayReadAtItsLargestEntry:
         moved = np.asarray(self.forged(far_point_result, self.MOVES[move])["points"][:-1])
         assert np.max(np.linalg.norm(moved - given, axis=1)) > np.ptp(given, axis=0).max()  # beyond the scene's size
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("move", sorted(MOVES))
     def test_scene_points_not_the_upgrades_are_refused(self, far_point_result, move):
         assert not _valid(self.forged(far_point_result, self.MOVES[move]))
