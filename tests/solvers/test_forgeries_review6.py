@@ -579,3 +579,36 @@ class TestRestatedCalibrationStagesAbsoluteFloor:
                              ids=["bound_above_cost_negative_gap", "cost_and_bound_restated"])
     def test_a_restated_figure_not_the_claims_is_refused(self, stage, fields):
         assert not _valid(_restated(stage, **fields))
+
+
+# The abs_gap cap of each certified kind, in its cost's units (the kinds' models and the verifier read it).
+def _abs_gap_caps() -> dict:
+    from geocert.solvers.autocalibration.problem import MAX_ABS_GAP as AUTOCALIBRATION
+    from geocert.solvers.bilinear.options import MAX_ABS_GAP as BILINEAR
+    from geocert.solvers.fractional.options import MAX_ABS_GAP as RESIDUALS
+
+    return {"triangulation": RESIDUALS, "resection": RESIDUALS, "homography": RESIDUALS, "bilinear": BILINEAR,
+            "autocalibration": AUTOCALIBRATION, "reconstruction": RESIDUALS}
+
+
+@pytest.mark.parametrize("name", sorted(_abs_gap_caps()))
+def test_each_kinds_request_refuses_an_abs_gap_beyond_its_cap_naming_the_option(name):
+    """As input: the kind's request model and its parser (parse_job) take the cap and refuse 10
+    times it, naming options/abs_gap (the API answers that refusal 422)."""
+    from pydantic import ValidationError
+
+    from geocert.batch import parse_job
+    from geocert.kinds import KINDS
+    from geocert.solvers.core.geometry import InputError
+
+    kind, cap = KINDS.get(name), _abs_gap_caps()[name]
+    example = copy.deepcopy(kind.example)
+    at_cap = {**example, "options": {**example.get("options", {}), "abs_gap": cap}}
+    kind.request_model.model_validate(at_cap)
+    beyond = {**example, "options": {**example.get("options", {}), "abs_gap": 10 * cap}}
+    with pytest.raises(ValidationError) as refusal:
+        kind.request_model.model_validate(beyond)
+    assert "abs_gap" in str(refusal.value)
+    with pytest.raises(InputError) as refused_input:
+        parse_job(beyond)
+    assert refused_input.value.field == "options/abs_gap"
