@@ -201,8 +201,9 @@ def every_track_searched():
 @contextlib.contextmanager
 def loose_gaps():
     """The solvers take any gap while a forger builds a document with gaps beyond the caps
-    (fractional.options.MAX_REL_GAP, MAX_ABS_GAP), which the kinds refuse as input and the
-    verifier as a document: a forger's solver need not refuse them."""
+    (fractional.options.MAX_REL_GAP; abs_gap's per kind, in its cost's units: fractional.options,
+    bilinear.options and autocalibration.problem's MAX_ABS_GAP), which the kinds refuse as input
+    and the verifier as a document: a forger's solver need not refuse them."""
     from geocert.solvers.bilinear.options import BilinearOptions
     from geocert.solvers.fractional.options import SearchOptions
 

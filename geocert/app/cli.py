@@ -61,15 +61,15 @@ def cmd_solve(args: argparse.Namespace) -> int:
 
 def cmd_verify(args: argparse.Namespace) -> int:
     """Exit 0 when the certificate is valid, 1 when it is not, 2 when the input cannot be read
-    (unreadable, not JSON, a member name repeated in one object, nested too deeply, or carrying
-    no certificate)."""
-    from geocert.solvers.core.strict import RepeatedName, load_document
+    (unreadable, not JSON, a member name repeated in one object, a number too long to read, nested
+    too deeply, or carrying no certificate)."""
+    from geocert.solvers.core.strict import RepeatedName, Unreadable, load_document
     from geocert.solvers.verify import estimates_kind, find_certificate, verify_any
 
     try:
         text = sys.stdin.read() if args.file == "-" else Path(args.file).read_text()
         document = load_document(text)
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RepeatedName, RecursionError) as exc:
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RepeatedName, Unreadable, RecursionError) as exc:
         reason = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
         print(f"geocert verify: cannot read {args.file}: {reason}", file=sys.stderr)
         return 2

@@ -11,6 +11,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from geocert.solvers.core.geometry import InputError
+from geocert.solvers.core.strict import printable_tree
 from geocert.kinds import KINDS
 from geocert.kinds.reconstruction import NO_CONTROL_CHARACTERS
 from geocert.workers.store import REDIS_GONE
@@ -36,7 +37,13 @@ def problem(status: int, title: str, detail: str | None = None, errors: list[dic
         body["instance"] = instance
     if errors:
         body["errors"] = errors
-    return JSONResponse(body, status_code=status, media_type=PROBLEM_JSON, headers=headers)
+    return problem_response(body, status, headers)
+
+
+def problem_response(body: dict, status: int, headers: dict | None = None) -> JSONResponse:
+    """A problem document as the answer; its texts may quote the request (a member name), so a
+    lone surrogate there (valid as a JSON escape, not encodable as UTF-8) is written as its escape."""
+    return JSONResponse(printable_tree(body), status_code=status, media_type=PROBLEM_JSON, headers=headers)
 
 
 def field_path(loc: tuple) -> str:
@@ -115,8 +122,7 @@ def install(app: FastAPI) -> None:
         instance = str(request.url.path)
         syntax = next((e for e in errors if e.get("type") == "json_invalid"), None)
         if syntax is not None:
-            return JSONResponse(json_syntax_problem(syntax, exc.body, instance), status_code=400,
-                                media_type=PROBLEM_JSON)
+            return problem_response(json_syntax_problem(syntax, exc.body, instance), 400)
         content_type = request.headers.get("content-type")
         if request.method in ("POST", "PUT", "PATCH") and not is_json_media_type(content_type) and any(
                 tuple(e.get("loc", ()))[:1] == ("body",) for e in errors):
@@ -124,8 +130,7 @@ def install(app: FastAPI) -> None:
             return problem(415, "Unsupported media type",
                            f"the body must be JSON sent with the header content-type: application/json ({given})",
                            [{"field": "content-type", "reason": "must be application/json"}], instance=instance)
-        body = validation_problem(errors, instance=instance)
-        return JSONResponse(body, status_code=422, media_type=PROBLEM_JSON)
+        return problem_response(validation_problem(errors, instance=instance), 422)
 
     @app.exception_handler(InputError)
     async def input_error(request: Request, exc: InputError):

@@ -100,7 +100,9 @@ class VerifyReport(BaseModel):
     items_checked: int
     items_skipped: int = Field(description="items not claimed certified: nothing to check")
     scope: dict[str, Any] | None = Field(None, description="what a valid document proves, and for which problem "
-                                                           "(kind, norm, max_residual, gaps, statement)")
+                                                           "(kind, norm, max_residual, gaps, statement; "
+                                                           "within_abs_gap: the positions of the items certified "
+                                                           "only through abs_gap, in the cost's units)")
 
 
 class WebhookState(BaseModel):

@@ -24,7 +24,8 @@ from geocert.solvers.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, F
                                                data_hash, problem_hash)
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost
 from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
-                                         informational, number as _number, record, work_budget)
+                                         informational, number as _number, printable_tree, record,
+                                         work_budget)
 from geocert.solvers.fractional import residual_claims
 from geocert.solvers.fractional.results import claim_of
 
@@ -45,10 +46,14 @@ class Report:
     items_skipped: int = 0
     scope: dict | None = None
     discounted: list = field(default_factory=list)  # {"item", "lower_bound", "proven"}: see verify_arrays
+    within_abs_gap: list = field(default_factory=list)  # items whose gap only abs_gap allows: see _verify
 
     def as_dict(self) -> dict:
-        return {"valid": self.valid, "checks": self.checks, "first_failure": self.first_failure,
-                "items_checked": self.items_checked, "items_skipped": self.items_skipped, "scope": self.scope}
+        """The report as JSON writes it; its texts quote the document (a member name in a
+        failure's detail), so a lone surrogate there is written as its escape (printable_tree)."""
+        return printable_tree({"valid": self.valid, "checks": self.checks, "first_failure": self.first_failure,
+                               "items_checked": self.items_checked, "items_skipped": self.items_skipped,
+                               "scope": self.scope})
 
 
 # --- the problem: options, data, one item ---------------------------------------------------
@@ -290,6 +295,15 @@ def _verify(document: Any, returned: dict | None) -> Report:
                                       "proofs counted their rounding) claim a lower_bound their proofs meet only with "
                                       "rounding uncounted: for them read proven, the bound proven with it counted, for "
                                       "lower_bound (their cost is within the gap tolerance of it)")
+    if report.within_abs_gap and report.scope is not None:
+        # abs_gap is capped in each kind's units, but a document chooses its coordinates' units
+        # (normalised image coordinates make a residual of 1 a radian): where only abs_gap
+        # certifies an item, the report says so beside the item.
+        report.scope["within_abs_gap"] = report.within_abs_gap
+        report.scope["statement"] += (f"; the items listed in within_abs_gap are certified through abs_gap "
+                                      f"({options['abs_gap']!r}, in the cost's units), not rel_gap: their gap exceeds "
+                                      "rel_gap times their cost, so for them optimal means a cost at most abs_gap "
+                                      "above the least cost in the scope")
     if first is None and report.items_checked == 0:
         report.first_failure = {"check": "format", "item": None, "detail": "no certified item to check"}
     report.checks = [{"name": name, "passed": passed, "failed": failed}
@@ -370,6 +384,7 @@ def _verify_items(document: dict, options: dict, items: list, report: Report, ta
         if position in proven:
             for name in checks:
                 tallies[name][0] += 1
+            _note_abs_gap(document["kind"], options, claim, position, report)
             continue
         try:
             arrays = _adapter(document["kind"]).read(document["data"], claim["index"])
@@ -378,10 +393,19 @@ def _verify_items(document: dict, options: dict, items: list, report: Report, ta
                 tallies[name][0] += 1
             if discounted:
                 report.discounted.append({"item": position, "lower_bound": claim["lower_bound"], "proven": bound})
+            _note_abs_gap(document["kind"], options, claim, position, report)
         except Invalid as exc:
             fail(exc.check, position, exc.detail)
         except Exception as exc:  # a malformed document is invalid, never a crash
             fail("format", position, f"{type(exc).__name__}: {exc}")
+
+
+def _note_abs_gap(kind: str, options: dict, claim: dict, position: int, report: Report) -> None:
+    """A certified claim whose gap rel_gap alone does not allow (its proof met only abs_gap):
+    named in the report's scope (within_abs_gap)."""
+    rel_gap_of = getattr(_adapter(kind), "rel_gap_of", lambda options_, _: options_["rel_gap"])
+    if float(claim["gap"]) > float(rel_gap_of(options, position)) * abs(float(claim["cost"])):
+        report.within_abs_gap.append(position)
 
 
 def _check_item_count(document: dict) -> None:

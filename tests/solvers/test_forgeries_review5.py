@@ -156,8 +156,9 @@ def _track_cost(document: dict, index: int, point: list) -> float:
 
 
 class TestGapsUncapped:
-    """(Refused now: every kind caps rel_gap at 0.5 and abs_gap at 1, fractional.options.MAX_REL_GAP
-    and MAX_ABS_GAP, as input and in the verifier's reading of the options.) A reconstruction's options cap rel_gap at 0.5 and abs_gap at 1 (reconstruction.verification:
+    """(Refused now: every kind caps rel_gap at 0.5 (fractional.options.MAX_REL_GAP) and abs_gap in
+    its cost's units (each options module's MAX_ABS_GAP, after review 6: the shared cap of 1 was as
+    large as whole kinds' costs), as input and in the verifier's reading of the options.) A reconstruction's options cap rel_gap at 0.5 and abs_gap at 1 (reconstruction.verification:
     "at rel_gap 0.999 'certified' would hold whatever a point costs"). The other kinds take any
     abs_gap >= 0 and rel_gap up to 1 (fractional.options.OPTION_RANGES, likewise bilinear and
     autocalibration), so a document whose options say abs_gap 1e300 (or rel_gap 1) calls every

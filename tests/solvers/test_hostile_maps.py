@@ -21,6 +21,7 @@ from geocert.solvers.fractional import proof
 from geocert.solvers.fractional.items import MapItem, refused_by_verifier
 from geocert.solvers.fractional.maps import fit_map
 from geocert.solvers.fractional.options import MapOptions
+from tests.support import loose_gaps
 
 # (seed, problem, norm): certified and refused ("the program's residuals differ from the data's").
 # 3:23 homography, sources 1e6 x their spread from the origin (about 5e8, spread 4e6); 2:2 resection
@@ -140,7 +141,7 @@ class TestTheSolverRefusesWhatTheVerifierWould:
         options = MapOptions(norm="L2L2", abs_gap=1.0)
         item, residuals, cost, claim = self.claim(M, target, "L2L2")
         assert "non-positive depth" in refused_by_verifier(item, M, residuals, cost, options, None)
-        with pytest.raises(verify.Invalid, match="non-positive depth"):
+        with loose_gaps(), pytest.raises(verify.Invalid, match="non-positive depth"):  # (abs_gap beyond the cap)
             verify.verify_arrays("homography", (self.source, target), dataclasses.asdict(options), claim)
 
     def test_a_cost_the_data_do_not_determine(self):
@@ -150,5 +151,5 @@ class TestTheSolverRefusesWhatTheVerifierWould:
         item, residuals, cost, claim = self.claim(self.M, target, "L1L1")
         assert cost < 1e-3
         assert "determine the solution's cost" in refused_by_verifier(item, self.M, residuals, cost, options, None)
-        with pytest.raises(verify.Invalid, match="determine the solution's cost"):
+        with loose_gaps(), pytest.raises(verify.Invalid, match="determine the solution's cost"):
             verify.verify_arrays("homography", (self.source, target), dataclasses.asdict(options), claim)

@@ -12,7 +12,7 @@ import numpy as np
 
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.autocalibration import problem as pr
-from geocert.solvers.autocalibration import proofs
+from geocert.solvers.autocalibration import proofs, structure_check
 from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers
@@ -171,7 +171,7 @@ class AutocalibrationVerification:
         if result.get("method") != options.get("method") or result.get("intrinsics") != problem.ranges:
             raise Invalid("returned", "method or intrinsics differ from what the options give")
         derived = {"upgrade": None, "dual_absolute_quadric": None, "cameras": None, "points": None}
-        p = None
+        H = p = None
         if result.get("plane_at_infinity") is not None:
             p = pr.plane_from_input(problem, _numbers(result["plane_at_infinity"], "plane_at_infinity", (4,),
                                                       "returned"))
@@ -181,7 +181,7 @@ class AutocalibrationVerification:
             derived = {"upgrade": H.tolist(), "dual_absolute_quadric": pr.dual_absolute_quadric(H).tolist(),
                        "cameras": pr.metric_cameras(cameras, H), "points": pr.metric_points(H, points)}
         for name, expected in derived.items():
-            if not _close(result.get(name), expected):
+            if not _derived_close(name, result.get(name), expected, cameras, points, H):
                 raise Invalid("returned", f"{name} is not what the plane at infinity and K give")
         _check_baseline(result.get("baseline"), problem, p)
 
@@ -396,9 +396,21 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
         return
     Q_in = _numbers(claim.get("dual_absolute_quadric"), "dual_absolute_quadric", (4, 4), "returned")
     expected = direct.derived(cameras, points, Q_in, bool(options.get("varying_focal")))
+    H = np.asarray(expected["upgrade"], dtype=float)
     for name, value in expected.items():
-        if not _close(result.get(name), value):
+        if not _derived_close(name, result.get(name), value, cameras, points, H):
             raise Invalid("returned", f"{name} is not what the quadric gives")
+
+
+def _derived_close(name: str, value: Any, expected: Any, cameras: np.ndarray, points: np.ndarray | None,
+                   H: np.ndarray | None) -> bool:
+    """A derived field of the result against its recomputation: the cameras and points each
+    record at its own scale (structure_check), the other fields (one matrix or vector each) by
+    _close."""
+    if name in ("cameras", "points") and H is not None:
+        check = structure_check.cameras_close if name == "cameras" else structure_check.points_close
+        return check(value, expected, cameras if name == "cameras" else points, H)
+    return _close(value, expected)
 
 
 def _close(value: Any, expected: Any, scale: float | None = None) -> bool:

@@ -32,7 +32,7 @@ class RepeatedName(ValueError):
 
     def __init__(self, name: str):
         super().__init__(f"the member name {name!r:.80} is repeated in one object")
-        self.name = name
+        self.name = printable(name)
 
 
 def _members(pairs: list[tuple[str, Any]]) -> dict:
@@ -44,12 +44,47 @@ def _members(pairs: list[tuple[str, Any]]) -> dict:
     return members
 
 
+class Unreadable(ValueError):
+    """Valid JSON the reader cannot hold: an integer literal longer than Python converts
+    (sys.get_int_max_str_digits, 4,300 digits by default), or any other ValueError of the parser
+    that is not a syntax error."""
+
+    def __init__(self, reason: str):
+        super().__init__(f"the text cannot be read: {printable(reason)}")
+
+
 def load_document(text: str | bytes) -> Any:
     """A document's JSON text read as the verifier reads it, refusing a member name repeated in
     one object (RepeatedName). RFC 8259 leaves a repeated name's meaning to each parser (the last
     value, the first, or an error), so one text could hold a second result that a reader keeping
-    the first value reads and no check read; the verifier reads one document only."""
-    return json.loads(text, object_pairs_hook=_members)
+    the first value reads and no check read; the verifier reads one document only. Valid JSON the
+    parser cannot hold (an integer of more than 4,300 digits) is Unreadable; syntax errors stay
+    JSONDecodeError, bytes not UTF-8 UnicodeDecodeError (both ValueErrors the callers name)."""
+    try:
+        return json.loads(text, object_pairs_hook=_members)
+    except (json.JSONDecodeError, UnicodeDecodeError, RepeatedName):
+        raise
+    except ValueError as exc:
+        raise Unreadable(str(exc)) from None
+
+
+def printable(text: str) -> str:
+    """``text`` (taken from a document: a member name, a value) as it may be echoed in a report or
+    an error: a lone surrogate (valid as a JSON escape, \\ud800, but not encodable as UTF-8) written
+    as its escape, every other character kept."""
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
+def printable_tree(value: Any) -> Any:
+    """``value`` (a report: dicts, lists, strings, numbers) with every string and member name
+    made printable (a report's details quote what a document holds)."""
+    if isinstance(value, str):
+        return printable(value)
+    if isinstance(value, dict):
+        return {printable_tree(key): printable_tree(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [printable_tree(item) for item in value]
+    return value
 
 
 def number(value: Any, name: str, check: str = "format") -> float:

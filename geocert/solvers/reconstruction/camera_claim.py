@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from geocert.solvers.fractional.options import MAX_ABS_GAP as RESIDUAL_MAX_ABS_GAP
 
 # Chi-square quantiles at 0.999 for 1 to 5 degrees of freedom (scipy.stats.chi2.ppf(0.999, d)).
 CHI2_999 = {1: 10.828, 2: 13.816, 3: 16.266, 4: 18.467, 5: 20.515}
@@ -42,10 +43,11 @@ POSE_DOF = 6
 MAX_ALLOWANCE = 0.5
 # The loosest gaps a reconstruction's certified claims may be made with: a camera or a point
 # "certified" at camera_rel_gap 0.999 or abs_gap 1e6 would be certified whatever it costs. With
-# these, a certified camera costs at most 2 (1 + allowance) times its bound plus 1 (px^2 under
-# L2L2, px under the L1 norms).
+# these, a certified camera costs at most 2 (1 + allowance) times its bound plus 1e-4 (px^2 under
+# L2L2, px under the L1 norms): abs_gap is the residual kinds' (fractional.options.MAX_ABS_GAP),
+# as the points and cameras are certified by triangulation and resection certificates.
 MAX_REL_GAP = 0.5
-MAX_ABS_GAP = 1.0
+MAX_ABS_GAP = RESIDUAL_MAX_ABS_GAP
 # A reconstruction is doubtful as a whole (the pipeline's claims._doubts, the verifier's check of
 # summary.doubtful) when more than these shares of its bounded cameras are not certified, of its
 # observations were rejected, or of its registered cameras were dropped.

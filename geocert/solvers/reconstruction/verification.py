@@ -927,6 +927,8 @@ class ReconstructionItems(TrackItems):
     def check_result(self, result: dict, certificate: dict, verify: Callable[[dict], object]) -> dict:
         """Every check of the result beyond its points' claims; returns what the report's scope
         adds (whether the labels are tied to the input the data state)."""
+        from geocert.solvers.reconstruction.stage_checks import check_stages
+
         registered, views = _check_cameras(result.get("cameras"), certificate.get("data", {}))
         _check_points(result.get("points"), certificate.get("data", {}).get("tracks"), views)
         labels = _check_labels(result, certificate["data"])
@@ -948,6 +950,7 @@ class ReconstructionItems(TrackItems):
         _check_summary(result, registered)
         _check_pipeline_counts(result, rel_gap)
         _check_projective_counts(result)
+        check_stages(result)  # (stage_checks: the stage records' shape and counts)
         _check_distortion(result, registered, own)
         _check_calibration(result, registered, verify)
         scoped = {"labels": labels}

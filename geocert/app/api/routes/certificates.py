@@ -15,7 +15,7 @@ from geocert.app.errors import PROBLEM_JSON, ApiProblem, is_json_media_type, jso
 from geocert.app.schemas import RESULT_MODELS, VerifyReport
 from geocert.kinds.schema import CertificateDocument
 from geocert.solvers import verify
-from geocert.solvers.core.strict import RepeatedName, load_document
+from geocert.solvers.core.strict import RepeatedName, Unreadable, load_document
 from geocert.workers.store import TERMINAL
 
 router = APIRouter(tags=["certificates"], dependencies=[Depends(rate_limited)])
@@ -53,7 +53,8 @@ async def verify_certificate(request: Request):
     a job, every item returned must also equal the item its certificate proves. ``valid`` is false,
     with ``first_failure`` naming the check, when any check fails (or the document carries no
     certificate); ``scope`` says what a valid document proves. A body naming a member twice in
-    one object is refused (422): which of the two a reader takes is its parser's choice."""
+    one object is refused (422): which of the two a reader takes is its parser's choice; so is valid
+    JSON the reader cannot hold (an integer of more than 4,300 digits)."""
     content_type = request.headers.get("content-type")
     if not is_json_media_type(content_type):
         given = f"it was {content_type!r}" if content_type else "it was missing"
@@ -74,6 +75,8 @@ def _verified(text: bytes) -> dict:
         document = load_document(text)
     except RepeatedName as exc:
         raise ApiProblem(422, f"{exc}: a document must name each member once", exc.name) from None
+    except Unreadable as exc:
+        raise ApiProblem(422, str(exc), "body") from None
     except RecursionError:
         raise ApiProblem(422, "the body is nested too deeply to read", "body") from None
     if not isinstance(document, dict):

@@ -1,0 +1,108 @@
+"""The shape of a reconstruction's stage records, and the counts they state, checked against what
+each count counts from (the verifier's, numpy free). A stage's figures (times, thresholds, RMS
+values) are informational; its status, the records it nests and its counts are not: a status
+"failed" beside the points it certified, a record held in another container than the pipeline's
+(which a check reading records would pass over), or a count beyond its total would each tell a
+reader something no stage did.
+
+What each count counts from (the summary states the views sent and the tracks; each track holds
+at most one observation a view, so tracks * views bounds every count of observations):
+
+- projective: initial_pair_search.candidates <= views * (views - 1) / 2 (the pairs of views);
+- bundle_adjustment: observations_kept and principal_point.observations <= tracks * views;
+- autocalibration: points_used <= tracks.
+
+(The projective stage's own counts, and the structure and cameras stages' counts of the items,
+are checked where they are read: verification._check_projective_counts, _check_summary.)"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from geocert.solvers.core.strict import Invalid
+
+# The statuses a stage ends with (pipeline._stage, _timed, _skip, _cancel; "running" is never
+# returned), and those of a stage that produced nothing (no point or camera it certifies).
+STATUSES = ("done", "failed", "skipped", "cancelled", "time_limit", "not_run")
+PRODUCED_NOTHING = ("failed", "skipped", "not_run")
+STAGE_NAMES = ("matches", "projective", "autocalibration", "bundle_adjustment", "structure", "cameras")
+
+# The records each stage nests, with their containers: "list" a list of objects, "object" an
+# object, "pair" a list of two view numbers; each may be absent or null.
+CONTAINERS = {
+    "projective": {"focal_rounds": "list", "merged": "list", "initial_pair_search": "object",
+                   "initial_pair": "pair", "radial_distortion": "object"},
+    "autocalibration": {"stages": "list", "intrinsics": "object"},
+    "bundle_adjustment": {"starts": "list", "principal_point": "object"},
+}
+NESTED = {("projective", "initial_pair_search"): {"pair": "object", "thresholds": "object"}}
+
+
+def _where(stage: str, path: str) -> str:
+    return f"stages/{stage}/{path}"
+
+
+def _container(value: Any, kind: str, where: str) -> None:
+    if value is None:
+        return
+    if kind == "object" and not isinstance(value, dict):
+        raise Invalid("returned", f"{where} must be an object, got {type(value).__name__}")
+    if kind == "list" and not (isinstance(value, list) and all(isinstance(entry, dict) for entry in value)):
+        raise Invalid("returned", f"{where} must be a list of objects")
+    if kind == "pair" and not (isinstance(value, list) and len(value) == 2):
+        raise Invalid("returned", f"{where} must be a pair of views, got {value!r:.60}")
+
+
+def _bounded(value: Any, where: str, total: int, counts_from: str) -> None:
+    if not (isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= total):
+        raise Invalid("returned", f"{where} is {value!r:.40}: a count of at most {total} ({counts_from})")
+
+
+def check_stages(result: dict) -> None:
+    """Every stage record: an object with a known name (once each) and status, its nested records
+    in the pipeline's containers, its counts within their totals, and a structure or cameras stage
+    that certified an item not saying it produced nothing."""
+    stages, summary = result.get("stages"), result.get("summary") or {}
+    if not (isinstance(stages, list) and all(isinstance(stage, dict) for stage in stages)):
+        raise Invalid("returned", "stages must be a list of objects")
+    names = [stage.get("name") for stage in stages]
+    if any(name not in STAGE_NAMES for name in names) or len(set(names)) != len(names):
+        raise Invalid("returned", f"stages are named {names!r:.120}: each once, of {', '.join(STAGE_NAMES)}")
+    views, tracks = summary.get("views"), summary.get("tracks")
+    if not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in (views, tracks)):
+        raise Invalid("returned", "summary/views and summary/tracks must be counts")
+    certified = {"structure": any(p.get("certified") is True for p in result.get("points") or [] if isinstance(p, dict)),
+                 "cameras": any(c.get("certified") is True for c in result.get("cameras") or [] if isinstance(c, dict))}
+    for stage in stages:
+        name = stage["name"]
+        if stage.get("status") not in STATUSES:
+            raise Invalid("returned", f"{_where(name, 'status')} is {stage.get('status')!r:.40}: one of "
+                                      f"{', '.join(STATUSES)}")
+        if certified.get(name) and stage["status"] in PRODUCED_NOTHING:
+            raise Invalid("returned", f"{_where(name, 'status')} is {stage['status']!r} beside the items it "
+                                      "certified")
+        for member, kind in CONTAINERS.get(name, {}).items():
+            _container(stage.get(member), kind, _where(name, member))
+            for inner, inner_kind in NESTED.get((name, member), {}).items():
+                if isinstance(stage.get(member), dict):
+                    _container(stage[member].get(inner), inner_kind, _where(name, f"{member}/{inner}"))
+    _check_counts({stage["name"]: stage for stage in stages}, views, tracks)
+
+
+def _check_counts(stages: dict, views: int, tracks: int) -> None:
+    observations = tracks * views
+    search = (stages.get("projective") or {}).get("initial_pair_search")
+    if isinstance(search, dict) and "candidates" in search:
+        _bounded(search["candidates"], _where("projective", "initial_pair_search/candidates"), views * (views - 1) // 2,
+                 f"the pairs of the {views} views")
+    adjustment = stages.get("bundle_adjustment") or {}
+    if "observations_kept" in adjustment:
+        _bounded(adjustment["observations_kept"], _where("bundle_adjustment", "observations_kept"), observations,
+                 f"{tracks} tracks, one observation a view of {views}")
+    test = adjustment.get("principal_point")
+    if isinstance(test, dict) and "observations" in test:
+        _bounded(test["observations"], _where("bundle_adjustment", "principal_point/observations"), observations,
+                 f"{tracks} tracks, one observation a view of {views}")
+    calibration = stages.get("autocalibration") or {}
+    if "points_used" in calibration:
+        _bounded(calibration["points_used"], _where("autocalibration", "points_used"), tracks, "the tracks")
