@@ -281,3 +281,58 @@ class TestProvenIntervalBelowTheNoise:
     def test_a_proven_interval_is_at_the_stated_noise_level(self, far_two_view_track):
         determinacy = far_two_view_track[1]["tracks"][-1]["determinacy"]
         assert determinacy["proven_intervals"]["cost_increase"] >= determinacy["cost_increase"]
+
+
+# --- a job document's members, and its progress's ----------------------------------------------
+
+def _job(result: dict, **members) -> dict:
+    """A job document as GET /v1/jobs/{id} returns it (geocert.app.schemas.Job), holding
+    ``result``, its progress the one the service recomputes from the result, plus ``members``."""
+    stats = result["stats"]
+    progress = {"items_total": stats["items"], "items_done": stats["items"], "items_certified": stats["certified"],
+                "nodes": stats["nodes"], "open_boxes": 0}
+    return {"id": "job", "kind": result["kind"], "status": "succeeded", "created_at": 0.0, "started_at": 0.0,
+            "finished_at": 1.0, "progress": progress, "links": {}, "result": result, "error": None, **members}
+
+
+# Each edit of a job whose result has 5 of its 6 tracks certified (track 0 truly not certified).
+JOB_EDITS = {
+    "job_certified": lambda job: job.update(certified=True, verified=True),
+    "job_summary": lambda job: job.update(summary={"items_certified": 6, "all_certified": True}),
+    "progress_fraction": lambda job: job["progress"].update(certified_fraction=1.0, tracks_certified=6),
+    "second_certificate": lambda job: job.update(certificate={"format": "geocert-certificate", "kind": "triangulation",
+                                                              "items": "every track certified"}),
+}
+
+
+class TestJobDocumentMembersOpen:
+    """A result's members, and those of each object it nests one level down, are now a closed set
+    (verify.check_members); a job document's are not, nor its progress's. check_job reads the
+    job's kind, status, error and progress's recomputed members (items_total, items_done,
+    items_certified, nodes, open_boxes and the bounds), and nothing else. A job whose result has
+    5 of 6 tracks certified (the stored L2L2 triangulation, track 0 truly restated not certified)
+    verifies as a job document stating `"certified": true, "verified": true` beside its status,
+    a job-level `summary` of 6 items certified, a progress stating `certified_fraction: 1.0` and
+    `tracks_certified: 6` (its deprecated tracks_* names make a tracks_ count look like the
+    service's), or a second `certificate` member at the job's level (a job's `result` is read
+    first; the other is carried unread). Each is a member a reader of the job, the document
+    GET /v1/jobs/{id} returns and a user reads first, takes for the service's word. Suggested
+    fix: close the job document's members and its progress's as the result's are (the members of
+    geocert.app.schemas.Job and JobProgress, listed in the verifier's registry), refusing any
+    other."""
+
+    def test_the_genuine_job_verifies(self):
+        from tests.solvers.test_forgeries_review5 import _one_track_uncertified
+
+        result = _one_track_uncertified()
+        assert result["stats"]["certified"] == 5
+        assert _valid(_job(result))
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("edit", sorted(JOB_EDITS))
+    def test_a_member_no_job_writes_is_refused(self, edit):
+        from tests.solvers.test_forgeries_review5 import _one_track_uncertified
+
+        job = _job(_one_track_uncertified())
+        JOB_EDITS[edit](job)
+        assert not _valid(job)
