@@ -336,3 +336,92 @@ class TestJobDocumentMembersOpen:
         job = _job(_one_track_uncertified())
         JOB_EDITS[edit](job)
         assert not _valid(job)
+
+
+@pytest.fixture(scope="module")
+def ambiguous_rig() -> tuple[object, dict]:
+    """(scene, the genuine result) of the nearly affine turntable of test_reconstruction_long_lens
+    (a 165,000 px lens from 1,000 times the object's size, 1 px of noise; 40 points, K unknown,
+    cameras not resected): the pipeline says its poses are not determined, and the result is
+    doubtful for that alone."""
+    from geocert.batch import solve_job
+    from geocert.solvers.reconstruction import synthetic
+
+    scene = synthetic.turntable(views=6, points=40, focal=165_000.0, step_degrees=23.5, elevation_degrees=16.0,
+                                distance=1000.0, noise_px=1.0, seed=0)
+    data = {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
+            "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
+                       for views, pixels in scene.tracks]}
+    return scene, solve_job({"kind": "reconstruction", "data": data,
+                             "options": {"certificate": "full", "resect_cameras": False}})
+
+
+def _said_not_checked(result: dict) -> dict:
+    """``result`` with its depth-reversal verdict restated as "not checked": poses_determined and
+    each camera's pose_determined null, summary.depth_reversal saying fewer than 2 views were
+    registered, the poses_not_determined and reconstruction_doubtful warnings dropped, doubtful
+    false (what the verifier recomputes from the rest)."""
+    forged = copy.deepcopy(result)
+    summary = forged["summary"]
+    summary.update(poses_determined=None, doubtful=False,
+                   depth_reversal={"checked": False, "reason": "fewer than 2 views registered"})
+    summary["warnings"] = [w for w in summary["warnings"]
+                           if w["code"] not in ("poses_not_determined", "reconstruction_doubtful")]
+    for camera in forged["cameras"]:
+        if camera["registered"]:
+            camera.update(pose_determined=None, mirror_rotation_deg=None)
+    return forged
+
+
+# Each edit of the twin_rig's genuine result (poses determined: the twin 18 times costlier).
+FIGURE_EDITS = {
+    "figures_say_ambiguous": lambda figures: figures.update(ambiguous=True, cost_ratio=1.0, statistic=0.0,
+                                                            mirror_cost_px2=figures["cost_px2"]),
+    "figures_say_not_checked": lambda figures: (figures.clear(), figures.update(checked=False, reason="stopped")),
+}
+
+
+class TestDepthReversalVerdictUnread:
+    """Beside the twin taken as stated (TestPosesDeterminedOfTheTwin), the verdict's own record is
+    read by no check: (1) poses_determined null means "not checked" (claims.py: None when the check
+    did not run: fewer than 2 views registered, or a stop before the twin's adjustment ended), and
+    null makes nothing doubtful. The nearly affine turntable, solved genuinely (4 of 6 views
+    registered, rotations 22 to 67 degrees from the truth), says its poses are not determined (the
+    twin costs 471.0 against 470.1 px^2, ratio 1.002; its cameras point up to 133 degrees
+    differently) and is doubtful for that alone; restated as not checked (poses_determined and
+    each camera's null, summary.depth_reversal {"checked": false, "reason": "fewer than 2 views
+    registered"} beside 4 registered views, the two warnings dropped, doubtful false) it verifies:
+    a rig whose poses the pipeline found undetermined, called not doubtful. (2) summary.
+    depth_reversal's figures may contradict the verdict: the long-lens turntable's genuine result
+    (poses determined, the twin 18 times costlier) verifies with figures saying the twin fits
+    as well (ambiguous true, cost_ratio 1.0), or that the check did not run. Suggested fix: tie
+    poses_determined to summary.depth_reversal: null exactly when not checked, and "not checked"
+    only with fewer than 2 registered views or a stopped job (its stats say so); false exactly
+    when the figures say ambiguous; the verdict recomputed from the stated figures (statistic and
+    cost_ratio from the costs, against MIRROR_CHI2 and MIRROR_MARGIN); each camera's
+    mirror_rotation_deg stated exactly when checked."""
+
+    def test_the_genuine_results_verify(self, ambiguous_rig, twin_rig):
+        scene, result = ambiguous_rig
+        assert _valid(result) and _valid(twin_rig[1])
+        assert result["summary"]["poses_determined"] is False and result["summary"]["doubtful"] is True
+        assert result["summary"]["views_registered"] >= 2
+
+    def test_the_forgery_is_false(self, ambiguous_rig):
+        scene, result = ambiguous_rig
+        figures = result["summary"]["depth_reversal"]
+        assert figures["checked"] and figures["ambiguous"] and figures["cost_ratio"] < 1.01
+        assert _pose_errors(scene, result).max() > 20.0
+        assert _said_not_checked(result)["summary"]["doubtful"] is False
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_poses_not_determined_restated_as_not_checked_is_refused(self, ambiguous_rig):
+        assert not _valid(_said_not_checked(ambiguous_rig[1]))
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("edit", sorted(FIGURE_EDITS))
+    def test_figures_contradicting_the_verdict_are_refused(self, twin_rig, edit):
+        forged = copy.deepcopy(twin_rig[1])
+        assert forged["summary"]["poses_determined"] is True
+        FIGURE_EDITS[edit](forged["summary"]["depth_reversal"])
+        assert not _valid(forged)
