@@ -381,6 +381,22 @@ FIGURE_EDITS = {
 }
 
 
+def _mirror_rotations(result: dict, value) -> dict:
+    """``result`` with every registered camera's mirror_rotation_deg (and the figures' own) ``value``."""
+    forged = copy.deepcopy(result)
+    for camera in forged["cameras"]:
+        if camera["registered"]:
+            camera["mirror_rotation_deg"] = value
+    figures = forged["summary"]["depth_reversal"]
+    figures["mirror_rotation_deg"] = {view: value for view in figures["mirror_rotation_deg"]}
+    return forged
+
+
+# Each edit of the ambiguous_rig's genuine result (the twin's cameras point up to 133 degrees apart).
+MIRROR_EDITS = {"mirror_rotations_zero": lambda result: _mirror_rotations(result, 0.0),
+                "mirror_rotations_words": lambda result: _mirror_rotations(result, "none")}
+
+
 class TestDepthReversalVerdictUnread:
     """Beside the twin taken as stated (TestPosesDeterminedOfTheTwin), the verdict's own record is
     read by no check: (1) poses_determined null means "not checked" (claims.py: None when the check
@@ -399,7 +415,13 @@ class TestDepthReversalVerdictUnread:
     only with fewer than 2 registered views or a stopped job (its stats say so); false exactly
     when the figures say ambiguous; the verdict recomputed from the stated figures (statistic and
     cost_ratio from the costs, against MIRROR_CHI2 and MIRROR_MARGIN); each camera's
-    mirror_rotation_deg stated exactly when checked."""
+    mirror_rotation_deg stated exactly when checked. (3) Each camera's mirror_rotation_deg (how far
+    the twin's camera points from the returned one: what makes "not determined" matter) is read by
+    no check, not even for its type: the ambiguous rig's (0 to 133 degrees) verify as 0 for every
+    camera, which reads as "the twin points the same way", or as the string "none" (docs/
+    certificate.md: an informational field is null or of its type). Suggested fix, beside the
+    above: recompute the twin's rotations from the stated twin (or refuse the field unless a
+    number >= 0 matching summary.depth_reversal's figure for its view)."""
 
     def test_the_genuine_results_verify(self, ambiguous_rig, twin_rig):
         scene, result = ambiguous_rig
@@ -425,3 +447,12 @@ class TestDepthReversalVerdictUnread:
         assert forged["summary"]["poses_determined"] is True
         FIGURE_EDITS[edit](forged["summary"]["depth_reversal"])
         assert not _valid(forged)
+
+    def test_the_mirror_rotations_are_large(self, ambiguous_rig):
+        cameras = [c for c in ambiguous_rig[1]["cameras"] if c["registered"]]
+        assert max(c["mirror_rotation_deg"] for c in cameras) > 90.0
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("edit", sorted(MIRROR_EDITS))
+    def test_mirror_rotations_not_the_twins_are_refused(self, ambiguous_rig, edit):
+        assert not _valid(MIRROR_EDITS[edit](ambiguous_rig[1]))
