@@ -456,3 +456,49 @@ class TestDepthReversalVerdictUnread:
     @pytest.mark.parametrize("edit", sorted(MIRROR_EDITS))
     def test_mirror_rotations_not_the_twins_are_refused(self, ambiguous_rig, edit):
         assert not _valid(MIRROR_EDITS[edit](ambiguous_rig[1]))
+
+
+# --- a K "given" that the cameras do not use ------------------------------------------------------
+
+GIVEN_K = [[700.0, 0.0, 320.0], [0.0, 700.0, 240.0], [0.0, 0.0, 1.0]]
+
+
+def _stated_given(result: dict) -> dict:
+    """``result`` with its options stating intrinsics {"K": GIVEN_K} (hashed: the current form
+    covers intrinsics) and summary.calibration's source "given" (what the verifier expects of a K
+    given); its cameras, their K and the calibration certificate kept."""
+    from tests.solvers.test_forgeries import rehash
+
+    forged = copy.deepcopy(result)
+    forged["certificate"]["options"]["intrinsics"] = {"K": copy.deepcopy(GIVEN_K)}
+    forged["summary"]["calibration"]["source"] = "given"
+    rehash(forged["certificate"])
+    return forged
+
+
+class TestGivenKNotTheCameras:
+    """summary.calibration.source is checked to be "given" whenever the options' intrinsics hold a
+    K (reconstruction.verification._check_calibration: "where the returned K comes from"), and a
+    given K empties the ranges the calibration certificate is compared with; the given K itself is
+    compared with nothing. The stored reconstruction (its cameras' K of focal 796.9 px, from the
+    bundle adjustment; a calibration certificate certifying 796.5 px) verifies with options
+    intrinsics {"K": focal 700 px} (hashed in the current form, so a user hashing a request that
+    gave K = 700 px finds it matches) and source "given": the result says its cameras' K is the
+    one the user gave, while every camera uses 796.9 px (13.8% more), and it carries a calibration
+    certificate and certified_K that a run with K given never makes (the pipeline runs no
+    autocalibration then). Suggested fix: with intrinsics.K stated, every registered camera's K
+    is that K (calibration_claim.same), summary.calibration's K too, and no calibration
+    certificate, certified_K or autocalibration_certified is stated."""
+
+    def test_the_genuine_result_verifies(self):
+        result = stored("reconstruction")
+        assert _valid(result) and result["summary"]["calibration"]["source"] == "bundle_adjustment"
+
+    def test_the_forgery_is_false(self):
+        forged = _stated_given(stored("reconstruction"))
+        focals = {camera["K"][0][0] for camera in forged["cameras"] if camera["registered"]}
+        assert all(f > 1.13 * GIVEN_K[0][0] for f in focals)
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_a_given_K_the_cameras_do_not_use_is_refused(self):
+        assert not _valid(_stated_given(stored("reconstruction")))
