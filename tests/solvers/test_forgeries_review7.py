@@ -302,6 +302,11 @@ JOB_EDITS = {
     "progress_fraction": lambda job: job["progress"].update(certified_fraction=1.0, tracks_certified=6),
     "second_certificate": lambda job: job.update(certificate={"format": "geocert-certificate", "kind": "triangulation",
                                                               "items": "every track certified"}),
+    # a result's members beside the result: a result document holding a member "result" is read
+    # as a job document (verify.find_certificate), its own tracks unread
+    "tracks_beside_the_result": lambda job: job.update(norm="L2L2", tracks=[
+        {"point": [0.0, 0.0, 0.0], "at_infinity": False, "certified": True, "status": "optimal", "cost": 0.0,
+         "lower_bound": 0.0, "gap": 0.0}] * 6),
 }
 
 
@@ -314,8 +319,11 @@ class TestJobDocumentMembersOpen:
     verifies as a job document stating `"certified": true, "verified": true` beside its status,
     a job-level `summary` of 6 items certified, a progress stating `certified_fraction: 1.0` and
     `tracks_certified: 6` (its deprecated tracks_* names make a tracks_ count look like the
-    service's), or a second `certificate` member at the job's level (a job's `result` is read
-    first; the other is carried unread). Each is a member a reader of the job, the document
+    service's), a second `certificate` member at the job's level (a job's `result` is read
+    first; the other is carried unread), or a result's own members (`norm`, six `tracks` each
+    "certified, optimal" at [0, 0, 0] with cost 0) beside `result`: verify.find_certificate reads
+    any document holding an object `result` as a job, so a result document wrapped round a
+    genuine one is verified by its inner result alone, and its own tracks are read by no check. Each is a member a reader of the job, the document
     GET /v1/jobs/{id} returns and a user reads first, takes for the service's word. Suggested
     fix: close the job document's members and its progress's as the result's are (the members of
     geocert.app.schemas.Job and JobProgress, listed in the verifier's registry), refusing any
