@@ -323,8 +323,9 @@ class TestJobDocumentMembersOpen:
     first; the other is carried unread), or a result's own members (`norm`, six `tracks` each
     "certified, optimal" at [0, 0, 0] with cost 0) beside `result`: verify.find_certificate reads
     any document holding an object `result` as a job, so a result document wrapped round a
-    genuine one is verified by its inner result alone, and its own tracks are read by no check. Each is a member a reader of the job, the document
-    GET /v1/jobs/{id} returns and a user reads first, takes for the service's word. Suggested
+    genuine one is verified by its inner result alone, and its own tracks are read by no check.
+    Each is a member a reader of the job, the document GET /v1/jobs/{id} returns and a user reads
+    first, takes for the service's word. Suggested
     fix: close the job document's members and its progress's as the result's are (the members of
     geocert.app.schemas.Job and JobProgress, listed in the verifier's registry), refusing any
     other."""
