@@ -139,8 +139,10 @@ class Registry:
 def result_members(model: type[BaseModel]) -> tuple[tuple[str, tuple[str, ...]], ...]:
     """A result model's members, and those of each model (or list of models) it nests one level
     down, as the verifier's registry lists them (VerifiedKind.members); a model keeping members
-    beyond its own (a certificate document: the verifier closes those itself) is left open."""
-    members = [("", tuple(sorted(model.model_fields)))]
+    beyond its own (a certificate document: the verifier closes those itself) is left open. A
+    result may carry its full certificate whether or not its model names one (batch.solve_job
+    adds it), as the verifier's own lists say."""
+    members = [("", tuple(sorted(set(model.model_fields) | {"certificate"})))]
     for name, field in sorted(model.model_fields.items()):
         nested = _model_in(field.annotation)
         if nested is not None and nested.model_config.get("extra") != "allow":
