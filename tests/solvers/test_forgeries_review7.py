@@ -519,6 +519,5 @@ class TestGivenKNotTheCameras:
         focals = {camera["K"][0][0] for camera in forged["cameras"] if camera["registered"]}
         assert all(f > 1.13 * GIVEN_K[0][0] for f in focals)
 
-    @pytest.mark.xfail(**XFAIL)
     def test_a_given_K_the_cameras_do_not_use_is_refused(self):
         assert not _valid(_stated_given(stored("reconstruction")))

@@ -468,6 +468,14 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
     if source != expected_source:
         raise Invalid("returned", f"{where}/source {source!r} is not where the returned K comes from "
                                   f"({expected_source!r})")
+    if expected_source == "given":  # the K asked for is the cameras' K, and nothing calibrated it
+        given_K = numbers(intrinsics["K"], "certificate/options/intrinsics/K", (3, 3), "returned")
+        if not (calibration_claim.same(K, given_K) and all(calibration_claim.same(k, given_K) for k in Ks)):
+            raise Invalid("returned", f"{where}: source \"given\", but the returned cameras' K is not the options' "
+                                      "intrinsics/K")
+        if certified or result.get("calibration_certificate") is not None:
+            raise Invalid("returned", f"{where}: K was given, so no autocalibration runs: no calibration "
+                                      "certificate or certified K may be stated")
     expected = None if cert is None else calibration_claim.difference(K, cert)
     given = claim.get("difference")
     if (expected is None) != (given is None) or (expected is not None and not (
