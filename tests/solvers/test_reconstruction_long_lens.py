@@ -98,15 +98,19 @@ def test_the_depth_reversed_twin_keeps_each_view_of_the_points_up_to_perspective
 
 
 class TestPosesDeterminedTied:
-    """The verifier cannot run the twin's adjustment, so it takes the depth-reversal verdict as
-    stated, but stated consistently (the summary, its warning, every registered camera), and a
-    rig whose poses are not determined must be called doubtful."""
+    """The verifier cannot run the twin's adjustment, so it takes the depth-reversal check's costs
+    as stated, but its verdict must be theirs and be stated consistently (the summary, its
+    warning, every registered camera), and a rig whose poses are not determined must be called
+    doubtful."""
 
     @staticmethod
     def not_determined(result: dict, warn: bool = True, cameras: bool = True, doubtful: bool = True) -> dict:
         result = copy.deepcopy(result)
         summary = result["summary"]
         summary["poses_determined"] = False
+        figures = summary["depth_reversal"]  # the figures made the verdict's: the twin fits as well
+        figures.update(mirror_cost_px2=figures["cost_px2"], statistic=0.0, cost_ratio=1.0, ambiguous=True,
+                       adopted=False)
         if warn:
             summary["warnings"].append({"code": "poses_not_determined", "detail": "stated"})
         if cameras:
