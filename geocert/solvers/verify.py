@@ -168,6 +168,14 @@ def verify_any(document: Any) -> Report:
 ENDED_WITH_RESULT = ("succeeded", "cancelled")
 
 
+# The members of the service's job document and its progress (geocert.app.schemas.Job and
+# JobProgress; tests/solvers/test_forgeries_review7.py checks they agree).
+JOB_MEMBERS = ("id", "kind", "status", "created_at", "started_at", "finished_at", "progress", "result", "error",
+               "links", "webhook")
+PROGRESS_MEMBERS = ("stage", "items_total", "items_done", "items_certified", "tracks_total", "tracks_done", "nodes",
+                    "open_boxes", "lower_bound", "upper_bound", "gap_abs", "gap_rel", "elapsed_s")
+
+
 def check_job(job: dict, result: dict) -> None:
     """A job document's own fields, which a user of GET /v1/jobs/{id} reads first, say what its
     result does: its kind is the result's; its status is one a job ends with beside its result
@@ -176,7 +184,16 @@ def check_job(job: dict, result: dict) -> None:
     the result when the job ends (workers.tasks.final_progress): items_total, items_done (the
     items not cancelled), items_certified and nodes from stats, no open box, and the bounds the
     sums of the lower bounds and costs of the items stating both; a succeeded job states no error.
-    A member the document does not state claims nothing and is not asked for."""
+    A member the document does not state claims nothing and is not asked for; a member no job
+    document has (the service's Job and JobProgress models: JOB_MEMBERS, PROGRESS_MEMBERS) is
+    refused, as a result's are."""
+    extra = sorted(set(job) - set(JOB_MEMBERS))
+    progress = job.get("progress")
+    extra += [f"progress/{name}" for name in sorted(set(progress) - set(PROGRESS_MEMBERS))] \
+        if isinstance(progress, dict) else []
+    if extra:
+        raise Invalid("returned", f"the job document has a member {extra[0]!r:.60} no job document has (its members: "
+                                  f"{', '.join(JOB_MEMBERS)}); a member no check reads claims nothing, so it is refused")
     if "kind" in job and job["kind"] != result.get("kind"):  # a member not stated claims nothing
         raise Invalid("returned", f"the job's kind {job.get('kind')!r:.40} is not its result's "
                                   f"{result.get('kind')!r:.40}")
