@@ -115,11 +115,9 @@ class TestCalibrationTiedByTwoTracks:
         # two of the 16 tracks: 12 of the 96 observations tie it
         assert len(forged["calibration_certificate"]["data"]["points"]) == 2 and len(genuine["points"]) == 16
 
-    @pytest.mark.xfail(**XFAIL)
     def test_a_calibration_of_two_tracks_is_refused(self, two_track_calibration):
         assert not _valid(two_track_calibration[1])
 
-    @pytest.mark.xfail(**XFAIL)
     def test_certificate_tracks_no_point_has_are_refused(self):
         """The stored result, its calibration certificate genuine, with 14 of its 16 points named
         as tracks 100 to 113 (the summary counts 16 tracks): 12 observations still tie it."""

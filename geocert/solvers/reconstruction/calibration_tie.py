@@ -33,6 +33,11 @@ import numpy as np
 from geocert.solvers.core.strict import Invalid, numbers
 
 TIE_RATIO, TIE_OBSERVATIONS = 10.0, 12
+# Each certificate camera must image at least this many of the result's placed points where the
+# returned camera does: a 3x4 camera has 11 degrees of freedom, so fewer leave it (and the K
+# certified from it) free; two shared points per camera let a genuine certificate of another
+# reconstruction, 1.5 times the focal length, pass on 12 observations.
+TIE_POINTS_PER_CAMERA = 6
 CONVERGENCE = 2e-4  # relative to the observations' largest coordinate (above)
 
 
@@ -53,7 +58,13 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
     if size is not None and any(camera.get("image_size") not in (None, list(size)) for camera in result["cameras"]
                                 if camera.get("view") in views):
         raise Invalid("returned", "the calibration certificate's image_size is not its views'")
-    apart, own, largest = _shared(result, views, tracks, cameras, points)
+    apart, own, largest, per_camera = _shared(result, views, tracks, cameras, points)
+    loose = [view for view, count in zip(views, per_camera) if count < TIE_POINTS_PER_CAMERA]
+    if loose:
+        raise Invalid("returned", f"the calibration certificate's camera of view {loose[0]} images "
+                                  f"{per_camera[views.index(loose[0])]} of the result's placed points (each of its cameras "
+                                  f"must be tied by at least {TIE_POINTS_PER_CAMERA}: fewer leave it, and the K "
+                                  "certified from it, free)")
     if len(apart) < TIE_OBSERVATIONS:
         raise Invalid("returned", f"the calibration certificate's reconstruction shares {len(apart)} observations "
                                   f"with the result's placed points (at least {TIE_OBSERVATIONS} tie it to them)")
@@ -67,17 +78,20 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
                                   f"their RMS error {rms:.3g} px on the {len(apart)} observations shared, plus "
                                   f"{CONVERGENCE:g} of the largest coordinate {largest:.4g}): it is not "
                                   "these tracks' reconstruction")
-    return {"observations": len(apart), "largest_px": worst, "allowed_px": allowed, "returned_rms_px": rms}
+    return {"observations": len(apart), "largest_px": worst, "allowed_px": allowed, "returned_rms_px": rms,
+            "fewest_points_per_camera": min(per_camera)}
 
 
 def _shared(result: dict, views: list, tracks: list, cameras: np.ndarray, points: np.ndarray
-            ) -> tuple[list, list, float]:
+            ) -> tuple[list, list, float, list[int]]:
     """For each observation of a placed point in a registered view that the certificate's data
     hold too: the distance between its images through the certificate's camera and point and
-    through the returned ones, and the returned ones' error; and the largest coordinate."""
+    through the returned ones, and the returned ones' error; the largest coordinate; and how many
+    such points each certificate camera images."""
     camera_of, point_of = {v: k for k, v in enumerate(views)}, {t: k for k, t in enumerate(tracks)}
     by_view = {int(c["view"]): np.asarray(c["P"], dtype=float) for c in result["cameras"] if c.get("P") is not None}
     apart, own, largest = [], [], 0.0
+    per_camera = [set() for _ in views]
     for point in result["points"]:
         j = point_of.get(point.get("track"))
         if j is None or point.get("point") is None:
@@ -91,5 +105,6 @@ def _shared(result: dict, views: list, tracks: list, cameras: np.ndarray, points
                 x, y = cameras[i] @ points[j], by_view[int(view)] @ X
                 apart.append(math.hypot(x[0] / x[2] - y[0] / y[2], x[1] / x[2] - y[1] / y[2]))
                 own.append(math.hypot(y[0] / y[2] - u, y[1] / y[2] - v))
+            per_camera[i].add(j)
             largest = max(largest, abs(float(u)), abs(float(v)))
-    return apart, own, largest
+    return apart, own, largest, [len(seen) for seen in per_camera]
