@@ -33,8 +33,8 @@ import numpy as np
 from geocert.solvers.core.strict import Invalid, numbers
 
 TIE_RATIO, TIE_OBSERVATIONS = 10.0, 12
-# Each certificate camera must image at least this many of the result's placed points where the
-# returned camera does: a 3x4 camera has 11 degrees of freedom, so fewer leave it (and the K
+# Each certificate camera of a registered view must image at least this many of the result's
+# placed points where the returned camera does: a 3x4 camera has 11 degrees of freedom, so fewer leave it (and the K
 # certified from it) free; two shared points per camera let a genuine certificate of another
 # reconstruction, 1.5 times the focal length, pass on 12 observations.
 TIE_POINTS_PER_CAMERA = 6
@@ -59,7 +59,10 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
                                 if camera.get("view") in views):
         raise Invalid("returned", "the calibration certificate's image_size is not its views'")
     apart, own, largest, per_camera = _shared(result, views, tracks, cameras, points)
-    loose = [view for view, count in zip(views, per_camera) if count < TIE_POINTS_PER_CAMERA]
+    # A view the result does not register (dropped after the calibration) has nothing to tie it;
+    # the scope counts such views. Every registered one must be tied.
+    registered = {int(c["view"]) for c in result["cameras"] if c.get("registered") is True}
+    loose = [view for view, count in zip(views, per_camera) if view in registered and count < TIE_POINTS_PER_CAMERA]
     if loose:
         raise Invalid("returned", f"the calibration certificate's camera of view {loose[0]} images "
                                   f"{per_camera[views.index(loose[0])]} of the result's placed points (each of its cameras "
@@ -79,7 +82,8 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
                                   f"{CONVERGENCE:g} of the largest coordinate {largest:.4g}): it is not "
                                   "these tracks' reconstruction")
     return {"observations": len(apart), "largest_px": worst, "allowed_px": allowed, "returned_rms_px": rms,
-            "fewest_points_per_camera": min(per_camera)}
+            "fewest_points_per_camera": min((n for v, n in zip(views, per_camera) if v in registered), default=0),
+            "views_not_registered": sum(1 for v in views if v not in registered)}
 
 
 def _shared(result: dict, views: list, tracks: list, cameras: np.ndarray, points: np.ndarray
