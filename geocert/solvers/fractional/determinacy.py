@@ -226,9 +226,9 @@ def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.
     safe_values = np.where(fixed, values, 1.0)
     half = np.sqrt(delta[:, None] * np.where(fixed[:, None], g * g / safe_values[:, None], 0.0).sum(axis=2))
     documents = []
+    level = None if pooled is None else pooled_level(pooled)  # one text for the job's tracks
     for i in range(len(X)):
-        out = Determinacy(cost_increase=float(delta[i]), redundancy=redundancy,
-                          level=None if pooled is None else pooled_level(pooled))
+        out = Determinacy(cost_increase=float(delta[i]), redundancy=redundancy, level=level)
         scale = float(length[i]) if has_depth[i] else None
         for k in range(4 if has_depth[i] else 3):
             value = float(quantity[i, k])
