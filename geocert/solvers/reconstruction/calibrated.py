@@ -191,6 +191,7 @@ class _State:
         self.points = np.full((len(tracks), 3), np.nan)
         self.outliers_removed = 0
         self.focal_scale = 1.0  # the focal length refined so far over the one given (refine_focal)
+        self.adjusted_whole_at = 0  # the registered views at the last whole adjustment (global_adjustment_growth)
 
     def scale_focal(self, scale: float) -> None:
         """Every K's focal terms (its upper-left 2x2) times ``scale``, the rays made again."""
@@ -867,14 +868,14 @@ def _triangulate_and_adjust(state, fixed: int, max_nfev: int, options, stats: di
     solver = options.ba_solver if options.ba_solver != "auto" else ("lsmr" if options.merge_components else "schur")
     if solver == "schur" and max_nfev < options.final_ba_max_nfev:
         count = int(state.registered.sum())
-        adjustments = stats.setdefault("adjustments", {"whole": 0, "local": 0, "whole_at": 0})
+        adjustments = stats.setdefault("adjustments", {"whole": 0, "local": 0})
         free = None
-        if added is not None and count < options.global_adjustment_growth * adjustments["whole_at"]:
+        if added is not None and count < options.global_adjustment_growth * state.adjusted_whole_at:
             free = _local_views(state, added, options.local_adjustment_views)
             adjustments["local"] += 1
         else:
             adjustments["whole"] += 1
-            adjustments["whole_at"] = count
+            state.adjusted_whole_at = count
         stats["ba_nfev"].append(_bundle_adjust_schur(state, fixed, options.ba_max_iterations, options,
                                                      free_views=free))
     else:
