@@ -611,3 +611,25 @@ def test_each_kinds_request_refuses_an_abs_gap_beyond_its_cap_naming_the_option(
     with pytest.raises(InputError) as refused_input:
         parse_job(beyond)
     assert refused_input.value.field == "options/abs_gap"
+
+
+class TestDerivedArraysAreJsonNumbers:
+    """The per-record comparison (autocalibration.structure_check) reads each camera and point with
+    the verifier's strict reader: a camera's t or a point written as strings of the same numbers,
+    accepted when the reader was numpy's float conversion, is refused, as is an integer too large
+    for a float (it raised OverflowError, not a refusal)."""
+
+    @pytest.mark.parametrize("edit", ["t_as_strings", "point_as_strings", "huge_integer"])
+    def test_a_record_not_of_json_numbers_is_refused(self, edit):
+        from geocert.solvers.verify import verify_any
+
+        result = stored("autocalibration_stratified")
+        assert verify_any(result).valid
+        if edit == "t_as_strings":
+            result["cameras"][1]["t"] = [repr(x) for x in result["cameras"][1]["t"]]
+        elif edit == "point_as_strings":
+            result["points"][0] = [repr(x) for x in result["points"][0]]
+        else:
+            result["points"][0] = [2 ** 1100, 0, 0]
+        report = verify_any(result)
+        assert not report.valid and report.first_failure["check"] == "returned"

@@ -22,23 +22,19 @@ from typing import Any
 
 import numpy as np
 
+from geocert.solvers.core.strict import Invalid, numbers
+
 ROUNDING = 1e-9  # relative to the terms summed: some 4.5e6 units in the last place, for any machine
 CAMERA_FIELDS = ("K", "R", "t", "center")
 
 
 def _array(value: Any, shape: tuple) -> np.ndarray | None:
-    """``value`` as a finite float array of ``shape``, or None."""
-    if not isinstance(value, list):
-        return None
+    """``value`` as a finite float array of ``shape`` read by the verifier's strict reader (JSON
+    numbers only: no strings, booleans or integers too large for a float), or None."""
     try:
-        array = np.array(value, dtype=float)
-    except (TypeError, ValueError):
+        return numbers(value, "value", shape, "returned")
+    except Invalid:
         return None
-    if array.shape != shape or not np.all(np.isfinite(array)):
-        return None
-    if any(isinstance(x, bool) for x in np.ravel(np.array(value, dtype=object))):
-        return None
-    return array
 
 
 def cameras_close(given: Any, expected: list[dict] | None, cameras: np.ndarray, H: np.ndarray) -> bool:
