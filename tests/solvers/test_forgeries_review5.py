@@ -443,7 +443,8 @@ class TestCameraToleranceUnhashed:
         certified camera's tolerance is read at (its claim, so read, is true). In the current
         form the hash covers it (tests/solvers/test_reconstruction_hash.py)."""
         report = verify_any(looser_cameras)
-        assert not report.valid or "camera_rel_gap 0.5 (not its default)" in report.scope["problem_sha256"]
+        assert report.valid, report.first_failure
+        assert "camera_rel_gap 0.5 (not its default)" in report.scope["problem_sha256"]
 
 
 def _with_cameras(count: int) -> dict:
