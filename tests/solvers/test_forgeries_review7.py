@@ -17,6 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from tests.solvers.test_forgeries import stored
 from tests.solvers.test_forgeries_review5 import XFAIL, _valid
+from tests.support import reconstruction_data
 
 # --- the calibration tie, over the observations the certificate chooses to share ---------------
 
@@ -138,9 +139,7 @@ def _turntable_job():
 
     scene = synthetic.turntable(views=6, points=40, focal=3300.0, step_degrees=23.5, elevation_degrees=16.0,
                                 distance=20.0, noise_px=0.3, seed=0)
-    data = {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
-            "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
-                       for views, pixels in scene.tracks]}
+    data = reconstruction_data(scene.tracks, scene.image_size, 6)
     return scene, {"kind": "reconstruction", "data": data,
                    "options": {"certificate": "full", "resect_cameras": False, "intrinsics": {"K": scene.K.tolist()}}}
 
@@ -364,9 +363,7 @@ def ambiguous_rig() -> tuple[object, dict]:
 
     scene = synthetic.turntable(views=6, points=40, focal=165_000.0, step_degrees=23.5, elevation_degrees=16.0,
                                 distance=1000.0, noise_px=1.0, seed=0)
-    data = {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
-            "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
-                       for views, pixels in scene.tracks]}
+    data = reconstruction_data(scene.tracks, scene.image_size, 6)
     return scene, solve_job({"kind": "reconstruction", "data": data,
                              "options": {"certificate": "full", "resect_cameras": False}})
 
