@@ -76,3 +76,19 @@ def test_the_model_houses_genuine_reconstruction_is_tied():
     assert report.valid, report.first_failure
     tie = report.scope["calibration_tie"]
     assert tie["largest_px"] <= 0.5 * tie["allowed_px"]
+
+
+def test_few_calibration_points_still_tie_every_camera():
+    """autocalibration_points picks the calibration's points spread over the track list; at the
+    option's small values some views saw 3 or 4 of them, and the result was refused by the tie's 6
+    points per camera (the Oxford Dinosaur's every 10th track, 21 views registered). The choice now
+    adds, for a view left short, tracks it sees (upgrade.choose_points)."""
+    from geocert.batch import solve_job
+    from tests.support import dinosaur_sample
+
+    _, tracks = dinosaur_sample(10)
+    result = solve_job({"kind": "reconstruction", "data": reconstruction_data(tracks, (720, 576), 36),
+                        "options": {"certificate": "full", "autocalibration_points": 20, "resect_cameras": False}})
+    report = verify_any(result)
+    assert report.valid, report.first_failure
+    assert report.scope["calibration_tie"]["fewest_points_per_camera"] >= calibration_tie.TIE_POINTS_PER_CAMERA

@@ -22,7 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
-from geocert.solvers.reconstruction import bundle, calibration_claim, camera_claim, projective, structure, upgrade
+from geocert.solvers.reconstruction import (bundle, calibration_claim, calibration_tie, camera_claim, projective,
+                                           structure, upgrade)
 from geocert.pipelines.reconstruction import ambiguity, claims
 from geocert.pipelines.reconstruction.fit import depths_and_errors as _depths_and_errors, fit_cost, rms as _rms
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
@@ -478,7 +479,9 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
                                            options.autocalibration_points, method,
                                            lambda p: tell(f"autocalibration {getattr(p, 'stage', '')}".strip(),
                                                           0, 1, p),
-                                           skip_critical=options.autocalibration_on_critical_motion == "skip")
+                                           skip_critical=options.autocalibration_on_critical_motion == "skip",
+                                           observed=(obs.view[proj.inlier], obs.track[proj.inlier]),
+                                           per_view=calibration_tie.TIE_POINTS_PER_CAMERA)
         except Cancelled:
             if incremental is not None:
                 stage.update(status="cancelled", reason="the job was cancelled: no certified upgrade was found")

@@ -67,31 +67,49 @@ def decompose(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return K / scale, R, t
 
 
-def choose_points(points: np.ndarray, limit: int) -> np.ndarray:
-    """Indices of at most ``limit`` reconstructed points spread over the track list (the
-    autocalibration's chirality rows; every point is not needed to bound the plane)."""
+def choose_points(points: np.ndarray, limit: int, observed: tuple[np.ndarray, np.ndarray] | None = None,
+                  per_view: int = 0) -> np.ndarray:
+    """Indices of about ``limit`` reconstructed points spread over the track list (the
+    autocalibration's chirality rows; every point is not needed to bound the plane), with at least
+    ``per_view`` seen by each view that sees that many (``observed``: the observations' views and
+    tracks), added where the spread left a view short: a calibration certificate ties each of its
+    cameras to the result through the points it shares with it."""
     finite = np.flatnonzero(np.isfinite(points[:, 0]))
     if len(finite) <= limit:
         return finite
-    return finite[np.linspace(0, len(finite) - 1, limit).round().astype(int)]
+    chosen = finite[np.linspace(0, len(finite) - 1, limit).round().astype(int)]
+    if observed is None or per_view <= 0:
+        return chosen
+    view, track = observed
+    usable = np.isfinite(points[track, 0])
+    extra = []
+    for v in np.unique(view[usable]):
+        seen = np.unique(track[usable & (view == v)])
+        short = per_view - np.count_nonzero(np.isin(seen, chosen))
+        if short > 0:
+            missing = seen[~np.isin(seen, chosen)]
+            extra.append(missing[np.linspace(0, len(missing) - 1, min(short, len(missing))).round().astype(int)])
+    return np.unique(np.concatenate([chosen, *extra])) if extra else chosen
 
 
 def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_size, intrinsics: dict,
                   options: pr.AutocalibrationOptions, max_points: int, method: str = "stratified",
-                  callback=None, skip_critical: bool = False) -> Metric:
+                  callback=None, skip_critical: bool = False, observed: tuple[np.ndarray, np.ndarray] | None = None,
+                  per_view: int = 0) -> Metric:
     """The metric upgrade by the stratified method (thesis ch. 6), the direct one (ch. 7), or
     "auto": stratified, and the direct method when the stratified one finds no upgrade. With
     ``skip_critical``, the certified search is not run when the linear estimate's motion is
     critical (motion(): a turntable, an orbit, a translating camera): there the tracks do not
     determine constant intrinsics, and a certified optimum would be one of many equally good
-    upgrades; ``skipped`` then says why, and the linear estimate is the adjustment's start."""
+    upgrades; ``skipped`` then says why, and the linear estimate is the adjustment's start.
+    ``observed`` and ``per_view``: choose_points'."""
     views = [v for v, P in enumerate(cameras) if P is not None]
     n_tracks = len(points)
     empty = Metric(None, [None] * len(cameras), [None] * len(cameras), np.full((n_tracks, 3), np.nan), [], False)
     if len(views) < 3:
         empty.reason = f"autocalibration needs at least 3 registered views ({len(views)} registered)"
         return empty
-    chosen = choose_points(points, max_points)
+    chosen = choose_points(points, max_points, observed, per_view)
     P = np.array([cameras[v] for v in views])
     X = points[chosen]
     problem = pr.prepare(P, X, image_size, intrinsics)
