@@ -606,7 +606,8 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
     intrinsics ranges it was proven over (its options', completed from its image size), against
     which the certified K's range edges are judged. The certificate's data is the projective
     reconstruction the pipeline upgraded: it proves K optimal for that reconstruction, which
-    calibration_tie ties to the result (the scope states how closely)."""
+    calibration_tie ties to the result (ReconstructionItems.check_result, once for any result
+    carrying a calibration certificate; the scope states how closely)."""
     from geocert.solvers.autocalibration import problem as pr
 
     document = result.get("calibration_certificate")
@@ -646,7 +647,6 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
                                                                         and given["gap"] >= 0
                                                                         and given["lower_bound"] <= given["cost"]):
             raise Invalid("returned", f"stages/autocalibration/stages/{k} is not the calibration certificate's claim")
-    calibration_tie.tie(result, stage, data)
     size = data.get("image_size")
     return pr.resolve_ranges(dict(options.get("intrinsics") or {}), None if size is None else tuple(size))
 
@@ -967,7 +967,7 @@ class ReconstructionItems(TrackItems):
         _check_calibration(result, registered, verify)
         scoped = {"labels": labels}
         calibration = result.get("calibration_certificate")
-        if isinstance(calibration, dict):  # carried with a certified K: how far its reconstruction lies
+        if isinstance(calibration, dict):  # carried (a certified K proven by it): tied to the result, once
             scoped["calibration_tie"] = calibration_tie.tie(result, _stage(result, "autocalibration"),
                                                             calibration.get("data") or {})
         return scoped
