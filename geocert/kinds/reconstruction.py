@@ -212,9 +212,11 @@ class ReconstructionCamera(BaseModel):
                                                            "about as well: this pose is then one of two the data "
                                                            "cannot tell apart, certified or not; null when not checked "
                                                            "(summary.depth_reversal)")
-    mirror_rotation_deg: float | None = Field(None, description="by how much the twin's rotation of this camera, "
-                                                                "relative to the reference view, differs from the "
-                                                                "returned one, degrees")
+    mirror_rotation_deg: float | None = Field(None, description="by how much the depth-reversed twin's rotation of "
+                                                                "this camera relative to the reference view differs "
+                                                                "from the returned one, degrees: the twin as "
+                                                                "constructed from the returned cameras, before its "
+                                                                "adjustment (the verifier recomputes it)")
     status: str
     bound_reason: str | None = Field(None, description="why the camera has no bound or is not certified (not "
                                                        "searched, not certified by the search, a point behind it, "

@@ -857,6 +857,22 @@ class TestCalibrationClaimsBehindNoProof:
         assert refused(forged)["check"] == "returned"
 
 
+def _restate_mirror_angles(result: dict) -> None:
+    """Each registered camera's mirror_rotation_deg, and the depth-reversal record's, restated from
+    the cameras' rotations as the pipeline states them (depth_reversal.mirror_angles_deg)."""
+    from geocert.solvers.reconstruction.depth_reversal import mirror_angles_deg
+
+    figures = result["summary"].get("depth_reversal") or {}
+    if not figures.get("checked"):
+        return
+    posed = {c["view"]: np.asarray(c["R"], dtype=float) for c in result["cameras"] if c["registered"]}
+    angles = mirror_angles_deg(posed, figures["reference_view"])
+    figures["mirror_rotation_deg"] = {str(view): angle for view, angle in angles.items()}
+    for camera in result["cameras"]:
+        if camera["registered"]:
+            camera["mirror_rotation_deg"] = angles[camera["view"]]
+
+
 def _moved_camera_result(result: dict, view: int, degrees: float, camera_rel_gap: float,
                          on_rays: bool = False, abs_gap: float | None = None) -> dict:
     """``result`` made again, every certificate genuine, around camera ``view`` rotated by
@@ -883,6 +899,7 @@ def _moved_camera_result(result: dict, view: int, degrees: float, camera_rel_gap
     K, R, t = (np.array(camera[name], dtype=float) for name in ("K", "R", "t"))
     R, t = turn @ R, turn @ t
     camera.update(R=R.tolist(), t=t.tolist(), P=(K @ np.column_stack([R, t])).tolist(), center=(-R.T @ t).tolist())
+    _restate_mirror_angles(result)
     if on_rays:
         track = certificate["data"]["tracks"][0]
         where = track["views"].index(view)

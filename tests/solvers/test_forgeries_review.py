@@ -13,7 +13,7 @@ import pytest
 
 from geocert.solvers.verify import verify_any
 from tests.solvers.test_forgeries import (  # noqa: F401 (a fixture, used by name)
-    _autocalibration_stage, _cameras_stage, calibrated_reconstruction, refused, rehash, stored)
+    _autocalibration_stage, _cameras_stage, _restate_mirror_angles, calibrated_reconstruction, refused, rehash, stored)
 
 
 def _stage(result: dict, name: str) -> dict:
@@ -123,7 +123,8 @@ def _two_views_registered(result: dict) -> dict:
         camera.update({name: None for name in ("K", "R", "t", "center", "P", "cost", "lower_bound", "gap",
                                                "optimal_cost", "degrees_of_freedom", "tolerance")})
         camera.update(certified=False, registered=False, searched=False, status="not_run", reason="not registered",
-                      points=0)
+                      points=0, mirror_rotation_deg=None, pose_determined=None)
+    _restate_mirror_angles(result)
     result = _unsearch_cameras(result)
     squared = []
     for point in result["points"]:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geocert.solvers.reconstruction import motion_claim
+from geocert.solvers.reconstruction import depth_reversal, motion_claim
 from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
 from geocert.solvers.reconstruction.calibration_claim import difference as k_difference, on_range_edge, same
 
@@ -156,9 +156,13 @@ def _depth_reversal(out, registered: list) -> dict | None:
     checked = bool(figures and figures.get("checked"))
     out.summary["depth_reversal"] = figures
     out.summary["poses_determined"] = (not figures["ambiguous"]) if checked else None
+    posed = {c.view: c.R for c in out.cameras if c.registered and c.R is not None}
+    if checked:  # from the returned rotations, so that the verifier recomputes them
+        figures["mirror_rotation_deg"] = (depth_reversal.mirror_angles_deg(posed, figures["reference_view"])
+                                          if figures["reference_view"] in posed else {})
     for camera in out.cameras:
         camera.pose_determined = camera.mirror_rotation_deg = None
-        if checked and camera.registered and camera.R is not None:
+        if checked and camera.view in posed:
             camera.pose_determined = not figures["ambiguous"]
             camera.mirror_rotation_deg = figures["mirror_rotation_deg"].get(camera.view)
     if not checked:

@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
-from geocert.solvers.reconstruction import (bundle, calibration_claim, calibration_tie, camera_claim, projective,
-                                           structure, upgrade)
+from geocert.solvers.reconstruction import (bundle, calibration_claim, calibration_tie, camera_claim,
+                                           depth_reversal_claim, projective, structure, upgrade)
 from geocert.pipelines.reconstruction import ambiguity, claims
 from geocert.pipelines.reconstruction.fit import depths_and_errors as _depths_and_errors, fit_cost, rms as _rms
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
@@ -433,7 +433,7 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
                                                n_views)
             else:
                 stage.update(status="skipped", reason="options.bundle_adjustment is false")
-                _depth_reversal_not_checked(out, stage)
+                _depth_reversal_not_checked(out)
         out.metric = metric = _normalise_frame(metric)
         keep = _check_cameras(out, metric, obs, keep, options.threshold_px)
         _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
@@ -541,7 +541,7 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
         else:
             name, metric = starts[0]
             stage.update(status="skipped", reason="options.bundle_adjustment is false", started_from=name)
-            _depth_reversal_not_checked(out, stage)
+            _depth_reversal_not_checked(out)
         out.metric = metric = _normalise_frame(metric)
     keep = _check_cameras(out, metric, obs, keep, options.threshold_px)
     _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
@@ -549,20 +549,21 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
 
 def _depth_reversal(out: Reconstruction, metric: upgrade.Metric, obs: Observations, keep: np.ndarray,
                     threshold_px: float, model: str, stage: dict, tell, n_views: int):
-    """ambiguity.check on the adjusted reconstruction, its figures in out.checks and the stage;
+    """ambiguity.check on the adjusted reconstruction, its figures in out.checks (the summary's);
     returns the reconstruction to go on with (the depth-reversed twin when it fits better) and its
     observations kept. A stop during the twin's adjustment keeps the adjusted cameras, unchecked."""
     stop, stopping = _stop_check(tell, "bundle_adjustment")
     metric, keep, figures = ambiguity.check(metric, obs, keep, threshold_px, model, stopping)
-    out.checks["depth_reversal"] = stage["depth_reversal"] = figures
+    out.checks["depth_reversal"] = figures  # stated once, as summary.depth_reversal (claims.summarise)
+    if figures.get("adopted"):  # the stage's figures are the returned rig's, the twin's now
+        stage.update(rms_px_after=_rms(metric, obs, keep), K=metric.K.tolist(), observations_kept=int(keep.sum()))
     if stop["asked"]:
         _keep_metric(out, metric, n_views, stage, "adjusted, the depth-reversal check not finished")
     return metric, keep
 
 
-def _depth_reversal_not_checked(out: Reconstruction, stage: dict) -> None:
-    out.checks["depth_reversal"] = stage["depth_reversal"] = {
-        "checked": False, "reason": "options.bundle_adjustment is false: the twin could only be compared adjusted"}
+def _depth_reversal_not_checked(out: Reconstruction) -> None:
+    out.checks["depth_reversal"] = {"checked": False, "reason": depth_reversal_claim.NOT_ADJUSTED}
 
 
 def _stop_check(tell, name: str):
@@ -821,8 +822,8 @@ def _drop_outlier_points(points: list[Point], P: dict[int, np.ndarray], threshol
 
 def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px: float, model: str,
                 should_stop=None):
-    """A short adjustment (8 iterations) from each upgrade (name, Metric); the one with the
-    smaller RMS goes on to a full adjustment. Returns its name, the adjusted reconstruction, the
+    """A short adjustment (8 iterations) from each upgrade (name, Metric); the one explaining every
+    observation best (fit.fit_cost, MSAC's capped cost) goes on to a full adjustment. Returns its name, the adjusted reconstruction, the
     observations kept, the RMS before, and each start's figures. ``should_stop()`` (asked each
     iteration) ends the adjustments where they are."""
     if len(starts) == 1:  # nothing to choose between: straight to the full adjustment

@@ -45,6 +45,20 @@ def mirrored(metric, reference: int):
     return replace(metric, rotations=rotations, translations=translations, points=points)
 
 
+def mirror_angles_deg(rotations: dict[int, np.ndarray], reference: int) -> dict[int, float]:
+    """How far each camera of the twin ``mirrored`` builds in view ``reference``'s frame points
+    from the camera given, degrees, keyed as ``rotations`` (view: R): the twin's rotation relative
+    to the reference, diag(1, 1, -1) Q diag(1, 1, -1), against the given one, Q = R R_ref'. It reads
+    the rotations only, so anyone holding the returned cameras recomputes it (the adjustment from
+    the twin then moves its cameras a few degrees: 1 to 5 on the long-lens turntables measured)."""
+    R_ref = np.asarray(rotations[reference], dtype=float)
+    out = {}
+    for view, R in rotations.items():
+        Q = np.asarray(R, dtype=float) @ R_ref.T
+        out[view] = rotation_between_deg(Q, MIRROR @ Q @ MIRROR)
+    return out
+
+
 def rotation_between_deg(A: np.ndarray, B: np.ndarray) -> float:
     """The angle of the rotation taking A to B, degrees."""
     R = A.T @ B

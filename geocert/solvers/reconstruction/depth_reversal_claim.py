@@ -6,26 +6,42 @@ as stated, but they must be the verdict's: ``summary.poses_determined`` is null 
 check did not run, and then only for a reason the result shows (fewer than 2 views registered, a
 stop, the adjustment switched off); when it ran, the statistic, the cost ratio and the three
 outcomes (rejected, adopted, ambiguous) are recomputed from the stated costs and noise at the
-pipeline's thresholds, and each registered camera's ``mirror_rotation_deg`` is the figures' for
-its view. What stays unchecked is stated in docs/certificate.md: the costs themselves and the
-twin's rotations, which need the twin."""
+pipeline's thresholds, and each registered camera's ``mirror_rotation_deg`` is recomputed: the
+angle between it and the twin's camera as constructed in the reference view's frame, before its
+adjustment (depth_reversal.mirror_angles_deg). What stays unchecked is stated in
+docs/certificate.md: the costs themselves, which need the adjusted twin."""
 
 from __future__ import annotations
 
-import math
 from typing import Any
+
+import numpy as np
 
 from geocert.solvers.core.geometry import is_number
 from geocert.solvers.core.strict import Invalid
+from geocert.solvers.reconstruction import depth_reversal
 
-# The pipeline's (ambiguity.MIRROR_CHI2, MIRROR_MARGIN; tests/solvers/test_depth_reversal_claim.py
-# checks they agree).
+# The twin is told apart when the costs differ by more than this many noise variances (the
+# chi-square with 1 degree of freedom at p = 0.001: a likelihood ratio above e^5.4) and by more
+# than this fraction of the smaller cost. The pipeline's check (ambiguity.py) judges by verdict()
+# and writes the reasons below; the verifier reads them from here too.
 MIRROR_CHI2 = 10.8
 MIRROR_MARGIN = 0.10
 ROUNDING = 1e-9
-NOT_CHECKED = {"fewer than 2 views registered": "registered",
-               "stopped before the twin's adjustment ended": "stopped",
-               "options.bundle_adjustment is false: the twin could only be compared adjusted": "not_adjusted"}
+ANGLE_ROUNDING_DEG = 1e-7  # the angles' arctan2 is well conditioned: rotations to 1e-15 move it by far less
+FEWER_THAN_2_VIEWS = "fewer than 2 views registered"
+STOPPED = "stopped before the twin's adjustment ended"
+NOT_ADJUSTED = "options.bundle_adjustment is false: the twin could only be compared adjusted"
+NOT_CHECKED = {FEWER_THAN_2_VIEWS: "registered", STOPPED: "stopped", NOT_ADJUSTED: "not_adjusted"}
+
+
+def verdict(cost: float, twin: float, variance: float) -> tuple[float, bool, bool]:
+    """(statistic, rejected, adopted) of a twin costing ``twin`` against ``cost``, in units of
+    the noise ``variance``: rejected when it costs more by MIRROR_CHI2 variances and by
+    MIRROR_MARGIN of the cost, adopted when it costs less by as much; neither: ambiguous."""
+    statistic = (twin - cost) / variance
+    return (statistic, statistic > MIRROR_CHI2 and twin > (1 + MIRROR_MARGIN) * cost,
+            -statistic > MIRROR_CHI2 and cost > (1 + MIRROR_MARGIN) * twin)
 
 
 def _close(value: Any, expected: float) -> bool:
@@ -36,6 +52,8 @@ def check(summary: dict, cameras: list[dict], stages: list) -> None:
     """Refuse a depth-reversal record that is not its verdict's (module docstring)."""
     figures, poses = summary.get("depth_reversal"), summary.get("poses_determined")
     registered = [c for c in cameras if c.get("registered") is True]
+    if any(c.get("mirror_rotation_deg") is not None for c in cameras if c.get("registered") is not True):
+        raise Invalid("returned", "a camera not registered states a mirror_rotation_deg")
     if figures is None:  # a result from before the check: nothing stated of it
         if poses is not None or any(c.get("mirror_rotation_deg") is not None for c in registered):
             raise Invalid("returned", "summary/poses_determined or a camera's mirror_rotation_deg is stated without "
@@ -55,29 +73,40 @@ def check(summary: dict, cameras: list[dict], stages: list) -> None:
                                       "mirror_rotation_deg is stated beside it")
         return
     names = ("cost_px2", "mirror_cost_px2", "noise_variance_px2", "statistic")
-    if not all(is_number(figures.get(n)) for n in names) or not (figures["cost_px2"] > 0
+    if not all(is_number(figures.get(n)) for n in names) or not (figures["cost_px2"] >= 0
+                                                                   and figures["mirror_cost_px2"] >= 0
                                                                    and figures["noise_variance_px2"] > 0):
-        raise Invalid("returned", f"summary/depth_reversal must state {', '.join(names)} as numbers, the costs and "
-                                  "noise positive")
+        raise Invalid("returned", f"summary/depth_reversal must state {', '.join(names)} as numbers, the costs not "
+                                  "negative and the noise positive")
     cost, twin, variance = figures["cost_px2"], figures["mirror_cost_px2"], figures["noise_variance_px2"]
-    statistic = (twin - cost) / variance
-    rejected = statistic > MIRROR_CHI2 and twin > (1 + MIRROR_MARGIN) * cost
-    adopted = -statistic > MIRROR_CHI2 and cost > (1 + MIRROR_MARGIN) * twin
+    statistic, rejected, adopted = verdict(cost, twin, variance)
     ambiguous = not (rejected or adopted)
-    if not (_close(figures["statistic"], statistic) and _close(figures.get("cost_ratio"), twin / cost)
+    ratio = figures.get("cost_ratio")
+    if not (_close(figures["statistic"], statistic) and (_close(ratio, twin / cost) if cost > 0 else ratio is None)
             and figures.get("threshold") == MIRROR_CHI2 and figures.get("margin") == MIRROR_MARGIN
             and figures.get("ambiguous") is ambiguous and figures.get("adopted") is adopted
             and poses is (not ambiguous)):
         raise Invalid("returned", "summary/depth_reversal's verdict (ambiguous, adopted, poses_determined) or its "
                                   "statistic and cost ratio are not what its costs and noise give at the check's "
                                   f"thresholds ({MIRROR_CHI2:g} variances, {100 * MIRROR_MARGIN:g}%)")
-    angles = figures.get("mirror_rotation_deg")
-    if not isinstance(angles, dict) or not all(is_number(a) and 0 <= a <= 180 for a in angles.values()):
-        raise Invalid("returned", "summary/depth_reversal/mirror_rotation_deg must map views to angles in [0, 180]")
+    # Each angle is the constructed twin's (depth_reversal.mirror_angles_deg), recomputed here from
+    # the returned rotations (checked against P elsewhere) about the stated reference view.
+    reference, angles = figures.get("reference_view"), figures.get("mirror_rotation_deg")
+    posed = {c["view"]: np.asarray(c["R"], dtype=float) for c in registered if c.get("R") is not None}
+    if not (isinstance(reference, int) and not isinstance(reference, bool) and isinstance(angles, dict)):
+        raise Invalid("returned", "summary/depth_reversal must state its reference_view and mirror_rotation_deg")
+    expected = depth_reversal.mirror_angles_deg(posed, reference) if reference in posed else {}
+    if set(angles) != {str(view) for view in expected} or not all(
+            _near(angles[str(view)], angle) for view, angle in expected.items()):
+        raise Invalid("returned", "summary/depth_reversal/mirror_rotation_deg is not, for each registered view, the "
+                                  f"angle between its camera and the twin's mirrored in view {reference}'s frame "
+                                  "(depth_reversal.mirror_angles_deg of the returned rotations)")
     for camera in registered:
-        stated, expected = camera.get("mirror_rotation_deg"), angles.get(str(camera.get("view")))
-        if not (stated == expected or (stated is not None and expected is not None and _close(stated, expected))):
-            raise Invalid("returned", f"cameras/{camera.get('view')}/mirror_rotation_deg {stated!r:.40} is not "
-                                      f"summary/depth_reversal's for its view ({expected!r})")
-    if not math.isfinite(statistic):
-        raise Invalid("returned", "summary/depth_reversal's statistic is not finite")
+        stated, angle = camera.get("mirror_rotation_deg"), expected.get(camera.get("view"))
+        if not (stated is None if angle is None else _near(stated, angle)):
+            raise Invalid("returned", f"cameras/{camera.get('view')}/mirror_rotation_deg {stated!r:.40} is not the "
+                                      f"twin's angle for its view ({angle!r})")
+
+
+def _near(value: Any, angle: float) -> bool:
+    return is_number(value) and abs(value - angle) <= ANGLE_ROUNDING_DEG
