@@ -232,12 +232,17 @@ class TriangulationKind:
                     deadline: float | None = None) -> list[dict]:
         from geocert.solvers.fractional import determinacy
         from geocert.solvers.fractional.batched import triangulate_many  # the conic solver, only to solve
+        from geocert.solvers.fractional.convexity_path import raise_sublevels
 
         tracks = [parsed.tracks[index] for index in indices]
         not_started = None if deadline is None else (
             "not started: the job's time limit (options.job_time_limit_s, "
             f"{options.job_time_limit_s:g} s) passed before this track started")
         results = triangulate_many(parsed.cameras, tracks, options, callback, deadline=deadline, not_started=not_started)
+        if "full" in (options.detail, options.certificate):  # intervals proven at the level they are read at
+            pooled = determinacy.pooled_for(parsed.cameras, tracks, results)
+            if pooled is not None:
+                raise_sublevels(parsed.cameras, tracks, results, pooled[0], options.norm)
         documents = track_documents(results, options.detail, options.certificate == "full")
         if options.detail == "full":  # the same documents as _document's, for the whole batch at once
             for document, found in zip(documents, determinacy.tracks_many(parsed.cameras, tracks, results)):

@@ -66,6 +66,11 @@ class LocalColumns:
                                                               self.sublevel_bounds.tolist())]
         return self._sublevels
 
+    def set_sublevel(self, row: int, increase: float, radius: float, bounds: np.ndarray) -> None:
+        """Row ``row``'s proven interval replaced (radius nan: none)."""
+        self.sublevel_increase[row], self.sublevel_radius[row], self.sublevel_bounds[row] = increase, radius, bounds
+        self._sublevels = None
+
     def result(self, row: int) -> TrackResult:
         """Row ``row`` as the TrackResult the convexity path certifies."""
         cost, lower, radius = float(self.cost[row]), float(self.lower_bound[row]), float(self.radius[row])
@@ -114,6 +119,10 @@ class TrackResults(Sequence):
             self.objects.pop(i, None)
         else:
             self.objects[i] = result
+
+    def row(self, i: int) -> int:
+        """Track ``i``'s row of ``local``, -1 when it is held as an object (or has no result)."""
+        return int(self._row[i])
 
     def in_columns(self) -> np.ndarray:
         """Whether each track is (still) a row of ``local``, not an object: (T,) bool."""

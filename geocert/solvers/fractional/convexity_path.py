@@ -11,7 +11,10 @@ residual uncertainty). Every other track is left to the branch and bound (None).
 A certified track also gets a proven interval of every point of the scope within a cost
 increase of the optimum (fractional.convexity.sublevel_radii): the increase is the one its
 determinacy estimate uses (SIGMAS^2 times the fit's residual variance, at least the certified
-gap), so the estimate and the proof speak of one set.
+gap), so the estimate and the proof speak of one set. A job of many tracks reads its estimates at
+the noise pooled over its tracks when that is higher (determinacy.pooled_increase: a 2-view
+track's own residual is one degree of freedom's estimate of it), and raise_sublevels proves its
+intervals again at that level.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ import numpy as np
 
 from geocert.solvers.core.certificates import ROUNDING
 from geocert.solvers.core.determinacy import SIGMAS
-from geocert.solvers.fractional.columns import LocalColumns, TrackResults
+from geocert.solvers.fractional.columns import LocalColumns, TrackResults, sublevels
 from geocert.solvers.fractional.convexity import (ball_bounds, ball_intervals, convexity_bounds, convexity_terms,
                                                   sublevel_radii)
 from geocert.solvers.fractional.flat import FlatTracks, linear, refine
@@ -98,3 +101,39 @@ def track_sublevel(cameras: np.ndarray, points: np.ndarray, point, cost: float, 
     if not np.isfinite(radius):
         return None
     return {"cost_increase": increase, "radius": radius, "intervals": ball_intervals(point, radius)}
+
+
+def raise_sublevels(cameras: np.ndarray, tracks: list, results, floor: float, norm: str) -> int:
+    """Prove again at cost increase ``floor`` (the job's pooled one) every proven interval of
+    ``results`` (a TrackResults or a list of TrackResult, tracks as triangulate_many takes them)
+    stated at a lower increase, so that no interval is proven at a level below the one its track's
+    determinacy is read at; one the enclosure test does not prove at ``floor`` is dropped. L2L2
+    only (the pooled increase is in squared pixels, the L1 norms' costs are not). Returns how many
+    were raised."""
+    if norm != "L2L2":
+        return 0
+    found = sublevels(results)
+    low = [i for i, sublevel in enumerate(found) if sublevel is not None and sublevel["cost_increase"] < floor]
+    if not low:
+        return 0
+    rows = [results.row(i) if isinstance(results, TrackResults) else -1 for i in low]
+    X = np.array([results.local.point[row] if row >= 0 else results[i].point for i, row in zip(low, rows)],
+                 dtype=float)
+    flat = FlatTracks.build(cameras, [tracks[i] for i in low])
+    with np.errstate(all="ignore"):
+        radius = sublevel_radii(flat, X, np.full(len(low), float(floor)), strictness=STRICTNESS, norm=norm)
+    for k, (i, row) in enumerate(zip(low, rows)):
+        proven = bool(np.isfinite(radius[k]))
+        if row >= 0:
+            results.local.set_sublevel(row, floor, radius[k], ball_bounds(X[k], radius[k] if proven else 0.0))
+            continue
+        certificate = results[i].certificate
+        sublevel = {"cost_increase": float(floor), "radius": float(radius[k]),
+                    "intervals": ball_intervals(X[k], radius[k])} if proven else None
+        certificate.sublevel = sublevel
+        if certificate.proof is not None:
+            if sublevel is None:
+                certificate.proof.pop("sublevel", None)
+            else:
+                certificate.proof["sublevel"] = sublevel
+    return len(low)

@@ -96,23 +96,13 @@ def tracks_many(cameras: np.ndarray, tracks: list, results: list) -> list[dict |
     with np.errstate(divide="ignore", invalid="ignore"):
         centres = _centres(cameras)
     out: list[dict | None] = [None] * len(tracks)
-    X, finite, cost, lower = solutions(results)  # no object made for the convexity path's columns
+    X, finite, cost, lower, groups, projected = _projected(cameras, tracks, results)
     proven = sublevels(results)
-    groups: dict[int, list[int]] = {}
-    for i in np.flatnonzero(finite).tolist():
-        groups.setdefault(len(tracks[i][0]), []).append(i)
     for i in np.flatnonzero(~finite).tolist():
         result = results[i]
         if result is not None and result.point is not None:  # at infinity
             out[i] = track(cameras[tracks[i][0]], tracks[i][1], result.point, True, result.cost, result.lower_bound)
-    projected = {}
-    with np.errstate(all="ignore"):
-        for n, members in groups.items():
-            try:
-                projected[n] = _project(cameras, [tracks[i] for i in members], X[members])
-            except (ValueError, ArithmeticError, np.linalg.LinAlgError):
-                pass
-        pooled = pooled_increase({n: (p[-1] * p[-1]).sum(axis=1) for n, p in projected.items()})
+    pooled = _pooled(projected)
     for n, members in groups.items():
         try:
             if n not in projected:
@@ -126,6 +116,34 @@ def tracks_many(cameras: np.ndarray, tracks: list, results: list) -> list[dict |
         for i, document in zip(members, documents):
             out[i] = document
     return out
+
+
+def pooled_for(cameras: np.ndarray, tracks: list, results: list) -> tuple[float, int] | None:
+    """The pooled cost increase (pooled_increase) tracks_many gives the same tracks and results."""
+    return _pooled(_projected(np.asarray(cameras, dtype=float), tracks, results)[-1])
+
+
+def _projected(cameras: np.ndarray, tracks: list, results: list) -> tuple:
+    """The results' points X, whether finite, costs and lower bounds (solutions), the tracks with
+    finite points grouped by length, and each group's projections (_project; a group that does
+    not project is left out)."""
+    X, finite, cost, lower = solutions(results)  # no object made for the convexity path's columns
+    groups: dict[int, list[int]] = {}
+    for i in np.flatnonzero(finite).tolist():
+        groups.setdefault(len(tracks[i][0]), []).append(i)
+    projected = {}
+    with np.errstate(all="ignore"):
+        for n, members in groups.items():
+            try:
+                projected[n] = _project(cameras, [tracks[i] for i in members], X[members])
+            except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+                pass
+    return X, finite, cost, lower, groups, projected
+
+
+def _pooled(projected: dict) -> tuple[float, int] | None:
+    with np.errstate(all="ignore"):
+        return pooled_increase({n: (p[-1] * p[-1]).sum(axis=1) for n, p in projected.items()})
 
 
 def _project(cameras: np.ndarray, tracks: list, X: np.ndarray) -> tuple:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from geocert.solvers.core.certificates import residual_rounding
-from geocert.solvers.core.geometry import cost_rounding, norm_cost, normalised_cameras
+from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost, normalised_cameras
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.convexity import outside_range, track_bound, verify_sublevel
@@ -18,6 +18,7 @@ from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
 
 MAX_VIEWS = 1000  # views in a track, for the parser too: a chart's choice of reference takes views^2 work
 MAX_POINTS = 1_000_000
+LEVEL_ROUNDING = 1e-9  # the solver's two sums of one track's squared residuals differ in their last bits
 
 
 class TrackItem:
@@ -243,6 +244,7 @@ class TrackItems:
         returns no such determinacy. (An uncertified item's figures: verify.uncertified_claim.)"""
         if certificate.get("kind") != "triangulation":
             return
+        norm = (certificate.get("options") or {}).get("norm")
         for index, (item, claim) in enumerate(zip(result["tracks"], certificate["items"])):
             determinacy = item.get("determinacy")
             if not isinstance(determinacy, dict) or (determinacy.get("proven") is False
@@ -258,6 +260,13 @@ class TrackItems:
             if not isinstance(sublevel, dict) or stated != proven_track(sublevel):
                 raise Invalid("returned", f"tracks/{index}/determinacy/proven_intervals are not the ones its "
                                           "certificate proves")
+            # Proven at no lower a level than the estimate beside it is read at (the job's pooled
+            # noise, squared pixels: L2L2), which a lower level's smaller set would misstate.
+            level = determinacy.get("cost_increase")
+            if norm == "L2L2" and not (is_number(level) and stated["cost_increase"] >= level * (1 - LEVEL_ROUNDING)):
+                raise Invalid("returned", f"tracks/{index}/determinacy/proven_intervals are proven at cost increase "
+                                          f"{stated['cost_increase']!r:.12} below the {level!r:.12} its estimate is "
+                                          "read at")
 
     def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
         """What an uncertified track's point costs on its observations (and the allowance for its
