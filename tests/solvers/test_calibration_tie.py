@@ -59,6 +59,34 @@ def test_one_point_elsewhere_is_refused_whatever_the_median():
     assert "not these tracks' reconstruction" in report.first_failure["detail"]
 
 
+def test_a_certificate_camera_of_a_view_not_registered_is_refused():
+    """The stored result's calibration, its view 5 no longer registered in the result (its camera
+    and its observations gone): the certificate's camera of view 5 is tied to nothing, and would
+    move the certified K as freely as it is placed."""
+    result = stored("reconstruction")
+    stage = next(s for s in result["stages"] if s["name"] == "autocalibration")
+    assert 5 in stage["certificate_views"]
+    calibration_tie.tie(result, stage, result["calibration_certificate"]["data"])  # genuine: tied
+    result["cameras"][5].update(registered=False, P=None)
+    for point in result["points"]:
+        point["observations"] = [o for o in point["observations"] if o[0] != 5]
+    with pytest.raises(calibration_tie.Invalid, match="view 5, which the result does not register"):
+        calibration_tie.tie(result, stage, result["calibration_certificate"]["data"])
+
+
+def test_the_pipeline_claims_no_calibration_whose_views_were_dropped():
+    """A view the calibration certificate holds, dropped after it: the pipeline carries no
+    certificate, the stage says why, and the summary's calibration is not certified."""
+    from geocert.pipelines.reconstruction import pipeline
+
+    out = pipeline.Reconstruction([pipeline.Camera(v, v != 2, None) for v in range(3)], [], [
+        {"name": "autocalibration", "certified": True, "K": np.eye(3).tolist(), "certificate_views": [0, 1, 2]}])
+    out.proven = type("Proven", (), {"views": [0, 1, 2]})()
+    pipeline._untie_dropped_views(out, out.stages[0])
+    assert out.proven is None and out.stages[0]["certified"] is False and out.stages[0]["certificate_views"] is None
+    assert "[2]" in out.stages[0]["reason"]
+
+
 @pytest.mark.slow
 def test_the_model_houses_genuine_reconstruction_is_tied():
     """VGG's House tracks (10 views, K unknown; the upgrade searched through its orbital motion):

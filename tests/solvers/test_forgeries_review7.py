@@ -93,8 +93,9 @@ class TestCalibrationTiedByTwoTracks:
     cameras' K is 797 px. Two points fix 4 of a camera's 11 degrees of freedom: the rest of each
     camera, and so K, is free. (The same freedom: certificate_tracks naming track numbers no
     returned point has, 100 and up, make points that no observation ties at all: the stored
-    result naming 14 of its calibration's 16 points so verifies; and, not built here,
-    certificate_views naming a view that is not registered adds a camera no observation ties.)
+    result naming 14 of its calibration's 16 points so verifies; and certificate_views naming a
+    view that is not registered adds a camera no observation ties: now refused,
+    tests/solvers/test_calibration_tie.py.)
     Suggested fix: the calibration certificate's tracks must be every placed point the
     autocalibration stage used (certificate_tracks the result's track numbers, each a returned
     point, points_used their number) and its views every registered view, so that every returned

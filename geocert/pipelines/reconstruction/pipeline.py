@@ -110,8 +110,24 @@ def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], image_sizes: list, 
     except Cancelled as stop:
         _cancel(stages, str(stop))
     out.cancelled = any(stage["status"] == "cancelled" for stage in out.stages)
+    _untie_dropped_views(out, stages["autocalibration"])
     claims.summarise(out, len(tracks), n_views)
     return out
+
+
+def _untie_dropped_views(out: Reconstruction, stage: dict) -> None:
+    """The calibration certificate proves its K optimal for the projective cameras of the views it
+    holds; a view the result no longer registers (dropped after the calibration) has no returned
+    camera to tie its certificate camera to the result (calibration_tie), so that K is not
+    claimed for the returned cameras: the certificate is not carried, and the stage says why."""
+    if out.proven is None:
+        return
+    dropped = [int(v) for v in out.proven.views if not out.cameras[int(v)].registered]
+    if dropped:
+        out.proven = None
+        stage.update(certified=False, certificate_views=None, certificate_tracks=None, reason=(
+            f"the certified calibration's reconstruction holds view(s) {dropped} that the result does not register "
+            "(dropped after the calibration): nothing ties their cameras to the result, so its K is not claimed"))
 
 
 def not_reconstructed(n_views: int, status: str, reason: str, camera_reason: str) -> Reconstruction:

@@ -3,7 +3,8 @@
 The calibration certificate proves its K optimal for the projective reconstruction in its own
 data: the pipeline's, from the same tracks, which the returned cameras refine by bundle
 adjustment. Its cameras must be the views the autocalibration stage names (certificate_views),
-its points the tracks it names (certificate_tracks), and it must image every observation it
+its points the tracks it names (certificate_tracks), every one of those views registered in the
+result, and it must image every observation it
 shares with the result's placed points where the returned cameras image it, to within TIE_RATIO
 times the returned cameras' own RMS error on those observations, plus CONVERGENCE of the
 observations' largest coordinate. A median, or a floor of 10 px, let half the observations lie
@@ -58,11 +59,16 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
     if size is not None and any(camera.get("image_size") not in (None, list(size)) for camera in result["cameras"]
                                 if camera.get("view") in views):
         raise Invalid("returned", "the calibration certificate's image_size is not its views'")
-    apart, own, largest, per_camera = _shared(result, views, tracks, cameras, points)
-    # A view the result does not register (dropped after the calibration) has nothing to tie it;
-    # the scope counts such views. Every registered one must be tied.
+    # A view the result does not register (dropped after the calibration) has no returned camera
+    # to tie its certificate camera to: a camera tied to nothing, which moves the certified K as
+    # freely as it is placed (the pipeline carries no certificate then).
     registered = {int(c["view"]) for c in result["cameras"] if c.get("registered") is True}
-    loose = [view for view, count in zip(views, per_camera) if view in registered and count < TIE_POINTS_PER_CAMERA]
+    untied = [view for view in views if view not in registered]
+    if untied:
+        raise Invalid("returned", f"the calibration certificate holds a camera of view {untied[0]}, which the result "
+                                  "does not register: nothing ties it to the result")
+    apart, own, largest, per_camera = _shared(result, views, tracks, cameras, points)
+    loose = [view for view, count in zip(views, per_camera) if count < TIE_POINTS_PER_CAMERA]
     if loose:
         raise Invalid("returned", f"the calibration certificate's camera of view {loose[0]} images "
                                   f"{per_camera[views.index(loose[0])]} of the result's placed points (each of its cameras "
@@ -82,8 +88,7 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
                                   f"{CONVERGENCE:g} of the largest coordinate {largest:.4g}): it is not "
                                   "these tracks' reconstruction")
     return {"observations": len(apart), "largest_px": worst, "allowed_px": allowed, "returned_rms_px": rms,
-            "fewest_points_per_camera": min((n for v, n in zip(views, per_camera) if v in registered), default=0),
-            "views_not_registered": sum(1 for v in views if v not in registered)}
+            "fewest_points_per_camera": min(per_camera, default=0)}
 
 
 def _shared(result: dict, views: list, tracks: list, cameras: np.ndarray, points: np.ndarray
