@@ -14,7 +14,7 @@ from geocert.batch import solve_job
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.batched import triangulate_many
 from geocert.solvers.fractional.options import TriangulationOptions
-from tests.support import service_job
+from tests.support import reconstruction_data, service_job
 
 NOT_STARTED = "not started"
 
@@ -108,9 +108,7 @@ def test_a_reconstruction_stopped_by_its_clock_after_certified_points_verifies(m
     from geocert.solvers.verify import verify_any
 
     scene = synthetic.scene(views=6, points=40, seed=3, noise_px=0.5)
-    data = {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
-            "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
-                       for views, pixels in scene.tracks]}
+    data = reconstruction_data(scene.tracks, scene.image_size, 6)
     options = {"certificate": "full", "intrinsics": {"K": [[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]]}}
     late = {"s": 0.0}
     monkeypatch.setattr(kind, "time", SimpleNamespace(perf_counter=lambda: time.perf_counter() + late["s"],

@@ -14,6 +14,7 @@ import pytest
 from geocert.solvers.verify import verify_any
 from tests.solvers.test_forgeries import (  # noqa: F401 (a fixture, used by name)
     TestDoubtfulTied, calibrated_reconstruction, refused, stored)
+from tests.support import reconstruction_data
 
 ACCEPTED = "accepted today: see the class's docstring"
 
@@ -463,9 +464,7 @@ def reconstruction_with_k1():
     from geocert.solvers.reconstruction import synthetic
 
     scene = synthetic.scene(views=6, points=16, seed=3, noise_px=0.5)
-    data = {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
-            "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
-                       for views, pixels in scene.tracks]}
+    data = reconstruction_data(scene.tracks, scene.image_size, 6)
     result = solve_job({"kind": "reconstruction", "data": data,
                         "options": {"certificate": "full", "camera_rel_gap": 0.25, "radial_distortion": "on"}})
     assert all(camera["k1"] for camera in result["cameras"] if camera["registered"])

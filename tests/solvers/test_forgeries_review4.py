@@ -13,6 +13,7 @@ import pytest
 from geocert.solvers.verify import verify_any
 from tests.solvers.test_forgeries import stored
 from tests.solvers.test_forgeries_review3 import _uncertified
+from tests.support import reconstruction_data
 
 ACCEPTED = "accepted today: see the class's docstring"
 XFAIL = {"strict": True, "reason": ACCEPTED, "raises": AssertionError}
@@ -30,9 +31,7 @@ def given_K_reconstruction() -> dict:
     from geocert.solvers.reconstruction import synthetic
 
     scene = synthetic.scene(views=6, points=16, seed=3, noise_px=0.5)
-    data = {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
-            "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
-                       for views, pixels in scene.tracks]}
+    data = reconstruction_data(scene.tracks, scene.image_size, 6)
     K = [[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]]
     result = solve_job({"kind": "reconstruction", "data": data,
                         "options": {"certificate": "full", "intrinsics": {"K": K}}})
@@ -209,9 +208,7 @@ class TestGenuineUnregisteredReconstructionMisread:
         from geocert.solvers.reconstruction import synthetic
 
         scene = synthetic.scene(views=5, points=14, seed=7, noise_px=0.5)
-        data = {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(5)],
-                "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
-                           for views, pixels in scene.tracks]}
+        data = reconstruction_data(scene.tracks, scene.image_size, 5)
         result = solve_job({"kind": "reconstruction", "data": data, "options": {"certificate": "full", **options}})
         assert result["summary"]["views_registered"] == 0
         return result
@@ -409,9 +406,7 @@ def radial_reconstruction() -> dict:
     from geocert.solvers.reconstruction import synthetic
 
     scene = synthetic.scene(views=6, points=16, seed=3, noise_px=0.5)
-    data = {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
-            "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
-                       for views, pixels in scene.tracks]}
+    data = reconstruction_data(scene.tracks, scene.image_size, 6)
     result = solve_job({"kind": "reconstruction", "data": data,
                         "options": {"certificate": "full", "radial_distortion": "on"}})
     assert verify_any(result).valid and result["cameras"][0]["k1"] is not None
