@@ -141,6 +141,10 @@ def geocert_figures(result: dict) -> dict:
     failed = [f"{stage.get('name')} stage {stage.get('status')}: {stage.get('reason')}"
               for stage in result.get("stages", []) if stage.get("status") in ("failed", "error")]
     reasons = sorted({c.get("reason") for c in result.get("cameras", []) if not c.get("registered") and c.get("reason")})
+    # Views the calibration certificate holds that the result does not register: nothing ties them.
+    calibration = next((s for s in result.get("stages", []) if s.get("name") == "autocalibration"), {})
+    registered_views = {c.get("view") for c in result.get("cameras", []) if c.get("registered")}
+    untied = [v for v in calibration.get("certificate_views") or [] if v not in registered_views]
     return {"cameras": cameras, "points": summary.get("points"), "registered": len(cameras), "failed": failed,
             "unregistered_reasons": reasons,
             "cameras_certified": certified / len(cameras) if cameras else None,
@@ -148,7 +152,7 @@ def geocert_figures(result: dict) -> dict:
             "determined": summary.get("autocalibration_determined"), "critical_motion": summary.get("critical_motion"),
             "warnings": sorted(set(warnings)), "flagged": flagged, "rms_px": summary.get("rms_reprojection_px"),
             "poses_determined": summary.get("poses_determined"), "mirror_cost_ratio": reversal.get("cost_ratio"),
-            "mirror_statistic": reversal.get("statistic")}
+            "mirror_statistic": reversal.get("statistic"), "calibration_views_not_registered": len(untied)}
 
 
 def colmap_figures(run: dict) -> dict:
