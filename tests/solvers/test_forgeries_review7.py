@@ -2,9 +2,9 @@
 the calibration tie, the depth-reversal verdict taken as stated, the result's members as a closed
 set, and the triangulation determinacy's pooled noise. Each class is built from a genuine stored
 certificate (tests/data/certificates) or genuine solver output (geocert.batch.solve_job); each
-test of the sound outcome xfails (strict) until the verifier (or the solver) gives it, and beside
-it the genuine document it starts from verifies. Each class's docstring says what is accepted, how
-false it is, and a suggested fix."""
+test of the sound outcome xfailed (strict) until the verifier (or the solver) gave it, and now
+passes; beside it the genuine document it starts from verifies. Each class's docstring says what
+was accepted, how false it was, and the fix suggested."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from tests.solvers.test_forgeries import stored
-from tests.solvers.test_forgeries_review5 import XFAIL, _valid
+from tests.solvers.test_forgeries_review5 import _valid
 from tests.support import reconstruction_data
 
 # --- the calibration tie, over the observations the certificate chooses to share ---------------
