@@ -23,6 +23,7 @@ from typing import Any
 
 from geocert.solvers.core.certificates import CLAIM_OPTIONS as EARLIER_CLAIM_OPTIONS
 from geocert.solvers.core.strict import Invalid, number
+from geocert.solvers.reconstruction.camera_claim import MAX_REL_GAP
 
 # What the earlier form left out, at the value a request naming none of them gets
 # (ReconstructionOptions' defaults; tests/solvers/test_forgeries_review5.py checks they agree).
@@ -41,8 +42,8 @@ def checked(options: dict) -> dict:
     for name in ("autocalibration_rel_gap", "metric_rel_gap"):
         if options.get(name) is not None:
             out[name] = number(options[name], f"options/{name}", "options")
-            if not 0 <= out[name] <= 0.5:
-                raise Invalid("options", f"options/{name} {out[name]!r} is beyond 0.5")
+            if not 0 <= out[name] <= MAX_REL_GAP:
+                raise Invalid("options", f"options/{name} {out[name]!r} is beyond {MAX_REL_GAP}")
     for name, words in (("radial_distortion", RADIAL_DISTORTIONS), ("autocalibration", AUTOCALIBRATION_METHODS)):
         if options.get(name) is not None:
             if options[name] not in words:
