@@ -132,14 +132,17 @@ def test_the_terms_moved_to_a_level_are_the_ones_computed_at_it():
 
 @pytest.fixture(scope="module")
 def convexity() -> dict:
-    """A full result of a track certified by its convexity, with a proven interval."""
+    """A full result of a track certified by its convexity, with a proven interval (among twelve
+    alike: a job's intervals are proven at the noise pooled over its tracks, which one 2-view
+    track estimates from one degree of freedom, too loosely to prove any interval)."""
     job = readme_job(mode="full")
-    job["data"]["tracks"][0]["points"] = [[330, 250], [251.5, 253]]
+    job["data"]["tracks"] = [{"views": [0, 1], "points": [[330 + 0.3 * k, 250], [251.5, 253 - 0.2 * k]]}
+                             for k in range(12)]
     result = solve_job(job)
     proof = result["certificate"]["items"][0]["proof"]
     assert proof["type"] == "convexity" and "sublevel" in proof
     report = verify_any(result)
-    assert report.valid and {"name": "proven_interval", "passed": 1, "failed": 0} in report.checks
+    assert report.valid and {"name": "proven_interval", "passed": 12, "failed": 0} in report.checks
     return result
 
 
@@ -241,3 +244,18 @@ class TestForgedIntervalsOfASearch:
         assert document["items"][0]["proof"]["type"] == "branch_and_bound"
         document["items"][0]["proof"]["sublevel"] = searched["certificate"]["items"][0]["proof"]["sublevel"]
         assert failed(document)["check"] == "format"
+
+
+def test_one_two_view_track_alone_proves_no_interval_at_its_level():
+    """A job of one 2-view track estimates its noise from one degree of freedom: its estimate is
+    read at Student's quantile (about 236^2 times the residual variance), where the enclosure test
+    proves no bounded set; the result says not proven rather than stating an interval of a level
+    below its estimate's, and verifies."""
+    job = readme_job(mode="full", detail="full")
+    job["data"]["tracks"][0]["points"] = [[330, 250], [251.5, 253]]
+    result = solve_job(job)
+    determinacy = result["tracks"][0]["determinacy"]
+    assert determinacy["cost_increase"] > 200 ** 2 * result["tracks"][0]["cost"]
+    assert determinacy["proven"] is False and determinacy["proven_intervals"] is None
+    assert "sublevel" not in result["certificate"]["items"][0]["proof"]
+    assert verify_any(result).valid
