@@ -272,6 +272,33 @@ def proven_track(sublevel: dict | None) -> dict | None:
                            "test at that level (fractional.convexity)")
 
 
+def proven_map(sublevel: dict | None) -> dict | None:
+    """The proven intervals of a certified resection's camera centre from its certificate's
+    ``sublevel`` (fractional.resection_sublevel; None: none)."""
+    if sublevel is None:
+        return None
+    return proven_document(sublevel["cost_increase"], ("centre_x", "centre_y", "centre_z"), sublevel["intervals"],
+                           f"the cameras enclosed in a ball of radius {sublevel['radius']:.6g} (whitened by the "
+                           f"Gauss-Newton information at the camera), narrowed by {sublevel['rounds']} rounds bounding "
+                           "the cost below by a quadratic, the centre bounded over what remains "
+                           "(fractional.resection_sublevel)")
+
+
+def prove_map(source: np.ndarray, target: np.ndarray, matrix, document: dict | None) -> dict | None:
+    """A certified L2L2 resection's proven interval at its determinacy ``document``'s
+    cost_increase (None where none is proven), set in the document too."""
+    from geocert.solvers.fractional.resection_sublevel import resection_sublevel
+
+    if document is None or document.get("cost_increase") is None or matrix is None:
+        return None
+    with np.errstate(all="ignore"):
+        sublevel = resection_sublevel(source, target, matrix, document["cost_increase"])
+    if sublevel is not None:
+        document["proven_intervals"] = proven_map(sublevel)
+        document["proven"] = True
+    return sublevel
+
+
 def _complement(M: np.ndarray) -> np.ndarray:
     """An orthonormal basis (columns) of the directions orthogonal to vec(M)."""
     v = M.ravel() / np.linalg.norm(M)
