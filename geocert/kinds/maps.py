@@ -134,11 +134,12 @@ class MapKind:
         if options.detail == "full":
             document["determinacy"] = safely(determinacy.map_, source, target, result.matrix, result.cost,
                                              result.lower_bound)
-            if self.name == "resection" and result.certified and options.norm == "L2L2":
-                # Proven at the estimate's own level; the full certificate carries the proof.
+            proof = (document.get("certificate") or {}).get("proof")  # a full certificate's only
+            if self.name == "resection" and result.certified and options.norm == "L2L2" and (
+                    proof is None or proof.get("type") == "branch_and_bound"):  # a trivial proof carries none
+                # Proven at the estimate's own level; a full certificate carries the proof.
                 sublevel = determinacy.prove_map(source, target, result.matrix, document["determinacy"])
-                proof = (document.get("certificate") or {}).get("proof")
-                if sublevel is not None and isinstance(proof, dict) and proof.get("type") == "branch_and_bound":
+                if sublevel is not None and proof is not None:
                     proof["sublevel"] = sublevel
         return document
 

@@ -218,7 +218,18 @@ class TestForgedIntervals:
         assert failed(document)["check"] == "format"
 
 
-def test_no_proven_interval_under_the_l1_norms_or_in_brief():
+def test_a_noiseless_camera_certified_by_the_trivial_bound_states_none_and_verifies():
+    """Its proof ({"type": "trivial"}) has no place for one: a result saying proven beside it
+    would be refused."""
+    rng = np.random.default_rng(seed("resection proven", "noiseless"))
+    job, _ = resection_job(rng, 12, 0.0)
+    result = solve_job(job)
+    assert result["certificate"]["items"][0]["proof"]["type"] == "trivial"
+    assert result["maps"][0]["determinacy"]["proven_intervals"] is None
+    assert verify_any(result).valid
+
+
+def test_no_proven_interval_under_the_l1_norms():
     rng = np.random.default_rng(seed("resection proven", "norms"))
     job, _ = resection_job(rng, 12, 1.0, norm="L2L1")
     result = solve_job(job)
