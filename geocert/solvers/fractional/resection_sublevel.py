@@ -19,7 +19,8 @@ c) and U = c + increase: the set L of cameras costing at most U is what is bound
     T[8:11]' (X_j - X_ref) (so |w_j(theta) - w_j| <= R |g_j|); so sum_j |G_j u|^2 / tau_j^2 <=
     k, which lambda_min(sum_j G_j' G_j / tau_j^2) > k refutes: the convex set, and L, lie
     inside |phi| < R. The bound is loose by about the number of points (each residual may take
-    the whole budget): it only starts (2).
+    the whole budget): it only starts (2). Its passing also proves T invertible (T' (...) T is
+    then positive definite), so every theta is some T phi: any computed T serves.
 (2) Rounds: knowing L inside |phi| <= r, every depth there is at most hi_j = w_j + r |g_j|, so
     every camera of L has sum_j |n_j + B_j T phi|^2 / hi_j^2 <= (its cost) <= U: a quadratic in
     phi, q0 + 2 rho' phi + phi' K phi, whose sublevel set lies in |phi| <= (|rho| + sqrt(|rho|^2
@@ -114,6 +115,9 @@ class Scene:
             try:
                 L = np.linalg.cholesky(0.5 * (H0 + H0.T))
                 T = np.linalg.inv(L).T  # T' H0 T = I (to rounding: any T serves the proof)
+                # Entries far below the largest are rounding (they may be subnormal): any T serves
+                # the proof, so they are set to 0, keeping every number in the moderate range.
+                T = np.where(np.abs(T) < 1e-20 * np.abs(T).max(), 0.0, T)
             except np.linalg.LinAlgError:
                 self.usable = False
                 return
