@@ -284,16 +284,24 @@ def proven_map(sublevel: dict | None) -> dict | None:
                            "(fractional.resection_sublevel)")
 
 
-def prove_map(source: np.ndarray, target: np.ndarray, matrix, document: dict | None) -> dict | None:
-    """A certified L2L2 resection's proven interval at its determinacy ``document``'s
-    cost_increase (None where none is proven), set in the document too."""
+def prove_map(source: np.ndarray, target: np.ndarray, matrix, cost: float, lower: float | None,
+              document: dict | None = None) -> dict | None:
+    """A certified L2L2 resection's proven interval (None where none is proven) at the level its
+    determinacy estimate is read at (cost_increase: 3^2 times cost / (2k - 11), at least the gap),
+    computed from the cost alone so that a result without determinacy (detail brief) proves the
+    same; set in ``document`` (the determinacy) too when given."""
+    from geocert.solvers.core.determinacy import cost_increase
     from geocert.solvers.fractional.resection_sublevel import resection_sublevel
 
-    if document is None or document.get("cost_increase") is None or matrix is None:
+    if matrix is None or cost is None or not math.isfinite(cost):
         return None
-    with np.errstate(all="ignore"):
-        sublevel = resection_sublevel(source, target, matrix, document["cost_increase"])
-    if sublevel is not None:
+    increase = cost_increase(cost, 2 * len(source) - 11, certified_gap(cost, lower))
+    try:  # as safely(): a proof not found never fails a solve
+        with np.errstate(all="ignore"):
+            sublevel = resection_sublevel(source, target, matrix, increase)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        sublevel = None
+    if sublevel is not None and document is not None:
         document["proven_intervals"] = proven_map(sublevel)
         document["proven"] = True
     return sublevel
