@@ -6,7 +6,8 @@ reads off the answer, and the degeneracies recognised.
   infinity (no interval then).
 - A resection: the camera centre; warned when the 3D points are nearly coplanar, or when the
   points and the centre lie near a critical configuration (the camera is not fixed: a direction
-  of the data's curvature is singular).
+  of the data's curvature is singular). A certified L2L2 resection's centre also has proven
+  intervals at the estimate's level (prove_map, fractional.resection_sublevel).
 - A homography: the image of the source points' centroid; warned when the source or the target
   points are nearly collinear (coplanar, for maps of P^3).
 
