@@ -394,7 +394,8 @@ def main() -> None:
     if not args.no_real:
         print("\nTriangulation on real camera sets (true points reprojected, 0.5 px noise): coverage of the truth")
         print("\n".join(real_triangulation(np.random.default_rng(37))))
-        print("\nResection on real camera sets (points drawn in the set's box, 0.5 px noise): the true centre's coverage")
+        print("\nResection on real camera sets (points drawn in the set's box, 0.5 px noise): the true centre's "
+              "coverage")
         print("\n".join(real_resection(np.random.default_rng(37))))
         rows, lines = real_autocalibration()
         report("Autocalibration on real cameras (ground truth moved to a projective frame, 0.5 px): the general "

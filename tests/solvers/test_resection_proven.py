@@ -79,8 +79,8 @@ def test_every_camera_within_the_increase_has_its_centre_in_the_proven_intervals
     J = np.array(J).T
     _, _, vt = np.linalg.svd(J)
     # ... and each centre coordinate's extreme direction on the curvature's ellipsoid, S g
-    gradient = np.array([(centres_of((base + h * e).reshape(1, 3, 4))[0] - centres_of((base - h * e).reshape(1, 3, 4))[0])
-                         / (2 * h) for e in np.eye(12)]).T  # (3, 12)
+    gradient = np.array([(centres_of((base + h * e).reshape(1, 3, 4))[0]
+                          - centres_of((base - h * e).reshape(1, 3, 4))[0]) / (2 * h) for e in np.eye(12)]).T
     extreme = (np.linalg.pinv(J.T @ J, rcond=1e-12) @ gradient.T).T
     directions = list(vt[-4:-1]) + [u / np.linalg.norm(u) for u in list(extreme) + list(rng.normal(size=(30, 12)))]
     steps = np.geomspace(1e-7, 1.0, 300)
@@ -147,7 +147,8 @@ def forged(result, item: int = 1, **changes) -> dict:
 
 class TestForgedIntervals:
     @pytest.mark.parametrize("coordinate", [0, 1, 2])
-    @pytest.mark.parametrize("end,change", [(0, 1e-6), (1, -1e-6), (0, 1e-3), (1, -1e-3), (0, -1e-4), (1, 1e-4), (0, -0.5), (1, 0.5)])
+    @pytest.mark.parametrize("end,change", [(0, 1e-6), (1, -1e-6), (0, 1e-3), (1, -1e-3), (0, -1e-4), (1, 1e-4),
+                                            (0, -0.5), (1, 0.5)])
     def test_a_narrowed_or_widened_interval_is_refused(self, proven, coordinate, end, change):
         intervals = copy.deepcopy(proven["certificate"]["items"][1]["proof"]["sublevel"]["intervals"])
         width = intervals[coordinate][1] - intervals[coordinate][0]
@@ -233,19 +234,19 @@ def test_a_noiseless_camera_certified_by_the_trivial_bound_states_none_and_verif
 # cameras (f = 3310 px, 0.6 m away; Seitz et al., Middlebury multi-view stereo) with 0.5 px of
 # noise: the whitening matrix's inverse Cholesky factor had an entry of 2.7e-39, rounding below
 # the moderate range, and no interval was proven.
-DINO_CAMERA_SOURCE = [[0.020867, 0.020118, 0.014898], [-0.018347, 0.075594, -0.006647], [-0.016014, 0.036506, 0.016051], [0.001929,
-                     0.053116, 0.026583], [-0.035725, 0.08142, -0.0108], [-0.035583, 0.054244, -0.015551],
-                     [0.020858, 0.032804, -0.032208], [-0.025076, 0.059701, 0.008917], [-0.011026, 0.05154,
-                     -0.035159], [-0.024007, 0.003496, 0.016202], [0.024472, 0.007508, -0.022547], [-0.003973,
-                     0.033698, 0.008896], [0.014297, 0.013204, 0.015291], [0.009889, 0.071894, -0.031134],
-                     [-0.033323, 0.083275, -0.012489], [0.019446, 0.001871, 0.016731], [0.022024, 0.018816,
-                     0.004861], [-0.040429, 0.002159, 0.025139], [0.025188, 0.051654, 0.021281], [-0.009046,
-                     0.026321, -0.017053]]
-DINO_CAMERA_TARGET = [[346.376, 124.992], [152.622, 211.203], [341.142, 103.829], [232.178, 52.171], [152.773, 229.715], [288.458,
-                     260.913], [282.5, 352.533], [246.596, 131.415], [252.47, 364.511], [512.152, 110.346],
-                     [390.382, 308.572], [330.177, 145.293], [389.594, 124.557], [118.666, 340.462], [137.161,
-                     238.253], [430.993, 121.955], [349.224, 173.813], [556.36, 60.381], [198.342, 87.367],
-                     [370.206, 277.49]]
+DINO_CAMERA_SOURCE = [[0.020867, 0.020118, 0.014898], [-0.018347, 0.075594, -0.006647], [-0.016014, 0.036506,
+                     0.016051], [0.001929, 0.053116, 0.026583], [-0.035725, 0.08142, -0.0108], [-0.035583,
+                     0.054244, -0.015551], [0.020858, 0.032804, -0.032208], [-0.025076, 0.059701, 0.008917],
+                     [-0.011026, 0.05154, -0.035159], [-0.024007, 0.003496, 0.016202], [0.024472, 0.007508,
+                     -0.022547], [-0.003973, 0.033698, 0.008896], [0.014297, 0.013204, 0.015291], [0.009889,
+                     0.071894, -0.031134], [-0.033323, 0.083275, -0.012489], [0.019446, 0.001871, 0.016731],
+                     [0.022024, 0.018816, 0.004861], [-0.040429, 0.002159, 0.025139], [0.025188, 0.051654,
+                     0.021281], [-0.009046, 0.026321, -0.017053]]
+DINO_CAMERA_TARGET = [[346.376, 124.992], [152.622, 211.203], [341.142, 103.829], [232.178, 52.171], [152.773,
+                     229.715], [288.458, 260.913], [282.5, 352.533], [246.596, 131.415], [252.47, 364.511],
+                     [512.152, 110.346], [390.382, 308.572], [330.177, 145.293], [389.594, 124.557], [118.666,
+                     340.462], [137.161, 238.253], [430.993, 121.955], [349.224, 173.813], [556.36, 60.381],
+                     [198.342, 87.367], [370.206, 277.49]]
 
 
 def test_a_real_small_scale_camera_is_proven_and_verifies():
