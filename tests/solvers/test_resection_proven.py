@@ -105,8 +105,8 @@ def test_every_camera_within_the_increase_has_its_centre_in_the_proven_intervals
 def test_the_proven_intervals_hold_the_truth_at_the_stated_rate():
     """40 synthetic cameras (12 to 60 points, 1 px noise): 3 standard errors' level, so each
     coordinate's interval (a superset of the estimate's, to the curvature's accuracy) holds the
-    true centre in at least 99.7% of cases in expectation; all 120 here, and each proven
-    interval holds the estimate's."""
+    true centre in at least 99.7% of cases in expectation: at least 119 of 120 here (all 120 when
+    measured), and each proven interval holds the estimate's."""
     rng = np.random.default_rng(seed("resection proven", "truth"))
     covered = total = 0
     for _ in range(40):
@@ -119,7 +119,7 @@ def test_the_proven_intervals_hold_the_truth_at_the_stated_rate():
         total += 3
         for proven, estimate in zip(document["proven_intervals"]["intervals"], document["intervals"]):
             assert proven["lower"] <= estimate["lower"] and estimate["upper"] <= proven["upper"]
-    assert covered == total
+    assert covered >= total - 1
 
 
 @pytest.fixture(scope="module")
