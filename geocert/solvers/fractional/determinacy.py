@@ -6,7 +6,8 @@ reads off the answer, and the degeneracies recognised.
   infinity (no interval then).
 - A resection: the camera centre; warned when the 3D points are nearly coplanar, or when the
   points and the centre lie near a critical configuration (the camera is not fixed: a direction
-  of the data's curvature is singular).
+  of the data's curvature is singular). A certified L2L2 resection's centre also has proven
+  intervals at the estimate's level (prove_map, fractional.resection_sublevel).
 - A homography: the image of the source points' centroid; warned when the source or the target
   points are nearly collinear (coplanar, for maps of P^3).
 
@@ -270,6 +271,41 @@ def proven_track(sublevel: dict | None) -> dict | None:
     return proven_document(sublevel["cost_increase"], ("x", "y", "z"), sublevel["intervals"],
                            f"a ball of radius {sublevel['radius']:.6g} about the point, proven by the enclosure "
                            "test at that level (fractional.convexity)")
+
+
+def proven_map(sublevel: dict | None) -> dict | None:
+    """The proven intervals of a certified resection's camera centre from its certificate's
+    ``sublevel`` (fractional.resection_sublevel; None: none)."""
+    if sublevel is None:
+        return None
+    return proven_document(sublevel["cost_increase"], ("centre_x", "centre_y", "centre_z"), sublevel["intervals"],
+                           f"the cameras enclosed in a ball of radius {sublevel['radius']:.6g} (whitened by the "
+                           f"Gauss-Newton information at the camera), narrowed by {sublevel['rounds']} rounds bounding "
+                           "the cost below by a quadratic, the centre bounded over what remains "
+                           "(fractional.resection_sublevel)")
+
+
+def prove_map(source: np.ndarray, target: np.ndarray, matrix, cost: float, lower: float | None,
+              document: dict | None = None) -> dict | None:
+    """A certified L2L2 resection's proven interval (None where none is proven) at the level its
+    determinacy estimate is read at (cost_increase: 3^2 times cost / (2k - 11), at least the gap),
+    computed from the cost alone so that a result without determinacy (detail brief) proves the
+    same; set in ``document`` (the determinacy) too when given."""
+    from geocert.solvers.core.determinacy import cost_increase
+    from geocert.solvers.fractional.resection_sublevel import resection_sublevel
+
+    if matrix is None or cost is None or not math.isfinite(cost):
+        return None
+    increase = cost_increase(cost, 2 * len(source) - 11, certified_gap(cost, lower))
+    try:  # as safely(): a proof not found never fails a solve
+        with np.errstate(all="ignore"):
+            sublevel = resection_sublevel(source, target, matrix, increase)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        sublevel = None
+    if sublevel is not None and document is not None:
+        document["proven_intervals"] = proven_map(sublevel)
+        document["proven"] = True
+    return sublevel
 
 
 def _complement(M: np.ndarray) -> np.ndarray:

@@ -11,9 +11,10 @@ from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost, n
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.convexity import outside_range, track_bound, verify_sublevel
-from geocert.solvers.fractional.determinacy import proven_track
+from geocert.solvers.fractional.determinacy import proven_map, proven_track
 from geocert.solvers.fractional.proof import (check_program, program_allowance, program_discount, raw_sizes,
                                               residual_uncertainty, track_uncertainty, verify_search)
+from geocert.solvers.fractional.resection_sublevel import verify_resection_sublevel
 from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
 
 MAX_VIEWS = 1000  # views in a track, for the parser too: a chart's choice of reference takes views^2 work
@@ -213,6 +214,40 @@ def verify_track_search(item, options: dict, proof: dict, lower_claimed: float, 
     return bound
 
 
+def verify_map_search(item, options: dict, proof: dict, lower_claimed: float, solution, passed: list[str]) -> float:
+    """A map's search (proof.verify_search), and a resection's proven interval of its camera
+    centre when it states one (fractional.resection_sublevel; no other map states one)."""
+    bound = verify_search(item, options, {key: value for key, value in proof.items() if key != "sublevel"},
+                          lower_claimed, solution, passed)
+    if "sublevel" in proof:
+        if (item.source.shape[1], item.target.shape[1]) != (3, 2):
+            raise Invalid("format", "proof/sublevel: only a resection's proof states a proven interval")
+        verify_resection_sublevel(item.source, item.target, proof["sublevel"], solution, options["norm"])
+        passed.append("proven_interval")
+    return bound
+
+
+def _check_proven(where: str, determinacy, claim: dict, norm, proven) -> None:
+    """An item's determinacy may say proven only with the intervals its claim's proof proves:
+    ``proven`` (determinacy.proven_track or proven_map) of the proof's sublevel, every member (its
+    level's words too), and under L2L2 at no lower a level than the estimate beside it is read
+    at, which a lower level's smaller set would misstate."""
+    if not isinstance(determinacy, dict) or (determinacy.get("proven") is False
+                                             and determinacy.get("proven_intervals") is None):
+        return
+    proof = claim.get("proof") if claim.get("certified") is True else None
+    sublevel = proof.get("sublevel") if isinstance(proof, dict) else None
+    stated = determinacy.get("proven_intervals")
+    if sublevel is None or determinacy.get("proven") is not True or not isinstance(stated, dict):
+        raise Invalid("returned", f"{where}/determinacy says proven, and its certificate proves no interval")
+    if not isinstance(sublevel, dict) or stated != proven(sublevel):
+        raise Invalid("returned", f"{where}/determinacy/proven_intervals are not the ones its certificate proves")
+    level = determinacy.get("cost_increase")
+    if norm == "L2L2" and not (is_number(level) and stated["cost_increase"] >= level * (1 - LEVEL_ROUNDING)):
+        raise Invalid("returned", f"{where}/determinacy/proven_intervals are proven at cost increase "
+                                  f"{stated['cost_increase']!r:.12} below the {level!r:.12} its estimate is read at")
+
+
 def figure_allowance(cost: float) -> float:
     """How far a stated cost may be from the one the verifier recomputes for an uncertified item
     (the solver's and the verifier's rounding of the same residuals)."""
@@ -246,27 +281,7 @@ class TrackItems:
             return
         norm = (certificate.get("options") or {}).get("norm")
         for index, (item, claim) in enumerate(zip(result["tracks"], certificate["items"])):
-            determinacy = item.get("determinacy")
-            if not isinstance(determinacy, dict) or (determinacy.get("proven") is False
-                                                     and determinacy.get("proven_intervals") is None):
-                continue
-            proof = claim.get("proof") if claim.get("certified") is True else None
-            sublevel = proof.get("sublevel") if isinstance(proof, dict) else None
-            stated = determinacy.get("proven_intervals")
-            if sublevel is None or determinacy.get("proven") is not True or not isinstance(stated, dict):
-                raise Invalid("returned", f"tracks/{index}/determinacy says proven, and its certificate proves no "
-                                          "interval")
-            # Every member, its words (level) too, as the solver builds them from the proof's sublevel.
-            if not isinstance(sublevel, dict) or stated != proven_track(sublevel):
-                raise Invalid("returned", f"tracks/{index}/determinacy/proven_intervals are not the ones its "
-                                          "certificate proves")
-            # Proven at no lower a level than the estimate beside it is read at (the job's pooled
-            # noise, squared pixels: L2L2), which a lower level's smaller set would misstate.
-            level = determinacy.get("cost_increase")
-            if norm == "L2L2" and not (is_number(level) and stated["cost_increase"] >= level * (1 - LEVEL_ROUNDING)):
-                raise Invalid("returned", f"tracks/{index}/determinacy/proven_intervals are proven at cost increase "
-                                          f"{stated['cost_increase']!r:.12} below the {level!r:.12} its estimate is "
-                                          "read at")
+            _check_proven(f"tracks/{index}", item.get("determinacy"), claim, norm, proven_track)
 
     def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
         """What an uncertified track's point costs on its observations (and the allowance for its
@@ -333,7 +348,7 @@ class TrackItems:
 class MapItems:
     """A map kind's verification adapter (the (source, target) dimensions it serves)."""
 
-    proofs = {"branch_and_bound": verify_search}
+    proofs = {"branch_and_bound": verify_map_search}
     data_items = "maps"
     domain = "every map that puts every point at positive depth"
 
@@ -375,6 +390,11 @@ class MapItems:
         (target minus the map's image), certified or not, and an uncertified map's cost is their
         norm (verify.uncertified_claim, on its claim): a residual or a cost no matrix gives is refused."""
         norm = certificate["options"].get("norm")
+        for index, (entry, claim) in enumerate(zip(result.get("maps") or [], certificate["items"])):
+            if isinstance(entry, dict) and isinstance(claim, dict):
+                # Only a resection's proof proves an interval (verify_map_search): a homography's
+                # determinacy saying proven finds no sublevel and is refused here.
+                _check_proven(f"maps/{index}", entry.get("determinacy"), claim, norm, proven_map)
         for index, entry in enumerate(result.get("maps") or []):
             if isinstance(entry, dict) and entry.get("matrix") is None and entry.get("residuals") not in (None, []):
                 raise Invalid("returned", f"maps/{index}/residuals are given, but no matrix they derive from")

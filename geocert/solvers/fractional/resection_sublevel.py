@@ -1,0 +1,370 @@
+"""A proven interval of a resection's camera centre: every camera of the scope (every 3x4 camera
+putting every point at positive depth) whose L2L2 cost is at most the optimum's plus ``increase``
+has its centre within the intervals. Numpy only: the solver states it, the verifier recomputes it.
+
+Cameras are taken on the slice where the reference point's depth is the returned camera P0's
+(every camera of the scope is a positive multiple of one there; the cost and the centre do not
+change with the scale), as P0 + D(theta), theta in R^11: the first two rows' entries, then the
+third row's first three, its fourth fixed by the slice (-theta[8:11] . X_ref). Point j's depth is
+w_j(theta) = w_j + theta[8:11] . (X_j - X_ref), its numerator n_j(theta) = n_j + B_j theta (the
+residual r_j = n_j / w_j, both linear in theta), and whitened coordinates theta = T phi, with T'
+H0 T = I for H0 the Gauss-Newton information at P0. Let c be P0's cost (the optimum is at most
+c) and U = c + increase: the set L of cameras costing at most U is what is bounded.
+
+(1) An enclosure, as the triangulation's (convexity.py (E)): every camera of L has every
+    |r_j| <= rho = sqrt(U), so lies in the convex set of cameras with positive depths and every
+    |n_j(theta)| <= rho w_j(theta), which holds phi = 0. On the sphere |phi| = R that set has
+    |G_j u| <= tau_j = (rho + |r_j|)(w_j + R |g_j|) / R for the unit u = phi / R, G_j = A_j T the
+    residual's exact first-order map (r_j(theta) - r_j = A_j theta / w_j(theta)) and g_j =
+    T[8:11]' (X_j - X_ref) (so |w_j(theta) - w_j| <= R |g_j|); so sum_j |G_j u|^2 / tau_j^2 <=
+    k, which lambda_min(sum_j G_j' G_j / tau_j^2) > k refutes: the convex set, and L, lie
+    inside |phi| < R. The bound is loose by about the number of points (each residual may take
+    the whole budget): it only starts (2). Its passing also proves T invertible (T' (...) T is
+    then positive definite), so every theta is some T phi: any computed T serves.
+(2) Rounds: knowing L inside |phi| <= r, every depth there is at most hi_j = w_j + r |g_j|, so
+    every camera of L has sum_j |n_j + B_j T phi|^2 / hi_j^2 <= (its cost) <= U: a quadratic in
+    phi, q0 + 2 rho' phi + phi' K phi, whose sublevel set lies in |phi| <= (|rho| + sqrt(|rho|^2
+    + kappa (U - q0))) / kappa for kappa <= lambda_min(K). That is the next r (never more than
+    the last). Near P0 the quadratic is the cost's Gauss-Newton model scaled by (w_j / hi_j)^2,
+    so the rounds approach the estimate's ellipsoid at level U (its ball in whitened
+    coordinates) once r |g_j| is small beside w_j.
+(3) The centre C of P0 + D solves A C = -p4 (A the left 3x3, p4 the last column), and so does
+    computed centre of P0, Z a computed inverse of A0 and e = P0 [C0; 1]: C - C0 =
+    -Z D [C0; 1] - (A0^-1 - Z) D [C0; 1] - A0^-1 e + A0^-1 dA A^-1 (e + D [C0; 1]). The first
+    term is linear in theta (l_k . theta for coordinate k, ranging over +- r |T' l_k|), the rest
+    second order or rounding, bounded with s <= sigma_min(A0) and |dA| <= |D|_F <= |T|_F r
+    sqrt(1 + |X_ref|^2).
+
+Round-off (docs/certificate.md): each computed quantity is widened by a generous multiple of the
+unit round-off times the size of the terms behind it; inexact data-derived matrices (B_j, G_j,
+n_j) enter through |a + b|^2 >= (1 - eta) |a|^2 - (1 / eta - 1) |b|^2 with b their error bound;
+a smallest eigenvalue is proven by a Cholesky factorisation of the matrix less the margin, its
+entries' error and 32 u trace (Demmel's, Rump's bound for order 11 is (n + 1) u trace); weights
+1 / tau^2 and 1 / hi^2 are rounded down. The numbers are kept to a moderate range (convexity.py:
+0 or magnitude within 2^+-128), so that no product underflows beyond UNDERFLOW.
+
+The cost is O(k) per test or round (k x 2 x 11 products, an 11 x 11 Cholesky factorisation): the
+check of a stated proof is linear in the number of points, its stated rounds at most MAX_ROUNDS.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from geocert.solvers.core.strict import Invalid, number, numbers, record
+from geocert.solvers.fractional.convexity import LARGEST, SMALLEST, UNDERFLOW, in_range
+
+U = 2.0 ** -52
+ETA = 1e-6  # the split of inexact terms: (1 - ETA) of the computed quadratic is kept
+MAX_ROUNDS = 32
+ROUNDS_STOP = 0.99  # the solver stops its rounds once a round shrinks r by less than this factor
+STATED_SLACK = 1e-7  # the solver states its intervals this much wider (relative to the half-width)
+CHECK_SLACK = 1e-5  # a stated interval may be at most this much wider than the checker's
+NAMES = ("centre_x", "centre_y", "centre_z")
+
+
+class Scene:
+    """What every test and round reads, with the round-off bounds of each."""
+
+    def __init__(self, source: np.ndarray, target: np.ndarray, matrix: np.ndarray, reference: int):
+        X = np.asarray(source, dtype=float)
+        x = np.asarray(target, dtype=float)
+        P = np.asarray(matrix, dtype=float)
+        k = len(X)
+        self.k, self.reference = k, reference
+        self.usable = (X.ndim == 2 and X.shape[1] == 3 and x.shape == (k, 2) and P.shape == (3, 4)
+                       and 0 <= reference < k and k >= 6 and bool(in_range(X).all() and in_range(x).all()
+                                                                  and in_range(P).all()))
+        if not self.usable:
+            return
+        Xh = np.hstack([X, np.ones((k, 1))])
+        if Xh[reference] @ P[2] < 0:
+            P = -P  # the scope's cameras put every point at positive depth: the sign that does
+        self.P = P
+        with np.errstate(all="ignore"):
+            proj = Xh @ P.T
+            size = np.abs(Xh) @ np.abs(P).T  # (k, 3): the terms behind each projected coordinate
+            w, size_w = proj[:, 2], size[:, 2]
+            self.w = w
+            self.w_hi = (w + 8 * U * size_w) * (1 + 4 * U)
+            image = proj[:, :2] / w[:, None]
+            r = image - x
+            err_image = 32 * U * ((size[:, :2] + np.abs(image) * size_w[:, None]) / np.abs(w)[:, None]
+                                  + np.abs(image))
+            err_r = err_image + 32 * U * np.abs(x)
+            self.r_up = np.sqrt(((np.abs(r) + err_r) ** 2).sum(axis=1)) * (1 + 8 * U)
+            self.c_up = float((self.r_up ** 2).sum()) * (1 + (k + 8) * U)
+            # n_j = P12 X_j - x_j w_j, and its error
+            self.n = proj[:, :2] - x * w[:, None]
+            self.eps_n = np.sqrt(((16 * U * (size[:, :2] + np.abs(x) * size_w[:, None])) ** 2).sum(axis=1))
+            D = X - X[reference]  # (k, 3), each entry within U of the exact difference
+            blocks = np.zeros((k, 2, 11))
+            blocks[:, 0, 0:4] = Xh
+            blocks[:, 1, 4:8] = Xh
+            B = blocks.copy()
+            B[:, :, 8:11] = -x[:, :, None] * D[:, None, :]
+            A = blocks
+            A[:, :, 8:11] = -image[:, :, None] * D[:, None, :]
+            D_size = np.sqrt((D * D).sum(axis=1))
+            self.err_B = 4 * U * np.sqrt((x * x).sum(axis=1)) * D_size  # |computed B_j - B_j|_F
+            self.err_A = (np.sqrt((err_image ** 2).sum(axis=1)) + 4 * U * np.sqrt((image ** 2).sum(axis=1))) \
+                * D_size * (1 + 4 * U)
+            H0 = np.einsum("kai,kaj,k->ij", A, A, 1 / (w * w))
+            try:
+                L = np.linalg.cholesky(0.5 * (H0 + H0.T))
+                T = np.linalg.inv(L).T  # T' H0 T = I (to rounding: any T serves the proof)
+                # Entries far below the largest are rounding (they may be subnormal): any T serves
+                # the proof, so they are set to 0, keeping every number in the moderate range.
+                T = np.where(np.abs(T) < 1e-20 * np.abs(T).max(), 0.0, T)
+            except np.linalg.LinAlgError:
+                self.usable = False
+                return
+            self.T = T
+            self.T_F = float(np.sqrt((T * T).sum())) * (1 + 16 * U)
+            self.G = A @ T  # (k, 2, 11)
+            self.C = B @ T
+            A_F = np.sqrt((A * A).sum(axis=(1, 2)))
+            B_F = np.sqrt((B * B).sum(axis=(1, 2)))
+            self.err_G = (self.err_A + 32 * U * A_F) * self.T_F * (1 + 8 * U)
+            self.err_C = (self.err_B + 32 * U * B_F) * self.T_F * (1 + 8 * U)
+            g = D @ T[8:11]
+            g_size = np.sqrt(((np.abs(D) @ np.abs(T[8:11])) ** 2).sum(axis=1))
+            self.g_up = (np.sqrt((g * g).sum(axis=1)) + 16 * U * g_size) * (1 + 8 * U)
+            self.usable = bool(np.all(w - 8 * U * size_w > 0) and np.isfinite(self.c_up) and np.all(np.isfinite(self.G))
+                               and np.all(np.isfinite(self.C)) and np.all(np.isfinite(self.g_up))
+                               and np.all(np.isfinite(self.eps_n)) and in_range(T).all())
+        self.X_ref = X[reference]
+
+    def level(self, increase: float) -> float:
+        """U from above: the returned camera's cost (at least the optimum) plus the increase."""
+        return (self.c_up + increase) * (1 + 4 * U)
+
+
+def least_eigenvalue_above(M: np.ndarray, margin: float, allowance: float) -> bool:
+    """Whether every symmetric matrix within ``allowance`` (spectral norm) of the computed ``M``
+    has its smallest eigenvalue above ``margin``: a Cholesky factorisation of M less the margin,
+    the allowance and 32 u trace (the factorisation's own backward error), every pivot positive."""
+    M = 0.5 * (M + M.T)
+    trace = float(np.abs(np.diag(M)).sum())
+    shift = (margin + allowance + 32 * U * (trace + abs(margin)) + UNDERFLOW) * (1 + 8 * U)
+    if not (np.all(np.isfinite(M)) and math.isfinite(shift)):
+        return False
+    try:
+        factor = np.linalg.cholesky(M - shift * np.eye(len(M)))
+    except np.linalg.LinAlgError:
+        return False
+    return bool(np.all(np.isfinite(factor)) and np.all(np.diag(factor) > 0))
+
+
+def encloses(scene: Scene, increase: float, R: float, strictness: float = 1.0) -> bool:
+    """(1) at radius R: every camera of the scope costing at most U lies within |phi| < R."""
+    if not (scene.usable and SMALLEST <= R <= LARGEST):
+        return False
+    with np.errstate(all="ignore"):
+        rho = math.sqrt(scene.level(increase)) * (1 + 4 * U)
+        e = (rho + scene.r_up) * (1 + 1e-12)
+        tau = e * (scene.w_hi + R * scene.g_up) / R * (1 + 8 * U) + scene.err_G * (1 + 8 * U)
+        weight = 1 / (tau * tau) * (1 - 8 * U)
+        M = np.einsum("kai,kaj,k->ij", scene.G, scene.G, weight)
+        allowance = 2 * (scene.k + 16) * U * float((weight * (scene.G ** 2).sum(axis=(1, 2))).sum())
+        margin = scene.k * (1 + 1e-12 + 1e-6 * (strictness - 1))
+        return least_eigenvalue_above(M, margin, strictness * allowance)
+
+
+def shrink(scene: Scene, increase: float, r: float) -> float:
+    """(2): one round from |phi| <= r to the radius it proves (at most r; r when it fails)."""
+    with np.errstate(all="ignore"):
+        hi = (scene.w_hi + r * scene.g_up) * (1 + 4 * U)
+        weight = 1 / (hi * hi) * (1 - 8 * U)  # at most 1 / hi^2: the quadratic stays below the cost
+        C, n = scene.C, scene.n
+        K = np.einsum("kai,kaj,k->ij", C, C, weight)
+        rho = np.einsum("kai,ka,k->i", C, n, weight)
+        q0 = float((weight * (n * n).sum(axis=1)).sum())
+        k = scene.k
+        C_F = np.sqrt((C * C).sum(axis=(1, 2)))
+        n_len = np.sqrt((n * n).sum(axis=1))
+        K_allowance = 2 * (k + 16) * U * float((weight * C_F * C_F).sum())
+        rho_up = (float(np.sqrt(rho @ rho)) * (1 + 8 * U) + (k + 16) * U * float((weight * C_F * n_len).sum())) \
+            * (1 + 4 * U)
+        q0_lo = q0 * (1 - (k + 16) * U)
+        try:
+            least = float(np.linalg.eigvalsh(0.5 * (K + K.T))[0])
+        except np.linalg.LinAlgError:
+            return r
+        kappa = least * (1 - 1e-9) - 2 * (K_allowance + 32 * U * float(np.abs(np.diag(K)).sum()))
+        if not (kappa > 0 and least_eigenvalue_above(K, kappa, K_allowance)):
+            return r
+        errors_n = 2 / ETA * float((weight * scene.eps_n ** 2).sum()) * (1 + 8 * U)
+        errors_C = 2 / ETA * float((weight * scene.err_C ** 2).sum()) * (1 + 8 * U)
+        a2 = ((1 - ETA) * kappa - errors_C) * (1 - 8 * U)
+        a1 = (1 - ETA) * rho_up * (1 + 4 * U)
+        a0 = ((1 - ETA) * q0_lo - errors_n) * (1 - 8 * U) if (1 - ETA) * q0_lo > errors_n \
+            else ((1 - ETA) * q0_lo - errors_n) * (1 + 8 * U)
+        room = max((scene.level(increase) - a0) * (1 + 4 * U), 0.0)
+        if not a2 > 0:
+            return r
+        bound = (a1 + math.sqrt((a1 * a1 + a2 * room) * (1 + 8 * U)) * (1 + 4 * U)) / a2 * (1 + 64 * U)
+    return min(r, bound) if math.isfinite(bound) else r
+
+
+def centre_bounds(scene: Scene, r: float) -> np.ndarray | None:
+    """(3): [lower, upper] of each centre coordinate over |phi| <= r, rounded outward; None when the
+    left 3x3 block is not shown invertible over the whole ball."""
+    P = scene.P
+    with np.errstate(all="ignore"):
+        A0 = P[:, :3]
+        centre = np.linalg.svd(P)[2][-1]
+        if not abs(centre[3]) > 0:
+            return None
+        c0 = centre[:3] / centre[3]
+        ch = np.append(c0, 1.0)
+        try:
+            Z = np.linalg.inv(A0)
+        except np.linalg.LinAlgError:
+            return None
+        # Z e, e = P0 [c0; 1]: its size from above (two products' rounding, the terms' sizes)
+        Ze = Z @ (P @ ch)
+        Ze_up = (float(np.sqrt(Ze @ Ze)) * (1 + 8 * U)
+                 + 16 * U * float(np.sqrt(((np.abs(Z) @ (np.abs(P) @ np.abs(ch))) ** 2).sum()))) * (1 + 4 * U)
+        residual = np.eye(3) - Z @ A0
+        eps_Z = (float(np.sqrt((residual * residual).sum())) * (1 + 8 * U)
+                 + 8 * U * float(np.sqrt(((np.abs(Z) @ np.abs(A0)) ** 2).sum()))) * (1 + 4 * U)
+        T, T_F = scene.T, scene.T_F
+        # l_k . theta = [Z D [c0; 1]]_k (rows 0, 1 of D times [c0; 1]; row 2's last entry is
+        # -theta[8:11] . X_ref), and vec(Z dA) = M theta (M's entries are Z's, exactly)
+        l = np.zeros((3, 11))
+        l[:, 0:4] = Z[:, 0:1] * ch
+        l[:, 4:8] = Z[:, 1:2] * ch
+        l[:, 8:11] = Z[:, 2:3] * (c0 - scene.X_ref)
+        l_err = 4 * U * np.abs(Z).max(axis=1) * (float(np.abs(ch).sum()) + float(np.abs(scene.X_ref).sum()))
+        M = np.zeros((3, 3, 11))
+        for a, start in enumerate((0, 4, 8)):
+            M[:, :, start:start + 3] += Z[:, a, None, None] * np.eye(3)[None]
+        M = M.reshape(9, 11)
+
+        def reach(rows: np.ndarray, errors: np.ndarray) -> np.ndarray:
+            """|rows_i . T phi| <= r * this, each row (its own error ``errors``, a 2-norm bound)."""
+            product = rows @ T
+            return (np.sqrt((product * product).sum(axis=1)) * (1 + 8 * U)
+                    + 16 * U * T_F * np.sqrt((rows * rows).sum(axis=1)) + T_F * errors) * (1 + 4 * U)
+
+        linear = reach(l, l_err * math.sqrt(11))  # per coordinate
+        Eh = r * float(np.sqrt((linear * linear).sum())) * (1 + 8 * U)  # |Z D [c0; 1]|
+        rows = reach(M, np.zeros(9)).reshape(3, 3)  # row k of Z dA holds M's rows 3k .. 3k + 2
+        EA_rows = r * np.sqrt((rows * rows).sum(axis=1)) * (1 + 8 * U)  # |row k of Z dA|
+        y = (eps_Z + float(np.sqrt((EA_rows * EA_rows).sum()))) * (1 + 8 * U)  # |I - Z A|_F over the ball
+        if not y < 1:
+            return None
+        # C - c0 = -(Z A)^-1 (Z e + Z D [c0; 1]) with (Z A)^-1 = I + Y (I - Y)^-1, Y = I - Z A:
+        # coordinate k's remainder is at most |row k of Y| |(I - Y)^-1| (|Z e| + |Z D [c0; 1]|)
+        second = (Ze_up + (eps_Z + EA_rows) / (1 - y) * (Ze_up + Eh)) * (1 + 16 * U)
+        half = (r * linear + second) * (1 + 8 * U)
+        bounds = np.stack([np.nextafter(c0 - half, -np.inf), np.nextafter(c0 + half, np.inf)], axis=-1)
+    return bounds if np.all(np.isfinite(bounds)) else None
+
+
+def reference_point(source: np.ndarray) -> int:
+    """The point nearest the points' centroid: the slice's depth is fixed there."""
+    X = np.asarray(source, dtype=float)
+    return int(np.argmin(((X - X.mean(axis=0)) ** 2).sum(axis=1)))
+
+
+def proven_centre(scene: Scene, increase: float, radius: float, rounds: int) -> tuple[np.ndarray | None, float]:
+    """The centre's bounds proven from radius (1) and that many rounds (2), and the final radius."""
+    r = radius
+    for _ in range(rounds):
+        r = shrink(scene, increase, r)
+    return centre_bounds(scene, r), r
+
+
+def resection_sublevel(source, target, matrix, increase: float, steps: int = 40) -> dict | None:
+    """The proof a solver states (None where it finds none): the smallest radius (1) passes with
+    twice its allowances (bisection), the rounds (2) until they shrink r by less than 1%, and
+    the centre's intervals a little wider (STATED_SLACK) than its own recomputation's."""
+    if not (math.isfinite(increase) and increase >= 0 and (increase == 0 or SMALLEST <= increase <= LARGEST)):
+        return None
+    reference = reference_point(source)
+    scene = Scene(source, target, matrix, reference)
+    if not scene.usable:
+        return None
+    with np.errstate(all="ignore"):
+        rho = math.sqrt(scene.level(increase))
+        e = rho + scene.r_up
+        M = np.einsum("kai,kaj,k->ij", scene.G, scene.G, 1 / (e * scene.w_hi) ** 2)
+        least = float(np.linalg.eigvalsh(0.5 * (M + M.T))[0])
+    if not least > 0:
+        return None
+    lo = max(math.sqrt(scene.k / least), SMALLEST)
+    hi = lo
+    for _ in range(300):
+        if encloses(scene, increase, hi, strictness=2.0):
+            break
+        lo, hi = hi, 2 * hi
+        if hi > LARGEST:
+            return None
+    for _ in range(steps):
+        middle = math.sqrt(lo * hi)
+        if middle >= hi or middle <= lo:
+            break
+        if encloses(scene, increase, middle, strictness=2.0):
+            hi = middle
+        else:
+            lo = middle
+    radius, r, rounds = hi, hi, 0
+    while rounds < MAX_ROUNDS:
+        smaller = shrink(scene, increase, r)
+        rounds += 1
+        if not smaller < ROUNDS_STOP * r:
+            r = smaller
+            break
+        r = smaller
+    bounds = centre_bounds(scene, r)
+    if bounds is None:
+        return None
+    wider = 0.5 * (bounds[:, 1] - bounds[:, 0]) * STATED_SLACK
+    stated = np.stack([np.nextafter(bounds[:, 0] - wider, -np.inf), np.nextafter(bounds[:, 1] + wider, np.inf)],
+                      axis=-1)
+    return {"cost_increase": float(increase), "reference": reference, "radius": float(radius), "rounds": rounds,
+            "intervals": stated.tolist()}
+
+
+def verify_resection_sublevel(source: np.ndarray, target: np.ndarray, sublevel, matrix: np.ndarray, norm: str) -> None:
+    """A resection's proven interval: refused unless (1) holds at the stated radius, and the
+    stated intervals hold the centre's bounds the stated rounds (2) and (3) prove here, and are
+    no wider than those by more than CHECK_SLACK of their half-widths (a narrower interval is not
+    proven, a much wider one is not the proof's). O(k) a round: at most MAX_ROUNDS + 1 passes
+    over the points."""
+    record(sublevel, "proof/sublevel", ("cost_increase", "reference", "radius", "rounds", "intervals"))
+    increase = number(sublevel.get("cost_increase"), "proof/sublevel/cost_increase")
+    radius = number(sublevel.get("radius"), "proof/sublevel/radius")
+    intervals = numbers(sublevel.get("intervals"), "proof/sublevel/intervals", (3, 2))
+    reference, rounds = sublevel.get("reference"), sublevel.get("rounds")
+    if norm != "L2L2":
+        raise Invalid("proven_interval", "a resection's proven interval is for L2L2 (its cost the sum of squares)")
+    if type(reference) is not int or not 0 <= reference < len(source):
+        raise Invalid("proven_interval", "proof/sublevel/reference must index a point of the map")
+    if type(rounds) is not int or not 0 <= rounds <= MAX_ROUNDS:
+        raise Invalid("proven_interval", f"proof/sublevel/rounds must be an integer from 0 to {MAX_ROUNDS}")
+    if not (increase >= 0 and (increase == 0 or SMALLEST <= increase <= LARGEST) and SMALLEST <= radius <= LARGEST):
+        raise Invalid("proven_interval", "proof/sublevel needs cost_increase >= 0 and a radius of magnitude within "
+                                         "[2^-128, 2^128]")
+    scene = Scene(source, target, matrix, reference)
+    if not scene.usable:
+        raise Invalid("proven_interval", "the map's numbers are outside the range a proven interval is checked for "
+                                         "(6 points at least, every number 0 or of magnitude within [2^-128, 2^128], "
+                                         "every depth positive)")
+    if not encloses(scene, increase, radius):
+        raise Invalid("proven_interval", f"not proven at radius {radius!r}: the cameras costing up to cost_increase "
+                                         f"{increase!r} more are not shown to lie within it")
+    bounds, _ = proven_centre(scene, increase, radius, rounds)
+    if bounds is None:
+        raise Invalid("proven_interval", "the camera's left 3x3 block is not shown invertible over the proven set: "
+                                         "no interval of its centre is proven")
+    if not (np.all(intervals[:, 0] <= bounds[:, 0]) and np.all(intervals[:, 1] >= bounds[:, 1])):
+        raise Invalid("proven_interval", "proof/sublevel/intervals are narrower than what the proof proves")
+    slack = 0.5 * (bounds[:, 1] - bounds[:, 0]) * CHECK_SLACK + 4 * np.spacing(np.abs(bounds).max(axis=1))
+    if not (np.all(intervals[:, 0] >= bounds[:, 0] - slack) and np.all(intervals[:, 1] <= bounds[:, 1] + slack)):
+        raise Invalid("proven_interval", "proof/sublevel/intervals are wider than what the proof proves: they are not "
+                                         "its intervals")
