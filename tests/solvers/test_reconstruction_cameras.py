@@ -230,3 +230,11 @@ class TestCameraMisfit:
         assert said.startswith("views 1, 4: the pose is at its optimum and a principal point of its own")
         assert "view 6: the pose is at its optimum and no intrinsic" in said
         assert _misfit_said([camera(2, None)]) == "its pose, or the camera's K, may be off"
+
+    def test_no_tolerance_names_no_intrinsic(self):
+        from geocert.solvers.reconstruction.camera_misfit import misfit_cause
+
+        refits = {"pose": 0.2, "principal_point": 0.0, "focal_and_principal_point": 0.0}
+        # 5 points leave no tolerance for any camera: the cause is not an intrinsic, and no error
+        assert misfit_cause(refits, 0.2, 5, 6, "L2L2", 1e-2) == "unexplained"
+        assert misfit_cause(refits, 0.2, 200, 6, "L2L2", 1e-2) == "principal_point"

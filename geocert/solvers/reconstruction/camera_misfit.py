@@ -71,7 +71,8 @@ def misfit_cause(misfit: dict | None, excess: float, points: int, dof: int, norm
     if misfit["pose"] < 0.5 * excess:
         return "pose"
     for name, extra in (("principal_point", 2), ("focal_and_principal_point", 3)):
-        if misfit[name] <= camera_claim.tolerance(points, min(dof + extra, camera_claim.PROJECTIVE_DOF), norm, rel_gap):
+        tolerance = camera_claim.tolerance(points, min(dof + extra, camera_claim.PROJECTIVE_DOF), norm, rel_gap)
+        if tolerance is not None and misfit[name] <= tolerance:
             return name
     return "unexplained"
 
