@@ -100,7 +100,7 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
 
 
 def _misfit_said(beyond: list) -> str:
-    """What the refits of the cameras beyond their tolerance found (structure.camera_misfit), in
+    """What the refits of the cameras beyond their tolerance found (camera_misfit.camera_misfit), in
     words: whether their poses or the camera's K misfit them."""
     causes: dict[str, list[int]] = {}
     for c in beyond:
