@@ -264,8 +264,12 @@ def bench_set(set_key: str, args, root: Path, records: list) -> None:
                 options = geocert_options(run_name, photo_set)
                 if options is None:
                     continue
+                options.update(json.loads(json.dumps(args.options)))
                 run = run_geocert(geocert_job(photo_set, names, options, matches), args.timeout)
                 figures = {"error": run["error"]} if "error" in run else geocert_figures(run["result"])
+                if args.results and "result" in run:
+                    Path(args.results).mkdir(parents=True, exist_ok=True)
+                    (Path(args.results) / f"{set_key}-{order}-{run_name}.json").write_text(json.dumps(run["result"]))
             # COLMAP's colmap and colmap-K rows against the ground truth (its K only, for a set without poses)
             truth, note = reference(photo_set, None if run_name in ("colmap", "colmap-K") else colmap.get("colmap"))
             errors = {} if "error" in figures else camera_errors.compare(figures["cameras"], truth)
@@ -293,6 +297,10 @@ def main() -> None:
                         "COLMAP run for the others")
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds per run (each a child process)")
     parser.add_argument("--json", default=None, help="also write every run's figures here")
+    parser.add_argument("--options", type=json.loads, default={}, help="JSON object merged into every geocert run's "
+                        "options, e.g. '{\"radial_distortion\": \"auto\"}'")
+    parser.add_argument("--results", default=None, help="a folder to write each geocert run's result to "
+                        "(<set>-<order>-<run>.json), for bench.camera_certification to read")
     args = parser.parse_args()
     args.orders, args.runs = args.orders.split(","), args.runs.split(",")
     root = photo_sets.data_root(args.data)

@@ -161,3 +161,80 @@ class TestDegreesOfFreedom:
         assert camera_claim.allowance(200, 11, "L2L2") == 0.0
         assert camera_claim.allowance(5, 6, "L2L2") is None
         assert camera_claim.tolerance(200, 6, "L2L2", 0.01) == pytest.approx((1 + 20.515 / 389) / 0.99 - 1)
+
+
+def with_principal_point(scene, view: int, shift_px) -> np.ndarray:
+    """The camera the view's pixels come from when its principal point is ``shift_px`` from the
+    shared K's (a stabilised lens moves it from shot to shot), its pose the true one."""
+    K = scene.K.copy()
+    K[:2, 2] += shift_px
+    return structure.camera_matrix(K, scene.rotations[view], scene.translations[view])
+
+
+def pose_fitted(K: np.ndarray, R: np.ndarray, t: np.ndarray, X: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The camera with this K whose pose, refined from (R, t), fits the pixels x of X best (what
+    an adjustment with a shared K returns)."""
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
+
+    def camera(p):
+        return structure.camera_matrix(K, Rotation.from_rotvec(p[:3]).as_matrix() @ R, t + p[3:])
+
+    def residual(p):
+        proj = np.hstack([X, np.ones((len(X), 1))]) @ camera(p).T
+        return (proj[:, :2] / proj[:, 2:] - x).ravel()
+
+    return camera(least_squares(residual, np.zeros(6), method="lm").x)
+
+
+class TestCameraMisfit:
+    """Why a camera is not certified (camera_misfit): refitted locally on its points, is its pose off
+    its optimum, or does the camera's K misfit the view? Every camera has the shared K; one view's
+    pixels come from another camera."""
+
+    def bounds(self, pixels_from: dict, refit: bool, points: int = 300):
+        scene, cameras, sources = shared_K_scene(points=points, noise_px=0.3, seed=5)
+        rng = np.random.default_rng(7)
+        for view, P in pixels_from.items():
+            proj = np.hstack([scene.points, np.ones((len(scene.points), 1))]) @ P(scene).T
+            sources[view] = (scene.points, proj[:, :2] / proj[:, 2:] + rng.normal(scale=0.3, size=(len(proj), 2)))
+            if refit:
+                cameras[view] = pose_fitted(scene.K, scene.rotations[view], scene.translations[view], *sources[view])
+        return structure.resect_cameras(cameras, sources, MapOptions(rel_gap=1e-2), dof=6)
+
+    def test_a_principal_point_of_its_own_is_named(self):
+        # the pose the adjustment would return with the shared K: at its optimum on these pixels
+        bounds = self.bounds({3: lambda scene: with_principal_point(scene, 3, [6.0, -4.0])}, refit=True)
+        b = bounds[3]
+        assert not b.certified and b.misfit is not None and b.misfit["cause"] == "principal_point"
+        assert b.misfit["pose"] > b.tolerance and b.misfit["principal_point"] < 0.5 * b.tolerance
+        assert "the camera's K misfits this view, its principal point" in b.reason
+        assert all(bounds[v].certified and bounds[v].misfit is None for v in bounds if v != 3)
+
+    def test_a_pose_off_its_optimum_is_named(self):
+        # the pixels of the view turned: the returned (true) pose is off their optimum
+        bounds = self.bounds({2: lambda scene: turned(scene, 2, 0.3)}, refit=False)
+        b = bounds[2]
+        assert not b.certified and b.misfit["cause"] == "pose" and b.misfit["pose"] < 0.5 * b.tolerance
+        assert "its pose was off its optimum" in b.reason
+
+    def test_the_summary_says_which(self):
+        from types import SimpleNamespace
+
+        from geocert.pipelines.reconstruction.claims import _misfit_said
+
+        def camera(view, cause):
+            return SimpleNamespace(view=view, bound=SimpleNamespace(misfit=None if cause is None else {"cause": cause}))
+
+        said = _misfit_said([camera(1, "principal_point"), camera(4, "principal_point"), camera(6, "unexplained")])
+        assert said.startswith("views 1, 4: the pose is at its optimum and a principal point of its own")
+        assert "view 6: the pose is at its optimum and no intrinsic" in said
+        assert _misfit_said([camera(2, None)]) == "its pose, or the camera's K, may be off"
+
+    def test_no_tolerance_names_no_intrinsic(self):
+        from geocert.solvers.reconstruction.camera_misfit import misfit_cause
+
+        refits = {"pose": 0.2, "principal_point": 0.0, "focal_and_principal_point": 0.0}
+        # 5 points leave no tolerance for any camera: the cause is not an intrinsic, and no error
+        assert misfit_cause(refits, 0.2, 5, 6, "L2L2", 1e-2) == "unexplained"
+        assert misfit_cause(refits, 0.2, 200, 6, "L2L2", 1e-2) == "principal_point"

@@ -77,12 +77,11 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
             "no K, R, t), known up to a 3D projective transformation, and no point is returned")})
     for dropped in out.checks.get("cameras_dropped", []):
         warnings.append({"code": "camera_dropped", "detail": f"view {dropped['view']}: {dropped['reason']}"})
-    beyond = [c.view for c in bounded if c.bound.beyond_tolerance]
+    beyond = [c for c in bounded if c.bound.beyond_tolerance]
     if beyond:
         warnings.append({"code": "camera_fit_beyond_tolerance", "detail": (
-            f"views {', '.join(map(str, beyond))}: each costs more above a 3x4 camera on its own points than its "
-            "fewer degrees of freedom explain (its bound_reason says by how much): its pose, or the shared K, may "
-            "be off")})
+            f"views {', '.join(str(c.view) for c in beyond)}: each costs more above a 3x4 camera on its own points "
+            "than its fewer degrees of freedom explain (its bound_reason says by how much): " + _misfit_said(beyond))})
     if out.checks.get("points_dropped"):
         warnings.append({"code": "points_dropped", "detail": f"{out.checks['points_dropped']} certified points lay "
                                                              "behind a camera or far from an observation: dropped"})
@@ -98,6 +97,26 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
             "certificate is about the returned cameras and points fitting their own observations, not about the "
             "rig being right): " + "; ".join(doubts))})
     out.summary["warnings"] = warnings
+
+
+def _misfit_said(beyond: list) -> str:
+    """What the refits of the cameras beyond their tolerance found (camera_misfit.camera_misfit), in
+    words: whether their poses or the camera's K misfit them."""
+    causes: dict[str, list[int]] = {}
+    for c in beyond:
+        causes.setdefault((c.bound.misfit or {}).get("cause") or "not refitted", []).append(c.view)
+    if set(causes) == {"not refitted"}:
+        return "its pose, or the camera's K, may be off"
+    said = {"pose": "refitting its pose alone removes most of it: the pose was off its optimum",
+            "principal_point": "the pose is at its optimum and a principal point of its own brings it within tolerance: "
+                               "the camera's K (given, or shared by every view) misfits it, not its pose",
+            "focal_and_principal_point": "the pose is at its optimum and a focal length and principal point of its own "
+                                         "bring it within tolerance: the camera's K misfits it, not its pose",
+            "unexplained": "the pose is at its optimum and no intrinsic of its own explains the rest (distortion, "
+                           "its points, or an affine misfit)",
+            "not refitted": "not refitted (its pose, or the camera's K, may be off)"}
+    return "; ".join(f"view{'s' if len(views) > 1 else ''} {', '.join(map(str, views))}: {said[cause]}"
+                     for cause, views in causes.items())
 
 
 def judge_motion(out) -> None:

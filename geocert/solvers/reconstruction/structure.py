@@ -20,6 +20,7 @@ from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
 from geocert.solvers.fractional.results import MapResult, TrackResult
 from geocert.solvers.reconstruction import camera_claim
+from geocert.solvers.reconstruction.camera_misfit import camera_misfit, misfit_cause, misfit_words
 
 
 CAMERA_THREADS = 2  # cameras resected at once (see resect_cameras)
@@ -41,6 +42,9 @@ class CameraBound:
     dof: int | None = None  # the returned camera's own degrees of freedom (camera_claim.degrees_of_freedom)
     tolerance: float | None = None  # certified when cost <= (1 + tolerance) lower_bound + abs_gap (camera_claim)
     beyond_tolerance: bool = False  # a 3x4 camera (found or bounded) beats it by more than its tolerance
+    # What refitting it on its points (held) recovers of its excess over the free 3x4 camera, each a
+    # fraction of that camera's cost (camera_misfit); None when not looked at (certified, or no free camera)
+    misfit: dict | None = None
 
 
 def camera_matrix(K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -176,9 +180,10 @@ def _bound_camera(view: int, P: np.ndarray, X: np.ndarray, x: np.ndarray, option
     tolerance = camera_claim.tolerance(len(X), dof, options.norm, options.rel_gap)
     kept_cost = cost if math.isfinite(cost) else None
 
-    def unbounded(reason: str, beyond: bool = False) -> CameraBound:
+    def unbounded(reason: str, beyond: bool = False, misfit: dict | None = None) -> CameraBound:
         return CameraBound(view, kept_cost, None, None, None, False, "not_certified", len(X),
-                           time.perf_counter() - start, reason, dof=dof, tolerance=tolerance, beyond_tolerance=beyond)
+                           time.perf_counter() - start, reason, dof=dof, tolerance=tolerance, beyond_tolerance=beyond,
+                           misfit=misfit)
 
     if tolerance is None:
         return unbounded(f"camera_rel_gap {options.rel_gap:g} leaves no tolerance")
@@ -194,11 +199,15 @@ def _bound_camera(view: int, P: np.ndarray, X: np.ndarray, x: np.ndarray, option
             return unbounded("a point is behind the camera returned: outside the bound's scope")
         free = free_camera_cost(P, X, x, options.norm)
         if free is not None and not camera_claim.within(cost, free, tolerance, options.abs_gap):
-            return unbounded(f"the camera returned costs {cost:.4g}, {(cost - free) / max(free, 1e-300):.2%} above a "
+            excess = (cost - free) / max(free, 1e-300)
+            misfit = camera_misfit(P, X, x, options.norm, free)
+            if misfit is not None:
+                misfit["cause"] = misfit_cause(misfit, excess, len(X), dof, options.norm, options.rel_gap)
+            return unbounded(f"the camera returned costs {cost:.4g}, {excess:.2%} above a "
                              f"free 3x4 camera found locally ({free:.4g}), more than its tolerance {tolerance:.2%}: "
                              "no bound can certify it, so the certified resection was not run "
-                             "(options.bound_every_camera runs it)" + why,
-                             beyond=not camera_claim.within(cost, free, flag_tolerance, options.abs_gap))
+                             "(options.bound_every_camera runs it)" + why + misfit_words(misfit),
+                             beyond=not camera_claim.within(cost, free, flag_tolerance, options.abs_gap), misfit=misfit)
     result = fit_map(X, x, options)
     lower = result.lower_bound if result.certified else None
     gap = None if lower is None else max(0.0, cost - lower)
