@@ -203,6 +203,22 @@ def test_7_webhooks_go_only_to_public_addresses(plain):
         listener.close()
 
 
+def test_7_ipv6_addresses_carrying_a_refused_ipv4_are_refused(plain):
+    """IPv6 addresses that a translator or tunnel takes to an IPv4 address: NAT64's well-known
+    prefix (a cloud's NAT64 gateway takes 64:ff9b::a00:1 to 10.0.0.1 in its network, and
+    64:ff9b::a9fe:a9fe to the metadata address), 6to4, IPv4-translated and IPv4-compatible ones,
+    and NAT64's local-use prefix, were accepted as public (Python calls them global): each is
+    judged by the IPv4 address inside it. A public IPv4 inside is accepted as before."""
+    _, client = plain
+    for url in ("http://[64:ff9b::a9fe:a9fe]/", "http://[64:ff9b::a00:1]/", "http://[64:ff9b::7f00:1]:6379/",
+                "http://[2002:7f00:1::]/", "http://[::ffff:0:7f00:1]/", "http://[::127.0.0.1]/",
+                "http://[64:ff9b:1::a00:1]/"):
+        answer = problem(client.post("/v1/jobs", json={**TRIANGULATION, "callback_url": url}), 422)
+        assert answer["errors"][0]["field"] == "callback_url", url
+    for url in ("http://[64:ff9b::808:808]/", "http://[2002:808:808::1]/"):
+        assert client.post("/v1/jobs", json={**TRIANGULATION, "callback_url": url}).status_code == 202, url
+
+
 def test_4_stereo_segment_matching_keeps_the_time_limit(plain):
     """Segment matching (every pair of segments compared, four assignments solved) never asked
     the clock: 2000 segments an image with time_limit_s 2 held a worker 35 s, 1000 (the default
