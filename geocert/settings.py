@@ -36,6 +36,9 @@ class Settings(BaseSettings):
     # Certificate verifications (POST /v1/certificates/verify) running at once in one API
     # process (429 beyond it; 0: unlimited): each may hold some 25 times its body in memory.
     max_concurrent_verifications: int = 2
+    # Orientations (POST /v1/orient) running at once in one API process (429 beyond it; 0:
+    # unlimited): each may hold some 700 MB and 12 s of CPU at max_view_points_per_job.
+    max_concurrent_orientations: int = 2
     # Requests per minute one key may make to /v1 (429 beyond it; 0: unlimited).
     rate_limit_per_minute: int = 1200
     # Jobs one key may have queued or running at once (429 beyond it; 0: unlimited).

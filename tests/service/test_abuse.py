@@ -17,6 +17,7 @@ import zipfile
 from pathlib import Path
 
 import cv2
+import httpx
 import numpy as np
 import pytest
 import redis
@@ -167,6 +168,44 @@ def test_5_6_a_large_body_over_budget_is_refused_from_its_shape_unparsed(plain):
     assert peak_rss_mib(running.api.pid) - before < 100
     small = client.post("/v1/orient", json={"cameras": cameras[:2], "points": points[:5000]})
     assert small.status_code == 200, small.text
+
+
+def test_6_orientations_at_once_are_bounded(plain):
+    """/v1/orient is computed in the API process: at its budget (20 cameras x 200k points) one
+    request held some 700 MB and 12 s of CPU, and four at once took the API to 3 GB while another
+    key's GET /v1/jobs waited 5 s; nothing bounded how many ran at once. Now a third is refused
+    (429 with Retry-After, naming GEOCERT_MAX_CONCURRENT_ORIENTATIONS) while two are running,
+    counted from before the body is read: here two requests whose bodies are still arriving."""
+    running, client = plain
+    body = json.dumps({"cameras": [np.eye(3, 4).tolist()] * 2, "points": [[0.0, 0.0, 1.0]] * 10}).encode()
+    release, results = threading.Event(), []
+
+    def held_body():
+        yield body[:10]
+        release.wait(20)
+        yield body[10:]
+
+    def held_request():
+        with httpx.Client(base_url=running.base, timeout=60) as own:
+            results.append(own.post("/v1/orient", content=held_body(),
+                                    headers={"content-type": "application/json"}).status_code)
+
+    held = [threading.Thread(target=held_request) for _ in range(2)]
+    try:
+        for thread in held:
+            thread.start()
+        deadline = time.monotonic() + 30
+        while (third := client.post("/v1/orient", content=body,  # let in until the held two have arrived
+                                    headers={"content-type": "application/json"})).status_code == 200:
+            assert time.monotonic() < deadline, "a third orientation was let in while two were running"
+            time.sleep(0.2)
+        assert "GEOCERT_MAX_CONCURRENT_ORIENTATIONS" in problem(third, 429)["detail"]
+    finally:
+        release.set()
+        for thread in held:
+            thread.join(60)
+    assert results == [200, 200]
+    assert client.post("/v1/orient", content=body, headers={"content-type": "application/json"}).status_code == 200
 
 
 def test_7_webhooks_go_only_to_public_addresses(plain):
