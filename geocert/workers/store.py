@@ -95,6 +95,7 @@ class JobStore:
         pipe.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in meta.items() if k != "task_ids"})
         meta["chunks"] = chunks  # not stored: every read of the job (each poll) would read them (JobStore.chunks)
         self._put_request(pipe, job_id, request, chunk_key, items_key)
+        pipe.eval(self._PRUNE_INDEX, 1, self.owner_key(owner, "jobs"), self.key(""), self.PRUNED_PER_JOB)
         pipe.zadd(self.owner_key(owner, "jobs"), {job_id: meta["created_at"]})
         self.publish(job_id, "status", {"status": "queued"}, pipe)
         if meta["task_ids"]:
@@ -803,6 +804,16 @@ class JobStore:
       at = at + 2 + count
     end
     return 1
+    """
+
+    # Drop from an owner's index (KEYS[1]) those of its ARGV[2] oldest entries whose job key
+    # (ARGV[1] .. id) is gone, expired: each submission does, so the index of a key that never
+    # lists (listings drop what they meet) holds about its jobs that exist, not every job it made.
+    PRUNED_PER_JOB = 8
+    _PRUNE_INDEX = """
+    for _, id in ipairs(redis.call('ZRANGE', KEYS[1], 0, tonumber(ARGV[2]) - 1)) do
+      if redis.call('EXISTS', ARGV[1] .. id) == 0 then redis.call('ZREM', KEYS[1], id) end
+    end
     """
 
     def release(self, owner: str, job_id: str) -> None:

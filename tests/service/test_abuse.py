@@ -461,6 +461,25 @@ def test_9_a_job_deleted_while_its_webhook_is_delivered_leaves_nothing(small):
             assert key in owned or (key.startswith("geocert:owner:") and key.rsplit(":", 1)[1] in ("jobs", "active")), key
 
 
+def test_9_an_api_keys_index_keeps_no_expired_job(tmp_path):
+    """Each API key's index of its jobs (geocert:owner:{key}:jobs, no expiry) dropped an expired
+    job only when a listing met it: a key that submits and never lists grew it by one entry a
+    job for ever (1,200 a minute at the default rate limit). Now each submission drops the
+    oldest entries whose job has expired, so the index holds about the jobs that exist."""
+    with cluster(tmp_path, workers=1, geocert_result_ttl_s="1") as (running, client):
+        store = redis.Redis.from_url(running.redis_url, decode_responses=True)
+        first = [client.post("/v1/jobs", json=TRIANGULATION).json()["id"] for _ in range(5)]
+        for job_id in first:
+            ended(client, job_id)
+        deadline = time.monotonic() + 60
+        while any(client.get(f"/v1/jobs/{job_id}").status_code != 404 for job_id in first):
+            assert time.monotonic() < deadline, "the jobs did not expire"
+            time.sleep(0.2)
+        last = client.post("/v1/jobs", json=TRIANGULATION).json()["id"]
+        (index,) = store.scan_iter("geocert:owner:*:jobs")
+        assert store.zrange(index, 0, -1) == [last]
+
+
 # ---------------------------------------------------------------------------------------------
 # Worker memory, and a solver process killed under its task
 
