@@ -109,6 +109,11 @@ class Settings(BaseSettings):
     # Each attempt ends within this many seconds in all (connecting, sending, the answer's status),
     # however slowly the receiver sends.
     webhook_timeout_s: float = 10.0
+    # With API keys, deliveries one key may have in flight at once (0: no share): a webhook
+    # worker has 8 threads, and one key's slow receivers held every one of them, so that another
+    # key's webhooks waited behind all of its attempts. A delivery over its key's share is
+    # deferred (not counted as an attempt).
+    webhook_deliveries_per_key: int = 4
     # Webhooks go only to public addresses; networks (comma-separated addresses or CIDR blocks,
     # e.g. "127.0.0.1/32,10.1.0.0/16") the operator allows besides.
     webhook_allowed_networks: str = ""

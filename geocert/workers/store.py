@@ -491,6 +491,29 @@ class JobStore:
         pipe.hdel(self.SLOT_OWNERS, slot)
         pipe.execute()
 
+    # Webhook deliveries in flight, per API key: a sorted set per key (its deliveries' task ids,
+    # scored by when each was taken). An entry older than ARGV[3] (its webhook worker gone) lapses,
+    # and so does the whole set when no delivery takes a place in it (EXPIRE).
+    _TAKE_DELIVERY = """
+    redis.call('ZREMRANGEBYSCORE', KEYS[1], '-inf', ARGV[3])
+    if not redis.call('ZSCORE', KEYS[1], ARGV[1]) and redis.call('ZCARD', KEYS[1]) >= tonumber(ARGV[4]) then
+      return 0
+    end
+    redis.call('ZADD', KEYS[1], ARGV[2], ARGV[1])
+    redis.call('EXPIRE', KEYS[1], ARGV[5])
+    return 1
+    """
+
+    def take_delivery(self, owner: str, delivery: str, share: int, lapse_s: float) -> bool:
+        """Take one of ``owner``'s ``share`` places for a webhook delivery (True), unless its
+        deliveries hold them all; one not freed lapses after ``lapse_s``."""
+        moment = now()
+        return bool(self.r.eval(self._TAKE_DELIVERY, 1, self.owner_key(owner, "deliveries"), delivery, moment,
+                                moment - lapse_s, share, max(1, math.ceil(lapse_s))))
+
+    def free_delivery(self, owner: str, delivery: str) -> None:
+        self.r.zrem(self.owner_key(owner, "deliveries"), delivery)
+
     def touch(self, job_id: str) -> None:
         """A task of this job is alive (read by the reaper, ``workers.reaper``)."""
         self.r.zadd(self.RUNNING, {job_id: now()})

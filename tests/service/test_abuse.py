@@ -583,6 +583,58 @@ def test_another_keys_job_is_taken_before_a_floods_queued_tasks(tmp_path):
         assert ended(client, flood, headers=a)["status"] == "succeeded"
 
 
+def test_one_keys_slow_receivers_leave_webhook_threads_for_another_key(tmp_path):
+    """Key A's webhooks go to a receiver that holds every connection; key B's job then ends.
+    A webhook worker's 8 threads were all held by A's deliveries, B's waiting behind each of A's
+    attempts (40 deliveries to a tarpit: 27 s). Now a key has at most
+    GEOCERT_WEBHOOK_DELIVERIES_PER_KEY in flight (the others deferred, not counted as attempts),
+    and B's webhook is delivered while A's receiver still holds its connections."""
+    a, b = {"X-API-Key": "key-a"}, {"X-API-Key": "key-b"}
+    release, lock = threading.Event(), threading.Lock()
+    held = {"now": 0, "most": 0}
+
+    def hold(handler):
+        with lock:
+            held["now"] += 1
+            held["most"] = max(held["most"], held["now"])
+        release.wait(120)
+        with lock:
+            held["now"] -= 1
+        handler.send_response(200)
+        handler.send_header("Content-Length", "0")
+        handler.end_headers()
+
+    def answer(handler):
+        handler.send_response(200)
+        handler.send_header("Content-Length", "0")
+        handler.end_headers()
+
+    slow, quick = Receiver(hold), Receiver(answer)
+    try:
+        with cluster(tmp_path, workers=1, geocert_api_keys="key-a,key-b", geocert_webhook_allowed_networks="127.0.0.1/32",
+                     geocert_webhook_timeout_s="150", geocert_webhook_deliveries_per_key="2") as (running, client):
+            flood = [client.post("/v1/jobs", json={**TRIANGULATION, "callback_url": slow.url}, headers=a).json()["id"]
+                     for _ in range(10)]
+            deadline = time.monotonic() + 60
+            while slow.received < 2:
+                assert time.monotonic() < deadline, "A's deliveries did not start"
+                time.sleep(0.1)
+            other = client.post("/v1/jobs", json={**TRIANGULATION, "callback_url": quick.url}, headers=b).json()["id"]
+            ended(client, other, headers=b)
+            deadline = time.monotonic() + 90  # well within A's attempts' 150 s: A's receiver holds them all
+            while (hook := client.get(f"/v1/jobs/{other}", headers=b).json()["webhook"])["state"] != "delivered":
+                assert time.monotonic() < deadline, f"B's webhook {hook} behind A's held deliveries"
+                time.sleep(0.2)
+            assert not release.is_set() and 1 <= held["most"] <= 2, held
+            states = [client.get(f"/v1/jobs/{job_id}", headers=a).json()["webhook"] for job_id in flood]
+            assert all(hook["attempts"] <= 1 and hook["state"] in ("waiting", "retrying") for hook in states), states
+            release.set()
+    finally:
+        release.set()
+        slow.close()
+        quick.close()
+
+
 def test_a_solver_process_stopped_with_its_worker_has_its_task_run_again(tmp_path):
     """SIGTERM to a worker's process group (systemd stopping its control group, a deploy) stops
     its solver processes too: unlike a process that died alone, its task is queued again (as a
