@@ -57,6 +57,10 @@ class Settings(BaseSettings):
     max_reconstruction_views: int = 300
     # Cameras times points: an autocalibration's chirality rows, /v1/orient's dense arrays.
     max_view_points_per_job: int = 4_000_000
+    # Points in one map (resection, homography): each of its conic programs has a row per point,
+    # and its first programs do not stop at its time limit (5,000 points with time_limit_s 2: 15 s;
+    # 20,000: 65 s and 0.8 GB; 200,000: 3.3 GB, then the solver process died).
+    max_points_per_map: int = 20_000
     # A bilinear job's basis: shapes times points (each frame's programs grow with both).
     max_basis_points_per_job: int = 50_000
     # stereo_lines: segments in one image of a frame, or lines matched in one frame pair. Matching
@@ -146,6 +150,7 @@ BUDGETS = {
     "reconstruction_views": ("max_reconstruction_views", "views in one job"),
     "view_points": ("max_view_points_per_job", "views times points in one job"),
     "basis_points": ("max_basis_points_per_job", "basis shapes times points in one job"),
+    "map_points": ("max_points_per_map", "points in one map"),
     "segments_per_frame": ("max_segments_per_frame", "segments in one image of a frame (or lines in one pair)"),
 }
 

@@ -208,6 +208,25 @@ def test_6_orientations_at_once_are_bounded(plain):
     assert client.post("/v1/orient", content=body, headers={"content-type": "application/json"}).status_code == 200
 
 
+def test_a_map_over_its_points_budget_is_refused_at_submission(plain):
+    """One map of 200,000 points (within the job's items and observations) was queued: its
+    first conic programs ignore the time limit (2 s asked; 20,000 points ran 65 s), and a solver
+    process held 3.3 GB before it died. The points of one map are a budget figure: 413 naming
+    it, read from a large body's shape (a small one's: test_a_map_at_its_points_budget_is_taken)."""
+    _, client = plain
+    rng = np.random.default_rng(4)
+    source = np.round(rng.normal(size=(20_001, 3)), 6).tolist()
+    target = np.round(rng.uniform(0, 640, size=(20_001, 2)), 3).tolist()
+    job = {"kind": "resection", "data": {"maps": [{"source": source[:10], "target": target[:10]},
+                                                  {"source": source, "target": target}]}}
+    answer = problem(client.post("/v1/jobs", json=job), 413)
+    assert "20001 points in one map" in answer["detail"] and "GEOCERT_MAX_POINTS_PER_MAP" in answer["detail"]
+    assert answer["errors"][0]["field"] == "data/maps/1/source"
+    job = {"kind": "homography", "data": {"maps": [{"source": [p[:2] for p in source[:20_001]], "target": target}]}}
+    answer = problem(client.post("/v1/jobs", json=job), 413)
+    assert answer["errors"][0]["field"] == "data/maps/0/source"
+
+
 def test_7_webhooks_go_only_to_public_addresses(plain):
     """callback_url at loopback, private, link-local (the metadata service), IPv6 loopback or
     127.0.0.1 written as a number: a 422 naming callback_url, before anything is sent. A name
@@ -333,7 +352,8 @@ def test_11_exported_names_are_refused_or_made_safe(plain):
 def small(tmp_path_factory):
     with cluster(tmp_path_factory.mktemp("small"), workers=1, geocert_max_autocalibration_views="8",
                  geocert_max_view_points_per_job="2000", geocert_max_basis_points_per_job="500",
-                 geocert_max_segments_per_frame="40", geocert_webhook_allowed_networks="127.0.0.1/32",
+                 geocert_max_segments_per_frame="40", geocert_max_points_per_map="50",
+                 geocert_webhook_allowed_networks="127.0.0.1/32",
                  geocert_webhook_timeout_s="2", geocert_webhook_attempts="2",
                  geocert_webhook_backoff_s="0.2") as (running, client):
         yield running, client
@@ -388,6 +408,19 @@ def test_6_orient_is_refused_beyond_cameras_times_points(small):
                                                       "views": [[0, 1]] * 201}), 413)
     assert "2010 views times points" in answer["detail"] and "GEOCERT_MAX_VIEW_POINTS_PER_JOB" in answer["detail"]
     assert client.post("/v1/orient", json={"cameras": cameras, "points": points[:200]}).status_code == 200
+
+
+def test_a_map_at_its_points_budget_is_taken(small):
+    """GEOCERT_MAX_POINTS_PER_MAP of 50 here: a map of 51 points is refused (413 naming it), one of 50 solved."""
+    _, client = small
+    rng = np.random.default_rng(5)
+    maps = [{"source": np.round(rng.normal(size=(n, 3)), 4).tolist(),
+             "target": np.round(rng.uniform(0, 640, size=(n, 2)), 3).tolist()} for n in (50, 51)]
+    answer = problem(client.post("/v1/jobs", json={"kind": "resection", "data": {"maps": maps}}), 413)
+    assert "51 points in one map" in answer["detail"] and answer["errors"][0]["field"] == "data/maps/1/source"
+    response = client.post("/v1/jobs", json={"kind": "resection", "data": {"maps": maps[:1]}})
+    assert response.status_code == 202, response.text
+    assert ended(client, response.json()["id"])["status"] == "succeeded"
 
 
 def test_8_a_tarpit_receiver_fails_its_delivery_within_its_deadline_and_holds_no_solver(small):
