@@ -486,12 +486,14 @@ def test_9_a_job_deleted_while_its_webhook_is_delivered_leaves_nothing(small):
     # Every other key without an expiry is one of the service's own, each kept small by an owner:
     # the workers' heartbeats and slots (entries lapse when a worker stops beating), the running
     # jobs (ended jobs leave it), metrics (one field per label), the signing key, the reaper's
-    # lock, and each API key's index and active set (ended or expired jobs leave them).
+    # lock, and each API key's index, active set and stored bytes (with each job's; ended or
+    # expired jobs leave them).
     owned = {"geocert:workers", "geocert:workers:solvers", "geocert:slots", "geocert:slots:owners",
              "geocert:running", "geocert:metrics", "geocert:webhook_secret", "geocert:reaper"}
     for key in store.scan_iter("geocert:*"):
         if not key.startswith("geocert:job:") and store.ttl(key) == -1:
-            assert key in owned or (key.startswith("geocert:owner:") and key.rsplit(":", 1)[1] in ("jobs", "active")), key
+            assert key in owned or (key.startswith("geocert:owner:") and
+                                    key.rsplit(":", 1)[1] in ("jobs", "active", "stored", "stored_bytes")), key
 
 
 def test_9_an_api_keys_index_keeps_no_expired_job(tmp_path):
@@ -511,6 +513,30 @@ def test_9_an_api_keys_index_keeps_no_expired_job(tmp_path):
         last = client.post("/v1/jobs", json=TRIANGULATION).json()["id"]
         (index,) = store.scan_iter("geocert:owner:*:jobs")
         assert store.zrange(index, 0, -1) == [last]
+
+
+def test_a_keys_stored_jobs_are_bounded_in_bytes(tmp_path):
+    """Jobs are kept result_ttl_s (7 days) after they end, and nothing bounded what one key kept:
+    at the rate limit, some 700 MB an hour of one-track jobs (9.7 KiB each in Redis), 20 GB an
+    hour of 5.5 MB ones, for every client's Redis. Now a key's jobs that exist hold at most
+    GEOCERT_MAX_STORED_BYTES_PER_KEY, each counted as its request's bytes and at least 16 KiB:
+    beyond it a 429 naming it, until the key deletes jobs (or they expire); a large body (its
+    items read a batch at a time) is counted by its items' bytes."""
+    with cluster(tmp_path, workers=1, geocert_max_stored_bytes_per_key="40000") as (running, client):
+        kept = [client.post("/v1/jobs", json=TRIANGULATION) for _ in range(2)]
+        assert [response.status_code for response in kept] == [202, 202]
+        answer = problem(client.post("/v1/jobs", json=TRIANGULATION), 429)
+        assert "GEOCERT_MAX_STORED_BYTES_PER_KEY" in answer["detail"]
+        ended(client, kept[0].json()["id"])
+        assert client.delete(f"/v1/jobs/{kept[0].json()['id']}").status_code == 204
+        assert client.post("/v1/jobs", json=TRIANGULATION).status_code == 202
+        ended(client, kept[1].json()["id"])
+        assert client.delete(f"/v1/jobs/{kept[1].json()['id']}").status_code == 204
+        large = {**TRIANGULATION, "data": {**TRIANGULATION["data"], "tracks": TRIANGULATION["data"]["tracks"] * 30_000}}
+        answer = problem(client.post("/v1/jobs", json=large), 429)  # 1.7 MB of items: read a batch at a time
+        assert "GEOCERT_MAX_STORED_BYTES_PER_KEY" in answer["detail"]
+        store = redis.Redis.from_url(running.redis_url, decode_responses=True)
+        assert [key for key in store.scan_iter("geocert:upload:*")] == []
 
 
 # ---------------------------------------------------------------------------------------------
