@@ -36,10 +36,18 @@ class Settings(BaseSettings):
     # Certificate verifications (POST /v1/certificates/verify) running at once in one API
     # process (429 beyond it; 0: unlimited): each may hold some 25 times its body in memory.
     max_concurrent_verifications: int = 2
+    # Orientations (POST /v1/orient) running at once in one API process (429 beyond it; 0:
+    # unlimited): each may hold some 700 MB and 12 s of CPU at max_view_points_per_job.
+    max_concurrent_orientations: int = 2
     # Requests per minute one key may make to /v1 (429 beyond it; 0: unlimited).
     rate_limit_per_minute: int = 1200
     # Jobs one key may have queued or running at once (429 beyond it; 0: unlimited).
     max_active_jobs_per_key: int = 100
+    # Bytes one key's jobs that exist (queued, running, or ended and not yet expired or deleted)
+    # may hold in Redis, each counted as its request's bytes and at least 16 KiB (429 beyond it;
+    # 0: unlimited). Results are kept result_ttl_s after a job ends, and a key at the rate limit
+    # stored some 700 MB an hour of one-track jobs, or 20 GB an hour of 5.5 MB ones.
+    max_stored_bytes_per_key: int = 1 << 30
     # A job's budget, computed from its request before anything of it is decoded or built (each
     # kind's request_figures; 413 naming the figure and its limit beyond one). See the README's
     # Operations section, "Limits", for what each bounds.
@@ -54,6 +62,10 @@ class Settings(BaseSettings):
     max_reconstruction_views: int = 300
     # Cameras times points: an autocalibration's chirality rows, /v1/orient's dense arrays.
     max_view_points_per_job: int = 4_000_000
+    # Points in one map (resection, homography): each of its conic programs has a row per point,
+    # and its first programs do not stop at its time limit (5,000 points with time_limit_s 2: 15 s;
+    # 20,000: 65 s and 0.8 GB; 200,000: 3.3 GB, then the solver process died).
+    max_points_per_map: int = 20_000
     # A bilinear job's basis: shapes times points (each frame's programs grow with both).
     max_basis_points_per_job: int = 50_000
     # stereo_lines: segments in one image of a frame, or lines matched in one frame pair. Matching
@@ -106,6 +118,11 @@ class Settings(BaseSettings):
     # Each attempt ends within this many seconds in all (connecting, sending, the answer's status),
     # however slowly the receiver sends.
     webhook_timeout_s: float = 10.0
+    # With API keys, deliveries one key may have in flight at once (0: no share): a webhook
+    # worker has 8 threads, and one key's slow receivers held every one of them, so that another
+    # key's webhooks waited behind all of its attempts. A delivery over its key's share is
+    # deferred (not counted as an attempt).
+    webhook_deliveries_per_key: int = 4
     # Webhooks go only to public addresses; networks (comma-separated addresses or CIDR blocks,
     # e.g. "127.0.0.1/32,10.1.0.0/16") the operator allows besides.
     webhook_allowed_networks: str = ""
@@ -138,6 +155,7 @@ BUDGETS = {
     "reconstruction_views": ("max_reconstruction_views", "views in one job"),
     "view_points": ("max_view_points_per_job", "views times points in one job"),
     "basis_points": ("max_basis_points_per_job", "basis shapes times points in one job"),
+    "map_points": ("max_points_per_map", "points in one map"),
     "segments_per_frame": ("max_segments_per_frame", "segments in one image of a frame (or lines in one pair)"),
 }
 

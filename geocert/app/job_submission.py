@@ -19,7 +19,7 @@ from geocert.settings import chunk_size_for, get_settings, over_budget
 from geocert.workers import logs
 from geocert.workers.destinations import allowed_networks, literal_refusal
 from geocert.workers.queue import can_collect, submit_chunks, task_commands
-from geocert.workers.store import JobStore
+from geocert.workers.store import JobStore, StoredBytesExceeded
 
 
 def _check_count(kind, items: int) -> None:
@@ -99,7 +99,8 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
             # Its tasks' last-resort time limits follow from its own limits (options lowered to the
             # server's maxima by _check_limits, so parsed again from the request as it will run).
             bound = kind.time_bound_s(parsed, parse_options(kind, request))
-            meta = _create(store, owner, kind, request, items, upload.key if upload is not None else None, bound)
+            meta = _create(store, owner, kind, request, items, upload.key if upload is not None else None, bound,
+                           upload.bytes if upload is not None else 0)
         except BaseException:
             if idempotency_key is not None:
                 store.settle_idempotent(owner, idempotency_key, digest, None)  # free the key for a retry
@@ -120,7 +121,7 @@ def parse_options(kind, request: dict):
 
 
 def _create(store: JobStore, owner: str, kind, request: dict, items: int, items_key: str | None = None,
-            item_time_bound_s: float | None = None) -> dict:
+            item_time_bound_s: float | None = None, items_bytes: int = 0) -> dict:
     settings = get_settings()
     chunk = chunk_size_for(kind)
     request_id = logs.current("request_id")
@@ -130,11 +131,17 @@ def _create(store: JobStore, owner: str, kind, request: dict, items: int, items_
             return task_commands(meta, request_id)
 
     collect = can_collect()
-    meta = store.create(kind.name, request, items, chunk, owner, request.get("callback_url"),
-                        settings.max_active_jobs_per_key, chunk_key=kind.chunk_key, items_key=items_key,
-                        item_time_bound_s=item_time_bound_s,
-                        job_time_limit_s=request.get("options", {}).get("job_time_limit_s"),
-                        enqueue=enqueue if collect else None)
+    try:
+        meta = store.create(kind.name, request, items, chunk, owner, request.get("callback_url"),
+                            settings.max_active_jobs_per_key, chunk_key=kind.chunk_key, items_key=items_key,
+                            item_time_bound_s=item_time_bound_s,
+                            job_time_limit_s=request.get("options", {}).get("job_time_limit_s"),
+                            enqueue=enqueue if collect else None, items_bytes=items_bytes,
+                            stored_bytes_limit=settings.max_stored_bytes_per_key)
+    except StoredBytesExceeded:
+        raise ApiProblem(429, f"this key's jobs kept on the server would hold more than {settings.max_stored_bytes_per_key} "
+                              "bytes with this one (GEOCERT_MAX_STORED_BYTES_PER_KEY): delete finished jobs "
+                              "(DELETE /v1/jobs/{id}) or wait for them to expire", headers={"Retry-After": "60"}) from None
     if meta is None:
         raise ApiProblem(429, f"this key already has {settings.max_active_jobs_per_key} jobs queued or running "
                               "(GEOCERT_MAX_ACTIVE_JOBS_PER_KEY); wait for one to end", headers={"Retry-After": "5"})

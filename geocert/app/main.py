@@ -61,24 +61,28 @@ class BodySizeLimit:
 
 
 class VerificationGate:
-    """At most ``limit`` certificate verifications at once in this process (429 problem+json with
-    Retry-After beyond it), counted from before the body is read: a body is parsed into Python
-    objects some 25 times its size (29 MB of empty lists: 760 MB and 19 s, for a one-line
-    refusal), so the verifier's memory is bounded by the limit times that, whatever the request
-    rate. On the event loop: the count needs no lock."""
+    """At most ``limit`` requests to ``path`` at once in this process (429 problem+json with
+    Retry-After beyond it), counted from before the body is read: the API computes these itself,
+    and a body is parsed into Python objects some 25 times its size (29 MB of empty lists: 760 MB
+    and 19 s, for a one-line refusal), so their memory is bounded by the limit times that,
+    whatever the request rate. Certificate verifications by default; /v1/orient too (its dense
+    cameras x points arrays: some 700 MB and 12 s at its budget each). On the event loop: the
+    count needs no lock."""
 
     PATH = "/v1/certificates/verify"
 
-    def __init__(self, app: ASGIApp, limit: int):
+    def __init__(self, app: ASGIApp, limit: int, path: str = PATH, what: str = "certificate verifications",
+                 variable: str = "GEOCERT_MAX_CONCURRENT_VERIFICATIONS"):
         self.app, self.limit, self.active = app, limit, 0
+        self.path, self.what, self.variable = path, what, variable
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http" or scope.get("path") != self.PATH or self.limit <= 0:
+        if scope["type"] != "http" or scope.get("path") != self.path or self.limit <= 0:
             return await self.app(scope, receive, send)
         if self.active >= self.limit:
             response = errors.problem(429, "Too many requests",
-                                      f"{self.limit} certificate verifications are running in this process "
-                                      "(GEOCERT_MAX_CONCURRENT_VERIFICATIONS): retry shortly",
+                                      f"{self.limit} {self.what} are running in this process "
+                                      f"({self.variable}): retry shortly",
                                       headers={"Retry-After": "5"})
             return await response(scope, receive, send)
         self.active += 1
@@ -112,6 +116,8 @@ def create_app() -> FastAPI:
     app.include_router(observability.router)
     webui.install(app)  # after the API's routes: /web is a mount
     app.add_middleware(VerificationGate, limit=get_settings().max_concurrent_verifications)
+    app.add_middleware(VerificationGate, limit=get_settings().max_concurrent_orientations, path="/v1/orient",
+                       what="orientations", variable="GEOCERT_MAX_CONCURRENT_ORIENTATIONS")
     app.add_middleware(BodySizeLimit, limit=get_settings().max_body_bytes)
     app.add_middleware(observability.RequestContext)  # outermost: sees every answer, 413s included
     return app

@@ -292,6 +292,7 @@ class Upload:
     count: int
     observations: int
     digest: str | None  # of the whole request (head with its items), when asked for (Idempotency-Key)
+    bytes: int = 0  # of the items' JSON texts
 
 
 def upload_items(redis_client, split: Split, request: dict, with_digest: bool = False) -> Upload:
@@ -307,7 +308,7 @@ def upload_items(redis_client, split: Split, request: dict, with_digest: bool = 
     digest = hashlib.sha256(json.dumps(placeholder, sort_keys=True).encode()) if with_digest else None
     slots: list[Any] = [None] * split.count
     data = {**request["data"], split.chunk_key: slots}
-    observations = 0
+    observations = written = 0
     try:
         for begin in range(0, split.count, BATCH):
             stop = min(begin + BATCH, split.count)
@@ -323,6 +324,7 @@ def upload_items(redis_client, split: Split, request: dict, with_digest: bool = 
             observations += kind.observations(parsed)
             slots[begin:stop] = [None] * (stop - begin)
             texts = [json.dumps(item) for item in items]
+            written += sum(map(len, texts))
             for item in items if digest is not None else ():
                 digest.update(json.dumps(item, sort_keys=True).encode())
             pipe = redis_client.pipeline()
@@ -332,4 +334,4 @@ def upload_items(redis_client, split: Split, request: dict, with_digest: bool = 
     except BaseException:
         redis_client.delete(key)
         raise
-    return Upload(key, split.count, observations, None if digest is None else digest.hexdigest())
+    return Upload(key, split.count, observations, None if digest is None else digest.hexdigest(), written)

@@ -116,6 +116,17 @@ class MapKind:
             maps[i] = (source, target)
         return ParsedMaps(maps)
 
+    @staticmethod
+    def request_figures(data: dict) -> dict:
+        """The most points in one map: its every conic program has a row per point, and a map's
+        first programs do not stop at its time limit."""
+        largest, field = 0, "data/maps"
+        for i, entry in enumerate(data.get("maps") or ()):
+            points = len(entry.get("source") or ()) if isinstance(entry, dict) else 0
+            if points > largest:
+                largest, field = points, f"data/maps/{i}/source"
+        return {"map_points": (largest, field)}
+
     def count(self, parsed: ParsedMaps) -> int:
         return len(parsed.maps)
 

@@ -7,8 +7,9 @@ record which ports answered. So every address a destination resolves to is check
 connection is made to a checked address itself (not to the name again, which DNS could then
 answer differently: rebinding). Refused: every address that is not globally routable (loopback,
 private, link-local and so metadata, shared, reserved, unspecified, documentation) and every
-multicast address, IPv4 written inside IPv6 included, unless it lies in one of the networks the
-operator allows (GEOCERT_WEBHOOK_ALLOWED_NETWORKS, e.g. a receiver on the same host for tests).
+multicast address, IPv4 written inside IPv6 included (mapped, NAT64, 6to4, SIIT), unless it
+lies in one of the networks the operator allows (GEOCERT_WEBHOOK_ALLOWED_NETWORKS, e.g. a
+receiver on the same host for tests).
 
 The connection is made by an httpcore network backend (``CheckedBackend``), which also holds each
 attempt to one deadline in all: every read and write is given what is left of it (a receiver
@@ -38,12 +39,39 @@ def allowed_networks(text: str) -> tuple[ipaddress.IPv4Network | ipaddress.IPv6N
     return tuple(ipaddress.ip_network(part.strip(), strict=False) for part in text.split(",") if part.strip())
 
 
+# IPv6 addresses whose last 32 bits are an IPv4 address that a translator or tunnel delivers
+# to: NAT64's well-known prefix (a cloud's NAT64 gateway takes 64:ff9b::a00:1 to 10.0.0.1 in
+# its network), IPv4-translated (SIIT) and the deprecated IPv4-compatible addresses. Each is
+# judged by the IPv4 address inside it, as the IPv4-mapped ones and 6to4's (2002::/16) are.
+_EMBEDDING_IPV4 = tuple(ipaddress.ip_network(n) for n in ("64:ff9b::/96", "::ffff:0:0:0/96", "::/96"))
+# NAT64's local-use prefix (RFC 8215) places the IPv4 address where its operator chose, and is
+# never globally reachable.
+_LOCAL_NAT64 = ipaddress.ip_network("64:ff9b:1::/48")
+
+
+def embedded_ipv4(address: ipaddress.IPv6Address) -> ipaddress.IPv4Address | None:
+    """The IPv4 address an IPv6 address reaches through a translator or tunnel, if any."""
+    if address.is_loopback or address.is_unspecified:  # ::1 and :: are themselves, not 0.0.0.1
+        return None
+    if address.ipv4_mapped is not None:
+        return address.ipv4_mapped
+    if address.sixtofour is not None:
+        return address.sixtofour
+    if any(address in network for network in _EMBEDDING_IPV4):
+        return ipaddress.IPv4Address(int(address) & 0xFFFFFFFF)
+    return None
+
+
 def refusal(address: Address, allowed: Iterable = ()) -> str | None:
     """Why a webhook may not go to this address (None: it may)."""
     if any(address.version == network.version and address in network for network in allowed):
         return None
-    if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
-        return refusal(address.ipv4_mapped, allowed)
+    if isinstance(address, ipaddress.IPv6Address):
+        if address in _LOCAL_NAT64:
+            return "not public"
+        inner = embedded_ipv4(address)
+        if inner is not None:
+            return refusal(inner, allowed)
     if address.is_multicast:
         return "multicast"
     if not address.is_global:

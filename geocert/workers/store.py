@@ -33,6 +33,14 @@ def now() -> float:
     return time.time()
 
 
+class StoredBytesExceeded(Exception):
+    """The owner's jobs that exist would hold more than their limit with this one."""
+
+    def __init__(self, limit: int):
+        super().__init__(limit)
+        self.limit = limit
+
+
 class JobStore:
     def __init__(self, client: redis.Redis, result_ttl_s: int = 7 * 24 * 3600):
         self.r = client
@@ -55,7 +63,8 @@ class JobStore:
                callback_url: str | None = None, active_limit: int = 0, task_ids=None,
                chunk_key: str | None = None, items_key: str | None = None,
                item_time_bound_s: float | None = None, job_time_limit_s: float | None = None,
-               enqueue: Callable[[dict], list[tuple[str, tuple]]] | None = None) -> dict | None:
+               enqueue: Callable[[dict], list[tuple[str, tuple]]] | None = None,
+               items_bytes: int = 0, stored_bytes_limit: int = 0) -> dict | None:
         """Record a new queued job, counted among the owner's active jobs, with its ``status``
         event and the ids its tasks will have (one per chunk; made here unless given), in one
         round trip. None when the owner already has ``active_limit`` jobs queued or running (0:
@@ -76,7 +85,11 @@ class JobStore:
 
         ``enqueue``: given the job's record, the broker's Redis commands that queue its tasks
         (workers.queue.task_commands); they run in the same transaction, only if the job is
-        admitted: a submission is one round trip, and no task is ever queued without its job."""
+        admitted: a submission is one round trip, and no task is ever queued without its job.
+
+        ``stored_bytes_limit``: what the owner's jobs that exist may hold in all (0: no limit),
+        each counted as its request's bytes (``items_bytes``: those of ``items_key``'s texts), at
+        least STORED_BYTES_FLOOR; StoredBytesExceeded beyond it, nothing of the job kept."""
         job_id = uuid.uuid4().hex
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
@@ -91,10 +104,13 @@ class JobStore:
         }
         meta["task_ids"] = list(task_ids) if task_ids is not None else [uuid.uuid4().hex for _ in chunks]
         pipe = self.r.pipeline()
-        pipe.eval(self._ADMIT, 1, self.owner_key(owner, "active"), job_id, active_limit)
+        pipe.eval(self._PRUNE_INDEX, 3, *self._accounts(owner), self.key(""), self.PRUNED_PER_JOB)
+        request_bytes = self._put_request(pipe, job_id, request, chunk_key, items_key) + items_bytes
+        admit_at = len(pipe)
+        pipe.eval(self._ADMIT, 3, self.owner_key(owner, "active"), *self._accounts(owner)[1:], job_id, active_limit,
+                  max(request_bytes, self.STORED_BYTES_FLOOR), stored_bytes_limit)
         pipe.hset(self.key(job_id), mapping={k: json.dumps(v) for k, v in meta.items() if k != "task_ids"})
         meta["chunks"] = chunks  # not stored: every read of the job (each poll) would read them (JobStore.chunks)
-        self._put_request(pipe, job_id, request, chunk_key, items_key)
         pipe.zadd(self.owner_key(owner, "jobs"), {job_id: meta["created_at"]})
         self.publish(job_id, "status", {"status": "queued"}, pipe)
         if meta["task_ids"]:
@@ -103,8 +119,11 @@ class JobStore:
             commands = enqueue(meta)
             pipe.eval(self._RUN_IF_ADMITTED, 1, self.owner_key(owner, "active"), job_id,
                       *(part for name, args in commands for part in (name, len(args), *args)))
-        if pipe.execute()[0] != 1:
+        admitted = pipe.execute()[admit_at]
+        if admitted != 1:
             self.delete(job_id)
+            if admitted == -1:
+                raise StoredBytesExceeded(stored_bytes_limit)
             return None
         return meta
 
@@ -185,22 +204,27 @@ class JobStore:
 
     _ITEMS_PER_PUSH = 10_000
 
-    def _put_request(self, pipe, job_id: str, request: dict, chunk_key: str | None, items_key: str | None) -> None:
+    def _put_request(self, pipe, job_id: str, request: dict, chunk_key: str | None, items_key: str | None) -> int:
+        """Queue the request's writes on ``pipe``; the bytes written (not those of ``items_key``)."""
         data = request.get("data")
         items = data.get(chunk_key) if chunk_key and isinstance(data, dict) else None
         if (not isinstance(items, list) or not items) and items_key is None:
-            pipe.set(self.key(job_id, "request"), json.dumps(request))
-            return
-        head = {**request, "data": {**data, chunk_key: f"geocert-items-{job_id}"}}
-        pipe.set(self.key(job_id, "request"), json.dumps(head))
+            text = json.dumps(request)
+            pipe.set(self.key(job_id, "request"), text)
+            return len(text)
+        head = json.dumps({**request, "data": {**data, chunk_key: f"geocert-items-{job_id}"}})
+        pipe.set(self.key(job_id, "request"), head)
         pipe.hset(self.key(job_id), "request_items", json.dumps(chunk_key))
         if items_key is not None:
             pipe.rename(items_key, self.key(job_id, "request:items"))
             pipe.persist(self.key(job_id, "request:items"))  # the job's keys expire when it ends
-            return
+            return len(head)
+        written = len(head)
         for begin in range(0, len(items), self._ITEMS_PER_PUSH):
-            pipe.rpush(self.key(job_id, "request:items"),
-                       *(json.dumps(item) for item in items[begin:begin + self._ITEMS_PER_PUSH]))
+            texts = [json.dumps(item) for item in items[begin:begin + self._ITEMS_PER_PUSH]]
+            written += sum(map(len, texts))
+            pipe.rpush(self.key(job_id, "request:items"), *texts)
+        return written
 
     def request_text(self, job_id: str) -> str | None:
         """The job as submitted, as JSON text (None when no request is kept)."""
@@ -490,6 +514,29 @@ class JobStore:
         pipe.hdel(self.SLOT_OWNERS, slot)
         pipe.execute()
 
+    # Webhook deliveries in flight, per API key: a sorted set per key (its deliveries' task ids,
+    # scored by when each was taken). An entry older than ARGV[3] (its webhook worker gone) lapses,
+    # and so does the whole set when no delivery takes a place in it (EXPIRE).
+    _TAKE_DELIVERY = """
+    redis.call('ZREMRANGEBYSCORE', KEYS[1], '-inf', ARGV[3])
+    if not redis.call('ZSCORE', KEYS[1], ARGV[1]) and redis.call('ZCARD', KEYS[1]) >= tonumber(ARGV[4]) then
+      return 0
+    end
+    redis.call('ZADD', KEYS[1], ARGV[2], ARGV[1])
+    redis.call('EXPIRE', KEYS[1], ARGV[5])
+    return 1
+    """
+
+    def take_delivery(self, owner: str, delivery: str, share: int, lapse_s: float) -> bool:
+        """Take one of ``owner``'s ``share`` places for a webhook delivery (True), unless its
+        deliveries hold them all; one not freed lapses after ``lapse_s``."""
+        moment = now()
+        return bool(self.r.eval(self._TAKE_DELIVERY, 1, self.owner_key(owner, "deliveries"), delivery, moment,
+                                moment - lapse_s, share, max(1, math.ceil(lapse_s))))
+
+    def free_delivery(self, owner: str, delivery: str) -> None:
+        self.r.zrem(self.owner_key(owner, "deliveries"), delivery)
+
     def touch(self, job_id: str) -> None:
         """A task of this job is alive (read by the reaper, ``workers.reaper``)."""
         self.r.zadd(self.RUNNING, {job_id: now()})
@@ -738,7 +785,7 @@ class JobStore:
         pipe.zrem(self.RUNNING, job_id)
         pipe.zrem(self.DEADLINES, job_id)
         if owner is not None:
-            pipe.zrem(self.owner_key(owner, "jobs"), job_id)
+            pipe.eval(self._FORGET, 3, *self._accounts(owner), job_id)
         pipe.execute()
 
     # --- listing -----------------------------------------------------------------------------
@@ -776,7 +823,10 @@ class JobStore:
                 if len(found) > limit:
                     break
         if gone:
-            self.r.zrem(index, *gone)
+            pipe = self.r.pipeline()
+            for job_id in gone:
+                pipe.eval(self._FORGET, 3, *self._accounts(owner), job_id)
+            pipe.execute()
         following = (found[limit - 1][0], found[limit - 1][1]) if len(found) > limit else None
         return [meta for _, _, meta in found[:limit]], following
 
@@ -785,10 +835,16 @@ class JobStore:
     def owner_key(owner: str, part: str) -> str:
         return f"geocert:owner:{owner}:{part}"
 
-    # Count a job among the owner's active jobs unless it already has the limit (0: no limit).
+    # Count a job among the owner's active jobs unless it already has the limit (ARGV[2]; 0: no
+    # limit), and its bytes (ARGV[3]) among those of the owner's stored jobs unless they would
+    # pass theirs (ARGV[4]; 0: no limit): 1, else 0 (active) or -1 (stored bytes).
     _ADMIT = """
     if tonumber(ARGV[2]) > 0 and redis.call('SCARD', KEYS[1]) >= tonumber(ARGV[2]) then return 0 end
+    local stored = tonumber(redis.call('GET', KEYS[3]) or '0')
+    if tonumber(ARGV[4]) > 0 and stored + tonumber(ARGV[3]) > tonumber(ARGV[4]) then return -1 end
     redis.call('SADD', KEYS[1], ARGV[1])
+    redis.call('HSET', KEYS[2], ARGV[1], ARGV[3])
+    redis.call('INCRBY', KEYS[3], ARGV[3])
     return 1
     """
 
@@ -803,6 +859,32 @@ class JobStore:
       at = at + 2 + count
     end
     return 1
+    """
+
+    # An owner's accounts of its jobs that exist: the index (created time -> id), each job's
+    # bytes, and their sum. A job leaves them when deleted, when a listing meets it expired, and
+    # when a submission of its owner finds it expired among the index's ARGV[2] oldest entries
+    # (_PRUNE_INDEX: so a key that never lists keeps about its jobs that exist, not every job it made).
+    def _accounts(self, owner: str) -> tuple[str, str, str]:
+        return self.owner_key(owner, "jobs"), self.owner_key(owner, "stored"), self.owner_key(owner, "stored_bytes")
+
+    PRUNED_PER_JOB = 8
+    STORED_BYTES_FLOOR = 16 << 10  # a job's record, events and a small result
+    _FORGET_LUA = """
+    local function forget(id)
+      local bytes = redis.call('HGET', KEYS[2], id)
+      redis.call('ZREM', KEYS[1], id)
+      if bytes then
+        redis.call('HDEL', KEYS[2], id)
+        redis.call('DECRBY', KEYS[3], bytes)
+      end
+    end
+    """
+    _FORGET = _FORGET_LUA + "forget(ARGV[1])"
+    _PRUNE_INDEX = _FORGET_LUA + """
+    for _, id in ipairs(redis.call('ZRANGE', KEYS[1], 0, tonumber(ARGV[2]) - 1)) do
+      if redis.call('EXISTS', ARGV[1] .. id) == 0 then forget(id) end
+    end
     """
 
     def release(self, owner: str, job_id: str) -> None:

@@ -81,34 +81,51 @@ def post(url: str, body: bytes, headers: dict[str, str]) -> tuple[str, str | Non
 
 @celery_app.task(name="geocert.deliver_webhook", bind=True, max_retries=None,
                  soft_time_limit=get_settings().webhook_timeout_s + 20, time_limit=get_settings().webhook_timeout_s + 30)
-def deliver_webhook(self, job_id: str) -> None:
+def deliver_webhook(self, job_id: str, deferrals: int = 0) -> None:
     with logs.context(job_id=job_id):
         jobs = store()
         meta = jobs.get(job_id)
         if meta is None or not meta.get("webhook") or meta["webhook"]["state"] in FINAL:
             return
         settings = get_settings()
-        hook = meta["webhook"]
-        body = json.dumps(jobs.document(meta), separators=(",", ":")).encode()
-        timestamp = str(int(time.time()))
-        attempt = hook["attempts"] + 1
-        headers = {"Content-Type": "application/json", "User-Agent": "geocert-webhook",
-                   "X-Geocert-Job": job_id, "X-Geocert-Attempt": str(attempt),
-                   "X-Geocert-Signature": f"t={timestamp},v1={sign(webhook_secret(jobs.r), timestamp, body)}"}
-        outcome, error = post(hook["url"], body, headers)
-        hook.update(attempts=attempt, last_error=error, last_attempt_at=time.time())
-        if outcome == "delivered":
-            hook.update(state="delivered", delivered_at=time.time())
-        elif outcome == "refused" or attempt >= settings.webhook_attempts:
-            hook["state"] = outcome
-        else:
-            hook["state"] = "retrying"
-        if not jobs.set_fields(job_id, webhook=hook):
-            return  # the job was deleted meanwhile: nothing of it is written again
-        metrics.record_webhook(jobs.r, hook["state"])
-        log.info("webhook attempt %d: %s", attempt, error or "delivered")
-        if hook["state"] == "retrying":
-            raise self.retry(countdown=settings.webhook_backoff_s * 2 ** (attempt - 1))
+        share = settings.webhook_deliveries_per_key if settings.api_keys else 0
+        place = self.request.id
+        if share > 0 and not jobs.take_delivery(meta["owner"], place, share, settings.webhook_timeout_s + 60):
+            # Its key's deliveries hold their share of the webhook threads: later, not an attempt.
+            raise self.retry(args=(job_id,), kwargs={"deferrals": deferrals + 1},
+                             countdown=min(5.0, 0.25 * 2 ** deferrals))
+        try:
+            _attempt(self, jobs, meta, settings)
+        finally:
+            if share > 0:
+                jobs.free_delivery(meta["owner"], place)
+
+
+def _attempt(task, jobs, meta: dict, settings) -> None:
+    """One delivery attempt of the job ``meta``, written on its record; a retry scheduled after a
+    failed attempt but the last."""
+    job_id = meta["id"]
+    hook = meta["webhook"]
+    body = json.dumps(jobs.document(meta), separators=(",", ":")).encode()
+    timestamp = str(int(time.time()))
+    attempt = hook["attempts"] + 1
+    headers = {"Content-Type": "application/json", "User-Agent": "geocert-webhook",
+               "X-Geocert-Job": job_id, "X-Geocert-Attempt": str(attempt),
+               "X-Geocert-Signature": f"t={timestamp},v1={sign(webhook_secret(jobs.r), timestamp, body)}"}
+    outcome, error = post(hook["url"], body, headers)
+    hook.update(attempts=attempt, last_error=error, last_attempt_at=time.time())
+    if outcome == "delivered":
+        hook.update(state="delivered", delivered_at=time.time())
+    elif outcome == "refused" or attempt >= settings.webhook_attempts:
+        hook["state"] = outcome
+    else:
+        hook["state"] = "retrying"
+    if not jobs.set_fields(job_id, webhook=hook):
+        return  # the job was deleted meanwhile: nothing of it is written again
+    metrics.record_webhook(jobs.r, hook["state"])
+    log.info("webhook attempt %d: %s", attempt, error or "delivered")
+    if hook["state"] == "retrying":
+        raise task.retry(args=(job_id,), kwargs={}, countdown=settings.webhook_backoff_s * 2 ** (attempt - 1))
 
 
 @celery_app.task(name="geocert.deliver_webhook_failed")

@@ -17,6 +17,7 @@ import zipfile
 from pathlib import Path
 
 import cv2
+import httpx
 import numpy as np
 import pytest
 import redis
@@ -169,6 +170,63 @@ def test_5_6_a_large_body_over_budget_is_refused_from_its_shape_unparsed(plain):
     assert small.status_code == 200, small.text
 
 
+def test_6_orientations_at_once_are_bounded(plain):
+    """/v1/orient is computed in the API process: at its budget (20 cameras x 200k points) one
+    request held some 700 MB and 12 s of CPU, and four at once took the API to 3 GB while another
+    key's GET /v1/jobs waited 5 s; nothing bounded how many ran at once. Now a third is refused
+    (429 with Retry-After, naming GEOCERT_MAX_CONCURRENT_ORIENTATIONS) while two are running,
+    counted from before the body is read: here two requests whose bodies are still arriving."""
+    running, client = plain
+    body = json.dumps({"cameras": [np.eye(3, 4).tolist()] * 2, "points": [[0.0, 0.0, 1.0]] * 10}).encode()
+    release, results = threading.Event(), []
+
+    def held_body():
+        yield body[:10]
+        release.wait(20)
+        yield body[10:]
+
+    def held_request():
+        with httpx.Client(base_url=running.base, timeout=60) as own:
+            results.append(own.post("/v1/orient", content=held_body(),
+                                    headers={"content-type": "application/json"}).status_code)
+
+    held = [threading.Thread(target=held_request) for _ in range(2)]
+    try:
+        for thread in held:
+            thread.start()
+        deadline = time.monotonic() + 30
+        while (third := client.post("/v1/orient", content=body,  # let in until the held two have arrived
+                                    headers={"content-type": "application/json"})).status_code == 200:
+            assert time.monotonic() < deadline, "a third orientation was let in while two were running"
+            time.sleep(0.2)
+        assert "GEOCERT_MAX_CONCURRENT_ORIENTATIONS" in problem(third, 429)["detail"]
+    finally:
+        release.set()
+        for thread in held:
+            thread.join(60)
+    assert results == [200, 200]
+    assert client.post("/v1/orient", content=body, headers={"content-type": "application/json"}).status_code == 200
+
+
+def test_a_map_over_its_points_budget_is_refused_at_submission(plain):
+    """One map of 200,000 points (within the job's items and observations) was queued: its
+    first conic programs ignore the time limit (2 s asked; 20,000 points ran 65 s), and a solver
+    process held 3.3 GB before it died. The points of one map are a budget figure: 413 naming
+    it, read from a large body's shape (a small one's: test_a_map_at_its_points_budget_is_taken)."""
+    _, client = plain
+    rng = np.random.default_rng(4)
+    source = np.round(rng.normal(size=(20_001, 3)), 6).tolist()
+    target = np.round(rng.uniform(0, 640, size=(20_001, 2)), 3).tolist()
+    job = {"kind": "resection", "data": {"maps": [{"source": source[:10], "target": target[:10]},
+                                                  {"source": source, "target": target}]}}
+    answer = problem(client.post("/v1/jobs", json=job), 413)
+    assert "20001 points in one map" in answer["detail"] and "GEOCERT_MAX_POINTS_PER_MAP" in answer["detail"]
+    assert answer["errors"][0]["field"] == "data/maps/1/source"
+    job = {"kind": "homography", "data": {"maps": [{"source": [p[:2] for p in source[:20_001]], "target": target}]}}
+    answer = problem(client.post("/v1/jobs", json=job), 413)
+    assert answer["errors"][0]["field"] == "data/maps/0/source"
+
+
 def test_7_webhooks_go_only_to_public_addresses(plain):
     """callback_url at loopback, private, link-local (the metadata service), IPv6 loopback or
     127.0.0.1 written as a number: a 422 naming callback_url, before anything is sent. A name
@@ -201,6 +259,22 @@ def test_7_webhooks_go_only_to_public_addresses(plain):
         assert listener.connections == 0
     finally:
         listener.close()
+
+
+def test_7_ipv6_addresses_carrying_a_refused_ipv4_are_refused(plain):
+    """IPv6 addresses that a translator or tunnel takes to an IPv4 address: NAT64's well-known
+    prefix (a cloud's NAT64 gateway takes 64:ff9b::a00:1 to 10.0.0.1 in its network, and
+    64:ff9b::a9fe:a9fe to the metadata address), 6to4, IPv4-translated and IPv4-compatible ones,
+    and NAT64's local-use prefix, were accepted as public (Python calls them global): each is
+    judged by the IPv4 address inside it. A public IPv4 inside is accepted as before."""
+    _, client = plain
+    for url in ("http://[64:ff9b::a9fe:a9fe]/", "http://[64:ff9b::a00:1]/", "http://[64:ff9b::7f00:1]:6379/",
+                "http://[2002:7f00:1::]/", "http://[::ffff:0:7f00:1]/", "http://[::127.0.0.1]/",
+                "http://[64:ff9b:1::a00:1]/"):
+        answer = problem(client.post("/v1/jobs", json={**TRIANGULATION, "callback_url": url}), 422)
+        assert answer["errors"][0]["field"] == "callback_url", url
+    for url in ("http://[64:ff9b::808:808]/", "http://[2002:808:808::1]/"):
+        assert client.post("/v1/jobs", json={**TRIANGULATION, "callback_url": url}).status_code == 202, url
 
 
 def test_4_stereo_segment_matching_keeps_the_time_limit(plain):
@@ -278,7 +352,8 @@ def test_11_exported_names_are_refused_or_made_safe(plain):
 def small(tmp_path_factory):
     with cluster(tmp_path_factory.mktemp("small"), workers=1, geocert_max_autocalibration_views="8",
                  geocert_max_view_points_per_job="2000", geocert_max_basis_points_per_job="500",
-                 geocert_max_segments_per_frame="40", geocert_webhook_allowed_networks="127.0.0.1/32",
+                 geocert_max_segments_per_frame="40", geocert_max_points_per_map="50",
+                 geocert_webhook_allowed_networks="127.0.0.1/32",
                  geocert_webhook_timeout_s="2", geocert_webhook_attempts="2",
                  geocert_webhook_backoff_s="0.2") as (running, client):
         yield running, client
@@ -333,6 +408,19 @@ def test_6_orient_is_refused_beyond_cameras_times_points(small):
                                                       "views": [[0, 1]] * 201}), 413)
     assert "2010 views times points" in answer["detail"] and "GEOCERT_MAX_VIEW_POINTS_PER_JOB" in answer["detail"]
     assert client.post("/v1/orient", json={"cameras": cameras, "points": points[:200]}).status_code == 200
+
+
+def test_a_map_at_its_points_budget_is_taken(small):
+    """GEOCERT_MAX_POINTS_PER_MAP of 50 here: a map of 51 points is refused (413 naming it), one of 50 solved."""
+    _, client = small
+    rng = np.random.default_rng(5)
+    maps = [{"source": np.round(rng.normal(size=(n, 3)), 4).tolist(),
+             "target": np.round(rng.uniform(0, 640, size=(n, 2)), 3).tolist()} for n in (50, 51)]
+    answer = problem(client.post("/v1/jobs", json={"kind": "resection", "data": {"maps": maps}}), 413)
+    assert "51 points in one map" in answer["detail"] and answer["errors"][0]["field"] == "data/maps/1/source"
+    response = client.post("/v1/jobs", json={"kind": "resection", "data": {"maps": maps[:1]}})
+    assert response.status_code == 202, response.text
+    assert ended(client, response.json()["id"])["status"] == "succeeded"
 
 
 def test_8_a_tarpit_receiver_fails_its_delivery_within_its_deadline_and_holds_no_solver(small):
@@ -398,12 +486,57 @@ def test_9_a_job_deleted_while_its_webhook_is_delivered_leaves_nothing(small):
     # Every other key without an expiry is one of the service's own, each kept small by an owner:
     # the workers' heartbeats and slots (entries lapse when a worker stops beating), the running
     # jobs (ended jobs leave it), metrics (one field per label), the signing key, the reaper's
-    # lock, and each API key's index and active set (ended or expired jobs leave them).
+    # lock, and each API key's index, active set and stored bytes (with each job's; ended or
+    # expired jobs leave them).
     owned = {"geocert:workers", "geocert:workers:solvers", "geocert:slots", "geocert:slots:owners",
              "geocert:running", "geocert:metrics", "geocert:webhook_secret", "geocert:reaper"}
     for key in store.scan_iter("geocert:*"):
         if not key.startswith("geocert:job:") and store.ttl(key) == -1:
-            assert key in owned or (key.startswith("geocert:owner:") and key.rsplit(":", 1)[1] in ("jobs", "active")), key
+            assert key in owned or (key.startswith("geocert:owner:") and
+                                    key.rsplit(":", 1)[1] in ("jobs", "active", "stored", "stored_bytes")), key
+
+
+def test_9_an_api_keys_index_keeps_no_expired_job(tmp_path):
+    """Each API key's index of its jobs (geocert:owner:{key}:jobs, no expiry) dropped an expired
+    job only when a listing met it: a key that submits and never lists grew it by one entry a
+    job for ever (1,200 a minute at the default rate limit). Now each submission drops the
+    oldest entries whose job has expired, so the index holds about the jobs that exist."""
+    with cluster(tmp_path, workers=1, geocert_result_ttl_s="1") as (running, client):
+        store = redis.Redis.from_url(running.redis_url, decode_responses=True)
+        first = [client.post("/v1/jobs", json=TRIANGULATION).json()["id"] for _ in range(5)]
+        for job_id in first:
+            ended(client, job_id)
+        deadline = time.monotonic() + 60
+        while any(client.get(f"/v1/jobs/{job_id}").status_code != 404 for job_id in first):
+            assert time.monotonic() < deadline, "the jobs did not expire"
+            time.sleep(0.2)
+        last = client.post("/v1/jobs", json=TRIANGULATION).json()["id"]
+        (index,) = store.scan_iter("geocert:owner:*:jobs")
+        assert store.zrange(index, 0, -1) == [last]
+
+
+def test_a_keys_stored_jobs_are_bounded_in_bytes(tmp_path):
+    """Jobs are kept result_ttl_s (7 days) after they end, and nothing bounded what one key kept:
+    at the rate limit, some 700 MB an hour of one-track jobs (9.7 KiB each in Redis), 20 GB an
+    hour of 5.5 MB ones, for every client's Redis. Now a key's jobs that exist hold at most
+    GEOCERT_MAX_STORED_BYTES_PER_KEY, each counted as its request's bytes and at least 16 KiB:
+    beyond it a 429 naming it, until the key deletes jobs (or they expire); a large body (its
+    items read a batch at a time) is counted by its items' bytes."""
+    with cluster(tmp_path, workers=1, geocert_max_stored_bytes_per_key="40000") as (running, client):
+        kept = [client.post("/v1/jobs", json=TRIANGULATION) for _ in range(2)]
+        assert [response.status_code for response in kept] == [202, 202]
+        answer = problem(client.post("/v1/jobs", json=TRIANGULATION), 429)
+        assert "GEOCERT_MAX_STORED_BYTES_PER_KEY" in answer["detail"]
+        ended(client, kept[0].json()["id"])
+        assert client.delete(f"/v1/jobs/{kept[0].json()['id']}").status_code == 204
+        assert client.post("/v1/jobs", json=TRIANGULATION).status_code == 202
+        ended(client, kept[1].json()["id"])
+        assert client.delete(f"/v1/jobs/{kept[1].json()['id']}").status_code == 204
+        large = {**TRIANGULATION, "data": {**TRIANGULATION["data"], "tracks": TRIANGULATION["data"]["tracks"] * 30_000}}
+        answer = problem(client.post("/v1/jobs", json=large), 429)  # 1.7 MB of items: read a batch at a time
+        assert "GEOCERT_MAX_STORED_BYTES_PER_KEY" in answer["detail"]
+        store = redis.Redis.from_url(running.redis_url, decode_responses=True)
+        assert [key for key in store.scan_iter("geocert:upload:*")] == []
 
 
 # ---------------------------------------------------------------------------------------------
@@ -507,6 +640,58 @@ def test_another_keys_job_is_taken_before_a_floods_queued_tasks(tmp_path):
         running.start_worker(concurrency=2)
         assert ended(client, other, headers=b)["status"] == "succeeded"
         assert ended(client, flood, headers=a)["status"] == "succeeded"
+
+
+def test_one_keys_slow_receivers_leave_webhook_threads_for_another_key(tmp_path):
+    """Key A's webhooks go to a receiver that holds every connection; key B's job then ends.
+    A webhook worker's 8 threads were all held by A's deliveries, B's waiting behind each of A's
+    attempts (40 deliveries to a tarpit: 27 s). Now a key has at most
+    GEOCERT_WEBHOOK_DELIVERIES_PER_KEY in flight (the others deferred, not counted as attempts),
+    and B's webhook is delivered while A's receiver still holds its connections."""
+    a, b = {"X-API-Key": "key-a"}, {"X-API-Key": "key-b"}
+    release, lock = threading.Event(), threading.Lock()
+    held = {"now": 0, "most": 0}
+
+    def hold(handler):
+        with lock:
+            held["now"] += 1
+            held["most"] = max(held["most"], held["now"])
+        release.wait(120)
+        with lock:
+            held["now"] -= 1
+        handler.send_response(200)
+        handler.send_header("Content-Length", "0")
+        handler.end_headers()
+
+    def answer(handler):
+        handler.send_response(200)
+        handler.send_header("Content-Length", "0")
+        handler.end_headers()
+
+    slow, quick = Receiver(hold), Receiver(answer)
+    try:
+        with cluster(tmp_path, workers=1, geocert_api_keys="key-a,key-b", geocert_webhook_allowed_networks="127.0.0.1/32",
+                     geocert_webhook_timeout_s="150", geocert_webhook_deliveries_per_key="2") as (running, client):
+            flood = [client.post("/v1/jobs", json={**TRIANGULATION, "callback_url": slow.url}, headers=a).json()["id"]
+                     for _ in range(10)]
+            deadline = time.monotonic() + 60
+            while slow.received < 2:
+                assert time.monotonic() < deadline, "A's deliveries did not start"
+                time.sleep(0.1)
+            other = client.post("/v1/jobs", json={**TRIANGULATION, "callback_url": quick.url}, headers=b).json()["id"]
+            ended(client, other, headers=b)
+            deadline = time.monotonic() + 90  # well within A's attempts' 150 s: A's receiver holds them all
+            while (hook := client.get(f"/v1/jobs/{other}", headers=b).json()["webhook"])["state"] != "delivered":
+                assert time.monotonic() < deadline, f"B's webhook {hook} behind A's held deliveries"
+                time.sleep(0.2)
+            assert not release.is_set() and 1 <= held["most"] <= 2, held
+            states = [client.get(f"/v1/jobs/{job_id}", headers=a).json()["webhook"] for job_id in flood]
+            assert all(hook["attempts"] <= 1 and hook["state"] in ("waiting", "retrying") for hook in states), states
+            release.set()
+    finally:
+        release.set()
+        slow.close()
+        quick.close()
 
 
 def test_a_solver_process_stopped_with_its_worker_has_its_task_run_again(tmp_path):

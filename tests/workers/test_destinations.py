@@ -22,6 +22,9 @@ from geocert.workers.destinations import CheckedBackend, Refused, allowed_networ
     ("169.254.169.254", "link-local"), ("0.0.0.0", "unspecified"), ("224.0.0.1", "multicast"),
     ("100.100.100.200", "not public"), ("::1", "loopback"), ("fe80::1", "link-local"), ("fd00:ec2::254", "private"),
     ("::ffff:127.0.0.1", "loopback"), ("ff02::1", "multicast"), ("8.8.8.8", None), ("2001:4860:4860::8888", None),
+    ("64:ff9b::a9fe:a9fe", "link-local"), ("64:ff9b::a00:1", "private"), ("2002:7f00:1::", "loopback"),
+    ("::ffff:0:7f00:1", "loopback"), ("::7f00:1", "loopback"), ("64:ff9b:1::a00:1", "not public"),
+    ("64:ff9b::808:808", None), ("2002:808:808::1", None),
 ])
 def test_addresses_not_globally_routable_are_refused(address, reason):
     assert refusal(ipaddress.ip_address(address)) == reason
