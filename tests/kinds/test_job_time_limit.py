@@ -125,3 +125,21 @@ def test_a_reconstruction_stopped_by_its_clock_after_certified_points_verifies(m
     assert result["points"] and all(point["certified"] for point in result["points"])
     report = verify_any(result)
     assert report.valid, report.first_failure
+
+
+def test_a_large_maps_tightening_stops_at_its_time_limit():
+    """A resection of 2,000 points tightens its root box (4 rounds of 22 programs each) before
+    its search: the item's clock covers that too, so with a time limit already past when it
+    starts no tightening program is solved, the search stops at its root, and the map reads
+    time_limit, not certified, and verifies (before: every round ran and the L1L1 root, closed by
+    them, was returned optimal whatever the limit). The document claims nothing, which the
+    verifier says."""
+    from geocert.solvers.verify import verify_any
+    from tests.support import map_job
+
+    job = map_job(np.random.default_rng(3), "resection", 2000, "L1L1", maps=1)
+    job["options"].update(time_limit_s=1e-3)
+    result = solve_job(job)
+    item = result["maps"][0]
+    assert item["status"] == "time_limit" and not item["certified"]
+    assert verify_any(result).first_failure["detail"] == "no certified item to check"

@@ -11,6 +11,7 @@ complement of the reference point.
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 import time
 from typing import Callable
@@ -113,13 +114,16 @@ def _fit_map(source, target, options: MapOptions, callback, start: float) -> Map
             prepared.problem.use_bound_tolerance(LARGE_BOUND_TOLERANCE)
             prepared.problem.capping = True
             prepared.problem.cap_gap = CAP_GAP * options.rel_gap
+        # The item's clock covers the tightening before the search, whose clock is what is left.
+        prepared.problem.deadline = start + options.time_limit_s
         if math.isfinite(prepared.upper):  # with the settings above, so that the root's bound is the search's
             closing = CLOSING_SHARE * options.rel_gap if options.norm == "L2L2" else None
             prepared.problem.root = prepared.problem.tighten(prepared.problem.root, prepared.upper, TIGHTEN_ROUNDS,
                                                              closing_gap=closing)
         # Root region on the caller's last row l: z = B w with w = N' S^-T l / (l . X_ref).
         functionals = prepared.problem.B[:, :n] @ chart.last_row_basis.T @ np.linalg.inv(chart.source_norm).T
-        searched = search(prepared, options, "every map that puts every point at positive depth", chart.reference,
+        left = replace(options, time_limit_s=max(0.0, prepared.problem.deadline - time.perf_counter()))
+        searched = search(prepared, left, "every map that puts every point at positive depth", chart.reference,
                           functionals, np.append(source[chart.reference], 1.0), callback)
         if searched.solution is None:
             result = MapResult(searched.status, False, nodes=searched.nodes, reason=searched.reason)

@@ -11,6 +11,7 @@ ratio above the convex envelope of ``t / s`` (docs/algorithms.md, section 4).
 from __future__ import annotations
 
 import math
+import time
 import warnings
 from dataclasses import dataclass
 
@@ -336,6 +337,13 @@ class BoxProblem:
         self.node_tightening = False  # a round of bound tightening at every node below the root (maps)
         self._tightener = ReusableConicProgram(lean=True, tolerance=TIGHTENING_TOLERANCE)
         self._kept_bound: tuple[Box, float, BoxBound] | None = None  # (box, upper bound, its bound): tighten's last
+        # A time.perf_counter() reading past which no more tightening or capping programs are
+        # solved (a side or cap not solved for stays unproven: sound, only looser); the search's
+        # own clock stops the nodes. None: no clock.
+        self.deadline: float | None = None
+
+    def _past_deadline(self) -> bool:
+        return self.deadline is not None and time.perf_counter() >= self.deadline
 
     def use_bound_tolerance(self, tolerance: float) -> None:
         """Node bounds solved to ``tolerance`` (lean settings) instead of 1e-9."""
@@ -456,6 +464,8 @@ class BoxProblem:
         stop were 60% to 70% of the solve."""
         solver = ReusableConicProgram(lean=True, tolerance=TIGHTENING_TOLERANCE)  # 2k objectives, one feasible set
         for _ in range(rounds):
+            if self._past_deadline():
+                return box
             if closing_gap is not None and self._closes(box, upper_bound, closing_gap):
                 return box
             data = self.conic_data(box, upper_bound, envelope=False)
@@ -499,6 +509,9 @@ class BoxProblem:
             duals: list[np.ndarray | None] = []
             proven = others[chosen].copy()
             for number, (i, index) in enumerate(zip(chosen, variables)):
+                if self._past_deadline():  # this term's cap stays what was proven before
+                    duals.append(None)
+                    continue
                 objective = data.q.copy()
                 objective[index] = 0.0
                 result, value = _proven_minimum(solver, data, objective, first=not duals)
@@ -518,6 +531,9 @@ class BoxProblem:
         duals: list[np.ndarray | None] = []
         for i in range(k):
             for sign, side in ((1.0, low), (-1.0, high)):
+                if self._past_deadline():  # this side stays unproven (infinite)
+                    duals.append(None)
+                    continue
                 objective = tightening_objective(data, self.B[i], sign)
                 result, value = _proven_minimum(solver, data, objective, first=not duals)
                 if result.status is ConicStatus.INFEASIBLE:
