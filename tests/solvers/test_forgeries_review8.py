@@ -58,7 +58,6 @@ class TestReferenceViewNotRegistered:
         forged = _reference_not_registered(result, 99)
         assert all(c["mirror_rotation_deg"] is None for c in forged["cameras"])
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("reference", [0, 1, 99])
     def test_a_reference_view_not_registered_is_refused(self, ambiguous_rig, reference):  # noqa: F811
         assert not _valid(_reference_not_registered(ambiguous_rig[1], reference))
