@@ -147,7 +147,6 @@ class TestProvenIntervalLevelUnderL1:
         genuine_level = result["tracks"][-1]["determinacy"]["proven_intervals"]["cost_increase"]
         assert FORGED_LEVEL < 1e-4 * genuine_level
 
-    @pytest.mark.xfail(**XFAIL)
     def test_an_interval_below_the_tracks_own_level_is_refused(self, far_track_l1):
         assert not _valid(_interval_at(far_track_l1[1], FORGED_LEVEL))
 

@@ -11,6 +11,7 @@ from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost, n
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.convexity import outside_range, track_bound, verify_sublevel
+from geocert.solvers.fractional.convexity_path import cost_increase
 from geocert.solvers.fractional.determinacy import proven_track
 from geocert.solvers.fractional.proof import (check_program, program_allowance, program_discount, raw_sizes,
                                               residual_uncertainty, track_uncertainty, verify_search)
@@ -260,8 +261,18 @@ class TrackItems:
             if not isinstance(sublevel, dict) or stated != proven_track(sublevel):
                 raise Invalid("returned", f"tracks/{index}/determinacy/proven_intervals are not the ones its "
                                           "certificate proves")
-            # Proven at no lower a level than the estimate beside it is read at (the job's pooled
-            # noise, squared pixels: L2L2), which a lower level's smaller set would misstate.
+            # Proven at no lower a level than the track's own (convexity_path.cost_increase of its
+            # claim: SIGMAS^2 times its residual variance, at least its gap, in its norm's units),
+            # at which the solver proves every interval: a level the proof may choose shrinks the
+            # set to a ball that need not hold the point observed (under any norm).
+            views = len(certificate["data"]["tracks"][index]["views"])
+            own = float(cost_increase(claim["cost"], claim["lower_bound"], views))
+            if not stated["cost_increase"] >= own * (1 - LEVEL_ROUNDING):
+                raise Invalid("returned", f"tracks/{index}/determinacy/proven_intervals are proven at cost increase "
+                                          f"{stated['cost_increase']!r:.12} below the track's own {own!r:.12} (3^2 "
+                                          "times its residual variance, at least its gap)")
+            # Nor below the level the estimate beside it is read at (the job's pooled noise,
+            # squared pixels: L2L2), which a lower level's smaller set would misstate.
             level = determinacy.get("cost_increase")
             if norm == "L2L2" and not (is_number(level) and stated["cost_increase"] >= level * (1 - LEVEL_ROUNDING)):
                 raise Invalid("returned", f"tracks/{index}/determinacy/proven_intervals are proven at cost increase "
