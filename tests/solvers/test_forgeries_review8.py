@@ -173,6 +173,8 @@ NESTED_MEMBERS = {
     "reconstruction_stage_certified": ("reconstruction", _member(("stages", 0), "certified", True)),
     "reconstruction_warning_code": ("reconstruction", lambda result: result["summary"]["warnings"].append(
         {"code": "reconstruction_certified", "detail": "every camera and point of the rig is certified optimal"})),
+    # a certificate's own item (the claim the proof is about), on either verification path
+    "certificate_item_unique": ("triangulation_l2l2", _member(("certificate", "items", 0), "unique_optimum", True)),
 }
 
 
@@ -187,7 +189,8 @@ class TestNestedMembersOpen:
     homography's (or a bilinear frame's) determinacy "certified": true beside "proven": false,
     the stratified metric stage's summary "unique_optimum": true (no certificate says anything
     of uniqueness: docs/certificate.md, "What a certificate does not say"), a reconstruction's
-    projective stage "certified": true (nothing certifies the projective reconstruction), and a
+    projective stage "certified": true (nothing certifies the projective reconstruction), a
+    certificate's own item (a triangulation claim) stating "unique_optimum": true, and a
     warning of a code no pipeline writes, "reconstruction_certified", saying "every camera and
     point of the rig is certified optimal" beside a rig whose summary certifies 4 of its 6 cameras
     (10,000 such warnings verify too). Each is a member no check reads, which docs/certificate.md
@@ -219,3 +222,60 @@ class TestNestedMembersOpen:
         forged = copy.deepcopy(ambiguous_rig[1])
         forged["summary"]["depth_reversal"]["poses_certified"] = True
         assert not _valid(forged)
+
+
+# --- the stacked path's records ----------------------------------------------------------------
+
+# Each edit of the stored L2L2 triangulation's first claim: a member its proof's records do not
+# have, which the per-item check refuses (strict.record) and a reader may take for the proof's.
+RECORD_MEMBERS = {
+    "proof": lambda claim: claim["proof"].update(proven_unique=True),
+    "root": lambda claim: claim["proof"]["root"].update(exact=True),
+    "leaf_proof": lambda claim: claim["proof"]["proofs"][0].update(exact_bound=99.0),
+}
+
+
+class TestStackedPathRecordsOpen:
+    """Triangulation claims of the common shape are checked many at once (stacked.proven_tracks),
+    which "only ever accepts what it has checked": the per-item path reads each proof record
+    through strict.record, refusing a member it does not list ("a field no check reads is not a
+    place to hide what a reader might take for part of the proof"), but the stacked path reads
+    the members it needs and passes over the rest. So the stored L2L2 triangulation (every claim
+    of the common shape) verifies, as a result or a bare certificate, with its first claim's
+    proof stating "proven_unique": true, its root region "exact": true, or a leaf proof an
+    "exact_bound" of 99.0 (its dual proves 0.9997); verify_item, the per-item check of the same
+    claim, refuses each ("proof: unknown ['proven_unique']"). The outcome depends on which path a
+    claim takes, and the stacked one accepts what the per-item one refuses. Suggested fix (made
+    here): the stacked path takes a claim only when its proof, root and leaf proofs have exactly
+    the members the per-item records take, leaving any other to the per-item check, which names
+    the member it refuses."""
+
+    def test_the_genuine_certificate_verifies_on_the_stacked_path(self):
+        from geocert.solvers.fractional.items import MAX_VIEWS
+        from geocert.solvers.fractional.stacked import proven_tracks
+        from geocert.solvers.verify import checked_options
+
+        result = stored("triangulation_l2l2")
+        certificate = result["certificate"]
+        options = checked_options("triangulation", certificate["options"])
+        assert proven_tracks(certificate["data"], options, certificate["items"], MAX_VIEWS) == set(range(6))
+        assert _valid(result) and _valid(certificate)
+
+    @pytest.mark.parametrize("edit", sorted(RECORD_MEMBERS))
+    def test_the_per_item_check_refuses_the_forgery(self, edit):
+        from geocert.solvers.core.strict import Invalid
+        from geocert.solvers.verify import verify_item
+
+        certificate = stored("triangulation_l2l2")["certificate"]
+        claim = copy.deepcopy(certificate["items"][0])
+        RECORD_MEMBERS[edit](claim)
+        with pytest.raises(Invalid, match="unknown"):
+            verify_item("triangulation", certificate["data"], certificate["options"], claim)
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("bare", [False, True])
+    @pytest.mark.parametrize("edit", sorted(RECORD_MEMBERS))
+    def test_a_record_member_no_check_reads_is_refused(self, edit, bare):
+        result = stored("triangulation_l2l2")
+        RECORD_MEMBERS[edit](result["certificate"]["items"][0])
+        assert not _valid(result["certificate"] if bare else result)
