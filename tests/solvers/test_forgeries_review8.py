@@ -279,3 +279,76 @@ class TestStackedPathRecordsOpen:
         RECORD_MEMBERS[edit](result["certificate"]["items"][0])
         assert not _valid(result["certificate"] if bare else result)
 
+
+# --- a count stated as a boolean ---------------------------------------------------------------
+
+def _one_track_certified() -> dict:
+    """The stored L2L2 triangulation with tracks 1 to 5 restated, truly, as not certified (point
+    and cost kept, no bound): 1 of its 6 tracks certified, a genuine weaker result that verifies."""
+    from tests.solvers.test_forgeries_review3 import _uncertified
+
+    result = stored("triangulation_l2l2")
+    for index in range(1, 6):
+        track = result["tracks"][index]
+        _uncertified(result, "tracks", index, point=track["point"], cost=track["cost"], lower_bound=None, gap=None)
+    return result
+
+
+def _job_of(result: dict) -> dict:
+    from tests.solvers.test_forgeries_review7 import _job
+
+    return _job(result)
+
+
+# Each edit of the job of _one_track_certified: a count of 1 (or 0) restated as true (false).
+BOOLEAN_COUNTS = {
+    "stats_certified": lambda job: job["result"]["stats"].update(certified=True),
+    "stats_statuses": lambda job: job["result"]["stats"]["statuses"].update(optimal=True),
+    "progress_items_certified": lambda job: job["progress"].update(items_certified=True),
+    "progress_open_boxes": lambda job: job["progress"].update(open_boxes=False),
+}
+
+
+class TestCountsStatedAsBooleans:
+    """The counts a result and a job state (stats' items, certified and statuses, progress's
+    items_certified and open_boxes, a certificate summary's leaves, a reconstruction's summary
+    counts and fractions) are compared with the items' by Python's ==, for which true == 1 ==
+    1.0 and false == 0: a JSON boolean stands for a count of 1 or 0. So a triangulation job with
+    1 of its 6 tracks certified (the other 5 stopped at their node limit) verifies stating
+    `"certified": true` in its stats, statuses `{"optimal": true, "node_limit": 5}`, progress
+    `"items_certified": true` and `"open_boxes": false`: a reader sees "certified: true" for a
+    job 5 of whose 6 items are not. (Likewise the stored reconstruction's
+    points_certified_fraction true, a summary's cameras_dropped false.) Suggested fix (made
+    here): the counts are compared as JSON values, a boolean never equal to a number
+    (strict.same), wherever a returned count is compared with the one the items give."""
+
+    def test_the_genuine_job_verifies(self):
+        job = _job_of(_one_track_certified())
+        assert _valid(job) and job["result"]["stats"]["certified"] == 1
+
+    def test_the_forgery_is_false(self):
+        job = _job_of(_one_track_certified())
+        BOOLEAN_COUNTS["stats_certified"](job)
+        outcomes = [track["certified"] for track in job["result"]["tracks"]]
+        assert job["result"]["stats"]["certified"] is True and outcomes.count(False) == 5
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("edit", sorted(BOOLEAN_COUNTS))
+    def test_a_count_stated_as_a_boolean_is_refused(self, edit):
+        job = _job_of(_one_track_certified())
+        BOOLEAN_COUNTS[edit](job)
+        assert not _valid(job)
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_a_summary_count_of_leaves_stated_as_a_boolean_is_refused(self):
+        result = stored("homography2_l2l2")
+        assert result["maps"][0]["certificate"]["leaves"] == 1
+        result["maps"][0]["certificate"]["leaves"] = True
+        assert not _valid(result)
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_a_reconstruction_fraction_stated_as_a_boolean_is_refused(self):
+        result = stored("reconstruction")
+        assert result["summary"]["points_certified_fraction"] == 1.0
+        result["summary"]["points_certified_fraction"] = True
+        assert not _valid(result)
