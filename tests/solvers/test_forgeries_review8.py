@@ -332,23 +332,21 @@ class TestCountsStatedAsBooleans:
         outcomes = [track["certified"] for track in job["result"]["tracks"]]
         assert job["result"]["stats"]["certified"] is True and outcomes.count(False) == 5
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("edit", sorted(BOOLEAN_COUNTS))
     def test_a_count_stated_as_a_boolean_is_refused(self, edit):
         job = _job_of(_one_track_certified())
         BOOLEAN_COUNTS[edit](job)
         assert not _valid(job)
 
-    @pytest.mark.xfail(**XFAIL)
     def test_a_summary_count_of_leaves_stated_as_a_boolean_is_refused(self):
         result = stored("homography2_l2l2")
         assert result["maps"][0]["certificate"]["leaves"] == 1
         result["maps"][0]["certificate"]["leaves"] = True
         assert not _valid(result)
 
-    @pytest.mark.xfail(**XFAIL)
     def test_a_reconstruction_fraction_stated_as_a_boolean_is_refused(self):
         result = stored("reconstruction")
         assert result["summary"]["points_certified_fraction"] == 1.0
         result["summary"]["points_certified_fraction"] = True
         assert not _valid(result)
+
