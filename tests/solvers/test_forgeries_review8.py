@@ -350,3 +350,117 @@ class TestCountsStatedAsBooleans:
         result["summary"]["points_certified_fraction"] = True
         assert not _valid(result)
 
+
+# --- the calibration tie's allowance, with every observation shared -----------------------------
+
+# The focal length of the forged calibration, times the returned cameras'.
+TIE_FOCAL = 1.5
+
+
+def _reposed_calibration_data(result: dict, focal_factor: float) -> dict:
+    """A metric reconstruction of every one of the result's tracks with focal length
+    ``focal_factor`` times the returned cameras': each view's pose and every point fitted (least
+    squares: 36 pose and 48 point parameters against the 192 coordinates of the 96 observations)
+    so that each camera images each point where the returned camera does, as near as that K
+    allows; then written in a projective frame (a seeded 4x4 transform, no image changes)."""
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
+
+    cameras, points = result["cameras"], result["points"]
+    K = np.asarray(cameras[0]["K"], dtype=float).copy()
+    K[0, 0] *= focal_factor
+    K[1, 1] *= focal_factor
+
+    def image(P, X):
+        y = P @ np.append(X, 1.0)
+        return y[:2] / y[2]
+
+    def camera(pose):
+        return K @ np.column_stack([Rotation.from_rotvec(pose[:3]).as_matrix(), pose[3:]])
+
+    seen = np.array([(int(view), j) for j, point in enumerate(points) for view, _, _ in point["observations"]])
+    targets = np.array([image(np.asarray(cameras[view]["P"]), np.asarray(points[j]["point"])) for view, j in seen])
+    n = len(cameras)
+
+    def residuals(z):
+        poses, X = z[:6 * n].reshape(-1, 6), z[6 * n:].reshape(-1, 3)
+        Ps = np.array([camera(pose) for pose in poses])
+        y = np.einsum("oij,oj->oi", Ps[seen[:, 0]], np.hstack([X[seen[:, 1]], np.ones((len(seen), 1))]))
+        return (y[:, :2] / y[:, 2:] - targets).ravel()
+
+    start = [v for c in cameras for v in [*Rotation.from_matrix(np.asarray(c["R"])).as_rotvec(), *c["t"]]]
+    start += [v for point in points for v in point["point"]]
+    z = least_squares(residuals, np.array(start), xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    poses, X = z[:6 * n].reshape(-1, 6), z[6 * n:].reshape(-1, 3)
+    H = np.eye(4) + 0.2 * np.random.default_rng(3).normal(size=(4, 4))
+    data = copy.deepcopy(result["calibration_certificate"]["data"])
+    data["cameras"] = [(camera(pose) @ np.linalg.inv(H)).tolist() for pose in poses]
+    data["points"] = [(H @ np.append(x, 1.0)).tolist() for x in X]
+    return data
+
+
+@pytest.fixture(scope="module")
+def reposed_calibration() -> tuple[dict, dict]:
+    """(the stored reconstruction, and the same result carrying the genuine calibration
+    certificate of _reposed_calibration_data at TIE_FOCAL, its autocalibration stage naming every
+    track)."""
+    from tests.solvers.test_calibration_tie import carrying
+
+    result = stored("reconstruction")
+    forged = carrying(result, _reposed_calibration_data(result, TIE_FOCAL))
+    stage = next(s for s in forged["stages"] if s["name"] == "autocalibration")
+    stage["certificate_tracks"] = [point["track"] for point in result["points"]]
+    return result, forged
+
+
+def _rms_to_observations(result: dict, data: dict) -> float:
+    cameras, points = np.asarray(data["cameras"], dtype=float), np.asarray(data["points"], dtype=float)
+    squared = []
+    for j, point in enumerate(result["points"]):
+        for view, u, v in point["observations"]:
+            y = cameras[int(view)] @ points[j]
+            squared.append((y[0] / y[2] - u) ** 2 + (y[1] / y[2] - v) ** 2)
+    return float(np.sqrt(np.mean(squared)))
+
+
+class TestCalibrationTieAllowance:
+    """(calibration_tie.py is being changed elsewhere: this class is reported, not fixed here.)
+    calibration_tie.tie holds every observation the calibration certificate shares with the
+    result within TIE_RATIO = 10 times the returned cameras' RMS error there, plus 2e-4 of the
+    largest coordinate: on the stored reconstruction (RMS 0.54 px) 5.49 px. A reconstruction whose
+    K differs by half is re-posed well within that: the stored reconstruction verifies carrying
+    the genuine stratified certificate of a reconstruction of all 16 of its tracks (every one of
+    its 96 observations shared, 16 points tying each camera) with focal length 1,195.3 px, 1.5
+    times the returned cameras', each camera posed and every point placed by least squares to
+    image where the returned ones do: the tie measures them at most 3.75 px apart (allowed 5.49),
+    and certified_K is then 1,195.3 px. On the pipeline's own reconstruction of the tracks (the
+    stored calibration certificate's data and certified plane) that K costs 10.1 where the proven
+    optimum (796.5 px) costs 9.6e-29, and the forged certificate's reconstruction fits the
+    observations at an RMS of 1.46 px against the returned cameras' 0.54 (2.7 times, 7.3 times
+    the squared cost: a chi-square test over 192 coordinates rejects it). At 1.2 times (956.3 px)
+    it is 1.91 px apart, 0.87 px RMS, and costs 1.40 there. Review 7's two tracks were refused by
+    counting the points that tie each camera; this one shares every observation. Suggested fix:
+    judge the certificate's reconstruction against the observations, not against the returned
+    cameras' images at a multiple of their error: its cost on the shared observations at most
+    the returned cameras' plus a chi-square allowance for the degrees of freedom the two fits
+    differ by (a few percent here, not 7 times); or compare its metric upgrade (the certified plane
+    and K applied to its cameras) with the returned metric cameras' rotations and focal length."""
+
+    def test_the_genuine_result_verifies(self, reposed_calibration):
+        assert _valid(reposed_calibration[0])
+
+    def test_the_forgery_is_false(self, reposed_calibration):
+        from tests.solvers.test_forgeries_review6 import _metric_cost
+
+        genuine, forged = reposed_calibration
+        pipeline = genuine["calibration_certificate"]
+        forged_K = np.asarray(forged["summary"]["calibration"]["certified_K"])
+        assert forged_K[0, 0] > 1.45 * genuine["summary"]["calibration"]["certified_K"][0][0]
+        assert pipeline["items"][1]["cost"] < 1e-20 and _metric_cost(pipeline, forged_K) > 1.0
+        shared = _rms_to_observations(genuine, forged["calibration_certificate"]["data"])
+        assert shared > 2.0 * genuine["summary"]["rms_reprojection_px"]
+        assert len(forged["calibration_certificate"]["data"]["points"]) == len(genuine["points"]) == 16
+
+    @pytest.mark.xfail(**XFAIL)
+    def test_a_calibration_of_a_reconstruction_with_another_K_is_refused(self, reposed_calibration):
+        assert not _valid(reposed_calibration[1])
