@@ -556,7 +556,10 @@ class TestPooledLevelRestated:
     (determinacy.pooled_for over the returned tracks' points; its chi-square and Student quantiles
     need scipy.special, which the verifier does not import: a table of the quantiles, or a numpy
     series, would do) and refuse a determinacy.cost_increase below it, or compare the proof's level
-    with that recomputed level directly."""
+    with that recomputed level directly. The service pools per batch of a job (TriangulationKind.
+    solve_batch), which the document does not state: pool over the whole job instead, or state
+    each track's batch (or the pooled level and its degrees of freedom, once per job) so that
+    the verifier can recompute it."""
 
     def test_the_genuine_result_verifies(self, far_two_view_track):  # noqa: F811
         truth, result = far_two_view_track
