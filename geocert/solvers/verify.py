@@ -24,7 +24,7 @@ from geocert.solvers.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, F
                                                data_hash, problem_hash)
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost
 from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
-                                         informational, number as _number, printable_tree, record,
+                                         informational, number as _number, printable_tree, record, same,
                                          work_budget)
 from geocert.solvers.fractional import residual_claims
 from geocert.solvers.fractional.results import claim_of
@@ -221,7 +221,7 @@ def check_job(job: dict, result: dict) -> None:
                 "items_done": stats.get("items", 0) - cancelled, "tracks_done": stats.get("items", 0) - cancelled,
                 "items_certified": stats.get("certified"), "nodes": stats.get("nodes"), "open_boxes": 0}
     for name, value in expected.items():
-        if name in progress and progress[name] != value:
+        if name in progress and not same(progress[name], value):
             raise Invalid("returned", f"progress/{name} is {progress[name]!r:.40}, its result gives {value!r:.40}")
     _check_job_bounds(progress, result)
 
@@ -550,7 +550,7 @@ def _check_returned(result: dict, certificate: dict) -> None:
         if not isinstance(item, dict):
             raise Invalid("returned", f"{key}/{index} must be an object")
         for name in RETURNED_FIELDS + tuple(kind.solution_fields):
-            if (name in item or name in claim) and item.get(name) != claim.get(name):
+            if (name in item or name in claim) and not same(item.get(name), claim.get(name)):
                 raise Invalid("returned", f"{key}/{index}/{name} is {item.get(name)!r}, its certificate proves "
                                           f"{claim.get(name)!r}")
         _check_item_notes(item, f"{key}/{index}")
@@ -609,7 +609,7 @@ def _check_stats(kind, result: dict) -> None:
         raise Invalid("returned", f"stats/statuses {stats['statuses']!r:.80} counts more than the job's "
                                   f"{len(outcomes)} item(s)")
     for name, value in expected.items():
-        if name in stats and stats[name] != value:
+        if name in stats and not same(stats[name], value):
             raise Invalid("returned", f"stats/{name} is {stats[name]!r}, the items give {value!r}")
 
 
@@ -670,7 +670,7 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
         if "leaves" in summary:
             leaves = proof.get("leaves")
             expected = len(leaves) if isinstance(leaves, list) else 0
-            if summary["leaves"] != expected:
+            if not same(summary["leaves"], expected):
                 raise Invalid("returned", f"{where}/leaves is {summary['leaves']!r}, its proof has {expected}")
 
 

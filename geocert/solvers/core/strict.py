@@ -87,6 +87,20 @@ def printable_tree(value: Any) -> Any:
     return value
 
 
+def same(given: Any, expected: Any) -> bool:
+    """Whether two JSON values are equal as JSON reads them: Python's == takes true for 1 and
+    false for 0 (and 1.0), so a returned count compared by it could be stated as a boolean
+    (``"certified": true`` for one item certified of six); here a boolean equals only a boolean,
+    in lists and objects too."""
+    if isinstance(given, bool) or isinstance(expected, bool):
+        return type(given) is type(expected) and given == expected
+    if isinstance(given, dict) and isinstance(expected, dict):
+        return given.keys() == expected.keys() and all(same(given[k], expected[k]) for k in given)
+    if isinstance(given, list) and isinstance(expected, list):
+        return len(given) == len(expected) and all(same(a, b) for a, b in zip(given, expected))
+    return given == expected
+
+
 def number(value: Any, name: str, check: str = "format") -> float:
     if not is_number(value):
         raise Invalid(check, f"{name} must be a finite JSON number, got {value!r:.40}")

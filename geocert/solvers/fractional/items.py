@@ -11,6 +11,7 @@ from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost, n
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.convexity import outside_range, track_bound, verify_sublevel
+from geocert.solvers.fractional.convexity_path import cost_increase
 from geocert.solvers.fractional.determinacy import proven_map, proven_track
 from geocert.solvers.fractional.proof import (check_program, program_allowance, program_discount, raw_sizes,
                                               residual_uncertainty, track_uncertainty, verify_search)
@@ -281,7 +282,21 @@ class TrackItems:
             return
         norm = (certificate.get("options") or {}).get("norm")
         for index, (item, claim) in enumerate(zip(result["tracks"], certificate["items"])):
-            _check_proven(f"tracks/{index}", item.get("determinacy"), claim, norm, proven_track)
+            determinacy = item.get("determinacy")
+            _check_proven(f"tracks/{index}", determinacy, claim, norm, proven_track)
+            stated = determinacy.get("proven_intervals") if isinstance(determinacy, dict) else None
+            if stated is None:
+                continue
+            # Proven at no lower a level than the track's own (convexity_path.cost_increase of its
+            # claim: SIGMAS^2 times its residual variance, at least its gap, in its norm's units),
+            # at which the solver proves every interval: a level the proof may choose shrinks the
+            # set to a ball that need not hold the point observed (under any norm).
+            views = len(certificate["data"]["tracks"][index]["views"])
+            own = float(cost_increase(claim["cost"], claim["lower_bound"], views))
+            if not stated["cost_increase"] >= own * (1 - LEVEL_ROUNDING):
+                raise Invalid("returned", f"tracks/{index}/determinacy/proven_intervals are proven at cost increase "
+                                          f"{stated['cost_increase']!r:.12} below the track's own {own!r:.12} (3^2 "
+                                          "times its residual variance, at least its gap)")
 
     def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
         """What an uncertified track's point costs on its observations (and the allowance for its

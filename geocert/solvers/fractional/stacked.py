@@ -34,6 +34,10 @@ CHECKS = ("data", "claim", "objective", "scope", "program", "root_region", "tigh
           "leaf_bounds", "lower_bound", "gap")  # what verify_item reports for such a track
 MAX_ENTRIES = 4_000_000  # floats of one chunk's relaxation matrices (32 MB)
 MAX_LEAVES = 64  # leaves and proofs of one track on this path (more: checked alone)
+# The members of the records this path reads (proof.verify_search's, without caps or tightening).
+PROOF_MEMBERS = frozenset(("type", "scale", "root", "tightening", "search_box", "proofs", "leaves"))
+ROOT_MEMBERS = frozenset(("gamma", "functionals", "claim", "bounds", "duals"))
+LEAF_PROOF_MEMBERS = frozenset(("box", "upper_bound", "kind", "z", "bound"))
 
 
 _NUMBERS = frozenset((int, float))
@@ -79,7 +83,11 @@ def _read(position: int, claim: dict, tracks: list, n_cameras: int, max_views: i
             or not 1 <= len(proofs) <= MAX_LEAVES or not isinstance(leaves, list)
             or not 1 <= len(leaves) <= MAX_LEAVES):
         return None
-    if not all(isinstance(p, dict) and p.get("kind") == "dual" for p in proofs):
+    # Exactly the members the per-item path's records take (strict.record), no caps: any other
+    # record is checked alone, whose reading names what it refuses.
+    if not (set(proof) - {"sublevel"} == PROOF_MEMBERS and set(root) == ROOT_MEMBERS):
+        return None
+    if not all(isinstance(p, dict) and p.get("kind") == "dual" and set(p) == LEAF_PROOF_MEMBERS for p in proofs):
         return None
     if not all(isinstance(leaf, list) and len(leaf) == 3 and type(leaf[2]) is int and 0 <= leaf[2] < len(proofs)
                for leaf in leaves):

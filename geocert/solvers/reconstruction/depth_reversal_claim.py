@@ -95,6 +95,15 @@ def check(summary: dict, cameras: list[dict], stages: list) -> None:
     posed = {c["view"]: np.asarray(c["R"], dtype=float) for c in registered if c.get("R") is not None}
     if not (isinstance(reference, int) and not isinstance(reference, bool) and isinstance(angles, dict)):
         raise Invalid("returned", "summary/depth_reversal must state its reference_view and mirror_rotation_deg")
+    # The check builds the twin in a registered view's frame (ambiguity.check); the angles are
+    # stated only while that view is still posed, so a reference the result shows neither posed
+    # nor dropped afterwards (the sanity layer's reason) would state none for any camera.
+    if reference not in posed and not any(
+            c.get("view") == reference and c.get("registered") is False and str(c.get("reason") or "").startswith(
+                "dropped") for c in cameras):
+        raise Invalid("returned", f"summary/depth_reversal/reference_view {reference!r:.20} is not a registered view "
+                                  "of the result (nor one dropped after the check): the twin is built in a registered "
+                                  "view's frame")
     expected = depth_reversal.mirror_angles_deg(posed, reference) if reference in posed else {}
     if set(angles) != {str(view) for view in expected} or not all(
             _near(angles[str(view)], angle) for view, angle in expected.items()):

@@ -51,7 +51,7 @@ from typing import Any, Callable
 import numpy as np
 
 from geocert.solvers.core.geometry import is_number, norm_cost
-from geocert.solvers.core.strict import Invalid, number, numbers
+from geocert.solvers.core.strict import Invalid, number, numbers, same
 from geocert.solvers.fractional import residual_claims
 from geocert.solvers.fractional.items import TRACKS, TrackItems
 from geocert.solvers.fractional.options import TriangulationOptions
@@ -209,7 +209,7 @@ def _check_summary(result: dict, registered: list[dict]) -> None:
                 "cameras_certified_fraction": certified_cameras / len(registered) if registered else None}
     for name, value in expected.items():
         given = summary.get(name)
-        if not (given == value or (value is not None and _close(given, value, 0.0))):
+        if not (same(given, value) or (value is not None and _close(given, value, 0.0))):
             raise Invalid("returned", f"summary/{name} is {given!r}, the items give {value!r}")
     rms = math.sqrt(squared / count) if count else None
     given = summary.get("rms_reprojection_px")
@@ -222,7 +222,7 @@ def _check_summary(result: dict, registered: list[dict]) -> None:
                   "cameras": {"cameras": len(registered), "certified": certified_cameras,
                               "searched": sum(1 for c in cameras if c.get("searched") is True)}}.get(stage.get("name"))
         for name, value in (counts or {}).items():
-            if name in stage and stage[name] != value:
+            if name in stage and not same(stage[name], value):
                 raise Invalid("returned", f"stages/{stage['name']}/{name} is {stage[name]!r}, the items give {value!r}")
 
 
@@ -240,7 +240,7 @@ def _check_pipeline_counts(result: dict, rel_gap: float) -> None:
         given = summary.get(name)
         if not (isinstance(given, int) and not isinstance(given, bool) and given >= 0):
             raise Invalid("returned", f"summary/{name} must be a count, got {given!r}")
-        if name in structure and structure[name] != given:
+        if name in structure and not same(structure[name], given):
             raise Invalid("returned", f"summary/{name} is {given!r}, the structure stage's {structure[name]!r}")
     numbers_ = [point.get("track") for point in points]
     if not all(isinstance(t, int) and not isinstance(t, bool) and 0 <= t < summary["tracks"] for t in numbers_) \
@@ -796,7 +796,7 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) 
             continue
         source = np.asarray(entry["source"], dtype=float).reshape(-1, 3)
         target = np.asarray(entry["target"], dtype=float).reshape(-1, 2)
-        if camera.get("points") is not None and camera["points"] != len(source):
+        if camera.get("points") is not None and not same(camera["points"], len(source)):
             raise Invalid("returned", f"{where}: points {camera['points']!r}, its certified points number "
                                       f"{len(source)}")
         if status == "degenerate" and not len(source) < camera_claim.MIN_POINTS:
@@ -817,7 +817,7 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) 
         stated = camera.get("degrees_of_freedom")
         if stated is None and camera.get("tolerance") is None:
             continue  # a result from before they were stated: held to a 3x4 camera's (no allowance)
-        if stated != dof:
+        if not same(stated, dof):
             raise Invalid("returned", f"{where}: degrees_of_freedom {stated!r}, the returned cameras' K give {dof}")
         tolerance = camera_claim.tolerance(len(source), dof, norm, rel_gap)
         given = camera.get("tolerance")
