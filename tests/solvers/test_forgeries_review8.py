@@ -218,7 +218,6 @@ class TestNestedMembersOpen:
         change(forged)
         assert not _valid(forged)
 
-    @pytest.mark.xfail(**XFAIL)
     def test_an_extra_member_of_the_depth_reversal_record_is_refused(self, ambiguous_rig):  # noqa: F811
         forged = copy.deepcopy(ambiguous_rig[1])
         forged["summary"]["depth_reversal"]["poses_certified"] = True
@@ -513,7 +512,6 @@ class TestDepthReversalVerdictRemoved:
         assert result["summary"]["poses_determined"] is False and "doubtful" not in forged["summary"]
         assert not any(w["code"] == "reconstruction_doubtful" for w in forged["summary"]["warnings"])
 
-    @pytest.mark.xfail(**XFAIL)
     def test_a_current_form_result_without_its_verdict_is_refused(self, ambiguous_rig):  # noqa: F811
         assert not _valid(_verdict_removed(ambiguous_rig[1]))
 

@@ -33,6 +33,13 @@ FEWER_THAN_2_VIEWS = "fewer than 2 views registered"
 STOPPED = "stopped before the twin's adjustment ended"
 NOT_ADJUSTED = "options.bundle_adjustment is false: the twin could only be compared adjusted"
 NOT_CHECKED = {FEWER_THAN_2_VIEWS: "registered", STOPPED: "stopped", NOT_ADJUSTED: "not_adjusted"}
+# The record's members as the pipeline writes them (ambiguity.check; mirror_rotation_deg by
+# claims.summarise), when the check ran and when it did not: a member beyond them is refused.
+MEMBERS = frozenset(("checked", "reference_view", "model", "cost_px2", "mirror_cost_px2", "cost_ratio",
+                     "noise_variance_px2", "statistic", "threshold", "margin", "returned_refitted", "observations",
+                     "observations_fitting", "mirror_observations_fitting", "focal_px", "mirror_focal_px",
+                     "mirror_rotation_deg", "ambiguous", "adopted"))
+NOT_CHECKED_MEMBERS = frozenset(("checked", "reason"))
 
 
 def verdict(cost: float, twin: float, variance: float) -> tuple[float, bool, bool]:
@@ -48,23 +55,33 @@ def _close(value: Any, expected: float) -> bool:
     return is_number(value) and abs(value - expected) <= ROUNDING * max(abs(expected), 1e-300)
 
 
-def check(summary: dict, cameras: list[dict], stages: list) -> None:
-    """Refuse a depth-reversal record that is not its verdict's (module docstring)."""
+def check(summary: dict, cameras: list[dict], stages: list, current_form: bool = False) -> None:
+    """Refuse a depth-reversal record that is not its verdict's (module docstring). ``current_form``:
+    the document's hash is in the form every result since the check is written in, so a missing
+    record is one removed, unless fewer than two cameras are posed or a stage shows a stop."""
     figures, poses = summary.get("depth_reversal"), summary.get("poses_determined")
     registered = [c for c in cameras if c.get("registered") is True]
     if any(c.get("mirror_rotation_deg") is not None for c in cameras if c.get("registered") is not True):
         raise Invalid("returned", "a camera not registered states a mirror_rotation_deg")
     if figures is None:  # a result from before the check: nothing stated of it
+        posed = sum(1 for c in registered if c.get("R") is not None)
+        if current_form and posed >= 2 and not _stopped(stages):
+            raise Invalid("returned", "summary/depth_reversal is missing: a result in the current form states the "
+                                      "depth-reversal check's record whenever two cameras are posed, unless a stage "
+                                      "shows the stop that prevented it")
         if poses is not None or any(c.get("mirror_rotation_deg") is not None for c in registered):
             raise Invalid("returned", "summary/poses_determined or a camera's mirror_rotation_deg is stated without "
                                       "summary/depth_reversal")
         return
     if not isinstance(figures, dict) or figures.get("checked") not in (True, False):
         raise Invalid("returned", "summary/depth_reversal must be an object saying whether the check ran (checked)")
+    extra = sorted(str(name) for name in set(figures) - (MEMBERS if figures["checked"] else NOT_CHECKED_MEMBERS))
+    if extra:
+        raise Invalid("returned", f"summary/depth_reversal has no member {extra[0]!r:.40}")
     if figures["checked"] is False:
         why = NOT_CHECKED.get(figures.get("reason"))
         shown = {"registered": len(registered) < 2,
-                 "stopped": any(isinstance(s, dict) and s.get("status") in ("cancelled", "time_limit") for s in stages),
+                 "stopped": _stopped(stages),
                  "not_adjusted": any(isinstance(s, dict) and s.get("name") == "bundle_adjustment"
                                      and s.get("status") == "skipped" for s in stages)}.get(why, False)
         if not shown or poses is not None or any(c.get("mirror_rotation_deg") is not None for c in registered):
@@ -115,6 +132,10 @@ def check(summary: dict, cameras: list[dict], stages: list) -> None:
         if not (stated is None if angle is None else _near(stated, angle)):
             raise Invalid("returned", f"cameras/{camera.get('view')}/mirror_rotation_deg {stated!r:.40} is not the "
                                       f"twin's angle for its view ({angle!r})")
+
+
+def _stopped(stages: list) -> bool:
+    return any(isinstance(s, dict) and s.get("status") in ("cancelled", "time_limit") for s in stages)
 
 
 def _near(value: Any, angle: float) -> bool:
