@@ -31,10 +31,13 @@ def raw_pack(z: np.ndarray) -> str:
     return base64.b64encode(np.asarray(z, dtype="<f8").tobytes()).decode("ascii")
 
 
-def rehash(document: dict) -> dict:
+def rehash(document: dict, earlier: bool = False) -> dict:
+    """The document's hashes made again, in its kind's current form (``earlier``: the earlier
+    form, as a stored document from before the hash covered more options)."""
     from geocert.kinds import get_kind
 
-    names = getattr(get_kind(document["kind"]).verification, "claim_options", None)
+    verification = get_kind(document["kind"]).verification
+    names = getattr(verification, "earlier_claim_options" if earlier else "claim_options", None)
     document["data_sha256"] = data_hash(document["kind"], document["data"])
     document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names)
     return document

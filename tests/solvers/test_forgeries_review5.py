@@ -473,7 +473,7 @@ def _with_cameras(count: int) -> dict:
     summary.update(views=count, views_registered=count, cameras_certified_fraction=4 / count, doubtful=True)
     summary["warnings"].append({"code": "reconstruction_doubtful", "detail": "most bounded cameras are not certified"})
     next(stage for stage in result["stages"] if stage["name"] == "cameras")["cameras"] = count
-    rehash(result["certificate"])
+    rehash(result["certificate"], earlier=True)  # the stored form: it predates the depth-reversal record
     return result
 
 
