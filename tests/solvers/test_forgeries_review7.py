@@ -300,20 +300,32 @@ class TestProvenIntervalBelowTheNoise:
     def test_a_proven_interval_below_the_stated_level_is_refused(self, far_two_view_track):
         """The far track's interval proven at its own level (what the solver stated before), its
         determinacy's cost_increase kept at the pooled level: refused."""
-        from geocert.solvers.fractional.convexity_path import track_sublevel
-        from geocert.solvers.fractional.determinacy import proven_track
-
-        truth, result = far_two_view_track
-        forged = copy.deepcopy(result)
-        track, claim = forged["tracks"][-1], forged["certificate"]["items"][-1]
-        data = forged["certificate"]["data"]
-        cameras = np.asarray(data["cameras"], dtype=float)[data["tracks"][-1]["views"]]
-        own = track_sublevel(cameras, np.asarray(data["tracks"][-1]["points"], dtype=float), track["point"],
-                             track["cost"], track["lower_bound"], "L2L2")
-        assert own is not None and own["cost_increase"] < 1e-3 * track["determinacy"]["cost_increase"]
-        claim["proof"]["sublevel"] = own
-        track["determinacy"].update(proven=True, proven_intervals=proven_track(own))
+        result = far_two_view_track[1]
+        forged = proven_at_own_level(result)
+        own = forged["certificate"]["items"][-1]["proof"]["sublevel"]
+        assert own["cost_increase"] < 1e-3 * result["tracks"][-1]["determinacy"]["cost_increase"]
         assert not _valid(forged)
+
+
+def proven_at_own_level(result: dict, restate_level: bool = False) -> dict:
+    """``result`` (far_two_view_track's) with its far track's interval proven at the track's own
+    level (convexity_path.track_sublevel) and stated proven; ``restate_level``: its determinacy's
+    cost_increase restated at that level too (its level sentence, naming the pooled variance, kept)."""
+    from geocert.solvers.fractional.convexity_path import track_sublevel
+    from geocert.solvers.fractional.determinacy import proven_track
+
+    forged = copy.deepcopy(result)
+    track, claim = forged["tracks"][-1], forged["certificate"]["items"][-1]
+    data = forged["certificate"]["data"]
+    cameras = np.asarray(data["cameras"], dtype=float)[data["tracks"][-1]["views"]]
+    own = track_sublevel(cameras, np.asarray(data["tracks"][-1]["points"], dtype=float), track["point"],
+                         track["cost"], track["lower_bound"], "L2L2")
+    assert own is not None
+    claim["proof"]["sublevel"] = own
+    track["determinacy"].update(proven=True, proven_intervals=proven_track(own))
+    if restate_level:
+        track["determinacy"]["cost_increase"] = own["cost_increase"]
+    return forged
 
 
 # --- a job document's members, and its progress's ----------------------------------------------

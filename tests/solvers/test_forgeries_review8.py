@@ -526,20 +526,10 @@ def verify_any_scope(document: dict) -> dict:
 
 def _proven_at_own_level(result: dict) -> dict:
     """``result`` (far_two_view_track's) with its far track's interval proven at the track's own
-    level, as review 7's forgery, and its determinacy's cost_increase restated at that level too
-    (its level sentence, still naming the pooled variance, kept)."""
-    from geocert.solvers.fractional.convexity_path import track_sublevel
-    from geocert.solvers.fractional.determinacy import proven_track
+    level, as review 7's forgery, and its determinacy's cost_increase restated at that level too."""
+    from tests.solvers.test_forgeries_review7 import proven_at_own_level
 
-    forged = copy.deepcopy(result)
-    track, claim = forged["tracks"][-1], forged["certificate"]["items"][-1]
-    data = forged["certificate"]["data"]
-    cameras = np.asarray(data["cameras"], dtype=float)[data["tracks"][-1]["views"]]
-    own = track_sublevel(cameras, np.asarray(data["tracks"][-1]["points"], dtype=float), track["point"],
-                         track["cost"], track["lower_bound"], "L2L2")
-    claim["proof"]["sublevel"] = own
-    track["determinacy"].update(proven=True, proven_intervals=proven_track(own), cost_increase=own["cost_increase"])
-    return forged
+    return proven_at_own_level(result, restate_level=True)
 
 
 class TestPooledLevelRestated:
