@@ -239,13 +239,16 @@ class TriangulationKind:
             "not started: the job's time limit (options.job_time_limit_s, "
             f"{options.job_time_limit_s:g} s) passed before this track started")
         results = triangulate_many(parsed.cameras, tracks, options, callback, deadline=deadline, not_started=not_started)
+        projected = None
         if "full" in (options.detail, options.certificate):  # intervals proven at the level they are read at
-            pooled = determinacy.pooled_for(parsed.cameras, tracks, results)
+            projected = determinacy.projected_tracks(parsed.cameras, tracks, results)
+            pooled = determinacy.pooled_for(parsed.cameras, tracks, results, projected)
             if pooled is not None:
                 raise_sublevels(parsed.cameras, tracks, results, pooled[0], options.norm)
         documents = track_documents(results, options.detail, options.certificate == "full")
         if options.detail == "full":  # the same documents as _document's, for the whole batch at once
-            for document, found in zip(documents, determinacy.tracks_many(parsed.cameras, tracks, results)):
+            for document, found in zip(documents, determinacy.tracks_many(parsed.cameras, tracks, results,
+                                                                          projected)):
                 document["determinacy"] = found
         return documents
 

@@ -87,7 +87,8 @@ def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at
     return out.document()
 
 
-def tracks_many(cameras: np.ndarray, tracks: list, results: list) -> list[dict | None]:
+def tracks_many(cameras: np.ndarray, tracks: list, results: list, projected: tuple | None = None
+                ) -> list[dict | None]:
     """``track`` for many tracks of one scene at once (``cameras`` (N, 3, 4) the scene's, each
     track ``(views, points)``, each result with ``point``, ``at_infinity``, ``cost`` and
     ``lower_bound``): the same documents, the same numbers to rounding. The centres are found once
@@ -97,7 +98,7 @@ def tracks_many(cameras: np.ndarray, tracks: list, results: list) -> list[dict |
     with np.errstate(divide="ignore", invalid="ignore"):
         centres = _centres(cameras)
     out: list[dict | None] = [None] * len(tracks)
-    X, finite, cost, lower, groups, projected = _projected(cameras, tracks, results)
+    X, finite, cost, lower, groups, projected = projected or projected_tracks(cameras, tracks, results)
     proven = sublevels(results)
     for i in np.flatnonzero(~finite).tolist():
         result = results[i]
@@ -119,15 +120,19 @@ def tracks_many(cameras: np.ndarray, tracks: list, results: list) -> list[dict |
     return out
 
 
-def pooled_for(cameras: np.ndarray, tracks: list, results: list) -> tuple[float, int] | None:
-    """The pooled cost increase (pooled_increase) tracks_many gives the same tracks and results."""
-    return _pooled(_projected(np.asarray(cameras, dtype=float), tracks, results)[-1])
+def pooled_for(cameras: np.ndarray, tracks: list, results: list, projected: tuple | None = None
+               ) -> tuple[float, int] | None:
+    """The pooled cost increase (pooled_increase) tracks_many gives the same tracks and results.
+    ``projected``: projected_tracks of them, when the caller has it (tracks_many takes it too)."""
+    return _pooled((projected or projected_tracks(np.asarray(cameras, dtype=float), tracks, results))[-1])
 
 
-def _projected(cameras: np.ndarray, tracks: list, results: list) -> tuple:
+def projected_tracks(cameras: np.ndarray, tracks: list, results: list) -> tuple:
     """The results' points X, whether finite, costs and lower bounds (solutions), the tracks with
     finite points grouped by length, and each group's projections (_project; a group that does
-    not project is left out)."""
+    not project is left out). What pooled_for and tracks_many read: made once, it serves both
+    (the proven intervals' raising between them changes no point)."""
+    cameras = np.asarray(cameras, dtype=float)
     X, finite, cost, lower = solutions(results)  # no object made for the convexity path's columns
     groups: dict[int, list[int]] = {}
     for i in np.flatnonzero(finite).tolist():
