@@ -355,7 +355,10 @@ def _verify_all(document: dict, returned: dict | None, adapter, options: dict, i
             # What else a kind's result returns on the strength of its certificates (e.g. a
             # reconstruction's cameras, against the camera certificate beside its points').
             check_result = getattr(_adapter(document["kind"]), "check_result", None)
-            scoped = check_result(returned, document, lambda other: _verify(other, None)) if check_result else None
+            # The hash's form, as _check_hashes found it (the scope states only the earlier one).
+            current_form = report.scope is not None and "problem_sha256" not in report.scope
+            scoped = check_result(returned, document, lambda other: _verify(other, None),
+                                  current_form=current_form) if check_result else None
             if isinstance(scoped, dict) and report.scope is not None:  # e.g. which labels are tied to the input
                 report.scope.update(scoped)
             tallies["returned"][0] += 1

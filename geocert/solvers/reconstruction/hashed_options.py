@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from geocert.solvers.core.certificates import CLAIM_OPTIONS as EARLIER_CLAIM_OPTIONS, problem_hash
+from geocert.solvers.core.certificates import CLAIM_OPTIONS as EARLIER_CLAIM_OPTIONS
 from geocert.solvers.core.strict import Invalid, number
 from geocert.solvers.reconstruction.camera_claim import MAX_REL_GAP
 
@@ -82,16 +82,6 @@ def check_earlier_form(options: dict) -> str:
     return (f"the earlier form: it covers the kind, the data and {', '.join(EARLIER_CLAIM_OPTIONS)} only, not the "
             f"options these claims also read, which the document states as: {'; '.join(stated)}. Compare them with "
             "your request: a hash of this form does not tell them from values changed after it was written")
-
-
-def in_current_form(certificate: dict) -> bool:
-    """Whether a reconstruction certificate's problem_sha256 covers CLAIM_OPTIONS (the form every
-    result since the depth-reversal check is hashed in), not the earlier form's four."""
-    try:
-        return problem_hash("reconstruction", certificate.get("data"), certificate.get("options") or {},
-                            CLAIM_OPTIONS) == certificate.get("problem_sha256")
-    except (TypeError, ValueError):  # not hashable: the hash check has refused it already
-        return False
 
 
 def check_calibration_options(calibration: dict, options: dict) -> None:

@@ -226,7 +226,7 @@ def _check_summary(result: dict, registered: list[dict]) -> None:
                 raise Invalid("returned", f"stages/{stage['name']}/{name} is {stage[name]!r}, the items give {value!r}")
 
 
-def _check_pipeline_counts(result: dict, rel_gap: float) -> None:
+def _check_pipeline_counts(result: dict, rel_gap: float, current_form: bool) -> None:
     """The summary's counts of what the pipeline was given and set aside (tracks, points_dropped,
     cameras_dropped, observations_removed) and its camera claim: each agrees with the stage that
     records it and with the items (the points' track numbers, the cameras dropped with their
@@ -272,8 +272,7 @@ def _check_pipeline_counts(result: dict, rel_gap: float) -> None:
             c.get("pose_determined") != poses for c in cameras if c.get("registered") is True and "pose_determined" in c):
         raise Invalid("returned", f"summary/poses_determined is {poses!r}: its warning (poses_not_determined) and "
                                   "every registered camera's pose_determined must say the same")
-    depth_reversal_claim.check(summary, cameras, result.get("stages") or [],
-                               hashed_options.in_current_form(result.get("certificate") or {}))
+    depth_reversal_claim.check(summary, cameras, result.get("stages") or [], current_form)
     doubtful = bool((len(bounded) >= 2 and beyond > DOUBTFUL_FRACTION * len(bounded))
                     or (removed and removed > DOUBTFUL_REMOVED * (removed + kept))
                     or (dropped and dropped > DOUBTFUL_DROPPED * (dropped + registered))
@@ -937,9 +936,11 @@ class ReconstructionItems(TrackItems):
               "certified points returned")
         return statement
 
-    def check_result(self, result: dict, certificate: dict, verify: Callable[[dict], object]) -> dict:
+    def check_result(self, result: dict, certificate: dict, verify: Callable[[dict], object],
+                     current_form: bool = False) -> dict:
         """Every check of the result beyond its points' claims; returns what the report's scope
-        adds (whether the labels are tied to the input the data state)."""
+        adds (whether the labels are tied to the input the data state). ``current_form``: the
+        certificate's problem_sha256 covers CLAIM_OPTIONS (verify._check_hashes found it so)."""
         from geocert.solvers.reconstruction.stage_checks import check_stages
 
         registered, views = _check_cameras(result.get("cameras"), certificate.get("data", {}))
@@ -961,7 +962,7 @@ class ReconstructionItems(TrackItems):
         _check_unstarted(result, registered)
         _check_camera_certificate(result, certificate, searched, certified, verify)
         _check_summary(result, registered)
-        _check_pipeline_counts(result, rel_gap)
+        _check_pipeline_counts(result, rel_gap, current_form)
         _check_projective_counts(result)
         check_stages(result)  # (stage_checks: the stage records' shape and counts)
         _check_distortion(result, registered, own)
