@@ -3,8 +3,8 @@ refitted locally, the points held, with its pose alone, then with a principal po
 then with a focal length and principal point of its own. On the real photos measured
 (bench.camera_certification) every camera beyond its tolerance has its pose at its optimum, and
 the camera's K misfits the view: with openMVG's K for Sceaux Castle, each photo wants a principal
-point of its own (one shot's lens, stabilised, is not the next's is a likely reason), and with it
-10 of the 11 fall within the tolerance a camera with it would have. A diagnosis for the camera's
+point of its own (why was not measured), and with it 10 of the 11 fall within the tolerance a
+camera with it would have. A diagnosis for the camera's
 reason and the summary's warning, found locally: not a certificate, and no certified claim rests
 on it."""
 
@@ -28,19 +28,18 @@ def camera_misfit(P: np.ndarray, X: np.ndarray, x: np.ndarray, norm: str, free: 
     excess says the pose is at its optimum on these points; a principal point or focal length of
     its own that removes it says the camera model (the given or shared K) misfits this view. A
     diagnosis found locally, not a certificate: None when P has no camera decomposition."""
-    from scipy.linalg import rq
     from scipy.optimize import least_squares
     from scipy.spatial.transform import Rotation
 
-    K, R = rq(P[:, :3])
-    signs = np.diag(np.sign(np.diag(K)))
-    K, R = K @ signs, signs @ R
-    if not (np.all(np.isfinite(K)) and K[2, 2] != 0 and free > 0):
+    from geocert.solvers.reconstruction.upgrade import decompose
+
+    try:
+        with np.errstate(all="ignore"):
+            K, R, t = decompose(P)
+    except np.linalg.LinAlgError:
         return None
-    t = np.linalg.solve(K, P[:, 3])
-    if np.linalg.det(R) < 0:
-        R, t = -R, -t
-    K = K / K[2, 2]
+    if not (np.all(np.isfinite(K)) and np.all(np.isfinite(t)) and free > 0):
+        return None
     scale = float(np.abs(np.diag(K[:2, :2])).mean())
 
     def project(p, extra):
