@@ -359,44 +359,15 @@ TIE_FOCAL = 1.5
 
 def _reposed_calibration_data(result: dict, focal_factor: float) -> dict:
     """A metric reconstruction of every one of the result's tracks with focal length
-    ``focal_factor`` times the returned cameras': each view's pose and every point fitted (least
-    squares: 36 pose and 48 point parameters against the 192 coordinates of the 96 observations)
-    so that each camera images each point where the returned camera does, as near as that K
-    allows; then written in a projective frame (a seeded 4x4 transform, no image changes)."""
-    from scipy.optimize import least_squares
-    from scipy.spatial.transform import Rotation
+    ``focal_factor`` times the returned cameras' (review 7's reposed_calibration_data): each
+    view's pose and every point fitted (36 pose and 48 point parameters against the 192
+    coordinates of the 96 observations) so that each camera images each point it observes where
+    the returned camera does, as near as that K allows."""
+    from tests.solvers.test_forgeries_review7 import reposed_calibration_data
 
-    cameras, points = result["cameras"], result["points"]
-    K = np.asarray(cameras[0]["K"], dtype=float).copy()
-    K[0, 0] *= focal_factor
-    K[1, 1] *= focal_factor
-
-    def image(P, X):
-        y = P @ np.append(X, 1.0)
-        return y[:2] / y[2]
-
-    def camera(pose):
-        return K @ np.column_stack([Rotation.from_rotvec(pose[:3]).as_matrix(), pose[3:]])
-
-    seen = np.array([(int(view), j) for j, point in enumerate(points) for view, _, _ in point["observations"]])
-    targets = np.array([image(np.asarray(cameras[view]["P"]), np.asarray(points[j]["point"])) for view, j in seen])
-    n = len(cameras)
-
-    def residuals(z):
-        poses, X = z[:6 * n].reshape(-1, 6), z[6 * n:].reshape(-1, 3)
-        Ps = np.array([camera(pose) for pose in poses])
-        y = np.einsum("oij,oj->oi", Ps[seen[:, 0]], np.hstack([X[seen[:, 1]], np.ones((len(seen), 1))]))
-        return (y[:, :2] / y[:, 2:] - targets).ravel()
-
-    start = [v for c in cameras for v in [*Rotation.from_matrix(np.asarray(c["R"])).as_rotvec(), *c["t"]]]
-    start += [v for point in points for v in point["point"]]
-    z = least_squares(residuals, np.array(start), xtol=1e-15, ftol=1e-15, gtol=1e-15).x
-    poses, X = z[:6 * n].reshape(-1, 6), z[6 * n:].reshape(-1, 3)
-    H = np.eye(4) + 0.2 * np.random.default_rng(3).normal(size=(4, 4))
-    data = copy.deepcopy(result["calibration_certificate"]["data"])
-    data["cameras"] = [(camera(pose) @ np.linalg.inv(H)).tolist() for pose in poses]
-    data["points"] = [(H @ np.append(x, 1.0)).tolist() for x in X]
-    return data
+    points = result["points"]
+    seen = [(int(view), j) for j, point in enumerate(points) for view, _, _ in point["observations"]]
+    return reposed_calibration_data(result, focal_factor, list(range(len(points))), seen)[0]
 
 
 @pytest.fixture(scope="module")
