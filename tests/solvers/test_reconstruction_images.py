@@ -170,6 +170,35 @@ class TestSyntheticTracks:
             assert result.stats["features_per_image"][1:] == [0, 0, 0] and result.tracks == []
 
 
+class TestThreads:
+    """Images are read and pairs matched two at a time (features.in_order_threads): the tracks are
+    the same as one at a time, and the results come in the items' order however they finish."""
+
+    def test_tracks_are_those_of_one_thread(self, box, box_tracks, monkeypatch):
+        from geocert.pipelines.reconstruction import features as module
+
+        monkeypatch.setattr(module, "FEATURE_THREADS", 1)
+        alone = tracks_from_images(box[1])
+        assert len(alone.tracks) == len(box_tracks.tracks) > 1000
+        for (views, points), (views2, points2) in zip(alone.tracks, box_tracks.tracks):
+            assert np.array_equal(views, views2) and np.array_equal(points, points2)
+        assert alone.stats["verified_pairs"] == box_tracks.stats["verified_pairs"]
+        assert alone.stats["features_per_image"] == box_tracks.stats["features_per_image"]
+
+    def test_results_in_order_a_stop_a_prefix_a_cancel_none(self):
+        import time as clock
+
+        from geocert.pipelines.reconstruction import features as module
+
+        def slow_first(item):  # the first item finishes last
+            clock.sleep(0.05 if item == 0 else 0.0)
+            return item * 10
+
+        assert module.in_order_threads(slow_first, list(range(6)), lambda k: False) == [0, 10, 20, 30, 40, 50]
+        assert module.in_order_threads(slow_first, list(range(6)), lambda k: k >= 3) == [0, 10, 20]
+        assert module.in_order_threads(slow_first, list(range(6)), lambda k: None if k == 2 else False) is None
+
+
 def _cluttered(image: np.ndarray, seed: int, amplitude: float = 40.0) -> np.ndarray:
     """The image with one-pixel dots of +-amplitude over its lower half, different in every view:
     fine, high-contrast detail no other view repeats (foliage, gravel, sensor and JPEG noise on a

@@ -43,6 +43,7 @@ from __future__ import annotations
 import base64
 import binascii
 import struct
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -535,6 +536,41 @@ def select_keypoints(keypoints, max_features: int) -> list:
     return [keypoints[i] for i in kept]
 
 
+# Images read, and pairs matched, at once: OpenCV's SIFT and RANSAC and numpy's products release the
+# interpreter's lock, so a worker uses two cores on them, as the camera stage does
+# (structure.CAMERA_THREADS). Each item's result is the same as alone (MAGSAC++ seeds its own
+# generator per call), and results are taken in the items' order.
+FEATURE_THREADS = 2
+
+
+def in_order_threads(function, items: list, stop) -> list | None:
+    """``function(item)`` for the items, FEATURE_THREADS at a time (at most the processors), the
+    results in the items' order. ``stop(k)`` is asked, in this thread, before the k-th item starts:
+    True starts no more (the results then end with the items started before: a prefix), None
+    means a cancel (returns None once the items in flight finish)."""
+    import os
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    threads = max(1, min(FEATURE_THREADS, os.cpu_count() or 1))
+    results: list = []
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        running: deque = deque()
+        for k, item in enumerate(items):
+            while len(running) >= threads:
+                results.append(running.popleft().result())
+            asked = stop(k)
+            if asked is None:
+                for future in running:
+                    future.result()
+                return None
+            if asked:
+                break
+            running.append(pool.submit(function, item))
+        results.extend(future.result() for future in running)
+    return results
+
+
 def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None = None,
                        callback=None) -> ImageTracks:
     """Features, verified matches and tracks for grayscale uint8 images (see the module docstring).
@@ -560,20 +596,29 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
         return True
 
     # nfeatures 0: every keypoint detected, then select_keypoints keeps the largest-scale ones
-    sift = cv2.SIFT_create(nfeatures=0, contrastThreshold=options.contrast_threshold,
-                           edgeThreshold=options.edge_threshold)
-    keypoints, descriptors = [], []
-    for k, image in enumerate(images):
-        if asks_to_stop(callback, {"stage": "features", "done": k, "total": len(images)}):
-            return ImageTracks([], sizes, stats, "cancelled")
-        if over_time(f"features read of {k} of {len(images)} images"):
-            break
+    local = threading.local()  # a detector per thread: OpenCV does not promise one is safe to share
+
+    def features(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        sift = getattr(local, "sift", None)
+        if sift is None:
+            sift = local.sift = cv2.SIFT_create(nfeatures=0, contrastThreshold=options.contrast_threshold,
+                                                edgeThreshold=options.edge_threshold)
         if image.ndim == 3:
             image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
         image = np.ascontiguousarray(image, dtype=np.uint8)
         kps, desc = sift.compute(image, select_keypoints(sift.detect(image, None), options.max_features))
-        keypoints.append(np.array([kp.pt for kp in kps], dtype=np.float64).reshape(-1, 2))
-        descriptors.append(desc if desc is not None else np.zeros((0, 128), np.float32))
+        return (np.array([kp.pt for kp in kps], dtype=np.float64).reshape(-1, 2),
+                desc if desc is not None else np.zeros((0, 128), np.float32))
+
+    def features_stop(k: int) -> bool | None:
+        if asks_to_stop(callback, {"stage": "features", "done": k, "total": len(images)}):
+            return None  # cancelled
+        return over_time(f"features read of {k} of {len(images)} images")
+
+    found = in_order_threads(features, images, features_stop)
+    if found is None:
+        return ImageTracks([], sizes, stats, "cancelled")
+    keypoints, descriptors = [k for k, _ in found], [d for _, d in found]
     stats["features_per_image"] = [len(k) for k in keypoints] + [0] * (len(images) - len(keypoints))
     timing["features"] = time.perf_counter() - start
 
@@ -585,12 +630,17 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
     stats["pairs_chosen_by"] = rule
     pair_matches: dict[tuple[int, int], np.ndarray] = {}
     verified: list[dict] = []
-    for k, (i, j) in enumerate(pairs):
+
+    def matches_stop(k: int) -> bool | None:
         if asks_to_stop(callback, {"stage": "matches", "done": k, "total": len(pairs)}):
-            return ImageTracks([], sizes, stats, "cancelled")
-        if over_time(f"{k} of {len(pairs)} image pairs matched"):
-            break
-        found = match_pair(keypoints[i], descriptors[i], keypoints[j], descriptors[j], options)
+            return None  # cancelled
+        return over_time(f"{k} of {len(pairs)} image pairs matched")
+
+    matched = in_order_threads(lambda pair: match_pair(keypoints[pair[0]], descriptors[pair[0]], keypoints[pair[1]],
+                                                       descriptors[pair[1]], options), pairs, matches_stop)
+    if matched is None:
+        return ImageTracks([], sizes, stats, "cancelled")
+    for (i, j), found in zip(pairs, matched):
         if found is not None:
             pair_matches[(i, j)], figures = found
             verified.append({"views": [i, j], **figures})
