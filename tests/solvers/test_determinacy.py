@@ -211,10 +211,10 @@ class TestStereoLines:
             truths = {"rotation_angle_deg": angle, "t_x": scene.t[0], "t_y": scene.t[1], "t_z": scene.t[2]}
             inside += sum(interval(document, k)["lower"] <= v <= interval(document, k)["upper"]
                           for k, v in truths.items())
-        # 27 of 32 measured: the refined estimate is not quite the unweighted optimum the curvature
-        # is taken at (Huber weights, 12 iterations at most), so these cover less than 3 standard
-        # errors should
-        assert inside >= 24
+        # 31 of 32 measured (28 with the refinement's lines in Euclidean coordinates, which stopped
+        # further short of the optimum): the refined estimate is not quite the unweighted optimum
+        # the curvature is taken at (Huber weights, 8 iterations at most)
+        assert inside >= 29
 
     def test_parallel_lines_are_flagged(self):
         rng = np.random.default_rng(5)

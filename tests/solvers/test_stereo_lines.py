@@ -14,7 +14,7 @@ from geocert.kinds.stereo_lines import KIND
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.lines import align, incremental, linear, polynomial, scenes
 from geocert.solvers.lines import refine as refinement
-from geocert.solvers.lines.geometry import line_set, log_rotation, rodrigues, rotation_error_deg, triangulated_lines
+from geocert.solvers.lines.geometry import line_set, log_rotation, rodrigues, rotation_error_deg
 from geocert.solvers.lines import matching
 from geocert.solvers.lines.matching import MatchingOptions, four_view_matches
 from geocert.solvers.lines.pipeline import StereoLinesOptions, estimate_motion, estimate_pair
@@ -144,30 +144,61 @@ class TestRansac:
 
     def test_the_refinements_jacobian_is_the_residuals_derivative(self):
         """The exact Jacobian (motion: a rotation vector on the left, then t; each line: its two
-        points moved along the basis normal to it) against central differences of the residuals,
-        away from the optimum (a wrong Jacobian would still converge, slower or elsewhere)."""
+        points moved across the line in the first image and in their inverse depths) against
+        central differences of the residuals, away from the optimum (a wrong Jacobian would still
+        converge, slower or elsewhere)."""
         scene = scenes.pair_scene(np.random.default_rng(31), 20, noise_px=0.5)
         lines = line_set(scene.rig, scene.segments)
         R, t = rodrigues(np.array([0.01, -0.02, 0.015])) @ scene.R, scene.t + 0.01
         problem = refinement._Problem(lines)
-        P, Q = refinement._points_on_lines(lines, triangulated_lines(lines, R, t))
-        basis = refinement._normal_basis(P, Q)
-        r, Jm, Jl = problem.jacobian(R, t, P, Q, basis)
+        P, Q = refinement._start(lines, R, t)
+        lateral = refinement._lateral(P, Q)
+        r, Jm, Jl = problem.jacobian(R, t, P, Q, lateral)
         np.testing.assert_allclose(r, problem.residuals(R.copy(), t.copy(), P.copy(), Q.copy()), atol=1e-12)
         h = 1e-6
 
         def moved(k, sign):
             step = np.zeros(10)
             step[k] = sign * h
-            return problem.residuals(rodrigues(step[:3]) @ R, t + step[3:6],
-                                     P + step[6] * basis[:, 0] + step[7] * basis[:, 1],
-                                     Q + step[8] * basis[:, 0] + step[9] * basis[:, 1])
+            P1, Q1 = P.copy(), Q.copy()
+            P1[:, :3] += step[6] * lateral
+            P1[:, 3] += step[7]
+            Q1[:, :3] += step[8] * lateral
+            Q1[:, 3] += step[9]
+            return problem.residuals(rodrigues(step[:3]) @ R, t + step[3:6], P1, Q1)
 
         numeric = np.stack([(moved(k, 1) - moved(k, -1)) / (2 * h) for k in range(10)], axis=2)
         exact = np.concatenate([Jm, Jl], axis=2)
         for columns in (slice(0, 3), slice(3, 6), slice(6, 10)):
             scale = np.abs(numeric[:, :, columns]).max()
             np.testing.assert_allclose(exact[:, :, columns], numeric[:, :, columns], atol=1e-6 * scale)
+
+    def test_the_refinement_reaches_the_motion_on_a_sequence(self):
+        """bench/stereo_lines.py's section 4 sequence end to end (100 lines a frame, 0.5 px, 1
+        degree and 3 cm a frame): the refined motions' 90th percentiles of error are within 0.2
+        degrees and 2 cm (0.135 and 1.35 measured; with the lines' points moved in Euclidean
+        coordinates, 12 iterations, 0.275 and 2.46: some pairs stopped short of the optimum or in a
+        worse one)."""
+        rig, poses, frames = scenes.sequence(np.random.default_rng(5), 41, 100, noise_px=0.5, degrees=1.0,
+                                             metres=0.03)
+        rotation, translation = [], []
+        for k in range(40):
+            estimate, _, _ = estimate_pair(rig, frames[k], frames[k + 1], None, StereoLinesOptions())
+            assert estimate.status == "estimate", estimate.reason
+            R = poses[k + 1][0] @ poses[k][0].T
+            rotation.append(rotation_error_deg(estimate.R, R))
+            translation.append(np.linalg.norm(estimate.t - (poses[k + 1][1] - R @ poses[k][1])))
+        assert np.percentile(rotation, 90) <= 0.2, np.percentile(rotation, 90)
+        assert np.percentile(translation, 90) <= 0.02, np.percentile(translation, 90)
+
+    def test_the_refinements_lines_start_in_front_of_the_rig(self):
+        """Points the algebraic triangulation puts behind the cameras or far off start at the
+        scene's depth on their ray (from there a point would pass through infinity, where its
+        projected line turns over), and their image in the first view is kept."""
+        P = np.array([[0.5, 0.2, 4.0], [1.0, -2.0, -8.0], [0.1, 0.1, 500.0], [0.3, 0.0, 0.01]])
+        X = refinement._inverse_depth(P, depth=4.0)
+        np.testing.assert_allclose(X[:, :3], P / P[:, 2:3])
+        np.testing.assert_allclose(X[:, 3], [0.25, 0.25, 0.25, 0.25])
 
 
 class TestMatching:

@@ -14,8 +14,8 @@ import math
 import numpy as np
 
 from geocert.solvers.core.determinacy import information_intervals
-from geocert.solvers.lines.geometry import LineSet, segment_lines, triangulated_lines
-from geocert.solvers.lines.refine import _normal_basis, _points_on_lines, _Problem
+from geocert.solvers.lines.geometry import LineSet, segment_lines
+from geocert.solvers.lines.refine import _lateral, _Problem, _start
 
 VANISHING = 0.1
 
@@ -25,9 +25,8 @@ def motion(lines: LineSet, R: np.ndarray, t: np.ndarray) -> dict | None:
     if n < 2:
         return None
     problem = _Problem(lines)
-    P, Q = _points_on_lines(lines, triangulated_lines(lines, R, t))
-    basis = _normal_basis(P, Q)
-    r0, Jm, Jl = problem.jacobian(R, t, P, Q, basis)  # as the refinement builds it: (N, 8), (N, 8, 6), (N, 8, 4)
+    P, Q = _start(lines, R, t)
+    r0, Jm, Jl = problem.jacobian(R, t, P, Q, _lateral(P, Q))  # as the refinement builds it: (N, 8), (N, 8, 6), (N, 8, 4)
     U = Jl.transpose(0, 2, 1) @ Jl + 1e-12 * np.eye(4)
     W = Jm.transpose(0, 2, 1) @ Jl
     V = Jm.reshape(-1, 6).T @ Jm.reshape(-1, 6)
