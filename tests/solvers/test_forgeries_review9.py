@@ -1,0 +1,109 @@
+"""A ninth hostile review of the verifier (issue 33), aimed at what the eighth review's round
+added: the resection's proven centre intervals (fractional.resection_sublevel), the triangulation's
+intervals raised to the pooled level, the depth-reversal record, camera_misfit's bound_reason, the
+maps' time_limit statuses, and floating-point hygiene wherever a document-chosen number scales a
+bound. Each class is built from genuine solver output (geocert.batch.solve_job) or a genuine
+stored certificate (tests/data/certificates); each test of the sound outcome xfails (strict) while
+the verifier accepts the forgery, and beside it the genuine document it starts from verifies. Each
+class's docstring says what is accepted, how false it is (measured), and a suggested fix."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from tests.solvers.test_forgeries_review5 import XFAIL, _valid
+
+# --- a resection's proven interval at a level the document chooses ------------------------------
+
+# The forged levels (squared pixels): 0 (the cameras costing no more than the returned one) and
+# a thousandth of a squared pixel, each about 10^4 times or more below the camera's own level.
+FORGED_LEVELS = (0.0, 1e-3)
+
+
+@pytest.fixture(scope="module")
+def proven_resection() -> tuple[np.ndarray, dict]:
+    """(the true camera centre, the genuine full result of one 25-point L2L2 resection with 1 px
+    of noise, certified with a proven interval of its centre)."""
+    from geocert.batch import solve_job
+    from tests.solvers.test_resection_proven import resection_job
+    from tests.support import seed
+
+    rng = np.random.default_rng(seed("resection proven", "forged"))
+    job, (truth,) = resection_job(rng, 25, 1.0)
+    result = solve_job(job)
+    item = result["maps"][0]
+    assert item["certified"] and item["determinacy"]["proven"] is True
+    return truth, result
+
+
+def _map_proven_at(result: dict, level: float) -> dict:
+    """``result`` with its map's proven interval proven again, genuinely (resection_sublevel: the
+    enclosure test and the rounds pass), at cost increase ``level``: the proof's sublevel, the
+    determinacy's proven_intervals and the determinacy's own cost_increase all restated."""
+    from geocert.solvers.fractional.determinacy import proven_map
+    from geocert.solvers.fractional.resection_sublevel import resection_sublevel
+
+    forged = copy.deepcopy(result)
+    data = forged["certificate"]["data"]["maps"][0]
+    claim = forged["certificate"]["items"][0]
+    sublevel = resection_sublevel(np.asarray(data["source"], dtype=float), np.asarray(data["target"], dtype=float),
+                                  np.asarray(claim["matrix"], dtype=float), level)
+    assert sublevel is not None
+    claim["proof"]["sublevel"] = sublevel
+    determinacy = forged["maps"][0]["determinacy"]
+    determinacy["cost_increase"] = level
+    determinacy["proven_intervals"] = proven_map(sublevel)
+    return forged
+
+
+def _own_level(result: dict) -> float:
+    """The level the map's interval is documented at (docs/certificate.md: 3^2 times its cost
+    over 2k - 11, at least its gap), from its claim."""
+    from geocert.solvers.core.determinacy import cost_increase
+
+    claim = result["certificate"]["items"][0]
+    points = len(result["certificate"]["data"]["maps"][0]["source"])
+    return cost_increase(claim["cost"], 2 * points - 11, claim["gap"])
+
+
+def _holds(document: dict, truth: np.ndarray) -> np.ndarray:
+    found = document["proven_intervals"]["intervals"]
+    return np.array([i["lower"] <= x <= i["upper"] for i, x in zip(found, truth)])
+
+
+class TestResectionProvenAtAChosenLevel:
+    """A resection's proven interval is refused below its determinacy's cost_increase
+    (items._check_proven), but that cost_increase is the document's own number: nothing ties it
+    to the map's claim, as review 8 tied a track's (TrackItems.check_returned: at least the
+    track's own level, 3^2 times its cost over 2n - 3, from its claim, under every norm). A
+    25-point camera with 1 px of noise: its genuine interval, at its own level 12.17 px^2 (3^2 x
+    52.7 / 39), holds the true centre; proven again genuinely at cost increase 0 (or 1e-3), the
+    determinacy's cost_increase restated to match, it verifies "proven": true, each interval
+    about 1/17 of the genuine width (x [-0.679, -0.665] against [-0.785, -0.559]), and the true
+    centre (-0.634, -0.886, -7.399) lies outside all three (x by 0.031, y by 0.022, z by 0.12,
+    2 to 4 times the forged intervals' widths beyond them). Suggested fix: as for a track, a
+    map's proven interval's level is at least its own, recomputed from its claim's cost and gap
+    and its number of points (determinacy.prove_map's cost_increase), whatever the
+    determinacy's cost_increase says (and that cost_increase is then checked against it too)."""
+
+    def test_the_genuine_interval_holds_the_truth(self, proven_resection):
+        truth, result = proven_resection
+        assert _valid(result)
+        determinacy = result["maps"][0]["determinacy"]
+        assert _holds(determinacy, truth).all()
+        assert determinacy["proven_intervals"]["cost_increase"] == pytest.approx(_own_level(result), rel=1e-12)
+
+    @pytest.mark.parametrize("level", FORGED_LEVELS)
+    def test_the_forgery_is_false(self, proven_resection, level):
+        truth, result = proven_resection
+        forged = _map_proven_at(result, level)
+        assert level < 1e-3 * _own_level(result)  # the documented level: 12.17
+        assert not _holds(forged["maps"][0]["determinacy"], truth).any()  # the true centre outside all three
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("level", FORGED_LEVELS)
+    def test_a_map_proven_below_its_own_level_is_refused(self, proven_resection, level):
+        assert not _valid(_map_proven_at(proven_resection[1], level))
