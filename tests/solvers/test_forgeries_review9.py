@@ -84,7 +84,7 @@ class TestResectionProvenAtAChosenLevel:
     determinacy's cost_increase restated to match, it verifies "proven": true, each interval
     about 1/17 of the genuine width (x [-0.679, -0.665] against [-0.785, -0.559]), and the true
     centre (-0.634, -0.886, -7.399) lies outside all three (x by 0.031, y by 0.022, z by 0.12,
-    2 to 4 times the forged intervals' widths beyond them). Suggested fix: as for a track, a
+    1.8 to 2.3 times the forged intervals' widths beyond them). Suggested fix: as for a track, a
     map's proven interval's level is at least its own, recomputed from its claim's cost and gap
     and its number of points (determinacy.prove_map's cost_increase), whatever the
     determinacy's cost_increase says (and that cost_increase is then checked against it too)."""
@@ -107,3 +107,113 @@ class TestResectionProvenAtAChosenLevel:
     @pytest.mark.parametrize("level", FORGED_LEVELS)
     def test_a_map_proven_below_its_own_level_is_refused(self, proven_resection, level):
         assert not _valid(_map_proven_at(proven_resection[1], level))
+
+
+# --- options the solver refuses, in a certificate ------------------------------------------------
+
+# Run-control options a stored resection certificate states (max_nodes 5000, time_limit_s 60),
+# changed to values the solver refuses on input (geocert.batch.solve_job: InputError).
+REFUSED_OPTIONS = [("max_nodes", -5000), ("max_nodes", 0), ("max_nodes", True), ("time_limit_s", -60.0),
+                   ("time_limit_s", True), ("time_limit_s", 1e300), ("job_time_limit_s", -600.0)]
+
+
+def _with_option(document: dict, name: str, value) -> dict:
+    forged = copy.deepcopy(document)
+    forged["certificate"]["options"][name] = value
+    return forged
+
+
+class TestOptionsTheSolverRefuses:
+    """docs/certificate.md: "options the solver would refuse ... are invalid (check options)", and
+    "every number in a document must be a JSON number: ... not a boolean". The verifier reads only
+    the options a claim depends on (verify.checked_options: norm, gaps, max_residual) and hashes
+    only those (claim_options), so the run-control options are neither checked nor hashed: the
+    stored L2L2 resection verifies, unchanged but for its certificate's options, with max_nodes
+    -5000, 0 or true, time_limit_s -60, true or 1e300, or job_time_limit_s -600, each of which
+    geocert.batch.solve_job refuses on input ("options/max_nodes: must be a finite number >= 1
+    and <= 1e+06", "must be a number", ...). The document then states options no solve ran under
+    (a certified item of 4 leaves beside a node limit of 0, a limit of -60 s), and no re-hash is
+    needed to do it. Suggested fix: validate every option with the kind's own options class, as
+    the solver does (checked_options reading the whole options object), and refuse a boolean
+    wherever a number stands; or, if run-control options are to stay informational, list them
+    as such in docs/certificate.md and check their types."""
+
+    def test_the_genuine_document_verifies(self):
+        from tests.solvers.test_forgeries import stored
+
+        assert _valid(stored("resection_l2l2"))
+
+    @pytest.mark.parametrize("name,value", REFUSED_OPTIONS)
+    def test_the_forgery_is_false(self, name, value):
+        from geocert.batch import solve_job
+        from geocert.solvers.core.geometry import InputError
+        from tests.solvers.test_forgeries import stored
+
+        certificate = stored("resection_l2l2")["certificate"]
+        with pytest.raises(InputError, match=f"options/{name}"):
+            solve_job({"kind": "resection", "data": certificate["data"],
+                       "options": {"certificate": "full", name: value}})
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("name,value", REFUSED_OPTIONS)
+    def test_options_the_solver_refuses_are_refused(self, name, value):
+        from tests.solvers.test_forgeries import stored
+
+        assert not _valid(_with_option(stored("resection_l2l2"), name, value))
+
+
+# --- a map's summary root_region, not the proof's -------------------------------------------------
+
+
+def _root_ratios(item: dict) -> np.ndarray:
+    """What the summary's root_region says of the map returned: (F l) / (d . l), l its last row."""
+    region = item["certificate"]["root_region"]
+    last = np.asarray(item["matrix"], dtype=float)[-1]
+    return np.asarray(region["functionals"]) @ last / (np.asarray(region["denominator"]) @ last)
+
+
+def _root_region_moved(document: dict) -> dict:
+    """``document`` with its first map's summary root_region moved by its own width, each range
+    [lower, upper] to [upper, 2 upper - lower]: its words ("lower <= (F l) / (d . l) <= upper for
+    the last row l of every map in the scope") kept."""
+    forged = copy.deepcopy(document)
+    region = forged["maps"][0]["certificate"]["root_region"]
+    lower, upper = np.asarray(region["lower"]), np.asarray(region["upper"])
+    region["lower"], region["upper"] = upper.tolist(), (2 * upper - lower).tolist()
+    return forged
+
+
+class TestMapRootRegionNotTheProofs:
+    """Issue 33's fix of its class 5 made a bilinear frame's summary root_region the proof's (the scope); a map's
+    (resection, homography) is still read as informational (docs/certificate.md), yet it states a
+    fact in words: "lower <= (F l) / (d . l) <= upper for the last row l of every map in the
+    scope". Moved by its own width (each range [lower, upper] to [upper, 2 upper - lower]) on the
+    stored L2L2 resection and homography, it verifies, and the map returned, which is in the scope,
+    breaks it (resection: ratios 0.1451, 0.2459, 0.1255 against forged lower ends 0.1485, 0.2599,
+    0.1341). Any numbers verify (1e300, true, a sign flipped). Suggested fix: as for a bilinear
+    frame, the summary's root_region is the proof's root box in the caller's terms (recomputed
+    from proof.root and the chart), or it carries no statement the verifier does not check."""
+
+    @pytest.mark.parametrize("name", ["resection_l2l2", "homography2_l2l2"])
+    def test_the_genuine_region_holds_the_returned_map(self, name):
+        from tests.solvers.test_forgeries import stored
+
+        document = stored(name)
+        assert _valid(document)
+        region, ratios = document["maps"][0]["certificate"]["root_region"], _root_ratios(document["maps"][0])
+        assert np.all(np.asarray(region["lower"]) <= ratios) and np.all(ratios <= np.asarray(region["upper"]))
+
+    @pytest.mark.parametrize("name", ["resection_l2l2", "homography2_l2l2"])
+    def test_the_forgery_is_false(self, name):
+        from tests.solvers.test_forgeries import stored
+
+        forged = _root_region_moved(stored(name))
+        region = forged["maps"][0]["certificate"]["root_region"]
+        assert np.all(_root_ratios(forged["maps"][0]) < np.asarray(region["lower"]))  # the returned map outside
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("name", ["resection_l2l2", "homography2_l2l2"])
+    def test_a_root_region_not_the_proofs_is_refused(self, name):
+        from tests.solvers.test_forgeries import stored
+
+        assert not _valid(_root_region_moved(stored(name)))
