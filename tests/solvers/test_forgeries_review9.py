@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from tests.solvers.test_forgeries_review5 import XFAIL, _valid
+from tests.solvers.test_forgeries_review7 import ambiguous_rig  # noqa: F401 (a fixture: the nearly affine turntable)
 
 # --- a resection's proven interval at a level the document chooses ------------------------------
 
@@ -217,3 +218,66 @@ class TestMapRootRegionNotTheProofs:
         from tests.solvers.test_forgeries import stored
 
         assert not _valid(_root_region_moved(stored(name)))
+
+
+# --- the depth-reversal record's figures beside the verdict ---------------------------------------
+
+# Each forged figure of summary.depth_reversal (the nearly affine turntable's record), against what
+# the result shows: the returned rig fits 46 observations (summary.observations, the points'
+# observations), its shared focal length is 15071.13 px (every camera's K), the projective stage
+# read 240 observations. The first three say the returned rig fits everything at the twin's focal
+# length; the rest are numbers no pipeline writes (a negative count, a boolean, a subnormal focal).
+RECORD_FORGERIES = [{"observations_fitting": 240, "mirror_observations_fitting": 46, "focal_px": 45697.98646526578},
+                    {"observations": -1}, {"observations_fitting": True}, {"focal_px": 5e-324},
+                    {"mirror_focal_px": -1.0}, {"model": 7}, {"returned_refitted": 0.5}]
+
+
+def _record_restated(result: dict, changes: dict) -> dict:
+    forged = copy.deepcopy(result)
+    forged["summary"]["depth_reversal"].update(changes)
+    return forged
+
+
+class TestDepthReversalFiguresUnread:
+    """depth_reversal_claim.check recomputes the record's verdict from its two costs and noise and
+    its angles from the returned rotations, and docs/certificate.md lists what stays taken as
+    stated: "the two costs and the noise". The record's other figures are read by no check:
+    observations, observations_fitting, mirror_observations_fitting, focal_px, mirror_focal_px,
+    model, returned_refitted. On the nearly affine turntable (review 7's fixture: poses not
+    determined, the returned rig fitting 46 of the 240 observations and its twin 147, focal
+    lengths 15071 px against 45698 px) the record verifies restated to say the returned rig fits
+    all 240 observations at the twin's focal length and the twin only 46, and equally with a count
+    of -1 or true, a focal length of 5e-324 or -1, a model 7 or returned_refitted 0.5, none of
+    which the pipeline writes (ambiguity.check). What is false is measured from the result itself:
+    the returned rig's observations (summary.observations) are 46, its focal length (each camera's
+    K) 15071.13 px. Suggested fix: check each figure the result shows (observations_fitting and
+    focal_px against the returned rig's, or the twin's where adopted; observations against the
+    projective stage's count) and the types and ranges of the rest (counts non-negative integers,
+    focal lengths positive, model one of bundle.MODELS, returned_refitted a boolean), or
+    list them in docs/certificate.md as taken as stated."""
+
+    def test_the_genuine_record_is_the_results(self, ambiguous_rig):  # noqa: F811
+        result = ambiguous_rig[1]
+        assert _valid(result)
+        record = result["summary"]["depth_reversal"]
+        assert record["observations_fitting"] == result["summary"]["observations"] == 46
+        assert all(c["K"][0][0] == record["focal_px"] for c in result["cameras"] if c["registered"])
+
+    @pytest.mark.parametrize("changes", RECORD_FORGERIES)
+    def test_the_forgery_is_false(self, ambiguous_rig, changes):  # noqa: F811
+        from geocert.solvers.reconstruction.bundle import MODELS
+
+        result = ambiguous_rig[1]
+        record = _record_restated(result, changes)["summary"]["depth_reversal"]
+        shown = (record["observations_fitting"] == result["summary"]["observations"]
+                 and record["focal_px"] == result["cameras"][2]["K"][0][0]
+                 and type(record["observations"]) is int and record["observations"] >= 0
+                 and type(record["observations_fitting"]) is int
+                 and record["mirror_focal_px"] > 0 and record["model"] in MODELS
+                 and type(record["returned_refitted"]) is bool)
+        assert not shown
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("changes", RECORD_FORGERIES)
+    def test_a_record_not_the_results_is_refused(self, ambiguous_rig, changes):  # noqa: F811
+        assert not _valid(_record_restated(ambiguous_rig[1], changes))
