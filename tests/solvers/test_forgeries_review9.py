@@ -281,3 +281,71 @@ class TestDepthReversalFiguresUnread:
     @pytest.mark.parametrize("changes", RECORD_FORGERIES)
     def test_a_record_not_the_results_is_refused(self, ambiguous_rig, changes):  # noqa: F811
         assert not _valid(_record_restated(ambiguous_rig[1], changes))
+
+
+# --- informational fields not of their type -------------------------------------------------------
+
+
+def _set(document: dict, path: tuple, value) -> dict:
+    forged = copy.deepcopy(document)
+    target = forged
+    for key in path[:-1]:
+        target = target[key]
+    target[path[-1]] = value
+    return forged
+
+
+# Fields of the stored L2L2 resection's result that no check reads, each given a value not of its
+# type: a boolean where a number stands (docs/certificate.md: "not a boolean"), a number where a
+# list stands (the result model, kinds.maps.MapsResult, refuses these two).
+MISTYPED = [(("maps", 0, "determinacy", "redundancy"), True), (("maps", 0, "determinacy", "cost_increase"), True),
+            (("maps", 0, "determinacy", "intervals", 0, "lower"), True),
+            (("maps", 0, "certificate", "root_region", "lower", 0), True),
+            (("maps", 0, "certificate", "root_region", "reference_point"), -1.5), (("stats", "solve_s"), True),
+            (("maps", 0, "determinacy", "intervals"), True), (("maps", 0, "determinacy", "warnings"), 1e300)]
+
+
+class TestInformationalFieldsNotOfTheirType:
+    """docs/certificate.md (issue 33's class 8): fields no check reads are informational, "and each
+    must be null or of its type (a finite number, an integer, a string)"; "every number in a
+    document must be a JSON number: ... not a boolean". Only an item's nodes, elapsed_s and reason
+    and a summary's scope, note, order, moment_rank and eigenvalue_ratio are typed
+    (verify._check_item_notes, SUMMARY_NOTES): the stored L2L2 resection verifies with its
+    determinacy's redundancy, cost_increase or an interval's lower end true, a summary
+    root_region's bound true or its reference_point -1.5 (a point index), stats.solve_s true, its
+    determinacy's intervals true or its warnings 1e300 (no list: the service's own result model
+    refuses these two). JSON readers read true as 1 in arithmetic (Python, JavaScript): the
+    redundancy 3 (2 x 7 - 11) reads as 1. The same holds of a track's determinacy (each member but
+    proven and proven_intervals takes any value). Suggested fix: read each informational field
+    with its type, as _check_item_notes does (the determinacy by the kind's result model, strictly:
+    no boolean for a number), or say in docs/certificate.md which fields are not typed."""
+
+    def test_the_genuine_fields_are_of_their_type(self):
+        from tests.solvers.test_forgeries import stored
+
+        document = stored("resection_l2l2")
+        assert _valid(document)
+        for path, _ in MISTYPED:
+            value = document
+            for key in path:
+                value = value[key]
+            assert not isinstance(value, bool) and isinstance(value, (int, float, list))
+        assert document["maps"][0]["determinacy"]["redundancy"] == 3
+
+    def test_the_result_model_refuses_two(self):
+        from pydantic import ValidationError
+
+        from geocert.kinds import get_kind
+        from tests.solvers.test_forgeries import stored
+
+        model = get_kind("resection").result_model
+        for path, value in MISTYPED[-2:]:
+            with pytest.raises(ValidationError):
+                model.model_validate(_set(stored("resection_l2l2"), path, value))
+
+    @pytest.mark.xfail(**XFAIL)
+    @pytest.mark.parametrize("path,value", MISTYPED)
+    def test_a_field_not_of_its_type_is_refused(self, path, value):
+        from tests.solvers.test_forgeries import stored
+
+        assert not _valid(_set(stored("resection_l2l2"), path, value))
