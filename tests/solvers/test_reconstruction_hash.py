@@ -36,11 +36,15 @@ def at_defaults() -> dict:
                       "options": {"certificate": "full"}})
 
 
-def test_the_earlier_forms_defaults_are_the_options_defaults():
+def test_the_earlier_forms_defaults_are_the_options_defaults_it_was_written_with():
+    """Every default the earlier form left out is today's, but radial_distortion's: "off" while that
+    form was written (so an earlier-form document without it is read as off), "auto" since."""
     from geocert.pipelines.reconstruction.options import ReconstructionOptions
 
     defaults = dataclasses.asdict(ReconstructionOptions())
-    assert {name: defaults[name] for name in hashed_options.EARLIER_DEFAULTS} == hashed_options.EARLIER_DEFAULTS
+    assert {name: defaults[name] for name in hashed_options.EARLIER_DEFAULTS} == {
+        **hashed_options.EARLIER_DEFAULTS, "radial_distortion": "auto"}
+    assert hashed_options.EARLIER_DEFAULTS["radial_distortion"] == "off"
 
 
 def test_the_hash_covers_every_option_a_claim_reads():

@@ -72,11 +72,12 @@ class ReconstructionOptions(FractionalOptions):
     # holds it at the image centre (COLMAP's default).
     principal_point: str = "auto"
     # K unknown, "incremental": one radial distortion term k1 (COLMAP's SIMPLE_RADIAL) estimated with
-    # the focal length. "auto" keeps it when the data fix it (a chi-square test on the cost it
-    # saves; pipeline._radial_test), "on" always, "off" never (the default: measured, "auto" helps
-    # Sceaux but moves templeSparseRing's focal from +1.0% to +3.9%). When kept, the observations are
-    # undistorted with it before the metric stages: every certificate is conditional on that k1.
-    radial_distortion: str = "off"
+    # the focal length. "auto" (the default) keeps it when the data fix it (a chi-square test on the
+    # cost it saves; pipeline._radial_test), "on" always, "off" never. "auto" brings Sceaux's focal
+    # length within 3% (COLMAP's +2.3%) and keeps no term on the rings, at the CPU of the test's
+    # adjustments (docs/reconstruction-vs-colmap.md). When kept, the observations are undistorted
+    # with it before the metric stages: every certificate is conditional on that k1.
+    radial_distortion: str = "auto"
     focal_prior_px: float | None = None
     focal_prior_factor: float = 1.2
     focal_prior_rounds: int = 3
