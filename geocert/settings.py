@@ -44,8 +44,8 @@ class Settings(BaseSettings):
     # Jobs one key may have queued or running at once (429 beyond it; 0: unlimited).
     max_active_jobs_per_key: int = 100
     # Bytes one key's jobs that exist (queued, running, or ended and not yet expired or deleted)
-    # may hold in Redis, each counted as its request's bytes and at least 16 KiB (429 beyond it;
-    # 0: unlimited). Results are kept result_ttl_s after a job ends, and a key at the rate limit
+    # may hold in Redis, each counted as its request's bytes and at least 16 KiB, and once it ends
+    # its stored result's bytes too (compressed, fragments included) (429 beyond it; 0: unlimited). Results are kept result_ttl_s after a job ends, and a key at the rate limit
     # stored some 700 MB an hour of one-track jobs, or 20 GB an hour of 5.5 MB ones.
     max_stored_bytes_per_key: int = 1 << 30
     # A job's budget, computed from its request before anything of it is decoded or built (each

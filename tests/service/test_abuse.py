@@ -539,6 +539,42 @@ def test_a_keys_stored_jobs_are_bounded_in_bytes(tmp_path):
         assert [key for key in store.scan_iter("geocert:upload:*")] == []
 
 
+def test_a_keys_stored_results_count_among_its_stored_bytes(tmp_path):
+    """A key's stored bytes counted its jobs' requests only, while a job's result is kept as long
+    and is several times larger (a track's result some 12 times its request, a quarter of that
+    compressed): a key within its limit by its requests kept several times it. Now a job that
+    ends adds its stored result (the fragments of a streamed one included) to its key's account,
+    so fewer jobs are admitted after it; deleting the job gives every byte back."""
+    limit = 6 * 16384
+    rng = np.random.default_rng(3)
+    tracks = [{"views": [0, 1], "points": [[float(x), float(y)], [float(x) - 80 + float(dx), float(y) + float(dy)]]}
+              for x, y, dx, dy in zip(rng.uniform(100, 500, 100), rng.uniform(100, 400, 100),
+                                      rng.normal(0, 2, 100), rng.normal(0, 2, 100))]
+    many = {**TRIANGULATION, "data": {**TRIANGULATION["data"], "tracks": tracks}}
+    with cluster(tmp_path, workers=1, geocert_max_stored_bytes_per_key=str(limit)) as (running, client):
+        store = redis.Redis.from_url(running.redis_url)
+        response = client.post("/v1/jobs", json=many)
+        assert response.status_code == 202, response.text
+        job_id = response.json()["id"]
+        assert ended(client, job_id)["status"] == "succeeded"
+        (account,) = store.scan_iter("geocert:owner:*:stored_bytes")
+        request_bytes = len(store.get(f"geocert:job:{job_id}:request")) + sum(
+            map(len, store.lrange(f"geocert:job:{job_id}:request:items", 0, -1)))
+        result_bytes = store.strlen(f"geocert:job:{job_id}:result") + sum(
+            store.hstrlen(f"geocert:job:{job_id}:fragments", start) for start in store.hkeys(f"geocert:job:{job_id}:fragments"))
+        assert result_bytes > 16384, result_bytes  # enough to keep out a job more than the request alone
+        counted = max(request_bytes, 16384) + result_bytes
+        assert int(store.get(account)) == counted
+        admitted = 0
+        while (answer := client.post("/v1/jobs", json=TRIANGULATION)).status_code == 202:
+            admitted += 1
+            assert admitted < 10
+        assert "GEOCERT_MAX_STORED_BYTES_PER_KEY" in problem(answer, 429)["detail"]
+        assert admitted == (limit - counted) // 16384 < (limit - max(request_bytes, 16384)) // 16384
+        assert client.delete(f"/v1/jobs/{job_id}").status_code == 204
+        assert client.post("/v1/jobs", json=TRIANGULATION).status_code == 202
+
+
 # ---------------------------------------------------------------------------------------------
 # Worker memory, and a solver process killed under its task
 
