@@ -565,8 +565,59 @@ def bench_whole() -> None:
     report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
 
 
+def resident_mib(running) -> tuple[float, float]:
+    """The API process's resident memory now, and that of its child processes (submissions,
+    orientations) together, in MiB."""
+    api = running.api.pid
+    return rss_kib(api) / 1024, sum(rss_kib(pid) for pid in tree(api) if pid != api) / 1024
+
+
+def at_once(running, name: str, sends: list) -> None:
+    """Send requests at once (``send(client)`` each, from threads); report their answers, the API's
+    peak growth and CPU, the other key's slowest GET /v1/jobs meanwhile, and the memory the API
+    and its child processes hold afterwards."""
+    api_before, api_cpu = peak_rss_kib(running.api.pid), cpu_seconds(running.api.pid)
+    reads = OtherKeysReads(running)
+    answers: list[str] = []
+    began = time.monotonic()
+
+    def one(send):
+        with httpx.Client(base_url=str(running.client.base_url), timeout=600) as own:
+            sent = time.monotonic()
+            response = send(own)
+            answers.append(f"{response.status_code} in {time.monotonic() - sent:.1f} s")
+
+    threads = [threading.Thread(target=one, args=(send,)) for send in sends]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    took = time.monotonic() - began
+    slowest_read = reads.stop()
+    time.sleep(1)  # what is still held a second after the answers
+    api_now, children_now = resident_mib(running)
+    answers.sort()
+    report(name, f"{', '.join(answers)} ({took:.1f} s in all); API peak +{(peak_rss_kib(running.api.pid) - api_before) / 1024:.0f} MiB, "
+                 f"{cpu_seconds(running.api.pid) - api_cpu:.1f} s CPU; the other key's GET /v1/jobs meanwhile at most "
+                 f"{slowest_read:.2f} s; resident a second later: the API {api_now:.0f} MiB, its child processes "
+                 f"{children_now:.0f} MiB")
+
+
+def bench_orient() -> None:
+    body = orient(20, 200_000)  # at the budget: 4M cameras x points
+    size = len(json.dumps(body)) / 1e6
+    print("orient: /v1/orient at its budget, two at once (GEOCERT_MAX_CONCURRENT_ORIENTATIONS)", flush=True)
+    with cluster(workers=1, concurrency=2, **KEYS) as running:
+        api_now, _ = resident_mib(running)
+        report("the API's resident memory at the start", f"{api_now:.0f} MiB")
+        for which in ("first", "second", "third"):
+            at_once(running, f"two /v1/orient at once, 20 cameras x 200k points ({size:.1f} MB each), {which}",
+                    [post("/v1/orient", body)] * 2)
+    report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
 SECTIONS = {"api": bench_api, "bodies": bench_bodies, "whole": bench_whole, "worker": bench_worker, "stereo": bench_stereo,
-            "clocks": bench_clocks, "webhooks": bench_webhooks, "fairness": bench_fairness}
+            "clocks": bench_clocks, "webhooks": bench_webhooks, "fairness": bench_fairness, "orient": bench_orient}
 
 
 def main() -> None:

@@ -178,6 +178,8 @@ def test_6_orientations_at_once_are_bounded(plain):
     counted from before the body is read: here two requests whose bodies are still arriving."""
     running, client = plain
     body = json.dumps({"cameras": [np.eye(3, 4).tolist()] * 2, "points": [[0.0, 0.0, 1.0]] * 10}).encode()
+    # The orientation processes start with the first (seconds): started before the count is read.
+    assert client.post("/v1/orient", content=body, headers={"content-type": "application/json"}).status_code == 200
     release, results = threading.Event(), []
 
     def held_body():
@@ -206,6 +208,67 @@ def test_6_orientations_at_once_are_bounded(plain):
             thread.join(60)
     assert results == [200, 200]
     assert client.post("/v1/orient", content=body, headers={"content-type": "application/json"}).status_code == 200
+
+
+def spawned(pid: int) -> list[int]:
+    """The API process's spawned helper processes (multiprocessing's) under ``pid``."""
+    found, todo = [], [pid]
+    while todo:
+        current = todo.pop()
+        try:
+            with open(f"/proc/{current}/task/{current}/children") as children:
+                todo.extend(int(child) for child in children.read().split())
+            with open(f"/proc/{current}/cmdline", "rb") as cmdline:
+                if b"spawn_main" in cmdline.read():
+                    found.append(current)
+        except OSError:
+            pass
+    return found
+
+
+def test_6_orientations_run_outside_the_api_process(plain):
+    """/v1/orient decoded its body, built its dense arrays and wrote its answer in the API process,
+    holding the interpreter lock for most of it: two at the budget kept another client's GET
+    /v1/jobs waiting 2.5-3.3 s, and the API kept the 1.3-2.0 GB it grew to. Now the orientation is
+    done in an orientation process: with that process stopped (SIGSTOP) while it holds a request,
+    another request is answered and the orientation is not, and it ends once the process runs
+    again with the answer it gives in process; errors read as they did; a killed orientation
+    process fails the request it held with a 503, and the next is taken."""
+    running, client = plain
+    rng = np.random.default_rng(6)
+    body = {"cameras": rng.normal(size=(3, 3, 4)).tolist(), "points": rng.normal(size=(40, 3)).tolist()}
+    first = client.post("/v1/orient", json=body)  # starts the orientation processes, and waits for them
+    assert first.status_code == 200, first.text
+    helpers = spawned(running.api.pid)
+    assert helpers, "no orientation process: the orientation ran in the API process"
+    for pid in helpers:
+        os.kill(pid, signal.SIGSTOP)
+    answered = {}
+    try:
+        sender = threading.Thread(target=lambda: answered.update(answer=client.post("/v1/orient", json=body, timeout=120)))
+        sender.start()
+        assert client.get("/v1/jobs").status_code == 200
+        sender.join(timeout=5)  # an answer now could only come from the API process itself
+        assert sender.is_alive(), "the orientation was answered while its process was stopped"
+    finally:
+        for pid in helpers:
+            os.kill(pid, signal.SIGCONT)
+    sender.join(timeout=120)
+    assert answered["answer"].status_code == 200 and answered["answer"].json() == first.json()
+    refused = client.post("/v1/orient", json={**body, "points": [[0, 0, 0, 0]]})
+    assert refused.status_code == 422 and refused.json()["errors"][0]["field"] == "points/0", refused.text
+    invalid = client.post("/v1/orient", json={**body, "cameras": "many"})
+    assert invalid.status_code == 422 and invalid.json()["errors"][0]["field"] == "cameras", invalid.text
+    broken = client.post("/v1/orient", content=json.dumps(body)[:-2].encode() + b"x}",
+                         headers={"content-type": "application/json"})
+    assert broken.status_code == 400, broken.text
+    assert client.post("/v1/orient", content=json.dumps(body), headers={"content-type": "text/plain"}).status_code == 415
+    for pid in spawned(running.api.pid):
+        os.kill(pid, signal.SIGKILL)
+    lost = client.post("/v1/orient", json=body)
+    assert lost.status_code == 503 and lost.headers["Retry-After"], lost.text
+    again = client.post("/v1/orient", json=body)
+    assert again.status_code == 200 and again.json() == first.json()
 
 
 def test_a_map_over_its_points_budget_is_refused_at_submission(plain):
