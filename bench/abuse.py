@@ -616,8 +616,42 @@ def bench_orient() -> None:
     report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
 
 
+def bench_exports(at_once_count: int = 8, copies: int = 50) -> None:
+    """Exports of a large reconstruction's result (COLMAP's text model, PLY), many at once: each
+    reads the whole result, decodes it and writes the export in the API process. The result is a
+    solved reconstruction's (12 views, 2000 points) with its points repeated ``copies`` times,
+    stored in its place (a reconstruction of 100,000 points is within the job limits, and would
+    take the worker far longer to solve)."""
+    import zlib
+
+    import redis
+
+    print(f"exports: {at_once_count} exports at once of a large reconstruction", flush=True)
+    body = reconstruction_tracks(12, 2000)
+    body["options"] = {}
+    with cluster(workers=1, concurrency=2, **KEYS) as running:
+        client = running.client
+        job_id = client.post("/v1/jobs", json=body, headers=ATTACKER, timeout=600).json()["id"]
+        job = wait_end(client, job_id, ATTACKER, 900)
+        result = job["result"]
+        result["points"] = result["points"] * copies
+        text = json.dumps(result).encode()
+        store = redis.Redis.from_url(running.redis_url)
+        store.set(f"geocert:job:{job_id}:result", zlib.compress(text, 1))
+        store.hset(f"geocert:job:{job_id}", mapping={"result_encoding": json.dumps("zlib"), "result_form": json.dumps("model")})
+        report("the reconstruction exported", f"{job['status']}, {sum(c['registered'] for c in result['cameras'])} views "
+                                              f"registered, its {len(result['points']) // copies} points repeated {copies} "
+                                              f"times: {len(result['points'])} points, a result of {len(text) / 1e6:.0f} MB")
+        for query in ("format=colmap", "format=ply", "format=ply&binary=true"):
+            path = f"/v1/jobs/{job_id}/export?{query}"
+            at_once(running, f"{at_once_count} exports at once, {query}",
+                    [lambda own, path=path: own.get(path, headers=ATTACKER)] * at_once_count)
+    report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
 SECTIONS = {"api": bench_api, "bodies": bench_bodies, "whole": bench_whole, "worker": bench_worker, "stereo": bench_stereo,
-            "clocks": bench_clocks, "webhooks": bench_webhooks, "fairness": bench_fairness, "orient": bench_orient}
+            "clocks": bench_clocks, "webhooks": bench_webhooks, "fairness": bench_fairness, "orient": bench_orient,
+            "exports": bench_exports}
 
 
 def main() -> None:

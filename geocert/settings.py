@@ -39,6 +39,11 @@ class Settings(BaseSettings):
     # Orientations (POST /v1/orient) running at once in one API process (429 beyond it; 0:
     # unlimited): each may hold some 700 MB and 12 s of CPU at max_view_points_per_job.
     max_concurrent_orientations: int = 2
+    # Exports of a job's result (GET /v1/jobs/{id}/export) running at once in one API process, and
+    # of one key's (429 beyond either; 0: unlimited): each is written in an export process, which
+    # may hold some 700 MB and 18 s of CPU for a reconstruction of 100,000 points.
+    max_concurrent_exports: int = 2
+    max_concurrent_exports_per_key: int = 1
     # Requests per minute one key may make to /v1 (429 beyond it; 0: unlimited).
     rate_limit_per_minute: int = 1200
     # Jobs one key may have queued or running at once (429 beyond it; 0: unlimited).

@@ -638,6 +638,62 @@ def test_a_keys_stored_results_count_among_its_stored_bytes(tmp_path):
         assert client.post("/v1/jobs", json=TRIANGULATION).status_code == 202
 
 
+def test_exports_are_bounded_per_process_and_per_key_and_written_outside_the_api(tmp_path):
+    """An export (COLMAP's model, PLY) read, decoded and wrote a whole result in the API process,
+    as many at once as were asked: eight COLMAP exports of a 100,000-point result held +5.4 GB
+    and kept another key's GET /v1/jobs waiting 17 s. Now each is written in an export process,
+    at most GEOCERT_MAX_CONCURRENT_EXPORTS (2) at once per API process and
+    GEOCERT_MAX_CONCURRENT_EXPORTS_PER_KEY (1) of one key's, a 429 naming the limit beyond:
+    with the export processes stopped (SIGSTOP) while they hold one export of each of two keys,
+    a key's second export and a third key's are refused, another request is answered, and the
+    two exports end once the processes run again with what they gave before."""
+    from geocert.kinds import get_kind
+
+    keys = {"X-API-Key": "one"}, {"X-API-Key": "other"}, {"X-API-Key": "third"}
+    with cluster(tmp_path, workers=1, geocert_api_keys="one,other,third") as (running, client):
+        jobs = [client.post("/v1/jobs", json=get_kind("reconstruction").example, headers=key).json()["id"]
+                for key in keys[:2]]
+        for job_id, key in zip(jobs, keys):
+            assert ended(client, job_id, headers=key)["status"] == "succeeded"
+        paths = [f"/v1/jobs/{job_id}/export?format=ply" for job_id in jobs]
+        before = [client.get(path, headers=key) for path, key in zip(paths, keys)]  # starts the export processes
+        assert [answer.status_code for answer in before] == [200, 200]
+        helpers = spawned(running.api.pid)
+        assert helpers, "no export process: the exports were written in the API process"
+        for pid in helpers:
+            os.kill(pid, signal.SIGSTOP)
+        answers: dict[int, httpx.Response] = {}
+        senders = [threading.Thread(target=lambda k=k: answers.update({k: client.get(paths[k], headers=keys[k],
+                                                                                     timeout=120)}))
+                   for k in range(2)]
+        nowhere = f"/v1/jobs/{'0' * 32}/export?format=ply"  # a 404 at once when let in: never held
+
+        def refused_while_held(sender, key) -> dict:
+            sender.start()
+            deadline = time.monotonic() + 30
+            while (answer := client.get(nowhere, headers=key)).status_code != 429:
+                assert answer.status_code in (404, 422), answer.text
+                assert time.monotonic() < deadline, "the held export was not counted"
+                time.sleep(0.1)
+            assert answer.headers["Retry-After"]
+            return problem(answer, 429)
+
+        try:
+            assert "GEOCERT_MAX_CONCURRENT_EXPORTS_PER_KEY" in refused_while_held(senders[0], keys[0])["detail"]
+            assert client.get(nowhere, headers=keys[1]).status_code in (404, 422)  # another key's are let in
+            detail = refused_while_held(senders[1], keys[2])["detail"]
+            assert "GEOCERT_MAX_CONCURRENT_EXPORTS" in detail and "PER_KEY" not in detail
+            assert client.get("/v1/jobs", headers=keys[2]).status_code == 200
+            assert not answers, "an export was answered while the export processes were stopped"
+        finally:
+            for pid in helpers:
+                os.kill(pid, signal.SIGCONT)
+        for sender in senders:
+            sender.join(120)
+        assert [answers[k].content for k in range(2)] == [answer.content for answer in before]
+        assert client.get(paths[1], headers=keys[1]).status_code == 200
+
+
 # ---------------------------------------------------------------------------------------------
 # Worker memory, and a solver process killed under its task
 
