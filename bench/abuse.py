@@ -649,9 +649,38 @@ def bench_exports(at_once_count: int = 8, copies: int = 50) -> None:
     report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
 
 
+def bench_memory() -> None:
+    """What the API process keeps after large requests it answers itself, one after another: its
+    resident memory a second after each (glibc keeps what a request freed in its arenas, unless
+    given back)."""
+    print("memory: the API's resident memory after large requests", flush=True)
+    rng = np.random.default_rng(8)
+    tracks = [{"views": [0, 1], "points": [[float(x), float(y)], [float(x) - 80, float(y) + 1]]}
+              for x, y in np.round(rng.uniform(100, 500, (100_000, 2)), 2)]
+    many = {**SMALL, "data": {**SMALL["data"], "tracks": tracks}, "options": {"job_time_limit_s": 1}}
+    document = {"kind": "triangulation", "items": np.round(rng.normal(size=(250_000, 10)), 6).tolist()}
+    with cluster(workers=1, concurrency=2, **KEYS) as running:
+        report("the API's resident memory at the start", f"{resident_mib(running)[0]:.0f} MiB")
+        sent: dict = {}
+
+        def submit(own):
+            response = own.post("/v1/jobs", json=many, headers=ATTACKER)
+            sent["id"] = response.json().get("id")
+            return response
+        at_once(running, f"a triangulation of 100,000 tracks ({len(json.dumps(many)) / 1e6:.1f} MB, read item by item)",
+                [submit])
+        wait_end(running.client, sent["id"], ATTACKER, 900)
+        at_once(running, "its result read twice at once (100,000 tracks, most not started)",
+                [lambda own: own.get(f"/v1/jobs/{sent['id']}", headers=ATTACKER)] * 2)
+        at_once(running, f"two certificate verifications at once of a {len(json.dumps(document)) / 1e6:.0f} MB document",
+                [post("/v1/certificates/verify", document)] * 2)
+        at_once(running, "the same again", [post("/v1/certificates/verify", document)] * 2)
+    report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
 SECTIONS = {"api": bench_api, "bodies": bench_bodies, "whole": bench_whole, "worker": bench_worker, "stereo": bench_stereo,
             "clocks": bench_clocks, "webhooks": bench_webhooks, "fairness": bench_fairness, "orient": bench_orient,
-            "exports": bench_exports}
+            "exports": bench_exports, "memory": bench_memory}
 
 
 def main() -> None:

@@ -5,9 +5,10 @@ from __future__ import annotations
 import re
 
 from fastapi import FastAPI
+from fastapi.concurrency import run_in_threadpool
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from geocert.app import docs, errors, observability, webui
+from geocert.app import docs, errors, observability, processes, webui
 from geocert.app.api.routes import certificates, jobs, orient, service
 from geocert.settings import get_settings
 from geocert.workers import logs
@@ -60,6 +61,39 @@ class BodySizeLimit:
                                   f"the request body exceeds the limit of {self.limit} bytes (GEOCERT_MAX_BODY_BYTES)",
                                   headers={"Connection": "close"})
         await response(scope, receive, send)
+
+
+class GiveBackMemory:
+    """After a request whose body or answer passed ``above`` bytes, the heap's free pages go back
+    to the system (processes.give_back_memory: glibc's malloc_trim, in a thread: it releases the
+    interpreter lock). glibc keeps what a request freed in its arenas for later allocations, so
+    the API process stayed at the size of its largest requests for good; the trim costs some
+    milliseconds, once per large request."""
+
+    def __init__(self, app: ASGIApp, above: int = 1 << 20):
+        self.app, self.above = app, above
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        moved = 0
+
+        async def counted_receive() -> Message:
+            nonlocal moved
+            message = await receive()
+            moved += len(message.get("body", b""))
+            return message
+
+        async def counted_send(message: Message) -> None:
+            nonlocal moved
+            moved += len(message.get("body", b""))
+            await send(message)
+
+        try:
+            await self.app(scope, counted_receive, counted_send)
+        finally:
+            if moved > self.above:
+                await run_in_threadpool(processes.give_back_memory)
 
 
 class VerificationGate:
@@ -148,6 +182,7 @@ def create_app() -> FastAPI:
                        per_key=get_settings().max_concurrent_exports_per_key,
                        per_key_variable="GEOCERT_MAX_CONCURRENT_EXPORTS_PER_KEY")
     app.add_middleware(BodySizeLimit, limit=get_settings().max_body_bytes)
+    app.add_middleware(GiveBackMemory)
     app.add_middleware(observability.RequestContext)  # outermost: sees every answer, 413s included
     return app
 

@@ -7,7 +7,8 @@ process's heap afterwards (glibc keeps freed memory in its arenas). In a process
 costs the API process the bytes sent through a pipe, and the memory is that process's.
 
 A ``Pool`` starts its processes with its first use (spawned, not forked: the API process has an
-event loop and threads a fork would copy) and each imports what its work needs first (``ready``).
+event loop and threads a fork would copy) and each imports what its work needs first (``ready``),
+at a lower scheduling priority than the API process's (NICENESS).
 A process that dies (killed for memory, say) breaks its pool: the request it held is answered
 503 (retry), and the next use starts new processes.
 
@@ -47,7 +48,7 @@ class Pool:
             if self._pool is None:
                 count = max(1, self.size())
                 self._pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context("spawn"))
-                self._starting = [self._pool.submit(self.ready) for _ in range(count)]
+                self._starting = [self._pool.submit(_start, self.ready) for _ in range(count)]
             return self._pool
 
     def started(self) -> ProcessPoolExecutor | None:
@@ -78,6 +79,19 @@ class Pool:
             self._forget(pool)
             raise ApiProblem(503, f"{self.what} stopped before it answered; send it again",
                              headers={"Retry-After": "1"}) from None
+
+
+NICENESS = 5  # the processes' scheduling priority below the API process's
+
+
+def _start(ready: Callable[[], None]) -> None:
+    """A process's first task: below the API process's priority (on a loaded machine the API's
+    event loop, answering every client, comes before one client's heavy request), then ``ready``."""
+    try:
+        os.nice(NICENESS)
+    except OSError:
+        pass
+    ready()
 
 
 def validated(model, body: bytes) -> tuple[Any, tuple | None]:

@@ -271,6 +271,41 @@ def test_6_orientations_run_outside_the_api_process(plain):
     assert again.status_code == 200 and again.json() == first.json()
 
 
+def test_verifications_run_outside_the_api_process(plain):
+    """A certificate verification read and checked its document in a thread of the API process,
+    holding the interpreter lock for seconds: two of 26 MB at once kept another client's GET
+    /v1/jobs waiting 2.4-2.8 s. Now it runs in a verification process: with that process stopped
+    while it holds a document, another request is answered and the verification is not; it ends
+    once the process runs again, with the report it gives in process; errors read as they did."""
+    running, client = plain
+    document = {"kind": "triangulation", "items": [[0.5] * 10] * 20}
+    first = client.post("/v1/certificates/verify", json=document)  # starts the processes, and waits for them
+    assert first.status_code == 200 and first.json()["valid"] is False, first.text
+    before = set(spawned(running.api.pid))
+    helpers = list(before)
+    assert helpers, "no verification process: the verification ran in the API process"
+    for pid in helpers:
+        os.kill(pid, signal.SIGSTOP)
+    answered = {}
+    try:
+        sender = threading.Thread(target=lambda: answered.update(
+            answer=client.post("/v1/certificates/verify", json=document, timeout=120)))
+        sender.start()
+        assert client.get("/v1/jobs").status_code == 200
+        sender.join(timeout=5)  # an answer now could only come from the API process itself
+        assert sender.is_alive(), "the verification was answered while its process was stopped"
+    finally:
+        for pid in helpers:
+            os.kill(pid, signal.SIGCONT)
+    sender.join(timeout=120)
+    assert answered["answer"].status_code == 200 and answered["answer"].json() == first.json()
+    broken = client.post("/v1/certificates/verify", content=b'{"kind": x}', headers={"content-type": "application/json"})
+    assert broken.status_code == 400 and broken.headers["content-type"].startswith("application/problem+json")
+    twice = client.post("/v1/certificates/verify", content=b'{"kind": 1, "kind": 2}',
+                        headers={"content-type": "application/json"})
+    assert twice.status_code == 422 and twice.json()["errors"][0]["field"] == "kind", twice.text
+
+
 def test_a_map_over_its_points_budget_is_refused_at_submission(plain):
     """One map of 200,000 points (within the job's items and observations) was queued: its
     first conic programs ignore the time limit (2 s asked; 20,000 points ran 65 s), and a solver
