@@ -5,7 +5,7 @@ CPU, the other key's slowest GET /v1/jobs while the API answered it, the peak me
 worker process, what the attacker got and how long until its job ended, and how long the other
 key's small job (one track) waited to start and took to end, submitted right after the attack.
 
-    .venv/bin/python -m bench.abuse [--only api,bodies,whole,worker,stereo,clocks,webhooks,fairness]
+    .venv/bin/python -m bench.abuse [--only api,bodies,whole,worker,stereo,clocks,webhooks,fairness,orient,exports,memory]
 
   api       the attacks the API now refuses from the request alone (photo bombs, views, a bilinear
             basis, /v1/orient, stereo segments, webhook destinations, Last-Event-ID, names), with
@@ -27,7 +27,13 @@ key's small job (one track) waited to start and took to end, submitted right aft
   webhooks  a tarpit receiver (a byte every 5 s) and a delete racing a delivery;
   fairness  the attacker queues 12 long jobs on one worker of two solver processes; the other
             key's wait with the per-key share and without it (GEOCERT_SOLVERS_KEPT_FOR_OTHERS=0:
-            first come, first served), in the same run.
+            first come, first served), in the same run;
+  orient    two /v1/orient at once at the cameras-times-points budget, three rounds: the other
+            key's slowest GET /v1/jobs, and what the API and its orientation processes hold after;
+  exports   eight exports at once (COLMAP, PLY, binary PLY) from one key of a 100,000-point
+            reconstruction result;
+  memory    the API's resident memory after each of a large streamed submission, its large result
+            read, and two large certificate verifications at once (twice).
 
 Each figure is printed beside what the review reproduced on the code before these limits (its
 report's figures, on its machine: measuring them again would mean holding gigabytes and minutes
