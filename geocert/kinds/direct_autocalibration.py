@@ -87,7 +87,8 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
 
         p = pr.plane_from_input(problem, np.array(document["plane_at_infinity"]))
         centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
-        why = f"the job's time limit (options.time_limit_s, {options.time_limit_s:g} s) had passed, and {ANALYSIS_GRACE_S:g} s more"
+        why = (f"the job's time limit (options.time_limit_s, {options.time_limit_s:g} s) had passed, and "
+               f"{ANALYSIS_GRACE_S:g} s more")
         if p is not None and document["Ks"] is not None:
             stage["determinacy"] = within(deadline, "the direct stage's determinacy", why,
                                           determinacy.varying_focal_stage, problem, p, document["Ks"], centres)
