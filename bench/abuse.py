@@ -5,7 +5,7 @@ CPU, the other key's slowest GET /v1/jobs while the API answered it, the peak me
 worker process, what the attacker got and how long until its job ended, and how long the other
 key's small job (one track) waited to start and took to end, submitted right after the attack.
 
-    .venv/bin/python -m bench.abuse [--only api,bodies,whole,worker,stereo,clocks,webhooks,fairness]
+    .venv/bin/python -m bench.abuse [--only api,bodies,whole,worker,stereo,clocks,webhooks,fairness,orient,exports,memory]
 
   api       the attacks the API now refuses from the request alone (photo bombs, views, a bilinear
             basis, /v1/orient, stereo segments, webhook destinations, Last-Event-ID, names), with
@@ -27,7 +27,13 @@ key's small job (one track) waited to start and took to end, submitted right aft
   webhooks  a tarpit receiver (a byte every 5 s) and a delete racing a delivery;
   fairness  the attacker queues 12 long jobs on one worker of two solver processes; the other
             key's wait with the per-key share and without it (GEOCERT_SOLVERS_KEPT_FOR_OTHERS=0:
-            first come, first served), in the same run.
+            first come, first served), in the same run;
+  orient    two /v1/orient at once at the cameras-times-points budget, three rounds: the other
+            key's slowest GET /v1/jobs, and what the API and its orientation processes hold after;
+  exports   eight exports at once (COLMAP, PLY, binary PLY) from one key of a 100,000-point
+            reconstruction result;
+  memory    the API's resident memory after each of a large streamed submission, its large result
+            read, and two large certificate verifications at once (twice).
 
 Each figure is printed beside what the review reproduced on the code before these limits (its
 report's figures, on its machine: measuring them again would mean holding gigabytes and minutes
@@ -565,8 +571,122 @@ def bench_whole() -> None:
     report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
 
 
+def resident_mib(running) -> tuple[float, float]:
+    """The API process's resident memory now, and that of its child processes (submissions,
+    orientations) together, in MiB."""
+    api = running.api.pid
+    return rss_kib(api) / 1024, sum(rss_kib(pid) for pid in tree(api) if pid != api) / 1024
+
+
+def at_once(running, name: str, sends: list) -> None:
+    """Send requests at once (``send(client)`` each, from threads); report their answers, the API's
+    peak growth and CPU, the other key's slowest GET /v1/jobs meanwhile, and the memory the API
+    and its child processes hold afterwards."""
+    api_before, api_cpu = peak_rss_kib(running.api.pid), cpu_seconds(running.api.pid)
+    reads = OtherKeysReads(running)
+    answers: list[str] = []
+    began = time.monotonic()
+
+    def one(send):
+        with httpx.Client(base_url=str(running.client.base_url), timeout=600) as own:
+            sent = time.monotonic()
+            response = send(own)
+            answers.append(f"{response.status_code} in {time.monotonic() - sent:.1f} s")
+
+    threads = [threading.Thread(target=one, args=(send,)) for send in sends]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    took = time.monotonic() - began
+    slowest_read = reads.stop()
+    time.sleep(1)  # what is still held a second after the answers
+    api_now, children_now = resident_mib(running)
+    answers.sort()
+    report(name, f"{', '.join(answers)} ({took:.1f} s in all); API peak +{(peak_rss_kib(running.api.pid) - api_before) / 1024:.0f} MiB, "
+                 f"{cpu_seconds(running.api.pid) - api_cpu:.1f} s CPU; the other key's GET /v1/jobs meanwhile at most "
+                 f"{slowest_read:.2f} s; resident a second later: the API {api_now:.0f} MiB, its child processes "
+                 f"{children_now:.0f} MiB")
+
+
+def bench_orient() -> None:
+    body = orient(20, 200_000)  # at the budget: 4M cameras x points
+    size = len(json.dumps(body)) / 1e6
+    print("orient: /v1/orient at its budget, two at once (GEOCERT_MAX_CONCURRENT_ORIENTATIONS)", flush=True)
+    with cluster(workers=1, concurrency=2, **KEYS) as running:
+        api_now, _ = resident_mib(running)
+        report("the API's resident memory at the start", f"{api_now:.0f} MiB")
+        for which in ("first", "second", "third"):
+            at_once(running, f"two /v1/orient at once, 20 cameras x 200k points ({size:.1f} MB each), {which}",
+                    [post("/v1/orient", body)] * 2)
+    report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
+def bench_exports(at_once_count: int = 8, copies: int = 50) -> None:
+    """Exports of a large reconstruction's result (COLMAP's text model, PLY), many at once: each
+    reads the whole result, decodes it and writes the export in the API process. The result is a
+    solved reconstruction's (12 views, 2000 points) with its points repeated ``copies`` times,
+    stored in its place (a reconstruction of 100,000 points is within the job limits, and would
+    take the worker far longer to solve)."""
+    import zlib
+
+    import redis
+
+    print(f"exports: {at_once_count} exports at once of a large reconstruction", flush=True)
+    body = reconstruction_tracks(12, 2000)
+    body["options"] = {}
+    with cluster(workers=1, concurrency=2, **KEYS) as running:
+        client = running.client
+        job_id = client.post("/v1/jobs", json=body, headers=ATTACKER, timeout=600).json()["id"]
+        job = wait_end(client, job_id, ATTACKER, 900)
+        result = job["result"]
+        result["points"] = result["points"] * copies
+        text = json.dumps(result).encode()
+        store = redis.Redis.from_url(running.redis_url)
+        store.set(f"geocert:job:{job_id}:result", zlib.compress(text, 1))
+        store.hset(f"geocert:job:{job_id}", mapping={"result_encoding": json.dumps("zlib"), "result_form": json.dumps("model")})
+        report("the reconstruction exported", f"{job['status']}, {sum(c['registered'] for c in result['cameras'])} views "
+                                              f"registered, its {len(result['points']) // copies} points repeated {copies} "
+                                              f"times: {len(result['points'])} points, a result of {len(text) / 1e6:.0f} MB")
+        for query in ("format=colmap", "format=ply", "format=ply&binary=true"):
+            path = f"/v1/jobs/{job_id}/export?{query}"
+            at_once(running, f"{at_once_count} exports at once, {query}",
+                    [lambda own, path=path: own.get(path, headers=ATTACKER)] * at_once_count)
+    report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
+def bench_memory() -> None:
+    """What the API process keeps after large requests it answers itself, one after another: its
+    resident memory a second after each (glibc keeps what a request freed in its arenas, unless
+    given back)."""
+    print("memory: the API's resident memory after large requests", flush=True)
+    rng = np.random.default_rng(8)
+    tracks = [{"views": [0, 1], "points": [[float(x), float(y)], [float(x) - 80, float(y) + 1]]}
+              for x, y in np.round(rng.uniform(100, 500, (100_000, 2)), 2)]
+    many = {**SMALL, "data": {**SMALL["data"], "tracks": tracks}, "options": {"job_time_limit_s": 1}}
+    document = {"kind": "triangulation", "items": np.round(rng.normal(size=(250_000, 10)), 6).tolist()}
+    with cluster(workers=1, concurrency=2, **KEYS) as running:
+        report("the API's resident memory at the start", f"{resident_mib(running)[0]:.0f} MiB")
+        sent: dict = {}
+
+        def submit(own):
+            response = own.post("/v1/jobs", json=many, headers=ATTACKER)
+            sent["id"] = response.json().get("id")
+            return response
+        at_once(running, f"a triangulation of 100,000 tracks ({len(json.dumps(many)) / 1e6:.1f} MB, read item by item)",
+                [submit])
+        wait_end(running.client, sent["id"], ATTACKER, 900)
+        at_once(running, "its result read twice at once (100,000 tracks, most not started)",
+                [lambda own: own.get(f"/v1/jobs/{sent['id']}", headers=ATTACKER)] * 2)
+        at_once(running, f"two certificate verifications at once of a {len(json.dumps(document)) / 1e6:.0f} MB document",
+                [post("/v1/certificates/verify", document)] * 2)
+        at_once(running, "the same again", [post("/v1/certificates/verify", document)] * 2)
+    report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
 SECTIONS = {"api": bench_api, "bodies": bench_bodies, "whole": bench_whole, "worker": bench_worker, "stereo": bench_stereo,
-            "clocks": bench_clocks, "webhooks": bench_webhooks, "fairness": bench_fairness}
+            "clocks": bench_clocks, "webhooks": bench_webhooks, "fairness": bench_fairness, "orient": bench_orient,
+            "exports": bench_exports, "memory": bench_memory}
 
 
 def main() -> None:

@@ -39,13 +39,18 @@ class Settings(BaseSettings):
     # Orientations (POST /v1/orient) running at once in one API process (429 beyond it; 0:
     # unlimited): each may hold some 700 MB and 12 s of CPU at max_view_points_per_job.
     max_concurrent_orientations: int = 2
+    # Exports of a job's result (GET /v1/jobs/{id}/export) running at once in one API process, and
+    # of one key's (429 beyond either; 0: unlimited): each is written in an export process, which
+    # may hold some 700 MB and 18 s of CPU for a reconstruction of 100,000 points.
+    max_concurrent_exports: int = 2
+    max_concurrent_exports_per_key: int = 1
     # Requests per minute one key may make to /v1 (429 beyond it; 0: unlimited).
     rate_limit_per_minute: int = 1200
     # Jobs one key may have queued or running at once (429 beyond it; 0: unlimited).
     max_active_jobs_per_key: int = 100
     # Bytes one key's jobs that exist (queued, running, or ended and not yet expired or deleted)
-    # may hold in Redis, each counted as its request's bytes and at least 16 KiB (429 beyond it;
-    # 0: unlimited). Results are kept result_ttl_s after a job ends, and a key at the rate limit
+    # may hold in Redis, each counted as its request's bytes and at least 16 KiB, and once it ends
+    # its stored result's bytes too (compressed, fragments included) (429 beyond it; 0: unlimited). Results are kept result_ttl_s after a job ends, and a key at the rate limit
     # stored some 700 MB an hour of one-track jobs, or 20 GB an hour of 5.5 MB ones.
     max_stored_bytes_per_key: int = 1 << 30
     # A job's budget, computed from its request before anything of it is decoded or built (each

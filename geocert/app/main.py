@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import re
+
 from fastapi import FastAPI
+from fastapi.concurrency import run_in_threadpool
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from geocert.app import docs, errors, observability, webui
+from geocert.app import docs, errors, observability, processes, webui
 from geocert.app.api.routes import certificates, jobs, orient, service
 from geocert.settings import get_settings
 from geocert.workers import logs
@@ -60,36 +63,92 @@ class BodySizeLimit:
         await response(scope, receive, send)
 
 
+class GiveBackMemory:
+    """After a request whose body or answer passed ``above`` bytes, the heap's free pages go back
+    to the system (processes.give_back_memory: glibc's malloc_trim, in a thread: it releases the
+    interpreter lock). glibc keeps what a request freed in its arenas for later allocations, so
+    the API process stayed at the size of its largest requests for good; the trim costs some
+    milliseconds, once per large request."""
+
+    def __init__(self, app: ASGIApp, above: int = 1 << 20):
+        self.app, self.above = app, above
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        moved = 0
+
+        async def counted_receive() -> Message:
+            nonlocal moved
+            message = await receive()
+            moved += len(message.get("body", b""))
+            return message
+
+        async def counted_send(message: Message) -> None:
+            nonlocal moved
+            moved += len(message.get("body", b""))
+            await send(message)
+
+        try:
+            await self.app(scope, counted_receive, counted_send)
+        finally:
+            if moved > self.above:
+                await run_in_threadpool(processes.give_back_memory)
+
+
 class VerificationGate:
     """At most ``limit`` requests to ``path`` at once in this process (429 problem+json with
     Retry-After beyond it), counted from before the body is read: the API computes these itself,
     and a body is parsed into Python objects some 25 times its size (29 MB of empty lists: 760 MB
     and 19 s, for a one-line refusal), so their memory is bounded by the limit times that,
-    whatever the request rate. Certificate verifications by default; /v1/orient too (its dense
-    cameras x points arrays: some 700 MB and 12 s at its budget each). On the event loop: the
-    count needs no lock."""
+    whatever the request rate. Certificate verifications by default; /v1/orient and exports too
+    (each done in a process of its own, as many as the gate lets in). ``path``: the path, or a
+    pattern a path must match whole. ``per_key``: at most this many of one API key's (its
+    X-API-Key header) among them (0: no such limit), so that one key cannot hold every place. On
+    the event loop: the counts need no lock."""
 
     PATH = "/v1/certificates/verify"
 
-    def __init__(self, app: ASGIApp, limit: int, path: str = PATH, what: str = "certificate verifications",
-                 variable: str = "GEOCERT_MAX_CONCURRENT_VERIFICATIONS"):
+    def __init__(self, app: ASGIApp, limit: int, path: str | re.Pattern = PATH, what: str = "certificate verifications",
+                 variable: str = "GEOCERT_MAX_CONCURRENT_VERIFICATIONS", per_key: int = 0, per_key_variable: str = ""):
         self.app, self.limit, self.active = app, limit, 0
         self.path, self.what, self.variable = path, what, variable
+        self.per_key, self.per_key_variable, self.by_key = per_key, per_key_variable, {}
+
+    def _gated(self, path: str | None) -> bool:
+        if path is None:
+            return False
+        return self.path.fullmatch(path) is not None if isinstance(self.path, re.Pattern) else path == self.path
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http" or scope.get("path") != self.path or self.limit <= 0:
+        if scope["type"] != "http" or not self._gated(scope.get("path")) or self.limit <= 0:
             return await self.app(scope, receive, send)
+        key = dict(scope.get("headers") or []).get(b"x-api-key") if self.per_key > 0 else None
         if self.active >= self.limit:
-            response = errors.problem(429, "Too many requests",
-                                      f"{self.limit} {self.what} are running in this process "
-                                      f"({self.variable}): retry shortly",
-                                      headers={"Retry-After": "5"})
-            return await response(scope, receive, send)
+            return await self._refuse(scope, receive, send, f"{self.limit} {self.what} are running in this process "
+                                                            f"({self.variable})")
+        if key is not None and self.by_key.get(key, 0) >= self.per_key:
+            return await self._refuse(scope, receive, send, f"{self.per_key} {self.what} of this key are running in "
+                                                            f"this process ({self.per_key_variable})")
         self.active += 1
+        if key is not None:
+            self.by_key[key] = self.by_key.get(key, 0) + 1
         try:
             await self.app(scope, receive, send)
         finally:
             self.active -= 1
+            if key is not None:
+                self.by_key[key] -= 1
+                if not self.by_key[key]:
+                    del self.by_key[key]
+
+    @staticmethod
+    async def _refuse(scope, receive, send, why: str) -> None:
+        response = errors.problem(429, "Too many requests", f"{why}: retry shortly", headers={"Retry-After": "5"})
+        await response(scope, receive, send)
+
+
+EXPORT_PATH = re.compile(r"/v1/jobs/[^/]+/export")
 
 
 def create_app() -> FastAPI:
@@ -118,7 +177,12 @@ def create_app() -> FastAPI:
     app.add_middleware(VerificationGate, limit=get_settings().max_concurrent_verifications)
     app.add_middleware(VerificationGate, limit=get_settings().max_concurrent_orientations, path="/v1/orient",
                        what="orientations", variable="GEOCERT_MAX_CONCURRENT_ORIENTATIONS")
+    app.add_middleware(VerificationGate, limit=get_settings().max_concurrent_exports, path=EXPORT_PATH,
+                       what="exports", variable="GEOCERT_MAX_CONCURRENT_EXPORTS",
+                       per_key=get_settings().max_concurrent_exports_per_key,
+                       per_key_variable="GEOCERT_MAX_CONCURRENT_EXPORTS_PER_KEY")
     app.add_middleware(BodySizeLimit, limit=get_settings().max_body_bytes)
+    app.add_middleware(GiveBackMemory)
     app.add_middleware(observability.RequestContext)  # outermost: sees every answer, 413s included
     return app
 

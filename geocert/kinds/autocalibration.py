@@ -8,18 +8,19 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, Field
 
-from geocert.kinds.autocalibration_stages import self_check_stages, stage_document
+from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document
 from geocert.kinds.documents import finite_or_none
 from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finite, JobBase, JobStats, Strict
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.autocalibration.verification import STAGES, outcome, read_data
-from geocert.solvers.core.determinacy import safely
+from geocert.solvers.core.determinacy import within
 from geocert.solvers.verify import self_check_enabled
 
 Range = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[lo, hi]")]
@@ -201,11 +202,13 @@ class AutocalibrationKind:
             from geocert.kinds.direct_autocalibration import solve_document
 
             return solve_document(parsed, options, callback)
+        began = time.monotonic()
         problem = pr.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
         checking = self_check_enabled()  # GEOCERT_SELF_VERIFY=1: proofs made, and checked below
         result = stratified.solve(problem, dataclasses.replace(options, certificate="full") if checking else options,
                                   callback)
-        item = stratified_item(parsed, options, problem, result, options.certificate == "full" or checking)
+        item = stratified_item(parsed, options, problem, result, options.certificate == "full" or checking,
+                               deadline=began + self.time_bound_s(parsed, options) + ANALYSIS_GRACE_S)
         if checking:
             self_check_stages(parsed, options, item["stages"])
         return item
@@ -230,11 +233,13 @@ class AutocalibrationKind:
         return {"kind": self.name, "method": item.pop("method"), **outcome(item), **item, "stats": stats}
 
 
-def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem: pr.Problem, result, full: bool
-                    ) -> dict:
+def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem: pr.Problem, result, full: bool,
+                    deadline: float | None = None) -> dict:
     """The job's item (the result's stages and solution) from a stratified solve of ``problem``
     (stratified.solve's result), with each certified stage's proof when ``full``: the kind's own
-    solve, and the reconstruction kind's calibration certificate (its pipeline's solve)."""
+    solve, and the reconstruction kind's calibration certificate (its pipeline's solve).
+    ``deadline`` (time.monotonic): the job's time limit in all, which the stages' determinacy
+    analyses keep (a stage's analysis not done by then says so: determinacy.not_analysed)."""
     from geocert.solvers.autocalibration import determinacy, proofs
 
     a = result.affine
@@ -281,13 +286,16 @@ def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem:
         document["points"] = pr.metric_points(H, parsed.points)
     metric_stage["plane_at_infinity"] = document["plane_at_infinity"]
     centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
+    why = (f"the job's time limit (options.time_limit_s, {options.time_limit_s:g} s a stage) had passed, and "
+           f"{ANALYSIS_GRACE_S:g} s more")
     if result.p is not None and math.isfinite(affine_cost):
-        affine_stage["determinacy"] = safely(determinacy.affine_stage, problem, result.p, affine_stage["cost"],
-                                             affine_stage["lower_bound"], centres,
-                                             None if document["K"] is None else np.array(document["K"]))
+        affine_stage["determinacy"] = within(deadline, "the affine stage's determinacy", why, determinacy.affine_stage,
+                                             problem, result.p, affine_stage["cost"], affine_stage["lower_bound"],
+                                             centres, None if document["K"] is None else np.array(document["K"]))
     if document["K"] is not None:
-        metric_stage["determinacy"] = safely(determinacy.metric_stage, problem, result.p, np.array(document["K"]),
-                                             metric_stage["cost"], metric_stage["lower_bound"], centres)
+        metric_stage["determinacy"] = within(deadline, "the metric stage's determinacy", why, determinacy.metric_stage,
+                                             problem, result.p, np.array(document["K"]), metric_stage["cost"],
+                                             metric_stage["lower_bound"], centres)
     if result.baseline is not None:
         Kb = problem.K0 @ pr.upper_triangular_root(mrelax.omega_of(result.baseline["w"])) \
             if np.linalg.eigvalsh(mrelax.omega_of(result.baseline["w"]))[0] > 0 else None

@@ -11,6 +11,13 @@ from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.verify import SelfCheckFailed, verify_arrays
 
+# The stages' determinacy analyses run until this many seconds past the job's time limit in all
+# (its stages' limits), then stop (determinacy.within): a job whose stages ran to their limits
+# still says how well its data fix its answer (a critical motion, often why it is not certified),
+# and ends within a few seconds of its limit however many views it has (the analyses of 200 views
+# took some 0.7 s of CPU, outside any clock).
+ANALYSIS_GRACE_S = 2.0
+
 
 def stage_document(name: str, status: str, certified: bool, cost: float, lower: float, nodes: int, elapsed: float,
                    reason: str | None, rel_gap: float, abs_gap: float, scope: str, proof: dict | None) -> dict:

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from geocert.kinds.autocalibration_stages import self_check_stages, stage_document
+from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document
 from geocert.solvers.autocalibration import direct
 from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.autocalibration import problem as pr
@@ -37,6 +37,8 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
     from geocert.solvers.verify import self_check_enabled
 
     began = time.perf_counter()
+    # The job's time limit in all (its one stage), and the determinacy analysis's grace past it.
+    deadline = time.monotonic() + options.time_limit_s + ANALYSIS_GRACE_S
 
     def check() -> None:
         """Between programs and interior-point iterations: a cancel, or the stage's time limit."""
@@ -81,15 +83,18 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
         # How well the data fix the plane and K (one focal length a view: each view's), read with the
         # stratified costs' curvature (the moment relaxation has no local parametrisation of its own).
         from geocert.solvers.autocalibration import determinacy
-        from geocert.solvers.core.determinacy import safely
+        from geocert.solvers.core.determinacy import within
 
         p = pr.plane_from_input(problem, np.array(document["plane_at_infinity"]))
         centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
+        why = (f"the job's time limit (options.time_limit_s, {options.time_limit_s:g} s) had passed, and "
+               f"{ANALYSIS_GRACE_S:g} s more")
         if p is not None and document["Ks"] is not None:
-            stage["determinacy"] = safely(determinacy.varying_focal_stage, problem, p, document["Ks"], centres)
+            stage["determinacy"] = within(deadline, "the direct stage's determinacy", why,
+                                          determinacy.varying_focal_stage, problem, p, document["Ks"], centres)
         elif p is not None:
-            stage["determinacy"] = safely(determinacy.metric_stage, problem, p, np.array(document["K"]), None, None,
-                                          centres)
+            stage["determinacy"] = within(deadline, "the direct stage's determinacy", why, determinacy.metric_stage,
+                                          problem, p, np.array(document["K"]), None, None, centres)
     stages = [stage]
     if checking:
         self_check_stages(parsed, dataclasses.replace(options), stages)

@@ -89,7 +89,8 @@ class JobStore:
 
         ``stored_bytes_limit``: what the owner's jobs that exist may hold in all (0: no limit),
         each counted as its request's bytes (``items_bytes``: those of ``items_key``'s texts), at
-        least STORED_BYTES_FLOOR; StoredBytesExceeded beyond it, nothing of the job kept."""
+        least STORED_BYTES_FLOOR, and from its end its stored result's (``_COUNT_RESULT``);
+        StoredBytesExceeded beyond it, nothing of the job kept."""
         job_id = uuid.uuid4().hex
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
@@ -762,9 +763,12 @@ class JobStore:
                     self.key(job_id, "gaps"), self.key(job_id, "fragmentsums"))
         if fragments is None:
             pipe.delete(self.key(job_id, "fragments"))
-        pipe.srem(self.owner_key(self.field(job_id, "owner") or "", "active"), job_id)
+        owner = self.field(job_id, "owner") or ""
+        pipe.srem(self.owner_key(owner, "active"), job_id)
         pipe.zrem(self.RUNNING, job_id)
         pipe.zrem(self.DEADLINES, job_id)
+        pipe.eval(self._COUNT_RESULT, 4, self.key(job_id, "result"), self.key(job_id, "fragments"),
+                  *self._accounts(owner)[1:], job_id)
         self._announce_end(job_id, status, error, pipe)
         pipe.execute()
 
@@ -869,7 +873,7 @@ class JobStore:
         return self.owner_key(owner, "jobs"), self.owner_key(owner, "stored"), self.owner_key(owner, "stored_bytes")
 
     PRUNED_PER_JOB = 8
-    STORED_BYTES_FLOOR = 16 << 10  # a job's record, events and a small result
+    STORED_BYTES_FLOOR = 16 << 10  # a job's record and events (its result is counted when it ends)
     _FORGET_LUA = """
     local function forget(id)
       local bytes = redis.call('HGET', KEYS[2], id)
@@ -885,6 +889,19 @@ class JobStore:
     for _, id in ipairs(redis.call('ZRANGE', KEYS[1], 0, tonumber(ARGV[2]) - 1)) do
       if redis.call('EXISTS', ARGV[1] .. id) == 0 then forget(id) end
     end
+    """
+
+    # A job that ends adds what its result holds (the stored result, and the fragments a streamed
+    # result is kept as) to its bytes in its owner's accounts, when it is still counted there (not
+    # deleted meanwhile): a result is about 3 times its request compressed (a track's 12 times
+    # uncompressed), so a key counted by its requests alone kept several times its limit.
+    _COUNT_RESULT = """
+    if redis.call('HEXISTS', KEYS[3], ARGV[1]) == 0 then return 0 end
+    local bytes = redis.call('STRLEN', KEYS[1])
+    for _, start in ipairs(redis.call('HKEYS', KEYS[2])) do bytes = bytes + redis.call('HSTRLEN', KEYS[2], start) end
+    redis.call('HINCRBY', KEYS[3], ARGV[1], bytes)
+    redis.call('INCRBY', KEYS[4], bytes)
+    return bytes
     """
 
     def release(self, owner: str, job_id: str) -> None:

@@ -53,3 +53,36 @@ def test_a_verification_beyond_the_limit_is_refused_before_its_body_is_read():
 def test_other_paths_and_no_limit_pass():
     assert run_two(1, "/v1/jobs") == [200, 200]
     assert run_two(0, "/v1/certificates/verify") == [200, 200]
+
+
+def test_a_large_request_gives_the_heaps_free_pages_back(monkeypatch):
+    """glibc keeps what a request freed in its arenas: after a request whose body or answer passes
+    the threshold (here 100 bytes), GiveBackMemory hands the free pages back (malloc_trim), once;
+    after a small one it does not."""
+    from geocert.app import main, processes
+
+    trims = []
+    monkeypatch.setattr(processes, "give_back_memory", lambda: trims.append(1))
+
+    def answer(size: int):
+        async def app(scope, receive, send):
+            await receive()
+            await send({"type": "http.response.start", "status": 200, "headers": []})
+            await send({"type": "http.response.body", "body": b"x" * size})
+        return app
+
+    async def one(app, body: bytes) -> None:
+        async def receive():
+            return {"type": "http.request", "body": body, "more_body": False}
+
+        async def send(message):
+            pass
+        await main.GiveBackMemory(app, above=100)({"type": "http", "method": "POST", "path": "/", "headers": []},
+                                                  receive, send)
+
+    asyncio.run(one(answer(10), b"{}"))
+    assert trims == []
+    asyncio.run(one(answer(10), b"x" * 200))
+    assert trims == [1]
+    asyncio.run(one(answer(200), b"{}"))
+    assert trims == [1, 1]

@@ -178,6 +178,8 @@ def test_6_orientations_at_once_are_bounded(plain):
     counted from before the body is read: here two requests whose bodies are still arriving."""
     running, client = plain
     body = json.dumps({"cameras": [np.eye(3, 4).tolist()] * 2, "points": [[0.0, 0.0, 1.0]] * 10}).encode()
+    # The orientation processes start with the first (seconds): started before the count is read.
+    assert client.post("/v1/orient", content=body, headers={"content-type": "application/json"}).status_code == 200
     release, results = threading.Event(), []
 
     def held_body():
@@ -206,6 +208,102 @@ def test_6_orientations_at_once_are_bounded(plain):
             thread.join(60)
     assert results == [200, 200]
     assert client.post("/v1/orient", content=body, headers={"content-type": "application/json"}).status_code == 200
+
+
+def spawned(pid: int) -> list[int]:
+    """The API process's spawned helper processes (multiprocessing's) under ``pid``."""
+    found, todo = [], [pid]
+    while todo:
+        current = todo.pop()
+        try:
+            with open(f"/proc/{current}/task/{current}/children") as children:
+                todo.extend(int(child) for child in children.read().split())
+            with open(f"/proc/{current}/cmdline", "rb") as cmdline:
+                if b"spawn_main" in cmdline.read():
+                    found.append(current)
+        except OSError:
+            pass
+    return found
+
+
+def test_6_orientations_run_outside_the_api_process(plain):
+    """/v1/orient decoded its body, built its dense arrays and wrote its answer in the API process,
+    holding the interpreter lock for most of it: two at the budget kept another client's GET
+    /v1/jobs waiting 2.5-3.3 s, and the API kept the 1.3-2.0 GB it grew to. Now the orientation is
+    done in an orientation process: with that process stopped (SIGSTOP) while it holds a request,
+    another request is answered and the orientation is not, and it ends once the process runs
+    again with the answer it gives in process; errors read as they did; a killed orientation
+    process fails the request it held with a 503, and the next is taken."""
+    running, client = plain
+    rng = np.random.default_rng(6)
+    body = {"cameras": rng.normal(size=(3, 3, 4)).tolist(), "points": rng.normal(size=(40, 3)).tolist()}
+    first = client.post("/v1/orient", json=body)  # starts the orientation processes, and waits for them
+    assert first.status_code == 200, first.text
+    helpers = spawned(running.api.pid)
+    assert helpers, "no orientation process: the orientation ran in the API process"
+    for pid in helpers:
+        os.kill(pid, signal.SIGSTOP)
+    answered = {}
+    try:
+        sender = threading.Thread(target=lambda: answered.update(answer=client.post("/v1/orient", json=body, timeout=120)))
+        sender.start()
+        assert client.get("/v1/jobs").status_code == 200
+        sender.join(timeout=5)  # an answer now could only come from the API process itself
+        assert sender.is_alive(), "the orientation was answered while its process was stopped"
+    finally:
+        for pid in helpers:
+            os.kill(pid, signal.SIGCONT)
+    sender.join(timeout=120)
+    assert answered["answer"].status_code == 200 and answered["answer"].json() == first.json()
+    refused = client.post("/v1/orient", json={**body, "points": [[0, 0, 0, 0]]})
+    assert refused.status_code == 422 and refused.json()["errors"][0]["field"] == "points/0", refused.text
+    invalid = client.post("/v1/orient", json={**body, "cameras": "many"})
+    assert invalid.status_code == 422 and invalid.json()["errors"][0]["field"] == "cameras", invalid.text
+    broken = client.post("/v1/orient", content=json.dumps(body)[:-2].encode() + b"x}",
+                         headers={"content-type": "application/json"})
+    assert broken.status_code == 400, broken.text
+    assert client.post("/v1/orient", content=json.dumps(body), headers={"content-type": "text/plain"}).status_code == 415
+    for pid in spawned(running.api.pid):
+        os.kill(pid, signal.SIGKILL)
+    lost = client.post("/v1/orient", json=body)
+    assert lost.status_code == 503 and lost.headers["Retry-After"], lost.text
+    again = client.post("/v1/orient", json=body)
+    assert again.status_code == 200 and again.json() == first.json()
+
+
+def test_verifications_run_outside_the_api_process(plain):
+    """A certificate verification read and checked its document in a thread of the API process,
+    holding the interpreter lock for seconds: two of 26 MB at once kept another client's GET
+    /v1/jobs waiting 2.4-2.8 s. Now it runs in a verification process: with that process stopped
+    while it holds a document, another request is answered and the verification is not; it ends
+    once the process runs again, with the report it gives in process; errors read as they did."""
+    running, client = plain
+    document = {"kind": "triangulation", "items": [[0.5] * 10] * 20}
+    first = client.post("/v1/certificates/verify", json=document)  # starts the processes, and waits for them
+    assert first.status_code == 200 and first.json()["valid"] is False, first.text
+    before = set(spawned(running.api.pid))
+    helpers = list(before)
+    assert helpers, "no verification process: the verification ran in the API process"
+    for pid in helpers:
+        os.kill(pid, signal.SIGSTOP)
+    answered = {}
+    try:
+        sender = threading.Thread(target=lambda: answered.update(
+            answer=client.post("/v1/certificates/verify", json=document, timeout=120)))
+        sender.start()
+        assert client.get("/v1/jobs").status_code == 200
+        sender.join(timeout=5)  # an answer now could only come from the API process itself
+        assert sender.is_alive(), "the verification was answered while its process was stopped"
+    finally:
+        for pid in helpers:
+            os.kill(pid, signal.SIGCONT)
+    sender.join(timeout=120)
+    assert answered["answer"].status_code == 200 and answered["answer"].json() == first.json()
+    broken = client.post("/v1/certificates/verify", content=b'{"kind": x}', headers={"content-type": "application/json"})
+    assert broken.status_code == 400 and broken.headers["content-type"].startswith("application/problem+json")
+    twice = client.post("/v1/certificates/verify", content=b'{"kind": 1, "kind": 2}',
+                        headers={"content-type": "application/json"})
+    assert twice.status_code == 422 and twice.json()["errors"][0]["field"] == "kind", twice.text
 
 
 def test_a_map_over_its_points_budget_is_refused_at_submission(plain):
@@ -537,6 +635,98 @@ def test_a_keys_stored_jobs_are_bounded_in_bytes(tmp_path):
         assert "GEOCERT_MAX_STORED_BYTES_PER_KEY" in answer["detail"]
         store = redis.Redis.from_url(running.redis_url, decode_responses=True)
         assert [key for key in store.scan_iter("geocert:upload:*")] == []
+
+
+def test_a_keys_stored_results_count_among_its_stored_bytes(tmp_path):
+    """A key's stored bytes counted its jobs' requests only, while a job's result is kept as long
+    and is several times larger (a track's result some 12 times its request, a quarter of that
+    compressed): a key within its limit by its requests kept several times it. Now a job that
+    ends adds its stored result (the fragments of a streamed one included) to its key's account,
+    so fewer jobs are admitted after it; deleting the job gives every byte back."""
+    limit = 6 * 16384
+    rng = np.random.default_rng(3)
+    tracks = [{"views": [0, 1], "points": [[float(x), float(y)], [float(x) - 80 + float(dx), float(y) + float(dy)]]}
+              for x, y, dx, dy in zip(rng.uniform(100, 500, 100), rng.uniform(100, 400, 100),
+                                      rng.normal(0, 2, 100), rng.normal(0, 2, 100))]
+    many = {**TRIANGULATION, "data": {**TRIANGULATION["data"], "tracks": tracks}}
+    with cluster(tmp_path, workers=1, geocert_max_stored_bytes_per_key=str(limit)) as (running, client):
+        store = redis.Redis.from_url(running.redis_url)
+        response = client.post("/v1/jobs", json=many)
+        assert response.status_code == 202, response.text
+        job_id = response.json()["id"]
+        assert ended(client, job_id)["status"] == "succeeded"
+        (account,) = store.scan_iter("geocert:owner:*:stored_bytes")
+        request_bytes = len(store.get(f"geocert:job:{job_id}:request")) + sum(
+            map(len, store.lrange(f"geocert:job:{job_id}:request:items", 0, -1)))
+        result_bytes = store.strlen(f"geocert:job:{job_id}:result") + sum(
+            store.hstrlen(f"geocert:job:{job_id}:fragments", start) for start in store.hkeys(f"geocert:job:{job_id}:fragments"))
+        assert result_bytes > 16384, result_bytes  # enough to keep out a job more than the request alone
+        counted = max(request_bytes, 16384) + result_bytes
+        assert int(store.get(account)) == counted
+        admitted = 0
+        while (answer := client.post("/v1/jobs", json=TRIANGULATION)).status_code == 202:
+            admitted += 1
+            assert admitted < 10
+        assert "GEOCERT_MAX_STORED_BYTES_PER_KEY" in problem(answer, 429)["detail"]
+        assert admitted == (limit - counted) // 16384 < (limit - max(request_bytes, 16384)) // 16384
+        assert client.delete(f"/v1/jobs/{job_id}").status_code == 204
+        assert client.post("/v1/jobs", json=TRIANGULATION).status_code == 202
+
+
+def test_exports_are_bounded_per_process_and_per_key_and_written_outside_the_api(tmp_path):
+    """An export (COLMAP's model, PLY) read, decoded and wrote a whole result in the API process,
+    as many at once as were asked: eight COLMAP exports of a 100,000-point result held +5.4 GB
+    and kept another key's GET /v1/jobs waiting 17 s. Now each is written in an export process,
+    at most GEOCERT_MAX_CONCURRENT_EXPORTS (2) at once per API process and
+    GEOCERT_MAX_CONCURRENT_EXPORTS_PER_KEY (1) of one key's, a 429 naming the limit beyond:
+    with the export processes stopped (SIGSTOP) while they hold one export of each of two keys,
+    a key's second export and a third key's are refused, another request is answered, and the
+    two exports end once the processes run again with what they gave before."""
+    from geocert.kinds import get_kind
+
+    keys = {"X-API-Key": "one"}, {"X-API-Key": "other"}, {"X-API-Key": "third"}
+    with cluster(tmp_path, workers=1, geocert_api_keys="one,other,third") as (running, client):
+        jobs = [client.post("/v1/jobs", json=get_kind("reconstruction").example, headers=key).json()["id"]
+                for key in keys[:2]]
+        for job_id, key in zip(jobs, keys):
+            assert ended(client, job_id, headers=key)["status"] == "succeeded"
+        paths = [f"/v1/jobs/{job_id}/export?format=ply" for job_id in jobs]
+        before = [client.get(path, headers=key) for path, key in zip(paths, keys)]  # starts the export processes
+        assert [answer.status_code for answer in before] == [200, 200]
+        helpers = spawned(running.api.pid)
+        assert helpers, "no export process: the exports were written in the API process"
+        for pid in helpers:
+            os.kill(pid, signal.SIGSTOP)
+        answers: dict[int, httpx.Response] = {}
+        senders = [threading.Thread(target=lambda k=k: answers.update({k: client.get(paths[k], headers=keys[k],
+                                                                                     timeout=120)}))
+                   for k in range(2)]
+        nowhere = f"/v1/jobs/{'0' * 32}/export?format=ply"  # a 404 at once when let in: never held
+
+        def refused_while_held(sender, key) -> dict:
+            sender.start()
+            deadline = time.monotonic() + 30
+            while (answer := client.get(nowhere, headers=key)).status_code != 429:
+                assert answer.status_code in (404, 422), answer.text
+                assert time.monotonic() < deadline, "the held export was not counted"
+                time.sleep(0.1)
+            assert answer.headers["Retry-After"]
+            return problem(answer, 429)
+
+        try:
+            assert "GEOCERT_MAX_CONCURRENT_EXPORTS_PER_KEY" in refused_while_held(senders[0], keys[0])["detail"]
+            assert client.get(nowhere, headers=keys[1]).status_code in (404, 422)  # another key's are let in
+            detail = refused_while_held(senders[1], keys[2])["detail"]
+            assert "GEOCERT_MAX_CONCURRENT_EXPORTS" in detail and "PER_KEY" not in detail
+            assert client.get("/v1/jobs", headers=keys[2]).status_code == 200
+            assert not answers, "an export was answered while the export processes were stopped"
+        finally:
+            for pid in helpers:
+                os.kill(pid, signal.SIGCONT)
+        for sender in senders:
+            sender.join(120)
+        assert [answers[k].content for k in range(2)] == [answer.content for answer in before]
+        assert client.get(paths[1], headers=keys[1]).status_code == 200
 
 
 # ---------------------------------------------------------------------------------------------

@@ -41,7 +41,7 @@ from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.core.determinacy import (RELATIVE_WIDTH, SIGMAS, certified_gap, clip, cost_increase,
                                               curvature_intervals, interval, numeric_jacobian, ranges_at, spread,
-                                              sublevel_rays)
+                                              sublevel_rays, tick)
 
 # Radians: rotations given exactly (a metric reconstruction's) carry no noise estimate, and are not
 # taken as known better than 0.6 degrees. Adjusted along a critical family they scatter by that
@@ -381,8 +381,10 @@ def plane_family(problem, p: np.ndarray, w: np.ndarray | None, gap: float | None
         setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
         w = refit(problem, p, mrelax.linear_baseline(setup)[0])
     here = _K_of_w(problem, w)
-    Ks = [None if q is None else _K_of_w(problem, refit(problem, q, w)) if w is not None else np.full(5, np.nan)
-          for q in points]
+    Ks = []
+    for q in points:
+        tick()  # each refit is a least-squares fit of its own
+        Ks.append(None if q is None else _K_of_w(problem, refit(problem, q, w)) if w is not None else np.full(5, np.nan))
     moves = [math.inf if k is None else change(here, k) for k in Ks]
     return {"J": J, "residuals": r, "cost_increase": delta, "points": points, "K": here, "Ks": Ks, "w": w,
             "largest_move": max(moves) if moves else 0.0}

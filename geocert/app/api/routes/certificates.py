@@ -6,9 +6,9 @@ from __future__ import annotations
 import json
 
 from fastapi import APIRouter, Depends, Request
-from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 
+from geocert.app import processes
 from geocert.app.api.deps import JobStoreDep, error_responses, rate_limited
 from geocert.app.api.routes.jobs import OwnedJob
 from geocert.app.errors import PROBLEM_JSON, ApiProblem, is_json_media_type, json_syntax_problem
@@ -16,6 +16,7 @@ from geocert.app.schemas import RESULT_MODELS, VerifyReport
 from geocert.kinds.schema import CertificateDocument
 from geocert.solvers import verify
 from geocert.solvers.core.strict import RepeatedName, Unreadable, load_document
+from geocert.settings import get_settings
 from geocert.workers.store import TERMINAL
 
 router = APIRouter(tags=["certificates"], dependencies=[Depends(rate_limited)])
@@ -61,13 +62,48 @@ async def verify_certificate(request: Request):
         raise ApiProblem(415, f"the body must be JSON sent with the header content-type: application/json ({given})",
                          "content-type")
     text = await request.body()
-    try:  # parsed once, by the verifier's reader, off the event loop (a body becomes ~25 times its size)
-        return await run_in_threadpool(_verified, text)
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:  # not JSON, or not UTF-8 text
-        syntax = ({"loc": ("body", exc.pos), "ctx": {"error": exc.msg}} if isinstance(exc, json.JSONDecodeError)
-                  else {"loc": ("body", exc.start), "ctx": {"error": f"not UTF-8 ({exc.reason})"}})
-        return JSONResponse(json_syntax_problem(syntax, text, str(request.url.path)), status_code=400,
-                            media_type=PROBLEM_JSON)
+    # Parsed once, by the verifier's reader, in a verification process: the reader and the checks
+    # hold the interpreter lock for seconds on a large document (two of 26 MB at once kept another
+    # key's GET /v1/jobs waiting 2.6-5.2 s in a thread of the API process), and a body becomes
+    # several times its size in memory.
+    outcome = await _POOL.run(_verified_in_process, bytes(text), processes.environment())
+    if outcome[0] == "report":
+        return outcome[1]
+    if outcome[0] == "syntax":  # not JSON, or not UTF-8 text
+        _, position, error = outcome
+        return JSONResponse(json_syntax_problem({"loc": ("body", position), "ctx": {"error": error}}, text,
+                                                str(request.url.path)), status_code=400, media_type=PROBLEM_JSON)
+    processes.raise_carried(outcome, text)
+
+
+def _ready() -> None:
+    """A verification process's first task: the verifier imported."""
+    from geocert.solvers import verify as _  # noqa: F401
+
+
+# As many verification processes as verifications may run at once (its gate refuses more).
+_POOL = processes.Pool(lambda: get_settings().max_concurrent_verifications or 2, _ready,
+                       "the process verifying this document")
+
+
+def _verified_in_process(text: bytes, environment: dict[str, str]) -> tuple:
+    """In a verification process: ("report", the report), ("syntax", position, error) for a body
+    that is not JSON or not UTF-8, or an error carried (processes.carried). The heap's free pages
+    go back to the system after each."""
+    processes.use(environment)
+    try:
+        return "report", _verified(text)
+    except json.JSONDecodeError as exc:
+        return "syntax", exc.pos, exc.msg
+    except UnicodeDecodeError as exc:
+        return "syntax", exc.start, f"not UTF-8 ({exc.reason})"
+    except Exception as exc:  # the errors a verification answers with; anything else is a bug, raised
+        error = processes.carried(exc)
+        if error is None:
+            raise
+        return error
+    finally:
+        processes.give_back_memory()
 
 
 def _verified(text: bytes) -> dict:

@@ -21,13 +21,18 @@ from fastapi.sse import EventSourceResponse, ServerSentEvent
 from geocert.app.api.deps import Caller, JobStoreDep, error_responses, get_async_redis, rate_limited, stream_slot
 from geocert.settings import get_settings
 from geocert.app import lifecycle
-from geocert.app import shape, streamed, submissions
+from geocert.app import exports, processes, shape, streamed, submissions
 from geocert.app.job_submission import _submit
 from geocert.app.errors import ApiProblem
 from geocert.app.schemas import JOB_EXAMPLES, JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
 from geocert.workers.queue import withdraw_queued
 from geocert.workers.store import REDIS_GONE, TERMINAL, JobStore, events, read_job
+
+# As many export processes as exports may run at once (the gate on the export path refuses more).
+_EXPORTS = processes.Pool(lambda: get_settings().max_concurrent_exports or 2, exports.ready,
+                          "the process writing this export")
+
 
 class StreamedItemsRoute(APIRoute):
     """POST routes of this router check a large JSON body's budget from its shape before parsing
@@ -248,25 +253,24 @@ def get_job_request(job: OwnedJob, store: JobStoreDep):
     200: {"content": {"application/zip": {}, "application/octet-stream": {}, "text/plain": {}},
           "description": "format=colmap: a zip of COLMAP's text model (cameras.txt, images.txt, points3D.txt); "
                          "format=ply: the points as PLY (ascii, or binary with binary=true)"},
-    **error_responses(404, 409, 422)})
-def export_job(job: OwnedJob, store: JobStoreDep, format: Annotated[str, Query(description="colmap or ply")],
-               binary: Annotated[bool, Query(description="ply: binary little-endian")] = False):
-    """A finished reconstruction job's result in a format other tools open."""
-    from geocert.solvers.reconstruction import export
+    **error_responses(404, 409, 422, 429, 503)})
+async def export_job(job: OwnedJob, format: Annotated[str, Query(description="colmap or ply")],
+                     binary: Annotated[bool, Query(description="ply: binary little-endian")] = False):
+    """A finished reconstruction job's result in a format other tools open. Written in an export
+    process (app.exports); at most GEOCERT_MAX_CONCURRENT_EXPORTS at once per API process, and
+    GEOCERT_MAX_CONCURRENT_EXPORTS_PER_KEY of one key's (429 with Retry-After beyond)."""
+    from geocert.solvers.reconstruction.export import FORMATS
 
-    if format not in export.FORMATS:
-        raise ApiProblem(422, f"unknown format {format!r} (served: {', '.join(export.FORMATS)})", "format")
+    if format not in FORMATS:
+        raise ApiProblem(422, f"unknown format {format!r} (served: {', '.join(FORMATS)})", "format")
     if job["status"] != "succeeded":
         raise ApiProblem(409, f"job {job['id']} is {job['status']}: only a succeeded job's result is exported")
-    result = store.result(job["id"]) or {}
-    if result.get("kind") != "reconstruction":
-        raise ApiProblem(422, f"job {job['id']} is a {result.get('kind')} job: only reconstruction results are "
-                              "exported", "format")
-    if format == "colmap":
-        return Response(export.colmap_zip(result), media_type="application/zip",
-                        headers={"content-disposition": f'attachment; filename="{job["id"]}-colmap.zip"'})
-    return Response(export.ply(result, binary), media_type="application/octet-stream" if binary else "text/plain",
-                    headers={"content-disposition": f'attachment; filename="{job["id"]}.ply"'})
+    outcome = await _EXPORTS.run(exports.export_job, job["id"], format, binary, processes.environment())
+    if outcome[0] != "export":
+        processes.raise_carried(outcome, b"")
+    _, content, media_type, suffix = outcome
+    return Response(content, media_type=media_type,
+                    headers={"content-disposition": f'attachment; filename="{job["id"]}{suffix}"'})
 
 
 @router.post("/{job_id}/cancel", response_model=Job, status_code=202, responses=error_responses(404, 409))
