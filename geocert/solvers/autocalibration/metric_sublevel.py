@@ -9,7 +9,8 @@ optimum) and U = c + increase (rounded up). From the root box of omega (the rang
 bound tightening with the cost capped at ``cap`` > U (metric.tighten: each side a safe dual bound)
 shrink the box to one holding every omega costing at most U; its halves are then bounded over the
 relaxation with the same cap, and a box whose safe bound exceeds U (or that holds no domain point,
-or whose relaxation is infeasible) is excluded; the others are split while the budget lasts. The
+or whose relaxation is infeasible) is excluded; the others are tightened at the cap (the slabs cut
+off, each closed by its cut, are excluded) and halved while the budget lasts. The
 interval of each intrinsic is the hull, over the leaves not excluded, of its range on the leaf
 (metric_relaxation.intrinsics_ranges, met with the ranges), in pixels. A leaf without a safe bound
 the verifier recomputes excludes nothing. The verifier (proofs.check_sublevel) recomputes it."""
@@ -29,7 +30,7 @@ LEVEL_SLACK = 1e-9  # U = c (1 + this) + increase: the returned cost's own round
 CAP_MARGIN = 1e-4  # the programs' cap, this much above U: a leaf is excluded by a bound above U
 EXCLUDE_MARGIN = 1e-6  # the solver excludes a leaf only when its bound exceeds U by this much
 STATED_SLACK = 1e-7  # the solver states its intervals this much wider (relative to the half-width)
-MAX_BOXES = 40  # programs of the search after the tightening (each a conic solve)
+MAX_BOXES = 120  # programs of the search after the tightening (conic solves, a split's ten counted)
 TIGHTENING_ROUNDS = 6
 
 
@@ -65,30 +66,26 @@ def prove(problem, p: np.ndarray, unit: float, cost: float, increase: float, tim
     root_lo, root_hi = relax.omega_box(problem.unit_ranges)
     lo, hi, rounds = tighten(setup, root_lo, root_hi, cap, 0.0, rounds=TIGHTENING_ROUNDS, stop=stop)
     search = MetricProblem(setup, lo, hi, record=True)
+    search.upper, search.deadline = cap, began + time_limit_s  # its splits tighten at the cap
     open_boxes, leaves, programs = [Box(lo.copy(), hi.copy())], [], 0
     while open_boxes:
         box = open_boxes.pop(0)
-        if programs >= MAX_BOXES or stop():
+        cut = id(box) in search.cuts
+        if not cut and (programs >= MAX_BOXES or stop()):
             leaves.append((box, None))  # not bounded: kept (it excludes nothing)
             continue
-        programs += 1
+        programs += 0 if cut else 1
         bound = search.bound(box, cap)
         proof = bound.proof
-        if proof is not None and (proof.kind in ("no_domain", "farkas")
+        if proof is not None and (proof.kind in ("no_domain", "farkas", "cut")
                                   or (proof.kind == "dual" and proof.bound > U * (1 + EXCLUDE_MARGIN))):
-            leaves.append((box, proof))
+            leaves.append((box, proof))  # a cut's slab holds no omega costing at most the cap
             continue
-        if relax.intrinsics_ranges(setup.ranges, box.lo, box.hi) is None:
-            leaves.append((box, None))  # no K of the box within the ranges: the hull skips it
-            continue
-        k = int(np.argmax((box.hi - box.lo) / np.maximum(hi - lo, 1e-300)))
-        middle = 0.5 * (box.lo[k] + box.hi[k])
-        if not box.lo[k] < middle < box.hi[k]:
+        if relax.intrinsics_ranges(setup.ranges, box.lo, box.hi) is None or programs >= MAX_BOXES or stop():
             leaves.append((box, None))
             continue
-        left_hi, right_lo = box.hi.copy(), box.lo.copy()
-        left_hi[k] = right_lo[k] = middle
-        open_boxes += [Box(box.lo.copy(), left_hi), Box(right_lo, box.hi.copy())]
+        programs += 10  # the split's tightening: each side minimised and maximised at the cap
+        open_boxes += search.split(box, bound)
     kept = [(b.lo, b.hi) for b, proof in leaves if proof is None]
     intervals = hull(problem.unit_ranges, problem.K0, kept)
     if intervals is None:

@@ -464,8 +464,9 @@ def check_sublevel(problem, setup, sublevel: Any, cost: float) -> np.ndarray:
     lo, hi, proven_lo, proven_hi = _check_rounds(problem, setup, sublevel, U, "proven_interval",
                                                  "its cap is below the level proven")
     read: list = []
-    check_leaves(sublevel, lo, hi, lambda l, h, c: mrelax.build(setup, l, h, c), setup.unit, 5, None,
-                 Box(proven_lo, proven_hi), len(problem.norm.cameras), read)
+    check_leaves(sublevel, lo, hi, lambda l, h, c: mrelax.build(setup, l, h, c), setup.unit, 5,
+                 lambda l, h, c: mrelax.build(setup, l, h, c, cap_row=True), Box(proven_lo, proven_hi),
+                 len(problem.norm.cameras), read)
     leaf_lo, leaf_hi, bounds = read
 
     def hull(limit: float) -> np.ndarray | None:
