@@ -391,8 +391,11 @@ def real_autocalibration_proven(noise_px: float = 0.5) -> list[str]:
         f, fe = proven["focal_x"], estimate["focal_x"]
         ratio = ((f["upper"] - f["lower"]) / (fe["upper"] - fe["lower"])
                  if fe["lower"] is not None and fe["upper"] is not None and fe["upper"] > fe["lower"] else math.nan)
+        def end(x):
+            return "unbounded" if x is None else f"{x:.0f}"
+
         lines.append(f"  {name}: f {result['K'][0][0]:.0f} px (truth {K[0, 0]:.0f}); proven focal_x "
-                     f"[{f['lower']:.0f}, {f['upper']:.0f}], estimate [{fe['lower']:.0f}, {fe['upper']:.0f}] "
+                     f"[{end(f['lower'])}, {end(f['upper'])}], estimate [{end(fe['lower'])}, {end(fe['upper'])}] "
                      f"(width ratio {ratio:.2f}); truth inside proven {len(inside)}/5, estimate "
                      f"{len(inside_estimate)}/5; verifies {verify_any(result).valid}; {elapsed:.0f} s")
     lines.append(f"  all: the truth inside the proven intervals {covered}/{total}, the estimate's {estimated}/{total}")
