@@ -299,12 +299,16 @@ def _check_proven_intervals(stage: dict, claim: dict) -> None:
         return
     proof = claim.get("proof")
     sublevel = proof.get("sublevel") if isinstance(proof, dict) else None
-    if sublevel is None or determinacy.get("proven") is not True:
+    if not isinstance(sublevel, dict) or determinacy.get("proven") is not True:
         raise Invalid("returned", "stages/1/determinacy says proven, and no proof of its intervals is carried")
-    if determinacy.get("proven_intervals") != proven_metric(sublevel):
+    try:
+        expected = proven_metric(sublevel)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise Invalid("returned", "stages/1: its proof's sublevel states no intervals") from exc
+    if determinacy.get("proven_intervals") != expected:
         raise Invalid("returned", "stages/1/determinacy/proven_intervals are not its proof's sublevel")
     estimate = determinacy.get("cost_increase")
-    if isinstance(estimate, (int, float)) and not sublevel["cost_increase"] >= estimate * (1 - 1e-9):
+    if isinstance(estimate, (int, float)) and not expected["cost_increase"] >= estimate * (1 - 1e-9):
         raise Invalid("returned", "stages/1/determinacy: the proven intervals' cost_increase is below its "
                                   "estimate's (a lower level proves a smaller set)")
 
