@@ -9,7 +9,9 @@ vector whose safe bound the verifier recomputes from the relaxation it rebuilds 
 Metric stage ("stratified_metric"), for the plane at infinity it states: the root box of omega
 from the intrinsics ranges (interval arithmetic, recomputed), rounds of bound tightening (each
 side a safe dual bound over the relaxation with the cost capped), and leaves covering the last
-round's box, each with its dual vector.
+round's box, each with its dual vector; optionally its ``sublevel`` (metric_sublevel): proven
+intervals of the intrinsics, from rounds and leaves of a search at the cost level they are for
+(check_sublevel).
 """
 
 from __future__ import annotations
