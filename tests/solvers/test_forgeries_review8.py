@@ -198,7 +198,11 @@ class TestNestedMembersOpen:
     says is refused for a result's own members for that reason. Suggested fix: close every
     object a result nests, at every depth, to the members its writer gives it (the kinds' result
     models, the pipeline's stage records and summary records: one registry, as JOB_MEMBERS), and
-    the warnings' codes to the codes the pipelines write (a registry both read)."""
+    the warnings' codes to the codes the pipelines write (a registry both read). Made here
+    (core.records, core.warning_codes): every nested record closed to its writer's members, a
+    certificate's items to a claim's, the warnings' codes to the registry; a reconstruction's
+    stage records state a claim only where their writer does (their other figures not yet
+    closed per stage)."""
 
     @pytest.mark.parametrize("name", sorted({source for source, _ in NESTED_MEMBERS.values()}))
     def test_the_genuine_results_verify(self, name):
@@ -210,7 +214,6 @@ class TestNestedMembersOpen:
         codes = {w["code"] for w in result["summary"]["warnings"]}
         assert "reconstruction_certified" not in codes
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("edit", sorted(NESTED_MEMBERS))
     def test_a_nested_member_no_kind_writes_is_refused(self, edit):
         name, change = NESTED_MEMBERS[edit]
