@@ -559,8 +559,10 @@ def check_members(kind, result: dict) -> None:
     from geocert.solvers.verified_kinds import NESTED_RECORDS
 
     records.check_nested(result, NESTED_RECORDS.get(kind.name, ()))
-    if kind.name == "reconstruction":
-        records.check_reconstruction_stages(result.get("stages"))
+    if kind.name == "reconstruction":  # its stages, each closed to its writer's members by its name
+        from geocert.solvers.reconstruction.stage_checks import STAGE_RECORDS
+
+        records.check(result.get("stages"), STAGE_RECORDS, "stages")
 
 
 def _check_returned(result: dict, certificate: dict) -> None:

@@ -200,9 +200,8 @@ class TestNestedMembersOpen:
     models, the pipeline's stage records and summary records: one registry, as JOB_MEMBERS), and
     the warnings' codes to the codes the pipelines write (a registry both read). Made here
     (core.records, core.warning_codes): every nested record closed to its writer's members, a
-    certificate's items to a claim's, the warnings' codes to the registry; a reconstruction's
-    stage records state a claim only where their writer does (their other figures not yet
-    closed per stage)."""
+    certificate's items to a claim's, the warnings' codes to the registry, a reconstruction's
+    stage records to their writer's members by name (stage_checks.STAGE_RECORDS)."""
 
     @pytest.mark.parametrize("name", sorted({source for source, _ in NESTED_MEMBERS.values()}))
     def test_the_genuine_results_verify(self, name):

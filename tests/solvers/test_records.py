@@ -87,3 +87,63 @@ def test_a_record_is_closed_at_every_depth():
         edit(forged)
         with pytest.raises(Invalid):
             records.check(forged, records.DETERMINACY, "determinacy")
+
+
+@pytest.fixture(scope="module")
+def undeclared_stage_members():
+    """Every member the reconstruction pipeline wrote in a stage record that
+    stage_checks.STAGE_RECORDS does not declare (so that keep_declared left it out), over the
+    kind's example solved with K unknown, with K known and with the projective registration."""
+    import copy
+
+    from geocert.batch import solve_job
+    from geocert.kinds import KINDS
+    from geocert.kinds import reconstruction as kind_module
+
+    found: list[str] = []
+    declared = kind_module.keep_declared
+
+    def recording(value, shape):
+        before = copy.deepcopy(value)
+        kept = declared(value, shape)
+        _missing(before, kept, f"stages/{before.get('name')}", found)
+        return kept
+
+    example = KINDS.get("reconstruction").example
+    original, kind_module.keep_declared = kind_module.keep_declared, recording
+    try:
+        result = solve_job(example)
+        K = next(c["K"] for c in result["cameras"] if c.get("K"))
+        for options in ({"intrinsics": {"K": K}}, {"registration": "projective"}):
+            solve_job({**example, "options": {**example["options"], **options}})
+    finally:
+        kind_module.keep_declared = original
+    return found
+
+
+def _missing(before, after, where: str, found: list) -> None:
+    if isinstance(before, dict):
+        found += [f"{where}/{name}" for name in before if name not in after]
+        for name, value in before.items():
+            if name in after:
+                _missing(value, after[name], f"{where}/{name}", found)
+    elif isinstance(before, list):
+        for index, (value, kept) in enumerate(zip(before, after)):
+            _missing(value, kept, f"{where}/{index}", found)
+
+
+def test_the_stage_records_declare_what_the_pipeline_writes(undeclared_stage_members):
+    assert undeclared_stage_members == []
+
+
+def test_a_stage_member_no_writer_writes_is_refused():
+    from tests.solvers.test_forgeries import stored
+    from tests.solvers.test_forgeries_review5 import _valid
+
+    for name, member in (("projective", "certified"), ("structure", "verified"), ("cameras", "unique_optimum")):
+        result = stored("reconstruction")
+        next(s for s in result["stages"] if s["name"] == name)[member] = True
+        assert not _valid(result), (name, member)
+    result = stored("reconstruction")
+    next(s for s in result["stages"] if s["name"] == "bundle_adjustment")["principal_point"]["certified"] = True
+    assert not _valid(result)

@@ -47,6 +47,28 @@ def record(*members: str, codes: frozenset | None = None, **nested: "Record | By
     return Record(frozenset(members) | frozenset(nested), dict(nested), codes)
 
 
+def keep_declared(value: Any, shape: "Record | ByName") -> Any:
+    """The writer's side of check: ``value`` with every member its record does not declare left
+    out, at every depth (a list's records each; a record of a name not declared as it is), so that
+    what a writer returns is what the verifier reads. Returns the value (changed in place)."""
+    if isinstance(value, list):
+        for entry in value:
+            keep_declared(entry, shape)
+        return value
+    if not isinstance(value, dict):
+        return value
+    if isinstance(shape, ByName):
+        shape = shape.records.get(value.get("name"))
+        if shape is None:
+            return value
+    for name in [name for name in value if name not in shape.members]:
+        del value[name]
+    for name, inner in shape.nested.items():
+        if value.get(name) is not None:
+            keep_declared(value[name], inner)
+    return value
+
+
 def check(value: Any, shape: "Record | ByName", where: str) -> None:
     """Refuses a member of ``value`` (a record, or a list of records) its writer never writes, at
     any depth of ``shape``. What is not a record (null, a number) is left to the checks reading it."""
@@ -109,16 +131,7 @@ INTRINSIC_RANGES = record("focal", "aspect", "skew", "principal_point")
 # (kinds.autocalibration_stages.stage_document, its certificate summary popped).
 NESTED_STAGE = record("name", "cost", "lower_bound", "gap", "status", "certified", "nodes", "elapsed_s", "reason")
 
-# Where a reconstruction's stage records may state a claim (pipelines.reconstruction.pipeline: the
-# autocalibration stage its certified upgrade, the structure and cameras stages their counts of
-# certified items); any other stage stating one is refused. The stages' other members are figures
-# of how the run went, which no check reads and the report does not present as claims.
-STAGE_CLAIMS = {"certified": ("autocalibration", "structure", "cameras"),
-                "certificate_views": ("autocalibration",), "certificate_tracks": ("autocalibration",),
-                "determined": ("autocalibration",), "critical_motion": ("autocalibration",),
-                "cameras_built_with_one_K": ("autocalibration",), "claim": ("cameras",)}
-RECONSTRUCTION_STAGE_RECORDS = {"stages": NESTED_STAGE, "motion_warnings": WARNING, "intrinsics": INTRINSIC_RANGES}
-
+# A reconstruction's stages are closed by name in reconstruction.stage_checks (STAGE_RECORDS).
 # A reconstruction's summary (pipelines.reconstruction.claims.summarise) and its records; its
 # depth-reversal record is closed by its own check (depth_reversal_claim.MEMBERS).
 RECONSTRUCTION_SUMMARY = record(
@@ -131,23 +144,6 @@ RECONSTRUCTION_SUMMARY = record(
                        difference=record("focal_percent", "aspect", "skew_px", "principal_point_px")),
     distortion=record("model", "k1", "focal_px", "estimated_by", "certified", "test", "statement"),
     warnings=WARNING)
-
-
-def check_reconstruction_stages(stages) -> None:
-    """A reconstruction's stage records: a claim only where its writer states one (STAGE_CLAIMS),
-    and the records they nest closed."""
-    for index, stage in enumerate(stages if isinstance(stages, list) else []):
-        if not isinstance(stage, dict):
-            continue
-        where = f"stages/{index}"
-        for name, writers in STAGE_CLAIMS.items():
-            if name in stage and stage.get("name") not in writers:
-                raise Invalid("returned", f"{where} ({stage.get('name')!r:.40}) states {name!r}, which only the "
-                                          f"{', '.join(writers)} stage(s) state: a claim no check reads is refused")
-        for name, shape in RECONSTRUCTION_STAGE_RECORDS.items():
-            if stage.get(name) is not None:
-                check(stage[name], shape, f"{where}/{name}")
-
 
 
 def check_nested(result: dict, nested: tuple) -> None:
