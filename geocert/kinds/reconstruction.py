@@ -30,7 +30,7 @@ from geocert.solvers.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputE
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.verification import RECONSTRUCTION
 from geocert.solvers.core.records import keep_declared
-from geocert.solvers.reconstruction.stage_checks import STAGE_RECORDS
+from geocert.solvers.reconstruction.stage_checks import IMAGES, STAGE_RECORDS
 
 MAX_VIEWS = 1000
 MAX_TRACKS = 200_000
@@ -577,7 +577,7 @@ class ReconstructionKind:
             out.summary["cpu_s"] = {"matches": matches["cpu_s"], **out.summary["cpu_s"]}
         camera_maps = {c.view: c.bound for c in out.cameras if c.bound is not None and c.bound.result is not None}
         return {"calibration_proof": calibration_proof, "cameras": cameras, "points": points, "stages": stages, "summary": _jsonable(out.summary),
-                "images": images_document, "camera_results": self._camera_items(out, options, camera_maps),
+                "images": keep_declared(images_document, IMAGES), "camera_results": self._camera_items(out, options, camera_maps),
                 # A cancelled run keeps what it did (pipeline.reconstruct); the item says it was
                 # stopped, so the job ends "cancelled" (workers.tasks._end), not "succeeded".
                 "status": "cancelled" if out.cancelled else "time_limit" if clock["passed"] else (

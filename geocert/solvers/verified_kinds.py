@@ -17,6 +17,7 @@ from geocert.solvers.core import records
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.fractional.items import TRACKS, MapItems
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
+from geocert.solvers.reconstruction import stage_checks
 from geocert.solvers.reconstruction.verification import RECONSTRUCTION
 
 NOT_CERTIFIED = ("stereo_lines results are estimates (RANSAC around algebraic solvers), never certified: there is "
@@ -112,7 +113,7 @@ NESTED_RECORDS: dict[str, tuple] = {
     "bilinear": _item_records("frames", records.FRAME_SUMMARY,
                               baseline=records.record("method", "camera", "coefficients", "cost")),
     "reconstruction": _item_records("points", records.TRACK_SUMMARY) + (
-        ("", {"summary": records.RECONSTRUCTION_SUMMARY}),),
+        ("", {"summary": stage_checks.RECONSTRUCTION_SUMMARY, "images": stage_checks.IMAGES}),),
 }
 
 

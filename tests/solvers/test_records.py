@@ -106,7 +106,7 @@ def undeclared_stage_members():
     def recording(value, shape):
         before = copy.deepcopy(value)
         kept = declared(value, shape)
-        _missing(before, kept, f"stages/{before.get('name')}", found)
+        _missing(before, kept, f"stages/{before.get('name')}" if isinstance(before, dict) else "images", found)
         return kept
 
     example = KINDS.get("reconstruction").example
@@ -146,4 +146,14 @@ def test_a_stage_member_no_writer_writes_is_refused():
         assert not _valid(result), (name, member)
     result = stored("reconstruction")
     next(s for s in result["stages"] if s["name"] == "bundle_adjustment")["principal_point"]["certified"] = True
+    assert not _valid(result)
+
+
+def test_a_summary_time_of_no_stage_is_refused():
+    from tests.solvers.test_forgeries import stored
+    from tests.solvers.test_forgeries_review5 import _valid
+
+    result = stored("reconstruction")
+    assert _valid(result)
+    result["summary"]["time_s"]["certification"] = 0.0
     assert not _valid(result)

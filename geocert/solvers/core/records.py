@@ -131,19 +131,7 @@ INTRINSIC_RANGES = record("focal", "aspect", "skew", "principal_point")
 # (kinds.autocalibration_stages.stage_document, its certificate summary popped).
 NESTED_STAGE = record("name", "cost", "lower_bound", "gap", "status", "certified", "nodes", "elapsed_s", "reason")
 
-# A reconstruction's stages are closed by name in reconstruction.stage_checks (STAGE_RECORDS).
-# A reconstruction's summary (pipelines.reconstruction.claims.summarise) and its records; its
-# depth-reversal record is closed by its own check (depth_reversal_claim.MEMBERS).
-RECONSTRUCTION_SUMMARY = record(
-    "views", "views_registered", "tracks", "points", "observations", "rms_reprojection_px", "points_certified",
-    "points_certified_fraction", "cameras_certified", "cameras_certified_fraction", "camera_claim",
-    "critical_motion", "cameras_dropped", "observations_removed", "points_dropped", "time_s", "cpu_s",
-    "autocalibration_certified", "autocalibration_determined", "doubtful", "depth_reversal", "poses_determined",
-    calibration=record("K", "model", "source", "certified_K", "certified", "returned_is_certified", "on_range_edge",
-                       "determined",
-                       difference=record("focal_percent", "aspect", "skew_px", "principal_point_px")),
-    distortion=record("model", "k1", "focal_px", "estimated_by", "certified", "test", "statement"),
-    warnings=WARNING)
+# A reconstruction's stages, summary and images are closed in reconstruction.stage_checks.
 
 
 def check_nested(result: dict, nested: tuple) -> None:

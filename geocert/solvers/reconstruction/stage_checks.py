@@ -48,10 +48,13 @@ NESTED = {("projective", "initial_pair_search"): {"pair": "object", "thresholds"
 # nested in a stage is closed where listed; the maps keyed by data (registered_by, time_s) and the
 # lists of merges and verified pairs are figures kept as written.
 COMMON = ("name", "status", "reason", "elapsed_s", "cpu_s")
+# The photos' matching figures (pipelines.reconstruction.features.tracks_from_images' statistics):
+# the result's ``images`` and its matches stage.
+IMAGES = record("images", "time_s", "stopped", "features_per_image", "candidate_pairs", "pairs_chosen_by",
+                "verified_pairs", "tracks_built", "dropped_inconsistent", "dropped_short", "tracks_kept",
+                "focal_prior_from_exif")
 STAGE_RECORDS = ByName({
-    "matches": record(*COMMON, "images", "time_s", "stopped", "features_per_image", "candidate_pairs",
-                      "pairs_chosen_by", "verified_pairs", "tracks_built", "dropped_inconsistent", "dropped_short",
-                      "tracks_kept", "focal_prior_from_exif"),
+    "matches": record(*COMMON, *IMAGES.members),
     "projective": record(
         *COMMON, "method", "views", "tracks", "time_s", "registered_by", "resumed_from", "initial_pair",
         "initial_inliers", "bundle_adjustments", "ba_iterations", "focal_scale", "registered", "views_registered",
@@ -151,3 +154,18 @@ def _check_counts(stages: dict, views: int, tracks: int) -> None:
     calibration = stages.get("autocalibration") or {}
     if "points_used" in calibration:
         _bounded(calibration["points_used"], _where("autocalibration", "points_used"), tracks, "the tracks")
+
+
+# A reconstruction's summary (pipelines.reconstruction.claims.summarise) and its records; its
+# depth-reversal record is closed by its own check (depth_reversal_claim.MEMBERS).
+RECONSTRUCTION_SUMMARY = record(
+    "views", "views_registered", "tracks", "points", "observations", "rms_reprojection_px", "points_certified",
+    "points_certified_fraction", "cameras_certified", "cameras_certified_fraction", "camera_claim",
+    "critical_motion", "cameras_dropped", "observations_removed", "points_dropped",
+    "autocalibration_certified", "autocalibration_determined", "doubtful", "depth_reversal", "poses_determined",
+    time_s=record(*STAGE_NAMES), cpu_s=record(*STAGE_NAMES),
+    calibration=record("K", "model", "source", "certified_K", "certified", "returned_is_certified", "on_range_edge",
+                       "determined",
+                       difference=record("focal_percent", "aspect", "skew_px", "principal_point_px")),
+    distortion=record("model", "k1", "focal_px", "estimated_by", "certified", "test", "statement"),
+    warnings=WARNING)
