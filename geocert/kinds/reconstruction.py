@@ -29,6 +29,8 @@ from geocert.solvers.autocalibration.problem import StageProgress
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, number_array
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.verification import RECONSTRUCTION
+from geocert.solvers.core.records import keep_declared
+from geocert.solvers.reconstruction.stage_checks import IMAGES, STAGE_RECORDS
 
 MAX_VIEWS = 1000
 MAX_TRACKS = 200_000
@@ -566,15 +568,16 @@ class ReconstructionKind:
         points = [{"track": p.track, **track_document(p.result), "observations": p.observations} for p in out.points]
         for point in points:
             point["determinacy"] = None
-        stages = [_jsonable(stage) for stage in out.stages]
+        # each stage as the verifier reads it (stage_checks.STAGE_RECORDS: what it declares)
+        stages = [keep_declared(_jsonable(stage), STAGE_RECORDS) for stage in out.stages]
         if matches is not None:
-            stages.insert(0, _jsonable(matches))
+            stages.insert(0, keep_declared(_jsonable(matches), STAGE_RECORDS))
             # the matches stage first, as in stages
             out.summary["time_s"] = {"matches": matches["elapsed_s"], **out.summary["time_s"]}
             out.summary["cpu_s"] = {"matches": matches["cpu_s"], **out.summary["cpu_s"]}
         camera_maps = {c.view: c.bound for c in out.cameras if c.bound is not None and c.bound.result is not None}
         return {"calibration_proof": calibration_proof, "cameras": cameras, "points": points, "stages": stages, "summary": _jsonable(out.summary),
-                "images": images_document, "camera_results": self._camera_items(out, options, camera_maps),
+                "images": keep_declared(images_document, IMAGES), "camera_results": self._camera_items(out, options, camera_maps),
                 # A cancelled run keeps what it did (pipeline.reconstruct); the item says it was
                 # stopped, so the job ends "cancelled" (workers.tasks._end), not "succeeded".
                 "status": "cancelled" if out.cancelled else "time_limit" if clock["passed"] else (

@@ -139,6 +139,10 @@ class Determinacy(BaseModel):
                                          "and no warning")
     level: str
     cost_increase: float | None
+    pooled_tracks: list[list[int]] | None = Field(None, description="with a level pooled over the job's tracks: "
+                                                                    "the tracks pooled, as runs [first, stop) of "
+                                                                    "their indices (the verifier recomputes the "
+                                                                    "level from their residuals)")
     redundancy: int = Field(description="residuals beyond the parameters (0: no noise estimate)")
     intervals: list[DeterminacyInterval]
     warnings: list[DeterminacyWarning]

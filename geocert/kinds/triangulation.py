@@ -247,8 +247,11 @@ class TriangulationKind:
                 raise_sublevels(parsed.cameras, tracks, results, pooled[0], options.norm)
         documents = track_documents(results, options.detail, options.certificate == "full")
         if options.detail == "full":  # the same documents as _document's, for the whole batch at once
+            runs = determinacy.pool_runs(indices)
             for document, found in zip(documents, determinacy.tracks_many(parsed.cameras, tracks, results,
                                                                           projected)):
+                if found is not None and determinacy.pooled_dof(found.get("level")) is not None:
+                    found["pooled_tracks"] = runs  # whose residuals its level is pooled from (the verifier's)
                 document["determinacy"] = found
         return documents
 

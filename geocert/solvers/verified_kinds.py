@@ -13,9 +13,11 @@ from typing import Any
 
 from geocert.solvers.autocalibration.verification import STAGES
 from geocert.solvers.bilinear.verification import FRAMES
+from geocert.solvers.core import records
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.fractional.items import TRACKS, MapItems
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
+from geocert.solvers.reconstruction import stage_checks
 from geocert.solvers.reconstruction.verification import RECONSTRUCTION
 
 NOT_CERTIFIED = ("stereo_lines results are estimates (RANSAC around algebraic solvers), never certified: there is "
@@ -93,6 +95,26 @@ VERIFIED_KINDS: dict[str, VerifiedKind] = {kind.name: kind for kind in (
                  "mirror_rotation_deg"),
         stats=STATS)),
 )}
+
+
+# The records each kind's result nests below the objects VerifiedKind.members closes, closed to
+# their writers' members (core.records): ((where, {member: record}), ...) as records.check_nested
+# reads them, "" the result itself.
+def _item_records(key: str, summary: records.Record, **more) -> tuple:
+    return ((key, {"certificate": summary, "determinacy": records.DETERMINACY, **more}),)
+
+
+MAP_RECORDS = _item_records("maps", records.MAP_SUMMARY)
+NESTED_RECORDS: dict[str, tuple] = {
+    "triangulation": _item_records("tracks", records.TRACK_SUMMARY),
+    "resection": MAP_RECORDS,
+    "homography": MAP_RECORDS,
+    "autocalibration": _item_records("stages", records.STAGE_SUMMARY) + (("", {"intrinsics": records.INTRINSIC_RANGES}),),
+    "bilinear": _item_records("frames", records.FRAME_SUMMARY,
+                              baseline=records.record("method", "camera", "coefficients", "cost")),
+    "reconstruction": _item_records("points", records.TRACK_SUMMARY) + (
+        ("", {"summary": stage_checks.RECONSTRUCTION_SUMMARY, "images": stage_checks.IMAGES}),),
+}
 
 
 def register(kind: VerifiedKind) -> VerifiedKind:

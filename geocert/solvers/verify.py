@@ -494,10 +494,26 @@ def _document_items(document: Any) -> list[dict]:
     for key in ("kind", "data", "options", "items", "data_sha256", "problem_sha256"):
         if key not in document:
             raise Invalid("format", f"missing {key!r}")
-    _adapter(document["kind"])
+    kind = _kind(document["kind"])
     if not isinstance(document["items"], list):
         raise Invalid("format", "items must be a list")
+    _check_claim_members(kind, document["items"])
     return document["items"]
+
+
+def _check_claim_members(kind, items: list) -> None:
+    """Each item of a certificate holds only what certificate_document writes of a claim
+    (records.CLAIM_MEMBERS) and its kind's solution fields: a member no check reads (an item's
+    "unique_optimum") claims nothing, so it is refused, on every path an item is checked by."""
+    from geocert.solvers.core.records import CLAIM_MEMBERS
+
+    allowed = set(CLAIM_MEMBERS) | set(kind.solution_fields)
+    for index, item in enumerate(items):
+        extra = sorted(str(name) for name in set(item) - allowed) if isinstance(item, dict) else []
+        if extra:
+            raise Invalid("format", f"items/{index} has a member {extra[0]!r:.40} no {kind.name} claim has (its "
+                                    f"members: {', '.join(sorted(allowed))}); a member no check reads claims "
+                                    "nothing, so it is refused")
 
 
 def _check_hashes(document: dict, options: dict) -> str | None:
@@ -538,6 +554,15 @@ def check_members(kind, result: dict) -> None:
                 raise Invalid("returned", f"{place} has a member {extra[0]!r:.40} no {kind.name} result writes "
                                           f"(its members: {', '.join(names)}); a member no check reads claims "
                                           "nothing, so it is refused")
+    # and every record nested below those, at any depth (core.records: the writers' members)
+    from geocert.solvers.core import records
+    from geocert.solvers.verified_kinds import NESTED_RECORDS
+
+    records.check_nested(result, NESTED_RECORDS.get(kind.name, ()))
+    if kind.name == "reconstruction":  # its stages, each closed to its writer's members by its name
+        from geocert.solvers.reconstruction.stage_checks import STAGE_RECORDS
+
+        records.check(result.get("stages"), STAGE_RECORDS, "stages")
 
 
 def _check_returned(result: dict, certificate: dict) -> None:

@@ -198,6 +198,28 @@ def pooled_increase(costs_by_views: dict[int, np.ndarray]) -> tuple[float, int] 
     return quantile * quantile * variance, total
 
 
+def pooled_dof(level) -> int | None:
+    """The degrees of freedom a ``level`` written by pooled_level states, or None when it is not
+    one pooled_level writes."""
+    before, after = pooled_level((0.0, 987654321)).split("987654321")
+    if not (isinstance(level, str) and level.startswith(before) and level.endswith(after)):
+        return None
+    dof = level[len(before):len(level) - len(after)]
+    return int(dof) if dof.isdigit() and dof.isascii() else None
+
+
+def pool_runs(indices: list[int]) -> list[list[int]]:
+    """The job's track indices pooled together as runs [first, stop) (a determinacy's
+    pooled_tracks: what the verifier recomputes the pooled level from)."""
+    runs: list[list[int]] = []
+    for index in indices:
+        if runs and runs[-1][1] == index:
+            runs[-1][1] = index + 1
+        else:
+            runs.append([index, index + 1])
+    return runs
+
+
 def pooled_level(pooled: tuple[float, int]) -> str:
     """The documents' ``level`` when cost_increase comes from the pooled variance."""
     return (f"parameters whose squared residuals exceed the optimum's by at most cost_increase: the largest of the "

@@ -12,7 +12,8 @@ from geocert.solvers.core.strict import Invalid, number as _number, numbers, rec
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.convexity import outside_range, track_bound, verify_sublevel
 from geocert.solvers.fractional.convexity_path import cost_increase
-from geocert.solvers.fractional.determinacy import proven_map, proven_track
+from geocert.solvers.fractional.determinacy import pooled_dof, proven_map, proven_track
+from geocert.solvers.fractional.pooled_floor import pooled_floor, squared_residuals
 from geocert.solvers.fractional.proof import (check_program, program_allowance, program_discount, raw_sizes,
                                               residual_uncertainty, track_uncertainty, verify_search)
 from geocert.solvers.fractional.resection_sublevel import verify_resection_sublevel
@@ -249,6 +250,56 @@ def _check_proven(where: str, determinacy, claim: dict, norm, proven) -> None:
                                   f"{stated['cost_increase']!r:.12} below the {level!r:.12} its estimate is read at")
 
 
+def _check_pooled(index: int, determinacy, result: dict, certificate: dict, floors: dict) -> None:
+    """A track's determinacy read at a level pooled over the job's tracks (its ``level`` as
+    determinacy.pooled_level writes it) names the tracks pooled (``pooled_tracks``: runs [first,
+    stop) of their indices, its own among them), and its cost_increase is at least the floor
+    pooled_floor recomputes from their residuals at the points returned: a pooled level is not
+    the document's word. (The pool is: a level pooled over other tracks than the job's batch is
+    checked as that pool's. A level not pooled is the track's own, checked with its interval.)"""
+    if not isinstance(determinacy, dict):
+        return
+    where = f"tracks/{index}/determinacy"
+    stated_dof, runs = pooled_dof(determinacy.get("level")), determinacy.get("pooled_tracks")
+    if stated_dof is None and runs is None:
+        return
+    tracks = result["tracks"]
+    if stated_dof is None or not _runs(runs, len(tracks)) or not any(a <= index < b for a, b in runs):
+        raise Invalid("returned", f"{where} is read at a level pooled over the job's tracks only with that level's "
+                                  "words and the tracks pooled (pooled_tracks: runs [first, stop) of their indices, "
+                                  "its own among them)")
+    key = tuple(map(tuple, runs))
+    if key not in floors:
+        data = certificate["data"]
+        cameras = np.asarray(data["cameras"], dtype=float)
+        costs, dofs = [], []
+        for a, b in runs:
+            for j in range(a, b):
+                track, observed = tracks[j], data["tracks"][j]
+                if not isinstance(track, dict) or track.get("point") is None or track.get("at_infinity") is not False:
+                    continue
+                costs.append(squared_residuals(cameras, observed["views"], observed["points"], track["point"]))
+                dofs.append(2 * len(observed["views"]) - 3)
+        floors[key] = pooled_floor(np.array(costs), np.array(dofs))
+    floor, level = floors[key], determinacy.get("cost_increase")
+    if floor is not None and not (is_number(level) and level >= floor * (1 - LEVEL_ROUNDING)):
+        raise Invalid("returned", f"{where}/cost_increase is {level!r:.12}, below {floor!r:.12}, the least the "
+                                  f"residual variance pooled over its pooled_tracks gives (pooled_floor)")
+
+
+def _runs(runs, tracks: int) -> bool:
+    """Whether ``runs`` are increasing, disjoint runs [first, stop) of indices of ``tracks``."""
+    if not isinstance(runs, list) or not runs:
+        return False
+    stop = 0
+    for run in runs:
+        if not (isinstance(run, list) and len(run) == 2 and all(type(v) is int for v in run)
+                and stop <= run[0] < run[1] <= tracks):
+            return False
+        stop = run[1]
+    return True
+
+
 def figure_allowance(cost: float) -> float:
     """How far a stated cost may be from the one the verifier recomputes for an uncertified item
     (the solver's and the verifier's rounding of the same residuals)."""
@@ -281,8 +332,10 @@ class TrackItems:
         if certificate.get("kind") != "triangulation":
             return
         norm = (certificate.get("options") or {}).get("norm")
+        floors: dict = {}
         for index, (item, claim) in enumerate(zip(result["tracks"], certificate["items"])):
             determinacy = item.get("determinacy")
+            _check_pooled(index, determinacy, result, certificate, floors)
             _check_proven(f"tracks/{index}", determinacy, claim, norm, proven_track)
             stated = determinacy.get("proven_intervals") if isinstance(determinacy, dict) else None
             if stated is None:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from geocert.solvers.core.records import INTRINSIC_RANGES, NESTED_STAGE, WARNING, ByName, record
 from geocert.solvers.core.strict import Invalid
 
 # The statuses a stage ends with (pipeline._stage, _timed, _skip, _cancel; "running" is never
@@ -36,6 +37,53 @@ CONTAINERS = {
     "bundle_adjustment": {"starts": "list", "principal_point": "object"},
 }
 NESTED = {("projective", "initial_pair_search"): {"pair": "object", "thresholds": "object"}}
+
+
+# Each stage record's members, by its name, as the pipeline writes them (pipelines.reconstruction:
+# pipeline, claims; the registrations' statistics, solvers.reconstruction.calibrated and
+# projective; kinds.reconstruction's matches stage, from pipelines.reconstruction.features). The
+# kind writes a stage through records.keep_declared (a member not declared here is not returned,
+# so a genuine result never holds one), and the verifier refuses one (records.check);
+# tests/solvers/test_records.py runs the pipeline and checks it declares all it writes. A record
+# nested in a stage is closed where listed; the maps keyed by data (registered_by, time_s) and the
+# lists of merges and verified pairs are figures kept as written.
+COMMON = ("name", "status", "reason", "elapsed_s", "cpu_s")
+# The photos' matching figures (pipelines.reconstruction.features.tracks_from_images' statistics):
+# the result's ``images`` and its matches stage.
+IMAGES = record("images", "time_s", "stopped", "features_per_image", "candidate_pairs", "pairs_chosen_by",
+                "verified_pairs", "tracks_built", "dropped_inconsistent", "dropped_short", "tracks_kept",
+                "focal_prior_from_exif")
+STAGE_RECORDS = ByName({
+    "matches": record(*COMMON, *IMAGES.members),
+    "projective": record(
+        *COMMON, "method", "views", "tracks", "time_s", "registered_by", "resumed_from", "initial_pair",
+        "initial_inliers", "bundle_adjustments", "ba_iterations", "focal_scale", "registered", "views_registered",
+        "points", "observations", "observations_kept", "outliers_removed", "observations_of_dropped_tracks",
+        "observations_of_unregistered_views", "rms_reprojection_px", "merged", "cancelled",
+        adjustments=record("whole", "local"),
+        initial_pair_search=record(
+            "candidates", "reason",
+            pair=record("views", "inliers", "shared", "median_angle_deg", "forward_motion"),
+            thresholds=record("min_inliers", "min_median_angle_deg", "max_forward_motion", "relaxations")),
+        focal_rounds=record("focal_px", "registration_focal_px", "k1", "registered", "resumed", "refined_focal_px",
+                            "refined_k1", "again_from_a_new_pair", "fit_cost", "resumed_fit_cost"),
+        per_view=record("view", "registered_by", "tracks", "linked", "points"),
+        radial_distortion=record("model", "estimated", "k1")),
+    "autocalibration": record(
+        *COMMON, "method", "K", "linear_K", "certified", "determined", "critical_motion", "cameras_built_with_one_K",
+        "points_used", "certificate_views", "certificate_tracks",
+        intrinsics=INTRINSIC_RANGES, stages=NESTED_STAGE, motion_warnings=WARNING,
+        rotation_noise_rad=record("estimated", "diac_family", "plane_family")),
+    "bundle_adjustment": record(
+        *COMMON, "K", "model", "started_from", "observations_kept", "rms_px_before", "rms_px_after",
+        starts=record("from", "rms_px_before", "rms_px_after_8_iterations", "fit_cost", "observations_fitting"),
+        principal_point=record("estimated", "observations", "K_free", "chi2", "threshold", "inside_middle_half",
+                               "reason")),
+    "structure": record(*COMMON, "tracks", "points", "certified", "points_dropped", "observations_removed",
+                        "tracks_not_started"),
+    "cameras": record(*COMMON, "cameras", "certified", "searched", "claim", "degrees_of_freedom",
+                      "cameras_not_started"),
+})
 
 
 def _where(stage: str, path: str) -> str:
@@ -106,3 +154,18 @@ def _check_counts(stages: dict, views: int, tracks: int) -> None:
     calibration = stages.get("autocalibration") or {}
     if "points_used" in calibration:
         _bounded(calibration["points_used"], _where("autocalibration", "points_used"), tracks, "the tracks")
+
+
+# A reconstruction's summary (pipelines.reconstruction.claims.summarise) and its records; its
+# depth-reversal record is closed by its own check (depth_reversal_claim.MEMBERS).
+RECONSTRUCTION_SUMMARY = record(
+    "views", "views_registered", "tracks", "points", "observations", "rms_reprojection_px", "points_certified",
+    "points_certified_fraction", "cameras_certified", "cameras_certified_fraction", "camera_claim",
+    "critical_motion", "cameras_dropped", "observations_removed", "points_dropped",
+    "autocalibration_certified", "autocalibration_determined", "doubtful", "depth_reversal", "poses_determined",
+    time_s=record(*STAGE_NAMES), cpu_s=record(*STAGE_NAMES),
+    calibration=record("K", "model", "source", "certified_K", "certified", "returned_is_certified", "on_range_edge",
+                       "determined",
+                       difference=record("focal_percent", "aspect", "skew_px", "principal_point_px")),
+    distortion=record("model", "k1", "focal_px", "estimated_by", "certified", "test", "statement"),
+    warnings=WARNING)

@@ -931,8 +931,10 @@ class ReconstructionItems(TrackItems):
               "is the one the calibration certificate beside it proves optimal for the projective reconstruction in "
               "that certificate's data (the pipeline's, from the same tracks, before the bundle adjustment: it images every "
               "observation it shares with the returned points within calibration_tie.allowed_px of where the returned "
-              "cameras do, TIE_RATIO times their RMS error there, calibration_tie.largest_px at most; so K is proven "
-              "optimal for a reconstruction that close to the result's, not for the result's own); the critical motion behind `determined` is judged again from the cameras and "
+              "cameras do, TIE_RATIO times their RMS error there, calibration_tie.largest_px at most, and fits those "
+              "observations at a cost calibration_tie.shared_cost_px2 of at most calibration_tie.allowed_cost_px2, twice "
+              "the returned cameras' plus 3 standard deviations of a chi-square over the coordinates shared; so K is "
+              "proven optimal for a reconstruction that close to the result's, not for the result's own); the critical motion behind `determined` is judged again from the cameras and "
               "certified points returned")
         return statement
 

@@ -1,0 +1,79 @@
+"""A floor under the pooled cost increase the triangulation kind reads its determinacy at
+(determinacy.pooled_increase), recomputed by the verifier from the residuals of the tracks a
+document says were pooled, numpy only (docs/certificate.md, "The pooled level").
+
+pooled_increase takes, over a pool's tracks of d_i = 2 n_i - 3 degrees of freedom and squared
+residuals c_i: a first variance, the median of c_i / m(d_i) (m the chi-square's median); the
+tracks with c_i at most q(d_i) times it (q its 99.9% point); their pooled variance V = sum c / sum
+d over D = sum d degrees of freedom; and t(D)^2 V, t the Student quantile at 3 standard errors'
+coverage. Its quantiles are scipy's. Here they are bounded instead, never exceeding the genuine
+level: m and q by the Wilson-Hilferty approximation within CHI2_MARGIN either side (tests/solvers/
+test_pooled_floor.py checks those bounds hold against scipy's quantiles for every track length a
+job may have), so each track is surely pooled, surely left out, or either; V by the smallest
+variance any such choice gives; and t(D) by the first two terms of its Cornish-Fisher expansion
+at the largest D, z + (z^3 + z) / (4 D), below the quantile for every D (the same test)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from geocert.solvers.core.determinacy import SIGMAS
+
+# The normal quantiles of the chi-square's 99.9% point (determinacy.OUTLIER_TAIL) and of 3
+# standard errors' two-sided coverage (determinacy.COVERAGE).
+Z_OUTLIER = 3.090232306167813
+Z_COVERAGE = SIGMAS
+# How far the Wilson-Hilferty quantiles may be from the chi-square's for 1 degree of freedom and
+# more (3.4% at most, for the median of 1).
+CHI2_MARGIN = 0.05
+
+
+def wilson_hilferty(dof: np.ndarray, z: float) -> np.ndarray:
+    """The chi-square quantile of ``dof`` degrees of freedom at the normal quantile ``z``, by
+    Wilson and Hilferty's cube-root approximation."""
+    k = np.asarray(dof, dtype=float)
+    return k * (1.0 - 2.0 / (9.0 * k) + z * np.sqrt(2.0 / (9.0 * k))) ** 3
+
+
+def student_floor(dof: float) -> float:
+    """A value at most the Student quantile at 3 standard errors' two-sided coverage for ``dof``
+    degrees of freedom (Cornish-Fisher's first two terms)."""
+    z = Z_COVERAGE
+    return z + (z ** 3 + z) / (4.0 * dof)
+
+
+def pooled_floor(costs: np.ndarray, dofs: np.ndarray) -> float | None:
+    """At most the cost increase pooled_increase gives tracks of squared residuals ``costs`` and
+    degrees of freedom ``dofs`` (as above); None where it gives none."""
+    dof = np.asarray(dofs, dtype=float)
+    cost = np.asarray(costs, dtype=float)
+    use = (dof > 0) & np.isfinite(cost)
+    dof, cost = dof[use], cost[use]
+    if not len(cost):
+        return None
+    median = wilson_hilferty(dof, 0.0)
+    first_low = float(np.median(cost / (median * (1 + CHI2_MARGIN))))
+    first_high = float(np.median(cost / (median * (1 - CHI2_MARGIN))))
+    if not first_high > 0:
+        return None
+    tail = wilson_hilferty(dof, Z_OUTLIER)
+    sure = cost <= tail * (1 - CHI2_MARGIN) * first_low
+    either = ~sure & (cost <= tail * (1 + CHI2_MARGIN) * first_high)
+    total, degrees = float(cost[sure].sum()), float(dof[sure].sum())
+    for k in np.flatnonzero(either)[np.argsort(cost[either] / dof[either], kind="stable")]:
+        if degrees == 0 or cost[k] / dof[k] < total / degrees:  # pooling it lowers the variance
+            total, degrees = total + float(cost[k]), degrees + float(dof[k])
+    if degrees == 0:
+        return None
+    t = student_floor(float(dof[sure | either].sum()))
+    return t * t * total / degrees
+
+
+def squared_residuals(cameras: np.ndarray, views: list, points: np.ndarray, point) -> float:
+    """A track's squared residuals at its returned point (math.inf where it projects to none)."""
+    with np.errstate(all="ignore"):
+        proj = np.asarray(cameras, dtype=float)[views] @ np.append(np.asarray(point, dtype=float), 1.0)
+        cost = float(np.sum((proj[:, :2] / proj[:, 2:3] - np.asarray(points, dtype=float)) ** 2))
+    return cost if math.isfinite(cost) else math.inf
