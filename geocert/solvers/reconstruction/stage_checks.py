@@ -68,7 +68,7 @@ STAGE_RECORDS = ByName({
         focal_rounds=record("focal_px", "registration_focal_px", "k1", "registered", "resumed", "refined_focal_px",
                             "refined_k1", "again_from_a_new_pair", "fit_cost", "resumed_fit_cost"),
         per_view=record("view", "registered_by", "tracks", "linked", "points"),
-        radial_distortion=record("model", "estimated", "k1")),
+        radial_distortion=record("model", "estimated", "k1", "chi2", "threshold", "k1_tested", "against", "reason")),
     "autocalibration": record(
         *COMMON, "method", "K", "linear_K", "certified", "determined", "critical_motion", "cameras_built_with_one_K",
         "points_used", "certificate_views", "certificate_tracks",
