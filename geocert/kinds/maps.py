@@ -147,7 +147,7 @@ class MapKind:
                                              result.lower_bound)
         proof = (document.get("certificate") or {}).get("proof")  # a full certificate's only (either detail)
         if self.name == "resection" and result.certified and options.norm == "L2L2" and (
-                proof.get("type") == "branch_and_bound" if proof is not None else options.detail == "full"):
+                proof.get("type") in ("branch_and_bound", "sublevel_bound") if proof is not None else options.detail == "full"):
             # Proven at the estimate's level, whatever the detail (the proof is the same in both); a
             # trivial proof has no place for one.
             sublevel = determinacy.prove_map(source, target, result.matrix, result.cost, result.lower_bound,
