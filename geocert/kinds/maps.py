@@ -63,7 +63,8 @@ class ParsedMaps:
 
 
 def map_document(result: MapResult, detail: str = "full", full_certificate: bool = False) -> dict:
-    region = {"reference_point": result.certificate.reference} if result.certificate else {}
+    reference = getattr(result.certificate, "reference", None)  # a search's (a bound with no search has no region)
+    region = {"reference_point": reference} if reference is not None else {}
     certificate = brief_certificate(result, full_certificate) if detail == "brief" else certificate_summary(
         result, region,
         "lower <= (F l) / (d . l) <= upper for the last row l of every map in the scope, "

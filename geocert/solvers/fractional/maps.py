@@ -170,7 +170,7 @@ def _sublevel_certified(chart: MapChart, source, target, guess, options: MapOpti
         f"{proof['rounds']} rounds, whitened coordinates) over which the cost is bounded below by a quadratic "
         "(sublevel bound, fractional.resection_bound)"))
     result = _map_result(chart, source, target, v, options, "optimal", claimed, 0, certificate)
-    if not result.certified:
+    if not result.certified or result.cost <= options.abs_gap:  # the trivial bound's (prepare's first step)
         return None
     certificate.tolerance = max(options.abs_gap, options.rel_gap * abs(result.cost))
     return result
