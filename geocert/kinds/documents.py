@@ -26,7 +26,7 @@ def certificate_summary(result: ItemResult, region: dict, meaning: str, scope: s
     proof = proof_of(result)
     extra = {"proof": proof} if proof is not None else {}
     if isinstance(c, LocalCertificate):
-        return local_summary(c.scope, c.tolerance, c.radius, c.tolerance_met and result.certified, extra)
+        return local_summary(c.scope, c.tolerance, c.radius, c.tolerance_met and result.certified, extra, c.note)
     if c is not None:
         return {**extra,
                 "scope": c.scope,
@@ -43,12 +43,14 @@ def certificate_summary(result: ItemResult, region: dict, meaning: str, scope: s
     return None
 
 
-def local_summary(scope: str, tolerance: float, radius: float, tolerance_met: bool, extra: dict) -> dict:
-    """The certificate summary of an item certified by the convexity bound (no search)."""
+def local_summary(scope: str, tolerance: float, radius: float, tolerance_met: bool, extra: dict,
+                  note: str | None = None) -> dict:
+    """The certificate summary of an item certified with no search: by the convexity bound, or
+    as ``note`` says."""
+    note = note or (f"no search: the cost is convex on the ball of radius {radius!r} about the solution, which "
+                    "holds every point of the scope costing as little (convexity bound)")
     return {"scope": scope, "root_region": None, "tolerance": finite_or_none(tolerance),
-            "tolerance_met": tolerance_met, "leaves": 0,
-            "note": f"no search: the cost is convex on the ball of radius {radius!r} about the solution, which "
-                    "holds every point of the scope costing as little (convexity bound)", **extra}
+            "tolerance_met": tolerance_met, "leaves": 0, "note": note, **extra}
 
 
 def brief_certificate(result: ItemResult, full: bool) -> dict | None:

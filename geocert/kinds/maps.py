@@ -63,7 +63,8 @@ class ParsedMaps:
 
 
 def map_document(result: MapResult, detail: str = "full", full_certificate: bool = False) -> dict:
-    region = {"reference_point": result.certificate.reference} if result.certificate else {}
+    reference = getattr(result.certificate, "reference", None)  # a search's (a bound with no search has no region)
+    region = {"reference_point": reference} if reference is not None else {}
     certificate = brief_certificate(result, full_certificate) if detail == "brief" else certificate_summary(
         result, region,
         "lower <= (F l) / (d . l) <= upper for the last row l of every map in the scope, "
@@ -147,7 +148,7 @@ class MapKind:
                                              result.lower_bound)
         proof = (document.get("certificate") or {}).get("proof")  # a full certificate's only (either detail)
         if self.name == "resection" and result.certified and options.norm == "L2L2" and (
-                proof.get("type") == "branch_and_bound" if proof is not None else options.detail == "full"):
+                proof.get("type") in ("branch_and_bound", "sublevel_bound") if proof is not None else options.detail == "full"):
             # Proven at the estimate's level, whatever the detail (the proof is the same in both); a
             # trivial proof has no place for one.
             sublevel = determinacy.prove_map(source, target, result.matrix, result.cost, result.lower_bound,

@@ -31,7 +31,7 @@ from geocert.solvers.fractional.results import claim_of
 
 MAX_DEPTH = 64
 CHECKS = ("format", "data_hash", "options", "data", "claim", "objective", "scope", "program", "root_region",
-          "tightening", "coverage", "leaf_bounds", "convexity", "proven_interval", "lower_bound", "gap", "returned")
+          "tightening", "coverage", "leaf_bounds", "convexity", "sublevel_bound", "proven_interval", "lower_bound", "gap", "returned")
 
 
 @dataclass

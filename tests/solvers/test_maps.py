@@ -330,13 +330,17 @@ def test_a_cut_box_whose_bound_fails_is_bounded_as_it_was(monkeypatch):
     pytest.fail("no node was cut")
 
 
-def test_an_l2l2_proof_says_its_relaxation_and_the_verifier_holds_it_to_it():
+def test_an_l2l2_proof_says_its_relaxation_and_the_verifier_holds_it_to_it(monkeypatch):
     """L2L2 maps are bounded with the quadratic envelope (Relaxation.quadratic); the proof says
-    so, and its duals prove nothing for the envelope of t / s (absent field) or another norm."""
+    so, and its duals prove nothing for the envelope of t / s (absent field) or another norm.
+    (The search's: a resection the bound with no search certifies is switched to it.)"""
     import copy
     import dataclasses
 
     from geocert.solvers import verify
+    from geocert.solvers.fractional import maps
+
+    monkeypatch.setattr(maps, "_sublevel_certified", lambda *args: None)
 
     rng = np.random.default_rng(seed("maps", "quadratic"))
     _, source, target = scene(rng, "resection", 40)
@@ -377,6 +381,7 @@ def test_root_tightening_stops_once_the_root_bound_closes_and_the_proof_still_ve
     from geocert.solvers import verify
     from geocert.solvers.fractional import maps, search
 
+    monkeypatch.setattr(maps, "_sublevel_certified", lambda *args: None)  # the search's (no bound without one)
     norm = "L2L2"
     rng = np.random.default_rng(seed("maps", "closing root", norm))
     _, source, target = scene(rng, "resection", 60)

@@ -16,6 +16,7 @@ from geocert.solvers.fractional.determinacy import pooled_dof, proven_map, prove
 from geocert.solvers.fractional.pooled_floor import pooled_floor, squared_residuals
 from geocert.solvers.fractional.proof import (check_program, program_allowance, program_discount, raw_sizes,
                                               residual_uncertainty, track_uncertainty, verify_search)
+from geocert.solvers.fractional.resection_bound import TYPE as SUBLEVEL_BOUND, verify_resection_bound
 from geocert.solvers.fractional.resection_sublevel import verify_resection_sublevel
 from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
 
@@ -229,6 +230,18 @@ def verify_map_search(item, options: dict, proof: dict, lower_claimed: float, so
     return bound
 
 
+def verify_map_sublevel_bound(item, options: dict, proof: dict, lower_claimed: float, solution,
+                              passed: list[str]) -> float:
+    """A resection's bound with no search (fractional.resection_bound), recomputed at the claim's
+    camera from the stated radius and rounds; and its proven interval when it states one."""
+    bound = verify_resection_bound(item.source, item.target, proof, solution, options)
+    passed.append(SUBLEVEL_BOUND)
+    if "sublevel" in proof:
+        verify_resection_sublevel(item.source, item.target, proof["sublevel"], solution, options["norm"])
+        passed.append("proven_interval")
+    return bound
+
+
 def _check_proven(where: str, determinacy, claim: dict, norm, proven) -> None:
     """An item's determinacy may say proven only with the intervals its claim's proof proves:
     ``proven`` (determinacy.proven_track or proven_map) of the proof's sublevel, every member (its
@@ -416,7 +429,7 @@ class TrackItems:
 class MapItems:
     """A map kind's verification adapter (the (source, target) dimensions it serves)."""
 
-    proofs = {"branch_and_bound": verify_map_search}
+    proofs = {"branch_and_bound": verify_map_search, SUBLEVEL_BOUND: verify_map_sublevel_bound}
     data_items = "maps"
     domain = "every map that puts every point at positive depth"
 

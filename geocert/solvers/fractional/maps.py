@@ -21,8 +21,10 @@ import numpy as np
 from geocert.solvers.core.bnb import Progress
 from geocert.solvers.fractional.charts import MapChart, normaliser
 from geocert.solvers.fractional.options import MapOptions
-from geocert.solvers.fractional.results import MapResult
-from geocert.solvers.fractional.search import LARGE_BOUND_TOLERANCE, Early, Reasons, prepare, recomputed_status, search
+from geocert.solvers.fractional.resection_bound import resection_bound
+from geocert.solvers.fractional.results import LocalCertificate, MapResult
+from geocert.solvers.fractional.search import (LARGE_BOUND_TOLERANCE, Early, Reasons, local_refine, prepare,
+                                               recomputed_status, search)
 from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.fractional.items import MapItem, discounted, refused_by_verifier
@@ -93,10 +95,19 @@ NODE_TIGHTENING_POINTS = 50
 CAP_GAP = 2.0
 
 
+SCOPE = "every map that puts every point at positive depth"
+CLAIM_MARGIN = 1e-12  # the bound claimed below the bound computed (relative), as convexity_path's
+
+
 def _fit_map(source, target, options: MapOptions, callback, start: float) -> MapResult:
     chart = MapChart.build(source, target, options.norm)
     n = source.shape[1]
-    prepared = prepare(chart.program, chart.from_matrix(dlt(source, target)), np.eye(chart.program.dim)[:n],
+    guess = chart.from_matrix(dlt(source, target))
+    local = _sublevel_certified(chart, source, target, guess, options)
+    if local is not None:
+        local.elapsed_s = time.perf_counter() - start
+        return local
+    prepared = prepare(chart.program, guess, np.eye(chart.program.dim)[:n],
                        options.abs_gap, options.max_residual, _REASONS)
     if isinstance(prepared, Early):
         if prepared.incumbent is None:
@@ -123,7 +134,7 @@ def _fit_map(source, target, options: MapOptions, callback, start: float) -> Map
         # Root region on the caller's last row l: z = B w with w = N' S^-T l / (l . X_ref).
         functionals = prepared.problem.B[:, :n] @ chart.last_row_basis.T @ np.linalg.inv(chart.source_norm).T
         left = replace(options, time_limit_s=max(0.0, prepared.problem.deadline - time.perf_counter()))
-        searched = search(prepared, left, "every map that puts every point at positive depth", chart.reference,
+        searched = search(prepared, left, SCOPE, chart.reference,
                           functionals, np.append(source[chart.reference], 1.0), callback)
         if searched.solution is None:
             result = MapResult(searched.status, False, nodes=searched.nodes, reason=searched.reason)
@@ -131,6 +142,37 @@ def _fit_map(source, target, options: MapOptions, callback, start: float) -> Map
             result = _map_result(chart, source, target, searched.solution, options, searched.status,
                                  searched.lower_bound, searched.nodes, searched.certificate, prepared.scale)
     result.elapsed_s = time.perf_counter() - start
+    return result
+
+
+def _sublevel_certified(chart: MapChart, source, target, guess, options: MapOptions) -> MapResult | None:
+    """An L2L2 resection certified with no search (fractional.resection_bound: the quadratic bound
+    over the ball proven to hold every camera costing as little) at its local optimum, when that
+    bound is within the tolerance as the verifier recomputes it; None otherwise (the search runs)."""
+    if options.norm != "L2L2" or (source.shape[1], target.shape[1]) != (3, 2) or guess is None:
+        return None
+    with np.errstate(all="ignore"):
+        v, cost = local_refine(chart.program, guess, "L2L2")
+        if not math.isfinite(cost):
+            return None
+        M = chart.matrix(v)
+        M = M / np.linalg.norm(M)  # the matrix _map_result returns, which the bound is about
+        try:
+            found = resection_bound(source, target, M)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            found = None
+    if found is None:
+        return None
+    bound, proof = found
+    claimed = bound - CLAIM_MARGIN * abs(bound)  # the verifier's sums may differ in their last bits
+    certificate = LocalCertificate(SCOPE, math.nan, proof["radius"], proof, note=(
+        f"no search: every camera of the scope costing as little lies in a ball (radius {proof['radius']!r}, "
+        f"{proof['rounds']} rounds, whitened coordinates) over which the cost is bounded below by a quadratic "
+        "(sublevel bound, fractional.resection_bound)"))
+    result = _map_result(chart, source, target, v, options, "optimal", claimed, 0, certificate)
+    if not result.certified or result.cost <= options.abs_gap:  # the trivial bound's (prepare's first step)
+        return None
+    certificate.tolerance = max(options.abs_gap, options.rel_gap * abs(result.cost))
     return result
 
 

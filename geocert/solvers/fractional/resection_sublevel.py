@@ -132,6 +132,8 @@ class Scene:
             g = D @ T[8:11]
             g_size = np.sqrt(((np.abs(D) @ np.abs(T[8:11])) ** 2).sum(axis=1))
             self.g_up = (np.sqrt((g * g).sum(axis=1)) + 16 * U * g_size) * (1 + 8 * U)
+            self.g, self.g_err = g, 16 * U * g_size * (1 + 8 * U)  # |computed g_j - g_j| (resection_bound)
+            self.w_err = 8 * U * size_w * (1 + 4 * U)  # |computed w_j - w_j|
             self.usable = bool(np.all(w - 8 * U * size_w > 0) and np.isfinite(self.c_up) and np.all(np.isfinite(self.G))
                                and np.all(np.isfinite(self.C)) and np.all(np.isfinite(self.g_up))
                                and np.all(np.isfinite(self.eps_n)) and in_range(T).all())
@@ -279,16 +281,9 @@ def proven_centre(scene: Scene, increase: float, radius: float, rounds: int) -> 
     return centre_bounds(scene, r), r
 
 
-def resection_sublevel(source, target, matrix, increase: float, steps: int = 40) -> dict | None:
-    """The proof a solver states (None where it finds none): the smallest radius (1) passes with
-    twice its allowances (bisection), the rounds (2) until they shrink r by less than 1%, and
-    the centre's intervals a little wider (STATED_SLACK) than its own recomputation's."""
-    if not (math.isfinite(increase) and increase >= 0 and (increase == 0 or SMALLEST <= increase <= LARGEST)):
-        return None
-    reference = reference_point(source)
-    scene = Scene(source, target, matrix, reference)
-    if not scene.usable:
-        return None
+def smallest_radius(scene: Scene, increase: float, steps: int = 40) -> float | None:
+    """The smallest radius (1) passes at with twice its allowances (the solver's: the checker's
+    sums, differing in their last bits, pass there too), by bisection; None when none does."""
     with np.errstate(all="ignore"):
         rho = math.sqrt(scene.level(increase))
         e = rho + scene.r_up
@@ -312,7 +307,23 @@ def resection_sublevel(source, target, matrix, increase: float, steps: int = 40)
             hi = middle
         else:
             lo = middle
-    radius, r, rounds = hi, hi, 0
+    return hi
+
+
+def resection_sublevel(source, target, matrix, increase: float, steps: int = 40) -> dict | None:
+    """The proof a solver states (None where it finds none): the smallest radius (1) passes with
+    twice its allowances (bisection), the rounds (2) until they shrink r by less than 1%, and
+    the centre's intervals a little wider (STATED_SLACK) than its own recomputation's."""
+    if not (math.isfinite(increase) and increase >= 0 and (increase == 0 or SMALLEST <= increase <= LARGEST)):
+        return None
+    reference = reference_point(source)
+    scene = Scene(source, target, matrix, reference)
+    if not scene.usable:
+        return None
+    radius = smallest_radius(scene, increase, steps)
+    if radius is None:
+        return None
+    r, rounds = radius, 0
     while rounds < MAX_ROUNDS:
         smaller = shrink(scene, increase, r)
         rounds += 1

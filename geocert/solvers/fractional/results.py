@@ -42,6 +42,7 @@ class LocalCertificate:
     # A proven interval: {"cost_increase": delta, "radius": R', "intervals": [[lo, hi]] * 3}, every
     # point of the scope costing at most the optimum plus delta within R' of the solution.
     sublevel: dict | None = None
+    note: str | None = None  # what proved the bound, when not the convexity bound
 
 
 @dataclass
