@@ -104,7 +104,6 @@ class TestResectionProvenAtAChosenLevel:
         assert level < 1e-3 * _own_level(result)  # the documented level: 12.17
         assert not _holds(forged["maps"][0]["determinacy"], truth).any()  # the true centre outside all three
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("level", FORGED_LEVELS)
     def test_a_map_proven_below_its_own_level_is_refused(self, proven_resection, level):
         assert not _valid(_map_proven_at(proven_resection[1], level))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from geocert.solvers.core.certificates import residual_rounding
+from geocert.solvers.core.determinacy import certified_gap, cost_increase as map_cost_increase
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost, normalised_cameras
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
@@ -249,6 +250,27 @@ def _check_proven(where: str, determinacy, claim: dict, norm, proven) -> None:
                                   f"{stated['cost_increase']!r:.12} below the {level!r:.12} its estimate is read at")
 
 
+def _check_map_level(where: str, determinacy, claim: dict, data: dict, index: int) -> None:
+    """A map's proven interval (a resection's; _check_proven has tied it to its proof) is proven
+    at no lower a level than the map's own, and its determinacy's cost_increase is that level: the
+    one the solver proves it at (determinacy.prove_map: 3^2 times the claim's cost over 2k - 11,
+    at least its gap), recomputed from the claim, as a track's is (TrackItems.check_returned). A
+    level the document chooses shrinks the set to one that need not hold the camera."""
+    stated = determinacy.get("proven_intervals") if isinstance(determinacy, dict) else None
+    if stated is None:
+        return
+    points = len(data["maps"][index]["source"])
+    own = float(map_cost_increase(claim["cost"], 2 * points - 11, certified_gap(claim["cost"], claim["lower_bound"])))
+    if not stated["cost_increase"] >= own * (1 - LEVEL_ROUNDING):
+        raise Invalid("returned", f"{where}/determinacy/proven_intervals are proven at cost increase "
+                                  f"{stated['cost_increase']!r:.12} below the map's own {own!r:.12} (3^2 times its "
+                                  "cost over 2k - 11, at least its gap)")
+    level = determinacy.get("cost_increase")
+    if not (is_number(level) and abs(level - own) <= LEVEL_ROUNDING * own):
+        raise Invalid("returned", f"{where}/determinacy/cost_increase is {level!r:.40}, the map's own level is "
+                                  f"{own!r:.12} (3^2 times its cost over 2k - 11, at least its gap)")
+
+
 def figure_allowance(cost: float) -> float:
     """How far a stated cost may be from the one the verifier recomputes for an uncertified item
     (the solver's and the verifier's rounding of the same residuals)."""
@@ -410,6 +432,7 @@ class MapItems:
                 # Only a resection's proof proves an interval (verify_map_search): a homography's
                 # determinacy saying proven finds no sublevel and is refused here.
                 _check_proven(f"maps/{index}", entry.get("determinacy"), claim, norm, proven_map)
+                _check_map_level(f"maps/{index}", entry.get("determinacy"), claim, certificate["data"], index)
         for index, entry in enumerate(result.get("maps") or []):
             if isinstance(entry, dict) and entry.get("matrix") is None and entry.get("residuals") not in (None, []):
                 raise Invalid("returned", f"maps/{index}/residuals are given, but no matrix they derive from")
