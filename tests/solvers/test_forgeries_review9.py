@@ -276,10 +276,14 @@ class TestDepthReversalFiguresUnread:
                  and type(record["returned_refitted"]) is bool)
         assert not shown
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("changes", RECORD_FORGERIES)
     def test_a_record_not_the_results_is_refused(self, ambiguous_rig, changes):  # noqa: F811
         assert not _valid(_record_restated(ambiguous_rig[1], changes))
+
+    def test_the_verifiers_models_are_the_bundles(self):
+        from geocert.solvers.reconstruction import bundle, depth_reversal_claim
+
+        assert depth_reversal_claim.MODELS == bundle.MODELS
 
 
 # --- informational fields not of their type -------------------------------------------------------
