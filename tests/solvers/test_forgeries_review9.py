@@ -211,7 +211,6 @@ class TestMapRootRegionNotTheProofs:
         region = forged["maps"][0]["certificate"]["root_region"]
         assert np.all(_root_ratios(forged["maps"][0]) < np.asarray(region["lower"]))  # the returned map outside
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("name", ["resection_l2l2", "homography2_l2l2"])
     def test_a_root_region_not_the_proofs_is_refused(self, name):
         from tests.solvers.test_forgeries import stored

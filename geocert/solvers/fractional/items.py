@@ -271,6 +271,17 @@ def _check_map_level(where: str, determinacy, claim: dict, data: dict, index: in
                                   f"{own!r:.12} (3^2 times its cost over 2k - 11, at least its gap)")
 
 
+def _agrees(given, expected) -> bool:
+    """A stated number or array is the one recomputed (to a relative 1e-9: the solver computed it
+    with the same operations, perhaps on another machine's BLAS), of its shape, with no boolean."""
+    expected = np.asarray(expected, dtype=float)
+    try:
+        value = numbers(given, "value", expected.shape)
+    except Invalid:
+        return False
+    return bool(np.all(np.abs(value - expected) <= 1e-9 * np.maximum(1.0, np.abs(expected))))
+
+
 def figure_allowance(cost: float) -> float:
     """How far a stated cost may be from the one the verifier recomputes for an uncertified item
     (the solver's and the verifier's rounding of the same residuals)."""
@@ -422,6 +433,33 @@ class MapItems:
             raise Invalid("objective", "the matrix returned has no finite cost on its points")
         return cost, figure_allowance(cost)
 
+    def _check_root_region(self, where: str, summary, claim: dict, certificate: dict, index: int) -> None:
+        """A certified map's summary root_region states a fact ("lower <= (F l) / (d . l) <= upper
+        for the last row l of every map in the scope"): it must be the proof's root box in the
+        caller's terms, as the solver writes it (fractional.maps._fit_map: the search box, its
+        functionals through the chart rebuilt from the data, the reference point homogeneous), as a
+        bilinear frame's is; none where the proof searched nothing."""
+        if claim.get("certified") is not True or not isinstance(summary, dict) or "root_region" not in summary:
+            return
+        region, proof = summary["root_region"], claim.get("proof")
+        if not (isinstance(proof, dict) and proof.get("type") == "branch_and_bound"):
+            if region is not None:
+                raise Invalid("returned", f"{where}/certificate/root_region is stated, and its proof searched no box")
+            return
+        source, target = self.read(certificate["data"], index)
+        chart = MapChart.build(source, target, certificate["options"]["norm"])
+        lower, upper = proof["search_box"]
+        n = source.shape[1]
+        branched = np.asarray(proof["root"]["functionals"], dtype=float)[:len(lower), :n]
+        expected = {"lower": lower, "upper": upper,
+                    "denominator": np.append(source[chart.reference], 1.0),
+                    "functionals": branched @ chart.last_row_basis.T @ np.linalg.inv(chart.source_norm).T}
+        if not isinstance(region, dict) or type(region.get("reference_point")) is not int or (
+                region["reference_point"] != chart.reference) or not all(
+                name in region and _agrees(region[name], value) for name, value in expected.items()):
+            raise Invalid("returned", f"{where}/certificate/root_region is not its proof's root box in the caller's "
+                                      "terms (the search box, its functionals and reference point)")
+
     def check_returned(self, result: dict, certificate: dict) -> None:
         """Each returned map's ``residuals`` are what its matrix leaves on the certificate's data
         (target minus the map's image), certified or not, and an uncertified map's cost is their
@@ -433,6 +471,7 @@ class MapItems:
                 # determinacy saying proven finds no sublevel and is refused here.
                 _check_proven(f"maps/{index}", entry.get("determinacy"), claim, norm, proven_map)
                 _check_map_level(f"maps/{index}", entry.get("determinacy"), claim, certificate["data"], index)
+                self._check_root_region(f"maps/{index}", entry.get("certificate"), claim, certificate, index)
         for index, entry in enumerate(result.get("maps") or []):
             if isinstance(entry, dict) and entry.get("matrix") is None and entry.get("residuals") not in (None, []):
                 raise Invalid("returned", f"maps/{index}/residuals are given, but no matrix they derive from")
