@@ -23,6 +23,7 @@ from geocert.solvers.core.cones import rounding_uncounted
 from geocert.solvers.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
                                                data_hash, problem_hash)
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost
+from geocert.solvers.core.notes import check_notes
 from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
                                          informational, number as _number, printable_tree, record, same,
                                          work_budget)
@@ -560,6 +561,7 @@ def _check_returned(result: dict, certificate: dict) -> None:
     stats = result.get("stats")
     if isinstance(stats, dict):
         _check_item_notes({"nodes": stats.get("nodes")}, "stats")
+    check_notes(result)  # its informational fields, typed
     own = getattr(kind.verification, "check_returned", None)
     if own is not None:  # what else the result returns, derived from the claims
         own(result, certificate)
