@@ -73,7 +73,7 @@ def checked_options(kind: str, options: Any) -> dict:
 
 def residual_options(kind: str, options: dict) -> dict:
     """checked_options of a kind whose cost is a norm of residuals: norm, gaps, max_residual."""
-    return residual_claims.checked_options(_kind(kind).options_type, options)
+    return residual_claims.checked_options(_kind(kind).options_type, options, run_control=True)
 
 
 def _kind(kind: Any):

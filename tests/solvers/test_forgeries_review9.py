@@ -114,7 +114,8 @@ class TestResectionProvenAtAChosenLevel:
 # Run-control options a stored resection certificate states (max_nodes 5000, time_limit_s 60),
 # changed to values the solver refuses on input (geocert.batch.solve_job: InputError).
 REFUSED_OPTIONS = [("max_nodes", -5000), ("max_nodes", 0), ("max_nodes", True), ("time_limit_s", -60.0),
-                   ("time_limit_s", True), ("time_limit_s", 1e300), ("job_time_limit_s", -600.0)]
+                   ("time_limit_s", True), ("time_limit_s", 1e300), ("job_time_limit_s", -600.0),
+                   ("max_nodes", 2.5), ("max_nodes", None), ("time_limit_s", "60"), ("job_time_limit_s", 1e6)]
 
 
 def _with_option(document: dict, name: str, value) -> dict:
@@ -154,12 +155,24 @@ class TestOptionsTheSolverRefuses:
             solve_job({"kind": "resection", "data": certificate["data"],
                        "options": {"certificate": "full", name: value}})
 
-    @pytest.mark.xfail(**XFAIL)
     @pytest.mark.parametrize("name,value", REFUSED_OPTIONS)
     def test_options_the_solver_refuses_are_refused(self, name, value):
         from tests.solvers.test_forgeries import stored
 
         assert not _valid(_with_option(stored("resection_l2l2"), name, value))
+
+    def test_the_solvers_own_edges_verify(self):
+        """The verifier reads the ranges the solver and the API state (OPTION_RANGES,
+        JOB_LIMIT_RANGE), so each range's own inclusive edge verifies."""
+        from geocert.solvers.fractional.options import MapOptions
+        from tests.solvers.test_forgeries import stored
+
+        edges = [("max_nodes", MapOptions.OPTION_RANGES["max_nodes"]["ge"]),
+                 ("max_nodes", MapOptions.OPTION_RANGES["max_nodes"]["le"]),
+                 ("time_limit_s", MapOptions.OPTION_RANGES["time_limit_s"]["le"]),
+                 ("job_time_limit_s", MapOptions.JOB_LIMIT_RANGE["le"])]
+        for name, value in edges:
+            assert _valid(_with_option(stored("resection_l2l2"), name, value)), (name, value)
 
 
 # --- a map's summary root_region, not the proof's -------------------------------------------------
