@@ -54,7 +54,8 @@ def _check_determinacy(determinacy: dict, where: str) -> None:
         if name in determinacy:
             _typed(determinacy[name], f"{where}/{name}", what)
     if determinacy.get("determined") not in (None, True, False):
-        raise Invalid("returned", f"{where}/determined must be null, true or false, got {determinacy['determined']!r:.40}")
+        raise Invalid("returned", f"{where}/determined must be null, true or false, "
+                                  f"got {determinacy['determined']!r:.40}")
     for name, members in (("intervals", INTERVAL), ("warnings", WARNING)):
         entries = determinacy.get(name)
         if entries is None:

@@ -165,7 +165,8 @@ def _check_figures(figures: dict, ambiguous: bool, adopted: bool, stages: list) 
     adjustment, projective = named.get("bundle_adjustment") or {}, named.get("projective") or {}
     if "observations_kept" in adjustment and adjustment["observations_kept"] != figures[fitting]:
         raise Invalid("returned", f"summary/depth_reversal/{fitting} is {figures[fitting]!r}, the rig returned fits "
-                                  f"{adjustment['observations_kept']!r:.40} (stages/bundle_adjustment/observations_kept)")
+                                  f"{adjustment['observations_kept']!r:.40} "
+                                  "(stages/bundle_adjustment/observations_kept)")
     K = adjustment.get("K")
     shown = K[0][0] if isinstance(K, list) and K and isinstance(K[0], list) and K[0] else None
     if shown is not None and not _close(figures[focal], shown):
