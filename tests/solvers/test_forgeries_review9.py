@@ -108,6 +108,12 @@ class TestResectionProvenAtAChosenLevel:
     def test_a_map_proven_below_its_own_level_is_refused(self, proven_resection, level):
         assert not _valid(_map_proven_at(proven_resection[1], level))
 
+    @pytest.mark.parametrize("level", [0.0, True, 1e300])
+    def test_a_determinacy_read_at_another_level_is_refused(self, proven_resection, level):
+        forged = copy.deepcopy(proven_resection[1])
+        forged["maps"][0]["determinacy"]["cost_increase"] = level  # the genuine interval kept
+        assert not _valid(forged)
+
 
 # --- options the solver refuses, in a certificate ------------------------------------------------
 
