@@ -23,6 +23,7 @@ from geocert.solvers.core.cones import rounding_uncounted
 from geocert.solvers.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
                                                data_hash, problem_hash)
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost
+from geocert.solvers.core.notes import check_notes
 from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
                                          informational, number as _number, printable_tree, record, same,
                                          work_budget)
@@ -72,7 +73,7 @@ def checked_options(kind: str, options: Any) -> dict:
 
 def residual_options(kind: str, options: dict) -> dict:
     """checked_options of a kind whose cost is a norm of residuals: norm, gaps, max_residual."""
-    return residual_claims.checked_options(_kind(kind).options_type, options)
+    return residual_claims.checked_options(_kind(kind).options_type, options, run_control=True)
 
 
 def _kind(kind: Any):
@@ -585,6 +586,7 @@ def _check_returned(result: dict, certificate: dict) -> None:
     stats = result.get("stats")
     if isinstance(stats, dict):
         _check_item_notes({"nodes": stats.get("nodes")}, "stats")
+    check_notes(result)  # its informational fields, typed
     own = getattr(kind.verification, "check_returned", None)
     if own is not None:  # what else the result returns, derived from the claims
         own(result, certificate)
@@ -663,7 +665,8 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
     A certified item's certificate summary (its ``certificate`` member) says what its proof
     does: its tolerance is max(abs_gap, rel_gap * cost) with the item's rel_gap, met, and its
     leaves are the proof's. (Its root_region describes the proof's root box in the caller's
-    terms: informational, but for a bilinear frame, where it is the scope: bilinear.verification.)"""
+    terms: informational, but for a bilinear frame, where it is the scope: bilinear.verification, and a
+    certified map, where it is its proof's: items.MapItems.)"""
     items = result.get(kind.item_key)
     if kind.name == "autocalibration":
         items = result.get("stages")

@@ -17,7 +17,9 @@ def _figures(cost=100.0, twin=400.0, variance=1.0, **more):
     return {"checked": True, "cost_px2": cost, "mirror_cost_px2": twin, "noise_variance_px2": variance,
             "statistic": statistic, "cost_ratio": twin / cost if cost else None, "threshold": claim.MIRROR_CHI2,
             "margin": claim.MIRROR_MARGIN, "ambiguous": ambiguous, "adopted": False,
-            "reference_view": 0, "mirror_rotation_deg": {"0": 0.0, "1": TURNED}, **more}
+            "reference_view": 0, "mirror_rotation_deg": {"0": 0.0, "1": TURNED}, "model": "simple",
+            "returned_refitted": True, "observations": 100, "observations_fitting": 90,
+            "mirror_observations_fitting": 80, "focal_px": 1000.0, "mirror_focal_px": 1100.0, **more}
 
 
 # View 1 turned 15 degrees about the vertical from view 0: its twin in view 0's frame, turned the

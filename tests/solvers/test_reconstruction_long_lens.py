@@ -110,7 +110,7 @@ class TestPosesDeterminedTied:
         summary["poses_determined"] = False
         figures = summary["depth_reversal"]  # the figures made the verdict's: the twin fits as well
         figures.update(mirror_cost_px2=figures["cost_px2"], statistic=0.0, cost_ratio=1.0, ambiguous=True,
-                       adopted=False)
+                       adopted=False, returned_refitted=True)  # the pipeline refits the rig unless the twin is rejected
         if warn:
             summary["warnings"].append({"code": "poses_not_determined", "detail": "stated"})
         if cameras:

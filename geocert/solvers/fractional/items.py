@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from geocert.solvers.core.certificates import residual_rounding
+from geocert.solvers.core.determinacy import certified_gap, cost_increase as map_cost_increase
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost, normalised_cameras
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
@@ -313,6 +314,38 @@ def _runs(runs, tracks: int) -> bool:
     return True
 
 
+def _check_map_level(where: str, determinacy, claim: dict, data: dict, index: int) -> None:
+    """A map's proven interval (a resection's; _check_proven has tied it to its proof) is proven
+    at no lower a level than the map's own, and its determinacy's cost_increase is that level: the
+    one the solver proves it at (determinacy.prove_map: 3^2 times the claim's cost over 2k - 11,
+    at least its gap), recomputed from the claim, as a track's is (TrackItems.check_returned). A
+    level the document chooses shrinks the set to one that need not hold the camera."""
+    stated = determinacy.get("proven_intervals") if isinstance(determinacy, dict) else None
+    if stated is None:
+        return
+    points = len(data["maps"][index]["source"])
+    own = float(map_cost_increase(claim["cost"], 2 * points - 11, certified_gap(claim["cost"], claim["lower_bound"])))
+    if not stated["cost_increase"] >= own * (1 - LEVEL_ROUNDING):
+        raise Invalid("returned", f"{where}/determinacy/proven_intervals are proven at cost increase "
+                                  f"{stated['cost_increase']!r:.12} below the map's own {own!r:.12} (3^2 times its "
+                                  "cost over 2k - 11, at least its gap)")
+    level = determinacy.get("cost_increase")
+    if not (is_number(level) and abs(level - own) <= LEVEL_ROUNDING * own):
+        raise Invalid("returned", f"{where}/determinacy/cost_increase is {level!r:.40}, the map's own level is "
+                                  f"{own!r:.12} (3^2 times its cost over 2k - 11, at least its gap)")
+
+
+def _agrees(given, expected) -> bool:
+    """A stated number or array is the one recomputed (to a relative 1e-9: the solver computed it
+    with the same operations, perhaps on another machine's BLAS), of its shape, with no boolean."""
+    expected = np.asarray(expected, dtype=float)
+    try:
+        value = numbers(given, "value", expected.shape)
+    except Invalid:
+        return False
+    return bool(np.all(np.abs(value - expected) <= 1e-9 * np.maximum(1.0, np.abs(expected))))
+
+
 def figure_allowance(cost: float) -> float:
     """How far a stated cost may be from the one the verifier recomputes for an uncertified item
     (the solver's and the verifier's rounding of the same residuals)."""
@@ -466,6 +499,33 @@ class MapItems:
             raise Invalid("objective", "the matrix returned has no finite cost on its points")
         return cost, figure_allowance(cost)
 
+    def _check_root_region(self, where: str, summary, claim: dict, certificate: dict, index: int) -> None:
+        """A certified map's summary root_region states a fact ("lower <= (F l) / (d . l) <= upper
+        for the last row l of every map in the scope"): it must be the proof's root box in the
+        caller's terms, as the solver writes it (fractional.maps._fit_map: the search box, its
+        functionals through the chart rebuilt from the data, the reference point homogeneous), as a
+        bilinear frame's is; none where the proof searched nothing."""
+        if claim.get("certified") is not True or not isinstance(summary, dict) or "root_region" not in summary:
+            return
+        region, proof = summary["root_region"], claim.get("proof")
+        if not (isinstance(proof, dict) and proof.get("type") == "branch_and_bound"):
+            if region is not None:
+                raise Invalid("returned", f"{where}/certificate/root_region is stated, and its proof searched no box")
+            return
+        source, target = self.read(certificate["data"], index)
+        chart = MapChart.build(source, target, certificate["options"]["norm"])
+        lower, upper = proof["search_box"]
+        n = source.shape[1]
+        branched = np.asarray(proof["root"]["functionals"], dtype=float)[:len(lower), :n]
+        expected = {"lower": lower, "upper": upper,
+                    "denominator": np.append(source[chart.reference], 1.0),
+                    "functionals": branched @ chart.last_row_basis.T @ np.linalg.inv(chart.source_norm).T}
+        if not isinstance(region, dict) or type(region.get("reference_point")) is not int or (
+                region["reference_point"] != chart.reference) or not all(
+                name in region and _agrees(region[name], value) for name, value in expected.items()):
+            raise Invalid("returned", f"{where}/certificate/root_region is not its proof's root box in the caller's "
+                                      "terms (the search box, its functionals and reference point)")
+
     def check_returned(self, result: dict, certificate: dict) -> None:
         """Each returned map's ``residuals`` are what its matrix leaves on the certificate's data
         (target minus the map's image), certified or not, and an uncertified map's cost is their
@@ -476,6 +536,8 @@ class MapItems:
                 # Only a resection's proof proves an interval (verify_map_search): a homography's
                 # determinacy saying proven finds no sublevel and is refused here.
                 _check_proven(f"maps/{index}", entry.get("determinacy"), claim, norm, proven_map)
+                _check_map_level(f"maps/{index}", entry.get("determinacy"), claim, certificate["data"], index)
+                self._check_root_region(f"maps/{index}", entry.get("certificate"), claim, certificate, index)
         for index, entry in enumerate(result.get("maps") or []):
             if isinstance(entry, dict) and entry.get("matrix") is None and entry.get("residuals") not in (None, []):
                 raise Invalid("returned", f"maps/{index}/residuals are given, but no matrix they derive from")

@@ -9,8 +9,16 @@ from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.strict import Invalid, number
 
 
-def checked_options(options_type: type, options: dict) -> dict:
-    """norm, gaps and max_residual, read strictly and validated as the solver validates them."""
+# The options that control a run, not what it proves: not hashed, yet a document stating one the
+# solver refuses (a node limit of 0, a time limit of -60 s or 1e300 s) states a run that never was.
+RUN_CONTROL = ("max_nodes", "time_limit_s", "job_time_limit_s")
+
+
+def checked_options(options_type: type, options: dict, run_control: bool = False) -> dict:
+    """norm, gaps and max_residual, read strictly and validated as the solver validates them.
+    ``run_control``: the run-control options the document states (RUN_CONTROL, those of
+    ``options_type``) are validated with them, by its check() (the ranges its OPTION_RANGES state
+    once, for the API's models too); they are not returned (no claim depends on them)."""
     norm = options.get("norm")
     if not isinstance(norm, str):
         raise Invalid("options", f"options/norm must be a string, got {norm!r:.40}")
@@ -19,8 +27,13 @@ def checked_options(options_type: type, options: dict) -> dict:
         checked[name] = number(options.get(name), f"options/{name}", "options")
     max_residual = options.get("max_residual")
     checked["max_residual"] = None if max_residual is None else number(max_residual, "options/max_residual", "options")
+    run = {name: number(options[name], f"options/{name}", "options") for name in RUN_CONTROL
+           if run_control and name in options and hasattr(options_type, name)}
+    for name, value in run.items():  # a count (its default an int: max_nodes) is a whole number, as the solver reads it
+        if type(getattr(options_type, name)) is int and not value.is_integer():
+            raise Invalid("options", f"options/{name}: must be an integer, got {options[name]!r:.40}")
     try:
-        options_type(**checked).check()
+        options_type(**checked, **run).check()
     except InputError as exc:
         raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
     return checked

@@ -40,6 +40,9 @@ MEMBERS = frozenset(("checked", "reference_view", "model", "cost_px2", "mirror_c
                      "observations_fitting", "mirror_observations_fitting", "focal_px", "mirror_focal_px",
                      "mirror_rotation_deg", "ambiguous", "adopted"))
 NOT_CHECKED_MEMBERS = frozenset(("checked", "reason"))
+# The bundle models the twin may be adjusted with (bundle.MODELS, which imports scipy; a test
+# asserts the two agree).
+MODELS = ("simple", "full", "fixed", "varying", "principal", "radial")
 
 
 def verdict(cost: float, twin: float, variance: float) -> tuple[float, bool, bool]:
@@ -106,6 +109,7 @@ def check(summary: dict, cameras: list[dict], stages: list, current_form: bool =
         raise Invalid("returned", "summary/depth_reversal's verdict (ambiguous, adopted, poses_determined) or its "
                                   "statistic and cost ratio are not what its costs and noise give at the check's "
                                   f"thresholds ({MIRROR_CHI2:g} variances, {100 * MIRROR_MARGIN:g}%)")
+    _check_figures(figures, ambiguous, adopted, stages)
     # Each angle is the constructed twin's (depth_reversal.mirror_angles_deg), recomputed here from
     # the returned rotations (checked against P elsewhere) about the stated reference view.
     reference, angles = figures.get("reference_view"), figures.get("mirror_rotation_deg")
@@ -132,6 +136,45 @@ def check(summary: dict, cameras: list[dict], stages: list, current_form: bool =
         if not (stated is None if angle is None else _near(stated, angle)):
             raise Invalid("returned", f"cameras/{camera.get('view')}/mirror_rotation_deg {stated!r:.40} is not the "
                                       f"twin's angle for its view ({angle!r})")
+
+
+def _check_figures(figures: dict, ambiguous: bool, adopted: bool, stages: list) -> None:
+    """The record's other figures are of their types and ranges, and those the result shows are
+    its: the rig returned (the twin's figures where it was adopted) fits the observations the
+    bundle_adjustment stage kept, at the focal length of its K; every observation sent is the
+    projective stage's count where that stage counts each once (the projective and incremental
+    paths; a K-known registration counts its inliers). The returned rig is refitted whenever the
+    twin is not rejected (ambiguity.check: a refit only lowers its cost, so cannot undo a rejection)."""
+    counts = ("observations", "observations_fitting", "mirror_observations_fitting")
+    if not all(type(figures.get(n)) is int and figures[n] >= 0 for n in counts) or not (
+            figures["observations_fitting"] <= figures["observations"]
+            and figures["mirror_observations_fitting"] <= figures["observations"]):
+        raise Invalid("returned", "summary/depth_reversal must state its observations and those each rig fits as "
+                                  "counts (integers >= 0), the fitting ones at most the observations")
+    if not all(is_number(figures.get(n)) and figures[n] > 0 for n in ("focal_px", "mirror_focal_px")):
+        raise Invalid("returned", "summary/depth_reversal must state focal_px and mirror_focal_px as positive numbers")
+    if figures.get("model") not in MODELS or type(figures.get("returned_refitted")) is not bool:
+        raise Invalid("returned", f"summary/depth_reversal's model is one of {', '.join(MODELS)} and "
+                                  "returned_refitted true or false")
+    if (ambiguous or adopted) and figures["returned_refitted"] is not True:
+        raise Invalid("returned", "summary/depth_reversal/returned_refitted must be true: the returned rig is refitted "
+                                  "whenever the twin is not rejected")
+    named = {s.get("name"): s for s in stages if isinstance(s, dict)}
+    fitting, focal = ("mirror_observations_fitting", "mirror_focal_px") if adopted else ("observations_fitting",
+                                                                                         "focal_px")
+    adjustment, projective = named.get("bundle_adjustment") or {}, named.get("projective") or {}
+    if "observations_kept" in adjustment and adjustment["observations_kept"] != figures[fitting]:
+        raise Invalid("returned", f"summary/depth_reversal/{fitting} is {figures[fitting]!r}, the rig returned fits "
+                                  f"{adjustment['observations_kept']!r:.40} "
+                                  "(stages/bundle_adjustment/observations_kept)")
+    K = adjustment.get("K")
+    shown = K[0][0] if isinstance(K, list) and K and isinstance(K[0], list) and K[0] else None
+    if shown is not None and not _close(figures[focal], shown):
+        raise Invalid("returned", f"summary/depth_reversal/{focal} is {figures[focal]!r}, the rig returned has focal "
+                                  f"length {shown!r:.40} (stages/bundle_adjustment/K)")
+    if "observations_of_unregistered_views" in projective and projective.get("observations") != figures["observations"]:
+        raise Invalid("returned", f"summary/depth_reversal/observations is {figures['observations']!r}, the projective "
+                                  f"stage counts {projective.get('observations')!r:.40}")
 
 
 def _stopped(stages: list) -> bool:
