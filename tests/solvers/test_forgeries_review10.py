@@ -11,8 +11,14 @@ nearly coplanar points, a point near the camera plane, points far from one anoth
 outliers); the data and the camera at huge and tiny magnitudes, the camera's sign flipped;
 malformed proof fields (booleans, floats for integers, NaN, inf, subnormal and negative radii,
 out-of-range rounds and references); edited pixels and points; a max_residual the camera breaks;
-the proof beside another norm (L1L1, L2L1, its cost restated) and beside a homography. The worst
-bound measured is 1.0000000e-6 of the optimum below it (the eta share, as documented)."""
+the proof beside another norm (L1L1, L2L1, its cost restated) and beside a homography. A wider
+sweep (not kept as a test, for its time: 400 seeded scenes of 6 to 12 points, pixel noise 0.01 to
+30, points at scales 1e-3 to 1e3 or 1e8, nearly coplanar to 1e-6, one point 1e-4 to 0.1 from the
+camera plane, 24 local minima each, references and radii 1 and 3 times the solver's and 0, 4 or
+32 rounds of the forger's choosing: 2496 bounds proven) found the largest bound 0.99999747e-6 of
+the least cost found below it: the eta share, as documented. Not a forgery, but noted: the fast
+path is not scale-invariant (points and pixels scaled by 2^14 together, or by 2^-40, the same
+camera proves no bound; the solver then searches)."""
 
 from __future__ import annotations
 
