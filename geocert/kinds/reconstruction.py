@@ -21,6 +21,7 @@ import numpy as np
 from pydantic import BaseModel, Field
 
 from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION, IntrinsicsIn
+from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S
 from geocert.kinds.documents import certificate_document
 from geocert.kinds.maps import RESECTION, map_document
 from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict
@@ -563,7 +564,10 @@ class ReconstructionKind:
             out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
         if clock["passed"]:
             _stopped_by_clock(out, limit_s)
-        calibration_proof = self._calibration_proof(out, options)
+        # The calibration certificate's determinacy analyses keep the job's clock, as the
+        # autocalibration kind's do (its grace included).
+        calibration_proof = self._calibration_proof(
+            out, options, time.monotonic() + limit_s - (time.perf_counter() - start) + ANALYSIS_GRACE_S)
         cameras = [self._camera(camera, parsed) for camera in out.cameras]
         points = [{"track": p.track, **track_document(p.result), "observations": p.observations} for p in out.points]
         for point in points:
@@ -587,11 +591,12 @@ class ReconstructionKind:
                 "cost": None, "lower_bound": None}
 
     @staticmethod
-    def _calibration_proof(out, options: ReconstructionOptions) -> dict | None:
+    def _calibration_proof(out, options: ReconstructionOptions, deadline: float | None = None) -> dict | None:
         """What the certified K's certificate is made of, as the autocalibration kind states it:
         the data, options and item of the pipeline's stratified solve (plain JSON: an item may be
         stored between solve and assembly), when the result claims a certified K and a full
-        certificate is asked for."""
+        certificate is asked for. ``deadline`` (time.monotonic): the job's clock, which its
+        stages' determinacy analyses keep (autocalibration.stratified_item)."""
         proven, claim = out.proven, out.summary.get("calibration") or {}
         if options.certificate != "full" or proven is None or not claim.get("certified"):
             return None
@@ -600,7 +605,7 @@ class ReconstructionKind:
         data = {"cameras": proven.cameras.tolist(), "points": proven.points.tolist(),
                 "image_size": None if proven.image_size is None else list(proven.image_size)}
         item = stratified_item(Projective(proven.cameras, proven.points, proven.image_size), proven.options,
-                               proven.problem, proven.result, True)
+                               proven.problem, proven.result, True, deadline=deadline)
         # The stage's figures are the certificate's claims (costs at the solution as returned)
         for stated, claimed in zip(out.stages[1].get("stages") or [], item["stages"]):
             stated.update({name: claimed[name] for name in ("cost", "lower_bound", "gap", "status", "certified")})
