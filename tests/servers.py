@@ -157,3 +157,20 @@ class Streams:
 def thread_count(pid: int) -> int:
     with open(f"/proc/{pid}/status") as status:
         return next(int(line.split()[1]) for line in status if line.startswith("Threads:"))
+
+
+def spawned(pid: int) -> list[int]:
+    """The API process's spawned helper processes (multiprocessing's: submission, orientation,
+    export and verification processes) under ``pid``."""
+    found, todo = [], [pid]
+    while todo:
+        current = todo.pop()
+        try:
+            with open(f"/proc/{current}/task/{current}/children") as children:
+                todo.extend(int(child) for child in children.read().split())
+            with open(f"/proc/{current}/cmdline", "rb") as cmdline:
+                if b"spawn_main" in cmdline.read():
+                    found.append(current)
+        except OSError:
+            pass
+    return found

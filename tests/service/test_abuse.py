@@ -25,7 +25,7 @@ import redis
 from bench.abuse import Receiver
 from geocert.solvers.autocalibration import scenes
 from geocert.workers.priorities import queue_lists
-from tests.servers import cluster
+from tests.servers import cluster, spawned
 
 pytestmark = pytest.mark.slow  # real servers: the full run only
 
@@ -208,22 +208,6 @@ def test_6_orientations_at_once_are_bounded(plain):
             thread.join(60)
     assert results == [200, 200]
     assert client.post("/v1/orient", content=body, headers={"content-type": "application/json"}).status_code == 200
-
-
-def spawned(pid: int) -> list[int]:
-    """The API process's spawned helper processes (multiprocessing's) under ``pid``."""
-    found, todo = [], [pid]
-    while todo:
-        current = todo.pop()
-        try:
-            with open(f"/proc/{current}/task/{current}/children") as children:
-                todo.extend(int(child) for child in children.read().split())
-            with open(f"/proc/{current}/cmdline", "rb") as cmdline:
-                if b"spawn_main" in cmdline.read():
-                    found.append(current)
-        except OSError:
-            pass
-    return found
 
 
 def test_6_orientations_run_outside_the_api_process(plain):

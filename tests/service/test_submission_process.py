@@ -16,7 +16,7 @@ import time
 import pytest
 
 from geocert.app.schemas import JOB_REQUEST
-from tests.servers import cluster
+from tests.servers import cluster, spawned
 
 pytestmark = pytest.mark.slow  # real servers: the full run only
 
@@ -35,22 +35,6 @@ def reconstruction(points: int, seed: int) -> dict:
                    for seen, pixels in scene.tracks]}}
 
 
-def submission_processes(pid: int) -> list[int]:
-    """The API process's submission processes (multiprocessing's spawned children) under ``pid``."""
-    found, todo = [], [pid]
-    while todo:
-        current = todo.pop()
-        try:
-            with open(f"/proc/{current}/task/{current}/children") as children:
-                todo.extend(int(child) for child in children.read().split())
-            with open(f"/proc/{current}/cmdline", "rb") as cmdline:
-                if b"spawn_main" in cmdline.read():
-                    found.append(current)
-        except OSError:
-            pass
-    return found
-
-
 def test_another_keys_requests_are_answered_while_a_large_body_is_submitted(tmp_path):
     first, second = reconstruction(300, 3), reconstruction(300, 4)
     assert len(json.dumps(first)) > THRESHOLD
@@ -64,7 +48,7 @@ def test_another_keys_requests_are_answered_while_a_large_body_is_submitted(tmp_
         # key's list is. Until then each body is answered by the API process: tried again.
         waited = None
         for _ in range(60):
-            helpers = submission_processes(running.api.pid)
+            helpers = spawned(running.api.pid)
             assert helpers, "no submission process: the body was taken in the API process"
             for pid in helpers:
                 os.kill(pid, signal.SIGSTOP)
@@ -91,7 +75,7 @@ def test_another_keys_requests_are_answered_while_a_large_body_is_submitted(tmp_
 
         # The submission processes killed (for memory, say): the body sent then is refused, to be
         # sent again, and new processes take the next.
-        for pid in submission_processes(running.api.pid):
+        for pid in spawned(running.api.pid):
             os.kill(pid, signal.SIGKILL)
         lost = client.post("/v1/jobs", json=second, headers=ONE, timeout=120)
         assert lost.status_code == 503 and lost.headers["Retry-After"], lost.text
