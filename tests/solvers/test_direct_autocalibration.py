@@ -178,18 +178,22 @@ class TestExtraction:
 
     def test_a_loose_relaxation_still_returns_a_quadric_keeping_chirality(self, monkeypatch):
         """Table 7.1's seed 1008, varying focal, chirality "points", without the focal rows (with
-        them the scene certifies: the next test): the order-2 relaxation is rank
-        3 (not tight), and its first moments round and polish to quadrics putting cameras behind
-        the scene; one of the points extracted from its moment matrix polishes to one that keeps
-        every point in front. Without the extraction (EXTRACTED_RANKS = 1) no quadric is returned
-        and the trial counts as a numerical failure (the mutation checked)."""
+        them the scene certifies: the next test): not certified, no bound stated, and the quadric
+        returned keeps every point in front of every camera with the focal lengths within 5%.
+        Which way it gets there rests on the conic solver's path: on one machine the order-2
+        relaxation is rank 3 (not tight), its first moments round and polish to quadrics putting
+        cameras behind the scene, and one of the points extracted from its moment matrix polishes
+        to one that keeps every point in front (without the extraction, EXTRACTED_RANKS = 1, no
+        quadric is returned: the mutation checked there); on an AMD EPYC the relaxation comes out
+        rank one (eigenvalue ratio 3.5e-6) and its gap, 1.4e-4, misses the tolerance. So the
+        rank is not asserted, the outcome is."""
         monkeypatch.setattr(direct, "focal_rows", lambda cameras, ranges: None)
         scene, Ks = scenes.table71_scene(1008, 0.2, True)
         data = {"cameras": scene.cameras.tolist(), "points": scene.points.tolist()}
         intrinsics = {**UNIT, "focal": [0.05, 1.0]}
         result = solve_job(job(data, intrinsics, chirality="points", varying_focal=True))
         stage = result["stages"][0]
-        assert stage["status"] == "not_certified" and stage["certificate"]["moment_rank"] > 1
+        assert stage["status"] == "not_certified" and stage["certificate"]["moment_rank"] >= 1
         assert stage["lower_bound"] is None and stage["gap"] is None  # not certified: no bound stated
         points = np.array(result["points"])
         for camera in result["cameras"]:
