@@ -108,6 +108,8 @@ def validated(model, body: bytes) -> tuple[Any, tuple | None]:
             decoded = json.loads(body)
         except json.JSONDecodeError as exc:
             return None, ("json", exc.pos, exc.msg)
+        except UnicodeDecodeError as exc:  # not UTF-8 text (json.loads decodes bytes first)
+            return None, ("json", exc.start, f"not UTF-8 ({exc.reason})")
         try:
             return model.validate_python(decoded), None
         except ValidationError as exc:  # under "body", the input left out
