@@ -14,6 +14,7 @@ from __future__ import annotations
 import itertools
 import math
 import time
+from time import monotonic  # the determinacy analyses' clock (core.determinacy.within)
 from dataclasses import asdict
 from typing import Annotated, Any, Literal
 
@@ -567,7 +568,7 @@ class ReconstructionKind:
         # The calibration certificate's determinacy analyses keep the job's clock, as the
         # autocalibration kind's do (its grace included).
         calibration_proof = self._calibration_proof(
-            out, options, time.monotonic() + limit_s - (time.perf_counter() - start) + ANALYSIS_GRACE_S)
+            out, options, monotonic() + limit_s - (time.perf_counter() - start) + ANALYSIS_GRACE_S)
         cameras = [self._camera(camera, parsed) for camera in out.cameras]
         points = [{"track": p.track, **track_document(p.result), "observations": p.observations} for p in out.points]
         for point in points:
