@@ -28,7 +28,12 @@ class TestReconstructionThroughTheService:
         job = wait_for(service, job_id)
         assert job["status"] == "succeeded", job.get("error")
         result = job["result"]
-        assert {"projective", "structure"} <= stages
+        # Progress is throttled (GEOCERT_PROGRESS_INTERVAL_S, 0.25 s), so a stage shorter than that
+        # may go unseen (this job's structure stage, 24 points, with the radial test before it):
+        # the stream shows the first stage and others, each one of the pipeline's.
+        from geocert.pipelines.reconstruction.pipeline import STAGES
+
+        assert "projective" in stages and len(stages) >= 2 and stages <= set(STAGES), stages
         assert result["summary"]["views_registered"] == 6 and result["summary"]["points"] == 24
         assert all(point["certified"] for point in result["points"])
         assert abs(result["cameras"][0]["K"][0][0] / 800 - 1) < 1e-4
