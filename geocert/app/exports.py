@@ -40,9 +40,6 @@ def export_job(job_id: str, format: str, binary: bool, environment: dict[str, st
             return ("export", export.ply(result, binary), "application/octet-stream" if binary else "text/plain",
                     ".ply")
         except Exception as exc:  # the errors an export answers with; anything else is a bug, raised
-            error = processes.carried(exc)
-            if error is None:
-                raise
-            return error
+            return processes.carried_or_raised(exc)
     finally:
         processes.give_back_memory()

@@ -47,10 +47,7 @@ def orient_body(body: bytes, environment: dict[str, str]) -> tuple:
         try:
             found = oriented(request)
         except Exception as exc:  # the errors a request answers with; anything else is a bug, raised
-            error = processes.carried(exc)
-            if error is None:
-                raise
-            return error
+            return processes.carried_or_raised(exc)
         del request
         document = OrientResult.model_validate(found).model_dump(mode="json")
         return "answer", json.dumps(document, ensure_ascii=False, allow_nan=False, separators=(",", ":")).encode()

@@ -131,6 +131,15 @@ def carried(exc: Exception) -> tuple | None:
     return None
 
 
+def carried_or_raised(exc: Exception) -> tuple:
+    """``carried(exc)`` in a process's except clause: an error no request answers with (a bug) is
+    raised again, its traceback kept."""
+    error = carried(exc)
+    if error is None:
+        raise exc
+    return error
+
+
 def raise_carried(outcome: tuple, body: bytes) -> None:
     """Raise the error ``outcome`` carries (``validated``'s or ``carried``'s), as in process."""
     what = outcome[0]

@@ -98,10 +98,7 @@ def _verified_in_process(text: bytes, environment: dict[str, str]) -> tuple:
     except UnicodeDecodeError as exc:
         return "syntax", exc.start, f"not UTF-8 ({exc.reason})"
     except Exception as exc:  # the errors a verification answers with; anything else is a bug, raised
-        error = processes.carried(exc)
-        if error is None:
-            raise
-        return error
+        return processes.carried_or_raised(exc)
     finally:
         processes.give_back_memory()
 
