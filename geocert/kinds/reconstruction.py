@@ -14,7 +14,6 @@ from __future__ import annotations
 import itertools
 import math
 import time
-from time import monotonic  # the determinacy analyses' clock (core.determinacy.within)
 from dataclasses import asdict
 from typing import Annotated, Any, Literal
 
@@ -22,7 +21,6 @@ import numpy as np
 from pydantic import BaseModel, Field
 
 from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION, IntrinsicsIn
-from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S
 from geocert.kinds.documents import certificate_document
 from geocert.kinds.maps import RESECTION, map_document
 from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict
@@ -565,10 +563,7 @@ class ReconstructionKind:
             out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
         if clock["passed"]:
             _stopped_by_clock(out, limit_s)
-        # The calibration certificate's determinacy analyses keep the job's clock, as the
-        # autocalibration kind's do (its grace included).
-        calibration_proof = self._calibration_proof(
-            out, options, monotonic() + limit_s - (time.perf_counter() - start) + ANALYSIS_GRACE_S)
+        calibration_proof = self._calibration_proof(out, options)
         cameras = [self._camera(camera, parsed) for camera in out.cameras]
         points = [{"track": p.track, **track_document(p.result), "observations": p.observations} for p in out.points]
         for point in points:
@@ -592,12 +587,12 @@ class ReconstructionKind:
                 "cost": None, "lower_bound": None}
 
     @staticmethod
-    def _calibration_proof(out, options: ReconstructionOptions, deadline: float | None = None) -> dict | None:
+    def _calibration_proof(out, options: ReconstructionOptions) -> dict | None:
         """What the certified K's certificate is made of, as the autocalibration kind states it:
         the data, options and item of the pipeline's stratified solve (plain JSON: an item may be
         stored between solve and assembly), when the result claims a certified K and a full
-        certificate is asked for. ``deadline`` (time.monotonic): the job's clock, which its
-        stages' determinacy analyses keep (autocalibration.stratified_item)."""
+        certificate is asked for. The stages' determinacy analyses are not run (a deadline already
+        past): the certificate does not carry them, and the pipeline's own stage states its own."""
         proven, claim = out.proven, out.summary.get("calibration") or {}
         if options.certificate != "full" or proven is None or not claim.get("certified"):
             return None
@@ -606,7 +601,7 @@ class ReconstructionKind:
         data = {"cameras": proven.cameras.tolist(), "points": proven.points.tolist(),
                 "image_size": None if proven.image_size is None else list(proven.image_size)}
         item = stratified_item(Projective(proven.cameras, proven.points, proven.image_size), proven.options,
-                               proven.problem, proven.result, True, deadline=deadline)
+                               proven.problem, proven.result, True, deadline=-math.inf)
         # The stage's figures are the certificate's claims (costs at the solution as returned)
         for stated, claimed in zip(out.stages[1].get("stages") or [], item["stages"]):
             stated.update({name: claimed[name] for name in ("cost", "lower_bound", "gap", "status", "certified")})
