@@ -36,9 +36,12 @@ class Settings(BaseSettings):
     # Certificate verifications (POST /v1/certificates/verify) running at once in one API
     # process (429 beyond it; 0: unlimited): each may hold some 25 times its body in memory.
     max_concurrent_verifications: int = 2
+    # ... and of one key's among them (its X-API-Key header), so one key cannot hold every place.
+    max_concurrent_verifications_per_key: int = 1
     # Orientations (POST /v1/orient) running at once in one API process (429 beyond it; 0:
     # unlimited): each may hold some 700 MB and 12 s of CPU at max_view_points_per_job.
     max_concurrent_orientations: int = 2
+    max_concurrent_orientations_per_key: int = 1  # ... and of one key's among them
     # Exports of a job's result (GET /v1/jobs/{id}/export) running at once in one API process, and
     # of one key's (429 beyond either; 0: unlimited): each is written in an export process, which
     # may hold some 700 MB and 18 s of CPU for a reconstruction of 100,000 points.

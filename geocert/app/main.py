@@ -174,9 +174,13 @@ def create_app() -> FastAPI:
     app.include_router(service.router)
     app.include_router(observability.router)
     webui.install(app)  # after the API's routes: /web is a mount
-    app.add_middleware(VerificationGate, limit=get_settings().max_concurrent_verifications)
+    app.add_middleware(VerificationGate, limit=get_settings().max_concurrent_verifications,
+                       per_key=get_settings().max_concurrent_verifications_per_key,
+                       per_key_variable="GEOCERT_MAX_CONCURRENT_VERIFICATIONS_PER_KEY")
     app.add_middleware(VerificationGate, limit=get_settings().max_concurrent_orientations, path="/v1/orient",
-                       what="orientations", variable="GEOCERT_MAX_CONCURRENT_ORIENTATIONS")
+                       what="orientations", variable="GEOCERT_MAX_CONCURRENT_ORIENTATIONS",
+                       per_key=get_settings().max_concurrent_orientations_per_key,
+                       per_key_variable="GEOCERT_MAX_CONCURRENT_ORIENTATIONS_PER_KEY")
     app.add_middleware(VerificationGate, limit=get_settings().max_concurrent_exports, path=EXPORT_PATH,
                        what="exports", variable="GEOCERT_MAX_CONCURRENT_EXPORTS",
                        per_key=get_settings().max_concurrent_exports_per_key,

@@ -24,7 +24,7 @@ import ctypes
 import multiprocessing
 import os
 import threading
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable
 
@@ -40,7 +40,6 @@ class Pool:
     def __init__(self, size: Callable[[], int], ready: Callable[[], None], what: str):
         self.size, self.ready, self.what = size, ready, what  # what: "the process taking this large body"
         self._pool: ProcessPoolExecutor | None = None
-        self._starting: list[Future] = []  # each process's first task: its imports (``ready``)
         self._lock = threading.Lock()
 
     def _executor(self) -> ProcessPoolExecutor:
@@ -48,19 +47,9 @@ class Pool:
             if self._pool is None:
                 count = max(1, self.size())
                 self._pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context("spawn"))
-                self._starting = [self._pool.submit(_start, self.ready) for _ in range(count)]
+                for _ in range(count):  # each process's first task: its imports (``ready``)
+                    self._pool.submit(_start, self.ready)
             return self._pool
-
-    def started(self) -> ProcessPoolExecutor | None:
-        """The processes once they have started; None while they start (begun by the first call:
-        a process takes seconds to import what it needs)."""
-        pool = self._executor()
-        if not all(started.done() for started in self._starting):
-            return None
-        if any(started.exception() is not None for started in self._starting):
-            self._forget(pool)
-            return None
-        return pool
 
     def _forget(self, pool: ProcessPoolExecutor) -> None:
         """Drop a pool whose process died (every later submission to it would fail)."""
@@ -69,10 +58,10 @@ class Pool:
                 self._pool = None
         pool.shutdown(wait=False, cancel_futures=True)
 
-    async def run(self, function: Callable, *args: Any, pool: ProcessPoolExecutor | None = None) -> Any:
+    async def run(self, function: Callable, *args: Any) -> Any:
         """``function(*args)`` in one of the processes (waiting for them to start, and for a free
         one); a 503 to retry when its process dies meanwhile."""
-        pool = pool or self._executor()
+        pool = self._executor()
         try:
             return await asyncio.wrap_future(pool.submit(function, *args))
         except BrokenProcessPool:

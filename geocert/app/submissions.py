@@ -12,8 +12,9 @@ The route still runs its dependencies (the caller's key, its rate limit, its hea
 small stand-in body in place of the large one (StreamedItemsRoute); the submission process then
 does what ``_submit`` does with the body itself, with the API process's settings (its GEOCERT_*
 environment), so the job it makes, the request stored and the errors answered are those of a
-body submitted in process. The processes start with the first large body, which is taken in a
-thread of the API process while they do (seconds: they import what a submission needs). A
+body submitted in process. The processes start with the first large body, which waits for them
+(seconds: they import what a submission needs): taken in a thread of the API process meanwhile,
+it held the event loop, and every other client, for as long as it took (6.9 s, once). A
 submission process that dies (killed for memory, say) fails the
 submission it held with a 503 to retry; the next large body starts new ones.
 """
@@ -23,7 +24,6 @@ from __future__ import annotations
 import json
 
 from fastapi import Response
-from fastapi.concurrency import run_in_threadpool
 
 from geocert.app import processes
 
@@ -46,12 +46,7 @@ _POOL = processes.Pool(lambda: PROCESSES, _ready, "the process taking this large
 async def submit(body: bytes, owner: str, idempotency_key: str | None, response: Response) -> dict:
     """Submit the job whose JSON body is ``body`` in a submission process: the job's document
     (``response`` given its headers and status), or the error raised here as it would be in process."""
-    pool = _POOL.started()
-    if pool is None:  # starting: taken in a thread of this process, as before there were any
-        outcome = await run_in_threadpool(_submit_body, bytes(body), owner, idempotency_key, processes.environment())
-    else:
-        outcome = await _POOL.run(_submit_body, bytes(body), owner, idempotency_key, processes.environment(),
-                                  pool=pool)
+    outcome = await _POOL.run(_submit_body, bytes(body), owner, idempotency_key, processes.environment())
     if outcome[0] != "document":
         processes.raise_carried(outcome, body)
     _, document, status, headers = outcome
