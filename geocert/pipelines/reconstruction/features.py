@@ -465,11 +465,6 @@ def fit_fundamental(points_a: np.ndarray, points_b: np.ndarray,
     return F, mask.ravel().astype(bool)
 
 
-def verify_pair(points_a: np.ndarray, points_b: np.ndarray, options: FeatureOptions) -> np.ndarray:
-    """Inlier mask of a RANSAC fundamental matrix (all False when none is found)."""
-    return fit_fundamental(points_a, points_b, options)[1]
-
-
 def epipolar_distances(F: np.ndarray, points_a: np.ndarray, points_b: np.ndarray) -> np.ndarray:
     """(n_a, n_b): for every point of a and point of b, the larger of the two pixel distances, of
     b's point to a's epipolar line F x_a and of a's point to b's line F^T x_b."""

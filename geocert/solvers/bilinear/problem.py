@@ -209,12 +209,6 @@ def to_raw(frame: Frame, M: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.hstack([M_raw, t_raw[:, None]])
 
 
-def to_normalised(frame: Frame, camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    M = camera[:, :3] / frame.camera_scale
-    t = (camera[:, :3] @ frame.shape_centre + camera[:, 3] - frame.image_centre) / frame.image_scale
-    return M, t
-
-
 def cost_unit(frame: Frame, norm: str) -> float:
     """Raw cost = normalised cost times this (a power of two)."""
     return frame.image_scale if norm == "L1L1" else frame.image_scale ** 2

@@ -103,10 +103,6 @@ def segment_lines(segments: np.ndarray) -> np.ndarray:
     return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
 
 
-def _unit_rows(x: np.ndarray) -> np.ndarray:
-    return x / np.linalg.norm(x, axis=-1, keepdims=True)
-
-
 @dataclass
 class LineSet:
     """Lines matched across the four views of a frame pair (a: frame a, b: frame b), with what
