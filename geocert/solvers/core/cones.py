@@ -219,19 +219,6 @@ def _project_soc(block: np.ndarray) -> np.ndarray:
     return out
 
 
-def _transposed_product(A, z: np.ndarray) -> np.ndarray:
-    return np.asarray(A.T @ z).ravel() if sp.issparse(A) else A.T @ z
-
-
-def _box_minimum(c: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> float:
-    """min of c'x over lower <= x <= upper (zero coefficients cost nothing, even on infinite sides;
-    a product past the float range is -inf or inf, as it should be: no bound, or none lost)."""
-    with np.errstate(invalid="ignore", over="ignore"):
-        terms = np.minimum(c * lower, c * upper)
-    terms[c == 0] = 0.0
-    return float(np.sum(terms))
-
-
 def _reach(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """max(|lower|, |upper|): how far each variable reaches from 0."""
     return np.maximum(np.abs(lower), np.abs(upper))
