@@ -4,7 +4,7 @@ Per set and order of the photos (file order; shuffled with a stated seed; every 
 dense ring), in one run: COLMAP with K unknown (pycolmap's defaults on the CPU: SIFT, exhaustive
 matching, incremental mapping, EXIF focal length when present; bench/colmap_baseline.py) and with K
 known ("colmap-K"), and geocert through ``geocert solve`` (the CLI's path, the code a user's job
-takes) with K unknown and its defaults, with the README's ring options where the README gives them
+takes) with K unknown and its defaults, with the ring options docs/benchmarks.md gives
 (dinoSparseRing), and with K known. Each run is a child process with a time limit. Printed per run:
 views registered, rotation error against the ground truth after the best global rotation (median,
 max, views above 5 degrees), camera centre error after a similarity alignment (% of the scene's
@@ -52,8 +52,8 @@ import numpy as np
 
 from bench import camera_errors, colmap_baseline, machine_speed_ms, photo_sets
 
-# The README's options for the dinoSparseRing (docs/benchmarks.md, "Photos to tracks, and the K-known path"),
-# the only set the README gives options for: bench.reconstruction_images.RING_JOB_OPTIONS, not
+# The ring options for the dinoSparseRing (docs/benchmarks.md, "Photos to tracks, and the K-known path"),
+# the only set the docs give options for: bench.reconstruction_images.RING_JOB_OPTIONS, not
 # imported from there because that module sets one BLAS thread in this process's environment,
 # which COLMAP's child process would inherit.
 README_OPTIONS = {"min_inliers": 10, "merge_components": True,

@@ -166,7 +166,7 @@ def bilinear():
 def stereo_lines_pair():
     """One frame pair of a calibrated stereo rig (the thesis's: 320 px, 7.4 cm baseline) seeing 20
     lines, as segments in each of the four images (unmatched, in no particular order), 0.3 px
-    noise: what a robot sends each time it moves (README: Prefer: wait)."""
+    noise: what a robot sends each time it moves (docs/api.md: Prefer: wait)."""
     from geocert.solvers.lines.scenes import pair_scene
 
     rng = np.random.default_rng(106)
@@ -289,7 +289,7 @@ def ring_photos(shared: Path) -> dict:
     K = np.array(rows[0][1:10], dtype=float).reshape(3, 3)
     ring = {"intrinsics": {"K": K.tolist()}, "min_inliers": 10, "merge_components": True,
             "features": {"max_features": 0, "contrast_threshold": 0.005, "ratio": 0.85, "ransac_threshold_px": 2,
-                         "guided_ratio": 0.8}}  # README, "Reconstruction": the options the ring needs
+                         "guided_ratio": 0.8}}  # the ring options of docs/benchmarks.md
     return {"kind": "reconstruction", "data": {"images": images}, "options": ring}
 
 

@@ -1,7 +1,7 @@
 """Settings, from GEOCERT_* environment variables (pydantic-settings): one module that the API,
 the workers and the command line all read (the workers import nothing of the web layer).
 
-Every setting is listed with its variable and default in the README's configuration table.
+Every setting is listed with its variable and default in docs/operations.md, "Configuration".
 """
 
 from __future__ import annotations
@@ -57,8 +57,8 @@ class Settings(BaseSettings):
     # stored some 700 MB an hour of one-track jobs, or 20 GB an hour of 5.5 MB ones.
     max_stored_bytes_per_key: int = 1 << 30
     # A job's budget, computed from its request before anything of it is decoded or built (each
-    # kind's request_figures; 413 naming the figure and its limit beyond one). See the README's
-    # Operations section, "Limits", for what each bounds.
+    # kind's request_figures; 413 naming the figure and its limit beyond one). See docs/operations.md,
+    # "Limits", for what each bounds.
     # Pixels of a reconstruction's photos, from their headers: all of them (the worker holds them
     # decoded, a byte each), and the largest (feature detection holds about 240 bytes a pixel of
     # one image at a time: 12 Mpx is about 2.9 GB).

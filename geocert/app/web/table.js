@@ -1,4 +1,4 @@
-// The items of a result in a table paged, filtered and sorted in the browser (README: one parse
+// The items of a result in a table paged, filtered and sorted in the browser (docs/api.md, the web page: one parse
 // of the result, instant filters and sorts). Each row shows the answer itself (a point, a
 // matrix, a motion) and how well the data fix it, beside the bounds.
 "use strict";

@@ -84,7 +84,7 @@ class CalibratedOptions:
     # ba_max_nfev). Both move every registered camera and point; "schur" solves each step's normal
     # equations exactly, where LSMR's inner iterations took most of a small set's CPU. "auto":
     # "lsmr" with merge_components, "schur" without. The merged ring's path was measured with
-    # "lsmr" (dinoSparseRing, the README's ring options, K unknown: 14/14 views with "lsmr", 7/14
+    # "lsmr" (dinoSparseRing, the ring options of docs/benchmarks.md, K unknown: 14/14 views with "lsmr", 7/14
     # with "schur"), so that path keeps it.
     ba_solver: str = "auto"
     ba_max_iterations: int = 10
