@@ -3,7 +3,7 @@
 certified triangulation gives for the tracks it sees.
 
 For each item, in one run: the solve with a summary certificate, the solve with a full one, the
-JSON size of its certificate, and the time `solvers.verify` takes to check it. Prints totals,
+JSON size of its certificate, and the time `geocert.verify` takes to check it. Prints totals,
 medians and the ratio of verification to solve time (target: at most 1).
 
 ``--job``: instead, the tracks as one triangulation job with ``certificate: "full"`` under each
@@ -29,7 +29,7 @@ from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.fractional.maps import MapOptions, fit_map
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 from geocert.solvers.fractional.results import claim_of
-from geocert.solvers.verify import verify_arrays
+from geocert.verify.checks import verify_arrays
 
 
 def measure(kind: str, items, solve, options, solution) -> dict:
@@ -75,7 +75,7 @@ def report(name: str, figures: dict) -> None:
 def job_figures(norm: str, cameras, tracks) -> None:
     """One full-certificate job of the tracks: document bytes per track, verification rate."""
     from geocert.batch import solve_job
-    from geocert.solvers.verify import verify_any
+    from geocert.verify.checks import verify_any
 
     job = {"kind": "triangulation", "options": {"norm": norm, "certificate": "full"},
            "data": {"cameras": cameras.tolist(),

@@ -44,7 +44,7 @@ import time
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from geocert.solvers import verify
+from geocert.verify import checks as verify
 from geocert.solvers.core.certificates import BOUND_TOLERANCE, pack, unpack
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.inputs import check_correspondences, minimum_points

@@ -22,7 +22,7 @@ import json
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from geocert.solvers import verify
+from geocert.verify import checks as verify
 from geocert.solvers.core.geometry import normalised_cameras
 from geocert.solvers.fractional.batched import triangulate_many
 from geocert.solvers.fractional.results import claim_of

@@ -23,7 +23,7 @@ import numpy as np
 
 from geocert.solvers.core.certificates import data_hash, problem_hash
 from geocert.solvers.core.strict import document_size
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 
 STORED = Path(__file__).resolve().parents[1] / "tests" / "data" / "certificates"
 

@@ -64,7 +64,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
     (unreadable, not JSON, a member name repeated in one object, a number too long to read, nested
     too deeply, or carrying no certificate)."""
     from geocert.solvers.core.strict import RepeatedName, Unreadable, load_document
-    from geocert.solvers.verify import estimates_kind, find_certificate, verify_any
+    from geocert.verify.checks import estimates_kind, find_certificate, verify_any
 
     try:
         text = sys.stdin.read() if args.file == "-" else Path(args.file).read_text()

@@ -1,5 +1,6 @@
 """The problem kinds served: one line each (see base.py for what a kind is)."""
 
+import geocert.verify.checks  # noqa: F401 (installs the solvers' self-check: GEOCERT_SELF_VERIFY=1)
 from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION
 from geocert.kinds.bilinear import KIND as BILINEAR
 from geocert.kinds.base import ProblemKind, Registry, default_options, options_from

@@ -19,9 +19,9 @@ from geocert.kinds.documents import finite_or_none
 from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finite, JobBase, JobStats, Strict
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.autocalibration import problem as pr
-from geocert.solvers.autocalibration.verification import STAGES, outcome, read_data
+from geocert.verify.autocalibration import STAGES, outcome, read_data
 from geocert.solvers.core.determinacy import within
-from geocert.solvers.verify import self_check_enabled
+from geocert.solvers.core.self_check import enabled as self_check_enabled
 
 Range = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[lo, hi]")]
 Point4 = Annotated[list[Finite], Field(min_length=4, max_length=4, description="[X, Y, Z, W]")]

@@ -9,7 +9,8 @@ import dataclasses
 from geocert.kinds.documents import finite_or_none
 from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.core.strict import Invalid
-from geocert.solvers.verify import SelfCheckFailed, verify_arrays
+from geocert.solvers.core.self_check import SelfCheckFailed
+from geocert.verify.checks import verify_arrays
 
 # The stages' determinacy analyses run until this many seconds past the job's time limit in all
 # (its stages' limits), then stop (determinacy.within): a job whose stages ran to their limits

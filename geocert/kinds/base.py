@@ -15,7 +15,7 @@ from typing import Any, Callable, Protocol, runtime_checkable
 
 from pydantic import BaseModel
 
-from geocert.solvers import verified_kinds
+from geocert.verify import adapters as verified_kinds
 from geocert.solvers.core.geometry import InputError
 
 ProgressCallback = Callable[[Any], "bool | None"]

@@ -14,10 +14,12 @@ from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBa
 from geocert.solvers.bilinear import determinacy
 from geocert.solvers.bilinear import problem as pb
 from geocert.solvers.bilinear.options import BilinearOptions
-from geocert.solvers.bilinear.verification import FRAMES
+from geocert.verify.bilinear import FRAMES
 from geocert.solvers.core.determinacy import safely
 from geocert.solvers.core.strict import Invalid
-from geocert.solvers.verify import SelfCheckFailed, self_check_enabled, verify_arrays
+from geocert.solvers.core.self_check import SelfCheckFailed
+from geocert.solvers.core.self_check import enabled as self_check_enabled
+from geocert.verify.checks import verify_arrays
 
 Point3 = Annotated[list[Finite], Field(min_length=3, max_length=3, description="[X, Y, Z]")]
 _DEFAULTS = BilinearOptions()

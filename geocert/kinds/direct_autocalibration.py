@@ -34,7 +34,7 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
     from geocert.solvers.autocalibration import direct_solve
     from geocert.solvers.autocalibration.stratified import announce
     from geocert.solvers.core.bnb import asks_to_stop
-    from geocert.solvers.verify import self_check_enabled
+    from geocert.solvers.core.self_check import enabled as self_check_enabled
 
     began = time.perf_counter()
     # The job's time limit in all (its one stage), and the determinacy analysis's grace past it.

@@ -13,7 +13,7 @@ from geocert.kinds.documents import brief_certificate, certificate_summary, outc
 from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
 from geocert.solvers.fractional.inputs import check_correspondences
-from geocert.solvers.verified_kinds import VERIFIED_KINDS
+from geocert.verify.adapters import VERIFIED_KINDS
 from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.fractional.results import MapResult
 

@@ -28,9 +28,9 @@ from geocert.kinds.triangulation import TrackOut, track_document
 from geocert.solvers.autocalibration.problem import StageProgress
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, number_array
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
-from geocert.solvers.reconstruction.verification import RECONSTRUCTION
+from geocert.verify.reconstruction import RECONSTRUCTION
 from geocert.solvers.core.records import keep_declared
-from geocert.solvers.reconstruction.stage_checks import IMAGES, STAGE_RECORDS
+from geocert.verify.reconstruction_stages import IMAGES, STAGE_RECORDS
 
 MAX_VIEWS = 1000
 MAX_TRACKS = 200_000

@@ -21,7 +21,7 @@ from geocert.kinds.schema import Determinacy, Finite, JobBase, JobStats, Strict
 from geocert.solvers.core.bnb import Progress
 from geocert.solvers.core.determinacy import safely
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
-from geocert.solvers.verified_kinds import NOT_CERTIFIED, VERIFIED_KINDS
+from geocert.verify.adapters import NOT_CERTIFIED, VERIFIED_KINDS
 from geocert.solvers.lines.geometry import Rig
 from geocert.solvers.lines.matching import MatchingOptions
 from geocert.solvers.lines.pipeline import SOLVERS, StereoLinesOptions, compose, estimate_pair

@@ -16,7 +16,7 @@ from geocert.batch import parse_job, solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.autocalibration import scenes
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 from tests.support import HOUSE_RANGES, house_in_projective_frame, shared_data
 
 KIND = get_kind("autocalibration")
@@ -191,7 +191,7 @@ class TestSelfCheck:
     def test_a_refused_stage_fails_the_solve(self, monkeypatch):
         from geocert.solvers.autocalibration import proofs
         from geocert.solvers.core.strict import Invalid
-        from geocert.solvers.verify import SelfCheckFailed
+        from geocert.verify.checks import SelfCheckFailed
 
         def refuse(*args, **kwargs):
             raise Invalid("leaf_bounds", "refused on purpose")

@@ -10,7 +10,7 @@ from geocert.batch import parse_job, solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional import determinacy
-from geocert.solvers.verify import RETURNED_FIELDS, verify_any
+from geocert.verify.checks import RETURNED_FIELDS, verify_any
 
 KINDS = ("triangulation", "homography", "resection")
 

@@ -15,7 +15,7 @@ from pydantic import ValidationError
 from geocert.batch import solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.autocalibration import scenes
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 
 KIND = get_kind("autocalibration")
 UNIT = {"aspect": [0.95, 1.05], "skew": [-0.01, 0.01], "principal_point": [[-0.1, 0.1], [-0.1, 0.1]]}

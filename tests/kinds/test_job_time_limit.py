@@ -105,7 +105,7 @@ def test_a_reconstruction_stopped_by_its_clock_after_certified_points_verifies(m
 
     from geocert.kinds import reconstruction as kind
     from geocert.solvers.reconstruction import structure, synthetic
-    from geocert.solvers.verify import verify_any
+    from geocert.verify.checks import verify_any
 
     scene = synthetic.scene(views=6, points=40, seed=3, noise_px=0.5)
     data = reconstruction_data(scene.tracks, scene.image_size, 6)
@@ -134,7 +134,7 @@ def test_a_large_maps_tightening_stops_at_its_time_limit():
     does not close (0.1% to 1.6% on such maps, against rel_gap 1e-3), and the map reads
     time_limit, not certified; the document claims nothing, which the verifier says. Before, the
     tightening ran whatever the limit and closed the L2L2 root: optimal (measured, 2.1 s)."""
-    from geocert.solvers.verify import verify_any
+    from geocert.verify.checks import verify_any
     from tests.support import map_job
 
     job = map_job(np.random.default_rng(3), "resection", 2000, "L2L2", maps=1)

@@ -18,7 +18,7 @@ from geocert.batch import parse_job, solve_job
 from geocert.kinds import KINDS
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.certificates import FORMAT, VERSION
-from geocert.solvers.verify import verify_any, verify_document
+from geocert.verify.checks import verify_any, verify_document
 
 KIND_NAMES = KINDS.names()
 
@@ -110,7 +110,7 @@ from tests.kinds import toy_kind
 KINDS.register(toy_kind.KIND)  # the one line
 from geocert.batch import solve_job
 from geocert.solvers.core.certificates import FORMAT, VERSION
-from geocert.solvers.verify import verify_any, verify_document
+from geocert.verify.checks import verify_any, verify_document
 from geocert.app.cli import openapi_document
 from geocert.app.api.routes.service import list_problems
 result = solve_job({**toy_kind.KIND.example, "options": {"certificate": "full"}})

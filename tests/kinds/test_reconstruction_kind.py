@@ -19,7 +19,7 @@ from geocert.batch import parse_job, solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.reconstruction import export
-from geocert.solvers.verify import verify_any, verify_document
+from geocert.verify.checks import verify_any, verify_document
 
 KIND = get_kind("reconstruction")
 
@@ -233,7 +233,7 @@ def test_the_calibration_certificate_runs_no_analysis_it_does_not_carry(monkeypa
 def forgeries_refused(result: dict) -> None:
     """A result whose cameras are not all searched (some claim no bound): honest, it verifies;
     every way of claiming a bound without its map, or dropping a searched camera's map, is refused."""
-    from geocert.solvers.verify import verify_any
+    from geocert.verify.checks import verify_any
 
     honest = json.loads(json.dumps(result))
     report = verify_any(honest)

@@ -332,7 +332,7 @@ class TestNodeTightening:
         import copy
 
         from geocert.batch import solve_job
-        from geocert.solvers.verify import verify_any
+        from geocert.verify.checks import verify_any
 
         scene = scenes.make_scene(10, 0.5, seed=1)
         result = solve_job({"kind": "autocalibration", "data": scene.job_data(), "options": {"certificate": "full"}})
@@ -356,7 +356,7 @@ class TestNodeTightening:
         import copy
 
         from geocert.batch import solve_job
-        from geocert.solvers.verify import verify_any
+        from geocert.verify.checks import verify_any
 
         scene = scenes.make_scene(20, 0.1, seed=20000)
         result = solve_job({"kind": "autocalibration", "data": scene.job_data(), "options": {"certificate": "full"}})
@@ -382,7 +382,7 @@ class TestUncleanSolvesStillBound:
 
     def test_the_scene_that_stalled_certifies_and_verifies(self):
         from geocert.batch import solve_job
-        from geocert.solvers.verify import verify_any
+        from geocert.verify.checks import verify_any
 
         scene = scenes.make_scene(10, 0.1, seed=10016)
         result = solve_job({"kind": "autocalibration", "data": scene.job_data(),
@@ -433,7 +433,7 @@ def test_the_metric_stage_tightening_stops_at_a_cancel_or_its_time_limit():
     s): a cancel seen at the stage's first check now stops it before any program."""
     from geocert.solvers.autocalibration import problem as pr
     from geocert.solvers.autocalibration import stratified
-    from geocert.solvers.autocalibration.verification import read_data
+    from geocert.verify.autocalibration import read_data
 
     cameras, points, image_size = read_data(scenes.make_scene(6, 0.1, seed=5).job_data())
     options = pr.AutocalibrationOptions(time_limit_s=60)

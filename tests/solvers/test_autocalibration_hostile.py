@@ -23,11 +23,11 @@ from geocert.solvers.autocalibration import affine_relaxation as arelax
 from geocert.solvers.autocalibration import frames, metric, proofs
 from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.autocalibration import problem as pr
-from geocert.solvers.autocalibration.verification import CLAIM_OPTIONS, read_data
+from geocert.verify.autocalibration import CLAIM_OPTIONS, read_data
 from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unpack
 from geocert.solvers.core.cones import proves_infeasible
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 from tests.solvers.test_forgeries import uncertify
 
 KIND = "autocalibration"

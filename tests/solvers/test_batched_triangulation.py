@@ -14,7 +14,7 @@ from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.fractional import batched, stacked
 from geocert.solvers.fractional.results import LocalCertificate, claim_of
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
-from geocert.solvers.verify import checked_options, verify_arrays
+from geocert.verify.checks import checked_options, verify_arrays
 
 from tests.support import project, random_cameras, shared_data
 

@@ -19,7 +19,7 @@ from geocert.solvers.bilinear.relaxation import Relaxation, mccormick_rows
 from geocert.solvers.bilinear.search import Model, fit_frame
 from geocert.solvers.core.conic import ConicStatus, solve_conic
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 
 
 def envelope_violation(rows, m: float, a: float) -> float:
@@ -324,7 +324,7 @@ def test_geocert_verify_checks_it_without_a_conic_solver(certified_result, tmp_p
     path.write_text(json.dumps(bad))
     assert subprocess.run([sys.executable, "-m", "geocert.app.cli", "verify", str(path)],
                           capture_output=True, text=True).returncode == 1
-    code = ("import json, sys; from geocert.solvers.verify import verify_any; "
+    code = ("import json, sys; from geocert.verify.checks import verify_any; "
             f"valid = verify_any(json.load(open({str(good)!r}))).valid; "
             "bad = [m for m in sys.modules if m.split('.')[0] in ('clarabel', 'cvxpy', 'pyscipopt')]; "
             "print(json.dumps([valid, bad]))")

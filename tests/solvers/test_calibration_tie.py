@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from geocert.solvers.reconstruction import calibration_tie
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 from tests.solvers.test_forgeries import stored
 from tests.support import reconstruction_data
 

@@ -16,7 +16,7 @@ from geocert.batch import solve_job
 from geocert.solvers.fractional.relaxation import NORMS
 from geocert.solvers.core.certificates import BOUND_TOLERANCE
 from geocert.solvers.core.coverage import uncovered_part
-from geocert.solvers.verify import verify_arrays, verify_document
+from geocert.verify.checks import verify_arrays, verify_document
 from geocert.solvers.core.bnb import Box
 
 from tests.support import map_job, seed, triangulation_job
@@ -253,7 +253,7 @@ class TestVerifierStandsAlone:
         # Reading the registry and checking a whole document, not only importing the module.
         path = tmp_path / "certificate.json"
         path.write_text(json.dumps(branched))
-        code = ("import json, sys; from geocert.solvers.verify import verify_document; "
+        code = ("import json, sys; from geocert.verify.checks import verify_document; "
                 f"valid = verify_document(json.load(open({str(path)!r}))).valid; "
                 "bad = [m for m in sys.modules if m.split('.')[0] in "
                 "('clarabel', 'cvxpy', 'pyscipopt', 'scs', 'ecos', 'osqp')]; print(json.dumps([valid, bad]))")

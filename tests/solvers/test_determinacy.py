@@ -393,7 +393,7 @@ class TestPooledNoise:
         (the pooled noise's, for most tracks above their own), whether the convexity bound or a
         search certified it; the result verifies, and each of the 60 proven boxes holds the true
         point (measured: all 60 under either path)."""
-        from geocert.solvers.verify import verify_any
+        from geocert.verify.checks import verify_any
 
         cameras, truth, tracks = self.scene(np.random.default_rng(12), 6, 60)
         result = solve_job({"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": tracks},

@@ -17,7 +17,7 @@ from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.core.certificates import pack, unpack
 from geocert.solvers.core.cones import smat
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 
 UNIT = {"aspect": [0.95, 1.05], "skew": [-0.01, 0.01], "principal_point": [[-0.1, 0.1], [-0.1, 0.1]]}
 

@@ -15,7 +15,7 @@ from geocert.batch import solve_job
 from geocert.solvers.autocalibration import direct, scenes
 from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.autocalibration import problem as pr
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 
 K_TRUE = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
 
@@ -195,7 +195,7 @@ class TestVerifierMessage:
             result[name] = None
         result["stats"]["certified"] = 0  # the job's counts as such a result gives them (verify._check_stats)
         result["stats"]["statuses"] = {"not_certified": 1}
-        from geocert.solvers.autocalibration.verification import outcome
+        from geocert.verify.autocalibration import outcome
 
         result.update(outcome(result))  # and its own status, as its stages give it
         report = verify_any(result)

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from geocert.solvers.core.certificates import data_hash, pack, problem_hash
-from geocert.solvers.verify import verify_any, verify_document
+from geocert.verify.checks import verify_any, verify_document
 from tests.support import loose_gaps
 
 STORED = Path(__file__).resolve().parents[1] / "data" / "certificates"
@@ -175,7 +175,7 @@ class TestSubnormalFarkasVectors:
 def forged_metric():
     from geocert.solvers.autocalibration import metric_relaxation as mrelax
     from geocert.solvers.autocalibration import problem as pr
-    from geocert.solvers.autocalibration.verification import read_data
+    from geocert.verify.autocalibration import read_data
 
     document = copy.deepcopy(stored("autocalibration_five_views")["certificate"])
     claim = document["items"][1]
@@ -379,7 +379,7 @@ class TestDeterminacyWithinScope:
     def test_the_metric_stages_intervals_lie_within_the_intrinsics_ranges(self):
         from geocert.solvers.autocalibration import determinacy
         from geocert.solvers.autocalibration import problem as pr
-        from geocert.solvers.autocalibration.verification import read_data
+        from geocert.verify.autocalibration import read_data
 
         result = stored("autocalibration_five_views")
         stage = result["stages"][1]
@@ -449,7 +449,7 @@ class TestVerifierCost:
 
         monkeypatch.setattr(strict, "WORK_PER_UNIT", 0)
         monkeypatch.setattr(strict, "WORK_BASE", 10)
-        import geocert.solvers.verify as verify
+        import geocert.verify.checks as verify
 
         monkeypatch.setattr(verify, "WORK_PER_UNIT", 0)
         monkeypatch.setattr(verify, "WORK_BASE", 10)
@@ -566,7 +566,7 @@ def thin_cut_metric():
     optimal where the scene's own (focal 1000 px, in the same box) costs almost nothing."""
     from geocert.solvers.autocalibration import metric_relaxation as mrelax
     from geocert.solvers.autocalibration import problem as pr
-    from geocert.solvers.autocalibration.verification import read_data
+    from geocert.verify.autocalibration import read_data
 
     result = stored("autocalibration_stratified")
     document = result["certificate"]
@@ -889,7 +889,7 @@ def _moved_camera_result(result: dict, view: int, degrees: float, camera_rel_gap
     from geocert.batch import solve_job
     from geocert.solvers.core.geometry import norm_cost
     from geocert.solvers.reconstruction import camera_claim
-    from geocert.solvers.reconstruction.verification import camera_maps
+    from geocert.verify.reconstruction import camera_maps
 
     result = copy.deepcopy(result)
     certificate, options = result["certificate"], result["certificate"]["options"]

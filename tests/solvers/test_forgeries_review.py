@@ -11,7 +11,7 @@ import copy
 import numpy as np
 import pytest
 
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 from tests.solvers.test_forgeries import (  # noqa: F401 (a fixture, used by name)
     _autocalibration_stage, _cameras_stage, _restate_mirror_angles, calibrated_reconstruction, refused, rehash, stored)
 
@@ -42,7 +42,7 @@ def _unsearch_cameras(result: dict) -> dict:
     the certified points left (camera_claim), and no camera certificate: a true, weaker claim."""
     from geocert.solvers.core.geometry import norm_cost
     from geocert.solvers.reconstruction import camera_claim
-    from geocert.solvers.reconstruction.verification import camera_maps
+    from geocert.verify.reconstruction import camera_maps
 
     registered = [camera for camera in result["cameras"] if camera["registered"]]
     maps = camera_maps(result["points"], [camera["view"] for camera in registered])
@@ -221,7 +221,7 @@ class TestCalibrationCertificateOptionsUntied:
     def test_a_calibration_certificate_with_a_loose_gap_is_refused(self, calibrated_reconstruction, options):
         from geocert.solvers.autocalibration import metric_relaxation as mrelax
         from geocert.solvers.autocalibration import problem as pr
-        from geocert.solvers.autocalibration.verification import read_data
+        from geocert.verify.autocalibration import read_data
 
         result = copy.deepcopy(calibrated_reconstruction)
         document = copy.deepcopy(result["calibration_certificate"])

@@ -35,7 +35,7 @@ from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.fractional.resection_bound import proven_bound, resection_bound
 from geocert.solvers.fractional.resection_sublevel import MAX_ROUNDS, Scene
 from geocert.solvers.fractional.results import claim_of
-from geocert.solvers.verify import verify_arrays
+from geocert.verify.checks import verify_arrays
 from tests.solvers.test_resection_bound import fast_claim, scene, searched
 
 

@@ -11,7 +11,7 @@ import copy
 
 import pytest
 
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 from tests.solvers.test_forgeries import (  # noqa: F401 (a fixture, used by name)
     TestDoubtfulTied, calibrated_reconstruction, refused, stored)
 from tests.support import reconstruction_data
@@ -521,7 +521,7 @@ def _K_signed(result: dict, signs: tuple) -> dict:
     import numpy as np
 
     from geocert.solvers.autocalibration import problem as pr
-    from geocert.solvers.autocalibration.verification import read_data
+    from geocert.verify.autocalibration import read_data
 
     result = copy.deepcopy(result)
     K = (np.array(result["K"]) @ np.diag(signs)).tolist()

@@ -10,7 +10,7 @@ import copy
 
 import pytest
 
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 from tests.solvers.test_forgeries import stored
 from tests.solvers.test_forgeries_review3 import _uncertified
 from tests.support import reconstruction_data
@@ -73,7 +73,7 @@ class TestUncertifiedStatusUnread:
         from typing import get_args
 
         from geocert.kinds.schema import ItemStatus
-        from geocert.solvers.verify import UNCERTIFIED_STATUSES
+        from geocert.verify.checks import UNCERTIFIED_STATUSES
 
         assert set(get_args(ItemStatus)) == {"optimal", "infeasible", *UNCERTIFIED_STATUSES}
 
@@ -546,7 +546,7 @@ class TestUnregisteredCameraStatusUnread:
     saying "optimal". Fixed so: its status is not_run, as the kind writes it."""
 
     def test_an_unregistered_camera_called_optimal_is_refused(self):
-        from geocert.solvers.reconstruction.verification import _check_cameras
+        from geocert.verify.reconstruction import _check_cameras
         from geocert.solvers.core.strict import Invalid
 
         result = TestGenuineUnregisteredReconstructionMisread.unregistered()

@@ -12,7 +12,7 @@ import copy
 import numpy as np
 import pytest
 
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 from tests.solvers.test_forgeries import stored
 
 ACCEPTED = "accepted today: see the class's docstring"
@@ -147,7 +147,7 @@ def _track_cost(document: dict, index: int, point: list) -> float:
     """What ``point`` costs on track ``index`` of a triangulation certificate's data (the
     verifier's own recomputation, verify._check_residual_claim's)."""
     from geocert.solvers.core.geometry import norm_cost
-    from geocert.solvers.verify import _adapter
+    from geocert.verify.checks import _adapter
 
     adapter = _adapter("triangulation")
     item = adapter.item(adapter.read(document["data"], index), document["options"]["norm"])

@@ -29,7 +29,7 @@ def _metric_setup(certificate: dict):
     builds them."""
     from geocert.solvers.autocalibration import metric_relaxation as mrelax
     from geocert.solvers.autocalibration import problem as pr
-    from geocert.solvers.autocalibration.verification import read_data
+    from geocert.verify.autocalibration import read_data
 
     cameras, points, image_size = read_data(certificate["data"])
     problem = pr.prepare(cameras, points, image_size, dict(certificate["options"]["intrinsics"] or {}))
@@ -51,7 +51,7 @@ def _with_metric_K(result: dict, K: np.ndarray, abs_gap: float) -> dict:
     from it (upgrade, quadric, cameras, points: what the verifier recomputes), the stage's figures
     and its summary's tolerance; the genuine proof and lower bound kept, the hashes redone."""
     from geocert.solvers.autocalibration import problem as pr
-    from geocert.solvers.autocalibration.verification import read_data
+    from geocert.verify.autocalibration import read_data
 
     forged = copy.deepcopy(result)
     certificate = forged["certificate"]
@@ -144,7 +144,7 @@ class TestAbsoluteGapCapInTheCostsUnits:
         from geocert.solvers.autocalibration import direct
         from geocert.solvers.autocalibration import direct_relaxation as dr
         from geocert.solvers.autocalibration import problem as pr
-        from geocert.solvers.autocalibration.verification import _direct_setup, read_data
+        from geocert.verify.autocalibration import _direct_setup, read_data
 
         forged = stored("autocalibration_direct")
         certificate = forged["certificate"]
@@ -241,7 +241,7 @@ class TestAbsoluteGapCapInPixels:
         """The stored noiseless stratified scene: both stages cost about 1e-14 and 2e-12 and are
         certified through abs_gap (1e-12), not rel_gap; the report's scope says so. The noisy
         tracks, certified through rel_gap, are not named."""
-        from geocert.solvers.verify import verify_any
+        from geocert.verify.checks import verify_any
 
         report = verify_any(stored("autocalibration_stratified"))
         assert report.valid and report.scope["within_abs_gap"] == [0, 1]
@@ -561,7 +561,7 @@ class TestDerivedArraysAreJsonNumbers:
 
     @pytest.mark.parametrize("edit", ["t_as_strings", "point_as_strings", "huge_integer"])
     def test_a_record_not_of_json_numbers_is_refused(self, edit):
-        from geocert.solvers.verify import verify_any
+        from geocert.verify.checks import verify_any
 
         result = stored("autocalibration_stratified")
         assert verify_any(result).valid

@@ -570,7 +570,7 @@ class TestGivenKNotTheCameras:
 
 def test_the_verifiers_job_members_are_the_services():
     from geocert.app import schemas
-    from geocert.solvers import verify
+    from geocert.verify import checks as verify
 
     assert set(verify.JOB_MEMBERS) == set(schemas.Job.model_fields)
     assert set(verify.PROGRESS_MEMBERS) == set(schemas.JobProgress.model_fields)

@@ -255,7 +255,7 @@ class TestStackedPathRecordsOpen:
     def test_the_genuine_certificate_verifies_on_the_stacked_path(self):
         from geocert.solvers.fractional.items import MAX_VIEWS
         from geocert.solvers.fractional.stacked import proven_tracks
-        from geocert.solvers.verify import checked_options
+        from geocert.verify.checks import checked_options
 
         result = stored("triangulation_l2l2")
         certificate = result["certificate"]
@@ -266,7 +266,7 @@ class TestStackedPathRecordsOpen:
     @pytest.mark.parametrize("edit", sorted(RECORD_MEMBERS))
     def test_the_per_item_check_refuses_the_forgery(self, edit):
         from geocert.solvers.core.strict import Invalid
-        from geocert.solvers.verify import verify_item
+        from geocert.verify.checks import verify_item
 
         certificate = stored("triangulation_l2l2")["certificate"]
         claim = copy.deepcopy(certificate["items"][0])
@@ -502,7 +502,7 @@ class TestDepthReversalVerdictRemoved:
 
 
 def verify_any_scope(document: dict) -> dict:
-    from geocert.solvers.verify import verify_any
+    from geocert.verify.checks import verify_any
 
     return verify_any(document).scope or {}
 

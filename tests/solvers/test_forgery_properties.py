@@ -25,7 +25,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from geocert.solvers.core.certificates import data_hash, problem_hash, unpack
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 
 STORED = Path(__file__).resolve().parents[1] / "data" / "certificates"
 NAMES = sorted(path.stem for path in STORED.glob("*.json"))
@@ -153,7 +153,7 @@ def _claim_cost(kind: str, data: dict, options: dict, claim: dict) -> float | No
                        options["norm"])
     from geocert.solvers.autocalibration import metric_relaxation as mrelax
     from geocert.solvers.autocalibration import problem as pr
-    from geocert.solvers.autocalibration.verification import read_data
+    from geocert.verify.autocalibration import read_data
 
     cameras, points, size = read_data(data)
     problem = pr.prepare(cameras, points, size, dict(options.get("intrinsics") or {}))

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from bench.hostile_maps import options_for, problem, refused
-from geocert.solvers import verify
+from geocert.verify import checks as verify
 from geocert.solvers.fractional import proof
 from geocert.solvers.fractional.items import MapItem, refused_by_verifier
 from geocert.solvers.fractional.maps import fit_map

@@ -1,6 +1,7 @@
-"""The estimators import nothing above them: no module of geocert/solvers imports the kinds, the
-app, the workers or the job runner (kinds call solvers, never the reverse). The verifier finds each
-kind's adapter in its own registry (solvers/verified_kinds.py), not the kinds'."""
+"""The estimators import nothing above them: no module of geocert/solvers imports the verifier,
+the kinds, the app, the workers or the job runner (kinds call solvers, never the reverse). The
+verifier (geocert/verify) imports nothing above it either: it finds each kind's adapter in its own
+registry (verify/adapters.py), not the kinds'."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2] / "geocert"
 ABOVE = ("geocert.kinds", "geocert.app", "geocert.workers", "geocert.batch", "geocert.service", "geocert.pipelines")
+ABOVE_SOLVERS = ("geocert.verify", *ABOVE)
 KNOWN: dict = {}
 
 
@@ -22,13 +24,51 @@ def imported(path: Path) -> set[str]:
     return names
 
 
-def test_no_solver_module_imports_a_layer_above_it():
+def imports_above(folder: str, above: tuple) -> dict:
+    """Each module of ``folder`` that imports a module of ``above``, with those it imports."""
     found = {}
-    for path in sorted((ROOT / "solvers").rglob("*.py")):
-        above = {name for name in imported(path) if name.startswith(ABOVE)}
-        if above:
-            found[str(path.relative_to(ROOT))] = above
-    assert found == KNOWN
+    for path in sorted((ROOT / folder).rglob("*.py")):
+        names = {name for name in imported(path) if name.startswith(above)}
+        if names:
+            found[str(path.relative_to(ROOT))] = names
+    return found
+
+
+def test_no_solver_module_imports_a_layer_above_it():
+    """The verifier included: a solver's self-check reaches it through solvers.core.self_check."""
+    assert imports_above("solvers", ABOVE_SOLVERS) == KNOWN
+
+
+def test_no_verifier_module_imports_a_layer_above_it():
+    assert imports_above("verify", ABOVE) == {}
+
+
+def test_a_solvers_self_check_is_the_verifiers():
+    """With GEOCERT_SELF_VERIFY=1 (the suites run so), a certified solve is checked by the verifier
+    through the hook it installs: a verifier that refuses fails the solve."""
+    import numpy as np
+    import pytest
+
+    from geocert.solvers.core import self_check
+    from geocert.solvers.fractional.triangulation import triangulate
+
+    cameras = np.array([[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]], [[1, 0, 0, -1], [0, 1, 0, 0], [0, 0, 1, 0]]],
+                       dtype=float)
+    points = np.array([[0.01, 0.02], [-0.19, 0.021]])
+    assert triangulate(cameras, points).certified
+    installed, seen = self_check._check, []
+
+    def refusing(kind, arrays, options, claim):
+        seen.append(kind)
+        raise self_check.SelfCheckFailed("refused")
+    self_check.install(refusing)
+    try:
+        with pytest.raises(self_check.SelfCheckFailed):
+            triangulate(cameras, points)
+    finally:
+        self_check.install(installed)
+    assert seen == ["triangulation"]
+    assert installed.__module__ == "geocert.verify.checks"
 
 
 def test_the_verifier_checks_every_kind_without_the_service():
@@ -41,7 +81,7 @@ def test_the_verifier_checks_every_kind_without_the_service():
     code = """
 import json, sys
 from pathlib import Path
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 folder = Path("tests/data/certificates")
 names = sorted(p.stem for p in folder.glob("*.json") if not p.stem.startswith("make"))
 valid = {name: verify_any(json.loads((folder / f"{name}.json").read_text())).valid for name in names}
@@ -65,7 +105,7 @@ def test_a_served_kind_registered_with_another_contract_is_refused():
 
     import pytest
 
-    from geocert.solvers.verified_kinds import VERIFIED_KINDS, register
+    from geocert.verify.adapters import VERIFIED_KINDS, register
 
     known = VERIFIED_KINDS["triangulation"]
     assert register(known) is known
@@ -84,7 +124,7 @@ def test_the_verifiers_result_members_are_the_kinds_result_models():
 
     from geocert.kinds import KINDS
     from geocert.kinds.base import result_members
-    from geocert.solvers.verified_kinds import VERIFIED_KINDS, register
+    from geocert.verify.adapters import VERIFIED_KINDS, register
 
     for kind in KINDS:
         expected = result_members(kind.result_model) if kind.certifies else ()

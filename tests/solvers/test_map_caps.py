@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from geocert.solvers import verify
+from geocert.verify import checks as verify
 from geocert.solvers.core.bnb import Box, BoxStatus
 from geocert.solvers.core.geometry import norm_terms
 from geocert.solvers.fractional import search

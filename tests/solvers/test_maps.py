@@ -226,7 +226,7 @@ def test_root_region_from_a_subset_of_points_is_proven_for_all(norm, monkeypatch
     region, the verifier accepts the full certificate, and the subset holds the reference point."""
     import dataclasses
 
-    from geocert.solvers import verify
+    from geocert.verify import checks as verify
     from geocert.solvers.fractional import search
 
     monkeypatch.setattr(search, "ROOT_SUBSET", 12)
@@ -337,7 +337,7 @@ def test_an_l2l2_proof_says_its_relaxation_and_the_verifier_holds_it_to_it(monke
     import copy
     import dataclasses
 
-    from geocert.solvers import verify
+    from geocert.verify import checks as verify
     from geocert.solvers.fractional import maps
 
     monkeypatch.setattr(maps, "_sublevel_certified", lambda *args: None)
@@ -378,7 +378,7 @@ def test_root_tightening_stops_once_the_root_bound_closes_and_the_proof_still_ve
     round, and are not checked.)"""
     import dataclasses
 
-    from geocert.solvers import verify
+    from geocert.verify import checks as verify
     from geocert.solvers.fractional import maps, search
 
     monkeypatch.setattr(maps, "_sublevel_certified", lambda *args: None)  # the search's (no bound without one)

@@ -16,7 +16,7 @@ from geocert.solvers.fractional.batched import triangulate_many
 from geocert.solvers.fractional.convexity import ball_intervals
 from geocert.solvers.fractional.determinacy import tracks_many
 from geocert.solvers.fractional.triangulation import TriangulationOptions
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 
 from tests.solvers.test_soundness import readme_job
 from tests.support import every_track_searched, noisy_track, random_cameras, seed

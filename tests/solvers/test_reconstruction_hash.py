@@ -12,7 +12,7 @@ import pytest
 
 from geocert.solvers.core.certificates import problem_hash
 from geocert.solvers.reconstruction import hashed_options
-from geocert.solvers.verify import checked_options, verify_any
+from geocert.verify.checks import checked_options, verify_any
 from tests.solvers.test_forgeries import stored
 
 

@@ -14,7 +14,7 @@ import numpy as np
 from geocert.pipelines.reconstruction import pipeline
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction import depth_reversal, synthetic, upgrade
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 
 from tests.solvers.test_forgeries import calibrated_reconstruction, refused  # noqa: F401 (a fixture, used by name)
 from tests.solvers.test_reconstruction import aligned_rotation_errors

@@ -15,7 +15,7 @@ from geocert.solvers.fractional.maps import fit_map
 from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.fractional.resection_bound import resection_bound
 from geocert.solvers.fractional.results import claim_of
-from geocert.solvers.verify import verify_arrays
+from geocert.verify.checks import verify_arrays
 
 K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
 

@@ -13,7 +13,7 @@ import pytest
 
 from geocert.batch import solve_job
 from geocert.solvers.fractional.resection_sublevel import Scene, proven_centre
-from geocert.solvers.verify import verify_any
+from geocert.verify.checks import verify_any
 
 from tests.support import map_job, scene, seed
 

@@ -23,7 +23,7 @@ from geocert.batch import parse_job, solve_job
 from geocert.solvers.fractional.relaxation import Relaxation
 from geocert.solvers.fractional.charts import Chart
 from geocert.solvers.core.coverage import uncovered_part
-from geocert.solvers.verify import verify_any, verify_document
+from geocert.verify.checks import verify_any, verify_document
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import proves_infeasible
 

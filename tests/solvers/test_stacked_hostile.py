@@ -13,7 +13,7 @@ from geocert.batch import solve_job
 from geocert.solvers.core.certificates import pack
 from geocert.solvers.fractional import stacked
 from geocert.solvers.fractional.items import TrackItems
-from geocert.solvers.verify import checked_options, verify_any
+from geocert.verify.checks import checked_options, verify_any
 
 from tests.solvers.test_stacked_verification import scene_job
 from tests.support import every_track_searched, project, random_cameras

@@ -20,7 +20,7 @@ from geocert.solvers.fractional import stacked
 from geocert.solvers.fractional.charts import Chart
 from geocert.solvers.fractional.items import TrackItem, TrackItems
 from geocert.solvers.fractional.relaxation import Relaxation
-from geocert.solvers.verify import checked_options, verify_any, verify_item
+from geocert.verify.checks import checked_options, verify_any, verify_item
 
 from tests.support import every_track_searched, project, random_cameras
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from geocert.solvers.verify import verify_any, verify_document
+from geocert.verify.checks import verify_any, verify_document
 
 STORED = Path(__file__).resolve().parents[1] / "data" / "certificates"
 NAMES = sorted(path.stem for path in STORED.glob("*.json"))

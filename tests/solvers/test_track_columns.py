@@ -18,7 +18,7 @@ from geocert.solvers.fractional.batched import triangulate_many
 from geocert.solvers.fractional.columns import TrackResults, solutions
 from geocert.solvers.fractional.results import LocalCertificate, claim_of
 from geocert.solvers.fractional.triangulation import TriangulationOptions
-from geocert.solvers.verify import verify_arrays
+from geocert.verify.checks import verify_arrays
 
 from tests.support import dinosaur_sample
 

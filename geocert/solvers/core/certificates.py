@@ -1,6 +1,6 @@
 """Full certificates: what a search records so that anyone can check its bound (docs/certificate.md).
 
-The records are plain data (numpy only): the solver fills them, :mod:`solvers.verify` reads them
+The records are plain data (numpy only): the solver fills them, :mod:`geocert.verify` reads them
 back from JSON. Arrays of dual values are stored as base64 of little-endian float64 (exact and
 half the size of decimal text); boxes and scalars are JSON numbers (Python writes floats so that
 they read back bit for bit).

@@ -62,7 +62,7 @@ from geocert.solvers.fractional.search import (MAX_SCALE, ROOT_SUBSET, branch_di
 from geocert.solvers.fractional.items import PROGRAM_REFUSED, UNDISCOUNTABLE, TrackItem, refused_by_verifier
 from geocert.solvers.fractional.proof import track_uncertainty
 from geocert.solvers.fractional.triangulation import track_result, triangulate
-from geocert.solvers.verify import self_check, self_check_enabled
+from geocert.solvers.core import self_check
 
 D = 3
 SCOPE = "every point in front of every camera"
@@ -92,7 +92,7 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
     Contract: each result is what ``triangulate(cameras[views], points, options)`` returns
     for that track in its status, its certified flag and the form of its certificate (a
     SearchCertificate with the same scope, reference view and number of functionals; with
-    ``options.certificate == "full"`` a proof that geocert.solvers.verify and the stacked
+    ``options.certificate == "full"`` a proof that geocert.verify.checks and the stacked
     verifier accept: the root region's proof and one leaf closed by a dual vector, every
     bound the safe bound of its own dual, recomputed by the verifier). What may differ:
 
@@ -116,7 +116,7 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
     with ``options.certificate == "full"``.
     """
     options = options or TriangulationOptions()
-    checking = self_check_enabled()
+    checking = self_check.enabled()
     run = dataclasses.replace(options, certificate="full") if checking else options
     cameras = normalised_cameras(cameras)
     started = time.perf_counter()
@@ -160,7 +160,7 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
         for i, result in [*searched.items(), *rows]:
             views, points = tracks[i]
             if result.certified:
-                self_check("triangulation", (cameras[list(views)], np.asarray(points, dtype=float)),
+                self_check.check("triangulation", (cameras[list(views)], np.asarray(points, dtype=float)),
                            dataclasses.asdict(run),
                            claim_of(result, point=result.point, at_infinity=result.at_infinity))
     if options.certificate != "full":

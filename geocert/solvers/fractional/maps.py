@@ -22,13 +22,13 @@ from geocert.solvers.core.bnb import Progress
 from geocert.solvers.fractional.charts import MapChart, normaliser
 from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.fractional.resection_bound import resection_bound
-from geocert.solvers.fractional.results import LocalCertificate, MapResult
+from geocert.solvers.fractional.results import LocalCertificate, MapResult, claim_of
 from geocert.solvers.fractional.search import (LARGE_BOUND_TOLERANCE, Early, Reasons, local_refine, prepare,
                                                recomputed_status, search)
 from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.fractional.items import MapItem, discounted, refused_by_verifier
-from geocert.solvers.verify import checked_solve
+from geocert.solvers.core.self_check import checked_solve
 
 
 def dlt(source: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -72,7 +72,7 @@ def fit_map(
     target = np.asarray(target, dtype=float)
     kind = "resection" if (source.shape[1], target.shape[1]) == (3, 2) else "homography"
     return checked_solve(kind, (source, target), options, lambda run: _fit_map(source, target, run, callback, start),
-                         lambda result: {"matrix": result.matrix})
+                         lambda result: claim_of(result, matrix=result.matrix))
 
 
 # Rounds of bound tightening on the root box (search.BoxProblem.tighten), ended early once the

@@ -37,7 +37,7 @@ class SearchOptions:
     abs_gap: float = 1e-7
     max_nodes: int = 2000
     time_limit_s: float = 30.0
-    certificate: str = "summary"  # "full": every bound's proof, checkable by geocert.solvers.verify
+    certificate: str = "summary"  # "full": every bound's proof, checkable by geocert.verify.checks
 
     # pydantic Field keywords per option: the one statement of each range.
     OPTION_RANGES = {"rel_gap": {"ge": 0, "le": MAX_REL_GAP}, "abs_gap": {"ge": 0, "le": MAX_ABS_GAP},

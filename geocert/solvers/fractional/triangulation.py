@@ -19,12 +19,12 @@ from geocert.solvers.core.bnb import Progress
 from geocert.solvers.fractional.charts import Chart, camera_centres
 from geocert.solvers.fractional.convexity_path import track_sublevel
 from geocert.solvers.fractional.options import NORMS, TriangulationOptions
-from geocert.solvers.fractional.results import SearchCertificate, TrackResult
+from geocert.solvers.fractional.results import SearchCertificate, TrackResult, claim_of
 from geocert.solvers.fractional.search import Early, Reasons, depth_subspace, prepare, recomputed_status, search
 from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import norm_cost, normalised_cameras, reprojection_residuals
 from geocert.solvers.fractional.items import TrackItem, discounted, refused_by_verifier
-from geocert.solvers.verify import checked_solve
+from geocert.solvers.core.self_check import checked_solve
 
 
 
@@ -71,7 +71,7 @@ def triangulate(
     points = np.asarray(points, dtype=float)
     return checked_solve("triangulation", (cameras, points), options,
                          lambda run: _triangulate(cameras, points, run, callback, start),
-                         lambda result: {"point": result.point, "at_infinity": result.at_infinity})
+                         lambda result: claim_of(result, point=result.point, at_infinity=result.at_infinity))
 
 
 def _triangulate(cameras, points, options: TriangulationOptions, callback, start: float) -> TrackResult:

@@ -14,7 +14,7 @@ from geocert.app.api.routes.jobs import OwnedJob
 from geocert.app.errors import PROBLEM_JSON, ApiProblem, is_json_media_type, json_syntax_problem
 from geocert.app.schemas import RESULT_MODELS, VerifyReport
 from geocert.kinds.schema import CertificateDocument
-from geocert.solvers import verify
+from geocert.verify import checks as verify
 from geocert.solvers.core.strict import RepeatedName, Unreadable, load_document
 from geocert.settings import get_settings
 from geocert.workers.store import TERMINAL
@@ -78,7 +78,7 @@ async def verify_certificate(request: Request):
 
 def _ready() -> None:
     """A verification process's first task: the verifier imported."""
-    from geocert.solvers import verify as _  # noqa: F401
+    from geocert.verify import checks as _  # noqa: F401
 
 
 # As many verification processes as verifications may run at once (its gate refuses more).

@@ -1,4 +1,4 @@
-"""The verifier's adapter for bilinear fitting (geocert.solvers.verify reads claims through it):
+"""The verifier's adapter for bilinear fitting (geocert.verify.checks reads claims through it):
 numpy and scipy.sparse only, no conic solver. An item is a frame; its claim is the camera and
 coefficients, their cost recomputed from the raw data, and a proof: ``trivial`` (cost within
 abs_gap of 0) or ``bilinear_bnb`` (the camera box of the scope, the root's bound-tightening

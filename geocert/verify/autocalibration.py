@@ -1,4 +1,4 @@
-"""The verifier's adapter for autocalibration (geocert.solvers.verify reads claims through it):
+"""The verifier's adapter for autocalibration (geocert.verify.checks reads claims through it):
 numpy only. The certificate's items are the stages: item 0 the affine stage's claim, item 1 the
 metric stage's (conditional on the plane at infinity it states)."""
 

@@ -3,7 +3,7 @@
 The checks every kind shares live here: the document's format and hashes, the options a claim
 depends on, each certified claim's fields, its solution's cost and scope recomputed from the raw
 data, and the agreement of a result with its certificate. What depends on the kind comes from its
-verification adapter in the verifier's own registry (verified_kinds.py; the service's kinds take
+verification adapter in the verifier's own registry (adapters.py; the service's kinds take
 their verification contract from it, never the reverse): how to read an item's data and rebuild its
 program, and which proof types it takes ("trivial" for every kind; "branch_and_bound" for the
 fractional kinds, checked in geocert.solvers.fractional.proof; room for others, e.g. "sdp_dual").
@@ -12,14 +12,14 @@ docs/certificate.md explains each step.
 
 from __future__ import annotations
 
-import dataclasses
-import os
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
+from geocert.solvers.core import self_check
 from geocert.solvers.core.cones import rounding_uncounted
+from geocert.solvers.core.self_check import SelfCheckFailed
 from geocert.solvers.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
                                                data_hash, problem_hash)
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost
@@ -28,7 +28,6 @@ from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, docu
                                          informational, number as _number, printable_tree, record, same,
                                          work_budget)
 from geocert.solvers.fractional import residual_claims
-from geocert.solvers.fractional.results import claim_of
 
 MAX_DEPTH = 64
 CHECKS = ("format", "data_hash", "options", "data", "claim", "objective", "scope", "program", "root_region",
@@ -79,7 +78,7 @@ def residual_options(kind: str, options: dict) -> dict:
 def _kind(kind: Any):
     """The kind's verification contract, from the verifier's registry; a kind not served is invalid."""
     # imported here: the adapters import modules (fractional.maps, .triangulation) that import this one
-    from geocert.solvers.verified_kinds import VERIFIED_KINDS
+    from geocert.verify.adapters import VERIFIED_KINDS
 
     if not isinstance(kind, str) or kind not in VERIFIED_KINDS:
         raise Invalid("format", f"kind {kind!r:.40} is not served (served: {', '.join(VERIFIED_KINDS)})")
@@ -129,7 +128,7 @@ def estimates_kind(document: Any) -> str | None:
         return None
     inner = document["result"] if isinstance(document.get("result"), dict) else document
     name = inner.get("kind", document.get("kind"))
-    from geocert.solvers.verified_kinds import VERIFIED_KINDS
+    from geocert.verify.adapters import VERIFIED_KINDS
 
     if isinstance(name, str) and name in VERIFIED_KINDS and not VERIFIED_KINDS[name].certifies:
         return name
@@ -557,11 +556,11 @@ def check_members(kind, result: dict) -> None:
                                           "nothing, so it is refused")
     # and every record nested below those, at any depth (core.records: the writers' members)
     from geocert.solvers.core import records
-    from geocert.solvers.verified_kinds import NESTED_RECORDS
+    from geocert.verify.adapters import NESTED_RECORDS
 
     records.check_nested(result, NESTED_RECORDS.get(kind.name, ()))
     if kind.name == "reconstruction":  # its stages, each closed to its writer's members by its name
-        from geocert.solvers.reconstruction.stage_checks import STAGE_RECORDS
+        from geocert.verify.reconstruction_stages import STAGE_RECORDS
 
         records.check(result.get("stages"), STAGE_RECORDS, "stages")
 
@@ -824,32 +823,12 @@ def _met_uncounted(kind: str, arrays: tuple, options: dict, claim: dict) -> bool
     return True
 
 
-class SelfCheckFailed(AssertionError):
-    """A certified result its own certificate does not prove (GEOCERT_SELF_VERIFY=1)."""
-
-
-def self_check_enabled() -> bool:
-    """GEOCERT_SELF_VERIFY=1: every certified result is checked by this module before it is
-    returned (the test suites run so; an operator may too, at about twice the solve time)."""
-    return os.environ.get("GEOCERT_SELF_VERIFY") == "1"
-
-
-def self_check(kind: str, arrays: tuple, options: dict, claim: dict) -> None:
+def _self_check(kind: str, arrays: tuple, options: dict, claim: dict) -> None:
+    """The solvers' self-check (solvers.core.self_check, GEOCERT_SELF_VERIFY=1): the claim verified."""
     try:
         verify_arrays(kind, arrays, options, claim)
     except Invalid as exc:
         raise SelfCheckFailed(f"{kind}: check {exc.check} failed: {exc.detail}") from exc
 
 
-def checked_solve(kind: str, arrays: tuple, options, solve: Callable, solution: Callable) -> Any:
-    """``solve(options)``, self-checked when GEOCERT_SELF_VERIFY=1: then it runs with a full
-    certificate and the verifier checks a certified result (``solution(result)`` gives the
-    claim's solution fields); the proof is kept only when the caller asked for it."""
-    checking = self_check_enabled()
-    run = dataclasses.replace(options, certificate="full") if checking else options
-    result = solve(run)
-    if checking and result.certified:
-        self_check(kind, arrays, dataclasses.asdict(run), claim_of(result, **solution(result)))
-    if options.certificate != "full" and result.certificate is not None:
-        result.certificate.proof = None
-    return result
+self_check.install(_self_check)

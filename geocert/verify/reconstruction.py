@@ -943,7 +943,7 @@ class ReconstructionItems(TrackItems):
         """Every check of the result beyond its points' claims; returns what the report's scope
         adds (whether the labels are tied to the input the data state). ``current_form``: the
         certificate's problem_sha256 covers CLAIM_OPTIONS (verify._check_hashes found it so)."""
-        from geocert.solvers.reconstruction.stage_checks import check_stages
+        from geocert.verify.reconstruction_stages import check_stages
 
         registered, views = _check_cameras(result.get("cameras"), certificate.get("data", {}))
         _check_points(result.get("points"), certificate.get("data", {}).get("tracks"), views)

@@ -11,14 +11,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from geocert.solvers.autocalibration.verification import STAGES
-from geocert.solvers.bilinear.verification import FRAMES
+from geocert.verify.autocalibration import STAGES
+from geocert.verify.bilinear import FRAMES
 from geocert.solvers.core import records
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.fractional.items import TRACKS, MapItems
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
-from geocert.solvers.reconstruction import stage_checks
-from geocert.solvers.reconstruction.verification import RECONSTRUCTION
+from geocert.verify import reconstruction_stages as stage_checks
+from geocert.verify.reconstruction import RECONSTRUCTION
 
 NOT_CERTIFIED = ("stereo_lines results are estimates (RANSAC around algebraic solvers), never certified: there is "
                  "no certificate to verify")
