@@ -96,9 +96,9 @@ def nonrigid(frames: int = 240, points: int = 91, noise: float = 0.002, seed: in
     two basis shapes, varying camera orientation): each frame's shape is (1 - w) S0 + w S1 with w
     oscillating in [-0.4, 1.4] (affine coefficients), seen by a scaled orthographic camera of
     varying orientation, with Gaussian noise; all frames solved as one job in-process
-    (geocert.batch.solve_job, one item per frame). Prints the mean 3D shape error (RMS over points,
+    (geocert.jobs.runner.solve_job, one item per frame). Prints the mean 3D shape error (RMS over points,
     relative to the shape's RMS size) and frames per second."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     rng = np.random.default_rng(seed)
     s = np.linspace(0, 1, points)

@@ -74,7 +74,7 @@ def report(name: str, figures: dict) -> None:
 
 def job_figures(norm: str, cameras, tracks) -> None:
     """One full-certificate job of the tracks: document bytes per track, verification rate."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.verify.checks import verify_any
 
     job = {"kind": "triangulation", "options": {"norm": norm, "certificate": "full"},

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import scenes
 from geocert.solvers.core.determinacy import fixes
 

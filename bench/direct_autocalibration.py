@@ -4,7 +4,7 @@ Scenes (geocert.solvers.autocalibration.scenes.table71_scene): 12 cameras at dis
 at 15 points in [-1, 1]^3, K = I (fixed focal) or diag(f, f, 1) with f in [0.05, 1] per view
 (varying focal), 0.2% noise of the image size (2 units; scaled by f when it varies) added before
 each camera is DLT-resected, a random projective frame. Each scene is solved through the kind
-(geocert.batch.solve_job, method "direct"), without and with chirality ("points").
+(geocert.jobs.runner.solve_job, method "direct"), without and with chirality ("points").
 
 Prints, per column (as Table 7.1): mean errors of (7.17) against ground truth (df = |f1/f1' - 1|
 + |f2/f2' - 1|, dr = max(r/r', r'/r) with r = f1/f2, dp = (|u| + |v|)/2 - (|u'| + |v'|)/2,
@@ -39,7 +39,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from geocert.batch import solve_job  # noqa: E402
+from geocert.jobs.runner import solve_job  # noqa: E402
 from geocert.solvers.autocalibration import scenes  # noqa: E402
 
 UNIT = {"aspect": [0.95, 1.05], "skew": [-0.01, 0.01], "principal_point": [[-0.1, 0.1], [-0.1, 0.1]]}

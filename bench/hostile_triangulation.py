@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from geocert.verify import checks as verify
 from geocert.solvers.core.geometry import normalised_cameras
-from geocert.solvers.fractional.batched import triangulate_many
+from geocert.solvers.fractional.many_tracks import triangulate_many
 from geocert.solvers.fractional.results import claim_of
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 

@@ -148,7 +148,7 @@ def ring_through_the_kind(names, Ks, Rs) -> None:
     by the kind (stage 1 to the certified structure), as the API and the CLI run it."""
     import base64
 
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     images = [{"name": n, "content": base64.b64encode((RING / n).read_bytes()).decode()} for n in names]
     job = {"kind": "reconstruction", "data": {"images": images},

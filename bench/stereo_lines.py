@@ -255,7 +255,7 @@ def corridor(frames: int) -> None:
     print("| solver | sample | pairs | t within 10% | t marked not determined | wrong and unmarked | rotation deg "
           "(median / max) | t error / length (median) | drift: position cm, % of the walk | drift: rotation deg |")
     print("|---|---|---|---|---|---|---|---|---|---|")
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     rig, poses, pairs = scenes.corridor_walk(np.random.default_rng(8), frames=frames)
     length = 0.08 * (frames - 1)

@@ -7,7 +7,7 @@ Prints, in one run and side by side:
      included, capped at 10 s a track; its box is +-0.05 around the DLT+LM point, a help), and OpenCV DLT followed by Levenberg-Marquardt (how often its point is behind a
      camera, or costs more than the certified optimum);
   3. the whole L2L2 batch through a running service (`geocert serve`, 2 workers), submit to result;
-  4. per norm, side by side on every track: the batched solver (fractional.batched.triangulate_many,
+  4. per norm, side by side on every track: the batched solver (fractional.many_tracks.triangulate_many,
      called on chunks of --chunk tracks as the service's kind calls it) against triangulate track by
      track, and (L2L2) OpenCV DLT + LM, CPU time per track;
   (--service-only: the job through the service with each number of workers against the batched
@@ -45,7 +45,7 @@ import numpy as np
 from bench import machine_speed_ms
 from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.core.geometry import norm_cost
-from geocert.solvers.fractional.batched import triangulate_many
+from geocert.solvers.fractional.many_tracks import triangulate_many
 from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, triangulate
 from geocert.solvers.fractional import flat as flat_tracks
 from geocert.solvers.fractional.convexity import convexity_bounds
@@ -301,7 +301,7 @@ def search_only(cameras, tracks, chunk: int = 500) -> int:
     switched off for the call)."""
     from unittest import mock
 
-    from geocert.solvers.fractional import batched
+    from geocert.solvers.fractional import many_tracks
     from geocert.solvers.fractional.columns import TrackResults
 
     with mock.patch.object(batched, "certify_tracks", lambda cameras, tracks, options: TrackResults(len(tracks))):

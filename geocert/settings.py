@@ -6,6 +6,7 @@ Every setting is listed with its variable and default in docs/operations.md, "Co
 
 from __future__ import annotations
 
+import os
 from functools import lru_cache
 from pathlib import Path
 
@@ -188,3 +189,13 @@ def chunk_size_for(kind) -> int:
 @lru_cache
 def get_settings() -> Settings:
     return Settings()
+
+
+def redis_url() -> str:
+    """The Redis the service keeps its jobs in and queues its tasks on: GEOCERT_REDIS_URL (also read
+    from the environment directly, since `geocert serve` sets it for its embedded Redis after the
+    settings may have been read)."""
+    url = get_settings().redis_url or os.environ.get("GEOCERT_REDIS_URL")
+    if not url:
+        raise RuntimeError("GEOCERT_REDIS_URL is not set (geocert serve sets it for its embedded Redis)")
+    return url

@@ -198,7 +198,7 @@ def every_track_searched():
     certify, certifies none): for tests of a search's proof."""
     import pytest
 
-    from geocert.solvers.fractional import batched
+    from geocert.solvers.fractional import many_tracks
     from geocert.solvers.fractional.columns import TrackResults
 
     with pytest.MonkeyPatch.context() as patch:

@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parents[1]
 KNOWN = {
     # the store, queue, tasks, webhooks, heartbeat and reaper of the workers
     frozenset({"geocert.workers.celery_app", "geocert.workers.heartbeat", "geocert.workers.queue",
-               "geocert.workers.reaper", "geocert.workers.store", "geocert.workers.tasks", "geocert.workers.webhooks"}),
+               "geocert.workers.reaper", "geocert.jobs.store", "geocert.workers.tasks", "geocert.workers.webhooks"}),
 }
 
 

@@ -30,7 +30,7 @@ def _progress_bar(progress: dict) -> None:
 def cmd_solve(args: argparse.Namespace) -> int:
     from geocert.app.schemas import JOB_REQUEST
     from geocert.solvers.core.geometry import InputError
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     try:
         text = sys.stdin.read() if args.job == "-" else Path(args.job).read_text()
@@ -284,7 +284,7 @@ def cmd_webhook_secret(args: argparse.Namespace) -> int:
     """Print the key webhook signatures use (GEOCERT_WEBHOOK_SECRET, or the one kept in Redis)."""
     import redis
 
-    from geocert.workers.celery_app import redis_url
+    from geocert.settings import redis_url
     from geocert.workers.webhooks import webhook_secret
 
     print(webhook_secret(redis.Redis.from_url(redis_url(), decode_responses=True)))

@@ -14,7 +14,7 @@ from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.strict import printable_tree
 from geocert.kinds import KINDS
 from geocert.kinds.reconstruction import NO_CONTROL_CHARACTERS
-from geocert.workers.store import REDIS_GONE
+from geocert.jobs.store import REDIS_GONE
 
 PROBLEM_JSON = "application/problem+json"
 REDIS_RETRY_AFTER_S = 5  # Retry-After of a 503 while Redis does not answer

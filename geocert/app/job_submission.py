@@ -13,13 +13,13 @@ from fastapi import Response
 
 from geocert.app import streamed
 from geocert.app.errors import ApiProblem
-from geocert.batch import parse_job
+from geocert.jobs.runner import parse_job
 from geocert.kinds import get_kind
 from geocert.settings import chunk_size_for, get_settings, over_budget
 from geocert.workers import logs
-from geocert.workers.destinations import allowed_networks, literal_refusal
+from geocert.jobs.destinations import allowed_networks, literal_refusal
 from geocert.workers.queue import can_collect, submit_chunks, task_commands
-from geocert.workers.store import JobStore, StoredBytesExceeded
+from geocert.jobs.store import JobStore, StoredBytesExceeded
 
 
 def _check_count(kind, items: int) -> None:

@@ -109,7 +109,7 @@ def validated(model, body: bytes) -> tuple[Any, tuple | None]:
 
 def carried(exc: Exception) -> tuple | None:
     """An error raised in a process as a tuple that crosses the pipe (None: not one carried)."""
-    from geocert.workers.store import REDIS_GONE
+    from geocert.jobs.store import REDIS_GONE
 
     if isinstance(exc, ApiProblem):
         return "problem", exc.status, exc.detail, exc.field, exc.headers

@@ -143,7 +143,7 @@ class TriangulationKind:
     item_key = "tracks"
     chunk_key = "tracks"  # data["tracks"][i] is item i: a task reads only its chunk's
     streamed_result = True  # the result: its items, the norm and stats (batch.streams_result)
-    # Tracks are solved together (solvers.fractional.batched): most of a track's work is shared
+    # Tracks are solved together (solvers.fractional.many_tracks): most of a track's work is shared
     # by the tracks of a group, about 0.9 ms a track in groups of 500 against 1.4 in groups of 100.
     chunk_size = 500
     batch_size = 500
@@ -231,7 +231,7 @@ class TriangulationKind:
     def solve_batch(self, parsed: ParsedTracks, indices: list[int], options: TriangulationOptions, callback,
                     deadline: float | None = None) -> list[dict]:
         from geocert.solvers.fractional import determinacy
-        from geocert.solvers.fractional.batched import triangulate_many  # the conic solver, only to solve
+        from geocert.solvers.fractional.many_tracks import triangulate_many  # the conic solver, only to solve
         from geocert.solvers.fractional.convexity_path import raise_sublevels
 
         tracks = [parsed.tracks[index] for index in indices]

@@ -2,20 +2,12 @@
 
 from __future__ import annotations
 
-import os
 
 from celery import Celery
 from celery.signals import worker_process_init, worker_ready, worker_shutdown
 
-from geocert.settings import get_settings
+from geocert.settings import get_settings, redis_url
 from geocert.workers.redis_server import broker_url
-
-
-def redis_url() -> str:
-    url = get_settings().redis_url or os.environ.get("GEOCERT_REDIS_URL")
-    if not url:
-        raise RuntimeError("GEOCERT_REDIS_URL is not set (geocert serve sets it for its embedded Redis)")
-    return url
 
 
 SOLVE_QUEUE = "celery"  # Celery's default queue: the solve tasks
@@ -89,7 +81,7 @@ def _start_heartbeat(sender=None, **_) -> None:
     from geocert.workers.heartbeat import Heartbeat
 
     from geocert.workers.reaper import reap
-    from geocert.workers.store import JobStore
+    from geocert.jobs.store import JobStore
     from geocert.workers.tasks import end_jobs_past_clock
 
     name = getattr(sender, "hostname", None) or "geocert@unknown"

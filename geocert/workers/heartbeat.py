@@ -23,7 +23,7 @@ import time
 
 import redis
 
-from geocert.workers.store import JobStore
+from geocert.jobs.store import JobStore
 
 KEY = "geocert:workers"
 SOLVERS = "geocert:workers:solvers"  # worker name -> its solver processes (JobStore.take_slot reads it)

@@ -7,7 +7,7 @@ import functools
 import threading
 
 from geocert.workers.priorities import FIRST, LATER
-from geocert.workers.store import JobStore
+from geocert.jobs.store import JobStore
 
 _LOCK = threading.Lock()
 _SOLVE_CHUNK = None
@@ -42,7 +42,7 @@ def task_deadline_s(kind_name: str, item_bound_s: float | None, items: int, job_
     what the job's own time limits allow it (batch.task_time_bound_s: its items' and, with
     ``job_limit_s``, its job_time_limit_s) plus GEOCERT_TASK_TIME_MARGIN_S.
     ``item_bound_s`` None: a job recorded without it, held to the server's per-item maximum."""
-    from geocert.batch import task_time_bound_s
+    from geocert.jobs.runner import task_time_bound_s
     from geocert.kinds import get_kind
     from geocert.settings import get_settings
 

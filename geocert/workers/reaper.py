@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 
-from geocert.workers.store import JobStore
+from geocert.jobs.store import JobStore
 
 log = logging.getLogger("geocert.worker")
 LOCK = "geocert:reaper"

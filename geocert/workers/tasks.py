@@ -34,14 +34,14 @@ import time
 
 from geocert.settings import get_settings
 from geocert.solvers.core.geometry import InputError
-from geocert.batch import (abs_gap_of, assemble, item_counts, item_sums, job_deadline, merged_sums, not_started_item,
+from geocert.jobs.runner import (abs_gap_of, assemble, item_counts, item_sums, job_deadline, merged_sums, not_started_item,
                            result_fragment, result_json, result_shell, solve_items, stats_from, streams_result)
 from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
 from geocert.workers.priorities import LATER
 from geocert.workers.queue import SOFT_AFTER_S, task_deadline_s, task_options
-from geocert.workers.store import REDIS_GONE, JobStore, shared_store as store
+from geocert.jobs.store import REDIS_GONE, JobStore, shared_store as store
 from celery.exceptions import SoftTimeLimitExceeded
 
 log = logging.getLogger("geocert.worker")

@@ -26,10 +26,10 @@ import time
 import httpcore
 
 from geocert.settings import get_settings
-from geocert.workers.destinations import CheckedBackend, Refused, allowed_networks
+from geocert.jobs.destinations import CheckedBackend, Refused, allowed_networks
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
-from geocert.workers.store import shared_store as store
+from geocert.jobs.store import shared_store as store
 
 log = logging.getLogger("geocert.webhooks")
 _SECRET_KEY = "geocert:webhook_secret"

@@ -7,7 +7,7 @@ import numpy as np
 
 from geocert.app.cli import openapi_document
 from geocert.app.schemas import JobProgress
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from tests.support import triangulation_job
 
 

@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from geocert.batch import parse_job, solve_job
+from geocert.jobs.runner import parse_job, solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.autocalibration import scenes
 from geocert.solvers.core.geometry import InputError

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pydantic
 import pytest
 
-from geocert.batch import parse_job, solve_job
+from geocert.jobs.runner import parse_job, solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional import determinacy

@@ -12,7 +12,7 @@ import sys
 import pytest
 from pydantic import ValidationError
 
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.autocalibration import scenes
 from geocert.verify.checks import verify_any

@@ -14,7 +14,7 @@ import sys
 import pytest
 from pydantic import ValidationError
 
-from geocert.batch import parse_job, solve_job
+from geocert.jobs.runner import parse_job, solve_job
 from geocert.kinds import KINDS
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.certificates import FORMAT, VERSION
@@ -108,7 +108,7 @@ import json
 from geocert.kinds import KINDS
 from tests.kinds import toy_kind
 KINDS.register(toy_kind.KIND)  # the one line
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.solvers.core.certificates import FORMAT, VERSION
 from geocert.verify.checks import verify_any, verify_document
 from geocert.app.cli import openapi_document

@@ -15,7 +15,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from geocert.batch import parse_job, solve_job
+from geocert.jobs.runner import parse_job, solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.reconstruction import export
@@ -87,7 +87,7 @@ class TestBadInput:
     def test_the_api_models_options_are_taken(self):
         """The API validates a job with its model and passes model_dump's options on: ranges not
         given are null there (a regression: they reached the upgrade as None)."""
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
 
         body = KIND.request_model.model_validate(job(resect_cameras=False)).model_dump(mode="json")
         assert body["options"]["intrinsics"]["focal"] is None
@@ -139,7 +139,7 @@ class TestResult:
     def test_observations_name_their_view_by_an_integer(self, solved):
         """As the API writes the result (batch.result_json: the result model's JSON): [view, u, v]
         with view an integer (the model typed it float: [[0.0, 554.369, 163.897], ...])."""
-        from geocert.batch import result_json
+        from geocert.jobs.runner import result_json
 
         written = json.loads(result_json(KIND, solved))
         for point in written["points"]:
@@ -200,7 +200,7 @@ class TestResult:
                 None, None, None, None), event
 
     def test_a_cancelled_run_keeps_the_stages_before(self):
-        from geocert.batch import solve_items
+        from geocert.jobs.runner import solve_items
 
         parsed = KIND.parse(KIND.example["data"])
         options = parse_job(KIND.example)[2]
@@ -446,7 +446,7 @@ def run_cancelled_at(stage: str, monkeypatch=None, **options) -> tuple[dict, lis
     """The example job solved as the service solves it (batch.solve_items), cancelled once a
     progress label of ``stage`` has been published (the cancel is then seen at the next check,
     and stays requested, as the worker's ProgressPublisher.should_stop does)."""
-    from geocert.batch import solve_items
+    from geocert.jobs.runner import solve_items
 
     body = job(**options)
     kind, parsed, parsed_options = parse_job(body)
@@ -467,7 +467,7 @@ class TestCancel:
     def test_during_the_projective_stage_keeps_the_views_registered(self):
         item, labels = run_cancelled_at("projective")
         assert item["status"] == "cancelled"
-        from geocert.batch import item_sums
+        from geocert.jobs.runner import item_sums
 
         assert item_sums([item])["statuses"] == {"cancelled": 1}
         statuses = {stage["name"]: stage["status"] for stage in item["stages"]}
@@ -510,7 +510,7 @@ class TestStructureTimeLimit:
     was done is kept, the stages say time_limit and how much was left out."""
 
     def test_past_it_the_points_and_cameras_not_started_are_left_out(self):
-        from geocert.batch import solve_items
+        from geocert.jobs.runner import solve_items
 
         body = job(structure_time_limit_s=1e-9)
         kind, parsed, options = parse_job(body)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import time
 from types import SimpleNamespace
 
-from geocert.batch import solve_items
+from geocert.jobs.runner import solve_items
 
 
 class CountingKind:

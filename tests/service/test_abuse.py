@@ -399,7 +399,7 @@ def test_11_exported_names_are_refused_or_made_safe(plain):
     ../../etc/passwd was written verbatim: control characters are refused at submission, and the
     export writes every name as one safe token."""
     from geocert.app.core.security import PUBLIC_OWNER
-    from geocert.workers.store import JobStore
+    from geocert.jobs.store import JobStore
 
     running, client = plain
     request = {"kind": "reconstruction", "data": {"views": [{"name": "a\n1 1 0 0 0 0 0 0 1 evil.png",

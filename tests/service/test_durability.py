@@ -9,7 +9,7 @@ import httpx
 import pytest
 import numpy as np
 
-from geocert.workers.store import JobStore
+from geocert.jobs.store import JobStore
 from tests.servers import SHORT_TASKS, cluster, wait_until_done
 from tests.support import service_job as triangulation_job
 

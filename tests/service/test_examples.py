@@ -65,7 +65,7 @@ class TestTheFiles:
 
     def test_each_file_is_a_valid_job(self):
         from geocert.app.schemas import JOB_REQUEST
-        from geocert.batch import parse_job
+        from geocert.jobs.runner import parse_job
 
         for name in NAMES:
             body = json.loads(generate.path(name).read_text())
@@ -89,7 +89,7 @@ def test_the_openapi_document_carries_an_example_job_per_kind():
 @pytest.mark.shared_data("oxford_house", "oxford_dinosaur", "middlebury_dinoSparseRing")
 def test_the_real_data_examples_are_written_from_the_datasets(tmp_path, monkeypatch):
     from geocert.app.schemas import JOB_REQUEST
-    from geocert.batch import parse_job
+    from geocert.jobs.runner import parse_job
 
     monkeypatch.setattr(generate, "HERE", tmp_path)
     assert generate.main(["--shared", str(REAL_DATA)] + list(generate.REAL)) == 0

@@ -173,7 +173,7 @@ class TestListing:
 def test_the_job_index_forgets_expired_jobs(tmp_path):
     """Jobs expire GEOCERT_RESULT_TTL_S after they end; the listing drops them from its index."""
     from geocert.workers.redis_server import start_embedded_redis
-    from geocert.workers.store import JobStore
+    from geocert.jobs.store import JobStore
 
     process, url = start_embedded_redis(tmp_path)
     try:

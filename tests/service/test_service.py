@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from geocert.solvers.core.certificates import VERSION
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 
 from tests.servers import free_port
 from tests.support import random_cameras, service_job as triangulation_job

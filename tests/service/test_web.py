@@ -457,7 +457,7 @@ class TestTheResultAsItIs:
 
     def test_a_failed_job_says_what_failed_in_words(self, page, tmp_path):
         from geocert.app.core.security import PUBLIC_OWNER
-        from geocert.workers.store import JobStore
+        from geocert.jobs.store import JobStore
 
         with cluster(tmp_path, workers=0) as (running, client):
             store = JobStore.from_url(running.redis_url)

@@ -331,7 +331,7 @@ class TestNodeTightening:
     def test_a_certificate_with_cuts_verifies_and_a_leaf_past_its_cut_is_refused(self):
         import copy
 
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
         from geocert.verify.checks import verify_any
 
         scene = scenes.make_scene(10, 0.5, seed=1)
@@ -355,7 +355,7 @@ class TestNodeTightening:
     def test_the_affine_stage_cuts_too_and_its_cuts_are_checked(self):
         import copy
 
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
         from geocert.verify.checks import verify_any
 
         scene = scenes.make_scene(20, 0.1, seed=20000)
@@ -381,7 +381,7 @@ class TestUncleanSolvesStillBound:
     over 5,400 nodes."""
 
     def test_the_scene_that_stalled_certifies_and_verifies(self):
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
         from geocert.verify.checks import verify_any
 
         scene = scenes.make_scene(10, 0.1, seed=10016)

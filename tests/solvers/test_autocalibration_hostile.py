@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.autocalibration import affine_relaxation as arelax
 from geocert.solvers.autocalibration import frames, metric, proofs

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from bench.bilinear import scene
-from geocert.batch import parse_job, solve_job
+from geocert.jobs.runner import parse_job, solve_job
 from geocert.solvers.bilinear import problem as pb
 from geocert.solvers.bilinear.options import BilinearOptions
 from geocert.solvers.bilinear.relaxation import Relaxation, mccormick_rows

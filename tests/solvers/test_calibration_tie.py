@@ -19,7 +19,7 @@ from tests.support import reconstruction_data
 def carrying(result: dict, data: dict) -> dict:
     """The result carrying the genuine calibration certificate of ``data`` (solved with the stored
     certificate's options), its calibration fields made that certificate's."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.solvers.reconstruction import calibration_claim
 
     options = dict(result["calibration_certificate"]["options"])
@@ -91,7 +91,7 @@ def test_the_pipeline_claims_no_calibration_whose_views_were_dropped():
 def test_the_model_houses_genuine_reconstruction_is_tied():
     """VGG's House tracks (10 views, K unknown; the upgrade searched through its orbital motion):
     the largest distance is about 3 times the returned cameras' RMS error, within TIE_RATIO."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from tests.solvers.test_reconstruction import house_tracks
 
     _, _, tracks = house_tracks()
@@ -111,7 +111,7 @@ def test_few_calibration_points_still_tie_every_camera():
     option's small values some views saw 3 or 4 of them, and the result was refused by the tie's 6
     points per camera (the Oxford Dinosaur's every 10th track, 21 views registered). The choice now
     adds, for a view left short, tracks it sees (upgrade.choose_points)."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from tests.support import dinosaur_sample
 
     _, tracks = dinosaur_sample(10)

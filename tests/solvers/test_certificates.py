@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unpack
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.solvers.fractional.relaxation import NORMS
 from geocert.solvers.core.certificates import BOUND_TOLERANCE
 from geocert.solvers.core.coverage import uncovered_part

@@ -11,7 +11,7 @@ import pytest
 import scipy.optimize
 
 from geocert.solvers.fractional import flat as flat_tracks
-from geocert.solvers.fractional.batched import triangulate_many
+from geocert.solvers.fractional.many_tracks import triangulate_many
 from geocert.solvers.fractional.convexity import (PAIRS, bounds_at, convexity_bounds, outside_range, positive_definite,
                                                   track_bound)
 from geocert.solvers.fractional.triangulation import TriangulationOptions

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.solvers import datasets
 from geocert.solvers.autocalibration import determinacy, scenes
 from geocert.solvers.core.determinacy import fixes

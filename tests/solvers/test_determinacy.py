@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from bench.determinacy import cameras_looking_at_origin, project
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import scenes
 from geocert.solvers.core.determinacy import curvature_intervals
 from geocert.solvers.fractional import determinacy as fractional

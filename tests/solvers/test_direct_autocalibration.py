@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import direct, direct_solve, scenes
 from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.autocalibration import problem as pr
@@ -333,7 +333,7 @@ class TestBadInput:
         ({"varying_focal": "yes"}, "options/varying_focal"),
     ])
     def test_named(self, options, field):
-        from geocert.batch import parse_job
+        from geocert.jobs.runner import parse_job
         from geocert.solvers.core.geometry import InputError
 
         scene, _, data, intrinsics = table71(1, 0.0)

@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import direct, direct_solve, scenes
 from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.core.certificates import pack, unpack

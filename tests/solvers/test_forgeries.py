@@ -264,7 +264,7 @@ class TestEmbeddedCertificatesTied:
 
     @staticmethod
     def camera_certificate(result: dict, **options) -> dict:
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
 
         maps = result["camera_certificate"]["data"]["maps"]
         own = result["camera_certificate"]["options"]
@@ -545,7 +545,7 @@ class TestFarFromTheOrigin:
         assert not report.valid or standing.get(0, claim["lower_bound"]) <= exact
 
     def test_a_new_claim_is_below_the_exact_minimum_and_verifies(self):
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
 
         data = stored("homography_far_from_origin")["certificate"]["data"]
         result = solve_job({"kind": "homography", "data": data, "options": {"norm": "L2L2", "certificate": "full"}})
@@ -886,7 +886,7 @@ def _moved_camera_result(result: dict, view: int, degrees: float, camera_rel_gap
     ``on_rays``: track 0 loses its observation in ``view`` (it stays certified), and every other
     point is returned uncertified, placed on the moved camera's ray through its observation
     there."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.solvers.core.geometry import norm_cost
     from geocert.solvers.reconstruction import camera_claim
     from geocert.verify.reconstruction import camera_maps

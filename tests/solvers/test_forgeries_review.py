@@ -99,7 +99,7 @@ def _two_views_registered(result: dict) -> dict:
     triangulated anew in those two cameras (their tracks cut to them), the other views returned
     not registered with a warning, the cameras unsearched, the counts to match. The calibration
     (its certificate of the six views' projective reconstruction) is left as it was."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     keep = [0, 1]
     certificate = result["certificate"]
@@ -191,7 +191,7 @@ class TestCalibrationCertificateOptionsUntied:
 
     @staticmethod
     def pinned(result: dict) -> dict:
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
 
         document = result["calibration_certificate"]
         options = {name: document["options"][name] for name in ("rel_gap", "metric_rel_gap", "abs_gap")}

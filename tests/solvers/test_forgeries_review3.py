@@ -77,7 +77,7 @@ class TestUncertifiedFiguresOfEveryKind:
         bound, and every check passes: the report's only failure is that nothing is certified."""
         import numpy as np
 
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
         from tests.support import map_job, seed, triangulation_job
 
         rng = np.random.default_rng(seed("review3", "stopped", kind))
@@ -220,7 +220,7 @@ class TestProvenIntervalsWords:
 
     @staticmethod
     def proven_track() -> tuple[dict, dict]:
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
         from tests.support import seed, triangulation_job
 
         import numpy as np
@@ -435,7 +435,7 @@ class TestBilinearDefaultBoxUnchecked:
 
     @staticmethod
     def solved(camera_bound) -> dict:
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
 
         document = stored("bilinear_l2l2")["certificate"]
         options = {name: document["options"][name] for name in ("norm", "coefficients", "camera", "coefficient_bound",
@@ -460,7 +460,7 @@ def reconstruction_with_k1():
     """make_fixtures' reconstruction scene solved with radial_distortion "on": every camera states
     the k1 its observations were undistorted with, the summary its distortion statement and the
     certificates_conditional_on_k1 warning."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.solvers.reconstruction import synthetic
 
     scene = synthetic.scene(views=6, points=16, seed=3, noise_px=0.5)

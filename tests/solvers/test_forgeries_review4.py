@@ -27,7 +27,7 @@ def _valid(document: dict) -> bool:
 def given_K_reconstruction() -> dict:
     """Six views of 16 points with K given (synthetic.scene seed 3, as make_fixtures'
     reconstruction): a genuine result, every point certified."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.solvers.reconstruction import synthetic
 
     scene = synthetic.scene(views=6, points=16, seed=3, noise_px=0.5)
@@ -80,7 +80,7 @@ class TestUncertifiedStatusUnread:
     def test_a_track_behind_a_camera_is_infeasible_and_verifies(self):
         """The one "infeasible" the verifier proves from the data: a camera whose depth row is
         the reference's negated (no point in front of both), beside a certified track."""
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
 
         cameras = [[[800, 0, 320, 0], [0, 800, 240, 0], [0, 0, 1, 0]],
                    [[800, 0, 320, -800], [0, 800, 240, 0], [0, 0, 1, 0]],
@@ -204,7 +204,7 @@ class TestGenuineUnregisteredReconstructionMisread:
 
     @staticmethod
     def unregistered(**options) -> dict:
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
         from geocert.solvers.reconstruction import synthetic
 
         scene = synthetic.scene(views=5, points=14, seed=7, noise_px=0.5)
@@ -402,7 +402,7 @@ class TestReconstructionLabelsUntied:
 def radial_reconstruction() -> dict:
     """make_fixtures' six-view scene solved with radial_distortion "on" (K unknown): a genuine
     result whose cameras state k1 and its centre, each image's centre."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.solvers.reconstruction import synthetic
 
     scene = synthetic.scene(views=6, points=16, seed=3, noise_px=0.5)

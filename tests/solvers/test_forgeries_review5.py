@@ -1,6 +1,6 @@
 """A fifth hostile review of the verifier (issue 33): each class below is a false claim that
 ``verify_any`` accepts today, built from a genuine stored certificate (tests/data/certificates) or
-genuine solver output (geocert.batch.solve_job with certificate "full"). Each forgery test asserts
+genuine solver output (geocert.jobs.runner.solve_job with certificate "full"). Each forgery test asserts
 the sound outcome, so it xfails (strict) until the verifier gives it; beside it, the true claim the
 forgery starts from verifies. Each class's docstring says what is accepted, how false it is, and a
 suggested fix."""
@@ -33,7 +33,7 @@ WORLD_SHRINK = 3e5
 def small_world() -> dict:
     """A genuine stratified autocalibration of the stored data in a frame whose metric world is
     of order 1e-9 (both stages certified, the result verifies)."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     certificate = stored("autocalibration_stratified")["certificate"]
     data = certificate["data"]
@@ -387,7 +387,7 @@ def looser_cameras() -> dict:
     untouched, and a genuine camera certificate solved at rel_gap 0.5 over the same maps; each
     searched camera's bound, each camera's tolerance and the camera claim's words made the new
     certificate's."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.solvers.reconstruction import camera_claim
 
     forged = stored("reconstruction")

@@ -1,7 +1,7 @@
 """A sixth hostile review of the verifier (issue 33), aimed at what the fifth review's fixes added:
 the gap caps, the per-array scale of autocalibration's derived fields, and the strict reader of a
 document's text. Each class is built from a genuine stored certificate (tests/data/certificates)
-or genuine solver output (geocert.batch.solve_job); each test of the sound outcome xfails (strict)
+or genuine solver output (geocert.jobs.runner.solve_job); each test of the sound outcome xfails (strict)
 until the verifier gives it, and beside it the genuine document it starts from verifies. Each
 class's docstring says what is accepted, how false it is, and a suggested fix."""
 
@@ -179,7 +179,7 @@ class TestAbsoluteGapCapInTheCostsUnits:
         assert refused(self.forged_direct(lambda Q: Q)[0])["check"] == "options"
 
     def test_the_cap_is_refused_as_input_naming_the_option(self):
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
         from geocert.solvers.core.geometry import InputError
 
         certificate = stored("autocalibration_direct")["certificate"]
@@ -205,7 +205,7 @@ def quiet_tracks() -> tuple[dict, dict]:
     noise, solved genuinely at abs_gap 1 (beyond the cap now: solved with the caps lifted, as a
     forger's solver would; every track certified by the trivial bound 0) and at the default gaps
     (the optimum, certified within 1e-3)."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     genuine = stored("triangulation_l2l2")
     data = genuine["certificate"]["data"]
@@ -255,7 +255,7 @@ def small_frames() -> tuple[dict, dict]:
     """The stored L2L2 bilinear data with every observation scaled by 0.4 about the origin (costs
     of about 0.26 and 0.20), solved genuinely at abs_gap 1 (each frame certified by the trivial
     bound 0) and at the stored options (the optima, certified within 1e-3)."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     certificate = stored("bilinear_l2l2")["certificate"]
     data = copy.deepcopy(certificate["data"])
@@ -324,7 +324,7 @@ def far_point_result() -> dict:
     """A genuine stratified autocalibration of the stored data with one more point, far from the
     scene (1e12 along the metric frame's z, mapped into the projective frame by the genuine
     upgrade): both stages certified, the result verifies."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     genuine = stored("autocalibration_stratified")
     data = copy.deepcopy(genuine["certificate"]["data"])
@@ -536,7 +536,7 @@ def test_each_kinds_request_refuses_an_abs_gap_beyond_its_cap_naming_the_option(
     times it, naming options/abs_gap (the API answers that refusal 422)."""
     from pydantic import ValidationError
 
-    from geocert.batch import parse_job
+    from geocert.jobs.runner import parse_job
     from geocert.kinds import KINDS
     from geocert.solvers.core.geometry import InputError
 

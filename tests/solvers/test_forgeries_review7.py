@@ -1,7 +1,7 @@
 """A seventh hostile review of the verifier (issue 33), aimed at what the sixth review's round added:
 the calibration tie, the depth-reversal verdict taken as stated, the result's members as a closed
 set, and the triangulation determinacy's pooled noise. Each class is built from a genuine stored
-certificate (tests/data/certificates) or genuine solver output (geocert.batch.solve_job); each
+certificate (tests/data/certificates) or genuine solver output (geocert.jobs.runner.solve_job); each
 test of the sound outcome xfailed (strict) until the verifier (or the solver) gave it, and now
 passes; beside it the genuine document it starts from verifies. Each class's docstring says what
 was accepted, how false it was, and the fix suggested."""
@@ -185,7 +185,7 @@ def _returning_the_twin(check):
 def twin_rig() -> tuple[object, dict, dict]:
     """(scene, the genuine result, the result of the same job with the pipeline's depth-reversal
     check returning the twin and calling it determined)."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.pipelines.reconstruction import ambiguity
 
     scene, job = _turntable_job()
@@ -253,7 +253,7 @@ FAR_SHIFT, FAR_NOISE_PX = 200.0, 0.3
 def far_two_view_track() -> tuple[np.ndarray, dict]:
     """(the far point's true position, the genuine result of the stored triangulation's first
     four tracks plus the far point's 2-view track, every track certified)."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     genuine = stored("triangulation_l2l2")
     data = genuine["certificate"]["data"]
@@ -413,7 +413,7 @@ def ambiguous_rig() -> tuple[object, dict]:
     (a 165,000 px lens from 1,000 times the object's size, 1 px of noise; 40 points, K unknown,
     cameras not resected): the pipeline says its poses are not determined, and the result is
     doubtful for that alone."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.solvers.reconstruction import synthetic
 
     scene = synthetic.turntable(views=6, points=40, focal=165_000.0, step_degrees=23.5, elevation_degrees=16.0,

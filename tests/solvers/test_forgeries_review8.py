@@ -2,7 +2,7 @@
 added: the depth-reversal record's angles recomputed about its reference view, proven intervals
 read against their determinacy's level, and the result's members closed one level down. Each
 class is built from a genuine stored certificate (tests/data/certificates) or genuine solver
-output (geocert.batch.solve_job); each test of the sound outcome xfails (strict) while the
+output (geocert.jobs.runner.solve_job); each test of the sound outcome xfails (strict) while the
 verifier accepts the forgery, and beside it the genuine document it starts from verifies. Each
 class's docstring says what is accepted, how false it is (measured), and a suggested fix."""
 
@@ -77,7 +77,7 @@ def far_track_l1(request) -> tuple[np.ndarray, dict]:
     """(the far point's true position, the genuine result under that norm of the stored
     triangulation's first four tracks plus the far point's 2-view track, every track certified
     with a proven interval)."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     genuine = stored("triangulation_l2l2")
     data = genuine["certificate"]["data"]

@@ -2,7 +2,7 @@
 added: the resection's proven centre intervals (fractional.resection_sublevel), the triangulation's
 intervals raised to the pooled level, the depth-reversal record, camera_misfit's bound_reason, the
 maps' time_limit statuses, and floating-point hygiene wherever a document-chosen number scales a
-bound. Each class is built from genuine solver output (geocert.batch.solve_job) or a genuine
+bound. Each class is built from genuine solver output (geocert.jobs.runner.solve_job) or a genuine
 stored certificate (tests/data/certificates); each test of the sound outcome xfails (strict) while
 the verifier accepts the forgery, and beside it the genuine document it starts from verifies. Each
 class's docstring says what is accepted, how false it is (measured), and a suggested fix."""
@@ -28,7 +28,7 @@ FORGED_LEVELS = (0.0, 1e-3)
 def proven_resection() -> tuple[np.ndarray, dict]:
     """(the true camera centre, the genuine full result of one 25-point L2L2 resection with 1 px
     of noise, certified with a proven interval of its centre)."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from tests.solvers.test_resection_proven import resection_job
     from tests.support import seed
 
@@ -118,7 +118,7 @@ class TestResectionProvenAtAChosenLevel:
 # --- options the solver refuses, in a certificate ------------------------------------------------
 
 # Run-control options a stored resection certificate states (max_nodes 5000, time_limit_s 60),
-# changed to values the solver refuses on input (geocert.batch.solve_job: InputError).
+# changed to values the solver refuses on input (geocert.jobs.runner.solve_job: InputError).
 REFUSED_OPTIONS = [("max_nodes", -5000), ("max_nodes", 0), ("max_nodes", True), ("time_limit_s", -60.0),
                    ("time_limit_s", True), ("time_limit_s", 1e300), ("job_time_limit_s", -600.0),
                    ("max_nodes", 2.5), ("max_nodes", None), ("time_limit_s", "60"), ("job_time_limit_s", 1e6)]
@@ -137,7 +137,7 @@ class TestOptionsTheSolverRefuses:
     only those (claim_options), so the run-control options are neither checked nor hashed: the
     stored L2L2 resection verifies, unchanged but for its certificate's options, with max_nodes
     -5000, 0 or true, time_limit_s -60, true or 1e300, or job_time_limit_s -600, each of which
-    geocert.batch.solve_job refuses on input ("options/max_nodes: must be a finite number >= 1
+    geocert.jobs.runner.solve_job refuses on input ("options/max_nodes: must be a finite number >= 1
     and <= 1e+06", "must be a number", ...). The document then states options no solve ran under
     (a certified item of 4 leaves beside a node limit of 0, a limit of -60 s), and no re-hash is
     needed to do it. Suggested fix: validate every option with the kind's own options class, as
@@ -152,7 +152,7 @@ class TestOptionsTheSolverRefuses:
 
     @pytest.mark.parametrize("name,value", REFUSED_OPTIONS)
     def test_the_forgery_is_false(self, name, value):
-        from geocert.batch import solve_job
+        from geocert.jobs.runner import solve_job
         from geocert.solvers.core.geometry import InputError
         from tests.solvers.test_forgeries import stored
 

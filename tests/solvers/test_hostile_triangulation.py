@@ -23,7 +23,7 @@ from geocert.solvers.core.geometry import normalised_cameras
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.fractional.items import TrackItem
 from geocert.solvers.fractional.proof import check_program
-from geocert.solvers.fractional.batched import triangulate_many
+from geocert.solvers.fractional.many_tracks import triangulate_many
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 
 from tests.support import noisy_track, random_cameras, seed

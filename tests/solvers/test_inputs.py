@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from geocert.solvers.core.geometry import InputError
-from geocert.batch import parse_job, solve_job
+from geocert.jobs.runner import parse_job, solve_job
 
 from tests.support import random_cameras
 

@@ -9,7 +9,7 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2] / "geocert"
-ABOVE = ("geocert.kinds", "geocert.app", "geocert.workers", "geocert.batch", "geocert.service", "geocert.pipelines")
+ABOVE = ("geocert.kinds", "geocert.app", "geocert.workers", "geocert.jobs", "geocert.pipelines")
 ABOVE_SOLVERS = ("geocert.verify", *ABOVE)
 KNOWN: dict = {}
 
@@ -87,7 +87,7 @@ names = sorted(p.stem for p in folder.glob("*.json") if not p.stem.startswith("m
 valid = {name: verify_any(json.loads((folder / f"{name}.json").read_text())).valid for name in names}
 estimate = verify_any({"kind": "stereo_lines", "status": "estimate", "pairs": []})
 above = sorted({m.split(".")[1] for m in sys.modules if m.startswith("geocert.") and m.split(".")[1] in
-                ("kinds", "app", "workers", "batch", "service", "pipelines")})
+                ("kinds", "app", "workers", "jobs", "pipelines")})
 print(json.dumps({"valid": valid, "estimate": estimate.first_failure, "above": above}))
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT.parent)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.solvers.orientation import camera_centre, orient
 
 from tests.support import noisy_track, project, random_cameras

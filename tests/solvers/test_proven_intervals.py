@@ -11,8 +11,8 @@ import copy
 import numpy as np
 import pytest
 
-from geocert.batch import solve_job
-from geocert.solvers.fractional.batched import triangulate_many
+from geocert.jobs.runner import solve_job
+from geocert.solvers.fractional.many_tracks import triangulate_many
 from geocert.solvers.fractional.convexity import ball_intervals
 from geocert.solvers.fractional.determinacy import tracks_many
 from geocert.solvers.fractional.triangulation import TriangulationOptions

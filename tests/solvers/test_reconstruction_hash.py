@@ -29,7 +29,7 @@ def _earlier_form(result: dict) -> dict:
 @pytest.fixture(scope="module")
 def at_defaults() -> dict:
     """A genuine reconstruction of the kind's example scene, every option at its default."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.kinds import get_kind
 
     return solve_job({"kind": "reconstruction", "data": get_kind("reconstruction").example["data"],
@@ -87,7 +87,7 @@ def test_the_stored_reconstruction_in_the_earlier_form_verifies_stating_its_came
 def test_a_calibration_certificate_at_other_gaps_than_the_options_is_refused():
     """The stored reconstruction carrying a genuine calibration certificate of its own projective
     reconstruction solved at metric_rel_gap 0.5 (the options ask for 1e-4)."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     result = stored("reconstruction")
     calibration = result["calibration_certificate"]
@@ -103,7 +103,7 @@ def test_a_calibration_certificate_at_other_gaps_than_the_options_is_refused():
 def test_an_earlier_form_without_the_calibration_gaps_is_held_to_their_defaults(at_defaults):
     """The earlier form's hash does not cover whether metric_rel_gap is stated: removed, it is
     read as its default, so a calibration certificate at another gap is still refused."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     result = copy.deepcopy(at_defaults)
     calibration = result["calibration_certificate"]

@@ -72,7 +72,7 @@ def test_the_clock_passing_after_registration_says_time_limit_first_and_keeps_th
     import time
     from types import SimpleNamespace
 
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.kinds import reconstruction as kind
 
     late = {"s": 0.0}

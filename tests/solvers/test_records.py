@@ -63,7 +63,7 @@ def test_the_shared_records_are_the_result_models():
 
 
 def test_the_claim_members_are_what_certificate_document_writes():
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.kinds import KINDS
 
     for kind in KINDS:
@@ -96,7 +96,7 @@ def undeclared_stage_members():
     kind's example solved with K unknown, with K known and with the projective registration."""
     import copy
 
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.kinds import KINDS
     from geocert.kinds import reconstruction as kind_module
 

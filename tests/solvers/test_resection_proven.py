@@ -11,7 +11,7 @@ import copy
 import numpy as np
 import pytest
 
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.solvers.fractional.resection_sublevel import Scene, proven_centre
 from geocert.verify.checks import verify_any
 

@@ -19,7 +19,7 @@ from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unp
 from geocert.solvers.core.conic import ConicStatus, solve_conic
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.search import root_region
-from geocert.batch import parse_job, solve_job
+from geocert.jobs.runner import parse_job, solve_job
 from geocert.solvers.fractional.relaxation import Relaxation
 from geocert.solvers.fractional.charts import Chart
 from geocert.solvers.core.coverage import uncovered_part

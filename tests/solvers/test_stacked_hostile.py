@@ -9,7 +9,7 @@ import copy
 import numpy as np
 import pytest
 
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.solvers.core.certificates import pack
 from geocert.solvers.fractional import stacked
 from geocert.solvers.fractional.items import TrackItems

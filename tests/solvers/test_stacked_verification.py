@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import pack, unpack
 from geocert.solvers.core.geometry import normalised_cameras

@@ -9,7 +9,7 @@ import copy
 import numpy as np
 import pytest
 
-from geocert.batch import parse_job, solve_job
+from geocert.jobs.runner import parse_job, solve_job
 from geocert.kinds.stereo_lines import KIND
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.lines import align, incremental, linear, polynomial, scenes

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.solvers.lines import scenes
 
 

@@ -14,7 +14,7 @@ import pytest
 from geocert.kinds.triangulation import track_document, track_documents
 from geocert.solvers.core.geometry import norm_cost, reprojection_residuals
 from geocert.solvers.fractional import determinacy
-from geocert.solvers.fractional.batched import triangulate_many
+from geocert.solvers.fractional.many_tracks import triangulate_many
 from geocert.solvers.fractional.columns import TrackResults, solutions
 from geocert.solvers.fractional.results import LocalCertificate, claim_of
 from geocert.solvers.fractional.triangulation import TriangulationOptions

@@ -1,4 +1,4 @@
-"""Where a webhook may go (workers/destinations.py): every address not globally routable is
+"""Where a webhook may go (geocert/jobs/destinations.py): every address not globally routable is
 refused unless its network is allowed, on the address connected to (a name that resolves to
 loopback is refused without a connection), and an attempt ends at its deadline however slowly
 the other side sends. Nothing here leaves 127.0.0.1."""
@@ -13,8 +13,8 @@ import time
 import httpcore
 import pytest
 
-from geocert.workers import destinations
-from geocert.workers.destinations import CheckedBackend, Refused, allowed_networks, literal_refusal, refusal
+from geocert.jobs import destinations
+from geocert.jobs.destinations import CheckedBackend, Refused, allowed_networks, literal_refusal, refusal
 
 
 @pytest.mark.parametrize("address, reason", [

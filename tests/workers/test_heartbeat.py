@@ -9,7 +9,7 @@ import pytest
 import redis
 
 from geocert.workers.heartbeat import KEY, UNACKED_INDEX, beat, held_tasks
-from geocert.workers.store import JobStore
+from geocert.jobs.store import JobStore
 
 
 @pytest.fixture

@@ -16,10 +16,10 @@ import json
 import os
 import time
 
-from geocert.batch import solve_job
+from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
 from geocert.workers import tasks
-from geocert.workers.store import JobStore
+from geocert.jobs.store import JobStore
 
 jobs = JobStore.from_url(os.environ["GEOCERT_REDIS_URL"])
 LIMIT_S = 0.5

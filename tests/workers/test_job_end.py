@@ -8,10 +8,10 @@ from tests.support import run_with_redis
 CODE = """
 import json
 import os
-from geocert.batch import parse_job, solve_job
+from geocert.jobs.runner import parse_job, solve_job
 from geocert.kinds import get_kind
 from geocert.workers import tasks
-from geocert.workers.store import JobStore
+from geocert.jobs.store import JobStore
 
 jobs = JobStore.from_url(os.environ["GEOCERT_REDIS_URL"])
 job = get_kind("triangulation").example

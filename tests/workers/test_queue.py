@@ -61,7 +61,7 @@ import json, sys, redis
 import redis.connection
 from geocert.workers import queue
 from geocert.workers.priorities import queue_lists
-from geocert.workers.store import JobStore
+from geocert.jobs.store import JobStore
 store = JobStore.from_url(sys.argv[1])
 request = {"kind": "triangulation", "data": {"tracks": [{}] * 5}, "options": {}}
 writes = [0]

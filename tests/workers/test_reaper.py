@@ -11,7 +11,7 @@ from tests.support import run_with_redis
 CODE = """
 import json, os, sys, time
 from geocert.workers import reaper, tasks
-from geocert.workers.store import JobStore
+from geocert.jobs.store import JobStore
 
 STALE_AFTER_S = 30.0
 jobs = JobStore.from_url(os.environ["GEOCERT_REDIS_URL"])

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from geocert.kinds import get_kind
-from geocert.workers.store import JobStore
+from geocert.jobs.store import JobStore
 from tests.support import embedded_redis_client
 
 
@@ -219,7 +219,7 @@ class TestStreamedResult:
 
     @staticmethod
     def solved_items(count: int) -> tuple:
-        from geocert.batch import parse_job, solve_job
+        from geocert.jobs.runner import parse_job, solve_job
 
         kind, _, options = parse_job(get_kind("triangulation").example)
         one = solve_job(kind.example)["tracks"]
@@ -227,13 +227,13 @@ class TestStreamedResult:
         return kind, options, items
 
     def store_runs(self, jobs, job_id, kind, items, cuts) -> None:
-        from geocert.batch import item_sums, result_fragment
+        from geocert.jobs.runner import item_sums, result_fragment
 
         for begin, end in zip(cuts[:-1], cuts[1:]):
             jobs.save_fragment(job_id, begin, item_sums(items[begin:end]), result_fragment(kind, items[begin:end]))
 
     def test_fragments_join_to_the_result_assembled_whole(self, jobs, monkeypatch):
-        from geocert.batch import assemble, merged_sums, result_json, result_shell, stats_from
+        from geocert.jobs.runner import assemble, merged_sums, result_json, result_shell, stats_from
 
         kind, options, items = self.solved_items(12)
         meta = jobs.create("triangulation", request_of(12), 12, 5, "someone", chunk_key="tracks")
@@ -273,7 +273,7 @@ class TestStreamedResult:
         assert jobs.fragment_plan(meta["id"], 12) is None  # 5 leads to no fragment; 7 is never reached
 
     def test_reading_the_result_reads_its_fragments_once(self, jobs):
-        from geocert.batch import merged_sums, result_shell, stats_from
+        from geocert.jobs.runner import merged_sums, result_shell, stats_from
 
         kind, options, items = self.solved_items(400)
         meta = jobs.create("triangulation", request_of(400), 400, 100, "someone", chunk_key="tracks")

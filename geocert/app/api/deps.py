@@ -14,7 +14,7 @@ from geocert.settings import get_settings
 from geocert.app.core.security import PUBLIC_OWNER, caller
 from geocert.app.errors import PROBLEM_JSON, ApiProblem
 from geocert.app.schemas import ProblemDetails
-from geocert.workers.store import JobStore, count_request
+from geocert.jobs.store import JobStore, count_request
 
 
 @lru_cache
@@ -22,7 +22,7 @@ def get_store() -> JobStore:
     from redis.backoff import ExponentialBackoff
     from redis.retry import Retry
 
-    from geocert.workers.celery_app import redis_url
+    from geocert.settings import redis_url
 
     # Bounded waits: a request during a Redis outage fails over to 503 within a few seconds
     # instead of hanging (the socket timeout exceeds the SSE stream's 1 s blocking XREAD).
@@ -52,7 +52,7 @@ def get_async_redis(streams: bool = False) -> redis.asyncio.Redis:
         from redis.asyncio.retry import Retry
         from redis.backoff import ExponentialBackoff
 
-        from geocert.workers.celery_app import redis_url
+        from geocert.settings import redis_url
 
         settings = get_settings()
         clients[streams] = redis.asyncio.Redis.from_url(

@@ -17,7 +17,7 @@ from fastapi import HTTPException, Security
 from fastapi.security import APIKeyHeader
 
 from geocert.settings import get_settings
-from geocert.workers.store import PUBLIC_OWNER  # every caller, when no keys are configured (loopback only)
+from geocert.jobs.store import PUBLIC_OWNER  # every caller, when no keys are configured (loopback only)
 
 api_key_header = APIKeyHeader(
     name="X-API-Key", auto_error=False, scheme_name="ApiKey",

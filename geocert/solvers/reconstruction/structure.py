@@ -58,10 +58,10 @@ def triangulate_tracks(cameras: dict[int, np.ndarray], tracks: list[tuple[np.nda
                        options: TriangulationOptions, progress=None, should_stop=None) -> list[TrackResult | None]:
     """One certified triangulation per track (views, pixels) over the given cameras; None for a
     track with fewer than two views. Tracks are solved in chunks by the batched solver
-    (fractional.batched.triangulate_many: each track's result is what the certified solver
+    (fractional.many_tracks.triangulate_many: each track's result is what the certified solver
     returns for it alone, its root relaxations solved many at a time; 4,952 Dinosaur tracks in
     19.7 s one by one)."""
-    from geocert.solvers.fractional.batched import triangulate_many
+    from geocert.solvers.fractional.many_tracks import triangulate_many
 
     views = sorted(cameras)
     index = {view: i for i, view in enumerate(views)}

@@ -23,7 +23,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.append(str(HERE.parents[2]))  # for tests.support (geocert: as installed, or from PYTHONPATH)
 
-from geocert.batch import solve_job  # noqa: E402
+from geocert.jobs.runner import solve_job  # noqa: E402
 from geocert.kinds import get_kind  # noqa: E402
 from geocert.verify.checks import verify_any  # noqa: E402
 from tests.support import map_job, project, random_cameras, scene, seed, triangulation_job  # noqa: E402

@@ -17,7 +17,7 @@ from geocert.kinds.schema import CertificateDocument
 from geocert.verify import checks as verify
 from geocert.solvers.core.strict import RepeatedName, Unreadable, load_document
 from geocert.settings import get_settings
-from geocert.workers.store import TERMINAL
+from geocert.jobs.store import TERMINAL
 
 router = APIRouter(tags=["certificates"], dependencies=[Depends(rate_limited)])
 

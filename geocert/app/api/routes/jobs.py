@@ -27,7 +27,7 @@ from geocert.app.errors import ApiProblem
 from geocert.app.schemas import JOB_EXAMPLES, JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
 from geocert.workers.queue import withdraw_queued
-from geocert.workers.store import REDIS_GONE, TERMINAL, JobStore, events, read_job
+from geocert.jobs.store import REDIS_GONE, TERMINAL, JobStore, events, read_job
 
 # As many export processes as exports may run at once (the gate on the export path refuses more).
 _EXPORTS = processes.Pool(lambda: get_settings().max_concurrent_exports or 2, exports.ready,

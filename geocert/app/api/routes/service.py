@@ -11,7 +11,7 @@ from geocert.app.api.deps import error_responses, get_store, rate_limited
 from geocert.app.schemas import ProblemKindInfo
 from geocert.kinds import KINDS, default_options
 from geocert.settings import get_settings
-from geocert.workers.store import JobStore
+from geocert.jobs.store import JobStore
 
 router = APIRouter()
 

@@ -990,7 +990,7 @@ def shared_store() -> JobStore:
     global _SHARED
     if _SHARED is None:
         from geocert.settings import get_settings
-        from geocert.workers.celery_app import redis_url
+        from geocert.settings import redis_url
 
         _SHARED = JobStore.from_url(redis_url(), get_settings().result_ttl_s)
     return _SHARED

@@ -1,4 +1,4 @@
-"""The batched triangulation path (geocert/solvers/fractional/batched.py): for every track the
+"""The batched triangulation path (geocert/solvers/fractional/many_tracks.py): for every track the
 status, certified flag and cost that ``triangulate`` returns, and certificates the verifier (per
 item and stacked) accepts."""
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from geocert.solvers.datasets import load_dinosaur
-from geocert.solvers.fractional import batched, stacked
+from geocert.solvers.fractional import many_tracks, stacked
 from geocert.solvers.fractional.results import LocalCertificate, claim_of
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 from geocert.verify.checks import checked_options, verify_arrays
@@ -37,7 +37,7 @@ def solve_both(cameras, tracks, options, monkeypatch=None):
     alone = []
     if monkeypatch is not None:
         monkeypatch.setattr(batched, "triangulate", lambda *args: alone.append(1) or triangulate(*args))
-    ours = batched.triangulate_many(cameras, tracks, options)
+    ours = many_tracks.triangulate_many(cameras, tracks, options)
     if monkeypatch is not None:
         monkeypatch.undo()
     theirs = [triangulate(cameras[views], points, options) for views, points in tracks]
@@ -100,7 +100,7 @@ def test_dinosaur_tracks_as_triangulate_returns_them(dinosaur, norm, monkeypatch
 def test_full_certificates_pass_both_verifiers(dinosaur, norm):
     cameras, tracks = dinosaur
     options = TriangulationOptions(norm=norm, certificate="full")
-    results = batched.triangulate_many(cameras, tracks, options)
+    results = many_tracks.triangulate_many(cameras, tracks, options)
     certified = {i for i, r in enumerate(results) if r.certified}
     assert len(certified) >= 295
     assert all(results[i].certificate.proof is not None for i in certified)
@@ -113,7 +113,7 @@ def test_full_certificates_pass_both_verifiers(dinosaur, norm):
 
 def test_summary_certificates_carry_no_proof(dinosaur):
     cameras, tracks = dinosaur
-    results = batched.triangulate_many(cameras, tracks[:20], TriangulationOptions())
+    results = many_tracks.triangulate_many(cameras, tracks[:20], TriangulationOptions())
     assert all(r.certified and r.certificate is not None and r.certificate.proof is None for r in results)
 
 
@@ -122,7 +122,7 @@ def test_self_check_runs_on_batched_results(dinosaur, monkeypatch):
     monkeypatch.setenv("GEOCERT_SELF_VERIFY", "1")
     checked = []
     monkeypatch.setattr(batched, "self_check", lambda *args: checked.append(args[3]["cost"]))
-    results = batched.triangulate_many(cameras, tracks[:10], TriangulationOptions())
+    results = many_tracks.triangulate_many(cameras, tracks[:10], TriangulationOptions())
     assert len(checked) == sum(r.certified for r in results) == 10
     assert all(r.certificate.proof is None for r in results)  # kept only when asked for
 
@@ -190,9 +190,9 @@ def test_the_batched_refinement_reaches_scipys_minimum(dinosaur):
         cams = np.array([cameras[views] for views, _ in group])
         points = np.array([points for _, points in group])
         num, den, T, reference, ok = stacked.chart_arrays(cams, points)
-        start, ok_start = batched._dlt(num)
-        refined, ok_lm = batched._refine_l2l2(num, den, T[:, 3], start, ok & ok_start)
-        ours = batched._costs(num, den, T[:, 3], refined, "L2L2")
+        start, ok_start = many_tracks._dlt(num)
+        refined, ok_lm = many_tracks._refine_l2l2(num, den, T[:, 3], start, ok & ok_start)
+        ours = many_tracks._costs(num, den, T[:, 3], refined, "L2L2")
         for g in np.flatnonzero(ok_lm):
             exact = np.arange(n) == reference[g]
             program = FractionalProgram(num[g], den[g], exact, T[g, 3][None, :], "L2L2")
@@ -212,6 +212,6 @@ def test_a_root_node_claim_holds_when_the_verifier_rebuilds_the_track_alone(norm
     start = index - index % 500
     chunk = [(track.views, track.points) for track in loaded[start:start + 500]]
     options = TriangulationOptions(norm=norm, certificate="full")
-    results = batched.triangulate_many(cameras, chunk, options)
+    results = many_tracks.triangulate_many(cameras, chunk, options)
     assert results[index - start].certified
     verified(cameras, chunk, results, options)  # raises at a claim refused
