@@ -10,9 +10,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 KNOWN = {
-    # the store, queue, tasks, webhooks, heartbeat and reaper of the workers
-    frozenset({"geocert.workers.celery_app", "geocert.workers.heartbeat", "geocert.workers.queue",
-               "geocert.workers.reaper", "geocert.jobs.store", "geocert.workers.tasks", "geocert.workers.webhooks"}),
+    # the Celery app, whose signal handlers import the tasks, and the queue, tasks, webhooks and
+    # reaper that import the app
+    frozenset({"geocert.workers.celery_app", "geocert.workers.queue", "geocert.workers.reaper",
+               "geocert.workers.tasks", "geocert.workers.webhooks"}),
 }
 
 

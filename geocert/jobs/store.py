@@ -26,6 +26,11 @@ PUBLIC_OWNER = "public"  # the owner of every job when no API keys are configure
 # Redis restarting, loading its append-only file or unreachable (BusyLoadingError is a ConnectionError).
 REDIS_GONE = (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError)
 _STREAM_MAXLEN = 2000
+# The workers' heartbeats (workers.heartbeat writes them; take_slot reads which workers live and
+# their solver processes): here, below the workers, so that the store needs nothing of theirs.
+WORKERS_KEY = "geocert:workers"  # worker name -> its last beat
+SOLVERS_KEY = "geocert:workers:solvers"  # worker name -> its solver processes
+FRESH_S = 10.0  # a worker whose last beat is older is gone
 PAST_CLOCK_CLAIM_S = 300  # how long a claim to end a job past its clock holds (JobStore.claim_past_clock)
 
 
@@ -502,10 +507,8 @@ class JobStore:
     def take_slot(self, job_id: str, slot: str, kept_for_others: int) -> bool:
         """Take a solver slot for a task of this job (True), unless the job's key holds its share
         already (False: the task waits). A job that is gone takes one (its task finds it gone)."""
-        from geocert.workers.heartbeat import FRESH_S, KEY, SOLVERS
-
         moment = now()
-        return bool(self.r.eval(self._TAKE_SLOT, 5, self.SLOTS, self.SLOT_OWNERS, KEY, SOLVERS, self.key(job_id),
+        return bool(self.r.eval(self._TAKE_SLOT, 5, self.SLOTS, self.SLOT_OWNERS, WORKERS_KEY, SOLVERS_KEY, self.key(job_id),
                                 slot, moment, moment - self.SLOT_LAPSE_S, moment - FRESH_S, kept_for_others,
                                 json.dumps(PUBLIC_OWNER)))
 

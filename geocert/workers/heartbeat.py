@@ -23,12 +23,10 @@ import time
 
 import redis
 
-from geocert.jobs.store import JobStore
+from geocert.jobs.store import FRESH_S, SOLVERS_KEY, WORKERS_KEY, JobStore
 
-KEY = "geocert:workers"
-SOLVERS = "geocert:workers:solvers"  # worker name -> its solver processes (JobStore.take_slot reads it)
+KEY, SOLVERS = WORKERS_KEY, SOLVERS_KEY  # (JobStore.take_slot reads them)
 INTERVAL_S = 2.0
-FRESH_S = 10.0
 FORGET_S = 3600.0  # entries older than this are removed by the next beat of any worker
 
 log = logging.getLogger("geocert.worker")

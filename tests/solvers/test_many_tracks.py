@@ -36,7 +36,7 @@ def solve_both(cameras, tracks, options, monkeypatch=None):
     triangulate_many left to triangulate (not closed on the batched path)."""
     alone = []
     if monkeypatch is not None:
-        monkeypatch.setattr(batched, "triangulate", lambda *args: alone.append(1) or triangulate(*args))
+        monkeypatch.setattr(many_tracks, "triangulate", lambda *args: alone.append(1) or triangulate(*args))
     ours = many_tracks.triangulate_many(cameras, tracks, options)
     if monkeypatch is not None:
         monkeypatch.undo()
@@ -121,7 +121,7 @@ def test_self_check_runs_on_batched_results(dinosaur, monkeypatch):
     cameras, tracks = dinosaur
     monkeypatch.setenv("GEOCERT_SELF_VERIFY", "1")
     checked = []
-    monkeypatch.setattr(batched, "self_check", lambda *args: checked.append(args[3]["cost"]))
+    monkeypatch.setattr(many_tracks.self_check, "check", lambda *args: checked.append(args[3]["cost"]))
     results = many_tracks.triangulate_many(cameras, tracks[:10], TriangulationOptions())
     assert len(checked) == sum(r.certified for r in results) == 10
     assert all(r.certificate.proof is None for r in results)  # kept only when asked for
