@@ -304,7 +304,7 @@ def search_only(cameras, tracks, chunk: int = 500) -> int:
     from geocert.solvers.fractional import many_tracks
     from geocert.solvers.fractional.columns import TrackResults
 
-    with mock.patch.object(batched, "certify_tracks", lambda cameras, tracks, options: TrackResults(len(tracks))):
+    with mock.patch.object(many_tracks, "certify_tracks", lambda cameras, tracks, options: TrackResults(len(tracks))):
         return batched_certified(cameras, tracks, chunk)
 
 

@@ -202,7 +202,7 @@ def every_track_searched():
     from geocert.solvers.fractional.columns import TrackResults
 
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(batched, "certify_tracks", lambda cameras, tracks, options: TrackResults(len(tracks)))
+        patch.setattr(many_tracks, "certify_tracks", lambda cameras, tracks, options: TrackResults(len(tracks)))
         yield
 
 
