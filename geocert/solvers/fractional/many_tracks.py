@@ -26,13 +26,11 @@ a chart this path does not build: a view's depth row parallel to the reference's
 centre at infinity, a start outside the domain, a root region not proven, ...) is solved by
 ``triangulate`` itself.
 
-Measured (bench/triangulation.py, all 4,983 Dinosaur tracks under L2L2, CPU ms a track, median,
-on a shared machine at load 1 to 5, last runs at 742b228/c25c52f): in chunks of 500, 0.89 against
-4.11 for triangulate track by track and 1.02 for OpenCV DLT + LM (0.87x; earlier runs 0.99x to
-1.06x); in chunks of 100, 1.38 against 3.90 and 0.90 (1.53x; each batched stage has a cost per
-group, whatever its size). A batched barrier for the root relaxation too was tried and not
-kept: its ~50 Newton passes of stacked 7x7 to 31x31 systems cost more than Clarabel's solves
-(0.86 against about 0.4 ms a track).
+Why: on the Dinosaur's 4,983 tracks under L2L2, in chunks of 500, this costs about what OpenCV's
+DLT + LM costs a track, against some four times that for ``triangulate`` track by track
+(bench/triangulation.py; docs/benchmarks.md has the current figures). A batched barrier for the
+root relaxation too was tried and not kept: its ~50 Newton passes of stacked 7x7 to 31x31 systems
+cost more than Clarabel's solves.
 """
 
 from __future__ import annotations
