@@ -29,7 +29,7 @@ of a map known to exist, or a cost that is not its matrix's).
 Targets scaled by 1e6 and offset by 1e6 of that lie beyond the clip: such problems have every
 target at the same corner and are degenerate or trivially fitted (kept: hostile too).
 
-Nothing here asserts; tests/solvers/test_hostile_maps.py holds the checked cases.
+Nothing here asserts; tests/solvers/fractional/test_hostile_maps.py holds the checked cases.
 """
 
 from __future__ import annotations

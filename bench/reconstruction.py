@@ -27,7 +27,7 @@ from geocert.solvers.datasets import load_dinosaur
 from geocert.pipelines.reconstruction import pipeline
 from geocert.solvers.reconstruction import synthetic
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
-from tests.solvers.test_reconstruction import aligned_rotation_errors, house_tracks, vgg_pose, vgg_refit
+from tests.solvers.reconstruction.test_reconstruction import aligned_rotation_errors, house_tracks, vgg_pose, vgg_refit
 
 
 def run(name: str, tracks, sizes, options: ReconstructionOptions):

@@ -2,7 +2,7 @@
 
 Datasets: Middlebury dinoSparseRing (Seitz, Curless, Diebel, Scharstein and Szeliski, CVPR 2006;
 14 photos 640x480 of an untextured object, ground-truth K, R, t) with the tuned options
-tests/solvers/test_reconstruction_ring.py uses, and a synthetic render (a textured box on a
+tests/pipelines/reconstruction/test_reconstruction_ring.py uses, and a synthetic render (a textured box on a
 textured ground, 8 views over 150 degrees, geocert.solvers.reconstruction.render). Prints per
 dataset: features per image, verified pairs, tracks, views registered, rotation error after
 aligning to the truth (median / max degrees), RMS reprojection error and time per step.
@@ -42,7 +42,7 @@ from geocert.pipelines.reconstruction.features import FeatureOptions, tracks_fro
 from geocert.solvers.reconstruction.render import box_scene
 
 RING = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "middlebury_dinoSparseRing"
-# The options the ring needs (tests/solvers/test_reconstruction_ring.py uses the same): faint
+# The options the ring needs (tests/pipelines/reconstruction/test_reconstruction_ring.py uses the same): faint
 # SIFT keypoints, a loose ratio test, guided matching (without it the tracks of three views or
 # more crossing 0013|0014 are mostly wrong: adjusted from the true cameras they end 2.7 degrees
 # off), and a second reconstruction merged (the chain breaks at 0013|0014 for PnP). Fragile: with

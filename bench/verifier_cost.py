@@ -7,7 +7,7 @@ machine's load is printed beside it.
 
     .venv/bin/python -m bench.verifier_cost [--points 10060]
 
-Nothing here asserts; tests/solvers/test_forgeries.py holds the checked cases.
+Nothing here asserts; tests/verify/test_forgeries.py holds the checked cases.
 """
 
 from __future__ import annotations

@@ -169,7 +169,7 @@ ENDED_WITH_RESULT = ("succeeded", "cancelled")
 
 
 # The members of the service's job document and its progress (geocert.app.schemas.Job and
-# JobProgress; tests/solvers/test_forgeries_review7.py checks they agree).
+# JobProgress; tests/verify/test_forgeries_review7.py checks they agree).
 JOB_MEMBERS = ("id", "kind", "status", "created_at", "started_at", "finished_at", "progress", "result", "error",
                "links", "webhook")
 PROGRESS_MEMBERS = ("stage", "items_total", "items_done", "items_certified", "tracks_total", "tracks_done", "nodes",

@@ -44,7 +44,7 @@ NESTED = {("projective", "initial_pair_search"): {"pair": "object", "thresholds"
 # projective; kinds.reconstruction's matches stage, from pipelines.reconstruction.features). The
 # kind writes a stage through records.keep_declared (a member not declared here is not returned,
 # so a genuine result never holds one), and the verifier refuses one (records.check);
-# tests/solvers/test_records.py runs the pipeline and checks it declares all it writes. A record
+# tests/verify/test_records.py runs the pipeline and checks it declares all it writes. A record
 # nested in a stage is closed where listed; the maps keyed by data (registered_by, time_s) and the
 # lists of merges and verified pairs are figures kept as written.
 COMMON = ("name", "status", "reason", "elapsed_s", "cpu_s")

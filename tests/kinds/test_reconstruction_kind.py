@@ -301,7 +301,7 @@ class TestCamerasNotSearched:
         forgeries_refused(result)
 
     def test_model_house_from_tracks(self):
-        from tests.solvers.test_reconstruction import house_tracks
+        from tests.solvers.reconstruction.test_reconstruction import house_tracks
 
         _, _, tracks = house_tracks()
         result = solve_job({"kind": "reconstruction", "options": {"certificate": "full"}, "data": {
@@ -617,7 +617,7 @@ class TestPhotos:
         import cv2
 
         from geocert.solvers.reconstruction import render
-        from tests.solvers.test_reconstruction import aligned_rotation_errors
+        from tests.solvers.reconstruction.test_reconstruction import aligned_rotation_errors
 
         scene = render.box_scene(n_views=8, arc_deg=120, seed=1)
         images = [{"name": f"v{k}", "content": base64.b64encode(cv2.imencode(".png", scene.render(c))[1]).decode()}

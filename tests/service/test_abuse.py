@@ -444,7 +444,7 @@ def small(tmp_path_factory):
 def test_3_more_views_than_the_budget_are_refused_at_submission(small):
     """Direct autocalibration with 300 views ran 205 s past a time limit of 2 s (1000 views: 7.8
     GB): views are a budget figure, refused before the job is queued (the solvers also check the
-    clock within a stage's tightening: tests/solvers/test_autocalibration.py)."""
+    clock within a stage's tightening: tests/solvers/autocalibration/test_autocalibration.py)."""
     _, client = small
     data = scenes.make_scene(12, 0.1, seed=5).job_data()
     answer = problem(client.post("/v1/jobs", json={"kind": "autocalibration", "data": data,

@@ -10,7 +10,7 @@ import json
 
 import pytest
 
-from tests.solvers.test_forgeries import rehash, stored
+from tests.verify.test_forgeries import rehash, stored
 
 
 @pytest.fixture(scope="module")

@@ -37,7 +37,7 @@ ROUNDING = 1e-14
 # where this allowance, not the others, admits a residual: 0.44 to 1.37 times 1e-16 of it (the 7
 # far-offset maps of bench.hostile_maps, 2 georeferenced resections), so 1e-14 leaves a margin of
 # about 70; a program coefficient wrong by 1e-6 of itself is still refused on georeferenced data
-# (tests/solvers/test_hostile_maps.py).
+# (tests/solvers/fractional/test_hostile_maps.py).
 TERMS_ROUNDING = 1e-14
 
 

@@ -5,7 +5,7 @@ determinacy "certified": true) is refused, as verify.check_members refuses one o
 own members or of an object one level down (docs/certificate.md, "Members").
 
 Each record is listed once, here, beside the writer it is read from; the writers' own output is
-checked against these lists by the tests (tests/solvers/test_records.py), so that neither can
+checked against these lists by the tests (tests/verify/test_records.py), so that neither can
 drift without a test failing. Older forms of a record are accepted with exactly the members their
 writers wrote (the lists below hold every member a form of the record was written with)."""
 

@@ -2,7 +2,7 @@
 autocalibration stage's motion warnings), in one place: the verifier refuses a warning of any other
 code (records.WARNING), which no check reads and a reader would take for the product's word (a
 "reconstruction_certified" warning beside a rig 4 of whose 6 cameras are certified).
-tests/solvers/test_records.py collects the codes the source writes and checks they are listed here."""
+tests/verify/test_records.py collects the codes the source writes and checks they are listed here."""
 
 from __future__ import annotations
 

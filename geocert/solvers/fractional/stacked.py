@@ -5,7 +5,7 @@ branched functionals (the leaves' relaxations by leaf).
 
 Each check is the per-item check (items.py, proof.py, verify.py) on stacked arrays, with the
 same tolerances; the relaxation is rebuilt here with a leading axis over tracks, row for row as
-``Relaxation.relaxation`` builds it (tests/solvers/test_stacked_verification.py compares the
+``Relaxation.relaxation`` builds it (tests/verify/test_stacked_verification.py compares the
 two). A track any check here refuses, or whose document does not have that shape, is not
 reported proven: the verifier then checks it alone, and its report names the failure. So this
 path can only ever accept what it has checked; it never decides a refusal.

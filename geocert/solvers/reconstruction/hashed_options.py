@@ -26,7 +26,7 @@ from geocert.solvers.core.strict import Invalid, number
 from geocert.solvers.reconstruction.camera_claim import MAX_REL_GAP
 
 # What the earlier form left out, at the value a request naming none of them got while that form
-# was written (ReconstructionOptions' defaults then; tests/solvers/test_reconstruction_hash.py
+# was written (ReconstructionOptions' defaults then; tests/solvers/reconstruction/test_reconstruction_hash.py
 # checks they agree but for radial_distortion, whose default became "auto" after that form).
 EARLIER_DEFAULTS: dict[str, Any] = {"camera_rel_gap": 1e-2, "intrinsics": {}, "radial_distortion": "off",
                                     "autocalibration": "stratified", "autocalibration_rel_gap": 1e-5,

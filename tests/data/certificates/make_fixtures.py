@@ -1,5 +1,5 @@
 """Write the genuine full certificates the verifier's compatibility and property tests read
-(tests/solvers/test_stored_certificates.py, test_forgeries.py): one small solved job per
+(tests/verify/test_stored_certificates.py, test_forgeries.py): one small solved job per
 certified kind and proof shape, each stored as the result document the service returns (the
 certificate inside it, and for a reconstruction its camera certificate).
 
@@ -89,7 +89,7 @@ def resection_l1l1() -> dict:
 
 def resection_caps() -> dict:
     """A 50-point camera with four outliers, L2L1: node tightening and per-term caps
-    (tests/solvers/test_map_caps.py's scene)."""
+    (tests/solvers/fractional/test_map_caps.py's scene)."""
     rng = np.random.default_rng(seed("caps", "fixture", "4"))
     _, source, target = scene(rng, "resection", 50)
     target = target + rng.normal(size=target.shape)
@@ -126,7 +126,7 @@ def autocalibration_stratified() -> dict:
 
 def autocalibration_five_views() -> dict:
     """Five views of 12 points (make_scene seed 0): a scene whose metric programs have equality
-    rows with every coefficient below 1/2 (the subnormal forgeries of tests/solvers/test_forgeries.py)."""
+    rows with every coefficient below 1/2 (the subnormal forgeries of tests/verify/test_forgeries.py)."""
     from geocert.solvers.autocalibration import scenes
 
     scene = scenes.make_scene(5, 0.1, points=12, seed=0)

@@ -1,0 +1,136 @@
+"""The estimators import nothing above them: no module of geocert/solvers imports the verifier,
+the kinds, the app, the workers or the job runner (kinds call solvers, never the reverse). The
+verifier (geocert/verify) imports nothing above it either: it finds each kind's adapter in its own
+registry (verify/adapters.py), not the kinds'."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1] / "geocert"
+ABOVE = ("geocert.kinds", "geocert.app", "geocert.workers", "geocert.jobs", "geocert.pipelines")
+ABOVE_SOLVERS = ("geocert.verify", *ABOVE)
+KNOWN: dict = {}
+
+
+def imported(path: Path) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module)
+        elif isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+    return names
+
+
+def imports_above(folder: str, above: tuple) -> dict:
+    """Each module of ``folder`` that imports a module of ``above``, with those it imports."""
+    found = {}
+    for path in sorted((ROOT / folder).rglob("*.py")):
+        names = {name for name in imported(path) if name.startswith(above)}
+        if names:
+            found[str(path.relative_to(ROOT))] = names
+    return found
+
+
+def test_no_solver_module_imports_a_layer_above_it():
+    """The verifier included: a solver's self-check reaches it through solvers.core.self_check."""
+    assert imports_above("solvers", ABOVE_SOLVERS) == KNOWN
+
+
+def test_no_verifier_module_imports_a_layer_above_it():
+    assert imports_above("verify", ABOVE) == {}
+
+
+def test_a_solvers_self_check_is_the_verifiers():
+    """With GEOCERT_SELF_VERIFY=1 (the suites run so), a certified solve is checked by the verifier
+    through the hook it installs: a verifier that refuses fails the solve."""
+    import numpy as np
+    import pytest
+
+    from geocert.solvers.core import self_check
+    from geocert.solvers.fractional.triangulation import triangulate
+
+    cameras = np.array([[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]], [[1, 0, 0, -1], [0, 1, 0, 0], [0, 0, 1, 0]]],
+                       dtype=float)
+    points = np.array([[0.01, 0.02], [-0.19, 0.021]])
+    assert triangulate(cameras, points).certified
+    installed, seen = self_check._check, []
+
+    def refusing(kind, arrays, options, claim):
+        seen.append(kind)
+        raise self_check.SelfCheckFailed("refused")
+    self_check.install(refusing)
+    try:
+        with pytest.raises(self_check.SelfCheckFailed):
+            triangulate(cameras, points)
+    finally:
+        self_check.install(installed)
+    assert seen == ["triangulation"]
+    assert installed.__module__ == "geocert.verify.checks"
+
+
+def test_the_verifier_checks_every_kind_without_the_service():
+    """A third party's verifier: stored certificates of every certifying kind verify, and a
+    stereo_lines document is refused saying why, without geocert.kinds (or anything above the
+    solvers) ever imported."""
+    import subprocess
+    import sys
+
+    code = """
+import json, sys
+from pathlib import Path
+from geocert.verify.checks import verify_any
+folder = Path("tests/data/certificates")
+names = sorted(p.stem for p in folder.glob("*.json") if not p.stem.startswith("make"))
+valid = {name: verify_any(json.loads((folder / f"{name}.json").read_text())).valid for name in names}
+estimate = verify_any({"kind": "stereo_lines", "status": "estimate", "pairs": []})
+above = sorted({m.split(".")[1] for m in sys.modules if m.startswith("geocert.") and m.split(".")[1] in
+                ("kinds", "app", "workers", "jobs", "pipelines")})
+print(json.dumps({"valid": valid, "estimate": estimate.first_failure, "above": above}))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT.parent)
+    assert out.returncode == 0, out.stderr[-2000:]
+    import json
+
+    seen = json.loads(out.stdout.strip().splitlines()[-1])
+    assert len(seen["valid"]) >= 7 and all(seen["valid"].values()), seen["valid"]
+    assert seen["estimate"]["check"] == "format" and "never certified" in seen["estimate"]["detail"]
+    assert seen["above"] == []
+
+
+def test_a_served_kind_registered_with_another_contract_is_refused():
+    import dataclasses
+
+    import pytest
+
+    from geocert.verify.adapters import VERIFIED_KINDS, register
+
+    known = VERIFIED_KINDS["triangulation"]
+    assert register(known) is known
+    with pytest.raises(ValueError):
+        register(dataclasses.replace(known, item_key="points"))
+    assert VERIFIED_KINDS["triangulation"] is known
+
+
+def test_the_verifiers_result_members_are_the_kinds_result_models():
+    """The members the verifier lets a result hold (VerifiedKind.members) are its kind's result
+    model's, one level down included; a model with one more member is refused at registration."""
+    import dataclasses
+
+    import pytest
+    from pydantic import create_model
+
+    from geocert.kinds import KINDS
+    from geocert.kinds.base import result_members
+    from geocert.verify.adapters import VERIFIED_KINDS, register
+
+    for kind in KINDS:
+        expected = result_members(kind.result_model) if kind.certifies else ()
+        assert VERIFIED_KINDS[kind.name].members == expected, kind.name
+    model = KINDS.get("triangulation").result_model
+    wider = create_model("WiderResult", __base__=model, certified=(bool, True))
+    known = VERIFIED_KINDS["triangulation"]
+    with pytest.raises(ValueError):
+        register(dataclasses.replace(known, members=result_members(wider)))
