@@ -1,10 +1,12 @@
-"""The Celery application: Redis as broker, JSON only, acknowledgement after the work is done."""
+"""The Celery application: Redis as broker, JSON only, acknowledgement after the work is done.
+
+A leaf: it imports none of the tasks, nor the worker's signal handlers (workers.signals), which
+Celery imports with the tasks (``include``) in a worker only; the API names tasks through it."""
 
 from __future__ import annotations
 
 
 from celery import Celery
-from celery.signals import worker_process_init, worker_ready, worker_shutdown
 
 from geocert.settings import get_settings, redis_url
 from geocert.workers.redis_server import broker_url
@@ -16,7 +18,7 @@ WEBHOOK_QUEUE = "webhooks"
 
 def make_celery() -> Celery:
     settings = get_settings()
-    app = Celery("geocert", broker=broker_url(redis_url()), include=["geocert.workers.tasks", "geocert.workers.webhooks"])
+    app = Celery("geocert", broker=broker_url(redis_url()), include=["geocert.workers.tasks", "geocert.workers.webhooks", "geocert.workers.signals"])
     app.conf.update(
         task_serializer="json",
         accept_content=["json"],
@@ -48,55 +50,3 @@ def make_celery() -> Celery:
 
 
 celery_app = make_celery()
-
-
-@worker_process_init.connect
-def _json_logs(**_) -> None:
-    from geocert.workers import logs
-
-    logs.configure()
-    limit_memory(get_settings().worker_memory_mb)
-
-
-def limit_memory(megabytes: int) -> None:
-    """Bound this solver process's address space (GEOCERT_WORKER_MEMORY_MB; 0: unbounded): an
-    allocation past it fails (MemoryError, or OpenCV's "Insufficient memory") in the task that made
-    it, whose job then fails with the reason (workers.tasks), instead of the kernel killing a
-    process (or the machine swapping) for one client's job."""
-    import resource
-
-    if megabytes > 0:
-        limit = megabytes << 20
-        _, hard = resource.getrlimit(resource.RLIMIT_AS)
-        resource.setrlimit(resource.RLIMIT_AS, (limit if hard == resource.RLIM_INFINITY else min(limit, hard), hard))
-
-
-_HEARTBEAT = None
-
-
-@worker_ready.connect
-def _start_heartbeat(sender=None, **_) -> None:
-    """From the moment the worker takes tasks, it beats (``workers.heartbeat``; read by /readyz)."""
-    global _HEARTBEAT
-    from geocert.workers.heartbeat import Heartbeat
-
-    from geocert.workers.reaper import reap
-    from geocert.jobs.store import JobStore
-    from geocert.workers.tasks import end_jobs_past_clock
-
-    name = getattr(sender, "hostname", None) or "geocert@unknown"
-    settings = get_settings()
-    if SOLVE_QUEUE not in sender.app.amqp.queues.consume_from:  # a webhook worker: it renews its leases only
-        _HEARTBEAT = Heartbeat(redis_url(), name, solvers=None).start()
-        return
-    jobs = JobStore.from_url(redis_url(), settings.result_ttl_s, socket_timeout=10, socket_connect_timeout=5)
-    every_s = 5.0
-    solvers = getattr(getattr(sender, "controller", None), "concurrency", None) or 1
-    _HEARTBEAT = Heartbeat(redis_url(), name, reaper=lambda: reap(jobs, settings.visibility_timeout_s, every_s),
-                           reap_every_s=every_s, solvers=solvers, clock=lambda: end_jobs_past_clock(jobs)).start()
-
-
-@worker_shutdown.connect
-def _stop_heartbeat(**_) -> None:
-    if _HEARTBEAT is not None:
-        _HEARTBEAT.stop()

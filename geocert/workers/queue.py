@@ -1,34 +1,24 @@
-"""Putting a job's work on the queue and taking it off: what the API asks of the workers, without
-importing the tasks' solver code at module level."""
+"""Putting a job's work on the queue and taking it off: what the API asks of the workers, naming
+their tasks without importing them (the API process imports no task code)."""
 
 from __future__ import annotations
 
 import functools
-import threading
 
 from geocert.workers.priorities import FIRST, LATER
 from geocert.jobs.store import JobStore
 
-_LOCK = threading.Lock()
-_SOLVE_CHUNK = None
-_SOLVE_CHUNK_FAILED = None
+SOLVE_CHUNK = "geocert.solve_chunk"
+SOLVE_CHUNK_FAILED = "geocert.solve_chunk_failed"
 
 
-def _solve_chunk_task():
-    """The solve task, resolved once under a lock: Celery's task objects are lazy proxies whose
-    first evaluation is not thread-safe, and the API submits from many threads at once (a burst
-    of first submissions answered 500 with AttributeError: 'PromiseProxy' ... '_Proxy__local').
-    Its errback (``solve_chunk_failed``) is resolved with it."""
-    global _SOLVE_CHUNK, _SOLVE_CHUNK_FAILED
-    with _LOCK:
-        if _SOLVE_CHUNK is None:
-            from geocert.workers.tasks import solve_chunk, solve_chunk_failed
+def _task(name: str, *args):
+    """The task ``name`` with ``args``, as a signature by its name: the workers have its code, the
+    API process never imports it (nor the solvers behind it). A result is never kept (the job
+    store holds them)."""
+    from geocert.workers.celery_app import celery_app
 
-            solve_chunk_failed.name  # noqa: B018 (evaluates the proxies here, under the lock)
-            solve_chunk.name  # noqa: B018
-            _SOLVE_CHUNK_FAILED = solve_chunk_failed
-            _SOLVE_CHUNK = solve_chunk
-    return _SOLVE_CHUNK
+    return celery_app.signature(name, args=args, options={"ignore_result": True})
 
 
 # After the cooperative stop a task is given (``task_deadline_s``), Celery's soft time limit
@@ -56,9 +46,8 @@ def task_options(kind_name: str, item_bound_s: float | None, items: int, job_lim
     """Celery's options for such a task: soft and hard time limits after its deadline, and the
     errback that ends its job ``failed`` (keeping what it finished) when the hard limit kills it,
     so that a killed task is never delivered again."""
-    _solve_chunk_task()
     soft = task_deadline_s(kind_name, item_bound_s, items, job_limit_s) + SOFT_AFTER_S
-    return {"soft_time_limit": soft, "time_limit": soft + HARD_AFTER_S, "link_error": _SOLVE_CHUNK_FAILED.s()}
+    return {"soft_time_limit": soft, "time_limit": soft + HARD_AFTER_S, "link_error": _task(SOLVE_CHUNK_FAILED)}
 
 
 def _chunk_group(meta: dict, request_id: str | None):
@@ -68,8 +57,7 @@ def _chunk_group(meta: dict, request_id: str | None):
     (priorities.FIRST, LATER): another key's job is not queued behind all of a large job's tasks."""
     from celery import group
 
-    solve_chunk = _solve_chunk_task()
-    return group([solve_chunk.s(meta["id"], start, stop, request_id).set(
+    return group([_task(SOLVE_CHUNK, meta["id"], start, stop, request_id).set(
                       task_id=task_id, priority=FIRST if index == 0 else LATER,
                       **task_options(meta["kind"], meta.get("item_time_bound_s"), stop - start,
                                      meta.get("job_time_limit_s")))
@@ -129,7 +117,7 @@ def withdraw_queued(store: JobStore, job_id: str) -> None:
     """A job ended while queued (``JobStore.cancel_if_queued``): its tasks are revoked and its end
     counted (metrics, webhook)."""
     from geocert.workers.celery_app import celery_app
-    from geocert.workers.tasks import after_end
+    from geocert.workers.endings import after_end
 
     for task_id in store.task_ids(job_id):
         celery_app.control.revoke(task_id)

@@ -38,9 +38,10 @@ from geocert.jobs.runner import (abs_gap_of, assemble, item_counts, item_sums, j
                            result_fragment, result_json, result_shell, solve_items, stats_from, streams_result)
 from geocert.kinds import get_kind, options_from
 from geocert.workers import logs, metrics
+from geocert.workers.endings import after_end
 from geocert.workers.celery_app import celery_app
 from geocert.workers.priorities import LATER
-from geocert.workers.queue import SOFT_AFTER_S, task_deadline_s, task_options
+from geocert.workers.queue import SOFT_AFTER_S, SOLVE_CHUNK, SOLVE_CHUNK_FAILED, task_deadline_s, task_options
 from geocert.jobs.store import REDIS_GONE, JobStore, shared_store as store
 from celery.exceptions import SoftTimeLimitExceeded
 
@@ -114,7 +115,7 @@ class ProgressPublisher:
         return self.cancelled or self.overrun or self.job_ended
 
 
-@celery_app.task(name="geocert.solve_chunk", bind=True, max_retries=5)
+@celery_app.task(name=SOLVE_CHUNK, bind=True, max_retries=5)
 def solve_chunk(self, job_id: str, start: int, stop: int, request_id: str | None = None, deferrals: int = 0) -> None:
     """Solve items ``start`` to ``stop - 1`` of a job (or the first of them, within the budget).
 
@@ -324,7 +325,7 @@ def end_over_time(jobs: JobStore, job_id: str, kind, options, ran_s: float, limi
                    None, kind=kind, options=options)
 
 
-@celery_app.task(name="geocert.solve_chunk_failed")
+@celery_app.task(name=SOLVE_CHUNK_FAILED)
 def solve_chunk_failed(request, exc, traceback) -> None:
     """Celery's errback for a solve task that failed outside its own handling (run by the worker's
     main process): killed at its hard time limit, its solver process dead (out of memory, a
@@ -488,17 +489,3 @@ def _stored_result(jobs: JobStore, job_id: str, kind, options, unsolved, none_st
     stats = stats_from(sums, time.time() - (meta["started_at"] or meta["created_at"]))
     request = jobs.request(job_id) if kind.certifies and options.certificate == "full" else None
     return assemble(kind, request, options, items, stats), sums, stats
-
-
-def after_end(jobs: JobStore, job_id: str) -> None:
-    """After a job has ended (``JobStore.end`` or ``cancel_if_queued``): count it, and queue its
-    webhook if it has one."""
-    meta = jobs.get(job_id)
-    if meta is None:
-        return
-    metrics.record_job_end(jobs.r, meta)
-    log.info("job ended %s", meta["status"])
-    if meta.get("webhook"):
-        from geocert.workers.webhooks import queue_delivery
-
-        queue_delivery(job_id)

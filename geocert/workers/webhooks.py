@@ -29,6 +29,7 @@ from geocert.settings import get_settings
 from geocert.jobs.destinations import CheckedBackend, Refused, allowed_networks
 from geocert.workers import logs, metrics
 from geocert.workers.celery_app import celery_app
+from geocert.workers.endings import DELIVER_WEBHOOK, DELIVER_WEBHOOK_FAILED
 from geocert.jobs.store import shared_store as store
 
 log = logging.getLogger("geocert.webhooks")
@@ -79,7 +80,7 @@ def post(url: str, body: bytes, headers: dict[str, str]) -> tuple[str, str | Non
     return "failed", f"failed: no 2xx answer within {limit:g} s"
 
 
-@celery_app.task(name="geocert.deliver_webhook", bind=True, max_retries=None,
+@celery_app.task(name=DELIVER_WEBHOOK, bind=True, max_retries=None,
                  soft_time_limit=get_settings().webhook_timeout_s + 20, time_limit=get_settings().webhook_timeout_s + 30)
 def deliver_webhook(self, job_id: str, deferrals: int = 0) -> None:
     with logs.context(job_id=job_id):
@@ -128,7 +129,7 @@ def _attempt(task, jobs, meta: dict, settings) -> None:
         raise task.retry(args=(job_id,), kwargs={}, countdown=settings.webhook_backoff_s * 2 ** (attempt - 1))
 
 
-@celery_app.task(name="geocert.deliver_webhook_failed")
+@celery_app.task(name=DELIVER_WEBHOOK_FAILED)
 def deliver_webhook_failed(request, exc, traceback) -> None:
     """Errback of a delivery that ended outside its own handling (killed at its time limit): the
     record says ``failed``, never stays ``waiting`` for ever."""
@@ -140,8 +141,3 @@ def deliver_webhook_failed(request, exc, traceback) -> None:
                     last_error="failed: the attempt did not end within its time limit")
         if jobs.set_fields(job_id, webhook=hook):
             metrics.record_webhook(jobs.r, "failed")
-
-
-def queue_delivery(job_id: str) -> None:
-    """Queue a job's webhook on the webhook queue, with its errback."""
-    deliver_webhook.apply_async((job_id,), link_error=deliver_webhook_failed.s())

@@ -1,0 +1,62 @@
+"""A worker's lifecycle (Celery's signals, connected when Celery imports this module with the
+tasks, in a worker only): JSON logs and a memory bound in each solver process, and a heartbeat
+(with the reaper and the clock on past jobs) from the moment it takes tasks."""
+
+from __future__ import annotations
+
+from celery.signals import worker_process_init, worker_ready, worker_shutdown
+
+from geocert.settings import get_settings, redis_url
+from geocert.workers.celery_app import SOLVE_QUEUE
+
+
+@worker_process_init.connect
+def _json_logs(**_) -> None:
+    from geocert.workers import logs
+
+    logs.configure()
+    limit_memory(get_settings().worker_memory_mb)
+
+
+def limit_memory(megabytes: int) -> None:
+    """Bound this solver process's address space (GEOCERT_WORKER_MEMORY_MB; 0: unbounded): an
+    allocation past it fails (MemoryError, or OpenCV's "Insufficient memory") in the task that made
+    it, whose job then fails with the reason (workers.tasks), instead of the kernel killing a
+    process (or the machine swapping) for one client's job."""
+    import resource
+
+    if megabytes > 0:
+        limit = megabytes << 20
+        _, hard = resource.getrlimit(resource.RLIMIT_AS)
+        resource.setrlimit(resource.RLIMIT_AS, (limit if hard == resource.RLIM_INFINITY else min(limit, hard), hard))
+
+
+_HEARTBEAT = None
+
+
+@worker_ready.connect
+def _start_heartbeat(sender=None, **_) -> None:
+    """From the moment the worker takes tasks, it beats (``workers.heartbeat``; read by /readyz)."""
+    global _HEARTBEAT
+    from geocert.workers.heartbeat import Heartbeat
+
+    from geocert.workers.reaper import reap
+    from geocert.jobs.store import JobStore
+    from geocert.workers.tasks import end_jobs_past_clock
+
+    name = getattr(sender, "hostname", None) or "geocert@unknown"
+    settings = get_settings()
+    if SOLVE_QUEUE not in sender.app.amqp.queues.consume_from:  # a webhook worker: it renews its leases only
+        _HEARTBEAT = Heartbeat(redis_url(), name, solvers=None).start()
+        return
+    jobs = JobStore.from_url(redis_url(), settings.result_ttl_s, socket_timeout=10, socket_connect_timeout=5)
+    every_s = 5.0
+    solvers = getattr(getattr(sender, "controller", None), "concurrency", None) or 1
+    _HEARTBEAT = Heartbeat(redis_url(), name, reaper=lambda: reap(jobs, settings.visibility_timeout_s, every_s),
+                           reap_every_s=every_s, solvers=solvers, clock=lambda: end_jobs_past_clock(jobs)).start()
+
+
+@worker_shutdown.connect
+def _stop_heartbeat(**_) -> None:
+    if _HEARTBEAT is not None:
+        _HEARTBEAT.stop()
