@@ -15,7 +15,7 @@ theirs), CPU seconds (the child's user + system time, every thread) and wall sec
 CPU over COLMAP's on the same photos. The machine's load is printed with each run: the timings are
 only comparable within one run of this bench.
 
-Sets (bench/photo_sets.py says where each comes from, its format, and how a test can use it):
+Sets (testing/photo_sets.py says where each comes from, its format, and how a test can use it):
 Middlebury multi-view stereo data, dinoSparseRing, templeRing and templeSparseRing (Seitz,
 Curless, Diebel, Scharstein and Szeliski, "A comparison and evaluation of multi-view stereo
 reconstruction algorithms", CVPR 2006); the Oxford Corridor sequence and its matches (Visual
@@ -50,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import camera_errors, colmap_baseline, machine_speed_ms, photo_sets
+from testing import camera_errors, colmap_baseline, machine_speed_ms, photo_sets
 
 # The ring options for the dinoSparseRing (docs/benchmarks.md, "Photos to tracks, and the K-known path"),
 # the only set the docs give options for: bench.reconstruction_images.RING_JOB_OPTIONS, not

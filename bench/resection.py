@@ -107,7 +107,7 @@ def fit_timed(problems, norm: str, gap: float, best_l2: list[float], time_limit:
 
 
 def baseline(name: str, problems, certified_costs: list[float]) -> None:
-    from bench.baselines import map_dlt_lm
+    from testing.baselines import map_dlt_lm
 
     worse, negative, times = 0, 0, []
     for (source, target), optimum in zip(problems, certified_costs):
@@ -125,7 +125,7 @@ def baseline(name: str, problems, certified_costs: list[float]) -> None:
 
 
 def scip_subsets(name: str, problems, count: int) -> None:
-    from bench.baselines import scip_map
+    from testing.baselines import scip_map
 
     rng = np.random.default_rng(0)
     ours_t, scip_t, reached = [], [], 0

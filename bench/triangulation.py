@@ -97,7 +97,7 @@ def solve_batched(cameras, tracks, norm: str, chunk: int) -> dict:
 
 def dlt_lm_all(cameras, tracks) -> list[float]:
     """OpenCV DLT + LM's CPU time on every track."""
-    from bench.baselines import dlt_lm
+    from testing.baselines import dlt_lm
 
     cpu = []
     for track in tracks:
@@ -130,7 +130,7 @@ def side_by_side(cameras, tracks, norm: str, ours: dict, chunk: int) -> None:
 
 
 def scip_sample(cameras, tracks, norm: str, sample, ours: dict) -> dict:
-    from bench.baselines import dlt_lm, scip_triangulate
+    from testing.baselines import dlt_lm, scip_triangulate
 
     times, agree, reached, box_held = [], 0, 0, 0
     for i in sample:
@@ -152,7 +152,7 @@ def scip_sample(cameras, tracks, norm: str, sample, ours: dict) -> dict:
 
 
 def dlt_lm_sample(cameras, tracks, sample, ours: dict) -> dict:
-    from bench.baselines import dlt_lm
+    from testing.baselines import dlt_lm
 
     behind, worse, below, times, cpu = 0, 0, 0, [], []
     for i in sample:
@@ -264,7 +264,7 @@ def floor_solve(cameras, tracks) -> int:
 
 
 def per_track_scipy(cameras, tracks) -> int:
-    from bench.baselines import dlt_leastsq
+    from testing.baselines import dlt_leastsq
 
     for views, points in tracks:
         dlt_leastsq(cameras[views], points)

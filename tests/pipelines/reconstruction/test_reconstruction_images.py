@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 from geocert.solvers.core.geometry import InputError
 from geocert.pipelines.reconstruction import features
 from geocert.solvers.reconstruction import calibrated
-from bench.camera_errors import align_rotations, rotation_angle_deg
+from testing.camera_errors import align_rotations, rotation_angle_deg
 from geocert.solvers.reconstruction.calibrated import CalibratedOptions, calibrated_reconstruction, refine_cameras
 from geocert.pipelines.reconstruction.features import (FeatureOptions, build_tracks, decode_image,
                                                      tracks_from_images)

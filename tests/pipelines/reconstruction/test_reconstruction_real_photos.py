@@ -5,7 +5,7 @@ evaluation of multi-view stereo reconstruction algorithms", CVPR 2006): 16 photo
 plaster temple on a turntable, ground-truth K, R, t. COLMAP with its defaults (pycolmap 4.2.1:
 SIFT, exhaustive matching, incremental mapping; bench/reconstruction_vs_colmap.py) registers 13 of
 the 16, median rotation error 0.53 degrees, focal length +0.7%. The set does not ship with
-geocert: the test skips naming the folder and where the photos come from (bench/photo_sets.py).
+geocert: the test skips naming the folder and where the photos come from (testing/photo_sets.py).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from __future__ import annotations
 import cv2
 import pytest
 
-from bench import camera_errors, photo_sets
+from testing import camera_errors, photo_sets
 from geocert.pipelines.reconstruction import features, pipeline
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 
@@ -24,7 +24,7 @@ COLMAP_ROTATION_MEDIAN_DEG = 0.53
 
 
 def photo_set(name: str):
-    """A bench photo set, or the test skipped naming where it comes from (bench/photo_sets.py)."""
+    """A bench photo set, or the test skipped naming where it comes from (testing/photo_sets.py)."""
     try:
         return photo_sets.load(name)
     except photo_sets.MissingSet as missing:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from geocert.solvers.reconstruction import calibrated
-from bench.camera_errors import align_rotations
+from testing.camera_errors import align_rotations
 from geocert.solvers.reconstruction.calibrated import CalibratedOptions, calibrated_reconstruction
 from geocert.pipelines.reconstruction.features import FeatureOptions, tracks_from_images
 from geocert.solvers.reconstruction.render import box_scene

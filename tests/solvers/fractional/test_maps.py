@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.baselines import map_dlt_lm
+from testing.baselines import map_dlt_lm
 from geocert.solvers.core.bnb import Box, BoxStatus
 from geocert.solvers.fractional.charts import MapChart, normaliser
 from geocert.solvers.core.conic import ConicStatus, solve_conic
@@ -178,7 +178,7 @@ class TestAgainstSCIP:
     few. SCIP's map and its bound are checked against our certificate on every instance; that
     SCIP also reaches its own gap is required only where it reliably does within its time limit
     (homographies): for resections it depends on the machine's speed. The limit is CPU time
-    (bench.baselines): on wall-clock time, a machine loaded by other work closed 0 and 1 of the
+    (testing.baselines): on wall-clock time, a machine loaded by other work closed 0 and 1 of the
     4 homographies, where 2 are required."""
 
     @pytest.mark.parametrize("norm", NORMS)
@@ -186,7 +186,7 @@ class TestAgainstSCIP:
         ("homography2", (4, 9), 4, 30, 2), ("resection", (6, 11), 2, 30, 0)])
     def test_small_instances(self, kind, sizes, instances, time_limit, must_close, norm):
         pytest.importorskip("pyscipopt")
-        from bench.baselines import scip_map
+        from testing.baselines import scip_map
 
         rng = np.random.default_rng(seed(kind, norm, "scip"))
         closed = checked = 0

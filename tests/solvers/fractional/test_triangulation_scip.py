@@ -7,7 +7,7 @@ import pytest
 
 pyscipopt = pytest.importorskip("pyscipopt")
 
-from bench.baselines import scip_triangulate
+from testing.baselines import scip_triangulate
 from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, triangulate
 

@@ -99,7 +99,7 @@ class PhotoSet:
 
 class MissingSet(FileNotFoundError):
     def __init__(self, key: str, path: Path, source: str):
-        super().__init__(f"photo set {key!r} not found at {path}: get it from {source} (see bench/photo_sets.py)")
+        super().__init__(f"photo set {key!r} not found at {path}: get it from {source} (see testing/photo_sets.py)")
         self.key, self.path, self.source = key, path, source
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from bench import camera_errors, photo_sets
+from testing import camera_errors, photo_sets
 
 
 def loaded(key: str) -> photo_sets.PhotoSet:
