@@ -46,7 +46,6 @@ machine and its load, printed with them.
 from __future__ import annotations
 
 import base64
-import http.server
 import json
 import os
 import threading
@@ -58,6 +57,7 @@ import httpx
 import numpy as np
 
 from bench.faults import FIGURES, cluster, cpu_seconds, peak_rss_kib, run
+from testing.receivers import Receiver
 
 TERMINAL = ("succeeded", "failed", "cancelled")
 ATTACKER, OTHER = {"X-API-Key": "attacker"}, {"X-API-Key": "other"}
@@ -341,7 +341,7 @@ def bench_stereo() -> None:
 def searched_tracks(tracks: int, job_time_limit_s: float) -> dict:
     """Tracks each solved by a search of its own (a scope limit, max_residual, sends every track
     of a batch to the search alone): milliseconds each, one after another in its batch."""
-    from tests.support import service_job
+    from testing.jobs import service_job
 
     return service_job(np.random.default_rng(7), tracks, views=4, max_residual=50.0, detail="brief",
                        time_limit_s=30, job_time_limit_s=job_time_limit_s)
@@ -391,33 +391,6 @@ def bench_clocks() -> None:
             attack(running, name, send)
             report("  what it kept", kept_and_stopped(running.client, sent["id"]))
         report("the machine meanwhile (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
-
-
-class Receiver:
-    """A webhook receiver on loopback: ``answer(handler)`` answers each POST (tests use it too)."""
-
-    def __init__(self, answer):
-        outer = self
-        self.received = 0
-
-        class Handler(http.server.BaseHTTPRequestHandler):
-            protocol_version = "HTTP/1.1"
-
-            def do_POST(self):
-                self.rfile.read(int(self.headers["Content-Length"]))
-                outer.received += 1
-                answer(self)
-
-            def log_message(self, *args):
-                pass
-
-        self.server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self.server.daemon_threads = True
-        threading.Thread(target=self.server.serve_forever, daemon=True).start()
-        self.url = f"http://127.0.0.1:{self.server.server_address[1]}/hook"
-
-    def close(self):
-        self.server.shutdown()
 
 
 def bench_webhooks() -> None:

@@ -26,21 +26,10 @@ import numpy as np
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import scenes
 from geocert.solvers.core.determinacy import fixes
+from testing.determinacy import cameras_looking_at_origin, project
 
 SHARED_DATA = Path(os.environ.get("GEOCERT_SHARED_DATA", "/work/shared/data"))
 BENCH_DATA = Path(os.environ.get("GEOCERT_BENCH_DATA") or Path(__file__).resolve().parents[2] / "bench-data")
-
-
-def cameras_looking_at_origin(centres: np.ndarray) -> np.ndarray:
-    K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
-    rng = np.random.default_rng(0)
-    return np.array([K @ np.hstack([R, -(R @ c)[:, None]]) for c in centres
-                     for R in [scenes.look_at(c, np.zeros(3), rng, up=np.array([0.0, 1.0, 0.0]))]])
-
-
-def project(cameras, X):
-    x = cameras @ np.append(X, 1.0)
-    return x[:, :2] / x[:, 2:3]
 
 
 def tally(rows: dict, name: str, interval: dict, truth: float) -> None:

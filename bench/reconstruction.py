@@ -27,7 +27,7 @@ from geocert.solvers.datasets import load_dinosaur
 from geocert.pipelines.reconstruction import pipeline
 from geocert.solvers.reconstruction import synthetic
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
-from tests.solvers.reconstruction.test_reconstruction import aligned_rotation_errors, house_tracks, vgg_pose, vgg_refit
+from testing.reconstruction import aligned_rotation_errors, house_tracks, vgg_pose, vgg_refit
 
 
 def run(name: str, tracks, sizes, options: ReconstructionOptions):
@@ -69,7 +69,7 @@ def main() -> None:
         row("synthetic 10 views, 0.5 px", out, total, 800.0,
             aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations)))
     if "house" in only:
-        cameras, points, tracks = house_tracks()
+        cameras, points, tracks = house_tracks(Path(args.data) / "oxford_house")
         out, total = run("house", tracks, [(768, 576)] * 10, ReconstructionOptions(autocalibration_time_limit_s=20))
         poses = [vgg_pose(P) for P in cameras]
         errors = aligned_rotation_errors([c.R if c.R is not None else np.eye(3) for c in out.cameras],

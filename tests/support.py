@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from testing.jobs import look_at, noisy_track, project, random_cameras, service_job  # noqa: F401 (the tests')
 
 ROOT = Path(__file__).resolve().parents[1]  # the project's checkout
 
@@ -41,35 +42,6 @@ def dinosaur_sample(step: int) -> tuple[np.ndarray, list]:
 
     cameras, tracks = load_dinosaur(shared_data("oxford_dinosaur"))
     return cameras, [(tracks[i].views, tracks[i].points) for i in range(0, len(tracks), step)]
-
-
-def look_at(centre: np.ndarray, target: np.ndarray, focal: float = 800.0) -> np.ndarray:
-    """A 3x4 camera K [R | -R c] at ``centre`` looking at ``target`` (640x480 image)."""
-    z = target - centre
-    z = z / np.linalg.norm(z)
-    x = np.cross([0.0, 1.0, 0.0], z)
-    x = x / np.linalg.norm(x)
-    y = np.cross(z, x)
-    R = np.stack([x, y, z])
-    K = np.array([[focal, 0, 320], [0, focal, 240], [0, 0, 1.0]])
-    return K @ np.hstack([R, -R @ centre[:, None]])
-
-
-def random_cameras(rng: np.random.Generator, count: int, spread: float = 2.0) -> np.ndarray:
-    return np.array([
-        look_at(rng.normal(size=3) * spread + np.array([0.0, 0.0, -8.0]), rng.normal(size=3) * 0.3)
-        for _ in range(count)
-    ])
-
-
-def project(cameras: np.ndarray, X: np.ndarray) -> np.ndarray:
-    proj = cameras @ X
-    return proj[:, :2] / proj[:, 2:3]
-
-
-def noisy_track(rng: np.random.Generator, cameras: np.ndarray, noise_px: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
-    X = np.append(rng.normal(size=3), 1.0)
-    return X, project(cameras, X) + rng.normal(size=(len(cameras), 2)) * noise_px
 
 
 def seed(*words: str) -> int:
@@ -116,17 +88,6 @@ def triangulation_job(rng, tracks: int, views: int, norm: str, noise: float = 3.
         entries.append({"views": chosen, "points": points.tolist()})
     return {"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": entries},
             "options": {"norm": norm, "certificate": "full"}}
-
-
-def service_job(rng, tracks: int, views: int = 4, **options) -> dict:
-    cameras = random_cameras(rng, views)
-    body_tracks = []
-    for _ in range(tracks):
-        chosen = sorted(rng.choice(views, size=int(rng.integers(2, views + 1)), replace=False).tolist())
-        _, points = noisy_track(rng, cameras[chosen])
-        body_tracks.append({"views": chosen, "points": points.tolist()})
-    return {"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": body_tracks},
-            "options": options}
 
 
 HOUSE_RANGES = {"focal": [400, 1000], "aspect": [0.9, 1.1], "skew": [-30, 30],

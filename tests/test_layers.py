@@ -134,3 +134,15 @@ def test_the_verifiers_result_members_are_the_kinds_result_models():
     known = VERIFIED_KINDS["triangulation"]
     with pytest.raises(ValueError):
         register(dataclasses.replace(known, members=result_members(wider)))
+
+
+def test_tests_and_benches_share_code_through_testing_only():
+    """What tests and benches share lives in testing/ (not installed): no test imports a bench,
+    no bench a test, and testing/ neither."""
+    found = {}
+    for folder, forbidden in (("tests", ("bench",)), ("bench", ("tests",)), ("testing", ("tests", "bench"))):
+        for path in sorted((ROOT.parent / folder).rglob("*.py")):
+            names = {name for name in imported(path) if name.split(".")[0] in forbidden}
+            if names:
+                found[str(path.relative_to(ROOT.parent))] = names
+    assert found == {}

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 import redis
 
-from bench.abuse import Receiver
+from testing.receivers import Receiver
 from geocert.solvers.autocalibration import scenes
 from geocert.workers.priorities import queue_lists
 from tests.servers import cluster, spawned

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from bench.bilinear import scene
+from testing.bilinear import scene
 from geocert.jobs.runner import parse_job, solve_job
 from geocert.solvers.bilinear import problem as pb
 from geocert.solvers.bilinear.options import BilinearOptions
@@ -157,7 +157,7 @@ def test_scip_optimum_lies_within_our_bounds(norm):
     optimum lies in [lower_bound, cost]. (SCIP closes the L1 instance in seconds; on L2 it stops at
     its time limit with the optimum found, our cost to 1e-8, and its gap open.)"""
     pytest.importorskip("pyscipopt")
-    from bench.bilinear import scip_bilinear
+    from testing.bilinear import scip_bilinear
 
     basis, points, *_ = scene(3, 8, 0.005, 100)
     fit = fit_frame(basis, points, BilinearOptions(norm=norm, rel_gap=1e-4))

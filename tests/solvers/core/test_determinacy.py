@@ -9,7 +9,7 @@ import functools
 import numpy as np
 import pytest
 
-from bench.determinacy import cameras_looking_at_origin, project
+from testing.determinacy import cameras_looking_at_origin, project
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import scenes
 from geocert.solvers.core.determinacy import curvature_intervals
@@ -239,7 +239,7 @@ class TestBilinear:
         return solve_job(job)["frames"][0]
 
     def test_intervals_hold_the_true_coefficients(self):
-        from bench.bilinear import scene
+        from testing.bilinear import scene
 
         inside = total = 0
         for seed in range(6):
@@ -253,7 +253,7 @@ class TestBilinear:
         assert inside >= 0.9 * total
 
     def test_a_nearly_dependent_basis_is_flagged(self):
-        from bench.bilinear import scene
+        from testing.bilinear import scene
 
         basis, points, *_ = scene(3, 20, 0.005, 50)
         basis[2] = basis[0] + 1e-4 * np.random.default_rng(1).normal(size=basis[0].shape)

@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bench.hostile_maps import options_for, problem, refused
+from testing.hostile_maps import options_for, problem, refused
 from geocert.verify import checks as verify
 from geocert.solvers.fractional import proof
 from geocert.solvers.fractional.items import MapItem, refused_by_verifier

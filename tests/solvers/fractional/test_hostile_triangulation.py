@@ -18,7 +18,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bench.hostile_triangulation import refused, scene
+from testing.hostile_triangulation import refused, scene
 from geocert.solvers.core.geometry import normalised_cameras
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.fractional.items import TrackItem

@@ -6,57 +6,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.linalg import rq
 from scipy.spatial.transform import Rotation
 
-from geocert.solvers.datasets import load_dinosaur, load_house
+from geocert.solvers.datasets import load_dinosaur
 from geocert.pipelines.reconstruction import claims, pipeline
 from geocert.solvers.reconstruction import projective, synthetic, upgrade
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.tracks import Observations
 
 from tests.support import shared_data
-
-
-def aligned_rotation_errors(estimated: list[np.ndarray], truth: list[np.ndarray]) -> np.ndarray:
-    """Degrees between R_i Q and the true R_i, Q the rotation aligning the frames best."""
-    M = sum(a.T @ b for a, b in zip(estimated, truth))
-    U, _, Vt = np.linalg.svd(M)
-    Q = U @ np.diag([1, 1, np.linalg.det(U @ Vt)]) @ Vt
-    return np.array([np.degrees(np.arccos(np.clip((np.trace((a @ Q).T @ b) - 1) / 2, -1, 1)))
-                     for a, b in zip(estimated, truth)])
-
-
-def house_tracks():
-    cameras, points, views = load_house(shared_data("oxford_house"))
-    by_point: dict[int, list] = {}
-    for v, seen in enumerate(views):
-        for index, pixel in zip(seen.point_indices, seen.pixels):
-            by_point.setdefault(int(index), []).append((v, pixel))
-    keys = [k for k, seen in sorted(by_point.items()) if len(seen) >= 2]
-    tracks = [(np.array([v for v, _ in by_point[k]]), np.array([p for _, p in by_point[k]])) for k in keys]
-    return cameras, points[keys], tracks
-
-
-def vgg_pose(P: np.ndarray):
-    P = P * np.sign(np.linalg.det(P[:, :3]))
-    K, R = rq(P[:, :3])
-    D = np.diag(np.sign(np.diag(K)))
-    K, R = K @ D, D @ R
-    return K / K[2, 2], R, np.linalg.solve(K, P[:, 3])
-
-
-def vgg_refit(cameras, points, tracks, image_size=(768, 576)):
-    """VGG's own House reconstruction adjusted under our camera model (one focal length, square
-    pixels, the principal point at the image's centre), started from VGG's mean focal length and
-    their cameras' rotations, translations and points: the reference that model can be held to."""
-    poses = [vgg_pose(P) for P in cameras]
-    f = np.mean([K[0, 0] for K, _, _ in poses])
-    cx, cy = image_size[0] / 2, image_size[1] / 2
-    start = upgrade.Metric(np.array([[f, 0, cx], [0, f, cy], [0, 0, 1]]), [R for _, R, _ in poses],
-                           [t for _, _, t in poses], points.copy(), [], False)
-    obs = Observations.from_tracks(tracks, len(cameras))
-    return upgrade.adjust(start, obs.view, obs.track, obs.pixel, 2.0)[0]
+from testing import reconstruction as shared_scenes
+from testing.reconstruction import aligned_rotation_errors, vgg_pose, vgg_refit  # noqa: F401
 
 
 class TestSynthetic:
@@ -405,6 +365,11 @@ RING_VIEWS = 40
 
 
 @pytest.fixture(scope="module")
+
+def house_tracks():
+    """The Oxford Model House's tracks (the calling test skips without the shared data)."""
+    return shared_scenes.house_tracks(shared_data("oxford_house"))
+
 def ring():
     """A dense ring (40 photos 9 degrees apart round an object, each point seen over a stretch of
     the ring, a 1500 px lens: Middlebury's templeRing's shape) in a shuffled file order."""
