@@ -16,6 +16,7 @@ from geocert.solvers.autocalibration import proofs, structure_check
 from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers
+from geocert.solvers.fractional import residual_claims
 
 STAGE_NAMES = {"stratified": ["affine", "metric"], "direct": ["direct"]}
 CLAIM_OPTIONS = ("method", "intrinsics", "rel_gap", "metric_rel_gap", "abs_gap", "chirality", "varying_focal",
@@ -98,7 +99,9 @@ class AutocalibrationVerification:
             if checked[name] is None and checked["method"] == "stratified":
                 checked[name] = getattr(defaults, name)
         try:
-            pr.AutocalibrationOptions(**{**checked, "intrinsics": dict(checked["intrinsics"] or {})}).check()
+            # the run-control options stated too (not hashed: a node limit of 0 states a run that never was)
+            run = residual_claims.run_control_values(pr.AutocalibrationOptions, options)
+            pr.AutocalibrationOptions(**{**checked, "intrinsics": dict(checked["intrinsics"] or {}), **run}).check()
         except (InputError, TypeError) as exc:
             raise Invalid("options", str(exc)) from exc
         return checked

@@ -56,7 +56,7 @@ from geocert.solvers.fractional import residual_claims
 from geocert.solvers.fractional.items import TRACKS, TrackItems
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.reconstruction import (calibration_claim, calibration_tie, camera_claim, depth_reversal_claim,
-                                           hashed_options, motion_claim)
+                                           hashed_options, motion_claim, run_control)
 from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
 
 ROUNDING = 1e-9  # relative: what JSON round trips and a recomputed cost may differ by
@@ -911,6 +911,7 @@ class ReconstructionItems(TrackItems):
                 raise Invalid("options", f"options/camera_rel_gap {checked['camera_rel_gap']!r} is beyond "
                                          f"{camera_claim.MAX_REL_GAP}: a camera would be certified whatever it costs")
         checked.update(hashed_options.checked(options))
+        run_control.check(options)  # not hashed: refused when the solver would refuse it
         return checked
 
     def scope_statement(self, options: dict) -> dict:
