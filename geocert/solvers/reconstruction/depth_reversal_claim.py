@@ -109,7 +109,7 @@ def check(summary: dict, cameras: list[dict], stages: list, current_form: bool =
         raise Invalid("returned", "summary/depth_reversal's verdict (ambiguous, adopted, poses_determined) or its "
                                   "statistic and cost ratio are not what its costs and noise give at the check's "
                                   f"thresholds ({MIRROR_CHI2:g} variances, {100 * MIRROR_MARGIN:g}%)")
-    _check_figures(figures, ambiguous, adopted, stages)
+    _check_figures(figures, ambiguous, adopted, stages, registered)
     # Each angle is the constructed twin's (depth_reversal.mirror_angles_deg), recomputed here from
     # the returned rotations (checked against P elsewhere) about the stated reference view.
     reference, angles = figures.get("reference_view"), figures.get("mirror_rotation_deg")
@@ -138,7 +138,7 @@ def check(summary: dict, cameras: list[dict], stages: list, current_form: bool =
                                       f"twin's angle for its view ({angle!r})")
 
 
-def _check_figures(figures: dict, ambiguous: bool, adopted: bool, stages: list) -> None:
+def _check_figures(figures: dict, ambiguous: bool, adopted: bool, stages: list, registered: list[dict]) -> None:
     """The record's other figures are of their types and ranges, and those the result shows are
     its: the rig returned (the twin's figures where it was adopted) fits the observations the
     bundle_adjustment stage kept, at the focal length of its K; every observation sent is the
@@ -172,9 +172,34 @@ def _check_figures(figures: dict, ambiguous: bool, adopted: bool, stages: list) 
     if shown is not None and not _close(figures[focal], shown):
         raise Invalid("returned", f"summary/depth_reversal/{focal} is {figures[focal]!r}, the rig returned has focal "
                                   f"length {shown!r:.40} (stages/bundle_adjustment/K)")
+    _check_returned_K(K, registered)
     if "observations_of_unregistered_views" in projective and projective.get("observations") != figures["observations"]:
         raise Invalid("returned", f"summary/depth_reversal/observations is {figures['observations']!r}, the projective "
                                   f"stage counts {projective.get('observations')!r:.40}")
+
+
+def _check_returned_K(K: Any, registered: list[dict]) -> None:
+    """The bundle_adjustment stage's K, which the record's focal length is read against, is the K
+    of the cameras returned when they share one (every registered camera's K the same: the shared
+    models; summary.calibration.K is checked to be it elsewhere), so the record is about the rig
+    returned, not a K the stage alone states. (Cameras with a focal length each, the "varying"
+    model, share none: the stage's K is then not tied here.)"""
+    Ks = [_matrix(c.get("K")) for c in registered if c.get("K") is not None]
+    if K is None or not Ks or any(k is None or not np.array_equal(k, Ks[0]) for k in Ks):
+        return
+    stated = _matrix(K)
+    if stated is None or not np.all(
+            np.abs(stated - Ks[0]) <= ROUNDING * max(float(np.abs(Ks[0]).max()), 1e-300)):
+        raise Invalid("returned", "stages/bundle_adjustment/K is not the K of the cameras returned (every registered "
+                                  "camera's), which the depth-reversal record's focal length is read against")
+
+
+def _matrix(value: Any) -> np.ndarray | None:
+    """A 3x3 matrix of finite numbers, or None."""
+    if not (isinstance(value, list) and len(value) == 3 and all(
+            isinstance(row, list) and len(row) == 3 and all(is_number(x) for x in row) for row in value)):
+        return None
+    return np.array(value, dtype=float)
 
 
 def _stopped(stages: list) -> bool:

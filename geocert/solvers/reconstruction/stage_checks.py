@@ -114,7 +114,7 @@ FIGURES = {
         "initial_pair_search/thresholds/min_median_angle_deg": "measure",
         "initial_pair_search/thresholds/max_forward_motion": "number",
         "initial_pair_search/thresholds/relaxations": "count",
-        "radial_distortion/k1": "number", "radial_distortion/chi2": "measure", "radial_distortion/threshold": "measure",
+        "radial_distortion/k1": "number", "radial_distortion/chi2": "number", "radial_distortion/threshold": "measure",
         "radial_distortion/k1_tested": "number"},
     "autocalibration": {
         "K": "calibration", "linear_K": "calibration", "points_used": "count",
@@ -125,7 +125,7 @@ FIGURES = {
         "starts/*/rms_px_before": "measure", "starts/*/rms_px_after_8_iterations": "measure",
         "starts/*/fit_cost": "measure", "starts/*/observations_fitting": "count",
         "principal_point/observations": "count", "principal_point/K_free": "calibration",
-        "principal_point/chi2": "measure", "principal_point/threshold": "measure"},
+        "principal_point/chi2": "number", "principal_point/threshold": "measure"},
 }
 COMMON_FIGURES = {"elapsed_s": "measure", "cpu_s": "measure"}
 
