@@ -58,7 +58,8 @@ def _close(value: Any, expected: float) -> bool:
     return is_number(value) and abs(value - expected) <= ROUNDING * max(abs(expected), 1e-300)
 
 
-def check(summary: dict, cameras: list[dict], stages: list, current_form: bool = False) -> None:
+def check(summary: dict, cameras: list[dict], stages: list, current_form: bool = False,
+          points: list | None = None) -> None:
     """Refuse a depth-reversal record that is not its verdict's (module docstring). ``current_form``:
     the document's hash is in the form every result since the check is written in, so a missing
     record is one removed, unless fewer than two cameras are posed or a stage shows a stop."""
@@ -110,6 +111,8 @@ def check(summary: dict, cameras: list[dict], stages: list, current_form: bool =
                                   "statistic and cost ratio are not what its costs and noise give at the check's "
                                   f"thresholds ({MIRROR_CHI2:g} variances, {100 * MIRROR_MARGIN:g}%)")
     _check_figures(figures, ambiguous, adopted, stages, registered)
+    if points is not None:
+        _check_observations(figures["observations"], summary, points)
     # Each angle is the constructed twin's (depth_reversal.mirror_angles_deg), recomputed here from
     # the returned rotations (checked against P elsewhere) about the stated reference view.
     reference, angles = figures.get("reference_view"), figures.get("mirror_rotation_deg")
@@ -192,6 +195,23 @@ def _check_returned_K(K: Any, registered: list[dict]) -> None:
             np.abs(stated - Ks[0]) <= ROUNDING * max(float(np.abs(Ks[0]).max()), 1e-300)):
         raise Invalid("returned", "stages/bundle_adjustment/K is not the K of the cameras returned (every registered "
                                   "camera's), which the depth-reversal record's focal length is read against")
+
+
+def _check_observations(observations: int, summary: dict, points: list) -> None:
+    """The observations the check was sent (every observation of every track, pipeline._run) are
+    tied to the data on every path (on the K-known one no stage counts them): at least those the
+    points returned hold (each point's track, checked against the certificate's data elsewhere)
+    and 2 for each track not returned (a track has 2 views at least), at most one a view for each
+    track (summary.tracks and views, checked against the stages and the points)."""
+    held = sum(len(p["observations"]) for p in points if isinstance(p, dict) and isinstance(p.get("observations"), list))
+    tracks, views = summary.get("tracks"), summary.get("views")
+    if not all(type(n) is int and n >= 0 for n in (tracks, views)):
+        return  # refused where the summary's counts are read
+    least, most = held + 2 * max(tracks - len(points), 0), tracks * views
+    if not least <= observations <= most:
+        raise Invalid("returned", f"summary/depth_reversal/observations is {observations!r}: the tracks sent hold from "
+                                  f"{least} (the points returned's observations, and 2 for each track not returned) "
+                                  f"to {most} (one a view for each track)")
 
 
 def _matrix(value: Any) -> np.ndarray | None:

@@ -272,7 +272,7 @@ def _check_pipeline_counts(result: dict, rel_gap: float, current_form: bool) -> 
             c.get("pose_determined") != poses for c in cameras if c.get("registered") is True and "pose_determined" in c):
         raise Invalid("returned", f"summary/poses_determined is {poses!r}: its warning (poses_not_determined) and "
                                   "every registered camera's pose_determined must say the same")
-    depth_reversal_claim.check(summary, cameras, result.get("stages") or [], current_form)
+    depth_reversal_claim.check(summary, cameras, result.get("stages") or [], current_form, points)
     doubtful = bool((len(bounded) >= 2 and beyond > DOUBTFUL_FRACTION * len(bounded))
                     or (removed and removed > DOUBTFUL_REMOVED * (removed + kept))
                     or (dropped and dropped > DOUBTFUL_DROPPED * (dropped + registered))
