@@ -15,7 +15,8 @@ from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.autocalibration import proofs, structure_check
 from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.geometry import InputError, number_array
-from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers
+from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
+from geocert.solvers.fractional import residual_claims
 
 STAGE_NAMES = {"stratified": ["affine", "metric"], "direct": ["direct"]}
 CLAIM_OPTIONS = ("method", "intrinsics", "rel_gap", "metric_rel_gap", "abs_gap", "chirality", "varying_focal",
@@ -98,7 +99,9 @@ class AutocalibrationVerification:
             if checked[name] is None and checked["method"] == "stratified":
                 checked[name] = getattr(defaults, name)
         try:
-            pr.AutocalibrationOptions(**{**checked, "intrinsics": dict(checked["intrinsics"] or {})}).check()
+            # the run-control options stated too (not hashed: a node limit of 0 states a run that never was)
+            run = residual_claims.run_control_values(pr.AutocalibrationOptions, options)
+            pr.AutocalibrationOptions(**{**checked, "intrinsics": dict(checked["intrinsics"] or {}), **run}).check()
         except (InputError, TypeError) as exc:
             raise Invalid("options", str(exc)) from exc
         return checked
@@ -389,6 +392,7 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
         raise Invalid("returned", "method or intrinsics differ from what the options give")
     if result.get("dual_absolute_quadric") != claim.get("dual_absolute_quadric"):
         raise Invalid("returned", "dual_absolute_quadric differs from the direct stage's claim")
+    _check_relaxation_figures(result, claim, options)
     if claim.get("dual_absolute_quadric") is None:  # a stage that found no quadric (not certified)
         for name in ("plane_at_infinity", "K", "Ks", "upgrade", "cameras", "points"):
             if result.get(name) is not None:
@@ -400,6 +404,34 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
     for name, value in expected.items():
         if not _derived_close(name, result.get(name), value, cameras, points, H):
             raise Invalid("returned", f"{name} is not what the quadric gives")
+
+
+def _check_relaxation_figures(result: dict, claim: dict, options: dict) -> None:
+    """The direct stage's summary states the relaxation it solved: its order is the options'
+    relaxation_order (the one the verifier builds the proof's programs at), its moment_rank and
+    eigenvalue_ratio the proof's when the stage is certified (the proof's are checked with it:
+    direct.check_rank), and otherwise figures a moment matrix of that order can have."""
+    from geocert.solvers.autocalibration import direct
+
+    stage = result["stages"][0]
+    summary = stage.get("certificate") if isinstance(stage, dict) else None
+    if not isinstance(summary, dict):
+        return
+    where = "stages/0/certificate"
+    order = options.get("relaxation_order")
+    if "order" in summary and not same(summary["order"], order):
+        raise Invalid("returned", f"{where}/order is {summary['order']!r:.40}: the relaxation solved is of the options' "
+                                  f"relaxation_order {order!r}")
+    proof = claim.get("proof") if claim.get("certified") is True and isinstance(claim.get("proof"), dict) else None
+    if proof is not None:
+        for name in ("moment_rank", "eigenvalue_ratio"):
+            if name in summary and not same(summary[name], proof.get(name)):
+                raise Invalid("returned", f"{where}/{name} is {summary[name]!r:.40}, its proof states "
+                                          f"{proof.get(name)!r:.40}")
+    try:
+        direct.check_rank(summary.get("moment_rank"), summary.get("eigenvalue_ratio"), order, where)
+    except Invalid as exc:
+        raise Invalid("returned", exc.detail) from exc
 
 
 def _derived_close(name: str, value: Any, expected: Any, cameras: np.ndarray, points: np.ndarray | None,

@@ -20,6 +20,7 @@ from geocert.solvers.core.coverage import extended, uncovered_part, widened
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
                                          numbers as _numbers, record as _record)
+from geocert.solvers.fractional import residual_claims
 
 CLAIM_OPTIONS = ("norm", "coefficients", "camera", "coefficient_bound", "camera_bound", "rel_gap", "abs_gap")
 MAX_ROUNDS = 64  # the solver's half rounds (search.TIGHTENING_ROUNDS) with room
@@ -43,7 +44,8 @@ class BilinearVerification:
             if not isinstance(checked[name], str):
                 raise Invalid("options", f"options/{name} must be a string")
         try:
-            BilinearOptions(**checked).check()
+            # the run-control options stated too (not hashed: a node limit of 0 states a run that never was)
+            BilinearOptions(**checked, **residual_claims.run_control_values(BilinearOptions, options)).check()
         except (InputError, TypeError) as exc:
             raise Invalid("options", str(exc)) from exc
         return checked

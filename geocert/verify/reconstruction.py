@@ -56,7 +56,7 @@ from geocert.solvers.fractional import residual_claims
 from geocert.solvers.fractional.items import TRACKS, TrackItems
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.reconstruction import (calibration_claim, calibration_tie, camera_claim, depth_reversal_claim,
-                                           hashed_options, motion_claim)
+                                           hashed_options, motion_claim, run_control)
 from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
 
 ROUNDING = 1e-9  # relative: what JSON round trips and a recomputed cost may differ by
@@ -272,7 +272,7 @@ def _check_pipeline_counts(result: dict, rel_gap: float, current_form: bool) -> 
             c.get("pose_determined") != poses for c in cameras if c.get("registered") is True and "pose_determined" in c):
         raise Invalid("returned", f"summary/poses_determined is {poses!r}: its warning (poses_not_determined) and "
                                   "every registered camera's pose_determined must say the same")
-    depth_reversal_claim.check(summary, cameras, result.get("stages") or [], current_form)
+    depth_reversal_claim.check(summary, cameras, result.get("stages") or [], current_form, points)
     doubtful = bool((len(bounded) >= 2 and beyond > DOUBTFUL_FRACTION * len(bounded))
                     or (removed and removed > DOUBTFUL_REMOVED * (removed + kept))
                     or (dropped and dropped > DOUBTFUL_DROPPED * (dropped + registered))
@@ -911,6 +911,7 @@ class ReconstructionItems(TrackItems):
                 raise Invalid("options", f"options/camera_rel_gap {checked['camera_rel_gap']!r} is beyond "
                                          f"{camera_claim.MAX_REL_GAP}: a camera would be certified whatever it costs")
         checked.update(hashed_options.checked(options))
+        run_control.check(options)  # not hashed: refused when the solver would refuse it
         return checked
 
     def scope_statement(self, options: dict) -> dict:

@@ -20,7 +20,8 @@ from __future__ import annotations
 from typing import Any
 
 from geocert.solvers.core.records import INTRINSIC_RANGES, NESTED_STAGE, WARNING, ByName, record
-from geocert.solvers.core.strict import Invalid
+from geocert.solvers.core.geometry import is_number
+from geocert.solvers.core.strict import Invalid, same
 
 # The statuses a stage ends with (pipeline._stage, _timed, _skip, _cancel; "running" is never
 # returned), and those of a stage that produced nothing (no point or camera it certifies).
@@ -86,6 +87,97 @@ STAGE_RECORDS = ByName({
 })
 
 
+# The stages' figures the verifier reads nowhere else: informational (they describe the run, a
+# check reads none of them: docs/certificate.md), but each of its type, so that no figure states
+# what no run produces: "count" a whole number >= 0, "measure" a number >= 0 (a time, an RMS, a
+# chi-square, a threshold, an angle), "number" any finite number (a distortion term, a motion
+# ratio), "calibration" a calibration matrix (3x3, upper triangular, bottom row [0, 0, 1], positive
+# focal lengths), and each at most MAX_FIGURE in magnitude; null where the stage has none. Keyed
+# (stage, path), a path's "*" any entry of a list. (A stage's K, and the summary's times, are
+# tied to what the verifier reads: _check_figures and verification._stage_calibration.)
+MAX_FIGURE = 1e12
+FIGURES = {
+    "projective": {
+        "views": "count", "tracks": "count", "initial_inliers": "count", "bundle_adjustments": "count",
+        "ba_iterations": "count", "focal_scale": "measure", "views_registered": "count", "points": "count",
+        "observations": "count", "observations_kept": "count", "outliers_removed": "count",
+        "observations_of_dropped_tracks": "count", "observations_of_unregistered_views": "count",
+        "rms_reprojection_px": "measure", "adjustments/whole": "count", "adjustments/local": "count",
+        "focal_rounds/*/focal_px": "measure", "focal_rounds/*/registration_focal_px": "measure",
+        "focal_rounds/*/k1": "number", "focal_rounds/*/refined_focal_px": "measure",
+        "focal_rounds/*/refined_k1": "number", "focal_rounds/*/fit_cost": "measure",
+        "focal_rounds/*/resumed_fit_cost": "measure", "focal_rounds/*/registered": "count",
+        "initial_pair_search/candidates": "count", "initial_pair_search/pair/inliers": "count",
+        "initial_pair_search/pair/shared": "count", "initial_pair_search/pair/median_angle_deg": "measure",
+        "initial_pair_search/pair/forward_motion": "number",
+        "initial_pair_search/thresholds/min_inliers": "count",
+        "initial_pair_search/thresholds/min_median_angle_deg": "measure",
+        "initial_pair_search/thresholds/max_forward_motion": "number",
+        "initial_pair_search/thresholds/relaxations": "count",
+        "radial_distortion/k1": "number", "radial_distortion/chi2": "number", "radial_distortion/threshold": "measure",
+        "radial_distortion/k1_tested": "number"},
+    "autocalibration": {
+        "K": "calibration", "linear_K": "calibration", "points_used": "count",
+        "rotation_noise_rad/estimated": "measure", "rotation_noise_rad/diac_family": "measure",
+        "rotation_noise_rad/plane_family": "measure", "stages/*/nodes": "count", "stages/*/elapsed_s": "measure"},
+    "bundle_adjustment": {
+        "K": "calibration", "observations_kept": "count", "rms_px_before": "measure", "rms_px_after": "measure",
+        "starts/*/rms_px_before": "measure", "starts/*/rms_px_after_8_iterations": "measure",
+        "starts/*/fit_cost": "measure", "starts/*/observations_fitting": "count",
+        "principal_point/observations": "count", "principal_point/K_free": "calibration",
+        "principal_point/chi2": "number", "principal_point/threshold": "measure"},
+}
+COMMON_FIGURES = {"elapsed_s": "measure", "cpu_s": "measure"}
+
+
+def _values(record: Any, path: list[str], where: str):
+    """(where, value) of each value at ``path`` in ``record`` ("*": each entry of a list)."""
+    if not path:
+        yield where, record
+        return
+    head, rest = path[0], path[1:]
+    if head == "*":
+        for index, entry in enumerate(record if isinstance(record, list) else []):
+            yield from _values(entry, rest, f"{where}/{index}")
+    elif isinstance(record, dict) and head in record:
+        yield from _values(record[head], rest, f"{where}/{head}")
+
+
+def _figure(value: Any, where: str, kind: str) -> None:
+    if value is None:
+        return
+    if kind == "calibration":
+        K = value
+        rows = isinstance(K, list) and len(K) == 3 and all(isinstance(r, list) and len(r) == 3 for r in K)
+        entries = [x for r in K for x in r] if rows else []
+        if not (rows and all(is_number(x) and abs(x) <= MAX_FIGURE for x in entries)
+                and K[1][0] == K[2][0] == K[2][1] == 0 and K[2][2] == 1 and K[0][0] > 0 and K[1][1] > 0):
+            raise Invalid("returned", f"{where} must be null or a calibration matrix (3x3, upper triangular, bottom row "
+                                      f"[0, 0, 1], positive focal lengths, entries at most {MAX_FIGURE:g}), got "
+                                      f"{value!r:.80}")
+        return
+    ok = is_number(value) and abs(value) <= MAX_FIGURE and (kind == "number" or value >= 0) \
+        and (kind != "count" or type(value) is int)
+    if not ok:
+        what = {"count": "a count (an integer >= 0)", "measure": "a number >= 0", "number": "a finite number"}[kind]
+        raise Invalid("returned", f"{where} must be null or {what} at most {MAX_FIGURE:g} (informational: it describes "
+                                  f"the run), got {value!r:.40}")
+
+
+def _check_figures(stage: dict, summary: dict) -> None:
+    """A stage's figures of their types (FIGURES), and its times the summary's (summary.time_s and
+    cpu_s restate each stage's elapsed_s and cpu_s, pipelines.reconstruction.claims.summarise)."""
+    name = stage["name"]
+    for path, kind in {**COMMON_FIGURES, **FIGURES.get(name, {})}.items():
+        for where, value in _values(stage, path.split("/"), f"stages/{name}"):
+            _figure(value, where, kind)
+    for own, total in (("elapsed_s", "time_s"), ("cpu_s", "cpu_s")):
+        stated = summary.get(total)
+        if isinstance(stated, dict) and name in stated and own in stage and not same(stated[name], stage[own]):
+            raise Invalid("returned", f"summary/{total}/{name} is {stated[name]!r:.40}, the stage's {own} "
+                                      f"{stage[own]!r:.40}")
+
+
 def _where(stage: str, path: str) -> str:
     return f"stages/{stage}/{path}"
 
@@ -134,7 +226,12 @@ def check_stages(result: dict) -> None:
             for inner, inner_kind in NESTED.get((name, member), {}).items():
                 if isinstance(stage.get(member), dict):
                     _container(stage[member].get(inner), inner_kind, _where(name, f"{member}/{inner}"))
+        _check_figures(stage, summary)
     _check_counts({stage["name"]: stage for stage in stages}, views, tracks)
+    for total in ("time_s", "cpu_s"):  # the summary's times: each a stage's (checked above), none another's
+        stated = summary.get(total)
+        if isinstance(stated, dict) and not set(stated) <= set(names):
+            raise Invalid("returned", f"summary/{total} names a stage the result has not: {sorted(stated)!r:.120}")
 
 
 def _check_counts(stages: dict, views: int, tracks: int) -> None:

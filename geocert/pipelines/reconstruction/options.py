@@ -12,13 +12,14 @@ import numpy as np
 from geocert.solvers.autocalibration.problem import AutocalibrationOptions
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.options import FractionalOptions
-from geocert.solvers.reconstruction import camera_claim
+from geocert.solvers.reconstruction import run_control
 
 AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")
 MAX_EXHAUSTIVE = 200  # images matched every pair with every other at most (19,900 pairs)
-CAMERA_MODELS = ("simple", "varying", "full")
-REGISTRATIONS = ("incremental", "projective")
-RADIAL_DISTORTIONS = ("auto", "on", "off")
+# The run-control options' ranges and words are stated in the solvers' layer, where the verifier
+# reads them too (solvers.reconstruction.run_control).
+CAMERA_MODELS, REGISTRATIONS, RADIAL_DISTORTIONS = run_control.CAMERA_MODELS, run_control.REGISTRATIONS, \
+    run_control.RADIAL_DISTORTIONS
 
 
 @dataclass
@@ -100,20 +101,8 @@ class ReconstructionOptions(FractionalOptions):
     # Stage 1's options that are not numbers: their allowed values.
     FEATURE_CHOICES = {"pairs": ("auto", "exhaustive", "retrieval", "sequential"), "ring": (True, False)}
 
-    # The gaps behind a certified point or camera are capped (camera_claim.MAX_REL_GAP and
-    # MAX_ABS_GAP): at rel_gap 0.999 or abs_gap 1e6 "certified" would hold whatever an item costs.
-    OPTION_RANGES = {**FractionalOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": camera_claim.MAX_REL_GAP},
-                     "rel_gap": {"ge": 0, "le": camera_claim.MAX_REL_GAP},
-                     "abs_gap": {"ge": 0, "le": camera_claim.MAX_ABS_GAP},
-                     "camera_rel_gap": {"ge": 0, "le": camera_claim.MAX_REL_GAP},
-                     "autocalibration_rel_gap": {"ge": 0, "le": camera_claim.MAX_REL_GAP},
-                     "autocalibration_max_nodes": {"ge": 1, "le": 1_000_000},
-                     "autocalibration_time_limit_s": {"gt": 0, "le": 3600},
-                     "structure_time_limit_s": {"gt": 0, "le": 3600},
-                     "autocalibration_points": {"ge": 10, "le": 100_000},
-                     "threshold_px": {"gt": 0, "le": 1000}, "min_inliers": {"ge": 6, "le": 100_000},
-                     "focal_prior_factor": {"gt": 0, "le": 100}, "focal_prior_rounds": {"ge": 1, "le": 10},
-                     "seed": {"ge": 0, "le": 2**31 - 1}}
+    # (The gaps behind a certified point or camera are capped there: run_control.RANGES.)
+    OPTION_RANGES = {**FractionalOptions.OPTION_RANGES, **run_control.RANGES}
 
     def check(self) -> None:
         FractionalOptions.check(self)
@@ -121,11 +110,11 @@ class ReconstructionOptions(FractionalOptions):
             self.intrinsics = {name: value for name, value in self.intrinsics.items() if value is not None}
         if self.camera_model not in CAMERA_MODELS:
             raise InputError("options/camera_model", f"must be one of {', '.join(CAMERA_MODELS)}")
-        if self.autocalibration_on_critical_motion not in ("skip", "search"):
+        if self.autocalibration_on_critical_motion not in run_control.ON_CRITICAL_MOTION:
             raise InputError("options/autocalibration_on_critical_motion", 'must be "skip" or "search"')
         if self.autocalibration not in AUTOCALIBRATION_METHODS:
             raise InputError("options/autocalibration", f"must be one of {', '.join(AUTOCALIBRATION_METHODS)}")
-        if self.principal_point not in ("auto", "centre"):
+        if self.principal_point not in run_control.PRINCIPAL_POINTS:
             raise InputError("options/principal_point", 'must be "auto" or "centre"')
         if self.radial_distortion not in RADIAL_DISTORTIONS:
             raise InputError("options/radial_distortion", f"must be one of {', '.join(RADIAL_DISTORTIONS)}")
@@ -133,7 +122,7 @@ class ReconstructionOptions(FractionalOptions):
             raise InputError("options/registration", f"must be one of {', '.join(REGISTRATIONS)}")
         if self.focal_prior_px is not None and not (isinstance(self.focal_prior_px, (int, float))
                                                     and math.isfinite(self.focal_prior_px)
-                                                    and 0 < self.focal_prior_px <= 1e6):
+                                                    and 0 < self.focal_prior_px <= run_control.FOCAL_PRIOR_LIMIT):
             raise InputError("options/focal_prior_px", "must be a positive number of pixels (at most 1e6), or null")
         for name in ("metric_rel_gap", "camera_rel_gap", "autocalibration_rel_gap", "autocalibration_max_nodes",
                      "autocalibration_time_limit_s", "structure_time_limit_s", "autocalibration_points", "threshold_px", "min_inliers",

@@ -38,7 +38,7 @@ from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.autocalibration.problem import CHIRALITY, ORDERS  # the options it reads (problem.py checks them)
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.core.strict import Invalid, charge, dual_vector, informational, record
+from geocert.solvers.core.strict import Invalid, charge, dual_vector, informational, record, same
 
 RANK_TOLERANCE = 1e-4  # numerical rank: eigenvalues of the moment matrix above this times the largest
 # Chirality pairs a program holds (one moment row each, about a hundred nonzeros): the signed
@@ -292,6 +292,25 @@ def derived(cameras: np.ndarray, points: np.ndarray | None, Q_in: np.ndarray, va
 
 # --- the proof --------------------------------------------------------------------------------
 
+def check_rank(rank, ratio, order: int, where: str) -> None:
+    """A moment matrix's rank and eigenvalue ratio as the rank test states them (informational,
+    but never what no moment matrix of this order has): a rank from 1 to the matrix's size (its
+    largest eigenvalue is positive: its corner y_0 is 1), a ratio of the second eigenvalue to the
+    first at most 1, and the two agreeing: rank 1 exactly when the ratio is within RANK_TOLERANCE."""
+    informational(rank, f"{where}/moment_rank", "integer")
+    informational(ratio, f"{where}/eigenvalue_ratio")
+    size = len(dr.monomials(order))
+    if rank is not None and not (type(rank) is int and 1 <= rank <= size):
+        raise Invalid("format", f"{where}/moment_rank is {rank!r:.40}: a rank from 1 to {size} (the order-{order} "
+                                "moment matrix's size), or null")
+    if ratio is not None and not ratio <= 1:
+        raise Invalid("format", f"{where}/eigenvalue_ratio is {ratio!r:.40}: the second eigenvalue over the first "
+                                "is at most 1")
+    if rank is not None and ratio is not None and (rank == 1) != (ratio <= RANK_TOLERANCE):
+        raise Invalid("format", f"{where}: moment_rank {rank} and eigenvalue_ratio {ratio!r:.12} disagree (rank 1 "
+                                f"exactly when the ratio is at most {RANK_TOLERANCE:g})")
+
+
 def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tuple]:
     """The bound a "direct_moment" proof establishes over the program's feasible set, and the
     orientations it excludes: each orientation of the setup (built with exclude=False) is either
@@ -299,8 +318,9 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
     record(proof, "proof", ("type", "order", "programs", "excluded"), ("moment_rank", "eigenvalue_ratio"))
     informational(proof.get("moment_rank"), "proof/moment_rank", "integer")  # they explain a bound, prove nothing
     informational(proof.get("eigenvalue_ratio"), "proof/eigenvalue_ratio")
-    if proof.get("order") != order:
+    if not same(proof.get("order"), order):
         raise Invalid("program", f"the proof is for relaxation order {proof.get('order')!r}, not {order}")
+    check_rank(proof.get("moment_rank"), proof.get("eigenvalue_ratio"), order, "proof")
     excluded, programs = proof.get("excluded"), proof.get("programs")
     if not isinstance(excluded, list) or not isinstance(programs, list):
         raise Invalid("format", "a direct proof has excluded and programs lists")

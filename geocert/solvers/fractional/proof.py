@@ -233,6 +233,11 @@ def program_allowance(item, solution, scale: float) -> np.ndarray:
     return allowance(ours, theirs, numerator_size[0], depth_size[0], depths[0], clear)
 
 
+# How far a root's stated bounds may lie beyond the proven ones the verifier recomputes
+# (_check_stated_root), as a share of their size: the solver pads them by 1e-7 (search.prove_root).
+ROOT_AGREEMENT = 1e-6
+
+
 def _check_root(program, F: np.ndarray, gamma: float, needed: float, root: dict, lower, upper,
                 witness: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The root region's bounds, as proven (the claimed ones widened by rounding: coverage.
@@ -266,7 +271,27 @@ def _check_root(program, F: np.ndarray, gamma: float, needed: float, root: dict,
     if proven is None:
         raise Invalid("root_region", f"bounds {lower.tolist()}, {upper.tolist()} are tighter than the proven "
                                      f"{proven_lower.tolist()}, {proven_upper.tolist()}")
+    _check_stated_root(claim_lo, claim_hi, lower, upper, proven_lower, proven_upper)
     return proven
+
+
+def _check_stated_root(claim_lo, claim_hi, lower, upper, proven_lower, proven_upper) -> None:
+    """The root's stated bounds agree with what is recomputed, not only enclose it: they are the
+    proven ones (padded by the solver by 1e-7 of their size), not looser by more than
+    ROOT_AGREEMENT of it. A looser bound would still be sound (the search must cover what is
+    stated), but it is not the proof the solver wrote: a document edited there is refused. (The
+    claimed box is the solver's choice around its own estimates, which a batched solve's barrier
+    makes inexact: it is held only to enclose the proven range strictly, above.)"""
+    if not np.all(stated_root_agrees(claim_lo, claim_hi, lower, upper, proven_lower, proven_upper)):
+        raise Invalid("root_region", f"bounds {lower.tolist()}, {upper.tolist()} are looser than the proven "
+                                     f"{proven_lower.tolist()}, {proven_upper.tolist()} by more than "
+                                     f"{ROOT_AGREEMENT:g} of their size: they are not the proof's")
+
+
+def stated_root_agrees(claim_lo, claim_hi, lower, upper, proven_lower, proven_upper) -> np.ndarray:
+    """_check_stated_root's test, per functional (the arrays' last axis; stacked.py's too)."""
+    size = 1 + np.abs(proven_lower) + np.abs(proven_upper)
+    return (lower >= proven_lower - ROOT_AGREEMENT * size) & (upper <= proven_upper + ROOT_AGREEMENT * size)
 
 
 def _finite_bounds(data, where: str) -> None:

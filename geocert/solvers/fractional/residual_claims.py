@@ -27,16 +27,25 @@ def checked_options(options_type: type, options: dict, run_control: bool = False
         checked[name] = number(options.get(name), f"options/{name}", "options")
     max_residual = options.get("max_residual")
     checked["max_residual"] = None if max_residual is None else number(max_residual, "options/max_residual", "options")
-    run = {name: number(options[name], f"options/{name}", "options") for name in RUN_CONTROL
-           if run_control and name in options and hasattr(options_type, name)}
-    for name, value in run.items():  # a count (its default an int: max_nodes) is a whole number, as the solver reads it
-        if type(getattr(options_type, name)) is int and not value.is_integer():
-            raise Invalid("options", f"options/{name}: must be an integer, got {options[name]!r:.40}")
+    run = run_control_values(options_type, options) if run_control else {}
     try:
         options_type(**checked, **run).check()
     except InputError as exc:
         raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
     return checked
+
+
+def run_control_values(options_type: type, options: dict, names: tuple[str, ...] = RUN_CONTROL) -> dict:
+    """The run-control options ``options`` states (of ``names``, those ``options_type`` has), read
+    strictly: each a finite JSON number (not a boolean), a count (its default an int: max_nodes)
+    a whole number, as the solver reads it. The caller passes them to ``options_type``'s check(),
+    which applies its OPTION_RANGES (the bilinear and autocalibration kinds do so too)."""
+    run = {name: number(options[name], f"options/{name}", "options") for name in names
+           if name in options and hasattr(options_type, name)}
+    for name, value in run.items():
+        if type(getattr(options_type, name)) is int and not value.is_integer():
+            raise Invalid("options", f"options/{name}: must be an integer, got {options[name]!r:.40}")
+    return {name: int(value) if type(getattr(options_type, name)) is int else value for name, value in run.items()}
 
 
 def scope(kind: str, domain: str, options: dict) -> dict:

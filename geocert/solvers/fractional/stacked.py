@@ -27,7 +27,8 @@ from geocert.solvers.core.coverage import uncovered_part
 from geocert.solvers.core.geometry import cost_roundings, lengths, norm_terms, normalised_cameras
 from geocert.solvers.core.strict import Invalid, dual_vector, numbers
 from geocert.solvers.fractional.convexity import verify_sublevel
-from geocert.solvers.fractional.proof import SCALE_RANGE, _sample_steps, allowance, raw_sizes, track_uncertainty
+from geocert.solvers.fractional.proof import (SCALE_RANGE, _sample_steps, allowance, raw_sizes, stated_root_agrees,
+                                             track_uncertainty)
 
 D = 3  # a track's program has 3 variables
 CHECKS = ("data", "claim", "objective", "scope", "program", "root_region", "tightening", "coverage",
@@ -397,7 +398,8 @@ def _root_holds(num, den, linear, gamma, F, claim_box, bounds, v0, members, n) -
     proven = safe_bounds(Q, A, b, Z, ConeSpec(nonneg=1, soc=(3,) * n), claim_lo, claim_hi, np.linalg.inv(F))
     low, high = proven[:, 0::2], -proven[:, 1::2]
     return (inside & np.all((claim_lo < low) & (low <= high) & (high < claim_hi), axis=1)
-            & np.all((bounds[:, 0] <= low) & (bounds[:, 1] >= high), axis=1))
+            & np.all((bounds[:, 0] <= low) & (bounds[:, 1] >= high), axis=1)
+            & np.all(stated_root_agrees(claim_lo, claim_hi, bounds[:, 0], bounds[:, 1], low, high), axis=1))
 
 
 def _relaxation_size(n: int, k: int, norm: str) -> tuple[int, int]:

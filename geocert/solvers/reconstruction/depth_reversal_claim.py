@@ -58,7 +58,8 @@ def _close(value: Any, expected: float) -> bool:
     return is_number(value) and abs(value - expected) <= ROUNDING * max(abs(expected), 1e-300)
 
 
-def check(summary: dict, cameras: list[dict], stages: list, current_form: bool = False) -> None:
+def check(summary: dict, cameras: list[dict], stages: list, current_form: bool = False,
+          points: list | None = None) -> None:
     """Refuse a depth-reversal record that is not its verdict's (module docstring). ``current_form``:
     the document's hash is in the form every result since the check is written in, so a missing
     record is one removed, unless fewer than two cameras are posed or a stage shows a stop."""
@@ -109,7 +110,9 @@ def check(summary: dict, cameras: list[dict], stages: list, current_form: bool =
         raise Invalid("returned", "summary/depth_reversal's verdict (ambiguous, adopted, poses_determined) or its "
                                   "statistic and cost ratio are not what its costs and noise give at the check's "
                                   f"thresholds ({MIRROR_CHI2:g} variances, {100 * MIRROR_MARGIN:g}%)")
-    _check_figures(figures, ambiguous, adopted, stages)
+    _check_figures(figures, ambiguous, adopted, stages, registered)
+    if points is not None:
+        _check_observations(figures["observations"], summary, points)
     # Each angle is the constructed twin's (depth_reversal.mirror_angles_deg), recomputed here from
     # the returned rotations (checked against P elsewhere) about the stated reference view.
     reference, angles = figures.get("reference_view"), figures.get("mirror_rotation_deg")
@@ -138,7 +141,7 @@ def check(summary: dict, cameras: list[dict], stages: list, current_form: bool =
                                       f"twin's angle for its view ({angle!r})")
 
 
-def _check_figures(figures: dict, ambiguous: bool, adopted: bool, stages: list) -> None:
+def _check_figures(figures: dict, ambiguous: bool, adopted: bool, stages: list, registered: list[dict]) -> None:
     """The record's other figures are of their types and ranges, and those the result shows are
     its: the rig returned (the twin's figures where it was adopted) fits the observations the
     bundle_adjustment stage kept, at the focal length of its K; every observation sent is the
@@ -172,9 +175,51 @@ def _check_figures(figures: dict, ambiguous: bool, adopted: bool, stages: list) 
     if shown is not None and not _close(figures[focal], shown):
         raise Invalid("returned", f"summary/depth_reversal/{focal} is {figures[focal]!r}, the rig returned has focal "
                                   f"length {shown!r:.40} (stages/bundle_adjustment/K)")
+    _check_returned_K(K, registered)
     if "observations_of_unregistered_views" in projective and projective.get("observations") != figures["observations"]:
         raise Invalid("returned", f"summary/depth_reversal/observations is {figures['observations']!r}, the projective "
                                   f"stage counts {projective.get('observations')!r:.40}")
+
+
+def _check_returned_K(K: Any, registered: list[dict]) -> None:
+    """The bundle_adjustment stage's K, which the record's focal length is read against, is the K
+    of the cameras returned when they share one (every registered camera's K the same: the shared
+    models; summary.calibration.K is checked to be it elsewhere), so the record is about the rig
+    returned, not a K the stage alone states. (Cameras with a focal length each, the "varying"
+    model, share none: the stage's K is then not tied here.)"""
+    Ks = [_matrix(c.get("K")) for c in registered if c.get("K") is not None]
+    if K is None or not Ks or any(k is None or not np.array_equal(k, Ks[0]) for k in Ks):
+        return
+    stated = _matrix(K)
+    if stated is None or not np.all(
+            np.abs(stated - Ks[0]) <= ROUNDING * max(float(np.abs(Ks[0]).max()), 1e-300)):
+        raise Invalid("returned", "stages/bundle_adjustment/K is not the K of the cameras returned (every registered "
+                                  "camera's), which the depth-reversal record's focal length is read against")
+
+
+def _check_observations(observations: int, summary: dict, points: list) -> None:
+    """The observations the check was sent (every observation of every track, pipeline._run) are
+    tied to the data on every path (on the K-known one no stage counts them): at least those the
+    points returned hold (each point's track, checked against the certificate's data elsewhere)
+    and 2 for each track not returned (a track has 2 views at least), at most one a view for each
+    track (summary.tracks and views, checked against the stages and the points)."""
+    held = sum(len(p["observations"]) for p in points if isinstance(p, dict) and isinstance(p.get("observations"), list))
+    tracks, views = summary.get("tracks"), summary.get("views")
+    if not all(type(n) is int and n >= 0 for n in (tracks, views)):
+        return  # refused where the summary's counts are read
+    least, most = held + 2 * max(tracks - len(points), 0), tracks * views
+    if not least <= observations <= most:
+        raise Invalid("returned", f"summary/depth_reversal/observations is {observations!r}: the tracks sent hold from "
+                                  f"{least} (the points returned's observations, and 2 for each track not returned) "
+                                  f"to {most} (one a view for each track)")
+
+
+def _matrix(value: Any) -> np.ndarray | None:
+    """A 3x3 matrix of finite numbers, or None."""
+    if not (isinstance(value, list) and len(value) == 3 and all(
+            isinstance(row, list) and len(row) == 3 and all(is_number(x) for x in row) for row in value)):
+        return None
+    return np.array(value, dtype=float)
 
 
 def _stopped(stages: list) -> bool:
