@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from geocert.solvers.verify import verify_any
-from tests.solvers.test_forgeries_review7 import ambiguous_rig  # noqa: F401 (a fixture: the nearly affine turntable)
+from geocert.verify.checks import verify_any
+from tests.verify.test_forgeries_review7 import ambiguous_rig  # noqa: F401 (a fixture: the nearly affine turntable)
 
 STORED = Path(__file__).parent.parent / "data" / "certificates"
 
@@ -292,7 +292,7 @@ def known_K() -> dict:
     """A K-known reconstruction (a 6-view turntable, 30 tracks, 0.5 px of noise, one observation
     40 px off): the depth-reversal check runs, and no stage counts the observations it was sent
     (180, every observation of every track)."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
     from geocert.solvers.reconstruction import synthetic
     from tests.support import reconstruction_data
 
