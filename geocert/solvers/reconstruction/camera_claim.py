@@ -153,9 +153,10 @@ def kept(source: list, target: list, matrix, set_aside: int | None) -> tuple[lis
     return ([s for s, out in zip(source, beyond) if not out], [t for t, out in zip(target, beyond) if not out])
 
 
-def statement(norm: str, rel_gap: float, set_aside: bool = True) -> str:
+def statement(norm: str, rel_gap: float, set_aside: bool = False) -> str:
     """What "certified" says of a camera, in words (the result's cameras stage and summary);
-    ``set_aside`` False: the words before the outlier rule (results that state no set_aside)."""
+    ``set_aside`` False (the default): the words before the outlier rule, for results whose
+    cameras state no set_aside; the pipeline states it."""
     k = "" if norm == "L2L2" else "2 * "
     aside = (f"; a camera not certified on all its points is resected again without the observations it misses by "
              f"more than {OUTLIER_SCALES:g} noise scales (read from its median residual), at most "
