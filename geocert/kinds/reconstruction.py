@@ -224,6 +224,10 @@ class ReconstructionCamera(BaseModel):
                                                        "searched, not certified by the search, a point behind it, "
                                                        "a gap beyond the tolerance, cancelled); null when certified")
     points: int = Field(description="points the resection used")
+    set_aside: int | None = Field(None, description="observations of certified points set aside as outliers before "
+                                                    "its bound (missed by more than 8 noise scales, at most 5% of "
+                                                    "them; camera_claim.outliers, recomputed by the verifier): points "
+                                                    "counts those kept; 0 when judged on all; null when not judged")
     degrees_of_freedom: int | None = Field(None, description="the returned camera's own: its pose (6) plus each "
                                                              "intrinsic the registered cameras do not share")
     tolerance: float | None = Field(None, description="certified means cost <= (1 + tolerance) lower_bound + abs_gap: "
@@ -622,16 +626,18 @@ class ReconstructionKind:
                 "pose_determined": camera.pose_determined, "mirror_rotation_deg": camera.mirror_rotation_deg,
                 "bound_reason": None if b is None else b.reason,
                 "points": 0 if b is None else b.points, "searched": bool(b is not None and b.result is not None),
-                "degrees_of_freedom": None if b is None else b.dof, "tolerance": None if b is None else b.tolerance}
+                "degrees_of_freedom": None if b is None else b.dof, "tolerance": None if b is None else b.tolerance,
+                "set_aside": None if b is None else b.set_aside}
 
     @staticmethod
     def _camera_items(out, options, bounds: dict) -> list[dict]:
         """Each camera's resection as a resection item (with its data), for the camera certificate."""
         from geocert.pipelines.reconstruction.pipeline import point_entries
-        from geocert.solvers.reconstruction.camera_claim import sources
+        from geocert.solvers.reconstruction.camera_claim import kept, sources
 
         views = sorted(bounds)
-        found = sources(point_entries(out.points), views)
+        found = [kept(source, target, out.cameras[view].P, bounds[view].set_aside)
+                 for view, (source, target) in zip(views, sources(point_entries(out.points), views))]
         return [{"view": view, "map": {"source": source, "target": target}, **map_document(bounds[view].result)}
                 for view, (source, target) in zip(views, found)]
 

@@ -69,12 +69,30 @@ def _views_of(cameras: list[dict]) -> list[dict]:
     return [camera for camera in cameras if camera.get("P") is not None and camera.get("K") is not None]
 
 
-def camera_maps(points: list[dict], views: list[int]) -> list[dict]:
-    """Each view's resection data from the returned points (camera_claim.sources: every
-    observation in that view of a certified finite point), as (source point, target pixel)."""
+def camera_maps(points: list[dict], cameras: list[dict]) -> list[dict]:
+    """Each camera's resection data from the returned points (camera_claim.sources: every
+    observation in that view of a certified finite point), as (source point, target pixel), less
+    the outliers the camera says it set aside (camera_claim.kept: the rule recomputed from its P;
+    refused when its set_aside is not the rule's count)."""
+    views = [int(camera["view"]) for camera in cameras]
     found = camera_claim.sources([(p.get("point"), p.get("at_infinity"), p.get("certified"), p.get("observations"))
                                   for p in points if isinstance(p, dict)], views)
-    return [{"source": source, "target": target} for source, target in found]
+    out = []
+    for camera, (source, target) in zip(cameras, found):
+        set_aside = camera.get("set_aside")
+        if set_aside is not None and not (type(set_aside) is int and set_aside >= 0):
+            raise Invalid("returned", f"cameras/{camera['view']}: set_aside must be a count, got {set_aside!r:.40}")
+        if set_aside:
+            if camera.get("status") == "not_run" or camera.get("P") is None:
+                raise Invalid("returned", f"cameras/{camera['view']}: a camera not judged sets nothing aside")
+            source_target = camera_claim.kept(source, target, np.asarray(camera["P"], dtype=float), set_aside)
+            if source_target is None:
+                raise Invalid("returned", f"cameras/{camera['view']}: set_aside {set_aside}, but the returned camera "
+                                          "sets aside none or another number of its observations as outliers "
+                                          "(camera_claim.outliers)")
+            source, target = source_target
+        out.append({"source": source, "target": target})
+    return out
 
 
 def _close(value: Any, expected: float, scale: float) -> bool:
@@ -282,7 +300,10 @@ def _check_pipeline_counts(result: dict, rel_gap: float, current_form: bool) -> 
                                   f"reconstruction {'' if doubtful else 'not '}doubtful, and the warning must say "
                                   "so exactly then")
     judged = any(c.get("degrees_of_freedom") is not None or c.get("searched") is True for c in cameras)
-    claim = camera_claim.statement(result.get("norm"), rel_gap)
+    # the words before the outlier rule, for a result no camera of which states set_aside (so none
+    # set any aside: each is held to all its points)
+    claim = camera_claim.statement(result.get("norm"), rel_gap,
+                                   any(c.get("set_aside") is not None for c in cameras if isinstance(c, dict)))
     for where, given in (("summary/camera_claim", summary.get("camera_claim")),
                          ("stages/cameras/claim", stages.get("cameras", {}).get("claim"))):
         if not (given == claim or (given is None and not judged)):
@@ -716,7 +737,7 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
             or len(maps) != len(searched):
         raise Invalid("returned", f"the camera certificate must hold one map per searched camera ({len(searched)}, "
                                   "in view order)")
-    expected_maps = camera_maps(result.get("points") or [], [int(camera["view"]) for camera in searched])
+    expected_maps = camera_maps(result.get("points") or [], searched)
     for k, camera in enumerate(searched):
         if maps[k] != expected_maps[k]:
             raise Invalid("returned", f"cameras/{camera.get('view')}: the camera certificate's map is not the "
@@ -772,13 +793,12 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) 
     certified), and no bound unless searched. A camera the cameras stage did not judge
     (``not_run``) states no figures."""
     norm = result.get("norm")
-    views = [int(camera["view"]) for camera in registered]
     dof = camera_claim.degrees_of_freedom([camera["K"] for camera in registered])
     stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "cameras"), None)
     if stage is not None and "degrees_of_freedom" in stage and stage["degrees_of_freedom"] != dof:
         raise Invalid("returned", f"stages/cameras/degrees_of_freedom is {stage['degrees_of_freedom']!r:.40}, the "
                                   f"returned cameras' K give {dof}")
-    for camera, entry in zip(registered, camera_maps(result.get("points") or [], views)):
+    for camera, entry in zip(registered, camera_maps(result.get("points") or [], registered)):
         where = f"cameras/{camera['view']}"
         certified, status = camera.get("certified"), camera.get("status")
         if certified not in (True, False) or (status == "optimal") != (certified is True):

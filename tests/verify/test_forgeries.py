@@ -935,7 +935,7 @@ def _moved_camera_result(result: dict, view: int, degrees: float, camera_rel_gap
                  "target": [o[1:] for p in result["points"] if p["point"] is not None
                             for o in p["observations"] if o[0] == c["view"]]} for c in registered]
     else:
-        maps = camera_maps(result["points"], [c["view"] for c in registered])
+        maps = camera_maps(result["points"], registered)
     with loose_gaps():
         cameras = solve_job({"kind": "resection", "data": {"maps": maps},
                              "options": {**own, "rel_gap": camera_rel_gap, "certificate": "full"}})["certificate"]

@@ -45,7 +45,7 @@ def _unsearch_cameras(result: dict) -> dict:
     from geocert.verify.reconstruction import camera_maps
 
     registered = [camera for camera in result["cameras"] if camera["registered"]]
-    maps = camera_maps(result["points"], [camera["view"] for camera in registered])
+    maps = camera_maps(result["points"], registered)
     dof = camera_claim.degrees_of_freedom([camera["K"] for camera in registered])
     options = result["certificate"]["options"]
     for camera, entry in zip(registered, maps):

@@ -784,7 +784,8 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
         # Each camera's own degrees of freedom (its pose, and the intrinsics the cameras do not
         # share) set the allowance its tolerance gives it over a 3x4 camera (camera_claim).
         dof = camera_claim.degrees_of_freedom([out.cameras[v].K for v in P])
-        stage.update(degrees_of_freedom=dof, claim=camera_claim.statement(options.norm, options.camera_rel_gap))
+        stage.update(degrees_of_freedom=dof,
+                     claim=camera_claim.statement(options.norm, options.camera_rel_gap, set_aside=True))
         bounds = structure.resect_cameras(P, arrays, map_options, lambda d, total: seen("cameras", d, total),
                                           should_stop=should_stop,
                                           bound_every_camera=options.bound_every_camera, dof=dof)

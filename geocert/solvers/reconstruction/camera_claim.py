@@ -26,7 +26,15 @@ MAX_ALLOWANCE (fewer than 26 points for a shared K under L2L2: so few points can
 camera from a wrong one by a ratio of costs) it is withheld (0): the camera is then certified
 only as a 3x4 camera would be, against the bound and the search's gap alone (exact data are).
 ``dof`` is read from the cameras returned (``degrees_of_freedom``), so a verifier recomputes
-every figure from the result."""
+every figure from the result.
+
+Observations the returned camera misses by more than OUTLIER_SCALES noise scales (the scale read
+from its median residual length, as a 2D Gaussian's: median = sigma sqrt(2 ln 2)) are outliers a
+Gaussian would put there with probability exp(-OUTLIER_SCALES^2 / 2) = 1e-14: a camera whose
+certificate fails on all its points is resected again without them (at most MAX_SET_ASIDE of its
+points, and never a point behind it), and states how many it set aside (``set_aside``). The rule
+is recomputed from the returned camera and points, so a verifier rebuilds the same map; a camera
+stating 0 (or nothing, before the rule) is certified on all its points."""
 
 from __future__ import annotations
 
@@ -54,6 +62,9 @@ MAX_ABS_GAP = RESIDUAL_MAX_ABS_GAP
 DOUBTFUL_FRACTION = 0.5
 DOUBTFUL_REMOVED = 0.25
 DOUBTFUL_DROPPED = 0.25
+OUTLIER_SCALES = 8.0
+MAX_SET_ASIDE = 0.05  # of a camera's points: more misses than this are the camera's, not outliers
+RAYLEIGH_MEDIAN = math.sqrt(2.0 * math.log(2.0))  # a 2D Gaussian residual's median length over sigma
 SAME = 1e-9  # relative: intrinsics equal up to JSON round trips are shared
 
 
@@ -110,15 +121,53 @@ def within(cost: float, lower_bound: float, tolerance_: float, abs_gap: float) -
     return bool(math.isfinite(cost) and cost <= (1.0 + tolerance_) * lower_bound + abs_gap)
 
 
-def statement(norm: str, rel_gap: float) -> str:
-    """What "certified" says of a camera, in words (the result's cameras stage and summary)."""
+def outliers(source, target, matrix) -> np.ndarray | None:
+    """The observations the rule sets aside for camera ``matrix`` (module docstring) as a mask over
+    its map (source points, target pixels); None when it sets none aside: none beyond
+    OUTLIER_SCALES scales, more than MAX_SET_ASIDE of them, a point behind the camera among them,
+    or fewer than MIN_POINTS left."""
+    X = np.asarray(source, dtype=float).reshape(-1, 3)
+    x = np.asarray(target, dtype=float).reshape(-1, 2)
+    if len(X) < MIN_POINTS:
+        return None
+    with np.errstate(all="ignore"):
+        projected = np.hstack([X, np.ones((len(X), 1))]) @ np.asarray(matrix, dtype=float).T
+        lengths = np.linalg.norm(x - projected[:, :2] / projected[:, 2:3], axis=1)
+        scale = float(np.median(lengths)) / RAYLEIGH_MEDIAN
+        beyond = ~(lengths <= OUTLIER_SCALES * scale)  # a NaN length (a point at depth 0) too
+    count = int(beyond.sum())
+    if (count == 0 or count > MAX_SET_ASIDE * len(X) or len(X) - count < MIN_POINTS
+            or not np.all(projected[beyond, 2] > 0)):
+        return None
+    return beyond
+
+
+def kept(source: list, target: list, matrix, set_aside: int | None) -> tuple[list, list] | None:
+    """The map a camera stating ``set_aside`` is certified on: all of it for 0 or None, the rule's
+    kept observations when it is the rule's count; None for any other number (refused)."""
+    if not set_aside:
+        return source, target
+    beyond = outliers(source, target, matrix)
+    if beyond is None or int(beyond.sum()) != set_aside:
+        return None
+    return ([s for s, out in zip(source, beyond) if not out], [t for t, out in zip(target, beyond) if not out])
+
+
+def statement(norm: str, rel_gap: float, set_aside: bool = False) -> str:
+    """What "certified" says of a camera, in words (the result's cameras stage and summary);
+    ``set_aside`` False (the default): the words before the outlier rule, for results whose
+    cameras state no set_aside; the pipeline states it."""
     k = "" if norm == "L2L2" else "2 * "
+    aside = (f"; a camera not certified on all its points is resected again without the observations it misses by "
+             f"more than {OUTLIER_SCALES:g} noise scales (read from its median residual), at most "
+             f"{MAX_SET_ASIDE:.0%} of them, and its claim is then about the points kept (it states how many it set "
+             "aside)") if set_aside else ""
     return (f"a certified camera's cost on its points is at most (1 + tolerance) times the lower bound the certified "
             f"resection proves for every 3x4 camera putting those points in front (plus abs_gap); 1 + tolerance = "
             f"(1 + allowance) / (1 - camera_rel_gap {rel_gap:g}), allowance = chi2_0.999(11 - degrees_of_freedom) / "
             f"({k}(2 * points - 11)): what the returned camera's fewer degrees of freedom (its pose, plus the "
             f"intrinsics the cameras do not share) cost at the 99.9% level, not an error in it; withheld (0) where "
-            f"it would exceed {MAX_ALLOWANCE:g}")
+            f"it would exceed {MAX_ALLOWANCE:g}" + aside)
 
 
 def sources(points, views: list[int]) -> list[tuple[list, list]]:

@@ -45,6 +45,9 @@ class CameraBound:
     # What refitting it on its points (held) recovers of its excess over the free 3x4 camera, each a
     # fraction of that camera's cost (camera_misfit); None when not looked at (certified, or no free camera)
     misfit: dict | None = None
+    # Observations set aside as outliers before the bound (camera_claim.outliers): 0 when certified
+    # or judged on all its points; None when not judged
+    set_aside: int | None = None
 
 
 def camera_matrix(K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -166,7 +169,27 @@ def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.n
 
 def _bound_camera(view: int, P: np.ndarray, X: np.ndarray, x: np.ndarray, options: MapOptions,
                   bound_every_camera: bool, dof: int = camera_claim.PROJECTIVE_DOF) -> CameraBound:
-    """One camera's figures and bound (see resect_cameras)."""
+    """One camera's figures and bound (see resect_cameras): on all its points, and when that does
+    not certify it, again without the observations camera_claim.outliers sets aside (the claim is
+    then about the points kept, and says how many were set aside); the first when neither does."""
+    whole = _bound_on(view, P, X, x, options, bound_every_camera, dof)
+    whole.set_aside = 0 if whole.status != "cancelled" else None
+    if whole.certified or whole.status == "degenerate":
+        return whole
+    beyond = camera_claim.outliers(X, x, P)
+    if beyond is None:
+        return whole
+    inliers = _bound_on(view, P, X[~beyond], x[~beyond], options, bound_every_camera, dof)
+    if not inliers.certified:
+        return whole
+    inliers.set_aside = int(beyond.sum())
+    inliers.elapsed_s += whole.elapsed_s
+    return inliers
+
+
+def _bound_on(view: int, P: np.ndarray, X: np.ndarray, x: np.ndarray, options: MapOptions,
+              bound_every_camera: bool, dof: int = camera_claim.PROJECTIVE_DOF) -> CameraBound:
+    """One camera's figures and bound on this map (see resect_cameras)."""
     from geocert.solvers.fractional.maps import fit_map
 
     start = time.perf_counter()
