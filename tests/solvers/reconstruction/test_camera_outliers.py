@@ -13,9 +13,9 @@ from scipy.spatial.transform import Rotation
 
 from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.reconstruction import camera_claim, structure
-from geocert.solvers.reconstruction.verification import camera_maps
-from geocert.solvers.verify import verify_any
-from tests.solvers.test_forgeries import refused, stored
+from geocert.verify.reconstruction import camera_maps
+from geocert.verify.checks import verify_any
+from tests.verify.test_forgeries import refused, stored
 from tests.support import loose_gaps
 
 
@@ -89,7 +89,7 @@ def test_observations_set_aside_beyond_the_rule_are_refused():
     """A forger drops the three observations a certified camera fits worst, re-solves its
     resection on the rest (a valid resection certificate), and states set_aside 3: the rule
     recomputed from the returned camera sets none aside on these data, so it is refused."""
-    from geocert.batch import solve_job
+    from geocert.jobs.runner import solve_job
 
     result = stored("reconstruction")
     registered = [c for c in result["cameras"] if c.get("registered")]
