@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from geocert.verify import checks as verify
+from geocert.solvers.fractional.results import claim_of
 from geocert.solvers.core.bnb import Box, BoxStatus
 from geocert.solvers.core.geometry import norm_terms
 from geocert.solvers.fractional import search
@@ -117,7 +118,7 @@ def test_the_verifier_accepts_a_capped_certificate_and_recomputes_its_caps(cappe
     source, target, options, result = capped_certificate
     proof = result.certificate.proof
     assert len(proof["caps"]) == 2 and any(record.get("caps") == 2 for record in proof["proofs"])
-    claim = verify.claim_of(result, matrix=result.matrix)
+    claim = claim_of(result, matrix=result.matrix)
     verify.verify_arrays("resection", (source, target), dataclasses.asdict(options), claim)
 
     def refused(change) -> verify.Invalid:

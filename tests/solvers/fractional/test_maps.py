@@ -226,6 +226,7 @@ def test_root_region_from_a_subset_of_points_is_proven_for_all(norm, monkeypatch
     region, the verifier accepts the full certificate, and the subset holds the reference point."""
     import dataclasses
 
+    from geocert.solvers.fractional.results import claim_of
     from geocert.verify import checks as verify
     from geocert.solvers.fractional import search
 
@@ -240,7 +241,7 @@ def test_root_region_from_a_subset_of_points_is_proven_for_all(norm, monkeypatch
     result = fit_map(source, target, options)
     assert result.certified, result.reason
     verify.verify_arrays("resection", (source, target), dataclasses.asdict(options),
-                         verify.claim_of(result, matrix=result.matrix))
+                         claim_of(result, matrix=result.matrix))
 
 
 @pytest.mark.parametrize("kind, count", [("resection", 5), ("resection", 6), ("resection", 40), ("homography2", 4),
@@ -337,6 +338,7 @@ def test_an_l2l2_proof_says_its_relaxation_and_the_verifier_holds_it_to_it(monke
     import copy
     import dataclasses
 
+    from geocert.solvers.fractional.results import claim_of
     from geocert.verify import checks as verify
     from geocert.solvers.fractional import maps
 
@@ -348,7 +350,7 @@ def test_an_l2l2_proof_says_its_relaxation_and_the_verifier_holds_it_to_it(monke
     options = MapOptions(norm="L2L2", certificate="full")
     result = fit_map(source, target, options)
     assert result.certified and result.certificate.proof["relaxation"] == "quadratic"
-    claim = verify.claim_of(result, matrix=result.matrix)
+    claim = claim_of(result, matrix=result.matrix)
     verify.verify_arrays("resection", (source, target), dataclasses.asdict(options), claim)
     without = copy.deepcopy(claim)
     del without["proof"]["relaxation"]
@@ -363,7 +365,7 @@ def test_an_l2l2_proof_says_its_relaxation_and_the_verifier_holds_it_to_it(monke
     l1 = MapOptions(norm="L2L1", certificate="full")
     other = fit_map(source, target, l1)
     assert other.certified and "relaxation" not in other.certificate.proof
-    claimed = verify.claim_of(other, matrix=other.matrix)
+    claimed = claim_of(other, matrix=other.matrix)
     claimed["proof"]["relaxation"] = "quadratic"
     with pytest.raises(verify.Invalid) as error:
         verify.verify_arrays("resection", (source, target), dataclasses.asdict(l1), claimed)
@@ -378,6 +380,7 @@ def test_root_tightening_stops_once_the_root_bound_closes_and_the_proof_still_ve
     round, and are not checked.)"""
     import dataclasses
 
+    from geocert.solvers.fractional.results import claim_of
     from geocert.verify import checks as verify
     from geocert.solvers.fractional import maps, search
 
@@ -397,7 +400,7 @@ def test_root_tightening_stops_once_the_root_bound_closes_and_the_proof_still_ve
         bounds.clear()
         result = fit_map(source, target, options)
         assert result.certified, result.reason
-        claim = verify.claim_of(result, matrix=result.matrix)
+        claim = claim_of(result, matrix=result.matrix)
         verify.verify_arrays("resection", (source, target), dataclasses.asdict(options), claim)
         results[share] = (result, len(result.certificate.proof["tightening"]), list(bounds))
     (closed, rounds_closed, bounds_closed), (full, rounds_full, _) = results.values()
