@@ -225,11 +225,12 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
     K-known path again from the refined K on the observations undistorted with the refined k1,
     resumed from the adjusted cameras (its views kept, those it lacks registered, the final
     adjustments run again: not every view registered again from a new initial pair) (at most
-    ``focal_prior_rounds`` times); when only k1 moved (the focal length by 2% or less) and
-    ``radial_distortion`` is "auto", the radial term is tested (_radial_test) before that round,
-    and a term rejected ends the rounds. Returns the reconstruction as a projective.Projective
-    (P = K [R | t] and the points, for the certified upgrade), the upgrade.Metric the adjustment
-    found (its k1 that of the pixels given) and the radial term's figures."""
+    ``focal_prior_rounds`` times); when only k1 moved (the focal length by 2% or less), every
+    view the tracks see is registered and ``radial_distortion`` is "auto", the radial term is
+    tested (_radial_test) before that round, and a term rejected ends the rounds. Returns the
+    reconstruction as a projective.Projective (P = K [R | t] and the points, for the certified
+    upgrade), the upgrade.Metric the adjustment found (its k1 that of the pixels given) and the
+    radial term's figures."""
     from geocert.solvers.reconstruction.calibrated import CalibratedOptions, calibrated_reconstruction
 
     n_views = len(image_sizes)
@@ -241,6 +242,7 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
     history, metric, found, k1, resume, first = [], None, None, 0.0, None, {}
     radial = {"model": options.radial_distortion, "estimated": False, "k1": 0.0}
     unadjusted = False  # the cameras kept are the last round's, at its focal length, not adjusted (a stop)
+    seen = len({int(v) for views, _ in tracks for v in views})  # the views the tracks see
 
     def register(focal: float, k1: float, resume):
         """One round: the K-known path at this focal length (resumed from cameras, or from a new
@@ -290,10 +292,13 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
         if not (refined > 0 and np.isfinite(refined) and np.isfinite(metric.k1)) or (
                 abs(refined / focal - 1) <= 0.02 and moved <= RADIAL_STEP_PX):
             break
-        if abs(refined / focal - 1) <= 0.02 and options.radial_distortion == "auto":
-            # Only k1 asks for another round: the radial term is tested first, and a term the data
-            # do not support is not worth a registration on pixels undistorted with it (on every
-            # 2nd templeRing photo k1 asked for a second round, and the test rejects the term).
+        if abs(refined / focal - 1) <= 0.02 and options.radial_distortion == "auto" and step["registered"] == seen:
+            # Only k1 asks for another round, and no view is left to place: the radial term is
+            # tested first, and a term the data do not support is not worth a registration on
+            # pixels undistorted with it (on every 2nd templeRing photo k1 asked for a second
+            # round, and the test rejects the term). With views missing the rounds go on as they
+            # were: a resumed round, or a new registration after it, may place them (the
+            # dinoSparseRing's sixth view).
             metric, early = _radial_test(metric, obs, options, dict(radial))
             step["radial_tested"] = True
             if not early["estimated"]:
@@ -304,7 +309,6 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
     # A resumed round keeps the views a wrong prior focal length placed and adds those PnP finds;
     # when views are still missing, one new registration at the refined K may place more (on the
     # dinoSparseRing: 6 of 14 against 5 resumed); the one registering more views is kept.
-    seen = len({int(v) for views, _ in tracks for v in views})
     if history and history[-1]["resumed"] and found.status != "cancelled" and metric is not None \
             and history[-1]["registered"] < seen:
         again, again_start, again_metric, step = register(float(metric.K[0, 0]), metric.k1, None)
