@@ -225,9 +225,10 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
     K-known path again from the refined K on the observations undistorted with the refined k1,
     resumed from the adjusted cameras (its views kept, those it lacks registered, the final
     adjustments run again: not every view registered again from a new initial pair) (at most
-    ``focal_prior_rounds`` times); when only k1 moved (the focal length by 2% or less), every
-    view the tracks see is registered and ``radial_distortion`` is "auto", the radial term is
-    tested (_radial_test) before that round, and a term rejected ends the rounds. Returns the
+    ``focal_prior_rounds`` times); when only k1 moved (the focal length by 2% or less) from 0
+    (the first term found), every view the tracks see is registered and ``radial_distortion``
+    is "auto", the radial term is tested (_radial_test) before that round, and a term rejected
+    ends the rounds. Returns the
     reconstruction as a projective.Projective (P = K [R | t] and the points, for the certified
     upgrade), the upgrade.Metric the adjustment found (its k1 that of the pixels given) and the
     radial term's figures."""
@@ -292,13 +293,16 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
         if not (refined > 0 and np.isfinite(refined) and np.isfinite(metric.k1)) or (
                 abs(refined / focal - 1) <= 0.02 and moved <= RADIAL_STEP_PX):
             break
-        if abs(refined / focal - 1) <= 0.02 and options.radial_distortion == "auto" and step["registered"] == seen:
-            # Only k1 asks for another round, and no view is left to place: the radial term is
-            # tested first, and a term the data do not support is not worth a registration on
-            # pixels undistorted with it (on every 2nd templeRing photo k1 asked for a second
-            # round, and the test rejects the term). With views missing the rounds go on as they
-            # were: a resumed round, or a new registration after it, may place them (the
-            # dinoSparseRing's sixth view).
+        if abs(refined / focal - 1) <= 0.02 and options.radial_distortion == "auto" and k1 == 0.0 \
+                and step["registered"] == seen:
+            # Only a new k1 asks for another round (this round's pixels were not undistorted), and
+            # no view is left to place: the radial term is tested first, and a term the data do
+            # not support is not worth a registration on pixels undistorted with it (on every 2nd
+            # templeRing photo k1 asked for a second round, and the test rejects the term). A
+            # term already registered with (Sceaux: the second round's) is refined, not tested
+            # again until the end. With views missing the rounds go on as they were: a resumed
+            # round, or a new registration after it, may place them (the dinoSparseRing's sixth
+            # view).
             metric, early = _radial_test(metric, obs, options, dict(radial))
             step["radial_tested"] = True
             if not early["estimated"]:
