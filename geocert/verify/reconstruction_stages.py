@@ -67,7 +67,7 @@ STAGE_RECORDS = ByName({
             pair=record("views", "inliers", "shared", "median_angle_deg", "forward_motion"),
             thresholds=record("min_inliers", "min_median_angle_deg", "max_forward_motion", "relaxations")),
         focal_rounds=record("focal_px", "registration_focal_px", "k1", "registered", "resumed", "refined_focal_px",
-                            "refined_k1", "again_from_a_new_pair", "fit_cost", "resumed_fit_cost"),
+                            "refined_k1", "again_from_a_new_pair", "fit_cost", "resumed_fit_cost", "radial_tested"),
         per_view=record("view", "registered_by", "tracks", "linked", "points"),
         radial_distortion=record("model", "estimated", "k1", "chi2", "threshold", "k1_tested", "against", "reason")),
     "autocalibration": record(
@@ -77,7 +77,8 @@ STAGE_RECORDS = ByName({
         rotation_noise_rad=record("estimated", "diac_family", "plane_family")),
     "bundle_adjustment": record(
         *COMMON, "K", "model", "started_from", "observations_kept", "rms_px_before", "rms_px_after",
-        starts=record("from", "rms_px_before", "rms_px_after_8_iterations", "fit_cost", "observations_fitting"),
+        starts=record("from", "rms_px_before", "rms_px_after_8_iterations", "fit_cost", "observations_fitting",
+                      "same_rig_as"),
         principal_point=record("estimated", "observations", "K_free", "chi2", "threshold", "inside_middle_half",
                                "reason")),
     "structure": record(*COMMON, "tracks", "points", "certified", "points_dropped", "observations_removed",

@@ -25,7 +25,8 @@ from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
 from geocert.solvers.reconstruction import (bundle, calibration_claim, calibration_tie, camera_claim,
                                            depth_reversal_claim, projective, structure, upgrade)
 from geocert.pipelines.reconstruction import ambiguity, claims
-from geocert.pipelines.reconstruction.fit import depths_and_errors as _depths_and_errors, fit_cost, rms as _rms
+from geocert.pipelines.reconstruction.fit import (depths_and_errors as _depths_and_errors, fit_cost, rms as _rms,
+                                                  same_images)
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.tracks import Observations
 
@@ -224,9 +225,13 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
     K-known path again from the refined K on the observations undistorted with the refined k1,
     resumed from the adjusted cameras (its views kept, those it lacks registered, the final
     adjustments run again: not every view registered again from a new initial pair) (at most
-    ``focal_prior_rounds`` times). Returns the reconstruction as a projective.Projective
-    (P = K [R | t] and the points, for the certified upgrade), the upgrade.Metric the adjustment
-    found (its k1 that of the pixels given) and the radial term's figures."""
+    ``focal_prior_rounds`` times); when only k1 moved (the focal length by 2% or less) from 0
+    (the first term found), every view the tracks see is registered and ``radial_distortion``
+    is "auto", the radial term is tested (_radial_test) before that round, and a term rejected
+    ends the rounds. Returns the
+    reconstruction as a projective.Projective (P = K [R | t] and the points, for the certified
+    upgrade), the upgrade.Metric the adjustment found (its k1 that of the pixels given) and the
+    radial term's figures."""
     from geocert.solvers.reconstruction.calibrated import CalibratedOptions, calibrated_reconstruction
 
     n_views = len(image_sizes)
@@ -236,7 +241,9 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
     corner = max(np.hypot(w, h) / 2 for w, h in image_sizes)
     model = "simple" if options.radial_distortion == "off" else "radial"
     history, metric, found, k1, resume, first = [], None, None, 0.0, None, {}
+    radial = {"model": options.radial_distortion, "estimated": False, "k1": 0.0}
     unadjusted = False  # the cameras kept are the last round's, at its focal length, not adjusted (a stop)
+    seen = len({int(v) for views, _ in tracks for v in views})  # the views the tracks see
 
     def register(focal: float, k1: float, resume):
         """One round: the K-known path at this focal length (resumed from cameras, or from a new
@@ -286,12 +293,26 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
         if not (refined > 0 and np.isfinite(refined) and np.isfinite(metric.k1)) or (
                 abs(refined / focal - 1) <= 0.02 and moved <= RADIAL_STEP_PX):
             break
+        if abs(refined / focal - 1) <= 0.02 and options.radial_distortion == "auto" and k1 == 0.0 \
+                and step["registered"] == seen:
+            # Only a new k1 asks for another round (this round's pixels were not undistorted), and
+            # no view is left to place: the radial term is tested first, and a term the data do
+            # not support is not worth a registration on pixels undistorted with it (on every 2nd
+            # templeRing photo k1 asked for a second round, and the test rejects the term). A
+            # term already registered with (Sceaux: the second round's) is refined, not tested
+            # again until the end. With views missing the rounds go on as they were: a resumed
+            # round, or a new registration after it, may place them (the dinoSparseRing's sixth
+            # view).
+            metric, early = _radial_test(metric, obs, options, dict(radial))
+            step["radial_tested"] = True
+            if not early["estimated"]:
+                radial = early
+                break
         focal, k1 = refined, metric.k1
         resume = (metric.rotations, metric.translations)
     # A resumed round keeps the views a wrong prior focal length placed and adds those PnP finds;
     # when views are still missing, one new registration at the refined K may place more (on the
     # dinoSparseRing: 6 of 14 against 5 resumed); the one registering more views is kept.
-    seen = len({int(v) for views, _ in tracks for v in views})
     if history and history[-1]["resumed"] and found.status != "cancelled" and metric is not None \
             and history[-1]["registered"] < seen:
         again, again_start, again_metric, step = register(float(metric.K[0, 0]), metric.k1, None)
@@ -305,8 +326,7 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
             if again_cost < resumed_cost:
                 found, metric = again, again_metric
         history.append(step)
-    radial = {"model": options.radial_distortion, "estimated": False, "k1": 0.0}
-    if metric is not None and model == "radial" and found.status != "cancelled":
+    if metric is not None and model == "radial" and found.status != "cancelled":  # (a term rejected early: k1 is 0)
         metric, radial = _radial_test(metric, obs, options, radial)
     registered = [v for v in range(n_views) if found is not None and found.rotations[v] is not None]
     cameras: list = [None] * n_views
@@ -840,7 +860,9 @@ def _drop_outlier_points(points: list[Point], P: dict[int, np.ndarray], threshol
 def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px: float, model: str,
                 should_stop=None):
     """A short adjustment (8 iterations) from each upgrade (name, Metric); the one explaining every
-    observation best (fit.fit_cost, MSAC's capped cost) goes on to a full adjustment. Returns its name, the adjusted reconstruction, the
+    observation best (fit.fit_cost, MSAC's capped cost) goes on to a full adjustment. A start that
+    is an earlier start's rig in another frame (fit.same_images) is not adjusted (its figures say
+    ``same_rig_as``). Returns its name, the adjusted reconstruction, the
     observations kept, the RMS before, and each start's figures. ``should_stop()`` (asked each
     iteration) ends the adjustments where they are."""
     if len(starts) == 1:  # nothing to choose between: straight to the full adjustment
@@ -850,10 +872,17 @@ def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px:
                                          should_stop=should_stop)
         return name, metric, keep, before, [{"from": name, "rms_px_before": before}]
     tried, trials = [], []
-    for name, start in starts:
+    for k, (name, start) in enumerate(starts):
+        before = _rms(start, obs, keep)
+        # Two starts are often one rig (the certified upgrade of the registration's cameras is
+        # those cameras again, in another frame): the later one is not adjusted again, as its
+        # adjustment would go where the earlier one's went (the earlier is kept on a tie anyway).
+        same = next((earlier for earlier, other in starts[:k] if same_images(start, other, obs)), None)
+        if same is not None:
+            trials.append({"from": name, "rms_px_before": before, "same_rig_as": same})
+            continue
         adjusted, kept, _ = upgrade.adjust(start, obs.view, obs.track, obs.pixel, threshold_px, max_iterations=8,
                                            model=model, should_stop=should_stop)
-        before = _rms(start, obs, keep)
         cost = fit_cost(adjusted, obs, threshold_px)
         tried.append((cost, name, adjusted, before))
         trials.append({"from": name, "rms_px_before": before, "rms_px_after_8_iterations": _rms(adjusted, obs, kept),

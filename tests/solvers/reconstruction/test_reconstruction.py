@@ -232,6 +232,41 @@ class TestSanityLayer:
                 assert image[2] > 0 and np.hypot(image[0] / image[2] - u, image[1] / image[2] - w) < 2.0 * np.sqrt(6)
 
 
+class TestAdjustmentStarts:
+    """The adjustment stage's starts (pipeline.adjust_best)."""
+
+    @staticmethod
+    def _rig(scene):
+        return upgrade.Metric(scene.K.copy(), list(scene.rotations.copy()), list(scene.translations.copy()),
+                              scene.points.copy(), [], False)
+
+    def test_a_start_that_is_an_earlier_start_in_another_frame_is_not_adjusted_again(self, monkeypatch):
+        # The certified upgrade of the registration's cameras is often those cameras again in
+        # another frame (their RMS equal to 1e-11): adjusting both is the same work twice.
+        scene = synthetic.scene(views=6, points=40, seed=2, noise_px=0.3)
+        obs = Observations.from_tracks(scene.tracks, 6)
+        rig = self._rig(scene)
+        Q, s, c = Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix(), 2.5, np.array([1.0, -2.0, 0.5])
+        moved = self._rig(scene)  # X' = s Q X + c, so R' = R Q^T and t' = s t - R' c
+        moved.points = s * scene.points @ Q.T + c
+        moved.rotations = [R @ Q.T for R in scene.rotations]
+        moved.translations = [s * t - R @ Q.T @ c for R, t in zip(scene.rotations, scene.translations)]
+        other = self._rig(scene)  # another rig: one camera turned by a degree
+        other.rotations[3] = Rotation.from_rotvec([0.0, np.radians(1.0), 0.0]).as_matrix() @ other.rotations[3]
+        adjusted = []
+        real = upgrade.adjust
+        monkeypatch.setattr(upgrade, "adjust", lambda start, *args, **kw: adjusted.append(start) or real(
+            start, *args, **kw))
+        keep = np.ones(len(obs.view), dtype=bool)
+        name, _, _, _, trials = pipeline.adjust_best([("autocalibration", rig), ("incremental", moved),
+                                                      ("linear", other)], obs, keep, 2.0, "simple")
+        assert trials[1]["same_rig_as"] == "autocalibration" and "fit_cost" not in trials[1]
+        assert trials[1]["rms_px_before"] == pytest.approx(trials[0]["rms_px_before"], abs=1e-9)
+        assert "same_rig_as" not in trials[2] and "fit_cost" in trials[2]
+        assert not any(start is moved for start in adjusted)
+        assert len(adjusted) == 3 and name == "autocalibration"  # two short adjustments, then the full one
+
+
 class TestCalibrationClaim:
     def _out(self, certified_K, returned_K, ranges, critical=None, adjusted=True):
         stage = {"name": "autocalibration", "status": "done", "certified": True, "K": certified_K,
@@ -359,6 +394,36 @@ class TestUnknownIntrinsics:
             resect_cameras=False, radial_distortion="auto"))
         assert "distortion" not in out.summary and all(c.k1 is None for c in out.cameras)
         assert not out.stages[0]["radial_distortion"]["estimated"]
+
+    def test_a_radial_term_the_test_rejects_gets_no_registration_round(self):
+        # No distortion, the principal point 40 px right of and 25 px above the centre: the first
+        # round's adjustment about the centre fits a k1 that moves the corner by more than
+        # RADIAL_STEP_PX with the focal length within 2% (every 2nd templeRing photo's case). The
+        # term is tested before a second registration on pixels undistorted with it, rejected
+        # against the free principal point, and no second round is run.
+        scene = synthetic.scene(views=10, points=200, seed=6, noise_px=0.3, spread_degrees=50.0)
+        tracks = [(views, pixels + np.array([40.0, -25.0])) for views, pixels in scene.tracks]
+        out = pipeline.reconstruct(tracks, [scene.image_size] * 10, ReconstructionOptions(resect_cameras=False))
+        rounds, radial = out.stages[0]["focal_rounds"], out.stages[0]["radial_distortion"]
+        first = rounds[0]
+        corner = np.hypot(640, 480) / 2
+        moved = abs(first["refined_k1"]) * (corner / first["refined_focal_px"]) ** 3 * first["refined_focal_px"]
+        assert moved > pipeline.RADIAL_STEP_PX
+        assert abs(first["refined_focal_px"] / first["registration_focal_px"] - 1) <= 0.02
+        assert len(rounds) == 1 and first["radial_tested"]
+        assert not radial["estimated"] and radial["chi2"] <= pipeline.RADIAL_CHI2
+        assert radial["k1_tested"] == first["refined_k1"]
+        assert "distortion" not in out.summary and out.summary["views_registered"] == 10
+        assert aligned_rotation_errors([c.R for c in out.cameras], list(scene.rotations)).max() < 0.5
+
+    def test_a_radial_term_the_test_keeps_still_gets_its_registration_round(self):
+        # Barrel distortion k1 = -0.25 about the centre: the early test keeps the term, and the
+        # second round registers on the pixels undistorted with it, as before.
+        scene, tracks = self._distorted(-0.25)
+        out = pipeline.reconstruct(tracks, [scene.image_size] * 10, ReconstructionOptions(resect_cameras=False))
+        rounds = out.stages[0]["focal_rounds"]
+        assert len(rounds) >= 2 and rounds[1]["k1"] == rounds[0]["refined_k1"]
+        assert out.stages[0]["radial_distortion"]["estimated"]
 
 
 RING_VIEWS = 40
