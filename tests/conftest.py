@@ -4,6 +4,7 @@ kernels loaded (the numerical tests must pass under any: CI runs them under two)
 counts the tests skipped for want of the shared data and says where they looked."""
 
 import os
+from pathlib import Path
 
 import pytest
 from hypothesis import settings
@@ -52,6 +53,20 @@ def pytest_report_header(config):
     return [f"BLAS: {'; '.join(blas_kernels())} (OPENBLAS_CORETYPE={os.environ.get('OPENBLAS_CORETYPE', '')})",
             f"numpy SIMD: {numpy_simd()}",
             f"shared data: {SHARED_DATA} ({found}{', required' if SHARED_DATA_REQUIRED else ''})"]
+
+
+SLOW_TESTS = Path(__file__).with_name("slow_tests.txt")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests and files measured slow (slow_tests.txt, written by scripts/slow_tests.py from a
+    run's durations) are marked slow as well as those marked in their files, so that the quick
+    tier (-m "not slow") stays quick."""
+    measured = {line.strip() for line in SLOW_TESTS.read_text().splitlines()
+                if line.strip() and not line.startswith("#")} if SLOW_TESTS.exists() else set()
+    for item in items:
+        if item.nodeid in measured or item.nodeid.split("::")[0] in measured:
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.hookimpl(tryfirst=True)

@@ -19,6 +19,11 @@ from testing import reconstruction as shared_scenes
 from testing.reconstruction import aligned_rotation_errors, vgg_pose, vgg_refit  # noqa: F401
 
 
+def house_tracks():
+    """The Oxford Model House's tracks (the calling test skips without the shared data)."""
+    return shared_scenes.house_tracks(shared_data("oxford_house"))
+
+
 class TestSynthetic:
     def test_exact_tracks_give_the_scene_exactly(self):
         scene = synthetic.scene(views=8, points=60, seed=5)
@@ -430,11 +435,6 @@ RING_VIEWS = 40
 
 
 @pytest.fixture(scope="module")
-
-def house_tracks():
-    """The Oxford Model House's tracks (the calling test skips without the shared data)."""
-    return shared_scenes.house_tracks(shared_data("oxford_house"))
-
 def ring():
     """A dense ring (40 photos 9 degrees apart round an object, each point seen over a stretch of
     the ring, a 1500 px lens: Middlebury's templeRing's shape) in a shuffled file order."""
