@@ -65,7 +65,8 @@ def pytest_collection_modifyitems(config, items):
     measured = {line.strip() for line in SLOW_TESTS.read_text().splitlines()
                 if line.strip() and not line.startswith("#")} if SLOW_TESTS.exists() else set()
     for item in items:
-        if item.nodeid in measured or item.nodeid.split("::")[0] in measured:
+        owners = item.nodeid.split("[")[0].split("::")  # its file, class and function
+        if item.nodeid in measured or any("::".join(owners[:n]) in measured for n in range(1, len(owners) + 1)):
             item.add_marker(pytest.mark.slow)
 
 
