@@ -874,14 +874,31 @@ def _check_camera_status(result: dict, camera: dict, where: str) -> None:
 
 
 def _check_unstarted(result: dict, registered: list[dict]) -> None:
-    """The cameras a stop left unstarted are the last in the order the cameras stage starts them
-    (structure.resect_cameras: most points first, then by view; every camera started finishes),
-    and a cancel is the job's too (its stats say it was cancelled)."""
+    """A camera not judged (``not_run``) is one the cameras stage never reached: then none was
+    judged, and the stage did not end "done" (a camera it judged cannot be called not judged,
+    which would also take it out of the doubtful rule's count). The cameras a stop left unstarted
+    are the last in the order the cameras stage starts them (structure.resect_cameras: most
+    certified points first, counted from the returned points, not as stated; then by view; every
+    camera started finishes); the stage counts them; and a cancel is the job's too (its stats say
+    it was cancelled)."""
+    stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "cameras"), None)
+    not_judged = [c for c in registered if c.get("status") == "not_run"]
+    if not_judged and (len(not_judged) != len(registered) or (stage is not None and stage.get("status") == "done")):
+        raise Invalid("returned", f"cameras/{not_judged[0]['view']}: called not judged (not_run), but the cameras "
+                                  "stage judged cameras (a camera is not judged only when the stage never ran)")
     judged = [c for c in registered if c.get("status") != "not_run"]
     unstarted = [c for c in judged if c.get("status") in CAMERA_STOPS and c.get("searched", True) is not True]
     if not unstarted:
         return
-    order = sorted(judged, key=lambda c: (-(c.get("points") or 0), c["view"]))
+    if stage is not None and "cameras_not_started" in stage and not same(stage["cameras_not_started"], len(unstarted)):
+        raise Invalid("returned", f"cameras/{unstarted[0]['view']}: called never started, with "
+                                  f"{len(unstarted)} cameras so, but the cameras stage counts "
+                                  f"{stage['cameras_not_started']!r:.20} not started")
+    found = camera_claim.sources([(p.get("point"), p.get("at_infinity"), p.get("certified"), p.get("observations"))
+                                  for p in result.get("points") or [] if isinstance(p, dict)],
+                                 [int(c["view"]) for c in judged])
+    counts = {id(c): len(source) for c, (source, _) in zip(judged, found)}
+    order = sorted(judged, key=lambda c: (-counts[id(c)], c["view"]))
     if {id(c) for c in order[len(order) - len(unstarted):]} != {id(c) for c in unstarted}:
         raise Invalid("returned", f"cameras/{unstarted[0]['view']}: called never started ({unstarted[0]['status']!r}), "
                                   "but a camera the cameras stage starts after it (fewer points, or as many and a "
