@@ -43,7 +43,7 @@ def test_no_verifier_module_imports_a_layer_above_it():
     assert imports_above("verify", ABOVE) == {}
 
 
-def test_a_solvers_self_check_is_the_verifiers():
+def test_a_solvers_self_check_is_the_verifiers(monkeypatch):
     """With GEOCERT_SELF_VERIFY=1 (the suites run so), a certified solve is checked by the verifier
     through the hook it installs: a verifier that refuses fails the solve."""
     import numpy as np
@@ -55,6 +55,7 @@ def test_a_solvers_self_check_is_the_verifiers():
     cameras = np.array([[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]], [[1, 0, 0, -1], [0, 1, 0, 0], [0, 0, 1, 0]]],
                        dtype=float)
     points = np.array([[0.01, 0.02], [-0.19, 0.021]])
+    monkeypatch.setenv("GEOCERT_SELF_VERIFY", "1")
     assert triangulate(cameras, points).certified
     installed, seen = self_check._check, []
 

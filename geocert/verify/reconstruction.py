@@ -74,9 +74,17 @@ def camera_maps(points: list[dict], cameras: list[dict]) -> list[dict]:
     observation in that view of a certified finite point), as (source point, target pixel), less
     the outliers the camera says it set aside (camera_claim.kept: the rule recomputed from its P;
     refused when its set_aside is not the rule's count)."""
-    views = [int(camera["view"]) for camera in cameras]
-    found = camera_claim.sources([(p.get("point"), p.get("at_infinity"), p.get("certified"), p.get("observations"))
-                                  for p in points if isinstance(p, dict)], views)
+    return maps_less_set_aside(camera_sources(points, cameras), cameras)
+
+
+def camera_sources(points: list[dict], cameras: list[dict]) -> list[tuple[list, list]]:
+    """Each camera's observations of certified finite points (camera_claim.sources), all of them."""
+    return camera_claim.sources([(p.get("point"), p.get("at_infinity"), p.get("certified"), p.get("observations"))
+                                 for p in points if isinstance(p, dict)], [int(camera["view"]) for camera in cameras])
+
+
+def maps_less_set_aside(found: list[tuple[list, list]], cameras: list[dict]) -> list[dict]:
+    """``found`` (camera_sources) less what each camera says it set aside (see camera_maps)."""
     out = []
     for camera, (source, target) in zip(cameras, found):
         set_aside = camera.get("set_aside")
@@ -704,7 +712,7 @@ def _judged_motion(result: dict, registered: list[dict], summary: dict, stage: d
 
 
 def _check_camera_certificate(result: dict, certificate: dict, searched: list[dict], certified: list[int],
-                              verify: Callable[[dict], object]) -> None:
+                              verify: Callable[[dict], object], expected_maps: list[dict]) -> None:
     """The camera certificate backs the certified cameras, and is about this result: the
     resection kind, the result's norm, max_residual, abs_gap and camera tolerance, and one map
     per searched camera built from the returned points."""
@@ -737,7 +745,6 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
             or len(maps) != len(searched):
         raise Invalid("returned", f"the camera certificate must hold one map per searched camera ({len(searched)}, "
                                   "in view order)")
-    expected_maps = camera_maps(result.get("points") or [], searched)
     for k, camera in enumerate(searched):
         if maps[k] != expected_maps[k]:
             raise Invalid("returned", f"cameras/{camera.get('view')}: the camera certificate's map is not the "
@@ -786,7 +793,7 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
                                       f"proven bound {proven:.6g} plus abs_gap")
 
 
-def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) -> None:
+def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, maps: list[dict]) -> None:
     """Every registered camera's own figures, whatever it claims: its points (its map from the
     certified points), its cost recomputed from its P, its degrees of freedom (the returned
     cameras' K give them) and tolerance (camera_claim), its status (``optimal`` exactly when
@@ -798,7 +805,7 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float) 
     if stage is not None and "degrees_of_freedom" in stage and stage["degrees_of_freedom"] != dof:
         raise Invalid("returned", f"stages/cameras/degrees_of_freedom is {stage['degrees_of_freedom']!r:.40}, the "
                                   f"returned cameras' K give {dof}")
-    for camera, entry in zip(registered, camera_maps(result.get("points") or [], registered)):
+    for camera, entry in zip(registered, maps):
         where = f"cameras/{camera['view']}"
         certified, status = camera.get("certified"), camera.get("status")
         if certified not in (True, False) or (status == "optimal") != (certified is True):
@@ -873,7 +880,7 @@ def _check_camera_status(result: dict, camera: dict, where: str) -> None:
                                       f"{stage!r:.40})")
 
 
-def _check_unstarted(result: dict, registered: list[dict]) -> None:
+def _check_unstarted(result: dict, registered: list[dict], seen: list[int]) -> None:
     """A camera not judged (``not_run``) is one the cameras stage never reached: then none was
     judged, and the stage did not end "done" (a camera it judged cannot be called not judged,
     which would also take it out of the doubtful rule's count). The cameras a stop left unstarted
@@ -894,11 +901,8 @@ def _check_unstarted(result: dict, registered: list[dict]) -> None:
         raise Invalid("returned", f"cameras/{unstarted[0]['view']}: called never started, with "
                                   f"{len(unstarted)} cameras so, but the cameras stage counts "
                                   f"{stage['cameras_not_started']!r:.20} not started")
-    found = camera_claim.sources([(p.get("point"), p.get("at_infinity"), p.get("certified"), p.get("observations"))
-                                  for p in result.get("points") or [] if isinstance(p, dict)],
-                                 [int(c["view"]) for c in judged])
-    counts = {id(c): len(source) for c, (source, _) in zip(judged, found)}
-    order = sorted(judged, key=lambda c: (-counts[id(c)], c["view"]))
+    count = {id(camera): n for camera, n in zip(registered, seen)}
+    order = sorted(judged, key=lambda c: (-count[id(c)], c["view"]))
     if {id(c) for c in order[len(order) - len(unstarted):]} != {id(c) for c in unstarted}:
         raise Invalid("returned", f"cameras/{unstarted[0]['view']}: called never started ({unstarted[0]['status']!r}), "
                                   "but a camera the cameras stage starts after it (fewer points, or as many and a "
@@ -998,9 +1002,14 @@ class ReconstructionItems(TrackItems):
         certified = [k for k, camera in enumerate(searched) if camera.get("certified") is True]
         own = certificate["options"]
         rel_gap = float(own.get("camera_rel_gap", own.get("rel_gap")))  # as the pipeline passed it
-        _check_camera_figures(result, registered, rel_gap)
-        _check_unstarted(result, registered)
-        _check_camera_certificate(result, certificate, searched, certified, verify)
+        # Each registered camera's map from the returned points, built once for the checks below
+        found = camera_sources(result.get("points") or [], registered)
+        maps = maps_less_set_aside(found, registered)
+        _check_camera_figures(result, registered, rel_gap, maps)
+        _check_unstarted(result, registered, [len(source) for source, _ in found])
+        by_camera = {id(camera): entry for camera, entry in zip(registered, maps)}
+        _check_camera_certificate(result, certificate, searched, certified, verify,
+                                  [by_camera[id(camera)] for camera in searched])
         _check_summary(result, registered)
         _check_pipeline_counts(result, rel_gap, current_form)
         _check_projective_counts(result)
