@@ -3,8 +3,9 @@ and bench/bilinear.py."""
 
 from __future__ import annotations
 
-from geocert.solvers.bilinear import problem as pb
 import numpy as np
+
+from geocert.solvers.bilinear import problem as pb
 
 
 def scene(K: int, N: int, noise: float, seed: int, outliers: float = 0.0, image: float = 100.0):

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from geocert.solvers.autocalibration import scenes
 import numpy as np
+
+from geocert.solvers.autocalibration import scenes
 
 
 def cameras_looking_at_origin(centres: np.ndarray) -> np.ndarray:

@@ -3,13 +3,15 @@ shared by tests/solvers/fractional/test_hostile_triangulation.py and bench/hosti
 
 from __future__ import annotations
 
+import dataclasses
+import json
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
 from geocert.solvers.core.geometry import normalised_cameras
 from geocert.solvers.fractional.results import claim_of
 from geocert.verify import checks as verify
-from scipy.spatial.transform import Rotation
-import dataclasses
-import json
-import numpy as np
 
 
 def scene(seed: int, tracks: int, views: int = 12):

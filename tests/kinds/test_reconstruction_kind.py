@@ -617,7 +617,7 @@ class TestPhotos:
         import cv2
 
         from geocert.solvers.reconstruction import render
-        from tests.solvers.reconstruction.test_reconstruction import aligned_rotation_errors
+        from testing.reconstruction import aligned_rotation_errors
 
         scene = render.box_scene(n_views=8, arc_deg=120, seed=1)
         images = [{"name": f"v{k}", "content": base64.b64encode(cv2.imencode(".png", scene.render(c))[1]).decode()}

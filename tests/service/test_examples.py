@@ -234,7 +234,7 @@ def check_stereo(job, truth, result):
 
 
 def check_reconstruction(job, truth, result):
-    from tests.solvers.reconstruction.test_reconstruction import aligned_rotation_errors
+    from testing.reconstruction import aligned_rotation_errors
 
     registered = [c for c in result["cameras"] if c["registered"]]
     assert len(registered) == len(truth["rotations"])

@@ -200,7 +200,7 @@ def twin_rig() -> tuple[object, dict, dict]:
 
 
 def _pose_errors(scene, result: dict) -> np.ndarray:
-    from tests.solvers.reconstruction.test_reconstruction import aligned_rotation_errors
+    from testing.reconstruction import aligned_rotation_errors
 
     registered = [c for c in result["cameras"] if c["registered"]]
     return aligned_rotation_errors([np.asarray(c["R"]) for c in registered],

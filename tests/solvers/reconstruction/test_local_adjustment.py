@@ -11,7 +11,7 @@ import pytest
 from geocert.solvers.reconstruction import calibrated, synthetic
 from geocert.solvers.reconstruction.calibrated import CalibratedOptions, calibrated_reconstruction
 
-from tests.solvers.reconstruction.test_reconstruction import aligned_rotation_errors
+from testing.reconstruction import aligned_rotation_errors
 
 
 @pytest.fixture(scope="module")

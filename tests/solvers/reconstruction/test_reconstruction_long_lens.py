@@ -17,7 +17,7 @@ from geocert.solvers.reconstruction import depth_reversal, synthetic, upgrade
 from geocert.verify.checks import verify_any
 
 from tests.verify.test_forgeries import calibrated_reconstruction, refused  # noqa: F401 (a fixture, used by name)
-from tests.solvers.reconstruction.test_reconstruction import aligned_rotation_errors
+from testing.reconstruction import aligned_rotation_errors
 
 
 def reconstruct_cameras(scene):

@@ -15,7 +15,7 @@ from geocert.pipelines.reconstruction import pipeline
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction import synthetic, upgrade
 
-from tests.solvers.reconstruction.test_reconstruction import aligned_rotation_errors
+from testing.reconstruction import aligned_rotation_errors
 
 VIEWS = 12
 
