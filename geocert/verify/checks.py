@@ -64,10 +64,23 @@ def checked_options(kind: str, options: Any) -> dict:
     class, exactly as the solver validates them."""
     if not isinstance(options, dict):
         raise Invalid("options", "options must be an object")
+    _check_option_words(options)
     own = getattr(_adapter(kind), "checked_options", None)
     if own is not None:  # a kind whose cost is not a norm of residuals reads its own
         return own(options)
     return residual_options(kind, options)
+
+
+def _check_option_words(options: dict) -> None:
+    """options.certificate and options.detail (what a result carries, never what is proven),
+    when the echo states them, are words the solvers take (fractional.options: CERTIFICATE_MODES,
+    DETAIL_MODES): an echo stating another states a request no solver served."""
+    from geocert.solvers.fractional.options import CERTIFICATE_MODES, DETAIL_MODES
+
+    for name, words in (("certificate", CERTIFICATE_MODES), ("detail", DETAIL_MODES)):
+        value = options.get(name)
+        if value is not None and not (isinstance(value, str) and value in words):
+            raise Invalid("options", f"options/{name}: must be one of {', '.join(words)}, got {value!r:.40}")
 
 
 def residual_options(kind: str, options: dict) -> dict:
@@ -197,9 +210,10 @@ def check_job(job: dict, result: dict) -> None:
     if "kind" in job and job["kind"] != result.get("kind"):  # a member not stated claims nothing
         raise Invalid("returned", f"the job's kind {job.get('kind')!r:.40} is not its result's "
                                   f"{result.get('kind')!r:.40}")
-    if job.get("status") == "succeeded" and job.get("error") is not None:
-        raise Invalid("returned", "a succeeded job's error is null (the service states one only for a job that "
-                                  f"failed), this job's is {job['error']!r:.80}")
+    if job.get("status") in ENDED_WITH_RESULT and job.get("error") is not None:
+        raise Invalid("returned", f"a {job['status']} job's error is null (the service states one only for a job "
+                                  f"that failed), this job's is {job['error']!r:.80}")
+    _check_job_members(job)
     if "status" not in job and job.get("progress") is None:
         return
     stats = result.get("stats")
@@ -224,6 +238,54 @@ def check_job(job: dict, result: dict) -> None:
         if name in progress and not same(progress[name], value):
             raise Invalid("returned", f"progress/{name} is {progress[name]!r:.40}, its result gives {value!r:.40}")
     _check_job_bounds(progress, result)
+
+
+# The webhook's state as the service writes it (geocert.app.schemas.WebhookState).
+WEBHOOK_MEMBERS = ("url", "state", "attempts", "last_error", "delivered_at")
+WEBHOOK_STATES = ("waiting", "retrying", "delivered", "failed", "refused")
+
+
+def _check_job_members(job: dict) -> None:
+    """A job document's own members, each of the type the service's Job model gives it: its id a
+    string and each link it states the job's own URL (jobs.store.links), its times numbers of seconds
+    (created_at stated; started_at and finished_at null or numbers), its progress's counts and
+    elapsed_s numbers >= 0 and its stage null or words, its webhook null or the webhook's state."""
+    job_id = job.get("id")
+    if "id" in job and not isinstance(job_id, str):
+        raise Invalid("returned", f"the job's id must be a string, got {job_id!r:.40}")
+    if "links" in job:
+        base = f"/v1/jobs/{job_id}"
+        own = {"self": base, "events": f"{base}/events", "cancel": f"{base}/cancel"}
+        links = job["links"]
+        if not (isinstance(job_id, str) and isinstance(links, dict)
+                and all(name in own and url == own[name] for name, url in links.items())):
+            raise Invalid("returned", f"links must point at the job's own URLs ({own!r:.120}), got {links!r:.120}")
+    for name in ("created_at", "started_at", "finished_at"):
+        value = job.get(name)
+        if name in job and not ((value is None and name != "created_at") or (is_number(value) and value >= 0)):
+            raise Invalid("returned", f"{name} must be {'' if name == 'created_at' else 'null or '}a time in seconds "
+                                      f"(a number >= 0), got {value!r:.40}")
+    progress = job.get("progress")
+    if isinstance(progress, dict):
+        for name in ("elapsed_s", "nodes", "open_boxes", "items_done", "items_total", "tracks_done", "tracks_total"):
+            value = progress.get(name)
+            if value is not None and not (is_number(value) and value >= 0 and (name == "elapsed_s" or type(value) is int)):
+                raise Invalid("returned", f"progress/{name} must be {'a number' if name == 'elapsed_s' else 'a count'} "
+                                          f">= 0, got {value!r:.40}")
+        if progress.get("stage") is not None and not isinstance(progress["stage"], str):
+            raise Invalid("returned", f"progress/stage must be null or a stage's name, got {progress['stage']!r:.40}")
+    webhook = job.get("webhook")
+    if webhook is None:
+        return
+    extra = sorted(set(webhook) - set(WEBHOOK_MEMBERS)) if isinstance(webhook, dict) else []
+    if not isinstance(webhook, dict) or extra or not isinstance(webhook.get("url"), str) \
+            or webhook.get("state") not in WEBHOOK_STATES or not (type(webhook.get("attempts")) is int
+                                                                  and webhook["attempts"] >= 0) \
+            or not (webhook.get("last_error") is None or isinstance(webhook["last_error"], str)) \
+            or not (webhook.get("delivered_at") is None or (is_number(webhook["delivered_at"])
+                                                            and webhook["delivered_at"] >= 0)):
+        raise Invalid("returned", f"webhook must be null or the webhook's state ({', '.join(WEBHOOK_MEMBERS)}: a url, "
+                                  f"one of {', '.join(WEBHOOK_STATES)}, a count of attempts), got {webhook!r:.80}")
 
 
 def _check_job_bounds(progress: dict, result: dict) -> None:
@@ -625,6 +687,10 @@ def _check_stats(kind, result: dict) -> None:
         if isinstance(item, dict)]
     if not isinstance(stats, dict):
         raise Invalid("returned", "stats must be an object")
+    for name in ("solve_s", "elapsed_s"):  # durations (informational), each a number >= 0 when stated
+        if stats.get(name) is not None and not (is_number(stats[name]) and stats[name] >= 0):
+            raise Invalid("returned", f"stats/{name} must be null or a number of seconds >= 0, got "
+                                      f"{stats[name]!r:.40}")
     expected = {"items": len(outcomes), "certified": sum(certified for _, certified in outcomes)}
     statuses = {}
     for status, _ in outcomes:

@@ -483,6 +483,10 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
         raise Invalid("returned", f"{where}/certified_K is stated exactly when a certified K is claimed beside a "
                                   "returned one")
     cert = None if cert is None else numbers(cert, f"{where}/certified_K", (3, 3), "returned")
+    for name, value in (("K", K), ("certified_K", cert)):  # compared to the cameras' within rounding: its form exact
+        if value is not None and not (value[1, 0] == value[2, 0] == value[2, 1] == 0 and value[2, 2] == 1):
+            raise Invalid("returned", f"{where}/{name} must be upper triangular with K[2][2] = 1 (its entries below "
+                                      "the diagonal exactly 0)")
     stage = _stage(result, "autocalibration")
     ranges = _stage_calibration(result, stage, cert, verify)
     returned = bool(cert is not None and model == "shared" and calibration_claim.same(K, cert))
@@ -491,8 +495,9 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
                                   f"returned K is {'' if returned else 'not '}the certified one")
     source = claim.get("source")
     intrinsics = ((result.get("certificate") or {}).get("options") or {}).get("intrinsics")
-    adjusted = any(isinstance(s, dict) and s.get("name") == "bundle_adjustment" and s.get("status") != "skipped"
-                   for s in result.get("stages") or [])
+    # adjusted: the adjustment ran (claims.calibration reads "not skipped" of the statuses the
+    # pipeline writes: done, or stopped in it; a stage not run or failed adjusted nothing)
+    adjusted = _stage(result, "bundle_adjustment").get("status") in ("done", "cancelled", "time_limit")
     expected_source = ("none" if K is None else "given" if isinstance(intrinsics, dict) and "K" in intrinsics
                        else "autocalibration" if returned else "bundle_adjustment" if adjusted else "camera_model")
     if source != expected_source:
@@ -986,6 +991,8 @@ class ReconstructionItems(TrackItems):
         adds (whether the labels are tied to the input the data state). ``current_form``: the
         certificate's problem_sha256 covers CLAIM_OPTIONS (verify._check_hashes found it so)."""
         from geocert.verify.reconstruction_stages import check_stages
+        from geocert.verify.reconstruction_members import check_members
+        from geocert.verify.reconstruction_statuses import check_statuses
 
         registered, views = _check_cameras(result.get("cameras"), certificate.get("data", {}))
         _check_points(result.get("points"), certificate.get("data", {}).get("tracks"), views)
@@ -1014,6 +1021,8 @@ class ReconstructionItems(TrackItems):
         _check_pipeline_counts(result, rel_gap, current_form)
         _check_projective_counts(result)
         check_stages(result)  # (stage_checks: the stage records' shape and counts)
+        check_members(result)  # the stages' words, switches and lists, typed and tied
+        check_statuses(result)  # each stage's status against what it produced, and the job's stop
         _check_distortion(result, registered, own)
         _check_calibration(result, registered, verify)
         scoped = {"labels": labels}

@@ -1,0 +1,245 @@
+"""The members of a reconstruction's stage records that are neither figures (reconstruction_stages
+.FIGURES types those) nor read by another check: words, switches, lists of views and tracks, maps
+keyed by view, each of the type its writer gives it, and tied to what the result holds where its
+data allow (the verifier's, numpy free). A member no check types could state what no run
+produces (a start "the same rig as" one that never was, a principal point "estimated": "yes"),
+which a reader takes for the run's word.
+
+Writers: pipelines.reconstruction.pipeline (the stages, adjust_best's starts, _principal_point,
+_radial_test), solvers.reconstruction.calibrated (registered_by, per_view, resumed_from),
+pipelines.reconstruction.features (the photos' matching figures: ``images`` and the matches
+stage). Each may be null where the stage has none, as a figure may."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from geocert.solvers.core.geometry import is_number
+from geocert.solvers.core.strict import Invalid
+from geocert.verify.reconstruction_stages import MAX_FIGURE, _values
+
+# How calibrated.py registers a view (registered_by's words); adjust_best's starts; the models the
+# adjustment is run with (options.camera_model, or "fixed" with K known).
+REGISTRATION_STEPS = ("initial pair", "pnp", "essential", "merged", "given")
+STARTS = ("autocalibration", "incremental", "linear")
+STARTED_FROM = STARTS + ("calibrated",)
+ADJUSTMENT_MODELS = ("simple", "varying", "full", "fixed")
+AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")
+
+# (stage, path) -> its type: "boolean" true or false; "text" a string; a tuple one of those words;
+# "views" / "tracks" distinct view / track numbers of those the summary counts; "view_map" an
+# object keyed by view number, each one of REGISTRATION_STEPS; "measures" an object of numbers >= 0
+# (times keyed by step); "object" an object; "counts" a list of counts; "pairs" a list of
+# objects, each naming two views. A path's "*" is any entry of a list.
+MEMBERS = {
+    "*": {"reason": "text"},
+    "matches": {"stopped": "text", "pairs_chosen_by": "text", "time_s": "measures", "features_per_image": "counts",
+                "verified_pairs": "pairs", "focal_prior_from_exif": "object"},
+    "projective": {
+        "method": "text", "registered_by": "view_map", "cancelled": "boolean", "time_s": "measures",
+        "focal_rounds/*/resumed": "boolean", "focal_rounds/*/radial_tested": "boolean",
+        "focal_rounds/*/again_from_a_new_pair": "boolean", "per_view/*/registered_by": REGISTRATION_STEPS,
+        "radial_distortion/model": ("auto", "on", "off"), "radial_distortion/estimated": "boolean",
+        "radial_distortion/against": ("principal", "simple"), "radial_distortion/reason": "text",
+        "initial_pair_search/reason": "text"},
+    "autocalibration": {
+        "method": AUTOCALIBRATION_METHODS, "certified": "boolean", "determined": "boolean",
+        "critical_motion": "text", "cameras_built_with_one_K": "boolean", "certificate_views": "views",
+        "certificate_tracks": "tracks", "stages/*/name": "text", "stages/*/status": "text",
+        "stages/*/certified": "boolean", "stages/*/reason": "text"},
+    "bundle_adjustment": {
+        "model": ADJUSTMENT_MODELS, "started_from": STARTED_FROM, "starts/*/from": STARTS,
+        "starts/*/same_rig_as": STARTS, "principal_point/estimated": "boolean",
+        "principal_point/inside_middle_half": "boolean", "principal_point/reason": "text"},
+    "cameras": {"claim": "text"},
+}
+# The members counted (each a count, at most its total): (stage, path) -> what bounds it.
+COUNTS = {("projective", "resumed_from"): "views", ("structure", "tracks_not_started"): "tracks",
+          ("cameras", "cameras_not_started"): "views", ("matches", "images"): "views",
+          ("matches", "candidate_pairs"): "pairs", ("matches", "tracks_built"): None,
+          ("matches", "dropped_inconsistent"): None, ("matches", "dropped_short"): None,
+          ("matches", "tracks_kept"): None}
+
+
+def _fail(where: str, what: str, value: Any) -> None:
+    raise Invalid("returned", f"{where} must be null or {what}, got {value!r:.60}")
+
+
+def _numbers(value: Any, total: int) -> bool:
+    return isinstance(value, list) and all(type(v) is int and 0 <= v < total for v in value) \
+        and len(set(value)) == len(value)
+
+
+def _typed(value: Any, where: str, kind: Any, views: int, tracks: int) -> None:
+    if value is None:
+        return
+    if isinstance(kind, tuple):
+        if not (isinstance(value, str) and value in kind):
+            _fail(where, f"one of {', '.join(kind)}", value)
+    elif kind == "boolean" and not isinstance(value, bool):
+        _fail(where, "true or false", value)
+    elif kind == "text" and not isinstance(value, str):
+        _fail(where, "a string", value)
+    elif kind == "object" and not isinstance(value, dict):
+        _fail(where, "an object", value)
+    elif kind == "views" and not _numbers(value, views):
+        _fail(where, f"distinct view numbers (of the {views} views)", value)
+    elif kind == "tracks" and not _numbers(value, tracks):
+        _fail(where, f"distinct track numbers (of the {tracks} tracks)", value)
+    elif kind == "counts" and not (isinstance(value, list) and all(type(v) is int and 0 <= v <= MAX_FIGURE
+                                                                     for v in value)):
+        _fail(where, "a list of counts (integers >= 0)", value)
+    elif kind == "measures" and not (isinstance(value, dict) and all(
+            is_number(v) and 0 <= v <= MAX_FIGURE for v in value.values())):
+        _fail(where, "an object of numbers >= 0 (times)", value)
+    elif kind == "view_map" and not (isinstance(value, dict) and all(
+            isinstance(key, str) and key.isdigit() and int(key) < views and key == str(int(key))
+            and step in REGISTRATION_STEPS for key, step in value.items())):
+        _fail(where, f"an object keyed by view number (of the {views} views), each one of "
+                     f"{', '.join(REGISTRATION_STEPS)}", value)
+    elif kind == "pairs" and not (isinstance(value, list) and all(
+            isinstance(entry, dict) and _numbers(entry.get("views"), views) and len(entry["views"]) == 2
+            for entry in value)):
+        _fail(where, "a list of objects, each naming two views", value)
+
+
+def check_members(result: dict) -> None:
+    """Every typed member of every stage (MEMBERS, COUNTS), ``images`` and its ties to the
+    matches stage, and the members tied to what the result holds (_check_ties)."""
+    summary = result.get("summary") or {}
+    views, tracks = summary["views"], summary["tracks"]  # counts (check_stages)
+    totals = {"views": views, "tracks": tracks, "pairs": views * (views - 1) // 2, None: MAX_FIGURE}
+    stages = {stage["name"]: stage for stage in result["stages"]}
+    for name, stage in stages.items():
+        for path, kind in {**MEMBERS["*"], **MEMBERS.get(name, {})}.items():
+            for where, value in _values(stage, path.split("/"), f"stages/{name}"):
+                _typed(value, where, kind, views, tracks)
+    for (name, path), total in COUNTS.items():
+        value = stages.get(name, {}).get(path)
+        if value is not None and not (type(value) is int and 0 <= value <= totals[total]):
+            _fail(f"stages/{name}/{path}", f"a count (an integer from 0 to {totals[total]:g})", value)
+    _check_images(result, stages.get("matches"), views)
+    _check_ties(result, stages, views, tracks)
+
+
+def _check_images(result: dict, matches: dict | None, views: int) -> None:
+    """``images`` (the photos' matching figures) is an object exactly when the result has a
+    matches stage (photos sent: kinds.reconstruction), and that stage restates its figures (but
+    focal_prior_from_exif, added after it); it counts the views sent."""
+    images = result.get("images")
+    if images is not None and not isinstance(images, dict):
+        raise Invalid("returned", f"images must be null or an object, got {type(images).__name__}")
+    if (images is None) != (matches is None):
+        raise Invalid("returned", "images is stated exactly when the result has a matches stage (photos sent), "
+                                  f"this result {'has' if matches is not None else 'has no'} matches stage")
+    if images is None:
+        return
+    for name, value in images.items():
+        if name != "focal_prior_from_exif" and name in matches and matches[name] != value:
+            raise Invalid("returned", f"images/{name} is not the matches stage's {name}")
+        if name == "focal_prior_from_exif" or name in matches:
+            continue
+        raise Invalid("returned", f"images/{name} is not restated by the matches stage (which states the figures "
+                                  "it matched with)")
+    _typed(images.get("focal_prior_from_exif"), "images/focal_prior_from_exif", "object", views, 0)
+    if "images" in images and images["images"] != views:
+        raise Invalid("returned", f"images/images is {images['images']!r:.20}, the summary's views {views}")
+    counted = images.get("features_per_image")
+    if counted is not None and (not isinstance(counted, list) or len(counted) != views):
+        raise Invalid("returned", f"images/features_per_image must count each of the {views} images")
+
+
+def _check_ties(result: dict, stages: dict, views: int, tracks: int) -> None:
+    projective = stages.get("projective", {})
+    if projective.get("cancelled") is True and projective.get("status") not in ("cancelled", "time_limit"):
+        raise Invalid("returned", f"stages/projective/cancelled is true, and the stage's status is "
+                                  f"{projective.get('status')!r:.20} (a stop says it was stopped)")
+    per_view = projective.get("per_view")
+    if per_view is not None:
+        if not (isinstance(per_view, list) and len(per_view) == views and all(isinstance(e, dict) for e in per_view)):
+            raise Invalid("returned", f"stages/projective/per_view must hold one entry for each of the {views} views, "
+                                      "in view order")
+        for k, entry in enumerate(per_view):
+            where = f"stages/projective/per_view/{k}"
+            if entry.get("view") != k or type(entry.get("view")) is not int:
+                raise Invalid("returned", f"{where}/view is {entry.get('view')!r:.20}: the entries are in view order")
+            through = entry.get("tracks")
+            if not (type(through) is int and 0 <= through <= tracks):
+                _fail(f"{where}/tracks", f"a count of at most {tracks} (the tracks)", through)
+            for name in ("linked", "points"):
+                if entry.get(name) is not None and not (type(entry[name]) is int and 0 <= entry[name] <= through):
+                    _fail(f"{where}/{name}", f"a count of at most its tracks ({through})", entry[name])
+    _check_starts(result, stages)
+    _check_principal_point(stages.get("bundle_adjustment", {}))
+    structure, summary = stages.get("structure", {}), result.get("summary") or {}
+    left = structure.get("tracks_not_started")
+    returned, dropped = len(result.get("points") or []), summary.get("points_dropped")
+    if left is not None and type(dropped) is int and left > tracks - returned - dropped:
+        raise Invalid("returned", f"stages/structure/tracks_not_started is {left}: the {tracks} tracks less the "
+                                  f"{returned} points returned and {dropped} dropped leave {tracks - returned - dropped}")
+    cameras = stages.get("cameras", {})
+    registered = sum(1 for c in result.get("cameras") or [] if isinstance(c, dict) and c.get("registered") is True)
+    if cameras.get("cameras_not_started") is not None and cameras["cameras_not_started"] > registered:
+        raise Invalid("returned", f"stages/cameras/cameras_not_started is {cameras['cameras_not_started']}, more than "
+                                  f"the {registered} cameras registered")
+
+
+def _check_starts(result: dict, stages: dict) -> None:
+    """adjust_best's starts: each named once, in the order the pipeline makes them, each one the
+    result had (the certified upgrade's K, the registration's cameras, the linear estimate); one
+    the same rig as an earlier start names that start and was not adjusted; the start adjusted is
+    one that was (the first of least fit_cost where each states it), and a known K starts from
+    the calibrated reconstruction alone."""
+    stage, calibration = stages.get("bundle_adjustment", {}), stages.get("autocalibration", {})
+    starts = stage.get("starts") or []
+    names = [s.get("from") for s in starts]
+    if len(set(names)) != len(names) or names != [n for n in STARTS if n in names]:
+        raise Invalid("returned", f"stages/bundle_adjustment/starts/*/from are {names!r:.80}: each start once, in the "
+                                  f"pipeline's order ({', '.join(STARTS)})")
+    had = {"autocalibration": calibration.get("K") is not None, "linear": calibration.get("linear_K") is not None,
+           "incremental": str(stages.get("projective", {}).get("method") or "").startswith("incremental")}
+    for k, start in enumerate(starts):
+        where = f"stages/bundle_adjustment/starts/{k}"
+        if not had[start["from"]]:
+            raise Invalid("returned", f"{where}/from is {start['from']!r}, a start this result never had (no "
+                                      + {"autocalibration": "K in the autocalibration stage",
+                                         "linear": "linear_K in the autocalibration stage",
+                                         "incremental": "incremental registration"}[start["from"]] + ")")
+        same = start.get("same_rig_as")
+        if same is not None:
+            if same not in names[:k]:
+                raise Invalid("returned", f"{where}/same_rig_as is {same!r}: not an earlier start ({names[:k]!r})")
+            adjusted = [n for n in ("rms_px_after_8_iterations", "fit_cost", "observations_fitting")
+                        if start.get(n) is not None]
+            if adjusted:
+                raise Invalid("returned", f"{where}: the same rig as an earlier start is not adjusted, and it states "
+                                          f"{adjusted[0]}")
+    started = stage.get("started_from")
+    tried = [s for s in starts if s.get("same_rig_as") is None]
+    if starts and started is not None and started not in [s["from"] for s in tried]:
+        raise Invalid("returned", f"stages/bundle_adjustment/started_from is {started!r:.40}, not a start it adjusted "
+                                  f"({[s['from'] for s in tried]!r})")
+    costs = [s.get("fit_cost") for s in tried]
+    if len(tried) > 1 and started is not None and all(is_number(c) for c in costs):
+        best = tried[costs.index(min(costs))]["from"]
+        if started != best:
+            raise Invalid("returned", f"stages/bundle_adjustment/started_from is {started!r}, and the start of least "
+                                      f"fit_cost is {best!r} (the one adjust_best goes on with)")
+    intrinsics = ((result.get("certificate") or {}).get("options") or {}).get("intrinsics")
+    known = isinstance(intrinsics, dict) and intrinsics.get("K") is not None
+    if started is not None and (started == "calibrated") != known:
+        raise Invalid("returned", f"stages/bundle_adjustment/started_from is {started!r}: the calibrated "
+                                  "reconstruction is the start exactly when K is given (options.intrinsics.K)")
+
+
+def _check_principal_point(stage: dict) -> None:
+    """_principal_point's test: the principal point is estimated only when its chi-square passes
+    the threshold and it lies in the image's middle half, and only in the simple camera model."""
+    test = stage.get("principal_point")
+    if not isinstance(test, dict) or test.get("estimated") is not True:
+        return
+    chi2, threshold = test.get("chi2"), test.get("threshold")
+    if not (is_number(chi2) and is_number(threshold) and chi2 > threshold and test.get("inside_middle_half") is True
+            and stage.get("model") == "simple"):
+        raise Invalid("returned", "stages/bundle_adjustment/principal_point/estimated is true, and its test does not "
+                                  "pass (chi2 above its threshold, inside the middle half, the simple model)")
