@@ -231,7 +231,9 @@ def verify_map_search(item, options: dict, proof: dict, lower_claimed: float, so
             verify_resection_sublevel(item.source, item.target, proof["sublevel"], solution, options["norm"])
             passed.append("proven_interval")
         else:  # the L1 norms': read off the leaves of a search at the level
-            verify_resection_leaves(item, options, proof["sublevel"], solution, passed)
+            # on a program of its own (the search's check has rescaled the item's)
+            verify_resection_leaves(MapItem((item.source, item.target), options["norm"]), options, proof["sublevel"],
+                                    solution, passed)
     return bound
 
 

@@ -27,9 +27,11 @@ import math
 
 import numpy as np
 
-from geocert.solvers.core.determinacy import SIGMAS, certified_gap, proven_document
+from geocert.solvers.core.determinacy import SIGMAS, proven_document
+from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.core.strict import Invalid, number, numbers, record
 from geocert.solvers.fractional.charts import MapChart
+from geocert.solvers.fractional.proof import checked_leaves
 
 NAMES = ("depth_x", "depth_y", "depth_z", "depth_0")
 NORMS = ("L1L1", "L2L1")
@@ -101,15 +103,12 @@ def proven_leaves_document(sublevel: dict) -> dict:
                            "not bounded by them (fractional.resection_leaves)")
 
 
-def verify_resection_leaves(item, options: dict, sublevel, solution: np.ndarray, passed: list[str]) -> None:
-    """A leaves sublevel (an L1 resection's proven intervals): its search proof checked as a
-    search's (proof.checked_leaves) with every part holding for the cameras costing at most the
-    level, and the stated intervals holding the hull its kept leaves prove. Refused: a narrower
-    interval, a level below the one stated, a reference that is not the chart's."""
-    from geocert.solvers.core.geometry import norm_cost
-    from geocert.solvers.fractional.items import MapItem
-    from geocert.solvers.fractional.proof import checked_leaves
-
+def verify_resection_leaves(fresh, options: dict, sublevel, solution: np.ndarray, passed: list[str]) -> None:
+    """A leaves sublevel (an L1 resection's proven intervals) of the map ``fresh`` (items.MapItem,
+    its program not yet used: checked_leaves rescales it): its search proof checked as a search's
+    (proof.checked_leaves) with every part holding for the cameras costing at most the level, and
+    the stated intervals holding the hull its kept leaves prove. Refused: a narrower interval, a
+    level the proofs do not reach, a reference that is not the chart's."""
     record(sublevel, "proof/sublevel", ("cost_increase", "reference", "intervals", "search"))
     norm = options["norm"]
     if norm not in NORMS:
@@ -121,7 +120,6 @@ def verify_resection_leaves(item, options: dict, sublevel, solution: np.ndarray,
     search = sublevel.get("search")
     if not isinstance(search, dict) or search.get("type") != "branch_and_bound":
         raise Invalid("proven_interval", "proof/sublevel/search must be a branch_and_bound proof")
-    fresh = MapItem((item.source, item.target), norm)  # its own program: checked_leaves rescales it
     if sublevel.get("reference") != fresh.chart.reference or type(sublevel.get("reference")) is not int:
         raise Invalid("proven_interval", f"proof/sublevel/reference must be the chart's reference point "
                                          f"{fresh.chart.reference}")
