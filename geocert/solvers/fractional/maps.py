@@ -99,6 +99,11 @@ NODE_TIGHTENING_POINTS = 50
 CAP_GAP = 2.0
 
 
+# The second search behind an L1 resection's proven intervals (_prove_leaves) stops, within the
+# item's clock, after this many seconds or this many times the solve's own, whichever is more;
+# its open boxes are then kept leaves (wider intervals, never none).
+LEAVES_MIN_S = 10.0
+LEAVES_SHARE = 2.0
 SCOPE = "every map that puts every point at positive depth"
 CLAIM_MARGIN = 1e-12  # the bound claimed below the bound computed (relative), as convexity_path's
 
@@ -168,8 +173,9 @@ def _prove_leaves(result: MapResult, chart: MapChart, source, target, prepared, 
         discount = program_discount(item, M, np.array(result.residuals), program_allowance(item, M, prepared.scale))
         increase = l1_cost_increase(options.norm, result.cost, len(source), certified_gap(result.cost, result.lower_bound))
         try:
-            sublevel = leaves_sublevel(prepared, chart, v, result.cost, increase, discount,
-                                       start + options.time_limit_s)
+            now = time.perf_counter()
+            deadline = min(start + options.time_limit_s, now + max(LEAVES_MIN_S, LEAVES_SHARE * (now - start)))
+            sublevel = leaves_sublevel(prepared, chart, v, result.cost, increase, discount, deadline)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):
             sublevel = None
     if sublevel is not None:

@@ -4,7 +4,8 @@ the program's distance from the data (scaled units), every part of it proven for
 costing at most U: a root region of residual bound gamma_for(U), rounds of tightening at U, then
 boxes of the branched functionals bounded at U (with node tightening), a box closed once its
 bound exceeds U (it holds no such camera) and split otherwise, widest first, until MAX_NODES
-boxes or the clock. The leaves not closed bound the set; the intervals are read off them as the
+boxes or the clock (which leaves the open boxes as kept leaves: wider intervals, never none). The
+leaves not closed bound the set; the intervals are read off them as the
 verifier reads them (resection_leaves.hull), stated a little wider (STATED_PAD)."""
 
 from __future__ import annotations
@@ -89,9 +90,7 @@ def leaves_sublevel(prepared: Prepared, chart: MapChart, v: np.ndarray, cost: fl
         for child in problem.split(box, result):
             consider(child, bound, proof)
             nodes += 1
-    leaves.extend((box, proof, True) for box, _, proof, _ in open_boxes)
-    if time.perf_counter() >= deadline:
-        return None
+    leaves.extend((box, proof, True) for box, _, proof, _ in open_boxes)  # kept: the clock only widens
     lo = np.array([box.lo for box, _, _ in leaves])
     hi = np.array([box.hi for box, _, _ in leaves])
     kept = np.array([flag for _, _, flag in leaves])

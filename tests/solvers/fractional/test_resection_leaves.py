@@ -246,3 +246,25 @@ def test_a_brief_certificate_proves_no_interval(norm):
     document = result["maps"][0]["determinacy"]
     assert document["proven"] is False and document["proven_intervals"] is None
     assert "proof" not in result["maps"][0]["certificate"]
+
+
+@pytest.mark.parametrize("norm", NORMS)
+def test_a_second_search_stopped_by_its_clock_proves_wider_intervals_that_verify(norm, monkeypatch):
+    """With no time left after the solve (no tightening round, one box bounded), the root region
+    alone bounds the set: wider intervals, still holding the ones a full second search proves, and
+    accepted by the verifier."""
+    from geocert.solvers.fractional import maps
+
+    rng = np.random.default_rng(seed("resection leaves", "clock", norm))
+    job, (truth,) = resection(rng, 15, norm)
+    full = solve_job(copy.deepcopy(job))
+    monkeypatch.setattr(maps, "LEAVES_MIN_S", 0.0)
+    monkeypatch.setattr(maps, "LEAVES_SHARE", 0.0)
+    stopped = solve_job(job)
+    assert verify_any(stopped).valid
+    lower, upper = intervals_of(stopped["maps"][0]["determinacy"])
+    full_lower, full_upper = intervals_of(full["maps"][0]["determinacy"])
+    assert np.all(lower <= full_lower) and np.all(full_upper <= upper) and np.any(upper - lower > full_upper - full_lower)
+    reference = stopped["certificate"]["items"][0]["proof"]["sublevel"]["reference"]
+    row = depth_rows(truth[None], np.array(job["data"]["maps"][0]["source"]), reference)[0]
+    assert np.all((lower <= row) & (row <= upper))
