@@ -155,6 +155,10 @@ class MapKind:
                                              document.get("determinacy"))
             if sublevel is not None and proof is not None:
                 proof["sublevel"] = sublevel
+        elif proof is not None and isinstance(proof.get("sublevel"), dict) and document.get("determinacy"):
+            # An L1 resection's, read off its search's leaves (fractional.resection_leaves)
+            document["determinacy"]["proven_intervals"] = determinacy.proven_map(proof["sublevel"])
+            document["determinacy"]["proven"] = True
         return document
 
     def cancelled_item(self) -> dict:

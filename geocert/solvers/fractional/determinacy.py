@@ -305,6 +305,9 @@ def proven_map(sublevel: dict | None) -> dict | None:
     ``sublevel`` (fractional.resection_sublevel; None: none)."""
     if sublevel is None:
         return None
+    if "search" in sublevel:  # an L1 resection's, read off a search's leaves
+        from geocert.solvers.fractional.resection_leaves import proven_leaves_document
+        return proven_leaves_document(sublevel)
     return proven_document(sublevel["cost_increase"], ("centre_x", "centre_y", "centre_z"), sublevel["intervals"],
                            f"the cameras enclosed in a ball of radius {sublevel['radius']:.6g} (whitened by the "
                            f"Gauss-Newton information at the camera), narrowed by {sublevel['rounds']} rounds bounding "

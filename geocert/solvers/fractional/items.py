@@ -18,6 +18,7 @@ from geocert.solvers.fractional.pooled_floor import pooled_floor, squared_residu
 from geocert.solvers.fractional.proof import (check_program, program_allowance, program_discount, raw_sizes,
                                               residual_uncertainty, track_uncertainty, verify_search)
 from geocert.solvers.fractional.resection_bound import TYPE as SUBLEVEL_BOUND, verify_resection_bound
+from geocert.solvers.fractional.resection_leaves import l1_cost_increase, verify_resection_leaves
 from geocert.solvers.fractional.resection_sublevel import verify_resection_sublevel
 from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
 
@@ -226,8 +227,13 @@ def verify_map_search(item, options: dict, proof: dict, lower_claimed: float, so
     if "sublevel" in proof:
         if (item.source.shape[1], item.target.shape[1]) != (3, 2):
             raise Invalid("format", "proof/sublevel: only a resection's proof states a proven interval")
-        verify_resection_sublevel(item.source, item.target, proof["sublevel"], solution, options["norm"])
-        passed.append("proven_interval")
+        if options["norm"] == "L2L2":
+            verify_resection_sublevel(item.source, item.target, proof["sublevel"], solution, options["norm"])
+            passed.append("proven_interval")
+        else:  # the L1 norms': read off the leaves of a search at the level
+            # on a program of its own (the search's check has rescaled the item's)
+            verify_resection_leaves(MapItem((item.source, item.target), options["norm"]), options, proof["sublevel"],
+                                    solution, passed)
     return bound
 
 
@@ -314,7 +320,7 @@ def _runs(runs, tracks: int) -> bool:
     return True
 
 
-def _check_map_level(where: str, determinacy, claim: dict, data: dict, index: int) -> None:
+def _check_map_level(where: str, determinacy, claim: dict, data: dict, index: int, norm: str = "L2L2") -> None:
     """A map's proven interval (a resection's; _check_proven has tied it to its proof) is proven
     at no lower a level than the map's own, and its determinacy's cost_increase is that level: the
     one the solver proves it at (determinacy.prove_map: 3^2 times the claim's cost over 2k - 11,
@@ -324,6 +330,14 @@ def _check_map_level(where: str, determinacy, claim: dict, data: dict, index: in
     if stated is None:
         return
     points = len(data["maps"][index]["source"])
+    if norm != "L2L2":  # read off a search's leaves (resection_leaves), at the L1 level; the estimate beside
+        # them is of the squared residuals, read at its own level
+        own = l1_cost_increase(norm, claim["cost"], points, certified_gap(claim["cost"], claim["lower_bound"]))
+        if not stated["cost_increase"] >= own * (1 - LEVEL_ROUNDING):
+            raise Invalid("returned", f"{where}/determinacy/proven_intervals are proven at cost increase "
+                                      f"{stated['cost_increase']!r:.12} below the map's own {own!r:.12} "
+                                      "(resection_leaves.l1_cost_increase)")
+        return
     own = float(map_cost_increase(claim["cost"], 2 * points - 11, certified_gap(claim["cost"], claim["lower_bound"])))
     if not stated["cost_increase"] >= own * (1 - LEVEL_ROUNDING):
         raise Invalid("returned", f"{where}/determinacy/proven_intervals are proven at cost increase "
@@ -536,7 +550,7 @@ class MapItems:
                 # Only a resection's proof proves an interval (verify_map_search): a homography's
                 # determinacy saying proven finds no sublevel and is refused here.
                 _check_proven(f"maps/{index}", entry.get("determinacy"), claim, norm, proven_map)
-                _check_map_level(f"maps/{index}", entry.get("determinacy"), claim, certificate["data"], index)
+                _check_map_level(f"maps/{index}", entry.get("determinacy"), claim, certificate["data"], index, norm)
                 self._check_root_region(f"maps/{index}", entry.get("certificate"), claim, certificate, index)
         for index, entry in enumerate(result.get("maps") or []):
             if isinstance(entry, dict) and entry.get("matrix") is None and entry.get("residuals") not in (None, []):

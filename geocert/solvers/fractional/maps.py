@@ -29,6 +29,10 @@ from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.fractional.items import MapItem, discounted, refused_by_verifier
 from geocert.solvers.core.self_check import checked_solve
+from geocert.solvers.core.determinacy import certified_gap
+from geocert.solvers.fractional.proof import program_allowance, program_discount
+from geocert.solvers.fractional.resection_leaves import NORMS as LEAF_NORMS, l1_cost_increase
+from geocert.solvers.fractional.sublevel_search import leaves_sublevel
 
 
 def dlt(source: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -95,6 +99,11 @@ NODE_TIGHTENING_POINTS = 50
 CAP_GAP = 2.0
 
 
+# The second search behind an L1 resection's proven intervals (_prove_leaves) stops, within the
+# item's clock, after this many seconds or this many times the solve's own, whichever is more;
+# its open boxes are then kept leaves (wider intervals, never none).
+LEAVES_MIN_S = 10.0
+LEAVES_SHARE = 2.0
 SCOPE = "every map that puts every point at positive depth"
 CLAIM_MARGIN = 1e-12  # the bound claimed below the bound computed (relative), as convexity_path's
 
@@ -141,8 +150,36 @@ def _fit_map(source, target, options: MapOptions, callback, start: float) -> Map
         else:
             result = _map_result(chart, source, target, searched.solution, options, searched.status,
                                  searched.lower_bound, searched.nodes, searched.certificate, prepared.scale)
+            _prove_leaves(result, chart, source, target, prepared, options, start)
     result.elapsed_s = time.perf_counter() - start
     return result
+
+
+def _prove_leaves(result: MapResult, chart: MapChart, source, target, prepared, options: MapOptions,
+                  start: float) -> None:
+    """An L1 resection certified by a search, with a full certificate: its proven intervals
+    (fractional.resection_leaves), read off a second search at the level l1_cost_increase gives,
+    set as its proof's sublevel; none when not proven within the item's clock."""
+    proof = result.certificate.proof if result.certificate is not None else None
+    if not (result.certified and options.norm in LEAF_NORMS and (source.shape[1], target.shape[1]) == (3, 2)
+            and isinstance(proof, dict) and proof.get("type") == "branch_and_bound"):
+        return
+    M = np.array(result.matrix)
+    item = MapItem((source, target), options.norm, chart)
+    v = item.to_program(M)
+    if v is None:
+        return
+    with np.errstate(all="ignore"):
+        discount = program_discount(item, M, np.array(result.residuals), program_allowance(item, M, prepared.scale))
+        increase = l1_cost_increase(options.norm, result.cost, len(source), certified_gap(result.cost, result.lower_bound))
+        try:
+            now = time.perf_counter()
+            deadline = min(start + options.time_limit_s, now + max(LEAVES_MIN_S, LEAVES_SHARE * (now - start)))
+            sublevel = leaves_sublevel(prepared, chart, v, result.cost, increase, discount, deadline)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            sublevel = None
+    if sublevel is not None:
+        proof["sublevel"] = sublevel
 
 
 def _sublevel_certified(chart: MapChart, source, target, guess, options: MapOptions) -> MapResult | None:

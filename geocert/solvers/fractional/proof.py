@@ -5,9 +5,10 @@ bound. Linear algebra only: no conic solver is imported."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 import functools
 import math
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -33,6 +34,41 @@ SCALE_RANGE = (1e-15, 1e3)  # the solver's residual factor lies in it (search.MA
 def verify_search(item, options: dict, proof: dict, lower_claimed: float, solution,
                    passed: list[str]) -> float:
     """The lower bound (caller's units) the search's proof establishes."""
+    # Only points costing less than the claimed lower bound need excluding: every proof must
+    # hold for them, so its cost cap may be anything not below that bound (less the relative
+    # tolerance: a cap of 0 would prove nothing of a positive bound, whatever the scale).
+    checked = checked_leaves(item, options, proof, lambda unit, discount: max(
+        0.0, lower_claimed * unit * (1 - BOUND_TOLERANCE)), solution, passed)
+    if not checked.bounds:
+        return math.inf
+    # The program's bound, for the data's problem: lowered by the program's distance from it.
+    return min(checked.bounds) / checked.unit - (checked.discount if math.isfinite(checked.discount) else math.inf)
+
+
+@dataclass
+class CheckedLeaves:
+    """What a checked search proof proves, in the program's scaled units: every point of the
+    scope costing at most ``cap`` lies in a leaf; leaf i (``lo[i]``..``hi[i]`` in the branched
+    functionals ``F[:k]``, extended to the proven searched box) holds no point costing less than
+    ``bounds[i]`` (inf: none costing at most cap). ``discount``: the program's distance from the
+    data's problem at the solution (caller's units; inf where an observation is not compared)."""
+
+    bounds: list[float]
+    lo: np.ndarray
+    hi: np.ndarray
+    F: np.ndarray
+    k: int
+    unit: float
+    cap: float
+    discount: float
+
+
+def checked_leaves(item, options: dict, proof: dict, cap_of: Callable[[float, float], float], solution,
+                   passed: list[str]) -> CheckedLeaves:
+    """verify_search's checks of a search proof, with every proof in it required to hold for the
+    points costing at most ``cap_of(unit, discount)`` (scaled units; the unit and the program's
+    discount at the solution are the proof's): root region, tightening, caps, coverage, leaf
+    bounds. The leaves as checked (CheckedLeaves)."""
     program, norm = item.program, item.norm
     record(proof, "proof", ("type", "scale", "root", "tightening", "search_box", "proofs", "leaves"),
            ("relaxation", "caps"))
@@ -42,11 +78,12 @@ def verify_search(item, options: dict, proof: dict, lower_claimed: float, soluti
     program.max_residual = options["max_residual"]
     program.rescale(scale)
     unit = cost_unit(scale, norm)
-    # Only points costing less than the claimed lower bound need excluding: every proof must
-    # hold for them, so its cost cap may be anything not below that bound (less the relative
-    # tolerance: a cap of 0 would prove nothing of a positive bound, whatever the scale).
-    cap = max(0.0, lower_claimed * unit * (1 - BOUND_TOLERANCE))
     allowed = check_program(item, solution, scale)
+    with np.errstate(invalid="ignore"):  # an observation not compared: no bound beyond the program's
+        discount = program_discount(item, solution, item.raw_residuals(solution)[0], allowed)
+    cap = cap_of(unit, discount)
+    if not (cap >= 0 and math.isfinite(cap)):
+        raise Invalid("program", "the program's distance from the data is not bounded at the solution")
     passed.append("program")
 
     root = record(proof.get("root"), "proof/root", ("gamma", "functionals", "claim", "bounds", "duals"))
@@ -105,12 +142,7 @@ def verify_search(item, options: dict, proof: dict, lower_claimed: float, soluti
     leaf_lo, leaf_hi = extended(leaf_lo, leaf_hi, search_box, searched)
     bounds = _check_leaf_proofs(relaxation, proofs, leaves, leaf_lo, leaf_hi, cap, k, others, (search_box, searched))
     passed.append("leaf_bounds")
-    if not bounds:
-        return math.inf
-    # The program's bound, for the data's problem: lowered by the program's distance from it.
-    with np.errstate(invalid="ignore"):  # an observation not compared: no bound beyond the program's
-        discount = program_discount(item, solution, item.raw_residuals(solution)[0], allowed)
-    return min(bounds) / unit - (discount if math.isfinite(discount) else math.inf)
+    return CheckedLeaves(bounds, leaf_lo, leaf_hi, F, k, unit, cap, discount)
 
 
 @functools.lru_cache(maxsize=32)
