@@ -96,6 +96,47 @@ class JobStore:
         each counted as its request's bytes (``items_bytes``: those of ``items_key``'s texts), at
         least STORED_BYTES_FLOOR, and from its end its stored result's (``_COUNT_RESULT``);
         StoredBytesExceeded beyond it, nothing of the job kept."""
+        pipe = self.r.pipeline()
+        meta, admit_at = self._stage_create(pipe, kind, request, items_total, chunk_size, owner, callback_url,
+                                            active_limit, task_ids, chunk_key, items_key, item_time_bound_s,
+                                            job_time_limit_s, enqueue, items_bytes, stored_bytes_limit)
+        admitted = pipe.execute()[admit_at]
+        if admitted != 1:
+            discard = self.r.pipeline()
+            self._stage_delete(discard, meta["id"], owner)
+            discard.execute()
+        return self._admitted(meta, admitted, stored_bytes_limit)
+
+    async def create_async(self, client: redis.asyncio.Redis, kind: str, request: dict, items_total: int,
+                           chunk_size: int, owner: str, callback_url: str | None = None, active_limit: int = 0,
+                           task_ids=None, chunk_key: str | None = None, items_key: str | None = None,
+                           item_time_bound_s: float | None = None, job_time_limit_s: float | None = None,
+                           enqueue: Callable[[dict], list[tuple[str, tuple]]] | None = None,
+                           items_bytes: int = 0, stored_bytes_limit: int = 0) -> dict | None:
+        """``create`` through an asyncio client (``decode_responses``, the same server): the same
+        transaction, for the API's event loop."""
+        pipe = client.pipeline()
+        meta, admit_at = self._stage_create(pipe, kind, request, items_total, chunk_size, owner, callback_url,
+                                            active_limit, task_ids, chunk_key, items_key, item_time_bound_s,
+                                            job_time_limit_s, enqueue, items_bytes, stored_bytes_limit)
+        admitted = (await pipe.execute())[admit_at]
+        if admitted != 1:
+            discard = client.pipeline()
+            self._stage_delete(discard, meta["id"], owner)
+            await discard.execute()
+        return self._admitted(meta, admitted, stored_bytes_limit)
+
+    @staticmethod
+    def _admitted(meta: dict, admitted: int, stored_bytes_limit: int) -> dict | None:
+        if admitted == -1:
+            raise StoredBytesExceeded(stored_bytes_limit)
+        return meta if admitted == 1 else None
+
+    def _stage_create(self, pipe, kind, request, items_total, chunk_size, owner, callback_url, active_limit, task_ids,
+                      chunk_key, items_key, item_time_bound_s, job_time_limit_s, enqueue, items_bytes,
+                      stored_bytes_limit) -> tuple[dict, int]:
+        """Queue a new job's transaction on ``pipe`` (a sync or an asyncio pipeline); its record,
+        and the position of the admission's answer among the transaction's."""
         job_id = uuid.uuid4().hex
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
@@ -109,7 +150,6 @@ class JobStore:
                         "delivered_at": None} if callback_url else None,
         }
         meta["task_ids"] = list(task_ids) if task_ids is not None else [uuid.uuid4().hex for _ in chunks]
-        pipe = self.r.pipeline()
         pipe.eval(self._PRUNE_INDEX, 3, *self._accounts(owner), self.key(""), self.PRUNED_PER_JOB)
         request_bytes = self._put_request(pipe, job_id, request, chunk_key, items_key) + items_bytes
         admit_at = len(pipe)
@@ -125,13 +165,7 @@ class JobStore:
             commands = enqueue(meta)
             pipe.eval(self._RUN_IF_ADMITTED, 1, self.owner_key(owner, "active"), job_id,
                       *(part for name, args in commands for part in (name, len(args), *args)))
-        admitted = pipe.execute()[admit_at]
-        if admitted != 1:
-            self.delete(job_id)
-            if admitted == -1:
-                raise StoredBytesExceeded(stored_bytes_limit)
-            return None
-        return meta
+        return meta, admit_at
 
     @staticmethod
     def chunks(meta: dict) -> list[tuple[int, int]]:
@@ -788,12 +822,15 @@ class JobStore:
     def delete(self, job_id: str) -> None:
         owner = self.field(job_id, "owner")
         pipe = self.r.pipeline()
+        self._stage_delete(pipe, job_id, owner)
+        pipe.execute()
+
+    def _stage_delete(self, pipe, job_id: str, owner: str | None) -> None:
         pipe.delete(*(self.key(job_id, part) for part in self._PARTS))
         pipe.zrem(self.RUNNING, job_id)
         pipe.zrem(self.DEADLINES, job_id)
         if owner is not None:
             pipe.eval(self._FORGET, 3, *self._accounts(owner), job_id)
-        pipe.execute()
 
     # --- listing -----------------------------------------------------------------------------
     def list_jobs(self, owner: str, limit: int, after: tuple[float, str] | None = None,
@@ -923,6 +960,16 @@ class JobStore:
         raw = self.r.get(key)
         return json.loads(raw) if raw else None
 
+    async def remember_idempotent_async(self, client: redis.asyncio.Redis, owner: str, idempotency_key: str,
+                                        body_digest: str) -> dict | None:
+        """``remember_idempotent`` through an asyncio client."""
+        key = self._idempotency_key(owner, idempotency_key)
+        entry = json.dumps({"body": body_digest, "job": None})
+        if await client.set(key, entry, nx=True, ex=self.ttl):
+            return None
+        raw = await client.get(key)
+        return json.loads(raw) if raw else None
+
     def settle_idempotent(self, owner: str, idempotency_key: str, body_digest: str, job_id: str | None) -> None:
         """Record the job made for a reserved key (or, with None, free the key: creation failed)."""
         key = self._idempotency_key(owner, idempotency_key)
@@ -930,6 +977,15 @@ class JobStore:
             self.r.delete(key)
         else:
             self.r.set(key, json.dumps({"body": body_digest, "job": job_id}), ex=self.ttl)
+
+    async def settle_idempotent_async(self, client: redis.asyncio.Redis, owner: str, idempotency_key: str,
+                                      body_digest: str, job_id: str | None) -> None:
+        """``settle_idempotent`` through an asyncio client."""
+        key = self._idempotency_key(owner, idempotency_key)
+        if job_id is None:
+            await client.delete(key)
+        else:
+            await client.set(key, json.dumps({"body": body_digest, "job": job_id}), ex=self.ttl)
 
 
 async def read_job(client: redis.asyncio.Redis, job_id: str) -> dict | None:
