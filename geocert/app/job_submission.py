@@ -181,11 +181,11 @@ def _create(store: JobStore, owner: str, kind, request: dict, items: int, items_
     return meta
 
 
-# A body up to this size is submitted on the API's event loop (submit_on_loop) when the loop can
-# queue tasks without waiting (queue.loop_producer): its checks and job cost about a millisecond
-# of CPU (3 tracks; some 40 us a track more), while a thread of the pool given it competed with the
-# loop for the interpreter lock at each of the loop's system calls. Larger bodies go to the pool.
-LOOP_BODY_BYTES = 32 << 10
+# A body up to GEOCERT_SUBMIT_ON_LOOP_BYTES is submitted on the API's event loop (submit_on_loop)
+# when the loop can queue tasks without waiting (queue.loop_producer): its checks and job cost
+# about a millisecond of CPU (3 tracks; some 40 us a track more), while a thread of the pool given
+# it competed with the loop for the interpreter lock at each of the loop's system calls. Larger
+# bodies go to the pool.
 
 
 async def submit_on_loop(body, response: Response, store: JobStore, client, owner: str,

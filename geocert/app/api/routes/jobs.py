@@ -136,7 +136,7 @@ async def submit_job(
         document = await submissions.submit(whole, owner, idempotency_key, response)
         del whole
     elif (split := getattr(request.state, "streamed", None)) is None and \
-            len(await request.body()) <= job_submission.LOOP_BODY_BYTES and (producer := await _loop_producer()):
+            len(await request.body()) <= get_settings().submit_on_loop_bytes and (producer := await _loop_producer()):
         document = await job_submission.submit_on_loop(body, response, store, get_async_redis(), owner,
                                                        idempotency_key, producer)
     else:
