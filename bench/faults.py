@@ -15,6 +15,9 @@ processes, each a process of its own on loopback:
 
     .venv/bin/python -m bench.faults [--only submit,streams,redelivery,restart,body]
 
+``--only saturated`` runs the saturated half of section 1 alone (the API, no workers), for
+before-and-after pairs.
+
 Each section starts its own cluster in a temporary directory. Figures are printed as they come and
 as one table at the end. Nothing here asserts: the tests (tests/service/test_faults.py) check
 behaviour, this prints speed.
@@ -423,19 +426,28 @@ def bench_body(limit: int = 4_000_000) -> None:
                f"413, under {2 * limit / 2**20:.1f} MiB")
 
 
+def bench_saturated(clients: int = 20, jobs_per_client: int = 15) -> None:
+    print(f"1b. submits a second, {clients} clients back to back, no workers", flush=True)
+    rng = np.random.default_rng(1)
+    saturated(clients, jobs_per_client, [json.dumps(triangulation_job(rng, tracks=3)).encode() for _ in range(40)])
+
+
 SECTIONS = {"submit": bench_submit, "streams": bench_streams, "redelivery": bench_redelivery,
             "restart": bench_restart, "body": bench_body}
 
 
-def run(sections: dict, description: str, first_column: str = "figure", third_column: str = "target") -> None:
-    """Run the sections named on the command line (--only), then print every figure as one table
-    (its third column, when any figure has one: ``report``'s ``target``)."""
+def run(sections: dict, description: str, first_column: str = "figure", third_column: str = "target",
+        named_only: dict | None = None) -> None:
+    """Run the sections named on the command line (--only; by default every one of ``sections``,
+    not those of ``named_only``), then print every figure as one table (its third column, when
+    any figure has one: ``report``'s ``target``)."""
     parser = argparse.ArgumentParser(description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--only", default=",".join(sections), help="comma-separated sections: " + ", ".join(sections))
+    parser.add_argument("--only", default=",".join(sections),
+                        help="comma-separated sections: " + ", ".join({**sections, **(named_only or {})}))
     args = parser.parse_args()
     for name in args.only.split(","):
         try:
-            sections[name.strip()]()
+            {**sections, **(named_only or {})}[name.strip()]()
         except Exception as exc:  # one section failing does not hide the others' figures
             report(f"section {name} failed", f"{type(exc).__name__}: {exc}")
     targets = any(target for _, _, target in FIGURES)
@@ -446,7 +458,7 @@ def run(sections: dict, description: str, first_column: str = "figure", third_co
 
 
 def main() -> None:
-    run(SECTIONS, __doc__)
+    run(SECTIONS, __doc__, named_only={"saturated": bench_saturated})
 
 
 if __name__ == "__main__":

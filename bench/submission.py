@@ -4,7 +4,10 @@ on a body already validated, against an embedded Redis, one thread, no HTTP. Pri
 submission: CPU and wall milliseconds, the socket writes to Redis (each a round trip: the caller
 waits for its answer) and the Redis commands run, with the machine's load.
 
-    .venv/bin/python -m bench.submission [--tracks 3] [--count 300] [--profile]
+    .venv/bin/python -m bench.submission [--tracks 3] [--count 300] [--profile] [--loop]
+
+``--loop``: the event loop's path instead (``job_submission.submit_on_loop``, the Redis calls
+through an asyncio client), which the API takes for a small body.
 
 Run it against another checkout with PYTHONPATH=<that checkout> for a before and after in one
 session. Nothing here asserts (tests/workers/test_queue.py checks the behaviour).
@@ -29,6 +32,7 @@ def main() -> None:
     parser.add_argument("--tracks", type=int, default=3, help="tracks a job (the 3 of bench.faults' submissions)")
     parser.add_argument("--count", type=int, default=300, help="submissions measured")
     parser.add_argument("--profile", action="store_true", help="also print cProfile's top functions")
+    parser.add_argument("--loop", action="store_true", help="the event loop's path (submit_on_loop)")
     args = parser.parse_args()
 
     from geocert.workers.redis_server import start_embedded_redis
@@ -36,13 +40,13 @@ def main() -> None:
     server, url = start_embedded_redis(Path(tempfile.mkdtemp(prefix="geocert-bench-submission-")))
     os.environ.update(GEOCERT_REDIS_URL=url, GEOCERT_MAX_ACTIVE_JOBS_PER_KEY="0")
     try:
-        measure(url, args.tracks, args.count, args.profile)
+        measure(url, args.tracks, args.count, args.profile, args.loop)
     finally:
         server.terminate()
         server.wait(timeout=10)
 
 
-def measure(url: str, tracks: int, count: int, profile: bool) -> None:
+def measure(url: str, tracks: int, count: int, profile: bool, loop: bool = False) -> None:
     import redis
     import redis.connection
     from fastapi import Response
@@ -61,6 +65,19 @@ def measure(url: str, tracks: int, count: int, profile: bool) -> None:
     def submit(index: int) -> None:
         submission._submit(bodies[index % len(bodies)], Response(), store, "public", None)
 
+    if loop:
+        import asyncio
+
+        from geocert.workers import queue
+
+        queue.ready_loop_producer()
+        runner = asyncio.Runner()
+        client = runner.run(_async_client(url))
+
+        def submit(index: int) -> None:  # noqa: F811 (the loop's path instead)
+            runner.run(submission.submit_on_loop(bodies[index % len(bodies)], Response(), store, client, "public",
+                                                 None, queue.loop_producer()))
+
     submit(0)  # first-use costs (connections, Celery's producer) out of the figures
     counter = redis.Redis.from_url(url, decode_responses=True)
     counter.config_resetstat()
@@ -71,13 +88,23 @@ def measure(url: str, tracks: int, count: int, profile: bool) -> None:
         writes[0] += 1
         return send(self, *args, **kwargs)
 
+    import redis.asyncio.connection
+
+    send_async = redis.asyncio.connection.AbstractConnection.send_packed_command
+
+    async def counted_async(self, *args, **kwargs):
+        writes[0] += 1
+        return await send_async(self, *args, **kwargs)
+
     redis.connection.AbstractConnection.send_packed_command = counted
+    redis.asyncio.connection.AbstractConnection.send_packed_command = counted_async
     cpu, wall = time.process_time(), time.perf_counter()
     try:
         for index in range(count):
             submit(index)
     finally:
         redis.connection.AbstractConnection.send_packed_command = send
+        redis.asyncio.connection.AbstractConnection.send_packed_command = send_async
     cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
     commands = {name.removeprefix("cmdstat_"): stats["calls"] / count
                 for name, stats in sorted(counter.info("commandstats").items()) if name != "cmdstat_config"}
@@ -89,6 +116,12 @@ def measure(url: str, tracks: int, count: int, profile: bool) -> None:
         profiler = cProfile.Profile()
         profiler.runcall(lambda: [submit(index) for index in range(count)])
         pstats.Stats(profiler).sort_stats("cumulative").print_stats(30)
+
+
+async def _async_client(url: str):
+    import redis.asyncio
+
+    return redis.asyncio.Redis.from_url(url, decode_responses=True)
 
 
 if __name__ == "__main__":

@@ -30,6 +30,9 @@ class Settings(BaseSettings):
     # checked and stored a batch at a time), so that the API holds about the body's size, not
     # Python objects for every number (app.streamed).
     stream_threshold_bytes: int = 1 << 20
+    # A body up to this size is submitted on the API's event loop (app.job_submission.submit_on_loop),
+    # a larger one in its thread pool; 0: every submission in the pool.
+    submit_on_loop_bytes: int = 32 << 10
     # Most items (tracks or maps) in one job (413 beyond it).
     max_items_per_job: int = 200_000
     # Most observations or correspondences, summed over a job's items (413 beyond it).

@@ -3,7 +3,9 @@ their tasks without importing them (the API process imports no task code)."""
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import threading
 
 from geocert.workers.priorities import FIRST, LATER
 from geocert.jobs.store import JobStore
@@ -95,22 +97,64 @@ def can_collect() -> bool:
         return callable(getattr(producer.channel, "create_publish_batch", None))
 
 
-def task_commands(meta: dict, request_id: str | None) -> list[tuple[str, tuple]]:
+def task_commands(meta: dict, request_id: str | None, producer=None) -> list[tuple[str, tuple]]:
     """The broker's Redis commands (name, arguments) that publish the job's chunk tasks, made by
     Celery and kombu as a publish makes them (the same messages, queues and headers) but not
     sent: JobStore.create runs them in the job's own transaction (``enqueue``), so a submission
-    is one round trip to Redis whatever its number of chunks, instead of one more a chunk."""
+    is one round trip to Redis whatever its number of chunks, instead of one more a chunk.
+    ``producer``: kombu's producer to make them with (``loop_producer``), else one of the pool's."""
     from geocert.workers.celery_app import celery_app
 
+    with contextlib.ExitStack() as stack:
+        if producer is None:
+            producer = stack.enter_context(celery_app.producer_or_acquire())
+        return _collected(producer, meta, request_id)
+
+
+def _collected(producer, meta: dict, request_id: str | None) -> list[tuple[str, tuple]]:
     collected = _Collected()
-    with celery_app.producer_or_acquire() as producer:
-        # kombu's Producer publishes through its current batch (thread-local, as Producer.batch sets it).
-        producer._batch_local.current = collected
-        try:
-            _chunk_group(meta, request_id).apply_async(producer=producer)
-        finally:
-            del producer._batch_local.current
+    # kombu's Producer publishes through its current batch (thread-local, as Producer.batch sets it).
+    producer._batch_local.current = collected
+    try:
+        _chunk_group(meta, request_id).apply_async(producer=producer)
+    finally:
+        del producer._batch_local.current
     return collected.commands
+
+
+_LOOP_PRODUCER: list = []  # what ready_loop_producer made: the producer, or None (the broker cannot collect)
+_LOOP_PRODUCER_LOCK = threading.Lock()
+
+
+def loop_producer():
+    """The producer whose task commands an event loop may make without waiting on the network:
+    its connection made and the queue declared (``ready_loop_producer``, in a thread, first); None
+    until then, or when the broker cannot collect them (can_collect). Collecting sends nothing,
+    so from then on making the commands is computation alone. Its thread-local batch makes it
+    safe for one thread at a time: an event loop's."""
+    return _LOOP_PRODUCER[0] if _LOOP_PRODUCER else None
+
+
+def loop_producer_tried() -> bool:
+    """Whether ``ready_loop_producer`` has run (and ``loop_producer`` is what it will stay)."""
+    return bool(_LOOP_PRODUCER)
+
+
+def ready_loop_producer() -> None:
+    """Make ``loop_producer`` (blocking: connects to the broker): a producer taken from the pool
+    for good, and a first job's commands made with it and dropped, through which Celery declares
+    the queue (cached from then on)."""
+    from geocert.workers.celery_app import celery_app
+
+    with _LOOP_PRODUCER_LOCK:
+        if _LOOP_PRODUCER:
+            return
+        if not can_collect():
+            _LOOP_PRODUCER.append(None)
+            return
+        producer = celery_app.producer_pool.acquire(block=True)
+        _collected(producer, {"id": "ready", "kind": "triangulation", "chunks": [(0, 1)], "task_ids": ["ready"]}, None)
+        _LOOP_PRODUCER.append(producer)
 
 
 def withdraw_queued(store: JobStore, job_id: str) -> None:

@@ -298,3 +298,18 @@ class TestJobRecord:
         assert JobStore.chunks(jobs.get(large["id"])) == large["chunks"]
         assert JobStore.chunks({"items_total": 250, "chunk_size": 100}) == [(0, 100), (100, 200), (200, 250)]
         assert JobStore.chunks({"chunks": [[0, 7], [7, 9]]}) == [(0, 7), (7, 9)]  # as an earlier version stored them
+
+
+def test_the_stores_encoder_writes_json_dumps_text_to_the_byte():
+    """What the store writes (the request's head and items, the record's fields, events) is
+    json.dumps's text, by one shared C encoder: the floats JSON spells oddly, NaN and infinities,
+    non-ASCII and control characters, nesting, keys that are not strings."""
+    from geocert.jobs.store import dumps
+
+    rng = np.random.default_rng(5)
+    values = [None, True, 0, -7, 2 ** 70, 1e-05, 1e16, 1e-320, -0.0, 0.1 + 0.2, math.nan, math.inf, -math.inf,
+              "é\u2028\x00\"\\/", "", [], {}, {3: "int key", 2.5: "float key", None: "none key", True: "bool key"},
+              request_of(40, seed=5), {"nested": [[[{"a": [rng.normal(size=3).tolist()]}]]]},
+              rng.normal(size=200).tolist(), (1, 2)]
+    for value in values:
+        assert dumps(value) == json.dumps(value), value

@@ -115,3 +115,60 @@ class TestNumberArray:
         assert array.tolist() == [[1.0, 2.0], [3.0, 4.5]]
         with pytest.raises(InputError, match="rows of one length"):
             number_array([[1.0, 2.0], [3.0]], "x", "pairs", 2)
+
+
+class TestCameraChecks:
+    """check_cameras checks every camera at once: the camera named is the first that fails any
+    check, with the first check it fails (non-finite entries before everything else), and the
+    cameras it returns are those of normalised_cameras."""
+
+    def cameras(self):
+        return np.random.default_rng(3).normal(size=(5, 3, 4))
+
+    @pytest.mark.parametrize("spoil, named", [
+        ({1: "depth", 2: "zero", 3: "nan"}, ("cameras/3", "non-finite")),  # finiteness first, over all
+        ({1: "depth", 2: "zero"}, ("cameras/1", "rank-deficient")),  # a zero row: rank 2 at most
+        ({2: "zero", 3: "rank"}, ("cameras/2", "camera matrix is zero")),
+        ({0: "rank", 4: "zero"}, ("cameras/0", "rank-deficient")),
+        ({4: "depth"}, ("cameras/4", "rank-deficient")),
+    ])
+    def test_the_first_failing_camera_and_check_are_named(self, spoil, named):
+        from geocert.solvers.core.geometry import check_cameras
+
+        cams = self.cameras()
+        for index, how in spoil.items():
+            if how == "zero":
+                cams[index] = 0
+            elif how == "depth":
+                cams[index, 2] = 0
+            elif how == "rank":
+                cams[index, 2] = 2 * cams[index, 0] - cams[index, 1]
+            else:
+                cams[index, 1, 2] = np.nan
+        with pytest.raises(InputError) as error:
+            check_cameras(cams)
+        assert error.value.field == named[0] and named[1] in str(error.value)
+
+    def test_rank_deficiency_quotes_that_cameras_singular_values(self):
+        from geocert.solvers.core.geometry import check_cameras
+
+        cams = self.cameras()
+        cams[3, 2] = cams[3, 0]
+        with pytest.raises(InputError) as error:
+            check_cameras(cams)
+        assert str(np.linalg.svd(cams[3], compute_uv=False).tolist()) in str(error.value)
+
+    def test_cameras_far_from_one_are_scaled_by_powers_of_two_alone(self):
+        from geocert.solvers.core.geometry import check_cameras, normalised_cameras
+
+        cams = self.cameras()
+        cams[1] *= 2.0 ** 200
+        cams[3] *= 2.0 ** -200
+        cams[4] *= 2.0 ** 60  # near enough to 1: kept as it is
+        checked = check_cameras(cams)
+        assert np.array_equal(checked, normalised_cameras(cams))
+        assert np.array_equal(checked[[0, 2, 4]], cams[[0, 2, 4]])
+        for index in (1, 3):
+            ratio = checked[index] / cams[index]
+            assert np.all(ratio == ratio.flat[0]) and np.frexp(ratio.flat[0])[0] == 0.5  # one power of two
+            assert 0.5 <= np.abs(checked[index]).max() < 1

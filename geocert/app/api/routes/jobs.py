@@ -22,11 +22,12 @@ from geocert.app.api.deps import Caller, JobStoreDep, error_responses, get_async
 from geocert.settings import get_settings
 from geocert.app import lifecycle
 from geocert.app import exports, processes, shape, streamed, submissions
+from geocert.app import job_submission
 from geocert.app.job_submission import _submit
 from geocert.app.errors import ApiProblem
 from geocert.app.schemas import JOB_EXAMPLES, JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
-from geocert.workers.queue import withdraw_queued
+from geocert.workers.queue import loop_producer, loop_producer_tried, ready_loop_producer, withdraw_queued
 from geocert.jobs.store import REDIS_GONE, TERMINAL, JobStore, events, read_job
 
 # As many export processes as exports may run at once (the gate on the export path refuses more).
@@ -134,9 +135,12 @@ async def submit_job(
         request.state.whole_body = None  # not kept while waiting
         document = await submissions.submit(whole, owner, idempotency_key, response)
         del whole
+    elif (split := getattr(request.state, "streamed", None)) is None and \
+            len(await request.body()) <= get_settings().submit_on_loop_bytes and (producer := await _loop_producer()):
+        document = await job_submission.submit_on_loop(body, response, store, get_async_redis(), owner,
+                                                       idempotency_key, producer)
     else:
-        document = await run_in_threadpool(_submit, body, response, store, owner, idempotency_key,
-                                           getattr(request.state, "streamed", None))
+        document = await run_in_threadpool(_submit, body, response, store, owner, idempotency_key, split)
     request.state.streamed = None  # the body's text, not kept while waiting
     wait = preferred_wait(prefer)
     if wait is None:
@@ -153,6 +157,14 @@ async def submit_job(
         finished.status_code = 200
         finished.headers.update({k: v for k, v in response.headers.items() if k != "content-length"})
     return finished
+
+
+async def _loop_producer():
+    """queue.loop_producer, made in a thread the first time (it connects to the broker); None
+    when the broker cannot queue tasks in a job's transaction (then submissions use the pool)."""
+    if not loop_producer_tried():
+        await run_in_threadpool(ready_loop_producer)
+    return loop_producer()
 
 
 _JOB_ID = re.compile(r"[0-9a-f]{32}")  # JobStore.create's ids
