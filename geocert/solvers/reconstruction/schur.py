@@ -31,7 +31,8 @@ class StopRule:
     - ``gradient_tolerance``: the largest entry of the (robustly weighted) gradient J^T r is at
       most this, checked before each step (Ceres: max_norm(gradient) <= gradient_tolerance);
     - ``parameter_tolerance``: a step's length is at most (|x| + parameter_tolerance) *
-      parameter_tolerance, x every camera, shared and point parameter (Ceres's definition).
+      parameter_tolerance, x every camera, shared and point parameter (Ceres's definition); the
+      step is taken when it lowers the cost, then the solve ends.
 
     0 turns a test off. Near the minimum, Levenberg-Marquardt's steps shrink geometrically, so the
     cost still to be gained is of the order of the last step's gain: with ``function_tolerance``
@@ -195,18 +196,21 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
             A_new = A + da[:n * c].reshape(n, c)
             S_new = S + da[n * c:]
             B_new = B + db
-            if stop.parameter_tolerance > 0:
-                x_norm = np.sqrt(np.sum(A * A) + np.sum(S * S) + np.sum(B * B))
-                if (np.sqrt(np.sum(da * da) + np.sum(db * db))
-                        <= (x_norm + stop.parameter_tolerance) * stop.parameter_tolerance):
-                    return A, S, B, r, iterations
+            small = stop.parameter_tolerance > 0 and (
+                np.sqrt(np.sum(da * da) + np.sum(db * db))
+                <= (np.sqrt(np.sum(A * A) + np.sum(S * S) + np.sum(B * B)) + stop.parameter_tolerance)
+                * stop.parameter_tolerance)
             r_new = residual(A_new[view], S_new, B_new[track])
             cost_new = _cost(r_new, f_scale) if np.all(np.isfinite(r_new)) else np.inf
             if cost_new < cost:
-                converged = cost - cost_new <= stop.function_tolerance * cost
+                # A step within the parameter tolerance ends the solve, taken: near an exact fit it
+                # is small against the parameters but not against what is left of the error.
+                converged = small or cost - cost_new <= stop.function_tolerance * cost
                 A, S, B, r, cost = A_new, S_new, B_new, r_new, cost_new
                 lam = max(lam / 3, 1e-12)
                 break
+            if small:
+                return A, S, B, r, iterations
             lam *= 4
             if lam > 1e12:
                 return A, S, B, r, iterations
