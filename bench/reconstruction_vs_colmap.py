@@ -50,7 +50,8 @@ from pathlib import Path
 
 import numpy as np
 
-from testing import camera_errors, colmap_baseline, machine_speed_ms, photo_sets
+from bench import colmap_baseline, machine_speed_ms
+from testing import camera_errors, photo_sets
 
 # The ring options for the dinoSparseRing (docs/benchmarks.md, "Photos to tracks, and the K-known path"),
 # the only set the docs give options for: bench.reconstruction_images.RING_JOB_OPTIONS, not

@@ -4,7 +4,8 @@ Projective: each camera's 12 entries and each point's 4 homogeneous coordinates 
 gauge, a 4x4 projective change of frame and each row's scale, is left to the damping).
 Metric: one K shared by every view (fx, fy, skew, cx, cy), a rotation vector and a translation
 per view, each point's 3 coordinates. Residuals are in pixels either way; ``f_scale`` (pixels)
-makes the loss Huber's, None plain least squares."""
+makes the loss Huber's, None plain least squares; ``stop`` (schur.StopRule, Ceres's tests by
+default) says when an adjustment ends before ``max_iterations``."""
 
 from __future__ import annotations
 
@@ -15,7 +16,8 @@ from geocert.solvers.reconstruction import schur
 
 
 def projective(cameras: np.ndarray, points: np.ndarray, view: np.ndarray, track: np.ndarray, pixels: np.ndarray,
-               scales: np.ndarray, f_scale: float | None = None, max_iterations: int = 30, should_stop=None):
+               scales: np.ndarray, f_scale: float | None = None, max_iterations: int = 30, should_stop=None,
+               stop: schur.StopRule = schur.CERES):
     """Refine cameras (n, 3, 4) and homogeneous points (p, 4) over observations (view, track,
     pixel): pixels are normalised image coordinates and ``scales`` each view's normalisation
     scale, so residual / scale is in pixels. Returns cameras, points, pixel residuals (M, 2)."""
@@ -42,7 +44,7 @@ def projective(cameras: np.ndarray, points: np.ndarray, view: np.ndarray, track:
         scale = inv_scale[:, :, None]
         return ja * scale, np.zeros((len(Am), 2, 0)), jb * scale
 
-    A, _, B, r, _ = schur.solve(residual, A, np.zeros(0), B, view, track, f_scale, max_iterations,
+    A, _, B, r, _ = schur.solve(residual, A, np.zeros(0), B, view, track, f_scale, max_iterations, stop=stop,
                                 jacobian=jacobian, should_stop=should_stop)
     P = A.reshape(n, 3, 4)
     P = P / np.linalg.norm(A, axis=1)[:, None, None]
@@ -61,7 +63,8 @@ MODELS = ("simple", "full", "fixed", "varying", "principal", "radial")
 
 def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, points: np.ndarray, view: np.ndarray,
            track: np.ndarray, pixels: np.ndarray, f_scale: float | None = None, max_iterations: int = 30,
-           model: str = "simple", focals: np.ndarray | None = None, should_stop=None, k1: float = 0.0):
+           model: str = "simple", focals: np.ndarray | None = None, should_stop=None, k1: float = 0.0,
+           stop: schur.StopRule = schur.CERES):
     """Refine one shared K (``model``: "simple" f with square pixels, no skew and cx, cy fixed; "full"
     fx, fy, skew, cx, cy; "fixed" K as given; "radial" f and the distortion term, from ``k1``),
     rotations (n, 3, 3), translations (n, 3) and points (p, 3) against pixel observations. Returns
@@ -147,7 +150,7 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
     start = {"fixed": np.zeros(0), "varying": np.zeros(0), "simple": np.array([np.sqrt(abs(given[0] * given[1]))]),
              "full": given.copy(), "principal": np.array([np.sqrt(abs(given[0] * given[1])), given[3], given[4]]),
              "radial": np.array([np.sqrt(abs(given[0] * given[1])), k1])}[model]
-    A, S, B, r, _ = schur.solve(residual, A, start, points.copy(), view, track, f_scale, max_iterations,
+    A, S, B, r, _ = schur.solve(residual, A, start, points.copy(), view, track, f_scale, max_iterations, stop=stop,
                                 jacobian=jacobian, should_stop=should_stop)
     k = entries(S)
     K = np.array([[k[0], k[2], k[3]], [0.0, k[1], k[4]], [0.0, 0.0, 1.0]])

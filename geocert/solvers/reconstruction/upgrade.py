@@ -16,7 +16,7 @@ import numpy as np
 from scipy.linalg import rq
 
 from geocert.solvers.autocalibration import problem as pr
-from geocert.solvers.reconstruction import motion_claim
+from geocert.solvers.reconstruction import motion_claim, schur
 
 
 @dataclass
@@ -269,11 +269,25 @@ def K_of(metric: Metric, view: int) -> np.ndarray:
     return metric.K if metric.Ks is None else metric.Ks[view]
 
 
+# When upgrade.adjust's first round (Huber's loss) ends before its iteration cap. The second round
+# (plain least squares over the observations the first leaves within the threshold) adjusts
+# everything again, but which observations it keeps depends on where the first round ends. With
+# Huber's loss the (reweighted) steps shrink slowly near the minimum, so under Ceres's 1e-6 each
+# first round on the Middlebury templeRing ran to its 30 iterations. 1e-4 stops them after 7 to
+# 16 (every 2nd templeRing photo, K unknown: 25.9 s CPU against 29.7 s), but kept one more track
+# on the dinoSparseRing with K known and moved its median rotation error from 0.14 to 0.16
+# degrees, so the default stays Ceres's (docs/benchmarks.md).
+ROBUST_ROUND_STOP = schur.CERES
+
+
 def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: np.ndarray, threshold_px: float,
-           max_iterations: int = 30, model: str = "simple", should_stop=None) -> tuple[Metric, np.ndarray, dict]:
+           max_iterations: int = 30, model: str = "simple", should_stop=None,
+           robust_stop: schur.StopRule = ROBUST_ROUND_STOP,
+           stop: schur.StopRule = schur.CERES) -> tuple[Metric, np.ndarray, dict]:
     """Metric bundle adjustment (one shared K): Huber's loss, then plain least squares on the
     observations within the threshold. Returns the adjusted reconstruction, the observations
-    kept, and figures. ``should_stop()`` (asked each iteration) ends it where it is."""
+    kept, and figures. ``should_stop()`` (asked each iteration) ends it where it is;
+    ``robust_stop`` and ``stop`` (schur.StopRule) end the first round and the second sooner."""
     from geocert.solvers.reconstruction import bundle
 
     start = time.perf_counter()
@@ -297,7 +311,8 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
         K, R, t, Xp, r, k1 = bundle.metric(K, R, t, X[points], vindex[obs_view[use]], pindex[obs_track[use]],
                                            pixels[use], f_scale=threshold_px / 2 if round_ == 0 else None,
                                            max_iterations=max_iterations, model=model, focals=focals,
-                                           should_stop=should_stop, k1=k1)
+                                           should_stop=should_stop, k1=k1,
+                                           stop=robust_stop if round_ == 0 else stop)
         if K.ndim == 3:  # one K per view: the middle focal length stands for them in K
             focals = K[:, 0, 0]
             K = K[int(np.argsort(focals)[len(focals) // 2])]
