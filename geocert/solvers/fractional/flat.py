@@ -158,7 +158,8 @@ def smallest_eigenvalue3(A: np.ndarray) -> np.ndarray:
     eigenvalue and p^2 the mean squared deviation from it, the eigenvalues are
     q + 2 p cos(phi + 2 pi k / 3), 3 phi = arccos(det(A - q I) / 2 p^3). Where the two least
     eigenvalues nearly meet (the arccos's argument near 1, where its rounding grows as the
-    square root) or the formula over- or underflows, eigvalsh answers instead."""
+    square root), or where p^3 leaves the range where its products round as in the middle of it
+    (p outside [1e-90, 1e90]), eigvalsh answers instead."""
     a00, a01, a02, a11, a12, a22 = (np.where(np.isfinite(a), a, 0.0) for a in np.asarray(A, dtype=float))
     with np.errstate(all="ignore"):
         q = (a00 + a11 + a22) / 3
@@ -167,8 +168,9 @@ def smallest_eigenvalue3(A: np.ndarray) -> np.ndarray:
         det = b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02) + a02 * (a01 * a12 - b11 * a02)
         r = det / (2 * p * p * p)
         least = q + 2 * p * np.cos(np.arccos(np.clip(r, -1.0, 1.0)) / 3 + 2 * np.pi / 3)
-    least = np.where(p == 0, q, least)  # a multiple of the identity
-    redo = (p != 0) & ~((r <= 1 - NEAR_DOUBLE) & np.isfinite(least))
+    identity = (a01 == 0) & (a02 == 0) & (a12 == 0) & (a00 == a11) & (a11 == a22)  # a multiple of it
+    least = np.where(identity, a00, least)
+    redo = ~identity & ~((r <= 1 - NEAR_DOUBLE) & (p > 1e-90) & (p < 1e90) & np.isfinite(least))
     if redo.any():
         matrices = np.stack([a00, a01, a02, a01, a11, a12, a02, a12, a22], axis=-1)[redo].reshape(-1, 3, 3)
         least[redo] = np.linalg.eigvalsh(matrices)[:, 0]
