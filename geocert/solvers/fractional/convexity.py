@@ -58,7 +58,7 @@ import copy
 import numpy as np
 
 from geocert.solvers.core.strict import Invalid, number, numbers, record
-from geocert.solvers.fractional.flat import PAIRS, FlatTracks
+from geocert.solvers.fractional.flat import PAIRS, FlatTracks, smallest_eigenvalue3
 
 U = 2.0 ** -52
 # R as fractions of the distance to the nearest principal plane (half of it at most, so that
@@ -271,7 +271,6 @@ def sublevel_radii(flat: FlatTracks, x: np.ndarray, increase: np.ndarray, strict
     with np.errstate(all="ignore"):
         terms = at_level(flat, terms, increase) if terms is not None and norm == "L2L2" else \
             convexity_terms(flat, x, increase, norm)
-    n_tracks = len(x)
     usable = terms.usable
     with np.errstate(all="ignore"):
         # Below R0 = sqrt(n / lambda_min(sum_i M_i' M_i / (e_i w_i)^2)) the test fails (each
@@ -279,8 +278,7 @@ def sublevel_radii(flat: FlatTracks, x: np.ndarray, increase: np.ndarray, strict
         # R^2 / (e_i w_i (1 + R q))^2, so R0 / (1 - R0 q) passes but for the test's margins.
         weight = 1 / (terms.e * terms.w_hi) ** 2
         A = flat.per_track(terms.MtM * weight)
-        matrices = A[[0, 1, 2, 1, 3, 4, 2, 4, 5]].T.reshape(n_tracks, 3, 3)
-        smallest = np.linalg.eigvalsh(np.where(np.isfinite(matrices), matrices, 0.0))[:, 0]
+        smallest = smallest_eigenvalue3(A)  # eigvalsh's to rounding (non-finite entries read as 0)
         lo = np.sqrt(terms.n / np.where(smallest > 0, smallest, np.nan))
         lo = np.where(np.isfinite(lo) & (lo >= SMALLEST), lo, SMALLEST)
         q = np.maximum.reduceat(np.where(terms.w_hi > 0, terms.d_up / terms.w_hi, np.inf), flat.starts[:-1])

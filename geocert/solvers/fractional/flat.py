@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # a symmetric 3x3 matrix's entries, in order
+NEAR_DOUBLE = 1e-3  # smallest_eigenvalue3: above 1 - this (the two least within about p / 20), eigvalsh answers
 
 
 @dataclass
@@ -147,3 +148,31 @@ def solve3(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     b0, b1, b2 = b
     return np.stack([c00 * b0 + c01 * b1 + c02 * b2, c01 * b0 + c11 * b1 + c12 * b2,
                      c02 * b0 + c12 * b1 + c22 * b2]) / det
+
+
+def smallest_eigenvalue3(A: np.ndarray) -> np.ndarray:
+    """The least eigenvalue of symmetric 3x3 matrices given entry by entry, ``A`` (6, T) in PAIRS
+    order, non-finite entries read as 0: numpy.linalg.eigvalsh(...)[:, 0] to rounding (an error
+    of a few units of the last place of the matrix's norm, as LAPACK's), without a LAPACK call
+    per matrix. The trigonometric solution of the characteristic cubic: with q the mean
+    eigenvalue and p^2 the mean squared deviation from it, the eigenvalues are
+    q + 2 p cos(phi + 2 pi k / 3), 3 phi = arccos(det(A - q I) / 2 p^3). Where the two least
+    eigenvalues nearly meet (the arccos's argument near 1, where its rounding grows as the
+    square root), or where p^3 leaves the range where its products round as in the middle of it
+    (p outside [1e-90, 1e90]), eigvalsh answers instead."""
+    a00, a01, a02, a11, a12, a22 = (np.where(np.isfinite(a), a, 0.0) for a in np.asarray(A, dtype=float))
+    with np.errstate(all="ignore"):
+        q = (a00 + a11 + a22) / 3
+        b00, b11, b22 = a00 - q, a11 - q, a22 - q
+        p = np.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6)
+        det = b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02) + a02 * (a01 * a12 - b11 * a02)
+        r = det / (2 * p * p * p)
+        least = q + 2 * p * np.cos(np.arccos(np.clip(r, -1.0, 1.0)) / 3 + 2 * np.pi / 3)
+    identity = (a01 == 0) & (a02 == 0) & (a12 == 0) & (a00 == a11) & (a11 == a22)  # a multiple of it
+    least = np.where(identity, a00, least)
+    redo = ~identity & ~((r <= 1 - NEAR_DOUBLE) & (p > 1e-90) & (p < 1e90) & np.isfinite(least))
+    if redo.any():
+        matrices = np.stack([a00, a01, a02, a01, a11, a12, a02, a12, a22], axis=-1)[redo].reshape(-1, 3, 3)
+        least[redo] = np.linalg.eigvalsh(matrices)[:, 0]
+    return least
+

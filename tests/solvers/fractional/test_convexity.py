@@ -212,6 +212,45 @@ def test_positive_definite_agrees_with_eigenvalues():
     assert np.all(smallest[allowed] > margin[allowed] + 0.6 * np.abs(smallest[allowed]) * (1 - 1e-9))
 
 
+def _rotated(rng, values: np.ndarray) -> np.ndarray:
+    """Symmetric matrices Q diag(values) Q' with Q random rotations: values (N, 3)."""
+    Q, _ = np.linalg.qr(rng.normal(size=(len(values), 3, 3)))
+    return np.einsum("nij,nj,nkj->nik", Q, values, Q)
+
+
+def test_smallest_eigenvalue3_is_eigvalshs_to_rounding():
+    """flat.smallest_eigenvalue3 (the proven intervals' first guess) against numpy's eigvalsh,
+    within a few units of the last place of the matrix's norm: on random matrices, on the two
+    least eigenvalues nearly or exactly equal (where the closed form alone loses half the digits),
+    the two largest, all three, badly conditioned ones, multiples of the identity, scales near
+    overflow and underflow, and non-finite entries (read as 0)."""
+    rng = np.random.default_rng(seed("smallest eigenvalue"))
+    n = 4000
+    base = rng.normal(size=(n, 1)) * np.ones((1, 3))
+    cases = [rng.normal(size=(n, 3, 3))]
+    cases[0] = cases[0] + cases[0].transpose(0, 2, 1)
+    for d in (1e-2, 1e-4, 1e-8, 1e-12, 0.0):
+        near = rng.normal(size=n) * d
+        cases.append(_rotated(rng, base + np.stack([np.zeros(n), near, np.full(n, 3.0)], axis=1)))  # least pair
+        cases.append(_rotated(rng, base + np.stack([np.full(n, -3.0), near, np.zeros(n)], axis=1)))  # top pair
+        cases.append(_rotated(rng, 5 + d * rng.normal(size=(n, 3))))  # all three
+    cases.append(_rotated(rng, np.stack([1e-9 * rng.random(n), rng.random(n), 1 + rng.random(n)], axis=1)))
+    cases.append(rng.normal(size=(n, 1, 1)) * np.eye(3))
+    M = np.concatenate(cases)
+    M = M * 10.0 ** rng.uniform(-150, 150, size=(len(M), 1, 1))  # p^3 over- and underflows at the ends
+    entries = np.stack([M[:, a, b] for a, b in PAIRS])
+    entries[:, :50] = np.where(rng.random((6, 50)) < 0.3, np.nan, entries[:, :50])
+    entries[:, 50:100] = np.where(rng.random((6, 50)) < 0.3, np.inf, entries[:, 50:100])
+    entries[0, 100:110] = np.inf  # several flawed entries, still one matrix each
+    read = np.where(np.isfinite(entries), entries, 0.0)
+    matrices = read[[0, 1, 2, 1, 3, 4, 2, 4, 5]].T.reshape(-1, 3, 3)
+    expected = np.linalg.eigvalsh(matrices)[:, 0]
+    got = flat_tracks.smallest_eigenvalue3(entries)
+    norm = np.sqrt((matrices * matrices).sum(axis=(1, 2)))
+    assert np.all(np.abs(got - expected) <= 64 * np.finfo(float).eps * norm)
+    assert np.array_equal(flat_tracks.smallest_eigenvalue3(np.zeros((6, 3))), np.zeros(3))
+
+
 def test_a_bound_at_a_given_radius_is_the_ladders_and_needs_a_radius_that_encloses(dinosaur):
     """bounds_at (what a checker of a claimed radius computes) gives the ladder's bound at the
     ladder's radius, none at a radius too small to enclose the region or not a positive number."""
