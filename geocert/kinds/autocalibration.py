@@ -246,17 +246,20 @@ def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem:
     document: dict = {"method": options.method, "intrinsics": problem.ranges, "plane_at_infinity": None,
                       "K": None, "dual_absolute_quadric": None, "upgrade": None, "cameras": None, "points": None,
                       "baseline": None}
-    plane = None
     affine_cost = math.inf
     if a.plane is not None:
-        plane = pr.plane_in_input(problem, a.plane[:3])
-        affine_cost = pr.affine_cost(problem, result.p)  # at the plane as returned
-        document["plane_at_infinity"] = plane.tolist()
-    affine_stage = stage_document("affine", a.status, a.certified and pr.allowed_by_chirality(problem, result.p)
-                                  if result.p is not None else False, affine_cost, a.lower_bound, a.nodes,
-                                  result.affine_s, a.reason, options.rel_gap, options.abs_gap,
+        document["plane_at_infinity"] = pr.plane_in_input(problem, a.plane[:3]).tolist()
+    if result.p is not None:  # the plane as returned, read back (None: through the reference camera's centre)
+        affine_cost = pr.affine_cost(problem, result.p)
+    status, certified, reason = a.status, a.certified, a.reason
+    if certified and (result.p is None or not pr.allowed_by_chirality(problem, result.p)):
+        status, certified, reason = "not_certified", False, (
+            "the plane returned is not strictly inside the chirality polytope" if result.p is not None
+            else "the plane returned passes through the reference camera's centre")
+    affine_stage = stage_document("affine", status, certified, affine_cost, a.lower_bound, a.nodes,
+                                  result.affine_s, reason, options.rel_gap, options.abs_gap,
                                   "every plane at infinity chirality allows",
-                                  proofs.encode_affine(a) if full and a.certified else None)
+                                  proofs.encode_affine(a) if full and certified else None)
     affine_stage["plane_at_infinity"] = document["plane_at_infinity"]
     m = result.metric
     not_run = "cancelled" if a.status == "cancelled" else "failed"

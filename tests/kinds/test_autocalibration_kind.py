@@ -262,3 +262,31 @@ class TestOxfordModelHouse:
         assert returned <= min(found) * (1 + 1e-6)
         # VGG's own plane costs far more: the constant-intrinsics model does not fit its cameras.
         assert pr.affine_cost(problem, vgg) > 100 * returned
+
+
+class TestCancelAtAStageStart:
+    """Review 14: a cancel at the metric stage's first progress (its label, after an affine stage
+    certified at its root) raised in the affine cost, evaluated at no plane. The job ends
+    cancelled, keeping the affine stage it finished, certified and verifying."""
+
+    def test_the_finished_affine_stage_is_kept_and_verifies(self):
+        from geocert.jobs.runner import assemble, job_stats
+
+        document = job(certificate="full")
+        kind, parsed, options = parse_job(document)
+        labels = []
+
+        def callback(progress):
+            labels.append(getattr(progress, "stage", None))
+            return labels[-1] == "metric"
+
+        item = kind.solve_item(parsed, 0, options, callback)
+        assert labels[-1] == "metric"
+        result = assemble(kind, document, options, [item], job_stats([item], 0.0))
+        KIND.result_model.model_validate(result)
+        assert result["status"] == "cancelled" and result["K"] is None
+        affine, metric = result["stages"]
+        assert (affine["status"], affine["certified"]) == ("optimal", True) and affine["cost"] is not None
+        assert (metric["status"], metric["certified"]) == ("cancelled", False)
+        report = verify_any(result)
+        assert report.valid, report.first_failure

@@ -503,6 +503,45 @@ class TestCancel:
         assert next(stage for stage in item["stages"] if stage["name"] == "cameras")["status"] == "cancelled"
 
 
+class TestTinyThreshold:
+    """Review 14: options.threshold_px far below what any reconstruction of the data fits raised in
+    the bundle adjustment's Schur solve (no observation left to adjust). A threshold is any
+    positive number of pixels, so the run ends instead with a failed stage naming the option, the
+    later stages skipped and no view returned registered; a start a threshold leaves nothing to
+    is one adjust_best passes over."""
+
+    @staticmethod
+    def stages(result: dict) -> dict:
+        KIND.result_model.model_validate(result)
+        return {stage["name"]: stage for stage in result["stages"]}
+
+    def test_no_observation_kept_fails_the_registration_naming_the_option(self):
+        result = solve_job(job(threshold_px=0.01))
+        stages = self.stages(result)
+        assert stages["projective"]["status"] == "failed"
+        assert "options.threshold_px (0.01 px)" in stages["projective"]["reason"]
+        assert all(stages[name]["status"] == "skipped" for name in
+                   ("autocalibration", "bundle_adjustment", "structure", "cameras"))
+        assert result["summary"]["views_registered"] == 0 and result["summary"]["points"] == 0
+        assert not any(camera["registered"] for camera in result["cameras"])
+
+    def test_every_camera_dropped_fails_the_structure_stage(self):
+        stages = self.stages(solve_job(job(threshold_px=1e-6)))
+        assert stages["structure"]["status"] == "failed" and "no point can be triangulated" in stages["structure"]["reason"]
+        assert stages["cameras"]["status"] == "skipped"
+
+    def test_an_adjustment_left_with_nothing_is_judged_not_raised(self):
+        """With the projective registration the returned rig fits every observation within 0.01 px
+        (the example is noiseless: 3e-7 px); the depth-reversed twin's first adjustment keeps none
+        of them (it raised there), and the twin is judged and rejected all the same."""
+        result = solve_job(job(threshold_px=0.01, registration="projective"))
+        stages = self.stages(result)
+        assert all(stage["status"] == "done" for stage in stages.values()), stages
+        assert result["summary"]["views_registered"] == 6 and result["summary"]["points"] == 24
+        reversal = result["summary"]["depth_reversal"]
+        assert reversal["checked"] and not reversal["adopted"] and not reversal["ambiguous"]
+
+
 class TestStructureTimeLimit:
     """The certified points and cameras keep one clock together, structure_time_limit_s (they had
     only time_limit_s per point and per camera: a job's length grew with its tracks, and so did

@@ -142,6 +142,19 @@ def not_reconstructed(n_views: int, status: str, reason: str, camera_reason: str
     return out
 
 
+def _none_kept(out: Reconstruction, stages: dict, stage: dict, name: str, threshold_px: float, what: str) -> None:
+    """The stage ``name`` failed: no observation reprojects within the outlier threshold of
+    ``what`` (a threshold below the data's noise, or a reconstruction fitting none of them), so
+    nothing is left to calibrate, adjust or triangulate; no view is returned registered."""
+    reason = (f"no observation reprojects within options.threshold_px ({threshold_px:g} px) of {what}: every "
+              "observation is an outlier at that threshold (is it below the noise of the data?)")
+    stage.update(status="failed", reason=reason)
+    for camera in out.cameras:
+        if camera.registered:
+            camera.registered, camera.P, camera.reason = False, None, reason
+    _skip(stages, name, f"the {name.replace('_', ' ')} stage kept no observation")
+
+
 def _cancel(stages: dict, at: str) -> None:
     hit = False
     for name in STAGES:
@@ -467,6 +480,10 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
                              observations_kept=figures["observations_kept"])
                 metric, keep = _depth_reversal(out, metric, obs, keep, options.threshold_px, "fixed", stage, tell,
                                                n_views)
+                if not keep.any():
+                    _none_kept(out, stages, stage, "bundle_adjustment", options.threshold_px,
+                               "the adjusted reconstruction")
+                    return
             else:
                 stage.update(status="skipped", reason="options.bundle_adjustment is false")
                 _depth_reversal_not_checked(out)
@@ -503,6 +520,9 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
         if registered < 2:
             stage.update(status="failed", reason=proj.stats.get("reason") or "fewer than 2 views registered")
             _skip(stages, "projective", "the projective reconstruction failed")
+            return
+        if not np.any(proj.inlier & np.isfinite(proj.points[obs.track, 0])):
+            _none_kept(out, stages, stage, "projective", options.threshold_px, "the registered views' reconstruction")
             return
     sizes = {tuple(image_sizes[v]) for v, P in enumerate(proj.cameras) if P is not None}
     image_size = next(iter(sizes)) if len(sizes) == 1 else None
@@ -574,6 +594,9 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             adjusted_with = "principal" if (stage.get("principal_point") or {}).get("estimated") else model
             metric, keep = _depth_reversal(out, metric, obs, keep, options.threshold_px, adjusted_with, stage, tell,
                                            n_views)
+            if not keep.any():
+                _none_kept(out, stages, stage, "bundle_adjustment", options.threshold_px, "the adjusted reconstruction")
+                return
         else:
             name, metric = starts[0]
             stage.update(status="skipped", reason="options.bundle_adjustment is false", started_from=name)
@@ -748,6 +771,11 @@ def _structure(tracks, n_views, options, stages, out: Reconstruction, tell, obs,
                 f"{kept} {what} done before it are kept, {not_started} were not started")
 
     with _timed(stages, "structure") as stage:
+        if len(P) < 2:  # (a tiny options.threshold_px: the sanity layer drops every camera fitting none)
+            stage.update(status="failed", reason=f"{len(P)} view(s) left registered after the cameras' checks (each "
+                                                 "camera's reason says why): no point can be triangulated")
+            _skip(stages, "structure", "fewer than 2 views left registered")
+            return
         kept_tracks = []
         usable = np.flatnonzero(keep & np.isin(obs.view, list(P)))
         usable = usable[np.argsort(obs.track[usable], kind="stable")]  # grouped by track, in observation order

@@ -44,17 +44,17 @@ def solve(problem: Problem, options: AutocalibrationOptions, callback=None) -> S
     stage = affine.solve_affine(problem.norm, bnb_options(options, options.rel_gap), record,
                                 stage_callback(callback, "affine"))
     affine_s = time.perf_counter() - start
-    if stage.plane is None or (stage.status == "cancelled"):  # a cancelled stage keeps the plane it had
-        p = None if stage.plane is None else plane_from_input(problem, plane_in_input(problem, stage.plane[:3]))
+    # The plane as returned (in the input frame): what the metric stage starts from and what the
+    # affine stage is judged at, so that what a verifier reads back is exactly what was solved.
+    # Every way out below keeps it (a job cancelled keeps the stage it finished).
+    p = None if stage.plane is None else plane_from_input(problem, plane_in_input(problem, stage.plane[:3]))
+    if p is None or stage.status == "cancelled":  # a cancelled stage keeps the plane it had
         return Stratified(problem, stage, affine_s, None, 0.0, None, None, p)
     if announce(callback, "metric"):
         cancelled = metric.MetricStage("cancelled", False, None, math.inf, -math.inf, 0, np.zeros(5), np.zeros(5),
                                        reason="the job was cancelled")
-        return Stratified(problem, stage, affine_s, cancelled, 0.0, None, None)
+        return Stratified(problem, stage, affine_s, cancelled, 0.0, None, None, p)
     start = time.perf_counter()
-    # The metric stage starts from the plane as returned (in the input frame), so that what a
-    # verifier reads back is exactly what was solved.
-    p = plane_from_input(problem, plane_in_input(problem, stage.plane[:3]))
     baseline = None
     try:
         setup = metric.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)

@@ -308,6 +308,8 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
         pindex = -np.ones(len(X), dtype=int)
         pindex[points] = np.arange(len(points))
         use = np.flatnonzero(keep)
+        if len(use) == 0:  # nothing left to adjust (none within the threshold): as it is, none kept
+            break
         K, R, t, Xp, r, k1 = bundle.metric(K, R, t, X[points], vindex[obs_view[use]], pindex[obs_track[use]],
                                            pixels[use], f_scale=threshold_px / 2 if round_ == 0 else None,
                                            max_iterations=max_iterations, model=model, focals=focals,
