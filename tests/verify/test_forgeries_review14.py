@@ -189,8 +189,6 @@ def test_cameras_a_cancel_left_unstarted_restated_as_judged_uncertifiable_are_re
 
 # --- genuine runs refused ----------------------------------------------------------------------
 
-@pytest.mark.xfail(strict=True, reason="review 14: a genuine run stopped after the certified upgrade, before any "
-                                       "point, refused by the calibration tie")
 def test_a_run_cancelled_in_the_adjustment_verifies():
     """A cancel asked as the adjustment starts: the certified upgrade is kept with its
     certificate, the adjustment, structure and cameras stages end cancelled, no point returned."""
@@ -202,8 +200,6 @@ def test_a_run_cancelled_in_the_adjustment_verifies():
     _verifies(result)
 
 
-@pytest.mark.xfail(strict=True, reason="review 14: a genuine run stopped after the certified upgrade, before any "
-                                       "point, refused by the calibration tie")
 def test_a_run_whose_structure_clock_passed_before_its_first_track_verifies():
     """structure_time_limit_s below the time a first track takes: the structure stage ends
     time_limit with every track not started (no point), the cameras stage time_limit with every
@@ -215,8 +211,6 @@ def test_a_run_whose_structure_clock_passed_before_its_first_track_verifies():
     _verifies(result)
 
 
-@pytest.mark.xfail(strict=True, reason="review 14: autocalibration auto refused (the stage's method auto, the "
-                                       "certificate's stratified)")
 def test_a_run_with_autocalibration_auto_verifies():
     result = _run(autocalibration="auto")
     assert _stage(result, "autocalibration")["status"] == "done"
