@@ -215,3 +215,14 @@ def test_a_run_with_autocalibration_auto_verifies():
     result = _run(autocalibration="auto")
     assert _stage(result, "autocalibration")["status"] == "done"
     _verifies(result)
+
+
+@pytest.mark.parametrize("method", ["stratified", "direct"])
+def test_autocalibration_auto_restated_as_another_method_is_refused(method):
+    """The stage states the option's word (hashed: the options' echo says "auto"): restated
+    "stratified" it is the certificate's method and verified before the stage was tied to the
+    echo; "direct" is not what the certificate ran."""
+    result = _run(autocalibration="auto")
+    forged = copy.deepcopy(result)
+    _stage(forged, "autocalibration")["method"] = method
+    _refused(forged)
