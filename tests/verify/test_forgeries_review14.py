@@ -91,8 +91,6 @@ def cancelled_before_the_cameras() -> dict:
     return result
 
 
-@pytest.mark.xfail(strict=True, reason="review 14: a cameras stage's stop restated as never run (skipped, not_run, "
-                                       "failed), resect_cameras true")
 @pytest.mark.parametrize("word", ["skipped", "not_run", "failed"])
 def test_a_cancel_restated_as_the_cameras_stage_never_run_is_refused(cancelled_before_the_cameras, word):
     """With the options' echo saying resect_cameras true, the pipeline never skips the cameras
@@ -116,8 +114,6 @@ def test_a_cancel_restated_as_resect_cameras_false_is_refused(cancelled_before_t
     _refused(forged)
 
 
-@pytest.mark.xfail(strict=True, reason="review 14: a cameras stage's stop restated as skipped by resect_cameras, "
-                                       "the option true")
 def test_the_structure_clock_restated_as_the_cameras_stage_skipped_is_refused():
     """The stored genuine run as the structure stage's own clock (structure_time_limit_s) leaves
     it when it passes before the cameras stage starts a camera (every camera time_limit, not
