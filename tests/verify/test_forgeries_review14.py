@@ -222,3 +222,20 @@ def test_autocalibration_auto_restated_as_another_method_is_refused(method):
     forged = copy.deepcopy(result)
     _stage(forged, "autocalibration")["method"] = method
     _refused(forged)
+
+
+def test_a_calibration_certificate_beside_no_point_and_no_certified_K_is_refused():
+    """A run with no placed point carries its calibration certificate untied (nothing to tie it
+    to), so only as the proof of the certified K claimed beside it, which verifies it: restated
+    as claiming no certified K, the certificate would be carried unverified. (A guard: the tie
+    refused it before, as it refused the genuine run.)"""
+    result = _run(lambda labels: any(label.startswith("bundle") for label in labels))
+    assert result["calibration_certificate"] is not None and not result["points"]
+    forged = copy.deepcopy(result)
+    forged["summary"]["calibration"].update(certified=False, certified_K=None, returned_is_certified=False,
+                                            difference=None, on_range_edge=[], determined=False)
+    forged["summary"]["autocalibration_certified"] = False
+    _stage(forged, "autocalibration")["certified"] = False
+    forged["summary"]["warnings"] = [w for w in forged["summary"]["warnings"] if w["code"] != "returned_K_not_certified"]
+    report = verify_any(forged)
+    assert not report.valid and "calibration certificate" in report.first_failure["detail"], report.first_failure
