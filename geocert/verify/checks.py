@@ -367,7 +367,10 @@ def _verify(document: Any, returned: dict | None) -> Report:
     with work_budget(WORK_PER_UNIT * size + WORK_BASE):
         _verify_all(document, returned, adapter, options, items, report, tallies, fail)
     report.first_failure = first
-    report.valid = first is None and report.items_checked > 0
+    # a result may make a certified claim beyond its items, checked by its kind's check_result
+    # (a reconstruction's certified K, against its calibration certificate, where no point is placed)
+    beyond = (report.scope or {}).get("result_claims_checked") or 0
+    report.valid = first is None and (report.items_checked > 0 or beyond > 0)
     if report.discounted and report.scope is not None:
         report.scope["discounted"] = report.discounted
         report.scope["statement"] += ("; except that the items listed in discounted (certificates written before "
@@ -383,7 +386,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
                                       f"({options['abs_gap']!r}, in the cost's units), not rel_gap: their gap exceeds "
                                       "rel_gap times their cost, so for them optimal means a cost at most abs_gap "
                                       "above the least cost in the scope")
-    if first is None and report.items_checked == 0:
+    if first is None and report.items_checked == 0 and not beyond:
         report.first_failure = {"check": "format", "item": None, "detail": "no certified item to check"}
     report.checks = [{"name": name, "passed": passed, "failed": failed}
                      for name, (passed, failed) in tallies.items() if passed or failed]

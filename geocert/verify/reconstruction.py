@@ -666,9 +666,17 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
                                       "it would certify a K whatever it costs")
     hashed_options.check_calibration_options(options, (result.get("certificate") or {}).get("options") or {})
     stage = _stage(result, "autocalibration")
-    if stage.get("method") != options.get("method", "stratified"):
-        raise Invalid("returned", f"stages/autocalibration/method is {stage.get('method')!r:.40}, the calibration "
-                                  f"certificate's is {options.get('method', 'stratified')!r}")
+    # The stage states the option's word, the certificate the method the pipeline ran: "auto" runs
+    # the stratified method first, and only its upgrade is carried with a certificate
+    # (upgrade.autocalibrate); the option is hashed, so the stage's word is the echo's when stated.
+    method, asked = options.get("method", "stratified"), stage.get("method")
+    echoed = ((result.get("certificate") or {}).get("options") or {}).get("autocalibration")
+    if not (asked == method or (asked == "auto" and method == "stratified")):
+        raise Invalid("returned", f"stages/autocalibration/method is {asked!r:.40}, the calibration "
+                                  f"certificate's is {method!r:.40}")
+    if echoed is not None and asked != echoed:
+        raise Invalid("returned", f"stages/autocalibration/method is {asked!r:.40}, the options' autocalibration "
+                                  f"{echoed!r:.40}")
     restated = stage.get("stages")
     if not (isinstance(restated, list) and len(restated) == len(claims)):
         raise Invalid("returned", "stages/autocalibration/stages must restate the calibration certificate's two stages")
@@ -1027,6 +1035,21 @@ class ReconstructionItems(TrackItems):
         _check_calibration(result, registered, verify)
         scoped = {"labels": labels}
         calibration = result.get("calibration_certificate")
+        claim = result["summary"].get("calibration")
+        # a certified K claimed: _check_calibration verified the calibration certificate proving it
+        proven = isinstance(calibration, dict) and (
+            claim.get("certified") if isinstance(claim, dict)
+            else _stage(result, "autocalibration").get("K") is not None) is True
+        if proven:  # a certified claim checked beyond the points (a result may place none)
+            scoped["result_claims_checked"] = 1
+        if isinstance(calibration, dict) and not proven and not any(
+                isinstance(p, dict) and p.get("point") is not None for p in result.get("points") or []):
+            # No point placed: nothing ties the certificate to the result's tracks (calibration_tie.without_points),
+            # so it is carried only as the proof of the certified K claimed beside it, never unverified; that
+            # K claims nothing the points would judge (determined and the motion need certified points:
+            # _judged_motion).
+            raise Invalid("returned", "a calibration certificate is carried beside no placed point, and no "
+                                      "certified K it proves is claimed: nothing ties it to the result")
         if isinstance(calibration, dict):  # carried (a certified K proven by it): tied to the result, once
             scoped["calibration_tie"] = calibration_tie.tie(result, _stage(result, "autocalibration"),
                                                             calibration.get("data") or {})

@@ -70,6 +70,7 @@ def check_statuses(result: dict) -> None:
                 _refuse(f"{name}/status", f"{status[name]!r} beside the points the structure stage returned (it "
                                           f"ran only after this stage ended {' or '.join(allowed)})")
     _check_sequence(names, status)
+    _check_cameras_word(result, status)
     _check_products(by_name, status, points, registered, judged)
     _check_job_stop(result, status, points, cameras)
 
@@ -95,6 +96,28 @@ def _check_sequence(names: list[str], status: dict) -> None:
             if status[other] not in allowed and not before:
                 _refuse(f"{other}/status", f"{status[other]!r} after the {name} stage ended {word!r} (the pipeline "
                                            f"ends every later stage {' or '.join(allowed)})")
+
+
+def _check_cameras_word(result: dict, status: dict) -> None:
+    """The cameras stage's word is one the pipeline writes for it (pipeline._structure, _skip):
+    never "failed"; "not_run" in no run whose structure stage ended done (the cameras stage is
+    entered then, and ends done, stopped or skipped); "skipped" beside a structure stage that ran
+    (done, or stopped by its own clock) only when options.resect_cameras is false (an earlier
+    stage that failed skips the structure stage too). The option is read from the options' echo
+    where stated; it is not covered by problem_sha256, so an echo restated false is not caught here."""
+    word, structure = status["cameras"], status["structure"]
+    if word == "failed":
+        _refuse("cameras/status", "'failed': the pipeline never calls the cameras stage failed (it is done, stopped, "
+                                  "or skipped)")
+    if word == "not_run" and structure == "done":
+        _refuse("cameras/status", "'not_run' after the structure stage ended done: the cameras stage was entered "
+                                  "(no finished run keeps not_run)")
+    options = (result.get("certificate") or {}).get("options")
+    resect = options.get("resect_cameras") if isinstance(options, dict) else None
+    if word == "skipped" and structure in ("done",) + STOPS and resect is True:
+        _refuse("cameras/status", f"'skipped' after the structure stage ended {structure!r}, with "
+                                  "options.resect_cameras true: the pipeline skips the cameras stage only when that "
+                                  "option is false or an earlier stage failed")
 
 
 def _stated(stage: dict, members: tuple) -> list[str]:

@@ -7,7 +7,8 @@ its points the tracks it names (certificate_tracks), every one of those views re
 result, and it must image every observation it
 shares with the result's placed points where the returned cameras image it, to within TIE_RATIO
 times the returned cameras' own RMS error on those observations, plus CONVERGENCE of the
-observations' largest coordinate. A median, or a floor of 10 px, let half the observations lie
+observations' largest coordinate. A result that places no point has nothing to tie it to (without_points):
+its certified K is then claimed of the certificate's own reconstruction only, and the report says so. A median, or a floor of 10 px, let half the observations lie
 anywhere, or a reconstruction 8% off in focal length pass on tracks whose own error is 0.5 px.
 
 CONVERGENCE is what the projective stage's own convergence leaves on tracks the returned cameras
@@ -79,6 +80,8 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
     if untied:
         raise Invalid("returned", f"the calibration certificate holds a camera of view {untied[0]}, which the result "
                                   "does not register: nothing ties it to the result")
+    if not any(point.get("point") is not None for point in result["points"]):
+        return without_points(views, tracks)
     apart, own, theirs, largest, per_camera = _shared(result, views, tracks, cameras, points)
     loose = [view for view, count in zip(views, per_camera) if count < TIE_POINTS_PER_CAMERA]
     if loose:
@@ -102,6 +105,21 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
     fit = _fit(own, theirs, largest)
     return {"observations": len(apart), "largest_px": worst, "allowed_px": allowed, "returned_rms_px": rms,
             "fewest_points_per_camera": min(per_camera, default=0), **fit}
+
+
+def without_points(views: list, tracks: list) -> dict:
+    """The tie of a result that places no point (a run stopped after the certified upgrade and
+    before the structure stage returned one: a cancel, the job's clock, the structure stage's own):
+    no observation of the result's is there to tie the certificate's reconstruction to, and none
+    to contradict it. The certificate proves its K optimal for the reconstruction in its own data
+    only (which the verifier checks from that data alone: ReconstructionItems.check_result asks
+    that the result claim that K certified, so that its certificate is verified), and the figures
+    say that nothing tied it: no observation, no point per camera."""
+    return {"observations": 0, "tied": False, "views": len(views), "tracks": len(tracks),
+            "fewest_points_per_camera": 0,
+            "statement": "the result places no point: the calibration certificate's K is proven optimal for the "
+                         "projective reconstruction in its own data only, which nothing in the result ties to its "
+                         "tracks"}
 
 
 def _fit(own: list, theirs: list, largest: float) -> dict:
