@@ -4,7 +4,7 @@ import geocert.verify.checks  # noqa: F401 (installs the solvers' self-check: GE
 from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION
 from geocert.kinds.bilinear import KIND as BILINEAR
 from geocert.kinds.base import ProblemKind, Registry, default_options, options_from
-from geocert.kinds.maps import HOMOGRAPHY, RESECTION
+from geocert.kinds.resection_homography import HOMOGRAPHY, RESECTION
 from geocert.kinds.reconstruction import KIND as RECONSTRUCTION
 from geocert.kinds.stereo_lines import KIND as STEREO_LINES
 from geocert.kinds.triangulation import KIND as TRIANGULATION

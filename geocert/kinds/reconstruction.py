@@ -22,7 +22,7 @@ from pydantic import BaseModel, Field
 
 from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION, IntrinsicsIn
 from geocert.kinds.documents import certificate_document
-from geocert.kinds.maps import RESECTION, map_document
+from geocert.kinds.resection_homography import RESECTION, map_document
 from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict
 from geocert.kinds.triangulation import TrackOut, track_document
 from geocert.solvers.autocalibration.problem import StageProgress

@@ -318,7 +318,7 @@ def _set(document: dict, path: tuple, value) -> dict:
 
 # Fields of the stored L2L2 resection's result that no check reads, each given a value not of its
 # type: a boolean where a number stands (docs/certificate.md: "not a boolean"), a number where a
-# list stands (the result model, kinds.maps.MapsResult, refuses these two).
+# list stands (the result model, kinds.resection_homography.MapsResult, refuses these two).
 MISTYPED = [(("maps", 0, "determinacy", "redundancy"), True), (("maps", 0, "determinacy", "cost_increase"), True),
             (("maps", 0, "determinacy", "intervals", 0, "lower"), True),
             (("maps", 0, "certificate", "root_region", "lower", 0), True),
