@@ -12,6 +12,7 @@ import json
 from urllib.parse import urlsplit
 
 from fastapi import Response
+from fastapi.concurrency import run_in_threadpool
 
 from geocert.app import streamed
 from geocert.app.errors import ApiProblem
@@ -21,7 +22,7 @@ from geocert.settings import chunk_size_for, get_settings, over_budget
 from geocert.workers import logs
 from geocert.jobs.destinations import allowed_networks, literal_refusal
 from geocert.workers.queue import can_collect, submit_chunks, task_commands
-from geocert.jobs.store import JobStore, StoredBytesExceeded
+from geocert.jobs.store import TERMINAL, JobStore, StoredBytesExceeded, read_job
 
 
 def _check_count(kind, items: int) -> None:
@@ -230,10 +231,6 @@ def _replay(store: JobStore, earlier: dict, digest: str, response: Response) -> 
 
 
 async def _replay_async(store: JobStore, client, earlier: dict, digest: str, response: Response) -> dict:
-    from fastapi.concurrency import run_in_threadpool
-
-    from geocert.jobs.store import TERMINAL, read_job
-
     _check_replay(earlier, digest)
     meta = _replayed(earlier, await read_job(client, earlier["job"]), response)
     # An ended job's document reads its result (the sync store's calls): in a thread.

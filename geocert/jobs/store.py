@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import hashlib
+import inspect
 import json
 import math
 import time
@@ -124,24 +125,19 @@ class JobStore:
             discard.execute()
         return self._admitted(meta, admitted, stored_bytes_limit)
 
-    async def create_async(self, client: redis.asyncio.Redis, kind: str, request: dict, items_total: int,
-                           chunk_size: int, owner: str, callback_url: str | None = None, active_limit: int = 0,
-                           task_ids=None, chunk_key: str | None = None, items_key: str | None = None,
-                           item_time_bound_s: float | None = None, job_time_limit_s: float | None = None,
-                           enqueue: Callable[[dict], list[tuple[str, tuple]]] | None = None,
-                           items_bytes: int = 0, stored_bytes_limit: int = 0) -> dict | None:
-        """``create`` through an asyncio client (``decode_responses``, the same server): the same
-        transaction, for the API's event loop."""
+    async def create_async(self, client: redis.asyncio.Redis, *args, **kwargs) -> dict | None:
+        """``create`` (the same arguments after ``client``) through an asyncio client
+        (``decode_responses``, the same server): the same transaction, for the API's event loop."""
+        bound = _CREATE_SIGNATURE.bind(self, *args, **kwargs)
+        bound.apply_defaults()
         pipe = client.pipeline()
-        meta, admit_at = self._stage_create(pipe, kind, request, items_total, chunk_size, owner, callback_url,
-                                            active_limit, task_ids, chunk_key, items_key, item_time_bound_s,
-                                            job_time_limit_s, enqueue, items_bytes, stored_bytes_limit)
+        meta, admit_at = self._stage_create(pipe, *bound.args[1:])
         admitted = (await pipe.execute())[admit_at]
         if admitted != 1:
             discard = client.pipeline()
-            self._stage_delete(discard, meta["id"], owner)
+            self._stage_delete(discard, meta["id"], bound.arguments["owner"])
             await discard.execute()
-        return self._admitted(meta, admitted, stored_bytes_limit)
+        return self._admitted(meta, admitted, bound.arguments["stored_bytes_limit"])
 
     @staticmethod
     def _admitted(meta: dict, admitted: int, stored_bytes_limit: int) -> dict | None:
@@ -1003,6 +999,10 @@ class JobStore:
             await client.delete(key)
         else:
             await client.set(key, dumps({"body": body_digest, "job": job_id}), ex=self.ttl)
+
+
+
+_CREATE_SIGNATURE = inspect.signature(JobStore.create)  # create_async takes create's arguments
 
 
 async def read_job(client: redis.asyncio.Redis, job_id: str) -> dict | None:

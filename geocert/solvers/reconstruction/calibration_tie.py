@@ -7,9 +7,10 @@ its points the tracks it names (certificate_tracks), every one of those views re
 result, and it must image every observation it
 shares with the result's placed points where the returned cameras image it, to within TIE_RATIO
 times the returned cameras' own RMS error on those observations, plus CONVERGENCE of the
-observations' largest coordinate. A result that places no point has nothing to tie it to (without_points):
-its certified K is then claimed of the certificate's own reconstruction only, and the report says so. A median, or a floor of 10 px, let half the observations lie
-anywhere, or a reconstruction 8% off in focal length pass on tracks whose own error is 0.5 px.
+observations' largest coordinate. A median, or a floor of 10 px, let half the observations lie
+anywhere, or a reconstruction 8% off in focal length pass on tracks whose own error is 0.5 px. A
+result that places no point has nothing to tie the certificate to (without_points): its certified
+K is then claimed of the certificate's own reconstruction only, and the report says so.
 
 CONVERGENCE is what the projective stage's own convergence leaves on tracks the returned cameras
 fit exactly: on the kind's example (pixels rounded to 1e-6, the returned cameras' RMS error
