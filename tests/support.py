@@ -193,3 +193,20 @@ def loose_gaps():
     finally:
         for ranges, name, value in saved:
             ranges[name] = value
+
+
+def refusal(document) -> dict | None:
+    """The verifier's first failure on ``document`` (a result or a certificate), None when it verifies."""
+    from geocert.verify.checks import verify_any
+
+    report = verify_any(document)
+    return None if report.valid else report.first_failure
+
+
+def forged_sublevel(result: dict, item: int = 1, **changes) -> dict:
+    """A copy of ``result``'s certificate with item ``item``'s proof/sublevel members changed."""
+    import copy
+
+    document = copy.deepcopy(result["certificate"])
+    document["items"][item]["proof"]["sublevel"].update(changes)
+    return document

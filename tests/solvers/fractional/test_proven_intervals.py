@@ -19,7 +19,7 @@ from geocert.solvers.fractional.triangulation import TriangulationOptions
 from geocert.verify.checks import verify_any
 
 from tests.verify.test_soundness import readme_job
-from tests.support import every_track_searched, noisy_track, random_cameras, seed
+from tests.support import every_track_searched, noisy_track, random_cameras, seed, refusal
 
 
 def scene(rng, tracks: int, views: tuple[int, int], noise: float, cameras: int = 12):
@@ -146,11 +146,6 @@ def convexity() -> dict:
     return result
 
 
-def failed(document) -> dict | None:
-    report = verify_any(document)
-    return None if report.valid else report.first_failure
-
-
 def forged(convexity, **changes) -> dict:
     doc = copy.deepcopy(convexity["certificate"])
     doc["items"][0]["proof"]["sublevel"].update(changes)
@@ -163,40 +158,40 @@ class TestForgedIntervals:
     def test_a_narrowed_or_widened_interval_is_refused(self, convexity, coordinate, end, change):
         intervals = copy.deepcopy(convexity["certificate"]["items"][0]["proof"]["sublevel"]["intervals"])
         intervals[coordinate][end] += change * max(abs(intervals[coordinate][end]), 1.0)
-        assert failed(forged(convexity, intervals=intervals))["check"] == "proven_interval"
+        assert refusal(forged(convexity, intervals=intervals))["check"] == "proven_interval"
 
     @pytest.mark.parametrize("factor", [0.5, 0.9])
     def test_a_smaller_ball_is_refused_though_its_intervals_agree(self, convexity, factor):
         sublevel = convexity["certificate"]["items"][0]["proof"]["sublevel"]
         point = convexity["certificate"]["items"][0]["point"]
         radius = sublevel["radius"] * factor
-        first = failed(forged(convexity, radius=radius, intervals=ball_intervals(point, radius)))
+        first = refusal(forged(convexity, radius=radius, intervals=ball_intervals(point, radius)))
         assert first["check"] == "proven_interval" and "not proven" in first["detail"]
 
     @pytest.mark.parametrize("factor", [3.0, 100.0])
     def test_a_larger_cost_increase_at_the_same_radius_is_refused(self, convexity, factor):
         increase = convexity["certificate"]["items"][0]["proof"]["sublevel"]["cost_increase"] * factor
-        assert failed(forged(convexity, cost_increase=increase))["check"] == "proven_interval"
+        assert refusal(forged(convexity, cost_increase=increase))["check"] == "proven_interval"
 
     @pytest.mark.parametrize("increase", [-1.0, 1e300, 5e-324])
     def test_a_negative_huge_or_subnormal_cost_increase_is_refused(self, convexity, increase):
-        assert failed(forged(convexity, cost_increase=increase))["check"] == "proven_interval"
+        assert refusal(forged(convexity, cost_increase=increase))["check"] == "proven_interval"
 
     def test_a_field_it_does_not_have_is_refused(self, convexity):
-        assert failed(forged(convexity, note=1.0))["check"] == "format"
+        assert refusal(forged(convexity, note=1.0))["check"] == "format"
 
     def test_a_result_saying_proven_with_other_intervals_is_refused(self, convexity):
         result = copy.deepcopy(convexity)
         result["tracks"][0]["determinacy"]["proven_intervals"]["intervals"][2]["lower"] += 1.0
-        assert failed(result)["check"] == "returned"
+        assert refusal(result)["check"] == "returned"
 
     def test_a_result_saying_proven_without_a_proof_of_it_is_refused(self, convexity):
         result = copy.deepcopy(convexity)
         del result["certificate"]["items"][0]["proof"]["sublevel"]
         assert verify_any(result["certificate"]).valid  # the certificate alone proves its bound
-        assert failed(result)["check"] == "returned"
+        assert refusal(result)["check"] == "returned"
         result["tracks"][0]["determinacy"]["proven_intervals"] = None
-        assert failed(result)["check"] == "returned"  # proven: true with nothing proven
+        assert refusal(result)["check"] == "returned"  # proven: true with nothing proven
 
 
 @pytest.fixture(scope="module")
@@ -226,7 +221,7 @@ class TestForgedIntervalsOfASearch:
         doc = copy.deepcopy(searched["certificate"])
         intervals = doc["items"][3]["proof"]["sublevel"]["intervals"]
         intervals[2][end] += change * max(abs(intervals[2][end]), 1.0)
-        first = failed(doc)
+        first = refusal(doc)
         assert first["check"] == "proven_interval" and first["item"] == 3
 
     def test_a_smaller_ball_is_refused(self, searched):
@@ -234,7 +229,7 @@ class TestForgedIntervalsOfASearch:
         item = doc["items"][2]
         radius = item["proof"]["sublevel"]["radius"] * 0.5
         item["proof"]["sublevel"].update(radius=radius, intervals=ball_intervals(item["point"], radius))
-        assert failed(doc)["check"] == "proven_interval"
+        assert refusal(doc)["check"] == "proven_interval"
 
     def test_a_map_proof_stating_an_interval_is_refused(self, searched, monkeypatch):
         from geocert.solvers.fractional import maps
@@ -246,7 +241,7 @@ class TestForgedIntervalsOfASearch:
                                      noise=3.0))["certificate"]
         assert document["items"][0]["proof"]["type"] == "branch_and_bound"
         document["items"][0]["proof"]["sublevel"] = searched["certificate"]["items"][0]["proof"]["sublevel"]
-        assert failed(document)["check"] == "format"
+        assert refusal(document)["check"] == "format"
 
 
 def test_one_two_view_track_alone_proves_no_interval_at_its_level():

@@ -17,7 +17,7 @@ from scipy.optimize import linprog
 from geocert.jobs.runner import solve_job
 from geocert.verify.checks import verify_any
 
-from tests.support import scene, seed
+from tests.support import scene, seed, forged_sublevel, refusal
 
 NORMS = ("L1L1", "L2L1")
 
@@ -164,17 +164,6 @@ def proven() -> dict:
     return result
 
 
-def failed(document) -> dict | None:
-    report = verify_any(document)
-    return None if report.valid else report.first_failure
-
-
-def forged(result, item: int = 1, **changes) -> dict:
-    document = copy.deepcopy(result["certificate"])
-    document["items"][item]["proof"]["sublevel"].update(changes)
-    return document
-
-
 class TestForgedIntervals:
     @pytest.mark.parametrize("entry", [0, 1, 2, 3])
     @pytest.mark.parametrize("end,change", [(0, 1e-3), (1, -1e-3), (0, 0.5), (1, -0.5)])
@@ -182,19 +171,19 @@ class TestForgedIntervals:
         intervals = copy.deepcopy(proven["certificate"]["items"][1]["proof"]["sublevel"]["intervals"])
         width = intervals[entry][1] - intervals[entry][0]
         intervals[entry][end] += change * width
-        first = failed(forged(proven, intervals=intervals))
+        first = refusal(forged_sublevel(proven, intervals=intervals))
         assert first["check"] == "proven_interval" and first["item"] == 1 and "narrower" in first["detail"]
 
     def test_a_wider_interval_is_a_weaker_truth_and_passes(self, proven):
         intervals = copy.deepcopy(proven["certificate"]["items"][1]["proof"]["sublevel"]["intervals"])
         intervals[0][0] -= 1.0
-        assert failed(forged(proven, intervals=intervals)) is None
+        assert refusal(forged_sublevel(proven, intervals=intervals)) is None
 
     def test_a_higher_level_than_the_leaves_were_proven_at_is_refused(self, proven):
         """Its parts (root region, tightening, leaves) hold for the cameras costing at most the
         level the solver searched at: a higher one asks more than they prove."""
         increase = proven["certificate"]["items"][1]["proof"]["sublevel"]["cost_increase"] * 2
-        first = failed(forged(proven, cost_increase=increase))
+        first = refusal(forged_sublevel(proven, cost_increase=increase))
         assert first["check"] in ("root_region", "tightening", "leaf_bounds")
 
     def test_a_result_saying_proven_at_a_level_below_its_own_is_refused(self, proven):
@@ -203,39 +192,39 @@ class TestForgedIntervals:
         result = copy.deepcopy(proven)
         sublevel = result["certificate"]["items"][1]["proof"]["sublevel"]
         sublevel["cost_increase"] *= 0.5
-        assert failed(result["certificate"]) is None
+        assert refusal(result["certificate"]) is None
         result["maps"][1]["determinacy"]["proven_intervals"]["cost_increase"] = sublevel["cost_increase"]
-        first = failed(result)
+        first = refusal(result)
         assert first["check"] == "returned" and "below" in first["detail"]
 
     def test_a_dropped_leaf_is_refused(self, proven):
         search = copy.deepcopy(proven["certificate"]["items"][1]["proof"]["sublevel"]["search"])
         search["leaves"] = search["leaves"][1:]
-        assert failed(forged(proven, search=search))["check"] == "coverage"
+        assert refusal(forged_sublevel(proven, search=search))["check"] == "coverage"
 
     def test_a_leaf_claiming_a_higher_bound_is_refused(self, proven):
         search = copy.deepcopy(proven["certificate"]["items"][1]["proof"]["sublevel"]["search"])
         dual = next(p for p in search["proofs"] if p["kind"] == "dual")
         dual["bound"] *= 10
-        assert failed(forged(proven, search=search))["check"] == "leaf_bounds"
+        assert refusal(forged_sublevel(proven, search=search))["check"] == "leaf_bounds"
 
     @pytest.mark.parametrize("change", [{"search": None}, {"search": {"type": "trivial"}}, {"reference": -1},
                                         {"cost_increase": -1.0}, {"note": 1.0}])
     def test_a_malformed_sublevel_is_refused(self, proven, change):
-        assert failed(forged(proven, **change))["check"] in ("proven_interval", "format")
+        assert refusal(forged_sublevel(proven, **change))["check"] in ("proven_interval", "format")
 
     def test_a_result_saying_proven_without_the_leaves_is_refused(self, proven):
         result = copy.deepcopy(proven)
         del result["certificate"]["items"][0]["proof"]["sublevel"]
         assert verify_any(result["certificate"]).valid  # the certificate alone proves its bound
-        assert failed(result)["check"] == "returned"
+        assert refusal(result)["check"] == "returned"
         result["maps"][0]["determinacy"]["proven_intervals"] = None
-        assert failed(result)["check"] == "returned"  # proven: true with nothing proven
+        assert refusal(result)["check"] == "returned"  # proven: true with nothing proven
 
     def test_a_result_with_other_intervals_than_its_leaves_is_refused(self, proven):
         result = copy.deepcopy(proven)
         result["maps"][0]["determinacy"]["proven_intervals"]["intervals"][3]["lower"] += 1e-3
-        assert failed(result)["check"] == "returned"
+        assert refusal(result)["check"] == "returned"
 
 
 @pytest.mark.parametrize("norm", NORMS)

@@ -15,7 +15,7 @@ from geocert.jobs.runner import solve_job
 from geocert.solvers.fractional.resection_sublevel import Scene, proven_centre
 from geocert.verify.checks import verify_any
 
-from tests.support import map_job, scene, seed
+from tests.support import map_job, scene, seed, forged_sublevel, refusal
 
 
 def resection_job(rng, count: int, noise: float, maps: int = 1, **options) -> tuple[dict, list[np.ndarray]]:
@@ -134,17 +134,6 @@ def proven() -> dict:
     return result
 
 
-def failed(document) -> dict | None:
-    report = verify_any(document)
-    return None if report.valid else report.first_failure
-
-
-def forged(result, item: int = 1, **changes) -> dict:
-    document = copy.deepcopy(result["certificate"])
-    document["items"][item]["proof"]["sublevel"].update(changes)
-    return document
-
-
 class TestForgedIntervals:
     @pytest.mark.parametrize("coordinate", [0, 1, 2])
     @pytest.mark.parametrize("end,change", [(0, 1e-6), (1, -1e-6), (0, 1e-3), (1, -1e-3), (0, -1e-4), (1, 1e-4),
@@ -153,7 +142,7 @@ class TestForgedIntervals:
         intervals = copy.deepcopy(proven["certificate"]["items"][1]["proof"]["sublevel"]["intervals"])
         width = intervals[coordinate][1] - intervals[coordinate][0]
         intervals[coordinate][end] += change * width
-        first = failed(forged(proven, intervals=intervals))
+        first = refusal(forged_sublevel(proven, intervals=intervals))
         assert first["check"] == "proven_interval" and first["item"] == 1
 
     @pytest.mark.parametrize("factor", [0.5, 0.1])
@@ -166,57 +155,57 @@ class TestForgedIntervals:
         scene_ = Scene(source, target, np.array(proven["certificate"]["items"][1]["matrix"]), sublevel["reference"])
         bounds, _ = proven_centre(scene_, lower, sublevel["radius"], sublevel["rounds"])
         assert np.all(bounds[:, 1] - bounds[:, 0] < np.diff(sublevel["intervals"], axis=1)[:, 0])
-        first = failed(forged(proven, intervals=bounds.tolist()))
+        first = refusal(forged_sublevel(proven, intervals=bounds.tolist()))
         assert first["check"] == "proven_interval"
         # ... and the result stating them at the lower level beside its estimate's level
         result = copy.deepcopy(proven)
-        result["certificate"] = forged(proven, intervals=bounds.tolist(), cost_increase=lower)
-        assert failed(result["certificate"]) is None  # true of the lower level
+        result["certificate"] = forged_sublevel(proven, intervals=bounds.tolist(), cost_increase=lower)
+        assert refusal(result["certificate"]) is None  # true of the lower level
         stated = result["maps"][1]["determinacy"]["proven_intervals"]
         stated["cost_increase"] = lower
         for entry, (lo, hi) in zip(stated["intervals"], bounds.tolist()):
             entry["lower"], entry["upper"] = lo, hi
-        first = failed(result)
+        first = refusal(result)
         assert first["check"] == "returned" and "below" in first["detail"]
 
     def test_a_smaller_radius_is_refused(self, proven):
         radius = proven["certificate"]["items"][1]["proof"]["sublevel"]["radius"] * 0.3
-        first = failed(forged(proven, radius=radius))
+        first = refusal(forged_sublevel(proven, radius=radius))
         assert first["check"] == "proven_interval" and "not proven" in first["detail"]
 
     @pytest.mark.parametrize("rounds", [0, -1, 33, 1.0])
     def test_rounds_other_than_the_proofs_are_refused(self, proven, rounds):
-        assert failed(forged(proven, rounds=rounds))["check"] == "proven_interval"
+        assert refusal(forged_sublevel(proven, rounds=rounds))["check"] == "proven_interval"
 
     @pytest.mark.parametrize("increase", [-1.0, 1e300, 5e-324])
     def test_a_negative_huge_or_subnormal_cost_increase_is_refused(self, proven, increase):
-        assert failed(forged(proven, cost_increase=increase))["check"] == "proven_interval"
+        assert refusal(forged_sublevel(proven, cost_increase=increase))["check"] == "proven_interval"
 
     def test_a_larger_cost_increase_with_the_same_intervals_is_refused(self, proven):
         increase = proven["certificate"]["items"][1]["proof"]["sublevel"]["cost_increase"] * 4
-        assert failed(forged(proven, cost_increase=increase))["check"] == "proven_interval"
+        assert refusal(forged_sublevel(proven, cost_increase=increase))["check"] == "proven_interval"
 
     def test_a_field_it_does_not_have_is_refused(self, proven):
-        assert failed(forged(proven, note=1.0))["check"] == "format"
+        assert refusal(forged_sublevel(proven, note=1.0))["check"] == "format"
 
     def test_a_result_saying_proven_with_other_intervals_is_refused(self, proven):
         result = copy.deepcopy(proven)
         result["maps"][0]["determinacy"]["proven_intervals"]["intervals"][2]["lower"] -= 1.0
-        assert failed(result)["check"] == "returned"
+        assert refusal(result)["check"] == "returned"
 
     def test_a_result_saying_proven_without_a_proof_of_it_is_refused(self, proven):
         result = copy.deepcopy(proven)
         del result["certificate"]["items"][0]["proof"]["sublevel"]
         assert verify_any(result["certificate"]).valid  # the certificate alone proves its bound
-        assert failed(result)["check"] == "returned"
+        assert refusal(result)["check"] == "returned"
         result["maps"][0]["determinacy"]["proven_intervals"] = None
-        assert failed(result)["check"] == "returned"  # proven: true with nothing proven
+        assert refusal(result)["check"] == "returned"  # proven: true with nothing proven
 
     def test_a_homography_proof_stating_an_interval_is_refused(self, proven):
         document = solve_job(map_job(np.random.default_rng(5), "homography2", 8, "L2L2", maps=1))["certificate"]
         assert document["items"][0]["proof"]["type"] == "branch_and_bound"
         document["items"][0]["proof"]["sublevel"] = proven["certificate"]["items"][0]["proof"]["sublevel"]
-        assert failed(document)["check"] == "format"
+        assert refusal(document)["check"] == "format"
 
 
 def test_a_noiseless_camera_certified_by_the_trivial_bound_states_none_and_verifies():
