@@ -120,7 +120,7 @@ def job_deadline(options: Any, started: float) -> float | None:
 def not_started_item(kind, options) -> dict:
     """An item the job's time limit ended before it started: status ``time_limit``, never
     certified, no solution, saying so (the kind's unsolved item)."""
-    item = kind.cancelled_item()
+    item = kind.cancelled_item(options)
     reason = (f"not started: the job's time limit (options.job_time_limit_s, "
               f"{job_time_limit_of(options):g} s) passed before this item started")
     return {**item, "status": "time_limit", "reason": reason}
@@ -163,7 +163,7 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
         if tracker.stopped or (should_stop is not None and should_stop()):
             tracker.stopped = True
             for index in chosen:  # never started: not counted as done
-                items.append(kind.cancelled_item())
+                items.append(kind.cancelled_item(options))
                 if on_item is not None:
                     on_item(index, items[-1])
             continue

@@ -213,12 +213,16 @@ class AutocalibrationKind:
             self_check_stages(parsed, options, item["stages"])
         return item
 
-    def cancelled_item(self) -> dict:
+    def cancelled_item(self, options: pr.AutocalibrationOptions) -> dict:
+        """Never started: the stages of the job's method (the direct method's one, the stratified
+        method's two), each cancelled."""
         stage = {"cost": None, "lower_bound": None, "gap": None, "status": "cancelled", "certified": False,
                  "nodes": 0, "elapsed_s": 0.0, "reason": "the job was cancelled before it started"}
-        return {"method": "stratified", "intrinsics": {}, "plane_at_infinity": None, "K": None,
+        method = getattr(options, "method", "stratified")
+        names = ("direct",) if method == "direct" else ("affine", "metric")
+        return {"method": method, "intrinsics": {}, "plane_at_infinity": None, "K": None,
                 "dual_absolute_quadric": None, "upgrade": None, "cameras": None, "points": None, "baseline": None,
-                "stages": [{"name": "affine", **stage}, {"name": "metric", **stage}], "status": "cancelled",
+                "stages": [{"name": name, **stage} for name in names], "status": "cancelled",
                 "certified": False, "nodes": 0, "elapsed_s": 0.0, "cost": None, "lower_bound": None}
 
     def claimed_items(self, items: list[dict]) -> list[dict]:

@@ -44,7 +44,8 @@ class ProblemKind(Protocol):
 
     def solve_item(self, parsed: Any, index: int, options: Any, callback: ProgressCallback | None) -> dict: ...
 
-    def cancelled_item(self) -> dict: ...
+    def cancelled_item(self, options: Any) -> dict:
+        """An item never started (a cancel, or the job's time limit first), for the job's options."""
 
     def assemble(self, options: Any, items: list[dict], stats: dict) -> dict: ...
 

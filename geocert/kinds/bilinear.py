@@ -178,7 +178,7 @@ class BilinearKind:
                                          document["coefficients"], document["cost"], document["lower_bound"])
         return document
 
-    def cancelled_item(self) -> dict:
+    def cancelled_item(self, options: Any) -> dict:
         return {"camera": None, "coefficients": None, "shape": None, "residuals": None, "baseline": None,
                 "cost": None, "lower_bound": None, "gap": None, "status": "cancelled", "certified": False,
                 "nodes": 0, "elapsed_s": 0.0, "reason": "the job was cancelled before this frame started",

@@ -641,7 +641,7 @@ class ReconstructionKind:
         return [{"view": view, "map": {"source": source, "target": target}, **map_document(bounds[view].result)}
                 for view, (source, target) in zip(views, found)]
 
-    def cancelled_item(self) -> dict:
+    def cancelled_item(self, options: Any) -> dict:
         return {"cameras": [], "points": [], "summary": {}, "images": None, "camera_results": [],
                 "stages": [{"name": "projective", "status": "cancelled", "reason": "the job was cancelled"}],
                 "status": "cancelled", "certified": False, "nodes": 0, "elapsed_s": 0.0, "cost": None,

@@ -161,7 +161,7 @@ class MapKind:
             document["determinacy"]["proven"] = True
         return document
 
-    def cancelled_item(self) -> dict:
+    def cancelled_item(self, options: Any) -> dict:
         return map_document(MapResult("cancelled", False, reason="the job was cancelled before this map started"))
 
     def assemble(self, options: MapOptions, items: list[dict], stats: dict) -> dict:

@@ -345,7 +345,7 @@ class StereoLinesKind:
             "nodes": 0, "elapsed_s": seconds, "cost": None, "lower_bound": None, "determinacy": determinacy,
         }
 
-    def cancelled_item(self) -> dict:
+    def cancelled_item(self, options: Any) -> dict:
         return {"frames": [-1, -1], "status": "cancelled", "certified": False, "R": None, "t": None, "inliers": [],
                 "inlier_ratio": 0.0, "lines": 0, "matches": None, "degenerate": [], "solver": "", "iterations": 0,
                 "time_ms": 0.0, "rms_px": None, "refined": False,

@@ -255,7 +255,7 @@ class TriangulationKind:
                 document["determinacy"] = found
         return documents
 
-    def cancelled_item(self) -> dict:
+    def cancelled_item(self, options: Any) -> dict:
         return track_document(TrackResult("cancelled", False, reason="the job was cancelled before this track started"))
 
     def assemble(self, options: TriangulationOptions, items: list[dict], stats: dict) -> dict:

@@ -171,7 +171,7 @@ class AutocalibrationVerification:
             problem = pr.prepare(cameras, points, image_size, dict(options.get("intrinsics") or {}))
         except (InputError, TypeError, ValueError) as exc:
             raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
-        if result.get("method") != options.get("method") or result.get("intrinsics") != problem.ranges:
+        if result.get("method") != options.get("method") or not _ranges_stated(result, problem):
             raise Invalid("returned", "method or intrinsics differ from what the options give")
         derived = {"upgrade": None, "dual_absolute_quadric": None, "cameras": None, "points": None}
         H = p = None
@@ -378,6 +378,18 @@ def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, p
     return bound
 
 
+def _ranges_stated(result: dict, problem) -> bool:
+    """The result states the intrinsics ranges the options and data give; a job stopped before any
+    stage started (a cancel, or the job's clock: every stage cancelled or time_limit, with no node
+    and no cost) resolved none and states {} (its item is written without the data)."""
+    if result.get("intrinsics") == problem.ranges:
+        return True
+    stages = result.get("stages") or []
+    never_started = all(isinstance(s, dict) and s.get("status") in ("cancelled", "time_limit") and not s.get("nodes")
+                        and s.get("cost") is None and s.get("lower_bound") is None for s in stages)
+    return never_started and result.get("intrinsics") == {}
+
+
 def _check_returned_direct(result: dict, certificate: dict) -> None:
     from geocert.solvers.autocalibration import direct
 
@@ -388,7 +400,7 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
         problem = pr.prepare(cameras, points, image_size, dict(options.get("intrinsics") or {}))
     except (InputError, TypeError, ValueError) as exc:
         raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
-    if result.get("method") != "direct" or result.get("intrinsics") != problem.ranges:
+    if result.get("method") != "direct" or not _ranges_stated(result, problem):
         raise Invalid("returned", "method or intrinsics differ from what the options give")
     if result.get("dual_absolute_quadric") != claim.get("dual_absolute_quadric"):
         raise Invalid("returned", "dual_absolute_quadric differs from the direct stage's claim")

@@ -469,7 +469,7 @@ def partial_result(jobs: JobStore, job_id: str, kind, options, reason: str) -> d
     """The result of the items a failed job stored (None when it stored none): every other item
     is its kind's unsolved item, saying why."""
     def unsolved() -> dict:
-        item = kind.cancelled_item()
+        item = kind.cancelled_item(options)
         return {**item, "reason": reason} if "reason" in item else item
 
     assembled = _stored_result(jobs, job_id, kind, options, unsolved, none_stored=None)

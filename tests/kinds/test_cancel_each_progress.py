@@ -40,3 +40,20 @@ def test_a_cancel_at_an_early_progress_ends_cleanly(name, calls):
     if kind.certifies and certified_anything(result):
         report = verify_any(result)
         assert report.valid, report.first_failure
+
+
+@pytest.mark.parametrize("method, stages", [("direct", ["direct"]), ("stratified", ["affine", "metric"])])
+def test_an_autocalibration_cancelled_before_it_starts_states_its_own_method(method, stages):
+    """A job cancelled before its one item starts is the kind's never-started item: for the direct
+    method its one stage, not the stratified method's two (the verifier refused such a result's
+    stage names); nothing is certified and the verifier says exactly that."""
+    kind = KINDS.get("autocalibration")
+    job = copy.deepcopy(kind.example)
+    job["options"] = {"method": method, "certificate": "full"}
+    result = solve_job(job, should_stop=lambda: True)
+    kind.result_model.model_validate(result)
+    assert result["method"] == method
+    assert [stage["name"] for stage in result["stages"]] == stages
+    assert {stage["status"] for stage in result["stages"]} == {"cancelled"}
+    report = verify_any(result)
+    assert not report.valid and report.first_failure["detail"] == "no certified item to check"

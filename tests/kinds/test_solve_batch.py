@@ -30,7 +30,7 @@ class CountingKind:
         raise AssertionError("a batching kind is given batches")
 
     @staticmethod
-    def cancelled_item():
+    def cancelled_item(options):
         return {"status": "cancelled", "certified": False, "nodes": 0, "cost": None, "lower_bound": None,
                 "reason": "cancelled"}
 

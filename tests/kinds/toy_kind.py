@@ -139,7 +139,7 @@ class CentroidKind:
                 "certified": True, "nodes": 0, "elapsed_s": 0.0,
                 "certificate": {"proof": {"type": "closed_form"}}}
 
-    def cancelled_item(self) -> dict:
+    def cancelled_item(self, options: Any) -> dict:
         return {"point": [math.nan, math.nan], "cost": None, "lower_bound": None, "gap": None, "status": "cancelled",
                 "certified": False, "nodes": 0, "elapsed_s": 0.0}
 

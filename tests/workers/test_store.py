@@ -223,7 +223,7 @@ class TestStreamedResult:
 
         kind, _, options = parse_job(get_kind("triangulation").example)
         one = solve_job(kind.example)["tracks"]
-        items = [dict(one[i % len(one)], nodes=i + 1) for i in range(count - 1)] + [kind.cancelled_item()]
+        items = [dict(one[i % len(one)], nodes=i + 1) for i in range(count - 1)] + [kind.cancelled_item(options)]
         return kind, options, items
 
     def store_runs(self, jobs, job_id, kind, items, cuts) -> None:
