@@ -103,8 +103,11 @@ def _check_cameras_word(result: dict, status: dict) -> None:
     never "failed"; "not_run" in no run whose structure stage ended done (the cameras stage is
     entered then, and ends done, stopped or skipped); "skipped" beside a structure stage that ran
     (done, or stopped by its own clock) only when options.resect_cameras is false (an earlier
-    stage that failed skips the structure stage too). The option is read from the options' echo
-    where stated; it is not covered by problem_sha256, so an echo restated false is not caught here."""
+    stage that failed skips the structure stage too); and the adjustment "skipped" beside a
+    structure stage that was entered (not skipped) only when options.bundle_adjustment is false (a
+    stage that failed before it skips the structure stage too). The options are read from the
+    options' echo where stated; problem_sha256 covers them (hashed_options.CLAIM_OPTIONS), and the
+    report's scope states them for a document of an earlier form, whose hash does not."""
     word, structure = status["cameras"], status["structure"]
     if word == "failed":
         _refuse("cameras/status", "'failed': the pipeline never calls the cameras stage failed (it is done, stopped, "
@@ -118,6 +121,12 @@ def _check_cameras_word(result: dict, status: dict) -> None:
         _refuse("cameras/status", f"'skipped' after the structure stage ended {structure!r}, with "
                                   "options.resect_cameras true: the pipeline skips the cameras stage only when that "
                                   "option is false or an earlier stage failed")
+    adjust = options.get("bundle_adjustment") if isinstance(options, dict) else None
+    if status["bundle_adjustment"] == "skipped" and structure not in ("skipped", "not_run") and adjust is True:
+        _refuse("bundle_adjustment/status", f"'skipped' before a structure stage that ended {structure!r}, with "
+                                            "options.bundle_adjustment true: the pipeline skips the adjustment only "
+                                            "when that option is false or an earlier stage failed (which skips the "
+                                            "structure stage too)")
 
 
 def _stated(stage: dict, members: tuple) -> list[str]:

@@ -32,12 +32,12 @@ def raw_pack(z: np.ndarray) -> str:
 
 
 def rehash(document: dict, earlier: bool = False) -> dict:
-    """The document's hashes made again, in its kind's current form (``earlier``: the earlier
+    """The document's hashes made again, in its kind's current form (``earlier``: its earliest
     form, as a stored document from before the hash covered more options)."""
     from geocert.kinds import get_kind
 
     verification = get_kind(document["kind"]).verification
-    names = getattr(verification, "earlier_claim_options" if earlier else "claim_options", None)
+    names = verification.earlier_forms[-1][0] if earlier else getattr(verification, "claim_options", None)
     document["data_sha256"] = data_hash(document["kind"], document["data"])
     document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names)
     return document
