@@ -37,7 +37,8 @@ def rehash(document: dict, earlier: bool = False) -> dict:
     from geocert.kinds import get_kind
 
     verification = get_kind(document["kind"]).verification
-    names = verification.earlier_forms[-1][0] if earlier else getattr(verification, "claim_options", None)
+    forms = getattr(verification, "earlier_forms", ()) if earlier else ()
+    names = forms[-1][0] if forms else getattr(verification, "claim_options", None)
     document["data_sha256"] = data_hash(document["kind"], document["data"])
     document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names)
     return document
