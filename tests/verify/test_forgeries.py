@@ -949,7 +949,8 @@ def _moved_camera_result(result: dict, view: int, degrees: float, camera_rel_gap
         # the tolerance's formula, as the forger applies it (camera_claim.tolerance refuses a gap beyond its cap)
         tolerance = (1 + camera_claim.allowance(len(source), dof, options["norm"])) / (1 - camera_rel_gap) - 1
         certified = camera_claim.within(cost, claim["lower_bound"], tolerance, options["abs_gap"])
-        c.update(cost=cost, searched=True, points=len(source), degrees_of_freedom=dof, tolerance=tolerance,
+        c.update(cost=cost, searched=True, free_camera=None, points=len(source), degrees_of_freedom=dof,
+                 tolerance=tolerance,
                  certified=certified, status="optimal" if certified else "not_certified",
                  lower_bound=claim["lower_bound"], gap=cost - claim["lower_bound"], optimal_cost=claim["cost"])
     squared = []
