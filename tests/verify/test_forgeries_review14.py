@@ -2,19 +2,20 @@
 stage statuses, nested members and job stop, attacked both ways. Forgeries start from genuine
 runs (the reconstruction kind's example, six views, K unknown, full certificate, or the stored
 genuine document) and edit them as a forger would; genuine runs are solved in pipeline outcomes
-review 13 did not try. Each test here fails on the verifier as it stands (strict xfail): a
-forgery that verifies, or a genuine result refused.
+review 13 did not try. Each test here failed on the verifier as it stood before its fix: a
+forgery that verified, or a genuine result refused.
 
 - A stop hidden as an option: a cameras stage stopped before it judged a camera (a cancel, or
   the structure stage's own clock) restated "skipped" with its reason "options.resect_cameras is
   false", every camera "not_run" and the job's stop "optimal", while the certificate's options
-  echo ``resect_cameras: true``. Nothing ties the cameras stage's "skipped" to the option (the
+  echo ``resect_cameras: true``. Nothing tied the cameras stage's "skipped" to the option (the
   pipeline skips it only when the option is false or an earlier stage failed), so the job's
-  cancel disappears. The option is outside problem_sha256, so the echo itself can be restated
-  false with the stage.
+  cancel disappeared. The option was outside problem_sha256, so the echo itself could be restated
+  false with the stage (fixed: the hash covers it, hashed_options.CLAIM_OPTIONS).
 - A stop hidden as a judgement: cameras a cancel left unstarted restated as judged and "not
   certified" (not searched, "no bound can certify it"), the stage done and the job "optimal":
-  nothing recomputes that judgement (they fit their points to 1e-12 px^2).
+  nothing recomputed that judgement (they fit their points to 1e-12 px^2; fixed: a judged
+  camera states the free camera that beats it, from which the verifier recomputes it).
 - Genuine runs refused: (a) a run stopped after the certified upgrade and before the structure
   stage returned a point (a cancel in the adjustment; the structure stage's own clock before its
   first track), carrying its calibration certificate and no point, is refused by the calibration
