@@ -208,3 +208,16 @@ def test_the_adjustment_skipped_is_tied_to_its_option(at_defaults):
     rehash(result["certificate"])
     report = verify_any(result)
     assert not report.valid and "bundle_adjustment/status" in report.first_failure["detail"], report.first_failure
+
+
+def test_a_cancel_restated_as_skipped_with_resect_cameras_absent_is_refused(cancelled_before_the_cameras):
+    """The second form's hash does not cover whether resect_cameras is stated either: removed from
+    the echo, it is read as its default (true), as the scope says, so the cameras stage restated
+    skipped is refused."""
+    from tests.verify.test_forgeries_review14 import _as_skipped
+
+    forged = copy.deepcopy(cancelled_before_the_cameras)
+    _as_skipped(forged)
+    del forged["certificate"]["options"]["resect_cameras"]
+    report = verify_any(_second_form(forged))
+    assert not report.valid and "cameras/status" in report.first_failure["detail"], report.first_failure
