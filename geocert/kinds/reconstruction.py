@@ -238,6 +238,11 @@ class ReconstructionCamera(BaseModel):
     searched: bool = Field(False, description="the certified resection ran for this camera: with certificate "
                                               "\"full\", its map is in camera_certificate (one per searched camera, "
                                               "in view order); a camera not searched claims no bound")
+    free_camera: list[list[float]] | None = Field(
+        None, description="the 3x4 camera, all 12 entries free, found locally from this one, that beats it on its "
+                          "points by more than its tolerance (every point in front of it): why a camera not searched "
+                          "is not certified when its own figures do not say so (no bound, at most this camera's "
+                          "cost, can certify it; the verifier recomputes both costs); null otherwise")
 
 
 class ReconstructionPoint(TrackOut):
@@ -627,7 +632,8 @@ class ReconstructionKind:
                 "bound_reason": None if b is None else b.reason,
                 "points": 0 if b is None else b.points, "searched": bool(b is not None and b.result is not None),
                 "degrees_of_freedom": None if b is None else b.dof, "tolerance": None if b is None else b.tolerance,
-                "set_aside": None if b is None else b.set_aside}
+                "set_aside": None if b is None else b.set_aside,
+                "free_camera": None if b is None else lst(b.free_camera)}
 
     @staticmethod
     def _camera_items(out, options, bounds: dict) -> list[dict]:

@@ -92,7 +92,7 @@ VERIFIED_KINDS: dict[str, VerifiedKind] = {kind.name: kind for kind in (
         cameras=("view", "name", "registered", "reason", "image_size", "K", "R", "t", "center", "P", "k1",
                  "distortion_centre", "cost", "lower_bound", "gap", "optimal_cost", "certified", "status",
                  "bound_reason", "points", "degrees_of_freedom", "tolerance", "searched", "pose_determined",
-                 "mirror_rotation_deg", "set_aside"),
+                 "mirror_rotation_deg", "set_aside", "free_camera"),
         stats=STATS)),
 )}
 

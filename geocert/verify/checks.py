@@ -332,6 +332,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
 
     items: list = []
     options: dict = {}
+    hashed: tuple[str, ...] = ()  # the options the problem hash was found to cover
     size = 0
     try:
         # A result holding its certificate is walked once: the certificate nests less deeply.
@@ -350,7 +351,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
         tallies["format"][0] += 1
         options = checked_options(document["kind"], document["options"])
         tallies["options"][0] += 1
-        earlier_form = _check_hashes(document, options)
+        hashed, earlier_form = _check_hashes(document, options)
         tallies["data_hash"][0] += 1
         _check_item_count(document)
         report.scope = scope_statement(document["kind"], options)
@@ -365,7 +366,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
     adapter = _adapter(document["kind"]) if items else None
     # The work the document may ask for, in proportion to its size (strict.charge).
     with work_budget(WORK_PER_UNIT * size + WORK_BASE):
-        _verify_all(document, returned, adapter, options, items, report, tallies, fail)
+        _verify_all(document, returned, adapter, options, items, report, tallies, fail, hashed)
     report.first_failure = first
     # a result may make a certified claim beyond its items, checked by its kind's check_result
     # (a reconstruction's certified K, against its calibration certificate, where no point is placed)
@@ -394,9 +395,9 @@ def _verify(document: Any, returned: dict | None) -> Report:
 
 
 def _verify_all(document: dict, returned: dict | None, adapter, options: dict, items: list, report: Report,
-                tallies: dict, fail) -> None:
+                tallies: dict, fail, hashed: tuple[str, ...] = ()) -> None:
     """_verify's checks of the items, of what ties them together, and of the result returning
-    them (failures counted through ``fail``)."""
+    them (failures counted through ``fail``; ``hashed``: the options the problem hash covers)."""
     forget = getattr(adapter, "forget", lambda: None)  # what an adapter remembers of one document
     forget()
     try:
@@ -420,10 +421,9 @@ def _verify_all(document: dict, returned: dict | None, adapter, options: dict, i
             # What else a kind's result returns on the strength of its certificates (e.g. a
             # reconstruction's cameras, against the camera certificate beside its points').
             check_result = getattr(_adapter(document["kind"]), "check_result", None)
-            # The hash's form, as _check_hashes found it (the scope states only the earlier one).
-            current_form = report.scope is not None and "problem_sha256" not in report.scope
+            # The hash's form, as _check_hashes found it: the options it covers.
             scoped = check_result(returned, document, lambda other: _verify(other, None),
-                                  current_form=current_form) if check_result else None
+                                  hashed=hashed) if check_result else None
             if isinstance(scoped, dict) and report.scope is not None:  # e.g. which labels are tied to the input
                 report.scope.update(scoped)
             tallies["returned"][0] += 1
@@ -581,9 +581,9 @@ def _check_claim_members(kind, items: list) -> None:
                                     "nothing, so it is refused")
 
 
-def _check_hashes(document: dict, options: dict) -> str | None:
-    """The data's and the problem's hashes; returns what the report's scope says of a problem hash
-    of a kind's earlier form (None for the current one)."""
+def _check_hashes(document: dict, options: dict) -> tuple[tuple[str, ...], str | None]:
+    """The data's and the problem's hashes; returns the options the problem hash covers and what
+    the report's scope says of a problem hash of a kind's earlier form (None for the current one)."""
     expected = data_hash(document["kind"], document["data"])
     if expected != document["data_sha256"]:
         raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
@@ -591,11 +591,12 @@ def _check_hashes(document: dict, options: dict) -> str | None:
     names = getattr(adapter, "claim_options", None)
     expected = problem_hash(document["kind"], document["data"], options, names)
     if expected == document["problem_sha256"]:
-        return None
-    earlier = getattr(adapter, "earlier_claim_options", None)  # a kind whose hash came to cover more options
-    if earlier is not None and problem_hash(document["kind"], document["data"], options, earlier) \
-            == document["problem_sha256"]:
-        return adapter.check_earlier_form(options)  # refuses what that form cannot tell apart
+        return names or CLAIM_OPTIONS, None
+    # a kind whose hash came to cover more options: its earlier forms, newest first, each with
+    # what the report's scope says of it
+    for earlier, statement in getattr(adapter, "earlier_forms", ()):
+        if problem_hash(document["kind"], document["data"], options, earlier) == document["problem_sha256"]:
+            return earlier, statement(options)
     raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and options "
                                f"({', '.join(names or CLAIM_OPTIONS)}) hash to {expected!r}")
 

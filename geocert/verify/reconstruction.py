@@ -252,13 +252,14 @@ def _check_summary(result: dict, registered: list[dict]) -> None:
                 raise Invalid("returned", f"stages/{stage['name']}/{name} is {stage[name]!r}, the items give {value!r}")
 
 
-def _check_pipeline_counts(result: dict, rel_gap: float, current_form: bool) -> None:
+def _check_pipeline_counts(result: dict, rel_gap: float, states_depth_reversal: bool) -> None:
     """The summary's counts of what the pipeline was given and set aside (tracks, points_dropped,
     cameras_dropped, observations_removed) and its camera claim: each agrees with the stage that
     records it and with the items (the points' track numbers, the cameras dropped with their
     reason, the warnings). The input itself is not in this document: a count of it is checked for
     agreement, not against the input (the scope says so). The camera claim is the words
-    camera_claim.statement gives for the result's norm and camera_rel_gap."""
+    camera_claim.statement gives for the result's norm and camera_rel_gap. ``states_depth_reversal``:
+    the document's hash form is one whose results state the depth-reversal record (hashed_options)."""
     summary, points, cameras = result["summary"], result["points"], result["cameras"]
     stages = {stage.get("name"): stage for stage in result.get("stages") or [] if isinstance(stage, dict)}
     structure = stages.get("structure", {})
@@ -298,7 +299,7 @@ def _check_pipeline_counts(result: dict, rel_gap: float, current_form: bool) -> 
             c.get("pose_determined") != poses for c in cameras if c.get("registered") is True and "pose_determined" in c):
         raise Invalid("returned", f"summary/poses_determined is {poses!r}: its warning (poses_not_determined) and "
                                   "every registered camera's pose_determined must say the same")
-    depth_reversal_claim.check(summary, cameras, result.get("stages") or [], current_form, points)
+    depth_reversal_claim.check(summary, cameras, result.get("stages") or [], states_depth_reversal, points)
     doubtful = bool((len(bounded) >= 2 and beyond > DOUBTFUL_FRACTION * len(bounded))
                     or (removed and removed > DOUBTFUL_REMOVED * (removed + kept))
                     or (dropped and dropped > DOUBTFUL_DROPPED * (dropped + registered))
@@ -806,13 +807,17 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
                                       f"proven bound {proven:.6g} plus abs_gap")
 
 
-def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, maps: list[dict]) -> None:
+def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, maps: list[dict],
+                          states_free: bool = True) -> list[int]:
     """Every registered camera's own figures, whatever it claims: its points (its map from the
     certified points), its cost recomputed from its P, its degrees of freedom (the returned
     cameras' K give them) and tolerance (camera_claim), its status (``optimal`` exactly when
-    certified), and no bound unless searched. A camera the cameras stage did not judge
-    (``not_run``) states no figures."""
+    certified), no bound unless searched, and a judgement that no bound can certify it recomputed
+    (_check_judgement). A camera the cameras stage did not judge (``not_run``) states no figures.
+    Returns the views whose judgement is unchecked (a document of an earlier form, ``states_free``
+    false, stating no free camera)."""
     norm = result.get("norm")
+    unchecked: list[int] = []
     dof = camera_claim.degrees_of_freedom([camera["K"] for camera in registered])
     stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "cameras"), None)
     if stage is not None and "degrees_of_freedom" in stage and stage["degrees_of_freedom"] != dof:
@@ -854,16 +859,70 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, 
             if not (math.isfinite(cost) and _close(camera.get("cost"), cost, terms)):
                 raise Invalid("returned", f"{where}: cost {camera.get('cost')!r}, but the returned camera costs "
                                           f"{cost!r} on its certified points")
+        tolerance = camera_claim.tolerance(len(source), dof, norm, rel_gap)
+        if not _check_judgement(result, camera, where, source, target, tolerance, states_free):
+            unchecked.append(camera["view"])
         stated = camera.get("degrees_of_freedom")
         if stated is None and camera.get("tolerance") is None:
             continue  # a result from before they were stated: held to a 3x4 camera's (no allowance)
         if not same(stated, dof):
             raise Invalid("returned", f"{where}: degrees_of_freedom {stated!r}, the returned cameras' K give {dof}")
-        tolerance = camera_claim.tolerance(len(source), dof, norm, rel_gap)
         given = camera.get("tolerance")
         if not (given is None and tolerance is None) and not (tolerance is not None and _close(given, tolerance, 0.0)):
             raise Invalid("returned", f"{where}: tolerance {given!r}, its points and degrees of freedom give "
                                       f"{tolerance!r}")
+    return unchecked
+
+
+def _check_judgement(result: dict, camera: dict, where: str, source: np.ndarray, target: np.ndarray,
+                     tolerance: float | None, states_free: bool) -> bool:
+    """A camera not searched and not certified was judged so by its own figures (no tolerance, or
+    a point behind it) or because a free 3x4 camera found locally beats it by more than its
+    tolerance (structure._bound_on): no bound, at most that camera's cost, can then certify it.
+    The latter judgement is recomputed: the free camera it states (free_camera, its 12 numbers)
+    puts every certified point in front, and the returned camera's cost on them exceeds (1 +
+    tolerance) times the free camera's plus abs_gap (the tolerance its points, the norm,
+    camera_rel_gap and the K returned give). Without it the judgement would be the result's word
+    alone, and a camera a stop left unstarted could be called judged: a document stating no free
+    camera is refused, but one of an earlier hash form (``states_free`` false, written before the
+    kind stated it), whose judgement is then unchecked (returns False; the report's scope names
+    the camera). Only such a camera states a free camera."""
+    free = camera.get("free_camera")
+    if not (camera.get("searched", True) is not True and camera.get("status") == "not_certified"):
+        if free is not None:
+            raise Invalid("returned", f"{where}: states a free_camera, which only a camera judged uncertifiable by "
+                                      "one (not searched, not certified) states")
+        return True
+    P = np.asarray(camera["P"], dtype=float)
+    ones = np.hstack([source, np.ones((len(source), 1))])
+    if tolerance is None or not np.all(ones @ P[2] > 0):  # its own figures leave it uncertified
+        if free is not None:
+            raise Invalid("returned", f"{where}: states a free_camera, though its own figures (no tolerance, or a "
+                                      "point behind it) leave it uncertified, no free camera judging it")
+        return True
+    if free is None:
+        if states_free:
+            raise Invalid("returned", f"{where}: not searched and not certified, with every certified point in front "
+                                      "of it and a tolerance, and no free_camera stated: only a free 3x4 camera "
+                                      "beating it by more than its tolerance leaves such a camera unsearched "
+                                      "(structure.resect_cameras), and the judgement is recomputed from it")
+        return False
+    M = numbers(free, f"{where}/free_camera", (3, 4), "returned")
+    options = result["certificate"]["options"]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        projected, own = ones @ M.T, ones @ P.T
+        cost = norm_cost(target - own[:, :2] / own[:, 2:3], result.get("norm"))
+        beats = norm_cost(target - projected[:, :2] / projected[:, 2:3], result.get("norm"))
+    if not (np.all(np.isfinite(projected)) and np.all(projected[:, 2] > 0) and math.isfinite(beats)):
+        raise Invalid("returned", f"{where}: its free_camera does not put every certified point in front of it: it "
+                                  "is no camera the resection's bound is about")
+    # judged beaten only beyond rounding (the kind judges with camera_claim.JUDGED_MARGIN to spare)
+    if camera_claim.within(cost, beats * (1 + ROUNDING), tolerance, float(options["abs_gap"])):
+        raise Invalid("returned", f"{where}: judged not certifiable by a free 3x4 camera (not searched), but on its "
+                                  f"certified points the camera returned costs {cost:.6g} and its free_camera "
+                                  f"{beats:.6g}: within its tolerance {tolerance:.3g} (plus abs_gap), so a bound "
+                                  "could certify it")
+    return True
 
 
 # A camera's status, as the kind writes it (structure.resect_cameras): "optimal" when certified;
@@ -930,11 +989,11 @@ def _check_unstarted(result: dict, registered: list[dict], seen: list[int]) -> N
 class ReconstructionItems(TrackItems):
     """Points as triangulations (TrackItems), plus ``check_result``: the rest of the result."""
 
-    # problem_sha256 covers every option a claim or check reads; the earlier form (the points'
-    # options only) is read as hashed_options says
+    # problem_sha256 covers every option a claim or check reads, and those deciding whether a
+    # stage runs; the earlier forms (the points' options only; then not the latter) are read as
+    # hashed_options says
     claim_options = hashed_options.CLAIM_OPTIONS
-    earlier_claim_options = hashed_options.EARLIER_CLAIM_OPTIONS
-    check_earlier_form = staticmethod(hashed_options.check_earlier_form)
+    earlier_forms = hashed_options.EARLIER_FORMS
 
     @staticmethod
     def job_outcomes(result: dict) -> list:
@@ -994,10 +1053,11 @@ class ReconstructionItems(TrackItems):
         return statement
 
     def check_result(self, result: dict, certificate: dict, verify: Callable[[dict], object],
-                     current_form: bool = False) -> dict:
+                     hashed: tuple[str, ...] = ()) -> dict:
         """Every check of the result beyond its points' claims; returns what the report's scope
-        adds (whether the labels are tied to the input the data state). ``current_form``: the
-        certificate's problem_sha256 covers CLAIM_OPTIONS (verify._check_hashes found it so)."""
+        adds (whether the labels are tied to the input the data state). ``hashed``: the options the
+        certificate's problem_sha256 covers (verify._check_hashes found it so), which tell the
+        form, and so what a document of that form states (hashed_options.states_...)."""
         from geocert.verify.reconstruction_stages import check_stages
         from geocert.verify.reconstruction_members import check_members
         from geocert.verify.reconstruction_statuses import check_statuses
@@ -1020,13 +1080,14 @@ class ReconstructionItems(TrackItems):
         # Each registered camera's map from the returned points, built once for the checks below
         found = camera_sources(result.get("points") or [], registered)
         maps = maps_less_set_aside(found, registered)
-        _check_camera_figures(result, registered, rel_gap, maps)
+        unchecked = _check_camera_figures(result, registered, rel_gap, maps,
+                                          hashed_options.states_free_cameras(hashed))
         _check_unstarted(result, registered, [len(source) for source, _ in found])
         by_camera = {id(camera): entry for camera, entry in zip(registered, maps)}
         _check_camera_certificate(result, certificate, searched, certified, verify,
                                   [by_camera[id(camera)] for camera in searched])
         _check_summary(result, registered)
-        _check_pipeline_counts(result, rel_gap, current_form)
+        _check_pipeline_counts(result, rel_gap, hashed_options.states_depth_reversal(hashed))
         _check_projective_counts(result)
         check_stages(result)  # (stage_checks: the stage records' shape and counts)
         check_members(result)  # the stages' words, switches and lists, typed and tied
@@ -1034,6 +1095,20 @@ class ReconstructionItems(TrackItems):
         _check_distortion(result, registered, own)
         _check_calibration(result, registered, verify)
         scoped = {"labels": labels}
+        posed = sum(1 for camera in registered if camera.get("R") is not None)
+        if result["summary"].get("depth_reversal") is None and posed >= 2 \
+                and not hashed_options.states_depth_reversal(hashed):
+            scoped["depth_reversal"] = ("unchecked: the summary states no depth-reversal record, which a document of "
+                                        "the earliest hash form (written before the check) lacks, so whether the "
+                                        "depth-reversed twin of the rig fits as well (poses not determined) is not "
+                                        "said")
+        if unchecked:
+            scoped["camera_judgements"] = (
+                f"unchecked for cameras {', '.join(map(str, unchecked))}: each is called not certified, not searched, "
+                "as beaten by more than its tolerance by a free 3x4 camera found locally, which the document (of an "
+                "earlier hash form, written before the free camera was stated) does not state; so that judgement is "
+                "the result's word, and such a camera may be one a stop left unstarted (then the cameras stage's "
+                "status and the job's stop are the result's word too)")
         calibration = result.get("calibration_certificate")
         claim = result["summary"].get("calibration")
         # a certified K claimed: _check_calibration verified the calibration certificate proving it

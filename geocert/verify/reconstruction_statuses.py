@@ -103,8 +103,12 @@ def _check_cameras_word(result: dict, status: dict) -> None:
     never "failed"; "not_run" in no run whose structure stage ended done (the cameras stage is
     entered then, and ends done, stopped or skipped); "skipped" beside a structure stage that ran
     (done, or stopped by its own clock) only when options.resect_cameras is false (an earlier
-    stage that failed skips the structure stage too). The option is read from the options' echo
-    where stated; it is not covered by problem_sha256, so an echo restated false is not caught here."""
+    stage that failed skips the structure stage too); and the adjustment "skipped" beside a
+    structure stage that was entered (not skipped) only when options.bundle_adjustment is false (a
+    stage that failed before it skips the structure stage too). The options are read from the
+    options' echo, absent read as its default, true (as the report's scope reads it: an earlier
+    form's hash does not cover its absence); problem_sha256 covers them (hashed_options.CLAIM_OPTIONS),
+    and the report's scope states them for a document of an earlier form, whose hash does not."""
     word, structure = status["cameras"], status["structure"]
     if word == "failed":
         _refuse("cameras/status", "'failed': the pipeline never calls the cameras stage failed (it is done, stopped, "
@@ -113,11 +117,18 @@ def _check_cameras_word(result: dict, status: dict) -> None:
         _refuse("cameras/status", "'not_run' after the structure stage ended done: the cameras stage was entered "
                                   "(no finished run keeps not_run)")
     options = (result.get("certificate") or {}).get("options")
-    resect = options.get("resect_cameras") if isinstance(options, dict) else None
-    if word == "skipped" and structure in ("done",) + STOPS and resect is True:
+    if not isinstance(options, dict):
+        return  # no options' echo to read them from (check_result reads a result beside its certificate)
+    if word == "skipped" and structure in ("done",) + STOPS and options.get("resect_cameras") is not False:
         _refuse("cameras/status", f"'skipped' after the structure stage ended {structure!r}, with "
-                                  "options.resect_cameras true: the pipeline skips the cameras stage only when that "
-                                  "option is false or an earlier stage failed")
+                                  "options.resect_cameras true (or absent): the pipeline skips the cameras stage only "
+                                  "when that option is false or an earlier stage failed")
+    if status["bundle_adjustment"] == "skipped" and structure not in ("skipped", "not_run") \
+            and options.get("bundle_adjustment") is not False:
+        _refuse("bundle_adjustment/status", f"'skipped' before a structure stage that ended {structure!r}, with "
+                                            "options.bundle_adjustment true (or absent): the pipeline skips the "
+                                            "adjustment only when that option is false or an earlier stage failed "
+                                            "(which skips the structure stage too)")
 
 
 def _stated(stage: dict, members: tuple) -> list[str]:

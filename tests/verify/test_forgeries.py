@@ -32,12 +32,13 @@ def raw_pack(z: np.ndarray) -> str:
 
 
 def rehash(document: dict, earlier: bool = False) -> dict:
-    """The document's hashes made again, in its kind's current form (``earlier``: the earlier
+    """The document's hashes made again, in its kind's current form (``earlier``: its earliest
     form, as a stored document from before the hash covered more options)."""
     from geocert.kinds import get_kind
 
     verification = get_kind(document["kind"]).verification
-    names = getattr(verification, "earlier_claim_options" if earlier else "claim_options", None)
+    forms = getattr(verification, "earlier_forms", ()) if earlier else ()
+    names = forms[-1][0] if forms else getattr(verification, "claim_options", None)
     document["data_sha256"] = data_hash(document["kind"], document["data"])
     document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names)
     return document
@@ -948,7 +949,8 @@ def _moved_camera_result(result: dict, view: int, degrees: float, camera_rel_gap
         # the tolerance's formula, as the forger applies it (camera_claim.tolerance refuses a gap beyond its cap)
         tolerance = (1 + camera_claim.allowance(len(source), dof, options["norm"])) / (1 - camera_rel_gap) - 1
         certified = camera_claim.within(cost, claim["lower_bound"], tolerance, options["abs_gap"])
-        c.update(cost=cost, searched=True, points=len(source), degrees_of_freedom=dof, tolerance=tolerance,
+        c.update(cost=cost, searched=True, free_camera=None, points=len(source), degrees_of_freedom=dof,
+                 tolerance=tolerance,
                  certified=certified, status="optimal" if certified else "not_certified",
                  lower_bound=claim["lower_bound"], gap=cost - claim["lower_bound"], optimal_cost=claim["cost"])
     squared = []

@@ -39,9 +39,15 @@ def _uncertify_points(result: dict, keep: set) -> dict:
 
 def _unsearch_cameras(result: dict) -> dict:
     """Every registered camera called not searched and not certified, its figures recomputed on
-    the certified points left (camera_claim), and no camera certificate: a true, weaker claim."""
+    the certified points left (camera_claim), and no camera certificate: a weaker claim, as a
+    document of the second hash form states it (problem_sha256 over SECOND_CLAIM_OPTIONS, no
+    free camera: the judgement "no bound can certify it" unchecked and said so in the report's
+    scope; the current form's is recomputed from the free camera it states, which a camera that
+    a bound could certify has none of)."""
+    from geocert.solvers.core.certificates import problem_hash
     from geocert.solvers.core.geometry import norm_cost
-    from geocert.solvers.reconstruction import camera_claim
+    from geocert.solvers.reconstruction import camera_claim, hashed_options
+    from geocert.verify.checks import checked_options
     from geocert.verify.reconstruction import camera_maps
 
     registered = [camera for camera in result["cameras"] if camera["registered"]]
@@ -53,10 +59,15 @@ def _unsearch_cameras(result: dict) -> dict:
         target = np.array(entry["target"], dtype=float).reshape(-1, 2)
         image = np.hstack([source, np.ones((len(source), 1))]) @ np.array(camera["P"]).T
         cost = norm_cost(target - image[:, :2] / image[:, 2:3], result["norm"]) if len(source) else 0.0
+        camera.pop("free_camera", None)
         camera.update(searched=False, certified=False, status="not_certified", lower_bound=None, gap=None,
                       optimal_cost=None, points=len(source), cost=cost, degrees_of_freedom=dof,
                       tolerance=camera_claim.tolerance(len(source), dof, result["norm"], options["camera_rel_gap"]))
     result["camera_certificate"] = None
+    document = result["certificate"]
+    document["problem_sha256"] = problem_hash("reconstruction", document["data"],
+                                              checked_options("reconstruction", document["options"]),
+                                              hashed_options.SECOND_CLAIM_OPTIONS)
     result["summary"].update(cameras_certified=0, cameras_certified_fraction=0.0)
     _cameras_stage(result).update(certified=0, searched=0)
     # every camera bounded and none certified: doubtful (claims._doubts), said first

@@ -2,19 +2,20 @@
 stage statuses, nested members and job stop, attacked both ways. Forgeries start from genuine
 runs (the reconstruction kind's example, six views, K unknown, full certificate, or the stored
 genuine document) and edit them as a forger would; genuine runs are solved in pipeline outcomes
-review 13 did not try. Each test here fails on the verifier as it stands (strict xfail): a
-forgery that verifies, or a genuine result refused.
+review 13 did not try. Each test here failed on the verifier as it stood before its fix: a
+forgery that verified, or a genuine result refused.
 
 - A stop hidden as an option: a cameras stage stopped before it judged a camera (a cancel, or
   the structure stage's own clock) restated "skipped" with its reason "options.resect_cameras is
   false", every camera "not_run" and the job's stop "optimal", while the certificate's options
-  echo ``resect_cameras: true``. Nothing ties the cameras stage's "skipped" to the option (the
+  echo ``resect_cameras: true``. Nothing tied the cameras stage's "skipped" to the option (the
   pipeline skips it only when the option is false or an earlier stage failed), so the job's
-  cancel disappears. The option is outside problem_sha256, so the echo itself can be restated
-  false with the stage.
+  cancel disappeared. The option was outside problem_sha256, so the echo itself could be restated
+  false with the stage (fixed: the hash covers it, hashed_options.CLAIM_OPTIONS).
 - A stop hidden as a judgement: cameras a cancel left unstarted restated as judged and "not
   certified" (not searched, "no bound can certify it"), the stage done and the job "optimal":
-  nothing recomputes that judgement (they fit their points to 1e-12 px^2).
+  nothing recomputed that judgement (they fit their points to 1e-12 px^2; fixed: a judged
+  camera states the free camera that beats it, from which the verifier recomputes it).
 - Genuine runs refused: (a) a run stopped after the certified upgrade and before the structure
   stage returned a point (a cancel in the adjustment; the structure stage's own clock before its
   first track), carrying its calibration certificate and no point, is refused by the calibration
@@ -102,8 +103,6 @@ def test_a_cancel_restated_as_the_cameras_stage_never_run_is_refused(cancelled_b
     _refused(forged)
 
 
-@pytest.mark.xfail(strict=True, reason="review 14: resect_cameras not covered by problem_sha256: the echo restated "
-                                       "false with the stage skipped hides a cancel")
 def test_a_cancel_restated_as_resect_cameras_false_is_refused(cancelled_before_the_cameras):
     """The same forgery made consistent with the options' echo: resect_cameras is not among the
     options problem_sha256 covers, so the echo can be restated false and the document stays
@@ -155,8 +154,6 @@ def _cost(result: dict, view: int) -> float:
     return total
 
 
-@pytest.mark.xfail(strict=True, reason="review 14: cameras a cancel left unstarted restated as judged and not "
-                                       "certified (no bound can certify it), the cancel hidden")
 def test_cameras_a_cancel_left_unstarted_restated_as_judged_uncertifiable_are_refused():
     """A cancel part way through the cameras stage (the cameras not started called cancelled,
     counted in cameras_not_started, the job cancelled) restated as a finished run whose last

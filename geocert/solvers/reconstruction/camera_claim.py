@@ -66,6 +66,10 @@ OUTLIER_SCALES = 8.0
 MAX_SET_ASIDE = 0.05  # of a camera's points: more misses than this are the camera's, not outliers
 RAYLEIGH_MEDIAN = math.sqrt(2.0 * math.log(2.0))  # a 2D Gaussian residual's median length over sigma
 SAME = 1e-9  # relative: intrinsics equal up to JSON round trips are shared
+# relative: a free 3x4 camera judges a camera uncertifiable only when it beats it by more than its
+# tolerance with this to spare on its own cost, so that the verifier, recomputing both costs from
+# the numbers returned (to 1e-9 of them), judges the same
+JUDGED_MARGIN = 1e-6
 
 
 def _intrinsics(K) -> np.ndarray:

@@ -15,6 +15,16 @@ was written, so the report's scope states that the hash does not cover those opt
 document states for each, for the user to compare with their request. Every claim is then read at
 the values stated (a certified camera's tolerance from the camera_rel_gap stated, which its camera
 certificate must prove), so what the report says is true of the document.
+
+The second form (CLAIM_OPTIONS but resect_cameras and bundle_adjustment: SECOND_CLAIM_OPTIONS)
+left out the options that decide whether the cameras stage and the adjustment run: a cameras
+stage a cancel stopped could be restated "skipped" by resect_cameras, the echo restated false, and
+the hash stayed the request's. The hash covers them since (CLAIM_OPTIONS); documents of the second
+form still verify, as those of the first do, the report's scope stating what the document states
+for each option its form leaves out (check_earlier_form: the first form's scope lists both sets).
+A document of either earlier form also states no free camera for a camera judged uncertifiable by
+one (the kind states it since the hash covers these options): that judgement is then unchecked,
+and the report's scope says which cameras (verify.reconstruction).
 """
 
 from __future__ import annotations
@@ -31,14 +41,18 @@ from geocert.solvers.reconstruction.camera_claim import MAX_REL_GAP
 EARLIER_DEFAULTS: dict[str, Any] = {"camera_rel_gap": 1e-2, "intrinsics": {}, "radial_distortion": "off",
                                     "autocalibration": "stratified", "autocalibration_rel_gap": 1e-5,
                                     "metric_rel_gap": 1e-4}
-CLAIM_OPTIONS = EARLIER_CLAIM_OPTIONS + tuple(EARLIER_DEFAULTS)
+SECOND_CLAIM_OPTIONS = EARLIER_CLAIM_OPTIONS + tuple(EARLIER_DEFAULTS)
+# What the second form left out: the options deciding whether a stage runs, at their defaults
+# (ReconstructionOptions'; tests/solvers/reconstruction/test_reconstruction_hash.py checks they agree).
+SECOND_DEFAULTS: dict[str, Any] = {"resect_cameras": True, "bundle_adjustment": True}
+CLAIM_OPTIONS = SECOND_CLAIM_OPTIONS + tuple(SECOND_DEFAULTS)
 RADIAL_DISTORTIONS = ("auto", "on", "off")
 AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")
 
 
 def checked(options: dict) -> dict:
     """The hashed options beyond the points', each of its type (a number, the words the kind
-    takes, an object or "unknown" for intrinsics), as stated (absent: None)."""
+    takes, an object or "unknown" for intrinsics, true or false), as stated (absent: None)."""
     out: dict[str, Any] = {}
     for name in ("autocalibration_rel_gap", "metric_rel_gap"):
         if options.get(name) is not None:
@@ -55,34 +69,72 @@ def checked(options: dict) -> dict:
         raise Invalid("options", "options/intrinsics must be \"unknown\" or an object")
     if intrinsics is not None:
         out["intrinsics"] = intrinsics
+    for name in SECOND_DEFAULTS:
+        if options.get(name) is not None:
+            if not isinstance(options[name], bool):
+                raise Invalid("options", f"options/{name}: must be true or false, got {options[name]!r:.40}")
+            out[name] = options[name]
     return out
 
 
 def _at_default(name: str, value: Any) -> bool:
-    """Whether an option the earlier form leaves out is what a request naming none gets."""
+    """Whether an option an earlier form leaves out is what a request naming none gets."""
     if value is None:  # absent: read as the earlier form read it
         return True
     if name == "intrinsics":  # ranges from the image size: "unknown", or no K and no range stated
         return value == "unknown" or (isinstance(value, dict) and all(v is None for v in value.values()))
-    return value == EARLIER_DEFAULTS[name]
+    return value == {**EARLIER_DEFAULTS, **SECOND_DEFAULTS}[name]
 
 
-def check_earlier_form(options: dict) -> str:
-    """What the report's scope says of a document hashed the earlier way: the options that form
-    does not cover, each as the document states it (absent: read as its default; camera_rel_gap
-    absent is read as rel_gap, as documents from before it was an option are)."""
+def _stated(options: dict, defaults: dict) -> list[str]:
+    """Each option of ``defaults`` as the document states it (absent: read as its default;
+    camera_rel_gap absent is read as rel_gap, as documents from before it was an option are)."""
     stated = []
-    for name in EARLIER_DEFAULTS:
+    for name in defaults:
         value = options.get(name)
         if name == "camera_rel_gap" and value is None:
             stated.append(f"camera_rel_gap absent, read as rel_gap {options['rel_gap']!r}")
         elif value is None:
-            stated.append(f"{name} absent, read as {EARLIER_DEFAULTS[name]!r}")
+            stated.append(f"{name} absent, read as {defaults[name]!r}")
         else:
             stated.append(f"{name} {value!r:.80}" + ("" if _at_default(name, value) else " (not its default)"))
+    return stated
+
+
+def check_earlier_form(options: dict) -> str:
+    """What the report's scope says of a document hashed the earliest way (the points' four
+    options only): the options that form does not cover, each as the document states it."""
+    stated = _stated(options, {**EARLIER_DEFAULTS, **SECOND_DEFAULTS})
     return (f"the earlier form: it covers the kind, the data and {', '.join(EARLIER_CLAIM_OPTIONS)} only, not the "
-            f"options these claims also read, which the document states as: {'; '.join(stated)}. Compare them with "
-            "your request: a hash of this form does not tell them from values changed after it was written")
+            f"options these claims also read, nor those deciding whether the adjustment and the cameras stage run, "
+            f"which the document states as: {'; '.join(stated)}. Compare them with your request: a hash of this form "
+            "does not tell them from values changed after it was written")
+
+
+def check_second_form(options: dict) -> str:
+    """What the report's scope says of a document hashed the second way (SECOND_CLAIM_OPTIONS):
+    the options deciding whether a stage runs, which it does not cover, as the document states them."""
+    stated = _stated(options, SECOND_DEFAULTS)
+    return (f"the second form: it covers the kind, the data and {', '.join(SECOND_CLAIM_OPTIONS)}, not the options "
+            f"deciding whether the adjustment and the cameras stage run, which the document states as: "
+            f"{'; '.join(stated)}. Compare them with your request: a hash of this form does not tell them from values "
+            "changed after it was written (a stage a stop ended, restated as skipped by its option)")
+
+
+# The earlier forms, newest first, each with what the report's scope says of it (verify.checks)
+EARLIER_FORMS = ((SECOND_CLAIM_OPTIONS, check_second_form), (EARLIER_CLAIM_OPTIONS, check_earlier_form))
+
+
+def states_free_cameras(hashed: tuple[str, ...]) -> bool:
+    """Whether a document whose problem_sha256 covers ``hashed`` was written by a kind that states
+    the free camera of every camera judged uncertifiable by one (those of CLAIM_OPTIONS' form)."""
+    return set(CLAIM_OPTIONS) <= set(hashed)
+
+
+def states_depth_reversal(hashed: tuple[str, ...]) -> bool:
+    """Whether a document of that form was written by a kind that states the depth-reversal
+    check's record (every form since the first)."""
+    return set(SECOND_CLAIM_OPTIONS) <= set(hashed)
 
 
 def check_calibration_options(calibration: dict, options: dict) -> None:

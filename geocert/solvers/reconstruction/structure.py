@@ -48,6 +48,9 @@ class CameraBound:
     # Observations set aside as outliers before the bound (camera_claim.outliers): 0 when certified
     # or judged on all its points; None when not judged
     set_aside: int | None = None
+    # The free 3x4 camera found locally that beats it by more than its tolerance, when that is why
+    # it was not searched (the verifier recomputes both costs from it); None otherwise
+    free_camera: np.ndarray | None = None
 
 
 def camera_matrix(K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -95,6 +98,13 @@ def free_camera_cost(P: np.ndarray, X: np.ndarray, x: np.ndarray, norm: str) -> 
     (Levenberg-Marquardt on the pixel residuals), when it puts every point in front; else None.
     Any camera putting every point in front costs at least the certified resection's optimum, so
     this cost is an upper bound on it (and on any lower bound the resection could prove)."""
+    found = free_camera(P, X, x, norm)
+    return None if found is None else found[1]
+
+
+def free_camera(P: np.ndarray, X: np.ndarray, x: np.ndarray, norm: str) -> tuple[np.ndarray, float] | None:
+    """free_camera_cost's camera (its sign chosen so that every point has a positive depth) and
+    cost; None when it puts a point behind it."""
     from scipy.optimize import least_squares
 
     Xh = np.hstack([X, np.ones((len(X), 1))])
@@ -107,11 +117,14 @@ def free_camera_cost(P: np.ndarray, X: np.ndarray, x: np.ndarray, norm: str) -> 
         found = least_squares(residual, (P / np.linalg.norm(P)).ravel(), method="lm", x_scale="jac", max_nfev=200)
     except (ValueError, np.linalg.LinAlgError):
         return None
-    proj = Xh @ found.x.reshape(3, 4).T
+    M = found.x.reshape(3, 4)
+    proj = Xh @ M.T
     if not (np.all(proj[:, 2] > 0) or np.all(proj[:, 2] < 0)) or not np.all(np.isfinite(proj)):
-        return None  # -M is the same camera with every depth of the other sign
+        return None
+    if proj[0, 2] < 0:  # -M is the same camera with every depth of the other sign
+        M, proj = -M, -proj
     cost = norm_cost(x - proj[:, :2] / proj[:, 2:3], norm)
-    return cost if np.isfinite(cost) else None
+    return (M, cost) if np.isfinite(cost) else None
 
 
 def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.ndarray, np.ndarray]],
@@ -220,17 +233,23 @@ def _bound_on(view: int, P: np.ndarray, X: np.ndarray, x: np.ndarray, options: M
     if not bound_every_camera:
         if not depths_positive:
             return unbounded("a point is behind the camera returned: outside the bound's scope")
-        free = free_camera_cost(P, X, x, options.norm)
-        if free is not None and not camera_claim.within(cost, free, tolerance, options.abs_gap):
+        found = free_camera(P, X, x, options.norm)
+        free = None if found is None else found[1]
+        # beaten with JUDGED_MARGIN to spare (so that the verifier's recomputation agrees); else searched
+        if free is not None and not camera_claim.within(cost, free * (1 + camera_claim.JUDGED_MARGIN), tolerance,
+                                                        options.abs_gap):
             excess = (cost - free) / max(free, 1e-300)
             misfit = camera_misfit(P, X, x, options.norm, free)
             if misfit is not None:
                 misfit["cause"] = misfit_cause(misfit, excess, len(X), dof, options.norm, options.rel_gap)
-            return unbounded(f"the camera returned costs {cost:.4g}, {excess:.2%} above a "
-                             f"free 3x4 camera found locally ({free:.4g}), more than its tolerance {tolerance:.2%}: "
-                             "no bound can certify it, so the certified resection was not run "
-                             "(options.bound_every_camera runs it)" + why + misfit_words(misfit),
-                             beyond=not camera_claim.within(cost, free, flag_tolerance, options.abs_gap), misfit=misfit)
+            judged = unbounded(f"the camera returned costs {cost:.4g}, {excess:.2%} above a "
+                               f"free 3x4 camera found locally ({free:.4g}), more than its tolerance {tolerance:.2%}: "
+                               "no bound can certify it, so the certified resection was not run "
+                               "(options.bound_every_camera runs it)" + why + misfit_words(misfit),
+                               beyond=not camera_claim.within(cost, free, flag_tolerance, options.abs_gap),
+                               misfit=misfit)
+            judged.free_camera = found[0]
+            return judged
     result = fit_map(X, x, options)
     lower = result.lower_bound if result.certified else None
     gap = None if lower is None else max(0.0, cost - lower)

@@ -1,7 +1,8 @@
-"""A reconstruction's problem_sha256 covers every option a claim or check reads
-(reconstruction.hashed_options), and documents hashed the earlier way (the points' four options
-only) still verify, their report's scope stating the options that form does not cover, as the
-document states them."""
+"""A reconstruction's problem_sha256 covers every option a claim or check reads, and those deciding
+whether a stage runs (reconstruction.hashed_options), and documents hashed an earlier way (the
+points' four options only; then every option but resect_cameras and bundle_adjustment) still
+verify, their report's scope stating the options that form does not cover, as the document
+states them."""
 
 from __future__ import annotations
 
@@ -51,7 +52,8 @@ def test_the_hash_covers_every_option_a_claim_reads():
     document = stored("reconstruction")["certificate"]
     options = checked_options("reconstruction", document["options"])
     for name, value in (("camera_rel_gap", 0.5), ("radial_distortion", "on"), ("intrinsics", "unknown"),
-                        ("metric_rel_gap", 0.5), ("autocalibration_rel_gap", 0.5)):
+                        ("metric_rel_gap", 0.5), ("autocalibration_rel_gap", 0.5), ("resect_cameras", False),
+                        ("bundle_adjustment", False)):
         changed = checked_options("reconstruction", {**document["options"], name: value})
         assert problem_hash("reconstruction", document["data"], changed, hashed_options.CLAIM_OPTIONS) \
             != problem_hash("reconstruction", document["data"], options, hashed_options.CLAIM_OPTIONS), name
@@ -126,3 +128,96 @@ def test_an_earlier_form_without_camera_rel_gap_states_that_rel_gap_is_read(at_d
     report = verify_any(_earlier_form(result))
     assert report.valid, report.first_failure
     assert f"camera_rel_gap absent, read as rel_gap {options['rel_gap']!r}" in report.scope["problem_sha256"]
+
+
+# --- the second form: every option but those deciding whether a stage runs --------------------
+
+def _second_form(result: dict) -> dict:
+    """The result as the kind wrote it in the second form: problem_sha256 over
+    SECOND_CLAIM_OPTIONS, and no camera's free_camera (stated since)."""
+    result = copy.deepcopy(result)
+    for camera in result["cameras"]:
+        camera.pop("free_camera", None)
+    document = result["certificate"]
+    options = checked_options("reconstruction", document["options"])
+    document["problem_sha256"] = problem_hash("reconstruction", document["data"], options,
+                                              hashed_options.SECOND_CLAIM_OPTIONS)
+    return result
+
+
+def test_the_second_forms_defaults_are_the_options_defaults():
+    from geocert.pipelines.reconstruction.options import ReconstructionOptions
+
+    defaults = dataclasses.asdict(ReconstructionOptions())
+    assert {name: defaults[name] for name in hashed_options.SECOND_DEFAULTS} == hashed_options.SECOND_DEFAULTS
+    assert hashed_options.CLAIM_OPTIONS == hashed_options.SECOND_CLAIM_OPTIONS + ("resect_cameras", "bundle_adjustment")
+
+
+def test_a_second_form_at_the_defaults_verifies_and_says_so(at_defaults):
+    report = verify_any(_second_form(at_defaults))
+    assert report.valid, report.first_failure
+    scope = report.scope["problem_sha256"]
+    assert scope.startswith("the second form") and "resect_cameras True; bundle_adjustment True" in scope
+
+
+def test_the_earliest_form_states_the_options_deciding_whether_a_stage_runs_too(at_defaults):
+    report = verify_any(_earlier_form(at_defaults))
+    assert report.valid, report.first_failure
+    assert "resect_cameras True; bundle_adjustment True" in report.scope["problem_sha256"]
+
+
+@pytest.fixture(scope="module")
+def cancelled_before_the_cameras() -> dict:
+    from tests.verify.test_forgeries_review14 import _run
+
+    result = _run(lambda labels: any(label.startswith("structure") for label in labels))
+    assert {stage["name"]: stage["status"] for stage in result["stages"]}["cameras"] == "cancelled"
+    return result
+
+
+def test_a_cancel_restated_as_resect_cameras_false_in_the_second_form_says_so(cancelled_before_the_cameras):
+    """Review 14's forgery (the cancel restated as the cameras stage skipped by resect_cameras false)
+    rehashed in the second form, which does not cover the option: a document of that form cannot be
+    told from it, so it verifies, and the report's scope states resect_cameras false, not its
+    default, for the user to compare with their request (true). In the current form it is refused
+    (test_forgeries_review14)."""
+    from tests.verify.test_forgeries_review14 import _as_skipped
+
+    forged = copy.deepcopy(cancelled_before_the_cameras)
+    _as_skipped(forged)
+    forged["certificate"]["options"]["resect_cameras"] = False
+    assert not verify_any(forged).valid
+    report = verify_any(_second_form(forged))
+    assert report.valid, report.first_failure
+    assert "resect_cameras False (not its default)" in report.scope["problem_sha256"]
+
+
+def test_the_adjustment_skipped_is_tied_to_its_option(at_defaults):
+    """A run with bundle_adjustment false verifies; its echo restated true (rehashed: the hash
+    covers it) beside the adjustment skipped is refused: the pipeline skips the adjustment only
+    when the option is false or an earlier stage failed, which skips the structure stage too."""
+    from geocert.jobs.runner import solve_job
+    from geocert.kinds import get_kind
+    from tests.verify.test_forgeries import rehash
+
+    result = solve_job({"kind": "reconstruction", "data": get_kind("reconstruction").example["data"],
+                        "options": {"certificate": "full", "bundle_adjustment": False}})
+    assert next(s for s in result["stages"] if s["name"] == "bundle_adjustment")["status"] == "skipped"
+    assert verify_any(result).valid
+    result["certificate"]["options"]["bundle_adjustment"] = True
+    rehash(result["certificate"])
+    report = verify_any(result)
+    assert not report.valid and "bundle_adjustment/status" in report.first_failure["detail"], report.first_failure
+
+
+def test_a_cancel_restated_as_skipped_with_resect_cameras_absent_is_refused(cancelled_before_the_cameras):
+    """The second form's hash does not cover whether resect_cameras is stated either: removed from
+    the echo, it is read as its default (true), as the scope says, so the cameras stage restated
+    skipped is refused."""
+    from tests.verify.test_forgeries_review14 import _as_skipped
+
+    forged = copy.deepcopy(cancelled_before_the_cameras)
+    _as_skipped(forged)
+    del forged["certificate"]["options"]["resect_cameras"]
+    report = verify_any(_second_form(forged))
+    assert not report.valid and "cameras/status" in report.first_failure["detail"], report.first_failure
