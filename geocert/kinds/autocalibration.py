@@ -208,7 +208,8 @@ class AutocalibrationKind:
         result = stratified.solve(problem, dataclasses.replace(options, certificate="full") if checking else options,
                                   callback)
         item = stratified_item(parsed, options, problem, result, options.certificate == "full" or checking,
-                               deadline=began + self.time_bound_s(parsed, options) + ANALYSIS_GRACE_S)
+                               deadline=began + self.time_bound_s(parsed, options) + ANALYSIS_GRACE_S,
+                               prove_intervals=options.certificate == "full")
         if checking:
             self_check_stages(parsed, options, item["stages"])
         return item
@@ -237,13 +238,36 @@ class AutocalibrationKind:
         return {"kind": self.name, "method": item.pop("method"), **outcome(item), **item, "stats": stats}
 
 
+def _prove_intervals(problem: pr.Problem, result, stage: dict, proof: dict, time_limit_s: float) -> None:
+    """The metric stage's proven intervals at its determinacy's cost increase: into its proof
+    (``sublevel``) and its determinacy (``proven_intervals``), when the search proves any."""
+    from geocert.solvers.autocalibration import metric_sublevel
+    from geocert.verify.autocalibration import proven_metric
+
+    document = stage["determinacy"]
+    increase = document.get("cost_increase")
+    if increase is None or stage["cost"] is None:
+        return
+    try:
+        found = metric_sublevel.prove(problem, result.p, result.metric.unit, stage["cost"], increase, time_limit_s)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        found = None
+    if found is None:
+        return
+    proof["sublevel"] = found
+    document["proven_intervals"] = proven_metric(proof["sublevel"])
+    document["proven"] = True
+
+
 def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem: pr.Problem, result, full: bool,
-                    deadline: float | None = None) -> dict:
+                    deadline: float | None = None, prove_intervals: bool = False) -> dict:
     """The job's item (the result's stages and solution) from a stratified solve of ``problem``
     (stratified.solve's result), with each certified stage's proof when ``full``: the kind's own
-    solve, and the reconstruction kind's calibration certificate (its pipeline's solve).
-    ``deadline`` (time.monotonic): the job's time limit in all, which the stages' determinacy
-    analyses keep (a stage's analysis not done by then says so: determinacy.not_analysed)."""
+    solve, and the reconstruction kind's calibration certificate (its pipeline's solve). With
+    ``prove_intervals`` a certified metric stage's determinacy also states the intervals of K its
+    proof's ``sublevel`` proves (metric_sublevel), at the estimate's cost increase. ``deadline``
+    (time.monotonic): the job's time limit in all, which the stages' determinacy analyses and that
+    search keep (a stage's analysis not done by then says so: determinacy.not_analysed)."""
     from geocert.solvers.autocalibration import determinacy, proofs
 
     a = result.affine
@@ -303,6 +327,12 @@ def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem:
         metric_stage["determinacy"] = within(deadline, "the metric stage's determinacy", why, determinacy.metric_stage,
                                              problem, result.p, np.array(document["K"]), metric_stage["cost"],
                                              metric_stage["lower_bound"], centres)
+        proof = metric_stage["certificate"].get("proof")
+        if prove_intervals and full and proof is not None and metric_stage["certified"] \
+                and metric_stage["determinacy"] is not None:
+            left = math.inf if deadline is None else deadline - time.monotonic()
+            if left > 0:
+                _prove_intervals(problem, result, metric_stage, proof, min(options.time_limit_s, 20.0, left))
     if result.baseline is not None:
         Kb = problem.K0 @ pr.upper_triangular_root(mrelax.omega_of(result.baseline["w"])) \
             if np.linalg.eigvalsh(mrelax.omega_of(result.baseline["w"]))[0] > 0 else None

@@ -14,6 +14,7 @@ from geocert.solvers.autocalibration import metric_relaxation as mrelax
 from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.autocalibration import proofs, structure_check
 from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
+from geocert.solvers.core.determinacy import proven_document
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
 from geocert.solvers.fractional import residual_claims
@@ -187,6 +188,21 @@ class AutocalibrationVerification:
             if not _derived_close(name, result.get(name), expected, cameras, points, H):
                 raise Invalid("returned", f"{name} is not what the plane at infinity and K give")
         _check_baseline(result.get("baseline"), problem, p)
+        _check_proven_intervals(stages[1], claims[1])
+
+    @staticmethod
+    def estimates_of(result: dict, certificate: dict) -> dict:
+        """What of the result must be estimates only (verify._check_estimates): all of it but the
+        metric stage's proven intervals, which check_returned has checked against its proof."""
+        stages = result.get("stages")
+        proof = (certificate["items"][1].get("proof") if len(certificate.get("items") or []) == 2
+                 and isinstance(certificate["items"][1], dict) and certificate["items"][1].get("certified") is True
+                 else None)
+        if not (isinstance(stages, list) and len(stages) == 2 and isinstance(stages[1], dict)
+                and isinstance(stages[1].get("determinacy"), dict) and isinstance(proof, dict) and "sublevel" in proof):
+            return result
+        determinacy = {k: v for k, v in stages[1]["determinacy"].items() if k not in ("proven", "proven_intervals")}
+        return {**result, "stages": [stages[0], {**stages[1], "determinacy": determinacy}]}
 
     def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
         """What an uncertified stage's solution costs (the affine stage's plane, the metric
@@ -267,12 +283,48 @@ class AutocalibrationVerification:
         w = pr.w_of_K(problem, K)
         setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
         lo, hi = mrelax.omega_box(problem.unit_ranges)
-        _check_cost(mrelax.cost(setup, w), claimed)
+        cost = mrelax.cost(setup, w)
+        _check_cost(cost, claimed)
         passed.append("objective")
         if not mrelax.in_domain(setup, w, lo, hi):
             raise Invalid("scope", "the DIAC returned is outside the domain (box, PSD, or a view's scale range)")
         passed.append("scope")
-        return proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed), options["metric_rel_gap"]
+        return proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed, cost), options["metric_rel_gap"]
+
+
+def _check_proven_intervals(stage: dict, claim: dict) -> None:
+    """A metric stage's determinacy saying proven states exactly its proof's sublevel intervals
+    (proofs.check_sublevel checked them: the claim is certified, so its proof was checked), at no
+    lower a cost increase than its estimate's."""
+    determinacy = stage.get("determinacy")
+    if not isinstance(determinacy, dict):
+        return
+    says = determinacy.get("proven") not in (None, False) or determinacy.get("proven_intervals") is not None
+    if not says:
+        return
+    proof = claim.get("proof")
+    sublevel = proof.get("sublevel") if isinstance(proof, dict) else None
+    if not isinstance(sublevel, dict) or claim.get("certified") is not True or determinacy.get("proven") is not True:
+        raise Invalid("returned", "stages/1/determinacy says proven, and no proof of its intervals is carried (a "
+                                  "certified metric claim's proof/sublevel)")
+    try:
+        expected = proven_metric(sublevel)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise Invalid("returned", "stages/1: its proof's sublevel states no intervals") from exc
+    if determinacy.get("proven_intervals") != expected:
+        raise Invalid("returned", "stages/1/determinacy/proven_intervals are not its proof's sublevel")
+    estimate = determinacy.get("cost_increase")
+    if isinstance(estimate, (int, float)) and not expected["cost_increase"] >= estimate * (1 - 1e-9):
+        raise Invalid("returned", "stages/1/determinacy: the proven intervals' cost_increase is below its "
+                                  "estimate's (a lower level proves a smaller set)")
+
+
+def proven_metric(sublevel: dict) -> dict:
+    """The proven intervals a metric stage's determinacy states from its proof's ``sublevel``."""
+    return proven_document(sublevel["cost_increase"], ("focal_x", "focal_y", "skew", "principal_u", "principal_v"),
+                           sublevel["intervals"], "for the plane at infinity the stage states: the hull, over the "
+                           "leaves of a search at that level not excluded by a safe bound above it, of each "
+                           "intrinsic's range on the leaf (pixels)")
 
 
 def outcome(item: dict) -> dict:

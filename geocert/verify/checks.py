@@ -656,7 +656,9 @@ def _check_returned(result: dict, certificate: dict) -> None:
     if own is not None:  # what else the result returns, derived from the claims
         own(result, certificate)
     if certificate["kind"] not in ("triangulation", "resection"):  # kinds whose determinacy proves intervals (own check)
-        _check_estimates(result)
+        # a kind proving some intervals says which parts are estimates still (its check_returned checked the rest)
+        estimates_of = getattr(kind.verification, "estimates_of", None)
+        _check_estimates(result if estimates_of is None else estimates_of(result, certificate))
     _check_summaries(kind, result, certificate)
     _check_stats(kind, result)
 

@@ -138,9 +138,16 @@ def _widen(a, *operands) -> np.ndarray:
 
 
 def may_meet_ranges(ranges: dict, lo: np.ndarray, hi: np.ndarray) -> bool:
-    """False only when no omega of the box has its K within the ranges (interval arithmetic on
-    v = w23, u = w13, fy^2 = w22 - v^2, skew = (w12 - u v) / fy, fx^2 = w11 - skew^2 - u^2,
-    aspect = fy / fx; every interval widened outward, so rounding never empties one wrongly)."""
+    """False only when no omega of the box has its K within the ranges (intrinsics_ranges)."""
+    return intrinsics_ranges(ranges, lo, hi) is not None
+
+
+def intrinsics_ranges(ranges: dict, lo: np.ndarray, hi: np.ndarray) -> np.ndarray | None:
+    """[lower, upper] (5 x 2) of (fx, fy, skew, u, v) (preconditioned) over every omega of the
+    box whose K is within the ranges; None only when no omega of the box has one. Interval
+    arithmetic on v = w23, u = w13, fy^2 = w22 - v^2, skew = (w12 - u v) / fy,
+    fx^2 = w11 - skew^2 - u^2, aspect = fy / fx, each met with its range; every interval widened
+    outward, so rounding never narrows or empties one wrongly."""
     def meet(a, b):
         low, high = max(a[0], b[0]), min(a[1], b[1])
         return None if low > high else np.array([low, high])
@@ -149,25 +156,38 @@ def may_meet_ranges(ranges: dict, lo: np.ndarray, hi: np.ndarray) -> bool:
     u = meet(_widen(np.array([lo[2], hi[2]])), ranges["u"])
     v = meet(_widen(np.array([lo[4], hi[4]])), ranges["v"])
     if u is None or v is None:
-        return False
+        return None
     v2 = _sq(v)
     fy2 = meet(_widen(np.array([lo[3] - v2[1], hi[3] - v2[0]]), lo[3], hi[3], v2), fy_range ** 2)
     if fy2 is None:
-        return False
+        return None
     fy = _widen(np.sqrt(fy2))
     numerator = _widen(_add(np.array([lo[1], hi[1]]), -_mul(u, v)[::-1]), lo[1], hi[1], _mul(u, v))
     quotients = [numerator[0] / fy[0], numerator[0] / fy[1], numerator[1] / fy[0], numerator[1] / fy[1]]
     skew = meet(_widen(np.array([min(quotients), max(quotients)])), ranges["skew"])
     if skew is None:
-        return False
+        return None
     s2, u2 = _sq(skew), _sq(u)
     fx2 = meet(_widen(np.array([lo[0] - s2[1] - u2[1], hi[0] - s2[0] - u2[0]]), lo[0], hi[0], s2, u2),
                np.array(ranges["focal"], float) ** 2)
     if fx2 is None:
-        return False
+        return None
     fx = _widen(np.sqrt(fx2))
     aspect = _widen(np.array([fy[0] / fx[1], fy[1] / fx[0]]))
-    return meet(aspect, ranges["aspect"]) is not None
+    if meet(aspect, ranges["aspect"]) is None:
+        return None
+    return np.array([fx, fy, skew, u, v])
+
+
+def pixel_intervals(K0: np.ndarray, unit: np.ndarray) -> np.ndarray:
+    """(fx, fy, skew, u, v) intervals (5 x 2) in pixels from preconditioned ones, K = K0 K_unit
+    with K0 = [[f0, 0, u0], [0, f0, v0], [0, 0, 1]] (f0 > 0), rounded outward."""
+    f0, u0, v0 = float(K0[0, 0]), float(K0[0, 2]), float(K0[1, 2])
+    out = unit * f0
+    out[3] += u0
+    out[4] += v0
+    pad = WIDEN * (np.abs(out) + abs(u0) + abs(v0))
+    return np.stack([out[:, 0] - pad[:, 0], out[:, 1] + pad[:, 1]], axis=1)
 
 
 def lambda_range(setup: MetricSetup, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:

@@ -9,7 +9,9 @@ vector whose safe bound the verifier recomputes from the relaxation it rebuilds 
 Metric stage ("stratified_metric"), for the plane at infinity it states: the root box of omega
 from the intrinsics ranges (interval arithmetic, recomputed), rounds of bound tightening (each
 side a safe dual bound over the relaxation with the cost capped), and leaves covering the last
-round's box, each with its dual vector.
+round's box, each with its dual vector; optionally its ``sublevel`` (metric_sublevel): proven
+intervals of the intrinsics, from rounds and leaves of a search at the cost level they are for
+(check_sublevel).
 """
 
 from __future__ import annotations
@@ -62,12 +64,22 @@ def encode_affine(stage) -> dict:
             "excluded": [{"delta": item["delta"], "rows": item["rows"]} for item in stage.excluded]}
 
 
+def _rounds(rounds: list) -> list:
+    return [{"cap": r.cap, "box_in": _box(r.lo_in, r.hi_in), "box_out": _box(r.lo_out, r.hi_out),
+             "duals": [pack(z) for z in r.duals]} for r in rounds]
+
+
 def encode_metric(stage) -> dict:
     proofs, leaves = encode_leaves(stage.leaves)
-    return {"type": "stratified_metric", "unit": stage.unit,
-            "tightening": [{"cap": r.cap, "box_in": _box(r.lo_in, r.hi_in), "box_out": _box(r.lo_out, r.hi_out),
-                            "duals": [pack(z) for z in r.duals]} for r in stage.rounds],
+    return {"type": "stratified_metric", "unit": stage.unit, "tightening": _rounds(stage.rounds),
             "search_box": _box(stage.search_lo, stage.search_hi), "proofs": proofs, "leaves": leaves}
+
+
+def encode_sublevel(sublevel: dict) -> dict:
+    proofs, leaves = encode_leaves(sublevel["leaves"])
+    return {"cost_increase": sublevel["cost_increase"], "tightening": _rounds(sublevel["rounds"]),
+            "search_box": _box(sublevel["search_lo"], sublevel["search_hi"]), "proofs": proofs, "leaves": leaves,
+            "intervals": np.asarray(sublevel["intervals"], float).tolist()}
 
 
 # --- checks -----------------------------------------------------------------------------------
@@ -90,7 +102,7 @@ def _read_box(value: Any, where: str, d: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, unit: float, d: int,
-                 build_capped=None, proven: Box | None = None, size: int = 1) -> float:
+                 build_capped=None, proven: Box | None = None, size: int = 1, read: list | None = None) -> float:
     """The smallest bound the leaves prove over the root box, in cost units: they must cover it,
     and each leaf's proof is rebuilt and rechecked. ``build(lo, hi, cap)`` gives the leaf's
     program (or None: no point of the domain in that box); ``build_capped`` the same with the
@@ -101,7 +113,8 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
     the work a program costs (strict.charge: its views and rows), paid before each is built. A leaf
     beyond its cut but for the cut's rounding (within coverage.SIDE_TOLERANCE of the root box's
     size: certificates written before the cut counted it) is read as ending at the cut's value,
-    and the boxes on its inner face are extended over the sliver (_moved_faces)."""
+    and the boxes on its inner face are extended over the sliver (_moved_faces). ``read``, when
+    given, receives the leaves as read (lower corners, upper corners) and each one's bound."""
     claimed = Box(root_lo, root_hi)
     proven = claimed if proven is None else proven
     proofs, leaves = proof.get("proofs"), proof.get("leaves")
@@ -192,6 +205,8 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
         raise Invalid("coverage", "the leaves do not cover the box searched")
     if not all(value == value for value in bounds):
         raise Invalid("leaf_bounds", "a leaf's bound is not a number")
+    if read is not None:
+        read += [leaf_lo, leaf_hi, np.array(bounds, dtype=float)]
     return float(min(bounds))
 
 
@@ -345,11 +360,30 @@ def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float
     return bound
 
 
-def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
-    """The bound a metric proof establishes over every omega of the domain, for the plane p."""
-    record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"))
+def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, claimed_cost: float, passed: list,
+                 cost: float | None = None) -> float:
+    """The bound a metric proof establishes over every omega of the domain, for the plane p;
+    with its ``sublevel``, the proven intervals too (``cost``: the claimed K's recomputed cost)."""
+    record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"), ("sublevel",))
     setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
     setup.unit = checked_unit(proof.get("unit"), "unit", claimed_cost)
+    lo, hi, proven_lo, proven_hi = _check_rounds(problem, setup, proof, lower_claimed, "tightening", "its cap is "
+                                                 "below the lower bound claimed")
+    passed += ["root_region", "tightening"]
+    bound = check_leaves(proof, lo, hi, lambda l, h, c: mrelax.build(setup, l, h, c), setup.unit, 5,
+                         lambda l, h, c: mrelax.build(setup, l, h, c, cap_row=True), Box(proven_lo, proven_hi),
+                         len(problem.norm.cameras))
+    passed += ["coverage", "leaf_bounds"]
+    if "sublevel" in proof:
+        check_sublevel(problem, setup, proof["sublevel"], max(claimed_cost, claimed_cost if cost is None else cost))
+        passed.append("proven_interval")
+    return bound
+
+
+def _check_rounds(problem, setup, proof: dict, floor: float, check: str, below: str):
+    """The tightening rounds of ``proof`` from the ranges' root box, each cap at least ``floor``:
+    (the last box claimed, the last box proven: the claimed one widened by rounding); ``check``
+    names the check a failure fails, ``below`` what a cap under the floor is."""
     lo, hi = mrelax.omega_box(problem.unit_ranges)
     proven_lo, proven_hi = lo, hi  # each round's box as proven: the claimed one widened by rounding
     rounds = proof.get("tightening")
@@ -359,23 +393,23 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
         record(round_, f"tightening/{n}", ("cap", "box_in", "box_out", "duals"))
         lo_in, hi_in = _read_box(round_.get("box_in"), f"tightening/{n}/box_in", 5)
         if not (np.array_equal(lo_in, lo) and np.array_equal(hi_in, hi)):
-            raise Invalid("tightening", f"tightening/{n} does not start from the box before it")
-        cap = _number(round_.get("cap"), f"tightening/{n}/cap", "tightening")
-        if not cap >= lower_claimed:
-            raise Invalid("tightening", f"tightening/{n}: its cap is below the lower bound claimed")
+            raise Invalid(check, f"tightening/{n} does not start from the box before it")
+        cap = _number(round_.get("cap"), f"tightening/{n}/cap", check)
+        if not cap >= floor:
+            raise Invalid(check, f"tightening/{n}: {below}")
         lo_out, hi_out = _read_box(round_.get("box_out"), f"tightening/{n}/box_out", 5)
         charge(len(problem.norm.cameras), f"tightening/{n}")
         program = mrelax.build(setup, proven_lo, proven_hi, cap, cap_row=True)
         duals = round_.get("duals")
         if program is None or not isinstance(duals, list) or len(duals) != 10:
-            raise Invalid("tightening", f"tightening/{n}: ten duals (or null) are needed over a box of the domain")
+            raise Invalid(check, f"tightening/{n}: ten duals (or null) are needed over a box of the domain")
         side_lo, side_hi = proven_lo.copy(), proven_hi.copy()
         for side, text in enumerate(duals):
             k, sign = side // 2, (1.0 if side % 2 == 0 else -1.0)
             if text is None:
                 before, target = (lo_in[k], lo_out[k]) if sign > 0 else (hi_in[k], hi_out[k])
                 if target != before:
-                    raise Invalid("tightening", f"tightening/{n}: side {side} moved without a proof")
+                    raise Invalid(check, f"tightening/{n}: side {side} moved without a proof")
                 continue
             q = np.zeros_like(program.q)
             q[k] = sign
@@ -388,19 +422,68 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
                 side_hi[k] = min(side_hi[k], value)
         sides = widened(lo_out, hi_out, side_lo, side_hi)
         if sides is None:
-            raise Invalid("tightening", f"tightening/{n}: sides {lo_out.tolist()}, {hi_out.tolist()} are beyond the "
-                                        f"proven {side_lo.tolist()}, {side_hi.tolist()}")
+            raise Invalid(check, f"tightening/{n}: sides {lo_out.tolist()}, {hi_out.tolist()} are beyond the "
+                                 f"proven {side_lo.tolist()}, {side_hi.tolist()}")
         lo, hi = lo_out, hi_out
         proven_lo, proven_hi = sides
     search_lo, search_hi = _read_box(proof.get("search_box"), "search_box", 5)
     if not (np.array_equal(search_lo, lo) and np.array_equal(search_hi, hi)):
-        raise Invalid("root_region", "the box searched is not the last tightening's")
-    passed += ["root_region", "tightening"]
-    bound = check_leaves(proof, lo, hi, lambda l, h, c: mrelax.build(setup, l, h, c), setup.unit, 5,
-                         lambda l, h, c: mrelax.build(setup, l, h, c, cap_row=True), Box(proven_lo, proven_hi),
-                         len(problem.norm.cameras))
-    passed += ["coverage", "leaf_bounds"]
-    return bound
+        raise Invalid("root_region" if check == "tightening" else check, "the box searched is not the last "
+                                                                          "tightening's")
+    return lo, hi, proven_lo, proven_hi
+
+
+# A metric proof's sublevel (metric_sublevel): U is the claimed K's cost (the larger of the claim
+# and its recomputation) times (1 + SUBLEVEL_SLACK) plus the increase, rounded up.
+SUBLEVEL_SLACK = 1e-9
+SMALLEST_INCREASE, LARGEST_INCREASE = 2.0 ** -128, 2.0 ** 128
+
+
+def sublevel_level(cost: float, increase: float) -> float:
+    return (cost * (1 + SUBLEVEL_SLACK) + increase) * (1 + 4 * 2.0 ** -52)
+
+
+def sublevel_hull(problem, setup, sublevel: dict, cost: float, margin: float = 0.0) -> np.ndarray:
+    """What a metric proof's ``sublevel`` proves (metric_sublevel): (fx, fy, skew, u, v) in pixels
+    (5 x 2) of every K of the ranges costing at most U = sublevel_level(cost, cost_increase) for
+    the stated plane. Its rounds (each cap at least U) and the leaves covering their box are
+    checked as a metric proof's, and the hull is taken, over the leaves as check_leaves reads them
+    (extended to the proven box's faces, moved to their cuts) whose recomputed bound is not above
+    U (1 + ``margin``), of each intrinsic's range on the leaf (metric_relaxation.intrinsics_ranges).
+    The verifier's hull (margin 0); the solver states its intervals from this same function (at a
+    small margin, so that another machine's rounding of a bound near U narrows nothing)."""
+    increase = _number(sublevel.get("cost_increase"), "proof/sublevel/cost_increase", "proven_interval")
+    if not (increase == 0 or SMALLEST_INCREASE <= increase <= LARGEST_INCREASE):
+        raise Invalid("proven_interval", "proof/sublevel/cost_increase must be 0 or within 2^-128 .. 2^128")
+    U = sublevel_level(cost, increase)
+    lo, hi, proven_lo, proven_hi = _check_rounds(problem, setup, sublevel, U, "proven_interval",
+                                                 "its cap is below the level proven")
+    read: list = []
+    check_leaves(sublevel, lo, hi, lambda l, h, c: mrelax.build(setup, l, h, c), setup.unit, 5,
+                 lambda l, h, c: mrelax.build(setup, l, h, c, cap_row=True), Box(proven_lo, proven_hi),
+                 len(problem.norm.cameras), read)
+    leaf_lo, leaf_hi, bounds = read
+    found = [r for r in (mrelax.intrinsics_ranges(problem.unit_ranges, leaf_lo[i], leaf_hi[i])
+                         for i in np.flatnonzero(~(bounds > U * (1 + margin)))) if r is not None]
+    if not found:
+        raise Invalid("proven_interval", "every leaf is excluded: not even the returned K costs that little")
+    stacked = np.array(found)
+    return mrelax.pixel_intervals(problem.K0, np.stack([stacked[:, :, 0].min(axis=0), stacked[:, :, 1].max(axis=0)],
+                                                       axis=1))
+
+
+def check_sublevel(problem, setup, sublevel: Any, cost: float) -> np.ndarray:
+    """A metric stage's proven intervals (metric_sublevel): every K of the ranges whose cost for
+    the stated plane is at most the optimum plus ``cost_increase`` has (fx, fy, skew, u, v) in
+    pixels within them. The stated intervals must hold what its leaves prove (sublevel_hull); a
+    wider one is a weaker true statement, a narrower one is refused. Returns the hull proven."""
+    record(sublevel, "proof/sublevel", ("cost_increase", "tightening", "search_box", "proofs", "leaves", "intervals"))
+    stated = _numbers(sublevel.get("intervals"), "proof/sublevel/intervals", (5, 2))
+    proven = sublevel_hull(problem, setup, sublevel, cost)
+    if not np.all((stated[:, 0] <= proven[:, 0]) & (proven[:, 1] <= stated[:, 1])):
+        raise Invalid("proven_interval", "proof/sublevel/intervals are narrower than what its leaves prove "
+                                         f"({proven.tolist()})")
+    return proven
 
 
 # The programs' objective is unit times the cost, unit = 1 / the first incumbent's cost (about 1
