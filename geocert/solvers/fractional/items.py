@@ -515,7 +515,8 @@ class MapItems:
 
     def _check_root_region(self, where: str, summary, claim: dict, certificate: dict, index: int) -> None:
         """A certified map's summary root_region states a fact ("lower <= (F l) / (d . l) <= upper
-        for the last row l of every map in the scope"): it must be the proof's root box in the
+        for the last row l of every map of the scope costing less than the search's cost cap"; a
+        result written before said "of every map in the scope", which no search proves): it must be the proof's root box in the
         caller's terms, as the solver writes it (fractional.maps._fit_map: the search box, its
         functionals through the chart rebuilt from the data, the reference point homogeneous), as a
         bilinear frame's is; none where the proof searched nothing."""
