@@ -123,3 +123,62 @@ class TestRootRegionStatedForTheWholeScope:
                     found = True
                     break
         assert found
+
+
+# --- a direct proof's programs no check reads ---------------------------------------------------
+
+def _stored(name: str) -> dict:
+    import json
+    from pathlib import Path
+
+    return json.loads((Path(__file__).resolve().parents[1] / "data" / "certificates" / f"{name}.json").read_text())
+
+
+def _rehash(document: dict) -> None:
+    from geocert.kinds import get_kind
+    from geocert.solvers.core.certificates import data_hash, problem_hash
+
+    names = getattr(get_kind(document["kind"]).verification, "claim_options", None)
+    document["data_sha256"] = data_hash(document["kind"], document["data"])
+    document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names)
+
+
+class TestDirectProgramsUnread:
+    """A direct_moment proof's ``programs`` were read only where their delta matched an
+    orientation the verifier bounds: a program of an excluded orientation, or of a delta no
+    orientation has ("x", 7.0), verified with any ``z`` (a list, an int, text that is no base64),
+    any ``cuts`` ("bad") and any ``bound`` (1e300), though docs/certificate.md says a proof record
+    has the fields it lists, each unread field null or of its type, and every dual vector base64
+    of finite float64. (A boolean delta true was also read as the orientation +1.) Fixed in
+    direct.check_proof: every program is one of an orientation left to bound, its delta a number
+    (null for "centers" and "none"), and is read there."""
+
+    @pytest.mark.parametrize("extra", [
+        {"delta": 7.0, "z": "not base64 at all!!", "bound": 1.0},
+        {"delta": "x", "z": [1, 2], "bound": 1e300, "cuts": "bad"},
+    ])
+    def test_a_program_of_no_orientation_is_refused(self, extra):
+        result = _stored("autocalibration_direct")
+        _verifies(result)
+        result["certificate"]["items"][0]["proof"]["programs"].append(extra)
+        _rehash(result["certificate"])
+        assert _refused(result)["check"] == "format"
+
+    def test_a_program_of_an_excluded_orientation_is_refused(self):
+        result = _stored("autocalibration_direct_points")
+        _verifies(result)
+        proof = result["certificate"]["items"][0]["proof"]
+        assert [item["delta"] for item in proof["excluded"]] == [-1.0]
+        proof["programs"].append({"delta": -1.0, "z": "garbage", "bound": 2.0})
+        _rehash(result["certificate"])
+        assert _refused(result)["check"] == "format"
+
+    def test_a_boolean_delta_is_refused_and_an_integer_one_read(self):
+        result = _stored("autocalibration_direct_points")
+        forged = copy.deepcopy(result)
+        forged["certificate"]["items"][0]["proof"]["programs"][0]["delta"] = True
+        _rehash(forged["certificate"])
+        assert _refused(forged)["check"] == "format"
+        result["certificate"]["items"][0]["proof"]["programs"][0]["delta"] = 1
+        _rehash(result["certificate"])
+        _verifies(result)
