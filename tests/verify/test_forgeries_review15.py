@@ -182,3 +182,145 @@ class TestDirectProgramsUnread:
         result["certificate"]["items"][0]["proof"]["programs"][0]["delta"] = 1
         _rehash(result["certificate"])
         _verifies(result)
+
+
+# --- the property over the proofs no stored certificate holds -------------------------------------
+
+def _property_documents() -> dict:
+    """Genuine full results of the certified paths no stored certificate (tests/data/certificates)
+    takes, so test_forgery_properties never mutates them: an L2L2 track certified by convexity
+    with its proven interval, L1L1 and L2L1 tracks searched with theirs, an L2L2 resection
+    certified with no search (sublevel_bound) with its proven centre interval, and an L1L1
+    resection whose depth row's interval is read off a search's leaves."""
+    from tests.solvers.fractional.test_resection_leaves import solved
+
+    out = {}
+    for norm in ("L2L2", "L1L1", "L2L1"):
+        out[f"triangulation {norm}"] = solve_job(triangulation_job(
+            np.random.default_rng(seed("review15", "property", norm)), 2, 4, norm))
+    out["resection sublevel_bound"] = solve_job(map_job(np.random.default_rng(seed("review15", "fast")), "resection",
+                                                        40, "L2L2", maps=1))
+    out["resection leaves L1L1"] = solved(np.random.default_rng(seed("review15", "leaves")), 12, "L1L1")[1]
+    return out
+
+
+@pytest.fixture(scope="module")
+def property_documents() -> dict:
+    from tests.verify import test_forgery_properties as properties
+
+    documents = _property_documents()
+    out = {}
+    for name, result in documents.items():
+        report = verify_any(result)
+        assert report.valid, (name, report.first_failure)
+        key = "maps" if "maps" in result else "tracks"
+        assert all(entry["determinacy"]["proven"] is True for entry in result[key]), name
+        out[name] = (result, properties._standing(result["certificate"], report))
+    proofs = {claim["proof"]["type"] for result, _ in out.values() for claim in result["certificate"]["items"]}
+    assert proofs == {"convexity", "branch_and_bound", "sublevel_bound"}
+    return out
+
+
+def _proven(result: dict, index: int):
+    key = "maps" if "maps" in result else "tracks"
+    stated = (result[key][index].get("determinacy") or {}).get("proven_intervals")
+    if not stated:
+        return None
+    return stated["cost_increase"], np.array([[i["lower"], i["upper"]] for i in stated["intervals"]])
+
+
+def _restate_intervals(result: dict) -> None:
+    """A forger keeps the result's proven intervals the proof's (determinacy.proven_*)."""
+    from geocert.solvers.fractional.determinacy import proven_map, proven_track
+
+    key = "maps" if "maps" in result else "tracks"
+    for index, claim in enumerate(result["certificate"]["items"]):
+        sublevel = (claim.get("proof") or {}).get("sublevel")
+        if isinstance(sublevel, dict):
+            try:
+                result[key][index]["determinacy"]["proven_intervals"] = (
+                    proven_map if key == "maps" else proven_track)(sublevel)
+            except (KeyError, TypeError, ValueError, AttributeError):
+                pass
+
+
+def _judge_intervals(genuine: dict, forged: dict, what: str) -> None:
+    """An accepted interval proven at the genuine level or above holds the genuine one (a
+    mutation proves no tighter set; the data are unchanged where this is asked)."""
+    if forged["certificate"]["data"] != genuine["certificate"]["data"]:
+        return
+    for index in range(len(genuine["certificate"]["items"])):
+        before, after = _proven(genuine, index), _proven(forged, index)
+        if before is None or after is None or not after[0] >= before[0] * (1 - 1e-9):
+            continue
+        slack = 1e-9 * np.abs(before[1])
+        assert np.all(after[1][:, 0] <= before[1][:, 0] + slack[:, 0]) and \
+            np.all(after[1][:, 1] >= before[1][:, 1] - slack[:, 1]), (what, index, before, after)
+
+
+PROPERTY_VALUES = ("subnormal", "-subnormal", "zero", "-zero", "huge", "tiny", "negated", "nearby")
+
+
+def _forgeries(name: str, result: dict, count: int):
+    """``count`` paths of the document's floats (its proofs' and their intervals' first, then the
+    claims' and the result's), each with every value: deterministic."""
+    from tests.verify import test_forgery_properties as properties
+
+    document = result["certificate"]
+    proofs = [("certificate", "items", i, "proof") + p for i, claim in enumerate(document["items"])
+              for p in properties._paths(claim.get("proof"))]
+    claims = [("certificate", "items", i) + p for i, claim in enumerate(document["items"])
+              for p in properties._paths({k: v for k, v in claim.items() if k != "proof"})]
+    returned = [p for p in properties._paths({k: v for k, v in result.items() if k != "certificate"})
+                if "proven_intervals" in p or "residuals" in p or "root_region" in p]
+    rng = np.random.default_rng(seed("review15", "paths", name))
+    chosen = []
+    for group, share in ((proofs, count // 2), (claims, count // 4), (returned, count // 4)):
+        if group:
+            chosen += [group[i] for i in rng.choice(len(group), size=min(share, len(group)), replace=False)]
+    for path in chosen:
+        for how in PROPERTY_VALUES:
+            yield path, how, float(rng.uniform(1e-9, 1e-3)), int(rng.integers(10**6))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["triangulation L2L2", "triangulation L1L1", "triangulation L2L1",
+                                  "resection sublevel_bound", "resection leaves L1L1"])
+def test_a_forged_proof_or_interval_is_refused_or_still_true(property_documents, name):
+    """test_forgery_properties' property on these documents (each float of a proof, a claim or
+    a returned interval, residual or root region replaced by a subnormal, 0, -0, a huge or a tiny
+    number, its negative or a nearby number; the hashes and the result's proven intervals
+    restated), judged by that file's judge and, for proven intervals, by the genuine interval:
+    one proven at the genuine level or above holds it."""
+    from tests.verify import test_forgery_properties as properties
+
+    genuine, _ = property_documents[name]
+    count = {"resection leaves L1L1": 24, "triangulation L1L1": 40, "triangulation L2L1": 40}.get(name, 80)
+    judged = 0
+    for path, how, nearby, entry in _forgeries(name, genuine, count):
+        forged = copy.deepcopy(genuine)
+        properties._mutate_number(forged, path, how, nearby, entry)
+        if "sublevel" in path:
+            _restate_intervals(forged)
+        properties._rehash(forged["certificate"])
+        report = verify_any(forged)
+        if not report.valid:
+            continue
+        what = f"{name}: {'/'.join(map(str, path))} {how}"
+        properties._judge(name, property_documents, forged, report, what)
+        _judge_intervals(genuine, forged, what)
+        judged += 1
+    assert judged > 0  # some mutations keep a true claim (a nearby proof number): the judge ran
+
+
+def test_the_interval_judge_catches_a_narrowed_interval(property_documents):
+    """The interval judge is no formality: the genuine track's interval narrowed (its proof
+    restated, as the verifier would refuse) fails it."""
+    genuine, _ = property_documents["triangulation L2L2"]
+    forged = copy.deepcopy(genuine)
+    intervals = forged["certificate"]["items"][0]["proof"]["sublevel"]["intervals"]
+    intervals[0] = [intervals[0][0] + 1e-3 * abs(intervals[0][1] - intervals[0][0]), intervals[0][1]]
+    _restate_intervals(forged)
+    assert not verify_any(forged).valid
+    with pytest.raises(AssertionError):
+        _judge_intervals(genuine, forged, "a narrowed interval")
