@@ -394,6 +394,7 @@ class TrackItems:
         norm = (certificate.get("options") or {}).get("norm")
         floors: dict = {}
         for index, (item, claim) in enumerate(zip(result["tracks"], certificate["items"])):
+            self._check_root_region(f"tracks/{index}", item.get("certificate"), claim, certificate, index)
             determinacy = item.get("determinacy")
             _check_pooled(index, determinacy, result, certificate, floors)
             _check_proven(f"tracks/{index}", determinacy, claim, norm, proven_track)
@@ -410,6 +411,33 @@ class TrackItems:
                 raise Invalid("returned", f"tracks/{index}/determinacy/proven_intervals are proven at cost increase "
                                           f"{stated['cost_increase']!r:.12} below the track's own {own!r:.12} (3^2 "
                                           "times its residual variance, at least its gap)")
+
+    def _check_root_region(self, where: str, summary, claim: dict, certificate: dict, index: int) -> None:
+        """A certified track's summary root_region states a fact ("lower <= (F X) / (d . X) <=
+        upper for every point X of the scope costing less than the search's cost cap"): it must
+        be the proof's root box in the caller's terms, as the solver writes it (fractional.
+        triangulation: the search box, its branched functionals through the chart rebuilt from
+        the data, the chart's depth row, its reference view), as a map's is (MapItems); none
+        where the proof searched nothing (a convexity proof)."""
+        if claim.get("certified") is not True or not isinstance(summary, dict) or "root_region" not in summary:
+            return
+        region, proof = summary["root_region"], claim.get("proof")
+        if not (isinstance(proof, dict) and proof.get("type") == "branch_and_bound"):
+            if region is not None:
+                raise Invalid("returned", f"{where}/certificate/root_region is stated, and its proof searched no box")
+            return
+        cameras, points = self.read(certificate["data"], index)
+        chart = Chart.build(cameras, points, certificate["options"]["norm"])
+        lower, upper = proof["search_box"]
+        to_chart = np.linalg.inv(chart.T)
+        branched = np.asarray(proof["root"]["functionals"], dtype=float)[:len(lower)]
+        expected = {"lower": lower, "upper": upper, "functionals": branched @ to_chart[:3],
+                    "denominator": to_chart[3]}
+        if not isinstance(region, dict) or type(region.get("reference_view")) is not int or (
+                region["reference_view"] != chart.reference) or not all(
+                name in region and _agrees(region[name], value) for name, value in expected.items()):
+            raise Invalid("returned", f"{where}/certificate/root_region is not its proof's root box in the caller's "
+                                      "terms (the search box, its functionals, denominator and reference view)")
 
     def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
         """What an uncertified track's point costs on its observations (and the allowance for its
