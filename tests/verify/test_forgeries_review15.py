@@ -12,6 +12,12 @@ Found and fixed:
   scope" (a map's, "for the last row l of every map in the scope"); the proof's root box holds only
   the points that could cost less than the search's cap, and points of the scope a tenth of a unit
   from the returned one lie outside it. The writer's words now say for which points it holds.
+- A certified track's root region not its proof's (TestTrackRootRegionNotTheProofs): its lower,
+  upper, functionals, denominator and reference view took any numbers (0, negated, moved, scaled
+  by 1e6: all verified on the stored triangulation_l2l1), a box narrowed to the returned point
+  too, though the region states a fact about the scope's points, as a map's (review 9) and a
+  bilinear frame's (class 5) do. Now recomputed as the solver writes it; none beside a convexity
+  proof. Genuine batches verify (root-closed tracks of fractional.many_tracks, searched ones).
 - A direct proof's programs no check reads (TestDirectProgramsUnread): a program of an excluded
   orientation, or of a delta no orientation has, verified with any z, cuts and bound (a list, an
   int, text that is no base64, "bad", 1e300); a boolean delta was read as +1. Refused now.
@@ -33,10 +39,13 @@ Tried and refused (or accepted with the claim still true):
   off a search's leaves), homography L2L2: some 1,240 paths, 11,000 documents. Accepted ones were
   true: e.g. an L2L1 track's sublevel cost_increase raised by 1% at the same radius (the enclosure
   test recomputed passes at the higher level: the set stated still holds every such point).
-- Every float of the results (not the certificates) of the stored stratified and direct
-  autocalibration, bilinear, homography, triangulation and resection documents set to 0, negated,
-  moved by 1e-3 or multiplied by 1e6: refused but where the field is informational (times,
-  determinacy estimates) or the value unchanged (an entry already 0 to rounding).
+- Every float of the results (not the certificates) of the stored stratified autocalibration
+  (303 paths) and of 80 sampled paths of the stored direct autocalibration (centres and points),
+  bilinear L2L2, homography, triangulation L2L1 and resection L1L1 documents and of the genuine
+  convexity track, sublevel_bound resection and L1L1 leaves resection, set to 0, negated, moved
+  by 1e-3 or multiplied by 1e6: refused but where the field is informational (times,
+  determinacy estimates), the value unchanged (an entry already 0 to rounding: K's and R's
+  zeros, an L1 fit's interpolated residuals), or a track's root region (the class above).
 - A result of kind stereo_lines or reconstruction carrying a triangulation certificate, a job of
   kind stereo_lines around it, a result nested in a result: refused (returned).
 - A finite point restated at infinity ([2x, 2y, 2z, 2], at_infinity true): refused (claim).
@@ -383,6 +392,14 @@ def test_the_interval_judge_catches_a_narrowed_interval(property_documents):
 
 # --- a track's root region not its proof's ---------------------------------------------------------
 
+@pytest.fixture(scope="module")
+def stored():
+    """The stored triangulation_l2l1 result (three tracks, each searched)."""
+    result = _stored("triangulation_l2l1")
+    _verifies(result)
+    return result
+
+
 class TestTrackRootRegionNotTheProofs:
     """A certified track's summary root_region (its lower, upper, functionals, denominator and
     reference view) took any numbers: set to 0, negated, moved or scaled by 1e6, every one
@@ -393,12 +410,6 @@ class TestTrackRootRegionNotTheProofs:
     the document verified. Fixed: items.TrackItems._check_root_region recomputes it as the solver
     writes it (the proof's search box, its branched functionals through the chart rebuilt from the
     data, the chart's depth row, its reference view), and a convexity proof's summary states none."""
-
-    @pytest.fixture(scope="class")
-    def stored(self):
-        result = _stored("triangulation_l2l1")
-        _verifies(result)
-        return result
 
     @pytest.mark.parametrize("name", ["lower", "upper", "functionals", "denominator"])
     def test_a_changed_region_is_refused(self, stored, name):
