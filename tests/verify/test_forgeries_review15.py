@@ -18,6 +18,9 @@ Found and fixed:
   too, though the region states a fact about the scope's points, as a map's (review 9) and a
   bilinear frame's (class 5) do. Now recomputed as the solver writes it; none beside a convexity
   proof. Genuine batches verify (root-closed tracks of fractional.many_tracks, searched ones).
+- A certified item's scope in words (TestScopeWordsUntied): under max_residual a search's summary
+  scope could drop "with every residual <= 10.0" (or say anything: typed text), claiming the
+  optimum over points no proof searched. Now the solver's words, the limit stated for a search.
 - A direct proof's programs no check reads (TestDirectProgramsUnread): a program of an excluded
   orientation, or of a delta no orientation has, verified with any z, cuts and bound (a list, an
   int, text that is no base64, "bad", 1e300); a boolean delta was read as +1. Refused now.
@@ -471,3 +474,50 @@ def test_a_reconstruction_points_root_region_beside_a_convexity_proof_is_refused
     assert result["certificate"]["items"][0]["proof"]["type"] == "convexity"
     result["points"][0]["certificate"]["root_region"] = copy.deepcopy(stored["tracks"][0]["certificate"]["root_region"])
     _refused(result)
+
+
+# --- a certified item's scope in words --------------------------------------------------------------
+
+class TestScopeWordsUntied:
+    """A certified item's summary ``scope`` is the result's own statement of what the optimum is
+    over (the scope the verifier's report states from the options). Under max_residual a search's
+    proof covers only the points (maps) with every residual within it, and the solver says so
+    ("... with every residual <= 10.0"); the words were typed text no check read: dropped to
+    "every point in front of every camera" (a claim of the optimum over points no proof searched:
+    one with a larger residual may cost less; on the stored track the free optimum happens to be
+    the limited one), or "every point of space, every norm", the stored
+    triangulation_l1l1_max_residual verified. Fixed (items._check_scope_words): the words are the
+    solver's, the limit stated exactly for a search (the trivial bound and a resection's
+    sublevel bound hold over the whole scope, and say so)."""
+
+    @pytest.mark.parametrize("words", ["every point in front of every camera", "every point of space, every norm"])
+    def test_other_words_are_refused(self, words):
+        result = _stored("triangulation_l1l1_max_residual")
+        _verifies(result)
+        assert result["tracks"][0]["certificate"]["scope"].endswith("with every residual <= 10.0")
+        result["tracks"][0]["certificate"]["scope"] = words
+        assert _refused(result)["check"] == "returned"
+
+    def test_a_maps_words_are_its_proofs(self):
+        job = map_job(np.random.default_rng(seed("review15", "mrh")), "homography2", 12, "L1L1", maps=1)
+        job["options"]["max_residual"] = 20  # an integer limit: stated as given
+        result = solve_job(job)
+        assert result["maps"][0]["certified"]
+        assert result["maps"][0]["certificate"]["scope"].endswith("with every residual <= 20")
+        _verifies(result)
+        result["maps"][0]["certificate"]["scope"] = "every map that puts every point at positive depth"
+        assert _refused(result)["check"] == "returned"
+
+    def test_bounds_over_the_whole_scope_say_so(self):
+        """A sublevel bound (resection) and the trivial bound (exact data) under max_residual
+        hold over the whole scope: their words have no limit, and verify."""
+        job = map_job(np.random.default_rng(seed("review15", "mr")), "resection", 12, "L2L2", maps=1)
+        job["options"]["max_residual"] = 50
+        result = solve_job(job)
+        assert result["certificate"]["items"][0]["proof"]["type"] == "sublevel_bound"
+        _verifies(result)
+        job = triangulation_job(np.random.default_rng(seed("review15", "exact")), 2, 3, "L2L2", 0.0)
+        job["options"]["max_residual"] = 5.0
+        result = solve_job(job)
+        assert {claim["proof"]["type"] for claim in result["certificate"]["items"]} == {"trivial"}
+        _verifies(result)

@@ -349,6 +349,24 @@ def _check_map_level(where: str, determinacy, claim: dict, data: dict, index: in
                                   f"{own!r:.12} (3^2 times its cost over 2k - 11, at least its gap)")
 
 
+def _check_scope_words(where: str, summary, claim: dict, options: dict, words: str) -> None:
+    """A certified item's summary ``scope`` (when stated) is the scope its proof covers, in the
+    solver's words: the kind's (``words``), and under max_residual, for a search (the only proof
+    whose program is limited to it; the trivial bound and a resection's sublevel bound hold over
+    the whole scope), "with every residual <= max_residual" (as search.search writes it). Words
+    dropping the limit claim an optimum over points no proof searched (a point with a larger
+    residual may cost less); other words claim what no check reads."""
+    if claim.get("certified") is not True or not isinstance(summary, dict) or "scope" not in summary:
+        return
+    proof = claim.get("proof")
+    limit = options.get("max_residual")
+    searched = isinstance(proof, dict) and proof.get("type") == "branch_and_bound"
+    expected = f"{words} with every residual <= {limit}" if limit is not None and searched else words
+    if summary["scope"] != expected:
+        raise Invalid("returned", f"{where}/certificate/scope is {summary['scope']!r:.120}, the scope its proof covers "
+                                  f"is {expected!r}")
+
+
 def _agrees(given, expected) -> bool:
     """A stated number or array is the one recomputed (to a relative 1e-9: the solver computed it
     with the same operations, perhaps on another machine's BLAS), of its shape, with no boolean."""
@@ -395,6 +413,8 @@ class TrackItems:
         floors: dict = {}
         for index, (item, claim) in enumerate(zip(result["tracks"], certificate["items"])):
             self._check_root_region(f"tracks/{index}", item.get("certificate"), claim, certificate, index)
+            _check_scope_words(f"tracks/{index}", item.get("certificate"), claim, certificate["options"],
+                               "every point in front of every camera")
             determinacy = item.get("determinacy")
             _check_pooled(index, determinacy, result, certificate, floors)
             _check_proven(f"tracks/{index}", determinacy, claim, norm, proven_track)
@@ -581,6 +601,8 @@ class MapItems:
                 _check_proven(f"maps/{index}", entry.get("determinacy"), claim, norm, proven_map)
                 _check_map_level(f"maps/{index}", entry.get("determinacy"), claim, certificate["data"], index, norm)
                 self._check_root_region(f"maps/{index}", entry.get("certificate"), claim, certificate, index)
+                _check_scope_words(f"maps/{index}", entry.get("certificate"), claim, certificate["options"],
+                                   "every map that puts every point at positive depth")
         for index, entry in enumerate(result.get("maps") or []):
             if isinstance(entry, dict) and entry.get("matrix") is None and entry.get("residuals") not in (None, []):
                 raise Invalid("returned", f"maps/{index}/residuals are given, but no matrix they derive from")
