@@ -21,6 +21,8 @@ Found and fixed:
 - A certified item's scope in words (TestScopeWordsUntied): under max_residual a search's summary
   scope could drop "with every residual <= 10.0" (or say anything: typed text), claiming the
   optimum over points no proof searched. Now the solver's words, the limit stated for a search.
+  Likewise a certified bilinear frame's and autocalibration stage's scope words
+  (TestOtherKindsScopeWords): "every affine camera (any translation)", "every K" verified.
 - A direct proof's programs no check reads (TestDirectProgramsUnread): a program of an excluded
   orientation, or of a delta no orientation has, verified with any z, cuts and bound (a list, an
   int, text that is no base64, "bad", 1e300); a boolean delta was read as +1. Refused now.
@@ -521,3 +523,42 @@ class TestScopeWordsUntied:
         result = solve_job(job)
         assert {claim["proof"]["type"] for claim in result["certificate"]["items"]} == {"trivial"}
         _verifies(result)
+
+
+class TestOtherKindsScopeWords:
+    """TestScopeWordsUntied's class for the kinds whose items are not tracks or maps: a certified
+    bilinear frame's summary scope ("every affine camera whose 2x3 part lies in the camera box
+    ...") and a certified autocalibration stage's ("every K within the intrinsics ranges, for the
+    plane at infinity stated") took any words: "every affine camera (any translation) ...", "every
+    K" verified, claiming the optimum over cameras or calibrations no proof covered. Fixed
+    (bilinear.FRAME_SCOPES, autocalibration.STAGE_SCOPES): a certified item states the kind's
+    words or none."""
+
+    def test_a_frames_scope_without_its_box_is_refused(self):
+        result = _stored("bilinear_l2l2")
+        _verifies(result)
+        result["frames"][0]["certificate"]["scope"] = "every affine camera (any translation), every coefficient vector allowed"
+        assert _refused(result)["check"] == "returned"
+
+    @pytest.mark.parametrize("name, stage", [("autocalibration_stratified", 0), ("autocalibration_stratified", 1),
+                                             ("autocalibration_direct", 0)])
+    def test_a_stages_scope_in_other_words_is_refused(self, name, stage):
+        result = _stored(name)
+        _verifies(result)
+        result["stages"][stage]["certificate"]["scope"] = "every K"
+        assert _refused(result)["check"] == "returned"
+
+    def test_the_verifiers_words_are_the_kinds(self):
+        import inspect
+
+        import geocert.kinds.autocalibration as autocalibration_kind
+        from geocert.kinds import bilinear as bilinear_kind
+        from geocert.kinds import direct_autocalibration
+        from geocert.verify.autocalibration import STAGE_SCOPES
+        from geocert.verify.bilinear import FRAME_SCOPES
+
+        assert FRAME_SCOPES["searched"] == bilinear_kind.SCOPE
+        assert f'"{FRAME_SCOPES["trivial"]}"' in inspect.getsource(bilinear_kind)
+        assert STAGE_SCOPES["direct"] == direct_autocalibration.SCOPE
+        source = inspect.getsource(autocalibration_kind)
+        assert f'"{STAGE_SCOPES["affine"]}"' in source and f'"{STAGE_SCOPES["metric"]}"' in source
