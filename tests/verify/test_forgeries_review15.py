@@ -59,7 +59,8 @@ Tried and refused (or accepted with the claim still true):
 - Cost: 1,000 extra "tightened" proofs with null duals, named by no leaf, on a genuine 2,000-point
   L1L1 resection: they verify (each is a valid proof) at about 175 microseconds per unit of size
   added, 2 per unit of work: within the stated bound (4 units of work per unit of size plus
-  2,000,000); the base lets a document of some 30,000 units ask about 4 s. Not a forgery.
+  2,000,000). At that rate the 2,000,000 base alone would let a document of some 30,000 units
+  ask about 4 s (estimated from the rate, not run). Not a forgery; the docs state the bound.
 - Read and found sound (no forgery built): the bilinear node tightening records (a leaf's bound
   may exceed what its parent's cap proves, but only points costing less than the claimed bound
   need excluding, and every cap is at least it), the stratified leaves' cut proofs and caps, the
