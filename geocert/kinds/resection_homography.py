@@ -67,7 +67,9 @@ def map_document(result: MapResult, detail: str = "full", full_certificate: bool
     region = {"reference_point": reference} if reference is not None else {}
     certificate = brief_certificate(result, full_certificate) if detail == "brief" else certificate_summary(
         result, region,
-        "lower <= (F l) / (d . l) <= upper for the last row l of every map in the scope, "
+        "lower <= (F l) / (d . l) <= upper for the last row l of every map of the scope costing less than the "
+        "search's cost cap (for a certified map: lower_bound, to within 1e-9 of it and the program's rounding), the "
+        "maps a search must exclude; not for every map of the scope. "
         "F = functionals, d = denominator (the reference point, homogeneous)",
         "every map that puts every point at positive depth")
     return {"matrix": result.matrix, "residuals": result.residuals, **outcome_document(result),

@@ -62,7 +62,9 @@ def track_document(result: TrackResult, detail: str = "full", full_certificate: 
         else {}
     certificate = brief_certificate(result, full_certificate) if detail == "brief" else certificate_summary(
         result, region,
-        "lower <= (F X) / (d . X) <= upper for every point X of the scope, "
+        "lower <= (F X) / (d . X) <= upper for every point X of the scope costing less than the search's cost cap "
+        "(for a certified item: lower_bound, to within 1e-9 of it and the program's rounding), the points a search "
+        "must exclude; not for every point of the scope. "
         "F = functionals (one per direction the other views' depths vary along), "
         "d = denominator (positive in front of the reference view)",
         "every point in front of every camera")

@@ -28,6 +28,19 @@ CLAIM_OPTIONS = ("method", "intrinsics", "rel_gap", "metric_rel_gap", "abs_gap",
 MAX_CAMERAS = 1000
 MAX_POINTS = 100_000
 MAX_OBSERVATIONS = 2_000_000  # cameras times points
+# What each certified stage's summary says its proof covers, in the kind's words (geocert.kinds
+# writes them; tests/verify/test_forgeries_review15.py checks the two agree): a stage's words are
+# the result's own statement of its scope, so a certified stage states these or none.
+STAGE_SCOPES = {
+    "affine": "every plane at infinity chirality allows",
+    "metric": "every K within the intrinsics ranges, for the plane at infinity stated",
+    "direct": ("every absolute dual quadric Q (trace 1 in the program's frame) positive semidefinite of rank 3 "
+               "whose views' DIACs w = P Q P' keep (w11 + w22) / w33 within what the intrinsics ranges allow "
+               "(their combination (1 + aspect^2) focal^2 + skew^2 + u^2 + v^2 between its least and greatest over "
+               "the ranges, preconditioned; each intrinsic is not held to its own range) and that the chirality "
+               "option allows (its chosen rows strictly on one side of its null plane, none on it: an orientation "
+               "excluded by Gordan's alternative holds no such plane)"),
+}
 
 
 def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, float] | None]:
@@ -158,6 +171,12 @@ class AutocalibrationVerification:
         stages = result.get("stages")
         if not isinstance(stages, list) or [s.get("name") if isinstance(s, dict) else None for s in stages] != names:
             raise Invalid("returned", f"stages must be named {', '.join(names)}, in that order")
+        for index, (stage, claim) in enumerate(zip(stages, claims)):
+            summary = stage.get("certificate")
+            if claim.get("certified") is True and isinstance(summary, dict) and "scope" in summary \
+                    and summary["scope"] != STAGE_SCOPES[names[index]]:
+                raise Invalid("returned", f"stages/{index}/certificate/scope is {summary['scope']!r:.120}, the scope its "
+                                          f"proof covers is {STAGE_SCOPES[names[index]]!r:.120}")
         if direct:
             if result.get("baseline") is not None:  # the direct method has no linear estimate
                 raise Invalid("returned", "baseline: the direct method states no linear estimate")

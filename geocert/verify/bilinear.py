@@ -27,6 +27,13 @@ MAX_ROUNDS = 64  # the solver's half rounds (search.TIGHTENING_ROUNDS) with room
 LEAF_CLAIM_TOLERANCE = 1e-6  # as the fractional kinds' (fractional.proof): the recomputed bound counts
 
 
+# What a certified frame's summary says its proof covers, in the kind's words (geocert.kinds.bilinear
+# writes them; tests/verify/test_forgeries_review15.py checks the two agree).
+FRAME_SCOPES = {"searched": "every affine camera whose 2x3 part lies in the camera box (any translation), every "
+                            "coefficient vector allowed",
+                "trivial": "every camera and coefficient vector"}
+
+
 class BilinearVerification:
     claim_options = CLAIM_OPTIONS
     proofs: dict = {}
@@ -147,6 +154,11 @@ class BilinearVerification:
             if claim.get("certified") is not True or not isinstance(item, dict):
                 continue
             summary = item.get("certificate")
+            searched = isinstance(proof, dict) and proof.get("type") == "bilinear_bnb"
+            words = FRAME_SCOPES["searched" if searched else "trivial"]
+            if isinstance(summary, dict) and "scope" in summary and summary["scope"] != words:
+                raise Invalid("returned", f"frames/{claim['index']}/certificate/scope is {summary['scope']!r:.120}, the "
+                                          f"scope its proof covers is {words!r}")
             region = summary.get("root_region") if isinstance(summary, dict) else None
             if isinstance(proof, dict) and proof.get("type") == "bilinear_bnb":
                 lo, hi = proof["camera_box"]

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -339,11 +340,20 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
                 and frames.exact_gordan(rows, chosen)):
             raise Invalid("root_region", f"orientation {item['delta']:+g}: the rows do not exclude it")
         gone.append(float(item["delta"]))
+    # Every program is one of an orientation left to bound, and is read there: a program of an
+    # excluded orientation, or of none (a delta no orientation has), would be a record no check
+    # reads, its z, delta and cuts of any type.
+    live = [o.delta for o in setup.orientations if o.delta not in gone]
+    for number, program in enumerate(programs):
+        if not any(_of_orientation(program.get("delta"), delta) for delta in live):
+            raise Invalid("format", f"programs/{number}: delta {program.get('delta')!r:.40} is not an orientation "
+                                    f"left to bound ({', '.join(map(repr, live)) or 'none'}): a program no check "
+                                    "reads proves nothing")
     bound = math.inf
     for o in setup.orientations:
         if o.delta in gone:
             continue
-        match = [p for p in programs if isinstance(p, dict) and p.get("delta") == o.delta]
+        match = [p for p in programs if isinstance(p, dict) and _of_orientation(p.get("delta"), o.delta)]
         leaves = [_cuts(p.get("cuts", [])) for p in match]
         if not match or not covers(leaves):
             raise Invalid("root_region", f"orientation {o.delta!r} needs one program, or the leaves of a split "
@@ -361,6 +371,14 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
     if bound == math.inf:
         raise Invalid("root_region", "every orientation is excluded: nothing to bound")
     return bound, tuple(gone)
+
+
+def _of_orientation(stated: Any, delta: float | None) -> bool:
+    """Whether a program's stated delta names the orientation ``delta`` (None: the one of
+    "centers" and "none"; a number, never a boolean, otherwise)."""
+    if delta is None:
+        return stated is None
+    return isinstance(stated, (int, float)) and not isinstance(stated, bool) and stated == delta
 
 
 def _rows_without_pairs(setup: DirectSetup, order: int, cuts: int) -> int:

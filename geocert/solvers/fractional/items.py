@@ -349,6 +349,24 @@ def _check_map_level(where: str, determinacy, claim: dict, data: dict, index: in
                                   f"{own!r:.12} (3^2 times its cost over 2k - 11, at least its gap)")
 
 
+def _check_scope_words(where: str, summary, claim: dict, options: dict, words: str) -> None:
+    """A certified item's summary ``scope`` (when stated) is the scope its proof covers, in the
+    solver's words: the kind's (``words``), and under max_residual, for a search (the only proof
+    whose program is limited to it; the trivial bound and a resection's sublevel bound hold over
+    the whole scope), "with every residual <= max_residual" (as search.search writes it). Words
+    dropping the limit claim an optimum over points no proof searched (a point with a larger
+    residual may cost less); other words claim what no check reads."""
+    if claim.get("certified") is not True or not isinstance(summary, dict) or "scope" not in summary:
+        return
+    proof = claim.get("proof")
+    limit = options.get("max_residual")
+    searched = isinstance(proof, dict) and proof.get("type") == "branch_and_bound"
+    expected = f"{words} with every residual <= {limit}" if limit is not None and searched else words
+    if summary["scope"] != expected:
+        raise Invalid("returned", f"{where}/certificate/scope is {summary['scope']!r:.120}, the scope its proof covers "
+                                  f"is {expected!r}")
+
+
 def _agrees(given, expected) -> bool:
     """A stated number or array is the one recomputed (to a relative 1e-9: the solver computed it
     with the same operations, perhaps on another machine's BLAS), of its shape, with no boolean."""
@@ -394,6 +412,9 @@ class TrackItems:
         norm = (certificate.get("options") or {}).get("norm")
         floors: dict = {}
         for index, (item, claim) in enumerate(zip(result["tracks"], certificate["items"])):
+            self._check_root_region(f"tracks/{index}", item.get("certificate"), claim, certificate, index)
+            _check_scope_words(f"tracks/{index}", item.get("certificate"), claim, certificate["options"],
+                               "every point in front of every camera")
             determinacy = item.get("determinacy")
             _check_pooled(index, determinacy, result, certificate, floors)
             _check_proven(f"tracks/{index}", determinacy, claim, norm, proven_track)
@@ -410,6 +431,33 @@ class TrackItems:
                 raise Invalid("returned", f"tracks/{index}/determinacy/proven_intervals are proven at cost increase "
                                           f"{stated['cost_increase']!r:.12} below the track's own {own!r:.12} (3^2 "
                                           "times its residual variance, at least its gap)")
+
+    def _check_root_region(self, where: str, summary, claim: dict, certificate: dict, index: int) -> None:
+        """A certified track's summary root_region states a fact ("lower <= (F X) / (d . X) <=
+        upper for every point X of the scope costing less than the search's cost cap"): it must
+        be the proof's root box in the caller's terms, as the solver writes it (fractional.
+        triangulation: the search box, its branched functionals through the chart rebuilt from
+        the data, the chart's depth row, its reference view), as a map's is (MapItems); none
+        where the proof searched nothing (a convexity proof)."""
+        if claim.get("certified") is not True or not isinstance(summary, dict) or "root_region" not in summary:
+            return
+        region, proof = summary["root_region"], claim.get("proof")
+        if not (isinstance(proof, dict) and proof.get("type") == "branch_and_bound"):
+            if region is not None:
+                raise Invalid("returned", f"{where}/certificate/root_region is stated, and its proof searched no box")
+            return
+        cameras, points = self.read(certificate["data"], index)
+        chart = Chart.build(cameras, points, certificate["options"]["norm"])
+        lower, upper = proof["search_box"]
+        to_chart = np.linalg.inv(chart.T)
+        branched = np.asarray(proof["root"]["functionals"], dtype=float)[:len(lower)]
+        expected = {"lower": lower, "upper": upper, "functionals": branched @ to_chart[:3],
+                    "denominator": to_chart[3]}
+        if not isinstance(region, dict) or type(region.get("reference_view")) is not int or (
+                region["reference_view"] != chart.reference) or not all(
+                name in region and _agrees(region[name], value) for name, value in expected.items()):
+            raise Invalid("returned", f"{where}/certificate/root_region is not its proof's root box in the caller's "
+                                      "terms (the search box, its functionals, denominator and reference view)")
 
     def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
         """What an uncertified track's point costs on its observations (and the allowance for its
@@ -515,7 +563,8 @@ class MapItems:
 
     def _check_root_region(self, where: str, summary, claim: dict, certificate: dict, index: int) -> None:
         """A certified map's summary root_region states a fact ("lower <= (F l) / (d . l) <= upper
-        for the last row l of every map in the scope"): it must be the proof's root box in the
+        for the last row l of every map of the scope costing less than the search's cost cap"; a
+        result written before said "of every map in the scope", which no search proves): it must be the proof's root box in the
         caller's terms, as the solver writes it (fractional.maps._fit_map: the search box, its
         functionals through the chart rebuilt from the data, the reference point homogeneous), as a
         bilinear frame's is; none where the proof searched nothing."""
@@ -552,6 +601,8 @@ class MapItems:
                 _check_proven(f"maps/{index}", entry.get("determinacy"), claim, norm, proven_map)
                 _check_map_level(f"maps/{index}", entry.get("determinacy"), claim, certificate["data"], index, norm)
                 self._check_root_region(f"maps/{index}", entry.get("certificate"), claim, certificate, index)
+                _check_scope_words(f"maps/{index}", entry.get("certificate"), claim, certificate["options"],
+                                   "every map that puts every point at positive depth")
         for index, entry in enumerate(result.get("maps") or []):
             if isinstance(entry, dict) and entry.get("matrix") is None and entry.get("residuals") not in (None, []):
                 raise Invalid("returned", f"maps/{index}/residuals are given, but no matrix they derive from")
