@@ -53,7 +53,7 @@ import numpy as np
 from geocert.solvers.core.geometry import is_number, norm_cost
 from geocert.solvers.core.strict import Invalid, number, numbers, same
 from geocert.solvers.fractional import residual_claims
-from geocert.solvers.fractional.items import TRACKS, TrackItems
+from geocert.solvers.fractional.items import TRACKS, TrackItems, _check_scope_words
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.reconstruction import (calibration_claim, calibration_tie, camera_claim, depth_reversal_claim,
                                            hashed_options, motion_claim, run_control)
@@ -1008,6 +1008,19 @@ class ReconstructionItems(TrackItems):
             if isinstance(stats, dict) and stats.get("statuses") == {stop: 1}:
                 return [(stop, certified)]
         return [("optimal" if certified else "not_certified", certified)]
+
+    def check_returned(self, result: dict, certificate: dict) -> None:
+        """A certified point's summary states its proof's root box and scope in the solver's words,
+        as a triangulation track's must (TrackItems: the same writer makes both); its determinacy
+        is an estimate (checked with the result's other estimates)."""
+        points = result.get("points")
+        if not isinstance(points, list):
+            return
+        for index, (point, claim) in enumerate(zip(points, certificate["items"])):
+            summary = point.get("certificate") if isinstance(point, dict) else None
+            self._check_root_region(f"points/{index}", summary, claim, certificate, index)
+            _check_scope_words(f"points/{index}", summary, claim, certificate["options"],
+                               "every point in front of every camera")
 
     def checked_options(self, options: dict) -> dict:
         """The points' options (a triangulation's), and the cameras' tolerance (stated in the

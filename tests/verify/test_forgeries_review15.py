@@ -69,9 +69,10 @@ Tried and refused (or accepted with the claim still true):
 
 Left:
 
-- Reconstruction (another helper's files): only tried the track root region's class there. A
-  point's summary root_region is not tied to its proof: a search box beside a convexity proof
-  verifies (strict xfail below, with the fix suggested).
+- Reconstruction: only the track root region's class was tried there. A point's summary
+  root_region was not tied to its proof (a search box beside a convexity proof verified); fixed
+  after the review (ReconstructionItems.check_returned runs the tracks' root-region and scope-word
+  checks on every certified point).
 - A certificate summary's ``note`` (text, informational by docs/certificate.md) states the proof's
   numbers in words ("a ball (radius 130.55...)", "convex on the ball of radius ..."): edited to
   any words ("radius 0.00001", "the unique optimum of every norm") it verifies. Tying it to the
@@ -466,11 +467,6 @@ class TestTrackRootRegionNotTheProofs:
             _verifies(result)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "reconstruction (another helper's files, geocert/verify/reconstruction*.py): a reconstruction point's summary "
-    "root_region is not tied to its proof, as a triangulation track's now is (items.TrackItems._check_root_region, "
-    "which runs for the triangulation kind only): a search box stated beside a convexity proof verifies. Suggested "
-    "fix: the reconstruction adapter's check_returned calls the same check for each point"))
 def test_a_reconstruction_points_root_region_beside_a_convexity_proof_is_refused(stored):
     result = _stored("reconstruction")
     _verifies(result)
