@@ -69,8 +69,10 @@ class ReconstructionOptions(FractionalOptions):
     # reconstruction. "projective": a projective reconstruction from the tracks alone (projective.py).
     registration: str = "incremental"
     # K unknown, camera_model "simple": "auto" frees the principal point in the adjustment when the
-    # data fix it (a chi-square test on the cost it saves; pipeline._principal_point), "centre"
-    # holds it at the image centre (COLMAP's default).
+    # data fix it (a chi-square test on the cost it saves; pipeline._principal_point), "per_view"
+    # as "auto", then a principal point for each view when the data fix them (the same test for
+    # their 2 (views - 1) parameters; pipeline._principal_points_per_view: a stabilised lens shifts
+    # it from shot to shot), "centre" holds it at the image centre (COLMAP's default).
     principal_point: str = "auto"
     # K unknown, "incremental": one radial distortion term k1 (COLMAP's SIMPLE_RADIAL) estimated with
     # the focal length. "auto" (the default) keeps it when the data fix it (a chi-square test on the
@@ -115,7 +117,7 @@ class ReconstructionOptions(FractionalOptions):
         if self.autocalibration not in AUTOCALIBRATION_METHODS:
             raise InputError("options/autocalibration", f"must be one of {', '.join(AUTOCALIBRATION_METHODS)}")
         if self.principal_point not in run_control.PRINCIPAL_POINTS:
-            raise InputError("options/principal_point", 'must be "auto" or "centre"')
+            raise InputError("options/principal_point", 'must be "auto", "per_view" or "centre"')
         if self.radial_distortion not in RADIAL_DISTORTIONS:
             raise InputError("options/radial_distortion", f"must be one of {', '.join(RADIAL_DISTORTIONS)}")
         if self.registration not in REGISTRATIONS:
