@@ -82,7 +82,8 @@ STAGE_RECORDS = ByName({
         principal_point=record("estimated", "observations", "K_free", "chi2", "threshold", "inside_middle_half",
                                "reason"),
         principal_point_per_view=record("estimated", "observations", "parameters_added", "chi2", "threshold",
-                                        "inside_middle_half", "spread_px", "reason")),
+                                        "inside_middle_half", "spread_px", "sd_px", "max_sd_px", "precise",
+                                        "reason")),
     "structure": record(*COMMON, "tracks", "points", "certified", "points_dropped", "observations_removed",
                         "tracks_not_started"),
     "cameras": record(*COMMON, "cameras", "certified", "searched", "claim", "degrees_of_freedom",
@@ -131,7 +132,8 @@ FIGURES = {
         "principal_point/chi2": "number", "principal_point/threshold": "measure",
         "principal_point_per_view/observations": "count", "principal_point_per_view/parameters_added": "count",
         "principal_point_per_view/chi2": "number", "principal_point_per_view/threshold": "measure",
-        "principal_point_per_view/spread_px/*": "measure"},
+        "principal_point_per_view/spread_px/*": "measure", "principal_point_per_view/sd_px/*": "measure",
+        "principal_point_per_view/max_sd_px": "measure"},
 }
 COMMON_FIGURES = {"elapsed_s": "measure", "cpu_s": "measure"}
 
