@@ -1,9 +1,9 @@
 """How precisely the data fix each view's principal point in a saved result with a principal point
 per view (``bench.reconstruction_vs_colmap --options '{"principal_point": "per_view"}' --results
 DIR``): each view's principal point's marginal standard deviation in pixels, linearised at the
-returned cameras and points (the reduced camera system: the points, the shared focal length and the
-other views free; the similarity's null space left out, which no principal point moves with;
-the noise's variance from the residuals), beside its distance from the views' median. A principal
+returned cameras and points (solvers.reconstruction.principal_points: the reduced camera system,
+the points, the shared focal length and the other views free, the similarity's 7 directions left
+out), beside its distance from the views' median. A principal
 point the per-view test frees but the data fix only to tens of pixels trades with the view's
 rotation (docs/reconstruction-vs-colmap.md: templeSparseRing against Sceaux).
 
@@ -46,7 +46,8 @@ def main() -> None:
     parser.add_argument("results", nargs="+")
     for path in parser.parse_args().results:
         found = precision(json.load(open(path)))
-        print(f"## {path}: noise {found['sigma_px']:.3f} px, null space {found['null']} (7: the similarity)")
+        print(f"## {path}: noise {found['sigma_px']:.3f} px, null space {found['null']} (the similarity's 7, and any the "
+              "data leave free)")
         print("| view | principal point sd px | offset from the median px |\n|---|---|---|")
         for v, sd, offset in zip(found["views"], found["sd_px"], found["offset_px"]):
             print(f"| {v} | {sd:.2f} | {offset:.1f} |")

@@ -1,9 +1,10 @@
 """How precisely the data fix each view's own principal point (the bundle model
 "principal_per_view"): its marginal standard deviation in pixels, linearised at the adjusted
 cameras and points. The reduced camera system (the points eliminated: the points, the shared
-focal length and the other views free) is inverted without its null space (the similarity's
-7 directions, which no principal point moves with, and any further direction the data leave
-free); the noise's variance is read from the residuals. Near a distant object a principal
+focal length and the other views free) is inverted without the similarity's 7 directions (its
+smallest: no principal point moves with them); a further direction the data leave free gives
+the principal points moving along it an unbounded deviation (its eigenvalue floored at 1e-12 of
+the largest); the noise's variance is read from the residuals. Near a distant object a principal
 point's shift and a small rotation of the view nearly coincide: the per-view chi-square test
 then passes on a misfit the principal points absorb while the data fix them to tens of pixels
 (templeSparseRing, docs/reconstruction-vs-colmap.md), which this measures."""
@@ -16,6 +17,7 @@ from scipy.spatial.transform import Rotation
 
 STEP = 1e-6  # forward differences' step (rotation vectors, translations, pixels, points)
 NULL = 1e-12  # eigenvalues of the reduced system below this fraction of the largest: its null space
+GAUGE = 7  # the similarity's directions (rotation, translation, scale), which no principal point moves with
 
 
 def standard_deviations(Ks, rotations, translations, points, view, track, pixels) -> tuple[np.ndarray, float, int]:
@@ -60,10 +62,12 @@ def standard_deviations(Ks, rotations, translations, points, view, track, pixels
                             format="csr")
     S = N[:c, :c].toarray() - (N[:c, c:] @ inverse @ N[:c, c:].T).toarray()
     values, vectors = np.linalg.eigh(S)
-    kept = values > NULL * values.max()
-    null = int((~kept).sum())
-    variance = float((r0 ** 2).sum() / max(2 * m - (c + 3 * p - null), 1))
-    covariance = (vectors[:, kept] / values[kept]) @ vectors[:, kept].T * variance
+    null = int(np.count_nonzero(values <= NULL * values.max()))
+    # The similarity's 7 directions (the smallest) are left out; any other the data leave (nearly)
+    # free is kept, floored at NULL of the largest: a principal point moving along it is not fixed.
+    values, vectors = np.maximum(values[GAUGE:], NULL * values.max()), vectors[:, GAUGE:]
+    variance = float((r0 ** 2).sum() / max(2 * m - (c + 3 * p - GAUGE), 1))
+    covariance = (vectors / values) @ vectors.T * variance
     sd = np.array([np.sqrt(max(np.linalg.eigvalsh(covariance[8 * k + 6:8 * k + 8, 8 * k + 6:8 * k + 8]).max(), 0.0))
                    for k in range(n)])
     return sd, float(np.sqrt(variance)), null
