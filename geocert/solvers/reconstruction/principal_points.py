@@ -2,9 +2,9 @@
 "principal_per_view"): its marginal standard deviation in pixels, linearised at the adjusted
 cameras and points. The reduced camera system (the points eliminated: the points, the shared
 focal length and the other views free) is inverted without the similarity's 7 directions (its
-smallest: no principal point moves with them); a further direction the data leave free gives
-the principal points moving along it an unbounded deviation (its eigenvalue floored at 1e-12 of
-the largest); the noise's variance is read from the residuals. Near a distant object a principal
+smallest: no principal point moves with them); a principal point moving along a further
+direction the data leave free (an eigenvalue below 1e-12 of the largest) is not fixed (an
+infinite deviation); the noise's variance is read from the residuals. Near a distant object a principal
 point's shift and a small rotation of the view nearly coincide: the per-view chi-square test
 then passes on a misfit the principal points absorb while the data fix them to tens of pixels
 (templeSparseRing, docs/reconstruction-vs-colmap.md), which this measures."""
@@ -17,6 +17,7 @@ from scipy.spatial.transform import Rotation
 
 STEP = 1e-6  # forward differences' step (rotation vectors, translations, pixels, points)
 NULL = 1e-12  # eigenvalues of the reduced system below this fraction of the largest: its null space
+LOOSE = 1e-6  # a principal point's share of a free direction (unit vector) above this: it moves along it
 GAUGE = 7  # the similarity's directions (rotation, translation, scale), which no principal point moves with
 
 
@@ -62,12 +63,18 @@ def standard_deviations(Ks, rotations, translations, points, view, track, pixels
                             format="csr")
     S = N[:c, :c].toarray() - (N[:c, c:] @ inverse @ N[:c, c:].T).toarray()
     values, vectors = np.linalg.eigh(S)
-    null = int(np.count_nonzero(values <= NULL * values.max()))
-    # The similarity's 7 directions (the smallest) are left out; any other the data leave (nearly)
-    # free is kept, floored at NULL of the largest: a principal point moving along it is not fixed.
-    values, vectors = np.maximum(values[GAUGE:], NULL * values.max()), vectors[:, GAUGE:]
+    free = values <= NULL * values.max()
+    null = int(np.count_nonzero(free))
+    # The similarity's 7 directions (the smallest) are left out; a principal point moving along any
+    # other the data leave free is not fixed at all (an infinite deviation).
+    loose = vectors[:, GAUGE:][:, free[GAUGE:]]
+    fixed = ~free
+    fixed[:GAUGE] = False
     variance = float((r0 ** 2).sum() / max(2 * m - (c + 3 * p - GAUGE), 1))
-    covariance = (vectors / values) @ vectors.T * variance
-    sd = np.array([np.sqrt(max(np.linalg.eigvalsh(covariance[8 * k + 6:8 * k + 8, 8 * k + 6:8 * k + 8]).max(), 0.0))
-                   for k in range(n)])
+    covariance = (vectors[:, fixed] / values[fixed]) @ vectors[:, fixed].T * variance
+    sd = np.empty(n)
+    for k in range(n):
+        block = slice(8 * k + 6, 8 * k + 8)
+        unfixed = loose.shape[1] > 0 and float(np.abs(loose[block]).max()) > LOOSE
+        sd[k] = np.inf if unfixed else np.sqrt(max(np.linalg.eigvalsh(covariance[block, block]).max(), 0.0))
     return sd, float(np.sqrt(variance)), null
