@@ -73,7 +73,7 @@ class ReconstructionOptions(FractionalOptions):
     # as "auto", then a principal point for each view when the data fix them (the same test for
     # their 2 (views - 1) parameters; pipeline._principal_points_per_view: a stabilised lens shifts
     # it from shot to shot), "centre" holds it at the image centre (COLMAP's default).
-    principal_point: str = "auto"
+    principal_point: str = "per_view"
     # K unknown, "incremental": one radial distortion term k1 (COLMAP's SIMPLE_RADIAL) estimated with
     # the focal length. "auto" (the default) keeps it when the data fix it (a chi-square test on the
     # cost it saves; pipeline._radial_test), "on" always, "off" never. "auto" brings Sceaux's focal

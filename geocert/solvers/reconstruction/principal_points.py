@@ -62,7 +62,11 @@ def standard_deviations(Ks, rotations, translations, points, view, track, pixels
     inverse = sp.block_diag([np.linalg.pinv(blocks[3 * k:3 * k + 3, 3 * k:3 * k + 3].toarray()) for k in range(p)],
                             format="csr")
     S = N[:c, :c].toarray() - (N[:c, c:] @ inverse @ N[:c, c:].T).toarray()
-    values, vectors = np.linalg.eigh(S)
+    # Each parameter scaled to unit diagonal (Jacobi): the null space's threshold does not then
+    # depend on the frame's units (the pipeline's, or the result's normalised one).
+    scale = 1.0 / np.sqrt(np.maximum(np.diag(S), 1e-300))
+    values, vectors = np.linalg.eigh(S * scale[:, None] * scale[None, :])
+    vectors = vectors * scale[:, None]  # back to the parameters: covariance = V diag(1 / values) V^T
     free = values <= NULL * values.max()
     null = int(np.count_nonzero(free))
     # The similarity's 7 directions (the smallest) are left out; a principal point moving along any
@@ -75,6 +79,6 @@ def standard_deviations(Ks, rotations, translations, points, view, track, pixels
     sd = np.empty(n)
     for k in range(n):
         block = slice(8 * k + 6, 8 * k + 8)
-        unfixed = loose.shape[1] > 0 and float(np.abs(loose[block]).max()) > LOOSE
+        unfixed = loose.shape[1] > 0 and float(np.abs(loose[block] / scale[block, None]).max()) > LOOSE
         sd[k] = np.inf if unfixed else np.sqrt(max(np.linalg.eigvalsh(covariance[block, block]).max(), 0.0))
     return sd, float(np.sqrt(variance)), null
