@@ -155,9 +155,11 @@ class ReconstructionOptionsIn(Strict):
         _D.registration, description='K unknown: "incremental" (COLMAP\'s way: the K-known path from a prior focal '
                                      'length, refined by bundle adjustment; its cameras start the certified upgrade) '
                                      'or "projective" (a projective reconstruction from the tracks alone)')
-    principal_point: Literal["auto", "centre"] = Field(
+    principal_point: Literal["auto", "per_view", "centre"] = Field(
         _D.principal_point, description='K unknown, camera_model "simple": "auto" frees the principal point when the '
-                                        'data fix it (a chi-square test), "centre" holds it at the image centre')
+                                        'data fix it (a chi-square test), "per_view" (the default) as "auto" and then one '
+                                        'for each view when the data fix them (the same test, and each view\'s fixed '
+                                        'to 5 px), "centre" holds it at the image centre')
     radial_distortion: Literal["auto", "on", "off"] = Field(
         _D.radial_distortion, description='K unknown, "incremental": one radial distortion term k1 (COLMAP\'s '
                                           'SIMPLE_RADIAL) with the focal length; "auto" keeps it when the data fix it '

@@ -443,7 +443,7 @@ def _warned(summary: dict, code: str) -> bool:
 def _check_calibration(result: dict, registered: list[dict], verify: Callable[[dict], object]) -> None:
     """summary.calibration is about the K the cameras return (claims.CalibrationClaim): its K is
     every registered camera's (model "shared") or one focal length among theirs with their
-    principal point and skew ("varying"); certified_K is stated exactly when certified, and is
+    principal point and skew, or one camera's K (a principal point per view) ("varying"); certified_K is stated exactly when certified, and is
     the returned K exactly when returned_is_certified (then source "autocalibration"); the
     difference and the certified intrinsics on their range's edge (the autocalibration stage's
     ranges) are recomputed; determined only when certified, off the edge and with no critical
@@ -474,9 +474,10 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
     if K is not None and model == "varying":
         rest = np.array([[k[0, 1], k[0, 2], k[1, 2], k[1, 1] / k[0, 0]] for k in Ks + [K]])
         focals = [k[0, 0] for k in Ks]
-        if not (all(calibration_claim.same(r, rest[-1]) for r in rest) and min(focals) <= K[0, 0] <= max(focals)):
+        if not ((all(calibration_claim.same(r, rest[-1]) for r in rest) and min(focals) <= K[0, 0] <= max(focals))
+                or any(calibration_claim.same(k, K) for k in Ks)):  # or one camera's K (a principal point each)
             raise Invalid("returned", f"{where}/K is not one of the registered cameras' focal lengths with their "
-                                      "shared intrinsics (model varying)")
+                                      "shared intrinsics, nor one registered camera's K (model varying)")
     if model not in ("shared", "varying") or certified not in (True, False):
         raise Invalid("returned", f"{where}: model must be shared or varying, certified a boolean")
     cert = claim.get("certified_K")

@@ -50,7 +50,9 @@ MEMBERS = {
     "bundle_adjustment": {
         "model": ADJUSTMENT_MODELS, "started_from": STARTED_FROM, "starts/*/from": STARTS,
         "starts/*/same_rig_as": STARTS, "principal_point/estimated": "boolean",
-        "principal_point/inside_middle_half": "boolean", "principal_point/reason": "text"},
+        "principal_point/inside_middle_half": "boolean", "principal_point/reason": "text",
+        "principal_point_per_view/estimated": "boolean", "principal_point_per_view/inside_middle_half": "boolean",
+        "principal_point_per_view/precise": "boolean", "principal_point_per_view/reason": "text"},
     "cameras": {"claim": "text"},
 }
 # The members counted (each a count, at most its total): (stage, path) -> what bounds it.

@@ -80,7 +80,10 @@ STAGE_RECORDS = ByName({
         starts=record("from", "rms_px_before", "rms_px_after_8_iterations", "fit_cost", "observations_fitting",
                       "same_rig_as"),
         principal_point=record("estimated", "observations", "K_free", "chi2", "threshold", "inside_middle_half",
-                               "reason")),
+                               "reason"),
+        principal_point_per_view=record("estimated", "observations", "parameters_added", "chi2", "threshold",
+                                        "inside_middle_half", "spread_px", "sd_px", "max_sd_px", "precise",
+                                        "reason")),
     "structure": record(*COMMON, "tracks", "points", "certified", "points_dropped", "observations_removed",
                         "tracks_not_started"),
     "cameras": record(*COMMON, "cameras", "certified", "searched", "claim", "degrees_of_freedom",
@@ -126,7 +129,11 @@ FIGURES = {
         "starts/*/rms_px_before": "measure", "starts/*/rms_px_after_8_iterations": "measure",
         "starts/*/fit_cost": "measure", "starts/*/observations_fitting": "count",
         "principal_point/observations": "count", "principal_point/K_free": "calibration",
-        "principal_point/chi2": "number", "principal_point/threshold": "measure"},
+        "principal_point/chi2": "number", "principal_point/threshold": "measure",
+        "principal_point_per_view/observations": "count", "principal_point_per_view/parameters_added": "count",
+        "principal_point_per_view/chi2": "number", "principal_point_per_view/threshold": "measure",
+        "principal_point_per_view/spread_px/*": "measure", "principal_point_per_view/sd_px/*": "measure",
+        "principal_point_per_view/max_sd_px": "measure"},
 }
 COMMON_FIGURES = {"elapsed_s": "measure", "cpu_s": "measure"}
 

@@ -305,7 +305,10 @@ def calibration_claim(out) -> CalibrationClaim:
         same_K = bool(same(K, cert) and not varying)
         difference = k_difference(K, cert)
         if not same_K:
-            which = ("each camera has its own focal length (camera_model \"varying\"), calibration.K the middle one's"
+            per_view = varying and len({tuple(np.round(k[:2, 2], 9)) for k in out.metric.Ks if k is not None}) > 1
+            which = ("each camera has its own principal point (principal_point \"per_view\"), calibration.K the "
+                     "middle one's" if per_view else
+                     "each camera has its own focal length (camera_model \"varying\"), calibration.K the middle one's"
                      if varying else "the cameras returned use the adjusted K")
             warnings.append({"code": "returned_K_not_certified", "detail": (
                 f"{'the bundle adjustment' if adjusted else 'the camera model (no adjustment)'} moved K from the "

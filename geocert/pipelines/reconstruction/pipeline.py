@@ -394,7 +394,7 @@ def _radial_test(metric: upgrade.Metric, obs: Observations, options: Reconstruct
         from dataclasses import replace
 
         with_keep = _kept(metric, obs, options.threshold_px)
-        rival = "principal" if options.principal_point == "auto" else "simple"
+        rival = "principal" if options.principal_point in ("auto", "per_view") else "simple"
         trial, trial_keep, _ = upgrade.adjust(replace(metric, k1=0.0), obs.view, obs.track, obs.pixel,
                                               options.threshold_px, model=rival)
         common = with_keep & trial_keep
@@ -450,6 +450,74 @@ def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray
         figures["estimated"] = True
         return trial, trial_keep, figures
     return metric, keep, figures
+
+
+PRINCIPAL_POINT_P = 0.001  # the per-view test's level (PRINCIPAL_POINT_CHI2's, for 2 (views - 1) degrees of freedom)
+# The per-view principal points are kept only when the data fix each to this (its standard
+# deviation, px): the shifts they are meant to capture (Sceaux's stabilised lens) are 3-21 px, and
+# a principal point known to worse than this cannot tell such a shift from a small rotation of its
+# view (templeSparseRing's, fixed to 8-17 px, moved its rotations 1.4 degrees off the ground truth:
+# docs/reconstruction-vs-colmap.md).
+MAX_PRINCIPAL_POINT_SD_PX = 5.0
+
+
+def _principal_points_per_view(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold_px: float,
+                               image_size):
+    """A principal point per view, estimated when the data fix them (options.principal_point
+    "per_view"): the adjustment again with each view's own (bundle model "principal_per_view", from
+    the one the views share), kept when it lowers the cost on the observations both keep by more
+    than the chi-square quantile at 1 - PRINCIPAL_POINT_P for the 2 (views - 1) parameters it adds
+    (2 views more when the shared one is held at the centre) in noise variances (the residuals'
+    own, from the freer fit), every view's lies in the middle half of the image and the data fix
+    each to MAX_PRINCIPAL_POINT_SD_PX (_principal_point_sd); else the shared one stays. Returns the reconstruction, the observations kept and the test's figures."""
+    from scipy.stats import chi2
+
+    views = [v for v, R in enumerate(metric.rotations) if R is not None]
+    trial, trial_keep, _ = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, threshold_px,
+                                          model="principal_per_view")
+    common = keep & trial_keep
+    n = int(common.sum())
+    centre = np.array([image_size[0] / 2, image_size[1] / 2])
+    added = 2 * (len(views) - 1) + (2 if np.allclose(metric.K[:2, 2], centre) else 0)
+    figures = {"estimated": False, "observations": n, "parameters_added": added}
+    if n < 20 or len(views) < 2 or trial.Ks is None:
+        return metric, keep, {**figures, "reason": "too few observations to test"}
+    held, free = _rms(metric, obs, common) ** 2 * n, _rms(trial, obs, common) ** 2 * n
+    variance = max(free / max(2 * n - added, 1), 1e-4)  # residuals below 0.01 px are rounding, not noise
+    statistic = (held - free) / variance
+    threshold = float(chi2.ppf(1 - PRINCIPAL_POINT_P, added))
+    sd = _principal_point_sd(trial, obs, trial_keep, views)
+    offsets = np.array([trial.Ks[v][:2, 2] - centre for v in views])
+    inside = bool(np.all(np.abs(offsets) <= np.array(image_size, dtype=float) / 4))
+    spread = np.linalg.norm(np.array([trial.Ks[v][:2, 2] for v in views]) - trial.K[:2, 2], axis=1)
+    precise = bool(np.all(sd <= MAX_PRINCIPAL_POINT_SD_PX))
+    figures.update(chi2=float(statistic), threshold=threshold, inside_middle_half=inside,
+                   spread_px=[float(spread.min()), float(np.median(spread)), float(spread.max())],
+                   sd_px=[float(sd.min()), float(np.median(sd)), float(sd.max())],
+                   max_sd_px=MAX_PRINCIPAL_POINT_SD_PX, precise=precise)
+    if statistic > threshold and inside and precise:
+        figures["estimated"] = True
+        return trial, trial_keep, figures
+    return metric, keep, figures
+
+
+def _principal_point_sd(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, views: list) -> np.ndarray:
+    """principal_points.standard_deviations of each view's principal point (px) in ``metric``, on
+    the observations ``keep`` of points it holds (infinite where they cannot be computed)."""
+    from geocert.solvers.reconstruction import principal_points
+
+    vindex = -np.ones(len(metric.rotations), dtype=int)
+    vindex[views] = np.arange(len(views))
+    use = keep & (vindex[obs.view] >= 0) & np.isfinite(metric.points[obs.track, 0])
+    tracks, track = np.unique(obs.track[use], return_inverse=True)
+    try:
+        sd, _, _ = principal_points.standard_deviations(
+            [metric.Ks[v] for v in views], [metric.rotations[v] for v in views],
+            [metric.translations[v] for v in views], metric.points[tracks], vindex[obs.view[use]], track,
+            obs.pixel[use])
+    except (np.linalg.LinAlgError, ValueError):
+        return np.full(len(views), np.inf)
+    return np.where(np.isfinite(sd), sd, np.inf)
 
 
 def _plain(stats: dict) -> dict:
@@ -586,12 +654,16 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             if stop["asked"]:
                 _keep_metric(out, metric, n_views, stage, "adjusted as far as the adjustment went")
             stage["starts"] = trials
-            if model == "simple" and options.principal_point == "auto" and image_size is not None:
+            if model == "simple" and options.principal_point in ("auto", "per_view") and image_size is not None:
                 metric, keep, stage["principal_point"] = _principal_point(metric, obs, keep, options.threshold_px,
                                                                           image_size)
+            if model == "simple" and options.principal_point == "per_view" and image_size is not None:
+                metric, keep, stage["principal_point_per_view"] = _principal_points_per_view(
+                    metric, obs, keep, options.threshold_px, image_size)
             stage.update(started_from=name, model=model, rms_px_before=before, rms_px_after=_rms(metric, obs, keep),
                          K=metric.K.tolist(), observations_kept=int(keep.sum()))
-            adjusted_with = "principal" if (stage.get("principal_point") or {}).get("estimated") else model
+            adjusted_with = ("principal_per_view" if (stage.get("principal_point_per_view") or {}).get("estimated")
+                             else "principal" if (stage.get("principal_point") or {}).get("estimated") else model)
             metric, keep = _depth_reversal(out, metric, obs, keep, options.threshold_px, adjusted_with, stage, tell,
                                            n_views)
             if not keep.any():

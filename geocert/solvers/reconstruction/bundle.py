@@ -57,22 +57,27 @@ def projective(cameras: np.ndarray, points: np.ndarray, view: np.ndarray, track:
 # five, "fixed" none, "varying" one focal length per view (principal point held, square pixels),
 # "principal" the focal length and the principal point (square pixels, no skew), "radial" the focal
 # length and one radial distortion term k1 about the principal point held where K has it (COLMAP's
-# SIMPLE_RADIAL: a point at normalised image coordinates n is seen at K's pixel of n (1 + k1 |n|^2)).
-MODELS = ("simple", "full", "fixed", "varying", "principal", "radial")
+# SIMPLE_RADIAL: a point at normalised image coordinates n is seen at K's pixel of n (1 + k1 |n|^2)),
+# "principal_per_view" one focal length and a principal point per view (square pixels, no skew).
+MODELS = ("simple", "full", "fixed", "varying", "principal", "radial", "principal_per_view")
 
 
 def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, points: np.ndarray, view: np.ndarray,
            track: np.ndarray, pixels: np.ndarray, f_scale: float | None = None, max_iterations: int = 30,
            model: str = "simple", focals: np.ndarray | None = None, should_stop=None, k1: float = 0.0,
-           stop: schur.StopRule = schur.CERES):
+           stop: schur.StopRule = schur.CERES, centres: np.ndarray | None = None):
     """Refine one shared K (``model``: "simple" f with square pixels, no skew and cx, cy fixed; "full"
     fx, fy, skew, cx, cy; "fixed" K as given; "radial" f and the distortion term, from ``k1``),
     rotations (n, 3, 3), translations (n, 3) and points (p, 3) against pixel observations. Returns
-    K, rotations, translations, points, residuals (M, 2), and k1 (``k1`` as given unless "radial")."""
+    K, rotations, translations, points, residuals (M, 2), and k1 (``k1`` as given unless "radial").
+    "varying" and "principal_per_view" return one K per view (n, 3, 3), from ``focals`` (n,) and
+    ``centres`` (n, 2) (K's where not given)."""
     A = np.hstack([Rotation.from_matrix(rotations).as_rotvec(), translations])
     given = np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]])
     if model == "varying":
         A = np.hstack([A, (np.full(len(A), K[0, 0]) if focals is None else focals)[:, None]])
+    if model == "principal_per_view":
+        A = np.hstack([A, np.tile(given[3:5], (len(A), 1)) if centres is None else np.asarray(centres, dtype=float)])
 
     def entries(S):
         if model == "fixed":
@@ -81,6 +86,8 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
             return np.array([S[0], S[0], 0.0, given[3], given[4]])
         if model == "principal":
             return np.array([S[0], S[0], 0.0, S[1], S[2]])
+        if model == "principal_per_view":  # the principal points are each view's (Am[:, 6:8])
+            return np.array([S[0], S[0], 0.0, 0.0, 0.0])
         if model == "radial":
             return np.array([S[0], S[0], 0.0, given[3], given[4]])
         if model == "varying":
@@ -94,6 +101,8 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         v = cam[:, 1] / cam[:, 2]
         if model == "varying":
             return np.stack([Am[:, 6] * u + k[3] - pixels[:, 0], Am[:, 6] * v + k[4] - pixels[:, 1]], axis=1)
+        if model == "principal_per_view":
+            return np.stack([k[0] * u + Am[:, 6] - pixels[:, 0], k[0] * v + Am[:, 7] - pixels[:, 1]], axis=1)
         if model == "radial":
             scale = 1.0 + S[1] * (u * u + v * v)
             u, v = u * scale, v * scale
@@ -132,7 +141,9 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         ones, zeros = np.ones(m), np.zeros(m)
         if model == "varying":
             ja = np.concatenate([ja, seen[:, :, None]], axis=2)
-        if model in ("simple", "principal", "radial"):  # d / d f: both focal terms move with f
+        if model == "principal_per_view":
+            ja = np.concatenate([ja, np.broadcast_to(np.eye(2), (m, 2, 2))], axis=2)
+        if model in ("simple", "principal", "radial", "principal_per_view"):  # d / d f: both focal terms move with f
             columns = [seen]
             if model == "principal":
                 columns += [np.stack([ones, zeros], axis=1), np.stack([zeros, ones], axis=1)]
@@ -149,13 +160,16 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
 
     start = {"fixed": np.zeros(0), "varying": np.zeros(0), "simple": np.array([np.sqrt(abs(given[0] * given[1]))]),
              "full": given.copy(), "principal": np.array([np.sqrt(abs(given[0] * given[1])), given[3], given[4]]),
-             "radial": np.array([np.sqrt(abs(given[0] * given[1])), k1])}[model]
+             "radial": np.array([np.sqrt(abs(given[0] * given[1])), k1]),
+             "principal_per_view": np.array([np.sqrt(abs(given[0] * given[1]))])}[model]
     A, S, B, r, _ = schur.solve(residual, A, start, points.copy(), view, track, f_scale, max_iterations, stop=stop,
                                 jacobian=jacobian, should_stop=should_stop)
     k = entries(S)
     K = np.array([[k[0], k[2], k[3]], [0.0, k[1], k[4]], [0.0, 0.0, 1.0]])
     if model == "varying":  # one K per view
         K = np.array([[[f, 0.0, k[3]], [0.0, f, k[4]], [0.0, 0.0, 1.0]] for f in A[:, 6]])
+    if model == "principal_per_view":
+        K = np.array([[[k[0], 0.0, u], [0.0, k[0], v], [0.0, 0.0, 1.0]] for u, v in A[:, 6:8]])
     return K, Rotation.from_rotvec(A[:, :3]).as_matrix(), A[:, 3:6], B, r, float(S[1]) if model == "radial" else k1
 
 

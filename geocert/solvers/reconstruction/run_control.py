@@ -18,7 +18,7 @@ from geocert.solvers.reconstruction import camera_claim
 CAMERA_MODELS = ("simple", "varying", "full")
 REGISTRATIONS = ("incremental", "projective")
 RADIAL_DISTORTIONS = ("auto", "on", "off")
-PRINCIPAL_POINTS = ("auto", "centre")
+PRINCIPAL_POINTS = ("auto", "per_view", "centre")
 ON_CRITICAL_MOTION = ("skip", "search")
 
 # pydantic Field keywords per option: the search's max_nodes and time_limit_s (every search's),

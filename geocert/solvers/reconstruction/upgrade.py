@@ -265,6 +265,13 @@ def _stage(name: str, stage, elapsed: float) -> dict:
             "elapsed_s": elapsed, "reason": stage.reason}
 
 
+def middle_centre(centres: np.ndarray) -> int:
+    """The view whose principal point lies nearest the per-view principal points' median (its K
+    stands for theirs in Metric.K, as the middle focal length's does for the "varying" model)."""
+    centres = np.asarray(centres, dtype=float)
+    return int(np.argmin(np.linalg.norm(centres - np.median(centres, axis=0), axis=1)))
+
+
 def K_of(metric: Metric, view: int) -> np.ndarray:
     return metric.K if metric.Ks is None else metric.Ks[view]
 
@@ -298,6 +305,11 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
     K, R, t, X = metric.K, np.array([metric.rotations[v] for v in views]), \
         np.array([metric.translations[v] for v in views]), metric.points.copy()
     focals = None if metric.Ks is None else np.array([metric.Ks[v][0, 0] for v in views])
+    # "principal_per_view": each view's principal point (the shared K's where it has none of its own)
+    centres = None if model != "principal_per_view" else np.array(
+        [K_of(metric, v)[:2, 2] for v in views], dtype=float)
+    if model == "principal_per_view":
+        focals = None
     rms_before = None
     k1 = metric.k1
     for round_ in range(2):
@@ -314,8 +326,11 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
                                            pixels[use], f_scale=threshold_px / 2 if round_ == 0 else None,
                                            max_iterations=max_iterations, model=model, focals=focals,
                                            should_stop=should_stop, k1=k1,
-                                           stop=robust_stop if round_ == 0 else stop)
-        if K.ndim == 3:  # one K per view: the middle focal length stands for them in K
+                                           stop=robust_stop if round_ == 0 else stop, centres=centres)
+        if K.ndim == 3 and model == "principal_per_view":  # one principal point per view: the middle one's K stands for them
+            centres = K[:, :2, 2]
+            K = K[middle_centre(centres)]
+        elif K.ndim == 3:  # one K per view: the middle focal length stands for them in K
             focals = K[:, 0, 0]
             K = K[int(np.argsort(focals)[len(focals) // 2])]
         X[points] = Xp
@@ -324,7 +339,11 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
             rms_before = float(np.sqrt(np.mean(errors ** 2)))
         keep[use[~(errors < threshold_px)]] = False
     adjusted = replace(metric, K=K, points=X, k1=k1)
-    if focals is not None:
+    if centres is not None:
+        adjusted.Ks = [None] * len(metric.rotations)
+        for k, v in enumerate(views):
+            adjusted.Ks[v] = np.array([[K[0, 0], 0.0, centres[k, 0]], [0.0, K[0, 0], centres[k, 1]], [0.0, 0.0, 1.0]])
+    elif focals is not None:
         adjusted.Ks = [None] * len(metric.rotations)
         for k, v in enumerate(views):
             adjusted.Ks[v] = np.array([[focals[k], 0.0, K[0, 2]], [0.0, focals[k], K[1, 2]], [0.0, 0.0, 1.0]])

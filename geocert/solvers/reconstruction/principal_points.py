@@ -1,0 +1,84 @@
+"""How precisely the data fix each view's own principal point (the bundle model
+"principal_per_view"): its marginal standard deviation in pixels, linearised at the adjusted
+cameras and points. The reduced camera system (the points eliminated: the points, the shared
+focal length and the other views free) is inverted without the similarity's 7 directions (its
+smallest: no principal point moves with them); a principal point moving along a further
+direction the data leave free (an eigenvalue below 1e-12 of the largest) is not fixed (an
+infinite deviation); the noise's variance is read from the residuals. Near a distant object a principal
+point's shift and a small rotation of the view nearly coincide: the per-view chi-square test
+then passes on a misfit the principal points absorb while the data fix them to tens of pixels
+(templeSparseRing, docs/reconstruction-vs-colmap.md), which this measures."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial.transform import Rotation
+
+STEP = 1e-6  # forward differences' step (rotation vectors, translations, pixels, points)
+NULL = 1e-12  # eigenvalues of the reduced system below this fraction of the largest: its null space
+LOOSE = 1e-6  # a principal point's share of a free direction (unit vector) above this: it moves along it
+GAUGE = 7  # the similarity's directions (rotation, translation, scale), which no principal point moves with
+
+
+def standard_deviations(Ks, rotations, translations, points, view, track, pixels) -> tuple[np.ndarray, float, int]:
+    """(each view's principal point's standard deviation, px: the larger axis of its 2x2
+    covariance; the noise's sigma, px; the null space's dimension) for views (n) with K each
+    (one focal length: the mean of theirs), rotations (n, 3, 3), translations (n, 3), points
+    (p, 3) and observations (view, track: indices into them; pixels (m, 2))."""
+    Ks, X = np.asarray(Ks, dtype=float), np.asarray(points, dtype=float)
+    view, track, pixels = np.asarray(view, dtype=int), np.asarray(track, dtype=int), np.asarray(pixels, dtype=float)
+    n, m, p = len(Ks), len(view), len(X)
+    focal = float(Ks[:, 0, 0].mean())
+    A = np.hstack([Rotation.from_matrix(np.asarray(rotations, dtype=float)).as_rotvec(),
+                   np.asarray(translations, dtype=float), Ks[:, :2, 2]])
+
+    def residual(A, f, X):
+        cam = Rotation.from_rotvec(A[view, :3]).apply(X[track]) + A[view, 3:6]
+        return f * cam[:, :2] / cam[:, 2:3] + A[view, 6:8] - pixels
+
+    r0 = residual(A, focal, X)
+    rows, cols, vals, at = [], [], [], np.arange(m)
+
+    def add(d, columns):
+        for c in range(2):
+            rows.append(2 * at + c)
+            cols.append(columns)
+            vals.append(d[:, c])
+
+    for j in range(8):
+        moved = A.copy()
+        moved[:, j] += STEP
+        add((residual(moved, focal, X) - r0) / STEP, 8 * view + j)
+    add((residual(A, focal * (1 + STEP), X) - r0) / (focal * STEP), np.full(m, 8 * n))
+    for j in range(3):
+        moved = X.copy()
+        moved[:, j] += STEP
+        add((residual(A, focal, moved) - r0) / STEP, 8 * n + 1 + 3 * track + j)
+    c = 8 * n + 1
+    J = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(2 * m, c + 3 * p))
+    N = (J.T @ J).tocsr()
+    blocks = N[c:, c:]
+    inverse = sp.block_diag([np.linalg.pinv(blocks[3 * k:3 * k + 3, 3 * k:3 * k + 3].toarray()) for k in range(p)],
+                            format="csr")
+    S = N[:c, :c].toarray() - (N[:c, c:] @ inverse @ N[:c, c:].T).toarray()
+    # Each parameter scaled to unit diagonal (Jacobi): the null space's threshold does not then
+    # depend on the frame's units (the pipeline's, or the result's normalised one).
+    scale = 1.0 / np.sqrt(np.maximum(np.diag(S), 1e-300))
+    values, vectors = np.linalg.eigh(S * scale[:, None] * scale[None, :])
+    vectors = vectors * scale[:, None]  # back to the parameters: covariance = V diag(1 / values) V^T
+    free = values <= NULL * values.max()
+    null = int(np.count_nonzero(free))
+    # The similarity's 7 directions (the smallest) are left out; a principal point moving along any
+    # other the data leave free is not fixed at all (an infinite deviation).
+    loose = vectors[:, GAUGE:][:, free[GAUGE:]]
+    fixed = ~free
+    fixed[:GAUGE] = False
+    variance = float((r0 ** 2).sum() / max(2 * m - (c + 3 * p - GAUGE), 1))
+    covariance = (vectors[:, fixed] / values[fixed]) @ vectors[:, fixed].T * variance
+    sd = np.empty(n)
+    for k in range(n):
+        block = slice(8 * k + 6, 8 * k + 8)
+        unfixed = loose.shape[1] > 0 and float(np.abs(loose[block] / scale[block, None]).max()) > LOOSE
+        sd[k] = np.inf if unfixed else np.sqrt(max(np.linalg.eigvalsh(covariance[block, block]).max(), 0.0))
+    return sd, float(np.sqrt(variance)), null
