@@ -13,9 +13,10 @@ Vandenberghe's CVXOPT notes, "The CVXOPT linear and quadratic cone program solve
     minimise q'y  s.t.  A y + s = b,  s in {0}^k x R+^m x S+^n1 x ...  (svec as Clarabel's)
 returning (status, y, z).
 
-Measured (Table 7.1's scenes, one BLAS thread): 19 to 38 iterations of 40 to 80 ms,
-1.2 to 2.2 processor seconds a solve (Clarabel: 4.8 to 7 s); the block operator's assembly is
-half of it. With OpenBLAS on two threads on the loaded shared machine, each 714 x 714 Cholesky
+Measured (Table 7.1's scenes, one BLAS thread): 17 to 38 iterations; with the block operator
+assembled as the svec operator kron(Gi) (ASSEMBLY "kron"), 40 to 80 ms an iteration, half of it
+the assembly; per moment (_Psd.schur), about 20 ms, of which the assembly 10 ms, the Cholesky
+factorisation 5 ms and the refined Newton solves 5 ms (bench.direct_autocalibration --speed). With OpenBLAS on two threads on the loaded shared machine, each 714 x 714 Cholesky
 took 0.33 s instead of 5 ms: the service's workers run BLAS on one thread, and so does the bench.
 
 Nothing here is trusted: the bound is direct_relaxation.safe_bound of the returned z, and only a
@@ -53,7 +54,8 @@ def _svec_index(n: int):
 
 # How the Schur complement is assembled: "moments" (_Psd.schur, the nonnegative rows' part dense over the
 # moments they hold) or "kron" (the former assembly: the svec operator kron(Gi) and sparse products,
-# kept as bench.direct_autocalibration --speed's baseline; the same iterates up to rounding).
+# kept as bench.direct_autocalibration --speed's baseline; the same iterates up to rounding, which
+# on seed 1008's ill-conditioned programs decides whether the last iterations pass the tolerance).
 ASSEMBLY = "moments"
 CHUNK = 32  # moments per chunk of the Schur block's assembly (_Psd.schur): its arrays stay in cache
 
