@@ -228,7 +228,8 @@ def trajectory(N: int = 50, seed: int = 0, runs=((20, 10.0), (40, 60.0)), widths
               + ", ".join(f"h = {h:g}: {g:.3%}" for h, g in zip(widths, gaps))
               + f"; gap ~ h^{p:.2f}, 1e-3 at h* = {h_star:.2g}; {each:.2f} s of CPU a box")
         print(f"  boxes of half-width h* covering the h = {widths[0]:g} box about the incumbent: {near:.2g} "
-              f"({near * each:.2g} s); covering the root box (half-width {root:.3g}): {boxes:.2g} ({boxes * each:.2g} s)")
+              f"({near * each:.2g} s); covering the root box (half-width {root:.3g}): {boxes:.2g} "
+              f"({boxes * each:.2g} s)")
 
 
 def _at_incumbent(K: int, N: int, seed: int):
@@ -380,7 +381,8 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--capacity", action="store_true", help="only the relaxation's capacity table")
     parser.add_argument("--trajectory", action="store_true",
-                        help="issue 38: K = 20 (10 s) and 40 (60 s): the gap over time, CPU per node, boxes the relaxation asks for")
+                        help="issue 38: K = 20 (10 s) and 40 (60 s): the gap over time, CPU per node, "
+                        "the boxes the relaxation asks for")
     parser.add_argument("--shor", action="store_true",
                         help="only the root gap with Shor's semidefinite constraint added (needs cvxpy, the test extra)")
     parser.add_argument("--nonrigid-service", type=int, default=0, metavar="WORKERS",
