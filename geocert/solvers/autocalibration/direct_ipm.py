@@ -17,7 +17,9 @@ Measured (Table 7.1's scenes, one BLAS thread): 17 to 38 iterations; with the bl
 assembled as the svec operator kron(Gi) (ASSEMBLY "kron"), 40 to 80 ms an iteration, half of it
 the assembly; per moment (_Psd.schur), about 20 ms, of which the assembly 10 ms, the Cholesky
 factorisation 5 ms and the refined Newton solves 5 ms (bench.direct_autocalibration --speed).
-With OpenBLAS on two threads on the loaded shared machine, each 714 x 714 Cholesky took 0.33 s instead of 5 ms: the service's workers run BLAS on one thread, and so does the bench.
+With OpenBLAS on two threads on the loaded shared machine, each 714 x 714
+Cholesky took 0.33 s instead of 5 ms: the service's workers run BLAS on one thread, and so does
+the bench.
 
 Nothing here is trusted: the bound is direct_relaxation.safe_bound of the returned z, and only a
 solve whose residuals and gap meet the tolerances is "Solved" (ConicStatus.OPTIMAL); anything
