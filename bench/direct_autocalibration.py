@@ -20,6 +20,8 @@ fixed-focal scenes in a last column (intrinsics ranges: focal [0.5, 2], the same
 
     .venv/bin/python -m bench.direct_autocalibration [--trials 10] [--first-trial 0] [--stratified] [--time-limit 10] [--jobs 1]
         [--rows rows.jsonl]   (or --from-rows rows.jsonl: the table of the trials run so far)
+    .venv/bin/python -m bench.direct_autocalibration --speed [--trials 5]   (issue 38: against the former
+        Schur complement assembly in the same run, the ratio printed)
 
 --jobs runs that many solves at once (each single-threaded); the load average is printed before
 and after, since times on a shared machine are inflated by the other work on it.
@@ -149,6 +151,61 @@ def targets(names: list[str], results: list[dict]) -> None:
           f" (wall medians {wall})")
 
 
+def _timed(seed: int, varying: bool, chirality: str) -> dict:
+    """One direct solve through the kind: its processor seconds, the K it states (each view's with
+    varying focal), whether it is certified, and its lower bound."""
+    scene, _ = scenes.table71_scene(seed, 0.2, varying)
+    options = {"method": "direct", "chirality": chirality, "varying_focal": varying, "time_limit_s": 3600,
+               "intrinsics": {**UNIT, "focal": [0.05, 1.0] if varying else [0.5, 2.0]}}
+    cpu = time.process_time()
+    result = solve_job({"kind": "autocalibration", "data": {"cameras": scene.cameras.tolist(),
+                                                            "points": scene.points.tolist()}, "options": options})
+    cpu = time.process_time() - cpu
+    Ks = result["Ks"] if varying else [result["K"]]
+    return {"cpu": cpu, "Ks": None if any(K is None for K in Ks or [None]) else np.array(Ks),
+            "certified": all(stage["certified"] for stage in result["stages"]),
+            "bound": result["stages"][-1].get("lower_bound")}
+
+
+def speed(trials: int, first: int) -> None:
+    """Issue 38: the direct method's processor time with the Schur complement assembled per moment
+    (direct_ipm.ASSEMBLY "moments") against the former assembly ("kron": the svec operator and
+    sparse products), each trial solved both ways one after the other (the order alternating), on
+    Table 7.1's scenes (seeds 1000 + first onwards, the four columns); one warm-up solve each first.
+    Prints per column the median processor seconds, their ratio, the largest relative difference
+    of the certified K, and the certified counts."""
+    from geocert.solvers.autocalibration import direct_ipm
+
+    print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())} ({os.cpu_count()} cores)", flush=True)
+    for assembly in ("kron", "moments"):
+        direct_ipm.ASSEMBLY = assembly
+        _timed(999, False, "none")
+    names = [f"{focal}/{'chir' if chirality == 'points' else 'no chir'}" for focal, _, chirality in COLUMNS]
+    out = {name: {"kron": [], "moments": []} for name in names}
+    for i in range(first, first + trials):
+        for name, (_, varying, chirality) in zip(names, COLUMNS):
+            for assembly in (("kron", "moments") if i % 2 == 0 else ("moments", "kron")):
+                direct_ipm.ASSEMBLY = assembly
+                out[name][assembly].append(_timed(1000 + i, varying, chirality))
+    direct_ipm.ASSEMBLY = "moments"
+    print(f"direct autocalibration, {trials} trials per column (seeds {1000 + first} to {1000 + first + trials - 1}), "
+          "processor seconds a solve (one BLAS thread)")
+    print(f"{'column':<18}{'kron median':>12}{'moments median':>16}{'ratio':>8}{'max |dK|/|K|':>14}"
+          f"{'certified kron/moments':>24}")
+    for name in names:
+        old, new = out[name]["kron"], out[name]["moments"]
+        a, b = float(np.median([r["cpu"] for r in old])), float(np.median([r["cpu"] for r in new]))
+        diffs = [float(np.max(np.abs(x["Ks"] - y["Ks"])) / np.max(np.abs(x["Ks"]))) for x, y in zip(old, new)
+                 if x["Ks"] is not None and y["Ks"] is not None]
+        print(f"{name:<18}{a:>12.3f}{b:>16.3f}{a / b:>8.2f}{max(diffs) if diffs else float('nan'):>14.1e}"
+              f"{sum(r['certified'] for r in old):>16d}/{sum(r['certified'] for r in new)}")
+    every_old = [r["cpu"] for name in names for r in out[name]["kron"]]
+    every_new = [r["cpu"] for name in names for r in out[name]["moments"]]
+    print(f"{'all':<18}{np.median(every_old):>12.3f}{np.median(every_new):>16.3f}"
+          f"{np.median(every_old) / np.median(every_new):>8.2f}")
+    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+
+
 def _run(task: tuple) -> dict:
     return {"task": list(task), **trial(*task)}
 
@@ -169,7 +226,12 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=1, help="solves run at once")
     parser.add_argument("--rows", help="append each trial's row to this JSON-lines file as it ends")
     parser.add_argument("--from-rows", help="print the table of the trials in this file, solving nothing")
+    parser.add_argument("--speed", action="store_true",
+                        help="issue 38: processor time against the former Schur assembly, same run (prints the ratio)")
     args = parser.parse_args()
+    if args.speed:
+        speed(args.trials, args.first_trial)
+        return
     if args.from_rows:
         with open(args.from_rows) as handle:
             rows = [json.loads(line) for line in handle if line.strip()]
