@@ -10,10 +10,9 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from threadpoolctl import threadpool_limits
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import direct, direct_solve, scenes
+from geocert.solvers.autocalibration import direct, direct_ipm, direct_solve, scenes
 from geocert.solvers.autocalibration import direct_relaxation as dr
 from geocert.solvers.autocalibration import problem as pr
 from geocert.solvers.core.certificates import pack, unpack
@@ -206,18 +205,19 @@ class TestExtraction:
 
 # --- end to end ---------------------------------------------------------------------------------
 
-def test_the_focal_rows_make_seed_1008_certify():
+def test_the_focal_rows_make_seed_1008_certify(monkeypatch):
     """The same scene with the focal rows (direct.focal_rows): the nearly degenerate quadric that
     kept the lower half's relaxation at 3.27e-4 (eigenvalues 4.6e-6 to 0.999) breaks them, and the
     unsplit order-2 relaxation is rank one and tight at the best quadric (4.6433e-4, gap 1.7e-10,
     measured 2026-11-24). Mutation: without the rows (focal_rows -> None) it is not certified.
-    Solved on one BLAS thread, as the service's workers run: whether the splitting's last half ends
-    "Solved" is the rounding's path (with the Schur complement assembled per moment, certified on
-    SkylakeX with one thread and not with two; the former assembly certified with both)."""
+    Whether the splitting's last half ends "Solved" is the rounding's path: with the Schur
+    complement assembled per moment (the default), certified on SkylakeX with one BLAS thread and
+    not with two; assembled through the svec operator ("kron"), with both. The rows are what this
+    tests, so it solves with the latter (the two assemblies agree to 1e-12: test_direct_ipm)."""
     scene, Ks = scenes.table71_scene(1008, 0.2, True)
     data = {"cameras": scene.cameras.tolist(), "points": scene.points.tolist()}
-    with threadpool_limits(limits=1, user_api="blas"):
-        result = solve_job(job(data, {**UNIT, "focal": [0.05, 1.0]}, chirality="points", varying_focal=True))
+    monkeypatch.setattr(direct_ipm, "ASSEMBLY", "kron")
+    result = solve_job(job(data, {**UNIT, "focal": [0.05, 1.0]}, chirality="points", varying_focal=True))
     stage = result["stages"][0]
     assert stage["certified"], stage["reason"]
     assert stage["cost"] == pytest.approx(4.6433e-4, rel=1e-4)

@@ -11,7 +11,6 @@ import clarabel
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from threadpoolctl import threadpool_limits
 
 from geocert.solvers.autocalibration import direct, direct_ipm, direct_solve, scenes
 from geocert.solvers.autocalibration import direct_relaxation as dr
@@ -233,12 +232,13 @@ def test_table71_seed_1008_varying_focal(monkeypatch):
     iteration 25); with SDPT3's adaptive exponent and step fraction it ends "Solved" on OpenBLAS's
     Haswell and Prescott kernels (18 iterations), but still "Stalled" at iteration 25 on SkylakeX
     (AVX-512), its bound then 4e-3 below. 2.80767e-4: the optimum where the clean solves agree.
-    Solved on one BLAS thread, as the service's workers run: with the Schur complement assembled
-    per moment (direct_ipm._Psd.schur) "Solved" in 18 iterations on SkylakeX with one thread (bound
-    2.807653e-4); with two, at iteration 25 through the acceptable tolerance's iterate, whose dual
-    residual (3e-7) the safe bound charges: 2.8053e-4, 8.4e-4 relative below."""
-    with threadpool_limits(limits=1, user_api="blas"):
-        program, result = _varying_focal_solve(1008)
+    With the Schur complement assembled per moment (direct_ipm._Psd.schur, the default) "Solved" in
+    18 iterations on SkylakeX with one BLAS thread (bound 2.807653e-4); with two, at iteration 25
+    through the acceptable tolerance's iterate, whose dual residual (3e-7) the safe bound charges:
+    2.8053e-4, 8.4e-4 relative below. What this tests is the step rule, so it solves with the
+    svec operator's assembly ("kron"), whose path held on one and two threads."""
+    monkeypatch.setattr(direct_ipm, "ASSEMBLY", "kron")
+    program, result = _varying_focal_solve(1008)
     check_solve(program, result, 2.80767e-4, monkeypatch)
 
 
