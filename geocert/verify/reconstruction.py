@@ -109,6 +109,20 @@ def _close(value: Any, expected: float, scale: float) -> bool:
     return is_number(value) and abs(value - expected) <= ROUNDING * max(scale, abs(expected))
 
 
+def intrinsics_of(P: Any) -> np.ndarray:
+    """The K a camera's P fixes (K [R | t] = P, K upper triangular with a positive diagonal and
+    K[2][2] = 1: the RQ decomposition of P's left 3x3). The degrees of freedom are counted from
+    these, not from the K stated: a stated K is checked against P only to P's rounding (1e-9 of
+    its largest entry, about 1e-6 px), which would let a K moved by 1e-6 px in each intrinsic,
+    its P unchanged, count every intrinsic as not shared (11 degrees of freedom, the allowance
+    withdrawn) and so judge cameras that fit within their true tolerance uncertifiable."""
+    M = np.asarray(P, dtype=float)[:, :3]
+    Q, U = np.linalg.qr(np.flipud(M).T)
+    K = np.flipud(np.fliplr(U.T))
+    K = K * np.sign(np.diag(K))[None, :]  # a positive diagonal (the rotation's rows flipped to match)
+    return K / K[2, 2]
+
+
 def _check_camera_fields(camera: dict, where: str) -> None:
     """K, R, t and the centre are what the camera's P gives (they fix each other: P's third row is
     R's, of unit norm, so K [R | t] = P with K[2][2] = 1 leaves no scale free)."""
@@ -819,7 +833,7 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, 
     false, stating no free camera)."""
     norm = result.get("norm")
     unchecked: list[int] = []
-    dof = camera_claim.degrees_of_freedom([camera["K"] for camera in registered])
+    dof = camera_claim.degrees_of_freedom([intrinsics_of(camera["P"]) for camera in registered])
     stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "cameras"), None)
     if stage is not None and "degrees_of_freedom" in stage and stage["degrees_of_freedom"] != dof:
         raise Invalid("returned", f"stages/cameras/degrees_of_freedom is {stage['degrees_of_freedom']!r:.40}, the "
