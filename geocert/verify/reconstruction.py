@@ -18,7 +18,7 @@ a result to them (docs/certificate.md, "Reconstruction"):
   it (the resection bound's scope), its lower bound is at most the proven one and its cost, its
   gap is cost - lower_bound, and its cost at most (1 + tolerance) times the proven bound plus
   abs_gap, the tolerance recomputed (camera_claim) from its points, the norm, camera_rel_gap and
-  its degrees of freedom, which the returned cameras' K give;
+  its degrees of freedom, which the K each returned camera's P fixes give (intrinsics_of);
 - the summary's counts and RMS are recomputed from the items;
 - summary.calibration is about the K returned: its K the cameras', its certified_K the one the
   calibration certificate beside it proves (a valid stratified autocalibration certificate of
@@ -825,8 +825,8 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
 def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, maps: list[dict],
                           states_free: bool = True) -> list[int]:
     """Every registered camera's own figures, whatever it claims: its points (its map from the
-    certified points), its cost recomputed from its P, its degrees of freedom (the returned
-    cameras' K give them) and tolerance (camera_claim), its status (``optimal`` exactly when
+    certified points), its cost recomputed from its P, its degrees of freedom (the K each
+    returned camera's P fixes give them: intrinsics_of) and tolerance (camera_claim), its status (``optimal`` exactly when
     certified), no bound unless searched, and a judgement that no bound can certify it recomputed
     (_check_judgement). A camera the cameras stage did not judge (``not_run``) states no figures.
     Returns the views whose judgement is unchecked (a document of an earlier form, ``states_free``
@@ -837,7 +837,7 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, 
     stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "cameras"), None)
     if stage is not None and "degrees_of_freedom" in stage and stage["degrees_of_freedom"] != dof:
         raise Invalid("returned", f"stages/cameras/degrees_of_freedom is {stage['degrees_of_freedom']!r:.40}, the "
-                                  f"returned cameras' K give {dof}")
+                                  f"K the returned cameras' P fix give {dof}")
     for camera, entry in zip(registered, maps):
         where = f"cameras/{camera['view']}"
         certified, status = camera.get("certified"), camera.get("status")
@@ -881,7 +881,7 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, 
         if stated is None and camera.get("tolerance") is None:
             continue  # a result from before they were stated: held to a 3x4 camera's (no allowance)
         if not same(stated, dof):
-            raise Invalid("returned", f"{where}: degrees_of_freedom {stated!r}, the returned cameras' K give {dof}")
+            raise Invalid("returned", f"{where}: degrees_of_freedom {stated!r}, the K the returned cameras' P fix give {dof}")
         given = camera.get("tolerance")
         if not (given is None and tolerance is None) and not (tolerance is not None and _close(given, tolerance, 0.0)):
             raise Invalid("returned", f"{where}: tolerance {given!r}, its points and degrees of freedom give "
