@@ -62,6 +62,10 @@ Tried and refused (or accepted with the claim still true):
   summary removed (null) verifies: it then states nothing. The region's ``meaning`` restated as
   "... for every point X of the scope" verifies (test_a_root_regions_meaning_restated_for_the_
   whole_scope_verifies, xfail): see Left.
+- The adjustment stage's own figures: its K with the focal length times 1.5 (refused: the
+  depth-reversal record's focal length); rms_px_after 0.001 and the shared test's K_free set to
+  the identity verify: figures of an adjustment the verifier does not run (its points are not
+  the returned ones), typed only (reconstruction_stages.FIGURES).
 - summary.calibration.model "varying" on a shared-K result verifies: the returned K is then
   held not to be the certified one (source bundle_adjustment, its warning required), a weaker
   claim.
