@@ -18,7 +18,7 @@ a result to them (docs/certificate.md, "Reconstruction"):
   it (the resection bound's scope), its lower bound is at most the proven one and its cost, its
   gap is cost - lower_bound, and its cost at most (1 + tolerance) times the proven bound plus
   abs_gap, the tolerance recomputed (camera_claim) from its points, the norm, camera_rel_gap and
-  its degrees of freedom, which the returned cameras' K give;
+  its degrees of freedom, which the K each returned camera's P fixes give (intrinsics_of);
 - the summary's counts and RMS are recomputed from the items;
 - summary.calibration is about the K returned: its K the cameras', its certified_K the one the
   calibration certificate beside it proves (a valid stratified autocalibration certificate of
@@ -107,6 +107,20 @@ def _close(value: Any, expected: float, scale: float) -> bool:
     """``value`` is a number within rounding of ``expected``, read at the magnitude ``scale`` or
     its own, whichever is larger (0: a copy or a recomputation of the same sum, at its own)."""
     return is_number(value) and abs(value - expected) <= ROUNDING * max(scale, abs(expected))
+
+
+def intrinsics_of(P: Any) -> np.ndarray:
+    """The K a camera's P fixes (K [R | t] = P, K upper triangular with a positive diagonal and
+    K[2][2] = 1: the RQ decomposition of P's left 3x3). The degrees of freedom are counted from
+    these, not from the K stated: a stated K is checked against P only to P's rounding (1e-9 of
+    its largest entry, about 1e-6 px), which would let a K moved by 1e-6 px in each intrinsic,
+    its P unchanged, count every intrinsic as not shared (11 degrees of freedom, the allowance
+    withdrawn) and so judge cameras that fit within their true tolerance uncertifiable."""
+    M = np.asarray(P, dtype=float)[:, :3]
+    Q, U = np.linalg.qr(np.flipud(M).T)
+    K = np.flipud(np.fliplr(U.T))
+    K = K * np.sign(np.diag(K))[None, :]  # a positive diagonal (the rotation's rows flipped to match)
+    return K / K[2, 2]
 
 
 def _check_camera_fields(camera: dict, where: str) -> None:
@@ -811,19 +825,19 @@ def _check_camera_certificate(result: dict, certificate: dict, searched: list[di
 def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, maps: list[dict],
                           states_free: bool = True) -> list[int]:
     """Every registered camera's own figures, whatever it claims: its points (its map from the
-    certified points), its cost recomputed from its P, its degrees of freedom (the returned
-    cameras' K give them) and tolerance (camera_claim), its status (``optimal`` exactly when
+    certified points), its cost recomputed from its P, its degrees of freedom (the K each
+    returned camera's P fixes give them: intrinsics_of) and tolerance (camera_claim), its status (``optimal`` exactly when
     certified), no bound unless searched, and a judgement that no bound can certify it recomputed
     (_check_judgement). A camera the cameras stage did not judge (``not_run``) states no figures.
     Returns the views whose judgement is unchecked (a document of an earlier form, ``states_free``
     false, stating no free camera)."""
     norm = result.get("norm")
     unchecked: list[int] = []
-    dof = camera_claim.degrees_of_freedom([camera["K"] for camera in registered])
+    dof = camera_claim.degrees_of_freedom([intrinsics_of(camera["P"]) for camera in registered])
     stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "cameras"), None)
     if stage is not None and "degrees_of_freedom" in stage and stage["degrees_of_freedom"] != dof:
         raise Invalid("returned", f"stages/cameras/degrees_of_freedom is {stage['degrees_of_freedom']!r:.40}, the "
-                                  f"returned cameras' K give {dof}")
+                                  f"K the returned cameras' P fix give {dof}")
     for camera, entry in zip(registered, maps):
         where = f"cameras/{camera['view']}"
         certified, status = camera.get("certified"), camera.get("status")
@@ -867,7 +881,7 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, 
         if stated is None and camera.get("tolerance") is None:
             continue  # a result from before they were stated: held to a 3x4 camera's (no allowance)
         if not same(stated, dof):
-            raise Invalid("returned", f"{where}: degrees_of_freedom {stated!r}, the returned cameras' K give {dof}")
+            raise Invalid("returned", f"{where}: degrees_of_freedom {stated!r}, the K the returned cameras' P fix give {dof}")
         given = camera.get("tolerance")
         if not (given is None and tolerance is None) and not (tolerance is not None and _close(given, tolerance, 0.0)):
             raise Invalid("returned", f"{where}: tolerance {given!r}, its points and degrees of freedom give "

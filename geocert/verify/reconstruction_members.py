@@ -173,6 +173,7 @@ def _check_ties(result: dict, stages: dict, views: int, tracks: int) -> None:
                     _fail(f"{where}/{name}", f"a count of at most its tracks ({through})", entry[name])
     _check_starts(result, stages)
     _check_principal_point(stages.get("bundle_adjustment", {}))
+    _check_principal_points_per_view(result, stages.get("bundle_adjustment", {}))
     structure, summary = stages.get("structure", {}), result.get("summary") or {}
     left = structure.get("tracks_not_started")
     returned, dropped = len(result.get("points") or []), summary.get("points_dropped")
@@ -245,3 +246,49 @@ def _check_principal_point(stage: dict) -> None:
             and stage.get("model") == "simple"):
         raise Invalid("returned", "stages/bundle_adjustment/principal_point/estimated is true, and its test does not "
                                   "pass (chi2 above its threshold, inside the middle half, the simple model)")
+
+
+# pipeline.MAX_PRINCIPAL_POINT_SD_PX: the per-view principal points are kept only when the data fix
+# each to this (tests/verify/test_forgeries_review16.py checks the two agree)
+MAX_PRINCIPAL_POINT_SD_PX = 5.0
+# relative to the focal length: principal points further apart than this are each a view's own
+# (genuine ones differ by pixels; a K is tied to its P only to about 1e-9 of P, so the verifier
+# reads them off P: verify.reconstruction.intrinsics_of)
+PER_VIEW_APART = 1e-6
+
+
+def _check_principal_points_per_view(result: dict, stage: dict) -> None:
+    """_principal_points_per_view's test (options.principal_point "per_view"): a principal point
+    per view is kept (``estimated``) only when its chi-square passes its threshold, every view's
+    lies in the middle half of its image, and the data fix each to MAX_PRINCIPAL_POINT_SD_PX
+    (``precise``, every sd_px at most it), in the simple model; and the cameras returned (their
+    P) have principal points of their own exactly when it was kept, after a simple-model
+    adjustment (the other models share theirs, or set them from the image: "varying")."""
+    from geocert.verify.reconstruction import intrinsics_of
+
+    test = stage.get("principal_point_per_view")
+    estimated = isinstance(test, dict) and test.get("estimated") is True
+    where = "stages/bundle_adjustment/principal_point_per_view"
+    if estimated:
+        chi2, threshold, sd = test.get("chi2"), test.get("threshold"), test.get("sd_px")
+        options = (result.get("certificate") or {}).get("options") or {}
+        if not (is_number(chi2) and is_number(threshold) and chi2 > threshold and test.get("inside_middle_half") is True
+                and test.get("precise") is True and test.get("max_sd_px") == MAX_PRINCIPAL_POINT_SD_PX
+                and isinstance(sd, list) and sd and all(is_number(s) and s <= MAX_PRINCIPAL_POINT_SD_PX for s in sd)
+                and stage.get("model") == "simple" and options.get("principal_point") == "per_view"):
+            raise Invalid("returned", f"{where}/estimated is true, and its test does not pass (chi2 above its "
+                                      f"threshold, inside the middle half, every sd_px at most max_sd_px "
+                                      f"{MAX_PRINCIPAL_POINT_SD_PX}, precise, the simple model, options.principal_point "
+                                      "per_view)")
+    if stage.get("model") != "simple":
+        return
+    Ks = [intrinsics_of(camera["P"]) for camera in result.get("cameras") or []
+          if isinstance(camera, dict) and camera.get("registered") is True and camera.get("P") is not None]
+    if len(Ks) < 2:
+        return
+    points = [K[:2, 2] for K in Ks]
+    apart = max(float(abs(p - points[0]).max()) for p in points) > PER_VIEW_APART * max(abs(K[0, 0]) for K in Ks)
+    if apart != estimated:
+        raise Invalid("returned", f"{where}: the cameras returned have "
+                                  + ("principal points of their own, and the test does not say they were estimated"
+                                     if apart else "one principal point, and the test says one each was estimated"))
