@@ -54,6 +54,7 @@ from geocert.solvers.core.geometry import is_number, norm_cost
 from geocert.solvers.core.strict import Invalid, number, numbers, same
 from geocert.solvers.fractional import residual_claims
 from geocert.solvers.fractional.items import TRACKS, TrackItems, _check_scope_words
+from geocert.verify.reconstruction_members import intrinsics_of
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.reconstruction import (calibration_claim, calibration_tie, camera_claim, depth_reversal_claim,
                                            hashed_options, motion_claim, run_control)
@@ -107,20 +108,6 @@ def _close(value: Any, expected: float, scale: float) -> bool:
     """``value`` is a number within rounding of ``expected``, read at the magnitude ``scale`` or
     its own, whichever is larger (0: a copy or a recomputation of the same sum, at its own)."""
     return is_number(value) and abs(value - expected) <= ROUNDING * max(scale, abs(expected))
-
-
-def intrinsics_of(P: Any) -> np.ndarray:
-    """The K a camera's P fixes (K [R | t] = P, K upper triangular with a positive diagonal and
-    K[2][2] = 1: the RQ decomposition of P's left 3x3). The degrees of freedom are counted from
-    these, not from the K stated: a stated K is checked against P only to P's rounding (1e-9 of
-    its largest entry, about 1e-6 px), which would let a K moved by 1e-6 px in each intrinsic,
-    its P unchanged, count every intrinsic as not shared (11 degrees of freedom, the allowance
-    withdrawn) and so judge cameras that fit within their true tolerance uncertifiable."""
-    M = np.asarray(P, dtype=float)[:, :3]
-    Q, U = np.linalg.qr(np.flipud(M).T)
-    K = np.flipud(np.fliplr(U.T))
-    K = K * np.sign(np.diag(K))[None, :]  # a positive diagonal (the rotation's rows flipped to match)
-    return K / K[2, 2]
 
 
 def _check_camera_fields(camera: dict, where: str) -> None:

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from geocert.solvers.core.geometry import is_number
 from geocert.solvers.core.strict import Invalid
 from geocert.verify.reconstruction_stages import MAX_FIGURE, _values
@@ -248,12 +250,26 @@ def _check_principal_point(stage: dict) -> None:
                                   "pass (chi2 above its threshold, inside the middle half, the simple model)")
 
 
+def intrinsics_of(P: Any) -> np.ndarray:
+    """The K a camera's P fixes (K [R | t] = P, K upper triangular with a positive diagonal and
+    K[2][2] = 1: the RQ decomposition of P's left 3x3). The degrees of freedom are counted from
+    these, not from the K stated: a stated K is checked against P only to P's rounding (1e-9 of
+    its largest entry, about 1e-6 px), which would let a K moved by 1e-6 px in each intrinsic,
+    its P unchanged, count every intrinsic as not shared (11 degrees of freedom, the allowance
+    withdrawn) and so judge cameras that fit within their true tolerance uncertifiable."""
+    M = np.asarray(P, dtype=float)[:, :3]
+    Q, U = np.linalg.qr(np.flipud(M).T)
+    K = np.flipud(np.fliplr(U.T))
+    K = K * np.sign(np.diag(K))[None, :]  # a positive diagonal (the rotation's rows flipped to match)
+    return K / K[2, 2]
+
+
 # pipeline.MAX_PRINCIPAL_POINT_SD_PX: the per-view principal points are kept only when the data fix
 # each to this (tests/verify/test_forgeries_review16.py checks the two agree)
 MAX_PRINCIPAL_POINT_SD_PX = 5.0
 # relative to the focal length: principal points further apart than this are each a view's own
 # (genuine ones differ by pixels; a K is tied to its P only to about 1e-9 of P, so the verifier
-# reads them off P: verify.reconstruction.intrinsics_of)
+# reads them off P: intrinsics_of)
 PER_VIEW_APART = 1e-6
 
 
@@ -264,8 +280,6 @@ def _check_principal_points_per_view(result: dict, stage: dict) -> None:
     (``precise``, every sd_px at most it), in the simple model; and the cameras returned (their
     P) have principal points of their own exactly when it was kept, after a simple-model
     adjustment (the other models share theirs, or set them from the image: "varying")."""
-    from geocert.verify.reconstruction import intrinsics_of
-
     test = stage.get("principal_point_per_view")
     estimated = isinstance(test, dict) and test.get("estimated") is True
     where = "stages/bundle_adjustment/principal_point_per_view"

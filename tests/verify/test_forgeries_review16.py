@@ -88,10 +88,10 @@ Left:
   by 1e-6 px (genuine proofs for those cameras) makes a document whose 11 degrees of freedom are
   true of its cameras. That is a new reconstruction, not an edit the verifier can see; a rule
   counting only differences the data could tell apart would need the kind to state the same.
-- options.principal_point and camera_model are outside problem_sha256 (hashed_options
-  .CLAIM_OPTIONS): they choose the camera model the degrees of freedom, and so the tolerances,
-  follow. The record is now tied to principal_point's echo, but the echo itself can be restated
-  with the record (a fourth hash form would cover them).
+- options.principal_point and camera_model were outside problem_sha256: they choose the camera
+  model the degrees of freedom, and so the tolerances, follow; the echo could be restated with
+  the record. Fixed after the review: the current hash form covers them (the second form's scope
+  states them, test_reconstruction_hash).
 """
 
 from __future__ import annotations
@@ -290,8 +290,14 @@ class TestPerViewRecordUntied:
 
     @pytest.mark.parametrize("option", ["centre", "auto"])
     def test_per_view_Ks_beside_another_principal_point_option_are_refused(self, per_view, option):
+        """The option restated: the hash covers it since (refused there); rehashed, as a forger
+        would, the per-view record and Ks beside it are refused."""
+        from tests.verify.test_forgeries import rehash
+
         forged = copy.deepcopy(per_view)
         forged["certificate"]["options"]["principal_point"] = option
+        assert "problem_sha256" in _refused(copy.deepcopy(forged))["detail"]
+        rehash(forged["certificate"])
         assert "principal_point_per_view" in _refused(forged)["detail"]
 
     def test_a_shared_K_beside_a_record_saying_estimated_is_refused(self, cancelled_in_the_cameras_stage, per_view):

@@ -16,10 +16,12 @@ document states for each, for the user to compare with their request. Every clai
 the values stated (a certified camera's tolerance from the camera_rel_gap stated, which its camera
 certificate must prove), so what the report says is true of the document.
 
-The second form (CLAIM_OPTIONS but resect_cameras and bundle_adjustment: SECOND_CLAIM_OPTIONS)
-left out the options that decide whether the cameras stage and the adjustment run: a cameras
-stage a cancel stopped could be restated "skipped" by resect_cameras, the echo restated false, and
-the hash stayed the request's. The hash covers them since (CLAIM_OPTIONS); documents of the second
+The second form (CLAIM_OPTIONS but resect_cameras, bundle_adjustment, camera_model and
+principal_point: SECOND_CLAIM_OPTIONS) left out the options that decide whether the cameras stage
+and the adjustment run, and those choosing the camera model whose intrinsics each camera's
+tolerance counts: a cameras stage a cancel stopped could be restated "skipped" by resect_cameras,
+the echo restated false, and the hash stayed the request's. The hash covers them since
+(CLAIM_OPTIONS); documents of the second
 form still verify, as those of the first do, the report's scope stating what the document states
 for each option its form leaves out (check_earlier_form: the first form's scope lists both sets).
 A document of either earlier form also states no free camera for a camera judged uncertifiable by
@@ -34,6 +36,7 @@ from typing import Any
 from geocert.solvers.core.certificates import CLAIM_OPTIONS as EARLIER_CLAIM_OPTIONS
 from geocert.solvers.core.strict import Invalid, number
 from geocert.solvers.reconstruction.camera_claim import MAX_REL_GAP
+from geocert.solvers.reconstruction.run_control import CAMERA_MODELS, PRINCIPAL_POINTS
 
 # What the earlier form left out, at the value a request naming none of them got while that form
 # was written (ReconstructionOptions' defaults then; tests/solvers/reconstruction/test_reconstruction_hash.py
@@ -42,9 +45,12 @@ EARLIER_DEFAULTS: dict[str, Any] = {"camera_rel_gap": 1e-2, "intrinsics": {}, "r
                                     "autocalibration": "stratified", "autocalibration_rel_gap": 1e-5,
                                     "metric_rel_gap": 1e-4}
 SECOND_CLAIM_OPTIONS = EARLIER_CLAIM_OPTIONS + tuple(EARLIER_DEFAULTS)
-# What the second form left out: the options deciding whether a stage runs, at their defaults
-# (ReconstructionOptions'; tests/solvers/reconstruction/test_reconstruction_hash.py checks they agree).
-SECOND_DEFAULTS: dict[str, Any] = {"resect_cameras": True, "bundle_adjustment": True}
+# What the second form left out, at the value a request naming none got while it was written: the
+# options deciding whether a stage runs, and those choosing the camera model whose intrinsics the
+# cameras' tolerances count (ReconstructionOptions' defaults then; tests/solvers/reconstruction/
+# test_reconstruction_hash.py checks they agree but for principal_point, "per_view" since).
+SECOND_DEFAULTS: dict[str, Any] = {"resect_cameras": True, "bundle_adjustment": True, "camera_model": "simple",
+                                   "principal_point": "auto"}
 CLAIM_OPTIONS = SECOND_CLAIM_OPTIONS + tuple(SECOND_DEFAULTS)
 RADIAL_DISTORTIONS = ("auto", "on", "off")
 AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")
@@ -59,7 +65,8 @@ def checked(options: dict) -> dict:
             out[name] = number(options[name], f"options/{name}", "options")
             if not 0 <= out[name] <= MAX_REL_GAP:
                 raise Invalid("options", f"options/{name} {out[name]!r} is beyond {MAX_REL_GAP}")
-    for name, words in (("radial_distortion", RADIAL_DISTORTIONS), ("autocalibration", AUTOCALIBRATION_METHODS)):
+    for name, words in (("radial_distortion", RADIAL_DISTORTIONS), ("autocalibration", AUTOCALIBRATION_METHODS),
+                        ("camera_model", CAMERA_MODELS), ("principal_point", PRINCIPAL_POINTS)):
         if options.get(name) is not None:
             if options[name] not in words:
                 raise Invalid("options", f"options/{name} must be one of {', '.join(words)}, not {options[name]!r:.40}")
@@ -69,7 +76,7 @@ def checked(options: dict) -> dict:
         raise Invalid("options", "options/intrinsics must be \"unknown\" or an object")
     if intrinsics is not None:
         out["intrinsics"] = intrinsics
-    for name in SECOND_DEFAULTS:
+    for name in ("resect_cameras", "bundle_adjustment"):
         if options.get(name) is not None:
             if not isinstance(options[name], bool):
                 raise Invalid("options", f"options/{name}: must be true or false, got {options[name]!r:.40}")
@@ -106,17 +113,20 @@ def check_earlier_form(options: dict) -> str:
     options only): the options that form does not cover, each as the document states it."""
     stated = _stated(options, {**EARLIER_DEFAULTS, **SECOND_DEFAULTS})
     return (f"the earlier form: it covers the kind, the data and {', '.join(EARLIER_CLAIM_OPTIONS)} only, not the "
-            f"options these claims also read, nor those deciding whether the adjustment and the cameras stage run, "
+            f"options these claims also read, nor those deciding whether the adjustment and the cameras stage run "
+            f"or choosing the camera model the cameras' tolerances count, "
             f"which the document states as: {'; '.join(stated)}. Compare them with your request: a hash of this form "
             "does not tell them from values changed after it was written")
 
 
 def check_second_form(options: dict) -> str:
     """What the report's scope says of a document hashed the second way (SECOND_CLAIM_OPTIONS):
-    the options deciding whether a stage runs, which it does not cover, as the document states them."""
+    the options deciding whether a stage runs and choosing the camera model, which it does not
+    cover, as the document states them."""
     stated = _stated(options, SECOND_DEFAULTS)
     return (f"the second form: it covers the kind, the data and {', '.join(SECOND_CLAIM_OPTIONS)}, not the options "
-            f"deciding whether the adjustment and the cameras stage run, which the document states as: "
+            f"deciding whether the adjustment and the cameras stage run, nor those choosing the camera model the "
+            f"cameras' tolerances count, which the document states as: "
             f"{'; '.join(stated)}. Compare them with your request: a hash of this form does not tell them from values "
             "changed after it was written (a stage a stop ended, restated as skipped by its option)")
 

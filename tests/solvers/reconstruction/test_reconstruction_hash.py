@@ -53,7 +53,7 @@ def test_the_hash_covers_every_option_a_claim_reads():
     options = checked_options("reconstruction", document["options"])
     for name, value in (("camera_rel_gap", 0.5), ("radial_distortion", "on"), ("intrinsics", "unknown"),
                         ("metric_rel_gap", 0.5), ("autocalibration_rel_gap", 0.5), ("resect_cameras", False),
-                        ("bundle_adjustment", False)):
+                        ("bundle_adjustment", False), ("camera_model", "varying"), ("principal_point", "centre")):
         changed = checked_options("reconstruction", {**document["options"], name: value})
         assert problem_hash("reconstruction", document["data"], changed, hashed_options.CLAIM_OPTIONS) \
             != problem_hash("reconstruction", document["data"], options, hashed_options.CLAIM_OPTIONS), name
@@ -149,8 +149,11 @@ def test_the_second_forms_defaults_are_the_options_defaults():
     from geocert.pipelines.reconstruction.options import ReconstructionOptions
 
     defaults = dataclasses.asdict(ReconstructionOptions())
-    assert {name: defaults[name] for name in hashed_options.SECOND_DEFAULTS} == hashed_options.SECOND_DEFAULTS
-    assert hashed_options.CLAIM_OPTIONS == hashed_options.SECOND_CLAIM_OPTIONS + ("resect_cameras", "bundle_adjustment")
+    # principal_point's default was "auto" while the second form was written ("per_view" since)
+    assert {**{name: defaults[name] for name in hashed_options.SECOND_DEFAULTS}, "principal_point": "auto"} \
+        == hashed_options.SECOND_DEFAULTS
+    assert hashed_options.CLAIM_OPTIONS == hashed_options.SECOND_CLAIM_OPTIONS + (
+        "resect_cameras", "bundle_adjustment", "camera_model", "principal_point")
 
 
 def test_a_second_form_at_the_defaults_verifies_and_says_so(at_defaults):
@@ -158,6 +161,21 @@ def test_a_second_form_at_the_defaults_verifies_and_says_so(at_defaults):
     assert report.valid, report.first_failure
     scope = report.scope["problem_sha256"]
     assert scope.startswith("the second form") and "resect_cameras True; bundle_adjustment True" in scope
+    # the camera model the tolerances count: principal_point's default then was "auto", "per_view" now
+    assert "camera_model 'simple'; principal_point 'per_view' (not its default)" in scope
+
+
+@pytest.mark.parametrize("name, value", [("principal_point", "auto"), ("camera_model", "varying")])
+def test_the_camera_model_restated_is_refused_by_the_hash(at_defaults, name, value):
+    """Review 16: the options choosing the camera model (whose intrinsics each camera's tolerance
+    counts) were outside problem_sha256; the current form covers them, so a document restating
+    them no longer hashes to the request's."""
+    result = copy.deepcopy(at_defaults)
+    assert result["certificate"]["options"][name] != value
+    result["certificate"]["options"][name] = value
+    report = verify_any(result)
+    assert not report.valid and report.first_failure["check"] == "data_hash" and \
+        "problem_sha256" in report.first_failure["detail"], report.first_failure
 
 
 def test_the_earliest_form_states_the_options_deciding_whether_a_stage_runs_too(at_defaults):
