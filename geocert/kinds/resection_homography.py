@@ -13,6 +13,7 @@ from geocert.kinds.documents import brief_certificate, certificate_summary, outc
 from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
 from geocert.solvers.fractional.inputs import check_correspondences
+from geocert.solvers.fractional.items import MAP_REGION_MEANING
 from geocert.verify.adapters import VERIFIED_KINDS
 from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.fractional.results import MapResult
@@ -66,12 +67,7 @@ def map_document(result: MapResult, detail: str = "full", full_certificate: bool
     reference = getattr(result.certificate, "reference", None)  # a search's (a bound with no search has no region)
     region = {"reference_point": reference} if reference is not None else {}
     certificate = brief_certificate(result, full_certificate) if detail == "brief" else certificate_summary(
-        result, region,
-        "lower <= (F l) / (d . l) <= upper for the last row l of every map of the scope costing less than the "
-        "search's cost cap (for a certified map: lower_bound, to within 1e-9 of it and the program's rounding), the "
-        "maps a search must exclude; not for every map of the scope. "
-        "F = functionals, d = denominator (the reference point, homogeneous)",
-        "every map that puts every point at positive depth")
+        result, region, MAP_REGION_MEANING, "every map that puts every point at positive depth")
     return {"matrix": result.matrix, "residuals": result.residuals, **outcome_document(result),
             "certificate": certificate}
 

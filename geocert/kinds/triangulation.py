@@ -12,7 +12,7 @@ from pydantic import BaseModel, Field
 from geocert.kinds.documents import brief_certificate, certificate_summary, local_summary, outcome_document
 from geocert.kinds.schema import Camera, CertificateDocument, ItemOutcome, JobBase, JobStats, Pixel, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, check_cameras, number_array
-from geocert.solvers.fractional.items import MAX_VIEWS, TRACKS
+from geocert.solvers.fractional.items import MAX_VIEWS, TRACK_REGION_MEANING, TRACKS
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.fractional.columns import SCOPE, TrackResults
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult
@@ -61,13 +61,7 @@ def track_document(result: TrackResult, detail: str = "full", full_certificate: 
     region = {"reference_view": result.certificate.reference} if isinstance(result.certificate, SearchCertificate) \
         else {}
     certificate = brief_certificate(result, full_certificate) if detail == "brief" else certificate_summary(
-        result, region,
-        "lower <= (F X) / (d . X) <= upper for every point X of the scope costing less than the search's cost cap "
-        "(for a certified item: lower_bound, to within 1e-9 of it and the program's rounding), the points a search "
-        "must exclude; not for every point of the scope. "
-        "F = functionals (one per direction the other views' depths vary along), "
-        "d = denominator (positive in front of the reference view)",
-        "every point in front of every camera")
+        result, region, TRACK_REGION_MEANING, "every point in front of every camera")
     return {"point": result.point, "at_infinity": result.at_infinity, **outcome_document(result),
             "certificate": certificate}
 

@@ -426,6 +426,9 @@ def _verify_all(document: dict, returned: dict | None, adapter, options: dict, i
                                   hashed=hashed) if check_result else None
             if isinstance(scoped, dict) and report.scope is not None:  # e.g. which labels are tied to the input
                 report.scope.update(scoped)
+            returned_scope = getattr(adapter, "returned_scope", None)  # e.g. root regions in earlier words
+            if returned_scope is not None and report.scope is not None:
+                report.scope.update(returned_scope())
             tallies["returned"][0] += 1
         except Invalid as exc:
             fail(exc.check, None, exc.detail)

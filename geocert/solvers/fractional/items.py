@@ -384,6 +384,52 @@ def figure_allowance(cost: float) -> float:
     return 1e-9 * max(1.0, abs(cost))
 
 
+# A search's root region in words (the kinds write them; the verifier refuses other words). The
+# earlier words (results written before they were corrected) claimed the box for every point
+# (map) of the scope; a root box holds only those that could cost less than the search's cost cap.
+# Stored documents hold them, so they still verify, and the report's scope says what they mean.
+TRACK_REGION_MEANING = (
+    "lower <= (F X) / (d . X) <= upper for every point X of the scope costing less than the search's cost cap "
+    "(for a certified item: lower_bound, to within 1e-9 of it and the program's rounding), the points a search "
+    "must exclude; not for every point of the scope. "
+    "F = functionals (one per direction the other views' depths vary along), "
+    "d = denominator (positive in front of the reference view)")
+TRACK_REGION_MEANING_EARLIER = (
+    "lower <= (F X) / (d . X) <= upper for every point X of the scope, "
+    "F = functionals (one per direction the other views' depths vary along), "
+    "d = denominator (positive in front of the reference view)")
+MAP_REGION_MEANING = (
+    "lower <= (F l) / (d . l) <= upper for the last row l of every map of the scope costing less than the "
+    "search's cost cap (for a certified map: lower_bound, to within 1e-9 of it and the program's rounding), the "
+    "maps a search must exclude; not for every map of the scope. "
+    "F = functionals, d = denominator (the reference point, homogeneous)")
+MAP_REGION_MEANING_EARLIER = (
+    "lower <= (F l) / (d . l) <= upper for the last row l of every map in the scope, "
+    "F = functionals, d = denominator (the reference point, homogeneous)")
+EARLIER_MEANING_SCOPE = ("the root_region of {items} states the earlier words (its box \"for every\" point or map of "
+                         "the scope); what its proof proves, and this report checks, is that the box holds every one "
+                         "costing less than the search's cost cap, not every one of the scope")
+
+
+def _region_words(where: str, region: dict, current: str, earlier: str, seen: list[str]) -> None:
+    """A root region's meaning is the solver's words: today's, or the earlier ones a stored
+    document may hold (``where`` then noted in ``seen``, for the report's scope); no other."""
+    meaning = region.get("meaning")
+    if meaning == earlier:
+        seen.append(where)
+    elif meaning != current:
+        raise Invalid("returned", f"{where}/certificate/root_region/meaning is not the solver's words for a root "
+                                  "region (the box holds what could cost less than the search's cost cap)")
+
+
+def earlier_words_scope(seen: list[str]) -> dict:
+    """The report's scope entry for root regions stated in the earlier words (none: {})."""
+    if not seen:
+        return {}
+    items = ", ".join(seen[:5]) + (f" and {len(seen) - 5} more" if len(seen) > 5 else "")
+    return {"root_region": EARLIER_MEANING_SCOPE.format(items=items)}
+
+
 class TrackItems:
     """The triangulation kind's verification adapter."""
 
@@ -398,9 +444,15 @@ class TrackItems:
         # they are read once, not once per track. The verifier forgets them at the start and end
         # of each document (forget()), so a list changed between two verifications is read anew.
         self._cameras: tuple[object, np.ndarray] | None = None
+        self.earlier_words: list[str] = []  # root regions stated in the earlier words (returned_scope)
 
     def forget(self) -> None:
         self._cameras = None
+        self.earlier_words = []
+
+    def returned_scope(self) -> dict:
+        """What the report's scope adds once the result is checked (root regions in earlier words)."""
+        return earlier_words_scope(self.earlier_words)
 
     def check_returned(self, result: dict, certificate: dict) -> None:
         """A track's determinacy may say proven only with the intervals its claim's proof proves:
@@ -446,6 +498,8 @@ class TrackItems:
             if region is not None:
                 raise Invalid("returned", f"{where}/certificate/root_region is stated, and its proof searched no box")
             return
+        if isinstance(region, dict):
+            _region_words(where, region, TRACK_REGION_MEANING, TRACK_REGION_MEANING_EARLIER, self.earlier_words)
         cameras, points = self.read(certificate["data"], index)
         chart = Chart.build(cameras, points, certificate["options"]["norm"])
         lower, upper = proof["search_box"]
@@ -530,6 +584,14 @@ class MapItems:
 
     def __init__(self, kind: str, dimensions: set[tuple[int, int]]):
         self.kind, self.dimensions = kind, dimensions
+        self.earlier_words: list[str] = []  # root regions stated in the earlier words (returned_scope)
+
+    def forget(self) -> None:
+        self.earlier_words = []
+
+    def returned_scope(self) -> dict:
+        """What the report's scope adds once the result is checked (root regions in earlier words)."""
+        return earlier_words_scope(self.earlier_words)
 
     def read(self, data: dict, index: int) -> tuple:
         if not isinstance(data, dict):
@@ -575,6 +637,8 @@ class MapItems:
             if region is not None:
                 raise Invalid("returned", f"{where}/certificate/root_region is stated, and its proof searched no box")
             return
+        if isinstance(region, dict):
+            _region_words(where, region, MAP_REGION_MEANING, MAP_REGION_MEANING_EARLIER, self.earlier_words)
         source, target = self.read(certificate["data"], index)
         chart = MapChart.build(source, target, certificate["options"]["norm"])
         lower, upper = proof["search_box"]
