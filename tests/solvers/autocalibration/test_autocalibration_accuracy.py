@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from geocert.solvers.autocalibration import frames, metric, scenes, stratified
-from geocert.solvers.autocalibration import metric_relaxation as mrelax
+from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as prob
 
 STARTS = 50
@@ -52,13 +52,13 @@ def metric_ends(problem, p, rng):
         f, aspect, s, u, v = k
         K = np.array([[f, s, u], [0.0, aspect * f, v], [0.0, 0.0, 1.0]])
         omega = K @ K.T
-        return np.array([omega[a, b] for a, b in mrelax.ENTRIES])
+        return np.array([omega[a, b] for a, b in metric_relaxation.ENTRIES])
 
     ends = []
     for _ in range(STARTS):
-        fit = least_squares(lambda k: mrelax.residuals(setup, w_of(k)), rng.uniform(lo, hi), bounds=(lo, hi),
+        fit = least_squares(lambda k: metric_relaxation.residuals(setup, w_of(k)), rng.uniform(lo, hi), bounds=(lo, hi),
                             method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=2000)
-        ends.append((mrelax.cost(setup, w_of(fit.x)), True))
+        ends.append((metric_relaxation.cost(setup, w_of(fit.x)), True))
     return ends
 
 

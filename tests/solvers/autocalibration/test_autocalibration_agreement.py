@@ -21,8 +21,8 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import direct, scenes
-from geocert.solvers.autocalibration import direct_relaxation as dr
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import direct_relaxation
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 from tests.support import HOUSE_RANGES, house_in_projective_frame, shared_data
 
 
@@ -180,7 +180,8 @@ class TestModelHouse:
         data, frame = house_in_projective_frame()
         results = {"stratified": solve(data, "stratified", intrinsics=cls.RANGES, time_limit_s=15.0),
                    "direct": solve(data, "direct", intrinsics=cls.RANGES, chirality="centers")}
-        problem = pr.prepare(np.array(data["cameras"]), np.array(data["points"]), (768, 576), cls.RANGES)
+        problem = autocalibration_problem.prepare(np.array(data["cameras"]), np.array(data["points"]), (768, 576),
+                                                  cls.RANGES)
         vgg = {"plane_at_infinity": frame.T @ np.array([0.0, 0.0, 0.0, 1.0]),
                "dual_absolute_quadric": np.linalg.solve(frame, np.linalg.solve(frame, np.diag([1.0, 1, 1, 0])).T)}
         return problem, results, vgg
@@ -190,8 +191,9 @@ class TestModelHouse:
         """((7.12) at the answer's quadric, the modulus cost at its plane)."""
         setup = direct.setup_for(problem, "none")
         Q = np.array(answer["dual_absolute_quadric"], dtype=float)
-        plane = pr.plane_from_input(problem, np.array(answer["plane_at_infinity"], dtype=float))
-        return dr.cost(setup.cameras, setup.from_input(Q / np.linalg.norm(Q))), pr.affine_cost(problem, plane)
+        plane = autocalibration_problem.plane_from_input(problem, np.array(answer["plane_at_infinity"], dtype=float))
+        return (direct_relaxation.cost(setup.cameras, setup.from_input(Q / np.linalg.norm(Q))),
+                autocalibration_problem.affine_cost(problem, plane))
 
     def test_only_the_direct_method_certifies_and_bounds_stay_below_costs(self, house):
         """The direct method certifies its quadric since its program is split (direct_solve.MAX_SPLITS):
