@@ -210,7 +210,7 @@ def test_the_focal_rows_make_seed_1008_certify(monkeypatch):
     """The same scene with the focal rows (direct.focal_rows): the nearly degenerate quadric that
     kept the lower half's relaxation at 3.27e-4 (eigenvalues 4.6e-6 to 0.999) breaks them, and the
     unsplit order-2 relaxation is rank one and tight at the best quadric (4.6433e-4, gap 1.7e-10,
-    measured 2026-11-24). Mutation: without the rows (focal_rows -> None) it is not certified.
+    measured). Mutation: without the rows (focal_rows -> None) it is not certified.
     Whether the splitting's last half ends "Solved" is the rounding's path: with the Schur
     complement assembled per moment (the default), certified on SkylakeX with one BLAS thread and
     not with two; assembled through the svec operator ("kron"), with both. The rows are what this

@@ -1,5 +1,5 @@
 """The direct method on a pixel-scale scene whose cameras all look at one point (an outside user's
-trial, 2026-11-24): without the focal rows (direct.focal_rows) the global minimum of (7.12) there
+trial): without the focal rows (direct.focal_rows) the global minimum of (7.12) there
 is a degenerate quadric with f -> 0 (7.3 px against 800), and with chirality "points" no rounded
 quadric was feasible. Also: the cameras' centres, the focal rows hold for every calibration within the ranges, exact
 scenes certify at the default abs_gap, and the verifier's message for a direct document."""
