@@ -199,7 +199,7 @@ class AutocalibrationVerification:
         H = p = None
         if result.get("plane_at_infinity") is not None:
             p = autocalibration_problem.plane_from_input(problem, _numbers(result["plane_at_infinity"],
-                                                                          "plane_at_infinity", (4,), "returned"))
+                                                                           "plane_at_infinity", (4,), "returned"))
         if p is not None and result.get("K") is not None:
             K = _numbers(result["K"], "K", (3, 3), "returned")
             H = autocalibration_problem.upgrade(problem, p, np.linalg.solve(problem.K0, K))
@@ -249,7 +249,7 @@ class AutocalibrationVerification:
                 if claim.get("plane_at_infinity") is None or (claim["index"] == 1 and claim.get("K") is None):
                     return None
                 p = autocalibration_problem.plane_from_input(problem, _numbers(claim["plane_at_infinity"],
-                                                                              "plane_at_infinity", (4,), "claim"))
+                                                                               "plane_at_infinity", (4,), "claim"))
                 if p is None:
                     return None  # a plane through the reference camera's centre costs nothing: none is stated
                 if claim["index"] == 0:

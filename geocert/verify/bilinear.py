@@ -220,7 +220,7 @@ def _check_baseline(index: int, given: Any, basis: np.ndarray, points: np.ndarra
     frame = problem.normalise(basis, points)
     with np.errstate(all="ignore"):
         M, a, t = problem.linear_baseline(frame.X, frame.u, options["norm"], options["coefficients"],
-                                     options["coefficient_bound"])
+                                          options["coefficient_bound"])
     expected = problem.to_raw(frame, M, t)
     expected_cost = problem.cost(problem.residuals(basis, points, expected, a), options["norm"])
     scale = max(float(np.max(np.abs(expected))), 1.0)

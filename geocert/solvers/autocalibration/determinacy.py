@@ -460,7 +460,7 @@ def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | Non
 
     def residuals(x, q=p):
         here = setup if q is p else metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, q,
-                                                     problem.unit_ranges)
+                                                                problem.unit_ranges)
         return metric_relaxation.residuals(here, x)[informative]
 
     J = numeric_jacobian(residuals, w)
