@@ -55,8 +55,8 @@ from scipy.optimize import least_squares  # noqa: E402
 
 from bench import machine_speed_ms  # noqa: E402
 from geocert.solvers.autocalibration import frames, metric, scenes, stratified  # noqa: E402
-from geocert.solvers.autocalibration import metric_relaxation as mrelax  # noqa: E402
-from geocert.solvers.autocalibration import problem as prob  # noqa: E402
+from geocert.solvers.autocalibration import metric_relaxation  # noqa: E402
+from geocert.solvers.autocalibration import problem as autocalibration_problem  # noqa: E402
 
 # Thesis Table 6.1: (noise %, views) -> (dp, df, duv, ds, pi_inf iterations (1), (2), omega* iterations).
 THESIS_61 = {
@@ -106,14 +106,14 @@ AFFINE_GAP, METRIC_GAP = 1e-5, 1e-4
 
 # --- the measures ---------------------------------------------------------------------------
 
-def plane_error(problem: prob.Problem, plane_input: np.ndarray, p: np.ndarray) -> float:
+def plane_error(problem: autocalibration_problem.Problem, plane_input: np.ndarray, p: np.ndarray) -> float:
     """Thesis 6.37 on the reference frame's p: sqrt(sum_i (p_i / p_i0 - 1)^2)."""
     reference = problem.norm.T0.T @ plane_input
     p0 = reference[:3] / reference[3]
     return float(np.sqrt(np.sum((p / p0 - 1.0) ** 2)))
 
 
-def plane_norm_error(problem: prob.Problem, plane_input: np.ndarray, p: np.ndarray) -> float:
+def plane_norm_error(problem: autocalibration_problem.Problem, plane_input: np.ndarray, p: np.ndarray) -> float:
     """|p - p0| / |p0| on the same p (6.37 divides by each component: large when one is near 0)."""
     reference = problem.norm.T0.T @ plane_input
     p0 = reference[:3] / reference[3]
@@ -151,15 +151,16 @@ def grid_deviations(points: np.ndarray, truth: np.ndarray, lines: list[list[int]
     return float(angle[parallel].mean()), float((90.0 - angle[perpendicular]).mean())
 
 
-def upgraded(problem: prob.Problem, p: np.ndarray, K_unit: np.ndarray, X: np.ndarray) -> np.ndarray:
-    H = prob.upgrade(problem, p, K_unit)
+def upgraded(problem: autocalibration_problem.Problem, p: np.ndarray, K_unit: np.ndarray, X: np.ndarray) -> np.ndarray:
+    H = autocalibration_problem.upgrade(problem, p, K_unit)
     Y = np.linalg.solve(H, X.T).T
     return Y[:, :3] / Y[:, 3:4]
 
 
 # --- local minimisation of the same costs ---------------------------------------------------
 
-def affine_local(problem: prob.Problem, regions, starts: int, rng: np.random.Generator) -> list[tuple[float, bool]]:
+def affine_local(problem: autocalibration_problem.Problem, regions, starts: int,
+                 rng: np.random.Generator) -> list[tuple[float, bool]]:
     """The modulus cost over p from random starts (uniform in the solver's chirality boxes, kept
     when chirality allows them); per start, (final cost, whether chirality allows the end)."""
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
@@ -169,18 +170,19 @@ def affine_local(problem: prob.Problem, regions, starts: int, rng: np.random.Gen
         for _ in range(200):
             region = regions[rng.integers(len(regions))]
             h = region.setup.M @ np.append(rng.uniform(region.lo, region.hi), 1.0)
-            if h[3] > 0 and prob.allowed_by_chirality(problem, h[:3] / h[3]):
+            if h[3] > 0 and autocalibration_problem.allowed_by_chirality(problem, h[:3] / h[3]):
                 p0 = h[:3] / h[3]
                 break
         if p0 is None:
             continue
         fit = least_squares(lambda p: frames.modulus_residuals(coef, p), p0, method="lm", xtol=1e-15, ftol=1e-15,
                             gtol=1e-15, max_nfev=2000)
-        out.append((prob.affine_cost(problem, fit.x), prob.allowed_by_chirality(problem, fit.x)))
+        out.append((autocalibration_problem.affine_cost(problem, fit.x),
+                    autocalibration_problem.allowed_by_chirality(problem, fit.x)))
     return out
 
 
-def intrinsics_bounds(problem: prob.Problem) -> tuple[np.ndarray, np.ndarray]:
+def intrinsics_bounds(problem: autocalibration_problem.Problem) -> tuple[np.ndarray, np.ndarray]:
     """(focal, aspect, skew, u, v) bounds: the intrinsics ranges, preconditioned."""
     r = problem.unit_ranges
     names = ("focal", "aspect", "skew", "u", "v")
@@ -192,10 +194,10 @@ def w_of(k: np.ndarray) -> np.ndarray:
     f, aspect, s, u, v = k
     K = np.array([[f, s, u], [0.0, aspect * f, v], [0.0, 0.0, 1.0]])
     omega = K @ K.T
-    return np.array([omega[a, b] for a, b in mrelax.ENTRIES])
+    return np.array([omega[a, b] for a, b in metric_relaxation.ENTRIES])
 
 
-def metric_local(problem: prob.Problem, p: np.ndarray, starts: int, rng: np.random.Generator
+def metric_local(problem: autocalibration_problem.Problem, p: np.ndarray, starts: int, rng: np.random.Generator
                  ) -> list[tuple[float, bool]]:
     """The metric cost (metric_relaxation.residuals of omega's five entries) from random starts,
     K uniform within the intrinsics ranges, minimised over K's five parameters within the ranges
@@ -205,9 +207,9 @@ def metric_local(problem: prob.Problem, p: np.ndarray, starts: int, rng: np.rand
     lo, hi = intrinsics_bounds(problem)
     out = []
     for _ in range(starts):
-        fit = least_squares(lambda k: mrelax.residuals(setup, w_of(k)), rng.uniform(lo, hi), bounds=(lo, hi),
+        fit = least_squares(lambda k: metric_relaxation.residuals(setup, w_of(k)), rng.uniform(lo, hi), bounds=(lo, hi),
                             method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=2000)
-        out.append((mrelax.cost(setup, w_of(fit.x)), True))
+        out.append((metric_relaxation.cost(setup, w_of(fit.x)), True))
     return out
 
 
@@ -235,8 +237,9 @@ def trial(task: tuple) -> dict:
         scene = scenes.make_scene(views, noise, seed=seed, grid_points=grid)
     else:
         scene = scenes.make_scene(views, noise, seed=seed)
-    problem = prob.prepare(scene.cameras, scene.points, scene.image_size, {})
-    options = prob.AutocalibrationOptions(rel_gap=AFFINE_GAP, metric_rel_gap=METRIC_GAP, time_limit_s=time_limit)
+    problem = autocalibration_problem.prepare(scene.cameras, scene.points, scene.image_size, {})
+    options = autocalibration_problem.AutocalibrationOptions(rel_gap=AFFINE_GAP, metric_rel_gap=METRIC_GAP,
+                                                             time_limit_s=time_limit)
     start = time.perf_counter()
     result = stratified.solve(problem, options)
     wall = time.perf_counter() - start
@@ -266,7 +269,8 @@ def trial(task: tuple) -> dict:
         out["baseline_psd"] = result.baseline["psd"]
         out["baseline_cost"] = result.baseline["cost"]
         try:
-            Kb = problem.K0 @ prob.upper_triangular_root(mrelax.omega_of(result.baseline["w"]))
+            Kb = problem.K0 @ autocalibration_problem.upper_triangular_root(
+                metric_relaxation.omega_of(result.baseline["w"]))
             out["baseline_df"], out["baseline_duv"], out["baseline_ds"] = k_errors(Kb, scene.K)
         except np.linalg.LinAlgError:
             pass

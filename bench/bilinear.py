@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from geocert.solvers.bilinear import problem as pb
+from geocert.solvers.bilinear import problem as bilinear_problem
 from geocert.solvers.bilinear.options import BilinearOptions
 from geocert.solvers.bilinear.search import fit_frame
 from testing.bilinear import scene, scip_bilinear
@@ -24,8 +24,8 @@ from testing.bilinear import scene, scip_bilinear
 def errors(basis, clean, camera, alpha, true_camera, true_alpha) -> dict:
     """The thesis's error measures (8.5.1): RMS reprojection error against the noiseless image,
     camera error relative to the true camera's norm, coefficient error, RMS 3D error."""
-    S, S_true = pb.shape_of(basis, alpha), pb.shape_of(basis, true_alpha)
-    image = pb.shape_of(basis, alpha) @ camera[:, :3].T + camera[:, 3]
+    S, S_true = bilinear_problem.shape_of(basis, alpha), bilinear_problem.shape_of(basis, true_alpha)
+    image = bilinear_problem.shape_of(basis, alpha) @ camera[:, :3].T + camera[:, 3]
     return {"reprojection": float(np.sqrt(np.mean(np.sum((image - clean) ** 2, axis=1)))),
             "camera": float(np.linalg.norm(camera - true_camera) / np.linalg.norm(true_camera)),
             "coefficients": float(np.sqrt(np.mean((alpha - true_alpha) ** 2))),
@@ -59,7 +59,7 @@ def nonrigid(frames: int = 240, points: int = 91, noise: float = 0.002, seed: in
         angle, tilt = 2 * math.pi * f / frames, 0.4 * math.sin(2 * math.pi * f / 80)
         R = _rotation(angle, tilt)
         camera = np.hstack([50 * R[:2], rng.uniform(-20, 20, (2, 1))])
-        S = pb.shape_of(basis, alpha)
+        S = bilinear_problem.shape_of(basis, alpha)
         image = S @ camera[:, :3].T + camera[:, 3] + rng.normal(size=(points, 2)) * noise * size
         data.append({"points": image.tolist()})
         truth.append(S)
@@ -114,7 +114,7 @@ def gap_anatomy(K: int = 20, N: int = 50, seed: int = 0) -> None:
     from geocert.solvers.core.conic import ReusableConicProgram
 
     basis, points, *_ = scene(K, N, 0.005, seed)
-    frame = pb.normalise(basis, points)
+    frame = bilinear_problem.normalise(basis, points)
     model = Model(frame, "L2L2", "convex", 10.0)
     M0, a0, _, value = root_incumbent(model)
     relaxation = Relaxation(frame.X, frame.u, "L2L2", "convex", 10.0)
@@ -210,7 +210,7 @@ def trajectory(N: int = 50, seed: int = 0, runs=((20, 10.0), (40, 60.0)), widths
         for t, nodes, open_, lower, upper, gap in shown:
             print(f"| {t:.1f} | {nodes} | {open_} | {lower:.4g} | {upper:.4g} | {gap:.2%} |")
         frame, relaxation, M0, value = _at_incumbent(K, N, seed)
-        root = pb.default_half_width(M0.reshape(2, 3))
+        root = bilinear_problem.default_half_width(M0.reshape(2, 3))
         solver = ReusableConicProgram(lean=False)
         gaps, box_cpu = [], []
         for h in widths:
@@ -239,7 +239,7 @@ def _at_incumbent(K: int, N: int, seed: int):
     from geocert.solvers.bilinear.search import Model, root_incumbent
 
     basis, points, *_ = scene(K, N, 0.005, seed)
-    frame = pb.normalise(basis, points)
+    frame = bilinear_problem.normalise(basis, points)
     M0, _, _, value = root_incumbent(Model(frame, "L2L2", "convex", 10.0))
     return frame, Relaxation(frame.X, frame.u, "L2L2", "convex", 10.0), M0.ravel(), value
 

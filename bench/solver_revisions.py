@@ -31,7 +31,7 @@ BILINEAR = ((5, 0, 30.0), (5, 1, 30.0), (10, 0, 30.0), (10, 1, 30.0), (20, 0, 10
 
 def stratified_rows() -> list[dict]:
     from geocert.solvers.autocalibration import affine, metric, scenes, stratified
-    from geocert.solvers.autocalibration import problem as prob
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
 
     cpu: dict[str, float] = {}
     for module, name in ((affine, "solve_affine"), (metric, "solve_metric")):
@@ -44,9 +44,9 @@ def stratified_rows() -> list[dict]:
     rows = []
     for seed in (1, 2, 3):
         scene = scenes.make_scene(20, 0.1, seed=seed)
-        problem = prob.prepare(scene.cameras, scene.points, scene.image_size, {})
-        result = stratified.solve(problem, prob.AutocalibrationOptions(rel_gap=1e-5, metric_rel_gap=1e-4,
-                                                                       time_limit_s=10))
+        problem = autocalibration_problem.prepare(scene.cameras, scene.points, scene.image_size, {})
+        result = stratified.solve(problem, autocalibration_problem.AutocalibrationOptions(
+            rel_gap=1e-5, metric_rel_gap=1e-4, time_limit_s=10))
         rows.append({"workload": "affine stage", "cpu": cpu["affine"], "nodes": result.affine.nodes,
                      "certified": bool(result.affine.certified), "status": result.affine.status})
         rows.append({"workload": "metric stage", "cpu": cpu["metric"], "nodes": result.metric.nodes,

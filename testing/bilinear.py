@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from geocert.solvers.bilinear import problem as pb
+from geocert.solvers.bilinear import problem
 
 
 def scene(K: int, N: int, noise: float, seed: int, outliers: float = 0.0, image: float = 100.0):
@@ -18,7 +18,7 @@ def scene(K: int, N: int, noise: float, seed: int, outliers: float = 0.0, image:
     alpha = rng.uniform(0, 1, K)
     alpha /= alpha.sum()
     camera = rng.uniform(-1, 1, (2, 4)) * image
-    clean = pb.shape_of(basis, alpha) @ camera[:, :3].T + camera[:, 3]
+    clean = problem.shape_of(basis, alpha) @ camera[:, :3].T + camera[:, 3]
     size = 2 * image
     points = clean + rng.normal(size=clean.shape) * noise * size
     bad = rng.choice(N, int(round(outliers * N)), replace=False)

@@ -17,8 +17,8 @@ from pydantic import BaseModel, Field
 from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document
 from geocert.kinds.documents import finite_or_none
 from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finite, JobBase, JobStats, Strict
-from geocert.solvers.autocalibration import metric_relaxation as mrelax
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import metric_relaxation
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import STAGES, outcome, read_data
 from geocert.solvers.core.determinacy import within
 from geocert.solvers.core.self_check import enabled as self_check_enabled
@@ -43,8 +43,8 @@ class IntrinsicsIn(Strict):
         None, description="[[u_lo, u_hi], [v_lo, v_hi]] pixels; default the middle half of the image")
 
 
-_DEFAULTS = pr.AutocalibrationOptions()
-_RANGES = pr.AutocalibrationOptions.OPTION_RANGES
+_DEFAULTS = autocalibration_problem.AutocalibrationOptions()
+_RANGES = autocalibration_problem.AutocalibrationOptions.OPTION_RANGES
 
 
 class AutocalibrationOptionsIn(Strict):
@@ -54,8 +54,9 @@ class AutocalibrationOptionsIn(Strict):
     metric_rel_gap: Finite = Field(_DEFAULTS.metric_rel_gap, **_RANGES["metric_rel_gap"],
                                    description="the metric stage's")
     abs_gap: Finite | None = Field(None, **_RANGES["abs_gap"],
-                                   description=f"default {pr.STRATIFIED_ABS_GAP:g} (stratified), "
-                                               f"{pr.DIRECT_ABS_GAP:g} (direct: its cost's units, problem.py)")
+                                   description=f"default {autocalibration_problem.STRATIFIED_ABS_GAP:g} (stratified), "
+                                               f"{autocalibration_problem.DIRECT_ABS_GAP:g} "
+                                               "(direct: its cost's units, problem.py)")
     max_nodes: int = Field(_DEFAULTS.max_nodes, **_RANGES["max_nodes"], description="per stage")
     time_limit_s: Finite = Field(_DEFAULTS.time_limit_s, **_RANGES["time_limit_s"], description="per stage")
     certificate: Literal["summary", "full"] = "summary"
@@ -159,7 +160,7 @@ class AutocalibrationKind:
                    "by a moment relaxation, certified when the relaxation is tight).")
     item_key = "stages"  # the certificate's claims; a job is one reconstruction
     chunk_size = 1
-    options_type = pr.AutocalibrationOptions
+    options_type = autocalibration_problem.AutocalibrationOptions
     request_model = AutocalibrationJob
     result_model = AutocalibrationResult
     solution_fields = ("plane_at_infinity", "K", "dual_absolute_quadric")  # the last: the direct stage's
@@ -175,18 +176,18 @@ class AutocalibrationKind:
         views, points = len(data.get("cameras") or ()), len(data.get("points") or ())
         return {"autocalibration_views": (views, "data/cameras"), "view_points": (views * points, "data/points")}
 
-    def check_options(self, parsed: Parsed, options: pr.AutocalibrationOptions) -> None:
+    def check_options(self, parsed: Parsed, options: autocalibration_problem.AutocalibrationOptions) -> None:
         """Every intrinsics range given or defaulted from data/image_size, and the direct method's
         chirality pairs counted (before the job is queued: the solve cannot start without them,
         and nothing is built past the size limits)."""
-        pr.resolve_ranges(options.intrinsics, parsed.image_size)
+        autocalibration_problem.resolve_ranges(options.intrinsics, parsed.image_size)
         if options.method == "direct":
             from geocert.solvers.autocalibration import direct
 
             direct.check_size(len(parsed.cameras), 0 if parsed.points is None else len(parsed.points),
                               options.chirality)
 
-    def time_bound_s(self, parsed: Parsed, options: pr.AutocalibrationOptions) -> float:
+    def time_bound_s(self, parsed: Parsed, options: autocalibration_problem.AutocalibrationOptions) -> float:
         return options.time_limit_s * (1 if options.method == "direct" else 2)  # per stage
 
     def count(self, parsed: Parsed) -> int:
@@ -195,7 +196,8 @@ class AutocalibrationKind:
     def observations(self, parsed: Parsed) -> int:
         return len(parsed.cameras) * (1 + (0 if parsed.points is None else len(parsed.points)))
 
-    def solve_item(self, parsed: Parsed, index: int, options: pr.AutocalibrationOptions, callback) -> dict:
+    def solve_item(self, parsed: Parsed, index: int, options: autocalibration_problem.AutocalibrationOptions,
+                   callback) -> dict:
         from geocert.solvers.autocalibration import stratified  # the conic solver, only to solve
 
         if options.method == "direct":  # thesis ch. 7: one stage
@@ -203,7 +205,7 @@ class AutocalibrationKind:
 
             return solve_document(parsed, options, callback)
         began = time.monotonic()
-        problem = pr.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
+        problem = autocalibration_problem.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
         checking = self_check_enabled()  # GEOCERT_SELF_VERIFY=1: proofs made, and checked below
         result = stratified.solve(problem, dataclasses.replace(options, certificate="full") if checking else options,
                                   callback)
@@ -214,7 +216,7 @@ class AutocalibrationKind:
             self_check_stages(parsed, options, item["stages"])
         return item
 
-    def cancelled_item(self, options: pr.AutocalibrationOptions) -> dict:
+    def cancelled_item(self, options: autocalibration_problem.AutocalibrationOptions) -> dict:
         """Never started: the stages of the job's method (the direct method's one, the stratified
         method's two), each cancelled."""
         stage = {"cost": None, "lower_bound": None, "gap": None, "status": "cancelled", "certified": False,
@@ -238,7 +240,8 @@ class AutocalibrationKind:
         return {"kind": self.name, "method": item.pop("method"), **outcome(item), **item, "stats": stats}
 
 
-def _prove_intervals(problem: pr.Problem, result, stage: dict, proof: dict, time_limit_s: float) -> None:
+def _prove_intervals(problem: autocalibration_problem.Problem, result, stage: dict, proof: dict,
+                     time_limit_s: float) -> None:
     """The metric stage's proven intervals at its determinacy's cost increase: into its proof
     (``sublevel``) and its determinacy (``proven_intervals``), when the search proves any."""
     from geocert.solvers.autocalibration import metric_sublevel
@@ -259,7 +262,8 @@ def _prove_intervals(problem: pr.Problem, result, stage: dict, proof: dict, time
     document["proven"] = True
 
 
-def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem: pr.Problem, result, full: bool,
+def stratified_item(parsed: Parsed, options: autocalibration_problem.AutocalibrationOptions,
+                    problem: autocalibration_problem.Problem, result, full: bool,
                     deadline: float | None = None, prove_intervals: bool = False) -> dict:
     """The job's item (the result's stages and solution) from a stratified solve of ``problem``
     (stratified.solve's result), with each certified stage's proof when ``full``: the kind's own
@@ -276,11 +280,11 @@ def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem:
                       "baseline": None}
     affine_cost = math.inf
     if a.plane is not None:
-        document["plane_at_infinity"] = pr.plane_in_input(problem, a.plane[:3]).tolist()
+        document["plane_at_infinity"] = autocalibration_problem.plane_in_input(problem, a.plane[:3]).tolist()
     if result.p is not None:  # the plane as returned, read back (None: through the reference camera's centre)
-        affine_cost = pr.affine_cost(problem, result.p)
+        affine_cost = autocalibration_problem.affine_cost(problem, result.p)
     status, certified, reason = a.status, a.certified, a.reason
-    if certified and (result.p is None or not pr.allowed_by_chirality(problem, result.p)):
+    if certified and (result.p is None or not autocalibration_problem.allowed_by_chirality(problem, result.p)):
         status, certified, reason = "not_certified", False, (
             "the plane returned is not strictly inside the chirality polytope" if result.p is not None
             else "the plane returned passes through the reference camera's centre")
@@ -300,21 +304,22 @@ def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem:
         K = K / K[2, 2]
         K[1, 0] = K[2, 0] = K[2, 1] = 0.0
         K[2, 2] = 1.0
-        setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, result.p, problem.unit_ranges)
-        w = pr.w_of_K(problem, K)
-        lo, hi = mrelax.omega_box(problem.unit_ranges)
-        inside = mrelax.in_domain(setup, w, lo, hi)
+        setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, result.p, problem.unit_ranges)
+        w = autocalibration_problem.w_of_K(problem, K)
+        lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
+        inside = metric_relaxation.in_domain(setup, w, lo, hi)
         metric_stage = stage_document("metric", m.status if inside or not m.certified else "not_certified",
-                                      m.certified and inside, mrelax.cost(setup, w), m.lower_bound, m.nodes,
+                                      m.certified and inside, metric_relaxation.cost(setup, w), m.lower_bound, m.nodes,
                                       result.metric_s, m.reason if inside else "the DIAC returned left its domain by rounding",
                                       options.metric_rel_gap, options.abs_gap,
                                       "every K within the intrinsics ranges, for the plane at infinity stated",
                                       proofs.encode_metric(m) if full and m.certified else None)
         metric_stage["K"] = K.tolist()
-        H = pr.upgrade(problem, result.p, np.linalg.solve(problem.K0, K))
-        document.update(K=K.tolist(), upgrade=H.tolist(), dual_absolute_quadric=pr.dual_absolute_quadric(H).tolist(),
-                        cameras=pr.metric_cameras(parsed.cameras, H))
-        document["points"] = pr.metric_points(H, parsed.points)
+        H = autocalibration_problem.upgrade(problem, result.p, np.linalg.solve(problem.K0, K))
+        document.update(K=K.tolist(), upgrade=H.tolist(),
+                        dual_absolute_quadric=autocalibration_problem.dual_absolute_quadric(H).tolist(),
+                        cameras=autocalibration_problem.metric_cameras(parsed.cameras, H))
+        document["points"] = autocalibration_problem.metric_points(H, parsed.points)
     metric_stage["plane_at_infinity"] = document["plane_at_infinity"]
     centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
     why = (f"the job's time limit (options.time_limit_s, {options.time_limit_s:g} s a stage) had passed, and "
@@ -334,8 +339,9 @@ def stratified_item(parsed: Parsed, options: pr.AutocalibrationOptions, problem:
             if left > 0:
                 _prove_intervals(problem, result, metric_stage, proof, min(options.time_limit_s, 20.0, left))
     if result.baseline is not None:
-        Kb = problem.K0 @ pr.upper_triangular_root(mrelax.omega_of(result.baseline["w"])) \
-            if np.linalg.eigvalsh(mrelax.omega_of(result.baseline["w"]))[0] > 0 else None
+        Kb = problem.K0 @ autocalibration_problem.upper_triangular_root(
+            metric_relaxation.omega_of(result.baseline["w"])) \
+            if np.linalg.eigvalsh(metric_relaxation.omega_of(result.baseline["w"]))[0] > 0 else None
         document["baseline"] = {"method": "linear", "K": None if Kb is None else (Kb / Kb[2, 2]).tolist(),
                                 "psd": result.baseline["psd"], "cost": finite_or_none(result.baseline["cost"])}
     stages = [affine_stage, metric_stage]

@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 
 from geocert.kinds.documents import finite_or_none
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import problem
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.core.self_check import SelfCheckFailed
 from geocert.verify.checks import verify_arrays
@@ -40,7 +40,7 @@ def stage_document(name: str, status: str, certified: bool, cost: float, lower: 
             "certified": certified, "nodes": nodes, "elapsed_s": elapsed, "reason": reason, "certificate": summary}
 
 
-def self_check_stages(parsed, options: pr.AutocalibrationOptions, stages: list[dict]) -> None:
+def self_check_stages(parsed, options: problem.AutocalibrationOptions, stages: list[dict]) -> None:
     """Every certified stage checked by the verifier before it is returned (GEOCERT_SELF_VERIFY=1),
     as the other kinds' items are; the proofs are dropped afterwards unless asked for."""
     arrays = (parsed.cameras, parsed.points, parsed.image_size)

@@ -12,7 +12,7 @@ from pydantic import BaseModel, Field
 from geocert.kinds.documents import finite_or_none, outcome_document
 from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Pixel, Strict
 from geocert.solvers.bilinear import determinacy
-from geocert.solvers.bilinear import problem as pb
+from geocert.solvers.bilinear import problem
 from geocert.solvers.bilinear.options import BilinearOptions
 from geocert.verify.bilinear import FRAMES
 from geocert.solvers.core.determinacy import safely
@@ -142,7 +142,7 @@ class BilinearKind:
         {"points": [[-20.02, -9.14], [-47.24, 42.27], [-68.68, 121.9], None, [-39.32, -5.13], [-47.46, 20.34], [-18.17, -48.25], [23.77, -32.24], [-43.92, 61.55], [-42.69, -10.68]]}]}}
 
     def parse(self, data: Any, items: range | None = None) -> ParsedFrames:
-        return ParsedFrames(*pb.read_data(data, items))
+        return ParsedFrames(*problem.read_data(data, items))
 
     @staticmethod
     def request_figures(data: dict) -> dict:

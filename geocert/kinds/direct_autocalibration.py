@@ -12,8 +12,8 @@ import numpy as np
 
 from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document
 from geocert.solvers.autocalibration import direct
-from geocert.solvers.autocalibration import direct_relaxation as dr
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import direct_relaxation
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 
 SCOPE = ("every absolute dual quadric Q (trace 1 in the program's frame) positive semidefinite of rank 3 "
          "whose views' DIACs w = P Q P' keep (w11 + w22) / w33 within what the intrinsics ranges allow "
@@ -27,10 +27,10 @@ def returned_quadric(setup: direct.DirectSetup, Q: np.ndarray) -> tuple[list, fl
     """Q in the input frame as the result states it (JSON floats), and its cost recomputed from
     that, as the verifier does."""
     Q_in = setup.to_input(Q).tolist()
-    return Q_in, dr.cost(setup.cameras, setup.from_input(np.array(Q_in)))
+    return Q_in, direct_relaxation.cost(setup.cameras, setup.from_input(np.array(Q_in)))
 
 
-def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict:
+def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptions, callback) -> dict:
     from geocert.solvers.autocalibration import direct_solve
     from geocert.solvers.autocalibration.stratified import announce
     from geocert.solvers.core.bnb import asks_to_stop
@@ -43,13 +43,13 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
     def check() -> None:
         """Between programs and interior-point iterations: a cancel, or the stage's time limit."""
         elapsed = time.perf_counter() - began
-        if asks_to_stop(callback, pr.StageProgress(0, 0, -math.inf, math.inf, math.inf, math.inf, elapsed,
-                                                   stage="direct")):
+        if asks_to_stop(callback, autocalibration_problem.StageProgress(0, 0, -math.inf, math.inf, math.inf, math.inf,
+                                                                        elapsed, stage="direct")):
             raise direct_solve.Stopped("cancelled", "the job was cancelled")
         if elapsed > options.time_limit_s:
             raise direct_solve.Stopped("time_limit", f"stopped at options.time_limit_s ({options.time_limit_s:g} s)")
 
-    problem = pr.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
+    problem = autocalibration_problem.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
     setup = direct.setup_for(problem, options.chirality)
     checking = self_check_enabled()
     full = options.certificate == "full" or checking
@@ -85,7 +85,7 @@ def solve_document(parsed, options: pr.AutocalibrationOptions, callback) -> dict
         from geocert.solvers.autocalibration import determinacy
         from geocert.solvers.core.determinacy import within
 
-        p = pr.plane_from_input(problem, np.array(document["plane_at_infinity"]))
+        p = autocalibration_problem.plane_from_input(problem, np.array(document["plane_at_infinity"]))
         centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
         why = (f"the job's time limit (options.time_limit_s, {options.time_limit_s:g} s) had passed, and "
                f"{ANALYSIS_GRACE_S:g} s more")

@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.autocalibration import metric_relaxation as mrelax
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import metric_relaxation
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration import proofs, structure_check
 from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.determinacy import proven_document
@@ -108,14 +108,15 @@ class AutocalibrationVerification:
         checked = {name: options.get(name) for name in CLAIM_OPTIONS}
         for name in ("rel_gap", "metric_rel_gap", "abs_gap"):
             checked[name] = _number(checked[name], f"options/{name}", "options")
-        defaults = pr.AutocalibrationOptions()
+        defaults = autocalibration_problem.AutocalibrationOptions()
         for name in ("chirality", "varying_focal", "relaxation_order"):  # documents made before the direct method
             if checked[name] is None and checked["method"] == "stratified":
                 checked[name] = getattr(defaults, name)
         try:
             # the run-control options stated too (not hashed: a node limit of 0 states a run that never was)
-            run = residual_claims.run_control_values(pr.AutocalibrationOptions, options)
-            pr.AutocalibrationOptions(**{**checked, "intrinsics": dict(checked["intrinsics"] or {}), **run}).check()
+            run = residual_claims.run_control_values(autocalibration_problem.AutocalibrationOptions, options)
+            autocalibration_problem.AutocalibrationOptions(
+                **{**checked, "intrinsics": dict(checked["intrinsics"] or {}), **run}).check()
         except (InputError, TypeError) as exc:
             raise Invalid("options", str(exc)) from exc
         return checked
@@ -188,7 +189,8 @@ class AutocalibrationVerification:
         try:
             cameras, points, image_size = read_data(certificate["data"])
             options = certificate["options"]
-            problem = pr.prepare(cameras, points, image_size, dict(options.get("intrinsics") or {}))
+            problem = autocalibration_problem.prepare(cameras, points, image_size,
+                                                      dict(options.get("intrinsics") or {}))
         except (InputError, TypeError, ValueError) as exc:
             raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
         if result.get("method") != options.get("method") or not _ranges_stated(result, problem):
@@ -196,13 +198,15 @@ class AutocalibrationVerification:
         derived = {"upgrade": None, "dual_absolute_quadric": None, "cameras": None, "points": None}
         H = p = None
         if result.get("plane_at_infinity") is not None:
-            p = pr.plane_from_input(problem, _numbers(result["plane_at_infinity"], "plane_at_infinity", (4,),
-                                                      "returned"))
+            p = autocalibration_problem.plane_from_input(problem, _numbers(result["plane_at_infinity"],
+                                                                           "plane_at_infinity", (4,), "returned"))
         if p is not None and result.get("K") is not None:
             K = _numbers(result["K"], "K", (3, 3), "returned")
-            H = pr.upgrade(problem, p, np.linalg.solve(problem.K0, K))
-            derived = {"upgrade": H.tolist(), "dual_absolute_quadric": pr.dual_absolute_quadric(H).tolist(),
-                       "cameras": pr.metric_cameras(cameras, H), "points": pr.metric_points(H, points)}
+            H = autocalibration_problem.upgrade(problem, p, np.linalg.solve(problem.K0, K))
+            derived = {"upgrade": H.tolist(),
+                       "dual_absolute_quadric": autocalibration_problem.dual_absolute_quadric(H).tolist(),
+                       "cameras": autocalibration_problem.metric_cameras(cameras, H),
+                       "points": autocalibration_problem.metric_points(H, points)}
         for name, expected in derived.items():
             if not _derived_close(name, result.get(name), expected, cameras, points, H):
                 raise Invalid("returned", f"{name} is not what the plane at infinity and K give")
@@ -229,30 +233,32 @@ class AutocalibrationVerification:
         stage's has; None when the stage returns none."""
         try:
             cameras, points, image_size = read_data(data)
-            problem = pr.prepare(cameras, points, image_size, dict(options["intrinsics"] or {}))
+            problem = autocalibration_problem.prepare(cameras, points, image_size, dict(options["intrinsics"] or {}))
         except InputError as exc:
             raise Invalid("data", f"{exc.field}: {exc.reason}") from exc
         with np.errstate(all="ignore"):
             if options["method"] == "direct":
-                from geocert.solvers.autocalibration import direct_relaxation as dr
+                from geocert.solvers.autocalibration import direct_relaxation
 
                 if claim.get("dual_absolute_quadric") is None:
                     return None
                 Q = _numbers(claim["dual_absolute_quadric"], "dual_absolute_quadric", (4, 4), "claim")
                 setup = _direct_setup(problem, options)
-                cost = dr.cost(setup.cameras, setup.from_input(Q))
+                cost = direct_relaxation.cost(setup.cameras, setup.from_input(Q))
             else:
                 if claim.get("plane_at_infinity") is None or (claim["index"] == 1 and claim.get("K") is None):
                     return None
-                p = pr.plane_from_input(problem, _numbers(claim["plane_at_infinity"], "plane_at_infinity", (4,),
-                                                          "claim"))
+                p = autocalibration_problem.plane_from_input(problem, _numbers(claim["plane_at_infinity"],
+                                                                               "plane_at_infinity", (4,), "claim"))
                 if p is None:
                     return None  # a plane through the reference camera's centre costs nothing: none is stated
                 if claim["index"] == 0:
-                    cost = pr.affine_cost(problem, p)
+                    cost = autocalibration_problem.affine_cost(problem, p)
                 else:
-                    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
-                    cost = mrelax.cost(setup, pr.w_of_K(problem, _numbers(claim["K"], "K", (3, 3), "claim")))
+                    setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p,
+                                                        problem.unit_ranges)
+                    cost = metric_relaxation.cost(
+                        setup, autocalibration_problem.w_of_K(problem, _numbers(claim["K"], "K", (3, 3), "claim")))
         cost = float(cost)
         if not np.isfinite(cost):
             raise Invalid("objective", "the stage's solution has no finite cost")
@@ -270,13 +276,13 @@ class AutocalibrationVerification:
                     passed: list) -> tuple[float, float]:
         cameras, points, image_size = arrays
         try:
-            problem = pr.prepare(cameras, points, image_size, dict(options["intrinsics"] or {}))
+            problem = autocalibration_problem.prepare(cameras, points, image_size, dict(options["intrinsics"] or {}))
         except InputError as exc:
             raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
         if options["method"] == "direct":
             return _check_direct(problem, arrays, options, claim, claimed, passed), options["metric_rel_gap"]
         plane = _numbers(claim.get("plane_at_infinity"), "plane_at_infinity", (4,), "claim")
-        p = pr.plane_from_input(problem, plane)
+        p = autocalibration_problem.plane_from_input(problem, plane)
         if p is None:
             raise Invalid("objective", "the plane at infinity passes through the reference camera's centre")
         proof = claim.get("proof")
@@ -285,10 +291,10 @@ class AutocalibrationVerification:
         if claim["index"] == 0:
             if proof.get("type") != "stratified_affine":
                 raise Invalid("format", "stage 0 takes a stratified_affine proof")
-            cost = pr.affine_cost(problem, p)
+            cost = autocalibration_problem.affine_cost(problem, p)
             _check_cost(cost, claimed)
             passed.append("objective")
-            if not pr.allowed_by_chirality(problem, p):
+            if not autocalibration_problem.allowed_by_chirality(problem, p):
                 raise Invalid("scope", "the plane at infinity returned is not one chirality allows")
             passed.append("scope")
             return proofs.check_affine(problem, proof, lower_claimed, claimed, passed), options["rel_gap"]
@@ -299,13 +305,13 @@ class AutocalibrationVerification:
             # the proof is about K K^T, whose one upper-triangular root with a positive diagonal is
             # the K the intrinsics ranges (checked on K K^T by in_domain) are about
             raise Invalid("claim", "K must be upper triangular with K[2][2] = 1 and a positive diagonal")
-        w = pr.w_of_K(problem, K)
-        setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
-        lo, hi = mrelax.omega_box(problem.unit_ranges)
-        cost = mrelax.cost(setup, w)
+        w = autocalibration_problem.w_of_K(problem, K)
+        setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+        lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
+        cost = metric_relaxation.cost(setup, w)
         _check_cost(cost, claimed)
         passed.append("objective")
-        if not mrelax.in_domain(setup, w, lo, hi):
+        if not metric_relaxation.in_domain(setup, w, lo, hi):
             raise Invalid("scope", "the DIAC returned is outside the domain (box, PSD, or a view's scale range)")
         passed.append("scope")
         return proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed, cost), options["metric_rel_gap"]
@@ -375,7 +381,7 @@ def _check_baseline(given: Any, problem, p) -> None:
     setup = None
     if p is not None:
         try:
-            setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+            setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
         except (ValueError, np.linalg.LinAlgError):
             setup = None
     if setup is None or not np.all(setup.q_lower > 0):
@@ -384,19 +390,19 @@ def _check_baseline(given: Any, problem, p) -> None:
             or not isinstance(given["psd"], bool):
         raise Invalid("returned", "baseline must be the linear estimate: method, K, psd, cost")
     with np.errstate(all="ignore"):
-        w, psd = mrelax.linear_baseline(setup)
-        omega = mrelax.omega_of(w)
-        expected_cost = mrelax.cost(setup, w)
+        w, psd = metric_relaxation.linear_baseline(setup)
+        omega = metric_relaxation.omega_of(w)
+        expected_cost = metric_relaxation.cost(setup, w)
     expected_K = None
     if np.linalg.eigvalsh(omega)[0] > 0:
-        K = problem.K0 @ pr.upper_triangular_root(omega)
+        K = problem.K0 @ autocalibration_problem.upper_triangular_root(omega)
         expected_K = K / K[2, 2]
     if given["psd"] != psd or (given["K"] is None) != (expected_K is None):
         raise Invalid("returned", "baseline: psd or K is not what the linear estimate gives")
     cost = _number(given["cost"], "baseline/cost", "returned")
     if expected_K is not None:
         K = _numbers(given["K"], "baseline/K", (3, 3), "returned")
-        own = mrelax.cost(setup, pr.w_of_K(problem, K))
+        own = metric_relaxation.cost(setup, autocalibration_problem.w_of_K(problem, K))
         if not (np.all(np.abs(K - expected_K) <= BASELINE_TOLERANCE * float(np.max(np.abs(expected_K))))
                 and abs(cost - own) <= BASELINE_TOLERANCE * max(abs(own), 1e-12)):
             raise Invalid("returned", "baseline: K is not the linear estimate, or its cost not what K costs")
@@ -419,7 +425,7 @@ def _direct_setup(problem, options: dict):
 def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, passed: list) -> float:
     """The direct stage: the quadric's cost and scope, what it gives, and the moment proof."""
     from geocert.solvers.autocalibration import direct
-    from geocert.solvers.autocalibration import direct_relaxation as dr
+    from geocert.solvers.autocalibration import direct_relaxation
 
     if claim["index"] != 0:
         raise Invalid("format", "the direct method has one stage (0)")
@@ -431,7 +437,7 @@ def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, p
         raise Invalid("claim", "dual_absolute_quadric must be symmetric with a nonzero trace")
     setup = _direct_setup(problem, options)
     Q = setup.from_input(Q_in)
-    _check_cost(dr.cost(setup.cameras, Q), claimed)
+    _check_cost(direct_relaxation.cost(setup.cameras, Q), claimed)
     passed.append("objective")
     bound, excluded = direct.check_proof(setup, proof, options["relaxation_order"])
     if not direct.in_domain(setup, Q, excluded):
@@ -468,7 +474,7 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
     options = certificate["options"]
     try:
         cameras, points, image_size = read_data(certificate["data"])
-        problem = pr.prepare(cameras, points, image_size, dict(options.get("intrinsics") or {}))
+        problem = autocalibration_problem.prepare(cameras, points, image_size, dict(options.get("intrinsics") or {}))
     except (InputError, TypeError, ValueError) as exc:
         raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
     if result.get("method") != "direct" or not _ranges_stated(result, problem):

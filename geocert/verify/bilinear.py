@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.bilinear import problem as pb
+from geocert.solvers.bilinear import problem
 from geocert.solvers.bilinear.options import BilinearOptions
 from geocert.solvers.bilinear.relaxation import Relaxation, tightening_objective, with_cost_cap
 from geocert.solvers.core.bnb import Box
@@ -89,11 +89,11 @@ class BilinearVerification:
         try:
             remembered = self._basis
             if remembered is None or remembered[0] is not data.get("basis"):
-                basis, _ = pb.read_data(data, range(0))
+                basis, _ = problem.read_data(data, range(0))
                 basis.setflags(write=False)
                 self._basis = remembered = (data.get("basis"), basis)
             basis = remembered[1]
-            return basis, pb.read_frame(frames[index], index, basis.shape[1], basis.shape[0])
+            return basis, problem.read_frame(frames[index], index, basis.shape[1], basis.shape[0])
         except InputError as exc:
             raise Invalid("data", f"{exc.field}: {exc.reason}") from exc
 
@@ -103,11 +103,11 @@ class BilinearVerification:
         K = basis.shape[0]
         camera = _numbers(claim.get("camera"), "camera", (2, 4), "claim")
         alpha = _numbers(claim.get("coefficients"), "coefficients", (K,), "claim")
-        cost = pb.cost(pb.residuals(basis, points, camera, alpha), options["norm"])
+        cost = problem.cost(problem.residuals(basis, points, camera, alpha), options["norm"])
         if not abs(cost - claimed) <= OBJECTIVE_TOLERANCE * abs(cost) + 1e-300:
             raise Invalid("objective", f"the solution costs {cost!r}, the certificate claims {claimed!r}")
         passed.append("objective")
-        if not pb.feasible_coefficients(alpha, options["coefficients"], options["coefficient_bound"]):
+        if not problem.feasible_coefficients(alpha, options["coefficients"], options["coefficient_bound"]):
             raise Invalid("scope", "the coefficients are not in the coefficient set (sum 1 within 1e-12 per "
                                    "coefficient; convex: non-negative; affine: within coefficient_bound)")
         proof = claim.get("proof")
@@ -130,7 +130,7 @@ class BilinearVerification:
         camera = _numbers(claim["camera"], "camera", (2, 4), "claim")
         alpha = _numbers(claim["coefficients"], "coefficients", (basis.shape[0],), "claim")
         with np.errstate(all="ignore"):
-            cost = float(pb.cost(pb.residuals(basis, points, camera, alpha), options["norm"]))
+            cost = float(problem.cost(problem.residuals(basis, points, camera, alpha), options["norm"]))
         if not np.isfinite(cost):
             raise Invalid("objective", "the camera returned has no finite cost on its points")
         return cost, OBJECTIVE_TOLERANCE * abs(cost) + 1e-300
@@ -168,7 +168,7 @@ class BilinearVerification:
                     raise Invalid("returned", f"frames/{claim['index']}/certificate/root_region is not the camera box its "
                                               "proof covers (the scope)")
         try:
-            basis, frames = pb.read_data(certificate["data"])
+            basis, frames = problem.read_data(certificate["data"])
         except InputError as exc:
             raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
         if result.get("coefficients") != certificate["options"].get("coefficients"):
@@ -187,9 +187,9 @@ class BilinearVerification:
             camera = _numbers(item["camera"], f"frames/{index}/camera", (2, 4), "returned")
             alpha = _numbers(item["coefficients"], f"frames/{index}/coefficients", (basis.shape[0],), "returned")
             shape = _numbers(item.get("shape"), f"frames/{index}/shape", (basis.shape[1], 3), "returned")
-            if not np.allclose(shape, pb.shape_of(basis, alpha), rtol=1e-9, atol=1e-12):
+            if not np.allclose(shape, problem.shape_of(basis, alpha), rtol=1e-9, atol=1e-12):
                 raise Invalid("returned", f"frames/{index}/shape is not the coefficients' combination of the basis")
-            r = pb.residuals(basis, points, camera, alpha)
+            r = problem.residuals(basis, points, camera, alpha)
             given = item.get("residuals")
             if not isinstance(given, list) or len(given) != len(r) or any(
                     (g is None) != bool(np.isnan(row[0])) or (g is not None and not (
@@ -214,15 +214,15 @@ def _check_baseline(index: int, given: Any, basis: np.ndarray, points: np.ndarra
     camera = _numbers(given["camera"], f"{where}/camera", (2, 4), "returned")
     alpha = _numbers(given["coefficients"], f"{where}/coefficients", (basis.shape[0],), "returned")
     cost = _number(given["cost"], f"{where}/cost", "returned")
-    own = pb.cost(pb.residuals(basis, points, camera, alpha), options["norm"])
+    own = problem.cost(problem.residuals(basis, points, camera, alpha), options["norm"])
     if not abs(cost - own) <= 1e-9 * max(abs(own), 1.0):
         raise Invalid("returned", f"{where}/cost is not what its camera and coefficients cost ({own!r})")
-    frame = pb.normalise(basis, points)
+    frame = problem.normalise(basis, points)
     with np.errstate(all="ignore"):
-        M, a, t = pb.linear_baseline(frame.X, frame.u, options["norm"], options["coefficients"],
-                                     options["coefficient_bound"])
-    expected = pb.to_raw(frame, M, t)
-    expected_cost = pb.cost(pb.residuals(basis, points, expected, a), options["norm"])
+        M, a, t = problem.linear_baseline(frame.X, frame.u, options["norm"], options["coefficients"],
+                                          options["coefficient_bound"])
+    expected = problem.to_raw(frame, M, t)
+    expected_cost = problem.cost(problem.residuals(basis, points, expected, a), options["norm"])
     scale = max(float(np.max(np.abs(expected))), 1.0)
     if not (np.all(np.abs(camera - expected) <= BASELINE_TOLERANCE * scale)
             and np.all(np.abs(alpha - a) <= BASELINE_TOLERANCE * max(float(np.max(np.abs(a))), 1.0))
@@ -235,8 +235,8 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
     """The lower bound (caller's units) a bilinear_bnb proof establishes."""
     norm, K = options["norm"], basis.shape[0]
     _record(proof, "proof", ("type", "camera_box", "tightening", "node_tightening", "proofs", "leaves"))
-    frame = pb.normalise(basis, points)
-    unit = pb.cost_unit(frame, norm)
+    frame = problem.normalise(basis, points)
+    unit = problem.cost_unit(frame, norm)
     # Only points costing less than the claimed lower bound need excluding (as for the other kinds).
     cap = max(0.0, lower_claimed / unit * (1 - BOUND_TOLERANCE))
     scale = frame.camera_scale
@@ -244,7 +244,7 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
     scope_lo, scope_hi = scope_lo / scale, scope_hi / scale  # powers of two: exact
     M = camera[:, :3].ravel() / scale
     # without camera_bound, the box the options give is the default box of the camera returned
-    bound = pb.default_half_width(M) if options["camera_bound"] is None else options["camera_bound"] / scale
+    bound = problem.default_half_width(M) if options["camera_bound"] is None else options["camera_bound"] / scale
     if not (np.all(scope_lo <= -bound) and np.all(scope_hi >= bound)):
         raise Invalid("scope", "the camera box does not contain the box camera_bound states" if
                       options["camera_bound"] is not None else "the camera box does not contain the default box of "

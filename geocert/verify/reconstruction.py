@@ -645,7 +645,7 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
     reconstruction the pipeline upgraded: it proves K optimal for that reconstruction, which
     calibration_tie ties to the result (ReconstructionItems.check_result, once for any result
     carrying a calibration certificate; the scope states how closely)."""
-    from geocert.solvers.autocalibration import problem as pr
+    from geocert.solvers.autocalibration import problem
 
     document = result.get("calibration_certificate")
     if not isinstance(document, dict) or document.get("kind") != "autocalibration":
@@ -693,7 +693,7 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
                                                                         and given["lower_bound"] <= given["cost"]):
             raise Invalid("returned", f"stages/autocalibration/stages/{k} is not the calibration certificate's claim")
     size = data.get("image_size")
-    return pr.resolve_ranges(dict(options.get("intrinsics") or {}), None if size is None else tuple(size))
+    return problem.resolve_ranges(dict(options.get("intrinsics") or {}), None if size is None else tuple(size))
 
 
 def _judged_motion(result: dict, registered: list[dict], summary: dict, stage: dict) -> tuple[str | None, bool]:

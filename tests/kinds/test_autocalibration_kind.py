@@ -243,25 +243,27 @@ class TestOxfordModelHouse:
     def test_the_affine_answer_is_no_worse_than_local_starts(self, house):
         from scipy.optimize import minimize
 
-        from geocert.solvers.autocalibration import problem as pr
+        from geocert.solvers.autocalibration import problem as autocalibration_problem
 
         data, frame, result = house
-        problem = pr.prepare(np.array(data["cameras"]), np.array(data["points"]), (768, 576), self.RANGES)
-        returned = pr.affine_cost(problem, pr.plane_from_input(problem, np.array(result["plane_at_infinity"])))
+        problem = autocalibration_problem.prepare(np.array(data["cameras"]), np.array(data["points"]), (768, 576),
+                                                  self.RANGES)
+        plane = autocalibration_problem.plane_from_input(problem, np.array(result["plane_at_infinity"]))
+        returned = autocalibration_problem.affine_cost(problem, plane)
         assert returned == pytest.approx(result["stages"][0]["cost"], rel=1e-9)
-        vgg = pr.plane_from_input(problem, frame.T @ np.array([0.0, 0.0, 0.0, 1.0]))
+        vgg = autocalibration_problem.plane_from_input(problem, frame.T @ np.array([0.0, 0.0, 0.0, 1.0]))
         rng = np.random.default_rng(1)
         found = []
         for _ in range(30):
             start = vgg + rng.standard_normal(3) * rng.uniform(0.01, 0.3)
-            fit = minimize(lambda p: pr.affine_cost(problem, p), start, method="Nelder-Mead",
+            fit = minimize(lambda p: autocalibration_problem.affine_cost(problem, p), start, method="Nelder-Mead",
                            options={"xatol": 1e-12, "fatol": 1e-18, "maxiter": 4000})
-            if pr.allowed_by_chirality(problem, fit.x):
+            if autocalibration_problem.allowed_by_chirality(problem, fit.x):
                 found.append(fit.fun)
         assert len(found) >= 10
         assert returned <= min(found) * (1 + 1e-6)
         # VGG's own plane costs far more: the constant-intrinsics model does not fit its cameras.
-        assert pr.affine_cost(problem, vgg) > 100 * returned
+        assert autocalibration_problem.affine_cost(problem, vgg) > 100 * returned
 
 
 class TestCancelAtAStageStart:

@@ -10,7 +10,7 @@ import pytest
 
 from geocert.kinds import autocalibration as kind_module
 from geocert.kinds import get_kind
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration import scenes, stratified
 from geocert.solvers.core import determinacy
 
@@ -22,7 +22,7 @@ def solved():
     scene = scenes.make_scene(6, 0.1, seed=21)
     parsed = KIND.parse(scene.job_data())
     options = KIND.options_type()
-    problem = pr.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
+    problem = autocalibration_problem.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
     return parsed, options, problem, stratified.solve(problem, options, lambda *args, **kwargs: None)
 
 

@@ -105,19 +105,21 @@ class TestReviewScenes:
         as it reads it) lies inside what the result states, within a thousandth of the width:
         the solver states that hull (the first version read the leaves as its search left them,
         up to 7e-7 px narrower on these scenes)."""
-        from geocert.solvers.autocalibration import metric_relaxation as mrelax
-        from geocert.solvers.autocalibration import problem as pr
+        from geocert.solvers.autocalibration import metric_relaxation
+        from geocert.solvers.autocalibration import problem as autocalibration_problem
         from geocert.solvers.autocalibration import proofs
         from geocert.verify.autocalibration import read_data
 
         certificate = review_result["certificate"]
         claim = certificate["items"][1]
         cameras, points, size = read_data(certificate["data"])
-        problem = pr.prepare(cameras, points, size, dict(certificate["options"].get("intrinsics") or {}))
-        p = pr.plane_from_input(problem, np.array(claim["plane_at_infinity"]))
-        setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+        problem = autocalibration_problem.prepare(cameras, points, size,
+                                                  dict(certificate["options"].get("intrinsics") or {}))
+        p = autocalibration_problem.plane_from_input(problem, np.array(claim["plane_at_infinity"]))
+        setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
         setup.unit = claim["proof"]["unit"]
-        cost = max(claim["cost"], float(mrelax.cost(setup, pr.w_of_K(problem, np.array(claim["K"])))))
+        cost = max(claim["cost"],
+                   float(metric_relaxation.cost(setup, autocalibration_problem.w_of_K(problem, np.array(claim["K"])))))
         hull = proofs.sublevel_hull(problem, setup, claim["proof"]["sublevel"], cost)
         stated = proven_bounds(review_result)
         assert np.all(stated[:, 0] <= hull[:, 0]) and np.all(hull[:, 1] <= stated[:, 1])
@@ -207,8 +209,8 @@ class TestRealLayouts:
         On these critical motions the stated plane is one of a family, and the true K costs 11
         times the level for it (dinoSparseRing: the intervals, focal 1000 to 1075 px, miss the
         true 3310): that is the plane's error, not the intervals'."""
-        from geocert.solvers.autocalibration import metric_relaxation as mrelax
-        from geocert.solvers.autocalibration import problem as pr
+        from geocert.solvers.autocalibration import metric_relaxation
+        from geocert.solvers.autocalibration import problem as autocalibration_problem
         from geocert.verify.autocalibration import read_data
 
         result, K = real_result
@@ -218,12 +220,12 @@ class TestRealLayouts:
             return
         certificate = result["certificate"]
         cameras, points, size = read_data(certificate["data"])
-        problem = pr.prepare(cameras, points, size, dict(certificate["options"]["intrinsics"]))
-        p = pr.plane_from_input(problem, np.array(result["plane_at_infinity"]))
-        setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+        problem = autocalibration_problem.prepare(cameras, points, size, dict(certificate["options"]["intrinsics"]))
+        p = autocalibration_problem.plane_from_input(problem, np.array(result["plane_at_infinity"]))
+        setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
         stage = result["stages"][1]
         level = stage["cost"] + stage["determinacy"]["proven_intervals"]["cost_increase"]
-        if mrelax.cost(setup, pr.w_of_K(problem, K / K[2, 2])) <= level:
+        if metric_relaxation.cost(setup, autocalibration_problem.w_of_K(problem, K / K[2, 2])) <= level:
             assert np.all(inside(proven_bounds(result), intrinsics(K)))
 
     def test_an_interval_narrowed_is_refused(self, real_result):
@@ -240,19 +242,20 @@ def test_with_the_true_plane_the_intervals_hold_the_true_K(layout):
     proofs.check_sublevel: they hold the true K, all five intrinsics (dinoSparseRing: focal
     3134 to 3395 px about the true 3310; the House: 631 to 665 about 666)."""
     from geocert.solvers.autocalibration import determinacy, metric, metric_sublevel, proofs
-    from geocert.solvers.autocalibration import metric_relaxation as mrelax
-    from geocert.solvers.autocalibration import problem as pr
+    from geocert.solvers.autocalibration import metric_relaxation
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
 
     scene, ranges = layout()
-    problem = pr.prepare(scene.cameras, scene.points, scene.image_size, dict(ranges))
-    p = pr.plane_from_input(problem, scene.plane_at_infinity)
-    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
-    lo, hi = mrelax.omega_box(problem.unit_ranges)
-    stage = metric.solve_metric(setup, lo, hi, pr.bnb_options(pr.AutocalibrationOptions(), 1e-4), True)
+    problem = autocalibration_problem.prepare(scene.cameras, scene.points, scene.image_size, dict(ranges))
+    p = autocalibration_problem.plane_from_input(problem, scene.plane_at_infinity)
+    setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+    lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
+    bnb = autocalibration_problem.bnb_options(autocalibration_problem.AutocalibrationOptions(), 1e-4)
+    stage = metric.solve_metric(setup, lo, hi, bnb, True)
     assert stage.certified
-    K = problem.K0 @ pr.upper_triangular_root(mrelax.omega_of(stage.w))
+    K = problem.K0 @ autocalibration_problem.upper_triangular_root(metric_relaxation.omega_of(stage.w))
     K = K / K[2, 2]
-    cost = float(mrelax.cost(setup, pr.w_of_K(problem, K)))
+    cost = float(metric_relaxation.cost(setup, autocalibration_problem.w_of_K(problem, K)))
     increase = determinacy.metric_stage(problem, p, K, cost, stage.lower_bound, None)["cost_increase"]
     sublevel = metric_sublevel.prove(problem, p, stage.unit, cost, increase, 20.0)
     assert sublevel is not None

@@ -174,29 +174,30 @@ class TestSubnormalFarkasVectors:
 
 @pytest.fixture(scope="module")
 def forged_metric():
-    from geocert.solvers.autocalibration import metric_relaxation as mrelax
-    from geocert.solvers.autocalibration import problem as pr
+    from geocert.solvers.autocalibration import metric_relaxation
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     document = copy.deepcopy(stored("autocalibration_five_views")["certificate"])
     claim = document["items"][1]
     cameras, points, size = read_data(document["data"])
-    problem = pr.prepare(cameras, points, size, dict(document["options"].get("intrinsics") or {}))
-    plane = pr.plane_from_input(problem, np.array(claim["plane_at_infinity"]))
-    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, plane, problem.unit_ranges)
+    problem = autocalibration_problem.prepare(cameras, points, size, dict(document["options"].get("intrinsics") or {}))
+    plane = autocalibration_problem.plane_from_input(problem, np.array(claim["plane_at_infinity"]))
+    setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, plane, problem.unit_ranges)
     K = np.array(claim["K"])
     factor = 1.0
-    while mrelax.cost(setup, pr.w_of_K(problem, K)) < 40 * claim["cost"]:  # below the 1.0 "proven"
+    # below the 1.0 "proven"
+    while metric_relaxation.cost(setup, autocalibration_problem.w_of_K(problem, K)) < 40 * claim["cost"]:
         factor *= 1.01
         K = np.array(claim["K"])
         K[0, 0] *= factor
         K[1, 1] *= factor
-    cost = mrelax.cost(setup, pr.w_of_K(problem, K))
-    lo, hi = mrelax.omega_box(problem.unit_ranges)
-    assert mrelax.in_domain(setup, pr.w_of_K(problem, K), lo, hi)
+    cost = metric_relaxation.cost(setup, autocalibration_problem.w_of_K(problem, K))
+    lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
+    assert metric_relaxation.in_domain(setup, autocalibration_problem.w_of_K(problem, K), lo, hi)
     setup.unit = TINY
     lower = cost * (1 - 1e-4)
-    program = mrelax.build(setup, lo, hi, lower)
+    program = metric_relaxation.build(setup, lo, hi, lower)
     A = program.A.toarray() if hasattr(program.A, "toarray") else np.asarray(program.A)
     row = next(i for i in range(program.cones.zero) if program.b[i] >= 0.5 and np.abs(A[i]).max() < 0.5)
     z = np.zeros(len(program.b))
@@ -379,7 +380,7 @@ class TestDeterminacyWithinScope:
 
     def test_the_metric_stages_intervals_lie_within_the_intrinsics_ranges(self):
         from geocert.solvers.autocalibration import determinacy
-        from geocert.solvers.autocalibration import problem as pr
+        from geocert.solvers.autocalibration import problem as autocalibration_problem
         from geocert.verify.autocalibration import read_data
 
         result = stored("autocalibration_five_views")
@@ -387,8 +388,8 @@ class TestDeterminacyWithinScope:
         skew = next(i for i in stage["determinacy"]["intervals"] if i["name"] == "skew")
         assert skew["lower"] < -10 and skew["upper"] > 10  # as stored: beyond the scope
         cameras, points, size = read_data(result["certificate"]["data"])
-        problem = pr.prepare(cameras, points, size, {})
-        p = pr.plane_from_input(problem, np.array(stage["plane_at_infinity"]))
+        problem = autocalibration_problem.prepare(cameras, points, size, {})
+        p = autocalibration_problem.plane_from_input(problem, np.array(stage["plane_at_infinity"]))
         document = determinacy.metric_stage(problem, p, np.array(stage["K"]), stage["cost"], stage["lower_bound"], None)
         r = problem.ranges
         (u_lo, u_hi), (v_lo, v_hi) = r["principal_point"]
@@ -419,11 +420,11 @@ class TestVerifierCost:
         return rehash(document)
 
     def test_ten_thousand_points_are_refused_before_any_program_is_built(self, monkeypatch):
-        from geocert.solvers.autocalibration import direct_relaxation as dr
+        from geocert.solvers.autocalibration import direct_relaxation
 
         built = []
-        original = dr.build
-        monkeypatch.setattr(dr, "build", lambda cameras, pairs, *a, **k: built.append(
+        original = direct_relaxation.build
+        monkeypatch.setattr(direct_relaxation, "build", lambda cameras, pairs, *a, **k: built.append(
             0 if pairs is None else len(pairs)) or original(cameras, pairs, *a, **k))
         document = self.many_points(10_060)
         failure = refused(document)
@@ -431,11 +432,11 @@ class TestVerifierCost:
         assert not [count for count in built if count > 1000], built
 
     def test_a_short_dual_vector_is_refused_before_its_program_is_built(self, monkeypatch):
-        from geocert.solvers.autocalibration import direct_relaxation as dr
+        from geocert.solvers.autocalibration import direct_relaxation
 
         built = []
-        original = dr.build
-        monkeypatch.setattr(dr, "build", lambda cameras, pairs, *a, **k: built.append(
+        original = direct_relaxation.build
+        monkeypatch.setattr(direct_relaxation, "build", lambda cameras, pairs, *a, **k: built.append(
             0 if pairs is None else len(pairs)) or original(cameras, pairs, *a, **k))
         document = self.many_points(1_500)  # within the pair limit
         for program in document["items"][0]["proof"]["programs"]:
@@ -459,11 +460,11 @@ class TestVerifierCost:
             assert not report.valid and "more work than its size pays for" in report.first_failure["detail"], name
 
     def test_a_basis_beyond_the_limits_is_refused(self):
-        from geocert.solvers.bilinear import problem as pb
+        from geocert.solvers.bilinear import problem as bilinear_problem
         from geocert.solvers.core.geometry import InputError
 
         with pytest.raises(InputError, match="limit"):
-            pb.read_basis([[[0.0, 0.0, float(i)]] * 2 for i in range(pb.MAX_SHAPES + 1)])
+            bilinear_problem.read_basis([[[0.0, 0.0, float(i)]] * 2 for i in range(bilinear_problem.MAX_SHAPES + 1)])
 
 
 class TestUnreadFields:
@@ -565,28 +566,30 @@ def thin_cut_metric():
     over the omega box of intrinsics whose principal point is pinned to +-1e-6 px (the middle of
     its default range, so the affine stage's genuine proof stands): a K of focal 600 px claimed
     optimal where the scene's own (focal 1000 px, in the same box) costs almost nothing."""
-    from geocert.solvers.autocalibration import metric_relaxation as mrelax
-    from geocert.solvers.autocalibration import problem as pr
+    from geocert.solvers.autocalibration import metric_relaxation
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     result = stored("autocalibration_stratified")
     document = result["certificate"]
     cameras, points, image_size = read_data(document["data"])
-    (ul, uu), (vl, vu) = pr.resolve_ranges({}, image_size)["principal_point"]
+    (ul, uu), (vl, vu) = autocalibration_problem.resolve_ranges({}, image_size)["principal_point"]
     u0, v0 = (ul + uu) / 2, (vl + vu) / 2
     document["options"]["intrinsics"] = {"principal_point": [[u0 - 1e-6, u0 + 1e-6], [v0 - 1e-6, v0 + 1e-6]]}
-    problem = pr.prepare(cameras, points, image_size, document["options"]["intrinsics"])
+    problem = autocalibration_problem.prepare(cameras, points, image_size, document["options"]["intrinsics"])
     claim = document["items"][1]
-    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference,
-                             pr.plane_from_input(problem, np.array(claim["plane_at_infinity"])), problem.unit_ranges)
-    lo, hi = mrelax.omega_box(problem.unit_ranges)
+    setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference,
+                                        autocalibration_problem.plane_from_input(problem,
+                                                                                 np.array(claim["plane_at_infinity"])),
+                                        problem.unit_ranges)
+    lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
 
     def w(focal):
-        return pr.w_of_K(problem, np.array([[focal, 0.0, u0], [0.0, focal, v0], [0.0, 0.0, 1.0]]))
+        return autocalibration_problem.w_of_K(problem, np.array([[focal, 0.0, u0], [0.0, focal, v0], [0.0, 0.0, 1.0]]))
 
-    cost = mrelax.cost(setup, w(600.0))
+    cost = metric_relaxation.cost(setup, w(600.0))
     setup.unit = 1.0 / cost
-    rows = len(mrelax.build(setup, lo, hi, cost, cap_row=True).b)
+    rows = len(metric_relaxation.build(setup, lo, hi, cost, cap_row=True).b)
     claim.update(K=[[600.0, 0.0, u0], [0.0, 600.0, v0], [0.0, 0.0, 1.0]], cost=cost, lower_bound=cost * (1 - 1e-5),
                  gap=cost * 1e-5)
     claim["proof"] = {"type": "stratified_metric", "unit": 1.0 / cost, "tightening": [],
@@ -596,7 +599,8 @@ def thin_cut_metric():
                       "leaves": [[lo.tolist(), hi.tolist(), 0]]}
     rehash(document)
     truth = w(1000.0)
-    assert mrelax.in_domain(setup, truth, lo, hi) and mrelax.cost(setup, truth) < 1e-6 * claim["lower_bound"]
+    assert metric_relaxation.in_domain(setup, truth, lo, hi)
+    assert metric_relaxation.cost(setup, truth) < 1e-6 * claim["lower_bound"]
     return only(document, 1)
 
 
@@ -717,7 +721,7 @@ class TestMetricRoundsBounded:
     minutes within the 32 MB body limit. Now at most proofs.MAX_ROUNDS (the solver makes 12)."""
 
     def test_rounds_beyond_the_limit_are_refused_before_any_is_built(self, monkeypatch):
-        from geocert.solvers.autocalibration import metric_relaxation as mrelax
+        from geocert.solvers.autocalibration import metric_relaxation
         from geocert.solvers.autocalibration.proofs import MAX_ROUNDS
 
         result = stored("autocalibration_five_views")
@@ -726,8 +730,8 @@ class TestMetricRoundsBounded:
         cap = proof["tightening"][-1]["cap"] if proof["tightening"] else result["certificate"]["items"][1]["cost"]
         proof["tightening"] += [{"cap": cap, "box_in": box, "box_out": box, "duals": [None] * 10}] * (MAX_ROUNDS + 1)
         built = []
-        original = mrelax.build
-        monkeypatch.setattr(mrelax, "build", lambda *a, **k: built.append(1) or original(*a, **k))
+        original = metric_relaxation.build
+        monkeypatch.setattr(metric_relaxation, "build", lambda *a, **k: built.append(1) or original(*a, **k))
         assert refused(only(result["certificate"], 1))["check"] == "format"
         assert not built
 

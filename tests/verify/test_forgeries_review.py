@@ -91,13 +91,14 @@ def _certified_K_from(result: dict, document: dict) -> dict:
     """``document`` (an autocalibration certificate) put in as the calibration certificate, and
     the summary's certified K, its difference from the returned K, its range edges and the
     autocalibration stage's K and ranges made to agree with it."""
-    from geocert.solvers.autocalibration import problem as pr
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
     from geocert.solvers.reconstruction import calibration_claim
 
     result["calibration_certificate"] = document
     K = document["items"][1]["K"]
     size = document["data"].get("image_size")
-    ranges = pr.resolve_ranges(dict(document["options"].get("intrinsics") or {}), None if size is None else tuple(size))
+    ranges = autocalibration_problem.resolve_ranges(dict(document["options"].get("intrinsics") or {}),
+                                                    None if size is None else tuple(size))
     calibration = result["summary"]["calibration"]
     calibration.update(certified_K=K, difference=calibration_claim.difference(calibration["K"], K),
                        on_range_edge=calibration_claim.on_range_edge(K, ranges))
@@ -230,8 +231,8 @@ class TestCalibrationCertificateOptionsUntied:
 
     @pytest.mark.parametrize("options", [{"metric_rel_gap": 1.0}, {"abs_gap": 1e6}])
     def test_a_calibration_certificate_with_a_loose_gap_is_refused(self, calibrated_reconstruction, options):
-        from geocert.solvers.autocalibration import metric_relaxation as mrelax
-        from geocert.solvers.autocalibration import problem as pr
+        from geocert.solvers.autocalibration import metric_relaxation
+        from geocert.solvers.autocalibration import problem as autocalibration_problem
         from geocert.verify.autocalibration import read_data
 
         result = copy.deepcopy(calibrated_reconstruction)
@@ -239,11 +240,11 @@ class TestCalibrationCertificateOptionsUntied:
         document["options"].update(options)
         claim = document["items"][1]
         cameras, points, size = read_data(document["data"])
-        problem = pr.prepare(cameras, points, size, {})
-        plane = pr.plane_from_input(problem, np.array(claim["plane_at_infinity"]))
-        setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, plane, problem.unit_ranges)
+        problem = autocalibration_problem.prepare(cameras, points, size, {})
+        plane = autocalibration_problem.plane_from_input(problem, np.array(claim["plane_at_infinity"]))
+        setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, plane, problem.unit_ranges)
         K = [[1500.0, 0.0, 330.0], [0.0, 1500.0, 250.0], [0.0, 0.0, 1.0]]
-        cost = mrelax.cost(setup, pr.w_of_K(problem, np.array(K)))
+        cost = metric_relaxation.cost(setup, autocalibration_problem.w_of_K(problem, np.array(K)))
         assert cost > 1e20 * claim["cost"]
         # The genuine proof's bound is 0 (exact data): its leaves need no vector; a unit near 1 for the new cost.
         claim.update(K=K, cost=cost, gap=cost - claim["lower_bound"])

@@ -523,18 +523,22 @@ def _K_signed(result: dict, signs: tuple) -> dict:
     upgrade, quadric, cameras and points recomputed from it as the verifier recomputes them."""
     import numpy as np
 
-    from geocert.solvers.autocalibration import problem as pr
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     result = copy.deepcopy(result)
     K = (np.array(result["K"]) @ np.diag(signs)).tolist()
     result["K"] = result["stages"][1]["K"] = result["certificate"]["items"][1]["K"] = K
     cameras, points, size = read_data(result["certificate"]["data"])
-    problem = pr.prepare(cameras, points, size, dict(result["certificate"]["options"].get("intrinsics") or {}))
-    H = pr.upgrade(problem, pr.plane_from_input(problem, np.array(result["plane_at_infinity"])),
-                   np.linalg.solve(problem.K0, np.array(K)))
-    result.update(upgrade=H.tolist(), dual_absolute_quadric=pr.dual_absolute_quadric(H).tolist(),
-                  cameras=pr.metric_cameras(cameras, H), points=pr.metric_points(H, points))
+    problem = autocalibration_problem.prepare(cameras, points, size,
+                                              dict(result["certificate"]["options"].get("intrinsics") or {}))
+    H = autocalibration_problem.upgrade(problem,
+                                        autocalibration_problem.plane_from_input(problem,
+                                                                                 np.array(result["plane_at_infinity"])),
+                                        np.linalg.solve(problem.K0, np.array(K)))
+    result.update(upgrade=H.tolist(), dual_absolute_quadric=autocalibration_problem.dual_absolute_quadric(H).tolist(),
+                  cameras=autocalibration_problem.metric_cameras(cameras, H),
+                  points=autocalibration_problem.metric_points(H, points))
     return result
 
 

@@ -27,22 +27,23 @@ FOCAL_SCALE = 1.17
 def _metric_setup(certificate: dict):
     """(problem, plane, metric setup) of a stratified certificate's metric stage, as the verifier
     builds them."""
-    from geocert.solvers.autocalibration import metric_relaxation as mrelax
-    from geocert.solvers.autocalibration import problem as pr
+    from geocert.solvers.autocalibration import metric_relaxation
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     cameras, points, image_size = read_data(certificate["data"])
-    problem = pr.prepare(cameras, points, image_size, dict(certificate["options"]["intrinsics"] or {}))
-    p = pr.plane_from_input(problem, np.asarray(certificate["items"][1]["plane_at_infinity"]))
-    return problem, p, mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+    problem = autocalibration_problem.prepare(cameras, points, image_size,
+                                              dict(certificate["options"]["intrinsics"] or {}))
+    p = autocalibration_problem.plane_from_input(problem, np.asarray(certificate["items"][1]["plane_at_infinity"]))
+    return problem, p, metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
 
 
 def _metric_cost(certificate: dict, K: np.ndarray) -> float:
-    from geocert.solvers.autocalibration import metric_relaxation as mrelax
-    from geocert.solvers.autocalibration import problem as pr
+    from geocert.solvers.autocalibration import metric_relaxation
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
 
     problem, _, setup = _metric_setup(certificate)
-    return float(mrelax.cost(setup, pr.w_of_K(problem, K)))
+    return float(metric_relaxation.cost(setup, autocalibration_problem.w_of_K(problem, K)))
 
 
 def _with_metric_K(result: dict, K: np.ndarray, abs_gap: float) -> dict:
@@ -50,7 +51,7 @@ def _with_metric_K(result: dict, K: np.ndarray, abs_gap: float) -> dict:
     plane, at ``abs_gap``: the metric claim's K, cost and gap, the result's K and what follows
     from it (upgrade, quadric, cameras, points: what the verifier recomputes), the stage's figures
     and its summary's tolerance; the genuine proof and lower bound kept, the hashes redone."""
-    from geocert.solvers.autocalibration import problem as pr
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     forged = copy.deepcopy(result)
@@ -61,9 +62,11 @@ def _with_metric_K(result: dict, K: np.ndarray, abs_gap: float) -> dict:
     claim = certificate["items"][1]
     cost = _metric_cost(certificate, K)
     claim.update(K=K.tolist(), cost=cost, gap=cost - claim["lower_bound"])
-    H = pr.upgrade(problem, p, np.linalg.solve(problem.K0, K))
-    forged.update(K=K.tolist(), upgrade=H.tolist(), dual_absolute_quadric=pr.dual_absolute_quadric(H).tolist(),
-                  cameras=pr.metric_cameras(cameras, H), points=pr.metric_points(H, points))
+    H = autocalibration_problem.upgrade(problem, p, np.linalg.solve(problem.K0, K))
+    forged.update(K=K.tolist(), upgrade=H.tolist(),
+                  dual_absolute_quadric=autocalibration_problem.dual_absolute_quadric(H).tolist(),
+                  cameras=autocalibration_problem.metric_cameras(cameras, H),
+                  points=autocalibration_problem.metric_points(H, points))
     forged["stages"][1].update(K=K.tolist(), cost=cost, gap=claim["gap"], determinacy=None)
     options = certificate["options"]
     for stage, item in zip(forged["stages"], certificate["items"]):
@@ -142,8 +145,8 @@ class TestAbsoluteGapCapInTheCostsUnits:
         verifier recomputes), the stage's figures and tolerance; the genuine proof and bound kept.
         Returns it and the quadric's cost."""
         from geocert.solvers.autocalibration import direct
-        from geocert.solvers.autocalibration import direct_relaxation as dr
-        from geocert.solvers.autocalibration import problem as pr
+        from geocert.solvers.autocalibration import direct_relaxation
+        from geocert.solvers.autocalibration import problem as autocalibration_problem
         from geocert.verify.autocalibration import _direct_setup, read_data
 
         forged = stored("autocalibration_direct")
@@ -151,10 +154,11 @@ class TestAbsoluteGapCapInTheCostsUnits:
         options = certificate["options"]
         options["abs_gap"] = abs_gap
         cameras, points, image_size = read_data(certificate["data"])
-        setup = _direct_setup(pr.prepare(cameras, points, image_size, dict(options["intrinsics"] or {})), options)
+        setup = _direct_setup(autocalibration_problem.prepare(cameras, points, image_size,
+                                                              dict(options["intrinsics"] or {})), options)
         claim = certificate["items"][0]
         Q = Q_of(np.asarray(claim["dual_absolute_quadric"]))
-        cost = float(dr.cost(setup.cameras, setup.from_input(Q)))
+        cost = float(direct_relaxation.cost(setup.cameras, setup.from_input(Q)))
         derived = direct.derived(cameras, points, Q, bool(options["varying_focal"]))
         claim.update(dual_absolute_quadric=Q.tolist(), plane_at_infinity=derived["plane_at_infinity"], K=derived["K"],
                      cost=cost, gap=cost - claim["lower_bound"])
@@ -269,11 +273,11 @@ def small_frames() -> tuple[dict, dict]:
 def _frame_shifted_within_a_unit(result: dict) -> dict:
     """``result`` with frame 0's camera translated along x as far as a cost below 0.99 allows (its
     residuals what that camera leaves), claimed with the genuine solve's trivial bound 0."""
-    from geocert.solvers.bilinear import problem as pb
+    from geocert.solvers.bilinear import problem as bilinear_problem
 
     forged = copy.deepcopy(result)
     certificate = forged["certificate"]
-    basis, frames = pb.read_data(certificate["data"])
+    basis, frames = bilinear_problem.read_data(certificate["data"])
     frame, claim = forged["frames"][0], certificate["items"][0]
     alpha = np.asarray(frame["coefficients"])
 
@@ -283,11 +287,11 @@ def _frame_shifted_within_a_unit(result: dict) -> dict:
         return camera
 
     def cost(camera: np.ndarray) -> float:
-        return float(pb.cost(pb.residuals(basis, frames[0], camera, alpha), "L2L2"))
+        return float(bilinear_problem.cost(bilinear_problem.residuals(basis, frames[0], camera, alpha), "L2L2"))
 
     camera = max((shifted(d) for d in np.linspace(0.0, 2.0, 201)), key=lambda c: cost(c) if cost(c) < 0.99 else -1.0)
     value = cost(camera)
-    residuals = pb.residuals(basis, frames[0], camera, alpha)
+    residuals = bilinear_problem.residuals(basis, frames[0], camera, alpha)
     frame.update(camera=camera.tolist(), cost=value, gap=value, determinacy=None,
                  residuals=[None if np.isnan(row[0]) else row.tolist() for row in residuals])
     claim.update(camera=camera.tolist(), cost=value, gap=value)

@@ -146,28 +146,28 @@ def _claim_cost(kind: str, data: dict, options: dict, claim: dict) -> float | No
             return None
         return norm_cost(residuals, options["norm"])
     if kind == "bilinear":
-        from geocert.solvers.bilinear import problem as pb
+        from geocert.solvers.bilinear import problem as bilinear_problem
 
         basis, points = adapter.read(data, claim["index"])
-        return pb.cost(pb.residuals(basis, points, np.array(claim["camera"]), np.array(claim["coefficients"])),
-                       options["norm"])
-    from geocert.solvers.autocalibration import metric_relaxation as mrelax
-    from geocert.solvers.autocalibration import problem as pr
+        return bilinear_problem.cost(bilinear_problem.residuals(basis, points, np.array(claim["camera"]),
+                                                                np.array(claim["coefficients"])), options["norm"])
+    from geocert.solvers.autocalibration import metric_relaxation
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     cameras, points, size = read_data(data)
-    problem = pr.prepare(cameras, points, size, dict(options.get("intrinsics") or {}))
+    problem = autocalibration_problem.prepare(cameras, points, size, dict(options.get("intrinsics") or {}))
     if options.get("method") == "direct":
         from geocert.solvers.autocalibration import direct
-        from geocert.solvers.autocalibration import direct_relaxation as dr
+        from geocert.solvers.autocalibration import direct_relaxation
 
         setup = direct.setup_for(problem, options["chirality"], exclude=False)
-        return dr.cost(setup.cameras, setup.from_input(np.array(claim["dual_absolute_quadric"])))
-    p = pr.plane_from_input(problem, np.array(claim["plane_at_infinity"]))
+        return direct_relaxation.cost(setup.cameras, setup.from_input(np.array(claim["dual_absolute_quadric"])))
+    p = autocalibration_problem.plane_from_input(problem, np.array(claim["plane_at_infinity"]))
     if claim["index"] == 0:
-        return pr.affine_cost(problem, p)
-    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
-    return mrelax.cost(setup, pr.w_of_K(problem, np.array(claim["K"])))
+        return autocalibration_problem.affine_cost(problem, p)
+    setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+    return metric_relaxation.cost(setup, autocalibration_problem.w_of_K(problem, np.array(claim["K"])))
 
 
 SCOPE_OPTIONS = ("max_residual", "intrinsics", "chirality", "coefficients", "coefficient_bound", "camera_bound",

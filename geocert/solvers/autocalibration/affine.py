@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from geocert.solvers.autocalibration import affine_relaxation as relax
+from geocert.solvers.autocalibration import affine_relaxation
 from geocert.solvers.autocalibration import cuts
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.core.bnb import BnbOptions, Box, branch_and_bound
@@ -29,7 +29,7 @@ class Region:
     lo: np.ndarray
     hi: np.ndarray
     basis: list[list[int]]  # per side (v0 low, v0 high, v1 low, ...): three rows proving it
-    setup: relax.AffineSetup
+    setup: affine_relaxation.AffineSetup
     leaves: list = field(default_factory=list)
     status: str = "optimal"
     nodes: int = 0
@@ -91,7 +91,7 @@ class AffineProblem(cuts.BoxSearch):
     def objective(self, v: np.ndarray) -> float:
         if not self.in_domain(v):
             return math.inf
-        return relax.cost(self.region.setup, v)
+        return affine_relaxation.cost(self.region.setup, v)
 
     def improve(self, v: np.ndarray) -> tuple[np.ndarray, float]:
         setup = self.region.setup
@@ -114,7 +114,7 @@ class AffineProblem(cuts.BoxSearch):
         return v, start
 
     def build(self, lo: np.ndarray, hi: np.ndarray, cap: float, cap_row: bool = False):
-        return relax.build(self.region.setup, lo, hi, cap, cap_row)
+        return affine_relaxation.build(self.region.setup, lo, hi, cap, cap_row)
 
     @property
     def unit(self) -> float:
@@ -144,7 +144,7 @@ def regions_of(norm: frames.Normalised, coef: np.ndarray) -> tuple[list[Region],
         hi = np.array([sides[2 * k + 1][0] for k in range(3)])
         reference_row = (0 if norm.points is None else len(norm.points)) + norm.reference
         used = relaxation_rows(a, b, reference_row)
-        setup = relax.AffineSetup(coef, frames.plane_map(G, delta), a[used], b[used])
+        setup = affine_relaxation.AffineSetup(coef, frames.plane_map(G, delta), a[used], b[used])
         regions.append(Region(delta, G, used, lo, hi, [side[1] for side in sides], setup))
     if not regions:
         return [], excluded, "no plane at infinity is consistent with chirality (no quasi-affine frame)"

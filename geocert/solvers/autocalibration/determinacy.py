@@ -38,7 +38,7 @@ import math
 import numpy as np
 
 from geocert.solvers.autocalibration import frames
-from geocert.solvers.autocalibration import metric_relaxation as mrelax
+from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.core.determinacy import (RELATIVE_WIDTH, SIGMAS, certified_gap, clip, cost_increase,
                                               curvature_intervals, interval, numeric_jacobian, ranges_at, spread,
                                               sublevel_rays, tick)
@@ -338,9 +338,9 @@ def refit(problem, p: np.ndarray, w: np.ndarray) -> np.ndarray | None:
     intrinsics ranges not imposed: the interval is clipped to them afterwards)."""
     from scipy.optimize import least_squares
 
-    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+    setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
     try:
-        fit = least_squares(lambda x: mrelax.residuals(setup, x), w, method="lm", xtol=1e-12, ftol=1e-12)
+        fit = least_squares(lambda x: metric_relaxation.residuals(setup, x), w, method="lm", xtol=1e-12, ftol=1e-12)
     except (ValueError, np.linalg.LinAlgError):
         return None
     return fit.x if np.all(np.isfinite(fit.x)) else None
@@ -350,7 +350,7 @@ def _K_of_w(problem, w: np.ndarray | None) -> np.ndarray:
     """(fx, fy, skew, u, v) in pixels for preconditioned omega entries w (NaN when not a K)."""
     if w is None:
         return np.full(5, np.nan)
-    k = intrinsics(mrelax.omega_of(w))
+    k = intrinsics(metric_relaxation.omega_of(w))
     if not np.all(np.isfinite(k)):
         return k
     K = problem.K0 @ np.array([[k[0], k[2], k[3]], [0.0, k[1], k[4]], [0.0, 0.0, 1.0]])
@@ -378,8 +378,8 @@ def plane_family(problem, p: np.ndarray, w: np.ndarray | None, gap: float | None
     points = sublevel_rays(lambda q: float(residuals(q) @ residuals(q)), p, J.T @ J, cost + delta, extra or [],
                            allowed=allowed)
     if w is None:
-        setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
-        w = refit(problem, p, mrelax.linear_baseline(setup)[0])
+        setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+        w = refit(problem, p, metric_relaxation.linear_baseline(setup)[0])
     here = _K_of_w(problem, w)
     Ks = []
     for q in points:
@@ -428,8 +428,9 @@ def affine_stage(problem, p: np.ndarray, cost: float | None, lower: float | None
     out = curvature_intervals(family["J"], family["residuals"], quantities, certified_gap(cost, lower))
     lo, hi = ranges_at(value, [None if q is None else plane_of(q) for q in family["points"]])
     out.intervals = [interval(name, value[k], lo[k], hi[k]) for k, name in enumerate(quantities)]
-    H = mrelax.homographies(problem.norm.cameras, problem.norm.reference, p)
-    omega = None if family["w"] is None or not np.all(np.isfinite(family["K"])) else mrelax.omega_of(family["w"])
+    H = metric_relaxation.homographies(problem.norm.cameras, problem.norm.reference, p)
+    omega = (None if family["w"] is None or not np.all(np.isfinite(family["K"]))
+             else metric_relaxation.omega_of(family["w"]))
     named = motion_warnings(H, centres, omega=omega)
     out.warnings = _merge(_merge(out.warnings, named), _plane_warning(family, H, centres, named))
     return out.document()
@@ -453,14 +454,14 @@ def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | Non
     combination of the ranges, and only focal lengths' positivity clips."""
     from geocert.solvers.autocalibration.problem import w_of_K
 
-    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+    setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
     w = w_of_K(problem, K_pixels)
     informative = np.concatenate([np.arange(5) + 6 * j for j in range(len(setup.H))])  # the 33 entry is 0
 
     def residuals(x, q=p):
-        here = setup if q is p else mrelax.setup_for(problem.norm.cameras, problem.norm.reference, q,
-                                                     problem.unit_ranges)
-        return mrelax.residuals(here, x)[informative]
+        here = setup if q is p else metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, q,
+                                                                problem.unit_ranges)
+        return metric_relaxation.residuals(here, x)[informative]
 
     J = numeric_jacobian(residuals, w)
     value = _K_of_w(problem, w)
@@ -488,7 +489,7 @@ def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | Non
     upper_end = value + np.hypot(hi_w - value, hi_p - value)
     out.intervals = [clip(interval(name, value[k], lower_end[k], upper_end[k], scales[k]), *bounds)
                      for k, (name, bounds) in enumerate(zip(NAMES, _scope(problem, scoped)))]
-    named = motion_warnings(setup.H, centres, omega=mrelax.omega_of(w))
+    named = motion_warnings(setup.H, centres, omega=metric_relaxation.omega_of(w))
     out.warnings = _merge(_merge(out.warnings, named), _plane_warning(family, setup.H, centres, named))
     return out.document()
 
@@ -507,13 +508,13 @@ def varying_focal_stage(problem, p: np.ndarray, Ks: list, centres: np.ndarray | 
 
     def residuals(theta):
         focal, q = theta[:m], theta[m:]
-        H = mrelax.homographies(problem.norm.cameras, reference, q)
+        H = metric_relaxation.homographies(problem.norm.cameras, reference, q)
         omega_ref = np.diag([focal[reference] ** 2, focal[reference] ** 2, 1.0])
         out = []
         for j, i in enumerate(others):
             image = H[j] @ omega_ref @ H[j].T
             diff = np.diag([focal[i] ** 2, focal[i] ** 2, 1.0]) - image / image[2, 2]
-            out.append(mrelax.WEIGHTS[:5] * np.array([diff[x, y] for x, y in mrelax.ENTRIES]))
+            out.append(metric_relaxation.WEIGHTS[:5] * np.array([diff[x, y] for x, y in metric_relaxation.ENTRIES]))
         return np.concatenate(out)
 
     theta = np.concatenate([a, p])
@@ -522,5 +523,5 @@ def varying_focal_stage(problem, p: np.ndarray, Ks: list, centres: np.ndarray | 
     out = curvature_intervals(J, residuals(theta), quantities)
     for found in out.intervals:
         clip(found, 0.0, None)
-    out.warnings += motion_warnings(mrelax.homographies(problem.norm.cameras, reference, p), centres)
+    out.warnings += motion_warnings(metric_relaxation.homographies(problem.norm.cameras, reference, p), centres)
     return out.document()

@@ -34,9 +34,9 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.autocalibration import direct_relaxation as dr
+from geocert.solvers.autocalibration import direct_relaxation
 from geocert.solvers.autocalibration import frames
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration.problem import CHIRALITY, ORDERS  # the options it reads (problem.py checks them)
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.strict import Invalid, charge, dual_vector, informational, record, same
@@ -79,7 +79,7 @@ class Orientation:
 
 @dataclass
 class DirectSetup:
-    problem: pr.Problem
+    problem: autocalibration_problem.Problem
     T: np.ndarray  # reference frame -> program frame (cameras P T)
     cameras: np.ndarray  # the program's data
     orientations: list[Orientation]
@@ -133,12 +133,12 @@ def within_focal(setup: "DirectSetup", Q: np.ndarray, tolerance: float = 0.0) ->
     return bool(np.all(np.einsum("kab,ab->k", setup.focal, Q) >= -tolerance))
 
 
-def setup_for(problem: pr.Problem, chirality: str, exclude: bool = True) -> DirectSetup:
+def setup_for(problem: autocalibration_problem.Problem, chirality: str, exclude: bool = True) -> DirectSetup:
     """``exclude``: look for Gordan proofs excluding an orientation (the solver; the verifier
     keeps both orientations and reads the exclusions from the proof)."""
     norm = problem.norm
-    T = dr.conditioning_frame(norm.cameras)
-    cameras = dr.framed_cameras(norm.cameras, T)
+    T = direct_relaxation.conditioning_frame(norm.cameras)
+    cameras = direct_relaxation.framed_cameras(norm.cameras, T)
     to_frame = np.linalg.inv(T).T  # rows (points, centres) of the reference frame -> program frame
 
     def framed(rows):
@@ -151,7 +151,7 @@ def setup_for(problem: pr.Problem, chirality: str, exclude: bool = True) -> Dire
         orientations = [Orientation(None, None, None)]
     elif chirality == "centers":
         rows = framed(centres)
-        orientations = [Orientation(None, dr.chirality_pairs(rows, len(rows)), rows, len(rows))]
+        orientations = [Orientation(None, direct_relaxation.chirality_pairs(rows, len(rows)), rows, len(rows))]
     else:
         if norm.points is None:
             raise InputError("options/chirality", '"points" needs data/points (or choose "centers" or "none")')
@@ -163,7 +163,8 @@ def setup_for(problem: pr.Problem, chirality: str, exclude: bool = True) -> Dire
                 excluded.append({"delta": delta, "rows": chosen})
                 continue
             rows = framed(ref_rows)
-            orientations.append(Orientation(delta, dr.chirality_pairs(rows, len(centres)), rows, len(centres)))
+            orientations.append(Orientation(delta, direct_relaxation.chirality_pairs(rows, len(centres)), rows,
+                                            len(centres)))
     return DirectSetup(problem, T, cameras, orientations, excluded, focal_rows(cameras, problem.unit_ranges))
 
 
@@ -228,7 +229,7 @@ def calibrations(cameras: np.ndarray, Q_in: np.ndarray) -> list[np.ndarray | Non
             continue
         omega = omega / omega[2, 2]
         try:
-            K = pr.upper_triangular_root(omega)
+            K = autocalibration_problem.upper_triangular_root(omega)
         except np.linalg.LinAlgError:
             K = None
         out.append(K)
@@ -240,7 +241,7 @@ def mean_calibration(cameras: np.ndarray, Q_in: np.ndarray) -> np.ndarray | None
     omegas = [P @ Q_in @ P.T for P in cameras]
     omega = np.mean([(w + w.T) / 2 / w[2, 2] for w in omegas], axis=0)
     try:
-        return pr.upper_triangular_root(omega)
+        return autocalibration_problem.upper_triangular_root(omega)
     except np.linalg.LinAlgError:
         return None
 
@@ -261,13 +262,13 @@ def upgrade(cameras: np.ndarray, points: np.ndarray | None, Q_in: np.ndarray) ->
         Hs = H.copy()
         Hs[:, 3] *= sign
         try:
-            cams = pr.metric_cameras(cameras, Hs)
+            cams = autocalibration_problem.metric_cameras(cameras, Hs)
         except (np.linalg.LinAlgError, ValueError):
             continue
         R = np.array([c["R"] for c in cams])
         C = np.array([c["center"] for c in cams])
         if points is not None:
-            X = pr.metric_points(Hs, points)
+            X = autocalibration_problem.metric_points(Hs, points)
             X = np.array([x for x in X if x is not None]).reshape(-1, 3)
             score = float(np.sum(np.einsum("ik,ijk->ij", R[:, 2], X[None, :, :] - C[:, None, :]) > 0))
         else:
@@ -288,7 +289,8 @@ def derived(cameras: np.ndarray, points: np.ndarray | None, Q_in: np.ndarray, va
     return {"plane_at_infinity": plane.tolist(), "K": None if K is None else K.tolist(),
             "Ks": [None if k is None else k.tolist() for k in Ks] if varying_focal else None,
             "upgrade": H.tolist(), "dual_absolute_quadric": Q_in.tolist(),
-            "cameras": pr.metric_cameras(cameras, H), "points": pr.metric_points(H, points)}
+            "cameras": autocalibration_problem.metric_cameras(cameras, H),
+            "points": autocalibration_problem.metric_points(H, points)}
 
 
 # --- the proof --------------------------------------------------------------------------------
@@ -300,7 +302,7 @@ def check_rank(rank, ratio, order: int, where: str) -> None:
     first at most 1, and the two agreeing: rank 1 exactly when the ratio is within RANK_TOLERANCE."""
     informational(rank, f"{where}/moment_rank", "integer")
     informational(ratio, f"{where}/eigenvalue_ratio")
-    size = len(dr.monomials(order))
+    size = len(direct_relaxation.monomials(order))
     if rank is not None and not (type(rank) is int and 1 <= rank <= size):
         raise Invalid("format", f"{where}/moment_rank is {rank!r:.40}: a rank from 1 to {size} (the order-{order} "
                                 "moment matrix's size), or null")
@@ -364,9 +366,9 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
             rows = _rows_without_pairs(setup, order, len(cuts)) + (0 if o.pairs is None else len(o.pairs))
             charge(rows, f"the program of orientation {o.delta!r}")
             dual_vector(item.get("z"), rows, f"programs/{o.delta}/z", "leaf_bounds")
-            program = dr.build(setup.cameras, o.pairs, order, cuts, setup.focal)
+            program = direct_relaxation.build(setup.cameras, o.pairs, order, cuts, setup.focal)
             z = dual_vector(item.get("z"), len(program.b), f"programs/{o.delta}/z", "leaf_bounds")
-            value, _ = dr.safe_bound(program, z)
+            value, _ = direct_relaxation.safe_bound(program, z)
             bound = min(bound, value)
     if bound == math.inf:
         raise Invalid("root_region", "every orientation is excluded: nothing to bound")
@@ -384,7 +386,7 @@ def _of_orientation(stated: Any, delta: float | None) -> bool:
 def _rows_without_pairs(setup: DirectSetup, order: int, cuts: int) -> int:
     """The rows of a program of ``cuts`` cuts without its chirality pairs (its size does not
     depend on the cuts' values or the cameras' numbers)."""
-    return len(dr.build(setup.cameras, None, order, ((0, 0.0, 1.0),) * cuts, setup.focal).b)
+    return len(direct_relaxation.build(setup.cameras, None, order, ((0, 0.0, 1.0),) * cuts, setup.focal).b)
 
 
 # Cuts on one program's path from its orientation's root: the solver splits at most this often
@@ -402,8 +404,9 @@ def _cuts(raw) -> tuple:
         if not (isinstance(cut, list) and len(cut) == 3):
             raise Invalid("format", "a cut is [k, c, sign]")
         k, c, sign = cut
-        if not (isinstance(k, int) and not isinstance(k, bool) and 0 <= k < dr.N and isinstance(c, (int, float))
-                and not isinstance(c, bool) and math.isfinite(c) and sign in (1, -1) and not isinstance(sign, bool)):
+        if not (isinstance(k, int) and not isinstance(k, bool) and 0 <= k < direct_relaxation.N
+                and isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c)
+                and sign in (1, -1) and not isinstance(sign, bool)):
             raise Invalid("format", "a cut is [k (0 to 8), c (finite), sign (1 or -1)]")
         out.append((k, float(c), float(sign)))
     return tuple(out)

@@ -56,7 +56,7 @@ import scipy.sparse as sp
 
 from geocert.solvers.autocalibration import direct
 from geocert.solvers.autocalibration import direct_ipm
-from geocert.solvers.autocalibration import direct_relaxation as dr
+from geocert.solvers.autocalibration import direct_relaxation
 from geocert.solvers.core.certificates import pack
 from geocert.solvers.core.conic import ConicStatus, clarabel_cones, map_clarabel_status
 
@@ -112,7 +112,8 @@ def _settings(tolerance: float, regularisation: float = 1e-6) -> clarabel.Defaul
     return settings
 
 
-def solve_program(program: dr.Program, enough=None, attempts=None, check=None) -> tuple[ConicStatus, np.ndarray | None, np.ndarray | None, str]:
+def solve_program(program: direct_relaxation.Program, enough=None, attempts=None,
+                  check=None) -> tuple[ConicStatus, np.ndarray | None, np.ndarray | None, str]:
     """(status, y, z, raw status) of the first clean solve among ATTEMPTS that ``enough(y, z)``
     accepts (default: any clean solve), else the clean one with the highest safe bound, else the
     last with a dual (still a safe bound); never raises on solver trouble. ``check()`` is called
@@ -130,7 +131,8 @@ def solve_program(program: dr.Program, enough=None, attempts=None, check=None) -
             # of two clean solves the one with the higher safe bound (a later attempt is not
             # necessarily the more accurate: Clarabel's regularised solves stop further from the
             # optimum than direct_ipm's)
-            if not clean or dr.safe_bound(program, retry[2])[0] > dr.safe_bound(program, answer[2])[0]:
+            if (not clean or direct_relaxation.safe_bound(program, retry[2])[0]
+                    > direct_relaxation.safe_bound(program, answer[2])[0]):
                 answer = retry
         elif (not clean and retry[2] is not None) or answer[2] is None:
             answer = retry
@@ -139,7 +141,7 @@ def solve_program(program: dr.Program, enough=None, attempts=None, check=None) -
     return answer
 
 
-def _solve_ipm(program: dr.Program, tolerance: float, check=None):
+def _solve_ipm(program: direct_relaxation.Program, tolerance: float, check=None):
     """direct_ipm's solve as (status, y, z, raw status): "Solved" only when its residuals and gap
     met the tolerance."""
     try:
@@ -154,7 +156,7 @@ def _solve_ipm(program: dr.Program, tolerance: float, check=None):
     return status, result.y, result.z, raw
 
 
-def _solve_once(program: dr.Program, tolerance: float, regularisation: float):
+def _solve_once(program: direct_relaxation.Program, tolerance: float, regularisation: float):
     try:
         P = sp.csc_matrix((len(program.q), len(program.q)))
         solution = clarabel.DefaultSolver(P, program.q, program.A, program.b, clarabel_cones(program.cones),
@@ -171,9 +173,9 @@ def _solve_once(program: dr.Program, tolerance: float, regularisation: float):
         return ConicStatus.FAILED, None, None, f"exception: {exc}"
 
 
-def rank_test(program: dr.Program, y: np.ndarray) -> tuple[int, float, np.ndarray]:
+def rank_test(program: direct_relaxation.Program, y: np.ndarray) -> tuple[int, float, np.ndarray]:
     """(numerical rank, second / first eigenvalue, eigenvalues) of the moment matrix."""
-    values = np.linalg.eigvalsh(dr.moment_matrix(program, y))[::-1]
+    values = np.linalg.eigvalsh(direct_relaxation.moment_matrix(program, y))[::-1]
     rank = int(np.sum(values > direct.RANK_TOLERANCE * values[0]))
     return rank, float(values[1] / values[0]), values
 
@@ -233,7 +235,7 @@ def polish_within(cameras: np.ndarray, Q: np.ndarray, focal: np.ndarray) -> np.n
     return S if np.all(np.einsum("kab,ab->k", focal, S / np.trace(S)) >= 0) else None
 
 
-def extract(program: dr.Program, y: np.ndarray, rank: int) -> list[np.ndarray]:
+def extract(program: direct_relaxation.Program, y: np.ndarray, rank: int) -> list[np.ndarray]:
     """The ``rank`` points x whose moments the moment matrix M_d(y) would be a mixture of, if it
     were (Henrion and Lasserre's extraction, 2005): M = V V' with V's columns the top eigenvectors
     scaled by their roots; V in column echelon form on ``rank`` independent rows among the
@@ -244,11 +246,11 @@ def extract(program: dr.Program, y: np.ndarray, rank: int) -> list[np.ndarray]:
     checked for feasibility and costed before use: nothing here touches the bound)."""
     import scipy.linalg as sl
 
-    M = dr.moment_matrix(program, y)
+    M = direct_relaxation.moment_matrix(program, y)
     values, vectors = np.linalg.eigh(M)
     values, vectors = values[::-1][:rank], vectors[:, ::-1][:, :rank]
     V = vectors * np.sqrt(np.maximum(values, 0.0))
-    basis = dr.monomials(program.moments.order)
+    basis = direct_relaxation.monomials(program.moments.order)
     low = np.flatnonzero(basis.sum(axis=1) <= 1)
     _, _, pivots = sl.qr(V[low].T, pivoting=True)
     rows = low[pivots[:rank]]
@@ -258,11 +260,11 @@ def extract(program: dr.Program, y: np.ndarray, rank: int) -> list[np.ndarray]:
         return []
     position = {tuple(e): i for i, e in enumerate(basis)}
     N = []
-    for k in range(dr.N):
-        shift = np.zeros(dr.N, dtype=np.int64)
+    for k in range(direct_relaxation.N):
+        shift = np.zeros(direct_relaxation.N, dtype=np.int64)
         shift[k] = 1
         N.append(W[[position[tuple(basis[r] + shift)] for r in rows]])
-    weights = np.random.default_rng(0).random(dr.N)
+    weights = np.random.default_rng(0).random(direct_relaxation.N)
     _, Z = sl.schur(sum(w * Nk for w, Nk in zip(weights / weights.sum(), N)))
     points = np.array([[Z[:, j] @ Nk @ Z[:, j] for Nk in N] for j in range(rank)])
     return [x for x in points if np.all(np.isfinite(x))]
@@ -287,7 +289,7 @@ def allowed(setup: direct.DirectSetup, orientation: direct.Orientation, Q: np.nd
 
 
 def candidates(setup: direct.DirectSetup, y: np.ndarray, orientation: direct.Orientation,
-               program: dr.Program | None = None, rank: int = 1) -> list[np.ndarray]:
+               program: direct_relaxation.Program | None = None, rank: int = 1) -> list[np.ndarray]:
     """Feasible quadrics from a relaxation's moments: the first moments rounded, and rounded then
     polished (each kept only when chirality and the focal rows hold); when the moment matrix's rank is
     above one (and ``program`` is given), also the points extracted for mixtures of 2 to
@@ -295,13 +297,13 @@ def candidates(setup: direct.DirectSetup, y: np.ndarray, orientation: direct.Ori
     can put its first moments (the mixture's mean) where every rounding breaks chirality (Table
     7.1's seed 1008, varying focal: the mean's polish puts cameras behind the scene) while one of
     the extracted points leads to a quadric that keeps it."""
-    starts = [y[:dr.N]]
+    starts = [y[:direct_relaxation.N]]
     if program is not None and rank > 1:
         for r in range(2, EXTRACTED_RANKS + 1):
             starts += extract(program, y, r)
     out, seen = [], []
     for x in starts:
-        rounded = direct.rank_three_projection(dr.q_of(x))
+        rounded = direct.rank_three_projection(direct_relaxation.q_of(x))
         if any(np.linalg.norm(rounded - other) <= 1e-6 for other in seen):
             continue  # the same start again (extracted mixtures repeat their points): its polish is known
         seen.append(rounded)
@@ -336,7 +338,7 @@ class Leaf:
     """One program of the split: an orientation's relaxation restricted by cuts."""
     orientation: direct.Orientation
     cuts: tuple
-    program: dr.Program
+    program: direct_relaxation.Program
     status: ConicStatus
     y: np.ndarray
     z: np.ndarray
@@ -363,25 +365,27 @@ MAX_SPLITS = direct.MAX_CUTS  # the verifier refuses deeper paths
 
 
 def _solve_leaf(setup, options, order, orientation, cuts, check=None) -> Leaf | None:
-    program = dr.build(setup.cameras, orientation.pairs, order, cuts, setup.focal)
+    program = direct_relaxation.build(setup.cameras, orientation.pairs, order, cuts, setup.focal)
 
     def enough(y, z):
         """A rank-one solve whose gap misses the tolerance is worth a more accurate attempt (the
         unsplit programs only: a half's own rounding may leave the half)."""
         if cuts or rank_test(program, y)[0] != 1:
             return True
-        found = [dr.cost(setup.cameras, Q) for Q in candidates(setup, y, orientation)]
+        found = [direct_relaxation.cost(setup.cameras, Q) for Q in candidates(setup, y, orientation)]
         if not found:
             return True
         best = min(found)
-        return best - dr.safe_bound(program, z)[0] <= max(options.abs_gap, options.metric_rel_gap * abs(best))
+        return (best - direct_relaxation.safe_bound(program, z)[0]
+                <= max(options.abs_gap, options.metric_rel_gap * abs(best)))
 
     # a half is solved by direct_ipm only: where it stalled (seeds 1008, 1012 and 1042, varying focal),
     # Clarabel's attempts took 6 to 20 s each and ended "AlmostSolved" too (the result is then not certified)
     status, y, z, raw = solve_program(program, enough, ATTEMPTS[:1] if cuts else ATTEMPTS, check)
     if z is None:
         return Leaf(orientation, cuts, program, status, y, z, raw, -math.inf, (0, math.nan, None))
-    return Leaf(orientation, cuts, program, status, y, z, raw, dr.safe_bound(program, z)[0], rank_test(program, y))
+    return Leaf(orientation, cuts, program, status, y, z, raw, direct_relaxation.safe_bound(program, z)[0],
+                rank_test(program, y))
 
 
 def split_of(leaf: Leaf) -> tuple[int, float] | None:
@@ -394,9 +398,9 @@ def split_of(leaf: Leaf) -> tuple[int, float] | None:
             k = int(np.argmax(np.abs(points[0] - points[1])))
             if abs(points[0][k] - points[1][k]) > 1e-6:
                 return k, float((points[0][k] + points[1][k]) / 2)
-    M = dr.moment_matrix(leaf.program, leaf.y)
-    mean = M[0, 1:1 + dr.N]
-    variance = np.diag(M)[1:1 + dr.N] - mean ** 2
+    M = direct_relaxation.moment_matrix(leaf.program, leaf.y)
+    mean = M[0, 1:1 + direct_relaxation.N]
+    variance = np.diag(M)[1:1 + direct_relaxation.N] - mean ** 2
     k = int(np.argmax(variance))
     if not variance[k] > 1e-12:
         return None
@@ -412,7 +416,7 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool, c
         nonlocal best, best_cost
         statuses.append(leaf.raw)
         for Q in candidates(setup, leaf.y, leaf.orientation, leaf.program, leaf.rank[0]):
-            c = dr.cost(setup.cameras, Q)
+            c = direct_relaxation.cost(setup.cameras, Q)
             if c < best_cost:
                 best, best_cost = Q, c
 

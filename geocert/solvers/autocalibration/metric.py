@@ -14,7 +14,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from geocert.solvers.autocalibration import cuts
-from geocert.solvers.autocalibration import metric_relaxation as relax
+from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.core.bnb import BnbOptions, Box, Progress, asks_to_stop, branch_and_bound, tolerance
 from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
 from geocert.solvers.core.cones import safe_lower_bound
@@ -38,7 +38,7 @@ class MetricStage:
     unit: float = 1.0
 
 
-homographies, setup_for = relax.homographies, relax.setup_for
+homographies, setup_for = metric_relaxation.homographies, metric_relaxation.setup_for
 
 
 CutProof = cuts.CutProof
@@ -52,12 +52,12 @@ class MetricProblem(cuts.BoxSearch):
     intrinsics ranges: 547 nodes, slabs included, certified, against 3000 nodes uncertified
     without; with the ranges held it certifies at the root)."""
 
-    def __init__(self, setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, record: bool):
+    def __init__(self, setup: metric_relaxation.MetricSetup, lo: np.ndarray, hi: np.ndarray, record: bool):
         super().__init__(lo, hi, record)
         self.setup, self.lo, self.hi = setup, lo, hi
 
     def build(self, lo: np.ndarray, hi: np.ndarray, cap: float, cap_row: bool = False):
-        return relax.build(self.setup, lo, hi, cap, cap_row)
+        return metric_relaxation.build(self.setup, lo, hi, cap, cap_row)
 
     @property
     def unit(self) -> float:
@@ -70,16 +70,16 @@ class MetricProblem(cuts.BoxSearch):
         return Box(box.lo.copy(), box.hi.copy())
 
     def objective(self, w: np.ndarray) -> float:
-        if not relax.in_domain(self.setup, w, self.lo, self.hi):
+        if not metric_relaxation.in_domain(self.setup, w, self.lo, self.hi):
             return math.inf
-        return relax.cost(self.setup, w)
+        return metric_relaxation.cost(self.setup, w)
 
     def improve(self, w: np.ndarray) -> tuple[np.ndarray, float]:
         """A local minimum from w, searched over the intrinsics themselves (fx, aspect, skew, u, v
         within their ranges), so that every point tried is a calibration of the domain."""
         start = self.objective(w)
         ranges = self.setup.ranges
-        k = relax.intrinsics_of(w)
+        k = metric_relaxation.intrinsics_of(w)
         if ranges is None or k is None:
             return w, start
         names = ("focal", "aspect", "skew", "u", "v")
@@ -95,10 +95,10 @@ class MetricProblem(cuts.BoxSearch):
             f, aspect, skew, u, v = x
             K = np.array([[f, skew, u], [0.0, f * aspect, v], [0.0, 0.0, 1.0]])
             omega = K @ K.T
-            return np.array([omega[a, b] for a, b in relax.ENTRIES])
+            return np.array([omega[a, b] for a, b in metric_relaxation.ENTRIES])
 
         try:
-            fit = least_squares(lambda x: relax.residuals(self.setup, w_of(x)), x0[free],
+            fit = least_squares(lambda x: metric_relaxation.residuals(self.setup, w_of(x)), x0[free],
                                 bounds=(lower[free], upper[free]), method="trf", max_nfev=60, xtol=1e-14,
                                 ftol=1e-14, gtol=1e-14)
             candidate = w_of(fit.x)
@@ -122,7 +122,7 @@ class Tightening:
     duals: list
 
 
-def tighten(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float, tolerance: float = 0.0,
+def tighten(setup: metric_relaxation.MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float, tolerance: float = 0.0,
             rounds: int = 12, progress: float = 0.02, stop: Callable[[], bool] | None = None
             ) -> tuple[np.ndarray, np.ndarray, list[Tightening]]:
     """Optimality-based bound tightening: each entry of omega minimised and maximised over the
@@ -136,7 +136,7 @@ def tighten(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float
     for _ in range(rounds):
         if stop is not None and stop():
             break
-        program = relax.build(setup, lo, hi, cap, cap_row=True)
+        program = metric_relaxation.build(setup, lo, hi, cap, cap_row=True)
         if program is None:
             break
         solver = ReusableConicProgram(lean=False)
@@ -162,17 +162,17 @@ def tighten(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float
     return lo, hi, record
 
 
-linear_baseline = relax.linear_baseline
+linear_baseline = metric_relaxation.linear_baseline
 
 
-def solve_metric(setup: relax.MetricSetup, lo: np.ndarray, hi: np.ndarray, bnb: BnbOptions, record: bool,
+def solve_metric(setup: metric_relaxation.MetricSetup, lo: np.ndarray, hi: np.ndarray, bnb: BnbOptions, record: bool,
                  callback=None) -> MetricStage:
     began = time.perf_counter()  # the stage's clock covers its first fits too
     problem = MetricProblem(setup, lo, hi, record)
     problem.deadline = began + bnb.time_limit_s
     best, upper = None, math.inf
     baseline, _ = linear_baseline(setup)
-    centre = relax.w_of_intrinsics({name: 0.5 * (a + b) for name, (a, b) in setup.ranges.items()}) \
+    centre = metric_relaxation.w_of_intrinsics({name: 0.5 * (a + b) for name, (a, b) in setup.ranges.items()}) \
         if setup.ranges is not None else 0.5 * (lo + hi)
     for start in (np.clip(baseline, lo, hi), centre):
         w, value = problem.improve(start)

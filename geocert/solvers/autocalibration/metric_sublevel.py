@@ -28,7 +28,7 @@ import time
 
 import numpy as np
 
-from geocert.solvers.autocalibration import metric_relaxation as relax
+from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import proofs
 from geocert.solvers.autocalibration.metric import MetricProblem, tighten
 from geocert.solvers.core.bnb import Box
@@ -53,7 +53,7 @@ def prove(problem, p: np.ndarray, unit: float, cost: float, increase: float, tim
     if not (math.isfinite(cost) and math.isfinite(increase) and increase >= 0 and cost >= 0):
         return None
     began = time.perf_counter()
-    setup = relax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+    setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
     setup.unit = unit
     U = proofs.sublevel_level(cost, increase)
     cap = U * (1 + CAP_MARGIN)
@@ -61,7 +61,7 @@ def prove(problem, p: np.ndarray, unit: float, cost: float, increase: float, tim
     def stop() -> bool:
         return time.perf_counter() - began > time_limit_s
 
-    root_lo, root_hi = relax.omega_box(problem.unit_ranges)
+    root_lo, root_hi = metric_relaxation.omega_box(problem.unit_ranges)
     lo, hi, rounds = tighten(setup, root_lo, root_hi, cap, 0.0, rounds=TIGHTENING_ROUNDS, stop=stop)
     search = MetricProblem(setup, lo, hi, record=True)
     search.upper, search.deadline = cap, began + time_limit_s  # its splits tighten at the cap
@@ -79,7 +79,7 @@ def prove(problem, p: np.ndarray, unit: float, cost: float, increase: float, tim
                                   or (proof.kind == "dual" and proof.bound > U * (1 + EXCLUDE_MARGIN))):
             leaves.append((box, proof))  # a cut's slab holds no omega costing at most the cap
             continue
-        if relax.intrinsics_ranges(setup.ranges, box.lo, box.hi) is None or programs >= MAX_BOXES or stop():
+        if metric_relaxation.intrinsics_ranges(setup.ranges, box.lo, box.hi) is None or programs >= MAX_BOXES or stop():
             leaves.append((box, None))
             continue
         programs += 10  # the split's tightening: each side minimised and maximised at the cap

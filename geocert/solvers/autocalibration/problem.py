@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from geocert.solvers.autocalibration import frames
-from geocert.solvers.autocalibration import metric_relaxation as mrelax
+from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.core.bnb import BnbOptions, Progress
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.options import MAX_REL_GAP, SearchOptions
@@ -247,7 +247,7 @@ def w_of_K(problem: Problem, K_pixels: np.ndarray) -> np.ndarray:
     K_unit = np.linalg.solve(problem.K0, K_pixels)
     omega = K_unit @ K_unit.T
     omega = omega / omega[2, 2]
-    return np.array([omega[a, b] for a, b in mrelax.ENTRIES])
+    return np.array([omega[a, b] for a, b in metric_relaxation.ENTRIES])
 
 
 def plane_in_input(problem: Problem, p: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ import numpy as np
 
 from geocert.solvers.autocalibration import affine_relaxation as arelax
 from geocert.solvers.autocalibration import frames
-from geocert.solvers.autocalibration import metric_relaxation as mrelax
+from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import pack
 from geocert.solvers.core.cones import SMALLEST_NORMAL, proves_infeasible, safe_lower_bound
@@ -365,14 +365,14 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
     """The bound a metric proof establishes over every omega of the domain, for the plane p;
     with its ``sublevel``, the proven intervals too (``cost``: the claimed K's recomputed cost)."""
     record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"), ("sublevel",))
-    setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+    setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
     setup.unit = checked_unit(proof.get("unit"), "unit", claimed_cost)
     lo, hi, proven_lo, proven_hi = _check_rounds(problem, setup, proof, lower_claimed, "tightening", "its cap is "
                                                  "below the lower bound claimed")
     passed += ["root_region", "tightening"]
-    bound = check_leaves(proof, lo, hi, lambda l, h, c: mrelax.build(setup, l, h, c), setup.unit, 5,
-                         lambda l, h, c: mrelax.build(setup, l, h, c, cap_row=True), Box(proven_lo, proven_hi),
-                         len(problem.norm.cameras))
+    bound = check_leaves(proof, lo, hi, lambda l, h, c: metric_relaxation.build(setup, l, h, c), setup.unit, 5,
+                         lambda l, h, c: metric_relaxation.build(setup, l, h, c, cap_row=True),
+                         Box(proven_lo, proven_hi), len(problem.norm.cameras))
     passed += ["coverage", "leaf_bounds"]
     if "sublevel" in proof:
         check_sublevel(problem, setup, proof["sublevel"], max(claimed_cost, claimed_cost if cost is None else cost))
@@ -384,7 +384,7 @@ def _check_rounds(problem, setup, proof: dict, floor: float, check: str, below: 
     """The tightening rounds of ``proof`` from the ranges' root box, each cap at least ``floor``:
     (the last box claimed, the last box proven: the claimed one widened by rounding); ``check``
     names the check a failure fails, ``below`` what a cap under the floor is."""
-    lo, hi = mrelax.omega_box(problem.unit_ranges)
+    lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
     proven_lo, proven_hi = lo, hi  # each round's box as proven: the claimed one widened by rounding
     rounds = proof.get("tightening")
     if not isinstance(rounds, list) or len(rounds) > MAX_ROUNDS:
@@ -399,7 +399,7 @@ def _check_rounds(problem, setup, proof: dict, floor: float, check: str, below: 
             raise Invalid(check, f"tightening/{n}: {below}")
         lo_out, hi_out = _read_box(round_.get("box_out"), f"tightening/{n}/box_out", 5)
         charge(len(problem.norm.cameras), f"tightening/{n}")
-        program = mrelax.build(setup, proven_lo, proven_hi, cap, cap_row=True)
+        program = metric_relaxation.build(setup, proven_lo, proven_hi, cap, cap_row=True)
         duals = round_.get("duals")
         if program is None or not isinstance(duals, list) or len(duals) != 10:
             raise Invalid(check, f"tightening/{n}: ten duals (or null) are needed over a box of the domain")
@@ -459,17 +459,17 @@ def sublevel_hull(problem, setup, sublevel: dict, cost: float, margin: float = 0
     lo, hi, proven_lo, proven_hi = _check_rounds(problem, setup, sublevel, U, "proven_interval",
                                                  "its cap is below the level proven")
     read: list = []
-    check_leaves(sublevel, lo, hi, lambda l, h, c: mrelax.build(setup, l, h, c), setup.unit, 5,
-                 lambda l, h, c: mrelax.build(setup, l, h, c, cap_row=True), Box(proven_lo, proven_hi),
+    check_leaves(sublevel, lo, hi, lambda l, h, c: metric_relaxation.build(setup, l, h, c), setup.unit, 5,
+                 lambda l, h, c: metric_relaxation.build(setup, l, h, c, cap_row=True), Box(proven_lo, proven_hi),
                  len(problem.norm.cameras), read)
     leaf_lo, leaf_hi, bounds = read
-    found = [r for r in (mrelax.intrinsics_ranges(problem.unit_ranges, leaf_lo[i], leaf_hi[i])
+    found = [r for r in (metric_relaxation.intrinsics_ranges(problem.unit_ranges, leaf_lo[i], leaf_hi[i])
                          for i in np.flatnonzero(~(bounds > U * (1 + margin)))) if r is not None]
     if not found:
         raise Invalid("proven_interval", "every leaf is excluded: not even the returned K costs that little")
     stacked = np.array(found)
-    return mrelax.pixel_intervals(problem.K0, np.stack([stacked[:, :, 0].min(axis=0), stacked[:, :, 1].max(axis=0)],
-                                                       axis=1))
+    return metric_relaxation.pixel_intervals(
+        problem.K0, np.stack([stacked[:, :, 0].min(axis=0), stacked[:, :, 1].max(axis=0)], axis=1))
 
 
 def check_sublevel(problem, setup, sublevel: Any, cost: float) -> np.ndarray:

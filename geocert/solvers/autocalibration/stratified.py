@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from geocert.solvers.autocalibration import affine, metric
-from geocert.solvers.autocalibration import metric_relaxation as mrelax
+from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration.problem import (AutocalibrationOptions, Problem, StageProgress, bnb_options,
                                                      plane_from_input, plane_in_input, stage_callback,
                                                      upper_triangular_root)
@@ -58,13 +58,13 @@ def solve(problem: Problem, options: AutocalibrationOptions, callback=None) -> S
     baseline = None
     try:
         setup = metric.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
-        lo, hi = mrelax.omega_box(problem.unit_ranges)
+        lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
         if not np.all(setup.q_lower > 0):
             raise ValueError("a view's scale is not bounded away from 0 over the intrinsics ranges")
         # the linear estimate exists whenever the metric stage can be set up (what the verifier
         # recomputes), whether or not its search then succeeds
         w, psd = metric.linear_baseline(setup)
-        baseline = {"w": w, "psd": psd, "cost": mrelax.cost(setup, w)}
+        baseline = {"w": w, "psd": psd, "cost": metric_relaxation.cost(setup, w)}
         result = metric.solve_metric(setup, lo, hi, bnb_options(options, options.metric_rel_gap), record,
                                      stage_callback(callback, "metric"))
     except (ValueError, np.linalg.LinAlgError) as exc:
@@ -74,5 +74,5 @@ def solve(problem: Problem, options: AutocalibrationOptions, callback=None) -> S
     metric_s = time.perf_counter() - start
     K_unit = None
     if result.w is not None:
-        K_unit = upper_triangular_root(mrelax.omega_of(result.w))
+        K_unit = upper_triangular_root(metric_relaxation.omega_of(result.w))
     return Stratified(problem, stage, affine_s, result, metric_s, baseline, K_unit, p)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.optimize
 
-from geocert.solvers.bilinear import problem as pb
+from geocert.solvers.bilinear import problem as bilinear_problem
 from geocert.solvers.bilinear.options import BilinearOptions
 from geocert.solvers.bilinear.relaxation import Relaxation, tightening_objective, with_cost_cap
 from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound
@@ -40,7 +40,7 @@ TIGHTENING_TOLERANCE = 1e-7
 class Model:
     """The frame's exact cost and the alternating steps, in normalised units."""
 
-    def __init__(self, frame: pb.Frame, norm: str, coefficients: str, bound: float):
+    def __init__(self, frame: bilinear_problem.Frame, norm: str, coefficients: str, bound: float):
         self.X, self.u, self.norm = frame.X, frame.u, norm
         self.coefficients, self.bound = coefficients, bound
         self.K, self.n = frame.X.shape[0], frame.X.shape[1]
@@ -94,7 +94,7 @@ class Model:
             alpha = _l1_fit(D, y, [(lo, hi)] * self.K, np.ones(self.K))
             if alpha is None:
                 return None
-        return pb.project_coefficients(alpha, self.coefficients, self.bound)
+        return bilinear_problem.project_coefficients(alpha, self.coefficients, self.bound)
 
     def als(self, M, alpha, t, iterations: int, lo=None, hi=None, deadline: float = math.inf):
         """Alternating steps from (M, alpha, t); the best point met and its cost. No step starts
@@ -140,7 +140,7 @@ def _l1_fit(design: np.ndarray, target: np.ndarray, bounds: list, equality: np.n
 
 def linear_baseline(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Thesis 8.3.3's linear estimate (problem.linear_baseline, which the verifier recomputes)."""
-    return pb.linear_baseline(model.X, model.u, model.norm, model.coefficients, model.bound)
+    return bilinear_problem.linear_baseline(model.X, model.u, model.norm, model.coefficients, model.bound)
 
 
 @dataclass
@@ -243,7 +243,7 @@ class BoxProblem:
         value = self.relaxation.bound(data, res.z)
         M, alpha, _ = self.relaxation.split_variables(res.x)
         M = np.clip(M, box.lo.reshape(2, 3), box.hi.reshape(2, 3))
-        alpha = pb.project_coefficients(alpha, self.model.coefficients, self.model.bound)
+        alpha = bilinear_problem.project_coefficients(alpha, self.model.coefficients, self.model.bound)
         candidate = (M, alpha, self.model.best_t(M, alpha))
         return BoxBound(BoxStatus.BOUNDED, min(value, cap), candidate=candidate, split_hint=hint,
                         proof=NodeProof(box, cap, "dual", res.z, value, source))
@@ -374,7 +374,8 @@ def root_incumbent(model: Model, seed: int = 0, deadline: float = math.inf):
     starts = [linear_baseline(model)[1], np.full(model.K, 1.0 / model.K)]
     rng = np.random.default_rng(seed)
     for _ in range(ALS_STARTS if model.K > 1 else 0):
-        starts.append(pb.project_coefficients(rng.dirichlet(np.ones(model.K)), model.coefficients, model.bound))
+        starts.append(bilinear_problem.project_coefficients(rng.dirichlet(np.ones(model.K)), model.coefficients,
+                                                            model.bound))
     squares = model if model.norm == "L2L2" else copy.copy(model)
     squares.norm = "L2L2"
     found = []
@@ -392,27 +393,27 @@ def root_incumbent(model: Model, seed: int = 0, deadline: float = math.inf):
     return min(found, key=lambda point: point[3]) if found else None
 
 
-def root_half_width(M: np.ndarray, camera_bound: float | None, frame: pb.Frame) -> float:
+def root_half_width(M: np.ndarray, camera_bound: float | None, frame: bilinear_problem.Frame) -> float:
     """The camera box's half-width (normalised): camera_bound when given, else the default box of
     the camera M (problem.default_half_width)."""
     if camera_bound is not None:
         return camera_bound / frame.camera_scale
-    return pb.default_half_width(M)
+    return bilinear_problem.default_half_width(M)
 
 
 def fit_frame(basis: np.ndarray, points: np.ndarray, options: BilinearOptions, callback=None) -> FrameResult:
     """One frame's certified fit (the kind's solve_item)."""
     start = time.perf_counter()
     norm = options.norm
-    frame = pb.normalise(basis, points)
+    frame = bilinear_problem.normalise(basis, points)
     model = Model(frame, norm, options.coefficients, options.coefficient_bound)
-    unit = pb.cost_unit(frame, norm)
+    unit = bilinear_problem.cost_unit(frame, norm)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         Mb, ab, tb = linear_baseline(model)
-    baseline_camera = pb.to_raw(frame, Mb, tb)
+    baseline_camera = bilinear_problem.to_raw(frame, Mb, tb)
     baseline = {"method": "linear", "camera": baseline_camera.tolist(), "coefficients": ab.tolist(),
-                "cost": pb.cost(pb.residuals(basis, points, baseline_camera, ab), norm)}
+                "cost": bilinear_problem.cost(bilinear_problem.residuals(basis, points, baseline_camera, ab), norm)}
     # the time limit is shared: a quarter for the incumbent, the root's tightening up to half of it,
     # the search what remains (every step below stops at its deadline)
     incumbent = root_incumbent(model, deadline=start + 0.25 * options.time_limit_s)
@@ -422,21 +423,21 @@ def fit_frame(basis: np.ndarray, points: np.ndarray, options: BilinearOptions, c
     relaxation = Relaxation(frame.X, frame.u, norm, options.coefficients, options.coefficient_bound)
     for round_ in range(BOX_ROUNDS):
         found = _search(model, relaxation, frame, options, incumbent, half, start, callback)
-        wider = pb.default_half_width(found.candidate[0])
+        wider = bilinear_problem.default_half_width(found.candidate[0])
         if options.camera_bound is not None or wider <= half or round_ == BOX_ROUNDS - 1:
             break
         # the camera found asks a wider default box than the incumbent's: the proof must cover it
         half, incumbent = wider, (*found.candidate, model.cost(*found.candidate))
     status, lower, nodes, candidate, trivial = found.status, found.lower, found.nodes, found.candidate, found.trivial
     M, alpha, t = candidate
-    camera = pb.to_raw(frame, M, t)
-    r = pb.residuals(basis, points, camera, alpha)
-    cost = pb.cost(r, norm)
+    camera = bilinear_problem.to_raw(frame, M, t)
+    r = bilinear_problem.residuals(basis, points, camera, alpha)
+    cost = bilinear_problem.cost(r, norm)
     lower_raw = lower * unit
     gap = max(0.0, cost - lower_raw)
     tolerance = max(options.abs_gap, options.rel_gap * abs(cost))
     certified = status == "optimal" and gap <= tolerance * (1 + 1e-12) and \
-        pb.feasible_coefficients(alpha, options.coefficients, options.coefficient_bound)
+        bilinear_problem.feasible_coefficients(alpha, options.coefficients, options.coefficient_bound)
     reason = None
     if certified and not trivial and options.camera_bound is None and wider > half:
         certified, status = False, "not_certified"
@@ -449,7 +450,7 @@ def fit_frame(basis: np.ndarray, points: np.ndarray, options: BilinearOptions, c
             status, status)
     if certified:
         lower_raw = cost - gap
-    shape = pb.shape_of(basis, alpha)
+    shape = bilinear_problem.shape_of(basis, alpha)
     out = FrameResult(
         status=status, certified=certified, cost=cost, lower_bound=lower_raw, gap=gap, nodes=nodes,
         elapsed_s=time.perf_counter() - start, reason=reason, camera=camera.tolist(), coefficients=alpha.tolist(),
@@ -477,11 +478,11 @@ class _Searched:
     leaves: list
 
 
-def _search(model: Model, relaxation: Relaxation, frame: pb.Frame, options: BilinearOptions, incumbent: tuple,
-            half: float, start: float, callback) -> _Searched:
+def _search(model: Model, relaxation: Relaxation, frame: bilinear_problem.Frame, options: BilinearOptions,
+            incumbent: tuple, half: float, start: float, callback) -> _Searched:
     """The branch and bound over the camera box |M_rk| <= half (normalised) from ``incumbent``
     (M, alpha, t, cost), within the frame's time limit counted from ``start``."""
-    norm, unit = model.norm, pb.cost_unit(frame, model.norm)
+    norm, unit = model.norm, bilinear_problem.cost_unit(frame, model.norm)
     lo, hi = np.full(6, -half), np.full(6, half)
     M, alpha, t, value = incumbent
     if np.any(np.abs(M) > half):  # a camera_bound below the incumbent: the best camera inside it

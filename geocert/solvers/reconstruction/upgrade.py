@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.linalg import rq
 
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.reconstruction import motion_claim, schur
 
 
@@ -49,8 +49,8 @@ class Proven:
     image_size: tuple | None
     views: list  # the view of each camera
     tracks: list  # the track of each point
-    options: pr.AutocalibrationOptions
-    problem: pr.Problem
+    options: autocalibration_problem.AutocalibrationOptions
+    problem: autocalibration_problem.Problem
     result: object
 
 
@@ -93,7 +93,7 @@ def choose_points(points: np.ndarray, limit: int, observed: tuple[np.ndarray, np
 
 
 def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_size, intrinsics: dict,
-                  options: pr.AutocalibrationOptions, max_points: int, method: str = "stratified",
+                  options: autocalibration_problem.AutocalibrationOptions, max_points: int, method: str = "stratified",
                   callback=None, skip_critical: bool = False, observed: tuple[np.ndarray, np.ndarray] | None = None,
                   per_view: int = 0) -> Metric:
     """The metric upgrade by the stratified method (thesis ch. 6), the direct one (ch. 7), or
@@ -112,7 +112,7 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
     chosen = choose_points(points, max_points, observed, per_view)
     P = np.array([cameras[v] for v in views])
     X = points[chosen]
-    problem = pr.prepare(P, X, image_size, intrinsics)
+    problem = autocalibration_problem.prepare(P, X, image_size, intrinsics)
     empty.ranges, empty.autocalibration_points = problem.ranges, len(chosen)
     linear = _linear(P, X, image_size)  # the adjustment's second start, and the motion's first judge
     empty.alternative = linear
@@ -207,12 +207,13 @@ def metric_from(cameras: list[np.ndarray | None], points: np.ndarray, H: np.ndar
     return Metric(K, rotations, translations, Xm, [], False)
 
 
-def _stratified(problem: pr.Problem, options, intrinsics, callback):
+def _stratified(problem: autocalibration_problem.Problem, options, intrinsics, callback):
     from geocert.solvers.autocalibration import stratified
 
     result = stratified.solve(problem, replace(options, intrinsics=intrinsics), callback)
     stages = [_stage("affine", result.affine, result.affine_s), _stage("metric", result.metric, result.metric_s)]
-    if result.p is not None and stages[0]["certified"] and not pr.allowed_by_chirality(problem, result.p):
+    if (result.p is not None and stages[0]["certified"]
+            and not autocalibration_problem.allowed_by_chirality(problem, result.p)):
         # As the autocalibration kind judges it: the plane as returned must be one chirality allows.
         stages[0].update(certified=False, status="not_certified",
                          reason="the plane returned is not strictly inside the chirality polytope")
@@ -223,17 +224,17 @@ def _stratified(problem: pr.Problem, options, intrinsics, callback):
     K[1, 0] = K[2, 0] = K[2, 1] = 0.0
     K[2, 2] = 1.0
     if stages[1]["certified"]:  # the K returned, as rounded, must lie in the metric stage's domain (as the kind's)
-        from geocert.solvers.autocalibration import metric_relaxation as mrelax
+        from geocert.solvers.autocalibration import metric_relaxation
 
-        setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, result.p, problem.unit_ranges)
-        lo, hi = mrelax.omega_box(problem.unit_ranges)
-        if not mrelax.in_domain(setup, pr.w_of_K(problem, K), lo, hi):
+        setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, result.p, problem.unit_ranges)
+        lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
+        if not metric_relaxation.in_domain(setup, autocalibration_problem.w_of_K(problem, K), lo, hi):
             stages[1].update(certified=False, status="not_certified",
                              reason="the DIAC returned left its domain by rounding")
-    return pr.upgrade(problem, result.p, np.linalg.solve(problem.K0, K)), K, stages, result
+    return autocalibration_problem.upgrade(problem, result.p, np.linalg.solve(problem.K0, K)), K, stages, result
 
 
-def _direct(problem: pr.Problem, P: np.ndarray, X: np.ndarray, options):
+def _direct(problem: autocalibration_problem.Problem, P: np.ndarray, X: np.ndarray, options):
     from geocert.solvers.autocalibration import direct, direct_solve
 
     start = time.perf_counter()

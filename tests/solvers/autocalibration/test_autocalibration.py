@@ -431,12 +431,12 @@ def test_the_metric_stage_tightening_stops_at_a_cancel_or_its_time_limit():
     """With many views one tightening round is ten conic programs of seconds each, and the rounds
     ran before the search looked at the clock (a 60-view metric stage took 12 s with a limit of 2
     s): a cancel seen at the stage's first check now stops it before any program."""
-    from geocert.solvers.autocalibration import problem as pr
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
     from geocert.solvers.autocalibration import stratified
     from geocert.verify.autocalibration import read_data
 
     cameras, points, image_size = read_data(scenes.make_scene(6, 0.1, seed=5).job_data())
-    options = pr.AutocalibrationOptions(time_limit_s=60)
+    options = autocalibration_problem.AutocalibrationOptions(time_limit_s=60)
     metric_calls = []
 
     def cancel_in_the_metric_stage(progress):
@@ -445,7 +445,7 @@ def test_the_metric_stage_tightening_stops_at_a_cancel_or_its_time_limit():
             return len(metric_calls) > 1  # the stage's announcement passes; its first check cancels
         return False
 
-    result = stratified.solve(pr.prepare(cameras, points, image_size, options.intrinsics), options,
+    result = stratified.solve(autocalibration_problem.prepare(cameras, points, image_size, options.intrinsics), options,
                               cancel_in_the_metric_stage)
     assert result.metric.status == "cancelled" and result.metric.rounds == []
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from geocert.solvers.autocalibration import frames, metric, scenes, stratified
-from geocert.solvers.autocalibration import metric_relaxation as mrelax
-from geocert.solvers.autocalibration import problem as prob
+from geocert.solvers.autocalibration import metric_relaxation
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 
 STARTS = 50
 SCENES = [(5, 0.2, 3), (10, 0.1, 4), (10, 0.5, 11)]  # views, noise (% of the image side), seed
@@ -23,10 +23,11 @@ def affine_ends(problem, regions, rng):
     while len(ends) < STARTS:
         region = regions[rng.integers(len(regions))]
         h = region.setup.M @ np.append(rng.uniform(region.lo, region.hi), 1.0)
-        if not (h[3] > 0 and prob.allowed_by_chirality(problem, h[:3] / h[3])):
+        if not (h[3] > 0 and autocalibration_problem.allowed_by_chirality(problem, h[:3] / h[3])):
             continue
         fit = frames_fit(coef, h[:3] / h[3])
-        ends.append((prob.affine_cost(problem, fit), prob.allowed_by_chirality(problem, fit)))
+        ends.append((autocalibration_problem.affine_cost(problem, fit),
+                     autocalibration_problem.allowed_by_chirality(problem, fit)))
     return ends
 
 
@@ -52,13 +53,13 @@ def metric_ends(problem, p, rng):
         f, aspect, s, u, v = k
         K = np.array([[f, s, u], [0.0, aspect * f, v], [0.0, 0.0, 1.0]])
         omega = K @ K.T
-        return np.array([omega[a, b] for a, b in mrelax.ENTRIES])
+        return np.array([omega[a, b] for a, b in metric_relaxation.ENTRIES])
 
     ends = []
     for _ in range(STARTS):
-        fit = least_squares(lambda k: mrelax.residuals(setup, w_of(k)), rng.uniform(lo, hi), bounds=(lo, hi),
+        fit = least_squares(lambda k: metric_relaxation.residuals(setup, w_of(k)), rng.uniform(lo, hi), bounds=(lo, hi),
                             method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=2000)
-        ends.append((mrelax.cost(setup, w_of(fit.x)), True))
+        ends.append((metric_relaxation.cost(setup, w_of(fit.x)), True))
     return ends
 
 
@@ -78,9 +79,9 @@ def check(stage, ends, rel_gap):
 @pytest.mark.parametrize("views,noise,seed", SCENES)
 def test_certified_stages_against_fifty_local_starts(views, noise, seed):
     scene = scenes.make_scene(views, noise, seed=seed)
-    problem = prob.prepare(scene.cameras, scene.points, scene.image_size, {})
-    result = stratified.solve(problem, prob.AutocalibrationOptions(rel_gap=1e-5, metric_rel_gap=1e-4,
-                                                                   time_limit_s=60))
+    problem = autocalibration_problem.prepare(scene.cameras, scene.points, scene.image_size, {})
+    result = stratified.solve(problem, autocalibration_problem.AutocalibrationOptions(
+        rel_gap=1e-5, metric_rel_gap=1e-4, time_limit_s=60))
     rng = np.random.default_rng(seed)
     assert check(result.affine, affine_ends(problem, result.affine.regions, rng), 1e-5), result.affine.status
     assert result.metric is not None and result.metric.w is not None

@@ -21,8 +21,8 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import direct, scenes
-from geocert.solvers.autocalibration import direct_relaxation as dr
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import direct_relaxation
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 from tests.support import HOUSE_RANGES, house_in_projective_frame, shared_data
 
 
@@ -96,7 +96,7 @@ def rotation_steps(result: dict) -> tuple[np.ndarray, np.ndarray]:
 @pytest.mark.slow
 @pytest.mark.shared_data("oxford_dinosaur")
 class TestDinosaur:
-    """Measured (2026-11-23): both certify (direct: moment rank 1, cost 7.27e-5, gap 7e-11; stratified:
+    """Measured: both certify (direct: moment rank 1, cost 7.27e-5, gap 7e-11; stratified:
     both stages at cost ~1e-27); the direct K has f = 2870 px, the stratified f = 100 px with aspect
     0.52 (the ranges' edge), because the turntable leaves K undetermined (Sturm 1997), which both
     results report; the 35 rotation steps agree to 1.3e-4 degrees (mean 9.987, sd 0.040). Which
@@ -161,7 +161,7 @@ class TestDinosaur:
 class TestModelHouse:
     """VGG's cameras have focal lengths 594 to 666 px, aspect 0.99 to 1.08, principal point u 388 to
     480: no constant K fits them, (7.12) is not zero at VGG's quadric (2.1e-3), nor the modulus
-    cost at VGG's plane (1.5e-5). Measured (2026-11-23, the frame and ranges of
+    cost at VGG's plane (1.5e-5). Measured (the frame and ranges of
     tests/kinds/test_autocalibration_kind.py): the direct method (chirality "centers") returns
     f = 714 px, aspect 1.00, principal point (402, 291), skew 2.9, cost (7.12) 1.80e-4 over a bound
     of 1.77e-4 (moment rank 2: not tight, not certified; since the split, certified: the bound
@@ -180,7 +180,8 @@ class TestModelHouse:
         data, frame = house_in_projective_frame()
         results = {"stratified": solve(data, "stratified", intrinsics=cls.RANGES, time_limit_s=15.0),
                    "direct": solve(data, "direct", intrinsics=cls.RANGES, chirality="centers")}
-        problem = pr.prepare(np.array(data["cameras"]), np.array(data["points"]), (768, 576), cls.RANGES)
+        problem = autocalibration_problem.prepare(np.array(data["cameras"]), np.array(data["points"]), (768, 576),
+                                                  cls.RANGES)
         vgg = {"plane_at_infinity": frame.T @ np.array([0.0, 0.0, 0.0, 1.0]),
                "dual_absolute_quadric": np.linalg.solve(frame, np.linalg.solve(frame, np.diag([1.0, 1, 1, 0])).T)}
         return problem, results, vgg
@@ -190,8 +191,9 @@ class TestModelHouse:
         """((7.12) at the answer's quadric, the modulus cost at its plane)."""
         setup = direct.setup_for(problem, "none")
         Q = np.array(answer["dual_absolute_quadric"], dtype=float)
-        plane = pr.plane_from_input(problem, np.array(answer["plane_at_infinity"], dtype=float))
-        return dr.cost(setup.cameras, setup.from_input(Q / np.linalg.norm(Q))), pr.affine_cost(problem, plane)
+        plane = autocalibration_problem.plane_from_input(problem, np.array(answer["plane_at_infinity"], dtype=float))
+        return (direct_relaxation.cost(setup.cameras, setup.from_input(Q / np.linalg.norm(Q))),
+                autocalibration_problem.affine_cost(problem, plane))
 
     def test_only_the_direct_method_certifies_and_bounds_stay_below_costs(self, house):
         """The direct method certifies its quadric since its program is split (direct_solve.MAX_SPLITS):

@@ -21,8 +21,8 @@ from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.autocalibration import affine_relaxation as arelax
 from geocert.solvers.autocalibration import frames, metric, proofs
-from geocert.solvers.autocalibration import metric_relaxation as mrelax
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import metric_relaxation
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import CLAIM_OPTIONS, read_data
 from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unpack
 from geocert.solvers.core.cones import proves_infeasible
@@ -44,7 +44,7 @@ def solved() -> dict:
 @pytest.fixture(scope="module")
 def problem(solved):
     cameras, points, size = read_data(solved["certificate"]["data"])
-    return pr.prepare(cameras, points, size, {})
+    return autocalibration_problem.prepare(cameras, points, size, {})
 
 
 def check(document) -> tuple[bool, dict | None]:
@@ -79,26 +79,26 @@ def rehash(result: dict) -> None:
 
 
 def metric_setup(problem, claim: dict):
-    p = pr.plane_from_input(problem, np.array(claim["plane_at_infinity"]))
-    return p, mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+    p = autocalibration_problem.plane_from_input(problem, np.array(claim["plane_at_infinity"]))
+    return p, metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
 
 
 def suboptimal_K(problem, claim: dict) -> tuple[list, float]:
     """A calibration in the metric domain, far from the optimum (K = [[1000, 0, 500], ...]), and its cost."""
     _, setup = metric_setup(problem, claim)
-    lo, hi = mrelax.omega_box(problem.unit_ranges)
+    lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
     K = np.array([[700.0, 0.0, 450.0], [0.0, 720.0, 560.0], [0.0, 0.0, 1.0]])
-    w = pr.w_of_K(problem, K)
-    assert mrelax.in_domain(setup, w, lo, hi)
-    return K.tolist(), mrelax.cost(setup, w)
+    w = autocalibration_problem.w_of_K(problem, K)
+    assert metric_relaxation.in_domain(setup, w, lo, hi)
+    return K.tolist(), metric_relaxation.cost(setup, w)
 
 
 def suboptimal_plane(problem, claim: dict, step=(0.02, -0.01, 0.01)) -> tuple[list, float]:
-    p0 = pr.plane_from_input(problem, np.array(claim["plane_at_infinity"]))
-    plane = pr.plane_in_input(problem, p0 + np.array(step))
-    p = pr.plane_from_input(problem, plane)
-    assert pr.allowed_by_chirality(problem, p)
-    return plane.tolist(), pr.affine_cost(problem, p)
+    p0 = autocalibration_problem.plane_from_input(problem, np.array(claim["plane_at_infinity"]))
+    plane = autocalibration_problem.plane_in_input(problem, p0 + np.array(step))
+    p = autocalibration_problem.plane_from_input(problem, plane)
+    assert autocalibration_problem.allowed_by_chirality(problem, p)
+    return plane.tolist(), autocalibration_problem.affine_cost(problem, p)
 
 
 # --- refused attacks --------------------------------------------------------------------------
@@ -171,9 +171,9 @@ class TestSolutionOutOfScope:
         rows = frames.chirality_rows(problem.norm, 1.0)
         pi = rows[0] - rows[1]  # positive on point 0, negative on point 1
         p = pi[:3] / pi[3]
-        assert not pr.allowed_by_chirality(problem, p)
-        plane = pr.plane_in_input(problem, p)
-        cost = pr.affine_cost(problem, pr.plane_from_input(problem, plane))
+        assert not autocalibration_problem.allowed_by_chirality(problem, p)
+        plane = autocalibration_problem.plane_in_input(problem, p)
+        cost = autocalibration_problem.affine_cost(problem, autocalibration_problem.plane_from_input(problem, plane))
         set_claim(r, 0, plane_at_infinity=plane.tolist(), cost=cost, lower_bound=0.0, gap=cost)
         r["certificate"]["options"]["rel_gap"] = 0.5  # the largest allowed (the scope is checked before the gap)
         rehash(r)
@@ -191,7 +191,7 @@ class TestSolutionOutOfScope:
         claim = r["certificate"]["items"][1]
         _, setup = metric_setup(problem, claim)
         K = np.array([[1e5, 0.0, 500.0], [0.0, 1e5, 500.0], [0.0, 0.0, 1.0]])  # focal beyond 5000
-        cost = mrelax.cost(setup, pr.w_of_K(problem, K))
+        cost = metric_relaxation.cost(setup, autocalibration_problem.w_of_K(problem, K))
         set_claim(r, 1, K=K.tolist(), cost=cost, lower_bound=0.0, gap=cost)
         r["certificate"]["options"]["metric_rel_gap"] = 1.0
         rehash(r)
@@ -645,10 +645,10 @@ class TestNanBoundSkipped:
         claim = r["certificate"]["items"][1]
         K, cost = suboptimal_K(problem, claim)  # cost ~3.2, the optimum ~2e-12
         _, setup = metric_setup(problem, claim)
-        lo, hi = mrelax.omega_box(problem.unit_ranges)
-        rows = len(mrelax.build(setup, lo, hi, 1.0).b)
+        lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
+        rows = len(metric_relaxation.build(setup, lo, hi, 1.0).b)
         far = [[1e8, -1.0, -1.0, 1e8, -1.0], [1e9, 1.0, 1.0, 1e9, 1.0]]
-        assert mrelax.build(setup, np.array(far[0]), np.array(far[1]), 1.0) is None
+        assert metric_relaxation.build(setup, np.array(far[0]), np.array(far[1]), 1.0) is None
         box = [lo.tolist(), hi.tolist()]
         proof = claim["proof"]
         proof.update(tightening=[], search_box=box,
@@ -723,16 +723,16 @@ class TestMetricPlaneMismatch:
     def test_metric_stage_on_another_plane(self, solved, problem):
         r = copy.deepcopy(solved)
         plane, _ = suboptimal_plane(problem, r["certificate"]["items"][0], (0.05, -0.03, 0.02))
-        p = pr.plane_from_input(problem, np.array(plane))
-        setup = mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
-        lo, hi = mrelax.omega_box(problem.unit_ranges)
-        options = pr.AutocalibrationOptions(metric_rel_gap=1e-2, time_limit_s=20)
-        stage = metric.solve_metric(setup, lo, hi, pr.bnb_options(options, 1e-2), True, None)
+        p = autocalibration_problem.plane_from_input(problem, np.array(plane))
+        setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+        lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
+        options = autocalibration_problem.AutocalibrationOptions(metric_rel_gap=1e-2, time_limit_s=20)
+        stage = metric.solve_metric(setup, lo, hi, autocalibration_problem.bnb_options(options, 1e-2), True, None)
         assert stage.certified
-        K = problem.K0 @ pr.upper_triangular_root(mrelax.omega_of(stage.w))
+        K = problem.K0 @ autocalibration_problem.upper_triangular_root(metric_relaxation.omega_of(stage.w))
         K = K / K[2, 2]
         K[1, 0] = K[2, 0] = K[2, 1] = 0.0
-        cost = mrelax.cost(setup, pr.w_of_K(problem, K))
+        cost = metric_relaxation.cost(setup, autocalibration_problem.w_of_K(problem, K))
         gap = max(0.0, cost - stage.lower_bound)
         r["certificate"]["options"]["metric_rel_gap"] = 1e-2
         rehash(r)
@@ -758,7 +758,7 @@ class TestClosedChiralityScope:
                 break
         data["points"] += [X.tolist(), (-X).tolist()]
         cams, points, size = read_data(data)
-        problem = pr.prepare(cams, points, size, {})
+        problem = autocalibration_problem.prepare(cams, points, size, {})
         rows = frames.chirality_rows(problem.norm, 1.0)
         iX, iY = len(points) - 2, len(points) - 1
         assert np.array_equal(rows[iX], -rows[iY])
@@ -767,14 +767,15 @@ class TestClosedChiralityScope:
                      A_eq=np.append(rows[iX], 0.0)[None], b_eq=[0.0], bounds=[(-1, 1)] * 4 + [(None, 1)], method="highs")
         assert lp.x[4] > 0  # planes through X, positive on every other row
         pi = lp.x[:4]
-        plane0 = pr.plane_in_input(problem, pi[:3] / pi[3])
+        plane0 = autocalibration_problem.plane_in_input(problem, pi[:3] / pi[3])
         # The scope is strict, as the exclusions are: no float neighbour of a plane through X is
         # in it (on one of X, -X it is <= 0), so such a claim fails its scope check.
         for _ in range(2000):
             candidate = plane0 * (1 + rng.integers(-8, 9, size=4) * 2.2e-16)
-            assert not pr.allowed_by_chirality(problem, pr.plane_from_input(problem, candidate))
+            assert not autocalibration_problem.allowed_by_chirality(
+                problem, autocalibration_problem.plane_from_input(problem, candidate))
         plane = plane0
-        cost = pr.affine_cost(problem, pr.plane_from_input(problem, plane))
+        cost = autocalibration_problem.affine_cost(problem, autocalibration_problem.plane_from_input(problem, plane))
         document = copy.deepcopy(solved["certificate"])
         document["data"] = data
         document["data_sha256"] = data_hash(KIND, data)

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import metric_relaxation as mrelax
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import metric_relaxation
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration import scenes
 from geocert.solvers.autocalibration.determinacy import intrinsics
 from geocert.verify.autocalibration import read_data
@@ -34,13 +34,14 @@ def proven_bounds(result: dict) -> np.ndarray:
 
 def metric_setup(result: dict):
     cameras, points, size = read_data(result["certificate"]["data"])
-    problem = pr.prepare(cameras, points, size, dict(result["certificate"]["options"].get("intrinsics") or {}))
-    p = pr.plane_from_input(problem, np.array(result["plane_at_infinity"]))
-    return problem, mrelax.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+    problem = autocalibration_problem.prepare(cameras, points, size,
+                                              dict(result["certificate"]["options"].get("intrinsics") or {}))
+    p = autocalibration_problem.plane_from_input(problem, np.array(result["plane_at_infinity"]))
+    return problem, metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
 
 
 def pixels(problem, w: np.ndarray) -> np.ndarray:
-    k = intrinsics(mrelax.omega_of(w))
+    k = intrinsics(metric_relaxation.omega_of(w))
     K = problem.K0 @ np.array([[k[0], k[2], k[3]], [0.0, k[1], k[4]], [0.0, 0.0, 1.0]])
     return np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]])
 
@@ -65,12 +66,12 @@ def test_every_K_within_the_increase_lies_in_the_proven_intervals(seed):
     assert verify_any(result).valid
     bounds = proven_bounds(result)
     problem, setup = metric_setup(result)
-    w = pr.w_of_K(problem, np.array(result["K"]))
+    w = autocalibration_problem.w_of_K(problem, np.array(result["K"]))
     level = stage["cost"] + stage["determinacy"]["proven_intervals"]["cost_increase"]
-    lo, hi = mrelax.omega_box(problem.unit_ranges)
+    lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
     rng = np.random.default_rng(seed)
-    J = np.array([(mrelax.residuals(setup, w + 1e-7 * e) - mrelax.residuals(setup, w - 1e-7 * e)) / 2e-7
-                  for e in np.eye(5)]).T
+    J = np.array([(metric_relaxation.residuals(setup, w + 1e-7 * e)
+                   - metric_relaxation.residuals(setup, w - 1e-7 * e)) / 2e-7 for e in np.eye(5)]).T
     _, _, vt = np.linalg.svd(J)
     directions = [*vt, *(u / np.linalg.norm(u) for u in rng.normal(size=(40, 5)))]
     inside, reached, value = 0, np.zeros(5), pixels(problem, w)
@@ -78,15 +79,15 @@ def test_every_K_within_the_increase_lies_in_the_proven_intervals(seed):
         for step in np.geomspace(1e-8, 1.0, 120):
             for sign in (1.0, -1.0):
                 x = w + sign * step * u
-                if mrelax.in_domain(setup, x, lo, hi) and mrelax.cost(setup, x) <= level:
+                if metric_relaxation.in_domain(setup, x, lo, hi) and metric_relaxation.cost(setup, x) <= level:
                     k = pixels(problem, x)
                     assert np.all(bounds[:, 0] <= k) and np.all(k <= bounds[:, 1]), (k, bounds)
                     reached = np.maximum(reached, np.abs(k - value))
                     inside += 1
     assert inside > 100
     assert np.all(reached[[0, 1, 3, 4]] > 0.05 * (bounds[[0, 1, 3, 4], 1] - bounds[[0, 1, 3, 4], 0]))
-    truth = pr.w_of_K(problem, scene.K / scene.K[2, 2])
-    if mrelax.cost(setup, truth) <= level:
+    truth = autocalibration_problem.w_of_K(problem, scene.K / scene.K[2, 2])
+    if metric_relaxation.cost(setup, truth) <= level:
         k = pixels(problem, truth)
         assert np.all(bounds[:, 0] <= k) and np.all(k <= bounds[:, 1])
 
@@ -107,7 +108,7 @@ def test_the_true_K_costing_within_the_increase_lies_in_the_proven_intervals():
         problem, setup = metric_setup(result)
         truth = scene.K / scene.K[2, 2]
         level = result["stages"][1]["cost"] + result["stages"][1]["determinacy"]["cost_increase"]
-        if mrelax.cost(setup, pr.w_of_K(problem, truth)) <= level:
+        if metric_relaxation.cost(setup, autocalibration_problem.w_of_K(problem, truth)) <= level:
             within += 1
             k = np.array([truth[0, 0], truth[1, 1], truth[0, 1], truth[0, 2], truth[1, 2]])
             assert np.all(bounds[:, 0] <= k) and np.all(k <= bounds[:, 1])

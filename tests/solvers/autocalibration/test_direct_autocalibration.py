@@ -13,8 +13,8 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import direct, direct_ipm, direct_solve, scenes
-from geocert.solvers.autocalibration import direct_relaxation as dr
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import direct_relaxation
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.core.certificates import pack, unpack
 from geocert.solvers.core.cones import smat
 from geocert.verify.checks import verify_any
@@ -36,7 +36,7 @@ def random_feasible(rng: np.random.Generator) -> np.ndarray:
 
 
 def setup_of(scene, intrinsics, chirality="none"):
-    problem = pr.prepare(scene.cameras, scene.points, None, intrinsics)
+    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, intrinsics)
     return direct.setup_for(problem, chirality)
 
 
@@ -48,14 +48,15 @@ class TestMoments:
         scene, _, _, intrinsics = table71(1, 0.0)
         setup = setup_of(scene, intrinsics, "centers")
         orientation = setup.orientations[0]
-        program = dr.build(setup.cameras, orientation.pairs, 2)
+        program = direct_relaxation.build(setup.cameras, orientation.pairs, 2)
         for _ in range(5):
             Q = random_feasible(rng)
-            x = dr.x_of(Q)
+            x = direct_relaxation.x_of(Q)
             y = program.moments.vector(x)
             s = program.b - program.A @ y[1:]
             # objective: the moments give (7.12) at Q
-            assert program.constant + program.q @ y[1:] == pytest.approx(dr.cost(setup.cameras, Q), rel=1e-9, abs=1e-12)
+            assert program.constant + program.q @ y[1:] == pytest.approx(direct_relaxation.cost(setup.cameras, Q),
+                                                                         rel=1e-9, abs=1e-12)
             # det Q (zero rows), the 3x3 minors and the chirality pairs (nonnegative rows), brute force
             assert s[0] == pytest.approx(np.linalg.det(Q), abs=1e-12)
             minors3 = [np.linalg.det(Q[np.ix_(k, k)]) for k in ([0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3])]
@@ -64,8 +65,8 @@ class TestMoments:
             assert np.allclose(s[5:5 + len(pairs)], pairs, atol=1e-12)
             # the PSD blocks: Q's localizer, the 2x2 minors' localizers, the moment matrix
             start = program.cones.zero + program.cones.nonneg
-            v1 = program.moments.vector(x)[:1 + dr.N]  # monomials of degree <= 1
-            v2 = program.moments.vector(x)[:len(dr.monomials(2))]
+            v1 = program.moments.vector(x)[:1 + direct_relaxation.N]  # monomials of degree <= 1
+            v2 = program.moments.vector(x)[:len(direct_relaxation.monomials(2))]
             expected = [np.kron(Q, np.outer(v1, v1))]
             expected += [np.linalg.det(Q[np.ix_(k, k)]) * np.outer(v1, v1)
                          for k in ([0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3])]
@@ -74,30 +75,30 @@ class TestMoments:
                 rows = n * (n + 1) // 2
                 assert np.allclose(smat(s[start:start + rows], n), M, atol=1e-12)
                 start += rows
-            assert np.allclose(dr.moment_matrix(program, y[1:]), np.outer(v2, v2))
+            assert np.allclose(direct_relaxation.moment_matrix(program, y[1:]), np.outer(v2, v2))
 
     def test_monomials_are_graded_and_indexed(self):
-        moments = dr.Moments(2)
+        moments = direct_relaxation.Moments(2)
         assert len(moments.exps) == 715 and moments.exps[0].sum() == 0
         assert np.array_equal(moments.index(moments.exps), np.arange(715))
         with pytest.raises(ValueError):
-            moments.index(np.array([[5] + [0] * (dr.N - 1)]))
+            moments.index(np.array([[5] + [0] * (direct_relaxation.N - 1)]))
 
     def test_the_frame_does_not_depend_on_lapacks_eigenvector_signs(self, monkeypatch):
         """A recorded dual vector is for one program: a verifier whose eigh signs its eigenvectors
         otherwise must rebuild the same frame, hence the same program."""
         scene, _, _, intrinsics = table71(4, 0.2)
-        cameras = pr.prepare(scene.cameras, scene.points, None, intrinsics).norm.cameras
-        T = dr.conditioning_frame(cameras)
+        cameras = autocalibration_problem.prepare(scene.cameras, scene.points, None, intrinsics).norm.cameras
+        T = direct_relaxation.conditioning_frame(cameras)
         rng, eigh = np.random.default_rng(6), np.linalg.eigh
 
         def flipped(M):
             values, V = eigh(M)
             return values, V * rng.choice([-1.0, 1.0], size=V.shape[1])
 
-        monkeypatch.setattr(dr.np.linalg, "eigh", flipped)
+        monkeypatch.setattr(direct_relaxation.np.linalg, "eigh", flipped)
         for _ in range(10):
-            assert np.array_equal(dr.conditioning_frame(cameras), T)
+            assert np.array_equal(direct_relaxation.conditioning_frame(cameras), T)
 
 
 # --- the safe bound -----------------------------------------------------------------------------
@@ -116,26 +117,26 @@ class TestSafeBound:
         rng = np.random.default_rng(1)
         scene, _, _, intrinsics = table71(3, 0.2)
         setup = setup_of(scene, intrinsics, "centers")
-        program = dr.build(setup.cameras, setup.orientations[0].pairs, 2)
+        program = direct_relaxation.build(setup.cameras, setup.orientations[0].pairs, 2)
         feasible = [Q for Q in (random_feasible(rng) for _ in range(400))
                     if direct.chirality_holds(setup.orientations[0], Q)]
-        lowest = min(dr.cost(setup.cameras, Q) for Q in feasible)
+        lowest = min(direct_relaxation.cost(setup.cameras, Q) for Q in feasible)
         for _ in range(30):
             z = rng.normal(size=len(program.b)) * rng.choice([1e-3, 1.0, 10.0])
-            bound, _ = dr.safe_bound(program, z)
+            bound, _ = direct_relaxation.safe_bound(program, z)
             assert bound <= lowest
 
     def test_the_solvers_dual_and_its_perturbations_bound_random_feasible_quadrics(self, noisy):
         setup, stage = noisy
         rng = np.random.default_rng(2)
-        program = dr.build(setup.cameras, None, 2, (), setup.focal)
+        program = direct_relaxation.build(setup.cameras, None, 2, (), setup.focal)
         z = unpack(stage.proof["programs"][0]["z"])
         feasible = [Q for Q in (random_feasible(rng) for _ in range(2000)) if direct.within_focal(setup, Q)]
         assert len(feasible) >= 20
-        costs = [dr.cost(setup.cameras, Q) for Q in feasible]
-        costs.append(dr.cost(setup.cameras, stage.Q))
+        costs = [direct_relaxation.cost(setup.cameras, Q) for Q in feasible]
+        costs.append(direct_relaxation.cost(setup.cameras, stage.Q))
         for scale in (0.0, 1e-6, 1e-3):
-            bound, _ = dr.safe_bound(program, z + scale * rng.normal(size=z.shape))
+            bound, _ = direct_relaxation.safe_bound(program, z + scale * rng.normal(size=z.shape))
             assert bound <= min(costs)
 
     def test_certified_and_rank_one(self, noisy):
@@ -150,7 +151,7 @@ class TestSafeBound:
         polished = [direct_solve.polish(setup.cameras, random_feasible(rng)) for _ in range(40)]
         kept = [Q for Q in polished if direct.within_focal(setup, Q)]  # the program's feasible set
         assert len(kept) >= 10
-        local = min(dr.cost(setup.cameras, Q) for Q in kept)
+        local = min(direct_relaxation.cost(setup.cameras, Q) for Q in kept)
         assert stage.cost <= local * (1 + 1e-9)
         assert stage.lower_bound <= local
 
@@ -166,8 +167,8 @@ class TestExtraction:
         multiplication matrix reads x_k's neighbour's rows (the mutation checked)."""
         rng = np.random.default_rng(7 + count)
         scene, _, _, intrinsics = table71(3, 0.2)
-        program = dr.build(setup_of(scene, intrinsics, "none").cameras, None, 2)
-        points = [dr.x_of(random_feasible(rng)) for _ in range(count)]
+        program = direct_relaxation.build(setup_of(scene, intrinsics, "none").cameras, None, 2)
+        points = [direct_relaxation.x_of(random_feasible(rng)) for _ in range(count)]
         weights = rng.random(count) + 0.2
         weights /= weights.sum()
         y = sum(w * program.moments.vector(x) for w, x in zip(weights, points))[1:]
@@ -209,7 +210,7 @@ def test_the_focal_rows_make_seed_1008_certify(monkeypatch):
     """The same scene with the focal rows (direct.focal_rows): the nearly degenerate quadric that
     kept the lower half's relaxation at 3.27e-4 (eigenvalues 4.6e-6 to 0.999) breaks them, and the
     unsplit order-2 relaxation is rank one and tight at the best quadric (4.6433e-4, gap 1.7e-10,
-    measured 2026-11-24). Mutation: without the rows (focal_rows -> None) it is not certified.
+    measured). Mutation: without the rows (focal_rows -> None) it is not certified.
     Whether the splitting's last half ends "Solved" is the rounding's path: with the Schur
     complement assembled per moment (the default), certified on SkylakeX with one BLAS thread and
     not with two; assembled through the svec operator ("kron"), with both. The rows are what this
@@ -316,18 +317,19 @@ class TestCertificate:
         rng = np.random.default_rng(5)
         scene, _, _, intrinsics = table71(3, 0.2)
         setup = setup_of(scene, intrinsics, "none")
-        program = dr.build(setup.cameras, None, 2)
-        lowest = min(dr.cost(setup.cameras, random_feasible(rng)) for _ in range(200))
+        program = direct_relaxation.build(setup.cameras, None, 2)
+        lowest = min(direct_relaxation.cost(setup.cameras, random_feasible(rng)) for _ in range(200))
         corner = len(program.b) - program.cones.psd[-1] * (program.cones.psd[-1] + 1) // 2  # M_d's (0, 0) in svec
         duals = []
         for _ in range(10):
             z = rng.normal(size=len(program.b))
             z[corner] -= 10.0
             duals.append(z)
-            assert dr.safe_bound(program, z)[0] <= lowest
+            assert direct_relaxation.safe_bound(program, z)[0] <= lowest
         original = np.linalg.eigvalsh
-        monkeypatch.setattr(dr.np.linalg, "eigvalsh", lambda M: np.abs(original(M)))  # the charge dropped
-        assert any(dr.safe_bound(program, z)[0] > lowest for z in duals)
+        # the charge dropped
+        monkeypatch.setattr(direct_relaxation.np.linalg, "eigvalsh", lambda M: np.abs(original(M)))
+        assert any(direct_relaxation.safe_bound(program, z)[0] > lowest for z in duals)
 
 
 class TestBadInput:

@@ -13,8 +13,8 @@ import pytest
 import scipy.sparse as sp
 
 from geocert.solvers.autocalibration import direct, direct_ipm, direct_solve, scenes
-from geocert.solvers.autocalibration import direct_relaxation as dr
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import direct_relaxation
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.core.cones import ConeSpec, rounding_uncounted, smat, svec
 from geocert.solvers.core.conic import ConicStatus, clarabel_cones
 
@@ -70,7 +70,7 @@ class TestOperator:
             q, A, b, cones = random_program(7, psd=(3, 5, 6), variables=11)
         else:
             scene, _ = scenes.table71_scene(1000, 0.2, False)
-            built = dr.build(scene.cameras, None, 2, ((4, 0.01, 1),))
+            built = direct_relaxation.build(scene.cameras, None, 2, ((4, 0.01, 1),))
             A, b, cones = built.A, built.b, built.cones
         A = sp.csr_matrix(A)
         start = cones.zero + cones.nonneg
@@ -139,7 +139,7 @@ class TestSolveProgram:
         monkeypatch.setattr(direct_solve, "ATTEMPTS", ((1e-9, None), (1e-8, 1e-6)))
         monkeypatch.setattr(direct_solve, "_solve_ipm", lambda program, tolerance, check=None: (ConicStatus.OPTIMAL, high, high, "ipm Solved"))
         monkeypatch.setattr(direct_solve, "_solve_once", lambda program, tol, reg: (ConicStatus.OPTIMAL, low, low, "Solved"))
-        monkeypatch.setattr(dr, "safe_bound", lambda program, z: (float(z[0]), 0.0))
+        monkeypatch.setattr(direct_relaxation, "safe_bound", lambda program, z: (float(z[0]), 0.0))
         status, y, z, raw = direct_solve.solve_program(None, lambda y, z: False)
         assert raw == "ipm Solved" and z[0] == 2.0
         # and the other way round: the later, higher one replaces the earlier
@@ -167,7 +167,7 @@ def test_table71_seed_1006_varying_focal_is_certified_rank_one():
     magnitudes, not from the rounding that happened: 3.7e-6 of it here): tightness is asserted on
     the bound before that charge, and the charge on its own."""
     scene, _ = scenes.table71_scene(1006, 0.2, True)
-    problem = pr.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
+    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
     setup = direct.setup_for(problem, "none")
     options = SimpleNamespace(relaxation_order=2, metric_rel_gap=1e-4, abs_gap=1e-12)
     stage = direct_solve.solve_direct(setup, options, True)
@@ -186,9 +186,9 @@ def _varying_focal_solve(seed: int):
     """Table 7.1's varying-focal scene of ``seed`` without chirality: its order-2 program and
     direct_ipm's solve of it."""
     scene, _ = scenes.table71_scene(seed, 0.2, True)
-    problem = pr.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
+    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
     setup = direct.setup_for(problem, "none")
-    program = dr.build(setup.cameras, None, 2)
+    program = direct_relaxation.build(setup.cameras, None, 2)
     return program, direct_ipm.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
                                      program.cones.psd)
 
@@ -204,7 +204,7 @@ def test_the_dual_equations_hold_to_rounding_on_table71_seed_1006():
     assert result.status == "Solved"
     assert np.linalg.norm(program.A.T @ result.z + program.q) <= 1e-11 * max(1.0, np.linalg.norm(program.q))
     with rounding_uncounted():
-        bound, _ = dr.safe_bound(program, result.z)
+        bound, _ = direct_relaxation.safe_bound(program, result.z)
     assert program.constant + result.dual - bound <= 1e-8 * bound
 
 
@@ -214,7 +214,7 @@ def check_solve(program, result, optimum: float, monkeypatch, rel: float = 1e-4)
     pass the tolerance): the safe bound of its dual is never above the optimum (given to six
     digits, hence the 1e-5); and when it says "Solved", its dual equations hold to the acceptable
     tolerance and the bound is the optimum's (to ``rel``)."""
-    bound, _ = dr.safe_bound(program, result.z)
+    bound, _ = direct_relaxation.safe_bound(program, result.z)
     assert bound <= optimum * (1 + 1e-5), (result.status, bound)
     assert result.status in ("Solved", "Stalled", "MaxIterations"), result.status
     if result.status == "Solved":
@@ -253,9 +253,9 @@ def test_table71_seed_1012_chirality_split_half(monkeypatch):
     Haswell with 1 and Prescott with 1, "Stalled" on SkylakeX with 1 and Haswell with 2 (bounds
     7.7172e-4 and 7.7028e-4)."""
     scene, _ = scenes.table71_scene(1012, 0.2, True)
-    problem = pr.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
+    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
     setup = direct.setup_for(problem, "points")
-    program = dr.build(setup.cameras, setup.orientations[0].pairs, 2, ((8, 0.05772124305830394, -1.0),))
+    program = direct_relaxation.build(setup.cameras, setup.orientations[0].pairs, 2, ((8, 0.05772124305830394, -1.0),))
     result = direct_ipm.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
                               program.cones.psd, max_iter=direct_solve.IPM_MAX_ITER)
     bound = check_solve(program, result, 7.71750e-4, monkeypatch)

@@ -1,5 +1,5 @@
 """The direct method on a pixel-scale scene whose cameras all look at one point (an outside user's
-trial, 2026-11-24): without the focal rows (direct.focal_rows) the global minimum of (7.12) there
+trial): without the focal rows (direct.focal_rows) the global minimum of (7.12) there
 is a degenerate quadric with f -> 0 (7.3 px against 800), and with chirality "points" no rounded
 quadric was feasible. Also: the cameras' centres, the focal rows hold for every calibration within the ranges, exact
 scenes certify at the default abs_gap, and the verifier's message for a direct document."""
@@ -13,8 +13,8 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import direct, scenes
-from geocert.solvers.autocalibration import direct_relaxation as dr
-from geocert.solvers.autocalibration import problem as pr
+from geocert.solvers.autocalibration import direct_relaxation
+from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.verify.checks import verify_any
 
 K_TRUE = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
@@ -91,7 +91,7 @@ class TestPixelScale:
         document, result = noisy
         data = document["data"]
         cameras, points = np.array(data["cameras"]), np.array(data["points"])
-        problem = pr.prepare(cameras, points, tuple(data["image_size"]), {})
+        problem = autocalibration_problem.prepare(cameras, points, tuple(data["image_size"]), {})
         setup = direct.setup_for(problem, "none")
         Q_in = np.array(result["dual_absolute_quadric"])
         # the point nearest every metric camera's principal axis, in the input frame (metric X = H^-1 X_in)
@@ -103,7 +103,7 @@ class TestPixelScale:
         X0 = np.array(result["upgrade"]) @ np.append(np.linalg.solve(A, b), 1.0)
         degenerate = direct.rank_three_projection(setup.from_input(1e-3 * Q_in / np.trace(Q_in)
                                                                    + np.outer(X0, X0) / (X0 @ X0)))
-        assert dr.cost(setup.cameras, degenerate) < 0.2 * result["stages"][0]["cost"]
+        assert direct_relaxation.cost(setup.cameras, degenerate) < 0.2 * result["stages"][0]["cost"]
         assert not direct.within_focal(setup, degenerate)
         assert direct.within_focal(setup, setup.from_input(Q_in))
 
@@ -151,9 +151,11 @@ class TestExactScene:
 
 class TestDefaultTolerance:
     def test_the_direct_default_abs_gap_and_the_stratified_one(self):
-        assert pr.AutocalibrationOptions(method="direct").abs_gap == pr.DIRECT_ABS_GAP == 1e-9
-        assert pr.AutocalibrationOptions().abs_gap == pr.STRATIFIED_ABS_GAP == 1e-12
-        assert pr.AutocalibrationOptions(method="direct", abs_gap=1e-12).abs_gap == 1e-12
+        direct_gap = autocalibration_problem.AutocalibrationOptions(method="direct").abs_gap
+        assert direct_gap == autocalibration_problem.DIRECT_ABS_GAP == 1e-9
+        stratified_gap = autocalibration_problem.AutocalibrationOptions().abs_gap
+        assert stratified_gap == autocalibration_problem.STRATIFIED_ABS_GAP == 1e-12
+        assert autocalibration_problem.AutocalibrationOptions(method="direct", abs_gap=1e-12).abs_gap == 1e-12
 
     def test_a_low_noise_scene_certifies_at_the_default(self):
         """0.02 px: cost 7.7e-8, the bound 2.2e-10 below it at rank one (the interior point's

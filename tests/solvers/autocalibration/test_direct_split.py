@@ -14,7 +14,7 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import direct, direct_solve, scenes
-from geocert.solvers.autocalibration import direct_relaxation as dr
+from geocert.solvers.autocalibration import direct_relaxation
 from geocert.solvers.core.certificates import pack, unpack
 from geocert.solvers.core.cones import smat
 from geocert.solvers.core.strict import Invalid
@@ -27,17 +27,17 @@ def test_a_cuts_block_is_its_localizing_matrix_at_a_point():
     """The block before the moment matrix is sign (c - x_k) v v' (v the monomials of degree <= 1)."""
     rng = np.random.default_rng(0)
     scene, _ = scenes.table71_scene(1, 0.0)
-    cameras = dr.framed_cameras(scene.cameras, np.eye(4))
-    plain = dr.build(cameras, None, 2)
+    cameras = direct_relaxation.framed_cameras(scene.cameras, np.eye(4))
+    plain = direct_relaxation.build(cameras, None, 2)
     for k, c, sign in ((3, 0.1, 1), (8, -0.2, -1)):
-        program = dr.build(cameras, None, 2, ((k, c, sign),))
-        assert program.cones.psd == plain.cones.psd[:-1] + (1 + dr.N, plain.cones.psd[-1])
+        program = direct_relaxation.build(cameras, None, 2, ((k, c, sign),))
+        assert program.cones.psd == plain.cones.psd[:-1] + (1 + direct_relaxation.N, plain.cones.psd[-1])
         B = rng.normal(size=(4, 3))
-        x = dr.x_of(B @ B.T)
+        x = direct_relaxation.x_of(B @ B.T)
         y = program.moments.vector(x)
         s = program.b - program.A @ y[1:]
         m = program.cones.psd[-1] * (program.cones.psd[-1] + 1) // 2
-        n = 1 + dr.N
+        n = 1 + direct_relaxation.N
         block = s[len(s) - m - n * (n + 1) // 2:len(s) - m]
         v = y[:n]
         assert np.allclose(smat(block, n), sign * (c - x[k]) * np.outer(v, v), atol=1e-12)
@@ -147,7 +147,7 @@ def test_a_split_that_lowers_the_bound_is_not_kept(monkeypatch):
     monkeypatch.setattr(direct_solve, "_solve_leaf", fake_leaf)
     monkeypatch.setattr(direct_solve, "split_of", lambda leaf: (0, 0.0))
     monkeypatch.setattr(direct_solve, "candidates", lambda *args, **kwargs: [np.eye(4)])
-    monkeypatch.setattr(dr, "cost", lambda cameras, Q: 1.5)
+    monkeypatch.setattr(direct_relaxation, "cost", lambda cameras, Q: 1.5)
     options = SimpleNamespace(relaxation_order=2, metric_rel_gap=1e-4, abs_gap=1e-12)
     stage = direct_solve.solve_direct(setup, options, True)
     assert stage.lower_bound == 1.0 and not stage.certified and stage.rank == 2

@@ -13,7 +13,7 @@ from hypothesis import given, settings, strategies as st
 
 from testing.bilinear import scene
 from geocert.jobs.runner import parse_job, solve_job
-from geocert.solvers.bilinear import problem as pb
+from geocert.solvers.bilinear import problem
 from geocert.solvers.bilinear.options import BilinearOptions
 from geocert.solvers.bilinear.relaxation import Relaxation, mccormick_rows
 from geocert.solvers.bilinear.search import Model, fit_frame
@@ -86,14 +86,14 @@ def test_the_lifted_relaxation_under_estimates(seed, norm, coefficients):
     rng = np.random.default_rng(seed)
     K, N = int(rng.integers(1, 5)), int(rng.integers(6, 12))
     basis, points, *_ = scene(K, N, 0.01, seed % 1000)
-    frame = pb.normalise(basis, points)
+    frame = problem.normalise(basis, points)
     model = Model(frame, norm, coefficients, 3.0)
     relaxation = Relaxation(frame.X, frame.u, norm, coefficients, 3.0)
     lo = rng.uniform(-2, 1, 6)
     hi = lo + rng.uniform(1e-3, 2, 6)
     M = (lo + rng.uniform(0, 1, 6) * (hi - lo)).reshape(2, 3)
     v = rng.dirichlet(np.ones(K)) if coefficients == "convex" else rng.uniform(-3, 3, K)
-    alpha = pb.project_coefficients(v, coefficients, 3.0)
+    alpha = problem.project_coefficients(v, coefficients, 3.0)
     t = model.best_t(M, alpha) + rng.normal(size=2) * 0.1
     cost = model.cost(M, alpha, t)
     data = relaxation.conic_data(lo, hi, cost * (1 + 1e-12) + 1e-12)
@@ -134,7 +134,7 @@ def test_certified_cost_is_never_above_alternating_least_squares(norm):
         basis, points, *_ = scene(4, 15, 0.01, 10 + seed)
         fit = fit_frame(basis, points, BilinearOptions(norm=norm))
         assert fit.certified, fit.reason
-        frame = pb.normalise(basis, points)
+        frame = problem.normalise(basis, points)
         model = Model(frame, norm, "convex", 10.0)
         lo = np.array(fit.camera_box[0]) / frame.camera_scale
         hi = np.array(fit.camera_box[1]) / frame.camera_scale
@@ -144,7 +144,7 @@ def test_certified_cost_is_never_above_alternating_least_squares(norm):
             start = rng.dirichlet(np.ones(4))
             M, t = model.camera_step(start, lo, hi)
             M, a, t, value = model.als(M, start, t, 40, lo, hi)
-            raw = pb.cost(pb.residuals(basis, points, pb.to_raw(frame, M, t), a), norm)
+            raw = problem.cost(problem.residuals(basis, points, problem.to_raw(frame, M, t), a), norm)
             assert raw >= fit.lower_bound * (1 - 1e-9)
             best = min(best, raw)
         assert fit.cost <= best + fit.tolerance
@@ -175,12 +175,12 @@ def test_l1_resists_outliers():
     shape_errors = {"L1L1": [], "L2L2": [], "linear": []}
     for seed in range(3):
         basis, points, camera, alpha, clean = scene(3, 30, 0.002, 50 + seed, outliers=0.2)
-        truth = pb.shape_of(basis, alpha)
+        truth = problem.shape_of(basis, alpha)
         for norm in ("L1L1", "L2L2"):
             fit = fit_frame(basis, points, BilinearOptions(norm=norm))
             shape_errors[norm].append(np.sqrt(np.mean(np.sum((np.array(fit.shape) - truth) ** 2, axis=1))))
         b = np.array(fit.baseline["coefficients"])
-        shape_errors["linear"].append(np.sqrt(np.mean(np.sum((pb.shape_of(basis, b) - truth) ** 2, axis=1))))
+        shape_errors["linear"].append(np.sqrt(np.mean(np.sum((problem.shape_of(basis, b) - truth) ** 2, axis=1))))
     l1 = np.median(shape_errors["L1L1"])
     assert l1 < 0.5 * np.median(shape_errors["L2L2"]) and l1 < 0.5 * np.median(shape_errors["linear"])
 
@@ -386,7 +386,7 @@ def test_root_incumbent_past_its_deadline_takes_one_step(monkeypatch):
     from geocert.solvers.bilinear import search
 
     basis, points, *_ = scene(10, 30, 0.005, 0)
-    frame = pb.normalise(basis, points)
+    frame = problem.normalise(basis, points)
     for norm in ("L2L2", "L1L1"):
         model = Model(frame, norm, "convex", 10.0)
         calls = {"camera": 0, "alpha": 0}
@@ -416,7 +416,7 @@ def test_a_frame_past_its_time_limit_stops_every_step():
     fit = fit_frame(basis, points, BilinearOptions(norm="L2L2", time_limit_s=1e-6, certificate="full"))
     assert fit.status == "time_limit" and not fit.certified and fit.nodes <= 1
     import geocert.solvers.bilinear.search as search
-    relaxation = Relaxation(*(lambda f: (f.X, f.u))(pb.normalise(basis, points)), "L2L2", "convex", 10.0)
+    relaxation = Relaxation(*(lambda f: (f.X, f.u))(problem.normalise(basis, points)), "L2L2", "convex", 10.0)
     lo, hi, _, _, rounds = search.tighten(relaxation, np.full(6, -8.0), np.full(6, 8.0), 1.0, deadline=-math.inf)
     assert len(rounds) == 1 and all(z is None for z in rounds[0]["duals"])
     assert np.array_equal(lo, np.full(6, -8.0)) and np.array_equal(hi, np.full(6, 8.0))
@@ -446,7 +446,7 @@ def test_the_cost_cap_row_is_inserted_where_stacking_puts_it():
             assert np.all(np.diff(got.indices[got.indptr[c]:got.indptr[c + 1]]) > 0), trial
         assert np.array_equal(got.toarray(), stacked(A, at, columns).toarray()), trial
     basis, points, *_ = scene(4, 15, 0.01, 1)
-    frame = pb.normalise(basis, points)
+    frame = problem.normalise(basis, points)
     for norm in ("L1L1", "L2L2"):
         relaxation = Relaxation(frame.X, frame.u, norm, "convex", 10.0)
         data = relaxation.conic_data(np.full(6, -4.0), np.full(6, 4.0), 10.0)
@@ -460,18 +460,18 @@ def test_the_basis_rank_check_is_one_decomposition_and_a_bisection(monkeypatch):
     """One singular value decomposition per shape cost K^3 N (100 s of the API's time for 300
     shapes of 400 points): a good basis takes one, a degenerate one a bisection, which still
     names the first shape that depends on those before it."""
-    from geocert.solvers.bilinear import problem as pb
+    from geocert.solvers.bilinear import problem
 
     calls = []
     svd = np.linalg.svd
-    monkeypatch.setattr(pb.np.linalg, "svd", lambda *a, **k: calls.append(1) or svd(*a, **k))
+    monkeypatch.setattr(problem.np.linalg, "svd", lambda *a, **k: calls.append(1) or svd(*a, **k))
     basis = np.random.default_rng(0).normal(size=(64, 30, 3))
-    pb.read_basis(basis.tolist())
+    problem.read_basis(basis.tolist())
     assert len(calls) == 1
     basis[41] = 0.25 * basis[3] + 0.75 * basis[17]
     calls.clear()
     with pytest.raises(InputError) as caught:
-        pb.read_basis(basis.tolist())
+        problem.read_basis(basis.tolist())
     assert caught.value.field == "data/basis/41" and len(calls) <= 8
 
 
@@ -500,9 +500,9 @@ def test_a_camera_beyond_its_incumbents_box_is_searched_again(monkeypatch):
         return original(model, relaxation, frame, options, incumbent, half, *rest)
     monkeypatch.setattr(search, "_search", counted)
     result = solve_job(job(basis.tolist(), [{"points": points.tolist()}], certificate="full"))
-    frame = pb.normalise(basis, points)
+    frame = problem.normalise(basis, points)
     M = np.asarray(result["frames"][0]["camera"])[:, :3] / frame.camera_scale
-    assert len(searched) >= 2 and searched[-1] >= pb.default_half_width(M) > searched[0]
+    assert len(searched) >= 2 and searched[-1] >= problem.default_half_width(M) > searched[0]
     assert result["frames"][0]["certified"]
     report = verify_any(result)
     assert report.valid, report.first_failure

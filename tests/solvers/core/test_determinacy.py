@@ -161,7 +161,7 @@ class TestAutocalibration:
     @pytest.mark.parametrize("noise", [0.1, 1.0])
     def test_the_motion_is_read_off_the_infinite_homographies(self, noise):
         from geocert.solvers.autocalibration import determinacy, problem
-        from geocert.solvers.autocalibration import metric_relaxation as mrelax
+        from geocert.solvers.autocalibration import metric_relaxation
 
         found = {}
         for motion in ("ring", "sphere", "translation"):
@@ -169,7 +169,7 @@ class TestAutocalibration:
                 scene = scenes.make_scene((10, 20)[seed % 2], noise, seed=900 + seed, motion=motion)
                 prepared = problem.prepare(scene.cameras, scene.points, (1000, 1000), {})
                 p = problem.plane_from_input(prepared, scene.plane_at_infinity)
-                H = mrelax.homographies(prepared.norm.cameras, prepared.norm.reference, p)
+                H = metric_relaxation.homographies(prepared.norm.cameras, prepared.norm.reference, p)
                 found.setdefault(motion, []).append([w["code"] for w in determinacy.motion_warnings(H, scene.centres)])
         assert found["ring"] == [["orbital_motion"]] * 4
         assert found["sphere"] == [[]] * 4
