@@ -176,6 +176,7 @@ def _check_ties(result: dict, stages: dict, views: int, tracks: int) -> None:
     _check_starts(result, stages)
     _check_principal_point(stages.get("bundle_adjustment", {}))
     _check_principal_points_per_view(result, stages.get("bundle_adjustment", {}))
+    _check_adjustment_model(result, stages.get("bundle_adjustment", {}))
     structure, summary = stages.get("structure", {}), result.get("summary") or {}
     left = structure.get("tracks_not_started")
     returned, dropped = len(result.get("points") or []), summary.get("points_dropped")
@@ -271,6 +272,49 @@ MAX_PRINCIPAL_POINT_SD_PX = 5.0
 # (genuine ones differ by pixels; a K is tied to its P only to about 1e-9 of P, so the verifier
 # reads them off P: intrinsics_of)
 PER_VIEW_APART = 1e-6
+
+
+def _check_adjustment_model(result: dict, stage: dict) -> None:
+    """The adjustment's model is the one the options ask for (options.camera_model with K unknown,
+    "simple" when absent; "fixed" exactly when K is given), and the cameras returned (the K each P
+    fixes: intrinsics_of) have that model's calibration: one K ("fixed", "full"); square pixels,
+    no skew and one principal point ("varying", each view its own focal length); the same and one
+    focal length ("simple"; a principal point per view only as its test says: _check_principal_
+    points_per_view). The hash covers camera_model, so a document restating it beside another
+    model's cameras would be about a request its adjustment did not follow."""
+    model = stage.get("model")
+    if model is None:  # the adjustment did not run
+        return
+    options = (result.get("certificate") or {}).get("options") or {}
+    intrinsics = options.get("intrinsics")
+    known = isinstance(intrinsics, dict) and intrinsics.get("K") is not None
+    asked = "fixed" if known else options.get("camera_model", "simple")
+    where = "stages/bundle_adjustment/model"
+    if model != asked:
+        raise Invalid("returned", f"{where} is {model!r:.20}, and the options ask for {asked!r:.20} ("
+                                  + ("K given" if known else "options.camera_model") + ")")
+    Ks = [intrinsics_of(camera["P"]) for camera in result.get("cameras") or []
+          if isinstance(camera, dict) and camera.get("registered") is True and camera.get("P") is not None]
+    if not Ks:
+        return
+    tolerance = PER_VIEW_APART * max(abs(K[0, 0]) for K in Ks)
+    first = Ks[0]
+
+    def shared(entries: tuple) -> bool:
+        return all(abs(K[i, j] - first[i, j]) <= tolerance for K in Ks for i, j in entries)
+
+    if model in ("fixed", "full"):
+        fits, what = shared(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2))), "one K"
+    else:
+        square = all(abs(K[0, 1]) <= tolerance and abs(K[0, 0] - K[1, 1]) <= tolerance for K in Ks)
+        fits, what = square and shared(((0, 2), (1, 2))), "square pixels, no skew and one principal point"
+        if model == "simple":
+            per_view = (stage.get("principal_point_per_view") or {}).get("estimated") is True
+            fits = square and shared(((0, 0),)) and (per_view or shared(((0, 2), (1, 2))))
+            what = "square pixels, no skew, one focal length and one principal point (or one each, as its test says)"
+    if not fits:
+        raise Invalid("returned", f"{where} is {model!r:.20}, and the cameras returned do not have its calibration "
+                                  f"({what})")
 
 
 def _check_principal_points_per_view(result: dict, stage: dict) -> None:

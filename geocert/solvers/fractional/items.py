@@ -356,11 +356,18 @@ def _check_scope_words(where: str, summary, claim: dict, options: dict, words: s
     the whole scope), "with every residual <= max_residual" (as search.search writes it). Words
     dropping the limit claim an optimum over points no proof searched (a point with a larger
     residual may cost less); other words claim what no check reads."""
-    if claim.get("certified") is not True or not isinstance(summary, dict) or "scope" not in summary:
+    if not isinstance(summary, dict) or "scope" not in summary:
         return
     proof = claim.get("proof")
     limit = options.get("max_residual")
-    searched = isinstance(proof, dict) and proof.get("type") == "branch_and_bound"
+    if claim.get("certified") is not True:
+        # an uncertified search's summary (one that met its tolerance, or stopped) states its scope
+        # as a certified search's does; without a search (no root box) the words claim nothing
+        if not isinstance(summary.get("root_region"), dict):
+            return
+        searched = True
+    else:
+        searched = isinstance(proof, dict) and proof.get("type") == "branch_and_bound"
     expected = f"{words} with every residual <= {limit}" if limit is not None and searched else words
     if summary["scope"] != expected:
         raise Invalid("returned", f"{where}/certificate/scope is {summary['scope']!r:.120}, the scope its proof covers "
@@ -430,6 +437,32 @@ def earlier_words_scope(seen: list[str]) -> dict:
     return {"root_region": EARLIER_MEANING_SCOPE.format(items=items)}
 
 
+def _uncertified_region(where: str, region, current: str, earlier: str, seen: list[str],
+                        reference: int | None = None) -> None:
+    """An uncertified item's summary root_region (a search that stopped, or met its tolerance and
+    was not certified: no proof to rebuild it from) states no more than a search can: the
+    solver's words, a box with lower <= upper, finite, and for a track the reference view its chart
+    takes (``reference``); or none."""
+    if region is None:
+        return
+    if not isinstance(region, dict):
+        raise Invalid("returned", f"{where}/certificate/root_region must be an object or null")
+    _region_words(where, region, current, earlier, seen)
+    lower, upper = region.get("lower"), region.get("upper")
+    try:
+        low = numbers(lower, f"{where}/certificate/root_region/lower", (len(lower),), "returned")
+        high = numbers(upper, f"{where}/certificate/root_region/upper", (len(lower),), "returned")
+    except (Invalid, TypeError):
+        raise Invalid("returned", f"{where}/certificate/root_region: lower and upper must be lists of finite numbers "
+                                  "of one length") from None
+    if not np.all(low <= high):
+        raise Invalid("returned", f"{where}/certificate/root_region: lower above upper (an empty box)")
+    if reference is not None and (type(region.get("reference_view")) is not int
+                                  or region["reference_view"] != reference):
+        raise Invalid("returned", f"{where}/certificate/root_region/reference_view is "
+                                  f"{region.get('reference_view')!r:.20}, its chart's reference view is {reference}")
+
+
 class TrackItems:
     """The triangulation kind's verification adapter."""
 
@@ -491,9 +524,16 @@ class TrackItems:
         triangulation: the search box, its branched functionals through the chart rebuilt from
         the data, the chart's depth row, its reference view), as a map's is (MapItems); none
         where the proof searched nothing (a convexity proof)."""
-        if claim.get("certified") is not True or not isinstance(summary, dict) or "root_region" not in summary:
+        if not isinstance(summary, dict) or "root_region" not in summary:
             return
         region, proof = summary["root_region"], claim.get("proof")
+        if claim.get("certified") is not True:
+            if region is not None:
+                cameras, points = self.read(certificate["data"], index)
+                reference = Chart.build(cameras, points, certificate["options"]["norm"]).reference
+                _uncertified_region(where, region, TRACK_REGION_MEANING, TRACK_REGION_MEANING_EARLIER,
+                                    self.earlier_words, reference)
+            return
         if not (isinstance(proof, dict) and proof.get("type") == "branch_and_bound"):
             if region is not None:
                 raise Invalid("returned", f"{where}/certificate/root_region is stated, and its proof searched no box")
@@ -630,9 +670,12 @@ class MapItems:
         caller's terms, as the solver writes it (fractional.maps._fit_map: the search box, its
         functionals through the chart rebuilt from the data, the reference point homogeneous), as a
         bilinear frame's is; none where the proof searched nothing."""
-        if claim.get("certified") is not True or not isinstance(summary, dict) or "root_region" not in summary:
+        if not isinstance(summary, dict) or "root_region" not in summary:
             return
         region, proof = summary["root_region"], claim.get("proof")
+        if claim.get("certified") is not True:
+            _uncertified_region(where, region, MAP_REGION_MEANING, MAP_REGION_MEANING_EARLIER, self.earlier_words)
+            return
         if not (isinstance(proof, dict) and proof.get("type") == "branch_and_bound"):
             if region is not None:
                 raise Invalid("returned", f"{where}/certificate/root_region is stated, and its proof searched no box")
