@@ -283,7 +283,9 @@ def _check_adjustment_model(result: dict, stage: dict) -> None:
     points_per_view). The hash covers camera_model, so a document restating it beside another
     model's cameras would be about a request its adjustment did not follow."""
     model = stage.get("model")
-    if model is None:  # the adjustment did not run
+    if model is None:  # the adjustment did not run (one that ran states its model)
+        if stage.get("status") == "done":
+            raise Invalid("returned", "stages/bundle_adjustment/model: an adjustment that ran states its model")
         return
     options = (result.get("certificate") or {}).get("options") or {}
     intrinsics = options.get("intrinsics")
@@ -293,6 +295,10 @@ def _check_adjustment_model(result: dict, stage: dict) -> None:
     if model != asked:
         raise Invalid("returned", f"{where} is {model!r:.20}, and the options ask for {asked!r:.20} ("
                                   + ("K given" if known else "options.camera_model") + ")")
+    if model != "simple" and (stage.get("principal_point") is not None
+                              or stage.get("principal_point_per_view") is not None):
+        raise Invalid("returned", f"{where} is {model!r:.20}, and the principal point's tests "
+                                  "it states run after the simple model's adjustment only")
     Ks = [intrinsics_of(camera["P"]) for camera in result.get("cameras") or []
           if isinstance(camera, dict) and camera.get("registered") is True and camera.get("P") is not None]
     if not Ks:

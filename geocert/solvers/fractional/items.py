@@ -437,30 +437,48 @@ def earlier_words_scope(seen: list[str]) -> dict:
     return {"root_region": EARLIER_MEANING_SCOPE.format(items=items)}
 
 
+def _uncertified_summary(where: str, summary: dict) -> None:
+    """An uncertified item's summary figures are typed as a certified one's are: ``leaves`` a count,
+    ``tolerance`` a number at least 0 or null."""
+    leaves, tolerance = summary.get("leaves"), summary.get("tolerance")
+    if "leaves" in summary and not (type(leaves) is int and leaves >= 0):
+        raise Invalid("returned", f"{where}/certificate/leaves is {leaves!r:.20}: a count")
+    if tolerance is not None and not (is_number(tolerance) and tolerance >= 0):
+        raise Invalid("returned", f"{where}/certificate/tolerance is {tolerance!r:.20}: a number at least 0, or null")
+
+
 def _uncertified_region(where: str, region, current: str, earlier: str, seen: list[str],
-                        reference: int | None = None) -> None:
+                        reference: tuple[str, int, np.ndarray]) -> None:
     """An uncertified item's summary root_region (a search that stopped, or met its tolerance and
     was not certified: no proof to rebuild it from) states no more than a search can: the
-    solver's words, a box with lower <= upper, finite, and for a track the reference view its chart
-    takes (``reference``); or none."""
+    solver's words; a box with lower <= upper, finite, one entry a row of its functionals (finite,
+    none all zero); the reference its chart takes (``reference``: the member's name, the chart's
+    reference, and the denominator it gives, or None where the chart gives it otherwise); or none."""
     if region is None:
         return
     if not isinstance(region, dict):
         raise Invalid("returned", f"{where}/certificate/root_region must be an object or null")
     _region_words(where, region, current, earlier, seen)
-    lower, upper = region.get("lower"), region.get("upper")
+    at = f"{where}/certificate/root_region"
+    lower, upper, functionals = region.get("lower"), region.get("upper"), region.get("functionals")
     try:
-        low = numbers(lower, f"{where}/certificate/root_region/lower", (len(lower),), "returned")
-        high = numbers(upper, f"{where}/certificate/root_region/upper", (len(lower),), "returned")
-    except (Invalid, TypeError):
-        raise Invalid("returned", f"{where}/certificate/root_region: lower and upper must be lists of finite numbers "
-                                  "of one length") from None
+        low = numbers(lower, f"{at}/lower", (len(lower),), "returned")
+        high = numbers(upper, f"{at}/upper", (len(lower),), "returned")
+        rows = numbers(functionals, f"{at}/functionals", (len(lower), len(functionals[0])), "returned")
+        denominator = numbers(region.get("denominator"), f"{at}/denominator", (rows.shape[1],), "returned")
+    except (Invalid, TypeError, IndexError, KeyError):
+        raise Invalid("returned", f"{at}: lower, upper (one entry a row of the functionals), functionals and "
+                                  "denominator must be finite numbers of matching shapes") from None
     if not np.all(low <= high):
-        raise Invalid("returned", f"{where}/certificate/root_region: lower above upper (an empty box)")
-    if reference is not None and (type(region.get("reference_view")) is not int
-                                  or region["reference_view"] != reference):
-        raise Invalid("returned", f"{where}/certificate/root_region/reference_view is "
-                                  f"{region.get('reference_view')!r:.20}, its chart's reference view is {reference}")
+        raise Invalid("returned", f"{at}: lower above upper (an empty box)")
+    if not (np.all(np.any(rows != 0, axis=1)) and np.any(denominator != 0)):
+        raise Invalid("returned", f"{at}: a functional or the denominator is all zero")
+    name, index, expected = reference
+    if type(region.get(name)) is not int or region[name] != index:
+        raise Invalid("returned", f"{at}/{name} is {region.get(name)!r:.20}, its chart's "
+                                  f"{name.replace('_', ' ')} is {index}")
+    if expected is not None and not _agrees(region["denominator"], expected):
+        raise Invalid("returned", f"{at}/denominator is not the one its chart's {name} gives")
 
 
 class TrackItems:
@@ -528,11 +546,13 @@ class TrackItems:
             return
         region, proof = summary["root_region"], claim.get("proof")
         if claim.get("certified") is not True:
+            _uncertified_summary(where, summary)
             if region is not None:
                 cameras, points = self.read(certificate["data"], index)
-                reference = Chart.build(cameras, points, certificate["options"]["norm"]).reference
+                chart = Chart.build(cameras, points, certificate["options"]["norm"])
                 _uncertified_region(where, region, TRACK_REGION_MEANING, TRACK_REGION_MEANING_EARLIER,
-                                    self.earlier_words, reference)
+                                    self.earlier_words, ("reference_view", chart.reference,
+                                                         np.linalg.inv(chart.T)[3]))
             return
         if not (isinstance(proof, dict) and proof.get("type") == "branch_and_bound"):
             if region is not None:
@@ -674,7 +694,12 @@ class MapItems:
             return
         region, proof = summary["root_region"], claim.get("proof")
         if claim.get("certified") is not True:
-            _uncertified_region(where, region, MAP_REGION_MEANING, MAP_REGION_MEANING_EARLIER, self.earlier_words)
+            _uncertified_summary(where, summary)
+            if region is not None:
+                source, target = self.read(certificate["data"], index)
+                chart = MapChart.build(source, target, certificate["options"]["norm"])
+                _uncertified_region(where, region, MAP_REGION_MEANING, MAP_REGION_MEANING_EARLIER, self.earlier_words,
+                                    ("reference_point", chart.reference, np.append(source[chart.reference], 1.0)))
             return
         if not (isinstance(proof, dict) and proof.get("type") == "branch_and_bound"):
             if region is not None:
