@@ -18,6 +18,7 @@ import numpy as np
 
 from geocert.solvers.core.geometry import is_number
 from geocert.solvers.core.strict import Invalid
+from geocert.solvers.reconstruction.camera_claim import MAX_PRINCIPAL_POINT_SD_PX
 from geocert.verify.reconstruction_stages import MAX_FIGURE, _values
 
 # How calibrated.py registers a view (registered_by's words); adjust_best's starts; the models the
@@ -265,9 +266,6 @@ def intrinsics_of(P: Any) -> np.ndarray:
     return K / K[2, 2]
 
 
-# pipeline.MAX_PRINCIPAL_POINT_SD_PX: the per-view principal points are kept only when the data fix
-# each to this (tests/verify/test_forgeries_review16.py checks the two agree)
-MAX_PRINCIPAL_POINT_SD_PX = 5.0
 # relative to the focal length: principal points further apart than this are each a view's own
 # (genuine ones differ by pixels; a K is tied to its P only to about 1e-9 of P, so the verifier
 # reads them off P: intrinsics_of)

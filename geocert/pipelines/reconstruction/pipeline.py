@@ -453,12 +453,6 @@ def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray
 
 
 PRINCIPAL_POINT_P = 0.001  # the per-view test's level (PRINCIPAL_POINT_CHI2's, for 2 (views - 1) degrees of freedom)
-# The per-view principal points are kept only when the data fix each to this (its standard
-# deviation, px): the shifts they are meant to capture (Sceaux's stabilised lens) are 3-21 px, and
-# a principal point known to worse than this cannot tell such a shift from a small rotation of its
-# view (templeSparseRing's, fixed to 8-17 px, moved its rotations 1.4 degrees off the ground truth:
-# docs/reconstruction-vs-colmap.md).
-MAX_PRINCIPAL_POINT_SD_PX = 5.0
 
 
 def _principal_points_per_view(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold_px: float,
@@ -469,7 +463,8 @@ def _principal_points_per_view(metric: upgrade.Metric, obs: Observations, keep: 
     than the chi-square quantile at 1 - PRINCIPAL_POINT_P for the 2 (views - 1) parameters it adds
     (2 views more when the shared one is held at the centre) in noise variances (the residuals'
     own, from the freer fit), every view's lies in the middle half of the image and the data fix
-    each to MAX_PRINCIPAL_POINT_SD_PX (_principal_point_sd); else the shared one stays. Returns the reconstruction, the observations kept and the test's figures."""
+    each to camera_claim.MAX_PRINCIPAL_POINT_SD_PX (_principal_point_sd); else the shared one stays.
+    Returns the reconstruction, the observations kept and the test's figures."""
     from scipy.stats import chi2
 
     views = [v for v, R in enumerate(metric.rotations) if R is not None]
@@ -490,11 +485,11 @@ def _principal_points_per_view(metric: upgrade.Metric, obs: Observations, keep: 
     offsets = np.array([trial.Ks[v][:2, 2] - centre for v in views])
     inside = bool(np.all(np.abs(offsets) <= np.array(image_size, dtype=float) / 4))
     spread = np.linalg.norm(np.array([trial.Ks[v][:2, 2] for v in views]) - trial.K[:2, 2], axis=1)
-    precise = bool(np.all(sd <= MAX_PRINCIPAL_POINT_SD_PX))
+    precise = bool(np.all(sd <= camera_claim.MAX_PRINCIPAL_POINT_SD_PX))
     figures.update(chi2=float(statistic), threshold=threshold, inside_middle_half=inside,
                    spread_px=[float(spread.min()), float(np.median(spread)), float(spread.max())],
                    sd_px=[float(sd.min()), float(np.median(sd)), float(sd.max())],
-                   max_sd_px=MAX_PRINCIPAL_POINT_SD_PX, precise=precise)
+                   max_sd_px=camera_claim.MAX_PRINCIPAL_POINT_SD_PX, precise=precise)
     if statistic > threshold and inside and precise:
         figures["estimated"] = True
         return trial, trial_keep, figures

@@ -59,6 +59,12 @@ MAX_ABS_GAP = RESIDUAL_MAX_ABS_GAP
 # A reconstruction is doubtful as a whole (the pipeline's claims._doubts, the verifier's check of
 # summary.doubtful) when more than these shares of its bounded cameras are not certified, of its
 # observations were rejected, or of its registered cameras were dropped.
+# A view's own principal point (principal_point "per_view") is kept only when the data fix each to
+# this standard deviation, px (the pipeline's test; the verifier ties the test's record to it): the
+# shifts it is meant to capture (Sceaux's stabilised lens) are 3-21 px, and a principal point known
+# to worse than this cannot tell such a shift from a small rotation of its view (templeSparseRing's,
+# fixed to 8-17 px, moved its rotations 1.4 degrees off the ground truth).
+MAX_PRINCIPAL_POINT_SD_PX = 5.0
 DOUBTFUL_FRACTION = 0.5
 DOUBTFUL_REMOVED = 0.25
 DOUBTFUL_DROPPED = 0.25
