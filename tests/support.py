@@ -210,3 +210,32 @@ def forged_sublevel(result: dict, item: int = 1, **changes) -> dict:
     document = copy.deepcopy(result["certificate"])
     document["items"][item]["proof"]["sublevel"].update(changes)
     return document
+
+
+def verified(result: dict):
+    """The verifier's report on ``result`` read back from its JSON text (as a third party reads
+    it), asserting that it verifies."""
+    import json
+
+    from geocert.verify.checks import verify_any
+
+    report = verify_any(json.loads(json.dumps(result)))
+    assert report.valid, report.first_failure
+    return report
+
+
+def refused(result: dict) -> dict:
+    """The verifier's first failure on ``result`` read back from its JSON text, asserting that it is
+    refused."""
+    import json
+
+    from geocert.verify.checks import verify_any
+
+    report = verify_any(json.loads(json.dumps(result)))
+    assert not report.valid, "the forgery verified"
+    return report.first_failure
+
+
+def stage(result: dict, name: str) -> dict:
+    """A reconstruction result's stage record by name."""
+    return next(entry for entry in result["stages"] if entry["name"] == name)

@@ -98,32 +98,15 @@ from __future__ import annotations
 
 import copy
 import itertools
-import json
 
 import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers.reconstruction import camera_claim, synthetic
-from geocert.verify.checks import verify_any
+from tests.support import refused as _refused, stage as _stage, verified as _verifies
 
 VIEWS = 8
-
-
-def _verifies(result: dict) -> dict:
-    report = verify_any(json.loads(json.dumps(result)))
-    assert report.valid, report.first_failure
-    return report
-
-
-def _refused(result: dict) -> dict:
-    report = verify_any(json.loads(json.dumps(result)))
-    assert not report.valid, "the forgery verified"
-    return report.first_failure
-
-
-def _stage(result: dict, name: str) -> dict:
-    return next(stage for stage in result["stages"] if stage["name"] == name)
 
 
 def _solve(tracks, image_size, stop_at: str | None = None, **options) -> dict:
@@ -306,11 +289,6 @@ class TestPerViewRecordUntied:
         _stage(forged, "bundle_adjustment")["principal_point_per_view"] = copy.deepcopy(_record(per_view))
         assert "principal_point_per_view" in _refused(forged)["detail"]
 
-    def test_the_pipelines_limit_is_the_verifiers(self):
-        from geocert.pipelines.reconstruction.pipeline import MAX_PRINCIPAL_POINT_SD_PX
-        from geocert.verify.reconstruction_members import MAX_PRINCIPAL_POINT_SD_PX as checked
-
-        assert checked == MAX_PRINCIPAL_POINT_SD_PX
 
 
 # --- the earlier hash forms: accepted with their scope saying what is unchecked ------------------------

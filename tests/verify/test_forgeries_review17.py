@@ -94,25 +94,10 @@ from geocert.solvers.core.certificates import problem_hash
 from geocert.solvers.fractional import items
 from geocert.solvers.reconstruction import hashed_options, synthetic
 from geocert.verify.checks import verify_any
+from tests.support import refused as _refused, stage as _stage, verified as _verifies
 from tests.verify.test_forgeries import rehash, uncertify
 
 VIEWS = 8
-
-
-def _verifies(result: dict):
-    report = verify_any(json.loads(json.dumps(result)))
-    assert report.valid, report.first_failure
-    return report
-
-
-def _refused(result: dict) -> dict:
-    report = verify_any(json.loads(json.dumps(result)))
-    assert not report.valid, "the forgery verified"
-    return report.first_failure
-
-
-def _stage(result: dict, name: str) -> dict:
-    return next(stage for stage in result["stages"] if stage["name"] == name)
 
 
 def _example(name: str, **options) -> dict:

@@ -129,7 +129,7 @@ import pytest
 from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.reconstruction import synthetic
-from geocert.verify.checks import verify_any
+from tests.support import refused as _refused, stage as _stage, verified as _verifies
 from tests.verify.test_forgeries import rehash
 
 K800 = [[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]]
@@ -137,22 +137,6 @@ MIXED = [[640, 480]] * 4 + [[800, 600]] * 4
 RANGES = {"focal": [240.0, 4000.0], "aspect": [0.95, 1.05], "skew": [-8.0, 8.0],
           "principal_point": [[160.0, 480.0], [120.0, 360.0]]}
 PER_VIEW_SHIFT = np.random.default_rng(1).uniform(-15, 15, (8, 2))
-
-
-def _verifies(result: dict):
-    report = verify_any(json.loads(json.dumps(result)))
-    assert report.valid, report.first_failure
-    return report
-
-
-def _refused(result: dict) -> dict:
-    report = verify_any(json.loads(json.dumps(result)))
-    assert not report.valid, "the forgery verified"
-    return report.first_failure
-
-
-def _stage(result: dict, name: str) -> dict:
-    return next(stage for stage in result["stages"] if stage["name"] == name)
 
 
 def _scene_job(options: dict, points: int = 100, sizes=None, shift=None, k1: float = 0.0) -> dict:
