@@ -29,6 +29,21 @@ allowed) a focal length 1.5 times the returned cameras' fits them at 7.3 times t
 times at 2.6, where the pipeline's own certificates measure 0.99 (the stored scene), 1.03 (the
 Oxford Model House's 1,257 observations) and 1.00 (the dinoSparseRing's 261).
 
+Both tests assume the certificate's reconstruction is as free as the returned cameras' model.
+An incremental registration's cameras (the default) are not: K [R | t] with one focal length,
+square pixels, no skew and the principal point at each image's centre, while the returned
+cameras estimate the principal point (and with camera_model "full" aspect and skew). On tracks
+whose principal point is off the centre that model fits worse by what holding it there costs,
+which grows with the square of the offset and which no noise allowance covers (36 px off on the
+synthetic scene: 535.5 px^2 against 514.4 allowed, the returned cameras at 227.3). Such a
+certificate (_built_centred, recomputed from its cameras) is held instead to the returned
+reconstruction re-adjusted in its model (_centred_reference, centred_fit): in the pixel test, and
+in the fit test with that reconstruction's cost beyond the returned cameras' added to the
+allowance. The addition is measured, not a constant: the evaluated cost of an explicit
+reconstruction in the model, so at least its least cost; the focal length free and the centre
+the image's, so a certificate re-posed with another focal length or principal point gains
+nothing from it.
+
 TIE_RATIO, measured on genuine results (the largest distance between the two images of a shared
 observation over the returned cameras' RMS error there; docs/certificate.md): 0.03 on the stored
 synthetic reconstruction, 0.90 on templeSparseRing's photos, 2.9 on the Oxford Corridor's and the
@@ -236,21 +251,25 @@ def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple
         return None
     registered = [c for c in result["cameras"] if c.get("registered") is True and c.get("P") is not None]
     index = {int(c["view"]): k for k, c in enumerate(registered)}
-    P = np.array([np.asarray(c["P"], dtype=float) for c in registered])
-    centres = np.array([[(c["image_size"][0] - 1) / 2, (c["image_size"][1] - 1) / 2] for c in registered], dtype=float)
     X, view, point, uv, row = [], [], [], [], {}
-    for k, p in enumerate(result["points"]):
-        if p.get("point") is None:
-            continue
-        seen = [(int(v), u, w) for v, u, w in p.get("observations") or [] if int(v) in index]
-        if not seen:
-            continue
-        X.append(p["point"] if p.get("at_infinity") else [*p["point"], 1.0])
-        for v, u, w in seen:
-            row[(k, v)] = len(uv)
-            view.append(index[v]), point.append(len(X) - 1), uv.append((u, w))
-    images = centred_fit.fit(P, centres, np.asarray(X, dtype=float), np.asarray(view), np.asarray(point),
-                             np.asarray(uv, dtype=float))
+    try:  # (the fields' shapes are checked elsewhere; one unreadable here leaves the returned cameras the reference)
+        P = np.array([np.asarray(c["P"], dtype=float) for c in registered]).reshape(len(registered), 3, 4)
+        centres = np.array([[(c["image_size"][0] - 1) / 2, (c["image_size"][1] - 1) / 2] for c in registered],
+                           dtype=float)
+        for k, p in enumerate(result["points"]):
+            if p.get("point") is None:
+                continue
+            seen = [(int(v), u, w) for v, u, w in p.get("observations") or [] if int(v) in index]
+            if not seen:
+                continue
+            X.append(p["point"] if p.get("at_infinity") else [*p["point"], 1.0])
+            for v, u, w in seen:
+                row[(k, v)] = len(uv)
+                view.append(index[v]), point.append(len(X) - 1), uv.append((u, w))
+        X, uv = np.asarray(X, dtype=float).reshape(-1, 4), np.asarray(uv, dtype=float).reshape(-1, 2)
+    except (TypeError, ValueError, KeyError, IndexError):
+        return None
+    images = centred_fit.fit(P, centres, X, np.asarray(view, dtype=int), np.asarray(point, dtype=int), uv)
     if images is None:
         return None
     keys = at[0]

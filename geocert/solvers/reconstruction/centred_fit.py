@@ -27,6 +27,11 @@ import numpy as np
 
 ITERATIONS = 30  # Levenberg-Marquardt steps at most (the synthetic scene's 60 px shift converges in 6)
 CHUNK = 200_000  # observation pairs per block of the points' Schur complement (memory: CHUNK * 49 floats)
+# The verifier's cost bound: each step solves a dense system of 6 * views + 1 unknowns and sums a
+# 7 x 7 block per pair of observations of one point; beyond these sizes fit() declines (None) and
+# the tie holds the certificate to the returned cameras, as it did before this fit (stricter).
+MAX_VIEWS = 300
+MAX_PAIRS = 5_000_000
 
 
 def _rq(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -60,17 +65,21 @@ def fit(P: np.ndarray, centres: np.ndarray, X: np.ndarray, view: np.ndarray, poi
     """The images (M, 2) of the observations (camera ``view``, point ``point``, pixels ``uv``) in
     the returned cameras ``P`` (V, 3, 4) and points ``X`` (N, 4, homogeneous; w = 0 at infinity)
     re-adjusted with every K [[f, 0, cx], [0, f, cy], [0, 0, 1]], f one focal length and (cx, cy)
-    the camera's ``centres`` row; None when the cameras cannot be read so (not finite)."""
+    the camera's ``centres`` row; None when the cameras cannot be read so (not finite), the
+    adjustment does not converge, or the problem is beyond MAX_VIEWS or MAX_PAIRS."""
     if not (np.all(np.isfinite(P)) and np.all(np.isfinite(X)) and np.all(np.isfinite(uv))) or len(uv) == 0:
         return None
     n_views, n_points = len(P), len(X)
+    if n_views > MAX_VIEWS or int(np.sum(np.square(np.bincount(point, minlength=n_points)))) > MAX_PAIRS:
+        return None
     Ks, Rs, ts = [], [], []
     for camera in P:
         K, R = _rq(camera[:, :3])
-        if not (abs(K[2, 2]) > 0 and np.all(np.isfinite(K))):
+        scale = K[2, 2]
+        if not (abs(scale) > 0 and np.all(np.isfinite(K))):
             return None
-        K = K / K[2, 2]
-        t = np.linalg.solve(K, camera[:, 3]) / _rq(camera[:, :3])[0][2, 2]
+        K = K / scale
+        t = np.linalg.solve(K, camera[:, 3]) / scale
         Ks.append(K), Rs.append(R), ts.append(t)
     Rs, ts, X = np.array(Rs), np.array(ts), np.array(X, dtype=float)
     f = float(np.median([np.sqrt(abs(K[0, 0] * K[1, 1])) for K in Ks]))
