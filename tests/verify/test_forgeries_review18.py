@@ -356,6 +356,19 @@ def test_a_certificate_reposed_with_another_K_beside_an_off_centre_run_is_refuse
     assert "reconstruction of these tracks' observations" in report.first_failure["detail"]
 
 
+@pytest.mark.parametrize("limit, value", [("ITERATIONS", 1), ("MAX_VIEWS", 7), ("MAX_PAIRS", 100)],
+                         ids=["not converged", "beyond the views bound", "beyond the pairs bound"])
+def test_a_centred_fit_not_converged_or_too_large_is_not_used(off_centre, monkeypatch, limit, value):
+    """The centred model's cost widens the tie only when the verifier's fit of it converged (an
+    unconverged fit's cost overstates the model's) and within its cost bound: otherwise the
+    certificate is held to the returned cameras, as before the fit, and the off-centre run is
+    refused again (stricter, never looser)."""
+    from geocert.solvers.reconstruction import centred_fit
+
+    monkeypatch.setattr(centred_fit, limit, value)
+    assert "reconstruction of these tracks' observations" in _refused(off_centre)["detail"]
+
+
 def test_the_centred_model_is_the_solvers_own(off_centre):
     """centred_fit (numpy, read by the verifier) and the pipeline's adjustment (bundle model
     "simple", the principal point held at the centre) find the same cost on the off-centre scene's
