@@ -408,7 +408,8 @@ def synthetic_resection_l1(seeds: int = 20, size: int = 20, noise_px: float = 0.
     points under L2L2 (its proven centre, fractional.resection_sublevel) for the widths: how often a
     centre interval is proven, holds the true centre (all 3 coordinates), the median width over
     L2L2's, the result verifying, and the processor time of a full certificate against a summary's
-    (both in this run), with the centre's own proof and its check apart."""
+    (both in this run), and of the full certificate with the centre's proof switched off (the
+    depth row alone, as before it), with the centre's own proof and its check apart."""
     from geocert.solvers.fractional.resection_centre_l1 import l1_centre, verify_l1_centre
     from geocert.verify.checks import verify_any
 
@@ -417,7 +418,7 @@ def synthetic_resection_l1(seeds: int = 20, size: int = 20, noise_px: float = 0.
     for norm in ("L1L1", "L2L1"):
         rng = np.random.default_rng(37)
         proven = inside = verified = 0
-        ratios, full_s, summary_s, prove_ms, check_ms = [], 0.0, 0.0, [], []
+        ratios, full_s, summary_s, depth_only_s, prove_ms, check_ms = [], 0.0, 0.0, 0.0, [], []
         for _ in range(seeds):
             centre = np.array([*rng.uniform(-2, 2, 2), -10.0])
             camera = cameras_looking_at_origin(centre[None, :])
@@ -429,6 +430,10 @@ def synthetic_resection_l1(seeds: int = 20, size: int = 20, noise_px: float = 0.
             solve_job(job)
             summary_s += time.process_time() - began
             job["options"]["certificate"] = "full"
+            began = time.process_time()
+            with mock.patch("geocert.solvers.fractional.maps.l1_centre", return_value=None):
+                solve_job(job)  # the full certificate as before the centre: its depth row alone
+            depth_only_s += time.process_time() - began
             began = time.process_time()
             result = solve_job(job)
             full_s += time.process_time() - began
@@ -453,7 +458,8 @@ def synthetic_resection_l1(seeds: int = 20, size: int = 20, noise_px: float = 0.
                 ratios.append((box[:, 1] - box[:, 0]) / (l2_box[:, 1] - l2_box[:, 0]))
         ratio = " ".join(f"{v:.2f}" for v in np.median(ratios, axis=0)) if ratios else "n/a"
         lines.append(f"  {norm} | {seeds:7d} | {proven:13d} | {inside:12d} | {ratio:>30} | {verified:5d}/{seeds} | "
-                     f"{full_s / max(summary_s, 1e-9):18.2f} | {np.median(prove_ms) if prove_ms else float('nan'):15.1f} | "
+                     f"{full_s / max(summary_s, 1e-9):5.2f} ({depth_only_s / max(summary_s, 1e-9):.2f} without the "
+                     f"centre) | {np.median(prove_ms) if prove_ms else float('nan'):15.1f} | "
                      f"{np.median(check_ms) if check_ms else float('nan'):.1f}")
     return lines
 

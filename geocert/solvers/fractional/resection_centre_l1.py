@@ -86,7 +86,8 @@ def dual_reach(scene: Scene, increase: float, r: float, row: np.ndarray, row_err
         lT_err = (16 * U * T_F * float(np.sqrt(row @ row)) + T_F * row_err) * (1 + 4 * U)
         v = np.einsum("kai,ka,k->i", C, y, s)
         C_F = np.sqrt((C * C).sum(axis=(1, 2)))
-        v_err = ((k + 16) * U * float((s * C_F * y_len).sum()) + float((s * y_len * scene.err_C).sum())
+        # each entry of v sums 2k products of three factors; sum_(a, i) |C_jai y_ja| <= sqrt(11) |C_j|_F |y_j|
+        v_err = (4 * (2 * k + 16) * U * float((s * C_F * y_len).sum()) + float((s * y_len * scene.err_C).sum())
                  + k * 64 * UNDERFLOW) * (1 + 8 * U)
         e = lT - mu * v
         e_size = float(np.sqrt(lT @ lT)) + mu * float(np.sqrt(v @ v))

@@ -8,7 +8,8 @@ the reference point's depth is 1 (the chart's scale). That row is the camera's d
 relative to the reference point's depth: a point X lies at depth_x X + depth_y Y + depth_z Z +
 depth_0 times the reference point's depth (the principal plane, and the viewing direction, of the
 camera). The other two rows are not branched, and the leaves say nothing of them: the camera
-centre (which lies on that plane) is not bounded here.
+centre (which lies on that plane) is bounded beside them at the same level, when proven
+(``sublevel.centre``: fractional.resection_centre_l1, checked here).
 
 The proof is a branch-and-bound proof of the search's form (proof.checked_leaves), with every part
 (root region, tightening rounds, caps, leaves) proven for the points costing at most the level
