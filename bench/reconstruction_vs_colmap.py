@@ -52,6 +52,7 @@ import numpy as np
 
 from bench import colmap_baseline, machine_speed_ms
 from testing import camera_errors, photo_sets
+from testing.third_party import verify_result
 
 # The ring options for the dinoSparseRing (docs/benchmarks.md, "Photos to tracks, and the K-known path"),
 # the only set the docs give options for: bench.reconstruction_images.RING_JOB_OPTIONS, not
@@ -119,28 +120,6 @@ def run_geocert(job: dict, timeout_s: float) -> dict:
             return {"error": f"exit {done.returncode}: {(done.stderr or done.stdout).strip()[-500:]}", "wall_s": wall,
                     "cpu_s": cpu}
         return {"result": json.loads(done.stdout), "wall_s": wall, "cpu_s": cpu}
-
-
-def verify_result(result: dict, timeout_s: float) -> str:
-    """``geocert verify`` on a result (its certificate full) in a child process, as a third party
-    would check it: "yes", or "no" and the report's first reason."""
-    geocert = Path(sys.executable).with_name("geocert")
-    with tempfile.TemporaryDirectory(prefix="geocert-bench-") as work:
-        path = Path(work) / "result.json"
-        path.write_text(json.dumps(result))
-        try:
-            done = subprocess.run([str(geocert), "verify", "--compact", str(path)], capture_output=True, text=True,
-                                  timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            return f"no (verifier past {timeout_s:.0f} s)"
-    if done.returncode == 0:
-        return "yes"
-    try:
-        report = json.loads(done.stdout)
-        reason = report.get("first_failure") or "a check failed"
-    except json.JSONDecodeError:
-        reason = (done.stderr or done.stdout).strip()[-200:]
-    return f"no ({str(reason)[:200]})"
 
 
 def codes(warnings) -> list[str]:

@@ -146,10 +146,10 @@ def test_the_ground_truth_agrees_with_the_photos(key):
 
 
 def test_the_benchs_verification_says_yes_to_a_genuine_result_and_no_to_a_forged_one():
-    """bench.reconstruction_vs_colmap --verify checks each result as a third party would
+    """bench.reconstruction_vs_colmap --verify (testing.third_party.verify_result) checks each result as a third party would
     (``geocert verify`` in a child process): a genuine certified result verifies, the same with
     one certified bound raised above its cost does not, and the answer names the failure."""
-    from bench.reconstruction_vs_colmap import verify_result
+    from testing.third_party import verify_result
     from geocert.jobs.runner import solve_job
     from geocert.kinds import get_kind
 
