@@ -494,8 +494,12 @@ def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options
     F, centre = Ks[:, :2, :2], Ks[:, :2, 2]
     held = None if local is None else ~local[state.obs_view[obs]]  # observations by held cameras
 
+    # Am is A[o_cam]: each camera's rotation (and its left Jacobian) is computed once, from its
+    # first observation's row, and spread to its observations.
+    _, rows, inverse = np.unique(o_cam, return_index=True, return_inverse=True)
+
     def project(Am, S, Bm):
-        R = Rotation.from_rotvec(Am[:, :3]).as_matrix()
+        R = Rotation.from_rotvec(Am[rows, :3]).as_matrix()[inverse]
         xc = np.einsum("nij,nj->ni", R, Bm) + Am[:, 3:6]
         z = np.where(np.abs(xc[:, 2]) < 1e-12, 1e-12, xc[:, 2])
         seen = np.einsum("nij,nj->ni", F, xc[:, :2] / z[:, None])  # the pixel's offset at scale 1
@@ -511,7 +515,7 @@ def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options
         dn[:, 0, 0] = dn[:, 1, 1] = 1.0 / z
         dn[:, :, 2] = -xc[:, :2] / (z ** 2)[:, None]
         du_dxc = scale * F @ dn
-        d_w = -du_dxc @ _skew(xc - Am[:, 3:6]) @ _left_jacobian(Am[:, :3])
+        d_w = -du_dxc @ _skew(xc - Am[:, 3:6]) @ _left_jacobian(Am[rows, :3])[inverse]
         d_s = seen[:, :, None] if focal else np.zeros((len(Am), 2, 0))
         d_camera = np.concatenate([d_w, du_dxc], axis=2)
         if held is not None:
