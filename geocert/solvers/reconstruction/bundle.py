@@ -119,7 +119,7 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         """Analytic (ja, js, jb) of ``residual``: pixels = M n' + c with n = cam[:2] / cam[2],
         n' = n (1 + k1 |n|^2) ("radial") or n, M = [[fx, skew], [0, fy]] (each view's f I for
         "varying"), cam = exp(w) B + t (a rotation vector's derivative by SO(3)'s left Jacobian)."""
-        from geocert.solvers.reconstruction.calibrated import _left_jacobian, _skew
+        from geocert.solvers.reconstruction.calibrated import _crossed, _left_jacobian
 
         k = entries(S)
         m = len(Am)
@@ -143,7 +143,7 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         else:
             M[:, 0, 0], M[:, 0, 1], M[:, 1, 1] = k[0], k[2], k[1]
         du_dcam = M @ dseen
-        d_w = -du_dcam @ _skew(cam - Am[:, 3:6]) @ _left_jacobian(Am[rows, :3])[inverse]
+        d_w = _crossed(cam - Am[:, 3:6], du_dcam) @ _left_jacobian(Am[rows, :3])[inverse]
         ja = np.concatenate([d_w, du_dcam], axis=2)
         ones, zeros = np.ones(m), np.zeros(m)
         if model == "varying":

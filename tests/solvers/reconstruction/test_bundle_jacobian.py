@@ -67,3 +67,14 @@ def test_the_residuals_are_each_observations_own_camera_in_any_order(model, monk
     monkeypatch.setattr(schur, "solve", capture)
     bundle.metric(K, R, t, X, view, track, pixels, max_iterations=1, model=model)
     assert np.abs(seen[0] - expected).max() <= 1e-9
+
+
+def test_crossed_is_the_skew_matrix_product():
+    """calibrated._crossed(x, a), which the rotation columns of both metric adjustments' Jacobians
+    use, is -a [x]_x written out (each row of a crossed with x)."""
+    from geocert.solvers.reconstruction.calibrated import _crossed, _skew
+
+    rng = np.random.default_rng(4)
+    x, a = rng.normal(size=(30, 3)), rng.normal(size=(30, 2, 3))
+    assert np.abs(_crossed(x, a) - (-a @ _skew(x))).max() <= 1e-14
+    assert np.abs(_crossed(x, a)[:, 1] - np.cross(x, a[:, 1])).max() <= 1e-14
