@@ -164,13 +164,18 @@ class _Blocks:
         Xs = X[self.own_order]
         return self._summed(Xs, Xs if Y is X else Y[self.own_order], self.own_runs, self.own_at)
 
-    def reduction(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    def gathered(self, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Y (M, r, c + s) in the order ``reduction`` reads it (once per Jacobian, not per damping)."""
+        return Y[self.own_order], Y[self.second]
+
+    def reduction(self, X: np.ndarray, Y: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
         """sum over the observations m, m' of each point of X_m^T Y_m' in the nc x nc matrix, for
-        X_m = V_j^-1 W_m^T and Y_m = W_m^T: W V^-1 W^T, what eliminating the points takes off U."""
-        own = self.own(X, Y)
+        X_m = V_j^-1 W_m^T and Y_m = W_m^T (``gathered``): W V^-1 W^T, what eliminating the points
+        takes off U."""
+        own = self._summed(X[self.own_order], Y[0], self.own_runs, self.own_at)
         if len(self.first) == 0:
             return own
-        cross = self._summed(X[self.first], Y[self.second], self.pair_runs, self.pair_at)
+        cross = self._summed(X[self.first], Y[1], self.pair_runs, self.pair_at)
         return own + cross + cross.T
 
 
@@ -197,17 +202,19 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
     for iterations in range(1, max_iterations + 1):
         if should_stop is not None and should_stop():
             break
-        w = _robust_weights(r, f_scale)
         ja, js, jb = (_jacobians(residual, A, S, B, view, track) if jacobian is None
                       else jacobian(A[view], S, B[track]))
-        je = np.concatenate([ja, js], axis=2) * np.sqrt(w)[:, None, None]  # (M, 2, c + s)
-        jb = jb * np.sqrt(w)[:, None, None]
-        rw = r * np.sqrt(w)[:, None]
+        je = np.concatenate([ja, js], axis=2)  # (M, 2, c + s)
+        rw = r
+        if f_scale is not None:  # Huber's weights (plain least squares: all 1)
+            root = np.sqrt(_robust_weights(r, f_scale))
+            je, jb, rw = je * root[:, None, None], jb * root[:, None, None], r * root[:, None]
         # Normal equations' blocks: U summed by view (blocks.own), W and the gradients per observation.
         U = blocks.own(je, je)
         diag_u = np.diag(U).copy()
         V = _sum_by(track, jb.transpose(0, 2, 1) @ jb, p)
         WmT = jb.transpose(0, 2, 1) @ je  # (M, d, c+s): each observation's W^T
+        WmT_gathered = blocks.gathered(WmT)
         ga = (je.transpose(0, 2, 1) @ rw[:, :, None])[:, :, 0]  # (M, c+s)
         gb = _sum_by(track, (jb.transpose(0, 2, 1) @ rw[:, :, None])[:, :, 0], p)
         if stop.gradient_tolerance > 0:
@@ -221,7 +228,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
             Vinv = _inverse(Vd)
             # Reduced system: (U - W V^-1 W^T) da = -(ga - W V^-1 gb).
             VWT = Vinv[track] @ WmT  # (M, d, c+s): (W V^-1)^T, V^-1 being symmetric
-            Ured = U - blocks.reduction(VWT, WmT)
+            Ured = U - blocks.reduction(VWT, WmT_gathered)
             Ured[np.diag_indices(nc)] += lam * diag_u + 1e-12
             rhs = np.bincount(cam_cols.ravel(), weights=(ga - (gb[track][:, None, :] @ VWT)[:, 0, :]).ravel(),
                               minlength=nc)
