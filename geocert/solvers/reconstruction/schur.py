@@ -215,8 +215,8 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
         V = _sum_by(track, jb.transpose(0, 2, 1) @ jb, p)
         WmT = jb.transpose(0, 2, 1) @ je  # (M, d, c+s): each observation's W^T
         WmT_gathered = blocks.gathered(WmT)
-        ga = (je.transpose(0, 2, 1) @ rw[:, :, None])[:, :, 0]  # (M, c+s)
-        gb = _sum_by(track, (jb.transpose(0, 2, 1) @ rw[:, :, None])[:, :, 0], p)
+        ga = np.einsum("mki,mk->mi", je, rw)  # (M, c+s); einsum: faster than matmul on stacks of vectors
+        gb = _sum_by(track, np.einsum("mki,mk->mi", jb, rw), p)
         if stop.gradient_tolerance > 0:
             gradient = max(np.abs(np.bincount(cam_cols.ravel(), weights=ga.ravel(), minlength=nc)).max(initial=0.0),
                            np.abs(gb).max(initial=0.0))
@@ -230,7 +230,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
             VWT = Vinv[track] @ WmT  # (M, d, c+s): (W V^-1)^T, V^-1 being symmetric
             Ured = U - blocks.reduction(VWT, WmT_gathered)
             Ured[np.diag_indices(nc)] += lam * diag_u + 1e-12
-            rhs = np.bincount(cam_cols.ravel(), weights=(ga - (gb[track][:, None, :] @ VWT)[:, 0, :]).ravel(),
+            rhs = np.bincount(cam_cols.ravel(), weights=(ga - np.einsum("mj,mjk->mk", gb[track], VWT)).ravel(),
                               minlength=nc)
             try:
                 da = -np.linalg.solve(Ured, rhs)
@@ -243,7 +243,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
                     return A, S, B, r, iterations
                 continue
             # Back substitution: db_j = -V_j^-1 (gb_j + sum_m W_m^T da_m).
-            wda = _sum_by(track, (WmT @ da[cam_cols][:, :, None])[:, :, 0], p)
+            wda = _sum_by(track, np.einsum("mij,mj->mi", WmT, da[cam_cols]), p)
             db = -(Vinv @ (gb + wda)[:, :, None])[:, :, 0]
             A_new = A + da[:n * c].reshape(n, c)
             S_new = S + da[n * c:]
