@@ -107,23 +107,29 @@ def retriangulated(metric: upgrade.Metric, obs: Observations) -> upgrade.Metric:
     at infinity keeps its point."""
     from dataclasses import replace
 
-    from geocert.solvers.reconstruction.calibrated import triangulate
-
     registered = np.array([R is not None for R in metric.rotations])
     use = np.flatnonzero(registered[obs.view])
     use = use[np.argsort(obs.track[use], kind="stable")]
     bounds = np.searchsorted(obs.track[use], np.arange(len(metric.points) + 1))
-    Kinv = {v: np.linalg.inv(upgrade.K_of(metric, v)) for v in np.flatnonzero(registered)}
+    eye = np.eye(3)
+    Kinv = np.array([np.linalg.inv(upgrade.K_of(metric, v)) if r else eye for v, r in enumerate(registered)])
+    R = np.array([eye if r is None else r for r in metric.rotations])
+    t = np.array([np.zeros(3) if x is None else x for x in metric.translations])
+    P = np.concatenate([R, t[:, :, None]], axis=2)
+    rays = np.einsum("mij,mj->mi", Kinv[obs.view[use]], np.c_[obs.pixel[use], np.ones(len(use))])[:, :2]
     points = metric.points.copy()
-    for track in range(len(metric.points)):
-        m = use[bounds[track]:bounds[track + 1]]
-        if len(m) < 2:
-            continue
-        views = obs.view[m]
-        rays = np.array([(Kinv[v] @ [u, w, 1.0])[:2] for v, (u, w) in zip(views, obs.pixel[m])])
-        Rs = np.array([metric.rotations[v] for v in views])
-        ts = np.array([metric.translations[v] for v in views])
-        X = triangulate(Rs, ts, rays)
-        if np.all(np.isfinite(X)) and np.all((Rs @ X + ts)[:, 2] > 0):
-            points[track] = X
+    counts = np.diff(bounds)
+    # calibrated.triangulate's DLT, the tracks with as many observations at once (one stacked SVD).
+    for k in np.unique(counts[counts >= 2]):
+        tracks = np.flatnonzero(counts == k)
+        m = bounds[tracks][:, None] + np.arange(k)[None, :]  # (tracks, k) into use
+        Pm, x = P[obs.view[use[m]]], rays[m]
+        A = np.concatenate([x[:, :, 0:1] * Pm[:, :, 2] - Pm[:, :, 0], x[:, :, 1:2] * Pm[:, :, 2] - Pm[:, :, 1]], axis=1)
+        A /= np.linalg.norm(A, axis=2, keepdims=True)
+        X = np.linalg.svd(A)[2][:, -1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            X = np.where(np.abs(X[:, 3:4]) < 1e-12, np.nan, X[:, :3] / X[:, 3:4])
+            ahead = np.all(np.einsum("tkij,tj->tki", Pm[:, :, :, :3], X)[:, :, 2] + Pm[:, :, 2, 3] > 0, axis=1)
+        good = np.all(np.isfinite(X), axis=1) & ahead
+        points[tracks[good]] = X[good]
     return replace(metric, points=points)

@@ -94,9 +94,16 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
             return given
         return S
 
+    # Am is A[view]: each view's rotation (and its left Jacobian) is computed once, from its first
+    # observation's row, and spread to its observations.
+    _, rows, inverse = np.unique(view, return_index=True, return_inverse=True)
+
+    def rotations(Am):
+        return Rotation.from_rotvec(Am[rows, :3]).as_matrix()[inverse]
+
     def residual(Am, S, Bm):
         k = entries(S)
-        cam = Rotation.from_rotvec(Am[:, :3]).apply(Bm) + Am[:, 3:6]
+        cam = np.einsum("mij,mj->mi", rotations(Am), Bm) + Am[:, 3:6]
         u = cam[:, 0] / cam[:, 2]
         v = cam[:, 1] / cam[:, 2]
         if model == "varying":
@@ -112,11 +119,11 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         """Analytic (ja, js, jb) of ``residual``: pixels = M n' + c with n = cam[:2] / cam[2],
         n' = n (1 + k1 |n|^2) ("radial") or n, M = [[fx, skew], [0, fy]] (each view's f I for
         "varying"), cam = exp(w) B + t (a rotation vector's derivative by SO(3)'s left Jacobian)."""
-        from geocert.solvers.reconstruction.calibrated import _left_jacobian, _skew
+        from geocert.solvers.reconstruction.calibrated import _crossed, _left_jacobian
 
         k = entries(S)
         m = len(Am)
-        R = Rotation.from_rotvec(Am[:, :3]).as_matrix()
+        R = rotations(Am)
         cam = np.einsum("mij,mj->mi", R, Bm) + Am[:, 3:6]
         z = cam[:, 2]
         n = cam[:, :2] / z[:, None]
@@ -136,7 +143,7 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         else:
             M[:, 0, 0], M[:, 0, 1], M[:, 1, 1] = k[0], k[2], k[1]
         du_dcam = M @ dseen
-        d_w = -du_dcam @ _skew(cam - Am[:, 3:6]) @ _left_jacobian(Am[:, :3])
+        d_w = _crossed(cam - Am[:, 3:6], du_dcam) @ _left_jacobian(Am[rows, :3])[inverse]
         ja = np.concatenate([d_w, du_dcam], axis=2)
         ones, zeros = np.ones(m), np.zeros(m)
         if model == "varying":

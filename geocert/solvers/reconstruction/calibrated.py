@@ -340,6 +340,14 @@ def _skew(v: np.ndarray) -> np.ndarray:
     return S
 
 
+def _crossed(x: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """-a @ [x]_x for rows x (M, 3) and a (M, r, 3): each row of a crossed with x, x × a_i
+    (the skew matrix's product written out: no (M, 3, 3) matrices built and multiplied)."""
+    x0, x1, x2 = x[:, 0, None], x[:, 1, None], x[:, 2, None]
+    a0, a1, a2 = a[:, :, 0], a[:, :, 1], a[:, :, 2]
+    return np.stack([x1 * a2 - x2 * a1, x2 * a0 - x0 * a2, x0 * a1 - x1 * a0], axis=2)
+
+
 def _left_jacobian(w: np.ndarray) -> np.ndarray:
     """SO(3)'s left Jacobian J(w) (n, 3, 3): exp(w + e) = exp(J(w) e) exp(w) to first order."""
     theta = np.linalg.norm(w, axis=1)
@@ -494,8 +502,12 @@ def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options
     F, centre = Ks[:, :2, :2], Ks[:, :2, 2]
     held = None if local is None else ~local[state.obs_view[obs]]  # observations by held cameras
 
+    # Am is A[o_cam]: each camera's rotation (and its left Jacobian) is computed once, from its
+    # first observation's row, and spread to its observations.
+    _, rows, inverse = np.unique(o_cam, return_index=True, return_inverse=True)
+
     def project(Am, S, Bm):
-        R = Rotation.from_rotvec(Am[:, :3]).as_matrix()
+        R = Rotation.from_rotvec(Am[rows, :3]).as_matrix()[inverse]
         xc = np.einsum("nij,nj->ni", R, Bm) + Am[:, 3:6]
         z = np.where(np.abs(xc[:, 2]) < 1e-12, 1e-12, xc[:, 2])
         seen = np.einsum("nij,nj->ni", F, xc[:, :2] / z[:, None])  # the pixel's offset at scale 1
@@ -511,7 +523,7 @@ def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options
         dn[:, 0, 0] = dn[:, 1, 1] = 1.0 / z
         dn[:, :, 2] = -xc[:, :2] / (z ** 2)[:, None]
         du_dxc = scale * F @ dn
-        d_w = -du_dxc @ _skew(xc - Am[:, 3:6]) @ _left_jacobian(Am[:, :3])
+        d_w = _crossed(xc - Am[:, 3:6], du_dxc) @ _left_jacobian(Am[rows, :3])[inverse]
         d_s = seen[:, :, None] if focal else np.zeros((len(Am), 2, 0))
         d_camera = np.concatenate([d_w, du_dxc], axis=2)
         if held is not None:

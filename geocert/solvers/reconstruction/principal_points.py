@@ -58,9 +58,13 @@ def standard_deviations(Ks, rotations, translations, points, view, track, pixels
     c = 8 * n + 1
     J = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(2 * m, c + 3 * p))
     N = (J.T @ J).tocsr()
-    blocks = N[c:, c:]
-    inverse = sp.block_diag([np.linalg.pinv(blocks[3 * k:3 * k + 3, 3 * k:3 * k + 3].toarray()) for k in range(p)],
-                            format="csr")
+    # The points' part is block diagonal (a point's 3 coordinates meet only each other): its 3 x 3
+    # blocks gathered at once, pseudo-inverted as one stack, and laid out again as a sparse matrix.
+    own = N[c:, c:].tocoo()
+    blocks = np.zeros((p, 3, 3))
+    np.add.at(blocks, (own.row // 3, own.row % 3, own.col % 3), own.data)
+    inverse = sp.csr_matrix((np.linalg.pinv(blocks).ravel(), np.repeat(3 * (np.arange(3 * p) // 3), 3)
+                             + np.tile(np.arange(3), 3 * p), np.arange(0, 9 * p + 1, 3)), shape=(3 * p, 3 * p))
     S = N[:c, :c].toarray() - (N[:c, c:] @ inverse @ N[:c, c:].T).toarray()
     # Each parameter scaled to unit diagonal (Jacobi): the null space's threshold does not then
     # depend on the frame's units (the pipeline's, or the result's normalised one).

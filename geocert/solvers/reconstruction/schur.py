@@ -107,6 +107,78 @@ def _cost(r, f_scale):
     return float(np.sum(np.where(length <= f_scale, length ** 2, 2 * f_scale * length - f_scale ** 2)))
 
 
+class _Blocks:
+    """The reduced system's sums over observations, block by block: observation m's parameters
+    are its view's c and the s shared ones (schur.solve's cam_cols), so a product X_m^T Y_m of two
+    per-observation blocks (r x (c + s)) lands in the block of its view with itself, and a product
+    between two observations of one point in the block of their two views. Each block's terms
+    are summed by one matrix product over the observations (or pairs) sorted by block, then the
+    few blocks placed in the nc x nc matrix: rather than a product per observation and pair and a
+    scatter of each (the observations outnumber the blocks a thousandfold)."""
+
+    def __init__(self, view: np.ndarray, track: np.ndarray, n: int, c: int, s: int, p: int):
+        self.k = c + s
+        nc = n * c + s
+        # Pairs of different observations of the same point, each pair once (first before second
+        # in the point's observations): their blocks, summed, give C and C^T (V^-1 is symmetric).
+        order = np.argsort(track, kind="stable")
+        counts = np.bincount(track, minlength=p)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        first, second = [], []
+        top = counts.max() + 1 if len(counts) else 1
+        for k in range(1, top):
+            for l in range(k + 1, top):
+                pts = np.flatnonzero(counts >= l)
+                first.append(order[starts[pts] + k - 1])
+                second.append(order[starts[pts] + l - 1])
+        first = np.concatenate(first) if first else np.zeros(0, dtype=int)
+        second = np.concatenate(second) if second else np.zeros(0, dtype=int)
+
+        def columns(v):  # the reduced system's columns of view v's block: its c, then the s shared
+            return np.concatenate([c * v + np.arange(c), n * c + np.arange(s)])
+
+        def grouped(key, rows_of, cols_of):
+            """Sorted by key, each run of one key's [start, end) and its block's flat indices."""
+            order = np.argsort(key, kind="stable")
+            keys, begin = np.unique(key[order], return_index=True)
+            end = np.append(begin[1:], len(order))
+            at = np.array([(columns(rows_of(q))[:, None] * nc + columns(cols_of(q))[None, :]).ravel()
+                           for q in keys], dtype=int).reshape(len(keys), (c + s) ** 2)
+            return order, list(zip(begin.tolist(), end.tolist())), at
+
+        self.own_order, self.own_runs, self.own_at = grouped(view, lambda q: q, lambda q: q)
+        key = view[first] * n + view[second]
+        order, self.pair_runs, self.pair_at = grouped(key, lambda q: q // n, lambda q: q % n)
+        self.first, self.second = first[order], second[order]
+        self.size = nc
+
+    def _summed(self, X, Y, runs, at) -> np.ndarray:
+        k = self.k
+        out = np.zeros((len(runs), k, k))
+        for i, (a, b) in enumerate(runs):
+            out[i] = X[a:b].reshape(-1, k).T @ Y[a:b].reshape(-1, k)
+        return np.bincount(at.ravel(), weights=out.ravel(), minlength=self.size ** 2).reshape(self.size, self.size)
+
+    def own(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        """sum_m X_m^T Y_m (X, Y: (M, r, c + s)) in the reduced system's nc x nc matrix."""
+        Xs = X[self.own_order]
+        return self._summed(Xs, Xs if Y is X else Y[self.own_order], self.own_runs, self.own_at)
+
+    def gathered(self, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Y (M, r, c + s) in the order ``reduction`` reads it (once per Jacobian, not per damping)."""
+        return Y[self.own_order], Y[self.second]
+
+    def reduction(self, X: np.ndarray, Y: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """sum over the observations m, m' of each point of X_m^T Y_m' in the nc x nc matrix, for
+        X_m = V_j^-1 W_m^T and Y_m = W_m^T (``gathered``): W V^-1 W^T, what eliminating the points
+        takes off U."""
+        own = self._summed(X[self.own_order], Y[0], self.own_runs, self.own_at)
+        if len(self.first) == 0:
+            return own
+        cross = self._summed(X[self.first], Y[1], self.pair_runs, self.pair_at)
+        return own + cross + cross.T
+
+
 def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iterations: int = 50,
           stop: StopRule = CERES, jacobian=None, should_stop=None):
     """Minimise sum_m rho(|residual_m|^2) over A (n, c), S (s,), B (p, d); returns A, S, B,
@@ -122,24 +194,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
     M = len(view)
     cam_cols = np.concatenate([c * view[:, None] + np.arange(c)[None, :],
                                np.broadcast_to(n * c + np.arange(s), (M, s))], axis=1)  # (M, c + s)
-    # Pairs of different observations of the same point, each pair once (first before second in
-    # the point's observations): the reduced system's blocks between them, summed into C, give
-    # C + C^T (V^-1 is symmetric), and each observation's block with itself goes with U's.
-    order = np.argsort(track, kind="stable")
-    counts = np.bincount(track, minlength=p)
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    first, second = [], []
-    for k in range(1, counts.max() + 1 if len(counts) else 1):
-        for l in range(k + 1, counts.max() + 1 if len(counts) else 1):
-            pts = np.flatnonzero(counts >= l)
-            first.append(order[starts[pts] + k - 1])
-            second.append(order[starts[pts] + l - 1])
-    first = np.concatenate(first) if first else np.zeros(0, dtype=int)
-    second = np.concatenate(second) if second else np.zeros(0, dtype=int)
-    # Where each block of the reduced system goes (the same every iteration), as flat indices of
-    # the nc x nc matrix: blocks are summed into it by one bincount.
-    diag_at = (np.repeat(cam_cols, c + s, axis=1) * nc + np.tile(cam_cols, (1, c + s))).ravel()
-    pair_at = (np.repeat(cam_cols[first], c + s, axis=1) * nc + np.tile(cam_cols[second], (1, c + s))).ravel()
+    blocks = _Blocks(view, track, n, c, s, p)
     r = residual(A[view], S, B[track])
     cost = _cost(r, f_scale)
     lam = 1e-3
@@ -147,38 +202,35 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
     for iterations in range(1, max_iterations + 1):
         if should_stop is not None and should_stop():
             break
-        w = _robust_weights(r, f_scale)
         ja, js, jb = (_jacobians(residual, A, S, B, view, track) if jacobian is None
                       else jacobian(A[view], S, B[track]))
-        je = np.concatenate([ja, js], axis=2) * np.sqrt(w)[:, None, None]  # (M, 2, c + s)
-        jb = jb * np.sqrt(w)[:, None, None]
-        rw = r * np.sqrt(w)[:, None]
-        # Normal equations' blocks.
-        jeT = je.transpose(0, 2, 1)
-        U = jeT @ je  # (M, c+s, c+s)
+        je = np.concatenate([ja, js], axis=2)  # (M, 2, c + s)
+        rw = r
+        if f_scale is not None:  # Huber's weights (plain least squares: all 1)
+            root = np.sqrt(_robust_weights(r, f_scale))
+            je, jb, rw = je * root[:, None, None], jb * root[:, None, None], r * root[:, None]
+        # Normal equations' blocks: U summed by view (blocks.own), W and the gradients per observation.
+        U = blocks.own(je, je)
+        diag_u = np.diag(U).copy()
         V = _sum_by(track, jb.transpose(0, 2, 1) @ jb, p)
-        Wm = jeT @ jb  # (M, c+s, d)
-        ga = (jeT @ rw[:, :, None])[:, :, 0]  # (M, c+s)
-        gb = _sum_by(track, (jb.transpose(0, 2, 1) @ rw[:, :, None])[:, :, 0], p)
-        diag_u = np.bincount(cam_cols.ravel(), weights=np.einsum("mii->mi", U).ravel(), minlength=nc)
+        WmT = jb.transpose(0, 2, 1) @ je  # (M, d, c+s): each observation's W^T
+        WmT_gathered = blocks.gathered(WmT)
+        ga = np.einsum("mki,mk->mi", je, rw)  # (M, c+s); einsum: faster than matmul on stacks of vectors
+        gb = _sum_by(track, np.einsum("mki,mk->mi", jb, rw), p)
         if stop.gradient_tolerance > 0:
             gradient = max(np.abs(np.bincount(cam_cols.ravel(), weights=ga.ravel(), minlength=nc)).max(initial=0.0),
                            np.abs(gb).max(initial=0.0))
             if gradient <= stop.gradient_tolerance:
                 iterations -= 1  # no step computed
                 break
-        WmT = Wm.transpose(0, 2, 1)
         while True:
             Vd = V + lam * (np.einsum("pii->pi", V)[:, :, None] * np.eye(d) + 1e-12 * np.eye(d))
             Vinv = _inverse(Vd)
             # Reduced system: (U - W V^-1 W^T) da = -(ga - W V^-1 gb).
-            WV = Wm @ Vinv[track]  # (M, c+s, d)
-            own = np.bincount(diag_at, weights=(U - WV @ WmT).ravel(), minlength=nc * nc).reshape(nc, nc)
-            cross = np.bincount(pair_at, weights=(WV[first] @ WmT[second]).ravel(),
-                                minlength=nc * nc).reshape(nc, nc)
-            Ured = own - cross - cross.T
+            VWT = Vinv[track] @ WmT  # (M, d, c+s): (W V^-1)^T, V^-1 being symmetric
+            Ured = U - blocks.reduction(VWT, WmT_gathered)
             Ured[np.diag_indices(nc)] += lam * diag_u + 1e-12
-            rhs = np.bincount(cam_cols.ravel(), weights=(ga - (WV @ gb[track][:, :, None])[:, :, 0]).ravel(),
+            rhs = np.bincount(cam_cols.ravel(), weights=(ga - np.einsum("mj,mjk->mk", gb[track], VWT)).ravel(),
                               minlength=nc)
             try:
                 da = -np.linalg.solve(Ured, rhs)
@@ -191,7 +243,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
                     return A, S, B, r, iterations
                 continue
             # Back substitution: db_j = -V_j^-1 (gb_j + sum_m W_m^T da_m).
-            wda = _sum_by(track, (Wm.transpose(0, 2, 1) @ da[cam_cols][:, :, None])[:, :, 0], p)
+            wda = _sum_by(track, np.einsum("mij,mj->mi", WmT, da[cam_cols]), p)
             db = -(Vinv @ (gb + wda)[:, :, None])[:, :, 0]
             A_new = A + da[:n * c].reshape(n, c)
             S_new = S + da[n * c:]
