@@ -1,0 +1,91 @@
+"""A nineteenth hostile review of the verifier (issue 33), aimed at the newest checks: a
+reconstruction's adjustment model and the principal point's test records
+(reconstruction_members._check_adjustment_model, camera_claim.MAX_PRINCIPAL_POINT_SD_PX), an
+uncertified item's region and summary (items._uncertified_region, _uncertified_summary), the judged
+cameras' free_camera, and the stratified metric stage's proven intervals (metric_sublevel,
+proofs.sublevel_hull and check_sublevel, verify.autocalibration._check_proven_intervals). Genuine
+results first edited as a forger would (rehashed where an edit touches what the hash covers);
+genuine runs with unusual options, to find false refusals. Reconstruction scenes are review 18's
+(synthetic.scene: 8 views 640x480, focal 800, noise 0.3 px, seed 6, 100 points).
+
+Found (each verified on the code before; fixed, each test failing on that code):
+
+- The simple and varying models' principal point at the image's centre is read by nothing
+  (test_a_principal_point_off_centre_with_no_test_estimating_it_is_refused). The pipeline holds
+  every start's principal point at (width / 2, height / 2) when the views share one image size,
+  and only the simple model's tests (principal_point with options.principal_point "auto" or
+  "per_view"; principal_point_per_view with "per_view") move it. On the scene with every pixel
+  shifted (+10, -5) px (defaults: the test estimates it at (329.7, 233.5)), each of these
+  verified, the cameras' P still putting it at (329.7, 233.5):
+  the test's record edited to ``estimated: false`` (a principal point at the centre claimed);
+  options.principal_point "centre" (rehashed) with the records null; "centre" with the test's
+  records left in place (a test no such run makes); and camera_model "varying" (rehashed, the
+  stage's model "varying", the records null: the varying model never moves it). The check (where
+  every view of the data has one image size: with several the pipeline leaves it where its start
+  had it): the cameras' principal point (read off P) is the image's centre in the simple and
+  varying models unless a test record says estimated, and a record sits only beside the
+  options.principal_point that runs its test.
+
+Tried and refused, or true (no change): see the tests below the found ones.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from geocert.jobs.runner import solve_job
+from tests.support import refused as _refused, stage as _stage, verified as _verifies
+from tests.verify.test_forgeries import rehash
+from tests.verify.test_forgeries_review18 import _scene_job
+
+SHIFT = (10.0, -5.0)
+
+
+@pytest.fixture(scope="module")
+def shifted() -> dict:
+    """The default run on the scene shifted by SHIFT: the principal point test estimates it."""
+    result = solve_job(_scene_job({}, shift=np.tile(SHIFT, (8, 1))))
+    adjustment = _stage(result, "bundle_adjustment")
+    assert adjustment["model"] == "simple" and adjustment["principal_point"]["estimated"] is True
+    _verifies(result)
+    return result
+
+
+def _estimated_false(forged: dict) -> None:
+    _stage(forged, "bundle_adjustment")["principal_point"]["estimated"] = False
+
+
+def _options(forged: dict, records: bool = False, **options) -> None:
+    forged["certificate"]["options"].update(options)
+    rehash(forged["certificate"])
+    adjustment = _stage(forged, "bundle_adjustment")
+    if "camera_model" in options:
+        adjustment["model"] = options["camera_model"]
+    if not records:
+        adjustment.update(principal_point=None, principal_point_per_view=None)
+
+
+@pytest.mark.parametrize("edit, words", [
+    (_estimated_false, "holds the principal point at the image's centre"),
+    (lambda forged: _options(forged, principal_point="centre"), "holds the principal point at the image's centre"),
+    (lambda forged: _options(forged, records=True, principal_point="centre"), "runs no such test"),
+    (lambda forged: _options(forged, camera_model="varying"), "holds the principal point at the image's centre"),
+], ids=["test record says not estimated", "options centre", "options centre, records kept", "restated varying"])
+def test_a_principal_point_off_centre_with_no_test_estimating_it_is_refused(shifted, edit, words):
+    forged = copy.deepcopy(shifted)
+    edit(forged)
+    assert words in _refused(forged)["detail"]
+
+
+# --- genuine runs beside the check: each verifies -------------------------------------------------
+
+@pytest.mark.parametrize("options", [{"principal_point": "centre"}, {"principal_point": "auto"},
+                                     {"camera_model": "varying"}, {"camera_model": "full"}],
+                         ids=["centre", "auto", "varying", "full"])
+def test_genuine_runs_on_the_shifted_scene_verify(options):
+    result = solve_job(_scene_job(options, shift=np.tile(SHIFT, (8, 1))))
+    assert _stage(result, "bundle_adjustment")["model"] == options.get("camera_model", "simple")
+    _verifies(result)
