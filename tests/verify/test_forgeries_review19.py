@@ -26,6 +26,15 @@ Found (each verified on the code before; fixed, each test failing on that code):
   varying models unless a test record says estimated, and a record sits only beside the
   options.principal_point that runs its test.
 
+- A determinacy that is not an object is read by no check
+  (test_a_determinacy_that_is_not_an_object_is_refused): on the triangulation example (L1L1,
+  max_residual 20, max_nodes 1: track 0 certified with proven intervals, track 1 node_limit), either
+  track's determinacy replaced by true, "x", 1.5 or [] verified, and so did the autocalibration
+  example's metric stage's (its proven intervals' check, verify.autocalibration.
+  _check_proven_intervals, returns on a determinacy not an object, as notes.check_notes typed only
+  one that is). Every writer gives an object or null (kinds.schema.Determinacy); docs/certificate.md
+  says an informational field is null or of its type. Fixed in notes._check_determinacies.
+
 Tried and refused, or true (no change): see the tests below the found ones.
 """
 
@@ -37,6 +46,7 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
+from geocert.kinds import get_kind
 from tests.support import refused as _refused, stage as _stage, verified as _verifies
 from tests.verify.test_forgeries import rehash
 from tests.verify.test_forgeries_review18 import _scene_job
@@ -78,6 +88,40 @@ def test_a_principal_point_off_centre_with_no_test_estimating_it_is_refused(shif
     forged = copy.deepcopy(shifted)
     edit(forged)
     assert words in _refused(forged)["detail"]
+
+
+def _example(name: str, **options) -> dict:
+    kind = get_kind(name)
+    return solve_job({**kind.example, "options": {**kind.example.get("options", {}), "certificate": "full", **options}})
+
+
+@pytest.fixture(scope="module")
+def tracks() -> dict:
+    result = _example("triangulation", norm="L1L1", max_residual=20.0, max_nodes=1)
+    assert [t["status"] for t in result["tracks"]] == ["optimal", "node_limit"]
+    assert result["tracks"][0]["determinacy"]["proven"] is True
+    _verifies(result)
+    return result
+
+
+@pytest.fixture(scope="module")
+def autocalibration() -> dict:
+    result = _example("autocalibration")
+    assert _stage(result, "metric")["determinacy"]["proven"] is True
+    _verifies(result)
+    return result
+
+
+@pytest.mark.parametrize("value", [True, "x", 1.5, []], ids=["true", "a string", "a number", "a list"])
+@pytest.mark.parametrize("where", ["certified track", "uncertified track", "metric stage"])
+def test_a_determinacy_that_is_not_an_object_is_refused(tracks, autocalibration, where, value):
+    if where == "metric stage":
+        forged = copy.deepcopy(autocalibration)
+        _stage(forged, "metric")["determinacy"] = value
+    else:
+        forged = copy.deepcopy(tracks)
+        forged["tracks"][0 if where == "certified track" else 1]["determinacy"] = value
+    assert "determinacy must be null or an object" in _refused(forged)["detail"]
 
 
 # --- genuine runs beside the check: each verifies -------------------------------------------------
