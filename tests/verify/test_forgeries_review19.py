@@ -35,12 +35,24 @@ Found (each verified on the code before; fixed, each test failing on that code):
   one that is). Every writer gives an object or null (kinds.schema.Determinacy); docs/certificate.md
   says an informational field is null or of its type. Fixed in notes._check_determinacies.
 
+- A judged camera's free_camera is read in subnormal arithmetic
+  (test_a_free_camera_is_read_at_its_own_scale): on test_reconstruction_judgements' scene (6 views,
+  16 points, 0.5 px, camera_rel_gap 0.25; cameras 1 and 2 judged), camera 1's own P times 1e-320
+  as its free camera was read as costing 4.637 on its certified points: no camera costs that (the
+  matrix the document holds, at its largest entry 1, costs 4.718; P itself 4.725), the rounding of
+  subnormal products did. Here the tolerance (25%) refused it; a smaller one would take such a
+  judgement (camera X beaten by a free camera) on rounding's word. reconstruction._check_judgement
+  now reads the free camera at its largest entry 1 (a camera is its matrix up to a positive scale).
+  A false judgement of a camera that is certifiable was not built (it needs a certified camera
+  restated as judged, its resection claim taken out of the camera certificate).
+
 Tried and refused, or true (no change): see the tests below the found ones.
 """
 
 from __future__ import annotations
 
 import copy
+import json
 
 import numpy as np
 import pytest
@@ -122,6 +134,31 @@ def test_a_determinacy_that_is_not_an_object_is_refused(tracks, autocalibration,
         forged = copy.deepcopy(tracks)
         forged["tracks"][0 if where == "certified track" else 1]["determinacy"] = value
     assert "determinacy must be null or an object" in _refused(forged)["detail"]
+
+
+def _scene_data(scene, options: dict) -> dict:
+    return {"kind": "reconstruction", "options": options,
+            "data": {"views": [{"name": f"view{v}", "image_size": list(scene.image_size)} for v in range(6)],
+                     "tracks": [{"views": [int(v) for v in views], "points": [[float(u), float(w)] for u, w in pixels]}
+                                for views, pixels in scene.tracks]}}
+
+
+def test_a_free_camera_is_read_at_its_own_scale():
+    import re
+
+    from geocert.solvers.reconstruction import synthetic
+    from tests.verify.test_reconstruction_judgements import _beaten, _costs
+
+    scene = synthetic.scene(views=6, points=16, seed=3, noise_px=0.5)  # test_reconstruction_judgements.judged's
+    result = solve_job(_scene_data(scene, {"certificate": "full", "camera_rel_gap": 0.25}))
+    camera = _beaten(result)[0]
+    tiny = np.asarray(camera["P"], dtype=float) * 1e-320
+    camera["free_camera"] = tiny.tolist()
+    detail = _refused(result)["detail"]  # its own P: not beaten by more than its tolerance
+    stated = float(re.search(r"its free_camera ([0-9.e+-]+):", detail).group(1))
+    read = np.asarray(json.loads(json.dumps(tiny.tolist())))
+    cost, front = _costs(result, camera, read / np.abs(read).max())
+    assert front and abs(stated - cost) <= 1e-5 * cost, (stated, cost)
 
 
 # --- genuine runs beside the check: each verifies -------------------------------------------------
