@@ -25,6 +25,13 @@ Found (each verified on the code before; fixed, each test failing on that code):
   had it): the cameras' principal point (read off P) is the image's centre in the simple and
   varying models unless a test record says estimated, and a record sits only beside the
   options.principal_point that runs its test.
+  The same with the adjustment restated as skipped
+  (test_an_adjustment_restated_as_skipped_keeps_the_models_calibration): options.bundle_adjustment
+  false (rehashed), the stage "skipped" with its figures and records removed, summary.calibration's
+  source "camera_model": verified, the cameras holding the adjusted rig and its estimated principal
+  point; the pipeline puts every start in the model asked for (the principal point at the centre in
+  the simple and varying models) before it asks whether to adjust. Now the cameras of a skipped
+  adjustment have the calibration of the model the options ask for, and no test record is stated.
 
 - A determinacy that is not an object is read by no check
   (test_a_determinacy_that_is_not_an_object_is_refused): on the triangulation example (L1L1,
@@ -76,6 +83,21 @@ def shifted() -> dict:
     return result
 
 
+def test_an_adjustment_restated_as_skipped_keeps_the_models_calibration(shifted):
+    forged = copy.deepcopy(shifted)
+    forged["certificate"]["options"]["bundle_adjustment"] = False
+    rehash(forged["certificate"])
+    adjustment = _stage(forged, "bundle_adjustment")
+    for name in [name for name in adjustment if name not in ("name", "status", "elapsed_s", "reason", "started_from",
+                                                              "cpu_s")]:
+        adjustment.pop(name)
+    adjustment.update(status="skipped", reason="options.bundle_adjustment is false")
+    forged["summary"]["calibration"]["source"] = "camera_model"
+    assert "adjustment skipped" in _refused(forged)["detail"]
+    adjustment["principal_point"] = copy.deepcopy(_stage(shifted, "bundle_adjustment")["principal_point"])
+    _refused(forged)  # its test's record left beside it: refused too
+
+
 def _estimated_false(forged: dict) -> None:
     _stage(forged, "bundle_adjustment")["principal_point"]["estimated"] = False
 
@@ -91,10 +113,10 @@ def _options(forged: dict, records: bool = False, **options) -> None:
 
 
 @pytest.mark.parametrize("edit, words", [
-    (_estimated_false, "holds the principal point at the image's centre"),
-    (lambda forged: _options(forged, principal_point="centre"), "holds the principal point at the image's centre"),
+    (_estimated_false, "model holds the principal point at the image's centre"),
+    (lambda forged: _options(forged, principal_point="centre"), "model holds the principal point at the image's centre"),
     (lambda forged: _options(forged, records=True, principal_point="centre"), "runs no such test"),
-    (lambda forged: _options(forged, camera_model="varying"), "holds the principal point at the image's centre"),
+    (lambda forged: _options(forged, camera_model="varying"), "model holds the principal point at the image's centre"),
 ], ids=["test record says not estimated", "options centre", "options centre, records kept", "restated varying"])
 def test_a_principal_point_off_centre_with_no_test_estimating_it_is_refused(shifted, edit, words):
     forged = copy.deepcopy(shifted)
@@ -164,9 +186,12 @@ def test_a_free_camera_is_read_at_its_own_scale():
 # --- genuine runs beside the check: each verifies -------------------------------------------------
 
 @pytest.mark.parametrize("options", [{"principal_point": "centre"}, {"principal_point": "auto"},
-                                     {"camera_model": "varying"}, {"camera_model": "full"}],
-                         ids=["centre", "auto", "varying", "full"])
+                                     {"camera_model": "varying"}, {"camera_model": "full"},
+                                     {"bundle_adjustment": False}, {"bundle_adjustment": False, "camera_model": "full"}],
+                         ids=["centre", "auto", "varying", "full", "no adjustment", "no adjustment, full"])
 def test_genuine_runs_on_the_shifted_scene_verify(options):
     result = solve_job(_scene_job(options, shift=np.tile(SHIFT, (8, 1))))
-    assert _stage(result, "bundle_adjustment")["model"] == options.get("camera_model", "simple")
+    adjustment = _stage(result, "bundle_adjustment")
+    assert adjustment.get("model") == (None if options.get("bundle_adjustment") is False
+                                       else options.get("camera_model", "simple"))
     _verifies(result)
