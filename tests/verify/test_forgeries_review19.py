@@ -53,7 +53,42 @@ Found (each verified on the code before; fixed, each test failing on that code):
   A false judgement of a camera that is certifiable was not built (it needs a certified camera
   restated as judged, its resection claim taken out of the camera certificate).
 
-Tried and refused, or true (no change): see the tests below the found ones.
+Tried, and refused with a clear reason or still true (no change):
+
+- The metric stage's proven intervals (the autocalibration example; its proof's sublevel: 6
+  tightening rounds, 23 cut proofs, 35 leaves). Every number of the proof (sampled: every 4th
+  leaf of the metric search and every 3rd of the sublevel's) set to 5e-324, 0, -0, 1e300, -1e300,
+  1e-300, the smallest normal, "1.0", true, negated, doubled, halved and moved by 1e-6: 7,125
+  edits, none verifying with a hull (the verifier's proofs.sublevel_hull) that leaves out the
+  scene's K or is narrower than the genuine one by 1e-3 of its width (those that verify: a leaf's
+  informational bound, a cap or a box moved where the proof still holds). Each proof's kind
+  changed (dual, farkas, no_domain, a cut on every axis and sign), each z swapped for another
+  proof's, each leaf pointed at every other proof or none: the same. The stated intervals and the
+  result's proven_intervals edited together: narrowed by 1e-9 of a bound, a bound 5e-324 or -0,
+  true, a string, NaN, -inf, empty, 4 or 6 rows, 3 columns, flattened: refused (narrower than
+  proven, or format); cost_increase doubled (a cap below the level), 1e-40, 5e-324, -1e-12,
+  1e100, true (outside 2^-128 .. 2^128, or not a number), 0 (below its estimate's); leaves,
+  proofs or tightening empty: refused. On a noisy scene (scenes.make_scene(6, 1.0, points=20,
+  seed=5): focal_x proven within [677.9, 920.8] at cost increase 0.185), 56,138 sampled K within
+  the ranges costing at most the level: every one inside the proven intervals.
+- The metric stage's estimate (curvature determinacy) members: cost_increase "x" or true refused;
+  -1, null, removed, determined true, its level's words, its intervals narrowed to a point, its
+  method, redundancy -5: verify (informational, typed only; the estimate proves nothing).
+- An uncertified track's summary (the triangulation example, L1L1, max_nodes 1): tolerance 0 or
+  1e300, leaves 0, the track's nodes 0 or null with status node_limit: verify (informational, typed;
+  not tied to the options or the search here). Genuine uncertified regions verify on the
+  triangulation example (L1L1, L2L1, L2L2, max_nodes 1 and 3) and on resection and homography maps
+  under L1L1 and L2L1 (12 points, 3 px of noise, max_nodes 3).
+- A K-known run with options.intrinsics.K restated (focal 880, or the principal point 10 px off),
+  rehashed: refused (summary/calibration: the returned cameras' K is not the options').
+- A judged camera's free camera scaled by 1e-322 to 5e-324: refused (not in front, or not beating
+  its camera); its own P at any scale: refused (within its tolerance).
+- A stage restated as cancelled (model null) after a structure stage that ran: refused.
+- Genuine runs on the shifted scene with registration projective (simple and varying), the direct
+  autocalibration, merge_components, intrinsics ranges, radial_distortion off with
+  principal_point auto, L1L1 (40 points), focal_prior_px 700, radial_distortion on with k1 -0.1
+  (150 points); cancels in the adjustment after 0, 3, 10, 40 and 80 asks (defaults and
+  principal_point auto): each verifies with the checks above.
 """
 
 from __future__ import annotations
