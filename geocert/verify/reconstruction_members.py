@@ -281,14 +281,23 @@ def _check_adjustment_model(result: dict, stage: dict) -> None:
     points_per_view). The hash covers camera_model, so a document restating it beside another
     model's cameras would be about a request its adjustment did not follow."""
     model = stage.get("model")
-    if model is None:  # the adjustment did not run (one that ran states its model)
-        if stage.get("status") == "done":
-            raise Invalid("returned", "stages/bundle_adjustment/model: an adjustment that ran states its model")
-        return
     options = (result.get("certificate") or {}).get("options") or {}
     intrinsics = options.get("intrinsics")
     known = isinstance(intrinsics, dict) and intrinsics.get("K") is not None
     asked = "fixed" if known else options.get("camera_model", "simple")
+    if model is None:  # the adjustment did not run (one that ran states its model)
+        if stage.get("status") == "done":
+            raise Invalid("returned", "stages/bundle_adjustment/model: an adjustment that ran states its model")
+        if stage.get("status") == "skipped" and options.get("bundle_adjustment") is False:
+            # the cameras are the start's, put in the model asked for (the pipeline does so before
+            # it asks whether to adjust): its calibration, and no test of the principal point
+            for name in PRINCIPAL_POINT_TESTS:
+                if stage.get(name) is not None:
+                    raise Invalid("returned", f"stages/bundle_adjustment/{name} is stated, and the adjustment after "
+                                              "which its test runs was skipped (options.bundle_adjustment false)")
+            _check_calibration(result, stage, asked, f"the cameras of the model asked for, {asked!r:.20} (the "
+                                                     "adjustment skipped: options.bundle_adjustment false),")
+        return
     where = "stages/bundle_adjustment/model"
     if model != asked:
         raise Invalid("returned", f"{where} is {model!r:.20}, and the options ask for {asked!r:.20} ("
@@ -297,11 +306,26 @@ def _check_adjustment_model(result: dict, stage: dict) -> None:
                               or stage.get("principal_point_per_view") is not None):
         raise Invalid("returned", f"{where} is {model!r:.20}, and the principal point's tests "
                                   "it states run after the simple model's adjustment only")
-    Ks = [intrinsics_of(camera["P"]) for camera in result.get("cameras") or []
-          if isinstance(camera, dict) and camera.get("registered") is True and camera.get("P") is not None]
+    # absent: a document of the second hash form, written while the default was "auto"
+    # (hashed_options.SECOND_DEFAULTS; today's documents state it)
+    chosen = options.get("principal_point", "auto")
+    for name, runs in PRINCIPAL_POINT_TESTS.items():
+        if stage.get(name) is not None and chosen not in runs:
+            raise Invalid("returned", f"stages/bundle_adjustment/{name} is stated, and options.principal_point "
+                                      f"{chosen!r:.20} runs no such test (it runs with {' or '.join(runs)})")
+    _check_calibration(result, stage, model, f"{where} is {model!r:.20}, and")
+
+
+def _check_calibration(result: dict, stage: dict, model: str, said: str) -> None:
+    """The cameras returned have ``model``'s calibration (_check_adjustment_model); ``said``
+    begins a refusal's words."""
+    registered = [camera for camera in result.get("cameras") or []
+                  if isinstance(camera, dict) and camera.get("registered") is True and camera.get("P") is not None]
+    Ks = [intrinsics_of(camera["P"]) for camera in registered]
     if not Ks:
         return
     tolerance = PER_VIEW_APART * max(abs(K[0, 0]) for K in Ks)
+    _check_centred(result, stage, model, Ks, tolerance, said)
     first = Ks[0]
 
     def shared(entries: tuple) -> bool:
@@ -317,8 +341,39 @@ def _check_adjustment_model(result: dict, stage: dict) -> None:
             fits = square and shared(((0, 0),)) and (per_view or shared(((0, 2), (1, 2))))
             what = "square pixels, no skew, one focal length and one principal point (or one each, as its test says)"
     if not fits:
-        raise Invalid("returned", f"{where} is {model!r:.20}, and the cameras returned do not have its calibration "
-                                  f"({what})")
+        raise Invalid("returned", f"{said} the cameras returned do not have its calibration ({what})")
+
+
+# The principal point's tests (the bundle_adjustment stage's records) and the options.principal_point
+# values each runs under (pipeline: _principal_point with "auto" or "per_view", _principal_points_per_view
+# with "per_view").
+PRINCIPAL_POINT_TESTS = {"principal_point": ("auto", "per_view"), "principal_point_per_view": ("per_view",)}
+
+
+def _check_centred(result: dict, stage: dict, model: str, Ks: list, tolerance: float, said: str) -> None:
+    """The simple and varying models hold the principal point at the image's centre (width / 2,
+    height / 2: the pipeline sets every start's there when the views registered share one image
+    size) unless a test of it estimated it (``principal_point`` or ``principal_point_per_view``
+    estimated, the simple model only). Read where every view of the data has one image size (its
+    input_labels; with views of several sizes the pipeline may leave it where the start had it):
+    a camera whose P puts it elsewhere was not adjusted in the model stated, or its test's record
+    was edited to say it was not estimated (options.principal_point "centre" restated included)."""
+    if model not in ("simple", "varying"):
+        return
+    if any(isinstance(stage.get(name), dict) and stage[name].get("estimated") is True for name in PRINCIPAL_POINT_TESTS):
+        return
+    labels = ((result.get("certificate") or {}).get("data") or {}).get("input_labels")
+    sizes = labels.get("image_sizes") if isinstance(labels, dict) else None
+    if not (isinstance(sizes, list) and sizes and all(isinstance(size, list) and len(size) == 2
+                                                      and all(is_number(v) for v in size) for size in sizes)
+            and all(size == sizes[0] for size in sizes)):
+        return
+    centre = np.array(sizes[0], dtype=float) / 2
+    worst = max(Ks, key=lambda K: float(np.abs(K[:2, 2] - centre).max()))
+    if float(np.abs(worst[:2, 2] - centre).max()) > tolerance:
+        raise Invalid("returned", f"{said} the {model!r:.20} model holds the principal point at the image's centre "
+                                  f"{centre.tolist()} unless its test estimated it, and a camera returned has it at "
+                                  f"{worst[:2, 2].round(6).tolist()} with no test saying estimated")
 
 
 def _check_principal_points_per_view(result: dict, stage: dict) -> None:

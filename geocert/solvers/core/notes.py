@@ -42,6 +42,10 @@ def _check_determinacies(value: Any, where: str) -> None:
                 continue
             if name == "determinacy" and isinstance(item, dict):
                 _check_determinacy(item, f"{where}{name}")
+            elif name == "determinacy" and item is not None:
+                # an object or null, as every writer gives it: any other value (true, a string, a
+                # number, a list) was read by no check, the proven intervals' and the estimates' alike
+                raise Invalid("returned", f"{where}{name} must be null or an object, got {item!r:.40}")
             else:
                 _check_determinacies(item, f"{where}{name}/")
     elif isinstance(value, list):
