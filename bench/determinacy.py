@@ -7,6 +7,7 @@ degenerate scenes (and real critical layouts) are flagged.
     .venv/bin/python -m bench.determinacy --triangulation-only   # the real camera sets' tracks only
     .venv/bin/python -m bench.determinacy --resection-only       # the real camera sets' resections only
     .venv/bin/python -m bench.determinacy --resection-l1         # their L1 resections' proven intervals only
+    .venv/bin/python -m bench.determinacy --resection-l1-synthetic  # L1 resections' proven centres, 20 cameras
     .venv/bin/python -m bench.determinacy --autocalibration-proven  # the metric stage's proven intervals
 
 Real sets: under $GEOCERT_BENCH_DATA (default bench-data beside the checkout) and $GEOCERT_SHARED_DATA (default
@@ -346,7 +347,7 @@ def real_resection_l1(rng, noise_px: float = 0.5, size: int = 20, per_set: int =
     whether the verifier accepts the result, and the processor time of the solve against the same
     solve with a summary certificate (no second search): the ratio of the sums, both in this run."""
     lines = [f"  {'scene':>40} | norm | cameras | truth inside (all 4) | width / error | verified | "
-             "CPU full / summary"]
+             "CPU full / summary | centre proven, truth inside"]
     from geocert.verify.checks import verify_any
 
     for name, views, _, _ in real_camera_sets():
@@ -355,7 +356,7 @@ def real_resection_l1(rng, noise_px: float = 0.5, size: int = 20, per_set: int =
         lower, upper = views.box
         width, height = views.image_size
         for norm in ("L1L1", "L2L1"):
-            inside, ratios, verified, full_s, summary_s, count = [], [], 0, 0.0, 0.0, 0
+            inside, ratios, verified, full_s, summary_s, count, centres = [], [], 0, 0.0, 0.0, 0, []
             for camera in views.cameras[:per_set]:
                 X = rng.uniform(lower, upper, size=(20 * size, 3))
                 proj = np.hstack([X, np.ones((len(X), 1))]) @ camera.T
@@ -386,12 +387,80 @@ def real_resection_l1(rng, noise_px: float = 0.5, size: int = 20, per_set: int =
                 returned = np.array(result["maps"][0]["matrix"])[2]
                 returned = returned / (returned @ np.append(X[reference], 1.0))
                 box = np.array([[i["lower"], i["upper"]] for i in d["proven_intervals"]["intervals"]])
+                box, centre_box = box[:4], box[4:]  # the depth row, then the centre when proven
                 inside.append(bool(np.all((box[:, 0] <= truth) & (truth <= box[:, 1]))))
                 ratios += list((box[:, 1] - box[:, 0]) / np.maximum(np.abs(returned - truth), 1e-300))
+                if len(centre_box):
+                    true_centre = np.linalg.svd(camera)[2][-1]
+                    true_centre = true_centre[:3] / true_centre[3]
+                    centres.append(bool(np.all((centre_box[:, 0] <= true_centre) & (true_centre <= centre_box[:, 1]))))
             if count:
                 lines.append(f"  {name:>40} | {norm} | {count:7d} | {np.mean(inside):20.1%} | "
                              f"{np.median(ratios) if ratios else float('nan'):13.1f} | {verified:4d}/{count:<3d} | "
-                             f"{full_s / max(summary_s, 1e-9):18.1f}")
+                             f"{full_s / max(summary_s, 1e-9):18.1f} | {sum(centres)}/{len(centres)}")
+    return lines
+
+
+def synthetic_resection_l1(seeds: int = 20, size: int = 20, noise_px: float = 0.5) -> list[str]:
+    """Proven intervals of L1 resections' camera centres (fractional.resection_centre_l1) on
+    ``seeds`` synthetic cameras 10 units from ``size`` points in [-2, 2]^3 (bench.determinacy's
+    resection scenes), noise_px of noise, under L1L1 and L2L1 with a full certificate; and the same
+    points under L2L2 (its proven centre, fractional.resection_sublevel) for the widths: how often a
+    centre interval is proven, holds the true centre (all 3 coordinates), the median width over
+    L2L2's, the result verifying, and the processor time of a full certificate against a summary's
+    (both in this run), and of the full certificate with the centre's proof switched off (the
+    depth row alone, as before it), with the centre's own proof and its check apart."""
+    from geocert.solvers.fractional.resection_centre_l1 import l1_centre, verify_l1_centre
+    from geocert.verify.checks import verify_any
+
+    lines = ["  norm | cameras | centre proven | truth inside | width / L2L2's (median, x y z) | verified | "
+             "CPU full / summary | centre proof ms | its check ms (medians)"]
+    for norm in ("L1L1", "L2L1"):
+        rng = np.random.default_rng(37)
+        proven = inside = verified = 0
+        ratios, full_s, summary_s, depth_only_s, prove_ms, check_ms = [], 0.0, 0.0, 0.0, [], []
+        for _ in range(seeds):
+            centre = np.array([*rng.uniform(-2, 2, 2), -10.0])
+            camera = cameras_looking_at_origin(centre[None, :])
+            X = rng.uniform(-2, 2, size=(size, 3))
+            image = np.array([project(camera, x)[0] for x in X]) + rng.normal(scale=noise_px, size=(size, 2))
+            job = {"kind": "resection", "data": {"maps": [{"source": X.tolist(), "target": image.tolist()}]},
+                   "options": {"norm": norm, "certificate": "summary", "detail": "full"}}
+            began = time.process_time()
+            solve_job(job)
+            summary_s += time.process_time() - began
+            job["options"]["certificate"] = "full"
+            began = time.process_time()
+            with mock.patch("geocert.solvers.fractional.maps.l1_centre", return_value=None):
+                solve_job(job)  # the full certificate as before the centre: its depth row alone
+            depth_only_s += time.process_time() - began
+            began = time.process_time()
+            result = solve_job(job)
+            full_s += time.process_time() - began
+            verified += verify_any(result).valid
+            sublevel = result["certificate"]["items"][0]["proof"].get("sublevel") or {}
+            if "centre" not in sublevel:
+                continue
+            proven += 1
+            box = np.array(sublevel["centre"]["intervals"])
+            inside += bool(np.all((box[:, 0] <= centre) & (centre <= box[:, 1])))
+            M = np.array(result["maps"][0]["matrix"])
+            began = time.process_time()
+            l1_centre(X, image, M, norm, sublevel["cost_increase"], sublevel["reference"])
+            prove_ms.append(1e3 * (time.process_time() - began))
+            began = time.process_time()
+            verify_l1_centre(X, image, sublevel["centre"], M, norm, sublevel["cost_increase"], sublevel["reference"])
+            check_ms.append(1e3 * (time.process_time() - began))
+            job["options"].update(norm="L2L2", certificate="summary")
+            l2 = solve_job(job)["maps"][0]["determinacy"]["proven_intervals"]
+            if l2 is not None:
+                l2_box = np.array([[i["lower"], i["upper"]] for i in l2["intervals"]])
+                ratios.append((box[:, 1] - box[:, 0]) / (l2_box[:, 1] - l2_box[:, 0]))
+        ratio = " ".join(f"{v:.2f}" for v in np.median(ratios, axis=0)) if ratios else "n/a"
+        lines.append(f"  {norm} | {seeds:7d} | {proven:13d} | {inside:12d} | {ratio:>30} | {verified:5d}/{seeds} | "
+                     f"{full_s / max(summary_s, 1e-9):5.2f} ({depth_only_s / max(summary_s, 1e-9):.2f} without the "
+                     f"centre) | {np.median(prove_ms) if prove_ms else float('nan'):15.1f} | "
+                     f"{np.median(check_ms) if check_ms else float('nan'):.1f}")
     return lines
 
 
@@ -482,6 +551,8 @@ def main() -> None:
                         help="the real camera sets' triangulation coverage only (estimated and proven intervals)")
     parser.add_argument("--resection-l1", action="store_true",
                         help="the real camera sets' L1 resections only: their proven depth-row intervals (issue 37)")
+    parser.add_argument("--resection-l1-synthetic", action="store_true",
+                        help="L1 resections' proven centres on 20 synthetic cameras (issue 37)")
     parser.add_argument("--resection-only", action="store_true",
                         help="the real camera sets' resection coverage only (estimated and proven intervals)")
     parser.add_argument("--autocalibration-proven", action="store_true",
@@ -490,6 +561,12 @@ def main() -> None:
     args = parser.parse_args()
     rng = np.random.default_rng(19)
     began = time.perf_counter()
+    if args.resection_l1_synthetic:
+        print(f"L1 resections' proven centres on synthetic cameras (20 points, 0.5 px noise); load "
+              f"{open('/proc/loadavg').read().split()[0]}")
+        print("\n".join(synthetic_resection_l1()))
+        print(f"\nWall time {time.perf_counter() - began:.0f} s; load {open('/proc/loadavg').read().split()[0]}")
+        return
     if args.resection_l1:
         print(f"L1 resections on real camera sets (20 points drawn in the set's box, 0.5 px noise); load "
               f"{open('/proc/loadavg').read().split()[0]}")

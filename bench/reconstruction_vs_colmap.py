@@ -27,7 +27,7 @@ with geocert; a set whose files are missing is reported with where to get it.
     .venv/bin/python -m bench.reconstruction_vs_colmap [--data DIR] [--sets dinoSparseRing,templeRing]
         [--orders file,shuffled,every2] [--seed 0] [--runs colmap,colmap-K,geocert,geocert-readme,
         geocert-K,geocert-K-readme; colmap-pinhole on request]
-        [--no-colmap | --reuse-colmap] [--timeout 1800] [--json OUT.json]
+        [--no-colmap | --reuse-colmap] [--timeout 1800] [--json OUT.json] [--verify]
 
 COLMAP's results are stored in DATA/colmap_cache.json (keyed by set, the photos in their order
 and a hash of their bytes, pycolmap's version and options): --reuse-colmap takes them from there
@@ -52,6 +52,7 @@ import numpy as np
 
 from bench import colmap_baseline, machine_speed_ms
 from testing import camera_errors, photo_sets
+from testing.third_party import verify_result
 
 # The ring options for the dinoSparseRing (docs/benchmarks.md, "Photos to tracks, and the K-known path"),
 # the only set the docs give options for: bench.reconstruction_images.RING_JOB_OPTIONS, not
@@ -214,6 +215,8 @@ def row(set_key, order, run_name, total, figures, errors, cpu, wall, colmap_cpu,
         if figures.get("mirror_cost_ratio") is not None:  # the depth-reversed twin's cost over the returned rig's
             poses = {True: "yes", False: "no", None: "-"}[figures.get("poses_determined")]
             claims += f"; poses determined {poses} (twin cost x{figures['mirror_cost_ratio']:.2f})"
+        if figures.get("verifies"):  # --verify: the verifier's answer on the result's full certificate
+            claims += f"; verifies {figures['verifies']}"
     elif figures.get("models"):
         claims = f"models {figures['models']}"
     ratio = f"{cpu / colmap_cpu:.2f}" if cpu is not None and colmap_cpu and run_name.startswith("geocert") else "-"
@@ -266,8 +269,12 @@ def bench_set(set_key: str, args, root: Path, records: list) -> None:
                 if options is None:
                     continue
                 options.update(json.loads(json.dumps(args.options)))
+                if args.verify:
+                    options["certificate"] = "full"
                 run = run_geocert(geocert_job(photo_set, names, options, matches), args.timeout)
                 figures = {"error": run["error"]} if "error" in run else geocert_figures(run["result"])
+                if args.verify and "result" in run:
+                    figures["verifies"] = verify_result(run["result"], args.timeout)
                 if args.results and "result" in run:
                     Path(args.results).mkdir(parents=True, exist_ok=True)
                     (Path(args.results) / f"{set_key}-{order}-{run_name}.json").write_text(json.dumps(run["result"]))
@@ -300,6 +307,8 @@ def main() -> None:
     parser.add_argument("--json", default=None, help="also write every run's figures here")
     parser.add_argument("--options", type=json.loads, default={}, help="JSON object merged into every geocert run's "
                         "options, e.g. '{\"radial_distortion\": \"auto\"}'")
+    parser.add_argument("--verify", action="store_true", help="ask geocert for its full certificate and check "
+                        "each result with `geocert verify` (a child process), printed in the claims column")
     parser.add_argument("--results", default=None, help="a folder to write each geocert run's result to "
                         "(<set>-<order>-<run>.json), for bench.camera_certification to read")
     args = parser.parse_args()

@@ -2,6 +2,8 @@
 comparison is tested on synthetic cameras; the loaders on the sets' files when they are present
 (they do not ship with geocert: those tests skip naming the missing folder)."""
 
+import json
+
 import cv2
 import numpy as np
 import pytest
@@ -141,3 +143,21 @@ def test_the_ground_truth_agrees_with_the_photos(key):
         assert np.median(distances) < 2.0, (a, b, np.median(distances))
         checked += 1
     assert checked >= len(photos.names) // 2
+
+
+def test_the_benchs_verification_says_yes_to_a_genuine_result_and_no_to_a_forged_one():
+    """bench.reconstruction_vs_colmap --verify (testing.third_party.verify_result) checks each result as a third party would
+    (``geocert verify`` in a child process): a genuine certified result verifies, the same with
+    one certified bound raised above its cost does not, and the answer names the failure."""
+    from testing.third_party import verify_result
+    from geocert.jobs.runner import solve_job
+    from geocert.kinds import get_kind
+
+    example = get_kind("triangulation").example
+    result = solve_job({**example, "options": {**example.get("options", {}), "certificate": "full"}})
+    assert verify_result(result, 120) == "yes"
+    forged = json.loads(json.dumps(result))
+    item = next(t for t in forged["tracks"] if t.get("certified"))
+    item["lower_bound"] = item["cost"] * 2 + 1.0
+    answer = verify_result(forged, 120)
+    assert answer.startswith("no (") and len(answer) > len("no ()")

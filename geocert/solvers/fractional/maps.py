@@ -32,6 +32,7 @@ from geocert.solvers.core.self_check import checked_solve
 from geocert.solvers.core.determinacy import certified_gap
 from geocert.solvers.fractional.proof import program_allowance, program_discount
 from geocert.solvers.fractional.resection_leaves import NORMS as LEAF_NORMS, l1_cost_increase
+from geocert.solvers.fractional.resection_centre_l1 import l1_centre
 from geocert.solvers.fractional.sublevel_search import leaves_sublevel
 
 
@@ -159,7 +160,8 @@ def _prove_leaves(result: MapResult, chart: MapChart, source, target, prepared, 
                   start: float) -> None:
     """An L1 resection certified by a search, with a full certificate: its proven intervals
     (fractional.resection_leaves), read off a second search at the level l1_cost_increase gives,
-    set as its proof's sublevel; none when not proven within the item's clock."""
+    set as its proof's sublevel, with its camera centre's at that level when proven
+    (fractional.resection_centre_l1); none when not proven within the item's clock."""
     proof = result.certificate.proof if result.certificate is not None else None
     if not (result.certified and options.norm in LEAF_NORMS and (source.shape[1], target.shape[1]) == (3, 2)
             and isinstance(proof, dict) and proof.get("type") == "branch_and_bound"):
@@ -178,8 +180,16 @@ def _prove_leaves(result: MapResult, chart: MapChart, source, target, prepared, 
             sublevel = leaves_sublevel(prepared, chart, v, result.cost, increase, discount, deadline)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):
             sublevel = None
-    if sublevel is not None:
-        proof["sublevel"] = sublevel
+    if sublevel is None:
+        return
+    try:  # the centre at the same level (resection_centre_l1), when proven
+        with np.errstate(all="ignore"):
+            centre = l1_centre(source, target, M, options.norm, increase, sublevel["reference"])
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        centre = None
+    if centre is not None:
+        sublevel["centre"] = centre
+    proof["sublevel"] = sublevel
 
 
 def _sublevel_certified(chart: MapChart, source, target, guess, options: MapOptions) -> MapResult | None:

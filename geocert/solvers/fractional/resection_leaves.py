@@ -8,7 +8,8 @@ the reference point's depth is 1 (the chart's scale). That row is the camera's d
 relative to the reference point's depth: a point X lies at depth_x X + depth_y Y + depth_z Z +
 depth_0 times the reference point's depth (the principal plane, and the viewing direction, of the
 camera). The other two rows are not branched, and the leaves say nothing of them: the camera
-centre (which lies on that plane) is not bounded here.
+centre (which lies on that plane) is bounded beside them at the same level, when proven
+(``sublevel.centre``: fractional.resection_centre_l1, checked here).
 
 The proof is a branch-and-bound proof of the search's form (proof.checked_leaves), with every part
 (root region, tightening rounds, caps, leaves) proven for the points costing at most the level
@@ -32,6 +33,7 @@ from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.core.strict import Invalid, number, numbers, record
 from geocert.solvers.fractional.charts import MapChart
 from geocert.solvers.fractional.proof import checked_leaves
+from geocert.solvers.fractional.resection_centre_l1 import NAMES as CENTRE_NAMES, verify_l1_centre
 
 NAMES = ("depth_x", "depth_y", "depth_z", "depth_0")
 NORMS = ("L1L1", "L2L1")
@@ -94,13 +96,26 @@ def depth_row(matrix: np.ndarray, reference: int, source: np.ndarray) -> np.ndar
 
 
 def proven_leaves_document(sublevel: dict) -> dict:
-    """What a result's determinacy states of a leaves sublevel (determinacy.proven_map)."""
-    return proven_document(sublevel["cost_increase"], NAMES, sublevel["intervals"],
-                           f"these are the camera's depth row (its last row over the depth of point "
+    """What a result's determinacy states of a leaves sublevel (determinacy.proven_map): the depth
+    row, and the camera centre when the sublevel proves it (its ``centre``)."""
+    centre = sublevel.get("centre")
+    if centre is None:
+        return proven_document(sublevel["cost_increase"], NAMES, sublevel["intervals"],
+                               f"these are the camera's depth row (its last row over the depth of point "
+                               f"{sublevel['reference']}: a point X lies at depth_x X + depth_y Y + depth_z Z + "
+                               "depth_0 times that point's depth), read off the leaves of a search at that level (the "
+                               "leaves whose proven bound exceeds it excluded, the rest bounding the set); the camera "
+                               "centre is not bounded by them (fractional.resection_leaves)")
+    return proven_document(sublevel["cost_increase"], NAMES + CENTRE_NAMES,
+                           list(sublevel["intervals"]) + list(centre["intervals"]),
+                           f"depth_x to depth_0 are the camera's depth row (its last row over the depth of point "
                            f"{sublevel['reference']}: a point X lies at depth_x X + depth_y Y + depth_z Z + depth_0 "
                            "times that point's depth), read off the leaves of a search at that level (the leaves "
-                           "whose proven bound exceeds it excluded, the rest bounding the set); the camera centre is "
-                           "not bounded by them (fractional.resection_leaves)")
+                           "whose proven bound exceeds it excluded, the rest bounding the set; "
+                           "fractional.resection_leaves); the centre's from the cameras enclosed in a ball of radius "
+                           f"{centre['radius']:.6g} (whitened by the Gauss-Newton information at the camera), "
+                           f"narrowed by {centre['rounds']} rounds, its first-order terms bounded over them by "
+                           "stated multipliers (fractional.resection_centre_l1)")
 
 
 def verify_resection_leaves(fresh, options: dict, sublevel, solution: np.ndarray, passed: list[str]) -> None:
@@ -109,7 +124,7 @@ def verify_resection_leaves(fresh, options: dict, sublevel, solution: np.ndarray
     (proof.checked_leaves) with every part holding for the cameras costing at most the level, and
     the stated intervals holding the hull its kept leaves prove. Refused: a narrower interval, a
     level the proofs do not reach, a reference that is not the chart's."""
-    record(sublevel, "proof/sublevel", ("cost_increase", "reference", "intervals", "search"))
+    record(sublevel, "proof/sublevel", ("cost_increase", "reference", "intervals", "search"), ("centre",))
     norm = options["norm"]
     if norm not in NORMS:
         raise Invalid("proven_interval", "proof/sublevel with a search is for the L1 norms (L1L1, L2L1)")
@@ -140,4 +155,7 @@ def verify_resection_leaves(fresh, options: dict, sublevel, solution: np.ndarray
     if not (np.all(intervals[:, 0] <= proven[:, 0]) and np.all(intervals[:, 1] >= proven[:, 1])):
         raise Invalid("proven_interval", "proof/sublevel/intervals are narrower than what the search's leaves prove "
                                          f"({proven.tolist()})")
+    if "centre" in sublevel:  # the camera centre's, at the same level (resection_centre_l1)
+        verify_l1_centre(fresh.source, fresh.target, sublevel["centre"], solution, norm, increase,
+                         sublevel["reference"])
     passed.append("proven_interval")

@@ -68,8 +68,10 @@ NAMES = ("centre_x", "centre_y", "centre_z")
 class Scene:
     """What every test and round reads, with the round-off bounds of each."""
 
-    def __init__(self, source: np.ndarray, target: np.ndarray, matrix: np.ndarray, reference: int):
+    def __init__(self, source: np.ndarray, target: np.ndarray, matrix: np.ndarray, reference: int,
+                 norm: str = "L2L2"):
         X = np.asarray(source, dtype=float)
+        self.norm = norm
         x = np.asarray(target, dtype=float)
         P = np.asarray(matrix, dtype=float)
         k = len(X)
@@ -95,7 +97,12 @@ class Scene:
                                   + np.abs(image))
             err_r = err_image + 32 * U * np.abs(x)
             self.r_up = np.sqrt(((np.abs(r) + err_r) ** 2).sum(axis=1)) * (1 + 8 * U)
-            self.c_up = float((self.r_up ** 2).sum()) * (1 + (k + 8) * U)
+            if norm == "L2L2":
+                self.c_up = float((self.r_up ** 2).sum()) * (1 + (k + 8) * U)
+            elif norm == "L2L1":  # the sum of the points' pixel distances
+                self.c_up = float(self.r_up.sum()) * (1 + (k + 8) * U)
+            else:  # L1L1: the sum of the coordinates' absolute residuals
+                self.c_up = float((np.abs(r) + err_r).sum()) * (1 + 8 * U) * (1 + (2 * k + 8) * U)
             # n_j = P12 X_j - x_j w_j, and its error
             self.n = proj[:, :2] - x * w[:, None]
             self.eps_n = np.sqrt(((16 * U * (size[:, :2] + np.abs(x) * size_w[:, None])) ** 2).sum(axis=1))
@@ -143,6 +150,13 @@ class Scene:
         """U from above: the returned camera's cost (at least the optimum) plus the increase."""
         return (self.c_up + increase) * (1 + 4 * U)
 
+    def rho(self, increase: float) -> float:
+        """Every residual's length at most this on the cameras costing at most U: sqrt(U) under
+        L2L2, U itself under the L1 norms (one point's pixel distance, or the sum of its absolute
+        coordinates, is at most the sum over the points)."""
+        level = self.level(increase)
+        return math.sqrt(level) if self.norm == "L2L2" else level
+
 
 def least_eigenvalue_above(M: np.ndarray, margin: float, allowance: float) -> bool:
     """Whether every symmetric matrix within ``allowance`` (spectral norm) of the computed ``M``
@@ -165,7 +179,7 @@ def encloses(scene: Scene, increase: float, R: float, strictness: float = 1.0) -
     if not (scene.usable and SMALLEST <= R <= LARGEST):
         return False
     with np.errstate(all="ignore"):
-        rho = math.sqrt(scene.level(increase)) * (1 + 4 * U)
+        rho = scene.rho(increase) * (1 + 4 * U)
         e = (rho + scene.r_up) * (1 + 1e-12)
         tau = e * (scene.w_hi + R * scene.g_up) / R * (1 + 8 * U) + scene.err_G * (1 + 8 * U)
         weight = 1 / (tau * tau) * (1 - 8 * U)
@@ -181,6 +195,12 @@ def shrink(scene: Scene, increase: float, r: float) -> float:
         hi = (scene.w_hi + r * scene.g_up) * (1 + 4 * U)
         weight = 1 / (hi * hi) * (1 - 8 * U)  # at most 1 / hi^2: the quadratic stays below the cost
         C, n = scene.C, scene.n
+        if scene.norm != "L2L2":  # |y|^2 / b_j <= |y| for |y| <= b_j, y = n_j(theta) / hi_j: b_j is
+            # at most rho (y is at most the residual's length) and |n_j| + r |C_j| over hi_j
+            reach = (np.sqrt((n * n).sum(axis=1)) + scene.eps_n
+                     + r * (np.sqrt((C * C).sum(axis=(1, 2))) + scene.err_C)) * (1 + 16 * U) / hi * (1 + 8 * U)
+            b = np.maximum(np.minimum(reach, scene.rho(increase) * (1 + 4 * U)), SMALLEST)
+            weight = weight / b * (1 - 4 * U)
         K = np.einsum("kai,kaj,k->ij", C, C, weight)
         rho = np.einsum("kai,ka,k->i", C, n, weight)
         q0 = float((weight * (n * n).sum(axis=1)).sum())
@@ -211,9 +231,12 @@ def shrink(scene: Scene, increase: float, r: float) -> float:
     return min(r, bound) if math.isfinite(bound) else r
 
 
-def centre_bounds(scene: Scene, r: float) -> np.ndarray | None:
+def centre_bounds(scene: Scene, r: float, linear_reach=None) -> np.ndarray | None:
     """(3): [lower, upper] of each centre coordinate over |phi| <= r, rounded outward; None when the
-    left 3x3 block is not shown invertible over the whole ball."""
+    left 3x3 block is not shown invertible over the whole ball. ``linear_reach`` (optional:
+    resection_centre_l1's dual bounds) maps 12 rows (l's 3, then the 9 of vec(Z dA) = M theta)
+    and their errors (2-norm bounds) to upper bounds of max row . theta and max -row . theta over
+    the proven set, each used where it is below the ball's r |T' row|."""
     P = scene.P
     with np.errstate(all="ignore"):
         A0 = P[:, :3]
@@ -252,18 +275,27 @@ def centre_bounds(scene: Scene, r: float) -> np.ndarray | None:
             return (np.sqrt((product * product).sum(axis=1)) * (1 + 8 * U)
                     + 16 * U * T_F * np.sqrt((rows * rows).sum(axis=1)) + T_F * errors) * (1 + 4 * U)
 
-        linear = reach(l, l_err * math.sqrt(11))  # per coordinate
-        Eh = r * float(np.sqrt((linear * linear).sum())) * (1 + 8 * U)  # |Z D [c0; 1]|
-        rows = reach(M, np.zeros(9)).reshape(3, 3)  # row k of Z dA holds M's rows 3k .. 3k + 2
-        EA_rows = r * np.sqrt((rows * rows).sum(axis=1)) * (1 + 8 * U)  # |row k of Z dA|
+        linear = r * reach(l, l_err * math.sqrt(11))  # per coordinate
+        entries = r * reach(M, np.zeros(9))  # row k of Z dA holds M's rows 3k .. 3k + 2
+        below = above = linear  # of l_k . theta (the centre moves by minus it) and of -l_k . theta
+        if linear_reach is not None:  # the same linear functionals bounded over the proven set
+            plus, minus = linear_reach(np.vstack([l, M]), np.concatenate([l_err * math.sqrt(11), np.zeros(9)]))
+            plus, minus = np.maximum(plus, 0.0), np.maximum(minus, 0.0)  # the set holds theta = 0
+            below = np.where(np.isfinite(plus[:3]), np.minimum(below, plus[:3]), below)
+            above = np.where(np.isfinite(minus[:3]), np.minimum(above, minus[:3]), above)
+            entries = np.minimum(entries, np.maximum(plus[3:], minus[3:]))
+        Eh = float(np.sqrt((np.maximum(below, above) ** 2).sum())) * (1 + 8 * U)  # |Z D [c0; 1]|
+        rows = entries.reshape(3, 3)
+        EA_rows = np.sqrt((rows * rows).sum(axis=1)) * (1 + 8 * U)  # |row k of Z dA|
         y = (eps_Z + float(np.sqrt((EA_rows * EA_rows).sum()))) * (1 + 8 * U)  # |I - Z A|_F over the ball
         if not y < 1:
             return None
         # C - c0 = -(Z A)^-1 (Z e + Z D [c0; 1]) with (Z A)^-1 = I + Y (I - Y)^-1, Y = I - Z A:
         # coordinate k's remainder is at most |row k of Y| |(I - Y)^-1| (|Z e| + |Z D [c0; 1]|)
         second = (Ze_up + (eps_Z + EA_rows) / (1 - y) * (Ze_up + Eh)) * (1 + 16 * U)
-        half = (r * linear + second) * (1 + 8 * U)
-        bounds = np.stack([np.nextafter(c0 - half, -np.inf), np.nextafter(c0 + half, np.inf)], axis=-1)
+        low = (below + second) * (1 + 8 * U)
+        high = (above + second) * (1 + 8 * U)
+        bounds = np.stack([np.nextafter(c0 - low, -np.inf), np.nextafter(c0 + high, np.inf)], axis=-1)
     return bounds if np.all(np.isfinite(bounds)) else None
 
 
@@ -285,7 +317,7 @@ def smallest_radius(scene: Scene, increase: float, steps: int = 40) -> float | N
     """The smallest radius (1) passes at with twice its allowances (the solver's: the checker's
     sums, differing in their last bits, pass there too), by bisection; None when none does."""
     with np.errstate(all="ignore"):
-        rho = math.sqrt(scene.level(increase))
+        rho = scene.rho(increase)
         e = rho + scene.r_up
         M = np.einsum("kai,kaj,k->ij", scene.G, scene.G, 1 / (e * scene.w_hi) ** 2)
         least = float(np.linalg.eigvalsh(0.5 * (M + M.T))[0])

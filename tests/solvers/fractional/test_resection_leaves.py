@@ -41,7 +41,7 @@ def solved(rng, count, norm, noise=1.0):
 
 
 def intervals_of(document):
-    found = document["proven_intervals"]["intervals"]
+    found = document["proven_intervals"]["intervals"][:4]  # then the centre's (test_resection_centre_l1.py)
     assert [i["name"] for i in found] == ["depth_x", "depth_y", "depth_z", "depth_0"]
     return np.array([i["lower"] for i in found]), np.array([i["upper"] for i in found])
 

@@ -247,12 +247,15 @@ def test_a_real_small_scale_camera_is_proven_and_verifies():
 
 
 def test_under_the_l1_norms_the_proven_intervals_are_the_depth_rows_read_off_leaves():
-    """Not the centre's (this module's enclosure is for L2L2): the depth row's, read off a search's
-    leaves (fractional.resection_leaves; tests/solvers/fractional/test_resection_leaves.py)."""
+    """The depth row's, read off a search's leaves (fractional.resection_leaves;
+    tests/solvers/fractional/test_resection_leaves.py), then the centre's at the same level, from
+    this module's enclosure and rounds with the L1 cost's inequalities
+    (fractional.resection_centre_l1; tests/solvers/fractional/test_resection_centre_l1.py)."""
     rng = np.random.default_rng(seed("resection proven", "norms"))
     job, _ = resection_job(rng, 12, 1.0, norm="L2L1")
     result = solve_job(job)
     stated = result["maps"][0]["determinacy"]["proven_intervals"]
-    assert [i["name"] for i in stated["intervals"]] == ["depth_x", "depth_y", "depth_z", "depth_0"]
+    assert [i["name"] for i in stated["intervals"]] == ["depth_x", "depth_y", "depth_z", "depth_0",
+                                                        "centre_x", "centre_y", "centre_z"]
     assert "search" in result["certificate"]["items"][0]["proof"]["sublevel"]
     assert verify_any(result).valid
