@@ -18,7 +18,7 @@ import numpy as np
 
 from geocert.solvers.core.geometry import is_number
 from geocert.solvers.core.strict import Invalid
-from geocert.solvers.reconstruction.camera_claim import MAX_PRINCIPAL_POINT_SD_PX
+from geocert.solvers.reconstruction.camera_claim import MAX_FOCAL_SD_FRACTION, MAX_PRINCIPAL_POINT_SD_PX
 from geocert.verify.reconstruction_stages import MAX_FIGURE, _values
 
 # How calibrated.py registers a view (registered_by's words); adjust_best's starts; the models the
@@ -55,7 +55,9 @@ MEMBERS = {
         "starts/*/same_rig_as": STARTS, "principal_point/estimated": "boolean",
         "principal_point/inside_middle_half": "boolean", "principal_point/reason": "text",
         "principal_point_per_view/estimated": "boolean", "principal_point_per_view/inside_middle_half": "boolean",
-        "principal_point_per_view/precise": "boolean", "principal_point_per_view/reason": "text"},
+        "principal_point_per_view/precise": "boolean", "principal_point_per_view/reason": "text",
+        "focal_per_view/estimated": "boolean", "focal_per_view/views": "views", "focal_per_view/precise": "boolean",
+        "focal_per_view/reason": "text"},
     "cameras": {"claim": "text"},
 }
 # The members counted (each a count, at most its total): (stage, path) -> what bounds it.
@@ -177,6 +179,7 @@ def _check_ties(result: dict, stages: dict, views: int, tracks: int) -> None:
     _check_starts(result, stages)
     _check_principal_point(stages.get("bundle_adjustment", {}))
     _check_principal_points_per_view(result, stages.get("bundle_adjustment", {}))
+    _check_focals_per_view(result, stages.get("bundle_adjustment", {}))
     _check_adjustment_model(result, stages.get("bundle_adjustment", {}))
     structure, summary = stages.get("structure", {}), result.get("summary") or {}
     left = structure.get("tracks_not_started")
@@ -338,8 +341,10 @@ def _check_calibration(result: dict, stage: dict, model: str, said: str) -> None
         fits, what = square and shared(((0, 2), (1, 2))), "square pixels, no skew and one principal point"
         if model == "simple":
             per_view = (stage.get("principal_point_per_view") or {}).get("estimated") is True
-            fits = square and shared(((0, 0),)) and (per_view or shared(((0, 2), (1, 2))))
-            what = "square pixels, no skew, one focal length and one principal point (or one each, as its test says)"
+            focal_per_view = (stage.get("focal_per_view") or {}).get("estimated") is True  # _check_focals_per_view
+            fits = square and (focal_per_view or shared(((0, 0),))) and (per_view or shared(((0, 2), (1, 2))))
+            what = ("square pixels, no skew, one focal length and one principal point (or one each, as their tests "
+                    "say)")
     if not fits:
         raise Invalid("returned", f"{said} the cameras returned do not have its calibration ({what})")
 
@@ -374,6 +379,54 @@ def _check_centred(result: dict, stage: dict, model: str, Ks: list, tolerance: f
         raise Invalid("returned", f"{said} the {model!r:.20} model holds the principal point at the image's centre "
                                   f"{centre.tolist()} unless its test estimated it, and a camera returned has it at "
                                   f"{worst[:2, 2].round(6).tolist()} with no test saying estimated")
+
+
+def _check_focals_per_view(result: dict, stage: dict) -> None:
+    """_focals_per_view's test (after a principal point per view was kept): a focal length of
+    their own for the views it names is kept (``estimated``) only when its chi-square passes its
+    threshold and the data fix each such focal length to MAX_FOCAL_SD_FRACTION of it and each
+    principal point to MAX_PRINCIPAL_POINT_SD_PX (``precise``), a principal point per view was
+    kept, in the simple model; and the registered cameras returned (their P) share one focal
+    length but for the views it names, each of which has its own, exactly when it was kept."""
+    test = stage.get("focal_per_view")
+    where = "stages/bundle_adjustment/focal_per_view"
+    estimated = isinstance(test, dict) and test.get("estimated") is True
+    named = test.get("views") if isinstance(test, dict) else None
+    if estimated:
+        chi2, threshold, sd, focal_sd = test.get("chi2"), test.get("threshold"), test.get("sd_px"), test.get("focal_sd")
+        options = (result.get("certificate") or {}).get("options") or {}
+        if not (is_number(chi2) and is_number(threshold) and chi2 > threshold and test.get("precise") is True
+                and test.get("max_sd_px") == MAX_PRINCIPAL_POINT_SD_PX
+                and test.get("max_focal_sd") == MAX_FOCAL_SD_FRACTION
+                and isinstance(sd, list) and sd and all(is_number(s) and s <= MAX_PRINCIPAL_POINT_SD_PX for s in sd)
+                and isinstance(named, list) and named and isinstance(focal_sd, list) and len(focal_sd) == len(named)
+                and all(is_number(s) and s <= MAX_FOCAL_SD_FRACTION for s in focal_sd)
+                and (stage.get("principal_point_per_view") or {}).get("estimated") is True
+                and stage.get("model") == "simple" and options.get("principal_point") == "per_view"):
+            raise Invalid("returned", f"{where}/estimated is true, and its test does not pass (chi2 above its "
+                                      f"threshold, a focal_sd for each view named, each at most max_focal_sd "
+                                      f"{MAX_FOCAL_SD_FRACTION}, every sd_px at most max_sd_px "
+                                      f"{MAX_PRINCIPAL_POINT_SD_PX}, precise, a principal point per view kept, the "
+                                      "simple model, options.principal_point per_view)")
+    if stage.get("model") != "simple":
+        if test is not None:
+            raise Invalid("returned", f"{where}: the focal length's test runs after the simple model's adjustment only")
+        return
+    cameras = [camera for camera in result.get("cameras") or []
+               if isinstance(camera, dict) and camera.get("registered") is True and camera.get("P") is not None]
+    if len(cameras) < 2:
+        return
+    focals = {camera.get("view"): float(intrinsics_of(camera["P"])[0, 0]) for camera in cameras}
+    apart = PER_VIEW_APART * max(abs(f) for f in focals.values())
+    own = set(named) if estimated and isinstance(named, list) else set()
+    shared = [f for view, f in focals.items() if view not in own]
+    if not shared or any(abs(f - shared[0]) > apart for f in shared):
+        raise Invalid("returned", f"{where}: the cameras returned have focal lengths of their own beyond the views "
+                                  "its test names" if estimated else
+                                  f"{where}: the cameras returned have focal lengths of their own, and no test says "
+                                  "they were estimated")
+    if estimated and not all(view in focals and abs(focals[view] - shared[0]) > apart for view in own):
+        raise Invalid("returned", f"{where}: a view its test names has the focal length the others share")
 
 
 def _check_principal_points_per_view(result: dict, stage: dict) -> None:

@@ -83,7 +83,9 @@ STAGE_RECORDS = ByName({
                                "reason"),
         principal_point_per_view=record("estimated", "observations", "parameters_added", "chi2", "threshold",
                                         "inside_middle_half", "spread_px", "sd_px", "max_sd_px", "precise",
-                                        "reason")),
+                                        "reason"),
+        focal_per_view=record("estimated", "views", "z", "z_threshold", "observations", "parameters_added", "chi2",
+                              "threshold", "focal_sd", "max_focal_sd", "sd_px", "max_sd_px", "precise", "reason")),
     "structure": record(*COMMON, "tracks", "points", "certified", "points_dropped", "observations_removed",
                         "tracks_not_started"),
     "cameras": record(*COMMON, "cameras", "certified", "searched", "claim", "degrees_of_freedom",
@@ -133,7 +135,12 @@ FIGURES = {
         "principal_point_per_view/observations": "count", "principal_point_per_view/parameters_added": "count",
         "principal_point_per_view/chi2": "number", "principal_point_per_view/threshold": "measure",
         "principal_point_per_view/spread_px/*": "measure", "principal_point_per_view/sd_px/*": "measure",
-        "principal_point_per_view/max_sd_px": "measure"},
+        "principal_point_per_view/max_sd_px": "measure", "focal_per_view/z/*": "number",
+        "focal_per_view/z_threshold": "measure", "focal_per_view/observations": "count",
+        "focal_per_view/parameters_added": "count", "focal_per_view/chi2": "number",
+        "focal_per_view/threshold": "measure", "focal_per_view/focal_sd/*": "measure",
+        "focal_per_view/max_focal_sd": "measure", "focal_per_view/sd_px/*": "measure",
+        "focal_per_view/max_sd_px": "measure"},
 }
 COMMON_FIGURES = {"elapsed_s": "measure", "cpu_s": "measure"}
 

@@ -496,6 +496,93 @@ def _principal_points_per_view(metric: upgrade.Metric, obs: Observations, keep: 
     return metric, keep, figures
 
 
+def _focals_per_view(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold_px: float):
+    """A focal length of its own for each view whose focal length the data set apart from the
+    others' (options.principal_point "per_view", after a principal point per view was kept), as
+    the principal points are tested: every view given its own (bundle model "focal_groups", a group
+    each) screens them, a view standing apart when its focal length lies more than the normal
+    quantile at 1 - FOCAL_P / (2 views) (Bonferroni's) of its standard deviation from the others'
+    median; those views are then given their own (the others sharing one), kept when that lowers
+    the cost on the observations both keep by more than the chi-square quantile at 1 - FOCAL_P
+    for the parameters it adds, in noise variances (the residuals' own, from the freer fit), and
+    the data fix each focal length to camera_claim.MAX_FOCAL_SD_FRACTION of it and each view's
+    principal point to camera_claim.MAX_PRINCIPAL_POINT_SD_PX. EXIF states one focal length for
+    every photo of Sceaux Castle, yet one of its 11 views is 2% shorter than the others (a focus
+    or stabiliser change EXIF does not record): the shared one fit no view well enough to certify
+    two of them. Returns the reconstruction, the observations kept and the test's figures."""
+    from scipy.stats import chi2, norm
+
+    from geocert.solvers.reconstruction import principal_points
+
+    views = [v for v, R in enumerate(metric.rotations) if R is not None]
+    figures = {"estimated": False, "views": []}
+    if len(views) < 3 or metric.Ks is None:
+        return metric, keep, {**figures, "reason": "fewer than 3 views to compare"}
+    each = {v: k for k, v in enumerate(views)}
+    screen, screen_keep, _ = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, threshold_px,
+                                            model="focal_groups", groups=each)
+    _, focal_sd = _intrinsics_sd(screen, obs, screen_keep, views, np.arange(len(views)))
+    focals = np.array([screen.Ks[v][0, 0] for v in views])
+    z = np.array([(focals[k] - np.median(np.delete(focals, k))) / focal_sd[k] for k in range(len(views))])
+    z_threshold = float(norm.ppf(1 - FOCAL_P / (2 * len(views))))
+    own = [v for k, v in enumerate(views) if np.isfinite(z[k]) and abs(z[k]) > z_threshold]
+    figures.update(z=[float(value) for value in z], z_threshold=z_threshold, views=own)
+    if not own or len(own) > len(views) - 2:
+        figures["views"] = []
+        return metric, keep, {**figures, "reason": "no view's focal length stands apart from the others'" if not own
+                              else "the focal lengths stand apart in most views: no one focal length to share"}
+    groups = {v: 0 for v in views}
+    groups.update({v: k + 1 for k, v in enumerate(own)})
+    trial, trial_keep, _ = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, threshold_px, model="focal_groups",
+                                          groups=groups)
+    common = keep & trial_keep
+    n = int(common.sum())
+    added = len(own)
+    figures.update(observations=n, parameters_added=added)
+    if n < 20:
+        return metric, keep, {**figures, "reason": "too few observations to test"}
+    held, free = _rms(metric, obs, common) ** 2 * n, _rms(trial, obs, common) ** 2 * n
+    variance = max(free / max(2 * n - added, 1), 1e-4)  # residuals below 0.01 px are rounding, not noise
+    statistic = (held - free) / variance
+    threshold = float(chi2.ppf(1 - FOCAL_P, added))
+    sd, focal_sd = _intrinsics_sd(trial, obs, trial_keep, views, np.array([groups[v] for v in views]))
+    relative = [float(focal_sd[groups[v]] / trial.Ks[v][0, 0]) for v in own]
+    precise = bool(np.all(sd <= camera_claim.MAX_PRINCIPAL_POINT_SD_PX)
+                   and all(r <= camera_claim.MAX_FOCAL_SD_FRACTION for r in relative))
+    figures.update(chi2=float(statistic), threshold=threshold, focal_sd=relative,
+                   max_focal_sd=camera_claim.MAX_FOCAL_SD_FRACTION,
+                   sd_px=[float(sd.min()), float(np.median(sd)), float(sd.max())],
+                   max_sd_px=camera_claim.MAX_PRINCIPAL_POINT_SD_PX, precise=precise)
+    if statistic > threshold and precise:
+        figures["estimated"] = True
+        return trial, trial_keep, figures
+    return metric, keep, figures
+
+
+def _intrinsics_sd(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, views: list,
+                   groups: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """principal_points.with_focal_groups in ``metric`` (each view's principal point's sd and each
+    group's focal length's, px), on the observations ``keep`` of points it holds (infinite where
+    they cannot be computed)."""
+    from geocert.solvers.reconstruction import principal_points
+
+    vindex = -np.ones(len(metric.rotations), dtype=int)
+    vindex[views] = np.arange(len(views))
+    use = keep & (vindex[obs.view] >= 0) & np.isfinite(metric.points[obs.track, 0])
+    tracks, track = np.unique(obs.track[use], return_inverse=True)
+    try:
+        sd, focal_sd, _, _ = principal_points.with_focal_groups(
+            [metric.Ks[v] for v in views], [metric.rotations[v] for v in views],
+            [metric.translations[v] for v in views], metric.points[tracks], vindex[obs.view[use]], track,
+            obs.pixel[use], groups)
+    except (np.linalg.LinAlgError, ValueError):
+        return np.full(len(views), np.inf), np.full(int(np.max(groups)) + 1, np.inf)
+    return np.where(np.isfinite(sd), sd, np.inf), np.where(np.isfinite(focal_sd), focal_sd, np.inf)
+
+
+FOCAL_P = 0.001  # the focal length test's level (the screen's, over the views, and the kept one's)
+
+
 def _principal_point_sd(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, views: list) -> np.ndarray:
     """principal_points.standard_deviations of each view's principal point (px) in ``metric``, on
     the observations ``keep`` of points it holds (infinite where they cannot be computed)."""
@@ -655,9 +742,12 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             if model == "simple" and options.principal_point == "per_view" and image_size is not None:
                 metric, keep, stage["principal_point_per_view"] = _principal_points_per_view(
                     metric, obs, keep, options.threshold_px, image_size)
+                if stage["principal_point_per_view"].get("estimated"):
+                    metric, keep, stage["focal_per_view"] = _focals_per_view(metric, obs, keep, options.threshold_px)
             stage.update(started_from=name, model=model, rms_px_before=before, rms_px_after=_rms(metric, obs, keep),
                          K=metric.K.tolist(), observations_kept=int(keep.sum()))
-            adjusted_with = ("principal_per_view" if (stage.get("principal_point_per_view") or {}).get("estimated")
+            adjusted_with = ("focal_groups" if (stage.get("focal_per_view") or {}).get("estimated")
+                             else "principal_per_view" if (stage.get("principal_point_per_view") or {}).get("estimated")
                              else "principal" if (stage.get("principal_point") or {}).get("estimated") else model)
             metric, keep = _depth_reversal(out, metric, obs, keep, options.threshold_px, adjusted_with, stage, tell,
                                            n_views)

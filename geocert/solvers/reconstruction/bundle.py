@@ -58,26 +58,35 @@ def projective(cameras: np.ndarray, points: np.ndarray, view: np.ndarray, track:
 # "principal" the focal length and the principal point (square pixels, no skew), "radial" the focal
 # length and one radial distortion term k1 about the principal point held where K has it (COLMAP's
 # SIMPLE_RADIAL: a point at normalised image coordinates n is seen at K's pixel of n (1 + k1 |n|^2)),
-# "principal_per_view" one focal length and a principal point per view (square pixels, no skew).
-MODELS = ("simple", "full", "fixed", "varying", "principal", "radial", "principal_per_view")
+# "principal_per_view" one focal length and a principal point per view (square pixels, no skew),
+# "focal_groups" a principal point per view and a focal length per group of views (``groups``:
+# each view's group; one group is "principal_per_view", a group each a K per view).
+MODELS = ("simple", "full", "fixed", "varying", "principal", "radial", "principal_per_view", "focal_groups")
 
 
 def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, points: np.ndarray, view: np.ndarray,
            track: np.ndarray, pixels: np.ndarray, f_scale: float | None = None, max_iterations: int = 30,
            model: str = "simple", focals: np.ndarray | None = None, should_stop=None, k1: float = 0.0,
-           stop: schur.StopRule = schur.CERES, centres: np.ndarray | None = None):
+           stop: schur.StopRule = schur.CERES, centres: np.ndarray | None = None,
+           groups: np.ndarray | None = None):
     """Refine one shared K (``model``: "simple" f with square pixels, no skew and cx, cy fixed; "full"
     fx, fy, skew, cx, cy; "fixed" K as given; "radial" f and the distortion term, from ``k1``),
     rotations (n, 3, 3), translations (n, 3) and points (p, 3) against pixel observations. Returns
     K, rotations, translations, points, residuals (M, 2), and k1 (``k1`` as given unless "radial").
-    "varying" and "principal_per_view" return one K per view (n, 3, 3), from ``focals`` (n,) and
-    ``centres`` (n, 2) (K's where not given)."""
+    "varying", "principal_per_view" and "focal_groups" return one K per view (n, 3, 3), from
+    ``focals`` (n,) and ``centres`` (n, 2) (K's where not given; "focal_groups" starts each group
+    from its views' mean focal length)."""
     A = np.hstack([Rotation.from_matrix(rotations).as_rotvec(), translations])
     given = np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]])
     if model == "varying":
         A = np.hstack([A, (np.full(len(A), K[0, 0]) if focals is None else focals)[:, None]])
-    if model == "principal_per_view":
+    if model in ("principal_per_view", "focal_groups"):
         A = np.hstack([A, np.tile(given[3:5], (len(A), 1)) if centres is None else np.asarray(centres, dtype=float)])
+    if model == "focal_groups":
+        groups = np.zeros(len(A), dtype=int) if groups is None else np.asarray(groups, dtype=int)
+        seen_focals = np.full(len(A), given[0]) if focals is None else np.asarray(focals, dtype=float)
+        group_focals = np.array([seen_focals[groups == g].mean() for g in range(int(groups.max()) + 1)])
+        obs_group = groups[view]  # each observation's focal length: S[obs_group]
 
     def entries(S):
         if model == "fixed":
@@ -86,7 +95,7 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
             return np.array([S[0], S[0], 0.0, given[3], given[4]])
         if model == "principal":
             return np.array([S[0], S[0], 0.0, S[1], S[2]])
-        if model == "principal_per_view":  # the principal points are each view's (Am[:, 6:8])
+        if model in ("principal_per_view", "focal_groups"):  # the principal points are each view's (Am[:, 6:8])
             return np.array([S[0], S[0], 0.0, 0.0, 0.0])
         if model == "radial":
             return np.array([S[0], S[0], 0.0, given[3], given[4]])
@@ -110,6 +119,9 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
             return np.stack([Am[:, 6] * u + k[3] - pixels[:, 0], Am[:, 6] * v + k[4] - pixels[:, 1]], axis=1)
         if model == "principal_per_view":
             return np.stack([k[0] * u + Am[:, 6] - pixels[:, 0], k[0] * v + Am[:, 7] - pixels[:, 1]], axis=1)
+        if model == "focal_groups":
+            f = S[obs_group]
+            return np.stack([f * u + Am[:, 6] - pixels[:, 0], f * v + Am[:, 7] - pixels[:, 1]], axis=1)
         if model == "radial":
             scale = 1.0 + S[1] * (u * u + v * v)
             u, v = u * scale, v * scale
@@ -140,6 +152,8 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         M = np.zeros((m, 2, 2))
         if model == "varying":
             M[:, 0, 0] = M[:, 1, 1] = Am[:, 6]
+        elif model == "focal_groups":
+            M[:, 0, 0] = M[:, 1, 1] = S[obs_group]
         else:
             M[:, 0, 0], M[:, 0, 1], M[:, 1, 1] = k[0], k[2], k[1]
         du_dcam = M @ dseen
@@ -148,7 +162,7 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         ones, zeros = np.ones(m), np.zeros(m)
         if model == "varying":
             ja = np.concatenate([ja, seen[:, :, None]], axis=2)
-        if model == "principal_per_view":
+        if model in ("principal_per_view", "focal_groups"):
             ja = np.concatenate([ja, np.broadcast_to(np.eye(2), (m, 2, 2))], axis=2)
         if model in ("simple", "principal", "radial", "principal_per_view"):  # d / d f: both focal terms move with f
             columns = [seen]
@@ -157,6 +171,9 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
             if model == "radial":
                 columns.append(np.einsum("mij,mj->mi", M, n * np.sum(n * n, axis=1)[:, None]))
             js = np.stack(columns, axis=2)
+        elif model == "focal_groups":  # d / d (the observation's group's f)
+            js = np.zeros((m, 2, len(S)))
+            js[np.arange(m), :, obs_group] = seen
         elif model == "full":  # fx, fy, skew, cx, cy
             u, v = seen[:, 0], seen[:, 1]
             js = np.stack([np.stack([u, zeros, v, ones, zeros], axis=1),
@@ -168,7 +185,8 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
     start = {"fixed": np.zeros(0), "varying": np.zeros(0), "simple": np.array([np.sqrt(abs(given[0] * given[1]))]),
              "full": given.copy(), "principal": np.array([np.sqrt(abs(given[0] * given[1])), given[3], given[4]]),
              "radial": np.array([np.sqrt(abs(given[0] * given[1])), k1]),
-             "principal_per_view": np.array([np.sqrt(abs(given[0] * given[1]))])}[model]
+             "principal_per_view": np.array([np.sqrt(abs(given[0] * given[1]))]),
+             "focal_groups": group_focals if model == "focal_groups" else None}[model]
     A, S, B, r, _ = schur.solve(residual, A, start, points.copy(), view, track, f_scale, max_iterations, stop=stop,
                                 jacobian=jacobian, should_stop=should_stop)
     k = entries(S)
@@ -177,6 +195,8 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         K = np.array([[[f, 0.0, k[3]], [0.0, f, k[4]], [0.0, 0.0, 1.0]] for f in A[:, 6]])
     if model == "principal_per_view":
         K = np.array([[[k[0], 0.0, u], [0.0, k[0], v], [0.0, 0.0, 1.0]] for u, v in A[:, 6:8]])
+    if model == "focal_groups":
+        K = np.array([[[f, 0.0, u], [0.0, f, v], [0.0, 0.0, 1.0]] for f, (u, v) in zip(S[groups], A[:, 6:8])])
     return K, Rotation.from_rotvec(A[:, :3]).as_matrix(), A[:, 3:6], B, r, float(S[1]) if model == "radial" else k1
 
 

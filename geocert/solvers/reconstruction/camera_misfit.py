@@ -63,14 +63,17 @@ def misfit_cause(misfit: dict | None, excess: float, points: int, dof: int, norm
     """What camera_misfit's refits say of a camera ``excess`` above the free camera: "pose" (its
     pose alone removes half of it or more), "principal_point" or "focal_and_principal_point" (its
     pose is at its optimum, and that intrinsic of its own brings it within the tolerance a camera
-    with those degrees of freedom more would have: camera_claim.tolerance), "unexplained"; None
+    with those intrinsics of its own would have: camera_claim.tolerance), "unexplained"; None
     without refits."""
     if not misfit or any(misfit.get(name) is None for name in MISFIT_MODELS):
         return None
     if misfit["pose"] < 0.5 * excess:
         return "pose"
     for name, extra in (("principal_point", 2), ("focal_and_principal_point", 3)):
-        tolerance = camera_claim.tolerance(points, min(dof + extra, camera_claim.PROJECTIVE_DOF), norm, rel_gap)
+        # The refit camera's own degrees of freedom: its pose and these intrinsics, or the ones it
+        # has already where more (a principal point of its own counts once: a camera already
+        # with one, 8, refit with a focal length too has 9, not 11).
+        tolerance = camera_claim.tolerance(points, max(dof, camera_claim.POSE_DOF + extra), norm, rel_gap)
         if tolerance is not None and misfit[name] <= tolerance:
             return name
     return "unexplained"

@@ -26,18 +26,30 @@ def standard_deviations(Ks, rotations, translations, points, view, track, pixels
     covariance; the noise's sigma, px; the null space's dimension) for views (n) with K each
     (one focal length: the mean of theirs), rotations (n, 3, 3), translations (n, 3), points
     (p, 3) and observations (view, track: indices into them; pixels (m, 2))."""
+    sd, _, sigma, null = with_focal_groups(Ks, rotations, translations, points, view, track, pixels)
+    return sd, sigma, null
+
+
+def with_focal_groups(Ks, rotations, translations, points, view, track, pixels,
+                      groups=None) -> tuple[np.ndarray, np.ndarray, float, int]:
+    """standard_deviations with the focal lengths of the bundle model "focal_groups": ``groups``
+    (n,) each view's group (None: one group), a group's focal length the mean of its views'.
+    Returns (each view's principal point's sd, each group's focal length's sd (px), sigma, null)."""
     Ks, X = np.asarray(Ks, dtype=float), np.asarray(points, dtype=float)
     view, track, pixels = np.asarray(view, dtype=int), np.asarray(track, dtype=int), np.asarray(pixels, dtype=float)
     n, m, p = len(Ks), len(view), len(X)
-    focal = float(Ks[:, 0, 0].mean())
+    groups = np.zeros(n, dtype=int) if groups is None else np.asarray(groups, dtype=int)
+    g = int(groups.max()) + 1
+    focals = np.array([Ks[groups == k, 0, 0].mean() for k in range(g)])
     A = np.hstack([Rotation.from_matrix(np.asarray(rotations, dtype=float)).as_rotvec(),
                    np.asarray(translations, dtype=float), Ks[:, :2, 2]])
+    obs_group = groups[view]
 
     def residual(A, f, X):
         cam = Rotation.from_rotvec(A[view, :3]).apply(X[track]) + A[view, 3:6]
-        return f * cam[:, :2] / cam[:, 2:3] + A[view, 6:8] - pixels
+        return f[obs_group, None] * cam[:, :2] / cam[:, 2:3] + A[view, 6:8] - pixels
 
-    r0 = residual(A, focal, X)
+    r0 = residual(A, focals, X)
     rows, cols, vals, at = [], [], [], np.arange(m)
 
     def add(d, columns):
@@ -49,13 +61,16 @@ def standard_deviations(Ks, rotations, translations, points, view, track, pixels
     for j in range(8):
         moved = A.copy()
         moved[:, j] += STEP
-        add((residual(moved, focal, X) - r0) / STEP, 8 * view + j)
-    add((residual(A, focal * (1 + STEP), X) - r0) / (focal * STEP), np.full(m, 8 * n))
+        add((residual(moved, focals, X) - r0) / STEP, 8 * view + j)
+    for k in range(g):
+        moved = focals.copy()
+        moved[k] *= 1 + STEP
+        add((residual(A, moved, X) - r0) / (focals[k] * STEP), np.full(m, 8 * n + k))
     for j in range(3):
         moved = X.copy()
         moved[:, j] += STEP
-        add((residual(A, focal, moved) - r0) / STEP, 8 * n + 1 + 3 * track + j)
-    c = 8 * n + 1
+        add((residual(A, focals, moved) - r0) / STEP, 8 * n + g + 3 * track + j)
+    c = 8 * n + g
     J = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(2 * m, c + 3 * p))
     N = (J.T @ J).tocsr()
     # The points' part is block diagonal (a point's 3 coordinates meet only each other): its 3 x 3
@@ -80,9 +95,10 @@ def standard_deviations(Ks, rotations, translations, points, view, track, pixels
     fixed[:GAUGE] = False
     variance = float((r0 ** 2).sum() / max(2 * m - (c + 3 * p - GAUGE), 1))
     covariance = (vectors[:, fixed] / values[fixed]) @ vectors[:, fixed].T * variance
-    sd = np.empty(n)
-    for k in range(n):
-        block = slice(8 * k + 6, 8 * k + 8)
+    def deviation(block: slice) -> float:
         unfixed = loose.shape[1] > 0 and float(np.abs(loose[block] / scale[block, None]).max()) > LOOSE
-        sd[k] = np.inf if unfixed else np.sqrt(max(np.linalg.eigvalsh(covariance[block, block]).max(), 0.0))
-    return sd, float(np.sqrt(variance)), null
+        return np.inf if unfixed else float(np.sqrt(max(np.linalg.eigvalsh(covariance[block, block]).max(), 0.0)))
+
+    sd = np.array([deviation(slice(8 * k + 6, 8 * k + 8)) for k in range(n)])
+    focal_sd = np.array([deviation(slice(8 * n + k, 8 * n + k + 1)) for k in range(g)])
+    return sd, focal_sd, float(np.sqrt(variance)), null

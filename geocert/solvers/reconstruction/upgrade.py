@@ -277,6 +277,18 @@ def K_of(metric: Metric, view: int) -> np.ndarray:
     return metric.K if metric.Ks is None else metric.Ks[view]
 
 
+def focal_groups(metric: Metric) -> dict[int, int]:
+    """{view: group} of the registered views by their focal lengths (equal ones share a group, as
+    the bundle model "focal_groups" returns them): group 0 the most views' (ties: the smallest
+    view's), the others numbered by their first view."""
+    views = [v for v, R in enumerate(metric.rotations) if R is not None]
+    focal = {v: float(K_of(metric, v)[0, 0]) for v in views}
+    values = sorted(set(focal.values()), key=lambda f: (-sum(1 for v in views if focal[v] == f),
+                                                         min(v for v in views if focal[v] == f)))
+    order = [values[0]] + sorted(values[1:], key=lambda f: min(v for v in views if focal[v] == f))
+    return {v: order.index(focal[v]) for v in views}
+
+
 # When upgrade.adjust's first round (Huber's loss) ends before its iteration cap. The second round
 # (plain least squares over the observations the first leaves within the threshold) adjusts
 # everything again, but which observations it keeps depends on where the first round ends. With
@@ -291,11 +303,14 @@ ROBUST_ROUND_STOP = schur.CERES
 def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: np.ndarray, threshold_px: float,
            max_iterations: int = 30, model: str = "simple", should_stop=None,
            robust_stop: schur.StopRule = ROBUST_ROUND_STOP,
-           stop: schur.StopRule = schur.CERES) -> tuple[Metric, np.ndarray, dict]:
+           stop: schur.StopRule = schur.CERES, groups: dict | None = None) -> tuple[Metric, np.ndarray, dict]:
     """Metric bundle adjustment (one shared K): Huber's loss, then plain least squares on the
     observations within the threshold. Returns the adjusted reconstruction, the observations
     kept, and figures. ``should_stop()`` (asked each iteration) ends it where it is;
-    ``robust_stop`` and ``stop`` (schur.StopRule) end the first round and the second sooner."""
+    ``robust_stop`` and ``stop`` (schur.StopRule) end the first round and the second sooner.
+    ``groups`` (model "focal_groups"): each registered view's focal length group {view: group},
+    the groups numbered from 0 (bundle.metric); None: focal_groups(metric), the groups its views'
+    focal lengths form."""
     from geocert.solvers.reconstruction import bundle
 
     start = time.perf_counter()
@@ -306,11 +321,17 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
     K, R, t, X = metric.K, np.array([metric.rotations[v] for v in views]), \
         np.array([metric.translations[v] for v in views]), metric.points.copy()
     focals = None if metric.Ks is None else np.array([metric.Ks[v][0, 0] for v in views])
-    # "principal_per_view": each view's principal point (the shared K's where it has none of its own)
-    centres = None if model != "principal_per_view" else np.array(
+    # "principal_per_view" and "focal_groups": each view's principal point (the shared K's where
+    # it has none of its own); "focal_groups" each view's focal length too (its group's)
+    centres = None if model not in ("principal_per_view", "focal_groups") else np.array(
         [K_of(metric, v)[:2, 2] for v in views], dtype=float)
     if model == "principal_per_view":
         focals = None
+    view_groups = None
+    if model == "focal_groups":
+        focals = np.array([K_of(metric, v)[0, 0] for v in views], dtype=float)
+        groups = focal_groups(metric) if groups is None else groups
+        view_groups = np.array([groups.get(int(v), 0) for v in views], dtype=int)
     rms_before = None
     k1 = metric.k1
     for round_ in range(2):
@@ -327,10 +348,15 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
                                            pixels[use], f_scale=threshold_px / 2 if round_ == 0 else None,
                                            max_iterations=max_iterations, model=model, focals=focals,
                                            should_stop=should_stop, k1=k1,
-                                           stop=robust_stop if round_ == 0 else stop, centres=centres)
+                                           stop=robust_stop if round_ == 0 else stop, centres=centres,
+                                           groups=view_groups)
         if K.ndim == 3 and model == "principal_per_view":  # one principal point per view: the middle one's K stands for them
             centres = K[:, :2, 2]
             K = K[middle_centre(centres)]
+        elif K.ndim == 3 and model == "focal_groups":  # one K per view: the middle principal point's stands for them
+            centres, focals = K[:, :2, 2], K[:, 0, 0]
+            shared = np.flatnonzero(view_groups == 0)  # group 0: the views sharing the first focal length
+            K = K[shared[middle_centre(centres[shared])]]
         elif K.ndim == 3:  # one K per view: the middle focal length stands for them in K
             focals = K[:, 0, 0]
             K = K[int(np.argsort(focals)[len(focals) // 2])]
@@ -343,7 +369,8 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
     if centres is not None:
         adjusted.Ks = [None] * len(metric.rotations)
         for k, v in enumerate(views):
-            adjusted.Ks[v] = np.array([[K[0, 0], 0.0, centres[k, 0]], [0.0, K[0, 0], centres[k, 1]], [0.0, 0.0, 1.0]])
+            f = K[0, 0] if model != "focal_groups" else focals[k]
+            adjusted.Ks[v] = np.array([[f, 0.0, centres[k, 0]], [0.0, f, centres[k, 1]], [0.0, 0.0, 1.0]])
     elif focals is not None:
         adjusted.Ks = [None] * len(metric.rotations)
         for k, v in enumerate(views):

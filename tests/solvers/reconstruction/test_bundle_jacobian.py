@@ -36,9 +36,10 @@ def test_the_analytic_jacobian_is_the_residuals_derivative(model, monkeypatch):
         return solve(residual, A, S, B, view, track, *args, jacobian=jacobian, **kwargs)
 
     monkeypatch.setattr(schur, "solve", compare)
-    focals = np.array([800.0, 810.0, 790.0, 805.0]) if model == "varying" else None
+    focals = np.array([800.0, 810.0, 790.0, 805.0]) if model in ("varying", "focal_groups") else None
+    groups = np.array([0, 1, 0, 2]) if model == "focal_groups" else None  # three focal lengths, one shared
     bundle.metric(K, R, t, X, view, track, rng.uniform(0, 600, (len(view), 2)), max_iterations=1, model=model,
-                  k1=0.05, focals=focals)
+                  k1=0.05, focals=focals, groups=groups)
     assert compared == [model]
 
 
