@@ -102,6 +102,36 @@ class TestChunkStart:
                     if fields["event"] == "status"]
         assert statuses == ["queued", "running"]
 
+    def test_a_job_is_created_by_one_command_and_a_refused_one_writes_nothing(self, jobs, monkeypatch):
+        """Its admission, writes and tasks' messages are one script (JobStore._CREATE), not a
+        transaction of a dozen commands; a job refused is refused before anything of it is
+        written (nothing to delete)."""
+        import redis.connection
+
+        writes = []
+        send = redis.connection.AbstractConnection.send_packed_command
+        monkeypatch.setattr(redis.connection.AbstractConnection, "send_packed_command",
+                            lambda self, *args, **kwargs: writes.append(1) or send(self, *args, **kwargs))
+        run = lambda: {name.removeprefix("cmdstat_") for name in jobs.r.info("commandstats")} - {"config", "info"}
+        enqueue = lambda meta: [("LPUSH", ("test-queue", f"message of {task}")) for task in meta["task_ids"]]
+        jobs.r.config_resetstat()
+        writes.clear()
+        meta = jobs.create("triangulation", request_of(3), 3, 2, "one-command", active_limit=1, chunk_key="tracks",
+                           enqueue=enqueue)
+        assert len(writes) == 1 and "eval" in run() and not run() & {"multi", "exec"}
+        assert jobs.r.lrange("test-queue", 0, -1) == [f"message of {task}" for task in reversed(meta["task_ids"])]
+        assert jobs.request(meta["id"]) == request_of(3) and jobs.get(meta["id"])["status"] == "queued"
+        jobs.r.config_resetstat()
+        assert jobs.create("triangulation", request_of(3), 3, 2, "one-command", active_limit=1, chunk_key="tracks",
+                           enqueue=enqueue) is None  # its one active job already
+        assert not run() & {"set", "hset", "rpush", "lpush", "xadd", "zadd", "sadd", "rename", "del", "incrby"}
+        assert jobs.r.llen("test-queue") == 2 and jobs.r.zcard(JobStore.owner_key("one-command", "jobs")) == 1
+
+    def test_a_job_of_more_tasks_and_items_than_a_lua_unpack_takes_is_created_whole(self, jobs):
+        meta = jobs.create("triangulation", request_of(9000), 9000, 1, "many-tasks", chunk_key="tracks")
+        assert jobs.r.lrange(JobStore.key(meta["id"], "tasks"), 0, -1) == meta["task_ids"] and len(meta["task_ids"]) == 9000
+        assert jobs.request(meta["id"]) == request_of(9000)
+
     def test_a_task_of_an_ended_or_gone_job_starts_nothing(self, jobs):
         meta = jobs.create("triangulation", request_of(10), 10, 5, "someone", chunk_key="tracks")
         assert jobs.cancel_if_queued(meta["id"])
