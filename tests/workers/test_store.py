@@ -132,6 +132,18 @@ class TestChunkStart:
         assert jobs.r.lrange(JobStore.key(meta["id"], "tasks"), 0, -1) == meta["task_ids"] and len(meta["task_ids"]) == 9000
         assert jobs.request(meta["id"]) == request_of(9000)
 
+    def test_what_the_creation_script_writes_reads_back_exactly(self, jobs):
+        """The script's commands travel as one JSON array (decoded by Redis's cjson): non-ASCII
+        and astral text, quotes and backslashes, and the created time's float come back as sent."""
+        request = request_of(2) | {"callback_url": "https://example.com/\u00e9?q=\"\\", "label": "clé 😀 \\ \" \u0001"}
+        owner = "clé-😀"
+        meta = jobs.create("triangulation", request, 2, 1, owner, chunk_key="tracks",
+                           enqueue=lambda meta: [("LPUSH", ("test-queue-exact", b"bytes \xc3\xa9", 7, 0.1 + 0.2))])
+        assert jobs.request(meta["id"]) == request and jobs.request_text(meta["id"]) == json.dumps(request)
+        assert jobs.r.zscore(JobStore.owner_key(owner, "jobs"), meta["id"]) == meta["created_at"]
+        assert jobs.get(meta["id"])["owner"] == owner
+        assert jobs.r.lrange("test-queue-exact", 0, -1) == [repr(0.1 + 0.2), "7", "bytes é"]
+
     def test_a_task_of_an_ended_or_gone_job_starts_nothing(self, jobs):
         meta = jobs.create("triangulation", request_of(10), 10, 5, "someone", chunk_key="tracks")
         assert jobs.cancel_if_queued(meta["id"])
