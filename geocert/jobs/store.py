@@ -165,7 +165,7 @@ class JobStore:
         ``job_time_limit_s`` (a many-item kind's option: the job's limit in all).
 
         ``enqueue``: given the job's record, the broker's Redis commands that queue its tasks
-        (workers.queue.task_commands); they run in the same transaction, only if the job is
+        (workers.queue.task_commands); they run in the same script, only if the job is
         admitted: a submission is one round trip, and no task is ever queued without its job.
 
         ``stored_bytes_limit``: what the owner's jobs that exist may hold in all (0: no limit),
