@@ -83,10 +83,17 @@ class _Commands:
 
     def __init__(self):
         self.arguments: list = []
+        self.bulk: list[tuple] = []  # the large writes, sent as commands of their own (``BULK``)
 
     # _CREATE passes a command's arguments to redis.call by one Lua unpack, which takes at most
     # LUAI_MAXCSTACK (8000) values: a push of more is split.
     PUSHED_AT_ONCE = 1000
+    # A SET or RPUSH of more bytes than this (a large request's text or items) is not run by the
+    # script but sent as a command of its own, in a transaction with it (JobStore.create): a
+    # script copies each value into Lua and back and decodes it from JSON, where Redis keeps a
+    # command's argument as it read it (a 12 MB request: tens of ms of the server in the script,
+    # against microseconds).
+    BULK = 16 << 10
 
     def command(self, name: str, *args) -> None:
         self.arguments += (name, len(args), *(arg if isinstance(arg, str) else _text(arg) for arg in args))
@@ -98,13 +105,19 @@ class _Commands:
         return _COMMANDS_ENCODER(self.arguments)
 
     def set(self, key: str, value: str) -> None:
-        self.command("SET", key, value)
+        if len(value) > self.BULK:
+            self.bulk.append(("SET", key, value))
+        else:
+            self.command("SET", key, value)
 
     def hset(self, key: str, field: str | None = None, value: str | None = None, mapping: dict | None = None) -> None:
         pairs = [] if field is None else [field, value]
         self.command("HSET", key, *pairs, *(part for pair in (mapping or {}).items() for part in pair))
 
     def rpush(self, key: str, *values: str) -> None:
+        if sum(map(len, values)) > self.BULK:
+            self.bulk.append(("RPUSH", key, *values))
+            return
         for begin in range(0, len(values), self.PUSHED_AT_ONCE):
             self.command("RPUSH", key, *values[begin:begin + self.PUSHED_AT_ONCE])
 
@@ -172,18 +185,36 @@ class JobStore:
         each counted as its request's bytes (``items_bytes``: those of ``items_key``'s texts), at
         least STORED_BYTES_FLOOR, and from its end its stored result's (``_COUNT_RESULT``);
         StoredBytesExceeded beyond it, nothing of the job kept."""
-        meta, keys, args = self._stage_create(kind, request, items_total, chunk_size, owner, callback_url, active_limit,
-                                              task_ids, chunk_key, items_key, item_time_bound_s, job_time_limit_s,
-                                              enqueue, items_bytes, stored_bytes_limit)
-        return self._admitted(meta, self.r.eval(self._CREATE, len(keys), *keys, *args), stored_bytes_limit)
+        meta, keys, args, bulk = self._stage_create(kind, request, items_total, chunk_size, owner, callback_url,
+                                                    active_limit, task_ids, chunk_key, items_key, item_time_bound_s,
+                                                    job_time_limit_s, enqueue, items_bytes, stored_bytes_limit)
+        if not bulk:
+            return self._admitted(meta, self.r.eval(self._CREATE, len(keys), *keys, *args), stored_bytes_limit)
+        pipe = self.r.pipeline()
+        for command in bulk:
+            pipe.execute_command(*command)
+        pipe.eval(self._CREATE, len(keys), *keys, *args)
+        admitted = pipe.execute()[-1]
+        if admitted != 1:
+            self.r.delete(*{command[1] for command in bulk})  # written before the script refused the job
+        return self._admitted(meta, admitted, stored_bytes_limit)
 
     async def create_async(self, client: redis.asyncio.Redis, *args, **kwargs) -> dict | None:
         """``create`` (the same arguments after ``client``) through an asyncio client
         (``decode_responses``, the same server): the same script, for the API's event loop."""
         bound = _CREATE_SIGNATURE.bind(self, *args, **kwargs)
         bound.apply_defaults()
-        meta, keys, script_args = self._stage_create(*bound.args[1:])
-        admitted = await client.eval(self._CREATE, len(keys), *keys, *script_args)
+        meta, keys, script_args, bulk = self._stage_create(*bound.args[1:])
+        if not bulk:
+            admitted = await client.eval(self._CREATE, len(keys), *keys, *script_args)
+        else:
+            pipe = client.pipeline()
+            for command in bulk:
+                pipe.execute_command(*command)
+            pipe.eval(self._CREATE, len(keys), *keys, *script_args)
+            admitted = (await pipe.execute())[-1]
+            if admitted != 1:
+                await client.delete(*{command[1] for command in bulk})
         return self._admitted(meta, admitted, bound.arguments["stored_bytes_limit"])
 
     @staticmethod
@@ -194,12 +225,14 @@ class JobStore:
 
     def _stage_create(self, kind, request, items_total, chunk_size, owner, callback_url, active_limit, task_ids,
                       chunk_key, items_key, item_time_bound_s, job_time_limit_s, enqueue, items_bytes,
-                      stored_bytes_limit) -> tuple[dict, list, list]:
-        """A new job's record, and the keys and arguments of the one script (``_CREATE``) that
-        admits and writes it: its writes are recorded here (``_Commands``), not sent, and run by
-        the script only when the job is admitted. One command instead of a transaction of a dozen:
-        a dozen fewer replies to parse and commands to pack in the API, nothing written for a job
-        refused (nothing to take back), and the same atomicity (a script runs whole, alone)."""
+                      stored_bytes_limit) -> tuple[dict, list, list, list]:
+        """A new job's record, the keys and arguments of the one script (``_CREATE``) that admits
+        and writes it, and its large writes (``_Commands.BULK``: a large request's text or
+        items, sent beside the script in a transaction, deleted if it refuses the job): its writes
+        are recorded here (``_Commands``), not sent, and run by the script only when the job is
+        admitted. One command instead of a transaction of a dozen: a dozen fewer replies to parse
+        and commands to pack in the API, nothing written for a job refused (nothing to take back),
+        and the same atomicity (a script runs whole, alone)."""
         job_id = uuid.uuid4().hex
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
@@ -227,7 +260,7 @@ class JobStore:
         keys = [*self._accounts(owner), self.owner_key(owner, "active")]
         args = [self.key(""), self.PRUNED_PER_JOB, job_id, active_limit, max(request_bytes, self.STORED_BYTES_FLOOR),
                 stored_bytes_limit, pipe.text()]
-        return meta, keys, args
+        return meta, keys, args, pipe.bulk
 
     @staticmethod
     def chunks(meta: dict) -> list[tuple[int, int]]:

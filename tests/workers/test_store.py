@@ -127,6 +127,40 @@ class TestChunkStart:
         assert not run() & {"set", "hset", "rpush", "lpush", "xadd", "zadd", "sadd", "rename", "del", "incrby"}
         assert jobs.r.llen("test-queue") == 2 and jobs.r.zcard(JobStore.owner_key("one-command", "jobs")) == 1
 
+    @pytest.mark.parametrize("on_the_loop", [False, True])
+    def test_a_large_request_is_written_beside_the_script_and_taken_back_if_refused(self, jobs, on_the_loop):
+        """Its text and items (over _Commands.BULK) go as commands of their own in a transaction
+        with the script, not through it; a job refused leaves none of them."""
+        import asyncio
+
+        import redis.asyncio
+
+        def create(*args, **kwargs):
+            if not on_the_loop:
+                return jobs.create(*args, **kwargs)
+
+            async def run():
+                client = redis.asyncio.Redis(connection_pool=redis.asyncio.ConnectionPool(
+                    connection_class=redis.asyncio.UnixDomainSocketConnection if "path" in
+                    jobs.r.connection_pool.connection_kwargs else redis.asyncio.Connection,
+                    **jobs.r.connection_pool.connection_kwargs))
+                try:
+                    return await jobs.create_async(client, *args, **kwargs)
+                finally:
+                    await client.aclose()
+
+            return asyncio.run(run())
+
+        owner = f"bulk-{on_the_loop}"
+        large = request_of(300) | {"note": "x" * 40_000}
+        kept = create("triangulation", large, 300, 100, owner, active_limit=1, chunk_key="tracks")
+        assert jobs.request(kept["id"]) == large and len(jobs.chunk_request(kept["id"], 100, 200)["data"]["tracks"]) == 300
+        whole = create("reconstruction", large, 1, 1, owner + "-whole")
+        assert jobs.request_text(whole["id"]) == json.dumps(large)
+        before = set(jobs.r.scan_iter("geocert:job:*"))
+        assert create("triangulation", large, 300, 100, owner, active_limit=1, chunk_key="tracks") is None
+        assert set(jobs.r.scan_iter("geocert:job:*")) == before  # nothing of the refused job
+
     def test_a_job_of_more_tasks_and_items_than_a_lua_unpack_takes_is_created_whole(self, jobs):
         meta = jobs.create("triangulation", request_of(9000), 9000, 1, "many-tasks", chunk_key="tracks")
         assert jobs.r.lrange(JobStore.key(meta["id"], "tasks"), 0, -1) == meta["task_ids"] and len(meta["task_ids"]) == 9000
