@@ -76,14 +76,21 @@ def _check_limits(kind, parsed, body, request: dict, counts: tuple[int, int] | N
     return items
 
 
-def _checked(body) -> tuple[dict, object, object]:
-    """The request (as JSON types), its kind and its parsed data, after every check made before
-    anything is stored."""
+def _checked(body) -> tuple[dict, object, object, object]:
+    """The request (as JSON types), its kind, its parsed data and options, after every check made
+    before anything is stored."""
     request = body.model_dump(mode="json")  # validated by its kind's model (discriminated on "kind")
     _check_callback(request)
     _check_budget(request)  # before anything of the job is decoded or built
-    kind, parsed, _ = parse_job(request)  # the solvers' own checks: rank, indices, duplicates
-    return request, kind, parsed
+    kind, parsed, options = parse_job(request)  # the solvers' own checks: rank, indices, duplicates
+    return request, kind, parsed, options
+
+
+def _as_run(kind, request: dict, options, checked: dict):
+    """The options the job runs with: those parsed with its checks (``options``, from the
+    request's options ``checked``), unless _check_limits lowered a default since (then parsed
+    again from the request as it will run)."""
+    return options if request["options"] == checked else parse_options(kind, request)
 
 
 def _digest(request: dict) -> str:
@@ -94,7 +101,8 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
             split: streamed.Split | None = None) -> dict:
     """The submission itself (synchronous Redis calls: run in FastAPI's thread pool). ``split``:
     a large body's items, when ``body`` is its head (StreamedItemsRoute)."""
-    request, kind, parsed = _checked(body)
+    request, kind, parsed, options = _checked(body)
+    checked = dict(request["options"])
     upload = None
     if split is not None:
         _check_count(kind, split.count)  # before any item is read
@@ -110,8 +118,8 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
                 return _replay(store, earlier, digest, response)
         try:
             # Its tasks' last-resort time limits follow from its own limits (options lowered to the
-            # server's maxima by _check_limits, so parsed again from the request as it will run).
-            bound = kind.time_bound_s(parsed, parse_options(kind, request))
+            # server's maxima by _check_limits).
+            bound = kind.time_bound_s(parsed, _as_run(kind, request, options, checked))
             meta = _create(store, owner, kind, request, items, upload.key if upload is not None else None, bound,
                            upload.bytes if upload is not None else 0)
         except BaseException:
@@ -196,9 +204,10 @@ async def submit_on_loop(body, response: Response, store: JobStore, client, owne
     loop's asyncio ``client`` (the store's server) and the tasks made with ``producer``
     (queue.loop_producer). What follows the checks runs to its end as a thread would, even if
     the request is cancelled meanwhile (a job is never left half made, nor a key reserved)."""
-    request, kind, parsed = _checked(body)
+    request, kind, parsed, options = _checked(body)
+    checked = dict(request["options"])
     items = _check_limits(kind, parsed, body, request)
-    bound = kind.time_bound_s(parsed, parse_options(kind, request))
+    bound = kind.time_bound_s(parsed, _as_run(kind, request, options, checked))
     digest = _digest(request) if idempotency_key is not None else None
     args, options = _create_arguments(owner, kind, request, items, None, bound, 0, _enqueue(producer))
 

@@ -54,6 +54,7 @@ def _shared_encoder() -> Callable[[Any], str]:
 
 
 dumps = _shared_encoder()
+_COMMANDS_ENCODER = json.JSONEncoder(separators=(",", ":")).encode
 
 
 class StoredBytesExceeded(Exception):
@@ -62,6 +63,76 @@ class StoredBytesExceeded(Exception):
     def __init__(self, limit: int):
         super().__init__(limit)
         self.limit = limit
+
+
+def _text(value) -> str:
+    """A command's argument as redis-py would send it, as text (bytes must be UTF-8)."""
+    if isinstance(value, bytes):
+        return value.decode()
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, int) and not isinstance(value, bool):
+        return str(value)
+    raise TypeError(f"not a Redis argument: {type(value).__name__}")
+
+
+class _Commands:
+    """Stands where a pipeline stands for the writes of a job's creation (JobStore._stage_create):
+    records each command as _CREATE takes it (its name, its argument count, its arguments, every
+    one a string) instead of sending it. Only the commands that creation makes."""
+
+    def __init__(self):
+        self.arguments: list = []
+        self.bulk: list[tuple] = []  # the large writes, sent as commands of their own (``BULK``)
+
+    # _CREATE passes a command's arguments to redis.call by one Lua unpack, which takes at most
+    # LUAI_MAXCSTACK (8000) values: a push of more is split.
+    PUSHED_AT_ONCE = 1000
+    # A SET or RPUSH of more bytes than this (a large request's text or items) is not run by the
+    # script but sent as a command of its own, in a transaction with it (JobStore.create): a
+    # script copies each value into Lua and back and decodes it from JSON, where Redis keeps a
+    # command's argument as it read it (a 12 MB request: tens of ms of the server in the script,
+    # against microseconds).
+    BULK = 16 << 10
+
+    def command(self, name: str, *args) -> None:
+        self.arguments += (name, len(args), *(arg if isinstance(arg, str) else _text(arg) for arg in args))
+
+    def text(self) -> str:
+        """The commands as one JSON array (decoded by the script's cjson to the same strings): one
+        argument for redis-py to pack instead of one a value, which cost it more than the rest of
+        the submission's Redis work (some 80 values a 3-track job)."""
+        return _COMMANDS_ENCODER(self.arguments)
+
+    def set(self, key: str, value: str) -> None:
+        if len(value) > self.BULK:
+            self.bulk.append(("SET", key, value))
+        else:
+            self.command("SET", key, value)
+
+    def hset(self, key: str, field: str | None = None, value: str | None = None, mapping: dict | None = None) -> None:
+        pairs = [] if field is None else [field, value]
+        self.command("HSET", key, *pairs, *(part for pair in (mapping or {}).items() for part in pair))
+
+    def rpush(self, key: str, *values: str) -> None:
+        if sum(map(len, values)) > self.BULK:
+            self.bulk.append(("RPUSH", key, *values))
+            return
+        for begin in range(0, len(values), self.PUSHED_AT_ONCE):
+            self.command("RPUSH", key, *values[begin:begin + self.PUSHED_AT_ONCE])
+
+    def rename(self, source: str, target: str) -> None:
+        self.command("RENAME", source, target)
+
+    def persist(self, key: str) -> None:
+        self.command("PERSIST", key)
+
+    def zadd(self, key: str, mapping: dict) -> None:
+        self.command("ZADD", key, *(part for member, score in mapping.items() for part in (float(score), member)))
+
+    def xadd(self, key: str, fields: dict, maxlen: int, approximate: bool = True) -> None:
+        self.command("XADD", key, "MAXLEN", *(("~",) if approximate else ()), maxlen, "*",
+                     *(part for pair in fields.items() for part in pair))
 
 
 class JobStore:
@@ -107,36 +178,43 @@ class JobStore:
         ``job_time_limit_s`` (a many-item kind's option: the job's limit in all).
 
         ``enqueue``: given the job's record, the broker's Redis commands that queue its tasks
-        (workers.queue.task_commands); they run in the same transaction, only if the job is
+        (workers.queue.task_commands); they run in the same script, only if the job is
         admitted: a submission is one round trip, and no task is ever queued without its job.
 
         ``stored_bytes_limit``: what the owner's jobs that exist may hold in all (0: no limit),
         each counted as its request's bytes (``items_bytes``: those of ``items_key``'s texts), at
         least STORED_BYTES_FLOOR, and from its end its stored result's (``_COUNT_RESULT``);
         StoredBytesExceeded beyond it, nothing of the job kept."""
+        meta, keys, args, bulk = self._stage_create(kind, request, items_total, chunk_size, owner, callback_url,
+                                                    active_limit, task_ids, chunk_key, items_key, item_time_bound_s,
+                                                    job_time_limit_s, enqueue, items_bytes, stored_bytes_limit)
+        if not bulk:
+            return self._admitted(meta, self.r.eval(self._CREATE, len(keys), *keys, *args), stored_bytes_limit)
         pipe = self.r.pipeline()
-        meta, admit_at = self._stage_create(pipe, kind, request, items_total, chunk_size, owner, callback_url,
-                                            active_limit, task_ids, chunk_key, items_key, item_time_bound_s,
-                                            job_time_limit_s, enqueue, items_bytes, stored_bytes_limit)
-        admitted = pipe.execute()[admit_at]
+        for command in bulk:
+            pipe.execute_command(*command)
+        pipe.eval(self._CREATE, len(keys), *keys, *args)
+        admitted = pipe.execute()[-1]
         if admitted != 1:
-            discard = self.r.pipeline()
-            self._stage_delete(discard, meta["id"], owner)
-            discard.execute()
+            self.r.delete(*{command[1] for command in bulk})  # written before the script refused the job
         return self._admitted(meta, admitted, stored_bytes_limit)
 
     async def create_async(self, client: redis.asyncio.Redis, *args, **kwargs) -> dict | None:
         """``create`` (the same arguments after ``client``) through an asyncio client
-        (``decode_responses``, the same server): the same transaction, for the API's event loop."""
+        (``decode_responses``, the same server): the same script, for the API's event loop."""
         bound = _CREATE_SIGNATURE.bind(self, *args, **kwargs)
         bound.apply_defaults()
-        pipe = client.pipeline()
-        meta, admit_at = self._stage_create(pipe, *bound.args[1:])
-        admitted = (await pipe.execute())[admit_at]
-        if admitted != 1:
-            discard = client.pipeline()
-            self._stage_delete(discard, meta["id"], bound.arguments["owner"])
-            await discard.execute()
+        meta, keys, script_args, bulk = self._stage_create(*bound.args[1:])
+        if not bulk:
+            admitted = await client.eval(self._CREATE, len(keys), *keys, *script_args)
+        else:
+            pipe = client.pipeline()
+            for command in bulk:
+                pipe.execute_command(*command)
+            pipe.eval(self._CREATE, len(keys), *keys, *script_args)
+            admitted = (await pipe.execute())[-1]
+            if admitted != 1:
+                await client.delete(*{command[1] for command in bulk})
         return self._admitted(meta, admitted, bound.arguments["stored_bytes_limit"])
 
     @staticmethod
@@ -145,11 +223,16 @@ class JobStore:
             raise StoredBytesExceeded(stored_bytes_limit)
         return meta if admitted == 1 else None
 
-    def _stage_create(self, pipe, kind, request, items_total, chunk_size, owner, callback_url, active_limit, task_ids,
+    def _stage_create(self, kind, request, items_total, chunk_size, owner, callback_url, active_limit, task_ids,
                       chunk_key, items_key, item_time_bound_s, job_time_limit_s, enqueue, items_bytes,
-                      stored_bytes_limit) -> tuple[dict, int]:
-        """Queue a new job's transaction on ``pipe`` (a sync or an asyncio pipeline); its record,
-        and the position of the admission's answer among the transaction's."""
+                      stored_bytes_limit) -> tuple[dict, list, list, list]:
+        """A new job's record, the keys and arguments of the one script (``_CREATE``) that admits
+        and writes it, and its large writes (``_Commands.BULK``: a large request's text or
+        items, sent beside the script in a transaction, deleted if it refuses the job): its writes
+        are recorded here (``_Commands``), not sent, and run by the script only when the job is
+        admitted. One command instead of a transaction of a dozen: a dozen fewer replies to parse
+        and commands to pack in the API, nothing written for a job refused (nothing to take back),
+        and the same atomicity (a script runs whole, alone)."""
         job_id = uuid.uuid4().hex
         chunks = [(start, min(start + chunk_size, items_total)) for start in range(0, items_total, chunk_size)]
         meta = {
@@ -163,11 +246,8 @@ class JobStore:
                         "delivered_at": None} if callback_url else None,
         }
         meta["task_ids"] = list(task_ids) if task_ids is not None else [uuid.uuid4().hex for _ in chunks]
-        pipe.eval(self._PRUNE_INDEX, 3, *self._accounts(owner), self.key(""), self.PRUNED_PER_JOB)
+        pipe = _Commands()
         request_bytes = self._put_request(pipe, job_id, request, chunk_key, items_key) + items_bytes
-        admit_at = len(pipe)
-        pipe.eval(self._ADMIT, 3, self.owner_key(owner, "active"), *self._accounts(owner)[1:], job_id, active_limit,
-                  max(request_bytes, self.STORED_BYTES_FLOOR), stored_bytes_limit)
         pipe.hset(self.key(job_id), mapping={k: dumps(v) for k, v in meta.items() if k != "task_ids"})
         meta["chunks"] = chunks  # not stored: every read of the job (each poll) would read them (JobStore.chunks)
         pipe.zadd(self.owner_key(owner, "jobs"), {job_id: meta["created_at"]})
@@ -175,10 +255,12 @@ class JobStore:
         if meta["task_ids"]:
             pipe.rpush(self.key(job_id, "tasks"), *meta["task_ids"])
         if enqueue is not None:
-            commands = enqueue(meta)
-            pipe.eval(self._RUN_IF_ADMITTED, 1, self.owner_key(owner, "active"), job_id,
-                      *(part for name, args in commands for part in (name, len(args), *args)))
-        return meta, admit_at
+            for name, args in enqueue(meta):
+                pipe.command(name, *args)
+        keys = [*self._accounts(owner), self.owner_key(owner, "active")]
+        args = [self.key(""), self.PRUNED_PER_JOB, job_id, active_limit, max(request_bytes, self.STORED_BYTES_FLOOR),
+                stored_bytes_limit, pipe.text()]
+        return meta, keys, args, pipe.bulk
 
     @staticmethod
     def chunks(meta: dict) -> list[tuple[int, int]]:
@@ -892,36 +974,10 @@ class JobStore:
     def owner_key(owner: str, part: str) -> str:
         return f"geocert:owner:{owner}:{part}"
 
-    # Count a job among the owner's active jobs unless it already has the limit (ARGV[2]; 0: no
-    # limit), and its bytes (ARGV[3]) among those of the owner's stored jobs unless they would
-    # pass theirs (ARGV[4]; 0: no limit): 1, else 0 (active) or -1 (stored bytes).
-    _ADMIT = """
-    if tonumber(ARGV[2]) > 0 and redis.call('SCARD', KEYS[1]) >= tonumber(ARGV[2]) then return 0 end
-    local stored = tonumber(redis.call('GET', KEYS[3]) or '0')
-    if tonumber(ARGV[4]) > 0 and stored + tonumber(ARGV[3]) > tonumber(ARGV[4]) then return -1 end
-    redis.call('SADD', KEYS[1], ARGV[1])
-    redis.call('HSET', KEYS[2], ARGV[1], ARGV[3])
-    redis.call('INCRBY', KEYS[3], ARGV[3])
-    return 1
-    """
-
-    # Run the commands in ARGV[2:] (each its name, its argument count, its arguments) when the job
-    # ARGV[1] was admitted (_ADMIT, earlier in the same transaction).
-    _RUN_IF_ADMITTED = """
-    if redis.call('SISMEMBER', KEYS[1], ARGV[1]) == 0 then return 0 end
-    local at = 2
-    while at <= #ARGV do
-      local count = tonumber(ARGV[at + 1])
-      redis.call(ARGV[at], unpack(ARGV, at + 2, at + 1 + count))
-      at = at + 2 + count
-    end
-    return 1
-    """
-
     # An owner's accounts of its jobs that exist: the index (created time -> id), each job's
     # bytes, and their sum. A job leaves them when deleted, when a listing meets it expired, and
     # when a submission of its owner finds it expired among the index's ARGV[2] oldest entries
-    # (_PRUNE_INDEX: so a key that never lists keeps about its jobs that exist, not every job it made).
+    # (_CREATE: so a key that never lists keeps about its jobs that exist, not every job it made).
     def _accounts(self, owner: str) -> tuple[str, str, str]:
         return self.owner_key(owner, "jobs"), self.owner_key(owner, "stored"), self.owner_key(owner, "stored_bytes")
 
@@ -938,10 +994,32 @@ class JobStore:
     end
     """
     _FORGET = _FORGET_LUA + "forget(ARGV[1])"
-    _PRUNE_INDEX = _FORGET_LUA + """
+    # A job's creation, whole (JobStore._stage_create), KEYS its owner's accounts (_accounts) and
+    # active jobs. The owner's index pruned: those of its ARGV[2] oldest entries whose job (key
+    # prefix ARGV[1]) has expired are forgotten. The job ARGV[3] admitted: counted among the
+    # owner's active jobs unless they are at its limit (ARGV[4]; 0: no limit), and its bytes
+    # (ARGV[5]) among those of the owner's stored jobs unless they would pass theirs (ARGV[6]; 0:
+    # no limit). Only then the commands in ARGV[7] run (a JSON array: each its name, its argument
+    # count, its arguments): the job's writes and its tasks' messages. 1, else 0 (active) or -1
+    # (stored bytes).
+    _CREATE = _FORGET_LUA + """
     for _, id in ipairs(redis.call('ZRANGE', KEYS[1], 0, tonumber(ARGV[2]) - 1)) do
       if redis.call('EXISTS', ARGV[1] .. id) == 0 then forget(id) end
     end
+    if tonumber(ARGV[4]) > 0 and redis.call('SCARD', KEYS[4]) >= tonumber(ARGV[4]) then return 0 end
+    local stored = tonumber(redis.call('GET', KEYS[3]) or '0')
+    if tonumber(ARGV[6]) > 0 and stored + tonumber(ARGV[5]) > tonumber(ARGV[6]) then return -1 end
+    redis.call('SADD', KEYS[4], ARGV[3])
+    redis.call('HSET', KEYS[2], ARGV[3], ARGV[5])
+    redis.call('INCRBY', KEYS[3], ARGV[5])
+    local commands = cjson.decode(ARGV[7])
+    local at = 1
+    while at <= #commands do
+      local count = commands[at + 1]
+      redis.call(commands[at], unpack(commands, at + 2, at + 1 + count))
+      at = at + 2 + count
+    end
+    return 1
     """
 
     # A job that ends adds what its result holds (the stored result, and the fragments a streamed

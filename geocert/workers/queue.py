@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import re
 import threading
 
 from geocert.workers.priorities import FIRST, LATER
@@ -116,10 +117,48 @@ def _collected(producer, meta: dict, request_id: str | None) -> list[tuple[str, 
     # kombu's Producer publishes through its current batch (thread-local, as Producer.batch sets it).
     producer._batch_local.current = collected
     try:
-        _chunk_group(meta, request_id).apply_async(producer=producer)
+        _send_as_group(meta, request_id, producer)
     finally:
         del producer._batch_local.current
     return collected.commands
+
+
+def _send_as_group(meta: dict, request_id: str | None, producer) -> None:
+    """``_chunk_group(meta, request_id).apply_async(producer=producer)`` without the canvas: each
+    chunk's task message made and published as ``send_task`` makes and publishes it, with the
+    options the group's apply hands it (its group's id and its index in it, the app's reply
+    address), for this case alone: no countdown, eta or expiry, its result ignored, no parent task
+    (the API is not a worker), the task named, not registered here. The same messages
+    (tests/workers/test_queue.py compares them with the group's, headers, body and properties) for
+    about half the CPU: the group froze, cloned and merged each signature, and send_task looked
+    the task up, routed it, and made a result object, before the same message and publish."""
+    from celery.utils import uuid
+
+    from geocert.workers.celery_app import celery_app
+
+    amqp = celery_app.amqp
+    group_id, reply_to = uuid(), celery_app.thread_oid
+    failed = [_task(SOLVE_CHUNK_FAILED)]
+    for index, ((start, stop), task_id) in enumerate(zip(meta["chunks"], meta["task_ids"])):
+        limits = task_options(meta["kind"], meta.get("item_time_bound_s"), stop - start, meta.get("job_time_limit_s"))
+        args = (meta["id"], start, stop, request_id)
+        options = amqp.router.route({"priority": FIRST if index == 0 else LATER}, SOLVE_CHUNK, args, {}, None)
+        # Celery's saferepr of these arguments (a hex id, two ints, a request id of the API's
+        # characters or None, well under its size limit) is their repr, without its cost.
+        reprs = {"argsrepr": repr(args), "kwargsrepr": "{}"} if _plain(request_id) else {}
+        message = amqp.create_task_message(
+            task_id, SOLVE_CHUNK, args, {}, None, None, group_id, index, None, 0, None, None, failed, reply_to,
+            limits["time_limit"], limits["soft_time_limit"], celery_app.conf.task_send_sent_event, None, None, None,
+            None, ignore_result=True, replaced_task_nesting=0, **reprs, **options)
+        with producer.connection._reraise_as_library_errors():
+            amqp.send_task_message(producer, SOLVE_CHUNK, message, **options)
+
+
+def _plain(request_id: str | None) -> bool:
+    return request_id is None or _PLAIN.fullmatch(request_id) is not None
+
+
+_PLAIN = re.compile(r"[A-Za-z0-9._:-]{1,128}")
 
 
 _LOOP_PRODUCER: list = []  # what ready_loop_producer made: the producer, or None (the broker cannot collect)

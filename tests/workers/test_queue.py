@@ -46,15 +46,18 @@ print(json.dumps({"can_collect": queue.can_collect(), "collected": collected["ta
 
 
 def _task(message: str) -> dict:
-    """A queued Celery message as a worker reads it: its headers and arguments, without what
-    differs between two publishes of the same task (its id and delivery tag, its group's id)."""
+    """A queued Celery message as a worker reads it: its headers, arguments and properties
+    (its priority among them), without what differs between two publishes of the same task (its
+    id, correlation id and delivery tag, its group's id)."""
     import base64
 
     message = json.loads(message)
     args, kwargs, embed = json.loads(base64.b64decode(message["body"]))
     headers = {k: v for k, v in message["headers"].items() if k not in ("id", "root_id", "group", "origin")}
-    return {"id": message["headers"]["id"], "task": [headers, args, kwargs, embed,
-                                                      message["properties"]["delivery_info"]]}
+    properties = {k: v for k, v in message["properties"].items() if k not in ("correlation_id", "delivery_tag")}
+    return {"id": message["headers"]["id"], "task": [headers, args, kwargs, embed, properties,
+                                                      {k: v for k, v in message.items() if k not in ("headers", "body",
+                                                                                                    "properties")}]}
 
 
 def test_tasks_collected_into_the_jobs_transaction_are_the_messages_a_publish_queues(tmp_path):

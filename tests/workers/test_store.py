@@ -102,6 +102,82 @@ class TestChunkStart:
                     if fields["event"] == "status"]
         assert statuses == ["queued", "running"]
 
+    def test_a_job_is_created_by_one_command_and_a_refused_one_writes_nothing(self, jobs, monkeypatch):
+        """Its admission, writes and tasks' messages are one script (JobStore._CREATE), not a
+        transaction of a dozen commands; a job refused is refused before anything of it is
+        written (nothing to delete)."""
+        import redis.connection
+
+        writes = []
+        send = redis.connection.AbstractConnection.send_packed_command
+        monkeypatch.setattr(redis.connection.AbstractConnection, "send_packed_command",
+                            lambda self, *args, **kwargs: writes.append(1) or send(self, *args, **kwargs))
+        run = lambda: {name.removeprefix("cmdstat_") for name in jobs.r.info("commandstats")} - {"config", "info"}
+        enqueue = lambda meta: [("LPUSH", ("test-queue", f"message of {task}")) for task in meta["task_ids"]]
+        jobs.r.config_resetstat()
+        writes.clear()
+        meta = jobs.create("triangulation", request_of(3), 3, 2, "one-command", active_limit=1, chunk_key="tracks",
+                           enqueue=enqueue)
+        assert len(writes) == 1 and "eval" in run() and not run() & {"multi", "exec"}
+        assert jobs.r.lrange("test-queue", 0, -1) == [f"message of {task}" for task in reversed(meta["task_ids"])]
+        assert jobs.request(meta["id"]) == request_of(3) and jobs.get(meta["id"])["status"] == "queued"
+        jobs.r.config_resetstat()
+        assert jobs.create("triangulation", request_of(3), 3, 2, "one-command", active_limit=1, chunk_key="tracks",
+                           enqueue=enqueue) is None  # its one active job already
+        assert not run() & {"set", "hset", "rpush", "lpush", "xadd", "zadd", "sadd", "rename", "del", "incrby"}
+        assert jobs.r.llen("test-queue") == 2 and jobs.r.zcard(JobStore.owner_key("one-command", "jobs")) == 1
+
+    @pytest.mark.parametrize("on_the_loop", [False, True])
+    def test_a_large_request_is_written_beside_the_script_and_taken_back_if_refused(self, jobs, on_the_loop):
+        """Its text and items (over _Commands.BULK) go as commands of their own in a transaction
+        with the script, not through it; a job refused leaves none of them."""
+        import asyncio
+
+        import redis.asyncio
+
+        def create(*args, **kwargs):
+            if not on_the_loop:
+                return jobs.create(*args, **kwargs)
+
+            async def run():
+                client = redis.asyncio.Redis(connection_pool=redis.asyncio.ConnectionPool(
+                    connection_class=redis.asyncio.UnixDomainSocketConnection if "path" in
+                    jobs.r.connection_pool.connection_kwargs else redis.asyncio.Connection,
+                    **jobs.r.connection_pool.connection_kwargs))
+                try:
+                    return await jobs.create_async(client, *args, **kwargs)
+                finally:
+                    await client.aclose()
+
+            return asyncio.run(run())
+
+        owner = f"bulk-{on_the_loop}"
+        large = request_of(300) | {"note": "x" * 40_000}
+        kept = create("triangulation", large, 300, 100, owner, active_limit=1, chunk_key="tracks")
+        assert jobs.request(kept["id"]) == large and len(jobs.chunk_request(kept["id"], 100, 200)["data"]["tracks"]) == 300
+        whole = create("reconstruction", large, 1, 1, owner + "-whole")
+        assert jobs.request_text(whole["id"]) == json.dumps(large)
+        before = set(jobs.r.scan_iter("geocert:job:*"))
+        assert create("triangulation", large, 300, 100, owner, active_limit=1, chunk_key="tracks") is None
+        assert set(jobs.r.scan_iter("geocert:job:*")) == before  # nothing of the refused job
+
+    def test_a_job_of_more_tasks_and_items_than_a_lua_unpack_takes_is_created_whole(self, jobs):
+        meta = jobs.create("triangulation", request_of(9000), 9000, 1, "many-tasks", chunk_key="tracks")
+        assert jobs.r.lrange(JobStore.key(meta["id"], "tasks"), 0, -1) == meta["task_ids"] and len(meta["task_ids"]) == 9000
+        assert jobs.request(meta["id"]) == request_of(9000)
+
+    def test_what_the_creation_script_writes_reads_back_exactly(self, jobs):
+        """The script's commands travel as one JSON array (decoded by Redis's cjson): non-ASCII
+        and astral text, quotes and backslashes, and the created time's float come back as sent."""
+        request = request_of(2) | {"callback_url": "https://example.com/\u00e9?q=\"\\", "label": "clé 😀 \\ \" \u0001"}
+        owner = "clé-😀"
+        meta = jobs.create("triangulation", request, 2, 1, owner, chunk_key="tracks",
+                           enqueue=lambda meta: [("LPUSH", ("test-queue-exact", b"bytes \xc3\xa9", 7, 0.1 + 0.2))])
+        assert jobs.request(meta["id"]) == request and jobs.request_text(meta["id"]) == json.dumps(request)
+        assert jobs.r.zscore(JobStore.owner_key(owner, "jobs"), meta["id"]) == meta["created_at"]
+        assert jobs.get(meta["id"])["owner"] == owner
+        assert jobs.r.lrange("test-queue-exact", 0, -1) == [repr(0.1 + 0.2), "7", "bytes é"]
+
     def test_a_task_of_an_ended_or_gone_job_starts_nothing(self, jobs):
         meta = jobs.create("triangulation", request_of(10), 10, 5, "someone", chunk_key="tracks")
         assert jobs.cancel_if_queued(meta["id"])

@@ -18,7 +18,8 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.routing import APIRoute
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
-from geocert.app.api.deps import Caller, JobStoreDep, error_responses, get_async_redis, rate_limited, stream_slot
+from geocert.app.api.deps import (Caller, JobStoreDep, error_responses, get_async_redis, get_store, rate_limited,
+                                  stream_slot)
 from geocert.settings import get_settings
 from geocert.app import lifecycle
 from geocert.app import exports, processes, shape, streamed, submissions
@@ -118,7 +119,6 @@ async def submit_job(
     body: Annotated[JobRequest, Body(openapi_examples=JOB_EXAMPLES)],
     request: Request,
     response: Response,
-    store: JobStoreDep,
     owner: Caller,
     idempotency_key: Annotated[str | None, Header(max_length=255, description=(
         "repeat a submission safely: the same key and body give the same job; "
@@ -130,6 +130,7 @@ async def submit_job(
     """Queue a job; answers 202 with its id and a Location to poll. With ``Prefer: wait=N`` the
     answer waits up to N seconds (at most 60) for the job to end: a job that ends in time comes
     back whole (200, its result or error), one that does not as the usual 202."""
+    store = get_store()  # not a dependency: each costs FastAPI more than the call
     whole = getattr(request.state, "whole_body", None)
     if whole is not None:  # a large body of a kind without an item list to stream
         request.state.whole_body = None  # not kept while waiting
