@@ -65,6 +65,10 @@ class StoredBytesExceeded(Exception):
         self.limit = limit
 
 
+class ResultGone(LookupError):
+    """The job's result expired (or was deleted) while it was being read: the job is gone."""
+
+
 def _text(value) -> str:
     """A command's argument as redis-py would send it, as text (bytes must be UTF-8)."""
     if isinstance(value, bytes):
@@ -424,6 +428,7 @@ class JobStore:
         result: save_fragment), None (plain JSON, stored before results were compressed)."""
         return meta.get("result_encoding") if meta is not None else self.field(job_id, "result_encoding")
 
+    EAGER_FRAGMENTS = 64  # a streamed result of at most this many fragments is read in one command
     RESULT_PIECE_BYTES = 1 << 16  # compressed bytes read at a time when a result is sent (about 4x that decompressed)
 
     def result_pieces(self, job_id: str, meta: dict | None = None) -> Iterator[bytes] | None:
@@ -440,6 +445,13 @@ class JobStore:
         length = self.binary.strlen(key)
         if not length:
             return None
+        if length <= self.RESULT_PIECE_BYTES:
+            # Read whole before anything is sent: a result that expires between STRLEN and its
+            # read is then a job that is gone (ResultGone: a 404), not a response cut short.
+            raw = self.binary.get(key)
+            if raw is None:
+                raise ResultGone(job_id)
+            return iter([zlib.decompress(raw)])
 
         def pieces() -> Iterator[bytes]:
             decompressor = zlib.decompressobj()
@@ -456,6 +468,13 @@ class JobStore:
         if raw is None:
             return None
         head, tail, starts = json.loads(zlib.decompress(raw))
+        if len(starts) <= self.EAGER_FRAGMENTS:
+            # A result of few fragments is read whole (one HMGET) before anything is sent, so
+            # that one expiring meanwhile is a job that is gone, not a response cut short.
+            fragments = self.binary.hmget(self.key(job_id, "fragments"), [str(start) for start in starts])
+            if any(fragment is None for fragment in fragments):
+                raise ResultGone(job_id)
+            return iter([head.encode(), b",".join(zlib.decompress(f) for f in fragments), tail.encode()])
 
         def pieces() -> Iterator[bytes]:
             yield head.encode()
@@ -472,7 +491,10 @@ class JobStore:
         """The stored result as JSON text (None when there is none), read in one piece."""
         encoding = self._encoding(job_id, meta)
         if encoding == "zlib-fragments":
-            pieces = self._fragment_pieces(job_id)
+            try:
+                pieces = self._fragment_pieces(job_id)
+            except ResultGone:
+                return None
             return None if pieces is None else b"".join(pieces).decode()
         if encoding == "zlib":
             raw = self.binary.get(self.key(job_id, "result"))

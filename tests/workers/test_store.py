@@ -328,6 +328,31 @@ class TestStreamedResult:
         jobs.delete(meta["id"])
         assert jobs.r.exists(jobs.key(meta["id"], "fragments")) == 0
 
+    def test_a_result_that_expires_while_read_is_a_job_gone_not_a_cut_response(self, jobs, monkeypatch):
+        """A result expiring between the job's status and its result's read (a GET at the end
+        of its time to live) ended the response midway ("removed while it was sent", the client
+        seeing an incomplete chunked body). A small result is now read whole before anything is
+        sent: gone is ResultGone (the API's 404), never a half-sent body."""
+        from geocert.jobs.runner import result_shell, stats_from, merged_sums
+        from geocert.jobs.store import ResultGone
+
+        kind, options, items = self.solved_items(12)
+        meta = jobs.create("triangulation", request_of(12), 12, 5, "someone", chunk_key="tracks")
+        self.store_runs(jobs, meta["id"], kind, items, [0, 5, 9, 12])
+        stats = stats_from(merged_sums([sums for _, sums in jobs.fragment_plan(meta["id"], 12)]), 1.5)
+        jobs.end(meta["id"], "done", fragments=(*result_shell(kind, options, stats), [0, 5, 9]))
+        jobs.r.hdel(jobs.key(meta["id"], "fragments"), "5")  # one fragment expired first
+        with pytest.raises(ResultGone):
+            jobs.result_pieces(meta["id"])
+        assert jobs.result_text(meta["id"]) is None
+
+        plain = jobs.create("triangulation", request_of(1), 1, 1, "someone")
+        jobs.end(plain["id"], "done", result={"kind": "triangulation", "tracks": []})
+        binary = type(jobs.binary)
+        monkeypatch.setattr(binary, "get", lambda self, key: None)  # gone between STRLEN and GET
+        with pytest.raises(ResultGone):
+            jobs.result_pieces(plain["id"])
+
     @pytest.mark.parametrize("cuts, plan", [
         ([0, 5, 9, 12], [0, 5, 9]),
         ([0, 5, 12], [0, 5]),

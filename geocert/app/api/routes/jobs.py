@@ -29,7 +29,7 @@ from geocert.app.errors import ApiProblem
 from geocert.app.schemas import JOB_EXAMPLES, JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
 from geocert.workers.queue import loop_producer, loop_producer_tried, ready_loop_producer, withdraw_queued
-from geocert.jobs.store import REDIS_GONE, TERMINAL, JobStore, events, read_job
+from geocert.jobs.store import REDIS_GONE, TERMINAL, JobStore, ResultGone, events, read_job
 
 # As many export processes as exports may run at once (the gate on the export path refuses more).
 _EXPORTS = processes.Pool(lambda: get_settings().max_concurrent_exports or 2, exports.ready,
@@ -238,7 +238,10 @@ def job_document(store: JobStore, job: dict) -> dict | Response:
     again took most of a large job's GET: over 1 s for 5,000 tracks on this machine under load."""
     if job["status"] not in TERMINAL or job.get("result_form") != "model":
         return store.document(job)
-    pieces = store.result_pieces(job["id"], job)
+    try:
+        pieces = store.result_pieces(job["id"], job)
+    except ResultGone:  # it expired (or was deleted) between reading its status and its result
+        raise ApiProblem(404, f"job {job['id']} not found (it expired while it was read)") from None
     shell = {key: job.get(key) for key in store._SUMMARY + ("error", "webhook")}
     text = Job.model_validate(shell | {"result": None, "links": store.links(job["id"])}).model_dump_json(by_alias=True)
     head, marker, tail = text.partition('"result":null')  # the one top-level key of that name (strings escape quotes)
