@@ -1,0 +1,139 @@
+"""Review 20: a hostile review of the calibration tie's centred model (calibration_tie._centred_
+reference, centred_fit): can a forger inflate the cost that model is allowed beyond the returned
+cameras (model_cost_px2 - returned_cost_px2)?
+
+Found: the result chooses its gauge. The same reconstruction stated 1e15 times as large (every
+point and translation scaled: every image, every cost and every K the same) froze the fit's points
+and translations (its damping had an absolute floor of 1e-9, far above their curvature there),
+and the fit stopped on the rotations and the focal length alone, "converged" (a small last
+decrease) at 2,032,844 px^2 where the model's least is 530: a certificate re-posed with the focal
+length 1.15 times the returned one and fitting the observations at 8,000 times the returned
+cameras' cost was tied. centred_fit now fits in a gauge of unit size it chooses itself
+(_unit_gauge), damps relative to each block, and calls a fit converged only when it is stationary
+(the step its normal equations predict lowers its cost by at most STATIONARY of it).
+
+Tried and refused (or stricter) on the code before this review, unchanged here: _built_centred
+made false (the returned cameras stay the reference: stricter); non-finite points, cameras or
+pixels, and a fit beyond MAX_VIEWS or MAX_PAIRS (None: stricter); a model cost below the
+returned cameras' (the addition is max(0, ...)); a NaN cost (refused: not cost <= allowed).
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from geocert.jobs.runner import solve_job
+from geocert.solvers.reconstruction import calibration_tie, centred_fit
+from tests.support import stage as _stage
+from tests.verify.test_forgeries_review18 import SHIFTS, _scene_job
+
+LARGE = 1e15  # the gauge's scale: a scene this many times as large (units are the result's to choose)
+
+
+@pytest.fixture(scope="module")
+def off_centre() -> dict:
+    """The defaults' run on the (+30, -20)-shifted scene (verifying: review 18)."""
+    return solve_job(_scene_job({}, points=200, shift=np.tile(SHIFTS["(+30, -20)"], (8, 1))))
+
+
+def _scaled(result: dict, scale: float) -> dict:
+    """The result's reconstruction in another gauge: points and translations times ``scale``
+    (each P's last column), the same images, K and R."""
+    out = copy.deepcopy(result)
+    for camera in out["cameras"]:
+        if camera.get("P") is not None:
+            camera["P"] = (np.asarray(camera["P"], dtype=float) * [1.0, 1.0, 1.0, scale]).tolist()
+    for point in out["points"]:
+        if point.get("point") is not None:
+            point["point"] = (np.asarray(point["point"], dtype=float) * scale).tolist()
+    return out
+
+
+def _observations(result: dict):
+    cameras = [c for c in result["cameras"] if c.get("registered")]
+    placed = [p for p in result["points"] if p.get("point") is not None]
+    column = {c["view"]: k for k, c in enumerate(cameras)}
+    view, point, pixels = (np.array(a) for a in zip(*[(column[v], j, (u, w)) for j, p in enumerate(placed)
+                                                     for v, u, w in p["observations"]]))
+    return cameras, placed, column, view, point, pixels.astype(float)
+
+
+def _fit_cost(result: dict) -> float | None:
+    cameras, placed, _, view, point, pixels = _observations(result)
+    X = np.array([[*p["point"], 1.0] for p in placed])
+    images = centred_fit.fit(np.array([c["P"] for c in cameras]), np.tile([319.5, 239.5], (len(cameras), 1)), X,
+                             view, point, pixels)
+    return None if images is None else float(np.sum(np.square(images - pixels)))
+
+
+@pytest.mark.parametrize("scale", [LARGE, 1e-15])
+def test_the_centred_fit_does_not_depend_on_the_results_gauge(off_centre, scale):
+    """The centred model's cost is a property of the observations: the fit finds the same from
+    the reconstruction stated at any scale (1e15 times as large froze its points and translations:
+    2,032,844 px^2 "converged", the model's least 530)."""
+    genuine = _fit_cost(off_centre)
+    assert genuine is not None
+    assert _fit_cost(_scaled(off_centre, scale)) == pytest.approx(genuine, rel=1e-6)
+
+
+def test_the_genuine_tie_holds_in_any_gauge(off_centre):
+    """The genuine certificate of the off-centre run, its result stated 1e15 times as large: tied,
+    with the same figures (it was refused, held to the frozen fit's images 40 px away)."""
+    stage = _stage(off_centre, "autocalibration")
+    data = off_centre["calibration_certificate"]["data"]
+    genuine = calibration_tie.tie(off_centre, stage, data)
+    scaled = calibration_tie.tie(_scaled(off_centre, LARGE), stage, data)
+    assert scaled["reference"] == calibration_tie.CENTRED_REFERENCE
+    assert scaled["model_cost_px2"] == pytest.approx(genuine["model_cost_px2"], rel=1e-6)
+    assert scaled["allowed_cost_px2"] == pytest.approx(genuine["allowed_cost_px2"], rel=1e-6)
+
+
+def _frozen_images(result: dict) -> np.ndarray:
+    """What the fit before this review returned for the result stated LARGE times as large: the
+    centred model adjusted in the rotations and the focal length only (points and translations
+    held), from the returned poses (scipy here, as a forger would compute it)."""
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
+
+    cameras, placed, _, view, point, pixels = _observations(result)
+    R0, t0 = np.array([c["R"] for c in cameras]), np.array([c["t"] for c in cameras])
+    X = np.array([p["point"] for p in placed])[point]
+    f0 = float(np.median([c["K"][0][0] for c in cameras]))
+
+    def images(p):
+        R = Rotation.from_rotvec(p[:-1].reshape(-1, 3)).as_matrix() @ R0
+        q = np.einsum("kij,kj->ki", R[view], X) + t0[view]
+        return p[-1] * q[:, :2] / q[:, 2:] + [319.5, 239.5]
+
+    solution = least_squares(lambda p: (images(p) - pixels).ravel(), np.r_[np.zeros(3 * len(cameras)), f0],
+                             method="lm")
+    return images(solution.x)
+
+
+def test_a_certificate_reposed_with_another_focal_length_in_a_large_gauge_is_refused(off_centre):
+    """A forger states the off-centre run 1e15 times as large (every image, K and cost the same;
+    the points' and cameras' certificates would be re-solved in it) and carries a certificate
+    re-posed with 1.15 times the returned focal length at the centre, fitted to the frozen fit's
+    images moved 5% toward the observations: 3.71 px from them (3.88 allowed), at a cost of
+    1,835,473 px^2 (2,033,131 allowed; the returned cameras 227). Refused now (held to the
+    model's own fit, it costs 1,204 px^2 against 817)."""
+    from geocert.solvers.reconstruction import bundle
+
+    cameras, placed, column, view, point, pixels = _observations(off_centre)
+    frozen = _frozen_images(off_centre)
+    target = frozen + 0.05 * (pixels - frozen)
+    K = np.array(cameras[0]["K"], dtype=float)
+    K[:2, 2] = [319.5, 239.5]
+    K[:2, :2] *= 1.15
+    K, R, t, X, _, _ = bundle.metric(K, np.array([c["R"] for c in cameras]), np.array([c["t"] for c in cameras]),
+                                     np.array([p["point"] for p in placed]), view, point, target, model="fixed")
+    stage = _stage(off_centre, "autocalibration")
+    row = {p["track"]: j for j, p in enumerate(placed)}
+    data = {**off_centre["calibration_certificate"]["data"],
+            "cameras": [(K @ np.c_[R[column[v]], t[column[v]]]).tolist() for v in stage["certificate_views"]],
+            "points": [[*X[row[track]].tolist(), 1.0] for track in stage["certificate_tracks"]]}
+    with pytest.raises(calibration_tie.Invalid, match="it is not (these tracks' reconstruction|a reconstruction of these tracks')"):
+        calibration_tie.tie(_scaled(off_centre, LARGE), stage, data)
