@@ -244,12 +244,16 @@ def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple
                        ) -> tuple[list, float] | None:
     """When the certificate's cameras are an incremental registration's (_built_centred): the
     images of the shared observations (``at``'s order) in the returned reconstruction re-adjusted in
-    that model (centred_fit.fit, over every observation of the result's placed points), and its cost
-    on them (px^2); else None, and the certificate is held to the returned cameras (a projective
-    reconstruction's cameras are as free as any model's)."""
+    that model (centred_fit.fit, over the shared observations only: the ones the tie measures, whose
+    returned cost it compares; observations of other points, which no returned cost here answers
+    for, pulled the fit, and its focal length, where a certificate re-posed at 1.23 times the focal
+    length followed it), and its cost on them (px^2); else None, and the certificate is held to the
+    returned cameras (a projective reconstruction's cameras are as free as any model's)."""
     if not _built_centred(result, views, cameras):
         return None
-    registered = [c for c in result["cameras"] if c.get("registered") is True and c.get("P") is not None]
+    shared = set(at[0])
+    registered = [c for c in result["cameras"] if c.get("registered") is True and c.get("P") is not None
+                  and c.get("view") in views]
     index = {int(c["view"]): k for k, c in enumerate(registered)}
     X, view, point, uv, row = [], [], [], [], {}
     try:  # (the fields' shapes are checked elsewhere; one unreadable here leaves the returned cameras the reference)
@@ -259,7 +263,7 @@ def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple
         for k, p in enumerate(result["points"]):
             if p.get("point") is None:
                 continue
-            seen = [(int(v), u, w) for v, u, w in p.get("observations") or [] if int(v) in index]
+            seen = [(int(v), u, w) for v, u, w in p.get("observations") or [] if (k, int(v)) in shared]
             if not seen:
                 continue
             X.append(p["point"] if p.get("at_infinity") else [*p["point"], 1.0])
