@@ -184,3 +184,42 @@ def test_observations_the_certificate_does_not_hold_do_not_pull_the_centred_fit(
     genuine = calibration_tie.tie(off_centre_subset, stage, off_centre_subset["calibration_certificate"]["data"])
     assert genuine["reference"] == calibration_tie.CENTRED_REFERENCE
     assert genuine["shared_cost_px2"] <= genuine["allowed_cost_px2"]
+
+
+def _ring(views: int, points: int) -> tuple:
+    """A ring of cameras (one K, its principal point 10 px off the centre) round points every
+    camera sees: centred_fit's arguments."""
+    rng = np.random.default_rng(0)
+    K = np.array([[808.0, 0.0, 330.0], [0.0, 800.0, 230.0], [0.0, 0.0, 1.0]])
+    P = []
+    for a in 2 * np.pi * np.arange(views) / views:
+        R = np.array([[np.cos(a), 0.0, -np.sin(a)], [0.0, 1.0, 0.0], [np.sin(a), 0.0, np.cos(a)]])
+        P.append(K @ np.c_[R, -R @ [5 * np.sin(a), 0.0, -5 * np.cos(a)]])
+    P, X = np.array(P), np.c_[rng.uniform(-1, 1, (points, 3)), np.ones(points)]
+    view, point = np.tile(np.arange(views), points), np.repeat(np.arange(points), views)
+    x = np.einsum("kij,kj->ki", P[view], X[point])
+    pixels = x[:, :2] / x[:, 2:] + rng.normal(0, 0.3, (len(view), 2))
+    return P, np.tile([319.5, 239.5], (views, 1)), X, view, point, pixels
+
+
+@pytest.mark.parametrize("views, points", [(120, 10), (50, 60)],
+                         ids=["beyond the views bound", "beyond the pairs bound"])
+def test_a_centred_fit_beyond_its_cost_bound_is_declined(views, points):
+    """The fit's cost grows with the views cubed and the pairs of observations of one point: at
+    the bounds before this review (300 views, 5 million pairs: 16,500 observations) one fit took
+    171 s and up to 76 solves of about 30 s each were allowed. Beyond 100 views or 100,000 pairs
+    the fit declines (the returned cameras stay the reference: stricter); within them it runs."""
+    assert views > centred_fit.MAX_VIEWS or points * views ** 2 > centred_fit.MAX_PAIRS
+    assert centred_fit.fit(*_ring(views, points)) is None
+    assert centred_fit.fit(*_ring(40, 20)) is not None
+
+
+def test_a_centred_fit_of_more_solves_than_its_bound_is_not_used(off_centre, monkeypatch):
+    """Each solve of the fit costs one Schur complement and one dense system: past SOLVES (the
+    off-centre run needs 6) the fit declines and the run is held to the returned cameras."""
+    monkeypatch.setattr(centred_fit, "SOLVES", 5)
+    with pytest.raises(calibration_tie.Invalid, match="reconstruction of these tracks' observations"):
+        calibration_tie.tie(off_centre, _stage(off_centre, "autocalibration"),
+                            off_centre["calibration_certificate"]["data"])
+    monkeypatch.setattr(centred_fit, "SOLVES", 6)
+    calibration_tie.tie(off_centre, _stage(off_centre, "autocalibration"), off_centre["calibration_certificate"]["data"])
