@@ -223,3 +223,46 @@ def test_a_centred_fit_of_more_solves_than_its_bound_is_not_used(off_centre, mon
                             off_centre["calibration_certificate"]["data"])
     monkeypatch.setattr(centred_fit, "SOLVES", 6)
     calibration_tie.tie(off_centre, _stage(off_centre, "autocalibration"), off_centre["calibration_certificate"]["data"])
+
+
+def test_one_observation_far_off_does_not_widen_every_observations_allowance(off_centre):
+    """The tie's floor was CONVERGENCE of the shared observations' largest coordinate. A track of
+    two views whose point lies just in front of camera 0's principal plane (its image there
+    about 4 million px out; every returned image exact) set it: each observation was allowed 803 px
+    and the fit 2.0e9 px^2, and a certificate re-posed at 1.5 times the returned focal length (its
+    point of that track placed as close as it goes: 508 px) was tied, at 1,257 times the returned
+    cameras' cost. The floor is now of the observations' median coordinate (342 there)."""
+    from scipy.optimize import least_squares
+
+    from tests.verify.test_forgeries_review18 import _reposed
+
+    stage = _stage(off_centre, "autocalibration")
+    views, tracks = stage["certificate_views"], stage["certificate_tracks"]
+    K = np.array(next(c for c in off_centre["cameras"] if c.get("registered"))["K"], dtype=float)
+    K[:2, :2] *= 1.5
+    K[:2, 2] = [319.5, 239.5]
+    data = _reposed(off_centre, K)
+    result = copy.deepcopy(off_centre)
+    P = {c["view"]: np.asarray(c["P"], dtype=float) for c in result["cameras"] if c.get("registered")}
+    R0 = np.asarray(next(c for c in result["cameras"] if c["view"] == 0)["R"], dtype=float)
+    t0 = np.asarray(next(c for c in result["cameras"] if c["view"] == 0)["t"], dtype=float)
+    point = next(p for p in result["points"] if p.get("track") == tracks[0])
+    X = -R0.T @ t0 + R0.T @ [1.0, 0.3, 2e-4]  # 2e-4 in front of camera 0, 1 aside
+    point["point"] = X.tolist()
+    point["observations"] = [[v, *(P[v] @ [*X, 1.0])[:2] / (P[v] @ [*X, 1.0])[2]]
+                             for v, _, _ in point["observations"][:2]]
+    assert point["observations"][0][0] == 0 and abs(point["observations"][0][1]) > 1e6
+    cameras = np.asarray(data["cameras"], dtype=float)
+
+    def apart(Y):
+        x = np.array([cameras[views.index(v)] @ [*Y, 1.0] for v, _, _ in point["observations"]])
+        return (x[:, :2] / x[:, 2:] - np.array([o[1:] for o in point["observations"]])).ravel()
+
+    A = np.concatenate([[u * cameras[views.index(v)][2] - cameras[views.index(v)][0],
+                         w * cameras[views.index(v)][2] - cameras[views.index(v)][1]]
+                        for v, u, w in point["observations"]])
+    start = np.linalg.svd(A)[2][-1]
+    Y = least_squares(apart, start[:3] / start[3], method="lm", x_scale="jac").x
+    data["points"][tracks.index(tracks[0])] = [*Y.tolist(), 1.0]
+    with pytest.raises(calibration_tie.Invalid, match="it is not these tracks' reconstruction"):
+        calibration_tie.tie(result, stage, data)
