@@ -28,8 +28,8 @@ about 30 s each were allowed. The bounds are now 100 views, 100,000 pairs and 45
 Tried, not reachable in a genuine result's model: a projective gauge of the returned
 reconstruction can start the fit in another basin (a stationary 36,984 px^2 where the least is
 530), but the returned cameras' models (one K; or one principal point, square pixels, no skew)
-leave a result only similarity gauges (and affine ones on critical motions, which the summary
-flags); affine gauges, tried, converged to the least.
+leave a result only similarity gauges (affine ones only on critical motions, not tried);
+affine gauges of a free model, tried directly, converged to the least.
 
 Tried and refused (or stricter) on the code before this review, unchanged here: _built_centred
 made false (the returned cameras stay the reference: stricter); non-finite points, cameras or
