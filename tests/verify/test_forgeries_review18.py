@@ -353,7 +353,10 @@ def test_a_certificate_reposed_with_another_K_beside_an_off_centre_run_is_refuse
                 "past the returned one": centre + 3 * (returned - centre)}[where]
     report = verify_any(carrying(off_centre, _reposed(off_centre, K)))
     assert not report.valid
-    assert "reconstruction of these tracks' observations" in report.first_failure["detail"]
+    # (refused by the fit test, or by the pixel test: the mirrored principal point lies 3.86 px from
+    # the centred fit's images, 3.83 allowed since the floor is of the median coordinate: review 20)
+    assert any(why in report.first_failure["detail"] for why in ("reconstruction of these tracks' observations",
+                                                                 "it is not these tracks' reconstruction"))
 
 
 @pytest.mark.parametrize("limit, value", [("ITERATIONS", 1), ("MAX_VIEWS", 7), ("MAX_PAIRS", 100)],

@@ -7,7 +7,9 @@ its points the tracks it names (certificate_tracks), every one of those views re
 result, and it must image every observation it
 shares with the result's placed points where the returned cameras image it, to within TIE_RATIO
 times the returned cameras' own RMS error on those observations, plus CONVERGENCE of the
-observations' largest coordinate. A median, or a floor of 10 px, let half the observations lie
+observations' median coordinate (each observation's larger coordinate, their median: the largest
+let one observation imaged far off, by a point just in front of a camera's principal plane, widen
+every observation's allowance, from 3.9 px to 803 on the off-centre scene). A median distance, or a floor of 10 px, let half the observations lie
 anywhere, or a reconstruction 8% off in focal length pass on tracks whose own error is 0.5 px. A
 result that places no point has nothing to tie the certificate to (without_points): its certified
 K is then claimed of the certificate's own reconstruction only, and the report says so.
@@ -69,7 +71,7 @@ TIE_RATIO, TIE_OBSERVATIONS = 10.0, 12
 # certified from it) free; two shared points per camera let a genuine certificate of another
 # reconstruction, 1.5 times the focal length, pass on 12 observations.
 TIE_POINTS_PER_CAMERA = 6
-CONVERGENCE = 2e-4  # relative to the observations' largest coordinate (above)
+CONVERGENCE = 2e-4  # relative to the observations' median coordinate (above)
 FIT_SIGMAS = 3.0  # the fit's allowance (above): standard deviations of a chi-square over the coordinates
 
 
@@ -123,7 +125,7 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
         raise Invalid("returned", f"the calibration certificate's reconstruction images an observation {worst:.3g} px "
                                   f"from where {where} does (at most {allowed:.3g}: {TIE_RATIO:g} times "
                                   f"their RMS error {rms:.3g} px on the {len(apart)} observations shared, plus "
-                                  f"{CONVERGENCE:g} of the largest coordinate {largest:.4g}): it is not "
+                                  f"{CONVERGENCE:g} of the median coordinate {largest:.4g}): it is not "
                                   "these tracks' reconstruction")
     fit = _fit(own, theirs, largest, None if centred is None else centred[1])
     return {"reference": "the returned cameras" if centred is None else CENTRED_REFERENCE,
@@ -181,12 +183,13 @@ def _shared(result: dict, views: list, tracks: list, cameras: np.ndarray, points
             ) -> tuple[list, list, list, float, list[int], tuple[list, list]]:
     """For each observation of a placed point in a registered view that the certificate's data
     hold too: the distance between its images through the certificate's camera and point and
-    through the returned ones, the returned ones' error and the certificate's; the largest
-    coordinate; how many such points each certificate camera images; and where each shared
+    through the returned ones, the returned ones' error and the certificate's; the median of
+    each observation's larger coordinate (not the largest: one observation far off would widen
+    all); how many such points each certificate camera images; and where each shared
     observation is ((its point's index in the result, its view), and its certificate image)."""
     camera_of, point_of = {v: k for k, v in enumerate(views)}, {t: k for k, t in enumerate(tracks)}
     by_view = {int(c["view"]): np.asarray(c["P"], dtype=float) for c in result["cameras"] if c.get("P") is not None}
-    apart, own, theirs, largest = [], [], [], 0.0
+    apart, own, theirs, scales = [], [], [], []
     keys, images = [], []
     per_camera = [set() for _ in views]
     for index, point in enumerate(result["points"]):
@@ -206,7 +209,8 @@ def _shared(result: dict, views: list, tracks: list, cameras: np.ndarray, points
                 images.append(x[:2] / x[2])
             keys.append((index, int(view)))
             per_camera[i].add(j)
-            largest = max(largest, abs(float(u)), abs(float(v)))
+            scales.append(max(abs(float(u)), abs(float(v))))
+    largest = float(np.median(scales)) if scales else 0.0
     return apart, own, theirs, largest, [len(seen) for seen in per_camera], (keys, images)
 
 
@@ -244,12 +248,16 @@ def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple
                        ) -> tuple[list, float] | None:
     """When the certificate's cameras are an incremental registration's (_built_centred): the
     images of the shared observations (``at``'s order) in the returned reconstruction re-adjusted in
-    that model (centred_fit.fit, over every observation of the result's placed points), and its cost
-    on them (px^2); else None, and the certificate is held to the returned cameras (a projective
-    reconstruction's cameras are as free as any model's)."""
+    that model (centred_fit.fit, over the shared observations only: the ones the tie measures, whose
+    returned cost it compares; observations of other points, which no returned cost here answers
+    for, pulled the fit, and its focal length, where a certificate re-posed at 1.23 times the focal
+    length followed it), and its cost on them (px^2); else None, and the certificate is held to the
+    returned cameras (a projective reconstruction's cameras are as free as any model's)."""
     if not _built_centred(result, views, cameras):
         return None
-    registered = [c for c in result["cameras"] if c.get("registered") is True and c.get("P") is not None]
+    shared = set(at[0])
+    registered = [c for c in result["cameras"] if c.get("registered") is True and c.get("P") is not None
+                  and c.get("view") in views]
     index = {int(c["view"]): k for k, c in enumerate(registered)}
     X, view, point, uv, row = [], [], [], [], {}
     try:  # (the fields' shapes are checked elsewhere; one unreadable here leaves the returned cameras the reference)
@@ -259,7 +267,7 @@ def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple
         for k, p in enumerate(result["points"]):
             if p.get("point") is None:
                 continue
-            seen = [(int(v), u, w) for v, u, w in p.get("observations") or [] if int(v) in index]
+            seen = [(int(v), u, w) for v, u, w in p.get("observations") or [] if (k, int(v)) in shared]
             if not seen:
                 continue
             X.append(p["point"] if p.get("at_infinity") else [*p["point"], 1.0])
