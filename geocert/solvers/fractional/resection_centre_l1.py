@@ -44,9 +44,8 @@ import numpy as np
 
 from geocert.solvers.core.strict import Invalid, number, numbers, record
 from geocert.solvers.fractional.convexity import LARGEST, SMALLEST, UNDERFLOW
-from geocert.solvers.fractional.resection_sublevel import (MAX_ROUNDS, ROUNDS_STOP, STATED_SLACK, U, Scene,
-                                                           centre_bounds, encloses, proven_centre, smallest_radius,
-                                                           shrink)
+from geocert.solvers.fractional.resection_sublevel import (MAX_ROUNDS, STATED_SLACK, U, Scene, centre_bounds,
+                                                           enclosed_radius, encloses, proven_centre)
 
 NAMES = ("centre_x", "centre_y", "centre_z")
 NORMS = ("L1L1", "L2L1")
@@ -228,17 +227,10 @@ def l1_centre(source, target, matrix, norm: str, increase: float, reference: int
     scene = Scene(source, target, matrix, reference, norm)
     if not scene.usable:
         return None
-    radius = smallest_radius(scene, increase)
-    if radius is None:
+    enclosure = enclosed_radius(scene, increase)
+    if enclosure is None:
         return None
-    r, rounds = radius, 0
-    while rounds < MAX_ROUNDS:
-        smaller = shrink(scene, increase, r)
-        rounds += 1
-        if not smaller < ROUNDS_STOP * r:
-            r = smaller
-            break
-        r = smaller
+    radius, r, rounds = enclosure
     l = _rows(scene)
     if l is None:
         return None

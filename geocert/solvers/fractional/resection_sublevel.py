@@ -342,16 +342,10 @@ def smallest_radius(scene: Scene, increase: float, steps: int = 40) -> float | N
     return hi
 
 
-def resection_sublevel(source, target, matrix, increase: float, steps: int = 40) -> dict | None:
-    """The proof a solver states (None where it finds none): the smallest radius (1) passes with
-    twice its allowances (bisection), the rounds (2) until they shrink r by less than 1%, and
-    the centre's intervals a little wider (STATED_SLACK) than its own recomputation's."""
-    if not (math.isfinite(increase) and increase >= 0 and (increase == 0 or SMALLEST <= increase <= LARGEST)):
-        return None
-    reference = reference_point(source)
-    scene = Scene(source, target, matrix, reference)
-    if not scene.usable:
-        return None
+def enclosed_radius(scene: Scene, increase: float, steps: int = 40) -> tuple[float, float, int] | None:
+    """The solver's enclosure (None where it finds none): the smallest radius (1) that passes
+    with twice its allowances, then the rounds (2) until one shrinks r by less than 1%; the
+    radius, the radius after the rounds and their count."""
     radius = smallest_radius(scene, increase, steps)
     if radius is None:
         return None
@@ -363,6 +357,23 @@ def resection_sublevel(source, target, matrix, increase: float, steps: int = 40)
             r = smaller
             break
         r = smaller
+    return radius, r, rounds
+
+
+def resection_sublevel(source, target, matrix, increase: float, steps: int = 40) -> dict | None:
+    """The proof a solver states (None where it finds none): the smallest radius (1) passes with
+    twice its allowances (bisection), the rounds (2) until they shrink r by less than 1%, and
+    the centre's intervals a little wider (STATED_SLACK) than its own recomputation's."""
+    if not (math.isfinite(increase) and increase >= 0 and (increase == 0 or SMALLEST <= increase <= LARGEST)):
+        return None
+    reference = reference_point(source)
+    scene = Scene(source, target, matrix, reference)
+    if not scene.usable:
+        return None
+    enclosure = enclosed_radius(scene, increase, steps)
+    if enclosure is None:
+        return None
+    radius, r, rounds = enclosure
     bounds = centre_bounds(scene, r)
     if bounds is None:
         return None

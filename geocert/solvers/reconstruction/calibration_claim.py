@@ -62,14 +62,23 @@ def built_with_one_K(cameras) -> bool:
     """Whether projective cameras (n, 3, 4) are all K [R | t] for one K: then a certificate that
     K upgrades them optimally proves what they were built with, not what their tracks fix."""
     Ks = []
-    J = np.eye(3)[::-1]
     for P in np.asarray(cameras, dtype=float):
-        omega = P[:, :3] @ P[:, :3].T
-        try:
-            L = np.linalg.cholesky(J @ (omega / omega[2, 2]) @ J)
-        except np.linalg.LinAlgError:
+        K = camera_intrinsics(P)
+        if K is None:
             return False
-        K = J @ L @ J
-        Ks.append(K * np.sign(np.diag(K))[None, :] / abs(K[2, 2]))
+        Ks.append(K)
     return len(Ks) >= 2 and all(np.all(np.abs(K - Ks[0]) <= BUILT_WITH_ONE_K * float(np.abs(Ks[0]).max()))
                                 for K in Ks[1:])
+
+
+def camera_intrinsics(P: np.ndarray) -> np.ndarray | None:
+    """The upper-triangular K (positive diagonal, K[2, 2] = 1) of a 3x4 camera P = K [R | t], from
+    the Cholesky factor of P's left 3x3 times its transpose (None when that is not positive definite)."""
+    J = np.eye(3)[::-1]
+    omega = P[:, :3] @ P[:, :3].T
+    try:
+        L = np.linalg.cholesky(J @ (omega / omega[2, 2]) @ J)
+    except np.linalg.LinAlgError:
+        return None
+    K = J @ L @ J
+    return K * np.sign(np.diag(K))[None, :] / abs(K[2, 2])

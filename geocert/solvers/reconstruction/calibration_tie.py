@@ -63,7 +63,7 @@ import numpy as np
 
 from geocert.solvers.core.strict import Invalid, numbers
 from geocert.solvers.reconstruction import centred_fit
-from geocert.solvers.reconstruction.calibration_claim import BUILT_WITH_ONE_K
+from geocert.solvers.reconstruction.calibration_claim import BUILT_WITH_ONE_K, camera_intrinsics
 
 TIE_RATIO, TIE_OBSERVATIONS = 10.0, 12
 # Each certificate camera of a registered view must image at least this many of the result's
@@ -223,19 +223,15 @@ def _built_centred(result: dict, views: list, cameras: np.ndarray) -> bool:
     and the principal point at its view's image centre ((w - 1) / 2, (h - 1) / 2), to
     calibration_claim.BUILT_WITH_ONE_K of K's largest entry: the incremental registration's cameras."""
     sizes = {c.get("view"): c.get("image_size") for c in result["cameras"]}
-    J, focals = np.eye(3)[::-1], []
+    focals = []
     for view, P in zip(views, cameras):
         size = sizes.get(view)
         if not (isinstance(size, list) and len(size) == 2 and all(isinstance(s, (int, float)) and not isinstance(s, bool)
                                                                    and 0 < s < 1e9 for s in size)):
             return False
-        omega = P[:, :3] @ P[:, :3].T
-        try:
-            L = np.linalg.cholesky(J @ (omega / omega[2, 2]) @ J)
-        except np.linalg.LinAlgError:
+        K = camera_intrinsics(P)
+        if K is None:
             return False
-        K = J @ L @ J
-        K = K * np.sign(np.diag(K))[None, :] / abs(K[2, 2])
         tol = BUILT_WITH_ONE_K * float(np.abs(K).max())
         if not (np.all(np.isfinite(K)) and abs(K[0, 1]) <= tol and abs(K[1, 1] - K[0, 0]) <= tol
                 and abs(K[0, 2] - (size[0] - 1) / 2) <= tol and abs(K[1, 2] - (size[1] - 1) / 2) <= tol):
