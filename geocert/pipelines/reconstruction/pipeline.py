@@ -409,10 +409,16 @@ def _radial_test(metric: upgrade.Metric, obs: Observations, options: Reconstruct
         radial.update(chi2=float(statistic), threshold=RADIAL_CHI2, k1_tested=metric.k1, against=rival)
         if not statistic > RADIAL_CHI2:
             if rival != "simple":
+                # The "principal" fit is what _principal_point would fit again from nearly the same
+                # start: it goes with the figures (RIVAL_FIT, taken out before they are reported).
+                radial[RIVAL_FIT] = (trial, trial_keep)
                 trial, _, _ = upgrade.adjust(replace(metric, k1=0.0), obs.view, obs.track, obs.pixel,
                                              options.threshold_px, model="simple")
             return trial, radial
     return metric, {**radial, "estimated": True, "k1": float(metric.k1)}
+
+
+RIVAL_FIT = "_rival_fit"  # the radial figures' key of the rival's (Metric, keep), never reported
 
 
 def _kept(metric: upgrade.Metric, obs: Observations, threshold_px: float) -> np.ndarray:
@@ -428,13 +434,22 @@ def _kept(metric: upgrade.Metric, obs: Observations, threshold_px: float) -> np.
 PRINCIPAL_POINT_CHI2 = 13.8  # chi-square with 2 degrees of freedom at p = 0.001
 
 
-def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold_px: float, image_size):
+def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold_px: float, image_size,
+                     prefit: tuple | None = None):
     """The principal point estimated when the data fix it: the adjustment again with it free
     (bundle model "principal"), kept when it lowers the cost on the observations both keep by
     more than PRINCIPAL_POINT_CHI2 noise variances (the residuals' own, from the freer fit) and
     lands in the middle half of the image; else the image centre stays. Returns the
-    reconstruction, the observations kept and the test's figures."""
-    trial, trial_keep, _ = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, threshold_px, model="principal")
+    reconstruction, the observations kept and the test's figures. ``prefit``: a "principal" fit
+    of the same observations already made (the radial test's rival, (Metric, keep)), used instead
+    of a new one when it registers the same views and tracks as ``metric`` and explains every
+    observation at least as well (fit_cost): the adjustment from ``metric`` would end where it did."""
+    trial = None
+    if prefit is not None and _same_registration(prefit[0], metric) and \
+            fit_cost(prefit[0], obs, threshold_px) <= fit_cost(metric, obs, threshold_px):
+        trial, trial_keep = prefit
+    if trial is None:
+        trial, trial_keep, _ = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, threshold_px, model="principal")
     common = keep & trial_keep
     n = int(common.sum())
     figures = {"estimated": False, "observations": n, "K_free": trial.K.tolist()}
@@ -450,6 +465,13 @@ def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray
         figures["estimated"] = True
         return trial, trial_keep, figures
     return metric, keep, figures
+
+
+def _same_registration(a: upgrade.Metric, b: upgrade.Metric) -> bool:
+    """The same views registered and the same tracks reconstructed."""
+    return len(a.rotations) == len(b.rotations) and a.points.shape == b.points.shape and \
+        [R is None for R in a.rotations] == [R is None for R in b.rotations] and \
+        bool(np.array_equal(np.isfinite(a.points[:, 0]), np.isfinite(b.points[:, 0])))
 
 
 PRINCIPAL_POINT_P = 0.001  # the per-view test's level (PRINCIPAL_POINT_CHI2's, for 2 (views - 1) degrees of freedom)
@@ -641,7 +663,7 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
         keep = _check_cameras(out, metric, obs, keep, options.threshold_px)
         _structure(tracks, n_views, options, stages, out, tell, obs, metric, keep)
         return
-    incremental = None
+    incremental = rival_fit = None
     with _timed(stages, "projective") as stage:
         tell("projective", 0, n_views)
         if options.registration == "incremental":
@@ -650,6 +672,7 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
                                "reconstruction the certified upgrade starts from)")
             proj, incremental, radial = _incremental(tracks, image_sizes, options, obs,
                                                      lambda d, t: tell.asks("projective", d, t))
+            rival_fit = radial.pop(RIVAL_FIT, None)
             if radial["estimated"]:
                 obs = _undistorted(out, obs, incremental, image_sizes, radial)
         else:
@@ -738,7 +761,7 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
             stage["starts"] = trials
             if model == "simple" and options.principal_point in ("auto", "per_view") and image_size is not None:
                 metric, keep, stage["principal_point"] = _principal_point(metric, obs, keep, options.threshold_px,
-                                                                          image_size)
+                                                                          image_size, rival_fit)
             if model == "simple" and options.principal_point == "per_view" and image_size is not None:
                 metric, keep, stage["principal_point_per_view"] = _principal_points_per_view(
                     metric, obs, keep, options.threshold_px, image_size)
