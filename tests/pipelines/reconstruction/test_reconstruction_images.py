@@ -309,6 +309,21 @@ def test_ratio_matches_follow_their_definition(seed):
             assert found.tolist() == _ratio_matches_row_by_row(d2, ratio, mutual)
 
 
+@pytest.mark.parametrize("seed", range(12))
+def test_matches_are_the_brute_force_mutual_ratio_matches(seed):
+    # Integer descriptors as SIFT's: few levels in few dimensions make equal distances common
+    # (a row's nearest two, and several rows nearest to one column); 0..255 in 128 as real ones.
+    rng = np.random.default_rng(seed)
+    levels, dims = ((3, 6), (256, 128))[seed % 2]
+    a = rng.integers(0, levels, size=(rng.integers(2, 60), dims)).astype(np.float32)
+    b = rng.integers(0, levels, size=(rng.integers(2, 60), dims)).astype(np.float32)
+    d2 = ((a[:, None, :].astype(np.float64) - b[None, :, :]) ** 2).sum(axis=2)
+    for ratio in (0.8, 0.95):
+        for mutual in (True, False):
+            found = features._match(a, b, FeatureOptions(ratio=ratio, mutual=mutual))
+            assert found.tolist() == _ratio_matches_row_by_row(d2, ratio, mutual)
+
+
 class TestGuidedMatching:
     # Cameras translated along x: F = [e]x with e = (1, 0, 0), epipolar lines are the rows (y_b = y_a).
     F = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
