@@ -1,0 +1,75 @@
+"""Review 21 (issue 33): forged records of the reconstruction's focal length per view test
+(stages.bundle_adjustment.focal_per_view). The verifier read the test's chi2 against the
+document's own threshold, and never the screen's z, z_threshold, views named or parameters
+added: a record stating a threshold of 0, a z_threshold below every z, or a view whose z lies
+within the threshold named as set apart, verified. It now recomputes both quantiles at the
+test's level and the views they name."""
+
+from __future__ import annotations
+
+import copy
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from geocert.verify.checks import verify_any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pipelines" / "reconstruction"))
+import test_focal_per_view as genuine  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def result():
+    scene, tracks = genuine._scene(True, genuine.SMALLER_FACTOR)
+    return genuine._job(tracks, scene.image_size)
+
+
+def _test(document: dict) -> dict:
+    return genuine._adjustment(document)["focal_per_view"]
+
+
+FORGERIES = {
+    # the chi-square below its quantile at 0.999 (10.83 for one parameter), the threshold lowered under it
+    "threshold_lowered": lambda t: t.update(chi2=5.0, threshold=4.0),
+    "threshold_zero": lambda t: t.update(chi2=1e-300, threshold=0.0),
+    # the view named has a z within the screen's threshold
+    "named_view_within_z_threshold": lambda t: t["z"].__setitem__(genuine.LONGER, 0.5),
+    # the screen's threshold lowered below every z: any view may be named
+    "z_threshold_lowered": lambda t: t.update(z_threshold=0.0),
+    "parameters_added_more": lambda t: t.update(parameters_added=5),
+    "parameters_added_none": lambda t: t.update(parameters_added=0),
+    "z_for_fewer_views": lambda t: t.update(z=t["z"][:2]),
+    "too_few_observations": lambda t: t.update(observations=3),
+}
+
+
+def test_the_genuine_record_verifies(result):
+    report = verify_any(json.loads(json.dumps(result)))
+    assert report.valid, report.first_failure
+
+
+@pytest.mark.parametrize("name", sorted(FORGERIES))
+def test_a_focal_test_record_with_its_own_quantiles_is_refused(result, name):
+    forged = copy.deepcopy(result)
+    FORGERIES[name](_test(forged))
+    report = verify_any(forged)
+    assert not report.valid and report.first_failure["check"] == "returned", (name, report.first_failure)
+    assert "focal_per_view" in report.first_failure["detail"], report.first_failure
+
+
+def test_the_verifiers_quantiles_are_scipys():
+    """The verifier's numpy-free quantiles (bisection on the closed forms) equal scipy's, which the
+    pipeline states, to the comparison's 1e-9, for every parameter count up to thousands."""
+    from scipy.stats import chi2, norm
+
+    from geocert.pipelines.reconstruction import pipeline
+    from geocert.verify import reconstruction_members as members
+
+    assert members.FOCAL_P == pipeline.FOCAL_P
+    for k in (1, 2, 3, 4, 5, 7, 10, 11, 64, 999, 2000):
+        assert members._close_quantile(float(chi2.ppf(1 - members.FOCAL_P, k)), members._chi2_quantile(0.999, k)), k
+    for views in (3, 8, 11, 100, 5000):
+        p = 1 - members.FOCAL_P / (2 * views)
+        assert members._close_quantile(float(norm.ppf(p)), members._normal_quantile(p)), views
