@@ -487,6 +487,11 @@ def _check_focals_per_view(result: dict, stage: dict) -> None:
         if test is not None:
             raise Invalid("returned", f"{where}: the focal length's test runs after the simple model's adjustment only")
         return
+    if test is not None and (stage.get("principal_point_per_view") or {}).get("estimated") is not True:
+        # the pipeline runs it only once a principal point per view was kept (options.principal_point
+        # per_view): a record beside any other run states a test that never ran, kept or not
+        raise Invalid("returned", f"{where} is stated, and its test runs only after a principal point per view "
+                                  "was kept (principal_point_per_view estimated)")
     cameras = [camera for camera in result.get("cameras") or []
                if isinstance(camera, dict) and camera.get("registered") is True and camera.get("P") is not None]
     if len(cameras) < 2:

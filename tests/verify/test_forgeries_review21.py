@@ -12,6 +12,7 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from geocert.verify.checks import verify_any
@@ -73,3 +74,28 @@ def test_the_verifiers_quantiles_are_scipys():
     for views in (3, 8, 11, 100, 5000):
         p = 1 - members.FOCAL_P / (2 * views)
         assert members._close_quantile(float(norm.ppf(p)), members._normal_quantile(p)), views
+
+
+@pytest.mark.parametrize("per_view", [None, {"estimated": False}])
+def test_a_focal_test_record_where_no_such_test_runs_is_refused(result, per_view):
+    """The pipeline runs the focal length's test only once a principal point per view was kept: a
+    record of it (here one saying it kept nothing, the cameras sharing one focal length and one
+    principal point) beside no principal point test or one that kept none states a test that
+    never ran. Checked on the stage (the cameras of a run without per-view principal points)."""
+    from geocert.solvers.core.strict import Invalid
+    from geocert.verify.reconstruction_members import _check_focals_per_view
+
+    forged = copy.deepcopy(result)
+    reference = next(c for c in forged["cameras"] if c["view"] != genuine.LONGER)
+    for camera in forged["cameras"]:  # every camera with one K (the reference's): as a run with no test kept
+        camera["P"] = (np.array(reference["K"]) @ np.column_stack([np.array(camera["R"]), np.array(camera["t"])])).tolist()
+    stage = genuine._adjustment(forged)
+    stage["focal_per_view"] = {"estimated": False, "views": [], "reason": "no view's focal length stands apart from "
+                                                                          "the others'"}
+    stage["principal_point_per_view"] = per_view
+    if per_view is None:
+        del stage["principal_point_per_view"]
+    with pytest.raises(Invalid, match="focal_per_view is stated"):
+        _check_focals_per_view(forged, stage)
+    stage["principal_point_per_view"] = {"estimated": True}  # where the test runs, the same record passes this check
+    _check_focals_per_view(forged, stage)
