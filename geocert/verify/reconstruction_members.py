@@ -243,6 +243,13 @@ def _check_starts(result: dict, stages: dict) -> None:
                                   "reconstruction is the start exactly when K is given (options.intrinsics.K)")
 
 
+# The principal point tests' levels (pipeline.PRINCIPAL_POINT_CHI2, the shared one's chi-square
+# quantile for 2 parameters at 0.999; pipeline.PRINCIPAL_POINT_P, the per-view one's level): their
+# thresholds are these, never the document's.
+PRINCIPAL_POINT_CHI2 = 13.8
+PRINCIPAL_POINT_P = 0.001
+
+
 def _check_principal_point(stage: dict) -> None:
     """_principal_point's test: the principal point is estimated only when its chi-square passes
     the threshold and it lies in the image's middle half, and only in the simple camera model."""
@@ -250,10 +257,11 @@ def _check_principal_point(stage: dict) -> None:
     if not isinstance(test, dict) or test.get("estimated") is not True:
         return
     chi2, threshold = test.get("chi2"), test.get("threshold")
-    if not (is_number(chi2) and is_number(threshold) and chi2 > threshold and test.get("inside_middle_half") is True
-            and stage.get("model") == "simple"):
+    if not (is_number(chi2) and threshold == PRINCIPAL_POINT_CHI2 and chi2 > threshold
+            and test.get("inside_middle_half") is True and stage.get("model") == "simple"):
         raise Invalid("returned", "stages/bundle_adjustment/principal_point/estimated is true, and its test does not "
-                                  "pass (chi2 above its threshold, inside the middle half, the simple model)")
+                                  f"pass (chi2 above its threshold {PRINCIPAL_POINT_CHI2}, inside the middle half, the "
+                                  "simple model)")
 
 
 def intrinsics_of(P: Any) -> np.ndarray:
@@ -427,24 +435,27 @@ def _chi2_quantile(p: float, k: int) -> float:
 
 def _focal_test_levels(result: dict, test: dict) -> bool:
     """The kept focal length test's own figures agree with one another and with FOCAL_P: one z a
-    registered view (in view order), at least the 20 observations the test needs, z_threshold the normal quantile at 1 - FOCAL_P / (2 views),
-    the views named exactly those whose |z| exceeds it (at most all but two), one parameter
-    added each, and threshold the chi-square quantile at 1 - FOCAL_P for them. A document
-    choosing its own quantiles (a threshold of 0, a z_threshold below every z) states a test
-    that never ran."""
-    views = sorted(camera.get("view") for camera in result.get("cameras") or []
-                   if isinstance(camera, dict) and camera.get("registered") is True
-                   and type(camera.get("view")) is int)
+    view registered at the test (in view order: those returned registered, and any the sanity
+    layer dropped after the adjustment), at least the 20 observations the test needs,
+    z_threshold the normal quantile at 1 - FOCAL_P / (2 views), as many views named as z exceed
+    it (the very views where none was dropped since), at most all but two, one parameter added
+    each, and threshold the chi-square quantile at 1 - FOCAL_P for them. A document choosing its
+    own quantiles (a threshold of 0, a z_threshold below every z) states a test that never ran."""
+    cameras = [camera for camera in result.get("cameras") or [] if isinstance(camera, dict)]
+    views = sorted(camera.get("view") for camera in cameras
+                   if camera.get("registered") is True and type(camera.get("view")) is int)
     z, z_threshold, named = test.get("z"), test.get("z_threshold"), test.get("views")
     added, threshold = test.get("parameters_added"), test.get("threshold")
-    if not (len(views) >= 3 and isinstance(z, list) and len(z) == len(views) and all(is_number(v) for v in z)
-            and is_number(z_threshold) and is_number(threshold) and isinstance(named, list)
-            and type(added) is int and added == len(named) and 1 <= added <= len(views) - 2
+    if not (isinstance(z, list) and 3 <= len(z) and len(views) <= len(z) <= len(cameras)
+            and all(is_number(v) for v in z) and is_number(z_threshold) and is_number(threshold)
+            and isinstance(named, list) and type(added) is int and added == len(named) and 1 <= added <= len(z) - 2
             and type(test.get("observations")) is int and test["observations"] >= 20):
         return False
-    if not _close_quantile(z_threshold, _normal_quantile(1 - FOCAL_P / (2 * len(views)))):
+    if not _close_quantile(z_threshold, _normal_quantile(1 - FOCAL_P / (2 * len(z)))):
         return False
-    if named != [view for view, value in zip(views, z) if abs(value) > z_threshold]:
+    if len(named) != sum(1 for value in z if abs(value) > z_threshold):
+        return False
+    if len(z) == len(views) and named != [view for view, value in zip(views, z) if abs(value) > z_threshold]:
         return False
     return _close_quantile(threshold, _chi2_quantile(1 - FOCAL_P, added))
 
@@ -481,7 +492,8 @@ def _check_focals_per_view(result: dict, stage: dict) -> None:
                                       f"{MAX_FOCAL_SD_FRACTION}, every sd_px at most max_sd_px "
                                       f"{MAX_PRINCIPAL_POINT_SD_PX}, precise, a principal point per view kept, the "
                                       "simple model, options.principal_point per_view, a z for each registered view, "
-                                      "the views named those whose focal length's z exceeds z_threshold, one parameter added each, and "
+                                      "the views named those whose focal length's z exceeds z_threshold, one "
+                                      "parameter added each, and "
                                       f"z_threshold and threshold the quantiles of level {FOCAL_P} they set)")
     if stage.get("model") != "simple":
         if test is not None:
@@ -521,14 +533,26 @@ def _check_principal_points_per_view(result: dict, stage: dict) -> None:
     where = "stages/bundle_adjustment/principal_point_per_view"
     if estimated:
         chi2, threshold, sd = test.get("chi2"), test.get("threshold"), test.get("sd_px")
+        added = test.get("parameters_added")
         options = (result.get("certificate") or {}).get("options") or {}
+        cameras = [camera for camera in result.get("cameras") or [] if isinstance(camera, dict)]
+        registered = sum(1 for camera in cameras if camera.get("registered") is True)
         if not (is_number(chi2) and is_number(threshold) and chi2 > threshold and test.get("inside_middle_half") is True
+                # 2 (views - 1) parameters, 2 views with the shared one held at the centre, the views
+                # those registered at the test (those returned registered and any the sanity layer
+                # dropped since, at most every view); its quantile at 1 - PRINCIPAL_POINT_P
+                and type(added) is int and added % 2 == 0
+                and max(2, 2 * (registered - 1)) <= added <= 2 * len(cameras)
+                and _close_quantile(threshold, _chi2_quantile(1 - PRINCIPAL_POINT_P, added))
+                and type(test.get("observations")) is int and test["observations"] >= 20
                 and test.get("precise") is True and test.get("max_sd_px") == MAX_PRINCIPAL_POINT_SD_PX
                 and isinstance(sd, list) and sd and all(is_number(s) and s <= MAX_PRINCIPAL_POINT_SD_PX for s in sd)
                 and stage.get("model") == "simple" and options.get("principal_point") == "per_view"):
             raise Invalid("returned", f"{where}/estimated is true, and its test does not pass (chi2 above its "
-                                      f"threshold, inside the middle half, every sd_px at most max_sd_px "
-                                      f"{MAX_PRINCIPAL_POINT_SD_PX}, precise, the simple model, options.principal_point "
+                                      f"threshold, the chi-square quantile at {1 - PRINCIPAL_POINT_P:g} for the "
+                                      "parameters added (2 a view, less 2), inside the middle half, every sd_px at "
+                                      f"most max_sd_px {MAX_PRINCIPAL_POINT_SD_PX}, precise, the simple model, "
+                                      "options.principal_point "
                                       "per_view)")
     if stage.get("model") != "simple":
         return

@@ -3,7 +3,8 @@
 document's own threshold, and never the screen's z, z_threshold, views named or parameters
 added: a record stating a threshold of 0, a z_threshold below every z, or a view whose z lies
 within the threshold named as set apart, verified. It now recomputes both quantiles at the
-test's level and the views they name."""
+test's level and the views they name. The principal point's tests (the shared one's and the
+per-view one's) read their chi2 against the document's threshold too: now against theirs."""
 
 from __future__ import annotations
 
@@ -44,6 +45,16 @@ FORGERIES = {
     "z_for_fewer_views": lambda t: t.update(z=t["z"][:2]),
     "too_few_observations": lambda t: t.update(observations=3),
 }
+# The principal point tests before it (the same hole: their chi2 against the document's threshold).
+# The shared one's threshold is 13.8 (2 parameters at 0.999); the per-view one's, here 36.12 for 14.
+POINT_FORGERIES = {
+    "shared_threshold_lowered": ("principal_point", lambda t: t.update(chi2=5.0, threshold=4.0)),
+    "per_view_threshold_lowered": ("principal_point_per_view", lambda t: t.update(chi2=30.0, threshold=29.0)),
+    "per_view_parameters_fewer": ("principal_point_per_view",
+                                  lambda t: t.update(chi2=30.0, threshold=29.58829844507442, parameters_added=10)),
+    "per_view_parameters_odd": ("principal_point_per_view", lambda t: t.update(parameters_added=13)),
+    "per_view_too_few_observations": ("principal_point_per_view", lambda t: t.update(observations=3)),
+}
 
 
 def test_the_genuine_record_verifies(result):
@@ -60,6 +71,16 @@ def test_a_focal_test_record_with_its_own_quantiles_is_refused(result, name):
     assert "focal_per_view" in report.first_failure["detail"], report.first_failure
 
 
+@pytest.mark.parametrize("name", sorted(POINT_FORGERIES))
+def test_a_principal_point_test_record_with_its_own_threshold_is_refused(result, name):
+    forged = copy.deepcopy(result)
+    record, change = POINT_FORGERIES[name]
+    change(genuine._adjustment(forged)[record])
+    report = verify_any(forged)
+    assert not report.valid and report.first_failure["check"] == "returned", (name, report.first_failure)
+    assert record in report.first_failure["detail"], report.first_failure
+
+
 def test_the_verifiers_quantiles_are_scipys():
     """The verifier's numpy-free quantiles (bisection on the closed forms) equal scipy's, which the
     pipeline states, to the comparison's 1e-9, for every parameter count up to thousands."""
@@ -69,6 +90,8 @@ def test_the_verifiers_quantiles_are_scipys():
     from geocert.verify import reconstruction_members as members
 
     assert members.FOCAL_P == pipeline.FOCAL_P
+    assert members.PRINCIPAL_POINT_P == pipeline.PRINCIPAL_POINT_P
+    assert members.PRINCIPAL_POINT_CHI2 == pipeline.PRINCIPAL_POINT_CHI2
     for k in (1, 2, 3, 4, 5, 7, 10, 11, 64, 999, 2000):
         assert members._close_quantile(float(chi2.ppf(1 - members.FOCAL_P, k)), members._chi2_quantile(0.999, k)), k
     for views in (3, 8, 11, 100, 5000):
@@ -88,7 +111,8 @@ def test_a_focal_test_record_where_no_such_test_runs_is_refused(result, per_view
     forged = copy.deepcopy(result)
     reference = next(c for c in forged["cameras"] if c["view"] != genuine.LONGER)
     for camera in forged["cameras"]:  # every camera with one K (the reference's): as a run with no test kept
-        camera["P"] = (np.array(reference["K"]) @ np.column_stack([np.array(camera["R"]), np.array(camera["t"])])).tolist()
+        pose = np.column_stack([np.array(camera["R"]), np.array(camera["t"])])
+        camera["P"] = (np.array(reference["K"]) @ pose).tolist()
     stage = genuine._adjustment(forged)
     stage["focal_per_view"] = {"estimated": False, "views": [], "reason": "no view's focal length stands apart from "
                                                                           "the others'"}
