@@ -123,3 +123,45 @@ def test_a_focal_test_record_where_no_such_test_runs_is_refused(result, per_view
         _check_focals_per_view(forged, stage)
     stage["principal_point_per_view"] = {"estimated": True}  # where the test runs, the same record passes this check
     _check_focals_per_view(forged, stage)
+
+
+# L1 resection centre (proof.sublevel.centre, fractional.resection_centre_l1): no forgery found.
+# A guard, passing on main's code as on this branch: the classes tried (mu 0, subnormal, 1e-310,
+# huge, 2^128, the stated one scaled; y on the dual norm's unit sphere, one ulp outside it, the
+# stated one; NaN, bools, strings, shapes; narrowed intervals; radius halved or subnormal; rounds
+# out of range) either are refused or prove bounds holding every camera a local search finds
+# within the level.
+@pytest.mark.parametrize("norm", ("L1L1", "L2L1"))
+def test_stated_multipliers_never_bound_the_centre_short_of_a_camera_within_the_level(norm):
+    from geocert.jobs.runner import solve_job
+    from geocert.solvers.fractional import resection_centre_l1 as centre_l1
+    from geocert.solvers.fractional.resection_sublevel import Scene, proven_centre
+    from tests.solvers.fractional.test_resection_leaves import local_search, resection
+
+    rng = np.random.default_rng(5)
+    job, _ = resection(rng, 16, norm, noise=1.0)
+    document = solve_job(job)
+    item, proof = document["maps"][0], document["certificate"]["items"][0]["proof"]["sublevel"]
+    source, target = (np.array(job["data"]["maps"][0][key]) for key in ("source", "target"))
+    increase = item["determinacy"]["proven_intervals"]["cost_increase"]
+    P = np.array(item["matrix"])
+    cameras = local_search(rng, source, target, P, norm, item["cost"] + increase, proof["reference"])
+    null = np.linalg.svd(cameras)[2][:, -1]
+    centres = null[:, :3] / null[:, 3:]
+    scene = Scene(source, target, P, proof["reference"], norm)
+    _, r = proven_centre(scene, increase, proof["centre"]["radius"], proof["centre"]["rounds"])
+    stated = centre_l1._duals(proof["centre"], len(source))
+    for _ in range(100):
+        duals = copy.deepcopy(stated)
+        i, j = int(rng.integers(centre_l1.ROWS)), int(rng.integers(2))
+        mu = float(rng.choice([0.0, 5e-324, 1e-310, 1e-10, 1.0, 1e10, 1e30, 2.0 ** 128]))
+        if duals[i][j] is not None and rng.random() < 0.5:
+            mu = duals[i][j][0] * float(rng.choice([1e-3, 0.5, 1 + 1e-12, 2.0, 1e3]))
+        y = rng.normal(size=(len(source), 2))
+        y = y / np.sqrt((y * y).sum(axis=1))[:, None] * (1 - 4.5e-16) if norm == "L2L1" else np.sign(y)
+        if duals[i][j] is not None and rng.random() < 0.5:
+            y = duals[i][j][1]
+        duals[i][j] = (mu, y)
+        bounds = centre_l1.bounds_with(scene, increase, r, duals)
+        assert bounds is None or (np.all(bounds[:, 0] <= centres.min(axis=0))
+                                  and np.all(centres.max(axis=0) <= bounds[:, 1])), (i, j, mu)
