@@ -12,6 +12,7 @@ stage). Each may be null where the stage has none, as a figure may."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -242,6 +243,13 @@ def _check_starts(result: dict, stages: dict) -> None:
                                   "reconstruction is the start exactly when K is given (options.intrinsics.K)")
 
 
+# The principal point tests' levels (pipeline.PRINCIPAL_POINT_CHI2, the shared one's chi-square
+# quantile for 2 parameters at 0.999; pipeline.PRINCIPAL_POINT_P, the per-view one's level): their
+# thresholds are these, never the document's.
+PRINCIPAL_POINT_CHI2 = 13.8
+PRINCIPAL_POINT_P = 0.001
+
+
 def _check_principal_point(stage: dict) -> None:
     """_principal_point's test: the principal point is estimated only when its chi-square passes
     the threshold and it lies in the image's middle half, and only in the simple camera model."""
@@ -249,10 +257,11 @@ def _check_principal_point(stage: dict) -> None:
     if not isinstance(test, dict) or test.get("estimated") is not True:
         return
     chi2, threshold = test.get("chi2"), test.get("threshold")
-    if not (is_number(chi2) and is_number(threshold) and chi2 > threshold and test.get("inside_middle_half") is True
-            and stage.get("model") == "simple"):
+    if not (is_number(chi2) and threshold == PRINCIPAL_POINT_CHI2 and chi2 > threshold
+            and test.get("inside_middle_half") is True and stage.get("model") == "simple"):
         raise Invalid("returned", "stages/bundle_adjustment/principal_point/estimated is true, and its test does not "
-                                  "pass (chi2 above its threshold, inside the middle half, the simple model)")
+                                  f"pass (chi2 above its threshold {PRINCIPAL_POINT_CHI2}, inside the middle half, the "
+                                  "simple model)")
 
 
 def intrinsics_of(P: Any) -> np.ndarray:
@@ -381,6 +390,80 @@ def _check_centred(result: dict, stage: dict, model: str, Ks: list, tolerance: f
                                   f"{worst[:2, 2].round(6).tolist()} with no test saying estimated")
 
 
+# The focal length test's level (pipeline.FOCAL_P): the screen's over the views (Bonferroni's) and
+# the chi-square's; the quantiles it sets are recomputed (_focal_test_levels), never read.
+FOCAL_P = 0.001
+
+
+def _normal_quantile(p: float) -> float:
+    """The standard normal quantile at ``p`` (0.5 < p < 1), by bisection on math.erfc."""
+    low, high = 0.0, 40.0
+    for _ in range(200):
+        middle = (low + high) / 2
+        if 0.5 * math.erfc(middle / math.sqrt(2.0)) > 1 - p:
+            low = middle
+        else:
+            high = middle
+    return (low + high) / 2
+
+
+def _chi2_survival(x: float, k: int) -> float:
+    """P(chi-square with ``k`` (>= 1) degrees of freedom > x), its closed form for whole k, each
+    term taken from its logarithm (no power or factorial overflowing, however many views)."""
+    if x <= 0:
+        return 1.0
+    if k % 2 == 0:
+        return sum(math.exp(-x / 2 + j * math.log(x / 2) - math.lgamma(j + 1)) for j in range(k // 2))
+    # erfc(sqrt(x / 2)) + sqrt(2x / pi) e^(-x/2) sum_j x^j / (1 3 5 ... (2j + 1)), j < (k - 1) / 2
+    return math.erfc(math.sqrt(x / 2)) + sum(
+        math.exp(0.5 * math.log(2 * x / math.pi) - x / 2 + j * math.log(x)
+                 - (math.lgamma(2 * j + 2) - j * math.log(2.0) - math.lgamma(j + 1)))
+        for j in range((k - 1) // 2))
+
+
+def _chi2_quantile(p: float, k: int) -> float:
+    """The chi-square quantile at ``p`` with ``k`` degrees of freedom, by bisection."""
+    low, high = 0.0, 10.0 * k + 200.0
+    for _ in range(200):
+        middle = (low + high) / 2
+        if _chi2_survival(middle, k) > 1 - p:
+            low = middle
+        else:
+            high = middle
+    return (low + high) / 2
+
+
+def _focal_test_levels(result: dict, test: dict) -> bool:
+    """The kept focal length test's own figures agree with one another and with FOCAL_P: one z a
+    view registered at the test (in view order: those returned registered, and any the sanity
+    layer dropped after the adjustment), at least the 20 observations the test needs,
+    z_threshold the normal quantile at 1 - FOCAL_P / (2 views), as many views named as z exceed
+    it (the very views where none was dropped since), at most all but two, one parameter added
+    each, and threshold the chi-square quantile at 1 - FOCAL_P for them. A document choosing its
+    own quantiles (a threshold of 0, a z_threshold below every z) states a test that never ran."""
+    cameras = [camera for camera in result.get("cameras") or [] if isinstance(camera, dict)]
+    views = sorted(camera.get("view") for camera in cameras
+                   if camera.get("registered") is True and type(camera.get("view")) is int)
+    z, z_threshold, named = test.get("z"), test.get("z_threshold"), test.get("views")
+    added, threshold = test.get("parameters_added"), test.get("threshold")
+    if not (isinstance(z, list) and 3 <= len(z) and len(views) <= len(z) <= len(cameras)
+            and all(is_number(v) for v in z) and is_number(z_threshold) and is_number(threshold)
+            and isinstance(named, list) and type(added) is int and added == len(named) and 1 <= added <= len(z) - 2
+            and type(test.get("observations")) is int and test["observations"] >= 20):
+        return False
+    if not _close_quantile(z_threshold, _normal_quantile(1 - FOCAL_P / (2 * len(z)))):
+        return False
+    if len(named) != sum(1 for value in z if abs(value) > z_threshold):
+        return False
+    if len(z) == len(views) and named != [view for view, value in zip(views, z) if abs(value) > z_threshold]:
+        return False
+    return _close_quantile(threshold, _chi2_quantile(1 - FOCAL_P, added))
+
+
+def _close_quantile(stated: float, recomputed: float) -> bool:
+    return abs(stated - recomputed) <= 1e-9 * max(1.0, abs(recomputed))
+
+
 def _check_focals_per_view(result: dict, stage: dict) -> None:
     """_focals_per_view's test (after a principal point per view was kept): a focal length of
     their own for the views it names is kept (``estimated``) only when its chi-square passes its
@@ -402,16 +485,25 @@ def _check_focals_per_view(result: dict, stage: dict) -> None:
                 and isinstance(named, list) and named and isinstance(focal_sd, list) and len(focal_sd) == len(named)
                 and all(is_number(s) and s <= MAX_FOCAL_SD_FRACTION for s in focal_sd)
                 and (stage.get("principal_point_per_view") or {}).get("estimated") is True
-                and stage.get("model") == "simple" and options.get("principal_point") == "per_view"):
+                and stage.get("model") == "simple" and options.get("principal_point") == "per_view"
+                and _focal_test_levels(result, test)):
             raise Invalid("returned", f"{where}/estimated is true, and its test does not pass (chi2 above its "
                                       f"threshold, a focal_sd for each view named, each at most max_focal_sd "
                                       f"{MAX_FOCAL_SD_FRACTION}, every sd_px at most max_sd_px "
                                       f"{MAX_PRINCIPAL_POINT_SD_PX}, precise, a principal point per view kept, the "
-                                      "simple model, options.principal_point per_view)")
+                                      "simple model, options.principal_point per_view, a z for each registered view, "
+                                      "the views named those whose focal length's z exceeds z_threshold, one "
+                                      "parameter added each, and "
+                                      f"z_threshold and threshold the quantiles of level {FOCAL_P} they set)")
     if stage.get("model") != "simple":
         if test is not None:
             raise Invalid("returned", f"{where}: the focal length's test runs after the simple model's adjustment only")
         return
+    if test is not None and (stage.get("principal_point_per_view") or {}).get("estimated") is not True:
+        # the pipeline runs it only once a principal point per view was kept (options.principal_point
+        # per_view): a record beside any other run states a test that never ran, kept or not
+        raise Invalid("returned", f"{where} is stated, and its test runs only after a principal point per view "
+                                  "was kept (principal_point_per_view estimated)")
     cameras = [camera for camera in result.get("cameras") or []
                if isinstance(camera, dict) and camera.get("registered") is True and camera.get("P") is not None]
     if len(cameras) < 2:
@@ -441,14 +533,26 @@ def _check_principal_points_per_view(result: dict, stage: dict) -> None:
     where = "stages/bundle_adjustment/principal_point_per_view"
     if estimated:
         chi2, threshold, sd = test.get("chi2"), test.get("threshold"), test.get("sd_px")
+        added = test.get("parameters_added")
         options = (result.get("certificate") or {}).get("options") or {}
+        cameras = [camera for camera in result.get("cameras") or [] if isinstance(camera, dict)]
+        registered = sum(1 for camera in cameras if camera.get("registered") is True)
         if not (is_number(chi2) and is_number(threshold) and chi2 > threshold and test.get("inside_middle_half") is True
+                # 2 (views - 1) parameters, 2 views with the shared one held at the centre, the views
+                # those registered at the test (those returned registered and any the sanity layer
+                # dropped since, at most every view); its quantile at 1 - PRINCIPAL_POINT_P
+                and type(added) is int and added % 2 == 0
+                and max(2, 2 * (registered - 1)) <= added <= 2 * len(cameras)
+                and _close_quantile(threshold, _chi2_quantile(1 - PRINCIPAL_POINT_P, added))
+                and type(test.get("observations")) is int and test["observations"] >= 20
                 and test.get("precise") is True and test.get("max_sd_px") == MAX_PRINCIPAL_POINT_SD_PX
                 and isinstance(sd, list) and sd and all(is_number(s) and s <= MAX_PRINCIPAL_POINT_SD_PX for s in sd)
                 and stage.get("model") == "simple" and options.get("principal_point") == "per_view"):
             raise Invalid("returned", f"{where}/estimated is true, and its test does not pass (chi2 above its "
-                                      f"threshold, inside the middle half, every sd_px at most max_sd_px "
-                                      f"{MAX_PRINCIPAL_POINT_SD_PX}, precise, the simple model, options.principal_point "
+                                      f"threshold, the chi-square quantile at {1 - PRINCIPAL_POINT_P:g} for the "
+                                      "parameters added (2 a view, less 2), inside the middle half, every sd_px at "
+                                      f"most max_sd_px {MAX_PRINCIPAL_POINT_SD_PX}, precise, the simple model, "
+                                      "options.principal_point "
                                       "per_view)")
     if stage.get("model") != "simple":
         return
