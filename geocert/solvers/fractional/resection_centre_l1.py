@@ -44,8 +44,8 @@ import numpy as np
 
 from geocert.solvers.core.strict import Invalid, number, numbers, record
 from geocert.solvers.fractional.convexity import LARGEST, SMALLEST, UNDERFLOW
-from geocert.solvers.fractional.resection_sublevel import (MAX_ROUNDS, STATED_SLACK, U, Scene, centre_bounds,
-                                                           enclosed_radius, encloses, proven_centre)
+from geocert.solvers.fractional.resection_sublevel import (STATED_SLACK, U, Scene, centre_bounds, check_enclosure,
+                                                           enclosed_radius, proven_centre)
 
 NAMES = ("centre_x", "centre_y", "centre_z")
 NORMS = ("L1L1", "L2L1")
@@ -262,20 +262,9 @@ def verify_l1_centre(source: np.ndarray, target: np.ndarray, centre, matrix: np.
     rounds = centre.get("rounds")
     if norm not in NORMS:
         raise Invalid("proven_interval", "proof/sublevel/centre is for the L1 norms (L1L1, L2L1)")
-    if type(rounds) is not int or not 0 <= rounds <= MAX_ROUNDS:
-        raise Invalid("proven_interval", f"proof/sublevel/centre/rounds must be an integer from 0 to {MAX_ROUNDS}")
-    if not (increase >= 0 and (increase == 0 or SMALLEST <= increase <= LARGEST) and SMALLEST <= radius <= LARGEST):
-        raise Invalid("proven_interval", "proof/sublevel/centre needs cost_increase >= 0 and a radius of magnitude "
-                                         "within [2^-128, 2^128]")
     duals = _duals(centre, len(source))
     scene = Scene(source, target, matrix, reference, norm)
-    if not scene.usable:
-        raise Invalid("proven_interval", "the map's numbers are outside the range a proven interval is checked for "
-                                         "(6 points at least, every number 0 or of magnitude within [2^-128, 2^128], "
-                                         "every depth positive)")
-    if not encloses(scene, increase, radius):
-        raise Invalid("proven_interval", f"centre not proven at radius {radius!r}: the cameras costing up to "
-                                         f"cost_increase {increase!r} more are not shown to lie within it")
+    check_enclosure(scene, increase, radius, rounds, "proof/sublevel/centre")
     _, r = proven_centre(scene, increase, radius, rounds)
     bounds = bounds_with(scene, increase, r, duals)
     if bounds is None:

@@ -360,6 +360,24 @@ def enclosed_radius(scene: Scene, increase: float, steps: int = 40) -> tuple[flo
     return radius, r, rounds
 
 
+def check_enclosure(scene: Scene, increase: float, radius: float, rounds, where: str) -> None:
+    """The checker's part shared by every resection's proven centre: the stated rounds and radius
+    in range, the scene's numbers in the range a proof is checked for, and the radius (1)
+    enclosing every camera within ``increase`` of the optimum (Invalid naming ``where`` if not)."""
+    if type(rounds) is not int or not 0 <= rounds <= MAX_ROUNDS:
+        raise Invalid("proven_interval", f"{where}/rounds must be an integer from 0 to {MAX_ROUNDS}")
+    if not (increase >= 0 and (increase == 0 or SMALLEST <= increase <= LARGEST) and SMALLEST <= radius <= LARGEST):
+        raise Invalid("proven_interval", f"{where} needs cost_increase >= 0 and a radius of magnitude within "
+                                         "[2^-128, 2^128]")
+    if not scene.usable:
+        raise Invalid("proven_interval", "the map's numbers are outside the range a proven interval is checked for "
+                                         "(6 points at least, every number 0 or of magnitude within [2^-128, 2^128], "
+                                         "every depth positive)")
+    if not encloses(scene, increase, radius):
+        raise Invalid("proven_interval", f"{where}: not proven at radius {radius!r}: the cameras costing up to "
+                                         f"cost_increase {increase!r} more are not shown to lie within it")
+
+
 def resection_sublevel(source, target, matrix, increase: float, steps: int = 40) -> dict | None:
     """The proof a solver states (None where it finds none): the smallest radius (1) passes with
     twice its allowances (bisection), the rounds (2) until they shrink r by less than 1%, and
@@ -399,19 +417,8 @@ def verify_resection_sublevel(source: np.ndarray, target: np.ndarray, sublevel, 
         raise Invalid("proven_interval", "a resection's proven interval is for L2L2 (its cost the sum of squares)")
     if type(reference) is not int or not 0 <= reference < len(source):
         raise Invalid("proven_interval", "proof/sublevel/reference must index a point of the map")
-    if type(rounds) is not int or not 0 <= rounds <= MAX_ROUNDS:
-        raise Invalid("proven_interval", f"proof/sublevel/rounds must be an integer from 0 to {MAX_ROUNDS}")
-    if not (increase >= 0 and (increase == 0 or SMALLEST <= increase <= LARGEST) and SMALLEST <= radius <= LARGEST):
-        raise Invalid("proven_interval", "proof/sublevel needs cost_increase >= 0 and a radius of magnitude within "
-                                         "[2^-128, 2^128]")
     scene = Scene(source, target, matrix, reference)
-    if not scene.usable:
-        raise Invalid("proven_interval", "the map's numbers are outside the range a proven interval is checked for "
-                                         "(6 points at least, every number 0 or of magnitude within [2^-128, 2^128], "
-                                         "every depth positive)")
-    if not encloses(scene, increase, radius):
-        raise Invalid("proven_interval", f"not proven at radius {radius!r}: the cameras costing up to cost_increase "
-                                         f"{increase!r} more are not shown to lie within it")
+    check_enclosure(scene, increase, radius, rounds, "proof/sublevel")
     bounds, _ = proven_centre(scene, increase, radius, rounds)
     if bounds is None:
         raise Invalid("proven_interval", "the camera's left 3x3 block is not shown invertible over the proven set: "
