@@ -19,7 +19,8 @@ import numpy as np
 
 from geocert.solvers.core.geometry import is_number
 from geocert.solvers.core.strict import Invalid
-from geocert.solvers.reconstruction.camera_claim import MAX_FOCAL_SD_FRACTION, MAX_PRINCIPAL_POINT_SD_PX
+from geocert.solvers.reconstruction.camera_claim import (FOCAL_P, MAX_FOCAL_SD_FRACTION, MAX_PRINCIPAL_POINT_SD_PX,
+                                                          PRINCIPAL_POINT_CHI2, PRINCIPAL_POINT_P)
 from geocert.verify.reconstruction_stages import MAX_FIGURE, _values
 
 # How calibrated.py registers a view (registered_by's words); adjust_best's starts; the models the
@@ -243,11 +244,6 @@ def _check_starts(result: dict, stages: dict) -> None:
                                   "reconstruction is the start exactly when K is given (options.intrinsics.K)")
 
 
-# The principal point tests' levels (pipeline.PRINCIPAL_POINT_CHI2, the shared one's chi-square
-# quantile for 2 parameters at 0.999; pipeline.PRINCIPAL_POINT_P, the per-view one's level): their
-# thresholds are these, never the document's.
-PRINCIPAL_POINT_CHI2 = 13.8
-PRINCIPAL_POINT_P = 0.001
 
 
 def _check_principal_point(stage: dict) -> None:
@@ -390,9 +386,6 @@ def _check_centred(result: dict, stage: dict, model: str, Ks: list, tolerance: f
                                   f"{worst[:2, 2].round(6).tolist()} with no test saying estimated")
 
 
-# The focal length test's level (pipeline.FOCAL_P): the screen's over the views (Bonferroni's) and
-# the chi-square's; the quantiles it sets are recomputed (_focal_test_levels), never read.
-FOCAL_P = 0.001
 
 
 def _normal_quantile(p: float) -> float:

@@ -28,6 +28,7 @@ from geocert.pipelines.reconstruction import ambiguity, claims
 from geocert.pipelines.reconstruction.fit import (depths_and_errors as _depths_and_errors, fit_cost, rms as _rms,
                                                   same_images)
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
+from geocert.solvers.reconstruction.camera_claim import FOCAL_P, PRINCIPAL_POINT_CHI2, PRINCIPAL_POINT_P
 from geocert.solvers.reconstruction.tracks import Observations
 
 STAGES = ("projective", "autocalibration", "bundle_adjustment", "structure", "cameras")
@@ -431,7 +432,6 @@ def _kept(metric: upgrade.Metric, obs: Observations, threshold_px: float) -> np.
     return keep
 
 
-PRINCIPAL_POINT_CHI2 = 13.8  # chi-square with 2 degrees of freedom at p = 0.001
 
 
 def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold_px: float, image_size,
@@ -474,7 +474,6 @@ def _same_registration(a: upgrade.Metric, b: upgrade.Metric) -> bool:
         bool(np.array_equal(np.isfinite(a.points[:, 0]), np.isfinite(b.points[:, 0])))
 
 
-PRINCIPAL_POINT_P = 0.001  # the per-view test's level (PRINCIPAL_POINT_CHI2's, for 2 (views - 1) degrees of freedom)
 
 
 def _principal_points_per_view(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold_px: float,
@@ -532,9 +531,7 @@ def _focals_per_view(metric: upgrade.Metric, obs: Observations, keep: np.ndarray
     every photo of Sceaux Castle, yet one of its 11 views is 2% shorter than the others (a focus
     or stabiliser change EXIF does not record): the shared one fit no view well enough to certify
     two of them. Returns the reconstruction, the observations kept and the test's figures."""
-    from scipy.stats import chi2, norm
-
-    from geocert.solvers.reconstruction import principal_points
+    from scipy.special import chdtri, ndtri  # the quantiles without scipy.stats' import (as the per-view test)
 
     views = [v for v, R in enumerate(metric.rotations) if R is not None]
     figures = {"estimated": False, "views": []}
@@ -546,7 +543,7 @@ def _focals_per_view(metric: upgrade.Metric, obs: Observations, keep: np.ndarray
     _, focal_sd = _intrinsics_sd(screen, obs, screen_keep, views, np.arange(len(views)))
     focals = np.array([screen.Ks[v][0, 0] for v in views])
     z = np.array([(focals[k] - np.median(np.delete(focals, k))) / focal_sd[k] for k in range(len(views))])
-    z_threshold = float(norm.ppf(1 - FOCAL_P / (2 * len(views))))
+    z_threshold = float(-ndtri(FOCAL_P / (2 * len(views))))
     own = [v for k, v in enumerate(views) if np.isfinite(z[k]) and abs(z[k]) > z_threshold]
     figures.update(z=[float(value) for value in z], z_threshold=z_threshold, views=own)
     if not own or len(own) > len(views) - 2:
@@ -566,7 +563,7 @@ def _focals_per_view(metric: upgrade.Metric, obs: Observations, keep: np.ndarray
     held, free = _rms(metric, obs, common) ** 2 * n, _rms(trial, obs, common) ** 2 * n
     variance = max(free / max(2 * n - added, 1), 1e-4)  # residuals below 0.01 px are rounding, not noise
     statistic = (held - free) / variance
-    threshold = float(chi2.ppf(1 - FOCAL_P, added))
+    threshold = float(chdtri(added, FOCAL_P))
     sd, focal_sd = _intrinsics_sd(trial, obs, trial_keep, views, np.array([groups[v] for v in views]))
     relative = [float(focal_sd[groups[v]] / trial.Ks[v][0, 0]) for v in own]
     precise = bool(np.all(sd <= camera_claim.MAX_PRINCIPAL_POINT_SD_PX)
@@ -602,7 +599,6 @@ def _intrinsics_sd(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, 
     return np.where(np.isfinite(sd), sd, np.inf), np.where(np.isfinite(focal_sd), focal_sd, np.inf)
 
 
-FOCAL_P = 0.001  # the focal length test's level (the screen's, over the views, and the kept one's)
 
 
 def _principal_point_sd(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, views: list) -> np.ndarray:

@@ -69,6 +69,13 @@ MAX_PRINCIPAL_POINT_SD_PX = 5.0
 # when the data fix each to this fraction of it (standard deviation): Sceaux Castle's stands apart
 # by 2% and is fixed to 0.2%.
 MAX_FOCAL_SD_FRACTION = 0.01
+# The levels of the camera model's tests (the pipeline runs them; the verifier recomputes their
+# thresholds from these, never reading the document's): the shared principal point's chi-square
+# quantile for its 2 parameters at 0.999; the per-view principal points' level; the focal length
+# test's level (its screen's over the views, Bonferroni's, and its chi-square's).
+PRINCIPAL_POINT_CHI2 = 13.8
+PRINCIPAL_POINT_P = 0.001
+FOCAL_P = 0.001
 DOUBTFUL_FRACTION = 0.5
 DOUBTFUL_REMOVED = 0.25
 DOUBTFUL_DROPPED = 0.25
