@@ -151,3 +151,35 @@ def test_the_one_pass_accepts_only_what_the_two_passes_accept_and_gives_the_same
         return  # refused here: the two passes answer it, as before
     two = JOB_REQUEST.validate_python(json.loads(body))  # raises if they refuse what the one pass took
     assert json.dumps(one.model_dump()) == json.dumps(two.model_dump())
+
+
+def test_a_client_gone_mid_body_is_answered_as_before_not_raised(monkeypatch):
+    """A client that leaves while its body arrives: the one pass's read meets the disconnect, and
+    leaves it to FastAPI's read, which answers it (400, to no one) as it did; the disconnect is
+    not raised out of the app (uvicorn would log it as the application's error)."""
+    from geocert.app.main import create_app
+
+    monkeypatch.setenv("GEOCERT_RATE_LIMIT_PER_MINUTE", "0")
+    get_settings.cache_clear()
+    app = create_app()
+    text = json.dumps(_triangulation()).encode()
+    messages = iter([{"type": "http.request", "body": text[:100], "more_body": True}])
+    statuses = []
+
+    async def receive():
+        return next(messages, {"type": "http.disconnect"})
+
+    async def send(message):
+        if message["type"] == "http.response.start":
+            statuses.append(message["status"])
+
+    scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "POST", "scheme": "http",
+             "path": "/v1/jobs", "raw_path": b"/v1/jobs", "query_string": b"", "root_path": "",
+             "headers": [(b"host", b"test"), (b"content-type", b"application/json"),
+                         (b"content-length", str(len(text)).encode())],
+             "client": ("127.0.0.1", 50000), "server": ("127.0.0.1", 8000), "state": {}}
+    try:
+        asyncio.run(app(scope, receive, send))
+    finally:
+        get_settings.cache_clear()
+    assert statuses == [400]

@@ -18,6 +18,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.routing import APIRoute
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 from pydantic import ValidationError
+from starlette.requests import ClientDisconnect
 
 from geocert.app.api.deps import (Caller, JobStoreDep, error_responses, get_async_redis, get_store, rate_limited,
                                   stream_slot)
@@ -84,7 +85,10 @@ async def read_in_one_pass(request: Request) -> None:
     from validate_json's, e.g. "a valid list" against "a valid array")."""
     if not is_json_media_type(request.headers.get("content-type")):
         return  # FastAPI answers it (415, or the body's own errors)
-    body = await request.body()
+    try:
+        body = await request.body()
+    except ClientDisconnect:
+        return  # FastAPI's own read meets it too, and answers it as it always did
     if not body:
         return
     try:
