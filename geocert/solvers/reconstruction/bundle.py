@@ -222,3 +222,22 @@ def undistort(pixels: np.ndarray, centre, focal: float, k1: float) -> np.ndarray
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(rd > 0, r / rd, 1.0)
     return centre + n * ratio[:, None] * focal
+
+
+def undistort_K(pixels: np.ndarray, K: np.ndarray, k1: float) -> np.ndarray:
+    """The pixels (M, 2) the pinhole camera K sees where the "fixed_radial" model's camera (K,
+    distortion k1 about K's principal point) saw ``pixels``: n_d = K^-1 pixel, the normalised
+    radius r_d = r (1 + k1 r^2) solved for r by Newton's method, then K n. For K with square
+    pixels and no skew, undistort's about K's principal point at K's focal length."""
+    if k1 == 0.0 or len(pixels) == 0:
+        return np.array(pixels, dtype=float, copy=True)
+    K = np.asarray(K, dtype=float)
+    M, centre = K[:2, :2], K[:2, 2]
+    n = np.linalg.solve(M, (np.asarray(pixels, dtype=float) - centre).T).T
+    rd = np.linalg.norm(n, axis=1)
+    r = rd.copy()
+    for _ in range(20):
+        r = r - (r * (1 + k1 * r * r) - rd) / (1 + 3 * k1 * r * r)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(rd > 0, r / rd, 1.0)
+    return centre + (n * ratio[:, None]) @ M.T
