@@ -96,9 +96,17 @@ def test_a_centre_not_Ks_principal_point_is_refused(known_K_with_k1):
     refused(forged)
 
 
-def test_the_test_recorded_in_the_projective_stage_is_refused(known_K_with_k1):
+@pytest.mark.parametrize("moved", [False, True])
+def test_the_test_recorded_in_the_projective_stage_is_refused(known_K_with_k1, moved):
+    """With K known the term is tested in the bundle adjustment, never in the registration."""
     forged = copy.deepcopy(known_K_with_k1)
-    _stage(forged, "projective")["radial_distortion"] = _stage(forged, "bundle_adjustment").pop("radial_distortion")
+    adjustment = _stage(forged, "bundle_adjustment")
+    # the members the K-unknown test's record has (it states no observations)
+    _stage(forged, "projective")["radial_distortion"] = {key: value for key, value in
+                                                         adjustment["radial_distortion"].items()
+                                                         if key != "observations"}
+    if moved:
+        adjustment.pop("radial_distortion")
     refused(forged)
 
 
