@@ -89,7 +89,7 @@ STAGE_RECORDS = ByName({
                               "threshold", "focal_sd", "max_focal_sd", "sd_px", "max_sd_px", "precise", "reason"),
         # K known: the radial term's test (pipeline._fixed_radial_test)
         radial_distortion=record("model", "estimated", "k1", "k1_tested", "chi2", "threshold", "observations",
-                                 "reason")),
+                                 "residual_dof", "reason")),
     "structure": record(*COMMON, "tracks", "points", "certified", "points_dropped", "observations_removed",
                         "tracks_not_started"),
     "cameras": record(*COMMON, "cameras", "certified", "searched", "claim", "degrees_of_freedom",
@@ -146,7 +146,8 @@ FIGURES = {
         "focal_per_view/max_focal_sd": "measure", "focal_per_view/sd_px/*": "measure",
         "focal_per_view/max_sd_px": "measure", "radial_distortion/k1": "number",
         "radial_distortion/k1_tested": "number", "radial_distortion/chi2": "number",
-        "radial_distortion/threshold": "measure", "radial_distortion/observations": "count"},
+        "radial_distortion/threshold": "measure", "radial_distortion/observations": "count",
+        "radial_distortion/residual_dof": "count"},
 }
 COMMON_FIGURES = {"elapsed_s": "measure", "cpu_s": "measure"}
 
