@@ -427,10 +427,10 @@ def _fixed_radial_test(metric: upgrade.Metric, obs: Observations, keep: np.ndarr
     adjustment again with it, bundle model "fixed_radial", from the "fixed" one): "off" never
     (None: no figures); "on" always; "auto" when it lowers the cost on the observations both keep
     by more than RADIAL_CHI2 noise variances (the residuals' own, from the fit with it, over their
-    degrees of freedom), as _radial_test judges the K-unknown term. A real lens's distortion that K does not model
-    (Sceaux Castle's, with openMVG's K) otherwise puts every camera beyond its tolerance. Returns
-    the reconstruction kept (its k1 that of the pixels given), the observations kept and the
-    test's figures."""
+    degrees of freedom), as _radial_test judges the K-unknown term. A real lens's distortion that
+    K does not model (Sceaux Castle's, with openMVG's K) otherwise adds to every camera's misfit.
+    Returns the reconstruction kept (its k1 that of the pixels given), the observations kept and
+    the test's figures."""
     from dataclasses import replace
 
     if options.radial_distortion == "off":

@@ -73,8 +73,8 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
            stop: schur.StopRule = schur.CERES, centres: np.ndarray | None = None,
            groups: np.ndarray | None = None):
     """Refine one shared K (``model``: "simple" f with square pixels, no skew and cx, cy fixed; "full"
-    fx, fy, skew, cx, cy; "fixed" K as given; "radial" f and the distortion term, from ``k1``; "fixed_radial" K as given
-    and the distortion term),
+    fx, fy, skew, cx, cy; "fixed" K as given; "radial" f and the distortion term, from ``k1``;
+    "fixed_radial" K as given and the distortion term),
     rotations (n, 3, 3), translations (n, 3) and points (p, 3) against pixel observations. Returns
     K, rotations, translations, points, residuals (M, 2), and k1 (``k1`` as given unless
     RADIAL_MODELS).
@@ -204,7 +204,8 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         K = np.array([[[k[0], 0.0, u], [0.0, k[0], v], [0.0, 0.0, 1.0]] for u, v in A[:, 6:8]])
     if model == "focal_groups":
         K = np.array([[[f, 0.0, u], [0.0, f, v], [0.0, 0.0, 1.0]] for f, (u, v) in zip(S[groups], A[:, 6:8])])
-    return K, Rotation.from_rotvec(A[:, :3]).as_matrix(), A[:, 3:6], B, r, float(S[-1]) if model in RADIAL_MODELS else k1
+    return (K, Rotation.from_rotvec(A[:, :3]).as_matrix(), A[:, 3:6], B, r,
+            float(S[-1]) if model in RADIAL_MODELS else k1)
 
 
 def undistort(pixels: np.ndarray, centre, focal: float, k1: float) -> np.ndarray:
