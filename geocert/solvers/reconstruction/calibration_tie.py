@@ -232,7 +232,7 @@ def _least_points(result: dict, point_of: dict, by_view: dict) -> dict:
     shared observations (227 at their least; 254 at the genuine run's L1-optimal points), and a
     certificate re-posed at 1.3 times the focal length (2,679 px^2, 4.1 px off) was tied and the
     document verified."""
-    P, group, uv, index = [], [], [], []
+    P, group, uv, index, stated = [], [], [], [], []
     for k, point in enumerate(result["points"]):
         if point.get("point") is None or point.get("track") not in point_of:
             continue
@@ -242,9 +242,16 @@ def _least_points(result: dict, point_of: dict, by_view: dict) -> dict:
         for v, u, w in seen:
             P.append(by_view[v]), group.append(len(index)), uv.append((u, w))
         index.append(k)
+        stated.append(point["point"] if point.get("at_infinity") else [*point["point"], 1.0])
     if not index:
         return {}
-    X, _ = _triangulate(np.asarray(P, dtype=float), np.asarray(group), np.asarray(uv, dtype=float))
+    P, group, uv = np.asarray(P, dtype=float), np.asarray(group), np.asarray(uv, dtype=float)
+    X, errors = _triangulate(P, group, uv)
+    # the stated point where it fits better (the triangulation's is an evaluated cost, not the least)
+    given = np.asarray(stated, dtype=float)
+    better = np.bincount(group, _errors(P, given[group], uv), minlength=len(index)) \
+        < np.bincount(group, errors, minlength=len(index))
+    X = np.where(better[:, None], given, X)
     return {k: X[m] for m, k in enumerate(index) if np.all(np.isfinite(X[m]))}
 
 
@@ -265,7 +272,7 @@ def _other_tracks(result: dict, views: list, tracks: list, cameras: np.ndarray, 
                  if c.get("registered") is True and c.get("P") is not None}
     camera_of = {v: k for k, v in enumerate(views)}
     held = set(tracks)
-    mine, theirs, pixels, counts = [], [], [], []
+    mine, theirs, pixels, counts, stated = [], [], [], [], []
     for point in result["points"]:
         if point.get("point") is None or point.get("track") in held:
             continue
@@ -274,6 +281,7 @@ def _other_tracks(result: dict, views: list, tracks: list, cameras: np.ndarray, 
         if len(seen) < 2:
             continue
         counts.append(len(seen))
+        stated.append(point["point"] if point.get("at_infinity") else [*point["point"], 1.0])
         for v, u, w in seen:
             mine.append(cameras[camera_of[v]]), theirs.append(reference[v]), pixels.append((u, w))
     if not pixels:
@@ -281,7 +289,10 @@ def _other_tracks(result: dict, views: list, tracks: list, cameras: np.ndarray, 
     group = np.repeat(np.arange(len(counts)), counts)
     uv = np.asarray(pixels, dtype=float)
     cost = float(np.sum(_triangulated(np.asarray(mine, dtype=float), group, uv)))
-    base = float(np.sum(_triangulated(np.asarray(theirs, dtype=float), group, uv)))
+    theirs = np.asarray(theirs, dtype=float)
+    # the returned cameras at the better of each point's triangulation in them and the point stated
+    base = float(np.sum(np.minimum(np.bincount(group, _triangulated(theirs, group, uv)),
+                                   np.bincount(group, _errors(theirs, np.asarray(stated, dtype=float)[group], uv)))))
     coordinates = 2 * len(uv)
     floor = float(np.median(np.max(np.abs(uv), axis=1)))
     allowed = (base * ratio * (2.0 + FIT_SIGMAS * math.sqrt(2.0 / coordinates))
@@ -299,6 +310,15 @@ def _other_tracks(result: dict, views: list, tracks: list, cameras: np.ndarray, 
 
 
 TRIANGULATION_STEPS = 20  # Levenberg-Marquardt steps per point (from the linear estimate)
+
+
+def _errors(P: np.ndarray, X: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Each observation's squared reprojection error (px^2) in the camera P (one 3x4 each) of the
+    homogeneous point X (one each); infinite where it is not finite."""
+    with np.errstate(all="ignore"):
+        x = np.einsum("kij,kj->ki", P, X)
+        e = np.sum(np.square(x[:, :2] / x[:, 2:3] - uv), axis=1)
+    return np.where(np.isfinite(e), e, np.inf)
 
 
 def _triangulated(P: np.ndarray, group: np.ndarray, uv: np.ndarray) -> np.ndarray:
