@@ -1107,7 +1107,8 @@ class ReconstructionItems(TrackItems):
               "the returned cameras' plus 3 standard deviations of a chi-square over the coordinates shared (a certificate "
               "built with the principal point at the images' centre is held to the returned reconstruction re-adjusted "
               "in that model instead, calibration_tie.reference, and allowed what that model costs beyond the returned "
-              "cameras, calibration_tie.model_cost_px2); so K is "
+              "cameras, calibration_tie.model_cost_px2), and its cameras fit the result's other placed points, each "
+              "triangulated in them, at calibration_tie.other_cost_px2, at most calibration_tie.other_allowed_cost_px2; so K is "
               "proven optimal for a reconstruction that close to the result's, not for the result's own); the critical motion behind `determined` is judged again from the cameras and "
               "certified points returned")
         return statement
