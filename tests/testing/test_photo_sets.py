@@ -117,7 +117,8 @@ def test_kitti_sets_move_forward(key, turn_deg):
     road = loaded(key)
     assert len(road.names) == 26 and road.names[:2] == ["000000.png", "000002.png"]
     size = cv2.imread(str(road.path(road.names[0])), cv2.IMREAD_UNCHANGED).shape
-    assert road.K[0, 0] == road.K[1, 1] and abs(road.K[0, 2] - size[1] / 2) < 25 and abs(road.K[1, 2] - size[0] / 2) < 10
+    assert road.K[0, 0] == road.K[1, 1]
+    assert abs(road.K[0, 2] - size[1] / 2) < 25 and abs(road.K[1, 2] - size[0] / 2) < 10
     cameras = [road.truth[n] for n in road.names]
     for a, b in zip(cameras, cameras[1:]):
         step = a.R @ (b.center - a.center)  # b's centre in a's frame: ahead is +z
