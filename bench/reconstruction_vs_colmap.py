@@ -20,7 +20,10 @@ Middlebury multi-view stereo data, dinoSparseRing, templeRing and templeSparseRi
 Curless, Diebel, Scharstein and Szeliski, "A comparison and evaluation of multi-view stereo
 reconstruction algorithms", CVPR 2006); the Oxford Corridor sequence and its matches (Visual
 Geometry Group, University of Oxford); Sceaux Castle (photographs (c) 2012 Pierre Moulon, openMVG's
-sample data; K only, so its rotations are compared with COLMAP's, marked "vs COLMAP"). None ships
+sample data; K only, so its rotations are compared with COLMAP's, marked "vs COLMAP"); forward
+motion down a road, kittiStraight and kittiTurn (every 2nd frame of two 51-frame excerpts of the
+KITTI odometry benchmark, Geiger, Lenz and Urtasun, CVPR 2012, CC BY-NC-SA 3.0: K and ground-truth
+poses; the copy in github.com/niconielsen32/VisualSLAM, KITTI_sequence_1 and _2). None ships
 with geocert; a set whose files are missing is reported with where to get it.
 
     .venv/bin/pip install -e '.[bench]'       # pycolmap
@@ -62,7 +65,8 @@ README_OPTIONS = {"min_inliers": 10, "merge_components": True,
                   "features": {"max_features": 0, "contrast_threshold": 0.005, "ratio": 0.85,
                                "ransac_threshold_px": 2.0, "guided_ratio": 0.8}}
 README_SETS = ("dinoSparseRing",)
-SETS = ("dinoSparseRing", "templeRing", "templeSparseRing", "corridor", "corridor-matches", "sceaux")
+SETS = ("dinoSparseRing", "templeRing", "templeSparseRing", "corridor", "corridor-matches", "sceaux", "kittiStraight",
+        "kittiTurn")
 RUNS = ("colmap", "colmap-K", "geocert", "geocert-readme", "geocert-K", "geocert-K-readme")
 # Runs on request (--runs): COLMAP with SIMPLE_PINHOLE, no distortion term (what the radial term is worth).
 EXTRA_RUNS = ("colmap-pinhole",)
