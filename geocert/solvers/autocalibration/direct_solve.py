@@ -501,3 +501,84 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool, c
     if stopped is not None and not certified:
         status, reason = stopped.status, f"{stopped.reason}; {reason}" if reason else stopped.reason
     return DirectStage(status, certified, best, best_cost, bound, order, rank, ratio, statuses, proof, reason)
+
+
+# --- the proven interval of the focal length (direct_sublevel) ---------------------------------
+
+DINKELBACH_STEPS = 6  # c <- r at the relaxation's minimiser, until it moves less than DINKELBACH_TOLERANCE
+DINKELBACH_TOLERANCE = 1e-6
+INTERVAL_PAD = 1e-9  # the interval stated, this much (relative) wider than the one its duals prove here
+
+
+def prove_focal(setup: direct.DirectSetup, Q: np.ndarray, cost: float, increase: float, check=None) -> dict | None:
+    """The direct proof's ``sublevel`` (direct_sublevel): for each orientation of the setup and each
+    end, c found by Dinkelbach's iteration from the returned Q's r (each step one solve of the
+    interval program at c, c then r at its first moments) and the dual of a solve at that c, whose
+    safe bound, above 0, proves the end (direct_sublevel.end; a c moved outward by 1e-6, 1e-4, then
+    1e-2 relative when it is not). None when an end is not proven, or ``check()`` raises Stopped."""
+    from geocert.solvers.autocalibration import direct_sublevel
+    from geocert.solvers.autocalibration.proofs import sublevel_level
+
+    if not (math.isfinite(cost) and math.isfinite(increase) and increase >= 0 and cost >= 0):
+        return None
+    level = sublevel_level(cost, increase)
+    start = direct_sublevel.ratio(setup.cameras, Q / np.trace(Q))
+    sides = {}
+    for side, sign in (("lower", 1.0), ("upper", -1.0)):
+        entries = []
+        for orientation in setup.orientations:
+            def solved(c):
+                program = direct_sublevel.side_program(setup.cameras, orientation.pairs, setup.focal, c, sign, level)
+                status, y, z, raw = solve_program(program, None, ATTEMPTS[:1], check)
+                return program, y, z
+
+            c = start
+            for _ in range(DINKELBACH_STEPS):
+                _, y, z = solved(c)
+                if y is None:
+                    break
+                moved = direct_sublevel.ratio(setup.cameras, direct_relaxation.q_of(y[:direct_relaxation.N]))
+                if not math.isfinite(moved):
+                    break
+                # never past the returned Q's own r: it is in the set
+                moved = min(moved, start) if sign > 0 else max(moved, start)
+                done = abs(moved - c) <= DINKELBACH_TOLERANCE * abs(c)
+                c = moved
+                if done:
+                    break
+            entry = None
+            for slack in (1e-6, 1e-4, 1e-2):
+                trial = c - sign * slack * abs(c)
+                program, _, z = solved(trial)
+                if z is None:
+                    continue
+                safe, _ = direct_relaxation.safe_bound(program, z, -math.inf)
+                if direct_sublevel.end(setup.cameras, trial, sign, safe) is not None:
+                    entry = {"delta": orientation.delta, "c": float(trial), "z": pack(z)}
+                    break
+            if entry is None:
+                return None
+            entries.append(entry)
+        sides[side] = entries
+    sublevel = {"cost_increase": float(increase), **sides, "interval": [0.0, 0.0]}
+    lo, hi = _proven_here(setup, sublevel, level)
+    sublevel["interval"] = [lo * (1 - INTERVAL_PAD), hi * (1 + INTERVAL_PAD)]
+    return sublevel
+
+
+def _proven_here(setup, sublevel: dict, level: float) -> tuple[float, float]:
+    """The interval the entries prove, as the verifier computes it (direct_sublevel.check)."""
+    from geocert.solvers.autocalibration import direct_sublevel
+    from geocert.solvers.core.certificates import unpack
+
+    ends = {}
+    for side, sign in (("lower", 1.0), ("upper", -1.0)):
+        found = []
+        for entry, orientation in zip(sublevel[side], setup.orientations):
+            program = direct_sublevel.side_program(setup.cameras, orientation.pairs, setup.focal, entry["c"], sign,
+                                                   level)
+            safe, _ = direct_relaxation.safe_bound(program, unpack(entry["z"]), -math.inf)
+            found.append(direct_sublevel.end(setup.cameras, entry["c"], sign, safe))
+        ends[side] = min(found) if sign > 0 else max(found)
+    return direct_sublevel.pixels(float(setup.problem.K0[0, 0]), ends["lower"], ends["upper"],
+                                  direct_sublevel.scope_range(setup.problem.unit_ranges))
