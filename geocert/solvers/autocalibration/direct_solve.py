@@ -58,6 +58,7 @@ from geocert.solvers.autocalibration import direct
 from geocert.solvers.autocalibration import direct_ipm
 from geocert.solvers.autocalibration import direct_relaxation
 from geocert.solvers.core.certificates import pack
+from geocert.solvers.autocalibration.proofs import sublevel_level
 from geocert.solvers.core.conic import ConicStatus, clarabel_cones, map_clarabel_status
 
 
@@ -511,13 +512,14 @@ INTERVAL_PAD = 1e-9  # the interval stated, this much (relative) wider than the 
 
 
 def prove_focal(setup: direct.DirectSetup, Q: np.ndarray, cost: float, increase: float, check=None) -> dict | None:
-    """The direct proof's ``sublevel`` (direct_sublevel): for each orientation of the setup and each
-    end, c found by Dinkelbach's iteration from the returned Q's r (each step one solve of the
-    interval program at c, c then r at its first moments) and the dual of a solve at that c, whose
-    safe bound, above 0, proves the end (direct_sublevel.end; a c moved outward by 1e-6, 1e-4, then
-    1e-2 relative when it is not). None when an end is not proven, or ``check()`` raises Stopped."""
+    """The direct proof's ``sublevel`` (direct_sublevel): for each end and each orientation of the
+    setup, c by Dinkelbach's iteration from the returned Q's r (each step one solve of the interval
+    program at c, c then r at its first moments), then solves at that c moved outward by 1e-6,
+    1e-4 and 1e-2 relative; of every solve's dual whose safe bound is above 0, the one proving the
+    tightest end (direct_sublevel.end) is kept. An end no dual proves is null: the scope's own
+    (measured: the lower end's programs stall the interior point on some scenes, where Clarabel took
+    23 s a solve, "AlmostSolved"). None when neither end is proven, or ``check()`` raises Stopped."""
     from geocert.solvers.autocalibration import direct_sublevel
-    from geocert.solvers.autocalibration.proofs import sublevel_level
 
     if not (math.isfinite(cost) and math.isfinite(increase) and increase >= 0 and cost >= 0):
         return None
@@ -527,14 +529,22 @@ def prove_focal(setup: direct.DirectSetup, Q: np.ndarray, cost: float, increase:
     for side, sign in (("lower", 1.0), ("upper", -1.0)):
         entries = []
         for orientation in setup.orientations:
+            best, best_end = None, None
+
             def solved(c):
+                nonlocal best, best_end
                 program = direct_sublevel.side_program(setup.cameras, orientation.pairs, setup.focal, c, sign, level)
                 status, y, z, raw = solve_program(program, None, ATTEMPTS[:1], check)
-                return program, y, z
+                if z is not None:
+                    safe, _ = direct_relaxation.safe_bound(program, z, -math.inf)
+                    proven = direct_sublevel.end(setup.cameras, c, sign, safe)
+                    if proven is not None and (best_end is None or sign * (proven - best_end) > 0):
+                        best, best_end = {"delta": orientation.delta, "c": float(c), "z": pack(z)}, proven
+                return y
 
             c = start
             for _ in range(DINKELBACH_STEPS):
-                _, y, z = solved(c)
+                y = solved(c)
                 if y is None:
                     break
                 moved = direct_sublevel.ratio(setup.cameras, direct_relaxation.q_of(y[:direct_relaxation.N]))
@@ -546,20 +556,18 @@ def prove_focal(setup: direct.DirectSetup, Q: np.ndarray, cost: float, increase:
                 c = moved
                 if done:
                     break
-            entry = None
             for slack in (1e-6, 1e-4, 1e-2):
                 trial = c - sign * slack * abs(c)
-                program, _, z = solved(trial)
-                if z is None:
-                    continue
-                safe, _ = direct_relaxation.safe_bound(program, z, -math.inf)
-                if direct_sublevel.end(setup.cameras, trial, sign, safe) is not None:
-                    entry = {"delta": orientation.delta, "c": float(trial), "z": pack(z)}
-                    break
-            if entry is None:
-                return None
-            entries.append(entry)
+                solved(trial)
+                if best_end is not None and sign * (best_end - trial) >= 0:
+                    break  # nothing further out can prove a tighter end
+            if best is None:
+                entries = None  # this end is the scope's
+                break
+            entries.append(best)
         sides[side] = entries
+    if sides["lower"] is None and sides["upper"] is None:
+        return None
     sublevel = {"cost_increase": float(increase), **sides, "interval": [0.0, 0.0]}
     lo, hi = _proven_here(setup, sublevel, level)
     sublevel["interval"] = [lo * (1 - INTERVAL_PAD), hi * (1 + INTERVAL_PAD)]
@@ -571,8 +579,10 @@ def _proven_here(setup, sublevel: dict, level: float) -> tuple[float, float]:
     from geocert.solvers.autocalibration import direct_sublevel
     from geocert.solvers.core.certificates import unpack
 
-    ends = {}
+    ends = {"lower": -math.inf, "upper": math.inf}
     for side, sign in (("lower", 1.0), ("upper", -1.0)):
+        if sublevel[side] is None:
+            continue
         found = []
         for entry, orientation in zip(sublevel[side], setup.orientations):
             program = direct_sublevel.side_program(setup.cameras, orientation.pairs, setup.focal, entry["c"], sign,

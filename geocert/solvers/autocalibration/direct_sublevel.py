@@ -18,7 +18,8 @@ its localizing matrix (over the monomials of degree <= 1: without it the bound w
 measured); a dual vector z of it gives a safe bound s (direct_relaxation.safe_bound, not floored at
 0) with tr((A - c B) Q) >= s. Since tr(B Q) <= BMAX = sum_i |p_i2|^2 on the set (Q PSD of trace
 1), s > 0 proves r >= c + s / BMAX; the upper end likewise from -(A - c B): r <= c - s / BMAX.
-Any c and any z give a true statement; a z with s <= 0 proves nothing and is refused.
+Any c and any z give a true statement; a z with s <= 0 proves nothing and is refused. An end
+stated null is the scope's (the focal rows'): nothing more is claimed for it.
 """
 
 from __future__ import annotations
@@ -127,6 +128,15 @@ LEVEL = ("every absolute dual quadric of the direct stage's scope whose cost (7.
          "middle (pixels); clipped to what the focal rows allow")
 
 
+def cost_increase(cost: float, lower_bound: float, views: int) -> float:
+    """The level the kind proves the interval at: SIGMAS^2 times (7.12)'s residual variance, cost
+    over its 4 residuals a view less Q's 8 degrees of freedom, never below the certified gap
+    (core.determinacy.cost_increase, the estimates' rule); the verifier asks no lower a level."""
+    from geocert.solvers.core.determinacy import cost_increase as rule
+
+    return rule(cost, max(4 * views - 8, 1), cost - lower_bound)
+
+
 def proven_document(sublevel: dict) -> dict:
     """The proven intervals a direct stage's determinacy states from its proof's ``sublevel``."""
     from geocert.solvers.core.determinacy import proven_document as document
@@ -151,9 +161,11 @@ def check(setup, sublevel, gone: tuple, cost: float) -> tuple[float, float]:
         raise Invalid("proven_interval", "proof/sublevel/cost_increase must be 0 or within 2^-128 .. 2^128")
     level = sublevel_level(cost, float(increase))
     live = [o for o in setup.orientations if o.delta not in gone]
-    ends = {}
+    ends = {"lower": -math.inf, "upper": math.inf}
     for side, sign in (("lower", 1.0), ("upper", -1.0)):
         entries = sublevel.get(side)
+        if entries is None:  # this end is the scope's (pixels clips to it)
+            continue
         if not (isinstance(entries, list) and len(entries) == len(live)):
             raise Invalid("format", f"proof/sublevel/{side} holds one entry for each orientation left to bound "
                                     f"({len(live)})")
