@@ -218,6 +218,16 @@ class AutocalibrationVerification:
         """What of the result must be estimates only (verify._check_estimates): all of it but the
         metric stage's proven intervals, which check_returned has checked against its proof."""
         stages = result.get("stages")
+        if certificate.get("options", {}).get("method") == "direct":  # its one stage's interval (direct_sublevel)
+            proof = (certificate["items"][0].get("proof") if len(certificate.get("items") or []) == 1
+                     and isinstance(certificate["items"][0], dict) and certificate["items"][0].get("certified") is True
+                     else None)
+            if not (isinstance(stages, list) and len(stages) == 1 and isinstance(stages[0], dict)
+                    and isinstance(stages[0].get("determinacy"), dict) and isinstance(proof, dict)
+                    and "sublevel" in proof):
+                return result
+            determinacy = {k: v for k, v in stages[0]["determinacy"].items() if k not in ("proven", "proven_intervals")}
+            return {**result, "stages": [{**stages[0], "determinacy": determinacy}]}
         proof = (certificate["items"][1].get("proof") if len(certificate.get("items") or []) == 2
                  and isinstance(certificate["items"][1], dict) and certificate["items"][1].get("certified") is True
                  else None)
@@ -443,6 +453,14 @@ def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, p
     if not direct.in_domain(setup, Q, excluded):
         raise Invalid("scope", "the quadric returned is not PSD of rank 3, or breaks a view's focal range, or is not "
                                "allowed by chirality")
+    if "sublevel" in proof:  # the focal length's proven interval (direct_sublevel), at the claimed cost or above
+        from geocert.solvers.autocalibration import direct_sublevel
+
+        if options["varying_focal"]:
+            raise Invalid("format", "proof/sublevel: the focal length's interval is proven for one K (varying_focal "
+                                    "false)")
+        direct_sublevel.check(setup, proof["sublevel"], excluded, max(claimed, direct_relaxation.cost(setup.cameras, Q)))
+        passed.append("proven_interval")
     cameras, points, _ = arrays
     try:
         given = direct.derived(cameras, points, Q_in, bool(options["varying_focal"]))
@@ -493,6 +511,37 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
     for name, value in expected.items():
         if not _derived_close(name, result.get(name), value, cameras, points, H):
             raise Invalid("returned", f"{name} is not what the quadric gives")
+    _check_direct_proven(result["stages"][0], claim, len(cameras))
+
+
+def _check_direct_proven(stage: dict, claim: dict, views: int) -> None:
+    """A direct stage's determinacy saying proven states exactly its proof's sublevel interval
+    (direct_sublevel.check checked it: the claim is certified, so its proof was checked), at no
+    lower a cost increase than direct_sublevel.cost_increase gives for the stage's cost and bound."""
+    from geocert.solvers.autocalibration import direct_sublevel
+
+    determinacy = stage.get("determinacy") if isinstance(stage, dict) else None
+    if not isinstance(determinacy, dict):
+        return
+    if determinacy.get("proven") in (None, False) and determinacy.get("proven_intervals") is None:
+        return
+    proof = claim.get("proof")
+    sublevel = proof.get("sublevel") if isinstance(proof, dict) else None
+    if not isinstance(sublevel, dict) or claim.get("certified") is not True or determinacy.get("proven") is not True:
+        raise Invalid("returned", "stages/0/determinacy says proven, and no proof of its interval is carried (a "
+                                  "certified direct claim's proof/sublevel)")
+    try:
+        expected = direct_sublevel.proven_document(sublevel)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise Invalid("returned", "stages/0: its proof's sublevel states no interval") from exc
+    if determinacy.get("proven_intervals") != expected:
+        raise Invalid("returned", "stages/0/determinacy/proven_intervals are not its proof's sublevel")
+    cost, lower = stage.get("cost"), stage.get("lower_bound")
+    if isinstance(cost, (int, float)) and isinstance(lower, (int, float)):
+        least = direct_sublevel.cost_increase(float(cost), float(lower), views)
+        if not expected["cost_increase"] >= least * (1 - 1e-9):
+            raise Invalid("returned", f"stages/0/determinacy: the proven interval's cost_increase is below "
+                                      f"{least!r} (direct_sublevel.cost_increase: a lower level proves a smaller set)")
 
 
 def _check_relaxation_figures(result: dict, claim: dict, options: dict) -> None:

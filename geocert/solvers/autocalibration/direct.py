@@ -318,7 +318,7 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
     """The bound a "direct_moment" proof establishes over the program's feasible set, and the
     orientations it excludes: each orientation of the setup (built with exclude=False) is either
     excluded exactly (Gordan, rational arithmetic) or bounded by the safe bound of its dual."""
-    record(proof, "proof", ("type", "order", "programs", "excluded"), ("moment_rank", "eigenvalue_ratio"))
+    record(proof, "proof", ("type", "order", "programs", "excluded"), ("moment_rank", "eigenvalue_ratio", "sublevel"))
     informational(proof.get("moment_rank"), "proof/moment_rank", "integer")  # they explain a bound, prove nothing
     informational(proof.get("eigenvalue_ratio"), "proof/eigenvalue_ratio")
     if not same(proof.get("order"), order):

@@ -399,7 +399,7 @@ def moment_matrix(program: Program, y: np.ndarray) -> np.ndarray:
     return full[idx]
 
 
-def safe_bound(program: Program, z: np.ndarray) -> tuple[float, float]:
+def safe_bound(program: Program, z: np.ndarray, floor: float = 0.0) -> tuple[float, float]:
     """A lower bound on f over the polynomial program's feasible set from any dual vector z, and
     the smallest eigenvalue of the moment matrix's dual block it charged (numpy only).
 
@@ -412,7 +412,8 @@ def safe_bound(program: Program, z: np.ndarray) -> tuple[float, float]:
     docstring), and r'y charged to the box; lambda_min is the computed eigenvalue less its error
     bound (cones.eigenvalue_error), and the sum's rounding is subtracted (cones.rounding_margin,
     plus the products with the constant and the eigenvalue). Never below 0, since f >= 0
-    everywhere."""
+    everywhere; ``floor``: that floor (-inf for an objective that is not (7.12): a proven interval's,
+    direct_sublevel, where a non-finite bound is then -inf too)."""
     from geocert.solvers.core.cones import (UNIT_ROUNDOFF, eigenvalue_error, flush_subnormal, project_dual,
                                             rounding_margin, smat)
 
@@ -422,7 +423,7 @@ def safe_bound(program: Program, z: np.ndarray) -> tuple[float, float]:
     head = ConeSpec(cones.zero, cones.nonneg, cones.soc, cones.psd[:-1])
     z = flush_subnormal(z)
     if not np.all(np.isfinite(z)):
-        return 0.0, -np.inf
+        return floor, -np.inf
     with np.errstate(over="ignore", invalid="ignore"):
         z[:head.rows] = project_dual(z[:head.rows], head)
         A = program.A
@@ -446,11 +447,11 @@ def safe_bound(program: Program, z: np.ndarray) -> tuple[float, float]:
         margin += 4.0 * UNIT_ROUNDOFF * (abs(program.constant) + abs(lam_low) * trace + abs(bound))
         bound -= margin
     if not bound == bound or not np.isfinite(bound):
-        return 0.0, lam
+        return floor, lam
     # f is a sum of squares (7.12), so 0 bounds it everywhere: where the optimum is 0 (an exact
     # scene) the dual's charges leave its bound a little below (-3.4e-8 measured, make_scene without
     # noise), which would keep a zero-cost quadric from ever certifying at any abs_gap below that
-    return max(bound, 0.0), lam
+    return max(bound, floor), lam
 
 
 def conditioning_frame(cameras: np.ndarray) -> np.ndarray:

@@ -58,6 +58,7 @@ from geocert.solvers.autocalibration import direct
 from geocert.solvers.autocalibration import direct_ipm
 from geocert.solvers.autocalibration import direct_relaxation
 from geocert.solvers.core.certificates import pack
+from geocert.solvers.autocalibration.proofs import sublevel_level
 from geocert.solvers.core.conic import ConicStatus, clarabel_cones, map_clarabel_status
 
 
@@ -501,3 +502,114 @@ def _solve_order(setup: direct.DirectSetup, options, order: int, record: bool, c
     if stopped is not None and not certified:
         status, reason = stopped.status, f"{stopped.reason}; {reason}" if reason else stopped.reason
     return DirectStage(status, certified, best, best_cost, bound, order, rank, ratio, statuses, proof, reason)
+
+
+# --- the proven interval of the focal length (direct_sublevel) ---------------------------------
+
+DINKELBACH_STEPS = 6  # c <- r at the relaxation's minimiser, until it moves less than DINKELBACH_TOLERANCE
+DINKELBACH_TOLERANCE = 1e-6
+CLARABEL_STEPS = 1  # Dinkelbach's steps by Clarabel where the interior point's solves were not clean
+# Clarabel at tolerance 1e-6 (the safe bound does not need an accurate dual, only one whose charges are
+# small; measured on seed 3's lower end at c = 0.94: "Solved" in 8.4 s, safe bound 0.143, the same as at 1e-7
+# in 10.1 s, where direct_ipm stalled with a safe bound of -0.070)
+CLARABEL_ATTEMPT = ((1e-6, 1e-6),)
+INTERVAL_PAD = 1e-9  # the interval stated, this much (relative) wider than the one its duals prove here
+
+
+def prove_focal(setup: direct.DirectSetup, Q: np.ndarray, cost: float, increase: float, check=None) -> dict | None:
+    """The direct proof's ``sublevel`` (direct_sublevel): for each end and each orientation of the
+    setup, c by Dinkelbach's iteration from the returned Q's r (each step one solve of the interval
+    program at c, c then r at its first moments), then solves at that c moved outward by 1e-6,
+    1e-4 and 1e-2 relative; of every solve's dual whose safe bound is above 0, the one proving the
+    tightest end (direct_sublevel.end) is kept. An end no dual proves is null: the scope's own
+    (measured: the lower end's programs stall the interior point on some scenes, where Clarabel took
+    23 s a solve, "AlmostSolved"). None when neither end is proven, or ``check()`` raises Stopped."""
+    from geocert.solvers.autocalibration import direct_sublevel
+
+    if not (math.isfinite(cost) and math.isfinite(increase) and increase >= 0 and cost >= 0):
+        return None
+    level = sublevel_level(cost, increase)
+    start = direct_sublevel.ratio(setup.cameras, Q / np.trace(Q))
+    sides = {}
+    for side, sign in (("lower", 1.0), ("upper", -1.0)):
+        entries = []
+        for orientation in setup.orientations:
+            best, best_end = None, None
+
+            clean = True
+
+            def solved(c, attempts=ATTEMPTS[:1]):
+                nonlocal best, best_end, clean
+                program = direct_sublevel.side_program(setup.cameras, orientation.pairs, setup.focal, c, sign, level)
+                status, y, z, raw = solve_program(program, None, attempts, check)
+                clean = clean and status is ConicStatus.OPTIMAL
+                if z is not None:
+                    safe, _ = direct_relaxation.safe_bound(program, z, -math.inf)
+                    proven = direct_sublevel.end(setup.cameras, c, sign, safe)
+                    if proven is not None and (best_end is None or sign * (proven - best_end) > 0):
+                        best, best_end = {"delta": orientation.delta, "c": float(c), "z": pack(z)}, proven
+                return y
+
+            def dinkelbach(steps, attempts):
+                c = start
+                for _ in range(steps):
+                    y = solved(c, attempts)
+                    if y is None:
+                        break
+                    moved = direct_sublevel.ratio(setup.cameras, direct_relaxation.q_of(y[:direct_relaxation.N]))
+                    if not math.isfinite(moved):
+                        break
+                    # never past the returned Q's own r: it is in the set
+                    moved = min(moved, start) if sign > 0 else max(moved, start)
+                    done = abs(moved - c) <= DINKELBACH_TOLERANCE * abs(c)
+                    c = moved
+                    if done:
+                        break
+                for slack in (1e-6, 1e-4, 1e-2):
+                    trial = c - sign * slack * abs(c)
+                    if best_end is not None and sign * (best_end - trial) >= 0:
+                        break  # a dual at c proves about c: not beyond what is proven (measured: Clarabel's
+                        # certifications redone where the interior point had proven as much, 45 s for nothing)
+                    solved(trial, attempts)
+                    if best_end is not None and sign * (best_end - trial) >= 0:
+                        break  # nothing further out can prove a tighter end
+
+            dinkelbach(DINKELBACH_STEPS, ATTEMPTS[:1])
+            if not clean:
+                # the interior point stalled (the lower end's programs, on some scenes): Clarabel, slower and clean;
+                # stopped by the job's clock, what is proven so far stands
+                try:
+                    dinkelbach(CLARABEL_STEPS, CLARABEL_ATTEMPT)
+                except Stopped:
+                    pass
+            if best is None:
+                entries = None  # this end is the scope's
+                break
+            entries.append(best)
+        sides[side] = entries
+    if sides["lower"] is None and sides["upper"] is None:
+        return None
+    sublevel = {"cost_increase": float(increase), **sides, "interval": [0.0, 0.0]}
+    lo, hi = _proven_here(setup, sublevel, level)
+    sublevel["interval"] = [lo * (1 - INTERVAL_PAD), hi * (1 + INTERVAL_PAD)]
+    return sublevel
+
+
+def _proven_here(setup, sublevel: dict, level: float) -> tuple[float, float]:
+    """The interval the entries prove, as the verifier computes it (direct_sublevel.check)."""
+    from geocert.solvers.autocalibration import direct_sublevel
+    from geocert.solvers.core.certificates import unpack
+
+    ends = {"lower": -math.inf, "upper": math.inf}
+    for side, sign in (("lower", 1.0), ("upper", -1.0)):
+        if sublevel[side] is None:
+            continue
+        found = []
+        for entry, orientation in zip(sublevel[side], setup.orientations):
+            program = direct_sublevel.side_program(setup.cameras, orientation.pairs, setup.focal, entry["c"], sign,
+                                                   level)
+            safe, _ = direct_relaxation.safe_bound(program, unpack(entry["z"]), -math.inf)
+            found.append(direct_sublevel.end(setup.cameras, entry["c"], sign, safe))
+        ends[side] = min(found) if sign > 0 else max(found)
+    return direct_sublevel.pixels(float(setup.problem.K0[0, 0]), ends["lower"], ends["upper"],
+                                  direct_sublevel.scope_range(setup.problem.unit_ranges))

@@ -1,0 +1,203 @@
+"""A proven interval of the direct method's focal length (fixed focal), numpy only: the solver
+writes the proof (direct_solve.prove_focal) and the verifier checks it with these functions.
+
+The quantity, for Q (program frame, trace 1) and the program's cameras P_i (direct.DirectSetup):
+
+    focal(Q) = f0 sqrt(r(Q)),   r(Q) = sum_i (w_i11 + w_i22) / (2 sum_i w_i33),   w_i = P_i Q P_i'
+
+a weighted mean (weights w_i33 > 0) of the views' (w11 + w22) / (2 w33), preconditioned: for a
+view of K (pixels) it is ((f_x^2 + f_y^2 + skew^2 + (u - u0)^2 + (v - v0)^2) / 2) / f0^2, the
+combination the focal rows hold, so focal = f when the skew is 0, the aspect 1 and the principal
+point the ranges' middle (u0, v0); f0 the preconditioner's focal length.
+
+The set: every Q of the direct stage's scope (direct_relaxation's program, each orientation not
+excluded) whose cost (7.12) is at most U = proofs.sublevel_level(cost, cost_increase). r >= c on it
+when min tr((A - c B) Q) >= 0 over it (A = sum_i (p_i0 p_i0' + p_i1 p_i1') / 2, B = sum_i p_i2
+p_i2'), bounded below by the order-2 relaxation of that program with the cost row U - f >= 0 and
+its localizing matrix (over the monomials of degree <= 1: without it the bound was far looser,
+measured); a dual vector z of it gives a safe bound s (direct_relaxation.safe_bound, not floored at
+0) with tr((A - c B) Q) >= s. Since tr(B Q) <= BMAX = sum_i |p_i2|^2 on the set (Q PSD of trace
+1), s > 0 proves r >= c + s / BMAX; the upper end likewise from -(A - c B): r <= c - s / BMAX.
+Any c and any z give a true statement; a z with s <= 0 proves nothing and is refused. An end
+stated null is the scope's (the focal rows'): nothing more is claimed for it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.sparse as sp
+
+from geocert.solvers.autocalibration import direct_relaxation
+from geocert.solvers.core.cones import ConeSpec
+
+NAME = "focal"
+_SIDE = len(direct_relaxation.monomials(1))
+EXTRA_ROWS = 1 + _SIDE * (_SIDE + 1) // 2  # the cost row, its localizing matrix (svec)
+
+
+def forms(cameras: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(A, B): r(Q) = tr(A Q) / tr(B Q)."""
+    A = sum(np.outer(P[0], P[0]) + np.outer(P[1], P[1]) for P in cameras) / 2.0
+    B = sum(np.outer(P[2], P[2]) for P in cameras)
+    return A, B
+
+
+def ratio(cameras: np.ndarray, Q: np.ndarray) -> float:
+    A, B = forms(cameras)
+    return float(np.sum(A * Q) / np.sum(B * Q))
+
+
+def largest_weight(cameras: np.ndarray) -> float:
+    """BMAX: tr(B Q) = sum_i p_i2' Q p_i2 <= sum_i |p_i2|^2 for Q PSD of trace 1, rounded up."""
+    return float(np.sum(cameras[:, 2, :] ** 2)) * (1.0 + 1e-12)
+
+
+def scope_range(unit_ranges: dict) -> tuple[float, float]:
+    """r's range over the scope: every view's (w11 + w22) / w33 lies within the focal rows' [low,
+    high] (direct.focal_rows), so their weighted mean's half does too."""
+    r = unit_ranges
+    low = (1.0 + r["aspect"][0] ** 2) * r["focal"][0] ** 2
+    high = ((1.0 + r["aspect"][1] ** 2) * r["focal"][1] ** 2 + max(abs(v) for v in r["skew"]) ** 2
+            + max(abs(v) for v in r["u"]) ** 2 + max(abs(v) for v in r["v"]) ** 2)
+    return low / 2.0, high / 2.0
+
+
+def program(cameras: np.ndarray, pairs, focal, S: np.ndarray, level: float) -> direct_relaxation.Program:
+    """The order-2 relaxation of min tr(S Q) over the orientation's program (its pairs, the focal
+    rows) with f <= level: the cost row (a nonnegative row) and its localizing matrix over the
+    monomials of degree <= 1 (a PSD block before the moment matrix, which stays last)."""
+    base = direct_relaxation.build(cameras, pairs, 2, (), focal)
+    p = direct_relaxation.trace_polynomial(S)
+    zero = tuple([0] * direct_relaxation.N)
+    q = np.zeros(len(base.q))
+    for e, c in p.items():
+        if sum(e) == 1:
+            q[int(np.argmax(e))] += c  # the degree-1 moments are y's first N (graded basis)
+    cones = base.cones
+    at = cones.zero + cones.nonneg
+    exps, coefs = direct_relaxation.poly(direct_relaxation.objective(cameras))
+    # (level - f) / level: the row and its block of order 1, not of the level's (measured: Table 7.1's seed 3, the
+    # lower end's interior-point iterates, stalled either way, then led Dinkelbach's c to 0.945 steadily, not
+    # between 0.87 and 0.91)
+    scale = 1.0 / float(level) if level > 0 else 1.0
+    slack = {tuple(int(v) for v in e): -float(c) * scale for e, c in zip(exps, coefs)}
+    slack[zero] = slack.get(zero, 0.0) + float(level) * scale
+    block, size = direct_relaxation.localizing(base.moments, [[slack]], 1)
+    C = block.tocsc()
+    m_size = cones.psd[-1]
+    m_rows = m_size * (m_size + 1) // 2
+    A = sp.vstack([base.A[:at], sp.csr_matrix(scale * base.q[None, :]), base.A[at:-m_rows], sp.csc_matrix(-C[:, 1:]),
+                   base.A[-m_rows:]]).tocsc()
+    b = np.concatenate([base.b[:at], [scale * (level - base.constant)], base.b[at:-m_rows],
+                        np.asarray(C[:, 0].todense()).ravel(), base.b[-m_rows:]])
+    spec = ConeSpec(cones.zero, cones.nonneg + 1, cones.soc, cones.psd[:-1] + (size, m_size))
+    return direct_relaxation.Program(q, float(p.get(zero, 0.0)), A, b, spec, base.lower, base.upper, base.moments)
+
+
+def side_program(cameras: np.ndarray, pairs, focal, c: float, sign: float, level: float) -> direct_relaxation.Program:
+    """sign +1: min tr((A - c B) Q) (r's lower end); -1: min tr((c B - A) Q) (its upper end)."""
+    A, B = forms(cameras)
+    return program(cameras, pairs, focal, sign * (A - c * B), level)
+
+
+def end(cameras: np.ndarray, c: float, sign: float, safe: float) -> float | None:
+    """What a safe bound ``safe`` at ``c`` proves of r: its lower end (sign +1) or upper (-1);
+    None when it proves nothing (safe not above 0)."""
+    if not (safe > 0 and math.isfinite(safe) and math.isfinite(c)):
+        return None
+    step = safe / largest_weight(cameras)
+    value = c + sign * step
+    return value - sign * 4.0 * 2.0 ** -52 * (abs(c) + step)  # the sum's rounding, outward
+
+
+def pixels(f0: float, r_lo: float, r_hi: float, scope: tuple[float, float]) -> tuple[float, float]:
+    """focal = f0 sqrt(r) over [r_lo, r_hi] clipped to the scope's range, rounded outward."""
+    lo, hi = max(r_lo, scope[0]), min(r_hi, scope[1])
+    lower = f0 * math.sqrt(max(lo, 0.0)) * (1.0 - 1e-12)
+    upper = f0 * math.sqrt(max(hi, 0.0)) * (1.0 + 1e-12)
+    return lower, upper
+
+
+def focal_of(cameras: np.ndarray, Q: np.ndarray, f0: float) -> float:
+    return f0 * math.sqrt(max(ratio(cameras, Q / np.trace(Q)), 0.0))
+
+
+LEVEL = ("every absolute dual quadric of the direct stage's scope whose cost (7.12) exceeds the certified one's by at "
+         "most cost_increase has its focal length within this interval; the focal length of Q is f0 times the root "
+         "of sum_i (w_i11 + w_i22) / (2 sum_i w_i33), w_i = P_i Q P_i' in the program's frame (preconditioned by K0, "
+         "f0 its focal length): the root of the views' mean (weighted by w_i33) of (f_x^2 + f_y^2 + skew^2 + (u - "
+         "u0)^2 + (v - v0)^2) / 2, the focal length when skew is 0, aspect 1 and the principal point the ranges' "
+         "middle (pixels); clipped to what the focal rows allow")
+
+
+def cost_increase(cost: float, lower_bound: float, views: int) -> float:
+    """The level the kind proves the interval at: SIGMAS^2 times (7.12)'s residual variance, cost
+    over its 4 residuals a view less Q's 8 degrees of freedom, never below the certified gap
+    (core.determinacy.cost_increase, the estimates' rule); the verifier asks no lower a level."""
+    from geocert.solvers.core.determinacy import cost_increase as rule
+
+    return rule(cost, max(4 * views - 8, 1), cost - lower_bound)
+
+
+def proven_document(sublevel: dict) -> dict:
+    """The proven intervals a direct stage's determinacy states from its proof's ``sublevel``."""
+    from geocert.solvers.core.determinacy import proven_document as document
+
+    return document(sublevel["cost_increase"], (NAME,), [sublevel["interval"]], LEVEL)
+
+
+def check(setup, sublevel, gone: tuple, cost: float) -> tuple[float, float]:
+    """What a direct proof's ``sublevel`` proves (the module docstring): (lower, upper) in pixels
+    of the focal length of every Q in the scope (setup built with exclude=False; ``gone`` the
+    orientations the proof excludes) costing at most sublevel_level(cost, cost_increase). Each
+    orientation left has one entry a side, {delta, c, z}, whose safe bound must be above 0; the
+    stated interval must hold what they prove (a wider one is a weaker true statement, a
+    narrower one is refused). Returns the interval proven."""
+    from geocert.solvers.autocalibration import direct
+    from geocert.solvers.autocalibration.proofs import LARGEST_INCREASE, SMALLEST_INCREASE, sublevel_level
+    from geocert.solvers.core.strict import Invalid, charge, dual_vector, is_number, numbers, record
+
+    record(sublevel, "proof/sublevel", ("cost_increase", "lower", "upper", "interval"))
+    increase = sublevel.get("cost_increase")
+    if not (is_number(increase) and (increase == 0 or SMALLEST_INCREASE <= increase <= LARGEST_INCREASE)):
+        raise Invalid("proven_interval", "proof/sublevel/cost_increase must be 0 or within 2^-128 .. 2^128")
+    level = sublevel_level(cost, float(increase))
+    live = [o for o in setup.orientations if o.delta not in gone]
+    ends = {"lower": -math.inf, "upper": math.inf}
+    for side, sign in (("lower", 1.0), ("upper", -1.0)):
+        entries = sublevel.get(side)
+        if entries is None:  # this end is the scope's (pixels clips to it)
+            continue
+        if not (isinstance(entries, list) and len(entries) == len(live)):
+            raise Invalid("format", f"proof/sublevel/{side} holds one entry for each orientation left to bound "
+                                    f"({len(live)})")
+        found = []
+        for o in live:
+            match = [e for e in entries if isinstance(e, dict) and direct._of_orientation(e.get("delta"), o.delta)]
+            if len(match) != 1:
+                raise Invalid("format", f"proof/sublevel/{side}: orientation {o.delta!r} needs exactly one entry")
+            entry = record(match[0], f"proof/sublevel/{side}", ("delta", "c", "z"))
+            c = entry.get("c")
+            if not is_number(c):
+                raise Invalid("format", f"proof/sublevel/{side}/c must be a finite number")
+            rows = direct._rows_without_pairs(setup, 2, 0) + EXTRA_ROWS + (0 if o.pairs is None else len(o.pairs))
+            charge(rows, f"the {side} interval program of orientation {o.delta!r}")
+            dual_vector(entry.get("z"), rows, f"proof/sublevel/{side}/z", "proven_interval")
+            built = side_program(setup.cameras, o.pairs, setup.focal, float(c), sign, level)
+            z = dual_vector(entry.get("z"), len(built.b), f"proof/sublevel/{side}/z", "proven_interval")
+            safe, _ = direct_relaxation.safe_bound(built, z, -math.inf)
+            value = end(setup.cameras, float(c), sign, safe)
+            if value is None:
+                raise Invalid("proven_interval", f"proof/sublevel/{side}: the dual's safe bound at c = {c!r} is "
+                                                 f"{safe!r}, not above 0: it proves no {side} end")
+            found.append(value)
+        ends[side] = min(found) if sign > 0 else max(found)
+    lo, hi = pixels(float(setup.problem.K0[0, 0]), ends["lower"], ends["upper"],
+                    scope_range(setup.problem.unit_ranges))
+    stated = numbers(sublevel.get("interval"), "proof/sublevel/interval", (2,))
+    if not (stated[0] <= lo and hi <= stated[1]):
+        raise Invalid("proven_interval", f"proof/sublevel/interval {stated.tolist()} is narrower than what its "
+                                         f"programs prove ([{lo!r}, {hi!r}])")
+    return lo, hi
