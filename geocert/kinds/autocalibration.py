@@ -65,6 +65,10 @@ class AutocalibrationOptionsIn(Strict):
     varying_focal: bool = Field(_DEFAULTS.varying_focal, description="direct method: one focal length per view")
     relaxation_order: int = Field(_DEFAULTS.relaxation_order, ge=2, le=2,
                                   description="direct method: the moment relaxation's order (order 3 does not fit)")
+    prove_focal_interval: bool = Field(
+        _DEFAULTS.prove_focal_interval,
+        description="direct method, one focal length, certificate full: prove an interval of the focal length over "
+                    "every quadric within a stated cost increase of the certified one (tens of seconds of CPU)")
 
 
 class AutocalibrationJob(JobBase):

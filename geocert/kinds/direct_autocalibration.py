@@ -96,8 +96,8 @@ def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptio
             stage["determinacy"] = within(deadline, "the direct stage's determinacy", why, determinacy.metric_stage,
                                           problem, p, np.array(document["K"]), None, None, centres)
             proof = stage["certificate"].get("proof")
-            if options.certificate == "full" and proof is not None and stage["certified"] \
-                    and stage["determinacy"] is not None:
+            if options.prove_focal_interval and options.certificate == "full" and proof is not None \
+                    and stage["certified"] and stage["determinacy"] is not None:
                 _prove_focal(setup, result, stage, proof, deadline)
     stages = [stage]
     if checking:

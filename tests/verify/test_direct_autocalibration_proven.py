@@ -9,6 +9,7 @@ another interval than its proof."""
 from __future__ import annotations
 
 import copy
+import json
 import math
 
 import numpy as np
@@ -39,7 +40,8 @@ def result() -> dict:
     return solve_job({"kind": "autocalibration",
                       "data": {"cameras": scene.cameras.tolist(), "points": scene.points.tolist()},
                       "options": {"method": "direct", "intrinsics": UNIT, "chirality": "centers",
-                                  "certificate": "full", "time_limit_s": 3600}})
+                                  "certificate": "full", "prove_focal_interval": True,
+                                  "time_limit_s": 3600}})
 
 
 def interval(result: dict) -> tuple[float, float]:
@@ -150,3 +152,17 @@ def test_the_solvers_interval_holds_the_true_quadrics_focal():
     Hi = np.linalg.inv(scene.projective)
     true_Q = setup.from_input(Hi @ np.diag([1.0, 1.0, 1.0, 0.0]) @ Hi.T)
     assert lower <= direct_sublevel.focal_of(setup.cameras, true_Q, 1.0) <= upper
+
+
+def test_without_the_option_a_full_certificate_states_no_proven_interval():
+    """The interval costs tens of seconds against the solve's second: a full certificate alone
+    does not ask for it, and its determinacy is the estimate's (not proven)."""
+    scene, _ = scenes.table71_scene(5, 0.2, False)
+    plain = solve_job({"kind": "autocalibration",
+                       "data": {"cameras": scene.cameras.tolist(), "points": scene.points.tolist()},
+                       "options": {"method": "direct", "intrinsics": UNIT, "chirality": "centers",
+                                   "certificate": "full", "time_limit_s": 3600}})
+    assert plain["stages"][0]["certified"]
+    assert '"sublevel"' not in json.dumps(plain["certificate"])
+    assert not plain["stages"][0]["determinacy"].get("proven")
+    assert plain["stages"][0]["determinacy"].get("proven_intervals") is None
