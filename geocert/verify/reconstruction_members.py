@@ -46,6 +46,8 @@ MEMBERS = {
         "focal_rounds/*/again_from_a_new_pair": "boolean", "per_view/*/registered_by": REGISTRATION_STEPS,
         "radial_distortion/model": ("auto", "on", "off"), "radial_distortion/estimated": "boolean",
         "radial_distortion/against": ("principal", "simple"), "radial_distortion/reason": "text",
+        "principal_point/estimated": "boolean", "principal_point/inside_middle_half": "boolean",
+        "principal_point/reason": "text",
         "initial_pair_search/reason": "text"},
     "autocalibration": {
         "method": AUTOCALIBRATION_METHODS, "certified": "boolean", "determined": "boolean",
@@ -180,6 +182,7 @@ def _check_ties(result: dict, stages: dict, views: int, tracks: int) -> None:
                     _fail(f"{where}/{name}", f"a count of at most its tracks ({through})", entry[name])
     _check_starts(result, stages)
     _check_principal_point(stages.get("bundle_adjustment", {}))
+    _check_principal_point(stages.get("projective", {}), "projective")
     _check_principal_points_per_view(result, stages.get("bundle_adjustment", {}))
     _check_focals_per_view(result, stages.get("bundle_adjustment", {}))
     _check_adjustment_model(result, stages.get("bundle_adjustment", {}))
@@ -246,18 +249,20 @@ def _check_starts(result: dict, stages: dict) -> None:
 
 
 
-def _check_principal_point(stage: dict) -> None:
+def _check_principal_point(stage: dict, name: str = "bundle_adjustment") -> None:
     """_principal_point's test: the principal point is estimated only when its chi-square passes
-    the threshold and it lies in the image's middle half, and only in the simple camera model."""
+    the threshold and it lies in the image's middle half, and (in the adjustment) only in the
+    simple camera model. The registration's test (the projective stage's record,
+    pipeline._registration_principal_point) is the same test."""
     test = stage.get("principal_point")
     if not isinstance(test, dict) or test.get("estimated") is not True:
         return
     chi2, threshold = test.get("chi2"), test.get("threshold")
     if not (is_number(chi2) and threshold == PRINCIPAL_POINT_CHI2 and chi2 > threshold
-            and test.get("inside_middle_half") is True and stage.get("model") == "simple"):
-        raise Invalid("returned", "stages/bundle_adjustment/principal_point/estimated is true, and its test does not "
-                                  f"pass (chi2 above its threshold {PRINCIPAL_POINT_CHI2}, inside the middle half, the "
-                                  "simple model)")
+            and test.get("inside_middle_half") is True and (name == "projective" or stage.get("model") == "simple")):
+        raise Invalid("returned", f"stages/{name}/principal_point/estimated is true, and its test does not "
+                                  f"pass (chi2 above its threshold {PRINCIPAL_POINT_CHI2}, inside the middle half"
+                                  + ("" if name == "projective" else ", the simple model") + ")")
 
 
 def intrinsics_of(P: Any) -> np.ndarray:
