@@ -1069,8 +1069,9 @@ class ReconstructionItems(TrackItems):
               "cameras do, TIE_RATIO times their RMS error there, calibration_tie.largest_px at most, and fits those "
               "observations at a cost calibration_tie.shared_cost_px2 of at most calibration_tie.allowed_cost_px2, twice "
               "the returned cameras' plus 3 standard deviations of a chi-square over the coordinates shared (a certificate "
-              "built with the principal point at the images' centre is held to the returned reconstruction re-adjusted "
-              "in that model instead, calibration_tie.reference, and allowed what that model costs beyond the returned "
+              "built with the principal point at the images' centre, or with one K elsewhere, is held to the returned "
+              "reconstruction re-adjusted in that model instead (the principal point then one and free), "
+              "calibration_tie.reference, and allowed what that model costs beyond the returned "
               "cameras, calibration_tie.model_cost_px2); so K is "
               "proven optimal for a reconstruction that close to the result's, not for the result's own); the critical motion behind `determined` is judged again from the cameras and "
               "certified points returned")

@@ -433,29 +433,36 @@ def _chi2_quantile(p: float, k: int) -> float:
 
 def _focal_test_levels(result: dict, test: dict) -> bool:
     """The kept focal length test's own figures agree with one another and with FOCAL_P: one z a
-    view registered at the test (in view order: those returned registered, and any the sanity
-    layer dropped after the adjustment), at least the 20 observations the test needs,
-    z_threshold the normal quantile at 1 - FOCAL_P / (2 views), as many views named as z exceed
-    it (the very views where none was dropped since), at most all but two, one parameter added
+    view registered at the test (in view order: those returned registered, and those the sanity
+    layer dropped after the adjustment, _views_at_adjustment), at least the 20 observations the
+    test needs, z_threshold the normal quantile at 1 - FOCAL_P / (2 views), the views named the
+    very views whose z exceed it (a dropped one too), at most all but two, one parameter added
     each, and threshold the chi-square quantile at 1 - FOCAL_P for them. A document choosing its
     own quantiles (a threshold of 0, a z_threshold below every z) states a test that never ran."""
-    cameras = [camera for camera in result.get("cameras") or [] if isinstance(camera, dict)]
-    views = sorted(camera.get("view") for camera in cameras
-                   if camera.get("registered") is True and type(camera.get("view")) is int)
+    views = _views_at_adjustment(result)
     z, z_threshold, named = test.get("z"), test.get("z_threshold"), test.get("views")
     added, threshold = test.get("parameters_added"), test.get("threshold")
-    if not (isinstance(z, list) and 3 <= len(z) and len(views) <= len(z) <= len(cameras)
+    if not (isinstance(z, list) and 3 <= len(z) == len(views)
             and all(is_number(v) for v in z) and is_number(z_threshold) and is_number(threshold)
             and isinstance(named, list) and type(added) is int and added == len(named) and 1 <= added <= len(z) - 2
             and type(test.get("observations")) is int and test["observations"] >= 20):
         return False
     if not _close_quantile(z_threshold, _normal_quantile(1 - FOCAL_P / (2 * len(z)))):
         return False
-    if len(named) != sum(1 for value in z if abs(value) > z_threshold):
-        return False
-    if len(z) == len(views) and named != [view for view, value in zip(views, z) if abs(value) > z_threshold]:
+    if named != [view for view, value in zip(views, z) if abs(value) > z_threshold]:
         return False
     return _close_quantile(threshold, _chi2_quantile(1 - FOCAL_P, added))
+
+
+def _views_at_adjustment(result: dict) -> list:
+    """The views registered when the adjustment's tests ran, in view order: those returned
+    registered and those the sanity layer dropped after it (pipeline._check_cameras: not
+    registered, their reason "dropped: ...", as the summary's cameras_dropped counts them), which
+    no other step unregisters."""
+    return sorted(camera.get("view") for camera in result.get("cameras") or []
+                  if isinstance(camera, dict) and type(camera.get("view")) is int
+                  and (camera.get("registered") is True
+                       or (camera.get("registered") is False and str(camera.get("reason") or "").startswith("dropped"))))
 
 
 def _close_quantile(stated: float, recomputed: float) -> bool:
@@ -515,7 +522,9 @@ def _check_focals_per_view(result: dict, stage: dict) -> None:
                                   "its test names" if estimated else
                                   f"{where}: the cameras returned have focal lengths of their own, and no test says "
                                   "they were estimated")
-    if estimated and not all(view in focals and abs(focals[view] - shared[0]) > apart for view in own):
+    # a named view the sanity layer dropped since has no camera to hold its own focal length (the
+    # test's levels above ask that it be a view registered at the test, dropped since)
+    if estimated and not all(abs(focals[view] - shared[0]) > apart for view in own if view in focals):
         raise Invalid("returned", f"{where}: a view its test names has the focal length the others share")
 
 
