@@ -391,8 +391,9 @@ REGISTER_AT_PRINCIPAL_POINT = True
 def _registration_principal_point(metric: upgrade.Metric, obs: Observations, options: ReconstructionOptions,
                                   image_sizes, radial: dict):
     """The registration's adjusted cameras again with the principal point free (bundle model
-    "principal"), kept by _principal_point's test, when the returned cameras will estimate it
-    (camera_model "simple" with principal_point "auto" or "per_view", or "full"), the views share
+    "principal"), kept by _principal_point's test, when the returned cameras will estimate it (the
+    adjustment run, camera_model "simple" with principal_point "auto" or "per_view", or "full"),
+    the views share
     one image size and no radial term (about the image's centre) was kept. The cameras K [R | t]
     built from the reconstruction kept are the projective reconstruction the certified upgrade
     starts from, and the calibration certificate's: held at the image's centre while the tracks'
@@ -404,8 +405,10 @@ def _registration_principal_point(metric: upgrade.Metric, obs: Observations, opt
     them to those. Returns the reconstruction kept and the test's figures (None: not tested). The
     "principal" fit goes with the radial figures (RIVAL_FIT) for the adjustment's own test to reuse."""
     sizes = {tuple(size) for size in image_sizes}
-    estimates = options.camera_model == "full" or (options.camera_model == "simple"
-                                                   and options.principal_point in ("auto", "per_view"))
+    # (without the adjustment the returned cameras are the certified upgrade's with the model's K,
+    # the principal point at the centre when "simple": poses found at another would not fit it)
+    estimates = options.bundle_adjustment and (options.camera_model == "full" or (
+        options.camera_model == "simple" and options.principal_point in ("auto", "per_view")))
     if not (REGISTER_AT_PRINCIPAL_POINT and estimates and len(sizes) == 1 and not radial["estimated"]):
         return metric, None
     keep = _kept(metric, obs, options.threshold_px)
