@@ -85,6 +85,10 @@ False refusal found, then fixed:
   observation 5.55 px from the re-adjusted reconstruction's image, 3.9 allowed).
   test_a_certificate_reposed_with_another_K_beside_an_off_centre_run_is_refused: a certificate
   re-posed with another focal length or principal point gains nothing from the model's allowance.
+  Fixed since (issue 35): the registration builds its cameras at the principal point the data fix
+  (stages.projective.principal_point), held to the returned reconstruction re-adjusted with one K,
+  its principal point free; (-90, +70), (+150, -110) and (-150, +110) verify in the defaults and
+  the full model (test_a_genuine_run_with_its_principal_point_off_centre_verifies).
 
 Genuine results that verify (test_genuine_results_verify and the fixtures'; all with certificate
 "full"): camera_model simple, varying, full; K known, with and without merge_components, and with
@@ -424,6 +428,14 @@ def test_a_certificate_reposed_with_another_K_beside_a_run_registered_at_its_pri
     assert not report.valid
     assert any(why in report.first_failure["detail"] for why in ("reconstruction of these tracks' observations",
                                                                  "it is not these tracks' reconstruction"))
+
+
+@pytest.mark.parametrize("edit", [{"chi2": 1.0}, {"inside_middle_half": False}, {"threshold": 0.0}],
+                         ids=["chi2 below the threshold", "outside the middle half", "threshold 0"])
+def test_a_registration_principal_point_test_that_does_not_pass_is_refused(at_principal_point, edit):
+    forged = copy.deepcopy(at_principal_point)
+    _stage(forged, "projective")["principal_point"].update(edit)
+    assert "stages/projective/principal_point/estimated is true" in _refused(forged)["detail"]
 
 
 @pytest.mark.parametrize("limit, value", [("ITERATIONS", 1), ("MAX_VIEWS", 7), ("MAX_PAIRS", 100)],
