@@ -430,6 +430,31 @@ def test_a_certificate_reposed_with_another_K_beside_a_run_registered_at_its_pri
                                                                  "it is not these tracks' reconstruction"))
 
 
+def test_the_one_K_model_is_the_solvers_own(off_centre):
+    """centred_fit with the principal point free (no centres) and the pipeline's adjustment (bundle
+    model "principal": one K, its principal point free) find the same cost on the off-centre
+    scene's observations, from the returned cameras; below the centred model's, at the returned
+    cameras' (which estimate the principal point, one for all here)."""
+    from geocert.solvers.reconstruction import bundle, centred_fit
+
+    cameras = [c for c in off_centre["cameras"] if c.get("registered")]
+    placed = [p for p in off_centre["points"] if p.get("point") is not None]
+    column = {c["view"]: k for k, c in enumerate(cameras)}
+    view, point, pixels = (np.array(a) for a in zip(*[(column[v], j, (u, w)) for j, p in enumerate(placed)
+                                                     for v, u, w in p["observations"]]))
+    X = np.array([[*p["point"], 1.0] for p in placed])
+    P = np.array([c["P"] for c in cameras])
+    free = float(np.sum(np.square(centred_fit.fit(P, None, X, view, point, pixels) - pixels)))
+    centred = float(np.sum(np.square(centred_fit.fit(P, np.tile([319.5, 239.5], (len(cameras), 1)), X, view, point,
+                                                     pixels) - pixels)))
+    *_, r, _ = bundle.metric(np.array(cameras[0]["K"]), np.array([c["R"] for c in cameras]),
+                             np.array([c["t"] for c in cameras]), X[:, :3], view, point, pixels.astype(float),
+                             model="principal")
+    assert free == pytest.approx(float(np.sum(np.square(r))), rel=1e-3)
+    assert free == pytest.approx(sum(p["cost"] for p in placed), rel=1e-3)
+    assert free < centred / 2
+
+
 @pytest.mark.parametrize("edit", [{"chi2": 1.0}, {"inside_middle_half": False}, {"threshold": 0.0}],
                          ids=["chi2 below the threshold", "outside the middle half", "threshold 0"])
 def test_a_registration_principal_point_test_that_does_not_pass_is_refused(at_principal_point, edit):
