@@ -14,8 +14,20 @@ dependencies, body validation and response model, the route's own work), its bod
 bytes, called one request after another on one event loop; no HTTP server and no socket to the
 client (uvicorn's parsing is not counted). The access log is silenced.
 
-Run it against another checkout with PYTHONPATH=<that checkout> for a before and after in one
-session. Nothing here asserts (tests/workers/test_queue.py checks the behaviour).
+``--parsers``: uvicorn's HTTP protocols alone on a submission's request (the bytes httpx sends,
+the answer written to a stub transport, a trivial ASGI app): CPU a request with h11 (the API's,
+``lifecycle.HeaderTimeoutH11``) and with httptools when it is importable (it is not a dependency:
+``pip install httptools`` beside, or PYTHONPATH a directory holding it), and their ratio.
+
+``--baseline <checkout>``: before and after in one run: this measurement made ``--rounds`` times
+in turn with this checkout's geocert and with that checkout's (each run a process of its own,
+alternating, this bench's code in both), then the ratio of their medians. E.g. the whole request
+of a small job and of a 0.9 MB one, against main:
+
+    .venv/bin/python -m bench.submission --app --baseline ../main
+    .venv/bin/python -m bench.submission --app --tracks 5000 --count 10 --baseline ../main
+
+Nothing here asserts (tests/workers/test_queue.py checks the behaviour).
 """
 
 from __future__ import annotations
@@ -25,6 +37,10 @@ import cProfile
 import json
 import os
 import pstats
+import re
+import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -39,7 +55,14 @@ def main() -> None:
     parser.add_argument("--profile", action="store_true", help="also print cProfile's top functions")
     parser.add_argument("--loop", action="store_true", help="the event loop's path (submit_on_loop)")
     parser.add_argument("--app", action="store_true", help="the whole request through the ASGI app")
+    parser.add_argument("--parsers", action="store_true", help="uvicorn's h11 against httptools, per request")
+    parser.add_argument("--baseline", metavar="CHECKOUT", help="another checkout to measure against, in turn")
+    parser.add_argument("--rounds", type=int, default=4, help="with --baseline: runs of each")
     args = parser.parse_args()
+    if args.parsers:
+        return parsers(args.tracks, args.count)
+    if args.baseline:
+        return against(args.baseline, args.rounds, [a for a in sys.argv[1:] if a not in _BASELINE_ARGS(args)])
 
     from geocert.workers.redis_server import start_embedded_redis
 
@@ -154,6 +177,119 @@ def measure(url: str, tracks: int, count: int, profile: bool, loop: bool = False
         profiler = cProfile.Profile()
         profiler.runcall(lambda: [submit(index) for index in range(count)])
         pstats.Stats(profiler).sort_stats("cumulative").print_stats(30)
+
+
+def parsers(tracks: int, count: int, rounds: int = 3) -> None:
+    """uvicorn's h11 protocol (the API's) against its httptools protocol on one submission's
+    request: the bytes parsed, the ASGI cycle run with a trivial app, the answer written."""
+    import asyncio
+    import statistics
+
+    from uvicorn.config import Config
+    from uvicorn.server import ServerState
+
+    from bench.faults import triangulation_job
+    from geocert.app.lifecycle import HeaderTimeoutH11
+
+    body = json.dumps(triangulation_job(np.random.default_rng(1), tracks=tracks)).encode()
+    request = (b"POST /v1/jobs HTTP/1.1\r\nHost: 127.0.0.1:8000\r\nAccept: */*\r\nAccept-Encoding: gzip, deflate\r\n"
+               b"Connection: keep-alive\r\nUser-Agent: python-httpx/0.28\r\ncontent-type: application/json\r\n"
+               b"Content-Length: " + str(len(body)).encode() + b"\r\n\r\n" + body)
+    answer = json.dumps({"id": "0" * 32, "kind": "triangulation", "status": "queued", "created_at": 1.0}).encode()
+
+    async def app(scope, receive, send):
+        await receive()
+        await send({"type": "http.response.start", "status": 202, "headers": [
+            (b"content-type", b"application/json"), (b"content-length", str(len(answer)).encode())]})
+        await send({"type": "http.response.body", "body": answer})
+
+    class Transport(asyncio.Transport):
+        def write(self, data):
+            pass
+
+        def get_extra_info(self, name, default=None):
+            return {"sockname": ("127.0.0.1", 8000), "peername": ("127.0.0.1", 50000)}.get(name, default)
+
+        def is_closing(self):
+            return False
+
+        def close(self):
+            pass
+
+    protocols = {"h11": HeaderTimeoutH11}
+    try:
+        from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
+
+        protocols["httptools"] = HttpToolsProtocol
+    except ImportError:
+        print("httptools is not importable: h11 alone")
+
+    async def per_request(cls) -> float:
+        config = Config(app, log_level="warning", access_log=False, h11_max_incomplete_event_size=16 * 1024)
+        config.load()
+        state = ServerState()
+        protocol = cls(config=config, server_state=state, app_state={})
+        protocol.connection_made(Transport())
+        for index in range(count + 50):  # 50 first ones out of the figure
+            if index == 50:
+                cpu = time.process_time()
+            protocol.data_received(request)
+            while state.tasks:
+                await asyncio.sleep(0)
+        protocol.connection_lost(None)
+        return (time.process_time() - cpu) / count
+
+    cpu = {name: [] for name in protocols}
+    for _ in range(rounds):
+        for name, cls in protocols.items():
+            cpu[name].append(asyncio.run(per_request(cls)))
+    for name, values in cpu.items():
+        print(f"{name}: " + ", ".join(f"{1e6 * value:.0f}" for value in values) + f" us of CPU a request ({len(body)}-byte "
+              f"body, {count} requests a round); load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    if "httptools" in cpu:
+        print(f"httptools / h11 (medians): {statistics.median(cpu['httptools']) / statistics.median(cpu['h11']):.2f}")
+
+
+def _BASELINE_ARGS(args) -> set[str]:
+    return {"--baseline", args.baseline, "--rounds", str(args.rounds), f"--baseline={args.baseline}",
+            f"--rounds={args.rounds}", "--profile"}
+
+
+# A run with one checkout's geocert (imported first, from the checkout given) and this bench.
+_RUN = """
+import sys
+sys.path.insert(0, sys.argv[1])
+import geocert
+assert geocert.__file__.startswith(sys.argv[1]), geocert.__file__
+sys.path.insert(0, sys.argv[2])
+from bench import submission
+sys.argv = ["bench.submission", *sys.argv[3:]]
+submission.main()
+"""
+
+
+def against(baseline: str, rounds: int, arguments: list[str]) -> None:
+    """This checkout's geocert and ``baseline``'s, measured in turn (this one first in even
+    rounds, the baseline first in odd ones), each run a process of its own; the CPU a submission
+    of each run, and the ratio of the medians (this checkout / the baseline)."""
+    here = str(Path(__file__).resolve().parent.parent)
+    checkouts = {"this checkout": here, "baseline": str(Path(baseline).resolve())}
+    cpu: dict[str, list[float]] = {name: [] for name in checkouts}
+    print(f"load average at the start: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
+    for round_ in range(rounds):
+        order = list(checkouts) if round_ % 2 == 0 else list(reversed(checkouts))
+        for name in order:
+            done = subprocess.run([sys.executable, "-c", _RUN, checkouts[name], here, *arguments],
+                                  capture_output=True, text=True, env={**os.environ, "PYTHONPATH": ""})
+            if done.returncode != 0:
+                raise SystemExit(f"{name} failed:\n{done.stderr[-3000:]}")
+            line = next(line for line in done.stdout.splitlines() if " ms CPU" in line)
+            cpu[name].append(float(re.search(r"([\d.]+) ms CPU", line).group(1)))
+            print(f"round {round_ + 1}, {name} ({checkouts[name]}): {line}", flush=True)
+    medians = {name: statistics.median(values) for name, values in cpu.items()}
+    print(f"CPU a submission, median of {rounds}: this checkout {medians['this checkout']:.3f} ms, baseline "
+          f"{medians['baseline']:.3f} ms: ratio {medians['this checkout'] / medians['baseline']:.2f}; load average at "
+          f"the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
 async def _async_client(url: str):

@@ -27,6 +27,18 @@ Sets, their owners (credit them when you use them) and what a test can do with e
   set's K is their median with zero skew and every figure against it is approximate. Folder
   ``oxford_corridor``. Tests: forward motion, from the photos or from VGG's matches
   (:func:`corridor_tracks`).
+- ``kittiStraight`` and ``kittiTurn``: two 51-frame excerpts of the KITTI odometry benchmark
+  (Geiger, Lenz and Urtasun, "Are we ready for autonomous driving? The KITTI vision benchmark
+  suite", CVPR 2012; licence CC BY-NC-SA 3.0, non-commercial: the data are read, never shipped),
+  the left grey camera (rectified: no distortion) of a car driving down a road, and the
+  ground-truth poses; K from the benchmark's ``calib.txt`` (P0). ``kittiStraight``: 1226x370 PNG,
+  f 707.09 px (the calibration of sequences 04-12), 60 m straight ahead (1.2 m a frame, 1.3
+  degrees of rotation in all); ``kittiTurn``: 1241x376 PNG, f 718.86 px (sequences 00-02), 44 m
+  through a right turn of 98 degrees. The sets are every 2nd frame (26 photos, 1.9 to 2.5 m
+  apart). Folders ``kitti_sequence_1`` and ``kitti_sequence_2`` (``image_l/######.png``,
+  ``calib.txt``, ``poses.txt``), as a public copy on GitHub holds them (niconielsen32/VisualSLAM,
+  KITTI_sequence_1 and KITTI_sequence_2).
+  Tests: forward motion along the optical axis, the epipole inside the image.
 - ``sceaux``: "Sceaux Castle", 11 JPEGs 2832x2128 (6 Mpx) from a Kodak Z612 with EXIF focal
   length, photographs copyright 2012 Pierre Moulon, published as openMVG's sample data set; K
   (``K.txt``, openMVG's) but no ground-truth poses. Folder ``sceaux_castle``. Tests: high
@@ -35,7 +47,9 @@ Sets, their owners (credit them when you use them) and what a test can do with e
 File formats: Middlebury ``*_par.txt``: a count line, then per photo ``name k11..k33 r11..r33 t1 t2
 t3`` with x = K [R | t] X in pixels, origin top-left. VGG ``bt.###.P``: one 3x4 matrix per frame,
 pixels; ``bt.###.corners``: x y per line; ``bt.nview-corners``: per 3D point, one corner index per
-frame or ``*``. openMVG ``K.txt``: the 3x3 K.
+frame or ``*``. openMVG ``K.txt``: the 3x3 K. KITTI ``calib.txt``: per line ``P#: p11..p34``, camera # (0: left grey)
+in pixels; ``poses.txt``: per frame 12 numbers, the 3x4 [R | c] taking camera 0's frame to the
+first frame's (camera to world, not world to camera).
 """
 
 from __future__ import annotations
@@ -53,6 +67,8 @@ DEFAULT_ROOT = Path(__file__).resolve().parents[2] / "bench-data"
 SHARED = Path(os.environ.get("GEOCERT_SHARED_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data")
 MIDDLEBURY = "https://vision.middlebury.edu/mview/data/ (Seitz et al., CVPR 2006)"
 VGG = "https://www.robots.ox.ac.uk/~vgg/data/data-mview.html (Visual Geometry Group, University of Oxford)"
+KITTI = ("https://github.com/niconielsen32/VisualSLAM (folders KITTI_sequence_1 and KITTI_sequence_2: image_l, "
+         "calib.txt, poses.txt), from https://www.cvlibs.net/datasets/kitti/eval_odometry.php (CC BY-NC-SA 3.0)")
 
 
 @dataclass(frozen=True)
@@ -172,6 +188,29 @@ def _sceaux(root: Path) -> PhotoSet:
                     np.loadtxt(directory / "K.txt"), truth_note="K from openMVG's K.txt; no ground-truth poses")
 
 
+def _kitti(key: str, folder: str, title: str, root: Path) -> PhotoSet:
+    """Every 2nd frame of a KITTI excerpt: camera 0's images, K from calib.txt's P0 and the
+    ground-truth poses (camera to world) turned into x = K [R | t] X."""
+    directory = root / folder
+    images = sorted((directory / "image_l").glob("*.png")) if directory.exists() else []
+    if len(images) < 2 or not (directory / "calib.txt").exists() or not (directory / "poses.txt").exists():
+        raise MissingSet(key, directory, KITTI)
+    P0 = np.array(next(line for line in (directory / "calib.txt").read_text().splitlines() if line.strip())
+                  .split()[-12:], dtype=float).reshape(3, 4)
+    K = P0[:, :3] / P0[2, 2]
+    poses = np.loadtxt(directory / "poses.txt").reshape(-1, 3, 4)
+    names, truth = [], {}
+    for index, path in enumerate(images[: len(poses)]):
+        if index % 2:
+            continue
+        name = path.name
+        R_wc, centre = poses[index][:, :3], poses[index][:, 3]
+        names.append(name)
+        truth[name] = Camera(K, R_wc.T, -R_wc.T @ centre)
+    return PhotoSet(key, title, "KITTI odometry benchmark (Geiger, Lenz, Urtasun, CVPR 2012), CC BY-NC-SA 3.0",
+                    directory / "image_l", names, K, truth)
+
+
 SETS = {
     "dinoSparseRing": lambda root: _middlebury("dinoSparseRing", "middlebury_dinoSparseRing", "dinoSR",
                                                "Middlebury dinoSparseRing, 14 photos 640x480", root),
@@ -181,6 +220,10 @@ SETS = {
                                                  "Middlebury templeSparseRing, 16 photos 640x480", root),
     "corridor": _corridor,
     "sceaux": _sceaux,
+    "kittiStraight": lambda root: _kitti("kittiStraight", "kitti_sequence_1",
+                                         "KITTI, 26 frames 1226x370 down a straight road (forward motion)", root),
+    "kittiTurn": lambda root: _kitti("kittiTurn", "kitti_sequence_2",
+                                     "KITTI, 26 frames 1241x376 through a right turn (forward motion)", root),
 }
 
 

@@ -163,8 +163,9 @@ class ReconstructionOptionsIn(Strict):
     radial_distortion: Literal["auto", "on", "off"] = Field(
         _D.radial_distortion, description='K unknown, "incremental": one radial distortion term k1 (COLMAP\'s '
                                           'SIMPLE_RADIAL) with the focal length; "auto" keeps it when the data fix it '
-                                          '(a chi-square test). When kept, the observations are undistorted with it '
-                                          'before the metric stages, and every certificate is conditional on that k1')
+                                          '(a chi-square test); K known: one k1 about K\'s principal point, K held as '
+                                          'given, by the same test. When kept, the observations are undistorted with '
+                                          'it before the metric stages, and every certificate is conditional on that k1')
     focal_prior_px: Finite | None = Field(None, gt=0, le=1e6, description='"incremental": the prior focal length '
                                           '(pixels; a prior, refined, not a fact: e.g. from the photos\' EXIF)')
     focal_prior_factor: Finite = Field(_D.focal_prior_factor, **_R["focal_prior_factor"],

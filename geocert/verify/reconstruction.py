@@ -388,16 +388,24 @@ def _check_distortion(result: dict, registered: list[dict], options: dict) -> No
     """The radial term (pipelines.reconstruction.claims._distortion): with one kept, every
     certificate is about the observations undistorted with an estimated k1, and the result says
     so. summary.distortion and the certificates_conditional_on_k1 warning (its words the
-    statement, which names k1) are stated exactly when a camera states a k1, or the projective
-    stage's radial_distortion says it was estimated; then every registered camera states one
-    term (k1 / focal^2 the summary's, at a focal length one of theirs) and its centre, the
-    summary calls it not certified, the stage's k1 has its sign, and options radial_distortion
+    statement, which names k1) are stated exactly when a camera states a k1, or the stage that
+    tests the term says it was estimated (K unknown: the projective stage's radial_distortion;
+    K known: the bundle adjustment's, _check_known_K_distortion); then every registered camera
+    states one term (k1 / focal^2 the summary's, at a focal length one of theirs) and its centre,
+    the summary calls it not certified, the stage's k1 has its sign, and options radial_distortion
     is not "off"; a camera not registered states none, nor does any camera without the term."""
     summary, cameras = result["summary"], result["cameras"]
     distortion = summary.get("distortion")
     warned = [w for w in summary.get("warnings") or [] if isinstance(w, dict)
               and w.get("code") == "certificates_conditional_on_k1"]
-    stage = _stage(result, "projective")
+    intrinsics = options.get("intrinsics")
+    known = isinstance(intrinsics, dict) and intrinsics.get("K") is not None
+    # the stage whose test estimates the term, and the one that never states it
+    testing, other = ("bundle_adjustment", "projective") if known else ("projective", "bundle_adjustment")
+    if _stage(result, other).get("radial_distortion") is not None:
+        raise Invalid("returned", f"stages/{other}/radial_distortion is stated, and with K "
+                                  + ("known" if known else "unknown") + f" the term is tested in the {testing} stage")
+    stage = _stage(result, testing)
     radial = stage.get("radial_distortion")
     estimated = isinstance(radial, dict) and radial.get("estimated") is True
     stated = [c for c in cameras if c.get("k1") is not None or c.get("distortion_centre") is not None]
@@ -417,23 +425,51 @@ def _check_distortion(result: dict, registered: list[dict], options: dict) -> No
         raise Invalid("returned", "the certificates_conditional_on_k1 warning must state summary/distortion's "
                                   "statement, naming its k1")
     if not (estimated and is_number(radial.get("k1")) and radial["k1"] * k1 > 0):
-        raise Invalid("returned", "stages/projective/radial_distortion must say the term was estimated, with the "
+        raise Invalid("returned", f"stages/{testing}/radial_distortion must say the term was estimated, with the "
                                   "summary's k1's sign")
     focals = [float(camera["K"][0][0]) for camera in registered]
     if not any(_close(focal, f, 0.0) for f in focals):
         raise Invalid("returned", f"summary/distortion/focal_px {focal!r} is not a registered camera's focal length")
+    if known:
+        given = numbers(intrinsics["K"], "certificate/options/intrinsics/K", (3, 3), "returned")
+        _check_known_K_distortion(radial, k1, focal, given, options)
     for camera, f in zip(registered, focals):
         centre = camera.get("distortion_centre")
         if not (_close(camera.get("k1"), k1 * (f / focal) ** 2, abs(k1)) and isinstance(centre, list)
                 and len(centre) == 2 and all(is_number(c) for c in centre)):
             raise Invalid("returned", f"cameras/{camera['view']}: k1 {camera.get('k1')!r} is not summary/distortion's "
                                       f"term at its focal length, or it states no distortion_centre")
+        if known:  # the term is about K's principal point, as the pipeline undistorts (bundle.undistort_K)
+            if all(_close(c, float(e), 0.0) for c, e in zip(centre, given[:2, 2])):
+                continue
+            raise Invalid("returned", f"cameras/{camera['view']}/distortion_centre {centre!r} is not the given K's "
+                                      "principal point")
         # the term is about the image's centre, as the pipeline undistorts ((w - 1) / 2, (h - 1) / 2)
         size = camera.get("image_size")
         if not (isinstance(size, list) and len(size) == 2 and all(is_number(v) for v in size)
                 and all(_close(c, (v - 1) / 2, 1.0) for c, v in zip(centre, size))):
             raise Invalid("returned", f"cameras/{camera['view']}/distortion_centre {centre!r} is not its image's "
                                       "centre")
+
+
+def _check_known_K_distortion(radial: dict, k1: float, focal: float, K: np.ndarray, options: dict) -> None:
+    """K known (pipeline._fixed_radial_test): the term is the bundle adjustment's test's, K held
+    as given, so its k1 is the summary's at the given K's focal length; the test ran with the
+    options' radial_distortion, and an "auto" term passed it: its chi-square above
+    camera_claim.RADIAL_CHI2 (the threshold recomputed, not read), the threshold stated that one."""
+    where = "stages/bundle_adjustment/radial_distortion"
+    if not _close(focal, float(K[0, 0]), 0.0):
+        raise Invalid("returned", f"summary/distortion/focal_px {focal!r} is not the given K's focal length")
+    if not _close(radial.get("k1"), k1, 0.0):
+        raise Invalid("returned", f"{where}/k1 {radial.get('k1')!r:.40} is not summary/distortion's k1 {k1!r}")
+    chosen = options.get("radial_distortion")
+    if radial.get("model") != chosen:
+        raise Invalid("returned", f"{where}/model {radial.get('model')!r:.20} is not options.radial_distortion "
+                                  f"{chosen!r:.20}")
+    if chosen == "auto" and not (is_number(radial.get("chi2")) and radial["chi2"] > camera_claim.RADIAL_CHI2
+                                 and radial.get("threshold") == camera_claim.RADIAL_CHI2):
+        raise Invalid("returned", f"{where}: a term kept by the test (options.radial_distortion \"auto\") has its "
+                                  f"chi2 above the threshold {camera_claim.RADIAL_CHI2:g} it states")
 
 
 def _warned(summary: dict, code: str) -> bool:
@@ -1072,7 +1108,8 @@ class ReconstructionItems(TrackItems):
               "built with the principal point at the images' centre, or with one K elsewhere, is held to the returned "
               "reconstruction re-adjusted in that model instead (the principal point then one and free), "
               "calibration_tie.reference, and allowed what that model costs beyond the returned "
-              "cameras, calibration_tie.model_cost_px2); so K is "
+              "cameras, calibration_tie.model_cost_px2), and its cameras fit the result's other placed points, each "
+              "triangulated in them, at calibration_tie.other_cost_px2, at most calibration_tie.other_allowed_cost_px2; so K is "
               "proven optimal for a reconstruction that close to the result's, not for the result's own); the critical motion behind `determined` is judged again from the cameras and "
               "certified points returned")
         return statement

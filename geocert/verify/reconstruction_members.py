@@ -61,7 +61,8 @@ MEMBERS = {
         "principal_point_per_view/estimated": "boolean", "principal_point_per_view/inside_middle_half": "boolean",
         "principal_point_per_view/precise": "boolean", "principal_point_per_view/reason": "text",
         "focal_per_view/estimated": "boolean", "focal_per_view/views": "views", "focal_per_view/precise": "boolean",
-        "focal_per_view/reason": "text"},
+        "focal_per_view/reason": "text", "radial_distortion/model": ("auto", "on", "off"),
+        "radial_distortion/estimated": "boolean", "radial_distortion/reason": "text"},
     "cameras": {"claim": "text"},
 }
 # The members counted (each a count, at most its total): (stage, path) -> what bounds it.

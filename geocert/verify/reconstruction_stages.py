@@ -9,7 +9,8 @@ What each count counts from (the summary states the views sent and the tracks; e
 at most one observation a view, so tracks * views bounds every count of observations):
 
 - projective: initial_pair_search.candidates <= views * (views - 1) / 2 (the pairs of views);
-- bundle_adjustment: observations_kept and principal_point.observations <= tracks * views;
+- bundle_adjustment: observations_kept, principal_point.observations and
+  radial_distortion.observations <= tracks * views;
 - autocalibration: points_used <= tracks.
 
 (The projective stage's own counts, and the structure and cameras stages' counts of the items,
@@ -35,7 +36,7 @@ CONTAINERS = {
     "projective": {"focal_rounds": "list", "merged": "list", "initial_pair_search": "object",
                    "initial_pair": "pair", "radial_distortion": "object", "principal_point": "object"},
     "autocalibration": {"stages": "list", "intrinsics": "object"},
-    "bundle_adjustment": {"starts": "list", "principal_point": "object"},
+    "bundle_adjustment": {"starts": "list", "principal_point": "object", "radial_distortion": "object"},
 }
 NESTED = {("projective", "initial_pair_search"): {"pair": "object", "thresholds": "object"}}
 
@@ -87,7 +88,10 @@ STAGE_RECORDS = ByName({
                                         "inside_middle_half", "spread_px", "sd_px", "max_sd_px", "precise",
                                         "reason"),
         focal_per_view=record("estimated", "views", "z", "z_threshold", "observations", "parameters_added", "chi2",
-                              "threshold", "focal_sd", "max_focal_sd", "sd_px", "max_sd_px", "precise", "reason")),
+                              "threshold", "focal_sd", "max_focal_sd", "sd_px", "max_sd_px", "precise", "reason"),
+        # K known: the radial term's test (pipeline._fixed_radial_test)
+        radial_distortion=record("model", "estimated", "k1", "k1_tested", "chi2", "threshold", "observations",
+                                 "residual_dof", "reason")),
     "structure": record(*COMMON, "tracks", "points", "certified", "points_dropped", "observations_removed",
                         "tracks_not_started"),
     "cameras": record(*COMMON, "cameras", "certified", "searched", "claim", "degrees_of_freedom",
@@ -142,7 +146,10 @@ FIGURES = {
         "focal_per_view/parameters_added": "count", "focal_per_view/chi2": "number",
         "focal_per_view/threshold": "measure", "focal_per_view/focal_sd/*": "measure",
         "focal_per_view/max_focal_sd": "measure", "focal_per_view/sd_px/*": "measure",
-        "focal_per_view/max_sd_px": "measure"},
+        "focal_per_view/max_sd_px": "measure", "radial_distortion/k1": "number",
+        "radial_distortion/k1_tested": "number", "radial_distortion/chi2": "number",
+        "radial_distortion/threshold": "measure", "radial_distortion/observations": "count",
+        "radial_distortion/residual_dof": "count"},
 }
 COMMON_FIGURES = {"elapsed_s": "measure", "cpu_s": "measure"}
 
@@ -261,10 +268,11 @@ def _check_counts(stages: dict, views: int, tracks: int) -> None:
     if "observations_kept" in adjustment:
         _bounded(adjustment["observations_kept"], _where("bundle_adjustment", "observations_kept"), observations,
                  f"{tracks} tracks, one observation a view of {views}")
-    test = adjustment.get("principal_point")
-    if isinstance(test, dict) and "observations" in test:
-        _bounded(test["observations"], _where("bundle_adjustment", "principal_point/observations"), observations,
-                 f"{tracks} tracks, one observation a view of {views}")
+    for name in ("principal_point", "radial_distortion"):
+        test = adjustment.get(name)
+        if isinstance(test, dict) and "observations" in test:
+            _bounded(test["observations"], _where("bundle_adjustment", f"{name}/observations"), observations,
+                     f"{tracks} tracks, one observation a view of {views}")
     calibration = stages.get("autocalibration") or {}
     if "points_used" in calibration:
         _bounded(calibration["points_used"], _where("autocalibration", "points_used"), tracks, "the tracks")

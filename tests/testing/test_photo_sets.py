@@ -57,7 +57,7 @@ class TestCompare:
 
 
 def test_a_missing_set_names_its_folder(tmp_path):
-    for key in ("templeRing", "corridor", "sceaux"):
+    for key in ("templeRing", "corridor", "sceaux", "kittiStraight", "kittiTurn"):
         with pytest.raises(photo_sets.MissingSet, match=str(tmp_path)):
             photo_sets.load(key, tmp_path)
 
@@ -109,6 +109,24 @@ def test_corridor_cameras_reproduce_vggs_matrices_and_matches():
     assert len(tracks) == int(np.sum((rows != "*").sum(axis=1) >= 2))
 
 
+@pytest.mark.parametrize("key, turn_deg", [("kittiStraight", 1.3), ("kittiTurn", 98.1)])
+def test_kitti_sets_move_forward(key, turn_deg):
+    """Every 2nd frame of the excerpt, K from calib.txt's P0, and each step's baseline straight
+    ahead in the camera's frame (|t_z| of the unit baseline above 0.95, where COLMAP's initial pair
+    test refuses a pair); the straight set hardly turns, the other turns right by 98 degrees."""
+    road = loaded(key)
+    assert len(road.names) == 26 and road.names[:2] == ["000000.png", "000002.png"]
+    size = cv2.imread(str(road.path(road.names[0])), cv2.IMREAD_UNCHANGED).shape
+    assert road.K[0, 0] == road.K[1, 1]
+    assert abs(road.K[0, 2] - size[1] / 2) < 25 and abs(road.K[1, 2] - size[0] / 2) < 10
+    cameras = [road.truth[n] for n in road.names]
+    for a, b in zip(cameras, cameras[1:]):
+        step = a.R @ (b.center - a.center)  # b's centre in a's frame: ahead is +z
+        assert step[2] / np.linalg.norm(step) > 0.95 and 1.0 < np.linalg.norm(step) < 3.0
+    turned = Rotation.from_matrix(cameras[-1].R @ cameras[0].R.T).magnitude()
+    assert np.degrees(turned) == pytest.approx(turn_deg, abs=0.2)
+
+
 def fundamental(a: photo_sets.Camera, b: photo_sets.Camera) -> np.ndarray:
     """F with x_b^T F x_a = 0 for the cameras' images of one point."""
     R, t = b.R @ a.R.T, b.t - b.R @ a.R.T @ a.t
@@ -117,7 +135,8 @@ def fundamental(a: photo_sets.Camera, b: photo_sets.Camera) -> np.ndarray:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("key", ["dinoSparseRing", "templeRing", "templeSparseRing", "corridor"])
+@pytest.mark.parametrize("key", ["dinoSparseRing", "templeRing", "templeSparseRing", "corridor", "kittiStraight",
+                                 "kittiTurn"])
 def test_the_ground_truth_agrees_with_the_photos(key):
     """Consecutive photos' SIFT matches that a RANSAC fundamental matrix keeps lie within 2 px
     (median) of the epipolar lines of the ground-truth cameras: a photo turned, flipped or swapped

@@ -234,10 +234,11 @@ def _distortion(out, distortion: dict) -> dict:
     K = out.metric.K if out.metric is not None and out.metric.K is not None else None
     focal = float(K[0, 0]) if K is not None else distortion["k1_at_focal_px"]
     k1 = distortion["k1"] * (focal / distortion["k1_at_focal_px"]) ** 2
+    about = "K's principal point" if distortion.get("about") == "principal_point" else "each image's centre"
     return {"model": distortion["model"], "k1": k1, "focal_px": focal, "estimated_by": "bundle_adjustment",
             "certified": False, "test": distortion.get("test"),
             "statement": (f"the observations were undistorted with the radial term k1 = {k1:.4g} (at focal length "
-                          f"{focal:.1f} px, about each image's centre) that the bundle adjustment estimated, before any "
+                          f"{focal:.1f} px, about {about}) that the bundle adjustment estimated, before any "
                           "point or camera was certified: every certificate is about the undistorted observations "
                           "the points return, so it is conditional on that k1, which is estimated, not certified")}
 

@@ -81,7 +81,8 @@ class ReconstructionOptions(FractionalOptions):
     # cost it saves; pipeline._radial_test), "on" always, "off" never. "auto" brings Sceaux's focal
     # length within 3% (COLMAP's +2.3%) and keeps no term on the rings, at the CPU of the test's
     # adjustments (docs/reconstruction-vs-colmap.md). When kept, the observations are undistorted
-    # with it before the metric stages: every certificate is conditional on that k1.
+    # with it before the metric stages: every certificate is conditional on that k1. K known: one
+    # k1 about K's principal point, K held as given, by the same test (pipeline._fixed_radial_test).
     radial_distortion: str = "auto"
     focal_prior_px: float | None = None
     focal_prior_factor: float = 1.2

@@ -28,7 +28,7 @@ from geocert.pipelines.reconstruction import ambiguity, claims
 from geocert.pipelines.reconstruction.fit import (depths_and_errors as _depths_and_errors, fit_cost, rms as _rms,
                                                   same_images)
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
-from geocert.solvers.reconstruction.camera_claim import FOCAL_P, PRINCIPAL_POINT_CHI2, PRINCIPAL_POINT_P
+from geocert.solvers.reconstruction.camera_claim import FOCAL_P, PRINCIPAL_POINT_CHI2, PRINCIPAL_POINT_P, RADIAL_CHI2
 from geocert.solvers.reconstruction.tracks import Observations
 
 STAGES = ("projective", "autocalibration", "bundle_adjustment", "structure", "cameras")
@@ -422,7 +422,6 @@ def _registration_principal_point(metric: upgrade.Metric, obs: Observations, opt
 
 
 RADIAL_STEP_PX = 0.5  # k1 moved by less than this at the image's corner: no further registration round
-RADIAL_CHI2 = 10.8  # chi-square with 1 degree of freedom at p = 0.001
 
 
 def _radial_test(metric: upgrade.Metric, obs: Observations, options: ReconstructionOptions, radial: dict):
@@ -464,6 +463,64 @@ def _radial_test(metric: upgrade.Metric, obs: Observations, options: Reconstruct
 
 
 RIVAL_FIT = "_rival_fit"  # the radial figures' key of the rival's (Metric, keep), never reported
+
+
+def _fixed_radial_test(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, options: ReconstructionOptions,
+                       should_stop=None):
+    """K known: whether one radial term k1 about K's principal point is kept, K held as given (the
+    adjustment again with it, bundle model "fixed_radial", from the "fixed" one): "off" never
+    (None: no figures); "on" always; "auto" when it lowers the cost on the observations both keep
+    by more than RADIAL_CHI2 noise variances (the residuals' own, from the fit with it, over their
+    degrees of freedom), as _radial_test judges the K-unknown term. A real lens's distortion that
+    K does not model (Sceaux Castle's, with openMVG's K) otherwise adds to every camera's misfit.
+    Returns the reconstruction kept (its k1 that of the pixels given), the observations kept and
+    the test's figures."""
+    from dataclasses import replace
+
+    if options.radial_distortion == "off":
+        return metric, keep, None
+    figures = {"model": options.radial_distortion, "estimated": False}
+    trial, trial_keep, _ = upgrade.adjust(replace(metric, k1=0.0), obs.view, obs.track, obs.pixel,
+                                          options.threshold_px, model="fixed_radial", should_stop=should_stop)
+    if not (np.isfinite(trial.k1) and trial.k1 != 0.0 and trial_keep.any()):
+        return metric, keep, {**figures, "reason": "the adjustment found no finite radial term"}
+    figures["k1_tested"] = float(trial.k1)
+    common = keep & trial_keep
+    n = int(common.sum())
+    # The noise variance from the fit with the term, over its residual degrees of freedom: 2 per
+    # observation less the poses', points' and term's parameters the fit spent on them (less the
+    # 7 of the similarity the cameras and points are fixed up to). Over 2 n alone the variance of
+    # templeSparseRing's 7,304 observations (5,779 degrees of freedom) is 0.4 times theirs, and
+    # its 1 px term (at the image's corner) passed the test (chi2 11.1), which it fails with them
+    # (4.4), its cameras then as they were (16 of 16 certified, not 15).
+    dof = 2 * n - (6 * len(np.unique(obs.view[common])) + 3 * len(np.unique(obs.track[common])) - 7) - 1
+    if n >= 20 and dof >= 1:
+        free, held = _rms(trial, obs, common) ** 2 * n, _rms(metric, obs, common) ** 2 * n
+        variance = max(free / dof, 1e-4)  # residuals below 0.01 px are rounding, not noise
+        figures.update(chi2=float((held - free) / variance), threshold=RADIAL_CHI2, observations=n,
+                       residual_dof=int(dof))
+    elif options.radial_distortion == "auto":
+        return metric, keep, {**figures, "reason": "too few observations to test"}
+    if options.radial_distortion == "on" or figures["chi2"] > RADIAL_CHI2:
+        figures.update(estimated=True, k1=float(trial.k1))
+        return trial, trial_keep, figures
+    return metric, keep, figures
+
+
+def _undistorted_K(out: Reconstruction, obs: Observations, metric: upgrade.Metric, n_views: int,
+                   radial: dict) -> Observations:
+    """K known: every observation undistorted with the radial term _fixed_radial_test kept (about
+    K's principal point, bundle.undistort_K): from here on the reconstruction is a pinhole one on
+    these pixels (metric.k1 0), and every certificate after it is about them, so conditional on
+    that k1 (out.distortion says so, and the points return the undistorted observations)."""
+    from dataclasses import replace
+
+    K = metric.K
+    out.distortion = {"model": "radial_k1", "k1_at_focal_px": float(K[0, 0]), "k1": float(metric.k1),
+                      "centres": [K[:2, 2].tolist()] * n_views, "test": radial, "about": "principal_point"}
+    pixels = bundle.undistort_K(obs.pixel, K, metric.k1)
+    metric.k1 = 0.0
+    return replace(obs, pixel=pixels)
 
 
 def _kept(metric: upgrade.Metric, obs: Observations, threshold_px: float) -> np.ndarray:
@@ -690,6 +747,15 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
                 stage.update(started_from="calibrated", model="fixed", rms_px_before=before,
                              rms_px_after=_rms(metric, obs, keep), K=metric.K.tolist(),
                              observations_kept=figures["observations_kept"])
+                tested, tested_keep, radial = _fixed_radial_test(metric, obs, keep, options, stopping)
+                if stop["asked"]:  # the test's adjustment stopped: the adjusted cameras, without a term
+                    _keep_metric(out, metric, n_views, stage, "adjusted, the radial term's test not finished")
+                if radial is not None:
+                    stage["radial_distortion"] = radial
+                    if radial["estimated"]:
+                        metric, keep = tested, tested_keep
+                        obs = _undistorted_K(out, obs, metric, n_views, radial)
+                        stage.update(rms_px_after=_rms(metric, obs, keep), observations_kept=int(keep.sum()))
                 metric, keep = _depth_reversal(out, metric, obs, keep, options.threshold_px, "fixed", stage, tell,
                                                n_views)
                 if not keep.any():

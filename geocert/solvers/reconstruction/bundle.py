@@ -58,10 +58,13 @@ def projective(cameras: np.ndarray, points: np.ndarray, view: np.ndarray, track:
 # "principal" the focal length and the principal point (square pixels, no skew), "radial" the focal
 # length and one radial distortion term k1 about the principal point held where K has it (COLMAP's
 # SIMPLE_RADIAL: a point at normalised image coordinates n is seen at K's pixel of n (1 + k1 |n|^2)),
+# "fixed_radial" K as given and that radial term k1 about its principal point (K known),
 # "principal_per_view" one focal length and a principal point per view (square pixels, no skew),
 # "focal_groups" a principal point per view and a focal length per group of views (``groups``:
 # each view's group; one group is "principal_per_view", a group each a K per view).
-MODELS = ("simple", "full", "fixed", "varying", "principal", "radial", "principal_per_view", "focal_groups")
+MODELS = ("simple", "full", "fixed", "varying", "principal", "radial", "principal_per_view", "focal_groups",
+          "fixed_radial")
+RADIAL_MODELS = ("radial", "fixed_radial")  # the models with the radial term k1, the last of their S
 
 
 def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, points: np.ndarray, view: np.ndarray,
@@ -70,9 +73,11 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
            stop: schur.StopRule = schur.CERES, centres: np.ndarray | None = None,
            groups: np.ndarray | None = None):
     """Refine one shared K (``model``: "simple" f with square pixels, no skew and cx, cy fixed; "full"
-    fx, fy, skew, cx, cy; "fixed" K as given; "radial" f and the distortion term, from ``k1``),
+    fx, fy, skew, cx, cy; "fixed" K as given; "radial" f and the distortion term, from ``k1``;
+    "fixed_radial" K as given and the distortion term),
     rotations (n, 3, 3), translations (n, 3) and points (p, 3) against pixel observations. Returns
-    K, rotations, translations, points, residuals (M, 2), and k1 (``k1`` as given unless "radial").
+    K, rotations, translations, points, residuals (M, 2), and k1 (``k1`` as given unless
+    RADIAL_MODELS).
     "varying", "principal_per_view" and "focal_groups" return one K per view (n, 3, 3), from
     ``focals`` (n,) and ``centres`` (n, 2) (K's where not given; "focal_groups" starts each group
     from its views' mean focal length)."""
@@ -89,7 +94,7 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         obs_group = groups[view]  # each observation's focal length: S[obs_group]
 
     def entries(S):
-        if model == "fixed":
+        if model in ("fixed", "fixed_radial"):
             return given
         if model == "simple":
             return np.array([S[0], S[0], 0.0, given[3], given[4]])
@@ -122,14 +127,14 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         if model == "focal_groups":
             f = S[obs_group]
             return np.stack([f * u + Am[:, 6] - pixels[:, 0], f * v + Am[:, 7] - pixels[:, 1]], axis=1)
-        if model == "radial":
-            scale = 1.0 + S[1] * (u * u + v * v)
+        if model in RADIAL_MODELS:
+            scale = 1.0 + S[-1] * (u * u + v * v)
             u, v = u * scale, v * scale
         return np.stack([k[0] * u + k[2] * v + k[3] - pixels[:, 0], k[1] * v + k[4] - pixels[:, 1]], axis=1)
 
     def jacobian(Am, S, Bm):
         """Analytic (ja, js, jb) of ``residual``: pixels = M n' + c with n = cam[:2] / cam[2],
-        n' = n (1 + k1 |n|^2) ("radial") or n, M = [[fx, skew], [0, fy]] (each view's f I for
+        n' = n (1 + k1 |n|^2) (RADIAL_MODELS) or n, M = [[fx, skew], [0, fy]] (each view's f I for
         "varying"), cam = exp(w) B + t (a rotation vector's derivative by SO(3)'s left Jacobian)."""
         from geocert.solvers.reconstruction.calibrated import _crossed, _left_jacobian
 
@@ -143,11 +148,11 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         dn[:, 0, 0] = dn[:, 1, 1] = 1.0 / z
         dn[:, :, 2] = -n / z[:, None]
         seen, dseen = n, dn  # n' and d n' / d cam
-        if model == "radial":
+        if model in RADIAL_MODELS:
             r2 = np.sum(n * n, axis=1)
-            scale = 1.0 + S[1] * r2
+            scale = 1.0 + S[-1] * r2
             seen = n * scale[:, None]
-            stretch = scale[:, None, None] * np.eye(2) + 2 * S[1] * n[:, :, None] * n[:, None, :]
+            stretch = scale[:, None, None] * np.eye(2) + 2 * S[-1] * n[:, :, None] * n[:, None, :]
             dseen = stretch @ dn
         M = np.zeros((m, 2, 2))
         if model == "varying":
@@ -174,6 +179,8 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         elif model == "focal_groups":  # d / d (the observation's group's f)
             js = np.zeros((m, 2, len(S)))
             js[np.arange(m), :, obs_group] = seen
+        elif model == "fixed_radial":  # d / d k1 alone
+            js = np.einsum("mij,mj->mi", M, n * np.sum(n * n, axis=1)[:, None])[:, :, None]
         elif model == "full":  # fx, fy, skew, cx, cy
             u, v = seen[:, 0], seen[:, 1]
             js = np.stack([np.stack([u, zeros, v, ones, zeros], axis=1),
@@ -184,7 +191,7 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
 
     start = {"fixed": np.zeros(0), "varying": np.zeros(0), "simple": np.array([np.sqrt(abs(given[0] * given[1]))]),
              "full": given.copy(), "principal": np.array([np.sqrt(abs(given[0] * given[1])), given[3], given[4]]),
-             "radial": np.array([np.sqrt(abs(given[0] * given[1])), k1]),
+             "radial": np.array([np.sqrt(abs(given[0] * given[1])), k1]), "fixed_radial": np.array([k1]),
              "principal_per_view": np.array([np.sqrt(abs(given[0] * given[1]))]),
              "focal_groups": group_focals if model == "focal_groups" else None}[model]
     A, S, B, r, _ = schur.solve(residual, A, start, points.copy(), view, track, f_scale, max_iterations, stop=stop,
@@ -197,7 +204,8 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         K = np.array([[[k[0], 0.0, u], [0.0, k[0], v], [0.0, 0.0, 1.0]] for u, v in A[:, 6:8]])
     if model == "focal_groups":
         K = np.array([[[f, 0.0, u], [0.0, f, v], [0.0, 0.0, 1.0]] for f, (u, v) in zip(S[groups], A[:, 6:8])])
-    return K, Rotation.from_rotvec(A[:, :3]).as_matrix(), A[:, 3:6], B, r, float(S[1]) if model == "radial" else k1
+    return (K, Rotation.from_rotvec(A[:, :3]).as_matrix(), A[:, 3:6], B, r,
+            float(S[-1]) if model in RADIAL_MODELS else k1)
 
 
 def undistort(pixels: np.ndarray, centre, focal: float, k1: float) -> np.ndarray:
@@ -215,3 +223,22 @@ def undistort(pixels: np.ndarray, centre, focal: float, k1: float) -> np.ndarray
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(rd > 0, r / rd, 1.0)
     return centre + n * ratio[:, None] * focal
+
+
+def undistort_K(pixels: np.ndarray, K: np.ndarray, k1: float) -> np.ndarray:
+    """The pixels (M, 2) the pinhole camera K sees where the "fixed_radial" model's camera (K,
+    distortion k1 about K's principal point) saw ``pixels``: n_d = K^-1 pixel, the normalised
+    radius r_d = r (1 + k1 r^2) solved for r by Newton's method, then K n. For K with square
+    pixels and no skew, undistort's about K's principal point at K's focal length."""
+    if k1 == 0.0 or len(pixels) == 0:
+        return np.array(pixels, dtype=float, copy=True)
+    K = np.asarray(K, dtype=float)
+    M, centre = K[:2, :2], K[:2, 2]
+    n = np.linalg.solve(M, (np.asarray(pixels, dtype=float) - centre).T).T
+    rd = np.linalg.norm(n, axis=1)
+    r = rd.copy()
+    for _ in range(20):
+        r = r - (r * (1 + k1 * r * r) - rd) / (1 + 3 * k1 * r * r)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(rd > 0, r / rd, 1.0)
+    return centre + (n * ratio[:, None]) @ M.T

@@ -74,6 +74,10 @@ MAX_FOCAL_SD_FRACTION = 0.01
 # quantile for its 2 parameters at 0.999; the per-view principal points' level; the focal length
 # test's level (its screen's over the views, Bonferroni's, and its chi-square's).
 PRINCIPAL_POINT_CHI2 = 13.8
+# The radial term k1's chi-square quantile for its 1 parameter at 0.999 (the pipeline's
+# _radial_test with K unknown and _fixed_radial_test with K known; the verifier reads a K-known
+# term's test against it).
+RADIAL_CHI2 = 10.8
 PRINCIPAL_POINT_P = 0.001
 FOCAL_P = 0.001
 DOUBTFUL_FRACTION = 0.5

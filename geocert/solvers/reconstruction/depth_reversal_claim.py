@@ -42,7 +42,8 @@ MEMBERS = frozenset(("checked", "reference_view", "model", "cost_px2", "mirror_c
 NOT_CHECKED_MEMBERS = frozenset(("checked", "reason"))
 # The bundle models the twin may be adjusted with (bundle.MODELS, which imports scipy; a test
 # asserts the two agree).
-MODELS = ("simple", "full", "fixed", "varying", "principal", "radial", "principal_per_view", "focal_groups")
+MODELS = ("simple", "full", "fixed", "varying", "principal", "radial", "principal_per_view", "focal_groups",
+          "fixed_radial")
 
 
 def verdict(cost: float, twin: float, variance: float) -> tuple[float, bool, bool]:
