@@ -46,6 +46,8 @@ MEMBERS = {
         "focal_rounds/*/again_from_a_new_pair": "boolean", "per_view/*/registered_by": REGISTRATION_STEPS,
         "radial_distortion/model": ("auto", "on", "off"), "radial_distortion/estimated": "boolean",
         "radial_distortion/against": ("principal", "simple"), "radial_distortion/reason": "text",
+        "principal_point/estimated": "boolean", "principal_point/inside_middle_half": "boolean",
+        "principal_point/reason": "text",
         "initial_pair_search/reason": "text"},
     "autocalibration": {
         "method": AUTOCALIBRATION_METHODS, "certified": "boolean", "determined": "boolean",
@@ -181,6 +183,7 @@ def _check_ties(result: dict, stages: dict, views: int, tracks: int) -> None:
                     _fail(f"{where}/{name}", f"a count of at most its tracks ({through})", entry[name])
     _check_starts(result, stages)
     _check_principal_point(stages.get("bundle_adjustment", {}))
+    _check_principal_point(stages.get("projective", {}), "projective")
     _check_principal_points_per_view(result, stages.get("bundle_adjustment", {}))
     _check_focals_per_view(result, stages.get("bundle_adjustment", {}))
     _check_adjustment_model(result, stages.get("bundle_adjustment", {}))
@@ -247,18 +250,20 @@ def _check_starts(result: dict, stages: dict) -> None:
 
 
 
-def _check_principal_point(stage: dict) -> None:
+def _check_principal_point(stage: dict, name: str = "bundle_adjustment") -> None:
     """_principal_point's test: the principal point is estimated only when its chi-square passes
-    the threshold and it lies in the image's middle half, and only in the simple camera model."""
+    the threshold and it lies in the image's middle half, and (in the adjustment) only in the
+    simple camera model. The registration's test (the projective stage's record,
+    pipeline._registration_principal_point) is the same test."""
     test = stage.get("principal_point")
     if not isinstance(test, dict) or test.get("estimated") is not True:
         return
     chi2, threshold = test.get("chi2"), test.get("threshold")
     if not (is_number(chi2) and threshold == PRINCIPAL_POINT_CHI2 and chi2 > threshold
-            and test.get("inside_middle_half") is True and stage.get("model") == "simple"):
-        raise Invalid("returned", "stages/bundle_adjustment/principal_point/estimated is true, and its test does not "
-                                  f"pass (chi2 above its threshold {PRINCIPAL_POINT_CHI2}, inside the middle half, the "
-                                  "simple model)")
+            and test.get("inside_middle_half") is True and (name == "projective" or stage.get("model") == "simple")):
+        raise Invalid("returned", f"stages/{name}/principal_point/estimated is true, and its test does not "
+                                  f"pass (chi2 above its threshold {PRINCIPAL_POINT_CHI2}, inside the middle half"
+                                  + ("" if name == "projective" else ", the simple model") + ")")
 
 
 def intrinsics_of(P: Any) -> np.ndarray:
@@ -429,29 +434,36 @@ def _chi2_quantile(p: float, k: int) -> float:
 
 def _focal_test_levels(result: dict, test: dict) -> bool:
     """The kept focal length test's own figures agree with one another and with FOCAL_P: one z a
-    view registered at the test (in view order: those returned registered, and any the sanity
-    layer dropped after the adjustment), at least the 20 observations the test needs,
-    z_threshold the normal quantile at 1 - FOCAL_P / (2 views), as many views named as z exceed
-    it (the very views where none was dropped since), at most all but two, one parameter added
+    view registered at the test (in view order: those returned registered, and those the sanity
+    layer dropped after the adjustment, _views_at_adjustment), at least the 20 observations the
+    test needs, z_threshold the normal quantile at 1 - FOCAL_P / (2 views), the views named the
+    very views whose z exceed it (a dropped one too), at most all but two, one parameter added
     each, and threshold the chi-square quantile at 1 - FOCAL_P for them. A document choosing its
     own quantiles (a threshold of 0, a z_threshold below every z) states a test that never ran."""
-    cameras = [camera for camera in result.get("cameras") or [] if isinstance(camera, dict)]
-    views = sorted(camera.get("view") for camera in cameras
-                   if camera.get("registered") is True and type(camera.get("view")) is int)
+    views = _views_at_adjustment(result)
     z, z_threshold, named = test.get("z"), test.get("z_threshold"), test.get("views")
     added, threshold = test.get("parameters_added"), test.get("threshold")
-    if not (isinstance(z, list) and 3 <= len(z) and len(views) <= len(z) <= len(cameras)
+    if not (isinstance(z, list) and 3 <= len(z) == len(views)
             and all(is_number(v) for v in z) and is_number(z_threshold) and is_number(threshold)
             and isinstance(named, list) and type(added) is int and added == len(named) and 1 <= added <= len(z) - 2
             and type(test.get("observations")) is int and test["observations"] >= 20):
         return False
     if not _close_quantile(z_threshold, _normal_quantile(1 - FOCAL_P / (2 * len(z)))):
         return False
-    if len(named) != sum(1 for value in z if abs(value) > z_threshold):
-        return False
-    if len(z) == len(views) and named != [view for view, value in zip(views, z) if abs(value) > z_threshold]:
+    if named != [view for view, value in zip(views, z) if abs(value) > z_threshold]:
         return False
     return _close_quantile(threshold, _chi2_quantile(1 - FOCAL_P, added))
+
+
+def _views_at_adjustment(result: dict) -> list:
+    """The views registered when the adjustment's tests ran, in view order: those returned
+    registered and those the sanity layer dropped after it (pipeline._check_cameras: not
+    registered, their reason "dropped: ...", as the summary's cameras_dropped counts them), which
+    no other step unregisters."""
+    return sorted(camera.get("view") for camera in result.get("cameras") or []
+                  if isinstance(camera, dict) and type(camera.get("view")) is int
+                  and (camera.get("registered") is True
+                       or (camera.get("registered") is False and str(camera.get("reason") or "").startswith("dropped"))))
 
 
 def _close_quantile(stated: float, recomputed: float) -> bool:
@@ -511,7 +523,9 @@ def _check_focals_per_view(result: dict, stage: dict) -> None:
                                   "its test names" if estimated else
                                   f"{where}: the cameras returned have focal lengths of their own, and no test says "
                                   "they were estimated")
-    if estimated and not all(view in focals and abs(focals[view] - shared[0]) > apart for view in own):
+    # a named view the sanity layer dropped since has no camera to hold its own focal length (the
+    # test's levels above ask that it be a view registered at the test, dropped since)
+    if estimated and not all(abs(focals[view] - shared[0]) > apart for view in own if view in focals):
         raise Invalid("returned", f"{where}: a view its test names has the focal length the others share")
 
 

@@ -34,7 +34,7 @@ STAGE_NAMES = ("matches", "projective", "autocalibration", "bundle_adjustment", 
 # object, "pair" a list of two view numbers; each may be absent or null.
 CONTAINERS = {
     "projective": {"focal_rounds": "list", "merged": "list", "initial_pair_search": "object",
-                   "initial_pair": "pair", "radial_distortion": "object"},
+                   "initial_pair": "pair", "radial_distortion": "object", "principal_point": "object"},
     "autocalibration": {"stages": "list", "intrinsics": "object"},
     "bundle_adjustment": {"starts": "list", "principal_point": "object", "radial_distortion": "object"},
 }
@@ -70,7 +70,9 @@ STAGE_RECORDS = ByName({
         focal_rounds=record("focal_px", "registration_focal_px", "k1", "registered", "resumed", "refined_focal_px",
                             "refined_k1", "again_from_a_new_pair", "fit_cost", "resumed_fit_cost", "radial_tested"),
         per_view=record("view", "registered_by", "tracks", "linked", "points"),
-        radial_distortion=record("model", "estimated", "k1", "chi2", "threshold", "k1_tested", "against", "reason")),
+        radial_distortion=record("model", "estimated", "k1", "chi2", "threshold", "k1_tested", "against", "reason"),
+        principal_point=record("estimated", "observations", "K_free", "chi2", "threshold", "inside_middle_half",
+                               "reason")),
     "autocalibration": record(
         *COMMON, "method", "K", "linear_K", "certified", "determined", "critical_motion", "cameras_built_with_one_K",
         "points_used", "certificate_views", "certificate_tracks",

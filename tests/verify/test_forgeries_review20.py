@@ -44,18 +44,18 @@ import copy
 import numpy as np
 import pytest
 
-from geocert.jobs.runner import solve_job
 from geocert.solvers.reconstruction import calibration_tie, centred_fit
 from tests.support import stage as _stage
-from tests.verify.test_forgeries_review18 import SHIFTS, _scene_job
+from tests.verify.test_forgeries_review18 import SHIFTS, _centred_registration
 
 LARGE = 1e15  # the gauge's scale: a scene this many times as large (units are the result's to choose)
 
 
 @pytest.fixture(scope="module")
 def off_centre() -> dict:
-    """The defaults' run on the (+30, -20)-shifted scene (verifying: review 18)."""
-    return solve_job(_scene_job({}, points=200, shift=np.tile(SHIFTS["(+30, -20)"], (8, 1))))
+    """The defaults' run on the (+30, -20)-shifted scene, registered at the image's centre
+    (verifying: review 18)."""
+    return _centred_registration({}, SHIFTS["(+30, -20)"])
 
 
 def _scaled(result: dict, scale: float) -> dict:
@@ -160,9 +160,9 @@ def test_a_certificate_reposed_with_another_focal_length_in_a_large_gauge_is_ref
 
 @pytest.fixture(scope="module")
 def off_centre_subset() -> dict:
-    """The off-centre run with a calibration certificate of 40 of its 200 tracks."""
-    return solve_job(_scene_job({"autocalibration_points": 40}, points=200,
-                                shift=np.tile(SHIFTS["(+30, -20)"], (8, 1))))
+    """The off-centre run (registered at the image's centre) with a calibration certificate of 40
+    of its 200 tracks."""
+    return _centred_registration({"autocalibration_points": 40}, SHIFTS["(+30, -20)"])
 
 
 def test_observations_the_certificate_does_not_hold_do_not_pull_the_centred_fit(off_centre_subset):

@@ -46,6 +46,19 @@ reconstruction in the model, so at least its least cost; the focal length free a
 the image's, so a certificate re-posed with another focal length or principal point gains
 nothing from it.
 
+The registration builds its cameras at the principal point the data fix when the returned
+cameras estimate it (pipeline._registration_principal_point: held at the centre, 114 px off, the
+pipeline's robust adjustment lay farther from that model's least-squares fit than the tie
+allows). Cameras built with one K, square pixels and no skew whose principal point is not each
+image's centre (_built_one_K) are held likewise to the returned reconstruction re-adjusted with
+one focal length and one principal point, both free (centred_fit with no centres): its cost is
+at most what holding the principal point anywhere costs, so a certificate re-posed with another
+principal point than the data's pays its misfit without allowance; and that model costs beyond
+the returned cameras what their freer model (a principal point or a focal length per view)
+saves, which a certificate of one K, wherever it is built, cannot fit (the 15%-longer view's
+scene with per-view principal points: an observation 4.31 px from the returned cameras' image,
+3.8 allowed).
+
 TIE_RATIO, measured on genuine results (the largest distance between the two images of a shared
 observation over the returned cameras' RMS error there; docs/certificate.md): 0.03 on the stored
 synthetic reconstruction, 0.90 on templeSparseRing's photos, 2.9 on the Oxford Corridor's and the
@@ -133,7 +146,7 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
     returned = float(np.sum(np.square(own)))
     ratio = 1.0 if centred is None or not returned > 0 else max(1.0, centred[1] / returned)
     others = _other_tracks(result, views, tracks, cameras, ratio)
-    return {"reference": "the returned cameras" if centred is None else CENTRED_REFERENCE,
+    return {"reference": "the returned cameras" if centred is None else centred[2],
             "observations": len(apart), "largest_px": worst, "allowed_px": allowed, "returned_rms_px": rms,
             "fewest_points_per_camera": min(per_camera, default=0), **fit, **others}
 
@@ -384,6 +397,8 @@ def _triangulate(P: np.ndarray, group: np.ndarray, uv: np.ndarray) -> tuple[np.n
 
 CENTRED_REFERENCE = ("the returned reconstruction re-adjusted with one focal length, square pixels, no skew and the "
                      "principal point at each image's centre: the model the certificate's cameras are built in")
+ONE_K_REFERENCE = ("the returned reconstruction re-adjusted with one focal length and one principal point (both free), "
+                   "square pixels and no skew: the model the certificate's cameras are built in")
 
 
 def _built_centred(result: dict, views: list, cameras: np.ndarray) -> bool:
@@ -408,16 +423,34 @@ def _built_centred(result: dict, views: list, cameras: np.ndarray) -> bool:
     return bool(focals) and max(focals) - min(focals) <= BUILT_WITH_ONE_K * max(focals)
 
 
+def _built_one_K(cameras: np.ndarray) -> bool:
+    """Whether every certificate camera is K [R | t] with one K (its principal point anywhere),
+    square pixels and no skew, to calibration_claim.BUILT_WITH_ONE_K of K's largest entry: the
+    registration's cameras built at the principal point the data fix."""
+    Ks = [camera_intrinsics(P) for P in cameras]
+    if not Ks or any(K is None or not np.all(np.isfinite(K)) for K in Ks):
+        return False
+    tol = BUILT_WITH_ONE_K * float(np.abs(Ks[0]).max())
+    return all(abs(K[0, 1]) <= tol and abs(K[1, 1] - K[0, 0]) <= tol and np.all(np.abs(K - Ks[0]) <= tol)
+               for K in Ks)
+
+
 def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple[list, list]
-                       ) -> tuple[list, float] | None:
+                       ) -> tuple[list, float, str] | None:
     """When the certificate's cameras are an incremental registration's (_built_centred): the
     images of the shared observations (``at``'s order) in the returned reconstruction re-adjusted in
     that model (centred_fit.fit, over the shared observations only: the ones the tie measures, whose
     returned cost it compares; observations of other points, which no returned cost here answers
     for, pulled the fit, and its focal length, where a certificate re-posed at 1.23 times the focal
-    length followed it), and its cost on them (px^2); else None, and the certificate is held to the
-    returned cameras (a projective reconstruction's cameras are as free as any model's)."""
-    if not _built_centred(result, views, cameras):
+    length followed it), and its cost on them (px^2), and the reference's words; when they are
+    built with one K, square pixels and no skew elsewhere (_built_one_K), the same with the
+    principal point one and free; else None, and the certificate is held to the returned cameras
+    (a projective reconstruction's cameras are as free as any model's)."""
+    if _built_centred(result, views, cameras):
+        reference = CENTRED_REFERENCE
+    elif _built_one_K(cameras):
+        reference = ONE_K_REFERENCE
+    else:
         return None
     shared = set(at[0])
     registered = [c for c in result["cameras"] if c.get("registered") is True and c.get("P") is not None
@@ -426,8 +459,8 @@ def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple
     X, view, point, uv, row = [], [], [], [], {}
     try:  # (the fields' shapes are checked elsewhere; one unreadable here leaves the returned cameras the reference)
         P = np.array([np.asarray(c["P"], dtype=float) for c in registered]).reshape(len(registered), 3, 4)
-        centres = np.array([[(c["image_size"][0] - 1) / 2, (c["image_size"][1] - 1) / 2] for c in registered],
-                           dtype=float)
+        centres = None if reference != CENTRED_REFERENCE else np.array(
+            [[(c["image_size"][0] - 1) / 2, (c["image_size"][1] - 1) / 2] for c in registered], dtype=float)
         for k, p in enumerate(result["points"]):
             if p.get("point") is None:
                 continue
@@ -447,4 +480,4 @@ def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple
     keys = at[0]
     mine = images[[row[key] for key in keys]]
     pixels = np.asarray(uv, dtype=float)[[row[key] for key in keys]]
-    return list(mine), float(np.sum(np.square(mine - pixels)))
+    return list(mine), float(np.sum(np.square(mine - pixels))), reference

@@ -26,9 +26,10 @@ from __future__ import annotations
 import numpy as np
 
 ITERATIONS = 30  # Levenberg-Marquardt steps at most (the synthetic scene's 60 px shift converges in 6)
-CHUNK = 200_000  # observation pairs per block of the points' Schur complement (memory: CHUNK * 49 floats)
+CHUNK = 200_000  # observation pairs per block of the points' Schur complement (memory: CHUNK * 81 floats at most)
 # The verifier's cost bound: each solve is a dense system of 6 * views + 1 unknowns and sums a
-# 7 x 7 block per pair of observations of one point (about 6 us a pair on a loaded core); beyond
+# 7 x 7 block (9 x 9 with the principal point free) per pair of observations of one point (about 6 us a
+# pair on a loaded core); beyond
 # these sizes, or SOLVES solves, fit() declines (None) and the tie holds the certificate to the
 # returned cameras, as it did before this fit (stricter). At 300 views and 5 million pairs one fit
 # took 171 s (a document of 16,500 observations; up to 76 solves of about 30 s each allowed).
@@ -65,13 +66,15 @@ def _rotation(w: np.ndarray) -> np.ndarray:
     return np.eye(3) + a * S + b * S @ S
 
 
-def fit(P: np.ndarray, centres: np.ndarray, X: np.ndarray, view: np.ndarray, point: np.ndarray,
+def fit(P: np.ndarray, centres: np.ndarray | None, X: np.ndarray, view: np.ndarray, point: np.ndarray,
         uv: np.ndarray) -> np.ndarray | None:
     """The images (M, 2) of the observations (camera ``view``, point ``point``, pixels ``uv``) in
     the returned cameras ``P`` (V, 3, 4) and points ``X`` (N, 4, homogeneous; w = 0 at infinity)
     re-adjusted with every K [[f, 0, cx], [0, f, cy], [0, 0, 1]], f one focal length and (cx, cy)
-    the camera's ``centres`` row; None when the cameras cannot be read so (not finite), the
-    adjustment does not converge, or the problem is beyond MAX_VIEWS or MAX_PAIRS."""
+    the camera's ``centres`` row, or (``centres`` None) one principal point (cx, cy) for every
+    camera, free like f (from the median of the returned cameras'); None when the cameras cannot
+    be read so (not finite), the adjustment does not converge, or the problem is beyond MAX_VIEWS
+    or MAX_PAIRS."""
     if not (np.all(np.isfinite(P)) and np.all(np.isfinite(X)) and np.all(np.isfinite(uv))) or len(uv) == 0:
         return None
     n_views, n_points = len(P), len(X)
@@ -92,22 +95,27 @@ def fit(P: np.ndarray, centres: np.ndarray, X: np.ndarray, view: np.ndarray, poi
     if gauge is None:
         return None
     ts, X = gauge
-    f = float(np.median([np.sqrt(abs(K[0, 0] * K[1, 1])) for K in Ks]))
+    # the parameters every camera shares: f, then (centres None) the principal point
+    shared = 1 if centres is not None else 3
+    f = np.array([float(np.median([np.sqrt(abs(K[0, 0] * K[1, 1])) for K in Ks]))]
+                 + ([] if centres is not None else list(np.median([K[:2, 2] for K in Ks], axis=0))))
 
     def images(Rs, ts, f, X):
         q = np.einsum("kij,kj->ki", Rs[view], X[point, :3]) + ts[view] * X[point, 3:4]
         with np.errstate(all="ignore"):
-            return f * q[:, :2] / q[:, 2:3] + centres[view], q
+            return f[0] * q[:, :2] / q[:, 2:3] + (centres[view] if centres is not None else f[1:]), q
 
     def cost(Rs, ts, f, X):
         x, _ = images(Rs, ts, f, X)
         c = float(np.sum(np.square(x - uv)))
         return c if np.isfinite(c) else np.inf
 
-    # the camera parameters of observation k: its view's rotation (3) and translation (3), then f
-    columns = np.concatenate([6 * view[:, None] + np.arange(6), np.full((len(view), 1), 6 * n_views)], axis=1)
+    # the camera parameters of observation k: its view's rotation (3) and translation (3), then
+    # the shared ones
+    columns = np.concatenate([6 * view[:, None] + np.arange(6),
+                              np.tile(6 * n_views + np.arange(shared), (len(view), 1))], axis=1)
     pairs = _pairs(point, n_points)
-    n = 6 * n_views + 1
+    n = 6 * n_views + shared
 
     def system(Rs, ts, f, X):
         """The normal equations at (Rs, ts, f, X): the cameras' block H and gradient g, each
@@ -117,11 +125,12 @@ def fit(P: np.ndarray, centres: np.ndarray, X: np.ndarray, view: np.ndarray, poi
         qz = q[:, 2]
         with np.errstate(all="ignore"):
             Jq = np.zeros((len(view), 2, 3))
-            Jq[:, 0, 0] = Jq[:, 1, 1] = f / qz
-            Jq[:, 0, 2], Jq[:, 1, 2] = -f * q[:, 0] / qz ** 2, -f * q[:, 1] / qz ** 2
+            Jq[:, 0, 0] = Jq[:, 1, 1] = f[0] / qz
+            Jq[:, 0, 2], Jq[:, 1, 2] = -f[0] * q[:, 0] / qz ** 2, -f[0] * q[:, 1] / qz ** 2
             RX = np.einsum("kij,kj->ki", Rs[view], X[point, :3])
-            A = np.concatenate([Jq @ -_skew(RX), Jq * X[point, 3][:, None, None], (q[:, :2] / qz[:, None])[:, :, None]],
-                               axis=2)  # (M, 2, 7)
+            A = np.concatenate([Jq @ -_skew(RX), Jq * X[point, 3][:, None, None], (q[:, :2] / qz[:, None])[:, :, None]]
+                               + ([] if shared == 1 else [np.broadcast_to(np.eye(2), (len(view), 2, 2))]),
+                               axis=2)  # (M, 2, 6 + shared)
             B = Jq @ Rs[view]  # (M, 2, 3)
         flat = (columns[:, :, None] * n + columns[:, None, :]).ravel()
         H = np.bincount(flat, (A.transpose(0, 2, 1) @ A).ravel(), minlength=n * n).reshape(n, n)
@@ -131,7 +140,7 @@ def fit(P: np.ndarray, centres: np.ndarray, X: np.ndarray, view: np.ndarray, poi
         np.add.at(Vp, point, B.transpose(0, 2, 1) @ B)
         gp = np.zeros((n_points, 3))
         np.add.at(gp, point, (B.transpose(0, 2, 1) @ r[:, :, None])[:, :, 0])
-        return H, g, Vp, gp, A.transpose(0, 2, 1) @ B  # W: (M, 7, 3)
+        return H, g, Vp, gp, A.transpose(0, 2, 1) @ B  # W: (M, 6 + shared, 3)
 
     def solve(H, g, Vp, gp, W, lam):
         """The damped step (cameras, points): Marquardt's damping, lam times each diagonal entry,
@@ -163,8 +172,8 @@ def fit(P: np.ndarray, centres: np.ndarray, X: np.ndarray, view: np.ndarray, poi
                 if solves > SOLVES:
                     return None
                 dc, dX = solve(*normal, lam)
-                dcam = dc[:-1].reshape(n_views, 6)
-                trial = (_rotation(dcam[:, :3]) @ Rs, ts + dcam[:, 3:], f + dc[-1],
+                dcam = dc[:-shared].reshape(n_views, 6)
+                trial = (_rotation(dcam[:, :3]) @ Rs, ts + dcam[:, 3:], f + dc[-shared:],
                          np.concatenate([X[:, :3] + np.where(used[:, None], dX, 0.0), X[:, 3:]], axis=1))
                 new = cost(*trial)
                 if new < current:
