@@ -331,27 +331,36 @@ def _check_proven_intervals(stage: dict, claim: dict) -> None:
     """A metric stage's determinacy saying proven states exactly its proof's sublevel intervals
     (proofs.check_sublevel checked them: the claim is certified, so its proof was checked), at no
     lower a cost increase than its estimate's."""
-    determinacy = stage.get("determinacy")
-    if not isinstance(determinacy, dict):
+    expected = _stated_proven(stage, claim, "stages/1", "metric", proven_metric)
+    if expected is None:
         return
-    says = determinacy.get("proven") not in (None, False) or determinacy.get("proven_intervals") is not None
-    if not says:
-        return
-    proof = claim.get("proof")
-    sublevel = proof.get("sublevel") if isinstance(proof, dict) else None
-    if not isinstance(sublevel, dict) or claim.get("certified") is not True or determinacy.get("proven") is not True:
-        raise Invalid("returned", "stages/1/determinacy says proven, and no proof of its intervals is carried (a "
-                                  "certified metric claim's proof/sublevel)")
-    try:
-        expected = proven_metric(sublevel)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise Invalid("returned", "stages/1: its proof's sublevel states no intervals") from exc
-    if determinacy.get("proven_intervals") != expected:
-        raise Invalid("returned", "stages/1/determinacy/proven_intervals are not its proof's sublevel")
-    estimate = determinacy.get("cost_increase")
+    estimate = stage["determinacy"].get("cost_increase")
     if isinstance(estimate, (int, float)) and not expected["cost_increase"] >= estimate * (1 - 1e-9):
         raise Invalid("returned", "stages/1/determinacy: the proven intervals' cost_increase is below its "
                                   "estimate's (a lower level proves a smaller set)")
+
+
+def _stated_proven(stage, claim: dict, where: str, name: str, read) -> dict | None:
+    """The proven intervals a stage's determinacy states, None when it states none: exactly what
+    ``read`` gives from its certified claim's proof's ``sublevel`` (checked with the claim), else
+    the stage is refused."""
+    determinacy = stage.get("determinacy") if isinstance(stage, dict) else None
+    if not isinstance(determinacy, dict):
+        return None
+    if determinacy.get("proven") in (None, False) and determinacy.get("proven_intervals") is None:
+        return None
+    proof = claim.get("proof")
+    sublevel = proof.get("sublevel") if isinstance(proof, dict) else None
+    if not isinstance(sublevel, dict) or claim.get("certified") is not True or determinacy.get("proven") is not True:
+        raise Invalid("returned", f"{where}/determinacy says proven, and no proof of its intervals is carried (a "
+                                  f"certified {name} claim's proof/sublevel)")
+    try:
+        expected = read(sublevel)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise Invalid("returned", f"{where}: its proof's sublevel states no intervals") from exc
+    if determinacy.get("proven_intervals") != expected:
+        raise Invalid("returned", f"{where}/determinacy/proven_intervals are not its proof's sublevel")
+    return expected
 
 
 def proven_metric(sublevel: dict) -> dict:
@@ -520,22 +529,9 @@ def _check_direct_proven(stage: dict, claim: dict, views: int) -> None:
     lower a cost increase than direct_sublevel.cost_increase gives for the stage's cost and bound."""
     from geocert.solvers.autocalibration import direct_sublevel
 
-    determinacy = stage.get("determinacy") if isinstance(stage, dict) else None
-    if not isinstance(determinacy, dict):
+    expected = _stated_proven(stage, claim, "stages/0", "direct", direct_sublevel.proven_document)
+    if expected is None:
         return
-    if determinacy.get("proven") in (None, False) and determinacy.get("proven_intervals") is None:
-        return
-    proof = claim.get("proof")
-    sublevel = proof.get("sublevel") if isinstance(proof, dict) else None
-    if not isinstance(sublevel, dict) or claim.get("certified") is not True or determinacy.get("proven") is not True:
-        raise Invalid("returned", "stages/0/determinacy says proven, and no proof of its interval is carried (a "
-                                  "certified direct claim's proof/sublevel)")
-    try:
-        expected = direct_sublevel.proven_document(sublevel)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise Invalid("returned", "stages/0: its proof's sublevel states no interval") from exc
-    if determinacy.get("proven_intervals") != expected:
-        raise Invalid("returned", "stages/0/determinacy/proven_intervals are not its proof's sublevel")
     cost, lower = stage.get("cost"), stage.get("lower_bound")
     if isinstance(cost, (int, float)) and isinstance(lower, (int, float)):
         least = direct_sublevel.cost_increase(float(cost), float(lower), views)

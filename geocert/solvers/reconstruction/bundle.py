@@ -216,13 +216,7 @@ def undistort(pixels: np.ndarray, centre, focal: float, k1: float) -> np.ndarray
         return np.array(pixels, dtype=float, copy=True)
     centre = np.asarray(centre, dtype=float)
     n = (np.asarray(pixels, dtype=float) - centre) / focal
-    rd = np.linalg.norm(n, axis=1)
-    r = rd.copy()
-    for _ in range(20):
-        r = r - (r * (1 + k1 * r * r) - rd) / (1 + 3 * k1 * r * r)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(rd > 0, r / rd, 1.0)
-    return centre + n * ratio[:, None] * focal
+    return centre + n * _undistorted_ratio(n, k1)[:, None] * focal
 
 
 def undistort_K(pixels: np.ndarray, K: np.ndarray, k1: float) -> np.ndarray:
@@ -235,10 +229,15 @@ def undistort_K(pixels: np.ndarray, K: np.ndarray, k1: float) -> np.ndarray:
     K = np.asarray(K, dtype=float)
     M, centre = K[:2, :2], K[:2, 2]
     n = np.linalg.solve(M, (np.asarray(pixels, dtype=float) - centre).T).T
+    return centre + (n * _undistorted_ratio(n, k1)[:, None]) @ M.T
+
+
+def _undistorted_ratio(n: np.ndarray, k1: float) -> np.ndarray:
+    """r / r_d for each normalised point n (M, 2) of radius r_d: r_d = r (1 + k1 r^2) solved for r
+    by Newton's method from r = r_d (1 where r_d is 0)."""
     rd = np.linalg.norm(n, axis=1)
     r = rd.copy()
     for _ in range(20):
         r = r - (r * (1 + k1 * r * r) - rd) / (1 + 3 * k1 * r * r)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(rd > 0, r / rd, 1.0)
-    return centre + (n * ratio[:, None]) @ M.T
+        return np.where(rd > 0, r / rd, 1.0)
