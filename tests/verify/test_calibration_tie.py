@@ -16,6 +16,27 @@ from tests.verify.test_forgeries import stored
 from tests.support import reconstruction_data
 
 
+def registered_at(result: dict, data: dict) -> dict:
+    """The result, its projective stage's principal-point record made to agree with the
+    certificate's cameras (calibration_tie._check_registration_record), as a forger's certificate
+    built with another K would: where it says the registration estimated the principal point, its
+    K_free the cameras' K; where it does not and the cameras' principal point is not the centre, a
+    record made up to say it was estimated there."""
+    from geocert.solvers.reconstruction.calibration_claim import camera_intrinsics
+
+    result = copy.deepcopy(result)
+    projective = next(s for s in result["stages"] if s["name"] == "projective")
+    record = projective.get("principal_point")
+    K = camera_intrinsics(np.asarray(data["cameras"][0], dtype=float))
+    size = next(c["image_size"] for c in result["cameras"] if c.get("registered"))
+    if isinstance(record, dict) and record.get("estimated") is True:
+        record["K_free"] = K.tolist()
+    elif np.max(np.abs(K[:2, 2] - [(size[0] - 1) / 2, (size[1] - 1) / 2])) > 1e-3:  # a record made up to say so
+        projective["principal_point"] = {"estimated": True, "observations": 1600, "K_free": K.tolist(),
+                                         "chi2": 1e4, "threshold": 13.8, "inside_middle_half": True}
+    return result
+
+
 def carrying(result: dict, data: dict) -> dict:
     """The result carrying the genuine calibration certificate of ``data`` (solved with the stored
     certificate's options), its calibration fields made that certificate's."""
@@ -25,7 +46,7 @@ def carrying(result: dict, data: dict) -> dict:
     options = dict(result["calibration_certificate"]["options"])
     other = solve_job({"kind": "autocalibration", "data": data, "options": options})
     assert all(stage["certified"] for stage in other["stages"]) and verify_any(other).valid
-    forged = copy.deepcopy(result)
+    forged = registered_at(result, data)
     forged["calibration_certificate"] = other["certificate"]
     stage = next(s for s in forged["stages"] if s["name"] == "autocalibration")
     stage["K"] = other["K"]

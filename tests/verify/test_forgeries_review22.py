@@ -52,6 +52,7 @@ from geocert.jobs.runner import solve_job
 from geocert.solvers.reconstruction import calibration_tie
 from geocert.verify.checks import verify_any
 from tests.support import stage as _stage
+from tests.verify.test_calibration_tie import registered_at
 from tests.verify.test_forgeries_review18 import SHIFTS, _reposed, _scene_job
 
 
@@ -116,6 +117,7 @@ def test_middle_tracks_with_cameras_fitted_to_every_track_are_refused(off_centre
     refused now by the other tracks (at 1.1 times: 837 px^2 against 467 allowed)."""
     result, data = _central(off_centre, count, scale, every_track=True)
     with pytest.raises(calibration_tie.Invalid, match="holds no point for"):
+        result = registered_at(result, data)  # the record made to agree (review 23)
         calibration_tie.tie(result, _stage(result, "autocalibration"), data)
 
 
@@ -183,7 +185,9 @@ def test_a_certificate_of_every_track_reposed_at_1_07_is_refused(off_centre):
     K[:2, :2] *= 1.07
     K[:2, 2], K[0, 1] = [319.5, 239.5], 0.0
     with pytest.raises(calibration_tie.Invalid):
-        calibration_tie.tie(off_centre, _stage(off_centre, "autocalibration"), _reposed(off_centre, K))
+        data = _reposed(off_centre, K)
+        result = registered_at(off_centre, data)  # the record made to agree (review 23)
+        calibration_tie.tie(result, _stage(result, "autocalibration"), data)
 
 
 # --- tried, not passing: guards -----------------------------------------------------------------

@@ -113,6 +113,7 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
     if untied:
         raise Invalid("returned", f"the calibration certificate holds a camera of view {untied[0]}, which the result "
                                   "does not register: nothing ties it to the result")
+    _check_registration_record(result, views, cameras)
     if not any(point.get("point") is not None for point in result["points"]):
         return without_points(views, tracks)
     apart, own, theirs, largest, per_camera, at = _shared(result, views, tracks, cameras, points)
@@ -149,6 +150,44 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
     return {"reference": "the returned cameras" if centred is None else centred[2],
             "observations": len(apart), "largest_px": worst, "allowed_px": allowed, "returned_rms_px": rms,
             "fewest_points_per_camera": min(per_camera, default=0), **fit, **others}
+
+
+def _check_registration_record(result: dict, views: list, cameras: np.ndarray) -> None:
+    """The projective stage's principal-point record (pipeline._registration_principal_point) and
+    the certificate's cameras, which are the registration's, say the same thing: cameras built with
+    one K whose principal point is not every view's image centre (_built_one_K, not _built_centred)
+    only where the record says the principal point was estimated (the views of one image size, as
+    the registration tests it only then); and a record saying so only
+    beside cameras built with one K, that K its K_free (the registration kept the free fit's
+    cameras). Unchecked, the record was the document's word: on the (+30, -20) off-centre run it
+    verified saying the principal point was held at the centre (estimated false), or with no record,
+    or with K_free moved to the centre or to another focal length, its certificate's cameras built
+    at (349.2, 219.8)."""
+    record = next((s.get("principal_point") for s in result.get("stages") or []
+                   if isinstance(s, dict) and s.get("name") == "projective"), None)
+    estimated = isinstance(record, dict) and record.get("estimated") is True
+    one_K = _built_one_K(cameras)
+    sizes = {tuple(c["image_size"]) for c in result["cameras"] if c.get("view") in views
+             and isinstance(c.get("image_size"), list)}
+    # (views of several sizes: the registration does not test the principal point, and its one K
+    # cannot be every view's centre)
+    if one_K and not estimated and len(sizes) == 1 and not _built_centred(result, views, cameras):
+        raise Invalid("returned", "the calibration certificate's cameras are built with one K whose principal point is "
+                                  "not the images' centre, and stages/projective/principal_point does not say the "
+                                  "registration estimated it (the registration builds its cameras at the centre "
+                                  "unless its test estimates the principal point)")
+    if not estimated:
+        return
+    try:
+        K_free = np.asarray(record.get("K_free"), dtype=float).reshape(3, 3)
+    except (TypeError, ValueError):
+        K_free = np.full((3, 3), np.nan)
+    K = camera_intrinsics(cameras[0]) if one_K else None
+    if K is None or not np.all(np.isfinite(K_free)) or not np.all(
+            np.abs(K - K_free) <= BUILT_WITH_ONE_K * float(np.abs(K).max())):
+        raise Invalid("returned", "stages/projective/principal_point says the registration estimated the principal "
+                                  "point (its cameras built with the free fit's K, K_free), and the calibration "
+                                  "certificate's cameras are not built with one K equal to its K_free")
 
 
 def without_points(views: list, tracks: list) -> dict:
