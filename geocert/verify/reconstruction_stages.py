@@ -8,7 +8,8 @@ reader something no stage did.
 What each count counts from (the summary states the views sent and the tracks; each track holds
 at most one observation a view, so tracks * views bounds every count of observations):
 
-- projective: initial_pair_search.candidates <= views * (views - 1) / 2 (the pairs of views);
+- projective: initial_pair_search.candidates <= views * (views - 1) / 2 (the pairs of views),
+  principal_point.observations <= tracks * views;
 - bundle_adjustment: observations_kept, principal_point.observations and
   radial_distortion.observations <= tracks * views;
 - autocalibration: points_used <= tracks.
@@ -127,7 +128,9 @@ FIGURES = {
         "initial_pair_search/thresholds/max_forward_motion": "number",
         "initial_pair_search/thresholds/relaxations": "count",
         "radial_distortion/k1": "number", "radial_distortion/chi2": "number", "radial_distortion/threshold": "measure",
-        "radial_distortion/k1_tested": "number"},
+        "radial_distortion/k1_tested": "number", "principal_point/observations": "count",
+        "principal_point/K_free": "calibration", "principal_point/chi2": "number",
+        "principal_point/threshold": "measure"},
     "autocalibration": {
         "K": "calibration", "linear_K": "calibration", "points_used": "count",
         "rotation_noise_rad/estimated": "measure", "rotation_noise_rad/diac_family": "measure",
@@ -264,6 +267,10 @@ def _check_counts(stages: dict, views: int, tracks: int) -> None:
     if isinstance(search, dict) and "candidates" in search:
         _bounded(search["candidates"], _where("projective", "initial_pair_search/candidates"), views * (views - 1) // 2,
                  f"the pairs of the {views} views")
+    registration = (stages.get("projective") or {}).get("principal_point")
+    if isinstance(registration, dict) and "observations" in registration:
+        _bounded(registration["observations"], _where("projective", "principal_point/observations"), observations,
+                 f"{tracks} tracks, one observation a view of {views}")
     adjustment = stages.get("bundle_adjustment") or {}
     if "observations_kept" in adjustment:
         _bounded(adjustment["observations_kept"], _where("bundle_adjustment", "observations_kept"), observations,

@@ -463,6 +463,21 @@ def test_a_registration_principal_point_test_that_does_not_pass_is_refused(at_pr
     assert "stages/projective/principal_point/estimated is true" in _refused(forged)["detail"]
 
 
+@pytest.mark.parametrize("edit, words", [({"observations": -5}, "principal_point/observations"),
+                                         ({"observations": 10 ** 9}, "a count of at most"),
+                                         ({"observations": "1600"}, "principal_point/observations"),
+                                         ({"chi2": True}, "principal_point/chi2"),
+                                         ({"threshold": -1.0}, "principal_point/threshold")],
+                         ids=["observations negative", "observations beyond tracks times views",
+                              "observations a string", "chi2 a boolean", "threshold negative"])
+def test_the_registration_principal_point_records_figures_are_of_their_types(at_principal_point, edit, words):
+    """The record's figures are checked as the adjustment's own are (FIGURES, the counts' bound):
+    the record was new, and its numbers went unread by the type checks."""
+    forged = copy.deepcopy(at_principal_point)
+    _stage(forged, "projective")["principal_point"].update(edit)
+    assert words in _refused(forged)["detail"]
+
+
 @pytest.mark.parametrize("limit, value", [("ITERATIONS", 1), ("MAX_VIEWS", 7), ("MAX_PAIRS", 100)],
                          ids=["not converged", "beyond the views bound", "beyond the pairs bound"])
 def test_a_centred_fit_not_converged_or_too_large_is_not_used(off_centre, monkeypatch, limit, value):
