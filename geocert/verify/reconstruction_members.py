@@ -248,8 +248,6 @@ def _check_starts(result: dict, stages: dict) -> None:
                                   "reconstruction is the start exactly when K is given (options.intrinsics.K)")
 
 
-
-
 def _check_principal_point(stage: dict, name: str = "bundle_adjustment") -> None:
     """_principal_point's test: the principal point is estimated only when its chi-square passes
     the threshold and it lies in the image's middle half, and (in the adjustment) only in the
@@ -390,8 +388,6 @@ def _check_centred(result: dict, stage: dict, model: str, Ks: list, tolerance: f
         raise Invalid("returned", f"{said} the {model!r:.20} model holds the principal point at the image's centre "
                                   f"{centre.tolist()} unless its test estimated it, and a camera returned has it at "
                                   f"{worst[:2, 2].round(6).tolist()} with no test saying estimated")
-
-
 
 
 def _normal_quantile(p: float) -> float:

@@ -17,7 +17,7 @@ cameras)."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -435,8 +435,6 @@ def _radial_test(metric: upgrade.Metric, obs: Observations, options: Reconstruct
     if metric.k1 == 0.0:
         return metric, radial
     if options.radial_distortion == "auto":
-        from dataclasses import replace
-
         with_keep = _kept(metric, obs, options.threshold_px)
         rival = "principal" if options.principal_point in ("auto", "per_view") else "simple"
         trial, trial_keep, _ = upgrade.adjust(replace(metric, k1=0.0), obs.view, obs.track, obs.pixel,
@@ -447,9 +445,7 @@ def _radial_test(metric: upgrade.Metric, obs: Observations, options: Reconstruct
             trial, _, _ = upgrade.adjust(replace(metric, k1=0.0), obs.view, obs.track, obs.pixel,
                                          options.threshold_px, model="simple")
             return trial, {**radial, "reason": "too few observations to test"}
-        free, held = _rms(metric, obs, common) ** 2 * n, _rms(trial, obs, common) ** 2 * n
-        variance = max(free / max(2 * n - 2, 1), 1e-4)
-        statistic = (held - free) / variance
+        statistic = _saved_variances(trial, metric, obs, common, 2 * n - 2)
         radial.update(chi2=float(statistic), threshold=RADIAL_CHI2, k1_tested=metric.k1, against=rival)
         if not statistic > RADIAL_CHI2:
             if rival != "simple":
@@ -475,8 +471,6 @@ def _fixed_radial_test(metric: upgrade.Metric, obs: Observations, keep: np.ndarr
     K does not model (Sceaux Castle's, with openMVG's K) otherwise adds to every camera's misfit.
     Returns the reconstruction kept (its k1 that of the pixels given), the observations kept and
     the test's figures."""
-    from dataclasses import replace
-
     if options.radial_distortion == "off":
         return metric, keep, None
     figures = {"model": options.radial_distortion, "estimated": False}
@@ -495,9 +489,7 @@ def _fixed_radial_test(metric: upgrade.Metric, obs: Observations, keep: np.ndarr
     # (4.4), its cameras then as they were (16 of 16 certified, not 15).
     dof = 2 * n - (6 * len(np.unique(obs.view[common])) + 3 * len(np.unique(obs.track[common])) - 7) - 1
     if n >= 20 and dof >= 1:
-        free, held = _rms(trial, obs, common) ** 2 * n, _rms(metric, obs, common) ** 2 * n
-        variance = max(free / dof, 1e-4)  # residuals below 0.01 px are rounding, not noise
-        figures.update(chi2=float((held - free) / variance), threshold=RADIAL_CHI2, observations=n,
+        figures.update(chi2=_saved_variances(metric, trial, obs, common, dof), threshold=RADIAL_CHI2, observations=n,
                        residual_dof=int(dof))
     elif options.radial_distortion == "auto":
         return metric, keep, {**figures, "reason": "too few observations to test"}
@@ -513,8 +505,6 @@ def _undistorted_K(out: Reconstruction, obs: Observations, metric: upgrade.Metri
     K's principal point, bundle.undistort_K): from here on the reconstruction is a pinhole one on
     these pixels (metric.k1 0), and every certificate after it is about them, so conditional on
     that k1 (out.distortion says so, and the points return the undistorted observations)."""
-    from dataclasses import replace
-
     K = metric.K
     out.distortion = {"model": "radial_k1", "k1_at_focal_px": float(K[0, 0]), "k1": float(metric.k1),
                       "centres": [K[:2, 2].tolist()] * n_views, "test": radial, "about": "principal_point"}
@@ -533,6 +523,17 @@ def _kept(metric: upgrade.Metric, obs: Observations, threshold_px: float) -> np.
     return keep
 
 
+def _saved_variances(held: upgrade.Metric, free: upgrade.Metric, obs: Observations, common: np.ndarray,
+                     dof: int) -> float:
+    """What freeing parameters saves, in noise variances: the cost of the fit holding them less that
+    of the fit freeing them, on the observations both keep, over the noise variance (the free
+    fit's cost over ``dof``; at least 1e-4 px^2, since residuals below 0.01 px are rounding, not
+    noise), read against a chi-square by each model test. ``dof``: each test's own count (the
+    K-known radial test's is the residuals' degrees of freedom, poses and points counted; the
+    others' two per observation less the parameters added)."""
+    n = int(common.sum())
+    held_cost, free_cost = _rms(held, obs, common) ** 2 * n, _rms(free, obs, common) ** 2 * n
+    return float((held_cost - free_cost) / max(free_cost / max(dof, 1), 1e-4))
 
 
 def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold_px: float, image_size,
@@ -556,9 +557,7 @@ def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray
     figures = {"estimated": False, "observations": n, "K_free": trial.K.tolist()}
     if n < 20:
         return metric, keep, {**figures, "reason": "too few observations to test"}
-    held, free = _rms(metric, obs, common) ** 2 * n, _rms(trial, obs, common) ** 2 * n
-    variance = max(free / max(2 * n - 3, 1), 1e-4)  # residuals below 0.01 px are rounding, not noise
-    statistic = (held - free) / max(variance, 1e-300)
+    statistic = _saved_variances(metric, trial, obs, common, 2 * n - 3)
     u, v = trial.K[0, 2], trial.K[1, 2]
     inside = abs(u - image_size[0] / 2) <= image_size[0] / 4 and abs(v - image_size[1] / 2) <= image_size[1] / 4
     figures.update(chi2=float(statistic), threshold=PRINCIPAL_POINT_CHI2, inside_middle_half=bool(inside))
@@ -573,8 +572,6 @@ def _same_registration(a: upgrade.Metric, b: upgrade.Metric) -> bool:
     return len(a.rotations) == len(b.rotations) and a.points.shape == b.points.shape and \
         [R is None for R in a.rotations] == [R is None for R in b.rotations] and \
         bool(np.array_equal(np.isfinite(a.points[:, 0]), np.isfinite(b.points[:, 0])))
-
-
 
 
 def _principal_points_per_view(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold_px: float,
@@ -599,9 +596,7 @@ def _principal_points_per_view(metric: upgrade.Metric, obs: Observations, keep: 
     figures = {"estimated": False, "observations": n, "parameters_added": added}
     if n < 20 or len(views) < 2 or trial.Ks is None:
         return metric, keep, {**figures, "reason": "too few observations to test"}
-    held, free = _rms(metric, obs, common) ** 2 * n, _rms(trial, obs, common) ** 2 * n
-    variance = max(free / max(2 * n - added, 1), 1e-4)  # residuals below 0.01 px are rounding, not noise
-    statistic = (held - free) / variance
+    statistic = _saved_variances(metric, trial, obs, common, 2 * n - added)
     threshold = float(chdtri(added, PRINCIPAL_POINT_P))
     sd = _principal_point_sd(trial, obs, trial_keep, views)
     offsets = np.array([trial.Ks[v][:2, 2] - centre for v in views])
@@ -661,9 +656,7 @@ def _focals_per_view(metric: upgrade.Metric, obs: Observations, keep: np.ndarray
     figures.update(observations=n, parameters_added=added)
     if n < 20:
         return metric, keep, {**figures, "reason": "too few observations to test"}
-    held, free = _rms(metric, obs, common) ** 2 * n, _rms(trial, obs, common) ** 2 * n
-    variance = max(free / max(2 * n - added, 1), 1e-4)  # residuals below 0.01 px are rounding, not noise
-    statistic = (held - free) / variance
+    statistic = _saved_variances(metric, trial, obs, common, 2 * n - added)
     threshold = float(chdtri(added, FOCAL_P))
     sd, focal_sd = _intrinsics_sd(trial, obs, trial_keep, views, np.array([groups[v] for v in views]))
     relative = [float(focal_sd[groups[v]] / trial.Ks[v][0, 0]) for v in own]
@@ -698,8 +691,6 @@ def _intrinsics_sd(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, 
     except (np.linalg.LinAlgError, ValueError):
         return np.full(len(views), np.inf), np.full(int(np.max(groups)) + 1, np.inf)
     return np.where(np.isfinite(sd), sd, np.inf), np.where(np.isfinite(focal_sd), focal_sd, np.inf)
-
-
 
 
 def _principal_point_sd(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, views: list) -> np.ndarray:
@@ -930,8 +921,6 @@ def _undistorted(out: Reconstruction, obs: Observations, metric: upgrade.Metric,
     image's centre, at the focal length it was estimated with): from here on the reconstruction is
     a pinhole one on these pixels, and every certificate after it is about them, so conditional on
     that k1 (out.distortion says so, and the points return the undistorted observations)."""
-    from dataclasses import replace
-
     centres = np.array([[(w - 1) / 2, (h - 1) / 2] for w, h in image_sizes])
     focal = float(metric.K[0, 0])
     out.distortion = {"model": "radial_k1", "k1_at_focal_px": focal, "k1": float(metric.k1),
