@@ -575,6 +575,32 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
         raise Invalid("returned", "summary: autocalibration_certified and autocalibration_determined must be "
                                   "summary/calibration's certified and determined")
     _require_warnings(result, stage, certified and not returned, cert, edges, critical)
+    _check_moved_warning(summary, certified and not returned, expected)
+
+
+def _check_moved_warning(summary: dict, due: bool, difference: dict | None) -> None:
+    """The returned_K_not_certified warning says how far the returned K moved from the certified
+    one, in the figures summary/calibration/difference states (recomputed from the two K above):
+    one such warning, only when the returned K is not the certified one, its focal length's
+    percent and principal point's pixels those of the difference as the pipeline writes them
+    (claims.calibration_claim). Unchecked, the warning's words were the document's: on the
+    stored reconstruction it verified saying "focal +0.00%, principal point 0.0 px" (the
+    cameras' K 0.05% and 0.7 px from the certified one), saying the returned K is the certified
+    one, or twice."""
+    warned = [w for w in summary.get("warnings") or [] if isinstance(w, dict)
+              and w.get("code") == "returned_K_not_certified"]
+    if not warned:
+        return  # _require_warnings asks for it where due
+    if not due or difference is None or len(warned) != 1:
+        raise Invalid("returned", "summary: a returned_K_not_certified warning is given "
+                                  + ("twice" if due and difference is not None else
+                                     "though the returned K is the certified one (or none is certified)"))
+    said = (f"focal {difference['focal_percent']:+.2f}%, principal point {difference['principal_point_px']:.1f} "
+            "px")
+    if said not in str(warned[0].get("detail")):
+        raise Invalid("returned", f"summary: the returned_K_not_certified warning must state how far the returned K "
+                                  f"moved from the certified one, as summary/calibration/difference gives it "
+                                  f"({said!r})")
 
 
 def _stage(result: dict, name: str) -> dict:
