@@ -133,13 +133,14 @@ def subset() -> dict:
 
 def test_a_genuine_certificate_of_a_subset_is_tied_by_the_other_tracks(subset):
     """The pipeline's certificate holds a spread of the tracks (here 40 of 200): its cameras fit
-    the other 160 points' observations at 399 px^2, the returned cameras at 176 and the centred
-    model 2.3 times theirs on the shared observations (867 allowed). The scope states it."""
+    the other 160 points' observations at 176 px^2, as the returned cameras do (203 allowed since
+    review 24; its cameras are built at the estimated principal point, the model's ratio 1). The
+    scope states it."""
     report = verify_any(json.loads(json.dumps(subset)))
     assert report.valid, report.first_failure
     tie = report.scope["calibration_tie"]
     assert tie["other_observations"] == 1280
-    assert tie["other_cost_px2"] <= 0.6 * tie["other_allowed_cost_px2"]
+    assert tie["other_cost_px2"] <= 0.9 * tie["other_allowed_cost_px2"]  # (review 24: the noise's allowance)
 
 
 def test_a_certificate_holding_every_track_states_no_other(off_centre):
