@@ -48,6 +48,7 @@ import pytest
 from geocert.jobs.runner import solve_job
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import stored
+from tests.verify.test_direct_autocalibration_proven import result as direct_result  # noqa: F401  (a fixture)
 from tests.verify.test_forgeries_review18 import SHIFTS, _scene_job
 
 
@@ -148,3 +149,41 @@ def test_the_returned_K_warning_is_still_required():
                                      if w["code"] != "returned_K_not_certified"]
     report = verify_any(result)
     assert not report.valid and "returned_K_not_certified" in report.first_failure["detail"]
+
+
+# --- tried, not passing: guards ------------------------------------------------------------------
+
+EDITS = {  # each a sublevel edit: (side, field, value) or (None, name, value)
+    "lower z * 1e-300": ("lower", "z", 1e-300), "upper z * 1e-200": ("upper", "z", 1e-200),
+    "lower z * 0": ("lower", "z", 0.0), "upper z * -1": ("upper", "z", -1.0), "lower z * 1e200": ("lower", "z", 1e200),
+    "lower c 0": ("lower", "c", 0.0), "lower c -0": ("lower", "c", -0.0), "upper c 5e-324": ("upper", "c", 5e-324),
+    "upper c 1e-308": ("upper", "c", 1e-308), "lower c 1e300": ("lower", "c", 1e300),
+    "upper c -1e300": ("upper", "c", -1e300), "cost_increase 0": (None, "cost_increase", 0.0),
+    "cost_increase 2^-128": (None, "cost_increase", 2.0 ** -128), "cost_increase 5e-324": (None, "cost_increase", 5e-324),
+    "lower end dropped": (None, "lower", None), "upper end dropped": (None, "upper", None),
+}
+
+
+@pytest.mark.parametrize("edit", list(EDITS))
+def test_the_direct_proven_intervals_numbers_edited_are_refused(direct_result, edit):  # noqa: F811
+    """The direct method's proven focal interval (Table 7.1's seed 5), one number of its proof
+    replaced by a subnormal, 0, -0, a huge or tiny normal number, or its sign flipped, the result's
+    determinacy restated from it: refused, every dual read by safe_bound in the programs rebuilt
+    from the certificate's data (passing on main as here)."""
+    from geocert.solvers.autocalibration import direct_sublevel
+    from geocert.solvers.core.certificates import pack, unpack
+    from tests.verify.test_forgeries import rehash
+
+    forged = copy.deepcopy(direct_result)
+    sublevel = forged["certificate"]["items"][0]["proof"]["sublevel"]
+    side, name, value = EDITS[edit]
+    if side is None:
+        sublevel[name] = value
+    elif name == "z":
+        sublevel[side][0]["z"] = pack(unpack(sublevel[side][0]["z"]) * value)
+    else:
+        sublevel[side][0]["c"] = value
+    forged["stages"][0]["determinacy"]["proven_intervals"] = direct_sublevel.proven_document(sublevel)
+    rehash(forged["certificate"])
+    first = verify_any(json.loads(json.dumps(forged))).first_failure
+    assert first is not None and first["check"] == "proven_interval", first
