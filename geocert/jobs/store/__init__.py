@@ -16,7 +16,8 @@ composes one class per concern, each in its own module over the client and key s
 - ``accounts``: an owner's index, stored bytes, active jobs and rate window;
 - ``idempotency``: Idempotency-Key reservations;
 - ``slots``: solver slots, webhook deliveries in flight, live workers;
-- ``clocks``: the running jobs' signs of life and deadlines (the reaper's reads).
+- ``clocks``: the running jobs' signs of life and deadlines (the reaper's reads);
+- ``uploads``: a large body's items, written a batch at a time before its job exists.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from geocert.jobs.store.records import Records, read_job
 from geocert.jobs.store.requests import Requests
 from geocert.jobs.store.results import Results
 from geocert.jobs.store.slots import Slots
+from geocert.jobs.store.uploads import Uploads
 
 __all__ = ["FRESH_S", "PAST_CLOCK_CLAIM_S", "PUBLIC_OWNER", "REDIS_GONE", "SOLVERS_KEY", "STREAM_MAXLEN", "TERMINAL",
            "WORKERS_KEY", "JobStore", "ResultGone", "StoredBytesExceeded", "count_request", "dumps", "events", "now",
@@ -42,7 +44,7 @@ __all__ = ["FRESH_S", "PAST_CLOCK_CLAIM_S", "PUBLIC_OWNER", "REDIS_GONE", "SOLVE
 
 
 class JobStore(Creation, Records, Requests, Lifecycle, Items, Results, Events, Accounts, Idempotency, Slots, Clocks,
-               StoreBase):
+               Uploads, StoreBase):
     """The job store: every concern's methods on one object over one client."""
 
 

@@ -94,3 +94,7 @@ class StoreBase:
     SLOTS = "geocert:slots"
     SLOT_OWNERS = "geocert:slots:owners"
     SLOT_LAPSE_S = 30.0
+
+    def ping(self) -> bool:
+        """Redis answers (raises when it does not)."""
+        return bool(self.r.ping())

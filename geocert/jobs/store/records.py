@@ -42,9 +42,13 @@ class Records(StoreBase):
         """The job as a listing shows it: its state and progress, no result."""
         return {key: meta.get(key) for key in self._SUMMARY} | {"links": self.links(meta["id"])}
 
+    def head(self, meta: dict) -> dict:
+        """The job as the API shows it without its result and links."""
+        return {key: meta.get(key) for key in self._SUMMARY + ("error", "webhook")}
+
     def document(self, meta: dict) -> dict:
         """The job as the API shows it (and as webhooks deliver it)."""
-        document = {key: meta.get(key) for key in self._SUMMARY + ("error", "webhook")}
+        document = self.head(meta)
         document["result"] = self.result(meta["id"], meta) if meta["status"] in TERMINAL else None
         document["links"] = self.links(meta["id"])
         return document

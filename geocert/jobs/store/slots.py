@@ -80,3 +80,8 @@ class Slots(StoreBase):
 
     def free_delivery(self, owner: str, delivery: str) -> None:
         self.r.zrem(self.owner_key(owner, "deliveries"), delivery)
+
+    def live_workers(self) -> int:
+        """How many workers beat within the last ``FRESH_S`` seconds (one Redis command; the
+        workers write their beats: ``workers.heartbeat``)."""
+        return int(self.r.zcount(WORKERS_KEY, now() - FRESH_S, "+inf"))
