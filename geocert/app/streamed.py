@@ -297,9 +297,10 @@ class Upload:
 def upload_items(store, split: Split, request: dict, with_digest: bool = False) -> Upload:
     """Every item validated by the kind's model, checked by its parser (with the rest of the
     request, whose ``data`` holds the checked head) and written as JSON to a temporary list of
-    ``store`` (a JobStore: its uploads), a batch at a time; with ``with_digest``, the request's digest too (as for every body, only for
-    an Idempotency-Key: hashing is not done on every submit). Raises RequestValidationError or
-    InputError naming the item, after removing what was written."""
+    ``store`` (a JobStore: its uploads), a batch at a time; with ``with_digest``, the request's
+    digest too (as for every body, only for an Idempotency-Key: hashing is not done on every
+    submit). Raises RequestValidationError or InputError naming the item, after removing what was
+    written."""
     kind = KINDS.get(split.kind)
     adapter = _items_adapter(split.kind)
     key = store.upload_key()
