@@ -1,7 +1,8 @@
 """The estimators import nothing above them: no module of geocert/solvers imports the verifier,
 the kinds, the app, the workers or the job runner (kinds call solvers, never the reverse). The
 verifier (geocert/verify) imports nothing above it either: it finds each kind's adapter in its own
-registry (verify/adapters.py), not the kinds'."""
+registry (verify/adapters.py), not the kinds'. The service's app asks the job store by name, never
+through its Redis client."""
 
 from __future__ import annotations
 
@@ -32,6 +33,27 @@ def imports_above(folder: str, above: tuple) -> dict:
         if names:
             found[str(path.relative_to(ROOT))] = names
     return found
+
+
+STORE_CLIENTS = ("r", "binary")  # a JobStore's Redis clients (geocert/jobs/store/base.py)
+
+
+def store_client_uses(folder: str) -> dict:
+    """Each module of ``folder`` that names an attribute ``r`` or ``binary`` (a job store's Redis
+    clients), with the lines where it does."""
+    found = {}
+    for path in sorted((ROOT / folder).rglob("*.py")):
+        lines = sorted(node.lineno for node in ast.walk(ast.parse(path.read_text()))
+                       if isinstance(node, ast.Attribute) and node.attr in STORE_CLIENTS)
+        if lines:
+            found[str(path.relative_to(ROOT))] = lines
+    return found
+
+
+def test_no_app_module_reaches_into_the_stores_redis_client():
+    """Routes and app code ask the job store by name (``ping``, ``live_workers``, an upload's
+    ``drop_upload``...), never through its Redis client (``store.r``, ``store.binary``)."""
+    assert store_client_uses("app") == {}
 
 
 def test_no_solver_module_imports_a_layer_above_it():

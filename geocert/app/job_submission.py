@@ -106,7 +106,7 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
     upload = None
     if split is not None:
         _check_count(kind, split.count)  # before any item is read
-        upload = streamed.upload_items(store.r, split, request, with_digest=idempotency_key is not None)
+        upload = streamed.upload_items(store, split, request, with_digest=idempotency_key is not None)
     try:
         items = _check_limits(kind, parsed, body, request,
                               (upload.count, upload.observations) if upload is not None else None)
@@ -128,7 +128,7 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
             raise
     finally:
         if upload is not None:
-            store.r.delete(upload.key)  # gone already once it became a job's item list
+            store.drop_upload(upload.key)  # gone already once it became a job's item list
     if idempotency_key is not None:
         store.settle_idempotent(owner, idempotency_key, digest, meta["id"])
     response.headers["Location"] = f"/v1/jobs/{meta['id']}"

@@ -77,6 +77,6 @@ def metrics():
     if not _collector_registered:
         from geocert.app.api.deps import get_store
 
-        REGISTRY.register(RedisCollector(get_store().r))
+        REGISTRY.register(RedisCollector.of_store(get_store()))
         _collector_registered = True
     return Response(generate_latest(REGISTRY), media_type=CONTENT_TYPE_LATEST)

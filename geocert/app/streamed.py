@@ -29,7 +29,6 @@ import functools
 import hashlib
 import json
 import re
-import uuid
 from array import array
 from dataclasses import dataclass, field
 from typing import Any
@@ -295,15 +294,16 @@ class Upload:
     bytes: int = 0  # of the items' JSON texts
 
 
-def upload_items(redis_client, split: Split, request: dict, with_digest: bool = False) -> Upload:
+def upload_items(store, split: Split, request: dict, with_digest: bool = False) -> Upload:
     """Every item validated by the kind's model, checked by its parser (with the rest of the
-    request, whose ``data`` holds the checked head) and written as JSON to a temporary list, a
-    batch at a time; with ``with_digest``, the request's digest too (as for every body, only for
-    an Idempotency-Key: hashing is not done on every submit). Raises RequestValidationError or
-    InputError naming the item, after removing what was written."""
+    request, whose ``data`` holds the checked head) and written as JSON to a temporary list of
+    ``store`` (a JobStore: its uploads), a batch at a time; with ``with_digest``, the request's
+    digest too (as for every body, only for an Idempotency-Key: hashing is not done on every
+    submit). Raises RequestValidationError or InputError naming the item, after removing what was
+    written."""
     kind = KINDS.get(split.kind)
     adapter = _items_adapter(split.kind)
-    key = f"geocert:upload:{uuid.uuid4().hex}"
+    key = store.upload_key()
     placeholder = {**request, "data": {**request["data"], split.chunk_key: None}}
     digest = hashlib.sha256(json.dumps(placeholder, sort_keys=True).encode()) if with_digest else None
     slots: list[Any] = [None] * split.count
@@ -327,11 +327,8 @@ def upload_items(redis_client, split: Split, request: dict, with_digest: bool = 
             written += sum(map(len, texts))
             for item in items if digest is not None else ():
                 digest.update(json.dumps(item, sort_keys=True).encode())
-            pipe = redis_client.pipeline()
-            pipe.rpush(key, *texts)
-            pipe.expire(key, UPLOAD_TTL_S)
-            pipe.execute()
+            store.append_upload(key, texts, UPLOAD_TTL_S)
     except BaseException:
-        redis_client.delete(key)
+        store.drop_upload(key)
         raise
     return Upload(key, split.count, observations, None if digest is None else digest.hexdigest(), written)

@@ -59,6 +59,12 @@ class RedisCollector:
         self.client = client
         self.queue_names = queue_names
 
+    @classmethod
+    def of_store(cls, store) -> "RedisCollector":
+        """The collector reading the Redis server of ``store`` (a JobStore): the API hands it its
+        store, not the store's client."""
+        return cls(store.r)
+
     def collect(self):
         raw = self.client.hgetall(METRICS_KEY)
         values: dict[str, list[tuple[dict, float]]] = {}

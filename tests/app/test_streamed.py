@@ -15,6 +15,7 @@ from geocert.app.errors import field_path
 from geocert.app.schemas import JOB_REQUEST, JobRequest
 from geocert.app import streamed
 from geocert.app.streamed import split_items, upload_items
+from geocert.jobs.store import JobStore
 from geocert.solvers.core.geometry import InputError
 from tests.support import embedded_redis_client, triangulation_job
 
@@ -99,7 +100,7 @@ class TestUploadItems:
     def test_items_are_stored_as_the_ordinary_path_stores_them(self, client):
         job, text = body_of()
         split = split_items(text)
-        upload = upload_items(client, split, head_request(split))
+        upload = upload_items(JobStore(client), split, head_request(split))
         ordinary = JOB_REQUEST.validate_python(job).model_dump(mode="json")
         assert client.lrange(upload.key, 0, -1) == [json.dumps(item) for item in ordinary["data"]["tracks"]]
         assert (upload.count, upload.observations) == (30, 120)
@@ -112,7 +113,7 @@ class TestUploadItems:
 
         def digest(text: str, asked: bool = True) -> str | None:
             split = split_items(text)
-            upload = upload_items(client, split, head_request(split), with_digest=asked)
+            upload = upload_items(JobStore(client), split, head_request(split), with_digest=asked)
             client.delete(upload.key)
             return upload.digest
 
@@ -127,7 +128,7 @@ class TestUploadItems:
         split = split_items(json.dumps(job))
         before = set(client.scan_iter("geocert:upload:*"))
         with pytest.raises(RequestValidationError) as raised:
-            upload_items(client, split, head_request(split))
+            upload_items(JobStore(client), split, head_request(split))
         assert field_path(raised.value.errors()[0]["loc"]).startswith("data/tracks/17/points/2")
         assert set(client.scan_iter("geocert:upload:*")) == before
 
@@ -136,7 +137,7 @@ class TestUploadItems:
         job["data"]["tracks"][25]["views"] = [0, 1, 2, 9]  # no camera 9
         split = split_items(json.dumps(job))
         with pytest.raises(InputError) as raised:
-            upload_items(client, split, head_request(split))
+            upload_items(JobStore(client), split, head_request(split))
         assert raised.value.field == "data/tracks/25/views/3"
         assert not list(client.scan_iter("geocert:upload:*"))
 

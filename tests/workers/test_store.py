@@ -414,3 +414,33 @@ def test_the_stores_encoder_writes_json_dumps_text_to_the_byte():
               rng.normal(size=200).tolist(), (1, 2)]
     for value in values:
         assert dumps(value) == json.dumps(value), value
+
+
+class TestWhatTheAppAsksByName:
+    """What the API once did through the store's Redis client, asked of the store by name."""
+
+    def test_live_workers_counts_the_beats_within_fresh_s(self, jobs):
+        from geocert.jobs.store import FRESH_S, WORKERS_KEY, now
+
+        jobs.r.delete(WORKERS_KEY)
+        assert jobs.live_workers() == 0
+        jobs.r.zadd(WORKERS_KEY, {"a": now(), "b": now() - FRESH_S / 2, "gone": now() - 2 * FRESH_S})
+        assert jobs.ping() is True
+        assert jobs.live_workers() == 2
+        jobs.r.delete(WORKERS_KEY)
+
+    def test_an_upload_is_written_with_its_expiry_and_dropped(self, jobs):
+        key = jobs.upload_key()
+        assert key.startswith("geocert:upload:") and key != jobs.upload_key()
+        jobs.append_upload(key, ['{"a": 1}', '{"b": 2}'], 60)
+        jobs.append_upload(key, ['{"c": 3}'], 60)
+        assert jobs.r.lrange(key, 0, -1) == ['{"a": 1}', '{"b": 2}', '{"c": 3}']
+        assert 0 < jobs.r.ttl(key) <= 60
+        jobs.drop_upload(key)
+        assert not jobs.r.exists(key)
+        jobs.drop_upload(key)  # gone already: nothing
+
+    def test_the_head_is_the_document_without_result_and_links(self, jobs):
+        meta = jobs.create("triangulation", request_of(3), 3, 2, "someone", chunk_key="tracks")
+        document = jobs.document(meta)
+        assert jobs.head(meta) == {key: value for key, value in document.items() if key not in ("result", "links")}

@@ -269,7 +269,7 @@ def job_document(store: JobStore, job: dict) -> dict | Response:
         pieces = store.result_pieces(job["id"], job)
     except ResultGone:  # it expired (or was deleted) between reading its status and its result
         raise ApiProblem(404, f"job {job['id']} not found (it expired while it was read)") from None
-    shell = {key: job.get(key) for key in store._SUMMARY + ("error", "webhook")}
+    shell = store.head(job)
     text = Job.model_validate(shell | {"result": None, "links": store.links(job["id"])}).model_dump_json(by_alias=True)
     head, marker, tail = text.partition('"result":null')  # the one top-level key of that name (strings escape quotes)
     assert marker, "a job document always has a result key"

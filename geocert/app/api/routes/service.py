@@ -52,12 +52,10 @@ def healthz():
 def readyz(store: Annotated[JobStore, Depends(get_store)]):
     """Ready when Redis answers and at least one worker beat within the last 10 s (each worker
     writes a heartbeat into Redis every 2 s): two Redis commands, no waiting on workers."""
-    from geocert.workers.heartbeat import live_workers
-
     checks = {"redis": False, "workers": 0}
     try:
-        checks["redis"] = bool(store.r.ping())
-        checks["workers"] = live_workers(store.r)
+        checks["redis"] = store.ping()
+        checks["workers"] = store.live_workers()
     except Exception as exc:  # not ready is an answer, not an error
         checks["error"] = type(exc).__name__
     ready = checks["redis"] and checks["workers"] > 0
