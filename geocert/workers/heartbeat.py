@@ -4,7 +4,8 @@ the tasks a worker holds.
 Each worker's main process writes its name and the time into one sorted set every
 ``INTERVAL_S`` seconds from the moment it is ready to take tasks, and removes itself when it shuts
 down. A worker counts as alive while its last beat is at most ``FRESH_S`` old; one killed outright
-stops beating and drops out of the count within ``FRESH_S``.
+stops beating and drops out of the count within ``FRESH_S``. The count is the store's
+(``JobStore.live_workers``, which /readyz asks).
 
 With each beat the worker also renews its leases (``renew_leases``): every task it holds
 (running, reserved, or waiting for its countdown) gets the time of the beat as its delivery time
@@ -23,19 +24,13 @@ import time
 
 import redis
 
-from geocert.jobs.store import FRESH_S, SOLVERS_KEY, WORKERS_KEY, JobStore
+from geocert.jobs.store import SOLVERS_KEY, WORKERS_KEY, JobStore
 
 KEY, SOLVERS = WORKERS_KEY, SOLVERS_KEY  # (JobStore.take_slot reads them)
 INTERVAL_S = 2.0
 FORGET_S = 3600.0  # entries older than this are removed by the next beat of any worker
 
 log = logging.getLogger("geocert.worker")
-
-
-def live_workers(client: redis.Redis, now: float | None = None) -> int:
-    """How many workers beat within the last ``FRESH_S`` seconds (one Redis command)."""
-    now = time.time() if now is None else now
-    return int(client.zcount(KEY, now - FRESH_S, "+inf"))
 
 
 UNACKED_INDEX = "unacked_index"  # Kombu's Redis transport: delivery tag -> when it was delivered
