@@ -282,12 +282,11 @@ def cmd_worker(args: argparse.Namespace) -> int:
 
 def cmd_webhook_secret(args: argparse.Namespace) -> int:
     """Print the key webhook signatures use (GEOCERT_WEBHOOK_SECRET, or the one kept in Redis)."""
-    import redis
-
+    from geocert.jobs.store import JobStore
     from geocert.settings import redis_url
     from geocert.workers.webhooks import webhook_secret
 
-    print(webhook_secret(redis.Redis.from_url(redis_url(), decode_responses=True)))
+    print(webhook_secret(JobStore.from_url(redis_url())))
     return 0
 
 

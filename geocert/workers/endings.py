@@ -7,7 +7,6 @@ from __future__ import annotations
 import logging
 
 from geocert.jobs.store import JobStore
-from geocert.workers import metrics
 
 log = logging.getLogger("geocert.worker")
 
@@ -21,7 +20,7 @@ def after_end(jobs: JobStore, job_id: str) -> None:
     meta = jobs.get(job_id)
     if meta is None:
         return
-    metrics.record_job_end(jobs.r, meta)
+    jobs.record_job_end(meta)
     log.info("job ended %s", meta["status"])
     if meta.get("webhook"):
         queue_delivery(job_id)

@@ -19,14 +19,14 @@ import logging
 from geocert.jobs.store import JobStore
 
 log = logging.getLogger("geocert.worker")
-LOCK = "geocert:reaper"
-STRANDED = "stranded_since"  # a job's field: its last sign of life when a round first found it stranded
+LOCK = JobStore.REAPER_LOCK  # (the store's: JobStore.take_reaper_lock)
+STRANDED = JobStore.STRANDED  # a job's field: its last sign of life when a round first found it stranded
 MAX_REAPS = 3
 
 
 def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str, str]]:
     """One round: returns (job id, what was done) for each stranded job found."""
-    if not jobs.r.set(LOCK, "1", nx=True, ex=max(1, int(every_s))):
+    if not jobs.take_reaper_lock(every_s):
         return []  # another worker reaps this round
     from geocert.workers.celery_app import SOLVE_QUEUE
     from geocert.workers.priorities import queue_lists
@@ -36,7 +36,7 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
     done = []
     stale = jobs.stale_running(stale_after_s)
     if stale:  # a job with a task still queued, or delivered and due back (kombu's unacked), waits
-        pending = _pending_tasks(jobs, queue_lists(SOLVE_QUEUE))
+        pending = jobs.pending_task_messages(queue_lists(SOLVE_QUEUE))
         # A job past its clock in all is ended by the heartbeat (tasks.end_jobs_past_clock), its
         # items not stored reading "not started": a re-queued chunk would only drop out, and
         # dropping the claim to end it could take it from a heartbeat assembling its result.
@@ -49,12 +49,11 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
             continue
         meta = jobs.get(job_id)
         if meta is None or meta["status"] != "running":
-            jobs.r.zrem(jobs.RUNNING, job_id)
+            jobs.forget_running(job_id)
             continue
-        if not _seen_stranded_before(jobs, job_id):
+        if not jobs.seen_stranded_before(job_id):
             continue
-        jobs.r.hdel(jobs.key(job_id), STRANDED)
-        reaps = int(jobs.r.hincrby(jobs.key(job_id), "reaps", 1))
+        reaps = jobs.count_reap(job_id)
         if reaps > MAX_REAPS:
             jobs.reopen_end(job_id)
             end_with_error(jobs, job_id, 500, "Tasks lost",
@@ -76,30 +75,3 @@ def reap(jobs: JobStore, stale_after_s: float, every_s: float) -> list[tuple[str
                     job_id, stale_after_s, len(chunks), len(missing), reaps)
         done.append((job_id, f"requeued {len(chunks)}"))
     return done
-
-
-def _pending_tasks(jobs: JobStore, lists: list[str]) -> str:
-    """Every waiting and delivered task's message, read in one transaction: kombu's restore sweep
-    moves a task from its delivered hash back to a queue list atomically, and a read of the lists
-    then of the hash, apart, could fall between and see it in neither."""
-    pipe = jobs.r.pipeline(transaction=True)
-    for name in lists:
-        pipe.lrange(name, 0, -1)
-    pipe.hvals("unacked")
-    return "\n".join(task for tasks in pipe.execute() for task in tasks)
-
-
-def _seen_stranded_before(jobs: JobStore, job_id: str) -> bool:
-    """Whether an earlier round found this job stranded with the same last sign of life. A task
-    taken from a queue is in neither the queue nor kombu's delivered hash until its worker has
-    recorded the delivery; a round falling in that moment would re-queue a job whose task is
-    starting. So a job is re-queued on its second sighting, a round later: a task delivered in
-    between has started and marked the job alive (a new sign of life), and it is left alone."""
-    last_life = jobs.r.zscore(jobs.RUNNING, job_id)
-    if last_life is None:  # it ended meanwhile
-        return False
-    seen = jobs.r.hget(jobs.key(job_id), STRANDED)
-    if seen is not None and float(seen) == last_life:
-        return True
-    jobs.set_fields(job_id, **{STRANDED: last_life})  # not on a job deleted meanwhile
-    return False

@@ -37,7 +37,7 @@ from geocert.solvers.core.geometry import InputError
 from geocert.jobs.runner import (abs_gap_of, assemble, item_counts, item_sums, job_deadline, merged_sums, not_started_item,
                            result_fragment, result_json, result_shell, solve_items, stats_from, streams_result)
 from geocert.kinds import get_kind, options_from
-from geocert.workers import logs, metrics
+from geocert.workers import logs
 from geocert.workers.endings import after_end
 from geocert.workers.celery_app import celery_app
 from geocert.workers.priorities import LATER
@@ -173,7 +173,7 @@ def _wait_for_redis(jobs: JobStore, limit_s: float) -> None:
     deadline = time.monotonic() + limit_s
     while time.monotonic() < deadline:
         try:
-            if jobs.r.ping():
+            if jobs.ping():
                 return
         except REDIS_GONE:
             time.sleep(0.5)
@@ -220,7 +220,7 @@ def _solve_started_chunk(jobs: JobStore, job_id: str, start: int, stop: int, req
                             stop_at=began + settings.chunk_time_budget_s, on_item=publisher.item_ended,
                             deadline=job_deadline(options, began - _ran_before(jobs, job_id)))
         done = publisher.flush()
-        metrics.record_items(jobs.r, kind.name, items)
+        jobs.record_items(kind.name, items)
         cut = start + len(items)
         if publisher.job_ended:
             log.info("job %s ended under items %d-%d: nothing of them stored", job_id, start, stop)

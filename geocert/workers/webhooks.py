@@ -20,28 +20,26 @@ import hashlib
 import hmac
 import json
 import logging
-import secrets
 import time
 
 import httpcore
 
 from geocert.settings import get_settings
 from geocert.jobs.destinations import CheckedBackend, Refused, allowed_networks
-from geocert.workers import logs, metrics
+from geocert.workers import logs
 from geocert.workers.celery_app import celery_app
 from geocert.workers.endings import DELIVER_WEBHOOK, DELIVER_WEBHOOK_FAILED
 from geocert.jobs.store import shared_store as store
 
 log = logging.getLogger("geocert.webhooks")
-_SECRET_KEY = "geocert:webhook_secret"
 
 
-def webhook_secret(client) -> str:
+def webhook_secret(jobs) -> str:
+    """GEOCERT_WEBHOOK_SECRET, or the secret kept in Redis (``JobStore.webhook_secret``, made once)."""
     configured = get_settings().webhook_secret
     if configured:
         return configured
-    client.set(_SECRET_KEY, secrets.token_hex(32), nx=True)
-    return client.get(_SECRET_KEY)
+    return jobs.webhook_secret()
 
 
 def sign(secret: str, timestamp: str, body: bytes) -> str:
@@ -112,7 +110,7 @@ def _attempt(task, jobs, meta: dict, settings) -> None:
     attempt = hook["attempts"] + 1
     headers = {"Content-Type": "application/json", "User-Agent": "geocert-webhook",
                "X-Geocert-Job": job_id, "X-Geocert-Attempt": str(attempt),
-               "X-Geocert-Signature": f"t={timestamp},v1={sign(webhook_secret(jobs.r), timestamp, body)}"}
+               "X-Geocert-Signature": f"t={timestamp},v1={sign(webhook_secret(jobs), timestamp, body)}"}
     outcome, error = post(hook["url"], body, headers)
     hook.update(attempts=attempt, last_error=error, last_attempt_at=time.time())
     if outcome == "delivered":
@@ -123,7 +121,7 @@ def _attempt(task, jobs, meta: dict, settings) -> None:
         hook["state"] = "retrying"
     if not jobs.set_fields(job_id, webhook=hook):
         return  # the job was deleted meanwhile: nothing of it is written again
-    metrics.record_webhook(jobs.r, hook["state"])
+    jobs.record_webhook(hook["state"])
     log.info("webhook attempt %d: %s", attempt, error or "delivered")
     if hook["state"] == "retrying":
         raise task.retry(args=(job_id,), kwargs={}, countdown=settings.webhook_backoff_s * 2 ** (attempt - 1))
@@ -140,4 +138,4 @@ def deliver_webhook_failed(request, exc, traceback) -> None:
         hook.update(state="failed", attempts=hook["attempts"] + 1, last_attempt_at=time.time(),
                     last_error="failed: the attempt did not end within its time limit")
         if jobs.set_fields(job_id, webhook=hook):
-            metrics.record_webhook(jobs.r, "failed")
+            jobs.record_webhook("failed")

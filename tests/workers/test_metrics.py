@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 
 
+from geocert.jobs.store import JobStore
 from geocert.workers import metrics
 from tests.support import embedded_redis_client
 
@@ -16,7 +17,7 @@ def client(tmp_path_factory):
 
 
 def families(client) -> dict:
-    return {family.name: family for family in metrics.RedisCollector(client).collect()}
+    return {family.name: family for family in metrics.RedisCollector(JobStore(client)).collect()}
 
 
 class TestRecordItems:

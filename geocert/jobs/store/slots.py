@@ -1,9 +1,11 @@
 """Solver slots (how many solve tasks of one key's jobs run at once), webhook deliveries in flight
-per key, and the live workers whose heartbeats say how many solvers there are."""
+per key and the key that signs them, and the live workers whose heartbeats say how many solvers
+there are."""
 
 from __future__ import annotations
 
 import math
+import secrets
 
 from geocert.jobs.store.base import FRESH_S, PUBLIC_OWNER, SOLVERS_KEY, WORKERS_KEY, StoreBase, dumps, now
 
@@ -85,3 +87,11 @@ class Slots(StoreBase):
         """How many workers beat within the last ``FRESH_S`` seconds (one Redis command; the
         workers write their beats: ``workers.heartbeat``)."""
         return int(self.r.zcount(WORKERS_KEY, now() - FRESH_S, "+inf"))
+
+    WEBHOOK_SECRET = "geocert:webhook_secret"
+
+    def webhook_secret(self) -> str:
+        """The key signing webhooks when none is configured: made at random by the first caller
+        (SET NX), the same for every worker after."""
+        self.r.set(self.WEBHOOK_SECRET, secrets.token_hex(32), nx=True)
+        return self.r.get(self.WEBHOOK_SECRET)
