@@ -2,7 +2,7 @@
 the kinds, the app, the workers or the job runner (kinds call solvers, never the reverse). The
 verifier (geocert/verify) imports nothing above it either: it finds each kind's adapter in its own
 registry (verify/adapters.py), not the kinds'. The service's app asks the job store by name, never
-through its Redis client."""
+through its Redis client, and neither do the workers."""
 
 from __future__ import annotations
 
@@ -54,6 +54,13 @@ def test_no_app_module_reaches_into_the_stores_redis_client():
     """Routes and app code ask the job store by name (``ping``, ``live_workers``, an upload's
     ``drop_upload``...), never through its Redis client (``store.r``, ``store.binary``)."""
     assert store_client_uses("app") == {}
+
+
+def test_no_worker_module_reaches_into_the_stores_redis_client():
+    """Workers too: the reaper's lock and stranded marks, a job's metrics, the webhook secret and
+    Redis's answer are the store's named methods (``take_reaper_lock``, ``record_items``,
+    ``webhook_secret``, ``ping``...), never ``store.r`` or ``store.binary``."""
+    assert store_client_uses("workers") == {}
 
 
 def test_no_solver_module_imports_a_layer_above_it():
