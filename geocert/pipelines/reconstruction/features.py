@@ -547,6 +547,20 @@ def _selected(keypoints, max_features: int) -> np.ndarray:
 ONE_PASS_PIXELS = 2_000_000
 
 
+def sift_features(sift, image: np.ndarray, max_features: int) -> tuple[list, np.ndarray | None]:
+    """The keypoints select_keypoints keeps of those ``sift`` detects in the grayscale uint8
+    image, and their descriptors: ``sift.compute(image, select_keypoints(sift.detect(image,
+    None), max_features))``, from one pass where that gives the same (ONE_PASS_PIXELS)."""
+    if image.size > ONE_PASS_PIXELS:
+        return sift.compute(image, select_keypoints(sift.detect(image, None), max_features))
+    found, described = sift.detectAndCompute(image, None)
+    kept = _selected(found, max_features)
+    keypoints = [found[i] for i in kept]
+    if described is not None and len(kept) and min(map(_octave, keypoints)) < 0:
+        return keypoints, described[kept]
+    return sift.compute(image, keypoints)  # compute's scale space starts at another octave than detect's
+
+
 def _octave(keypoint) -> int:
     """The octave OpenCV's SIFT packs in a keypoint's low byte (signed: -1 the doubled image)."""
     octave = keypoint.octave & 255
@@ -622,17 +636,7 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
                                                 edgeThreshold=options.edge_threshold)
         if image.ndim == 3:
             image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-        image = np.ascontiguousarray(image, dtype=np.uint8)
-        if image.size <= ONE_PASS_PIXELS:
-            found, described = sift.detectAndCompute(image, None)
-            kept = _selected(found, options.max_features)
-            kps = [found[i] for i in kept]
-            if described is not None and len(kept) and min(map(_octave, kps)) < 0:
-                desc = described[kept]
-            else:  # compute's scale space would start at another octave than detect's: as compute makes them
-                kps, desc = sift.compute(image, kps)
-        else:
-            kps, desc = sift.compute(image, select_keypoints(sift.detect(image, None), options.max_features))
+        kps, desc = sift_features(sift, np.ascontiguousarray(image, dtype=np.uint8), options.max_features)
         return (np.array([kp.pt for kp in kps], dtype=np.float64).reshape(-1, 2),
                 desc if desc is not None else np.zeros((0, 128), np.float32))
 
