@@ -54,8 +54,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
         return 2
     if sys.stderr.isatty():
         sys.stderr.write("\n")
-    json.dump(result, sys.stdout, indent=None if args.compact else 2)
-    sys.stdout.write("\n")
+    # json.dumps, not json.dump: dump writes piece by piece through the pure-Python encoder, dumps
+    # uses the C one for compact output (the same text, several times less CPU on a large result)
+    sys.stdout.write(json.dumps(result, indent=None if args.compact else 2) + "\n")
     return 0
 
 

@@ -526,12 +526,45 @@ def select_keypoints(keypoints, max_features: int) -> list:
     (10-12 chance inliers), where its 4000 largest-scale keypoints have 312 inliers with the next
     photo. COLMAP's SIFT keeps the coarsest octaves the same way (dropping the finest first).
     Images with fewer keypoints than the limit keep them all, as before."""
+    return [keypoints[i] for i in _selected(keypoints, max_features)]
+
+
+def _selected(keypoints, max_features: int) -> np.ndarray:
+    """select_keypoints's choice as indices into ``keypoints``, ascending."""
     if not max_features or len(keypoints) <= max_features:
-        return list(keypoints)
+        return np.arange(len(keypoints))
     size = np.array([k.size for k in keypoints])
     response = np.array([k.response for k in keypoints])
-    kept = np.sort(np.lexsort((-response, -size))[:max_features])
-    return [keypoints[i] for i in kept]
+    return np.sort(np.lexsort((-response, -size))[:max_features])
+
+
+# Images of at most this many pixels get their keypoints and descriptors from one SIFT pass
+# (detectAndCompute: one scale space) rather than detect, then compute on the keypoints kept (two):
+# OpenCV's compute builds its scale space from the keypoints' lowest octave, the doubled image's
+# (-1) as detect's whenever one of them is there, so each descriptor is the same either way (the
+# descriptors of the keypoints select_keypoints drops are computed for nothing, which is why large
+# images, with tens of thousands of keypoints, keep the two passes).
+ONE_PASS_PIXELS = 2_000_000
+
+
+def sift_features(sift, image: np.ndarray, max_features: int) -> tuple[list, np.ndarray | None]:
+    """The keypoints select_keypoints keeps of those ``sift`` detects in the grayscale uint8
+    image, and their descriptors: ``sift.compute(image, select_keypoints(sift.detect(image,
+    None), max_features))``, from one pass where that gives the same (ONE_PASS_PIXELS)."""
+    if image.size > ONE_PASS_PIXELS:
+        return sift.compute(image, select_keypoints(sift.detect(image, None), max_features))
+    found, described = sift.detectAndCompute(image, None)
+    kept = _selected(found, max_features)
+    keypoints = [found[i] for i in kept]
+    if described is not None and len(kept) and min(map(_octave, keypoints)) < 0:
+        return keypoints, described[kept]
+    return sift.compute(image, keypoints)  # compute's scale space starts at another octave than detect's
+
+
+def _octave(keypoint) -> int:
+    """The octave OpenCV's SIFT packs in a keypoint's low byte (signed: -1 the doubled image)."""
+    octave = keypoint.octave & 255
+    return octave - 256 if octave >= 128 else octave
 
 
 # Images read, and pairs matched, at once: OpenCV's SIFT and RANSAC and numpy's products release the
@@ -603,8 +636,7 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
                                                 edgeThreshold=options.edge_threshold)
         if image.ndim == 3:
             image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-        image = np.ascontiguousarray(image, dtype=np.uint8)
-        kps, desc = sift.compute(image, select_keypoints(sift.detect(image, None), options.max_features))
+        kps, desc = sift_features(sift, np.ascontiguousarray(image, dtype=np.uint8), options.max_features)
         return (np.array([kp.pt for kp in kps], dtype=np.float64).reshape(-1, 2),
                 desc if desc is not None else np.zeros((0, 128), np.float32))
 

@@ -229,6 +229,20 @@ def _calibrated(tracks, n_views: int, K: np.ndarray, options: ReconstructionOpti
     return metric, keep
 
 
+def _undistorted_tracks(tracks, centres: np.ndarray, focal: float, k1: float) -> list:
+    """The tracks with their pixels undistorted (bundle.undistort about each view's principal point
+    ``centres[view]``), every observation at once: each pixel's undistortion is its own (Newton's
+    method point by point), so the same as track by track, without a call per track."""
+    if not tracks:
+        return []
+    views = [np.asarray(v, dtype=int) for v, _ in tracks]
+    pixels = np.concatenate([np.asarray(p, dtype=float).reshape(-1, 2) for _, p in tracks])
+    every_view = np.concatenate(views)
+    undistorted = bundle.undistort(pixels, centres[every_view], focal, k1)
+    ends = np.cumsum([len(v) for v in views])[:-1]
+    return [(original, part) for (original, _), part in zip(tracks, np.split(undistorted, ends))]
+
+
 def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Observations, asks):
     """K unknown, COLMAP's way: the K-known path (calibrated.py) from a prior K (focal length
     ``focal_prior_factor`` times the larger image side, or ``focal_prior_px``; the principal point
@@ -264,9 +278,7 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
         initial pair), then the adjustment; returns (found, its metric start, the adjusted metric
         or None when it stopped or found fewer than 2 views, the round's figures)."""
         Ks = [np.array([[focal, 0.0, c[0]], [0.0, focal, c[1]], [0.0, 0.0, 1.0]]) for c in centres]
-        used = tracks if k1 == 0.0 else [
-            (views, bundle.undistort(np.asarray(pixels, dtype=float).reshape(-1, 2), centres[np.asarray(views, dtype=int)],
-                                     focal, k1)) for views, pixels in tracks]
+        used = tracks if k1 == 0.0 else _undistorted_tracks(tracks, centres, focal, k1)
         found = calibrated_reconstruction(used, Ks, CalibratedOptions(
             max_reprojection_px=2 * options.threshold_px, pnp_min_inliers=options.min_inliers, seed=options.seed,
             merge_components=options.merge_components, refine_focal=True), lambda progress: asks(progress.get("done", 0),

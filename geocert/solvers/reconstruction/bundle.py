@@ -238,6 +238,9 @@ def _undistorted_ratio(n: np.ndarray, k1: float) -> np.ndarray:
     rd = np.linalg.norm(n, axis=1)
     r = rd.copy()
     for _ in range(20):
-        r = r - (r * (1 + k1 * r * r) - rd) / (1 + 3 * k1 * r * r)
+        step = r - (r * (1 + k1 * r * r) - rd) / (1 + 3 * k1 * r * r)
+        if np.array_equal(step, r):  # a fixed point: the remaining iterations would return it as it is
+            break
+        r = step
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(rd > 0, r / rd, 1.0)

@@ -311,7 +311,13 @@ def _triangulate_new(state: _State, options: CalibratedOptions) -> int:
                 & np.all((err <= options.max_reprojection_px) & (xc[..., 2] > 0), axis=1))
         state.points[group[good]] = X[good]
         made += int(good.sum())
-        retry.extend(group[~good].tolist())
+        # _triangulate_track's first pass is this one, on the same observations: a track whose
+        # point is not finite, or whose rays' widest angle is clearly below the minimum (a margin
+        # for the last bits its products may round differently), returns False from it with
+        # nothing changed, so only the others are tried again (on a ring, most of those refused
+        # are the narrow ones)
+        hopeless = ~(ok & np.all(np.isfinite(X), axis=1)) | (angle < options.min_triangulation_angle_deg - 1e-6)
+        retry.extend(group[~good & ~hopeless].tolist())
     for track in sorted(retry):
         made += _triangulate_track(state, int(track), options)
     return made
