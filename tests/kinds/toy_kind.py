@@ -14,6 +14,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
+from geocert.kinds.base import ProblemKind
 from geocert.kinds.schema import Finite, JobBase, JobStats, Pixel, Strict
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, numbers
@@ -108,7 +109,7 @@ class CentroidVerification:
         return CentroidItem(arrays[0])
 
 
-class CentroidKind:
+class CentroidKind(ProblemKind):
     name = "centroid"
     description = "Toy: the point nearest (least squares) to each set of 2D points."
     item_key = "sets"
