@@ -17,6 +17,7 @@ from typing import Any, Callable
 from pydantic import BaseModel
 
 from geocert.verify import adapters as verified_kinds
+from geocert.verify.verification import hook
 from geocert.solvers.core.geometry import InputError
 
 ProgressCallback = Callable[[Any], "bool | None"]
@@ -145,7 +146,7 @@ class Registry:
         # (or, when served, must state the contract the verifier already checks it by)
         verified_kinds.register(verified_kinds.VerifiedKind(
             kind.name, kind.item_key, tuple(kind.solution_fields), kind.verification,
-            getattr(kind, "options_type", None) if not hasattr(kind.verification, "checked_options") else None,
+            kind.options_type if hook(kind.verification, "checked_options") is None else None,
             kind.certifies, result_members(kind.result_model) if kind.certifies else ()))
         self._kinds[kind.name] = kind
         return kind

@@ -18,6 +18,7 @@ from geocert.kinds.base import ProblemKind
 from geocert.kinds.schema import Finite, JobBase, JobStats, Pixel, Strict
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, numbers
+from geocert.verify.verification import Verification
 
 
 @dataclass
@@ -95,7 +96,7 @@ class CentroidItem:
         return True
 
 
-class CentroidVerification:
+class CentroidVerification(Verification):
     proofs = {"closed_form": _check_closed_form}
     domain = "every point of the plane"
 
