@@ -14,6 +14,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
+from geocert.kinds.base import ProblemKind
 from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document
 from geocert.kinds.documents import finite_or_none
 from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finite, JobBase, JobStats, Strict
@@ -157,7 +158,7 @@ EXAMPLE_DATA = {
 }
 
 
-class AutocalibrationKind:
+class AutocalibrationKind(ProblemKind):
     name = "autocalibration"
     description = ("Autocalibration of a projective reconstruction: stratified (constant intrinsics; the plane at "
                    "infinity, then the DIAC, each certified globally optimal) or direct (the absolute dual quadric "

@@ -9,22 +9,26 @@ one module (or package) defining a ProblemKind and one line in ``geocert/kinds/_
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 import typing
-from typing import Any, Callable, Protocol, runtime_checkable
+from typing import Any, Callable
 
 from pydantic import BaseModel
 
 from geocert.verify import adapters as verified_kinds
+from geocert.verify.verification import hook
 from geocert.solvers.core.geometry import InputError
 
 ProgressCallback = Callable[[Any], "bool | None"]
 
 
-@runtime_checkable
-class ProblemKind(Protocol):
-    """The protocol every kind meets (duck-typed; see kinds/triangulation.py for one)."""
+class ProblemKind(abc.ABC):
+    """What every kind is (see kinds/triangulation.py for one): a subclass states the required class
+    attributes below (the registry refuses a kind missing one), defines the abstract methods, and
+    overrides an optional member only where its default does not fit."""
 
+    # Required: each kind states these (as class attributes, or in its __init__).
     name: str  # the job's "kind"
     description: str
     item_key: str  # where items sit in data and result ("tracks", "maps")
@@ -36,66 +40,89 @@ class ProblemKind(Protocol):
     verification: Any  # numpy-only adapter the verifier reads items through (read, item, domain, proofs)
     example: dict  # a small job ({"kind", "data", "options"}) that solves quickly: docs and contract tests
 
-    def parse(self, data: Any, items: range | None = None) -> Any: ...
+    @abc.abstractmethod
+    def parse(self, data: Any, items: range | None = None) -> Any:
+        """The job's data decoded (only the given items' when ``items`` is given), or InputError."""
 
-    def count(self, parsed: Any) -> int: ...
+    @abc.abstractmethod
+    def count(self, parsed: Any) -> int:
+        """How many items the parsed data hold."""
 
-    def observations(self, parsed: Any) -> int: ...
+    @abc.abstractmethod
+    def observations(self, parsed: Any) -> int:
+        """How many observations the parsed data hold (a job's size for budgets and stats)."""
 
-    def solve_item(self, parsed: Any, index: int, options: Any, callback: ProgressCallback | None) -> dict: ...
+    @abc.abstractmethod
+    def solve_item(self, parsed: Any, index: int, options: Any, callback: ProgressCallback | None) -> dict:
+        """Item ``index`` solved: its document in the result."""
 
+    @abc.abstractmethod
     def cancelled_item(self, options: Any) -> dict:
         """An item never started (a cancel, or the job's time limit first), for the job's options."""
 
-    def assemble(self, options: Any, items: list[dict], stats: dict) -> dict: ...
+    @abc.abstractmethod
+    def assemble(self, options: Any, items: list[dict], stats: dict) -> dict:
+        """The result document from the items' documents, in order, and the job's stats."""
+
+    # Optional: what a kind may leave out, with what it means then.
+    certifies: bool = True
+    """It issues certificates. A kind of estimates sets ``certifies = False``: no certificate
+    option, nothing for the verifier."""
+
+    chunk_key: str | None = None
+    """The list of its data that holds its items one to one (e.g. "tracks"), which the job store
+    keeps item by item so that a task reads only its chunk's; None: no such list."""
+
+    streamed_result: bool = False
+    """Its result is its items in order (under item_key) plus members that depend on the options
+    and stats alone, so a large job's result is stored a task's run of items at a time and never
+    assembled whole (batch.streams_result)."""
+
+    solve_batch: Callable[..., list[dict]] | None = None
+    """None: no batch path, each item is solved by solve_item. A kind that shares work between
+    items (triangulation) defines ``solve_batch(parsed, indices, options, callback, deadline=None)
+    -> documents``: many items solved at once (as solve_item would solve each, in order),
+    batch_size of them at a time; ``callback`` as solve_item's, for what runs long inside;
+    ``deadline`` (time.monotonic(), the job's: batch.job_deadline) one clock for the whole batch:
+    each item's search stops by it, and an item not started by then reads time_limit
+    (batch.not_started_item)."""
+
+    batch_size: int = 1
+    """How many items solve_batch is given at a time (unused without solve_batch)."""
+
+    def check_options(self, parsed: Any, options: Any) -> None:
+        """Raise InputError when the data and options do not fit together; by default nothing to
+        check beyond each alone."""
+        return None
+
+    def claimed_items(self, items: list[dict]) -> list[dict]:
+        """The items its certificate claims; by default every item."""
+        return items
+
+    def certificate_data(self, data: Any, items: list[dict]) -> Any:
+        """The data its certificate's claims are about; by default the job's. A kind whose claims
+        are about what an earlier stage found (reconstruction's points in the cameras it returns)
+        states those instead."""
+        return data
+
+    def time_bound_s(self, parsed: Any, options: Any) -> float:
+        """The longest one item runs, in seconds, when every time limit of the job is kept: by
+        default its options' time_limit_s, per item (a kind says otherwise: per stage, per point).
+        The service sizes a task's last-resort limits from it (batch.task_time_bound_s)."""
+        return float(getattr(options, "time_limit_s", 0.0) or 0.0)
+
+    def request_figures(self, data: Any) -> dict:
+        """{figure: (value, field)}: what the job asks of the service beyond its items and
+        observations, computed cheaply from the request's data as validated by its model, before
+        anything is decoded or built (a photo's pixels from its header, shapes times points): the
+        API refuses a job over a limit of settings.BUDGETS (413 naming the figure, its field and
+        limit). By default nothing."""
+        return {}
 
 
-def _no_check(parsed: Any, options: Any) -> None:
-    return None
-
-
-def _every_item(items: list[dict]) -> list[dict]:
-    return items
-
-
-def _data_as_given(data: Any, items: list[dict]) -> Any:
-    return data
-
-
-def _no_figures(data: Any) -> dict:
-    return {}
-
-
-def _item_time_limit(parsed: Any, options: Any) -> float:
-    return float(getattr(options, "time_limit_s", 0.0) or 0.0)
-
-
-# Members a kind may leave out, with what they mean then: it issues certificates (a kind of
-# estimates sets certifies = False: no certificate option, nothing for the verifier); nothing to
-# check between its data and options beyond each alone; every item is a claim of its certificate;
-# no list of its data holds its items one to one (chunk_key: the list that does, e.g. "tracks",
-# which the job store keeps item by item so that a task reads only its chunk's); its certificate's
-# data are the job's (a kind whose claims are about what an earlier stage found, e.g.
-# reconstruction's points in the cameras it returns, states those instead).
-# solve_batch(parsed, indices, options, callback, deadline=None) -> documents: many items solved
-# at once (as solve_item would solve each, in order), batch_size of them at a time, when that
-# shares work (triangulation); ``callback`` as solve_item's, for what runs long inside; ``deadline``
-# (time.monotonic(), the job's: batch.job_deadline) one clock for the whole batch: each item's
-# search stops by it, and an item not started by then reads time_limit (batch.not_started_item).
-# streamed_result: its result is its items in order (under item_key) plus members that depend on
-# the options and stats alone, so a large job's result is stored a task's run of items at a time
-# and never assembled whole (batch.streams_result).
-# time_bound_s(parsed, options) -> seconds: the longest one item runs when every time limit of
-# the job is kept (its options' time_limit_s, per item, unless the kind says otherwise: per stage,
-# per point); the service sizes a task's last-resort limits from it (batch.task_time_bound_s).
-# request_figures(data) -> {figure: (value, field)}: what the job asks of the service beyond its
-# items and observations, computed cheaply from the request's data as validated by its model,
-# before anything is decoded or built (a photo's pixels from its header, shapes times points): the
-# API refuses a job over a limit of settings.BUDGETS (413 naming the figure, its field and limit).
-OPTIONAL_MEMBERS: dict[str, Any] = {"certifies": True, "check_options": _no_check, "claimed_items": _every_item,
-                                    "chunk_key": None, "certificate_data": _data_as_given, "streamed_result": False,
-                                    "solve_batch": None, "batch_size": 1, "time_bound_s": _item_time_limit,
-                                    "request_figures": _no_figures}
+REQUIRED_ATTRIBUTES = ("name", "description", "item_key", "chunk_size", "options_type", "request_model",
+                       "result_model", "solution_fields", "verification", "example")
+"""The class attributes every kind states (the optional ones have defaults on ProblemKind)."""
 
 
 class Registry:
@@ -107,17 +134,19 @@ class Registry:
             self.register(kind)
 
     def register(self, kind: ProblemKind) -> ProblemKind:
-        missing = [name for name in ProblemKind.__annotations__ if not hasattr(kind, name)]
-        if missing or not isinstance(kind, ProblemKind):
-            raise TypeError(f"{kind!r} is not a ProblemKind (missing: {', '.join(missing) or 'methods'})")
-        for name, default in OPTIONAL_MEMBERS.items():  # what a kind may leave out, filled in once here
-            if not hasattr(kind, name):
-                setattr(kind, name, default)
+        if not isinstance(kind, ProblemKind):
+            lacking = [name for name in (*REQUIRED_ATTRIBUTES, *ProblemKind.__abstractmethods__)
+                       if not hasattr(kind, name)]
+            raise TypeError(f"{kind!r} is not a ProblemKind: a kind subclasses geocert.kinds.base.ProblemKind"
+                            + (f" (and lacks: {', '.join(sorted(lacking))})" if lacking else ""))
+        missing = [name for name in REQUIRED_ATTRIBUTES if not hasattr(kind, name)]
+        if missing:
+            raise TypeError(f"{kind!r} is not a complete ProblemKind: missing {', '.join(missing)}")
         # the verifier's registry holds the served kinds' contracts; a kind added here joins it
         # (or, when served, must state the contract the verifier already checks it by)
         verified_kinds.register(verified_kinds.VerifiedKind(
             kind.name, kind.item_key, tuple(kind.solution_fields), kind.verification,
-            getattr(kind, "options_type", None) if not hasattr(kind.verification, "checked_options") else None,
+            kind.options_type if hook(kind.verification, "checked_options") is None else None,
             kind.certifies, result_members(kind.result_model) if kind.certifies else ()))
         self._kinds[kind.name] = kind
         return kind

@@ -9,6 +9,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, Field
 
+from geocert.kinds.base import ProblemKind
 from geocert.kinds.documents import finite_or_none, outcome_document
 from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Pixel, Strict
 from geocert.solvers.bilinear import determinacy
@@ -120,7 +121,7 @@ def frame_document(result, options: BilinearOptions) -> dict:
             "certificate": certificate}
 
 
-class BilinearKind:
+class BilinearKind(ProblemKind):
     name = "bilinear"
     description = ("Bilinear fitting (shape from exemplars, non-rigid structure from motion): per frame the affine "
                    "camera and the basis coefficients, certified globally optimal.")

@@ -20,6 +20,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
+from geocert.kinds.base import ProblemKind
 from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION, IntrinsicsIn
 from geocert.kinds.documents import certificate_document
 from geocert.kinds.resection_homography import RESECTION, map_document
@@ -453,7 +454,7 @@ def _exif_focal_prior(images: list[dict], sizes: list[tuple[float, float]]) -> d
     return {"focal_px": median, "images": len(found)}
 
 
-class ReconstructionKind:
+class ReconstructionKind(ProblemKind):
     name = "reconstruction"
     description = ("From matches (tracks across views, no cameras) or photos to a metric reconstruction: a "
                    "projective reconstruction, the certified metric upgrade (autocalibration), a metric bundle "

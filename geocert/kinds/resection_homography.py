@@ -9,6 +9,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
+from geocert.kinds.base import ProblemKind
 from geocert.kinds.documents import brief_certificate, certificate_summary, outcome_document
 from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
@@ -72,7 +73,7 @@ def map_document(result: MapResult, detail: str = "full", full_certificate: bool
             "certificate": certificate}
 
 
-class MapKind:
+class MapKind(ProblemKind):
     """Independent maps P^n -> P^m of the given (n, m) dimensions, one item each."""
 
     item_key = "maps"

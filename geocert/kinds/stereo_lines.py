@@ -17,6 +17,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
+from geocert.kinds.base import ProblemKind
 from geocert.kinds.schema import Determinacy, Finite, JobBase, JobStats, Strict
 from geocert.solvers.core.bnb import Progress
 from geocert.solvers.core.determinacy import safely
@@ -211,7 +212,7 @@ def _segments(value: Any, field: str, allow_empty: bool = True) -> np.ndarray:
     return array
 
 
-class StereoLinesKind:
+class StereoLinesKind(ProblemKind):
     name = "stereo_lines"
     description = ("Stereo line structure and motion (thesis ch. 9): the motion of a calibrated stereo rig between "
                    "frames from lines; estimates (RANSAC), never certified.")

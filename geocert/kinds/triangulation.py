@@ -9,6 +9,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
+from geocert.kinds.base import ProblemKind
 from geocert.kinds.documents import brief_certificate, certificate_summary, local_summary, outcome_document
 from geocert.kinds.schema import Camera, CertificateDocument, ItemOutcome, JobBase, JobStats, Pixel, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, check_cameras, number_array
@@ -133,7 +134,7 @@ def tracks_in_bulk(entries: list, chosen, cameras: int) -> list | None:
     return [(list(v), p) for v, p in zip(views, np.split(pixels, np.cumsum(sizes)[:-1]))]
 
 
-class TriangulationKind:
+class TriangulationKind(ProblemKind):
     name = "triangulation"
     description = "N-view triangulation: the 3D point minimising reprojection error, certified globally optimal."
     item_key = "tracks"

@@ -15,16 +15,23 @@ from geocert.verify.autocalibration import STAGES
 from geocert.verify.bilinear import FRAMES
 from geocert.solvers.core import records
 from geocert.solvers.core.strict import Invalid
-from geocert.solvers.fractional.items import TRACKS, MapItems
+from geocert.solvers.fractional.items import TRACKS, MapItems, TrackItems
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
 from geocert.verify import reconstruction_stages as stage_checks
 from geocert.verify.reconstruction import RECONSTRUCTION
+from geocert.verify.verification import Verification
+
+# The fractional kinds' adapters sit below the verifier (geocert/solvers/fractional/items.py) and
+# cannot subclass Verification; they are its virtual subclasses, and the verifier reads their
+# hooks through verification.hook, with Verification's defaults.
+Verification.register(TrackItems)
+Verification.register(MapItems)
 
 NOT_CERTIFIED = ("stereo_lines results are estimates (RANSAC around algebraic solvers), never certified: there is "
                  "no certificate to verify")
 
 
-class NoCertificates:
+class NoCertificates(Verification):
     """The adapter of a kind that issues no certificate: any document claiming one for this kind
     is refused, saying why."""
 
@@ -119,6 +126,9 @@ NESTED_RECORDS: dict[str, tuple] = {
 
 def register(kind: VerifiedKind) -> VerifiedKind:
     """Add a kind's contract (a kind the verifier does not list), or confirm a listed one's."""
+    if not isinstance(kind.verification, Verification):
+        raise TypeError(f"kind {kind.name!r}: its verification adapter {kind.verification!r} is not a "
+                        "geocert.verify.verification.Verification")
     known = VERIFIED_KINDS.get(kind.name)
     if known is None:
         VERIFIED_KINDS[kind.name] = kind

@@ -18,6 +18,7 @@ from geocert.solvers.core.determinacy import proven_document
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
 from geocert.solvers.fractional import residual_claims
+from geocert.verify.verification import Verification
 
 STAGE_NAMES = {"stratified": ["affine", "metric"], "direct": ["direct"]}
 CLAIM_OPTIONS = ("method", "intrinsics", "rel_gap", "metric_rel_gap", "abs_gap", "chirality", "varying_focal",
@@ -80,7 +81,7 @@ def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, fl
     return cameras, points, image_size
 
 
-class AutocalibrationVerification:
+class AutocalibrationVerification(Verification):
     claim_options = CLAIM_OPTIONS
     proofs: dict = {}
     # A stage that found no solution (no plane, K or quadric) says "failed": a word about the

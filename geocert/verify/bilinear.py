@@ -21,6 +21,7 @@ from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
                                          numbers as _numbers, record as _record)
 from geocert.solvers.fractional import residual_claims
+from geocert.verify.verification import Verification
 
 CLAIM_OPTIONS = ("norm", "coefficients", "camera", "coefficient_bound", "camera_bound", "rel_gap", "abs_gap")
 MAX_ROUNDS = 64  # the solver's half rounds (search.TIGHTENING_ROUNDS) with room
@@ -34,7 +35,7 @@ FRAME_SCOPES = {"searched": "every affine camera whose 2x3 part lies in the came
                 "trivial": "every camera and coefficient vector"}
 
 
-class BilinearVerification:
+class BilinearVerification(Verification):
     claim_options = CLAIM_OPTIONS
     proofs: dict = {}
     data_items = "frames"  # the certificate has one item per frame (verify._check_item_count)

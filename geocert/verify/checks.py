@@ -28,6 +28,7 @@ from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, docu
                                          informational, number as _number, printable_tree, record, same,
                                          work_budget)
 from geocert.solvers.fractional import residual_claims
+from geocert.verify.verification import hook
 
 MAX_DEPTH = 64
 CHECKS = ("format", "data_hash", "options", "data", "claim", "objective", "scope", "program", "root_region",
@@ -65,7 +66,7 @@ def checked_options(kind: str, options: Any) -> dict:
     if not isinstance(options, dict):
         raise Invalid("options", "options must be an object")
     _check_option_words(options)
-    own = getattr(_adapter(kind), "checked_options", None)
+    own = hook(_adapter(kind), "checked_options")
     if own is not None:  # a kind whose cost is not a norm of residuals reads its own
         return own(options)
     return residual_options(kind, options)
@@ -105,7 +106,7 @@ def _adapter(kind: Any):
 
 def scope_statement(kind: str, options: dict) -> dict:
     """What a valid certificate of this kind proves, in words and numbers."""
-    own = getattr(_adapter(kind), "scope_statement", None)
+    own = hook(_adapter(kind), "scope_statement")
     if own is not None:
         return own(options)
     return residual_claims.scope(kind, _adapter(kind).domain, options)
@@ -293,7 +294,7 @@ def _check_job_bounds(progress: dict, result: dict) -> None:
     both (a one-item kind's item: its last stage's), their difference, and the worst item's gap
     beyond abs_gap relative to its cost."""
     kind = _kind(result.get("kind"))
-    if getattr(kind.verification, "job_outcomes", None) is not None:
+    if hook(kind.verification, "job_outcomes") is not None:
         stages = result.get("stages") if kind.name == "autocalibration" else None
         items = stages[-1:] if isinstance(stages, list) else []
     else:
@@ -398,21 +399,21 @@ def _verify_all(document: dict, returned: dict | None, adapter, options: dict, i
                 tallies: dict, fail, hashed: tuple[str, ...] = ()) -> None:
     """_verify's checks of the items, of what ties them together, and of the result returning
     them (failures counted through ``fail``; ``hashed``: the options the problem hash covers)."""
-    forget = getattr(adapter, "forget", lambda: None)  # what an adapter remembers of one document
+    forget = hook(adapter, "forget") or (lambda: None)  # what an adapter remembers of one document
     forget()
     try:
         _verify_items(document, options, items, report, tallies, fail)
     finally:
         forget()
     valid = _clean(tallies)
-    together = getattr(adapter, "check_claims", None) if valid and items else None
+    together = hook(adapter, "check_claims") if valid and items else None
     if together is not None:  # what ties a kind's claims to each other (e.g. the stages of one solve)
         try:
             together(items, options)
             tallies["claim"][0] += 1
         except Invalid as exc:
             fail(exc.check, None, exc.detail)
-    scoped = getattr(adapter, "scope_of_items", None) if _clean(tallies) and items else None
+    scoped = hook(adapter, "scope_of_items") if _clean(tallies) and items else None
     if scoped is not None and report.scope is not None:  # numbers of the scope each item's proof states
         report.scope.update(scoped(items))
     if returned is not None and _clean(tallies):
@@ -420,13 +421,13 @@ def _verify_all(document: dict, returned: dict | None, adapter, options: dict, i
             _check_returned(returned, document)
             # What else a kind's result returns on the strength of its certificates (e.g. a
             # reconstruction's cameras, against the camera certificate beside its points').
-            check_result = getattr(_adapter(document["kind"]), "check_result", None)
+            check_result = hook(_adapter(document["kind"]), "check_result")
             # The hash's form, as _check_hashes found it: the options it covers.
             scoped = check_result(returned, document, lambda other: _verify(other, None),
                                   hashed=hashed) if check_result else None
             if isinstance(scoped, dict) and report.scope is not None:  # e.g. which labels are tied to the input
                 report.scope.update(scoped)
-            returned_scope = getattr(adapter, "returned_scope", None)  # e.g. root regions in earlier words
+            returned_scope = hook(adapter, "returned_scope")  # e.g. root regions in earlier words
             if returned_scope is not None and report.scope is not None:
                 report.scope.update(returned_scope())
             tallies["returned"][0] += 1
@@ -445,7 +446,7 @@ def _verify_items(document: dict, options: dict, items: list, report: Report, ta
     """Every claim of the document checked in turn (failures counted through ``fail``). A kind
     may prove many claims at once (``proven_together``: the positions it proves, every check
     passed); the rest are checked one by one, and a failure is named there."""
-    together, proven = getattr(_adapter(document["kind"]), "proven_together", None) if items else None, set()
+    together, proven = hook(_adapter(document["kind"]), "proven_together") if items else None, set()
     if together is not None:
         try:
             proven, checks = together(document["data"], options, items)
@@ -491,7 +492,7 @@ def _verify_items(document: dict, options: dict, items: list, report: Report, ta
 def _note_abs_gap(kind: str, options: dict, claim: dict, position: int, report: Report) -> None:
     """A certified claim whose gap rel_gap alone does not allow (its proof met only abs_gap):
     named in the report's scope (within_abs_gap)."""
-    rel_gap_of = getattr(_adapter(kind), "rel_gap_of", lambda options_, _: options_["rel_gap"])
+    rel_gap_of = hook(_adapter(kind), "rel_gap_of") or (lambda options_, _: options_["rel_gap"])
     if float(claim["gap"]) > float(rel_gap_of(options, position)) * abs(float(claim["cost"])):
         report.within_abs_gap.append(position)
 
@@ -499,7 +500,7 @@ def _note_abs_gap(kind: str, options: dict, claim: dict, position: int, report: 
 def _check_item_count(document: dict) -> None:
     """The certificate's items are the data's, one each (index = position): a result cannot leave
     out the items it did not certify (the hashes cover the data, not the items)."""
-    key = getattr(_adapter(document["kind"]), "data_items", None)
+    key = hook(_adapter(document["kind"]), "data_items")
     if key is None:  # a kind whose items are its stages (autocalibration: check_claims counts them)
         return
     entries = document["data"].get(key) if isinstance(document["data"], dict) else None
@@ -527,11 +528,11 @@ def uncertified_claim(kind: str, data: dict, options: dict, claim: dict) -> None
     without one)."""
     status = claim.get("status")
     if status == "infeasible":
-        proves = getattr(_adapter(kind), "proves_infeasible", None)
+        proves = hook(_adapter(kind), "proves_infeasible")
         if proves is None or not proves(data, claim, options):
             raise Invalid("claim", "status 'infeasible' is said only where the verifier proves it from the data (a "
                                    "track with a view whose depth is a non-positive constant); this item's is not")
-    elif status not in (words := getattr(_adapter(kind), "uncertified_statuses", UNCERTIFIED_STATUSES)):
+    elif status not in (words := hook(_adapter(kind), "uncertified_statuses") or UNCERTIFIED_STATUSES):
         raise Invalid("claim", f"an uncertified item's status is one of {', '.join(words)} (or 'infeasible' where "
                                f"the data prove it), not {status!r:.40}")
     for name in ("lower_bound", "gap"):
@@ -539,7 +540,7 @@ def uncertified_claim(kind: str, data: dict, options: dict, claim: dict) -> None
             raise Invalid("claim", f"{name} is {claim[name]!r:.40}: an uncertified item states none (no proof the "
                                    "verifier checks backs it)")
     cost = claim.get("cost")
-    solution_cost = getattr(_adapter(kind), "solution_cost", None)
+    solution_cost = hook(_adapter(kind), "solution_cost")
     true = solution_cost(data, claim, options) if solution_cost is not None else None
     if true is None:
         if cost is not None:
@@ -591,13 +592,13 @@ def _check_hashes(document: dict, options: dict) -> tuple[tuple[str, ...], str |
     if expected != document["data_sha256"]:
         raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
     adapter = _adapter(document["kind"])
-    names = getattr(adapter, "claim_options", None)
+    names = hook(adapter, "claim_options")
     expected = problem_hash(document["kind"], document["data"], options, names)
     if expected == document["problem_sha256"]:
         return names or CLAIM_OPTIONS, None
     # a kind whose hash came to cover more options: its earlier forms, newest first, each with
     # what the report's scope says of it
-    for earlier, statement in getattr(adapter, "earlier_forms", ()):
+    for earlier, statement in hook(adapter, "earlier_forms"):
         if problem_hash(document["kind"], document["data"], options, earlier) == document["problem_sha256"]:
             return earlier, statement(options)
     raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and options "
@@ -655,12 +656,12 @@ def _check_returned(result: dict, certificate: dict) -> None:
     if isinstance(stats, dict):
         _check_item_notes({"nodes": stats.get("nodes")}, "stats")
     check_notes(result)  # its informational fields, typed
-    own = getattr(kind.verification, "check_returned", None)
+    own = hook(kind.verification, "check_returned")
     if own is not None:  # what else the result returns, derived from the claims
         own(result, certificate)
     if certificate["kind"] not in ("triangulation", "resection"):  # kinds whose determinacy proves intervals (own check)
         # a kind proving some intervals says which parts are estimates still (its check_returned checked the rest)
-        estimates_of = getattr(kind.verification, "estimates_of", None)
+        estimates_of = hook(kind.verification, "estimates_of")
         _check_estimates(result if estimates_of is None else estimates_of(result, certificate))
     _check_summaries(kind, result, certificate)
     _check_stats(kind, result)
@@ -690,7 +691,7 @@ def _check_stats(kind, result: dict) -> None:
     stats = result.get("stats")
     if stats is None:
         return
-    own = getattr(kind.verification, "job_outcomes", None)
+    own = hook(kind.verification, "job_outcomes")
     outcomes = own(result) if own is not None else [
         (item.get("status"), item.get("certified") is True) for item in result.get(kind.item_key) or []
         if isinstance(item, dict)]
@@ -747,7 +748,7 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
     if not isinstance(items, list):
         return
     options = certificate["options"]
-    rel_gap_of = getattr(kind.verification, "rel_gap_of", lambda options, index: options.get("rel_gap"))
+    rel_gap_of = hook(kind.verification, "rel_gap_of") or (lambda options, index: options.get("rel_gap"))
     for index, (item, claim) in enumerate(zip(items, certificate["items"])):
         summary = item.get("certificate") if isinstance(item, dict) else None
         where = f"{kind.item_key}/{index}/certificate"
@@ -819,7 +820,7 @@ def _verify_claim(kind: str, arrays: tuple, options: dict, claim: dict, discount
         raise Invalid("claim", f"lower_bound {lower_claimed!r}, cost {claimed!r} and gap {gap!r} disagree "
                                "(lower_bound = cost - gap, gap >= 0)")
     passed.append("claim")
-    own = getattr(adapter, "check_claim", None)
+    own = hook(adapter, "check_claim")
     if own is not None:  # the kind checks its solution, scope and proof itself, and names its tolerance
         bound, rel_gap = own(arrays, options, claim, claimed, lower_claimed, passed)
     else:

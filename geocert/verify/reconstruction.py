@@ -55,6 +55,7 @@ from geocert.solvers.core.strict import Invalid, number, numbers, same
 from geocert.solvers.fractional import residual_claims
 from geocert.solvers.fractional.items import TRACKS, TrackItems, _check_scope_words
 from geocert.verify.reconstruction_members import intrinsics_of
+from geocert.verify.verification import Verification
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.reconstruction import (calibration_claim, calibration_tie, camera_claim, depth_reversal_claim,
                                            hashed_options, motion_claim, run_control)
@@ -1056,7 +1057,7 @@ def _check_unstarted(result: dict, registered: list[dict], seen: list[int]) -> N
                                   "it was cancelled")
 
 
-class ReconstructionItems(TrackItems):
+class ReconstructionItems(TrackItems, Verification):
     """Points as triangulations (TrackItems), plus ``check_result``: the rest of the result."""
 
     # problem_sha256 covers every option a claim or check reads, and those deciding whether a

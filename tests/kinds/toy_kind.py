@@ -14,9 +14,11 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
+from geocert.kinds.base import ProblemKind
 from geocert.kinds.schema import Finite, JobBase, JobStats, Pixel, Strict
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, numbers
+from geocert.verify.verification import Verification
 
 
 @dataclass
@@ -94,7 +96,7 @@ class CentroidItem:
         return True
 
 
-class CentroidVerification:
+class CentroidVerification(Verification):
     proofs = {"closed_form": _check_closed_form}
     domain = "every point of the plane"
 
@@ -108,7 +110,7 @@ class CentroidVerification:
         return CentroidItem(arrays[0])
 
 
-class CentroidKind:
+class CentroidKind(ProblemKind):
     name = "centroid"
     description = "Toy: the point nearest (least squares) to each set of 2D points."
     item_key = "sets"

@@ -1,0 +1,68 @@
+"""The verification adapter is an abstract base class (geocert/verify/verification.py): every hook
+the verifier reads from a kind's adapter is declared there with its default and what it means,
+every adapter the verifier lists is one, and a contract whose adapter is not is refused."""
+
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+import pytest
+
+from geocert.verify import adapters
+from geocert.verify.adapters import VERIFIED_KINDS, VerifiedKind
+from geocert.verify.verification import Verification, hook
+
+VERIFY = Path(adapters.__file__).parent
+
+
+def documented_members() -> set[str]:
+    """Verification's members that carry a docstring (a method's own, an attribute's the string
+    literal after it)."""
+    body = next(node for node in ast.parse((VERIFY / "verification.py").read_text()).body
+                if isinstance(node, ast.ClassDef) and node.name == "Verification").body
+    documented = set()
+    for node, following in zip(body, body[1:] + [None]):
+        if isinstance(node, ast.FunctionDef) and ast.get_docstring(node):
+            documented.add(node.name)
+        elif isinstance(node, (ast.AnnAssign, ast.Assign)) and isinstance(following, ast.Expr) \
+                and isinstance(following.value, ast.Constant) and isinstance(following.value.value, str):
+            target = node.target if isinstance(node, ast.AnnAssign) else node.targets[0]
+            documented.add(target.id)
+    return documented
+
+
+def test_every_hook_the_verifier_reads_is_declared_and_documented():
+    read = set()
+    for path in VERIFY.glob("*.py"):
+        read |= set(re.findall(r'\bhook\([^,()]+(?:\([^()]*\))?, "(\w+)"\)', path.read_text()))
+    assert {"checked_options", "job_outcomes", "check_claim", "claim_options", "forget"} <= read  # the reading is found
+    assert read <= documented_members(), read - documented_members()
+    for path in set(VERIFY.glob("*.py")) - {VERIFY / "verification.py"}:  # the verifier asks an adapter nothing by getattr with a default of its own
+        assert not re.search(r'getattr\((adapter|_adapter\(|kind\.verification)', path.read_text()), path.name
+
+
+def test_every_listed_adapter_is_a_verification():
+    for kind in VERIFIED_KINDS.values():
+        assert isinstance(kind.verification, Verification), kind.name
+
+
+def test_a_hook_an_adapter_leaves_out_reads_as_the_default():
+    triangulation = VERIFIED_KINDS["triangulation"].verification  # defined below the verifier
+    assert hook(triangulation, "check_claims") is None and hook(triangulation, "earlier_forms") == ()
+    assert hook(VERIFIED_KINDS["autocalibration"].verification, "job_outcomes") is not None
+
+
+def test_a_contract_whose_adapter_is_not_a_verification_is_refused(monkeypatch):
+    monkeypatch.setattr(adapters, "VERIFIED_KINDS", dict(VERIFIED_KINDS))
+
+    class Duck:
+        domain = "anywhere"
+
+        def read(self, data, index):
+            return ()
+
+    with pytest.raises(TypeError, match="not a geocert.verify.verification.Verification"):
+        adapters.register(VerifiedKind("duck", "items", ("x",), Duck()))
+    assert "duck" not in adapters.VERIFIED_KINDS
