@@ -1,5 +1,5 @@
 """The camera model's tests (pipeline._saved_variances: the radial term with K unknown, the shared
-principal point, the per-view principal points, and the K-known radial term) read what freeing
+principal point, the per-view principal points and focal lengths, and the K-known radial term) read what freeing
 parameters saves in noise variances, the noise variance the free fit's cost over its residual
 degrees of freedom: 2 per observation less every parameter it spends (6 per pose, 3 per point,
 less the similarity's 7, and its intrinsics). On a synthetic scene of short tracks (2 to 3 views
@@ -133,6 +133,25 @@ def test_the_known_K_radial_test_reads_the_noise_variance(seed):
     common = held_keep & free_keep
     assert figures["residual_dof"] == _dof(obs, common, 1)
     _check(figures["chi2"], held, free, obs, common, intrinsics=1)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_the_per_view_focal_test_reads_the_noise_variance(monkeypatch, seed):
+    """View 3 seen with a focal length 10% longer than the others' (its pixels scaled about the
+    principal point): the screen sets it apart and the fit giving it its own focal length is tested
+    against the per-view principal points' fit."""
+    scene, _, metric = _scene(seed)
+    centre = scene.K[:2, 2]
+    tracks = [(views, np.where((np.asarray(views) == 3)[:, None], centre + 1.10 * (pixels - centre), pixels))
+              for views, pixels in scene.tracks]
+    obs = Observations.from_tracks(tracks, 10)
+    held, held_keep, _ = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, THRESHOLD, model="principal_per_view")
+    fits = _recording(monkeypatch)
+    _, _, figures = pipeline._focals_per_view(held, obs, held_keep, THRESHOLD)
+    assert figures["views"] == [3] and figures["parameters_added"] == 1
+    model, free, free_keep = fits[-1]
+    assert model == "focal_groups"
+    _check(figures["chi2"], held, free, obs, held_keep & free_keep, intrinsics=1 + 1 + 2 * 10)
 
 
 def test_no_residual_degrees_of_freedom_make_no_test():
