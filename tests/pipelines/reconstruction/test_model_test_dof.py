@@ -1,13 +1,13 @@
 """The camera model's tests (pipeline._saved_variances: the radial term with K unknown, the shared
-principal point, the per-view principal points and focal lengths, and the K-known radial term) read what freeing
-parameters saves in noise variances, the noise variance the free fit's cost over its residual
-degrees of freedom: 2 per observation less every parameter it spends (6 per pose, 3 per point,
-less the similarity's 7, and its intrinsics). On a synthetic scene of short tracks (2 to 3 views
-each, as a sparse ring's) with Gaussian noise of known sigma, the variance each test implies
-((held cost - free cost) / chi2) is the noise's, and the chi2 is the one computed here by hand
-from the two fits. Over 2 per observation alone (the poses and points not counted, as main's
-radial, principal point and per-view tests divided) that variance is about half the noise's and
-every statistic about twice too large."""
+principal point, the per-view principal points and focal lengths, and the K-known radial term)
+read what freeing parameters saves in noise variances, the noise variance the free fit's cost
+over its residual degrees of freedom: 2 per observation less every parameter it spends (6 per
+pose, 3 per point, less the similarity's 7, and its intrinsics). On a synthetic scene of short
+tracks (2 to 3 views each, as a sparse ring's) with Gaussian noise of known sigma, the variance
+each test implies ((held cost - free cost) / chi2) is the noise's, and the chi2 is the one
+computed here by hand from the two fits. Over 2 per observation less the parameters added (the
+poses and points not counted, as main's radial, principal point and per-view tests divided) that
+variance is about half the noise's and every statistic about twice too large."""
 
 from __future__ import annotations
 
