@@ -452,12 +452,12 @@ def _radial_test(metric: upgrade.Metric, obs: Observations, options: Reconstruct
         trial, trial_keep, _ = upgrade.adjust(replace(metric, k1=0.0), obs.view, obs.track, obs.pixel,
                                               options.threshold_px, model=rival)
         common = with_keep & trial_keep
-        n = int(common.sum())
-        if n < 20:
+        # the free fit's intrinsics: f and k1 (bundle model "radial")
+        statistic, _ = _saved_variances(trial, metric, obs, common, 2)
+        if np.isnan(statistic):
             trial, _, _ = upgrade.adjust(replace(metric, k1=0.0), obs.view, obs.track, obs.pixel,
                                          options.threshold_px, model="simple")
             return trial, {**radial, "reason": "too few observations to test"}
-        statistic = _saved_variances(trial, metric, obs, common, 2 * n - 2)
         radial.update(chi2=float(statistic), threshold=RADIAL_CHI2, k1_tested=metric.k1, against=rival)
         if not statistic > RADIAL_CHI2:
             if rival != "simple":
@@ -493,16 +493,11 @@ def _fixed_radial_test(metric: upgrade.Metric, obs: Observations, keep: np.ndarr
     figures["k1_tested"] = float(trial.k1)
     common = keep & trial_keep
     n = int(common.sum())
-    # The noise variance from the fit with the term, over its residual degrees of freedom: 2 per
-    # observation less the poses', points' and term's parameters the fit spent on them (less the
-    # 7 of the similarity the cameras and points are fixed up to). Over 2 n alone the variance of
-    # templeSparseRing's 7,304 observations (5,779 degrees of freedom) is 0.4 times theirs, and
-    # its 1 px term (at the image's corner) passed the test (chi2 11.1), which it fails with them
-    # (4.4), its cameras then as they were (16 of 16 certified, not 15).
-    dof = 2 * n - (6 * len(np.unique(obs.view[common])) + 3 * len(np.unique(obs.track[common])) - 7) - 1
-    if n >= 20 and dof >= 1:
-        figures.update(chi2=_saved_variances(metric, trial, obs, common, dof), threshold=RADIAL_CHI2, observations=n,
-                       residual_dof=int(dof))
+    # the free fit's intrinsics: k1 alone (K held; templeSparseRing's 1 px term, 16 of 16 cameras
+    # certified without it and 15 with it, fails with its residual degrees of freedom counted)
+    statistic, dof = _saved_variances(metric, trial, obs, common, 1)
+    if not np.isnan(statistic):
+        figures.update(chi2=statistic, threshold=RADIAL_CHI2, observations=n, residual_dof=int(dof))
     elif options.radial_distortion == "auto":
         return metric, keep, {**figures, "reason": "too few observations to test"}
     if options.radial_distortion == "on" or figures["chi2"] > RADIAL_CHI2:
@@ -535,17 +530,36 @@ def _kept(metric: upgrade.Metric, obs: Observations, threshold_px: float) -> np.
     return keep
 
 
-def _saved_variances(held: upgrade.Metric, free: upgrade.Metric, obs: Observations, common: np.ndarray,
-                     dof: int) -> float:
-    """What freeing parameters saves, in noise variances: the cost of the fit holding them less that
-    of the fit freeing them, on the observations both keep, over the noise variance (the free
-    fit's cost over ``dof``; at least 1e-4 px^2, since residuals below 0.01 px are rounding, not
-    noise), read against a chi-square by each model test. ``dof``: each test's own count (the
-    K-known radial test's is the residuals' degrees of freedom, poses and points counted; the
-    others' two per observation less the parameters added)."""
+MIN_TEST_OBSERVATIONS = 20  # a model test on fewer observations (both fits keep) is not made
+
+
+def _residual_dof(obs: Observations, common: np.ndarray, intrinsics: int) -> int:
+    """The residual degrees of freedom of a fit on the observations ``common``: 2 per observation
+    less every parameter the fit spends on them: 6 per view's pose and 3 per point they see (less
+    the 7 of the similarity cameras and points are fixed up to) and the fit's ``intrinsics``."""
     n = int(common.sum())
+    views, points = len(np.unique(obs.view[common])), len(np.unique(obs.track[common]))
+    return 2 * n - (6 * views + 3 * points - 7) - int(intrinsics)
+
+
+def _saved_variances(held: upgrade.Metric, free: upgrade.Metric, obs: Observations, common: np.ndarray,
+                     intrinsics: int) -> tuple[float, int]:
+    """What freeing parameters saves, in noise variances, for every model test (read against the
+    chi-square quantile for the parameters freed): the cost of the fit holding them less that of
+    the fit freeing them, on the observations both keep, over the noise variance: the free fit's
+    cost over its residual degrees of freedom (_residual_dof, ``intrinsics`` the free fit's
+    calibration parameters), at least 1e-4 px^2 (residuals below 0.01 px are rounding, not
+    noise). Over 2 per observation alone (the poses and points not counted) the variance of
+    tracks seen in 2 to 3 views is 0.4 to 0.6 times the noise's and the statistic as much too
+    large: templeSparseRing's K-known radial term (1 px at the image's corner) passed at 11.1
+    against 10.8 and fails at 4.4. Returns the statistic (NaN, too few observations to test, below
+    MIN_TEST_OBSERVATIONS or without residual degrees of freedom) and the degrees of freedom."""
+    n = int(common.sum())
+    dof = _residual_dof(obs, common, intrinsics)
+    if n < MIN_TEST_OBSERVATIONS or dof < 1:
+        return float("nan"), dof
     held_cost, free_cost = _rms(held, obs, common) ** 2 * n, _rms(free, obs, common) ** 2 * n
-    return float((held_cost - free_cost) / max(free_cost / max(dof, 1), 1e-4))
+    return float((held_cost - free_cost) / max(free_cost / dof, 1e-4)), dof
 
 
 def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold_px: float, image_size,
@@ -567,9 +581,9 @@ def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray
     common = keep & trial_keep
     n = int(common.sum())
     figures = {"estimated": False, "observations": n, "K_free": trial.K.tolist()}
-    if n < 20:
+    statistic, _ = _saved_variances(metric, trial, obs, common, 3)  # the free fit's f and principal point
+    if np.isnan(statistic):
         return metric, keep, {**figures, "reason": "too few observations to test"}
-    statistic = _saved_variances(metric, trial, obs, common, 2 * n - 3)
     u, v = trial.K[0, 2], trial.K[1, 2]
     inside = abs(u - image_size[0] / 2) <= image_size[0] / 4 and abs(v - image_size[1] / 2) <= image_size[1] / 4
     figures.update(chi2=float(statistic), threshold=PRINCIPAL_POINT_CHI2, inside_middle_half=bool(inside))
@@ -606,9 +620,12 @@ def _principal_points_per_view(metric: upgrade.Metric, obs: Observations, keep: 
     centre = np.array([image_size[0] / 2, image_size[1] / 2])
     added = 2 * (len(views) - 1) + (2 if np.allclose(metric.K[:2, 2], centre) else 0)
     figures = {"estimated": False, "observations": n, "parameters_added": added}
-    if n < 20 or len(views) < 2 or trial.Ks is None:
+    if n < MIN_TEST_OBSERVATIONS or len(views) < 2 or trial.Ks is None:
         return metric, keep, {**figures, "reason": "too few observations to test"}
-    statistic = _saved_variances(metric, trial, obs, common, 2 * n - added)
+    # the free fit's intrinsics: the focal length and each view's principal point
+    statistic, _ = _saved_variances(metric, trial, obs, common, 1 + 2 * len(views))
+    if np.isnan(statistic):
+        return metric, keep, {**figures, "reason": "too few observations to test"}
     threshold = float(chdtri(added, PRINCIPAL_POINT_P))
     sd = _principal_point_sd(trial, obs, trial_keep, views)
     offsets = np.array([trial.Ks[v][:2, 2] - centre for v in views])
@@ -666,9 +683,11 @@ def _focals_per_view(metric: upgrade.Metric, obs: Observations, keep: np.ndarray
     n = int(common.sum())
     added = len(own)
     figures.update(observations=n, parameters_added=added)
-    if n < 20:
+    # the free fit's intrinsics: a focal length per group (the shared one and each own) and each
+    # view's principal point
+    statistic, _ = _saved_variances(metric, trial, obs, common, 1 + added + 2 * len(views))
+    if np.isnan(statistic):
         return metric, keep, {**figures, "reason": "too few observations to test"}
-    statistic = _saved_variances(metric, trial, obs, common, 2 * n - added)
     threshold = float(chdtri(added, FOCAL_P))
     sd, focal_sd = _intrinsics_sd(trial, obs, trial_keep, views, np.array([groups[v] for v in views]))
     relative = [float(focal_sd[groups[v]] / trial.Ks[v][0, 0]) for v in own]
