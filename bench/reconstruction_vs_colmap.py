@@ -24,13 +24,14 @@ sample data; K only, so its rotations are compared with COLMAP's, marked "vs COL
 motion down a road, kittiStraight and kittiTurn (every 2nd frame of two 51-frame excerpts of the
 KITTI odometry benchmark, Geiger, Lenz and Urtasun, CVPR 2012, CC BY-NC-SA 3.0: K and ground-truth
 poses; the copy in github.com/niconielsen32/VisualSLAM, KITTI_sequence_1 and _2). None ships
-with geocert; a set whose files are missing is reported with where to get it.
+with geocert; a set whose files are missing is reported with where to get it, or fetched first with
+--fetch (bench/fetch_photo_sets.py: every set but dinoSparseRing and the Corridor).
 
     .venv/bin/pip install -e '.[bench]'       # pycolmap
     .venv/bin/python -m bench.reconstruction_vs_colmap [--data DIR] [--sets dinoSparseRing,templeRing]
         [--orders file,shuffled,every2] [--seed 0] [--runs colmap,colmap-K,geocert,geocert-readme,
         geocert-K,geocert-K-readme; colmap-pinhole on request]
-        [--no-colmap | --reuse-colmap] [--timeout 1800] [--json OUT.json] [--verify]
+        [--no-colmap | --reuse-colmap] [--timeout 1800] [--json OUT.json] [--verify] [--fetch]
 
 COLMAP's results are stored in DATA/colmap_cache.json (keyed by set, the photos in their order
 and a hash of their bytes, pycolmap's version and options): --reuse-colmap takes them from there
@@ -54,7 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from bench import colmap_baseline, machine_speed_ms
-from testing import camera_errors, photo_sets
+from testing import camera_errors, fetch_photo_sets, photo_sets
 from testing.third_party import verify_result
 
 # The ring options for the dinoSparseRing (docs/benchmarks.md, "Photos to tracks, and the K-known path"),
@@ -270,8 +271,15 @@ def bench_set(set_key: str, args, root: Path, records: list) -> None:
     try:
         photo_set = photo_sets.load("corridor" if matches else set_key, root)
     except photo_sets.MissingSet as missing:
-        print(f"| {set_key} | | missing: {missing} |" + " |" * 13, flush=True)
-        return
+        if not (args.fetch and set_key in fetch_photo_sets.SETS):
+            print(f"| {set_key} | | missing: {missing} |" + " |" * 13, flush=True)
+            return
+        try:
+            fetch_photo_sets.fetch(set_key, root)
+        except fetch_photo_sets.FetchError as error:
+            print(f"| {set_key} | | missing, not fetched: {error} |" + " |" * 13, flush=True)
+            return
+        photo_set = photo_sets.load(set_key, root)
     orders = [o for o in args.orders if o != "every2" or photo_set.dense_ring]
     for order in orders:
         names = photo_set.order(order, args.seed)
@@ -335,6 +343,8 @@ def main() -> None:
                         "each result with `geocert verify` (a child process), printed in the claims column")
     parser.add_argument("--results", default=None, help="a folder to write each geocert run's result to "
                         "(<set>-<order>-<run>.json), for bench.camera_certification to read")
+    parser.add_argument("--fetch", action="store_true", help="fetch a missing set first (bench.fetch_photo_sets: "
+                        "the public copy, checked against testing/photo_sets_manifest.json)")
     args = parser.parse_args()
     args.orders, args.runs = args.orders.split(","), args.runs.split(",")
     root = photo_sets.data_root(args.data)

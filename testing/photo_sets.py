@@ -5,7 +5,8 @@ Each set lives in its own folder under a data root (``--data`` of the benches, e
 ``GEOCERT_BENCH_DATA`` environment variable, else bench-data beside the checkout); the photos are used as
 published, never downscaled. None of them ships with geocert: :func:`load` raises
 :class:`MissingSet` naming the folder and where the files come from, and a test that needs one
-skips with that message (``pytest.skip(str(error))``).
+skips with that message (``pytest.skip(str(error))``). All but dinoSparseRing and the Corridor are
+fetched, each file checked, by ``python -m bench.fetch_photo_sets`` (testing/fetch_photo_sets.py).
 
 Sets, their owners (credit them when you use them) and what a test can do with each:
 
@@ -115,7 +116,11 @@ class PhotoSet:
 
 class MissingSet(FileNotFoundError):
     def __init__(self, key: str, path: Path, source: str):
-        super().__init__(f"photo set {key!r} not found at {path}: get it from {source} (see testing/photo_sets.py)")
+        from testing.fetch_photo_sets import SETS as FETCHABLE
+
+        fetch = f", or `python -m bench.fetch_photo_sets --sets {key}`" if key in FETCHABLE else ""
+        super().__init__(f"photo set {key!r} not found at {path}: get it from {source}{fetch} "
+                         "(see testing/photo_sets.py)")
         self.key, self.path, self.source = key, path, source
 
 
