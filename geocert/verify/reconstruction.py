@@ -657,6 +657,15 @@ def _check_unstated_calibration(result: dict, registered: list[dict], summary: d
     if summary.get("autocalibration_certified") or summary.get("autocalibration_determined"):
         raise Invalid("returned", "summary: autocalibration_certified or autocalibration_determined is claimed "
                                   "with no summary/calibration to say which K it is about")
+    # The returned_K_not_certified warning states summary/calibration/difference's figures
+    # (_check_moved_warning); the pipeline has written it only beside summary/calibration (the two
+    # came in together). Without it, the warning's words were unchecked: the stored reconstruction
+    # with summary/calibration removed verified saying "focal +0.00%", "the returned K is the
+    # certified one", "+25.00%", or twice (review 25).
+    if any(isinstance(w, dict) and w.get("code") == "returned_K_not_certified" for w in summary.get("warnings") or []):
+        raise Invalid("returned", "summary: a returned_K_not_certified warning states how far the returned K moved "
+                                  "as summary/calibration/difference gives it, and this summary states no "
+                                  "summary/calibration")
     stage = _stage(result, "autocalibration")
     cert = None
     if result.get("calibration_certificate") is not None or (stage.get("certified") is True
