@@ -587,7 +587,8 @@ def _check_moved_warning(summary: dict, due: bool, difference: dict | None) -> N
     (claims.calibration_claim). Unchecked, the warning's words were the document's: on the
     stored reconstruction it verified saying "focal +0.00%, principal point 0.0 px" (the
     cameras' K 0.05% and 0.7 px from the certified one), saying the returned K is the certified
-    one, or twice."""
+    one, or twice; and holding the figures, it said anything else beside them (review 25). Its
+    words are now one of the forms the pipeline writes (calibration_claim.moved_warning)."""
     warned = [w for w in summary.get("warnings") or [] if isinstance(w, dict)
               and w.get("code") == "returned_K_not_certified"]
     if not warned:
@@ -596,12 +597,19 @@ def _check_moved_warning(summary: dict, due: bool, difference: dict | None) -> N
         raise Invalid("returned", "summary: a returned_K_not_certified warning is given "
                                   + ("twice" if due and difference is not None else
                                      "though the returned K is the certified one (or none is certified)"))
-    said = (f"focal {difference['focal_percent']:+.2f}%, principal point {difference['principal_point_px']:.1f} "
-            "px")
+    said = calibration_claim.moved_figures(difference)
     if said not in str(warned[0].get("detail")):
         raise Invalid("returned", f"summary: the returned_K_not_certified warning must state how far the returned K "
                                   f"moved from the certified one, as summary/calibration/difference gives it "
                                   f"({said!r})")
+    # Its words are one of the forms the pipeline writes (claims.calibration_claim, every version):
+    # holding the figures was not enough, the rest was the document's (review 25: "...; the
+    # returned K is nonetheless the certified one", or other figures beside them, verified).
+    if not any(warned[0]["detail"] == calibration_claim.moved_warning(adjusted, which, difference)
+               for adjusted in calibration_claim.MOVED_BY for which in calibration_claim.MOVED_WHICH):
+        raise Invalid("returned", "summary: the returned_K_not_certified warning's words are not the pipeline's (it "
+                                  f"says how far the returned K moved, {said!r}, which cameras use which K, and "
+                                  "nothing else)")
 
 
 def _stage(result: dict, name: str) -> dict:

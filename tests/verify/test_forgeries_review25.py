@@ -3,7 +3,7 @@
 reconstruction checks (the calibration tie's other tracks, the returned_K_not_certified warning's
 figures).
 
-Found (verified on main, the test below failing there):
+Found (verified on main, the tests below failing there):
 
 - The returned_K_not_certified warning's figures are checked only beside summary/calibration
   (_check_moved_warning). A result without summary/calibration is read as one from before it was
@@ -13,6 +13,11 @@ Found (verified on main, the test below failing there):
   "+25.00%, 300.0 px", "the returned K is the certified one", or given twice. The pipeline has
   written the warning only beside summary/calibration (both came in one commit), so a summary
   without it carrying the warning is now refused.
+- Beside summary/calibration, the warning had only to hold its figures: saying anything else
+  beside them verified ("...; the returned K is nonetheless the certified one", other figures
+  appended or inserted, the figures in a sentence saying the K is the certified one). Its words
+  are now one of the pipeline's forms, written by one function both read
+  (calibration_claim.moved_warning).
 
 Tried and not passing (guards below):
 
@@ -76,6 +81,39 @@ def test_the_returned_K_warning_without_summary_calibration_is_refused(edit):
     report = verify_any(json.loads(json.dumps(result)))
     assert not report.valid
     assert "returned_K_not_certified" in report.first_failure["detail"], report.first_failure
+
+
+WORDS_EDITS = {
+    "other figures appended": lambda d: d + " (in all: focal +30.00%, principal point 250.0 px)",
+    "a denial appended": lambda d: d + "; the returned K is nonetheless the certified one",
+    "the figures in another sentence": lambda d: "the returned K is the certified one; focal +0.05%, principal point 0.7 px",
+    "other figures beside them": lambda d: d.replace("0.7 px)", "0.7 px, then focal -12.00%, principal point 90.0 px)"),
+}
+
+
+@pytest.mark.parametrize("edit", list(WORDS_EDITS))
+def test_the_returned_K_warning_says_nothing_beside_its_figures(edit):
+    """Found: the stored reconstruction's warning holding its figures (focal +0.05%, principal
+    point 0.7 px) and saying something else beside them: verified on main (review 24 asked only
+    that the figures be in its words)."""
+    result = stored("reconstruction")
+    warning = _warning(result)
+    warning["detail"] = WORDS_EDITS[edit](warning["detail"])
+    assert "focal +0.05%, principal point 0.7 px" in warning["detail"]
+    report = verify_any(json.loads(json.dumps(result)))
+    assert not report.valid
+    assert "returned_K_not_certified" in report.first_failure["detail"], report.first_failure
+
+
+def test_every_form_of_the_returned_K_warning_is_the_pipelines():
+    """The forms the verifier accepts are the pipeline's, written through the same function, for
+    each of the three which-K cases and both causes."""
+    from geocert.solvers.reconstruction import calibration_claim
+
+    moved = {"focal_percent": 0.054, "principal_point_px": 0.707}
+    forms = {calibration_claim.moved_warning(adjusted, which, moved)
+             for adjusted in (True, False) for which in ("shared", "varying", "per_view")}
+    assert len(forms) == 6 and all("(focal +0.05%, principal point 0.7 px)" in form for form in forms)
 
 
 # --- tried, not passing: guards (each passing on main too) ----------------------------------------

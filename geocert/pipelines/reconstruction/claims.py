@@ -12,7 +12,8 @@ import numpy as np
 
 from geocert.solvers.reconstruction import depth_reversal, motion_claim
 from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
-from geocert.solvers.reconstruction.calibration_claim import difference as k_difference, on_range_edge, same
+from geocert.solvers.reconstruction.calibration_claim import (difference as k_difference, moved_warning,
+                                                              on_range_edge, same)
 
 
 
@@ -307,15 +308,8 @@ def calibration_claim(out) -> CalibrationClaim:
         difference = k_difference(K, cert)
         if not same_K:
             per_view = varying and len({tuple(np.round(k[:2, 2], 9)) for k in out.metric.Ks if k is not None}) > 1
-            which = ("each camera has its own principal point (principal_point \"per_view\"), calibration.K the "
-                     "middle one's" if per_view else
-                     "each camera has its own focal length (camera_model \"varying\"), calibration.K the middle one's"
-                     if varying else "the cameras returned use the adjusted K")
-            warnings.append({"code": "returned_K_not_certified", "detail": (
-                f"{'the bundle adjustment' if adjusted else 'the camera model (no adjustment)'} moved K from the "
-                f"certified one (focal {difference['focal_percent']:+.2f}%, "
-                f"principal point {difference['principal_point_px']:.1f} px): {which}; the certificate is about "
-                "calibration.certified_K")})
+            which = "per_view" if per_view else "varying" if varying else "shared"
+            warnings.append({"code": "returned_K_not_certified", "detail": moved_warning(adjusted, which, difference)})
         if stage.get("cameras_built_with_one_K"):
             warnings.append({"code": "certified_K_of_calibrated_cameras", "detail": (
                 "the projective cameras the certified K upgrades are the registration's, built as K [R | t] with "
