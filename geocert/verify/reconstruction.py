@@ -650,6 +650,23 @@ def _require_warnings(result: dict, stage: dict, not_returned: bool, cert: np.nd
                       ("certified_K_of_calibrated_cameras", cert is not None and _built_with_one_K(result, stage))):
         if due and not _warned(result["summary"], code):
             raise Invalid("returned", f"summary: no {code} warning, though the calibration calls for it")
+    # Their words are the pipeline's (calibration_claim), wherever given: unchecked, the stored
+    # reconstruction verified with its critical_motion (or certified_K_of_calibrated_cameras)
+    # warning saying "none: the tracks determine K" (review 25). returned_K_not_certified's are
+    # read by _check_moved_warning.
+    summary = result["summary"]
+    given = stage.get("status") == "skipped" and "K is known" in str(stage.get("reason") or "")  # claims._K_given
+    motions = {str(motion) for motion in (summary.get("critical_motion"), stage.get("critical_motion"), critical)
+               if motion}
+    forms = {"certified_K_on_range_edge": {calibration_claim.edge_warning(edges)} if edges else set(),
+             "critical_motion": {calibration_claim.critical_warning(motion, given) for motion in motions},
+             "certified_K_of_calibrated_cameras": {calibration_claim.CALIBRATED_CAMERAS_WARNING}}
+    for warning in summary.get("warnings") or []:
+        code = warning.get("code") if isinstance(warning, dict) else None
+        if code in forms and warning.get("detail") not in forms[code]:
+            raise Invalid("returned", f"summary: the {code} warning's words are not the pipeline's for this "
+                                      "calibration (" + (" or ".join(repr(f) for f in sorted(forms[code])) or
+                                                         "none is due") + ")")
 
 
 def _check_unstated_calibration(result: dict, registered: list[dict], summary: dict,

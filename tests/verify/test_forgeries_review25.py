@@ -18,6 +18,10 @@ Found (verified on main, the tests below failing there):
   appended or inserted, the figures in a sentence saying the K is the certified one). Its words
   are now one of the pipeline's forms, written by one function both read
   (calibration_claim.moved_warning).
+- The same for the other calibration warnings the verifier asks for: critical_motion and
+  certified_K_of_calibrated_cameras verified saying "none: the tracks determine K and every number
+  here is certified". Their words (and certified_K_on_range_edge's) are now the pipeline's, from
+  calibration_claim (critical_warning, CALIBRATED_CAMERAS_WARNING, edge_warning).
 
 Tried and not passing (guards below):
 
@@ -103,6 +107,23 @@ def test_the_returned_K_warning_says_nothing_beside_its_figures(edit):
     report = verify_any(json.loads(json.dumps(result)))
     assert not report.valid
     assert "returned_K_not_certified" in report.first_failure["detail"], report.first_failure
+
+
+CALIBRATION_WARNINGS = [("reconstruction", "critical_motion"), ("reconstruction_labelled", "critical_motion"),
+                        ("reconstruction_labelled", "certified_K_of_calibrated_cameras")]
+
+
+@pytest.mark.parametrize("name, code", CALIBRATION_WARNINGS)
+def test_the_other_calibration_warnings_say_what_the_pipeline_says(name, code):
+    """Found: the stored reconstructions' critical_motion and certified_K_of_calibrated_cameras
+    warnings saying the opposite of what they warn of: verified on main (the verifier asked only
+    that they be there)."""
+    result = stored(name)
+    warning = next(w for w in result["summary"]["warnings"] if w["code"] == code)
+    warning["detail"] = "none: the tracks determine K and every number here is certified"
+    report = verify_any(json.loads(json.dumps(result)))
+    assert not report.valid
+    assert code in report.first_failure["detail"], report.first_failure
 
 
 def test_every_form_of_the_returned_K_warning_is_the_pipelines():

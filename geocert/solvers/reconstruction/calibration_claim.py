@@ -36,6 +36,24 @@ def moved_warning(adjusted: bool, which: str, moved: dict) -> str:
             "the certificate is about calibration.certified_K")
 
 
+def edge_warning(edges) -> str:
+    """The certified_K_on_range_edge warning's words (``edges``: on_range_edge's names)."""
+    return (f"the certified K's {', '.join(edges)} lies on the edge of its search range: the range, not the tracks, "
+            "stops it there; widen options.intrinsics to let the data decide")
+
+
+def critical_warning(critical: str, known: bool) -> str:
+    """The critical_motion warning's words (``known``: K was given)."""
+    return (f"{critical}: the tracks do not determine a constant K"
+            + ("; K was given, so the reconstruction does not rely on them for it" if known else ""))
+
+
+CALIBRATED_CAMERAS_WARNING = (
+    "the projective cameras the certified K upgrades are the registration's, built as K [R | t] with one K: the "
+    "certificate proves that this K upgrades them optimally, which they already assume, not that the tracks alone "
+    "fix K (calibration.determined says whether the motion does)")
+
+
 def same(a, b) -> bool:
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     return bool(a.shape == b.shape and np.all(np.abs(a - b) <= SAME * max(1.0, float(np.abs(b).max()))))
