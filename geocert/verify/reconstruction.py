@@ -576,40 +576,34 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
         raise Invalid("returned", "summary: autocalibration_certified and autocalibration_determined must be "
                                   "summary/calibration's certified and determined")
     _require_warnings(result, stage, certified and not returned, cert, edges, critical)
-    _check_moved_warning(summary, certified and not returned, expected)
+    _check_moved_warning(summary, certified and not returned, [] if expected is None else [expected])
 
 
-def _check_moved_warning(summary: dict, due: bool, difference: dict | None) -> None:
+def _check_moved_warning(summary: dict, due: bool, differences: list[dict]) -> None:
     """The returned_K_not_certified warning says how far the returned K moved from the certified
-    one, in the figures summary/calibration/difference states (recomputed from the two K above):
-    one such warning, only when the returned K is not the certified one, its focal length's
-    percent and principal point's pixels those of the difference as the pipeline writes them
-    (claims.calibration_claim). Unchecked, the warning's words were the document's: on the
-    stored reconstruction it verified saying "focal +0.00%, principal point 0.0 px" (the
-    cameras' K 0.05% and 0.7 px from the certified one), saying the returned K is the certified
-    one, or twice; and holding the figures, it said anything else beside them (review 25). Its
-    words are now one of the forms the pipeline writes (calibration_claim.moved_warning)."""
+    one, in the figures summary/calibration/difference states (recomputed from the two K above;
+    without summary/calibration, from each registered camera's K, one of which calibration.K
+    would be): one such warning, only when the returned K is not the certified one, in one of the
+    forms the pipeline writes (calibration_claim.moved_warning). Unchecked, the warning's words
+    were the document's: on the stored reconstruction it verified saying "focal +0.00%, principal
+    point 0.0 px" (the cameras' K 0.05% and 0.7 px from the certified one), saying the returned K
+    is the certified one, or twice; holding the figures, it said anything else beside them; and
+    with summary/calibration removed, anything at all (reviews 24 and 25)."""
     warned = [w for w in summary.get("warnings") or [] if isinstance(w, dict)
               and w.get("code") == "returned_K_not_certified"]
     if not warned:
         return  # _require_warnings asks for it where due
-    if not due or difference is None or len(warned) != 1:
+    if not due or not differences or len(warned) != 1:
         raise Invalid("returned", "summary: a returned_K_not_certified warning is given "
-                                  + ("twice" if due and difference is not None else
+                                  + ("twice" if due and differences else
                                      "though the returned K is the certified one (or none is certified)"))
-    said = calibration_claim.moved_figures(difference)
-    if said not in str(warned[0].get("detail")):
+    said = " or ".join(sorted({calibration_claim.moved_figures(moved) for moved in differences}))
+    if not any(warned[0].get("detail") == calibration_claim.moved_warning(adjusted, which, moved)
+               for moved in differences for adjusted in calibration_claim.MOVED_BY
+               for which in calibration_claim.MOVED_WHICH):
         raise Invalid("returned", f"summary: the returned_K_not_certified warning must state how far the returned K "
                                   f"moved from the certified one, as summary/calibration/difference gives it "
-                                  f"({said!r})")
-    # Its words are one of the forms the pipeline writes (claims.calibration_claim, every version):
-    # holding the figures was not enough, the rest was the document's (review 25: "...; the
-    # returned K is nonetheless the certified one", or other figures beside them, verified).
-    if not any(warned[0]["detail"] == calibration_claim.moved_warning(adjusted, which, difference)
-               for adjusted in calibration_claim.MOVED_BY for which in calibration_claim.MOVED_WHICH):
-        raise Invalid("returned", "summary: the returned_K_not_certified warning's words are not the pipeline's (it "
-                                  f"says how far the returned K moved, {said!r}, which cameras use which K, and "
-                                  "nothing else)")
+                                  f"({said!r}), in the pipeline's words and nothing else")
 
 
 def _stage(result: dict, name: str) -> dict:
@@ -682,15 +676,6 @@ def _check_unstated_calibration(result: dict, registered: list[dict], summary: d
     if summary.get("autocalibration_certified") or summary.get("autocalibration_determined"):
         raise Invalid("returned", "summary: autocalibration_certified or autocalibration_determined is claimed "
                                   "with no summary/calibration to say which K it is about")
-    # The returned_K_not_certified warning states summary/calibration/difference's figures
-    # (_check_moved_warning); the pipeline has written it only beside summary/calibration (the two
-    # came in together). Without it, the warning's words were unchecked: the stored reconstruction
-    # with summary/calibration removed verified saying "focal +0.00%", "the returned K is the
-    # certified one", "+25.00%", or twice (review 25).
-    if any(isinstance(w, dict) and w.get("code") == "returned_K_not_certified" for w in summary.get("warnings") or []):
-        raise Invalid("returned", "summary: a returned_K_not_certified warning states how far the returned K moved "
-                                  "as summary/calibration/difference gives it, and this summary states no "
-                                  "summary/calibration")
     stage = _stage(result, "autocalibration")
     cert = None
     if result.get("calibration_certificate") is not None or (stage.get("certified") is True
@@ -705,6 +690,11 @@ def _check_unstated_calibration(result: dict, registered: list[dict], summary: d
     Ks = [numbers(camera["K"], f"cameras/{camera['view']}/K", (3, 3), "returned") for camera in registered]
     not_returned = cert is not None and bool(Ks) and not all(calibration_claim.same(k, cert) for k in Ks)
     _require_warnings(result, stage, not_returned, cert, edges, critical)
+    # the warning's words, as beside summary/calibration, where calibration.K would be one of the
+    # cameras' (unchecked, the stored reconstruction with summary/calibration removed verified
+    # saying "focal +0.00%", "+25.00%", the returned K is the certified one, or twice: review 25)
+    _check_moved_warning(summary, not_returned, [] if cert is None else [calibration_claim.difference(k, cert)
+                                                                          for k in Ks])
 
 
 def _built_with_one_K(result: dict, stage: dict) -> bool:

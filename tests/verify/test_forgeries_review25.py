@@ -10,9 +10,10 @@ Found (verified on main, the tests below failing there):
   stated (_check_unstated_calibration), which asked for the warning but read none of its words:
   the stored reconstruction with summary/calibration removed (autocalibration_certified and
   _determined set false) verified with its warning saying "focal +0.00%, principal point 0.0 px",
-  "+25.00%, 300.0 px", "the returned K is the certified one", or given twice. The pipeline has
-  written the warning only beside summary/calibration (both came in one commit), so a summary
-  without it carrying the warning is now refused.
+  "+25.00%, 300.0 px", "the returned K is the certified one", or given twice. It is now read
+  there as beside summary/calibration, its figures those of a registered camera's K against the
+  stage's certified one (the genuine words without summary/calibration still verify:
+  review 3's TestOldResultAllowances).
 - Beside summary/calibration, the warning had only to hold its figures: saying anything else
   beside them verified ("...; the returned K is nonetheless the certified one", other figures
   appended or inserted, the figures in a sentence saying the K is the certified one). Its words
