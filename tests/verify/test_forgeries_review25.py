@@ -211,3 +211,14 @@ def test_a_stereo_lines_certificate_is_refused_whatever_it_holds():
     report = verify_any(document)
     assert not report.valid and "never certified" in report.first_failure["detail"], report.first_failure
     assert VERIFIED_KINDS["stereo_lines"].certifies is False
+
+
+def test_hook_reads_a_member_declared_without_a_default():
+    """hook() evaluated Verification's default before looking at the adapter: a member declared
+    with no default (domain) raised AttributeError for every adapter, which defines it (fails on
+    main; no check reads domain through hook() yet)."""
+    from geocert.verify.verification import hook
+
+    for kind in VERIFIED_KINDS.values():
+        assert hook(kind.verification, "domain") == kind.verification.domain, kind.name
+
