@@ -23,6 +23,9 @@ Found (verified on main, the tests below failing there):
   certified_K_of_calibrated_cameras verified saying "none: the tracks determine K and every number
   here is certified". Their words (and certified_K_on_range_edge's) are now the pipeline's, from
   calibration_claim (critical_warning, CALIBRATED_CAMERAS_WARNING, edge_warning).
+- Not a forgery: hook() evaluated Verification's default before the adapter's member, so a member
+  declared without a default (domain) raised for every adapter; it now reads the default only
+  when the adapter has none.
 
 Tried and not passing (guards below):
 
