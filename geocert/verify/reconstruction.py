@@ -576,32 +576,34 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
         raise Invalid("returned", "summary: autocalibration_certified and autocalibration_determined must be "
                                   "summary/calibration's certified and determined")
     _require_warnings(result, stage, certified and not returned, cert, edges, critical)
-    _check_moved_warning(summary, certified and not returned, expected)
+    _check_moved_warning(summary, certified and not returned, [] if expected is None else [expected])
 
 
-def _check_moved_warning(summary: dict, due: bool, difference: dict | None) -> None:
+def _check_moved_warning(summary: dict, due: bool, differences: list[dict]) -> None:
     """The returned_K_not_certified warning says how far the returned K moved from the certified
-    one, in the figures summary/calibration/difference states (recomputed from the two K above):
-    one such warning, only when the returned K is not the certified one, its focal length's
-    percent and principal point's pixels those of the difference as the pipeline writes them
-    (claims.calibration_claim). Unchecked, the warning's words were the document's: on the
-    stored reconstruction it verified saying "focal +0.00%, principal point 0.0 px" (the
-    cameras' K 0.05% and 0.7 px from the certified one), saying the returned K is the certified
-    one, or twice."""
+    one, in the figures summary/calibration/difference states (recomputed from the two K above;
+    without summary/calibration, from each registered camera's K, one of which calibration.K
+    would be): one such warning, only when the returned K is not the certified one, in one of the
+    forms the pipeline writes (calibration_claim.moved_warning). Unchecked, the warning's words
+    were the document's: on the stored reconstruction it verified saying "focal +0.00%, principal
+    point 0.0 px" (the cameras' K 0.05% and 0.7 px from the certified one), saying the returned K
+    is the certified one, or twice; holding the figures, it said anything else beside them; and
+    with summary/calibration removed, anything at all (reviews 24 and 25)."""
     warned = [w for w in summary.get("warnings") or [] if isinstance(w, dict)
               and w.get("code") == "returned_K_not_certified"]
     if not warned:
         return  # _require_warnings asks for it where due
-    if not due or difference is None or len(warned) != 1:
+    if not due or not differences or len(warned) != 1:
         raise Invalid("returned", "summary: a returned_K_not_certified warning is given "
-                                  + ("twice" if due and difference is not None else
+                                  + ("twice" if due and differences else
                                      "though the returned K is the certified one (or none is certified)"))
-    said = (f"focal {difference['focal_percent']:+.2f}%, principal point {difference['principal_point_px']:.1f} "
-            "px")
-    if said not in str(warned[0].get("detail")):
+    said = " or ".join(sorted({calibration_claim.moved_figures(moved) for moved in differences}))
+    if not any(warned[0].get("detail") == calibration_claim.moved_warning(adjusted, which, moved)
+               for moved in differences for adjusted in calibration_claim.MOVED_BY
+               for which in calibration_claim.MOVED_WHICH):
         raise Invalid("returned", f"summary: the returned_K_not_certified warning must state how far the returned K "
                                   f"moved from the certified one, as summary/calibration/difference gives it "
-                                  f"({said!r})")
+                                  f"({said!r}), in the pipeline's words and nothing else")
 
 
 def _stage(result: dict, name: str) -> dict:
@@ -642,6 +644,23 @@ def _require_warnings(result: dict, stage: dict, not_returned: bool, cert: np.nd
                       ("certified_K_of_calibrated_cameras", cert is not None and _built_with_one_K(result, stage))):
         if due and not _warned(result["summary"], code):
             raise Invalid("returned", f"summary: no {code} warning, though the calibration calls for it")
+    # Their words are the pipeline's (calibration_claim), wherever given: unchecked, the stored
+    # reconstruction verified with its critical_motion (or certified_K_of_calibrated_cameras)
+    # warning saying "none: the tracks determine K" (review 25). returned_K_not_certified's are
+    # read by _check_moved_warning.
+    summary = result["summary"]
+    given = stage.get("status") == "skipped" and "K is known" in str(stage.get("reason") or "")  # claims._K_given
+    motions = {str(motion) for motion in (summary.get("critical_motion"), stage.get("critical_motion"), critical)
+               if motion}
+    forms = {"certified_K_on_range_edge": {calibration_claim.edge_warning(edges)} if edges else set(),
+             "critical_motion": {calibration_claim.critical_warning(motion, given) for motion in motions},
+             "certified_K_of_calibrated_cameras": {calibration_claim.CALIBRATED_CAMERAS_WARNING}}
+    for warning in summary.get("warnings") or []:
+        code = warning.get("code") if isinstance(warning, dict) else None
+        if code in forms and warning.get("detail") not in forms[code]:
+            raise Invalid("returned", f"summary: the {code} warning's words are not the pipeline's for this "
+                                      "calibration (" + (" or ".join(repr(f) for f in sorted(forms[code])) or
+                                                         "none is due") + ")")
 
 
 def _check_unstated_calibration(result: dict, registered: list[dict], summary: dict,
@@ -671,6 +690,11 @@ def _check_unstated_calibration(result: dict, registered: list[dict], summary: d
     Ks = [numbers(camera["K"], f"cameras/{camera['view']}/K", (3, 3), "returned") for camera in registered]
     not_returned = cert is not None and bool(Ks) and not all(calibration_claim.same(k, cert) for k in Ks)
     _require_warnings(result, stage, not_returned, cert, edges, critical)
+    # the warning's words, as beside summary/calibration, where calibration.K would be one of the
+    # cameras' (unchecked, the stored reconstruction with summary/calibration removed verified
+    # saying "focal +0.00%", "+25.00%", the returned K is the certified one, or twice: review 25)
+    _check_moved_warning(summary, not_returned, [] if cert is None else [calibration_claim.difference(k, cert)
+                                                                          for k in Ks])
 
 
 def _built_with_one_K(result: dict, stage: dict) -> bool:

@@ -113,5 +113,6 @@ class Verification(abc.ABC):
 
 
 def hook(adapter: Any, name: str) -> Any:
-    """An adapter's hook, or Verification's default for it."""
-    return getattr(adapter, name, getattr(Verification, name))
+    """An adapter's hook, or Verification's default for it (read only when the adapter has none:
+    a member declared without a default, such as ``domain``, is the adapter's own)."""
+    return getattr(adapter, name) if hasattr(adapter, name) else getattr(Verification, name)

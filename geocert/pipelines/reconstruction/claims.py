@@ -12,7 +12,9 @@ import numpy as np
 
 from geocert.solvers.reconstruction import depth_reversal, motion_claim
 from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
-from geocert.solvers.reconstruction.calibration_claim import difference as k_difference, on_range_edge, same
+from geocert.solvers.reconstruction.calibration_claim import (CALIBRATED_CAMERAS_WARNING, critical_warning,
+                                                              difference as k_difference, edge_warning,
+                                                              moved_warning, on_range_edge, same)
 
 
 
@@ -307,29 +309,16 @@ def calibration_claim(out) -> CalibrationClaim:
         difference = k_difference(K, cert)
         if not same_K:
             per_view = varying and len({tuple(np.round(k[:2, 2], 9)) for k in out.metric.Ks if k is not None}) > 1
-            which = ("each camera has its own principal point (principal_point \"per_view\"), calibration.K the "
-                     "middle one's" if per_view else
-                     "each camera has its own focal length (camera_model \"varying\"), calibration.K the middle one's"
-                     if varying else "the cameras returned use the adjusted K")
-            warnings.append({"code": "returned_K_not_certified", "detail": (
-                f"{'the bundle adjustment' if adjusted else 'the camera model (no adjustment)'} moved K from the "
-                f"certified one (focal {difference['focal_percent']:+.2f}%, "
-                f"principal point {difference['principal_point_px']:.1f} px): {which}; the certificate is about "
-                "calibration.certified_K")})
+            which = "per_view" if per_view else "varying" if varying else "shared"
+            warnings.append({"code": "returned_K_not_certified", "detail": moved_warning(adjusted, which, difference)})
         if stage.get("cameras_built_with_one_K"):
-            warnings.append({"code": "certified_K_of_calibrated_cameras", "detail": (
-                "the projective cameras the certified K upgrades are the registration's, built as K [R | t] with "
-                "one K: the certificate proves that this K upgrades them optimally, which they already assume, "
-                "not that the tracks alone fix K (calibration.determined says whether the motion does)")})
+            warnings.append({"code": "certified_K_of_calibrated_cameras", "detail": CALIBRATED_CAMERAS_WARNING})
         edges = on_range_edge(cert, stage.get("intrinsics") or {})
         if edges:
-            warnings.append({"code": "certified_K_on_range_edge", "detail": (
-                f"the certified K's {', '.join(edges)} lies on the edge of its search range: the range, not the "
-                "tracks, stops it there; widen options.intrinsics to let the data decide")})
+            warnings.append({"code": "certified_K_on_range_edge", "detail": edge_warning(edges)})
     critical = stage.get("critical_motion")
     if critical:
-        warnings.append({"code": "critical_motion", "detail": f"{critical}: the tracks do not determine a constant K"
-                         + ("; K was given, so the reconstruction does not rely on them for it" if known else "")})
+        warnings.append({"code": "critical_motion", "detail": critical_warning(critical, known)})
     determined = None if known or K is None else bool(certified and not critical and not edges
                                                       and stage.get("determined") is True)
     source = ("none" if K is None else "given" if known else "autocalibration" if same_K

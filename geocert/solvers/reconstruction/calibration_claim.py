@@ -15,6 +15,45 @@ SAME = 1e-9  # relative to K's largest entry: the same K up to rounding and JSON
 BUILT_WITH_ONE_K = 1e-6
 
 
+# The returned_K_not_certified warning (every form the pipeline has written): what moved K, how far
+# (difference's focal percent and principal point pixels), and which K the cameras use.
+MOVED_BY = {True: "the bundle adjustment", False: "the camera model (no adjustment)"}
+MOVED_WHICH = {"shared": "the cameras returned use the adjusted K",
+               "varying": "each camera has its own focal length (camera_model \"varying\"), calibration.K the middle "
+                          "one's",
+               "per_view": "each camera has its own principal point (principal_point \"per_view\"), calibration.K "
+                           "the middle one's"}
+
+
+def moved_figures(moved: dict) -> str:
+    """How far K moved (``difference``'s dict), as the warning states it."""
+    return f"focal {moved['focal_percent']:+.2f}%, principal point {moved['principal_point_px']:.1f} px"
+
+
+def moved_warning(adjusted: bool, which: str, moved: dict) -> str:
+    """The returned_K_not_certified warning's words (``which`` a key of MOVED_WHICH)."""
+    return (f"{MOVED_BY[adjusted]} moved K from the certified one ({moved_figures(moved)}): {MOVED_WHICH[which]}; "
+            "the certificate is about calibration.certified_K")
+
+
+def edge_warning(edges) -> str:
+    """The certified_K_on_range_edge warning's words (``edges``: on_range_edge's names)."""
+    return (f"the certified K's {', '.join(edges)} lies on the edge of its search range: the range, not the tracks, "
+            "stops it there; widen options.intrinsics to let the data decide")
+
+
+def critical_warning(critical: str, known: bool) -> str:
+    """The critical_motion warning's words (``known``: K was given)."""
+    return (f"{critical}: the tracks do not determine a constant K"
+            + ("; K was given, so the reconstruction does not rely on them for it" if known else ""))
+
+
+CALIBRATED_CAMERAS_WARNING = (
+    "the projective cameras the certified K upgrades are the registration's, built as K [R | t] with one K: the "
+    "certificate proves that this K upgrades them optimally, which they already assume, not that the tracks alone "
+    "fix K (calibration.determined says whether the motion does)")
+
+
 def same(a, b) -> bool:
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     return bool(a.shape == b.shape and np.all(np.abs(a - b) <= SAME * max(1.0, float(np.abs(b).max()))))
