@@ -649,7 +649,7 @@ def _require_warnings(result: dict, stage: dict, not_returned: bool, cert: np.nd
     # warning saying "none: the tracks determine K" (review 25). returned_K_not_certified's are
     # read by _check_moved_warning.
     summary = result["summary"]
-    given = stage.get("status") == "skipped" and "K is known" in str(stage.get("reason") or "")  # claims._K_given
+    given = calibration_claim.K_given(stage)
     motions = {str(motion) for motion in (summary.get("critical_motion"), stage.get("critical_motion"), critical)
                if motion}
     forms = {"certified_K_on_range_edge": {calibration_claim.edge_warning(edges)} if edges else set(),

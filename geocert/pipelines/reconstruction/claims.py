@@ -12,7 +12,7 @@ import numpy as np
 
 from geocert.solvers.reconstruction import depth_reversal, motion_claim
 from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
-from geocert.solvers.reconstruction.calibration_claim import (CALIBRATED_CAMERAS_WARNING, critical_warning,
+from geocert.solvers.reconstruction.calibration_claim import (CALIBRATED_CAMERAS_WARNING, K_given, critical_warning,
                                                               difference as k_difference, edge_warning,
                                                               moved_warning, on_range_edge, same)
 
@@ -148,7 +148,7 @@ def judge_motion(out) -> None:
     if critical is None:
         return
     detail = next((w["detail"] for w in judged["motion_warnings"] if w["code"] == critical), "")
-    if _K_given(stage):
+    if K_given(stage):
         said = (f"critical motion ({critical}): {detail}. The tracks alone would not determine a constant K "
                 "(Sturm 1997); K was given, so the metric reconstruction does not depend on them for it")
         stage["reason"] = said if not stage.get("reason") else f"{stage['reason']}; {said}"
@@ -161,11 +161,6 @@ def judge_motion(out) -> None:
     said = (f"critical motion ({critical}): {detail}. The tracks do not determine a constant K (Sturm 1997): {proved}; "
             "K comes from the bundle adjustment's camera model, not from a certificate")
     stage["reason"] = said if not stage.get("reason") else f"{stage['reason']}; {said}"
-
-
-def _K_given(stage: dict) -> bool:
-    """Whether the autocalibration stage was skipped because K was given."""
-    return stage.get("status") == "skipped" and "K is known" in (stage.get("reason") or "")
 
 
 def _depth_reversal(out, registered: list) -> dict | None:
@@ -299,7 +294,7 @@ def calibration_claim(out) -> CalibrationClaim:
     stage = out.stages[1]
     K = None if out.metric is None or out.metric.K is None else np.asarray(out.metric.K, dtype=float)
     varying = out.metric is not None and out.metric.Ks is not None
-    known = _K_given(stage)
+    known = K_given(stage)
     certified = bool(stage.get("certified")) and stage.get("K") is not None and K is not None
     cert = np.asarray(stage["K"], dtype=float) if certified else None
     warnings, edges, difference, same_K = [], [], None, False

@@ -42,6 +42,12 @@ def edge_warning(edges) -> str:
             "stops it there; widen options.intrinsics to let the data decide")
 
 
+def K_given(stage: dict) -> bool:
+    """Whether the autocalibration stage (its document) was skipped because K was given: the
+    critical_motion warning's ending then says so (read alike by the pipeline and the verifier)."""
+    return stage.get("status") == "skipped" and "K is known" in str(stage.get("reason") or "")
+
+
 def critical_warning(critical: str, known: bool) -> str:
     """The critical_motion warning's words (``known``: K was given)."""
     return (f"{critical}: the tracks do not determine a constant K"
