@@ -325,7 +325,7 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
             # support is not worth a registration on pixels undistorted with it (on every 2nd
             # templeRing photo k1 asked for a second round, and the test rejects the term). The
             # focal length is then the fit's without the term: the term moves it too (on
-            # templeSparseRing f 1549 px became 1591 with k1 -0.46, and 1539 without it), so a
+            # templeSparseRing f 1549 px became 1591 with k1 -0.46, and 1547 without it), so a
             # round is asked for only when that one moved beyond 2%. A term already registered
             # with (Sceaux: the second round's) is refined, not tested again until the end. With
             # views missing the rounds go on as they were: a resumed round, or a new registration
