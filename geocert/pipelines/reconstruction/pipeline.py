@@ -319,25 +319,21 @@ def _incremental(tracks, image_sizes, options: ReconstructionOptions, obs: Obser
         if not (refined > 0 and np.isfinite(refined) and np.isfinite(metric.k1)) or (
                 abs(refined / focal - 1) <= 0.02 and moved <= RADIAL_STEP_PX):
             break
-        if options.radial_distortion == "auto" and k1 == 0.0 and metric.k1 != 0.0 and step["registered"] == seen:
-            # A new k1 asks for another round (this round's pixels were not undistorted), and no
-            # view is left to place: the radial term is tested first, and a term the data do not
-            # support is not worth a registration on pixels undistorted with it (on every 2nd
-            # templeRing photo k1 asked for a second round, and the test rejects the term). The
-            # focal length is then the fit's without the term: the term moves it too (on
-            # templeSparseRing f 1549 px became 1591 with k1 -0.46, and 1547 without it), so a
-            # round is asked for only when that one moved beyond 2%. A term already registered
-            # with (Sceaux: the second round's) is refined, not tested again until the end. With
-            # views missing the rounds go on as they were: a resumed round, or a new registration
-            # after it, may place them (the dinoSparseRing's sixth view).
+        if abs(refined / focal - 1) <= 0.02 and options.radial_distortion == "auto" and k1 == 0.0 \
+                and step["registered"] == seen:
+            # Only a new k1 asks for another round (this round's pixels were not undistorted), and
+            # no view is left to place: the radial term is tested first, and a term the data do
+            # not support is not worth a registration on pixels undistorted with it (on every 2nd
+            # templeRing photo k1 asked for a second round, and the test rejects the term). A
+            # term already registered with (Sceaux: the second round's) is refined, not tested
+            # again until the end. With views missing the rounds go on as they were: a resumed
+            # round, or a new registration after it, may place them (the dinoSparseRing's sixth
+            # view).
             metric, early = _radial_test(metric, obs, options, dict(radial))
             step["radial_tested"] = True
             if not early["estimated"]:
                 radial = early
-                refined = float(metric.K[0, 0])
-                step["refined_focal_px_without_k1"] = refined
-                if not (refined > 0 and np.isfinite(refined)) or abs(refined / focal - 1) <= 0.02:
-                    break
+                break
         focal, k1 = refined, metric.k1
         resume = (metric.rotations, metric.translations)
     # A resumed round keeps the views a wrong prior focal length placed and adds those PnP finds;
