@@ -1,0 +1,163 @@
+"""A task's independent pieces spread over solver processes (workers.pieces), in a real Redis: a
+helper (here a thread running ``help_with``, as the ``solve_pieces`` task does) takes its share,
+the results come back in order and equal to the in-process ones, a helper's error fails the task
+with that error, a cancel stops every piece, a time stop keeps a prefix, a lost piece is computed
+again, and what a helper reads from Redis is data and a registered function, never code."""
+
+from __future__ import annotations
+
+import pickle
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from geocert.jobs.store import JobStore
+from geocert.solvers.core import pieces
+from tests.support import embedded_redis_client
+
+workers_pieces = pytest.importorskip("geocert.workers.pieces", reason="needs the worker's dependencies")
+
+
+@pytest.fixture(scope="module")
+def jobs(tmp_path_factory):
+    for client in embedded_redis_client(tmp_path_factory, decode_responses=True):
+        yield JobStore(client)
+
+
+@pieces.piece
+def slow_square(shared: dict, item: np.ndarray) -> np.ndarray:
+    time.sleep(shared["sleep_s"])
+    return item * item + shared["offset"]
+
+
+def in_process(one, items, stop):
+    return [one(item) for item in items]
+
+
+class Helper:
+    """A helper solver: takes pieces of any set of the job as they appear, until stopped."""
+
+    def __init__(self, jobs: JobStore, job_id: str):
+        self.jobs, self.job_id, self.solved, self.running = jobs, job_id, 0, True
+        self.thread = threading.Thread(target=self._run, name="helper", daemon=True)
+        self.sets: list[str] = []
+
+    def _run(self):
+        while self.running:
+            for key in self.jobs.binary.scan_iter(match=f"geocert:job:{self.job_id}:pieces:*:input"):
+                set_id = key.decode().split(":")[-2]
+                self.solved += workers_pieces.help_with(self.jobs, self.job_id, set_id)
+            time.sleep(0.005)
+
+    def __enter__(self):
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.running = False
+        self.thread.join(timeout=10)
+
+
+ITEMS = [np.array([k, k + 0.5]) for k in range(24)]
+
+
+def spread(jobs, job_id, shared, stop=lambda k: False):
+    spreader = workers_pieces.SpreadOverSolvers(jobs, job_id)
+    with pieces.spread_by(spreader):
+        return pieces.mapped(slow_square, shared, ITEMS, stop, in_process)
+
+
+def test_a_helper_takes_a_share_and_the_results_are_the_in_process_ones_in_order(jobs):
+    shared = {"sleep_s": 0.01, "offset": 3.0}
+    expected = in_process(lambda item: slow_square(shared, item), ITEMS, None)
+    with Helper(jobs, "spread") as helper:
+        found = spread(jobs, "spread", shared)
+    assert len(found) == len(expected)
+    assert all(np.array_equal(a, b) for a, b in zip(found, expected))
+    assert 0 < helper.solved < len(ITEMS)  # both took pieces
+    assert not list(jobs.binary.scan_iter(match="geocert:job:spread:pieces:*:input"))  # dropped after
+
+
+def test_without_a_spreader_the_stage_maps_in_process(jobs):
+    shared = {"sleep_s": 0.0, "offset": 1.0}
+    assert not pieces.spreading()
+    found = pieces.mapped(slow_square, shared, ITEMS, lambda k: False, in_process)
+    assert all(np.array_equal(a, item * item + 1.0) for a, item in zip(found, ITEMS))
+
+
+def test_a_piece_failing_in_a_helper_fails_the_task_with_its_error(jobs):
+    shared = {"sleep_s": 0.01, "offset": 0.0}
+    with Helper(jobs, "failing") as helper:
+        original = workers_pieces.help_with
+
+        def failing_first(jobs_, job_id, set_id):  # the helper's first piece raises
+            taken = jobs_.take_piece(job_id, set_id)
+            if taken is None:
+                return 0
+            jobs_.put_piece_result(job_id, set_id, taken[0], error="ValueError: bad item")
+            return 0
+
+        workers_pieces.help_with = failing_first
+        try:
+            with pytest.raises(workers_pieces.PieceFailed, match="ValueError: bad item"):
+                spread(jobs, "failing", shared)
+        finally:
+            workers_pieces.help_with = original
+        assert helper.solved == 0
+
+
+def test_a_cancel_stops_the_pieces_and_the_helpers_take_no_more(jobs):
+    shared = {"sleep_s": 0.02, "offset": 0.0}
+    with Helper(jobs, "cancelled") as helper:
+        assert spread(jobs, "cancelled", shared, stop=lambda k: None if k >= 4 else False) is None
+        time.sleep(0.3)  # the piece the helper had in hand ends
+        solved = helper.solved
+        time.sleep(0.2)
+        assert helper.solved == solved  # nothing taken after the cancel
+    assert 4 + solved < len(ITEMS) / 2
+
+
+def test_a_time_stop_keeps_a_prefix_of_the_pieces(jobs):
+    shared = {"sleep_s": 0.01, "offset": 2.0}
+    with Helper(jobs, "timed"):
+        found = spread(jobs, "timed", shared, stop=lambda k: k >= 6)
+    assert 6 <= len(found) < len(ITEMS)
+    assert all(np.array_equal(a, item * item + 2.0) for a, item in zip(found, ITEMS))
+
+
+def test_a_piece_its_helper_never_returns_is_computed_by_the_task(jobs, monkeypatch):
+    monkeypatch.setattr(workers_pieces, "LOST_AFTER_S", 0.2)
+    shared = {"sleep_s": 0.0, "offset": 5.0}
+    lost = []
+
+    def lose_one(stop):  # a helper that takes piece 0 and dies
+        def stopping(k):
+            if not lost:
+                for key in jobs.binary.scan_iter(match="geocert:job:lost:pieces:*:input"):
+                    lost.append(jobs.take_piece("lost", key.decode().split(":")[-2]))
+            return stop(k)
+        return stopping
+
+    found = spread(jobs, "lost", shared, stop=lose_one(lambda k: False))
+    assert lost and lost[0][0] == 0
+    assert all(np.array_equal(a, item * item + 5.0) for a, item in zip(found, ITEMS))
+
+
+def test_what_a_helper_reads_is_data_never_code():
+    class Code:
+        def __reduce__(self):
+            import os
+            return (os.system, ("true",))
+
+    with pytest.raises(pickle.UnpicklingError):
+        workers_pieces.decode(pickle.dumps(Code()))
+    from geocert.pipelines.reconstruction.features import FeatureOptions
+
+    options = FeatureOptions(ratio=0.7)
+    data = (np.arange(6.0).reshape(3, 2), [np.zeros((2, 128), np.float32)], options)
+    back = workers_pieces.decode(workers_pieces.encode(data))
+    assert back[2] == options and np.array_equal(back[0], data[0])
+    with pytest.raises(KeyError):
+        pieces.registered("os:system")
