@@ -15,9 +15,8 @@ import pytest
 
 from geocert.jobs.store import JobStore
 from geocert.solvers.core import pieces
+from geocert.workers import pieces as workers_pieces
 from tests.support import embedded_redis_client
-
-workers_pieces = pytest.importorskip("geocert.workers.pieces", reason="needs the worker's dependencies")
 
 
 @pytest.fixture(scope="module")
@@ -161,3 +160,43 @@ def test_what_a_helper_reads_is_data_never_code():
     assert back[2] == options and np.array_equal(back[0], data[0])
     with pytest.raises(KeyError):
         pieces.registered("os:system")
+
+
+FAILING_HELPER = """
+import base64, json, os
+import cv2, numpy as np
+from geocert.jobs.store import JobStore
+from geocert.workers import pieces as workers_pieces, tasks
+
+jobs = JobStore.from_url(os.environ["GEOCERT_REDIS_URL"])
+rng = np.random.default_rng(0)
+images = [{"name": f"p{k}.png", "content": base64.b64encode(cv2.imencode(".png", rng.integers(0, 255, (96, 128),
+           dtype=np.uint8))[1].tobytes()).decode()} for k in range(4)]
+meta = jobs.create("reconstruction", {"kind": "reconstruction", "data": {"images": images}, "options": {}}, 1, 1,
+                   "someone")
+helped = []
+
+def failing_helper(name, args, **options):  # a helper on another solver process whose first piece raises
+    job_id, set_id, _ = args
+    taken = jobs.take_piece(job_id, set_id)
+    if taken is not None:
+        helped.append(taken[0])
+        jobs.put_piece_result(job_id, set_id, taken[0], error="MemoryError: the helper ran out")
+
+JobStore.live_solvers = lambda self: 2  # another solver process is live
+from geocert.workers.celery_app import celery_app
+celery_app.send_task = failing_helper
+tasks._solve_chunk(meta["id"], 0, 1, None)
+ended = jobs.get(meta["id"])
+print(json.dumps({"status": ended["status"], "error": ended.get("error"), "helped": helped}))
+"""
+
+
+def test_a_piece_failing_in_a_helper_fails_the_job_through_the_task_keeping_its_error(tmp_path):
+    from tests.support import run_with_redis
+
+    ended = run_with_redis(tmp_path, FAILING_HELPER)
+    assert ended["helped"], "the helper took no piece"
+    assert ended["status"] == "failed"
+    assert ended["error"]["status"] == 500 and "PieceFailed" in ended["error"]["detail"]
+    assert "MemoryError: the helper ran out" in ended["error"]["detail"]
