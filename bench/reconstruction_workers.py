@@ -67,9 +67,11 @@ def tracks_job(data: Path) -> dict:
 
 @contextlib.contextmanager
 def serve(data_dir: Path, workers: int):
-    from tests.servers import free_port
+    import socket
 
-    port = free_port()
+    with socket.socket() as probe:  # a free port
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
     env = {key: value for key, value in os.environ.items() if key != "GEOCERT_REDIS_URL"}
     env.update(GEOCERT_DATA_DIR=str(data_dir), GEOCERT_LOG_LEVEL="WARNING")
     process = subprocess.Popen([sys.executable, "-m", "geocert.app.cli", "serve", "--port", str(port),
