@@ -7,7 +7,9 @@ Starts two services side by side, ``geocert serve --workers 1 --concurrency 1`` 
 in turn, ``--runs`` times, interleaved (1, 2, 1, 2, ...): the wall time from the submit to the
 job's end, its matches stage (the pieces) and the rest of it, and the CPU the job's own task
 spent in the matches stage (the helpers' share is not in it: under load, where wall times say
-little on a shared 2-core machine, it shows how the work was split). Prints each run, the median
+little on a shared 2-core machine, it shows how the work was split), and in all its stages: the
+1-solver / 2-solver ratio of the task's CPU in all is the speed-up an idle machine would see when
+the helpers keep pace (their own CPU, and Redis's, not counted). Prints each run, the median
 2-solver / 1-solver ratio of the job's wall time and of its matches stage, the share of the
 job's wall time in its spread stage (what bounds the speed-up: the rest runs on one process),
 the pieces each service's helpers solved (geocert_pieces_total), the load average before and
@@ -145,13 +147,15 @@ def main() -> None:
                     wall, result = run(client, job)
                     matches = result["summary"]["time_s"].get("matches", 0.0)
                     task_cpu = result["summary"]["cpu_s"].get("matches", 0.0)
-                    rows[label].append((wall, matches, task_cpu))
+                    job_cpu = sum(result["summary"]["cpu_s"].values())  # the task's own process, every stage
+                    rows[label].append((wall, matches, task_cpu, job_cpu))
                     same = without_times(result) == in_process
                     print(f"  {name}, {label} solver(s): job {wall:.2f} s, matches stage {matches:.2f} s "
-                          f"(the task's own CPU in it {task_cpu:.2f} s), rest {wall - matches:.2f} s, "
+                          f"(the task's own CPU in it {task_cpu:.2f} s), rest {wall - matches:.2f} s, the task's CPU in all "
+                          f"{job_cpu:.2f} s, "
                           f"result equal to in-process: {same}")
             after = {"1": pieces(one), "2": pieces(two)}
-            median = {label: tuple(statistics.median(run[k] for run in r) for k in range(3)) for label, r in rows.items()}
+            median = {label: tuple(statistics.median(run[k] for run in r) for k in range(4)) for label, r in rows.items()}
             helped = {label: after[label].get("helper", 0) - before[label].get("helper", 0) for label in after}
             share = median["1"][1] / median["1"][0] if median["1"][0] else 0.0
             print(f"| {name} | 1 solver: job {median['1'][0]:.2f} s, matches {median['1'][1]:.2f} s | "
@@ -160,7 +164,8 @@ def main() -> None:
                   f"{(median['1'][1] / median['2'][1]) if median['2'][1] else float('nan'):.2f}x | "
                   f"matches' share of the 1-solver job {share:.0%} (bound on the job's speed-up "
                   f"{1 / (1 - share / 2):.2f}x) | the task's CPU in matches: 1 solver {median['1'][2]:.2f} s, "
-                  f"2 solvers {median['2'][2]:.2f} s | pieces by helpers: 1 solver {helped['1']:.0f}, "
+                  f"2 solvers {median['2'][2]:.2f} s | the task's CPU in all: 1 solver {median['1'][3]:.2f} s, "
+                  f"2 solvers {median['2'][3]:.2f} s ({median['1'][3] / median['2'][3]:.2f}x) | pieces by helpers: 1 solver {helped['1']:.0f}, "
                   f"2 solvers {helped['2']:.0f} |")
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
 

@@ -118,6 +118,19 @@ def test_a_cancel_stops_the_pieces_and_the_helpers_take_no_more(jobs):
     assert 4 + solved < len(ITEMS) / 2
 
 
+def test_a_helper_takes_no_piece_of_a_cancelled_job(jobs):
+    """The job's cancel reaches a helper by itself (it asks between pieces), whatever its task does."""
+    shared = {"sleep_s": 0.0, "offset": 0.0}
+    jobs.put_pieces("to-cancel", "set", pieces.name_of(slow_square), workers_pieces.encode(shared),
+                    [workers_pieces.encode(item) for item in ITEMS], 60)
+    assert workers_pieces.help_with(jobs, "to-cancel", "set") == len(ITEMS)  # not cancelled: it takes them all
+    jobs.put_pieces("to-cancel", "again", pieces.name_of(slow_square), workers_pieces.encode(shared),
+                    [workers_pieces.encode(item) for item in ITEMS], 60)
+    jobs.request_cancel("to-cancel")
+    assert workers_pieces.help_with(jobs, "to-cancel", "again") == 0
+    assert jobs.take_piece("to-cancel", "again")[0] == 0  # left untaken
+
+
 def test_a_time_stop_keeps_a_prefix_of_the_pieces(jobs):
     shared = {"sleep_s": 0.01, "offset": 2.0}
     with Helper(jobs, "timed"):
