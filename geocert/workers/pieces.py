@@ -80,23 +80,42 @@ class SpreadOverSolvers:
 
     def __call__(self, function, shared, items, stop):
         jobs, job_id, total = self.jobs, self.job_id, len(items)
+        helpers = min(total - 1, max(0, jobs.live_solvers() - 1))  # one per other live solver process
+        if not helpers:  # no other solver: the pieces here, one at a time, nothing through Redis
+            return self._alone(function, shared, items, stop)
         set_id = uuid.uuid4().hex[:16]
         jobs.put_pieces(job_id, set_id, pieces.name_of(function), encode(shared), [encode(item) for item in items],
                         TTL_S)
         try:
-            helpers = min(total - 1, max(0, jobs.live_solvers() - 1))
-            if helpers:
-                from geocert.workers.celery_app import celery_app  # (needs the broker's address: a worker's)
-
-                for _ in range(helpers):
-                    celery_app.send_task(SOLVE_PIECES, (job_id, set_id, self.request_id), priority=FIRST,
-                                         ignore_result=True)
+            self.queue_helpers(set_id, helpers)
             return self._run(function, shared, items, stop, set_id)
         finally:
             jobs.count_own_pieces(self.solved)
             self.solved = 0
             jobs.stop_pieces(job_id, set_id, total)
             jobs.drop_pieces(job_id, set_id)
+
+    def queue_helpers(self, set_id: str, count: int) -> None:
+        """Queue ``count`` solve_pieces tasks for the set (ahead of the jobs' later tasks)."""
+        from geocert.workers.celery_app import celery_app  # (needs the broker's address: a worker's)
+
+        for _ in range(count):
+            celery_app.send_task(SOLVE_PIECES, (self.job_id, set_id, self.request_id), priority=FIRST,
+                                 ignore_result=True)
+
+    def _alone(self, function, shared, items, stop):
+        results = []
+        try:
+            for k, item in enumerate(items):
+                asked = stop(k)
+                if asked is None:
+                    return None
+                if asked:
+                    break
+                results.append(function(shared, item))
+            return results
+        finally:
+            self.jobs.count_own_pieces(len(results))
 
     def _run(self, function, shared, items, stop, set_id: str):
         jobs, job_id, total = self.jobs, self.job_id, len(items)

@@ -62,8 +62,30 @@ class Helper:
 ITEMS = [np.array([k, k + 0.5]) for k in range(24)]
 
 
+class BesideHelpers(workers_pieces.SpreadOverSolvers):
+    """The task's spreader with another solver live, whose helper is the test's (Helper)."""
+
+    def __init__(self, jobs, job_id):
+        super().__init__(jobs, job_id)
+        self.jobs = OtherSolverLive(jobs)
+
+    def queue_helpers(self, set_id, count):
+        pass
+
+
+class OtherSolverLive:
+    def __init__(self, jobs):
+        self._jobs = jobs
+
+    def __getattr__(self, name):
+        return getattr(self._jobs, name)
+
+    def live_solvers(self):
+        return 2
+
+
 def spread(jobs, job_id, shared, stop=lambda k: False):
-    spreader = workers_pieces.SpreadOverSolvers(jobs, job_id)
+    spreader = BesideHelpers(jobs, job_id)
     with pieces.spread_by(spreader):
         return pieces.mapped(slow_square, shared, ITEMS, stop, in_process)
 
@@ -77,6 +99,15 @@ def test_a_helper_takes_a_share_and_the_results_are_the_in_process_ones_in_order
     assert all(np.array_equal(a, b) for a, b in zip(found, expected))
     assert 0 < helper.solved < len(ITEMS)  # both took pieces
     assert not list(jobs.binary.scan_iter(match="geocert:job:spread:pieces:*:input"))  # dropped after
+
+
+def test_with_no_other_solver_the_task_solves_every_piece_itself_without_redis(jobs):
+    shared = {"sleep_s": 0.0, "offset": 4.0}
+    spreader = workers_pieces.SpreadOverSolvers(jobs, "alone")  # no worker beats here: no other solver
+    with pieces.spread_by(spreader):
+        found = pieces.mapped(slow_square, shared, ITEMS, lambda k: k >= 10, in_process)
+    assert len(found) == 10 and all(np.array_equal(a, item * item + 4.0) for a, item in zip(found, ITEMS))
+    assert not list(jobs.binary.scan_iter(match="geocert:job:alone:*"))
 
 
 def test_without_a_spreader_the_stage_maps_in_process(jobs):
