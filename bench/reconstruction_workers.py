@@ -61,8 +61,8 @@ def tracks_job(data: Path) -> dict:
     from geocert.solvers.datasets import load_dinosaur
 
     _, loaded = load_dinosaur(data / "oxford_dinosaur")
-    tracks = [{"views": [int(v) for v in views], "points": [[float(x), float(y)] for x, y in points]}
-              for views, points in loaded]
+    tracks = [{"views": [int(v) for v in track.views], "points": [[float(x), float(y)] for x, y in track.points]}
+              for track in loaded]
     return {"kind": "reconstruction", "options": {"autocalibration_time_limit_s": 20},
             "data": {"tracks": tracks, "views": [{"name": f"{v}", "image_size": [720, 576]} for v in range(36)]}}
 
