@@ -1,6 +1,7 @@
 """A reconstruction from photos through the service: its independent pieces (each image's
 features, each image pair's matches) are spread over the solver processes (workers.pieces), and
-the result is the same with one solver process, with two, and in-process (the CLI's path).
+the result is the same with one solver process, with two, and in-process (the CLI's path); a
+cancel while they run stops them.
 
 Photos: Middlebury's dinoSparseRing (Seitz, Curless, Diebel, Scharstein and Szeliski, CVPR 2006),
 read from the shared data beside the checkout (the test skips without it)."""
@@ -22,6 +23,7 @@ import pytest
 from geocert.jobs.runner import result_json, solve_job
 from geocert.kinds import get_kind
 from tests.servers import free_port, wait_ready
+from tests.service.test_cancel import cancel_at
 from tests.support import SHARED_DATA
 
 pytestmark = pytest.mark.slow  # real servers and SIFT on 14 photos
@@ -69,7 +71,7 @@ def serve(data_dir, workers: int):
     """``geocert serve --workers N --concurrency 1``: N solver processes (and an embedded Redis)."""
     port = free_port()
     env = {key: value for key, value in os.environ.items() if key != "GEOCERT_REDIS_URL"}
-    env.update(GEOCERT_DATA_DIR=str(data_dir))
+    env.update(GEOCERT_DATA_DIR=str(data_dir), GEOCERT_PROGRESS_INTERVAL_S="0.05")
     process = subprocess.Popen([sys.executable, "-m", "geocert.app.cli", "serve", "--port", str(port),
                                 "--workers", str(workers), "--concurrency", "1"], env=env)
     try:
@@ -97,6 +99,14 @@ def test_the_pieces_go_to_the_other_solver_and_the_result_is_the_same_as_with_on
     with serve(tmp_path / "two", workers=2) as client:
         two = solved(client, job)
         shared = pieces_solved(client)
+        # a cancel while the pieces run ends the job, and its helpers take no piece after it
+        cancelled = cancel_at(client, job, "matches")
+        ended = pieces_solved(client)
+        time.sleep(1.0)
+        after = pieces_solved(client)
+    matches = cancelled["result"]["stages"][0]
+    assert matches["name"] == "matches" and matches["status"] == "cancelled"
+    assert after == ended
     assert two["status"] == "succeeded", two.get("error")
     assert shared.get("helper", 0) > 0  # the other solver process took a share
     assert without_times(one["result"]) == in_process
