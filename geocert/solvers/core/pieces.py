@@ -62,6 +62,19 @@ def mapped(function: Callable, shared: Any, items: Sequence, stop: Stop,
     return spreader(function, shared, items, stop)
 
 
+def in_order(one: Callable, items: Sequence, stop: Stop) -> list | None:
+    """``one(item)`` for the items, here, in order: an ``in_process`` mapping without threads."""
+    results = []
+    for k, item in enumerate(items):
+        asked = stop(k)
+        if asked is None:
+            return None
+        if asked:
+            break
+        results.append(one(item))
+    return results
+
+
 def spreading() -> bool:
     """Whether a spreader is set for this code (a stage may then run its pieces one at a time
     in this process: the other processes are its parallelism)."""

@@ -693,7 +693,7 @@ def _initial_pair(state: _State, options: CalibratedOptions, allowed: np.ndarray
 
     # each candidate's essential matrix is a piece a caller may spread over processes
     geometries = pieces.mapped(pair_geometry, options.essential_threshold_px,
-                               [_pair_rays(state, i, j, shared.rows(i, j)) for i, j in candidates], stop, _in_order)
+                               [_pair_rays(state, i, j, shared.rows(i, j)) for i, j in candidates], stop, pieces.in_order)
     levels, min_inliers, min_angle = [], options.init_min_inliers, options.init_min_angle_deg
     for _ in range(options.init_relaxations + 1):
         levels.append((min_inliers, min_angle, options.init_max_forward_motion))
@@ -717,16 +717,6 @@ def _initial_pair(state: _State, options: CalibratedOptions, allowed: np.ndarray
                        f"{options.init_min_angle_deg:g}); the widest, views {list(widest.views)}: {widest.inliers} "
                        f"inliers of {widest.shared} shared tracks, median angle {widest.median_angle_deg:.2f} degrees")
     return None
-
-
-def _in_order(one, items: list, stop) -> list:
-    """``one(item)`` for the items in order, here, until ``stop(k)`` before the k-th says True."""
-    results = []
-    for k, item in enumerate(items):
-        if stop(k):
-            break
-        results.append(one(item))
-    return results
 
 
 VISIBILITY_LEVELS = 6  # COLMAP's visibility pyramid: grids of 2x2 up to 64x64 cells
