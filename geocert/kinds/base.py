@@ -10,8 +10,8 @@ one module (or package) defining a ProblemKind and one line in ``geocert/kinds/_
 from __future__ import annotations
 
 import abc
-import importlib
 import dataclasses
+import importlib
 import typing
 from typing import Any, Callable
 
