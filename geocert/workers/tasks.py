@@ -37,7 +37,7 @@ from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.pieces import spread_by
 from geocert.jobs.runner import (abs_gap_of, assemble, item_counts, item_sums, job_deadline, merged_sums, not_started_item,
                            result_fragment, result_json, result_shell, solve_items, stats_from, streams_result)
-from geocert.kinds import get_kind, options_from
+from geocert.kinds import KINDS, get_kind, options_from
 from geocert.workers import logs
 from geocert.workers.endings import after_end
 from geocert.workers.pieces import SOLVE_PIECES, SpreadOverSolvers, help_with
@@ -48,6 +48,10 @@ from geocert.jobs.store import REDIS_GONE, JobStore, shared_store as store
 from celery.exceptions import SoftTimeLimitExceeded
 
 log = logging.getLogger("geocert.worker")
+
+# A worker solves every kind: import them all now (the registry would on each kind's first job), so
+# the pool's processes share them and no job waits on its kind's imports.
+tuple(KINDS)
 
 
 class ProgressPublisher:
