@@ -17,6 +17,11 @@ Found (verified on main, the tests below failing there):
   (Determinacy.document's rule), and a K stage's intervals name the five intrinsics with the
   returned K's values and a tenth of their scale as tolerance.
 
+- A bilinear certificate's ``camera_bound`` lowered below the returned camera's entries (1.0
+  where they reach 92; the hash made again) verified: the proof's camera box holds the options'
+  box, so the bound holds over the smaller scope, but the report's statement says the camera
+  returned is in that scope and it is not. The camera returned must now lie in the options' box.
+
 Tried and refused already (no test added): a map's residuals or matrix edited, the result's norm
 changed, a summary's scope words or root region widened, a made-up warning code, stats counts
 edited, a stereo_lines result or one carrying a certificate (review 25).
@@ -30,7 +35,7 @@ import json
 import pytest
 
 from geocert.verify.checks import verify_any
-from tests.verify.test_forgeries import stored
+from tests.verify.test_forgeries import rehash, stored
 
 
 def _valid(document: dict) -> bool:
@@ -124,3 +129,13 @@ def test_the_estimate_of_an_analysis_stopped_at_its_time_limit_claims_nothing():
     result = stored("homography2_l2l2")
     result["maps"][0]["determinacy"] = not_analysed("the map's determinacy", "the job's time limit had passed")
     assert _valid(copy.deepcopy(result))
+
+
+@pytest.mark.parametrize("name", ["bilinear_l2l2", "bilinear_l1l1"])
+def test_a_camera_bound_the_returned_camera_exceeds_is_refused(name):
+    """Found: verified on main, its scope statement saying the camera returned is in |M_rk| <= 1."""
+    result = stored(name)
+    largest = max(abs(v) for frame in result["frames"] for row in frame["camera"] for v in row[:3])
+    result["certificate"]["options"]["camera_bound"] = largest / 2
+    rehash(result["certificate"])
+    assert not _valid(result)
