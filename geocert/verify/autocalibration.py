@@ -215,6 +215,8 @@ class AutocalibrationVerification(Verification):
         _check_baseline(result.get("baseline"), problem, p)
         _check_proven_intervals(stages[1], claims[1])
         estimates.check_intrinsics(stages[1].get("determinacy"), result.get("K"), "stages/1/determinacy")
+        estimates.check_redundancy(stages[0].get("determinacy"), len(cameras) - 4, "stages/0/determinacy")
+        estimates.check_redundancy(stages[1].get("determinacy"), 5 * len(cameras) - 10, "stages/1/determinacy")
 
     @staticmethod
     def estimates_of(result: dict, certificate: dict) -> dict:
@@ -526,6 +528,8 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
     _check_direct_proven(result["stages"][0], claim, len(cameras))
     if result.get("Ks") is None:  # one K (varying focal lengths: an estimate per view, of Ks)
         estimates.check_intrinsics(result["stages"][0].get("determinacy"), result.get("K"), "stages/0/determinacy")
+        estimates.check_redundancy(result["stages"][0].get("determinacy"), 5 * len(cameras) - 10,
+                                   "stages/0/determinacy")
 
 
 def _check_direct_proven(stage: dict, claim: dict, views: int) -> None:

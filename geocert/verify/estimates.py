@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from geocert.solvers.core.determinacy import fixes, safely
-from geocert.solvers.core.strict import Invalid
+from geocert.solvers.core.strict import Invalid, same
 from geocert.solvers.fractional import determinacy as estimate
 
 NUMBER_SLACK = 1e-6  # of an interval's width: another machine's eigendecomposition of the same J'J
@@ -64,6 +64,18 @@ def check_determined(determinacy: dict, where: str) -> None:
 
 INTRINSICS = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")  # autocalibration.determinacy.NAMES
 RELATIVE_WIDTH = 0.1  # core.determinacy.RELATIVE_WIDTH: the tolerance of a quantity of its scale
+
+
+def check_redundancy(determinacy: Any, expected: int, where: str) -> None:
+    """An autocalibration stage's estimate counts the residuals beyond its parameters as its
+    writer does (autocalibration.determinacy: the affine stage's modulus constraints, one a view
+    but the reference's, less the plane's 3; a K stage's 5 informative DIAC entries a view but
+    the reference's, less K's 5): ``expected``, from the number of views."""
+    if not isinstance(determinacy, dict) or _stopped(determinacy):
+        return
+    if not same(determinacy.get("redundancy"), expected):
+        raise Invalid("returned", f"{where}/redundancy is {determinacy.get('redundancy')!r:.30}; the stage's "
+                                  f"residuals beyond its parameters number {expected!r}")
 
 
 def check_intrinsics(determinacy: Any, K: Any, where: str) -> None:

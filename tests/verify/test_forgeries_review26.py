@@ -13,9 +13,10 @@ Found (verified on main, the tests below failing there):
 - Autocalibration's stage estimates (refitted with scipy by their writer, so not recomputed):
   ``determined`` flipped against its own intervals, an interval's ``tolerance`` widened so that a
   loose interval "fixes" its quantity, or a direct stage's ``value`` moved off the returned K, all
-  verified. ``determined`` must now be what the intervals and warnings give
-  (Determinacy.document's rule), and a K stage's intervals name the five intrinsics with the
-  returned K's values and a tenth of their scale as tolerance.
+  verified, as did a ``redundancy`` (residuals beyond the parameters) a thousand times the
+  data's. ``determined`` must now be what the intervals and warnings give (Determinacy.document's
+  rule), a K stage's intervals name the five intrinsics with the returned K's values and a tenth
+  of their scale as tolerance, and each stage's redundancy is the writer's count from the views.
 
 - A bilinear certificate's ``camera_bound`` lowered below the returned camera's entries (1.0
   where they reach 92; the hash made again) verified: the proof's camera box holds the options'
@@ -94,8 +95,9 @@ AUTOCALIBRATION_EDITS = {
     "determined flipped": lambda d: d.update(determined=not d["determined"]),
     "tolerance widened": lambda d: [i.update(tolerance=i["tolerance"] * 1e6) for i in d["intervals"]],
     "value moved": lambda d: d["intervals"][0].update(value=d["intervals"][0]["value"] * 0.8),
+    "redundancy raised": lambda d: d.update(redundancy=d["redundancy"] * 1000),
 }
-STAGES = {("autocalibration_stratified", 0): ("determined flipped",),
+STAGES = {("autocalibration_stratified", 0): ("determined flipped", "redundancy raised"),
           ("autocalibration_stratified", 1): tuple(AUTOCALIBRATION_EDITS),
           ("autocalibration_direct_points", 0): tuple(AUTOCALIBRATION_EDITS)}
 
