@@ -1,17 +1,19 @@
-"""The determinacy estimates a fractional or bilinear kind's result returns beside its claims, recomputed.
+"""The determinacy estimates a result returns beside its claims, tied to the data.
 
-A track's or map's ``determinacy`` (its intervals, ``determined``, level, redundancy and
+A track's, map's or bilinear frame's ``determinacy`` (its intervals, ``determined``, level, redundancy and
 warnings) proves nothing: it is the local curvature estimate (Gauss-Newton) at the solution the
 item returns. It is still a claim about the data ("determined: true", "x within [lo, hi]", no
 "near_coplanar_points" warning), so a result verified with its certificate states exactly the
-estimate the kind's writer (``fractional.determinacy.track`` and ``map_``, ``bilinear.determinacy.
-frame``, numpy only) computes
-from the certificate's data at the returned point or matrix, cost and lower bound: an interval
+estimate the kind's writer (``fractional.determinacy.track`` and ``map_``,
+``bilinear.determinacy.frame``, numpy only) computes from the certificate's data at the returned
+solution, cost and lower bound: an interval
 narrowed, a value moved, ``determined`` flipped or a warning dropped is refused (check
 ``returned``). Numbers agree to 1e-6 of the interval's width and 1e-9 of the value (another
 machine's rounding of the same sums); an end the data leave open (null) must be null. An
 analysis the solver stopped at its time limit (a single ``time_limit`` warning, no interval) or
-left out (null) claims nothing and is accepted as it is.
+left out (null) claims nothing and is accepted as it is. Autocalibration's estimates (refitted
+with scipy by their writer) are not recomputed: check_determined, check_intrinsics and
+check_redundancy tie what the data and the returned K give without a refit.
 """
 
 from __future__ import annotations
@@ -44,14 +46,15 @@ def check_determined(determinacy: dict, where: str) -> None:
     """An estimate no check recomputes (autocalibration's stages: its writer refits with scipy)
     still says ``determined`` only as its writer (core.determinacy.Determinacy.document) does:
     true exactly when every interval fixes its quantity (bounded, within its tolerance of its
-    value) and no warning is stated; and each bounded interval holds its value."""
+    value) and no warning is stated; and no bounded interval has its lower end above its upper."""
     intervals, warnings = determinacy.get("intervals"), determinacy.get("warnings")
     if not isinstance(intervals, list) or not all(isinstance(i, dict) for i in intervals):
         return  # typed by core.notes
     try:
         expected = all(fixes(i) for i in intervals) and not warnings
-    except TypeError:
-        raise Invalid("returned", f"{where}/intervals: lower, upper, value and tolerance are numbers or null") from None
+    except (TypeError, KeyError):
+        raise Invalid("returned", f"{where}/intervals: each states lower and upper, and lower, upper, value and "
+                                  "tolerance are numbers or null") from None
     if determinacy.get("determined") is not expected:
         raise Invalid("returned", f"{where}/determined is {determinacy.get('determined')!r:.20}, its intervals and "
                                   f"warnings give {expected!r} (every interval bounded within its tolerance of its "
