@@ -28,6 +28,7 @@ from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, docu
                                          informational, number as _number, printable_tree, record, same,
                                          work_budget)
 from geocert.solvers.fractional import residual_claims
+from geocert.verify import estimates
 from geocert.verify.verification import hook
 
 MAX_DEPTH = 64
@@ -659,6 +660,7 @@ def _check_returned(result: dict, certificate: dict) -> None:
     own = hook(kind.verification, "check_returned")
     if own is not None:  # what else the result returns, derived from the claims
         own(result, certificate)
+    estimates.check(kind, result, certificate)  # a track's or map's determinacy estimate, recomputed
     if certificate["kind"] not in ("triangulation", "resection"):  # kinds whose determinacy proves intervals (own check)
         # a kind proving some intervals says which parts are estimates still (its check_returned checked the rest)
         estimates_of = hook(kind.verification, "estimates_of")
@@ -678,6 +680,8 @@ def _check_estimates(value: Any, where: str = "") -> None:
                     item.get("proven") not in (None, False) or item.get("proven_intervals") is not None):
                 raise Invalid("returned", f"{where}/determinacy says proven, and no proof of its intervals is "
                                           "carried (an estimate is proven: false)")
+            if name == "determinacy" and isinstance(item, dict):
+                estimates.check_determined(item, f"{where}/determinacy")
             _check_estimates(item, f"{where}/{name}")
     elif isinstance(value, list):
         for index, item in enumerate(value):
