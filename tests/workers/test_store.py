@@ -444,3 +444,17 @@ class TestWhatTheAppAsksByName:
         meta = jobs.create("triangulation", request_of(3), 3, 2, "someone", chunk_key="tracks")
         document = jobs.document(meta)
         assert jobs.head(meta) == {key: value for key, value in document.items() if key not in ("result", "links")}
+
+
+def test_create_async_takes_creates_arguments_exactly():
+    """create_async binds its arguments with a plain function (creation._create_arguments) instead
+    of inspect's binding at each submission: its parameters, defaults and order are create's."""
+    import inspect
+
+    from geocert.jobs.store.creation import Creation, _create_arguments
+
+    create = list(inspect.signature(Creation.create).parameters.values())[1:]
+    assert [(p.name, p.default) for p in inspect.signature(_create_arguments).parameters.values()] == \
+           [(p.name, p.default) for p in create]
+    names = [p.name for p in create]
+    assert list(_create_arguments(*names)) == names  # in create's order, as _stage_create takes them
