@@ -24,6 +24,7 @@ take large bodies) are counted in each.
 from __future__ import annotations
 
 import asyncio
+import os
 import signal
 import socket
 import subprocess
@@ -110,8 +111,8 @@ def run(app: str, host: str, port: int, processes: int = 1) -> None:
         Server(config).run()
         return
     listening = config.bind_socket()
-    others = [subprocess.Popen([sys.executable, "-m", "geocert.app.lifecycle", app, str(listening.fileno())],
-                               pass_fds=[listening.fileno()], preexec_fn=_die_with_parent)
+    others = [subprocess.Popen([sys.executable, "-m", "geocert.app.lifecycle", app, str(listening.fileno()),
+                                str(os.getpid())], pass_fds=[listening.fileno()])
               for _ in range(processes - 1)]
     try:
         Server(config).run(sockets=[listening])
@@ -126,14 +127,19 @@ def run(app: str, host: str, port: int, processes: int = 1) -> None:
         listening.close()
 
 
-def _serve_inherited(app: str, fd: int) -> None:
-    """One of ``run``'s other API processes: serves ``app`` on the listening socket ``fd``."""
+def _serve_inherited(app: str, fd: int, parent: int) -> None:
+    """One of ``run``'s other API processes: serves ``app`` on the listening socket ``fd`` until
+    told to stop, or until ``parent`` (the process that started it) dies. The kernel is asked for
+    that here, not in a preexec_fn (unsafe in a process with threads, as `geocert serve` has)."""
+    _die_with_parent()
+    if os.getppid() != parent:  # it died before the request took effect
+        return
     listening = socket.socket(fileno=fd)
     Server(_config(app, host=listening.getsockname()[0], port=listening.getsockname()[1])).run(sockets=[listening])
 
 
 def _die_with_parent() -> None:
-    """In a child: ask Linux to send SIGTERM when the parent dies, even by SIGKILL."""
+    """Ask Linux to send this process SIGTERM when its parent dies, even by SIGKILL."""
     try:
         import ctypes
 
@@ -143,4 +149,4 @@ def _die_with_parent() -> None:
 
 
 if __name__ == "__main__":
-    _serve_inherited(sys.argv[1], int(sys.argv[2]))
+    _serve_inherited(sys.argv[1], int(sys.argv[2]), int(sys.argv[3]))

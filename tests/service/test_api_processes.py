@@ -1,7 +1,7 @@
 """`geocert serve --api-processes 2`: two API processes on one port, each request answered by
 whichever accepted its connection. A job made through one is read, replayed by its
 Idempotency-Key and streamed through the other; the other has the slow-header guard with the
-configured timeout; both stop when `geocert serve` is told to."""
+configured timeout; both stop when `geocert serve` is told to, or is killed."""
 
 from __future__ import annotations
 
@@ -122,13 +122,7 @@ def test_two_api_processes_serve_the_same_jobs_replays_and_streams(tmp_path):
 
         process.send_signal(signal.SIGTERM)  # `geocert serve` alone: it stops the other API process
         process.wait(timeout=60)
-        for pid in pids[1:]:
-            for _ in range(100):
-                if not os.path.exists(f"/proc/{pid}") or open(f"/proc/{pid}/stat").read().split()[2] == "Z":
-                    break
-                time.sleep(0.1)
-            else:
-                raise AssertionError(f"API process {pid} still runs after geocert serve stopped")
+        assert_ends(pids[1:])
 
 
 def test_every_api_process_closes_a_connection_whose_headers_are_too_slow(tmp_path):
@@ -150,3 +144,14 @@ def test_every_api_process_closes_a_connection_whose_headers_are_too_slow(tmp_pa
             except socket.timeout:
                 raise AssertionError(f"process {pid} kept a connection with half its headers for 8 s") from None
             connection.close()
+        os.kill(process.pid, signal.SIGKILL)  # `geocert serve` killed: the other API process goes with it
+        process.wait(timeout=10)
+        assert_ends(pids[1:])
+
+
+def assert_ends(pids: list[int], limit_s: float = 30) -> None:
+    deadline = time.monotonic() + limit_s
+    for pid in pids:
+        while os.path.exists(f"/proc/{pid}") and open(f"/proc/{pid}/stat").read().split()[2] != "Z":
+            assert time.monotonic() < deadline, f"API process {pid} still runs after geocert serve stopped"
+            time.sleep(0.1)
