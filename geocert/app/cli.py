@@ -201,7 +201,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
     try:
         from geocert.app import lifecycle
 
-        lifecycle.run("geocert.app.main:app", host=args.host, port=args.port)
+        lifecycle.run("geocert.app.main:app", host=args.host, port=args.port,
+                      processes=args.api_processes or get_settings().api_processes)
     finally:
         stopping.set()
         for process in workers:
@@ -337,6 +338,8 @@ def main(argv: list[str] | None = None) -> int:
     serve.add_argument("--host", default="127.0.0.1")
     serve.add_argument("--port", type=int, default=8000)
     serve.add_argument("--workers", type=int, default=1, help="worker processes to start (0 allowed)")
+    serve.add_argument("--api-processes", type=int, default=None,
+                       help="API processes on the port (default: GEOCERT_API_PROCESSES, 1)")
     serve.add_argument("--concurrency", type=int, default=default_concurrency(),
                        help="solver processes per worker (default: one per core, at least 2)")
     serve.set_defaults(func=cmd_serve)
