@@ -399,7 +399,7 @@ def _verify_all(document: dict, returned: dict | None, adapter, options: dict, i
                 tallies: dict, fail, hashed: tuple[str, ...] = ()) -> None:
     """_verify's checks of the items, of what ties them together, and of the result returning
     them (failures counted through ``fail``; ``hashed``: the options the problem hash covers)."""
-    forget = hook(adapter, "forget") or (lambda: None)  # what an adapter remembers of one document
+    forget = hook(adapter, "forget", lambda: None)  # what an adapter remembers of one document
     forget()
     try:
         _verify_items(document, options, items, report, tallies, fail)
@@ -492,7 +492,7 @@ def _verify_items(document: dict, options: dict, items: list, report: Report, ta
 def _note_abs_gap(kind: str, options: dict, claim: dict, position: int, report: Report) -> None:
     """A certified claim whose gap rel_gap alone does not allow (its proof met only abs_gap):
     named in the report's scope (within_abs_gap)."""
-    rel_gap_of = hook(_adapter(kind), "rel_gap_of") or (lambda options_, _: options_["rel_gap"])
+    rel_gap_of = hook(_adapter(kind), "rel_gap_of", lambda options_, _: options_["rel_gap"])
     if float(claim["gap"]) > float(rel_gap_of(options, position)) * abs(float(claim["cost"])):
         report.within_abs_gap.append(position)
 
@@ -532,7 +532,7 @@ def uncertified_claim(kind: str, data: dict, options: dict, claim: dict) -> None
         if proves is None or not proves(data, claim, options):
             raise Invalid("claim", "status 'infeasible' is said only where the verifier proves it from the data (a "
                                    "track with a view whose depth is a non-positive constant); this item's is not")
-    elif status not in (words := hook(_adapter(kind), "uncertified_statuses") or UNCERTIFIED_STATUSES):
+    elif status not in (words := hook(_adapter(kind), "uncertified_statuses", UNCERTIFIED_STATUSES)):
         raise Invalid("claim", f"an uncertified item's status is one of {', '.join(words)} (or 'infeasible' where "
                                f"the data prove it), not {status!r:.40}")
     for name in ("lower_bound", "gap"):
@@ -592,17 +592,17 @@ def _check_hashes(document: dict, options: dict) -> tuple[tuple[str, ...], str |
     if expected != document["data_sha256"]:
         raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
     adapter = _adapter(document["kind"])
-    names = hook(adapter, "claim_options")
+    names = hook(adapter, "claim_options", CLAIM_OPTIONS)
     expected = problem_hash(document["kind"], document["data"], options, names)
     if expected == document["problem_sha256"]:
-        return names or CLAIM_OPTIONS, None
+        return names, None
     # a kind whose hash came to cover more options: its earlier forms, newest first, each with
     # what the report's scope says of it
     for earlier, statement in hook(adapter, "earlier_forms"):
         if problem_hash(document["kind"], document["data"], options, earlier) == document["problem_sha256"]:
             return earlier, statement(options)
     raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and options "
-                               f"({', '.join(names or CLAIM_OPTIONS)}) hash to {expected!r}")
+                               f"({', '.join(names)}) hash to {expected!r}")
 
 
 # What a result returns of each item, which must equal what its certificate proves (and the
@@ -748,7 +748,7 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
     if not isinstance(items, list):
         return
     options = certificate["options"]
-    rel_gap_of = hook(kind.verification, "rel_gap_of") or (lambda options, index: options.get("rel_gap"))
+    rel_gap_of = hook(kind.verification, "rel_gap_of", lambda options, index: options.get("rel_gap"))
     for index, (item, claim) in enumerate(zip(items, certificate["items"])):
         summary = item.get("certificate") if isinstance(item, dict) else None
         where = f"{kind.item_key}/{index}/certificate"

@@ -112,7 +112,11 @@ class Verification(abc.ABC):
     outcomes are for its stats. None: the items under item_key."""
 
 
-def hook(adapter: Any, name: str) -> Any:
+def hook(adapter: Any, name: str, otherwise: Any = None) -> Any:
     """An adapter's hook, or Verification's default for it (read only when the adapter has none:
-    a member declared without a default, such as ``domain``, is the adapter's own)."""
-    return getattr(adapter, name) if hasattr(adapter, name) else getattr(Verification, name)
+    a member declared without a default, such as ``domain``, is the adapter's own); ``otherwise``
+    stands for a hook that is None (not declared, or declared None) and only then: a value the
+    adapter declares is used as declared, a falsy one too (``uncertified_statuses = ()`` allows no
+    word, it does not fall back to the verifier's)."""
+    value = getattr(adapter, name) if hasattr(adapter, name) else getattr(Verification, name)
+    return otherwise if value is None else value
