@@ -12,6 +12,7 @@ docs/certificate.md explains each step.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -82,6 +83,31 @@ def _check_option_words(options: dict) -> None:
         value = options.get(name)
         if value is not None and not (isinstance(value, str) and value in words):
             raise Invalid("options", f"options/{name}: must be one of {', '.join(words)}, got {value!r:.40}")
+
+
+def option_names(kind: str) -> tuple[str, ...] | None:
+    """The option names a certificate of ``kind`` may state (its adapter's option_names, or its
+    options_type's fields); None: the kind declares neither."""
+    names = hook(_adapter(kind), "option_names")
+    options_type = _kind(kind).options_type
+    if names is None and options_type is not None and dataclasses.is_dataclass(options_type):
+        names = tuple(entry.name for entry in dataclasses.fields(options_type))
+    return names
+
+
+def _check_option_names(kind: str, options: Any) -> None:
+    """A certificate's options are the ones its kind's solver takes (option_names): an option no
+    check reads (``x_intrinsics`` beside ``intrinsics``, a misspelt ``max_residul``) states a
+    request no solver served, and a reader would take it for part of what is proven, so it is
+    refused, naming it, as a result's unknown member is."""
+    names = option_names(kind)
+    if names is None or not isinstance(options, dict):
+        return
+    unknown = sorted(str(name) for name in set(options) - set(names))
+    if unknown:
+        raise Invalid("options", f"options/{unknown[0]:.60}: no {kind} certificate has this option (its options: "
+                                 f"{', '.join(sorted(names))}); an option no check reads claims nothing, so it is "
+                                 "refused")
 
 
 def residual_options(kind: str, options: dict) -> dict:
@@ -350,6 +376,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
                                     "carries its certificate in 'certificate'")
         items = _document_items(document)
         tallies["format"][0] += 1
+        _check_option_names(document["kind"], document["options"])
         options = checked_options(document["kind"], document["options"])
         tallies["options"][0] += 1
         hashed, earlier_form = _check_hashes(document, options)

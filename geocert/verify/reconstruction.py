@@ -1089,6 +1089,7 @@ class ReconstructionItems(TrackItems, Verification):
     # hashed_options says
     claim_options = hashed_options.CLAIM_OPTIONS
     earlier_forms = hashed_options.EARLIER_FORMS
+    option_names = run_control.OPTION_NAMES
 
     @staticmethod
     def job_outcomes(result: dict) -> list:

@@ -41,6 +41,12 @@ class Verification(abc.ABC):
     """``scope_statement(options) -> dict``: what a valid certificate of the kind proves, in words
     and numbers. None: the residual kinds' statement over ``domain``."""
 
+    option_names: tuple[str, ...] | None = None
+    """The option names a certificate of the kind may state: its options class's fields (the
+    document's options are ``dataclasses.asdict`` of them: kinds.documents), and any name an earlier
+    form wrote. A name outside them is refused (no check reads it). None: the fields of the kind's
+    options_type (the residual kinds'); a kind with neither states none to check."""
+
     claim_options: tuple[str, ...] | None = None
     """The options the problem hash covers. None: the verifier's CLAIM_OPTIONS."""
 
