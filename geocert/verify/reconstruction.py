@@ -1245,7 +1245,8 @@ class ReconstructionItems(TrackItems, Verification):
                                       "certified K it proves is claimed: nothing ties it to the result")
         if isinstance(calibration, dict):  # carried (a certified K proven by it): tied to the result, once
             scoped["calibration_tie"] = calibration_tie.tie(result, _stage(result, "autocalibration"),
-                                                            calibration.get("data") or {})
+                                                            calibration.get("data") or {},
+                                                            hashed_options.states_registration_record(hashed))
         return scoped
 
 
