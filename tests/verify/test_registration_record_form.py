@@ -6,7 +6,9 @@ holding a genuine off-centre run (its registration at the estimated principal po
 a certificate built at the centre with another focal length and delete the record. The form is
 now declared: the problem hash covers ``registration`` (hashed_options' fourth form), and a
 document of that form states the record wherever its registration tests the principal point
-(calibration_tie.registration_tests); an earlier form may lack it, and the report says so."""
+(calibration_tie.registration_tests); an earlier form may lack it, and the report says so. The
+same form states the certificate data's input_labels and the autocalibration stage's
+cameras_built_with_one_K (hashed_options.states_records), whose absence gave the same choice."""
 
 from __future__ import annotations
 
@@ -116,3 +118,38 @@ def test_no_record_is_asked_where_the_registration_does_not_test(off_centre):
         edited = copy.deepcopy(off_centre)
         edit(edited)
         assert not calibration_tie.registration_tests(edited)
+
+
+# The same class elsewhere: records a document of an earlier form lacks, which the verifier reads
+# such a document without more loosely; a document of today's form states them (states_records).
+
+def test_todays_form_without_its_input_labels_is_refused(off_centre):
+    """Found: the run with data/input_labels deleted (rehashed) verified on main, its report
+    saying the labels are unchecked, so a forger could swap the points' track numbers or the
+    cameras' names by leaving the labels out."""
+    from tests.verify.test_forgeries import rehash
+
+    forged = copy.deepcopy(off_centre)
+    del forged["certificate"]["data"]["input_labels"]
+    rehash(forged["certificate"])
+    report = _verify(forged)
+    assert not report.valid and "data/input_labels is absent" in report.first_failure["detail"], report.first_failure
+    # in the form written before the hash covered registration: read without them, and said so
+    earlier = _verify(_in_form(forged, hashed_options.THIRD_CLAIM_OPTIONS))
+    assert earlier.valid, earlier.first_failure
+    assert earlier.scope["labels"].startswith("unchecked")
+
+
+def test_todays_form_without_cameras_built_with_one_K_is_refused(off_centre):
+    """Found: the run's autocalibration stage without cameras_built_with_one_K, and its summary
+    without the certified_K_of_calibrated_cameras warning that finding calls for, verified on
+    main (the field was read as a stored document's that predates it)."""
+    stage = _stage(off_centre, "autocalibration")
+    assert stage["cameras_built_with_one_K"] is True
+    forged = copy.deepcopy(off_centre)
+    del _stage(forged, "autocalibration")["cameras_built_with_one_K"]
+    forged["summary"]["warnings"] = [w for w in forged["summary"]["warnings"]
+                                     if w["code"] != "certified_K_of_calibrated_cameras"]
+    report = _verify(forged)
+    assert not report.valid and "cameras_built_with_one_K is absent" in report.first_failure["detail"], \
+        report.first_failure

@@ -26,7 +26,8 @@ form still verify, as those of the first do, the report's scope stating what the
 for each option its form leaves out (check_earlier_form: the first form's scope lists both sets).
 The third form (THIRD_CLAIM_OPTIONS) left out ``registration``; the hash covers it since, and
 the pipeline of that form states the registration's principal-point record wherever its test runs
-(states_registration_record): a document of the third form or earlier may lack it, and is read
+(states_records, with the certificate data's input_labels and the autocalibration stage's
+cameras_built_with_one_K): a document of the third form or earlier may lack it, and is read
 without it, its report's scope saying so (check_third_form; the calibration tie's
 registration_record). A document of either of the first two forms also states no free camera for a camera judged uncertifiable by
 one (the kind states it since the hash covers these options): that judgement is then unchecked,
@@ -170,10 +171,13 @@ def states_free_cameras(hashed: tuple[str, ...]) -> bool:
     return set(THIRD_CLAIM_OPTIONS) <= set(hashed)
 
 
-def states_registration_record(hashed: tuple[str, ...]) -> bool:
-    """Whether a document of that form was written by a pipeline that states the registration's
-    principal-point record (stages.projective.principal_point) wherever its test runs (those of
-    CLAIM_OPTIONS' form: the hash covers registration)."""
+def states_records(hashed: tuple[str, ...]) -> bool:
+    """Whether a document of that form was written by a pipeline that states every record an
+    earlier form may lack, which the verifier reads a document without more loosely (those of
+    CLAIM_OPTIONS' form: the hash covers registration): the registration's principal-point record
+    (stages.projective.principal_point) wherever its test runs, the certificate data's
+    input_labels, and the autocalibration stage's cameras_built_with_one_K beside a calibration
+    certificate. A document of this form lacking one is refused."""
     return set(CLAIM_OPTIONS) <= set(hashed)
 
 
