@@ -202,7 +202,8 @@ def registration_tests(result: dict) -> bool:
     projective = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "projective"),
                       {})
     radial = projective.get("radial_distortion")
-    return not (isinstance(radial, dict) and radial.get("estimated") is True) and projective.get("cancelled") is not True
+    stopped = projective.get("cancelled") is True or projective.get("status") in ("cancelled", "time_limit")
+    return not (isinstance(radial, dict) and radial.get("estimated") is True) and not stopped
 
 
 def _check_registration_record(result: dict, views: list, cameras: np.ndarray, recorded: bool = True) -> str:
