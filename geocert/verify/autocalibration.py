@@ -4,6 +4,7 @@ metric stage's (conditional on the plane at infinity it states)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from typing import Any
@@ -84,6 +85,7 @@ def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, fl
 
 class AutocalibrationVerification(Verification):
     claim_options = CLAIM_OPTIONS
+    option_names = tuple(entry.name for entry in dataclasses.fields(autocalibration_problem.AutocalibrationOptions))
     proofs: dict = {}
     # A stage that found no solution (no plane, K or quadric) says "failed": a word about the
     # solver, not the data (verify.uncertified_claim).

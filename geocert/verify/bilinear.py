@@ -6,6 +6,7 @@ rounds, the leaves covering the searched box and each leaf's safe bound), docs/c
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -37,6 +38,7 @@ FRAME_SCOPES = {"searched": "every affine camera whose 2x3 part lies in the came
 
 class BilinearVerification(Verification):
     claim_options = CLAIM_OPTIONS
+    option_names = tuple(entry.name for entry in dataclasses.fields(BilinearOptions))
     proofs: dict = {}
     data_items = "frames"  # the certificate has one item per frame (verify._check_item_count)
     domain = ("every affine camera [M | t] whose 2x3 part M lies in the item's camera box (any translation t), "
