@@ -104,18 +104,16 @@ class SpreadOverSolvers:
                                  ignore_result=True)
 
     def _alone(self, function, shared, items, stop):
-        results = []
+        solved = []
+
+        def one(item):
+            solved.append(function(shared, item))
+            return solved[-1]
+
         try:
-            for k, item in enumerate(items):
-                asked = stop(k)
-                if asked is None:
-                    return None
-                if asked:
-                    break
-                results.append(function(shared, item))
-            return results
+            return pieces.in_order(one, items, stop)
         finally:
-            self.jobs.count_own_pieces(len(results))
+            self.jobs.count_own_pieces(len(solved))
 
     def _run(self, function, shared, items, stop, set_id: str):
         jobs, job_id, total = self.jobs, self.job_id, len(items)
