@@ -163,33 +163,29 @@ def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.n
         out = {bound.view: bound for bound in found or []}
         if progress is not None and len(out) == len(cameras):
             progress(len(out), len(cameras))
-        for view in [view for view in order if view not in out]:
-            out[view] = CameraBound(view, None, None, None, None, False, "cancelled", len(points(view)[0]), 0.0,
-                                    "the job was cancelled")
-        return dict(sorted(out.items()))
-
-    # At most ``threads`` cameras in flight: a cancel seen between two stops the ones not started.
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        running: set = set()
-        queue = iter(order)
-        stopped = False
-        while True:
-            while not stopped and len(running) < threads:
-                view = next(queue, None)
-                if view is None:
+    else:
+        # At most ``threads`` cameras in flight: a cancel seen between two stops the ones not started.
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            running: set = set()
+            queue = iter(order)
+            stopped = False
+            while True:
+                while not stopped and len(running) < threads:
+                    view = next(queue, None)
+                    if view is None:
+                        break
+                    running.add(pool.submit(_bound_camera, view, cameras[view], *points(view), options,
+                                            bound_every_camera, dof))
+                if not running:
                     break
-                running.add(pool.submit(_bound_camera, view, cameras[view], *points(view), options,
-                                        bound_every_camera, dof))
-            if not running:
-                break
-            finished, running = wait(running, return_when=FIRST_COMPLETED)
-            for future in finished:
-                bound = future.result()
-                out[bound.view] = bound
-                if progress is not None:
-                    progress(len(out), len(cameras))
-            if not stopped and should_stop is not None and should_stop():
-                stopped = True
+                finished, running = wait(running, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    bound = future.result()
+                    out[bound.view] = bound
+                    if progress is not None:
+                        progress(len(out), len(cameras))
+                if not stopped and should_stop is not None and should_stop():
+                    stopped = True
     for view in order:
         if view not in out:
             out[view] = CameraBound(view, None, None, None, None, False, "cancelled", len(points(view)[0]), 0.0,
