@@ -1,5 +1,6 @@
 """The estimators import nothing above them: no module of geocert/solvers imports the verifier,
-the kinds, the app, the workers or the job runner (kinds call solvers, never the reverse). The
+the kinds, the app, the workers or the job runner (kinds call solvers, never the reverse), and
+only solvers.core.conic imports the conic solver. The
 verifier (geocert/verify) imports nothing above it either: it finds each kind's adapter in its own
 registry (verify/adapters.py), not the kinds'. The service's app asks the job store by name, never
 through its Redis client, and neither do the workers."""
@@ -66,6 +67,14 @@ def test_no_worker_module_reaches_into_the_stores_redis_client():
 def test_no_solver_module_imports_a_layer_above_it():
     """The verifier included: a solver's self-check reaches it through solvers.core.self_check."""
     assert imports_above("solvers", ABOVE_SOLVERS) == KNOWN
+
+
+def test_only_the_conic_boundary_talks_to_the_conic_solver():
+    """One place builds Clarabel's solvers and reads its statuses (solvers.core.conic), so the
+    map from its statuses to ours, where an inaccurate answer is never certified, is the only one."""
+    talking = {str(path.relative_to(ROOT)) for path in sorted(ROOT.rglob("*.py"))
+               if any(name == "clarabel" or name.startswith("clarabel.") for name in imported(path))}
+    assert talking == {"solvers/core/conic.py"}
 
 
 def test_no_verifier_module_imports_a_layer_above_it():

@@ -50,16 +50,14 @@ import math
 import time
 from dataclasses import dataclass, field
 
-import clarabel
 import numpy as np
-import scipy.sparse as sp
 
 from geocert.solvers.autocalibration import direct
 from geocert.solvers.autocalibration import direct_ipm
 from geocert.solvers.autocalibration import direct_relaxation
 from geocert.solvers.core.certificates import pack
 from geocert.solvers.autocalibration.proofs import sublevel_level
-from geocert.solvers.core.conic import ConicStatus, clarabel_cones, map_clarabel_status
+from geocert.solvers.core.conic import ConicStatus, SolveSettings, solve_once
 
 
 @dataclass
@@ -98,19 +96,9 @@ IPM_MAX_ITER = 50
 REFINEMENT_STEPS = 1
 
 
-def _settings(tolerance: float, regularisation: float = 1e-6) -> clarabel.DefaultSettings:
-    settings = clarabel.DefaultSettings()
-    settings.verbose = False
-    settings.max_iter = 60
-    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = tolerance
-    settings.static_regularization_constant = regularisation
-    settings.iterative_refinement_max_iter = REFINEMENT_STEPS
-    settings.max_threads = 1
-    try:
-        settings.direct_solve_method = "faer"
-    except Exception:  # a build without it: the default factorisation
-        pass
-    return settings
+def _settings(tolerance: float, regularisation: float = 1e-6) -> SolveSettings:
+    return SolveSettings(gap=tolerance, feasibility=tolerance, max_iter=60, regularisation=regularisation,
+                         refinement_steps=REFINEMENT_STEPS, threads=1, faer=True)
 
 
 def solve_program(program: direct_relaxation.Program, enough=None, attempts=None,
@@ -158,20 +146,10 @@ def _solve_ipm(program: direct_relaxation.Program, tolerance: float, check=None)
 
 
 def _solve_once(program: direct_relaxation.Program, tolerance: float, regularisation: float):
-    try:
-        P = sp.csc_matrix((len(program.q), len(program.q)))
-        solution = clarabel.DefaultSolver(P, program.q, program.A, program.b, clarabel_cones(program.cones),
-                                          _settings(tolerance, regularisation)).solve()
-        raw = str(solution.status)
-        status = map_clarabel_status(raw)
-        y, z = np.array(solution.x, dtype=float), np.array(solution.z, dtype=float)
-        if not (np.all(np.isfinite(y)) and np.all(np.isfinite(z))):
-            return ConicStatus.FAILED, None, None, raw
-        return status, y, z, raw
-    except BaseException as exc:
-        if isinstance(exc, (KeyboardInterrupt, SystemExit, Stopped)):
-            raise
-        return ConicStatus.FAILED, None, None, f"exception: {exc}"
+    result = solve_once(program.q, program.A, program.b, program.cones, _settings(tolerance, regularisation))
+    if result.x is None or not (np.all(np.isfinite(result.x)) and np.all(np.isfinite(result.z))):
+        return ConicStatus.FAILED, None, None, result.raw_status
+    return result.status, result.x, result.z, result.raw_status
 
 
 def rank_test(program: direct_relaxation.Program, y: np.ndarray) -> tuple[int, float, np.ndarray]:

@@ -153,6 +153,58 @@ def solve_conic(q: np.ndarray, A: np.ndarray | sp.csc_matrix, b: np.ndarray, con
         return ConicResult(ConicStatus.FAILED, None, None, np.nan, np.nan, f"exception: {exc}")
 
 
+@dataclass(frozen=True)
+class SolveSettings:
+    """The settings of a one-off solve whose program needs other than the boundary's (a field left
+    None keeps Clarabel's default): the direct method's large moment programs (regularisation,
+    refinement, one thread) and multiplier searches that only need some dual, checked elsewhere."""
+
+    gap: float | None = None  # absolute and relative duality gap
+    feasibility: float | None = None
+    max_iter: int | None = None
+    regularisation: float | None = None  # the static regularisation constant
+    refinement_steps: int | None = None
+    threads: int | None = None
+    faer: bool = False  # the faer factorisation, when the build has it
+
+
+def _clarabel_settings(chosen: SolveSettings) -> clarabel.DefaultSettings:
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    if chosen.gap is not None:
+        settings.tol_gap_abs = settings.tol_gap_rel = chosen.gap
+    if chosen.feasibility is not None:
+        settings.tol_feas = chosen.feasibility
+    if chosen.max_iter is not None:
+        settings.max_iter = chosen.max_iter
+    if chosen.regularisation is not None:
+        settings.static_regularization_constant = chosen.regularisation
+    if chosen.refinement_steps is not None:
+        settings.iterative_refinement_max_iter = chosen.refinement_steps
+    if chosen.threads is not None:
+        settings.max_threads = chosen.threads
+    if chosen.faer:
+        try:
+            settings.direct_solve_method = "faer"
+        except Exception:  # a build without it: the default factorisation
+            pass
+    return settings
+
+
+def solve_once(q: np.ndarray, A: np.ndarray | sp.csc_matrix, b: np.ndarray, cones: ConeSpec,
+               settings: SolveSettings) -> ConicResult:
+    """One solve with the given settings and no retry: the caller decides what an inaccurate
+    answer is worth. Never raises on solver trouble, reports it instead."""
+    if isinstance(A, np.ndarray):
+        A = dense_to_csc(A)
+    try:
+        return _result(_new_solver(q, A, b, cones, _clarabel_settings(settings)).solve())
+    except BaseException as exc:  # Clarabel raises on malformed data (panic) as a Python exception
+        if isinstance(exc, (KeyboardInterrupt, SystemExit)):
+            raise
+        return ConicResult(ConicStatus.FAILED, None, None, np.nan, np.nan, f"exception: {exc}")
+
+
 def _retried(result: ConicResult, q, A: sp.csc_matrix, b, cones: ConeSpec, lean: bool,
              tolerance: float = 1e-9) -> ConicResult:
     """A lean solve that did not end cleanly solved again with the full settings; an inaccurate

@@ -2,7 +2,7 @@
 (every point at positive depth) costing at most the returned camera P0's cost plus
 ``cost_increase`` has its centre within them. Stated beside the depth row read off the leaves
 (fractional.resection_leaves: ``proof.sublevel.centre``), at the same level. Numpy only for the
-check (the solver's conic programs, which only find the multipliers, import clarabel).
+check (the solver's conic programs, which only find the multipliers, go through solvers.core.conic).
 
 The leaves bound the branched last row only; the centre needs all 11 of a camera's unknowns. It
 is bounded as an L2L2 resection's (fractional.resection_sublevel: the slice, the whitened
@@ -151,9 +151,10 @@ def _rows(scene: Scene) -> np.ndarray | None:
 
 def _multipliers(scene: Scene, increase: float, r: float, direction: np.ndarray) -> tuple[float, np.ndarray] | None:
     """(mu, y) for max direction . theta over the convex set of (3): the multipliers of its conic
-    program (clarabel); None when it does not solve."""
-    import clarabel
-    import scipy.sparse as sp
+    program (solved once; an inexact answer serves, since the check recomputes the bound from
+    whatever multipliers are stated); None when it does not solve."""
+    from geocert.solvers.core.cones import ConeSpec
+    from geocert.solvers.core.conic import ConicStatus, SolveSettings, solve_once
 
     k, norm = scene.k, scene.norm
     s = _weights(scene, r)
@@ -162,12 +163,11 @@ def _multipliers(scene: Scene, increase: float, r: float, direction: np.ndarray)
     M = scene.C * s[:, None, None]  # (k, 2, 11)
     parts = k if norm == "L2L1" else 2 * k  # one t per point (a 3-cone) or per coordinate (a 2-cone)
     size = 11 + parts
-    rows, b, cones = [], [], []
+    rows, b, cones = [], [], []  # cones: the second-order cones' sizes, after one nonnegative row
     first = np.zeros(size)
     first[11:] = 1.0
     rows.append(first)
     b.append(scene.level(increase))
-    cones.append(clarabel.NonnegativeConeT(1))
     for j in range(k):
         groups = ((0, 1),) if norm == "L2L1" else ((0,), (1,))
         for g, coordinates in enumerate(groups):
@@ -180,22 +180,19 @@ def _multipliers(scene: Scene, increase: float, r: float, direction: np.ndarray)
                 line[:11] = -M[j, m]
                 rows.append(line)
                 b.append(a[j, m])
-            cones.append(clarabel.SecondOrderConeT(1 + len(coordinates)))
+            cones.append(1 + len(coordinates))
     ball = np.zeros((12, size))
     ball[1:, :11] = -np.eye(11)
     rows.extend(ball)
     b.extend([r] + [0.0] * 11)
-    cones.append(clarabel.SecondOrderConeT(12))
-    A = sp.csc_matrix(np.array(rows))
+    cones.append(12)
     q = np.zeros(size)
     q[:11] = -d
-    settings = clarabel.DefaultSettings()
-    settings.verbose = False
-    settings.tol_gap_abs = settings.tol_gap_rel = 1e-10
-    solution = clarabel.DefaultSolver(sp.csc_matrix((size, size)), q, A, np.array(b), cones, settings).solve()
-    if str(solution.status) not in ("Solved", "AlmostSolved"):
+    solution = solve_once(q, np.array(rows), np.array(b), ConeSpec(nonneg=1, soc=tuple(cones)), SolveSettings(gap=1e-10))
+    # an almost-solved answer's multipliers serve as well (any multipliers give a true bound)
+    if not (solution.status is ConicStatus.OPTIMAL or solution.raw_status == "AlmostSolved"):
         return None
-    z = np.array(solution.z)
+    z = solution.z
     mu = float(z[0])
     if not (math.isfinite(mu) and mu > 0):
         return None

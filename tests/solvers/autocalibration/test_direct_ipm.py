@@ -7,7 +7,6 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
-import clarabel
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -16,7 +15,7 @@ from geocert.solvers.autocalibration import direct, direct_ipm, direct_solve, sc
 from geocert.solvers.autocalibration import direct_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.core.cones import ConeSpec, rounding_uncounted, smat, svec
-from geocert.solvers.core.conic import ConicStatus, clarabel_cones
+from geocert.solvers.core.conic import ConicStatus, SolveSettings, solve_once
 
 UNIT = {"aspect": [0.95, 1.05], "skew": [-0.01, 0.01], "principal_point": [[-0.1, 0.1], [-0.1, 0.1]]}
 
@@ -40,12 +39,9 @@ def random_program(seed: int, zero=1, nonneg=3, psd=(3, 4), variables=8):
 
 
 def clarabel_optimum(q, A, b, cones):
-    settings = clarabel.DefaultSettings()
-    settings.verbose = False
-    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = 1e-10
-    solution = clarabel.DefaultSolver(sp.csc_matrix((len(q), len(q))), q, A, b, clarabel_cones(cones), settings).solve()
-    assert str(solution.status) == "Solved"
-    return solution.obj_val
+    solution = solve_once(q, A, b, cones, SolveSettings(gap=1e-10, feasibility=1e-10))
+    assert solution.raw_status == "Solved"
+    return solution.primal_objective
 
 
 class TestOperator:

@@ -235,3 +235,23 @@ class TestSafeLowerBoundsOfRows:
         assert together[4] == -np.inf and alone[4] == -np.inf
         assert np.allclose(np.delete(together, 4), np.delete(alone, 4), rtol=1e-12, atol=1e-12)
         assert np.isfinite(np.delete(together, 4)).all()
+
+
+class TestSolveOnce:
+    """A one-off solve with its own settings: they reach the solver, and trouble is reported."""
+
+    def test_solves_agree_with_closed_form(self):
+        q, centre = np.array([1.0, -2.0, 0.5]), np.array([0.3, 0.1, -0.4])
+        result = conic.solve_once(q, *ball(centre, 1.5), BALL, conic.SolveSettings(gap=1e-10, feasibility=1e-10))
+        assert result.status is ConicStatus.OPTIMAL
+        assert result.primal_objective == pytest.approx(minimum(q, centre, 1.5), abs=1e-8)
+
+    def test_its_iteration_cap_is_the_one_given(self):
+        q, centre = np.array([1.0, -2.0, 0.5]), np.array([0.3, 0.1, -0.4])
+        result = conic.solve_once(q, *ball(centre, 1.5), BALL, conic.SolveSettings(max_iter=1))
+        assert result.raw_status == "MaxIterations" and result.status is ConicStatus.FAILED
+
+    def test_malformed_data_is_a_failure_not_an_exception(self):
+        A, b = ball([0.0, 0.0, 0.0], 1.0)
+        result = conic.solve_once(np.ones(3), A, b[:-1], BALL, conic.SolveSettings())
+        assert result.status is ConicStatus.FAILED and result.x is None
