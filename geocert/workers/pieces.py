@@ -81,7 +81,7 @@ class SpreadOverSolvers:
     def __call__(self, function, shared, items, stop):
         jobs, job_id, total = self.jobs, self.job_id, len(items)
         helpers = min(total - 1, max(0, jobs.live_solvers() - 1))  # one per other live solver process
-        if not helpers:  # no other solver: the pieces here, one at a time, nothing through Redis
+        if not helpers:  # no other solver: the pieces here, two threads at once, nothing through Redis
             return self._alone(function, shared, items, stop)
         set_id = uuid.uuid4().hex[:16]
         jobs.put_pieces(job_id, set_id, pieces.name_of(function), encode(shared), [encode(item) for item in items],
@@ -106,12 +106,13 @@ class SpreadOverSolvers:
     def _alone(self, function, shared, items, stop):
         solved = []
 
-        def one(item):
-            solved.append(function(shared, item))
-            return solved[-1]
+        def one(item):  # (in threads: each returns its own value; append is atomic)
+            value = function(shared, item)
+            solved.append(True)
+            return value
 
-        try:
-            return pieces.in_order(one, items, stop)
+        try:  # threads, as the command line's stages use: each piece's result is the same as alone
+            return pieces.in_threads(one, items, stop)
         finally:
             self.jobs.count_own_pieces(len(solved))
 

@@ -243,3 +243,46 @@ def test_a_piece_failing_in_a_helper_fails_the_job_through_the_task_keeping_its_
     assert ended["status"] == "failed"
     assert ended["error"]["status"] == 500 and "PieceFailed" in ended["error"]["detail"]
     assert "MemoryError: the helper ran out" in ended["error"]["detail"]
+
+
+@pieces.piece
+def meet(shared: threading.Barrier, item: int) -> int:
+    """A piece that returns only once another piece is running beside it (the barrier's other party)."""
+    shared.wait()
+    return item
+
+
+@pytest.mark.skipif((__import__("os").cpu_count() or 1) < 2, reason="threads at once need two processors")
+def test_with_no_other_solver_the_task_runs_its_pieces_two_at_once_in_its_own_process(jobs):
+    """As the command line's stages do (their threads): one solver process alone still uses two
+    cores. Each piece waits for another to run beside it; one at a time, the first would wait in
+    vain (the barrier's timeout breaks it)."""
+    barrier = threading.Barrier(2, timeout=30)
+    spreader = workers_pieces.SpreadOverSolvers(jobs, "two-at-once")  # no worker beats here: no other solver
+    with pieces.spread_by(spreader):
+        found = pieces.mapped(meet, barrier, [0, 1, 2, 3], lambda k: False, pieces.in_order)
+    assert found == [0, 1, 2, 3]
+    assert not list(jobs.binary.scan_iter(match="geocert:job:two-at-once:*"))  # nothing through Redis
+
+
+def test_pieces_in_threads_keep_their_order_a_stops_prefix_a_cancel_and_an_error():
+    def square(item):
+        time.sleep(0.001 * (item % 3))  # pieces of unequal length end out of order
+        return item * item
+
+    items = list(range(20))
+    assert pieces.in_threads(square, items, lambda k: False) == [k * k for k in items]
+    assert pieces.in_threads(square, items, lambda k: k >= 7) == [k * k for k in range(7)]
+    assert pieces.in_threads(square, items, lambda k: None if k >= 7 else False) is None
+    asked = []
+    pieces.in_threads(square, items, lambda k: asked.append(k) or False)
+    assert asked == items  # each asked once, before its piece starts, in order
+
+    def failing(item):
+        if item == 5:
+            raise ValueError("piece 5")
+        return item
+
+    with pytest.raises(ValueError, match="piece 5"):
+        pieces.in_threads(failing, items, lambda k: False)
+
