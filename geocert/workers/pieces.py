@@ -13,7 +13,9 @@ job's result does not depend on how many solvers shared it.
 A cancel (or the task's stop) stops the set: no piece is taken any more, and helpers also stop
 at their job's cancel. A piece that raises in a helper fails the job with its error (the task's
 own failure path: the items finished are kept). A piece a helper took and never returned (its
-process gone) is computed again by the task after a grace time.
+process gone, or the helper stopped by its time limit) is computed again by the task after a
+grace time. A helper holds its job's solver slot as the task does (the worker's heartbeat renews
+both), and its Celery time limits end it soon after its task's last-resort deadline.
 
 Pieces travel through Redis as pickles read back by an unpickler that makes only numpy arrays,
 plain containers and geocert's dataclasses, and runs only registered piece functions: what is in
@@ -28,6 +30,8 @@ import logging
 import pickle
 import time
 import uuid
+
+from celery.exceptions import SoftTimeLimitExceeded
 
 from geocert.solvers.core import pieces
 from geocert.workers.priorities import FIRST
@@ -71,11 +75,33 @@ def decode(data: bytes):
     return _DataOnly(io.BytesIO(data)).load()
 
 
-class SpreadOverSolvers:
-    """The spreader (solvers.core.pieces.spread_by) of a task of job ``job_id``."""
+def helper_time_limits(stop_by: float | None) -> dict:
+    """Celery's soft and hard time limits of a helper task queued now by a task stopped as a last
+    resort at ``stop_by`` (time.monotonic(); queue.task_deadline_s: its job's own limits plus
+    GEOCERT_TASK_TIME_MARGIN_S), as queue.task_options sizes the task's own: a helper has nothing
+    to do once its task is stopped. None: a task of unknown deadline, held to the longest any task
+    may run (GEOCERT_MAX_JOB_TIME_LIMIT_S, GEOCERT_CHUNK_TIME_BUDGET_S and
+    GEOCERT_MAX_ITEM_TIME_LIMIT_S, plus the margin)."""
+    from geocert.settings import get_settings
+    from geocert.workers.queue import HARD_AFTER_S, SOFT_AFTER_S
 
-    def __init__(self, jobs: JobStore, job_id: str, request_id: str | None = None):
-        self.jobs, self.job_id, self.request_id = jobs, job_id, request_id
+    if stop_by is None:
+        settings = get_settings()
+        left = (max(settings.max_job_time_limit_s, settings.chunk_time_budget_s + settings.max_item_time_limit_s)
+                + settings.task_time_margin_s)
+    else:
+        left = stop_by - time.monotonic()
+    soft = max(1.0, left) + SOFT_AFTER_S
+    return {"soft_time_limit": soft, "time_limit": soft + HARD_AFTER_S}
+
+
+class SpreadOverSolvers:
+    """The spreader (solvers.core.pieces.spread_by) of a task of job ``job_id``, stopped as a
+    last resort at ``stop_by`` (time.monotonic(); None: not known), which bounds its helpers'
+    time limits (helper_time_limits)."""
+
+    def __init__(self, jobs: JobStore, job_id: str, request_id: str | None = None, stop_by: float | None = None):
+        self.jobs, self.job_id, self.request_id, self.stop_by = jobs, job_id, request_id, stop_by
         self.solved = 0  # pieces of the current set this task solved itself
 
     def __call__(self, function, shared, items, stop):
@@ -96,12 +122,14 @@ class SpreadOverSolvers:
             jobs.drop_pieces(job_id, set_id)
 
     def queue_helpers(self, set_id: str, count: int) -> None:
-        """Queue ``count`` solve_pieces tasks for the set (ahead of the jobs' later tasks)."""
+        """Queue ``count`` solve_pieces tasks for the set (ahead of the jobs' later tasks), each
+        with time limits that end it soon after its task's (helper_time_limits)."""
         from geocert.workers.celery_app import celery_app  # (needs the broker's address: a worker's)
 
+        limits = helper_time_limits(self.stop_by)
         for _ in range(count):
             celery_app.send_task(SOLVE_PIECES, (self.job_id, set_id, self.request_id), priority=FIRST,
-                                 ignore_result=True)
+                                 ignore_result=True, **limits)
 
     def _alone(self, function, shared, items, stop):
         solved = []
@@ -179,6 +207,8 @@ def help_with(jobs: JobStore, job_id: str, set_id: str) -> int:
                     break
                 function, shared = pieces.registered(stated[0]), decode(stated[1])
             value = encode(function(shared, decode(item)))
+        except SoftTimeLimitExceeded:
+            raise  # the helper's own time limit, not the piece's fault: its task computes the piece
         except Exception as exc:  # noqa: BLE001 (the task that put the piece fails its job with it)
             log.exception("piece %d of job %s failed", index, job_id)
             jobs.put_piece_result(job_id, set_id, index, error=f"{type(exc).__name__}: {exc}", ttl_s=TTL_S)

@@ -286,3 +286,47 @@ def test_pieces_in_threads_keep_their_order_a_stops_prefix_a_cancel_and_an_error
     with pytest.raises(ValueError, match="piece 5"):
         pieces.in_threads(failing, items, lambda k: False)
 
+
+def test_a_helper_has_time_limits_ending_it_soon_after_its_task(jobs, monkeypatch):
+    """A helper's Celery limits follow its task's last-resort deadline (the job's own limits and
+    GEOCERT_TASK_TIME_MARGIN_S): a helper never outlives its task by more than the soft and hard
+    margins queue.task_options gives the task itself."""
+    import sys
+    from types import SimpleNamespace
+
+    from geocert.workers.queue import HARD_AFTER_S, SOFT_AFTER_S
+
+    sent = []  # the tasks' options, as the Celery app would send them (its module needs a worker's broker)
+    celery_app = SimpleNamespace(send_task=lambda name, args, **options: sent.append(options))
+    monkeypatch.setitem(sys.modules, "geocert.workers.celery_app", SimpleNamespace(celery_app=celery_app))
+    workers_pieces.SpreadOverSolvers(jobs, "limited", stop_by=time.monotonic() + 100).queue_helpers("set", 2)
+    assert len(sent) == 2
+    for options in sent:
+        assert 100 - 5 + SOFT_AFTER_S <= options["soft_time_limit"] <= 100 + SOFT_AFTER_S
+        assert options["time_limit"] == options["soft_time_limit"] + HARD_AFTER_S
+    sent.clear()
+    workers_pieces.SpreadOverSolvers(jobs, "unknown-deadline").queue_helpers("set", 1)
+    from geocert.settings import get_settings
+
+    settings = get_settings()
+    longest = max(settings.max_job_time_limit_s, settings.chunk_time_budget_s + settings.max_item_time_limit_s)
+    assert sent[0]["soft_time_limit"] == longest + settings.task_time_margin_s + SOFT_AFTER_S
+
+
+@pieces.piece
+def past_its_time(shared, item):
+    from celery.exceptions import SoftTimeLimitExceeded
+
+    raise SoftTimeLimitExceeded()
+
+
+def test_a_helper_stopped_by_its_time_limit_leaves_its_piece_to_the_task(jobs):
+    """Celery's soft limit raised in a helper's piece is the helper's end, not the piece's error:
+    the job is not failed with it, and the task computes the piece (as one lost)."""
+    from celery.exceptions import SoftTimeLimitExceeded
+
+    jobs.put_pieces("timed-out", "set", pieces.name_of(past_its_time), workers_pieces.encode(None),
+                    [workers_pieces.encode(k) for k in range(3)], 60)
+    with pytest.raises(SoftTimeLimitExceeded):
+        workers_pieces.help_with(jobs, "timed-out", "set")
+    assert jobs.piece_results("timed-out", "set", [0, 1, 2]) == ({}, {})  # no error stored
