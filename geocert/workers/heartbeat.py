@@ -25,6 +25,7 @@ import time
 import redis
 
 from geocert.jobs.store import SOLVERS_KEY, WORKERS_KEY, JobStore
+from geocert.workers.pieces import SOLVE_PIECES
 
 KEY, SOLVERS = WORKERS_KEY, SOLVERS_KEY  # (JobStore.take_slot reads them)
 INTERVAL_S = 2.0
@@ -36,13 +37,14 @@ log = logging.getLogger("geocert.worker")
 UNACKED_INDEX = "unacked_index"  # Kombu's Redis transport: delivery tag -> when it was delivered
 SOLVE_TASK = "geocert.solve_chunk"
 # The tasks that hold a solver slot of their job (JobStore.take_slot): the solve tasks and their
-# helpers with a stage's pieces (workers.pieces.SOLVE_PIECES); each is the job's first argument.
-SLOT_TASKS = (SOLVE_TASK, "geocert.solve_pieces")
+# helpers with a stage's pieces (workers.pieces); the job is each one's first argument.
+SLOT_TASKS = (SOLVE_TASK, SOLVE_PIECES)
 
 
 def held_tasks() -> list[tuple[str, str | None]]:
-    """(delivery tag, job id of a solve task or a helper, else None) of every task this worker process holds:
-    running, reserved, or waiting for its countdown (Celery's worker state, main process)."""
+    """(delivery tag, job id of a task holding a solver slot, else None) of every task this
+    worker process holds: running, reserved, or waiting for its countdown (Celery's worker state,
+    main process)."""
     from celery.worker import state
 
     held = []
