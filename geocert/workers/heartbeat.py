@@ -25,6 +25,7 @@ import time
 import redis
 
 from geocert.jobs.store import SOLVERS_KEY, WORKERS_KEY, JobStore
+from geocert.workers.pieces import SOLVE_PIECES
 
 KEY, SOLVERS = WORKERS_KEY, SOLVERS_KEY  # (JobStore.take_slot reads them)
 INTERVAL_S = 2.0
@@ -35,11 +36,15 @@ log = logging.getLogger("geocert.worker")
 
 UNACKED_INDEX = "unacked_index"  # Kombu's Redis transport: delivery tag -> when it was delivered
 SOLVE_TASK = "geocert.solve_chunk"
+# The tasks that hold a solver slot of their job (JobStore.take_slot): the solve tasks and their
+# helpers with a stage's pieces (workers.pieces); the job is each one's first argument.
+SLOT_TASKS = (SOLVE_TASK, SOLVE_PIECES)
 
 
 def held_tasks() -> list[tuple[str, str | None]]:
-    """(delivery tag, job id of a solve task or None) of every task this worker process holds:
-    running, reserved, or waiting for its countdown (Celery's worker state, main process)."""
+    """(delivery tag, job id of a task holding a solver slot, else None) of every task this
+    worker process holds: running, reserved, or waiting for its countdown (Celery's worker state,
+    main process)."""
     from celery.worker import state
 
     held = []
@@ -48,15 +53,16 @@ def held_tasks() -> list[tuple[str, str | None]]:
         if tag is None:
             continue
         args = request.args or ()
-        held.append((tag, args[0] if request.name == SOLVE_TASK and args else None))
+        held.append((tag, args[0] if request.name in SLOT_TASKS and args else None))
     return held
 
 
 def held_solve_tasks() -> list[str]:
-    """The ids of the solve tasks this worker process holds: their solver slots (JobStore.take_slot)."""
+    """The ids of the tasks this worker process holds that take solver slots (SLOT_TASKS: the
+    solve tasks and their helpers): their slots (JobStore.take_slot), which lapse unrenewed."""
     from celery.worker import state
 
-    return [request.id for request in list(state.requests.values()) if request.name == SOLVE_TASK]
+    return [request.id for request in list(state.requests.values()) if request.name in SLOT_TASKS]
 
 
 def beat(client: redis.Redis, name: str, held: list[tuple[str, str | None]] = (), solvers: int | None = 0,

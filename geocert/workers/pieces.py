@@ -13,11 +13,14 @@ job's result does not depend on how many solvers shared it.
 A cancel (or the task's stop) stops the set: no piece is taken any more, and helpers also stop
 at their job's cancel. A piece that raises in a helper fails the job with its error (the task's
 own failure path: the items finished are kept). A piece a helper took and never returned (its
-process gone) is computed again by the task after a grace time.
+process gone, or the helper stopped by its time limit) is computed again by the task after a
+grace time. A helper holds its job's solver slot as the task does (the worker's heartbeat renews
+both), and its Celery time limits end it soon after its task's last-resort deadline.
 
 Pieces travel through Redis as pickles read back by an unpickler that makes only numpy arrays,
 plain containers and geocert's dataclasses, and runs only registered piece functions: what is in
-Redis names data and a registered function, never code to run.
+Redis names data and a registered function, never code to run. A float32 array of byte values
+(SIFT's descriptors) travels as its bytes, read back as the same float32 array.
 """
 
 from __future__ import annotations
@@ -28,6 +31,9 @@ import logging
 import pickle
 import time
 import uuid
+
+import numpy as np
+from celery.exceptions import SoftTimeLimitExceeded
 
 from geocert.solvers.core import pieces
 from geocert.workers.priorities import FIRST
@@ -52,10 +58,35 @@ _NUMPY = {(module, name) for module in ("numpy.core.multiarray", "numpy._core.mu
           ("numpy", "ndarray"), ("numpy", "dtype")}
 
 
+def _float32_of(small: np.ndarray) -> np.ndarray:
+    """A float32 array sent as its uint8 values (_Compact), as it was."""
+    return small.astype(np.float32)
+
+
+COMPACT_FROM = 1024  # elements: a smaller array is not worth the check
+
+
+class _Compact(pickle.Pickler):
+    """Pickles a float32 array whose values are all whole numbers from 0 to 255 (and no -0.0) as
+    its uint8 values, a quarter of the bytes, read back exactly (_float32_of): SIFT's descriptors,
+    which OpenCV rounds to bytes and returns as float32, are most of what the matches stage's
+    pieces share and what its features' pieces return."""
+
+    def reducer_override(self, value):
+        if (type(value) is np.ndarray and value.dtype == np.float32 and value.size >= COMPACT_FROM
+                and value.min() >= 0 and value.max() <= 255):  # (NaN fails both)
+            small = value.astype(np.uint8)
+            if np.array_equal(small, value) and not np.signbit(value).any():
+                return _float32_of, (small,)
+        return NotImplemented
+
+
 class _DataOnly(pickle.Unpickler):
     def find_class(self, module: str, name: str):
         if (module, name) in _NUMPY:
             return super().find_class(module, name)
+        if (module, name) == (__name__, _float32_of.__name__):
+            return _float32_of
         if module.startswith("geocert."):
             found = super().find_class(module, name)
             if dataclasses.is_dataclass(found) and isinstance(found, type):
@@ -64,24 +95,48 @@ class _DataOnly(pickle.Unpickler):
 
 
 def encode(value) -> bytes:
-    return pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+    out = io.BytesIO()
+    _Compact(out, protocol=pickle.HIGHEST_PROTOCOL).dump(value)
+    return out.getvalue()
 
 
 def decode(data: bytes):
     return _DataOnly(io.BytesIO(data)).load()
 
 
-class SpreadOverSolvers:
-    """The spreader (solvers.core.pieces.spread_by) of a task of job ``job_id``."""
+def helper_time_limits(stop_by: float | None) -> dict:
+    """Celery's soft and hard time limits of a helper task queued now by a task stopped as a last
+    resort at ``stop_by`` (time.monotonic(); queue.task_deadline_s: its job's own limits plus
+    GEOCERT_TASK_TIME_MARGIN_S), as queue.task_options sizes the task's own: a helper has nothing
+    to do once its task is stopped. None: a task of unknown deadline, held to the longest any task
+    may run (GEOCERT_MAX_JOB_TIME_LIMIT_S, GEOCERT_CHUNK_TIME_BUDGET_S and
+    GEOCERT_MAX_ITEM_TIME_LIMIT_S, plus the margin)."""
+    from geocert.settings import get_settings
+    from geocert.workers.queue import HARD_AFTER_S, SOFT_AFTER_S
 
-    def __init__(self, jobs: JobStore, job_id: str, request_id: str | None = None):
-        self.jobs, self.job_id, self.request_id = jobs, job_id, request_id
+    if stop_by is None:
+        settings = get_settings()
+        left = (max(settings.max_job_time_limit_s, settings.chunk_time_budget_s + settings.max_item_time_limit_s)
+                + settings.task_time_margin_s)
+    else:
+        left = stop_by - time.monotonic()
+    soft = max(1.0, left) + SOFT_AFTER_S
+    return {"soft_time_limit": soft, "time_limit": soft + HARD_AFTER_S}
+
+
+class SpreadOverSolvers:
+    """The spreader (solvers.core.pieces.spread_by) of a task of job ``job_id``, stopped as a
+    last resort at ``stop_by`` (time.monotonic(); None: not known), which bounds its helpers'
+    time limits (helper_time_limits)."""
+
+    def __init__(self, jobs: JobStore, job_id: str, request_id: str | None = None, stop_by: float | None = None):
+        self.jobs, self.job_id, self.request_id, self.stop_by = jobs, job_id, request_id, stop_by
         self.solved = 0  # pieces of the current set this task solved itself
 
     def __call__(self, function, shared, items, stop):
         jobs, job_id, total = self.jobs, self.job_id, len(items)
         helpers = min(total - 1, max(0, jobs.live_solvers() - 1))  # one per other live solver process
-        if not helpers:  # no other solver: the pieces here, one at a time, nothing through Redis
+        if not helpers:  # no other solver: the pieces here, two threads at once, nothing through Redis
             return self._alone(function, shared, items, stop)
         set_id = uuid.uuid4().hex[:16]
         jobs.put_pieces(job_id, set_id, pieces.name_of(function), encode(shared), [encode(item) for item in items],
@@ -96,22 +151,25 @@ class SpreadOverSolvers:
             jobs.drop_pieces(job_id, set_id)
 
     def queue_helpers(self, set_id: str, count: int) -> None:
-        """Queue ``count`` solve_pieces tasks for the set (ahead of the jobs' later tasks)."""
+        """Queue ``count`` solve_pieces tasks for the set (ahead of the jobs' later tasks), each
+        with time limits that end it soon after its task's (helper_time_limits)."""
         from geocert.workers.celery_app import celery_app  # (needs the broker's address: a worker's)
 
+        limits = helper_time_limits(self.stop_by)
         for _ in range(count):
             celery_app.send_task(SOLVE_PIECES, (self.job_id, set_id, self.request_id), priority=FIRST,
-                                 ignore_result=True)
+                                 ignore_result=True, **limits)
 
     def _alone(self, function, shared, items, stop):
         solved = []
 
-        def one(item):
-            solved.append(function(shared, item))
-            return solved[-1]
+        def one(item):  # (in threads: each returns its own value; append is atomic)
+            value = function(shared, item)
+            solved.append(True)
+            return value
 
-        try:
-            return pieces.in_order(one, items, stop)
+        try:  # threads, as the command line's stages use: each piece's result is the same as alone
+            return pieces.in_threads(one, items, stop)
         finally:
             self.jobs.count_own_pieces(len(solved))
 
@@ -178,6 +236,8 @@ def help_with(jobs: JobStore, job_id: str, set_id: str) -> int:
                     break
                 function, shared = pieces.registered(stated[0]), decode(stated[1])
             value = encode(function(shared, decode(item)))
+        except SoftTimeLimitExceeded:
+            raise  # the helper's own time limit, not the piece's fault: its task computes the piece
         except Exception as exc:  # noqa: BLE001 (the task that put the piece fails its job with it)
             log.exception("piece %d of job %s failed", index, job_id)
             jobs.put_piece_result(job_id, set_id, index, error=f"{type(exc).__name__}: {exc}", ttl_s=TTL_S)

@@ -64,6 +64,16 @@ def limit_memory(megabytes: int) -> None:
 _HEARTBEAT = None
 
 
+def beat_name(hostname: str | None) -> str:
+    """The name this worker beats under: its Celery node name and its main process's id.
+    Several workers on one host may share a node name (``geocert worker`` started twice, each
+    ``geocert@host``): under one name their beats would count as one worker and its solver
+    processes, so /readyz, the keys' fair share and the pieces' helpers would see too few."""
+    import os
+
+    return f"{hostname or 'geocert@unknown'}/{os.getpid()}"
+
+
 @worker_ready.connect
 def _start_heartbeat(sender=None, **_) -> None:
     """From the moment the worker takes tasks, it beats (``workers.heartbeat``; read by /readyz)."""
@@ -74,7 +84,7 @@ def _start_heartbeat(sender=None, **_) -> None:
     from geocert.jobs.store import JobStore
     from geocert.workers.tasks import end_jobs_past_clock
 
-    name = getattr(sender, "hostname", None) or "geocert@unknown"
+    name = beat_name(getattr(sender, "hostname", None))
     settings = get_settings()
     if SOLVE_QUEUE not in sender.app.amqp.queues.consume_from:  # a webhook worker: it renews its leases only
         _HEARTBEAT = Heartbeat(redis_url(), name, solvers=None).start()

@@ -160,7 +160,9 @@ def solve_chunk(self, job_id: str, start: int, stop: int, request_id: str | None
 def solve_pieces(self, job_id: str, set_id: str, request_id: str | None = None) -> None:
     """Help a running task of the job with its stage's pieces (workers.pieces): take them until
     none is left, the set is stopped or the job cancelled. Without a solver slot for the job's key
-    (JobStore.take_slot) it leaves them to the task and the other helpers."""
+    (JobStore.take_slot) it leaves them to the task and the other helpers. Its slot is renewed by
+    the worker's heartbeat (heartbeat.held_solve_tasks); past its soft time limit
+    (pieces.helper_time_limits) it leaves the piece it holds to its task."""
     with logs.context(job_id=job_id, request_id=request_id, pieces=set_id):
         slot = self.request.id
         try:
@@ -170,6 +172,8 @@ def solve_pieces(self, job_id: str, set_id: str, request_id: str | None = None) 
                 help_with(store(), job_id, set_id)
             finally:
                 _free_slot(slot)
+        except SoftTimeLimitExceeded:  # its time limit (after its task's): the task computes the piece left
+            log.warning("the pieces %s of job %s: a helper stopped at its time limit", set_id, job_id)
         except REDIS_GONE:  # the task that put the pieces computes those not returned
             log.warning("Redis went away under the pieces %s of job %s", set_id, job_id)
 
@@ -241,7 +245,7 @@ def _solve_started_chunk(jobs: JobStore, job_id: str, start: int, stop: int, req
                                       kind if streams_result(kind, options) else None, abs_gap_of(options),
                                       stop_by=began + deadline_s)
         # a stage's independent pieces (a reconstruction's images and pairs) go to the other solvers too
-        with spread_by(SpreadOverSolvers(jobs, job_id, request_id)):
+        with spread_by(SpreadOverSolvers(jobs, job_id, request_id, stop_by=began + deadline_s)):
             items = solve_items(kind, parsed, options, range(start, stop), publisher, publisher.should_stop,
                                 stop_at=began + settings.chunk_time_budget_s, on_item=publisher.item_ended,
                                 deadline=job_deadline(options, began - _ran_before(jobs, job_id)))

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import pytest
 import redis
 
-from geocert.workers.heartbeat import KEY, UNACKED_INDEX, beat, held_tasks
+from geocert.workers.heartbeat import KEY, UNACKED_INDEX, beat, held_solve_tasks, held_tasks
 from geocert.jobs.store import JobStore
 
 
@@ -37,6 +37,30 @@ def test_held_tasks_are_every_request_of_the_worker_state(monkeypatch):
         "c": SimpleNamespace(message=None, name="geocert.solve_chunk", args=["job-3", 0, 1]),  # no delivery
     })
     assert sorted(held_tasks()) == [("tag-a", "job-1"), ("tag-b", None)]
+
+
+def test_a_helpers_slot_and_job_are_renewed_as_a_solve_tasks_are(client, monkeypatch):
+    """A helper with a stage's pieces (solve_pieces) holds its job's solver slot: unrenewed, the
+    slot would lapse after SLOT_LAPSE_S (30 s) while the helper still runs, and another task of
+    the key would take its place beyond the key's share."""
+    from celery.worker import state
+
+    monkeypatch.setattr(state, "requests", {
+        "solve": SimpleNamespace(id="solve", message=SimpleNamespace(delivery_tag="tag-s"), name="geocert.solve_chunk",
+                                 args=["job-1", 0, 1]),
+        "helper": SimpleNamespace(id="helper", message=SimpleNamespace(delivery_tag="tag-h"),
+                                  name="geocert.solve_pieces", args=["job-2", "set", None]),
+        "webhook": SimpleNamespace(id="webhook", message=SimpleNamespace(delivery_tag="tag-w"),
+                                   name="geocert.deliver_webhook", args=["job-3"]),
+    })
+    assert sorted(held_solve_tasks()) == ["helper", "solve"]
+    assert sorted(held_tasks()) == [("tag-h", "job-2"), ("tag-s", "job-1"), ("tag-w", None)]
+    client.zadd(JobStore.SLOTS, {"solve": 1.0, "helper": 1.0})
+    client.zadd(JobStore.RUNNING, {"job-2": 1.0})
+    beat(client, "geocert@test", held_tasks(), 1, held_solve_tasks())
+    slots = dict(client.zrange(JobStore.SLOTS, 0, -1, withscores=True))
+    assert slots["helper"] > 1e9 and slots["solve"] > 1e9
+    assert client.zscore(JobStore.RUNNING, "job-2") > 1e9
 
 
 def test_a_beat_renews_the_leases_it_holds_and_adds_none(client):

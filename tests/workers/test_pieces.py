@@ -243,3 +243,111 @@ def test_a_piece_failing_in_a_helper_fails_the_job_through_the_task_keeping_its_
     assert ended["status"] == "failed"
     assert ended["error"]["status"] == 500 and "PieceFailed" in ended["error"]["detail"]
     assert "MemoryError: the helper ran out" in ended["error"]["detail"]
+
+
+@pieces.piece
+def meet(shared: threading.Barrier, item: int) -> int:
+    """A piece that returns only once another piece is running beside it (the barrier's other party)."""
+    shared.wait()
+    return item
+
+
+@pytest.mark.skipif((__import__("os").cpu_count() or 1) < 2, reason="threads at once need two processors")
+def test_with_no_other_solver_the_task_runs_its_pieces_two_at_once_in_its_own_process(jobs):
+    """As the command line's stages do (their threads): one solver process alone still uses two
+    cores. Each piece waits for another to run beside it; one at a time, the first would wait in
+    vain (the barrier's timeout breaks it)."""
+    barrier = threading.Barrier(2, timeout=30)
+    spreader = workers_pieces.SpreadOverSolvers(jobs, "two-at-once")  # no worker beats here: no other solver
+    with pieces.spread_by(spreader):
+        found = pieces.mapped(meet, barrier, [0, 1, 2, 3], lambda k: False, pieces.in_order)
+    assert found == [0, 1, 2, 3]
+    assert not list(jobs.binary.scan_iter(match="geocert:job:two-at-once:*"))  # nothing through Redis
+
+
+def test_pieces_in_threads_keep_their_order_a_stops_prefix_a_cancel_and_an_error():
+    def square(item):
+        time.sleep(0.001 * (item % 3))  # pieces of unequal length end out of order
+        return item * item
+
+    items = list(range(20))
+    assert pieces.in_threads(square, items, lambda k: False) == [k * k for k in items]
+    assert pieces.in_threads(square, items, lambda k: k >= 7) == [k * k for k in range(7)]
+    assert pieces.in_threads(square, items, lambda k: None if k >= 7 else False) is None
+    asked = []
+    pieces.in_threads(square, items, lambda k: asked.append(k) or False)
+    assert asked == items  # each asked once, before its piece starts, in order
+
+    def failing(item):
+        if item == 5:
+            raise ValueError("piece 5")
+        return item
+
+    with pytest.raises(ValueError, match="piece 5"):
+        pieces.in_threads(failing, items, lambda k: False)
+
+
+def test_a_helper_has_time_limits_ending_it_soon_after_its_task(jobs, monkeypatch):
+    """A helper's Celery limits follow its task's last-resort deadline (the job's own limits and
+    GEOCERT_TASK_TIME_MARGIN_S): a helper never outlives its task by more than the soft and hard
+    margins queue.task_options gives the task itself."""
+    import sys
+    from types import SimpleNamespace
+
+    from geocert.workers.queue import HARD_AFTER_S, SOFT_AFTER_S
+
+    sent = []  # the tasks' options, as the Celery app would send them (its module needs a worker's broker)
+    celery_app = SimpleNamespace(send_task=lambda name, args, **options: sent.append(options))
+    monkeypatch.setitem(sys.modules, "geocert.workers.celery_app", SimpleNamespace(celery_app=celery_app))
+    workers_pieces.SpreadOverSolvers(jobs, "limited", stop_by=time.monotonic() + 100).queue_helpers("set", 2)
+    assert len(sent) == 2
+    for options in sent:
+        assert 100 - 5 + SOFT_AFTER_S <= options["soft_time_limit"] <= 100 + SOFT_AFTER_S
+        assert options["time_limit"] == options["soft_time_limit"] + HARD_AFTER_S
+    sent.clear()
+    workers_pieces.SpreadOverSolvers(jobs, "unknown-deadline").queue_helpers("set", 1)
+    from geocert.settings import get_settings
+
+    settings = get_settings()
+    longest = max(settings.max_job_time_limit_s, settings.chunk_time_budget_s + settings.max_item_time_limit_s)
+    assert sent[0]["soft_time_limit"] == longest + settings.task_time_margin_s + SOFT_AFTER_S
+
+
+@pieces.piece
+def past_its_time(shared, item):
+    from celery.exceptions import SoftTimeLimitExceeded
+
+    raise SoftTimeLimitExceeded()
+
+
+def test_a_helper_stopped_by_its_time_limit_leaves_its_piece_to_the_task(jobs):
+    """Celery's soft limit raised in a helper's piece is the helper's end, not the piece's error:
+    the job is not failed with it, and the task computes the piece (as one lost)."""
+    from celery.exceptions import SoftTimeLimitExceeded
+
+    jobs.put_pieces("timed-out", "set", pieces.name_of(past_its_time), workers_pieces.encode(None),
+                    [workers_pieces.encode(k) for k in range(3)], 60)
+    with pytest.raises(SoftTimeLimitExceeded):
+        workers_pieces.help_with(jobs, "timed-out", "set")
+    assert jobs.piece_results("timed-out", "set", [0, 1, 2]) == ({}, {})  # no error stored
+
+
+def test_float32_byte_values_travel_as_bytes_and_come_back_the_same():
+    """SIFT's descriptors (float32 holding whole numbers 0 to 255) are most of what the matches
+    stage's pieces share: they travel as a quarter of the bytes and read back bit for bit; any
+    other float32 array travels as it is."""
+    rng = np.random.default_rng(0)
+    descriptors = [rng.integers(0, 256, (500, 128)).astype(np.float32) for _ in range(3)]
+    shared = (descriptors, np.asfortranarray(descriptors[0][:64]))
+    data = workers_pieces.encode(shared)
+    assert len(data) < 0.3 * sum(d.nbytes for d in descriptors)
+    back = workers_pieces.decode(data)
+    for found, sent in zip([*back[0], back[1]], [*descriptors, shared[1]]):
+        assert found.dtype == np.float32 and found.shape == sent.shape and found.tobytes() == sent.tobytes()
+        assert found.flags.f_contiguous == sent.flags.f_contiguous
+    for other in (0.5, -0.0, 256.0, np.nan, -1.0):  # not a byte (or -0.0, whose sign a byte loses)
+        array = descriptors[1].copy()
+        array[7, 3] = other
+        found = workers_pieces.decode(workers_pieces.encode(array))
+        assert len(workers_pieces.encode(array)) > array.nbytes
+        assert found.dtype == np.float32 and found.tobytes() == array.tobytes()

@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import functools
+import os
 from typing import Any, Callable, Sequence
 
 Stop = Callable[[int], "bool | None"]
@@ -75,9 +76,48 @@ def in_order(one: Callable, items: Sequence, stop: Stop) -> list | None:
     return results
 
 
+# Pieces at once in one process (in_threads): OpenCV's SIFT and RANSAC, numpy's products and the
+# conic solver release the interpreter's lock, so two threads use two cores; more would only
+# contend on a 2-core machine, and the stages' own mappings use two as well.
+THREADS = 2
+
+
+def in_threads(one: Callable, items: Sequence, stop: Stop, threads: int | None = None) -> list | None:
+    """``one(item)`` for the items, ``threads`` at a time (None: THREADS; at most the
+    processors), in this process: an ``in_process`` mapping with ``in_order``'s results and
+    ``stop`` (asked in this thread before the k-th item starts; a cancel returns None once the
+    items in flight end). An item starts as soon as any running one ends, so one long item does
+    not hold the others back; each item's result is what it computes alone."""
+    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+    threads = max(1, min(THREADS if threads is None else threads, os.cpu_count() or 1, len(items)))
+    if threads == 1:
+        return in_order(one, items, stop)
+    results: dict[int, Any] = {}
+    started, asked = 0, False
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        running: dict = {}
+        while True:
+            while asked is False and started < len(items) and len(running) < threads:
+                asked = stop(started)
+                asked = None if asked is None else bool(asked)
+                if asked is False:
+                    running[pool.submit(one, items[started])] = started
+                    started += 1
+            if not running:
+                break
+            finished, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in finished:
+                results[running.pop(future)] = future.result()  # a piece that raised raises here
+    if asked is None:
+        return None
+    return [results[k] for k in range(started)]
+
+
 def spreading() -> bool:
-    """Whether a spreader is set for this code (a stage may then run its pieces one at a time
-    in this process: the other processes are its parallelism)."""
+    """Whether a spreader is set for this code (a stage then hands it every piece, with a
+    threadless ``in_process`` mapping: the spreader chooses how its process runs them, in
+    threads when no other process takes a share)."""
     return _SPREADER.get() is not None
 
 
