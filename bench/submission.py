@@ -279,23 +279,26 @@ def _BASELINE_ARGS(args) -> set[str]:
             f"--rounds={args.rounds}", "--profile"}
 
 
-# A run with one checkout's geocert (imported first, from the checkout given) and this bench.
+# A run with one checkout's geocert (imported first, from the checkout given) and a bench of this one.
 _RUN = """
+import importlib
 import sys
 sys.path.insert(0, sys.argv[1])
 import geocert
 assert geocert.__file__.startswith(sys.argv[1]), geocert.__file__
 sys.path.insert(0, sys.argv[2])
-from bench import submission
-sys.argv = ["bench.submission", *sys.argv[3:]]
-submission.main()
+bench = importlib.import_module(sys.argv[3])
+sys.argv = [sys.argv[3], *sys.argv[4:]]
+bench.main()
 """
 
 
-def against(baseline: str, rounds: int, arguments: list[str]) -> None:
+def against(baseline: str, rounds: int, arguments: list[str], bench: str = "bench.submission",
+            what: str = "a submission") -> None:
     """This checkout's geocert and ``baseline``'s, measured in turn (this one first in even
-    rounds, the baseline first in odd ones), each run a process of its own; the CPU a submission
-    of each run, and the ratio of the medians (this checkout / the baseline)."""
+    rounds, the baseline first in odd ones), each run a process of its own running the module
+    ``bench`` of this checkout with ``arguments``; the CPU (the first figure its output gives as
+    "<x> ms CPU") of each run, and the ratio of the medians (this checkout / the baseline)."""
     here = str(Path(__file__).resolve().parent.parent)
     checkouts = {"this checkout": here, "baseline": str(Path(baseline).resolve())}
     cpu: dict[str, list[float]] = {name: [] for name in checkouts}
@@ -303,7 +306,7 @@ def against(baseline: str, rounds: int, arguments: list[str]) -> None:
     for round_ in range(rounds):
         order = list(checkouts) if round_ % 2 == 0 else list(reversed(checkouts))
         for name in order:
-            done = subprocess.run([sys.executable, "-c", _RUN, checkouts[name], here, *arguments],
+            done = subprocess.run([sys.executable, "-c", _RUN, checkouts[name], here, bench, *arguments],
                                   capture_output=True, text=True, env={**os.environ, "PYTHONPATH": ""})
             if done.returncode != 0:
                 raise SystemExit(f"{name} failed:\n{done.stderr[-3000:]}")
@@ -311,7 +314,7 @@ def against(baseline: str, rounds: int, arguments: list[str]) -> None:
             cpu[name].append(float(re.search(r"([\d.]+) ms CPU", line).group(1)))
             print(f"round {round_ + 1}, {name} ({checkouts[name]}): {line}", flush=True)
     medians = {name: statistics.median(values) for name, values in cpu.items()}
-    print(f"CPU a submission, median of {rounds}: this checkout {medians['this checkout']:.3f} ms, baseline "
+    print(f"CPU {what}, median of {rounds}: this checkout {medians['this checkout']:.3f} ms, baseline "
           f"{medians['baseline']:.3f} ms: ratio {medians['this checkout'] / medians['baseline']:.2f}; load average at "
           f"the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
