@@ -22,6 +22,9 @@ the answer written to a stub transport, a trivial ASGI app): CPU a request with 
 ``--messages``: making a one-chunk job's task commands alone (``queue.task_commands`` with the
 event loop's producer), CPU a job.
 
+``--parse``: the triangulation kind's parse of the Oxford Dinosaur's tracks (Oxford VGG's data,
+4983 tracks; ``--tracks`` fewer), as the API checks a body and a worker reads its chunk, CPU a parse.
+
 ``--baseline <checkout>``: before and after in one run: this measurement made ``--rounds`` times
 in turn with this checkout's geocert and with that checkout's (each run a process of its own,
 alternating, this bench's code in both), then the ratio of their medians. E.g. the whole request
@@ -60,13 +63,17 @@ def main() -> None:
     parser.add_argument("--app", action="store_true", help="the whole request through the ASGI app")
     parser.add_argument("--parsers", action="store_true", help="uvicorn's h11 against httptools, per request")
     parser.add_argument("--messages", action="store_true", help="making a one-chunk job's task commands alone")
+    parser.add_argument("--parse", action="store_true", help="the triangulation kind's parse of the Dinosaur's tracks")
     parser.add_argument("--baseline", metavar="CHECKOUT", help="another checkout to measure against, in turn")
     parser.add_argument("--rounds", type=int, default=4, help="with --baseline: runs of each")
     args = parser.parse_args()
     if args.parsers:
         return parsers(args.tracks, args.count)
+    if args.parse and not args.baseline:
+        return parse_dinosaur(args.tracks, args.count)
     if args.baseline:
-        return against(args.baseline, args.rounds, [a for a in sys.argv[1:] if a not in _BASELINE_ARGS(args)])
+        return against(args.baseline, args.rounds, [a for a in sys.argv[1:] if a not in _BASELINE_ARGS(args)],
+                       what="a parse" if args.parse else "a submission")
 
     from geocert.workers.redis_server import start_embedded_redis
 
@@ -201,6 +208,27 @@ def messages(count: int) -> None:
     cpu = time.process_time() - cpu
     print(f"{count} one-chunk jobs' task commands (queue.task_commands, the loop's producer): "
           f"{1e3 * cpu / count:.3f} ms CPU a job; load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+
+
+def parse_dinosaur(tracks: int, count: int) -> None:
+    """``TriangulationKind.parse`` of the Dinosaur's first ``tracks`` tracks (all when fewer than
+    the 3 default), ``count`` times: CPU a parse."""
+    from bench.triangulation import DINOSAUR
+    from geocert.kinds import get_kind
+    from geocert.solvers.datasets import load_dinosaur
+
+    cameras, found = load_dinosaur(DINOSAUR)
+    found = found[:tracks] if tracks > 3 else found
+    data = json.loads(json.dumps({"cameras": cameras.tolist(),
+                                  "tracks": [{"views": list(t.views), "points": t.points.tolist()} for t in found]}))
+    kind = get_kind("triangulation")
+    kind.parse(data)
+    cpu = time.process_time()
+    for _ in range(count):
+        kind.parse(data)
+    cpu = time.process_time() - cpu
+    print(f"the Dinosaur's {len(found)} tracks parsed (TriangulationKind.parse) {count} times: {1e3 * cpu / count:.3f} "
+          f"ms CPU a parse; load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
 def parsers(tracks: int, count: int, rounds: int = 3) -> None:
