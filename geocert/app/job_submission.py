@@ -15,7 +15,7 @@ from fastapi import Response
 from fastapi.concurrency import run_in_threadpool
 
 from geocert.app import streamed
-from geocert.app.collection import collector_held
+from geocert.jobs.collection import collector_held
 from geocert.app.errors import ApiProblem
 from geocert.jobs.runner import parse_job
 from geocert.kinds import get_kind

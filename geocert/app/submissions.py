@@ -61,7 +61,7 @@ def _submit_body(body: bytes, owner: str, idempotency_key: str | None, environme
     crosses the pipe: ("document", document, status, headers), or an error carried (processes.
     validated, processes.carried): only plain values, so that nothing fails to cross back."""
     from geocert.app.api.deps import get_store
-    from geocert.app.collection import collector_held
+    from geocert.jobs.collection import collector_held
     from geocert.app.job_submission import _submit
     from geocert.app.schemas import JOB_REQUEST
 

@@ -44,6 +44,7 @@ from geocert.workers.pieces import SOLVE_PIECES, SpreadOverSolvers, help_with
 from geocert.workers.celery_app import celery_app
 from geocert.workers.priorities import LATER
 from geocert.workers.queue import SOFT_AFTER_S, SOLVE_CHUNK, SOLVE_CHUNK_FAILED, task_deadline_s, task_options
+from geocert.jobs.collection import collector_held
 from geocert.jobs.store import REDIS_GONE, JobStore, shared_store as store
 from celery.exceptions import SoftTimeLimitExceeded
 
@@ -93,10 +94,13 @@ class ProgressPublisher:
         last = progress["items_done"] == progress["items_total"]
         if time.monotonic() - self.last >= self.interval or last:
             self.last = time.monotonic()
-            if self.jobs.save_progress(self.job_id, self.start, progress, self.unsaved, self._fragment()) is None:
+            with collector_held():  # the fragment's model makes a tree of objects an item
+                saved = self.jobs.save_progress(self.job_id, self.start, progress, self.unsaved, self._fragment())
+            if saved is None:
                 self.job_ended = True
             self.unsaved = {}
 
+    @collector_held()
     def flush(self) -> int | None:
         """Store the items not stored yet (and the fragment); returns how many items of the job
         are stored (None: the job has ended or is gone, and nothing was stored)."""

@@ -11,7 +11,7 @@ import threading
 import numpy as np
 import pytest
 
-from geocert.app.collection import collector_held
+from geocert.jobs.collection import collector_held
 
 
 @pytest.fixture

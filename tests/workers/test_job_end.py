@@ -70,3 +70,45 @@ def test_a_tasks_items_are_written_once_in_its_fragments_and_end_as_its_result(t
     monkeypatch.setenv("INTERVAL", interval)
     ended = run_with_redis(tmp_path, PUBLISHED)
     assert ended == {"done": 8, "largest_field": 2, "plan": True, "same": True}
+
+
+STORED_WITHOUT_COLLECTIONS = """
+import gc
+import json
+import os
+from geocert.jobs.runner import parse_job, solve_items
+from geocert.kinds import get_kind
+from geocert.workers import tasks
+from geocert.jobs.store import JobStore
+
+jobs = JobStore.from_url(os.environ["GEOCERT_REDIS_URL"])
+job = get_kind("triangulation").example
+job = {**job, "data": {**job["data"], "tracks": job["data"]["tracks"] * 300}, "options": {"detail": "full"}}
+kind, parsed, options = parse_job(job)
+meta = jobs.create("triangulation", job, 600, 1000, "someone", chunk_key="tracks")
+assert jobs.mark_running(meta["id"])
+inside, started = [False], []
+fragment = tasks.result_fragment
+
+
+def watched(*args):
+    inside[0] = True
+    try:
+        return fragment(*args)
+    finally:
+        inside[0] = False
+
+
+tasks.result_fragment = watched
+gc.callbacks.append(lambda phase, info: started.append(inside[0]) if phase == "start" else None)
+publisher = tasks.ProgressPublisher(jobs, meta["id"], 0, 3600.0, kind, 0.0)
+solve_items(kind, parsed, options, range(600), publisher, on_item=publisher.item_ended)
+print(json.dumps({"done": publisher.flush(), "while_stored": sum(started), "enabled": gc.isenabled()}))
+"""
+
+
+def test_a_tasks_items_are_stored_without_the_cyclic_collector(tmp_path):
+    """The result model's dump of 600 full track documents started the cyclic collector again and
+    again over the young objects it makes (half the task's CPU storing them): it is held off."""
+    ended = run_with_redis(tmp_path, STORED_WITHOUT_COLLECTIONS)
+    assert ended == {"done": 600, "while_stored": 0, "enabled": True}

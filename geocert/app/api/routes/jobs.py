@@ -27,7 +27,7 @@ from geocert.app import lifecycle
 from geocert.app import exports, processes, shape, streamed, submissions
 from geocert.app import job_submission
 from geocert.app.job_submission import _submit
-from geocert.app.collection import collector_held
+from geocert.jobs.collection import collector_held
 from geocert.app.errors import ApiProblem, is_json_media_type
 from geocert.app.schemas import JOB_EXAMPLES, JOB_REQUEST, JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError

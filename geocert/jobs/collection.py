@@ -1,12 +1,13 @@
-"""Python's cyclic garbage collector held off while a job's body is taken in.
+"""Python's cyclic garbage collector held off while a job's body is taken in (the API) and while a
+task stores its items (the workers).
 
-Taking in a body makes a tree of objects per item (pydantic's validation from the bytes, the
-request dumped back as JSON types, the kind's parse, the texts stored): many young objects that
-survive, so the collector ran again and again over them, and over what the process already held,
-finding nothing (JSON makes no cycles; reference counting frees the tree). On the Oxford
-Dinosaur's 0.49 MB body it was most of the intake's CPU: the whole intake 190 ms with it, 62
-without (bench.submission --app). Held off, nothing leaks: whatever cycles appear meanwhile are
-collected once it runs again, at its next threshold.
+Both make a tree of objects per item (pydantic's validation from the bytes, the request dumped
+back as JSON types, the kind's parse; the items' documents validated and written by the result
+model): many young objects that survive, so the collector ran again and again over them, and
+over what the process already held, finding nothing (JSON makes no cycles; reference counting
+frees the trees). On the Oxford Dinosaur's 0.49 MB body it was most of the intake's CPU: the
+whole intake 190 ms with it, 62 without (bench.submission --app). Held off, nothing leaks:
+whatever cycles appear meanwhile are collected once it runs again, at its next threshold.
 """
 
 from __future__ import annotations
