@@ -9,6 +9,11 @@ beside the solve's CPU for scale, with the machine's load.
     .venv/bin/python -m bench.chunk_store [--detail brief|full] [--tracks 4983] [--rounds 5]
     .venv/bin/python -m bench.chunk_store --detail full --baseline ../main   # before and after, in turn
 
+``--codecs``: instead, what a fragment's compression costs beside the rest (per 1,000 items, one
+process): the result model's dump of the items (runner.result_fragment), zlib at the store's level
+(Results.RESULT_COMPRESSION_LEVEL) and at level 0 (stored, not compressed), each compressing and
+decompressing, with the bytes each keeps, against the solve.
+
 ``--baseline <checkout>``: bench.submission's: each run a process of its own with this checkout's
 geocert or that one's, alternating, and the ratio of the medians of the task's CPU.
 
@@ -35,6 +40,7 @@ def main() -> None:
     parser.add_argument("--detail", choices=("brief", "full"), default="brief")
     parser.add_argument("--tracks", type=int, default=4983)
     parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--codecs", action="store_true", help="a fragment's compression against its other costs")
     parser.add_argument("--baseline", metavar="CHECKOUT")
     parser.add_argument("--baseline-rounds", type=int, default=4)
     args = parser.parse_args()
@@ -44,11 +50,53 @@ def main() -> None:
         return against(args.baseline, args.baseline_rounds,
                        ["--detail", args.detail, "--tracks", str(args.tracks), "--rounds", str(args.rounds)],
                        bench="bench.chunk_store", what="storing 1,000 items")
+    if args.codecs:
+        return codecs(args.detail, args.rounds)
     measure(args.detail, args.tracks, args.rounds)
 
 
-def measure(detail: str, count: int, rounds: int) -> None:
+def codecs(detail: str, rounds: int) -> None:
+    import zlib
+
+    from geocert.jobs.runner import parse_job, result_fragment
+    from geocert.jobs.store import JobStore
+
+    kind, parsed, options = parse_job(dinosaur_job(detail, CHUNK))
+    kind.solve_batch(parsed, list(range(CHUNK)), options, lambda progress: False)  # first-use costs out
+    began = time.process_time()
+    items = kind.solve_batch(parsed, list(range(CHUNK)), options, lambda progress: False)
+    solve = time.process_time() - began
+
+    def per_1000(work) -> tuple[float, object]:
+        times = []
+        for _ in range(rounds):
+            began = time.process_time()
+            out = work()
+            times.append(time.process_time() - began)
+        return 1e3 * statistics.median(times) * 1000 / CHUNK, out
+
+    dump_ms, text = per_1000(lambda: result_fragment(kind, items))
+    raw = text.encode()
+    print(f"{CHUNK} Dinosaur tracks, detail {detail}: per 1,000 items, their solve {1e3 * solve * 1000 / CHUNK:.1f} ms "
+          f"CPU, the result model's dump of them {dump_ms:.1f} ms, {len(raw) * 1000 / CHUNK / 1024:.0f} KiB of JSON")
+    for level in (JobStore.RESULT_COMPRESSION_LEVEL, 0):
+        packed_ms, packed = per_1000(lambda: zlib.compress(raw, level))
+        unpacked_ms, _ = per_1000(lambda: zlib.decompress(packed))
+        print(f"  zlib level {level}: compressing {packed_ms:.2f} ms CPU, decompressing {unpacked_ms:.2f} ms, "
+              f"{len(packed) * 1000 / CHUNK / 1024:.0f} KiB kept ({len(packed) / len(raw):.2f} of the JSON)")
+    print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+
+
+def dinosaur_job(detail: str, count: int) -> dict:
     from geocert.solvers.datasets import load_dinosaur
+
+    cameras, tracks = load_dinosaur(DINOSAUR)
+    return {"kind": "triangulation", "options": {"detail": detail},
+            "data": {"cameras": cameras.tolist(),
+                     "tracks": [{"views": list(t.views), "points": t.points.tolist()} for t in tracks[:count]]}}
+
+
+def measure(detail: str, count: int, rounds: int) -> None:
     from geocert.workers.redis_server import start_embedded_redis
 
     process, url = start_embedded_redis(Path(tempfile.mkdtemp(prefix="chunk-store-")))
@@ -58,10 +106,7 @@ def measure(detail: str, count: int, rounds: int) -> None:
         from geocert.jobs.store import JobStore
         from geocert.workers.tasks import ProgressPublisher
 
-        cameras, tracks = load_dinosaur(DINOSAUR)
-        job = {"kind": "triangulation", "options": {"detail": detail},
-               "data": {"cameras": cameras.tolist(),
-                        "tracks": [{"views": list(t.views), "points": t.points.tolist()} for t in tracks[:count]]}}
+        job = dinosaur_job(detail, count)
         kind, parsed, options = parse_job(job)
         began = time.process_time()
         chunks = [(start, min(start + CHUNK, count)) for start in range(0, count, CHUNK)]
