@@ -22,6 +22,8 @@ the answer written to a stub transport, a trivial ASGI app): CPU a request with 
 ``--messages``: making a one-chunk job's task commands alone (``queue.task_commands`` with the
 event loop's producer), CPU a job.
 
+``--app --dinosaur``: the whole request with the Oxford Dinosaur's tracks as its body (0.49 MB).
+
 ``--parse``: the triangulation kind's parse of the Oxford Dinosaur's tracks (Oxford VGG's data,
 4983 tracks; ``--tracks`` fewer), as the API checks a body and a worker reads its chunk, CPU a parse.
 
@@ -64,6 +66,7 @@ def main() -> None:
     parser.add_argument("--parsers", action="store_true", help="uvicorn's h11 against httptools, per request")
     parser.add_argument("--messages", action="store_true", help="making a one-chunk job's task commands alone")
     parser.add_argument("--parse", action="store_true", help="the triangulation kind's parse of the Dinosaur's tracks")
+    parser.add_argument("--dinosaur", action="store_true", help="with --app: the Dinosaur's tracks as the body")
     parser.add_argument("--baseline", metavar="CHECKOUT", help="another checkout to measure against, in turn")
     parser.add_argument("--rounds", type=int, default=4, help="with --baseline: runs of each")
     args = parser.parse_args()
@@ -82,13 +85,14 @@ def main() -> None:
     try:
         if args.messages:
             return messages(args.count)
-        measure(url, args.tracks, args.count, args.profile, args.loop, args.app)
+        measure(url, args.tracks, args.count, args.profile, args.loop, args.app, args.dinosaur)
     finally:
         server.terminate()
         server.wait(timeout=10)
 
 
-def measure(url: str, tracks: int, count: int, profile: bool, loop: bool = False, app: bool = False) -> None:
+def measure(url: str, tracks: int, count: int, profile: bool, loop: bool = False, app: bool = False,
+            dinosaur: bool = False) -> None:
     import redis
     import redis.connection
     from fastapi import Response
@@ -127,7 +131,9 @@ def measure(url: str, tracks: int, count: int, profile: bool, loop: bool = False
         from geocert.app.main import app as asgi_app
 
         logging.getLogger("geocert.api").disabled = True
-        texts = [json.dumps(triangulation_job(rng, tracks=tracks)).encode() for _ in range(20)]
+        texts = [json.dumps(triangulation_job(rng, tracks=tracks)).encode() for _ in range(1 if dinosaur else 20)]
+        if dinosaur:
+            texts, tracks = [json.dumps(dinosaur_job()).encode()], 4983
         runner = asyncio.Runner()
 
         async def request(body: bytes) -> None:
@@ -210,17 +216,22 @@ def messages(count: int) -> None:
           f"{1e3 * cpu / count:.3f} ms CPU a job; load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
-def parse_dinosaur(tracks: int, count: int) -> None:
-    """``TriangulationKind.parse`` of the Dinosaur's first ``tracks`` tracks (all when fewer than
-    the 3 default), ``count`` times: CPU a parse."""
+def dinosaur_job() -> dict:
     from bench.triangulation import DINOSAUR
-    from geocert.kinds import get_kind
     from geocert.solvers.datasets import load_dinosaur
 
     cameras, found = load_dinosaur(DINOSAUR)
-    found = found[:tracks] if tracks > 3 else found
-    data = json.loads(json.dumps({"cameras": cameras.tolist(),
-                                  "tracks": [{"views": list(t.views), "points": t.points.tolist()} for t in found]}))
+    return {"kind": "triangulation", "data": {
+        "cameras": cameras.tolist(), "tracks": [{"views": list(t.views), "points": t.points.tolist()} for t in found]}}
+
+
+def parse_dinosaur(tracks: int, count: int) -> None:
+    """``TriangulationKind.parse`` of the Dinosaur's first ``tracks`` tracks (all when fewer than
+    the 3 default), ``count`` times: CPU a parse."""
+    from geocert.kinds import get_kind
+
+    data = json.loads(json.dumps(dinosaur_job()["data"]))
+    found = data["tracks"] = data["tracks"][:tracks] if tracks > 3 else data["tracks"]
     kind = get_kind("triangulation")
     kind.parse(data)
     cpu = time.process_time()
