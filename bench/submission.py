@@ -22,6 +22,11 @@ the answer written to a stub transport, a trivial ASGI app): CPU a request with 
 ``--messages``: making a one-chunk job's task commands alone (``queue.task_commands`` with the
 event loop's producer), CPU a job.
 
+``--app --dinosaur``: the whole request with the Oxford Dinosaur's tracks as its body (0.49 MB).
+
+``--parse``: the triangulation kind's parse of the Oxford Dinosaur's tracks (Oxford VGG's data,
+4983 tracks; ``--tracks`` fewer), as the API checks a body and a worker reads its chunk, CPU a parse.
+
 ``--baseline <checkout>``: before and after in one run: this measurement made ``--rounds`` times
 in turn with this checkout's geocert and with that checkout's (each run a process of its own,
 alternating, this bench's code in both), then the ratio of their medians. E.g. the whole request
@@ -60,13 +65,18 @@ def main() -> None:
     parser.add_argument("--app", action="store_true", help="the whole request through the ASGI app")
     parser.add_argument("--parsers", action="store_true", help="uvicorn's h11 against httptools, per request")
     parser.add_argument("--messages", action="store_true", help="making a one-chunk job's task commands alone")
+    parser.add_argument("--parse", action="store_true", help="the triangulation kind's parse of the Dinosaur's tracks")
+    parser.add_argument("--dinosaur", action="store_true", help="with --app: the Dinosaur's tracks as the body")
     parser.add_argument("--baseline", metavar="CHECKOUT", help="another checkout to measure against, in turn")
     parser.add_argument("--rounds", type=int, default=4, help="with --baseline: runs of each")
     args = parser.parse_args()
     if args.parsers:
         return parsers(args.tracks, args.count)
+    if args.parse and not args.baseline:
+        return parse_dinosaur(args.tracks, args.count)
     if args.baseline:
-        return against(args.baseline, args.rounds, [a for a in sys.argv[1:] if a not in _BASELINE_ARGS(args)])
+        return against(args.baseline, args.rounds, [a for a in sys.argv[1:] if a not in _BASELINE_ARGS(args)],
+                       what="a parse" if args.parse else "a submission")
 
     from geocert.workers.redis_server import start_embedded_redis
 
@@ -75,13 +85,14 @@ def main() -> None:
     try:
         if args.messages:
             return messages(args.count)
-        measure(url, args.tracks, args.count, args.profile, args.loop, args.app)
+        measure(url, args.tracks, args.count, args.profile, args.loop, args.app, args.dinosaur)
     finally:
         server.terminate()
         server.wait(timeout=10)
 
 
-def measure(url: str, tracks: int, count: int, profile: bool, loop: bool = False, app: bool = False) -> None:
+def measure(url: str, tracks: int, count: int, profile: bool, loop: bool = False, app: bool = False,
+            dinosaur: bool = False) -> None:
     import redis
     import redis.connection
     from fastapi import Response
@@ -120,7 +131,9 @@ def measure(url: str, tracks: int, count: int, profile: bool, loop: bool = False
         from geocert.app.main import app as asgi_app
 
         logging.getLogger("geocert.api").disabled = True
-        texts = [json.dumps(triangulation_job(rng, tracks=tracks)).encode() for _ in range(20)]
+        texts = [json.dumps(triangulation_job(rng, tracks=tracks)).encode() for _ in range(1 if dinosaur else 20)]
+        if dinosaur:
+            texts, tracks = [json.dumps(dinosaur_job()).encode()], 4983
         runner = asyncio.Runner()
 
         async def request(body: bytes) -> None:
@@ -203,6 +216,32 @@ def messages(count: int) -> None:
           f"{1e3 * cpu / count:.3f} ms CPU a job; load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
+def dinosaur_job() -> dict:
+    from bench.triangulation import DINOSAUR
+    from geocert.solvers.datasets import load_dinosaur
+
+    cameras, found = load_dinosaur(DINOSAUR)
+    return {"kind": "triangulation", "data": {
+        "cameras": cameras.tolist(), "tracks": [{"views": list(t.views), "points": t.points.tolist()} for t in found]}}
+
+
+def parse_dinosaur(tracks: int, count: int) -> None:
+    """``TriangulationKind.parse`` of the Dinosaur's first ``tracks`` tracks (all when fewer than
+    the 3 default), ``count`` times: CPU a parse."""
+    from geocert.kinds import get_kind
+
+    data = json.loads(json.dumps(dinosaur_job()["data"]))
+    found = data["tracks"] = data["tracks"][:tracks] if tracks > 3 else data["tracks"]
+    kind = get_kind("triangulation")
+    kind.parse(data)
+    cpu = time.process_time()
+    for _ in range(count):
+        kind.parse(data)
+    cpu = time.process_time() - cpu
+    print(f"the Dinosaur's {len(found)} tracks parsed (TriangulationKind.parse) {count} times: {1e3 * cpu / count:.3f} "
+          f"ms CPU a parse; load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+
+
 def parsers(tracks: int, count: int, rounds: int = 3) -> None:
     """uvicorn's h11 protocol (the API's) against its httptools protocol on one submission's
     request: the bytes parsed, the ASGI cycle run with a trivial app, the answer written."""
@@ -279,23 +318,26 @@ def _BASELINE_ARGS(args) -> set[str]:
             f"--rounds={args.rounds}", "--profile"}
 
 
-# A run with one checkout's geocert (imported first, from the checkout given) and this bench.
+# A run with one checkout's geocert (imported first, from the checkout given) and a bench of this one.
 _RUN = """
+import importlib
 import sys
 sys.path.insert(0, sys.argv[1])
 import geocert
 assert geocert.__file__.startswith(sys.argv[1]), geocert.__file__
 sys.path.insert(0, sys.argv[2])
-from bench import submission
-sys.argv = ["bench.submission", *sys.argv[3:]]
-submission.main()
+bench = importlib.import_module(sys.argv[3])
+sys.argv = [sys.argv[3], *sys.argv[4:]]
+bench.main()
 """
 
 
-def against(baseline: str, rounds: int, arguments: list[str]) -> None:
+def against(baseline: str, rounds: int, arguments: list[str], bench: str = "bench.submission",
+            what: str = "a submission") -> None:
     """This checkout's geocert and ``baseline``'s, measured in turn (this one first in even
-    rounds, the baseline first in odd ones), each run a process of its own; the CPU a submission
-    of each run, and the ratio of the medians (this checkout / the baseline)."""
+    rounds, the baseline first in odd ones), each run a process of its own running the module
+    ``bench`` of this checkout with ``arguments``; the CPU (the first figure its output gives as
+    "<x> ms CPU") of each run, and the ratio of the medians (this checkout / the baseline)."""
     here = str(Path(__file__).resolve().parent.parent)
     checkouts = {"this checkout": here, "baseline": str(Path(baseline).resolve())}
     cpu: dict[str, list[float]] = {name: [] for name in checkouts}
@@ -303,7 +345,7 @@ def against(baseline: str, rounds: int, arguments: list[str]) -> None:
     for round_ in range(rounds):
         order = list(checkouts) if round_ % 2 == 0 else list(reversed(checkouts))
         for name in order:
-            done = subprocess.run([sys.executable, "-c", _RUN, checkouts[name], here, *arguments],
+            done = subprocess.run([sys.executable, "-c", _RUN, checkouts[name], here, bench, *arguments],
                                   capture_output=True, text=True, env={**os.environ, "PYTHONPATH": ""})
             if done.returncode != 0:
                 raise SystemExit(f"{name} failed:\n{done.stderr[-3000:]}")
@@ -311,7 +353,7 @@ def against(baseline: str, rounds: int, arguments: list[str]) -> None:
             cpu[name].append(float(re.search(r"([\d.]+) ms CPU", line).group(1)))
             print(f"round {round_ + 1}, {name} ({checkouts[name]}): {line}", flush=True)
     medians = {name: statistics.median(values) for name, values in cpu.items()}
-    print(f"CPU a submission, median of {rounds}: this checkout {medians['this checkout']:.3f} ms, baseline "
+    print(f"CPU {what}, median of {rounds}: this checkout {medians['this checkout']:.3f} ms, baseline "
           f"{medians['baseline']:.3f} ms: ratio {medians['this checkout'] / medians['baseline']:.2f}; load average at "
           f"the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 

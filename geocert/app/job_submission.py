@@ -15,6 +15,7 @@ from fastapi import Response
 from fastapi.concurrency import run_in_threadpool
 
 from geocert.app import streamed
+from geocert.jobs.collection import collector_held
 from geocert.app.errors import ApiProblem
 from geocert.jobs.runner import parse_job
 from geocert.kinds import get_kind
@@ -97,6 +98,7 @@ def _digest(request: dict) -> str:
     return hashlib.sha256(json.dumps(request, sort_keys=True).encode()).hexdigest()
 
 
+@collector_held()
 def _submit(body, response: Response, store: JobStore, owner: str, idempotency_key: str | None,
             split: streamed.Split | None = None) -> dict:
     """The submission itself (synchronous Redis calls: run in FastAPI's thread pool). ``split``:
@@ -204,11 +206,12 @@ async def submit_on_loop(body, response: Response, store: JobStore, client, owne
     loop's asyncio ``client`` (the store's server) and the tasks made with ``producer``
     (queue.loop_producer). What follows the checks runs to its end as a thread would, even if
     the request is cancelled meanwhile (a job is never left half made, nor a key reserved)."""
-    request, kind, parsed, options = _checked(body)
-    checked = dict(request["options"])
-    items = _check_limits(kind, parsed, body, request)
-    bound = kind.time_bound_s(parsed, _as_run(kind, request, options, checked))
-    digest = _digest(request) if idempotency_key is not None else None
+    with collector_held():
+        request, kind, parsed, options = _checked(body)
+        checked = dict(request["options"])
+        items = _check_limits(kind, parsed, body, request)
+        bound = kind.time_bound_s(parsed, _as_run(kind, request, options, checked))
+        digest = _digest(request) if idempotency_key is not None else None
     args, options = _create_arguments(owner, kind, request, items, None, bound, 0, _enqueue(producer))
 
     async def store_it() -> dict:

@@ -61,11 +61,13 @@ def _submit_body(body: bytes, owner: str, idempotency_key: str | None, environme
     crosses the pipe: ("document", document, status, headers), or an error carried (processes.
     validated, processes.carried): only plain values, so that nothing fails to cross back."""
     from geocert.app.api.deps import get_store
+    from geocert.jobs.collection import collector_held
     from geocert.app.job_submission import _submit
     from geocert.app.schemas import JOB_REQUEST
 
     processes.use(environment)
-    request, error = processes.validated(JOB_REQUEST, body)
+    with collector_held():
+        request, error = processes.validated(JOB_REQUEST, body)
     if error is not None:
         return error
     response = Response()  # as FastAPI gives a route: no status of its own until one is set

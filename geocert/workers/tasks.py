@@ -44,6 +44,7 @@ from geocert.workers.pieces import SOLVE_PIECES, SpreadOverSolvers, help_with
 from geocert.workers.celery_app import celery_app
 from geocert.workers.priorities import LATER
 from geocert.workers.queue import SOFT_AFTER_S, SOLVE_CHUNK, SOLVE_CHUNK_FAILED, task_deadline_s, task_options
+from geocert.jobs.collection import collector_held
 from geocert.jobs.store import REDIS_GONE, JobStore, shared_store as store
 from celery.exceptions import SoftTimeLimitExceeded
 
@@ -60,8 +61,8 @@ class ProgressPublisher:
     progress counts stored items only, so a task that dies never leaves progress counting items
     that are not stored (they would be solved again, and progress would fall back).
 
-    With ``kind`` (a streamed result: batch.streams_result), the run of items the task solved is
-    also stored as one fragment of the result, with the store of its last item."""
+    With ``kind`` (a streamed result: batch.streams_result), each store writes its run of items
+    as one fragment of the result, which holds them (they are not written again one by one)."""
 
     def __init__(self, jobs: JobStore, job_id: str, start: int, interval: float, kind=None, abs_gap: float = 0.0,
                  stop_by: float = float("inf")):
@@ -75,32 +76,31 @@ class ProgressPublisher:
         self.job_ended = False  # its writes were refused: the job ended (or is gone) under this task
         self.unsaved: dict[int, dict] = {}
         self.kind = kind
-        self.ended: list[dict] = []  # the task's items in order (streamed results only)
 
     def item_ended(self, index: int, item: dict) -> None:
         self.unsaved[index] = item
-        if self.kind is not None:
-            self.ended.append(item)
 
     def _fragment(self) -> tuple[int, dict, str] | None:
-        """The task's fragment, once (None when stored already, or when the model refuses it:
-        the end then reads every item)."""
-        if self.kind is None or not self.ended:
+        """The fragment of the items not stored yet (a run: items end in order), None without
+        them or a streamed result, or when the model refuses them (they are then stored one by
+        one, and the end reads every item)."""
+        if self.kind is None or not self.unsaved:
             return None
-        text = result_fragment(self.kind, self.ended)
-        fragment = None if text is None else (self.start, item_sums(self.ended, self.abs_gap), text)
-        self.kind, self.ended = None, []
-        return fragment
+        items = list(self.unsaved.values())
+        text = result_fragment(self.kind, items)
+        return None if text is None else (next(iter(self.unsaved)), item_sums(items, self.abs_gap), text)
 
     def __call__(self, progress: dict) -> None:
         last = progress["items_done"] == progress["items_total"]
         if time.monotonic() - self.last >= self.interval or last:
             self.last = time.monotonic()
-            if self.jobs.save_progress(self.job_id, self.start, progress, self.unsaved,
-                                       self._fragment() if last else None) is None:
+            with collector_held():  # the fragment's model makes a tree of objects an item
+                saved = self.jobs.save_progress(self.job_id, self.start, progress, self.unsaved, self._fragment())
+            if saved is None:
                 self.job_ended = True
             self.unsaved = {}
 
+    @collector_held()
     def flush(self) -> int | None:
         """Store the items not stored yet (and the fragment); returns how many items of the job
         are stored (None: the job has ended or is gone, and nothing was stored)."""

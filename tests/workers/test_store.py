@@ -405,6 +405,50 @@ class TestStreamedResult:
         assert stored < read < stored + 2000 and stored < 0.2 * len(text)
 
 
+    def store_runs_with_items(self, jobs, job_id, kind, items, cuts) -> list:
+        from geocert.jobs.runner import item_sums, result_fragment
+
+        return [jobs.save_items(job_id, {i: items[i] for i in range(begin, end)},
+                                (begin, item_sums(items[begin:end]), result_fragment(kind, items[begin:end])))
+                for begin, end in zip(cuts[:-1], cuts[1:])]
+
+    def test_items_stored_with_their_fragment_are_written_once(self, jobs):
+        """A task's items and the fragment that holds them were both written whole: each item is
+        now written in its fragment only, its own field saying which fragment holds it, and read
+        back as the result model writes it, which assembles the same result to the byte."""
+        import copy
+
+        from geocert.jobs.runner import assemble, item_sums, result_json, stats_from
+
+        kind, options, items = self.solved_items(12)
+        meta = jobs.create("triangulation", request_of(12), 12, 12, "someone", chunk_key="tracks")
+        assert self.store_runs_with_items(jobs, meta["id"], kind, copy.deepcopy(items), [0, 5, 12]) == [5, 12]
+        raw = jobs.binary.hgetall(jobs.key(meta["id"], "items"))
+        assert sorted(int(index) for index in raw) == list(range(12))
+        assert all(len(value) <= 4 for value in raw.values())  # "@<start>", not the item
+        assert jobs.missing_items(meta["id"], 12) == []
+        assert [start for start, _ in jobs.fragment_plan(meta["id"], 12)] == [0, 5]
+        stored = jobs.all_items(meta["id"], 12)
+        assert stored == [jobs.stored_items(meta["id"])[i] for i in range(12)]
+        stats = stats_from(item_sums(items), 1.5)
+        assert item_sums(stored) == item_sums(items)
+        assert result_json(kind, assemble(kind, None, options, stored, stats)) == \
+            result_json(kind, assemble(kind, None, options, copy.deepcopy(items), stats))
+
+    def test_a_fragment_written_again_shorter_no_longer_holds_its_later_items(self, jobs):
+        """A task delivered again and cut elsewhere by its budget writes its fragment again,
+        shorter: its items past the new end are not stored any more (a task still to come solves
+        them), never read from a fragment that does not hold them."""
+        kind, _, items = self.solved_items(12)
+        meta = jobs.create("triangulation", request_of(12), 12, 12, "someone", chunk_key="tracks")
+        assert self.store_runs_with_items(jobs, meta["id"], kind, items, [0, 7]) == [7]
+        assert self.store_runs_with_items(jobs, meta["id"], kind, items, [0, 5]) == [5]
+        assert jobs.missing_items(meta["id"], 12) == list(range(5, 12))
+        assert sorted(jobs.stored_items(meta["id"])) == list(range(5))
+        assert self.store_runs_with_items(jobs, meta["id"], kind, items, [5, 12]) == [12]
+        assert len(jobs.all_items(meta["id"], 12)) == 12
+
+
 class TestJobRecord:
     def test_the_record_a_poll_reads_does_not_grow_with_the_chunks(self, jobs):
         small = jobs.create("triangulation", request_of(3), 3, 100, "someone", chunk_key="tracks")

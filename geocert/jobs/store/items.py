@@ -1,5 +1,6 @@
-"""What a job's tasks store as they go: their items (compressed one by one), the fragments of a
-streamed result with their sums, and the progress summed over the job's tasks."""
+"""What a job's tasks store as they go: their items (compressed one by one, or once in the fragment
+of a streamed result that holds them), the fragments with their sums, and the progress summed
+over the job's tasks."""
 
 from __future__ import annotations
 
@@ -96,18 +97,38 @@ class Items(StoreBase):
         redis.call('HSET', KEYS[2], unpack(ARGV, first, math.min(first + 1999, last)))
     end
     if ARGV[last + 1] ~= '' then
+        local start = tonumber(ARGV[last + 1])
+        local before = redis.call('HGET', KEYS[4], ARGV[last + 1])
         redis.call('HSET', KEYS[3], ARGV[last + 1], ARGV[last + 2])
         redis.call('HSET', KEYS[4], ARGV[last + 1], ARGV[last + 3])
+        if before then
+            -- a fragment written again shorter (a task delivered again, cut elsewhere by its
+            -- budget): its items past the new end that still read as in it are no longer stored
+            local reference = '@' .. ARGV[last + 1]
+            for index = start + tonumber(ARGV[last + 4]), start + cjson.decode(before)['items'] - 1 do
+                if redis.call('HGET', KEYS[2], tostring(index)) == reference then
+                    redis.call('HDEL', KEYS[2], tostring(index))
+                end
+            end
+        end
     end
     redis.call('ZADD', KEYS[5], ARGV[2], ARGV[1])
     return redis.call('HLEN', KEYS[2])
     """
 
     def _save(self, pipe, job_id: str, items: dict[int, dict], fragment: tuple[int, dict, str] | None) -> None:
-        """Queue ``_SAVE`` on ``pipe``: its answer is the number of the job's items stored, or None."""
-        pairs = [part for pair in self._packed(items).items() for part in pair]
+        """Queue ``_SAVE`` on ``pipe``: its answer is the number of the job's items stored, or None.
+        Items the fragment holds, exactly (its run is theirs), are written once: in it, each
+        item's field then holding only which fragment holds it (``_IN_FRAGMENT``)."""
+        if fragment is not None and items and fragment[1]["items"] == len(items) and \
+                min(items) == fragment[0] and max(items) == fragment[0] + len(items) - 1:
+            reference = self._IN_FRAGMENT + str(fragment[0]).encode()
+            pairs = [part for index in items for part in (str(index), reference)]
+        else:
+            pairs = [part for pair in self._packed(items).items() for part in pair]
         extra = ("",) if fragment is None else (
-            str(fragment[0]), zlib.compress(fragment[2].encode(), self.RESULT_COMPRESSION_LEVEL), dumps(fragment[1]))
+            str(fragment[0]), zlib.compress(fragment[2].encode(), self.RESULT_COMPRESSION_LEVEL), dumps(fragment[1]),
+            str(fragment[1]["items"]))
         pipe.eval(self._SAVE, 5, self.key(job_id), self.key(job_id, "items"), self.key(job_id, "fragments"),
                   self.key(job_id, "fragmentsums"), self.RUNNING, job_id, now(), len(items), *pairs, *extra)
 
@@ -142,8 +163,9 @@ class Items(StoreBase):
             at += sums["items"]
         return plan if at == total else None
 
-    # Items wait in Redis compressed too, one by one (zlib; an item stored as JSON text by an
-    # earlier version starts with "{" and is read as it is): the end reads them all. An item is
+    # Items no fragment holds (a result not streamed) wait in Redis compressed too, one by one
+    # (zlib; an item stored as JSON text by an earlier version starts with "{" and is read as it
+    # is): the end reads them all. An item is
     # a few hundred bytes to a few KB: a 4 KB window and a small memory level compress it as
     # well as zlib.compress's defaults (32 KB, level 8), whose set-up costs several times the
     # compression itself (measured on a 272-byte track: 49 us a call against 7.6 us, both 168
@@ -169,13 +191,42 @@ class Items(StoreBase):
     def _unpacked(raw: bytes) -> dict:
         return json.loads(raw if raw[:1] == b"{" else zlib.decompress(raw))
 
+    # An item of a streamed result is stored once, in its task's fragment (the result model's
+    # JSON of a run of items, save_progress's ``fragment``), its own field reading "@<the
+    # fragment's first index>": writing it in full as well cost a Dinosaur job's workers as much
+    # as the fragment did. It is read back from the fragment, as the result model wrote it (what
+    # the result model makes of it is the same document).
+    _IN_FRAGMENT = b"@"
+
+    def _items_by_index(self, job_id: str) -> dict[int, dict]:
+        """The items stored, by index; an item whose fragment does not hold it is not stored
+        (``_SAVE`` removes those, so none is expected)."""
+        stored = self.binary.hgetall(self.key(job_id, "items"))
+        starts = sorted({raw[1:] for raw in stored.values() if raw[:1] == self._IN_FRAGMENT})
+        runs = {}
+        if starts:
+            for start, fragment in zip(starts, self.binary.hmget(self.key(job_id, "fragments"), starts)):
+                if fragment is not None:
+                    runs[int(start)] = json.loads(b"[" + zlib.decompress(fragment) + b"]")
+        items = {}
+        for index, raw in stored.items():
+            index = int(index)
+            if raw[:1] != self._IN_FRAGMENT:
+                items[index] = self._unpacked(raw)
+                continue
+            start = int(raw[1:])
+            run = runs.get(start)
+            if run is not None and 0 <= index - start < len(run):
+                items[index] = run[index - start]
+        return items
+
     def stored_items(self, job_id: str) -> dict[int, dict]:
         """The items stored so far, by index (a job that fails keeps these)."""
-        return {int(index): self._unpacked(raw) for index, raw in self.binary.hgetall(self.key(job_id, "items")).items()}
+        return self._items_by_index(job_id)
 
     def all_items(self, job_id: str, total: int) -> list[dict]:
-        raw = self.binary.hgetall(self.key(job_id, "items"))
-        return [self._unpacked(raw[str(index).encode()]) for index in range(total)]
+        stored = self._items_by_index(job_id)
+        return [stored[index] for index in range(total)]
 
     def missing_items(self, job_id: str, total: int) -> list[int]:
         stored = set(self.r.hkeys(self.key(job_id, "items")))

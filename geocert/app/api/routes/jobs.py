@@ -27,6 +27,7 @@ from geocert.app import lifecycle
 from geocert.app import exports, processes, shape, streamed, submissions
 from geocert.app import job_submission
 from geocert.app.job_submission import _submit
+from geocert.jobs.collection import collector_held
 from geocert.app.errors import ApiProblem, is_json_media_type
 from geocert.app.schemas import JOB_EXAMPLES, JOB_REQUEST, JOB_STATUSES, Job, JobList, JobRequest
 from geocert.solvers.core.geometry import InputError
@@ -92,7 +93,8 @@ async def read_in_one_pass(request: Request) -> None:
     if not body:
         return
     try:
-        request._json = JOB_REQUEST.validate_json(body)
+        with collector_held():
+            request._json = JOB_REQUEST.validate_json(body)
     except ValidationError:
         pass
 
