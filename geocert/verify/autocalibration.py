@@ -212,7 +212,7 @@ class AutocalibrationVerification(Verification):
             if not _derived_close(name, result.get(name), expected, cameras, points, H):
                 raise Invalid("returned", f"{name} is not what the plane at infinity and K give")
         _check_baseline(result.get("baseline"), problem, p)
-        _check_proven_intervals(stages[1], claims[1])
+        _check_proven_intervals(stages[1], claims[1], stages[0])
 
     @staticmethod
     def estimates_of(result: dict, certificate: dict) -> dict:
@@ -235,7 +235,8 @@ class AutocalibrationVerification(Verification):
         if not (isinstance(stages, list) and len(stages) == 2 and isinstance(stages[1], dict)
                 and isinstance(stages[1].get("determinacy"), dict) and isinstance(proof, dict) and "sublevel" in proof):
             return result
-        determinacy = {k: v for k, v in stages[1]["determinacy"].items() if k not in ("proven", "proven_intervals")}
+        determinacy = {k: v for k, v in stages[1]["determinacy"].items()
+                       if k not in ("proven", "proven_intervals", "proven_over_planes")}
         return {**result, "stages": [stages[0], {**stages[1], "determinacy": determinacy}]}
 
     def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
@@ -328,17 +329,40 @@ class AutocalibrationVerification(Verification):
         return proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed, cost), options["metric_rel_gap"]
 
 
-def _check_proven_intervals(stage: dict, claim: dict) -> None:
+def _check_proven_intervals(stage: dict, claim: dict, affine: Any = None) -> None:
     """A metric stage's determinacy saying proven states exactly its proof's sublevel intervals
     (proofs.check_sublevel checked them: the claim is certified, so its proof was checked), at no
-    lower a cost increase than its estimate's."""
+    lower a cost increase than its estimate's; and its ``proven_over_planes`` exactly its proof's
+    plane_sublevel's (plane_sublevel.check checked them), at no lower increases than the metric
+    and affine (``affine``: that stage) estimates'."""
     expected = _stated_proven(stage, claim, "stages/1", "metric", proven_metric)
+    over = stage.get("determinacy", {}).get("proven_over_planes") if isinstance(stage, dict) and isinstance(
+        stage.get("determinacy"), dict) else None
     if expected is None:
+        if over is not None:
+            raise Invalid("returned", "stages/1/determinacy states proven_over_planes and is not proven")
         return
     estimate = stage["determinacy"].get("cost_increase")
     if isinstance(estimate, (int, float)) and not expected["cost_increase"] >= estimate * (1 - 1e-9):
         raise Invalid("returned", "stages/1/determinacy: the proven intervals' cost_increase is below its "
                                   "estimate's (a lower level proves a smaller set)")
+    if over is None:
+        return
+    from geocert.solvers.autocalibration import plane_sublevel
+
+    sublevel = claim["proof"].get("plane_sublevel")
+    try:
+        stated = plane_sublevel.proven_document(sublevel)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise Invalid("returned", "stages/1/determinacy/proven_over_planes: no proof/plane_sublevel carries "
+                                  "them") from exc
+    if over != stated:
+        raise Invalid("returned", "stages/1/determinacy/proven_over_planes are not its proof's plane_sublevel")
+    affine_estimate = (affine.get("determinacy") or {}).get("cost_increase") if isinstance(affine, dict) else None
+    for name, least in (("cost_increase", estimate), ("affine_increase", affine_estimate)):
+        if not isinstance(least, (int, float)) or not stated[name] >= least * (1 - 1e-9):
+            raise Invalid("returned", f"stages/1/determinacy/proven_over_planes: its {name} is below the "
+                                      "estimate's, or the estimate states none (a lower level proves a smaller set)")
 
 
 def _stated_proven(stage, claim: dict, where: str, name: str, read) -> dict | None:
