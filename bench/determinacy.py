@@ -495,7 +495,7 @@ def autocalibration_proven(noise_px: float = 0.5, synthetic: int = 5) -> list[st
     for seed in range(1, synthetic + 1):
         jobs.append((f"synthetic sphere, 8 views, 0.5% (seed {seed})", scenes.make_scene(8, 0.5, points=60, seed=seed),
                      {}))
-    lines, covered, total, estimated = [], 0, 0, 0
+    lines, covered, total, estimated, over, over_total = [], 0, 0, 0, 0, 0
     cpu = {"summary": 0.0, "proofs": 0.0, "full": 0.0}
     for name, scene, intrinsics in jobs:
         spent = {}
@@ -523,6 +523,9 @@ def autocalibration_proven(noise_px: float = 0.5, synthetic: int = 5) -> list[st
         proven = {i["name"]: i for i in d["proven_intervals"]["intervals"]}
         estimate = {i["name"]: i for i in d["intervals"]}
         inside = [n for n, i in proven.items() if i["lower"] <= truth[n] <= i["upper"]]
+        planes = {i["name"]: i for i in (d.get("proven_over_planes") or {}).get("intervals", [])}
+        inside_planes = [n for n, i in planes.items() if i["lower"] <= truth[n] <= i["upper"]]
+        over, over_total = over + len(inside_planes), over_total + len(planes)
         inside_estimate = [n for n, i in estimate.items() if i["lower"] is not None and i["upper"] is not None
                            and i["lower"] <= truth[n] <= i["upper"]]
         covered, total, estimated = covered + len(inside), total + 5, estimated + len(inside_estimate)
@@ -533,9 +536,11 @@ def autocalibration_proven(noise_px: float = 0.5, synthetic: int = 5) -> list[st
 
         lines.append(f"  {name}: f {result['K'][0][0]:.0f} px (truth {K[0, 0]:.0f}); proven focal_x "
                      f"[{end(f['lower'])}, {end(f['upper'])}], estimate [{end(fe['lower'])}, {end(fe['upper'])}]; "
-                     f"truth inside proven {len(inside)}/5, estimate {len(inside_estimate)}/5; verifies "
+                     f"truth inside proven {len(inside)}/5, proven over planes {len(inside_planes)}/{len(planes)}, "
+                     f"estimate {len(inside_estimate)}/5; verifies "
                      f"{verify_any(result).valid}; {timing}")
-    lines.append(f"  all: the truth inside the proven intervals {covered}/{total}, the estimate's {estimated}/{total}; "
+    lines.append(f"  all: the truth inside the proven intervals {covered}/{total}, those proven over planes "
+                 f"{over}/{over_total}, the estimate's {estimated}/{total}; "
                  f"CPU summary {cpu['summary']:.1f} s, full without intervals {cpu['proofs']:.1f} s, full "
                  f"{cpu['full']:.1f} s (x{cpu['full'] / cpu['summary']:.2f} a summary's, "
                  f"x{cpu['full'] / cpu['proofs']:.2f} without the intervals)")

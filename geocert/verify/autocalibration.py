@@ -12,7 +12,7 @@ import numpy as np
 
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
-from geocert.solvers.autocalibration import proofs, structure_check
+from geocert.solvers.autocalibration import plane_sublevel, proofs, structure_check
 from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.determinacy import proven_document
 from geocert.solvers.core.geometry import InputError, number_array
@@ -326,7 +326,12 @@ class AutocalibrationVerification(Verification):
         if not metric_relaxation.in_domain(setup, w, lo, hi):
             raise Invalid("scope", "the DIAC returned is outside the domain (box, PSD, or a view's scale range)")
         passed.append("scope")
-        return proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed, cost), options["metric_rel_gap"]
+        bound = proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed, cost)
+        if "plane_sublevel" in proof:  # K proven over the plane's own uncertainty too
+            plane_sublevel.check(problem, p, proof["plane_sublevel"], max(claimed, cost))
+            if "proven_interval" not in passed:
+                passed.append("proven_interval")
+        return bound, options["metric_rel_gap"]
 
 
 def _check_proven_intervals(stage: dict, claim: dict, affine: Any = None) -> None:
@@ -348,8 +353,6 @@ def _check_proven_intervals(stage: dict, claim: dict, affine: Any = None) -> Non
                                   "estimate's (a lower level proves a smaller set)")
     if over is None:
         return
-    from geocert.solvers.autocalibration import plane_sublevel
-
     sublevel = claim["proof"].get("plane_sublevel")
     try:
         stated = plane_sublevel.proven_document(sublevel)

@@ -39,7 +39,11 @@ import math
 import numpy as np
 
 from geocert.solvers.autocalibration import frames, metric_relaxation
-from geocert.solvers.core.strict import Invalid, charge
+from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.solvers.autocalibration.proofs import (LARGEST_INCREASE, SMALLEST_INCREASE, check_regions, record,
+                                                    sublevel_level)
+from geocert.solvers.core.determinacy import proven_document as _proven_document
+from geocert.solvers.core.strict import Invalid, charge, number, numbers
 
 WIDEN = 1e-12
 PLANE_BOXES = 6_000  # boxes bounded by the search over planes alone (3 dimensions)
@@ -417,7 +421,8 @@ def hull(context: Context, trees: list, margin: float = 0.0) -> np.ndarray:
     for i, (region, (box, levels)) in enumerate(zip(context.regions, trees)):
         if box is None:  # its plane tree leaves no plane
             continue
-        lo, hi = leaves(np.concatenate([box[0], context.w_lo])[None, :], np.concatenate([box[1], context.w_hi])[None, :],
+        lo, hi = leaves(np.concatenate([box[0], context.w_lo])[None, :],
+                        np.concatenate([box[1], context.w_hi])[None, :],
                         levels, f"proof/plane_sublevel/regions/{i}/levels", MAX_BOXES + 2)
         keep = _kept(context, region, lo, hi, margin)
         for j in np.flatnonzero(keep):
@@ -439,8 +444,6 @@ def prove(problem, regions: list[tuple[float, np.ndarray, np.ndarray, np.ndarray
     cost and chirality alone, over v), the box of planes it leaves (padded outward), and the tree
     over that box times omega's; and the intervals (hull's, at a small margin, padded outward).
     None when no level is finite or nothing is proven."""
-    from geocert.solvers.autocalibration.proofs import sublevel_level
-
     if not all(math.isfinite(x) and x >= 0 for x in (affine_cost, affine_increase, metric_cost, metric_increase)):
         return None
     built = [Region(problem, delta, G, lo, hi) for delta, G, lo, hi, _ in regions]
@@ -487,11 +490,6 @@ def check(problem, p: np.ndarray, sublevel, metric_cost: float) -> np.ndarray:
     weaker true statement, a narrower one is refused). U_a is the affine cost of the plane p
     stated, U_m ``metric_cost`` (the claimed K's, recomputed), each plus its increase. Returns
     the hull proven."""
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
-    from geocert.solvers.autocalibration.proofs import (LARGEST_INCREASE, SMALLEST_INCREASE, check_regions, record,
-                                                        sublevel_level)
-    from geocert.solvers.core.strict import number, numbers
-
     where = "proof/plane_sublevel"
     record(sublevel, where, ("affine_increase", "cost_increase", "regions", "excluded", "intervals"))
     increases = []
@@ -536,9 +534,7 @@ def check(problem, p: np.ndarray, sublevel, metric_cost: float) -> np.ndarray:
 def proven_document(sublevel: dict) -> dict:
     """What a metric stage's determinacy states as ``proven_over_planes`` from its proof's
     ``plane_sublevel``."""
-    from geocert.solvers.core.determinacy import proven_document as document
-
-    out = document(sublevel["cost_increase"], NAMES, sublevel["intervals"],
+    out = _proven_document(sublevel["cost_increase"], NAMES, sublevel["intervals"],
                    "over every plane at infinity chirality allows whose modulus cost exceeds the affine stage's by "
                    "at most affine_increase (not only the plane the stages state): the hull, over the leaves of a "
                    "search by interval arithmetic over planes and omega that no bound excludes, of each intrinsic's "

@@ -378,7 +378,8 @@ def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float
 def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, claimed_cost: float, passed: list,
                  cost: float | None = None) -> float:
     """The bound a metric proof establishes over every omega of the domain, for the plane p;
-    with its ``sublevel``, the proven intervals too (``cost``: the claimed K's recomputed cost)."""
+    with its ``sublevel``, the proven intervals too (``cost``: the claimed K's recomputed cost).
+    Its ``plane_sublevel`` is plane_sublevel.check's (the verifier calls it beside this)."""
     record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"),
            ("sublevel", "plane_sublevel"))
     setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
@@ -393,13 +394,6 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
     if "sublevel" in proof:
         check_sublevel(problem, setup, proof["sublevel"], max(claimed_cost, claimed_cost if cost is None else cost))
         passed.append("proven_interval")
-    if "plane_sublevel" in proof:  # over the plane's own uncertainty too (plane_sublevel)
-        from geocert.solvers.autocalibration import plane_sublevel
-
-        plane_sublevel.check(problem, p, proof["plane_sublevel"],
-                             max(claimed_cost, claimed_cost if cost is None else cost))
-        if "proven_interval" not in passed:
-            passed.append("proven_interval")
     return bound
 
 
