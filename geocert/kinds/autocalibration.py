@@ -369,7 +369,8 @@ def stratified_item(parsed: Parsed, options: autocalibration_problem.Autocalibra
             if left > 0:
                 _prove_intervals(problem, result, metric_stage, proof, min(options.time_limit_s, 20.0, left))
             # the planes' regions are proved side by side whether or not the affine search finished
-            if isinstance(affine_stage.get("determinacy"), dict) and "sublevel" in proof:
+            left = math.inf if deadline is None else deadline - time.monotonic()
+            if isinstance(affine_stage.get("determinacy"), dict) and "sublevel" in proof and left > 0:
                 _prove_over_planes(problem, result, affine_stage, metric_stage, proof)
     if result.baseline is not None:
         Kb = problem.K0 @ autocalibration_problem.upper_triangular_root(

@@ -48,6 +48,7 @@ from geocert.solvers.core.strict import Invalid, charge, number, numbers
 WIDEN = 1e-12
 PLANE_BOXES = 6_000  # boxes bounded by the search over planes alone (3 dimensions)
 MAX_BOXES = 6_000  # boxes bounded by the search over planes and omega (8 dimensions)
+VIEWS = 20  # up to this many views the searches get their whole budgets, beyond it in proportion
 MAX_LEVELS = 400
 PLANE_SPLITS = 3  # the levels of a search over planes and omega that split the planes' box (8 x 8 x 8)
 NAMES = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")
@@ -446,13 +447,16 @@ def prove(problem, regions: list[tuple[float, np.ndarray, np.ndarray, np.ndarray
     None when no level is finite or nothing is proven."""
     if not all(math.isfinite(x) and x >= 0 for x in (affine_cost, affine_increase, metric_cost, metric_increase)):
         return None
+    # each box's bounds cost about a view's work: many views search fewer boxes (wider intervals)
+    views = max(len(problem.norm.cameras), 1)
+    plane_budget, budget = (max(200, min(most, most * VIEWS // views)) for most in (PLANE_BOXES, MAX_BOXES))
     built = [Region(problem, delta, G, lo, hi) for delta, G, lo, hi, _ in regions]
     context = Context(problem, built, sublevel_level(affine_cost, affine_increase),
                       sublevel_level(metric_cost, metric_increase))
     documents, trees = [], []
     for n, region in enumerate(built):
         plane_levels = search(context, region, region.lo[None, :].copy(), region.hi[None, :].copy(),
-                              PLANE_BOXES // len(built))
+                              plane_budget // len(built))
         found = plane_hull(context, region, plane_levels, "plane_levels", HULL_MARGIN)
         box = None
         if found is not None:
@@ -460,7 +464,7 @@ def prove(problem, regions: list[tuple[float, np.ndarray, np.ndarray, np.ndarray
             box = (found[0] - pad, found[1] + pad)
         levels = ["00"] if box is None else search(
             context, region, np.concatenate([box[0], context.w_lo])[None, :],
-            np.concatenate([box[1], context.w_hi])[None, :], MAX_BOXES // len(built))
+            np.concatenate([box[1], context.w_hi])[None, :], budget // len(built))
         trees.append((box, levels))
         delta, G, lo, hi, basis = regions[n]
         documents.append({"delta": float(delta), "frame": np.asarray(G).tolist(),
