@@ -14,23 +14,27 @@ every K of S has its focal lengths, skew and principal point within them. S hold
 whenever the truth costs within those increases, which the estimate's increases (3 standard
 errors' worth of each stage's own residual variance) are chosen to make likely.
 
-Read off a search by interval arithmetic over boxes of (v, w): v the plane in the affine stage's
-region frame (each orientation's box, proved side by side in exact arithmetic as the affine
-proof's are: proofs.check_region), w omega's five free entries within the ranges' box. The tree
-is bisection only (the widest side relative to the root's, at its midpoint), carried as one bit
-a box a level (split or leaf), so a reader replays it exactly. A leaf is excluded when a
-chirality row is negative over it, when the modulus cost's interval lower bound exceeds U_a, when
-the metric cost's exceeds U_m, or when no omega of it has a K within the ranges; the intervals
-are the hull, over the leaves not excluded, of each intrinsic's range on the leaf
-(metric_relaxation.intrinsics_ranges). Every interval operation is widened outward by
-``WIDEN`` of its operands' size, so rounding never excludes a box wrongly.
+Read off two searches by interval arithmetic in each orientation's region: v the plane in the
+affine stage's region frame (its box proved side by side in exact arithmetic as the affine
+proof's is: proofs.check_regions), w omega's five free entries within the ranges' box. The first
+tree is over v alone (chirality and the modulus cost); the box of its leaves not excluded, stated
+as ``plane_box``, is the root of the second, over (v, w), which splits the planes' sides for its
+first PLANE_SPLITS levels and omega's after. Bisection only (the widest side relative to the
+root's, at its midpoint), one bit a box a level (split or leaf), so a reader replays both trees
+exactly. A leaf is excluded when a chirality row is negative over it, when a lower bound on the
+modulus cost over it exceeds U_a, or one on the metric cost exceeds U_m; the intervals are the
+hull, over the second trees' leaves not excluded, of each intrinsic's range on the leaf
+(metric_relaxation.intrinsics_ranges, which also drops a leaf with no K within the ranges).
+Every interval operation is widened outward by ``WIDEN`` of its operands' size, so rounding
+never excludes a box wrongly.
 
-The bounds are plain interval arithmetic (no relaxation): tight on small boxes, so the search
-decides well-determined scenes and leaves a critical family's leaves open; a leaf never split
-(the budget spent) excludes nothing but what its bound excludes, so the intervals are then wide,
-never wrong. In the interval products the modulus coefficients are affine in v once multiplied
-by the plane's last coordinate d, and so are the infinite homographies d H_j (the metric cost
-does not see their scale): both are exact intervals over a box."""
+The bounds are interval arithmetic in mean-value form (Dual), not a relaxation: tight on small
+boxes, loose on large ones, so the searches, stopped at their budgets, leave a critical family's
+leaves open and often much more; a leaf never split excludes nothing its own bound does not, so
+the intervals are then wide, never wrong. The modulus coefficients times the plane's last
+coordinate d are affine in v, and so are the infinite homographies d H_j (the metric cost does
+not see their scale): both are exact intervals over a box; the modulus residuals are also
+bounded as cbrt(gamma alpha^3) - beta and in a homogeneous form needing no division by d."""
 
 from __future__ import annotations
 
