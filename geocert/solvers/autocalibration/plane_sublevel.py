@@ -81,8 +81,10 @@ def _div(a, b):
 
 
 def _sq_lower(a):
-    """The least square over each interval."""
+    """The least square over each interval (0 where either end is NaN: an interval built from an
+    unbounded gradient says nothing)."""
     below = np.where(a[0] > 0, a[0], np.where(a[1] < 0, -a[1], 0.0))
+    below = np.where(np.isnan(a[0]) | np.isnan(a[1]), 0.0, below)
     return below * below * (1 - 4 * WIDEN)
 
 
