@@ -16,7 +16,9 @@ processes, each a process of its own on loopback:
     .venv/bin/python -m bench.faults [--only submit,streams,redelivery,restart,body]
 
 ``--only saturated`` runs the saturated half of section 1 alone (the API, no workers), for
-before-and-after pairs.
+before-and-after pairs; with the API's wait for a core (its scheduler statistics) and this bench's
+own client CPU beside its CPU. ``GEOCERT_API_PROCESSES=2`` in the environment serves it with two
+API processes.
 
 Each section starts its own cluster in a temporary directory. Figures are printed as they come and
 as one table at the end. Nothing here asserts: the tests (tests/service/test_faults.py) check
@@ -93,6 +95,30 @@ def cpu_seconds(pid: int) -> float:
     with open(f"/proc/{pid}/stat") as stat:
         fields = stat.read().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def api_pids(pid: int) -> list[int]:
+    """The API's processes: `geocert serve` and the API processes it started (GEOCERT_API_PROCESSES)."""
+    try:
+        with open(f"/proc/{pid}/task/{pid}/children") as children:
+            others = [int(child) for child in children.read().split()]
+    except OSError:
+        return [pid]
+    found = [pid]
+    for other in others:
+        try:
+            with open(f"/proc/{other}/cmdline", "rb") as cmdline:
+                if b"geocert.app.lifecycle" in cmdline.read():
+                    found.append(other)
+        except OSError:
+            pass
+    return found
+
+
+def run_queue_seconds(pid: int) -> float:
+    """Seconds a process's main thread has waited for a core while runnable (schedstat)."""
+    with open(f"/proc/{pid}/schedstat") as stat:
+        return int(stat.read().split()[1]) / 1e9
 
 
 def peak_rss_kib(pid: int) -> int:
@@ -246,13 +272,22 @@ def saturated(clients: int, jobs_per_client: int, bodies: list[bytes]) -> None:
                 await asyncio.gather(*(one(i) for i in range(clients)))
                 return found, time.monotonic() - began
 
-        cpu_before = cpu_seconds(running.api.pid)
+        pids = api_pids(running.api.pid)
+        cpu_before = sum(map(cpu_seconds, pids))
+        waited_before = sum(map(run_queue_seconds, pids))
+        client_before = time.process_time()
         latencies, wall = asyncio.run(saturate())
-        cpu = cpu_seconds(running.api.pid) - cpu_before
+        cpu = sum(map(cpu_seconds, pids)) - cpu_before
+        waited = sum(map(run_queue_seconds, pids)) - waited_before
+        client = time.process_time() - client_before
         p50, p95, p99 = percentiles_ms(latencies)
         report(f"submit, {clients} clients back to back, no think time, no workers (the API saturated)",
                f"p50 {p50:.0f} ms, p95 {p95:.0f} ms, p99 {p99:.0f} ms ({len(latencies) / wall:.0f} submits/s)")
         report("API CPU time per submit", f"{1e3 * cpu / len(latencies):.1f} ms")
+        report(f"the API's wait for a core per submit (its {len(pids)} process(es), run queue)",
+               f"{1e3 * waited / len(latencies):.1f} ms")
+        report("this bench's client CPU per submit (httpx, the same cores)", f"{1e3 * client / len(latencies):.1f} ms")
+        report("the machine while it ran (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
 
 
 # --- 2 and 3. idle streams and SIGTERM ---------------------------------------------------------

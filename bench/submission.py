@@ -19,6 +19,9 @@ the answer written to a stub transport, a trivial ASGI app): CPU a request with 
 ``lifecycle.HeaderTimeoutH11``) and with httptools when it is importable (it is not a dependency:
 ``pip install httptools`` beside, or PYTHONPATH a directory holding it), and their ratio.
 
+``--messages``: making a one-chunk job's task commands alone (``queue.task_commands`` with the
+event loop's producer), CPU a job.
+
 ``--baseline <checkout>``: before and after in one run: this measurement made ``--rounds`` times
 in turn with this checkout's geocert and with that checkout's (each run a process of its own,
 alternating, this bench's code in both), then the ratio of their medians. E.g. the whole request
@@ -56,6 +59,7 @@ def main() -> None:
     parser.add_argument("--loop", action="store_true", help="the event loop's path (submit_on_loop)")
     parser.add_argument("--app", action="store_true", help="the whole request through the ASGI app")
     parser.add_argument("--parsers", action="store_true", help="uvicorn's h11 against httptools, per request")
+    parser.add_argument("--messages", action="store_true", help="making a one-chunk job's task commands alone")
     parser.add_argument("--baseline", metavar="CHECKOUT", help="another checkout to measure against, in turn")
     parser.add_argument("--rounds", type=int, default=4, help="with --baseline: runs of each")
     args = parser.parse_args()
@@ -69,6 +73,8 @@ def main() -> None:
     server, url = start_embedded_redis(Path(tempfile.mkdtemp(prefix="geocert-bench-submission-")))
     os.environ.update(GEOCERT_REDIS_URL=url, GEOCERT_MAX_ACTIVE_JOBS_PER_KEY="0", GEOCERT_RATE_LIMIT_PER_MINUTE="0")
     try:
+        if args.messages:
+            return messages(args.count)
         measure(url, args.tracks, args.count, args.profile, args.loop, args.app)
     finally:
         server.terminate()
@@ -177,6 +183,24 @@ def measure(url: str, tracks: int, count: int, profile: bool, loop: bool = False
         profiler = cProfile.Profile()
         profiler.runcall(lambda: [submit(index) for index in range(count)])
         pstats.Stats(profiler).sort_stats("cumulative").print_stats(30)
+
+
+def messages(count: int) -> None:
+    """Making a one-chunk job's task commands (``queue.task_commands`` with the event loop's
+    producer, as a small submit makes them), ``count`` times: CPU a job."""
+    from geocert.workers import queue
+
+    queue.ready_loop_producer()
+    producer = queue.loop_producer()
+    meta = {"id": "0" * 32, "kind": "triangulation", "chunks": [(0, 3)], "task_ids": ["0" * 32]}
+    for _ in range(100):
+        queue.task_commands(meta, None, producer)  # first-use costs out of the figures
+    cpu = time.process_time()
+    for _ in range(count):
+        queue.task_commands(meta, None, producer)
+    cpu = time.process_time() - cpu
+    print(f"{count} one-chunk jobs' task commands (queue.task_commands, the loop's producer): "
+          f"{1e3 * cpu / count:.3f} ms CPU a job; load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
 def parsers(tracks: int, count: int, rounds: int = 3) -> None:

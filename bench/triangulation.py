@@ -11,7 +11,9 @@ Prints, in one run and side by side:
      called on chunks of --chunk tracks as the service's kind calls it) against triangulate track by
      track, and (L2L2) OpenCV DLT + LM, CPU time per track;
   (--service-only: the job through the service with each number of workers against the batched
-  solve's CPU over the workers, the kind's solve_batch as a worker runs it, documents included)
+  solve's CPU over the workers, the kind's solve_batch as a worker runs it, documents included;
+  and when the job was created, answered, started and finished (its own times) and its result read,
+  with the CPU the workers and the API spent meanwhile)
   5. the floor (L2L2): on the Dinosaur and on synthetic scenes of 2 to 20 views, CPU per track of
      the vectorised local solve (fractional.flat: linear start and Levenberg-Marquardt on every
      track at once, uncertified), of per-track scipy (OpenCV DLT, then MINPACK's leastsq), of the
@@ -203,19 +205,45 @@ def service_batch(cameras, tracks, workers: int, detail: str = "full") -> dict:
                     "data": {"cameras": cameras.tolist(),
                              "tracks": [{"views": t.views, "points": t.points.tolist()} for t in tracks]}}
             payload = json.dumps(body)
-            start = time.perf_counter()
+            cpu_before = service_cpu(server.pid)
+            began, start = time.time(), time.perf_counter()
             job = client.post("/v1/jobs", content=payload, headers={"content-type": "application/json"}).json()
+            posted = time.perf_counter() - start
             with client.stream("GET", f"/v1/jobs/{job['id']}/events", timeout=600) as stream:
                 for line in stream.iter_lines():
                     if line == "event: end":
                         break
             final = client.get(f"/v1/jobs/{job['id']}").json()
             wall = time.perf_counter() - start
+            cpu_after = service_cpu(server.pid)
         return {"wall": wall, "status": final["status"], "certified": final["result"]["stats"]["certified"],
-                "tracks": len(final["result"]["tracks"]), "body_mb": len(payload) / 1e6}
+                "tracks": len(final["result"]["tracks"]), "body_mb": len(payload) / 1e6, "posted": posted,
+                "created": final["created_at"] - began, "started": final["started_at"] - began,
+                "finished": final["finished_at"] - began,
+                "cpu": {part: cpu_after[part] - cpu_before[part] for part in cpu_after}}
     finally:
         server.terminate()
         server.wait(timeout=60)
+
+
+def service_cpu(pid: int) -> dict[str, float]:
+    """CPU seconds so far of `geocert serve`'s processes under ``pid``: its workers (Celery's
+    processes, their solver processes among them) and the rest (the API, its helpers, Redis)."""
+    found = {"workers": 0.0, "api": 0.0}
+    todo = [pid]
+    while todo:
+        current = todo.pop()
+        try:
+            with open(f"/proc/{current}/task/{current}/children") as children:
+                todo.extend(int(child) for child in children.read().split())
+            with open(f"/proc/{current}/cmdline", "rb") as cmdline:
+                part = "workers" if b"celery" in cmdline.read() else "api"
+            with open(f"/proc/{current}/stat") as stat:
+                fields = stat.read().rsplit(")", 1)[1].split()
+            found[part] += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        except OSError:
+            pass
+    return found
 
 
 def kind_solve_cpu(cameras, tracks, detail: str, repeats: int = 3) -> float:
@@ -252,6 +280,11 @@ def service_table(cameras, tracks, workers: list[int], details: list[str]) -> No
                   f"the batched solve's CPU (solve_batch in chunks, documents included) {solve:.3f} s, over "
                   f"{count}: {solve / count:.3f} s; ratio {batch['wall'] / (solve / count):.1f}x (target 1.25x with 2); "
                   f"load average {load()}", flush=True)
+            print(f"  when, from the POST's start: the job created {batch['created']:.2f} s, its 202 {batch['posted']:.2f} s, "
+                  f"started {batch['started']:.2f} s, finished {batch['finished']:.2f} s, its result read "
+                  f"{batch['wall']:.2f} s; CPU meanwhile: the workers "
+                  f"{batch['cpu']['workers']:.2f} s ({batch['cpu']['workers'] / solve:.1f}x the solve's), the API and "
+                  f"Redis {batch['cpu']['api']:.2f} s", flush=True)
         if 1 in walls and 2 in walls:
             print(f"Service, detail {detail}: 1 -> 2 workers {walls[1] / walls[2]:.2f}x (target 1.8x)")
 

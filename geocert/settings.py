@@ -141,6 +141,9 @@ class Settings(BaseSettings):
     # A connection must complete a request's headers within this many seconds of opening (or of
     # its previous response), else it is closed (slow-header clients).
     header_timeout_s: float = 10.0
+    # API processes `geocert serve` runs on its port (each an event loop of its own, one core at
+    # most; what a request needs from another is in Redis). `--api-processes` overrides it.
+    api_processes: int = 1
     # Event streams (SSE) one key may hold open at once in one API process, or one client address
     # when no keys are configured (429 beyond it; 0: unlimited).
     max_streams_per_key: int = 100

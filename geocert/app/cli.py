@@ -27,8 +27,23 @@ def _progress_bar(progress: dict) -> None:
     sys.stderr.flush()
 
 
-def cmd_solve(args: argparse.Namespace) -> int:
+def job_request_adapter(body: object):
+    """What validates a job: its kind's request model when the body names a served kind (the branch
+    of the API's union its tag selects: the same checks, and the same fields named in errors),
+    without importing every kind; otherwise the API's union, which says what is wrong with the kind."""
+    from pydantic import TypeAdapter
+
+    from geocert.kinds import KINDS
+
+    name = body.get("kind") if isinstance(body, dict) else None
+    if isinstance(name, str) and name in KINDS:
+        return TypeAdapter(KINDS.get(name).request_model)
     from geocert.app.schemas import JOB_REQUEST
+
+    return JOB_REQUEST
+
+
+def cmd_solve(args: argparse.Namespace) -> int:
     from geocert.solvers.core.geometry import InputError
     from geocert.jobs.runner import solve_job
 
@@ -40,7 +55,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     try:
-        request = JOB_REQUEST.dump_python(JOB_REQUEST.validate_python(body), mode="json")
+        adapter = job_request_adapter(body)
+        request = adapter.dump_python(adapter.validate_python(body), mode="json")
         sink = _progress_bar if sys.stderr.isatty() else None
         result = solve_job(request, sink=sink)
     except ValidationError as exc:
@@ -185,7 +201,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
     try:
         from geocert.app import lifecycle
 
-        lifecycle.run("geocert.app.main:app", host=args.host, port=args.port)
+        lifecycle.run("geocert.app.main:app", host=args.host, port=args.port,
+                      processes=args.api_processes or get_settings().api_processes)
     finally:
         stopping.set()
         for process in workers:
@@ -321,6 +338,8 @@ def main(argv: list[str] | None = None) -> int:
     serve.add_argument("--host", default="127.0.0.1")
     serve.add_argument("--port", type=int, default=8000)
     serve.add_argument("--workers", type=int, default=1, help="worker processes to start (0 allowed)")
+    serve.add_argument("--api-processes", type=int, default=None,
+                       help="API processes on the port (default: GEOCERT_API_PROCESSES, 1)")
     serve.add_argument("--concurrency", type=int, default=default_concurrency(),
                        help="solver processes per worker (default: one per core, at least 2)")
     serve.set_defaults(func=cmd_serve)

@@ -10,11 +10,25 @@ running after that.
 request's headers within ``GEOCERT_HEADER_TIMEOUT_S`` of opening, or of its previous response, or
 it is closed. uvicorn by itself times out only idle keep-alive connections, so a client sending
 its headers a byte at a time (slowloris) would hold a connection for ever.
+
+``run`` with ``processes`` > 1 (``GEOCERT_API_PROCESSES``): that many API processes accept on one
+listening socket, bound here: this process serves on it and starts the others
+(``python -m geocert.app.lifecycle APP FD``), each with its own event loop, the same guard and the
+same way out. One event loop is one core at most, and on a loaded machine the scheduler gives a
+process its share, whatever its queue of requests. What a request needs from another is in
+Redis (jobs, events, idempotency keys, the rate limit); the limits counted in a process (open
+event streams a key, verifications, exports and orientations at once, and the processes that
+take large bodies) are counted in each.
 """
 
 from __future__ import annotations
 
 import asyncio
+import os
+import signal
+import socket
+import subprocess
+import sys
 import threading
 import weakref
 
@@ -78,12 +92,61 @@ class HeaderTimeoutH11(H11Protocol):
             self.transport.close()
 
 
-def run(app: str, host: str, port: int) -> None:
+def _config(app: str, **where) -> uvicorn.Config:
     from geocert.settings import get_settings
 
     settings = get_settings()
     HeaderTimeoutH11.header_timeout_s = settings.header_timeout_s
-    config = uvicorn.Config(app, host=host, port=port, log_level="warning", http=HeaderTimeoutH11,
-                            timeout_keep_alive=5, timeout_graceful_shutdown=settings.shutdown_timeout_s,
-                            h11_max_incomplete_event_size=16 * 1024)
-    Server(config).run()
+    return uvicorn.Config(app, log_level="warning", http=HeaderTimeoutH11, timeout_keep_alive=5,
+                          timeout_graceful_shutdown=settings.shutdown_timeout_s,
+                          h11_max_incomplete_event_size=16 * 1024, **where)
+
+
+def run(app: str, host: str, port: int, processes: int = 1) -> None:
+    """Serve ``app`` on host:port until told to stop: in this process alone, or with
+    ``processes`` - 1 more API processes on the same listening socket (stopped with this one, and
+    by the kernel if this one dies)."""
+    config = _config(app, host=host, port=port)
+    if processes <= 1:
+        Server(config).run()
+        return
+    listening = config.bind_socket()
+    others = [subprocess.Popen([sys.executable, "-m", "geocert.app.lifecycle", app, str(listening.fileno()),
+                                str(os.getpid())], pass_fds=[listening.fileno()])
+              for _ in range(processes - 1)]
+    try:
+        Server(config).run(sockets=[listening])
+    finally:
+        for other in others:
+            other.send_signal(signal.SIGTERM)
+        for other in others:
+            try:
+                other.wait(timeout=(config.timeout_graceful_shutdown or 5) + 5)
+            except subprocess.TimeoutExpired:
+                other.kill()
+        listening.close()
+
+
+def _serve_inherited(app: str, fd: int, parent: int) -> None:
+    """One of ``run``'s other API processes: serves ``app`` on the listening socket ``fd`` until
+    told to stop, or until ``parent`` (the process that started it) dies. The kernel is asked for
+    that here, not in a preexec_fn (unsafe in a process with threads, as `geocert serve` has)."""
+    _die_with_parent()
+    if os.getppid() != parent:  # it died before the request took effect
+        return
+    listening = socket.socket(fileno=fd)
+    Server(_config(app, host=listening.getsockname()[0], port=listening.getsockname()[1])).run(sockets=[listening])
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to send this process SIGTERM when its parent dies, even by SIGKILL."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
+if __name__ == "__main__":
+    _serve_inherited(sys.argv[1], int(sys.argv[2]), int(sys.argv[3]))

@@ -1,22 +1,18 @@
-"""The problem kinds served: one line each (see base.py for what a kind is)."""
+"""The problem kinds served: one line each (see base.py for what a kind is). Each is named with the
+module that defines it and imported on first use (KINDS.get, or iterating KINDS), so that solving
+one kind does not import every kind's solvers."""
 
 import geocert.verify.checks  # noqa: F401 (installs the solvers' self-check: GEOCERT_SELF_VERIFY=1)
-from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION
-from geocert.kinds.bilinear import KIND as BILINEAR
 from geocert.kinds.base import ProblemKind, Registry, default_options, options_from
-from geocert.kinds.resection_homography import HOMOGRAPHY, RESECTION
-from geocert.kinds.reconstruction import KIND as RECONSTRUCTION
-from geocert.kinds.stereo_lines import KIND as STEREO_LINES
-from geocert.kinds.triangulation import KIND as TRIANGULATION
 
 KINDS = Registry(
-    TRIANGULATION,
-    RESECTION,
-    HOMOGRAPHY,
-    AUTOCALIBRATION,
-    BILINEAR,
-    STEREO_LINES,
-    RECONSTRUCTION,
+    triangulation="geocert.kinds.triangulation:KIND",
+    resection="geocert.kinds.resection_homography:RESECTION",
+    homography="geocert.kinds.resection_homography:HOMOGRAPHY",
+    autocalibration="geocert.kinds.autocalibration:KIND",
+    bilinear="geocert.kinds.bilinear:KIND",
+    stereo_lines="geocert.kinds.stereo_lines:KIND",
+    reconstruction="geocert.kinds.reconstruction:KIND",
 )
 get_kind = KINDS.get
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import importlib
 import typing
 from typing import Any, Callable
 
@@ -126,12 +127,16 @@ REQUIRED_ATTRIBUTES = ("name", "description", "item_key", "chunk_size", "options
 
 
 class Registry:
-    """The kinds served, by name, in the order registered."""
+    """The kinds served, by name, in the order registered. A kind may be registered by where it is
+    defined (``"module:attribute"``) and is imported on first use: a process that solves one kind
+    (the command line's ``geocert solve``) imports that kind's solvers only, not every kind's."""
 
-    def __init__(self, *kinds: ProblemKind):
-        self._kinds: dict[str, ProblemKind] = {}
+    def __init__(self, *kinds: ProblemKind, **defined_in: str):
+        self._kinds: dict[str, ProblemKind | str] = {}
         for kind in kinds:
             self.register(kind)
+        for name, where in defined_in.items():
+            self._kinds[name] = where
 
     def register(self, kind: ProblemKind) -> ProblemKind:
         if not isinstance(kind, ProblemKind):
@@ -154,13 +159,20 @@ class Registry:
     def get(self, name: Any) -> ProblemKind:
         if not isinstance(name, str) or name not in self._kinds:
             raise InputError("kind", f"unknown problem kind {name!r} (served: {', '.join(self._kinds)})")
-        return self._kinds[name]
+        kind = self._kinds[name]
+        if isinstance(kind, str):
+            module, attribute = kind.split(":")
+            kind = getattr(importlib.import_module(module), attribute)
+            if getattr(kind, "name", None) != name:
+                raise TypeError(f"{module}:{attribute} is not the kind {name!r}")
+            self.register(kind)
+        return kind
 
     def __contains__(self, name: object) -> bool:
         return name in self._kinds
 
     def __iter__(self):
-        return iter(self._kinds.values())
+        return iter([self.get(name) for name in list(self._kinds)])
 
     def names(self) -> list[str]:
         return list(self._kinds)

@@ -221,7 +221,7 @@ class TriangulationKind(ProblemKind):
         document = track_document(result, options.detail, options.certificate == "full")
         if options.detail == "full":  # brief: not computed
             document["determinacy"] = safely(determinacy.track, parsed.cameras[views], points, result.point,
-                                             result.at_infinity, result.cost, result.lower_bound,
+                                             result.at_infinity, result.cost, determinacy.stated_lower_bound(result),
                                              getattr(result.certificate, "sublevel", None))
         return document
 

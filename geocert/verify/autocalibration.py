@@ -4,6 +4,7 @@ metric stage's (conditional on the plane at infinity it states)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from typing import Any
@@ -18,6 +19,7 @@ from geocert.solvers.core.determinacy import proven_document
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
 from geocert.solvers.fractional import residual_claims
+from geocert.verify import estimates
 from geocert.verify.verification import Verification
 
 STAGE_NAMES = {"stratified": ["affine", "metric"], "direct": ["direct"]}
@@ -83,6 +85,7 @@ def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, fl
 
 class AutocalibrationVerification(Verification):
     claim_options = CLAIM_OPTIONS
+    option_names = tuple(entry.name for entry in dataclasses.fields(autocalibration_problem.AutocalibrationOptions))
     proofs: dict = {}
     # A stage that found no solution (no plane, K or quadric) says "failed": a word about the
     # solver, not the data (verify.uncertified_claim).
@@ -213,6 +216,9 @@ class AutocalibrationVerification(Verification):
                 raise Invalid("returned", f"{name} is not what the plane at infinity and K give")
         _check_baseline(result.get("baseline"), problem, p)
         _check_proven_intervals(stages[1], claims[1], stages[0])
+        estimates.check_intrinsics(stages[1].get("determinacy"), result.get("K"), "stages/1/determinacy")
+        estimates.check_redundancy(stages[0].get("determinacy"), len(cameras) - 4, "stages/0/determinacy")
+        estimates.check_redundancy(stages[1].get("determinacy"), 5 * len(cameras) - 10, "stages/1/determinacy")
 
     @staticmethod
     def estimates_of(result: dict, certificate: dict) -> dict:
@@ -549,6 +555,10 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
         if not _derived_close(name, result.get(name), value, cameras, points, H):
             raise Invalid("returned", f"{name} is not what the quadric gives")
     _check_direct_proven(result["stages"][0], claim, len(cameras))
+    if result.get("Ks") is None:  # one K (varying focal lengths: an estimate per view, of Ks)
+        estimates.check_intrinsics(result["stages"][0].get("determinacy"), result.get("K"), "stages/0/determinacy")
+        estimates.check_redundancy(result["stages"][0].get("determinacy"), 5 * len(cameras) - 10,
+                                   "stages/0/determinacy")
 
 
 def _check_direct_proven(stage: dict, claim: dict, views: int) -> None:

@@ -6,6 +6,7 @@ rounds, the leaves covering the searched box and each leaf's safe bound), docs/c
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -37,6 +38,7 @@ FRAME_SCOPES = {"searched": "every affine camera whose 2x3 part lies in the came
 
 class BilinearVerification(Verification):
     claim_options = CLAIM_OPTIONS
+    option_names = tuple(entry.name for entry in dataclasses.fields(BilinearOptions))
     proofs: dict = {}
     data_items = "frames"  # the certificate has one item per frame (verify._check_item_count)
     domain = ("every affine camera [M | t] whose 2x3 part M lies in the item's camera box (any translation t), "
@@ -252,6 +254,11 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
                       f"the camera returned (|M| <= {bound * scale!r}: camera_bound null)")
     if not (np.all(scope_lo <= M) and np.all(M <= scope_hi)):
         raise Invalid("scope", "the camera returned is outside the camera box of the scope")
+    # The scope the options state (the report's statement: "the camera and coefficients returned
+    # are in that scope") holds the camera returned too, not only the proof's larger box.
+    if options["camera_bound"] is not None and not np.all(np.abs(M) <= bound):
+        raise Invalid("scope", f"the camera returned is outside the scope's camera box (|M_rk| <= camera_bound "
+                               f"{options['camera_bound']!r})")
     passed.append("scope")
     relaxation = Relaxation(frame.X, frame.u, norm, options["coefficients"], options["coefficient_bound"])
     size = frame.X.shape[0] * frame.X.shape[1]  # basis shapes times points seen: a relaxation's rows

@@ -12,6 +12,7 @@ docs/certificate.md explains each step.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,6 +29,7 @@ from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, docu
                                          informational, number as _number, printable_tree, record, same,
                                          work_budget)
 from geocert.solvers.fractional import residual_claims
+from geocert.verify import estimates
 from geocert.verify.verification import hook
 
 MAX_DEPTH = 64
@@ -82,6 +84,31 @@ def _check_option_words(options: dict) -> None:
         value = options.get(name)
         if value is not None and not (isinstance(value, str) and value in words):
             raise Invalid("options", f"options/{name}: must be one of {', '.join(words)}, got {value!r:.40}")
+
+
+def option_names(kind: str) -> tuple[str, ...] | None:
+    """The option names a certificate of ``kind`` may state (its adapter's option_names, or its
+    options_type's fields); None: the kind declares neither."""
+    names = hook(_adapter(kind), "option_names")
+    options_type = _kind(kind).options_type
+    if names is None and options_type is not None and dataclasses.is_dataclass(options_type):
+        names = tuple(entry.name for entry in dataclasses.fields(options_type))
+    return names
+
+
+def _check_option_names(kind: str, options: Any) -> None:
+    """A certificate's options are the ones its kind's solver takes (option_names): an option no
+    check reads (``x_intrinsics`` beside ``intrinsics``, a misspelt ``max_residul``) states a
+    request no solver served, and a reader would take it for part of what is proven, so it is
+    refused, naming it, as a result's unknown member is."""
+    names = option_names(kind)
+    if names is None or not isinstance(options, dict):
+        return
+    unknown = sorted(str(name) for name in set(options) - set(names))
+    if unknown:
+        raise Invalid("options", f"options/{unknown[0]:.60}: no {kind} certificate has this option (its options: "
+                                 f"{', '.join(sorted(names))}); an option no check reads claims nothing, so it is "
+                                 "refused")
 
 
 def residual_options(kind: str, options: dict) -> dict:
@@ -350,6 +377,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
                                     "carries its certificate in 'certificate'")
         items = _document_items(document)
         tallies["format"][0] += 1
+        _check_option_names(document["kind"], document["options"])
         options = checked_options(document["kind"], document["options"])
         tallies["options"][0] += 1
         hashed, earlier_form = _check_hashes(document, options)
@@ -399,7 +427,7 @@ def _verify_all(document: dict, returned: dict | None, adapter, options: dict, i
                 tallies: dict, fail, hashed: tuple[str, ...] = ()) -> None:
     """_verify's checks of the items, of what ties them together, and of the result returning
     them (failures counted through ``fail``; ``hashed``: the options the problem hash covers)."""
-    forget = hook(adapter, "forget") or (lambda: None)  # what an adapter remembers of one document
+    forget = hook(adapter, "forget", lambda: None)  # what an adapter remembers of one document
     forget()
     try:
         _verify_items(document, options, items, report, tallies, fail)
@@ -492,7 +520,7 @@ def _verify_items(document: dict, options: dict, items: list, report: Report, ta
 def _note_abs_gap(kind: str, options: dict, claim: dict, position: int, report: Report) -> None:
     """A certified claim whose gap rel_gap alone does not allow (its proof met only abs_gap):
     named in the report's scope (within_abs_gap)."""
-    rel_gap_of = hook(_adapter(kind), "rel_gap_of") or (lambda options_, _: options_["rel_gap"])
+    rel_gap_of = hook(_adapter(kind), "rel_gap_of", lambda options_, _: options_["rel_gap"])
     if float(claim["gap"]) > float(rel_gap_of(options, position)) * abs(float(claim["cost"])):
         report.within_abs_gap.append(position)
 
@@ -532,7 +560,7 @@ def uncertified_claim(kind: str, data: dict, options: dict, claim: dict) -> None
         if proves is None or not proves(data, claim, options):
             raise Invalid("claim", "status 'infeasible' is said only where the verifier proves it from the data (a "
                                    "track with a view whose depth is a non-positive constant); this item's is not")
-    elif status not in (words := hook(_adapter(kind), "uncertified_statuses") or UNCERTIFIED_STATUSES):
+    elif status not in (words := hook(_adapter(kind), "uncertified_statuses", UNCERTIFIED_STATUSES)):
         raise Invalid("claim", f"an uncertified item's status is one of {', '.join(words)} (or 'infeasible' where "
                                f"the data prove it), not {status!r:.40}")
     for name in ("lower_bound", "gap"):
@@ -592,17 +620,17 @@ def _check_hashes(document: dict, options: dict) -> tuple[tuple[str, ...], str |
     if expected != document["data_sha256"]:
         raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
     adapter = _adapter(document["kind"])
-    names = hook(adapter, "claim_options")
+    names = hook(adapter, "claim_options", CLAIM_OPTIONS)
     expected = problem_hash(document["kind"], document["data"], options, names)
     if expected == document["problem_sha256"]:
-        return names or CLAIM_OPTIONS, None
+        return names, None
     # a kind whose hash came to cover more options: its earlier forms, newest first, each with
     # what the report's scope says of it
     for earlier, statement in hook(adapter, "earlier_forms"):
         if problem_hash(document["kind"], document["data"], options, earlier) == document["problem_sha256"]:
             return earlier, statement(options)
     raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and options "
-                               f"({', '.join(names or CLAIM_OPTIONS)}) hash to {expected!r}")
+                               f"({', '.join(names)}) hash to {expected!r}")
 
 
 # What a result returns of each item, which must equal what its certificate proves (and the
@@ -659,6 +687,7 @@ def _check_returned(result: dict, certificate: dict) -> None:
     own = hook(kind.verification, "check_returned")
     if own is not None:  # what else the result returns, derived from the claims
         own(result, certificate)
+    estimates.check(kind, result, certificate)  # a track's or map's determinacy estimate, recomputed
     if certificate["kind"] not in ("triangulation", "resection"):  # kinds whose determinacy proves intervals (own check)
         # a kind proving some intervals says which parts are estimates still (its check_returned checked the rest)
         estimates_of = hook(kind.verification, "estimates_of")
@@ -678,6 +707,8 @@ def _check_estimates(value: Any, where: str = "") -> None:
                     item.get("proven") not in (None, False) or item.get("proven_intervals") is not None):
                 raise Invalid("returned", f"{where}/determinacy says proven, and no proof of its intervals is "
                                           "carried (an estimate is proven: false)")
+            if name == "determinacy" and isinstance(item, dict):
+                estimates.check_determined(item, f"{where}/determinacy")
             _check_estimates(item, f"{where}/{name}")
     elif isinstance(value, list):
         for index, item in enumerate(value):
@@ -748,7 +779,7 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
     if not isinstance(items, list):
         return
     options = certificate["options"]
-    rel_gap_of = hook(kind.verification, "rel_gap_of") or (lambda options, index: options.get("rel_gap"))
+    rel_gap_of = hook(kind.verification, "rel_gap_of", lambda options, index: options.get("rel_gap"))
     for index, (item, claim) in enumerate(zip(items, certificate["items"])):
         summary = item.get("certificate") if isinstance(item, dict) else None
         where = f"{kind.item_key}/{index}/certificate"

@@ -176,12 +176,19 @@ LABELS_STATED = ("each point's track number and each camera's name and image siz
                  "checks data_sha256's data against it: data.tracks[i] is input track input_labels.track_numbers[i])")
 
 
-def _check_labels(result: dict, data: dict) -> str:
+def _check_labels(result: dict, data: dict, recorded: bool = True) -> str:
     """The result's labels tied to the input the certificate's data state (input_labels, hashed
     with them): each camera's name and image size are its view's, each point's track number its
     track's. Without input_labels (a document from before they were stated) they are unchecked,
-    and the report's scope says so (the returned words)."""
+    and the report's scope says so (the returned words); a document of the current form
+    (``recorded``: hashed_options.states_records) states them, so without them it is refused
+    (leaving them out chose the unchecked reading: the points' track numbers or the cameras' names
+    swapped verified then)."""
     labels = data.get("input_labels")
+    if labels is None and recorded:
+        raise Invalid("data", "data/input_labels is absent: a document of this form (its problem_sha256 covers "
+                              "registration) states the input's labels, and without them the result's labels would "
+                              "go unchecked")
     if labels is None:
         return LABELS_UNSTATED
     cameras, points = result["cameras"], result["points"]
@@ -478,7 +485,8 @@ def _warned(summary: dict, code: str) -> bool:
     return isinstance(warnings, list) and any(isinstance(w, dict) and w.get("code") == code for w in warnings)
 
 
-def _check_calibration(result: dict, registered: list[dict], verify: Callable[[dict], object]) -> None:
+def _check_calibration(result: dict, registered: list[dict], verify: Callable[[dict], object],
+                       recorded: bool = True) -> None:
     """summary.calibration is about the K the cameras return (claims.CalibrationClaim): its K is
     every registered camera's (model "shared") or one focal length among theirs with their
     principal point and skew, or one camera's K (a principal point per view) ("varying"); certified_K is stated exactly when certified, and is
@@ -490,7 +498,14 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
     not registered each have their warning. That the certified K is the autocalibration's
     optimum is the pipeline's statement (the scope says so): no proof of it is carried here. A
     result without summary.calibration (from before it was stated) is read by
-    _check_unstated_calibration."""
+    _check_unstated_calibration. ``recorded``: the document's form states every record
+    (hashed_options.states_records; _built_with_one_K)."""
+    stage = _stage(result, "autocalibration")
+    if recorded and result.get("calibration_certificate") is not None and "cameras_built_with_one_K" not in stage:
+        raise Invalid("returned", "stages/autocalibration/cameras_built_with_one_K is absent beside a calibration "
+                                  "certificate: a document of this form (its problem_sha256 covers registration) "
+                                  "states it, and without it the certified_K_of_calibrated_cameras warning would not "
+                                  "be asked for")
     summary = result["summary"]
     missing = sum(1 for camera in result["cameras"] if camera.get("registered") is not True)
     if missing and not _warned(summary, "views_not_registered"):
@@ -701,7 +716,8 @@ def _built_with_one_K(result: dict, stage: dict) -> bool:
     """Whether the calibration certificate's projective cameras (read and checked by
     _proven_calibration) are all K [R | t] for one K, as the autocalibration stage's
     ``cameras_built_with_one_K`` must say. A result written before the stage said so (a stored
-    version 2 document) lacks the field, and is not asked for the warning."""
+    document, of an earlier hash form) lacks the field, and is not asked for the warning; one of
+    the current form lacking it is refused (_check_calibration)."""
     cameras = result["calibration_certificate"]["data"]["cameras"]
     built = calibration_claim.built_with_one_K(numbers(cameras, "calibration_certificate/data/cameras",
                                                        (None, 3, 4), "returned"))
@@ -1089,6 +1105,7 @@ class ReconstructionItems(TrackItems, Verification):
     # hashed_options says
     claim_options = hashed_options.CLAIM_OPTIONS
     earlier_forms = hashed_options.EARLIER_FORMS
+    option_names = run_control.OPTION_NAMES
 
     @staticmethod
     def job_outcomes(result: dict) -> list:
@@ -1181,7 +1198,9 @@ class ReconstructionItems(TrackItems, Verification):
 
         registered, views = _check_cameras(result.get("cameras"), certificate.get("data", {}))
         _check_points(result.get("points"), certificate.get("data", {}).get("tracks"), views)
-        labels = _check_labels(result, certificate["data"])
+        # what a document of the current form states (hashed_options.states_records): absent, refused
+        recorded = hashed_options.states_records(hashed)
+        labels = _check_labels(result, certificate["data"], recorded)
         if any("searched" in camera for camera in registered):
             for camera in registered:
                 if camera.get("searched") is not True and (camera.get("certified") is not False
@@ -1210,7 +1229,7 @@ class ReconstructionItems(TrackItems, Verification):
         check_members(result)  # the stages' words, switches and lists, typed and tied
         check_statuses(result)  # each stage's status against what it produced, and the job's stop
         _check_distortion(result, registered, own)
-        _check_calibration(result, registered, verify)
+        _check_calibration(result, registered, verify, recorded)
         scoped = {"labels": labels}
         posed = sum(1 for camera in registered if camera.get("R") is not None)
         if result["summary"].get("depth_reversal") is None and posed >= 2 \
@@ -1244,7 +1263,8 @@ class ReconstructionItems(TrackItems, Verification):
                                       "certified K it proves is claimed: nothing ties it to the result")
         if isinstance(calibration, dict):  # carried (a certified K proven by it): tied to the result, once
             scoped["calibration_tie"] = calibration_tie.tie(result, _stage(result, "autocalibration"),
-                                                            calibration.get("data") or {})
+                                                            calibration.get("data") or {},
+                                                            recorded)
         return scoped
 
 

@@ -41,6 +41,12 @@ class Verification(abc.ABC):
     """``scope_statement(options) -> dict``: what a valid certificate of the kind proves, in words
     and numbers. None: the residual kinds' statement over ``domain``."""
 
+    option_names: tuple[str, ...] | None = None
+    """The option names a certificate of the kind may state: its options class's fields (the
+    document's options are ``dataclasses.asdict`` of them: kinds.documents), and any name an earlier
+    form wrote. A name outside them is refused (no check reads it). None: the fields of the kind's
+    options_type (the residual kinds'); a kind with neither states none to check."""
+
     claim_options: tuple[str, ...] | None = None
     """The options the problem hash covers. None: the verifier's CLAIM_OPTIONS."""
 
@@ -112,7 +118,11 @@ class Verification(abc.ABC):
     outcomes are for its stats. None: the items under item_key."""
 
 
-def hook(adapter: Any, name: str) -> Any:
+def hook(adapter: Any, name: str, otherwise: Any = None) -> Any:
     """An adapter's hook, or Verification's default for it (read only when the adapter has none:
-    a member declared without a default, such as ``domain``, is the adapter's own)."""
-    return getattr(adapter, name) if hasattr(adapter, name) else getattr(Verification, name)
+    a member declared without a default, such as ``domain``, is the adapter's own); ``otherwise``
+    stands for a hook that is None (not declared, or declared None) and only then: a value the
+    adapter declares is used as declared, a falsy one too (``uncertified_statuses = ()`` allows no
+    word, it does not fall back to the verifier's)."""
+    value = getattr(adapter, name) if hasattr(adapter, name) else getattr(Verification, name)
+    return otherwise if value is None else value

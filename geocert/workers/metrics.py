@@ -49,6 +49,11 @@ class RedisCollector:
         for labels, value in values.get("webhooks", []):
             hooks.add_metric([labels["state"]], value)
         yield hooks
+        pieces = CounterMetricFamily("geocert_pieces", "A task's independent pieces solved, by the task itself or by "
+                                     "a helper on another solver process", labels=["solved_by"])
+        for labels, value in values.get("pieces", []):
+            pieces.add_metric([labels["solved_by"]], value)
+        yield pieces
         yield from self._histograms(values, "item_solve_seconds", "Seconds to solve one item", SOLVE_BUCKETS)
         yield from self._histograms(values, "job_seconds", "Seconds from submission to the end of a job", JOB_BUCKETS)
         from geocert.workers.priorities import queue_lists

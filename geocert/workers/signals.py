@@ -18,6 +18,36 @@ def _json_logs(**_) -> None:
     limit_memory(get_settings().worker_memory_mb)
 
 
+# The solvers the kinds import at their first solve (so that the API process, which imports the
+# kinds, never loads them), loaded as a solver process starts instead: a fresh worker's first
+# task of each process paid the import (some 0.08 s of CPU for triangulation's, 0.2 s of wall at
+# load 14, on a job whose solve is 0.05 s). tests/workers/test_solvers_loaded.py checks that the
+# kinds' solver imports find every geocert.solvers module loaded.
+SOLVER_MODULES = (
+    "geocert.solvers.fractional.many_tracks", "geocert.solvers.fractional.triangulation",
+    "geocert.solvers.fractional.convexity_path", "geocert.solvers.fractional.determinacy",
+    "geocert.solvers.fractional.maps", "geocert.solvers.fractional.options", "geocert.solvers.core.bnb",
+    "geocert.solvers.core.determinacy", "geocert.solvers.core.self_check", "geocert.solvers.bilinear.search",
+    "geocert.solvers.autocalibration.stratified", "geocert.solvers.autocalibration.direct",
+    "geocert.solvers.autocalibration.direct_solve", "geocert.solvers.autocalibration.direct_sublevel",
+    "geocert.solvers.autocalibration.metric_sublevel", "geocert.solvers.autocalibration.determinacy",
+    "geocert.solvers.autocalibration.proofs", "geocert.solvers.lines.determinacy", "geocert.solvers.lines.geometry",
+    "geocert.solvers.lines.scenes", "geocert.solvers.reconstruction.synthetic",
+    "geocert.solvers.reconstruction.camera_claim",
+)
+
+
+@worker_process_init.connect
+def _solvers_loaded(**_) -> None:
+    import importlib
+
+    for name in SOLVER_MODULES:
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001 (a head start only: the task that needs it fails and says why, as before)
+            pass
+
+
 def limit_memory(megabytes: int) -> None:
     """Bound this solver process's address space (GEOCERT_WORKER_MEMORY_MB; 0: unbounded): an
     allocation past it fails (MemoryError, or OpenCV's "Insufficient memory") in the task that made

@@ -34,11 +34,13 @@ import time
 
 from geocert.settings import get_settings
 from geocert.solvers.core.geometry import InputError
+from geocert.solvers.core.pieces import spread_by
 from geocert.jobs.runner import (abs_gap_of, assemble, item_counts, item_sums, job_deadline, merged_sums, not_started_item,
                            result_fragment, result_json, result_shell, solve_items, stats_from, streams_result)
-from geocert.kinds import get_kind, options_from
+from geocert.kinds import KINDS, get_kind, options_from
 from geocert.workers import logs
 from geocert.workers.endings import after_end
+from geocert.workers.pieces import SOLVE_PIECES, SpreadOverSolvers, help_with
 from geocert.workers.celery_app import celery_app
 from geocert.workers.priorities import LATER
 from geocert.workers.queue import SOFT_AFTER_S, SOLVE_CHUNK, SOLVE_CHUNK_FAILED, task_deadline_s, task_options
@@ -46,6 +48,10 @@ from geocert.jobs.store import REDIS_GONE, JobStore, shared_store as store
 from celery.exceptions import SoftTimeLimitExceeded
 
 log = logging.getLogger("geocert.worker")
+
+# A worker solves every kind: import them all now (the registry would on each kind's first job), so
+# the pool's processes share them and no job waits on its kind's imports.
+tuple(KINDS)
 
 
 class ProgressPublisher:
@@ -150,6 +156,24 @@ def solve_chunk(self, job_id: str, start: int, stop: int, request_id: str | None
             raise self.retry(exc=exc, countdown=1)
 
 
+@celery_app.task(name=SOLVE_PIECES, bind=True, ignore_result=True)
+def solve_pieces(self, job_id: str, set_id: str, request_id: str | None = None) -> None:
+    """Help a running task of the job with its stage's pieces (workers.pieces): take them until
+    none is left, the set is stopped or the job cancelled. Without a solver slot for the job's key
+    (JobStore.take_slot) it leaves them to the task and the other helpers."""
+    with logs.context(job_id=job_id, request_id=request_id, pieces=set_id):
+        slot = self.request.id
+        try:
+            if not store().take_slot(job_id, slot, get_settings().solvers_kept_for_others):
+                return
+            try:
+                help_with(store(), job_id, set_id)
+            finally:
+                _free_slot(slot)
+        except REDIS_GONE:  # the task that put the pieces computes those not returned
+            log.warning("Redis went away under the pieces %s of job %s", set_id, job_id)
+
+
 def _defer(task_id: str, job_id: str, start: int, stop: int, request_id: str | None, deferrals: int) -> None:
     """Queue the task again (the same id: a cancel still revokes it) to start after a delay that
     doubles with each deferral, up to 5 s: its key holds all the solver slots it may."""
@@ -216,9 +240,11 @@ def _solve_started_chunk(jobs: JobStore, job_id: str, start: int, stop: int, req
         publisher = ProgressPublisher(jobs, job_id, start, settings.progress_interval_s,
                                       kind if streams_result(kind, options) else None, abs_gap_of(options),
                                       stop_by=began + deadline_s)
-        items = solve_items(kind, parsed, options, range(start, stop), publisher, publisher.should_stop,
-                            stop_at=began + settings.chunk_time_budget_s, on_item=publisher.item_ended,
-                            deadline=job_deadline(options, began - _ran_before(jobs, job_id)))
+        # a stage's independent pieces (a reconstruction's images and pairs) go to the other solvers too
+        with spread_by(SpreadOverSolvers(jobs, job_id, request_id)):
+            items = solve_items(kind, parsed, options, range(start, stop), publisher, publisher.should_stop,
+                                stop_at=began + settings.chunk_time_budget_s, on_item=publisher.item_ended,
+                                deadline=job_deadline(options, began - _ran_before(jobs, job_id)))
         done = publisher.flush()
         jobs.record_items(kind.name, items)
         cut = start + len(items)

@@ -93,12 +93,14 @@ def test_a_certificate_camera_of_a_view_not_registered_is_refused():
     result = stored("reconstruction")
     stage = next(s for s in result["stages"] if s["name"] == "autocalibration")
     assert 5 in stage["certificate_views"]
-    calibration_tie.tie(result, stage, result["calibration_certificate"]["data"])  # genuine: tied
+    # (recorded False: the stored document is of the earliest hash form, written before the
+    # registration's principal-point record)
+    calibration_tie.tie(result, stage, result["calibration_certificate"]["data"], recorded=False)  # genuine: tied
     result["cameras"][5].update(registered=False, P=None)
     for point in result["points"]:
         point["observations"] = [o for o in point["observations"] if o[0] != 5]
     with pytest.raises(calibration_tie.Invalid, match="view 5, which the result does not register"):
-        calibration_tie.tie(result, stage, result["calibration_certificate"]["data"])
+        calibration_tie.tie(result, stage, result["calibration_certificate"]["data"], recorded=False)
 
 
 def test_the_pipeline_claims_no_calibration_whose_views_were_dropped():

@@ -297,12 +297,22 @@ FAR_SHIFTS = {"(-90, +70)": (-90.0, 70.0), "(+150, -110)": (150.0, -110.0), "(-1
 
 def _centred_registration(options: dict, shift) -> dict:
     """The run as the pipeline made it before it registered at the estimated principal point: the
-    registration's cameras (the certificate's) built at the image's centre (a stored result)."""
+    registration's cameras (the certificate's) built at the image's centre, with no principal-point
+    record, and its problem_sha256 of the form written then (hashed_options' third form: today's
+    form states the record wherever the registration tests it) (a stored result)."""
     from geocert.pipelines.reconstruction import pipeline
+    from geocert.solvers.core.certificates import problem_hash
+    from geocert.solvers.reconstruction import hashed_options
+    from geocert.verify.checks import checked_options
 
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(pipeline, "REGISTER_AT_PRINCIPAL_POINT", False)
-        return solve_job(_scene_job(options, points=200, shift=np.tile(shift, (8, 1))))
+        result = solve_job(_scene_job(options, points=200, shift=np.tile(shift, (8, 1))))
+    document = result["certificate"]
+    document["problem_sha256"] = problem_hash("reconstruction", document["data"],
+                                              checked_options("reconstruction", document["options"]),
+                                              hashed_options.THIRD_CLAIM_OPTIONS)
+    return result
 
 
 @pytest.mark.parametrize("shift", list(SHIFTS) + list(FAR_SHIFTS))

@@ -168,3 +168,49 @@ def test_tasks_made_on_the_event_loop_send_nothing_and_join_the_jobs_transaction
     assert len(tasks) == 6 and set(by_id) == {*seen["collected"], *(t + "-again" for t in seen["collected"])}
     for task_id in seen["collected"]:
         assert by_id[task_id] == by_id[task_id + "-again"]
+
+
+# A fresh Redis: a job's tasks made twice with the same producer (the loop's), kombu's declarations
+# counted; then whether the queue's binding (without which the Redis transport finds no queue for a
+# message) exists.
+_DECLARED_ONCE = """
+import json, sys
+import kombu.messaging, redis
+from geocert.workers import queue
+declarations = []
+declare = kombu.messaging.Producer.maybe_declare
+def counted(self, entity, *args, **kwargs):
+    declarations.append(entity.name)
+    return declare(self, entity, *args, **kwargs)
+kombu.messaging.Producer.maybe_declare = counted
+from geocert.workers.celery_app import celery_app
+producer = celery_app.producer_pool.acquire(block=True)
+meta = {"id": "j" * 32, "kind": "triangulation", "chunks": [(0, 2), (2, 4), (4, 5)], "task_ids": ["a", "b", "c"]}
+first = queue.task_commands(meta, None, producer)
+declared_first = list(declarations)
+second = queue.task_commands(meta, None, producer)
+print(json.dumps({"declared_first": declared_first, "declared_second": declarations[len(declared_first):],
+                  "commands": [len(first), len(second)],
+                  "bindings": sorted(redis.Redis.from_url(sys.argv[1], decode_responses=True).keys("_kombu.binding*"))}))
+"""
+
+
+def test_the_queue_is_declared_by_the_first_tasks_made_on_a_connection_and_not_asked_again(tmp_path):
+    """kombu would be asked to declare the task queue at every message (and find it in its cache,
+    at a third of a small job's cost of making its messages): it is asked once a connection, the
+    first time, which still declares it on a fresh Redis."""
+    from geocert.workers.redis_server import start_embedded_redis
+
+    process, url = start_embedded_redis(tmp_path)
+    try:
+        env = {"GEOCERT_REDIS_URL": url, "PATH": "/usr/bin:/bin"}
+        out = subprocess.run([sys.executable, "-c", _DECLARED_ONCE, url], capture_output=True, text=True, env=env,
+                             timeout=120)
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
+    assert out.returncode == 0, out.stderr[-2000:]
+    seen = json.loads(out.stdout.strip().splitlines()[-1])
+    assert seen["declared_first"] == ["celery"] and seen["declared_second"] == []
+    assert seen["commands"] == [3, 3]
+    assert "_kombu.binding.celery" in seen["bindings"]

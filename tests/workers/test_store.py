@@ -260,7 +260,8 @@ class TestResultKeptCompressed:
     def test_items_wait_compressed_and_read_back_exactly(self, jobs):
         meta = jobs.create("triangulation", request_of(40), 40, 20, "someone", chunk_key="tracks")
         items = {i: {"point": [float(i), 0.5, -1.25], "status": "optimal", "reason": None,
-                     "determinacy": {"level": "parameters whose squared residuals exceed the optimum's by at most"}}
+                     "determinacy": {"level": "parameters whose squared residuals exceed the optimum's by at most"},
+                     "intervals": [{"name": f"q{k}", "value": k * 0.5} for k in range(40)]}
                  for i in range(40)}
         jobs.save_items(meta["id"], {i: items[i] for i in range(20)})
         # an item stored as JSON text (by an earlier version, during an upgrade) reads as well
@@ -285,7 +286,22 @@ class TestResultKeptCompressed:
         for i, item in items.items():
             text = json.dumps(item).encode()
             stored = jobs.r.hstrlen(jobs.key(meta["id"], "items"), str(i))
-            assert stored <= 1.02 * len(zlib.compress(text, jobs.RESULT_COMPRESSION_LEVEL)) + 8, (i, len(text))
+            if len(text) > jobs.ITEM_STORED_AS_TEXT:
+                assert stored <= 1.02 * len(zlib.compress(text, jobs.RESULT_COMPRESSION_LEVEL)) + 8, (i, len(text))
+
+    def test_a_small_item_waits_as_its_text_a_large_one_compressed(self, jobs):
+        """Compressing a brief track (a few hundred bytes) cost the workers more than encoding it
+        and saved a third of it, for the time its job runs: an item up to ITEM_STORED_AS_TEXT bytes
+        waits as its JSON text, a larger one compressed; both read back exactly."""
+        meta = jobs.create("triangulation", request_of(2), 2, 2, "someone", chunk_key="tracks")
+        small = {"point": [0.1, 0.2, 0.3], "status": "optimal", "cost": 0.05, "gap": 1e-8}
+        large = {**small, "intervals": [{"name": f"q{k}", "value": k * 0.25} for k in range(60)]}
+        assert len(json.dumps(small)) <= jobs.ITEM_STORED_AS_TEXT < len(json.dumps(large))
+        jobs.save_items(meta["id"], {0: small, 1: large})
+        raw = jobs.binary.hgetall(jobs.key(meta["id"], "items"))
+        assert raw[b"0"][:1] == b"{" and json.loads(raw[b"0"]) == small  # its text, as stored
+        assert raw[b"1"][:1] != b"{" and len(raw[b"1"]) < len(json.dumps(large)) / 2
+        assert jobs.all_items(meta["id"], 2) == [small, large]
 
 
 class TestStreamedResult:
@@ -444,3 +460,17 @@ class TestWhatTheAppAsksByName:
         meta = jobs.create("triangulation", request_of(3), 3, 2, "someone", chunk_key="tracks")
         document = jobs.document(meta)
         assert jobs.head(meta) == {key: value for key, value in document.items() if key not in ("result", "links")}
+
+
+def test_create_async_takes_creates_arguments_exactly():
+    """create_async binds its arguments with a plain function (creation._create_arguments) instead
+    of inspect's binding at each submission: its parameters, defaults and order are create's."""
+    import inspect
+
+    from geocert.jobs.store.creation import Creation, _create_arguments
+
+    create = list(inspect.signature(Creation.create).parameters.values())[1:]
+    assert [(p.name, p.default) for p in inspect.signature(_create_arguments).parameters.values()] == \
+           [(p.name, p.default) for p in create]
+    names = [p.name for p in create]
+    assert list(_create_arguments(*names)) == names  # in create's order, as _stage_create takes them

@@ -19,7 +19,8 @@ composes one class per concern, each in its own module over the client and key s
 - ``clocks``: the running jobs' signs of life and deadlines, and the reaper's lock, stranded
   marks and look at the broker's queues;
 - ``metrics``: the shared job metrics (counted by the workers, read by ``/metrics``);
-- ``uploads``: a large body's items, written a batch at a time before its job exists.
+- ``uploads``: a large body's items, written a batch at a time before its job exists;
+- ``pieces``: a running task's independent pieces, taken by the other solver processes too.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from geocert.jobs.store.idempotency import Idempotency
 from geocert.jobs.store.items import Items
 from geocert.jobs.store.lifecycle import Lifecycle
 from geocert.jobs.store.metrics import Metrics
+from geocert.jobs.store.pieces import Pieces
 from geocert.jobs.store.records import Records, read_job
 from geocert.jobs.store.requests import Requests
 from geocert.jobs.store.results import Results
@@ -47,7 +49,7 @@ __all__ = ["FRESH_S", "PAST_CLOCK_CLAIM_S", "PUBLIC_OWNER", "REDIS_GONE", "SOLVE
 
 
 class JobStore(Creation, Records, Requests, Lifecycle, Items, Results, Events, Accounts, Idempotency, Slots, Clocks,
-               Metrics, Uploads, StoreBase):
+               Metrics, Uploads, Pieces, StoreBase):
     """The job store: every concern's methods on one object over one client."""
 
 

@@ -3,7 +3,6 @@ by one Lua script in one round trip (from a thread, or from the API's event loop
 
 from __future__ import annotations
 
-import inspect
 import uuid
 from typing import Callable
 
@@ -67,9 +66,8 @@ class Creation(StoreBase):
     async def create_async(self, client: redis.asyncio.Redis, *args, **kwargs) -> dict | None:
         """``create`` (the same arguments after ``client``) through an asyncio client
         (``decode_responses``, the same server): the same script, for the API's event loop."""
-        bound = _CREATE_SIGNATURE.bind(self, *args, **kwargs)
-        bound.apply_defaults()
-        meta, keys, script_args, bulk = self._stage_create(*bound.args[1:])
+        arguments = _create_arguments(*args, **kwargs)
+        meta, keys, script_args, bulk = self._stage_create(*arguments)
         if not bulk:
             admitted = await client.eval(self._CREATE, len(keys), *keys, *script_args)
         else:
@@ -80,7 +78,7 @@ class Creation(StoreBase):
             admitted = (await pipe.execute())[-1]
             if admitted != 1:
                 await client.delete(*{command[1] for command in bulk})
-        return self._admitted(meta, admitted, bound.arguments["stored_bytes_limit"])
+        return self._admitted(meta, admitted, arguments[-1])
 
     @staticmethod
     def _admitted(meta: dict, admitted: int, stored_bytes_limit: int) -> dict | None:
@@ -165,4 +163,11 @@ class Creation(StoreBase):
     """
 
 
-_CREATE_SIGNATURE = inspect.signature(Creation.create)  # create_async takes create's arguments
+def _create_arguments(kind, request, items_total, chunk_size, owner, callback_url=None, active_limit=0, task_ids=None,
+                      chunk_key=None, items_key=None, item_time_bound_s=None, job_time_limit_s=None, enqueue=None,
+                      items_bytes=0, stored_bytes_limit=0) -> tuple:
+    """``Creation.create``'s arguments (its parameters, defaults and order exactly: a test compares
+    them), as ``_stage_create`` takes them, for ``create_async``: bound by the interpreter's call,
+    not by ``inspect.Signature.bind`` at each submission."""
+    return (kind, request, items_total, chunk_size, owner, callback_url, active_limit, task_ids, chunk_key, items_key,
+            item_time_bound_s, job_time_limit_s, enqueue, items_bytes, stored_bytes_limit)

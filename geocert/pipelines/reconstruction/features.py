@@ -50,6 +50,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from geocert.solvers.core import pieces
 from geocert.solvers.core.bnb import asks_to_stop
 from geocert.solvers.core.geometry import InputError
 
@@ -602,6 +603,35 @@ def in_order_threads(function, items: list, stop) -> list | None:
     return results
 
 
+_DETECTORS = threading.local()  # a detector per thread: OpenCV does not promise one is safe to share
+
+
+@pieces.piece
+def image_features(options: FeatureOptions, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One image's keypoints ((n, 2) pixels) and SIFT descriptors: a piece of the features stage
+    (solvers.core.pieces), a pure function of the image and options."""
+    settings = (options.contrast_threshold, options.edge_threshold)
+    if getattr(_DETECTORS, "settings", None) != settings:
+        # nfeatures 0: every keypoint detected, then select_keypoints keeps the largest-scale ones
+        _DETECTORS.sift = cv2.SIFT_create(nfeatures=0, contrastThreshold=options.contrast_threshold,
+                                          edgeThreshold=options.edge_threshold)
+        _DETECTORS.settings = settings
+    if image.ndim == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    kps, desc = sift_features(_DETECTORS.sift, np.ascontiguousarray(image, dtype=np.uint8), options.max_features)
+    return (np.array([kp.pt for kp in kps], dtype=np.float64).reshape(-1, 2),
+            desc if desc is not None else np.zeros((0, 128), np.float32))
+
+
+@pieces.piece
+def pair_matches(shared: tuple, pair: tuple[int, int]) -> tuple[np.ndarray, dict] | None:
+    """One image pair's verified matches (match_pair): a piece of the matches stage, ``shared``
+    the images' (keypoints, descriptors, options)."""
+    keypoints, descriptors, options = shared
+    i, j = pair
+    return match_pair(keypoints[i], descriptors[i], keypoints[j], descriptors[j], options)
+
+
 def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None = None,
                        callback=None) -> ImageTracks:
     """Features, verified matches and tracks for grayscale uint8 images (see the module docstring).
@@ -626,26 +656,12 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
             stats["stopped"] = f"{where}, at options.features.time_limit_s ({options.time_limit_s:g} s)"
         return True
 
-    # nfeatures 0: every keypoint detected, then select_keypoints keeps the largest-scale ones
-    local = threading.local()  # a detector per thread: OpenCV does not promise one is safe to share
-
-    def features(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        sift = getattr(local, "sift", None)
-        if sift is None:
-            sift = local.sift = cv2.SIFT_create(nfeatures=0, contrastThreshold=options.contrast_threshold,
-                                                edgeThreshold=options.edge_threshold)
-        if image.ndim == 3:
-            image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-        kps, desc = sift_features(sift, np.ascontiguousarray(image, dtype=np.uint8), options.max_features)
-        return (np.array([kp.pt for kp in kps], dtype=np.float64).reshape(-1, 2),
-                desc if desc is not None else np.zeros((0, 128), np.float32))
-
     def features_stop(k: int) -> bool | None:
         if asks_to_stop(callback, {"stage": "features", "done": k, "total": len(images)}):
             return None  # cancelled
         return over_time(f"features read of {k} of {len(images)} images")
 
-    found = in_order_threads(features, images, features_stop)
+    found = pieces.mapped(image_features, options, images, features_stop, in_order_threads)
     if found is None:
         return ImageTracks([], sizes, stats, "cancelled")
     keypoints, descriptors = [k for k, _ in found], [d for _, d in found]
@@ -658,7 +674,7 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
         candidate_pairs(len(descriptors), options, descriptors)
     stats["candidate_pairs"] = len(pairs)
     stats["pairs_chosen_by"] = rule
-    pair_matches: dict[tuple[int, int], np.ndarray] = {}
+    verified_matches: dict[tuple[int, int], np.ndarray] = {}
     verified: list[dict] = []
 
     def matches_stop(k: int) -> bool | None:
@@ -666,20 +682,19 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
             return None  # cancelled
         return over_time(f"{k} of {len(pairs)} image pairs matched")
 
-    matched = in_order_threads(lambda pair: match_pair(keypoints[pair[0]], descriptors[pair[0]], keypoints[pair[1]],
-                                                       descriptors[pair[1]], options), pairs, matches_stop)
+    matched = pieces.mapped(pair_matches, (keypoints, descriptors, options), pairs, matches_stop, in_order_threads)
     if matched is None:
         return ImageTracks([], sizes, stats, "cancelled")
     for (i, j), found in zip(pairs, matched):
         if found is not None:
-            pair_matches[(i, j)], figures = found
+            verified_matches[(i, j)], figures = found
             verified.append({"views": [i, j], **figures})
     stats["verified_pairs"] = verified
     asks_to_stop(callback, {"stage": "matches", "done": len(pairs), "total": len(pairs)})
     timing["matches"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    groups, counts = build_tracks(pair_matches, stats["features_per_image"], options.min_track_length)
+    groups, counts = build_tracks(verified_matches, stats["features_per_image"], options.min_track_length)
     stats.update(counts)
     tracks = []
     for members in groups:

@@ -198,9 +198,10 @@ def data_hash(kind: str, data: Any) -> str:
 
 def problem_hash(kind: str, data: Any, options: dict, names: tuple[str, ...] | None = None) -> str:
     """SHA-256 of everything a claim depends on: canonical JSON of {"kind", "data", "options"}
-    with the options ``names`` only (a kind's own, or CLAIM_OPTIONS: the fractional kinds'),
+    with the options ``names`` only (a kind's own, as declared, or for None CLAIM_OPTIONS: the
+    fractional kinds'),
     numbers as floats (max_residual null when unset)."""
-    claimed = {name: options.get(name) for name in (names or CLAIM_OPTIONS)}
+    claimed = {name: options.get(name) for name in (CLAIM_OPTIONS if names is None else names)}
     for name, value in claimed.items():
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             claimed[name] = float(value)

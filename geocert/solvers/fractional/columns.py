@@ -161,7 +161,8 @@ def solutions(results: Sequence) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
         if result is None:
             continue
         cost[i] = np.nan if result.cost is None else result.cost
-        lower[i] = np.nan if result.lower_bound is None else result.lower_bound
+        # a result not certified states no lower bound (documents.outcome_document): its estimate reads none
+        lower[i] = result.lower_bound if result.certified and result.lower_bound is not None else np.nan
         if result.point is not None and not result.at_infinity:
             point[i], finite[i] = result.point, True
     return point, finite, cost, lower

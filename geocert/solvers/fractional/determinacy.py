@@ -30,6 +30,13 @@ PARALLAX_DEGREES = 1.0  # rays meeting at less than this: near-zero parallax
 FLAT = 1e-2  # points whose centred spread along a direction is below this fraction: (nearly) flat
 
 
+def stated_lower_bound(result) -> float | None:
+    """The lower bound an item's document states: a certified result's, none for one not certified
+    (documents.outcome_document). An estimate's level reads this one, so that the verifier, which
+    sees only the document, recomputes the same level."""
+    return result.lower_bound if result.certified else None
+
+
 def _centres(cameras: np.ndarray) -> np.ndarray:
     """Euclidean centres (NaN for a camera whose centre is at infinity)."""
     C = camera_centres(cameras)
@@ -103,7 +110,8 @@ def tracks_many(cameras: np.ndarray, tracks: list, results: list, projected: tup
     for i in np.flatnonzero(~finite).tolist():
         result = results[i]
         if result is not None and result.point is not None:  # at infinity
-            out[i] = track(cameras[tracks[i][0]], tracks[i][1], result.point, True, result.cost, result.lower_bound)
+            out[i] = track(cameras[tracks[i][0]], tracks[i][1], result.point, True, result.cost,
+                           stated_lower_bound(result))
     pooled = _pooled(projected)
     for n, members in groups.items():
         try:
@@ -114,7 +122,7 @@ def tracks_many(cameras: np.ndarray, tracks: list, results: list, projected: tup
                                            lower[members], [proven[i] for i in members], n, projected[n], pooled)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):  # as safely(): never fails a solve
             documents = [safely(track, cameras[tracks[i][0]], tracks[i][1], X[i].tolist(), False, results[i].cost,
-                                results[i].lower_bound, proven[i], pooled) for i in members]
+                                stated_lower_bound(results[i]), proven[i], pooled) for i in members]
         for i, document in zip(members, documents):
             out[i] = document
     return out

@@ -48,6 +48,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 from scipy.spatial.transform import Rotation
 
+from geocert.solvers.core import pieces
 from geocert.solvers.core.bnb import asks_to_stop
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.reconstruction import schur
@@ -619,30 +620,39 @@ class PairGeometry:
                 and self.forward_motion <= max_forward_motion)
 
 
-def _pair_geometry(state: _State, i: int, j: int, pairs: np.ndarray, options: CalibratedOptions) -> PairGeometry:
-    """The essential matrix of views i, j by RANSAC on the tracks both see, its pose, inliers and
-    their median triangulation angle."""
-    ra, rb = state.obs_ray[pairs[:, 0]], state.obs_ray[pairs[:, 1]]
+def _pair_rays(state: _State, i: int, j: int, pairs: np.ndarray) -> tuple:
+    """What pair_geometry reads of a candidate pair: its views, the rays of the tracks both see
+    (normalised image coordinates) and their mean focal length."""
     focal = 0.25 * (state.Ks[i][0, 0] + state.Ks[j][1, 1] + state.Ks[i][1, 1] + state.Ks[j][0, 0])
-    none = PairGeometry((i, j), len(pairs), 0, 0.0, 1.0)
-    if len(pairs) < 5:
+    return i, j, state.obs_ray[pairs[:, 0]], state.obs_ray[pairs[:, 1]], focal
+
+
+@pieces.piece
+def pair_geometry(threshold_px: float, pair: tuple) -> PairGeometry:
+    """The essential matrix of a candidate pair (_pair_rays) by RANSAC on the tracks both views
+    see, its pose, inliers and their median triangulation angle: a piece of the initial pair's
+    search (solvers.core.pieces), a pure function of its rays (OpenCV's RANSAC seeds its
+    generator per call)."""
+    i, j, ra, rb, focal = pair
+    none = PairGeometry((i, j), len(ra), 0, 0.0, 1.0)
+    if len(ra) < 5:
         return none
     E, mask = cv2.findEssentialMat(ra, rb, np.eye(3), method=cv2.RANSAC, prob=0.9999,
-                                   threshold=options.essential_threshold_px / focal)
+                                   threshold=threshold_px / focal)
     if E is None or mask is None or E.shape[0] < 3:
         return none
     _, R, t, pose_mask = cv2.recoverPose(E[:3], ra, rb, np.eye(3), mask=mask.copy())
     inl = pose_mask.ravel() > 0
     t = t.ravel() / np.linalg.norm(t)
     if not inl.any():
-        return PairGeometry((i, j), len(pairs), 0, 0.0, float(abs(t[2])), R, t)
+        return PairGeometry((i, j), len(ra), 0, 0.0, float(abs(t[2])), R, t)
     X = cv2.triangulatePoints(np.eye(3, 4), np.c_[R, t], ra[inl].T, rb[inl].T)
     X = (X[:3] / np.where(np.abs(X[3]) < 1e-12, 1e-12, X[3])).T
     d1 = X / np.linalg.norm(X, axis=1, keepdims=True)
     d2 = X - (-R.T @ t)
     d2 /= np.linalg.norm(d2, axis=1, keepdims=True)
     angles = np.degrees(np.arccos(np.clip(np.sum(d1 * d2, axis=1), -1.0, 1.0)))
-    return PairGeometry((i, j), len(pairs), int(inl.sum()), float(np.median(angles)), float(abs(t[2])), R, t)
+    return PairGeometry((i, j), len(ra), int(inl.sum()), float(np.median(angles)), float(abs(t[2])), R, t)
 
 
 def _initial_pair(state: _State, options: CalibratedOptions, allowed: np.ndarray | None = None,
@@ -675,12 +685,15 @@ def _initial_pair(state: _State, options: CalibratedOptions, allowed: np.ndarray
         found["reason"] = (f"no pair of views shares {options.min_pair_tracks} tracks (the most any pair shares: "
                            f"{most})")
         return None
-    geometries = []
-    for i, j in candidates:
-        if geometries and asks_to_stop(callback, {"stage": "registration", "done": 0, "total": state.n_views}):
-            found["stopped"] = f"after {len(geometries)} of {len(candidates)} candidates"
-            break
-        geometries.append(_pair_geometry(state, i, j, shared.rows(i, j), options))
+    def stop(k: int) -> bool:
+        if k and asks_to_stop(callback, {"stage": "registration", "done": 0, "total": state.n_views}):
+            found["stopped"] = f"after {k} of {len(candidates)} candidates"
+            return True
+        return False
+
+    # each candidate's essential matrix is a piece a caller may spread over processes
+    geometries = pieces.mapped(pair_geometry, options.essential_threshold_px,
+                               [_pair_rays(state, i, j, shared.rows(i, j)) for i, j in candidates], stop, pieces.in_order)
     levels, min_inliers, min_angle = [], options.init_min_inliers, options.init_min_angle_deg
     for _ in range(options.init_relaxations + 1):
         levels.append((min_inliers, min_angle, options.init_max_forward_motion))

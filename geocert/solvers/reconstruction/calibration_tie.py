@@ -108,9 +108,11 @@ MISFIT_SHARE = 0.25  # the fit's allowance (above): of what the certificate's mo
 OTHER_TRACKS_MEASURED = {"synthetic": 0.00, "model_house": 0.12, "dinosaur": 0.01}
 
 
-def tie(result: dict, stage: dict, data: dict) -> dict:
+def tie(result: dict, stage: dict, data: dict, recorded: bool = True) -> dict:
     """Refuses a calibration certificate whose reconstruction is not the result's (as above);
-    returns the figures the report's scope states of the tie."""
+    returns the figures the report's scope states of the tie. ``recorded``: whether the document's
+    form states the registration's principal-point record wherever its test runs
+    (hashed_options.states_records; an earlier form's may lack it)."""
     views, tracks = stage.get("certificate_views"), stage.get("certificate_tracks")
     cameras = numbers(data.get("cameras"), "calibration_certificate/data/cameras", (None, 3, 4), "returned")
     points = numbers(data.get("points"), "calibration_certificate/data/points", (None, 4), "returned")
@@ -133,9 +135,9 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
     if untied:
         raise Invalid("returned", f"the calibration certificate holds a camera of view {untied[0]}, which the result "
                                   "does not register: nothing ties it to the result")
-    _check_registration_record(result, views, cameras)
+    registration = _check_registration_record(result, views, cameras, recorded)
     if not any(point.get("point") is not None for point in result["points"]):
-        return without_points(views, tracks)
+        return {**without_points(views, tracks), "registration_record": registration}
     apart, own, theirs, largest, per_camera, at = _shared(result, views, tracks, cameras, points)
     loose = [view for view, count in zip(views, per_camera) if count < TIE_POINTS_PER_CAMERA]
     if loose:
@@ -169,10 +171,42 @@ def tie(result: dict, stage: dict, data: dict) -> dict:
     others = _other_tracks(result, views, tracks, cameras, ratio)
     return {"reference": "the returned cameras" if centred is None else centred[2],
             "observations": len(apart), "largest_px": worst, "allowed_px": allowed, "returned_rms_px": rms,
-            "fewest_points_per_camera": min(per_camera, default=0), **fit, **others}
+            "fewest_points_per_camera": min(per_camera, default=0), **fit, **others,
+            "registration_record": registration}
 
 
-def _check_registration_record(result: dict, views: list, cameras: np.ndarray) -> None:
+def registration_tests(result: dict) -> bool:
+    """Whether the pipeline's registration tests the principal point in this run, and so states
+    its record (pipeline._registration_principal_point): K unknown, the incremental registration,
+    the adjustment run and estimating the principal point (camera_model "full", or "simple" with
+    principal_point "auto" or "per_view"), every view of one image size (the certificate data's
+    input_labels, else the cameras'), no radial term kept, and the registration not stopped. The
+    options are read from the echo, absent as ReconstructionOptions' defaults (the hash covers
+    them all in the form that states the record)."""
+    certificate = result.get("certificate") or {}
+    options = certificate.get("options") or {}
+    intrinsics = options.get("intrinsics")
+    if isinstance(intrinsics, dict) and intrinsics.get("K") is not None:
+        return False
+    model, principal = options.get("camera_model", "simple"), options.get("principal_point", "per_view")
+    if options.get("registration", "incremental") != "incremental" or options.get("bundle_adjustment", True) is not True \
+            or not (model == "full" or (model == "simple" and principal in ("auto", "per_view"))):
+        return False
+    labels = (certificate.get("data") or {}).get("input_labels")
+    sizes = labels.get("image_sizes") if isinstance(labels, dict) else None
+    if not isinstance(sizes, list):
+        sizes = [camera.get("image_size") for camera in result.get("cameras") or [] if isinstance(camera, dict)]
+    if not sizes or not all(isinstance(size, list) for size in sizes) \
+            or len({tuple(float(x) for x in size) for size in sizes}) != 1:
+        return False
+    projective = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "projective"),
+                      {})
+    radial = projective.get("radial_distortion")
+    stopped = projective.get("cancelled") is True or projective.get("status") in ("cancelled", "time_limit")
+    return not (isinstance(radial, dict) and radial.get("estimated") is True) and not stopped
+
+
+def _check_registration_record(result: dict, views: list, cameras: np.ndarray, recorded: bool = True) -> str:
     """The projective stage's principal-point record (pipeline._registration_principal_point) and
     the certificate's cameras, which are the registration's, say the same thing: cameras built with
     one K whose principal point is not every view's image centre (_built_one_K, not _built_centred)
@@ -182,9 +216,24 @@ def _check_registration_record(result: dict, views: list, cameras: np.ndarray) -
     cameras). Unchecked, the record was the document's word: on the (+30, -20) off-centre run it
     verified saying the principal point was held at the centre (estimated false), or with no record,
     or with K_free moved to the centre or to another focal length, its certificate's cameras built
-    at (349.2, 219.8)."""
+    at (349.2, 219.8). And the record is stated wherever this run's registration tests the principal
+    point (registration_tests) when ``recorded`` (the document's form states it so): without it,
+    cameras built at the images' centre beside off-centre tracks got the centred reference's room
+    (a certificate re-posed with another focal length tied from 0.96 to 1.05 times). Returns what
+    the report's scope says of the record."""
     record = next((s.get("principal_point") for s in result.get("stages") or []
                    if isinstance(s, dict) and s.get("name") == "projective"), None)
+    tested = registration_tests(result)
+    if record is None and tested and recorded:
+        # Without the record the certificate's cameras would be read as a registration at the
+        # images' centre, held to the centred reference with its room (MISFIT_SHARE): a document of
+        # a form that states the record may not choose that reading by leaving it out.
+        raise Invalid("returned", "stages/projective/principal_point is absent, and this run's registration tests "
+                                  "the principal point (the incremental registration, the adjustment estimating it, "
+                                  "views of one image size, no radial term kept, not stopped): a document of this "
+                                  "form (its problem_sha256 covers registration) states that record wherever the "
+                                  "test runs, and without it the certificate's cameras would be read as built at "
+                                  "the images' centre, with that reference's room")
     estimated = isinstance(record, dict) and record.get("estimated") is True
     one_K = _built_one_K(cameras)
     sizes = {tuple(c["image_size"]) for c in result["cameras"] if c.get("view") in views
@@ -197,7 +246,12 @@ def _check_registration_record(result: dict, views: list, cameras: np.ndarray) -
                                   "registration estimated it (the registration builds its cameras at the centre "
                                   "unless its test estimates the principal point)")
     if not estimated:
-        return
+        if record is not None:
+            return "stated"
+        return ("absent: this run's registration does not test the principal point" if not tested else
+                "absent: the document is of an earlier form (its problem_sha256 does not cover registration), "
+                "written before the registration's principal-point test was always stated, so its certificate's "
+                "cameras are read without it (built at the images' centre, the centred reference's room)")
     try:
         K_free = np.asarray(record.get("K_free"), dtype=float).reshape(3, 3)
     except (TypeError, ValueError):
@@ -208,6 +262,7 @@ def _check_registration_record(result: dict, views: list, cameras: np.ndarray) -
         raise Invalid("returned", "stages/projective/principal_point says the registration estimated the principal "
                                   "point (its cameras built with the free fit's K, K_free), and the calibration "
                                   "certificate's cameras are not built with one K equal to its K_free")
+    return "stated"
 
 
 def without_points(views: list, tracks: list) -> dict:

@@ -24,7 +24,12 @@ the echo restated false, and the hash stayed the request's. The hash covers them
 (CLAIM_OPTIONS); documents of the second
 form still verify, as those of the first do, the report's scope stating what the document states
 for each option its form leaves out (check_earlier_form: the first form's scope lists both sets).
-A document of either earlier form also states no free camera for a camera judged uncertifiable by
+The third form (THIRD_CLAIM_OPTIONS) left out ``registration``; the hash covers it since, and
+the pipeline of that form states the registration's principal-point record wherever its test runs
+(states_records, with the certificate data's input_labels and the autocalibration stage's
+cameras_built_with_one_K): a document of the third form or earlier may lack it, and is read
+without it, its report's scope saying so (check_third_form; the calibration tie's
+registration_record). A document of either of the first two forms also states no free camera for a camera judged uncertifiable by
 one (the kind states it since the hash covers these options): that judgement is then unchecked,
 and the report's scope says which cameras (verify.reconstruction).
 """
@@ -36,7 +41,7 @@ from typing import Any
 from geocert.solvers.core.certificates import CLAIM_OPTIONS as EARLIER_CLAIM_OPTIONS
 from geocert.solvers.core.strict import Invalid, number
 from geocert.solvers.reconstruction.camera_claim import MAX_REL_GAP
-from geocert.solvers.reconstruction.run_control import CAMERA_MODELS, PRINCIPAL_POINTS
+from geocert.solvers.reconstruction.run_control import CAMERA_MODELS, PRINCIPAL_POINTS, REGISTRATIONS
 
 # What the earlier form left out, at the value a request naming none of them got while that form
 # was written (ReconstructionOptions' defaults then; tests/solvers/reconstruction/test_reconstruction_hash.py
@@ -51,7 +56,16 @@ SECOND_CLAIM_OPTIONS = EARLIER_CLAIM_OPTIONS + tuple(EARLIER_DEFAULTS)
 # test_reconstruction_hash.py checks they agree but for principal_point, "per_view" since).
 SECOND_DEFAULTS: dict[str, Any] = {"resect_cameras": True, "bundle_adjustment": True, "camera_model": "simple",
                                    "principal_point": "auto"}
-CLAIM_OPTIONS = SECOND_CLAIM_OPTIONS + tuple(SECOND_DEFAULTS)
+THIRD_CLAIM_OPTIONS = SECOND_CLAIM_OPTIONS + tuple(SECOND_DEFAULTS)
+# What the third form left out: ``registration``, which decides whether the registration tests the
+# principal point (the incremental path only: pipeline._registration_principal_point) and so
+# whether stages.projective.principal_point is stated. The pipeline states that record wherever
+# its test runs since the hash covers it, so the form declares it: a document of this form
+# lacking the record, where the test runs, is refused, while one of an earlier form was written
+# before the record (or before it was always stated) and is read without it (verify.reconstruction:
+# the calibration tie, and the report's scope, say so).
+THIRD_DEFAULTS: dict[str, Any] = {"registration": "incremental"}
+CLAIM_OPTIONS = THIRD_CLAIM_OPTIONS + tuple(THIRD_DEFAULTS)
 RADIAL_DISTORTIONS = ("auto", "on", "off")
 AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")
 
@@ -66,7 +80,8 @@ def checked(options: dict) -> dict:
             if not 0 <= out[name] <= MAX_REL_GAP:
                 raise Invalid("options", f"options/{name} {out[name]!r} is beyond {MAX_REL_GAP}")
     for name, words in (("radial_distortion", RADIAL_DISTORTIONS), ("autocalibration", AUTOCALIBRATION_METHODS),
-                        ("camera_model", CAMERA_MODELS), ("principal_point", PRINCIPAL_POINTS)):
+                        ("camera_model", CAMERA_MODELS), ("principal_point", PRINCIPAL_POINTS),
+                        ("registration", REGISTRATIONS)):
         if options.get(name) is not None:
             if options[name] not in words:
                 raise Invalid("options", f"options/{name} must be one of {', '.join(words)}, not {options[name]!r:.40}")
@@ -90,7 +105,7 @@ def _at_default(name: str, value: Any) -> bool:
         return True
     if name == "intrinsics":  # ranges from the image size: "unknown", or no K and no range stated
         return value == "unknown" or (isinstance(value, dict) and all(v is None for v in value.values()))
-    return value == {**EARLIER_DEFAULTS, **SECOND_DEFAULTS}[name]
+    return value == {**EARLIER_DEFAULTS, **SECOND_DEFAULTS, **THIRD_DEFAULTS}[name]
 
 
 def _stated(options: dict, defaults: dict) -> list[str]:
@@ -111,7 +126,7 @@ def _stated(options: dict, defaults: dict) -> list[str]:
 def check_earlier_form(options: dict) -> str:
     """What the report's scope says of a document hashed the earliest way (the points' four
     options only): the options that form does not cover, each as the document states it."""
-    stated = _stated(options, {**EARLIER_DEFAULTS, **SECOND_DEFAULTS})
+    stated = _stated(options, {**EARLIER_DEFAULTS, **SECOND_DEFAULTS, **THIRD_DEFAULTS})
     return (f"the earlier form: it covers the kind, the data and {', '.join(EARLIER_CLAIM_OPTIONS)} only, not the "
             f"options these claims also read, nor those deciding whether the adjustment and the cameras stage run "
             f"or choosing the camera model the cameras' tolerances count, "
@@ -123,7 +138,7 @@ def check_second_form(options: dict) -> str:
     """What the report's scope says of a document hashed the second way (SECOND_CLAIM_OPTIONS):
     the options deciding whether a stage runs and choosing the camera model, which it does not
     cover, as the document states them."""
-    stated = _stated(options, SECOND_DEFAULTS)
+    stated = _stated(options, {**SECOND_DEFAULTS, **THIRD_DEFAULTS})
     return (f"the second form: it covers the kind, the data and {', '.join(SECOND_CLAIM_OPTIONS)}, not the options "
             f"deciding whether the adjustment and the cameras stage run, nor those choosing the camera model the "
             f"cameras' tolerances count, which the document states as: "
@@ -131,13 +146,38 @@ def check_second_form(options: dict) -> str:
             "changed after it was written (a stage a stop ended, restated as skipped by its option)")
 
 
+def check_third_form(options: dict) -> str:
+    """What the report's scope says of a document hashed the third way (THIRD_CLAIM_OPTIONS):
+    ``registration``, which it does not cover, as the document states it, and that such a document
+    may lack the registration's principal-point record (written before it was always stated)."""
+    stated = _stated(options, THIRD_DEFAULTS)
+    return (f"the third form: it covers the kind, the data and {', '.join(THIRD_CLAIM_OPTIONS)}, not registration, "
+            f"which the document states as: {'; '.join(stated)}. Compare it with your request. A document of this "
+            "form was written before the pipeline stated the registration's principal-point test "
+            "(stages.projective.principal_point) wherever it runs, so one lacking that record is read as a "
+            "registration at the images' centre (the calibration tie's centred reference and its room: "
+            "scope.calibration_tie.registration_record says when)")
+
+
 # The earlier forms, newest first, each with what the report's scope says of it (verify.checks)
-EARLIER_FORMS = ((SECOND_CLAIM_OPTIONS, check_second_form), (EARLIER_CLAIM_OPTIONS, check_earlier_form))
+EARLIER_FORMS = ((THIRD_CLAIM_OPTIONS, check_third_form), (SECOND_CLAIM_OPTIONS, check_second_form),
+                 (EARLIER_CLAIM_OPTIONS, check_earlier_form))
 
 
 def states_free_cameras(hashed: tuple[str, ...]) -> bool:
     """Whether a document whose problem_sha256 covers ``hashed`` was written by a kind that states
-    the free camera of every camera judged uncertifiable by one (those of CLAIM_OPTIONS' form)."""
+    the free camera of every camera judged uncertifiable by one (those of THIRD_CLAIM_OPTIONS' form
+    and later)."""
+    return set(THIRD_CLAIM_OPTIONS) <= set(hashed)
+
+
+def states_records(hashed: tuple[str, ...]) -> bool:
+    """Whether a document of that form was written by a pipeline that states every record an
+    earlier form may lack, which the verifier reads a document without more loosely (those of
+    CLAIM_OPTIONS' form: the hash covers registration): the registration's principal-point record
+    (stages.projective.principal_point) wherever its test runs, the certificate data's
+    input_labels, and the autocalibration stage's cameras_built_with_one_K beside a calibration
+    certificate. A document of this form lacking one is refused."""
     return set(CLAIM_OPTIONS) <= set(hashed)
 
 

@@ -8,11 +8,12 @@ or 1e300 s, or a seed of 0.5 states a run that never was. (The verifier's, numpy
 from __future__ import annotations
 
 import math
+from dataclasses import fields
 from typing import Any
 
 from geocert.solvers.core.geometry import is_number
 from geocert.solvers.core.strict import Invalid
-from geocert.solvers.fractional.options import SearchOptions
+from geocert.solvers.fractional.options import FractionalOptions, SearchOptions
 from geocert.solvers.reconstruction import camera_claim
 
 CAMERA_MODELS = ("simple", "varying", "full")
@@ -43,6 +44,20 @@ FOCAL_PRIOR_LIMIT = 1e6  # focal_prior_px, when given: a positive number of pixe
 FLAGS = ("bundle_adjustment", "resect_cameras", "bound_every_camera", "merge_components")
 CHOICES = {"camera_model": CAMERA_MODELS, "registration": REGISTRATIONS, "radial_distortion": RADIAL_DISTORTIONS,
            "principal_point": PRINCIPAL_POINTS, "autocalibration_on_critical_motion": ON_CRITICAL_MOTION}
+
+
+# Every option a reconstruction's certificate states: the fields of pipelines.reconstruction.options.
+# ReconstructionOptions (certificate_document writes dataclasses.asdict of them; that class sits
+# above the verifier, so they are named here, and tests/verify/test_option_names.py checks the two
+# agree), the search options' (FractionalOptions) and the reconstruction's own. No option was
+# renamed or removed since the first stored document: a document of an earlier form lacks some
+# (radial_distortion), it states none outside these.
+OPTION_NAMES = tuple(entry.name for entry in fields(FractionalOptions)) + (
+    "intrinsics", "autocalibration", "metric_rel_gap", "autocalibration_rel_gap", "autocalibration_max_nodes",
+    "autocalibration_time_limit_s", "autocalibration_points", "autocalibration_on_critical_motion", "chirality",
+    "threshold_px", "min_inliers", "bundle_adjustment", "camera_model", "resect_cameras", "camera_rel_gap",
+    "bound_every_camera", "features", "merge_components", "registration", "principal_point", "radial_distortion",
+    "focal_prior_px", "focal_prior_factor", "focal_prior_rounds", "structure_time_limit_s", "seed")
 
 
 def within(value: float, bounds: dict) -> bool:

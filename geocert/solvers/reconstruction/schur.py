@@ -79,16 +79,22 @@ def _sum_by(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
 
 
 def _inverse(V: np.ndarray) -> np.ndarray:
-    """Inverses of a stack of square matrices (k, d, d); for d = 3 by cofactors (rows' cross
-    products over the determinant), several times faster than np.linalg.inv on small blocks. A
-    singular block gives non-finite entries (the step is then refused and the damping raised)."""
+    """Inverses of a stack of square matrices (k, d, d); for d = 3 by cofactors (the adjugate over
+    the determinant, written out entry by entry), several times faster than np.linalg.inv on small
+    blocks. A singular block gives non-finite entries (the step is then refused and the damping
+    raised)."""
     if V.shape[-1] != 3:
         return np.linalg.inv(V)
-    r0, r1, r2 = V[:, 0], V[:, 1], V[:, 2]
-    columns = np.stack([np.cross(r1, r2), np.cross(r2, r0), np.cross(r0, r1)], axis=2)
-    det = np.einsum("ki,ki->k", r0, columns[:, :, 0])
+    a, b, c = V[:, 0, 0], V[:, 0, 1], V[:, 0, 2]
+    d, e, f = V[:, 1, 0], V[:, 1, 1], V[:, 1, 2]
+    g, h, i = V[:, 2, 0], V[:, 2, 1], V[:, 2, 2]
+    adjugate = np.empty_like(V)
+    adjugate[:, 0, 0], adjugate[:, 0, 1], adjugate[:, 0, 2] = e * i - f * h, c * h - b * i, b * f - c * e
+    adjugate[:, 1, 0], adjugate[:, 1, 1], adjugate[:, 1, 2] = f * g - d * i, a * i - c * g, c * d - a * f
+    adjugate[:, 2, 0], adjugate[:, 2, 1], adjugate[:, 2, 2] = d * h - e * g, b * g - a * h, a * e - b * d
+    det = a * adjugate[:, 0, 0] + b * adjugate[:, 1, 0] + c * adjugate[:, 2, 0]
     with np.errstate(divide="ignore", invalid="ignore"):
-        return columns / det[:, None, None]
+        return adjugate / det[:, None, None]
 
 
 def _robust_weights(r: np.ndarray, f_scale: float | None) -> np.ndarray:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from geocert.solvers.core import pieces
 from geocert.solvers.core.geometry import norm_cost
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
 from geocert.solvers.fractional.results import MapResult, TrackResult
@@ -151,33 +152,53 @@ def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.n
     def points(view: int):
         return sources.get(view, (np.zeros((0, 3)), np.zeros((0, 2))))
 
-    # At most ``threads`` cameras in flight: a cancel seen between two stops the ones not started.
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        running: set = set()
-        queue = iter(order)
-        stopped = False
-        while True:
-            while not stopped and len(running) < threads:
-                view = next(queue, None)
-                if view is None:
+    if pieces.spreading():  # a caller spreads each camera's search over processes (solvers.core.pieces)
+        def stop(k: int) -> bool:
+            if k and progress is not None:
+                progress(k, len(cameras))
+            return bool(should_stop is not None and should_stop())
+
+        found = pieces.mapped(bound_camera, (options, bound_every_camera, dof),
+                              [(view, cameras[view], *points(view)) for view in order], stop, pieces.in_order)
+        out = {bound.view: bound for bound in found or []}
+        if progress is not None and len(out) == len(cameras):
+            progress(len(out), len(cameras))
+    else:
+        # At most ``threads`` cameras in flight: a cancel seen between two stops the ones not started.
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            running: set = set()
+            queue = iter(order)
+            stopped = False
+            while True:
+                while not stopped and len(running) < threads:
+                    view = next(queue, None)
+                    if view is None:
+                        break
+                    running.add(pool.submit(_bound_camera, view, cameras[view], *points(view), options,
+                                            bound_every_camera, dof))
+                if not running:
                     break
-                running.add(pool.submit(_bound_camera, view, cameras[view], *points(view), options,
-                                        bound_every_camera, dof))
-            if not running:
-                break
-            finished, running = wait(running, return_when=FIRST_COMPLETED)
-            for future in finished:
-                bound = future.result()
-                out[bound.view] = bound
-                if progress is not None:
-                    progress(len(out), len(cameras))
-            if not stopped and should_stop is not None and should_stop():
-                stopped = True
+                finished, running = wait(running, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    bound = future.result()
+                    out[bound.view] = bound
+                    if progress is not None:
+                        progress(len(out), len(cameras))
+                if not stopped and should_stop is not None and should_stop():
+                    stopped = True
     for view in order:
         if view not in out:
             out[view] = CameraBound(view, None, None, None, None, False, "cancelled", len(points(view)[0]), 0.0,
                                     "the job was cancelled")
     return dict(sorted(out.items()))
+
+
+@pieces.piece
+def bound_camera(shared: tuple, camera: tuple) -> CameraBound:
+    """_bound_camera of one camera (view, P, its points, its pixels): a piece of the cameras
+    stage, ``shared`` (options, bound_every_camera, dof)."""
+    options, bound_every_camera, dof = shared
+    return _bound_camera(*camera, options, bound_every_camera, dof)
 
 
 def _bound_camera(view: int, P: np.ndarray, X: np.ndarray, x: np.ndarray, options: MapOptions,

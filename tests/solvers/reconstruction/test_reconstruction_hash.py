@@ -53,7 +53,8 @@ def test_the_hash_covers_every_option_a_claim_reads():
     options = checked_options("reconstruction", document["options"])
     for name, value in (("camera_rel_gap", 0.5), ("radial_distortion", "on"), ("intrinsics", "unknown"),
                         ("metric_rel_gap", 0.5), ("autocalibration_rel_gap", 0.5), ("resect_cameras", False),
-                        ("bundle_adjustment", False), ("camera_model", "varying"), ("principal_point", "centre")):
+                        ("bundle_adjustment", False), ("camera_model", "varying"), ("principal_point", "centre"),
+                        ("registration", "projective")):
         changed = checked_options("reconstruction", {**document["options"], name: value})
         assert problem_hash("reconstruction", document["data"], changed, hashed_options.CLAIM_OPTIONS) \
             != problem_hash("reconstruction", document["data"], options, hashed_options.CLAIM_OPTIONS), name
@@ -152,8 +153,18 @@ def test_the_second_forms_defaults_are_the_options_defaults():
     # principal_point's default was "auto" while the second form was written ("per_view" since)
     assert {**{name: defaults[name] for name in hashed_options.SECOND_DEFAULTS}, "principal_point": "auto"} \
         == hashed_options.SECOND_DEFAULTS
-    assert hashed_options.CLAIM_OPTIONS == hashed_options.SECOND_CLAIM_OPTIONS + (
+    assert hashed_options.THIRD_CLAIM_OPTIONS == hashed_options.SECOND_CLAIM_OPTIONS + (
         "resect_cameras", "bundle_adjustment", "camera_model", "principal_point")
+
+
+def test_the_third_forms_defaults_are_the_options_defaults():
+    """The fourth form (today's) covers registration beside the third form's options, at the
+    default a request naming none gets."""
+    from geocert.pipelines.reconstruction.options import ReconstructionOptions
+
+    defaults = dataclasses.asdict(ReconstructionOptions())
+    assert {name: defaults[name] for name in hashed_options.THIRD_DEFAULTS} == hashed_options.THIRD_DEFAULTS
+    assert hashed_options.CLAIM_OPTIONS == hashed_options.THIRD_CLAIM_OPTIONS + ("registration",)
 
 
 def test_a_second_form_at_the_defaults_verifies_and_says_so(at_defaults):

@@ -1,0 +1,224 @@
+"""The determinacy estimates a result returns beside its claims, tied to the data.
+
+A track's, map's or bilinear frame's ``determinacy`` (its intervals, ``determined``, level, redundancy and
+warnings) proves nothing: it is the local curvature estimate (Gauss-Newton) at the solution the
+item returns. It is still a claim about the data ("determined: true", "x within [lo, hi]", no
+"near_coplanar_points" warning), so a result verified with its certificate states exactly the
+estimate the kind's writer (``fractional.determinacy.track`` and ``map_``,
+``bilinear.determinacy.frame``, numpy only) computes from the certificate's data at the returned
+solution, cost and lower bound: an interval
+narrowed, a value moved, ``determined`` flipped or a warning dropped is refused (check
+``returned``). Numbers agree to 1e-6 of the interval's width and 1e-9 of the value (another
+machine's rounding of the same sums); an end the data leave open (null) must be null. An
+analysis the solver stopped at its time limit (a single ``time_limit`` warning, no interval) or
+left out (null) claims nothing and is accepted as it is. Autocalibration's estimates (refitted
+with scipy by their writer) are not recomputed: check_determined, check_intrinsics and
+check_redundancy tie what the data and the returned K give without a refit.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from geocert.solvers.core.determinacy import fixes, safely
+from geocert.solvers.core.strict import Invalid, same
+from geocert.solvers.fractional import determinacy as estimate
+
+NUMBER_SLACK = 1e-6  # of an interval's width: another machine's eigendecomposition of the same J'J
+VALUE_SLACK = 1e-9  # of a value: its own rounding
+COMPARED = ("method", "determined", "level", "redundancy")
+
+
+def check(kind: Any, result: dict, certificate: dict) -> None:
+    """Every returned track's or map's determinacy estimate is the writer's (module docstring)."""
+    if certificate.get("kind") == "triangulation":
+        _check_tracks(kind, result, certificate)
+    elif certificate.get("kind") in ("resection", "homography"):
+        _check_maps(kind, result, certificate)
+    elif certificate.get("kind") == "bilinear":
+        _check_frames(kind, result, certificate)
+
+
+def check_determined(determinacy: dict, where: str) -> None:
+    """An estimate no check recomputes (autocalibration's stages: its writer refits with scipy)
+    still says ``determined`` only as its writer (core.determinacy.Determinacy.document) does:
+    true exactly when every interval fixes its quantity (bounded, within its tolerance of its
+    value) and no warning is stated; and no bounded interval has its lower end above its upper."""
+    intervals, warnings = determinacy.get("intervals"), determinacy.get("warnings")
+    if not isinstance(intervals, list) or not all(isinstance(i, dict) for i in intervals):
+        return  # typed by core.notes
+    try:
+        expected = all(fixes(i) for i in intervals) and not warnings
+    except (TypeError, KeyError):
+        raise Invalid("returned", f"{where}/intervals: each states lower and upper, and lower, upper, value and "
+                                  "tolerance are numbers or null") from None
+    if determinacy.get("determined") is not expected:
+        raise Invalid("returned", f"{where}/determined is {determinacy.get('determined')!r:.20}, its intervals and "
+                                  f"warnings give {expected!r} (every interval bounded within its tolerance of its "
+                                  "value, and no warning)")
+    for number, found in enumerate(intervals):
+        lower, upper = found.get("lower"), found.get("upper")
+        if lower is not None and upper is not None and not lower <= upper:
+            raise Invalid("returned", f"{where}/intervals/{number}: lower {lower!r:.30} above upper {upper!r:.30}")
+
+
+INTRINSICS = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")  # autocalibration.determinacy.NAMES
+RELATIVE_WIDTH = 0.1  # core.determinacy.RELATIVE_WIDTH: the tolerance of a quantity of its scale
+
+
+def check_redundancy(determinacy: Any, expected: int, where: str) -> None:
+    """An autocalibration stage's estimate counts the residuals beyond its parameters as its
+    writer does (autocalibration.determinacy: the affine stage's modulus constraints, one a view
+    but the reference's, less the plane's 3; a K stage's 5 informative DIAC entries a view but
+    the reference's, less K's 5): ``expected``, from the number of views."""
+    if not isinstance(determinacy, dict) or _stopped(determinacy):
+        return
+    if not same(determinacy.get("redundancy"), expected):
+        raise Invalid("returned", f"{where}/redundancy is {determinacy.get('redundancy')!r:.30}; the stage's "
+                                  f"residuals beyond its parameters number {expected!r}")
+
+
+def check_intrinsics(determinacy: Any, K: Any, where: str) -> None:
+    """An autocalibration K stage's estimate (autocalibration.determinacy.metric_stage) is about
+    the K the result returns: its intervals name the five intrinsics in order, each ``value`` the
+    returned K's entry (to 1e-8 of the focal length: the writer reads K back through omega), and
+    each ``tolerance`` a tenth of its scale (the focal lengths their own, the others their
+    mean), so that ``determined`` (check_determined) is judged at the writer's width, not one the
+    document chose."""
+    if not isinstance(determinacy, dict) or _stopped(determinacy) or not isinstance(K, list):
+        return
+    try:
+        K = np.asarray(K, dtype=float).reshape(3, 3)
+    except (TypeError, ValueError):
+        return  # typed by the returned check of K
+    values = (K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2])
+    mean = 0.5 * (abs(K[0, 0]) + abs(K[1, 1]))
+    scales = (K[0, 0], K[1, 1], mean, mean, mean)
+    intervals = determinacy.get("intervals")
+    if not isinstance(intervals, list) or [i.get("name") if isinstance(i, dict) else None
+                                           for i in intervals] != list(INTRINSICS):
+        raise Invalid("returned", f"{where}/intervals name {', '.join(INTRINSICS)}, in that order (the K returned)")
+    earlier = not any("tolerance" in i for i in intervals)  # written before intervals stated one (_compare)
+    for number, (found, value, scale) in enumerate(zip(intervals, values, scales)):
+        given, tolerance = found.get("value"), found.get("tolerance")
+        if not _close(given, float(value), 0.0, 1e-8 * mean):
+            raise Invalid("returned", f"{where}/intervals/{number}/value is {given!r:.30}, the K returned gives "
+                                      f"{float(value)!r:.30}")
+        if not earlier and not _close(tolerance, RELATIVE_WIDTH * abs(float(scale)), 0.0, 1e-8 * mean):
+            raise Invalid("returned", f"{where}/intervals/{number}/tolerance is {tolerance!r:.30}, a tenth of its "
+                                      f"scale is {RELATIVE_WIDTH * abs(float(scale))!r:.30}")
+
+
+def _stopped(determinacy: dict) -> bool:
+    """An analysis stopped at its deadline (core.determinacy.not_analysed): no interval, one
+    time_limit warning, nothing determined; it claims nothing."""
+    warnings = determinacy.get("warnings")
+    return (determinacy.get("intervals") == [] and determinacy.get("determined") is False
+            and determinacy.get("proven") is False and determinacy.get("proven_intervals") is None
+            and isinstance(warnings, list) and len(warnings) == 1 and isinstance(warnings[0], dict)
+            and warnings[0].get("code") == "time_limit")
+
+
+def _check_tracks(kind, result: dict, certificate: dict) -> None:
+    data = certificate["data"]
+    cameras = np.asarray(data["cameras"], dtype=float)
+    for index, item in enumerate(result.get("tracks") or []):
+        determinacy = item.get("determinacy") if isinstance(item, dict) else None
+        if not isinstance(determinacy, dict) or _stopped(determinacy):
+            continue
+        where = f"tracks/{index}/determinacy"
+        if item.get("point") is None:
+            raise Invalid("returned", f"{where} is stated for a track returning no point (its writer states none)")
+        views = data["tracks"][index]["views"]
+        points = np.asarray(data["tracks"][index]["points"], dtype=float)
+        dof = estimate.pooled_dof(determinacy.get("level"))
+        pooled = None
+        if dof is not None:  # read at the level stated (checked against its pooled floor: items._check_pooled)
+            level = determinacy.get("cost_increase")
+            pooled = (float(level), dof) if isinstance(level, (int, float)) and not isinstance(level, bool) else None
+        expected = safely(estimate.track, cameras[views], points, item["point"], item.get("at_infinity") is True,
+                          item.get("cost"), item.get("lower_bound"), None, pooled)
+        _compare(where, determinacy, expected)
+
+
+def _check_maps(kind, result: dict, certificate: dict) -> None:
+    read = kind.verification.read
+    for index, item in enumerate(result.get("maps") or []):
+        determinacy = item.get("determinacy") if isinstance(item, dict) else None
+        if not isinstance(determinacy, dict) or _stopped(determinacy):
+            continue
+        where = f"maps/{index}/determinacy"
+        if item.get("matrix") is None:
+            raise Invalid("returned", f"{where} is stated for a map returning no matrix (its writer states none)")
+        source, target = read(certificate["data"], index)
+        expected = safely(estimate.map_, source, target, item["matrix"], item.get("cost"), item.get("lower_bound"))
+        _compare(where, determinacy, expected)
+
+
+def _check_frames(kind, result: dict, certificate: dict) -> None:
+    from geocert.solvers.bilinear import determinacy as frame_estimate
+
+    read = kind.verification.read
+    for index, item in enumerate(result.get("frames") or []):
+        determinacy = item.get("determinacy") if isinstance(item, dict) else None
+        if not isinstance(determinacy, dict) or _stopped(determinacy):
+            continue
+        where = f"frames/{index}/determinacy"
+        if item.get("camera") is None or item.get("coefficients") is None:
+            raise Invalid("returned", f"{where} is stated for a frame returning no camera (its writer states none)")
+        basis, points = read(certificate["data"], index)
+        expected = safely(frame_estimate.frame, basis, points, item["camera"], item["coefficients"], item.get("cost"),
+                          item.get("lower_bound"))
+        _compare(where, determinacy, expected)
+
+
+def _compare(where: str, given: dict, expected: dict | None) -> None:
+    """``given`` is ``expected`` but for its proven intervals (checked against the proof) and the
+    pool a pooled level names (checked against the data), to the module's slack."""
+    if expected is None:
+        raise Invalid("returned", f"{where} is stated where the estimate is not defined on the data (its writer "
+                                  "states none)")
+    check_determined(given, where)
+    intervals = given.get("intervals")
+    earlier = isinstance(intervals, list) and bool(intervals) and not any(
+        isinstance(i, dict) and "tolerance" in i for i in intervals)
+    if earlier:  # written before intervals stated their tolerance: fixed meant bounded (check_determined)
+        expected = {**expected, "determined": given.get("determined"),
+                    "intervals": [{k: v for k, v in i.items() if k != "tolerance"} for i in expected["intervals"]]}
+    for name in COMPARED:
+        if given.get(name) != expected.get(name):
+            raise Invalid("returned", f"{where}/{name} is {given.get(name)!r:.60}, the estimate at the solution "
+                                      f"returned gives {expected.get(name)!r:.60}")
+    if not _close(given.get("cost_increase"), expected.get("cost_increase"), 0.0, VALUE_SLACK):
+        raise Invalid("returned", f"{where}/cost_increase is {given.get('cost_increase')!r:.40}, the estimate's level "
+                                  f"is {expected.get('cost_increase')!r:.40}")
+    warnings = given.get("warnings")
+    if not isinstance(warnings, list) or [w.get("code") if isinstance(w, dict) else None for w in warnings] != [
+            w["code"] for w in expected["warnings"]]:
+        raise Invalid("returned", f"{where}/warnings are not the estimate's at the solution returned (codes "
+                                  f"{[w['code'] for w in expected['warnings']]!r:.80})")
+    if not isinstance(intervals, list) or len(intervals) != len(expected["intervals"]):
+        raise Invalid("returned", f"{where}/intervals are not the estimate's ({len(expected['intervals'])} of them)")
+    for number, (stated, own) in enumerate(zip(intervals, expected["intervals"])):
+        at = f"{where}/intervals/{number}"
+        if not isinstance(stated, dict) or stated.get("name") != own["name"]:
+            raise Invalid("returned", f"{at}/name is not the estimate's {own['name']!r}")
+        width = own["upper"] - own["lower"] if own["lower"] is not None and own["upper"] is not None else 0.0
+        scale = abs(own["value"]) if own["value"] is not None else 0.0
+        for name in ("value", "lower", "upper", "tolerance")[:3 if earlier else 4]:
+            if not _close(stated.get(name), own[name], width, VALUE_SLACK * scale):
+                raise Invalid("returned", f"{at}/{name} is {stated.get(name)!r:.40}, the estimate at the solution "
+                                          f"returned gives {own[name]!r:.40}")
+
+
+def _close(given: Any, expected: float | None, width: float, absolute: float) -> bool:
+    """Whether ``given`` is ``expected`` (None is None) to NUMBER_SLACK of ``width``, ``absolute``
+    and VALUE_SLACK of its own size."""
+    if expected is None or given is None:
+        return given is None and expected is None
+    if isinstance(given, bool) or not isinstance(given, (int, float)) or not math.isfinite(given):
+        return False
+    return abs(given - expected) <= NUMBER_SLACK * abs(width) + absolute + VALUE_SLACK * abs(expected)

@@ -1,0 +1,52 @@
+"""A solver process loads the kinds' solvers as it starts (workers.signals.SOLVER_MODULES), not at
+its first task: after that, the solver imports the kinds make when they solve load nothing more."""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+KINDS = Path(__file__).resolve().parents[2] / "geocert" / "kinds"
+
+
+def lazy_solver_imports() -> list[str]:
+    """The ``from geocert.solvers... import ...`` statements inside the kinds' functions."""
+    found = set()
+    for path in sorted(KINDS.glob("*.py")):
+        for function in ast.walk(ast.parse(path.read_text())):
+            if isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                for node in ast.walk(function):
+                    if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("geocert.solvers"):
+                        found.add(ast.unparse(node))
+    return sorted(found)
+
+
+_CHECK = """
+import json, sys
+from geocert.workers import signals
+signals._solvers_loaded()
+loaded = {name for name in sys.modules if name.startswith("geocert.solvers")}
+added = {}
+for statement in json.loads(sys.argv[1]):
+    exec(statement, {})
+    new = sorted({name for name in sys.modules if name.startswith("geocert.solvers")} - loaded)
+    if new:
+        added[statement] = new
+        loaded.update(new)
+print(json.dumps({"added": added, "listed_loaded": all(name in sys.modules for name in signals.SOLVER_MODULES)}))
+"""
+
+
+def test_the_kinds_solver_imports_find_their_modules_loaded_at_the_solver_process_start(tmp_path):
+    statements = lazy_solver_imports()
+    assert any("many_tracks" in statement for statement in statements)  # the scan sees them
+    out = subprocess.run([sys.executable, "-c", _CHECK, json.dumps(statements)], capture_output=True, text=True,
+                         timeout=300, env={"GEOCERT_REDIS_URL": f"unix://{tmp_path}/none.sock", "PATH": "/usr/bin:/bin"})
+    assert out.returncode == 0, out.stderr[-2000:]
+    seen = json.loads(out.stdout.strip().splitlines()[-1])
+    assert seen["listed_loaded"]
+    assert seen["added"] == {}, "kinds import solver modules not loaded at the solver process's start " \
+                                "(add them to workers.signals.SOLVER_MODULES)"
