@@ -23,6 +23,11 @@ from geocert.verify import estimates
 from geocert.verify.verification import Verification
 
 STAGE_NAMES = {"stratified": ["affine", "metric"], "direct": ["direct"]}
+# The optional proofs a job asks for by option (each costs several times the solve) that the
+# verifier holds a document to, read strictly (true or false, absent false) and not hashed into
+# problem_sha256: none is a premise of a claim (prove_focal_interval's direct proof predates its
+# option, so documents carry it either way).
+ASKED_PROOFS = ("prove_intervals_over_planes",)
 CLAIM_OPTIONS = ("method", "intrinsics", "rel_gap", "metric_rel_gap", "abs_gap", "chirality", "varying_focal",
                  "relaxation_order")
 # Sizes served (the parser's and the verifier's, checked before anything is built): the stages
@@ -119,11 +124,14 @@ class AutocalibrationVerification(Verification):
         try:
             # the run-control options stated too (not hashed: a node limit of 0 states a run that never was)
             run = residual_claims.run_control_values(autocalibration_problem.AutocalibrationOptions, options)
+            asked = {name: options.get(name, False) for name in ASKED_PROOFS}
             autocalibration_problem.AutocalibrationOptions(
-                **{**checked, "intrinsics": dict(checked["intrinsics"] or {}), **run}).check()
+                **{**checked, "intrinsics": dict(checked["intrinsics"] or {}), **run, **asked}).check()
         except (InputError, TypeError) as exc:
             raise Invalid("options", str(exc)) from exc
-        return checked
+        # not hashed (no claim's premise: each proof is checked in full wherever carried), but a
+        # document carries only the proofs its options asked for
+        return {**checked, **asked}
 
     def scope_statement(self, options: dict) -> dict:
         if options["method"] == "direct":
@@ -334,6 +342,9 @@ class AutocalibrationVerification(Verification):
         passed.append("scope")
         bound = proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed, cost)
         if "plane_sublevel" in proof:  # K proven over the plane's own uncertainty too
+            if options.get("prove_intervals_over_planes") is not True:
+                raise Invalid("format", "proof/plane_sublevel is carried, and options/prove_intervals_over_planes "
+                                        "is not true (only a job asking for it carries it)")
             plane_sublevel.check(problem, p, proof["plane_sublevel"], max(claimed, cost))
             if "proven_interval" not in passed:
                 passed.append("proven_interval")

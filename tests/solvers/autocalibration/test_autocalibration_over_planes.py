@@ -40,7 +40,7 @@ def real(name: str) -> tuple[dict, np.ndarray]:
     }[name]()
     scene = scenes.from_cameras(views.cameras, views.box, 0.5, seed=0, image_size=views.image_size)
     result = solve_job({"kind": "autocalibration", "data": scene.job_data(),
-                        "options": {"certificate": "full", "time_limit_s": 10,
+                        "options": {"certificate": "full", "time_limit_s": 10, "prove_intervals_over_planes": True,
                                     **({"intrinsics": intrinsics} if intrinsics else {})}})
     K = views.K[0] / views.K[0][2, 2]
     return result, np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]])
@@ -79,11 +79,53 @@ def test_the_truth_lies_in_the_intervals_proven_over_planes_on_real_cameras(name
 
 @pytest.fixture(scope="module")
 def proven() -> dict:
+    return solved(prove_intervals_over_planes=True)
+
+
+@functools.lru_cache(maxsize=None)
+def solved(**options) -> dict:
+    """A full certificate of a synthetic scene (8 views, 0.5 px), which verifies."""
     scene = scenes.make_scene(8, 0.5, points=60, seed=1)
-    result = solve_job({"kind": "autocalibration", "data": scene.job_data(), "options": {"certificate": "full"}})
+    result = solve_job({"kind": "autocalibration", "data": scene.job_data(),
+                        "options": {"certificate": "full", **options}})
     report = verify_any(result)
     assert report.valid, report.first_failure
     return result
+
+
+class TestOptIn:
+    """The intervals over planes are asked for (options.prove_intervals_over_planes, default
+    off): a full certificate without it is main's, with the intervals proven for the stated plane
+    alone, and a document carrying a plane_sublevel its options did not ask for is refused."""
+
+    def test_off_by_default_a_full_certificate_carries_none(self):
+        result = solved()
+        assert result["certificate"]["options"]["prove_intervals_over_planes"] is False
+        determinacy = result["stages"][1]["determinacy"]
+        assert "proven_over_planes" not in determinacy
+        assert determinacy["proven"] is True and determinacy["proven_intervals"]["intervals"]
+        proof = result["certificate"]["items"][1]["proof"]
+        assert "plane_sublevel" not in proof and "sublevel" in proof
+
+    def test_off_the_solution_is_the_one_proven_over_planes(self, proven):
+        """The option adds a proof; the plane, K and the stages' figures are the same."""
+        result = solved()
+        assert result["plane_at_infinity"] == proven["plane_at_infinity"] and result["K"] == proven["K"]
+        for off, on in zip(result["stages"], proven["stages"]):
+            assert {k: off[k] for k in ("cost", "lower_bound", "status", "certified")} \
+                == {k: on[k] for k in ("cost", "lower_bound", "status", "certified")}
+
+    def test_a_plane_sublevel_not_asked_for_is_refused(self, proven):
+        document = copy.deepcopy(proven)
+        document["certificate"]["options"]["prove_intervals_over_planes"] = False
+        first = failed(document)
+        assert first is not None and first["check"] == "format" and "prove_intervals_over_planes" in first["detail"]
+
+    def test_the_option_must_be_true_or_false(self, proven):
+        document = copy.deepcopy(proven)
+        document["certificate"]["options"]["prove_intervals_over_planes"] = "yes"
+        first = failed(document)
+        assert first is not None and first["check"] == "options", first
 
 
 def test_the_stated_K_and_the_truth_of_a_synthetic_scene_lie_inside(proven):
