@@ -100,12 +100,12 @@ class TestOptIn:
 
     def test_off_by_default_a_full_certificate_carries_none(self):
         result = solved()
-        assert result["certificate"]["options"]["prove_intervals_over_planes"] is False
         determinacy = result["stages"][1]["determinacy"]
         assert "proven_over_planes" not in determinacy
         assert determinacy["proven"] is True and determinacy["proven_intervals"]["intervals"]
         proof = result["certificate"]["items"][1]["proof"]
         assert "plane_sublevel" not in proof and "sublevel" in proof
+        assert result["certificate"]["options"]["prove_intervals_over_planes"] is False
 
     def test_off_the_solution_is_the_one_proven_over_planes(self, proven):
         """The option adds a proof; the plane, K and the stages' figures are the same."""
