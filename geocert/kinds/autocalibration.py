@@ -74,7 +74,8 @@ class AutocalibrationOptionsIn(Strict):
         _DEFAULTS.prove_intervals_over_planes,
         description="stratified method, certificate full: prove the metric stage's intervals of K over every plane "
                     "at infinity within a stated cost increase of the affine stage's too, not only the plane stated "
-                    "(3 to 4 times the solve's CPU; on near-critical real data often the ranges themselves)")
+                    "(2.5 to 3.5 times a full certificate's solve CPU; on near-critical real data often the "
+                    "ranges themselves)")
 
 
 class AutocalibrationJob(JobBase):

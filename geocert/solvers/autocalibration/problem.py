@@ -78,8 +78,9 @@ class AutocalibrationOptions(SearchOptions):
     # against a solve's second: asked for, not implied by a full certificate.
     prove_focal_interval: bool = False
     # The stratified metric stage's intervals proven over the plane at infinity's own uncertainty
-    # (plane_sublevel) cost 3 to 4 times a full certificate's solve and verification, and on real
-    # near-critical rings come out as the ranges: asked for, not implied by a full certificate.
+    # (plane_sublevel) cost 2.5 to 3.5 times a full certificate's solve (2 to 3.5 times its
+    # verification), and on real near-critical rings come out as the ranges: asked for, not implied
+    # by a full certificate.
     prove_intervals_over_planes: bool = False
     rel_gap: float = 1e-5
     metric_rel_gap: float = 1e-4
