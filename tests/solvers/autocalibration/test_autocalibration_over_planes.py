@@ -98,6 +98,11 @@ class TestOptIn:
     off): a full certificate without it is main's, with the intervals proven for the stated plane
     alone, and a document carrying a plane_sublevel its options did not ask for is refused."""
 
+    def test_the_verifier_knows_the_option(self):
+        from geocert.verify.checks import option_names
+
+        assert "prove_intervals_over_planes" in option_names("autocalibration")
+
     def test_off_by_default_a_full_certificate_carries_none(self):
         result = solved()
         determinacy = result["stages"][1]["determinacy"]
