@@ -483,9 +483,10 @@ def autocalibration_proven(noise_px: float = 0.5, synthetic: int = 5) -> list[st
     """The metric stage's proven intervals (a full certificate) on each real set, as
     real_autocalibration solves it, and on ``synthetic`` scenes of 8 views (make_scene, 0.5%
     noise): each job solved with certificate "summary", "full" without the proven intervals'
-    search, then "full", its CPU time (process_time) in each and the ratios; whether the proven
-    intervals hold the truth (for the plane stated: on a critical motion that plane is one of a
-    family), against the estimate's; and whether the result verifies."""
+    search, "full", then "full" with options.prove_intervals_over_planes, its CPU time
+    (process_time) in each and the ratios; whether the proven intervals hold the truth (for the
+    plane stated: on a critical motion that plane is one of a family; and over planes), against
+    the estimate's; and whether the last result verifies."""
     from geocert.verify.checks import verify_any
 
     jobs = []
@@ -495,11 +496,11 @@ def autocalibration_proven(noise_px: float = 0.5, synthetic: int = 5) -> list[st
     for seed in range(1, synthetic + 1):
         jobs.append((f"synthetic sphere, 8 views, 0.5% (seed {seed})", scenes.make_scene(8, 0.5, points=60, seed=seed),
                      {}))
-    lines, covered, total, estimated = [], 0, 0, 0
-    cpu = {"summary": 0.0, "proofs": 0.0, "full": 0.0}
+    lines, covered, total, estimated, over, over_total = [], 0, 0, 0, 0, 0
+    cpu = {"summary": 0.0, "proofs": 0.0, "full": 0.0, "over_planes": 0.0}
     for name, scene, intrinsics in jobs:
         spent = {}
-        for run in ("summary", "proofs", "full"):
+        for run in ("summary", "proofs", "full", "over_planes"):
             # "proofs": a full certificate without the proven intervals' search (the kind's step
             # that runs it made a no-op), so that what the intervals add shows apart from the proofs
             skip = mock.patch("geocert.kinds.autocalibration._prove_intervals") if run == "proofs" \
@@ -508,11 +509,13 @@ def autocalibration_proven(noise_px: float = 0.5, synthetic: int = 5) -> list[st
             with skip:
                 result = solve_job({"kind": "autocalibration", "data": scene.job_data(),
                                     "options": {"certificate": "summary" if run == "summary" else "full",
+                                                "prove_intervals_over_planes": run == "over_planes",
                                                 **({"intrinsics": intrinsics} if intrinsics else {})}})
             spent[run] = time.process_time() - began
             cpu[run] += spent[run]
         timing = (f"CPU summary {spent['summary']:.1f} s, full without intervals {spent['proofs']:.1f} s, full "
-                  f"{spent['full']:.1f} s (x{spent['full'] / spent['summary']:.2f})")
+                  f"{spent['full']:.1f} s (x{spent['full'] / spent['summary']:.2f}), with intervals over planes "
+                  f"{spent['over_planes']:.1f} s (x{spent['over_planes'] / spent['full']:.2f} a full one's)")
         d = result["stages"][1].get("determinacy")
         if d is None or d.get("proven_intervals") is None:
             lines.append(f"  {name}: no proven intervals (metric stage {result['stages'][1]['status']}); {timing}")
@@ -523,6 +526,9 @@ def autocalibration_proven(noise_px: float = 0.5, synthetic: int = 5) -> list[st
         proven = {i["name"]: i for i in d["proven_intervals"]["intervals"]}
         estimate = {i["name"]: i for i in d["intervals"]}
         inside = [n for n, i in proven.items() if i["lower"] <= truth[n] <= i["upper"]]
+        planes = {i["name"]: i for i in (d.get("proven_over_planes") or {}).get("intervals", [])}
+        inside_planes = [n for n, i in planes.items() if i["lower"] <= truth[n] <= i["upper"]]
+        over, over_total = over + len(inside_planes), over_total + len(planes)
         inside_estimate = [n for n, i in estimate.items() if i["lower"] is not None and i["upper"] is not None
                            and i["lower"] <= truth[n] <= i["upper"]]
         covered, total, estimated = covered + len(inside), total + 5, estimated + len(inside_estimate)
@@ -533,12 +539,15 @@ def autocalibration_proven(noise_px: float = 0.5, synthetic: int = 5) -> list[st
 
         lines.append(f"  {name}: f {result['K'][0][0]:.0f} px (truth {K[0, 0]:.0f}); proven focal_x "
                      f"[{end(f['lower'])}, {end(f['upper'])}], estimate [{end(fe['lower'])}, {end(fe['upper'])}]; "
-                     f"truth inside proven {len(inside)}/5, estimate {len(inside_estimate)}/5; verifies "
+                     f"truth inside proven {len(inside)}/5, proven over planes {len(inside_planes)}/{len(planes)}, "
+                     f"estimate {len(inside_estimate)}/5; verifies "
                      f"{verify_any(result).valid}; {timing}")
-    lines.append(f"  all: the truth inside the proven intervals {covered}/{total}, the estimate's {estimated}/{total}; "
+    lines.append(f"  all: the truth inside the proven intervals {covered}/{total}, those proven over planes "
+                 f"{over}/{over_total}, the estimate's {estimated}/{total}; "
                  f"CPU summary {cpu['summary']:.1f} s, full without intervals {cpu['proofs']:.1f} s, full "
                  f"{cpu['full']:.1f} s (x{cpu['full'] / cpu['summary']:.2f} a summary's, "
-                 f"x{cpu['full'] / cpu['proofs']:.2f} without the intervals)")
+                 f"x{cpu['full'] / cpu['proofs']:.2f} without the intervals), with intervals over planes "
+                 f"{cpu['over_planes']:.1f} s (x{cpu['over_planes'] / cpu['full']:.2f} a full one's)")
     return lines
 
 

@@ -125,6 +125,15 @@ class ProvenIntervals(BaseModel):
     intervals: list[ProvenInterval]
 
 
+class ProvenOverPlanes(ProvenIntervals):
+    """The stratified metric stage's intervals proven over the plane at infinity's own
+    uncertainty: every K within the ranges costing at most cost_increase more than the stage's
+    optimum for some plane chirality allows whose modulus cost is at most affine_increase above
+    the affine stage's (docs/kinds/autocalibration.md)."""
+
+    affine_increase: float
+
+
 class Determinacy(BaseModel):
     """How well the data fix the answer (a certificate proves the optimum, not that it is unique):
     intervals of what a user reads off it over the answers costing at most cost_increase more,
@@ -135,6 +144,9 @@ class Determinacy(BaseModel):
                                      "intervals beside them are estimated from the local curvature either way")
     proven_intervals: ProvenIntervals | None = Field(None, description="intervals proven within cost_increase of "
                                                                        "the optimum (null: none proven)")
+    proven_over_planes: ProvenOverPlanes | None = Field(
+        None, description="the stratified metric stage's intervals proven over every plane at infinity within "
+                          "affine_increase of the affine stage's cost, not only the plane stated (absent: none proven)")
     determined: bool = Field(description="every interval bounded, within its tolerance of the value on both sides, "
                                          "and no warning")
     level: str

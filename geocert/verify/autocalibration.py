@@ -13,7 +13,7 @@ import numpy as np
 
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
-from geocert.solvers.autocalibration import proofs, structure_check
+from geocert.solvers.autocalibration import plane_sublevel, proofs, structure_check
 from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.determinacy import proven_document
 from geocert.solvers.core.geometry import InputError, number_array
@@ -23,6 +23,11 @@ from geocert.verify import estimates
 from geocert.verify.verification import Verification
 
 STAGE_NAMES = {"stratified": ["affine", "metric"], "direct": ["direct"]}
+# The optional proofs a job asks for by option (each costs several times the solve) that the
+# verifier holds a document to, read strictly (true or false, absent false) and not hashed into
+# problem_sha256: none is a premise of a claim (prove_focal_interval's direct proof predates its
+# option, so documents carry it either way).
+ASKED_PROOFS = ("prove_intervals_over_planes",)
 CLAIM_OPTIONS = ("method", "intrinsics", "rel_gap", "metric_rel_gap", "abs_gap", "chirality", "varying_focal",
                  "relaxation_order")
 # Sizes served (the parser's and the verifier's, checked before anything is built): the stages
@@ -119,11 +124,14 @@ class AutocalibrationVerification(Verification):
         try:
             # the run-control options stated too (not hashed: a node limit of 0 states a run that never was)
             run = residual_claims.run_control_values(autocalibration_problem.AutocalibrationOptions, options)
+            asked = {name: options.get(name, False) for name in ASKED_PROOFS}
             autocalibration_problem.AutocalibrationOptions(
-                **{**checked, "intrinsics": dict(checked["intrinsics"] or {}), **run}).check()
+                **{**checked, "intrinsics": dict(checked["intrinsics"] or {}), **run, **asked}).check()
         except (InputError, TypeError) as exc:
             raise Invalid("options", str(exc)) from exc
-        return checked
+        # not hashed (no claim's premise: each proof is checked in full wherever carried), but a
+        # document carries only the proofs its options asked for
+        return {**checked, **asked}
 
     def scope_statement(self, options: dict) -> dict:
         if options["method"] == "direct":
@@ -215,7 +223,7 @@ class AutocalibrationVerification(Verification):
             if not _derived_close(name, result.get(name), expected, cameras, points, H):
                 raise Invalid("returned", f"{name} is not what the plane at infinity and K give")
         _check_baseline(result.get("baseline"), problem, p)
-        _check_proven_intervals(stages[1], claims[1])
+        _check_proven_intervals(stages[1], claims[1], stages[0])
         estimates.check_intrinsics(stages[1].get("determinacy"), result.get("K"), "stages/1/determinacy")
         estimates.check_redundancy(stages[0].get("determinacy"), len(cameras) - 4, "stages/0/determinacy")
         estimates.check_redundancy(stages[1].get("determinacy"), 5 * len(cameras) - 10, "stages/1/determinacy")
@@ -241,7 +249,8 @@ class AutocalibrationVerification(Verification):
         if not (isinstance(stages, list) and len(stages) == 2 and isinstance(stages[1], dict)
                 and isinstance(stages[1].get("determinacy"), dict) and isinstance(proof, dict) and "sublevel" in proof):
             return result
-        determinacy = {k: v for k, v in stages[1]["determinacy"].items() if k not in ("proven", "proven_intervals")}
+        determinacy = {k: v for k, v in stages[1]["determinacy"].items()
+                       if k not in ("proven", "proven_intervals", "proven_over_planes")}
         return {**result, "stages": [stages[0], {**stages[1], "determinacy": determinacy}]}
 
     def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
@@ -331,20 +340,49 @@ class AutocalibrationVerification(Verification):
         if not metric_relaxation.in_domain(setup, w, lo, hi):
             raise Invalid("scope", "the DIAC returned is outside the domain (box, PSD, or a view's scale range)")
         passed.append("scope")
-        return proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed, cost), options["metric_rel_gap"]
+        bound = proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed, cost)
+        if "plane_sublevel" in proof:  # K proven over the plane's own uncertainty too
+            if options.get("prove_intervals_over_planes") is not True:
+                raise Invalid("format", "proof/plane_sublevel is carried, and options/prove_intervals_over_planes "
+                                        "is not true (only a job asking for it carries it)")
+            plane_sublevel.check(problem, p, proof["plane_sublevel"], max(claimed, cost))
+            if "proven_interval" not in passed:
+                passed.append("proven_interval")
+        return bound, options["metric_rel_gap"]
 
 
-def _check_proven_intervals(stage: dict, claim: dict) -> None:
+def _check_proven_intervals(stage: dict, claim: dict, affine: Any = None) -> None:
     """A metric stage's determinacy saying proven states exactly its proof's sublevel intervals
     (proofs.check_sublevel checked them: the claim is certified, so its proof was checked), at no
-    lower a cost increase than its estimate's."""
+    lower a cost increase than its estimate's; and its ``proven_over_planes`` exactly its proof's
+    plane_sublevel's (plane_sublevel.check checked them), at no lower increases than the metric
+    and affine (``affine``: that stage) estimates'."""
     expected = _stated_proven(stage, claim, "stages/1", "metric", proven_metric)
+    over = stage.get("determinacy", {}).get("proven_over_planes") if isinstance(stage, dict) and isinstance(
+        stage.get("determinacy"), dict) else None
     if expected is None:
+        if over is not None:
+            raise Invalid("returned", "stages/1/determinacy states proven_over_planes and is not proven")
         return
     estimate = stage["determinacy"].get("cost_increase")
     if isinstance(estimate, (int, float)) and not expected["cost_increase"] >= estimate * (1 - 1e-9):
         raise Invalid("returned", "stages/1/determinacy: the proven intervals' cost_increase is below its "
                                   "estimate's (a lower level proves a smaller set)")
+    if over is None:
+        return
+    sublevel = claim["proof"].get("plane_sublevel")
+    try:
+        stated = plane_sublevel.proven_document(sublevel)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise Invalid("returned", "stages/1/determinacy/proven_over_planes: no proof/plane_sublevel carries "
+                                  "them") from exc
+    if over != stated:
+        raise Invalid("returned", "stages/1/determinacy/proven_over_planes are not its proof's plane_sublevel")
+    affine_estimate = (affine.get("determinacy") or {}).get("cost_increase") if isinstance(affine, dict) else None
+    for name, least in (("cost_increase", estimate), ("affine_increase", affine_estimate)):
+        if not isinstance(least, (int, float)) or not stated[name] >= least * (1 - 1e-9):
+            raise Invalid("returned", f"stages/1/determinacy/proven_over_planes: its {name} is below the "
+                                      "estimate's, or the estimate states none (a lower level proves a smaller set)")
 
 
 def _stated_proven(stage, claim: dict, where: str, name: str, read) -> dict | None:

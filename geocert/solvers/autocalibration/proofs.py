@@ -306,6 +306,52 @@ def _extend_over_slivers(moved: np.ndarray, up: np.ndarray, axis: np.ndarray, wa
                 target[on_face, k] = moved_side[i, k]
 
 
+def check_regions(problem, regions: Any, excluded: Any, fields: tuple[str, ...], where: str = "") -> list:
+    """Each orientation's region of planes (its frame, and a box whose sides its rows prove in
+    exact arithmetic) or its exclusion (Gordan's alternative, exactly), as an affine proof states
+    them (``fields``: a region's keys): (delta, G, a, b, lo, hi) of each region, a v + b >= 0 its
+    chirality rows in the frame."""
+    if not isinstance(regions, list) or not isinstance(excluded, list):
+        raise Invalid("format", f"{where}regions and {where}excluded must be lists")
+    deltas = sorted([r.get("delta") for r in regions if isinstance(r, dict)]
+                    + [e.get("delta") for e in excluded if isinstance(e, dict)])
+    if deltas != [-1.0, 1.0]:
+        raise Invalid("root_region", "each orientation (delta = +1 and -1) needs a region or an exclusion")
+    for i, item in enumerate(excluded):
+        record(item, f"{where}excluded/{i}", ("delta", "rows"))
+        rows = frames.chirality_rows(problem.norm, float(item["delta"]))
+        if not frames.exact_gordan(rows, _int_list(item.get("rows"), f"{where}excluded/rows")):
+            raise Invalid("root_region", f"orientation {item['delta']:+g}: the rows do not exclude it")
+    out = []
+    for i, region in enumerate(regions):
+        record(region, f"{where}regions/{i}", fields)
+        delta = float(region["delta"])
+        G = _numbers(region.get("frame"), f"{where}regions/{i}/frame", (4, 4))
+        if not np.linalg.cond(G) < 1e12:
+            raise Invalid("root_region", f"{where}regions/{i}: the frame is not invertible")
+        rows = frames.chirality_rows(problem.norm, delta)
+        a, b = frames.frame_rows(G, rows)
+        lo, hi = _read_box(region.get("box"), f"{where}regions/{i}/box", 3)
+        basis = region.get("basis")
+        if not isinstance(basis, list) or len(basis) != 6:
+            raise Invalid("format", f"{where}regions/{i}/basis must give three rows for each of the six sides")
+        proven = []
+        for side, chosen in enumerate(basis):
+            axis, upper = side // 2, side % 2 == 1
+            value = frames.exact_side(a, b, axis, upper, _int_list(chosen, f"{where}regions/{i}/basis/{side}", 3))
+            if value is None or (value > hi[axis] if upper else value < lo[axis]):
+                raise Invalid("root_region", f"{where}regions/{i}: side {side} of the box is not proved by its rows")
+            proven.append(value)
+        # Every plane positive on the rows is G^T (v, 1) times a positive number for some v of
+        # the polytope only if the polytope is bounded (the sides above) and not "inside out":
+        # a plane with a negative last coordinate in this frame would need the proved lower
+        # bounds above the upper ones on every axis (e.g. a frame with its last row negated).
+        if not all(proven[2 * k] < proven[2 * k + 1] for k in range(3)):
+            raise Invalid("root_region", f"{where}regions/{i}: the proved sides leave no plane in the frame's polytope")
+        out.append((delta, G, a, b, lo, hi))
+    return out
+
+
 def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
     """The bound an affine proof establishes over every plane chirality allows."""
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
@@ -313,41 +359,10 @@ def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float
     regions, excluded = proof.get("regions"), proof.get("excluded")
     if not isinstance(regions, list) or not isinstance(excluded, list):
         raise Invalid("format", "an affine proof has regions and excluded")
-    deltas = sorted([r.get("delta") for r in regions if isinstance(r, dict)]
-                    + [e.get("delta") for e in excluded if isinstance(e, dict)])
-    if deltas != [-1.0, 1.0]:
-        raise Invalid("root_region", "each orientation (delta = +1 and -1) needs a region or an exclusion")
-    for i, item in enumerate(excluded):
-        record(item, f"excluded/{i}", ("delta", "rows"))
-        rows = frames.chirality_rows(problem.norm, float(item["delta"]))
-        if not frames.exact_gordan(rows, _int_list(item.get("rows"), "excluded/rows")):
-            raise Invalid("root_region", f"orientation {item['delta']:+g}: the rows do not exclude it")
+    checked = check_regions(problem, regions, excluded, ("delta", "frame", "rows", "box", "basis", "unit", "proofs",
+                                                         "leaves"))
     bound = math.inf
-    for i, region in enumerate(regions):
-        record(region, f"regions/{i}", ("delta", "frame", "rows", "box", "basis", "unit", "proofs", "leaves"))
-        delta = float(region["delta"])
-        G = _numbers(region.get("frame"), f"regions/{i}/frame", (4, 4))
-        if not np.linalg.cond(G) < 1e12:
-            raise Invalid("root_region", f"regions/{i}: the frame is not invertible")
-        rows = frames.chirality_rows(problem.norm, delta)
-        a, b = frames.frame_rows(G, rows)
-        lo, hi = _read_box(region.get("box"), f"regions/{i}/box", 3)
-        basis = region.get("basis")
-        if not isinstance(basis, list) or len(basis) != 6:
-            raise Invalid("format", f"regions/{i}/basis must give three rows for each of the six sides")
-        proven = []
-        for side, chosen in enumerate(basis):
-            axis, upper = side // 2, side % 2 == 1
-            value = frames.exact_side(a, b, axis, upper, _int_list(chosen, f"regions/{i}/basis/{side}", 3))
-            if value is None or (value > hi[axis] if upper else value < lo[axis]):
-                raise Invalid("root_region", f"regions/{i}: side {side} of the box is not proved by its rows")
-            proven.append(value)
-        # Every plane positive on the rows is G^T (v, 1) times a positive number for some v of
-        # the polytope only if the polytope is bounded (the sides above) and not "inside out":
-        # a plane with a negative last coordinate in this frame would need the proved lower
-        # bounds above the upper ones on every axis (e.g. a frame with its last row negated).
-        if not all(proven[2 * k] < proven[2 * k + 1] for k in range(3)):
-            raise Invalid("root_region", f"regions/{i}: the proved sides leave no plane in the frame's polytope")
+    for i, (region, (delta, G, a, b, lo, hi)) in enumerate(zip(regions, checked)):
         used = _int_list(region.get("rows"), f"regions/{i}/rows")
         if not used or not all(0 <= k < len(a) for k in used):
             raise Invalid("format", f"regions/{i}/rows: no such rows")
@@ -363,8 +378,10 @@ def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float
 def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, claimed_cost: float, passed: list,
                  cost: float | None = None) -> float:
     """The bound a metric proof establishes over every omega of the domain, for the plane p;
-    with its ``sublevel``, the proven intervals too (``cost``: the claimed K's recomputed cost)."""
-    record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"), ("sublevel",))
+    with its ``sublevel``, the proven intervals too (``cost``: the claimed K's recomputed cost).
+    Its ``plane_sublevel`` is plane_sublevel.check's (the verifier calls it beside this)."""
+    record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"),
+           ("sublevel", "plane_sublevel"))
     setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
     setup.unit = checked_unit(proof.get("unit"), "unit", claimed_cost)
     lo, hi, proven_lo, proven_hi = _check_rounds(problem, setup, proof, lower_claimed, "tightening", "its cap is "
