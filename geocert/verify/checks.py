@@ -733,6 +733,15 @@ def _check_stats(kind, result: dict) -> None:
             raise Invalid("returned", f"stats/{name} must be null or a number of seconds >= 0, got "
                                       f"{stats[name]!r:.40}")
     expected = {"items": len(outcomes), "certified": sum(certified for _, certified in outcomes)}
+    # The job's nodes are its items' (runner.item_sums; a kind whose job is one item counts that
+    # item's nodes as the sum over its stages or points, which are the items read here: the
+    # stratified autocalibration's affine and metric stages, a reconstruction's points), each a
+    # count (_check_item_notes). An item stating none (null) leaves the sum unstated.
+    nodes = [item.get("nodes") for item in result.get(kind.item_key) or [] if isinstance(item, dict)]
+    if all(type(n) is int for n in nodes):
+        expected["nodes"] = sum(nodes)
+    elif stats.get("nodes") is not None:
+        raise Invalid("returned", f"stats/nodes is {stats['nodes']!r:.40}, and an item states no nodes to sum")
     statuses = {}
     for status, _ in outcomes:
         if status is not None:
@@ -749,12 +758,19 @@ def _check_stats(kind, result: dict) -> None:
             raise Invalid("returned", f"stats/{name} is {stats[name]!r}, the items give {value!r}")
 
 
+# The largest count a result states: 2^53 - 1, the largest integer every JSON reader holds exactly
+# (RFC 8259, section 6: readers commonly read numbers as IEEE 754 doubles). No search reaches it
+# (max_nodes is at most 1,000,000 an item); a Python reader would take 10**400 as it is written.
+MAX_COUNT = 2 ** 53 - 1
+
+
 def _check_item_notes(item: dict, where: str) -> None:
     """An item's informational fields are of their types (docs/certificate.md): ``nodes`` a
     count, ``reason`` words, ``elapsed_s`` a duration; each may be null."""
     nodes, reason, elapsed = item.get("nodes"), item.get("reason"), item.get("elapsed_s")
-    if nodes is not None and not (type(nodes) is int and nodes >= 0):
-        raise Invalid("returned", f"{where}/nodes must be null or a count (an integer >= 0), got {nodes!r:.40}")
+    if nodes is not None and not (type(nodes) is int and 0 <= nodes <= MAX_COUNT):
+        raise Invalid("returned", f"{where}/nodes must be null or a count (an integer from 0 to {MAX_COUNT}), got "
+                                  f"{nodes!r:.40}")
     if reason is not None and not isinstance(reason, str):
         raise Invalid("returned", f"{where}/reason must be null or a string, got {reason!r:.40}")
     if elapsed is not None and not (is_number(elapsed) and elapsed >= 0):
