@@ -15,7 +15,7 @@ from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration import proofs, structure_check
 from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
-from geocert.solvers.core.determinacy import proven_document
+from geocert.solvers.core.determinacy import ESTIMATES_FORM, proven_document
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
 from geocert.solvers.fractional import residual_claims
@@ -85,6 +85,7 @@ def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, fl
 
 class AutocalibrationVerification(Verification):
     claim_options = CLAIM_OPTIONS
+    hash_marks = ESTIMATES_FORM  # its determinacy estimates state their tolerances (Verification.hash_marks)
     option_names = tuple(entry.name for entry in dataclasses.fields(autocalibration_problem.AutocalibrationOptions))
     proofs: dict = {}
     # A stage that found no solution (no plane, K or quadric) says "failed": a word about the

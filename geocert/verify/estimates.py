@@ -32,24 +32,37 @@ VALUE_SLACK = 1e-9  # of a value: its own rounding
 COMPARED = ("method", "determined", "level", "redundancy")
 
 
-def check(kind: Any, result: dict, certificate: dict) -> None:
-    """Every returned track's or map's determinacy estimate is the writer's (module docstring)."""
+def check(kind: Any, result: dict, certificate: dict, earlier: bool = True) -> None:
+    """Every returned track's or map's determinacy estimate is the writer's (module docstring).
+    ``earlier``: whether the document's form lets an estimate be of the earlier form (its
+    intervals stating no tolerance, ``determined`` meaning bounded: a problem hash without the
+    estimates' form, core.determinacy.ESTIMATES_FORM); a document of the current form states
+    every interval's tolerance, so it cannot choose that reading by leaving them out."""
     if certificate.get("kind") == "triangulation":
-        _check_tracks(kind, result, certificate)
+        _check_tracks(kind, result, certificate, earlier)
     elif certificate.get("kind") in ("resection", "homography"):
-        _check_maps(kind, result, certificate)
+        _check_maps(kind, result, certificate, earlier)
     elif certificate.get("kind") == "bilinear":
-        _check_frames(kind, result, certificate)
+        _check_frames(kind, result, certificate, earlier)
 
 
-def check_determined(determinacy: dict, where: str) -> None:
+def check_determined(determinacy: dict, where: str, earlier: bool = True) -> None:
     """An estimate no check recomputes (autocalibration's stages: its writer refits with scipy)
     still says ``determined`` only as its writer (core.determinacy.Determinacy.document) does:
     true exactly when every interval fixes its quantity (bounded, within its tolerance of its
-    value) and no warning is stated; and no bounded interval has its lower end above its upper."""
+    value) and no warning is stated; and no bounded interval has its lower end above its upper.
+    Unless ``earlier`` (the document's form lets its estimates be of the earlier form: check),
+    every interval states its tolerance (null where its quantity has no scale), as the writer's
+    core.determinacy.interval does: an interval stating none would read as bounded suffices."""
     intervals, warnings = determinacy.get("intervals"), determinacy.get("warnings")
     if not isinstance(intervals, list) or not all(isinstance(i, dict) for i in intervals):
         return  # typed by core.notes
+    if not earlier:
+        missing = [number for number, i in enumerate(intervals) if "tolerance" not in i]
+        if missing:
+            raise Invalid("returned", f"{where}/intervals/{missing[0]} states no tolerance: a document of this form "
+                                      "(its problem_sha256 covers the estimates' form) states every interval's "
+                                      "tolerance, and without it determined would be read as bounded")
     try:
         expected = all(fixes(i) for i in intervals) and not warnings
     except (TypeError, KeyError):
@@ -122,7 +135,7 @@ def _stopped(determinacy: dict) -> bool:
             and warnings[0].get("code") == "time_limit")
 
 
-def _check_tracks(kind, result: dict, certificate: dict) -> None:
+def _check_tracks(kind, result: dict, certificate: dict, earlier: bool = True) -> None:
     data = certificate["data"]
     cameras = np.asarray(data["cameras"], dtype=float)
     for index, item in enumerate(result.get("tracks") or []):
@@ -141,10 +154,10 @@ def _check_tracks(kind, result: dict, certificate: dict) -> None:
             pooled = (float(level), dof) if isinstance(level, (int, float)) and not isinstance(level, bool) else None
         expected = safely(estimate.track, cameras[views], points, item["point"], item.get("at_infinity") is True,
                           item.get("cost"), item.get("lower_bound"), None, pooled)
-        _compare(where, determinacy, expected)
+        _compare(where, determinacy, expected, earlier)
 
 
-def _check_maps(kind, result: dict, certificate: dict) -> None:
+def _check_maps(kind, result: dict, certificate: dict, earlier: bool = True) -> None:
     read = kind.verification.read
     for index, item in enumerate(result.get("maps") or []):
         determinacy = item.get("determinacy") if isinstance(item, dict) else None
@@ -155,10 +168,10 @@ def _check_maps(kind, result: dict, certificate: dict) -> None:
             raise Invalid("returned", f"{where} is stated for a map returning no matrix (its writer states none)")
         source, target = read(certificate["data"], index)
         expected = safely(estimate.map_, source, target, item["matrix"], item.get("cost"), item.get("lower_bound"))
-        _compare(where, determinacy, expected)
+        _compare(where, determinacy, expected, earlier)
 
 
-def _check_frames(kind, result: dict, certificate: dict) -> None:
+def _check_frames(kind, result: dict, certificate: dict, earlier: bool = True) -> None:
     from geocert.solvers.bilinear import determinacy as frame_estimate
 
     read = kind.verification.read
@@ -172,18 +185,19 @@ def _check_frames(kind, result: dict, certificate: dict) -> None:
         basis, points = read(certificate["data"], index)
         expected = safely(frame_estimate.frame, basis, points, item["camera"], item["coefficients"], item.get("cost"),
                           item.get("lower_bound"))
-        _compare(where, determinacy, expected)
+        _compare(where, determinacy, expected, earlier)
 
 
-def _compare(where: str, given: dict, expected: dict | None) -> None:
+def _compare(where: str, given: dict, expected: dict | None, earlier_form: bool = True) -> None:
     """``given`` is ``expected`` but for its proven intervals (checked against the proof) and the
-    pool a pooled level names (checked against the data), to the module's slack."""
+    pool a pooled level names (checked against the data), to the module's slack; read as written
+    before intervals stated a tolerance only where ``earlier_form`` allows it (check)."""
     if expected is None:
         raise Invalid("returned", f"{where} is stated where the estimate is not defined on the data (its writer "
                                   "states none)")
-    check_determined(given, where)
+    check_determined(given, where, earlier_form)
     intervals = given.get("intervals")
-    earlier = isinstance(intervals, list) and bool(intervals) and not any(
+    earlier = earlier_form and isinstance(intervals, list) and bool(intervals) and not any(
         isinstance(i, dict) and "tolerance" in i for i in intervals)
     if earlier:  # written before intervals stated their tolerance: fixed meant bounded (check_determined)
         expected = {**expected, "determined": given.get("determined"),

@@ -39,8 +39,9 @@ def rehash(document: dict, earlier: bool = False) -> dict:
     verification = get_kind(document["kind"]).verification
     forms = getattr(verification, "earlier_forms", ()) if earlier else ()
     names = forms[-1][0] if forms else getattr(verification, "claim_options", None)
+    marks = None if earlier else getattr(verification, "hash_marks", None)  # (the estimates' form)
     document["data_sha256"] = data_hash(document["kind"], document["data"])
-    document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names)
+    document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names, marks)
     return document
 
 

@@ -217,9 +217,11 @@ def _rehash(document: dict) -> None:
     from geocert.kinds import get_kind
     from geocert.solvers.core.certificates import data_hash, problem_hash
 
-    names = getattr(get_kind(document["kind"]).verification, "claim_options", None)
+    verification = get_kind(document["kind"]).verification
+    names = getattr(verification, "claim_options", None)
     document["data_sha256"] = data_hash(document["kind"], document["data"])
-    document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names)
+    document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names,
+                                              getattr(verification, "hash_marks", None))
 
 
 class TestDirectProgramsUnread:
