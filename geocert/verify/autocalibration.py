@@ -220,6 +220,10 @@ class AutocalibrationVerification(Verification):
         estimates.check_intrinsics(stages[1].get("determinacy"), result.get("K"), "stages/1/determinacy")
         estimates.check_redundancy(stages[0].get("determinacy"), len(cameras) - 4, "stages/0/determinacy")
         estimates.check_redundancy(stages[1].get("determinacy"), 5 * len(cameras) - 10, "stages/1/determinacy")
+        for number, stage in enumerate(stages[:2]):
+            estimates.check_contains(stage.get("determinacy"), f"stages/{number}/determinacy")
+            estimates.check_stage_level(stage.get("determinacy"), stage.get("cost"), stage.get("lower_bound"),
+                                        f"stages/{number}/determinacy")
 
     @staticmethod
     def estimates_of(result: dict, certificate: dict) -> dict:
@@ -533,6 +537,7 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
         estimates.check_intrinsics(result["stages"][0].get("determinacy"), result.get("K"), "stages/0/determinacy")
         estimates.check_redundancy(result["stages"][0].get("determinacy"), 5 * len(cameras) - 10,
                                    "stages/0/determinacy")
+    estimates.check_contains(result["stages"][0].get("determinacy"), "stages/0/determinacy")
 
 
 def _check_direct_proven(stage: dict, claim: dict, views: int) -> None:

@@ -23,7 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.core.determinacy import fixes, safely
+from geocert.solvers.core.determinacy import SIGMAS, certified_gap, cost_increase as level_of, fixes, safely
+from geocert.solvers.core.geometry import is_number
 from geocert.solvers.core.strict import Invalid, same
 from geocert.solvers.fractional import determinacy as estimate
 
@@ -123,6 +124,45 @@ def check_intrinsics(determinacy: Any, K: Any, where: str) -> None:
         if not earlier and not _close(tolerance, RELATIVE_WIDTH * abs(float(scale)), 0.0, 1e-8 * mean):
             raise Invalid("returned", f"{where}/intervals/{number}/tolerance is {tolerance!r:.30}, a tenth of its "
                                       f"scale is {RELATIVE_WIDTH * abs(float(scale))!r:.30}")
+
+
+def check_contains(determinacy: Any, where: str) -> None:
+    """An autocalibration stage's intervals hold their own value: each bounded end on its side of
+    ``value`` (to VALUE_SLACK of it), as the writer's are (autocalibration.determinacy: the ends are
+    the value less and plus the walked distances, each at least 0; the affine stage's the range
+    of the planes reached with its own; a clip to the scope moves an end toward the value only,
+    the value inside the scope the stage certifies). An interval beside its value says the data
+    fix the quantity away from the answer returned."""
+    if not isinstance(determinacy, dict) or _stopped(determinacy) or not isinstance(determinacy.get("intervals"), list):
+        return
+    for number, found in enumerate(determinacy["intervals"]):
+        if not isinstance(found, dict) or not is_number(found.get("value")):
+            continue
+        value, lower, upper = found["value"], found.get("lower"), found.get("upper")
+        slack = VALUE_SLACK * abs(value)
+        if (is_number(lower) and lower > value + slack) or (is_number(upper) and upper < value - slack):
+            raise Invalid("returned", f"{where}/intervals/{number} [{lower!r:.20}, {upper!r:.20}] does not hold its "
+                                      f"value {value!r:.20}")
+
+
+def check_stage_level(determinacy: Any, cost: Any, lower_bound: Any, where: str) -> None:
+    """A stratified stage's ``cost_increase`` is the writer's level (core.determinacy.
+    cost_increase): SIGMAS^2 times the stage's cost over its redundancy, at least its certified
+    gap (cost - lower_bound), from figures the document states (the writer's residuals are those
+    of the stage's own cost: the modulus cost at the plane, the metric cost at omega). The direct
+    stage's estimate is of another cost (its DIAC residuals, not its certified objective), and is
+    not read here."""
+    if not isinstance(determinacy, dict) or _stopped(determinacy) or not is_number(cost):
+        return
+    redundancy = determinacy.get("redundancy")
+    if type(redundancy) is not int:
+        return  # (check_redundancy)
+    gap = certified_gap(float(cost), float(lower_bound)) if is_number(lower_bound) else None
+    expected = level_of(float(cost), redundancy, gap)
+    if not _close(determinacy.get("cost_increase"), expected, 0.0, NUMBER_SLACK * abs(expected)):
+        raise Invalid("returned", f"{where}/cost_increase is {determinacy.get('cost_increase')!r:.30}; the stage's "
+                                  f"cost {cost!r:.20} over its redundancy {redundancy}, times {SIGMAS:g}^2, at least "
+                                  f"its certified gap, gives {expected!r:.30}")
 
 
 def _stopped(determinacy: dict) -> bool:
