@@ -83,11 +83,9 @@ def _new_value(old: float, how: str, nearby: float) -> float:
 def _rehash(document: dict) -> None:
     from geocert.kinds import get_kind
 
-    verification = get_kind(document["kind"]).verification
-    names = getattr(verification, "claim_options", None)
+    names = getattr(get_kind(document["kind"]).verification, "claim_options", None)
     document["data_sha256"] = data_hash(document["kind"], document["data"])
-    document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names,
-                                              getattr(verification, "hash_marks", None))
+    document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names)
 
 
 def _at(root, path):

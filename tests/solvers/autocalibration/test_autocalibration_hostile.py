@@ -26,7 +26,6 @@ from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import CLAIM_OPTIONS, read_data
 from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unpack
 from geocert.solvers.core.cones import proves_infeasible
-from geocert.solvers.core.determinacy import ESTIMATES_FORM
 from geocert.solvers.core.geometry import InputError
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import uncertify
@@ -76,8 +75,7 @@ def set_claim(result: dict, index: int, **fields) -> None:
 def rehash(result: dict) -> None:
     document = result["certificate"]
     document["data_sha256"] = data_hash(KIND, document["data"])
-    document["problem_sha256"] = problem_hash(KIND, document["data"], document["options"], CLAIM_OPTIONS,
-                                              ESTIMATES_FORM)
+    document["problem_sha256"] = problem_hash(KIND, document["data"], document["options"], CLAIM_OPTIONS)
 
 
 def metric_setup(problem, claim: dict):
@@ -781,7 +779,7 @@ class TestClosedChiralityScope:
         document = copy.deepcopy(solved["certificate"])
         document["data"] = data
         document["data_sha256"] = data_hash(KIND, data)
-        document["problem_sha256"] = problem_hash(KIND, data, document["options"], CLAIM_OPTIONS, ESTIMATES_FORM)
+        document["problem_sha256"] = problem_hash(KIND, data, document["options"], CLAIM_OPTIONS)
         document["items"][0].update(
             plane_at_infinity=plane.tolist(), cost=cost, lower_bound=cost, gap=0.0,
             proof={"type": "stratified_affine", "regions": [],
