@@ -55,7 +55,7 @@ class Verification(abc.ABC):
     (certificates.problem_hash's marks): determinacy.ESTIMATES_FORM for a kind stating
     determinacy estimates, whose intervals then each state their tolerance. A document hashed
     without it is of the kind's earlier form (its estimates may be read as written before
-    intervals stated a tolerance, the report's scope saying so). None: no mark.)"""
+    intervals stated a tolerance, the report's scope saying so). None: no mark."""
 
     earlier_forms: tuple = ()
     """A kind whose problem hash came to cover more options: its earlier forms, newest first, each
