@@ -96,5 +96,6 @@ def certificate_document(kind, data: Any, options, items: list[dict]) -> dict:
     options = dataclasses.asdict(options)
     return {"format": FORMAT, "version": VERSION, "kind": kind.name, "options": options,
             "data": data, "data_sha256": data_hash(kind.name, data),
-            "problem_sha256": problem_hash(kind.name, data, options, getattr(kind.verification, "claim_options", None)),
+            "problem_sha256": problem_hash(kind.name, data, options, getattr(kind.verification, "claim_options", None),
+                                           getattr(kind.verification, "hash_marks", None)),
             "items": claims}

@@ -15,7 +15,7 @@ from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration import plane_sublevel, proofs, structure_check
 from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
-from geocert.solvers.core.determinacy import proven_document
+from geocert.solvers.core.determinacy import ESTIMATES_FORM, proven_document
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
 from geocert.solvers.fractional import residual_claims
@@ -90,6 +90,7 @@ def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, fl
 
 class AutocalibrationVerification(Verification):
     claim_options = CLAIM_OPTIONS
+    hash_marks = ESTIMATES_FORM  # its determinacy estimates state their tolerances (Verification.hash_marks)
     option_names = tuple(entry.name for entry in dataclasses.fields(autocalibration_problem.AutocalibrationOptions))
     proofs: dict = {}
     # A stage that found no solution (no plane, K or quadric) says "failed": a word about the
@@ -227,6 +228,10 @@ class AutocalibrationVerification(Verification):
         estimates.check_intrinsics(stages[1].get("determinacy"), result.get("K"), "stages/1/determinacy")
         estimates.check_redundancy(stages[0].get("determinacy"), len(cameras) - 4, "stages/0/determinacy")
         estimates.check_redundancy(stages[1].get("determinacy"), 5 * len(cameras) - 10, "stages/1/determinacy")
+        for number, stage in enumerate(stages[:2]):
+            estimates.check_contains(stage.get("determinacy"), f"stages/{number}/determinacy")
+            estimates.check_stage_level(stage.get("determinacy"), stage.get("cost"), stage.get("lower_bound"),
+                                        f"stages/{number}/determinacy")
 
     @staticmethod
     def estimates_of(result: dict, certificate: dict) -> dict:
@@ -570,6 +575,7 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
         estimates.check_intrinsics(result["stages"][0].get("determinacy"), result.get("K"), "stages/0/determinacy")
         estimates.check_redundancy(result["stages"][0].get("determinacy"), 5 * len(cameras) - 10,
                                    "stages/0/determinacy")
+    estimates.check_contains(result["stages"][0].get("determinacy"), "stages/0/determinacy")
 
 
 def _check_direct_proven(stage: dict, claim: dict, views: int) -> None:

@@ -18,6 +18,7 @@ from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
 from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
 from geocert.solvers.core.coverage import extended, uncovered_part, widened
+from geocert.solvers.core.determinacy import ESTIMATES_FORM
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
                                          numbers as _numbers, record as _record)
@@ -38,6 +39,7 @@ FRAME_SCOPES = {"searched": "every affine camera whose 2x3 part lies in the came
 
 class BilinearVerification(Verification):
     claim_options = CLAIM_OPTIONS
+    hash_marks = ESTIMATES_FORM  # its determinacy estimates state their tolerances (Verification.hash_marks)
     option_names = tuple(entry.name for entry in dataclasses.fields(BilinearOptions))
     proofs: dict = {}
     data_items = "frames"  # the certificate has one item per frame (verify._check_item_count)

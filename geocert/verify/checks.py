@@ -361,6 +361,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
     items: list = []
     options: dict = {}
     hashed: tuple[str, ...] = ()  # the options the problem hash was found to cover
+    earlier_estimates = True  # whether its estimates may be of the earlier form (_check_hashes)
     size = 0
     try:
         # A result holding its certificate is walked once: the certificate nests less deeply.
@@ -380,7 +381,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
         _check_option_names(document["kind"], document["options"])
         options = checked_options(document["kind"], document["options"])
         tallies["options"][0] += 1
-        hashed, earlier_form = _check_hashes(document, options)
+        hashed, earlier_form, earlier_estimates = _check_hashes(document, options)
         tallies["data_hash"][0] += 1
         _check_item_count(document)
         report.scope = scope_statement(document["kind"], options)
@@ -395,7 +396,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
     adapter = _adapter(document["kind"]) if items else None
     # The work the document may ask for, in proportion to its size (strict.charge).
     with work_budget(WORK_PER_UNIT * size + WORK_BASE):
-        _verify_all(document, returned, adapter, options, items, report, tallies, fail, hashed)
+        _verify_all(document, returned, adapter, options, items, report, tallies, fail, hashed, earlier_estimates)
     report.first_failure = first
     # a result may make a certified claim beyond its items, checked by its kind's check_result
     # (a reconstruction's certified K, against its calibration certificate, where no point is placed)
@@ -424,9 +425,10 @@ def _verify(document: Any, returned: dict | None) -> Report:
 
 
 def _verify_all(document: dict, returned: dict | None, adapter, options: dict, items: list, report: Report,
-                tallies: dict, fail, hashed: tuple[str, ...] = ()) -> None:
+                tallies: dict, fail, hashed: tuple[str, ...] = (), earlier_estimates: bool = True) -> None:
     """_verify's checks of the items, of what ties them together, and of the result returning
-    them (failures counted through ``fail``; ``hashed``: the options the problem hash covers)."""
+    them (failures counted through ``fail``; ``hashed``: the options the problem hash covers;
+    ``earlier_estimates``: whether the hash's form lets its estimates be of the earlier form)."""
     forget = hook(adapter, "forget", lambda: None)  # what an adapter remembers of one document
     forget()
     try:
@@ -446,7 +448,7 @@ def _verify_all(document: dict, returned: dict | None, adapter, options: dict, i
         report.scope.update(scoped(items))
     if returned is not None and _clean(tallies):
         try:
-            _check_returned(returned, document)
+            _check_returned(returned, document, earlier_estimates)
             # What else a kind's result returns on the strength of its certificates (e.g. a
             # reconstruction's cameras, against the camera certificate beside its points').
             check_result = hook(_adapter(document["kind"]), "check_result")
@@ -613,24 +615,39 @@ def _check_claim_members(kind, items: list) -> None:
                                     "nothing, so it is refused")
 
 
-def _check_hashes(document: dict, options: dict) -> tuple[tuple[str, ...], str | None]:
-    """The data's and the problem's hashes; returns the options the problem hash covers and what
-    the report's scope says of a problem hash of a kind's earlier form (None for the current one)."""
+def _check_hashes(document: dict, options: dict) -> tuple[tuple[str, ...], str | None, bool]:
+    """The data's and the problem's hashes; returns the options the problem hash covers, what
+    the report's scope says of a problem hash of a kind's earlier form (None for the current one),
+    and whether the document's determinacy estimates may be of the earlier form (intervals stating
+    no tolerance: a kind that declares no mark, or a hash without the mark its kind declares)."""
     expected = data_hash(document["kind"], document["data"])
     if expected != document["data_sha256"]:
         raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
     adapter = _adapter(document["kind"])
     names = hook(adapter, "claim_options", CLAIM_OPTIONS)
-    expected = problem_hash(document["kind"], document["data"], options, names)
+    marks = hook(adapter, "hash_marks")
+    expected = problem_hash(document["kind"], document["data"], options, names, marks)
     if expected == document["problem_sha256"]:
-        return names, None
+        return names, None, not marks
+    if marks and problem_hash(document["kind"], document["data"], options, names) == document["problem_sha256"]:
+        return names, _unmarked_form(names, marks), True
     # a kind whose hash came to cover more options: its earlier forms, newest first, each with
     # what the report's scope says of it
     for earlier, statement in hook(adapter, "earlier_forms"):
         if problem_hash(document["kind"], document["data"], options, earlier) == document["problem_sha256"]:
-            return earlier, statement(options)
+            return earlier, statement(options), True
     raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and options "
                                f"({', '.join(names)}) hash to {expected!r}")
+
+
+def _unmarked_form(names: tuple[str, ...], marks: dict) -> str:
+    """What the report's scope says of a document hashed without the form its kind declares
+    (Verification.hash_marks: the estimates' form, determinacy.ESTIMATES_FORM)."""
+    return (f"the earlier form: it covers the kind, the data and {', '.join(names)}, not the form today's documents "
+            f"declare ({marks!r}). Compare it with your request: a document of this form was written before "
+            "every determinacy interval stated its tolerance, so an estimate whose intervals state none is read as "
+            "such a document's, its determined meaning every interval bounded (not within a tenth of its "
+            "quantity's scale)")
 
 
 # What a result returns of each item, which must equal what its certificate proves (and the
@@ -663,7 +680,10 @@ def check_members(kind, result: dict) -> None:
         records.check(result.get("stages"), STAGE_RECORDS, "stages")
 
 
-def _check_returned(result: dict, certificate: dict) -> None:
+def _check_returned(result: dict, certificate: dict, earlier_estimates: bool = True) -> None:
+    """The result is what its certificate proves, and its other fields are tied to the claims
+    (``earlier_estimates``: whether the document's hash lets its estimates be of the earlier form,
+    their intervals stating no tolerance: _check_hashes)."""
     kind = _kind(certificate["kind"])
     key = kind.item_key
     check_members(kind, result)
@@ -687,16 +707,17 @@ def _check_returned(result: dict, certificate: dict) -> None:
     own = hook(kind.verification, "check_returned")
     if own is not None:  # what else the result returns, derived from the claims
         own(result, certificate)
-    estimates.check(kind, result, certificate)  # a track's or map's determinacy estimate, recomputed
+    estimates.check(kind, result, certificate, earlier_estimates)  # a track's or map's determinacy, recomputed
     if certificate["kind"] not in ("triangulation", "resection"):  # kinds whose determinacy proves intervals (own check)
         # a kind proving some intervals says which parts are estimates still (its check_returned checked the rest)
         estimates_of = hook(kind.verification, "estimates_of")
-        _check_estimates(result if estimates_of is None else estimates_of(result, certificate))
+        _check_estimates(result if estimates_of is None else estimates_of(result, certificate),
+                         earlier=earlier_estimates)
     _check_summaries(kind, result, certificate)
     _check_stats(kind, result)
 
 
-def _check_estimates(value: Any, where: str = "") -> None:
+def _check_estimates(value: Any, where: str = "", earlier: bool = True) -> None:
     """Every ``determinacy`` a result holds outside its certificate is an estimate: none may call
     itself proven, or state proven intervals, where no proof of them is carried."""
     if isinstance(value, dict):
@@ -708,11 +729,11 @@ def _check_estimates(value: Any, where: str = "") -> None:
                 raise Invalid("returned", f"{where}/determinacy says proven, and no proof of its intervals is "
                                           "carried (an estimate is proven: false)")
             if name == "determinacy" and isinstance(item, dict):
-                estimates.check_determined(item, f"{where}/determinacy")
-            _check_estimates(item, f"{where}/{name}")
+                estimates.check_determined(item, f"{where}/determinacy", earlier)
+            _check_estimates(item, f"{where}/{name}", earlier)
     elif isinstance(value, list):
         for index, item in enumerate(value):
-            _check_estimates(item, f"{where}/{index}")
+            _check_estimates(item, f"{where}/{index}", earlier)
 
 
 def _check_stats(kind, result: dict) -> None:
@@ -733,6 +754,15 @@ def _check_stats(kind, result: dict) -> None:
             raise Invalid("returned", f"stats/{name} must be null or a number of seconds >= 0, got "
                                       f"{stats[name]!r:.40}")
     expected = {"items": len(outcomes), "certified": sum(certified for _, certified in outcomes)}
+    # The job's nodes are its items' (runner.item_sums; a kind whose job is one item counts that
+    # item's nodes as the sum over its stages or points, which are the items read here: the
+    # stratified autocalibration's affine and metric stages, a reconstruction's points), each a
+    # count (_check_item_notes). An item stating none (null) leaves the sum unstated.
+    nodes = [item.get("nodes") for item in result.get(kind.item_key) or [] if isinstance(item, dict)]
+    if all(type(n) is int for n in nodes):
+        expected["nodes"] = sum(nodes)
+    elif stats.get("nodes") is not None:
+        raise Invalid("returned", f"stats/nodes is {stats['nodes']!r:.40}, and an item states no nodes to sum")
     statuses = {}
     for status, _ in outcomes:
         if status is not None:
@@ -749,12 +779,19 @@ def _check_stats(kind, result: dict) -> None:
             raise Invalid("returned", f"stats/{name} is {stats[name]!r}, the items give {value!r}")
 
 
+# The largest count a result states: 2^53 - 1, the largest integer every JSON reader holds exactly
+# (RFC 8259, section 6: readers commonly read numbers as IEEE 754 doubles). No search reaches it
+# (max_nodes is at most 1,000,000 an item); a Python reader would take 10**400 as it is written.
+MAX_COUNT = 2 ** 53 - 1
+
+
 def _check_item_notes(item: dict, where: str) -> None:
     """An item's informational fields are of their types (docs/certificate.md): ``nodes`` a
     count, ``reason`` words, ``elapsed_s`` a duration; each may be null."""
     nodes, reason, elapsed = item.get("nodes"), item.get("reason"), item.get("elapsed_s")
-    if nodes is not None and not (type(nodes) is int and nodes >= 0):
-        raise Invalid("returned", f"{where}/nodes must be null or a count (an integer >= 0), got {nodes!r:.40}")
+    if nodes is not None and not (type(nodes) is int and 0 <= nodes <= MAX_COUNT):
+        raise Invalid("returned", f"{where}/nodes must be null or a count (an integer from 0 to {MAX_COUNT}), got "
+                                  f"{nodes!r:.40}")
     if reason is not None and not isinstance(reason, str):
         raise Invalid("returned", f"{where}/reason must be null or a string, got {reason!r:.40}")
     if elapsed is not None and not (is_number(elapsed) and elapsed >= 0):

@@ -23,7 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.core.determinacy import fixes, safely
+from geocert.solvers.core.determinacy import SIGMAS, certified_gap, cost_increase as level_of, fixes, safely
+from geocert.solvers.core.geometry import is_number
 from geocert.solvers.core.strict import Invalid, same
 from geocert.solvers.fractional import determinacy as estimate
 
@@ -32,24 +33,37 @@ VALUE_SLACK = 1e-9  # of a value: its own rounding
 COMPARED = ("method", "determined", "level", "redundancy")
 
 
-def check(kind: Any, result: dict, certificate: dict) -> None:
-    """Every returned track's or map's determinacy estimate is the writer's (module docstring)."""
+def check(kind: Any, result: dict, certificate: dict, earlier: bool = True) -> None:
+    """Every returned track's or map's determinacy estimate is the writer's (module docstring).
+    ``earlier``: whether the document's form lets an estimate be of the earlier form (its
+    intervals stating no tolerance, ``determined`` meaning bounded: a problem hash without the
+    estimates' form, core.determinacy.ESTIMATES_FORM); a document of the current form states
+    every interval's tolerance, so it cannot choose that reading by leaving them out."""
     if certificate.get("kind") == "triangulation":
-        _check_tracks(kind, result, certificate)
+        _check_tracks(kind, result, certificate, earlier)
     elif certificate.get("kind") in ("resection", "homography"):
-        _check_maps(kind, result, certificate)
+        _check_maps(kind, result, certificate, earlier)
     elif certificate.get("kind") == "bilinear":
-        _check_frames(kind, result, certificate)
+        _check_frames(kind, result, certificate, earlier)
 
 
-def check_determined(determinacy: dict, where: str) -> None:
+def check_determined(determinacy: dict, where: str, earlier: bool = True) -> None:
     """An estimate no check recomputes (autocalibration's stages: its writer refits with scipy)
     still says ``determined`` only as its writer (core.determinacy.Determinacy.document) does:
     true exactly when every interval fixes its quantity (bounded, within its tolerance of its
-    value) and no warning is stated; and no bounded interval has its lower end above its upper."""
+    value) and no warning is stated; and no bounded interval has its lower end above its upper.
+    Unless ``earlier`` (the document's form lets its estimates be of the earlier form: check),
+    every interval states its tolerance (null where its quantity has no scale), as the writer's
+    core.determinacy.interval does: an interval stating none would read as bounded suffices."""
     intervals, warnings = determinacy.get("intervals"), determinacy.get("warnings")
     if not isinstance(intervals, list) or not all(isinstance(i, dict) for i in intervals):
         return  # typed by core.notes
+    if not earlier:
+        missing = [number for number, i in enumerate(intervals) if "tolerance" not in i]
+        if missing:
+            raise Invalid("returned", f"{where}/intervals/{missing[0]} states no tolerance: a document of this form "
+                                      "(its problem_sha256 covers the estimates' form) states every interval's "
+                                      "tolerance, and without it determined would be read as bounded")
     try:
         expected = all(fixes(i) for i in intervals) and not warnings
     except (TypeError, KeyError):
@@ -112,6 +126,45 @@ def check_intrinsics(determinacy: Any, K: Any, where: str) -> None:
                                       f"scale is {RELATIVE_WIDTH * abs(float(scale))!r:.30}")
 
 
+def check_contains(determinacy: Any, where: str) -> None:
+    """An autocalibration stage's intervals hold their own value: each bounded end on its side of
+    ``value`` (to VALUE_SLACK of it), as the writer's are (autocalibration.determinacy: the ends are
+    the value less and plus the walked distances, each at least 0; the affine stage's the range
+    of the planes reached with its own; a clip to the scope moves an end toward the value only,
+    the value inside the scope the stage certifies). An interval beside its value says the data
+    fix the quantity away from the answer returned."""
+    if not isinstance(determinacy, dict) or _stopped(determinacy) or not isinstance(determinacy.get("intervals"), list):
+        return
+    for number, found in enumerate(determinacy["intervals"]):
+        if not isinstance(found, dict) or not is_number(found.get("value")):
+            continue
+        value, lower, upper = found["value"], found.get("lower"), found.get("upper")
+        slack = VALUE_SLACK * abs(value)
+        if (is_number(lower) and lower > value + slack) or (is_number(upper) and upper < value - slack):
+            raise Invalid("returned", f"{where}/intervals/{number} [{lower!r:.20}, {upper!r:.20}] does not hold its "
+                                      f"value {value!r:.20}")
+
+
+def check_stage_level(determinacy: Any, cost: Any, lower_bound: Any, where: str) -> None:
+    """A stratified stage's ``cost_increase`` is the writer's level (core.determinacy.
+    cost_increase): SIGMAS^2 times the stage's cost over its redundancy, at least its certified
+    gap (cost - lower_bound), from figures the document states (the writer's residuals are those
+    of the stage's own cost: the modulus cost at the plane, the metric cost at omega). The direct
+    stage's estimate is of another cost (its DIAC residuals, not its certified objective), and is
+    not read here."""
+    if not isinstance(determinacy, dict) or _stopped(determinacy) or not is_number(cost):
+        return
+    redundancy = determinacy.get("redundancy")
+    if type(redundancy) is not int:
+        return  # (check_redundancy)
+    gap = certified_gap(float(cost), float(lower_bound)) if is_number(lower_bound) else None
+    expected = level_of(float(cost), redundancy, gap)
+    if not _close(determinacy.get("cost_increase"), expected, 0.0, NUMBER_SLACK * abs(expected)):
+        raise Invalid("returned", f"{where}/cost_increase is {determinacy.get('cost_increase')!r:.30}; the stage's "
+                                  f"cost {cost!r:.20} over its redundancy {redundancy}, times {SIGMAS:g}^2, at least "
+                                  f"its certified gap, gives {expected!r:.30}")
+
+
 def _stopped(determinacy: dict) -> bool:
     """An analysis stopped at its deadline (core.determinacy.not_analysed): no interval, one
     time_limit warning, nothing determined; it claims nothing."""
@@ -122,7 +175,7 @@ def _stopped(determinacy: dict) -> bool:
             and warnings[0].get("code") == "time_limit")
 
 
-def _check_tracks(kind, result: dict, certificate: dict) -> None:
+def _check_tracks(kind, result: dict, certificate: dict, earlier: bool = True) -> None:
     data = certificate["data"]
     cameras = np.asarray(data["cameras"], dtype=float)
     for index, item in enumerate(result.get("tracks") or []):
@@ -141,10 +194,10 @@ def _check_tracks(kind, result: dict, certificate: dict) -> None:
             pooled = (float(level), dof) if isinstance(level, (int, float)) and not isinstance(level, bool) else None
         expected = safely(estimate.track, cameras[views], points, item["point"], item.get("at_infinity") is True,
                           item.get("cost"), item.get("lower_bound"), None, pooled)
-        _compare(where, determinacy, expected)
+        _compare(where, determinacy, expected, earlier)
 
 
-def _check_maps(kind, result: dict, certificate: dict) -> None:
+def _check_maps(kind, result: dict, certificate: dict, earlier: bool = True) -> None:
     read = kind.verification.read
     for index, item in enumerate(result.get("maps") or []):
         determinacy = item.get("determinacy") if isinstance(item, dict) else None
@@ -155,10 +208,10 @@ def _check_maps(kind, result: dict, certificate: dict) -> None:
             raise Invalid("returned", f"{where} is stated for a map returning no matrix (its writer states none)")
         source, target = read(certificate["data"], index)
         expected = safely(estimate.map_, source, target, item["matrix"], item.get("cost"), item.get("lower_bound"))
-        _compare(where, determinacy, expected)
+        _compare(where, determinacy, expected, earlier)
 
 
-def _check_frames(kind, result: dict, certificate: dict) -> None:
+def _check_frames(kind, result: dict, certificate: dict, earlier: bool = True) -> None:
     from geocert.solvers.bilinear import determinacy as frame_estimate
 
     read = kind.verification.read
@@ -172,18 +225,19 @@ def _check_frames(kind, result: dict, certificate: dict) -> None:
         basis, points = read(certificate["data"], index)
         expected = safely(frame_estimate.frame, basis, points, item["camera"], item["coefficients"], item.get("cost"),
                           item.get("lower_bound"))
-        _compare(where, determinacy, expected)
+        _compare(where, determinacy, expected, earlier)
 
 
-def _compare(where: str, given: dict, expected: dict | None) -> None:
+def _compare(where: str, given: dict, expected: dict | None, earlier_form: bool = True) -> None:
     """``given`` is ``expected`` but for its proven intervals (checked against the proof) and the
-    pool a pooled level names (checked against the data), to the module's slack."""
+    pool a pooled level names (checked against the data), to the module's slack; read as written
+    before intervals stated a tolerance only where ``earlier_form`` allows it (check)."""
     if expected is None:
         raise Invalid("returned", f"{where} is stated where the estimate is not defined on the data (its writer "
                                   "states none)")
-    check_determined(given, where)
+    check_determined(given, where, earlier_form)
     intervals = given.get("intervals")
-    earlier = isinstance(intervals, list) and bool(intervals) and not any(
+    earlier = earlier_form and isinstance(intervals, list) and bool(intervals) and not any(
         isinstance(i, dict) and "tolerance" in i for i in intervals)
     if earlier:  # written before intervals stated their tolerance: fixed meant bounded (check_determined)
         expected = {**expected, "determined": given.get("determined"),

@@ -182,8 +182,8 @@ def _check_ties(result: dict, stages: dict, views: int, tracks: int) -> None:
                 if entry.get(name) is not None and not (type(entry[name]) is int and 0 <= entry[name] <= through):
                     _fail(f"{where}/{name}", f"a count of at most its tracks ({through})", entry[name])
     _check_starts(result, stages)
-    _check_principal_point(stages.get("bundle_adjustment", {}))
-    _check_principal_point(stages.get("projective", {}), "projective")
+    _check_principal_point(stages.get("bundle_adjustment", {}), result=result)
+    _check_principal_point(stages.get("projective", {}), "projective", result)
     _check_principal_points_per_view(result, stages.get("bundle_adjustment", {}))
     _check_focals_per_view(result, stages.get("bundle_adjustment", {}))
     _check_adjustment_model(result, stages.get("bundle_adjustment", {}))
@@ -248,20 +248,66 @@ def _check_starts(result: dict, stages: dict) -> None:
                                   "reconstruction is the start exactly when K is given (options.intrinsics.K)")
 
 
-def _check_principal_point(stage: dict, name: str = "bundle_adjustment") -> None:
-    """_principal_point's test: the principal point is estimated only when its chi-square passes
-    the threshold and it lies in the image's middle half, and (in the adjustment) only in the
-    simple camera model. The registration's test (the projective stage's record,
-    pipeline._registration_principal_point) is the same test."""
+def _check_principal_point(stage: dict, name: str = "bundle_adjustment", result: dict | None = None) -> None:
+    """_principal_point's test: the principal point is estimated exactly when its chi-square
+    passes the threshold and it lies in the image's middle half, and (in the adjustment) only in
+    the simple camera model. The registration's test (the projective stage's record,
+    pipeline._registration_principal_point) is the same test.
+
+    Both ways: a record saying ``estimated: false`` beside a chi2 above the threshold and a free
+    fit inside the middle half contradicts itself (the pipeline writes ``estimated`` exactly when
+    both hold), and on the projective record it chose the centred reading of the calibration
+    tie (its cameras at the images' centre, with that reference's room). A test that ran (a chi2
+    stated) states the pipeline's threshold, and ``inside_middle_half`` is what the free fit's
+    principal point (K_free) gives in the registered views' one image size, so neither can be
+    edited to make the contradiction disappear. The chi2 itself the verifier cannot recompute (the
+    adjustment's fits): a record whose chi2 is edited below the threshold is read as written (a
+    limit docs/certificate.md states). A record with no chi2 says the test did not run ("too few
+    observations to test"): estimated false."""
     test = stage.get("principal_point")
-    if not isinstance(test, dict) or test.get("estimated") is not True:
+    if not isinstance(test, dict):
         return
+    where = f"stages/{name}/principal_point"
     chi2, threshold = test.get("chi2"), test.get("threshold")
-    if not (is_number(chi2) and threshold == PRINCIPAL_POINT_CHI2 and chi2 > threshold
-            and test.get("inside_middle_half") is True and (name == "projective" or stage.get("model") == "simple")):
-        raise Invalid("returned", f"stages/{name}/principal_point/estimated is true, and its test does not "
-                                  f"pass (chi2 above its threshold {PRINCIPAL_POINT_CHI2}, inside the middle half"
-                                  + ("" if name == "projective" else ", the simple model") + ")")
+    if test.get("estimated") is True:
+        if not (is_number(chi2) and threshold == PRINCIPAL_POINT_CHI2 and chi2 > threshold
+                and test.get("inside_middle_half") is True and (name == "projective" or stage.get("model") == "simple")):
+            raise Invalid("returned", f"{where}/estimated is true, and its test does not "
+                                      f"pass (chi2 above its threshold {PRINCIPAL_POINT_CHI2}, inside the middle half"
+                                      + ("" if name == "projective" else ", the simple model") + ")")
+    if chi2 is None:
+        return
+    if threshold != PRINCIPAL_POINT_CHI2:
+        raise Invalid("returned", f"{where}/threshold is {threshold!r:.30}: the test's threshold is "
+                                  f"{PRINCIPAL_POINT_CHI2} (camera_claim.PRINCIPAL_POINT_CHI2)")
+    inside = _inside_middle_half(test.get("K_free"), result)
+    if inside is not None and test.get("inside_middle_half") is not inside:
+        raise Invalid("returned", f"{where}/inside_middle_half is {test.get('inside_middle_half')!r:.20}, and the free "
+                                  f"fit's principal point (K_free) lies {'inside' if inside else 'outside'} the middle "
+                                  "half of the views' image")
+    if test.get("estimated") is not True and is_number(chi2) and chi2 > threshold \
+            and test.get("inside_middle_half") is True:
+        raise Invalid("returned", f"{where}/estimated is {test.get('estimated')!r:.20}, and its test passes (chi2 "
+                                  f"{chi2!r:.20} above its threshold {PRINCIPAL_POINT_CHI2}, inside the middle half): "
+                                  "the pipeline estimates the principal point exactly then")
+
+
+def _inside_middle_half(K_free: Any, result: dict | None) -> bool | None:
+    """Whether K_free's principal point lies in the middle half of the registered views' one image
+    size, as _principal_point judges it (|u - w/2| <= w/4 and |v - h/2| <= h/4, the same float
+    operations on the same numbers); None where the record or the result states no such size."""
+    if not isinstance(result, dict) or not isinstance(K_free, list) or len(K_free) != 3 or not all(
+            isinstance(row, list) and len(row) == 3 and all(is_number(x) for x in row) for row in K_free):
+        return None
+    sizes = {tuple(camera["image_size"]) for camera in result.get("cameras") or []
+             if isinstance(camera, dict) and camera.get("registered") is True
+             and isinstance(camera.get("image_size"), list) and len(camera["image_size"]) == 2
+             and all(is_number(x) for x in camera["image_size"])}
+    if len(sizes) != 1:
+        return None
+    (width, height), = sizes
+    u, v = K_free[0][2], K_free[1][2]
+    return bool(abs(u - width / 2) <= width / 4 and abs(v - height / 2) <= height / 4)
 
 
 def intrinsics_of(P: Any) -> np.ndarray:

@@ -50,6 +50,13 @@ class Verification(abc.ABC):
     claim_options: tuple[str, ...] | None = None
     """The options the problem hash covers. None: the verifier's CLAIM_OPTIONS."""
 
+    hash_marks: dict | None = None
+    """The form the kind's documents declare through the problem hash beyond its options
+    (certificates.problem_hash's marks): determinacy.ESTIMATES_FORM for a kind stating
+    determinacy estimates, whose intervals then each state their tolerance. A document hashed
+    without it is of the kind's earlier form (its estimates may be read as written before
+    intervals stated a tolerance, the report's scope saying so). None: no mark."""
+
     earlier_forms: tuple = ()
     """A kind whose problem hash came to cover more options: its earlier forms, newest first, each
     ``(options covered, statement(options) -> what the report's scope says of it)``."""

@@ -31,16 +31,19 @@ def raw_pack(z: np.ndarray) -> str:
     return base64.b64encode(np.asarray(z, dtype="<f8").tobytes()).decode("ascii")
 
 
-def rehash(document: dict, earlier: bool = False) -> dict:
-    """The document's hashes made again, in its kind's current form (``earlier``: its earliest
-    form, as a stored document from before the hash covered more options)."""
+def rehash(document: dict, earlier: bool = False, marked: bool = False) -> dict:
+    """The document's hashes made again, in its kind's current options form (``earlier``: its
+    earliest form, as a stored document from before the hash covered more options); ``marked``:
+    with the form its kind declares (Verification.hash_marks: the estimates' form), which a
+    stored document's hash lacks."""
     from geocert.kinds import get_kind
 
     verification = get_kind(document["kind"]).verification
     forms = getattr(verification, "earlier_forms", ()) if earlier else ()
     names = forms[-1][0] if forms else getattr(verification, "claim_options", None)
+    marks = getattr(verification, "hash_marks", None) if marked else None
     document["data_sha256"] = data_hash(document["kind"], document["data"])
-    document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names)
+    document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names, marks)
     return document
 
 

@@ -148,7 +148,7 @@ def _options(forged: dict, records: bool = False, **options) -> None:
 
 
 @pytest.mark.parametrize("edit, words", [
-    (_estimated_false, "model holds the principal point at the image's centre"),
+    (_estimated_false, "principal_point/estimated is False, and its test passes"),  # (the record's own test)
     (lambda forged: _options(forged, principal_point="centre"), "model holds the principal point at the image's centre"),
     (lambda forged: _options(forged, records=True, principal_point="centre"), "runs no such test"),
     (lambda forged: _options(forged, camera_model="varying"), "model holds the principal point at the image's centre"),

@@ -196,13 +196,19 @@ def data_hash(kind: str, data: Any) -> str:
     return hashlib.sha256(canonical_json({"kind": kind, "data": data})).hexdigest()
 
 
-def problem_hash(kind: str, data: Any, options: dict, names: tuple[str, ...] | None = None) -> str:
+def problem_hash(kind: str, data: Any, options: dict, names: tuple[str, ...] | None = None,
+                 marks: dict | None = None) -> str:
     """SHA-256 of everything a claim depends on: canonical JSON of {"kind", "data", "options"}
     with the options ``names`` only (a kind's own, as declared, or for None CLAIM_OPTIONS: the
     fractional kinds'),
-    numbers as floats (max_residual null when unset)."""
+    numbers as floats (max_residual null when unset); and ``marks``, the form a kind's documents
+    declare beyond their options (its Verification.hash_marks: determinacy.ESTIMATES_FORM), as
+    "form" (absent from the hash of a document written before the kind declared one)."""
     claimed = {name: options.get(name) for name in (CLAIM_OPTIONS if names is None else names)}
     for name, value in claimed.items():
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             claimed[name] = float(value)
-    return hashlib.sha256(canonical_json({"kind": kind, "data": data, "options": claimed})).hexdigest()
+    hashed = {"kind": kind, "data": data, "options": claimed}
+    if marks:
+        hashed["form"] = marks
+    return hashlib.sha256(canonical_json(hashed)).hexdigest()

@@ -37,6 +37,12 @@ import numpy as np
 SIGMAS = 3.0
 SINGULAR = 1e-10  # an eigenvalue of J'J below this fraction of the largest: a direction the data do not fix
 RELATIVE_WIDTH = 0.1  # `determined`: every interval within this fraction of its quantity's scale of the value
+# The estimates' form, which a kind stating them declares through its problem hash (certificates.
+# problem_hash's marks; Verification.hash_marks): every interval states its ``tolerance`` (null
+# where its quantity has no scale) and ``determined`` is read against it. Documents written
+# before intervals stated one hash no mark, and their ``determined`` meant bounded; without the
+# mark a document could choose that older reading by leaving every tolerance out.
+ESTIMATES_FORM = {"determinacy": "every interval states its tolerance"}
 
 
 @dataclass

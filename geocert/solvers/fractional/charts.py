@@ -14,6 +14,7 @@ from fractions import Fraction
 import numpy as np
 
 from geocert.solvers.core.geometry import lengths
+from geocert.solvers.core.strict import charge
 from geocert.solvers.fractional.relaxation import FractionalProgram
 
 
@@ -41,11 +42,27 @@ def _camera_frame(centres: np.ndarray) -> np.ndarray:
     return H
 
 
+# Choosing a track's reference projects every camera's centre into every other view: views^2
+# pairs, each about 75 ns of CPU (1,000 views: 74 ms). A verification pays for them from its
+# work budget (strict.charge) at PAIRS_PER_UNIT pairs a unit, so that a document of long tracks
+# and little else cannot ask for more of this work than its size pays for: at most
+# PAIRS_PER_UNIT * (WORK_PER_UNIT * size + WORK_BASE) pairs in all. A track's own data pay for
+# its pairs up to about 190 views (3 numbers a view, 4 units a number: 12 k >= k^2 / 16);
+# longer tracks draw on WORK_BASE (32 million pairs, 2.4 s: 32 tracks of 1,000 views).
+PAIRS_PER_UNIT = 16
+
+
+def reference_work(views: int, tracks: int = 1) -> int:
+    """The work units choosing the reference of ``tracks`` tracks of ``views`` views costs."""
+    return -(-tracks * views * views // PAIRS_PER_UNIT)
+
+
 def _choose_reference(cameras: np.ndarray, points: np.ndarray, centres: np.ndarray) -> int:
     """The camera whose centre projects farthest from the other views' observations.
 
     A centre inside another view's residual cone makes the chart's region unbounded.
     """
+    charge(reference_work(len(cameras)), "choosing a track's chart reference (each centre seen by every view)")
     nearest = np.empty(len(cameras))
     block = max(1, 4096 // len(cameras))  # k^2 work in blocks of rows: memory stays linear in k
     for start in range(0, len(cameras), block):

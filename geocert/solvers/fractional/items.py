@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from geocert.solvers.core.certificates import residual_rounding
-from geocert.solvers.core.determinacy import certified_gap, cost_increase as map_cost_increase
+from geocert.solvers.core.determinacy import ESTIMATES_FORM, certified_gap, cost_increase as map_cost_increase
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost, normalised_cameras
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
@@ -485,6 +485,7 @@ class TrackItems:
     """The triangulation kind's verification adapter."""
 
     proofs = {"branch_and_bound": verify_track_search, "convexity": verify_convexity}
+    hash_marks = ESTIMATES_FORM  # its tracks' determinacy estimates state their tolerances (Verification.hash_marks)
     data_items = "tracks"  # the certificate has one item per entry (verify._check_item_count)
     domain = ("every point in front of every camera (positive depth in every view, last homogeneous "
               "coordinate >= 0)")
@@ -639,6 +640,7 @@ class MapItems:
     """A map kind's verification adapter (the (source, target) dimensions it serves)."""
 
     proofs = {"branch_and_bound": verify_map_search, SUBLEVEL_BOUND: verify_map_sublevel_bound}
+    hash_marks = ESTIMATES_FORM  # its maps' determinacy estimates state their tolerances (Verification.hash_marks)
     data_items = "maps"
     domain = "every map that puts every point at positive depth"
 

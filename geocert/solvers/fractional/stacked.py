@@ -25,7 +25,8 @@ from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import ConeSpec, _project_rows, rounding_counted, stacked_rounding_margin, subnormal
 from geocert.solvers.core.coverage import uncovered_part
 from geocert.solvers.core.geometry import cost_roundings, lengths, norm_terms, normalised_cameras
-from geocert.solvers.core.strict import Invalid, dual_vector, numbers
+from geocert.solvers.core.strict import Invalid, charge, dual_vector, numbers
+from geocert.solvers.fractional.charts import reference_work
 from geocert.solvers.fractional.convexity import verify_sublevel
 from geocert.solvers.fractional.proof import (SCALE_RANGE, _sample_steps, allowance, raw_sizes, stated_root_agrees,
                                              track_uncertainty)
@@ -274,6 +275,7 @@ def chart_arrays(cams: np.ndarray, points: np.ndarray):
     false where this path does not build the chart (a centre at infinity, or a depth row that
     may be parallel to the reference's: the per-item path decides those)."""
     G, n = cams.shape[:2]
+    charge(reference_work(n, G), "choosing the tracks' chart references (each centre seen by every view)")
     centres = np.linalg.svd(cams)[2][..., -1, :]
     centres = centres * np.where(centres[..., 3:4] < 0, -1.0, 1.0)
     # The reference: the camera whose centre projects farthest from the other views' observations.
