@@ -6,9 +6,19 @@ from __future__ import annotations
 import numpy as np
 
 from geocert.solvers.core.bnb import Box
+from geocert.solvers.core.strict import Invalid
 
 MAX_PIECES = 5_000  # uncovered pieces kept when leaves are subtracted one by one
 MAX_WORK = 200_000  # leaf-piece tests when leaves are subtracted one by one
+# Leaf tests one coverage check may make in all: this many a leaf, plus a base. Each slab tests
+# its leaves once on every axis, so a leaf is tested once a level of the slabs holding it: a
+# search's tree, bisected, is some tens of levels deep. A "caterpillar" (each level splitting one
+# leaf off the rest) is n levels deep and costs n^2 / 2: 20,000 leaves in a 2.7 MB document took
+# 34 s of CPU, some 80 minutes at the 32 MB body limit. A leaf-piece test of a subtraction (a
+# Python loop) costs SUBTRACTION_VISITS of them.
+VISITS_PER_LEAF = 64
+VISITS_BASE = 1_000_000
+SUBTRACTION_VISITS = 4
 
 
 def uncovered_part(root: Box, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -21,12 +31,18 @@ def uncovered_part(root: Box, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarra
     no plane separates the leaves (not a tree's partition), the slab's leaves are subtracted one
     by one, within a budget. Boxes are closed; leaves of zero volume cover nothing a positive
     volume does not (the union of closed boxes covering a box's interior covers the box).
+
+    The work is bounded by the leaves' count (VISITS_PER_LEAF, VISITS_BASE): an arrangement
+    needing more leaf tests is refused (check "coverage") before they are made, whatever
+    covers what: a search's tree never needs as many.
     """
+    budget = [VISITS_PER_LEAF * len(lo) + VISITS_BASE]
     if not np.all(root.hi > root.lo):
-        return _subtracted(root.lo, root.hi, lo, hi)
+        return _subtracted(root.lo, root.hi, lo, hi, budget)
     stack = [(root.lo, root.hi, np.arange(len(lo)))]
     while stack:
         box_lo, box_hi, index = stack.pop()
+        _spend(budget, len(index))
         L = np.maximum(lo[index], box_lo)
         H = np.minimum(hi[index], box_hi)
         inside = np.all(L < H, axis=1)
@@ -54,10 +70,18 @@ def uncovered_part(root: Box, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarra
                     stack.append((slab_lo, slab_hi, index[group]))
                 break
         else:  # no separating plane: not a tree's partition
-            gap = _subtracted(box_lo, box_hi, L, H)
+            gap = _subtracted(box_lo, box_hi, L, H, budget)
             if gap is not None:
                 return gap
     return None
+
+
+def _spend(budget: list[int], visits: int) -> None:
+    budget[0] -= visits
+    if budget[0] < 0:
+        raise Invalid("coverage", f"the leaves are arranged so that showing they cover the box takes more than "
+                                  f"{VISITS_PER_LEAF} leaf tests a leaf plus {VISITS_BASE:,} (a search's tree takes "
+                                  "far fewer): not checked")
 
 
 def _slab(box_lo, box_hi, axis: int, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
@@ -66,7 +90,8 @@ def _slab(box_lo, box_hi, axis: int, a: float, b: float) -> tuple[np.ndarray, np
     return slab_lo, slab_hi
 
 
-def _subtracted(root_lo: np.ndarray, root_hi: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+def _subtracted(root_lo: np.ndarray, root_hi: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                budget: list[int] | None = None):
     """uncovered_part by subtracting each closed box from the closed pieces still uncovered
     (what a subtraction leaves are slabs reaching strictly beyond the box, so nothing is lost);
     past MAX_PIECES pieces or MAX_WORK leaf-piece tests the box is reported as not shown covered."""
@@ -75,6 +100,8 @@ def _subtracted(root_lo: np.ndarray, root_hi: np.ndarray, lo: np.ndarray, hi: np
     work = 0
     for i in order:
         work += len(pieces)
+        if budget is not None:
+            _spend(budget, SUBTRACTION_VISITS * len(pieces))
         if work > MAX_WORK:
             return root_lo, root_hi
         remaining = []
