@@ -341,3 +341,13 @@ def test_a_returned_record_missing_a_member_is_refused(genuine, name, path):
     assert verify_any(result).valid
     del _get(result, path[:-1])[path[-1]]
     assert not verify_any(result).valid
+
+
+@pytest.mark.parametrize("value", [0, 0.0, -0.0])
+def test_a_determinacy_proven_that_is_a_number_is_refused(genuine, value):
+    """`proven` is a boolean: 0 == False in Python, so a membership test let a number stand for
+    "not proven" (found by the property above)."""
+    result = copy.deepcopy(genuine["autocalibration_stratified"][0])
+    assert result["stages"][0]["determinacy"]["proven"] is False
+    result["stages"][0]["determinacy"]["proven"] = value
+    assert not verify_any(result).valid
