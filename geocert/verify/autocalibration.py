@@ -397,7 +397,9 @@ def _stated_proven(stage, claim: dict, where: str, name: str, read) -> dict | No
     determinacy = stage.get("determinacy") if isinstance(stage, dict) else None
     if not isinstance(determinacy, dict):
         return None
-    if determinacy.get("proven") in (None, False) and determinacy.get("proven_intervals") is None:
+    # by identity: 0 == False, and a number where the boolean belongs is refused below
+    if (determinacy.get("proven") is None or determinacy.get("proven") is False) \
+            and determinacy.get("proven_intervals") is None:
         return None
     proof = claim.get("proof")
     sublevel = proof.get("sublevel") if isinstance(proof, dict) else None

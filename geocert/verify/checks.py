@@ -725,7 +725,8 @@ def _check_estimates(value: Any, where: str = "", earlier: bool = True) -> None:
             if name in ("certificate", "camera_certificate", "calibration_certificate"):
                 continue
             if name == "determinacy" and isinstance(item, dict) and (
-                    item.get("proven") not in (None, False) or item.get("proven_intervals") is not None):
+                    not (item.get("proven") is None or item.get("proven") is False)  # 0 == False: not a boolean
+                    or item.get("proven_intervals") is not None):
                 raise Invalid("returned", f"{where}/determinacy says proven, and no proof of its intervals is "
                                           "carried (an estimate is proven: false)")
             if name == "determinacy" and isinstance(item, dict):
