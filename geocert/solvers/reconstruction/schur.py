@@ -12,13 +12,7 @@ S, B_m)`` is vectorised over observations and returns (M, 2). Jacobians are cent
 differences, vectorised the same way (one perturbed copy per parameter coordinate).
 
 When to stop is ``StopRule``'s, Ceres Solver's three tests (Solver::Options function_tolerance,
-gradient_tolerance, parameter_tolerance) with Ceres's defaults; the iteration cap comes on top.
-The damping follows a step by how well the linear model predicted its gain, as Ceres's
-Levenberg-Marquardt strategy does (Nielsen 1999, "Damping parameter in Marquardt's method"):
-taken, it is scaled by max(1/3, 1 - (2 rho - 1)^3), rho the actual over the predicted gain;
-refused, it grows by a factor doubling with each refusal in a row. Dividing it by 3 after every
-step taken, whatever its gain, made ill-conditioned adjustments (a principal point per view, the
-depth-reversed twin) refuse every other step at their iteration cap."""
+gradient_tolerance, parameter_tolerance) with Ceres's defaults; the iteration cap comes on top."""
 
 from __future__ import annotations
 
@@ -210,7 +204,6 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
     r = residual(A[view], S, B[track])
     cost = _cost(r, f_scale)
     lam = 1e-3
-    grow = 2.0  # the damping's factor at the next refused step (Nielsen's nu)
     iterations = 0
     for iterations in range(1, max_iterations + 1):
         if should_stop is not None and should_stop():
@@ -230,15 +223,14 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
         WmT_gathered = blocks.gathered(WmT)
         ga = np.einsum("mki,mk->mi", je, rw)  # (M, c+s); einsum: faster than matmul on stacks of vectors
         gb = _sum_by(track, np.einsum("mki,mk->mi", jb, rw), p)
-        g_cams = np.bincount(cam_cols.ravel(), weights=ga.ravel(), minlength=nc)
-        diag_v = np.einsum("pii->pi", V)
         if stop.gradient_tolerance > 0:
-            gradient = max(np.abs(g_cams).max(initial=0.0), np.abs(gb).max(initial=0.0))
+            gradient = max(np.abs(np.bincount(cam_cols.ravel(), weights=ga.ravel(), minlength=nc)).max(initial=0.0),
+                           np.abs(gb).max(initial=0.0))
             if gradient <= stop.gradient_tolerance:
                 iterations -= 1  # no step computed
                 break
         while True:
-            Vd = V + lam * (diag_v[:, :, None] * np.eye(d) + 1e-12 * np.eye(d))
+            Vd = V + lam * (np.einsum("pii->pi", V)[:, :, None] * np.eye(d) + 1e-12 * np.eye(d))
             Vinv = _inverse(Vd)
             # Reduced system: (U - W V^-1 W^T) da = -(ga - W V^-1 gb).
             VWT = Vinv[track] @ WmT  # (M, d, c+s): (W V^-1)^T, V^-1 being symmetric
@@ -272,22 +264,12 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
                 # A step within the parameter tolerance ends the solve, taken: near an exact fit it
                 # is small against the parameters but not against what is left of the error.
                 converged = small or cost - cost_new <= stop.function_tolerance * cost
-                # The linear model's gain, from (H + lam D + 1e-12 I) step = -g (D: H's diagonal,
-                # the points' with 1e-12 added): -2 g.step - step' H step = -g.step + step' (lam D
-                # + 1e-12 I) step, the cameras' 1e-12 not scaled by lam.
-                g_step = float(g_cams @ da + np.sum(gb * db))
-                damped = lam * (float(diag_u @ (da * da)) + float(np.sum((diag_v + 1e-12) * db * db))) \
-                    + 1e-12 * float(da @ da)
-                predicted = damped - g_step
-                rho = (cost - cost_new) / predicted if predicted > 0 else 0.0
                 A, S, B, r, cost = A_new, S_new, B_new, r_new, cost_new
-                lam = max(lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), 1e-12)
-                grow = 2.0
+                lam = max(lam / 3, 1e-12)
                 break
             if small:
                 return A, S, B, r, iterations
-            lam *= grow
-            grow *= 2
+            lam *= 4
             if lam > 1e12:
                 return A, S, B, r, iterations
         if converged:
