@@ -577,30 +577,8 @@ FEATURE_THREADS = 2
 
 def in_order_threads(function, items: list, stop) -> list | None:
     """``function(item)`` for the items, FEATURE_THREADS at a time (at most the processors), the
-    results in the items' order. ``stop(k)`` is asked, in this thread, before the k-th item starts:
-    True starts no more (the results then end with the items started before: a prefix), None
-    means a cancel (returns None once the items in flight finish)."""
-    import os
-    from collections import deque
-    from concurrent.futures import ThreadPoolExecutor
-
-    threads = max(1, min(FEATURE_THREADS, os.cpu_count() or 1))
-    results: list = []
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        running: deque = deque()
-        for k, item in enumerate(items):
-            while len(running) >= threads:
-                results.append(running.popleft().result())
-            asked = stop(k)
-            if asked is None:
-                for future in running:
-                    future.result()
-                return None
-            if asked:
-                break
-            running.append(pool.submit(function, item))
-        results.extend(future.result() for future in running)
-    return results
+    results in the items' order: solvers.core.pieces.in_threads (``stop`` as it reads it)."""
+    return pieces.in_threads(function, items, stop, FEATURE_THREADS)
 
 
 _DETECTORS = threading.local()  # a detector per thread: OpenCV does not promise one is safe to share

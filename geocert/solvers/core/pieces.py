@@ -9,7 +9,7 @@ runs (``spread_by``): the service's worker sets one that hands the pieces to the
 solver processes (geocert.workers.pieces). Either way the results come back in the items' order,
 each the same as computed alone, so the stage's result does not depend on where they ran.
 
-``stop(k)`` is asked before the k-th piece starts (its answer as features.in_order_threads
+``stop(k)`` is asked before the k-th piece starts (its answer as in_order and in_threads
 reads it): True starts no more (the results are then the prefix of the pieces started), None is
 a cancel (the pieces running finish, and None is returned). A piece that raises raises here.
 
