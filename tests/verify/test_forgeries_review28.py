@@ -5,6 +5,12 @@ stratified level, nodes, determinacy.proven, the intervals proven over planes
 
 Found (each test marked xfail below fails on main's verifier, a false claim or a cost accepted):
 
+- A false calibration claim through a record missing members: review 26's centred forgery (a
+  reconstruction carrying a calibration certificate re-posed at the images' centre with 1.03 times
+  the focal length, beside the registration's principal-point record saying ``estimated: false``)
+  verifies again when the record leaves out ``K_free`` (inside_middle_half then read as written)
+  or its ``chi2`` (the record then says the test did not run, beside 1,596 observations): the
+  calibration tie takes the centred reading the forgery needs.
 - An autocalibration interval whose ``value`` is null (or absent) is passed over by the check that
   an interval holds its value (estimates.check_contains), and the affine stage's intervals are tied
   to nothing the stage returns (check_intrinsics ties a K stage's only): an interval moved off the
@@ -45,6 +51,7 @@ import pytest
 from geocert.verify.checks import verify_any
 from tests.support import stage as _stage
 from tests.verify.test_forgeries import rehash, stored
+from tests.verify.test_registration_record_form import centred_forgery, off_centre  # noqa: F401 (fixtures)
 
 
 def _verify(document: dict):
@@ -187,6 +194,51 @@ def test_a_camera_image_size_edited_to_switch_the_middle_half_test_off_is_refuse
     result["cameras"][0]["image_size"] = [641.0, 480.0]
     _principal_point(result)["inside_middle_half"] = False
     _refused(result)
+
+
+# 2b. The registration's record left without the figures its test reads: review 26's centred
+# forgery (a calibration certificate re-posed at the images' centre with 1.03 times the focal
+# length, a false claim) accepted again
+
+def _with_registration_record(forged: dict, genuine: dict, drop: tuple = (), **edits) -> dict:
+    forged = copy.deepcopy(forged)
+    record = copy.deepcopy(_stage(genuine, "projective")["principal_point"])
+    record.update(edits)
+    for name in drop:
+        del record[name]
+    _stage(forged, "projective")["principal_point"] = record
+    return forged
+
+
+LEFT_OUT = {
+    "K_free deleted": (("K_free",), {"inside_middle_half": False}),
+    "K_free null": ((), {"inside_middle_half": False, "K_free": None}),
+    "chi2 deleted": (("chi2",), {}),
+    "chi2 null": ((), {"chi2": None}),
+}
+
+
+@pytest.mark.xfail(strict=True, reason="review 28: a registration record missing its test's figures picks the "
+                                       "centred reading")
+@pytest.mark.parametrize("case", list(LEFT_OUT))
+def test_the_centred_forgery_beside_a_record_missing_its_tests_figures_is_refused(off_centre, centred_forgery,  # noqa: F811
+                                                                                  case):
+    """The genuine record (1,596 observations, chi2 3,183 against 13.8, K_free's principal point
+    inside the middle half, estimated) is refused with ``estimated: false`` (review 26), and so is
+    inside_middle_half flipped. Leave out K_free (the middle-half test is then read as written)
+    or the chi2 (the record then says the test did not run, though 1,596 observations are far
+    more than MIN_TEST_OBSERVATIONS): estimated false is consistent, the calibration tie takes the
+    centred reading, and the false certificate verifies."""
+    drop, edits = LEFT_OUT[case]
+    genuine = _stage(off_centre, "projective")["principal_point"]
+    assert genuine["estimated"] is True and genuine["chi2"] > genuine["threshold"]
+    _refused(_with_registration_record(centred_forgery, off_centre, drop, estimated=False, **edits))
+
+
+def test_the_centred_forgery_beside_the_whole_record_flipped_is_refused(off_centre, centred_forgery):  # noqa: F811
+    """The control: every figure kept, estimated and inside_middle_half flipped: refused."""
+    _refused(_with_registration_record(centred_forgery, off_centre, (), estimated=False, inside_middle_half=False),
+             "inside_middle_half")
 
 
 # 3. The intervals proven over planes (prove_intervals_over_planes)
