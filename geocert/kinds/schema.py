@@ -25,12 +25,14 @@ class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True)
 
 
-def options_model(name: str, options_type: type, wire: dict | None = None) -> type[BaseModel]:
+def options_model(name: str, options_type: type, wire: dict | None = None, doc: str | None = None) -> type[BaseModel]:
     """The wire model of a kind's options, derived from its solver's options dataclass: every
     option declared there (solvers.core.declared_options.option) that the API takes, with its
     default, range, allowed words and description as declared, so the API, the CLI, the solver
     and the verifier cannot disagree. A nested options dataclass becomes a nested model (named
-    after its class, ``...In``). ``wire``: {option: type, or (type, default factory)} for an
+    after the option, ``...In``; a dict-valued option may name its dataclass as its declared
+    ``wire``, and its docstring, when it has one, describes the nested model; ``doc``: the
+    model's own). ``wire``: {option: type, or (type, default factory)} for an
     option whose JSON shape is a model of the kind's (an object the dataclass holds as a dict)."""
     wire = wire or {}
     hints = typing.get_type_hints(options_type)
@@ -47,10 +49,14 @@ def options_model(name: str, options_type: type, wire: dict | None = None) -> ty
             annotation, factory = given
             fields[entry.name] = (annotation, Field(default_factory=factory, **keywords))
             continue
-        if given is None and dataclasses.is_dataclass(hints[entry.name]):
-            nested = hints[entry.name]
-            given = options_model(nested.__name__.removesuffix("Options") + "In", nested)
+        nested = given if given is not None else hints[entry.name]
+        if isinstance(nested, type) and dataclasses.is_dataclass(nested):  # a nested object of options
+            documented = nested.__doc__ and not nested.__doc__.startswith(nested.__name__ + "(")  # not dataclass's
+            given = options_model("".join(part.capitalize() for part in entry.name.split("_")) + "In", nested,
+                                  doc=nested.__doc__ if documented else None)
         annotation = given if given is not None else _wire_type(hints[entry.name], declared)
+        if declared.wire_default is None and type(None) not in typing.get_args(annotation):
+            annotation = annotation | None  # null on the wire: the solver's default
         if isinstance(annotation, type) and issubclass(annotation, BaseModel):
             fields[entry.name] = (annotation, Field(default_factory=annotation, **keywords))
             continue
@@ -61,7 +67,7 @@ def options_model(name: str, options_type: type, wire: dict | None = None) -> ty
         else:
             default = entry.default_factory()
         fields[entry.name] = (annotation, Field(default, **keywords))
-    return create_model(name, __base__=Strict, **fields)
+    return create_model(name, __base__=Strict, __doc__=doc, **fields)
 
 
 def _wire_type(hint: Any, declared) -> Any:
