@@ -67,7 +67,9 @@ def options_model(name: str, options_type: type, wire: dict | None = None, doc: 
         else:
             default = entry.default_factory()
         fields[entry.name] = (annotation, Field(default, **keywords))
-    return create_model(name, __base__=Strict, __doc__=doc, **fields)
+    model = create_model(name, __base__=Strict, __doc__=doc, **fields)
+    model.__options_type__ = options_type  # what it is derived from (tests/kinds/test_option_declarations.py)
+    return model
 
 
 def _wire_type(hint: Any, declared) -> Any:
