@@ -185,6 +185,9 @@ def loose_gaps():
         for sub in root.__subclasses__():
             yield from classes(sub)
 
+    from geocert.kinds import KINDS
+
+    list(KINDS)  # every kind's wire model built first, with the true ranges (a kind is imported on first use)
     saved = []  # each range is its option's declaration (core.declared_options): loosened there
     for owner in {*classes(SearchOptions), BilinearOptions}:
         for name in ("rel_gap", "abs_gap", "metric_rel_gap"):
