@@ -173,7 +173,11 @@ def loose_gaps():
     (fractional.options.MAX_REL_GAP; abs_gap's per kind, in its cost's units: fractional.options,
     bilinear.options and autocalibration.problem's MAX_ABS_GAP), which the kinds refuse as input
     and the verifier as a document: a forger's solver need not refuse them."""
+    import dataclasses
+    import types
+
     from geocert.solvers.bilinear.options import BilinearOptions
+    from geocert.solvers.core.declared_options import KEY
     from geocert.solvers.fractional.options import SearchOptions
 
     def classes(root):
@@ -181,18 +185,23 @@ def loose_gaps():
         for sub in root.__subclasses__():
             yield from classes(sub)
 
-    saved = []
+    from geocert.kinds import KINDS
+
+    list(KINDS)  # every kind's wire model built first, with the true ranges (a kind is imported on first use)
+    saved = []  # each range is its option's declaration (core.declared_options): loosened there
     for owner in {*classes(SearchOptions), BilinearOptions}:
-        ranges = owner.__dict__.get("OPTION_RANGES")
         for name in ("rel_gap", "abs_gap", "metric_rel_gap"):
-            if ranges is not None and name in ranges:
-                saved.append((ranges, name, ranges[name]))
-                ranges[name] = {"ge": 0}
+            entry = owner.__dataclass_fields__.get(name)
+            declared = entry.metadata.get(KEY) if entry is not None else None
+            if declared is not None and declared.bounds:
+                saved.append((entry, entry.metadata))
+                entry.metadata = types.MappingProxyType({**entry.metadata, KEY: dataclasses.replace(
+                    declared, bounds={"ge": 0})})
     try:
         yield
     finally:
-        for ranges, name, value in saved:
-            ranges[name] = value
+        for entry, metadata in reversed(saved):
+            entry.metadata = metadata
 
 
 def refusal(document) -> dict | None:

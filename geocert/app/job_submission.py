@@ -53,16 +53,23 @@ def _check_budget(request: dict) -> None:
         raise ApiProblem(413, *exceeded)
 
 
-def _check_limits(kind, parsed, body, request: dict, counts: tuple[int, int] | None = None) -> int:
-    """Raises on a limit passed (lowering default options to the server's maxima); returns the
-    item count. ``counts``: the items and observations, when not all of them are in ``parsed``
-    (a large body's, checked a batch at a time)."""
+def _check_limits(kind, parsed, request: dict, counts: tuple[int, int] | None = None) -> int:
+    """Raises on a limit passed; returns the item count. ``counts``: the items and observations,
+    when not all of them are in ``parsed`` (a large body's, checked a batch at a time)."""
     settings = get_settings()
     items, points = counts if counts is not None else (kind.count(parsed), kind.observations(parsed))
     _check_count(kind, items)
     if points > settings.max_points_per_job:
         raise ApiProblem(413, f"{points} observations exceed the limit of {settings.max_points_per_job} per job "
                               "(GEOCERT_MAX_POINTS_PER_JOB)", f"data/{kind.item_key}")
+    return items
+
+
+def _hold_to_server_maxima(body, request: dict) -> None:
+    """This server's maxima of an item's time and nodes and a job's time, applied to the request's
+    options before they are parsed (once, as the job will run): an option given above its maximum
+    is refused, naming it; a default above it is lowered to it."""
+    settings = get_settings()
     options, given = request["options"], body.options.model_fields_set
     for name, maximum, unit, variable in (
             ("time_limit_s", settings.max_item_time_limit_s, " s per item", "MAX_ITEM_TIME_LIMIT_S"),
@@ -74,24 +81,18 @@ def _check_limits(kind, parsed, body, request: dict, counts: tuple[int, int] | N
             raise ApiProblem(422, f"exceeds this server's maximum of {maximum:g}{unit} (GEOCERT_{variable})",
                              f"options/{name}")
         options[name] = maximum  # a default above the server's maximum is lowered to it
-    return items
 
 
 def _checked(body) -> tuple[dict, object, object, object]:
-    """The request (as JSON types), its kind, its parsed data and options, after every check made
-    before anything is stored."""
-    request = body.model_dump(mode="json")  # validated by its kind's model (discriminated on "kind")
+    """The request (as JSON types, validated by its kind's model: discriminated on "kind"), its
+    kind, its parsed data and options, after every check made before anything is stored. The
+    options are parsed once, here, as the job will run them (the server's maxima applied first)."""
+    request = body.model_dump(mode="json")
     _check_callback(request)
     _check_budget(request)  # before anything of the job is decoded or built
+    _hold_to_server_maxima(body, request)
     kind, parsed, options = parse_job(request)  # the solvers' own checks: rank, indices, duplicates
     return request, kind, parsed, options
-
-
-def _as_run(kind, request: dict, options, checked: dict):
-    """The options the job runs with: those parsed with its checks (``options``, from the
-    request's options ``checked``), unless _check_limits lowered a default since (then parsed
-    again from the request as it will run)."""
-    return options if request["options"] == checked else parse_options(kind, request)
 
 
 def _digest(request: dict) -> str:
@@ -104,13 +105,12 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
     """The submission itself (synchronous Redis calls: run in FastAPI's thread pool). ``split``:
     a large body's items, when ``body`` is its head (StreamedItemsRoute)."""
     request, kind, parsed, options = _checked(body)
-    checked = dict(request["options"])
     upload = None
     if split is not None:
         _check_count(kind, split.count)  # before any item is read
         upload = streamed.upload_items(store, split, request, with_digest=idempotency_key is not None)
     try:
-        items = _check_limits(kind, parsed, body, request,
+        items = _check_limits(kind, parsed, request,
                               (upload.count, upload.observations) if upload is not None else None)
         digest = None
         if idempotency_key is not None:  # the body's digest only for a key (a whole body hashed: not on every submit)
@@ -119,9 +119,8 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
             if earlier is not None:
                 return _replay(store, earlier, digest, response)
         try:
-            # Its tasks' last-resort time limits follow from its own limits (options lowered to the
-            # server's maxima by _check_limits).
-            bound = kind.time_bound_s(parsed, _as_run(kind, request, options, checked))
+            # Its tasks' last-resort time limits follow from its own limits (held to the server's maxima).
+            bound = kind.time_bound_s(parsed, options)
             meta = _create(store, owner, kind, request, items, upload.key if upload is not None else None, bound,
                            upload.bytes if upload is not None else 0)
         except BaseException:
@@ -135,12 +134,6 @@ def _submit(body, response: Response, store: JobStore, owner: str, idempotency_k
         store.settle_idempotent(owner, idempotency_key, digest, meta["id"])
     response.headers["Location"] = f"/v1/jobs/{meta['id']}"
     return store.document(meta)
-
-
-def parse_options(kind, request: dict):
-    from geocert.kinds import options_from
-
-    return options_from(kind.options_type, request.get("options"))
 
 
 def _create_arguments(owner: str, kind, request: dict, items: int, items_key: str | None, item_time_bound_s,
@@ -208,9 +201,8 @@ async def submit_on_loop(body, response: Response, store: JobStore, client, owne
     the request is cancelled meanwhile (a job is never left half made, nor a key reserved)."""
     with collector_held():
         request, kind, parsed, options = _checked(body)
-        checked = dict(request["options"])
-        items = _check_limits(kind, parsed, body, request)
-        bound = kind.time_bound_s(parsed, _as_run(kind, request, options, checked))
+        items = _check_limits(kind, parsed, request)
+        bound = kind.time_bound_s(parsed, options)
         digest = _digest(request) if idempotency_key is not None else None
     args, options = _create_arguments(owner, kind, request, items, None, bound, 0, _enqueue(producer))
 

@@ -17,7 +17,7 @@ from pydantic import BaseModel, Field
 from geocert.kinds.base import ProblemKind
 from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document
 from geocert.kinds.documents import finite_or_none
-from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finite, JobBase, JobStats, Strict
+from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finite, JobBase, JobStats, Strict, options_model
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import STAGES, outcome, read_data
@@ -44,38 +44,8 @@ class IntrinsicsIn(Strict):
         None, description="[[u_lo, u_hi], [v_lo, v_hi]] pixels; default the middle half of the image")
 
 
-_DEFAULTS = autocalibration_problem.AutocalibrationOptions()
-_RANGES = autocalibration_problem.AutocalibrationOptions.OPTION_RANGES
-
-
-class AutocalibrationOptionsIn(Strict):
-    method: Literal["stratified", "direct"] = "stratified"
-    intrinsics: IntrinsicsIn = Field(default_factory=IntrinsicsIn)
-    rel_gap: Finite = Field(_DEFAULTS.rel_gap, **_RANGES["rel_gap"], description="the affine stage's")
-    metric_rel_gap: Finite = Field(_DEFAULTS.metric_rel_gap, **_RANGES["metric_rel_gap"],
-                                   description="the metric stage's")
-    abs_gap: Finite | None = Field(None, **_RANGES["abs_gap"],
-                                   description=f"default {autocalibration_problem.STRATIFIED_ABS_GAP:g} (stratified), "
-                                               f"{autocalibration_problem.DIRECT_ABS_GAP:g} "
-                                               "(direct: its cost's units, problem.py)")
-    max_nodes: int = Field(_DEFAULTS.max_nodes, **_RANGES["max_nodes"], description="per stage")
-    time_limit_s: Finite = Field(_DEFAULTS.time_limit_s, **_RANGES["time_limit_s"], description="per stage")
-    certificate: Literal["summary", "full"] = "summary"
-    chirality: Literal["points", "centers", "none"] = Field(
-        _DEFAULTS.chirality, description="direct method: which rows must lie on one side of the plane at infinity")
-    varying_focal: bool = Field(_DEFAULTS.varying_focal, description="direct method: one focal length per view")
-    relaxation_order: int = Field(_DEFAULTS.relaxation_order, ge=2, le=2,
-                                  description="direct method: the moment relaxation's order (order 3 does not fit)")
-    prove_focal_interval: bool = Field(
-        _DEFAULTS.prove_focal_interval,
-        description="direct method, one focal length, certificate full: prove an interval of the focal length over "
-                    "every quadric within a stated cost increase of the certified one (tens of seconds of CPU)")
-    prove_intervals_over_planes: bool = Field(
-        _DEFAULTS.prove_intervals_over_planes,
-        description="stratified method, certificate full: prove the metric stage's intervals of K over every plane "
-                    "at infinity within a stated cost increase of the affine stage's too, not only the plane stated "
-                    "(2.5 to 3.5 times a full certificate's solve CPU; on near-critical real data often the "
-                    "ranges themselves)")
+AutocalibrationOptionsIn = options_model("AutocalibrationOptionsIn", autocalibration_problem.AutocalibrationOptions,
+                                         wire={"intrinsics": (IntrinsicsIn, IntrinsicsIn)})
 
 
 class AutocalibrationJob(JobBase):

@@ -11,7 +11,7 @@ from pydantic import BaseModel, Field
 
 from geocert.kinds.base import ProblemKind
 from geocert.kinds.documents import finite_or_none, outcome_document
-from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Pixel, Strict
+from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Pixel, Strict, options_model
 from geocert.solvers.bilinear import determinacy
 from geocert.solvers.bilinear import problem
 from geocert.solvers.bilinear.options import BilinearOptions
@@ -23,8 +23,6 @@ from geocert.solvers.core.self_check import enabled as self_check_enabled
 from geocert.verify.checks import verify_arrays
 
 Point3 = Annotated[list[Finite], Field(min_length=3, max_length=3, description="[X, Y, Z]")]
-_DEFAULTS = BilinearOptions()
-_RANGES = BilinearOptions.OPTION_RANGES
 
 
 class FrameIn(Strict):
@@ -37,26 +35,7 @@ class BilinearData(Strict):
     frames: list[FrameIn] = Field(min_length=1, description="one image per item")
 
 
-class BilinearOptionsIn(Strict):
-    norm: Literal["L1L1", "L2L2"] = Field(_DEFAULTS.norm, description="L1L1: sum of absolute coordinate residuals "
-                                                                      "(an LP relaxation); L2L2: sum of squares (SOCP)")
-    coefficients: Literal["convex", "affine"] = Field(_DEFAULTS.coefficients, description=(
-        "convex: alpha >= 0, sum alpha = 1; affine: sum alpha = 1, |alpha_i| <= coefficient_bound"))
-    camera: Literal["affine"] = Field(_DEFAULTS.camera, description="a 2x4 affine camera [M | t] per frame")
-    coefficient_bound: Finite = Field(_DEFAULTS.coefficient_bound, **_RANGES["coefficient_bound"],
-                                      description="affine coefficients' bound (the scope)")
-    camera_bound: Finite | None = Field(_DEFAULTS.camera_bound, **_RANGES["camera_bound"], description=(
-        "the scope's camera box |M_rk| <= camera_bound (image units per shape unit); default: per frame, "
-        "4 times the incumbent's largest entry rounded up to a power of two (stated in each certificate)"))
-    rel_gap: Finite = Field(_DEFAULTS.rel_gap, **_RANGES["rel_gap"], description="stop when gap <= rel_gap * cost ...")
-    abs_gap: Finite = Field(_DEFAULTS.abs_gap, **_RANGES["abs_gap"], description="... or gap <= abs_gap (cost units)")
-    max_nodes: int = Field(_DEFAULTS.max_nodes, **_RANGES["max_nodes"], description="per frame")
-    time_limit_s: Finite = Field(_DEFAULTS.time_limit_s, **_RANGES["time_limit_s"], description="per frame")
-    job_time_limit_s: Finite = Field(_DEFAULTS.job_time_limit_s, **_DEFAULTS.JOB_LIMIT_RANGE, description=(
-        "the job in all: its frames share this one clock (past it the frame running stops with its best answer, "
-        "status time_limit, and the frames not started read time_limit, not started)"))
-    certificate: Literal["summary", "full"] = Field(_DEFAULTS.certificate, description=(
-        "full: every bound's proof (dual vectors), checkable without a conic solver"))
+BilinearOptionsIn = options_model("BilinearOptionsIn", BilinearOptions)
 
 
 class BilinearJob(JobBase):

@@ -24,7 +24,7 @@ from geocert.kinds.base import ProblemKind
 from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION, IntrinsicsIn
 from geocert.kinds.documents import certificate_document
 from geocert.kinds.resection_homography import RESECTION, map_document
-from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict
+from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict, options_model
 from geocert.kinds.triangulation import TrackOut, track_document
 from geocert.solvers.autocalibration.problem import StageProgress
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, number_array
@@ -71,113 +71,9 @@ class KnownCalibration(Strict):
     K: Annotated[list[Annotated[list[Finite], Field(min_length=3, max_length=3)]], Field(min_length=3, max_length=3)]
 
 
-_D = ReconstructionOptions()
-_R = ReconstructionOptions.OPTION_RANGES
-_F = ReconstructionOptions.FEATURE_RANGES
-
-
-class FeaturesIn(Strict):
-    """Stage 1's matching, photos only (null: the default; the defaults are OpenCV's SIFT's and
-    suit textured scenes)."""
-
-    max_features: int | None = Field(None, **_F["max_features"], description="keypoints kept per image, the "
-                                     "largest-scale (0: all; default 4000)")
-    contrast_threshold: Finite | None = Field(None, **_F["contrast_threshold"],
-                                              description="SIFT's contrast threshold (default 0.02, COLMAP's; "
-                                                          "lower finds fainter keypoints)")
-    ratio: Finite | None = Field(None, **_F["ratio"], description="Lowe's ratio test (default 0.8)")
-    ransac_threshold_px: Finite | None = Field(None, **_F["ransac_threshold_px"],
-                                               description="epipolar distance of a verified match, pixels "
-                                                           "(default 1)")
-    guided_ratio: Finite | None = Field(None, **_F["guided_ratio"],
-                                        description="after a pair is verified, match it again along its epipolar "
-                                                    "lines with this ratio test (default 0: off)")
-    pairs: Literal["auto", "exhaustive", "retrieval", "sequential"] | None = Field(
-        None, description='which image pairs are matched: "exhaustive" every pair, "retrieval" each image with the '
-                          'images most alike it (a bag of visual words), "auto" (default) exhaustive up to '
-                          'exhaustive_limit images and retrieval beyond, "sequential" each image with its '
-                          'neighbour_window successors in the order given (video)')
-    exhaustive_limit: int | None = Field(None, **_F["exhaustive_limit"],
-                                         description='"auto": every pair up to this many images (default 40)')
-    retrieval_neighbours: int | None = Field(None, **_F["retrieval_neighbours"],
-                                             description='"retrieval": images matched with each (default 20)')
-    vocabulary_size: int | None = Field(None, **_F["vocabulary_size"],
-                                        description='"retrieval": visual words, clustered from the images\' own '
-                                                    'descriptors (default 1024)')
-    neighbour_window: int | None = Field(None, **_F["neighbour_window"],
-                                         description='"sequential": successors matched with each (default 5)')
-    ring: bool | None = Field(None, description='"sequential": the last images wrap round to the first (default '
-                                                'false)')
-    time_limit_s: Finite | None = Field(None, **_F["time_limit_s"],
-                                        description="seconds for reading features and matching (default 300): past "
-                                                    "it the images and pairs not yet done are left out, and the "
-                                                    "matches stage says time_limit")
-
-
-class ReconstructionOptionsIn(Strict):
-    intrinsics: Literal["unknown"] | KnownCalibration | IntrinsicsIn = Field(
-        default_factory=IntrinsicsIn, description='"unknown" (ranges from the image size), {"K": 3x3}, or ranges')
-    autocalibration: Literal["stratified", "direct", "auto"] = "stratified"
-    camera_model: Literal["simple", "varying", "full"] = Field(
-        _D.camera_model, description="the metric adjustment's calibration: one focal length (principal point at the "
-                                     "image centre, square pixels), one per view, or one K with five free entries")
-    norm: Literal["L2L2", "L2L1", "L1L1"] = _D.norm
-    rel_gap: Finite = Field(_D.rel_gap, **_R["rel_gap"], description="each point's certified solve")
-    abs_gap: Finite = Field(_D.abs_gap, **_R["abs_gap"])
-    max_nodes: int = Field(_D.max_nodes, **_R["max_nodes"], description="per point and per camera")
-    time_limit_s: Finite = Field(_D.time_limit_s, **_R["time_limit_s"], description="per point and per camera")
-    max_residual: Finite | None = Field(None, **_R["max_residual"], description="pixels; narrows the scope")
-    certificate: Literal["summary", "full"] = "summary"
-    metric_rel_gap: Finite = Field(_D.metric_rel_gap, **_R["metric_rel_gap"])
-    autocalibration_rel_gap: Finite = Field(_D.autocalibration_rel_gap, **_R["autocalibration_rel_gap"])
-    autocalibration_max_nodes: int = Field(_D.autocalibration_max_nodes, **_R["autocalibration_max_nodes"])
-    autocalibration_time_limit_s: Finite = Field(_D.autocalibration_time_limit_s, **_R["autocalibration_time_limit_s"])
-    structure_time_limit_s: Finite = Field(_D.structure_time_limit_s, **_R["structure_time_limit_s"],
-                                           description="seconds for the certified points and cameras together: past "
-                                                       "it the tracks and cameras not yet done are left out and the "
-                                                       "structure and cameras stages say time_limit")
-    autocalibration_points: int = Field(_D.autocalibration_points, **_R["autocalibration_points"])
-    autocalibration_on_critical_motion: Literal["skip", "search"] = Field(
-        _D.autocalibration_on_critical_motion,
-        description='"skip": no certified upgrade search when the linear estimate\'s motion is critical (a turntable, '
-                    'an orbit, a translating camera: the tracks do not determine K); "search": run it anyway')
-    chirality: Literal["points", "centers", "none"] = _D.chirality
-    threshold_px: Finite = Field(_D.threshold_px, **_R["threshold_px"], description="outlier threshold, pixels")
-    min_inliers: int = Field(_D.min_inliers, **_R["min_inliers"])
-    bundle_adjustment: bool = _D.bundle_adjustment
-    resect_cameras: bool = _D.resect_cameras
-    camera_rel_gap: Finite = Field(_D.camera_rel_gap, **_R["camera_rel_gap"],
-                                   description="each camera's resection's gap, a part of the returned camera's tolerance")
-    bound_every_camera: bool = Field(_D.bound_every_camera,
-                                     description="false: no certified resection for a camera a free camera found "
-                                                 "locally proves uncertifiable (it is reported without a bound)")
-    features: FeaturesIn = Field(default_factory=FeaturesIn)
-    registration: Literal["incremental", "projective"] = Field(
-        _D.registration, description='K unknown: "incremental" (COLMAP\'s way: the K-known path from a prior focal '
-                                     'length, refined by bundle adjustment; its cameras start the certified upgrade) '
-                                     'or "projective" (a projective reconstruction from the tracks alone)')
-    principal_point: Literal["auto", "per_view", "centre"] = Field(
-        _D.principal_point, description='K unknown, camera_model "simple": "auto" frees the principal point when the '
-                                        'data fix it (a chi-square test), "per_view" (the default) as "auto" and then one '
-                                        'for each view when the data fix them (the same test, and each view\'s fixed '
-                                        'to 5 px), "centre" holds it at the image centre')
-    radial_distortion: Literal["auto", "on", "off"] = Field(
-        _D.radial_distortion, description='K unknown, "incremental": one radial distortion term k1 (COLMAP\'s '
-                                          'SIMPLE_RADIAL) with the focal length; "auto" keeps it when the data fix it '
-                                          '(a chi-square test); K known: one k1 about K\'s principal point, K held as '
-                                          'given, by the same test. When kept, the observations are undistorted with '
-                                          'it before the metric stages, and every certificate is conditional on that k1')
-    focal_prior_px: Finite | None = Field(None, gt=0, le=1e6, description='"incremental": the prior focal length '
-                                          '(pixels; a prior, refined, not a fact: e.g. from the photos\' EXIF)')
-    focal_prior_factor: Finite = Field(_D.focal_prior_factor, **_R["focal_prior_factor"],
-                                       description='"incremental" without focal_prior_px: the prior focal length '
-                                                   'as this times the larger image side (COLMAP\'s 1.2)')
-    focal_prior_rounds: int = Field(_D.focal_prior_rounds, **_R["focal_prior_rounds"],
-                                    description='"incremental": runs from a refined focal length, at most')
-    merge_components: bool = Field(_D.merge_components,
-                                   description="K known only: views that do not register from the first start are "
-                                               "reconstructed from a second start and merged")
-    seed: int = Field(_D.seed, **_R["seed"])
+ReconstructionOptionsIn = options_model(
+    "ReconstructionOptionsIn", ReconstructionOptions,
+    wire={"intrinsics": (Literal["unknown"] | KnownCalibration | IntrinsicsIn, IntrinsicsIn)})
 
 
 class ReconstructionJob(JobBase):

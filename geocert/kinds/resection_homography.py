@@ -31,7 +31,7 @@ class MapsData(Strict):
     maps: list[MapIn] = Field(min_length=1, description="independent maps, solved in parallel")
 
 
-MapOptionsIn = options_model("MapOptionsIn", MapOptions(), "target units")
+MapOptionsIn = options_model("MapOptionsIn", MapOptions)
 
 
 class ResectionJob(JobBase):

@@ -3,9 +3,13 @@ options from a solver's options dataclass, the outcome every item reports, the c
 
 from __future__ import annotations
 
+import dataclasses
+import typing
 from typing import Annotated, Any, Literal
 
 from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, create_model
+
+from geocert.solvers.core.declared_options import KEY, MISSING
 
 # Strict types (the Strict models below): a JSON string ("330") or a boolean is never a number, and
 # a float (1.0) is never an integer; a JSON integer is still a number wherever a float is asked for.
@@ -21,39 +25,63 @@ class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True)
 
 
-def options_model(name: str, defaults, residual_units: str) -> type[BaseModel]:
-    """The options of a kind, defaults and ranges taken from its solver's options dataclass
-    (``OPTION_RANGES`` there), so the API, the CLI and the solver cannot disagree."""
-    ranges = type(defaults).OPTION_RANGES
-    return create_model(
-        name,
-        __base__=Strict,
-        norm=(Literal["L2L2", "L2L1", "L1L1"], defaults.norm),
-        rel_gap=(Finite, Field(defaults.rel_gap, **ranges["rel_gap"], description="stop when gap <= rel_gap * cost ...")),
-        abs_gap=(Finite, Field(defaults.abs_gap, **ranges["abs_gap"], description="... or gap <= abs_gap (cost units)")),
-        max_nodes=(int, Field(defaults.max_nodes, **ranges["max_nodes"], description="per item")),
-        time_limit_s=(Finite, Field(defaults.time_limit_s, **ranges["time_limit_s"], description="per item")),
-        max_residual=(Finite | None, Field(defaults.max_residual, **ranges["max_residual"],
-                                           description=f"{residual_units}; narrows the certificate's scope")),
-        certificate=(Literal["summary", "full"], Field(
-            defaults.certificate, description="full: every bound's proof (dual vectors), checkable without "
-                                              "a conic solver; see GET /v1/jobs/{id}/certificate")),
-        detail=(Literal["full", "brief"], Field(
-            defaults.detail, description="brief: each item carries its solution, bounds and status only "
-                                         "(certificate and determinacy null, determinacy not computed): "
-                                         "for large jobs; what is proven is the same")),
-        **job_time_limit_field(defaults),
-    )
+def options_model(name: str, options_type: type, wire: dict | None = None, doc: str | None = None) -> type[BaseModel]:
+    """The wire model of a kind's options, derived from its solver's options dataclass: every
+    option declared there (solvers.core.declared_options.option) that the API takes, with its
+    default, range, allowed words and description as declared, so the API, the CLI, the solver
+    and the verifier cannot disagree. A nested options dataclass becomes a nested model (named
+    after the option, ``...In``; a dict-valued option may name its dataclass as its declared
+    ``wire``, and its docstring, when it has one, describes the nested model; ``doc``: the
+    model's own). ``wire``: {option: type, or (type, default factory)} for an
+    option whose JSON shape is a model of the kind's (an object the dataclass holds as a dict)."""
+    wire = wire or {}
+    hints = typing.get_type_hints(options_type)
+    fields = {}
+    for entry in dataclasses.fields(options_type):
+        declared = entry.metadata.get(KEY)
+        if declared is None or not declared.api:
+            continue
+        keywords = dict(declared.bounds)
+        if declared.description is not None:
+            keywords["description"] = declared.description
+        given = wire.get(entry.name, declared.wire)
+        if isinstance(given, tuple):
+            annotation, factory = given
+            fields[entry.name] = (annotation, Field(default_factory=factory, **keywords))
+            continue
+        nested = given if given is not None else hints[entry.name]
+        if isinstance(nested, type) and dataclasses.is_dataclass(nested):  # a nested object of options
+            documented = nested.__doc__ and not nested.__doc__.startswith(nested.__name__ + "(")  # not dataclass's
+            given = options_model("".join(part.capitalize() for part in entry.name.split("_")) + "In", nested,
+                                  doc=nested.__doc__ if documented else None)
+        annotation = given if given is not None else _wire_type(hints[entry.name], declared)
+        if declared.wire_default is None and type(None) not in typing.get_args(annotation):
+            annotation = annotation | None  # null on the wire: the solver's default
+        if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+            fields[entry.name] = (annotation, Field(default_factory=annotation, **keywords))
+            continue
+        if declared.wire_default is not MISSING:
+            default = declared.wire_default
+        elif entry.default is not MISSING:
+            default = entry.default
+        else:
+            default = entry.default_factory()
+        fields[entry.name] = (annotation, Field(default, **keywords))
+    model = create_model(name, __base__=Strict, __doc__=doc, **fields)
+    model.__options_type__ = options_type  # what it is derived from (tests/kinds/test_option_declarations.py)
+    return model
 
 
-def job_time_limit_field(defaults) -> dict:
-    """The option ``job_time_limit_s`` of a many-item kind whose options have it (solvers'
-    JobLimit), as a create_model field; none for a kind without."""
-    if not hasattr(defaults, "job_time_limit_s"):
-        return {}
-    return {"job_time_limit_s": (Finite, Field(defaults.job_time_limit_s, **defaults.JOB_LIMIT_RANGE, description=(
-        "the job in all, from when it starts: its items share this one clock; past it the item running stops "
-        "with its best answer (status time_limit) and the items not started read time_limit, not started")))}
+def _wire_type(hint: Any, declared) -> Any:
+    """The JSON type of an option of Python type ``hint``: a float is a finite number (an integer
+    allowed), an int an integer, a str one of its declared words, X | None either or null."""
+    arguments = typing.get_args(hint)
+    if type(None) in arguments:
+        (inner,) = [argument for argument in arguments if argument is not type(None)]
+        return _wire_type(inner, declared) | None
+    if hint is str and declared.choices is not None:
+        return Literal[declared.choices]
+    return {float: Finite, int: int, bool: bool, str: str}[hint]
 
 
 class JobBase(Strict):

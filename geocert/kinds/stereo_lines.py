@@ -18,15 +18,13 @@ import numpy as np
 from pydantic import BaseModel, Field
 
 from geocert.kinds.base import ProblemKind
-from geocert.kinds.schema import Determinacy, Finite, JobBase, JobStats, Strict
+from geocert.kinds.schema import Determinacy, Finite, JobBase, JobStats, Strict, options_model
 from geocert.solvers.core.bnb import Progress
 from geocert.solvers.core.determinacy import safely
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
 from geocert.verify.adapters import NOT_CERTIFIED, VERIFIED_KINDS
 from geocert.solvers.lines.geometry import Rig
-from geocert.solvers.lines.matching import MatchingOptions
 from geocert.solvers.lines.pipeline import SOLVERS, StereoLinesOptions, compose, estimate_pair
-from geocert.solvers.lines.ransac import RansacOptions
 
 Segment = Annotated[list[Finite], Field(min_length=4, max_length=4, description="[x0, y0, x1, y1] pixels")]
 Row3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
@@ -55,51 +53,7 @@ class StereoLinesData(Strict):
         None, min_length=1, description="or, per consecutive frame pair, the lines matched across its four views")
 
 
-class RansacIn(Strict):
-    threshold_px: Finite = Field(RansacOptions.threshold_px, gt=0, le=1000,
-                                 description="inlier: RMS of a line's 8 endpoint transfer distances (pixels)")
-    confidence: Finite = Field(RansacOptions.confidence, gt=0, lt=1)
-    max_iterations: int = Field(RansacOptions.max_iterations, ge=1, le=100_000)
-    min_conditioning: Finite = Field(RansacOptions.min_conditioning, ge=0, le=1,
-                                     description="lines whose stereo planes meet at a smaller sine are not sampled")
-    min_sample_angle_deg: Finite = Field(RansacOptions.min_sample_angle_deg, ge=0, le=90)
-    seed: int | None = Field(RansacOptions.seed, description="sampling seed (null: fresh randomness)")
-    min_inliers: int = Field(RansacOptions.min_inliers, ge=2, le=10_000,
-                             description="a pair with fewer inliers fails (its motion is not trusted)")
-    local_optimisation: int = Field(RansacOptions.local_optimisation, ge=0, le=20,
-                                    description="rounds of refitting each new best sample on its inliers")
-
-
-class MatchingIn(Strict):
-    min_overlap: Finite = Field(MatchingOptions.min_overlap, ge=0, le=1)
-    max_stereo_angle_deg: Finite = Field(MatchingOptions.max_stereo_angle_deg, gt=0, le=90)
-    min_epipolar_angle_deg: Finite = Field(MatchingOptions.min_epipolar_angle_deg, ge=0, lt=90)
-    max_track_px: Finite = Field(MatchingOptions.max_track_px, gt=0, le=10_000)
-    max_track_angle_deg: Finite = Field(MatchingOptions.max_track_angle_deg, gt=0, le=90)
-    guided: bool = Field(MatchingOptions.guided, description="track again with the first estimate's rotation "
-                                                             "and estimate again (segments only)")
-    ambiguity_margin: Finite = Field(MatchingOptions.ambiguity_margin, ge=0, le=10,
-                                     description="drop a stereo match whose rival costs within this of it (0: off)")
-
-
-_DEFAULTS = StereoLinesOptions()
-
-
-class StereoLinesOptionsIn(Strict):
-    solver: Literal["polynomial", "linear", "incremental", "align"] = _DEFAULTS.solver
-    sample_size: Annotated[int, Field(ge=2, le=10)] | None = Field(
-        _DEFAULTS.sample_size, description="lines per RANSAC sample (null: the solver's minimum, 2; linear 3)")
-    ransac: RansacIn = Field(default_factory=RansacIn)
-    refine: bool = Field(_DEFAULTS.refine, description="refine each motion on its inliers (least squares)")
-    incremental_iterations: int = Field(_DEFAULTS.incremental_iterations, ge=1, le=20,
-                                        description="the incremental solver's relinearisations (1: the thesis's)")
-    matching: MatchingIn = Field(default_factory=MatchingIn)
-    time_limit_s: Finite = Field(_DEFAULTS.time_limit_s, **StereoLinesOptions.OPTION_RANGES["time_limit_s"],
-                                 description="per frame pair: RANSAC draws no sample after it, and the pair keeps "
-                                             "its best motion so far (its reason says so)")
-    job_time_limit_s: Finite = Field(_DEFAULTS.job_time_limit_s, **_DEFAULTS.JOB_LIMIT_RANGE, description=(
-        "the job in all: its pairs share this one clock (past it the pair running keeps its best motion so far, "
-        "and the pairs not started read time_limit, not started)"))
+StereoLinesOptionsIn = options_model("StereoLinesOptionsIn", StereoLinesOptions)
 
 
 class StereoLinesJob(JobBase):

@@ -30,7 +30,7 @@ class TriangulationData(Strict):
     tracks: list[TrackIn] = Field(min_length=1)
 
 
-TriangulationOptionsIn = options_model("TriangulationOptionsIn", TriangulationOptions(), "pixels")
+TriangulationOptionsIn = options_model("TriangulationOptionsIn", TriangulationOptions)
 
 
 class TriangulationJob(JobBase):

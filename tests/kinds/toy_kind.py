@@ -15,7 +15,8 @@ import numpy as np
 from pydantic import BaseModel, Field
 
 from geocert.kinds.base import ProblemKind
-from geocert.kinds.schema import Finite, JobBase, JobStats, Pixel, Strict
+from geocert.kinds.schema import JobBase, JobStats, Pixel, Strict, options_model
+from geocert.solvers.core.declared_options import DeclaredRanges, option
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, numbers
 from geocert.verify.verification import Verification
@@ -23,12 +24,15 @@ from geocert.verify.verification import Verification
 
 @dataclass
 class CentroidOptions:
-    norm: str = "L2L2"
-    rel_gap: float = 1e-3
-    abs_gap: float = 1e-7
-    max_residual: float | None = None
-    certificate: str = "summary"
-    OPTION_RANGES = {"rel_gap": {"ge": 0, "le": 1}, "abs_gap": {"ge": 0}}
+    """Each option declared once (its default, range, words, description): the API's model below
+    and the ranges its check and the verifier apply derive from these."""
+
+    norm: str = option("L2L2", choices=("L2L2",))
+    rel_gap: float = option(1e-3, ge=0, le=1)
+    abs_gap: float = option(1e-7, ge=0)
+    max_residual: float | None = option(None, api=False)  # the solver's, never asked for by the API
+    certificate: str = option("summary", choices=("summary", "full"))
+    OPTION_RANGES = DeclaredRanges()
 
     def check(self) -> None:
         if self.norm != "L2L2":
@@ -37,11 +41,7 @@ class CentroidOptions:
             raise InputError("options/max_residual", "not supported by this kind")
 
 
-class CentroidOptionsIn(Strict):
-    norm: Literal["L2L2"] = "L2L2"
-    rel_gap: Finite = Field(1e-3, ge=0, le=1)
-    abs_gap: Finite = Field(1e-7, ge=0)
-    certificate: Literal["summary", "full"] = "summary"
+CentroidOptionsIn = options_model("CentroidOptionsIn", CentroidOptions)
 
 
 class CentroidData(Strict):

@@ -53,6 +53,7 @@ import numpy as np
 from geocert.solvers.core import pieces
 from geocert.solvers.core.bnb import asks_to_stop
 from geocert.solvers.core.geometry import InputError
+from geocert.pipelines.reconstruction.options import FeatureOptions  # noqa: F401 (declared with the options)
 
 # Limits on one image. The encoded size bounds the work of decoding and the memory a request can
 # claim; the side and pixel limits are read from the file's header before decoding (so an image
@@ -61,36 +62,6 @@ MAX_ENCODED_BYTES = 20_000_000
 MAX_IMAGE_SIDE = 8192
 MAX_IMAGE_PIXELS = 25_000_000
 MIN_IMAGE_SIDE = 16
-
-
-@dataclass
-class FeatureOptions:
-    max_features: int = 4000  # keypoints kept per image (the largest-scale: select_keypoints); 0 keeps all
-    # SIFT's DoG contrast threshold; lower finds fainter keypoints. OpenCV keeps a keypoint whose
-    # contrast exceeds this over its 3 layers per octave (on intensities in [0, 1]); COLMAP's SIFT
-    # keeps it above 0.02 / 3, so 0.02 here is COLMAP's default (OpenCV's own, 0.04, loses the faint
-    # keypoints of untextured objects: 4 of templeSparseRing's 16 views register instead of 16).
-    contrast_threshold: float = 0.02
-    edge_threshold: float = 10.0  # SIFT's edge-response threshold (OpenCV's default)
-    ratio: float = 0.8  # Lowe's ratio test: nearest / second nearest descriptor distance below this
-    mutual: bool = True  # keep a match only when the two features are each other's nearest
-    ransac_threshold_px: float = 1.0  # epipolar distance (pixels) of a fundamental-matrix inlier
-    ransac_confidence: float = 0.999
-    ransac_max_iters: int = 5_000
-    min_inliers: int = 15  # a verified pair has at least this many inliers
-    min_track_length: int = 2  # views per kept track
-    pairs: str = "auto"  # "auto", "exhaustive", "retrieval" or "sequential" (see the module docstring)
-    exhaustive_limit: int = 40  # "auto": every pair for at most this many images, retrieval beyond
-    retrieval_neighbours: int = 20  # "retrieval": each image with this many most alike
-    vocabulary_size: int = 1024  # "retrieval": visual words clustered from the images' descriptors
-    neighbour_window: int = 5  # "sequential": each image with this many successors
-    ring: bool = False  # "sequential": the successors wrap round (a turntable or a closed loop)
-    guided_ratio: float = 0.0  # guided matching's ratio test (0: no guided matching; see the module docstring)
-    guided_min_inliers: int = 30  # a pair is matched again, guided, when it has at least this many inliers
-    guided_threshold_px: float | None = None  # epipolar distance of a guided candidate (None: ransac_threshold_px)
-    # Features and matching stop past this many seconds (the clock checked between images and
-    # between pairs); the tracks of what was matched by then are kept.
-    time_limit_s: float = 300.0
 
 
 @dataclass

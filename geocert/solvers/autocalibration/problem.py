@@ -11,6 +11,7 @@ import numpy as np
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.core.bnb import BnbOptions, Progress
+from geocert.solvers.core.declared_options import option, redeclared
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.options import MAX_REL_GAP, SearchOptions
 
@@ -69,27 +70,35 @@ class AutocalibrationOptions(SearchOptions):
     safe bound 1.3e-5 below the polished optimum on a 0.2% noise scene); the intrinsics ranges
     precondition it and bound a combination of each view's intrinsics (direct.focal_rows)."""
 
-    method: str = "stratified"
-    intrinsics: dict = field(default_factory=dict)
-    chirality: str = "centers"
-    varying_focal: bool = False
-    relaxation_order: int = 2
+    method: str = option("stratified", choices=METHODS)
+    # the API's model writes it as the kind's IntrinsicsIn (kinds/autocalibration.py)
+    intrinsics: dict = option(default_factory=dict)
+    chirality: str = option("centers", choices=CHIRALITY, description=(
+        "direct method: which rows must lie on one side of the plane at infinity"))
+    varying_focal: bool = option(False, description="direct method: one focal length per view")
+    relaxation_order: int = option(2, ge=min(ORDERS), le=max(ORDERS), description=(
+        "direct method: the moment relaxation's order (order 3 does not fit)"))
     # The direct method's proven focal interval (direct_sublevel) costs tens of seconds of CPU
     # against a solve's second: asked for, not implied by a full certificate.
-    prove_focal_interval: bool = False
+    prove_focal_interval: bool = option(False, description=(
+        "direct method, one focal length, certificate full: prove an interval of the focal length over "
+        "every quadric within a stated cost increase of the certified one (tens of seconds of CPU)"))
     # The stratified metric stage's intervals proven over the plane at infinity's own uncertainty
     # (plane_sublevel) cost 2.5 to 3.5 times a full certificate's solve (2 to 3.5 times its
     # verification), and on real near-critical rings come out as the ranges: asked for, not implied
     # by a full certificate.
-    prove_intervals_over_planes: bool = False
-    rel_gap: float = 1e-5
-    metric_rel_gap: float = 1e-4
-    abs_gap: float | None = None  # None: STRATIFIED_ABS_GAP or DIRECT_ABS_GAP, by the method
-    max_nodes: int = 20_000
-    time_limit_s: float = 60.0
-
-    OPTION_RANGES = {**SearchOptions.OPTION_RANGES, "metric_rel_gap": {"ge": 0, "le": MAX_REL_GAP},
-                     "abs_gap": {"ge": 0, "le": MAX_ABS_GAP}}
+    prove_intervals_over_planes: bool = option(False, description=(
+        "stratified method, certificate full: prove the metric stage's intervals of K over every plane "
+        "at infinity within a stated cost increase of the affine stage's too, not only the plane stated "
+        "(2.5 to 3.5 times a full certificate's solve CPU; on near-critical real data often the "
+        "ranges themselves)"))
+    rel_gap: float = redeclared(SearchOptions, "rel_gap", 1e-5, description="the affine stage's")
+    metric_rel_gap: float = option(1e-4, ge=0, le=MAX_REL_GAP, description="the metric stage's")
+    # None: STRATIFIED_ABS_GAP or DIRECT_ABS_GAP, by the method
+    abs_gap: float | None = option(None, ge=0, le=MAX_ABS_GAP, description=(
+        f"default {STRATIFIED_ABS_GAP:g} (stratified), {DIRECT_ABS_GAP:g} (direct: its cost's units, problem.py)"))
+    max_nodes: int = redeclared(SearchOptions, "max_nodes", 20_000, description="per stage")
+    time_limit_s: float = redeclared(SearchOptions, "time_limit_s", 60.0, description="per stage")
 
     def __post_init__(self) -> None:
         if self.abs_gap is None:

@@ -1,13 +1,15 @@
 """Options of the bilinear kind: a plain dataclass with defaults, ranges stated once in
-OPTION_RANGES (check() applies them; the API's model is built from them)."""
+its options' declarations (core.declared_options.option: check() applies them; the API's model
+is built from them)."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
+from geocert.solvers.core.declared_options import option, redeclared
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.fractional.options import CERTIFICATE_MODES, MAX_REL_GAP, JobLimit, _describe, _within
+from geocert.solvers.fractional.options import CERTIFICATE_MODES, JobLimit, SearchOptions, _describe, _within
 
 NORMS = ("L1L1", "L2L2")
 # abs_gap's cap, in the cost's units (image units, squared for L2L2): a frame's cost sums its
@@ -29,21 +31,24 @@ class BilinearOptions(JobLimit):
     derives it per frame from the incumbent (4 times its largest entry, see search.root_box). The
     translation is never bounded by the scope (any translation: see docs/certificate.md)."""
 
-    norm: str = "L2L2"
-    coefficients: str = "convex"
-    camera: str = "affine"
-    coefficient_bound: float = 10.0
-    camera_bound: float | None = None
-    rel_gap: float = 1e-3
-    abs_gap: float = 1e-9
-    max_nodes: int = 5000
-    time_limit_s: float = 60.0
-    certificate: str = "summary"
-
-    OPTION_RANGES = {"rel_gap": {"ge": 0, "le": MAX_REL_GAP}, "abs_gap": {"ge": 0, "le": MAX_ABS_GAP},
-                     "max_nodes": {"ge": 1, "le": 1_000_000},
-                     "time_limit_s": {"gt": 0, "le": 3600}, "coefficient_bound": {"ge": 1, "le": 1e6},
-                     "camera_bound": {"gt": 0, "le": 1e12}}
+    norm: str = option("L2L2", choices=NORMS, description="L1L1: sum of absolute coordinate residuals "
+                                                          "(an LP relaxation); L2L2: sum of squares (SOCP)")
+    coefficients: str = option("convex", choices=COEFFICIENTS, description=(
+        "convex: alpha >= 0, sum alpha = 1; affine: sum alpha = 1, |alpha_i| <= coefficient_bound"))
+    camera: str = option("affine", choices=CAMERAS, description="a 2x4 affine camera [M | t] per frame")
+    coefficient_bound: float = option(10.0, ge=1, le=1e6, description="affine coefficients' bound (the scope)")
+    camera_bound: float | None = option(None, gt=0, le=1e12, description=(
+        "the scope's camera box |M_rk| <= camera_bound (image units per shape unit); default: per frame, "
+        "4 times the incumbent's largest entry rounded up to a power of two (stated in each certificate)"))
+    rel_gap: float = redeclared(SearchOptions, "rel_gap")
+    abs_gap: float = redeclared(SearchOptions, "abs_gap", 1e-9, bounds={"ge": 0, "le": MAX_ABS_GAP})
+    max_nodes: int = redeclared(SearchOptions, "max_nodes", 5000, description="per frame")
+    time_limit_s: float = redeclared(SearchOptions, "time_limit_s", 60.0, description="per frame")
+    job_time_limit_s: float = redeclared(JobLimit, "job_time_limit_s", description=(
+        "the job in all: its frames share this one clock (past it the frame running stops with its best answer, "
+        "status time_limit, and the frames not started read time_limit, not started)"))
+    certificate: str = redeclared(SearchOptions, "certificate", description=(
+        "full: every bound's proof (dual vectors), checkable without a conic solver"))
 
     def check(self) -> None:
         for name, allowed in (("norm", NORMS), ("coefficients", COEFFICIENTS), ("camera", CAMERAS),

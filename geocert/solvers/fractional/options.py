@@ -1,12 +1,14 @@
 """Options of the fractional kinds, as plain dataclasses composed of what any search takes
 (SearchOptions) and what fixes the cost and its scope (ResidualOptions). Ranges are stated once,
-in OPTION_RANGES: check() applies them, and the API's models are built from them."""
+with each option's declaration (core.declared_options.option): check() applies them, and the API's
+models are built from the same declarations."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
+from geocert.solvers.core.declared_options import DeclaredRange, DeclaredRanges, option, redeclared
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.fractional.relaxation import NORMS
 
@@ -31,18 +33,17 @@ DETAIL_MODES = ("full", "brief")
 class SearchOptions:
     """How far a branch and bound goes, and what it returns (every kind's search)."""
 
-    rel_gap: float = 1e-3
+    rel_gap: float = option(1e-3, ge=0, le=MAX_REL_GAP, description="stop when gap <= rel_gap * cost ...")
     # In the cost's units (squared for L2L2). Below about 1e-7 the conic solves cannot resolve
     # the bound (measured on a Dinosaur track whose optimum is 1e-6 px).
-    abs_gap: float = 1e-7
-    max_nodes: int = 2000
-    time_limit_s: float = 30.0
-    certificate: str = "summary"  # "full": every bound's proof, checkable by geocert.verify.checks
+    abs_gap: float = option(1e-7, ge=0, le=MAX_ABS_GAP, description="... or gap <= abs_gap (cost units)")
+    max_nodes: int = option(2000, ge=1, le=1_000_000, description="per item")
+    time_limit_s: float = option(30.0, gt=0, le=3600, description="per item")
+    # "full": every bound's proof, checkable by geocert.verify.checks
+    certificate: str = option("summary", choices=CERTIFICATE_MODES, description=(
+        "full: every bound's proof (dual vectors), checkable without a conic solver; see GET /v1/jobs/{id}/certificate"))
 
-    # pydantic Field keywords per option: the one statement of each range.
-    OPTION_RANGES = {"rel_gap": {"ge": 0, "le": MAX_REL_GAP}, "abs_gap": {"ge": 0, "le": MAX_ABS_GAP},
-                     "max_nodes": {"ge": 1, "le": 1_000_000},
-                     "time_limit_s": {"gt": 0, "le": 3600}, "max_residual": {"gt": 0}}
+    OPTION_RANGES = DeclaredRanges()
 
     def check(self) -> None:
         for name in ("rel_gap", "abs_gap", "time_limit_s", "max_nodes"):
@@ -57,8 +58,11 @@ class SearchOptions:
 class ResidualOptions:
     """The cost (norm of the reprojection residuals) and its scope (max_residual)."""
 
-    norm: str = "L2L2"
-    max_residual: float | None = None  # the kind's residual units; narrows the certificate's scope
+    norm: str = option("L2L2", choices=NORMS)
+    # the kind's residual units (its description names them); narrows the certificate's scope
+    max_residual: float | None = option(None, gt=0, description="narrows the certificate's scope")
+
+    OPTION_RANGES = DeclaredRanges()
 
     def check(self) -> None:
         if self.norm not in NORMS:
@@ -71,7 +75,10 @@ class ResidualOptions:
 class FractionalOptions(ResidualOptions, SearchOptions):
     """Options every fractional-program kind shares (each kind sets its own defaults)."""
 
-    detail: str = "full"  # what each item's document carries (DETAIL_MODES); never what is proven
+    # what each item's document carries (DETAIL_MODES); never what is proven
+    detail: str = option("full", choices=DETAIL_MODES, description=(
+        "brief: each item carries its solution, bounds and status only (certificate and determinacy null, "
+        "determinacy not computed): for large jobs; what is proven is the same"))
 
     def check(self) -> None:
         ResidualOptions.check(self)
@@ -86,9 +93,12 @@ class JobLimit:
     clock from when the job starts (batch.solve_items), so a job of any size ends near it, its
     items not started by then reading ``time_limit``."""
 
-    job_time_limit_s: float = 600.0
+    job_time_limit_s: float = option(600.0, gt=0, le=86400, description=(
+        "the job in all, from when it starts: its items share this one clock; past it the item running stops "
+        "with its best answer (status time_limit) and the items not started read time_limit, not started"))
 
-    JOB_LIMIT_RANGE = {"gt": 0, "le": 86400}
+    OPTION_RANGES = DeclaredRanges()
+    JOB_LIMIT_RANGE = DeclaredRange("job_time_limit_s")
 
     def check_job_limit(self) -> None:
         value = self.job_time_limit_s
@@ -101,6 +111,9 @@ class JobLimit:
 class TriangulationOptions(FractionalOptions, JobLimit):
     """Residuals in pixels; limits per track (and job_time_limit_s for the job)."""
 
+    max_residual: float | None = redeclared(ResidualOptions, "max_residual",
+                                            description="pixels; narrows the certificate's scope")
+
     def check(self) -> None:
         FractionalOptions.check(self)
         self.check_job_limit()
@@ -111,8 +124,10 @@ class MapOptions(FractionalOptions, JobLimit):
     """Residuals in target units; limits per map (larger than a track's: more unknowns), and
     job_time_limit_s for the job."""
 
-    max_nodes: int = 5000
-    time_limit_s: float = 60.0
+    max_nodes: int = redeclared(SearchOptions, "max_nodes", 5000)
+    time_limit_s: float = redeclared(SearchOptions, "time_limit_s", 60.0)
+    max_residual: float | None = redeclared(ResidualOptions, "max_residual",
+                                            description="target units; narrows the certificate's scope")
 
     def check(self) -> None:
         FractionalOptions.check(self)

@@ -31,6 +31,7 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from geocert.solvers.core.declared_options import DeclaredRanges, option
 from geocert.solvers.lines.geometry import Rig, cross, skew
 
 _BIG = 1e6
@@ -48,18 +49,19 @@ def _check(should_stop: Callable[[], bool] | None) -> None:
 
 @dataclass
 class MatchingOptions:
-    min_overlap: float = 0.5
-    max_stereo_angle_deg: float = 20.0
-    min_epipolar_angle_deg: float = 5.0
-    max_track_px: float = 60.0
-    max_track_angle_deg: float = 10.0
-    guided: bool = True  # track again with the first estimate's rotation, and estimate again
-    ambiguity_margin: float = 0.0  # > 0: a stereo match is dropped when a rival's cost is within this of its own
+    min_overlap: float = option(0.5, ge=0, le=1)
+    max_stereo_angle_deg: float = option(20.0, gt=0, le=90)
+    min_epipolar_angle_deg: float = option(5.0, ge=0, lt=90)
+    max_track_px: float = option(60.0, gt=0, le=10_000)
+    max_track_angle_deg: float = option(10.0, gt=0, le=90)
+    # track again with the first estimate's rotation, and estimate again
+    guided: bool = option(True, description="track again with the first estimate's rotation and estimate again "
+                                            "(segments only)")
+    # > 0: a stereo match is dropped when a rival's cost is within this of its own
+    ambiguity_margin: float = option(0.0, ge=0, le=10, description=(
+        "drop a stereo match whose rival costs within this of it (0: off)"))
 
-    OPTION_RANGES = {"min_overlap": {"ge": 0, "le": 1}, "max_stereo_angle_deg": {"gt": 0, "le": 90},
-                     "min_epipolar_angle_deg": {"ge": 0, "lt": 90}, "max_track_px": {"gt": 0, "le": 10_000},
-                     "max_track_angle_deg": {"gt": 0, "le": 90},
-                     "ambiguity_margin": {"ge": 0, "le": 10}}
+    OPTION_RANGES = DeclaredRanges()
 
 
 def fundamental(rig: Rig) -> np.ndarray:

@@ -12,7 +12,8 @@ from typing import Callable
 import numpy as np
 
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.fractional.options import JobLimit
+from geocert.solvers.core.declared_options import option, redeclared
+from geocert.solvers.fractional.options import JobLimit, _describe, _within
 from geocert.solvers.lines import align, incremental, linear, polynomial
 from geocert.solvers.lines.geometry import LineSet, Rig, directions_and_points, line_set, reprojection_residuals
 from geocert.solvers.lines.matching import MatchingOptions, MatchingStopped, four_view_matches
@@ -72,17 +73,22 @@ class StereoLinesOptions(JobLimit):
     on bench/stereo_lines.py's sequence at 0.5 px, a median rotation error of 0.26 degrees
     without it, 0.07 with it; it costs about a third of the frame pair)."""
 
-    solver: str = "incremental"
-    sample_size: int | None = 3  # None: the solver's minimum (2; 3 for linear)
-    ransac: RansacOptions = field(default_factory=RansacOptions)
-    refine: bool = True
-    incremental_iterations: int = 3
-    matching: MatchingOptions = field(default_factory=MatchingOptions)
+    solver: str = option("incremental", choices=tuple(SOLVERS))
+    # None: the solver's minimum (2; 3 for linear)
+    sample_size: int | None = option(3, ge=2, le=10, description=(
+        "lines per RANSAC sample (null: the solver's minimum, 2; linear 3)"))
+    ransac: RansacOptions = option(default_factory=RansacOptions)
+    refine: bool = option(True, description="refine each motion on its inliers (least squares)")
+    incremental_iterations: int = option(3, ge=1, le=20, description=(
+        "the incremental solver's relinearisations (1: the thesis's)"))
+    matching: MatchingOptions = option(default_factory=MatchingOptions)
     # Per frame pair: RANSAC draws no sample after it and the pair keeps its best motion so far.
-    time_limit_s: float = 10.0
-
-    OPTION_RANGES = {"sample_size": {"ge": 2, "le": 10}, "incremental_iterations": {"ge": 1, "le": 20},
-                     "time_limit_s": {"gt": 0, "le": 3600}}
+    time_limit_s: float = option(10.0, gt=0, le=3600, description=(
+        "per frame pair: RANSAC draws no sample after it, and the pair keeps its best motion so far (its reason "
+        "says so)"))
+    job_time_limit_s: float = redeclared(JobLimit, "job_time_limit_s", description=(
+        "the job in all: its pairs share this one clock (past it the pair running keeps its best motion so far, "
+        "and the pairs not started read time_limit, not started)"))
 
     def __post_init__(self):
         self.ransac = _nested(RansacOptions, self.ransac, "options/ransac")
@@ -93,16 +99,17 @@ class StereoLinesOptions(JobLimit):
             raise InputError("options/solver", f"unknown solver {self.solver!r} (known: {', '.join(SOLVERS)})")
         if not isinstance(self.refine, bool):
             raise InputError("options/refine", "must be true or false")
-        if self.sample_size is not None and not 2 <= self.sample_size <= 10:
-            raise InputError("options/sample_size", "must be between 2 and 10")
+        ranges = self.OPTION_RANGES
+        if self.sample_size is not None and not _within(self.sample_size, ranges["sample_size"]):
+            raise InputError("options/sample_size", f"must be {_describe(ranges['sample_size'])}")
         if self.sample_size is not None and self.sample_size < self.minimum_lines:
             raise InputError("options/sample_size", f"the {self.solver} solver needs at least {self.minimum_lines} "
                                                     f"lines per sample, got {self.sample_size}")
-        if not 1 <= self.incremental_iterations <= 20:
-            raise InputError("options/incremental_iterations", "must be between 1 and 20")
+        if not _within(self.incremental_iterations, ranges["incremental_iterations"]):
+            raise InputError("options/incremental_iterations", f"must be {_describe(ranges['incremental_iterations'])}")
         if not (isinstance(self.time_limit_s, (int, float)) and math.isfinite(self.time_limit_s)
-                and 0 < self.time_limit_s <= 3600):
-            raise InputError("options/time_limit_s", "must be a finite number > 0 and <= 3600")
+                and _within(self.time_limit_s, ranges["time_limit_s"])):
+            raise InputError("options/time_limit_s", f"must be a finite number {_describe(ranges['time_limit_s'])}")
         self.check_job_limit()
 
     @property

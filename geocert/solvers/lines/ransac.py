@@ -15,6 +15,7 @@ from typing import Callable
 
 import numpy as np
 
+from geocert.solvers.core.declared_options import DeclaredRanges, option
 from geocert.solvers.lines import incremental
 from geocert.solvers.lines.geometry import LineSet, cross, directions_and_points, line_errors
 from geocert.solvers.lines.results import Degenerate, Motion
@@ -22,18 +23,25 @@ from geocert.solvers.lines.results import Degenerate, Motion
 
 @dataclass
 class RansacOptions:
-    threshold_px: float = 2.0  # a line is an inlier when the RMS of its 8 endpoint transfer distances is within this
-    confidence: float = 0.99
-    max_iterations: int = 200
-    min_conditioning: float = 0.002  # sin of the angle between a line's two stereo planes, below: not sampled
-    min_sample_angle_deg: float = 5.0  # samples whose lines are all within this of one direction are skipped
-    seed: int | None = 0  # reproducible sampling (None: fresh randomness)
-    min_inliers: int = 6  # fewer inliers than this: the pair fails (its motion is not trusted)
-    local_optimisation: int = 3  # rounds of refitting a new best hypothesis on its inliers (0: none)
+    # a line is an inlier when the RMS of its 8 endpoint transfer distances is within this
+    threshold_px: float = option(2.0, gt=0, le=1000, description=(
+        "inlier: RMS of a line's 8 endpoint transfer distances (pixels)"))
+    confidence: float = option(0.99, gt=0, lt=1)
+    max_iterations: int = option(200, ge=1, le=100_000)
+    # sin of the angle between a line's two stereo planes, below: not sampled
+    min_conditioning: float = option(0.002, ge=0, le=1, description=(
+        "lines whose stereo planes meet at a smaller sine are not sampled"))
+    # samples whose lines are all within this of one direction are skipped
+    min_sample_angle_deg: float = option(5.0, ge=0, le=90)
+    seed: int | None = option(0, description="sampling seed (null: fresh randomness)")  # reproducible sampling
+    # fewer inliers than this: the pair fails (its motion is not trusted)
+    min_inliers: int = option(6, ge=2, le=10_000, description=(
+        "a pair with fewer inliers fails (its motion is not trusted)"))
+    # rounds of refitting a new best hypothesis on its inliers (0: none)
+    local_optimisation: int = option(3, ge=0, le=20, description=(
+        "rounds of refitting each new best sample on its inliers"))
 
-    OPTION_RANGES = {"threshold_px": {"gt": 0, "le": 1000}, "confidence": {"gt": 0, "lt": 1},
-                     "max_iterations": {"ge": 1, "le": 100_000},
-                     "min_inliers": {"ge": 2, "le": 10_000}}
+    OPTION_RANGES = DeclaredRanges()
 
 
 @dataclass
