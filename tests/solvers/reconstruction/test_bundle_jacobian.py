@@ -71,9 +71,9 @@ def test_the_residuals_are_each_observations_own_camera_in_any_order(model, monk
 
 
 def test_crossed_is_the_skew_matrix_product():
-    """calibrated._crossed(x, a), which the rotation columns of both metric adjustments' Jacobians
+    """bundle._crossed(x, a), which the rotation columns of the Schur problems' Jacobians
     use, is -a [x]_x written out (each row of a crossed with x)."""
-    from geocert.solvers.reconstruction.calibrated import _crossed, _skew
+    from geocert.solvers.reconstruction.bundle import _crossed, _skew
 
     rng = np.random.default_rng(4)
     x, a = rng.normal(size=(30, 3)), rng.normal(size=(30, 2, 3))
