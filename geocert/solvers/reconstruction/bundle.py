@@ -1,11 +1,16 @@
-"""Bundle adjustments, both by Levenberg-Marquardt with the points eliminated (schur.py).
+"""Bundle adjustments: projective, and the one metric adjustment (``adjust``), whose normal
+equations are solved by Levenberg-Marquardt with the points eliminated (schur.py) or by
+scipy.optimize.least_squares.
 
 Projective: each camera's 12 entries and each point's 4 homogeneous coordinates are free (the
 gauge, a 4x4 projective change of frame and each row's scale, is left to the damping).
-Metric: one K shared by every view (fx, fy, skew, cx, cy), a rotation vector and a translation
-per view, each point's 3 coordinates. Residuals are in pixels either way; ``f_scale`` (pixels)
-makes the loss Huber's, None plain least squares; ``stop`` (schur.StopRule, Ceres's tests by
-default) says when an adjustment ends before ``max_iterations``."""
+Metric: one K shared by every view (``MODELS``: which of its entries, and which per-view
+intrinsics, are free) or each view's own K (held, or its focal terms scaled by one shared factor),
+a rotation vector and a translation per view, each point's 3 coordinates; ``Free`` says what
+moves, ``Schur`` or ``LeastSquares`` how each step is solved and when it stops. Residuals are in
+pixels either way; ``f_scale`` (pixels) makes the Schur strategy's loss Huber's, None plain least
+squares; ``stop`` (schur.StopRule, Ceres's tests by default) says when an adjustment ends before
+``max_iterations``. ``metric`` is ``adjust`` of one shared K by the Schur strategy, as a tuple."""
 
 from __future__ import annotations
 
@@ -89,10 +94,9 @@ class Free:
 
     ``intrinsics``: one of MODELS when K is one shared (3, 3) matrix; with one K per camera (n, 3,
     3): "given" (each K held) or "focal_scale" (every K's focal terms times one shared factor,
-    returned as ``Adjusted.scale``; Schur only). ``held``: per camera, True where it is held
-    (Schur: its Jacobian columns zero, so its step is zero, and the shared intrinsics are then
-    held as well only if the caller says so by ``intrinsics``; least squares: out of the
-    parameters). ``focals``, ``centres``, ``groups`` and ``k1``: the per-view models' starting
+    returned as ``Adjusted.scale``; Schur only). ``held`` (each view's own K only): per camera,
+    True where it is held (Schur: its Jacobian columns zero, so its step is zero; least squares:
+    out of the parameters). ``focals``, ``centres``, ``groups`` and ``k1``: the per-view models' starting
     values (see MODELS)."""
     intrinsics: str = "simple"
     held: np.ndarray | None = None
@@ -151,6 +155,8 @@ def adjust(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         return _least_squares(K, rotations, translations, points, view, track, pixels, free.held, normal_equations)
     if np.ndim(K) == 3:
         problem = _own_K(K, rotations, translations, view, pixels, free)
+    elif free.held is not None:
+        raise ValueError("held cameras are for each view's own K")
     else:
         problem = _shared_K(K, rotations, translations, view, pixels, free)
     residual, jacobian, A, start, finish = problem

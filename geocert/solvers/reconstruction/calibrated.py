@@ -18,9 +18,10 @@ essential matrix fixes the pair's geometry up to scale). The steps, incremental 
 3. Views added one at a time, the one seeing the most and best-spread triangulated points first
    (COLMAP's visibility pyramid), by PnP RANSAC
    (``cv2.solvePnPRansac``) on those points, then the tracks they complete triangulated.
-4. Metric bundle adjustment (``scipy.optimize.least_squares``, each rotation as a rotation
-   vector w in exp(w) R0, an analytic sparse Jacobian, soft-L1 loss) after each view and at the
-   end; observations that reproject farther than ``max_reprojection_px`` or lie behind their
+4. Metric bundle adjustment (bundle.adjust, each view's K held: ``ba_solver`` "schur",
+   Levenberg-Marquardt on the cameras' reduced system with Huber's loss, or "lsmr",
+   ``scipy.optimize.least_squares`` with each rotation as a rotation vector w in exp(w) R0 and
+   soft-L1 loss; analytic Jacobians either way) after each view and at the end; observations that reproject farther than ``max_reprojection_px`` or lie behind their
    camera are then marked outliers and counted, and a point left with fewer than two inlier
    observations is dropped. The final adjustments (``final_solver``, default "schur":
    Levenberg-Marquardt on the cameras' reduced system, run to convergence) move the cameras by
@@ -385,9 +386,9 @@ def _local_views(state: _State, view: int, count: int) -> np.ndarray:
 def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options: CalibratedOptions,
                          track_mask: np.ndarray | None = None, free_views: np.ndarray | None = None,
                          stop: schur.StopRule = schur.CERES) -> int:
-    """The metric bundle adjustment of ``_bundle_adjust`` by Levenberg-Marquardt on the cameras'
-    reduced system (schur.solve: the points eliminated, the normal equations solved exactly, Huber
-    loss at ``ba_f_scale_px``) until ``stop`` (or ``max_iterations``) ends it; returns the iterations used. Every
+    """The metric bundle adjustment of ``_bundle_adjust`` by bundle.adjust's Schur strategy
+    (Levenberg-Marquardt on the cameras' reduced system: the points eliminated, the normal
+    equations solved exactly, Huber loss at ``ba_f_scale_px``) until ``stop`` (or ``max_iterations``) ends it; returns the iterations used. Every
     camera is free (the damping holds the gauge's seven free directions); the world is then moved
     rigidly so view ``fixed`` is back at R = I, t = 0. Each camera is a rotation vector and a
     translation, with the Jacobian analytic. Only the tracks in ``track_mask`` (all when None) take part.
