@@ -1,15 +1,25 @@
-"""Bundle adjustments, both by Levenberg-Marquardt with the points eliminated (schur.py).
+"""Bundle adjustments: projective, and the one metric adjustment (``adjust``), whose normal
+equations are solved by Levenberg-Marquardt with the points eliminated (schur.py) or by
+scipy.optimize.least_squares.
 
 Projective: each camera's 12 entries and each point's 4 homogeneous coordinates are free (the
 gauge, a 4x4 projective change of frame and each row's scale, is left to the damping).
-Metric: one K shared by every view (fx, fy, skew, cx, cy), a rotation vector and a translation
-per view, each point's 3 coordinates. Residuals are in pixels either way; ``f_scale`` (pixels)
-makes the loss Huber's, None plain least squares; ``stop`` (schur.StopRule, Ceres's tests by
-default) says when an adjustment ends before ``max_iterations``."""
+Metric: one K shared by every view (``MODELS``: which of its entries, and which per-view
+intrinsics, are free) or each view's own K (held, or its focal terms scaled by one shared factor),
+a rotation vector and a translation per view, each point's 3 coordinates; ``Free`` says what
+moves, ``Schur`` or ``LeastSquares`` how each step is solved and when it stops. Residuals are in
+pixels either way; ``f_scale`` (pixels) makes the Schur strategy's loss Huber's, None plain least
+squares; ``stop`` (schur.StopRule, Ceres's tests by default) says when an adjustment ends before
+``max_iterations``. ``metric`` is ``adjust`` of one shared K by the Schur strategy, as a tuple."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 import numpy as np
+from scipy.optimize import least_squares
+from scipy.sparse import coo_matrix
 from scipy.spatial.transform import Rotation
 
 from geocert.solvers.reconstruction import schur
@@ -67,20 +77,114 @@ MODELS = ("simple", "full", "fixed", "varying", "principal", "radial", "principa
 RADIAL_MODELS = ("radial", "fixed_radial")  # the models with the radial term k1, the last of their S
 
 
-def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, points: np.ndarray, view: np.ndarray,
-           track: np.ndarray, pixels: np.ndarray, f_scale: float | None = None, max_iterations: int = 30,
-           model: str = "simple", focals: np.ndarray | None = None, should_stop=None, k1: float = 0.0,
-           stop: schur.StopRule = schur.CERES, centres: np.ndarray | None = None,
-           groups: np.ndarray | None = None):
-    """Refine one shared K (``model``: "simple" f with square pixels, no skew and cx, cy fixed; "full"
-    fx, fy, skew, cx, cy; "fixed" K as given; "radial" f and the distortion term, from ``k1``;
-    "fixed_radial" K as given and the distortion term),
-    rotations (n, 3, 3), translations (n, 3) and points (p, 3) against pixel observations. Returns
-    K, rotations, translations, points, residuals (M, 2), and k1 (``k1`` as given unless
-    RADIAL_MODELS).
-    "varying", "principal_per_view" and "focal_groups" return one K per view (n, 3, 3), from
-    ``focals`` (n,) and ``centres`` (n, 2) (K's where not given; "focal_groups" starts each group
-    from its views' mean focal length)."""
+# One metric bundle adjustment: ``adjust``. What it moves is a ``Free``; how each step's normal
+# equations are solved is the ``normal_equations`` strategy: ``Schur`` (schur.solve: the points
+# eliminated, the reduced camera system solved exactly, Levenberg-Marquardt with Huber's loss) or
+# ``LeastSquares`` (scipy.optimize.least_squares' trust region with LSMR on the sparse Jacobian).
+# The cameras' projection comes in three forms, each with its own arithmetic order, since the
+# results they have given (and the tests' ambiguous rigs built on them) depend on it to the last
+# bit: one shared K (MODELS), each view's own K under the Schur strategy (the focal terms
+# optionally scaled by one shared factor), and each view's own K under least squares (each free
+# rotation exp(w) R0 about its start, a held camera out of the parameters).
+
+
+@dataclass(frozen=True)
+class Free:
+    """What a metric bundle adjustment moves; what it does not move stays as given.
+
+    ``intrinsics``: one of MODELS when K is one shared (3, 3) matrix; with one K per camera (n, 3,
+    3): "given" (each K held) or "focal_scale" (every K's focal terms times one shared factor,
+    returned as ``Adjusted.scale``; Schur only). ``held`` (each view's own K only): per camera,
+    True where it is held (Schur: its Jacobian columns zero, so its step is zero; least squares:
+    out of the parameters). ``focals``, ``centres``, ``groups`` and ``k1``: the per-view models' starting
+    values (see MODELS)."""
+    intrinsics: str = "simple"
+    held: np.ndarray | None = None
+    focals: np.ndarray | None = None
+    centres: np.ndarray | None = None
+    groups: np.ndarray | None = None
+    k1: float = 0.0
+
+
+@dataclass(frozen=True)
+class Schur:
+    """Levenberg-Marquardt on the reduced camera system (schur.solve): at most ``max_iterations``
+    steps, ended sooner by ``stop`` or ``should_stop()``; Huber's loss at ``f_scale`` pixels (None:
+    plain least squares). Every camera is a rotation vector and a translation."""
+    max_iterations: int = 30
+    stop: schur.StopRule = schur.CERES
+    f_scale: float | None = None
+    should_stop: Callable[[], bool] | None = None
+
+
+@dataclass(frozen=True)
+class LeastSquares:
+    """scipy.optimize.least_squares (trust region reflective, LSMR, ``x_scale="jac"``) with the
+    robust ``loss`` at ``f_scale`` pixels, at most ``max_nfev`` evaluations, ``ftol``."""
+    max_nfev: int
+    loss: str = "soft_l1"
+    f_scale: float = 1.0
+    ftol: float = 1e-8
+
+
+@dataclass
+class Adjusted:
+    """An adjustment's result: K (the shared one, or one per camera), rotations (n, 3, 3),
+    translations (n, 3), points (p, 3), the residuals (M, 2; None under least squares), k1, the
+    focal scale ("focal_scale"; 1.0 otherwise) and the iterations (Schur) or evaluations (least
+    squares) used."""
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    X: np.ndarray
+    residuals: np.ndarray | None
+    k1: float
+    scale: float
+    iterations: int
+
+
+def adjust(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, points: np.ndarray, view: np.ndarray,
+           track: np.ndarray, pixels: np.ndarray, free: Free = Free(),
+           normal_equations: Schur | LeastSquares = Schur()) -> Adjusted:
+    """Refine the cameras (rotations (n, 3, 3), translations (n, 3)), the points (p, 3) and what
+    ``free`` frees of K against the pixel observations (view, track, pixels (M, 2)), by the
+    ``normal_equations`` strategy. Every point must be observed."""
+    if isinstance(normal_equations, LeastSquares):
+        if np.ndim(K) != 3 or free.intrinsics != "given":
+            raise ValueError("least squares adjusts the cameras and points under each view's own K")
+        return _least_squares(K, rotations, translations, points, view, track, pixels, free.held, normal_equations)
+    if np.ndim(K) == 3:
+        problem = _own_K(K, rotations, translations, view, pixels, free)
+    elif free.held is not None:
+        raise ValueError("held cameras are for each view's own K")
+    else:
+        problem = _shared_K(K, rotations, translations, view, pixels, free)
+    residual, jacobian, A, start, finish = problem
+    A, S, B, r, iterations = schur.solve(residual, A, start, points.copy(), view, track, normal_equations.f_scale,
+                                         normal_equations.max_iterations, stop=normal_equations.stop,
+                                         jacobian=jacobian, should_stop=normal_equations.should_stop)
+    K_out, k1, scale = finish(A, S)
+    return Adjusted(K_out, Rotation.from_rotvec(A[:, :3]).as_matrix(), A[:, 3:6], B, r, k1, scale, int(iterations))
+
+
+def _spread_rotations(view: np.ndarray):
+    """For Am = A[view]: each camera's rotation (and its left Jacobian) computed once, from its
+    first observation's row, and spread to its observations. Returns (rotations(Am),
+    rotation_columns(Am, cam, du_dcam)): R per observation, and d pixel / d w for cam = R B + t."""
+    _, rows, inverse = np.unique(view, return_index=True, return_inverse=True)
+
+    def rotations(Am):
+        return Rotation.from_rotvec(Am[rows, :3]).as_matrix()[inverse]
+
+    def rotation_columns(Am, cam, du_dcam):
+        return _crossed(cam - Am[:, 3:6], du_dcam) @ _left_jacobian(Am[rows, :3])[inverse]
+
+    return rotations, rotation_columns
+
+
+def _shared_K(K, rotations, translations, view, pixels, free: Free):
+    """The Schur problem of one shared K under ``free.intrinsics`` (MODELS)."""
+    model, focals, centres, groups, k1 = free.intrinsics, free.focals, free.centres, free.groups, free.k1
     A = np.hstack([Rotation.from_matrix(rotations).as_rotvec(), translations])
     given = np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]])
     if model == "varying":
@@ -108,16 +212,11 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
             return given
         return S
 
-    # Am is A[view]: each view's rotation (and its left Jacobian) is computed once, from its first
-    # observation's row, and spread to its observations.
-    _, rows, inverse = np.unique(view, return_index=True, return_inverse=True)
-
-    def rotations(Am):
-        return Rotation.from_rotvec(Am[rows, :3]).as_matrix()[inverse]
+    rotations_of, rotation_columns = _spread_rotations(view)
 
     def residual(Am, S, Bm):
         k = entries(S)
-        cam = np.einsum("mij,mj->mi", rotations(Am), Bm) + Am[:, 3:6]
+        cam = np.einsum("mij,mj->mi", rotations_of(Am), Bm) + Am[:, 3:6]
         u = cam[:, 0] / cam[:, 2]
         v = cam[:, 1] / cam[:, 2]
         if model == "varying":
@@ -136,11 +235,9 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         """Analytic (ja, js, jb) of ``residual``: pixels = M n' + c with n = cam[:2] / cam[2],
         n' = n (1 + k1 |n|^2) (RADIAL_MODELS) or n, M = [[fx, skew], [0, fy]] (each view's f I for
         "varying"), cam = exp(w) B + t (a rotation vector's derivative by SO(3)'s left Jacobian)."""
-        from geocert.solvers.reconstruction.calibrated import _crossed, _left_jacobian
-
         k = entries(S)
         m = len(Am)
-        R = rotations(Am)
+        R = rotations_of(Am)
         cam = np.einsum("mij,mj->mi", R, Bm) + Am[:, 3:6]
         z = cam[:, 2]
         n = cam[:, :2] / z[:, None]
@@ -162,7 +259,7 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
         else:
             M[:, 0, 0], M[:, 0, 1], M[:, 1, 1] = k[0], k[2], k[1]
         du_dcam = M @ dseen
-        d_w = _crossed(cam - Am[:, 3:6], du_dcam) @ _left_jacobian(Am[rows, :3])[inverse]
+        d_w = rotation_columns(Am, cam, du_dcam)
         ja = np.concatenate([d_w, du_dcam], axis=2)
         ones, zeros = np.ones(m), np.zeros(m)
         if model == "varying":
@@ -194,18 +291,185 @@ def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
              "radial": np.array([np.sqrt(abs(given[0] * given[1])), k1]), "fixed_radial": np.array([k1]),
              "principal_per_view": np.array([np.sqrt(abs(given[0] * given[1]))]),
              "focal_groups": group_focals if model == "focal_groups" else None}[model]
-    A, S, B, r, _ = schur.solve(residual, A, start, points.copy(), view, track, f_scale, max_iterations, stop=stop,
-                                jacobian=jacobian, should_stop=should_stop)
-    k = entries(S)
-    K = np.array([[k[0], k[2], k[3]], [0.0, k[1], k[4]], [0.0, 0.0, 1.0]])
-    if model == "varying":  # one K per view
-        K = np.array([[[f, 0.0, k[3]], [0.0, f, k[4]], [0.0, 0.0, 1.0]] for f in A[:, 6]])
-    if model == "principal_per_view":
-        K = np.array([[[k[0], 0.0, u], [0.0, k[0], v], [0.0, 0.0, 1.0]] for u, v in A[:, 6:8]])
-    if model == "focal_groups":
-        K = np.array([[[f, 0.0, u], [0.0, f, v], [0.0, 0.0, 1.0]] for f, (u, v) in zip(S[groups], A[:, 6:8])])
-    return (K, Rotation.from_rotvec(A[:, :3]).as_matrix(), A[:, 3:6], B, r,
-            float(S[-1]) if model in RADIAL_MODELS else k1)
+
+    def finish(A, S):
+        k = entries(S)
+        K = np.array([[k[0], k[2], k[3]], [0.0, k[1], k[4]], [0.0, 0.0, 1.0]])
+        if model == "varying":  # one K per view
+            K = np.array([[[f, 0.0, k[3]], [0.0, f, k[4]], [0.0, 0.0, 1.0]] for f in A[:, 6]])
+        if model == "principal_per_view":
+            K = np.array([[[k[0], 0.0, u], [0.0, k[0], v], [0.0, 0.0, 1.0]] for u, v in A[:, 6:8]])
+        if model == "focal_groups":
+            K = np.array([[[f, 0.0, u], [0.0, f, v], [0.0, 0.0, 1.0]] for f, (u, v) in zip(S[groups], A[:, 6:8])])
+        return K, (float(S[-1]) if model in RADIAL_MODELS else k1), 1.0
+
+    return residual, jacobian, A, start, finish
+
+
+def _own_K(K, rotations, translations, view, pixels, free: Free):
+    """The Schur problem of each camera's own K (n, 3, 3), held ("given") or with its focal terms
+    scaled by one shared factor ("focal_scale": pixels = c + s F xc[:2] / xc[2]); a camera
+    ``free.held`` keeps its place (its Jacobian columns zero)."""
+    if free.intrinsics not in ("given", "focal_scale"):
+        raise ValueError(f"each view's own K is 'given' or 'focal_scale', not {free.intrinsics!r}")
+    focal = free.intrinsics == "focal_scale"
+    Ks = np.asarray(K)[view]
+    F, centre = Ks[:, :2, :2], Ks[:, :2, 2]
+    held = None if free.held is None else np.asarray(free.held)[view]  # observations by held cameras
+    rotations_of, rotation_columns = _spread_rotations(view)
+
+    def project(Am, S, Bm):
+        R = rotations_of(Am)
+        xc = np.einsum("nij,nj->ni", R, Bm) + Am[:, 3:6]
+        z = np.where(np.abs(xc[:, 2]) < 1e-12, 1e-12, xc[:, 2])
+        seen = np.einsum("nij,nj->ni", F, xc[:, :2] / z[:, None])  # the pixel's offset at scale 1
+        return R, xc, z, seen, (S[0] if focal else 1.0)
+
+    def residual(Am, S, Bm):
+        _, _, _, seen, scale = project(Am, S, Bm)
+        return centre + scale * seen - pixels
+
+    def jacobian(Am, S, Bm):
+        R, xc, z, seen, scale = project(Am, S, Bm)
+        dn = np.zeros((len(Am), 2, 3))  # d (xc[:2] / z) / d xc
+        dn[:, 0, 0] = dn[:, 1, 1] = 1.0 / z
+        dn[:, :, 2] = -xc[:, :2] / (z ** 2)[:, None]
+        du_dxc = scale * F @ dn
+        d_w = rotation_columns(Am, xc, du_dxc)
+        d_s = seen[:, :, None] if focal else np.zeros((len(Am), 2, 0))
+        d_camera = np.concatenate([d_w, du_dxc], axis=2)
+        if held is not None:
+            d_camera[held] = 0.0
+        return d_camera, d_s, du_dxc @ R
+
+    A = np.array([np.r_[Rotation.from_matrix(R).as_rotvec(), t] for R, t in zip(rotations, translations)])
+
+    def finish(A, S):
+        return K, free.k1, (float(S[0]) if focal else 1.0)
+
+    return residual, jacobian, A, np.ones(1) if focal else np.zeros(0), finish
+
+
+def _least_squares(K, rotations, translations, points, view, track, pixels, held, solver: LeastSquares) -> Adjusted:
+    """Each camera's own K held; each free camera's rotation exp(w) R0 with R0 its rotation at the
+    start and w a rotation vector (starting at 0); the cameras ``held`` out of the parameters."""
+    n = len(rotations)
+    held = np.zeros(n, dtype=bool) if held is None else np.asarray(held, dtype=bool)
+    free_cams = np.flatnonzero(~held)
+    cam_of = np.full(n, -1)
+    cam_of[free_cams] = np.arange(len(free_cams))
+    o_cam, o_pt = cam_of[view], track
+    Ks = np.asarray(K)[view]
+    n_free, n_cam = len(free_cams), 6 * len(free_cams)
+    R0 = np.array([rotations[c] for c in free_cams]).reshape(-1, 3, 3)
+    moving = o_cam >= 0
+    m_idx = np.flatnonzero(moving)
+    M = len(view)
+    R_all, t_all = np.asarray(rotations, dtype=float).reshape(-1, 3, 3), np.asarray(translations, dtype=float).reshape(-1, 3)
+
+    def cameras(x):
+        """Per observation: rotation, translation (a held camera's where o_cam < 0), and w."""
+        c = x[:n_cam].reshape(-1, 6)
+        Rf = Rotation.from_rotvec(c[:, :3]).as_matrix().reshape(-1, 3, 3) @ R0 if n_free else R0
+        R_obs = R_all[view]
+        t_obs = t_all[view]
+        R_obs[moving] = Rf[o_cam[moving]]
+        t_obs[moving] = c[o_cam[moving], 3:]
+        return R_obs, t_obs, c
+
+    def project(x):
+        R_obs, t_obs, c = cameras(x)
+        X = x[n_cam:].reshape(-1, 3)[o_pt]
+        xc = np.einsum("nij,nj->ni", R_obs, X) + t_obs
+        h = np.einsum("nij,nj->ni", Ks, xc)
+        z = np.where(np.abs(h[:, 2]) < 1e-12, 1e-12, h[:, 2])
+        return R_obs, t_obs, c, X, xc, h, z
+
+    def residuals(x):
+        *_, h, z = project(x)
+        return (h[:, :2] / z[:, None] - pixels).ravel()
+
+    r = np.arange(M)
+    rows = np.concatenate([np.repeat(2 * m_idx[:, None] + np.arange(2)[None, :], 6, axis=1).ravel(),
+                           np.repeat(2 * r[:, None] + np.arange(2)[None, :], 3, axis=1).ravel()])
+    cam_cols = (6 * o_cam[m_idx])[:, None] + np.arange(6)[None, :]
+    pt_cols = (n_cam + 3 * o_pt)[:, None] + np.arange(3)[None, :]
+    cols = np.concatenate([np.tile(cam_cols, (1, 2)).reshape(-1, 2, 6).ravel(),
+                           np.tile(pt_cols, (1, 2)).reshape(-1, 2, 3).ravel()])
+
+    def jacobian(x):
+        R_obs, t_obs, c, X, xc, h, z = project(x)
+        dh = np.zeros((M, 2, 3))  # d pixel / d h
+        dh[:, 0, 0] = dh[:, 1, 1] = 1.0 / z
+        dh[:, :, 2] = -h[:, :2] / (z ** 2)[:, None]
+        du_dxc = dh @ Ks  # (n, 2, 3)
+        d_pt = du_dxc @ R_obs
+        m = m_idx
+        d_w = -du_dxc[m] @ _skew(xc[m] - t_obs[m]) @ _left_jacobian(c[o_cam[m], :3])
+        d_cam = np.concatenate([d_w, du_dxc[m]], axis=2)  # (k, 2, 6)
+        vals = np.concatenate([d_cam.ravel(), d_pt.ravel()])
+        return coo_matrix((vals, (rows, cols)), shape=(2 * M, len(x))).tocsr()
+
+    x0 = np.concatenate([np.concatenate([np.r_[np.zeros(3), translations[v]] for v in free_cams])
+                         if n_free else np.zeros(0), np.asarray(points).ravel()])
+    result = least_squares(residuals, x0, jac=jacobian, loss=solver.loss, f_scale=solver.f_scale,
+                           x_scale="jac", method="trf", tr_solver="lsmr", max_nfev=solver.max_nfev,
+                           ftol=solver.ftol, xtol=1e-10, gtol=1e-10)
+    _, _, c = cameras(result.x)
+    R_out = [np.array(R, dtype=float, copy=True) for R in rotations]
+    t_out = [np.array(t, dtype=float, copy=True) for t in translations]
+    for k, v in enumerate(free_cams):
+        R_out[v] = Rotation.from_rotvec(c[k, :3]).as_matrix() @ R0[k]
+        t_out[v] = c[k, 3:].copy()
+    return Adjusted(K, np.array(R_out).reshape(-1, 3, 3), np.array(t_out).reshape(-1, 3),
+                    result.x[n_cam:].reshape(-1, 3), None, 0.0, 1.0, int(result.nfev))
+
+
+def metric(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, points: np.ndarray, view: np.ndarray,
+           track: np.ndarray, pixels: np.ndarray, f_scale: float | None = None, max_iterations: int = 30,
+           model: str = "simple", focals: np.ndarray | None = None, should_stop=None, k1: float = 0.0,
+           stop: schur.StopRule = schur.CERES, centres: np.ndarray | None = None,
+           groups: np.ndarray | None = None):
+    """``adjust`` of one shared K by the Schur strategy, as a tuple: refine one shared K
+    (``model``: "simple" f with square pixels, no skew and cx, cy fixed; "full" fx, fy, skew, cx,
+    cy; "fixed" K as given; "radial" f and the distortion term, from ``k1``; "fixed_radial" K as
+    given and the distortion term), rotations (n, 3, 3), translations (n, 3) and points (p, 3)
+    against pixel observations. Returns K, rotations, translations, points, residuals (M, 2), and
+    k1 (``k1`` as given unless RADIAL_MODELS).
+    "varying", "principal_per_view" and "focal_groups" return one K per view (n, 3, 3), from
+    ``focals`` (n,) and ``centres`` (n, 2) (K's where not given; "focal_groups" starts each group
+    from its views' mean focal length)."""
+    out = adjust(K, rotations, translations, points, view, track, pixels,
+                 Free(model, focals=focals, centres=centres, groups=groups, k1=k1),
+                 Schur(max_iterations, stop, f_scale, should_stop))
+    return out.K, out.R, out.t, out.X, out.residuals, out.k1
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrices of rows of v (n, 3) -> (n, 3, 3)."""
+    S = np.zeros((len(v), 3, 3))
+    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return S
+
+
+def _crossed(x: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """-a @ [x]_x for rows x (M, 3) and a (M, r, 3): each row of a crossed with x, x × a_i
+    (the skew matrix's product written out: no (M, 3, 3) matrices built and multiplied)."""
+    x0, x1, x2 = x[:, 0, None], x[:, 1, None], x[:, 2, None]
+    a0, a1, a2 = a[:, :, 0], a[:, :, 1], a[:, :, 2]
+    return np.stack([x1 * a2 - x2 * a1, x2 * a0 - x0 * a2, x0 * a1 - x1 * a0], axis=2)
+
+
+def _left_jacobian(w: np.ndarray) -> np.ndarray:
+    """SO(3)'s left Jacobian J(w) (n, 3, 3): exp(w + e) = exp(J(w) e) exp(w) to first order."""
+    theta = np.linalg.norm(w, axis=1)
+    W = _skew(w)
+    small = theta < 1e-8
+    th = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5, (1 - np.cos(th)) / th ** 2)
+    b = np.where(small, 1.0 / 6.0, (th - np.sin(th)) / th ** 3)
+    return np.eye(3)[None] + a[:, None, None] * W + b[:, None, None] * (W @ W)
 
 
 def undistort(pixels: np.ndarray, centre, focal: float, k1: float) -> np.ndarray:

@@ -18,9 +18,10 @@ essential matrix fixes the pair's geometry up to scale). The steps, incremental 
 3. Views added one at a time, the one seeing the most and best-spread triangulated points first
    (COLMAP's visibility pyramid), by PnP RANSAC
    (``cv2.solvePnPRansac``) on those points, then the tracks they complete triangulated.
-4. Metric bundle adjustment (``scipy.optimize.least_squares``, each rotation as a rotation
-   vector w in exp(w) R0, an analytic sparse Jacobian, soft-L1 loss) after each view and at the
-   end; observations that reproject farther than ``max_reprojection_px`` or lie behind their
+4. Metric bundle adjustment (bundle.adjust, each view's K held: ``ba_solver`` "schur",
+   Levenberg-Marquardt on the cameras' reduced system with Huber's loss, or "lsmr",
+   ``scipy.optimize.least_squares`` with each rotation as a rotation vector w in exp(w) R0 and
+   soft-L1 loss; analytic Jacobians either way) after each view and at the end; observations that reproject farther than ``max_reprojection_px`` or lie behind their
    camera are then marked outliers and counted, and a point left with fewer than two inlier
    observations is dropped. The final adjustments (``final_solver``, default "schur":
    Levenberg-Marquardt on the cameras' reduced system, run to convergence) move the cameras by
@@ -51,7 +52,7 @@ from scipy.spatial.transform import Rotation
 from geocert.solvers.core import pieces
 from geocert.solvers.core.bnb import asks_to_stop
 from geocert.solvers.core.geometry import InputError
-from geocert.solvers.reconstruction import schur
+from geocert.solvers.reconstruction import bundle, schur
 
 
 @dataclass
@@ -339,114 +340,33 @@ def _remove_outliers(state: _State, options: CalibratedOptions) -> int:
     return len(bad)
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    """Cross-product matrices of rows of v (n, 3) -> (n, 3, 3)."""
-    S = np.zeros((len(v), 3, 3))
-    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
-    return S
-
-
-def _crossed(x: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """-a @ [x]_x for rows x (M, 3) and a (M, r, 3): each row of a crossed with x, x × a_i
-    (the skew matrix's product written out: no (M, 3, 3) matrices built and multiplied)."""
-    x0, x1, x2 = x[:, 0, None], x[:, 1, None], x[:, 2, None]
-    a0, a1, a2 = a[:, :, 0], a[:, :, 1], a[:, :, 2]
-    return np.stack([x1 * a2 - x2 * a1, x2 * a0 - x0 * a2, x0 * a1 - x1 * a0], axis=2)
-
-
-def _left_jacobian(w: np.ndarray) -> np.ndarray:
-    """SO(3)'s left Jacobian J(w) (n, 3, 3): exp(w + e) = exp(J(w) e) exp(w) to first order."""
-    theta = np.linalg.norm(w, axis=1)
-    W = _skew(w)
-    small = theta < 1e-8
-    th = np.where(small, 1.0, theta)
-    a = np.where(small, 0.5, (1 - np.cos(th)) / th ** 2)
-    b = np.where(small, 1.0 / 6.0, (th - np.sin(th)) / th ** 3)
-    return np.eye(3)[None] + a[:, None, None] * W + b[:, None, None] * (W @ W)
-
-
 def _bundle_adjust(state: _State, fixed: int, max_nfev: int, options: CalibratedOptions,
                    track_mask: np.ndarray | None = None) -> int:
     """Metric bundle adjustment of registered cameras (all but ``fixed``) and valid points over the
-    inlier observations; returns the function evaluations used.
-
-    Each free camera's rotation is exp(w) R0 with R0 its rotation at the start and w a rotation
-    vector (starting at 0); the Jacobian is analytic (pixels against w, t and the point). Only the
+    inlier observations by least squares (bundle.adjust's LeastSquares: soft-L1 by default, each
+    free rotation exp(w) R0 about its start); returns the function evaluations used. Only the
     tracks in ``track_mask`` (all when None) take part."""
     registered = state.registered
     valid = np.isfinite(state.points[:, 0]) & (True if track_mask is None else track_mask)
     obs = np.flatnonzero(state.inlier & registered[state.obs_view] & valid[state.obs_track])
     if len(obs) == 0:
         return 0
-    free_views = [int(v) for v in np.flatnonzero(registered) if v != fixed]
+    views = np.flatnonzero(registered)
     cam_of_view = np.full(state.n_views, -1)
-    cam_of_view[free_views] = np.arange(len(free_views))
+    cam_of_view[views] = np.arange(len(views))
     tracks = np.flatnonzero(valid)
     pt_of_track = np.full(len(state.points), -1)
     pt_of_track[tracks] = np.arange(len(tracks))
-    o_view, o_cam, o_pt = state.obs_view[obs], cam_of_view[state.obs_view[obs]], pt_of_track[state.obs_track[obs]]
-    o_px = state.obs_px[obs]
-    Ks = np.array(state.Ks)[o_view]
-    n_free, n_cam = len(free_views), 6 * len(free_views)
-    R0 = np.array([state.R[v] for v in free_views]).reshape(-1, 3, 3)
-    moving = o_cam >= 0
-    m_idx = np.flatnonzero(moving)
-
-    def cameras(x):
-        """Per observation: rotation, translation (the fixed camera's where o_cam < 0), and w."""
-        c = x[:n_cam].reshape(-1, 6)
-        Rf = Rotation.from_rotvec(c[:, :3]).as_matrix().reshape(-1, 3, 3) @ R0 if n_free else R0
-        R_obs = np.repeat(state.R[fixed][None], len(obs), axis=0)
-        t_obs = np.repeat(state.t[fixed][None], len(obs), axis=0)
-        R_obs[moving] = Rf[o_cam[moving]]
-        t_obs[moving] = c[o_cam[moving], 3:]
-        return R_obs, t_obs, c
-
-    def project(x):
-        R_obs, t_obs, c = cameras(x)
-        X = x[n_cam:].reshape(-1, 3)[o_pt]
-        xc = np.einsum("nij,nj->ni", R_obs, X) + t_obs
-        h = np.einsum("nij,nj->ni", Ks, xc)
-        z = np.where(np.abs(h[:, 2]) < 1e-12, 1e-12, h[:, 2])
-        return R_obs, t_obs, c, X, xc, h, z
-
-    def residuals(x):
-        *_, h, z = project(x)
-        return (h[:, :2] / z[:, None] - o_px).ravel()
-
-    r = np.arange(len(obs))
-    rows = np.concatenate([np.repeat(2 * m_idx[:, None] + np.arange(2)[None, :], 6, axis=1).ravel(),
-                           np.repeat(2 * r[:, None] + np.arange(2)[None, :], 3, axis=1).ravel()])
-    cam_cols = (6 * o_cam[m_idx])[:, None] + np.arange(6)[None, :]
-    pt_cols = (n_cam + 3 * o_pt)[:, None] + np.arange(3)[None, :]
-    cols = np.concatenate([np.tile(cam_cols, (1, 2)).reshape(-1, 2, 6).ravel(),
-                           np.tile(pt_cols, (1, 2)).reshape(-1, 2, 3).ravel()])
-
-    def jacobian(x):
-        R_obs, t_obs, c, X, xc, h, z = project(x)
-        dh = np.zeros((len(obs), 2, 3))  # d pixel / d h
-        dh[:, 0, 0] = dh[:, 1, 1] = 1.0 / z
-        dh[:, :, 2] = -h[:, :2] / (z ** 2)[:, None]
-        du_dxc = dh @ Ks  # (n, 2, 3)
-        d_pt = du_dxc @ R_obs
-        m = m_idx
-        d_w = -du_dxc[m] @ _skew(xc[m] - t_obs[m]) @ _left_jacobian(c[o_cam[m], :3])
-        d_cam = np.concatenate([d_w, du_dxc[m]], axis=2)  # (k, 2, 6)
-        vals = np.concatenate([d_cam.ravel(), d_pt.ravel()])
-        return coo_matrix((vals, (rows, cols)), shape=(2 * len(obs), len(x))).tocsr()
-
-    x0 = np.concatenate([np.concatenate([np.r_[np.zeros(3), state.t[v]] for v in free_views])
-                         if free_views else np.zeros(0), state.points[tracks].ravel()])
-    result = least_squares(residuals, x0, jac=jacobian, loss=options.ba_loss, f_scale=options.ba_f_scale_px,
-                           x_scale="jac", method="trf", tr_solver="lsmr", max_nfev=max_nfev,
-                           ftol=options.ba_ftol, xtol=1e-10, gtol=1e-10)
-    R_obs, t_obs, c = cameras(result.x)
-    for k, v in enumerate(free_views):
-        state.R[v] = Rotation.from_rotvec(c[k, :3]).as_matrix() @ R0[k]
-        state.t[v] = c[k, 3:].copy()
-    state.points[tracks] = result.x[n_cam:].reshape(-1, 3)
-    return int(result.nfev)
+    adjusted = bundle.adjust(np.array(state.Ks)[views], [state.R[v] for v in views], [state.t[v] for v in views],
+                             state.points[tracks], cam_of_view[state.obs_view[obs]],
+                             pt_of_track[state.obs_track[obs]], state.obs_px[obs],
+                             bundle.Free("given", held=views == fixed),
+                             bundle.LeastSquares(max_nfev, options.ba_loss, options.ba_f_scale_px, options.ba_ftol))
+    for c, v in enumerate(views):
+        if v != fixed:
+            state.R[v], state.t[v] = adjusted.R[c], adjusted.t[c]
+    state.points[tracks] = adjusted.X
+    return adjusted.iterations
 
 
 MAX_FOCAL_SCALE = 10.0  # refine_focal: the refined focal length within this factor of the one given
@@ -466,9 +386,9 @@ def _local_views(state: _State, view: int, count: int) -> np.ndarray:
 def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options: CalibratedOptions,
                          track_mask: np.ndarray | None = None, free_views: np.ndarray | None = None,
                          stop: schur.StopRule = schur.CERES) -> int:
-    """The metric bundle adjustment of ``_bundle_adjust`` by Levenberg-Marquardt on the cameras'
-    reduced system (schur.solve: the points eliminated, the normal equations solved exactly, Huber
-    loss at ``ba_f_scale_px``) until ``stop`` (or ``max_iterations``) ends it; returns the iterations used. Every
+    """The metric bundle adjustment of ``_bundle_adjust`` by bundle.adjust's Schur strategy
+    (Levenberg-Marquardt on the cameras' reduced system: the points eliminated, the normal
+    equations solved exactly, Huber loss at ``ba_f_scale_px``) until ``stop`` (or ``max_iterations``) ends it; returns the iterations used. Every
     camera is free (the damping holds the gauge's seven free directions); the world is then moved
     rigidly so view ``fixed`` is back at R = I, t = 0. Each camera is a rotation vector and a
     translation, with the Jacobian analytic. Only the tracks in ``track_mask`` (all when None) take part.
@@ -501,66 +421,33 @@ def _bundle_adjust_schur(state: _State, fixed: int, max_iterations: int, options
     seen = np.bincount(pt_of_track[state.obs_track[obs]], minlength=len(tracks)) > 0
     tracks, pt_of_track = tracks[seen], np.full(len(state.points), -1)
     pt_of_track[tracks] = np.arange(len(tracks))
-    o_cam, o_pt = cam_of_view[state.obs_view[obs]], pt_of_track[state.obs_track[obs]]
-    Ks = np.array(state.Ks)[state.obs_view[obs]]
-    px = state.obs_px[obs]
     # refine_focal: one shared scale s of every K's focal terms (pixels = c + s F xc[:2] / xc[2])
     focal = options.refine_focal and len(views) >= options.refine_focal_min_views and local is None
-    F, centre = Ks[:, :2, :2], Ks[:, :2, 2]
-    held = None if local is None else ~local[state.obs_view[obs]]  # observations by held cameras
-
-    # Am is A[o_cam]: each camera's rotation (and its left Jacobian) is computed once, from its
-    # first observation's row, and spread to its observations.
-    _, rows, inverse = np.unique(o_cam, return_index=True, return_inverse=True)
-
-    def project(Am, S, Bm):
-        R = Rotation.from_rotvec(Am[rows, :3]).as_matrix()[inverse]
-        xc = np.einsum("nij,nj->ni", R, Bm) + Am[:, 3:6]
-        z = np.where(np.abs(xc[:, 2]) < 1e-12, 1e-12, xc[:, 2])
-        seen = np.einsum("nij,nj->ni", F, xc[:, :2] / z[:, None])  # the pixel's offset at scale 1
-        return R, xc, z, seen, (S[0] if focal else 1.0)
-
-    def residual(Am, S, Bm):
-        _, _, _, seen, scale = project(Am, S, Bm)
-        return centre + scale * seen - px
-
-    def jacobian(Am, S, Bm):
-        R, xc, z, seen, scale = project(Am, S, Bm)
-        dn = np.zeros((len(Am), 2, 3))  # d (xc[:2] / z) / d xc
-        dn[:, 0, 0] = dn[:, 1, 1] = 1.0 / z
-        dn[:, :, 2] = -xc[:, :2] / (z ** 2)[:, None]
-        du_dxc = scale * F @ dn
-        d_w = _crossed(xc - Am[:, 3:6], du_dxc) @ _left_jacobian(Am[rows, :3])[inverse]
-        d_s = seen[:, :, None] if focal else np.zeros((len(Am), 2, 0))
-        d_camera = np.concatenate([d_w, du_dxc], axis=2)
-        if held is not None:
-            d_camera[held] = 0.0
-        return d_camera, d_s, du_dxc @ R
-
-    A = np.array([np.r_[Rotation.from_matrix(state.R[v]).as_rotvec(), state.t[v]] for v in views])
-    A, S, B, _, iterations = schur.solve(residual, A, np.ones(1) if focal else np.zeros(0),
-                                         state.points[tracks].copy(), o_cam, o_pt,
-                                         f_scale=options.ba_f_scale_px, max_iterations=max_iterations,
-                                         stop=stop, jacobian=jacobian)
+    adjusted = bundle.adjust(np.array(state.Ks)[views], [state.R[v] for v in views], [state.t[v] for v in views],
+                             state.points[tracks], cam_of_view[state.obs_view[obs]],
+                             pt_of_track[state.obs_track[obs]], state.obs_px[obs],
+                             bundle.Free("focal_scale" if focal else "given",
+                                         held=None if local is None else ~local[views]),
+                             bundle.Schur(max_iterations, stop, options.ba_f_scale_px))
+    R, t, X, scale = adjusted.R, adjusted.t, adjusted.X, adjusted.scale
     if focal:
-        if not (np.isfinite(S[0]) and 1 / MAX_FOCAL_SCALE <= state.focal_scale * S[0] <= MAX_FOCAL_SCALE):
-            return int(iterations)  # a bogus focal length: the adjustment is not taken
-        state.scale_focal(float(S[0]))
-    Rs = Rotation.from_rotvec(A[:, :3]).as_matrix()
+        if not (np.isfinite(scale) and 1 / MAX_FOCAL_SCALE <= state.focal_scale * scale <= MAX_FOCAL_SCALE):
+            return adjusted.iterations  # a bogus focal length: the adjustment is not taken
+        state.scale_focal(scale)
     if local is not None:  # view ``fixed`` held: no gauge to restore; the held cameras kept exactly
         for c, v in enumerate(views):
             if local[v]:
-                state.R[v], state.t[v] = Rs[c], A[c, 3:6].copy()
-        state.points[tracks] = B
-        return int(iterations)
+                state.R[v], state.t[v] = R[c], t[c].copy()
+        state.points[tracks] = X
+        return adjusted.iterations
     k = int(cam_of_view[fixed]) if registered[fixed] else 0
-    Rf, tf = Rs[k], A[k, 3:6].copy()  # the world moved by X' = Rf X + tf: view k at R = I, t = 0
+    Rf, tf = R[k], t[k].copy()  # the world moved by X' = Rf X + tf: view k at R = I, t = 0
     for c, v in enumerate(views):
-        state.R[v] = Rs[c] @ Rf.T
-        state.t[v] = A[c, 3:6] - state.R[v] @ tf
-    state.points[tracks] = B @ Rf.T + tf
+        state.R[v] = R[c] @ Rf.T
+        state.t[v] = t[c] - state.R[v] @ tf
+    state.points[tracks] = X @ Rf.T + tf
     state.R[views[k]], state.t[views[k]] = np.eye(3), np.zeros(3)
-    return int(iterations)
+    return adjusted.iterations
 
 
 # ---------------------------------------------------------------------------------------------

@@ -71,11 +71,85 @@ def test_the_residuals_are_each_observations_own_camera_in_any_order(model, monk
 
 
 def test_crossed_is_the_skew_matrix_product():
-    """calibrated._crossed(x, a), which the rotation columns of both metric adjustments' Jacobians
+    """bundle._crossed(x, a), which the rotation columns of the Schur problems' Jacobians
     use, is -a [x]_x written out (each row of a crossed with x)."""
-    from geocert.solvers.reconstruction.calibrated import _crossed, _skew
+    from geocert.solvers.reconstruction.bundle import _crossed, _skew
 
     rng = np.random.default_rng(4)
     x, a = rng.normal(size=(30, 3)), rng.normal(size=(30, 2, 3))
     assert np.abs(_crossed(x, a) - (-a @ _skew(x))).max() <= 1e-14
     assert np.abs(_crossed(x, a)[:, 1] - np.cross(x, a[:, 1])).max() <= 1e-14
+
+
+def _own_K_scene(seed: int = 0):
+    """Five views, each with its own K, of 40 points, the pixels 0.3 px off their projections."""
+    rng = np.random.default_rng(seed)
+    views, points = 5, 40
+    R = Rotation.random(views, random_state=seed + 1).as_matrix()
+    t = rng.normal(size=(views, 3)) * 0.3 + [0.0, 0.0, 8.0]
+    X = rng.normal(size=(points, 3))
+    K = np.array([[[800.0 + 10 * v, 1.0, 320.0 + v], [0.0, 795.0 + 10 * v, 240.0 - v], [0.0, 0.0, 1.0]]
+                  for v in range(views)])
+    view, track = np.repeat(np.arange(views), points), np.tile(np.arange(points), views)
+    cam = np.einsum("mij,mj->mi", R[view], X[track]) + t[view]
+    h = np.einsum("mij,mj->mi", K[view], cam)
+    pixels = h[:, :2] / h[:, 2:] + rng.normal(scale=0.3, size=(len(view), 2))
+    return K, R, t, X, view, track, pixels
+
+
+@pytest.mark.parametrize("intrinsics", ["given", "focal_scale"])
+def test_each_views_own_K_jacobian_is_the_residuals_derivative(intrinsics, monkeypatch):
+    """bundle.adjust's Schur problem with each view's own K (the K-known path's adjustment), a
+    camera held: its analytic Jacobian against central differences, the held camera's columns zero."""
+    K, R, t, X, view, track, pixels = _own_K_scene()
+    held = np.array([False, True, False, False, False])
+    solve, compared = schur.solve, []
+
+    def compare(residual, A, S, B, view, track, *args, jacobian=None, **kwargs):
+        analytic = jacobian(A[view], S, B[track])
+        numeric = list(schur._jacobians(residual, A, S, B, view, track))
+        numeric[0][held[view]] = 0.0
+        for a, n in zip(analytic, numeric):
+            assert a.shape == n.shape
+            if n.size:
+                assert np.abs(a - n).max() <= 1e-6 * np.abs(n).max()
+        compared.append(intrinsics)
+        return solve(residual, A, S, B, view, track, *args, jacobian=jacobian, **kwargs)
+
+    monkeypatch.setattr(schur, "solve", compare)
+    out = bundle.adjust(K, R, t * 1.01, X, view, track, pixels, bundle.Free(intrinsics, held=held),
+                        bundle.Schur(max_iterations=1))
+    assert compared == [intrinsics]
+    assert np.abs(out.t[1] - t[1] * 1.01).max() <= 1e-15 and np.abs(out.R[1] - R[1]).max() <= 1e-12
+
+
+def test_the_two_strategies_reach_the_same_minimum():
+    """The Schur strategy and least squares (plain losses, view 0 held) from the same perturbed
+    start end at the same reprojection cost, below the start's, the held camera where it was."""
+    K, R, t, X, view, track, pixels = _own_K_scene(3)
+    rng = np.random.default_rng(5)
+    start = (R, t + rng.normal(scale=0.02, size=t.shape), X + rng.normal(scale=0.02, size=X.shape))
+    start[1][0] = t[0]
+
+    def cost(Rs, ts, Xs):
+        h = np.einsum("mij,mj->mi", K[view], np.einsum("mij,mj->mi", Rs[view], Xs[track]) + ts[view])
+        return float(np.sum((h[:, :2] / h[:, 2:] - pixels) ** 2))
+
+    held = np.arange(5) == 0
+    exact = bundle.adjust(K, *start, view, track, pixels, bundle.Free("given", held=held),
+                          bundle.Schur(max_iterations=50))
+    lsq = bundle.adjust(K, *start, view, track, pixels, bundle.Free("given", held=held),
+                        bundle.LeastSquares(max_nfev=200, loss="linear", ftol=1e-12))
+    before, a, b = cost(*start), cost(exact.R, exact.t, exact.X), cost(lsq.R, lsq.t, lsq.X)
+    assert a < 0.5 * before and b < 0.5 * before
+    assert abs(a - b) <= 1e-6 * a
+    for out in (exact, lsq):
+        assert np.abs(out.t[0] - t[0]).max() <= 1e-12 and np.abs(out.R[0] - R[0]).max() <= 1e-12
+
+
+def test_held_cameras_and_least_squares_need_each_views_own_K():
+    K, R, t, X, view, track, pixels = _own_K_scene()
+    with pytest.raises(ValueError):
+        bundle.adjust(K[0], R, t, X, view, track, pixels, bundle.Free("fixed", held=np.arange(5) == 0))
+    with pytest.raises(ValueError):
+        bundle.adjust(K[0], R, t, X, view, track, pixels, bundle.Free("fixed"), bundle.LeastSquares(max_nfev=5))
