@@ -131,18 +131,14 @@ def solve_program(program: direct_relaxation.Program, enough=None, attempts=None
 
 
 def _solve_ipm(program: direct_relaxation.Program, tolerance: float, check=None):
-    """interior_point's solve as (status, y, z, raw status): "Solved" only when its residuals and gap
-    met the tolerance."""
-    try:
-        result = interior_point.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
+    """interior_point's solve as (status, y, z, raw status): OPTIMAL only when its residuals and gap
+    met the tolerance (solvers.core.conic's map of its statuses)."""
+    result = interior_point.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
                                   program.cones.psd, tolerance=tolerance, max_iter=IPM_MAX_ITER, check=check)
-    except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
-        return ConicStatus.FAILED, None, None, f"ipm exception: {exc}"
-    raw = f"ipm {result.status}"
-    if result.y is None or not (np.all(np.isfinite(result.y)) and np.all(np.isfinite(result.z))):
+    raw = f"ipm {result.raw_status}"
+    if result.status is ConicStatus.FAILED or result.y is None or result.z is None:
         return ConicStatus.FAILED, None, None, raw
-    status = ConicStatus.OPTIMAL if result.status == "Solved" else ConicStatus.INACCURATE
-    return status, result.y, result.z, raw
+    return result.status, result.y, result.z, raw
 
 
 def _solve_once(program: direct_relaxation.Program, tolerance: float, regularisation: float):

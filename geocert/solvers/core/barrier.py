@@ -5,7 +5,23 @@ Part of the conic boundary (solvers.core.conic)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+
+from geocert.solvers.core.conic import ConicStatus, map_barrier_status
+
+# How a problem's iterations ended, by code (the method's own words, conic's map makes them ours).
+ENDINGS = ("Centred", "InfeasibleStart", "NoStep", "NotFinite")
+_CENTRED, _INFEASIBLE_START, _NO_STEP, _NOT_FINITE = range(len(ENDINGS))
+
+
+@dataclass
+class BarrierResult:
+    x: np.ndarray  # (P, 3): the last central points
+    z: np.ndarray  # (P, rows): their dual points
+    statuses: np.ndarray  # (P,) ConicStatus, ours (OPTIMAL: "Centred")
+    raw_statuses: np.ndarray  # (P,) the method's own (ENDINGS)
 
 
 def solve_batched(q: np.ndarray, A: np.ndarray, b: np.ndarray, n: int, x: np.ndarray,
@@ -14,9 +30,10 @@ def solve_batched(q: np.ndarray, A: np.ndarray, b: np.ndarray, n: int, x: np.nda
     """``min q'x`` subject to ``b - A x`` in the cones of a residual region (one nonnegative row,
     then ``n`` second-order cones of size 3) for P problems in 3 unknowns at once, ``q`` (P, 3),
     ``A`` (P, rows, 3), ``b`` (P, rows), by the log-barrier method from strictly feasible points
-    ``x`` (P, 3). Returns (x, z, ok): the last central point, its dual point
+    ``x`` (P, 3). Returns the last central points x, their dual points
     ``z = -grad(barrier)(b - A x) / t`` (strictly inside the dual cone; its duality gap is about
-    deg / t_end) and whether the problem's iterates stayed finite and strictly feasible.
+    deg / t_end) and each problem's status: OPTIMAL ("Centred") when its iterates stayed finite
+    and strictly feasible, else FAILED (how it ended in raw_statuses).
 
     Nothing here needs to be exact: a bound is only ever the safe bound of the dual returned
     (cones.safe_lower_bound), which holds whatever z is. The schedule (t from 1 to 1e7 by 100,
@@ -88,6 +105,7 @@ def solve_batched(q: np.ndarray, A: np.ndarray, b: np.ndarray, n: int, x: np.nda
 
     s = b - times(Ac, x)
     phi, ok = barrier(s)
+    ending = np.where(ok, _CENTRED, _INFEASIBLE_START)
     t = t_start
     while True:
         last = t >= t_end
@@ -130,11 +148,14 @@ def solve_batched(q: np.ndarray, A: np.ndarray, b: np.ndarray, n: int, x: np.nda
                 alpha = np.where(pending, 0.5 * alpha, alpha)
             stuck = sel[pending]
             ok[stuck] = False  # no step found: not trusted (its bound is still safe, but loose)
+            ending[stuck] = _NO_STEP
             active[stuck] = False
         if last:
             break
         t = min(t * factor, t_end)
     gphi, _ = derivatives(s, Ac)
     z = -gphi / t
-    ok &= np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(x), axis=1)
-    return x, z, ok
+    ending[ok & ~(np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(x), axis=1))] = _NOT_FINITE
+    raw = np.array(ENDINGS, dtype=object)[ending]
+    ours = np.array([map_barrier_status(name) for name in ENDINGS], dtype=object)[ending]
+    return BarrierResult(x, z, ours, raw)

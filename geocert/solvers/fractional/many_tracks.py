@@ -498,8 +498,9 @@ def _root_regions_of(entries: list) -> list:
     P = 2 * D
     x0 = np.repeat(np.array([entry.v0 for entry in entries]), P, axis=0)
     with np.errstate(all="ignore"):
-        x, z, solved = barrier.solve_batched(Q.reshape(G * P, D), np.repeat(A, P, axis=0), np.repeat(b, P, axis=0), n, x0)
-        x, z, solved = x.reshape(G, P, D), z.reshape(G, P, -1), solved.reshape(G, P).all(axis=1)
+        found = barrier.solve_batched(Q.reshape(G * P, D), np.repeat(A, P, axis=0), np.repeat(b, P, axis=0), n, x0)
+        solved = (found.statuses == ConicStatus.OPTIMAL).reshape(G, P).all(axis=1)
+        x, z = found.x.reshape(G, P, D), found.z.reshape(G, P, -1)
     roots: list = [None] * G
     for size in sorted(set(sizes)):  # each length proven on its own rows
         rows = 1 + 3 * size

@@ -97,7 +97,7 @@ class TestSolve:
     def test_small_programs_reach_clarabels_optimum(self, seed):
         q, A, b, cones = random_program(seed)
         result = interior_point.solve(q, A, b, cones.zero, cones.nonneg, cones.psd)
-        assert result.status == "Solved"
+        assert result.status is ConicStatus.OPTIMAL and result.raw_status == "Solved"
         expected = clarabel_optimum(q, A, b, cones)
         assert result.primal == pytest.approx(expected, rel=1e-7, abs=1e-7)
         assert result.dual == pytest.approx(expected, rel=1e-7, abs=1e-7)
@@ -118,7 +118,7 @@ class TestSolve:
         and direct_solve maps it to an unclean status."""
         q, A, b, cones = random_program(5)
         result = interior_point.solve(q, A, b, cones.zero, cones.nonneg, cones.psd, max_iter=3)
-        assert result.status == "MaxIterations"
+        assert result.raw_status == "MaxIterations" and result.status is ConicStatus.INACCURATE
         program = SimpleNamespace(q=q, A=A, b=b, cones=cones)
         original = direct_solve.IPM_MAX_ITER
         try:
@@ -198,7 +198,7 @@ def test_the_dual_equations_hold_to_rounding_on_table71_seed_1006():
     charges for the residual and the moment block's eigenvalue is then rounding (compared before
     the charge for the bound's own rounding, which does not depend on the residual)."""
     program, result = _varying_focal_solve(1006)
-    assert result.status == "Solved"
+    assert result.status is ConicStatus.OPTIMAL
     assert np.linalg.norm(program.A.T @ result.z + program.q) <= 1e-11 * max(1.0, np.linalg.norm(program.q))
     with rounding_uncounted():
         bound, _ = direct_relaxation.safe_bound(program, result.z)
@@ -212,9 +212,9 @@ def check_solve(program, result, optimum: float, monkeypatch, rel: float = 1e-4)
     digits, hence the 1e-5); and when it says "Solved", its dual equations hold to the acceptable
     tolerance and the bound is the optimum's (to ``rel``)."""
     bound, _ = direct_relaxation.safe_bound(program, result.z)
-    assert bound <= optimum * (1 + 1e-5), (result.status, bound)
-    assert result.status in ("Solved", "Stalled", "MaxIterations"), result.status
-    if result.status == "Solved":
+    assert bound <= optimum * (1 + 1e-5), (result.raw_status, bound)
+    assert result.raw_status in ("Solved", "Stalled", "MaxIterations"), result.raw_status
+    if result.status is ConicStatus.OPTIMAL:
         assert np.linalg.norm(program.A.T @ result.z + program.q) <= 1e-8 * max(1.0, np.linalg.norm(program.q))
         assert bound == pytest.approx(optimum, rel=rel)
     else:  # direct_solve does not call it clean (and falls back to Clarabel)
@@ -256,5 +256,5 @@ def test_table71_seed_1012_chirality_split_half(monkeypatch):
     result = interior_point.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
                               program.cones.psd, max_iter=direct_solve.IPM_MAX_ITER)
     bound = check_solve(program, result, 7.71750e-4, monkeypatch)
-    if result.status == "Solved":
+    if result.status is ConicStatus.OPTIMAL:
         assert bound > 3.755e-4  # above the other half's optimum: this half is cut off
