@@ -169,25 +169,25 @@ def _timed(seed: int, varying: bool, chirality: str) -> dict:
 
 def speed(trials: int, first: int) -> None:
     """Issue 38: the direct method's processor time with the Schur complement assembled per moment
-    (direct_ipm.ASSEMBLY "moments") against the former assembly ("kron": the svec operator and
+    (interior_point.ASSEMBLY "moments") against the former assembly ("kron": the svec operator and
     sparse products), each trial solved both ways one after the other (the order alternating), on
     Table 7.1's scenes (seeds 1000 + first onwards, the four columns); one warm-up solve each first.
     Prints per column the median processor seconds, their ratio, the largest relative difference
     of the certified K, and the certified counts."""
-    from geocert.solvers.autocalibration import direct_ipm
+    from geocert.solvers.core import interior_point
 
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())} ({os.cpu_count()} cores)", flush=True)
     for assembly in ("kron", "moments"):
-        direct_ipm.ASSEMBLY = assembly
+        interior_point.ASSEMBLY = assembly
         _timed(999, False, "none")
     names = [f"{focal}/{'chir' if chirality == 'points' else 'no chir'}" for focal, _, chirality in COLUMNS]
     out = {name: {"kron": [], "moments": []} for name in names}
     for i in range(first, first + trials):
         for name, (_, varying, chirality) in zip(names, COLUMNS):
             for assembly in (("kron", "moments") if i % 2 == 0 else ("moments", "kron")):
-                direct_ipm.ASSEMBLY = assembly
+                interior_point.ASSEMBLY = assembly
                 out[name][assembly].append(_timed(1000 + i, varying, chirality))
-    direct_ipm.ASSEMBLY = "moments"
+    interior_point.ASSEMBLY = "moments"
     print(f"direct autocalibration, {trials} trials per column (seeds {1000 + first} to {1000 + first + trials - 1}), "
           "processor seconds a solve (one BLAS thread)")
     print(f"{'column':<18}{'kron median':>12}{'moments median':>16}{'ratio':>8}{'max |dK|/|K|':>14}"

@@ -1,6 +1,7 @@
 """The estimators import nothing above them: no module of geocert/solvers imports the verifier,
 the kinds, the app, the workers or the job runner (kinds call solvers, never the reverse), and
-only solvers.core.conic imports the conic solver. The
+only solvers.core.conic imports the conic solver; only the conic boundary's modules (conic.py and
+the hand-written back-ends beside it) name a back-end's status, each mapped to ours in conic.py. The
 verifier (geocert/verify) imports nothing above it either: it finds each kind's adapter in its own
 registry (verify/adapters.py), not the kinds'. The service's app asks the job store by name, never
 through its Redis client, and neither do the workers."""
@@ -75,6 +76,58 @@ def test_only_the_conic_boundary_talks_to_the_conic_solver():
     talking = {str(path.relative_to(ROOT)) for path in sorted(ROOT.rglob("*.py"))
                if any(name == "clarabel" or name.startswith("clarabel.") for name in imported(path))}
     assert talking == {"solvers/core/conic.py"}
+
+
+CONIC_BOUNDARY = {"solvers/core/conic.py", "solvers/core/interior_point.py", "solvers/core/barrier.py"}
+
+
+def backend_statuses() -> dict[str, set[str]]:
+    """conic.py's status maps (module-level dicts whose values are all ``ConicStatus.X``), by name,
+    with their keys: every back-end's statuses."""
+    maps = {}
+    for node in ast.parse((ROOT / "solvers/core/conic.py").read_text()).body:
+        if isinstance(node, ast.Assign) and isinstance(node.value, ast.Dict) and node.value.values and all(
+                isinstance(v, ast.Attribute) and isinstance(v.value, ast.Name) and v.value.id == "ConicStatus"
+                for v in node.value.values):
+            maps[node.targets[0].id] = {key.value for key in node.value.keys}
+    return maps
+
+
+def test_only_the_conic_boundary_names_a_back_ends_status():
+    """A module outside the boundary reads our statuses (ConicStatus) only: no string in its code
+    (docstrings and comments aside) is a back-end's status, such as Clarabel's "AlmostSolved" or
+    the interior-point method's "Solved", so conic.py's map is the one list of them."""
+    names = set().union(*backend_statuses().values())
+    assert {"Solved", "AlmostSolved", "MaxIterations"} <= names
+    naming = {}
+    for path in sorted(ROOT.rglob("*.py")):
+        module = str(path.relative_to(ROOT))
+        if module in CONIC_BOUNDARY:
+            continue
+        tree = ast.parse(path.read_text())
+        docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                      if isinstance(node, (ast.Module, ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))
+                      and node.body and isinstance(node.body[0], ast.Expr)}
+        found = sorted({node.value for node in ast.walk(tree) if isinstance(node, ast.Constant)
+                        and isinstance(node.value, str) and id(node) not in docstrings and node.value in names})
+        if found:
+            naming[module] = found
+    assert naming == {}
+
+
+def test_every_status_a_hand_written_back_end_ends_with_is_in_the_map():
+    """The interior-point method's statuses (the strings it assigns to ``status``) and the
+    barrier's endings are exactly the keys of their maps in conic.py: a new one not mapped fails
+    here, rather than falling to FAILED unseen."""
+    from geocert.solvers.core import barrier
+
+    maps = backend_statuses()
+    tree = ast.parse((ROOT / "solvers/core/interior_point.py").read_text())
+    assigned = {node.value.value for node in ast.walk(tree) if isinstance(node, ast.Assign)
+                and any(isinstance(t, ast.Name) and t.id == "status" for t in node.targets)
+                and isinstance(node.value, ast.Constant)}
+    assert assigned == maps["_INTERIOR_POINT_STATUS"]
+    assert set(barrier.ENDINGS) == maps["_BARRIER_STATUS"]
 
 
 def test_no_verifier_module_imports_a_layer_above_it():

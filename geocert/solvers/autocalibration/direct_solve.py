@@ -1,18 +1,18 @@
 """Direct autocalibration solved (thesis chapter 7): the moment relaxation of each orientation as
-one SDP, first by direct_ipm (a structured interior-point method, numpy: 1.2 to 2 processor
+one SDP, first by interior_point (a structured interior-point method, numpy: 1.2 to 2 processor
 seconds a solve on Table 7.1's scenes) and, when its solve is not clean, by Clarabel
 (assembled directly, sparse: no cvxpy); its safe bound, the quadric from the first-order moments,
 rounded to the feasible set and polished locally, the rank test, and where the relaxation is not
 tight, a split of the program (MAX_SPLITS).
 
-Why direct_ipm first: besides its speed (its docstring), Clarabel's clean ("Solved") answers with
+Why interior_point first: besides its speed (its docstring), Clarabel's clean ("Solved") answers with
 the static regularisation below stopped measurably short of the relaxation's value. On seed 1006
 (varying focal) Clarabel's bound was 2.270649e-4 with the moment matrix's second eigenvalue 1.9e-5
 of the first, so reported not certified (gap 1.2e-4 relative, at all three attempts) as "order 2
-not quite tight"; direct_ipm's is 2.2709252e-4 against the best quadric's 2.2709250e-4, ratio
+not quite tight"; interior_point's is 2.2709252e-4 against the best quadric's 2.2709250e-4, ratio
 3.4e-8: the relaxation is tight there, the gap was the solver's.
 
-The rest of this docstring is the Clarabel path, as measured before direct_ipm. Where a solve's
+The rest of this docstring is the Clarabel path, as measured before interior_point. Where a solve's
 time goes (order 2, Table 7.1's 12 views, profiled): assembling the program takes 0.02 s and Clarabel's setup 0.1 s; the rest is 12 to 22 interior-point iterations,
 each dominated by the factorisation of the KKT system, in which the moment matrix's cone is a dense
 1540-row block and the other cones (Q's 40 x 40 localizer, six 10 x 10 ones) fill in around it:
@@ -53,7 +53,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from geocert.solvers.autocalibration import direct
-from geocert.solvers.autocalibration import direct_ipm
+from geocert.solvers.core import interior_point
 from geocert.solvers.autocalibration import direct_relaxation
 from geocert.solvers.core.certificates import pack
 from geocert.solvers.autocalibration.proofs import sublevel_level
@@ -84,7 +84,7 @@ class Stopped(Exception):
         self.status, self.reason = status, reason
 
 
-# (tolerance, Clarabel's static regularisation; None: direct_ipm, the structured interior-point method)
+# (tolerance, Clarabel's static regularisation; None: interior_point, the structured interior-point method)
 ATTEMPTS = ((1e-9, None), (1e-8, 1e-6), (1e-9, 1e-6), (1e-8, 1e-7))
 IPM_MAX_ITER = 50
 # Iterative refinement steps per KKT solve (Clarabel's default: up to 10, to 1e-13 relative).
@@ -119,7 +119,7 @@ def solve_program(program: direct_relaxation.Program, enough=None, attempts=None
         if retry[0] is ConicStatus.OPTIMAL:
             # of two clean solves the one with the higher safe bound (a later attempt is not
             # necessarily the more accurate: Clarabel's regularised solves stop further from the
-            # optimum than direct_ipm's)
+            # optimum than interior_point's)
             if (not clean or direct_relaxation.safe_bound(program, retry[2])[0]
                     > direct_relaxation.safe_bound(program, answer[2])[0]):
                 answer = retry
@@ -131,18 +131,14 @@ def solve_program(program: direct_relaxation.Program, enough=None, attempts=None
 
 
 def _solve_ipm(program: direct_relaxation.Program, tolerance: float, check=None):
-    """direct_ipm's solve as (status, y, z, raw status): "Solved" only when its residuals and gap
-    met the tolerance."""
-    try:
-        result = direct_ipm.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
+    """interior_point's solve as (status, y, z, raw status): OPTIMAL only when its residuals and gap
+    met the tolerance (solvers.core.conic's map of its statuses)."""
+    result = interior_point.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
                                   program.cones.psd, tolerance=tolerance, max_iter=IPM_MAX_ITER, check=check)
-    except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
-        return ConicStatus.FAILED, None, None, f"ipm exception: {exc}"
-    raw = f"ipm {result.status}"
-    if result.y is None or not (np.all(np.isfinite(result.y)) and np.all(np.isfinite(result.z))):
+    raw = f"ipm {result.raw_status}"
+    if result.status is ConicStatus.FAILED or result.y is None or result.z is None:
         return ConicStatus.FAILED, None, None, raw
-    status = ConicStatus.OPTIMAL if result.status == "Solved" else ConicStatus.INACCURATE
-    return status, result.y, result.z, raw
+    return result.status, result.y, result.z, raw
 
 
 def _solve_once(program: direct_relaxation.Program, tolerance: float, regularisation: float):
@@ -358,7 +354,7 @@ def _solve_leaf(setup, options, order, orientation, cuts, check=None) -> Leaf | 
         return (best - direct_relaxation.safe_bound(program, z)[0]
                 <= max(options.abs_gap, options.metric_rel_gap * abs(best)))
 
-    # a half is solved by direct_ipm only: where it stalled (seeds 1008, 1012 and 1042, varying focal),
+    # a half is solved by interior_point only: where it stalled (seeds 1008, 1012 and 1042, varying focal),
     # Clarabel's attempts took 6 to 20 s each and ended "AlmostSolved" too (the result is then not certified)
     status, y, z, raw = solve_program(program, enough, ATTEMPTS[:1] if cuts else ATTEMPTS, check)
     if z is None:
@@ -489,7 +485,7 @@ DINKELBACH_TOLERANCE = 1e-6
 CLARABEL_STEPS = 1  # Dinkelbach's steps by Clarabel where the interior point's solves were not clean
 # Clarabel at tolerance 1e-6 (the safe bound does not need an accurate dual, only one whose charges are
 # small; measured on seed 3's lower end at c = 0.94: "Solved" in 8.4 s, safe bound 0.143, the same as at 1e-7
-# in 10.1 s, where direct_ipm stalled with a safe bound of -0.070)
+# in 10.1 s, where interior_point stalled with a safe bound of -0.070)
 CLARABEL_ATTEMPT = ((1e-6, 1e-6),)
 INTERVAL_PAD = 1e-9  # the interval stated, this much (relative) wider than the one its duals prove here
 

@@ -1,4 +1,12 @@
-"""The one place that talks to the conic solver (Clarabel), and the map from its statuses to ours.
+"""The conic boundary: the one place that talks to the conic solver (Clarabel), and the one list
+of every back-end's statuses mapped to ours (ConicStatus), so that callers read ours only.
+
+The boundary's modules, all in solvers/core: this one (Clarabel), interior_point.py (the
+structured primal-dual interior-point method, numpy, the direct autocalibration's moment programs
+solved first by it) and barrier.py (the batched log-barrier method of the batched triangulation's
+root regions). Each speaks its own statuses; each maps them here, through an explicit table where a
+status not listed is FAILED, never OPTIMAL. tests/test_layers.py holds that no other module
+imports Clarabel or names a back-end's status.
 
 Inner-loop relaxations assemble sparse data themselves and call :func:`solve_conic`; cvxpy is
 kept out of the hot path (it costs milliseconds of compilation per problem).
@@ -49,8 +57,36 @@ _CLARABEL_STATUS = {
 }
 
 
+# The structured interior-point method's (interior_point.solve). An end other than "Solved" still
+# returns the last iterate, whose dual gives a safe bound: never a clean answer.
+_INTERIOR_POINT_STATUS = {
+    "Solved": ConicStatus.OPTIMAL,  # residuals and gap within the tolerance, or the acceptable one
+    "MaxIterations": ConicStatus.INACCURATE,
+    "Stalled": ConicStatus.INACCURATE,  # no progress, or steps too short to make any
+    "NumericalError": ConicStatus.INACCURATE,  # a scaling or Schur complement not factored
+}
+
+# The batched barrier's (barrier.solve_batched), one per problem. A centre reached ("Centred") is
+# only ever used through the safe bound of its dual (the caller proves every bound again); a
+# problem that ended otherwise is not used at all.
+_BARRIER_STATUS = {
+    "Centred": ConicStatus.OPTIMAL,  # every centre taken from a strictly feasible start, all finite
+    "InfeasibleStart": ConicStatus.FAILED,  # the start not strictly inside the cones
+    "NoStep": ConicStatus.FAILED,  # no step found along a Newton direction
+    "NotFinite": ConicStatus.FAILED,  # the last point or its dual not finite
+}
+
+
 def map_clarabel_status(status) -> ConicStatus:
     return _CLARABEL_STATUS.get(str(status), ConicStatus.FAILED)
+
+
+def map_interior_point_status(status: str) -> ConicStatus:
+    return _INTERIOR_POINT_STATUS.get(status, ConicStatus.FAILED)
+
+
+def map_barrier_status(status: str) -> ConicStatus:
+    return _BARRIER_STATUS.get(status, ConicStatus.FAILED)
 
 
 def clarabel_cones(spec: ConeSpec) -> list:
@@ -77,6 +113,12 @@ class ConicResult:
     def lower_bound(self) -> float:
         # Both objectives bound the optimum within the solver's tolerance; the smaller is the safer.
         return min(self.primal_objective, self.dual_objective)
+
+    @property
+    def dual_usable(self) -> bool:
+        """A clean optimum's dual, or an almost-solved one's (Clarabel's "AlmostSolved"): for a
+        caller whose bound is safe whatever multipliers it is given, as good as any."""
+        return self.status is ConicStatus.OPTIMAL or self.raw_status == "AlmostSolved"
 
 
 def _settings(tolerance: float, lean: bool = False) -> clarabel.DefaultSettings:

@@ -63,8 +63,12 @@ def mapped(function: Callable, shared: Any, items: Sequence, stop: Stop,
     return spreader(function, shared, items, stop)
 
 
-def in_order(one: Callable, items: Sequence, stop: Stop) -> list | None:
-    """``one(item)`` for the items, here, in order: an ``in_process`` mapping without threads."""
+Done = Callable[[int, Any], None]
+
+
+def in_order(one: Callable, items: Sequence, stop: Stop, done: Done | None = None) -> list | None:
+    """``one(item)`` for the items, here, in order: an ``in_process`` mapping without threads
+    (``done`` as in_threads calls it)."""
     results = []
     for k, item in enumerate(items):
         asked = stop(k)
@@ -73,6 +77,8 @@ def in_order(one: Callable, items: Sequence, stop: Stop) -> list | None:
         if asked:
             break
         results.append(one(item))
+        if done is not None:
+            done(k, results[-1])
     return results
 
 
@@ -82,17 +88,20 @@ def in_order(one: Callable, items: Sequence, stop: Stop) -> list | None:
 THREADS = 2
 
 
-def in_threads(one: Callable, items: Sequence, stop: Stop, threads: int | None = None) -> list | None:
+def in_threads(one: Callable, items: Sequence, stop: Stop, threads: int | None = None,
+               done: Done | None = None) -> list | None:
     """``one(item)`` for the items, ``threads`` at a time (None: THREADS; at most the
     processors), in this process: an ``in_process`` mapping with ``in_order``'s results and
     ``stop`` (asked in this thread before the k-th item starts; a cancel returns None once the
     items in flight end). An item starts as soon as any running one ends, so one long item does
-    not hold the others back; each item's result is what it computes alone."""
+    not hold the others back; each item's result is what it computes alone. ``done(k, result)``,
+    when given, is called in this thread as each item ends (in the order they end, before the
+    next ``stop`` is asked): progress, or a caller's own collection of what ended before a cancel."""
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
     threads = max(1, min(THREADS if threads is None else threads, os.cpu_count() or 1, len(items)))
     if threads == 1:
-        return in_order(one, items, stop)
+        return in_order(one, items, stop, done)
     results: dict[int, Any] = {}
     started, asked = 0, False
     with ThreadPoolExecutor(max_workers=threads) as pool:
@@ -108,7 +117,10 @@ def in_threads(one: Callable, items: Sequence, stop: Stop, threads: int | None =
                 break
             finished, _ = wait(running, return_when=FIRST_COMPLETED)
             for future in finished:
-                results[running.pop(future)] = future.result()  # a piece that raised raises here
+                k = running.pop(future)
+                results[k] = future.result()  # a piece that raised raises here
+                if done is not None:
+                    done(k, results[k])
     if asked is None:
         return None
     return [results[k] for k in range(started)]

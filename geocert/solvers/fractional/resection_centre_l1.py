@@ -154,7 +154,7 @@ def _multipliers(scene: Scene, increase: float, r: float, direction: np.ndarray)
     program (solved once; an inexact answer serves, since the check recomputes the bound from
     whatever multipliers are stated); None when it does not solve."""
     from geocert.solvers.core.cones import ConeSpec
-    from geocert.solvers.core.conic import ConicStatus, SolveSettings, solve_once
+    from geocert.solvers.core.conic import SolveSettings, solve_once
 
     k, norm = scene.k, scene.norm
     s = _weights(scene, r)
@@ -190,7 +190,7 @@ def _multipliers(scene: Scene, increase: float, r: float, direction: np.ndarray)
     q[:11] = -d
     solution = solve_once(q, np.array(rows), np.array(b), ConeSpec(nonneg=1, soc=tuple(cones)), SolveSettings(gap=1e-10))
     # an almost-solved answer's multipliers serve as well (any multipliers give a true bound)
-    if not (solution.status is ConicStatus.OPTIMAL or solution.raw_status == "AlmostSolved"):
+    if not solution.dual_usable:
         return None
     z = solution.z
     mu = float(z[0])

@@ -143,8 +143,6 @@ def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.n
     Cameras are resected ``threads`` at a time (None: CAMERA_THREADS, at most the processors):
     the conic solver, most of a resection's time, releases the interpreter's lock. Each camera's
     search is the same as alone; the largest start first, so the last to finish is a small one."""
-    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
-
     threads = max(1, min(CAMERA_THREADS, os.cpu_count() or 1) if threads is None else threads)
     order = sorted(cameras, key=lambda view: (-len(sources.get(view, ((),))[0]), view))
     out: dict[int, CameraBound] = {}
@@ -164,28 +162,18 @@ def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.n
         if progress is not None and len(out) == len(cameras):
             progress(len(out), len(cameras))
     else:
-        # At most ``threads`` cameras in flight: a cancel seen between two stops the ones not started.
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            running: set = set()
-            queue = iter(order)
-            stopped = False
-            while True:
-                while not stopped and len(running) < threads:
-                    view = next(queue, None)
-                    if view is None:
-                        break
-                    running.add(pool.submit(_bound_camera, view, cameras[view], *points(view), options,
-                                            bound_every_camera, dof))
-                if not running:
-                    break
-                finished, running = wait(running, return_when=FIRST_COMPLETED)
-                for future in finished:
-                    bound = future.result()
-                    out[bound.view] = bound
-                    if progress is not None:
-                        progress(len(out), len(cameras))
-                if not stopped and should_stop is not None and should_stop():
-                    stopped = True
+        # At most ``threads`` cameras in flight, progress reported as each ends, and a cancel
+        # looked for once a camera has ended: the cameras in flight finish, the rest never start.
+        def ended(k: int, bound: CameraBound) -> None:
+            out[bound.view] = bound
+            if progress is not None:
+                progress(len(out), len(cameras))
+
+        def stop(k: int) -> bool | None:
+            return None if out and should_stop is not None and should_stop() else False
+
+        pieces.in_threads(lambda view: _bound_camera(view, cameras[view], *points(view), options, bound_every_camera,
+                                                     dof), order, stop, threads, done=ended)
     for view in order:
         if view not in out:
             out[view] = CameraBound(view, None, None, None, None, False, "cancelled", len(points(view)[0]), 0.0,

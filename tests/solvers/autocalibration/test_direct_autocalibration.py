@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import direct, direct_ipm, direct_solve, scenes
+from geocert.solvers.autocalibration import direct, direct_solve, scenes
+from geocert.solvers.core import interior_point
 from geocert.solvers.autocalibration import direct_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.core.certificates import pack, unpack
@@ -217,7 +218,7 @@ def test_the_focal_rows_make_seed_1008_certify(monkeypatch):
     tests, so it solves with the latter (the two assemblies agree to 1e-12: test_direct_ipm)."""
     scene, Ks = scenes.table71_scene(1008, 0.2, True)
     data = {"cameras": scene.cameras.tolist(), "points": scene.points.tolist()}
-    monkeypatch.setattr(direct_ipm, "ASSEMBLY", "kron")
+    monkeypatch.setattr(interior_point, "ASSEMBLY", "kron")
     result = solve_job(job(data, {**UNIT, "focal": [0.05, 1.0]}, chirality="points", varying_focal=True))
     stage = result["stages"][0]
     assert stage["certified"], stage["reason"]

@@ -1,4 +1,4 @@
-"""The direct method's structured interior-point solver (geocert.solvers.autocalibration.direct_ipm)
+"""The direct method's structured interior-point solver (geocert.solvers.core.interior_point)
 and how direct_solve uses it: the Schur complement's block operator, small conic programs
 against Clarabel, an unclean solve never reported clean, the better of two clean solves kept,
 and Table 7.1's seed 1006 (varying focal) certified, which Clarabel's accuracy left uncertified."""
@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from geocert.solvers.autocalibration import direct, direct_ipm, direct_solve, scenes
+from geocert.solvers.autocalibration import direct, direct_solve, scenes
+from geocert.solvers.core import interior_point
 from geocert.solvers.autocalibration import direct_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.core.cones import ConeSpec, rounding_uncounted, smat, svec
@@ -49,7 +50,7 @@ class TestOperator:
         """kron(Gi) svec(U) = svec(Gi U Gi): the Schur complement's PSD part."""
         rng = np.random.default_rng(0)
         for n in (1, 2, 5, 9):
-            block = direct_ipm._Psd(n, sp.csr_matrix((n * (n + 1) // 2, 1)), np.zeros(n * (n + 1) // 2))
+            block = interior_point._Psd(n, sp.csr_matrix((n * (n + 1) // 2, 1)), np.zeros(n * (n + 1) // 2))
             Gi = random_pd(rng, n)
             U = rng.normal(size=(n, n))
             U = U + U.T
@@ -72,7 +73,7 @@ class TestOperator:
         start = cones.zero + cones.nonneg
         for n in cones.psd:
             m = n * (n + 1) // 2
-            block = direct_ipm._Psd(n, A[start:start + m], b[start:start + m])
+            block = interior_point._Psd(n, A[start:start + m], b[start:start + m])
             start += m
             Gi = random_pd(rng, n)
             expected = (block.AT @ (block.AT @ block.kron(Gi)).T).T
@@ -84,7 +85,7 @@ class TestOperator:
         """r' Z r = Lambda = r^-1 S r^-T, and S = G Z G with G = r r' (G's inverse in the Schur complement)."""
         rng = np.random.default_rng(1)
         S, Z = random_pd(rng, 6), random_pd(rng, 6)
-        r, rinv, lam = direct_ipm._scaling_psd(S, Z)
+        r, rinv, lam = interior_point._scaling_psd(S, Z)
         assert np.allclose(r.T @ Z @ r, np.diag(lam)) and np.allclose(rinv @ S @ rinv.T, np.diag(lam))
         assert np.allclose(r @ rinv, np.eye(6))
         G = r @ r.T
@@ -95,8 +96,8 @@ class TestSolve:
     @pytest.mark.parametrize("seed", [0, 1, 2, 3])
     def test_small_programs_reach_clarabels_optimum(self, seed):
         q, A, b, cones = random_program(seed)
-        result = direct_ipm.solve(q, A, b, cones.zero, cones.nonneg, cones.psd)
-        assert result.status == "Solved"
+        result = interior_point.solve(q, A, b, cones.zero, cones.nonneg, cones.psd)
+        assert result.status is ConicStatus.OPTIMAL and result.raw_status == "Solved"
         expected = clarabel_optimum(q, A, b, cones)
         assert result.primal == pytest.approx(expected, rel=1e-7, abs=1e-7)
         assert result.dual == pytest.approx(expected, rel=1e-7, abs=1e-7)
@@ -116,8 +117,8 @@ class TestSolve:
         """Three iterations reach neither the tolerance nor the acceptable one: never "Solved",
         and direct_solve maps it to an unclean status."""
         q, A, b, cones = random_program(5)
-        result = direct_ipm.solve(q, A, b, cones.zero, cones.nonneg, cones.psd, max_iter=3)
-        assert result.status == "MaxIterations"
+        result = interior_point.solve(q, A, b, cones.zero, cones.nonneg, cones.psd, max_iter=3)
+        assert result.raw_status == "MaxIterations" and result.status is ConicStatus.INACCURATE
         program = SimpleNamespace(q=q, A=A, b=b, cones=cones)
         original = direct_solve.IPM_MAX_ITER
         try:
@@ -157,7 +158,7 @@ class TestSolveProgram:
 def test_table71_seed_1006_varying_focal_is_certified_rank_one():
     """Clarabel's clean solve of this relaxation stopped with the bound 1.2e-4 (relative) below the
     best quadric and the moment matrix's second eigenvalue 1.9e-5 of the first: reported not
-    certified. direct_ipm's solve places the bound within 1e-6 of it, rank one: the order-2
+    certified. interior_point's solve places the bound within 1e-6 of it, rank one: the order-2
     relaxation is tight here; the gap was the solver's. The certified bound is lower still by
     what its own computation may have rounded (cones.rounding_margin, worked out from the dual's
     magnitudes, not from the rounding that happened: 3.7e-6 of it here): tightness is asserted on
@@ -180,24 +181,24 @@ def test_table71_seed_1006_varying_focal_is_certified_rank_one():
 
 def _varying_focal_solve(seed: int):
     """Table 7.1's varying-focal scene of ``seed`` without chirality: its order-2 program and
-    direct_ipm's solve of it."""
+    interior_point's solve of it."""
     scene, _ = scenes.table71_scene(seed, 0.2, True)
     problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
     setup = direct.setup_for(problem, "none")
     program = direct_relaxation.build(setup.cameras, None, 2)
-    return program, direct_ipm.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
+    return program, interior_point.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
                                      program.cones.psd)
 
 
 def test_the_dual_equations_hold_to_rounding_on_table71_seed_1006():
     """Late in a solve the Schur complement is too ill-conditioned for its own solution: the
-    Newton step is refined against the operator itself (direct_ipm.REFINEMENT). Without it the
+    Newton step is refined against the operator itself (interior_point.REFINEMENT). Without it the
     dual residual |A'z + q| was 3.4e-8 here (7.7e-7 on seed 1012 with chirality, where the safe
     bound then lost 5e-5 relative to charge it); with it, 6e-14 to 1e-15. What the safe bound
     charges for the residual and the moment block's eigenvalue is then rounding (compared before
     the charge for the bound's own rounding, which does not depend on the residual)."""
     program, result = _varying_focal_solve(1006)
-    assert result.status == "Solved"
+    assert result.status is ConicStatus.OPTIMAL
     assert np.linalg.norm(program.A.T @ result.z + program.q) <= 1e-11 * max(1.0, np.linalg.norm(program.q))
     with rounding_uncounted():
         bound, _ = direct_relaxation.safe_bound(program, result.z)
@@ -211,13 +212,13 @@ def check_solve(program, result, optimum: float, monkeypatch, rel: float = 1e-4)
     digits, hence the 1e-5); and when it says "Solved", its dual equations hold to the acceptable
     tolerance and the bound is the optimum's (to ``rel``)."""
     bound, _ = direct_relaxation.safe_bound(program, result.z)
-    assert bound <= optimum * (1 + 1e-5), (result.status, bound)
-    assert result.status in ("Solved", "Stalled", "MaxIterations"), result.status
-    if result.status == "Solved":
+    assert bound <= optimum * (1 + 1e-5), (result.raw_status, bound)
+    assert result.raw_status in ("Solved", "Stalled", "MaxIterations"), result.raw_status
+    if result.status is ConicStatus.OPTIMAL:
         assert np.linalg.norm(program.A.T @ result.z + program.q) <= 1e-8 * max(1.0, np.linalg.norm(program.q))
         assert bound == pytest.approx(optimum, rel=rel)
     else:  # direct_solve does not call it clean (and falls back to Clarabel)
-        monkeypatch.setattr(direct_ipm, "solve", lambda *args, **kwargs: result)
+        monkeypatch.setattr(interior_point, "solve", lambda *args, **kwargs: result)
         assert direct_solve._solve_ipm(program, 1e-9)[0] is ConicStatus.INACCURATE
     return bound
 
@@ -228,12 +229,12 @@ def test_table71_seed_1008_varying_focal(monkeypatch):
     iteration 25); with SDPT3's adaptive exponent and step fraction it ends "Solved" on OpenBLAS's
     Haswell and Prescott kernels (18 iterations), but still "Stalled" at iteration 25 on SkylakeX
     (AVX-512), its bound then 4e-3 below. 2.80767e-4: the optimum where the clean solves agree.
-    With the Schur complement assembled per moment (direct_ipm._Psd.schur, the default) "Solved" in
+    With the Schur complement assembled per moment (interior_point._Psd.schur, the default) "Solved" in
     18 iterations on SkylakeX with one BLAS thread (bound 2.807653e-4); with two, at iteration 25
     through the acceptable tolerance's iterate, whose dual residual (3e-7) the safe bound charges:
     2.8053e-4, 8.4e-4 relative below. What this tests is the step rule, so it solves with the
     svec operator's assembly ("kron"), whose path held on one and two threads."""
-    monkeypatch.setattr(direct_ipm, "ASSEMBLY", "kron")
+    monkeypatch.setattr(interior_point, "ASSEMBLY", "kron")
     program, result = _varying_focal_solve(1008)
     check_solve(program, result, 2.80767e-4, monkeypatch)
 
@@ -252,8 +253,8 @@ def test_table71_seed_1012_chirality_split_half(monkeypatch):
     problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
     setup = direct.setup_for(problem, "points")
     program = direct_relaxation.build(setup.cameras, setup.orientations[0].pairs, 2, ((8, 0.05772124305830394, -1.0),))
-    result = direct_ipm.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
+    result = interior_point.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
                               program.cones.psd, max_iter=direct_solve.IPM_MAX_ITER)
     bound = check_solve(program, result, 7.71750e-4, monkeypatch)
-    if result.status == "Solved":
+    if result.status is ConicStatus.OPTIMAL:
         assert bound > 3.755e-4  # above the other half's optimum: this half is cut off

@@ -1,5 +1,6 @@
 """A primal-dual interior-point method for the moment relaxation (direct_relaxation.Program),
-numpy only, that exploits what Clarabel cannot: the structure of the PSD cones' scaling.
+numpy only, that exploits what Clarabel cannot: the structure of the PSD cones' scaling. Part of
+the conic boundary (solvers.core.conic maps its statuses to ours).
 
 Why: Clarabel factors the quasi-definite KKT system in which each PSD cone's Nesterov-Todd block
 is a dense n(n+1)/2 square (the 55 x 55 moment matrix: 1540 rows), about 3e9 flops an iteration
@@ -34,6 +35,7 @@ import numpy as np
 import scipy.linalg as sl
 import scipy.sparse as sp
 
+from geocert.solvers.core.conic import ConicStatus, map_interior_point_status
 
 REFINEMENT = 3  # refinement steps per Newton solve (1 left the dual residual at 1e-9 late in some solves; 2-4 at 1e-12)
 # ... and up to this many while the equations' error is above a tenth of the tolerance (of |q|, |b|):
@@ -158,12 +160,13 @@ class _Psd:
 
 @dataclass
 class Result:
-    status: str  # "Solved", "MaxIterations", "NumericalError", "Stalled"
+    status: ConicStatus  # ours (conic's map of raw_status); FAILED when y or z is not finite
     y: np.ndarray | None
     z: np.ndarray | None
     iterations: int
     primal: float
     dual: float
+    raw_status: str  # the method's own: "Solved", "MaxIterations", "NumericalError", "Stalled"
 
 
 def _factor(S: np.ndarray) -> np.ndarray:
@@ -191,9 +194,46 @@ def _scaling_psd(S: np.ndarray, Z: np.ndarray):
     return r, rinv, lam
 
 
+def _schur_complement(n: int, An: sp.csr_matrix, An_used: np.ndarray, flat_n: np.ndarray, weight: np.ndarray,
+                      blocks: list, Gis: list, legacy: bool) -> np.ndarray:
+    """H = A_K' (W'W)^-1 A_K: the nonnegative rows' part (``weight`` z / s, dense over the moments
+    they hold, An_used at the flat positions flat_n) and each PSD block's (_Psd.schur, or with
+    ``legacy`` the former assembly through kron, the benchmark's baseline)."""
+    if legacy:
+        H = (sp.csr_matrix(An.T).multiply(weight[None, :]) @ An).toarray()
+        for B, Gi in zip(blocks, Gis):
+            H += np.asarray(B.AT @ (B.AT @ B.kron(Gi)).T)
+        return (H + H.T) / 2
+    H = np.zeros((n, n))
+    np.add.at(H.reshape(-1), flat_n, ((An_used.T * weight) @ An_used).ravel())
+    for B, Gi in zip(blocks, Gis):
+        if len(B.cols) == n:
+            H += B.schur(Gi)
+        else:  # (np.add.at at the flat positions: measured 3 to 5 times faster than H[np.ix_(cols, cols)] +=)
+            np.add.at(H.reshape(-1), (B.cols[:, None] * n + B.cols[None, :]).ravel(), B.schur(Gi).ravel())
+    # (cho_factor reads H's upper triangle only: H is symmetric up to rounding, unsymmetrised)
+    return H
+
+
 def solve(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: int, psd: tuple,
           tolerance: float = 1e-9, max_iter: int = 60, acceptable: float = 1e-8, check=None) -> Result:
-    """Stops when the primal residual (relative to max(1, |b|)), the dual one (to max(1, |q|)) and
+    """The solve (_iterate) with its status mapped to ours (conic.map_interior_point_status): only
+    "Solved" with a finite y and z is OPTIMAL. Never raises on numerical trouble (FAILED, with the
+    exception as its raw status); ``check()``'s exceptions pass through."""
+    try:
+        raw, y, z, iterations, primal, dual = _iterate(q, A, b, zero, nonneg, psd, tolerance, max_iter, acceptable,
+                                                       check)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+        return Result(ConicStatus.FAILED, None, None, 0, np.nan, np.nan, f"exception: {exc}")
+    status = map_interior_point_status(raw)
+    if not (np.all(np.isfinite(y)) and np.all(np.isfinite(z))):
+        status = ConicStatus.FAILED
+    return Result(status, y, z, iterations, primal, dual, raw)
+
+
+def _iterate(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: int, psd: tuple,
+             tolerance: float, max_iter: int, acceptable: float, check):
+    """(raw status, y, z, iterations, primal, dual). Stops when the primal residual (relative to max(1, |b|)), the dual one (to max(1, |q|)) and
     the gap s'z (absolute, or relative to |q'y|) are all within ``tolerance`` ("Solved"); when
     the iterations end otherwise (a limit, a stall: the worst of the three not halved in STALL
     iterations, a numerical failure), the last iterate within ``acceptable`` is returned as
@@ -287,20 +327,7 @@ def solve(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: int, 
             break
         # Schur complement H = A_K' (W'W)^-1 A_K
         Gis = [rinv.T @ rinv for r, rinv, lam in scal]
-        if legacy:  # the former assembly (the benchmark's baseline)
-            H = (sp.csr_matrix(An.T).multiply((zp[0] / sp_[0])[None, :]) @ An).toarray()
-            for B, Gi in zip(blocks, Gis):
-                H += np.asarray(B.AT @ (B.AT @ B.kron(Gi)).T)
-            H = (H + H.T) / 2
-        else:
-            H = np.zeros((n, n))
-            np.add.at(H.reshape(-1), flat_n, ((An_used.T * (zp[0] / sp_[0])) @ An_used).ravel())
-            for B, Gi in zip(blocks, Gis):
-                if len(B.cols) == n:
-                    H += B.schur(Gi)
-                else:  # (np.add.at at the flat positions: measured 3 to 5 times faster than H[np.ix_(cols, cols)] +=)
-                    np.add.at(H.reshape(-1), (B.cols[:, None] * n + B.cols[None, :]).ravel(), B.schur(Gi).ravel())
-            # (cho_factor reads H's upper triangle only: H is symmetric up to rounding, unsymmetrised)
+        H = _schur_complement(n, An, An_used, flat_n, zp[0] / sp_[0], blocks, Gis, legacy)
         try:
             Hf = sl.cho_factor(H, check_finite=legacy)
         except np.linalg.LinAlgError:
@@ -407,4 +434,4 @@ def solve(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: int, 
         y, zK, lam_e = kept
         status = "Solved"
     z = np.concatenate([lam_e, zK])
-    return Result(status, y, z, it, float(q @ y), float(-bK @ zK - be @ lam_e))
+    return status, y, z, it, float(q @ y), float(-bK @ zK - be @ lam_e)
