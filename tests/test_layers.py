@@ -81,6 +81,38 @@ def test_no_verifier_module_imports_a_layer_above_it():
     assert imports_above("verify", ABOVE) == {}
 
 
+def module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imported_modules(path: Path, known: set) -> set[str]:
+    """The modules of ``known`` that ``path`` imports: ``from a.b import c`` counts ``a.b.c`` when
+    c is a module, and ``a.b`` always."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module)
+            names.update(f"{node.module}.{alias.name}" for alias in node.names)
+        elif isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+    return names & known
+
+
+def test_no_solver_module_is_the_verifiers_alone():
+    """What only the verifier reads is the verifier's: a module of geocert/solvers that no module
+    but the verifier's imports belongs in geocert/verify, beside what it checks with."""
+    paths = {module_name(path): path for path in sorted(ROOT.rglob("*.py"))}
+    importers: dict = {name: set() for name in paths}
+    for name, path in paths.items():
+        for used in imported_modules(path, set(paths)) - {name}:
+            importers[used].add(name)
+    verifiers_alone = sorted(name for name, users in importers.items()
+                             if name.startswith("geocert.solvers.") and users
+                             and all(user.startswith("geocert.verify") for user in users))
+    assert verifiers_alone == []
+
+
 def test_a_solvers_self_check_is_the_verifiers(monkeypatch):
     """With GEOCERT_SELF_VERIFY=1 (the suites run so), a certified solve is checked by the verifier
     through the hook it installs: a verifier that refuses fails the solve."""

@@ -24,11 +24,11 @@ from geocert.solvers.core.self_check import SelfCheckFailed
 from geocert.solvers.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
                                                data_hash, problem_hash)
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost
-from geocert.solvers.core.notes import check_notes
+from geocert.verify.notes import check_notes
 from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
                                          informational, number as _number, printable_tree, record, same,
                                          work_budget)
-from geocert.solvers.fractional import residual_claims
+from geocert.verify import residual_claims
 from geocert.verify import estimates
 from geocert.verify.verification import hook
 

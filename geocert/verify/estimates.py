@@ -57,7 +57,7 @@ def check_determined(determinacy: dict, where: str, earlier: bool = True) -> Non
     core.determinacy.interval does: an interval stating none would read as bounded suffices."""
     intervals, warnings = determinacy.get("intervals"), determinacy.get("warnings")
     if not isinstance(intervals, list) or not all(isinstance(i, dict) for i in intervals):
-        return  # typed by core.notes
+        return  # typed by verify.notes
     if not earlier:
         missing = [number for number, i in enumerate(intervals) if "tolerance" not in i]
         if missing:

@@ -92,7 +92,8 @@ from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.core.certificates import problem_hash
 from geocert.solvers.fractional import items
-from geocert.solvers.reconstruction import hashed_options, synthetic
+from geocert.solvers.reconstruction import synthetic
+from geocert.verify import hashed_options
 from geocert.verify.checks import verify_any
 from tests.support import refused as _refused, stage as _stage, verified as _verifies
 from tests.verify.test_forgeries import rehash, uncertify

@@ -302,7 +302,7 @@ def _centred_registration(options: dict, shift) -> dict:
     form states the record wherever the registration tests it) (a stored result)."""
     from geocert.pipelines.reconstruction import pipeline
     from geocert.solvers.core.certificates import problem_hash
-    from geocert.solvers.reconstruction import hashed_options
+    from geocert.verify import hashed_options
     from geocert.verify.checks import checked_options
 
     with pytest.MonkeyPatch.context() as patch:
