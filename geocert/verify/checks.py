@@ -810,7 +810,7 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
     does: its tolerance is max(abs_gap, rel_gap * cost) with the item's rel_gap, met, and its
     leaves are the proof's. (Its root_region describes the proof's root box in the caller's
     terms: informational, but for a bilinear frame, where it is the scope: bilinear.verification, and a
-    certified map or track, where it is its proof's: items.MapItems, items.TrackItems.)"""
+    certified map or track, where it is its proof's: fractional.MapItems, fractional.TrackItems.)"""
     items = result.get(kind.item_key)
     if kind.name == "autocalibration":
         items = result.get("stages")

@@ -53,7 +53,7 @@ import numpy as np
 from geocert.solvers.core.geometry import is_number, norm_cost
 from geocert.solvers.core.strict import Invalid, number, numbers, same
 from geocert.verify import residual_claims
-from geocert.solvers.fractional.items import TRACKS, TrackItems, _check_scope_words
+from geocert.verify.fractional import TRACKS, TrackItems, _check_scope_words
 from geocert.verify.reconstruction_members import intrinsics_of
 from geocert.verify.verification import Verification
 from geocert.solvers.fractional.options import TriangulationOptions
