@@ -134,6 +134,38 @@ def test_no_verifier_module_imports_a_layer_above_it():
     assert imports_above("verify", ABOVE) == {}
 
 
+def module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imported_modules(path: Path, known: set) -> set[str]:
+    """The modules of ``known`` that ``path`` imports: ``from a.b import c`` counts ``a.b.c`` when
+    c is a module, and ``a.b`` always."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module)
+            names.update(f"{node.module}.{alias.name}" for alias in node.names)
+        elif isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+    return names & known
+
+
+def test_no_solver_module_is_the_verifiers_alone():
+    """What only the verifier reads is the verifier's: a module of geocert/solvers that no module
+    but the verifier's imports belongs in geocert/verify, beside what it checks with."""
+    paths = {module_name(path): path for path in sorted(ROOT.rglob("*.py"))}
+    importers: dict = {name: set() for name in paths}
+    for name, path in paths.items():
+        for used in imported_modules(path, set(paths)) - {name}:
+            importers[used].add(name)
+    verifiers_alone = sorted(name for name, users in importers.items()
+                             if name.startswith("geocert.solvers.") and users
+                             and all(user.startswith("geocert.verify") for user in users))
+    assert verifiers_alone == []
+
+
 def test_a_solvers_self_check_is_the_verifiers(monkeypatch):
     """With GEOCERT_SELF_VERIFY=1 (the suites run so), a certified solve is checked by the verifier
     through the hook it installs: a verifier that refuses fails the solve."""
@@ -163,10 +195,18 @@ def test_a_solvers_self_check_is_the_verifiers(monkeypatch):
     assert installed.__module__ == "geocert.verify.checks"
 
 
+# The kinds whose programs the verifier still assembles with scipy.sparse (solvers/bilinear/
+# relaxation.py; autocalibration's direct_relaxation.py and direct_sublevel.py) or whose metric
+# cameras it splits with scipy.linalg.rq (autocalibration/problem.py): shared with the solvers,
+# not yet numpy alone. Every other kind's certificates verify with numpy alone.
+SCIPY_KINDS = ("autocalibration", "bilinear")
+
+
 def test_the_verifier_checks_every_kind_without_the_service():
     """A third party's verifier: stored certificates of every certifying kind verify, and a
     stereo_lines document is refused saying why, without geocert.kinds (or anything above the
-    solvers) ever imported."""
+    solvers) ever imported, nor a conic solver or OpenCV; and those of every kind but
+    SCIPY_KINDS without scipy."""
     import subprocess
     import sys
 
@@ -174,14 +214,23 @@ def test_the_verifier_checks_every_kind_without_the_service():
 import json, sys
 from pathlib import Path
 from geocert.verify.checks import verify_any
+SCIPY_KINDS = %r
 folder = Path("tests/data/certificates")
 names = sorted(p.stem for p in folder.glob("*.json") if not p.stem.startswith("make"))
-valid = {name: verify_any(json.loads((folder / f"{name}.json").read_text())).valid for name in names}
+names.sort(key=lambda name: name.startswith(SCIPY_KINDS))  # the numpy-only kinds first
+def loaded():
+    return sorted({m.split(".")[0] for m in sys.modules} & {"scipy", "clarabel", "cv2"})
+valid, numpy_only = {}, None
+for name in names:
+    if numpy_only is None and name.startswith(SCIPY_KINDS):
+        numpy_only = loaded()
+    valid[name] = verify_any(json.loads((folder / f"{name}.json").read_text())).valid
 estimate = verify_any({"kind": "stereo_lines", "status": "estimate", "pairs": []})
 above = sorted({m.split(".")[1] for m in sys.modules if m.startswith("geocert.") and m.split(".")[1] in
                 ("kinds", "app", "workers", "jobs", "pipelines")})
-print(json.dumps({"valid": valid, "estimate": estimate.first_failure, "above": above}))
-"""
+print(json.dumps({"valid": valid, "estimate": estimate.first_failure, "above": above,
+                  "numpy_only": numpy_only, "loaded": loaded()}))
+""" % (SCIPY_KINDS,)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT.parent)
     assert out.returncode == 0, out.stderr[-2000:]
     import json
@@ -190,6 +239,8 @@ print(json.dumps({"valid": valid, "estimate": estimate.first_failure, "above": a
     assert len(seen["valid"]) >= 7 and all(seen["valid"].values()), seen["valid"]
     assert seen["estimate"]["check"] == "format" and "never certified" in seen["estimate"]["detail"]
     assert seen["above"] == []
+    assert seen["numpy_only"] == []  # no scipy, conic solver or OpenCV for the numpy-only kinds
+    assert "clarabel" not in seen["loaded"] and "cv2" not in seen["loaded"]
 
 
 def test_a_served_kind_registered_with_another_contract_is_refused():

@@ -14,7 +14,7 @@ from geocert.kinds.documents import brief_certificate, certificate_summary, outc
 from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
 from geocert.solvers.fractional.inputs import check_correspondences
-from geocert.solvers.fractional.items import MAP_REGION_MEANING
+from geocert.verify.fractional import MAP_REGION_MEANING
 from geocert.verify.adapters import VERIFIED_KINDS
 from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.fractional.results import MapResult

@@ -13,7 +13,7 @@ from geocert.kinds.base import ProblemKind
 from geocert.kinds.documents import brief_certificate, certificate_summary, local_summary, outcome_document
 from geocert.kinds.schema import Camera, CertificateDocument, ItemOutcome, JobBase, JobStats, Pixel, Strict, options_model
 from geocert.solvers.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, check_cameras, number_array
-from geocert.solvers.fractional.items import MAX_VIEWS, TRACK_REGION_MEANING, TRACKS
+from geocert.verify.fractional import MAX_VIEWS, TRACK_REGION_MEANING, TRACKS
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.fractional.columns import SCOPE, TrackResults
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult

@@ -15,15 +15,15 @@ from geocert.verify.autocalibration import STAGES
 from geocert.verify.bilinear import FRAMES
 from geocert.solvers.core import records
 from geocert.solvers.core.strict import Invalid
-from geocert.solvers.fractional.items import TRACKS, MapItems, TrackItems
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
 from geocert.verify import reconstruction_stages as stage_checks
+from geocert.verify.fractional import TRACKS, MapItems, TrackItems
 from geocert.verify.reconstruction import RECONSTRUCTION
 from geocert.verify.verification import Verification
 
-# The fractional kinds' adapters sit below the verifier (geocert/solvers/fractional/items.py) and
-# cannot subclass Verification; they are its virtual subclasses, and the verifier reads their
-# hooks through verification.hook, with Verification's defaults.
+# The fractional kinds' adapters (verify/fractional.py) do not subclass Verification; they are its
+# virtual subclasses, and the verifier reads their hooks through verification.hook, with
+# Verification's defaults.
 Verification.register(TrackItems)
 Verification.register(MapItems)
 

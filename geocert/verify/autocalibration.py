@@ -13,13 +13,12 @@ import numpy as np
 
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
-from geocert.solvers.autocalibration import plane_sublevel, proofs, structure_check
+from geocert.solvers.autocalibration import plane_sublevel, proofs
 from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.determinacy import ESTIMATES_FORM, proven_document
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
-from geocert.solvers.fractional import residual_claims
-from geocert.verify import estimates
+from geocert.verify import estimates, residual_claims, structure_check
 from geocert.verify.verification import Verification
 
 STAGE_NAMES = {"stratified": ["affine", "metric"], "direct": ["direct"]}

@@ -22,7 +22,7 @@ from geocert.solvers.core.determinacy import ESTIMATES_FORM
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
                                          numbers as _numbers, record as _record)
-from geocert.solvers.fractional import residual_claims
+from geocert.verify import residual_claims
 from geocert.verify.verification import Verification
 
 CLAIM_OPTIONS = ("norm", "coefficients", "camera", "coefficient_bound", "camera_bound", "rel_gap", "abs_gap")

@@ -24,11 +24,11 @@ from geocert.solvers.core.self_check import SelfCheckFailed
 from geocert.solvers.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
                                                data_hash, problem_hash)
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost
-from geocert.solvers.core.notes import check_notes
+from geocert.verify.notes import check_notes
 from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
                                          informational, number as _number, printable_tree, record, same,
                                          work_budget)
-from geocert.solvers.fractional import residual_claims
+from geocert.verify import residual_claims
 from geocert.verify import estimates
 from geocert.verify.verification import hook
 
@@ -810,7 +810,7 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
     does: its tolerance is max(abs_gap, rel_gap * cost) with the item's rel_gap, met, and its
     leaves are the proof's. (Its root_region describes the proof's root box in the caller's
     terms: informational, but for a bilinear frame, where it is the scope: bilinear.verification, and a
-    certified map or track, where it is its proof's: items.MapItems, items.TrackItems.)"""
+    certified map or track, where it is its proof's: fractional.MapItems, fractional.TrackItems.)"""
     items = result.get(kind.item_key)
     if kind.name == "autocalibration":
         items = result.get("stages")

@@ -57,7 +57,7 @@ def check_determined(determinacy: dict, where: str, earlier: bool = True) -> Non
     core.determinacy.interval does: an interval stating none would read as bounded suffices."""
     intervals, warnings = determinacy.get("intervals"), determinacy.get("warnings")
     if not isinstance(intervals, list) or not all(isinstance(i, dict) for i in intervals):
-        return  # typed by core.notes
+        return  # typed by verify.notes
     if not earlier:
         missing = [number for number, i in enumerate(intervals) if "tolerance" not in i]
         if missing:
@@ -189,7 +189,7 @@ def _check_tracks(kind, result: dict, certificate: dict, earlier: bool = True) -
         points = np.asarray(data["tracks"][index]["points"], dtype=float)
         dof = estimate.pooled_dof(determinacy.get("level"))
         pooled = None
-        if dof is not None:  # read at the level stated (checked against its pooled floor: items._check_pooled)
+        if dof is not None:  # read at the level stated (checked against its pooled floor: fractional._check_pooled)
             level = determinacy.get("cost_increase")
             pooled = (float(level), dof) if isinstance(level, (int, float)) and not isinstance(level, bool) else None
         expected = safely(estimate.track, cameras[views], points, item["point"], item.get("at_infinity") is True,

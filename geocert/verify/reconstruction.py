@@ -52,13 +52,14 @@ import numpy as np
 
 from geocert.solvers.core.geometry import is_number, norm_cost
 from geocert.solvers.core.strict import Invalid, number, numbers, same
-from geocert.solvers.fractional import residual_claims
-from geocert.solvers.fractional.items import TRACKS, TrackItems, _check_scope_words
+from geocert.verify import residual_claims
+from geocert.verify.fractional import TRACKS, TrackItems, _check_scope_words
 from geocert.verify.reconstruction_members import intrinsics_of
 from geocert.verify.verification import Verification
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.reconstruction import (calibration_claim, calibration_tie, camera_claim, depth_reversal_claim,
-                                           hashed_options, motion_claim, run_control)
+                                           motion_claim, run_control)
+from geocert.verify import hashed_options
 from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
 
 ROUNDING = 1e-9  # relative: what JSON round trips and a recomputed cost may differ by

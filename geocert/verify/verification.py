@@ -2,9 +2,9 @@
 through (a kind's ``verification``, listed in verify/adapters.py). It reads an item's arrays from
 the data (``read``, the one method every adapter defines); every other hook is optional, and its
 default here (None: the verifier's own general check) is what the verifier does without it. The
-verifier reads a hook through ``hook``, so an adapter defined below the verifier (the fractional
-kinds' in geocert/solvers/fractional/items.py, registered here as virtual subclasses) gets the
-same defaults."""
+verifier reads a hook through ``hook``, so an adapter that does not subclass Verification (the
+fractional kinds' in verify/fractional.py, registered as virtual subclasses) gets the same
+defaults."""
 
 from __future__ import annotations
 

@@ -91,7 +91,7 @@ def forged_point():
     region proven for its own cost, then one farkas leaf over the searched box (a stored
     triangulation certificate whose tracks were searched; a reconstruction's points are now
     mostly certified by their convexity, with no search to forge)."""
-    from geocert.solvers.fractional.items import TRACKS
+    from geocert.verify.fractional import TRACKS
     from geocert.solvers.fractional.relaxation import Relaxation
     from geocert.solvers.fractional.search import root_region
 

@@ -46,7 +46,8 @@ def _unsearch_cameras(result: dict) -> dict:
     a bound could certify has none of)."""
     from geocert.solvers.core.certificates import problem_hash
     from geocert.solvers.core.geometry import norm_cost
-    from geocert.solvers.reconstruction import camera_claim, hashed_options
+    from geocert.solvers.reconstruction import camera_claim
+    from geocert.verify import hashed_options
     from geocert.verify.checks import checked_options
     from geocert.verify.reconstruction import camera_maps
 

@@ -422,7 +422,7 @@ class TestTrackRootRegionNotTheProofs:
     the scope (TestRootRegionStatedForTheWholeScope), as a map's and a bilinear frame's do, which
     are tied to their proofs (review 9, issue 33 class 5). Here the box is narrowed to a point at
     the returned one: a point of the scope costing less than lower_bound... lies outside it, and
-    the document verified. Fixed: items.TrackItems._check_root_region recomputes it as the solver
+    the document verified. Fixed: fractional.TrackItems._check_root_region recomputes it as the solver
     writes it (the proof's search box, its branched functionals through the chart rebuilt from the
     data, the chart's depth row, its reference view), and a convexity proof's summary states none."""
 
@@ -485,7 +485,7 @@ class TestScopeWordsUntied:
     "every point in front of every camera" (a claim of the optimum over points no proof searched:
     one with a larger residual may cost less; on the stored track the free optimum happens to be
     the limited one), or "every point of space, every norm", the stored
-    triangulation_l1l1_max_residual verified. Fixed (items._check_scope_words): the words are the
+    triangulation_l1l1_max_residual verified. Fixed (fractional._check_scope_words): the words are the
     solver's, the limit stated exactly for a search (the trivial bound and a resection's
     sublevel bound hold over the whole scope, and say so)."""
 

@@ -16,7 +16,7 @@ before):
   could cost less than the cap) and reference_view 99 of a 2-view track, beside scope "every point
   of space": it verifies. The solver writes such a summary for a search that met its tolerance and
   did not certify (documents.certificate_summary), in TRACK_REGION_MEANING's words; review 16's fix
-  reads the words of certified items only (items._check_root_region returns when the claim is not
+  reads the words of certified items only (fractional._check_root_region returns when the claim is not
   certified, checks._check_summaries reads only tolerance_met there). The box itself cannot be
   checked without its proof, but the words, the reference view and lower <= upper can, and the
   scope words as for a certified item's.
@@ -41,7 +41,7 @@ before):
 
 Fixed after the review: an uncertified item's root region states the solver's words, a box with
 lower <= upper and its chart's reference view, and its scope the search's words
-(items._uncertified_region, _check_scope_words); the adjustment's model is the one the options ask
+(fractional._uncertified_region, _check_scope_words); the adjustment's model is the one the options ask
 for, and the cameras returned have its calibration (reconstruction_members._check_adjustment_model:
 one K for "fixed" and "full"; square pixels, no skew and one principal point for "varying"; one
 focal length too for "simple", a principal point per view only as its test says).
@@ -91,8 +91,9 @@ import pytest
 from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.core.certificates import problem_hash
-from geocert.solvers.fractional import items
-from geocert.solvers.reconstruction import hashed_options, synthetic
+from geocert.verify import fractional as items
+from geocert.solvers.reconstruction import synthetic
+from geocert.verify import hashed_options
 from geocert.verify.checks import verify_any
 from tests.support import refused as _refused, stage as _stage, verified as _verifies
 from tests.verify.test_forgeries import rehash, uncertify
@@ -241,7 +242,7 @@ class TestRootRegionWords:
         assert "not every one of the scope" in said
 
     def test_many_earlier_words_keep_the_scope_short(self):
-        from geocert.solvers.fractional.items import earlier_words_scope
+        from geocert.verify.fractional import earlier_words_scope
 
         said = earlier_words_scope([f"points/{i}" for i in range(10_000)])["root_region"]
         assert "points/0, points/1, points/2, points/3, points/4 and 9995 more" in said and len(said) < 400

@@ -1,5 +1,5 @@
 """An eighteenth hostile review of the verifier (issue 33), aimed at review 17's three checks: an
-uncertified item's summary root_region and scope (items._uncertified_region, _check_scope_words),
+uncertified item's summary root_region and scope (fractional._uncertified_region, _check_scope_words),
 a reconstruction's adjustment model tied to the options, and the cameras returned tied to that
 model's calibration (reconstruction_members._check_adjustment_model). First genuine results, to
 find false refusals; then forgeries, edited from genuine solves as a forger would, rehashed where
@@ -49,7 +49,7 @@ Found (each verified; fixed after the review but the last, each test failing on 
   proof and options (track 0's leaves -5 is refused: "its proof has 1").
 - An uncertified item's scope is read only beside a root region
   (test_an_uncertified_scope_without_a_region_is_read): track 1's summary with root_region null,
-  or removed, and scope "every point of space, proven optimal" verifies (items._check_scope_words
+  or removed, and scope "every point of space, proven optimal" verifies (fractional._check_scope_words
   returns: "without a search (no root box) the words claim nothing"). The solver writes an
   uncertified search's summary with its root region; a scope stated without one could be required
   to be the kind's words too (or absent). Not fixed, by choice: the words of a summary no search
@@ -58,7 +58,7 @@ Found (each verified; fixed after the review but the last, each test failing on 
 Fixed after the review: a done adjustment states its model; the principal point's test records sit
 beside the simple model only; an uncertified region's functionals are finite, none all zero, one a
 row of its box, its denominator (not all zero) and reference (view or point) its chart's; an
-uncertified summary's leaves a count and tolerance a number at least 0 (items._uncertified_summary,
+uncertified summary's leaves a count and tolerance a number at least 0 (fractional._uncertified_summary,
 _uncertified_region; reconstruction_members._check_adjustment_model).
 
 False refusal found, then fixed:
@@ -302,7 +302,7 @@ def _centred_registration(options: dict, shift) -> dict:
     form states the record wherever the registration tests it) (a stored result)."""
     from geocert.pipelines.reconstruction import pipeline
     from geocert.solvers.core.certificates import problem_hash
-    from geocert.solvers.reconstruction import hashed_options
+    from geocert.verify import hashed_options
     from geocert.verify.checks import checked_options
 
     with pytest.MonkeyPatch.context() as patch:

@@ -1,7 +1,7 @@
 """A nineteenth hostile review of the verifier (issue 33), aimed at the newest checks: a
 reconstruction's adjustment model and the principal point's test records
 (reconstruction_members._check_adjustment_model, camera_claim.MAX_PRINCIPAL_POINT_SD_PX), an
-uncertified item's region and summary (items._uncertified_region, _uncertified_summary), the judged
+uncertified item's region and summary (fractional._uncertified_region, _uncertified_summary), the judged
 cameras' free_camera, and the stratified metric stage's proven intervals (metric_sublevel,
 proofs.sublevel_hull and check_sublevel, verify.autocalibration._check_proven_intervals). Genuine
 results first edited as a forger would (rehashed where an edit touches what the hash covers);

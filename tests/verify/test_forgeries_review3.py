@@ -128,7 +128,7 @@ class TestUncertifiedFiguresOfEveryKind:
         tell a true bound from this one."""
         import numpy as np
 
-        from geocert.solvers.fractional.items import TRACKS
+        from geocert.verify.fractional import TRACKS
 
         result = stored("triangulation_l2l2")
         claim = result["certificate"]["items"][0]

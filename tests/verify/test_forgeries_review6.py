@@ -558,7 +558,7 @@ def test_each_kinds_request_refuses_an_abs_gap_beyond_its_cap_naming_the_option(
 
 
 class TestDerivedArraysAreJsonNumbers:
-    """The per-record comparison (autocalibration.structure_check) reads each camera and point with
+    """The per-record comparison (verify.structure_check) reads each camera and point with
     the verifier's strict reader: a camera's t or a point written as strings of the same numbers,
     accepted when the reader was numpy's float conversion, is refused, as is an integer too large
     for a float (it raised OverflowError, not a refusal)."""

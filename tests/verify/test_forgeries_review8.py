@@ -122,7 +122,7 @@ def _holds(intervals: dict, truth: np.ndarray) -> bool:
 
 
 class TestProvenIntervalLevelUnderL1:
-    """Review 7's proven interval below its level was refused under L2L2 only (items.TrackItems.
+    """Review 7's proven interval below its level was refused under L2L2 only (fractional.TrackItems.
     check_returned compares the proof's cost_increase with the determinacy's, in squared pixels);
     under L2L1 and L1L1 no level is asked of a proven interval at all, and the solver proves each
     at the track's own level (convexity_path.cost_increase: 3^2 times its cost over 2n - 3, at
@@ -253,7 +253,7 @@ class TestStackedPathRecordsOpen:
     the member it refuses."""
 
     def test_the_genuine_certificate_verifies_on_the_stacked_path(self):
-        from geocert.solvers.fractional.items import MAX_VIEWS
+        from geocert.verify.fractional import MAX_VIEWS
         from geocert.solvers.fractional.stacked import proven_tracks
         from geocert.verify.checks import checked_options
 

@@ -77,7 +77,7 @@ def _holds(document: dict, truth: np.ndarray) -> np.ndarray:
 
 class TestResectionProvenAtAChosenLevel:
     """A resection's proven interval is refused below its determinacy's cost_increase
-    (items._check_proven), but that cost_increase is the document's own number: nothing ties it
+    (fractional._check_proven), but that cost_increase is the document's own number: nothing ties it
     to the map's claim, as review 8 tied a track's (TrackItems.check_returned: at least the
     track's own level, 3^2 times its cost over 2n - 3, from its claim, under every norm). A
     25-point camera with 1 px of noise: its genuine interval, at its own level 12.17 px^2 (3^2 x

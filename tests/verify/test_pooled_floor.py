@@ -11,8 +11,8 @@ import pytest
 from scipy.special import chdtri, stdtrit
 
 from geocert.solvers.fractional.determinacy import COVERAGE, OUTLIER_TAIL, pooled_increase
-from geocert.solvers.fractional.items import MAX_VIEWS
-from geocert.solvers.fractional.pooled_floor import (CHI2_MARGIN, Z_OUTLIER, pooled_floor, student_floor,
+from geocert.verify.fractional import MAX_VIEWS
+from geocert.verify.pooled_floor import (CHI2_MARGIN, Z_OUTLIER, pooled_floor, student_floor,
                                                      wilson_hilferty)
 from tests.verify.test_forgeries_review5 import _valid
 from tests.verify.test_forgeries_review7 import far_two_view_track  # noqa: F401 (a fixture)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from geocert.solvers.core.certificates import problem_hash
-from geocert.solvers.reconstruction import hashed_options
+from geocert.verify import hashed_options
 from geocert.verify.checks import checked_options, verify_any
 from tests.verify.test_forgeries import stored
 

@@ -20,7 +20,8 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers.core.certificates import problem_hash
-from geocert.solvers.reconstruction import calibration_tie, hashed_options
+from geocert.solvers.reconstruction import calibration_tie
+from geocert.verify import hashed_options
 from geocert.verify.checks import checked_options, verify_any
 from tests.support import stage as _stage
 from tests.verify.test_forgeries_review18 import SHIFTS, _centred_registration, _reposed, _scene_job

@@ -789,7 +789,8 @@ class TestProgramCheck:
 
     @staticmethod
     def altered(monkeypatch, change) -> None:
-        from geocert.solvers.fractional.items import TrackItem, TrackItems
+        from geocert.solvers.fractional.items import TrackItem
+        from geocert.verify.fractional import TrackItems
 
         original = TrackItem.__init__
         # The per-item path is under test: the stacked one (tests/verify/test_stacked_verification.py)

@@ -12,7 +12,7 @@ import pytest
 from geocert.jobs.runner import solve_job
 from geocert.solvers.core.certificates import pack
 from geocert.solvers.fractional import stacked
-from geocert.solvers.fractional.items import TrackItems
+from geocert.verify.fractional import TrackItems
 from geocert.verify.checks import checked_options, verify_any
 
 from tests.verify.test_stacked_verification import scene_job

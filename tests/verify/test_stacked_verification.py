@@ -18,7 +18,8 @@ from geocert.solvers.core.geometry import normalised_cameras
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.fractional import stacked
 from geocert.solvers.fractional.charts import Chart
-from geocert.solvers.fractional.items import TrackItem, TrackItems
+from geocert.solvers.fractional.items import TrackItem
+from geocert.verify.fractional import TrackItems
 from geocert.solvers.fractional.relaxation import Relaxation
 from geocert.verify.checks import checked_options, verify_any, verify_item
 

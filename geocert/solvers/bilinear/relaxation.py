@@ -18,11 +18,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
 
 from geocert.solvers.core.cones import UNIT_ROUNDOFF, ConeSpec, safe_lower_bound
+
+if TYPE_CHECKING:  # built where used: the verifier of the other kinds loads numpy alone
+    import scipy.sparse as sp
 
 PAD = 1e-9  # relative widening of the translation's derived interval (outward rounding)
 
@@ -131,6 +134,8 @@ class Relaxation:
         rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
         self.nrow = len(self.b0)
         assert self.nrow == self.cones.rows
+        import scipy.sparse as sp
+
         order = sp.csc_matrix((np.arange(1, len(vals) + 1, dtype=float), (rows, cols)), shape=(self.nrow, self.nvar))
         self._perm = order.data.astype(np.int64) - 1
         self._indices, self._indptr = order.indices.copy(), order.indptr.copy()
@@ -190,6 +195,8 @@ class Relaxation:
         vals[self._mc_start:self._mc_start + n_mc] = c_a.ravel()
         vals[self._mc_start + n_mc:self._mc_start + 2 * n_mc] = c_m.ravel()
         vals[self._mc_start + 2 * n_mc:self._mc_stop] = c_g.ravel()
+        import scipy.sparse as sp
+
         A = sp.csc_matrix((vals[self._perm], self._indices.copy(), self._indptr.copy()), shape=(self.nrow, self.nvar))
         b = self.b0.copy()
         b[7:7 + n_mc] = rhs.ravel()
@@ -229,6 +236,8 @@ def insert_row(A: sp.csc_matrix, at: int, columns: np.ndarray) -> sp.csc_matrix:
     """A with a row of ones in ``columns`` inserted before row ``at`` (the rows from ``at`` on
     move down by one): the same matrix as stacking the three parts, built in place of a
     vstack (which converted the whole relaxation twice per tightening)."""
+    import scipy.sparse as sp
+
     A = A.copy()
     A.sort_indices()
     nrow, ncol = A.shape

@@ -31,7 +31,6 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 UNIT_ROUNDOFF = 2.0 ** -53  # u: one rounding to nearest changes a result by at most this, relatively
 SMALLEST_SUBNORMAL = 2.0 ** -1074  # a product that underflows loses at most half of this
@@ -310,12 +309,18 @@ def _gammas(n: np.ndarray) -> np.ndarray:
     return n * UNIT_ROUNDOFF / (1.0 - n * UNIT_ROUNDOFF)
 
 
+# A program's A is a numpy array or a scipy.sparse matrix (the solvers' sparse relaxations); told
+# apart without importing scipy, so a verifier reading dense programs loads numpy alone.
+def _sparse(A) -> bool:
+    return hasattr(A, "tocsc") and hasattr(A, "nnz")  # scipy.sparse's matrices and arrays
+
+
 def _absolute(A):
-    return abs(A) if sp.issparse(A) else np.abs(A)
+    return abs(A) if _sparse(A) else np.abs(A)
 
 
 def _nonzeros(A) -> int:
-    return int(A.nnz) if sp.issparse(A) else int(np.count_nonzero(A))
+    return int(A.nnz) if _sparse(A) else int(np.count_nonzero(A))
 
 
 def safe_lower_bound(q: np.ndarray, A, b: np.ndarray, cones: ConeSpec, z: np.ndarray,

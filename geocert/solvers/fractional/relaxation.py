@@ -1,4 +1,4 @@
-"""The convex relaxations of sums of ratios, as plain conic data (numpy and scipy.sparse only).
+"""The convex relaxations of sums of ratios, as plain conic data (numpy; the solver's stacked relaxations scipy.sparse).
 
 What the branch-and-bound search solves and what a certificate verifier rebuilds are the same
 arrays, built here, so a verifier can check a solver's dual vectors without trusting its code
@@ -11,7 +11,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import ConeSpec, safe_lower_bounds
@@ -170,6 +169,8 @@ def _assemble(blocks: list[_Rows], n: int):
         for slot, columns, values in b.entries:
             rows.append(first + slot), cols.append(columns), vals.append(np.broadcast_to(values, (count,)))
         start += count * per
+    import scipy.sparse as sp  # the solver's stacked relaxations only: the verifier's are dense (numpy alone)
+
     E = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(total, n))
     return (-E).tocsc(), c
 
@@ -181,7 +182,7 @@ class ConicData:
     ``upper``, where the first d entries bound ``y = F v`` (``v = transform @ y``)."""
 
     q: np.ndarray
-    A: np.ndarray | sp.csc_matrix
+    A: np.ndarray  # or a scipy.sparse.csc_matrix (the solver's stacked relaxations: _assemble)
     b: np.ndarray
     cones: ConeSpec
     lower: np.ndarray
@@ -440,7 +441,12 @@ def with_cost_cap(data: ConicData, upper_bound: float) -> ConicData:
     """The same relaxation with ``q'x <= upper_bound`` as one more (first) nonnegative row: the
     feasible set of bound tightening. (Relaxations have no equality rows to keep ahead of it.)"""
     assert data.cones.zero == 0
-    A = sp.vstack([sp.csr_matrix(data.q[None, :]), data.A]).tocsc() if sp.issparse(data.A) else np.vstack([data.q[None, :], data.A])
+    if hasattr(data.A, "tocsc"):  # scipy.sparse (only a solver's data are: _assemble), so scipy is loaded already
+        import scipy.sparse as sp
+
+        A = sp.vstack([sp.csr_matrix(data.q[None, :]), data.A]).tocsc()
+    else:
+        A = np.vstack([data.q[None, :], data.A])
     return ConicData(data.q, A, np.concatenate([[upper_bound], data.b]),
                      ConeSpec(zero=data.cones.zero, nonneg=data.cones.nonneg + 1, soc=data.cones.soc),
                      data.lower, data.upper, data.transform)

@@ -112,7 +112,7 @@ def tie(result: dict, stage: dict, data: dict, recorded: bool = True) -> dict:
     """Refuses a calibration certificate whose reconstruction is not the result's (as above);
     returns the figures the report's scope states of the tie. ``recorded``: whether the document's
     form states the registration's principal-point record wherever its test runs
-    (hashed_options.states_records; an earlier form's may lack it)."""
+    (verify.hashed_options.states_records; an earlier form's may lack it)."""
     views, tracks = stage.get("certificate_views"), stage.get("certificate_tracks")
     cameras = numbers(data.get("cameras"), "calibration_certificate/data/cameras", (None, 3, 4), "returned")
     points = numbers(data.get("points"), "calibration_certificate/data/points", (None, 4), "returned")

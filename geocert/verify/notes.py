@@ -3,7 +3,7 @@ reads is informational, "and each must be null or of its type (a finite number, 
 string)", never a boolean where a number stands (JSON readers take true for 1 in arithmetic).
 This module types those a result carries beside its items' own notes (verify._check_item_notes):
 every determinacy estimate's members (proven and proven_intervals are read against the proof
-elsewhere: items._check_proven, verify._check_estimates), the stats' times, and a reconstruction
+elsewhere: fractional._check_proven, verify._check_estimates), the stats' times, and a reconstruction
 camera's bound_reason (camera_misfit's diagnosis, in words)."""
 
 from __future__ import annotations
