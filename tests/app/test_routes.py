@@ -1,6 +1,7 @@
 """The job and certificate routes in-process (tests/app/conftest.py: the app over a real Redis,
 its queued tasks run here): submit, poll, result, cancel, certificates, idempotent replays,
-listing, and problem+json naming the field. Results are checked against the ground truth the
+listing, and problem+json naming the field (moved here from tests/service/test_service.py, which
+started a real `geocert serve` for them). Results are checked against the ground truth the
 data were made from."""
 
 from __future__ import annotations
@@ -10,7 +11,8 @@ import json
 import numpy as np
 import pytest
 
-from testing.jobs import look_at
+from geocert.solvers.core.certificates import VERSION
+from testing.jobs import look_at, service_job as triangulation_job
 
 PROBLEM = "application/problem+json"
 
@@ -69,6 +71,7 @@ def test_the_full_certificate_is_served_and_verified_and_a_moved_point_is_caught
     assert response.status_code == 200
     document = response.json()
     assert document == job["result"]["certificate"]
+    assert document["format"] == "geocert-certificate" and document["version"] == VERSION
     for verifiable in (document, job["result"], job):
         report = api.post("/v1/certificates/verify", json=verifiable).json()
         assert report["valid"] is True and report["items_checked"] == 3 and report["first_failure"] is None, report
@@ -95,8 +98,10 @@ def test_verify_refuses_what_is_not_a_json_object_sent_as_json(api):
     assert problem_fields(api.post("/v1/certificates/verify", json=[1, 2]), 422) == ["body"]
     assert problem_fields(api.post("/v1/certificates/verify", content=b"{}", headers={"content-type": "text/plain"}),
                           415) == ["content-type"]
-    report = api.post("/v1/certificates/verify", json={"format": "something else"}).json()
-    assert report["valid"] is False and report["first_failure"]["check"] == "format"
+    for document in ({"format": "something else"}, {"kind": "triangulation", "tracks": []}):
+        response = api.post("/v1/certificates/verify", json=document)
+        assert response.status_code == 200
+        assert (response.json()["valid"], response.json()["first_failure"]["check"]) == (False, "format")
 
 
 def test_a_queued_job_cancelled_never_starts_and_an_ended_one_is_a_409(api, run_queued):
@@ -126,13 +131,6 @@ def test_bad_input_is_a_422_naming_the_field(api, change, field):
     change(body)
     assert field in problem_fields(api.post("/v1/jobs", json=body), 422)
     assert api.get("/v1/jobs").json()["jobs"] == []  # nothing was made
-
-
-def test_unparseable_json_is_a_400_at_its_line_and_column(api):
-    response = api.post("/v1/jobs", content=b'{"kind": "triangulation",\n "data": {"cameras": [1, 2,]}}',
-                        headers={"content-type": "application/json"})
-    assert problem_fields(response, 400) == ["body"]
-    assert (response.json()["line"], response.json()["column"]) == (2, 28)
 
 
 def test_an_unknown_job_is_a_404(api):
@@ -169,3 +167,96 @@ def test_the_listing_pages_newest_first_and_filters_by_status(api, run_queued):
                 for status in ("succeeded", "cancelled", "queued")}
     assert statuses == {"succeeded": [ids[2], ids[0]], "cancelled": [ids[1]], "queued": []}
     assert "cursor" in problem_fields(api.get("/v1/jobs", params={"cursor": "nonsense"}), 422)
+
+
+class TestCertificateBodies:
+    def test_a_document_naming_a_member_twice_is_refused_and_one_not_sent_as_json_too(self, api, run_queued):
+        """Which of two values of one name a reader takes is its parser's choice: a text holding
+        two results (a first "tracks" with claims no proof backs, then a genuine result) is refused,
+        naming the member, where the last was read and verified. A body not sent as JSON is a 415."""
+        body = triangulation_job(np.random.default_rng(30), tracks=2, views=3, certificate="full")
+        job_id = api.post("/v1/jobs", json=body).json()["id"]
+        run_queued()
+        result = api.get(f"/v1/jobs/{job_id}").json()["result"]
+        forged = [{**track, "cost": 0.0, "lower_bound": 0.0, "gap": 0.0} for track in result["tracks"]]
+        text = '{"tracks": ' + json.dumps(forged) + ", " + json.dumps(result)[1:]
+        assert api.post("/v1/certificates/verify", json=result).json()["valid"] is True
+        response = api.post("/v1/certificates/verify", content=text.encode(),
+                            headers={"content-type": "application/json"})
+        assert response.status_code == 422 and response.headers["content-type"].startswith("application/problem+json")
+        assert [e["field"] for e in response.json()["errors"]] == ["tracks"], response.json()
+        response = api.post("/v1/certificates/verify", content=json.dumps(result).encode(),
+                            headers={"content-type": "text/plain"})
+        assert response.status_code == 415 and "content-type: application/json" in response.json()["detail"]
+
+
+class TestBadInput:
+    def assert_problem(self, response, status: int, field: str | None = None):
+        assert response.status_code == status
+        assert response.headers["content-type"].startswith("application/problem+json")
+        problem = response.json()
+        assert problem["status"] == status and problem["title"]
+        if field is not None:
+            assert any(e["field"] == field for e in problem["errors"]), problem
+        return problem
+
+    def test_malformed_payloads_get_422_naming_the_field(self, api):
+        good = triangulation_job(np.random.default_rng(26), tracks=1)
+        bad_index = json.loads(json.dumps(good))
+        bad_index["data"]["tracks"][0]["views"][-1] = 99
+        self.assert_problem(api.post("/v1/jobs", json=bad_index), 422, "data/tracks/0/views/1")
+        nan = json.dumps(good).replace(str(good["data"]["tracks"][0]["points"][0][0]), "NaN", 1)
+        self.assert_problem(api.post("/v1/jobs", content=nan, headers={"content-type": "application/json"}),
+                            422, "data/tracks/0/points/0/0")
+        short = json.loads(json.dumps(good))
+        short["data"]["tracks"][0] = {"views": [0], "points": [[1.0, 2.0]]}
+        self.assert_problem(api.post("/v1/jobs", json=short), 422, "data/tracks/0/views")
+        flat = json.loads(json.dumps(good))
+        flat["data"]["cameras"][0] = [[0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 1, 0]]
+        self.assert_problem(api.post("/v1/jobs", json=flat), 422, "data/cameras/0")
+        self.assert_problem(api.post("/v1/jobs", json={**good, "options": {"norm": "L9"}}), 422, "options/norm")
+
+    def test_unparseable_json_is_a_400_with_line_column_and_the_parsers_message(self, api):
+        body = b'{"kind": "triangulation",\n "data": {"cameras": [1, 2,]}}'
+        problem = self.assert_problem(
+            api.post("/v1/jobs", content=body, headers={"content-type": "application/json"}), 400, "body")
+        assert (problem["line"], problem["column"]) == (2, 28)
+        assert "line 2, column 28" in problem["detail"] and "Expecting value" in problem["detail"]
+        problem = self.assert_problem(
+            api.post("/v1/certificates/verify", content=b"{not json", headers={"content-type": "application/json"}),
+            400, "body")
+        assert (problem["line"], problem["column"]) == (1, 2) and "double quotes" in problem["detail"]
+        problem = self.assert_problem(  # bytes that are not UTF-8 text (found by schemathesis: a 500)
+            api.post("/v1/certificates/verify", content=b'{"a": "\xff\xfe"}',
+                         headers={"content-type": "application/json"}), 400, "body")
+        assert "UTF-8" in problem["detail"]
+
+    @pytest.mark.parametrize("headers", [{}, {"content-type": "text/plain"}, {"content-type": "application/x-www-form-urlencoded"}])
+    def test_a_body_not_sent_as_json_gets_a_415_naming_the_header(self, api, headers):
+        body = json.dumps(triangulation_job(np.random.default_rng(26), tracks=1)).encode()
+        response = api.post("/v1/jobs", content=body, headers=headers)
+        problem = self.assert_problem(response, 415, "content-type")
+        assert "content-type: application/json" in problem["detail"]
+
+    @pytest.mark.parametrize("place, value, field", [
+        (("data", "tracks", 0, "points", 0, 0), "330", "data/tracks/0/points/0/0"),
+        (("data", "tracks", 0, "points", 0, 1), True, "data/tracks/0/points/0/1"),
+        (("data", "cameras", 0, 0, 0), "800", "data/cameras/0/0/0"),
+        (("data", "tracks", 0, "views", 1), 1.0, "data/tracks/0/views/1"),
+        (("options", "rel_gap"), "1e-3", "options/rel_gap"),
+        (("options", "max_nodes"), 100.0, "options/max_nodes"),
+        (("options", "time_limit_s"), False, "options/time_limit_s"),
+    ])
+    def test_values_are_taken_only_as_their_json_type(self, api, place, value, field):
+        body = triangulation_job(np.random.default_rng(26), tracks=1, rel_gap=1e-3)
+        target = body
+        for key in place[:-1]:
+            target = target[key]
+        target[place[-1]] = value
+        problem = self.assert_problem(api.post("/v1/jobs", json=body), 422, field)
+        reason = next(e["reason"] for e in problem["errors"] if e["field"] == field)
+        assert json.dumps(value) in reason  # says what it got: "330" is a string, 1.0 a decimal number
+
+    def test_unknown_job_is_404(self, api):
+        self.assert_problem(api.get("/v1/jobs/0123"), 404)
+        self.assert_problem(api.get("/v1/jobs/0123/events"), 404)
