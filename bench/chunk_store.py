@@ -17,7 +17,7 @@ decompressing, with the bytes each keeps, against the solve.
 ``--baseline <checkout>``: bench.submission's: each run a process of its own with this checkout's
 geocert or that one's, alternating, and the ratio of the medians of the task's CPU.
 
-Nothing here asserts (tests/workers/test_store.py and test_job_end.py check the behaviour).
+Nothing here asserts (tests/jobs/test_store.py and tests/workers/test_job_end.py check the behaviour).
 """
 
 from __future__ import annotations

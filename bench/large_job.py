@@ -13,7 +13,7 @@ cameras, 1 px noise), waits for it to end and fetches its result. Prints:
 
     .venv/bin/python -m bench.large_job [--tracks 200000] [--workers 2] [--chunk 100] [--detail brief]
 
-Nothing here asserts: tests/workers/test_store.py checks behaviour, this prints figures.
+Nothing here asserts: tests/jobs/test_store.py checks behaviour, this prints figures.
 """
 
 from __future__ import annotations

@@ -416,7 +416,7 @@ class TestTextsTheReaderCannotRead:
     ValueError in load_document and refuse it as unreadable (exit 2, 400 naming the position),
     and write a member name or any other text from the document with its non-ASCII characters
     escaped (as most of the verifier's details do with repr), or refuse lone surrogates when
-    reading the text. (The route's answers to these: tests/service/test_verify_unreadable.py.)"""
+    reading the text. (The route's answers to these: tests/app/test_verify_unreadable.py.)"""
 
     def test_a_long_integer_is_unreadable_input_for_the_cli(self, tmp_path):
         import subprocess
