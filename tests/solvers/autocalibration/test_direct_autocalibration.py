@@ -215,7 +215,7 @@ def test_the_focal_rows_make_seed_1008_certify(monkeypatch):
     Whether the splitting's last half ends "Solved" is the rounding's path: with the Schur
     complement assembled per moment (the default), certified on SkylakeX with one BLAS thread and
     not with two; assembled through the svec operator ("kron"), with both. The rows are what this
-    tests, so it solves with the latter (the two assemblies agree to 1e-12: test_direct_ipm)."""
+    tests, so it solves with the latter (the two assemblies agree to 1e-12: tests/solvers/core/test_interior_point.py)."""
     scene, Ks = scenes.table71_scene(1008, 0.2, True)
     data = {"cameras": scene.cameras.tolist(), "points": scene.points.tolist()}
     monkeypatch.setattr(interior_point, "ASSEMBLY", "kron")
