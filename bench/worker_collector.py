@@ -1,5 +1,5 @@
 """A solver process's triangulation CPU with its start-up heap frozen out of the cyclic
-collector (workers.signals.frozen_after_start: gc.freeze once the solvers are loaded) and
+collector (jobs.collection.start_up_heap_frozen: gc.freeze once the solvers are loaded, workers.signals) and
 without, interleaved, each run a process of its own that starts as a solver process does (the
 workers' tasks and SOLVER_MODULES imported), then parses and solves a job in the kind's chunks
 (jobs.runner.solve_items, documents included). Prints each run's CPU, the collector's runs and
@@ -43,7 +43,8 @@ tracks = tracks[:tracks_wanted]
 body = json.loads(json.dumps({"cameras": cameras.tolist(), "tracks": [
     {"views": [int(v) for v in t.views], "points": t.points.tolist()} for t in tracks]}))
 if frozen:
-    signals.frozen_after_start()
+    from geocert.jobs.collection import start_up_heap_frozen
+    start_up_heap_frozen()
 runs, began = [], [0.0]
 
 def timed(phase, info):

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from celery.signals import worker_process_init, worker_ready, worker_shutdown
 
+from geocert.jobs.collection import start_up_heap_frozen
 from geocert.settings import get_settings, redis_url
 from geocert.workers.celery_app import SOLVE_QUEUE
 
@@ -51,22 +52,7 @@ def _solvers_loaded(**_) -> None:
             importlib.import_module(name)
         except Exception:  # noqa: BLE001 (a head start only: the task that needs it fails and says why, as before)
             pass
-    frozen_after_start()
-
-
-def frozen_after_start() -> None:
-    """What the process holds once started (modules, classes, Celery's and the solvers' objects,
-    all kept for its life) moved out of the cyclic collector's generations (gc.freeze): a solve
-    makes many young objects that survive a while (a chunk's parse, its items' documents), so the
-    collector ran again and again, its older generations' runs scanning that whole start-up heap
-    and finding nothing in it. On the Oxford Dinosaur (4983 tracks, the kind's chunks) a solver
-    process's CPU fell from 0.57 to 0.45 s, the collector's share of it from 0.13 to 0.012 s, the
-    items the same (bench.worker_collector); a 3-track job never ran the collector. Cycles made
-    later are collected as before; the frozen objects are only never scanned (nor, in a forked
-    solver process, written to by the collector, so their pages stay shared with Celery's parent)."""
-    import gc
-
-    gc.freeze()
+    start_up_heap_frozen()  # after the imports above: what they loaded leaves the collector's generations
 
 
 def limit_memory(megabytes: int) -> None:
