@@ -35,8 +35,6 @@ import weakref
 import uvicorn
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
-from geocert.jobs.collection import start_up_heap_frozen
-
 stopping = threading.Event()
 _STOP_EVENTS: "weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, asyncio.Event]" = weakref.WeakKeyDictionary()
 
@@ -63,11 +61,6 @@ class Server(uvicorn.Server):
     def handle_exit(self, sig, frame) -> None:
         stop()
         super().handle_exit(sig, frame)
-
-    async def startup(self, sockets=None) -> None:
-        await super().startup(sockets=sockets)
-        # The app imported and started: its heap, kept for the process's life, out of the collector's scans.
-        start_up_heap_frozen()
 
 
 class HeaderTimeoutH11(H11Protocol):

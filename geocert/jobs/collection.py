@@ -1,5 +1,5 @@
 """Python's cyclic garbage collector held off while a job's body is taken in (the API) and while a
-task stores its items (the workers); and a long-lived process's start-up heap frozen out of it.
+task stores its items (the workers); and a solver process's start-up heap frozen out of it.
 
 Both make a tree of objects per item (pydantic's validation from the bytes, the request dumped
 back as JSON types, the kind's parse; the items' documents validated and written by the result
@@ -42,18 +42,18 @@ def collector_held() -> Iterator[None]:
 
 
 def start_up_heap_frozen() -> None:
-    """What a process holds once started (modules, classes, the app's routes and models, Celery's
-    and the solvers' objects, all kept for its life) moved out of the cyclic collector's
-    generations (gc.freeze): called by a solver process once its solvers are loaded
-    (workers.signals) and by an API process once it serves (app.lifecycle). Their work makes many
-    young objects that survive a while (a chunk's parse and its items' documents; the requests
-    and answers of many connections at once), so the collector ran again and again, its oldest
-    generation's runs scanning that whole start-up heap and finding nothing in it. Measured
-    (interleaved, same run): a solver process's CPU on the Oxford Dinosaur (4983 tracks, the
-    kind's chunks) from 0.57 to 0.45 s, the collector's share of it from 0.13 to 0.012 s, the
-    items the same (bench.worker_collector; a 3-track job never ran the collector); in the API,
-    small submissions over HTTP, the collector's CPU from 0.33 to 0.1 ms a request, each run of
-    its oldest generation a pause of the event loop. Cycles made later are collected as before;
-    the frozen objects are only never scanned (nor, in a forked process, written to by the
-    collector, so their pages stay shared with the parent's)."""
+    """What a solver process holds once started (modules, classes, Celery's and the solvers'
+    objects, all kept for its life) moved out of the cyclic collector's generations (gc.freeze),
+    called once its solvers are loaded (workers.signals). A solve makes many young objects that
+    survive a while (a chunk's parse, its items' documents), so the collector ran again and again,
+    its older generations' runs scanning that whole start-up heap and finding nothing in it. On
+    the Oxford Dinosaur (4983 tracks, the kind's chunks) a solver process's CPU fell from 0.57 to
+    0.45 s, the collector's share of it from 0.13 to 0.012 s, the items the same
+    (bench.worker_collector); a 3-track job never ran the collector. Cycles made later are
+    collected as before; the frozen objects are only never scanned (nor, in a forked process,
+    written to by the collector, so their pages stay shared with the parent's).
+
+    Not done in the API process: there small submissions' collections cost 0.1 ms of its 2 ms a
+    submission with or without it (bench.api_collector), the body's intake already holding the
+    collector off (collector_held)."""
     gc.freeze()
