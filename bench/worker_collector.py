@@ -37,14 +37,14 @@ from geocert.kinds import get_kind
 from geocert.solvers.datasets import load_dinosaur
 from geocert.workers.tasks import options_from
 
+if frozen:  # where a solver process freezes: after its imports, before any task's data
+    from geocert.jobs.collection import start_up_heap_frozen
+    start_up_heap_frozen()
 kind = get_kind("triangulation")
 cameras, tracks = load_dinosaur(data)
 tracks = tracks[:tracks_wanted]
 body = json.loads(json.dumps({"cameras": cameras.tolist(), "tracks": [
     {"views": [int(v) for v in t.views], "points": t.points.tolist()} for t in tracks]}))
-if frozen:
-    from geocert.jobs.collection import start_up_heap_frozen
-    start_up_heap_frozen()
 runs, began = [], [0.0]
 
 def timed(phase, info):

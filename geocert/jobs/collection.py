@@ -47,9 +47,10 @@ def start_up_heap_frozen() -> None:
     called once its solvers are loaded (workers.signals). A solve makes many young objects that
     survive a while (a chunk's parse, its items' documents), so the collector ran again and again,
     its older generations' runs scanning that whole start-up heap and finding nothing in it. On
-    the Oxford Dinosaur (4983 tracks, the kind's chunks) a solver process's CPU fell from 0.57 to
-    0.45 s, the collector's share of it from 0.13 to 0.012 s, the items the same
-    (bench.worker_collector); a 3-track job never ran the collector. Cycles made later are
+    the Oxford Dinosaur (4983 tracks, the kind's chunks) a process started as a solver process
+    spent 0.42 s of CPU instead of 0.53, the collector 0.017 s instead of 0.12, the items the same
+    (bench.worker_collector); a 3-track job never ran the collector. Through the service the
+    workers' CPU for that job moved less than its noise (docs/benchmarks.md). Cycles made later are
     collected as before; the frozen objects are only never scanned (nor, in a forked process,
     written to by the collector, so their pages stay shared with the parent's).
 
