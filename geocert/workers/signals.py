@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from celery.signals import worker_process_init, worker_ready, worker_shutdown
 
+from geocert.jobs.collection import start_up_heap_frozen
 from geocert.settings import get_settings, redis_url
 from geocert.workers.celery_app import SOLVE_QUEUE
 
@@ -51,6 +52,7 @@ def _solvers_loaded(**_) -> None:
             importlib.import_module(name)
         except Exception:  # noqa: BLE001 (a head start only: the task that needs it fails and says why, as before)
             pass
+    start_up_heap_frozen()  # after the imports above: what they loaded leaves the collector's generations
 
 
 def limit_memory(megabytes: int) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ast
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -50,3 +51,26 @@ def test_the_kinds_solver_imports_find_their_modules_loaded_at_the_solver_proces
     assert seen["listed_loaded"]
     assert seen["added"] == {}, "kinds import solver modules not loaded at the solver process's start " \
                                 "(add them to workers.signals.SOLVER_MODULES)"
+
+
+_FROZEN = """
+import gc, json
+from geocert.workers import signals
+before = gc.get_freeze_count()
+signals._solvers_loaded()
+print(json.dumps({"before": before, "after": gc.get_freeze_count(), "enabled": gc.isenabled()}))
+"""
+
+
+def test_a_solver_process_start_up_heap_is_frozen_out_of_the_collector(tmp_path):
+    """Once its solvers are loaded, what a solver process holds leaves the cyclic collector's
+    generations (gc.freeze): its collections then scan only what the tasks make; the collector
+    itself stays on, for the cycles tasks make."""
+    out = subprocess.run([sys.executable, "-c", _FROZEN], capture_output=True, text=True, timeout=300,
+                         env={"GEOCERT_REDIS_URL": f"unix://{tmp_path}/none.sock", "PATH": "/usr/bin:/bin",
+                              "PYTHONPATH": os.environ.get("PYTHONPATH", "")})
+    assert out.returncode == 0, out.stderr[-2000:]
+    seen = json.loads(out.stdout.strip().splitlines()[-1])
+    assert seen["before"] == 0
+    assert seen["after"] > 10_000  # the modules' objects, not a handful
+    assert seen["enabled"]
