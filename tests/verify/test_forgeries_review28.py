@@ -11,9 +11,10 @@ Found (each test marked xfail below fails on main's verifier, a false claim or a
   verifies again when the record leaves out ``K_free`` (inside_middle_half then read as written)
   or its ``chi2`` (the record then says the test did not run, beside 1,596 observations): the
   calibration tie takes the centred reading the forgery needs; a record of ``estimated: false``
-  alone does too. (The same false claim is reachable through the documented limit that the chi2
-  is not recomputed: review 26's test_a_not_estimated_record_below_its_threshold_is_read_as_written;
-  closing these paths narrows the class, recomputing the test closes it.)
+  alone does too. (The same false claim was reachable through the documented limit that the chi2
+  is not recomputed; closed: a record saying its test did not pass no longer gives the centred
+  reading its room, test_forgeries_review26_left.test_a_not_estimated_record_below_its_threshold_
+  gives_no_centred_room.)
 - An autocalibration interval whose ``value`` is null (or absent) is passed over by the check that
   an interval holds its value (estimates.check_contains), and the affine stage's intervals are tied
   to nothing the stage returns (check_intrinsics ties a K stage's only): an interval moved off the
