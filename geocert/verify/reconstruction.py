@@ -134,11 +134,12 @@ def _check_camera_fields(camera: dict, where: str) -> None:
 # The members every form of the writers (kinds.reconstruction: _camera, and triangulation.track_document
 # with the track and its observations) has stated of each camera and point, null where it has
 # nothing (later forms add k1, distortion_centre, pose_determined, mirror_rotation_deg, set_aside
-# and free_camera to a camera, which the stored documents of earlier forms lack): a record missing
-# one is not its writer's (an uncertified camera's cost deleted read as "no cost found").
+# and free_camera to a camera, which the stored documents of earlier forms lack, and a result from
+# before a camera's judgement was stated has no searched, degrees_of_freedom or tolerance, read
+# as such: _check_camera_figures): a record missing one is not its writer's (an uncertified camera's
+# cost deleted read as "no cost found").
 CAMERA_WRITTEN = ("view", "name", "registered", "reason", "image_size", "K", "R", "t", "center", "P", "cost",
-                  "lower_bound", "gap", "optimal_cost", "certified", "status", "bound_reason", "points", "searched",
-                  "degrees_of_freedom", "tolerance")
+                  "lower_bound", "gap", "optimal_cost", "certified", "status", "bound_reason", "points")
 POINT_WRITTEN = ("track", "observations", "point", "at_infinity", "cost", "lower_bound", "gap", "status", "certified",
                  "nodes", "elapsed_s", "reason", "certificate")
 
