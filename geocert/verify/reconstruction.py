@@ -131,10 +131,32 @@ def _check_camera_fields(camera: dict, where: str) -> None:
         raise Invalid("returned", f"{where}/center is not -R' t")
 
 
+# The members every form of the writers (kinds.reconstruction: _camera, and triangulation.track_document
+# with the track and its observations) has stated of each camera and point, null where it has
+# nothing (later forms add k1, distortion_centre, pose_determined, mirror_rotation_deg, set_aside
+# and free_camera to a camera, which the stored documents of earlier forms lack, and a result from
+# before a camera's judgement was stated has no searched, degrees_of_freedom or tolerance, read
+# as such: _check_camera_figures): a record missing one is not its writer's (an uncertified camera's
+# cost deleted read as "no cost found").
+CAMERA_WRITTEN = ("view", "name", "registered", "reason", "image_size", "K", "R", "t", "center", "P", "cost",
+                  "lower_bound", "gap", "optimal_cost", "certified", "status", "bound_reason", "points")
+POINT_WRITTEN = ("track", "observations", "point", "at_infinity", "cost", "lower_bound", "gap", "status", "certified",
+                 "nodes", "elapsed_s", "reason", "certificate")
+
+
+def _complete(records: list, written: tuple, key: str) -> None:
+    for index, record in enumerate(records):
+        missing = [name for name in written if name not in record]
+        if missing:
+            raise Invalid("returned", f"{key}/{index} leaves out {missing[0]!r}: its writer states "
+                                      f"{', '.join(written)} (null where it has none)")
+
+
 def _check_cameras(cameras: Any, stated: list) -> tuple[list[dict], list[int]]:
     """The cameras in view order, the registered ones those the certificate's data state."""
     if not isinstance(cameras, list) or not all(isinstance(c, dict) for c in cameras):
         raise Invalid("returned", "the result's cameras must be a list of objects")
+    _complete(cameras, CAMERA_WRITTEN, "cameras")
     if [camera.get("view") for camera in cameras] != list(range(len(cameras))):
         raise Invalid("returned", "the result's cameras must be one per view, in view order")
     registered = _views_of(cameras)
@@ -161,6 +183,9 @@ def _check_points(points: Any, tracks: Any, views: list[int]) -> None:
     """Each point's observations are its track in the certificate's data (views by position)."""
     if not isinstance(points, list) or not isinstance(tracks, list) or len(points) != len(tracks):
         raise Invalid("returned", "the result's points are not the certificate's tracks")
+    if not all(isinstance(point, dict) for point in points):
+        raise Invalid("returned", "the result's points must be a list of objects")
+    _complete(points, POINT_WRITTEN, "points")
     for index, (point, track) in enumerate(zip(points, tracks)):
         observations = point.get("observations") if isinstance(point, dict) else None
         if not isinstance(observations, list) or not all(isinstance(o, list) and len(o) == 3 for o in observations):

@@ -185,6 +185,7 @@ def _check_ties(result: dict, stages: dict, views: int, tracks: int) -> None:
     _check_principal_point(stages.get("bundle_adjustment", {}), result=result)
     _check_principal_point(stages.get("projective", {}), "projective", result)
     _check_principal_points_per_view(result, stages.get("bundle_adjustment", {}))
+    _check_estimated_off_centre(result, stages.get("bundle_adjustment", {}))
     _check_focals_per_view(result, stages.get("bundle_adjustment", {}))
     _check_adjustment_model(result, stages.get("bundle_adjustment", {}))
     structure, summary = stages.get("structure", {}), result.get("summary") or {}
@@ -265,9 +266,10 @@ def _check_principal_point(stage: dict, name: str = "bundle_adjustment", result:
     limit docs/certificate.md states). A record with no chi2 says the test did not run ("too few
     observations to test"): estimated false."""
     test = stage.get("principal_point")
-    if not isinstance(test, dict):
+    if test is None:
         return
     where = f"stages/{name}/principal_point"
+    _check_record_shape(test, where, result)
     chi2, threshold = test.get("chi2"), test.get("threshold")
     if test.get("estimated") is True:
         if not (is_number(chi2) and threshold == PRINCIPAL_POINT_CHI2 and chi2 > threshold
@@ -290,6 +292,63 @@ def _check_principal_point(stage: dict, name: str = "bundle_adjustment", result:
         raise Invalid("returned", f"{where}/estimated is {test.get('estimated')!r:.20}, and its test passes (chi2 "
                                   f"{chi2!r:.20} above its threshold {PRINCIPAL_POINT_CHI2}, inside the middle half): "
                                   "the pipeline estimates the principal point exactly then")
+
+
+# The two shapes _principal_point writes its record in (pipeline._principal_point): the test ran
+# (its chi2, threshold and inside_middle_half stated), or it did not, for too few observations.
+RECORD_RAN = frozenset({"estimated", "observations", "K_free", "chi2", "threshold", "inside_middle_half"})
+RECORD_NOT_RUN = frozenset({"estimated", "observations", "K_free", "reason"})
+NOT_RUN_REASON = "too few observations to test"
+# pipeline.MIN_TEST_OBSERVATIONS: the test is made on at least this many observations (both fits keep)
+MIN_TEST_OBSERVATIONS = 20
+
+
+def _check_record_shape(test: Any, where: str, result: dict | None) -> None:
+    """A principal-point record is one of its writer's two shapes, every member of the type it
+    writes: the test ran (RECORD_RAN: at least MIN_TEST_OBSERVATIONS observations, K_free a 3x3 of
+    numbers, the chi2 a number, the threshold, inside_middle_half) or it did not (RECORD_NOT_RUN:
+    estimated false, the reason "too few observations to test", which holds only below
+    MIN_TEST_OBSERVATIONS or without residual degrees of freedom: 2 per observation less 6 per view
+    and 3 per point (at most the summary's views and tracks, and the observations) less the 7 of a
+    similarity and the free fit's 3). A member left out switched a check off: K_free deleted or
+    null, inside_middle_half was read as written; the chi2 deleted beside 1,596 observations, the
+    record said the test never ran; either chose the calibration tie's centred reading."""
+    if not isinstance(test, dict):
+        _fail(where, "an object (the principal point's test)", test)
+    members = frozenset(test)
+    if members not in (RECORD_RAN, RECORD_NOT_RUN):
+        raise Invalid("returned", f"{where} has members {sorted(members)!r:.160}: its writer states "
+                                  f"{sorted(RECORD_RAN)} (the test ran) or {sorted(RECORD_NOT_RUN)} (too few "
+                                  "observations to test)")
+    K_free, observations = test["K_free"], test["observations"]
+    if not (isinstance(K_free, list) and len(K_free) == 3 and all(
+            isinstance(row, list) and len(row) == 3 and all(is_number(x) and abs(x) <= MAX_FIGURE for x in row)
+            for row in K_free)):
+        _fail(f"{where}/K_free", "a 3x3 matrix of numbers (the free fit's K)", K_free)
+    if not (type(observations) is int and 0 <= observations <= MAX_FIGURE):
+        _fail(f"{where}/observations", "a count", observations)
+    if not isinstance(test["estimated"], bool):
+        _fail(f"{where}/estimated", "true or false", test["estimated"])
+    if members == RECORD_RAN:
+        if not (is_number(test["chi2"]) and isinstance(test["inside_middle_half"], bool)):
+            raise Invalid("returned", f"{where}: a test that ran states its chi2 (a number) and inside_middle_half "
+                                      "(true or false)")
+        if observations < MIN_TEST_OBSERVATIONS:
+            raise Invalid("returned", f"{where}/observations is {observations}: the test is made on at least "
+                                      f"{MIN_TEST_OBSERVATIONS} observations, and this record says it ran")
+        return
+    if test["estimated"] is not False or test["reason"] != NOT_RUN_REASON:
+        raise Invalid("returned", f"{where}: a record without the test's figures says estimated false and "
+                                  f"{NOT_RUN_REASON!r}")
+    summary = (result or {}).get("summary") or {}
+    views, tracks = summary.get("views"), summary.get("tracks")
+    if observations >= MIN_TEST_OBSERVATIONS and type(views) is int and type(tracks) is int:
+        fewest_dof = 2 * observations - (6 * min(views, observations) + 3 * min(tracks, observations) - 7) - 3
+        if fewest_dof >= 1:
+            raise Invalid("returned", f"{where} says {NOT_RUN_REASON!r} on {observations} observations: at least "
+                                      f"{MIN_TEST_OBSERVATIONS}, and with at most {views} views and {tracks} points "
+                                      f"the free fit leaves at least {fewest_dof} residual degrees of freedom (the "
+                                      "test runs then)")
 
 
 def _inside_middle_half(K_free: Any, result: dict | None) -> bool | None:
@@ -422,18 +481,55 @@ def _check_centred(result: dict, stage: dict, model: str, Ks: list, tolerance: f
         return
     if any(isinstance(stage.get(name), dict) and stage[name].get("estimated") is True for name in PRINCIPAL_POINT_TESTS):
         return
-    labels = ((result.get("certificate") or {}).get("data") or {}).get("input_labels")
-    sizes = labels.get("image_sizes") if isinstance(labels, dict) else None
-    if not (isinstance(sizes, list) and sizes and all(isinstance(size, list) and len(size) == 2
-                                                      and all(is_number(v) for v in size) for size in sizes)
-            and all(size == sizes[0] for size in sizes)):
+    centre = _one_image_centre(result)
+    if centre is None:
         return
-    centre = np.array(sizes[0], dtype=float) / 2
     worst = max(Ks, key=lambda K: float(np.abs(K[:2, 2] - centre).max()))
     if float(np.abs(worst[:2, 2] - centre).max()) > tolerance:
         raise Invalid("returned", f"{said} the {model!r:.20} model holds the principal point at the image's centre "
                                   f"{centre.tolist()} unless its test estimated it, and a camera returned has it at "
                                   f"{worst[:2, 2].round(6).tolist()} with no test saying estimated")
+
+
+def _one_image_centre(result: dict) -> np.ndarray | None:
+    """(width / 2, height / 2) of the one image size every view of the data has (the certificate
+    data's input_labels), where the pipeline sets the simple and varying models' principal point;
+    None where the views have several sizes or the labels state none."""
+    labels = ((result.get("certificate") or {}).get("data") or {}).get("input_labels")
+    sizes = labels.get("image_sizes") if isinstance(labels, dict) else None
+    if not (isinstance(sizes, list) and sizes and all(isinstance(size, list) and len(size) == 2
+                                                      and all(is_number(v) for v in size) for size in sizes)
+            and all(size == sizes[0] for size in sizes)):
+        return None
+    return np.array(sizes[0], dtype=float) / 2
+
+
+def _check_estimated_off_centre(result: dict, stage: dict) -> None:
+    """The adjustment's principal_point record saying ``estimated`` (and no principal point per
+    view kept): the simple model's cameras then share the free fit's principal point, which the
+    pipeline otherwise holds at the image's centre (_check_centred); a free fit landing exactly
+    there (to PER_VIEW_APART of the focal length, about 1e-3 px) is not a fit, so cameras
+    returned with it there were not adjusted with it free. Found: with the chi2 raised above the
+    threshold (not recomputed), ``estimated: true`` beside every camera at the centre verified."""
+    test = stage.get("principal_point")
+    if stage.get("model") != "simple" or not (isinstance(test, dict) and test.get("estimated") is True) \
+            or (stage.get("principal_point_per_view") or {}).get("estimated") is True:
+        return
+    registered = [camera for camera in result.get("cameras") or []
+                  if isinstance(camera, dict) and camera.get("registered") is True and camera.get("P") is not None]
+    centre = _one_image_centre(result)
+    sizes = {tuple(camera["image_size"]) for camera in registered if isinstance(camera.get("image_size"), list)
+             and len(camera["image_size"]) == 2 and all(is_number(x) for x in camera["image_size"])}
+    if centre is None and len(sizes) == 1:  # (a document of a form without input_labels: the cameras' one size)
+        centre = np.array(next(iter(sizes)), dtype=float) / 2
+    Ks = [intrinsics_of(camera["P"]) for camera in registered]
+    if centre is None or not Ks:
+        return
+    tolerance = PER_VIEW_APART * max(abs(K[0, 0]) for K in Ks)
+    if all(float(np.abs(K[:2, 2] - centre).max()) <= tolerance for K in Ks):
+        raise Invalid("returned", "stages/bundle_adjustment/principal_point/estimated is true, and every camera "
+                                  f"returned has its principal point at the image's centre {centre.tolist()}, where "
+                                  "the simple model holds it unless its test estimated it")
 
 
 def _normal_quantile(p: float) -> float:

@@ -74,12 +74,51 @@ def test_the_contradiction_cannot_be_hidden_in_the_records_other_figures(off_cen
     assert not report.valid and words in report.first_failure["detail"], report.first_failure
 
 
-def test_a_not_estimated_record_below_its_threshold_is_read_as_written(off_centre, centred_forgery):  # noqa: F811
-    """The known limit (docs/certificate.md): the chi2 edited below the threshold is not
-    recomputed (the adjustment's fits), and the record is then consistent."""
-    forged = _with_record(centred_forgery, off_centre, estimated=False, chi2=1.0)
+@pytest.mark.parametrize("chi2", [1.0, -1243.0, 13.8])
+def test_a_not_estimated_record_below_its_threshold_gives_no_centred_room(off_centre, centred_forgery, chi2):  # noqa: F811
+    """Found (review 28; verified on main, then a documented limit): the chi2 edited below the
+    threshold, which the verifier cannot recompute (the adjustment's fits), made the record
+    consistent and chose the centred reading's room. A record saying its test ran and did not
+    pass now gives a certificate built at the centre no room (calibration_tie._centred_room): it
+    is held to the returned reconstruction re-adjusted with its principal point free, and the
+    centred forgery (1.03 times the focal length, the tracks' principal point 36 px off) is not
+    these tracks' reconstruction."""
+    forged = _with_record(centred_forgery, off_centre, estimated=False, chi2=chi2)
     report = _verify(forged)
-    assert report.valid or "principal_point" not in report.first_failure["detail"]
+    assert not report.valid
+    assert "calibration certificate" in report.first_failure["detail"], report.first_failure
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("shift", [0.0, 2.0])
+def test_a_genuine_run_whose_test_did_not_pass_verifies_without_the_centred_room(shift):
+    """What the reading above asks of genuine runs: the scene's principal point at the centre or
+    2 px off (the registration's chi2 0.4 and 10.5, below 13.8: its cameras built at the centre)
+    verifies held to the reconstruction re-adjusted with the principal point free (measured: the
+    certificate's cost 227.3 and 228.2 px^2, 258.1 and 259.1 allowed, the returned 227.4 and
+    228.2)."""
+    from geocert.jobs.runner import solve_job
+    from geocert.solvers.reconstruction import calibration_tie
+    from tests.verify.test_forgeries_review18 import _scene_job
+
+    result = solve_job(_scene_job({}, points=200, shift=np.tile([shift, -shift * 2 / 3], (8, 1))))
+    record = _stage(result, "projective")["principal_point"]
+    assert record["estimated"] is False and record["chi2"] < record["threshold"] and record["inside_middle_half"]
+    report = _verify(result)
+    assert report.valid, report.first_failure
+    assert report.scope["calibration_tie"]["reference"] == calibration_tie.CENTRED_HELD
+
+
+def test_a_record_of_too_few_observations_gives_no_centred_room(off_centre, centred_forgery):  # noqa: F811
+    """The same forgery beside a record in the other shape its writer has (the test not run, 19
+    observations: consistent, the count not recomputed either): no room, refused."""
+    record = _stage(off_centre, "projective")["principal_point"]
+    forged = copy.deepcopy(centred_forgery)
+    _stage(forged, "projective")["principal_point"] = {
+        "estimated": False, "observations": 19, "K_free": record["K_free"], "reason": "too few observations to test"}
+    report = _verify(forged)
+    assert not report.valid
+    assert "calibration certificate" in report.first_failure["detail"], report.first_failure
 
 
 # 4. nodes

@@ -11,9 +11,10 @@ Found (each test marked xfail below fails on main's verifier, a false claim or a
   verifies again when the record leaves out ``K_free`` (inside_middle_half then read as written)
   or its ``chi2`` (the record then says the test did not run, beside 1,596 observations): the
   calibration tie takes the centred reading the forgery needs; a record of ``estimated: false``
-  alone does too. (The same false claim is reachable through the documented limit that the chi2
-  is not recomputed: review 26's test_a_not_estimated_record_below_its_threshold_is_read_as_written;
-  closing these paths narrows the class, recomputing the test closes it.)
+  alone does too. (The same false claim was reachable through the documented limit that the chi2
+  is not recomputed; closed: a record saying its test did not pass no longer gives the centred
+  reading its room, test_forgeries_review26_left.test_a_not_estimated_record_below_its_threshold_
+  gives_no_centred_room.)
 - An autocalibration interval whose ``value`` is null (or absent) is passed over by the check that
   an interval holds its value (estimates.check_contains), and the affine stage's intervals are tied
   to nothing the stage returns (check_intrinsics ties a K stage's only): an interval moved off the
@@ -143,7 +144,6 @@ def _principal_point(result: dict) -> dict:
     return _stage(result, "bundle_adjustment")["principal_point"]
 
 
-@pytest.mark.xfail(strict=True, reason="review 28: a principal-point record missing K_free is read as written")
 @pytest.mark.parametrize("how", ["deleted", "null"])
 def test_inside_middle_half_flipped_with_K_free_left_out_is_refused(how):
     """Genuine: K_free's principal point (312, 234) lies inside the middle half of the 640 x 480
@@ -168,7 +168,6 @@ def test_inside_middle_half_flipped_with_K_free_kept_is_refused():
     _refused(result, "inside_middle_half")
 
 
-@pytest.mark.xfail(strict=True, reason="review 28: principal_point.estimated is not tied to the cameras returned")
 def test_estimated_true_beside_cameras_at_the_image_centre_is_refused():
     """``estimated: true`` with the chi2 raised above the threshold (the chi2 is not recomputed: a
     documented limit) verifies, though every camera returned has its principal point exactly at
@@ -216,8 +215,6 @@ LEFT_OUT = {
 }
 
 
-@pytest.mark.xfail(strict=True, reason="review 28: a registration record missing its test's figures picks the "
-                                       "centred reading")
 @pytest.mark.parametrize("case", list(LEFT_OUT))
 def test_the_centred_forgery_beside_a_record_missing_its_figures_is_refused(off_centre, centred_forgery,  # noqa: F811
                                                                             case):
@@ -356,7 +353,6 @@ MISSING_MEMBERS = [
     ("triangulation_l2l2", ("stats", "statuses")),
     ("triangulation_l2l2", ("stats", "items")),
     ("triangulation_l2l2", ("stats", "nodes")),
-    ("reconstruction", ("stages", 2, "principal_point", "chi2")),
 ]
 
 
@@ -373,6 +369,20 @@ def test_a_returned_record_missing_a_member_is_refused(name, path):
         parent = parent[key]
     del parent[path[-1]]
     assert not _verify(result).valid
+
+
+# The reconstruction's case, fixed: a principal-point record is one of its writer's two shapes
+# (reconstruction_members._check_record_shape)
+RECONSTRUCTION_MISSING = [("stages", 2, "principal_point", member)
+                          for member in ("chi2", "K_free", "threshold", "inside_middle_half", "observations")]
+
+
+@pytest.mark.parametrize("path", RECONSTRUCTION_MISSING, ids=["/".join(map(str, p)) for p in RECONSTRUCTION_MISSING])
+def test_a_reconstructions_principal_point_record_missing_a_member_is_refused(path):
+    result = stored("reconstruction")
+    assert _verify(result).valid
+    del result["stages"][2]["principal_point"][path[-1]]
+    _refused(result, "principal_point")
 
 
 def test_the_reconstructions_adjustment_stage_is_the_third():

@@ -149,7 +149,7 @@ def tie(result: dict, stage: dict, data: dict, recorded: bool = True) -> dict:
         raise Invalid("returned", f"the calibration certificate's reconstruction shares {len(apart)} observations "
                                   f"with the result's placed points (at least {TIE_OBSERVATIONS} tie it to them)")
     rms = math.sqrt(float(np.mean(np.square(own))))
-    centred = _centred_reference(result, views, cameras, at)
+    centred = _centred_reference(result, views, cameras, at, _centred_room(result))
     where = "the returned cameras"
     if centred is not None:  # an incremental registration's cameras: held to the returned ones re-adjusted in their model
         apart = [math.hypot(*(mine - ref)) for mine, ref in zip(at[1], centred[0])]
@@ -535,6 +535,12 @@ ONE_K_REFERENCE = ("the returned reconstruction re-adjusted with one focal lengt
                    "square pixels and no skew: the model the certificate's cameras are built in")
 
 
+CENTRED_HELD = ("the returned reconstruction re-adjusted with one focal length and one principal point (both free), "
+                "square pixels and no skew: the certificate's cameras are built at the images' centre, and the "
+                "registration's record says its test of the principal point did not pass (a chi2 the verifier does "
+                "not recompute), so holding it there is given no room")
+
+
 def _built_centred(result: dict, views: list, cameras: np.ndarray) -> bool:
     """Whether every certificate camera is K [R | t] with one focal length, square pixels, no skew
     and the principal point at its view's image centre ((w - 1) / 2, (h - 1) / 2), to
@@ -569,8 +575,26 @@ def _built_one_K(cameras: np.ndarray) -> bool:
                for K in Ks)
 
 
-def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple[list, list]
-                       ) -> tuple[list, float, str] | None:
+def _centred_room(result: dict) -> bool:
+    """Whether a certificate built at the images' centre is read as a registration the pipeline
+    held there (the centred reference, with the room of what holding it costs): where no record of
+    the registration's test is stated (the test does not run, or the document's form predates the
+    record: _check_registration_record) or the record says the free fit's principal point lies
+    outside the images' middle half (inside_middle_half, which its K_free decides). Not where the
+    record says the test ran and its chi2 did not pass, or had too few observations: the chi2
+    (and the count) are the adjustment's figures, which the verifier cannot recompute, and an
+    edited chi2 chose that room (review 26's centred certificate, 1.03 times the focal length at
+    the (+30, -20) scene, verified beside a chi2 of 1.0). Such a certificate is held instead to
+    the returned reconstruction re-adjusted with one principal point free (ONE_K_REFERENCE,
+    CENTRED_HELD): where the test genuinely did not pass, holding the principal point at the centre
+    costs less than its threshold's noise variances, which the noise allowance covers."""
+    record = next((s.get("principal_point") for s in result.get("stages") or []
+                   if isinstance(s, dict) and s.get("name") == "projective"), None)
+    return record is None or (isinstance(record, dict) and record.get("inside_middle_half") is False)
+
+
+def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple[list, list],
+                       centred_room: bool = True) -> tuple[list, float, str] | None:
     """When the certificate's cameras are an incremental registration's (_built_centred): the
     images of the shared observations (``at``'s order) in the returned reconstruction re-adjusted in
     that model (centred_fit.fit, over the shared observations only: the ones the tie measures, whose
@@ -581,7 +605,7 @@ def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple
     principal point one and free; else None, and the certificate is held to the returned cameras
     (a projective reconstruction's cameras are as free as any model's)."""
     if _built_centred(result, views, cameras):
-        reference = CENTRED_REFERENCE
+        reference = CENTRED_REFERENCE if centred_room else CENTRED_HELD
     elif _built_one_K(cameras):
         reference = ONE_K_REFERENCE
     else:
