@@ -75,7 +75,6 @@ def _refused(document: dict, words: str = "") -> dict:
 AFFINE = [("autocalibration_stratified", 0), ("autocalibration_five_views", 0)]
 
 
-@pytest.mark.xfail(strict=True, reason="review 28: an autocalibration interval with no value holds no value")
 @pytest.mark.parametrize("name, stage", AFFINE + [("autocalibration_direct", 0)])
 @pytest.mark.parametrize("how", ["null", "absent"])
 def test_an_interval_with_no_value_moved_off_the_answer_is_refused(name, stage, how):
@@ -93,7 +92,6 @@ def test_an_interval_with_no_value_moved_off_the_answer_is_refused(name, stage, 
     _refused(result)
 
 
-@pytest.mark.xfail(strict=True, reason="review 28: the affine stage's intervals are not tied to its plane")
 @pytest.mark.parametrize("name, stage", AFFINE)
 def test_an_affine_interval_and_its_value_moved_off_the_plane_returned_is_refused(name, stage):
     """The interval and its value moved together to 0.5 .. 0.6 where the stage returns a plane
@@ -107,7 +105,6 @@ def test_an_affine_interval_and_its_value_moved_off_the_plane_returned_is_refuse
     _refused(result)
 
 
-@pytest.mark.xfail(strict=True, reason="review 28: the affine stage's intervals are not tied to its plane")
 @pytest.mark.parametrize("edit", ["renamed", "truncated", "emptied"])
 def test_the_affine_intervals_name_the_planes_four_coordinates(edit):
     """The writer (autocalibration.determinacy) states plane_at_infinity[0] .. [3], in order: a
@@ -358,10 +355,14 @@ MISSING_MEMBERS = [
     ("triangulation_l2l2", ("stats", "nodes")),
     ("reconstruction", ("stages", 2, "principal_point", "chi2")),
 ]
+_STILL_OPEN = pytest.mark.xfail(strict=True, reason="review 28: a returned record may leave out members its writer "
+                                                    "writes")
+MISSING_MEMBER_CASES = [pytest.param(name, path, id="/".join(map(str, path)),
+                                     marks=[_STILL_OPEN] if name == "reconstruction" else [])
+                        for name, path in MISSING_MEMBERS]
 
 
-@pytest.mark.xfail(strict=True, reason="review 28: a returned record may leave out members its writer writes")
-@pytest.mark.parametrize("name, path", MISSING_MEMBERS, ids=["/".join(map(str, p)) for _, p in MISSING_MEMBERS])
+@pytest.mark.parametrize("name, path", MISSING_MEMBER_CASES)
 def test_a_returned_record_missing_a_member_is_refused(name, path):
     """Each deletion leaves no false number behind, but the record is not its writer's (a chi2
     deleted says "the test did not run" beside the free fit the test made, K_free); see
