@@ -267,7 +267,6 @@ def _sublevel(document: dict) -> dict:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="review 28: plane_sublevel's camera-box bounds are charged 1 unit per 50")
 def test_the_plane_searches_pay_a_unit_for_each_camera_box_bound(over_planes, monkeypatch):
     """The genuine document (8 views) replayed: every box of a plane_sublevel tree is bounded
     against every camera (plane_sublevel.excluded: arrays of boxes x cameras), and the verifier
