@@ -691,8 +691,7 @@ def check_members(kind, result: dict) -> None:
 # ``reason`` not by the earlier form's writer), core.certificates' summaries. Every format-2
 # document stored in tests/data/certificates has them. Reconstruction results are read by their
 # own checks (verify.reconstruction*), not here.
-_ITEM = ("cost", "lower_bound", "gap", "status", "certified", "nodes", "elapsed_s", "reason", "certificate",
-         "determinacy")
+_ITEM = ("cost", "lower_bound", "gap", "status", "certified", "nodes", "elapsed_s", "reason")
 _STATS = ("items", "certified", "nodes", "solve_s", "elapsed_s", "statuses")
 _MAP = (("", ("kind", "norm", "maps", "stats")), ("maps", _ITEM + ("matrix", "residuals")), ("stats", _STATS))
 COMPLETE: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
@@ -704,8 +703,12 @@ COMPLETE: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
                  ("frames", _ITEM + ("camera", "coefficients", "shape", "residuals", "baseline")), ("stats", _STATS)),
     "autocalibration": (("", ("kind", "method", "intrinsics", "plane_at_infinity", "K", "dual_absolute_quadric",
                               "upgrade", "cameras", "points", "baseline", "stages", "stats")),
-                        ("stages", _ITEM + ("name", "plane_at_infinity")), ("stats", _STATS)),
+                        ("stages", _ITEM + ("name",)), ("stats", _STATS)),
 }
+# An item's ``certificate`` (its summary) is required where it is certified (below); an
+# autocalibration stage's too unless it never started (kinds.autocalibration.cancelled_item writes
+# the outcome alone), with its ``plane_at_infinity`` (stratified), and its ``determinacy`` wherever it
+# states a cost (the writer analyses every stage that found a plane or a K).
 # What a certified item's certificate summary states of its proof (core.certificates.summary):
 # the scope covered, the tolerance met, and for a branch and bound over a region its root region
 # and leaves (an autocalibration stage's summary states no region: its proof is one program's).
@@ -726,6 +729,8 @@ def check_complete(kind, result: dict) -> None:
                 continue  # typed by the checks that read it
             place = "the result" if where == "" else f"{where}/{index}" if isinstance(value, list) else where
             _require(entry, names, place, kind.name)
+            if kind.name == "autocalibration" and where == "stages":
+                _require(entry, _stage_members(entry, result), place, kind.name)
             summary = entry.get("certificate") if where == kind.item_key else None
             if where == kind.item_key and entry.get("certified") is True:
                 if not isinstance(summary, dict):
@@ -733,6 +738,15 @@ def check_complete(kind, result: dict) -> None:
                                               "summary of what its proof covers, as its writer does")
                 _require(summary, SUMMARY if kind.name == "autocalibration" else REGION_SUMMARY,
                          f"{place}/certificate", kind.name)
+
+
+def _stage_members(stage: dict, result: dict) -> tuple[str, ...]:
+    """What an autocalibration stage states beyond its outcome (COMPLETE's note)."""
+    never_started = stage.get("status") in ("cancelled", "time_limit") and not stage.get("nodes") \
+        and stage.get("cost") is None
+    names = () if never_started else ("certificate",) + (() if result.get("method") == "direct"
+                                                         else ("plane_at_infinity",))
+    return names + (("determinacy",) if is_number(stage.get("cost")) else ())
 
 
 def _require(entry: dict, names: tuple[str, ...], place: str, kind: str) -> None:
