@@ -224,6 +224,7 @@ class AutocalibrationVerification(Verification):
                 raise Invalid("returned", f"{name} is not what the plane at infinity and K give")
         _check_baseline(result.get("baseline"), problem, p)
         _check_proven_intervals(stages[1], claims[1], stages[0])
+        estimates.check_plane(stages[0].get("determinacy"), stages[0].get("plane_at_infinity"), "stages/0/determinacy")
         estimates.check_intrinsics(stages[1].get("determinacy"), result.get("K"), "stages/1/determinacy")
         estimates.check_redundancy(stages[0].get("determinacy"), len(cameras) - 4, "stages/0/determinacy")
         estimates.check_redundancy(stages[1].get("determinacy"), 5 * len(cameras) - 10, "stages/1/determinacy")

@@ -678,6 +678,84 @@ def check_members(kind, result: dict) -> None:
         from geocert.verify.reconstruction_stages import STAGE_RECORDS
 
         records.check(result.get("stages"), STAGE_RECORDS, "stages")
+    check_complete(kind, result)
+
+
+# The members each kind's writer always writes (null where it has nothing to state): a record
+# closed to its writer's members (check_members) is also complete to them, so that leaving one out
+# cannot switch off the check that reads it or make a record say what its writer never would (a
+# certified item without the summary of what its proof covers, stats without the counts). From
+# the writers: geocert.kinds' result models and assemble (fractional, bilinear: every field of the
+# item and stats models), autocalibration's stratified_item and direct item (every headline field
+# written, null before a stage finds it; ``Ks`` only with varying focal lengths, ``status`` and
+# ``reason`` not by the earlier form's writer), core.certificates' summaries. Every format-2
+# document stored in tests/data/certificates has them. Reconstruction results are read by their
+# own checks (verify.reconstruction*), not here.
+_ITEM = ("cost", "lower_bound", "gap", "status", "certified", "nodes", "elapsed_s", "reason")
+_STATS = ("items", "certified", "nodes", "solve_s", "elapsed_s", "statuses")
+_MAP = (("", ("kind", "norm", "maps", "stats")), ("maps", _ITEM + ("matrix", "residuals")), ("stats", _STATS))
+COMPLETE: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
+    "triangulation": (("", ("kind", "norm", "tracks", "stats")), ("tracks", _ITEM + ("point", "at_infinity")),
+                      ("stats", _STATS)),
+    "resection": _MAP,
+    "homography": _MAP,
+    "bilinear": (("", ("kind", "norm", "coefficients", "frames", "stats")),
+                 ("frames", _ITEM + ("camera", "coefficients", "shape", "residuals", "baseline")), ("stats", _STATS)),
+    "autocalibration": (("", ("kind", "method", "intrinsics", "plane_at_infinity", "K", "dual_absolute_quadric",
+                              "upgrade", "cameras", "points", "baseline", "stages", "stats")),
+                        ("stages", _ITEM + ("name",)), ("stats", _STATS)),
+}
+# An item's ``certificate`` (its summary) is required where it is certified (below); an
+# autocalibration stage's too unless it never started (kinds.autocalibration.cancelled_item writes
+# the outcome alone), with its ``plane_at_infinity`` (stratified), and its ``determinacy`` wherever it
+# states a cost (the writer analyses every stage that found a plane or a K).
+# What a certified item's certificate summary states of its proof (core.certificates.summary):
+# the scope covered, the tolerance met, and for a branch and bound over a region its root region
+# and leaves (an autocalibration stage's summary states no region: its proof is one program's).
+SUMMARY = ("scope", "tolerance", "tolerance_met")
+REGION_SUMMARY = SUMMARY + ("root_region", "leaves")
+
+
+def check_complete(kind, result: dict) -> None:
+    """Every record of a result states each member its writer writes (COMPLETE; a certified
+    item's summary: SUMMARY or REGION_SUMMARY); the failure names the first one left out."""
+    required = COMPLETE.get(kind.name)
+    if required is None:
+        return
+    for where, names in required:
+        value = result if where == "" else result.get(where)
+        for index, entry in enumerate(value if isinstance(value, list) else [value]):
+            if not isinstance(entry, dict):
+                continue  # typed by the checks that read it
+            place = "the result" if where == "" else f"{where}/{index}" if isinstance(value, list) else where
+            _require(entry, names, place, kind.name)
+            if kind.name == "autocalibration" and where == "stages":
+                _require(entry, _stage_members(entry, result), place, kind.name)
+            summary = entry.get("certificate") if where == kind.item_key else None
+            if where == kind.item_key and entry.get("certified") is True:
+                # null only where the job asked for the brief detail (options.detail: no summary, no estimate)
+                _require(entry, ("certificate",), place, kind.name)
+                if not isinstance(summary, dict):
+                    continue
+                _require(summary, SUMMARY if kind.name == "autocalibration" else REGION_SUMMARY,
+                         f"{place}/certificate", kind.name)
+
+
+def _stage_members(stage: dict, result: dict) -> tuple[str, ...]:
+    """What an autocalibration stage states beyond its outcome (COMPLETE's note)."""
+    never_started = stage.get("status") in ("cancelled", "time_limit") and not stage.get("nodes") \
+        and stage.get("cost") is None
+    names = () if never_started else ("certificate",) + (() if result.get("method") == "direct"
+                                                         else ("plane_at_infinity",))
+    return names + (("determinacy",) if is_number(stage.get("cost")) else ())
+
+
+def _require(entry: dict, names: tuple[str, ...], place: str, kind: str) -> None:
+    missing = [name for name in names if name not in entry]
+    if missing:
+        raise Invalid("returned", f"{place} leaves out its member {missing[0]!r}, which every {kind} result's writer "
+                                  "states (null where it has nothing to state): a record missing a member is not "
+                                  "its writer's")
 
 
 def _check_returned(result: dict, certificate: dict, earlier_estimates: bool = True) -> None:

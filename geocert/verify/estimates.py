@@ -126,19 +126,59 @@ def check_intrinsics(determinacy: Any, K: Any, where: str) -> None:
                                       f"scale is {RELATIVE_WIDTH * abs(float(scale))!r:.30}")
 
 
+PLANE = tuple(f"plane_at_infinity[{k}]" for k in range(4))  # autocalibration.determinacy.affine_stage's names
+PLANE_SLACK = 1e-9  # of the plane's largest coordinate: the writer states the returned plane's own
+
+
+def check_plane(determinacy: Any, plane: Any, where: str) -> None:
+    """The affine stage's estimate (autocalibration.determinacy.affine_stage) is about the plane
+    the stage returns, as a K stage's is about its K (check_intrinsics): its intervals name
+    plane_at_infinity[0] .. [3] in order, each ``value`` the returned plane's coordinate (to
+    PLANE_SLACK of the plane's largest: the writer reads the plane back through the normalised
+    frame, so a coordinate near 0 differs from the stated one by the others' rounding), and each ``tolerance`` null as the writer writes it (a plane has no scale
+    of its own: bounded suffices). A document written before intervals stated a tolerance states
+    none on every interval (_compare's earlier form), and is read so."""
+    if not isinstance(determinacy, dict) or _stopped(determinacy):
+        return
+    try:
+        plane = np.asarray(plane, dtype=float).reshape(4)
+    except (TypeError, ValueError):
+        return  # typed by the returned check of the plane (and check_claims)
+    intervals = determinacy.get("intervals")
+    if not isinstance(intervals, list) or [i.get("name") if isinstance(i, dict) else None
+                                           for i in intervals] != list(PLANE):
+        raise Invalid("returned", f"{where}/intervals name {', '.join(PLANE)}, in that order (the plane returned)")
+    scale = float(np.max(np.abs(plane)))
+    for number, (found, coordinate) in enumerate(zip(intervals, plane)):
+        given = found.get("value")
+        if not _close(given, float(coordinate), 0.0, PLANE_SLACK * scale):
+            raise Invalid("returned", f"{where}/intervals/{number}/value is {given!r:.30}, the plane returned gives "
+                                      f"{float(coordinate)!r:.30}")
+        if found.get("tolerance", None) is not None:
+            raise Invalid("returned", f"{where}/intervals/{number}/tolerance is {found['tolerance']!r:.30}; a plane "
+                                      "coordinate's is null (bounded suffices), as its writer states it")
+
+
 def check_contains(determinacy: Any, where: str) -> None:
     """An autocalibration stage's intervals hold their own value: each bounded end on its side of
     ``value`` (to VALUE_SLACK of it), as the writer's are (autocalibration.determinacy: the ends are
     the value less and plus the walked distances, each at least 0; the affine stage's the range
     of the planes reached with its own; a clip to the scope moves an end toward the value only,
     the value inside the scope the stage certifies). An interval beside its value says the data
-    fix the quantity away from the answer returned."""
+    fix the quantity away from the answer returned; a bounded interval stating no numeric value
+    (null or absent) would hold nothing, and is refused (the writer's value is the returned
+    answer's, always a number)."""
     if not isinstance(determinacy, dict) or _stopped(determinacy) or not isinstance(determinacy.get("intervals"), list):
         return
     for number, found in enumerate(determinacy["intervals"]):
-        if not isinstance(found, dict) or not is_number(found.get("value")):
+        if not isinstance(found, dict):
             continue
-        value, lower, upper = found["value"], found.get("lower"), found.get("upper")
+        value, lower, upper = found.get("value"), found.get("lower"), found.get("upper")
+        if not is_number(value):
+            if is_number(lower) or is_number(upper):  # the writer's value is the answer's, always finite
+                raise Invalid("returned", f"{where}/intervals/{number} bounds its quantity but states no numeric "
+                                          f"value ({value!r:.20}): an interval holds the value the stage returns")
+            continue
         slack = VALUE_SLACK * abs(value)
         if (is_number(lower) and lower > value + slack) or (is_number(upper) and upper < value - slack):
             raise Invalid("returned", f"{where}/intervals/{number} [{lower!r:.20}, {upper!r:.20}] does not hold its "

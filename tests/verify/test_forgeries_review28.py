@@ -76,7 +76,6 @@ def _refused(document: dict, words: str = "") -> dict:
 AFFINE = [("autocalibration_stratified", 0), ("autocalibration_five_views", 0)]
 
 
-@pytest.mark.xfail(strict=True, reason="review 28: an autocalibration interval with no value holds no value")
 @pytest.mark.parametrize("name, stage", AFFINE + [("autocalibration_direct", 0)])
 @pytest.mark.parametrize("how", ["null", "absent"])
 def test_an_interval_with_no_value_moved_off_the_answer_is_refused(name, stage, how):
@@ -94,7 +93,6 @@ def test_an_interval_with_no_value_moved_off_the_answer_is_refused(name, stage, 
     _refused(result)
 
 
-@pytest.mark.xfail(strict=True, reason="review 28: the affine stage's intervals are not tied to its plane")
 @pytest.mark.parametrize("name, stage", AFFINE)
 def test_an_affine_interval_and_its_value_moved_off_the_plane_returned_is_refused(name, stage):
     """The interval and its value moved together to 0.5 .. 0.6 where the stage returns a plane
@@ -108,7 +106,6 @@ def test_an_affine_interval_and_its_value_moved_off_the_plane_returned_is_refuse
     _refused(result)
 
 
-@pytest.mark.xfail(strict=True, reason="review 28: the affine stage's intervals are not tied to its plane")
 @pytest.mark.parametrize("edit", ["renamed", "truncated", "emptied"])
 def test_the_affine_intervals_name_the_planes_four_coordinates(edit):
     """The writer (autocalibration.determinacy) states plane_at_infinity[0] .. [3], in order: a
@@ -267,7 +264,6 @@ def _sublevel(document: dict) -> dict:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="review 28: plane_sublevel's camera-box bounds are charged 1 unit per 50")
 def test_the_plane_searches_pay_a_unit_for_each_camera_box_bound(over_planes, monkeypatch):
     """The genuine document (8 views) replayed: every box of a plane_sublevel tree is bounded
     against every camera (plane_sublevel.excluded: arrays of boxes x cameras), and the verifier
@@ -354,10 +350,14 @@ MISSING_MEMBERS = [
     ("triangulation_l2l2", ("stats", "items")),
     ("triangulation_l2l2", ("stats", "nodes")),
 ]
+_STILL_OPEN = pytest.mark.xfail(strict=True, reason="review 28: a returned record may leave out members its writer "
+                                                    "writes")
+MISSING_MEMBER_CASES = [pytest.param(name, path, id="/".join(map(str, path)),
+                                     marks=[_STILL_OPEN] if name == "reconstruction" else [])
+                        for name, path in MISSING_MEMBERS]
 
 
-@pytest.mark.xfail(strict=True, reason="review 28: a returned record may leave out members its writer writes")
-@pytest.mark.parametrize("name, path", MISSING_MEMBERS, ids=["/".join(map(str, p)) for _, p in MISSING_MEMBERS])
+@pytest.mark.parametrize("name, path", MISSING_MEMBER_CASES)
 def test_a_returned_record_missing_a_member_is_refused(name, path):
     """Each deletion leaves no false number behind, but the record is not its writer's (a chi2
     deleted says "the test did not run" beside the free fit the test made, K_free); see

@@ -329,11 +329,14 @@ MISSING_MEMBERS = [
     ("homography2_l2l2", ("maps", 0, "residuals")),
     ("triangulation_l2l2", ("stats", "certified")),
 ]
+_STILL_OPEN = pytest.mark.xfail(strict=True, reason="issue 33 gap: a returned record may leave out members its writer "
+                                                    "writes (records are closed, not complete)")
+MISSING_MEMBER_CASES = [pytest.param(name, path, id="/".join(map(str, path)),
+                                     marks=[_STILL_OPEN] if name == "reconstruction" else [])
+                        for name, path in MISSING_MEMBERS]
 
 
-@pytest.mark.xfail(strict=True, reason="issue 33 gap: a returned record may leave out members its writer writes "
-                                       "(records are closed, not complete)")
-@pytest.mark.parametrize("name, path", MISSING_MEMBERS, ids=["/".join(map(str, p)) for _, p in MISSING_MEMBERS])
+@pytest.mark.parametrize("name, path", MISSING_MEMBER_CASES)
 def test_a_returned_record_missing_a_member_is_refused(genuine, name, path):
     result = copy.deepcopy(genuine[name][0])
     assert verify_any(result).valid

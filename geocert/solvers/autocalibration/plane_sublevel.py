@@ -52,7 +52,18 @@ from geocert.solvers.core.strict import Invalid, charge, number, numbers
 WIDEN = 1e-12
 PLANE_BOXES = 6_000  # boxes bounded by the search over planes alone (3 dimensions)
 MAX_BOXES = 6_000  # boxes bounded by the search over planes and omega (8 dimensions)
-VIEWS = 20  # up to this many views the searches get their whole budgets, beyond it in proportion
+# What one box's bound against one camera costs, in units of the verifier's work budget
+# (strict.charge; a unit is about 1.2 us of CPU: a chart's 16 centre-view pairs). Measured by
+# replaying a genuine 8-view document's trees, bounded in blocks (excluded): about 2.3 us of CPU a
+# camera-box over planes alone and 31 us over planes and omega (whose metric terms dominate).
+PLANE_BOX_UNITS = 2
+BOX_UNITS = 26
+# The work the searches' trees may cost in all (units; strict.WORK_BASE is 2,000,000): each
+# tree's boxes are as many as fit its share at the problem's number of views (tree_budget).
+PLANE_TREE_WORK = 300_000
+TREE_WORK = 1_200_000
+FLOOR_BOXES = 200  # at least this many boxes a tree, however many views (a document past it pays by its size)
+BLOCK_CAMERA_BOXES = 4_096  # bounded at once (about 4 kB a camera-box at the peak: some 16 MB)
 MAX_LEVELS = 400
 PLANE_SPLITS = 3  # the levels of a search over planes and omega that split the planes' box (8 x 8 x 8)
 NAMES = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")
@@ -262,9 +273,30 @@ def _metric_terms(region: Region, centre: np.ndarray, radius: np.ndarray, points
 def excluded(context: Context, region: Region, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Which boxes (N, 8: v then w; or N, 3: v alone, every omega) hold no point of S (module
     docstring), by interval bounds in mean-value form. A bound that comes out NaN (an unbounded
-    gradient) excludes nothing: every comparison with it is false."""
+    gradient) excludes nothing: every comparison with it is false. The boxes are bounded in
+    blocks of BLOCK_CAMERA_BOXES camera-boxes, so memory does not grow with the tree."""
+    step = max(1, BLOCK_CAMERA_BOXES // max(len(context.problem.norm.cameras), 1))
     with np.errstate(all="ignore"):
-        return _excluded(context, region, lo, hi)
+        if len(lo) <= step:
+            return _excluded(context, region, lo, hi)
+        return np.concatenate([_excluded(context, region, lo[k:k + step], hi[k:k + step])
+                               for k in range(0, len(lo), step)])
+
+
+def tree_budget(views: int, dimensions: int, regions: int = 1) -> int:
+    """The boxes one tree (of ``regions``' one each) may bound: its share of PLANE_TREE_WORK (a
+    tree over planes, 3 dimensions) or TREE_WORK (over planes and omega) at its units a
+    camera-box, within PLANE_BOXES or MAX_BOXES and at least FLOOR_BOXES; the solver searches
+    within it and the verifier replays no more."""
+    views = max(int(views), 1)
+    work, units, most = ((PLANE_TREE_WORK, PLANE_BOX_UNITS, PLANE_BOXES) if dimensions == 3
+                         else (TREE_WORK, BOX_UNITS, MAX_BOXES))
+    return max(FLOOR_BOXES, min(most, work // (units * views))) // max(int(regions), 1)
+
+
+def box_units(dimensions: int) -> int:
+    """The work units one box's bound against one camera is charged (PLANE_BOX_UNITS, BOX_UNITS)."""
+    return PLANE_BOX_UNITS if dimensions == 3 else BOX_UNITS
 
 
 def _meet(a, b):
@@ -406,14 +438,15 @@ def leaves(lo: np.ndarray, hi: np.ndarray, levels, where: str, most: int) -> tup
 def _kept(context: Context, region: Region, lo: np.ndarray, hi: np.ndarray, margin: float) -> np.ndarray:
     widened = Context(context.problem, context.regions, context.U_affine * (1 + margin),
                       context.U_metric * (1 + margin))
-    charge(len(lo) * max(len(context.problem.norm.cameras), 1) // 50 + 1, "proof/plane_sublevel")
+    charge(len(lo) * max(len(context.problem.norm.cameras), 1) * box_units(lo.shape[1]), "proof/plane_sublevel")
     return ~excluded(widened, region, lo, hi)
 
 
 def plane_hull(context: Context, region: Region, plane_levels, where: str, margin: float = 0.0
                ) -> tuple[np.ndarray, np.ndarray] | None:
     """The hull (in the region's frame) of the plane tree's leaves not excluded; None: none is."""
-    lo, hi = leaves(region.lo[None, :], region.hi[None, :], plane_levels, where, PLANE_BOXES + 2)
+    most = tree_budget(len(context.problem.norm.cameras), 3, len(context.regions))
+    lo, hi = leaves(region.lo[None, :], region.hi[None, :], plane_levels, where, max(most, 1) + 2)
     keep = _kept(context, region, lo, hi, margin)
     if not keep.any():
         return None
@@ -430,7 +463,8 @@ def hull(context: Context, trees: list, margin: float = 0.0) -> np.ndarray:
             continue
         lo, hi = leaves(np.concatenate([box[0], context.w_lo])[None, :],
                         np.concatenate([box[1], context.w_hi])[None, :],
-                        levels, f"proof/plane_sublevel/regions/{i}/levels", MAX_BOXES + 2)
+                        levels, f"proof/plane_sublevel/regions/{i}/levels",
+                        max(tree_budget(len(context.problem.norm.cameras), 8, len(context.regions)), 1) + 2)
         keep = _kept(context, region, lo, hi, margin)
         for j in np.flatnonzero(keep):
             r = metric_relaxation.intrinsics_ranges(context.problem.unit_ranges, lo[j, 3:], hi[j, 3:])
@@ -455,14 +489,13 @@ def prove(problem, regions: list[tuple[float, np.ndarray, np.ndarray, np.ndarray
         return None
     # each box's bounds cost about a view's work: many views search fewer boxes (wider intervals)
     views = max(len(problem.norm.cameras), 1)
-    plane_budget, budget = (max(200, min(most, most * VIEWS // views)) for most in (PLANE_BOXES, MAX_BOXES))
     built = [Region(problem, delta, G, lo, hi) for delta, G, lo, hi, _ in regions]
     context = Context(problem, built, sublevel_level(affine_cost, affine_increase),
                       sublevel_level(metric_cost, metric_increase))
     documents, trees = [], []
     for n, region in enumerate(built):
         plane_levels = search(context, region, region.lo[None, :].copy(), region.hi[None, :].copy(),
-                              plane_budget // len(built))
+                              tree_budget(views, 3, len(built)))
         found = plane_hull(context, region, plane_levels, "plane_levels", HULL_MARGIN)
         box = None
         if found is not None:
@@ -470,7 +503,7 @@ def prove(problem, regions: list[tuple[float, np.ndarray, np.ndarray, np.ndarray
             box = (found[0] - pad, found[1] + pad)
         levels = ["00"] if box is None else search(
             context, region, np.concatenate([box[0], context.w_lo])[None, :],
-            np.concatenate([box[1], context.w_hi])[None, :], budget // len(built))
+            np.concatenate([box[1], context.w_hi])[None, :], tree_budget(views, 8, len(built)))
         trees.append((box, levels))
         delta, G, lo, hi, basis = regions[n]
         documents.append({"delta": float(delta), "frame": np.asarray(G).tolist(),
