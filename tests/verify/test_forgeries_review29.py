@@ -28,7 +28,7 @@ Found (each test marked xfail below fails on main's verifier, a false claim acce
 - The direct stage's intervals (focal[0] .. focal[11], the returned Ks' focal lengths) are tied to
   nothing it returns (review 28 tied the affine stage's to its plane, a K stage's to its K): one
   moved with its value, renamed, the list cut, emptied (``determined: true`` read off no interval)
-  or two swapped, all verify.
+  two swapped, or its redundancy raised (checked on a one-K stage only), all verify.
 
 Tried and refused (kept below where no earlier review file covers the class): the summary's views
 or tracks edited (a float, 10^6, deleted) to let the "too few" shape stand on 96 observations; the
@@ -233,13 +233,14 @@ def test_the_genuine_direct_intervals_are_the_returned_focal_lengths():
 
 
 @pytest.mark.xfail(strict=True, reason="review 29: the direct stage's intervals are tied to nothing it returns")
-@pytest.mark.parametrize("edit", ["moved", "renamed", "truncated", "emptied", "swapped"])
+@pytest.mark.parametrize("edit", ["moved", "renamed", "truncated", "emptied", "swapped", "redundancy"])
 def test_the_direct_stages_intervals_are_its_returned_focal_lengths(edit):
     """Review 28 tied the affine stage's intervals to its plane and a K stage's to its K
     (check_intrinsics); the direct stage returns Ks (K null) and its intervals are checked against
     nothing: the first moved with its value 100 widths and 10% away from the returned focal length,
-    renamed, the list cut to two, emptied (``determined: true`` then read off no interval), or two
-    swapped, all verify."""
+    renamed, the list cut to two, emptied (``determined: true`` then read off no interval), two
+    swapped, or its redundancy raised by 5 (check_redundancy reads a one-K stage's only; the
+    direct one-K document refuses the same edit), all verify."""
     result = stored("autocalibration_direct")
     determinacy = result["stages"][0]["determinacy"]
     intervals = determinacy["intervals"]
@@ -254,6 +255,10 @@ def test_the_direct_stages_intervals_are_its_returned_focal_lengths(edit):
         determinacy["intervals"] = intervals[:2]
     elif edit == "emptied":
         determinacy["intervals"] = []
+    elif edit == "redundancy":
+        # the writer's: 5 residuals a view beside the first less the 12 focal lengths and the plane's 3
+        assert determinacy["redundancy"] == 5 * (12 - 1) - (12 + 3)
+        determinacy["redundancy"] += 5
     else:
         intervals[0], intervals[1] = intervals[1], intervals[0]
     assert determinacy["determined"] is True
