@@ -18,7 +18,7 @@ Found (each test marked xfail below fails on main's verifier, a false claim acce
   is the document's word, as the chi2 was before review 28.
 - The adjustment's principal-point record says "too few observations to test" on an edited count:
   _check_record_shape counts the degrees of freedom from the record's own ``observations``, which
-  nothing ties to the adjustment's (96 in the summary and the points; the record edited to 19, 5
+  nothing ties to the adjustment's (the summary's 96, the genuine record's; the record edited to 19, 5
   or 0 verifies, saying the test did not run where it ran). A record that ran may state any count
   from 20 up, too.
 - A camera's ``searched`` left out on one camera (the others stating it): the camera is read as
