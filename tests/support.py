@@ -248,3 +248,14 @@ def refused(result: dict) -> dict:
 def stage(result: dict, name: str) -> dict:
     """A reconstruction result's stage record by name."""
     return next(entry for entry in result["stages"] if entry["name"] == name)
+
+
+def assert_problem(response, status: int, field: str | None = None) -> dict:
+    """An RFC 9457 problem with this status, naming ``field`` among its errors when one is given."""
+    assert response.status_code == status
+    assert response.headers["content-type"].startswith("application/problem+json")
+    problem = response.json()
+    assert problem["status"] == status and problem["title"]
+    if field is not None:
+        assert any(e["field"] == field for e in problem["errors"]), problem
+    return problem

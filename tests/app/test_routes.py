@@ -13,6 +13,7 @@ import pytest
 
 from geocert.solvers.core.certificates import VERSION
 from testing.jobs import look_at, service_job as triangulation_job
+from tests.support import assert_problem
 
 PROBLEM = "application/problem+json"
 
@@ -191,42 +192,33 @@ class TestCertificateBodies:
 
 
 class TestBadInput:
-    def assert_problem(self, response, status: int, field: str | None = None):
-        assert response.status_code == status
-        assert response.headers["content-type"].startswith("application/problem+json")
-        problem = response.json()
-        assert problem["status"] == status and problem["title"]
-        if field is not None:
-            assert any(e["field"] == field for e in problem["errors"]), problem
-        return problem
-
     def test_malformed_payloads_get_422_naming_the_field(self, api):
         good = triangulation_job(np.random.default_rng(26), tracks=1)
         bad_index = json.loads(json.dumps(good))
         bad_index["data"]["tracks"][0]["views"][-1] = 99
-        self.assert_problem(api.post("/v1/jobs", json=bad_index), 422, "data/tracks/0/views/1")
+        assert_problem(api.post("/v1/jobs", json=bad_index), 422, "data/tracks/0/views/1")
         nan = json.dumps(good).replace(str(good["data"]["tracks"][0]["points"][0][0]), "NaN", 1)
-        self.assert_problem(api.post("/v1/jobs", content=nan, headers={"content-type": "application/json"}),
+        assert_problem(api.post("/v1/jobs", content=nan, headers={"content-type": "application/json"}),
                             422, "data/tracks/0/points/0/0")
         short = json.loads(json.dumps(good))
         short["data"]["tracks"][0] = {"views": [0], "points": [[1.0, 2.0]]}
-        self.assert_problem(api.post("/v1/jobs", json=short), 422, "data/tracks/0/views")
+        assert_problem(api.post("/v1/jobs", json=short), 422, "data/tracks/0/views")
         flat = json.loads(json.dumps(good))
         flat["data"]["cameras"][0] = [[0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 1, 0]]
-        self.assert_problem(api.post("/v1/jobs", json=flat), 422, "data/cameras/0")
-        self.assert_problem(api.post("/v1/jobs", json={**good, "options": {"norm": "L9"}}), 422, "options/norm")
+        assert_problem(api.post("/v1/jobs", json=flat), 422, "data/cameras/0")
+        assert_problem(api.post("/v1/jobs", json={**good, "options": {"norm": "L9"}}), 422, "options/norm")
 
     def test_unparseable_json_is_a_400_with_line_column_and_the_parsers_message(self, api):
         body = b'{"kind": "triangulation",\n "data": {"cameras": [1, 2,]}}'
-        problem = self.assert_problem(
+        problem = assert_problem(
             api.post("/v1/jobs", content=body, headers={"content-type": "application/json"}), 400, "body")
         assert (problem["line"], problem["column"]) == (2, 28)
         assert "line 2, column 28" in problem["detail"] and "Expecting value" in problem["detail"]
-        problem = self.assert_problem(
+        problem = assert_problem(
             api.post("/v1/certificates/verify", content=b"{not json", headers={"content-type": "application/json"}),
             400, "body")
         assert (problem["line"], problem["column"]) == (1, 2) and "double quotes" in problem["detail"]
-        problem = self.assert_problem(  # bytes that are not UTF-8 text (found by schemathesis: a 500)
+        problem = assert_problem(  # bytes that are not UTF-8 text (found by schemathesis: a 500)
             api.post("/v1/certificates/verify", content=b'{"a": "\xff\xfe"}',
                          headers={"content-type": "application/json"}), 400, "body")
         assert "UTF-8" in problem["detail"]
@@ -235,7 +227,7 @@ class TestBadInput:
     def test_a_body_not_sent_as_json_gets_a_415_naming_the_header(self, api, headers):
         body = json.dumps(triangulation_job(np.random.default_rng(26), tracks=1)).encode()
         response = api.post("/v1/jobs", content=body, headers=headers)
-        problem = self.assert_problem(response, 415, "content-type")
+        problem = assert_problem(response, 415, "content-type")
         assert "content-type: application/json" in problem["detail"]
 
     @pytest.mark.parametrize("place, value, field", [
@@ -253,10 +245,10 @@ class TestBadInput:
         for key in place[:-1]:
             target = target[key]
         target[place[-1]] = value
-        problem = self.assert_problem(api.post("/v1/jobs", json=body), 422, field)
+        problem = assert_problem(api.post("/v1/jobs", json=body), 422, field)
         reason = next(e["reason"] for e in problem["errors"] if e["field"] == field)
         assert json.dumps(value) in reason  # says what it got: "330" is a string, 1.0 a decimal number
 
     def test_unknown_job_is_404(self, api):
-        self.assert_problem(api.get("/v1/jobs/0123"), 404)
-        self.assert_problem(api.get("/v1/jobs/0123/events"), 404)
+        assert_problem(api.get("/v1/jobs/0123"), 404)
+        assert_problem(api.get("/v1/jobs/0123/events"), 404)

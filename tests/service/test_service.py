@@ -16,7 +16,7 @@ import pytest
 from geocert.jobs.runner import solve_job
 
 from tests.servers import free_port
-from tests.support import random_cameras, service_job as triangulation_job
+from tests.support import assert_problem, random_cameras, service_job as triangulation_job
 
 BODY_LIMIT = 2_000_000
 STREAM_THRESHOLD = 20_000  # bodies over this are taken item by item (TestLargeBodies)
@@ -379,7 +379,7 @@ class TestLargeBodies:
         body = self.large_body(32)
         change(body["data"]["tracks"])
         listed = [job["id"] for job in service.get("/v1/jobs", params={"limit": 100}).json()["jobs"]]
-        TestBadInput.assert_problem(None, service.post("/v1/jobs", json=body), 422, field)
+        assert_problem(service.post("/v1/jobs", json=body), 422, field)
         assert [job["id"] for job in service.get("/v1/jobs", params={"limit": 100}).json()["jobs"]] == listed
 
 
