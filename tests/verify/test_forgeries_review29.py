@@ -266,7 +266,6 @@ def test_the_genuine_direct_intervals_are_the_returned_focal_lengths():
         assert abs(interval["value"] - K[0][0]) <= 1e-9 * abs(K[0][0])
 
 
-@pytest.mark.xfail(strict=True, reason="review 29: the direct stage's intervals are tied to nothing it returns")
 @pytest.mark.parametrize("edit", ["moved", "renamed", "truncated", "emptied", "swapped", "redundancy"])
 def test_the_direct_stages_intervals_are_its_returned_focal_lengths(edit):
     """Review 28 tied the affine stage's intervals to its plane and a K stage's to its K
