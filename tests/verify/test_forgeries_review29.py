@@ -214,7 +214,6 @@ def test_the_genuine_report_names_both_judged_cameras():
     assert report.scope["camera_judgements"].startswith("unchecked for cameras 1, 2:")
 
 
-@pytest.mark.xfail(strict=True, reason="review 29: searched left out on one camera drops its caveat")
 def test_searched_left_out_on_one_camera_is_refused():
     """Camera 1 is not searched (judged beaten by a free camera, a judgement the report names as
     the result's word). Its ``searched`` deleted, the others' kept: read as searched, the report's
