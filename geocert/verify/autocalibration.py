@@ -573,10 +573,12 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
         if not _derived_close(name, result.get(name), value, cameras, points, H):
             raise Invalid("returned", f"{name} is not what the quadric gives")
     _check_direct_proven(result["stages"][0], claim, len(cameras))
-    if result.get("Ks") is None:  # one K (varying focal lengths: an estimate per view, of Ks)
+    if result.get("Ks") is None:  # one K
         estimates.check_intrinsics(result["stages"][0].get("determinacy"), result.get("K"), "stages/0/determinacy")
         estimates.check_redundancy(result["stages"][0].get("determinacy"), 5 * len(cameras) - 10,
                                    "stages/0/determinacy")
+    else:  # varying focal lengths: an estimate of each view's, of Ks
+        estimates.check_focal_lengths(result["stages"][0].get("determinacy"), result["Ks"], "stages/0/determinacy")
     estimates.check_contains(result["stages"][0].get("determinacy"), "stages/0/determinacy")
 
 

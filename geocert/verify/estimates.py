@@ -126,6 +126,41 @@ def check_intrinsics(determinacy: Any, K: Any, where: str) -> None:
                                       f"scale is {RELATIVE_WIDTH * abs(float(scale))!r:.30}")
 
 
+FOCAL_SLACK = 1e-9  # of the focal length: the writer states f0 * (f / f0), the returned focal length rounded
+
+
+def check_focal_lengths(determinacy: Any, Ks: Any, where: str) -> None:
+    """The direct stage's estimate with one focal length a view (autocalibration.determinacy.
+    varying_focal_stage) is about the Ks the result returns, as a K stage's is about its K
+    (check_intrinsics): its intervals name focal[0] .. focal[m-1] in order, one a returned K,
+    each ``value`` that K's focal length (to FOCAL_SLACK of it) and each ``tolerance`` a tenth of
+    it (its scale); its redundancy is the writer's, 5 DIAC residuals a view but the reference's
+    less the m focal lengths and the plane's 3."""
+    if not isinstance(determinacy, dict) or _stopped(determinacy) or not isinstance(Ks, list):
+        return
+    try:
+        focal = [float(np.asarray(K, dtype=float).reshape(3, 3)[0, 0]) for K in Ks]
+    except (TypeError, ValueError) as exc:
+        raise Invalid("returned", f"{where} estimates the focal lengths of Ks, which are not all 3x3 "
+                                  f"matrices") from exc
+    names = [f"focal[{k}]" for k in range(len(focal))]
+    intervals = determinacy.get("intervals")
+    if not isinstance(intervals, list) or [i.get("name") if isinstance(i, dict) else None
+                                           for i in intervals] != names:
+        raise Invalid("returned", f"{where}/intervals name focal[0] .. focal[{len(focal) - 1}], in that order "
+                                  "(the Ks returned)")
+    earlier = not any("tolerance" in i for i in intervals)  # written before intervals stated one (_compare)
+    for number, (found, value) in enumerate(zip(intervals, focal)):
+        given, tolerance = found.get("value"), found.get("tolerance")
+        if not _close(given, value, 0.0, FOCAL_SLACK * abs(value)):
+            raise Invalid("returned", f"{where}/intervals/{number}/value is {given!r:.30}, Ks[{number}] gives "
+                                      f"{value!r:.30}")
+        if not earlier and not _close(tolerance, RELATIVE_WIDTH * abs(value), 0.0, FOCAL_SLACK * abs(value)):
+            raise Invalid("returned", f"{where}/intervals/{number}/tolerance is {tolerance!r:.30}, a tenth of its "
+                                      f"focal length is {RELATIVE_WIDTH * abs(value)!r:.30}")
+    check_redundancy(determinacy, 5 * (len(focal) - 1) - (len(focal) + 3), where)
+
+
 PLANE = tuple(f"plane_at_infinity[{k}]" for k in range(4))  # autocalibration.determinacy.affine_stage's names
 PLANE_SLACK = 1e-9  # of the plane's largest coordinate: the writer states the returned plane's own
 

@@ -140,6 +140,11 @@ def _check_camera_fields(camera: dict, where: str) -> None:
 # cost deleted read as "no cost found").
 CAMERA_WRITTEN = ("view", "name", "registered", "reason", "image_size", "K", "R", "t", "center", "P", "cost",
                   "lower_bound", "gap", "optimal_cost", "certified", "status", "bound_reason", "points")
+# The camera's judgement (kinds.reconstruction._camera writes each on every camera, null or false
+# where it has none): each member on every camera or, in a result from before it was stated, on
+# none (searched came first, degrees_of_freedom and tolerance later). One left out on one camera
+# was read as that earlier form: a camera not searched read as searched.
+CAMERA_JUDGEMENT = ("searched", "degrees_of_freedom", "tolerance")
 POINT_WRITTEN = ("track", "observations", "point", "at_infinity", "cost", "lower_bound", "gap", "status", "certified",
                  "nodes", "elapsed_s", "reason", "certificate")
 
@@ -152,11 +157,21 @@ def _complete(records: list, written: tuple, key: str) -> None:
                                       f"{', '.join(written)} (null where it has none)")
 
 
+def _all_or_none(records: list, members: tuple, key: str) -> None:
+    """Each of ``members`` stated on every record or on none (a form that states it, on all)."""
+    for name in members:
+        stated = [name in record for record in records]
+        if any(stated) and not all(stated):
+            raise Invalid("returned", f"{key}/{stated.index(False)} leaves out {name!r}, which the others state: its "
+                                      "writer states it on every camera (a result from before it was, on none)")
+
+
 def _check_cameras(cameras: Any, stated: list) -> tuple[list[dict], list[int]]:
     """The cameras in view order, the registered ones those the certificate's data state."""
     if not isinstance(cameras, list) or not all(isinstance(c, dict) for c in cameras):
         raise Invalid("returned", "the result's cameras must be a list of objects")
     _complete(cameras, CAMERA_WRITTEN, "cameras")
+    _all_or_none(cameras, CAMERA_JUDGEMENT, "cameras")
     if [camera.get("view") for camera in cameras] != list(range(len(cameras))):
         raise Invalid("returned", "the result's cameras must be one per view, in view order")
     registered = _views_of(cameras)

@@ -214,7 +214,6 @@ def test_the_genuine_report_names_both_judged_cameras():
     assert report.scope["camera_judgements"].startswith("unchecked for cameras 1, 2:")
 
 
-@pytest.mark.xfail(strict=True, reason="review 29: searched left out on one camera drops its caveat")
 def test_searched_left_out_on_one_camera_is_refused():
     """Camera 1 is not searched (judged beaten by a free camera, a judgement the report names as
     the result's word). Its ``searched`` deleted, the others' kept: read as searched, the report's
@@ -266,7 +265,6 @@ def test_the_genuine_direct_intervals_are_the_returned_focal_lengths():
         assert abs(interval["value"] - K[0][0]) <= 1e-9 * abs(K[0][0])
 
 
-@pytest.mark.xfail(strict=True, reason="review 29: the direct stage's intervals are tied to nothing it returns")
 @pytest.mark.parametrize("edit", ["moved", "renamed", "truncated", "emptied", "swapped", "redundancy"])
 def test_the_direct_stages_intervals_are_its_returned_focal_lengths(edit):
     """Review 28 tied the affine stage's intervals to its plane and a K stage's to its K
