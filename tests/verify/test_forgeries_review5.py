@@ -465,7 +465,7 @@ def _with_cameras(count: int) -> dict:
         result["cameras"].append({"view": view, "name": f"view{view}", "registered": True, "reason": None,
                                   "image_size": [640.0, 480.0], "P": P.tolist(), "K": K.tolist(), "R": R.tolist(),
                                   "t": t.tolist(), "center": (-R.T @ t).tolist(), "cost": None, "lower_bound": None,
-                                  "gap": None, "optimal_cost": None, "certified": False, "status": "not_certified",
+                                  "gap": None, "optimal_cost": None, "certified": False, "status": "not_certified", "bound_reason": None,
                                   "points": 0, "searched": False, "degrees_of_freedom": None, "tolerance": None})
         result["certificate"]["data"]["cameras"].append(P.tolist())
         result["certificate"]["data"]["views"].append(view)
