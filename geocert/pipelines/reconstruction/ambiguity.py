@@ -5,10 +5,10 @@ adjustment may settle in either, and its own residuals cannot say which is right
 built in the frame of the view that sees most, adjusted with the same camera model, and the two
 compared by MSAC's capped cost over every observation (fit.fit_cost), in units of the returned
 reconstruction's noise variance (depth_reversal_claim.verdict, which the verifier reads too). Each
-is compared at its best: the twin is adjusted again after every track is triangulated anew in its
-cameras, and judged at the better of its two states; unless that already rejects it, the returned
-rig gets the same refit (for the comparison only), and its cost is the lower of its own and the
-refit's (``returned_refitted`` says whether it was run):
+is compared at its best: the twin is adjusted after every track is triangulated anew in its
+cameras; unless that already rejects it, the returned rig gets the same refit (for the comparison
+only), and its cost is the lower of its own and the refit's (``returned_refitted`` says whether it
+was run); a twin to be returned is adjusted once more from its tracks triangulated again:
 
 - the twin costs more by more than MIRROR_CHI2 variances and by more than MIRROR_MARGIN of the
   cost: the data reject it, the poses stand;
@@ -49,23 +49,16 @@ def check(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold
     stopped = (metric, keep, {"checked": False, "reason": STOPPED})
     seen = np.bincount(obs.view[keep], minlength=len(metric.rotations))
     reference = max(registered, key=lambda v: (seen[v], -v))
-    twin = depth_reversal.mirrored(metric, reference)
-    first, first_keep, _ = upgrade.adjust(twin, obs.view, obs.track, obs.pixel, threshold_px, model=model,
-                                          should_stop=should_stop)
+    # Every track is triangulated anew in the twin's cameras before its one adjustment, so the twin
+    # is judged on all it can explain (as the returned rig was built: its registration triangulated
+    # each track as its views were placed), and no observation its mirrored points did not fit is
+    # dropped for good before it could be.
+    twin = retriangulated(depth_reversal.mirrored(metric, reference), obs)
+    adjusted, twin_keep, _ = upgrade.adjust(twin, obs.view, obs.track, obs.pixel, threshold_px, model=model,
+                                            should_stop=should_stop)
     if should_stop is not None and should_stop():
         return stopped
-    # The adjustment drops the observations its start did not fit, for good (a point left with
-    # fewer than two is lost): every track is triangulated again in the adjusted twin's cameras
-    # and adjusted once more, so the twin is judged on all it can explain, as the returned rig was
-    # built (its registration triangulated each track as its views were placed). The twin is
-    # judged at the better of its two adjusted states.
-    second, second_keep, _ = upgrade.adjust(retriangulated(first, obs), obs.view, obs.track, obs.pixel,
-                                            threshold_px, model=model, should_stop=should_stop)
-    if should_stop is not None and should_stop():
-        return stopped
-    twin_cost, adjusted, twin_keep = min((fit_cost(first, obs, threshold_px), first, first_keep),
-                                         (fit_cost(second, obs, threshold_px), second, second_keep),
-                                         key=lambda state: state[0])
+    twin_cost = fit_cost(adjusted, obs, threshold_px)
     kept = int(keep.sum())
     points = int(np.count_nonzero(np.bincount(obs.track[keep], minlength=len(metric.points)) >= 2))
     # Residual degrees of freedom: 2 per observation less the poses (6 each), the points (3 each)
@@ -87,6 +80,18 @@ def check(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold
             return stopped
         cost, refitted = min(cost, fit_cost(refit, obs, threshold_px)), True
         statistic, rejected, adopted = verdict(cost, twin_cost, variance)
+    if adopted:
+        # The twin is returned: it gets the adjustment again from every track triangulated anew in
+        # its adjusted cameras (one adjustment from the mirrored start stops short on a long lens),
+        # and the better of its two states is kept; a lower cost only widens the adoption.
+        again, again_keep, _ = upgrade.adjust(retriangulated(adjusted, obs), obs.view, obs.track, obs.pixel,
+                                              threshold_px, model=model, should_stop=should_stop)
+        if should_stop is not None and should_stop():
+            return stopped
+        again_cost = fit_cost(again, obs, threshold_px)
+        if again_cost < twin_cost:
+            twin_cost, adjusted, twin_keep = again_cost, again, again_keep
+            statistic, rejected, adopted = verdict(cost, twin_cost, variance)
     ambiguous = not (rejected or adopted)
     kept_metric, kept_obs = (adjusted, twin_keep) if adopted else (metric, keep)
     figures = {
