@@ -531,6 +531,11 @@ def _kept(metric: upgrade.Metric, obs: Observations, threshold_px: float) -> np.
 
 
 MIN_TEST_OBSERVATIONS = 20  # a model test on fewer observations (both fits keep) is not made
+# The per-view principal points' trial is run only when their deviations, predicted before it
+# (_principal_points_per_view), are within this many times camera_claim.MAX_PRINCIPAL_POINT_SD_PX:
+# the prediction takes the noise at the linearised fit's minimum, and the trial's own deviations
+# would have to come out this many times smaller to pass.
+PRECISE_MARGIN = 3.0
 
 
 def _residual_dof(obs: Observations, common: np.ndarray, intrinsics: int) -> int:
@@ -613,12 +618,29 @@ def _principal_points_per_view(metric: upgrade.Metric, obs: Observations, keep: 
     from scipy.special import chdtri  # chi2.ppf(1 - p, k), without scipy.stats' import (about 0.4 s of CPU)
 
     views = [v for v, R in enumerate(metric.rotations) if R is not None]
+    centre = np.array([image_size[0] / 2, image_size[1] / 2])
+    added = 2 * (len(views) - 1) + (2 if np.allclose(metric.K[:2, 2], centre) else 0)
+    # The trial adjustment (two rounds at their cap, the slowest of the job's) only when the data
+    # could fix each view's principal point: their deviations from the shared fit, each view given
+    # the shared one, at the noise of the linearised per-view fit's minimum (the misfit a shift of
+    # its own would absorb taken off). Beyond PRECISE_MARGIN times the limit the trial could not
+    # pass its precision test: the shared principal point stays, the trial not run.
+    if len(views) >= 2 and int(keep.sum()) >= MIN_TEST_OBSERVATIONS:
+        shared = replace(metric, Ks=[None if R is None else upgrade.K_of(metric, v).copy()
+                                     for v, R in enumerate(metric.rotations)])
+        predicted = _principal_point_sd(shared, obs, keep, views, linearised_minimum=True)
+        if not np.all(predicted <= PRECISE_MARGIN * camera_claim.MAX_PRINCIPAL_POINT_SD_PX):
+            finite = predicted[np.isfinite(predicted)]
+            return metric, keep, {
+                "estimated": False, "observations": int(keep.sum()), "parameters_added": added,
+                "sd_px": [float(finite.min()), float(np.median(finite)), float(finite.max())] if len(finite) else [],
+                "max_sd_px": camera_claim.MAX_PRINCIPAL_POINT_SD_PX, "precise": False,
+                "reason": f"the data do not fix each view's principal point: predicted from the shared fit, "
+                          f"deviations beyond {PRECISE_MARGIN:g} times max_sd_px (the trial not run)"}
     trial, trial_keep, _ = upgrade.adjust(metric, obs.view, obs.track, obs.pixel, threshold_px,
                                           model="principal_per_view")
     common = keep & trial_keep
     n = int(common.sum())
-    centre = np.array([image_size[0] / 2, image_size[1] / 2])
-    added = 2 * (len(views) - 1) + (2 if np.allclose(metric.K[:2, 2], centre) else 0)
     figures = {"estimated": False, "observations": n, "parameters_added": added}
     if n < MIN_TEST_OBSERVATIONS or len(views) < 2 or trial.Ks is None:
         return metric, keep, {**figures, "reason": "too few observations to test"}
@@ -724,9 +746,11 @@ def _intrinsics_sd(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, 
     return np.where(np.isfinite(sd), sd, np.inf), np.where(np.isfinite(focal_sd), focal_sd, np.inf)
 
 
-def _principal_point_sd(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, views: list) -> np.ndarray:
-    """principal_points.standard_deviations of each view's principal point (px) in ``metric``, on
-    the observations ``keep`` of points it holds (infinite where they cannot be computed)."""
+def _principal_point_sd(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, views: list,
+                        linearised_minimum: bool = False) -> np.ndarray:
+    """principal_points.with_focal_groups' deviation of each view's principal point (px) in
+    ``metric`` (one focal group), on the observations ``keep`` of points it holds (infinite where
+    they cannot be computed); ``linearised_minimum``: at the noise of the linearised fit's minimum."""
     from geocert.solvers.reconstruction import principal_points
 
     vindex = -np.ones(len(metric.rotations), dtype=int)
@@ -734,10 +758,10 @@ def _principal_point_sd(metric: upgrade.Metric, obs: Observations, keep: np.ndar
     use = keep & (vindex[obs.view] >= 0) & np.isfinite(metric.points[obs.track, 0])
     tracks, track = np.unique(obs.track[use], return_inverse=True)
     try:
-        sd, _, _ = principal_points.standard_deviations(
+        sd, _, _, _ = principal_points.with_focal_groups(
             [metric.Ks[v] for v in views], [metric.rotations[v] for v in views],
             [metric.translations[v] for v in views], metric.points[tracks], vindex[obs.view[use]], track,
-            obs.pixel[use])
+            obs.pixel[use], linearised_minimum=linearised_minimum)
     except (np.linalg.LinAlgError, ValueError):
         return np.full(len(views), np.inf)
     return np.where(np.isfinite(sd), sd, np.inf)

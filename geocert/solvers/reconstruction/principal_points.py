@@ -31,10 +31,14 @@ def standard_deviations(Ks, rotations, translations, points, view, track, pixels
 
 
 def with_focal_groups(Ks, rotations, translations, points, view, track, pixels,
-                      groups=None) -> tuple[np.ndarray, np.ndarray, float, int]:
+                      groups=None, linearised_minimum: bool = False) -> tuple[np.ndarray, np.ndarray, float, int]:
     """standard_deviations with the focal lengths of the bundle model "focal_groups": ``groups``
     (n,) each view's group (None: one group), a group's focal length the mean of its views'.
-    Returns (each view's principal point's sd, each group's focal length's sd (px), sigma, null)."""
+    Returns (each view's principal point's sd, each group's focal length's sd (px), sigma, null).
+    ``linearised_minimum``: the noise's variance read from the residuals at the minimum of the
+    model linearised here (one Gauss-Newton step, every parameter free but the gauge's), not from
+    the residuals here: what the deviations would be after the adjustment, from the cameras
+    before it (a principal point per view the cameras here do not have yet)."""
     Ks, X = np.asarray(Ks, dtype=float), np.asarray(points, dtype=float)
     view, track, pixels = np.asarray(view, dtype=int), np.asarray(track, dtype=int), np.asarray(pixels, dtype=float)
     n, m, p = len(Ks), len(view), len(X)
@@ -93,8 +97,17 @@ def with_focal_groups(Ks, rotations, translations, points, view, track, pixels,
     loose = vectors[:, GAUGE:][:, free[GAUGE:]]
     fixed = ~free
     fixed[:GAUGE] = False
-    variance = float((r0 ** 2).sum() / max(2 * m - (c + 3 * p - GAUGE), 1))
-    covariance = (vectors[:, fixed] / values[fixed]) @ vectors[:, fixed].T * variance
+    unit = (vectors[:, fixed] / values[fixed]) @ vectors[:, fixed].T  # the covariance for a unit variance
+    cost = float((r0 ** 2).sum())
+    if linearised_minimum:
+        # |r0 + J d|^2 at its minimum: |r0|^2 less g_p' V^-1 g_p (the points, for the cameras
+        # held) less the reduced gradient's g' S^+ g (the cameras, the points following them)
+        gradient = J.T @ r0.ravel()
+        points_part = inverse @ gradient[c:]
+        reduced = gradient[:c] - N[:c, c:] @ points_part
+        cost = max(cost - float(gradient[c:] @ points_part) - float(reduced @ unit @ reduced), 0.0)
+    variance = cost / max(2 * m - (c + 3 * p - GAUGE), 1)
+    covariance = unit * variance
     def deviation(block: slice) -> float:
         unfixed = loose.shape[1] > 0 and float(np.abs(loose[block] / scale[block, None]).max()) > LOOSE
         return np.inf if unfixed else float(np.sqrt(max(np.linalg.eigvalsh(covariance[block, block]).max(), 0.0)))
