@@ -5,11 +5,10 @@ adjustment may settle in either, and its own residuals cannot say which is right
 built in the frame of the view that sees most, adjusted with the same camera model, and the two
 compared by MSAC's capped cost over every observation (fit.fit_cost), in units of the returned
 reconstruction's noise variance (depth_reversal_claim.verdict, which the verifier reads too). Each
-is compared at its best: the twin is adjusted from every track triangulated anew in its cameras,
-then, unless that already rejects it by far (CLEARLY_REJECTED), adjusted again from its tracks
-triangulated anew and judged at the better of its two states; unless that rejects it, the
-returned rig gets the same refit (for the comparison only), and its cost is the lower of its own
-and the refit's (``returned_refitted`` says whether it was run):
+is compared at its best: the twin is adjusted again after every track is triangulated anew in its
+cameras, and judged at the better of its two states; unless that already rejects it, the returned
+rig gets the same refit (for the comparison only), and its cost is the lower of its own and the
+refit's (``returned_refitted`` says whether it was run):
 
 - the twin costs more by more than MIRROR_CHI2 variances and by more than MIRROR_MARGIN of the
   cost: the data reject it, the poses stand;
@@ -23,10 +22,9 @@ and the refit's (``returned_refitted`` says whether it was run):
 The margin is there because real photos are not the model: an unmodelled lens distortion or a
 principal point held at the centre shifts costs by a few percent whatever the noise level, so a
 difference that small is not taken as evidence. Measured (the twin's cost over the returned one's):
-dinoSparseRing 1.21 with K unknown and 1.39 with K known, templeSparseRing 1.23 and 1.78 (the latter
-after the twin's first adjustment alone, beyond CLEARLY_REJECTED), the Oxford Corridor 4.10 and
-1.40 (measured when the twin's first adjustment started from its mirrored points); a synthetic
-turntable seen from 1000 times its size through a 165,000 px lens 1.02 (0.3 px of noise)."""
+dinoSparseRing 1.21 with K unknown and 1.38 with K known, templeSparseRing 1.21 and 1.80, the Oxford
+Corridor 4.10 and 1.40; a synthetic turntable seen from 1000 times its size through a 165,000 px lens
+1.02 (0.3 px of noise)."""
 
 from __future__ import annotations
 
@@ -37,14 +35,6 @@ from geocert.solvers.reconstruction import depth_reversal, upgrade
 from geocert.solvers.reconstruction.depth_reversal_claim import (FEWER_THAN_2_VIEWS, MIRROR_CHI2, MIRROR_MARGIN,
                                                                  STOPPED, verdict)
 from geocert.solvers.reconstruction.tracks import Observations
-
-
-# The twin's second adjustment is skipped when its first already costs more than this many times
-# the margin's (1 + MIRROR_MARGIN) the returned rig's cost: measured, a second adjustment lowered
-# the twin's cost ratio by at most 14% (templeSparseRing, K unknown: 1.43 to 1.23; K known 1.78 to
-# 1.71; the dinoSparseRing 1.26 to 1.21 and 1.39 to 1.39), so beyond this it could not bring the
-# twin within the margin.
-CLEARLY_REJECTED = 1.5
 
 
 def check(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold_px: float, model: str,
@@ -59,16 +49,23 @@ def check(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold
     stopped = (metric, keep, {"checked": False, "reason": STOPPED})
     seen = np.bincount(obs.view[keep], minlength=len(metric.rotations))
     reference = max(registered, key=lambda v: (seen[v], -v))
-    # Every track is triangulated anew in the twin's cameras before it is adjusted, so the twin is
-    # judged on all it can explain (as the returned rig was built: its registration triangulated
-    # each track as its views were placed), and no observation its mirrored points did not fit is
-    # dropped for good before it could be.
-    twin = retriangulated(depth_reversal.mirrored(metric, reference), obs)
-    adjusted, twin_keep, _ = upgrade.adjust(twin, obs.view, obs.track, obs.pixel, threshold_px, model=model,
-                                            should_stop=should_stop)
+    twin = depth_reversal.mirrored(metric, reference)
+    first, first_keep, _ = upgrade.adjust(twin, obs.view, obs.track, obs.pixel, threshold_px, model=model,
+                                          should_stop=should_stop)
     if should_stop is not None and should_stop():
         return stopped
-    twin_cost = fit_cost(adjusted, obs, threshold_px)
+    # The adjustment drops the observations its start did not fit, for good (a point left with
+    # fewer than two is lost): every track is triangulated again in the adjusted twin's cameras
+    # and adjusted once more, so the twin is judged on all it can explain, as the returned rig was
+    # built (its registration triangulated each track as its views were placed). The twin is
+    # judged at the better of its two adjusted states.
+    second, second_keep, _ = upgrade.adjust(retriangulated(first, obs), obs.view, obs.track, obs.pixel,
+                                            threshold_px, model=model, should_stop=should_stop)
+    if should_stop is not None and should_stop():
+        return stopped
+    twin_cost, adjusted, twin_keep = min((fit_cost(first, obs, threshold_px), first, first_keep),
+                                         (fit_cost(second, obs, threshold_px), second, second_keep),
+                                         key=lambda state: state[0])
     kept = int(keep.sum())
     points = int(np.count_nonzero(np.bincount(obs.track[keep], minlength=len(metric.points)) >= 2))
     # Residual degrees of freedom: 2 per observation less the poses (6 each), the points (3 each)
@@ -78,19 +75,6 @@ def check(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold
     variance = max((spread or 0.0) ** 2 * kept / dof, 1e-4)  # below 0.01 px is rounding, not noise
     cost = fit_cost(metric, obs, threshold_px)
     statistic, rejected, adopted = verdict(cost, twin_cost, variance)
-    if not (rejected and twin_cost > CLEARLY_REJECTED * (1 + MIRROR_MARGIN) * cost):
-        # The twin's second chance: adjusted again from every track triangulated anew in its
-        # adjusted cameras, judged at the better of its two states (its cost falls with the
-        # iterations it is given: the twin's focal length runs off toward an affine camera's).
-        # Not spent where it could not bring the twin within the margin.
-        again, again_keep, _ = upgrade.adjust(retriangulated(adjusted, obs), obs.view, obs.track, obs.pixel,
-                                              threshold_px, model=model, should_stop=should_stop)
-        if should_stop is not None and should_stop():
-            return stopped
-        again_cost = fit_cost(again, obs, threshold_px)
-        if again_cost < twin_cost:
-            twin_cost, adjusted, twin_keep = again_cost, again, again_keep
-            statistic, rejected, adopted = verdict(cost, twin_cost, variance)
     refitted = False
     if not rejected:
         # The returned rig gets the twin's second chance too before the twin is called as good or
