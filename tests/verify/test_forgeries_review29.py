@@ -99,7 +99,6 @@ def _with_registration_record(forged: dict, genuine: dict, **edits) -> dict:
     return forged
 
 
-@pytest.mark.xfail(strict=True, reason="review 29: the centred room chosen by K_free, the document's word")
 @pytest.mark.parametrize("u_share", [0.76, 0.95])
 def test_the_centred_forgery_beside_K_free_moved_out_of_the_middle_half_is_refused(
         off_centre, centred_forgery, u_share):  # noqa: F811
