@@ -105,8 +105,11 @@ def test_the_centred_forgery_beside_K_free_moved_out_of_the_middle_half_is_refus
     """The genuine record (chi2 above the threshold, K_free inside the middle half, estimated) with
     estimated false is refused (review 28). Its K_free's u moved to u_share of the width (outside
     the middle half: |u - w/2| > w/4) and inside_middle_half false: every check of the record
-    passes, _centred_room reads inside_middle_half false as the free fit lying outside, and the
-    certificate at the centre with 1.03 times the focal length gets the centred reference's room."""
+    passes, the tie read inside_middle_half false as the free fit lying outside, and the
+    certificate at the centre with 1.03 times the focal length got the centred reference's room
+    (verified on main). Now the room is decided by the verifier's own re-adjustment with the
+    principal point free (calibration_tie._centred_reference), which puts it 36 px off the centre,
+    inside the middle half, whatever the record says: held to it, the certificate is refused."""
     width, _ = _size(off_centre)
     genuine = _stage(off_centre, "projective")["principal_point"]
     assert genuine["estimated"] is True and genuine["chi2"] > genuine["threshold"]
@@ -163,7 +166,8 @@ def test_the_adjustments_record_counts_the_results_observations():
     assert record["chi2"] is not None
 
 
-@pytest.mark.xfail(strict=True, reason="review 29: the principal-point record's count is its word")
+@pytest.mark.xfail(strict=True, reason="review 29: the principal-point record's count is the pipeline's "
+                                        "(both fits' keeps, not replayed): no sound lower bound; docs/certificate.md")
 @pytest.mark.parametrize("observations", [19, 5, 0])
 def test_too_few_observations_on_an_edited_count_is_refused(observations):
     """The record rewritten in the "too few observations" shape with its count edited below
@@ -174,7 +178,8 @@ def test_too_few_observations_on_an_edited_count_is_refused(observations):
     _refused(result, "principal_point")
 
 
-@pytest.mark.xfail(strict=True, reason="review 29: the principal-point record's count is its word")
+@pytest.mark.xfail(strict=True, reason="review 29: the principal-point record's count is the pipeline's "
+                                        "(both fits' keeps, not replayed): no sound lower bound; docs/certificate.md")
 def test_a_record_that_ran_on_an_edited_count_is_refused():
     result = stored("reconstruction")
     _adjustment_record(result)["observations"] = 20
