@@ -126,6 +126,29 @@ def test_the_centred_forgery_beside_K_free_kept_is_refused(off_centre, centred_f
              "inside_middle_half")
 
 
+@pytest.mark.slow
+def test_a_genuine_run_held_at_the_centre_outside_the_middle_half_keeps_the_room():
+    """What the reading above leaves genuine runs: the scene's principal point 135 px below the
+    centre (outside the middle half of 480 px), so the registration holds it at the centre however
+    large its chi2 and builds its certificate there. The verifier's own re-adjustment with the
+    principal point free puts it there too (measured: v 369.7, the record's K_free 374.8; the
+    middle half ends at 360), grants the centred reference's room, and the run verifies (its
+    certificate 1,148 px^2 on the shared observations, 1,231 allowed, the centred model 1,122)."""
+    import numpy as np
+
+    from geocert.jobs.runner import solve_job
+    from geocert.solvers.reconstruction import calibration_tie
+    from tests.verify.test_forgeries_review18 import _scene_job
+
+    result = solve_job(_scene_job({}, points=200, shift=np.tile([0.0, 135.0], (8, 1))))
+    record = _stage(result, "projective")["principal_point"]
+    assert record["estimated"] is False and record["chi2"] > record["threshold"]
+    assert record["inside_middle_half"] is False
+    report = _verify(result)
+    assert report.valid, report.first_failure
+    assert report.scope["calibration_tie"]["reference"] == calibration_tie.CENTRED_REFERENCE
+
+
 @pytest.mark.parametrize("focal", [0.97, 1.0, 1.03])
 def test_the_centred_certificate_held_is_refused_at_each_focal_length(off_centre, focal):  # noqa: F811
     """The same centred certificates (0.97, 1.0 and 1.03 times the focal length; the room of the
