@@ -79,7 +79,7 @@ def test_a_not_estimated_record_below_its_threshold_gives_no_centred_room(off_ce
     """Found (review 28; verified on main, then a documented limit): the chi2 edited below the
     threshold, which the verifier cannot recompute (the adjustment's fits), made the record
     consistent and chose the centred reading's room. A record saying its test ran and did not
-    pass now gives a certificate built at the centre no room (calibration_tie._centred_room): it
+    pass now gives a certificate built at the centre no room (calibration_tie._centred_reference): it
     is held to the returned reconstruction re-adjusted with its principal point free, and the
     centred forgery (1.03 times the focal length, the tracks' principal point 36 px off) is not
     these tracks' reconstruction."""

@@ -99,15 +99,17 @@ def _with_registration_record(forged: dict, genuine: dict, **edits) -> dict:
     return forged
 
 
-@pytest.mark.xfail(strict=True, reason="review 29: the centred room chosen by K_free, the document's word")
 @pytest.mark.parametrize("u_share", [0.76, 0.95])
 def test_the_centred_forgery_beside_K_free_moved_out_of_the_middle_half_is_refused(
         off_centre, centred_forgery, u_share):  # noqa: F811
     """The genuine record (chi2 above the threshold, K_free inside the middle half, estimated) with
     estimated false is refused (review 28). Its K_free's u moved to u_share of the width (outside
     the middle half: |u - w/2| > w/4) and inside_middle_half false: every check of the record
-    passes, _centred_room reads inside_middle_half false as the free fit lying outside, and the
-    certificate at the centre with 1.03 times the focal length gets the centred reference's room."""
+    passes, the tie read inside_middle_half false as the free fit lying outside, and the
+    certificate at the centre with 1.03 times the focal length got the centred reference's room
+    (verified on main). Now the room is decided by the verifier's own re-adjustment with the
+    principal point free (calibration_tie._centred_reference), which puts it 36 px off the centre,
+    inside the middle half, whatever the record says: held to it, the certificate is refused."""
     width, _ = _size(off_centre)
     genuine = _stage(off_centre, "projective")["principal_point"]
     assert genuine["estimated"] is True and genuine["chi2"] > genuine["threshold"]
@@ -122,6 +124,29 @@ def test_the_centred_forgery_beside_K_free_kept_is_refused(off_centre, centred_f
     """The control: K_free kept inside the middle half, inside_middle_half flipped: refused."""
     _refused(_with_registration_record(centred_forgery, off_centre, inside_middle_half=False, estimated=False),
              "inside_middle_half")
+
+
+@pytest.mark.slow
+def test_a_genuine_run_held_at_the_centre_outside_the_middle_half_keeps_the_room():
+    """What the reading above leaves genuine runs: the scene's principal point 135 px below the
+    centre (outside the middle half of 480 px), so the registration holds it at the centre however
+    large its chi2 and builds its certificate there. The verifier's own re-adjustment with the
+    principal point free puts it there too (measured: v 369.7, the record's K_free 374.8; the
+    middle half ends at 360), grants the centred reference's room, and the run verifies (its
+    certificate 1,148 px^2 on the shared observations, 1,231 allowed, the centred model 1,122)."""
+    import numpy as np
+
+    from geocert.jobs.runner import solve_job
+    from geocert.solvers.reconstruction import calibration_tie
+    from tests.verify.test_forgeries_review18 import _scene_job
+
+    result = solve_job(_scene_job({}, points=200, shift=np.tile([0.0, 135.0], (8, 1))))
+    record = _stage(result, "projective")["principal_point"]
+    assert record["estimated"] is False and record["chi2"] > record["threshold"]
+    assert record["inside_middle_half"] is False
+    report = _verify(result)
+    assert report.valid, report.first_failure
+    assert report.scope["calibration_tie"]["reference"] == calibration_tie.CENTRED_REFERENCE
 
 
 @pytest.mark.parametrize("focal", [0.97, 1.0, 1.03])
@@ -164,7 +189,8 @@ def test_the_adjustments_record_counts_the_results_observations():
     assert record["chi2"] is not None
 
 
-@pytest.mark.xfail(strict=True, reason="review 29: the principal-point record's count is its word")
+@pytest.mark.xfail(strict=True, reason="review 29: the principal-point record's count is the pipeline's "
+                                        "(both fits' keeps, not replayed): no sound lower bound; docs/certificate.md")
 @pytest.mark.parametrize("observations", [19, 5, 0])
 def test_too_few_observations_on_an_edited_count_is_refused(observations):
     """The record rewritten in the "too few observations" shape with its count edited below
@@ -175,7 +201,8 @@ def test_too_few_observations_on_an_edited_count_is_refused(observations):
     _refused(result, "principal_point")
 
 
-@pytest.mark.xfail(strict=True, reason="review 29: the principal-point record's count is its word")
+@pytest.mark.xfail(strict=True, reason="review 29: the principal-point record's count is the pipeline's "
+                                        "(both fits' keeps, not replayed): no sound lower bound; docs/certificate.md")
 def test_a_record_that_ran_on_an_edited_count_is_refused():
     result = stored("reconstruction")
     _adjustment_record(result)["observations"] = 20

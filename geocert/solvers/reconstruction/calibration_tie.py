@@ -149,7 +149,7 @@ def tie(result: dict, stage: dict, data: dict, recorded: bool = True) -> dict:
         raise Invalid("returned", f"the calibration certificate's reconstruction shares {len(apart)} observations "
                                   f"with the result's placed points (at least {TIE_OBSERVATIONS} tie it to them)")
     rms = math.sqrt(float(np.mean(np.square(own))))
-    centred = _centred_reference(result, views, cameras, at, _centred_room(result))
+    centred = _centred_reference(result, views, cameras, at)
     where = "the returned cameras"
     if centred is not None:  # an incremental registration's cameras: held to the returned ones re-adjusted in their model
         apart = [math.hypot(*(mine - ref)) for mine, ref in zip(at[1], centred[0])]
@@ -221,8 +221,7 @@ def _check_registration_record(result: dict, views: list, cameras: np.ndarray, r
     cameras built at the images' centre beside off-centre tracks got the centred reference's room
     (a certificate re-posed with another focal length tied from 0.96 to 1.05 times). Returns what
     the report's scope says of the record."""
-    record = next((s.get("principal_point") for s in result.get("stages") or []
-                   if isinstance(s, dict) and s.get("name") == "projective"), None)
+    record = _registration_record(result)
     tested = registration_tests(result)
     if record is None and tested and recorded:
         # Without the record the certificate's cameras would be read as a registration at the
@@ -536,9 +535,10 @@ ONE_K_REFERENCE = ("the returned reconstruction re-adjusted with one focal lengt
 
 
 CENTRED_HELD = ("the returned reconstruction re-adjusted with one focal length and one principal point (both free), "
-                "square pixels and no skew: the certificate's cameras are built at the images' centre, and the "
-                "registration's record says its test of the principal point did not pass (a chi2 the verifier does "
-                "not recompute), so holding it there is given no room")
+                "square pixels and no skew: the certificate's cameras are built at the images' centre, the "
+                "registration's record is stated, and that re-adjustment (the verifier's own) puts the principal "
+                "point inside the images' middle half, where the registration holds it at the centre only when its "
+                "test does not pass: holding it there is given no room")
 
 
 def _built_centred(result: dict, views: list, cameras: np.ndarray) -> bool:
@@ -575,26 +575,28 @@ def _built_one_K(cameras: np.ndarray) -> bool:
                for K in Ks)
 
 
-def _centred_room(result: dict) -> bool:
-    """Whether a certificate built at the images' centre is read as a registration the pipeline
-    held there (the centred reference, with the room of what holding it costs): where no record of
-    the registration's test is stated (the test does not run, or the document's form predates the
-    record: _check_registration_record) or the record says the free fit's principal point lies
-    outside the images' middle half (inside_middle_half, which its K_free decides). Not where the
-    record says the test ran and its chi2 did not pass, or had too few observations: the chi2
-    (and the count) are the adjustment's figures, which the verifier cannot recompute, and an
-    edited chi2 chose that room (review 26's centred certificate, 1.03 times the focal length at
-    the (+30, -20) scene, verified beside a chi2 of 1.0). Such a certificate is held instead to
-    the returned reconstruction re-adjusted with one principal point free (ONE_K_REFERENCE,
-    CENTRED_HELD): where the test genuinely did not pass, holding the principal point at the centre
-    costs less than its threshold's noise variances, which the noise allowance covers."""
-    record = next((s.get("principal_point") for s in result.get("stages") or []
-                   if isinstance(s, dict) and s.get("name") == "projective"), None)
-    return record is None or (isinstance(record, dict) and record.get("inside_middle_half") is False)
+def _registration_record(result: dict):
+    """The projective stage's principal-point record (pipeline._registration_principal_point), or None."""
+    return next((s.get("principal_point") for s in result.get("stages") or []
+                 if isinstance(s, dict) and s.get("name") == "projective"), None)
 
 
-def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple[list, list],
-                       centred_room: bool = True) -> tuple[list, float, str] | None:
+def _outside_middle_half(result: dict, views: list, principal: np.ndarray) -> bool:
+    """Whether ``principal`` (one principal point, px) lies outside the middle half of the views'
+    one image size, as pipeline._principal_point judges its free fit's (|u - w/2| > w/4 or
+    |v - h/2| > h/4); False where the views have no one size (the registration tests the principal
+    point only then)."""
+    sizes = {tuple(c["image_size"]) for c in result["cameras"] if c.get("view") in views
+             and isinstance(c.get("image_size"), list) and len(c["image_size"]) == 2}
+    if len(sizes) != 1:
+        return False
+    (width, height), = sizes
+    u, v = float(principal[0]), float(principal[1])
+    return not (abs(u - width / 2) <= width / 4 and abs(v - height / 2) <= height / 4)
+
+
+def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple[list, list]
+                       ) -> tuple[list, float, str] | None:
     """When the certificate's cameras are an incremental registration's (_built_centred): the
     images of the shared observations (``at``'s order) in the returned reconstruction re-adjusted in
     that model (centred_fit.fit, over the shared observations only: the ones the tie measures, whose
@@ -603,9 +605,25 @@ def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple
     length followed it), and its cost on them (px^2), and the reference's words; when they are
     built with one K, square pixels and no skew elsewhere (_built_one_K), the same with the
     principal point one and free; else None, and the certificate is held to the returned cameras
-    (a projective reconstruction's cameras are as free as any model's)."""
+    (a projective reconstruction's cameras are as free as any model's).
+
+    The centred reference (CENTRED_REFERENCE), whose cost beyond the returned cameras is the room a
+    registration held at the images' centre needs on tracks whose principal point lies elsewhere,
+    is the certificate's only where no record of the registration's test is stated (the test does
+    not run, which the hashed options decide, or the document's form predates the record:
+    _check_registration_record), or where the verifier's own re-adjustment with one principal point
+    free puts it outside the images' middle half (where the registration holds it at the centre
+    whatever its chi2). Elsewhere the certificate is held to that re-adjustment (CENTRED_HELD, no
+    room): the registration held the principal point at the centre there only because its test did
+    not pass, and holding it there then costs less than the threshold's noise variances, which the
+    noise allowance covers. No member of the record chooses the reading: its chi2 and observations
+    are the adjustment's figures, which the verifier cannot recompute, and its K_free is tied to
+    the certificate's cameras only where it says estimated. Read from them, an edited chi2 (review
+    26: the centred certificate at 1.03 times the focal length, the (+30, -20) scene, beside a chi2
+    of 1.0) or K_free moved out of the middle half beside estimated false (review 29: 0.97 to 1.03
+    times) chose the room, and the certificate verified."""
     if _built_centred(result, views, cameras):
-        reference = CENTRED_REFERENCE if centred_room else CENTRED_HELD
+        reference = CENTRED_REFERENCE if _registration_record(result) is None else CENTRED_HELD
     elif _built_one_K(cameras):
         reference = ONE_K_REFERENCE
     else:
@@ -617,8 +635,8 @@ def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple
     X, view, point, uv, row = [], [], [], [], {}
     try:  # (the fields' shapes are checked elsewhere; one unreadable here leaves the returned cameras the reference)
         P = np.array([np.asarray(c["P"], dtype=float) for c in registered]).reshape(len(registered), 3, 4)
-        centres = None if reference != CENTRED_REFERENCE else np.array(
-            [[(c["image_size"][0] - 1) / 2, (c["image_size"][1] - 1) / 2] for c in registered], dtype=float)
+        centres = np.array([[(c["image_size"][0] - 1) / 2, (c["image_size"][1] - 1) / 2] for c in registered],
+                           dtype=float) if reference != ONE_K_REFERENCE else None
         for k, p in enumerate(result["points"]):
             if p.get("point") is None:
                 continue
@@ -632,7 +650,16 @@ def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple
         X, uv = np.asarray(X, dtype=float).reshape(-1, 4), np.asarray(uv, dtype=float).reshape(-1, 2)
     except (TypeError, ValueError, KeyError, IndexError):
         return None
-    images = centred_fit.fit(P, centres, X, np.asarray(view, dtype=int), np.asarray(point, dtype=int), uv)
+    view, point = np.asarray(view, dtype=int), np.asarray(point, dtype=int)
+    if reference == CENTRED_HELD:
+        free = centred_fit.fit_with_intrinsics(P, None, X, view, point, uv)
+        if free is None:
+            return None
+        images = free[0]
+        if _outside_middle_half(result, views, free[1][1:]):
+            reference, images = CENTRED_REFERENCE, centred_fit.fit(P, centres, X, view, point, uv)
+    else:
+        images = centred_fit.fit(P, None if reference == ONE_K_REFERENCE else centres, X, view, point, uv)
     if images is None:
         return None
     keys = at[0]

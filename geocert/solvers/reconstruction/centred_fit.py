@@ -68,13 +68,21 @@ def _rotation(w: np.ndarray) -> np.ndarray:
 
 def fit(P: np.ndarray, centres: np.ndarray | None, X: np.ndarray, view: np.ndarray, point: np.ndarray,
         uv: np.ndarray) -> np.ndarray | None:
+    """fit_with_intrinsics' images (M, 2), or None."""
+    fitted = fit_with_intrinsics(P, centres, X, view, point, uv)
+    return None if fitted is None else fitted[0]
+
+
+def fit_with_intrinsics(P: np.ndarray, centres: np.ndarray | None, X: np.ndarray, view: np.ndarray,
+                        point: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """The images (M, 2) of the observations (camera ``view``, point ``point``, pixels ``uv``) in
     the returned cameras ``P`` (V, 3, 4) and points ``X`` (N, 4, homogeneous; w = 0 at infinity)
     re-adjusted with every K [[f, 0, cx], [0, f, cy], [0, 0, 1]], f one focal length and (cx, cy)
     the camera's ``centres`` row, or (``centres`` None) one principal point (cx, cy) for every
     camera, free like f (from the median of the returned cameras'); None when the cameras cannot
     be read so (not finite), the adjustment does not converge, or the problem is beyond MAX_VIEWS
-    or MAX_PAIRS."""
+    or MAX_PAIRS. With them, the intrinsics the cameras share in that fit: [f], or (``centres``
+    None) [f, cx, cy]."""
     if not (np.all(np.isfinite(P)) and np.all(np.isfinite(X)) and np.all(np.isfinite(uv))) or len(uv) == 0:
         return None
     n_views, n_points = len(P), len(X)
@@ -202,7 +210,7 @@ def fit(P: np.ndarray, centres: np.ndarray | None, X: np.ndarray, view: np.ndarr
     x, _ = images(Rs, ts, f, X)
     # Not converged: its cost would overstate what the model costs, and widen the tie by that much;
     # the certificate is then held to the returned cameras (stricter), not to it.
-    return x if converged and np.all(np.isfinite(x)) else None
+    return (x, f) if converged and np.all(np.isfinite(x)) and np.all(np.isfinite(f)) else None
 
 
 def _unit_gauge(Rs: np.ndarray, ts: np.ndarray, X: np.ndarray, used: np.ndarray
