@@ -1272,6 +1272,14 @@ class ReconstructionItems(TrackItems, Verification):
         _check_distortion(result, registered, own)
         _check_calibration(result, registered, verify, recorded)
         scoped = {"labels": labels}
+        records = [name for name in ("projective", "bundle_adjustment")
+                   if isinstance(_stage(result, name).get("principal_point"), dict)]
+        if records:  # the test's fits are the pipeline's: the calibration tie reads none of their figures
+            scoped["principal_point_records"] = (
+                f"unchecked: the principal-point records of the {' and '.join(records)} stage(s) state the "
+                "pipeline's figures (observations, chi2), which the verifier does not replay: the count is "
+                "what both of the test's fits kept, and its free fit rejects its own outliers; their shape and "
+                "agreement with themselves are checked, and no room the verifier grants follows from them")
         posed = sum(1 for camera in registered if camera.get("R") is not None)
         if result["summary"].get("depth_reversal") is None and posed >= 2 \
                 and not hashed_options.states_depth_reversal(hashed):
