@@ -232,8 +232,6 @@ STAGE_MEMBERS = [("autocalibration", "motion_warnings"), ("cameras", "searched")
                  ("structure", "points_dropped"), ("bundle_adjustment", "starts"), (None, "stats")]
 
 
-@pytest.mark.xfail(strict=True, reason="review 29: a reconstruction's stage records may leave out their writer's "
-                                       "members")
 @pytest.mark.parametrize("name, member", STAGE_MEMBERS, ids=[f"{n}/{m}" for n, m in STAGE_MEMBERS])
 def test_a_reconstruction_stage_missing_a_member_is_refused(name, member):
     """The cameras and points are complete to their writer's members (CAMERA_WRITTEN,
