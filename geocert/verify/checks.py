@@ -689,8 +689,9 @@ def check_members(kind, result: dict) -> None:
 # item and stats models), autocalibration's stratified_item and direct item (every headline field
 # written, null before a stage finds it; ``Ks`` only with varying focal lengths, ``status`` and
 # ``reason`` not by the earlier form's writer), core.certificates' summaries. Every format-2
-# document stored in tests/data/certificates has them. Reconstruction results are read by their
-# own checks (verify.reconstruction*), not here.
+# document stored in tests/data/certificates has them. A reconstruction's result and stats are
+# complete here (kinds.reconstruction: run's item, assemble), its cameras, points and stage
+# records by its own checks (verify.reconstruction*: CAMERA_WRITTEN, reconstruction_stages._written).
 _ITEM = ("cost", "lower_bound", "gap", "status", "certified", "nodes", "elapsed_s", "reason")
 _STATS = ("items", "certified", "nodes", "solve_s", "elapsed_s", "statuses")
 _MAP = (("", ("kind", "norm", "maps", "stats")), ("maps", _ITEM + ("matrix", "residuals")), ("stats", _STATS))
@@ -704,6 +705,9 @@ COMPLETE: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
     "autocalibration": (("", ("kind", "method", "intrinsics", "plane_at_infinity", "K", "dual_absolute_quadric",
                               "upgrade", "cameras", "points", "baseline", "stages", "stats")),
                         ("stages", _ITEM + ("name",)), ("stats", _STATS)),
+    # its items (cameras, points) and stage records by its own checks (verify.reconstruction*)
+    "reconstruction": (("", ("kind", "norm", "cameras", "points", "stages", "summary", "images", "stats")),
+                       ("stats", _STATS)),
 }
 # An item's ``certificate`` (its summary) is required where it is certified (below); an
 # autocalibration stage's too unless it never started (kinds.autocalibration.cancelled_item writes

@@ -100,6 +100,72 @@ STAGE_RECORDS = ByName({
 })
 
 
+# The members each stage's writer (pipelines.reconstruction.pipeline, claims.judge_motion) writes on
+# every path that reaches them, so that a record leaving one out is not its writer's (a deleted
+# critical-motion warning read as "none"; a cameras stage without ``searched`` read as an earlier
+# form's). Every stage starts as pipeline._stage (name, status, elapsed_s, reason). A stage that
+# ran (status "done": _timed, left without a failure, a stop or a skip) states its CPU time and
+# what its every path writes: the projective stage's figures are its registration path's (the
+# incremental one's counts where its method says it ran); the adjustment's trials on every start
+# but the calibrated path's (K known: one adjustment), and its principal point's test where the
+# options and image sizes ask for it; the cameras stage's judgement figures (searched,
+# degrees_of_freedom) where the cameras state theirs (a result from before they were stated,
+# reconstruction.CAMERA_JUDGEMENT, has the stage's neither). The motion's judgement
+# (critical_motion, motion_warnings, rotation_noise_rad, determined) is on the autocalibration
+# stage, whatever its status, wherever the verifier judges the motion again (3 registered cameras:
+# reconstruction._judged_motion, as claims.judge_motion). Every stored format-2 document
+# (tests/data/certificates) states all of these; members a path writes only sometimes (the
+# registration's initial pair, its radial term) or an earlier form did not
+# (cameras_built_with_one_K) are not asked for.
+STARTED = ("name", "status", "reason", "elapsed_s")
+WRITTEN_WHEN_DONE = {
+    "projective": ("cpu_s",),
+    "autocalibration": ("cpu_s", "method", "stages", "certified", "intrinsics", "points_used", "K"),
+    "bundle_adjustment": ("cpu_s", "started_from", "model", "rms_px_before", "rms_px_after", "K", "observations_kept"),
+    "structure": ("cpu_s", "tracks", "points", "points_dropped", "observations_removed", "certified"),
+    "cameras": ("cpu_s", "cameras", "certified", "claim"),
+}
+# the incremental registration's counts (pipeline._incremental: every run that registered two views)
+INCREMENTAL_WRITTEN = ("focal_rounds", "views_registered", "observations", "observations_kept", "outliers_removed",
+                       "observations_of_dropped_tracks", "observations_of_unregistered_views")
+MOTION_JUDGED = ("critical_motion", "motion_warnings", "rotation_noise_rad", "determined")
+CAMERAS_JUDGED = ("searched", "degrees_of_freedom")
+MOTION_CAMERAS = 3
+
+
+def _principal_point_tested(options: dict, cameras: list) -> bool:
+    """Whether the adjustment's writer tests the principal point (pipeline: the simple model, the
+    principal point "auto" or "per_view", one image size: here every view's, a narrower test)."""
+    sizes = {str(camera.get("image_size")) for camera in cameras if isinstance(camera, dict)}
+    return options.get("camera_model") == "simple" and options.get("principal_point") in ("auto", "per_view") \
+        and len(sizes) == 1
+
+
+def _written(stage: dict, cameras: list, options: dict) -> tuple[str, ...]:
+    """The members the stage's writer has written (the note above)."""
+    name, done = stage["name"], stage.get("status") == "done"
+    names = STARTED + (WRITTEN_WHEN_DONE.get(name, ()) if done else ())
+    registered = sum(1 for camera in cameras if isinstance(camera, dict) and camera.get("registered") is True)
+    if name == "autocalibration" and registered >= MOTION_CAMERAS:
+        names += MOTION_JUDGED
+    if name == "projective" and done and str(stage.get("method")).startswith("incremental"):
+        names += INCREMENTAL_WRITTEN
+    if name == "bundle_adjustment" and done and stage.get("started_from") != "calibrated":
+        names += ("starts",) + (("principal_point",) if _principal_point_tested(options, cameras) else ())
+    if name == "cameras" and done:
+        names += tuple(member for member in CAMERAS_JUDGED
+                       if any(isinstance(camera, dict) and member in camera for camera in cameras))
+    return names
+
+
+def _check_written(stage: dict, cameras: list, options: dict) -> None:
+    missing = [member for member in _written(stage, cameras, options) if member not in stage]
+    if missing:
+        raise Invalid("returned", f"{_where(stage['name'], missing[0])} is left out: the stage's writer states it on "
+                                  f"a stage {stage.get('status')!r:.20} (null where it has none), so a record "
+                                  "without it is not its writer's")
+
+
 # The stages' figures the verifier reads nowhere else: informational (they describe the run, a
 # check reads none of them: docs/certificate.md), but each of its type, so that no figure states
 # what no run produces: "count" a whole number >= 0, "measure" a number >= 0 (a time, an RMS, a
@@ -240,6 +306,9 @@ def check_stages(result: dict) -> None:
         raise Invalid("returned", "summary/views and summary/tracks must be counts")
     certified = {"structure": any(p.get("certified") is True for p in result.get("points") or [] if isinstance(p, dict)),
                  "cameras": any(c.get("certified") is True for c in result.get("cameras") or [] if isinstance(c, dict))}
+    cameras = result.get("cameras") if isinstance(result.get("cameras"), list) else []
+    options = (result.get("certificate") or {}).get("options") if isinstance(result.get("certificate"), dict) else None
+    options = options if isinstance(options, dict) else {}  # (hashed: a forged option is refused with its hash)
     for stage in stages:
         name = stage["name"]
         if stage.get("status") not in STATUSES:
@@ -254,6 +323,7 @@ def check_stages(result: dict) -> None:
                 if isinstance(stage.get(member), dict):
                     _container(stage[member].get(inner), inner_kind, _where(name, f"{member}/{inner}"))
         _check_figures(stage, summary)
+        _check_written(stage, cameras, options)
     _check_counts({stage["name"]: stage for stage in stages}, views, tracks)
     for total in ("time_s", "cpu_s"):  # the summary's times: each a stage's (checked above), none another's
         stated = summary.get(total)

@@ -64,6 +64,14 @@ PLANE_TREE_WORK = 300_000
 TREE_WORK = 1_200_000
 FLOOR_BOXES = 200  # at least this many boxes a tree, however many views (a document past it pays by its size)
 BLOCK_CAMERA_BOXES = 4_096  # bounded at once (about 4 kB a camera-box at the peak: some 16 MB)
+# The chirality test is of every box against every row (the document's points, then its cameras):
+# those pairs are tested CHIRALITY_PAIRS at a time (a few arrays of 0.5 MB, whatever the points),
+# and a box is charged a unit for each ROWS_PER_UNIT rows beside its cameras' units, in the
+# verifier's work (_kept) and in the solver's trees alike (tree_budget). Measured about 5 ns of CPU
+# a pair tested so (40 to 70 ns a pair in one array of boxes x 10,000 rows), where a unit stands
+# for 1.2 us: 64 pairs a unit leaves a fourfold margin.
+CHIRALITY_PAIRS = 65_536
+ROWS_PER_UNIT = 64
 MAX_LEVELS = 400
 PLANE_SPLITS = 3  # the levels of a search over planes and omega that split the planes' box (8 x 8 x 8)
 NAMES = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")
@@ -283,15 +291,24 @@ def excluded(context: Context, region: Region, lo: np.ndarray, hi: np.ndarray) -
                                for k in range(0, len(lo), step)])
 
 
-def tree_budget(views: int, dimensions: int, regions: int = 1) -> int:
+def tree_budget(views: int, dimensions: int, regions: int = 1, rows: int = 0) -> int:
     """The boxes one tree (of ``regions``' one each) may bound: its share of PLANE_TREE_WORK (a
-    tree over planes, 3 dimensions) or TREE_WORK (over planes and omega) at its units a
-    camera-box, within PLANE_BOXES or MAX_BOXES and at least FLOOR_BOXES; the solver searches
-    within it and the verifier replays no more."""
+    tree over planes, 3 dimensions) or TREE_WORK (over planes and omega) at a box's units
+    (box_charge: its cameras' and its chirality ``rows``'), within PLANE_BOXES or MAX_BOXES and at
+    least FLOOR_BOXES. The solver searches within it at its rows; the verifier replays no more than
+    it at no rows (the most any writer searched: one from before the rows were charged counted
+    none), and pays for what it replays by the document's size (_kept)."""
     views = max(int(views), 1)
     work, units, most = ((PLANE_TREE_WORK, PLANE_BOX_UNITS, PLANE_BOXES) if dimensions == 3
                          else (TREE_WORK, BOX_UNITS, MAX_BOXES))
-    return max(FLOOR_BOXES, min(most, work // (units * views))) // max(int(regions), 1)
+    per_box = units * views * ROWS_PER_UNIT + max(int(rows), 0)  # in 1 / ROWS_PER_UNIT units
+    return max(FLOOR_BOXES, min(most, work * ROWS_PER_UNIT // per_box)) // max(int(regions), 1)
+
+
+def box_charge(boxes: int, views: int, dimensions: int, rows: int) -> int:
+    """The units ``boxes`` boxes' bounds are charged: box_units a camera-box, and a unit for each
+    ROWS_PER_UNIT box-row pairs of the chirality test (rounded up)."""
+    return boxes * max(int(views), 1) * box_units(dimensions) + -(-boxes * rows // ROWS_PER_UNIT)
 
 
 def box_units(dimensions: int) -> int:
@@ -339,13 +356,26 @@ def _homogeneous_form(region: Region, vc: np.ndarray, vr: np.ndarray) -> np.ndar
     return np.where((top > 0)[:, None] & np.isfinite(bound), bound, 0.0)
 
 
+def _against_chirality(region: Region, vc: np.ndarray, vr: np.ndarray) -> np.ndarray:
+    """Which boxes of v (centres, radii) a chirality row is negative over throughout: the rows
+    (the document's points, then its cameras) taken CHIRALITY_PAIRS // boxes at a time, so the
+    arrays are of at most CHIRALITY_PAIRS box-row pairs however many points the document holds."""
+    out = np.zeros(len(vc), dtype=bool)
+    step = max(1, CHIRALITY_PAIRS // max(len(vc), 1))
+    for k in range(0, len(region.rows), step):
+        rows = region.rows[k:k + step]
+        A, b = rows[:, :3], rows[:, 3]
+        reach = vr @ np.abs(A).T
+        top = vc @ A.T + reach + b
+        size = np.abs(vc) @ np.abs(A).T + reach + np.abs(b)
+        out |= np.any(top + WIDEN * size < 0, axis=1)
+    return out
+
+
 def _excluded(context: Context, region: Region, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     centre, radius = (lo + hi) / 2, (hi - lo) / 2
     vc, vr = centre[:, :3], radius[:, :3]
-    # chirality: a row negative over the whole box
-    top = vc @ region.rows[:, :3].T + vr @ np.abs(region.rows[:, :3]).T + region.rows[:, 3]
-    size = np.abs(vc) @ np.abs(region.rows[:, :3]).T + vr @ np.abs(region.rows[:, :3]).T + np.abs(region.rows[:, 3])
-    out = np.any(top + WIDEN * size < 0, axis=1)
+    out = _against_chirality(region, vc, vr)
     box, positive, smooth = _modulus_terms(region, vc, vr, False)
     point, _, _ = _modulus_terms(region, vc, vr, True)
     mean = _mean_value(box, point, vr[:, None, :])
@@ -438,7 +468,8 @@ def leaves(lo: np.ndarray, hi: np.ndarray, levels, where: str, most: int) -> tup
 def _kept(context: Context, region: Region, lo: np.ndarray, hi: np.ndarray, margin: float) -> np.ndarray:
     widened = Context(context.problem, context.regions, context.U_affine * (1 + margin),
                       context.U_metric * (1 + margin))
-    charge(len(lo) * max(len(context.problem.norm.cameras), 1) * box_units(lo.shape[1]), "proof/plane_sublevel")
+    charge(box_charge(len(lo), len(context.problem.norm.cameras), lo.shape[1], len(region.rows)),
+           "proof/plane_sublevel")
     return ~excluded(widened, region, lo, hi)
 
 
@@ -495,7 +526,7 @@ def prove(problem, regions: list[tuple[float, np.ndarray, np.ndarray, np.ndarray
     documents, trees = [], []
     for n, region in enumerate(built):
         plane_levels = search(context, region, region.lo[None, :].copy(), region.hi[None, :].copy(),
-                              tree_budget(views, 3, len(built)))
+                              tree_budget(views, 3, len(built), len(region.rows)))
         found = plane_hull(context, region, plane_levels, "plane_levels", HULL_MARGIN)
         box = None
         if found is not None:
@@ -503,7 +534,8 @@ def prove(problem, regions: list[tuple[float, np.ndarray, np.ndarray, np.ndarray
             box = (found[0] - pad, found[1] + pad)
         levels = ["00"] if box is None else search(
             context, region, np.concatenate([box[0], context.w_lo])[None, :],
-            np.concatenate([box[1], context.w_hi])[None, :], tree_budget(views, 8, len(built)))
+            np.concatenate([box[1], context.w_hi])[None, :],
+            tree_budget(views, 8, len(built), len(region.rows)))
         trees.append((box, levels))
         delta, G, lo, hi, basis = regions[n]
         documents.append({"delta": float(delta), "frame": np.asarray(G).tolist(),
