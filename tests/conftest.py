@@ -4,6 +4,7 @@ kernels loaded (the numerical tests must pass under any: CI runs them under two)
 counts the tests skipped for want of the shared data and says where they looked."""
 
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -26,6 +27,42 @@ import geocert.verify.checks  # noqa: E402,F401
 def pytest_configure(config):
     config.addinivalue_line("markers", "shared_data(*names): needs these data sets of ../shared/data "
                                        "(skipped without them, failed when GEOCERT_REQUIRE_SHARED_DATA=1)")
+    if os.environ.get("GEOCERT_CPU_DURATIONS"):
+        config.pluginmanager.register(CpuDurations(Path(os.environ["GEOCERT_CPU_DURATIONS"])))
+
+
+class CpuDurations:
+    """GEOCERT_CPU_DURATIONS=<file>: each test's setup, call and teardown in CPU seconds (this
+    process's, and its children's it waited for), appended to <file> as --durations=0 writes
+    wall seconds, for scripts/slow_tests.py: with other work on the machine, CPU time measures a
+    test where wall time does not."""
+
+    def __init__(self, path: Path):
+        self.path = path
+
+    @staticmethod
+    def _cpu_seconds() -> float:
+        children = os.times()
+        return time.process_time() + children.children_user + children.children_system
+
+    def _timed(self, phase: str, item):
+        before = self._cpu_seconds()
+        yield
+        seconds = self._cpu_seconds() - before
+        with self.path.open("a") as out:
+            out.write(f"{seconds:.3f}s {phase} {item.nodeid}\n")
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_setup(self, item):
+        yield from self._timed("setup", item)
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_call(self, item):
+        yield from self._timed("call", item)
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_teardown(self, item):
+        yield from self._timed("teardown", item)
 
 
 def blas_kernels() -> list[str]:

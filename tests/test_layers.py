@@ -195,11 +195,12 @@ def test_a_solvers_self_check_is_the_verifiers(monkeypatch):
     assert installed.__module__ == "geocert.verify.checks"
 
 
-# The kinds whose programs the verifier still assembles with scipy.sparse (solvers/bilinear/
-# relaxation.py; autocalibration's direct_relaxation.py and direct_sublevel.py) or whose metric
-# cameras it splits with scipy.linalg.rq (autocalibration/problem.py): shared with the solvers,
-# not yet numpy alone. Every other kind's certificates verify with numpy alone.
-SCIPY_KINDS = ("autocalibration", "bilinear")
+# The kind whose programs the verifier still assembles with scipy.sparse (autocalibration's
+# direct_relaxation.py and direct_sublevel.py) and whose metric cameras it splits with
+# scipy.linalg.rq (autocalibration/problem.py): shared with the solvers, not yet numpy alone.
+# Every other kind's certificates verify with numpy alone (bilinear's relaxations are built on
+# solvers/core/csc.py for the verifier).
+SCIPY_KINDS = ("autocalibration",)
 
 
 def test_the_verifier_checks_every_kind_without_the_service():

@@ -1,5 +1,5 @@
 """The verifier's adapter for bilinear fitting (geocert.verify.checks reads claims through it):
-numpy and scipy.sparse only, no conic solver. An item is a frame; its claim is the camera and
+numpy only (its relaxations' matrices are core.csc's), no conic solver. An item is a frame; its claim is the camera and
 coefficients, their cost recomputed from the raw data, and a proof: ``trivial`` (cost within
 abs_gap of 0) or ``bilinear_bnb`` (the camera box of the scope, the root's bound-tightening
 rounds, the leaves covering the searched box and each leaf's safe bound), docs/certificate.md."""
@@ -18,6 +18,7 @@ from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
 from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
 from geocert.solvers.core.coverage import extended, uncovered_part, widened
+from geocert.solvers.core.csc import CscMatrix
 from geocert.solvers.core.determinacy import ESTIMATES_FORM
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
@@ -262,7 +263,8 @@ def check_search(basis: np.ndarray, points: np.ndarray, camera: np.ndarray, opti
         raise Invalid("scope", f"the camera returned is outside the scope's camera box (|M_rk| <= camera_bound "
                                f"{options['camera_bound']!r})")
     passed.append("scope")
-    relaxation = Relaxation(frame.X, frame.u, norm, options["coefficients"], options["coefficient_bound"])
+    relaxation = Relaxation(frame.X, frame.u, norm, options["coefficients"], options["coefficient_bound"],
+                            matrix=CscMatrix)
     size = frame.X.shape[0] * frame.X.shape[1]  # basis shapes times points seen: a relaxation's rows
     passed.append("program")
 

@@ -326,6 +326,41 @@ def _uncertified_region(where: str, region, current: str, earlier: str, seen: li
         raise Invalid("returned", f"{at}/denominator is not the one its chart's {name} gives")
 
 
+def _check_root_region(where: str, summary, claim: dict, words: tuple[str, str], seen: list[str],
+                       reference_name: str, chart_terms, terms: str) -> None:
+    """The root_region check a track's and a map's summaries share (TrackItems, MapItems): none
+    stated, or an uncertified item's (_uncertified_region), or none where the proof searched no
+    box, or exactly the proof's root box in the caller's terms. ``words``: the solver's meaning
+    of a root region, today's and earlier; ``chart_terms()``: the chart rebuilt from the item's
+    data, as (its reference, the denominator it gives, the map from the proof's root functionals,
+    trimmed to the search box, to the caller's); ``terms``: what the caller's terms are, in the
+    refusal's words."""
+    if not isinstance(summary, dict) or "root_region" not in summary:
+        return
+    region, proof = summary["root_region"], claim.get("proof")
+    if claim.get("certified") is not True:
+        _uncertified_summary(where, summary)
+        if region is not None:
+            reference, denominator, _ = chart_terms()
+            _uncertified_region(where, region, *words, seen, (reference_name, reference, denominator))
+        return
+    if not (isinstance(proof, dict) and proof.get("type") == "branch_and_bound"):
+        if region is not None:
+            raise Invalid("returned", f"{where}/certificate/root_region is stated, and its proof searched no box")
+        return
+    if isinstance(region, dict):
+        _region_words(where, region, *words, seen)
+    reference, denominator, to_caller = chart_terms()
+    lower, upper = proof["search_box"]
+    branched = np.asarray(proof["root"]["functionals"], dtype=float)[:len(lower)]
+    expected = {"lower": lower, "upper": upper, "functionals": to_caller(branched), "denominator": denominator}
+    if not isinstance(region, dict) or type(region.get(reference_name)) is not int or (
+            region[reference_name] != reference) or not all(
+            name in region and _agrees(region[name], value) for name, value in expected.items()):
+        raise Invalid("returned", f"{where}/certificate/root_region is not its proof's root box in the caller's "
+                                  f"terms ({terms})")
+
+
 class TrackItems:
     """The triangulation kind's verification adapter."""
 
@@ -388,36 +423,15 @@ class TrackItems:
         triangulation: the search box, its branched functionals through the chart rebuilt from
         the data, the chart's depth row, its reference view), as a map's is (MapItems); none
         where the proof searched nothing (a convexity proof)."""
-        if not isinstance(summary, dict) or "root_region" not in summary:
-            return
-        region, proof = summary["root_region"], claim.get("proof")
-        if claim.get("certified") is not True:
-            _uncertified_summary(where, summary)
-            if region is not None:
-                cameras, points = self.read(certificate["data"], index)
-                chart = Chart.build(cameras, points, certificate["options"]["norm"])
-                _uncertified_region(where, region, TRACK_REGION_MEANING, TRACK_REGION_MEANING_EARLIER,
-                                    self.earlier_words, ("reference_view", chart.reference,
-                                                         np.linalg.inv(chart.T)[3]))
-            return
-        if not (isinstance(proof, dict) and proof.get("type") == "branch_and_bound"):
-            if region is not None:
-                raise Invalid("returned", f"{where}/certificate/root_region is stated, and its proof searched no box")
-            return
-        if isinstance(region, dict):
-            _region_words(where, region, TRACK_REGION_MEANING, TRACK_REGION_MEANING_EARLIER, self.earlier_words)
-        cameras, points = self.read(certificate["data"], index)
-        chart = Chart.build(cameras, points, certificate["options"]["norm"])
-        lower, upper = proof["search_box"]
-        to_chart = np.linalg.inv(chart.T)
-        branched = np.asarray(proof["root"]["functionals"], dtype=float)[:len(lower)]
-        expected = {"lower": lower, "upper": upper, "functionals": branched @ to_chart[:3],
-                    "denominator": to_chart[3]}
-        if not isinstance(region, dict) or type(region.get("reference_view")) is not int or (
-                region["reference_view"] != chart.reference) or not all(
-                name in region and _agrees(region[name], value) for name, value in expected.items()):
-            raise Invalid("returned", f"{where}/certificate/root_region is not its proof's root box in the caller's "
-                                      "terms (the search box, its functionals, denominator and reference view)")
+        def chart_terms():
+            cameras, points = self.read(certificate["data"], index)
+            chart = Chart.build(cameras, points, certificate["options"]["norm"])
+            to_chart = np.linalg.inv(chart.T)
+            return chart.reference, to_chart[3], lambda branched: branched @ to_chart[:3]
+
+        _check_root_region(where, summary, claim, (TRACK_REGION_MEANING, TRACK_REGION_MEANING_EARLIER),
+                           self.earlier_words, "reference_view", chart_terms,
+                           "the search box, its functionals, denominator and reference view")
 
     def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
         """What an uncertified track's point costs on its observations (and the allowance for its
@@ -537,36 +551,16 @@ class MapItems:
         caller's terms, as the solver writes it (fractional.maps._fit_map: the search box, its
         functionals through the chart rebuilt from the data, the reference point homogeneous), as a
         bilinear frame's is; none where the proof searched nothing."""
-        if not isinstance(summary, dict) or "root_region" not in summary:
-            return
-        region, proof = summary["root_region"], claim.get("proof")
-        if claim.get("certified") is not True:
-            _uncertified_summary(where, summary)
-            if region is not None:
-                source, target = self.read(certificate["data"], index)
-                chart = MapChart.build(source, target, certificate["options"]["norm"])
-                _uncertified_region(where, region, MAP_REGION_MEANING, MAP_REGION_MEANING_EARLIER, self.earlier_words,
-                                    ("reference_point", chart.reference, np.append(source[chart.reference], 1.0)))
-            return
-        if not (isinstance(proof, dict) and proof.get("type") == "branch_and_bound"):
-            if region is not None:
-                raise Invalid("returned", f"{where}/certificate/root_region is stated, and its proof searched no box")
-            return
-        if isinstance(region, dict):
-            _region_words(where, region, MAP_REGION_MEANING, MAP_REGION_MEANING_EARLIER, self.earlier_words)
-        source, target = self.read(certificate["data"], index)
-        chart = MapChart.build(source, target, certificate["options"]["norm"])
-        lower, upper = proof["search_box"]
-        n = source.shape[1]
-        branched = np.asarray(proof["root"]["functionals"], dtype=float)[:len(lower), :n]
-        expected = {"lower": lower, "upper": upper,
-                    "denominator": np.append(source[chart.reference], 1.0),
-                    "functionals": branched @ chart.last_row_basis.T @ np.linalg.inv(chart.source_norm).T}
-        if not isinstance(region, dict) or type(region.get("reference_point")) is not int or (
-                region["reference_point"] != chart.reference) or not all(
-                name in region and _agrees(region[name], value) for name, value in expected.items()):
-            raise Invalid("returned", f"{where}/certificate/root_region is not its proof's root box in the caller's "
-                                      "terms (the search box, its functionals and reference point)")
+        def chart_terms():
+            source, target = self.read(certificate["data"], index)
+            chart = MapChart.build(source, target, certificate["options"]["norm"])
+            to_caller = chart.last_row_basis.T @ np.linalg.inv(chart.source_norm).T
+            return (chart.reference, np.append(source[chart.reference], 1.0),
+                    lambda branched: branched[:, :source.shape[1]] @ to_caller)
+
+        _check_root_region(where, summary, claim, (MAP_REGION_MEANING, MAP_REGION_MEANING_EARLIER),
+                           self.earlier_words, "reference_point", chart_terms,
+                           "the search box, its functionals and reference point")
 
     def check_returned(self, result: dict, certificate: dict) -> None:
         """Each returned map's ``residuals`` are what its matrix leaves on the certificate's data

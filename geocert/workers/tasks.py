@@ -215,24 +215,29 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None, tas
                                task_id=task_id)
     if started is None:
         return  # expired, deleted, or ended (cancelled) before it started: nothing to do
+    parsed = (None, None)
     try:
-        _solve_started_chunk(jobs, job_id, start, stop, request_id, *started)
+        parsed = _solve_started_chunk(jobs, job_id, start, stop, request_id, *started)
     finally:
         if task_id is not None:
-            _leave(jobs, job_id, task_id)
+            _leave(jobs, job_id, task_id, *parsed)
 
 
-def _leave(jobs: JobStore, job_id: str, task_id: str) -> None:
-    """The task leaves the job (its items stored): past its clock in all, the last to leave ends it."""
+def _leave(jobs: JobStore, job_id: str, task_id: str, kind=None, options=None) -> None:
+    """The task leaves the job (its items stored): past its clock in all, the last to leave ends it,
+    with the kind and options the task parsed when it took the job from the queue."""
     try:
         jobs.leave(job_id, task_id)
-        end_past_clock(jobs, job_id)
+        end_past_clock(jobs, job_id, kind, options)
     except REDIS_GONE:
         pass  # its slot lapses unrenewed, and a worker's heartbeat ends the job (end_jobs_past_clock)
 
 
 def _solve_started_chunk(jobs: JobStore, job_id: str, start: int, stop: int, request_id: str | None,
-                         meta: dict, request: dict) -> None:
+                         meta: dict, request: dict) -> tuple:
+    """Solve the chunk and store its items, ending the job when they are its last; returns the
+    job's kind and options as the task parsed them (None where it did not get that far), for the
+    job's end when this task is the last to leave it."""
     settings = get_settings()
     began = time.monotonic()
     deadline_s = task_deadline_s(meta["kind"], meta["item_time_bound_s"], stop - start, meta["job_time_limit_s"])
@@ -283,15 +288,19 @@ def _solve_started_chunk(jobs: JobStore, job_id: str, start: int, stop: int, req
         else:
             end_with_error(jobs, job_id, 500, "Solver failure", f"{type(exc).__name__}: {exc}", None,
                            kind=kind, options=options)
+    return kind, options
 
 
-def end_past_clock(jobs: JobStore, job_id: str) -> bool:
+def end_past_clock(jobs: JobStore, job_id: str, kind=None, options=None) -> bool:
     """End a running job past its clock in all (job_time_limit_s) once no task of it is busy
     (``JobStore.claim_past_clock``): ``succeeded`` with the items stored, every other item its
-    kind's not started item (status ``time_limit``, uncertified). True when this call ended it."""
+    kind's not started item (status ``time_limit``, uncertified). True when this call ended it.
+    ``kind`` and ``options``: as the task ending it parsed them; without them, as stored
+    (_kind_and_options)."""
     if not jobs.claim_past_clock(job_id):
         return False
-    kind, options = _kind_and_options(jobs, job_id)
+    if kind is None or options is None:
+        kind, options = _kind_and_options(jobs, job_id)
     try:
         assembled = _stored_result(jobs, job_id, kind, options, lambda: not_started_item(kind, options))
         if assembled is None:
@@ -407,10 +416,15 @@ def _stopped_by_shutdown(exc) -> bool:
 
 
 def _kind_and_options(jobs: JobStore, job_id: str):
+    """The job's kind and its options as stored, for an end no task of it holds them at (its
+    errback, a worker's heartbeat, a task taken from the queue past the job's clock). The API
+    stored them as it parsed them (the server's maxima applied, the defaults filled in) and every
+    task that took the job from the queue parsed them once more: they are rebuilt here, not parsed
+    again, so a job ends with the very options its items were solved with."""
     try:
         request = jobs.chunk_request(job_id, 0, 0)
         kind = get_kind(request["kind"])
-        return kind, options_from(kind.options_type, request.get("options"))
+        return kind, kind.options_type(**(request.get("options") or {}))
     except Exception:  # noqa: BLE001 (the failure is recorded without the partial result then)
         return None, None
 

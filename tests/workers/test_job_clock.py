@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from tests.support import run_with_redis
 
-CODE = """
+SETUP = """
 import copy
 import json
 import os
@@ -49,8 +49,9 @@ def past_clock(job_id):
 
 def tracks(job_id):
     return [(t["status"], "not started" in (t["reason"] or "")) for t in jobs.result(job_id)["tracks"]]
+"""
 
-
+CODE = SETUP + """
 # 1. Two tasks running at the clock: the job waits for the last to leave, which ends it.
 one = new_job()
 run(one, "a", 0, items=True)
@@ -103,3 +104,39 @@ def test_a_job_past_its_clock_ends_once_no_task_of_it_is_busy(tmp_path):
     assert out["heartbeat_ended"] and out["tracks_two"] == [kept, not_started, not_started]
     assert out["ended_by_queued_task"] == "succeeded" and out["tracks_three"] == [kept, not_started, not_started]
     assert out["deadlines_left"] == 0
+
+
+# The options a job's tasks are solved with are parsed where a task takes the job from the queue
+# (tasks.options_from), and the job ends with those: the task ending a job past its clock hands
+# on the options it parsed, and an end no task holds them at (a worker's heartbeat, a solve task's
+# errback) rebuilds them as the API stored them; none parses them again (a second parse could end
+# the job with options its items were not solved with).
+ONCE = SETUP + """
+parses = []
+parse, solve_items = tasks.options_from, tasks.solve_items
+tasks.options_from = lambda *args, **kwargs: parses.append(args) or parse(*args, **kwargs)
+
+# 1. A task solving the second item while the clock runs out: the last to leave, it ends the job.
+one = new_job()
+run(one, "a", 0, items=True)
+tasks._leave(jobs, one, "a")
+tasks.solve_items = lambda *args, **kwargs: [solve_items(*args, **kwargs), past_clock(one)][0]
+tasks.solve_chunk.apply(args=(one, 1, 2), task_id="b")
+out["one"] = [jobs.fields(one)["status"], tracks(one), len(parses)]
+
+# 2. No task busy past the clock: a worker's heartbeat ends it.
+parses.clear()
+two = new_job()
+run(two, "c", 0, items=True)
+tasks._leave(jobs, two, "c")
+past_clock(two)
+out["two"] = [tasks.end_jobs_past_clock(jobs) == [two], tracks(two), len(parses)]
+print(json.dumps(out))
+"""
+
+
+def test_a_job_ends_with_the_options_its_task_parsed_never_parsing_them_again(tmp_path):
+    out = run_with_redis(tmp_path, ONCE, timeout=300)
+    kept, not_started = ["optimal", False], ["time_limit", True]
+    assert out["one"] == ["succeeded", [kept, kept, not_started], 1]  # the task's own parse, once
+    assert out["two"] == [True, [kept, not_started, not_started], 0]

@@ -1,5 +1,6 @@
 """The convex relaxation of one frame's bilinear program over a box of the camera's 2x3 part M
-(thesis 8.3): plain numpy and scipy.sparse, used alike by the solver and the verifier.
+(thesis 8.3): plain numpy, used alike by the solver and the verifier; its constraint matrix is
+scipy's CSC for the solver's conic solver, or core.csc's (numpy alone) for the verifier.
 
 Variables, in order: gamma (6K, gamma_rki = M_rk alpha_i), alpha (K), M (6), t (2), then the
 epigraph: e (2n, one per residual coordinate) for L1L1 or s (1) for L2L2. Rows (Clarabel's
@@ -23,8 +24,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from geocert.solvers.core.cones import UNIT_ROUNDOFF, ConeSpec, safe_lower_bound
+from geocert.solvers.core.csc import CscMatrix
 
-if TYPE_CHECKING:  # built where used: the verifier of the other kinds loads numpy alone
+if TYPE_CHECKING:  # imported where a scipy matrix is built: the verifier loads numpy alone
     import scipy.sparse as sp
 
 PAD = 1e-9  # relative widening of the translation's derived interval (outward rounding)
@@ -62,7 +64,10 @@ class Relaxation:
     """One frame's relaxation, its sparsity pattern assembled once: per box only the McCormick
     coefficients, the box rows' right-hand sides and the variables' bounds change."""
 
-    def __init__(self, X: np.ndarray, u: np.ndarray, norm: str, coefficients: str, coefficient_bound: float):
+    def __init__(self, X: np.ndarray, u: np.ndarray, norm: str, coefficients: str, coefficient_bound: float,
+                 matrix: type | None = None):
+        """``matrix``: the class of the constraint matrices built, called as scipy's csc_matrix
+        is; scipy's by default (the conic solver's), core.csc.CscMatrix for the verifier."""
         self.X, self.u, self.norm = np.asarray(X, float), np.asarray(u, float), norm
         K, n, _ = self.X.shape
         self.K, self.n = K, n
@@ -134,12 +139,14 @@ class Relaxation:
         rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
         self.nrow = len(self.b0)
         assert self.nrow == self.cones.rows
-        import scipy.sparse as sp
-
-        order = sp.csc_matrix((np.arange(1, len(vals) + 1, dtype=float), (rows, cols)), shape=(self.nrow, self.nvar))
-        self._perm = order.data.astype(np.int64) - 1
-        self._indices, self._indptr = order.indices.copy(), order.indptr.copy()
+        pattern, self._perm = CscMatrix.from_triplets(rows, cols, (self.nrow, self.nvar))
+        self._indices, self._indptr = pattern.indices, pattern.indptr
         self._vals = vals
+        if matrix is None:
+            import scipy.sparse as sp
+
+            matrix = sp.csc_matrix
+        self._matrix = matrix
         self.q = np.zeros(self.nvar)
         if l1:
             self.q[self.ie:] = 1.0
@@ -195,9 +202,7 @@ class Relaxation:
         vals[self._mc_start:self._mc_start + n_mc] = c_a.ravel()
         vals[self._mc_start + n_mc:self._mc_start + 2 * n_mc] = c_m.ravel()
         vals[self._mc_start + 2 * n_mc:self._mc_stop] = c_g.ravel()
-        import scipy.sparse as sp
-
-        A = sp.csc_matrix((vals[self._perm], self._indices.copy(), self._indptr.copy()), shape=(self.nrow, self.nvar))
+        A = self._matrix((vals[self._perm], self._indices.copy(), self._indptr.copy()), shape=(self.nrow, self.nvar))
         b = self.b0.copy()
         b[7:7 + n_mc] = rhs.ravel()
         b[self._box_row:self._box_row + 12] = np.ravel(np.column_stack([hi, -lo]))
@@ -235,9 +240,7 @@ def with_cost_cap(relaxation: Relaxation, data: ConicData, cap: float) -> ConicD
 def insert_row(A: sp.csc_matrix, at: int, columns: np.ndarray) -> sp.csc_matrix:
     """A with a row of ones in ``columns`` inserted before row ``at`` (the rows from ``at`` on
     move down by one): the same matrix as stacking the three parts, built in place of a
-    vstack (which converted the whole relaxation twice per tightening)."""
-    import scipy.sparse as sp
-
+    vstack (which converted the whole relaxation twice per tightening); of A's own class."""
     A = A.copy()
     A.sort_indices()
     nrow, ncol = A.shape
@@ -250,7 +253,7 @@ def insert_row(A: sp.csc_matrix, at: int, columns: np.ndarray) -> sp.csc_matrix:
     new_indices = np.insert(np.where(indices >= at, indices + 1, indices), positions, at)
     added = np.zeros(ncol + 1, dtype=np.int64)
     added[columns + 1] = 1
-    return sp.csc_matrix((data, new_indices, indptr + np.cumsum(added)), shape=(nrow + 1, ncol))
+    return type(A)((data, new_indices, indptr + np.cumsum(added)), shape=(nrow + 1, ncol))
 
 
 def tightening_objective(relaxation: Relaxation, entry: int, sign: float) -> np.ndarray:
