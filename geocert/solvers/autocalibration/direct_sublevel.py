@@ -1,5 +1,6 @@
-"""A proven interval of the direct method's focal length (fixed focal), numpy only: the solver
-writes the proof (direct_solve.prove_focal) and the verifier checks it with these functions.
+"""A proven interval of the direct method's focal length (fixed focal), or of each view's
+(varying_focal: the section at the end), numpy only: the solver writes the proof
+(direct_solve.prove_focal, prove_focal_lengths) and the verifier checks it with these functions.
 
 The quantity, for Q (program frame, trace 1) and the program's cameras P_i (direct.DirectSetup):
 
