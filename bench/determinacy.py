@@ -9,6 +9,8 @@ degenerate scenes (and real critical layouts) are flagged.
     .venv/bin/python -m bench.determinacy --resection-l1         # their L1 resections' proven intervals only
     .venv/bin/python -m bench.determinacy --resection-l1-synthetic  # L1 resections' proven centres, 20 cameras
     .venv/bin/python -m bench.determinacy --autocalibration-proven  # the metric stage's proven intervals
+    .venv/bin/python -m bench.determinacy --direct-views-proven 6 --autocalibration-scenes 6  # each view's, direct
+    .venv/bin/python -m bench.determinacy --direct-views-proven-real  # the same on the Model House's cameras
 
 Real sets: under $GEOCERT_BENCH_DATA (default bench-data beside the checkout) and $GEOCERT_SHARED_DATA (default
 /work/shared/data); those absent are left out.
@@ -464,6 +466,119 @@ def synthetic_resection_l1(seeds: int = 20, size: int = 20, noise_px: float = 0.
     return lines
 
 
+def direct_views_proven(seeds: int = 6, views: int = 6) -> list[str]:
+    """The direct method's proven interval of each view's focal length (varying_focal,
+    direct_sublevel.check_views) on Table 7.1's varying-focal protocol (f in [0.05, 1] a view, 0.2%
+    noise, ``views`` views, chirality "centers"), seeds 0 .. ``seeds`` - 1: whether the stage
+    certifies and every end is proven, the result verifying, how many views' intervals hold the
+    true focal length, the returned one, and the true quadric's (which they must when its cost is
+    within the level), the median half-width over the value (proven, and the curvature estimate's),
+    and the processor time of the job with the proof against without it, and of its verification."""
+    from geocert.solvers.autocalibration import direct, direct_relaxation
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.solvers.autocalibration.proofs import sublevel_level
+    from geocert.verify.checks import verify_any
+
+    intrinsics = {"aspect": [0.95, 1.05], "skew": [-0.01, 0.01], "principal_point": [[-0.1, 0.1], [-0.1, 0.1]],
+                  "focal": [0.05, 1.0]}
+
+    def quantity(w):
+        return float(np.sqrt((w[0, 0] + w[1, 1]) / (2.0 * w[2, 2])))
+
+    lines = [f"  seed | certified, ends proven | verified | true f inside | returned inside | true Q within level: "
+             f"its f inside | half-width / f, proven (estimate) median | CPU s job with / without | verify s"]
+    for seed in range(seeds):
+        scene, Ks = scenes.table71_scene(seed, 0.2, True, views=views)
+        job = {"kind": "autocalibration", "data": {"cameras": scene.cameras.tolist(), "points": scene.points.tolist()},
+               "options": {"method": "direct", "varying_focal": True, "intrinsics": intrinsics, "chirality": "centers",
+                           "certificate": "full", "time_limit_s": 3600}}
+        began = time.process_time()
+        solve_job(job)
+        without_s = time.process_time() - began
+        job["options"]["prove_focal_interval"] = True
+        began = time.process_time()
+        result = solve_job(job)
+        with_s = time.process_time() - began
+        began = time.process_time()
+        valid = verify_any(result).valid
+        verify_s = time.process_time() - began
+        stage = result["stages"][0]
+        proof = result["certificate"]["items"][0].get("proof") or {}
+        sublevel = proof.get("sublevel")
+        if sublevel is None:
+            lines.append(f"  {seed:4d} | {stage['certified']!s:>5}, no proof | {valid!s:>8} | CPU {with_s:.1f} / "
+                         f"{without_s:.1f}")
+            continue
+        ends = sum(v["lower"] is not None for v in sublevel["views"]) + sum(v["upper"] is not None
+                                                                          for v in sublevel["views"])
+        bounds = [(i["lower"], i["upper"]) for i in stage["determinacy"]["proven_intervals"]["intervals"]]
+        Q_returned = np.array(result["dual_absolute_quadric"])
+        Hi = np.linalg.inv(scene.projective)
+        true_Q = Hi @ np.diag([1.0, 1.0, 1.0, 0.0]) @ Hi.T
+        setup = direct.setup_for(autocalibration_problem.prepare(scene.cameras, scene.points, None, intrinsics),
+                                 "centers")
+        within = direct_relaxation.cost(setup.cameras, setup.from_input(true_Q)) <= sublevel_level(
+            stage["cost"], sublevel["cost_increase"])
+        true_in = sum(lo <= K[0, 0] <= hi for (lo, hi), K in zip(bounds, Ks))
+        returned_in = sum(lo <= quantity(P @ Q_returned @ P.T) <= hi for (lo, hi), P in zip(bounds, scene.cameras))
+        true_q_in = sum(lo <= quantity(P @ true_Q @ P.T) <= hi for (lo, hi), P in zip(bounds, scene.cameras))
+        half = np.median([(hi - lo) / 2 / K[0][0] for (lo, hi), K in zip(bounds, result["Ks"])])
+        estimate = np.median([(i["upper"] - i["lower"]) / 2 / i["value"] for i in stage["determinacy"]["intervals"]
+                              if i["upper"] is not None and i["lower"] is not None] or [np.nan])
+        lines.append(f"  {seed:4d} | {stage['certified']!s:>5}, {ends:2d}/{2 * views} | {valid!s:>8} | "
+                     f"{true_in:2d}/{views} | {returned_in:2d}/{views} | {within!s:>5}: {true_q_in:2d}/{views} | "
+                     f"{half:.3f} ({estimate:.3f}) | {with_s:6.1f} / {without_s:4.1f} | {verify_s:.1f}")
+    return lines
+
+
+def direct_views_proven_real(noise_px: float = 0.5) -> list[str]:
+    """direct_views_proven on the Oxford Model House's cameras (VGG's, each view its own K), moved
+    to a random projective frame with ``noise_px`` of noise (scenes.from_cameras), with the
+    intrinsics ranges the image size gives: each view's proven interval against its own K's
+    quantity, f0 sqrt((f_x^2 + f_y^2 + s^2 + (u - u0)^2 + (v - v0)^2) / 2), (u0, v0) the ranges'
+    middle, and against the true quadric's."""
+    from geocert.solvers import datasets
+    from geocert.solvers.autocalibration import direct, direct_relaxation, direct_sublevel
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.solvers.autocalibration.proofs import sublevel_level
+    from geocert.verify.checks import verify_any
+
+    if not (SHARED_DATA / "oxford_house").exists():
+        return ["  the Oxford Model House is absent (shared/data/oxford_house)"]
+    views = datasets.load_vgg_cameras(SHARED_DATA / "oxford_house", "house", (768, 576))
+    scene = scenes.from_cameras(views.cameras, views.box, noise_px, seed=0, image_size=views.image_size)
+    job = {"kind": "autocalibration", "data": scene.job_data(),
+           "options": {"method": "direct", "varying_focal": True, "chirality": "centers", "certificate": "full",
+                       "prove_focal_interval": True, "time_limit_s": 3600}}
+    began = time.process_time()
+    result = solve_job(job)
+    spent = time.process_time() - began
+    stage = result["stages"][0]
+    sublevel = (result["certificate"]["items"][0].get("proof") or {}).get("sublevel")
+    head = f"  Model House, {len(views.cameras)} views: certified {stage['certified']}, verified " \
+           f"{verify_any(result).valid}, {spent:.0f} s of CPU"
+    if sublevel is None:
+        return [head + "; no proof"]
+    problem = autocalibration_problem.prepare(scene.cameras, scene.points, scene.image_size, {})
+    setup = direct.setup_for(problem, "centers")
+    K0, f0 = problem.K0, float(problem.K0[0, 0])
+    Hi = np.linalg.inv(scene.projective)
+    true_Q = setup.from_input(Hi @ np.diag([1.0, 1.0, 1.0, 0.0]) @ Hi.T)
+    within = direct_relaxation.cost(setup.cameras, true_Q) <= sublevel_level(stage["cost"], sublevel["cost_increase"])
+    lines = [head + f"; the true quadric within the level: {within}",
+             "  view | proven [lower, upper] px | its K's quantity | the true quadric's | the returned Ks[k]'s fx"]
+    for k, interval in enumerate(stage["determinacy"]["proven_intervals"]["intervals"]):
+        K = views.K[k] / views.K[k][2, 2]
+        truth = float(np.sqrt((K[0, 0] ** 2 + K[1, 1] ** 2 + K[0, 1] ** 2 + (K[0, 2] - K0[0, 2]) ** 2
+                               + (K[1, 2] - K0[1, 2]) ** 2) / 2))
+        quadric = direct_sublevel.focal_of(setup.cameras, true_Q, f0, k)
+        lines.append(f"  {k:4d} | [{interval['lower']:.0f}, {interval['upper']:.0f}] | {truth:.0f} "
+                     f"{'in' if interval['lower'] <= truth <= interval['upper'] else 'OUT'} | {quadric:.0f} "
+                     f"{'in' if interval['lower'] <= quadric <= interval['upper'] else 'OUT'} | "
+                     f"{result['Ks'][k][0][0]:.0f}")
+    return lines
+
+
 def report(title: str, rows: dict, flagged: int | None, n: int, degenerate: str, caught: int, m: int) -> None:
     print(f"\n{title}")
     print(f"  {'quantity':>14} | {'coverage':>8} | {'median width':>12} | {'median |error|':>14} | unbounded | "
@@ -567,9 +682,26 @@ def main() -> None:
     parser.add_argument("--autocalibration-proven", action="store_true",
                         help="the metric stage's proven intervals (real sets, synthetic scenes) against the "
                              "estimate's and the truth, and a full certificate's CPU against a summary's")
+    parser.add_argument("--direct-views-proven", type=int, metavar="VIEWS", default=None,
+                        help="the direct method's proven focal length of each view (varying_focal), Table 7.1's "
+                             "protocol with VIEWS views, seeds 0 .. --autocalibration-scenes - 1")
+    parser.add_argument("--direct-views-proven-real", action="store_true",
+                        help="the same on the Oxford Model House's cameras")
     args = parser.parse_args()
     rng = np.random.default_rng(19)
     began = time.perf_counter()
+    if args.direct_views_proven_real:
+        print(f"Direct autocalibration, one focal length a view, real cameras (0.5 px): its proven intervals; load "
+              f"{open('/proc/loadavg').read().split()[0]}")
+        print("\n".join(direct_views_proven_real()))
+        print(f"\nWall time {time.perf_counter() - began:.0f} s; load {open('/proc/loadavg').read().split()[0]}")
+        return
+    if args.direct_views_proven is not None:
+        print(f"Direct autocalibration, one focal length a view: its proven intervals ({args.direct_views_proven} "
+              f"views, 0.2% noise); load {open('/proc/loadavg').read().split()[0]}")
+        print("\n".join(direct_views_proven(args.autocalibration_scenes, args.direct_views_proven)))
+        print(f"\nWall time {time.perf_counter() - began:.0f} s; load {open('/proc/loadavg').read().split()[0]}")
+        return
     if args.resection_l1_synthetic:
         print(f"L1 resections' proven centres on synthetic cameras (20 points, 0.5 px noise); load "
               f"{open('/proc/loadavg').read().split()[0]}")

@@ -95,10 +95,10 @@ def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptio
         elif p is not None:
             stage["determinacy"] = within(deadline, "the direct stage's determinacy", why, determinacy.metric_stage,
                                           problem, p, np.array(document["K"]), None, None, centres)
-            proof = stage["certificate"].get("proof")
-            if options.prove_focal_interval and options.certificate == "full" and proof is not None \
-                    and stage["certified"] and stage["determinacy"] is not None:
-                _prove_focal(setup, result, stage, proof, deadline)
+        proof = stage["certificate"].get("proof")
+        if p is not None and options.prove_focal_interval and options.certificate == "full" and proof is not None \
+                and stage["certified"] and stage["determinacy"] is not None:
+            _prove_focal(setup, result, stage, proof, deadline, options.varying_focal)
     stages = [stage]
     if checking:
         self_check_stages(parsed, dataclasses.replace(options), stages)
@@ -106,10 +106,11 @@ def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptio
             "elapsed_s": result.elapsed_s, "cost": stage["cost"], "lower_bound": stage["lower_bound"]}
 
 
-def _prove_focal(setup: direct.DirectSetup, result, stage: dict, proof: dict, deadline: float) -> None:
-    """The focal length's proven interval (direct_sublevel) at the cost increase
-    direct_sublevel.cost_increase states: into the stage's proof (``sublevel``) and its
-    determinacy (``proven_intervals``), when every end is proven before the job's deadline."""
+def _prove_focal(setup: direct.DirectSetup, result, stage: dict, proof: dict, deadline: float,
+                 varying_focal: bool) -> None:
+    """The focal length's proven interval (direct_sublevel; each view's with ``varying_focal``) at
+    the cost increase direct_sublevel.cost_increase states: into the stage's proof (``sublevel``)
+    and its determinacy (``proven_intervals``), when the search ends before the job's deadline."""
     from geocert.solvers.autocalibration import direct_solve, direct_sublevel
 
     increase = direct_sublevel.cost_increase(stage["cost"], stage["lower_bound"], len(setup.cameras))
@@ -118,12 +119,14 @@ def _prove_focal(setup: direct.DirectSetup, result, stage: dict, proof: dict, de
         if time.monotonic() > deadline:
             raise direct_solve.Stopped("time_limit", "the job's deadline")
 
+    prove = direct_solve.prove_focal_lengths if varying_focal else direct_solve.prove_focal
     try:
-        found = direct_solve.prove_focal(setup, result.Q, stage["cost"], increase, check)
+        found = prove(setup, result.Q, stage["cost"], increase, check)
     except (direct_solve.Stopped, ValueError, ArithmeticError, np.linalg.LinAlgError):
         found = None
     if found is None:
         return
     proof["sublevel"] = found
-    stage["determinacy"]["proven_intervals"] = direct_sublevel.proven_document(found)
+    read = direct_sublevel.proven_views_document if varying_focal else direct_sublevel.proven_document
+    stage["determinacy"]["proven_intervals"] = read(found)
     stage["determinacy"]["proven"] = True

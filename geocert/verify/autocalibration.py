@@ -514,12 +514,12 @@ def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, p
     if not direct.in_domain(setup, Q, excluded):
         raise Invalid("scope", "the quadric returned is not PSD of rank 3, or breaks a view's focal range, or is not "
                                "allowed by chirality")
-    if "sublevel" in proof:  # the focal length's proven interval (direct_sublevel), at the claimed cost or above
+    if "sublevel" in proof and options["varying_focal"]:  # each view's focal length's proven interval
+        _check_direct_views_sublevel(setup, proof["sublevel"], excluded, claimed, Q)
+        passed.append("proven_interval")
+    elif "sublevel" in proof:  # the focal length's proven interval (direct_sublevel), at the claimed cost or above
         from geocert.solvers.autocalibration import direct_sublevel
 
-        if options["varying_focal"]:
-            raise Invalid("format", "proof/sublevel: the focal length's interval is proven for one K (varying_focal "
-                                    "false)")
         direct_sublevel.check(setup, proof["sublevel"], excluded, max(claimed, direct_relaxation.cost(setup.cameras, Q)))
         passed.append("proven_interval")
     cameras, points, _ = arrays
@@ -532,6 +532,14 @@ def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, p
             raise Invalid("claim", f"{name} is not what the quadric gives")
     passed += ["scope", "program", "root_region", "leaf_bounds"]
     return bound
+
+
+def _check_direct_views_sublevel(setup, sublevel, excluded: tuple, claimed: float, Q: np.ndarray) -> None:
+    """A varying-focal direct proof's ``sublevel``: each view's focal length's proven interval
+    (direct_sublevel.check_views), at the claimed cost or the quadric's, whichever is higher."""
+    from geocert.solvers.autocalibration import direct_relaxation, direct_sublevel
+
+    direct_sublevel.check_views(setup, sublevel, excluded, max(claimed, direct_relaxation.cost(setup.cameras, Q)))
 
 
 def _ranges_stated(result: dict, problem) -> bool:
@@ -572,7 +580,10 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
     for name, value in expected.items():
         if not _derived_close(name, result.get(name), value, cameras, points, H):
             raise Invalid("returned", f"{name} is not what the quadric gives")
-    _check_direct_proven(result["stages"][0], claim, len(cameras))
+    if options.get("varying_focal"):
+        _check_direct_views_proven(result["stages"][0], claim, len(cameras))
+    else:
+        _check_direct_proven(result["stages"][0], claim, len(cameras))
     if result.get("Ks") is None:  # one K
         estimates.check_intrinsics(result["stages"][0].get("determinacy"), result.get("K"), "stages/0/determinacy")
         estimates.check_redundancy(result["stages"][0].get("determinacy"), 5 * len(cameras) - 10,
@@ -596,6 +607,23 @@ def _check_direct_proven(stage: dict, claim: dict, views: int) -> None:
         least = direct_sublevel.cost_increase(float(cost), float(lower), views)
         if not expected["cost_increase"] >= least * (1 - 1e-9):
             raise Invalid("returned", f"stages/0/determinacy: the proven interval's cost_increase is below "
+                                      f"{least!r} (direct_sublevel.cost_increase: a lower level proves a smaller set)")
+
+
+def _check_direct_views_proven(stage: dict, claim: dict, views: int) -> None:
+    """A varying-focal direct stage's determinacy saying proven states exactly its proof's
+    sublevel intervals, focal[0] .. focal[m-1] (direct_sublevel.check_views checked them), at no
+    lower a cost increase than direct_sublevel.cost_increase gives (as _check_direct_proven)."""
+    from geocert.solvers.autocalibration import direct_sublevel
+
+    expected = _stated_proven(stage, claim, "stages/0", "direct", direct_sublevel.proven_views_document)
+    if expected is None:
+        return
+    cost, lower = stage.get("cost"), stage.get("lower_bound")
+    if isinstance(cost, (int, float)) and isinstance(lower, (int, float)):
+        least = direct_sublevel.cost_increase(float(cost), float(lower), views)
+        if not expected["cost_increase"] >= least * (1 - 1e-9):
+            raise Invalid("returned", f"stages/0/determinacy: the proven intervals' cost_increase is below "
                                       f"{least!r} (direct_sublevel.cost_increase: a lower level proves a smaller set)")
 
 

@@ -1,5 +1,6 @@
-"""A proven interval of the direct method's focal length (fixed focal), numpy only: the solver
-writes the proof (direct_solve.prove_focal) and the verifier checks it with these functions.
+"""A proven interval of the direct method's focal length (fixed focal), or of each view's
+(varying_focal: the section at the end), numpy only: the solver writes the proof
+(direct_solve.prove_focal, prove_focal_lengths) and the verifier checks it with these functions.
 
 The quantity, for Q (program frame, trace 1) and the program's cameras P_i (direct.DirectSetup):
 
@@ -37,21 +38,27 @@ _SIDE = len(direct_relaxation.monomials(1))
 EXTRA_ROWS = 1 + _SIDE * (_SIDE + 1) // 2  # the cost row, its localizing matrix (svec)
 
 
-def forms(cameras: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(A, B): r(Q) = tr(A Q) / tr(B Q)."""
+def _of(cameras: np.ndarray, view: int | None) -> np.ndarray:
+    """The views the quantity is of: all (one focal length), or view ``view`` alone (its own)."""
+    return cameras if view is None else cameras[view:view + 1]
+
+
+def forms(cameras: np.ndarray, view: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(A, B): r(Q) = tr(A Q) / tr(B Q), over every view or over view ``view`` only."""
+    cameras = _of(cameras, view)
     A = sum(np.outer(P[0], P[0]) + np.outer(P[1], P[1]) for P in cameras) / 2.0
     B = sum(np.outer(P[2], P[2]) for P in cameras)
     return A, B
 
 
-def ratio(cameras: np.ndarray, Q: np.ndarray) -> float:
-    A, B = forms(cameras)
+def ratio(cameras: np.ndarray, Q: np.ndarray, view: int | None = None) -> float:
+    A, B = forms(cameras, view)
     return float(np.sum(A * Q) / np.sum(B * Q))
 
 
-def largest_weight(cameras: np.ndarray) -> float:
+def largest_weight(cameras: np.ndarray, view: int | None = None) -> float:
     """BMAX: tr(B Q) = sum_i p_i2' Q p_i2 <= sum_i |p_i2|^2 for Q PSD of trace 1, rounded up."""
-    return float(np.sum(cameras[:, 2, :] ** 2)) * (1.0 + 1e-12)
+    return float(np.sum(_of(cameras, view)[:, 2, :] ** 2)) * (1.0 + 1e-12)
 
 
 def scope_range(unit_ranges: dict) -> tuple[float, float]:
@@ -96,18 +103,20 @@ def program(cameras: np.ndarray, pairs, focal, S: np.ndarray, level: float) -> d
     return direct_relaxation.Program(q, float(p.get(zero, 0.0)), A, b, spec, base.lower, base.upper, base.moments)
 
 
-def side_program(cameras: np.ndarray, pairs, focal, c: float, sign: float, level: float) -> direct_relaxation.Program:
-    """sign +1: min tr((A - c B) Q) (r's lower end); -1: min tr((c B - A) Q) (its upper end)."""
-    A, B = forms(cameras)
+def side_program(cameras: np.ndarray, pairs, focal, c: float, sign: float, level: float,
+                 view: int | None = None) -> direct_relaxation.Program:
+    """sign +1: min tr((A - c B) Q) (r's lower end); -1: min tr((c B - A) Q) (its upper end). The
+    program is over every view's cost and rows; A and B are view ``view``'s alone when given."""
+    A, B = forms(cameras, view)
     return program(cameras, pairs, focal, sign * (A - c * B), level)
 
 
-def end(cameras: np.ndarray, c: float, sign: float, safe: float) -> float | None:
-    """What a safe bound ``safe`` at ``c`` proves of r: its lower end (sign +1) or upper (-1);
-    None when it proves nothing (safe not above 0)."""
+def end(cameras: np.ndarray, c: float, sign: float, safe: float, view: int | None = None) -> float | None:
+    """What a safe bound ``safe`` at ``c`` proves of r (view ``view``'s when given): its lower end
+    (sign +1) or upper (-1); None when it proves nothing (safe not above 0)."""
     if not (safe > 0 and math.isfinite(safe) and math.isfinite(c)):
         return None
-    step = safe / largest_weight(cameras)
+    step = safe / largest_weight(cameras, view)
     value = c + sign * step
     return value - sign * 4.0 * 2.0 ** -52 * (abs(c) + step)  # the sum's rounding, outward
 
@@ -120,8 +129,8 @@ def pixels(f0: float, r_lo: float, r_hi: float, scope: tuple[float, float]) -> t
     return lower, upper
 
 
-def focal_of(cameras: np.ndarray, Q: np.ndarray, f0: float) -> float:
-    return f0 * math.sqrt(max(ratio(cameras, Q / np.trace(Q)), 0.0))
+def focal_of(cameras: np.ndarray, Q: np.ndarray, f0: float, view: int | None = None) -> float:
+    return f0 * math.sqrt(max(ratio(cameras, Q / np.trace(Q), view), 0.0))
 
 
 LEVEL = ("every absolute dual quadric of the direct stage's scope whose cost (7.12) exceeds the certified one's by at "
@@ -148,6 +157,66 @@ def proven_document(sublevel: dict) -> dict:
     return document(sublevel["cost_increase"], (NAME,), [sublevel["interval"]], LEVEL)
 
 
+def _level(sublevel) -> float:
+    """proof/sublevel's cost_increase, checked (the level is sublevel_level of the cost and it)."""
+    from geocert.solvers.autocalibration.proofs import LARGEST_INCREASE, SMALLEST_INCREASE
+    from geocert.solvers.core.strict import Invalid, is_number
+
+    increase = sublevel.get("cost_increase")
+    if not (is_number(increase) and (increase == 0 or SMALLEST_INCREASE <= increase <= LARGEST_INCREASE)):
+        raise Invalid("proven_interval", "proof/sublevel/cost_increase must be 0 or within 2^-128 .. 2^128")
+    return float(increase)
+
+
+def _ends(setup, holder: dict, where: str, live: list, level: float, view: int | None) -> dict:
+    """r's ends (view ``view``'s, or the views' mean's) that ``holder``'s "lower" and "upper"
+    entries prove: one {delta, c, z} an orientation in ``live`` a side, each safe bound above 0;
+    an end stated null is the scope's (-inf or inf here, pixels clips it)."""
+    from geocert.solvers.autocalibration import direct
+    from geocert.solvers.core.strict import Invalid, charge, dual_vector, is_number, record
+
+    ends = {"lower": -math.inf, "upper": math.inf}
+    for side, sign in (("lower", 1.0), ("upper", -1.0)):
+        entries = holder.get(side)
+        if entries is None:  # this end is the scope's (pixels clips to it)
+            continue
+        if not (isinstance(entries, list) and len(entries) == len(live)):
+            raise Invalid("format", f"{where}/{side} holds one entry for each orientation left to bound "
+                                    f"({len(live)})")
+        found = []
+        for o in live:
+            match = [e for e in entries if isinstance(e, dict) and direct._of_orientation(e.get("delta"), o.delta)]
+            if len(match) != 1:
+                raise Invalid("format", f"{where}/{side}: orientation {o.delta!r} needs exactly one entry")
+            entry = record(match[0], f"{where}/{side}", ("delta", "c", "z"))
+            c = entry.get("c")
+            if not is_number(c):
+                raise Invalid("format", f"{where}/{side}/c must be a finite number")
+            rows = direct._rows_without_pairs(setup, 2, 0) + EXTRA_ROWS + (0 if o.pairs is None else len(o.pairs))
+            charge(rows, f"the {side} interval program of orientation {o.delta!r}")
+            dual_vector(entry.get("z"), rows, f"{where}/{side}/z", "proven_interval")
+            built = side_program(setup.cameras, o.pairs, setup.focal, float(c), sign, level, view)
+            z = dual_vector(entry.get("z"), len(built.b), f"{where}/{side}/z", "proven_interval")
+            safe, _ = direct_relaxation.safe_bound(built, z, -math.inf)
+            value = end(setup.cameras, float(c), sign, safe, view)
+            if value is None:
+                raise Invalid("proven_interval", f"{where}/{side}: the dual's safe bound at c = {c!r} is "
+                                                 f"{safe!r}, not above 0: it proves no {side} end")
+            found.append(value)
+        ends[side] = min(found) if sign > 0 else max(found)
+    return ends
+
+
+def _stated_holds(holder: dict, where: str, lo: float, hi: float) -> None:
+    """The interval ``holder`` states holds [lo, hi] (a wider one is a weaker true statement)."""
+    from geocert.solvers.core.strict import Invalid, numbers
+
+    stated = numbers(holder.get("interval"), f"{where}/interval", (2,))
+    if not (stated[0] <= lo and hi <= stated[1]):
+        raise Invalid("proven_interval", f"{where}/interval {stated.tolist()} is narrower than what its "
+                                         f"programs prove ([{lo!r}, {hi!r}])")
+
+
 def check(setup, sublevel, gone: tuple, cost: float) -> tuple[float, float]:
     """What a direct proof's ``sublevel`` proves (the module docstring): (lower, upper) in pixels
     of the focal length of every Q in the scope (setup built with exclude=False; ``gone`` the
@@ -155,49 +224,69 @@ def check(setup, sublevel, gone: tuple, cost: float) -> tuple[float, float]:
     orientation left has one entry a side, {delta, c, z}, whose safe bound must be above 0; the
     stated interval must hold what they prove (a wider one is a weaker true statement, a
     narrower one is refused). Returns the interval proven."""
-    from geocert.solvers.autocalibration import direct
-    from geocert.solvers.autocalibration.proofs import LARGEST_INCREASE, SMALLEST_INCREASE, sublevel_level
-    from geocert.solvers.core.strict import Invalid, charge, dual_vector, is_number, numbers, record
+    from geocert.solvers.autocalibration.proofs import sublevel_level
+    from geocert.solvers.core.strict import record
 
     record(sublevel, "proof/sublevel", ("cost_increase", "lower", "upper", "interval"))
-    increase = sublevel.get("cost_increase")
-    if not (is_number(increase) and (increase == 0 or SMALLEST_INCREASE <= increase <= LARGEST_INCREASE)):
-        raise Invalid("proven_interval", "proof/sublevel/cost_increase must be 0 or within 2^-128 .. 2^128")
-    level = sublevel_level(cost, float(increase))
+    level = sublevel_level(cost, _level(sublevel))
     live = [o for o in setup.orientations if o.delta not in gone]
-    ends = {"lower": -math.inf, "upper": math.inf}
-    for side, sign in (("lower", 1.0), ("upper", -1.0)):
-        entries = sublevel.get(side)
-        if entries is None:  # this end is the scope's (pixels clips to it)
-            continue
-        if not (isinstance(entries, list) and len(entries) == len(live)):
-            raise Invalid("format", f"proof/sublevel/{side} holds one entry for each orientation left to bound "
-                                    f"({len(live)})")
-        found = []
-        for o in live:
-            match = [e for e in entries if isinstance(e, dict) and direct._of_orientation(e.get("delta"), o.delta)]
-            if len(match) != 1:
-                raise Invalid("format", f"proof/sublevel/{side}: orientation {o.delta!r} needs exactly one entry")
-            entry = record(match[0], f"proof/sublevel/{side}", ("delta", "c", "z"))
-            c = entry.get("c")
-            if not is_number(c):
-                raise Invalid("format", f"proof/sublevel/{side}/c must be a finite number")
-            rows = direct._rows_without_pairs(setup, 2, 0) + EXTRA_ROWS + (0 if o.pairs is None else len(o.pairs))
-            charge(rows, f"the {side} interval program of orientation {o.delta!r}")
-            dual_vector(entry.get("z"), rows, f"proof/sublevel/{side}/z", "proven_interval")
-            built = side_program(setup.cameras, o.pairs, setup.focal, float(c), sign, level)
-            z = dual_vector(entry.get("z"), len(built.b), f"proof/sublevel/{side}/z", "proven_interval")
-            safe, _ = direct_relaxation.safe_bound(built, z, -math.inf)
-            value = end(setup.cameras, float(c), sign, safe)
-            if value is None:
-                raise Invalid("proven_interval", f"proof/sublevel/{side}: the dual's safe bound at c = {c!r} is "
-                                                 f"{safe!r}, not above 0: it proves no {side} end")
-            found.append(value)
-        ends[side] = min(found) if sign > 0 else max(found)
+    ends = _ends(setup, sublevel, "proof/sublevel", live, level, None)
     lo, hi = pixels(float(setup.problem.K0[0, 0]), ends["lower"], ends["upper"],
                     scope_range(setup.problem.unit_ranges))
-    stated = numbers(sublevel.get("interval"), "proof/sublevel/interval", (2,))
-    if not (stated[0] <= lo and hi <= stated[1]):
-        raise Invalid("proven_interval", f"proof/sublevel/interval {stated.tolist()} is narrower than what its "
-                                         f"programs prove ([{lo!r}, {hi!r}])")
+    _stated_holds(sublevel, "proof/sublevel", lo, hi)
     return lo, hi
+
+
+# --- one focal length a view (varying_focal) ---------------------------------------------------
+#
+# The same proof, view by view: focal_i(Q) = f0 sqrt(r_i(Q)), r_i = (w_i11 + w_i22) / (2 w_i33), is
+# the ratio tr(A_i Q) / tr(B_i Q) of view i's forms alone (forms(cameras, i)), over the same set (the
+# program's cost row and rows are every view's), with BMAX_i = |p_i2|^2; its range over the scope is
+# the focal rows' (scope_range), as each view's (w11 + w22) / w33 lies within them. The proof's
+# ``sublevel`` is {cost_increase, views: [{lower, upper, interval}, one a view, in order]}, each
+# view's ends as the one focal length's (null: the scope's).
+
+VIEW_NAME = "focal[{}]"  # estimates.check_focal_lengths' names, the same quantities' estimates
+
+VIEWS_LEVEL = ("every absolute dual quadric of the direct stage's scope whose cost (7.12) exceeds the certified one's "
+               "by at most cost_increase has view k's focal length within focal[k]; view k's focal length of Q is f0 "
+               "times the root of (w_11 + w_22) / (2 w_33), w = P_k Q P_k' in the program's frame (preconditioned by "
+               "K0, f0 its focal length): the root of (f_x^2 + f_y^2 + skew^2 + (u - u0)^2 + (v - v0)^2) / 2, the "
+               "focal length when skew is 0, aspect 1 and the principal point the ranges' middle (pixels); clipped "
+               "to what the focal rows allow")
+
+
+def proven_views_document(sublevel: dict) -> dict:
+    """The proven intervals a varying-focal direct stage's determinacy states from its proof's
+    ``sublevel``: focal[0] .. focal[m-1]."""
+    from geocert.solvers.core.determinacy import proven_document as document
+
+    views = sublevel["views"]
+    return document(sublevel["cost_increase"], tuple(VIEW_NAME.format(k) for k in range(len(views))),
+                    [view["interval"] for view in views], VIEWS_LEVEL)
+
+
+def check_views(setup, sublevel, gone: tuple, cost: float) -> list[tuple[float, float]]:
+    """What a varying-focal direct proof's ``sublevel`` proves: each view's (lower, upper) focal
+    length in pixels over every Q of the scope (as check's) costing at most sublevel_level(cost,
+    cost_increase). One entry a view, in order, each {lower, upper, interval} as check's one
+    focal length's; every view's stated interval must hold what its programs prove."""
+    from geocert.solvers.autocalibration.proofs import sublevel_level
+    from geocert.solvers.core.strict import Invalid, record
+
+    record(sublevel, "proof/sublevel", ("cost_increase", "views"))
+    level = sublevel_level(cost, _level(sublevel))
+    views = sublevel.get("views")
+    if not (isinstance(views, list) and len(views) == len(setup.cameras)):
+        raise Invalid("format", f"proof/sublevel/views holds one entry a view ({len(setup.cameras)}), in order")
+    live = [o for o in setup.orientations if o.delta not in gone]
+    f0, scope = float(setup.problem.K0[0, 0]), scope_range(setup.problem.unit_ranges)
+    out = []
+    for k, holder in enumerate(views):
+        where = f"proof/sublevel/views/{k}"
+        holder = record(holder, where, ("lower", "upper", "interval"))
+        ends = _ends(setup, holder, where, live, level, k)
+        lo, hi = pixels(f0, ends["lower"], ends["upper"], scope)
+        _stated_holds(holder, where, lo, hi)
+        out.append((lo, hi))
+    return out

@@ -81,8 +81,9 @@ class AutocalibrationOptions(SearchOptions):
     # The direct method's proven focal interval (direct_sublevel) costs tens of seconds of CPU
     # against a solve's second: asked for, not implied by a full certificate.
     prove_focal_interval: bool = option(False, description=(
-        "direct method, one focal length, certificate full: prove an interval of the focal length over "
-        "every quadric within a stated cost increase of the certified one (tens of seconds of CPU)"))
+        "direct method, certificate full: prove an interval of the focal length (each view's, with "
+        "varying_focal) over every quadric within a stated cost increase of the certified one (tens of "
+        "seconds of CPU; with varying_focal 6 to 60 s a view)"))
     # The stratified metric stage's intervals proven over the plane at infinity's own uncertainty
     # (plane_sublevel) cost 2.5 to 3.5 times a full certificate's solve (2 to 3.5 times its
     # verification), and on real near-critical rings come out as the ranges: asked for, not implied
