@@ -12,7 +12,9 @@ size), focal length error (%), principal point error (px), cameras certified (of
 registered) and points certified, what the result claims (``determined``, its warnings, cameras it
 flags, whether its poses are determined against their depth-reversed twin and the twin's cost over
 theirs), CPU seconds (the child's user + system time, every thread) and wall seconds, and geocert's
-CPU over COLMAP's on the same photos. The machine's load is printed with each run: the timings are
+CPU over COLMAP's on the same photos, and the same with each side's start-up taken off (a child
+that only starts and imports what its runs import, measured at the start: both CPU figures count
+it, a service's worker with its modules loaded does not pay it per job). The machine's load is printed with each run: the timings are
 only comparable within one run of this bench.
 
 Sets (testing/photo_sets.py says where each comes from, its format, and how a test can use it):
@@ -127,6 +129,32 @@ def run_geocert(job: dict, timeout_s: float) -> dict:
         return {"result": json.loads(done.stdout), "wall_s": wall, "cpu_s": cpu}
 
 
+# What each side's child process spends before its first photo: the interpreter and the imports of the
+# code a run takes (geocert solve's job path; COLMAP's child: numpy, pycolmap). Both CPU figures count
+# it; a service's worker, its modules loaded, does not pay geocert's for each job.
+STARTUP_IMPORTS = {"geocert": "import geocert.app.cli, geocert.jobs.runner, geocert.kinds.reconstruction, "
+                              "geocert.pipelines.reconstruction.pipeline",
+                   "colmap": "import numpy, pycolmap, bench.colmap_baseline"}
+
+
+def startup_cpu_s(side: str, repeats: int = 3) -> float | None:
+    """The median CPU seconds (user + system) of a child process that only starts and imports what
+    ``side``'s run imports, in the environment its runs get; None when it cannot import them."""
+    from geocert.app.cli import worker_environment
+
+    env = worker_environment(dict(os.environ)) if side == "geocert" else dict(os.environ)
+    spent = []
+    for _ in range(repeats):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        done = subprocess.run([sys.executable, "-c", STARTUP_IMPORTS[side]], capture_output=True, env=env,
+                              cwd=Path(__file__).resolve().parents[1])
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if done.returncode != 0:
+            return None
+        spent.append(after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
+    return float(np.median(spent))
+
+
 def codes(warnings) -> list[str]:
     """A list of warnings as their codes (a warning is {"code": ..., ...} or a string)."""
     return [w.get("code", str(w)) if isinstance(w, dict) else str(w) for w in warnings or []]
@@ -218,7 +246,8 @@ def fmt(value, spec: str, missing: str = "-") -> str:
     return missing if value is None else format(value, spec)
 
 
-def row(set_key, order, run_name, total, figures, errors, cpu, wall, colmap_cpu, load, note="") -> str:
+def row(set_key, order, run_name, total, figures, errors, cpu, wall, colmap_cpu, load, note="",
+        startup: dict | None = None) -> str:
     if "error" in figures:
         return (f"| {set_key} | {order} | {run_name} | failed: {figures['error'][:120]} | | | | | | | | | "
                 f"{fmt(cpu, '.1f')} | {fmt(wall, '.1f')} | | {load:.1f} |")
@@ -243,6 +272,8 @@ def row(set_key, order, run_name, total, figures, errors, cpu, wall, colmap_cpu,
     elif figures.get("models"):
         claims = f"models {figures['models']}"
     ratio = f"{cpu / colmap_cpu:.2f}" if cpu is not None and colmap_cpu and run_name.startswith("geocert") else "-"
+    if ratio != "-" and startup and None not in (startup.get("geocert"), startup.get("colmap")):
+        ratio += f" ({(cpu - startup['geocert']) / (colmap_cpu - startup['colmap']):.2f} less start-up)"
     return (f"| {set_key} | {order} | {run_name} | {figures['registered']}/{total} | {rot} | {over} | {centre} | "
             f"{fmt(errors.get('focal_error_pct'), '+.1f')} | {fmt(errors.get('principal_point_error_px'), '.1f')} | "
             f"{fmt(figures.get('cameras_certified'), '.2f')} | {fmt(figures.get('points_certified'), '.3f')} | "
@@ -315,7 +346,8 @@ def bench_set(set_key: str, args, root: Path, records: list) -> None:
                 errors.update(on_colmaps_views(figures["cameras"], colmap.get("colmap"), truth))
             baseline = colmap.get("colmap-K" if run_name.startswith("geocert-K") and "colmap-K" in colmap else "colmap")
             print(row(set_key, label, run_name + (" (cached)" if run.get("cached") else ""), len(names), figures,
-                      errors, run.get("cpu_s"), run.get("wall_s"), (baseline or {}).get("cpu_s"), load, note),
+                      errors, run.get("cpu_s"), run.get("wall_s"), (baseline or {}).get("cpu_s"), load, note,
+                      args.startup),
                   flush=True)
             for failure in figures.get("failed") or []:
                 print(f"|  | | {run_name}: {failure[:300]} |" + " |" * 13, flush=True)
@@ -362,6 +394,9 @@ def main() -> None:
     print(f"data {root}; pycolmap {version}; {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f} at start, "
           f"machine speed {machine_speed_ms():.0f} ms (bench.machine_speed_ms); "
           f"geocert's BLAS threads (the workers' environment) {threads}; COLMAP every core; shuffled seed {args.seed}")
+    args.startup = {side: startup_cpu_s(side) for side in STARTUP_IMPORTS}
+    print("start-up CPU s (a child that only imports what a run imports; counted in each run's CPU): "
+          + ", ".join(f"{side} {fmt(s, '.2f', 'not measured')}" for side, s in args.startup.items()))
     print(HEADER, flush=True)
     records: list = []
     for set_key in args.sets.split(","):

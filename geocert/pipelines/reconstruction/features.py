@@ -382,10 +382,18 @@ def _match(desc_a: np.ndarray, desc_b: np.ndarray, options: FeatureOptions) -> n
     """Ratio-test (and mutual) matches as (m, 2) keypoint indices.
 
     Squared descriptor distances come from one matrix product (|a|^2 + |b|^2 - 2 a.b), which gives
-    both directions' nearest neighbours at once (brute force, exact as cv2.BFMatcher with NORM_L2)."""
+    both directions' nearest neighbours at once (brute force, exact as cv2.BFMatcher with NORM_L2,
+    which was 5 times slower here)."""
     if len(desc_a) < 2 or len(desc_b) < 2:
         return np.zeros((0, 2), dtype=np.int64)
-    return _ratio_matches(_squared_distances(desc_a, desc_b), options.ratio, options.mutual)
+    # A row's nearest and second-nearest columns do not depend on its own |a|^2: the matrix holds
+    # |b|^2 - 2 a.b, and |a|^2 is added to the two distances the ratio test reads (and to the
+    # columns the mutual test reads), two passes over the matrix fewer. Every term is an integer
+    # below 2^24 (see _squared_distances), so each distance is the same number either way.
+    a, b = desc_a.astype(np.float32, copy=False), desc_b.astype(np.float32, copy=False)
+    partial = a @ (-2.0 * b).T
+    partial += np.einsum("ij,ij->i", b, b)[None, :]
+    return _ratio_matches(partial, options.ratio, options.mutual, np.einsum("ij,ij->i", a, a))
 
 
 def _squared_distances(desc_a: np.ndarray, desc_b: np.ndarray) -> np.ndarray:
@@ -399,10 +407,11 @@ def _squared_distances(desc_a: np.ndarray, desc_b: np.ndarray) -> np.ndarray:
     return np.maximum(d2, 0.0, out=d2)
 
 
-def _ratio_matches(d2: np.ndarray, ratio: float, mutual: bool) -> np.ndarray:
+def _ratio_matches(d2: np.ndarray, ratio: float, mutual: bool, row_offset: np.ndarray | None = None) -> np.ndarray:
     """Each row's nearest column, kept when nearer than ``ratio`` times the second-nearest (a
     single column passes; an infinite distance, a pair not allowed, never does) and, with
-    ``mutual``, when the two are each other's nearest."""
+    ``mutual``, when the two are each other's nearest. ``row_offset``: when given, the squared
+    distances are ``d2 + row_offset[:, None]`` (d2 then a row's distances less a constant)."""
     # Minima and argmins along rows, and minima along columns, are single passes over d2 (an
     # argpartition, or an argmin down the columns, costs as much as the distances themselves).
     rows = np.arange(d2.shape[0])
@@ -414,6 +423,9 @@ def _ratio_matches(d2: np.ndarray, ratio: float, mutual: bool) -> np.ndarray:
         d2[rows, nearest] = d_first
     else:
         d_first, d_second = d2[:, 0], np.full(len(rows), np.inf)
+    if row_offset is not None:
+        d_first = np.maximum(d_first + row_offset, 0.0)
+        d_second = np.maximum(d_second + row_offset, 0.0)
     keep = np.isfinite(d_first) & (d_first < (ratio ** 2) * d_second)
     if mutual and keep.any():
         # Each other's nearest: the row is its column's nearest, the first of equals (np.argmin's
@@ -421,7 +433,10 @@ def _ratio_matches(d2: np.ndarray, ratio: float, mutual: bool) -> np.ndarray:
         # percent of them on real photos: a pass over d2's columns costs as much as the product).
         candidates = np.flatnonzero(keep)
         columns, which = np.unique(nearest[candidates], return_inverse=True)
-        first_row = np.argmin(d2[:, columns], axis=0)
+        read = d2[:, columns]
+        if row_offset is not None:
+            read += row_offset[:, None]
+        first_row = np.argmin(read, axis=0)
         keep[candidates] = first_row[which.ravel()] == candidates
     return np.c_[rows[keep], nearest[keep]].astype(np.int64)
 

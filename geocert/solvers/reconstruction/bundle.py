@@ -18,7 +18,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 from scipy.spatial.transform import Rotation
 
@@ -412,6 +411,8 @@ def _least_squares(K, rotations, translations, points, view, track, pixels, held
 
     x0 = np.concatenate([np.concatenate([np.r_[np.zeros(3), translations[v]] for v in free_cams])
                          if n_free else np.zeros(0), np.asarray(points).ravel()])
+    from scipy.optimize import least_squares  # here: the Schur path never imports scipy.optimize (about 0.15 s)
+
     result = least_squares(residuals, x0, jac=jacobian, loss=solver.loss, f_scale=solver.f_scale,
                            x_scale="jac", method="trf", tr_solver="lsmr", max_nfev=solver.max_nfev,
                            ftol=solver.ftol, xtol=1e-10, gtol=1e-10)
