@@ -41,8 +41,20 @@ Found (each test marked xfail below fails on main's verifier, a false claim acce
    a budget of 2.24 M units (about 2.7 s at the 1.2 us a unit stands for: plane_sublevel's
    measure), and the tie runs two fits. Fix: charge the pairs and observations each solve sums
    (strict.charge) before it, so a document pays for its fits by its size.
+4. The adjustment stage's K, which docs/certificate.md calls "certified, not informational: the
+   returned cameras' K when they share one", is only typed (reconstruction_stages._figure: a
+   calibration matrix with positive focal lengths): the stored run (six cameras sharing one K,
+   summary.calibration model shared) with the stage's K at ten times the focal length (7,970 px),
+   its principal point at u = -321 (outside the image), or a skew of 1.5 verifies. Cause: no
+   check reads the stage's K beside the cameras' (the autocalibration stage's is tied to the
+   calibration certificate; the adjustment's to nothing). Fix: where the registered cameras share
+   one K (the K each P fixes: intrinsics_of), require the stage's K to be it (calibration_claim
+   .same), else null or what the model leaves shared.
+5. An item's informational words, untyped: a reconstruction camera's ``reason`` 1 verifies, where
+   docs/certificate.md says every item's reason is "null or of its type" (a string). Fix: type it
+   with the cameras' other members (verify.notes).
 
-Tried and refused (plain tests below): the adjustment's stage critical_motion set to null beside
+Tried and refused (plain tests below): the autocalibration stage's critical_motion set to null beside
 the summary's (motion_claim judges it again); the bilinear certificates' duals made subnormal,
 scaled by 1e-300 or 1e300, an entry 1e308 or the smallest normal, nudged one ulp, zeros made -0.0:
 the numpy CSC path's verdict is scipy's on each (80 perturbations, none differing); the CSC product
@@ -204,7 +216,48 @@ def test_the_centred_fit_is_charged_for_the_pairs_it_sums():
     assert spent >= pairs, f"{spent} units charged for solves summing {pairs} pairs each"
 
 
-# 4. The bilinear verification on the numpy CSC: scipy's verdicts, hostile duals
+# 4. The adjustment stage's K, said certified, tied to nothing
+
+ADJUSTMENT_K_EDITS = {
+    "focal length times 10": lambda K: K[0].__setitem__(0, 10 * K[0][0]) or K[1].__setitem__(1, 10 * K[1][1]),
+    "principal point outside the image": lambda K: K[0].__setitem__(2, -321.0),
+    "skew": lambda K: K[0].__setitem__(1, 1.5),
+}
+
+
+def test_the_genuine_adjustment_k_is_the_cameras_shared_one():
+    """What docs/certificate.md says of the adjustment stage's K ("certified, not informational:
+    the returned cameras' K when they share one") holds of the genuine run: its cameras share one
+    K (summary.calibration's, model shared) and the stage states it."""
+    result = stored("reconstruction")
+    Ks = [c["K"] for c in result["cameras"] if c.get("registered")]
+    assert all(K == Ks[0] for K in Ks) and result["summary"]["calibration"]["model"] == "shared"
+    assert _stage(result, "bundle_adjustment")["K"] == Ks[0] == result["summary"]["calibration"]["K"]
+
+
+@pytest.mark.xfail(strict=True, reason="review 30 class 4: the adjustment stage's K is only typed "
+                                       "(reconstruction_stages._figure), never compared with the cameras'")
+@pytest.mark.parametrize("edit", list(ADJUSTMENT_K_EDITS))
+def test_the_adjustment_stages_k_edited_is_refused(edit):
+    result = stored("reconstruction")
+    ADJUSTMENT_K_EDITS[edit](_stage(result, "bundle_adjustment")["K"])
+    _refused(result)
+
+
+# 5. An item's informational words, untyped
+
+@pytest.mark.xfail(strict=True, reason="review 30 class 5: a reconstruction camera's reason is not typed (a number "
+                                       "verifies where its writer writes a string or null)")
+def test_a_cameras_reason_a_number_is_refused():
+    """docs/certificate.md: every item's ``reason`` is informational, "each must be null or of its
+    type" (a string); a camera's reason 1 verifies."""
+    result = stored("reconstruction")
+    assert result["cameras"][0]["reason"] is None
+    result["cameras"][0]["reason"] = 1
+    _refused(result)
+
+
+# 6. The bilinear verification on the numpy CSC: scipy's verdicts, hostile duals
 
 def _decoded(text: str) -> np.ndarray:
     return np.frombuffer(base64.b64decode(text), dtype="<f8").copy()
