@@ -63,6 +63,16 @@ Found (each test marked xfail below fails on main's verifier, a false claim acce
 5. An item's informational words, untyped: a reconstruction camera's ``reason`` 1 verifies, where
    docs/certificate.md says every item's reason is "null or of its type" (a string). Fix: type it
    with the cameras' other members (verify.notes).
+6. The per-view principal points' record says each view's estimated principal point lies in the
+   middle half of its image (inside_middle_half), and the verifier reads it as written
+   (reconstruction_members._check_principal_points_per_view): review 16's per-view run (each
+   view's principal point within 15 px of the centre of 640 px images) with its images restated
+   1,260 px wide (the cameras' image_size and the hashed input labels, rehashed; the calibration
+   certificate solved again at that size) verifies, three views' principal points (u 310.6 to
+   313.8) left of the middle half [315, 945], the record still saying inside, estimated (the
+   shared record's K_free, u 322, inside, agrees). Fix: judge it as _inside_middle_half does the
+   shared record's, from each returned camera's principal point (intrinsics_of(P)) and its view's
+   image size.
 
 Tried and refused (plain tests below): the autocalibration stage's critical_motion set to null beside
 the summary's (motion_claim judges it again); the bilinear certificates' duals made subnormal,
@@ -91,6 +101,7 @@ import pytest
 from geocert.verify.checks import verify_any
 from tests.support import stage as _stage
 from tests.verify.test_forgeries import raw_pack, stored
+from tests.verify.test_forgeries_review16 import per_view  # noqa: F401 (a fixture)
 from tests.verify.test_registration_record_form import off_centre  # noqa: F401 (a fixture)
 
 
@@ -356,7 +367,52 @@ def test_a_cameras_reason_a_number_is_refused():
     _refused(result)
 
 
-# 6. The bilinear verification on the numpy CSC: scipy's verdicts, hostile duals
+# 6. The per-view principal points' record: inside_middle_half read as written
+
+RESTATED_WIDTH = 1260.0  # middle half [315, 945]: the shared K_free's u (322) inside, three views' (310.6 to 313.8) not
+
+
+def _restated_wide(result: dict) -> dict:
+    """The per-view run with its images restated RESTATED_WIDTH wide (the cameras' image_size, the
+    hashed input labels, rehashed; the calibration certificate solved again on its data at that
+    size, as the tie asks its size be the views')."""
+    from tests.verify.test_forgeries import rehash
+
+    size = [RESTATED_WIDTH, 480.0]
+    data = copy.deepcopy(result["calibration_certificate"]["data"])
+    data["image_size"] = size
+    forged = _carrying(result, data)
+    for camera in forged["cameras"]:
+        camera["image_size"] = list(size)
+    labels = forged["certificate"]["data"]["input_labels"]
+    labels["image_sizes"] = [list(size) for _ in labels["image_sizes"]]
+    rehash(forged["certificate"])
+    return forged
+
+
+def test_some_views_principal_points_lie_past_the_restated_middle_half(per_view):  # noqa: F811
+    """The premise: the record says each view's principal point was estimated inside the middle
+    half; the returned cameras' (the K each P fixes) lie within 15 px of the 640 px images' centre,
+    three of them left of 315 (outside the middle half of 1,260 px images); the shared record's
+    K_free (u 322) stays inside it, as its inside_middle_half says."""
+    from geocert.verify.reconstruction_members import intrinsics_of
+
+    record = _stage(per_view, "bundle_adjustment")["principal_point_per_view"]
+    assert record["estimated"] is True and record["inside_middle_half"] is True
+    us = [intrinsics_of(c["P"])[0, 2] for c in per_view["cameras"] if c.get("registered")]
+    assert sum(abs(u - RESTATED_WIDTH / 2) > RESTATED_WIDTH / 4 for u in us) >= 3
+    assert all(abs(u - 320) <= 80 for u in us)
+    u_free = _stage(per_view, "bundle_adjustment")["principal_point"]["K_free"][0][2]
+    assert abs(u_free - RESTATED_WIDTH / 2) <= RESTATED_WIDTH / 4
+
+
+@pytest.mark.xfail(strict=True, reason="review 30 class 6: the per-view record's inside_middle_half is read as "
+                                       "written, never judged from the returned cameras and the views' images")
+def test_per_view_principal_points_outside_the_stated_middle_half_are_refused(per_view):  # noqa: F811
+    _refused(_restated_wide(per_view))
+
+
+# 7. The bilinear verification on the numpy CSC: scipy's verdicts, hostile duals
 
 def _decoded(text: str) -> np.ndarray:
     return np.frombuffer(base64.b64decode(text), dtype="<f8").copy()
