@@ -74,18 +74,25 @@ Found (each test marked xfail below fails on main's verifier, a false claim acce
    shared record's, from each returned camera's principal point (intrinsics_of(P)) and its view's
    image size.
 
-Tried and refused (plain tests below): the autocalibration stage's critical_motion set to null beside
-the summary's (motion_claim judges it again); the bilinear certificates' duals made subnormal,
+Tried and refused (plain tests below): the autocalibration stage's critical_motion set to null
+beside the summary's (motion_claim judges it again); the restated image size beside the
+adjustment's genuine K_free (class 1's control); the bilinear certificates' duals made subnormal,
 scaled by 1e-300 or 1e300, an entry 1e308 or the smallest normal, nudged one ulp, zeros made -0.0:
-the numpy CSC path's verdict is scipy's on each (80 perturbations, none differing); the CSC product
-itself against scipy's on entries holding inf, NaN, subnormals and -0.0, to the bit (NaN where
-scipy's is NaN). Read and judged sound (no test): direct_sublevel.check_views (each view's ends
-from its own forms over every view's program, its BMAX_i = |p_i2|^2, scope_range per view from the
-per-view focal rows, the verifier's cost_increase floor shared with the one-focal check);
-plane_sublevel's chirality blocks (CHIRALITY_PAIRS pairs at a time, a Python loop of
-rows / (65,536 / boxes) steps, charged ceil(boxes x rows / 64) units, within the charge's margin
-at any box count); the CSC's explicit zeros (counted by nnz as scipy's, read False by != 0, as
-scipy's pattern omits them from the product counts).
+the numpy CSC path's verdict is scipy's on each (80 random perturbations tried, none differing);
+their data's coordinates made -0.0, subnormal or 1e300, the basis scaled by 1e-300 (rehashed):
+refused alike on both paths; the CSC product itself against scipy's on entries holding inf, NaN,
+subnormals and -0.0, to the bit (NaN where scipy's is NaN).
+
+Read and judged sound (no test): direct_sublevel.check_views (each view's ends from its own forms
+over every view's program, BMAX_i = |p_i2|^2, the scope's range per view from the per-view focal
+rows, the cost_increase floor shared with the one-focal check; a program of the stored 12-view
+document, 2,841 rows charged, builds and bounds in about 19 ms, its dual vector alone some 3,700
+size units); plane_sublevel's chirality blocks (CHIRALITY_PAIRS pairs at a time, rows / (65,536 /
+boxes) steps, charged ceil(boxes x rows / 64) units); the CSC's explicit zeros (counted by nnz as
+scipy's, read False by != 0); a member name repeated (strict.load_document refuses it).
+Accepted and read as documented (no test): the stage figures docs/certificate.md calls
+informational (RMS values, thresholds, linear_K, focal_rounds, rotation_noise_rad) edited; an
+autocalibration stage's certificate summary or determinacy null (the brief detail, not hashed).
 """
 
 from __future__ import annotations
@@ -467,6 +474,43 @@ def test_the_numpy_csc_verdict_is_scipys_on_hostile_duals(monkeypatch, name, how
     assert numpy_report.valid == scipy_report.valid, (numpy_report.first_failure, scipy_report.first_failure)
     if how in ("one subnormal", "scaled 1e-300"):
         assert not numpy_report.valid  # a subnormal entry proves nothing (strict.dual_vector)
+
+
+DATA_EDITS = ["a coordinate -0.0", "a coordinate subnormal", "a coordinate 1e300", "a basis entry subnormal",
+              "basis entries -0.0", "the basis scaled by 1e-300"]
+
+
+@pytest.mark.parametrize("name", ["bilinear_l2l2", "bilinear_l1l1"])
+@pytest.mark.parametrize("how", DATA_EDITS)
+def test_the_numpy_csc_verdict_is_scipys_on_hostile_data(monkeypatch, name, how):
+    """The data edited (and rehashed, as a forger would): each is refused, on core.csc's matrix
+    as on scipy's (the relaxations are built from the data: a product of a subnormal or -0.0
+    coordinate, or a basis scaled to nothing, reads alike in both)."""
+    import scipy.sparse as sp
+
+    import geocert.verify.bilinear as verify_bilinear
+    from tests.verify.test_forgeries import rehash
+
+    document = stored(name)
+    data = document["certificate"]["data"]
+    if how == "a coordinate -0.0":
+        data["frames"][0]["points"][0][0] = -0.0
+    elif how == "a coordinate subnormal":
+        data["frames"][0]["points"][0][0] = 5e-324
+    elif how == "a coordinate 1e300":
+        data["frames"][0]["points"][0][0] = 1e300
+    elif how == "a basis entry subnormal":
+        data["basis"][0][0][0] = 5e-324
+    elif how == "basis entries -0.0":
+        data["basis"][0][0][0] = data["basis"][1][1][1] = -0.0
+    else:
+        data["basis"] = (np.asarray(data["basis"]) * 1e-300).tolist()
+    rehash(document["certificate"])
+    numpy_report = _verify(document)
+    monkeypatch.setattr(verify_bilinear, "CscMatrix", sp.csc_matrix)
+    scipy_report = _verify(document)
+    assert not numpy_report.valid and not scipy_report.valid
+    assert numpy_report.first_failure["check"] == scipy_report.first_failure["check"]
 
 
 def test_the_csc_product_is_scipys_on_nonfinite_and_subnormal_entries():
