@@ -45,12 +45,11 @@ Found (each test marked xfail below fails on main's verifier, a false claim acce
    the document's work budget, charges nothing for its up to SOLVES (45) solves, each summing a
    block for every pair of observations of a point (up to MAX_PAIRS, 100,000) and a dense system
    of 6 * views + 3 unknowns (views up to MAX_VIEWS, 100). Measured on a synthetic scene of 100
-   views, 1,000 points seen 10 times (10,000 observations, 100,000 pairs) run inside a budget of
-   10 units: 3.7 s of CPU at 0.5 px noise (converged), 12.8 s at 50 px (declined after its
-   solves), load average about 8 on 2 cores; the document holding it is some 60,000 size units,
-   a budget of 2.24 M units (about 2.7 s at the 1.2 us a unit stands for: plane_sublevel's
-   measure), and the tie runs two fits. Fix: charge the pairs and observations each solve sums
-   (strict.charge) before it, so a document pays for its fits by its size.
+   views, 1,000 points seen 10 times (10,000 observations, 100,000 pairs), one fit run inside a
+   budget of 10 units: 3.3 to 3.7 s of CPU at 0.5 px noise (converged), 12.0 to 12.8 s at 50 px
+   (declined after its solves), two runs each, load average 7.4 to 8.4 on 2 cores; none of it
+   drawn from the budget, and the tie may run two fits. Fix: charge the pairs and observations
+   each solve sums (strict.charge) before it, so a document pays for its fits by its size.
 4. The adjustment stage's K, which docs/certificate.md calls "certified, not informational: the
    returned cameras' K when they share one", is only typed (reconstruction_stages._figure: a
    calibration matrix with positive focal lengths): the stored run (six cameras sharing one K,
