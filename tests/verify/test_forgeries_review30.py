@@ -36,8 +36,8 @@ Found (each test marked xfail below fails on main's verifier, a false claim acce
    gone), its reason null; the adjustment's principal-point record null (and with it the
    report's "unchecked" sentence about it: the record's figures vanish from the scope); the
    adjustment's starts emptied and rms_px_after null; the registration's focal_rounds and
-   rms_reprojection_px null. Cause: COMPLETE lists names, and no check reads null as "the writer
-   had nothing to state" only where it can. Fix: type each member as its writer writes it on the
+   rms_reprojection_px null. Cause: COMPLETE lists names, and null is taken wherever a member is,
+   not only where its writer writes null. Fix: type each member as its writer writes it on the
    stage's path (lists stay lists; the warnings tied to critical_motion; a record where the
    options ask for the test is a record, not null).
 3. The verifier's own re-adjustment is not charged (cost): centred_fit.fit_with_intrinsics, run
