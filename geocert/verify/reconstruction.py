@@ -753,6 +753,33 @@ def _check_unstated_calibration(result: dict, registered: list[dict], summary: d
                                                                           for k in Ks])
 
 
+def _check_adjusted_K(result: dict, registered: list[dict]) -> None:
+    """The adjustment stage's K is the K it returns (pipeline: metric.K when the stage ends, which
+    the summary's calibration K restates, claims.calibration_claim): where the registered cameras
+    share one K (the K each P fixes, which their K is: _check_camera_fields), the stage's K is it;
+    where they do not (a focal length or principal point per view), it is summary/calibration's K,
+    which _check_calibration ties to theirs. A stage not done (stopped, skipped) is held to it
+    where it states one (what the stop kept is what it had adjusted). A result without
+    summary/calibration (an earlier form) is held to the cameras' shared K only."""
+    stage = _stage(result, "bundle_adjustment")
+    if stage.get("K") is None:
+        return
+    where = "stages/bundle_adjustment/K"
+    K = numbers(stage["K"], where, (3, 3), "returned")
+    Ks = [numbers(camera["K"], f"cameras/{camera['view']}/K", (3, 3), "returned") for camera in registered]
+    if Ks and all(calibration_claim.same(k, Ks[0]) for k in Ks[1:]):
+        if not calibration_claim.same(K, Ks[0]):
+            raise Invalid("returned", f"{where} is not the K the registered cameras share (each camera's P fixes "
+                                      "it): the stage's K is the one it returned")
+        return
+    claim = result["summary"].get("calibration")
+    stated = claim.get("K") if isinstance(claim, dict) else None
+    if stated is not None and not calibration_claim.same(K, numbers(stated, "summary/calibration/K", (3, 3),
+                                                                      "returned")):
+        raise Invalid("returned", f"{where} is not summary/calibration/K, the K the adjustment returned (the "
+                                  "registered cameras do not share one)")
+
+
 def _built_with_one_K(result: dict, stage: dict) -> bool:
     """Whether the calibration certificate's projective cameras (read and checked by
     _proven_calibration) are all K [R | t] for one K, as the autocalibration stage's
@@ -1271,6 +1298,7 @@ class ReconstructionItems(TrackItems, Verification):
         check_statuses(result)  # each stage's status against what it produced, and the job's stop
         _check_distortion(result, registered, own)
         _check_calibration(result, registered, verify, recorded)
+        _check_adjusted_K(result, registered)
         scoped = {"labels": labels}
         records = [name for name in ("projective", "bundle_adjustment")
                    if isinstance(_stage(result, name).get("principal_point"), dict)]

@@ -389,8 +389,6 @@ def test_the_genuine_adjustment_k_is_the_cameras_shared_one():
     assert _stage(result, "bundle_adjustment")["K"] == Ks[0] == result["summary"]["calibration"]["K"]
 
 
-@pytest.mark.xfail(strict=True, reason="review 30 class 4: the adjustment stage's K is only typed "
-                                       "(reconstruction_stages._figure), never compared with the cameras'")
 @pytest.mark.parametrize("edit", list(ADJUSTMENT_K_EDITS))
 def test_the_adjustment_stages_k_edited_is_refused(edit):
     result = stored("reconstruction")
