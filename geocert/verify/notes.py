@@ -4,7 +4,7 @@ string)", never a boolean where a number stands (JSON readers take true for 1 in
 This module types those a result carries beside its items' own notes (verify._check_item_notes):
 every determinacy estimate's members (proven and proven_intervals are read against the proof
 elsewhere: fractional._check_proven, verify._check_estimates), the stats' times, and a reconstruction
-camera's bound_reason (camera_misfit's diagnosis, in words)."""
+camera's words: its reason and bound_reason (camera_misfit's diagnosis)."""
 
 from __future__ import annotations
 
@@ -18,6 +18,8 @@ DETERMINACY = {"method": "text", "level": "text", "cost_increase": "number", "re
 INTERVAL = {"name": "text", "value": "number", "lower": "number", "upper": "number", "tolerance": "number"}
 WARNING = dict(code="text", detail="text")  # (not {"code": ...}: the warning-code scan reads that form)
 STATS_TIMES = ("solve_s", "elapsed_s")
+# A reconstruction camera's words: why it is not registered or certified, and its bound's diagnosis
+CAMERA_WORDS = ("reason", "bound_reason")
 # Members holding a certificate or its summary: read by the proof checks, not here.
 CERTIFICATES = ("certificate", "camera_certificate", "calibration_certificate")
 
@@ -31,8 +33,9 @@ def check_notes(result: dict) -> None:
             if name in stats:
                 _typed(stats[name], f"stats/{name}", "number")
     for index, camera in enumerate(result.get("cameras") or [] if isinstance(result.get("cameras"), list) else []):
-        if isinstance(camera, dict) and "bound_reason" in camera:
-            _typed(camera["bound_reason"], f"cameras/{index}/bound_reason", "text")
+        for name in CAMERA_WORDS:  # (kinds.reconstruction._camera: a string or null, each)
+            if isinstance(camera, dict) and name in camera:
+                _typed(camera[name], f"cameras/{index}/{name}", "text")
 
 
 def _check_determinacies(value: Any, where: str) -> None:

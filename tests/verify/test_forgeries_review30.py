@@ -398,8 +398,6 @@ def test_the_adjustment_stages_k_edited_is_refused(edit):
 
 # 5. An item's informational words, untyped
 
-@pytest.mark.xfail(strict=True, reason="review 30 class 5: a reconstruction camera's reason is not typed (a number "
-                                       "verifies where its writer writes a string or null)")
 def test_a_cameras_reason_a_number_is_refused():
     """docs/certificate.md: every item's ``reason`` is informational, "each must be null or of its
     type" (a string); a camera's reason 1 verifies."""
