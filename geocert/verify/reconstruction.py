@@ -1261,6 +1261,7 @@ class ReconstructionItems(TrackItems, Verification):
         certificate's problem_sha256 covers (verify._check_hashes found it so), which tell the
         form, and so what a document of that form states (hashed_options.states_...)."""
         from geocert.verify.reconstruction_stages import check_stages
+        from geocert.verify import reconstruction_members
         from geocert.verify.reconstruction_members import check_members
         from geocert.verify.reconstruction_statuses import check_statuses
 
@@ -1305,9 +1306,14 @@ class ReconstructionItems(TrackItems, Verification):
         if records:  # the test's fits are the pipeline's: the calibration tie reads none of their figures
             scoped["principal_point_records"] = (
                 f"unchecked: the principal-point records of the {' and '.join(records)} stage(s) state the "
-                "pipeline's figures (observations, chi2), which the verifier does not replay: the count is "
-                "what both of the test's fits kept, and its free fit rejects its own outliers; their shape and "
-                "agreement with themselves are checked, and no room the verifier grants follows from them")
+                "pipeline's figures (observations, chi2, and K_free, the free fit's K, with the inside_middle_half "
+                "read off it), which the verifier does not replay: the count is what both of the test's fits kept, "
+                "and its free fit rejects its own outliers; their shape, their ranges (a chi2 at least 0, K_free a "
+                "calibration matrix whose focal lengths lie within "
+                f"{reconstruction_members.K_FREE_FOCAL[0]:g} to {reconstruction_members.K_FREE_FOCAL[1]:g} times the "
+                "images' larger side) and their agreement with themselves are checked; where the adjustment's "
+                "record says estimated, the middle half is judged from the returned cameras' principal points (the "
+                "K each P fixes), not from K_free; and no room the verifier grants follows from them")
         posed = sum(1 for camera in registered if camera.get("R") is not None)
         if result["summary"].get("depth_reversal") is None and posed >= 2 \
                 and not hashed_options.states_depth_reversal(hashed):

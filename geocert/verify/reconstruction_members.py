@@ -13,6 +13,7 @@ stage). Each may be null where the stage has none, as a figure may."""
 from __future__ import annotations
 
 import math
+import sys
 from typing import Any
 
 import numpy as np
@@ -287,6 +288,8 @@ def _check_principal_point(stage: dict, name: str = "bundle_adjustment", result:
         raise Invalid("returned", f"{where}/inside_middle_half is {test.get('inside_middle_half')!r:.20}, and the free "
                                   f"fit's principal point (K_free) lies {'inside' if inside else 'outside'} the middle "
                                   "half of the views' image")
+    if name == "bundle_adjustment" and test.get("estimated") is True:
+        _check_estimated_inside(result, where)
     if test.get("estimated") is not True and is_number(chi2) and chi2 > threshold \
             and test.get("inside_middle_half") is True:
         raise Invalid("returned", f"{where}/estimated is {test.get('estimated')!r:.20}, and its test passes (chi2 "
@@ -329,10 +332,16 @@ def _check_record_shape(test: Any, where: str, result: dict | None) -> None:
         _fail(f"{where}/observations", "a count", observations)
     if not isinstance(test["estimated"], bool):
         _fail(f"{where}/estimated", "true or false", test["estimated"])
+    _check_free_K(K_free, f"{where}/K_free", result)
     if members == RECORD_RAN:
         if not (is_number(test["chi2"]) and isinstance(test["inside_middle_half"], bool)):
             raise Invalid("returned", f"{where}: a test that ran states its chi2 (a number) and inside_middle_half "
                                       "(true or false)")
+        chi2 = test["chi2"]
+        if chi2 < 0 or 0 < chi2 < sys.float_info.min:
+            raise Invalid("returned", f"{where}/chi2 is {chi2!r:.30}: the test's statistic is what freeing the "
+                                      "principal point saves, at least 0 (pipeline._saved_variances), and a normal "
+                                      "float where it is not 0")
         if observations < MIN_TEST_OBSERVATIONS:
             raise Invalid("returned", f"{where}/observations is {observations}: the test is made on at least "
                                       f"{MIN_TEST_OBSERVATIONS} observations, and this record says it ran")
@@ -349,6 +358,78 @@ def _check_record_shape(test: Any, where: str, result: dict | None) -> None:
                                       f"{MIN_TEST_OBSERVATIONS}, and with at most {views} views and {tracks} points "
                                       f"the free fit leaves at least {fewest_dof} residual degrees of freedom (the "
                                       "test runs then)")
+
+
+# The free fit's focal lengths (pixels), relative to the larger side of the views' one image size:
+# from a field of view of about 180 degrees to about 0.06 degrees. No adjustment of a registration
+# the pipeline accepts ends outside (calibrated.MAX_FOCAL_SCALE holds the registration's focal
+# length within 10 times its prior, the image's size); a K_free outside states no fit.
+K_FREE_FOCAL = (1e-2, 1e3)
+
+
+def _check_free_K(K_free: list, where: str, result: dict | None) -> None:
+    """K_free is a calibration matrix (reconstruction_stages.FIGURES: 3x3, upper triangular, bottom
+    row [0, 0, 1]) whose focal lengths are normal floats within K_FREE_FOCAL of the larger side
+    of the views' one image size (where the result states one)."""
+    focals = (K_free[0][0], K_free[1][1])
+    if not (K_free[1][0] == K_free[2][0] == K_free[2][1] == 0 and K_free[2][2] == 1
+            and all(f >= sys.float_info.min for f in focals)):
+        _fail(where, "a calibration matrix (upper triangular, bottom row [0, 0, 1], focal lengths normal floats "
+                     "above 0)", K_free)
+    size = _one_image_size(result)
+    if size is not None:
+        side = max(size)
+        low, high = K_FREE_FOCAL[0] * side, K_FREE_FOCAL[1] * side
+        if not all(low <= f <= high for f in focals):
+            raise Invalid("returned", f"{where} has focal lengths {[float(f) for f in focals]!r:.60}: a free fit of "
+                                      f"views {size[0]:g} x {size[1]:g} px ends within {low:g} to {high:g} px")
+
+
+def _one_image_size(result: dict | None) -> tuple | None:
+    """The one image size (width, height) the registered cameras state, None where they state
+    several or none."""
+    sizes = {tuple(camera["image_size"]) for camera in (result or {}).get("cameras") or []
+             if isinstance(camera, dict) and camera.get("registered") is True
+             and isinstance(camera.get("image_size"), list) and len(camera["image_size"]) == 2
+             and all(is_number(x) and x > 0 for x in camera["image_size"])}
+    return next(iter(sizes)) if len(sizes) == 1 else None
+
+
+def _in_middle_half(u: float, v: float, width: float, height: float) -> bool:
+    """_principal_point's test of the middle half (the same float operations)."""
+    return bool(abs(u - width / 2) <= width / 4 and abs(v - height / 2) <= height / 4)
+
+
+def _returned_outside_middle_half(result: dict) -> list:
+    """The registered cameras whose principal point (the K their P fixes: intrinsics_of) lies
+    outside the middle half of their own image (image_size): (view, [u, v], image_size) each."""
+    outside = []
+    for camera in result.get("cameras") or []:
+        if not (isinstance(camera, dict) and camera.get("registered") is True and camera.get("P") is not None):
+            continue
+        size = camera.get("image_size")
+        if not (isinstance(size, list) and len(size) == 2 and all(is_number(x) for x in size)):
+            continue
+        K = intrinsics_of(camera["P"])
+        if not _in_middle_half(float(K[0, 2]), float(K[1, 2]), size[0], size[1]):
+            outside.append((camera.get("view"), [round(float(K[0, 2]), 3), round(float(K[1, 2]), 3)], size))
+    return outside
+
+
+def _check_estimated_inside(result: dict | None, where: str) -> None:
+    """A principal point the adjustment estimated (its record says so) is the returned cameras':
+    each lies in the middle half of its image, as its test asked of the fit it kept. Judged from
+    the cameras (each P's K), not from the record's own figures (K_free, inside_middle_half), which
+    the verifier does not replay: a K_free moved inside the middle half beside images restated
+    smaller stood for cameras whose principal point lay outside it."""
+    if not isinstance(result, dict):
+        return
+    outside = _returned_outside_middle_half(result)
+    if outside:
+        view, point, size = outside[0]
+        raise Invalid("returned", f"{where}/estimated is true, and camera {view}'s principal point {point} (the K its "
+                                  f"P fixes) lies outside the middle half of its {size[0]:g} x {size[1]:g} px image: "
+                                  "the test keeps an estimate only inside it")
 
 
 def _inside_middle_half(K_free: Any, result: dict | None) -> bool | None:

@@ -152,8 +152,6 @@ RECORD_EDITS = {
 }
 
 
-@pytest.mark.xfail(strict=True, reason="review 30 class 1: K_free and the chi2's sign are neither checked nor "
-                                       "named unchecked in the report's scope")
 @pytest.mark.parametrize("edit", list(RECORD_EDITS))
 def test_a_record_figure_edited_is_refused_or_named_unchecked(edit):
     """Accepted only with the scope's sentence naming the figure edited among the pipeline's,
@@ -247,8 +245,6 @@ def test_the_restated_size_beside_the_genuine_adjustment_record_is_refused(off_c
     _refused(_resized_centred_forgery(off_centre, K_free_inside=False), "estimated is true")
 
 
-@pytest.mark.xfail(strict=True, reason="review 30 class 1: the adjustment record's K_free, unchecked, lets the "
-                                       "centred room stand beside cameras estimated outside the middle half")
 def test_the_restated_size_beside_k_free_moved_inside_is_refused(off_centre):  # noqa: F811
     _refused(_resized_centred_forgery(off_centre, K_free_inside=True))
 
@@ -446,10 +442,10 @@ def test_some_views_principal_points_lie_past_the_restated_middle_half(per_view)
     assert abs(u_free - RESTATED_WIDTH / 2) <= RESTATED_WIDTH / 4
 
 
-@pytest.mark.xfail(strict=True, reason="review 30 class 6: the per-view record's inside_middle_half is read as "
-                                       "written, never judged from the returned cameras and the views' images")
 def test_per_view_principal_points_outside_the_stated_middle_half_are_refused(per_view):  # noqa: F811
-    _refused(_restated_wide(per_view))
+    """Refused by the shared record's check (class 1): it says estimated, and the returned cameras'
+    principal points (here each view's own) are judged against the restated middle half."""
+    _refused(_restated_wide(per_view), "principal_point/estimated is true")
 
 
 # 7. The bilinear verification on the numpy CSC: scipy's verdicts, hostile duals

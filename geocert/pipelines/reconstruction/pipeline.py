@@ -16,6 +16,7 @@ cameras)."""
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass, field, replace
 
@@ -589,6 +590,10 @@ def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray
     statistic, _ = _saved_variances(metric, trial, obs, common, 3)  # the free fit's f and principal point
     if np.isnan(statistic):
         return metric, keep, {**figures, "reason": "too few observations to test"}
+    # The free model nests the held one: a local fit ending above it on the common observations
+    # saved nothing (0, never a negative or subnormal statistic, which the verifier refuses as
+    # written by no fit). The decision is unchanged: the threshold is positive.
+    statistic = statistic if statistic >= sys.float_info.min else 0.0
     u, v = trial.K[0, 2], trial.K[1, 2]
     inside = abs(u - image_size[0] / 2) <= image_size[0] / 4 and abs(v - image_size[1] / 2) <= image_size[1] / 4
     figures.update(chi2=float(statistic), threshold=PRINCIPAL_POINT_CHI2, inside_middle_half=bool(inside))
