@@ -751,7 +751,8 @@ def _check_focals_per_view(result: dict, stage: dict) -> None:
 def _check_principal_points_per_view(result: dict, stage: dict) -> None:
     """_principal_points_per_view's test (options.principal_point "per_view"): a principal point
     per view is kept (``estimated``) only when its chi-square passes its threshold, every view's
-    lies in the middle half of its image, and the data fix each to MAX_PRINCIPAL_POINT_SD_PX
+    lies in the middle half of its image (judged from each returned camera's, the K its P fixes,
+    not read from inside_middle_half), and the data fix each to MAX_PRINCIPAL_POINT_SD_PX
     (``precise``, every sd_px at most it), in the simple model; and the cameras returned (their
     P) have principal points of their own exactly when it was kept, after a simple-model
     adjustment (the other models share theirs, or set them from the image: "varying")."""
@@ -781,6 +782,7 @@ def _check_principal_points_per_view(result: dict, stage: dict) -> None:
                                       f"most max_sd_px {MAX_PRINCIPAL_POINT_SD_PX}, precise, the simple model, "
                                       "options.principal_point "
                                       "per_view)")
+        _check_estimated_inside(result, where)
     if stage.get("model") != "simple":
         return
     Ks = [intrinsics_of(camera["P"]) for camera in result.get("cameras") or []

@@ -448,6 +448,15 @@ def test_per_view_principal_points_outside_the_stated_middle_half_are_refused(pe
     _refused(_restated_wide(per_view), "principal_point/estimated is true")
 
 
+def test_per_view_principal_points_outside_the_middle_half_beside_a_shared_record_not_estimated(per_view):  # noqa: F811
+    """The same forgery with the shared record's chi2 (the pipeline's, unchecked) edited below its
+    threshold and estimated false: only the per-view record then says estimated, and its
+    inside_middle_half is judged from each returned camera's principal point and its image."""
+    forged = _restated_wide(per_view)
+    _stage(forged, "bundle_adjustment")["principal_point"].update(chi2=5.0, estimated=False)
+    _refused(forged, "principal_point_per_view/estimated is true")
+
+
 # 7. The bilinear verification on the numpy CSC: scipy's verdicts, hostile duals
 
 def _decoded(text: str) -> np.ndarray:
