@@ -347,8 +347,6 @@ def _ring_scene(views: int, points: int, seen: int, noise: float, seed: int = 0)
     return P, X, np.array(view), np.array(point), np.array(uv)
 
 
-@pytest.mark.xfail(strict=True, reason="review 30 class 3: centred_fit's solves are not charged to the document's "
-                                       "work budget")
 def test_the_centred_fit_is_charged_for_the_pairs_it_sums():
     """Within a verification's budget, the fit pays at least a unit for each pair of observations
     of a point its solves sum (each solve sums all of them), before summing them."""
@@ -364,6 +362,20 @@ def test_the_centred_fit_is_charged_for_the_pairs_it_sums():
         spent = budget - strict._WORK.get()[0]
     assert fitted is not None  # the fit ran (converged): what it summed was paid for
     assert spent >= pairs, f"{spent} units charged for solves summing {pairs} pairs each"
+
+
+def test_a_centred_fit_its_budget_cannot_pay_declines():
+    """A budget too small for one solve: the fit declines (None: the tie then holds the certificate
+    to the returned cameras, stricter) and charges nothing it did not run, refusing nothing."""
+    from geocert.solvers.core import strict
+    from geocert.solvers.reconstruction import centred_fit
+
+    P, X, view, point, uv = _ring_scene(views=20, points=300, seen=6, noise=0.5)
+    assert centred_fit.fit_with_intrinsics(P, None, X, view, point, uv) is not None  # unbudgeted, it converges
+    budget = int(np.sum(np.bincount(point) ** 2))  # less than a solve's pairs and observations
+    with strict.work_budget(budget):
+        assert centred_fit.fit_with_intrinsics(P, None, X, view, point, uv) is None
+        assert 0 <= strict._WORK.get()[0] <= budget
 
 
 # 4. The adjustment stage's K, said certified, tied to nothing

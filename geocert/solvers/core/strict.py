@@ -243,6 +243,20 @@ def charge(units: int, what: str) -> None:
                                 f"{WORK_PER_UNIT} units of work per unit of size, plus {WORK_BASE:,}")
 
 
+def afford(units: int) -> bool:
+    """Pay for ``units`` of work where the budget left pays for them (True, charged), else
+    charge nothing and return False: for work a check may decline, with a stricter reading,
+    rather than refuse the document (calibration_tie's re-adjustment, centred_fit). Outside a
+    verification's budget, True."""
+    left = _WORK.get()
+    if left is None:
+        return True
+    if left[0] < units:
+        return False
+    left[0] -= units
+    return True
+
+
 def record(value: Any, where: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict:
     """An object with the ``required`` keys and perhaps the ``optional`` ones, no other: a field no
     check reads is not a place to hide what a reader might take for part of the proof."""

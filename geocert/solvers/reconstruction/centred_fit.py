@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from geocert.solvers.core import strict
+
 ITERATIONS = 30  # Levenberg-Marquardt steps at most (the synthetic scene's 60 px shift converges in 6)
 CHUNK = 200_000  # observation pairs per block of the points' Schur complement (memory: CHUNK * 81 floats at most)
 # The verifier's cost bound: each solve is a dense system of 6 * views + 1 unknowns and sums a
@@ -33,6 +35,12 @@ CHUNK = 200_000  # observation pairs per block of the points' Schur complement (
 # these sizes, or SOLVES solves, fit() declines (None) and the tie holds the certificate to the
 # returned cameras, as it did before this fit (stricter). At 300 views and 5 million pairs one fit
 # took 171 s (a document of 16,500 observations; up to 76 solves of about 30 s each allowed).
+# Inside a verification, each solve is paid for from the document's work budget before it runs
+# (strict.afford): a unit for each pair of observations of a point it sums and each observation
+# (solve_units; the system's build, once an iteration, a unit an observation), so the fits a
+# document asks for are paid by its size (a fit of 100,000 pairs took 3 to 13 s of CPU uncharged:
+# review 30). A budget that cannot pay declines the fit (None), as the bounds above do: the tie
+# then holds the certificate to the returned cameras (stricter), and no document is refused for it.
 MAX_VIEWS = 100
 MAX_PAIRS = 100_000
 SOLVES = 45  # the off-centre synthetic runs' fits take 6
@@ -124,6 +132,7 @@ def fit_with_intrinsics(P: np.ndarray, centres: np.ndarray | None, X: np.ndarray
                               np.tile(6 * n_views + np.arange(shared), (len(view), 1))], axis=1)
     pairs = _pairs(point, n_points)
     n = 6 * n_views + shared
+    solve_units = sum(len(k) for k, _ in pairs) + len(view)
 
     def system(Rs, ts, f, X):
         """The normal equations at (Rs, ts, f, X): the cameras' block H and gradient g, each
@@ -174,10 +183,12 @@ def fit_with_intrinsics(P: np.ndarray, centres: np.ndarray | None, X: np.ndarray
     current, lam, converged, solves = cost(Rs, ts, f, X), 1e-3, False, 0
     try:
         for _ in range(ITERATIONS):
+            if not strict.afford(len(view)):
+                return None
             normal = system(Rs, ts, f, X)
             while True:
                 solves += 1
-                if solves > SOLVES:
+                if solves > SOLVES or not strict.afford(solve_units):
                     return None
                 dc, dX = solve(*normal, lam)
                 dcam = dc[:-shared].reshape(n_views, 6)
@@ -201,6 +212,8 @@ def fit_with_intrinsics(P: np.ndarray, centres: np.ndarray | None, X: np.ndarray
         # decrease alone is not that (a step damped short, or a direction frozen, decreases little
         # far from any minimum), and a cost not at a minimum overstates the model's.
         if converged and np.isfinite(current):
+            if not strict.afford(len(view) + solve_units):
+                return None
             H, g, Vp, gp, W = system(Rs, ts, f, X)
             dc, dX = solve(H, g, Vp, gp, W, STATIONARY_DAMPING)
             predicted = -(float(g @ dc) + float(np.sum(gp[used] * dX[used])))
