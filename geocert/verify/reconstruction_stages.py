@@ -159,11 +159,57 @@ def _written(stage: dict, cameras: list, options: dict) -> tuple[str, ...]:
 
 
 def _check_written(stage: dict, cameras: list, options: dict) -> None:
-    missing = [member for member in _written(stage, cameras, options) if member not in stage]
+    written = _written(stage, cameras, options)
+    missing = [member for member in written if member not in stage]
     if missing:
         raise Invalid("returned", f"{_where(stage['name'], missing[0])} is left out: the stage's writer states it on "
                                   f"a stage {stage.get('status')!r:.20} (null where it has none), so a record "
                                   "without it is not its writer's")
+    _check_written_content(stage, written)
+
+
+# What a done stage's writer writes on its path, not only that it writes it (present but null or
+# emptied, each verified: review 30): the adjustment's figures (pipeline: stage.update after
+# adjust_best, or the calibrated path's one adjustment: each a number or a K), its trials (one a
+# start, adjust_best) and its principal point's record where the options ask for the test; the
+# incremental registration's focal rounds (a list, pipeline._incremental) and its RMS; the motion's
+# judgement: a critical motion named beside its warning (claims.judge_motion: judged["motion_warnings"]
+# holds it, the stage's reason says it).
+DONE_NOT_NULL = {
+    "bundle_adjustment": ("started_from", "model", "rms_px_before", "rms_px_after", "K", "observations_kept"),
+    "autocalibration": ("method", "stages", "certified", "intrinsics", "points_used"),
+    "structure": ("tracks", "points", "points_dropped", "observations_removed", "certified"),
+    "cameras": ("cameras", "certified", "claim"),
+}
+INCREMENTAL_NOT_NULL = ("focal_rounds", "views_registered", "observations", "observations_kept", "rms_reprojection_px")
+
+
+def _check_written_content(stage: dict, written: tuple) -> None:
+    name, done = stage["name"], stage.get("status") == "done"
+    if done:
+        must = DONE_NOT_NULL.get(name, ())
+        if name == "projective" and "focal_rounds" in written:  # the incremental path (INCREMENTAL_WRITTEN)
+            must = INCREMENTAL_NOT_NULL
+        nulled = [member for member in must if member in stage and stage[member] is None]
+        if nulled:
+            raise Invalid("returned", f"{_where(name, nulled[0])} is null on a stage done: its writer states it on "
+                                      "that path")
+        if name == "bundle_adjustment" and "starts" in written and not stage.get("starts"):
+            raise Invalid("returned", f"{_where(name, 'starts')} is {stage.get('starts')!r:.20}: the adjustment "
+                                      "states a trial for every start it had (adjust_best), at least one")
+        if name == "bundle_adjustment" and "principal_point" in written and not isinstance(stage["principal_point"],
+                                                                                            dict):
+            raise Invalid("returned", f"{_where(name, 'principal_point')} is null: the options and the views' one "
+                                      "image size ask for the principal point's test, and its writer states its record")
+    if name == "autocalibration" and stage.get("critical_motion") is not None and "critical_motion" in written:
+        critical, warnings = stage["critical_motion"], stage.get("motion_warnings")
+        if not (isinstance(warnings, list) and any(isinstance(w, dict) and w.get("code") == critical
+                                                   for w in warnings)):
+            raise Invalid("returned", f"{_where(name, 'motion_warnings')} holds no {critical!r:.40} warning beside "
+                                      "the critical_motion stated: the motion's judgement writes both")
+        if not (isinstance(stage.get("reason"), str) and stage["reason"]):
+            raise Invalid("returned", f"{_where(name, 'reason')} is {stage.get('reason')!r:.20} beside the critical "
+                                      "motion stated: the motion's judgement says it in the stage's reason")
 
 
 # The stages' figures the verifier reads nowhere else: informational (they describe the run, a

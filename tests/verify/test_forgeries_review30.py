@@ -268,8 +268,6 @@ def test_the_genuine_stages_state_what_is_nulled_below():
     assert result["summary"]["critical_motion"] == "critical_motion"
 
 
-@pytest.mark.xfail(strict=True, reason="review 30 class 2: check_complete asks a member's presence; a done "
-                                       "stage's member nulled or emptied verifies")
 @pytest.mark.parametrize("name, member, value", NULLED, ids=[f"{n}/{m}={v!r}" for n, m, v in NULLED])
 def test_a_done_stages_member_nulled_or_emptied_is_refused(name, member, value):
     result = stored("reconstruction")
@@ -295,8 +293,6 @@ TODAYS_NULLED = [("bundle_adjustment", "principal_point", None), ("bundle_adjust
                  ("bundle_adjustment", "rms_px_after", None)]
 
 
-@pytest.mark.xfail(strict=True, reason="review 30 class 2: on today's form too, the adjustment's record nulled "
-                                       "(the registration's is refused) or its figures emptied verify")
 @pytest.mark.parametrize("name, member, value", TODAYS_NULLED, ids=[f"{n}/{m}={v!r}" for n, m, v in TODAYS_NULLED])
 def test_todays_form_with_a_done_stages_member_nulled_is_refused(centred_today, name, member, value):
     result = copy.deepcopy(centred_today)
