@@ -690,8 +690,10 @@ def check_members(kind, result: dict) -> None:
 # written, null before a stage finds it; ``Ks`` only with varying focal lengths, ``status`` and
 # ``reason`` not by the earlier form's writer), core.certificates' summaries. Every format-2
 # document stored in tests/data/certificates has them. A reconstruction's result and stats are
-# complete here (kinds.reconstruction: run's item, assemble), its cameras, points and stage
-# records by its own checks (verify.reconstruction*: CAMERA_WRITTEN, reconstruction_stages._written).
+# complete here (kinds.reconstruction: run's item, assemble), and its summary's times
+# (claims.summarise: each stage's elapsed_s and cpu_s, written since before any stored form), its
+# cameras, points and stage records by its own checks (verify.reconstruction*: CAMERA_WRITTEN,
+# reconstruction_stages._written), its summary's calibration model by _check_calibration.
 _ITEM = ("cost", "lower_bound", "gap", "status", "certified", "nodes", "elapsed_s", "reason")
 _STATS = ("items", "certified", "nodes", "solve_s", "elapsed_s", "statuses")
 _MAP = (("", ("kind", "norm", "maps", "stats")), ("maps", _ITEM + ("matrix", "residuals")), ("stats", _STATS))
@@ -707,7 +709,7 @@ COMPLETE: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
                         ("stages", _ITEM + ("name",)), ("stats", _STATS)),
     # its items (cameras, points) and stage records by its own checks (verify.reconstruction*)
     "reconstruction": (("", ("kind", "norm", "cameras", "points", "stages", "summary", "images", "stats")),
-                       ("stats", _STATS)),
+                       ("summary", ("time_s", "cpu_s")), ("stats", _STATS)),
 }
 # An item's ``certificate`` (its summary) is required where it is certified (below); an
 # autocalibration stage's too unless it never started (kinds.autocalibration.cancelled_item writes

@@ -558,6 +558,9 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
     if not isinstance(claim, dict):
         raise Invalid("returned", "summary/calibration must be an object")
     where = "summary/calibration"
+    if recorded and "model" not in claim:  # the first form of the claim (before the varying model) had none: read as shared
+        raise Invalid("returned", f"{where} leaves out its member 'model', which a document of this form states "
+                                  "(claims.summarise)")
     Ks = [numbers(camera["K"], f"cameras/{camera['view']}/K", (3, 3), "returned") for camera in registered]
     K = None if claim.get("K") is None else numbers(claim["K"], f"{where}/K", (3, 3), "returned")
     certified, model = claim.get("certified"), claim.get("model", "shared")

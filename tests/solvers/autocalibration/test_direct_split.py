@@ -152,3 +152,63 @@ def test_a_split_that_lowers_the_bound_is_not_kept(monkeypatch):
     stage = direct_solve.solve_direct(setup, options, True)
     assert stage.lower_bound == 1.0 and not stage.certified and stage.rank == 2
     assert [p.get("cuts") for p in stage.proof["programs"]] == [None]
+
+
+def test_an_unclean_half_bounded_above_the_best_quadric_does_not_stop_the_certificate(monkeypatch):
+    """A half whose solve ended unclean still bounds (its safe bound holds for any dual vector, and
+    the verifier recomputes it): above the best quadric's cost, that half holds no quadric as good,
+    and the splitting certifies at its other half. Root: clean, bound 1.0, rank 2, the best
+    quadric 1.5. Its halves: one clean, rank one, at 1.5 - 1e-6 (tight), one not clean at 2.0.
+    Seed 1008 (varying focal) took this path with one OpenBLAS thread (its last half "Stalled" at
+    1.4e-3 against the best 4.64e-4) and certified only where that half ended "Solved"."""
+    orientation = direct.Orientation(None, None, None)
+    setup = direct.DirectSetup(None, np.eye(4), np.zeros((1, 3, 4)), [orientation], [])
+    z = np.zeros(3)
+
+    from geocert.solvers.core.conic import ConicStatus
+
+    def fake_leaf(setup, options, order, orientation, cuts, check=None):
+        if not cuts:
+            status, bound, rank = ConicStatus.OPTIMAL, 1.0, 2
+        elif cuts[-1][2] == 1:
+            status, bound, rank = ConicStatus.OPTIMAL, 1.5 - 1e-6, 1
+        else:
+            status, bound, rank = ConicStatus.INACCURATE, 2.0, 3
+        return direct_solve.Leaf(orientation, cuts, None, status, np.zeros(3), z, "fake", bound, (rank, 0.5, None))
+
+    monkeypatch.setattr(direct_solve, "_solve_leaf", fake_leaf)
+    monkeypatch.setattr(direct_solve, "split_of", lambda leaf: (0, 0.0))
+    monkeypatch.setattr(direct_solve, "candidates", lambda *args, **kwargs: [np.eye(4)])
+    monkeypatch.setattr(direct_relaxation, "cost", lambda cameras, Q: 1.5)
+    options = SimpleNamespace(relaxation_order=2, metric_rel_gap=1e-4, abs_gap=1e-12)
+    stage = direct_solve.solve_direct(setup, options, True)
+    assert stage.certified and stage.lower_bound == 1.5 - 1e-6 and stage.rank == 1
+    assert [p.get("cuts") for p in stage.proof["programs"]] == [[[0, 0.0, 1]], [[0, 0.0, -1]]]
+
+
+def test_an_unclean_half_bounded_below_the_best_quadric_still_stops_it(monkeypatch):
+    """The control: the unclean half's bound 1.4, below the best quadric's 1.5 (it may hold a
+    better one): not certified, the root kept."""
+    orientation = direct.Orientation(None, None, None)
+    setup = direct.DirectSetup(None, np.eye(4), np.zeros((1, 3, 4)), [orientation], [])
+    z = np.zeros(3)
+
+    from geocert.solvers.core.conic import ConicStatus
+
+    def fake_leaf(setup, options, order, orientation, cuts, check=None):
+        if not cuts:
+            status, bound, rank = ConicStatus.OPTIMAL, 1.0, 2
+        elif cuts[-1][2] == 1:
+            status, bound, rank = ConicStatus.OPTIMAL, 1.5 - 1e-6, 1
+        else:
+            status, bound, rank = ConicStatus.INACCURATE, 1.4, 3
+        return direct_solve.Leaf(orientation, cuts, None, status, np.zeros(3), z, "fake", bound, (rank, 0.5, None))
+
+    monkeypatch.setattr(direct_solve, "_solve_leaf", fake_leaf)
+    monkeypatch.setattr(direct_solve, "split_of", lambda leaf: (0, 0.0))
+    monkeypatch.setattr(direct_solve, "candidates", lambda *args, **kwargs: [np.eye(4)])
+    monkeypatch.setattr(direct_relaxation, "cost", lambda cameras, Q: 1.5)
+    options = SimpleNamespace(relaxation_order=2, metric_rel_gap=1e-4, abs_gap=1e-12)
+    stage = direct_solve.solve_direct(setup, options, True)
+    assert not stage.certified and stage.lower_bound == 1.0
+    assert [p.get("cuts") for p in stage.proof["programs"]] == [None]
