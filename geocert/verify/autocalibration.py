@@ -580,10 +580,7 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
     for name, value in expected.items():
         if not _derived_close(name, result.get(name), value, cameras, points, H):
             raise Invalid("returned", f"{name} is not what the quadric gives")
-    if options.get("varying_focal"):
-        _check_direct_views_proven(result["stages"][0], claim, len(cameras))
-    else:
-        _check_direct_proven(result["stages"][0], claim, len(cameras))
+    _check_direct_proven(result["stages"][0], claim, len(cameras), per_view=bool(options.get("varying_focal")))
     if result.get("Ks") is None:  # one K
         estimates.check_intrinsics(result["stages"][0].get("determinacy"), result.get("K"), "stages/0/determinacy")
         estimates.check_redundancy(result["stages"][0].get("determinacy"), 5 * len(cameras) - 10,
@@ -593,37 +590,23 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
     estimates.check_contains(result["stages"][0].get("determinacy"), "stages/0/determinacy")
 
 
-def _check_direct_proven(stage: dict, claim: dict, views: int) -> None:
-    """A direct stage's determinacy saying proven states exactly its proof's sublevel interval
-    (direct_sublevel.check checked it: the claim is certified, so its proof was checked), at no
-    lower a cost increase than direct_sublevel.cost_increase gives for the stage's cost and bound."""
+def _check_direct_proven(stage: dict, claim: dict, views: int, per_view: bool) -> None:
+    """A direct stage's determinacy saying proven states exactly its proof's sublevel interval, or
+    with varying focal lengths its intervals focal[0] .. focal[m-1] (direct_sublevel.check or
+    check_views checked them: the claim is certified, so its proof was checked), at no lower a
+    cost increase than direct_sublevel.cost_increase gives for the stage's cost and bound."""
     from geocert.solvers.autocalibration import direct_sublevel
 
-    expected = _stated_proven(stage, claim, "stages/0", "direct", direct_sublevel.proven_document)
+    reader = direct_sublevel.proven_views_document if per_view else direct_sublevel.proven_document
+    expected = _stated_proven(stage, claim, "stages/0", "direct", reader)
     if expected is None:
         return
     cost, lower = stage.get("cost"), stage.get("lower_bound")
     if isinstance(cost, (int, float)) and isinstance(lower, (int, float)):
         least = direct_sublevel.cost_increase(float(cost), float(lower), views)
         if not expected["cost_increase"] >= least * (1 - 1e-9):
-            raise Invalid("returned", f"stages/0/determinacy: the proven interval's cost_increase is below "
-                                      f"{least!r} (direct_sublevel.cost_increase: a lower level proves a smaller set)")
-
-
-def _check_direct_views_proven(stage: dict, claim: dict, views: int) -> None:
-    """A varying-focal direct stage's determinacy saying proven states exactly its proof's
-    sublevel intervals, focal[0] .. focal[m-1] (direct_sublevel.check_views checked them), at no
-    lower a cost increase than direct_sublevel.cost_increase gives (as _check_direct_proven)."""
-    from geocert.solvers.autocalibration import direct_sublevel
-
-    expected = _stated_proven(stage, claim, "stages/0", "direct", direct_sublevel.proven_views_document)
-    if expected is None:
-        return
-    cost, lower = stage.get("cost"), stage.get("lower_bound")
-    if isinstance(cost, (int, float)) and isinstance(lower, (int, float)):
-        least = direct_sublevel.cost_increase(float(cost), float(lower), views)
-        if not expected["cost_increase"] >= least * (1 - 1e-9):
-            raise Invalid("returned", f"stages/0/determinacy: the proven intervals' cost_increase is below "
+            what = "intervals'" if per_view else "interval's"
+            raise Invalid("returned", f"stages/0/determinacy: the proven {what} cost_increase is below "
                                       f"{least!r} (direct_sublevel.cost_increase: a lower level proves a smaller set)")
 
 
