@@ -21,7 +21,7 @@ import numpy as np
 from geocert.solvers.core.geometry import is_number
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.reconstruction.camera_claim import (FOCAL_P, MAX_FOCAL_SD_FRACTION, MAX_PRINCIPAL_POINT_SD_PX,
-                                                          PRINCIPAL_POINT_CHI2, PRINCIPAL_POINT_P)
+                                                          PRINCIPAL_POINT_CHI2, PRINCIPAL_POINT_P, in_middle_half)
 from geocert.verify.reconstruction_stages import MAX_FIGURE, _values
 
 # How calibrated.py registers a view (registered_by's words); adjust_best's starts; the models the
@@ -395,11 +395,6 @@ def _one_image_size(result: dict | None) -> tuple | None:
     return next(iter(sizes)) if len(sizes) == 1 else None
 
 
-def _in_middle_half(u: float, v: float, width: float, height: float) -> bool:
-    """_principal_point's test of the middle half (the same float operations)."""
-    return bool(abs(u - width / 2) <= width / 4 and abs(v - height / 2) <= height / 4)
-
-
 def _returned_outside_middle_half(result: dict) -> list:
     """The registered cameras whose principal point (the K their P fixes: intrinsics_of) lies
     outside the middle half of their own image (image_size): (view, [u, v], image_size) each."""
@@ -411,7 +406,7 @@ def _returned_outside_middle_half(result: dict) -> list:
         if not (isinstance(size, list) and len(size) == 2 and all(is_number(x) for x in size)):
             continue
         K = intrinsics_of(camera["P"])
-        if not _in_middle_half(float(K[0, 2]), float(K[1, 2]), size[0], size[1]):
+        if not in_middle_half(float(K[0, 2]), float(K[1, 2]), size[0], size[1]):
             outside.append((camera.get("view"), [round(float(K[0, 2]), 3), round(float(K[1, 2]), 3)], size))
     return outside
 
@@ -446,8 +441,7 @@ def _inside_middle_half(K_free: Any, result: dict | None) -> bool | None:
     if len(sizes) != 1:
         return None
     (width, height), = sizes
-    u, v = K_free[0][2], K_free[1][2]
-    return bool(abs(u - width / 2) <= width / 4 and abs(v - height / 2) <= height / 4)
+    return in_middle_half(K_free[0][2], K_free[1][2], width, height)
 
 
 def intrinsics_of(P: Any) -> np.ndarray:

@@ -595,7 +595,7 @@ def _principal_point(metric: upgrade.Metric, obs: Observations, keep: np.ndarray
     # written by no fit). The decision is unchanged: the threshold is positive.
     statistic = statistic if statistic >= sys.float_info.min else 0.0
     u, v = trial.K[0, 2], trial.K[1, 2]
-    inside = abs(u - image_size[0] / 2) <= image_size[0] / 4 and abs(v - image_size[1] / 2) <= image_size[1] / 4
+    inside = camera_claim.in_middle_half(u, v, image_size[0], image_size[1])
     figures.update(chi2=float(statistic), threshold=PRINCIPAL_POINT_CHI2, inside_middle_half=bool(inside))
     if statistic > PRINCIPAL_POINT_CHI2 and inside:
         figures["estimated"] = True

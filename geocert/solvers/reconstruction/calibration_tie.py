@@ -87,7 +87,7 @@ import math
 import numpy as np
 
 from geocert.solvers.core.strict import Invalid, numbers
-from geocert.solvers.reconstruction import centred_fit
+from geocert.solvers.reconstruction import camera_claim, centred_fit
 from geocert.solvers.reconstruction.calibration_claim import BUILT_WITH_ONE_K, camera_intrinsics
 
 TIE_RATIO, TIE_OBSERVATIONS = 10.0, 12
@@ -591,8 +591,7 @@ def _outside_middle_half(result: dict, views: list, principal: np.ndarray) -> bo
     if len(sizes) != 1:
         return False
     (width, height), = sizes
-    u, v = float(principal[0]), float(principal[1])
-    return not (abs(u - width / 2) <= width / 4 and abs(v - height / 2) <= height / 4)
+    return not camera_claim.in_middle_half(float(principal[0]), float(principal[1]), width, height)
 
 
 def _centred_reference(result: dict, views: list, cameras: np.ndarray, at: tuple[list, list]

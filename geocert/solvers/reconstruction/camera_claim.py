@@ -74,6 +74,13 @@ MAX_FOCAL_SD_FRACTION = 0.01
 # quantile for its 2 parameters at 0.999; the per-view principal points' level; the focal length
 # test's level (its screen's over the views, Bonferroni's, and its chi-square's).
 PRINCIPAL_POINT_CHI2 = 13.8
+
+
+def in_middle_half(u: float, v: float, width: float, height: float) -> bool:
+    """Whether a principal point (u, v) lies in the middle half of a width x height image, the
+    registration's and the adjustment's test keeps an estimate only there (|u - w/2| <= w/4 and
+    |v - h/2| <= h/4); the pipeline and the verifier judge it with these same float operations."""
+    return bool(abs(u - width / 2) <= width / 4 and abs(v - height / 2) <= height / 4)
 # The radial term k1's chi-square quantile for its 1 parameter at 0.999 (the pipeline's
 # _radial_test with K unknown and _fixed_radial_test with K known; the verifier reads a K-known
 # term's test against it).
