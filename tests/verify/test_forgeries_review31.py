@@ -19,6 +19,9 @@ Found (each test marked xfail below fails on main's verifier):
    rows" on Prescott. Every test reading these documents as genuine fails on such a machine
    (tests/verify/test_forgery_properties.py's fixture among them), and so would the verifier on a
    client's: the promise is that a third party checks a certificate, not the machine that wrote it.
+   Not the stored documents' age: today's centred synthetic run solved on Prescott is refused on
+   Haswell (claims 1.75e-31, recomputed 1.19e-31) and solved on Haswell refused on Prescott; the
+   off-centre and per-view runs solved on this machine's own kernel are refused on Prescott.
 2. The summary's time_s and cpu_s, which docs/certificate.md says "restate the stages' own", are
    checked only where each is an object and names the stage: either one a string, true, -1, 1e300,
    a list, null or {} (every stage left out), or a stage's entry deleted, verifies on the stored
@@ -69,6 +72,19 @@ false claim. The stages' and summary's every member of the stored reconstruction
 null, a string, true, [], {}, 1e300, -1, 5e-324, -0.0, 0 or deleted (274 paths, 11 ways): besides
 classes 2 and 3, only figures docs/certificate.md calls informational (RMS values, thresholds,
 the registration's focal rounds and initial pair search, nodes, times) verified edited.
+
+Also tried, nothing accepted: every stage, the summary and a camera given a member they lack
+(null, 1.0, an object, a string, []): only null for optional members (focal_per_view,
+radial_distortion, summary.distortion); the calibration, camera and point certificates of one run
+swapped into another (the stored, per-view and off-centre runs into today's centred one), two
+points' certificates swapped: refused. 1,500 random float edits each of the off-centre and per-view
+runs (rehashed): accepted only edits within tolerance (data points moved 1e-7, rehashed), a
+sublevel's cost_increase lowered to 0 (a weaker claim), -0.0 and subnormal skews, and the
+per-view record's chi2 (named unchecked); a calibration region's ``unit`` moved 5% was accepted
+once and is not judged here.
+
+Not done: the direct method's per-view proven intervals were not attacked beyond review 30's
+reading (the fixture's solve ran past 25 minutes of CPU at load 10 to 13 and was stopped).
 
 Read and judged sound (no test): calibration_tie._centred_reference's reference when a fit
 declines (the returned cameras, with no model misfit: the tie as before the centred reading),
