@@ -454,7 +454,10 @@ def _registration_principal_point(metric: upgrade.Metric, obs: Observations, opt
     that model dropped) put its fit farther from the model's least-squares fit than the verifier's
     tie allows (114 px off centre on the synthetic scene: 3,323 px^2 against 2,899). Built at the
     estimated principal point, they fit the tracks as the returned cameras do, and the tie holds
-    them to those. Returns the reconstruction kept and the test's figures (None: not tested). The
+    them to those. Where the free fit lies outside the middle half the cameras stay at the centre,
+and with camera_model "full" (whose adjustment keeps the observations the centred model misfits)
+they are that model's least-squares fit (_centred_least_squares). Returns the reconstruction kept
+and the test's figures (None: not tested). The
     "principal" fit goes with the radial figures (RIVAL_FIT) for the adjustment's own test to reuse."""
     sizes = {tuple(size) for size in image_sizes}
     # (without the adjustment the returned cameras are the certified upgrade's with the model's K,
