@@ -455,10 +455,10 @@ def _registration_principal_point(metric: upgrade.Metric, obs: Observations, opt
     tie allows (114 px off centre on the synthetic scene: 3,323 px^2 against 2,899). Built at the
     estimated principal point, they fit the tracks as the returned cameras do, and the tie holds
     them to those. Where the free fit lies outside the middle half the cameras stay at the centre,
-and with camera_model "full" (whose adjustment keeps the observations the centred model misfits)
-they are that model's least-squares fit (_centred_least_squares). Returns the reconstruction kept
-and the test's figures (None: not tested). The
-    "principal" fit goes with the radial figures (RIVAL_FIT) for the adjustment's own test to reuse."""
+    and with camera_model "full" (whose adjustment keeps the observations the centred model
+    misfits) they are that model's least-squares fit (_centred_least_squares). Returns the
+    reconstruction kept and the test's figures (None: not tested). The "principal" fit goes with
+    the radial figures (RIVAL_FIT) for the adjustment's own test to reuse."""
     sizes = {tuple(size) for size in image_sizes}
     # (without the adjustment the returned cameras are the certified upgrade's with the model's K,
     # the principal point at the centre when "simple": poses found at another would not fit it)
@@ -490,12 +490,16 @@ def _centred_least_squares(metric: upgrade.Metric, obs: Observations, keep: np.n
     the centred model misfits beyond the threshold dropped, which the full model keeps) lay 4.2 to
     7.1 px from it on the synthetic scene's off-centre runs, against 3.8 allowed; this fit lies
     within 0.001 px of it there. The verifier is unchanged: a certificate gets no more room than
-    before. The robust fit is kept where this one is not finite."""
+    before. A point the free fit keeps fewer than 2 observations of is not moved (one observation
+    leaves it free), and the robust fit is kept where this one is not finite."""
     views = np.array([v for v, R in enumerate(metric.rotations) if R is not None])
-    points = np.flatnonzero(np.isfinite(metric.points[:, 0]))
-    vindex, pindex = -np.ones(len(metric.rotations), dtype=int), -np.ones(len(metric.points), dtype=int)
-    vindex[views], pindex[points] = np.arange(len(views)), np.arange(len(points))
-    use = np.flatnonzero(keep & (vindex[obs.view] >= 0) & (pindex[obs.track] >= 0))
+    vindex = -np.ones(len(metric.rotations), dtype=int)
+    vindex[views] = np.arange(len(views))
+    seen = keep & (vindex[obs.view] >= 0) & np.isfinite(metric.points[obs.track, 0])
+    points = np.flatnonzero(np.bincount(obs.track[seen], minlength=len(metric.points)) >= 2)
+    pindex = -np.ones(len(metric.points), dtype=int)
+    pindex[points] = np.arange(len(points))
+    use = np.flatnonzero(seen & (pindex[obs.track] >= 0))
     if len(use) == 0:
         return metric
     K, R, t, X, _, _ = bundle.metric(metric.K, np.array([metric.rotations[v] for v in views]),
