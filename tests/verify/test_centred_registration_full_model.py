@@ -89,3 +89,18 @@ def test_a_certificate_reposed_at_another_focal_length_on_the_new_path_is_refuse
     report = verify_any(json.loads(json.dumps(carrying(result, _reposed(result, K)))))
     assert not report.valid, "a certificate re-posed at another focal length was accepted"
     assert "calibration certificate" in report.first_failure["detail"], report.first_failure
+
+
+@pytest.mark.slow
+def test_the_certificate_the_pipeline_does_not_carry_is_one_the_verifier_refuses(monkeypatch):
+    """The claim withdrawn above ((-200, +20), 600 tracks) is not a certificate the verifier would
+    have accepted: carried anyway (pipeline._untie_centred_misfit made a no-op), the same document
+    is refused by the tie's test of the other tracks, the words the stage's reason quotes."""
+    from geocert.pipelines.reconstruction import pipeline
+
+    monkeypatch.setattr(pipeline, "_untie_centred_misfit", lambda *args: None)
+    result = solve_job(_scene_job({"camera_model": "full"}, points=600, shift=np.tile((-200.0, 20.0), (8, 1))))
+    assert _stage(result, "autocalibration")["certified"] is True
+    report = verify_any(json.loads(json.dumps(result)))
+    assert not report.valid
+    assert "placed points it holds no point for" in report.first_failure["detail"], report.first_failure
