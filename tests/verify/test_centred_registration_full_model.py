@@ -18,9 +18,10 @@ misfits beyond the threshold dropped):
 Fixed at the producer (pipeline._centred_least_squares): on this path the registration's cameras
 are adjusted again in the centred model by plain least squares on the observations the free fit
 keeps, so the certificate is the verifier's reference to 0.001 px. The verifier is unchanged, so a
-certificate gets no more room than before: a certificate re-posed at another focal length ties
-over the same focal lengths as on main's code (the (+161, 0) run: about 860 to 1,020 px either
-way). Where the certificate holds part of the tracks (600 tracks, 300 held) and the centred model's
+certificate gets no more room than before: the returned reconstruction and the tie's allowance are
+the same as before the fix (the (+161, 0) run: 5,953.47 px^2 allowed, the centred model 5,682.57),
+and a certificate re-posed at another focal length ties over the same focal lengths (about 860 to
+1,020 px, both measured). Where the certificate holds part of the tracks (600 tracks, 300 held) and the centred model's
 misfit on the others exceeds what the tie's ratio carries over to them ((-200, +20): 10,070 px^2,
 8,959 allowed), the pipeline asks the tie itself and carries no certificate, saying why
 (pipeline._untie_centred_misfit): the run verifies with its K returned, not certified."""
@@ -75,9 +76,9 @@ def test_a_certificate_reposed_at_another_focal_length_on_the_new_path_is_refuse
     """The forgery the least-squares registration invites: the (+161, 0) run's genuine certificate
     verifies (refused before), and a genuine calibration certificate of its reconstruction re-posed
     at the centre with the certified focal length times ``focal`` (every camera and point adjusted to
-    the result's observations with that K held) is refused by the tie's fit test, as on main's
-    verifier (the same allowance, 5,953 px^2: re-posed from about 0.93 to 1.09 times it ties, as
-    there; docs/certificate.md)."""
+    the result's observations with that K held) is refused by the tie's fit test, as before the fix
+    (the same allowance, 5,953 px^2: re-posed from about 0.93 to 1.09 times it ties, as it did
+    before; docs/certificate.md)."""
     from tests.verify.test_calibration_tie import carrying
     from tests.verify.test_forgeries_review18 import _reposed
 
