@@ -190,7 +190,7 @@ class _ByCamera:
         for i, (b, e) in enumerate(zip(self.bounds[:-1], self.bounds[1:])):
             np.matmul(gathered[b * r:e * r], mats[i], out=out[b * r:e * r])
         scattered = np.empty((M, r, mats.shape[-1]))
-        scattered[self.order] = out.reshape(M, r, -1)
+        scattered[self.order] = out.reshape(M, r, mats.shape[-1])
         return scattered
 
     def camera_frame(self, R: np.ndarray, Am: np.ndarray, Bm: np.ndarray) -> np.ndarray:
@@ -486,7 +486,7 @@ def _left_times(F: np.ndarray, x: np.ndarray) -> np.ndarray:
     """F @ x[m] for one matrix F (r, k) and x (M, k, l): (M, r, l), as (x^T F^T)^T, one product
     over every row (numpy's stacked product makes one BLAS call per observation)."""
     M, k, l = x.shape
-    return (x.transpose(0, 2, 1).reshape(-1, k) @ F.T).reshape(M, l, -1).transpose(0, 2, 1)
+    return (x.transpose(0, 2, 1).reshape(-1, k) @ F.T).reshape(M, l, F.shape[0]).transpose(0, 2, 1)
 
 
 def _crossed(x: np.ndarray, a: np.ndarray) -> np.ndarray:
