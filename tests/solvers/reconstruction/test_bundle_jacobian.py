@@ -153,3 +153,69 @@ def test_held_cameras_and_least_squares_need_each_views_own_K():
         bundle.adjust(K[0], R, t, X, view, track, pixels, bundle.Free("fixed", held=np.arange(5) == 0))
     with pytest.raises(ValueError):
         bundle.adjust(K[0], R, t, X, view, track, pixels, bundle.Free("fixed"), bundle.LeastSquares(max_nfev=5))
+
+
+def _shuffled_scene(seed: int):
+    """Five cameras, the second seeing nothing, 25 points; the observations in a random order, so
+    each camera's are scattered among the others'."""
+    rng = np.random.default_rng(seed)
+    views, points = 5, 25
+    R = Rotation.random(views, random_state=seed + 1).as_matrix()
+    t = rng.normal(size=(views, 3)) * 0.3 + [0.0, 0.0, 8.0]
+    X = rng.normal(size=(points, 3))
+    seen = np.array([0, 2, 3, 4])
+    order = rng.permutation(len(seen) * points)
+    view, track = np.repeat(seen, points)[order], np.tile(np.arange(points), len(seen))[order]
+    return rng, R, t, X, view, track
+
+
+def test_products_by_camera_are_each_observations_own():
+    """bundle._ByCamera.times (each camera's observations in one matrix product) and
+    bundle._left_times (one matrix for all) equal numpy's product per observation, with the
+    observations in any order and a camera without any."""
+    rng, R, t, X, view, track = _shuffled_scene(6)
+    cameras = bundle._ByCamera(view)
+    mats = rng.normal(size=(len(cameras.rows), 3, 4))
+    x = rng.normal(size=(len(view), 2, 3))
+    expected = x @ mats[np.searchsorted(view[cameras.rows], view)]
+    assert np.abs(cameras.times(x, mats) - expected).max() <= 1e-12 * np.abs(expected).max()
+    F = rng.normal(size=(2, 2))
+    y = rng.normal(size=(len(view), 2, 3))
+    assert np.abs(bundle._left_times(F, y) - F @ y).max() <= 1e-12 * np.abs(F @ y).max()
+    rotations = cameras.rotations(np.hstack([Rotation.from_matrix(R).as_rotvec(), t])[view])
+    assert np.abs(rotations - R[view[cameras.rows]]).max() <= 1e-12
+
+
+@pytest.mark.parametrize("model", bundle.MODELS + ("given", "focal_scale"))
+def test_the_jacobian_in_any_observation_order_is_the_residuals_derivative(model, monkeypatch):
+    """The Jacobians' products by camera (bundle._ByCamera) put each observation's rows back in its
+    place: with the observations shuffled and a camera unobserved, every model's analytic Jacobian
+    (the shared K's and each view's own) is still the central differences'."""
+    rng, R, t, X, view, track = _shuffled_scene(7)
+    own = model in ("given", "focal_scale")
+    K = np.array([[800.0, 2.0, 320.0], [0.0, 790.0, 240.0], [0.0, 0.0, 1.0]])
+    if own:
+        K = np.array([K + [[10.0 * v, 0, v], [0, 10.0 * v, -v], [0, 0, 0]] for v in range(len(R))])
+    pixels = rng.uniform(0, 600, (len(view), 2))
+    compared = []
+    solve = schur.solve
+
+    def compare(residual, A, S, B, view, track, *args, jacobian=None, **kwargs):
+        analytic = jacobian(A[view], S, B[track])
+        numeric = schur._jacobians(residual, A, S, B, view, track)
+        for a, n in zip(analytic, numeric):
+            assert a.shape == n.shape
+            if n.size:
+                assert np.abs(a - n).max() <= 1e-6 * np.abs(n).max()
+        compared.append(model)
+        return solve(residual, A, S, B, view, track, *args, jacobian=jacobian, **kwargs)
+
+    monkeypatch.setattr(schur, "solve", compare)
+    if own:
+        bundle.adjust(K, R, t, X, view, track, pixels, bundle.Free(model), bundle.Schur(max_iterations=1))
+    else:
+        focals = np.array([800.0, 805.0, 810.0, 790.0, 805.0]) if model in ("varying", "focal_groups") else None
+        groups = np.array([0, 1, 0, 2, 2]) if model == "focal_groups" else None
+        bundle.metric(K, R, t, X, view, track, pixels, max_iterations=1, model=model, k1=0.05, focals=focals,
+                      groups=groups)
+    assert compared == [model]
