@@ -105,56 +105,35 @@ def build(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray, cap: float, cap_ro
     n = 6 + 3 * m
     V, R, E, S = slice(0, 3), 3, 4, 5
     T, Fv, Gv = 6 + np.arange(m), 6 + m + np.arange(m), 6 + 2 * m + np.arange(m)
-    capacity = 6 + len(setup.rows_a) + 12 + m * 40  # enough: at most ~14 envelope rows a view
-    A_rows = np.zeros((capacity, n))
-    rhs = np.zeros(capacity)
-    count = 0
-
-    def le(coeffs: dict, v_coeffs: np.ndarray | None, bound: float) -> None:
-        """sum coeffs[i] x_i + v_coeffs . v <= bound."""
-        nonlocal A_rows, rhs, count
-        if count == len(rhs):
-            A_rows = np.vstack([A_rows, np.zeros_like(A_rows)])
-            rhs = np.concatenate([rhs, np.zeros_like(rhs)])
-        row = A_rows[count]
-        for i, c in coeffs.items():
-            row[i] += c
-        if v_coeffs is not None:
-            row[V] += v_coeffs
-        rhs[count] = bound
-        count += 1
-
-    for k in range(3):
-        e = np.zeros(3)
-        e[k] = 1.0
-        le({}, e, hi[k])
-        le({}, -e, -lo[k])
-    for a, b in zip(setup.rows_a, setup.rows_b):
-        le({}, -a, b)
-
-    def cube_root_rows(var: int, F: np.ndarray, xl: float, xu: float) -> None:
-        for slope, icpt in envelopes.cbrt_over(xl, xu):  # y <= slope x + icpt
-            le({var: 1.0}, -slope * F[:3], slope * F[3] + icpt)
-        for slope, icpt in envelopes.cbrt_under(xl, xu):  # y >= slope x + icpt
-            le({var: -1.0}, slope * F[:3], -slope * F[3] - icpt)
-
-    def product_rows(z: int, y: int, F: np.ndarray, yl, yu, xl, xu) -> None:
-        """z = y * x(v), x = F . (v, 1): McCormick with y in [yl, yu], x in [xl, xu]."""
-        under, over = envelopes.mccormick(yl, yu, xl, xu)
-        for cy, cx, c0 in under:  # z >= cy y + cx x + c0
-            le({z: -1.0, y: cy}, cx * F[:3], -c0 - cx * F[3])
-        for cy, cx, c0 in over:  # z <= cy y + cx x + c0
-            le({z: 1.0, y: -cy}, -cx * F[:3], c0 + cx * F[3])
-
-    cube_root_rows(S, D, dl, du)
-    for j in range(m):
-        cube_root_rows(T[j], Cf[j], cl[j], cu[j])
-        product_rows(Fv[j], T[j], Af[j], tl[j], tu[j], al[j], au[j])
-        product_rows(Gv[j], S, Bf[j], sl[0], su[0], bl[j], bu[j])
+    k = len(setup.rows_a)
+    # the rows before the views': the box, chirality, s's cube-root envelope
+    head = np.zeros((6 + k + 2 * envelopes.TANGENTS, n))
+    head_rhs = np.zeros(len(head))
+    for i in range(3):  # v_i <= hi_i, -v_i <= -lo_i
+        head[2 * i, i], head_rhs[2 * i] = 1.0, hi[i]
+        head[2 * i + 1, i], head_rhs[2 * i + 1] = -1.0, -lo[i]
+    head[6:6 + k, V] = -setup.rows_a
+    head_rhs[6:6 + k] = setup.rows_b
+    s_rows, s_rhs, s_kept = cube_root_rows(np.array([S]), D[None], np.array([dl]), np.array([du]), n)
+    count = 6 + k + int(s_kept.sum())
+    head[6 + k:count], head_rhs[6 + k:count] = s_rows[s_kept], s_rhs[s_kept]
+    # each view's rows in turn: t's cube-root envelope (over, under), then f's and g's McCormick
+    # (under, over); a view's unused envelope slots are dropped, keeping the order
+    t_rows, t_rhs, t_kept = cube_root_rows(T, Cf, cl, cu, n)
+    f_rows, f_rhs = product_rows(Fv, T, Af, tl, tu, al, au, n)
+    g_rows, g_rhs = product_rows(Gv, np.full(m, S), Bf, np.full(m, sl[0]), np.full(m, su[0]), bl, bu, n)
+    view_rows = np.concatenate([t_rows, f_rows, g_rows], axis=1)
+    view_rhs = np.concatenate([t_rhs, f_rhs, g_rhs], axis=1)
+    view_kept = np.concatenate([t_kept, np.ones((m, 8), dtype=bool)], axis=1)
+    tail = np.zeros((2, n))
+    tail_rhs = np.zeros(2)
     slope, icpt = envelopes.power_secant(dl, du, 8.0 / 3.0)  # e <= slope d + icpt
-    le({E: 1.0}, -slope * D[:3], slope * D[3] + icpt)
+    tail[0, E], tail[0, V], tail_rhs[0] = 1.0, -slope * D[:3], slope * D[3] + icpt
     if cap_row:
-        le({R: 1.0}, None, cap * setup.unit)
+        tail[1, R], tail_rhs[1] = 1.0, cap * setup.unit
+    A_rows = np.concatenate([head[:count], view_rows[view_kept], tail[:1 + cap_row]])
+    rhs = np.concatenate([head_rhs[:count], view_rhs[view_kept], tail_rhs[:1 + cap_row]])
+    count = len(A_rows)
 
     nonneg = count
     # Rotated cone r e >= |w|^2, w = f - g: (r + e, r - e, 2 w) in the second-order cone; as
@@ -165,13 +144,53 @@ def build(setup: AffineSetup, lo: np.ndarray, hi: np.ndarray, cap: float, cap_ro
     root_unit = np.sqrt(setup.unit)
     cone[2 + np.arange(m), Fv] = -2.0 * root_unit
     cone[2 + np.arange(m), Gv] = 2.0 * root_unit
-    A = np.vstack([A_rows[:count], cone])
-    b = np.concatenate([rhs[:count], np.zeros(m + 2)])
+    A = np.vstack([A_rows, cone])
+    b = np.concatenate([rhs, np.zeros(m + 2)])
     q = np.zeros(n)
     q[R] = 1.0
     lower = np.concatenate([lo, [0.0, 0.0], sl, tl, fl, gl])
     upper = np.concatenate([hi, [cap * setup.unit, e_hi], su, tu, fu, gu])
     return AffineProgram(q, A, b, ConeSpec(nonneg=nonneg, soc=(m + 2,)), lower, upper)
+
+
+def cube_root_rows(var: np.ndarray, F: np.ndarray, xl: np.ndarray, xu: np.ndarray, n: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """y_i = cbrt(F[i] . (v, 1)), y_i the variable var[i], x_i = F[i] . (v, 1) in [xl[i], xu[i]]:
+    per i, the rows of envelopes.cbrt_over (y <= slope x + icpt) then cbrt_under (y >= ...), as
+    (rows (len(var), 2 TANGENTS, n), right-hand sides, which are kept)."""
+    count = len(var)
+    rows = np.zeros((count, 2 * envelopes.TANGENTS, n))
+    rhs = np.zeros((count, 2 * envelopes.TANGENTS))
+    kept = np.zeros((count, 2 * envelopes.TANGENTS), dtype=bool)
+    for half, lines, sign in ((slice(0, envelopes.TANGENTS), envelopes.cbrt_over_lines, 1.0),
+                              (slice(envelopes.TANGENTS, None), envelopes.cbrt_under_lines, -1.0)):
+        slope, icpt, used = lines(xl, xu)
+        slope, icpt = np.where(used, slope, 0.0), np.where(used, icpt, 0.0)
+        block = rows[:, half]
+        block[np.arange(count), :, var] = sign
+        block[:, :, :3] = (-sign * slope)[:, :, None] * F[:, None, :3]
+        rhs[:, half] = sign * (slope * F[:, 3:4]) + sign * icpt
+        kept[:, half] = used
+    return rows, rhs, kept
+
+
+def product_rows(z: np.ndarray, y: np.ndarray, F: np.ndarray, yl, yu, xl, xu, n: int
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """z_i = y_i * x_i, x_i = F[i] . (v, 1), y_i in [yl[i], yu[i]], x_i in [xl[i], xu[i]]:
+    McCormick's two under-estimators (z >= cy y + cx x + c0) then its two over-estimators, as
+    (rows (len(z), 4, n), right-hand sides)."""
+    count = len(z)
+    under, over = envelopes.mccormick_lines(yl, yu, xl, xu)
+    rows = np.zeros((count, 4, n))
+    rhs = np.zeros((count, 4))
+    for half, lines, sign in ((slice(0, 2), under, -1.0), (slice(2, 4), over, 1.0)):
+        cy, cx, c0 = lines[:, :, 0], lines[:, :, 1], lines[:, :, 2]
+        block = rows[:, half]
+        block[np.arange(count), :, z] = sign
+        block[np.arange(count), :, y] = -sign * cy
+        block[:, :, :3] = (-sign * cx)[:, :, None] * F[:, None, :3]
+        rhs[:, half] = sign * c0 + sign * (cx * F[:, 3:4])
+    return rows, rhs
 
 
 def cost(setup: AffineSetup, v: np.ndarray) -> float:

@@ -280,3 +280,85 @@ def caseI_over(xl, xu, yl, yu) -> list[Row]:
             f"x < 0); got x in [{xl}, {xu}], y in [{yl}, {yu}]"
         )
     return _b7_rows(xl, xu, yl, yu, sx, -sx, -1.0)
+
+
+# ---- the same envelopes for many boxes at once ---------------------------------------------------
+# A relaxation with one envelope a view builds its rows from these: the same lines, in the same
+# order and to the last bit (the same operations on the same float64 values), as the scalar
+# functions above give box by box, without a Python loop over the views.
+
+TANGENTS = 5  # the most lines cbrt_over gives
+
+
+def _intervals(lo: np.ndarray, hi: np.ndarray, name: str = "x") -> tuple[np.ndarray, np.ndarray]:
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise ValueError(f"{name} bounds must be finite")
+    if np.any(lo > hi):
+        raise ValueError(f"empty {name} interval")
+    return lo, hi
+
+
+def cbrt_over_lines(xl: np.ndarray, xu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``cbrt_over`` for each box [xl[i], xu[i]]: (slopes, intercepts, kept), each (len(xl),
+    TANGENTS); box i's lines are the kept entries of row i, in cbrt_over's order."""
+    xl, xu = _intervals(xl, xu)
+    m = len(xl)
+    with np.errstate(all="ignore"):
+        fl, fu = np.cbrt(xl), np.cbrt(xu)
+        fmax = np.maximum(np.abs(fl), np.abs(fu))
+        slopes, icpts = np.full((m, TANGENTS), np.nan), np.full((m, TANGENTS), np.nan)
+        width = xu - xl
+        degenerate = (xl == xu) | ~np.isfinite(width)
+        concave = ~degenerate & (xl >= 0.0)
+        inside = concave & (xl > 0.0)
+        at_zero = concave & (xl == 0.0)
+        points = np.empty((m, TANGENTS))
+        points[:] = xl[:, None]
+        for i, fraction in ((1, 0.25), (2, 0.5), (3, 0.75)):
+            points[:, i] = xl + fraction * width
+        points[:, 4] = xu
+        points[at_zero] = xu[at_zero, None] / 4.0 ** np.arange(TANGENTS)
+        c = np.cbrt(points)
+        tangent = concave[:, None] & (points > 0.0)
+        slopes[tangent] = (1.0 / (3.0 * c * c))[tangent]
+        icpts[tangent] = (2.0 * c / 3.0)[tangent]
+        convex = ~degenerate & (xl < 0.0) & (xu <= 0.0)
+        crossing = ~degenerate & (xl < 0.0) & (xu > 0.0)
+        b9 = crossing & (-xl / 8.0 < xu)
+        secant = convex | (crossing & ~b9)
+        m_secant = (fu - fl) / width
+        slopes[secant, 0] = m_secant[secant]
+        icpts[secant, 0] = (fl - m_secant * xl)[secant]
+        slopes[b9, 0] = (1.0 / (3.0 * fu * fu))[b9]
+        icpts[b9, 0] = (2.0 * fu / 3.0)[b9]
+        slopes[b9, 1] = ((fl - 2.0 * fu / 3.0) / xl)[b9]
+        icpts[b9, 1] = (2.0 * fu / 3.0)[b9]
+        raw = np.isfinite(slopes) & np.isfinite(icpts)
+        icpts = icpts + SLACK * (1.0 + np.abs(icpts) + fmax[:, None])  # _widened, upward
+        kept = raw & np.isfinite(icpts) & ~degenerate[:, None]
+        fallback = ~kept.any(axis=1)  # cbrt is increasing: cbrt(x) <= cbrt(xu)
+        slopes[fallback, 0] = 0.0
+        icpts[fallback, 0] = (fu + SLACK * (1.0 + np.abs(fu) + fmax))[fallback]
+        kept[fallback, 0] = True
+    return slopes, icpts, kept
+
+
+def cbrt_under_lines(xl: np.ndarray, xu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``cbrt_under`` for each box, as cbrt_over_lines gives cbrt_over."""
+    xl, xu = _intervals(xl, xu)
+    slopes, icpts, kept = cbrt_over_lines(-xu, -xl)
+    return slopes, -icpts, kept
+
+
+def mccormick_lines(xl, xu, yl, yu) -> tuple[np.ndarray, np.ndarray]:
+    """``mccormick`` for each box: (under, over), each (len(xl), 2, 3) of (cx, cy, c0)."""
+    xl, xu = _intervals(xl, xu, "x")
+    yl, yu = _intervals(yl, yu, "y")
+    corners = np.stack([xl * yl, xl * yu, xu * yl, xu * yu])
+    if not np.all(np.isfinite(corners)):
+        raise ValueError("x*y overflows on the box")
+    s = SLACK * (1.0 + np.abs(corners).max(axis=0))
+    under = np.stack([np.stack([yl, xl, -xl * yl - s], axis=1), np.stack([yu, xu, -xu * yu - s], axis=1)], axis=1)
+    over = np.stack([np.stack([yl, xu, -xu * yl + s], axis=1), np.stack([yu, xl, -xl * yu + s], axis=1)], axis=1)
+    return under, over

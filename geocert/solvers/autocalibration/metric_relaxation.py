@@ -229,84 +229,86 @@ def build(setup: MetricSetup, lo: np.ndarray, hi: np.ndarray, cap: float, cap_ro
     domain = setup.ranges is not None
     n = n0 + (4 if domain else 0)  # the domain's lifted terms: u^2, v^2, u v, skew^2
     R = 5
-    zero_rows, zero_rhs, rows, rhs = [], [], [], []
+    views = np.arange(m)
+    lam_var = 6 + 6 * views  # lambda_j; n_j's entries follow it
+    Q = np.array([q_form(H) for H in setup.H])  # (m, 6)
+    # h3' nu h3 = 1, nu = [n_j entries, lambda_j at 33]
+    zero_rows = np.zeros((m, n))
+    zero_rows[views[:, None], lam_var[:, None] + 1 + np.arange(5)] = Q[:, :5]
+    zero_rows[views, lam_var] = Q[:, 5]
+    head = np.zeros((11, n))  # the box, then the cap (kept with cap_row)
+    head[2 * np.arange(5), np.arange(5)] = 1.0
+    head[2 * np.arange(5) + 1, np.arange(5)] = -1.0
+    head[10, R] = 1.0
+    head_rhs = np.empty(11)
+    head_rhs[0:10:2], head_rhs[1:10:2] = hi, -lo
+    head_rhs[10] = cap * setup.unit
+    # per view: q_j's range, lambda_j's, then McCormick's two under- and two over-estimators of
+    # each n_jk = lambda_j w_k
+    under, over = envelopes.mccormick_lines(np.repeat(Ll, 5), np.repeat(Lu, 5), np.tile(lo, m), np.tile(hi, m))
+    view_rows = np.zeros((m, 4 + 20, n))
+    view_rhs = np.empty((m, 4 + 20))
+    view_rows[:, 0, :5], view_rhs[:, 0] = Q[:, :5], setup.q_upper - Q[:, 5]
+    view_rows[:, 1, :5], view_rhs[:, 1] = -Q[:, :5], Q[:, 5] - setup.q_lower
+    view_rows[views, 2, lam_var], view_rhs[:, 2] = 1.0, Lu
+    view_rows[views, 3, lam_var], view_rhs[:, 3] = -1.0, -Ll
+    entry_rows = view_rows[:, 4:].reshape(m, 5, 4, n)  # (view, k, the four rows)
+    entry_rhs = view_rhs[:, 4:].reshape(m, 5, 4)
+    pair_lam = np.repeat(lam_var, 5).reshape(m, 5)
+    pair_n = pair_lam + 1 + np.arange(5)
+    for half, lines, sign in ((slice(0, 2), under, -1.0), (slice(2, 4), over, 1.0)):
+        cx, cy, c0 = (lines[:, :, i].reshape(m, 5, 2) for i in range(3))
+        block = entry_rows[:, :, half]  # n_jk >= cx lambda_j + cy w_k + c0 (under), <= (over)
+        block[views[:, None], np.arange(5), :, pair_n] = sign
+        block[views[:, None], np.arange(5), :, pair_lam] = -sign * cx
+        block[views[:, None], np.arange(5), :, np.arange(5)] = -sign * cy
+        entry_rhs[:, :, half] = sign * c0
+    corners = np.stack([np.outer(Ll, lo), np.outer(Ll, hi), np.outer(Lu, lo), np.outer(Lu, hi)])
+    pad = WIDEN * np.abs(corners).max(axis=0)
+    lam_lo_w, lam_hi_w = corners.min(axis=0) - pad, corners.max(axis=0) + pad  # (m, 5)
+    rows, rhs = [], []
 
-    def var(j: int, k: int) -> int:  # k = 0: lambda_j; k = 1..5: n_j's entries
-        return 6 + 6 * j + k
-
-    def le(coeffs: dict, bound: float, target=rows, target_rhs=rhs) -> None:
+    def le(coeffs: dict, bound: float) -> None:
         row = np.zeros(n)
         for i, c in coeffs.items():
             row[i] += c
-        target.append(row)
-        target_rhs.append(bound)
+        rows.append(row)
+        rhs.append(bound)
 
-    for j, H in enumerate(setup.H):
-        Q = q_form(H)  # h3' nu h3 = 1, nu = [n_j entries, lambda_j at 33]
-        le({**{var(j, 1 + k): Q[k] for k in range(5)}, var(j, 0): Q[5]}, 1.0, zero_rows, zero_rhs)
-    for k in range(5):
-        le({k: 1.0}, hi[k])
-        le({k: -1.0}, -lo[k])
-    if cap_row:
-        le({R: 1.0}, cap * setup.unit)
-    lam_lo_w, lam_hi_w = np.zeros(5 * m), np.zeros(5 * m)
-    for j, H in enumerate(setup.H):
-        Q = q_form(H)
-        le({k: Q[k] for k in range(5)}, setup.q_upper[j] - Q[5])
-        le({k: -Q[k] for k in range(5)}, Q[5] - setup.q_lower[j])
-        le({var(j, 0): 1.0}, Lu[j])
-        le({var(j, 0): -1.0}, -Ll[j])
-        for k in range(5):
-            under, over = envelopes.mccormick(Ll[j], Lu[j], lo[k], hi[k])
-            for cx, cy, c0 in under:  # n >= cx lambda + cy w_k + c0
-                le({var(j, 1 + k): -1.0, var(j, 0): cx, k: cy}, -c0)
-            for cx, cy, c0 in over:
-                le({var(j, 1 + k): 1.0, var(j, 0): -cx, k: -cy}, c0)
-            corners = np.array([Ll[j] * lo[k], Ll[j] * hi[k], Lu[j] * lo[k], Lu[j] * hi[k]])
-            pad = WIDEN * np.abs(corners).max()
-            lam_lo_w[5 * j + k], lam_hi_w[5 * j + k] = corners.min() - pad, corners.max() + pad
     domain_cones, domain_lower, domain_upper = [], [], []
     if domain:
         domain_cones, domain_lower, domain_upper = domain_rows(setup.ranges, lo, hi, n0, le)
     # r >= |res|^2: (r + 1, r - 1, 2 res) in the second-order cone, res_j = W (omega - C_j nu_j).
-    cone_rows, cone_rhs = [np.zeros(n), np.zeros(n)], [1.0, -1.0]
-    cone_rows[0][R] = -1.0
-    cone_rows[1][R] = -1.0
-    for j, H in enumerate(setup.H):
-        C = congruence(H)
-        for e in range(6):
-            row = np.zeros(n)
-            constant = 0.0
-            if e < 5:
-                row[e] += 1.0  # omega's entry
-            else:
-                constant += 1.0  # omega33
-            row[var(j, 1):var(j, 1) + 5] -= C[e, :5]
-            row[var(j, 0)] -= C[e, 5]
-            scale = 2 * WEIGHTS[e] * np.sqrt(setup.unit)
-            cone_rows.append(-scale * row)
-            cone_rhs.append(scale * constant)
+    C = np.array([congruence(H) for H in setup.H])  # (m, 6, 6)
+    scale = 2 * WEIGHTS * np.sqrt(setup.unit)  # (6,)
+    residual = np.zeros((m, 6, n))
+    residual[:, np.arange(5), np.arange(5)] = 1.0  # omega's entry (omega33 = 1 is a constant)
+    residual[views[:, None, None], np.arange(6)[:, None], lam_var[:, None, None] + 1 + np.arange(5)] = -C[:, :, :5]
+    residual[views[:, None], np.arange(6), lam_var[:, None]] = -C[:, :, 5]
+    cone_rows = np.concatenate([np.zeros((2, n)), (-scale[:, None] * residual).reshape(6 * m, n)])
+    cone_rows[0, R] = cone_rows[1, R] = -1.0
+    cone_rhs = np.concatenate([[1.0, -1.0], np.tile(scale * np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0]), m)])
     # omega PSD: its svec, order (0,0), (0,1), (1,1), (0,2), (1,2), (2,2), off-diagonals times
     # sqrt 2 (s = b - A x; omega33 = 1 is a constant).
     psd_rows, psd_rhs = [], []
-    for entry, scale in ((0, 1.0), (1, np.sqrt(2)), (3, 1.0), (2, np.sqrt(2)), (4, np.sqrt(2)), (5, 1.0)):
+    for entry, factor in ((0, 1.0), (1, np.sqrt(2)), (3, 1.0), (2, np.sqrt(2)), (4, np.sqrt(2)), (5, 1.0)):
         row = np.zeros(n)
         if entry < 5:
-            row[entry] = -scale
+            row[entry] = -factor
         psd_rows.append(row)
-        psd_rhs.append(0.0 if entry < 5 else scale)
-    extra_rows = [row for cone in domain_cones for row, _ in cone]
+        psd_rhs.append(0.0 if entry < 5 else factor)
+    extra_rows = [_padded(row, n) for cone in domain_cones for row, _ in cone]
     extra_rhs = [value for cone in domain_cones for _, value in cone]
-    A = np.vstack(zero_rows + rows + cone_rows + [_padded(row, n) for row in extra_rows] + psd_rows)
-    b = np.array(zero_rhs + rhs + cone_rhs + extra_rhs + psd_rhs)
+    kept = 10 + bool(cap_row)
+    nonneg = np.concatenate([head[:kept], view_rows.reshape(m * 24, n), np.array(rows).reshape(len(rows), n)])
+    A = np.vstack([zero_rows, nonneg, cone_rows, np.array(extra_rows).reshape(len(extra_rows), n), np.array(psd_rows)])
+    b = np.concatenate([np.ones(m), head_rhs[:kept], view_rhs.ravel(), rhs, cone_rhs, extra_rhs, psd_rhs])
     q = np.zeros(n)
     q[R] = 1.0
-    lower = np.concatenate([lo, [0.0], *[np.concatenate([[Ll[j]], lam_lo_w[5 * j:5 * j + 5]]) for j in range(m)],
-                            domain_lower])
-    upper = np.concatenate([hi, [cap * setup.unit], *[np.concatenate([[Lu[j]], lam_hi_w[5 * j:5 * j + 5]]) for j in range(m)],
+    lower = np.concatenate([lo, [0.0], np.concatenate([Ll[:, None], lam_lo_w], axis=1).ravel(), domain_lower])
+    upper = np.concatenate([hi, [cap * setup.unit], np.concatenate([Lu[:, None], lam_hi_w], axis=1).ravel(),
                             domain_upper])
-    cones = ConeSpec(zero=len(zero_rows), nonneg=len(rows), soc=(len(cone_rows), *[len(c) for c in domain_cones]),
-                     psd=(3,))
+    cones = ConeSpec(zero=m, nonneg=len(nonneg), soc=(len(cone_rows), *[len(c) for c in domain_cones]), psd=(3,))
     return MetricProgram(q, A, b, cones, lower, upper)
 
 

@@ -575,3 +575,40 @@ class TestCaseIOver:
         assert zb**3 < Q(4.5)
         with pytest.raises(ValueError):
             caseI_over(1.0, 8.0, 0.0, 1.0)
+
+
+class TestManyBoxesAtOnce:
+    """The relaxations build their rows from cbrt_over_lines, cbrt_under_lines and
+    mccormick_lines, one call for every view: each box's lines must be the scalar functions',
+    in their order and to the last bit, so that a program (and a stored certificate's dual
+    against it) is the same whichever builds it."""
+
+    @staticmethod
+    def kept_lines(slopes, icpts, kept, i):
+        return [(float(m), float(b)) for m, b, k in zip(slopes[i], icpts[i], kept[i]) if k]
+
+    @EXAMPLES
+    @given(boxes=st.lists(intervals(), min_size=1, max_size=6))
+    def test_cube_root_lines_are_the_scalar_ones(self, boxes):
+        lo, hi = np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes])
+        for many, one in ((env.cbrt_over_lines, cbrt_over), (env.cbrt_under_lines, cbrt_under)):
+            slopes, icpts, kept = many(lo, hi)
+            for i, (xl, xu) in enumerate(boxes):
+                assert self.kept_lines(slopes, icpts, kept, i) == [(float(m), float(b)) for m, b in one(xl, xu)]
+
+    @EXAMPLES
+    @given(boxes=st.lists(st.tuples(intervals("free"), intervals("free")), min_size=1, max_size=6))
+    def test_mccormick_lines_are_the_scalar_ones(self, boxes):
+        xl, xu = np.array([b[0][0] for b in boxes]), np.array([b[0][1] for b in boxes])
+        yl, yu = np.array([b[1][0] for b in boxes]), np.array([b[1][1] for b in boxes])
+        under, over = env.mccormick_lines(xl, xu, yl, yu)
+        for i, ((a, b), (c, d)) in enumerate(boxes):
+            scalar_under, scalar_over = mccormick(a, b, c, d)
+            assert [tuple(map(float, line)) for line in under[i]] == [tuple(map(float, x)) for x in scalar_under]
+            assert [tuple(map(float, line)) for line in over[i]] == [tuple(map(float, x)) for x in scalar_over]
+
+    def test_refused_as_the_scalar_ones_are(self):
+        with pytest.raises(ValueError):
+            env.cbrt_over_lines(np.array([0.0, 2.0]), np.array([1.0, 1.0]))  # an empty interval
+        with pytest.raises(ValueError):
+            env.mccormick_lines(np.array([0.0]), np.array([np.inf]), np.array([0.0]), np.array([1.0]))
