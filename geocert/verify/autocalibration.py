@@ -18,7 +18,7 @@ from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.determinacy import ESTIMATES_FORM, proven_document
 from geocert.solvers.core.geometry import InputError, number_array
 from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
-from geocert.verify import estimates, residual_claims, structure_check
+from geocert.verify import cost_rounding, estimates, residual_claims, structure_check
 from geocert.verify.verification import Verification
 
 STAGE_NAMES = {"stratified": ["affine", "metric"], "direct": ["direct"]}
@@ -311,7 +311,7 @@ class AutocalibrationVerification(Verification):
         except InputError as exc:
             raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
         if options["method"] == "direct":
-            return _check_direct(problem, arrays, options, claim, claimed, passed), options["metric_rel_gap"]
+            return _check_direct(problem, arrays, options, claim, claimed, lower_claimed, passed), options["metric_rel_gap"]
         plane = _numbers(claim.get("plane_at_infinity"), "plane_at_infinity", (4,), "claim")
         p = autocalibration_problem.plane_from_input(problem, plane)
         if p is None:
@@ -323,10 +323,14 @@ class AutocalibrationVerification(Verification):
             if proof.get("type") != "stratified_affine":
                 raise Invalid("format", "stage 0 takes a stratified_affine proof")
             cost = autocalibration_problem.affine_cost(problem, p)
-            _check_cost(cost, claimed)
+            rounding = _check_cost(cost, claimed, cost_rounding.squares_rounding(
+                _affine_residuals(problem, p),
+                cost_rounding.affine_magnitudes(problem.norm.cameras, problem.norm.reference, p)),
+                _tolerance(options, options["rel_gap"], claimed))
             passed.append("objective")
             if not autocalibration_problem.allowed_by_chirality(problem, p):
                 raise Invalid("scope", "the plane at infinity returned is not one chirality allows")
+            _check_data_gap(cost, rounding, lower_claimed, _tolerance(options, options["rel_gap"], claimed))
             passed.append("scope")
             return proofs.check_affine(problem, proof, lower_claimed, claimed, passed), options["rel_gap"]
         if proof.get("type") != "stratified_metric":
@@ -340,10 +344,15 @@ class AutocalibrationVerification(Verification):
         setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
         lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
         cost = metric_relaxation.cost(setup, w)
-        _check_cost(cost, claimed)
+        rounding = _check_cost(cost, claimed, cost_rounding.squares_rounding(
+            metric_relaxation.residuals(setup, w),
+            cost_rounding.metric_magnitudes(setup.H, metric_relaxation.omega_of(w), metric_relaxation.WEIGHTS,
+                                            metric_relaxation._ROWS, metric_relaxation._COLUMNS)),
+            _tolerance(options, options["metric_rel_gap"], claimed))
         passed.append("objective")
         if not metric_relaxation.in_domain(setup, w, lo, hi):
             raise Invalid("scope", "the DIAC returned is outside the domain (box, PSD, or a view's scale range)")
+        _check_data_gap(cost, rounding, lower_claimed, _tolerance(options, options["metric_rel_gap"], claimed))
         passed.append("scope")
         bound = proofs.check_metric(problem, p, proof, lower_claimed, claimed, passed, cost)
         if "plane_sublevel" in proof:  # K proven over the plane's own uncertainty too
@@ -493,7 +502,8 @@ def _direct_setup(problem, options: dict):
         raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
 
 
-def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, passed: list) -> float:
+def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, lower_claimed: float,
+                  passed: list) -> float:
     """The direct stage: the quadric's cost and scope, what it gives, and the moment proof."""
     from geocert.solvers.autocalibration import direct
     from geocert.solvers.autocalibration import direct_relaxation
@@ -508,12 +518,16 @@ def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, p
         raise Invalid("claim", "dual_absolute_quadric must be symmetric with a nonzero trace")
     setup = _direct_setup(problem, options)
     Q = setup.from_input(Q_in)
-    _check_cost(direct_relaxation.cost(setup.cameras, Q), claimed)
+    cost = direct_relaxation.cost(setup.cameras, Q)
+    rounding = _check_cost(cost, claimed, cost_rounding.squares_rounding(
+        cost_rounding.direct_residuals(setup.cameras, Q), cost_rounding.direct_magnitudes(setup.cameras, Q)),
+        _tolerance(options, options["metric_rel_gap"], claimed))
     passed.append("objective")
     bound, excluded = direct.check_proof(setup, proof, options["relaxation_order"])
     if not direct.in_domain(setup, Q, excluded):
         raise Invalid("scope", "the quadric returned is not PSD of rank 3, or breaks a view's focal range, or is not "
                                "allowed by chirality")
+    _check_data_gap(cost, rounding, lower_claimed, _tolerance(options, options["metric_rel_gap"], claimed))
     if "sublevel" in proof and options["varying_focal"]:  # each view's focal length's proven interval
         _check_direct_views_sublevel(setup, proof["sublevel"], excluded, claimed, Q)
         passed.append("proven_interval")
@@ -689,9 +703,37 @@ def _largest(expected: Any) -> float:
     return 0.0
 
 
-def _check_cost(cost: float, claimed: float) -> None:
-    if not abs(cost - claimed) <= OBJECTIVE_TOLERANCE * abs(cost) + 1e-300:
+def _affine_residuals(problem, p: np.ndarray) -> np.ndarray:
+    from geocert.solvers.autocalibration import frames
+
+    coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
+    return frames.modulus_residuals(coef, p)
+
+
+def _tolerance(options: dict, rel_gap: float, claimed: float) -> float:
+    return max(options.get("abs_gap") or 0.0, rel_gap * abs(claimed))
+
+
+def _check_cost(cost: float, claimed: float, rounding: float, tolerance: float) -> float:
+    """The claimed cost is the solution's, to OBJECTIVE_TOLERANCE of it and the two evaluations'
+    rounding (cost_rounding: a near-exact fit's cost differs in its leading digits between BLAS
+    kernels), a rounding within the gap's tolerance (a solution whose cost the data determine no
+    better, e.g. a plane far out, is refused). Returns the rounding, for _check_data_gap."""
+    if not rounding <= tolerance:
+        raise Invalid("objective", f"the data determine the solution's cost only to within {rounding!r}, more than "
+                                   f"the tolerance {tolerance!r}")
+    if not cost_rounding.within(cost, claimed, OBJECTIVE_TOLERANCE, rounding):
         raise Invalid("objective", f"the solution costs {cost!r}, the certificate claims {claimed!r}")
+    return rounding
+
+
+def _check_data_gap(cost: float, rounding: float, lower_claimed: float, tolerance: float) -> None:
+    """The gap read from the verifier's evaluation and its rounding, not the claim, is within the
+    tolerance: a claim may round its cost, never its gap (a solution whose cost the data do not
+    determine, e.g. a plane far out, gains nothing from its wide rounding)."""
+    if not (cost + rounding) - lower_claimed <= tolerance * (1 + 1e-12) + OBJECTIVE_TOLERANCE * abs(cost):
+        raise Invalid("objective", f"the solution costs {cost!r} (to within {rounding!r}), more than the "
+                                   f"tolerance {tolerance!r} above lower_bound {lower_claimed!r}")
 
 
 STAGES = AutocalibrationVerification()

@@ -21,6 +21,7 @@ from geocert.solvers.core.coverage import extended, uncovered_part, widened
 from geocert.solvers.core.csc import CscMatrix
 from geocert.solvers.core.determinacy import ESTIMATES_FORM
 from geocert.solvers.core.geometry import InputError
+from geocert.verify import cost_rounding
 from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
                                          numbers as _numbers, record as _record)
 from geocert.verify import residual_claims
@@ -109,9 +110,20 @@ class BilinearVerification(Verification):
         K = basis.shape[0]
         camera = _numbers(claim.get("camera"), "camera", (2, 4), "claim")
         alpha = _numbers(claim.get("coefficients"), "coefficients", (K,), "claim")
-        cost = problem.cost(problem.residuals(basis, points, camera, alpha), options["norm"])
-        if not abs(cost - claimed) <= OBJECTIVE_TOLERANCE * abs(cost) + 1e-300:
+        residuals = problem.residuals(basis, points, camera, alpha)
+        cost = problem.cost(residuals, options["norm"])
+        seen = ~np.isnan(residuals[:, 0])
+        magnitudes = cost_rounding.bilinear_magnitudes(basis, points, camera, alpha)[seen]
+        # L1L1 sums |r|: each term moves by its own rounding (counted for both evaluations)
+        rounding = (2.0 * cost_rounding.RELATIVE * float(np.sum(magnitudes)) if options["norm"] == "L1L1"
+                    else cost_rounding.squares_rounding(residuals[seen], magnitudes))
+        if not cost_rounding.within(cost, claimed, OBJECTIVE_TOLERANCE, rounding):
             raise Invalid("objective", f"the solution costs {cost!r}, the certificate claims {claimed!r}")
+        # a claim may round its cost, never its gap: the gap read from this evaluation and its rounding
+        tolerance = max(options["abs_gap"], options["rel_gap"] * abs(claimed))
+        if not (cost + rounding) - lower_claimed <= tolerance * (1 + 1e-12) + OBJECTIVE_TOLERANCE * abs(cost):
+            raise Invalid("objective", f"the solution costs {cost!r} (to within {rounding!r}), more than the "
+                                       f"tolerance {tolerance!r} above lower_bound {lower_claimed!r}")
         passed.append("objective")
         if not problem.feasible_coefficients(alpha, options["coefficients"], options["coefficient_bound"]):
             raise Invalid("scope", "the coefficients are not in the coefficient set (sum 1 within 1e-12 per "

@@ -1005,7 +1005,14 @@ def _check_residual_claim(kind: str, adapter, arrays: tuple, options: dict, clai
         raise Invalid("objective", "the solution puts a point at non-positive depth")
     cost = norm_cost(residuals, norm)
     slack = cost_rounding(residuals, rounding, norm)
-    if not abs(cost - claimed) <= OBJECTIVE_TOLERANCE * abs(cost) + slack:
+    # An item that can say how far its data determine each residual (tracks and maps do; a kind
+    # added later need not) must have a cost the data determine to within the tolerance (below).
+    uncertainty = getattr(item, "residual_uncertainty", None)
+    spread = 0.0 if uncertainty is None else cost_rounding(residuals, uncertainty(solution), norm)
+    # The claim's evaluation and this one may each lie that spread from the exact cost (far-off
+    # data: a residual is a difference of numbers far larger than itself, rounded differently by
+    # another machine's kernels); the gap below reads this evaluation, not the claim.
+    if not abs(cost - claimed) <= OBJECTIVE_TOLERANCE * abs(cost) + slack + 2.0 * spread:
         raise Invalid("objective", f"the solution costs {cost!r}, the certificate claims {claimed!r}")
     tolerance = max(options["abs_gap"], options["rel_gap"] * abs(claimed))
     # The gap from the cost the data give (and its rounding), not the claimed one: a claim may
@@ -1013,10 +1020,6 @@ def _check_residual_claim(kind: str, adapter, arrays: tuple, options: dict, clai
     if not (cost + slack) - lower_claimed <= tolerance * (1 + 1e-12):
         raise Invalid("gap", f"the solution costs {cost!r} (to within {slack!r}), more than the tolerance "
                              f"{tolerance!r} above lower_bound {lower_claimed!r}")
-    # An item that can say how far its data determine each residual (tracks and maps do; a kind
-    # added later need not) must have a cost the data determine to within the tolerance.
-    uncertainty = getattr(item, "residual_uncertainty", None)
-    spread = 0.0 if uncertainty is None else cost_rounding(residuals, uncertainty(solution), norm)
     if not spread <= tolerance:
         raise Invalid("objective", f"the data determine the solution's cost only to within {spread!r}, more than "
                                    f"the tolerance {tolerance!r} (a point nearly on a principal plane, or data far "

@@ -223,6 +223,31 @@ def exact_side(a: np.ndarray, b: np.ndarray, axis: int, upper: bool, basis: list
     return result
 
 
+# The chirality rows in a region's frame are floats computed from the data (a normalisation through
+# LAPACK, a product with the frame through BLAS): another machine's kernels give rows a few ulps of
+# their magnitudes away, and the exact bound three of them prove moves with them. ROWS_ROUNDING
+# (64 ulps) bounds that move relative to the magnitudes; side_slack turns it into a distance on
+# the side.
+ROWS_ROUNDING = 64 * 2.0 ** -52
+
+
+def side_slack(a: np.ndarray, b: np.ndarray, basis: list[int], axis: int, reach: float) -> float:
+    """How far the bound three rows prove may move when each row (a_k, b_k) moves by ROWS_ROUNDING
+    of its magnitudes, over a box whose points are at most ``reach`` from the frame's origin in
+    each coordinate: with y the multipliers (sum y_k a_k = +-e_axis), sum y_k (|a_k|_1 reach + |b_k|)
+    ROWS_ROUNDING, doubled for the two machines' rows (0 when the rows are singular in floats)."""
+    M = np.array([a[k] for k in basis], dtype=float).T
+    rhs = np.zeros(3)
+    rhs[axis] = 1.0
+    try:
+        y = np.abs(np.linalg.solve(M, rhs))
+    except np.linalg.LinAlgError:
+        return 0.0
+    sizes = np.array([np.sum(np.abs(a[k])) * reach + abs(float(b[k])) for k in basis])
+    slack = 2.0 * ROWS_ROUNDING * float(y @ sizes)
+    return slack if np.isfinite(slack) else 0.0
+
+
 def _solve3(M: list[list[Fraction]], rhs: list[Fraction]) -> list[Fraction] | None:
     """Gaussian elimination in rationals (3x3)."""
     rows = [M[i][:] + [rhs[i]] for i in range(3)]

@@ -336,10 +336,15 @@ def check_regions(problem, regions: Any, excluded: Any, fields: tuple[str, ...],
         if not isinstance(basis, list) or len(basis) != 6:
             raise Invalid("format", f"{where}regions/{i}/basis must give three rows for each of the six sides")
         proven = []
+        reach = float(np.max(np.abs(np.concatenate([lo, hi])))) if np.all(np.isfinite(lo)) and np.all(
+            np.isfinite(hi)) else 0.0
         for side, chosen in enumerate(basis):
             axis, upper = side // 2, side % 2 == 1
-            value = frames.exact_side(a, b, axis, upper, _int_list(chosen, f"{where}regions/{i}/basis/{side}", 3))
-            if value is None or (value > hi[axis] if upper else value < lo[axis]):
+            chosen = _int_list(chosen, f"{where}regions/{i}/basis/{side}", 3)
+            value = frames.exact_side(a, b, axis, upper, chosen)
+            # the side as another machine's rows prove it may lie its rows' rounding away
+            slack = 0.0 if value is None else frames.side_slack(a, b, chosen, axis, reach)
+            if value is None or (value > hi[axis] + slack if upper else value < lo[axis] - slack):
                 raise Invalid("root_region", f"{where}regions/{i}: side {side} of the box is not proved by its rows")
             proven.append(value)
         # Every plane positive on the rows is G^T (v, 1) times a positive number for some v of

@@ -1,0 +1,78 @@
+"""The objective checks and a region's box sides allow the rounding another machine's BLAS kernels
+give (geocert/verify/cost_rounding.py, frames.side_slack), and nothing more: review 31's class 1,
+genuine stored certificates refused on OpenBLAS's Prescott or Haswell kernels because a near-exact
+fit's cost (1e-14) differs between kernels in its 8th digit."""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from geocert.verify import cost_rounding
+from geocert.verify.checks import verify_any
+from tests.verify.test_forgeries import stored
+
+ROOT = Path(__file__).resolve().parents[2]
+NOW_ACCEPTED = ["autocalibration_direct_points", "autocalibration_stratified", "autocalibration_five_views"]
+REFUSED_ON = """
+import json
+from geocert.verify.checks import verify_any
+from tests.verify.test_forgeries import stored
+print(json.dumps({name: verify_any(stored(name)).valid for name in %r}))
+""" % NOW_ACCEPTED
+
+
+def _openblas() -> bool:
+    try:
+        return "openblas" in json.dumps(np.show_config(mode="dicts"), default=str).lower()
+    except TypeError:
+        return False
+
+
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64") or not _openblas(),
+                    reason="OpenBLAS's x86-64 kernels chosen by OPENBLAS_CORETYPE")
+@pytest.mark.parametrize("coretype,disable", [("Prescott", "X86_V3 X86_V4 AVX512_ICL AVX512_SPR"),
+                                              ("Haswell", "")])
+def test_genuine_autocalibration_certificates_verify_on_another_kernel(coretype, disable):
+    env = {key: value for key, value in os.environ.items() if not key.startswith(("OPENBLAS_", "NPY_"))}
+    env.update(OPENBLAS_CORETYPE=coretype, OPENBLAS_NUM_THREADS="1", PYTHONPATH=str(ROOT))
+    if disable:
+        env["NPY_DISABLE_CPU_FEATURES"] = disable
+    out = subprocess.run([sys.executable, "-c", REFUSED_ON], cwd=ROOT, env=env, capture_output=True, text=True,
+                         timeout=600, check=True)
+    valid = json.loads(out.stdout.strip().splitlines()[-1])
+    assert all(valid.values()), valid
+
+
+@pytest.mark.parametrize("factor", [1 + 1e-3, 1 - 1e-3, 2.0, 0.5])
+def test_a_claimed_cost_moved_beyond_its_rounding_is_refused(factor):
+    """The stratified affine stage's claimed cost (1.03e-14, its rounding allowance about 2e-19
+    here) moved by a thousandth of itself is refused: the allowance is the terms' rounding, not
+    room."""
+    document = copy.deepcopy(stored("autocalibration_stratified"))
+    for item in document["certificate"]["items"]:
+        if item["index"] == 0:
+            item["cost"] *= factor
+            item["gap"] = item["cost"] - item["lower_bound"]
+    report = verify_any(document)
+    assert not report.valid
+    assert report.first_failure["check"] == "objective", report.first_failure
+
+
+def test_the_rounding_is_of_the_terms_not_the_cost():
+    """Residuals 1e-8 computed from terms of magnitude 1: the allowance is 64 ulps of the terms
+    times the residuals, above 1e-9 of the cost (1e-14), far below the cost itself."""
+    r = np.full(40, 1e-8)
+    rounding = cost_rounding.squares_rounding(r, np.ones(40))
+    cost = float(r @ r)
+    assert 1e-9 * cost < rounding < 1e-3 * cost
+    assert cost_rounding.within(cost, cost + 0.5 * rounding, 1e-9, rounding)
+    assert not cost_rounding.within(cost, cost + 2 * rounding, 1e-9, rounding)
