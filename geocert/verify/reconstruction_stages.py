@@ -36,7 +36,7 @@ STAGE_NAMES = ("matches", "projective", "autocalibration", "bundle_adjustment", 
 CONTAINERS = {
     "projective": {"focal_rounds": "list", "merged": "list", "initial_pair_search": "object",
                    "initial_pair": "pair", "radial_distortion": "object", "principal_point": "object"},
-    "autocalibration": {"stages": "list", "intrinsics": "object"},
+    "autocalibration": {"stages": "list", "intrinsics": "object", "rotation_noise_rad": "object"},
     "bundle_adjustment": {"starts": "list", "principal_point": "object", "radial_distortion": "object"},
 }
 NESTED = {("projective", "initial_pair_search"): {"pair": "object", "thresholds": "object"}}
@@ -201,6 +201,8 @@ def _check_written_content(stage: dict, written: tuple) -> None:
                                                                                             dict):
             raise Invalid("returned", f"{_where(name, 'principal_point')} is null: the options and the views' one "
                                       "image size ask for the principal point's test, and its writer states its record")
+    if name == "autocalibration":
+        _check_motion_judgement(stage)
     if name == "autocalibration" and stage.get("critical_motion") is not None and "critical_motion" in written:
         critical, warnings = stage["critical_motion"], stage.get("motion_warnings")
         if not (isinstance(warnings, list) and any(isinstance(w, dict) and w.get("code") == critical
@@ -212,6 +214,27 @@ def _check_written_content(stage: dict, written: tuple) -> None:
                                       "motion stated: the motion's judgement says it in the stage's reason")
 
 
+# The motion's judgement as its writer writes it (claims.judge_motion, motion_claim.judge), wherever
+# stated: ``determined`` true or false, ``rotation_noise_rad`` an object of its three figures (each
+# a number >= 0, FIGURES; the estimate and the plane's family null where the residuals give no
+# noise, the DIAC's family never: at least motion_claim's default). Review 31: a string, true, -1
+# or a list in its place, and ``determined`` null, verified.
+NOISE_FIGURES = ("estimated", "diac_family", "plane_family")
+
+
+def _check_motion_judgement(stage: dict) -> None:
+    if "determined" in stage and not isinstance(stage["determined"], bool):
+        raise Invalid("returned", f"{_where('autocalibration', 'determined')} must be true or false (the motion's "
+                                  f"judgement writes one), got {stage['determined']!r:.40}")
+    if "rotation_noise_rad" in stage:
+        noise = stage["rotation_noise_rad"]
+        if not (isinstance(noise, dict) and all(member in noise for member in NOISE_FIGURES)
+                and noise["diac_family"] is not None):
+            raise Invalid("returned", f"{_where('autocalibration', 'rotation_noise_rad')} must be an object stating "
+                                      f"{', '.join(NOISE_FIGURES)} (diac_family a number), as the motion's judgement "
+                                      f"writes it, got {noise!r:.80}")
+
+
 # The stages' figures the verifier reads nowhere else: informational (they describe the run, a
 # check reads none of them: docs/certificate.md), but each of its type, so that no figure states
 # what no run produces: "count" a whole number >= 0, "measure" a number >= 0 (a time, an RMS, a
@@ -219,7 +242,7 @@ def _check_written_content(stage: dict, written: tuple) -> None:
 # ratio), "calibration" a calibration matrix (3x3, upper triangular, bottom row [0, 0, 1], positive
 # focal lengths), and each at most MAX_FIGURE in magnitude; null where the stage has none. Keyed
 # (stage, path), a path's "*" any entry of a list. (A stage's K, and the summary's times, are
-# tied to what the verifier reads: _check_figures and verification._stage_calibration.)
+# tied to what the verifier reads: _check_summary_times and verification._stage_calibration.)
 MAX_FIGURE = 1e12
 FIGURES = {
     "projective": {
@@ -303,18 +326,36 @@ def _figure(value: Any, where: str, kind: str) -> None:
                                   f"the run), got {value!r:.40}")
 
 
-def _check_figures(stage: dict, summary: dict) -> None:
-    """A stage's figures of their types (FIGURES), and its times the summary's (summary.time_s and
-    cpu_s restate each stage's elapsed_s and cpu_s, pipelines.reconstruction.claims.summarise)."""
+def _check_figures(stage: dict) -> None:
+    """A stage's figures of their types (FIGURES)."""
     name = stage["name"]
     for path, kind in {**COMMON_FIGURES, **FIGURES.get(name, {})}.items():
         for where, value in _values(stage, path.split("/"), f"stages/{name}"):
             _figure(value, where, kind)
-    for own, total in (("elapsed_s", "time_s"), ("cpu_s", "cpu_s")):
+
+
+# The summary's times restate the stages' own (claims.summarise; kinds.reconstruction puts the
+# matches stage's first): time_s each stage's elapsed_s (every stage states one, pipeline._stage),
+# cpu_s each stage's cpu_s, 0.0 for a stage that states none (one not timed: skipped, cancelled,
+# not run). Each an object with an entry for every stage and no other, so that none is left out,
+# added, or stated of another type (review 31: a string, null or {} verified, the tie read only
+# where the object named the stage). Both stored reconstructions' forms state them so.
+SUMMARY_TIMES = (("time_s", "elapsed_s", None), ("cpu_s", "cpu_s", 0.0))
+
+
+def _check_summary_times(stages: list[dict], summary: dict) -> None:
+    names = [stage["name"] for stage in stages]
+    for total, own, unstated in SUMMARY_TIMES:
         stated = summary.get(total)
-        if isinstance(stated, dict) and name in stated and own in stage and not same(stated[name], stage[own]):
-            raise Invalid("returned", f"summary/{total}/{name} is {stated[name]!r:.40}, the stage's {own} "
-                                      f"{stage[own]!r:.40}")
+        if not (isinstance(stated, dict) and set(stated) == set(names)):
+            raise Invalid("returned", f"summary/{total} must be an object with an entry for each stage "
+                                      f"({', '.join(names)}) and no other, got {stated!r:.120}")
+        for stage in stages:
+            name, value = stage["name"], stated[stage["name"]]
+            expected = stage.get(own, unstated)
+            if not (is_number(value) and 0 <= value <= MAX_FIGURE) or not same(value, expected):
+                raise Invalid("returned", f"summary/{total}/{name} is {value!r:.40}, the stage's {own} "
+                                          f"{expected!r:.40}: the summary restates the stage's own")
 
 
 def _where(stage: str, path: str) -> str:
@@ -368,13 +409,10 @@ def check_stages(result: dict) -> None:
             for inner, inner_kind in NESTED.get((name, member), {}).items():
                 if isinstance(stage.get(member), dict):
                     _container(stage[member].get(inner), inner_kind, _where(name, f"{member}/{inner}"))
-        _check_figures(stage, summary)
+        _check_figures(stage)
         _check_written(stage, cameras, options)
     _check_counts({stage["name"]: stage for stage in stages}, views, tracks)
-    for total in ("time_s", "cpu_s"):  # the summary's times: each a stage's (checked above), none another's
-        stated = summary.get(total)
-        if isinstance(stated, dict) and not set(stated) <= set(names):
-            raise Invalid("returned", f"summary/{total} names a stage the result has not: {sorted(stated)!r:.120}")
+    _check_summary_times(stages, summary)
 
 
 def _check_counts(stages: dict, views: int, tracks: int) -> None:
