@@ -80,9 +80,9 @@ def sublevel_of(result: dict) -> dict:
 
 def restated(forged: dict) -> dict:
     """``forged``'s determinacy made its proof's again, and its certificate rehashed."""
-    from geocert.solvers.autocalibration import direct_sublevel
+    from geocert.solvers.autocalibration import direct_intrinsics
 
-    forged["stages"][0]["determinacy"]["proven_intervals"] = direct_sublevel.proven_document(sublevel_of(forged))
+    forged["stages"][0]["determinacy"]["proven_intervals"] = direct_intrinsics.proven_document(sublevel_of(forged))
     rehash(forged["certificate"])
     return forged
 
@@ -139,11 +139,25 @@ class TestForged:
         pair[side] += (0.01 if side == 0 else -0.01) * width
         refused(restated(forged), "proven_interval", "narrower")
 
+    def test_a_widened_interval_verifies(self, result):
+        forged = copy.deepcopy(result)
+        for pair in sublevel_of(forged)["intrinsics"]["intervals"]:
+            pair[0] = None if pair[0] is None else pair[0] - 0.5
+            pair[1] = None if pair[1] is None else pair[1] + 0.5
+        assert verify_any(restated(forged)).valid
+
     def test_an_end_stated_without_its_dual_is_refused(self, result):
         """principal_u's lower end stated with its entries removed (a missing end claimed)."""
         forged = copy.deepcopy(result)
         sublevel_of(forged)["intrinsics"]["u"]["lower"] = None
         refused(restated(forged), "proven_interval", "narrower")
+
+    def test_a_missing_end_stated_null_verifies(self, result):
+        forged = copy.deepcopy(result)
+        intrinsics = sublevel_of(forged)["intrinsics"]
+        intrinsics["u"]["lower"] = None
+        intrinsics["intervals"][0][0] = None
+        assert verify_any(restated(forged)).valid
 
     def test_a_forged_dual_is_refused(self, result):
         forged = copy.deepcopy(result)
