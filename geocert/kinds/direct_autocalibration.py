@@ -96,9 +96,11 @@ def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptio
             stage["determinacy"] = within(deadline, "the direct stage's determinacy", why, determinacy.metric_stage,
                                           problem, p, np.array(document["K"]), None, None, centres)
         proof = stage["certificate"].get("proof")
-        if p is not None and options.prove_focal_interval and options.certificate == "full" and proof is not None \
+        asked = options.prove_focal_interval or options.prove_intrinsics_intervals
+        if p is not None and asked and options.certificate == "full" and proof is not None \
                 and stage["certified"] and stage["determinacy"] is not None:
-            _prove_focal(setup, result, stage, proof, deadline, options.varying_focal)
+            _prove_focal(setup, result, stage, proof, deadline, options.varying_focal,
+                         options.prove_intrinsics_intervals and not options.varying_focal)
     stages = [stage]
     if checking:
         self_check_stages(parsed, dataclasses.replace(options), stages)
@@ -107,11 +109,13 @@ def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptio
 
 
 def _prove_focal(setup: direct.DirectSetup, result, stage: dict, proof: dict, deadline: float,
-                 varying_focal: bool) -> None:
+                 varying_focal: bool, intrinsics: bool = False) -> None:
     """The focal length's proven interval (direct_sublevel; each view's with ``varying_focal``) at
     the cost increase direct_sublevel.cost_increase states: into the stage's proof (``sublevel``)
-    and its determinacy (``proven_intervals``), when the search ends before the job's deadline."""
-    from geocert.solvers.autocalibration import direct_solve, direct_sublevel
+    and its determinacy (``proven_intervals``), when the search ends before the job's deadline.
+    ``intrinsics``: the other intrinsics' too (direct_intrinsics), over the same set, those the
+    deadline leaves unproven stated null."""
+    from geocert.solvers.autocalibration import direct_intrinsics, direct_solve, direct_sublevel
 
     increase = direct_sublevel.cost_increase(stage["cost"], stage["lower_bound"], len(setup.cameras))
 
@@ -126,7 +130,9 @@ def _prove_focal(setup: direct.DirectSetup, result, stage: dict, proof: dict, de
         found = None
     if found is None:
         return
+    if intrinsics:
+        found["intrinsics"] = direct_solve.prove_intrinsics(setup, result.Q, stage["cost"], increase, check)
     proof["sublevel"] = found
-    read = direct_sublevel.proven_views_document if varying_focal else direct_sublevel.proven_document
+    read = direct_sublevel.proven_views_document if varying_focal else direct_intrinsics.proven_document
     stage["determinacy"]["proven_intervals"] = read(found)
     stage["determinacy"]["proven"] = True

@@ -140,8 +140,9 @@ class DeterminacyWarning(BaseModel):
 
 class ProvenInterval(BaseModel):
     name: str
-    lower: float
-    upper: float
+    lower: float | None = Field(description="null: no end is proven on this side (reason says why)")
+    upper: float | None = Field(description="null: no end is proven on this side (reason says why)")
+    reason: str | None = Field(None, description="why an end is null (absent when both are proven)")
 
 
 class ProvenIntervals(BaseModel):

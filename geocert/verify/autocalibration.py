@@ -26,7 +26,7 @@ STAGE_NAMES = {"stratified": ["affine", "metric"], "direct": ["direct"]}
 # verifier holds a document to, read strictly (true or false, absent false) and not hashed into
 # problem_sha256: none is a premise of a claim (prove_focal_interval's direct proof predates its
 # option, so documents carry it either way).
-ASKED_PROOFS = ("prove_intervals_over_planes",)
+ASKED_PROOFS = ("prove_intervals_over_planes", "prove_intrinsics_intervals")
 CLAIM_OPTIONS = ("method", "intrinsics", "rel_gap", "metric_rel_gap", "abs_gap", "chirality", "varying_focal",
                  "relaxation_order")
 # Sizes served (the parser's and the verifier's, checked before anything is built): the stages
@@ -534,7 +534,16 @@ def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, l
     elif "sublevel" in proof:  # the focal length's proven interval (direct_sublevel), at the claimed cost or above
         from geocert.solvers.autocalibration import direct_sublevel
 
-        direct_sublevel.check(setup, proof["sublevel"], excluded, max(claimed, direct_relaxation.cost(setup.cameras, Q)))
+        if isinstance(proof["sublevel"], dict) and "intrinsics" in proof["sublevel"] \
+                and options.get("prove_intrinsics_intervals") is not True:
+            raise Invalid("format", "proof/sublevel/intrinsics is carried, and options/prove_intrinsics_intervals "
+                                    "did not ask for it")
+        at = max(claimed, direct_relaxation.cost(setup.cameras, Q))
+        direct_sublevel.check(setup, proof["sublevel"], excluded, at)
+        if "intrinsics" in proof["sublevel"]:  # the other intrinsics' (one K), over the same set
+            from geocert.solvers.autocalibration import direct_intrinsics
+
+            direct_intrinsics.check(setup, proof["sublevel"], excluded, at)
         passed.append("proven_interval")
     cameras, points, _ = arrays
     try:
@@ -611,7 +620,9 @@ def _check_direct_proven(stage: dict, claim: dict, views: int, per_view: bool) -
     cost increase than direct_sublevel.cost_increase gives for the stage's cost and bound."""
     from geocert.solvers.autocalibration import direct_sublevel
 
-    reader = direct_sublevel.proven_views_document if per_view else direct_sublevel.proven_document
+    from geocert.solvers.autocalibration import direct_intrinsics
+
+    reader = direct_sublevel.proven_views_document if per_view else direct_intrinsics.proven_document
     expected = _stated_proven(stage, claim, "stages/0", "direct", reader)
     if expected is None:
         return

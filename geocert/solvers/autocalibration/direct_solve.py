@@ -541,12 +541,31 @@ def prove_focal_lengths(setup: direct.DirectSetup, Q: np.ndarray, cost: float, i
     return {"cost_increase": float(increase), "views": views}
 
 
-def _prove_ends(setup: direct.DirectSetup, Q: np.ndarray, level: float, check, view: int | None) -> dict:
+def _prove_ends(setup: direct.DirectSetup, Q: np.ndarray, level: float, check, view: int | None,
+                ratio=None) -> dict:
     """{"lower": entries or None, "upper": ...}: prove_focal's search, of the views' mean r (view
-    None) or of view ``view``'s."""
-    from geocert.solvers.autocalibration import direct_sublevel
+    None) or of view ``view``'s, or of ``ratio`` (a direct_intrinsics.Ratio) when given."""
+    from geocert.solvers.autocalibration import direct_intrinsics, direct_sublevel
 
-    start = direct_sublevel.ratio(setup.cameras, Q / np.trace(Q), view)
+    if ratio is None:
+        def value(Q):
+            return direct_sublevel.ratio(setup.cameras, Q, view)
+
+        def build(pairs, c, sign):
+            return direct_sublevel.side_program(setup.cameras, pairs, setup.focal, c, sign, level, view)
+
+        def proves(c, sign, safe):
+            return direct_sublevel.end(setup.cameras, c, sign, safe, view)
+    else:
+        def value(Q):
+            return ratio.at(Q)
+
+        def build(pairs, c, sign):
+            return direct_intrinsics.side_program(setup.cameras, pairs, setup.focal, ratio, c, sign, level)
+
+        proves = ratio.end
+
+    start = value(Q / np.trace(Q))
     sides = {}
     for side, sign in (("lower", 1.0), ("upper", -1.0)):
         entries = []
@@ -557,13 +576,12 @@ def _prove_ends(setup: direct.DirectSetup, Q: np.ndarray, level: float, check, v
 
             def solved(c, attempts=ATTEMPTS[:1]):
                 nonlocal best, best_end, clean
-                program = direct_sublevel.side_program(setup.cameras, orientation.pairs, setup.focal, c, sign, level,
-                                                       view)
+                program = build(orientation.pairs, c, sign)
                 status, y, z, raw = solve_program(program, None, attempts, check)
                 clean = clean and status is ConicStatus.OPTIMAL
                 if z is not None:
                     safe, _ = direct_relaxation.safe_bound(program, z, -math.inf)
-                    proven = direct_sublevel.end(setup.cameras, c, sign, safe, view)
+                    proven = proves(c, sign, safe)
                     if proven is not None and (best_end is None or sign * (proven - best_end) > 0):
                         best, best_end = {"delta": orientation.delta, "c": float(c), "z": pack(z)}, proven
                 return y
@@ -573,7 +591,7 @@ def _prove_ends(setup: direct.DirectSetup, Q: np.ndarray, level: float, check, v
                     y = solved(c, attempts)
                     if y is None:
                         break
-                    moved = direct_sublevel.ratio(setup.cameras, direct_relaxation.q_of(y[:direct_relaxation.N]), view)
+                    moved = value(direct_relaxation.q_of(y[:direct_relaxation.N]))
                     if not math.isfinite(moved):
                         break
                     # never past the returned Q's own r: it is in the set
@@ -635,3 +653,33 @@ def _ends_here(setup, sides: dict, level: float, view: int | None) -> tuple[floa
             found.append(direct_sublevel.end(setup.cameras, entry["c"], sign, safe, view))
         ends[side] = min(found) if sign > 0 else max(found)
     return ends["lower"], ends["upper"]
+
+
+def prove_intrinsics(setup: direct.DirectSetup, Q: np.ndarray, cost: float, increase: float, check=None) -> dict:
+    """The direct proof's sublevel["intrinsics"] (direct_intrinsics): each ratio's ends by
+    prove_focal's search, and the intervals they prove as the verifier reads them, padded outward
+    by INTERVAL_PAD (of the value and f0). A ratio whose search ``check()`` stops, and every one
+    after it, is left unproven (null ends): what was proven stands."""
+    from geocert.solvers.autocalibration import direct_intrinsics
+
+    level = sublevel_level(cost, increase)
+    forms = direct_intrinsics.ratios(setup.cameras)
+    out, stopped = {}, False
+    for name in direct_intrinsics.RATIOS:
+        sides = {"lower": None, "upper": None}
+        if not stopped:
+            try:
+                sides = _prove_ends(setup, Q, level, check, None, forms[name])
+            except Stopped:
+                stopped = True
+        out[name] = sides
+    f0 = float(setup.problem.K0[0, 0])
+    # as the verifier reads them (direct_intrinsics.check)
+    proven = direct_intrinsics.proven_ends(setup, out, "intrinsics", setup.orientations, level)
+
+    def pad(x, sign, scale):
+        return None if x is None else x + sign * INTERVAL_PAD * (abs(x) + scale)
+
+    out["intervals"] = [[pad(proven[n][0], -1.0, 1.0 if n == "aspect" else f0),
+                         pad(proven[n][1], 1.0, 1.0 if n == "aspect" else f0)] for n in direct_intrinsics.NAMES]
+    return out

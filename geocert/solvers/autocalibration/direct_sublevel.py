@@ -75,13 +75,18 @@ def program(cameras: np.ndarray, pairs, focal, S: np.ndarray, level: float) -> d
     """The order-2 relaxation of min tr(S Q) over the orientation's program (its pairs, the focal
     rows) with f <= level: the cost row (a nonnegative row) and its localizing matrix over the
     monomials of degree <= 1 (a PSD block before the moment matrix, which stays last)."""
+    return polynomial_program(cameras, pairs, focal, direct_relaxation.trace_polynomial(S), level)
+
+
+def polynomial_program(cameras: np.ndarray, pairs, focal, p: dict, level: float) -> direct_relaxation.Program:
+    """program's relaxation with the objective a polynomial p in Q's centred entries (degree <= 4,
+    the order-2 moments'; direct_relaxation's dict form)."""
     base = direct_relaxation.build(cameras, pairs, 2, (), focal)
-    p = direct_relaxation.trace_polynomial(S)
     zero = tuple([0] * direct_relaxation.N)
     q = np.zeros(len(base.q))
-    for e, c in p.items():
-        if sum(e) == 1:
-            q[int(np.argmax(e))] += c  # the degree-1 moments are y's first N (graded basis)
+    exps, coefs = direct_relaxation.poly({e: c for e, c in p.items() if e != zero})
+    if len(coefs):
+        np.add.at(q, base.moments.index(exps) - 1, coefs)  # y excludes y_0 (graded basis: y_0 first)
     cones = base.cones
     at = cones.zero + cones.nonneg
     exps, coefs = direct_relaxation.poly(direct_relaxation.objective(cameras))
@@ -168,12 +173,22 @@ def _level(sublevel) -> float:
     return float(increase)
 
 
-def _ends(setup, holder: dict, where: str, live: list, level: float, view: int | None) -> dict:
-    """r's ends (view ``view``'s, or the views' mean's) that ``holder``'s "lower" and "upper"
-    entries prove: one {delta, c, z} an orientation in ``live`` a side, each safe bound above 0;
-    an end stated null is the scope's (-inf or inf here, pixels clips it)."""
+def _ends(setup, holder: dict, where: str, live: list, level: float, view: int | None, build=None,
+          proves=None) -> dict:
+    """r's ends (view ``view``'s, or the views' mean's; another ratio's with ``build(pairs, c,
+    sign)`` its program and ``proves(c, sign, safe)`` what a safe bound proves, direct_intrinsics')
+    that ``holder``'s "lower" and "upper" entries prove: one {delta, c, z} an orientation in
+    ``live`` a side, each safe bound above 0; an end stated null is not proven (-inf or inf here;
+    pixels clips the focal length's to the scope)."""
     from geocert.solvers.autocalibration import direct
     from geocert.solvers.core.strict import Invalid, charge, dual_vector, is_number, record
+
+    if build is None:
+        def build(pairs, c, sign):
+            return side_program(setup.cameras, pairs, setup.focal, c, sign, level, view)
+
+        def proves(c, sign, safe):
+            return end(setup.cameras, c, sign, safe, view)
 
     ends = {"lower": -math.inf, "upper": math.inf}
     for side, sign in (("lower", 1.0), ("upper", -1.0)):
@@ -195,10 +210,10 @@ def _ends(setup, holder: dict, where: str, live: list, level: float, view: int |
             rows = direct._rows_without_pairs(setup, 2, 0) + EXTRA_ROWS + (0 if o.pairs is None else len(o.pairs))
             charge(rows, f"the {side} interval program of orientation {o.delta!r}")
             dual_vector(entry.get("z"), rows, f"{where}/{side}/z", "proven_interval")
-            built = side_program(setup.cameras, o.pairs, setup.focal, float(c), sign, level, view)
+            built = build(o.pairs, float(c), sign)
             z = dual_vector(entry.get("z"), len(built.b), f"{where}/{side}/z", "proven_interval")
             safe, _ = direct_relaxation.safe_bound(built, z, -math.inf)
-            value = end(setup.cameras, float(c), sign, safe, view)
+            value = proves(float(c), sign, safe)
             if value is None:
                 raise Invalid("proven_interval", f"{where}/{side}: the dual's safe bound at c = {c!r} is "
                                                  f"{safe!r}, not above 0: it proves no {side} end")
@@ -227,14 +242,14 @@ def check(setup, sublevel, gone: tuple, cost: float) -> tuple[float, float]:
     from geocert.solvers.autocalibration.proofs import sublevel_level
     from geocert.solvers.core.strict import record
 
-    record(sublevel, "proof/sublevel", ("cost_increase", "lower", "upper", "interval"))
+    record(sublevel, "proof/sublevel", ("cost_increase", "lower", "upper", "interval"), ("intrinsics",))
     level = sublevel_level(cost, _level(sublevel))
     live = [o for o in setup.orientations if o.delta not in gone]
     ends = _ends(setup, sublevel, "proof/sublevel", live, level, None)
     lo, hi = pixels(float(setup.problem.K0[0, 0]), ends["lower"], ends["upper"],
                     scope_range(setup.problem.unit_ranges))
     _stated_holds(sublevel, "proof/sublevel", lo, hi)
-    return lo, hi
+    return lo, hi  # its "intrinsics", when carried: direct_intrinsics.check
 
 
 # --- one focal length a view (varying_focal) ---------------------------------------------------

@@ -84,6 +84,13 @@ class AutocalibrationOptions(SearchOptions):
         "direct method, certificate full: prove an interval of the focal length (each view's, with "
         "varying_focal) over every quadric within a stated cost increase of the certified one (tens of "
         "seconds of CPU; with varying_focal 6 to 60 s a view)"))
+    # The direct method's other intrinsics (direct_intrinsics): five more ratios, each end its own
+    # Dinkelbach search, several times the focal length's CPU: asked for on its own.
+    prove_intrinsics_intervals: bool = option(False, description=(
+        "direct method, one focal length (varying_focal false), certificate full: prove intervals of the "
+        "principal point, the second focal length, the skew and the aspect ratio over every quadric within "
+        "the stated cost increase, beside the focal length's (implies prove_focal_interval; several times its "
+        "CPU; an end no dual proves is stated null with its reason)"))
     # The stratified metric stage's intervals proven over the plane at infinity's own uncertainty
     # (plane_sublevel) cost 2.5 to 3.5 times a full certificate's solve (2 to 3.5 times its
     # verification), and on real near-critical rings come out as the ranges: asked for, not implied
@@ -110,9 +117,12 @@ class AutocalibrationOptions(SearchOptions):
         if self.method not in METHODS:
             raise InputError("options/method", f"must be one of {', '.join(METHODS)}")
         check_direct_options(self.chirality, self.varying_focal, self.relaxation_order)
-        for name in ("prove_focal_interval", "prove_intervals_over_planes"):
+        for name in ("prove_focal_interval", "prove_intervals_over_planes", "prove_intrinsics_intervals"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(f"options/{name}", "must be true or false")
+        if self.prove_intrinsics_intervals and self.varying_focal:
+            raise InputError("options/prove_intrinsics_intervals", "with varying_focal the direct method states one "
+                                                                   "focal length a view and no other intrinsic to prove")
         if not (isinstance(self.metric_rel_gap, (int, float)) and 0 <= self.metric_rel_gap <= 1):
             raise InputError("options/metric_rel_gap", "must be a finite number >= 0 and <= 1")
         if not isinstance(self.intrinsics, dict):
