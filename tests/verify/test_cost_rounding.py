@@ -76,3 +76,19 @@ def test_the_rounding_is_of_the_terms_not_the_cost():
     assert 1e-9 * cost < rounding < 1e-3 * cost
     assert cost_rounding.within(cost, cost + 0.5 * rounding, 1e-9, rounding)
     assert not cost_rounding.within(cost, cost + 2 * rounding, 1e-9, rounding)
+
+
+def test_tied_references_put_the_best_first_and_keep_only_ties():
+    """Cameras conditioned alike to 1e-12 are tied for the reference (another machine's LAPACK may
+    rank them otherwise); one clearly worse conditioned is not; the best (reference_camera's
+    choice) comes first."""
+    from geocert.solvers.autocalibration import frames
+
+    rng = np.random.default_rng(0)
+    R = [np.linalg.qr(rng.normal(size=(3, 3)))[0] for _ in range(4)]
+    cameras = np.array([np.hstack([r, rng.normal(size=(3, 1))]) for r in R])
+    cameras[2, :, :3] = cameras[2, :, :3] @ np.diag([1.0, 1.0, 1.0 + 1e-12])
+    cameras[3, :, :3] = cameras[3, :, :3] @ np.diag([1.0, 1.0, 3.0])
+    tied = frames.tied_references(cameras, np.eye(3))
+    assert tied[0] == frames.reference_camera(cameras)
+    assert sorted(tied) == [0, 1, 2]

@@ -50,9 +50,27 @@ def reference_camera(cameras: np.ndarray) -> int:
     return int(np.argmax(s[:, 2] / s[:, 0]))
 
 
-def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray) -> Normalised:
+# Cameras conditioned within this fraction of the best are tied for the reference: an exact scene's
+# cameras (a ring of one K) are conditioned alike to their last digits, which another machine's
+# LAPACK rounds differently, so the machine that verifies may rank them otherwise than the one that
+# solved.
+REFERENCE_TIE = 1e-9
+
+
+def tied_references(cameras: np.ndarray, N: np.ndarray) -> list[int]:
+    """reference_camera's choice for normalise(cameras, ., N), then every other camera tied with it
+    (REFERENCE_TIE), best conditioned first."""
     cams = np.einsum("ab,ibc->iac", N, cameras)
-    r = reference_camera(cams)
+    s = np.linalg.svd(cams[:, :, :3], compute_uv=False)
+    ratio = s[:, 2] / s[:, 0]
+    best = int(np.argmax(ratio))
+    tied = [int(i) for i in np.argsort(-ratio, kind="stable") if ratio[i] >= ratio[best] * (1.0 - REFERENCE_TIE)]
+    return [best] + [i for i in tied if i != best]
+
+
+def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, reference: int | None = None) -> Normalised:
+    cams = np.einsum("ab,ibc->iac", N, cameras)
+    r = reference_camera(cams) if reference is None else reference
     A, a = cams[r, :, :3], cams[r, :, 3]
     Ainv = np.linalg.inv(A)
     T0 = np.eye(4)

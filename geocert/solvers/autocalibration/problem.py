@@ -194,11 +194,19 @@ class Problem:
     unit_ranges: dict  # preconditioned
 
 
-def prepare(cameras: np.ndarray, points: np.ndarray | None, image_size, intrinsics: dict) -> Problem:
+def prepare(cameras: np.ndarray, points: np.ndarray | None, image_size, intrinsics: dict,
+            reference: int | None = None) -> Problem:
+    """The problem in its normalised frame; ``reference`` (default: the best-conditioned camera)
+    the camera moved to [I | 0], whose view the modulus constraints leave out."""
     ranges = resolve_ranges(intrinsics, image_size)
     K0 = preconditioner(ranges)
-    norm = frames.normalise(cameras, points, np.linalg.inv(K0))
+    norm = frames.normalise(cameras, points, np.linalg.inv(K0), reference)
     return Problem(norm, ranges, K0, normalised_ranges(ranges, K0))
+
+
+def tied_references(cameras: np.ndarray, image_size, intrinsics: dict) -> list[int]:
+    """The references prepare may take for these data on another machine (frames.tied_references)."""
+    return frames.tied_references(cameras, np.linalg.inv(preconditioner(resolve_ranges(intrinsics, image_size))))
 
 
 @dataclass
