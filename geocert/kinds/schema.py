@@ -7,7 +7,7 @@ import dataclasses
 import typing
 from typing import Annotated, Any, Literal
 
-from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, create_model
+from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, create_model, model_serializer
 
 from geocert.solvers.core.declared_options import KEY, MISSING
 
@@ -143,6 +143,15 @@ class ProvenInterval(BaseModel):
     lower: float | None = Field(description="null: no end is proven on this side (reason says why)")
     upper: float | None = Field(description="null: no end is proven on this side (reason says why)")
     reason: str | None = Field(None, description="why an end is null (absent when both are proven)")
+
+    @model_serializer(mode="wrap")
+    def _reason_only_where_stated(self, handler):
+        # the writers state a reason only beside a null end; a null one written everywhere would
+        # make every proven interval differ from its proof's, which the verifier compares
+        out = handler(self)
+        if isinstance(out, dict) and out.get("reason") is None:
+            out.pop("reason", None)
+        return out
 
 
 class ProvenIntervals(BaseModel):
