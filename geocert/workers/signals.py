@@ -35,6 +35,7 @@ SOLVER_MODULES = (
     "geocert.solvers.core.determinacy", "geocert.solvers.core.self_check", "geocert.solvers.bilinear.search",
     "geocert.solvers.autocalibration.stratified", "geocert.solvers.autocalibration.direct",
     "geocert.solvers.autocalibration.direct_solve", "geocert.solvers.autocalibration.direct_sublevel",
+    "geocert.solvers.autocalibration.direct_intrinsics",
     "geocert.solvers.autocalibration.metric_sublevel", "geocert.solvers.autocalibration.plane_sublevel",
     "geocert.solvers.autocalibration.determinacy",
     "geocert.solvers.autocalibration.proofs", "geocert.solvers.lines.determinacy", "geocert.solvers.lines.geometry",
