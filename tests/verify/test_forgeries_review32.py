@@ -99,3 +99,31 @@ def test_the_rounding_of_a_non_finite_sum_is_none():
         assert cost_rounding.squares_rounding(np.array([1.0, 2.0]), np.array([np.inf, 1.0])) == 0.0
         assert cost_rounding.squares_rounding(np.array([1.0, 2.0]), np.array([np.nan, 1.0])) == 0.0
         assert cost_rounding.squares_rounding(np.array([1e300]), np.array([1e300])) == 0.0
+
+
+# Class 1: a box side stated inside what its rows prove, by the slack a far-out other side buys
+
+def _box_forged(far: float, upper_1: float) -> dict:
+    """The stored stratified document's affine region with its axis-0 lower side stated at -far and
+    its axis-1 upper side at upper_1, its one leaf restated as the box."""
+    document = copy.deepcopy(stored("autocalibration_stratified"))
+    region = document["certificate"]["items"][0]["proof"]["regions"][0]
+    region["box"][0][0] = -far
+    region["box"][1][1] = upper_1
+    region["leaves"][0][0], region["leaves"][0][1] = region["box"][0], region["box"][1]
+    return document
+
+
+@pytest.mark.xfail(strict=True, reason="review 32 class 1: frames.side_slack scales with the stated box's reach, "
+                                       "so one side stated far out lets another be stated inside its rows' bound")
+@pytest.mark.parametrize("far", [1e14, 1e20, 1e300])
+def test_a_box_side_inside_its_rows_bound_is_refused_whatever_the_other_sides(far):
+    """The rows prove v[1] reaches 0.6335 (an exact bound of three of them, and the polytope's
+    extent by LP); the forged box says v[1] <= -1.0385, a sliver at the polytope's lower side."""
+    _refused(_box_forged(far, -1.0385), "not proved by its rows")
+
+
+def test_a_box_side_inside_its_rows_bound_is_refused_with_the_stored_sides():
+    """The same sliver with the stated far side moved back (reach 1e12, 1): refused."""
+    _refused(_box_forged(1e12, 0.33), "not proved by its rows")
+    _refused(_box_forged(0.5838123237053306, 0.33), "not proved by its rows")
