@@ -20,6 +20,8 @@ certificates (docs/certificate.md)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 RELATIVE = 64 * 2.0 ** -52
@@ -36,7 +38,7 @@ def squares_rounding(residuals: np.ndarray, magnitudes: np.ndarray) -> float:
 
 def within(cost: float, claimed: float, relative: float, rounding: float) -> bool:
     """Whether the claimed cost is the computed one, to ``relative`` of it plus the rounding."""
-    return abs(cost - claimed) <= relative * abs(cost) + rounding + 1e-300
+    return math.isfinite(cost) and abs(cost - claimed) <= relative * abs(cost) + rounding + 1e-300
 
 
 def metric_magnitudes(H: np.ndarray, omega: np.ndarray, weights: np.ndarray, rows: np.ndarray,

@@ -30,6 +30,7 @@ from geocert.solvers.fractional import determinacy as estimate
 
 NUMBER_SLACK = 1e-6  # of an interval's width: another machine's eigendecomposition of the same J'J
 VALUE_SLACK = 1e-9  # of a value: its own rounding
+MAX_COST_SPREAD = 1e-6  # the most a map's cost spread may move its estimate, relative (far-off data)
 COMPARED = ("method", "determined", "level", "redundancy")
 
 
@@ -322,7 +323,9 @@ def _map_cost_spread(source: np.ndarray, target: np.ndarray, matrix: Any) -> flo
             relative = 2.0 * spread / cost
     except (TypeError, ValueError):
         return 0.0
-    return relative if math.isfinite(relative) and relative >= 0 else 0.0
+    # capped: a cost the data barely determine (a near-exact map far off) must not let the level and
+    # interval ends move by multiples of themselves
+    return min(relative, MAX_COST_SPREAD) if math.isfinite(relative) and relative >= 0 else 0.0
 
 
 def _compare(where: str, given: dict, expected: dict | None, earlier_form: bool = True,

@@ -335,18 +335,17 @@ def check_regions(problem, regions: Any, excluded: Any, fields: tuple[str, ...],
         basis = region.get("basis")
         if not isinstance(basis, list) or len(basis) != 6:
             raise Invalid("format", f"{where}regions/{i}/basis must give three rows for each of the six sides")
-        proven = []
-        reach = float(np.max(np.abs(np.concatenate([lo, hi])))) if np.all(np.isfinite(lo)) and np.all(
-            np.isfinite(hi)) else 0.0
-        for side, chosen in enumerate(basis):
+        chosen_rows = [_int_list(chosen, f"{where}regions/{i}/basis/{side}", 3) for side, chosen in enumerate(basis)]
+        proven = [frames.exact_side(a, b, side // 2, side % 2 == 1, chosen) for side, chosen in enumerate(chosen_rows)]
+        # the reach of the polytope the rows prove, not of the box stated: a side stated far out
+        # must not buy slack for another
+        reach = max((abs(v) for v in proven if v is not None and math.isfinite(v)), default=0.0)
+        for side, (chosen, value) in enumerate(zip(chosen_rows, proven)):
             axis, upper = side // 2, side % 2 == 1
-            chosen = _int_list(chosen, f"{where}regions/{i}/basis/{side}", 3)
-            value = frames.exact_side(a, b, axis, upper, chosen)
             # the side as another machine's rows prove it may lie its rows' rounding away
             slack = 0.0 if value is None else frames.side_slack(a, b, chosen, axis, reach)
             if value is None or (value > hi[axis] + slack if upper else value < lo[axis] - slack):
                 raise Invalid("root_region", f"{where}regions/{i}: side {side} of the box is not proved by its rows")
-            proven.append(value)
         # Every plane positive on the rows is G^T (v, 1) times a positive number for some v of
         # the polytope only if the polytope is bounded (the sides above) and not "inside out":
         # a plane with a negative last coordinate in this frame would need the proved lower
