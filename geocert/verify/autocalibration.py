@@ -341,9 +341,10 @@ class AutocalibrationVerification(Verification):
         if claim["index"] == 0:
             if proof.get("type") != "stratified_affine":
                 raise Invalid("format", "stage 0 takes a stratified_affine proof")
-            cost = autocalibration_problem.affine_cost(problem, p)
+            residuals = _affine_residuals(problem, p)
+            cost = float(residuals @ residuals)  # affine_cost's sum, from the residuals the rounding reads
             rounding = _check_cost(cost, claimed, cost_rounding.squares_rounding(
-                _affine_residuals(problem, p),
+                residuals,
                 cost_rounding.affine_magnitudes(problem.norm.cameras, problem.norm.reference, p)),
                 _tolerance(options, options["rel_gap"], claimed))
             passed.append("objective")
@@ -362,9 +363,10 @@ class AutocalibrationVerification(Verification):
         w = autocalibration_problem.w_of_K(problem, K)
         setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
         lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
-        cost = metric_relaxation.cost(setup, w)
+        residuals = metric_relaxation.residuals(setup, w)
+        cost = float(residuals @ residuals)  # metric_relaxation.cost's sum, computed once
         rounding = _check_cost(cost, claimed, cost_rounding.squares_rounding(
-            metric_relaxation.residuals(setup, w),
+            residuals,
             cost_rounding.metric_magnitudes(setup.H, metric_relaxation.omega_of(w), metric_relaxation.WEIGHTS,
                                             metric_relaxation._ROWS, metric_relaxation._COLUMNS)),
             _tolerance(options, options["metric_rel_gap"], claimed))

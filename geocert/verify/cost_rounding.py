@@ -13,10 +13,10 @@ sum(2 |r_i| delta_i + delta_i^2) on each side.
 
 RELATIVE is 64 ulps of the terms: the dozens of operations behind a residual (products of up to four
 factors, sums of up to sixteen terms) round it by a few ulps each. On the stored certificates the
-kernels' costs differ by 1e-3 to 1e-2 of this allowance. It moves what a claim may state by at most
-that fraction of the terms, never the proof's bound, which the verifier recomputes; a claimed cost
-understated by it understates the stated gap by as much, below the gap tolerances of the stored
-certificates (docs/certificate.md)."""
+kernels' costs differ by 1e-6 to 0.05 of this allowance (measured under
+the default, Haswell and Prescott kernels). It moves only what a claim may state as its cost, never
+the proof's bound, which the verifier recomputes, nor the gap, which the checks read from the
+verifier's own cost plus this allowance (docs/certificate.md, "Tolerances")."""
 
 from __future__ import annotations
 

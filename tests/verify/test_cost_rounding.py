@@ -18,7 +18,7 @@ from tests.verify.test_forgeries import stored
 
 @pytest.mark.parametrize("factor", [1 + 1e-3, 1 - 1e-3, 2.0, 0.5])
 def test_a_claimed_cost_moved_beyond_its_rounding_is_refused(factor):
-    """The stratified affine stage's claimed cost (1.03e-14, its rounding allowance about 2e-19
+    """The stratified affine stage's claimed cost (1.03e-14, its rounding allowance 1.3e-19
     here) moved by a thousandth of itself is refused: the allowance is the terms' rounding, not
     room."""
     document = copy.deepcopy(stored("autocalibration_stratified"))
