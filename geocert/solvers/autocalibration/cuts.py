@@ -25,11 +25,6 @@ from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound, safe
 # solves on 20 views) are not solved again. Measured on 20 views: the same nodes, 0.57 to 0.59
 # times the CPU per stage (docs/benchmarks.md).
 SOLVE_TOLERANCE = 1e-7
-# A side of the box that a known point of the tightening's feasible set lies within this much of
-# the box's width of (or beyond, by the solver's feasibility tolerance) could only be cut by a
-# sliver: it is not solved for. Measured on 20 views: about 1 in 4 of the affine stage's sides
-# cut nothing, most of them a split's new face.
-TOUCH = 1e-6
 
 
 @dataclass
@@ -43,43 +38,20 @@ class CutProof(LeafProof):
     value: float = 0.0
 
 
-def side_bounds(program, dims: int, stop: Callable[[], bool] | None = None, solver: ReusableConicProgram | None = None,
-                points: list[np.ndarray] | None = None, last: tuple[int, float] | None = None,
-                ) -> list[tuple[int, float, float, np.ndarray]]:
+def side_bounds(program, dims: int, stop: Callable[[], bool] | None = None) -> list[tuple[int, float, float, np.ndarray]]:
     """(k, sign, value, z) for each of the first ``dims`` variables and each sign whose solve
     returned a dual with a finite safe bound: sign * x_k >= value over the program's feasible
     set, a safe dual bound by z.
-    ``stop()`` is asked before each solve: once true, the bounds found so far are returned.
-    ``solver``: the one to solve with (one kept from program to program reuses its set-up when
-    their patterns match). ``points``: points of the program's
-    feasible set known already (a node bound's minimiser); with each solve's own, a side some
-    point reaches to within TOUCH of the box's width is not solved for: no cut could be made
-    there. ``last``: the side (k, sign) to try last (a split's new face, which the set it halved
-    usually crosses: the solves before it then often show it cannot move)."""
-    solver = solver or ReusableConicProgram(lean=False, tolerance=SOLVE_TOLERANCE)
-    loaded = False
-    known = [x[:dims] for x in points or [] if x is not None and np.all(np.isfinite(x[:dims]))]
-    lo, hi = program.lower[:dims], program.upper[:dims]
-    reach = TOUCH * (hi - lo)
-    order = [(k, sign) for k in range(dims) for sign in (1.0, -1.0)]
-    if last in order:
-        order.remove(last)
-        order.append(last)
+    ``stop()`` is asked before each solve: once true, the bounds found so far are returned."""
+    solver = ReusableConicProgram(lean=False, tolerance=SOLVE_TOLERANCE)
     solved = []
-    for k, sign in order:
-        if any((x[k] <= lo[k] + reach[k]) if sign > 0 else (x[k] >= hi[k] - reach[k]) for x in known):
-            continue  # a point of the set is at this side of the box: it cannot move
+    for k, sign in ((k, sign) for k in range(dims) for sign in (1.0, -1.0)):
         if stop is not None and stop():
             break
         q = np.zeros_like(program.q)
         q[k] = sign
-        if loaded:
-            result = solver.solve_objective(q)
-        else:
-            result = solver.solve(q, program.A, program.b, program.cones)
-            loaded = True
-        if result.x is not None and np.all(np.isfinite(result.x[:dims])):
-            known.append(result.x[:dims])
+        result = solver.solve(q, program.A, program.b, program.cones) if not (k or sign < 0) \
+            else solver.solve_objective(q)
         if result.z is None or result.status in (ConicStatus.INFEASIBLE, ConicStatus.UNBOUNDED):
             continue  # (any other dual iterate gives a safe bound, as in BoxSearch.bound)
         solved.append((k, sign, q, result.z))
@@ -88,18 +60,16 @@ def side_bounds(program, dims: int, stop: Callable[[], bool] | None = None, solv
     # one projection and one product for all the duals (they share the feasible set)
     values = safe_lower_bounds(np.array([q for _, _, q, _ in solved]), program.A, program.b, program.cones,
                                np.array([z for _, _, _, z in solved]), program.lower, program.upper)
-    found = [(k, sign, float(value), z) for (k, sign, _, z), value in zip(solved, values) if math.isfinite(value)]
-    return sorted(found, key=lambda side: (side[0], -side[1]))  # the sides' order, whatever the solves'
+    return [(k, sign, float(value), z) for (k, sign, _, z), value in zip(solved, values) if math.isfinite(value)]
 
 
-def tighten_box(build_capped: Callable, box: Box, cap: float, record: bool, stop: Callable[[], bool] | None = None,
-                solver: ReusableConicProgram | None = None, points: list[np.ndarray] | None = None,
-                last: tuple[int, float] | None = None) -> tuple[list[tuple[Box, CutProof]], Box | None]:
+def tighten_box(build_capped: Callable, box: Box, cap: float, record: bool, stop: Callable[[], bool] | None = None
+                ) -> tuple[list[tuple[Box, CutProof]], Box | None]:
     """The slabs of the box its tightening cuts off, each with its cut, in a guillotine order
     (they and what remains partition the box), and what remains (None when nothing does).
     ``build_capped(lo, hi, cap)`` is the relaxation with the cost capped; its first variables are
     the box's coordinates. ``stop()`` ends the tightening early (side_bounds): the cuts found so
-    far stand, and what remains is only less tight. ``solver``, ``points``, ``last``: side_bounds'."""
+    far stand, and what remains is only less tight."""
     try:
         program = build_capped(box.lo, box.hi, cap)
     except ValueError:
@@ -108,7 +78,7 @@ def tighten_box(build_capped: Callable, box: Box, cap: float, record: bool, stop
         return [], box
     current_lo, current_hi = box.lo.copy(), box.hi.copy()
     slabs: list[tuple[Box, CutProof]] = []
-    for k, sign, value, z in side_bounds(program, len(box.lo), stop, solver, points, last):
+    for k, sign, value, z in side_bounds(program, len(box.lo), stop):
         side = value if sign > 0 else -value  # points costing <= cap: x_k >= side (or <= side)
         if sign > 0 and side > current_lo[k]:
             slab_hi = current_hi.copy()
@@ -144,14 +114,11 @@ class BoxSearch:
     def __init__(self, root_lo: np.ndarray, root_hi: np.ndarray, record: bool):
         self.root_lo, self.root_hi, self.record = root_lo, root_hi, record
         self.program = ReusableConicProgram(lean=False, tolerance=SOLVE_TOLERANCE)
-        self.tightener = ReusableConicProgram(lean=False, tolerance=SOLVE_TOLERANCE)  # capped programs' pattern
         self.upper = math.inf  # the incumbent's cost at the last bound
         self.cuts: dict[int, CutProof] = {}  # slabs cut off, by id, until the engine closes them
-        self.faces: dict[int, tuple[int, float]] = {}  # a split's children, by id: their new face (side_bounds)
 
     def bound(self, box: Box, upper_bound: float) -> BoxBound:
         cut = self.cuts.pop(id(box), None)
-        face = self.faces.pop(id(box), None)
         if cut is not None:  # a slab its parent's tightening showed holds no point costing <= its cap
             return BoxBound(BoxStatus.EMPTY, cut.upper_bound, proof=cut if self.record else None)
         self.upper = min(self.upper, upper_bound)
@@ -185,10 +152,7 @@ class BoxSearch:
             candidate = np.clip(result.x[:len(box.lo)], box.lo, box.hi)
         proof = LeafProof(box, upper_bound, "dual", result.z.copy(), bound) if self.record else None
         status = BoxStatus.EMPTY if bound >= upper_bound else BoxStatus.BOUNDED
-        # the relaxation's minimiser, for the box's tightening (a point of its feasible set while
-        # the cap stays above what it costs), and the face the split made
-        hint = (result.x, result.primal_objective / self.unit, face)
-        return BoxBound(status, bound, candidate=candidate, proof=proof, split_hint=hint)
+        return BoxBound(status, bound, candidate=candidate, proof=proof)
 
     def past_deadline(self) -> bool:
         return time.perf_counter() > self.deadline
@@ -197,10 +161,8 @@ class BoxSearch:
         """Tighten the box, then halve what remains along its widest side relative to the root's."""
         slabs: list[Box] = []
         if self.tightening and math.isfinite(self.upper):
-            x, cost, face = (bound.split_hint if bound is not None else None) or (None, math.inf, None)
-            points = [x] if x is not None and cost < self.upper else []
             cut_off, box = tighten_box(lambda lo, hi, cap: self.build(lo, hi, cap, cap_row=True), box, self.upper,
-                                       self.record, self.past_deadline, self.tightener, points, face)
+                                       self.record, self.past_deadline)
             for slab, proof in cut_off:
                 self.cuts[id(slab)] = proof
             slabs = [slab for slab, _ in cut_off]
@@ -211,6 +173,4 @@ class BoxSearch:
         left_hi, right_lo = box.hi.copy(), box.lo.copy()
         left_hi[axis] = middle
         right_lo[axis] = middle
-        left, right = Box(box.lo.copy(), left_hi), Box(right_lo, box.hi.copy())
-        self.faces[id(left)], self.faces[id(right)] = (axis, -1.0), (axis, 1.0)
-        return slabs + [left, right]
+        return slabs + [Box(box.lo.copy(), left_hi), Box(right_lo, box.hi.copy())]

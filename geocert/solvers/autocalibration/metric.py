@@ -133,25 +133,21 @@ def tighten(setup: metric_relaxation.MetricSetup, lo: np.ndarray, hi: np.ndarray
     with many views one round is ten programs of seconds each); once true, the box as tightened
     so far is returned."""
     record: list[Tightening] = []
-    # one solver for every round's programs (they share a pattern: its set-up is reused), at the
-    # sides' tolerance: the check below only decides when to stop, on a safe bound either way
-    solver = ReusableConicProgram(lean=False, tolerance=cuts.SOLVE_TOLERANCE)
     for _ in range(rounds):
         if stop is not None and stop():
             break
         program = metric_relaxation.build(setup, lo, hi, cap, cap_row=True)
         if program is None:
             break
-        points = []
+        solver = ReusableConicProgram(lean=False)
         if record:  # is the box tight enough already?
             result = solver.solve(program.q, program.A, program.b, program.cones)
             if result.status is ConicStatus.OPTIMAL and cap - safe_lower_bound(
                     program.q, program.A, program.b, program.cones, result.z, program.lower,
                     program.upper) / setup.unit <= tolerance:
                 break
-            points.append(result.x)
         new_lo, new_hi, duals = lo.copy(), hi.copy(), [None] * 10
-        for k, sign, value, z in cuts.side_bounds(program, 5, stop, solver, points):
+        for k, sign, value, z in cuts.side_bounds(program, 5, stop):
             if sign > 0 and value > new_lo[k]:
                 new_lo[k], duals[2 * k] = value, z.copy()
             if sign < 0 and -value < new_hi[k]:

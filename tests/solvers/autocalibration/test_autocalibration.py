@@ -450,33 +450,6 @@ def test_the_metric_stage_tightening_stops_at_a_cancel_or_its_time_limit():
     assert result.metric.status == "cancelled" and result.metric.rounds == []
 
 
-class TestSideBounds:
-    """A box's tightening does not solve for a side that a point known to lie in its feasible set
-    (the box's relaxation minimiser, an earlier side's solution) already reaches: no cut could be
-    made there. The other sides are the same as when no point is given."""
-
-    def test_a_side_a_known_point_reaches_is_not_solved(self):
-        from geocert.solvers.autocalibration import cuts
-
-        scene, norm = normalised_scene(8, 0.2, 4)
-        coef, _ = frames.modulus_coefficients(norm.cameras, norm.reference)
-        region = affine.regions_of(norm, coef)[0][0]
-        centre = 0.5 * (region.lo + region.hi)
-        lo, hi = centre - 0.1 * (region.hi - region.lo), centre + 0.1 * (region.hi - region.lo)
-        a, b = frames.frame_rows(region.G, frames.chirality_rows(norm, region.delta))
-        samples = np.random.default_rng(4).uniform(lo, hi, size=(200, 3))
-        costs = [affine_relaxation.cost(region.setup, v) for v in samples if np.all(a @ v + b >= 0)]
-        program = affine_relaxation.build(region.setup, lo, hi, float(np.median(costs)), cap_row=True)
-        alone = cuts.side_bounds(program, 3)
-        assert (1, -1.0) in [(k, sign) for k, sign, _, _ in alone]
-        at_face = 0.5 * (program.lower + program.upper)
-        at_face[1] = hi[1]  # on the box's upper face of v_1
-        with_point = cuts.side_bounds(program, 3, points=[at_face], last=(1, -1.0))
-        assert [(k, sign) for k, sign, _, _ in with_point] == [(k, sign) for k, sign, _, _ in alone if (k, sign) != (1, -1.0)]
-        for (_, _, value, _), (_, _, expected, _) in zip(with_point, [s for s in alone if s[:2] != (1, -1.0)]):
-            assert value == pytest.approx(expected, rel=1e-9, abs=1e-12)
-
-
 class TestSplitClock:
     """A box's tightening before its split is ten programs (each entry of omega minimised and
     maximised); with many views each takes a tenth of a second or more, and the engine reads its
