@@ -269,13 +269,11 @@ class AutocalibrationVerification(Verification):
             raise Invalid("data", f"{exc.field}: {exc.reason}") from exc
         with np.errstate(all="ignore"):
             if options["method"] == "direct":
-                from geocert.solvers.autocalibration import direct_relaxation
-
                 if claim.get("dual_absolute_quadric") is None:
                     return None
                 Q = _numbers(claim["dual_absolute_quadric"], "dual_absolute_quadric", (4, 4), "claim")
                 setup = _direct_setup(problem, options)
-                cost = direct_relaxation.cost(setup.cameras, setup.from_input(Q))
+                cost, rounding = _direct_cost(setup, setup.from_input(Q))
             else:
                 if claim.get("plane_at_infinity") is None or (claim["index"] == 1 and claim.get("K") is None):
                     return None
@@ -284,16 +282,18 @@ class AutocalibrationVerification(Verification):
                 if p is None:
                     return None  # a plane through the reference camera's centre costs nothing: none is stated
                 if claim["index"] == 0:
-                    cost = autocalibration_problem.affine_cost(problem, p)
+                    cost, rounding = _affine_cost(problem, p)
                 else:
                     setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p,
                                                         problem.unit_ranges)
-                    cost = metric_relaxation.cost(
+                    cost, rounding = _metric_cost(
                         setup, autocalibration_problem.w_of_K(problem, _numbers(claim["K"], "K", (3, 3), "claim")))
-        cost = float(cost)
-        if not np.isfinite(cost):
+        if not (np.isfinite(cost) and np.isfinite(rounding)):
             raise Invalid("objective", "the stage's solution has no finite cost")
-        return cost, OBJECTIVE_TOLERANCE * abs(cost) + 1e-300
+        # A certified stage's allowance (_check_cost), rounding included: the stage's cost as
+        # another machine's kernels computed it differs from this one in its last digits, and a
+        # near-exact fit's in its leading ones.
+        return cost, OBJECTIVE_TOLERANCE * abs(cost) + rounding + 1e-300
 
     def read(self, data: dict, index: int):
         if index not in (0, 1):
@@ -341,12 +341,8 @@ class AutocalibrationVerification(Verification):
         if claim["index"] == 0:
             if proof.get("type") != "stratified_affine":
                 raise Invalid("format", "stage 0 takes a stratified_affine proof")
-            residuals = _affine_residuals(problem, p)
-            cost = float(residuals @ residuals)  # affine_cost's sum, from the residuals the rounding reads
-            rounding = _check_cost(cost, claimed, cost_rounding.squares_rounding(
-                residuals,
-                cost_rounding.affine_magnitudes(problem.norm.cameras, problem.norm.reference, p)),
-                _tolerance(options, options["rel_gap"], claimed))
+            cost, rounding = _affine_cost(problem, p)
+            rounding = _check_cost(cost, claimed, rounding, _tolerance(options, options["rel_gap"], claimed))
             passed.append("objective")
             if not autocalibration_problem.allowed_by_chirality(problem, p):
                 raise Invalid("scope", "the plane at infinity returned is not one chirality allows")
@@ -363,13 +359,8 @@ class AutocalibrationVerification(Verification):
         w = autocalibration_problem.w_of_K(problem, K)
         setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
         lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
-        residuals = metric_relaxation.residuals(setup, w)
-        cost = float(residuals @ residuals)  # metric_relaxation.cost's sum, computed once
-        rounding = _check_cost(cost, claimed, cost_rounding.squares_rounding(
-            residuals,
-            cost_rounding.metric_magnitudes(setup.H, metric_relaxation.omega_of(w), metric_relaxation.WEIGHTS,
-                                            metric_relaxation._ROWS, metric_relaxation._COLUMNS)),
-            _tolerance(options, options["metric_rel_gap"], claimed))
+        cost, rounding = _metric_cost(setup, w)
+        rounding = _check_cost(cost, claimed, rounding, _tolerance(options, options["metric_rel_gap"], claimed))
         passed.append("objective")
         if not metric_relaxation.in_domain(setup, w, lo, hi):
             raise Invalid("scope", "the DIAC returned is outside the domain (box, PSD, or a view's scale range)")
@@ -539,10 +530,8 @@ def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, l
         raise Invalid("claim", "dual_absolute_quadric must be symmetric with a nonzero trace")
     setup = _direct_setup(problem, options)
     Q = setup.from_input(Q_in)
-    cost = direct_relaxation.cost(setup.cameras, Q)
-    rounding = _check_cost(cost, claimed, cost_rounding.squares_rounding(
-        cost_rounding.direct_residuals(setup.cameras, Q), cost_rounding.direct_magnitudes(setup.cameras, Q)),
-        _tolerance(options, options["metric_rel_gap"], claimed))
+    cost, rounding = _direct_cost(setup, Q)
+    rounding = _check_cost(cost, claimed, rounding, _tolerance(options, options["metric_rel_gap"], claimed))
     passed.append("objective")
     bound, excluded = direct.check_proof(setup, proof, options["relaxation_order"])
     if not direct.in_domain(setup, Q, excluded):
@@ -735,11 +724,30 @@ def _largest(expected: Any) -> float:
     return 0.0
 
 
-def _affine_residuals(problem, p: np.ndarray) -> np.ndarray:
+def _affine_cost(problem, p: np.ndarray) -> tuple[float, float]:
+    """The affine stage's cost at plane p (problem.affine_cost's sum) and its rounding."""
     from geocert.solvers.autocalibration import frames
 
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
-    return frames.modulus_residuals(coef, p)
+    residuals = frames.modulus_residuals(coef, p)
+    return float(residuals @ residuals), cost_rounding.squares_rounding(
+        residuals, cost_rounding.affine_magnitudes(problem.norm.cameras, problem.norm.reference, p))
+
+
+def _metric_cost(setup, w: np.ndarray) -> tuple[float, float]:
+    """The metric stage's cost at w (metric_relaxation.cost's sum, computed once) and its rounding."""
+    residuals = metric_relaxation.residuals(setup, w)
+    return float(residuals @ residuals), cost_rounding.squares_rounding(
+        residuals, cost_rounding.metric_magnitudes(setup.H, metric_relaxation.omega_of(w), metric_relaxation.WEIGHTS,
+                                                   metric_relaxation._ROWS, metric_relaxation._COLUMNS))
+
+
+def _direct_cost(setup, Q: np.ndarray) -> tuple[float, float]:
+    """The direct stage's cost at quadric Q (program frame) and its rounding."""
+    from geocert.solvers.autocalibration import direct_relaxation
+
+    return float(direct_relaxation.cost(setup.cameras, Q)), cost_rounding.squares_rounding(
+        cost_rounding.direct_residuals(setup.cameras, Q), cost_rounding.direct_magnitudes(setup.cameras, Q))
 
 
 def _tolerance(options: dict, rel_gap: float, claimed: float) -> float:

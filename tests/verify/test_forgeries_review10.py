@@ -131,8 +131,9 @@ class TestTheBoundOnHardGeometry:
             passed, bound = verify_arrays("resection", (X, x), options, claim)
             assert "sublevel_bound" in passed
             assert bound <= best and claim["lower_bound"] <= best * (1 - 1e-7)
-        elif result.certified:
-            assert result.cost <= best * (1 + 1e-9)
+        elif result.certified:  # a search's answer: its bound below every cost found, its cost within its gap
+            assert result.lower_bound <= best * (1 + 1e-9)
+            assert result.cost <= best / (1 - options["rel_gap"]) * (1 + 1e-9)
         found = resection_bound(X, x, np.array(result.matrix))
         assert found is None or found[0] <= best * (1 - 1e-7)
 

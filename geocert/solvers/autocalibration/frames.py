@@ -171,7 +171,18 @@ def quasi_affine_frame(rows: np.ndarray, plane: np.ndarray) -> np.ndarray:
 def centred_frame(rows: np.ndarray, plane: np.ndarray, rounds: int = 4) -> np.ndarray:
     """A quasi-affine frame whose plane at infinity sits at the Chebyshev centre of the polytope
     of planes (recomputed a few times): an arbitrary interior plane can leave the polytope
-    hundreds of units long, and branch and bound pays for every unit."""
+    hundreds of units long, and branch and bound pays for every unit.
+
+    The rows' coordinates are first scaled by powers of two (exact, and 1 for rows of order 1):
+    in a world of size 1e-9 against a last coordinate 1, the centre's plane mixes the two scales
+    and its frame loses the cloud's spread to cancellation, a few rounds later to 1e134-sized rows
+    no linear program reads, on some machines' kernels and not others. The frame of the original
+    rows is the scaled rows' frame times the same scaling."""
+    scale = np.exp2(-np.round(np.log2(np.maximum(np.abs(rows).max(axis=0), np.finfo(float).tiny))))
+    return _centred_frame(rows * scale, plane / scale, rounds) * scale
+
+
+def _centred_frame(rows: np.ndarray, plane: np.ndarray, rounds: int) -> np.ndarray:
     from scipy.optimize import linprog
 
     G = quasi_affine_frame(rows, plane)

@@ -13,8 +13,8 @@ from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import cost_rounding
 from geocert.solvers.core.strict import Invalid, numbers
 from geocert.solvers.fractional.charts import Chart, MapChart
-from geocert.solvers.fractional.proof import (check_program, program_allowance, program_discount, raw_sizes,
-                                              residual_uncertainty, track_uncertainty)
+from geocert.solvers.fractional.proof import (SOLVER_DISCOUNT_FACTOR, check_program, program_allowance,
+                                              program_discount, raw_sizes, residual_uncertainty, track_uncertainty)
 
 
 class TrackItem:
@@ -145,7 +145,8 @@ def discounted(item, solution: np.ndarray, residuals: np.ndarray, lower: float,
     if scale is None or item.to_program(solution) is None:
         return lower, None
     with np.errstate(all="ignore"):
-        discount = program_discount(item, solution, residuals, program_allowance(item, solution, scale))
+        discount = SOLVER_DISCOUNT_FACTOR * program_discount(item, solution, residuals,
+                                                            program_allowance(item, solution, scale))
     return (lower - discount, None) if np.isfinite(discount) else (min(lower, 0.0), UNDISCOUNTABLE)
 
 

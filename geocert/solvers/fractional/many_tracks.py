@@ -58,7 +58,7 @@ from geocert.solvers.fractional.results import SearchCertificate, TrackResult, c
 from geocert.solvers.fractional.search import (MAX_SCALE, ROOT_SUBSET, branch_directions, depth_subspace,
                                                local_refine, recomputed_status, root_region)
 from geocert.solvers.fractional.items import PROGRAM_REFUSED, UNDISCOUNTABLE, TrackItem, refused_by_verifier
-from geocert.solvers.fractional.proof import track_uncertainty
+from geocert.solvers.fractional.proof import SOLVER_DISCOUNT_FACTOR, track_uncertainty
 from geocert.solvers.fractional.triangulation import track_result, triangulate
 from geocert.solvers.core import barrier, self_check
 
@@ -663,7 +663,7 @@ def _check_results(entries: list, num, den, results: list, rows: list[int], refe
         discounts = cost_roundings(residuals, allowed, options.norm)
     for (row, result), discount in zip(certified, discounts):
         if np.isfinite(discount):
-            result.lower_bound -= float(discount)
+            result.lower_bound -= SOLVER_DISCOUNT_FACTOR * float(discount)
             result.gap = result.cost - result.lower_bound
             rounding = residual_rounding(np.asarray(result.residuals) + entries[row].points, entries[row].points)
             result.status, result.reason = recomputed_status("optimal", np.asarray(result.residuals), result.cost,
