@@ -207,9 +207,9 @@ def test_a_map_determinacy_interval_moved_far_away_is_refused(far_exact_map, val
     _refused(document)
 
 
-@pytest.mark.xfail(strict=True, reason="review 32 class 2: the level's slack is VALUE_SLACK "
-                                       "(1e-9) absolute plus the spread's 40 times itself, and the level is 8e-18")
 def test_a_map_determinacy_level_a_million_times_its_own_is_refused(far_exact_map):
+    """The level's slack was VALUE_SLACK (1e-9) absolute plus the spread's share, and the level is
+    8e-18: now relative to the level only."""
     document = copy.deepcopy(far_exact_map)
     document["maps"][0]["determinacy"]["cost_increase"] *= 1e6
     _refused(document)
