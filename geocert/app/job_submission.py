@@ -20,7 +20,7 @@ from geocert.app.errors import ApiProblem
 from geocert.jobs.runner import parse_job
 from geocert.kinds import get_kind
 from geocert.settings import chunk_size_for, get_settings, over_budget
-from geocert.workers import logs
+from geocert import logs
 from geocert.jobs.destinations import allowed_networks, literal_refusal
 from geocert.workers.queue import can_collect, submit_chunks, task_commands
 from geocert.jobs.store import TERMINAL, JobStore, StoredBytesExceeded, read_job

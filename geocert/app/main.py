@@ -11,7 +11,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from geocert.app import docs, errors, observability, processes, webui
 from geocert.app.api.routes import certificates, jobs, orient, service
 from geocert.settings import get_settings
-from geocert.workers import logs
+from geocert import logs
 
 
 class BodySizeLimit:

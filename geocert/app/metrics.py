@@ -11,11 +11,7 @@ import math
 
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, HistogramMetricFamily
 
-from geocert.jobs.store.metrics import (JOB_BUCKETS, METRICS_KEY, SOLVE_BUCKETS, record_items, record_job_end,
-                                        record_webhook)
-
-__all__ = ["JOB_BUCKETS", "METRICS_KEY", "SOLVE_BUCKETS", "RedisCollector", "record_items", "record_job_end",
-           "record_webhook"]
+from geocert.jobs.store.metrics import JOB_BUCKETS, SOLVE_BUCKETS
 
 
 class RedisCollector:

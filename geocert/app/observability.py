@@ -3,7 +3,7 @@
 Every request gets an id (the caller's ``X-Request-ID`` when it is sane, else a new one), echoed
 in the response and carried in the log context, which the job's tasks inherit. ``/metrics``
 shows this process's request counters and latencies plus the job figures every worker keeps in
-Redis (``workers.metrics``).
+Redis (``app.metrics``).
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from fastapi import APIRouter, Response
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, Counter, Histogram, generate_latest
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from geocert.workers import logs
-from geocert.workers.metrics import RedisCollector
+from geocert import logs
+from geocert.app.metrics import RedisCollector
 
 log = logging.getLogger("geocert.api")
 REGISTRY = CollectorRegistry()

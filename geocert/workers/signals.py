@@ -13,7 +13,7 @@ from geocert.workers.celery_app import SOLVE_QUEUE
 
 @worker_process_init.connect
 def _json_logs(**_) -> None:
-    from geocert.workers import logs
+    from geocert import logs
 
     logs.configure()
     limit_memory(get_settings().worker_memory_mb)

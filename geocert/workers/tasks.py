@@ -38,7 +38,7 @@ from geocert.solvers.core.pieces import spread_by
 from geocert.jobs.runner import (abs_gap_of, assemble, item_counts, item_sums, job_deadline, merged_sums, not_started_item,
                            result_fragment, result_json, result_shell, solve_items, stats_from, streams_result)
 from geocert.kinds import KINDS, get_kind, options_from
-from geocert.workers import logs
+from geocert import logs
 from geocert.workers.endings import after_end
 from geocert.workers.pieces import SOLVE_PIECES, SpreadOverSolvers, help_with
 from geocert.workers.celery_app import celery_app

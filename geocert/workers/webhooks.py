@@ -26,7 +26,7 @@ import httpcore
 
 from geocert.settings import get_settings
 from geocert.jobs.destinations import CheckedBackend, Refused, allowed_networks
-from geocert.workers import logs
+from geocert import logs
 from geocert.workers.celery_app import celery_app
 from geocert.workers.endings import DELIVER_WEBHOOK, DELIVER_WEBHOOK_FAILED
 from geocert.jobs.store import shared_store as store

@@ -7,7 +7,8 @@ import pytest
 
 
 from geocert.jobs.store import JobStore
-from geocert.workers import metrics
+from geocert.app import metrics
+from geocert.jobs.store import metrics as figures
 from tests.support import embedded_redis_client
 
 
@@ -22,11 +23,11 @@ def families(client) -> dict:
 
 class TestRecordItems:
     def test_counts_statuses_and_a_cumulative_histogram(self, client):
-        client.delete(metrics.METRICS_KEY)
+        client.delete(figures.METRICS_KEY)
         items = ([{"status": "optimal", "elapsed_s": 0.002}] * 3 + [{"status": "optimal", "elapsed_s": 0.02}] * 2
                  + [{"status": "node_limit", "elapsed_s": 2.0}] + [{"status": "cancelled", "elapsed_s": 0.0}] * 4)
-        metrics.record_items(client, "triangulation", items[:5])
-        metrics.record_items(client, "triangulation", items[5:])
+        figures.record_items(client, "triangulation", items[:5])
+        figures.record_items(client, "triangulation", items[5:])
         found = families(client)
         counted = {sample.labels["status"]: sample.value for sample in found["geocert_items"].samples
                    if sample.name == "geocert_items_total"}
@@ -41,7 +42,7 @@ class TestRecordItems:
     def test_a_chunk_costs_a_few_commands_whatever_its_size(self, client):
         def commands(count: int) -> int:
             before = client.info("stats")["total_commands_processed"]
-            metrics.record_items(client, "triangulation", [{"status": "optimal", "elapsed_s": 0.01 * (i % 50)}
+            figures.record_items(client, "triangulation", [{"status": "optimal", "elapsed_s": 0.01 * (i % 50)}
                                                            for i in range(count)])
             return client.info("stats")["total_commands_processed"] - before
 

@@ -1,5 +1,5 @@
 """Job metrics kept in Redis, so that every worker (on any machine) adds to the same figures and
-the API's ``/metrics`` shows them (``workers.metrics.RedisCollector`` reads them): jobs ended by
+the API's ``/metrics`` shows them (``app.metrics.RedisCollector`` reads them): jobs ended by
 kind and status, items solved by kind and status, webhook attempts by outcome, and histograms of
 item solve times and job times, all as fields of one hash."""
 
