@@ -359,7 +359,10 @@ class TestDerivedArrayReadAtItsLargestEntry:
 
     def test_the_genuine_result_verifies(self, far_point_result):
         assert _valid(far_point_result)
-        assert abs(far_point_result["points"][-1][2]) > 1e11
+        # Where the far point lands rests on the certified plane's last digits (a point 1e12 away
+        # is 1e-12 from the plane at infinity): 1.03e12 on one BLAS kernel, 9.7e10 on another.
+        # What the forgeries need is that 1e-9 of it dwarfs the scene (10 units against 1.6e-3).
+        assert abs(far_point_result["points"][-1][2]) > 1e10
         assert np.max(np.abs(far_point_result["points"][:-1])) < 1e-2
 
     @staticmethod
