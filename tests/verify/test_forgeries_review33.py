@@ -254,3 +254,44 @@ def test_a_far_map_interval_moved_a_pixel_does_not_hold_the_returned_image(far_e
 def test_a_far_map_interval_moved_beyond_the_cap_is_refused(far_exact_map):
     """The cap holds: 1.1e-6 of the value is refused."""
     _refused(_moved(far_exact_map, 1.2), "determinacy")
+
+
+# Non-finite, subnormal, -0 and huge values in the newest figures: refused
+
+ODD = [float("nan"), float("inf"), -float("inf"), -0.0, 5e-324, -5e-324, 1e308, -1e308, 0.0]
+
+
+@pytest.mark.parametrize("value", ODD)
+@pytest.mark.parametrize("where", ["cost_increase", "value", "lower", "upper", "tolerance"])
+def test_an_odd_number_in_a_far_map_estimate_is_refused(far_exact_map, where, value):
+    """The level (8e-18) and the first interval's figures (1e6, 4e-9 wide, tolerance 0.18)."""
+    document = copy.deepcopy(far_exact_map)
+    determinacy = document["maps"][0]["determinacy"]
+    target = determinacy if where == "cost_increase" else determinacy["intervals"][0]
+    target[where] = value
+    with np.errstate(all="ignore"):
+        _refused(document)
+
+
+@pytest.mark.parametrize("value", ODD)
+@pytest.mark.parametrize("stage", [0, 1])
+def test_an_odd_number_as_a_stage_level_is_refused(stage, value):
+    """The stored stratified document's stages' cost_increase (check_stage_level)."""
+    document = copy.deepcopy(stored("autocalibration_stratified"))
+    document["stages"][stage]["determinacy"]["cost_increase"] = value
+    with np.errstate(all="ignore"):
+        _refused(document)
+
+
+@pytest.mark.parametrize("value", ODD)
+@pytest.mark.parametrize("name", ["autocalibration_stratified", "autocalibration_direct", "bilinear_l2l2"])
+def test_an_odd_number_as_a_certified_cost_is_refused(name, value):
+    """The objective allowance (cost_rounding.within) on the stored genuine fits: the claimed cost
+    (and its stage's, lower_bound and gap restated to agree where they can)."""
+    document = copy.deepcopy(stored(name))["certificate"]  # bare: no result's restatement refuses it first
+    item = document["items"][0]
+    item.update(cost=value, gap=value - item["lower_bound"] if np.isfinite(value) else value)
+    with np.errstate(all="ignore"):
+        failure = _refused(document)
+    # a finite one reaches the claim's checks; a non-finite one is no JSON number (refused as unhashable)
+    assert failure["check"] in (("claim", "objective") if np.isfinite(value) else ("data_hash", "format"))
