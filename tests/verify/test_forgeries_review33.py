@@ -41,6 +41,29 @@ Found (xfail strict below; each with a test showing the accepted claim is false)
    Suggested fix: allow the spread on the width only (cost_spread * |width|, or the level's
    relative spread halved for a square root), never on |value|; compare value at VALUE_SLACK.
 
+3. A box side stated inside what its rows prove, by a slack bought with the region's frame.
+   Review 32's fix sizes frames.side_slack's reach from the sides the rows prove, not the stated
+   box; but the frame G is the document's (any with cond(G) < 1e12), and scaling its axis 0 by
+   3.5e-12 (cond 3e11) makes the proven axis-0 sides 2e11 out: the same polytope, and reach
+   multiplies every other side's slack, sum y_k (|a_k|_1 reach + |b_k|), though a_k's axis-0
+   component shrank by the same factor. On the stored stratified document so restated (its one
+   leaf the box) the axis-1 upper side verifies stated at 0.62353 where the rows prove (exactly,
+   and the LP extent) 0.63347: 0.6% of the axis' extent 1.67 (2% near cond 1e12), holding planes
+   chirality allows (one at v[1] = 0.6328 exhibited) that no leaf covers. The stage's bound here is
+   0 and stays true; a leaf bound over such a box rests on a box the rows do not prove.
+   At fault: geocert/solvers/autocalibration/frames.py:side_slack (one reach for every axis,
+   against |a_k|_1) as proofs.check_regions calls it. Suggested fix: per axis, the rounding of a_kj
+   times that axis' proven reach, sum_j ROWS_ROUNDING (|w_k| |G_j|) max(|lo_j|, |hi_j|) + |b_k|'s
+   (the rounding rows @ G^T actually has, componentwise), so a stretched axis' small entries pay
+   for its long reach and nothing else's.
+
+Also seen, no forgery (no test): a genuine certificate refused in its own frame. The class 1
+fixture's data with t bisected to the other side of the tie (t = 0.01052273669030382, camera 1
+first by rounding) and the solve forced to camera 3 is refused in camera 3's frame, at
+proofs.check_leaves: "leaves/678 is not beyond the cut of its proof 678" (affine stage, 1057
+nodes); t one ulp-scale step away verifies. With GEOCERT_SELF_VERIFY=1 that solve raises
+SelfCheckFailed, so a service choosing camera 3 on such data would fail the job.
+
 Tried and refused, or measured (plain tests below where quick):
 - The uncertified stage's allowance (solution_cost) is not capped as a certified stage's is
   (_check_cost refuses a rounding above the tolerance): affine_magnitudes grows as |p|^2 while the
@@ -295,3 +318,75 @@ def test_an_odd_number_as_a_certified_cost_is_refused(name, value):
         failure = _refused(document)
     # a finite one reaches the claim's checks; a non-finite one is no JSON number (refused as unhashable)
     assert failure["check"] in (("claim", "objective") if np.isfinite(value) else ("data_hash", "format"))
+
+
+# Class 3: a box side stated inside what its rows prove, by the slack a stretched frame buys
+
+STRETCH = 3.5e-12  # the frame's axis 0 scaled by this: its condition number 3e11, under the 1e12 allowed
+
+
+def _stretched(inside: float) -> tuple[dict, float, float]:
+    """The stored stratified document's affine region in its frame with axis 0 scaled by STRETCH
+    (the same polytope, its axis-0 extent 1e12 times longer), the box its rows' proven sides but
+    the axis-1 upper side stated ``inside`` times its slack inside; the one leaf restated as the
+    box. Returns the document, the proven side and the stated one."""
+    from geocert.solvers.autocalibration import frames
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.verify.autocalibration import read_data
+
+    document = copy.deepcopy(stored("autocalibration_stratified"))
+    certificate = document["certificate"]
+    cameras, points, image_size = read_data(certificate["data"])
+    problem = autocalibration_problem.prepare(cameras, points, image_size, {})
+    region = certificate["items"][0]["proof"]["regions"][0]
+    G = np.diag([STRETCH, 1.0, 1.0, 1.0]) @ np.array(region["frame"])
+    assert np.linalg.cond(G) < 1e12  # proofs.check_regions' limit
+    a, b = frames.frame_rows(G, frames.chirality_rows(problem.norm, region["delta"]))
+    proven = [frames.exact_side(a, b, side // 2, side % 2 == 1, region["basis"][side]) for side in range(6)]
+    slack = frames.side_slack(a, b, region["basis"][3], 1, max(abs(v) for v in proven))
+    lo, hi = [proven[0], proven[2], proven[4]], [proven[1], proven[3] - inside * slack, proven[5]]
+    region.update(frame=G.tolist(), box=[lo, hi], leaves=[[lo, hi, None]])
+    return document, proven[3], hi[1]
+
+
+def test_the_stretched_frame_with_its_proven_box_verifies():
+    """The stretch alone is no forgery: the region restated in it, its box the proven one."""
+    _valid(_stretched(0.0)[0])
+
+
+@pytest.mark.xfail(strict=True, reason="review 33 class 3: a box side's slack sized from a reach the forger "
+                                       "stretches with the region's frame")
+def test_a_box_side_inside_its_rows_bound_in_a_stretched_frame_is_refused():
+    _refused(_stretched(0.9)[0], "not proved by its rows")
+
+
+def test_the_stretched_box_leaves_out_planes_chirality_allows():
+    """The rows prove v[1] <= 0.63347 (LP: the polytope reaches it); the box says v[1] <= 0.62353
+    (0.6% of the axis' extent of 1.67 left out). A plane 1e-3 of the way from that extreme
+    point to the returned plane has v[1] = 0.6328: chirality allows it (the verifier's own
+    allowed_by_chirality), and no leaf covers it."""
+    from scipy.optimize import linprog
+
+    from geocert.solvers.autocalibration import frames
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.verify.autocalibration import read_data
+
+    document, proven, stated = _stretched(0.9)
+    assert proven - stated > 5e-3
+    original = stored("autocalibration_stratified")["certificate"]
+    cameras, points, image_size = read_data(original["data"])
+    problem = autocalibration_problem.prepare(cameras, points, image_size, {})
+    region = original["items"][0]["proof"]["regions"][0]
+    G = np.array(region["frame"])  # v[1] is the same coordinate in the stretched frame
+    a, b = frames.frame_rows(G, frames.chirality_rows(problem.norm, region["delta"]))
+    extreme = linprog(-np.eye(3)[1], A_ub=-a, b_ub=b, bounds=[(None, None)] * 3).x
+    assert extreme[1] == pytest.approx(proven, abs=1e-9)
+    returned = np.linalg.solve(G.T, np.append(autocalibration_problem.plane_from_input(
+        problem, np.array(original["items"][0]["plane_at_infinity"])), 1.0))
+    v = extreme + 1e-3 * (returned[:3] / returned[3] - extreme)
+    plane = G.T @ np.append(v, 1.0)
+    assert v[1] > stated + 1e-3
+    assert np.all(a @ v + b > 0)
+    assert autocalibration_problem.allowed_by_chirality(problem, plane[:3] / plane[3])
+    leaf = document["certificate"]["items"][0]["proof"]["regions"][0]["leaves"][0]
+    assert len(document["certificate"]["items"][0]["proof"]["regions"][0]["leaves"]) == 1 and leaf[1][1] == stated
