@@ -260,11 +260,14 @@ def exact_side(a: np.ndarray, b: np.ndarray, axis: int, upper: bool, basis: list
 ROWS_ROUNDING = 64 * 2.0 ** -52
 
 
-def side_slack(a: np.ndarray, b: np.ndarray, basis: list[int], axis: int, reach: float) -> float:
-    """How far the bound three rows prove may move when each row (a_k, b_k) moves by ROWS_ROUNDING
-    of its magnitudes, over a box whose points are at most ``reach`` from the frame's origin in
-    each coordinate: with y the multipliers (sum y_k a_k = +-e_axis), sum y_k (|a_k|_1 reach + |b_k|)
-    ROWS_ROUNDING, doubled for the two machines' rows (0 when the rows are singular in floats)."""
+def side_slack(a: np.ndarray, magnitudes: np.ndarray, basis: list[int], axis: int, reaches: np.ndarray) -> float:
+    """How far the bound three rows prove may move when each row moves by ROWS_ROUNDING of its
+    magnitudes, over a box whose points are at most ``reaches[j]`` from the frame's origin along
+    axis j: with y the multipliers (sum y_k a_k = +-e_axis), sum_k y_k (sum_j m_kj reaches_j + m_k3)
+    ROWS_ROUNDING, doubled for the two machines' rows (0 when the rows are singular in floats).
+    ``magnitudes`` (m) are |rows| @ |G|^T, the sizes each entry of (a, b) = rows @ G^T is rounded
+    from, column by column: a frame stretching one axis pays for that axis' long reach with its
+    small entries, and lends no slack to the others (one reach for every axis did)."""
     M = np.array([a[k] for k in basis], dtype=float).T
     rhs = np.zeros(3)
     rhs[axis] = 1.0
@@ -272,8 +275,9 @@ def side_slack(a: np.ndarray, b: np.ndarray, basis: list[int], axis: int, reach:
         y = np.abs(np.linalg.solve(M, rhs))
     except np.linalg.LinAlgError:
         return 0.0
-    sizes = np.array([np.sum(np.abs(a[k])) * reach + abs(float(b[k])) for k in basis])
-    slack = 2.0 * ROWS_ROUNDING * float(y @ sizes)
+    with np.errstate(all="ignore"):
+        sizes = np.array([float(magnitudes[k, :3] @ reaches) + float(magnitudes[k, 3]) for k in basis])
+        slack = 2.0 * ROWS_ROUNDING * float(y @ sizes)
     return slack if np.isfinite(slack) else 0.0
 
 

@@ -337,13 +337,15 @@ def check_regions(problem, regions: Any, excluded: Any, fields: tuple[str, ...],
             raise Invalid("format", f"{where}regions/{i}/basis must give three rows for each of the six sides")
         chosen_rows = [_int_list(chosen, f"{where}regions/{i}/basis/{side}", 3) for side, chosen in enumerate(basis)]
         proven = [frames.exact_side(a, b, side // 2, side % 2 == 1, chosen) for side, chosen in enumerate(chosen_rows)]
-        # the reach of the polytope the rows prove, not of the box stated: a side stated far out
-        # must not buy slack for another
-        reach = max((abs(v) for v in proven if v is not None and math.isfinite(v)), default=0.0)
+        # each axis' reach is the polytope's the rows prove, not the box stated's: a side stated far
+        # out must not buy slack for another, nor a stretched axis for the others
+        reaches = np.array([max((abs(v) for v in proven[2 * j:2 * j + 2] if v is not None and math.isfinite(v)),
+                                default=0.0) for j in range(3)])
+        magnitudes = np.abs(rows) @ np.abs(G).T
         for side, (chosen, value) in enumerate(zip(chosen_rows, proven)):
             axis, upper = side // 2, side % 2 == 1
             # the side as another machine's rows prove it may lie its rows' rounding away
-            slack = 0.0 if value is None else frames.side_slack(a, b, chosen, axis, reach)
+            slack = 0.0 if value is None else frames.side_slack(a, magnitudes, chosen, axis, reaches)
             if value is None or (value > hi[axis] + slack if upper else value < lo[axis] - slack):
                 raise Invalid("root_region", f"{where}regions/{i}: side {side} of the box is not proved by its rows")
         # Every plane positive on the rows is G^T (v, 1) times a positive number for some v of
