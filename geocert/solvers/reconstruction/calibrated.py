@@ -955,6 +955,8 @@ def _check_inputs(tracks, Ks) -> None:
             raise InputError(f"Ks/{v}", "K must be a finite 3x3 matrix")
         if K[0, 0] <= 0 or K[1, 1] <= 0 or abs(K[2, 2] - 1.0) > 1e-9 or np.any(K[[1, 2, 2], [0, 0, 1]] != 0):
             raise InputError(f"Ks/{v}", "K must be upper triangular with positive focal lengths and K[2][2] = 1")
+    if _tracks_fit(tracks, len(Ks)):
+        return
     for k, (views, points) in enumerate(tracks):
         views, points = np.asarray(views), np.asarray(points, dtype=np.float64)
         if views.ndim != 1 or points.shape != (len(views), 2) or not np.all(np.isfinite(points)):
@@ -963,6 +965,26 @@ def _check_inputs(tracks, Ks) -> None:
             raise InputError(f"tracks/{k}/views", f"view indices must lie in 0..{len(Ks) - 1}")
         if len(np.unique(views)) != len(views):
             raise InputError(f"tracks/{k}/views", "a view appears twice in one track")
+
+
+def _tracks_fit(tracks, n_views: int) -> bool:
+    """True when every track has integer views in 0..n_views-1, none twice, and one finite (u, v)
+    per view: the checks of _check_inputs over every observation at once (a job's thousands of
+    tracks checked one by one cost more than the rest of the check); False sends the tracks to
+    the check one by one, which names the first that does not fit."""
+    views = [np.asarray(v) for v, _ in tracks]
+    points = [np.asarray(x, dtype=np.float64) for _, x in tracks]
+    if not all(v.ndim == 1 and v.dtype.kind in "iu" and x.shape == (len(v), 2) for v, x in zip(views, points)):
+        return False
+    if not views:
+        return True
+    every_view = np.concatenate(views).astype(np.int64)
+    if not (np.all(np.isfinite(np.concatenate(points))) and (len(every_view) == 0 or (
+            every_view.min() >= 0 and every_view.max() < n_views))):
+        return False
+    # Each (track, view) once: a view twice in a track repeats its key.
+    keys = np.repeat(np.arange(len(views), dtype=np.int64), [len(v) for v in views]) * n_views + every_view
+    return len(np.unique(keys)) == len(keys)
 
 
 def calibrated_reconstruction(tracks: list[tuple[np.ndarray, np.ndarray]], Ks: list[np.ndarray],

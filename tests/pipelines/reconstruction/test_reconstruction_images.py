@@ -570,6 +570,21 @@ class TestCalibrated:
             calibrated_reconstruction(tracks, Ks)
         assert caught.value.field == field
 
+    @pytest.mark.parametrize("bad, field", [
+        ((np.array([0, 2]), np.zeros((2, 2))), "tracks/3/views"),
+        ((np.array([-1, 1]), np.zeros((2, 2))), "tracks/3/views"),
+        ((np.array([1, 0, 1]), np.zeros((3, 2))), "tracks/3/views"),
+        ((np.array([0, 1]), np.array([[0.0, 1.0], [np.nan, 2.0]])), "tracks/3"),
+        ((np.array([0, 1]), np.zeros((2, 3))), "tracks/3"),
+    ])
+    def test_bad_track_among_good_ones_is_named(self, bad, field):
+        # The tracks are checked all at once first: one that does not fit, among many that do,
+        # is still the one named.
+        good = [(np.array([0, 1]), np.full((2, 2), float(k))) for k in range(6)]
+        with pytest.raises(InputError) as caught:
+            calibrated_reconstruction(good[:3] + [bad] + good[3:], [np.eye(3)] * 2)
+        assert caught.value.field == field
+
     def test_no_initial_pair(self):
         K = np.diag([500.0, 500.0, 1.0])
         tracks = [(np.array([0, 1]), np.array([[1.0, 2.0], [3.0, 4.0]]))]
