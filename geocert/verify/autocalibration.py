@@ -152,6 +152,25 @@ class AutocalibrationVerification(Verification):
                              "calibration K within the intrinsics ranges gives a DIAC K K^T costing less than "
                              "lower_bound; each solution returned is in its scope and costs cost"}
 
+    @staticmethod
+    def data_scope(data: dict, options: dict) -> dict:
+        """The cameras tied for the reference frame, where there is a tie (check_claim accepts a
+        claim in any of their frames, and on noisy data each frame poses its own problem: review 33,
+        class 1, open); {} otherwise, or where the data cannot be read (the claims' checks say why)."""
+        try:
+            cameras, _, image_size = read_data(data)
+            tied = autocalibration_problem.tied_references(cameras, image_size, dict(options.get("intrinsics") or {}))
+        except (InputError, TypeError, ValueError, np.linalg.LinAlgError):
+            return {}
+        if len(tied) < 2:
+            return {}
+        return {"reference_cameras_tied": sorted(tied),  # their order, not the rounding's ranking
+                "reference_note": "these cameras are conditioned alike within 1e-9, and each claim is checked "
+                                  "in the frame of whichever of them it holds in, which this report does not "
+                                  "name: on an exact scene their frames pose one problem, on noisy data each its "
+                                  "own, so each claim is about the problem posed with one of them as the "
+                                  "reference camera"}
+
     def check_claims(self, items: list, options: dict) -> None:
         """The metric stage's claim is about the plane the affine stage returns (the direct method
         has one stage, "direct": nothing ties it to another)."""

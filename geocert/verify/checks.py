@@ -385,6 +385,9 @@ def _verify(document: Any, returned: dict | None) -> Report:
         tallies["data_hash"][0] += 1
         _check_item_count(document)
         report.scope = scope_statement(document["kind"], options)
+        data_scope = hook(_adapter(document["kind"]), "data_scope")
+        if data_scope is not None:
+            report.scope.update(data_scope(document["data"], options))
         if earlier_form is not None:
             report.scope["problem_sha256"] = earlier_form
     except Invalid as exc:

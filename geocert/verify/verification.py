@@ -41,6 +41,10 @@ class Verification(abc.ABC):
     """``scope_statement(options) -> dict``: what a valid certificate of the kind proves, in words
     and numbers. None: the residual kinds' statement over ``domain``."""
 
+    data_scope: Callable[[dict, dict], dict] | None = None
+    """``data_scope(data, options) -> dict``: what the scope must add that the data decide (the
+    autocalibration's cameras tied for the reference frame); {} when nothing. None: nothing."""
+
     option_names: tuple[str, ...] | None = None
     """The option names a certificate of the kind may state: its options class's fields (the
     document's options are ``dataclasses.asdict`` of them: kinds.documents), and any name an earlier

@@ -248,6 +248,16 @@ def test_the_other_frame_claims_are_false_in_the_problem_the_verifier_poses(tied
     assert _verify(other["certificate"]).scope == _verify(service["certificate"]).scope
 
 
+def test_the_report_names_the_tied_cameras_where_the_data_have_them(tied_scene):
+    """Until a claim names its frame (class 1, open), the report says the data tie two cameras for
+    it and that each claim is about one of their frames' problems; data with one best camera (the
+    stored stratified document) say nothing of it."""
+    for result in tied_scene["results"].values():
+        scope = _verify(result["certificate"]).scope
+        assert scope["reference_cameras_tied"] == [1, 3] and "does not name" in scope["reference_note"]
+    assert "reference_cameras_tied" not in _verify(stored("autocalibration_stratified")).scope
+
+
 def test_the_direct_service_frame_result_is_genuine(tied_direct):
     _valid(tied_direct["results"][3])
 
