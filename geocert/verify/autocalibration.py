@@ -153,23 +153,38 @@ class AutocalibrationVerification(Verification):
                              "lower_bound; each solution returned is in its scope and costs cost"}
 
     @staticmethod
-    def data_scope(data: dict, options: dict) -> dict:
-        """The cameras tied for the reference frame, where there is a tie (check_claim accepts a
-        claim in any of their frames, and on noisy data each frame poses its own problem: review 33,
-        class 1, open); {} otherwise, or where the data cannot be read (the claims' checks say why)."""
+    def data_scope(data: dict, options: dict, items: list) -> dict:
+        """The camera whose frame the claims are posed in (frames.reference_camera: the
+        lowest-indexed of the best conditioned), or, where a camera's conditioning lies on the tie's
+        edge, the cameras any machine may take for it; and the certified items whose proofs name no
+        reference (written before proofs named it), where the data leave more than one frame they may
+        be posed in. {} where the data cannot be read (the claims' checks say why)."""
         try:
             cameras, _, image_size = read_data(data)
-            tied = autocalibration_problem.tied_references(cameras, image_size, dict(options.get("intrinsics") or {}))
-        except (InputError, TypeError, ValueError, np.linalg.LinAlgError):
+            intrinsics = dict(options.get("intrinsics") or {})
+            candidates = autocalibration_problem.reference_candidates(cameras, image_size, intrinsics)
+            earlier = autocalibration_problem.earlier_references(cameras, image_size, intrinsics)
+        except (InputError, TypeError, ValueError, AttributeError, np.linalg.LinAlgError):
             return {}
-        if len(tied) < 2:
-            return {}
-        return {"reference_cameras_tied": sorted(tied),  # their order, not the rounding's ranking
-                "reference_note": "these cameras are conditioned alike within 1e-9, and each claim is checked "
-                                  "in the frame of whichever of them it holds in, which this report does not "
-                                  "name: on an exact scene their frames pose one problem, on noisy data each its "
-                                  "own, so each claim is about the problem posed with one of them as the "
-                                  "reference camera"}
+        scope: dict = {"reference_camera": candidates[0]} if len(candidates) == 1 else {
+            "reference_cameras_tied": candidates,
+            "reference_note": "these cameras' conditioning lies within the rounding of the tie's edge "
+                              "(frames.REFERENCE_TIE), so which of them is the reference camera is a machine's "
+                              "rounding's choice: each claim is checked in the frame of the one its proof names, "
+                              "and on noisy data each frame poses its own problem"}
+        cameras_unnamed = sorted(set(candidates) | set(earlier))
+        unnamed = [position for position, item in enumerate(items) if isinstance(item, dict)
+                   and item.get("certified") is True and isinstance(item.get("proof"), dict)
+                   and "reference" not in item["proof"]]
+        if unnamed and len(cameras_unnamed) > 1:
+            scope["reference_unnamed"] = {
+                "items": unnamed, "cameras": cameras_unnamed,
+                "note": "these items' proofs name no reference camera (written before proofs named it), and these "
+                        "cameras are conditioned alike within frames.REFERENCE_TIE: each item is checked in the "
+                        "frame of whichever of them it holds in, which this report does not name; on noisy data "
+                        "each frame poses its own problem, so such an item is a claim about the problem posed "
+                        "with one of these cameras as the reference, not necessarily the one this scope names"}
+        return scope
 
     def check_claims(self, items: list, options: dict) -> None:
         """The metric stage's claim is about the plane the affine stage returns (the direct method
@@ -324,15 +339,26 @@ class AutocalibrationVerification(Verification):
 
     def check_claim(self, arrays, options: dict, claim: dict, claimed: float, lower_claimed: float,
                     passed: list) -> tuple[float, float]:
-        """The claim in the frame of the best-conditioned camera, or of a camera tied with it
-        (frames.REFERENCE_TIE: which of a tie another machine's LAPACK ranks first is its rounding's;
-        each frame tried is checked in full, within the document's budget)."""
+        """The claim in the frame of the reference camera (frames.reference_camera: the lowest-indexed
+        of the cameras tied for the best conditioning), the one frame the data give unless a camera
+        lies on the tie's edge, where any machine's choice is tried (each in full, within the
+        document's budget) and the report's scope says so (data_scope)."""
         cameras, points, image_size = arrays
         intrinsics = dict(options["intrinsics"] or {})
         try:
-            references = autocalibration_problem.tied_references(cameras, image_size, intrinsics)
+            references = autocalibration_problem.reference_candidates(cameras, image_size, intrinsics)
+            earlier = autocalibration_problem.earlier_references(cameras, image_size, intrinsics)
         except InputError as exc:
             raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
+        proof = claim.get("proof")
+        if isinstance(proof, dict) and "reference" in proof:
+            if proof["reference"] not in references or type(proof["reference"]) is not int:
+                raise Invalid("scope", f"proof/reference is {proof['reference']!r:.40}: these data's claims are posed "
+                                       f"in the frame of camera {' or '.join(map(str, references))} (the "
+                                       "lowest-indexed of the best conditioned, frames.reference_camera)")
+            references = [proof["reference"]]
+        else:  # an earlier proof names no frame: those it may have been posed in (data_scope says so)
+            references = references + [r for r in earlier if r not in references]
         first = None
         for reference in references:
             tried = list(passed)
@@ -547,6 +573,7 @@ def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, l
     Q_in = _numbers(claim.get("dual_absolute_quadric"), "dual_absolute_quadric", (4, 4), "claim")
     if not np.array_equal(Q_in, Q_in.T) or not abs(np.trace(Q_in)) > 0:
         raise Invalid("claim", "dual_absolute_quadric must be symmetric with a nonzero trace")
+    proofs.check_reference(problem, proof)
     setup = _direct_setup(problem, options)
     Q = setup.from_input(Q_in)
     cost, rounding = _direct_cost(setup, Q)

@@ -387,7 +387,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
         report.scope = scope_statement(document["kind"], options)
         data_scope = hook(_adapter(document["kind"]), "data_scope")
         if data_scope is not None:
-            report.scope.update(data_scope(document["data"], options))
+            report.scope.update(data_scope(document["data"], options, items))
         if earlier_form is not None:
             report.scope["problem_sha256"] = earlier_form
     except Invalid as exc:

@@ -41,9 +41,10 @@ class Verification(abc.ABC):
     """``scope_statement(options) -> dict``: what a valid certificate of the kind proves, in words
     and numbers. None: the residual kinds' statement over ``domain``."""
 
-    data_scope: Callable[[dict, dict], dict] | None = None
-    """``data_scope(data, options) -> dict``: what the scope must add that the data decide (the
-    autocalibration's cameras tied for the reference frame); {} when nothing. None: nothing."""
+    data_scope: Callable[[dict, dict, list], dict] | None = None
+    """``data_scope(data, options, items) -> dict``: what the scope must add that the data and the
+    claims decide (the autocalibration's reference camera, and its items whose proofs name none);
+    {} when nothing. None: nothing."""
 
     option_names: tuple[str, ...] | None = None
     """The option names a certificate of the kind may state: its options class's fields (the

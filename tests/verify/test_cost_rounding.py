@@ -1,5 +1,5 @@
 """The objective checks and a region's box sides allow the rounding another machine's BLAS kernels
-give (geocert/verify/cost_rounding.py, frames.side_slack, frames.tied_references), and nothing
+give (geocert/verify/cost_rounding.py, frames.side_slack, frames.reference_candidates), and nothing
 more. That every stored genuine certificate verifies under OpenBLAS's Haswell and Prescott kernels
 (review 31's class 1: a near-exact fit's cost differs between kernels in its 8th digit) is
 tests/verify/test_forgeries_review31.py's kernel tests."""
@@ -42,17 +42,18 @@ def test_the_rounding_is_of_the_terms_not_the_cost():
     assert not cost_rounding.within(cost, cost + 2 * rounding, 1e-9, rounding)
 
 
-def test_tied_references_put_the_best_first_and_keep_only_ties():
+def test_the_reference_is_the_lowest_indexed_of_the_tied():
     """Cameras conditioned alike to 1e-12 are tied for the reference (another machine's LAPACK may
-    rank them otherwise); one clearly worse conditioned is not; the best (reference_camera's
-    choice) comes first."""
+    rank them otherwise), and the reference is the lowest-indexed of them whichever ranks first; one
+    clearly worse conditioned is not tied; an earlier proof (naming no reference) may be posed in
+    any tied camera's frame, the best first."""
     from geocert.solvers.autocalibration import frames
 
     rng = np.random.default_rng(0)
     R = [np.linalg.qr(rng.normal(size=(3, 3)))[0] for _ in range(4)]
     cameras = np.array([np.hstack([r, rng.normal(size=(3, 1))]) for r in R])
+    cameras[0, :, :3] = cameras[0, :, :3] @ np.diag([1.0, 1.0, 3.0])
     cameras[2, :, :3] = cameras[2, :, :3] @ np.diag([1.0, 1.0, 1.0 + 1e-12])
-    cameras[3, :, :3] = cameras[3, :, :3] @ np.diag([1.0, 1.0, 3.0])
-    tied = frames.tied_references(cameras, np.eye(3))
-    assert tied[0] == frames.reference_camera(cameras)
-    assert sorted(tied) == [0, 1, 2]
+    assert frames.reference_camera(cameras) == 1
+    assert frames.reference_candidates(cameras, np.eye(3)) == [1]
+    assert sorted(frames.earlier_references(cameras, np.eye(3))) == [1, 2, 3]

@@ -318,7 +318,8 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
     """The bound a "direct_moment" proof establishes over the program's feasible set, and the
     orientations it excludes: each orientation of the setup (built with exclude=False) is either
     excluded exactly (Gordan, rational arithmetic) or bounded by the safe bound of its dual."""
-    record(proof, "proof", ("type", "order", "programs", "excluded"), ("moment_rank", "eigenvalue_ratio", "sublevel"))
+    record(proof, "proof", ("type", "order", "programs", "excluded"),
+           ("reference", "moment_rank", "eigenvalue_ratio", "sublevel"))  # reference: the verifier's check_claim
     informational(proof.get("moment_rank"), "proof/moment_rank", "integer")  # they explain a bound, prove nothing
     informational(proof.get("eigenvalue_ratio"), "proof/eigenvalue_ratio")
     if not same(proof.get("order"), order):

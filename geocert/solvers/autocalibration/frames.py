@@ -2,7 +2,8 @@
 
 * Image coordinates are preconditioned by ``N = K0^-1`` (K0: the middle of the intrinsics
   ranges), so that the calibration sought is near the identity (thesis 6.7 works with K = I).
-* The reference camera (the best conditioned left 3x3 block) is moved to ``[I | 0]`` by ``T0``;
+* The reference camera (the lowest-indexed of the best conditioned left 3x3 blocks, reference_camera)
+  is moved to ``[I | 0]`` by ``T0``;
   there the plane at infinity is ``(p, 1)`` (thesis 6.2) and view j's infinite homography is
   ``H_j = A_j - a_j p^T``, whose characteristic polynomial has coefficients affine in p (3.5, 6.2.2).
 * Chirality (thesis 3.5, 6.2.3; Hartley 1998): with points and cameras sign-normalised so that
@@ -44,28 +45,50 @@ def signed_centre(P: np.ndarray) -> np.ndarray:
     return c
 
 
-def reference_camera(cameras: np.ndarray) -> int:
-    """The camera whose left 3x3 block is best conditioned (moved to [I | 0])."""
+def conditioning(cameras: np.ndarray) -> np.ndarray:
+    """Each camera's left 3x3 block's smallest singular value over its largest."""
     s = np.linalg.svd(cameras[:, :, :3], compute_uv=False)
-    return int(np.argmax(s[:, 2] / s[:, 0]))
+    return s[:, 2] / s[:, 0]
 
 
 # Cameras conditioned within this fraction of the best are tied for the reference: an exact scene's
 # cameras (a ring of one K) are conditioned alike to their last digits, which another machine's
-# LAPACK rounds differently, so the machine that verifies may rank them otherwise than the one that
-# solved.
+# LAPACK rounds differently, so "the best conditioned" is a choice of the rounding, and on noisy
+# data each camera's frame poses its own problem (the modulus constraints leave the reference's
+# view out and weight the others by their frame). The reference is therefore the lowest-indexed of
+# the tied cameras: a function of the data that no machine's rounding decides, except for a camera
+# whose conditioning lies on the tie's edge (within REFERENCE_TIE_BAND of it), which
+# reference_candidates names.
 REFERENCE_TIE = 1e-9
+REFERENCE_TIE_BAND = 0.5  # the edge's width, relative to REFERENCE_TIE
 
 
-def tied_references(cameras: np.ndarray, N: np.ndarray) -> list[int]:
-    """reference_camera's choice for normalise(cameras, ., N), then every other camera tied with it
-    (REFERENCE_TIE), best conditioned first."""
-    cams = np.einsum("ab,ibc->iac", N, cameras)
-    s = np.linalg.svd(cams[:, :, :3], compute_uv=False)
-    ratio = s[:, 2] / s[:, 0]
-    best = int(np.argmax(ratio))
-    tied = [int(i) for i in np.argsort(-ratio, kind="stable") if ratio[i] >= ratio[best] * (1.0 - REFERENCE_TIE)]
-    return [best] + [i for i in tied if i != best]
+def _tied(ratio: np.ndarray, tie: float) -> np.ndarray:
+    return np.flatnonzero(ratio >= ratio.max() * (1.0 - tie))
+
+
+def reference_camera(cameras: np.ndarray) -> int:
+    """The camera moved to [I | 0]: the lowest-indexed of those whose left 3x3 block is conditioned
+    within REFERENCE_TIE of the best."""
+    return int(_tied(conditioning(cameras), REFERENCE_TIE)[0])
+
+
+def reference_candidates(cameras: np.ndarray, N: np.ndarray) -> list[int]:
+    """The references normalise(cameras, ., N) may take on any machine, ascending: reference_camera's
+    choice, and any lower-indexed camera on the tie's edge (one, where none is: the usual case)."""
+    ratio = conditioning(np.einsum("ab,ibc->iac", N, cameras))
+    wide = _tied(ratio, REFERENCE_TIE * (1.0 + REFERENCE_TIE_BAND))
+    first_surely_tied = int(_tied(ratio, REFERENCE_TIE * (1.0 - REFERENCE_TIE_BAND))[0])
+    return [int(i) for i in wide if i <= first_surely_tied]
+
+
+def earlier_references(cameras: np.ndarray, N: np.ndarray) -> list[int]:
+    """The frames a proof naming no reference may be posed in: it was written when the reference was
+    the best conditioned camera, which is the rounding's choice among those tied (REFERENCE_TIE, with
+    its edge); best first."""
+    ratio = conditioning(np.einsum("ab,ibc->iac", N, cameras))
+    wide = _tied(ratio, REFERENCE_TIE * (1.0 + REFERENCE_TIE_BAND))
+    return [int(i) for i in wide[np.argsort(-ratio[wide], kind="stable")]]
 
 
 def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, reference: int | None = None) -> Normalised:

@@ -196,17 +196,24 @@ class Problem:
 
 def prepare(cameras: np.ndarray, points: np.ndarray | None, image_size, intrinsics: dict,
             reference: int | None = None) -> Problem:
-    """The problem in its normalised frame; ``reference`` (default: the best-conditioned camera)
-    the camera moved to [I | 0], whose view the modulus constraints leave out."""
+    """The problem in its normalised frame; ``reference`` (default: frames.reference_camera, the
+    lowest-indexed of the best-conditioned cameras) the camera moved to [I | 0], whose view the
+    modulus constraints leave out."""
     ranges = resolve_ranges(intrinsics, image_size)
     K0 = preconditioner(ranges)
     norm = frames.normalise(cameras, points, np.linalg.inv(K0), reference)
     return Problem(norm, ranges, K0, normalised_ranges(ranges, K0))
 
 
-def tied_references(cameras: np.ndarray, image_size, intrinsics: dict) -> list[int]:
-    """The references prepare may take for these data on another machine (frames.tied_references)."""
-    return frames.tied_references(cameras, np.linalg.inv(preconditioner(resolve_ranges(intrinsics, image_size))))
+def reference_candidates(cameras: np.ndarray, image_size, intrinsics: dict) -> list[int]:
+    """The references prepare may take for these data on any machine (frames.reference_candidates):
+    one, unless a camera's conditioning lies on the tie's edge."""
+    return frames.reference_candidates(cameras, np.linalg.inv(preconditioner(resolve_ranges(intrinsics, image_size))))
+
+
+def earlier_references(cameras: np.ndarray, image_size, intrinsics: dict) -> list[int]:
+    """The frames a proof naming no reference may be posed in (frames.earlier_references)."""
+    return frames.earlier_references(cameras, np.linalg.inv(preconditioner(resolve_ranges(intrinsics, image_size))))
 
 
 @dataclass

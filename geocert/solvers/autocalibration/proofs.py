@@ -53,14 +53,15 @@ def encode_leaves(leaves: list) -> tuple[list, list]:
     return proofs, out
 
 
-def encode_affine(stage) -> dict:
+def encode_affine(stage, reference: int) -> dict:
+    """The affine stage's proof, posed in the frame of camera ``reference`` (the problem's)."""
     regions = []
     for region in stage.regions:
         proofs, leaves = encode_leaves(region.leaves)
         regions.append({"delta": region.delta, "frame": region.G.tolist(), "rows": region.rows,
                         "box": _box(region.lo, region.hi), "basis": region.basis, "unit": region.setup.unit,
                         "proofs": proofs, "leaves": leaves})
-    return {"type": "stratified_affine", "regions": regions,
+    return {"type": "stratified_affine", "reference": int(reference), "regions": regions,
             "excluded": [{"delta": item["delta"], "rows": item["rows"]} for item in stage.excluded]}
 
 
@@ -69,9 +70,10 @@ def _rounds(rounds: list) -> list:
              "duals": [pack(z) for z in r.duals]} for r in rounds]
 
 
-def encode_metric(stage) -> dict:
+def encode_metric(stage, reference: int) -> dict:
+    """The metric stage's proof, posed in the frame of camera ``reference`` (the problem's)."""
     proofs, leaves = encode_leaves(stage.leaves)
-    return {"type": "stratified_metric", "unit": stage.unit, "tightening": _rounds(stage.rounds),
+    return {"type": "stratified_metric", "reference": int(reference), "unit": stage.unit, "tightening": _rounds(stage.rounds),
             "search_box": _box(stage.search_lo, stage.search_hi), "proofs": proofs, "leaves": leaves}
 
 
@@ -358,10 +360,19 @@ def check_regions(problem, regions: Any, excluded: Any, fields: tuple[str, ...],
     return out
 
 
+def check_reference(problem, proof: dict) -> None:
+    """A proof stating the camera whose frame it is posed in is checked in that frame only (an
+    earlier proof states none: the verifier's check_claim tries the frames it may be posed in)."""
+    if "reference" in proof and (type(proof["reference"]) is not int or proof["reference"] != problem.norm.reference):
+        raise Invalid("scope", f"proof/reference is {proof['reference']!r:.40}: this problem is posed in the frame "
+                               f"of camera {problem.norm.reference}")
+
+
 def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
     """The bound an affine proof establishes over every plane chirality allows."""
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
-    record(proof, "proof", ("type", "regions", "excluded"))
+    record(proof, "proof", ("type", "regions", "excluded"), ("reference",))
+    check_reference(problem, proof)
     regions, excluded = proof.get("regions"), proof.get("excluded")
     if not isinstance(regions, list) or not isinstance(excluded, list):
         raise Invalid("format", "an affine proof has regions and excluded")
@@ -387,7 +398,8 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
     with its ``sublevel``, the proven intervals too (``cost``: the claimed K's recomputed cost).
     Its ``plane_sublevel`` is plane_sublevel.check's (the verifier calls it beside this)."""
     record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"),
-           ("sublevel", "plane_sublevel"))
+           ("reference", "sublevel", "plane_sublevel"))
+    check_reference(problem, proof)
     setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
     setup.unit = checked_unit(proof.get("unit"), "unit", claimed_cost)
     lo, hi, proven_lo, proven_hi = _check_rounds(problem, setup, proof, lower_claimed, "tightening", "its cap is "
