@@ -1348,6 +1348,12 @@ class ReconstructionItems(TrackItems, Verification):
             raise Invalid("returned", "a calibration certificate is carried beside no placed point, and no "
                                       "certified K it proves is claimed: nothing ties it to the result")
         if isinstance(calibration, dict):  # carried (a certified K proven by it): tied to the result, once
+            from geocert.verify.autocalibration import AutocalibrationVerification
+
+            # the frame its claims are posed in, as its own report would name it (a reader of this
+            # report sees whether an earlier writer's proofs name none)
+            scoped["calibration_reference"] = AutocalibrationVerification.data_scope(
+                calibration.get("data") or {}, calibration.get("options") or {}, calibration.get("items") or [])
             scoped["calibration_tie"] = calibration_tie.tie(result, _stage(result, "autocalibration"),
                                                             calibration.get("data") or {},
                                                             recorded)

@@ -279,6 +279,22 @@ def test_proofs_naming_no_reference_are_named_in_the_report(tied_scene):
         assert report.scope["reference_camera"] == 1
 
 
+def test_a_reconstruction_names_its_calibration_certificates_frame():
+    """The stored reconstructions' calibration certificates (exact rings, all six cameras tied) were
+    written before proofs named their frame: the reconstruction's report says so, as the
+    certificate's own report would; the stored stratified document's proofs name none either, but
+    its data leave one frame, so its report names that frame alone."""
+    for name in ("reconstruction", "reconstruction_labelled"):
+        report = _verify(stored(name))
+        assert report.valid, report.first_failure
+        calibration = report.scope["calibration_reference"]
+        assert calibration["reference_camera"] == 0
+        assert calibration["reference_unnamed"]["items"] == [0, 1]
+        assert calibration["reference_unnamed"]["cameras"] == [0, 1, 2, 3, 4, 5]
+    scope = _verify(stored("autocalibration_stratified")).scope
+    assert scope["reference_camera"] == 5 and "reference_unnamed" not in scope
+
+
 def test_the_two_frames_pose_different_problems(tied_scene):
     """Why one frame is the data's: on noisy data each tied frame poses its own problem. The other
     frame's plane costs 35% more in the reference's frame than it claims in its own, and the bound it
