@@ -235,8 +235,9 @@ class AutocalibrationVerification(Verification):
         try:
             cameras, points, image_size = read_data(certificate["data"])
             options = certificate["options"]
-            problem = autocalibration_problem.prepare(cameras, points, image_size,
-                                                      dict(options.get("intrinsics") or {}))
+            intrinsics = dict(options.get("intrinsics") or {})
+            problem = autocalibration_problem.prepare(cameras, points, image_size, intrinsics,
+                                                      _stated_reference(claims, cameras, image_size, intrinsics))
         except (InputError, TypeError, ValueError) as exc:
             raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
         if result.get("method") != options.get("method") or not _ranges_stated(result, problem):
@@ -420,6 +421,16 @@ class AutocalibrationVerification(Verification):
             if "proven_interval" not in passed:
                 passed.append("proven_interval")
         return bound, options["metric_rel_gap"]
+
+
+def _stated_reference(claims: list, cameras: np.ndarray, image_size, intrinsics: dict) -> int | None:
+    """The frame the claims' proofs name where it is one of the data's (a camera on the tie's edge
+    leaves two: the returned fields are read in the proofs' own); None, the data's own choice,
+    otherwise (check_claim refuses any other)."""
+    proof = claims[0].get("proof") if claims and isinstance(claims[0], dict) else None
+    stated = proof.get("reference") if isinstance(proof, dict) else None
+    candidates = autocalibration_problem.reference_candidates(cameras, image_size, intrinsics)
+    return stated if type(stated) is int and stated in candidates else None
 
 
 def _check_proven_intervals(stage: dict, claim: dict, affine: Any = None) -> None:
@@ -640,7 +651,9 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
     options = certificate["options"]
     try:
         cameras, points, image_size = read_data(certificate["data"])
-        problem = autocalibration_problem.prepare(cameras, points, image_size, dict(options.get("intrinsics") or {}))
+        intrinsics = dict(options.get("intrinsics") or {})
+        problem = autocalibration_problem.prepare(cameras, points, image_size, intrinsics,
+                                                  _stated_reference(certificate["items"], cameras, image_size, intrinsics))
     except (InputError, TypeError, ValueError) as exc:
         raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
     if result.get("method") != "direct" or not _ranges_stated(result, problem):

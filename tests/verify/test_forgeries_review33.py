@@ -122,17 +122,16 @@ def _refused(document: dict, words: str = "") -> dict:
 # Class 1: a stratified claim certified in the frame of a tied camera the forger chooses
 
 def _conditioning(cameras: np.ndarray, N: np.ndarray) -> np.ndarray:
-    """frames.tied_references' ratio: smallest over largest singular value of each normalised
+    """frames.conditioning's ratio: smallest over largest singular value of each normalised
     camera's left block."""
     s = np.linalg.svd(np.einsum("ab,ibc->iac", N, cameras)[:, :, :3], compute_uv=False)
     return s[:, 2] / s[:, 0]
 
 
-@pytest.fixture(scope="module")
-def tied_data() -> dict:
+def _moved_to_a_tie(apart: float) -> dict:
     """make_scene(6 views, 0.2% noise, seed 1) with its world frame moved by T = I + t E (E's last
-    row only: the same reconstruction, its plane at infinity moved), t bisected to where cameras 3
-    and 1 are conditioned alike (camera 3 the best by 1e-12)."""
+    row only: the same reconstruction, its plane at infinity moved), t bisected to where camera 1
+    is conditioned ``apart`` (relative) below camera 3, the best."""
     from geocert.solvers.autocalibration import scenes
     from geocert.solvers.autocalibration import problem as autocalibration_problem
 
@@ -142,10 +141,8 @@ def tied_data() -> dict:
     E[3, :3] = np.random.default_rng(101).normal(size=3)
 
     def gap(t: float) -> float:
-        """Camera 3's conditioning less camera 1's, less 1e-12 of it: at its root camera 3 is the
-        best by 1e-12 (far beyond any machine's rounding of the SVD, far inside REFERENCE_TIE)."""
         ratio = _conditioning(scene.cameras @ (np.eye(4) + t * E), N)
-        return float(ratio[3] * (1.0 - 1e-12) - ratio[1])
+        return float(ratio[3] * (1.0 - apart) - ratio[1])
 
     low, high = 0.01, 0.02  # camera 3 is the best conditioned at one end, camera 1 at the other
     assert gap(low) * gap(high) < 0
@@ -157,9 +154,19 @@ def tied_data() -> dict:
     cameras /= np.linalg.norm(cameras, axis=(1, 2))[:, None, None]
     points = scene.points @ np.linalg.inv(T).T
     points /= np.linalg.norm(points, axis=1)[:, None]
-    data = {"cameras": cameras.tolist(), "points": points.tolist(), "image_size": list(scene.image_size)}
-    assert autocalibration_problem.earlier_references(cameras, scene.image_size, {}) == [3, 1]  # 3 the best
-    assert autocalibration_problem.reference_candidates(cameras, scene.image_size, {}) == [1]  # 1 the reference
+    return {"cameras": cameras.tolist(), "points": points.tolist(), "image_size": list(scene.image_size)}
+
+
+@pytest.fixture(scope="module")
+def tied_data() -> dict:
+    """Cameras 3 and 1 tied, camera 3 the best by 1e-12 (far beyond any machine's rounding of the
+    SVD, far inside REFERENCE_TIE)."""
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
+
+    data = _moved_to_a_tie(1e-12)
+    cameras = np.array(data["cameras"])
+    assert autocalibration_problem.earlier_references(cameras, data["image_size"], {}) == [3, 1]  # 3 the best
+    assert autocalibration_problem.reference_candidates(cameras, data["image_size"], {}) == [1]  # 1 the reference
     return data
 
 
@@ -293,6 +300,26 @@ def test_a_reconstruction_names_its_calibration_certificates_frame():
         assert calibration["reference_unnamed"]["cameras"] == [0, 1, 2, 3, 4, 5]
     scope = _verify(stored("autocalibration_stratified")).scope
     assert scope["reference_camera"] == 5 and "reference_unnamed" not in scope
+
+
+def test_a_camera_on_the_ties_edge_leaves_two_frames_each_named():
+    """Camera 1 conditioned 1e-9 below camera 3, the tie's very edge: which of them is the reference
+    is the rounding's, so a solve posed in either frame verifies (its returned fields read in its
+    proofs' frame), and the report names both cameras and says so."""
+    from geocert.jobs.runner import solve_job
+    from geocert.solvers.autocalibration import frames
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
+
+    data = _moved_to_a_tie(frames.REFERENCE_TIE)
+    assert autocalibration_problem.reference_candidates(np.array(data["cameras"]), data["image_size"], {}) == [1, 3]
+    for reference in (1, 3):
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(frames, "reference_camera", lambda _cameras, reference=reference: reference)
+            result = solve_job({"kind": "autocalibration", "data": data, "options": {"certificate": "full"}})
+        assert [item["proof"]["reference"] for item in result["certificate"]["items"]] == [reference, reference]
+        report = _verify(result)
+        assert report.valid, report.first_failure
+        assert report.scope["reference_cameras_tied"] == [1, 3] and "reference_camera" not in report.scope
 
 
 def test_the_two_frames_pose_different_problems(tied_scene):
