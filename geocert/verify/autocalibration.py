@@ -166,12 +166,23 @@ class AutocalibrationVerification(Verification):
             earlier = autocalibration_problem.earlier_references(cameras, image_size, intrinsics)
         except (InputError, TypeError, ValueError, AttributeError, np.linalg.LinAlgError):
             return {}
-        scope: dict = {"reference_camera": candidates[0]} if len(candidates) == 1 else {
-            "reference_cameras_tied": candidates,
-            "reference_note": "these cameras' conditioning lies within the rounding of the tie's edge "
-                              "(frames.REFERENCE_TIE), so which of them is the reference camera is a machine's "
-                              "rounding's choice: each claim is checked in the frame of the one its proof names, "
-                              "and on noisy data each frame poses its own problem"}
+        named = {item["proof"]["reference"] for item in items if isinstance(item, dict)
+                 and item.get("certified") is True and isinstance(item.get("proof"), dict)
+                 and type(item["proof"].get("reference")) is int}
+        if len(candidates) == 1:
+            scope: dict = {"reference_camera": candidates[0]}
+        elif len(named) == 1:  # check_claims refuses proofs naming two
+            scope = {"reference_camera": min(named), "reference_cameras_tied": candidates,
+                     "reference_note": "these cameras' conditioning lies within the rounding of the tie's edge "
+                                       "(frames.REFERENCE_TIE), so which of them is the reference camera is a "
+                                       "machine's rounding's choice: the claims' proofs name reference_camera and are "
+                                       "checked in its frame, so each claim is about the problem posed with it as the "
+                                       "reference (on noisy data another of these cameras poses another problem)"}
+        else:
+            scope = {"reference_cameras_tied": candidates,
+                     "reference_note": "these cameras' conditioning lies within the rounding of the tie's edge "
+                                       "(frames.REFERENCE_TIE), so which of them is the reference camera is a "
+                                       "machine's rounding's choice, and on noisy data each poses its own problem"}
         cameras_unnamed = sorted(set(candidates) | set(earlier))
         unnamed = [position for position, item in enumerate(items) if isinstance(item, dict)
                    and item.get("certified") is True and isinstance(item.get("proof"), dict)
@@ -195,6 +206,13 @@ class AutocalibrationVerification(Verification):
             return
         if len(items) != 2:
             raise Invalid("format", "autocalibration certifies two stages: affine, then metric")
+        stage_proofs = [item.get("proof") for item in items if isinstance(item, dict) and item.get("certified") is True
+                        and isinstance(item.get("proof"), dict)]
+        if len({repr(proof.get("reference")) for proof in stage_proofs}) > 1:
+            # the current writer names the frame in every proof, an earlier one in none: stages posed
+            # in two frames would claim a plane and a K of two different problems
+            raise Invalid("claim", "the stages' proofs name different reference cameras (or one names none): both "
+                                   "stages are posed in one frame")
         planes = [item.get("plane_at_infinity") for item in items]
         if planes[1] != planes[0]:
             raise Invalid("claim", "the metric stage states another plane at infinity than the affine stage")

@@ -36,6 +36,12 @@ MAX_COST_SPREAD = 1e-6  # the most a map's cost spread may move its estimate, re
 # kernels round otherwise beyond NUMBER_SLACK (measured: 9e-6 of the width under OpenBLAS's
 # Prescott kernels on the stored far-off homography). Read on the width only, never the value.
 MAP_WIDTH_SLACK = 1e-4
+# Of the size of a value and its interval's end: an end is the value plus a distance, each computed
+# from the returned solution, so another machine's end differs from this one's by the distance's
+# slack (NUMBER_SLACK, MAP_WIDTH_SLACK of the width) and a few roundings at their size, never by
+# VALUE_SLACK of the value (review 34: at 1e6 px that let an interval 4e-9 wide move 1.5e-3 px off
+# its value).
+END_ROUNDING = 64 * float(np.finfo(float).eps)
 COMPARED = ("method", "determined", "level", "redundancy")
 
 
@@ -373,20 +379,27 @@ def _compare(where: str, given: dict, expected: dict | None, earlier_form: bool 
         width = own["upper"] - own["lower"] if own["lower"] is not None and own["upper"] is not None else 0.0
         scale = abs(own["value"]) if own["value"] is not None else 0.0
         for name in ("value", "lower", "upper", "tolerance")[:3 if earlier else 4]:
-            # an end's distance from the value is the level over the curvature, so an end moves with their
-            # rounding by ``width_slack`` of the width; the value is the returned solution's own, which
-            # neither enters: no slack is read on the value's size (1e-6 of 1e6 px let it move a pixel)
-            slack = 0.0 if name == "value" else width_slack * abs(width)
-            if not _close(stated.get(name), own[name], width, VALUE_SLACK * scale + slack):
+            # the value is the returned solution's own, to VALUE_SLACK of itself (once: _close's); an
+            # end's distance from it is the level over the curvature, so an end moves with their
+            # rounding by ``width_slack`` of the width, and by END_ROUNDING of its size, never by
+            # the value's slack (review 34); the tolerance is a share of the value's scale
+            if name == "value":
+                close = _close(stated.get(name), own[name], width, 0.0)
+            elif name == "tolerance":
+                close = _close(stated.get(name), own[name], width, VALUE_SLACK * scale)
+            else:
+                size = max(scale, abs(own[name])) if own[name] is not None else scale
+                close = _close(stated.get(name), own[name], width, width_slack * abs(width) + END_ROUNDING * size, 0.0)
+            if not close:
                 raise Invalid("returned", f"{at}/{name} is {stated.get(name)!r:.40}, the estimate at the solution "
                                           f"returned gives {own[name]!r:.40}")
 
 
-def _close(given: Any, expected: float | None, width: float, absolute: float) -> bool:
+def _close(given: Any, expected: float | None, width: float, absolute: float, relative: float = VALUE_SLACK) -> bool:
     """Whether ``given`` is ``expected`` (None is None) to NUMBER_SLACK of ``width``, ``absolute``
-    and VALUE_SLACK of its own size."""
+    and ``relative`` (VALUE_SLACK) of its own size."""
     if expected is None or given is None:
         return given is None and expected is None
     if isinstance(given, bool) or not isinstance(given, (int, float)) or not math.isfinite(given):
         return False
-    return abs(given - expected) <= NUMBER_SLACK * abs(width) + absolute + VALUE_SLACK * abs(expected)
+    return abs(given - expected) <= NUMBER_SLACK * abs(width) + absolute + relative * abs(expected)
