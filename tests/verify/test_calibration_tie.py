@@ -56,7 +56,12 @@ def carrying(result: dict, data: dict) -> dict:
     summary = forged["summary"]["calibration"]
     summary["certified_K"] = other["K"]
     summary["difference"] = difference = calibration_claim.difference(np.asarray(summary["K"]), np.asarray(other["K"]))
-    for warning in forged["summary"]["warnings"]:  # restated as the forger would (review 24: its figures are read)
+    warnings = forged["summary"]["warnings"]
+    if summary["returned_is_certified"]:  # the genuine result returns its certified K: the forger says it moved
+        summary.update(returned_is_certified=False, source="bundle_adjustment")
+        warnings.insert(0, {"code": "returned_K_not_certified",
+                            "detail": calibration_claim.moved_warning(True, "shared", difference)})
+    for warning in warnings:  # restated as the forger would (review 24: its figures are read)
         if warning["code"] == "returned_K_not_certified":
             warning["detail"] = re.sub(r"focal [^,]*, principal point [0-9.]+ px",
                                        f"focal {difference['focal_percent']:+.2f}%, principal point "

@@ -985,9 +985,13 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
     with _timed(stages, "bundle_adjustment") as stage:
         model = options.camera_model
         if model in ("simple", "varying") and image_size is not None:  # the principal point at the image centre
-            for _, start in starts:
-                f = float(np.sqrt(abs(start.K[0, 0] * start.K[1, 1])))
-                start.K = np.array([[f, 0.0, image_size[0] / 2], [0.0, f, image_size[1] / 2], [0.0, 0.0, 1.0]])
+            # Copies, not the starts changed in place: the incremental start is the registration's
+            # principal-point fit when its test kept one (rival_fit's reconstruction), and that fit,
+            # its K left as the test found it, is what _principal_point reuses below instead of
+            # adjusting again (with its K set to the centre, it fitted worse and was not reused).
+            starts = [(name, replace(start, K=np.array([[f, 0.0, image_size[0] / 2], [0.0, f, image_size[1] / 2],
+                                                         [0.0, 0.0, 1.0]])))
+                      for name, start in starts for f in [float(np.sqrt(abs(start.K[0, 0] * start.K[1, 1])))]]
         if options.bundle_adjustment:
             if tell.asks("bundle_adjustment", 0, 1):
                 _keep_metric(out, starts[0][1], n_views, stage)
