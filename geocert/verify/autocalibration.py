@@ -183,7 +183,7 @@ class AutocalibrationVerification(Verification):
                      "reference_note": "these cameras' conditioning lies within the rounding of the tie's edge "
                                        "(frames.REFERENCE_TIE), so which of them is the reference camera is a "
                                        "machine's rounding's choice, and on noisy data each poses its own problem"}
-        cameras_unnamed = sorted(set(candidates) | set(earlier))
+        cameras_unnamed = sorted(earlier)
         unnamed = [position for position, item in enumerate(items) if isinstance(item, dict)
                    and item.get("certified") is True and isinstance(item.get("proof"), dict)
                    and "reference" not in item["proof"]]
@@ -376,8 +376,8 @@ class AutocalibrationVerification(Verification):
                                        f"in the frame of camera {' or '.join(map(str, references))} (the "
                                        "lowest-indexed of the best conditioned, frames.reference_camera)")
             references = [proof["reference"]]
-        else:  # an earlier proof names no frame: those it may have been posed in (data_scope says so)
-            references = references + [r for r in earlier if r not in references]
+        else:  # an earlier proof names no frame: those its writer's rounding may have taken (data_scope says so)
+            references = earlier
         first = None
         for reference in references:
             tried = list(passed)

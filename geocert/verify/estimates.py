@@ -36,11 +36,13 @@ MAX_COST_SPREAD = 1e-6  # the most a map's cost spread may move its estimate, re
 # kernels round otherwise beyond NUMBER_SLACK (measured: 9e-6 of the width under OpenBLAS's
 # Prescott kernels on the stored far-off homography). Read on the width only, never the value.
 MAP_WIDTH_SLACK = 1e-4
-# Of the size of a value and its interval's end: an end is the value plus a distance, each computed
-# from the returned solution, so another machine's end differs from this one's by the distance's
-# slack (NUMBER_SLACK, MAP_WIDTH_SLACK of the width) and a few roundings at their size, never by
-# VALUE_SLACK of the value (review 34: at 1e6 px that let an interval 4e-9 wide move 1.5e-3 px off
-# its value).
+# Of a value's size: how far a stated interval's end may lie on the wrong side of the stated value.
+# Every writer's interval holds its value (the ends are the value less and plus distances at least
+# 0, or the least and greatest of samples the value is among, or clipped toward it), which the
+# document's own numbers show whatever machine wrote them; read against the verifier's own, an end
+# may differ by VALUE_SLACK of the value (a far resection's centre, an SVD's, rounds at 1e-10 of
+# itself), which without this let an interval 4e-9 wide at 1e6 px move 1.5e-3 px off its value
+# (review 34) and a value 134 widths off its interval (review 35).
 END_ROUNDING = 64 * float(np.finfo(float).eps)
 COMPARED = ("method", "determined", "level", "redundancy")
 
@@ -379,20 +381,28 @@ def _compare(where: str, given: dict, expected: dict | None, earlier_form: bool 
         width = own["upper"] - own["lower"] if own["lower"] is not None and own["upper"] is not None else 0.0
         scale = abs(own["value"]) if own["value"] is not None else 0.0
         for name in ("value", "lower", "upper", "tolerance")[:3 if earlier else 4]:
-            # the value is the returned solution's own, to VALUE_SLACK of itself (once: _close's); an
-            # end's distance from it is the level over the curvature, so an end moves with their
-            # rounding by ``width_slack`` of the width, and by END_ROUNDING of its size, never by
-            # the value's slack (review 34); the tolerance is a share of the value's scale
-            if name == "value":
-                close = _close(stated.get(name), own[name], width, 0.0)
-            elif name == "tolerance":
-                close = _close(stated.get(name), own[name], width, VALUE_SLACK * scale)
-            else:
-                size = max(scale, abs(own[name])) if own[name] is not None else scale
-                close = _close(stated.get(name), own[name], width, width_slack * abs(width) + END_ROUNDING * size, 0.0)
-            if not close:
+            # the value is the returned solution's own, to VALUE_SLACK of itself; an end moves with
+            # it, and by ``width_slack`` of the width with the level and the curvature (each slack
+            # read once: review 34 found the value's twice); that the ends hold the stated value is
+            # _check_holds'; the tolerance is a share of the value's scale
+            absolute = VALUE_SLACK * scale + (width_slack * abs(width) if name in ("lower", "upper") else 0.0)
+            if not _close(stated.get(name), own[name], width, absolute, 0.0):
                 raise Invalid("returned", f"{at}/{name} is {stated.get(name)!r:.40}, the estimate at the solution "
                                           f"returned gives {own[name]!r:.40}")
+    _check_holds(intervals, where)
+
+
+def _check_holds(intervals: list, where: str) -> None:
+    """Each stated interval holds its stated value, to END_ROUNDING of the value's size: a writer's
+    always does (END_ROUNDING's note), so this reads the document's own numbers and no machine's."""
+    for number, found in enumerate(intervals):
+        value, lower, upper = found.get("value"), found.get("lower"), found.get("upper")
+        if not is_number(value):
+            continue  # read against the writer's by _compare
+        slack = END_ROUNDING * abs(value)
+        if (is_number(lower) and lower > value + slack) or (is_number(upper) and upper < value - slack):
+            raise Invalid("returned", f"{where}/intervals/{number} [{lower!r:.24}, {upper!r:.24}] does not hold its "
+                                      f"value {value!r:.24}")
 
 
 def _close(given: Any, expected: float | None, width: float, absolute: float, relative: float = VALUE_SLACK) -> bool:

@@ -82,13 +82,20 @@ def reference_candidates(cameras: np.ndarray, N: np.ndarray) -> list[int]:
     return [int(i) for i in wide if i <= first_surely_tied]
 
 
+# How far apart two cameras' conditioning may be and a machine's SVD still rank them either way: an
+# earlier writer took the best conditioned (np.argmax), which rounding decides only among cameras
+# this close (the ratios round at about 1e-15 of themselves; review 35 had an unnamed proof accepted
+# in the frame of a camera 1.2e-9 below the best, which no earlier writer could have taken).
+EARLIER_TIE = 1e-12
+
+
 def earlier_references(cameras: np.ndarray, N: np.ndarray) -> list[int]:
     """The frames a proof naming no reference may be posed in: it was written when the reference was
-    the best conditioned camera, which is the rounding's choice among those tied (REFERENCE_TIE, with
-    its edge); best first."""
+    the best conditioned camera, which a machine's rounding chooses among those within EARLIER_TIE;
+    best first."""
     ratio = conditioning(np.einsum("ab,ibc->iac", N, cameras))
-    wide = _tied(ratio, REFERENCE_TIE * (1.0 + REFERENCE_TIE_BAND))
-    return [int(i) for i in wide[np.argsort(-ratio[wide], kind="stable")]]
+    close = _tied(ratio, EARLIER_TIE)
+    return [int(i) for i in close[np.argsort(-ratio[close], kind="stable")]]
 
 
 def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, reference: int | None = None) -> Normalised:
