@@ -298,7 +298,7 @@ def _check_maps(kind, result: dict, certificate: dict, earlier: bool = True) -> 
         source, target = read(certificate["data"], index)
         expected = safely(estimate.map_, source, target, item["matrix"], item.get("cost"), item.get("lower_bound"))
         spread = _map_cost_spread(source, target, item["matrix"])
-        _compare(where, determinacy, expected, earlier, spread, MAP_WIDTH_SLACK + spread)
+        _compare(where, determinacy, expected, earlier, spread, MAP_WIDTH_SLACK + spread, _map_value_floor(source, target))
 
 
 def _check_frames(kind, result: dict, certificate: dict, earlier: bool = True) -> None:
@@ -343,7 +343,7 @@ def _map_cost_spread(source: np.ndarray, target: np.ndarray, matrix: Any) -> flo
 
 
 def _compare(where: str, given: dict, expected: dict | None, earlier_form: bool = True,
-             cost_spread: float = 0.0, width_slack: float = 0.0) -> None:
+             cost_spread: float = 0.0, width_slack: float = 0.0, value_floor: float = 0.0) -> None:
     """``given`` is ``expected`` but for its proven intervals (checked against the proof) and the
     pool a pooled level names (checked against the data), to the module's slack; read as written
     before intervals stated a tolerance only where ``earlier_form`` allows it (check)."""
@@ -385,11 +385,23 @@ def _compare(where: str, given: dict, expected: dict | None, earlier_form: bool 
             # it, and by ``width_slack`` of the width with the level and the curvature (each slack
             # read once: review 34 found the value's twice); that the ends hold the stated value is
             # _check_holds'; the tolerance is a share of the value's scale
-            absolute = VALUE_SLACK * scale + (width_slack * abs(width) if name in ("lower", "upper") else 0.0)
+            absolute = VALUE_SLACK * scale + (width_slack * abs(width) if name in ("lower", "upper") else 0.0) \
+                + (value_floor if name != "tolerance" else 0.0)
             if not _close(stated.get(name), own[name], width, absolute, 0.0):
                 raise Invalid("returned", f"{at}/{name} is {stated.get(name)!r:.40}, the estimate at the solution "
                                           f"returned gives {own[name]!r:.40}")
     _check_holds(intervals, where)
+
+
+def _map_value_floor(source: Any, target: Any) -> float:
+    """What a map estimate's value and ends may differ by whatever their own size: END_ROUNDING of
+    the data's largest coordinate. The value (a homography's image of the centroid, a resection's
+    centre) is computed from terms of the data's size through the normalisers, so where it is near
+    0 (a centroid mapped to the origin) it is their rounding, not a number to 1e-9 of itself
+    (review 35 class 2: 1.03e-13 stated, 9.76e-14 recomputed, from terms of 200 px)."""
+    sizes = [float(np.max(np.abs(np.asarray(array, dtype=float)))) for array in (source, target)
+             if np.asarray(array).size]
+    return END_ROUNDING * max(sizes, default=0.0)
 
 
 def _check_holds(intervals: list, where: str) -> None:
