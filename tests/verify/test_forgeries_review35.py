@@ -13,8 +13,9 @@ ends' slack against the verifier's figures read once, at the value's size, which
 4's far exact resection, refused only since review 34's fix held the ends to 64 ulps); class 3
 (frames.EARLIER_TIE: an unnamed proof is read only in frames an earlier writer's argmax could take,
 within 1e-12 of the best); class 2 (estimates._map_value_floor: a map's value and ends may differ by
-END_ROUNDING of the data's largest coordinate, the size of the terms they are computed from). Open
-(strict xfails): classes 1 and 4's far noisy resection. Classes 1's and 4's tests solve and verify in subprocesses under
+END_ROUNDING of the data's largest coordinate, the size of the terms they are computed from); class
+4's far noisy resection (fractional.determinacy.map_: the centre is the normalised map's null vector
+taken back to the world, not the pixel-world camera's SVD). Open (a strict xfail): class 1. Classes 1's and 4's tests solve and verify in subprocesses under
 OPENBLAS_CORETYPE=Haswell and Prescott (both writers' documents verified under the other kernel),
 so they state the same on any x86-64 machine with AVX2 and are skipped on others; class 2's states
 the value in exact arithmetic, in this process.
@@ -310,14 +311,8 @@ def test_the_near_exact_resections_are_certified_at_costs_of_the_rounding(across
 
 # Class 4: a far resection's centre estimate, rounded at the SVD's rounding of a far centre
 
-CLASS_4 = ("review 35 class 4: a far resection's centre estimate (value and central-difference gradient of an "
-           "SVD's centre in pixel-world coordinates) differs between kernels by 5-20% of the width, beyond the "
-           "ends' slack: refused under another kernel")
-
-
-@pytest.mark.parametrize("prefix", ["far_exact", pytest.param("far_noisy", marks=pytest.mark.xfail(
-    strict=True, raises=AssertionError, reason=CLASS_4))])  # far_exact: fixed (the ends' slack read once, at
-                                                              # the value's size, as before review 34)
+@pytest.mark.parametrize("prefix", ["far_exact", "far_noisy"])  # fixed: the ends' slack read once, at the
+# value's size (far_exact), and the centre taken from the normalised map's null vector (far_noisy)
 def test_a_far_resection_verifies_under_another_kernel(across_kernels, prefix):
     _verified_across(across_kernels, prefix)
 

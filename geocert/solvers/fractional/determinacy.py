@@ -390,8 +390,12 @@ def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | Non
     J = numeric_jacobian(residuals, zero)
     quantities = {}
     if m == 3 and n1 == 4:  # resection: the camera centre
+        Ts_inv = np.linalg.inv(Ts)
+
         def centre(theta):
-            C = np.linalg.svd(matrix_of(theta))[2][-1]
+            # the null vector of the normalised map (entries of one size), taken back to the world:
+            # the pixel-world camera's SVD rounds its centre at 1e-10 of itself far out
+            C = Ts_inv @ np.linalg.svd(normalised + (basis @ theta).reshape(M.shape))[2][-1]
             return C[:3] / C[3]
 
         value = centre(zero)
