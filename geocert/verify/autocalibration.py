@@ -191,7 +191,8 @@ class AutocalibrationVerification(Verification):
             scope["reference_unnamed"] = {
                 "items": unnamed, "cameras": cameras_unnamed,
                 "note": "these items' proofs name no reference camera (written before proofs named it), and these "
-                        "cameras are conditioned alike within frames.REFERENCE_TIE: each item is checked in the "
+                        "cameras are conditioned alike within frames.EARLIER_TIE (the rounding that chose the "
+                        "best conditioned for such a writer): each item is checked in the "
                         "frame of whichever of them it holds in, which this report does not name; on noisy data "
                         "each frame poses its own problem, so such an item is a claim about the problem posed "
                         "with one of these cameras as the reference, not necessarily the one this scope names"}
@@ -442,11 +443,16 @@ class AutocalibrationVerification(Verification):
 
 
 def _stated_reference(claims: list, cameras: np.ndarray, image_size, intrinsics: dict) -> int | None:
-    """The frame the claims' proofs name where it is one of the data's (a camera on the tie's edge
-    leaves two: the returned fields are read in the proofs' own); None, the data's own choice,
-    otherwise (check_claim refuses any other)."""
+    """The frame the returned fields are read in: the one the claims' proofs name where it is one
+    of the data's (a camera on the tie's edge leaves two); where a certified proof names none (an
+    earlier writer's), the best-conditioned camera that writer took (check_claim reads its proofs
+    there first); None, the data's own choice, otherwise (check_claim refuses any other)."""
     proof = claims[0].get("proof") if claims and isinstance(claims[0], dict) else None
-    stated = proof.get("reference") if isinstance(proof, dict) else None
+    if not isinstance(proof, dict):
+        return None
+    if "reference" not in proof:
+        return autocalibration_problem.earlier_references(cameras, image_size, intrinsics)[0]
+    stated = proof["reference"]
     candidates = autocalibration_problem.reference_candidates(cameras, image_size, intrinsics)
     return stated if type(stated) is int and stated in candidates else None
 

@@ -281,6 +281,11 @@ def test_proofs_naming_no_reference_are_checked_where_an_earlier_writer_posed_th
     assert report.valid, report.first_failure
     assert report.scope["reference_camera"] == 1 and "reference_unnamed" not in report.scope
     _refused(_unnamed(tied_scene["results"][1]["certificate"]))
+    # as a result too: its returned fields (the linear baseline among them) are read in the frame the
+    # earlier writer took, camera 3's, not the reference camera's
+    result = copy.deepcopy(tied_scene["results"][3])
+    result["certificate"] = _unnamed(result["certificate"])
+    _valid(result)
 
 
 def test_a_reconstruction_names_its_calibration_certificates_frame():
