@@ -170,29 +170,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import stored
-from tests.verify.test_forgeries_review34 import _in_prepare_frame
+from tests.verify.test_forgeries_review34 import _in_prepare_frame, _refused, _valid, _verify
 from tests.verify.test_forgeries_review34 import edge_data, edge_direct, edge_stratified  # noqa: F401 (fixtures)
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def _verify(document: dict):
-    return verify_any(json.loads(json.dumps(document)))
-
-
-def _valid(document: dict):
-    report = _verify(document)
-    assert report.valid, report.first_failure
-    return report
-
-
-def _refused(document: dict, words: str = "") -> dict:
-    report = _verify(document)
-    assert not report.valid, "a forged certificate was accepted"
-    assert words in report.first_failure["detail"], report.first_failure
-    return report.first_failure
 
 
 def _exact_resection(seed: int = 5) -> dict:
