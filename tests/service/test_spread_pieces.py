@@ -102,11 +102,17 @@ def test_the_pieces_go_to_the_other_solver_and_the_result_is_the_same_as_with_on
         # a cancel while the pieces run ends the job, and its helpers take no piece after it
         cancelled = cancel_at(client, job, "matches")
         ended = pieces_solved(client)
+        time.sleep(2.0)  # a piece the helper took before the cancel may still finish meanwhile
+        settled = pieces_solved(client)
         time.sleep(1.0)
         after = pieces_solved(client)
     matches = cancelled["result"]["stages"][0]
     assert matches["name"] == "matches" and matches["status"] == "cancelled"
-    assert after == ended
+    # one helper (one solver process, concurrency 1): at most the one piece it held at the cancel
+    # is counted after it, and none is taken later
+    assert settled.get("helper", 0) - ended.get("helper", 0) <= 1
+    assert settled.get("task", 0) == ended.get("task", 0)
+    assert after == settled
     assert two["status"] == "succeeded", two.get("error")
     assert shared.get("helper", 0) > 0  # the other solver process took a share
     assert without_times(one["result"]) == in_process
