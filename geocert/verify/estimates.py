@@ -296,8 +296,10 @@ def _check_maps(kind, result: dict, certificate: dict, earlier: bool = True) -> 
         if item.get("matrix") is None:
             raise Invalid("returned", f"{where} is stated for a map returning no matrix (its writer states none)")
         source, target = read(certificate["data"], index)
-        expected = safely(estimate.map_, source, target, item["matrix"], item.get("cost"), item.get("lower_bound"))
-        spread = _map_cost_spread(source, target, item["matrix"])
+        spread, squared_sum = _map_cost_spread(source, target, item["matrix"], item.get("cost"),
+                                               (certificate.get("options") or {}).get("norm"))
+        expected = safely(estimate.map_, source, target, item["matrix"], item.get("cost"), item.get("lower_bound"),
+                          squared_sum)
         _compare(where, determinacy, expected, earlier, spread, MAP_WIDTH_SLACK + spread, _map_value_floor(source, target))
 
 
@@ -318,11 +320,16 @@ def _check_frames(kind, result: dict, certificate: dict, earlier: bool = True) -
         _compare(where, determinacy, expected, earlier)
 
 
-def _map_cost_spread(source: np.ndarray, target: np.ndarray, matrix: Any) -> float:
+def _map_cost_spread(source: np.ndarray, target: np.ndarray, matrix: Any, stated: Any = None,
+                     norm: Any = None) -> tuple[float, float | None]:
     """How far the data determine a map's cost, relative to it (the objective check's spread,
     checks._check_residual_claim): far-off data make each residual a difference of numbers far
     larger than itself, which another machine's kernels round otherwise, and the estimate's level
-    (a multiple of the cost) moves with it."""
+    (a multiple of the cost) moves with it. With it, the squared residuals' sum the estimate's
+    level reads: an L2L2 document's ``stated`` cost where it lies within that spread of the one
+    recomputed here (as the objective check accepts it), so that the level is the document's own
+    (a near-exact fit's r'r is each machine's rounding noise, multiples of itself apart); None
+    (the recomputed one) otherwise."""
     from geocert.solvers.core.geometry import cost_rounding
     from geocert.solvers.fractional.proof import residual_uncertainty
 
@@ -336,10 +343,14 @@ def _map_cost_spread(source: np.ndarray, target: np.ndarray, matrix: Any) -> flo
             cost = float((residuals * residuals).sum())
             relative = 2.0 * spread / cost
     except (TypeError, ValueError):
-        return 0.0
+        return 0.0, None
+    squared_sum = None
+    if norm == "L2L2" and is_number(stated) and math.isfinite(stated) and math.isfinite(spread) and \
+            abs(float(stated) - cost) <= VALUE_SLACK * abs(cost) + 2.0 * spread:
+        squared_sum = float(stated)
     # capped: a cost the data barely determine (a near-exact map far off) must not let the level and
     # interval ends move by multiples of themselves
-    return min(relative, MAX_COST_SPREAD) if math.isfinite(relative) and relative >= 0 else 0.0
+    return (min(relative, MAX_COST_SPREAD) if math.isfinite(relative) and relative >= 0 else 0.0), squared_sum
 
 
 def _compare(where: str, given: dict, expected: dict | None, earlier_form: bool = True,
@@ -384,10 +395,11 @@ def _compare(where: str, given: dict, expected: dict | None, earlier_form: bool 
             # the value is the returned solution's own, to VALUE_SLACK of itself; an end moves with
             # it, and by ``width_slack`` of the width with the level and the curvature (each slack
             # read once: review 34 found the value's twice); that the ends hold the stated value is
-            # _check_holds'; the tolerance is a share of the value's scale
+            # _check_holds'; the tolerance is a share of the quantity's scale (a distance the data
+            # give, to VALUE_SLACK of itself: a centre at the origin has a value of the rounding)
             absolute = VALUE_SLACK * scale + (width_slack * abs(width) if name in ("lower", "upper") else 0.0) \
                 + (value_floor if name != "tolerance" else 0.0)
-            if not _close(stated.get(name), own[name], width, absolute, 0.0):
+            if not _close(stated.get(name), own[name], width, absolute, VALUE_SLACK if name == "tolerance" else 0.0):
                 raise Invalid("returned", f"{at}/{name} is {stated.get(name)!r:.40}, the estimate at the solution "
                                           f"returned gives {own[name]!r:.40}")
     _check_holds(intervals, where)

@@ -268,9 +268,6 @@ def across_kernels(tmp_path_factory) -> dict:
 
 # Class 1: a near-exact map's level, recomputed from this machine's residuals
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason="review 35 class 1: a near-exact map's estimate level is the verifier's "
-                                       "recomputed r.r (rounding noise), compared at a cost spread capped at 1e-6: "
-                                       "the service's exact-data resections are refused under another kernel")
 def test_near_exact_resections_verify_under_another_kernel(across_kernels):
     _verified_across(across_kernels, "exact")
 

@@ -191,14 +191,17 @@ def numeric_jacobian(function, theta: np.ndarray, step: float = 1e-6) -> np.ndar
 
 
 def curvature_intervals(J: np.ndarray, residuals: np.ndarray, quantities: dict[str, tuple],
-                        gap: float | None = None, sigmas: float = SIGMAS) -> Determinacy:
+                        gap: float | None = None, sigmas: float = SIGMAS,
+                        squared_sum: float | None = None) -> Determinacy:
     """Intervals for quantities (name -> (value, gradient in the parameters[, scale])) around an
-    optimum with residual Jacobian J (n x p) and residuals r."""
+    optimum with residual Jacobian J (n x p) and residuals r; ``squared_sum`` in place of r'r
+    where the caller has one the document states (a least-squares cost)."""
     J = np.asarray(J, dtype=float)
     r = np.asarray(residuals, dtype=float)
     n, p = J.shape
     information = J.T @ J if np.all(np.isfinite(J)) else np.full((p, p), np.nan)
-    return information_intervals(information, float(r @ r), n - p, quantities, gap, sigmas)
+    total = float(r @ r) if squared_sum is None else float(squared_sum)
+    return information_intervals(information, total, n - p, quantities, gap, sigmas)
 
 
 def cost_increase(cost: float, redundancy: int, gap: float | None = None, sigmas: float = SIGMAS) -> float:

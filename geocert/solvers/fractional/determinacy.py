@@ -362,7 +362,11 @@ def _normaliser(points: np.ndarray) -> np.ndarray:
 
 
 def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | None, cost: float | None,
-         lower: float | None) -> dict | None:
+         lower: float | None, squared_sum: float | None = None) -> dict | None:
+    """A map's estimate at ``matrix``. ``squared_sum``: the document's least-squares cost (an
+    L2L2 map's), read for the level in place of the residuals' sum recomputed here, so that the
+    level is the document's: on a near-exact fit r'r is rounding noise, which another machine's
+    kernels give otherwise by multiples of itself."""
     if matrix is None:
         return None
     source = np.asarray(source, dtype=float)
@@ -416,7 +420,7 @@ def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | Non
         extent = float(np.sqrt(((target - target.mean(axis=0)) ** 2).sum(axis=1).mean()))  # the targets' spread
         for k in range(len(value)):
             quantities[names[k]] = (float(value[k]), gradient[k], extent)
-    out = curvature_intervals(J, residuals(zero), quantities, certified_gap(cost, lower))
+    out = curvature_intervals(J, residuals(zero), quantities, certified_gap(cost, lower), squared_sum=squared_sum)
     if m == 3 and n1 == 4:
         flat = spread(source)
         if flat[-1] < FLAT:
