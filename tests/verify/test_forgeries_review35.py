@@ -15,7 +15,10 @@ ends' slack against the verifier's figures read once, at the value's size, which
 within 1e-12 of the best); class 2 (estimates._map_value_floor: a map's value and ends may differ by
 END_ROUNDING of the data's largest coordinate, the size of the terms they are computed from); class
 4's far noisy resection (fractional.determinacy.map_: the centre is the normalised map's null vector
-taken back to the world, not the pixel-world camera's SVD). Open (a strict xfail): class 1. Classes 1's and 4's tests solve and verify in subprocesses under
+taken back to the world, not the pixel-world camera's SVD); class 1 (fractional.determinacy.map_
+reads an L2L2 document's stated cost for the level, where the verifier finds it within the
+recomputed cost's spread: estimates._map_cost_spread; and a tolerance is compared to its own
+rounding). Classes 1's and 4's tests solve and verify in subprocesses under
 OPENBLAS_CORETYPE=Haswell and Prescott (both writers' documents verified under the other kernel),
 so they state the same on any x86-64 machine with AVX2 and are skipped on others; class 2's states
 the value in exact arithmetic, in this process.
