@@ -106,6 +106,8 @@ import pytest
 
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import stored
+from tests.verify.test_forgeries_review32 import far_exact_map  # noqa: F401 (a fixture: the far-off exact map)
+from tests.verify.test_forgeries_review33 import _in_service_frame as _in_prepare_frame
 
 
 def _verify(document: dict):
@@ -192,23 +194,6 @@ def edge_stratified(edge_data) -> dict:
 @pytest.fixture(scope="module")
 def edge_direct(edge_data) -> dict:
     return _solved(edge_data, "direct")
-
-
-def _in_prepare_frame(result: dict, data: dict) -> dict:
-    """The result with what derives from its plane and K recomputed in the frame check_returned
-    reads (prepare, no reference: camera 3's), its optional baseline left out."""
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
-    from geocert.verify.autocalibration import read_data
-
-    document = copy.deepcopy(result)
-    cameras, points, image_size = read_data(data)
-    problem = autocalibration_problem.prepare(cameras, points, image_size, {})
-    p = autocalibration_problem.plane_from_input(problem, np.array(document["plane_at_infinity"]))
-    H = autocalibration_problem.upgrade(problem, p, np.linalg.solve(problem.K0, np.array(document["K"])))
-    document.update(upgrade=H.tolist(), dual_absolute_quadric=autocalibration_problem.dual_absolute_quadric(H).tolist(),
-                    cameras=autocalibration_problem.metric_cameras(cameras, H),
-                    points=autocalibration_problem.metric_points(H, points), baseline=None)
-    return document
 
 
 def _contradiction_named(service: dict, forged: dict) -> None:
@@ -337,23 +322,6 @@ def test_the_nested_calibration_certificate_lists_its_unnamed_proofs():
 
 
 # Class 2: a map estimate's interval moved off its own value by 2e-9 of the value's size
-
-@pytest.fixture(scope="module")
-def far_exact_map() -> dict:
-    """Review 33's: the stored far-from-origin homography's source points (about 1e6 from the
-    origin), their targets a known homography's images plus 1e-9 noise."""
-    from geocert.jobs.runner import solve_job
-
-    data = copy.deepcopy(stored("homography_far_from_origin")["certificate"]["data"])
-    source = np.array(data["maps"][0]["source"], dtype=float)
-    H = np.array([[1.01, 0.02, 3.0], [-0.01, 0.99, -2.0], [1e-8, -2e-8, 1.0]])
-    image = np.hstack([source, np.ones((len(source), 1))]) @ H.T
-    target = image[:, :2] / image[:, 2:] + np.random.default_rng(3).normal(0.0, 1e-9, (len(source), 2))
-    data["maps"][0]["target"] = target.tolist()
-    result = solve_job({"kind": "homography", "data": data, "options": {"norm": "L2L2", "certificate": "full"}})
-    _valid(result)
-    return result
-
 
 def _ends_moved(result: dict, shift: float, names=("lower", "upper")) -> dict:
     document = copy.deepcopy(result)
