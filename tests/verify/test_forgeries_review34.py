@@ -107,6 +107,7 @@ import pytest
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import stored
 from tests.verify.test_forgeries_review32 import far_exact_map  # noqa: F401 (a fixture: the far-off exact map)
+from tests.verify.test_forgeries_review33 import _conditioning, _moved_to_a_tie
 from tests.verify.test_forgeries_review33 import _in_service_frame as _in_prepare_frame
 
 
@@ -132,42 +133,21 @@ def _refused(document: dict, words: str = "") -> dict:
 EDGE = 1.2e-9  # camera 1's conditioning below camera 3's, relative: inside the edge (0.5e-9 to 1.5e-9)
 
 
-def _conditioning(cameras: np.ndarray, N: np.ndarray) -> np.ndarray:
-    s = np.linalg.svd(np.einsum("ab,ibc->iac", N, cameras)[:, :, :3], compute_uv=False)
-    return s[:, 2] / s[:, 0]
-
-
 @pytest.fixture(scope="module")
 def edge_data() -> dict:
     """Review 33's tied scene (make_scene(6 views, 0.2% noise, seed 1), world frame moved by
     T = I + t E), t bisected so that camera 1's conditioning is EDGE below camera 3's."""
-    from geocert.solvers.autocalibration import frames, scenes
+    from geocert.solvers.autocalibration import frames
     from geocert.solvers.autocalibration import problem as autocalibration_problem
 
-    scene = scenes.make_scene(6, noise_percent=0.2, points=60, seed=1)
-    N = np.linalg.inv(autocalibration_problem.preconditioner(autocalibration_problem.resolve_ranges({}, scene.image_size)))
-    E = np.zeros((4, 4))
-    E[3, :3] = np.random.default_rng(101).normal(size=3)
-
-    def gap(t: float) -> float:
-        ratio = _conditioning(scene.cameras @ (np.eye(4) + t * E), N)
-        return float(ratio[3] * (1.0 - EDGE) - ratio[1])
-
-    low, high = 0.01, 0.02
-    assert gap(low) * gap(high) < 0
-    for _ in range(200):
-        middle = 0.5 * (low + high)
-        low, high = (middle, high) if np.sign(gap(middle)) == np.sign(gap(low)) else (low, middle)
-    T = np.eye(4) + low * E
-    cameras = scene.cameras @ T
-    cameras /= np.linalg.norm(cameras, axis=(1, 2))[:, None, None]
-    points = scene.points @ np.linalg.inv(T).T
-    points /= np.linalg.norm(points, axis=1)[:, None]
+    data = _moved_to_a_tie(EDGE)
+    cameras, image_size = np.array(data["cameras"]), data["image_size"]
+    N = np.linalg.inv(autocalibration_problem.preconditioner(autocalibration_problem.resolve_ranges({}, image_size)))
     ratio = _conditioning(cameras, N)
     assert int(np.argmax(ratio)) == 3 and 1.1e-9 < 1.0 - ratio[1] / ratio[3] < 1.3e-9
-    assert autocalibration_problem.reference_candidates(cameras, scene.image_size, {}) == [1, 3]
+    assert autocalibration_problem.reference_candidates(cameras, image_size, {}) == [1, 3]
     assert frames.reference_camera(np.einsum("ab,ibc->iac", N, cameras)) == 3  # any machine's
-    return {"cameras": cameras.tolist(), "points": points.tolist(), "image_size": list(scene.image_size)}
+    return data
 
 
 def _solved(data: dict, method: str) -> dict:
