@@ -209,7 +209,12 @@ class AutocalibrationVerification(Verification):
             raise Invalid("format", "autocalibration certifies two stages: affine, then metric")
         stage_proofs = [item.get("proof") for item in items if isinstance(item, dict) and item.get("certified") is True
                         and isinstance(item.get("proof"), dict)]
-        if len({repr(proof.get("reference")) for proof in stage_proofs}) > 1:
+        named = {repr(proof.get("reference")) for proof in stage_proofs}
+        # an uncertified stage's proof that names a frame names the certified stages' too: the
+        # returned fields are read in the frame the proofs name (_stated_reference)
+        named |= {repr(item["proof"]["reference"]) for item in items if isinstance(item, dict)
+                  and isinstance(item.get("proof"), dict) and "reference" in item["proof"]}
+        if len(named) > 1:
             # the current writer names the frame in every proof, an earlier one in none: stages posed
             # in two frames would claim a plane and a K of two different problems
             raise Invalid("claim", "the stages' proofs name different reference cameras (or one names none): both "
@@ -446,8 +451,12 @@ def _stated_reference(claims: list, cameras: np.ndarray, image_size, intrinsics:
     """The frame the returned fields are read in: the one the claims' proofs name where it is one
     of the data's (a camera on the tie's edge leaves two); where a certified proof names none (an
     earlier writer's), the best-conditioned camera that writer took (check_claim reads its proofs
-    there first); None, the data's own choice, otherwise (check_claim refuses any other)."""
-    proof = claims[0].get("proof") if claims and isinstance(claims[0], dict) else None
+    there first); None, the data's own choice, otherwise (check_claim refuses any other). A
+    certified stage's proof is read first: an uncertified one proves nothing of the frame (review
+    36 read the fields in the frame an uncertified affine stage's proof named)."""
+    proofs = [(item.get("certified") is True, item["proof"]) for item in claims
+              if isinstance(item, dict) and isinstance(item.get("proof"), dict)]
+    proof = next((proof for certified, proof in proofs if certified), proofs[0][1] if proofs else None)
     if not isinstance(proof, dict):
         return None
     if "reference" not in proof:

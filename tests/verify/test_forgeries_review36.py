@@ -374,7 +374,6 @@ def far_across_kernels(tmp_path_factory) -> dict:
             "Prescott": _run("Haswell", "verify", written["Prescott"], directory)}
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=CLASS_3)
 def test_far_resections_verify_under_another_kernel(far_across_kernels):
     failures = [(job, writer, failure["detail"]) for writer, checked in far_across_kernels.items()
                 for job, (valid, failure) in checked.items() if not valid]
@@ -442,7 +441,6 @@ def _affine_uncertified_in_frame(result: dict, data: dict, reference: int) -> di
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=CLASS_4)
 def test_returned_fields_in_the_frame_an_uncertified_proof_names_are_refused(edge_service, edge_data):
     _refused(_affine_uncertified_in_frame(edge_service, edge_data, 1))
 
