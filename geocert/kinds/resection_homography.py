@@ -144,8 +144,7 @@ class MapKind(ProblemKind):
         document = map_document(result, options.detail, options.certificate == "full")
         if options.detail == "full":
             document["determinacy"] = safely(determinacy.map_, source, target, result.matrix, result.cost,
-                                             determinacy.stated_lower_bound(result),
-                                             result.cost if options.norm == "L2L2" else None)
+                                             determinacy.stated_lower_bound(result))
         proof = (document.get("certificate") or {}).get("proof")  # a full certificate's only (either detail)
         if self.name == "resection" and result.certified and options.norm == "L2L2" and (
                 proof.get("type") in ("branch_and_bound", "sublevel_bound") if proof is not None else options.detail == "full"):
