@@ -23,10 +23,10 @@ besides by the width's slack, which grows with the data's offset over their spre
 Jacobian's rounding does: JACOBIAN_ROUNDING); class 1 in part (fractional.determinacy.map_: the
 level reads the squared residuals computed exactly, exact_squared_residuals, the same float on every
 machine, and no longer the stated cost: squared_sum is gone, review 35 class 1's genuine documents
-still verify across kernels). Open in part, strict xfails: the objective check still accepts a
-claimed cost anywhere within 2 spread, so a certified cost of 0 verifies where the matrix costs
-1.3e-11 (the level then 3^2 r'r / 13, not 0); an uncertified map's cost figure is held to
-figure_allowance only (its estimate no longer follows it).
+still verify across kernels; and checks._check_residual_claim holds a claimed cost besides to the
+least cost residuals within its allowance of the verifier's give, each residual's share clipped at
+0, so the certified cost of 0 is refused). Open in part, a strict xfail: an uncertified map's cost
+figure is held to figure_allowance only (1e-9 absolute; its estimate no longer follows it).
 
 1. A map's estimate level is the document's cost, which the checks hold only to windows far wider
    than any machine's rounding. Review 35 class 4's far resection (12 points uniform in
@@ -223,12 +223,8 @@ def _widths(result: dict, index: int = 0) -> list[float]:
 
 # Class 1: the estimate's level read off a cost the checks hold to a window far wider than rounding
 
-CLASS_1 = ("review 36 class 1 (open in part): the objective check accepts a claimed cost anywhere within 2 spread (a "
-           "worst-case bound, 25 times the residuals' rounding here) of the recomputed one, so a certified cost of 0 "
-           "verifies for a matrix costing 1.3e-11 (the estimate's level no longer follows it below the residuals' own)")
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=CLASS_1)
 def test_a_far_map_restated_at_cost_zero_is_refused(far_resection):
     _refused(_at_cost(far_resection, 0.0))
 
