@@ -711,6 +711,13 @@ def autocalibration_proven(noise_px: float = 0.5, synthetic: int = 5) -> list[st
     return lines
 
 
+def _section(title: str, lines, began: float) -> None:
+    """One section of the bench alone: its title with the load, its lines, the wall time."""
+    print(f"{title}; load {open('/proc/loadavg').read().split()[0]}")
+    print("\n".join(lines()))
+    print(f"\nWall time {time.perf_counter() - began:.0f} s; load {open('/proc/loadavg').read().split()[0]}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenes", type=int, default=40)
@@ -738,29 +745,18 @@ def main() -> None:
     rng = np.random.default_rng(19)
     began = time.perf_counter()
     if args.direct_intrinsics_proven_real:
-        print(f"Direct autocalibration, one K, real cameras (0.5 px): its proven intrinsics; load "
-              f"{open('/proc/loadavg').read().split()[0]}")
-        print("\n".join(direct_intrinsics_proven_real()))
-        print(f"\nWall time {time.perf_counter() - began:.0f} s; load {open('/proc/loadavg').read().split()[0]}")
-        return
+        return _section("Direct autocalibration, one K, real cameras (0.5 px): its proven intrinsics",
+                        direct_intrinsics_proven_real, began)
     if args.direct_views_proven_real:
-        print(f"Direct autocalibration, one focal length a view, real cameras (0.5 px): its proven intervals; load "
-              f"{open('/proc/loadavg').read().split()[0]}")
-        print("\n".join(direct_views_proven_real()))
-        print(f"\nWall time {time.perf_counter() - began:.0f} s; load {open('/proc/loadavg').read().split()[0]}")
-        return
+        return _section("Direct autocalibration, one focal length a view, real cameras (0.5 px): its proven intervals",
+                        direct_views_proven_real, began)
     if args.direct_views_proven is not None:
-        print(f"Direct autocalibration, one focal length a view: its proven intervals ({args.direct_views_proven} "
-              f"views, 0.2% noise); load {open('/proc/loadavg').read().split()[0]}")
-        print("\n".join(direct_views_proven(args.autocalibration_scenes, args.direct_views_proven)))
-        print(f"\nWall time {time.perf_counter() - began:.0f} s; load {open('/proc/loadavg').read().split()[0]}")
-        return
+        return _section(f"Direct autocalibration, one focal length a view: its proven intervals "
+                        f"({args.direct_views_proven} views, 0.2% noise)",
+                        lambda: direct_views_proven(args.autocalibration_scenes, args.direct_views_proven), began)
     if args.resection_l1_synthetic:
-        print(f"L1 resections' proven centres on synthetic cameras (20 points, 0.5 px noise); load "
-              f"{open('/proc/loadavg').read().split()[0]}")
-        print("\n".join(synthetic_resection_l1()))
-        print(f"\nWall time {time.perf_counter() - began:.0f} s; load {open('/proc/loadavg').read().split()[0]}")
-        return
+        return _section("L1 resections' proven centres on synthetic cameras (20 points, 0.5 px noise)",
+                        synthetic_resection_l1, began)
     if args.resection_l1:
         print(f"L1 resections on real camera sets (20 points drawn in the set's box, 0.5 px noise); load "
               f"{open('/proc/loadavg').read().split()[0]}")
