@@ -15,6 +15,9 @@ processes, each a process of its own on loopback:
 
     .venv/bin/python -m bench.faults [--only submit,streams,redelivery,restart,body]
 
+``--only polls``: the API alone answering 20 clients' polls of queued jobs back to back (polls a
+second, the API's CPU and wait for a core a poll), for before-and-after pairs.
+
 ``--only saturated`` runs the saturated half of section 1 alone (the API, no workers), for
 before-and-after pairs; with the API's wait for a core (its scheduler statistics) and this bench's
 own client CPU beside its CPU. ``GEOCERT_API_PROCESSES=2`` in the environment serves it with two
@@ -38,6 +41,7 @@ import sys
 import tempfile
 import threading
 import time
+import uuid
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from pathlib import Path
@@ -128,15 +132,16 @@ def peak_rss_kib(pid: int) -> int:
 
 class Cluster:
     def __init__(self, directory: Path, workers: int, env: dict[str, str], nice_workers: bool = False,
-                 concurrency: int = 1):
+                 concurrency: int = 1, api_log: Path | None = None):
         self.directory, self.nice_workers, self.concurrency = directory, nice_workers, concurrency
+        self.api_log = open(api_log, "w") if api_log is not None else None  # its JSON lines: the access log
         self.redis, self.redis_url = start_embedded_redis(directory)
         self.env = {**os.environ, "GEOCERT_RATE_LIMIT_PER_MINUTE": "0", **env,
                     "GEOCERT_REDIS_URL": self.redis_url, "GEOCERT_DATA_DIR": str(directory)}
         self.port = free_port()
         self.base = f"http://127.0.0.1:{self.port}"
         self.api = subprocess.Popen([sys.executable, "-m", "geocert.app.cli", "serve", "--port", str(self.port),
-                                     "--workers", "0"], env=self.env, stderr=subprocess.DEVNULL)
+                                     "--workers", "0"], env=self.env, stderr=self.api_log or subprocess.DEVNULL)
         self.workers = [self.start_worker() for _ in range(workers)]
         self.client = httpx.Client(base_url=self.base, timeout=60)
         deadline = time.monotonic() + 90
@@ -181,13 +186,16 @@ class Cluster:
         if self.redis.poll() is None:
             self.redis.terminate()
             self.redis.wait(timeout=10)
+        if self.api_log is not None:
+            self.api_log.close()
 
 
 @contextmanager
-def cluster(workers: int = 0, nice_workers: bool = False, concurrency: int = 1, **env: str):
+def cluster(workers: int = 0, nice_workers: bool = False, concurrency: int = 1, api_log: Path | None = None,
+            **env: str):
     with tempfile.TemporaryDirectory(prefix="geocert-bench-") as directory:
         running = Cluster(Path(directory), workers, {key.upper(): value for key, value in env.items()}, nice_workers,
-                          concurrency)
+                          concurrency, api_log)
         try:
             yield running
         finally:
@@ -223,32 +231,84 @@ def bench_submit(clients: int = 20, jobs_per_client: int = 15) -> None:
 
 def submit_and_poll(clients: int, jobs_per_client: int, bodies: list[bytes], nice: bool) -> None:
     headers = {"content-type": "application/json"}
-    with cluster(workers=2, nice_workers=nice, geocert_max_active_jobs_per_key="0",
-                 geocert_progress_interval_s="1.0") as running:
+    with tempfile.TemporaryDirectory(prefix="geocert-bench-log-") as logs, \
+            cluster(workers=2, nice_workers=nice, api_log=Path(logs) / "api.log", geocert_max_active_jobs_per_key="0",
+                    geocert_progress_interval_s="1.0") as running:
         running.client.post("/v1/jobs", content=bodies[0], headers=headers)  # first-use costs out of the figures
-        latencies: list[float] = []
+        submits: list[tuple[str, float, float, float]] = []  # request id, sent and answered (epoch s), seconds
         ended: list[str] = []
+        began: list[float] = []  # when the clock started: then, the API's CPU and its wait for a core so far
+        # Each client is made and connected before the clock starts: an httpx.Client loads the CA
+        # bundle when made (some 25 ms of CPU holding this process's interpreter lock), and twenty
+        # made at once delayed the first timed submits by hundreds of ms in this process, not the API.
+        ready = threading.Barrier(clients, action=lambda: began.extend(
+            (time.monotonic(), cpu_seconds(running.api.pid), run_queue_seconds(running.api.pid), time.time())))
 
         def client_loop(index: int) -> None:
             with httpx.Client(base_url=running.base, timeout=60) as client:
+                client.get("/healthz")
+                ready.wait()
                 for k in range(jobs_per_client):
-                    start = time.perf_counter()
-                    created = client.post("/v1/jobs", content=bodies[(index + k) % len(bodies)], headers=headers)
-                    latencies.append(time.perf_counter() - start)
+                    request_id = uuid.uuid4().hex
+                    sent, start = time.time(), time.perf_counter()
+                    created = client.post("/v1/jobs", content=bodies[(index + k) % len(bodies)],
+                                          headers={**headers, "x-request-id": request_id})
+                    submits.append((request_id, sent, time.time(), time.perf_counter() - start))
                     assert created.status_code == 202, created.text
                     ended.append(wait_end(client, created.json()["id"])["status"])
 
-        began = time.monotonic()
         with ThreadPoolExecutor(clients) as pool:
             list(pool.map(client_loop, range(clients)))
-        wall = time.monotonic() - began
-        p50, p95, p99 = percentiles_ms(latencies)
+        wall = time.monotonic() - began[0]
+        cpu = cpu_seconds(running.api.pid) - began[1]
+        waited = run_queue_seconds(running.api.pid) - began[2]
+        p50, p95, p99 = percentiles_ms([seconds for *_, seconds in submits])
         report(f"submit, {clients} clients each submitting and polling its job to the end, 2 workers"
                + (" at nice 10" if nice else " competing for the cores"),
-               f"p50 {p50:.0f} ms, p95 {p95:.0f} ms, p99 {p99:.0f} ms ({len(latencies)} jobs, "
-               f"{len(latencies) / wall:.0f} jobs/s, {ended.count('succeeded')} succeeded)",
+               f"p50 {p50:.0f} ms, p95 {p95:.0f} ms, p99 {p99:.0f} ms ({len(submits)} jobs, "
+               f"{len(submits) / wall:.0f} jobs/s, {ended.count('succeeded')} succeeded)",
                "p50 <= 50 ms, p99 <= 250 ms")
         report("the machine while it ran (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+        running.stop()  # the access log complete
+        where_submits_wait(submits, Path(logs) / "api.log", cpu, waited, began[3])
+
+
+def where_submits_wait(submits: list[tuple[str, float, float, float]], api_log: Path, cpu: float, waited: float,
+                       since: float) -> None:
+    """A submit's wall time in three parts, from the API's access log (its JSON line's ``time``, to
+    1 ms, and ``duration_ms``, from the outermost middleware's entry to its return) matched by the
+    request id: before the API's middleware (the client's send, uvicorn reading and parsing it,
+    the event loop reaching it), inside the API (the app: validation, the one Redis round trip,
+    the loop's other requests meanwhile), and after it (the answer reaching the client's thread).
+    With the API's CPU and its wait for a core (run queue) per request since the clock started
+    (epoch ``since``), polls included."""
+    seen: dict[str, tuple[float, float]] = {}
+    requests = 0
+    for line in api_log.read_text().splitlines():
+        try:
+            entry = json.loads(line)
+        except ValueError:
+            continue
+        if "duration_ms" not in entry or entry["time"] < since:
+            continue
+        requests += 1
+        if entry.get("method") == "POST":
+            seen[entry.get("request_id")] = (entry["time"], entry["duration_ms"] / 1e3)
+    before, inside, after = [], [], []
+    for request_id, sent, answered, _ in submits:
+        if request_id in seen:
+            ended, duration = seen[request_id]
+            before.append(ended - duration - sent)
+            inside.append(duration)
+            after.append(answered - ended)
+    if not inside:
+        return
+    shown = "; ".join(f"{name} p50 {p50:.1f} / p95 {p95:.1f} / p99 {p99:.1f} ms" for name, (p50, p95, p99) in
+                      (("before the API's middleware", percentiles_ms(before)), ("inside", percentiles_ms(inside)),
+                       ("after", percentiles_ms(after))))
+    report(f"where a submit's time went ({len(inside)} matched in the API's access log)", shown)
+    report("the API's CPU and its wait for a core per request (submits and polls, run queue)",
+           f"{1e3 * cpu / max(requests, 1):.2f} ms and {1e3 * waited / max(requests, 1):.2f} ms ({requests} requests)")
 
 
 def saturated(clients: int, jobs_per_client: int, bodies: list[bytes]) -> None:
@@ -467,6 +527,46 @@ def bench_saturated(clients: int = 20, jobs_per_client: int = 15) -> None:
     saturated(clients, jobs_per_client, [json.dumps(triangulation_job(rng, tracks=3)).encode() for _ in range(40)])
 
 
+def bench_polls(clients: int = 20, polls_per_client: int = 100) -> None:
+    """The API alone answering polls: 20 clients each GETting its own queued job back to back (no
+    workers, so the jobs stay queued): what a poll of a running job costs the API, which 20
+    polling clients ask some 200 times a second while others submit."""
+    print(f"1c. polls a second, {clients} clients back to back, no workers", flush=True)
+    rng = np.random.default_rng(1)
+    headers = {"content-type": "application/json"}
+    with cluster(workers=0, geocert_max_active_jobs_per_key="0") as running:
+        ids = [running.client.post("/v1/jobs", content=json.dumps(triangulation_job(rng, tracks=3)).encode(),
+                                   headers=headers).json()["id"] for _ in range(clients)]
+        for job_id in ids:
+            assert running.client.get(f"/v1/jobs/{job_id}").json()["status"] == "queued"
+
+        async def poll() -> tuple[list[float], float]:
+            found: list[float] = []
+            async with httpx.AsyncClient(base_url=running.base, timeout=60,
+                                         limits=httpx.Limits(max_connections=clients)) as client:
+                async def one(job_id: str) -> None:
+                    for _ in range(polls_per_client):
+                        start = time.perf_counter()
+                        response = await client.get(f"/v1/jobs/{job_id}")
+                        found.append(time.perf_counter() - start)
+                        assert response.status_code == 200, response.text
+
+                began = time.monotonic()
+                await asyncio.gather(*(one(job_id) for job_id in ids))
+                return found, time.monotonic() - began
+
+        pid = running.api.pid
+        cpu_before, waited_before = cpu_seconds(pid), run_queue_seconds(pid)
+        latencies, wall = asyncio.run(poll())
+        cpu, waited = cpu_seconds(pid) - cpu_before, run_queue_seconds(pid) - waited_before
+        p50, p95, p99 = percentiles_ms(latencies)
+        report(f"poll of a queued job, {clients} clients back to back, no workers (the API saturated)",
+               f"p50 {p50:.1f} ms, p95 {p95:.1f} ms, p99 {p99:.1f} ms ({len(latencies) / wall:.0f} polls/s)")
+        report("API CPU time per poll; its wait for a core per poll (run queue)",
+               f"{1e3 * cpu / len(latencies):.2f} ms; {1e3 * waited / len(latencies):.2f} ms")
+        report("the machine while it ran (load average over 1 min, cores)", f"{os.getloadavg()[0]:.1f}, {os.cpu_count()}")
+
+
 SECTIONS = {"submit": bench_submit, "streams": bench_streams, "redelivery": bench_redelivery,
             "restart": bench_restart, "body": bench_body}
 
@@ -493,7 +593,7 @@ def run(sections: dict, description: str, first_column: str = "figure", third_co
 
 
 def main() -> None:
-    run(SECTIONS, __doc__, named_only={"saturated": bench_saturated})
+    run(SECTIONS, __doc__, named_only={"saturated": bench_saturated, "polls": bench_polls})
 
 
 if __name__ == "__main__":

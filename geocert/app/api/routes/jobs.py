@@ -254,9 +254,23 @@ def list_jobs(
 
 
 @router.get("/{job_id}", response_model=Job, responses=error_responses(404))
-def get_job(job: OwnedJob, store: JobStoreDep):
+async def get_job(job: OwnedJob, store: JobStoreDep):
     """Status, progress, and once finished the result (or the error as problem details)."""
-    return job_document(store, job)
+    if job["status"] not in TERMINAL:
+        # A small document made of the record already read, no I/O: answered on the loop. A
+        # route run in the pool took two threads' turns (the route, then its response model),
+        # each taking the interpreter lock from the loop, for every poll of a running job.
+        return store.document(job)
+    return await run_in_threadpool(finished_document, store, job)
+
+
+def finished_document(store: JobStore, job: dict) -> Response:
+    """An ended job's document, read, validated and written in the calling thread (its result
+    may be large): as the route's response model would write it."""
+    found = job_document(store, job)
+    if isinstance(found, Response):
+        return found
+    return Response(Job.model_validate(found).model_dump_json(by_alias=True), media_type="application/json")
 
 
 def job_document(store: JobStore, job: dict) -> dict | Response:
