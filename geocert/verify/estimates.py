@@ -396,7 +396,7 @@ def _compare(where: str, given: dict, expected: dict | None, earlier_form: bool 
         width = own["upper"] - own["lower"] if own["lower"] is not None and own["upper"] is not None else 0.0
         scale = abs(own["value"]) if own["value"] is not None else 0.0
         for name in ("value", "lower", "upper", "tolerance")[:3 if earlier else 4]:
-            # the value is the returned solution's own, to VALUE_SLACK of itself; an end moves with
+            # the value is the returned solution's own, to ``value_slack`` of itself; an end moves with
             # it, and by ``width_slack`` of the width with the level and the curvature (each slack
             # read once: review 34 found the value's twice); that the ends hold the stated value is
             # _check_holds'; the tolerance is a share of the quantity's scale (a distance the data
