@@ -146,10 +146,10 @@ import numpy as np
 import pytest
 
 from tests.verify.test_forgeries_review34 import _refused, _valid, _verify
+from tests.verify.test_forgeries_review34 import edge_data  # noqa: F401 (a fixture)
 from tests.verify.test_forgeries_review35 import _far_resection, _has_avx2, _run
 from tests.verify.test_forgeries_review36 import _at_cost, _widths
 from tests.verify.test_forgeries_review36 import edge_service, far_resection  # noqa: F401 (fixtures)
-from tests.verify.test_forgeries_review34 import edge_data  # noqa: F401 (a fixture)
 
 
 # Class 1: a far map's cost understated, and its residuals zeroed, within the residuals' worst-case bound
@@ -370,14 +370,16 @@ def _refusals(far_maps_across_kernels: dict, prefix: str) -> list:
 
 @pytest.mark.xfail(strict=True, raises=AssertionError, reason=CLASS_3)
 def test_far_homographies_verify_under_another_kernel(far_maps_across_kernels):
-    assert not _refusals(far_maps_across_kernels, "homography_1e6"), _refusals(far_maps_across_kernels, "homography_1e6")
+    refusals = _refusals(far_maps_across_kernels, "homography_1e6")
+    assert not refusals, refusals
 
 
 def test_the_far_homographies_are_certified_with_their_estimates(far_maps_across_kernels):
     for kernel, results in far_maps_across_kernels["written"].items():
         for job in ("homography_1e6_5", "homography_1e6_6"):
             item = results[job]["maps"][0]
-            assert item["certified"] and item["determinacy"]["intervals"][0]["name"] == "centroid_image_x", (kernel, job)
+            assert item["certified"], (kernel, job)
+            assert item["determinacy"]["intervals"][0]["name"] == "centroid_image_x", (kernel, job)
 
 
 @pytest.mark.xfail(strict=True, raises=AssertionError, reason=CLASS_4)
