@@ -45,8 +45,9 @@ classes 1, 2 and 5 run in this process and state what holds on any machine.
    verify, the returned point outside its own intervals. At an offset of 1e3 (world coordinates in
    metres, any city-scale scene) both verify too (slack 1e-6 px, 19 widths of x's interval).
    Only the depth interval (its value near 5) is held: collapsed, refused ("intervals/3/lower").
-   At fault: geocert/verify/estimates.py:_check_tracks (and _check_frames alike: not tried) with
-   _compare's VALUE_SLACK default. Suggested fix at the cause: the value of a track's x, y, z
+   (_check_frames reads the same default, but a bilinear frame's coefficients are of unit size:
+   the stored result's intervals collapsed are refused.)
+   At fault: geocert/verify/estimates.py:_check_tracks with _compare's VALUE_SLACK default. Suggested fix at the cause: the value of a track's x, y, z
    intervals is the returned point's coordinate: require it exactly; compare each end's offset from
    the value (end - value) to the estimate's at NUMBER_SLACK and a width slack of the width, not
    the end itself at 1e-9 of the value; measure across kernels as for maps before choosing the
@@ -133,7 +134,8 @@ tolerance to 1e-6 of rel_gap * cost; the solver's incumbent cost is 1.8e-6 off t
 
 Tried and refused (plain tests below): the far map's cost below the least; a far track's interval
 moved by 1.5e-9 of its value; its depth interval collapsed; a stratified certificate's proofs
-naming a null reference ("proof/reference is None"); review 34's edge result with its metric stage
+naming a null reference ("proof/reference is None"); the stored bilinear result's
+intervals collapsed; review 34's edge result with its metric stage
 made uncertified and its proof naming camera 1 while the certified affine stage names 3.
 """
 
@@ -549,3 +551,16 @@ def test_proven_far_resections_pass_their_proof_check_under_another_kernel(far_m
                 for job, (valid, failure) in checked.items()
                 if job.startswith("proven") and not valid and failure["check"] != "returned"]
     assert not refusals, refusals
+
+
+def test_stored_bilinear_frames_intervals_collapsed_are_refused():
+    """Class 2's edit on a bilinear result: its coefficients are of unit size, so 1e-9 of the value
+    is far below any width, and the collapsed intervals are refused."""
+    from tests.verify.test_forgeries import stored
+
+    document = copy.deepcopy(stored("bilinear_l2l2"))
+    for frame in document["frames"]:
+        for interval in frame["determinacy"]["intervals"]:
+            if interval["lower"] is not None:
+                interval["lower"] = interval["upper"] = interval["value"]
+    _refused(document, "frames/0/determinacy/intervals/0/lower")
