@@ -310,8 +310,12 @@ def _check_maps(kind, result: dict, certificate: dict, earlier: bool = True) -> 
         source, target = read(certificate["data"], index)
         expected = safely(estimate.map_, source, target, item["matrix"], item.get("cost"), item.get("lower_bound"))
         spread = _map_cost_spread(source, target, item["matrix"])
+        # a resection's centre, measured within 2 ulps between kernels, is held to MAP_VALUE_ROUNDING;
+        # a homography's centroid image, computed through the normalisers, differs by some 300 ulps
+        # at 1e6 off the origin (review 37), so it keeps VALUE_SLACK of itself
+        resection = np.asarray(item["matrix"]).shape == (3, 4)
         _compare(where, determinacy, expected, earlier, spread, MAP_WIDTH_SLACK + spread + _map_offset(source, target)
-                 * JACOBIAN_ROUNDING, _map_value_floor(source, target), MAP_VALUE_ROUNDING)
+                 * JACOBIAN_ROUNDING, _map_value_floor(source, target), MAP_VALUE_ROUNDING if resection else VALUE_SLACK)
 
 
 def _check_frames(kind, result: dict, certificate: dict, earlier: bool = True) -> None:

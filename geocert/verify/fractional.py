@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from geocert.solvers.core.determinacy import ESTIMATES_FORM, certified_gap, cost_increase as map_cost_increase
+from geocert.solvers.core.determinacy import ESTIMATES_FORM, certified_gap
 from geocert.solvers.core.geometry import is_number, norm_cost, normalised_cameras
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.convexity import outside_range, track_bound, verify_sublevel
 from geocert.solvers.fractional.convexity_path import cost_increase
-from geocert.solvers.fractional.determinacy import pooled_dof, proven_map, proven_track
+from geocert.solvers.fractional.determinacy import map_level, pooled_dof, proven_map, proven_track
 from geocert.solvers.fractional.items import MapItem, TrackItem
 from geocert.solvers.fractional.proof import verify_search
 from geocert.solvers.fractional.resection_bound import TYPE as SUBLEVEL_BOUND, verify_resection_bound
@@ -168,9 +168,10 @@ def _runs(runs, tracks: int) -> bool:
 def _check_map_level(where: str, determinacy, claim: dict, data: dict, index: int, norm: str = "L2L2") -> None:
     """A map's proven interval (a resection's; _check_proven has tied it to its proof) is proven
     at no lower a level than the map's own, and its determinacy's cost_increase is that level: the
-    one the solver proves it at (determinacy.prove_map: 3^2 times the claim's cost over 2k - 11,
-    at least its gap), recomputed from the claim, as a track's is (TrackItems.check_returned). A
-    level the document chooses shrinks the set to one that need not hold the camera."""
+    one the solver proves it at (determinacy.map_level: 3^2 times the squared residuals of the
+    claim's matrix, computed exactly, over 2k - 11, at least its gap), recomputed from the data, as
+    a track's is (TrackItems.check_returned). A level the document chooses shrinks the set to one
+    that need not hold the camera."""
     stated = determinacy.get("proven_intervals") if isinstance(determinacy, dict) else None
     if stated is None:
         return
@@ -183,15 +184,16 @@ def _check_map_level(where: str, determinacy, claim: dict, data: dict, index: in
                                       f"{stated['cost_increase']!r:.12} below the map's own {own!r:.12} "
                                       "(resection_leaves.l1_cost_increase)")
         return
-    own = float(map_cost_increase(claim["cost"], 2 * points - 11, certified_gap(claim["cost"], claim["lower_bound"])))
+    source, target = (np.asarray(data["maps"][index][name], dtype=float) for name in ("source", "target"))
+    own = map_level(source, target, claim["matrix"], claim["cost"], claim["lower_bound"])
     if not stated["cost_increase"] >= own * (1 - LEVEL_ROUNDING):
         raise Invalid("returned", f"{where}/determinacy/proven_intervals are proven at cost increase "
                                   f"{stated['cost_increase']!r:.12} below the map's own {own!r:.12} (3^2 times its "
-                                  "cost over 2k - 11, at least its gap)")
+                                  "squared residuals over 2k - 11, at least its gap)")
     level = determinacy.get("cost_increase")
     if not (is_number(level) and abs(level - own) <= LEVEL_ROUNDING * own):
         raise Invalid("returned", f"{where}/determinacy/cost_increase is {level!r:.40}, the map's own level is "
-                                  f"{own!r:.12} (3^2 times its cost over 2k - 11, at least its gap)")
+                                  f"{own!r:.12} (3^2 times its squared residuals over 2k - 11, at least its gap)")
 
 
 def _check_scope_words(where: str, summary, claim: dict, options: dict, words: str) -> None:

@@ -326,15 +326,14 @@ def proven_map(sublevel: dict | None) -> dict | None:
 def prove_map(source: np.ndarray, target: np.ndarray, matrix, cost: float, lower: float | None,
               document: dict | None = None) -> dict | None:
     """A certified L2L2 resection's proven interval (None where none is proven) at the level its
-    determinacy estimate is read at (cost_increase: 3^2 times cost / (2k - 11), at least the gap),
-    computed from the cost alone so that a result without determinacy (detail brief) proves the
-    same; set in ``document`` (the determinacy) too when given."""
-    from geocert.solvers.core.determinacy import cost_increase
+    determinacy estimate is read at (map_level: 3^2 times the exact squared residuals / (2k - 11),
+    at least the gap), computed from the data and the matrix so that a result without determinacy
+    (detail brief) proves the same; set in ``document`` (the determinacy) too when given."""
     from geocert.solvers.fractional.resection_sublevel import resection_sublevel
 
     if matrix is None or cost is None or not math.isfinite(cost):
         return None
-    increase = cost_increase(cost, 2 * len(source) - 11, certified_gap(cost, lower))
+    increase = map_level(source, target, matrix, cost, lower)
     try:  # as safely(): a proof not found never fails a solve
         with np.errstate(all="ignore"):
             sublevel = resection_sublevel(source, target, matrix, increase)
@@ -393,6 +392,15 @@ def exact_squared_residuals(source: np.ndarray, target: np.ndarray, matrix: np.n
                 exponent = square_exponent
             total += (a * a) << (exponent - square_exponent)
     return total / (1 << exponent)
+
+
+def map_level(source: np.ndarray, target: np.ndarray, matrix, cost: float | None, lower: float | None) -> float:
+    """An L2L2 resection's level, the one its estimate, its proven interval and the verifier read:
+    3^2 times the exact squared residuals over 2k - 11, at least the certified gap."""
+    from geocert.solvers.core.determinacy import cost_increase
+
+    squared = exact_squared_residuals(source, target, np.asarray(matrix, dtype=float))
+    return float(cost_increase(squared, 2 * len(source) - 11, certified_gap(cost, lower)))
 
 
 def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | None, cost: float | None,
