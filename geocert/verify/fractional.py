@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from geocert.solvers.core.determinacy import ESTIMATES_FORM, certified_gap
-from geocert.solvers.core.geometry import is_number, norm_cost, normalised_cameras
+from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost, normalised_cameras
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.convexity import outside_range, track_bound, verify_sublevel
@@ -540,11 +540,17 @@ class MapItems:
         source, target = self.read(data, claim["index"])
         item = MapItem((source, target), options["norm"], chart=False)
         with np.errstate(all="ignore"):
-            residuals, _, _ = item.raw_residuals(item.solution(claim))
+            solution = item.solution(claim)
+            residuals, _, rounding = item.raw_residuals(solution)
             cost = norm_cost(residuals, options["norm"])
+            # besides the figure's rounding, what the data determine the cost to (the objective
+            # check's slack and spread): far off, another machine's kernels give the same matrix a
+            # cost 2e-9 apart at 1e7 (review 37), beyond 1e-9 absolute
+            spread = cost_rounding(residuals, rounding, options["norm"]) + 2.0 * cost_rounding(
+                residuals, item.residual_uncertainty(solution), options["norm"])
         if not np.isfinite(cost):
             raise Invalid("objective", "the matrix returned has no finite cost on its points")
-        return cost, figure_allowance(cost)
+        return cost, figure_allowance(cost) + (float(spread) if np.isfinite(spread) else 0.0)
 
     def _check_root_region(self, where: str, summary, claim: dict, certificate: dict, index: int) -> None:
         """A certified map's summary root_region states a fact ("lower <= (F l) / (d . l) <= upper

@@ -25,8 +25,9 @@ level reads the squared residuals computed exactly, exact_squared_residuals, the
 machine, and no longer the stated cost: squared_sum is gone, review 35 class 1's genuine documents
 still verify across kernels; and checks._check_residual_claim holds a claimed cost besides to the
 least cost residuals within its allowance of the verifier's give, each residual's share clipped at
-0, so the certified cost of 0 is refused). Open in part, a strict xfail: an uncertified map's cost
-figure is held to figure_allowance only (1e-9 absolute; its estimate no longer follows it).
+0, so the certified cost of 0 is refused). An uncertified map's cost figure restated 0.9e-9 lower
+still verifies: at an offset of 9e8 the data determine that cost only to 2e-6 (review 37 class 4
+holds such a figure to that spread), and its estimate no longer follows it.
 
 1. A map's estimate level is the document's cost, which the checks hold only to windows far wider
    than any machine's rounding. Review 35 class 4's far resection (12 points uniform in
@@ -284,13 +285,6 @@ def uncertified_far_map() -> dict:
     return result
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="review 36 class 1 (open in part): an uncertified map's cost figure is held to "
-                          "figure_allowance only (1e-9 absolute below a cost of 1); its estimate no longer follows it")
-def test_an_uncertified_map_restated_lower_with_its_estimate_is_refused(uncertified_far_map):
-    _refused(_uncertified_lowered(uncertified_far_map))
-
-
 def _uncertified_lowered(result: dict) -> dict:
     """Map 1's cost restated 0.9 of figure_allowance (1e-9 here) below what the verifier's own
     solution_cost gives, its estimate recomputed there."""
@@ -299,8 +293,9 @@ def _uncertified_lowered(result: dict) -> dict:
     certificate = result["certificate"]
     maps = MapItems("resection", {(3, 2)})
     value, allowance = maps.solution_cost(certificate["data"], certificate["items"][1], certificate["options"])
-    assert allowance == figure_allowance(value) == 1e-9 and 2 * _spread(result, 1) > allowance
-    return _at_cost(result, value - 0.9 * allowance, 1)
+    # the allowance holds the cost's spread besides the figure's 1e-9 (review 37 class 4)
+    assert figure_allowance(value) == 1e-9 and allowance >= figure_allowance(value) + 2 * _spread(result, 1)
+    return _at_cost(result, value - 0.9 * figure_allowance(value), 1)
 
 
 def test_an_uncertified_maps_level_does_not_follow_its_stated_cost(uncertified_far_map):
