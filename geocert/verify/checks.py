@@ -1023,17 +1023,18 @@ def _check_residual_claim(kind: str, adapter, arrays: tuple, options: dict, clai
     # An item that can say how far its data determine each residual (tracks and maps do; a kind
     # added later need not) must have a cost the data determine to within the tolerance (below).
     uncertainty = getattr(item, "residual_uncertainty", None)
-    spread = 0.0 if uncertainty is None else cost_rounding(residuals, uncertainty(solution), norm)
+    determined = None if uncertainty is None else uncertainty(solution)
+    spread = 0.0 if determined is None else cost_rounding(residuals, determined, norm)
     # The claim's evaluation and this one may each lie that spread from the exact cost (far-off
     # data: a residual is a difference of numbers far larger than itself, rounded differently by
     # another machine's kernels); the gap below reads this evaluation, not the claim.
     if not abs(cost - claimed) <= OBJECTIVE_TOLERANCE * abs(cost) + slack + 2.0 * spread:
         raise Invalid("objective", f"the solution costs {cost!r}, the certificate claims {claimed!r}")
-    if uncertainty is not None:
+    if determined is not None:
         # and no less than the least cost residuals within that allowance of this evaluation's
         # can give: the window above credits a residual near 0 with a negative share (review 36: a
         # far map costing 1.3e-11 claimed 0 within it, where each residual's bounds give 3e-12)
-        least = _least_cost(residuals, rounding + 2.0 * uncertainty(solution), norm)
+        least = _least_cost(residuals, rounding + 2.0 * determined, norm)
         if not claimed >= least - OBJECTIVE_TOLERANCE * abs(cost):
             raise Invalid("objective", f"the solution costs at least {least!r} (each residual to within what the "
                                        f"data determine it to), the certificate claims {claimed!r}")
