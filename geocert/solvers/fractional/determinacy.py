@@ -391,7 +391,10 @@ def exact_squared_residuals(source: np.ndarray, target: np.ndarray, matrix: np.n
                 total <<= square_exponent - exponent
                 exponent = square_exponent
             total += (a * a) << (exponent - square_exponent)
-    return total / (1 << exponent)
+    try:
+        return total / (1 << exponent)
+    except OverflowError:  # a sum beyond the largest float
+        return math.inf
 
 
 def map_level(source: np.ndarray, target: np.ndarray, matrix, cost: float | None, lower: float | None) -> float:

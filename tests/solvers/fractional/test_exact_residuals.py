@@ -49,3 +49,9 @@ def test_a_point_on_the_plane_at_infinity_costs_infinity():
     source = np.array([[1.0, 0.0], [0.0, 1.0]])
     matrix = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, -1.0]])  # the first point's depth is 0
     assert exact_squared_residuals(source, np.zeros((2, 2)), matrix) == float("inf")
+
+
+def test_a_sum_beyond_the_largest_float_is_infinity():
+    source = np.array([[0.0, 0.0]])
+    matrix = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    assert exact_squared_residuals(source, np.array([[1e200, 1e200]]), matrix) == float("inf")
