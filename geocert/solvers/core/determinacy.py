@@ -194,8 +194,8 @@ def curvature_intervals(J: np.ndarray, residuals: np.ndarray, quantities: dict[s
                         gap: float | None = None, sigmas: float = SIGMAS,
                         squared_sum: float | None = None) -> Determinacy:
     """Intervals for quantities (name -> (value, gradient in the parameters[, scale])) around an
-    optimum with residual Jacobian J (n x p) and residuals r; ``squared_sum`` in place of r'r
-    where the caller has one the document states (a least-squares cost)."""
+    optimum with residual Jacobian J (n x p) and residuals r; ``squared_sum`` in place of the float
+    r'r where the caller computes it exactly (fractional.determinacy.exact_squared_residuals)."""
     J = np.asarray(J, dtype=float)
     r = np.asarray(residuals, dtype=float)
     n, p = J.shape
