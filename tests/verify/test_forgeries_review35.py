@@ -385,10 +385,12 @@ def _recomputed_level(result: dict) -> float:
                             item["lower_bound"])["cost_increase"]
 
 
-def test_the_near_exact_level_rests_on_rounding_noise(resection):
-    """The level the verifier expects is its own r.r of the float residuals: against the exact sum
-    of squares of the exact residuals of the returned matrix (Fractions), it is off by far more
-    than MAX_COST_SPREAD, so another machine's r.r is too."""
+def test_the_near_exact_level_is_the_exact_sum_not_rounding_noise(resection):
+    """The level was the float r.r of the residuals (the certified gap, a float cost, over a
+    trivial bound), off the exact sum of squares of the returned matrix's exact residuals
+    (Fractions) by far more than MAX_COST_SPREAD, so another machine's was too. Now the level reads
+    the exact sum and the certified gap reads the cost stated exactly (review 37 class 1): it is the
+    exact sum to 1e-12, and the float r.r is still off it."""
     from fractions import Fraction
 
     from geocert.verify.estimates import MAX_COST_SPREAD
@@ -403,7 +405,11 @@ def test_the_near_exact_level_rests_on_rounding_noise(resection):
         exact += sum((Fraction(t) - image[k] / image[2]) ** 2 for k, t in enumerate(target))
     level = item["determinacy"]["cost_increase"]
     assert item["determinacy"]["redundancy"] == 9  # so the level is max(r.r, the gap)
-    assert exact > 0 and abs(level - float(exact)) > 100 * MAX_COST_SPREAD * float(exact)
+    assert exact > 0 and abs(level - float(exact)) <= 1e-12 * float(exact)
+    source, target = np.array(data["source"], dtype=float), np.array(data["target"], dtype=float)
+    projected = np.hstack([source, np.ones((len(source), 1))]) @ np.array(item["matrix"]).T
+    floats = target - projected[:, :2] / projected[:, 2:]
+    assert abs(float((floats * floats).sum()) - float(exact)) > 100 * MAX_COST_SPREAD * float(exact)
     assert level == pytest.approx(_recomputed_level(resection), rel=1e-12)
 
 

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from geocert.solvers.core.certificates import ROUNDING
+from geocert.solvers.core import exact
+from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE, ROUNDING
 from geocert.solvers.core.determinacy import SIGMAS
 from geocert.solvers.fractional.columns import LocalColumns, TrackResults, sublevels
 from geocert.solvers.fractional.convexity import (ball_bounds, ball_intervals, convexity_bounds, convexity_terms,
@@ -31,6 +32,23 @@ from geocert.solvers.fractional.options import TriangulationOptions
 
 STRICTNESS = 2.0  # the solver's allowances over the verifier's
 CLAIM_MARGIN = 1e-12  # the bound claimed below the bound computed (relative)
+
+
+def _stated(flat: FlatTracks, x: np.ndarray, y: np.ndarray, r: np.ndarray, cost: np.ndarray,
+            spread: np.ndarray) -> np.ndarray:
+    """The residuals (2, m) the results state, ``cost`` updated in place: where the floats' rounding
+    could move a track's cost past exact.FLOAT_SHARE of OBJECTIVE_TOLERANCE (far-off data, a
+    near-exact fit), its residuals computed exactly, as the verifier then reads them
+    (items.stated_residuals)."""
+    exactly = np.flatnonzero(~(spread <= exact.FLOAT_SHARE * OBJECTIVE_TOLERANCE * np.abs(cost)) & np.isfinite(cost))
+    if not len(exactly):
+        return r
+    r = r.copy()
+    for i in exactly:
+        a, b = flat.starts[i], flat.starts[i + 1]
+        r[:, a:b] = -exact.residuals(flat.rows[:, :, a:b].transpose(2, 0, 1), np.append(x[i], 1.0), y[:, a:b].T).T
+        cost[i] = exact.cost(r[:, a:b].T, "L2L2")
+    return r
 
 
 def certify_tracks(cameras: np.ndarray, tracks: list, options: TriangulationOptions) -> TrackResults:
@@ -53,6 +71,7 @@ def certify_tracks(cameras: np.ndarray, tracks: list, options: TriangulationOpti
             (r * r).sum(axis=0), (2 * np.abs(r) * rounding + rounding * rounding).sum(axis=0),
             (2 * np.abs(r) * uncertainty + uncertainty * uncertainty).sum(axis=0), (~(depth > 0)).astype(float)]))
     cost, slack, spread, behind = sums
+    r = _stated(flat, x, y, r, cost, spread)
     tolerance = np.maximum(options.abs_gap, options.rel_gap * np.abs(cost))
     claimed = np.minimum(lower - CLAIM_MARGIN * np.abs(lower), cost)
     # A cost within abs_gap of 0 is certified by the trivial bound (the search's first step).

@@ -23,6 +23,7 @@ import numpy as np
 
 from geocert.solvers.core.determinacy import (SIGMAS, SINGULAR, Determinacy, certified_gap, curvature_intervals,
                                                interval, numeric_jacobian, proven_document, safely, spread)
+from geocert.solvers.core.exact import scaled
 from geocert.solvers.fractional.charts import camera_centres
 from geocert.solvers.fractional.columns import solutions, sublevels
 
@@ -360,13 +361,6 @@ def _normaliser(points: np.ndarray) -> np.ndarray:
     return T
 
 
-def _scaled(values: list[float]) -> tuple[list[int], int]:
-    """Integers n_i and one exponent e with values[i] = n_i * 2**e exactly."""
-    ratios = [float(v).as_integer_ratio() for v in values]
-    shift = max(d.bit_length() - 1 for _, d in ratios)
-    return [n << (shift - (d.bit_length() - 1)) for n, d in ratios], -shift
-
-
 def exact_squared_residuals(source: np.ndarray, target: np.ndarray, matrix: np.ndarray) -> float:
     """The squared residuals' sum of ``matrix`` on the data, the same float on every machine: each
     residual computed exactly (integer arithmetic on the floats' exact values) and rounded once
@@ -375,11 +369,11 @@ def exact_squared_residuals(source: np.ndarray, target: np.ndarray, matrix: np.n
     between BLAS kernels (review 35), and a level read from a stated cost instead let a forger
     choose it (review 36); about 10 ms for 1000 points."""
     M = np.asarray(matrix, dtype=float)
-    entries, _ = _scaled(M.ravel().tolist())
+    entries, _ = scaled(M.ravel().tolist())
     rows = [entries[i * M.shape[1]:(i + 1) * M.shape[1]] for i in range(M.shape[0])]
     total, exponent = 0, 0
     for X, x in zip(np.asarray(source, dtype=float).tolist(), np.asarray(target, dtype=float).tolist()):
-        point, _ = _scaled(X + [1.0])  # one scale for the point's entries: it cancels in the ratio
+        point, _ = scaled(X + [1.0])  # one scale for the point's entries: it cancels in the ratio
         image = [sum(m * v for m, v in zip(row, point)) for row in rows]
         if image[-1] == 0:
             return math.inf

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from geocert.solvers.core.certificates import residual_rounding
-from geocert.solvers.core.geometry import cost_rounding
+from geocert.solvers.core import exact
+from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE, residual_rounding
+from geocert.solvers.core.geometry import cost_rounding, norm_cost
 from geocert.solvers.core.strict import Invalid, numbers
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.proof import (SOLVER_DISCOUNT_FACTOR, check_program, program_allowance,
@@ -59,6 +60,10 @@ class TrackItem:
 
     def residual_uncertainty(self, solution: np.ndarray) -> np.ndarray:
         return track_uncertainty(self.cameras, solution)
+
+    def exact_residuals(self, solution: np.ndarray) -> np.ndarray:
+        """raw_residuals' residuals computed exactly and rounded once (core.exact)."""
+        return -exact.residuals(self.cameras, solution, self.points)
 
     def raw_sizes_many(self, vs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The size of the terms behind each numerator and depth of raw_parts_many (the sums of
@@ -111,6 +116,10 @@ class MapItem:
         homogeneous = np.hstack([self.source, np.ones((len(self.source), 1))])
         return residual_uncertainty(homogeneous @ solution.T, np.abs(homogeneous) @ np.abs(solution).T)
 
+    def exact_residuals(self, solution: np.ndarray) -> np.ndarray:
+        """raw_residuals' residuals computed exactly and rounded once (core.exact)."""
+        return exact.residuals(solution, np.hstack([self.source, np.ones((len(self.source), 1))]), self.target)
+
     def raw_sizes_many(self, vs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The size of the terms behind each numerator ``target * depth - row . X`` and depth
         ``last row . X`` of raw_parts_many: the sums of their products' magnitudes."""
@@ -127,6 +136,21 @@ class MapItem:
 
     def from_program(self, v: np.ndarray):
         return self.chart.matrix(v)
+
+
+def stated_residuals(item, solution: np.ndarray, residuals: np.ndarray, norm: str,
+                     always: bool = False) -> tuple[np.ndarray, float]:
+    """The residuals and cost a result states, as the verifier reads them (checks.
+    _check_residual_claim): the floats where their rounding cannot move the cost past
+    exact.FLOAT_SHARE of OBJECTIVE_TOLERANCE, the residuals computed exactly otherwise (far-off
+    data, a near-exact fit), or ``always``."""
+    with np.errstate(all="ignore"):
+        cost = float(norm_cost(residuals, norm))
+        if always or exact.needs_exact(residuals, item.residual_uncertainty(solution), cost, norm,
+                                       OBJECTIVE_TOLERANCE):
+            residuals = item.exact_residuals(solution)
+            cost = exact.cost(residuals, norm)
+    return residuals, cost
 
 
 PROGRAM_REFUSED = "the verifier could not check the proof against the data at this solution ({})"

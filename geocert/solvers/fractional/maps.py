@@ -26,8 +26,7 @@ from geocert.solvers.fractional.results import LocalCertificate, MapResult, clai
 from geocert.solvers.fractional.search import (LARGE_BOUND_TOLERANCE, Early, Reasons, local_refine, prepare,
                                                recomputed_status, search)
 from geocert.solvers.core.certificates import residual_rounding
-from geocert.solvers.core.geometry import norm_cost
-from geocert.solvers.fractional.items import MapItem, discounted, refused_by_verifier
+from geocert.solvers.fractional.items import MapItem, discounted, refused_by_verifier, stated_residuals
 from geocert.solvers.core.self_check import checked_solve
 from geocert.solvers.core.determinacy import certified_gap
 from geocert.solvers.fractional.proof import program_allowance, program_discount
@@ -231,9 +230,9 @@ def _map_result(chart: MapChart, source, target, v, options, status, lower, node
     M = M / np.linalg.norm(M)  # positive scale: the reference depth stays positive
     homogeneous = np.hstack([source, np.ones((len(source), 1))])
     proj = homogeneous @ M.T
-    residuals = target - proj[:, :-1] / proj[:, -1:]
-    cost = norm_cost(residuals, options.norm)  # recomputed from the caller's data
     item = MapItem((source, target), options.norm, chart)
+    # recomputed from the caller's data, exactly (one number on every machine; a map has few points)
+    residuals, cost = stated_residuals(item, M, target - proj[:, :-1] / proj[:, -1:], options.norm, always=True)
     undiscountable = None
     if lower is not None:
         lower, undiscountable = discounted(item, M, residuals, min(lower, cost), scale)

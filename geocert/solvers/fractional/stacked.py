@@ -20,6 +20,7 @@ from collections import defaultdict
 
 import numpy as np
 
+from geocert.solvers.core import exact
 from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE, TERMS_ROUNDING, residual_rounding
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import ConeSpec, _project_rows, rounding_counted, stacked_rounding_margin, subnormal
@@ -227,12 +228,18 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     residuals = image - points
     ok &= np.all(proj[..., 2] > 0, axis=1)
     recomputed = norm_terms(residuals, norm).sum(axis=1)
-    slack = cost_roundings(residuals, residual_rounding(image, points), norm)
+    rounding = residual_rounding(image, points)
+    slack = cost_roundings(residuals, rounding, norm)
+    with np.errstate(all="ignore"):
+        spread = cost_roundings(residuals, track_uncertainty(cams, X), norm)
+    # where the floats' rounding could move the cost, the residuals computed exactly, as the
+    # per-item check reads them (exact.needs_exact)
+    for g in np.flatnonzero(ok & ~(spread <= exact.FLOAT_SHARE * OBJECTIVE_TOLERANCE * np.abs(recomputed))):
+        stated = -exact.residuals(cams[g], X[g], points[g])
+        recomputed[g], slack[g] = exact.cost(stated, norm), cost_roundings(stated, rounding[g], norm)
     ok &= np.abs(recomputed - cost) <= OBJECTIVE_TOLERANCE * np.abs(recomputed) + slack
     tolerance = np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
     ok &= (recomputed + slack) - lower_claimed <= tolerance * (1 + 1e-12)  # the gap, from the data's cost
-    with np.errstate(all="ignore"):
-        spread = cost_roundings(residuals, track_uncertainty(cams, X), norm)
     ok &= spread <= np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
 
     # The program at the claimed scale (verify_search) and its agreement with the data.

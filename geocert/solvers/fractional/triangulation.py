@@ -22,8 +22,8 @@ from geocert.solvers.fractional.options import NORMS, TriangulationOptions
 from geocert.solvers.fractional.results import SearchCertificate, TrackResult, claim_of
 from geocert.solvers.fractional.search import Early, Reasons, depth_subspace, prepare, recomputed_status, search
 from geocert.solvers.core.certificates import residual_rounding
-from geocert.solvers.core.geometry import norm_cost, normalised_cameras, reprojection_residuals
-from geocert.solvers.fractional.items import TrackItem, discounted, refused_by_verifier
+from geocert.solvers.core.geometry import normalised_cameras, reprojection_residuals
+from geocert.solvers.fractional.items import TrackItem, discounted, refused_by_verifier, stated_residuals
 from geocert.solvers.core.self_check import checked_solve
 
 
@@ -111,9 +111,9 @@ def track_result(chart: Chart, cameras, points, y, options, status, lower, nodes
     solution = X if at_infinity else np.append(X[:3] / X[3], 1.0)
     point = solution.tolist() if at_infinity else solution[:3].tolist()
     # The cost of the point as returned (what anyone recomputing it gets, to the last bit).
-    residuals = reprojection_residuals(cameras, solution, points)
-    cost = norm_cost(residuals, options.norm)  # recomputed in pixels from the original data
     item = TrackItem((cameras, points), options.norm, chart)
+    # recomputed in pixels from the original data (exactly where the floats' rounding could move it)
+    residuals, cost = stated_residuals(item, solution, reprojection_residuals(cameras, solution, points), options.norm)
     undiscountable = None
     if lower is not None:
         lower, undiscountable = discounted(item, solution, residuals, min(lower, cost), scale)
