@@ -545,7 +545,6 @@ CLASS_6 = ("review 37 class 6: resection_sublevel.verify_resection_sublevel reco
            "refuses all four genuine documents")
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=CLASS_6)
 def test_proven_far_resections_pass_their_proof_check_under_another_kernel(far_maps_across_kernels):
     refusals = [(job, writer, failure["detail"]) for writer, checked in far_maps_across_kernels["checked"].items()
                 for job, (valid, failure) in checked.items()
