@@ -23,8 +23,9 @@ certified track's or map's cost, where the floats' rounding could move it past a
 OBJECTIVE_TOLERANCE, and every map's returned residuals, are stated from the residuals computed
 exactly and rounded once, one number on every machine; checks._check_residual_claim holds the
 claim to them at OBJECTIVE_TOLERANCE and their rounding, no longer the worst-case spread, and
-MapItems.check_returned each residual to 2 rounding and 4 ulps). Open, strict xfails: classes 2
-and 6.
+MapItems.check_returned each residual to 2 rounding and 4 ulps). Class 6 (resection_sublevel,
+resection_centre_l1 and resection_bound recompute their proofs in a fixed order of operations,
+fixed_order: one float on every machine, no allowance). Open, strict xfail: class 2.
 
 1. A far map's cost understated within the least cost's window, its residuals stated 0. Review
    36's far resection (offset 1e6, 1e-6 px of noise, seed 5; certified by the trivial bound) costs
@@ -127,9 +128,23 @@ and 6.
    At fault: geocert/solvers/fractional/resection_sublevel.py:verify_resection_sublevel (the
    bounds recomputed with the verifier's rounding and compared with no allowance on the narrow
    side, CHECK_SLACK of the half-width and 4 ulps on the wide one) and its check_enclosure.
-   Suggested fix at the cause: recompute the bounds from quantities every machine computes alike
-   (exact or outward-rounded sums), or allow the narrow side the recomputation's own rounding at
-   the data's offset (as JACOBIAN_ROUNDING * _map_offset does for estimates).
+   Measured (seeds 5 and 6, 1e-3 px; the bounds one kernel recomputes against the other's, over
+   the half-width): 6e-11 to 1.3e-10 at offset 0, 7e-9 to 2.5e-6 at 1e3, 2e-5 to 2.6e-3 at 1e5
+   (the whitening T, LAPACK's Cholesky and inverse of an ill-conditioned 11 x 11 matrix, 1e-4
+   apart; the centre, LAPACK's svd, 1.3e-6 apart, 1e-3 of a half-width), beyond CHECK_SLACK on
+   the wide side too. An allowance would have had to be 3e-3 of the half-width at 1e5 (3e4
+   times STATED_SLACK), growing with the offset: a forger's room. Fixed at the cause: every product, sum, Cholesky factorisation (the
+   enclosure's and the eigenvalue tests), inverse and the centre the check reads are computed in
+   a fixed order with elementwise operations (fractional.fixed_order; shrink's kappa by bisection
+   on those factorisations, not LAPACK's eigvalsh; the L1 centre's dual bounds and
+   resection_bound's tangent terms alike). The recomputation is now the same floats under both
+   kernels (bounds, rounds' radius and T compared bit for bit at offsets 0, 1e3 and 1e5; at 1e6
+   the trivial bound certifies them, with no sublevel), documents written by
+   the fixed writer verify under both, and the narrow side keeps no allowance: an end one ulp
+   inside the recomputed bound is refused (test below). Documents written before the fix verify
+   at offset 0 (their intervals 5e-7 of a half-width wider than the new bounds, within
+   CHECK_SLACK); at 1e5 they are refused (1e-3 of a half-width off), and at 1e3 so are Haswell's
+   (resection_bound: "the proof establishes ... less than lower_bound", as under Prescott before).
 
 Measured, no class: hostile triangulation scenes (testing.hostile_triangulation.scene, seeds 1
 and 2, 400 tracks, triangulate_many under L2L2, L2L1 and L1L1: 181/182/181 and 160/156/152 certified)
@@ -559,21 +574,39 @@ def test_an_uncertified_far_homographys_figure_allowance_holds_its_own_spread():
     assert figure_allowance(value) == 1e-9 < spread and allowance >= 1e-9 + 2 * spread
 
 
-# Class 6: a far resection's sublevel proof, recomputed under another kernel
-
-CLASS_6 = ("review 37 class 6: resection_sublevel.verify_resection_sublevel recomputes the centre's proven bounds and "
-           "holds the stated intervals to them (narrower: refused; wider by CHECK_SLACK of the half-width and 4 ulps: "
-           "refused) and check_enclosure at the stated radius; at an offset of 1e5 the other kernel's recomputation "
-           "refuses all four genuine documents")
+# Class 6: a far resection's sublevel proof, recomputed under another kernel (fixed: one recomputation,
+# in a fixed order, on every machine)
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=CLASS_6)
 def test_proven_far_resections_pass_their_proof_check_under_another_kernel(far_maps_across_kernels):
     refusals = [(job, writer, failure["detail"]) for writer, checked in far_maps_across_kernels["checked"].items()
                 for job, (valid, failure) in checked.items()
                 if job.startswith("proven") and not valid and failure["check"] != "returned"]
     assert not refusals, refusals
 
+
+
+def test_a_far_resections_centre_narrowed_one_ulp_past_its_proven_bound_is_refused(proven_far_resections):
+    """Class 6's fix allows the narrow side nothing: the recomputation is one float on every machine
+    (fixed_order), so the stated intervals are the writer's bounds widened by STATED_SLACK of the
+    half-width, and an end moved one ulp inside the bound recomputed here is refused."""
+    from geocert.solvers.fractional.resection_sublevel import STATED_SLACK, Scene, proven_centre
+
+    for seed, result in proven_far_resections.items():
+        item, matrix = _map_item(result)
+        sublevel = result["certificate"]["items"][0]["proof"]["sublevel"]
+        scene = Scene(item.source, item.target, matrix, sublevel["reference"])
+        bounds, _ = proven_centre(scene, sublevel["cost_increase"], sublevel["radius"], sublevel["rounds"])
+        stated = np.array(sublevel["intervals"])
+        half = 0.5 * (bounds[:, 1] - bounds[:, 0])
+        assert np.all(stated[:, 0] <= bounds[:, 0]) and np.all(stated[:, 1] >= bounds[:, 1]), seed
+        gap = np.maximum(bounds[:, 0] - stated[:, 0], stated[:, 1] - bounds[:, 1])
+        assert np.all(gap <= 1.01 * STATED_SLACK * half + 2 * np.spacing(np.abs(bounds).max(axis=1))), seed
+        for end, inward in ((0, np.inf), (1, -np.inf)):
+            document = copy.deepcopy(result)
+            edited = document["certificate"]["items"][0]["proof"]["sublevel"]["intervals"]
+            edited[0][end] = float(np.nextafter(bounds[0, end], inward))
+            _refused(document, "narrower than what the proof proves")
 
 def test_stored_bilinear_frames_intervals_collapsed_are_refused():
     """Class 2's edit on a bilinear result: its coefficients are of unit size, so 1e-9 of the value

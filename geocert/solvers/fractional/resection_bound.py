@@ -42,8 +42,9 @@ import numpy as np
 
 from geocert.solvers.core.strict import Invalid, number, record
 from geocert.solvers.fractional.convexity import SMALLEST, UNDERFLOW
+from geocert.solvers.fractional.fixed_order import gram, norm, weighted
 from geocert.solvers.fractional.resection_sublevel import (ETA, MAX_ROUNDS, ROUNDS_STOP, U, Scene, encloses,
-                                                            least_eigenvalue_above, reference_point, shrink,
+                                                            least_eigenvalue_below, reference_point, shrink,
                                                             smallest_radius)
 
 TYPE = "sublevel_bound"
@@ -70,23 +71,21 @@ def tangent_terms(scene: Scene, r: float) -> tuple[float, float, float] | None:
         usable = bool(np.all(p >= SMALLEST) and np.all(u > 0) and np.all(np.isfinite(F_up)) and np.all(np.isfinite(sigma)))
         if not usable:
             return None
-        cross = np.einsum("kai,ka,kj,k->ij", C, n, g, sigma)  # sum sigma_j C_j' n_j g_j'
-        K = np.einsum("kai,kaj,k->ij", C, C, u) - (cross + cross.T)
+        # elementwise, in a fixed order (fixed_order): one bound on every machine, whatever its BLAS kernel
+        Cn = (C * n[:, :, None]).sum(axis=1)  # C_j' n_j
+        cross = ((Cn[:, :, None] * g[:, None, :]) * sigma[:, None, None]).sum(axis=0)  # sum sigma_j C_j' n_j g_j'
+        K = gram(C, u) - (cross + cross.T)
         nn = (n * n).sum(axis=1)
-        rho = np.einsum("kai,ka,k->i", C, n, v) - 0.5 * np.einsum("k,kj,k->j", nn, g, sigma)
+        rho = weighted(C, n, v) - 0.5 * ((g * nn[:, None]) * sigma[:, None]).sum(axis=0)
         q0 = float((v * nn).sum())
         C_F = np.sqrt((C * C).sum(axis=(1, 2)))
         n_len = np.sqrt(nn)
         K_allowance = 4 * (k + 16) * U * float((u * C_F * C_F).sum() + 2 * (sigma * C_F * n_len * g_len).sum())
-        rho_up = (float(np.sqrt(rho @ rho)) * (1 + 8 * U)
+        rho_up = (norm(rho) * (1 + 8 * U)
                   + 2 * (k + 16) * U * float((v * C_F * n_len).sum() + (sigma * nn * g_len).sum())) * (1 + 4 * U)
         q0_lo = q0 * (1 - (k + 16) * U)
-        try:
-            least = float(np.linalg.eigvalsh(0.5 * (K + K.T))[0])
-        except np.linalg.LinAlgError:
-            return None
-        kappa = least * (1 - 1e-9) - 2 * (K_allowance + 32 * U * float(np.abs(np.diag(K)).sum()))
-        if not (kappa > 0 and least_eigenvalue_above(K, kappa, K_allowance)):
+        kappa = least_eigenvalue_below(K, K_allowance)
+        if kappa is None:
             return None
         errors_n = 2 / ETA * float((F_up * scene.eps_n ** 2).sum()) * (1 + 8 * U)
         errors_C = 2 / ETA * float((F_up * scene.err_C ** 2).sum()) * (1 + 8 * U)

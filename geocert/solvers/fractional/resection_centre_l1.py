@@ -44,6 +44,7 @@ import numpy as np
 
 from geocert.solvers.core.strict import Invalid, number, numbers, record
 from geocert.solvers.fractional.convexity import LARGEST, SMALLEST, UNDERFLOW
+from geocert.solvers.fractional.fixed_order import mul, norm, weighted
 from geocert.solvers.fractional.resection_sublevel import (STATED_SLACK, U, Scene, centre_bounds, check_enclosure,
                                                            enclosed_radius, proven_centre)
 
@@ -81,18 +82,19 @@ def dual_reach(scene: Scene, increase: float, r: float, row: np.ndarray, row_err
     T, T_F, C, n = scene.T, scene.T_F, scene.C, scene.n
     with np.errstate(all="ignore"):
         s = _weights(scene, r)
-        lT = row @ T
-        lT_err = (16 * U * T_F * float(np.sqrt(row @ row)) + T_F * row_err) * (1 + 4 * U)
-        v = np.einsum("kai,ka,k->i", C, y, s)
+        # in a fixed order (fixed_order): one bound on every machine, whatever its BLAS kernel
+        lT = mul(row, T)
+        lT_err = (16 * U * T_F * norm(row) + T_F * row_err) * (1 + 4 * U)
+        v = weighted(C, y, s)
         C_F = np.sqrt((C * C).sum(axis=(1, 2)))
         # each entry of v sums 2k products of three factors; sum_(a, i) |C_jai y_ja| <= sqrt(11) |C_j|_F |y_j|
         v_err = (4 * (2 * k + 16) * U * float((s * C_F * y_len).sum()) + float((s * y_len * scene.err_C).sum())
                  + k * 64 * UNDERFLOW) * (1 + 8 * U)
         e = lT - mu * v
-        e_size = float(np.sqrt(lT @ lT)) + mu * float(np.sqrt(v @ v))
-        e_up = (float(np.sqrt(e @ e)) * (1 + 8 * U) + lT_err + mu * v_err * (1 + 4 * U) + 16 * U * e_size
+        e_size = norm(lT) + mu * norm(v)
+        e_up = (norm(e) * (1 + 8 * U) + lT_err + mu * v_err * (1 + 4 * U) + 16 * U * e_size
                 + 64 * UNDERFLOW) * (1 + 8 * U)
-        yn = float(np.einsum("ka,ka,k->", y, n, s))
+        yn = float(((y * n) * s[:, None]).sum())
         n_len = np.sqrt((n * n).sum(axis=1))
         yn_err = ((2 * k + 16) * U * float((s * y_len * n_len).sum()) + float((s * y_len * scene.eps_n).sum())
                   + k * 64 * UNDERFLOW) * (1 + 8 * U)

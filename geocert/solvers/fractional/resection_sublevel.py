@@ -55,6 +55,7 @@ import numpy as np
 
 from geocert.solvers.core.strict import Invalid, number, numbers, record
 from geocert.solvers.fractional.convexity import LARGEST, SMALLEST, UNDERFLOW, in_range
+from geocert.solvers.fractional.fixed_order import cholesky, gram, inverse3, lower_inverse, mul, norm, weighted
 
 U = 2.0 ** -52
 ETA = 1e-6  # the split of inexact terms: (1 - ETA) of the computed quadratic is kept
@@ -82,12 +83,12 @@ class Scene:
         if not self.usable:
             return
         Xh = np.hstack([X, np.ones((k, 1))])
-        if Xh[reference] @ P[2] < 0:
+        if mul(Xh[reference], P[2]) < 0:
             P = -P  # the scope's cameras put every point at positive depth: the sign that does
         self.P = P
         with np.errstate(all="ignore"):
-            proj = Xh @ P.T
-            size = np.abs(Xh) @ np.abs(P).T  # (k, 3): the terms behind each projected coordinate
+            proj = mul(Xh, P.T)
+            size = mul(np.abs(Xh), np.abs(P).T)  # (k, 3): the terms behind each projected coordinate
             w, size_w = proj[:, 2], size[:, 2]
             self.w = w
             self.w_hi = (w + 8 * U * size_w) * (1 + 4 * U)
@@ -118,26 +119,27 @@ class Scene:
             self.err_B = 4 * U * np.sqrt((x * x).sum(axis=1)) * D_size  # |computed B_j - B_j|_F
             self.err_A = (np.sqrt((err_image ** 2).sum(axis=1)) + 4 * U * np.sqrt((image ** 2).sum(axis=1))) \
                 * D_size * (1 + 4 * U)
-            H0 = np.einsum("kai,kaj,k->ij", A, A, 1 / (w * w))
-            try:
-                L = np.linalg.cholesky(0.5 * (H0 + H0.T))
-                T = np.linalg.inv(L).T  # T' H0 T = I (to rounding: any T serves the proof)
-                # Entries far below the largest are rounding (they may be subnormal): any T serves
-                # the proof, so they are set to 0, keeping every number in the moderate range.
-                T = np.where(np.abs(T) < 1e-20 * np.abs(T).max(), 0.0, T)
-            except np.linalg.LinAlgError:
+            H0 = gram(A, 1 / (w * w))
+            # T' H0 T = I to rounding (any T serves the proof), in a fixed order (fixed_order): on
+            # far data H0 is ill-conditioned, and LAPACK's T differed between BLAS kernels by 1e-4
+            L = cholesky(0.5 * (H0 + H0.T))
+            if L is None:
                 self.usable = False
                 return
+            T = lower_inverse(L).T
+            # Entries far below the largest are rounding (they may be subnormal): any T serves
+            # the proof, so they are set to 0, keeping every number in the moderate range.
+            T = np.where(np.abs(T) < 1e-20 * np.abs(T).max(), 0.0, T)
             self.T = T
             self.T_F = float(np.sqrt((T * T).sum())) * (1 + 16 * U)
-            self.G = A @ T  # (k, 2, 11)
-            self.C = B @ T
+            self.G = mul(A, T)  # (k, 2, 11)
+            self.C = mul(B, T)
             A_F = np.sqrt((A * A).sum(axis=(1, 2)))
             B_F = np.sqrt((B * B).sum(axis=(1, 2)))
             self.err_G = (self.err_A + 32 * U * A_F) * self.T_F * (1 + 8 * U)
             self.err_C = (self.err_B + 32 * U * B_F) * self.T_F * (1 + 8 * U)
-            g = D @ T[8:11]
-            g_size = np.sqrt(((np.abs(D) @ np.abs(T[8:11])) ** 2).sum(axis=1))
+            g = mul(D, T[8:11])
+            g_size = np.sqrt((mul(np.abs(D), np.abs(T[8:11])) ** 2).sum(axis=1))
             self.g_up = (np.sqrt((g * g).sum(axis=1)) + 16 * U * g_size) * (1 + 8 * U)
             self.g, self.g_err = g, 16 * U * g_size * (1 + 8 * U)  # |computed g_j - g_j| (resection_bound)
             self.w_err = 8 * U * size_w * (1 + 4 * U)  # |computed w_j - w_j|
@@ -167,12 +169,37 @@ def least_eigenvalue_above(M: np.ndarray, margin: float, allowance: float) -> bo
     shift = (margin + allowance + 32 * U * (trace + abs(margin)) + UNDERFLOW) * (1 + 8 * U)
     if not (np.all(np.isfinite(M)) and math.isfinite(shift)):
         return False
-    try:
-        factor = np.linalg.cholesky(M - shift * np.eye(len(M)))
-    except np.linalg.LinAlgError:
-        return False
-    return bool(np.all(np.isfinite(factor)) and np.all(np.diag(factor) > 0))
+    return cholesky(M - shift * np.eye(len(M))) is not None  # fixed_order: one answer on every machine
 
+
+
+def least_eigenvalue_below(M: np.ndarray, allowance: float, steps: int = 48) -> float | None:
+    """A positive kappa that least_eigenvalue_above(M, kappa, allowance) passes, close to the
+    largest such (by bisection from M's least diagonal entry, an upper bound of its smallest
+    eigenvalue, to 2^-steps of it); None when none of 2^-60 of that passes. Only Cholesky
+    factorisations in a fixed order decide: one kappa on every machine (LAPACK's eigvalsh, its
+    first guess before, differed between BLAS kernels)."""
+    diagonal = np.diag(M)
+    hi = float(diagonal.min()) if len(diagonal) else 0.0
+    if not (hi > 0 and math.isfinite(hi)):
+        return None
+    lo = hi
+    for _ in range(60):
+        lo *= 0.5
+        if least_eigenvalue_above(M, lo, allowance):
+            break
+    else:
+        return None
+    hi = min(hi, 2 * lo)
+    for _ in range(steps):
+        middle = 0.5 * (lo + hi)
+        if not lo < middle < hi:
+            break
+        if least_eigenvalue_above(M, middle, allowance):
+            lo = middle
+        else:
+            hi = middle
+    return lo
 
 def encloses(scene: Scene, increase: float, R: float, strictness: float = 1.0) -> bool:
     """(1) at radius R: every camera of the scope costing at most U lies within |phi| < R."""
@@ -183,7 +210,7 @@ def encloses(scene: Scene, increase: float, R: float, strictness: float = 1.0) -
         e = (rho + scene.r_up) * (1 + 1e-12)
         tau = e * (scene.w_hi + R * scene.g_up) / R * (1 + 8 * U) + scene.err_G * (1 + 8 * U)
         weight = 1 / (tau * tau) * (1 - 8 * U)
-        M = np.einsum("kai,kaj,k->ij", scene.G, scene.G, weight)
+        M = gram(scene.G, weight)
         allowance = 2 * (scene.k + 16) * U * float((weight * (scene.G ** 2).sum(axis=(1, 2))).sum())
         margin = scene.k * (1 + 1e-12 + 1e-6 * (strictness - 1))
         return least_eigenvalue_above(M, margin, strictness * allowance)
@@ -201,22 +228,18 @@ def shrink(scene: Scene, increase: float, r: float) -> float:
                      + r * (np.sqrt((C * C).sum(axis=(1, 2))) + scene.err_C)) * (1 + 16 * U) / hi * (1 + 8 * U)
             b = np.maximum(np.minimum(reach, scene.rho(increase) * (1 + 4 * U)), SMALLEST)
             weight = weight / b * (1 - 4 * U)
-        K = np.einsum("kai,kaj,k->ij", C, C, weight)
-        rho = np.einsum("kai,ka,k->i", C, n, weight)
+        K = gram(C, weight)
+        rho = weighted(C, n, weight)
         q0 = float((weight * (n * n).sum(axis=1)).sum())
         k = scene.k
         C_F = np.sqrt((C * C).sum(axis=(1, 2)))
         n_len = np.sqrt((n * n).sum(axis=1))
         K_allowance = 2 * (k + 16) * U * float((weight * C_F * C_F).sum())
-        rho_up = (float(np.sqrt(rho @ rho)) * (1 + 8 * U) + (k + 16) * U * float((weight * C_F * n_len).sum())) \
+        rho_up = (norm(rho) * (1 + 8 * U) + (k + 16) * U * float((weight * C_F * n_len).sum())) \
             * (1 + 4 * U)
         q0_lo = q0 * (1 - (k + 16) * U)
-        try:
-            least = float(np.linalg.eigvalsh(0.5 * (K + K.T))[0])
-        except np.linalg.LinAlgError:
-            return r
-        kappa = least * (1 - 1e-9) - 2 * (K_allowance + 32 * U * float(np.abs(np.diag(K)).sum()))
-        if not (kappa > 0 and least_eigenvalue_above(K, kappa, K_allowance)):
+        kappa = least_eigenvalue_below(K, K_allowance)
+        if kappa is None:
             return r
         errors_n = 2 / ETA * float((weight * scene.eps_n ** 2).sum()) * (1 + 8 * U)
         errors_C = 2 / ETA * float((weight * scene.err_C ** 2).sum()) * (1 + 8 * U)
@@ -240,22 +263,23 @@ def centre_bounds(scene: Scene, r: float, linear_reach=None) -> np.ndarray | Non
     P = scene.P
     with np.errstate(all="ignore"):
         A0 = P[:, :3]
-        centre = np.linalg.svd(P)[2][-1]
-        if not abs(centre[3]) > 0:
+        # Z ~ A0^-1 and c0 ~ -Z p4 with one step of refinement, in a fixed order (fixed_order): the
+        # expansion point and Z are any (their errors e and eps_Z are bounded below), but the
+        # bounds are centred on c0, and LAPACK's svd put it 1e-3 of a half-width apart between
+        # BLAS kernels on far data
+        Z = inverse3(A0)
+        if Z is None:
             return None
-        c0 = centre[:3] / centre[3]
+        c0 = -mul(Z, P[:, 3])
+        c0 = c0 - mul(Z, mul(A0, c0) + P[:, 3])
         ch = np.append(c0, 1.0)
-        try:
-            Z = np.linalg.inv(A0)
-        except np.linalg.LinAlgError:
-            return None
         # Z e, e = P0 [c0; 1]: its size from above (two products' rounding, the terms' sizes)
-        Ze = Z @ (P @ ch)
-        Ze_up = (float(np.sqrt(Ze @ Ze)) * (1 + 8 * U)
-                 + 16 * U * float(np.sqrt(((np.abs(Z) @ (np.abs(P) @ np.abs(ch))) ** 2).sum()))) * (1 + 4 * U)
-        residual = np.eye(3) - Z @ A0
+        Ze = mul(Z, mul(P, ch))
+        Ze_up = (norm(Ze) * (1 + 8 * U)
+                 + 16 * U * float(np.sqrt((mul(np.abs(Z), mul(np.abs(P), np.abs(ch))) ** 2).sum()))) * (1 + 4 * U)
+        residual = np.eye(3) - mul(Z, A0)
         eps_Z = (float(np.sqrt((residual * residual).sum())) * (1 + 8 * U)
-                 + 8 * U * float(np.sqrt(((np.abs(Z) @ np.abs(A0)) ** 2).sum()))) * (1 + 4 * U)
+                 + 8 * U * float(np.sqrt((mul(np.abs(Z), np.abs(A0)) ** 2).sum()))) * (1 + 4 * U)
         T, T_F = scene.T, scene.T_F
         # l_k . theta = [Z D [c0; 1]]_k (rows 0, 1 of D times [c0; 1]; row 2's last entry is
         # -theta[8:11] . X_ref), and vec(Z dA) = M theta (M's entries are Z's, exactly)
@@ -271,7 +295,7 @@ def centre_bounds(scene: Scene, r: float, linear_reach=None) -> np.ndarray | Non
 
         def reach(rows: np.ndarray, errors: np.ndarray) -> np.ndarray:
             """|rows_i . T phi| <= r * this, each row (its own error ``errors``, a 2-norm bound)."""
-            product = rows @ T
+            product = mul(rows, T)
             return (np.sqrt((product * product).sum(axis=1)) * (1 + 8 * U)
                     + 16 * U * T_F * np.sqrt((rows * rows).sum(axis=1)) + T_F * errors) * (1 + 4 * U)
 

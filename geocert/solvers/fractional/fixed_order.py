@@ -1,0 +1,99 @@
+"""Small linear algebra in a fixed order of operations: the same floats on every machine.
+
+A proof the verifier recomputes (fractional.resection_sublevel, resection_centre_l1) is refused
+when the recomputed bound is wider than the stated one. BLAS and LAPACK (matmul, einsum's
+contractions through them, dot, cholesky, inv, svd, eigvalsh) sum in an order of their kernel's
+choosing (OpenBLAS's Haswell and Prescott kernels differ), and on ill-conditioned data (a
+resection 1e5 from the origin) the whitening T of an 11 x 11 Gauss-Newton matrix differed by
+1e-4 between kernels, its centre's bounds by 1e-3 of their half-widths: a genuine proof written
+under one kernel was refused under the other. Here each sum runs over its index in order, with
+elementwise numpy operations only (each an IEEE operation, correctly rounded, no fused
+multiply-add), so writer and verifier compute one float. The round-off bounds of the proofs are
+bounds for any order of summation and any Cholesky factorisation in floating point: nothing of
+their soundness rests on this order, only the agreement between machines.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a (..., n) times b (n, ...): sum_p a[..., p] b[p], p in order (a matrix or vector product)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    n = a.shape[-1]
+    if b.ndim == 1:
+        out = a[..., 0] * b[0]
+        for p in range(1, n):
+            out = out + a[..., p] * b[p]
+        return out
+    out = a[..., 0, None] * b[0]
+    for p in range(1, n):
+        out = out + a[..., p, None] * b[p]
+    return out
+
+
+def gram(G: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """sum_j weight_j G_j' G_j for G (k, m, n): the products elementwise, summed over j and the
+    rows of each G_j by numpy's reduction over fixed axes (one order for given shapes)."""
+    return ((G[:, :, :, None] * G[:, :, None, :]) * weight[:, None, None, None]).sum(axis=(0, 1))
+
+
+def weighted(G: np.ndarray, y: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """sum_j weight_j G_j' y_j for G (k, m, n), y (k, m)."""
+    return ((G * y[:, :, None]) * weight[:, None, None]).sum(axis=(0, 1))
+
+
+def cholesky(M: np.ndarray) -> np.ndarray | None:
+    """The lower factor L of M = L L' (M symmetric, its lower triangle read), column by column,
+    each inner product summed in order; None when a pivot is not positive (or not finite)."""
+    M = np.asarray(M, dtype=float)
+    n = len(M)
+    L = np.zeros((n, n))
+    for j in range(n):
+        s = M[j:, j].copy()
+        for p in range(j):
+            s = s - L[j:, p] * L[j, p]
+        pivot = float(s[0])
+        if not (pivot > 0 and math.isfinite(pivot)):
+            return None
+        L[j, j] = math.sqrt(pivot)
+        L[j + 1:, j] = s[1:] / L[j, j]
+    return L if bool(np.all(np.isfinite(L))) else None
+
+
+def lower_inverse(L: np.ndarray) -> np.ndarray:
+    """The inverse of a lower triangular L with nonzero diagonal, by forward substitution in order."""
+    n = len(L)
+    X = np.zeros((n, n))
+    for i in range(n):
+        row = np.zeros(n)
+        row[i] = 1.0
+        for p in range(i):
+            row = row - L[i, p] * X[p]
+        X[i] = row / L[i, i]
+    return X
+
+
+def inverse3(A: np.ndarray) -> np.ndarray | None:
+    """The inverse of a 3 x 3 matrix by its adjugate over its determinant (None when that is 0 or
+    not finite)."""
+    a = np.asarray(A, dtype=float)
+    adjugate = np.array([[a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1], a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2],
+                          a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]],
+                         [a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2], a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0],
+                          a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]],
+                         [a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0], a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1],
+                          a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]]])
+    determinant = a[0, 0] * adjugate[0, 0] + a[0, 1] * adjugate[1, 0] + a[0, 2] * adjugate[2, 0]
+    if not (determinant != 0 and math.isfinite(determinant)):
+        return None
+    Z = adjugate / determinant
+    return Z if bool(np.all(np.isfinite(Z))) else None
+
+
+def norm(v: np.ndarray) -> float:
+    """The 2-norm of a vector, its squares summed in order."""
+    return math.sqrt(float(mul(v, v)))
