@@ -619,3 +619,21 @@ def test_stored_bilinear_frames_intervals_collapsed_are_refused():
             if interval["lower"] is not None:
                 interval["lower"] = interval["upper"] = interval["value"]
     _refused(document, "frames/0/determinacy/intervals/0/lower")
+
+
+@pytest.mark.parametrize("norm", ["L2L1", "L1L1"])
+def test_a_far_resections_search_summary_states_the_tolerance_of_its_stated_cost(norm):
+    """Seen by review 37 and again by class 6's fix: a certified L2L1 or L1L1 resection 1e5 from the
+    origin (1e-3 px, seed 5) was refused on its own machine, its summary's tolerance (the search's
+    working one, from its incumbent's cost in the program) 1.1e-6 off the one its stated cost gives.
+    The writer states the tolerance of the cost it states (items.stated_tolerance)."""
+    from geocert.jobs.runner import solve_job
+
+    job = _far_resection(1e5, 1e-3, 5)
+    job["options"]["norm"] = norm
+    result = solve_job(job)
+    item = result["maps"][0]
+    assert item["certified"] and item["certificate"]["leaves"] > 0
+    options = result["certificate"]["options"]
+    assert item["certificate"]["tolerance"] == max(options["abs_gap"], options["rel_gap"] * item["cost"])
+    _valid(result)

@@ -26,7 +26,8 @@ from geocert.solvers.fractional.results import LocalCertificate, MapResult, clai
 from geocert.solvers.fractional.search import (LARGE_BOUND_TOLERANCE, Early, Reasons, local_refine, prepare,
                                                recomputed_status, search)
 from geocert.solvers.core.certificates import residual_rounding
-from geocert.solvers.fractional.items import MapItem, discounted, refused_by_verifier, stated_residuals
+from geocert.solvers.fractional.items import (MapItem, discounted, refused_by_verifier, stated_residuals,
+                                              stated_tolerance)
 from geocert.solvers.core.self_check import checked_solve
 from geocert.solvers.core.determinacy import certified_gap
 from geocert.solvers.fractional.proof import program_allowance, program_discount
@@ -243,6 +244,7 @@ def _map_result(chart: MapChart, source, target, v, options, status, lower, node
     if status == "optimal":
         reason = refused_by_verifier(item, M, residuals, cost, options, scale)
         status = "not_certified" if reason else status
+    stated_tolerance(certificate, status, lower, cost, options)
     return MapResult(status=status, certified=status == "optimal" and lower is not None, matrix=M.tolist(), reason=reason,
                      residuals=residuals.tolist(), cost=cost, lower_bound=lower,
                      gap=cost - lower if lower is not None else None, nodes=nodes, certificate=certificate)

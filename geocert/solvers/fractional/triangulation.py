@@ -23,7 +23,8 @@ from geocert.solvers.fractional.results import SearchCertificate, TrackResult, c
 from geocert.solvers.fractional.search import Early, Reasons, depth_subspace, prepare, recomputed_status, search
 from geocert.solvers.core.certificates import residual_rounding
 from geocert.solvers.core.geometry import normalised_cameras, reprojection_residuals
-from geocert.solvers.fractional.items import TrackItem, discounted, refused_by_verifier, stated_residuals
+from geocert.solvers.fractional.items import (TrackItem, discounted, refused_by_verifier, stated_residuals,
+                                              stated_tolerance)
 from geocert.solvers.core.self_check import checked_solve
 
 
@@ -125,6 +126,7 @@ def track_result(chart: Chart, cameras, points, y, options, status, lower, nodes
         reason = refused_by_verifier(item, solution, residuals, cost, options, scale)
         status = "not_certified" if reason else status
     certified = status == "optimal" and lower is not None
+    stated_tolerance(certificate, status, lower, cost, options)
     if certified and certificate is not None and not at_infinity and "full" in (options.detail, options.certificate):
         sublevel = track_sublevel(cameras, points, solution[:3], cost, lower, options.norm)
         certificate.sublevel = sublevel
