@@ -637,3 +637,21 @@ def test_a_far_resections_search_summary_states_the_tolerance_of_its_stated_cost
     options = result["certificate"]["options"]
     assert item["certificate"]["tolerance"] == max(options["abs_gap"], options["rel_gap"] * item["cost"])
     _valid(result)
+
+
+@pytest.mark.parametrize("offset", [1e5, 1e6])
+def test_a_far_homographys_cost_understated_within_its_targets_rounding_is_refused(offset):
+    """Class 1's fix, its slack: a cost read from exact residuals is held to their ulps (and 1e-9 of
+    abs_gap), not to the rounding allowance of a float evaluation (1e-14 of the target's size: on
+    targets 1e6 from the origin, 2e-6 of this cost). A far homography (1e-3 px, certified) restated
+    1e-7 (relative) below its cost is refused."""
+    from geocert.jobs.runner import solve_job
+
+    result = solve_job(_far_homography(offset, 1e-3, 5))
+    assert result["maps"][0]["certified"]
+    _valid(result)
+    document = copy.deepcopy(result)
+    stated = result["maps"][0]["cost"] * (1 - 1e-7)
+    for where in (document["maps"][0], document["certificate"]["items"][0]):
+        where["cost"], where["gap"] = stated, stated - where["lower_bound"]
+    _refused(document, "the solution costs")

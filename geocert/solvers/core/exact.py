@@ -87,6 +87,15 @@ def cost(residuals: np.ndarray, norm: str) -> float:
     return math.fsum(norm_terms(np.asarray(residuals, dtype=float), norm).tolist())
 
 
+def slack(residuals: np.ndarray, norm: str, abs_gap: float, tolerance: float) -> float:
+    """What a cost stated from these exact residuals is held to besides ``tolerance`` (relative) of
+    itself: 4 ulps of each residual, and ``tolerance`` of abs_gap (a document written before,
+    with a float cost, of a near-exact fit: its cost is rounding, far below any gap)."""
+    with np.errstate(all="ignore"):
+        ulps = 4.0 * np.spacing(np.abs(residuals))
+        return cost_rounding(residuals, ulps, norm) + tolerance * abs_gap
+
+
 def needs_exact(residuals: np.ndarray, uncertainty: np.ndarray, cost_value: float, norm: str,
                 tolerance: float) -> bool:
     """Whether a float evaluation of these residuals (each within ``uncertainty`` of the exact
