@@ -91,10 +91,13 @@ solution the document states, and on the exact path the cost is the exact one. D
 exact residual is inf, its slack nan, and the objective check refuses. Cross-kernel (Haswell and
 Prescott writers and verifiers; tracks, homographies and resections at offsets 1e3, 1e5, 1e6 and
 1e7, exact, 1e-6 px and 1 px, L2L2, L2L1 and L1L1; 108 documents a writer): no certified claim
-refused beyond classes 3 and 4 (the rest: "no certified item to check"). fixed_order: the round-off
-bounds read by encloses, shrink and centre_bounds count each sum of n terms at (n + 16) U of its
-magnitude, which holds for any order; least_eigenvalue_below only picks the kappa that the sound
-least_eigenvalue_above test then checks: no bound rests on the order. Review 37's test of a centre
+refused beyond classes 3 and 4 (the rest: "no certified item to check"). fixed_order (read, not
+proven): the round-off allowances of encloses and shrink count a Gram sum of 2k terms at 2(k + 16) U
+of its magnitude and the products at 8 to 32 U, bounds that hold for any order of summation;
+least_eigenvalue_below only picks the kappa that the least_eigenvalue_above test (a Cholesky
+factorisation of M minus a shift with its allowance) then checks; no bound read seemed to rest on
+the order. Not tried: reconstruction documents (their tracks take the same checks), and cameras
+with entries near 2^+-1000, whose normalised_cameras scaling may round tiny entries. Review 37's test of a centre
 narrowed one ulp is refused (not repeated here).
 """
 
