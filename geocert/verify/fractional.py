@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from geocert.solvers.core import exact
+from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.determinacy import ESTIMATES_FORM, certified_gap
 from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost, normalised_cameras
 from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
@@ -232,6 +234,22 @@ def _agrees(given, expected) -> bool:
     return bool(np.all(np.abs(value - expected) <= 1e-9 * np.maximum(1.0, np.abs(expected))))
 
 
+def _stated_figure(item, solution: np.ndarray, norm: str) -> tuple[float, float]:
+    """An uncertified track's or map's cost as its writer states it (items.stated_residuals) and
+    the allowance it is held to: where a float evaluation's rounding could move the cost, the
+    residuals computed exactly (core.exact) and 4 ulps of them, as a certified claim's (an
+    allowance of the float evaluation's spread let a far map's cost be stated 0, review 38);
+    elsewhere this evaluation and its rounding."""
+    with np.errstate(all="ignore"):
+        residuals, _, rounding = item.raw_residuals(solution)
+        cost = norm_cost(residuals, norm)
+        if exact.needs_exact(residuals, item.residual_uncertainty(solution), cost, norm, OBJECTIVE_TOLERANCE):
+            stated = item.exact_residuals(solution)
+            cost = exact.cost(stated, norm)
+            return cost, OBJECTIVE_TOLERANCE * abs(cost) + exact.slack(stated, norm)
+        return cost, figure_allowance(cost) + cost_rounding(residuals, rounding, norm)
+
+
 def figure_allowance(cost: float) -> float:
     """How far a stated cost may be from the one the verifier recomputes for an uncertified item
     (the solver's and the verifier's rounding of the same residuals)."""
@@ -445,12 +463,11 @@ class TrackItems:
         at_infinity = claim.get("at_infinity") is True
         X = numbers(point, "point", (4,) if at_infinity else (3,), "claim")
         X = X if at_infinity else np.append(X, 1.0)
-        with np.errstate(all="ignore"):
-            projected = cameras @ X
-            cost = norm_cost(projected[:, :2] / projected[:, 2:3] - observed, options["norm"])
+        cost, allowance = _stated_figure(TrackItem((cameras, observed), options["norm"], chart=False), X,
+                                         options["norm"])
         if not np.isfinite(cost):
             raise Invalid("objective", "the point returned has no finite cost on its observations")
-        return cost, figure_allowance(cost)
+        return cost, allowance
 
     def _read_cameras(self, value) -> np.ndarray:
         remembered = self._cameras
@@ -539,18 +556,10 @@ class MapItems:
             return None
         source, target = self.read(data, claim["index"])
         item = MapItem((source, target), options["norm"], chart=False)
-        with np.errstate(all="ignore"):
-            solution = item.solution(claim)
-            residuals, _, rounding = item.raw_residuals(solution)
-            cost = norm_cost(residuals, options["norm"])
-            # besides the figure's rounding, what the data determine the cost to (the objective
-            # check's slack and spread): far off, another machine's kernels give the same matrix a
-            # cost 2e-9 apart at 1e7 (review 37), beyond 1e-9 absolute
-            spread = cost_rounding(residuals, rounding, options["norm"]) + 2.0 * cost_rounding(
-                residuals, item.residual_uncertainty(solution), options["norm"])
+        cost, allowance = _stated_figure(item, item.solution(claim), options["norm"])
         if not np.isfinite(cost):
             raise Invalid("objective", "the matrix returned has no finite cost on its points")
-        return cost, figure_allowance(cost) + (float(spread) if np.isfinite(spread) else 0.0)
+        return cost, allowance
 
     def _check_root_region(self, where: str, summary, claim: dict, certificate: dict, index: int) -> None:
         """A certified map's summary root_region states a fact ("lower <= (F l) / (d . l) <= upper
@@ -594,15 +603,21 @@ class MapItems:
             matrix = numbers(entry["matrix"], f"{where}/matrix", (target.shape[1] + 1, source.shape[1] + 1),
                              "returned")
             item = MapItem((source, target), norm, chart=False)
-            _, _, rounding = item.raw_residuals(matrix)
             if "residuals" in entry:
-                given = numbers(entry["residuals"], f"{where}/residuals", rounding.shape, "returned")
-                # each residual as the matrix leaves it exactly (its writer states them so: far off,
-                # a residual is a difference of terms 1e8 in size that each machine's kernels round
-                # otherwise, and a window that wide let residuals of 1e-8 px be stated 0, review 37)
+                given = numbers(entry["residuals"], f"{where}/residuals", target.shape, "returned")
+                # each residual as the matrix leaves it exactly, to 4 ulps (its writer states them
+                # so): where a float evaluation's rounding could move the cost (far off, a residual
+                # is a difference of terms 1e8 in size that each machine's kernels round otherwise),
+                # any window of that rounding let residuals of 1e-8 px be stated 0 (reviews 37 and
+                # 38). Elsewhere a document written before states float residuals, each within
+                # twice what the data determine it to (and its rounding) of the exact one.
                 with np.errstate(all="ignore"):
                     exact_residuals = item.exact_residuals(matrix)
-                    allowed = 2 * rounding + 4 * np.spacing(np.abs(exact_residuals))
+                    allowed = 4 * np.spacing(np.abs(exact_residuals))
+                    floats, _, rounding = item.raw_residuals(matrix)
+                    determined = item.residual_uncertainty(matrix)
+                    if not exact.needs_exact(floats, determined, norm_cost(floats, norm), norm, OBJECTIVE_TOLERANCE):
+                        allowed = allowed + 2 * np.minimum(rounding, determined)
                 if not np.all(np.abs(given - exact_residuals) <= allowed):
                     raise Invalid("returned", f"{where}/residuals are not what its matrix leaves on the data")
 

@@ -555,23 +555,28 @@ def test_the_exact_squared_residuals_differ_from_the_float_cost_beyond_level_rou
         assert abs(exact - result["maps"][0]["cost"]) <= 1e-12 * exact, seed
 
 
-def test_an_uncertified_far_homographys_figure_allowance_holds_its_own_spread():
-    """Machine-independent: on class 4's far map the spread the verifier itself gives the cost
-    (cost_rounding at residual_uncertainty) is beyond the figure's 1e-9, and the allowance the cost
-    figure is held to holds twice it (fixed: it was 1e-9 alone)."""
+def test_an_uncertified_far_homographys_figure_is_its_exact_cost_to_ulps():
+    """Machine-independent: on class 4's far map the spread the verifier gives a float cost
+    (cost_rounding at residual_uncertainty) is beyond the figure's 1e-9. Class 4's first fix held
+    the figure to twice that spread, which let a far map's cost be stated 0 (review 38 class 2); now
+    the figure is the cost of the exact residuals, as its writer states it, held to 1e-9 of itself
+    and 4 ulps of each residual, far below that spread."""
     from geocert.jobs.runner import solve_job
+    from geocert.solvers.core import exact
     from geocert.solvers.core.geometry import cost_rounding
-    from geocert.verify.fractional import MapItems, figure_allowance
+    from geocert.verify.fractional import MapItems
 
     result = solve_job(_with_uncertified(5))
     assert not result["maps"][1]["certified"]
+    _valid(result)
     certificate = result["certificate"]
     value, allowance = MapItems("homography", {(2, 2)}).solution_cost(certificate["data"], certificate["items"][1],
                                                                        certificate["options"])
     item, matrix = _map_item(result, 1)
     residuals, _, _ = item.raw_residuals(matrix)
     spread = cost_rounding(residuals, item.residual_uncertainty(matrix), "L2L2")
-    assert figure_allowance(value) == 1e-9 < spread and allowance >= 1e-9 + 2 * spread
+    assert value == exact.cost(item.exact_residuals(matrix), "L2L2") == result["maps"][1]["cost"]
+    assert 1e-9 < spread and allowance < 1e-3 * spread
 
 
 # Class 6: a far resection's sublevel proof, recomputed under another kernel (fixed: one recomputation,

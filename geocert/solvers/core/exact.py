@@ -87,13 +87,11 @@ def cost(residuals: np.ndarray, norm: str) -> float:
     return math.fsum(norm_terms(np.asarray(residuals, dtype=float), norm).tolist())
 
 
-def slack(residuals: np.ndarray, norm: str, abs_gap: float, tolerance: float) -> float:
-    """What a cost stated from these exact residuals is held to besides ``tolerance`` (relative) of
-    itself: 4 ulps of each residual, and ``tolerance`` of abs_gap (a document written before,
-    with a float cost, of a near-exact fit: its cost is rounding, far below any gap)."""
+def slack(residuals: np.ndarray, norm: str) -> float:
+    """What a cost stated from these exact residuals is held to besides the relative tolerance:
+    4 ulps of each residual (the writer computes the same floats; nothing a document chooses)."""
     with np.errstate(all="ignore"):
-        ulps = 4.0 * np.spacing(np.abs(residuals))
-        return cost_rounding(residuals, ulps, norm) + tolerance * abs_gap
+        return cost_rounding(residuals, 4.0 * np.spacing(np.abs(residuals)), norm)
 
 
 def needs_exact(residuals: np.ndarray, uncertainty: np.ndarray, cost_value: float, norm: str,

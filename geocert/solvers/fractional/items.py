@@ -27,6 +27,8 @@ class TrackItem:
         result as the verifier will (the verifier always rebuilds it)."""
         self.norm = norm
         self.cameras, self.points = arrays
+        if chart is False:  # its residuals only: no program is built
+            return
         self.chart = chart if chart is not None else Chart.build(self.cameras, self.points, norm)
         self.program = self.chart.program
 

@@ -237,7 +237,7 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     for g in np.flatnonzero(ok & ~(spread <= exact.FLOAT_SHARE * OBJECTIVE_TOLERANCE * np.abs(recomputed))):
         stated = -exact.residuals(cams[g], X[g], points[g])
         recomputed[g] = exact.cost(stated, norm)
-        slack[g] = exact.slack(stated, norm, options["abs_gap"], OBJECTIVE_TOLERANCE)
+        slack[g] = exact.slack(stated, norm)
     ok &= np.abs(recomputed - cost) <= OBJECTIVE_TOLERANCE * np.abs(recomputed) + slack
     tolerance = np.maximum(options["abs_gap"], options["rel_gap"] * np.abs(cost))
     ok &= (recomputed + slack) - lower_claimed <= tolerance * (1 + 1e-12)  # the gap, from the data's cost
