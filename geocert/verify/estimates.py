@@ -68,6 +68,12 @@ JACOBIAN_ROUNDING = float(np.finfo(float).eps) / 1e-6
 # 2.5e-7 wide at 1e6 (3 to 2,000 ulps of the value). Twice the ulp: the stated end may lie a binade
 # above the verifier's.
 END_OFFSET_ULPS = 2.0
+# Of a track interval's width, what its end's offset may differ by besides NUMBER_SLACK: the writer
+# (tracks_many: batched einsum and eigh) and the verifier (track: one J'J) reach the half-width by
+# different sums; on hostile scenes (testing.hostile_triangulation, seeds 1 and 2, 400 tracks, L2L2,
+# cameras scaled by 1e-6 to 1e6) the offsets differ by up to 5.8e-7 of the width, under either
+# kernel alike. Far below a width: a collapsed or narrowed interval moves an end by a share of it.
+TRACK_WIDTH_SLACK = 1e-5
 TRACK_POINT = ("x", "y", "z")  # the track estimate's intervals whose value is the returned point's coordinate
 COMPARED = ("method", "determined", "level", "redundancy")
 
@@ -312,7 +318,7 @@ def _check_tracks(kind, result: dict, certificate: dict, earlier: bool = True) -
         # the ends as offsets from the value, to the width (review 37 class 2): VALUE_SLACK of a
         # value 1e6 off the origin is 1e-3 px, thousands of widths, so the x, y and z intervals
         # collapsed onto their values, or moved with them off the returned point, verified
-        _compare(where, determinacy, expected, earlier, offsets=True)
+        _compare(where, determinacy, expected, earlier, width_slack=TRACK_WIDTH_SLACK, offsets=True)
 
 
 def _check_point_values(where: str, determinacy: dict, point: Any) -> None:
