@@ -391,6 +391,33 @@ def exact_squared_residuals(source: np.ndarray, target: np.ndarray, matrix: np.n
         return math.inf
 
 
+def exact_centroid_image(source: np.ndarray, matrix: np.ndarray) -> list[float]:
+    """The source points' centroid mapped by ``matrix``, the same floats on every machine: the
+    centroid and its image computed exactly (integer arithmetic on the floats' exact values) and
+    each coordinate rounded once; inf where the centroid maps to infinity or beyond the largest
+    float. A homography estimate's value: computed through the normalisers, as the estimate's
+    gradient is, it differed between BLAS kernels by 310 ulps 1e6 off the origin (review 37
+    class 3)."""
+    M = np.asarray(matrix, dtype=float)
+    entries, _ = _scaled(M.ravel().tolist())
+    rows = [entries[i * M.shape[1]:(i + 1) * M.shape[1]] for i in range(M.shape[0])]
+    points = np.asarray(source, dtype=float)
+    coordinates, exponent = _scaled(points.ravel().tolist())  # source = coordinates * 2**exponent
+    dims = points.shape[1]
+    # the centroid (sum / k, 1) scaled by k * 2**-exponent: (sum of the integers, k * 2**-exponent)
+    centroid = [sum(coordinates[j::dims]) for j in range(dims)] + [len(points) << -exponent]
+    image = [sum(m * v for m, v in zip(row, centroid)) for row in rows]
+    if image[-1] == 0:
+        return [math.inf] * (len(image) - 1)
+    out = []
+    for value in image[:-1]:
+        try:
+            out.append(value / image[-1])  # Python's int division: correctly rounded
+        except OverflowError:
+            out.append(math.inf)
+    return out
+
+
 def map_level(source: np.ndarray, target: np.ndarray, matrix, cost: float | None, lower: float | None) -> float:
     """An L2L2 resection's level, the one its estimate, its proven interval and the verifier read:
     3^2 times the exact squared residuals over 2k - 11, at least the certified gap."""
@@ -451,7 +478,7 @@ def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | Non
             image = matrix_of(theta) @ centroid
             return image[:-1] / image[-1]
 
-        value = transfer(zero)
+        value = exact_centroid_image(source, M)  # the same floats on every machine
         gradient = numeric_jacobian(transfer, zero)
         names = ("centroid_image_x", "centroid_image_y", "centroid_image_z")
         extent = float(np.sqrt(((target - target.mean(axis=0)) ** 2).sum(axis=1).mean()))  # the targets' spread
