@@ -399,10 +399,10 @@ def exact_centroid_image(source: np.ndarray, matrix: np.ndarray) -> list[float]:
     gradient is, it differed between BLAS kernels by 310 ulps 1e6 off the origin (review 37
     class 3)."""
     M = np.asarray(matrix, dtype=float)
-    entries, _ = _scaled(M.ravel().tolist())
+    entries, _ = scaled(M.ravel().tolist())
     rows = [entries[i * M.shape[1]:(i + 1) * M.shape[1]] for i in range(M.shape[0])]
     points = np.asarray(source, dtype=float)
-    coordinates, exponent = _scaled(points.ravel().tolist())  # source = coordinates * 2**exponent
+    coordinates, exponent = scaled(points.ravel().tolist())  # source = coordinates * 2**exponent
     dims = points.shape[1]
     # the centroid (sum / k, 1) scaled by k * 2**-exponent: (sum of the integers, k * 2**-exponent)
     centroid = [sum(coordinates[j::dims]) for j in range(dims)] + [len(points) << -exponent]
