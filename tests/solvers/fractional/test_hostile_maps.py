@@ -18,7 +18,7 @@ import pytest
 from testing.hostile_maps import options_for, problem, refused
 from geocert.verify import checks as verify
 from geocert.solvers.fractional import proof
-from geocert.solvers.fractional.items import MapItem, refused_by_verifier
+from geocert.solvers.fractional.items import MapItem, refused_by_verifier, stated_residuals
 from geocert.solvers.fractional.maps import fit_map
 from geocert.solvers.fractional.options import MapOptions
 from tests.support import loose_gaps
@@ -127,9 +127,10 @@ class TestTheSolverRefusesWhatTheVerifierWould:
     M = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, 1.0]])  # depth x + 1: the last point's is 1e-9
 
     def claim(self, M, target, norm):
+        """A claim as the writers state it (items.stated_residuals: the exact residuals' cost where a
+        float evaluation's rounding could move it), so that the check the test names is what refuses."""
         item = MapItem((self.source, target), norm)
-        residuals = item.raw_residuals(M)[0]
-        cost = {"L1L1": np.abs(residuals).sum(), "L2L2": (residuals ** 2).sum()}[norm]
+        residuals, cost = stated_residuals(item, M, item.raw_residuals(M)[0], norm)
         return item, residuals, float(cost), {"index": 0, "status": "optimal", "certified": True, "cost": float(cost),
                                               "lower_bound": 0.0, "gap": float(cost), "matrix": M.tolist(),
                                               "proof": {"type": "trivial"}}
