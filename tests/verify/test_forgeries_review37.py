@@ -20,7 +20,7 @@ only, so review 36's class 2 is open again for far homographies). Class 4
 (fractional.MapItems.solution_cost: an uncertified map's cost figure is held to the objective
 check's slack and twice its spread besides figure_allowance; since review 38, to the exact cost).
 Class 1 (core.exact: a certified track's or map's cost, where the floats' rounding could move it
-past a hundredth of OBJECTIVE_TOLERANCE, and every map's returned residuals, are stated from the
+past a quarter of OBJECTIVE_TOLERANCE, and every map's returned residuals, are stated from the
 residuals computed exactly and rounded once, one number on every machine;
 checks._check_residual_claim holds the claim to them at OBJECTIVE_TOLERANCE and 4 ulps, no longer
 the worst-case spread). Class 6 (resection_sublevel, resection_centre_l1 and resection_bound

@@ -94,7 +94,8 @@ spread (cost_rounding at residual_uncertainty, 1e-15 of the terms over the depth
 of OBJECTIVE_TOLERANCE of the cost, and its slack, cost_rounding at ROUNDING (1e-14) of |image| +
 |target|, is at most about ten times the spread (|image| is below the terms over the depth): a
 claim on the float path may move about 1.1e-9 of its cost, not more, for large pixel coordinates
-too. A forger cannot steer the decision: it is taken on the verifier's own floats of the
+too. (Since raised to a quarter, exact.FLOAT_SHARE, for the Dinosaur's tracks' CPU: about 3.5e-9
+of the cost at most.) A forger cannot steer the decision: it is taken on the verifier's own floats of the
 solution the document states, and on the exact path the cost is the exact one. Depth 0: the
 exact residual is inf, its slack nan, and the objective check refuses. Cross-kernel (Haswell and
 Prescott writers and verifiers; tracks, homographies and resections at offsets 1e3, 1e5, 1e6 and

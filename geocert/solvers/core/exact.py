@@ -22,8 +22,11 @@ import numpy as np
 from geocert.solvers.core.geometry import cost_rounding, norm_terms
 
 # Float evaluation serves where its cost is this share of OBJECTIVE_TOLERANCE (relative) from
-# the exact one at worst; elsewhere the cost is computed exactly.
-FLOAT_SHARE = 0.01
+# the exact one at worst; elsewhere the cost is computed exactly. A writer's float cost and a
+# verifier's then differ by at most half the tolerance. A hundredth sent 4,340 of the Oxford
+# Dinosaur's 4,983 tracks (projective cameras: terms far larger than their residuals) down the
+# exact path, 0.22 s of CPU against 0.06 s for the whole solve at a quarter (240 tracks).
+FLOAT_SHARE = 0.25
 
 
 def scaled(values: list[float]) -> tuple[list[int], int]:
