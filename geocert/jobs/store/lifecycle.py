@@ -87,9 +87,17 @@ class Lifecycle(StoreBase):
             return None
         return self._decoded(("status",) + names, raw), self._chunk(start, *chunk)
 
-    def leave(self, job_id: str, task_id: str) -> None:
-        """The task ``task_id`` no longer works on the job (its items stored, or it stopped)."""
-        self.r.srem(self.key(job_id, "busy"), task_id)
+    def leave(self, job_id: str, task_id: str, claim_past_clock: bool = False) -> bool | None:
+        """The task ``task_id`` no longer works on the job (its items stored, or it stopped).
+        With ``claim_past_clock``, then ``claim_past_clock`` in the same round trip (a task's
+        last two calls: one wait for Redis instead of two), returning its answer."""
+        if not claim_past_clock:
+            self.r.srem(self.key(job_id, "busy"), task_id)
+            return None
+        pipe = self.r.pipeline()
+        pipe.srem(self.key(job_id, "busy"), task_id)
+        self._claim_past_clock(pipe, job_id)
+        return bool(pipe.execute()[1])
 
     def reopen_end(self, job_id: str) -> None:
         """Drop a claim to end the job whose holder is gone (the job is running but nobody moves)."""
