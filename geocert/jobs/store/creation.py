@@ -110,7 +110,7 @@ class Creation(StoreBase):
         }
         meta["task_ids"] = list(task_ids) if task_ids is not None else [uuid.uuid4().hex for _ in chunks]
         pipe = _Commands()
-        request_bytes = self._put_request(pipe, job_id, request, chunk_key, items_key) + items_bytes
+        request_bytes = self._put_request(pipe, job_id, request, chunk_key, items_key, chunk_size) + items_bytes
         pipe.hset(self.key(job_id), mapping={k: dumps(v) for k, v in meta.items() if k != "task_ids"})
         meta["chunks"] = chunks  # not stored: every read of the job (each poll) would read them (JobStore.chunks)
         pipe.zadd(self.owner_key(owner, "jobs"), {job_id: meta["created_at"]})

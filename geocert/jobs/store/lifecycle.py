@@ -83,9 +83,9 @@ class Lifecycle(StoreBase):
         self._mark_running(pipe, job_id, task_id)
         self._read_chunk(pipe, job_id, start, stop)
         raw, running, *chunk = pipe.execute()
-        if raw[0] is None or not running or chunk[0] is None:
+        if raw[0] is None or not running or chunk[0][0] is None:
             return None
-        return self._decoded(("status",) + names, raw), self._chunk(start, *chunk)
+        return self._decoded(("status",) + names, raw), self._chunk(start, stop, *chunk[0])
 
     def leave(self, job_id: str, task_id: str, claim_past_clock: bool = False) -> bool | None:
         """The task ``task_id`` no longer works on the job (its items stored, or it stopped).
