@@ -228,8 +228,11 @@ def service_batch(cameras, tracks, workers: int, detail: str = "full") -> dict:
 
 def service_cpu(pid: int) -> dict[str, float]:
     """CPU seconds so far of `geocert serve`'s processes under ``pid``: its workers (Celery's
-    processes, their solver processes among them) and the rest (the API, its helpers, Redis)."""
-    found = {"workers": 0.0, "api": 0.0}
+    processes, their solver processes among them) and the rest (the API, its helpers, Redis);
+    and the seconds the workers' main threads waited in the run queue for a core
+    (``workers_wait``, /proc/<pid>/schedstat: on a shared machine, what a second worker cannot
+    turn into speed)."""
+    found = {"workers": 0.0, "api": 0.0, "workers_wait": 0.0}
     todo = [pid]
     while todo:
         current = todo.pop()
@@ -241,6 +244,9 @@ def service_cpu(pid: int) -> dict[str, float]:
             with open(f"/proc/{current}/stat") as stat:
                 fields = stat.read().rsplit(")", 1)[1].split()
             found[part] += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+            if part == "workers":
+                with open(f"/proc/{current}/schedstat") as schedstat:
+                    found["workers_wait"] += int(schedstat.read().split()[1]) / 1e9
         except OSError:
             pass
     return found
@@ -283,8 +289,9 @@ def service_table(cameras, tracks, workers: list[int], details: list[str]) -> No
             print(f"  when, from the POST's start: the job created {batch['created']:.2f} s, its 202 {batch['posted']:.2f} s, "
                   f"started {batch['started']:.2f} s, finished {batch['finished']:.2f} s, its result read "
                   f"{batch['wall']:.2f} s; CPU meanwhile: the workers "
-                  f"{batch['cpu']['workers']:.2f} s ({batch['cpu']['workers'] / solve:.1f}x the solve's), the API and "
-                  f"Redis {batch['cpu']['api']:.2f} s", flush=True)
+                  f"{batch['cpu']['workers']:.2f} s ({batch['cpu']['workers'] / solve:.1f}x the solve's, waiting "
+                  f"{batch['cpu']['workers_wait']:.2f} s for a core), the API and Redis {batch['cpu']['api']:.2f} s",
+                  flush=True)
         if 1 in walls and 2 in walls:
             print(f"Service, detail {detail}: 1 -> 2 workers {walls[1] / walls[2]:.2f}x (target 1.8x)")
 

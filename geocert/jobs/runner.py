@@ -58,7 +58,9 @@ class ItemProgress:
         self.start = time.perf_counter()
         self.stopped = False
 
-    def finished(self, item: dict) -> None:
+    def finished(self, item: dict, emit: bool = True) -> None:
+        """Count a finished item; ``emit=False`` when more of its group end at the same moment
+        (solve_batch returns them together), so that the group's progress is sent once."""
         self.done += 1
         self.nodes_done += item["nodes"]
         if item.get("cost") is not None and item.get("lower_bound") is not None:
@@ -67,7 +69,8 @@ class ItemProgress:
             self.bounded_done += 1
             self.worst_gap_rel = max(self.worst_gap_rel,
                                      gap_beyond_tolerance(item["cost"], item["lower_bound"], self.abs_gap))
-        self.emit(None)
+        if emit:
+            self.emit(None)
 
     def emit(self, running: Progress | None) -> None:
         """Sends the progress. The bounds sum real figures only (the finished items' and the
@@ -153,8 +156,10 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
     tracker = ItemProgress(total if total is not None else len(indices), sink, should_stop, abs_gap_of(options))
     items = []
     # A kind that solves many items at once (solve_batch) takes them a group at a time: the
-    # budget and a cancel are seen between groups, progress at each item of a group; the
-    # deadline inside a group too (solve_batch's own).
+    # budget and a cancel are seen between groups, progress once a group (its items end at the
+    # same moment: a progress per item made and sent 500 documents of progress a group, and the
+    # worker's throttle stored the group's first item on its own, a round trip and a fragment
+    # more); the deadline inside a group too (solve_batch's own). ``on_item`` still sees each.
     group = kind.batch_size if kind.solve_batch is not None else 1
     for begin in range(0, len(indices), group):
         if stop_at is not None and items and not tracker.stopped and time.monotonic() > stop_at:
@@ -173,11 +178,12 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
             solved = [kind.solve_item(parsed, chosen[0], within_deadline(options, deadline), tracker.engine_callback)]
         else:
             solved = kind.solve_batch(parsed, list(chosen), options, tracker.engine_callback, deadline=deadline)
-        for index, item in zip(chosen, solved):
+        last = min(len(chosen), len(solved))
+        for position, (index, item) in enumerate(zip(chosen, solved), 1):
             items.append(item)
             if on_item is not None:
                 on_item(index, item)
-            tracker.finished(item)
+            tracker.finished(item, emit=position == last)
     return items
 
 

@@ -75,6 +75,7 @@ class ProgressPublisher:
         self.cancelled = False
         self.job_ended = False  # its writes were refused: the job ended (or is gone) under this task
         self.unsaved: dict[int, dict] = {}
+        self.stored: int | None = None  # the job's items stored, as this task's last store read them
         self.kind = kind
 
     def item_ended(self, index: int, item: dict) -> None:
@@ -98,16 +99,24 @@ class ProgressPublisher:
                 saved = self.jobs.save_progress(self.job_id, self.start, progress, self.unsaved, self._fragment())
             if saved is None:
                 self.job_ended = True
+            else:
+                self.stored = saved["items_done"]
             self.unsaved = {}
 
     @collector_held()
     def flush(self) -> int | None:
         """Store the items not stored yet (and the fragment); returns how many items of the job
-        are stored (None: the job has ended or is gone, and nothing was stored)."""
+        are stored (None: the job has ended or is gone, and nothing was stored). With every item
+        stored already (the last progress stored them), the count that store read: no round trip
+        (the task that stores a job's last items reads the whole count in that same store)."""
+        if not self.unsaved and self.stored is not None and not self.job_ended:
+            return self.stored
         done = self.jobs.save_items(self.job_id, self.unsaved, self._fragment())
         self.unsaved = {}
         if done is None:
             self.job_ended = True
+        else:
+            self.stored = done
         return done
 
     def should_stop(self) -> bool:
@@ -212,7 +221,7 @@ def _solve_chunk(job_id: str, start: int, stop: int, request_id: str | None, tas
     # Its fields, the job marked running (this task busy on it) and its own items only (see
     # JobStore.create): one round trip.
     started = jobs.start_chunk(job_id, start, stop, "items_total", "kind", "item_time_bound_s", "job_time_limit_s",
-                               task_id=task_id)
+                               "started_at", task_id=task_id)
     if started is None:
         return  # expired, deleted, or ended (cancelled) before it started: nothing to do
     parsed = (None, None)
@@ -227,8 +236,7 @@ def _leave(jobs: JobStore, job_id: str, task_id: str, kind=None, options=None) -
     """The task leaves the job (its items stored): past its clock in all, the last to leave ends it,
     with the kind and options the task parsed when it took the job from the queue."""
     try:
-        jobs.leave(job_id, task_id)
-        end_past_clock(jobs, job_id, kind, options)
+        end_past_clock(jobs, job_id, kind, options, claimed=jobs.leave(job_id, task_id, claim_past_clock=True))
     except REDIS_GONE:
         pass  # its slot lapses unrenewed, and a worker's heartbeat ends the job (end_jobs_past_clock)
 
@@ -253,7 +261,7 @@ def _solve_started_chunk(jobs: JobStore, job_id: str, start: int, stop: int, req
         with spread_by(SpreadOverSolvers(jobs, job_id, request_id, stop_by=began + deadline_s)):
             items = solve_items(kind, parsed, options, range(start, stop), publisher, publisher.should_stop,
                                 stop_at=began + settings.chunk_time_budget_s, on_item=publisher.item_ended,
-                                deadline=job_deadline(options, began - _ran_before(jobs, job_id)))
+                                deadline=job_deadline(options, began - _ran_before(meta["started_at"])))
         done = publisher.flush()
         jobs.record_items(kind.name, items)
         cut = start + len(items)
@@ -291,13 +299,14 @@ def _solve_started_chunk(jobs: JobStore, job_id: str, start: int, stop: int, req
     return kind, options
 
 
-def end_past_clock(jobs: JobStore, job_id: str, kind=None, options=None) -> bool:
+def end_past_clock(jobs: JobStore, job_id: str, kind=None, options=None, claimed: bool | None = None) -> bool:
     """End a running job past its clock in all (job_time_limit_s) once no task of it is busy
     (``JobStore.claim_past_clock``): ``succeeded`` with the items stored, every other item its
     kind's not started item (status ``time_limit``, uncertified). True when this call ended it.
     ``kind`` and ``options``: as the task ending it parsed them; without them, as stored
-    (_kind_and_options)."""
-    if not jobs.claim_past_clock(job_id):
+    (_kind_and_options). ``claimed``: the claim made already (a task's leave makes it in the
+    same round trip), else it is made here."""
+    if not (jobs.claim_past_clock(job_id) if claimed is None else claimed):
         return False
     if kind is None or options is None:
         kind, options = _kind_and_options(jobs, job_id)
@@ -331,13 +340,13 @@ def _past_its_time_limit(jobs: JobStore, job_id: str) -> bool:
                 and time.time() > fields["started_at"] + fields["job_time_limit_s"])
 
 
-def _ran_before(jobs: JobStore, job_id: str) -> float:
-    """Seconds since the job started (its first task: ``started_at``), 0 for this task's own
-    start: the job's time limit is one clock its tasks share, wherever and whenever they run."""
-    started = jobs.fields(job_id, "started_at")
-    if started is None or started["started_at"] is None:
+def _ran_before(started_at: float | None) -> float:
+    """Seconds since the job started (its first task: ``started_at``, as the task's start read it
+    before marking the job running), 0 for this task's own start: the job's time limit is one
+    clock its tasks share, wherever and whenever they run."""
+    if started_at is None:
         return 0.0
-    return max(0.0, time.time() - started["started_at"])
+    return max(0.0, time.time() - started_at)
 
 
 MEMORY_TITLE = "Memory limit exceeded"

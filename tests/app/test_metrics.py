@@ -39,6 +39,17 @@ class TestRecordItems:
         total = [sample.value for sample in found["geocert_item_solve_seconds"].samples if sample.name.endswith("_sum")]
         assert total == [pytest.approx(3 * 0.002 + 2 * 0.02 + 2.0)]
 
+    def test_a_time_on_a_buckets_bound_counts_in_it(self, client):
+        """Prometheus's buckets are "less than or equal": a time equal to a bound counts in that
+        bucket (the counts are found by bisection of the sorted times)."""
+        client.delete(figures.METRICS_KEY)
+        times = [0.001, 0.003, 0.003, 0.0031, 1.0, 60.0, 61.0]
+        figures.record_items(client, "triangulation", [{"status": "optimal", "elapsed_s": t} for t in reversed(times)])
+        buckets = {sample.labels["le"]: sample.value for sample in families(client)["geocert_item_solve_seconds"].samples
+                   if sample.name.endswith("_bucket")}
+        assert (buckets["0.001"], buckets["0.003"], buckets["0.01"], buckets["1.0"], buckets["60.0"], buckets["+Inf"]) \
+            == (1, 3, 4, 5, 6, 7)
+
     def test_a_chunk_costs_a_few_commands_whatever_its_size(self, client):
         def commands(count: int) -> int:
             before = client.info("stats")["total_commands_processed"]

@@ -1,5 +1,5 @@
 """batch.solve_items with a kind that solves many items at once (solve_batch): groups of
-batch_size in order, progress per item, a cancel or the time budget seen between groups, and the
+batch_size in order, progress once a group (its items end together), a cancel or the time budget seen between groups, and the
 job's deadline given to every group and seen between them."""
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ class CountingKind:
 
 
 class TestSolveBatch:
-    def test_groups_in_order_and_progress_per_item(self):
+    def test_groups_in_order_and_progress_per_group(self):
         kind = CountingKind(batch_size=4)
         seen, progress = [], []
         items = solve_items(kind, list(range(20)), None, range(3, 13), sink=progress.append,
@@ -44,7 +44,9 @@ class TestSolveBatch:
         assert kind.batches == [[3, 4, 5, 6], [7, 8, 9, 10], [11, 12]]
         assert [item["value"] for item in items] == [i * i for i in range(3, 13)]
         assert seen == [(i, i * i) for i in range(3, 13)]
-        assert [p["items_done"] for p in progress] == list(range(1, 11))
+        # each item seen, progress once a group with every item of it counted
+        assert [p["items_done"] for p in progress] == [4, 8, 10]
+        assert [p["nodes"] for p in progress] == [4, 8, 10]
 
     def test_a_cancel_is_seen_between_groups(self):
         kind = CountingKind(batch_size=4)

@@ -53,6 +53,18 @@ class TestRequestByChunk:
         last = jobs.chunk_request(meta["id"], 200, 250)["data"]["tracks"]
         assert len(last) == 250 and last[249] == request["data"]["tracks"][249]
 
+    def test_a_chunks_items_are_one_element_and_any_range_reads_across_them(self, jobs):
+        """The items are kept a chunk an element (one text a task reads and parses once); a task
+        cut elsewhere by its budget, or reaching into the next chunk, still reads its own items."""
+        request = request_of(250)
+        meta = jobs.create("triangulation", request, 250, 100, "someone", chunk_key="tracks")
+        assert jobs.r.llen(jobs.key(meta["id"], "request:items")) == 3
+        for start, stop in ((37, 100), (37, 163), (99, 101), (200, 250), (249, 250), (0, 250)):
+            tracks = jobs.chunk_request(meta["id"], start, stop)["data"]["tracks"]
+            assert len(tracks) == 250
+            assert tracks[start:stop] == request["data"]["tracks"][start:stop]
+            assert all(track is None for track in tracks[:start] + tracks[stop:])
+
     def test_an_empty_chunk_reads_the_requests_head_and_no_item(self, jobs):
         """What reads a job's kind and options (an ending job's: tasks._kind_and_options) asks for
         no item; it read every one (LRANGE 0 -1), 20,000 tracks decoded to end a job."""

@@ -29,10 +29,14 @@ class Clocks(StoreBase):
         another caller has the claim. The claim lapses after PAST_CLOCK_CLAIM_S: the reaper
         leaves such a job alone, so a claim whose holder died is not dropped by it, and a
         later heartbeat ends the job (an end takes seconds, 2.5 s for 20,000 items)."""
+        return bool(self._claim_past_clock(self.r, job_id))
+
+    def _claim_past_clock(self, client, job_id: str):
+        """_CLAIM_PAST_CLOCK run by ``client`` (its answer) or queued on a pipeline."""
         moment = now()
-        return bool(self.r.eval(self._CLAIM_PAST_CLOCK, 5, self.key(job_id), self.key(job_id, "busy"), self.DEADLINES,
-                                self.SLOTS, self.key(job_id, "final"), job_id, moment, moment - self.SLOT_LAPSE_S,
-                                min(self.ttl, PAST_CLOCK_CLAIM_S)))
+        return client.eval(self._CLAIM_PAST_CLOCK, 5, self.key(job_id), self.key(job_id, "busy"), self.DEADLINES,
+                           self.SLOTS, self.key(job_id, "final"), job_id, moment, moment - self.SLOT_LAPSE_S,
+                           min(self.ttl, PAST_CLOCK_CLAIM_S))
 
     def past_clock(self) -> list[str]:
         """The running jobs whose clock in all has run out."""

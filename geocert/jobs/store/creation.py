@@ -29,13 +29,14 @@ class Creation(StoreBase):
         no limit): nothing of the job is kept then.
 
         ``chunk_key``: the data list whose entries are the job's items one to one (a kind's
-        ``chunk_key``). Those entries are kept one per element of a Redis list beside the rest of
-        the request, so that a task reads its own items (``chunk_request``), not the whole request:
-        read traffic stays about the request's size whatever the number of chunks.
+        ``chunk_key``). Those entries are kept a chunk (``chunk_size`` of them) per element of a
+        Redis list beside the rest of the request (Requests), so that a task reads its own items
+        (``chunk_request``), not the whole request: read traffic stays about the request's size
+        whatever the number of chunks.
 
-        ``items_key``: a Redis list already holding those entries' JSON texts (a large body's
-        items, written a batch at a time: app.streamed); it becomes the job's item list, and the
-        request's own list is ignored.
+        ``items_key``: a Redis list already holding those entries' JSON texts, one an element (a
+        large body's items, written a batch at a time: app.streamed); it becomes the job's item
+        list, and the request's own list is ignored.
 
         ``item_time_bound_s``: the longest one of its items runs while the job's own time limits
         hold (its kind's ``time_bound_s``), from which its tasks' last-resort limits are sized, with
@@ -110,7 +111,7 @@ class Creation(StoreBase):
         }
         meta["task_ids"] = list(task_ids) if task_ids is not None else [uuid.uuid4().hex for _ in chunks]
         pipe = _Commands()
-        request_bytes = self._put_request(pipe, job_id, request, chunk_key, items_key) + items_bytes
+        request_bytes = self._put_request(pipe, job_id, request, chunk_key, items_key, chunk_size) + items_bytes
         pipe.hset(self.key(job_id), mapping={k: dumps(v) for k, v in meta.items() if k != "task_ids"})
         meta["chunks"] = chunks  # not stored: every read of the job (each poll) would read them (JobStore.chunks)
         pipe.zadd(self.owner_key(owner, "jobs"), {job_id: meta["created_at"]})

@@ -83,13 +83,21 @@ class Lifecycle(StoreBase):
         self._mark_running(pipe, job_id, task_id)
         self._read_chunk(pipe, job_id, start, stop)
         raw, running, *chunk = pipe.execute()
-        if raw[0] is None or not running or chunk[0] is None:
+        if raw[0] is None or not running or chunk[0][0] is None:
             return None
-        return self._decoded(("status",) + names, raw), self._chunk(start, *chunk)
+        return self._decoded(("status",) + names, raw), self._chunk(start, stop, *chunk[0])
 
-    def leave(self, job_id: str, task_id: str) -> None:
-        """The task ``task_id`` no longer works on the job (its items stored, or it stopped)."""
-        self.r.srem(self.key(job_id, "busy"), task_id)
+    def leave(self, job_id: str, task_id: str, claim_past_clock: bool = False) -> bool | None:
+        """The task ``task_id`` no longer works on the job (its items stored, or it stopped).
+        With ``claim_past_clock``, then ``claim_past_clock`` in the same round trip (a task's
+        last two calls: one wait for Redis instead of two), returning its answer."""
+        if not claim_past_clock:
+            self.r.srem(self.key(job_id, "busy"), task_id)
+            return None
+        pipe = self.r.pipeline()
+        pipe.srem(self.key(job_id, "busy"), task_id)
+        self._claim_past_clock(pipe, job_id)
+        return bool(pipe.execute()[1])
 
     def reopen_end(self, job_id: str) -> None:
         """Drop a claim to end the job whose holder is gone (the job is running but nobody moves)."""

@@ -5,6 +5,7 @@ item solve times and job times, all as fields of one hash."""
 
 from __future__ import annotations
 
+import bisect
 import json
 
 from geocert.jobs.store.base import StoreBase
@@ -20,9 +21,12 @@ def _field(name: str, **labels) -> str:
 
 def _observe(pipe, name: str, buckets, values: list[float], **labels) -> None:
     """Add ``values`` to a histogram: one increment per bucket (each answered by Redis, so a
-    chunk's items are counted together rather than one command per item and bucket)."""
+    chunk's items are counted together rather than one command per item and bucket). The values
+    are sorted once and each bucket's count found by bisection (a pass over every value for each
+    of the 11 buckets cost 5,500 steps a 500-item chunk)."""
+    ordered = sorted(values)
     for bound in buckets:
-        count = sum(1 for value in values if value <= bound)
+        count = bisect.bisect_right(ordered, bound)
         if count:
             pipe.hincrby(METRICS_KEY, _field(name + "_bucket", le=str(bound), **labels), count)
     pipe.hincrby(METRICS_KEY, _field(name + "_bucket", le="+Inf", **labels), len(values))
