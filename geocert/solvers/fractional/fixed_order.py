@@ -37,8 +37,10 @@ def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def gram(G: np.ndarray, weight: np.ndarray) -> np.ndarray:
     """sum_j weight_j G_j' G_j for G (k, m, n): the products elementwise, summed over j and the
-    rows of each G_j by numpy's reduction over fixed axes (one order for given shapes)."""
-    return ((G[:, :, :, None] * G[:, :, None, :]) * weight[:, None, None, None]).sum(axis=(0, 1))
+    rows of each G_j by numpy's reduction over the first axis (one order for given shapes)."""
+    rows = G.reshape(-1, G.shape[-1])  # (k m, n): each G_j's rows, j by j
+    weighted_rows = rows * np.repeat(weight, G.shape[1])[:, None]
+    return (weighted_rows[:, :, None] * rows[:, None, :]).sum(axis=0)
 
 
 def weighted(G: np.ndarray, y: np.ndarray, weight: np.ndarray) -> np.ndarray:
@@ -48,14 +50,14 @@ def weighted(G: np.ndarray, y: np.ndarray, weight: np.ndarray) -> np.ndarray:
 
 def cholesky(M: np.ndarray) -> np.ndarray | None:
     """The lower factor L of M = L L' (M symmetric, its lower triangle read), column by column,
-    each inner product summed in order; None when a pivot is not positive (or not finite)."""
+    each inner product summed in one order; None when a pivot is not positive (or not finite)."""
     M = np.asarray(M, dtype=float)
     n = len(M)
     L = np.zeros((n, n))
     for j in range(n):
-        s = M[j:, j].copy()
-        for p in range(j):
-            s = s - L[j:, p] * L[j, p]
+        # the inner products by numpy's reduction over a row's last axis (a fixed order for a given
+        # length): one vector operation a column instead of one a term
+        s = M[j:, j] - (L[j:, :j] * L[j, :j]).sum(axis=1)
         pivot = float(s[0])
         if not (pivot > 0 and math.isfinite(pivot)):
             return None
