@@ -84,7 +84,8 @@ Open: none.
    eigendecomposition by fixed_order.symmetric_eigen, cyclic Jacobi on Python floats). Measured:
    homographies at offsets 0, 1e4, 1e6 and 1e7 (exact, 1e-3 px and 1 px of noise, seeds 5 and 6;
    the job data made once) written under Haswell and Prescott (with NPY_DISABLE_CPU_FEATURES) and
-   recomputed under both: all 48 estimates bit for bit the writer's. Far off (exact.needs_exact)
+   recomputed under both: all 48 estimates bit for bit the writer's; L2L2, L2L1 and L1L1 at 1e6
+   and 1e7 (seed 6; exact, 1e-3 and 1 px), each certified document verifies under the other kernel. Far off (exact.needs_exact)
    estimates._check_maps holds a homography's value to an ulp of the exact centroid image and reads
    its ends as offsets from it (review 37 class 3's fix), the width at the slack it had before
    (the writer before this fix computed the ends through BLAS: on the same 24 jobs they lie up to
