@@ -11,8 +11,10 @@ narrowed, a value moved, ``determined`` flipped or a warning dropped is refused 
 ``returned``). Numbers agree to 1e-6 of the interval's width and 1e-9 of the value (another
 machine's rounding of the same sums); a track's x, y and z values are its returned point's
 coordinates exactly, and its ends are read as offsets from their value, to the width and the ends'
-own rounding (END_OFFSET_ULPS), whatever the value's size; an end the data leave open (null) must
-be null. An
+own rounding (END_OFFSET_ULPS), whatever the value's size; a far homography's (its cost one a float
+evaluation could move, exact.needs_exact) likewise, its value the exact centroid image to an ulp
+(its writer, fractional.homography_estimate, computes one float on every machine); an end the
+data leave open (null) must be null. An
 analysis the solver stopped at its time limit (a single ``time_limit`` warning, no interval) or
 left out (null) claims nothing and is accepted as it is. Autocalibration's estimates (refitted
 with scipy by their writer) are not recomputed: check_determined, check_intrinsics and
@@ -74,6 +76,10 @@ END_OFFSET_ULPS = 2.0
 # cameras scaled by 1e-6 to 1e6) the offsets differ by up to 5.8e-7 of the width, under either
 # kernel alike. Far below a width: a collapsed or narrowed interval moves an end by a share of it.
 TRACK_WIDTH_SLACK = 1e-5
+# A far homography's value against the exact centroid image the verifier computes by the writer's
+# function (fractional.determinacy.exact_centroid_image), in units in its last place: 0 ulps apart
+# between writers' kernels (offsets 0 to 1e7, exact to 1 px of noise).
+HOMOGRAPHY_VALUE_ULPS = 1.0
 TRACK_POINT = ("x", "y", "z")  # the track estimate's intervals whose value is the returned point's coordinate
 COMPARED = ("method", "determined", "level", "redundancy")
 
@@ -349,14 +355,60 @@ def _check_maps(kind, result: dict, certificate: dict, earlier: bool = True) -> 
         source, target = read(certificate["data"], index)
         expected = safely(estimate.map_, source, target, item["matrix"], item.get("cost"), item.get("lower_bound"))
         spread = _map_cost_spread(source, target, item["matrix"])
+        width_slack = MAP_WIDTH_SLACK + spread + _map_offset(source, target) * JACOBIAN_ROUNDING
+        if np.asarray(item["matrix"]).shape != (3, 4) and _far(source, target, item["matrix"], certificate):
+            # far off, today's writer computes a homography's estimate in a fixed order (fractional.
+            # homography_estimate: bit for bit the verifier's under either kernel) and its value
+            # exactly: the value held to an ulp, each end read as its offset from it (as a track's,
+            # review 37 class 2), so an interval collapsed onto its value or moved with it is refused
+            # (review 37 class 3). The width keeps its slack for documents of the writer before
+            # (exact value and cost, estimate through BLAS: the stored homography_far_from_origin's
+            # ends 7.4e-6 of the width from today's); a writer's before the exact value stated a
+            # float cost too, which the objective check holds to the exact one here
+            # (checks._check_residual_claim)
+            _check_exact_values(where, determinacy, expected)
+            _compare(where, determinacy, expected, earlier, spread, width_slack, 0.0, 0.0, offsets=True)
+            continue
         # a resection's centre, measured within 2 ulps between kernels, is held to MAP_VALUE_ROUNDING;
-        # a homography's centroid image keeps VALUE_SLACK of itself: its writer now computes it
-        # exactly (exact_centroid_image, one float on every machine), but earlier writers computed
-        # it through the normalisers, some 300 ulps apart between kernels at 1e6 off the origin
-        # (review 37), and their documents bear no mark of the form
+        # a homography's centroid image nearer the origin keeps VALUE_SLACK of itself, for documents
+        # of earlier writers (computed through the normalisers, some 300 ulps apart between kernels
+        # at 1e6 off the origin, review 37), which bear no mark of the form
         resection = np.asarray(item["matrix"]).shape == (3, 4)
-        _compare(where, determinacy, expected, earlier, spread, MAP_WIDTH_SLACK + spread + _map_offset(source, target)
-                 * JACOBIAN_ROUNDING, _map_value_floor(source, target), MAP_VALUE_ROUNDING if resection else VALUE_SLACK)
+        _compare(where, determinacy, expected, earlier, spread, width_slack, _map_value_floor(source, target),
+                 MAP_VALUE_ROUNDING if resection else VALUE_SLACK)
+
+
+def _check_exact_values(where: str, determinacy: dict, expected: dict | None) -> None:
+    """Each stated value is the estimate's to HOMOGRAPHY_VALUE_ULPS of it (the rest is _compare's)."""
+    intervals = determinacy.get("intervals")
+    if expected is None or not isinstance(intervals, list):
+        return  # (_compare)
+    for number, (found, own) in enumerate(zip(intervals, expected["intervals"])):
+        value = found.get("value") if isinstance(found, dict) else None
+        if own["value"] is not None and is_number(value) and not abs(
+                float(value) - own["value"]) <= HOMOGRAPHY_VALUE_ULPS * math.ulp(own["value"]):
+            raise Invalid("returned", f"{where}/intervals/{number}/value is {value!r:.40}, the exact centroid image "
+                                      f"is {own['value']!r:.40}")
+
+
+def _far(source: np.ndarray, target: np.ndarray, matrix: Any, certificate: dict) -> bool:
+    """Whether a float evaluation's rounding could move the map's cost (exact.needs_exact, as the
+    objective check decides it): where it could, its writer states the exact cost, and today's."""
+    from geocert.solvers.core import exact
+    from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
+    from geocert.solvers.core.geometry import norm_cost
+    from geocert.solvers.fractional.items import MapItem
+
+    norm = (certificate.get("options") or {}).get("norm")
+    try:
+        M = np.asarray(matrix, dtype=float)
+        item = MapItem((source, target), norm, chart=False)
+        with np.errstate(all="ignore"):
+            floats, _, _ = item.raw_residuals(M)
+            return bool(exact.needs_exact(floats, item.residual_uncertainty(M), norm_cost(floats, norm), norm,
+                                          OBJECTIVE_TOLERANCE))
+    except (TypeError, ValueError, KeyError, ArithmeticError):
+        return False
 
 
 def _check_frames(kind, result: dict, certificate: dict, earlier: bool = True) -> None:

@@ -9,7 +9,8 @@ reads off the answer, and the degeneracies recognised.
   of the data's curvature is singular). A certified L2L2 resection's centre also has proven
   intervals at the estimate's level (prove_map, fractional.resection_sublevel).
 - A homography: the image of the source points' centroid; warned when the source or the target
-  points are nearly collinear (coplanar, for maps of P^3).
+  points are nearly collinear (coplanar, for maps of P^3). Computed in a fixed order of operations
+  (fractional.homography_estimate): the same floats on every machine.
 
 The curvature is that of the squared reprojection errors whatever the norm solved for (for the
 L1 norms, an estimate of the same kind: the intervals say how flat the fit is, not a confidence).
@@ -437,6 +438,9 @@ def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | Non
     target = np.asarray(target, dtype=float)
     M = np.asarray(matrix, dtype=float)
     m, n1 = M.shape
+    if not (m == 3 and n1 == 4):  # a homography: in a fixed order of operations (review 38 class 4)
+        from geocert.solvers.fractional.homography_estimate import homography
+        return homography(source, target, M, cost, lower)
     # Parameters in normalised coordinates (centroid 0, mean distance sqrt 2 on both sides), where
     # the map's entries are of one size: in pixels they span orders of magnitude, and J'J's
     # smallest eigenvalue would look singular for that reason alone.
@@ -457,52 +461,28 @@ def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | Non
     zero = np.zeros(basis.shape[1])
     J = numeric_jacobian(residuals, zero)
     quantities = {}
-    if m == 3 and n1 == 4:  # resection: the camera centre
-        Ts_inv = np.linalg.inv(Ts)
+    Ts_inv = np.linalg.inv(Ts)
 
-        def centre(theta):
-            # the null vector of the normalised map (entries of one size), taken back to the world:
-            # the pixel-world camera's SVD rounds its centre at 1e-10 of itself far out
-            C = Ts_inv @ np.linalg.svd(normalised + (basis @ theta).reshape(M.shape))[2][-1]
-            return C[:3] / C[3]
+    def centre(theta):
+        # the null vector of the normalised map (entries of one size), taken back to the world:
+        # the pixel-world camera's SVD rounds its centre at 1e-10 of itself far out
+        C = Ts_inv @ np.linalg.svd(normalised + (basis @ theta).reshape(M.shape))[2][-1]
+        return C[:3] / C[3]
 
-        value = centre(zero)
-        gradient = numeric_jacobian(centre, zero)
-        distance = float(np.linalg.norm(value - source.mean(axis=0)))  # the centre known to a tenth of it
-        for k, name in enumerate(("centre_x", "centre_y", "centre_z")):
-            quantities[name] = (float(value[k]), gradient[k], distance)
-    else:  # a homography: where the source points' centroid goes
-        centroid = np.append(source.mean(axis=0), 1.0)
-
-        def transfer(theta):
-            image = matrix_of(theta) @ centroid
-            return image[:-1] / image[-1]
-
-        value = exact_centroid_image(source, M)  # the same floats on every machine
-        gradient = numeric_jacobian(transfer, zero)
-        names = ("centroid_image_x", "centroid_image_y", "centroid_image_z")
-        extent = float(np.sqrt(((target - target.mean(axis=0)) ** 2).sum(axis=1).mean()))  # the targets' spread
-        for k in range(len(value)):
-            quantities[names[k]] = (float(value[k]), gradient[k], extent)
+    value = centre(zero)
+    gradient = numeric_jacobian(centre, zero)
+    distance = float(np.linalg.norm(value - source.mean(axis=0)))  # the centre known to a tenth of it
+    for k, name in enumerate(("centre_x", "centre_y", "centre_z")):
+        quantities[name] = (float(value[k]), gradient[k], distance)
     out = curvature_intervals(J, residuals(zero), quantities, certified_gap(cost, lower),
                               squared_sum=exact_squared_residuals(source, target, M))
-    if m == 3 and n1 == 4:
-        flat = spread(source)
-        if flat[-1] < FLAT:
-            out.warnings.append({"code": "near_coplanar_points",
-                                 "detail": f"the 3D points are nearly coplanar (spread {flat[-1]:.2g} of their extent): "
-                                           "the camera is poorly fixed off their plane"})
-        if any(interval["lower"] is None for interval in out.intervals):  # a direction the data do not fix
-            out.warnings.append({"code": "near_critical_configuration",
-                                 "detail": "the points and the camera centre are near a configuration that does not fix "
-                                           "the camera (coplanar points, or a twisted cubic through the centre)"})
-    else:
-        dims = source.shape[1]
-        for name, pts in (("source", source), ("target", target)):
-            flat = spread(pts)
-            if flat[dims - 1] < FLAT:
-                shape = "collinear" if dims == 2 else "coplanar"
-                out.warnings.append({"code": f"near_{shape}_points",
-                                     "detail": f"the {name} points are nearly {shape} (spread {flat[dims - 1]:.2g} of "
-                                               "their extent): the map is poorly fixed off that line or plane"})
+    flat = spread(source)
+    if flat[-1] < FLAT:
+        out.warnings.append({"code": "near_coplanar_points",
+                             "detail": f"the 3D points are nearly coplanar (spread {flat[-1]:.2g} of their extent): "
+                                       "the camera is poorly fixed off their plane"})
+    if any(interval["lower"] is None for interval in out.intervals):  # a direction the data do not fix
+        out.warnings.append({"code": "near_critical_configuration",
+                             "detail": "the points and the camera centre are near a configuration that does not fix "
+                                       "the camera (coplanar points, or a twisted cubic through the centre)"})
     return out.document()

@@ -99,3 +99,43 @@ def inverse3(A: np.ndarray) -> np.ndarray | None:
 def norm(v: np.ndarray) -> float:
     """The 2-norm of a vector, its squares summed in order."""
     return math.sqrt(float(mul(v, v)))
+
+
+def symmetric_eigen(M: np.ndarray, sweeps: int = 100) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues (ascending) and eigenvectors (columns) of a symmetric M (its upper triangle
+    read), by cyclic Jacobi rotations in a fixed order on Python floats: np.linalg.eigh's LAPACK
+    path differs between kernels. Sweeps stop once every off-diagonal entry is below 1e-18 of the
+    matrix's size (rounding's), or after ``sweeps``. ArithmeticError on entries not finite."""
+    A = [[float(M[min(i, j)][max(i, j)]) for j in range(len(M))] for i in range(len(M))]
+    n = len(A)
+    if not all(math.isfinite(x) for row in A for x in row):
+        raise ArithmeticError("a matrix entry is not finite")
+    V = [[1.0 if i == j else 0.0 for j in range(n)] for i in range(n)]
+    size = math.fsum(x * x for row in A for x in row)
+    for _ in range(sweeps):
+        if math.fsum(A[i][j] * A[i][j] for i in range(n) for j in range(i + 1, n)) <= 1e-36 * size:
+            break
+        for p in range(n - 1):
+            for q in range(p + 1, n):
+                apq = A[p][q]
+                if apq == 0.0:
+                    continue
+                tau = (A[q][q] - A[p][p]) / (2.0 * apq)
+                if abs(tau) > 1e150:  # tau * tau overflows: t is 1 / (2 tau) to rounding
+                    t = 0.5 / tau
+                else:
+                    t = math.copysign(1.0, tau) / (abs(tau) + math.sqrt(1.0 + tau * tau))
+                c = 1.0 / math.sqrt(1.0 + t * t)
+                s = t * c
+                for row in A:  # A J: columns p and q
+                    akp, akq = row[p], row[q]
+                    row[p], row[q] = c * akp - s * akq, s * akp + c * akq
+                Ap, Aq = A[p], A[q]  # J' (A J): rows p and q
+                A[p] = [c * x - s * y for x, y in zip(Ap, Aq)]
+                A[q] = [s * x + c * y for x, y in zip(Ap, Aq)]
+                A[p][q] = A[q][p] = 0.0
+                for row in V:
+                    vkp, vkq = row[p], row[q]
+                    row[p], row[q] = c * vkp - s * vkq, s * vkp + c * vkq
+    order = sorted(range(n), key=lambda k: (A[k][k], k))
+    return (np.array([A[k][k] for k in order]), np.array([[row[k] for k in order] for row in V]).reshape(n, n))
