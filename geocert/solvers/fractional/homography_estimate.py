@@ -21,6 +21,7 @@ from fractions import Fraction
 import numpy as np
 
 from geocert.solvers.core.determinacy import SINGULAR, Determinacy, certified_gap, cost_increase, interval, spread
+from geocert.solvers.core.exact import exact_centroid_image, exact_squared_residuals
 from geocert.solvers.fractional.fixed_order import mul, norm, symmetric_eigen
 
 FLAT = 1e-2  # fractional.determinacy.FLAT: points whose centred spread along a direction is below this
@@ -126,8 +127,6 @@ def homography(source: np.ndarray, target: np.ndarray, M: np.ndarray, cost: floa
                lower: float | None) -> dict:
     """The estimate of a homography (M (d+1) x (d+1)): where the source points' centroid goes, its
     value the exact image (exact_centroid_image), its level from the exact squared residuals."""
-    from geocert.solvers.fractional.determinacy import exact_centroid_image, exact_squared_residuals
-
     with np.errstate(all="ignore"):  # a point mapped to infinity: its residuals' column is not finite
         J_J, gradient, residuals = information(source, target, M)
     value = exact_centroid_image(source, M)  # the same floats on every machine
