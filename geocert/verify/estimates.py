@@ -77,7 +77,7 @@ END_OFFSET_ULPS = 2.0
 # kernel alike. Far below a width: a collapsed or narrowed interval moves an end by a share of it.
 TRACK_WIDTH_SLACK = 1e-5
 # A far homography's value against the exact centroid image the verifier computes by the writer's
-# function (fractional.determinacy.exact_centroid_image), in units in its last place: 0 ulps apart
+# function (core.exact.exact_centroid_image), in units in its last place: 0 ulps apart
 # between writers' kernels (offsets 0 to 1e7, exact to 1 px of noise).
 HOMOGRAPHY_VALUE_ULPS = 1.0
 TRACK_POINT = ("x", "y", "z")  # the track estimate's intervals whose value is the returned point's coordinate

@@ -195,7 +195,7 @@ def curvature_intervals(J: np.ndarray, residuals: np.ndarray, quantities: dict[s
                         squared_sum: float | None = None) -> Determinacy:
     """Intervals for quantities (name -> (value, gradient in the parameters[, scale])) around an
     optimum with residual Jacobian J (n x p) and residuals r; ``squared_sum`` in place of the float
-    r'r where the caller computes it exactly (fractional.determinacy.exact_squared_residuals)."""
+    r'r where the caller computes it exactly (core.exact.exact_squared_residuals)."""
     J = np.asarray(J, dtype=float)
     r = np.asarray(residuals, dtype=float)
     n, p = J.shape
