@@ -20,6 +20,8 @@ Found:
    5.8e-6, the solver's own lower bound on the data 4.85e-6, 48 times abs_gap; claimed 0,
    trivial bound: the certificate verifies, and so does the full result with the exact residuals
    stated (check_returned holds them to the exact ones) and its determinacy left out (None).
+   (c) resection alike (review 35's K [I | 0], 12 points): the camera's exact cost is 1.5e4
+   px^2, the solver's own lower bound on the data 7.6e3 px^2; claimed 0, both verify.
    At fault: geocert/solvers/fractional/proof.py:residual_uncertainty (no absolute term for
    underflow) as exact.needs_exact reads it in geocert/verify/checks.py:_check_residual_claim; the
    solutions read unscaled (items.TrackItem.solution for a point at infinity, MapItem.solution).
@@ -137,23 +139,32 @@ def test_the_same_direction_at_unit_scale_is_refused():
     assert not report.valid and report.first_failure["check"] == "objective"
 
 
-# Class 1 (b): a homography's matrix in subnormal numbers
+# Class 1 (b) and (c): a homography's or a resection's matrix in subnormal numbers
 
-@pytest.fixture(scope="module")
-def subnormal_homography() -> dict:
-    """A genuine homography result (review 37's near-identity map, exact data), its matrix rounded
-    to integers times 2^-1074 (largest 1000), its targets this machine's float image under that
-    matrix, claimed at cost 0 by the trivial bound, the exact residuals stated, no determinacy."""
-    from geocert.jobs.runner import solve_job
-    from geocert.solvers.fractional.items import MapItem
+def _genuine_map_job(kind: str) -> dict:
+    """Review 37's near-identity homography, review 35's resection (K [I | 0], 12 points 5 in
+    front): exact data, at the origin."""
+    from tests.verify.test_forgeries_review35 import _far_resection
     from tests.verify.test_forgeries_review37 import _far_homography
 
-    result = copy.deepcopy(solve_job(_far_homography(0.0, 0.0, 5)))
+    return _far_homography(0.0, 0.0, 5) if kind == "homography" else _far_resection(0.0, 0.0, 5)
+
+
+@pytest.fixture(scope="module", params=["homography", "resection"])
+def subnormal_homography(request) -> dict:
+    """A genuine result of the kind, its matrix rounded to integers times 2^-1074 (largest 1000),
+    its targets this machine's float image under that matrix, claimed at cost 0 by the trivial
+    bound, the exact residuals stated, no determinacy."""
+    from geocert.jobs.runner import solve_job
+    from geocert.solvers.fractional.items import MapItem
+
+    result = copy.deepcopy(solve_job(_genuine_map_job(request.param)))
     certificate = result["certificate"]
     source = np.array(certificate["data"]["maps"][0]["source"], dtype=float)
     genuine = np.array(result["maps"][0]["matrix"], dtype=float)
     matrix = np.round(genuine / np.abs(genuine).max() * 1000) * SUBNORMAL
-    target = -MapItem((source, np.zeros_like(source)), "L2L2", chart=False).raw_residuals(matrix)[0]
+    nothing = np.zeros((len(source), len(matrix) - 1))
+    target = -MapItem((source, nothing), "L2L2", chart=False).raw_residuals(matrix)[0]
     certificate["data"]["maps"][0]["target"] = target.tolist()
     exact_residuals = MapItem((source, target), "L2L2", chart=False).exact_residuals(matrix)
     for where in (certificate["items"][0], result["maps"][0]):
@@ -177,7 +188,8 @@ def test_a_subnormal_homographys_result_claimed_at_cost_0_is_refused(subnormal_h
 
 def test_the_subnormal_homography_costs_more_than_abs_gap_and_so_does_every_map(subnormal_homography):
     """Machine-independent: the stated matrix's exact cost is above 1e-6 (ten times abs_gap), and
-    the solver's own certificate on the same data proves a lower bound above 1e-6."""
+    the solver's own certificate on the same data proves a lower bound above 1e-6 (measured: a
+    homography's 5.8e-6 against 4.85e-6; a resection's 1.5e4 against 7.6e3 px^2)."""
     from geocert.jobs.runner import solve_job
     from geocert.solvers.core import exact
     from geocert.solvers.fractional.items import MapItem
@@ -187,6 +199,6 @@ def test_the_subnormal_homography_costs_more_than_abs_gap_and_so_does_every_map(
     item = MapItem((np.array(data["source"]), np.array(data["target"])), "L2L2", chart=False)
     matrix = np.array(certificate["items"][0]["matrix"])
     assert exact.cost(item.exact_residuals(matrix), "L2L2") > 1e-6
-    genuine = solve_job({"kind": "homography", "data": certificate["data"],
+    genuine = solve_job({"kind": certificate["kind"], "data": certificate["data"],
                          "options": {"norm": "L2L2", "certificate": "full"}})
     assert genuine["maps"][0]["certified"] and genuine["maps"][0]["lower_bound"] > 1e-6
