@@ -22,14 +22,20 @@ Found:
    stated (check_returned holds them to the exact ones) and its determinacy left out (None).
    (c) resection alike (review 35's K [I | 0], 12 points): the camera's exact cost is 1.5e4
    px^2, the solver's own lower bound on the data 7.6e3 px^2; claimed 0, both verify.
+   (d) a finite point: three cameras K R_i [I | 0] sharing their centre at the origin (a rotating
+   camera), the point (3, 5, 40) * 1000 * 2^-1074 in front of them: exact cost 81.5 px^2 (the
+   solver's own best point 81.2, uncertified), claimed 0: verifies. Rescaling the solution alone
+   does not reach this one (its last coordinate is 1).
    At fault: geocert/solvers/fractional/proof.py:residual_uncertainty (no absolute term for
    underflow) as exact.needs_exact reads it in geocert/verify/checks.py:_check_residual_claim; the
    solutions read unscaled (items.TrackItem.solution for a point at infinity, MapItem.solution).
-   Suggested fix at the cause: read a homogeneous solution (a point at infinity, a map's matrix)
-   scaled by a power of two to its largest entry near 1, as normalised_cameras does cameras (the
-   exact residuals do not change, the float ones leave the subnormal range); and give
-   residual_uncertainty an absolute term for underflow (a few 2^-1074 over the depth), or take the
-   exact path wherever a product or depth is subnormal.
+   Suggested fix at the cause: give residual_uncertainty an absolute term for underflow (each
+   product's half of 2^-1074, a few 2^-1074 over the depth), or take the exact path wherever a
+   projection's terms are below the normal range (2^-1022 times a margin), in the objective check,
+   the stacked check (solvers/fractional/stacked.py _check_group), fractional._stated_figure and
+   MapItems.check_returned alike; and read a homogeneous solution (a point at infinity, a map's
+   matrix) scaled by a power of two to its largest entry near 1, as normalised_cameras does
+   cameras (the exact residuals do not change).
 
 Seen, no forgery: fractional.estimates._map_cost_spread divides by the float cost, a Python float:
 a map whose float residuals are all exactly 0 (cost 0.0) with a determinacy stated is refused with
@@ -137,6 +143,48 @@ def test_the_same_direction_at_unit_scale_is_refused():
     rehash(document)
     report = _verify(document)
     assert not report.valid and report.first_failure["check"] == "objective"
+
+
+# Class 1 (d): a finite point a subnormal distance in front of cameras centred at the origin
+
+def _rotating_camera_certificate() -> dict:
+    """Three cameras K R_i [I | 0] sharing their centre at the origin (a rotating camera, a
+    panorama), and a finite point (3, 5, 40) * 1000 * 2^-1074 in front of them: every product
+    behind its projections is subnormal. The observations are this machine's float image of it,
+    claimed at cost 0 by the trivial bound."""
+    from geocert.solvers.fractional.items import TrackItem
+
+    rng = np.random.default_rng(2)
+    K = np.array([[800.3, 0, 320.1], [0, 799.7, 240.2], [0, 0, 1]])
+    cameras = np.array([K @ np.hstack([_rotation(rng.normal(0, 0.05, 3)), np.zeros((3, 1))]) for _ in range(3)])
+    cameras /= np.abs(cameras).max(axis=(1, 2))[:, None, None]
+    point = np.append(DIRECTION[:3], 1.0)
+    observations = TrackItem((cameras, np.zeros((3, 2))), "L2L2", chart=False).raw_residuals(point)[0]
+    document = _subnormal_track_certificate()
+    document["data"]["cameras"] = cameras.tolist()
+    document["data"]["tracks"][0]["points"] = observations.tolist()
+    document["items"][0].update(point=point[:3].tolist(), at_infinity=False)
+    return rehash(document)
+
+
+@pytest.mark.xfail(strict=True, reason=CLASS_1)
+def test_a_finite_point_a_subnormal_distance_from_the_cameras_centre_claimed_at_cost_0_is_refused():
+    assert not _verify(_rotating_camera_certificate()).valid
+
+
+def test_the_finite_subnormal_point_costs_over_1_px2():
+    """Machine-independent: the stated point's exact cost is above 1 px^2 (measured 81.5; the
+    solver's own best point on these data costs 81.2, uncertified): rescaling a point at infinity
+    would not reach this one, whose last coordinate is 1."""
+    from geocert.solvers.core import exact
+    from geocert.solvers.fractional.items import TrackItem
+
+    document = _rotating_camera_certificate()
+    item = TrackItem((np.array(document["data"]["cameras"]), np.array(document["data"]["tracks"][0]["points"])),
+                     "L2L2", chart=False)
+    point = np.append(document["items"][0]["point"], 1.0)
+    assert exact.cost(item.exact_residuals(point), "L2L2") > 1.0
+    assert np.all(item.residual_uncertainty(point) == 0)
 
 
 # Class 1 (b) and (c): a homography's or a resection's matrix in subnormal numbers
