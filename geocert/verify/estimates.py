@@ -444,12 +444,13 @@ def _map_cost_spread(source: np.ndarray, target: np.ndarray, matrix: Any) -> flo
             residuals = target - proj[:, :-1] / proj[:, -1:]
             spread = cost_rounding(residuals, residual_uncertainty(proj, np.abs(homogeneous) @ np.abs(M).T), "L2L2")
             cost = float((residuals * residuals).sum())
-            relative = 2.0 * spread / cost
+            # a float cost of 0 with any spread is not determined at all: the cap, not a division by 0
+            relative = 2.0 * spread / cost if cost > 0 else (math.inf if spread > 0 else 0.0)
     except (TypeError, ValueError):
         return 0.0
     # capped: a cost the data barely determine (a near-exact map far off) must not let the level and
     # interval ends move by multiples of themselves
-    return min(relative, MAX_COST_SPREAD) if math.isfinite(relative) and relative >= 0 else 0.0
+    return min(relative, MAX_COST_SPREAD) if relative >= 0 else 0.0
 
 
 def _compare(where: str, given: dict, expected: dict | None, earlier_form: bool = True,

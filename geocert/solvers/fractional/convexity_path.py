@@ -29,6 +29,7 @@ from geocert.solvers.fractional.convexity import (ball_bounds, ball_intervals, c
                                                   sublevel_radii)
 from geocert.solvers.fractional.flat import FlatTracks, linear, refine
 from geocert.solvers.fractional.options import TriangulationOptions
+from geocert.solvers.fractional.proof import image_uncertainty
 
 STRICTNESS = 2.0  # the solver's allowances over the verifier's
 CLAIM_MARGIN = 1e-12  # the bound claimed below the bound computed (relative)
@@ -65,8 +66,7 @@ def certify_tracks(cameras: np.ndarray, tracks: list, options: TriangulationOpti
         lower, radius, _ = convexity_bounds(flat, x, strictness=STRICTNESS, terms=terms)
         y, image, r, depth = flat.points, terms.image, terms.r, terms.w
         rounding = ROUNDING * (np.abs(image) + np.abs(y))  # the verifier's residual_rounding
-        # proof.residual_uncertainty: how far the data determine each residual coordinate.
-        uncertainty = 1e-15 * (terms.size[:2] + np.abs(image) * terms.size[2]) / np.abs(depth)
+        uncertainty = image_uncertainty(image, depth, terms.size[:2], terms.size[2])
         sums = flat.per_track(np.stack([
             (r * r).sum(axis=0), (2 * np.abs(r) * rounding + rounding * rounding).sum(axis=0),
             (2 * np.abs(r) * uncertainty + uncertainty * uncertainty).sum(axis=0), (~(depth > 0)).astype(float)]))

@@ -161,17 +161,35 @@ def raw_sizes(cameras: np.ndarray, points: np.ndarray, solutions: np.ndarray) ->
     return terms[..., :2] + np.abs(points)[..., None, :, :] * terms[..., 2:3], terms[..., 2]
 
 
+# The least subnormal float. A product below the normal range rounds by up to half of it, not by a
+# share of itself: a solution written in subnormal numbers (review 39) rounded every product behind
+# its projection by up to a third of itself while 1e-15 of the terms' size underflowed to 0, so the
+# float cost of a forged solution (0) was taken as determined.
+UNDERFLOW = 2.0 ** -1074
+
+
 def residual_uncertainty(proj: np.ndarray, terms: np.ndarray) -> np.ndarray:
     """How far the data determine each residual coordinate ``proj[..., :-1] / proj[..., -1]`` (a
     projection, its depth last) given ``terms``, the sums of the magnitudes of the products behind
-    each of proj's entries: 1e-15 of the terms' size over the depth (a 4-term product rounds by
-    under 5e-16 of it). Tiny unless a point is nearly on a principal plane, or the data lie far
-    from the origin, where a residual is a difference of numbers far larger than itself and no
-    frame computes it better."""
-    depth = np.abs(proj[..., -1:])
-    image = proj[..., :-1] / np.where(depth > 0, proj[..., -1:], 1.0)
-    size = terms[..., :-1] + np.abs(image) * terms[..., -1:]
-    return np.where(depth > 0, 1e-15 * size / np.where(depth > 0, depth, 1.0), np.inf)
+    each of proj's entries (image_uncertainty)."""
+    depth = proj[..., -1:]
+    image = proj[..., :-1] / np.where(depth != 0, depth, 1.0)
+    return image_uncertainty(image, depth, terms[..., :-1], terms[..., -1:])
+
+
+def image_uncertainty(image: np.ndarray, depth: np.ndarray, numerator_size: np.ndarray,
+                      depth_size: np.ndarray) -> np.ndarray:
+    """How far the data determine an image coordinate ``image`` = numerator / ``depth``, given the
+    sums of the magnitudes of the products behind the numerator and the depth: 1e-15 of the terms'
+    size over the depth (a 4-term product rounds by under 5e-16 of it), and for products below the
+    normal range 4 UNDERFLOW each of numerator and depth over the depth (four products, each
+    rounded by half of UNDERFLOW; twice that for the division's second order) and the quotient's own
+    UNDERFLOW. Tiny unless a point is nearly on a principal plane, or the data lie far from the
+    origin (a residual is then a difference of numbers far larger than itself, and no frame
+    computes it better), or the solution's numbers are subnormal; infinite at depth 0."""
+    depth = np.abs(depth)
+    size = 1e-15 * (numerator_size + np.abs(image) * depth_size) + 4 * UNDERFLOW * (1.0 + np.abs(image))
+    return np.where(depth > 0, size / np.where(depth > 0, depth, 1.0) + UNDERFLOW, np.inf)
 
 
 def track_uncertainty(cameras: np.ndarray, solution: np.ndarray) -> np.ndarray:
