@@ -219,12 +219,13 @@ class TriangulationKind(ProblemKind):
     def _document(parsed: ParsedTracks, views, points, result: TrackResult, options: TriangulationOptions) -> dict:
         from geocert.solvers.core.determinacy import safely
         from geocert.solvers.fractional import determinacy
+        from geocert.solvers.fractional.columns import certified_sublevel
 
         document = track_document(result, options.detail, options.certificate == "full")
         if options.detail == "full":  # brief: not computed
             document["determinacy"] = safely(determinacy.track, parsed.cameras[views], points, result.point,
                                              result.at_infinity, result.cost, determinacy.stated_lower_bound(result),
-                                             getattr(result.certificate, "sublevel", None))
+                                             certified_sublevel(result))
         return document
 
     def solve_batch(self, parsed: ParsedTracks, indices: list[int], options: TriangulationOptions, callback,

@@ -183,5 +183,13 @@ def sublevels(results: Sequence) -> list[dict | None]:
         others = enumerate(results)
     for i, result in others:
         if result is not None:
-            out[i] = getattr(result.certificate, "sublevel", None)
+            out[i] = certified_sublevel(result)
     return out
+
+
+def certified_sublevel(result) -> dict | None:
+    """A result's proven interval where its claim stands: a search may prove one and the result be
+    decertified after it (its bound not the data's problem's, items.UNDISCOUNTABLE), and the
+    verifier reads a sublevel only from a certified claim's proof, so an uncertified track whose
+    estimate said "proven" was refused on its writer's own machine."""
+    return getattr(result.certificate, "sublevel", None) if result.certified else None

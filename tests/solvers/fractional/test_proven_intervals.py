@@ -257,3 +257,18 @@ def test_one_two_view_track_alone_proves_no_interval_at_its_level():
     assert determinacy["proven"] is False and determinacy["proven_intervals"] is None
     assert "sublevel" not in result["certificate"]["items"][0]["proof"]
     assert verify_any(result).valid
+
+
+def test_a_track_decertified_after_its_search_states_no_proven_interval():
+    """A search may prove a track's interval and the track then lose its claim (a point near a
+    camera's centre: its depth is round-off, the search's bound is not the data's problem's). The
+    verifier reads a proven interval only from a certified claim's proof, so the writer states
+    none for it: such tracks said "proven" and were refused on their writer's own machine."""
+    from tests.verify.test_depth_across_kernels import _near_centre_job
+
+    result = solve_job(_near_centre_job(1))
+    decertified = [track for track in result["tracks"] if not track["certified"]
+                   and track["certificate"]["leaves"] >= 1]
+    assert decertified, "the premise: a searched track left uncertified"
+    assert all(track["determinacy"]["proven"] is False for track in decertified)
+    assert verify_any(result).valid, verify_any(result).first_failure
