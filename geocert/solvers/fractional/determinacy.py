@@ -25,7 +25,7 @@ import numpy as np
 from geocert.solvers.core.determinacy import (SIGMAS, SINGULAR, Determinacy, certified_gap, curvature_intervals,
                                                interval, numeric_jacobian, proven_document, safely, spread)
 from geocert.solvers.core.exact import exact_centroid_image, exact_squared_residuals  # noqa: F401 (callers read them here)
-from geocert.solvers.fractional.charts import camera_centres
+from geocert.solvers.fractional import fixed_order
 from geocert.solvers.fractional.columns import solutions, sublevels
 
 PARALLAX_DEGREES = 1.0  # rays meeting at less than this: near-zero parallax
@@ -40,11 +40,19 @@ def stated_lower_bound(result) -> float | None:
 
 
 def _centres(cameras: np.ndarray) -> np.ndarray:
-    """Euclidean centres (NaN for a camera whose centre is at infinity)."""
-    C = camera_centres(cameras)
+    """Euclidean centres (NaN for a camera whose centre is at infinity), computed in a fixed order
+    (the writer's batched path and the verifier's single track, on any machine, read one float)."""
+    C = fixed_order.camera_centres(cameras)
     finite = np.abs(C[:, 3:4]) > 1e-12 * np.abs(C).max(axis=1, keepdims=True)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(finite, C[:, :3] / C[:, 3:4], np.nan)
+
+
+def _length(ray: np.ndarray) -> np.ndarray | float:
+    """|ray| over the last axis, its squares summed in order: the single track's and the batched
+    tracks' depth, one float (np.linalg.norm's dot may fuse its products under one kernel)."""
+    squares = ray[..., 0] * ray[..., 0] + ray[..., 1] * ray[..., 1] + ray[..., 2] * ray[..., 2]
+    return float(np.sqrt(squares)) if np.ndim(squares) == 0 else np.sqrt(squares)
 
 
 def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at_infinity: bool,
@@ -72,7 +80,7 @@ def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at
          / proj[:, 2:3, None]).reshape(-1, 3)
     centres = _centres(cameras)
     ray = X - centres[0]
-    length = float(np.linalg.norm(ray)) if np.all(np.isfinite(centres[0])) else math.nan
+    length = _length(ray) if np.all(np.isfinite(centres[0])) else math.nan
     scale = length if length > 0 else None  # the point is fixed when known to a tenth of its depth
     quantities = {name: (float(X[k]), np.eye(3)[k], scale) for k, name in enumerate(("x", "y", "z"))}
     if scale is not None:
@@ -86,7 +94,7 @@ def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at
     rays = X[None, :] - centres
     rays = rays[np.all(np.isfinite(rays), axis=1)]
     if len(rays) >= 2:
-        unit = rays / np.linalg.norm(rays, axis=1, keepdims=True)
+        unit = rays / _length(rays)[:, None]
         cosines = np.clip(np.abs(unit @ unit.T), -1.0, 1.0)
         widest = float(np.degrees(np.arccos(cosines.min())))
         if widest < PARALLAX_DEGREES:
@@ -252,11 +260,11 @@ def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.
     values, vectors = np.linalg.eigh(0.5 * (information + information.transpose(0, 2, 1)))
     centres = all_centres[views]  # (G, n, 3)
     ray = X - centres[:, 0]
-    length = np.sqrt((ray * ray).sum(axis=1))
+    length = _length(ray)
     has_depth = np.all(np.isfinite(centres[:, 0]), axis=1) & (length > 0)
     rays = X[:, None, :] - centres
     usable = np.all(np.isfinite(rays), axis=2)  # (G, n)
-    unit = rays / np.sqrt((rays * rays).sum(axis=2))[..., None]
+    unit = rays / _length(rays)[..., None]
     cosines = np.clip(np.abs(np.einsum("gai,gbi->gab", unit, unit)), -1.0, 1.0)
     cosines = np.where(usable[:, :, None] & usable[:, None, :], cosines, np.inf)
     widest = np.degrees(np.arccos(np.minimum(cosines.min(axis=(1, 2)), 1.0)))
