@@ -1,0 +1,176 @@
+"""Review 40: a hostile review of the residuals' uncertainty below the normal range (proof.
+image_uncertainty's UNDERFLOW term), the fixed-order camera centres behind a track's depth
+estimate (fixed_order.camera_centres, determinacy._length) and columns.certified_sublevel.
+
+Found:
+
+1. The scope check squares the residuals. checks._check_residual_claim (geocert/verify/checks.py:1040)
+   reads a solution's longest residual as sqrt(sum r*r): a residual below about 1.5e-162 squares
+   to 0 (below the least subnormal), so its length reads 0 and passes any max_residual (a finite
+   number > 0, options.ResidualOptions: 1e-300 is one). Two cameras on one optical axis, K = I,
+   observations (0, 0) and (1e-165, 0), max_residual 1e-300: no point has every residual within
+   1e-300 (the first view asks |x| <= 1e-300, the second |x/2 - 1e-165| <= 1e-300), so the scope
+   is empty and nothing in it is optimal; a claim "optimal at (0, 0, 1), cost 0 (L2L2) or 1e-165
+   (L1L1), trivial bound" verifies, its residual 1e135 times max_residual. The solver itself
+   certifies such a point on these data (its own scope test squares alike).
+   Suggested fix at the cause: compare each residual coordinate against max_residual before
+   squaring (|r_k| > max_residual is out), or measure the length scaled (np.hypot, or divided by
+   the largest coordinate first), in the verifier's scope check and the solver's alike.
+
+2. Genuine output refused on its own machine: cameras whose entries reach 2^1023 (a camera is
+   defined up to scale; geometry.normalised_cameras brings it to its largest entry near 1 for the
+   solvers and the certificate's checks). estimates._check_tracks (geocert/verify/estimates.py:306)
+   recomputes a track's determinacy estimate from the raw data/cameras, not normalised: the
+   projections overflow to inf, the verifier's estimate is undetermined, and the writer's
+   (normalised cameras, determined) is refused at "returned". The certificate alone verifies.
+   Suggested fix at the cause: read the cameras through normalised_cameras in _check_tracks (and
+   wherever an estimate reads data/cameras), as the writer (triangulation.parse, check_cameras)
+   does: a power of two changes no residual, depth or Jacobian.
+
+Seen, not a forgery: cameras in subnormal numbers (entries times 2^-1070) crash the solver's
+parse (geometry.normalised_cameras: math.ldexp(1.0, 1069) raises OverflowError, not an
+InputError) and the verifier refuses such a document at "format" with "OverflowError: math range
+error" (a crash's text as its reason).
+
+Refused (plain tests below): proven intervals stated on an uncertified track, or a certified track's
+proof's sublevel dropped with its determinacy still saying proven; a genuine result on cameras
+scaled by 2^-1000 (products near the bottom of the normal range) verifies.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import numpy as np
+import pytest
+
+from geocert.verify.checks import verify_any
+from tests.verify.test_forgeries import rehash, uncertify
+
+
+def _verify(document: dict):
+    return verify_any(json.loads(json.dumps(document)))
+
+
+# Class 1: a residual too small to square passes any max_residual
+
+AXIS_CAMERAS = [np.hstack([np.eye(3), np.zeros((3, 1))]).tolist(),  # K = I, centre at the origin
+                np.hstack([np.eye(3), np.array([[0.0], [0.0], [1.0]])]).tolist()]  # centre at (0, 0, -1)
+TINY = 1e-165  # its square underflows to 0
+MAX_RESIDUAL = 1e-300
+
+
+def _empty_scope_certificate(norm: str) -> dict:
+    """Observations (0, 0) and (TINY, 0) in two cameras on one optical axis, max_residual
+    MAX_RESIDUAL (an empty scope), and a claim that (0, 0, 1) is optimal by the trivial bound."""
+    cost = 0.0 if norm == "L2L2" else TINY  # (TINY^2 rounds to 0; TINY under L1L1)
+    claim = {"index": 0, "status": "optimal", "certified": True, "cost": cost, "lower_bound": 0.0, "gap": cost,
+             "point": [0.0, 0.0, 1.0], "at_infinity": False, "proof": {"type": "trivial"}}
+    document = {"format": "geocert-certificate", "version": 2, "kind": "triangulation",
+                "options": {"job_time_limit_s": 600.0, "rel_gap": 0.001, "abs_gap": 1e-07, "max_nodes": 2000,
+                            "time_limit_s": 30.0, "certificate": "full", "norm": norm,
+                            "max_residual": MAX_RESIDUAL, "detail": "full"},
+                "data": {"cameras": AXIS_CAMERAS, "tracks": [{"views": [0, 1], "points": [[0.0, 0.0], [TINY, 0.0]]}]},
+                "items": [claim]}
+    return rehash(document)
+
+
+def test_the_scope_is_empty_and_the_claimed_point_is_outside_it():
+    """Machine-independent: the claimed point's residual in view 1 is TINY exactly (its image is
+    (0, 0)), 1e135 times max_residual; and no point is in scope, since view 0 asks |x| <=
+    MAX_RESIDUAL and view 1 |x / 2 - TINY| <= MAX_RESIDUAL (x / 2 <= MAX_RESIDUAL / 2)."""
+    from geocert.solvers.core import exact
+    from geocert.solvers.fractional.items import TrackItem
+
+    document = _empty_scope_certificate("L1L1")
+    item = TrackItem((np.array(AXIS_CAMERAS), np.array(document["data"]["tracks"][0]["points"])), "L1L1",
+                     chart=False)
+    residuals = item.exact_residuals(np.array([0.0, 0.0, 1.0, 1.0]))
+    assert np.abs(residuals).max() == TINY > 1e100 * MAX_RESIDUAL
+    assert MAX_RESIDUAL + MAX_RESIDUAL / 2 < TINY  # |x| and |x / 2 - TINY| cannot both be that small
+    assert exact.cost(residuals, "L1L1") == TINY
+
+
+@pytest.mark.xfail(strict=True, reason="review 40 class 1: checks._check_residual_claim squares the residuals "
+                                       "for the scope check; a residual of 1e-165 reads length 0 and passes "
+                                       "max_residual 1e-300 (an empty scope)")
+@pytest.mark.parametrize("norm", ["L2L2", "L1L1"])
+def test_a_point_outside_an_empty_scope_claimed_optimal_is_refused(norm):
+    report = _verify(_empty_scope_certificate(norm))
+    assert not report.valid and report.first_failure["check"] == "scope", report.first_failure
+
+
+@pytest.mark.xfail(strict=True, reason="review 40 class 1: the solver's own scope test squares alike, and "
+                                       "certifies a point outside the empty scope")
+def test_the_solver_certifies_no_point_in_an_empty_scope():
+    from geocert.jobs.runner import solve_job
+
+    document = _empty_scope_certificate("L2L2")
+    result = solve_job({"kind": "triangulation", "data": document["data"],
+                        "options": {"norm": "L2L2", "certificate": "full", "max_residual": MAX_RESIDUAL}})
+    assert not result["tracks"][0]["certified"]
+
+
+# Class 2: cameras with entries near the top of the float range
+
+def _scene(scale: float) -> dict:
+    """Review 39's three cameras times ``scale`` (a power of two: the same cameras), one track of
+    a point 10 in front, observed with offsets of a third of a pixel."""
+    from tests.verify.test_forgeries_review39 import _cameras
+
+    cameras = _cameras()
+    X = np.array([0.3, 0.2, 10.0, 1.0])
+    observations = [((P @ X)[:2] / (P @ X)[2] + np.array([0.3, -0.2])).tolist() for P in cameras]
+    return {"cameras": (cameras * scale).tolist(), "tracks": [{"views": [0, 1, 2], "points": observations}]}
+
+
+def _solve(scale: float) -> dict:
+    from geocert.jobs.runner import solve_job
+
+    return solve_job({"kind": "triangulation", "data": _scene(scale), "options": {"norm": "L2L2", "certificate": "full"}})
+
+
+@pytest.mark.xfail(strict=True, reason="review 40 class 2: estimates._check_tracks recomputes the determinacy "
+                                       "from the raw cameras (not normalised_cameras), whose projections overflow")
+def test_a_genuine_result_on_cameras_near_the_float_limit_verifies():
+    result = _solve(2.0 ** 1023)
+    assert result["tracks"][0]["certified"]
+    assert _verify(result["certificate"]).valid  # the certificate alone: normalised cameras
+    report = _verify(result)
+    assert report.valid, report.first_failure
+
+
+def test_a_genuine_result_on_cameras_near_the_bottom_of_the_normal_range_verifies():
+    """2^-1000: every product still normal (entries to 2^-1010); the writer and the verifier agree."""
+    result = _solve(2.0 ** -1000)
+    assert result["tracks"][0]["certified"]
+    report = _verify(result)
+    assert report.valid, report.first_failure
+
+
+# Refused: proven intervals tied to certified claims (columns.certified_sublevel)
+
+@pytest.fixture(scope="module")
+def proven_result() -> dict:
+    result = _solve(1.0)
+    assert result["tracks"][0]["determinacy"]["proven"] is True
+    assert "sublevel" in result["certificate"]["items"][0]["proof"]
+    return result
+
+
+def test_proven_intervals_on_an_uncertified_track_are_refused(proven_result):
+    result = copy.deepcopy(proven_result)
+    uncertify(result["certificate"]["items"][0])
+    del result["certificate"]["items"][0]["proof"]
+    uncertify(result["tracks"][0])
+    rehash(result["certificate"])
+    report = _verify(result)
+    assert not report.valid
+
+
+def test_a_certified_tracks_proven_intervals_without_their_sublevel_are_refused(proven_result):
+    result = copy.deepcopy(proven_result)
+    del result["certificate"]["items"][0]["proof"]["sublevel"]
+    report = _verify(result)
+    assert not report.valid and report.first_failure["check"] == "returned", report.first_failure
