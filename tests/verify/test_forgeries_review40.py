@@ -54,6 +54,17 @@ Found:
    rule, fixes() of each) once they are held to the verifier's within their slack, or accept
    either value where the verifier's half-width is within that slack of the tolerance.
 
+5. (Borderline: docs/certificate.md lists ``note`` as informational.) A certified track's summary
+   ``note`` states the convexity proof's fact in numbers, "no search: the cost is convex on the
+   ball of radius R about the solution, which holds every point of the scope costing as little"
+   (kinds/documents.py:50), and no check reads it: the note rewritten to a radius of 1e6 (the
+   proof's is 6.2; a ball of radius 1e6 holds points behind the cameras, where the cost is not
+   even defined) verifies. The summary's scope and root_region, which state facts alike, are tied
+   to the proof (fractional._check_scope_words, _check_root_region).
+   Suggested fix at the cause: a certified item's note is the writer's words for its proof (the
+   convexity proof's radius as the proof states it; the other notes' fixed texts), or the note
+   carries no numbers a reader would take as proven.
+
 Seen, not a forgery: cameras in subnormal numbers (entries times 2^-1070) crash the solver's
 parse (geometry.normalised_cameras: math.ldexp(1.0, 1069) raises OverflowError, not an
 InputError) and the verifier refuses such a document at "format" with "OverflowError: math range
@@ -291,3 +302,26 @@ def test_a_genuine_track_at_its_intervals_tolerance_verifies():
             assert report.valid, report.first_failure
             lo, hi = (mid, hi) if result["tracks"][0]["determinacy"]["determined"] else (lo, mid)
     pytest.skip("no tie of determined reached on this machine")
+
+
+# Class 5: a certified track's note states its convexity radius, unread
+
+def test_the_convexity_note_states_the_proofs_radius():
+    """The writer's note names the radius its proof states (machine-independent: both are the
+    same float written twice)."""
+    result = _solve(1.0)
+    proof = result["certificate"]["items"][0]["proof"]
+    assert proof["type"] == "convexity"
+    assert repr(proof["radius"]) in result["tracks"][0]["certificate"]["note"]
+
+
+@pytest.mark.xfail(strict=True, reason="review 40 class 5: a certified track's note (its convexity radius) is "
+                                       "read by no check")
+def test_a_note_stating_a_radius_the_proof_does_not_prove_is_refused():
+    result = copy.deepcopy(_solve(1.0))
+    radius = result["certificate"]["items"][0]["proof"]["radius"]
+    assert radius < 10
+    result["tracks"][0]["certificate"]["note"] = result["tracks"][0]["certificate"]["note"].replace(repr(radius), "1000000.0")
+    assert "1000000.0" in result["tracks"][0]["certificate"]["note"]
+    report = _verify(result)
+    assert not report.valid
