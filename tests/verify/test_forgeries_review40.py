@@ -70,7 +70,10 @@ parse (geometry.normalised_cameras: math.ldexp(1.0, 1069) raises OverflowError, 
 InputError) and the verifier refuses such a document at "format" with "OverflowError: math range
 error" (a crash's text as its reason).
 
-Refused (plain tests below): proven intervals stated on an uncertified track, or a certified track's
+Refused (plain tests below): review 39's point at infinity just above the normal range (2^-1022
+times 1 to 2^60, products below it where the camera's entries are under 1), its float image as
+observations, claimed at cost 0 (refused at "objective": proof.image_uncertainty's UNDERFLOW term
+sends it down the exact path); proven intervals stated on an uncertified track, or a certified track's
 proof's sublevel dropped with its determinacy still saying proven; a genuine result on cameras
 scaled by 2^-1000 (products near the bottom of the normal range) verifies.
 """
@@ -166,7 +169,8 @@ def _scene(scale: float) -> dict:
 def _solve(scale: float) -> dict:
     from geocert.jobs.runner import solve_job
 
-    return solve_job({"kind": "triangulation", "data": _scene(scale), "options": {"norm": "L2L2", "certificate": "full"}})
+    return solve_job({"kind": "triangulation", "data": _scene(scale),
+                      "options": {"norm": "L2L2", "certificate": "full"}})
 
 
 @pytest.mark.xfail(strict=True, reason="review 40 class 2: estimates._check_tracks recomputes the determinacy "
@@ -321,7 +325,25 @@ def test_a_note_stating_a_radius_the_proof_does_not_prove_is_refused():
     result = copy.deepcopy(_solve(1.0))
     radius = result["certificate"]["items"][0]["proof"]["radius"]
     assert radius < 10
-    result["tracks"][0]["certificate"]["note"] = result["tracks"][0]["certificate"]["note"].replace(repr(radius), "1000000.0")
-    assert "1000000.0" in result["tracks"][0]["certificate"]["note"]
+    summary = result["tracks"][0]["certificate"]
+    summary["note"] = summary["note"].replace(repr(radius), "1000000.0")
+    assert "1000000.0" in summary["note"]
     report = _verify(result)
     assert not report.valid
+
+
+# Refused: a direction just above the normal range, products below it
+
+@pytest.mark.parametrize("power", [0, 5, 60])
+def test_a_direction_just_above_the_normal_range_claimed_at_cost_0_is_refused(power):
+    from geocert.solvers.fractional.items import TrackItem
+    from tests.verify.test_forgeries_review39 import _subnormal_track_certificate
+
+    document = _subnormal_track_certificate()
+    cameras = np.array(document["data"]["cameras"])
+    direction = np.array([3.0, 5.0, 40.0, 0.0]) * 2.0 ** (-1022 + power)
+    observations = TrackItem((cameras, np.zeros((3, 2))), "L2L2", chart=False).raw_residuals(direction)[0]
+    document["data"]["tracks"][0]["points"] = observations.tolist()
+    document["items"][0]["point"] = direction.tolist()
+    report = _verify(rehash(document))
+    assert not report.valid and report.first_failure["check"] == "objective", report.first_failure
