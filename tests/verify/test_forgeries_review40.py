@@ -35,8 +35,8 @@ Found:
    PARALLAX_DEGREES (1 degree) gets its near_zero_parallax warning in one and not the other, so
    ``determined`` flips and the writer's document is refused at "returned" (measured here under
    OpenBLAS's Haswell kernel: three views on a line, the point found by bisection along its depth;
-   the tie is reached on the solver's returned point in the first few jobs tried). The fix in
-   63cd9454 put the centres and the lengths in a fixed order, not the cosines.
+   the tie is reached on the solver's returned point in the first few jobs tried). The fixed
+   order covers the centres and the lengths (fixed_order.camera_centres, _length), not the cosines.
    Suggested fix at the cause: the cosines in one fixed order in both (fixed_order's sums, or the
    same elementwise expression u0*v0 + u1*v1 + u2*v2 in the writer and the verifier), as
    _length now is.
