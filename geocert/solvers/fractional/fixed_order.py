@@ -66,6 +66,26 @@ def cholesky(M: np.ndarray) -> np.ndarray | None:
     return L if bool(np.all(np.isfinite(L))) else None
 
 
+def cholesky_completes(M: np.ndarray) -> np.ndarray:
+    """For a stack M (k, n, n): whether ``cholesky`` of each M[i] returns a factor (not None).
+    Each matrix's factorisation is cholesky's own operations, elementwise over the stack, so each
+    answer is the one cholesky gives alone (one float per entry on every machine). A pivot that
+    is not positive or not finite fails its matrix, as in cholesky; the matrix is carried on
+    (its entries then not finite, or not read) so that one pass decides the whole stack."""
+    M = np.asarray(M, dtype=float)
+    k, n = M.shape[0], M.shape[-1]
+    L = np.zeros((k, n, n))
+    pivots = np.empty((k, n))
+    with np.errstate(all="ignore"):
+        for j in range(n):
+            s = M[:, j:, j] - (L[:, j:, :j] * L[:, j, None, :j]).sum(axis=2)
+            pivots[:, j] = s[:, 0]
+            root = np.sqrt(s[:, 0])
+            L[:, j, j] = root
+            L[:, j + 1:, j] = s[:, 1:] / root[:, None]
+        return np.all(pivots > 0, axis=1) & np.all(np.isfinite(pivots), axis=1) & np.all(np.isfinite(L), axis=(1, 2))
+
+
 def lower_inverse(L: np.ndarray) -> np.ndarray:
     """The inverse of a lower triangular L with nonzero diagonal, by forward substitution in order."""
     n = len(L)

@@ -55,7 +55,7 @@ import numpy as np
 
 from geocert.solvers.core.strict import Invalid, number, numbers, record
 from geocert.solvers.fractional.convexity import LARGEST, SMALLEST, UNDERFLOW, in_range
-from geocert.solvers.fractional.fixed_order import cholesky, gram, inverse3, lower_inverse, mul, norm, weighted
+from geocert.solvers.fractional.fixed_order import cholesky, cholesky_completes, gram, inverse3, lower_inverse, mul, norm, weighted
 
 U = 2.0 ** -52
 ETA = 1e-6  # the split of inexact terms: (1 - ETA) of the computed quadratic is kept
@@ -173,32 +173,83 @@ def least_eigenvalue_above(M: np.ndarray, margin: float, allowance: float) -> bo
 
 
 
+def _shifted(M: np.ndarray, margins: list, allowance: float) -> np.ndarray:
+    """Whether least_eigenvalue_above(M, margin, allowance) passes, for each of the margins: its
+    operations, each margin's matrix M less its shift, decided by one stacked factorisation
+    (fixed_order.cholesky_completes: each answer the one cholesky gives alone)."""
+    M = 0.5 * (M + M.T)
+    trace = float(np.abs(np.diag(M)).sum())
+    shifts = [(margin + allowance + 32 * U * (trace + abs(margin)) + UNDERFLOW) * (1 + 8 * U) for margin in margins]
+    finite = np.array([math.isfinite(shift) for shift in shifts], dtype=bool) & bool(np.all(np.isfinite(M)))
+    if not finite.any():
+        return finite
+    stack = M - np.array(shifts)[finite, None, None] * np.eye(len(M))  # each M - shift I, entry by entry
+    passes = np.zeros(len(margins), dtype=bool)
+    passes[finite] = cholesky_completes(stack)
+    return passes
+
+
+# The bisection's next BISECTION_LEVELS steps are decided by one stacked factorisation of every
+# midpoint they may reach (2^levels - 1 of them): the factorisations of an 11 x 11 matrix are a
+# few dozen small array operations each, so a stack costs little more than one matrix.
+BISECTION_LEVELS = 4
+
+
 def least_eigenvalue_below(M: np.ndarray, allowance: float, steps: int = 48) -> float | None:
     """A positive kappa that least_eigenvalue_above(M, kappa, allowance) passes, close to the
     largest such (by bisection from M's least diagonal entry, an upper bound of its smallest
     eigenvalue, to 2^-steps of it); None when none of 2^-60 of that passes. Only Cholesky
     factorisations in a fixed order decide: one kappa on every machine (LAPACK's eigvalsh, its
-    first guess before, differed between BLAS kernels)."""
+    first guess before, differed between BLAS kernels). The midpoints and each test's answer are
+    those of testing one midpoint after another: the next BISECTION_LEVELS steps' possible
+    midpoints are tested at once, then the path the answers take is followed."""
     diagonal = np.diag(M)
     hi = float(diagonal.min()) if len(diagonal) else 0.0
     if not (hi > 0 and math.isfinite(hi)):
         return None
-    lo = hi
+    halvings, lo = [], hi
     for _ in range(60):
         lo *= 0.5
-        if least_eigenvalue_above(M, lo, allowance):
+        halvings.append(lo)
+    lo = None
+    for first in range(0, 60, BISECTION_LEVELS):
+        chunk = halvings[first:first + BISECTION_LEVELS]
+        passes = _shifted(M, chunk, allowance)
+        if passes.any():
+            lo = chunk[int(np.argmax(passes))]
             break
-    else:
+    if lo is None:
         return None
     hi = min(hi, 2 * lo)
-    for _ in range(steps):
-        middle = 0.5 * (lo + hi)
-        if not lo < middle < hi:
-            break
-        if least_eigenvalue_above(M, middle, allowance):
-            lo = middle
-        else:
-            hi = middle
+    taken = 0
+    while taken < steps:
+        levels = min(BISECTION_LEVELS, steps - taken)
+        # node i (from 1) of the tree of intervals: its children 2i (the midpoint fails: hi moves
+        # to it) and 2i + 1 (it passes: lo moves); a midpoint not strictly inside ends the bisection.
+        bounds, middles = {1: (lo, hi)}, {}
+        for node in range(1, 2 ** levels):
+            if node not in bounds:
+                continue
+            a, b = bounds[node]
+            middle = 0.5 * (a + b)
+            if not a < middle < b:
+                continue
+            middles[node] = middle
+            if 2 * node < 2 ** levels:
+                bounds[2 * node], bounds[2 * node + 1] = (a, middle), (middle, b)
+        if 1 not in middles:
+            return lo
+        nodes = list(middles)
+        answers = dict(zip(nodes, _shifted(M, [middles[node] for node in nodes], allowance).tolist()))
+        node = 1
+        for _ in range(levels):
+            if node not in middles:
+                return lo
+            if answers[node]:
+                lo, node = middles[node], 2 * node + 1
+            else:
+                hi, node = middles[node], 2 * node
+            taken += 1
     return lo
 
 def encloses(scene: Scene, increase: float, R: float, strictness: float = 1.0) -> bool:
