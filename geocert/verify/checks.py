@@ -13,6 +13,7 @@ docs/certificate.md explains each step.
 from __future__ import annotations
 
 import dataclasses
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -23,7 +24,7 @@ from geocert.solvers.core.cones import rounding_uncounted
 from geocert.solvers.core.self_check import SelfCheckFailed
 from geocert.solvers.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
                                                data_hash, problem_hash)
-from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost
+from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost, residual_lengths
 from geocert.verify.notes import check_notes
 from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
                                          informational, number as _number, printable_tree, record, same,
@@ -929,11 +930,28 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
                 raise Invalid("returned", f"{where}/tolerance is {given!r}, the options give {expected!r}")
         if "tolerance_met" in summary and summary["tolerance_met"] is not True:
             raise Invalid("returned", f"{where}/tolerance_met must be true for a certified item")
+        _check_note_radius(summary.get("note"), proof, where)
         if "leaves" in summary:
             leaves = proof.get("leaves")
             expected = len(leaves) if isinstance(leaves, list) else 0
             if not same(summary["leaves"], expected):
                 raise Invalid("returned", f"{where}/leaves is {summary['leaves']!r}, its proof has {expected}")
+
+
+# A radius a summary's note states (the writers' words: "the ball of radius R about the solution",
+# "a ball (radius R, ..."), which must be its proof's: the note is informational, but a number it
+# gives about the proof is the proof's (a convexity radius 6.2 restated 1e6, a ball holding points
+# behind the cameras, verified: review 40).
+NOTE_RADIUS = re.compile(r"radius ([^\s,)]+)")
+
+
+def _check_note_radius(note: Any, proof: dict, where: str) -> None:
+    stated = NOTE_RADIUS.findall(note) if isinstance(note, str) else []
+    radius = proof.get("radius")
+    expected = repr(float(radius)) if is_number(radius) else None
+    for found in stated:
+        if found != expected:
+            raise Invalid("returned", f"{where}/note states a radius {found:.40}; its proof's is {expected}")
 
 
 def verify_item(kind: str, data: dict, options: dict, claim: dict) -> list[str]:
@@ -1037,7 +1055,7 @@ def _check_residual_claim(kind: str, adapter, arrays: tuple, options: dict, clai
                                    "from the origin)")
     passed.append("objective")
     if options["max_residual"] is not None:
-        longest = float(np.max(np.sqrt((residuals * residuals).sum(axis=1))))
+        longest = float(np.max(residual_lengths(residuals)))
         if not longest <= options["max_residual"]:
             raise Invalid("scope", f"the solution has a residual of length {longest!r}, beyond max_residual "
                                    f"{options['max_residual']!r}")

@@ -138,7 +138,7 @@ def _check_pooled(index: int, determinacy, result: dict, certificate: dict, floo
     key = tuple(map(tuple, runs))
     if key not in floors:
         data = certificate["data"]
-        cameras = np.asarray(data["cameras"], dtype=float)
+        cameras = normalised_cameras(data["cameras"])  # as the writer reads them (huge entries overflow raw)
         costs, dofs = [], []
         for a, b in runs:
             for j in range(a, b):

@@ -524,7 +524,7 @@ def test_a_tolerance_restated_to_flip_determined_is_refused(resection):
     for interval in determinacy["intervals"]:
         interval["tolerance"] = 0.5 * (interval["upper"] - interval["value"])
     determinacy["determined"] = False
-    _refused(document, "determined")
+    _refused(document, "tolerance")  # held to the estimate's (determined follows the stated intervals)
 
 
 def test_current_form_intervals_without_tolerance_are_refused(resection):

@@ -29,6 +29,8 @@ from geocert.solvers.fractional import fixed_order
 from geocert.solvers.fractional.columns import solutions, sublevels
 
 PARALLAX_DEGREES = 1.0  # rays meeting at less than this: near-zero parallax
+# The test reads the rays' cosines against this (no arccos: its last bit is the CPU's vector unit's)
+PARALLAX_COSINE = math.cos(math.radians(PARALLAX_DEGREES))
 FLAT = 1e-2  # points whose centred spread along a direction is below this fraction: (nearly) flat
 
 
@@ -53,6 +55,15 @@ def _length(ray: np.ndarray) -> np.ndarray | float:
     tracks' depth, one float (np.linalg.norm's dot may fuse its products under one kernel)."""
     squares = ray[..., 0] * ray[..., 0] + ray[..., 1] * ray[..., 1] + ray[..., 2] * ray[..., 2]
     return float(np.sqrt(squares)) if np.ndim(squares) == 0 else np.sqrt(squares)
+
+
+def _cosines(unit: np.ndarray) -> np.ndarray:
+    """|cos| of every pair of unit rays (..., n, 3) -> (..., n, n), each a sum in one order, as
+    the single track and the batched tracks both read them (a matmul's and an einsum's sums
+    differed in the last bit, and a track at 1 degree got its warning from one and not the other:
+    review 40)."""
+    a, b = unit[..., :, None, :], unit[..., None, :, :]
+    return np.minimum(np.abs(a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]), 1.0)
 
 
 def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at_infinity: bool,
@@ -95,9 +106,9 @@ def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at
     rays = rays[np.all(np.isfinite(rays), axis=1)]
     if len(rays) >= 2:
         unit = rays / _length(rays)[:, None]
-        cosines = np.clip(np.abs(unit @ unit.T), -1.0, 1.0)
-        widest = float(np.degrees(np.arccos(cosines.min())))
-        if widest < PARALLAX_DEGREES:
+        least = float(_cosines(unit).min())
+        if least > PARALLAX_COSINE:
+            widest = float(np.degrees(np.arccos(least)))
             out.warnings.append({"code": "near_zero_parallax",
                                  "detail": f"the rays meet at {widest:.3g} degrees at most (< {PARALLAX_DEGREES:g}): "
                                            "the depth along them is poorly fixed"})
@@ -265,9 +276,9 @@ def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.
     rays = X[:, None, :] - centres
     usable = np.all(np.isfinite(rays), axis=2)  # (G, n)
     unit = rays / _length(rays)[..., None]
-    cosines = np.clip(np.abs(np.einsum("gai,gbi->gab", unit, unit)), -1.0, 1.0)
-    cosines = np.where(usable[:, :, None] & usable[:, None, :], cosines, np.inf)
-    widest = np.degrees(np.arccos(np.minimum(cosines.min(axis=(1, 2)), 1.0)))
+    cosines = np.where(usable[:, :, None] & usable[:, None, :], _cosines(unit), np.inf)
+    least = np.minimum(cosines.min(axis=(1, 2)), 1.0)
+    widest = np.degrees(np.arccos(least))
     # eigen_intervals on every track at once: each quantity's gradient in J'J's eigenbasis, the
     # part along directions the data do not fix, the half-width from the rest.
     names = ("x", "y", "z", "depth_view0")
@@ -301,7 +312,7 @@ def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.
             else:
                 out.intervals.append(interval(names[k], value, None, None, scale))
         out.proven_intervals = proven_track(proven[i])
-        if usable[i].sum() >= 2 and widest[i] < PARALLAX_DEGREES:
+        if usable[i].sum() >= 2 and least[i] > PARALLAX_COSINE:
             out.warnings.append({"code": "near_zero_parallax",
                                  "detail": f"the rays meet at {float(widest[i]):.3g} degrees at most (< "
                                            f"{PARALLAX_DEGREES:g}): the depth along them is poorly fixed"})

@@ -14,7 +14,7 @@ import numpy as np
 
 from geocert.solvers.core.bnb import Box
 from geocert.solvers.core.cones import ConeSpec, safe_lower_bounds
-from geocert.solvers.core.geometry import norm_cost
+from geocert.solvers.core.geometry import norm_cost, residual_lengths
 
 # Only for the split heuristic (a relative variation): the domain is every positive depth, cut
 # nowhere short of 0, so that no point of the scope is left out of a bound.
@@ -79,7 +79,7 @@ class FractionalProgram:
     def in_scope(self, residuals: np.ndarray) -> bool:
         """Every residual within max_residual, with SCOPE_MARGIN to spare (see there)."""
         return self.max_residual is None or bool(
-            np.all(np.sqrt((residuals * residuals).sum(axis=1)) <= self.max_residual * (1 - SCOPE_MARGIN)))
+            np.all(residual_lengths(residuals) <= self.max_residual * (1 - SCOPE_MARGIN)))
 
     def residuals(self, v: np.ndarray) -> np.ndarray:
         V = np.concatenate((v, (1.0,)))

@@ -21,7 +21,7 @@ from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, Progr
 from geocert.solvers.core.certificates import CapProof, LeafProof, RootProof, SearchProof, TighteningProof, encode
 from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram, solve_conic
 from geocert.solvers.core.cones import ConeSpec, proves_infeasible, safe_lower_bound
-from geocert.solvers.core.geometry import cost_rounding, lengths, norm_cost, norm_terms
+from geocert.solvers.core.geometry import cost_rounding, lengths, norm_cost, norm_terms, residual_lengths
 from geocert.solvers.fractional.options import FractionalOptions
 from geocert.solvers.fractional.results import SearchCertificate
 from geocert.solvers.fractional.relaxation import (EPS_DEPTH, ConicData, FractionalProgram, Relaxation, complete_functionals,
@@ -716,7 +716,7 @@ def recomputed_status(status: str, residuals: np.ndarray, cost: float, lower: fl
     if cost + slack - lower > max(options.abs_gap, options.rel_gap * cost):
         return "not_certified", (f"the solution's cost recomputed from the data, {cost!r} (to within {slack!r}), is "
                                  f"not within the tolerance of the proven bound {lower!r}")
-    if options.max_residual is not None and not np.all(lengths(residuals, 1) <= options.max_residual):
+    if options.max_residual is not None and not np.all(residual_lengths(residuals) <= options.max_residual):
         return "not_certified", ("the solution as returned has a residual beyond max_residual "
                                  f"{options.max_residual!r} once recomputed from the data")
     return status, None
