@@ -43,14 +43,23 @@ Found (each an xfail(strict) test below: it fails today, the forgery being accep
    judged, uncertified camera's ``cost`` (kinds/reconstruction._camera writes the bound's
    cost, a number for every camera with points) null verifies, as does every camera's ``points``
    count null (the writer writes 0 or the count, never null). reconstruction._check_camera_figures
-   reads the cost only ``if camera.get("cost") is not None or certified`` (reconstruction.py:1022)
-   and the count only when not null (:1017). CAMERA_WRITTEN's comment names the deleted cost
+   reads the cost only ``if camera.get("cost") is not None or certified`` (reconstruction.py:1026)
+   and the count only when not null (:1020). CAMERA_WRITTEN's comment names the deleted cost
    ("read as no cost found") as a forgery refused; null is the same reading: on the stored
    reconstruction cameras 1 and 2 (their P costing 4.72 and 4.16 on their certified points) then
    state no cost at all.
    Suggested fix at the cause: a judged camera (status not not_run) with certified points states
    its cost (a number) and its points count (an integer), as the writer does; null only where
    the writer writes it (no bound: status not_run; a degenerate camera's cost).
+
+Seen, not a forgery: the stratified solver fails on cameras scaled by a power of two (a camera is
+defined up to scale, and such a scaling changes no ratio): the stored stratified job's cameras
+times 2^-30 or 2^60 end both stages "failed" ("the orientation -1 has no strictly quasi-affine
+plane, but that could not be proved exactly"), where 2^-10 to 2^30 certify both; times 2^600,
+2^-600 for the points, or 1e-310 the solver raises ValueError from scipy's linprog ("A_ub must
+not contain values inf, nan") instead of an InputError. No document is written, so nothing is
+refused or accepted; the solver could read the cameras through a power-of-two normalisation
+first, as geometry.normalised_cameras does for triangulation.
 
 Refused (plain tests below): a stereo_lines result or job carrying another kind's certificate;
 a bilinear leaf's recorded bound raised to 1e308; the stratified stage's cost_increase moved;
