@@ -82,6 +82,7 @@ refused or accepted; the solver could read the cameras through a power-of-two no
 first, as geometry.normalised_cameras does for triangulation.
 
 Refused (plain tests below): a stereo_lines result or job carrying another kind's certificate;
+a reconstruction carrying another job's calibration or camera certificate;
 a bilinear leaf's recorded bound raised to 1e308; the stratified stage's cost_increase moved;
 an uncertified camera's cost deleted (not nulled).
 """
@@ -294,3 +295,17 @@ def test_a_stereo_lines_result_carrying_another_kinds_certificate_is_refused():
 def test_a_stereo_lines_job_carrying_another_kinds_result_is_refused():
     job = {"kind": "stereo_lines", "status": "succeeded", "result": stored("triangulation_l2l2")}
     assert not _accepted(job)
+
+
+# Refused: a reconstruction's embedded certificates from another job
+
+def test_a_calibration_certificate_from_another_job_is_refused():
+    forged = stored("reconstruction")
+    forged["calibration_certificate"] = stored("autocalibration_stratified")["certificate"]
+    assert not _accepted(forged)
+
+
+def test_a_camera_certificate_from_another_reconstruction_is_refused():
+    forged = stored("reconstruction")
+    forged["camera_certificate"] = stored("reconstruction_labelled")["camera_certificate"]
+    assert not _accepted(forged)
