@@ -37,6 +37,7 @@ import numpy as np
 from geocert.solvers.autocalibration import direct_relaxation
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.solvers.autocalibration.proofs import check_recorded_bound
 from geocert.solvers.autocalibration.problem import CHIRALITY, ORDERS  # the options it reads (problem.py checks them)
 from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.strict import Invalid, charge, dual_vector, informational, record, same
@@ -370,10 +371,18 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
             program = direct_relaxation.build(setup.cameras, o.pairs, order, cuts, setup.focal)
             z = dual_vector(item.get("z"), len(program.b), f"programs/{o.delta}/z", "leaf_bounds")
             value, _ = direct_relaxation.safe_bound(program, z)
+            check_recorded_bound(item.get("bound"), value, f"programs/{o.delta}", PROGRAM_RECORD_TOLERANCE)
             bound = min(bound, value)
     if bound == math.inf:
         raise Invalid("root_region", "every orientation is excluded: nothing to bound")
     return bound, tuple(gone)
+
+
+# A direct program's recorded bound is its solver's safe bound from the dual vector before it was
+# written (certificates.pack); the vector as read gives a bound 4.5e-6 of itself lower on the stored
+# direct document (its entries 1e6 times the bound). Held to a thousandth: a record is the solver's,
+# not a claim (a 1e308 record verified, review 41).
+PROGRAM_RECORD_TOLERANCE = 1e-3
 
 
 def _of_orientation(stated: Any, delta: float | None) -> bool:
