@@ -16,7 +16,7 @@ from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration import plane_sublevel, proofs
 from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.determinacy import ESTIMATES_FORM, proven_document
-from geocert.solvers.core.geometry import InputError, number_array
+from geocert.solvers.core.geometry import InputError, is_number, number_array
 from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
 from geocert.verify import cost_rounding, estimates, residual_claims, structure_check
 from geocert.verify.verification import Verification
@@ -710,9 +710,52 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
         estimates.check_intrinsics(result["stages"][0].get("determinacy"), result.get("K"), "stages/0/determinacy")
         estimates.check_redundancy(result["stages"][0].get("determinacy"), 5 * len(cameras) - 10,
                                    "stages/0/determinacy")
+        _check_direct_level(problem, result, result["stages"][0].get("determinacy"), "stages/0/determinacy")
     else:  # varying focal lengths: an estimate of each view's, of Ks
         estimates.check_focal_lengths(result["stages"][0].get("determinacy"), result["Ks"], "stages/0/determinacy")
+        _check_direct_level(problem, result, result["stages"][0].get("determinacy"), "stages/0/determinacy")
     estimates.check_contains(result["stages"][0].get("determinacy"), "stages/0/determinacy")
+
+
+# What the direct stage's level may differ by besides NUMBER_SLACK of itself: each metric residual
+# (preconditioned omega entries, of order 1) as another machine's sums round it, 1e-12 of a unit
+# each (their rounding is some 1e-16); a near-exact scene's level is that noise.
+DIRECT_RESIDUAL_ROUNDING = 1e-12
+
+
+def _check_direct_level(problem, result: dict, determinacy: Any, where: str) -> None:
+    """The direct stage's ``cost_increase`` is its writer's (autocalibration.determinacy.
+    metric_stage, or varying_focal_stage with one focal length a view: SIGMAS^2 times the
+    residuals' cost at the returned plane and K (or Ks) over their redundancy; no certified gap, the stage's certified cost being another cost). Unread, a level of
+    1e6, -1 or null verified (review 41), and with it intervals said to hold every quadric within it."""
+    from geocert.solvers.autocalibration.determinacy import varying_focal_residuals
+    from geocert.solvers.autocalibration.problem import w_of_K
+    from geocert.solvers.core.determinacy import cost_increase
+
+    if not isinstance(determinacy, dict) or estimates.stopped(determinacy):
+        return
+    redundancy = determinacy.get("redundancy")
+    p = autocalibration_problem.plane_from_input(problem, np.asarray(result["plane_at_infinity"], dtype=float))
+    if p is None or type(redundancy) is not int:
+        return  # no estimate written (the writer's condition), or typed by check_redundancy
+    with np.errstate(all="ignore"):
+        if result.get("Ks") is None:  # metric_stage's residuals
+            setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
+            informative = np.concatenate([np.arange(5) + 6 * j for j in range(len(setup.H))])
+            r = metric_relaxation.residuals(setup, w_of_K(problem, np.asarray(result["K"], dtype=float)))[informative]
+        else:  # varying_focal_stage's, at each view's focal length over the preconditioner's
+            f0 = float(problem.K0[0, 0])
+            a = np.array([float(np.asarray(K, dtype=float)[0, 0]) / f0 for K in result["Ks"]])
+            r = varying_focal_residuals(problem, np.concatenate([a, p]))
+        expected = cost_increase(float(r @ r), redundancy)
+        spread = cost_increase(float(np.sum(2 * np.abs(r) * DIRECT_RESIDUAL_ROUNDING + DIRECT_RESIDUAL_ROUNDING ** 2)),
+                               redundancy)
+    stated = determinacy.get("cost_increase")
+    if not (math.isfinite(expected) and is_number(stated)
+            and abs(float(stated) - expected) <= estimates.NUMBER_SLACK * abs(expected) + spread):
+        raise Invalid("returned", f"{where}/cost_increase is {stated!r:.30}; the metric residuals' cost at the "
+                                  f"returned plane and K over its redundancy {redundancy}, times the sigmas squared, "
+                                  f"gives {expected!r:.30}")
 
 
 def _check_direct_proven(stage: dict, claim: dict, views: int, per_view: bool) -> None:

@@ -144,7 +144,7 @@ def check_redundancy(determinacy: Any, expected: int, where: str) -> None:
     writer does (autocalibration.determinacy: the affine stage's modulus constraints, one a view
     but the reference's, less the plane's 3; a K stage's 5 informative DIAC entries a view but
     the reference's, less K's 5): ``expected``, from the number of views."""
-    if not isinstance(determinacy, dict) or _stopped(determinacy):
+    if not isinstance(determinacy, dict) or stopped(determinacy):
         return
     if not same(determinacy.get("redundancy"), expected):
         raise Invalid("returned", f"{where}/redundancy is {determinacy.get('redundancy')!r:.30}; the stage's "
@@ -158,7 +158,7 @@ def check_intrinsics(determinacy: Any, K: Any, where: str) -> None:
     each ``tolerance`` a tenth of its scale (the focal lengths their own, the others their
     mean), so that ``determined`` (check_determined) is judged at the writer's width, not one the
     document chose."""
-    if not isinstance(determinacy, dict) or _stopped(determinacy) or not isinstance(K, list):
+    if not isinstance(determinacy, dict) or stopped(determinacy) or not isinstance(K, list):
         return
     try:
         K = np.asarray(K, dtype=float).reshape(3, 3)
@@ -192,7 +192,7 @@ def check_focal_lengths(determinacy: Any, Ks: Any, where: str) -> None:
     each ``value`` that K's focal length (to FOCAL_SLACK of it) and each ``tolerance`` a tenth of
     it (its scale); its redundancy is the writer's, 5 DIAC residuals a view but the reference's
     less the m focal lengths and the plane's 3."""
-    if not isinstance(determinacy, dict) or _stopped(determinacy) or not isinstance(Ks, list):
+    if not isinstance(determinacy, dict) or stopped(determinacy) or not isinstance(Ks, list):
         return
     try:
         focal = [float(np.asarray(K, dtype=float).reshape(3, 3)[0, 0]) for K in Ks]
@@ -229,7 +229,7 @@ def check_plane(determinacy: Any, plane: Any, where: str) -> None:
     frame, so a coordinate near 0 differs from the stated one by the others' rounding), and each ``tolerance`` null as the writer writes it (a plane has no scale
     of its own: bounded suffices). A document written before intervals stated a tolerance states
     none on every interval (_compare's earlier form), and is read so."""
-    if not isinstance(determinacy, dict) or _stopped(determinacy):
+    if not isinstance(determinacy, dict) or stopped(determinacy):
         return
     try:
         plane = np.asarray(plane, dtype=float).reshape(4)
@@ -259,7 +259,7 @@ def check_contains(determinacy: Any, where: str) -> None:
     fix the quantity away from the answer returned; a bounded interval stating no numeric value
     (null or absent) would hold nothing, and is refused (the writer's value is the returned
     answer's, always a number)."""
-    if not isinstance(determinacy, dict) or _stopped(determinacy) or not isinstance(determinacy.get("intervals"), list):
+    if not isinstance(determinacy, dict) or stopped(determinacy) or not isinstance(determinacy.get("intervals"), list):
         return
     for number, found in enumerate(determinacy["intervals"]):
         if not isinstance(found, dict):
@@ -283,7 +283,7 @@ def check_stage_level(determinacy: Any, cost: Any, lower_bound: Any, where: str)
     of the stage's own cost: the modulus cost at the plane, the metric cost at omega). The direct
     stage's estimate is of another cost (its DIAC residuals, not its certified objective), and is
     not read here."""
-    if not isinstance(determinacy, dict) or _stopped(determinacy) or not is_number(cost):
+    if not isinstance(determinacy, dict) or stopped(determinacy) or not is_number(cost):
         return
     redundancy = determinacy.get("redundancy")
     if type(redundancy) is not int:
@@ -296,7 +296,7 @@ def check_stage_level(determinacy: Any, cost: Any, lower_bound: Any, where: str)
                                   f"its certified gap, gives {expected!r:.30}")
 
 
-def _stopped(determinacy: dict) -> bool:
+def stopped(determinacy: dict) -> bool:
     """An analysis stopped at its deadline (core.determinacy.not_analysed): no interval, one
     time_limit warning, nothing determined; it claims nothing."""
     warnings = determinacy.get("warnings")
@@ -311,7 +311,7 @@ def _check_tracks(kind, result: dict, certificate: dict, earlier: bool = True) -
     cameras = normalised_cameras(data["cameras"])  # as the writer reads them: raw, entries near 2^1023 overflow
     for index, item in enumerate(result.get("tracks") or []):
         determinacy = item.get("determinacy") if isinstance(item, dict) else None
-        if not isinstance(determinacy, dict) or _stopped(determinacy):
+        if not isinstance(determinacy, dict) or stopped(determinacy):
             continue
         where = f"tracks/{index}/determinacy"
         if item.get("point") is None:
@@ -352,7 +352,7 @@ def _check_maps(kind, result: dict, certificate: dict, earlier: bool = True) -> 
     read = kind.verification.read
     for index, item in enumerate(result.get("maps") or []):
         determinacy = item.get("determinacy") if isinstance(item, dict) else None
-        if not isinstance(determinacy, dict) or _stopped(determinacy):
+        if not isinstance(determinacy, dict) or stopped(determinacy):
             continue
         where = f"maps/{index}/determinacy"
         if item.get("matrix") is None:
@@ -422,7 +422,7 @@ def _check_frames(kind, result: dict, certificate: dict, earlier: bool = True) -
     read = kind.verification.read
     for index, item in enumerate(result.get("frames") or []):
         determinacy = item.get("determinacy") if isinstance(item, dict) else None
-        if not isinstance(determinacy, dict) or _stopped(determinacy):
+        if not isinstance(determinacy, dict) or stopped(determinacy):
             continue
         where = f"frames/{index}/determinacy"
         if item.get("camera") is None or item.get("coefficients") is None:

@@ -90,7 +90,9 @@ Fixed at their causes: class 3, a leaf's (stratified) or program's (direct) reco
 most the bound its vector proves (proofs.check_recorded_bound: 1e-6 of their size, a direct
 program's a thousandth, its vector as written 4.5e-6 below its record on the stored document);
 class 4, a judged camera states its certified points' number and, with enough points and a finite
-cost, its cost. Open (strict xfails below): classes 1, 2 and 5.
+cost, its cost; class 2, the direct stage's level is its writer's, recomputed from the residuals
+at the returned plane and K or Ks (determinacy.varying_focal_residuals, shared with the writer).
+Open (strict xfails below): classes 1 and 5.
 """
 
 from __future__ import annotations
@@ -181,8 +183,6 @@ def test_stored_stratified_intervals_collapsed_are_refused():
 
 # Class 2: the direct stage's level is read by no check
 
-@pytest.mark.xfail(strict=True, reason="review 41 class 2: the direct stage's cost_increase is not tied to its "
-                                       "cost (check_stage_level is not called for the direct method)")
 @pytest.mark.parametrize("level", [1e6, -1.0, None])
 def test_the_direct_stages_level_restated_is_refused(level):
     forged = stored("autocalibration_direct")

@@ -494,28 +494,34 @@ def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | Non
     return out.document()
 
 
+def varying_focal_residuals(problem, theta: np.ndarray) -> np.ndarray:
+    """varying_focal_stage's residuals at theta = (a_0 .. a_m-1, the plane's 3 coordinates): each
+    other view's DIAC diag(a_i^2, a_i^2, 1) less the reference view's carried by H_i, weighted as
+    the metric stage's five entries (the verifier reads the stage's level from them)."""
+    reference, m = problem.norm.reference, len(problem.norm.cameras)
+    focal, q = theta[:m], theta[m:]
+    H = metric_relaxation.homographies(problem.norm.cameras, reference, q)
+    omega_ref = np.diag([focal[reference] ** 2, focal[reference] ** 2, 1.0])
+    out = []
+    for j, i in enumerate(i for i in range(m) if i != reference):
+        image = H[j] @ omega_ref @ H[j].T
+        diff = np.diag([focal[i] ** 2, focal[i] ** 2, 1.0]) - image / image[2, 2]
+        out.append(metric_relaxation.WEIGHTS[:5] * np.array([diff[x, y] for x, y in metric_relaxation.ENTRIES]))
+    return np.concatenate(out)
+
+
 def varying_focal_stage(problem, p: np.ndarray, Ks: list, centres: np.ndarray | None) -> dict | None:
     """One focal length per view (zero skew, unit aspect, the principal point at the
     preconditioner's): each view's DIAC diag(a_i^2, a_i^2, 1) (preconditioned, a_i = f_i / f0)
     against the reference view's carried by H_i, with the plane p free too."""
-    reference = problem.norm.reference
     if any(K is None for K in Ks):
         return None
     f0 = float(problem.K0[0, 0])
     a = np.array([float(np.asarray(K)[0, 0]) / f0 for K in Ks])
-    others = [i for i in range(len(Ks)) if i != reference]
     m = len(Ks)
 
     def residuals(theta):
-        focal, q = theta[:m], theta[m:]
-        H = metric_relaxation.homographies(problem.norm.cameras, reference, q)
-        omega_ref = np.diag([focal[reference] ** 2, focal[reference] ** 2, 1.0])
-        out = []
-        for j, i in enumerate(others):
-            image = H[j] @ omega_ref @ H[j].T
-            diff = np.diag([focal[i] ** 2, focal[i] ** 2, 1.0]) - image / image[2, 2]
-            out.append(metric_relaxation.WEIGHTS[:5] * np.array([diff[x, y] for x, y in metric_relaxation.ENTRIES]))
-        return np.concatenate(out)
+        return varying_focal_residuals(problem, theta)
 
     theta = np.concatenate([a, p])
     J = numeric_jacobian(residuals, theta)
