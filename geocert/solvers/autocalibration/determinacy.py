@@ -529,5 +529,6 @@ def varying_focal_stage(problem, p: np.ndarray, Ks: list, centres: np.ndarray | 
     out = curvature_intervals(J, residuals(theta), quantities)
     for found in out.intervals:
         clip(found, 0.0, None)
-    out.warnings += motion_warnings(metric_relaxation.homographies(problem.norm.cameras, reference, p), centres)
+    norm = problem.norm
+    out.warnings += motion_warnings(metric_relaxation.homographies(norm.cameras, norm.reference, p), centres)
     return out.document()
