@@ -342,6 +342,15 @@ def safe_lower_bounds(Q: np.ndarray, A, b: np.ndarray, cones: ConeSpec, Z: np.nd
     one feasible set: one projection and one matrix product for all of them (the root region's
     2d bounds of a track). A row whose dual is not finite, or whose bound is not, bounds nothing
     (-inf); subnormal entries are read as 0 (a certificate holds none: strict.dual_vector)."""
+    return safe_lower_bounds_and_margins(Q, A, b, cones, Z, lower, upper, transform)[0]
+
+
+def safe_lower_bounds_and_margins(Q: np.ndarray, A, b: np.ndarray, cones: ConeSpec, Z: np.ndarray,
+                                  lower: np.ndarray, upper: np.ndarray, transform: np.ndarray | None = None
+                                  ) -> tuple[np.ndarray, np.ndarray]:
+    """safe_lower_bounds, and the rounding margin each bound subtracted (rounding_margin): a
+    bound computed in another order (another machine, a sparse matrix) lies within about twice
+    it of this one."""
     Z = np.array(Z, dtype=float)
     finite = np.isfinite(Z).all(axis=1)
     Z[~finite] = 0.0  # no bound from them (below), whatever they hold
@@ -363,7 +372,7 @@ def safe_lower_bounds(Q: np.ndarray, A, b: np.ndarray, cones: ConeSpec, Z: np.nd
         margin = rounding_margin(np.abs(Q), _absolute(A), np.abs(b), Z, _reach(lower, upper),
                                  None if transform is None else np.abs(transform), _nonzeros(A), terms)
         bounds = bounds - margin
-    return np.where(finite & np.isfinite(bounds), bounds, -np.inf)
+    return np.where(finite & np.isfinite(bounds), bounds, -np.inf), np.broadcast_to(margin, bounds.shape)
 
 
 def proves_infeasible(A, b: np.ndarray, cones: ConeSpec, z: np.ndarray, lower: np.ndarray, upper: np.ndarray,
