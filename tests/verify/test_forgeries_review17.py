@@ -347,7 +347,10 @@ class TestDirectPrograms:
         edit(forged["certificate"]["items"][0]["proof"])
         assert words in _refused(forged)["detail"]
 
-    def test_a_programs_stated_bound_is_informational(self, direct):
+    def test_a_programs_stated_bound_above_its_proven_one_is_refused(self, direct):
+        """Informational once (its value unread); since review 41 a recorded bound is at most the
+        one its vector proves (proofs.check_recorded_bound): a record of 1e300 is refused."""
         forged = copy.deepcopy(direct)
         forged["certificate"]["items"][0]["proof"]["programs"][0]["bound"] = 1e300
-        _verifies(forged)
+        report = verify_any(json.loads(json.dumps(forged)))
+        assert not report.valid and report.first_failure["check"] == "leaf_bounds", report.first_failure
