@@ -718,16 +718,18 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
 
 
 # What the direct stage's level may differ by besides NUMBER_SLACK of itself: each metric residual
-# (preconditioned omega entries, of order 1) as another machine's sums round it, 1e-12 of a unit
-# each (their rounding is some 1e-16); a near-exact scene's level is that noise.
+# (preconditioned omega entries, of order 1) as another machine's sums round it, allowed 1e-12 of
+# a unit, a bound chosen far above a few ulps (not measured across kernels: the stored direct
+# documents verify under Haswell's and Prescott's); a near-exact scene's level is that noise.
 DIRECT_RESIDUAL_ROUNDING = 1e-12
 
 
 def _check_direct_level(problem, result: dict, determinacy: Any, where: str) -> None:
     """The direct stage's ``cost_increase`` is its writer's (autocalibration.determinacy.
     metric_stage, or varying_focal_stage with one focal length a view: SIGMAS^2 times the
-    residuals' cost at the returned plane and K (or Ks) over their redundancy; no certified gap, the stage's certified cost being another cost). Unread, a level of
-    1e6, -1 or null verified (review 41), and with it intervals said to hold every quadric within it."""
+    residuals' cost at the returned plane and K (or Ks) over their redundancy; no certified gap,
+    the stage's certified cost being another cost). Unread, a level of 1e6, -1 or null verified
+    (review 41), and with it intervals said to hold every quadric within it."""
     from geocert.solvers.autocalibration.determinacy import varying_focal_residuals
     from geocert.solvers.autocalibration.problem import w_of_K
     from geocert.solvers.core.determinacy import cost_increase

@@ -1027,9 +1027,9 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, 
             raise Invalid("returned", f"{where}: status degenerate, and its {len(source)} certified points are enough "
                                       f"for a camera (degenerate: fewer than {camera_claim.MIN_POINTS})")
         # A camera judged (optimal or not_certified, never one stopped before its bound: cancelled,
-        # not started) on enough points to be one states its cost, as its writer does (null only where the cost is not finite):
-        # read only when stated, a cost nulled hid an uncertified camera's misfit (4.72 on the stored
-        # reconstruction, review 41).
+        # not started) on enough points to be one states its cost, as its writer does (null only
+        # where the cost is not finite): read only when stated, a cost nulled hid an uncertified
+        # camera's misfit (4.72 on the stored reconstruction, review 41).
         if camera.get("cost") is not None or camera.get("certified") is True or (
                 status in JUDGED_STATUSES and len(source) >= camera_claim.MIN_POINTS):
             P = np.asarray(camera["P"], dtype=float)

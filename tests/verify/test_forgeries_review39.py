@@ -38,8 +38,8 @@ Found:
    cameras (the exact residuals do not change).
 
 Fixed at the cause: proof.image_uncertainty (which residual_uncertainty and the convexity path
-read) adds 4 UNDERFLOW (2^-1074) per product of numerator and depth over the depth and the
-quotient's own UNDERFLOW: on normal numbers nothing changes, and below the normal range the
+read) adds 4 LEAST_SUBNORMAL (2^-1074) per product of numerator and depth over the depth and the
+quotient's own LEAST_SUBNORMAL: on normal numbers nothing changes, and below the normal range the
 uncertainty covers the products' real rounding (tested here against the exact residuals), so
 needs_exact sends these claims down the exact path, where all four are refused at "objective".
 
@@ -119,7 +119,7 @@ def _refused_at_objective(document: dict) -> None:
 
 
 def _uncertainty_covers_the_rounding(item, solution: np.ndarray) -> None:
-    """The fix at the cause (proof.image_uncertainty's UNDERFLOW term): the uncertainty the float
+    """The fix at the cause (proof.image_uncertainty's LEAST_SUBNORMAL term): the uncertainty the float
     path trusts is at least how far this machine's float residuals lie from the exact ones, which
     here is a share of a pixel (1e-15 of the products' size alone underflowed to 0)."""
     floats = item.raw_residuals(solution)[0]

@@ -1,5 +1,5 @@
 """Review 40: a hostile review of the residuals' uncertainty below the normal range (proof.
-image_uncertainty's UNDERFLOW term), the fixed-order camera centres behind a track's depth
+image_uncertainty's LEAST_SUBNORMAL term), the fixed-order camera centres behind a track's depth
 estimate (fixed_order.camera_centres, determinacy._length) and columns.certified_sublevel.
 
 Found:
@@ -72,7 +72,7 @@ error" (a crash's text as its reason).
 
 Refused (plain tests below): review 39's point at infinity just above the normal range (2^-1022
 times 1 to 2^60, products below it where the camera's entries are under 1), its float image as
-observations, claimed at cost 0 (refused at "objective": proof.image_uncertainty's UNDERFLOW term
+observations, claimed at cost 0 (refused at "objective": proof.image_uncertainty's LEAST_SUBNORMAL term
 sends it down the exact path); proven intervals stated on an uncertified track, or a certified track's
 proof's sublevel dropped with its determinacy still saying proven; a genuine result on cameras
 scaled by 2^-1000 (products near the bottom of the normal range) verifies.

@@ -30,6 +30,7 @@ from geocert.solvers.core.cones import SMALLEST_NORMAL, proves_infeasible, safe_
 from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
                                          numbers as _numbers, record)
 from geocert.solvers.core.coverage import SIDE_TOLERANCE, extended, uncovered_part, widened
+from geocert.solvers.fractional.proof import LEAF_CLAIM_TOLERANCE  # the record's allowance, as the fractional kinds'
 
 MAX_LEAVES = 200_000
 # Tightening rounds of a metric proof (metric.tighten makes at most 12). Each builds a program
@@ -213,12 +214,8 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
     return float(min(bounds))
 
 
-# How far a leaf's recorded bound may lie above the one its vector proves (as the fractional kinds'
-# and bilinear's): the record is the solver's, computed by the same sums up to rounding.
-LEAF_CLAIM_TOLERANCE = 1e-6
-
-
-def check_recorded_bound(recorded: Any, bound: float, where: str, tolerance: float = LEAF_CLAIM_TOLERANCE) -> None:
+def check_recorded_bound(recorded: Any, bound: float, where: str,
+                         tolerance: float = LEAF_CLAIM_TOLERANCE) -> None:
     """A leaf's or program's recorded ``bound`` (informational: the verifier uses its own) is at
     most the bound its vector proves, to ``tolerance`` of their size: unread, a record of
     1e308 over a proven 2.2e-12 verified (review 41), a statement no proof backs."""

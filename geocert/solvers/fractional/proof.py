@@ -161,11 +161,12 @@ def raw_sizes(cameras: np.ndarray, points: np.ndarray, solutions: np.ndarray) ->
     return terms[..., :2] + np.abs(points)[..., None, :, :] * terms[..., 2:3], terms[..., 2]
 
 
-# The least subnormal float. A product below the normal range rounds by up to half of it, not by a
-# share of itself: a solution written in subnormal numbers (review 39) rounded every product behind
-# its projection by up to a third of itself while 1e-15 of the terms' size underflowed to 0, so the
-# float cost of a forged solution (0) was taken as determined.
-UNDERFLOW = 2.0 ** -1074
+# The least subnormal float (not convexity.UNDERFLOW, a test's allowance). A product below the
+# normal range rounds by up to half of it, not by a share of itself: a solution written in
+# subnormal numbers (review 39) rounded every product behind its projection by up to a third of
+# itself while 1e-15 of the terms' size underflowed to 0, so the float cost of a forged solution
+# (0) was taken as determined.
+LEAST_SUBNORMAL = 2.0 ** -1074
 
 
 def residual_uncertainty(proj: np.ndarray, terms: np.ndarray) -> np.ndarray:
@@ -182,14 +183,14 @@ def image_uncertainty(image: np.ndarray, depth: np.ndarray, numerator_size: np.n
     """How far the data determine an image coordinate ``image`` = numerator / ``depth``, given the
     sums of the magnitudes of the products behind the numerator and the depth: 1e-15 of the terms'
     size over the depth (a 4-term product rounds by under 5e-16 of it), and for products below the
-    normal range 4 UNDERFLOW each of numerator and depth over the depth (four products, each
-    rounded by half of UNDERFLOW; twice that for the division's second order) and the quotient's own
-    UNDERFLOW. Tiny unless a point is nearly on a principal plane, or the data lie far from the
+    normal range 4 LEAST_SUBNORMAL each of numerator and depth over the depth (four products, each
+    rounded by half of it; twice that for the division's second order) and the quotient's own
+    LEAST_SUBNORMAL. Tiny unless a point is nearly on a principal plane, or the data lie far from the
     origin (a residual is then a difference of numbers far larger than itself, and no frame
     computes it better), or the solution's numbers are subnormal; infinite at depth 0."""
     depth = np.abs(depth)
-    size = 1e-15 * (numerator_size + np.abs(image) * depth_size) + 4 * UNDERFLOW * (1.0 + np.abs(image))
-    return np.where(depth > 0, size / np.where(depth > 0, depth, 1.0) + UNDERFLOW, np.inf)
+    size = 1e-15 * (numerator_size + np.abs(image) * depth_size) + 4 * LEAST_SUBNORMAL * (1 + np.abs(image))
+    return np.where(depth > 0, size / np.where(depth > 0, depth, 1.0) + LEAST_SUBNORMAL, np.inf)
 
 
 def track_uncertainty(cameras: np.ndarray, solution: np.ndarray) -> np.ndarray:

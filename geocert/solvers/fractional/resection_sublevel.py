@@ -55,7 +55,8 @@ import numpy as np
 
 from geocert.solvers.core.strict import Invalid, number, numbers, record
 from geocert.solvers.fractional.convexity import LARGEST, SMALLEST, UNDERFLOW, in_range
-from geocert.solvers.fractional.fixed_order import cholesky, cholesky_completes, gram, inverse3, lower_inverse, mul, norm, weighted
+from geocert.solvers.fractional.fixed_order import (cholesky, cholesky_completes, gram, inverse3, lower_inverse, mul, norm,
+                                                   weighted)
 
 U = 2.0 ** -52
 ETA = 1e-6  # the split of inexact terms: (1 - ETA) of the computed quadratic is kept
