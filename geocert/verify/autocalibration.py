@@ -18,7 +18,7 @@ from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.solvers.core.determinacy import ESTIMATES_FORM, proven_document
 from geocert.solvers.core.geometry import InputError, is_number, number_array
 from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
-from geocert.verify import cost_rounding, estimates, residual_claims, structure_check
+from geocert.verify import autocalibration_estimates, cost_rounding, estimates, residual_claims, structure_check
 from geocert.verify.verification import Verification
 
 STAGE_NAMES = {"stratified": ["affine", "metric"], "direct": ["direct"]}
@@ -291,6 +291,7 @@ class AutocalibrationVerification(Verification):
             estimates.check_contains(stage.get("determinacy"), f"stages/{number}/determinacy")
             estimates.check_stage_level(stage.get("determinacy"), stage.get("cost"), stage.get("lower_bound"),
                                         f"stages/{number}/determinacy")
+        autocalibration_estimates.check_stratified(problem, p, result.get("K"), stages, _centres(derived["cameras"]))
 
     @staticmethod
     def estimates_of(result: dict, certificate: dict) -> dict:
@@ -715,6 +716,15 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
         estimates.check_focal_lengths(result["stages"][0].get("determinacy"), result["Ks"], "stages/0/determinacy")
         _check_direct_level(problem, result, result["stages"][0].get("determinacy"), "stages/0/determinacy")
     estimates.check_contains(result["stages"][0].get("determinacy"), "stages/0/determinacy")
+    p = autocalibration_problem.plane_from_input(problem, np.asarray(result["plane_at_infinity"], dtype=float)) \
+        if result.get("plane_at_infinity") is not None else None
+    autocalibration_estimates.check_direct(problem, p, result.get("K"), result.get("Ks"), result["stages"][0],
+                                           _centres(expected.get("cameras")))
+
+
+def _centres(cameras: Any) -> np.ndarray | None:
+    """The derived metric cameras' centres (None when there are none), as the writer reads them."""
+    return None if cameras is None else np.array([c["center"] for c in cameras])
 
 
 # What the direct stage's level may differ by besides NUMBER_SLACK of itself: each metric residual

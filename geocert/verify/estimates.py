@@ -16,9 +16,10 @@ evaluation could move, exact.needs_exact) likewise, its value the exact centroid
 (its writer, fractional.homography_estimate, computes one float on every machine); an end the
 data leave open (null) must be null. An
 analysis the solver stopped at its time limit (a single ``time_limit`` warning, no interval) or
-left out (null) claims nothing and is accepted as it is. Autocalibration's estimates (refitted
-with scipy by their writer) are not recomputed: check_determined, check_intrinsics and
-check_redundancy tie what the data and the returned K give without a refit.
+left out (null) claims nothing and is accepted as it is. Autocalibration's estimates (their plane
+family refitted with scipy by their writer): check_determined, check_intrinsics and
+check_redundancy tie what the data and the returned K give without a refit, and
+autocalibration_estimates walks the writer's numpy walks again and judges the motion again.
 """
 
 from __future__ import annotations

@@ -147,10 +147,12 @@ def _best_calibration(L: np.ndarray) -> np.ndarray | None:
     return max(fitting, key=lambda pair: pair[0])[1] if fitting else best
 
 
-def diac_family(H: np.ndarray, omega: np.ndarray | None = None, noise: float | None = None) -> dict | None:
+def diac_family(H: np.ndarray, omega: np.ndarray | None = None, noise: float | None = None,
+                threshold: float = RELATIVE_WIDTH) -> dict | None:
     """The directions along which the DIAC is free at the noise level (module docstring): their
-    count, the largest move of K within 3 standard errors along any direction, sigma and the
-    singular values. None when no DIAC positive definite fits (nothing to measure around)."""
+    count (those moving K by more than ``threshold``), the largest move of K within 3 standard
+    errors along any direction, sigma and the singular values. None when no DIAC positive definite
+    fits (nothing to measure around)."""
     L = invariance_operator(H)
     if len(L) < 6:
         return None
@@ -179,7 +181,7 @@ def diac_family(H: np.ndarray, omega: np.ndarray | None = None, noise: float | N
             continue
         moves.append(max(change(here, intrinsics(_symmetric(best + sign * step * (basis @ v)))) for sign in (1, -1)))
     moves = np.array(moves)
-    return {"free": int(np.sum(moves > RELATIVE_WIDTH)), "largest_move": float(moves.max()), "sigma": sigma,
+    return {"free": int(np.sum(moves > threshold)), "largest_move": float(moves.max()), "sigma": sigma,
             "singular": singular, "moves": moves}
 
 
@@ -280,7 +282,7 @@ def _moved(move: float) -> str:
 
 def motion_warnings(H: np.ndarray, centres: np.ndarray | None, noise: float | None = None,
                     omega: np.ndarray | None = None, reference: np.ndarray | None = None,
-                    plane_noise: float | None = None) -> list[dict]:
+                    plane_noise: float | None = None, threshold: float = RELATIVE_WIDTH) -> list[dict]:
     """The critical motion, if any, of views whose infinite homographies are H (m, 3, 3; for a
     metric reconstruction, the rotations relative to one view) and whose centres are ``centres``
     (m or m + 1 rows, or None). ``noise``: the standard error of the H's entries (radians for
@@ -291,14 +293,16 @@ def motion_warnings(H: np.ndarray, centres: np.ndarray | None, noise: float | No
     autocalibration kind's affine stage judges it, with the rotations known to ``plane_noise``
     (default ``noise``: a caller whose rotations were adjusted may hold the DIAC's judgement to
     ROTATION_NOISE, the drift along a critical family, and the plane's to the residuals' own
-    noise). Returns [] or one warning {code, detail}."""
+    noise). ``threshold``: the move of K that is too far (``RELATIVE_WIDTH``; the verifier asks
+    just either side of it, to demand only a judgement no rounding can turn). Returns [] or one
+    warning {code, detail}."""
     H = np.asarray(H, dtype=float)
     if len(H) < 2:
         return []
-    family = diac_family(H, omega, noise)
+    family = diac_family(H, omega, noise, threshold)
     if reference is not None and centres is not None and (family is None or family["free"] == 0):
         planes = rotation_plane_family(H, reference, centres, noise if plane_noise is None else plane_noise)
-        if planes is not None and planes["largest_move"] > RELATIVE_WIDTH:
+        if planes is not None and planes["largest_move"] > threshold:
             code, looks = motion_name(H, centres)
             moved = _moved(planes["largest_move"])
             return [{"code": code,
@@ -357,10 +361,11 @@ def _K_of_w(problem, w: np.ndarray | None) -> np.ndarray:
     return np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]])
 
 
-def plane_family(problem, p: np.ndarray, w: np.ndarray | None, gap: float | None, extra: list | None = None) -> dict:
-    """The planes the modulus cost cannot tell from p at its noise level (module docstring),
-    walked along its ellipsoid's axes and the directions extreme for ``extra`` gradients; with the
-    metric fit redone at each (w: the fit at p; None: the linear method's, refined)."""
+def modulus_walk(problem, p: np.ndarray, gap: float | None, extra: list | None = None) -> dict:
+    """The modulus cost's residuals at the plane p, their Jacobian, its level (``cost_increase``
+    over its own residuals' variance, or the certified ``gap``) and the planes its walk reaches
+    (``sublevel_rays`` along the ellipsoid's axes and the ``extra`` gradients' extreme directions,
+    chirality ending a walk): numpy only, so that the verifier walks again what the writer walked."""
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
     rows = [frames.chirality_rows(problem.norm, delta) for delta in (1.0, -1.0)]
 
@@ -377,6 +382,17 @@ def plane_family(problem, p: np.ndarray, w: np.ndarray | None, gap: float | None
     delta = cost_increase(cost, len(r) - 3, gap)
     points = sublevel_rays(lambda q: float(residuals(q) @ residuals(q)), p, J.T @ J, cost + delta, extra or [],
                            allowed=allowed)
+    return {"J": J, "residuals": r, "cost_increase": delta, "points": points}
+
+
+def plane_family(problem, p: np.ndarray, w: np.ndarray | None, gap: float | None, extra: list | None = None,
+                 walk: dict | None = None) -> dict:
+    """The planes the modulus cost cannot tell from p at its noise level (module docstring),
+    walked along its ellipsoid's axes and the directions extreme for ``extra`` gradients
+    (``walk``: that walk made already); with the metric fit redone at each (w: the fit at p; None:
+    the linear method's, refined)."""
+    walk = walk or modulus_walk(problem, p, gap, extra)
+    points = walk["points"]
     if w is None:
         setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
         w = refit(problem, p, metric_relaxation.linear_baseline(setup)[0])
@@ -386,8 +402,7 @@ def plane_family(problem, p: np.ndarray, w: np.ndarray | None, gap: float | None
         tick()  # each refit is a least-squares fit of its own
         Ks.append(None if q is None else _K_of_w(problem, refit(problem, q, w)) if w is not None else np.full(5, np.nan))
     moves = [math.inf if k is None else change(here, k) for k in Ks]
-    return {"J": J, "residuals": r, "cost_increase": delta, "points": points, "K": here, "Ks": Ks, "w": w,
-            "largest_move": max(moves) if moves else 0.0}
+    return {**walk, "K": here, "Ks": Ks, "w": w, "largest_move": max(moves) if moves else 0.0}
 
 
 def _plane_warning(family: dict, H: np.ndarray, centres: np.ndarray | None, named: list[dict]) -> list[dict]:
@@ -410,9 +425,11 @@ def _plane_warning(family: dict, H: np.ndarray, centres: np.ndarray | None, name
                        "constant intrinsics"}]
 
 
-def affine_stage(problem, p: np.ndarray, cost: float | None, lower: float | None, centres: np.ndarray | None,
-                 K_pixels: np.ndarray | None = None) -> dict:
-    from geocert.solvers.autocalibration.problem import plane_in_input, w_of_K
+def affine_walk(problem, p: np.ndarray, gap: float | None) -> dict:
+    """The affine stage's intervals (the plane at infinity as the result states it, over the planes
+    the modulus walk reaches) and that walk (``modulus_walk``, its extra directions the stated
+    plane's coordinates' gradients): numpy only, the verifier's too."""
+    from geocert.solvers.autocalibration.problem import plane_in_input
 
     plane = plane_in_input(problem, p)  # as the result states it
 
@@ -421,13 +438,23 @@ def affine_stage(problem, p: np.ndarray, cost: float | None, lower: float | None
         return out if out @ plane >= 0 else -out
 
     gradient = numeric_jacobian(plane_of, p)
-    w = None if K_pixels is None else w_of_K(problem, np.asarray(K_pixels, dtype=float))
-    family = plane_family(problem, p, w, certified_gap(cost, lower), list(gradient))
+    walk = modulus_walk(problem, p, gap, list(gradient))
     value = plane_of(p)
-    quantities = {f"plane_at_infinity[{k}]": (float(value[k]), gradient[k]) for k in range(4)}
+    lo, hi = ranges_at(value, [None if q is None else plane_of(q) for q in walk["points"]])
+    return {**walk, "value": value, "gradient": gradient,
+            "intervals": [interval(f"plane_at_infinity[{k}]", value[k], lo[k], hi[k]) for k in range(4)]}
+
+
+def affine_stage(problem, p: np.ndarray, cost: float | None, lower: float | None, centres: np.ndarray | None,
+                 K_pixels: np.ndarray | None = None) -> dict:
+    from geocert.solvers.autocalibration.problem import w_of_K
+
+    walk = affine_walk(problem, p, certified_gap(cost, lower))
+    w = None if K_pixels is None else w_of_K(problem, np.asarray(K_pixels, dtype=float))
+    family = plane_family(problem, p, w, certified_gap(cost, lower), walk=walk)
+    quantities = {f"plane_at_infinity[{k}]": (float(walk["value"][k]), walk["gradient"][k]) for k in range(4)}
     out = curvature_intervals(family["J"], family["residuals"], quantities, certified_gap(cost, lower))
-    lo, hi = ranges_at(value, [None if q is None else plane_of(q) for q in family["points"]])
-    out.intervals = [interval(name, value[k], lo[k], hi[k]) for k, name in enumerate(quantities)]
+    out.intervals = walk["intervals"]
     H = metric_relaxation.homographies(problem.norm.cameras, problem.norm.reference, p)
     omega = (None if family["w"] is None or not np.all(np.isfinite(family["K"]))
              else metric_relaxation.omega_of(family["w"]))
@@ -436,26 +463,22 @@ def affine_stage(problem, p: np.ndarray, cost: float | None, lower: float | None
     return out.document()
 
 
-def _scope(problem, scoped: bool) -> list[tuple[float | None, float | None]]:
-    """Each of NAMES' clip: the intrinsics ranges (the certified scope) when ``scoped``, else
-    only positive focal lengths."""
-    if not scoped:
-        return [(0.0, None), (0.0, None), (None, None), (None, None), (None, None)]
+def scope_of(problem) -> list[tuple[float | None, float | None]]:
+    """Each of NAMES' clip: the intrinsics ranges (the stratified metric stage's certified scope;
+    the direct method's scope is a combination of them, and its estimate is clipped the same)."""
     r = problem.ranges
     (fl, fu), (al, au), (sl, su) = r["focal"], r["aspect"], r["skew"]
     (ul, uu), (vl, vu) = r["principal_point"]
     return [(max(fl, 0.0), fu), (max(fl * al, 0.0), fu * au), (sl, su), (ul, uu), (vl, vu)]
 
 
-def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | None, lower: float | None,
-                 centres: np.ndarray | None, scoped: bool = True) -> dict:
-    """``scoped``: the metric stage's scope is every K within the intrinsics ranges (the
-    stratified method's), and the intervals are clipped to it; the direct method's scope is a
-    combination of the ranges, and only focal lengths' positivity clips."""
-    from geocert.solvers.autocalibration.problem import w_of_K
-
+def metric_walk(problem, p: np.ndarray, w: np.ndarray, gap: float | None) -> dict:
+    """The metric stage's estimate at the plane p and omega entries w before the plane's own
+    family is added: the metric residuals, their Jacobian, K's entries and their gradients, the
+    curvature estimate (its level), and the intrinsics over the omega the metric cost's walk
+    reaches, clipped as the stage clips (``intervals``; the stage's own are these widened by the
+    plane's family, so they hold these). Numpy only: the verifier walks it again."""
     setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
-    w = w_of_K(problem, K_pixels)
     informative = np.concatenate([np.arange(5) + 6 * j for j in range(len(setup.H))])  # the 33 entry is 0
 
     def residuals(x, q=p):
@@ -469,18 +492,36 @@ def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | Non
     f = 0.5 * (abs(value[0]) + abs(value[1]))
     scales = (value[0], value[1], f, f, f)
     quantities = {name: (float(value[k]), gradient[k], scales[k]) for k, name in enumerate(NAMES)}
-    out = curvature_intervals(J, residuals(w), quantities, certified_gap(cost, lower))
+    out = curvature_intervals(J, residuals(w), quantities, gap)
     # omega's own uncertainty: the metric cost walked to cost + delta along its ellipsoid.
     r = residuals(w)
     points = sublevel_rays(lambda x: float(residuals(x) @ residuals(x)), w, J.T @ J,
                            float(r @ r) + float(out.cost_increase or 0.0), list(gradient))
-    lo_w, hi_w = ranges_at(value, [None if x is None else _K_of_w(problem, x) for x in points])
+    lo, hi = ranges_at(value, [None if x is None else _K_of_w(problem, x) for x in points])
+    bounds = scope_of(problem)
+    return {"setup": setup, "residuals": residuals, "J": J, "value": value, "gradient": gradient, "scales": scales,
+            "estimate": out, "lower": lo, "upper": hi,
+            "intervals": [clip(interval(name, value[k], lo[k], hi[k], scales[k]), *bounds[k])
+                          for k, name in enumerate(NAMES)]}
+
+
+def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | None, lower: float | None,
+                 centres: np.ndarray | None) -> dict:
+    """K's intervals: the metric walk's and the plane family's in quadrature, clipped to the
+    intrinsics ranges (scope_of)."""
+    from geocert.solvers.autocalibration.problem import w_of_K
+
+    w = w_of_K(problem, K_pixels)
+    walk = metric_walk(problem, p, w, certified_gap(cost, lower))
+    setup, residuals, J, value, scales, out = (walk[k] for k in ("setup", "residuals", "J", "value", "scales",
+                                                                 "estimate"))
+    lo_w, hi_w = walk["lower"], walk["upper"]
     # The plane is an estimate too: its family (the modulus cost's, to its own noise level) moves
     # the optimum; the metric fit is redone on each plane reached. The two added in quadrature.
     Jp = numeric_jacobian(lambda q: residuals(w, q), p)
     try:
         D = -np.linalg.lstsq(J, Jp, rcond=None)[0]  # dw*/dp, 5 x 3: the directions extreme for K
-        extra = list(gradient @ D)
+        extra = list(walk["gradient"] @ D)
     except np.linalg.LinAlgError:
         extra = []
     family = plane_family(problem, p, w, None, extra)
@@ -488,7 +529,7 @@ def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | Non
     lower_end = value - np.hypot(value - lo_w, value - lo_p)
     upper_end = value + np.hypot(hi_w - value, hi_p - value)
     out.intervals = [clip(interval(name, value[k], lower_end[k], upper_end[k], scales[k]), *bounds)
-                     for k, (name, bounds) in enumerate(zip(NAMES, _scope(problem, scoped)))]
+                     for k, (name, bounds) in enumerate(zip(NAMES, scope_of(problem)))]
     named = motion_warnings(setup.H, centres, omega=metric_relaxation.omega_of(w))
     out.warnings = _merge(_merge(out.warnings, named), _plane_warning(family, setup.H, centres, named))
     return out.document()
