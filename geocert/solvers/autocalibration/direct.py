@@ -222,7 +222,7 @@ def rank_three_projection(Q: np.ndarray) -> np.ndarray:
 def calibrations(cameras: np.ndarray, Q_in: np.ndarray) -> list[np.ndarray | None]:
     """K_i (pixels, K[2, 2] = 1) with K_i K_i' proportional to P_i Q P_i' (None if not definite)."""
     out = []
-    for P in cameras:
+    for P in frames.unit_scaled(cameras):  # P Q P' squares a camera's scale
         omega = P @ Q_in @ P.T
         omega = (omega + omega.T) / 2
         if not omega[2, 2] != 0:
@@ -239,7 +239,7 @@ def calibrations(cameras: np.ndarray, Q_in: np.ndarray) -> list[np.ndarray | Non
 
 def mean_calibration(cameras: np.ndarray, Q_in: np.ndarray) -> np.ndarray | None:
     """One K for constant intrinsics: the root of the mean of the views' normalised P_i Q P_i'."""
-    omegas = [P @ Q_in @ P.T for P in cameras]
+    omegas = [P @ Q_in @ P.T for P in frames.unit_scaled(cameras)]
     omega = np.mean([(w + w.T) / 2 / w[2, 2] for w in omegas], axis=0)
     try:
         return autocalibration_problem.upper_triangular_root(omega)

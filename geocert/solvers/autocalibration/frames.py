@@ -36,6 +36,28 @@ class Normalised:
     camera_signs: np.ndarray  # (m,)
 
 
+# Cameras and points are homogeneous: any scale is the same camera or point. At extreme scales the
+# solve fails or overflows (the stored stratified scene, entries about 0.75: its cameras times 2^-20
+# or 2^40 failed, times 2^600 overflowed to a scipy error). Each camera or point whose largest entry
+# lies outside [2^SMALLEST_EXPONENT, 2^LARGEST_EXPONENT) is brought to unit size by a power of two,
+# which is exact. Ordinary scales (normalised cameras near 1, pixel cameras up to about 1e8) are
+# left as given: the normalised frame depends on the reference camera's scale (another, equivalent
+# frame), and documents written before must be read in the frame they were written in.
+SMALLEST_EXPONENT = -12
+LARGEST_EXPONENT = 28
+
+
+def unit_scaled(arrays: np.ndarray) -> np.ndarray:
+    """Each of ``arrays`` (cameras (n, 3, 4) or points (n, 4)) whose largest entry lies outside
+    [2^SMALLEST_EXPONENT, 2^LARGEST_EXPONENT) divided by the power of two that brings that entry
+    into [0.5, 1)."""
+    arrays = np.asarray(arrays, dtype=float)
+    axes = tuple(range(1, arrays.ndim))
+    _, exponent = np.frexp(np.abs(arrays).max(axis=axes))
+    exponent = np.where((exponent <= SMALLEST_EXPONENT) | (exponent > LARGEST_EXPONENT), exponent, 0)
+    return np.ldexp(arrays, -exponent.reshape((-1,) + (1,) * len(axes)))
+
+
 def signed_centre(P: np.ndarray) -> np.ndarray:
     """The cofactor 4-vector c with P c = 0 and c[3] = det(P[:, :3]): for a real camera
     M [I | -C], c = det(M) (C, 1), so its sign carries the camera's orientation."""
@@ -76,7 +98,7 @@ def reference_camera(cameras: np.ndarray) -> int:
 def reference_candidates(cameras: np.ndarray, N: np.ndarray) -> list[int]:
     """The references normalise(cameras, ., N) may take on any machine, ascending: reference_camera's
     choice, and any lower-indexed camera on the tie's edge (one, where none is: the usual case)."""
-    ratio = conditioning(np.einsum("ab,ibc->iac", N, cameras))
+    ratio = conditioning(np.einsum("ab,ibc->iac", N, unit_scaled(cameras)))
     wide = _tied(ratio, REFERENCE_TIE * (1.0 + REFERENCE_TIE_BAND))
     first_surely_tied = int(_tied(ratio, REFERENCE_TIE * (1.0 - REFERENCE_TIE_BAND))[0])
     return [int(i) for i in wide if i <= first_surely_tied]
@@ -93,13 +115,14 @@ def earlier_references(cameras: np.ndarray, N: np.ndarray) -> list[int]:
     """The frames a proof naming no reference may be posed in: it was written when the reference was
     the best conditioned camera, which a machine's rounding chooses among those within EARLIER_TIE;
     best first."""
-    ratio = conditioning(np.einsum("ab,ibc->iac", N, cameras))
+    ratio = conditioning(np.einsum("ab,ibc->iac", N, unit_scaled(cameras)))
     close = _tied(ratio, EARLIER_TIE)
     return [int(i) for i in close[np.argsort(-ratio[close], kind="stable")]]
 
 
 def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, reference: int | None = None) -> Normalised:
-    cams = np.einsum("ab,ibc->iac", N, cameras)
+    cams = np.einsum("ab,ibc->iac", N, unit_scaled(cameras))
+    points = None if points is None else unit_scaled(points)
     r = reference_camera(cams) if reference is None else reference
     A, a = cams[r, :, :3], cams[r, :, 3]
     Ainv = np.linalg.inv(A)
@@ -375,6 +398,7 @@ def check_reconstruction(cameras: np.ndarray, field: str = "data/cameras") -> No
         raise InputError(field, "must be a list of 3x4 matrices")
     if len(cameras) < 3:
         raise InputError(field, f"autocalibration needs at least 3 cameras, got {len(cameras)}")
+    cameras = unit_scaled(cameras)
     s = np.linalg.svd(cameras, compute_uv=False)
     for i, values in enumerate(s):
         if not values[2] > 1e-9 * values[0]:
