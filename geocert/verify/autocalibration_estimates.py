@@ -9,10 +9,10 @@ warning dropped, verified as determined (review 41). Here, at the returned plane
 - **Widths.** The writer's walks (``affine_walk``, ``metric_walk``: numpy only) are made again.
   The affine stage's intervals are that walk's ranges; a K stage's hold its walk's ranges (the
   plane's family widens them, in quadrature), so each stated interval must contain the
-  recomputed one, to ``WALK_SLACK`` of its width, and be unbounded where the walk is. A K stage's
-  end may instead hold the local curvature's (Gauss-Newton, the level's own words), which
-  documents written before the walk state: each end is held to the nearer of the two to the
-  value, unbounded only where both are. With one focal length a view (``varying_focal_stage``,
+  recomputed one, to ``WALK_SLACK`` of its width, and be unbounded where the walk is. In a
+  document written before the walk (its intervals state no tolerance) a K stage's end may instead
+  hold the local curvature's (Gauss-Newton, the level's own words), as such documents state: each
+  end is held to the nearer of the two to the value, unbounded only where both are. With one focal length a view (``varying_focal_stage``,
   curvature only) the curvature's alone.
 - **Motions.** The DIAC's family (``motion_warnings``, numpy only) is judged again with the
   returned K's DIAC; where it finds a critical motion at thresholds just either side of
@@ -63,7 +63,7 @@ def check_stratified(problem, p: np.ndarray | None, K: Any, stages: list, centre
     walk = _walked(writer.metric_walk, problem, p, w,
                    certified_gap(_cost(stages[1], "cost"), _cost(stages[1], "lower_bound")))
     if walk is not None:
-        _check_holds(metric, _nearer(walk, problem), "stages/1/determinacy")
+        _check_holds(metric, _held(walk, problem, metric), "stages/1/determinacy")
     H = metric_relaxation.homographies(problem.norm.cameras, problem.norm.reference, p)
     omega = metric_relaxation.omega_of(w)
     for number, stated in ((0, affine), (1, metric)):
@@ -88,16 +88,22 @@ def check_direct(problem, p: np.ndarray | None, K: Any, Ks: Any, stage: dict, ce
         w = w_of_K(problem, np.asarray(K, dtype=float))
         walk = _walked(writer.metric_walk, problem, p, w, None)
         if walk is not None:
-            _check_holds(stated, _nearer(walk, problem), "stages/0/determinacy")
+            _check_holds(stated, _held(walk, problem, stated), "stages/0/determinacy")
         omega = metric_relaxation.omega_of(w)
     else:
         return
     _check_motion(stated, H, centres, omega, "stages/0/determinacy")
 
 
-def _nearer(walk: dict, problem) -> list[dict]:
-    """Each of a K stage's ends: the walk's or the local curvature's (clipped as the stage clips),
-    whichever lies nearer the value (None only where both are unbounded)."""
+def _held(walk: dict, problem, stated: dict) -> list[dict]:
+    """What a K stage's stated intervals must hold: the walk's; in a document written before the
+    walk (its intervals state no tolerance: estimates.check_intrinsics reads the same), each end
+    the walk's or the local curvature's, whichever lies nearer the value (None only where both
+    are unbounded). Read so for today's documents, the curvature's bounded ends stood for a
+    critical motion's unbounded K (review 43)."""
+    intervals = stated.get("intervals")
+    if any(isinstance(i, dict) and "tolerance" in i for i in intervals or []):
+        return walk["intervals"]
     bounds = writer.scope_of(problem)
     out = []
     for own, curved, (lowest, highest) in zip(walk["intervals"], walk["estimate"].intervals, bounds):
