@@ -72,10 +72,23 @@ def _jacobians(residual, A, S, B, view, track, step=1e-6):
 def _sum_by(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     """Rows of ``values`` (M, ...) summed by ``index`` (M,) into n rows: np.add.at's sum, by one
     bincount (several times faster than ufunc.at on the observations)."""
-    flat = values.reshape(len(index), -1)
-    k = flat.shape[1]
-    at = (index[:, None] * k + np.arange(k)[None, :]).ravel()
-    return np.bincount(at, weights=flat.ravel(), minlength=n * k).reshape((n,) + values.shape[1:])
+    return _SumBy(index, n)(values)
+
+
+class _SumBy:
+    """``_sum_by`` over one index, its bincount positions made once per row width: ``solve`` sums
+    by the tracks three times an iteration, and building the positions cost as much as the sum."""
+
+    def __init__(self, index: np.ndarray, n: int):
+        self.index, self.n, self.at = index, n, {}
+
+    def __call__(self, values: np.ndarray) -> np.ndarray:
+        flat = values.reshape(len(self.index), -1)
+        k = flat.shape[1]
+        at = self.at.get(k)
+        if at is None:
+            at = self.at[k] = (self.index[:, None] * k + np.arange(k)[None, :]).ravel()
+        return np.bincount(at, weights=flat.ravel(), minlength=self.n * k).reshape((self.n,) + values.shape[1:])
 
 
 def _inverse(V: np.ndarray) -> np.ndarray:
@@ -159,10 +172,16 @@ class _Blocks:
         self.size = nc
 
     def _summed(self, X, Y, runs, at) -> np.ndarray:
+        # Each run's product is X[a:b].reshape(-1, k).T @ Y[a:b].reshape(-1, k) (the same operands'
+        # memory, so the same BLAS call and sums), from views made once and written into its block:
+        # the loop runs for every view and view pair at every damping tried.
         k = self.k
-        out = np.zeros((len(runs), k, k))
+        r = X.shape[1]
+        rows_x, rows_y = X.reshape(-1, k), Y.reshape(-1, k)
+        columns_x = rows_x.T
+        out = np.empty((len(runs), k, k))
         for i, (a, b) in enumerate(runs):
-            out[i] = X[a:b].reshape(-1, k).T @ Y[a:b].reshape(-1, k)
+            np.matmul(columns_x[:, a * r:b * r], rows_y[a * r:b * r], out=out[i])
         return np.bincount(at.ravel(), weights=out.ravel(), minlength=self.size ** 2).reshape(self.size, self.size)
 
     def own(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
@@ -201,6 +220,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
     cam_cols = np.concatenate([c * view[:, None] + np.arange(c)[None, :],
                                np.broadcast_to(n * c + np.arange(s), (M, s))], axis=1)  # (M, c + s)
     blocks = _Blocks(view, track, n, c, s, p)
+    by_track = _SumBy(track, p)
     r = residual(A[view], S, B[track])
     cost = _cost(r, f_scale)
     lam = 1e-3
@@ -220,11 +240,11 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
         diag_u = np.diag(U).copy()
         # jb^T copied contiguous first: numpy's stacked product then takes its fast path (the same
         # sums, about a third less CPU than from the transposed view).
-        V = _sum_by(track, np.ascontiguousarray(jb.transpose(0, 2, 1)) @ jb, p)
+        V = by_track(np.ascontiguousarray(jb.transpose(0, 2, 1)) @ jb)
         WmT = jb.transpose(0, 2, 1) @ je  # (M, d, c+s): each observation's W^T
         WmT_gathered = blocks.gathered(WmT)
         ga = np.einsum("mki,mk->mi", je, rw)  # (M, c+s); einsum: faster than matmul on stacks of vectors
-        gb = _sum_by(track, np.einsum("mki,mk->mi", jb, rw), p)
+        gb = by_track(np.einsum("mki,mk->mi", jb, rw))
         if stop.gradient_tolerance > 0:
             gradient = max(np.abs(np.bincount(cam_cols.ravel(), weights=ga.ravel(), minlength=nc)).max(initial=0.0),
                            np.abs(gb).max(initial=0.0))
@@ -251,7 +271,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
                     return A, S, B, r, iterations
                 continue
             # Back substitution: db_j = -V_j^-1 (gb_j + sum_m W_m^T da_m).
-            wda = _sum_by(track, np.einsum("mij,mj->mi", WmT, da[cam_cols]), p)
+            wda = by_track(np.einsum("mij,mj->mi", WmT, da[cam_cols]))
             db = -(Vinv @ (gb + wda)[:, :, None])[:, :, 0]
             A_new = A + da[:n * c].reshape(n, c)
             S_new = S + da[n * c:]
