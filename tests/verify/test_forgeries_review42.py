@@ -19,7 +19,11 @@ genuine result wrong):
    scales they may be stated as anything below the floor: with the stored data's points times
    2^-40 (residuals some 5e-13) and basis times 2^-60 (the fitted shape some 1e-19), a genuine
    certified result verifies; with every residual stated [0, 0] ("the camera images every point
-   exactly") or every fitted point stated at the origin, it still verifies. The maps' residuals
+   exactly") or every fitted point stated at the origin, it still verifies. The linear
+   ``baseline`` likewise (_check_baseline: BASELINE_TOLERANCE times max(its size, 1), and its cost
+   to 1e-6 absolute): its translation moved by 1e-4 (1e8 times the image's extent) and its cost
+   restated as what that camera costs (2e-7, the linear estimate's being 3e-20) verifies, so the
+   baseline reads 1e13 times worse than it is. The maps' residuals
    were held to their exact values for the same reason (reviews 37 and 38:
    verify/fractional.py, MapItems.check_returned); the frames' were not.
 
@@ -116,15 +120,27 @@ def test_the_small_scale_frame_is_certified_and_verifies(small_frame_result):
 
 
 @pytest.mark.xfail(strict=True, reason="review 42 class 2: a bilinear frame's residuals and shape are compared "
-                                       "with absolute floors (1e-9, 1e-12); at small scales zeros verify")
-@pytest.mark.parametrize("member", ["residuals", "shape"])
-def test_small_residuals_or_shape_stated_zero_are_refused(small_frame_result, member):
+                                       "(and baseline) with absolute floors; at small scales zeros and a moved baseline verify")
+@pytest.mark.parametrize("member", ["residuals", "shape", "baseline"])
+def test_small_residuals_shape_or_baseline_restated_are_refused(small_frame_result, member):
+    from geocert.solvers.bilinear import problem
+
     forged = copy.deepcopy(small_frame_result)
     frame = forged["frames"][0]
     if member == "residuals":
         frame["residuals"] = [None if r is None else [0.0, 0.0] for r in frame["residuals"]]
-    else:
+    elif member == "shape":
         frame["shape"] = [[0.0, 0.0, 0.0] for _ in frame["shape"]]
+    else:  # the baseline's translation moved 1e8 times the image's extent, its cost restated to match
+        baseline = frame["baseline"]
+        baseline["camera"][0][3] += 1e-4
+        baseline["camera"][1][3] -= 1e-4
+        data = forged["certificate"]["data"]
+        points = np.array([[np.nan, np.nan] if p is None else p for p in data["frames"][0]["points"]])
+        cost = problem.cost(problem.residuals(np.array(data["basis"]), points, np.array(baseline["camera"]),
+                                              np.array(baseline["coefficients"])), "L2L2")
+        assert cost > 1e6 * small_frame_result["frames"][0]["baseline"]["cost"]
+        baseline["cost"] = float(cost)
     assert not _accepted(forged)
 
 
