@@ -175,14 +175,16 @@ def line_set(rig: Rig, segments: np.ndarray) -> LineSet:
     return LineSet(rig, segments, planes_a, planes_b, points_a, points_b, conditioning, pixel_planes, depth)
 
 
-def in_baseline_units(lines: LineSet) -> tuple[LineSet, float]:
-    """The same lines with the rig's baseline as the unit of length, and that unit (the baseline's
-    length in the rig's units): a motion found from them has its t in baselines. The algebraic
-    solvers' equations (9.3) mix rotation and translation terms whose balance, like their
-    orthonormal null-space points, depends on the unit; in the rig's own unit the same images of
-    a scaled world gave other motions (errors of 15% to several times t at 1e-3 or 1e3 times the
-    unit), in baselines they give one."""
-    unit = float(np.linalg.norm(lines.rig.t))
+def in_depth_units(lines: LineSet) -> tuple[LineSet, float]:
+    """The same lines with the scene's typical depth (_typical_depth) as the unit of length, and
+    that unit in the rig's units: a motion found from them has its t in depths. The algebraic
+    solvers' equations (9.3) weigh rotation terms (proportional to the points' coordinates)
+    against translation terms (to their homogeneous weight) by the unit, as do their orthonormal
+    null-space points; in the rig's own unit the same images of a scaled world gave other
+    motions (errors of 15% to several times t at 1e-3 or 1e3 times the unit), in depths they give
+    one. Depths rather than baselines: with the points about 1 away the two kinds of terms are
+    balanced (in baselines, 30 to 80 away here, RANSAC's samples were worse: bench/stereo_lines.py)."""
+    unit = lines.depth
     rig = lines.rig
     return line_set(Rig(rig.K_left, rig.K_right, rig.R, np.asarray(rig.t, dtype=float) / unit), lines.segments), unit
 

@@ -15,7 +15,7 @@ from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.declared_options import option, redeclared
 from geocert.solvers.fractional.options import JobLimit, _describe, _within
 from geocert.solvers.lines import align, incremental, linear, polynomial
-from geocert.solvers.lines.geometry import LineSet, Rig, directions_and_points, in_baseline_units, line_set, \
+from geocert.solvers.lines.geometry import LineSet, Rig, directions_and_points, in_depth_units, line_set, \
     reprojection_residuals
 from geocert.solvers.lines.matching import MatchingOptions, MatchingStopped, four_view_matches
 from geocert.solvers.lines.ransac import RansacOptions, ransac
@@ -145,10 +145,10 @@ def weak_support(lines: LineSet, inliers: np.ndarray, options: StereoLinesOption
 def estimate_motion(lines: LineSet, options: StereoLinesOptions,
                     should_stop: Callable[[], bool] | None = None) -> PairEstimate:
     """The motion of a frame pair from lines matched across its four views (t in the rig's
-    units; found in baselines: geometry.in_baseline_units)."""
+    units; found in units of the scene's depth: geometry.in_depth_units)."""
     n = len(lines)
     if n:
-        lines, unit = in_baseline_units(lines)
+        lines, unit = in_depth_units(lines)
     if n < options.samples:
         return PairEstimate("failed", lines=n, solver=options.solver,
                             reason=f"{n} lines matched across the four views; the {options.solver} solver's samples "
