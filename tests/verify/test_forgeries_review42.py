@@ -217,3 +217,29 @@ def test_every_solver_is_free_of_the_unit_on_noisy_lines(solver):
         assert np.allclose(np.array(pair["t"]) / unit, base["t"], rtol=1e-6, atol=1e-9 * np.linalg.norm(base["t"]))
         assert np.allclose(pair["R"], base["R"], atol=1e-9)
         assert pair["translation_determined"] == base["translation_determined"]
+
+
+def test_a_tiny_baseline_is_not_zero_and_tiny_focal_lengths_are_intrinsics(example_pair):
+    """The rig's checks are relative: a baseline of 1e-300 (its squares underflow) is a baseline,
+    and intrinsics with focal lengths of 3.2e-7 (the images in those units; an absolute
+    test refused focal lengths below 1e-6) are not singular; the
+    example's motion comes back, t scaled by the baseline's factor."""
+    from geocert.jobs.runner import solve_job
+    from geocert.kinds.stereo_lines import KIND
+
+    job = copy.deepcopy(KIND.example)
+    job["data"]["rig"]["t"] = [1e-300 * x for x in job["data"]["rig"]["t"]]
+    pair = solve_job(job)["pairs"][0]
+    assert pair["status"] == "estimate", pair["reason"]
+    assert np.allclose(np.array(pair["t"]) / 1e-300, example_pair["t"], rtol=1e-6)
+    job = copy.deepcopy(KIND.example)
+    for key in ("K_left", "K_right"):
+        K = np.array(job["data"]["rig"][key])
+        K[:2] *= 1e-9
+        job["data"]["rig"][key] = K.tolist()
+    job["data"]["matches"] = [(1e-9 * np.array(job["data"]["matches"][0])).tolist()]
+    job["options"]["ransac"] = {"threshold_px": 2e-9}  # the threshold is in the images' units
+    pair = solve_job(job)["pairs"][0]
+    assert pair["status"] == "estimate", pair["reason"]
+    assert np.allclose(pair["t"], example_pair["t"], rtol=1e-6)
+    assert pair["translation_determined"] is True

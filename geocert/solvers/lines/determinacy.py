@@ -33,7 +33,8 @@ def motion(lines: LineSet, R: np.ndarray, t: np.ndarray) -> dict | None:
     # information scales as 1/unit^2 against the rotation's, so at 1e4 it fell below the relative
     # test ("unbounded"), and a fixed 1e-12 added to each line's block was a different share of it
     # at every unit.
-    baseline = float(np.linalg.norm(lines.rig.t))
+    largest = float(np.abs(lines.rig.t).max())
+    baseline = largest * float(np.linalg.norm(np.asarray(lines.rig.t) / largest))  # its squares may underflow
     Jm = Jm * np.array([1.0, 1.0, 1.0, baseline, baseline, baseline])
     U = Jl.transpose(0, 2, 1) @ Jl
     column = np.sqrt(np.einsum("nii->ni", U))  # (N, 4)
@@ -56,7 +57,7 @@ def motion(lines: LineSet, R: np.ndarray, t: np.ndarray) -> dict | None:
     gradient = np.zeros(6)
     gradient[:3] = np.degrees(axis)  # d angle / d rotation vector (left perturbation), first order
     quantities = {"rotation_angle_deg": (angle, gradient)}
-    length = float(np.linalg.norm(t))  # the translation known to a tenth of its length
+    length = baseline * float(np.linalg.norm(t / baseline))  # the translation known to a tenth of its length
     for k, name in enumerate(("t_x", "t_y", "t_z")):
         quantities[name] = (float(t[k]), baseline * np.eye(6)[3 + k], length)
     out = information_intervals(schur, float((r0 * r0).sum()), 8 * n - 6 - 4 * n, quantities)
