@@ -137,7 +137,10 @@ def read_rig(value: Any) -> Rig:
     Ks = []
     for key in ("K_left", "K_right"):
         K = _matrix(value[key], f"data/rig/{key}")
-        if abs(np.linalg.det(K)) < 1e-12 * max(1.0, np.abs(K).max()) ** 3:
+        # Singular relative to its own columns (|det| over their lengths' product, Hadamard: 1
+        # for orthogonal ones), so that focal lengths in any unit are intrinsics.
+        columns = float(np.prod(np.linalg.norm(K / max(np.abs(K).max(), 1e-300), axis=0)))
+        if not abs(np.linalg.det(K / max(np.abs(K).max(), 1e-300))) > 1e-12 * columns:
             raise InputError(f"data/rig/{key}", "is singular: not an intrinsics matrix")
         Ks.append(K)
     R = _matrix(value["R"], "data/rig/R")
@@ -146,7 +149,7 @@ def read_rig(value: Any) -> Rig:
     t = number_array(value["t"], "data/rig/t", "a list of 3 numbers", 1, COORDINATE_LIMIT)
     if t.shape != (3,):
         raise InputError("data/rig/t", "must be a list of 3 numbers")
-    if not np.linalg.norm(t) > 0:
+    if not np.abs(t).max() > 0:  # not its norm: the squares of a baseline of 1e-300 underflow
         raise InputError("data/rig/t", "is zero: a stereo rig needs a baseline")
     return Rig(Ks[0], Ks[1], R, t)
 

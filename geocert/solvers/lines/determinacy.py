@@ -27,7 +27,20 @@ def motion(lines: LineSet, R: np.ndarray, t: np.ndarray) -> dict | None:
     problem = _Problem(lines)
     P, Q = _start(lines, R, t)
     r0, Jm, Jl = problem.jacobian(R, t, P, Q, _lateral(P, Q))  # as the refinement builds it: (N, 8), (N, 8, 6), (N, 8, 4)
-    U = Jl.transpose(0, 2, 1) @ Jl + 1e-12 * np.eye(4)
+    # The motion's t in units of the baseline (t = baseline * tau) and each line's parameters
+    # scaled by its own block's diagonal (Jacobi): the information's eigenvalues are then compared
+    # (core's relative singular test) and regularised in unit-free terms. In the rig's units, t's
+    # information scales as 1/unit^2 against the rotation's, so at 1e4 it fell below the relative
+    # test ("unbounded"), and a fixed 1e-12 added to each line's block was a different share of it
+    # at every unit.
+    largest = float(np.abs(lines.rig.t).max())
+    baseline = largest * float(np.linalg.norm(np.asarray(lines.rig.t) / largest))  # its squares may underflow
+    Jm = Jm * np.array([1.0, 1.0, 1.0, baseline, baseline, baseline])
+    U = Jl.transpose(0, 2, 1) @ Jl
+    column = np.sqrt(np.einsum("nii->ni", U))  # (N, 4)
+    column = np.where(column > 0, column, 1.0)
+    U = U / column[:, :, None] / column[:, None, :] + 1e-12 * np.eye(4)
+    Jl = Jl / column[:, None, :]
     W = Jm.transpose(0, 2, 1) @ Jl
     V = Jm.reshape(-1, 6).T @ Jm.reshape(-1, 6)
     U_inv = np.linalg.inv(U)
@@ -44,9 +57,9 @@ def motion(lines: LineSet, R: np.ndarray, t: np.ndarray) -> dict | None:
     gradient = np.zeros(6)
     gradient[:3] = np.degrees(axis)  # d angle / d rotation vector (left perturbation), first order
     quantities = {"rotation_angle_deg": (angle, gradient)}
-    length = float(np.linalg.norm(t))  # the translation known to a tenth of its length
+    length = baseline * float(np.linalg.norm(t / baseline))  # the translation known to a tenth of its length
     for k, name in enumerate(("t_x", "t_y", "t_z")):
-        quantities[name] = (float(t[k]), np.eye(6)[3 + k], length)
+        quantities[name] = (float(t[k]), baseline * np.eye(6)[3 + k], length)
     out = information_intervals(schur, float((r0 * r0).sum()), 8 * n - 6 - 4 * n, quantities)
     # The intervals are about the optimum; an estimate short of it (RANSAC's start, a refinement
     # that stopped early) is held to the interval stretched to take in the step to it.

@@ -124,7 +124,7 @@ class LineSet:
     points_b: np.ndarray
     conditioning: np.ndarray
     pixel_planes: np.ndarray  # (N, 4, 4): P_k^T l_k, each view in its own frame's coordinates, l_k unit normal in pixels
-    depth: float = 1.0  # the scene's typical depth (median over the lines), the scale of its coordinates
+    depth: float = 1.0  # the scene's typical depth (_typical_depth), the scale of its coordinates
 
     def __len__(self) -> int:
         return len(self.segments)
@@ -142,6 +142,21 @@ def stereo_planes(rig: Rig, left: np.ndarray, right: np.ndarray) -> np.ndarray:
     return planes / np.linalg.norm(planes[:, :, :3], axis=2, keepdims=True)
 
 
+def _typical_depth(rig: Rig, left: np.ndarray, right_planes: np.ndarray) -> float:
+    """The median depth of the left segments' endpoints (N, 4) triangulated on the right
+    camera's planes (N, 4): the scene's own scale, in the rig's unit. (It was once the median
+    of |z / w| over an orthonormal basis of each line's null space; that basis is arbitrary
+    within the line and its mix of points changes with the unit, so a scene measured in
+    millimetres read as 7.7 km deep.) Endpoints behind the rig or on a plane through the ray
+    (a line in an epipolar plane) are left out; with none left, the baseline's length."""
+    rays = np.concatenate([left.reshape(-1, 2, 2), np.ones((len(left), 2, 1))], axis=2) @ np.linalg.inv(rig.K_left).T
+    n, d = right_planes[:, None, :3], right_planes[:, None, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depths = (-d / (n * rays).sum(axis=2) * rays[:, :, 2]).reshape(-1)
+    depths = depths[np.isfinite(depths) & (depths > 0)]
+    return float(np.median(depths)) if len(depths) else float(np.linalg.norm(rig.t))
+
+
 def line_set(rig: Rig, segments: np.ndarray) -> LineSet:
     """The LineSet of (N, 4, 4) segments (left a, right a, left b, right b)."""
     segments = np.asarray(segments, dtype=float).reshape(-1, 4, 4)
@@ -156,12 +171,22 @@ def line_set(rig: Rig, segments: np.ndarray) -> LineSet:
     P_left, P_right = rig.cameras()
     pixel_planes = np.stack([lines[:, 0] @ P_left, lines[:, 1] @ P_right, lines[:, 2] @ P_left,
                              lines[:, 3] @ P_right], axis=1)
-    finite = points_a[:, :, 3]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        depths = np.abs(points_a[:, :, 2] / finite)
-    depths = depths[np.isfinite(depths) & (depths > 0)]
-    depth = float(np.median(depths)) if len(depths) else 1.0
+    depth = _typical_depth(rig, segments[:, 0], planes_a[:, 1])
     return LineSet(rig, segments, planes_a, planes_b, points_a, points_b, conditioning, pixel_planes, depth)
+
+
+def in_depth_units(lines: LineSet) -> tuple[LineSet, float]:
+    """The same lines with the scene's typical depth (_typical_depth) as the unit of length, and
+    that unit in the rig's units: a motion found from them has its t in depths. The algebraic
+    solvers' equations (9.3) weigh rotation terms (proportional to the points' coordinates)
+    against translation terms (to their homogeneous weight) by the unit, as do their orthonormal
+    null-space points; in the rig's own unit the same images of a scaled world gave other
+    motions (errors of 15% to several times t at 1e-3 or 1e3 times the unit), in depths they give
+    one. Depths rather than baselines: with the points about 1 away the two kinds of terms are
+    balanced (in baselines, 30 to 80 away here, RANSAC's samples were worse: bench/stereo_lines.py)."""
+    unit = lines.depth
+    rig = lines.rig
+    return line_set(Rig(rig.K_left, rig.K_right, rig.R, np.asarray(rig.t, dtype=float) / unit), lines.segments), unit
 
 
 def equations(lines: LineSet) -> tuple[np.ndarray, np.ndarray]:

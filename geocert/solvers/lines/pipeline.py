@@ -15,7 +15,8 @@ from geocert.solvers.core.geometry import InputError
 from geocert.solvers.core.declared_options import option, redeclared
 from geocert.solvers.fractional.options import JobLimit, _describe, _within
 from geocert.solvers.lines import align, incremental, linear, polynomial
-from geocert.solvers.lines.geometry import LineSet, Rig, directions_and_points, line_set, reprojection_residuals
+from geocert.solvers.lines.geometry import LineSet, Rig, directions_and_points, in_depth_units, line_set, \
+    reprojection_residuals
 from geocert.solvers.lines.matching import MatchingOptions, MatchingStopped, four_view_matches
 from geocert.solvers.lines.ransac import RansacOptions, ransac
 from geocert.solvers.lines.refine import RefineOptions, refine
@@ -143,8 +144,11 @@ def weak_support(lines: LineSet, inliers: np.ndarray, options: StereoLinesOption
 
 def estimate_motion(lines: LineSet, options: StereoLinesOptions,
                     should_stop: Callable[[], bool] | None = None) -> PairEstimate:
-    """The motion of a frame pair from lines matched across its four views."""
+    """The motion of a frame pair from lines matched across its four views (t in the rig's
+    units; found in units of the scene's depth: geometry.in_depth_units)."""
     n = len(lines)
+    if n:
+        lines, unit = in_depth_units(lines)
     if n < options.samples:
         return PairEstimate("failed", lines=n, solver=options.solver,
                             reason=f"{n} lines matched across the four views; the {options.solver} solver's samples "
@@ -166,7 +170,7 @@ def estimate_motion(lines: LineSet, options: StereoLinesOptions,
     if weak is not None:
         return PairEstimate("failed", lines=n, iterations=found.iterations, solver=options.solver, reason=weak,
                             inliers=inliers.tolist(), degenerate=found.degenerate.tolist(), rms_px=rms, refined=refined)
-    return PairEstimate("estimate", motion.R, motion.t, inliers.tolist(), n, found.iterations, options.solver,
+    return PairEstimate("estimate", motion.R, motion.t * unit, inliers.tolist(), n, found.iterations, options.solver,
                         degenerate=found.degenerate.tolist(), rms_px=rms, refined=refined)
 
 

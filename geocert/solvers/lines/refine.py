@@ -62,7 +62,7 @@ def _points_on_lines(lines: LineSet, X: np.ndarray) -> tuple[np.ndarray, np.ndar
         s = np.where(np.abs(denominator) > 1e-12, (b * e - c * dd) / np.where(denominator == 0, 1, denominator), 0.0)
         ends.append(base + s[:, None] * direction)
     P, Q = ends
-    degenerate = np.linalg.norm(Q - P, axis=1) < 1e-9
+    degenerate = np.linalg.norm(Q - P, axis=1) < 1e-9 * lines.depth  # coincident, at the scene's scale
     Q[degenerate] = P[degenerate] + direction[degenerate]
     return P, Q
 
@@ -218,7 +218,8 @@ def refine(lines: LineSet, motion: Motion, options: RefineOptions | None = None)
         g = (J.transpose(0, 2, 1) @ (r * sw)[:, :, None])[:, :, 0]  # (N, 10)
         U, W, V = H[:, 6:, 6:], H[:, :6, 6:], H[:, :6, :6].sum(axis=0)  # (N, 4, 4), (N, 6, 4), (6, 6)
         gm, gl = g[:, :6].sum(axis=0), g[:, 6:]
-        diagonal = np.einsum("nii->ni", U)[:, :, None] * eye4 + 1e-12 * eye4
+        entries = np.einsum("nii->ni", U)  # damping floor: a share of each line's largest, not a unit's worth
+        diagonal = (entries + 1e-12 * entries.max(axis=1, keepdims=True))[:, :, None] * eye4
         improved = converged = False
         for _ in range(8):
             Ui = np.linalg.inv(U + damping * diagonal)

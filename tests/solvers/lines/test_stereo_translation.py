@@ -50,15 +50,18 @@ def test_a_corridor_walks_translation_is_within_10_percent_or_marked(solver):
     assert wrong_and_marked > 0  # the scene is the hard one it is meant to be
 
 
-@pytest.mark.parametrize("solver,least", [("incremental", 3), ("polynomial", 1)])
+@pytest.mark.parametrize("solver,least", [("incremental", 3), ("polynomial", 2)])
 def test_a_well_seen_translation_is_determined_and_right(solver, least):
     """Lines 1.5 to 4 m away all round the view, 30 cm a frame: the pairs that say their
     translation is determined are within 10% of it, and some say so (the marking is not merely
     always on; the refinement often stops short of the optimum, and its intervals are then
-    stretched to take in the step to it, which leaves some right translations marked)."""
+    stretched to take in the step to it, which leaves some right translations marked). Sixteen
+    pairs: the polynomial solver's RANSAC finds one of the first six determined or none as the
+    rounding of its equations goes (one in six in metres, none in units of the scene's depth; two
+    of the sixteen either way, incremental six)."""
     rng = np.random.default_rng(11)
     determined = 0
-    for _ in range(6):
+    for _ in range(16):
         scene = scenes.pair_scene(rng, 80, noise_px=0.5, outlier_fraction=0.3, degrees=2.0, metres=0.3,
                                   depth=(1.5, 4.0))
         poses = [(np.eye(3), np.zeros(3)), (scene.R, scene.t)]
