@@ -37,6 +37,14 @@ LEAF_CLAIM_TOLERANCE = 1e-6  # as the fractional kinds' (fractional.proof): the 
 FRAME_SCOPES = {"searched": "every affine camera whose 2x3 part lies in the camera box (any translation), every "
                             "coefficient vector allowed",
                 "trivial": "every camera and coefficient vector"}
+# What a frame's root region means, in the kind's words (geocert.kinds.bilinear writes these): a
+# stated region's meaning must be them (review 42: rewritten to say every camera and coefficient
+# vector is covered, it verified). Unchanged since the kind was first written: no earlier words.
+FRAME_REGION_MEANING = (
+    "camera_lower <= M <= camera_upper entrywise for the camera's 2x3 part M; any translation "
+    "(a point costing less than the incumbent has its translation within a range its "
+    "observations bound); coefficients: sum 1 and, convex: >= 0, affine: within "
+    "coefficient_bound")
 
 
 class BilinearVerification(Verification):
@@ -166,18 +174,24 @@ class BilinearVerification(Verification):
 
     def check_returned(self, result: dict, certificate: dict) -> None:
         """Each frame's shape and residuals are what its camera and coefficients give, and a
-        certified frame's summary states the camera box its proof covers (the scope)."""
+        certified frame's summary states the camera box its proof covers (the scope); a root
+        region, certified or not, means what the kind's words say (FRAME_REGION_MEANING)."""
         for claim, item in zip(certificate["items"], result["frames"]):
             proof = claim.get("proof")
-            if claim.get("certified") is not True or not isinstance(item, dict):
+            if not isinstance(item, dict):
                 continue
             summary = item.get("certificate")
+            region = summary.get("root_region") if isinstance(summary, dict) else None
+            if region is not None and not (isinstance(region, dict) and region.get("meaning") == FRAME_REGION_MEANING):
+                raise Invalid("returned", f"frames/{claim['index']}/certificate/root_region/meaning is not the kind's "
+                                          "words for a camera box (bilinear.FRAME_REGION_MEANING)")
+            if claim.get("certified") is not True:
+                continue
             searched = isinstance(proof, dict) and proof.get("type") == "bilinear_bnb"
             words = FRAME_SCOPES["searched" if searched else "trivial"]
             if isinstance(summary, dict) and "scope" in summary and summary["scope"] != words:
                 raise Invalid("returned", f"frames/{claim['index']}/certificate/scope is {summary['scope']!r:.120}, the "
                                           f"scope its proof covers is {words!r}")
-            region = summary.get("root_region") if isinstance(summary, dict) else None
             if isinstance(proof, dict) and proof.get("type") == "bilinear_bnb":
                 lo, hi = proof["camera_box"]
                 expected = {"camera_lower": [lo[:3], lo[3:]], "camera_upper": [hi[:3], hi[3:]],

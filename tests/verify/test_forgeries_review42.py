@@ -86,8 +86,6 @@ def test_the_stored_results_verify(name):
     assert _accepted(stored(name))
 
 
-@pytest.mark.xfail(strict=True, reason="review 42 class 1: a bilinear frame's root_region meaning and summary note "
-                                       "are not the writer's words; rewritten, they verify")
 @pytest.mark.parametrize("member", ["meaning", "note", "homography_note"])
 def test_a_frames_summary_words_rewritten_are_refused(member):
     if member == "homography_note":
