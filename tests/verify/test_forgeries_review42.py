@@ -184,3 +184,51 @@ def test_the_motion_does_not_depend_on_the_unit_of_length(example_pair, unit):
     assert pair["status"] == "estimate", pair["reason"]
     assert np.allclose(np.array(pair["t"]) / unit, example_pair["t"], rtol=1e-3, atol=1e-6)
     assert pair["translation_determined"] is True, pair["reason"]
+
+
+# Class 1, the genuine words: each proof with no search states its note, which verifies; another
+# proof's words, or the same words altered, are refused
+
+def _exact_bilinear_job() -> dict:
+    """The stored bilinear job's first frame, its points moved onto the fitted camera's image of
+    the fitted shape: it costs round-off, within abs_gap of 0 (the trivial proof)."""
+    result = stored("bilinear_l2l2")
+    frame, certificate = result["frames"][0], result["certificate"]
+    shape = np.hstack([np.array(frame["shape"]), np.ones((len(frame["shape"]), 1))])
+    points = (shape @ np.array(frame["camera"]).T).tolist()
+    data = {"basis": certificate["data"]["basis"], "frames": [{"points": points}]}
+    return {"kind": "bilinear", "data": data, "options": certificate["options"]}
+
+
+@pytest.fixture(scope="module")
+def no_search_results() -> dict:
+    """A genuine result of each proof with no search: trivial (a bilinear frame), convexity (a
+    triangulation track), sublevel_bound (an L2L2 resection)."""
+    from geocert.jobs.runner import solve_job
+
+    out = {"trivial": (solve_job(_exact_bilinear_job()), "frames")}
+    for proof, name, key in (("convexity", "triangulation_l2l2", "tracks"),
+                             ("sublevel_bound", "resection_node_tightening", "maps")):
+        certificate = stored(name)["certificate"]
+        out[proof] = (solve_job({"kind": certificate["kind"], "data": certificate["data"],
+                                 "options": certificate["options"]}), key)
+    return out
+
+
+@pytest.mark.parametrize("proof", ["trivial", "convexity", "sublevel_bound"])
+def test_a_no_search_proofs_note_verifies_and_altered_is_refused(no_search_results, proof):
+    from geocert.solvers.core import summary_notes
+
+    result, key = no_search_results[proof]
+    assert result["certificate"]["items"][0]["proof"]["type"] == proof  # the premise
+    note = result[key][0]["certificate"]["note"]
+    assert note == summary_notes.note_of(result["certificate"]["items"][0]["proof"])
+    assert _accepted(result)
+    others = [summary_notes.TRIVIAL, summary_notes.convexity(0.5), summary_notes.sublevel(0.5, 3)]
+    for forged_note in [text for text in others if text != note] + [note + " (and the only minimum)"]:
+        forged = copy.deepcopy(result)
+        forged[key][0]["certificate"]["note"] = forged_note
+        assert not _accepted(forged), forged_note
+    left_out = copy.deepcopy(result)
+    left_out[key][0]["certificate"]["note"] = None  # a note says nothing the proof does not: null claims nothing
+    assert _accepted(left_out)

@@ -14,6 +14,9 @@ from __future__ import annotations
 from typing import Any
 
 TRIVIAL = "the incumbent's cost is within abs_gap of the trivial bound 0"
+# The proof types bounded with no search, as their proofs name them (fractional.convexity's, and
+# fractional.resection_bound.TYPE: tests/verify/test_forgeries_review42.py solves one of each).
+CONVEXITY, SUBLEVEL_BOUND = "convexity", "sublevel_bound"
 
 
 def convexity(radius: float) -> str:
@@ -35,8 +38,8 @@ def note_of(proof: Any) -> str | None:
     kind = proof.get("type") if isinstance(proof, dict) else None
     if kind == "trivial":
         return TRIVIAL
-    if kind == "convexity":
+    if kind == CONVEXITY:
         return convexity(proof.get("radius"))
-    if kind == "sublevel":
+    if kind == SUBLEVEL_BOUND:
         return sublevel(proof.get("radius"), proof.get("rounds"))
     return None
