@@ -131,8 +131,6 @@ def test_the_small_scale_frame_is_certified_and_verifies(small_frame_result):
     assert 0 < np.max(np.abs(frame["shape"])) < 1e-12
 
 
-@pytest.mark.xfail(strict=True, reason="review 42 class 2: a bilinear frame's residuals and shape are compared "
-                                       "(and baseline) with absolute floors; at small scales zeros and a moved baseline verify")
 @pytest.mark.parametrize("member", ["residuals", "shape", "baseline"])
 def test_small_residuals_shape_or_baseline_restated_are_refused(small_frame_result, member):
     from geocert.solvers.bilinear import problem
