@@ -230,3 +230,22 @@ def test_a_no_search_proofs_note_verifies_and_altered_is_refused(no_search_resul
     left_out = copy.deepcopy(result)
     left_out[key][0]["certificate"]["note"] = None  # a note says nothing the proof does not: null claims nothing
     assert _accepted(left_out)
+
+
+# Class 2, the genuine results: certified and verified at every legal scale of points and basis
+# (the stored points reach 160: times 1e6 they are near the input limit 1e9)
+
+@pytest.mark.parametrize("norm", ["L2L2", "L1L1"])
+@pytest.mark.parametrize("points_scale, basis_scale", [(1e-300, 1.0), (1e-8, 1.0), (1e6, 1.0), (1.0, 1e-150),
+                                                       (1.0, 1e8), (1e-300, 1e-150)])
+def test_a_genuine_frame_verifies_at_any_scale(norm, points_scale, basis_scale):
+    from geocert.jobs.runner import solve_job
+
+    certificate = stored("bilinear_l2l2")["certificate"]
+    data = copy.deepcopy(certificate["data"])
+    data["frames"] = [{"points": [None if p is None else [p[0] * points_scale, p[1] * points_scale]
+                                  for p in data["frames"][0]["points"]]}]
+    data["basis"] = [[[x * basis_scale for x in point] for point in shape] for shape in data["basis"]]
+    result = solve_job({"kind": "bilinear", "data": data, "options": dict(certificate["options"], norm=norm)})
+    assert result["frames"][0]["certified"] is True
+    assert _accepted(result)
