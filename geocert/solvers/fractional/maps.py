@@ -213,7 +213,8 @@ def _sublevel_certified(chart: MapChart, source, target, guess, options: MapOpti
         return None
     bound, proof = found
     claimed = bound - CLAIM_MARGIN * abs(bound)  # the verifier's sums may differ in their last bits
-    certificate = LocalCertificate(SCOPE, math.nan, proof["radius"], proof, note=summary_notes.sublevel(proof["radius"], proof["rounds"]))
+    certificate = LocalCertificate(SCOPE, math.nan, proof["radius"], proof,
+                                   note=summary_notes.sublevel(proof["radius"], proof["rounds"]))
     result = _map_result(chart, source, target, v, options, "optimal", claimed, 0, certificate)
     if not result.certified or result.cost <= options.abs_gap:  # the trivial bound's (prepare's first step)
         return None
