@@ -15,7 +15,8 @@ from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBa
 from geocert.solvers.bilinear import determinacy
 from geocert.solvers.bilinear import problem
 from geocert.solvers.bilinear.options import BilinearOptions
-from geocert.verify.bilinear import FRAMES
+from geocert.verify.bilinear import FRAME_REGION_MEANING, FRAMES
+from geocert.solvers.core import summary_notes
 from geocert.solvers.core.determinacy import safely
 from geocert.solvers.core.strict import Invalid
 from geocert.solvers.core.self_check import SelfCheckFailed
@@ -83,16 +84,13 @@ def frame_document(result, options: BilinearOptions) -> dict:
         if result.camera_box is not None:
             lo, hi = result.camera_box
             region = {"camera_lower": [lo[:3], lo[3:]], "camera_upper": [hi[:3], hi[3:]], "translation": "any",
-                      "coefficients": options.coefficients, "meaning": (
-                          "camera_lower <= M <= camera_upper entrywise for the camera's 2x3 part M; any translation "
-                          "(a point costing less than the incumbent has its translation within a range its "
-                          "observations bound); coefficients: sum 1 and, convex: >= 0, affine: within "
-                          "coefficient_bound")}
+                      "coefficients": options.coefficients,
+                      "meaning": FRAME_REGION_MEANING}
         certificate = {"scope": SCOPE if region is not None else "every camera and coefficient vector",
                        "root_region": region, "tolerance": finite_or_none(result.tolerance),
                        "tolerance_met": result.certified, "leaves": result.leaves}
         if region is None:
-            certificate["note"] = "the incumbent's cost is within abs_gap of the trivial bound 0"
+            certificate["note"] = summary_notes.TRIVIAL
         if result.proof is not None:
             certificate["proof"] = result.proof
     return {"camera": result.camera, "coefficients": result.coefficients, "shape": result.shape,

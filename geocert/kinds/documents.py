@@ -9,6 +9,7 @@ import dataclasses
 import math
 from typing import Any
 
+from geocert.solvers.core import summary_notes
 from geocert.solvers.core.certificates import FORMAT, VERSION, data_hash, problem_hash
 from geocert.solvers.fractional.results import ItemResult, LocalCertificate, proof_of
 
@@ -39,7 +40,7 @@ def certificate_summary(result: ItemResult, region: dict, meaning: str, scope: s
                 "leaves": c.leaves}
     if result.certified:
         return {"scope": scope, "root_region": None, "tolerance": 0.0, "tolerance_met": True, "leaves": 0,
-                "note": "the incumbent's cost is within abs_gap of the trivial bound 0", **extra}
+                "note": summary_notes.TRIVIAL, **extra}
     return None
 
 
@@ -47,8 +48,7 @@ def local_summary(scope: str, tolerance: float, radius: float, tolerance_met: bo
                   note: str | None = None) -> dict:
     """The certificate summary of an item certified with no search: by the convexity bound, or
     as ``note`` says."""
-    note = note or (f"no search: the cost is convex on the ball of radius {radius!r} about the solution, which "
-                    "holds every point of the scope costing as little (convexity bound)")
+    note = note or summary_notes.convexity(radius)
     return {"scope": scope, "root_region": None, "tolerance": finite_or_none(tolerance),
             "tolerance_met": tolerance_met, "leaves": 0, "note": note, **extra}
 

@@ -20,7 +20,7 @@ from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
 from geocert.solvers.core.coverage import extended, uncovered_part, widened
 from geocert.solvers.core.csc import CscMatrix
 from geocert.solvers.core.determinacy import ESTIMATES_FORM
-from geocert.solvers.core.geometry import InputError
+from geocert.solvers.core.geometry import InputError, is_number
 from geocert.verify import cost_rounding
 from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
                                          numbers as _numbers, record as _record)
@@ -37,6 +37,14 @@ LEAF_CLAIM_TOLERANCE = 1e-6  # as the fractional kinds' (fractional.proof): the 
 FRAME_SCOPES = {"searched": "every affine camera whose 2x3 part lies in the camera box (any translation), every "
                             "coefficient vector allowed",
                 "trivial": "every camera and coefficient vector"}
+# What a frame's root region means, in the kind's words (geocert.kinds.bilinear writes these): a
+# stated region's meaning must be them (review 42: rewritten to say every camera and coefficient
+# vector is covered, it verified). Unchanged since the kind was first written: no earlier words.
+FRAME_REGION_MEANING = (
+    "camera_lower <= M <= camera_upper entrywise for the camera's 2x3 part M; any translation "
+    "(a point costing less than the incumbent has its translation within a range its "
+    "observations bound); coefficients: sum 1 and, convex: >= 0, affine: within "
+    "coefficient_bound")
 
 
 class BilinearVerification(Verification):
@@ -166,18 +174,24 @@ class BilinearVerification(Verification):
 
     def check_returned(self, result: dict, certificate: dict) -> None:
         """Each frame's shape and residuals are what its camera and coefficients give, and a
-        certified frame's summary states the camera box its proof covers (the scope)."""
+        certified frame's summary states the camera box its proof covers (the scope); a root
+        region, certified or not, means what the kind's words say (FRAME_REGION_MEANING)."""
         for claim, item in zip(certificate["items"], result["frames"]):
             proof = claim.get("proof")
-            if claim.get("certified") is not True or not isinstance(item, dict):
+            if not isinstance(item, dict):
                 continue
             summary = item.get("certificate")
+            region = summary.get("root_region") if isinstance(summary, dict) else None
+            if region is not None and not (isinstance(region, dict) and region.get("meaning") == FRAME_REGION_MEANING):
+                raise Invalid("returned", f"frames/{claim['index']}/certificate/root_region/meaning is not the kind's "
+                                          "words for a camera box (bilinear.FRAME_REGION_MEANING)")
+            if claim.get("certified") is not True:
+                continue
             searched = isinstance(proof, dict) and proof.get("type") == "bilinear_bnb"
             words = FRAME_SCOPES["searched" if searched else "trivial"]
             if isinstance(summary, dict) and "scope" in summary and summary["scope"] != words:
                 raise Invalid("returned", f"frames/{claim['index']}/certificate/scope is {summary['scope']!r:.120}, the "
                                           f"scope its proof covers is {words!r}")
-            region = summary.get("root_region") if isinstance(summary, dict) else None
             if isinstance(proof, dict) and proof.get("type") == "bilinear_bnb":
                 lo, hi = proof["camera_box"]
                 expected = {"camera_lower": [lo[:3], lo[3:]], "camera_upper": [hi[:3], hi[3:]],
@@ -205,14 +219,23 @@ class BilinearVerification(Verification):
             camera = _numbers(item["camera"], f"frames/{index}/camera", (2, 4), "returned")
             alpha = _numbers(item["coefficients"], f"frames/{index}/coefficients", (basis.shape[0],), "returned")
             shape = _numbers(item.get("shape"), f"frames/{index}/shape", (basis.shape[1], 3), "returned")
-            if not np.allclose(shape, problem.shape_of(basis, alpha), rtol=1e-9, atol=1e-12):
-                raise Invalid("returned", f"frames/{index}/shape is not the coefficients' combination of the basis")
-            r = problem.residuals(basis, points, camera, alpha)
+            # Each number within RETURNED_TOLERANCE of the size of the terms it sums (the data's own
+            # scale, whatever it is), not of an absolute floor: with floors (1e-12 for the shape,
+            # 1e-9 for residuals) data scaled small let residuals of 5e-13 be stated 0 and a shape
+            # of 1e-19 be stated at the origin (review 42). Writer and verifier evaluate the same
+            # sums; their orders differ by a few ulps of the terms, far below this.
+            with np.errstate(all="ignore"):
+                terms = np.einsum("i,ijk->jk", np.abs(alpha), np.abs(basis))  # the shape's terms
+                if not np.all(np.abs(shape - problem.shape_of(basis, alpha)) <= RETURNED_TOLERANCE * terms):
+                    raise Invalid("returned", f"frames/{index}/shape is not the coefficients' combination of the basis")
+                r = problem.residuals(basis, points, camera, alpha)
+                allowed = RETURNED_TOLERANCE * (np.abs(points) + terms @ np.abs(camera[:, :3]).T + np.abs(camera[:, 3]))
             given = item.get("residuals")
             if not isinstance(given, list) or len(given) != len(r) or any(
                     (g is None) != bool(np.isnan(row[0])) or (g is not None and not (
-                        isinstance(g, list) and len(g) == 2 and np.allclose(g, row, rtol=1e-9, atol=1e-9)))
-                    for g, row in zip(given, r)):
+                        isinstance(g, list) and len(g) == 2 and all(is_number(x) for x in g)
+                        and np.all(np.abs(np.array(g, dtype=float) - row) <= tolerance)))
+                    for g, row, tolerance in zip(given, r, allowed)):
                 raise Invalid("returned", f"frames/{index}/residuals are not the camera's")
 
 
@@ -220,6 +243,8 @@ class BilinearVerification(Verification):
 # one machine's BLAS to another's by far less than this (relative to the camera's largest entry,
 # and to the cost).
 BASELINE_TOLERANCE = 1e-6
+# A frame's returned shape and residuals, relative to the size of the terms each sums (check_returned).
+RETURNED_TOLERANCE = 1e-9
 
 
 def _check_baseline(index: int, given: Any, basis: np.ndarray, points: np.ndarray, options: dict) -> None:
@@ -232,19 +257,28 @@ def _check_baseline(index: int, given: Any, basis: np.ndarray, points: np.ndarra
     camera = _numbers(given["camera"], f"{where}/camera", (2, 4), "returned")
     alpha = _numbers(given["coefficients"], f"{where}/coefficients", (basis.shape[0],), "returned")
     cost = _number(given["cost"], f"{where}/cost", "returned")
-    own = problem.cost(problem.residuals(basis, points, camera, alpha), options["norm"])
-    if not abs(cost - own) <= 1e-9 * max(abs(own), 1.0):
-        raise Invalid("returned", f"{where}/cost is not what its camera and coefficients cost ({own!r})")
     frame = problem.normalise(basis, points)
+    # The tolerances are relative to the data's own scales (normalise's powers of two: the image's
+    # spread, the basis's, and the camera's M that maps one to the other), never to an absolute
+    # floor: with max(size, 1) the camera's 2x3 part (2^20 for the basis 2^-60 times the points'
+    # scale 2^-40) set the translation's allowance too, and a translation moved 1e8 times the
+    # image's extent, its cost restated to match, verified (review 42). The cost's floor is that
+    # of the image's spread in the norm's units (cost_unit), times the tolerance.
+    floor = BASELINE_TOLERANCE * problem.cost_unit(frame, options["norm"])
+    own = problem.cost(problem.residuals(basis, points, camera, alpha), options["norm"])
+    if not abs(cost - own) <= 1e-9 * max(abs(own), floor):
+        raise Invalid("returned", f"{where}/cost is not what its camera and coefficients cost ({own!r})")
     with np.errstate(all="ignore"):
         M, a, t = problem.linear_baseline(frame.X, frame.u, options["norm"], options["coefficients"],
                                           options["coefficient_bound"])
     expected = problem.to_raw(frame, M, t)
     expected_cost = problem.cost(problem.residuals(basis, points, expected, a), options["norm"])
-    scale = max(float(np.max(np.abs(expected))), 1.0)
-    if not (np.all(np.abs(camera - expected) <= BASELINE_TOLERANCE * scale)
+    camera_scale = max(float(np.max(np.abs(expected[:, :3]))), frame.image_scale / frame.shape_scale)
+    translation_scale = max(float(np.max(np.abs(expected[:, 3]))), frame.image_scale)
+    if not (np.all(np.abs(camera[:, :3] - expected[:, :3]) <= BASELINE_TOLERANCE * camera_scale)
+            and np.all(np.abs(camera[:, 3] - expected[:, 3]) <= BASELINE_TOLERANCE * translation_scale)
             and np.all(np.abs(alpha - a) <= BASELINE_TOLERANCE * max(float(np.max(np.abs(a))), 1.0))
-            and abs(cost - expected_cost) <= BASELINE_TOLERANCE * max(abs(expected_cost), 1.0)):
+            and abs(cost - expected_cost) <= BASELINE_TOLERANCE * max(abs(expected_cost), floor)):
         raise Invalid("returned", f"{where} is not the linear estimate for this frame's data")
 
 

@@ -13,13 +13,12 @@ docs/certificate.md explains each step.
 from __future__ import annotations
 
 import dataclasses
-import re
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from geocert.solvers.core import exact, self_check
+from geocert.solvers.core import exact, self_check, summary_notes
 from geocert.solvers.core.cones import rounding_uncounted
 from geocert.solvers.core.self_check import SelfCheckFailed
 from geocert.solvers.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
@@ -909,6 +908,8 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
     for index, (item, claim) in enumerate(zip(items, certificate["items"])):
         summary = item.get("certificate") if isinstance(item, dict) else None
         where = f"{kind.item_key}/{index}/certificate"
+        if isinstance(summary, dict):
+            _check_note(summary.get("note"), claim.get("proof"), where)
         if isinstance(summary, dict) and claim.get("certified") is not True:
             if "tolerance_met" in summary and summary["tolerance_met"] is not False:
                 raise Invalid("returned", f"{where}/tolerance_met must be false for an uncertified item")
@@ -930,7 +931,6 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
                 raise Invalid("returned", f"{where}/tolerance is {given!r}, the options give {expected!r}")
         if "tolerance_met" in summary and summary["tolerance_met"] is not True:
             raise Invalid("returned", f"{where}/tolerance_met must be true for a certified item")
-        _check_note_radius(summary.get("note"), proof, where)
         if "leaves" in summary:
             leaves = proof.get("leaves")
             expected = len(leaves) if isinstance(leaves, list) else 0
@@ -938,20 +938,19 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
                 raise Invalid("returned", f"{where}/leaves is {summary['leaves']!r}, its proof has {expected}")
 
 
-# A radius a summary's note states (the writers' words: "the ball of radius R about the solution",
-# "a ball (radius R, ..."), which must be its proof's: the note is informational, but a number it
-# gives about the proof is the proof's (a convexity radius 6.2 restated 1e6, a ball holding points
-# behind the cameras, verified: review 40).
-NOTE_RADIUS = re.compile(r"radius ([^\s,)]+)")
+# A summary's note says how its item's bound was proven, in its writer's words, which are a function
+# of the proof (solvers.core.summary_notes.note_of: the trivial bound's, the convexity bound's with
+# its radius, the sublevel bound's with its radius and rounds; a search states none). The note is
+# informational, but words about the proof are the proof's: any other text is refused (a convexity
+# radius 6.2 restated 1e6, review 40; the trivial bound's note on a searched frame costing 1.6, and
+# "every other map costs at least twice as much" on a map, review 42). A note may be left out (null).
 
 
-def _check_note_radius(note: Any, proof: dict, where: str) -> None:
-    stated = NOTE_RADIUS.findall(note) if isinstance(note, str) else []
-    radius = proof.get("radius")
-    expected = repr(float(radius)) if is_number(radius) else None
-    for found in stated:
-        if found != expected:
-            raise Invalid("returned", f"{where}/note states a radius {found:.40}; its proof's is {expected}")
+def _check_note(note: Any, proof: Any, where: str) -> None:
+    expected = summary_notes.note_of(proof)
+    if note is not None and note != expected:
+        raise Invalid("returned", f"{where}/note is {note!r:.120}; its proof's words are "
+                                  f"{'none (a search states no note)' if expected is None else repr(expected)}")
 
 
 def verify_item(kind: str, data: dict, options: dict, claim: dict) -> list[str]:

@@ -84,7 +84,8 @@ estimates and the pooled level read the cameras through normalised_cameras, as t
 PARALLAX_COSINE (no arccos: its last bit is the vector unit's); (4) ``determined`` is no longer
 compared exactly: check_determined derives it from the stated intervals, whose ends are held to
 the verifier's within their slack; (5) a radius a summary's note states must be its proof's
-(checks._check_note_radius). normalised_cameras scales by np.ldexp (subnormal cameras read).
+(checks._check_note_radius; since review 42 the whole note is its proof's words: checks._check_note).
+normalised_cameras scales by np.ldexp (subnormal cameras read).
 """
 
 from __future__ import annotations

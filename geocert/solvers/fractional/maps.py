@@ -18,6 +18,7 @@ from typing import Callable
 
 import numpy as np
 
+from geocert.solvers.core import summary_notes
 from geocert.solvers.core.bnb import Progress
 from geocert.solvers.fractional.charts import MapChart, normaliser
 from geocert.solvers.fractional.options import MapOptions
@@ -212,10 +213,8 @@ def _sublevel_certified(chart: MapChart, source, target, guess, options: MapOpti
         return None
     bound, proof = found
     claimed = bound - CLAIM_MARGIN * abs(bound)  # the verifier's sums may differ in their last bits
-    certificate = LocalCertificate(SCOPE, math.nan, proof["radius"], proof, note=(
-        f"no search: every camera of the scope costing as little lies in a ball (radius {proof['radius']!r}, "
-        f"{proof['rounds']} rounds, whitened coordinates) over which the cost is bounded below by a quadratic "
-        "(sublevel bound, fractional.resection_bound)"))
+    certificate = LocalCertificate(SCOPE, math.nan, proof["radius"], proof,
+                                   note=summary_notes.sublevel(proof["radius"], proof["rounds"]))
     result = _map_result(chart, source, target, v, options, "optimal", claimed, 0, certificate)
     if not result.certified or result.cost <= options.abs_gap:  # the trivial bound's (prepare's first step)
         return None
