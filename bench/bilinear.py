@@ -111,7 +111,7 @@ def gap_anatomy(K: int = 20, N: int = 50, seed: int = 0) -> None:
     either by f shrinks the gap by about f, and pinning either closes it."""
     from geocert.solvers.bilinear.relaxation import Relaxation
     from geocert.solvers.bilinear.search import Model, root_incumbent, tighten
-    from geocert.solvers.core.conic import ReusableConicProgram
+    from geocert.core.conic import ReusableConicProgram
 
     basis, points, *_ = scene(K, N, 0.005, seed)
     frame = bilinear_problem.normalise(basis, points)
@@ -154,7 +154,7 @@ def relaxation_capacity(N: int = 50, seed: int = 0, widths=(0.1, 0.01, 0.001)) -
     camera's and the coefficients' widths, so the gap falls only as the 6-dimensional camera box
     shrinks (boxes needed grow as (1/h)^6)."""
     from geocert.solvers.bilinear.search import tighten
-    from geocert.solvers.core.conic import ReusableConicProgram
+    from geocert.core.conic import ReusableConicProgram
 
     print(f"\nrelaxation capacity: N = {N}, 0.5% noise, L2L2, one frame per K; the root relaxation's relative gap "
           "on a camera box of half-width h about the incumbent (coefficients tightened for it); CPU s of the "
@@ -187,7 +187,7 @@ def trajectory(N: int = 50, seed: int = 0, runs=((20, 10.0), (40, 60.0)), widths
     bound is near the optimum: boxes there prune only at h*) and the root's camera box, in 6
     dimensions, times the measured CPU per box: the search the relaxation asks for."""
     from geocert.solvers.bilinear.search import tighten
-    from geocert.solvers.core.conic import ReusableConicProgram
+    from geocert.core.conic import ReusableConicProgram
 
     print(f"\ngap over time: N = {N}, 0.5% noise, L2L2, convex coefficients, seed {seed}; "
           f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
@@ -255,7 +255,7 @@ def shor_capacity(N: int = 50, seed: int = 0, widths=(0.1, 0.01)) -> None:
     import cvxpy as cp
 
     from geocert.solvers.bilinear.search import tighten
-    from geocert.solvers.core.conic import ReusableConicProgram
+    from geocert.core.conic import ReusableConicProgram
 
     print(f"\nShor's relaxation against McCormick's: N = {N}, 0.5% noise, L2L2, one frame per K; the root gap on a "
           "camera box of half-width h about the incumbent (coefficients tightened for it), and the CPU s of one "

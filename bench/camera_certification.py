@@ -24,7 +24,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from geocert.solvers.core.geometry import norm_cost
+from geocert.core.geometry import norm_cost
 from geocert.solvers.reconstruction import camera_claim
 from geocert.solvers.reconstruction.structure import free_camera_cost
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import scenes
-from geocert.solvers.core.determinacy import fixes
+from geocert.core.determinacy import fixes
 from testing.determinacy import cameras_looking_at_origin, project
 
 SHARED_DATA = Path(os.environ.get("GEOCERT_SHARED_DATA", "/work/shared/data"))

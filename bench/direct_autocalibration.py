@@ -174,7 +174,7 @@ def speed(trials: int, first: int) -> None:
     Table 7.1's scenes (seeds 1000 + first onwards, the four columns); one warm-up solve each first.
     Prints per column the median processor seconds, their ratio, the largest relative difference
     of the certified K, and the certified counts."""
-    from geocert.solvers.core import interior_point
+    from geocert.core import interior_point
 
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())} ({os.cpu_count()} cores)", flush=True)
     for assembly in ("kron", "moments"):

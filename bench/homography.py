@@ -18,7 +18,7 @@ import time
 import cv2
 import numpy as np
 
-from geocert.solvers.core.geometry import norm_cost
+from geocert.core.geometry import norm_cost
 from bench.mapfits import apply, fit_all
 from geocert.solvers.fractional.triangulation import NORMS
 

@@ -44,8 +44,8 @@ import time
 import numpy as np
 
 from geocert.verify import checks as verify
-from geocert.solvers.core.certificates import BOUND_TOLERANCE, pack, unpack
-from geocert.solvers.core.geometry import InputError
+from geocert.core.certificates import BOUND_TOLERANCE, pack, unpack
+from geocert.core.geometry import InputError
 from geocert.solvers.fractional.inputs import check_correspondences
 from geocert.solvers.fractional.maps import fit_map
 from geocert.solvers.fractional.results import claim_of

@@ -135,13 +135,13 @@ def without_times(value):
 
 def alone(jobs: list[tuple[str, dict]], runs: int) -> None:
     """In this process, a worker's task with no other solver live (workers.pieces: the spreader
-    runs the pieces itself) as it was, one piece at a time (solvers.core.pieces.in_order), and
+    runs the pieces itself) as it was, one piece at a time (core.pieces.in_order), and
     as it is, two at once (in_threads), against the command line's stages (no spreader),
     interleaved: wall and CPU of the whole job, without the service's own noise."""
     import functools
 
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.core import pieces as core
+    from geocert.core import pieces as core
 
     def spreader(mapping):
         return lambda function, shared, items, stop: mapping(functools.partial(function, shared), items, stop)

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from geocert.solvers.datasets import load_dinosaur, load_house
-from geocert.solvers.core.geometry import norm_cost
+from geocert.core.geometry import norm_cost
 from bench.mapfits import apply
 from geocert.solvers.fractional.maps import MapOptions, fit_map
 from geocert.solvers.fractional.triangulation import NORMS, triangulate

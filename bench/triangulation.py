@@ -46,7 +46,7 @@ import numpy as np
 
 from bench import machine_speed_ms
 from geocert.solvers.datasets import load_dinosaur
-from geocert.solvers.core.geometry import norm_cost
+from geocert.core.geometry import norm_cost
 from geocert.solvers.fractional.many_tracks import triangulate_many
 from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, triangulate
 from geocert.solvers.fractional import flat as flat_tracks

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from geocert.solvers.core.certificates import data_hash, problem_hash
-from geocert.solvers.core.strict import document_size
+from geocert.core.certificates import data_hash, problem_hash
+from geocert.core.strict import document_size
 from geocert.verify.checks import verify_any
 
 STORED = Path(__file__).resolve().parents[1] / "tests" / "data" / "certificates"

@@ -9,7 +9,7 @@ import json
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from geocert.solvers.core.geometry import normalised_cameras
+from geocert.core.geometry import normalised_cameras
 from geocert.solvers.fractional.results import claim_of
 from geocert.verify import checks as verify
 

@@ -19,7 +19,7 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 # Every certified result the suites produce, in this process and in the workers it starts, is
 # checked by the independent verifier before it is returned (geocert/verify/checks.py): a result its own
 # certificate does not prove raises SelfCheckFailed. The verifier installs that check when it is
-# imported (solvers.core.self_check): here, for tests that call a solver directly.
+# imported (core.self_check): here, for tests that call a solver directly.
 os.environ.setdefault("GEOCERT_SELF_VERIFY", "1")
 import geocert.verify.checks  # noqa: E402,F401
 

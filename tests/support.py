@@ -177,7 +177,7 @@ def loose_gaps():
     import types
 
     from geocert.solvers.bilinear.options import BilinearOptions
-    from geocert.solvers.core.declared_options import KEY
+    from geocert.core.declared_options import KEY
     from geocert.solvers.fractional.options import SearchOptions
 
     def classes(root):

@@ -1,6 +1,6 @@
 """The estimators import nothing above them: no module of geocert/solvers imports the verifier,
 the kinds, the app, the workers or the job runner (kinds call solvers, never the reverse), and
-only solvers.core.conic imports the conic solver; only the conic boundary's modules (conic.py and
+only core.conic imports the conic solver; only the conic boundary's modules (conic.py and
 the hand-written back-ends beside it) name a back-end's status, each mapped to ours in conic.py. The
 verifier (geocert/verify) imports nothing above it either: it finds each kind's adapter in its own
 registry (verify/adapters.py), not the kinds'. The service's app asks the job store by name, never
@@ -65,27 +65,33 @@ def test_no_worker_module_reaches_into_the_stores_redis_client():
     assert store_client_uses("workers") == {}
 
 
+def test_the_shared_core_imports_nothing_above_it():
+    """geocert.core lies below the estimators and the verifier alike: it imports neither (nor
+    anything above them), so both may build on it without a circle."""
+    assert imports_above("core", ("geocert.solvers", *ABOVE_SOLVERS)) == {}
+
+
 def test_no_solver_module_imports_a_layer_above_it():
-    """The verifier included: a solver's self-check reaches it through solvers.core.self_check."""
+    """The verifier included: a solver's self-check reaches it through core.self_check."""
     assert imports_above("solvers", ABOVE_SOLVERS) == KNOWN
 
 
 def test_only_the_conic_boundary_talks_to_the_conic_solver():
-    """One place builds Clarabel's solvers and reads its statuses (solvers.core.conic), so the
+    """One place builds Clarabel's solvers and reads its statuses (core.conic), so the
     map from its statuses to ours, where an inaccurate answer is never certified, is the only one."""
     talking = {str(path.relative_to(ROOT)) for path in sorted(ROOT.rglob("*.py"))
                if any(name == "clarabel" or name.startswith("clarabel.") for name in imported(path))}
-    assert talking == {"solvers/core/conic.py"}
+    assert talking == {"core/conic.py"}
 
 
-CONIC_BOUNDARY = {"solvers/core/conic.py", "solvers/core/interior_point.py", "solvers/core/barrier.py"}
+CONIC_BOUNDARY = {"core/conic.py", "core/interior_point.py", "core/barrier.py"}
 
 
 def backend_statuses() -> dict[str, set[str]]:
     """conic.py's status maps (module-level dicts whose values are all ``ConicStatus.X``), by name,
     with their keys: every back-end's statuses."""
     maps = {}
-    for node in ast.parse((ROOT / "solvers/core/conic.py").read_text()).body:
+    for node in ast.parse((ROOT / "core/conic.py").read_text()).body:
         if isinstance(node, ast.Assign) and isinstance(node.value, ast.Dict) and node.value.values and all(
                 isinstance(v, ast.Attribute) and isinstance(v.value, ast.Name) and v.value.id == "ConicStatus"
                 for v in node.value.values):
@@ -119,10 +125,10 @@ def test_every_status_a_hand_written_back_end_ends_with_is_in_the_map():
     """The interior-point method's statuses (the strings it assigns to ``status``) and the
     barrier's endings are exactly the keys of their maps in conic.py: a new one not mapped fails
     here, rather than falling to FAILED unseen."""
-    from geocert.solvers.core import barrier
+    from geocert.core import barrier
 
     maps = backend_statuses()
-    tree = ast.parse((ROOT / "solvers/core/interior_point.py").read_text())
+    tree = ast.parse((ROOT / "core/interior_point.py").read_text())
     assigned = {node.value.value for node in ast.walk(tree) if isinstance(node, ast.Assign)
                 and any(isinstance(t, ast.Name) and t.id == "status" for t in node.targets)
                 and isinstance(node.value, ast.Constant)}
@@ -172,7 +178,7 @@ def test_a_solvers_self_check_is_the_verifiers(monkeypatch):
     import numpy as np
     import pytest
 
-    from geocert.solvers.core import self_check
+    from geocert.core import self_check
     from geocert.solvers.fractional.triangulation import triangulate
 
     cameras = np.array([[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]], [[1, 0, 0, -1], [0, 1, 0, 0], [0, 0, 1, 0]]],
@@ -199,7 +205,7 @@ def test_a_solvers_self_check_is_the_verifiers(monkeypatch):
 # direct_relaxation.py and direct_sublevel.py) and whose metric cameras it splits with
 # scipy.linalg.rq (autocalibration/problem.py): shared with the solvers, not yet numpy alone.
 # Every other kind's certificates verify with numpy alone (bilinear's relaxations are built on
-# solvers/core/csc.py for the verifier).
+# core/csc.py for the verifier).
 SCIPY_KINDS = ("autocalibration",)
 
 

@@ -44,7 +44,7 @@ def job_request_adapter(body: object):
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
-    from geocert.solvers.core.geometry import InputError
+    from geocert.core.geometry import InputError
     from geocert.jobs.runner import solve_job
 
     try:
@@ -80,7 +80,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
     """Exit 0 when the certificate is valid, 1 when it is not, 2 when the input cannot be read
     (unreadable, not JSON, a member name repeated in one object, a number too long to read, nested
     too deeply, or carrying no certificate)."""
-    from geocert.solvers.core.strict import RepeatedName, Unreadable, load_document
+    from geocert.core.strict import RepeatedName, Unreadable, load_document
     from geocert.verify.checks import estimates_kind, find_certificate, verify_any
 
     try:

@@ -10,8 +10,8 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from geocert.solvers.core.geometry import InputError
-from geocert.solvers.core.strict import printable_tree
+from geocert.core.geometry import InputError
+from geocert.core.strict import printable_tree
 from geocert.kinds import KINDS
 from geocert.kinds.reconstruction import NO_CONTROL_CHARACTERS
 from geocert.jobs.store import REDIS_GONE

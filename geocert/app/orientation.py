@@ -18,7 +18,7 @@ import numpy as np
 from geocert.app import processes
 from geocert.app.errors import ApiProblem
 from geocert.settings import get_settings, over_budget
-from geocert.solvers.core.geometry import InputError, check_cameras
+from geocert.core.geometry import InputError, check_cameras
 
 # What the route's model reads in place of the body (its validation is then cheap); the body itself
 # is validated in the orientation process.

@@ -33,7 +33,7 @@ from fastapi.exceptions import RequestValidationError
 
 from geocert.app.errors import ApiProblem
 from geocert.settings import get_settings
-from geocert.solvers.core.geometry import InputError
+from geocert.core.geometry import InputError
 
 
 class Pool:

@@ -13,8 +13,8 @@ from typing import Any, Callable
 
 from geocert.kinds import get_kind, options_from
 from geocert.kinds.documents import certificate_document, finite_or_none
-from geocert.solvers.core.bnb import Progress
-from geocert.solvers.core.geometry import InputError
+from geocert.core.bnb import Progress
+from geocert.core.geometry import InputError
 
 ProgressSink = Callable[[dict], None]
 StopCheck = Callable[[], bool]

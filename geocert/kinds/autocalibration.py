@@ -21,8 +21,8 @@ from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finit
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import STAGES, outcome, read_data
-from geocert.solvers.core.determinacy import within
-from geocert.solvers.core.self_check import enabled as self_check_enabled
+from geocert.core.determinacy import within
+from geocert.core.self_check import enabled as self_check_enabled
 
 Range = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[lo, hi]")]
 Point4 = Annotated[list[Finite], Field(min_length=4, max_length=4, description="[X, Y, Z, W]")]

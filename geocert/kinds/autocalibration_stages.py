@@ -8,8 +8,8 @@ import dataclasses
 
 from geocert.kinds.documents import finite_or_none
 from geocert.solvers.autocalibration import problem
-from geocert.solvers.core.strict import Invalid
-from geocert.solvers.core.self_check import SelfCheckFailed
+from geocert.core.strict import Invalid
+from geocert.core.self_check import SelfCheckFailed
 from geocert.verify.checks import verify_arrays
 
 # The stages' determinacy analyses run until this many seconds past the job's time limit in all

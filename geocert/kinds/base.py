@@ -19,7 +19,7 @@ from pydantic import BaseModel
 
 from geocert.verify import adapters as verified_kinds
 from geocert.verify.verification import hook
-from geocert.solvers.core.geometry import InputError
+from geocert.core.geometry import InputError
 
 ProgressCallback = Callable[[Any], "bool | None"]
 

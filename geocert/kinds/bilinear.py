@@ -16,11 +16,11 @@ from geocert.solvers.bilinear import determinacy
 from geocert.solvers.bilinear import problem
 from geocert.solvers.bilinear.options import BilinearOptions
 from geocert.verify.bilinear import FRAME_REGION_MEANING, FRAMES
-from geocert.solvers.core import summary_notes
-from geocert.solvers.core.determinacy import safely
-from geocert.solvers.core.strict import Invalid
-from geocert.solvers.core.self_check import SelfCheckFailed
-from geocert.solvers.core.self_check import enabled as self_check_enabled
+from geocert.core import summary_notes
+from geocert.core.determinacy import safely
+from geocert.core.strict import Invalid
+from geocert.core.self_check import SelfCheckFailed
+from geocert.core.self_check import enabled as self_check_enabled
 from geocert.verify.checks import verify_arrays
 
 Point3 = Annotated[list[Finite], Field(min_length=3, max_length=3, description="[X, Y, Z]")]

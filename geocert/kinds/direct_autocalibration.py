@@ -33,8 +33,8 @@ def returned_quadric(setup: direct.DirectSetup, Q: np.ndarray) -> tuple[list, fl
 def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptions, callback) -> dict:
     from geocert.solvers.autocalibration import direct_solve
     from geocert.solvers.autocalibration.stratified import announce
-    from geocert.solvers.core.bnb import asks_to_stop
-    from geocert.solvers.core.self_check import enabled as self_check_enabled
+    from geocert.core.bnb import asks_to_stop
+    from geocert.core.self_check import enabled as self_check_enabled
 
     began = time.perf_counter()
     # The job's time limit in all (its one stage), and the determinacy analysis's grace past it.
@@ -83,7 +83,7 @@ def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptio
         # How well the data fix the plane and K (one focal length a view: each view's), read with the
         # stratified costs' curvature (the moment relaxation has no local parametrisation of its own).
         from geocert.solvers.autocalibration import determinacy
-        from geocert.solvers.core.determinacy import within
+        from geocert.core.determinacy import within
 
         p = autocalibration_problem.plane_from_input(problem, np.array(document["plane_at_infinity"]))
         centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])

@@ -9,8 +9,8 @@ import dataclasses
 import math
 from typing import Any
 
-from geocert.solvers.core import summary_notes
-from geocert.solvers.core.certificates import FORMAT, VERSION, data_hash, problem_hash
+from geocert.core import summary_notes
+from geocert.core.certificates import FORMAT, VERSION, data_hash, problem_hash
 from geocert.solvers.fractional.results import ItemResult, LocalCertificate, proof_of
 
 

@@ -27,10 +27,10 @@ from geocert.kinds.resection_homography import RESECTION, map_document
 from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict, options_model
 from geocert.kinds.triangulation import TrackOut, track_document
 from geocert.solvers.autocalibration.problem import StageProgress
-from geocert.solvers.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, number_array
+from geocert.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, number_array
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.verify.reconstruction import RECONSTRUCTION
-from geocert.solvers.core.records import keep_declared
+from geocert.core.records import keep_declared
 from geocert.verify.reconstruction_stages import IMAGES, STAGE_RECORDS
 
 MAX_VIEWS = 1000

@@ -12,7 +12,7 @@ from pydantic import BaseModel, Field
 from geocert.kinds.base import ProblemKind
 from geocert.kinds.documents import brief_certificate, certificate_summary, outcome_document
 from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Strict, options_model
-from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
+from geocert.core.geometry import COORDINATE_LIMIT, InputError, number_array
 from geocert.solvers.fractional.inputs import check_correspondences
 from geocert.verify.fractional import MAP_REGION_MEANING
 from geocert.verify.adapters import VERIFIED_KINDS
@@ -136,7 +136,7 @@ class MapKind(ProblemKind):
     def solve_item(self, parsed: ParsedMaps, index: int, options: MapOptions, callback) -> dict:
         from geocert.solvers.fractional.maps import fit_map  # the conic solver, only to solve
 
-        from geocert.solvers.core.determinacy import safely
+        from geocert.core.determinacy import safely
         from geocert.solvers.fractional import determinacy
 
         source, target = parsed.maps[index]

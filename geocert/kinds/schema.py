@@ -9,7 +9,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, create_model, model_serializer
 
-from geocert.solvers.core.declared_options import KEY, MISSING
+from geocert.core.declared_options import KEY, MISSING
 
 # Strict types (the Strict models below): a JSON string ("330") or a boolean is never a number, and
 # a float (1.0) is never an integer; a JSON integer is still a number wherever a float is asked for.
@@ -27,7 +27,7 @@ class Strict(BaseModel):
 
 def options_model(name: str, options_type: type, wire: dict | None = None, doc: str | None = None) -> type[BaseModel]:
     """The wire model of a kind's options, derived from its solver's options dataclass: every
-    option declared there (solvers.core.declared_options.option) that the API takes, with its
+    option declared there (core.declared_options.option) that the API takes, with its
     default, range, allowed words and description as declared, so the API, the CLI, the solver
     and the verifier cannot disagree. A nested options dataclass becomes a nested model (named
     after the option, ``...In``; a dict-valued option may name its dataclass as its declared

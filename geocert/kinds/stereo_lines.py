@@ -19,9 +19,9 @@ from pydantic import BaseModel, Field
 
 from geocert.kinds.base import ProblemKind
 from geocert.kinds.schema import Determinacy, Finite, JobBase, JobStats, Strict, options_model
-from geocert.solvers.core.bnb import Progress
-from geocert.solvers.core.determinacy import safely
-from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, number_array
+from geocert.core.bnb import Progress
+from geocert.core.determinacy import safely
+from geocert.core.geometry import COORDINATE_LIMIT, InputError, number_array
 from geocert.verify.adapters import NOT_CERTIFIED, VERIFIED_KINDS
 from geocert.solvers.lines.geometry import Rig
 from geocert.solvers.lines.pipeline import SOLVERS, StereoLinesOptions, compose, estimate_pair
@@ -322,7 +322,7 @@ class StereoLinesKind(ProblemKind):
 def translation_judged(determinacy: dict | None, t) -> tuple[bool, str | None]:
     """Whether the pair's determinacy fixes t to 10% of its length, and if not, why (a narrow
     baseline seeing distant lines fixes the rotation long before the translation)."""
-    from geocert.solvers.core.determinacy import fixes
+    from geocert.core.determinacy import fixes
 
     if determinacy is None:
         return False, "the translation's determinacy could not be estimated: it is not known to be fixed"

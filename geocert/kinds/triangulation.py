@@ -12,7 +12,7 @@ from pydantic import BaseModel, Field
 from geocert.kinds.base import ProblemKind
 from geocert.kinds.documents import brief_certificate, certificate_summary, local_summary, outcome_document
 from geocert.kinds.schema import Camera, CertificateDocument, ItemOutcome, JobBase, JobStats, Pixel, Strict, options_model
-from geocert.solvers.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, check_cameras, number_array
+from geocert.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, check_cameras, number_array
 from geocert.verify.fractional import MAX_VIEWS, TRACK_REGION_MEANING, TRACKS
 from geocert.solvers.fractional.options import TriangulationOptions
 from geocert.solvers.fractional.columns import SCOPE, TrackResults
@@ -217,7 +217,7 @@ class TriangulationKind(ProblemKind):
 
     @staticmethod
     def _document(parsed: ParsedTracks, views, points, result: TrackResult, options: TriangulationOptions) -> dict:
-        from geocert.solvers.core.determinacy import safely
+        from geocert.core.determinacy import safely
         from geocert.solvers.fractional import determinacy
         from geocert.solvers.fractional.columns import certified_sublevel
 

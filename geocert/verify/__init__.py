@@ -13,7 +13,7 @@ behind each certified claim from the raw data, and says which check failed when 
 
 It sits above the estimators: it reuses their numpy-only pieces (the relaxations it rebuilds, the
 geometry) and they never import it; a solver's self-check (GEOCERT_SELF_VERIFY=1) reaches it
-through solvers.core.self_check, where ``checks`` installs itself. docs/certificate.md explains
+through core.self_check, where ``checks`` installs itself. docs/certificate.md explains
 each step.
 """
 

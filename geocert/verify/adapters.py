@@ -13,8 +13,8 @@ from typing import Any
 
 from geocert.verify.autocalibration import STAGES
 from geocert.verify.bilinear import FRAMES
-from geocert.solvers.core import records
-from geocert.solvers.core.strict import Invalid
+from geocert.core import records
+from geocert.core.strict import Invalid
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
 from geocert.verify import reconstruction_stages as stage_checks
 from geocert.verify.fractional import TRACKS, MapItems, TrackItems

@@ -14,10 +14,10 @@ import numpy as np
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration import plane_sublevel, proofs
-from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
-from geocert.solvers.core.determinacy import ESTIMATES_FORM, proven_document
-from geocert.solvers.core.geometry import InputError, is_number, number_array
-from geocert.solvers.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
+from geocert.core.certificates import OBJECTIVE_TOLERANCE
+from geocert.core.determinacy import ESTIMATES_FORM, proven_document
+from geocert.core.geometry import InputError, is_number, number_array
+from geocert.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
 from geocert.verify import autocalibration_estimates, cost_rounding, estimates, residual_claims, structure_check
 from geocert.verify.verification import Verification
 
@@ -742,7 +742,7 @@ def _check_direct_level(problem, result: dict, determinacy: Any, where: str) -> 
     (review 41), and with it intervals said to hold every quadric within it."""
     from geocert.solvers.autocalibration.determinacy import varying_focal_residuals
     from geocert.solvers.autocalibration.problem import w_of_K
-    from geocert.solvers.core.determinacy import cost_increase
+    from geocert.core.determinacy import cost_increase
 
     if not isinstance(determinacy, dict) or estimates.stopped(determinacy):
         return

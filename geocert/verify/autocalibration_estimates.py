@@ -31,8 +31,8 @@ import numpy as np
 from geocert.solvers.autocalibration import determinacy as writer
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration.problem import w_of_K
-from geocert.solvers.core.determinacy import certified_gap, clip, safely
-from geocert.solvers.core.strict import Invalid
+from geocert.core.determinacy import certified_gap, clip, safely
+from geocert.core.strict import Invalid
 from geocert.verify import estimates
 
 # Of a recomputed interval's width: how far a stated end may lie inside it. The walk bisects each

@@ -14,15 +14,15 @@ import numpy as np
 from geocert.solvers.bilinear import problem
 from geocert.solvers.bilinear.options import BilinearOptions
 from geocert.solvers.bilinear.relaxation import Relaxation, tightening_objective, with_cost_cap
-from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
-from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
-from geocert.solvers.core.coverage import extended, uncovered_part, widened
-from geocert.solvers.core.csc import CscMatrix
-from geocert.solvers.core.determinacy import ESTIMATES_FORM
-from geocert.solvers.core.geometry import InputError, is_number
+from geocert.core.bnb import Box
+from geocert.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
+from geocert.core.cones import proves_infeasible, safe_lower_bound
+from geocert.core.coverage import extended, uncovered_part, widened
+from geocert.core.csc import CscMatrix
+from geocert.core.determinacy import ESTIMATES_FORM
+from geocert.core.geometry import InputError, is_number
 from geocert.verify import cost_rounding
-from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
+from geocert.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
                                          numbers as _numbers, record as _record)
 from geocert.verify import residual_claims
 from geocert.verify.verification import Verification

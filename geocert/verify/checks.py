@@ -18,14 +18,14 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.core import exact, self_check, summary_notes
-from geocert.solvers.core.cones import rounding_uncounted
-from geocert.solvers.core.self_check import SelfCheckFailed
-from geocert.solvers.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
+from geocert.core import exact, self_check, summary_notes
+from geocert.core.cones import rounding_uncounted
+from geocert.core.self_check import SelfCheckFailed
+from geocert.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
                                                data_hash, problem_hash)
-from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost, residual_lengths
+from geocert.core.geometry import cost_rounding, is_number, norm_cost, residual_lengths
 from geocert.verify.notes import check_notes
-from geocert.solvers.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
+from geocert.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
                                          informational, number as _number, printable_tree, record, same,
                                          work_budget)
 from geocert.verify import residual_claims
@@ -607,7 +607,7 @@ def _check_claim_members(kind, items: list) -> None:
     """Each item of a certificate holds only what certificate_document writes of a claim
     (records.CLAIM_MEMBERS) and its kind's solution fields: a member no check reads (an item's
     "unique_optimum") claims nothing, so it is refused, on every path an item is checked by."""
-    from geocert.solvers.core.records import CLAIM_MEMBERS
+    from geocert.core.records import CLAIM_MEMBERS
 
     allowed = set(CLAIM_MEMBERS) | set(kind.solution_fields)
     for index, item in enumerate(items):
@@ -673,7 +673,7 @@ def check_members(kind, result: dict) -> None:
                                           f"(its members: {', '.join(names)}); a member no check reads claims "
                                           "nothing, so it is refused")
     # and every record nested below those, at any depth (core.records: the writers' members)
-    from geocert.solvers.core import records
+    from geocert.core import records
     from geocert.verify.adapters import NESTED_RECORDS
 
     records.check_nested(result, NESTED_RECORDS.get(kind.name, ()))
@@ -939,7 +939,7 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
 
 
 # A summary's note says how its item's bound was proven, in its writer's words, which are a function
-# of the proof (solvers.core.summary_notes.note_of: the trivial bound's, the convexity bound's with
+# of the proof (core.summary_notes.note_of: the trivial bound's, the convexity bound's with
 # its radius, the sublevel bound's with its radius and rounds; a search states none). The note is
 # informational, but words about the proof are the proof's: any other text is refused (a convexity
 # radius 6.2 restated 1e6, review 40; the trivial bound's note on a searched frame costing 1.6, and
@@ -1084,7 +1084,7 @@ def _met_uncounted(kind: str, arrays: tuple, options: dict, claim: dict) -> bool
 
 
 def _self_check(kind: str, arrays: tuple, options: dict, claim: dict) -> None:
-    """The solvers' self-check (solvers.core.self_check, GEOCERT_SELF_VERIFY=1): the claim verified."""
+    """The solvers' self-check (core.self_check, GEOCERT_SELF_VERIFY=1): the claim verified."""
     try:
         verify_arrays(kind, arrays, options, claim)
     except Invalid as exc:

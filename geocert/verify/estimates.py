@@ -29,9 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.core.determinacy import SIGMAS, certified_gap, cost_increase as level_of, fixes, safely
-from geocert.solvers.core.geometry import is_number, normalised_cameras
-from geocert.solvers.core.strict import Invalid, same
+from geocert.core.determinacy import SIGMAS, certified_gap, cost_increase as level_of, fixes, safely
+from geocert.core.geometry import is_number, normalised_cameras
+from geocert.core.strict import Invalid, same
 from geocert.solvers.fractional import determinacy as estimate
 
 NUMBER_SLACK = 1e-6  # of an interval's width: another machine's eigendecomposition of the same J'J
@@ -400,9 +400,9 @@ def _check_exact_values(where: str, determinacy: dict, expected: dict | None) ->
 def _far(source: np.ndarray, target: np.ndarray, matrix: Any, certificate: dict) -> bool:
     """Whether a float evaluation's rounding could move the map's cost (exact.needs_exact, as the
     objective check decides it): where it could, its writer states the exact cost, and today's."""
-    from geocert.solvers.core import exact
-    from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
-    from geocert.solvers.core.geometry import norm_cost
+    from geocert.core import exact
+    from geocert.core.certificates import OBJECTIVE_TOLERANCE
+    from geocert.core.geometry import norm_cost
     from geocert.solvers.fractional.items import MapItem
 
     norm = (certificate.get("options") or {}).get("norm")
@@ -439,7 +439,7 @@ def _map_cost_spread(source: np.ndarray, target: np.ndarray, matrix: Any) -> flo
     checks._check_residual_claim): far-off data make each residual a difference of numbers far
     larger than itself, which another machine's kernels round otherwise, and the estimate's level
     (a multiple of the cost, where its certified gap sets it) moves with it."""
-    from geocert.solvers.core.geometry import cost_rounding
+    from geocert.core.geometry import cost_rounding
     from geocert.solvers.fractional.proof import residual_uncertainty
 
     try:

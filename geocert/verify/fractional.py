@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from geocert.solvers.core import exact
-from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
-from geocert.solvers.core.determinacy import ESTIMATES_FORM, certified_gap
-from geocert.solvers.core.geometry import cost_rounding, is_number, norm_cost, normalised_cameras
-from geocert.solvers.core.strict import Invalid, number as _number, numbers, record
+from geocert.core import exact
+from geocert.core.certificates import OBJECTIVE_TOLERANCE
+from geocert.core.determinacy import ESTIMATES_FORM, certified_gap
+from geocert.core.geometry import cost_rounding, is_number, norm_cost, normalised_cameras
+from geocert.core.strict import Invalid, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.convexity import outside_range, track_bound, verify_sublevel
 from geocert.solvers.fractional.convexity_path import cost_increase

@@ -38,8 +38,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from geocert.solvers.core.certificates import CLAIM_OPTIONS as EARLIER_CLAIM_OPTIONS
-from geocert.solvers.core.strict import Invalid, number
+from geocert.core.certificates import CLAIM_OPTIONS as EARLIER_CLAIM_OPTIONS
+from geocert.core.strict import Invalid, number
 from geocert.solvers.reconstruction.camera_claim import MAX_REL_GAP
 from geocert.solvers.reconstruction.run_control import CAMERA_MODELS, PRINCIPAL_POINTS, REGISTRATIONS
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from geocert.solvers.core.strict import Invalid, informational
+from geocert.core.strict import Invalid, informational
 
 # A determinacy document's members (core.determinacy.Determinacy.document) and their types; an
 # interval's and a warning's.

@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from geocert.solvers.core.determinacy import SIGMAS
+from geocert.core.determinacy import SIGMAS
 
 # The normal quantiles of the chi-square's 99.9% point (determinacy.OUTLIER_TAIL) and of 3
 # standard errors' two-sided coverage (determinacy.COVERAGE).

@@ -50,8 +50,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from geocert.solvers.core.geometry import is_number, norm_cost
-from geocert.solvers.core.strict import Invalid, number, numbers, same
+from geocert.core.geometry import is_number, norm_cost
+from geocert.core.strict import Invalid, number, numbers, same
 from geocert.verify import residual_claims
 from geocert.verify.fractional import TRACKS, TrackItems, _check_scope_words
 from geocert.verify.reconstruction_members import intrinsics_of

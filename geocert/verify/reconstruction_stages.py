@@ -21,9 +21,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from geocert.solvers.core.records import INTRINSIC_RANGES, NESTED_STAGE, WARNING, ByName, record
-from geocert.solvers.core.geometry import is_number
-from geocert.solvers.core.strict import Invalid, same
+from geocert.core.records import INTRINSIC_RANGES, NESTED_STAGE, WARNING, ByName, record
+from geocert.core.geometry import is_number
+from geocert.core.strict import Invalid, same
 
 # The statuses a stage ends with (pipeline._stage, _timed, _skip, _cancel; "running" is never
 # returned), and those of a stage that produced nothing (no point or camera it certifies).

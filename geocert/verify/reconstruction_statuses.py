@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from geocert.solvers.core.strict import Invalid
+from geocert.core.strict import Invalid
 
 STOPS = ("cancelled", "time_limit")
 # What each stage ends with where the result returns points (the structure stage ran).

@@ -4,9 +4,9 @@ checked by the solver's own options class, and its scope in words. The verifier'
 
 from __future__ import annotations
 
-from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
-from geocert.solvers.core.geometry import InputError
-from geocert.solvers.core.strict import Invalid, number
+from geocert.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
+from geocert.core.geometry import InputError
+from geocert.core.strict import Invalid, number
 
 
 # The options that control a run, not what it proves: not hashed, yet a document stating one the

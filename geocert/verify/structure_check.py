@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.core.strict import Invalid, numbers
+from geocert.core.strict import Invalid, numbers
 
 ROUNDING = 1e-9  # relative to the terms summed: some 4.5e6 units in the last place, for any machine
 CAMERA_FIELDS = ("K", "R", "t", "center")

@@ -1,4 +1,4 @@
-"""A running task's independent pieces (solvers.core.pieces: a reconstruction's images read and
+"""A running task's independent pieces (core.pieces: a reconstruction's images read and
 image pairs matched) spread over the service's other solver processes, as a batch's chunks are.
 
 The task running the stage (``SpreadOverSolvers``) stores the pieces (JobStore.put_pieces),
@@ -35,7 +35,7 @@ import uuid
 import numpy as np
 from celery.exceptions import SoftTimeLimitExceeded
 
-from geocert.solvers.core import pieces
+from geocert.core import pieces
 from geocert.workers.priorities import FIRST
 from geocert.jobs.store import JobStore
 
@@ -125,7 +125,7 @@ def helper_time_limits(stop_by: float | None) -> dict:
 
 
 class SpreadOverSolvers:
-    """The spreader (solvers.core.pieces.spread_by) of a task of job ``job_id``, stopped as a
+    """The spreader (core.pieces.spread_by) of a task of job ``job_id``, stopped as a
     last resort at ``stop_by`` (time.monotonic(); None: not known), which bounds its helpers'
     time limits (helper_time_limits)."""
 

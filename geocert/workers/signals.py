@@ -31,8 +31,8 @@ def _json_logs(**_) -> None:
 SOLVER_MODULES = (
     "geocert.solvers.fractional.many_tracks", "geocert.solvers.fractional.triangulation",
     "geocert.solvers.fractional.convexity_path", "geocert.solvers.fractional.determinacy",
-    "geocert.solvers.fractional.maps", "geocert.solvers.fractional.options", "geocert.solvers.core.bnb",
-    "geocert.solvers.core.determinacy", "geocert.solvers.core.self_check", "geocert.solvers.bilinear.search",
+    "geocert.solvers.fractional.maps", "geocert.solvers.fractional.options", "geocert.core.bnb",
+    "geocert.core.determinacy", "geocert.core.self_check", "geocert.solvers.bilinear.search",
     "geocert.solvers.autocalibration.stratified", "geocert.solvers.autocalibration.direct",
     "geocert.solvers.autocalibration.direct_solve", "geocert.solvers.autocalibration.direct_sublevel",
     "geocert.solvers.autocalibration.direct_intrinsics",

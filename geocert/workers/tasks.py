@@ -33,8 +33,8 @@ import signal
 import time
 
 from geocert.settings import get_settings
-from geocert.solvers.core.geometry import InputError
-from geocert.solvers.core.pieces import spread_by
+from geocert.core.geometry import InputError
+from geocert.core.pieces import spread_by
 from geocert.jobs.runner import (abs_gap_of, assemble, item_counts, item_sums, job_deadline, merged_sums, not_started_item,
                            result_fragment, result_json, result_shell, solve_items, stats_from, streams_result)
 from geocert.kinds import KINDS, get_kind, options_from

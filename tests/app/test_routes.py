@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pytest
 
-from geocert.solvers.core.certificates import VERSION
+from geocert.core.certificates import VERSION
 from testing.jobs import look_at, service_job as triangulation_job
 from tests.support import assert_problem
 

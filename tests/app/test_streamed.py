@@ -16,7 +16,7 @@ from geocert.app.schemas import JOB_REQUEST, JobRequest
 from geocert.app import streamed
 from geocert.app.streamed import split_items, upload_items
 from geocert.jobs.store import JobStore
-from geocert.solvers.core.geometry import InputError
+from geocert.core.geometry import InputError
 from tests.support import embedded_redis_client, triangulation_job
 
 

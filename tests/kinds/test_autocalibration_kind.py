@@ -15,7 +15,7 @@ import pytest
 from geocert.jobs.runner import parse_job, solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.autocalibration import scenes
-from geocert.solvers.core.geometry import InputError
+from geocert.core.geometry import InputError
 from geocert.verify.checks import verify_any
 from tests.support import HOUSE_RANGES, house_in_projective_frame, shared_data
 
@@ -190,7 +190,7 @@ class TestSelfCheck:
 
     def test_a_refused_stage_fails_the_solve(self, monkeypatch):
         from geocert.solvers.autocalibration import proofs
-        from geocert.solvers.core.strict import Invalid
+        from geocert.core.strict import Invalid
         from geocert.verify.checks import SelfCheckFailed
 
         def refuse(*args, **kwargs):

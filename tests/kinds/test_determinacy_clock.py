@@ -12,7 +12,7 @@ from geocert.kinds import autocalibration as kind_module
 from geocert.kinds import get_kind
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration import scenes, stratified
-from geocert.solvers.core import determinacy
+from geocert.core import determinacy
 
 KIND = get_kind("autocalibration")
 

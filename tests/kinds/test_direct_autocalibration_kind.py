@@ -62,7 +62,7 @@ class TestVaryingFocal:
             assert abs(K[0][0] / truth[0, 0] - 1) < 0.1 and abs(K[1][1] / truth[1, 1] - 1) < 0.1
 
     def test_each_focal_length_gets_an_interval_holding_the_truth(self, varying):
-        from geocert.solvers.core.determinacy import fixes
+        from geocert.core.determinacy import fixes
 
         _, Ks, result, _ = varying
         determinacy = result["stages"][0]["determinacy"]

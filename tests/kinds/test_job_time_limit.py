@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.core.geometry import InputError
+from geocert.core.geometry import InputError
 from geocert.solvers.fractional.many_tracks import triangulate_many
 from geocert.solvers.fractional.options import TriangulationOptions
 from tests.support import reconstruction_data, service_job

@@ -16,8 +16,8 @@ from pydantic import ValidationError
 
 from geocert.jobs.runner import parse_job, solve_job
 from geocert.kinds import KINDS
-from geocert.solvers.core.geometry import InputError
-from geocert.solvers.core.certificates import FORMAT, VERSION
+from geocert.core.geometry import InputError
+from geocert.core.certificates import FORMAT, VERSION
 from geocert.verify.checks import verify_any, verify_document
 
 KIND_NAMES = KINDS.names()
@@ -109,7 +109,7 @@ from geocert.kinds import KINDS
 from tests.kinds import toy_kind
 KINDS.register(toy_kind.KIND)  # the one line
 from geocert.jobs.runner import solve_job
-from geocert.solvers.core.certificates import FORMAT, VERSION
+from geocert.core.certificates import FORMAT, VERSION
 from geocert.verify.checks import verify_any, verify_document
 from geocert.app.cli import openapi_document
 from geocert.app.api.routes.service import list_problems

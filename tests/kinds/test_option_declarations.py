@@ -1,5 +1,5 @@
 """Each kind's options are declared once, on its solver's options dataclass (default, range,
-words, description: solvers.core.declared_options.option), and the API's wire model is derived
+words, description: core.declared_options.option), and the API's wire model is derived
 from that declaration (kinds.schema.options_model): the two agree option by option, and no kind
 module states an option again."""
 
@@ -14,7 +14,7 @@ import pytest
 from pydantic import BaseModel
 
 from geocert.kinds import KINDS
-from geocert.solvers.core.declared_options import MISSING, declarations
+from geocert.core.declared_options import MISSING, declarations
 
 KIND_MODULES = pathlib.Path(__file__).resolve().parents[2] / "geocert" / "kinds"
 RANGE_KEYWORDS = ("ge", "gt", "le", "lt")

@@ -16,7 +16,7 @@ import pytest
 
 from geocert.jobs.runner import parse_job, solve_job
 from geocert.kinds import get_kind
-from geocert.solvers.core.geometry import InputError
+from geocert.core.geometry import InputError
 from geocert.solvers.reconstruction import export
 from geocert.verify.checks import verify_any, verify_document
 

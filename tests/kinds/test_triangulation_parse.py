@@ -11,7 +11,7 @@ import pytest
 
 from geocert.kinds import triangulation
 from geocert.kinds.triangulation import KIND, tracks_in_bulk
-from geocert.solvers.core.geometry import InputError
+from geocert.core.geometry import InputError
 
 
 def request_data(rng, tracks: int = 30, cameras: int = 6) -> dict:

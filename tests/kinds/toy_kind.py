@@ -16,9 +16,9 @@ from pydantic import BaseModel, Field
 
 from geocert.kinds.base import ProblemKind
 from geocert.kinds.schema import JobBase, JobStats, Pixel, Strict, options_model
-from geocert.solvers.core.declared_options import DeclaredRanges, option
-from geocert.solvers.core.geometry import InputError, number_array
-from geocert.solvers.core.strict import Invalid, numbers
+from geocert.core.declared_options import DeclaredRanges, option
+from geocert.core.geometry import InputError, number_array
+from geocert.core.strict import Invalid, numbers
 from geocert.verify.verification import Verification
 
 

@@ -11,13 +11,13 @@ import sys
 import numpy as np
 import pytest
 
-from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unpack
+from geocert.core.certificates import data_hash, pack, problem_hash, unpack
 from geocert.jobs.runner import solve_job
 from geocert.solvers.fractional.relaxation import NORMS
-from geocert.solvers.core.certificates import BOUND_TOLERANCE
-from geocert.solvers.core.coverage import uncovered_part
+from geocert.core.certificates import BOUND_TOLERANCE
+from geocert.core.coverage import uncovered_part
 from geocert.verify.checks import verify_arrays, verify_document
-from geocert.solvers.core.bnb import Box
+from geocert.core.bnb import Box
 
 from tests.support import map_job, seed, triangulation_job
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from geocert.solvers.core.strict import Invalid
+from geocert.core.strict import Invalid
 from geocert.solvers.reconstruction import depth_reversal_claim as claim
 
 

@@ -15,7 +15,7 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import scenes
-from geocert.solvers.core.certificates import pack, unpack
+from geocert.core.certificates import pack, unpack
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import rehash
 
@@ -49,7 +49,7 @@ def test_the_ratios_read_K_off_its_DIAC():
 
 def test_asking_with_varying_focal_is_refused():
     from geocert.solvers.autocalibration.problem import AutocalibrationOptions
-    from geocert.solvers.core.geometry import InputError
+    from geocert.core.geometry import InputError
 
     options = AutocalibrationOptions(method="direct", varying_focal=True, prove_intrinsics_intervals=True)
     with pytest.raises(InputError) as raised:

@@ -18,7 +18,7 @@ from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import direct, direct_relaxation, scenes
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration.proofs import sublevel_level
-from geocert.solvers.core.certificates import pack, unpack
+from geocert.core.certificates import pack, unpack
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import rehash
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from geocert.solvers.core.certificates import data_hash, pack, problem_hash
+from geocert.core.certificates import data_hash, pack, problem_hash
 from geocert.verify.checks import verify_any, verify_document
 from tests.support import loose_gaps
 
@@ -149,7 +149,7 @@ class TestSubnormalFarkasVectors:
         assert refused(document)["check"] in ("format", "leaf_bounds")
 
     def test_the_farkas_test_itself_is_not_fooled(self, forged_point):
-        from geocert.solvers.core.cones import proves_infeasible
+        from geocert.core.cones import proves_infeasible
 
         _, data, z = forged_point
         assert not proves_infeasible(data.A, data.b, data.cones, z, data.lower, data.upper, data.transform)
@@ -158,7 +158,7 @@ class TestSubnormalFarkasVectors:
                                      data.transform)
 
     def test_a_dual_vector_with_a_subnormal_entry_is_refused_by_its_reader(self):
-        from geocert.solvers.core.strict import Invalid, dual_vector
+        from geocert.core.strict import Invalid, dual_vector
 
         with pytest.raises(Invalid, match="subnormal"):
             dual_vector(raw_pack(np.array([1.0, TINY, 0.0])), 3)
@@ -167,7 +167,7 @@ class TestSubnormalFarkasVectors:
     def test_a_safe_bound_from_underflowing_products_is_no_bound(self):
         """min 0 x over {x in [2, 3]: 0.4 x >= 0.6} is 0; z = 5e-324 on the row made the old
         bound -b'z = 5e-324 (0.6 z rounds up to one subnormal, 0.4 z down to 0)."""
-        from geocert.solvers.core.cones import ConeSpec, proves_infeasible, safe_lower_bound
+        from geocert.core.cones import ConeSpec, proves_infeasible, safe_lower_bound
 
         A, b, cones = np.array([[-0.4]]), np.array([-0.6]), ConeSpec(nonneg=1)
         lower, upper = np.array([2.0]), np.array([3.0])
@@ -228,7 +228,7 @@ class TestStratifiedUnit:
         assert refused(document)["check"] in ("program", "format", "lower_bound")
 
     def test_its_program_bound_is_no_bound(self, forged_metric):
-        from geocert.solvers.core.cones import safe_lower_bound
+        from geocert.core.cones import safe_lower_bound
 
         _, program, z = forged_metric
         assert safe_lower_bound(program.q, program.A, program.b, program.cones, z, program.lower,
@@ -450,7 +450,7 @@ class TestVerifierCost:
     def test_every_program_is_paid_for_before_it_is_built(self, monkeypatch):
         """With no budget beyond the document's bare size, a genuine certificate of each kind is
         refused for its work, never after building a program it could not pay for."""
-        from geocert.solvers.core import strict
+        from geocert.core import strict
 
         monkeypatch.setattr(strict, "WORK_PER_UNIT", 0)
         monkeypatch.setattr(strict, "WORK_BASE", 10)
@@ -464,7 +464,7 @@ class TestVerifierCost:
 
     def test_a_basis_beyond_the_limits_is_refused(self):
         from geocert.solvers.bilinear import problem as bilinear_problem
-        from geocert.solvers.core.geometry import InputError
+        from geocert.core.geometry import InputError
 
         with pytest.raises(InputError, match="limit"):
             bilinear_problem.read_basis([[[0.0, 0.0, float(i)]] * 2 for i in range(bilinear_problem.MAX_SHAPES + 1)])
@@ -622,7 +622,7 @@ class TestCutMovedOverTheBox:
         assert refused(thin_cut_metric)["check"] in ("coverage", "leaf_bounds")
 
     def test_the_thin_box_is_thinner_than_the_tolerance(self, thin_cut_metric):
-        from geocert.solvers.core.coverage import SIDE_TOLERANCE
+        from geocert.core.coverage import SIDE_TOLERANCE
 
         lo, hi = (np.array(side) for side in thin_cut_metric["items"][1]["proof"]["search_box"])
         assert (hi - lo).min() < SIDE_TOLERANCE * np.abs(np.r_[lo, hi]).max()
@@ -703,7 +703,7 @@ class TestIntegerEntriesReadInBulk:
     number is still named."""
 
     def test_integer_rows_are_not_checked_entry_by_entry(self, monkeypatch):
-        from geocert.solvers.core import geometry
+        from geocert.core import geometry
 
         def entry_by_entry(*args, **kwargs):
             raise AssertionError("read entry by entry")
@@ -714,7 +714,7 @@ class TestIntegerEntriesReadInBulk:
 
     @pytest.mark.parametrize("bad", [True, "1", 2 ** 1023, 10 ** 400, float("nan")])
     def test_a_bad_entry_is_named(self, bad):
-        from geocert.solvers.core.geometry import InputError, number_array
+        from geocert.core.geometry import InputError, number_array
 
         with pytest.raises(InputError) as caught:
             number_array([[0, 1, 2]] * 3 + [[0, bad, 2]], "x", "rows", 2)
@@ -898,7 +898,7 @@ def _moved_camera_result(result: dict, view: int, degrees: float, camera_rel_gap
     point is returned uncertified, placed on the moved camera's ray through its observation
     there."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.core.geometry import norm_cost
+    from geocert.core.geometry import norm_cost
     from geocert.solvers.reconstruction import camera_claim
     from geocert.verify.reconstruction import camera_maps
 
@@ -1052,7 +1052,7 @@ class TestUnitOnExactData:
     @pytest.mark.parametrize("unit", [TINY, 1e-300, 1e-5, 1e5, 1e300])
     def test_a_unit_far_from_1_and_from_the_cost_is_refused(self, unit):
         from geocert.solvers.autocalibration.proofs import checked_unit
-        from geocert.solvers.core.strict import Invalid
+        from geocert.core.strict import Invalid
 
         with pytest.raises(Invalid):
             checked_unit(unit, "regions/0/unit", 1.3e-31)

@@ -44,8 +44,8 @@ def _unsearch_cameras(result: dict) -> dict:
     free camera: the judgement "no bound can certify it" unchecked and said so in the report's
     scope; the current form's is recomputed from the free camera it states, which a camera that
     a bound could certify has none of)."""
-    from geocert.solvers.core.certificates import problem_hash
-    from geocert.solvers.core.geometry import norm_cost
+    from geocert.core.certificates import problem_hash
+    from geocert.core.geometry import norm_cost
     from geocert.solvers.reconstruction import camera_claim
     from geocert.verify import hashed_options
     from geocert.verify.checks import checked_options

@@ -29,7 +29,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from geocert.solvers.core.strict import Invalid
+from geocert.core.strict import Invalid
 from geocert.solvers.fractional.maps import fit_map
 from geocert.solvers.fractional.options import MapOptions
 from geocert.solvers.fractional.resection_bound import proven_bound, resection_bound

@@ -87,7 +87,7 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.core.geometry import norm_cost
+from geocert.core.geometry import norm_cost
 from geocert.verify.checks import verify_any
 
 from tests.support import map_job, seed, triangulation_job
@@ -215,7 +215,7 @@ def _stored(name: str) -> dict:
 
 def _rehash(document: dict) -> None:
     from geocert.kinds import get_kind
-    from geocert.solvers.core.certificates import data_hash, problem_hash
+    from geocert.core.certificates import data_hash, problem_hash
 
     names = getattr(get_kind(document["kind"]).verification, "claim_options", None)
     document["data_sha256"] = data_hash(document["kind"], document["data"])

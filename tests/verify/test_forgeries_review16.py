@@ -297,7 +297,7 @@ def test_a_stop_hidden_in_the_second_form_is_scoped(cancelled_in_the_cameras_sta
     """The cancel restated as judgements with no free camera: refused in the newest form; in the
     second (rehashed as a forger would) it verifies, the report's scope naming the cameras whose
     judgement is the result's word and the stage options the hash does not cover."""
-    from geocert.solvers.core.certificates import data_hash, problem_hash
+    from geocert.core.certificates import data_hash, problem_hash
     from geocert.verify import hashed_options
 
     forged = copy.deepcopy(cancelled_in_the_cameras_stage)

@@ -90,7 +90,7 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
-from geocert.solvers.core.certificates import problem_hash
+from geocert.core.certificates import problem_hash
 from geocert.verify import fractional as items
 from geocert.solvers.reconstruction import synthetic
 from geocert.verify import hashed_options

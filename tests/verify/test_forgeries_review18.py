@@ -301,7 +301,7 @@ def _centred_registration(options: dict, shift) -> dict:
     record, and its problem_sha256 of the form written then (hashed_options' third form: today's
     form states the record wherever the registration tests it) (a stored result)."""
     from geocert.pipelines.reconstruction import pipeline
-    from geocert.solvers.core.certificates import problem_hash
+    from geocert.core.certificates import problem_hash
     from geocert.verify import hashed_options
     from geocert.verify.checks import checked_options
 

@@ -100,7 +100,7 @@ def test_a_focal_test_record_where_no_such_test_runs_is_refused(result, per_view
     record of it (here one saying it kept nothing, the cameras sharing one focal length and one
     principal point) beside no principal point test or one that kept none states a test that
     never ran. Checked on the stage (the cameras of a run without per-view principal points)."""
-    from geocert.solvers.core.strict import Invalid
+    from geocert.core.strict import Invalid
     from geocert.verify.reconstruction_members import _check_focals_per_view
 
     forged = copy.deepcopy(result)

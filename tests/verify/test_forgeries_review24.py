@@ -182,7 +182,7 @@ def test_the_direct_proven_intervals_numbers_edited_are_refused(direct_result, e
     determinacy restated from it: refused, every dual read by safe_bound in the programs rebuilt
     from the certificate's data (passing on main as here)."""
     from geocert.solvers.autocalibration import direct_sublevel
-    from geocert.solvers.core.certificates import pack, unpack
+    from geocert.core.certificates import pack, unpack
     from tests.verify.test_forgeries import rehash
 
     forged = copy.deepcopy(direct_result)

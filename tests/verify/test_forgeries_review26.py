@@ -126,7 +126,7 @@ def test_an_autocalibration_stages_estimate_edited_is_refused(name, stage, edit)
 
 def test_the_estimate_of_an_analysis_stopped_at_its_time_limit_claims_nothing():
     """An analysis the solver stopped (core.determinacy.not_analysed) is accepted as it is."""
-    from geocert.solvers.core.determinacy import not_analysed
+    from geocert.core.determinacy import not_analysed
 
     result = stored("homography2_l2l2")
     result["maps"][0]["determinacy"] = not_analysed("the map's determinacy", "the job's time limit had passed")

@@ -191,7 +191,7 @@ def test_a_long_tracks_chart_reference_is_paid_from_the_work_budget(monkeypatch)
     document shows it), the pairs projected stay within PAIRS_PER_UNIT times the budget, and the
     tracks beyond it are refused for the work they ask for; on main all 5 tracks' 5 million pairs
     were projected."""
-    from geocert.solvers.core import strict
+    from geocert.core import strict
     from geocert.solvers.fractional import charts
     from geocert.verify import checks
 

@@ -26,9 +26,9 @@ import json
 import numpy as np
 import pytest
 
-from geocert.solvers.core import coverage
-from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.strict import Invalid
+from geocert.core import coverage
+from geocert.core.bnb import Box
+from geocert.core.strict import Invalid
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import stored
 

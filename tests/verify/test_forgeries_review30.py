@@ -3,7 +3,7 @@ room decided by the verifier's own re-adjustment (calibration_tie._centred_refer
 the principal-point records' figures named unchecked in the report's scope, the reconstruction
 stage records' completeness (checks.COMPLETE), plane_sublevel's chirality rows charged by rows x
 boxes, the direct method's per-view proven focal intervals, and the bilinear verification on
-solvers/core/csc.py's numpy CSC.
+core/csc.py's numpy CSC.
 
 Found (each test marked xfail below fails on main's verifier, a false claim accepted):
 
@@ -346,7 +346,7 @@ def _ring_scene(views: int, points: int, seen: int, noise: float, seed: int = 0)
 def test_the_centred_fit_is_charged_for_the_pairs_it_sums():
     """Within a verification's budget, the fit pays at least a unit for each pair of observations
     of a point its solves sum (each solve sums all of them), before summing them."""
-    from geocert.solvers.core import strict
+    from geocert.core import strict
     from geocert.solvers.reconstruction import centred_fit
 
     P, X, view, point, uv = _ring_scene(views=20, points=300, seen=6, noise=0.5)
@@ -363,7 +363,7 @@ def test_the_centred_fit_is_charged_for_the_pairs_it_sums():
 def test_a_centred_fit_its_budget_cannot_pay_declines():
     """A budget too small for one solve: the fit declines (None: the tie then holds the certificate
     to the returned cameras, stricter) and charges nothing it did not run, refusing nothing."""
-    from geocert.solvers.core import strict
+    from geocert.core import strict
     from geocert.solvers.reconstruction import centred_fit
 
     P, X, view, point, uv = _ring_scene(views=20, points=300, seen=6, noise=0.5)
@@ -564,7 +564,7 @@ def test_the_csc_product_is_scipys_on_nonfinite_and_subnormal_entries():
     subnormals, -0.0, an explicit zero), to the bit (NaN where scipy's is NaN)."""
     import scipy.sparse as sp
 
-    from geocert.solvers.core.csc import CscMatrix
+    from geocert.core.csc import CscMatrix
 
     rng = np.random.default_rng(30)
     rows, cols = 7, 9

@@ -395,7 +395,7 @@ def test_the_centred_fit_answers_exactly_its_unbudgeted_fit_or_nothing():
     """For budgets from 0 to what the fit costs: None, or the unbudgeted answer to the bit; the
     budget left between 0 and what it was. So no budget chooses the tie's reference: a fit the
     budget cannot pay declines (the returned cameras, the stricter reading)."""
-    from geocert.solvers.core import strict
+    from geocert.core import strict
     from geocert.solvers.reconstruction import centred_fit
     from tests.verify.test_forgeries_review30 import _ring_scene
 
@@ -456,7 +456,7 @@ def test_only_members_written_sometimes_may_be_left_out(name):
 def test_the_csc_product_is_scipys_on_random_shapes():
     import scipy.sparse as sp
 
-    from geocert.solvers.core.csc import CscMatrix
+    from geocert.core.csc import CscMatrix
 
     rng = np.random.default_rng(31)
     entries = np.array([0.0, -0.0, 5e-324, 1e308, 1e-300, 1.0, np.pi])

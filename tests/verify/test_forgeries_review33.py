@@ -245,7 +245,7 @@ def test_the_self_check_refuses_another_frame(tied_data):
     check (GEOCERT_SELF_VERIFY=1, as under test) rather than leave it."""
     from geocert.jobs.runner import solve_job
     from geocert.solvers.autocalibration import frames
-    from geocert.solvers.core.self_check import SelfCheckFailed
+    from geocert.core.self_check import SelfCheckFailed
 
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(frames, "reference_camera", lambda _cameras: 3)

@@ -192,7 +192,7 @@ def _residuals(result: dict, index: int = 0) -> tuple[np.ndarray, np.ndarray, np
 
 
 def _spread(result: dict, index: int = 0) -> float:
-    from geocert.solvers.core.geometry import cost_rounding
+    from geocert.core.geometry import cost_rounding
 
     _, _, residuals, bound = _residuals(result, index)
     return cost_rounding(residuals, bound, "L2L2")

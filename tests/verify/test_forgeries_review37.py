@@ -359,7 +359,7 @@ def test_a_far_track_cost_understated_within_the_former_window_is_refused(far_tr
     """Class 1 on tracks: the writer states the cost of the residuals computed exactly; restated at
     1.05 of the least review 36's window allowed (each residual within rounding + 2
     residual_uncertainty of the verifier's float one: at 1e6 a quarter of the exact cost), refused."""
-    from geocert.solvers.core import exact
+    from geocert.core import exact
     from geocert.solvers.fractional.items import TrackItem
 
     cameras = np.array(far_track["certificate"]["data"]["cameras"], dtype=float)
@@ -533,7 +533,7 @@ def test_an_estimate_whose_exact_sum_overflows_is_left_out_on_both_sides():
     """A squared residual beyond the largest float: exact_squared_residuals gives inf (it raised
     OverflowError, against its docstring), and the estimate is none, the writer's and the
     verifier's alike (a null determinacy is accepted as it is)."""
-    from geocert.solvers.core.determinacy import safely
+    from geocert.core.determinacy import safely
     from geocert.solvers.fractional import determinacy
 
     rng = np.random.default_rng(37)
@@ -685,8 +685,8 @@ def test_an_uncertified_far_homographys_figure_is_its_exact_cost_to_ulps():
     the figure is the cost of the exact residuals, as its writer states it, held to 1e-9 of itself
     and 4 ulps of each residual, far below that spread."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.core import exact
-    from geocert.solvers.core.geometry import cost_rounding
+    from geocert.core import exact
+    from geocert.core.geometry import cost_rounding
     from geocert.verify.fractional import MapItems
 
     result = solve_job(_with_uncertified(5))

@@ -98,7 +98,7 @@ Open: none.
    cent of its cost, 58 million times OBJECTIVE_TOLERANCE of it) verifies; 1.1e-13 less is refused.
    The slack serves documents written before with a float cost of a near-exact fit (exact.slack's
    docstring); a document whose cost is the exact one (the writers' now) needs none of it. At
-   fault: geocert/solvers/core/exact.py:slack (tolerance * abs_gap) as
+   fault: geocert/core/exact.py:slack (tolerance * abs_gap) as
    checks._check_residual_claim reads it. Suggested fix at the cause: hold a claim to 4 ulps and
    OBJECTIVE_TOLERANCE of the exact cost; give the abs_gap term only to a claim whose cost is a
    float evaluation (within the spread of the exact one, which the verifier can compute) and
@@ -173,7 +173,7 @@ def test_a_far_maps_residuals_stated_zero_within_twice_the_rounding_are_refused(
 def test_the_zeroed_residuals_are_the_exact_ones_of_up_to_1e_8_px(far_exact_homography):
     """Machine-independent (the exact residuals are one float everywhere): every residual is
     zeroed, none is 0, the largest is above 1e-8 px, and the stated cost is theirs, not 0."""
-    from geocert.solvers.core import exact as core_exact
+    from geocert.core import exact as core_exact
 
     document, exact, zeroed = _zeroed(far_exact_homography)
     assert zeroed.all() and np.all(exact != 0) and np.abs(exact).max() > 1e-8
@@ -228,7 +228,7 @@ def test_an_uncertified_far_maps_cost_stated_zero_is_refused(uncertified_far_map
 def test_the_uncertified_far_maps_stated_cost_is_the_exact_one_and_far_from_zero(uncertified_far_map):
     """Machine-independent: the writer states the exact cost (one float everywhere), well above
     any rounding of it (1e-11 under L2L2, 1e-4 under L1L1)."""
-    from geocert.solvers.core import exact
+    from geocert.core import exact
 
     norm = uncertified_far_map["certificate"]["options"]["norm"]
     item, matrix = _map_item(uncertified_far_map, 1)
@@ -281,8 +281,8 @@ def test_the_uncertified_far_tracks_state_their_exact_cost_which_no_float_sum_ho
     """Machine-independent: each uncertified track states its exact cost (core.exact, one float
     everywhere), and the data determine a float evaluation of it only to a spread many times the
     figure's allowance of 1e-9 (so a float sum within 1e-9 of the exact one is luck, not a rule)."""
-    from geocert.solvers.core import exact
-    from geocert.solvers.core.geometry import cost_rounding
+    from geocert.core import exact
+    from geocert.core.geometry import cost_rounding
     from geocert.solvers.fractional.items import TrackItem
     from geocert.verify.fractional import figure_allowance
 
@@ -366,8 +366,8 @@ def test_a_far_tracks_cost_understated_by_1e_9_of_abs_gap_is_refused(far_track_w
 def test_the_understatement_is_over_5_per_cent_of_the_exact_cost(far_track_wide_gap):
     """Machine-independent: the stated cost is the exact one, and 0.9e-13 is over 5 per cent of it
     (over 1e7 times OBJECTIVE_TOLERANCE of it)."""
-    from geocert.solvers.core import exact
-    from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE
+    from geocert.core import exact
+    from geocert.core.certificates import OBJECTIVE_TOLERANCE
     from geocert.solvers.fractional.items import TrackItem
 
     cameras = np.array(far_track_wide_gap["certificate"]["data"]["cameras"], dtype=float)

@@ -137,7 +137,7 @@ def test_the_subnormal_direction_costs_over_1_px2_and_the_data_admit_no_cost_bel
     is above 1, and the solver's own certificate on the same data proves a lower bound above 1, so
     the claim "optimal at cost 0" is false whatever the direction."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.core import exact
+    from geocert.core import exact
     from geocert.solvers.fractional.items import TrackItem
 
     document = _subnormal_track_certificate()
@@ -191,7 +191,7 @@ def test_the_finite_subnormal_point_costs_over_1_px2():
     """Machine-independent: the stated point's exact cost is above 1 px^2 (measured 81.5; the
     solver's own best point on these data costs 81.2, uncertified): rescaling a point at infinity
     would not reach this one, whose last coordinate is 1."""
-    from geocert.solvers.core import exact
+    from geocert.core import exact
     from geocert.solvers.fractional.items import TrackItem
 
     document = _rotating_camera_certificate()
@@ -252,7 +252,7 @@ def test_the_subnormal_map_costs_more_than_abs_gap_and_so_does_every_map(subnorm
     the solver's own certificate on the same data proves a lower bound above 1e-6 (measured: a
     homography's 5.8e-6 against 4.85e-6; a resection's 1.5e4 against 7.6e3 px^2)."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.core import exact
+    from geocert.core import exact
     from geocert.solvers.fractional.items import MapItem
 
     certificate = subnormal_map["certificate"]

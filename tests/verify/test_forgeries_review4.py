@@ -547,7 +547,7 @@ class TestUnregisteredCameraStatusUnread:
 
     def test_an_unregistered_camera_called_optimal_is_refused(self):
         from geocert.verify.reconstruction import _check_cameras
-        from geocert.solvers.core.strict import Invalid
+        from geocert.core.strict import Invalid
 
         result = TestGenuineUnregisteredReconstructionMisread.unregistered()
         cameras = result["cameras"]

@@ -131,7 +131,7 @@ def test_the_scope_is_empty_and_the_claimed_point_is_outside_it():
     """Machine-independent: the claimed point's residual in view 1 is TINY exactly (its image is
     (0, 0)), 1e135 times max_residual; and no point is in scope, since view 0 asks |x| <=
     MAX_RESIDUAL and view 1 |x / 2 - TINY| <= MAX_RESIDUAL (x / 2 <= MAX_RESIDUAL / 2)."""
-    from geocert.solvers.core import exact
+    from geocert.core import exact
     from geocert.solvers.fractional.items import TrackItem
 
     document = _empty_scope_certificate("L1L1")

@@ -188,7 +188,7 @@ def test_a_critical_motions_warning_dropped_alone_is_refused(orbital_result, num
     """The intervals left as written and ``determined`` what they then give (the affine stage's
     plane intervals are bounded: true; the metric stage's are not: false): only the warning goes.
     The motion judged again at the returned K is critical, so the stage must say so."""
-    from geocert.solvers.core.determinacy import fixes
+    from geocert.core.determinacy import fixes
 
     forged = copy.deepcopy(orbital_result)
     determinacy = forged["stages"][number]["determinacy"]

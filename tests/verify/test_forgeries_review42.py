@@ -17,7 +17,7 @@ wrong; all three are fixed at their causes and their tests are plain):
    map with the note "every other map costs at least twice as much" (a uniqueness claim nothing
    proves) verifies too.
    Fixed: a note's words are a function of its proof, written once in
-   geocert/solvers/core/summary_notes.py (note_of: the trivial bound's, the convexity bound's with
+   geocert/core/summary_notes.py (note_of: the trivial bound's, the convexity bound's with
    its radius, the sublevel bound's with its radius and rounds; a search states none), which the
    writers (kinds.documents, kinds.bilinear, solvers.fractional.maps) and the verifier
    (checks._check_note, for every kind, replacing _check_note_radius) both use: any other text is
@@ -286,7 +286,7 @@ def no_search_results() -> dict:
 
 @pytest.mark.parametrize("proof", ["trivial", "convexity", "sublevel_bound"])
 def test_a_no_search_proofs_note_verifies_and_altered_is_refused(no_search_results, proof):
-    from geocert.solvers.core import summary_notes
+    from geocert.core import summary_notes
 
     result, key = no_search_results[proof]
     assert result["certificate"]["items"][0]["proof"]["type"] == proof  # the premise

@@ -100,7 +100,7 @@ def _walked_again(document: dict) -> dict:
     """The verifier's own walks at the returned plane and K (the metric walk, and each end the
     nearer of walk and curvature as autocalibration_estimates._held reads it for earlier documents)."""
     from geocert.solvers.autocalibration import determinacy as writer, problem as autocalibration_problem
-    from geocert.solvers.core.determinacy import certified_gap
+    from geocert.core.determinacy import certified_gap
     from geocert.verify import autocalibration as verifier
     from geocert.verify import autocalibration_estimates
 
@@ -121,7 +121,7 @@ def _walked_again(document: dict) -> dict:
 def _restated(document: dict, intervals: list[dict], drop_warnings: bool) -> dict:
     """The metric stage's intervals restated as ``intervals`` (ends only); with ``drop_warnings``
     both stages' warnings gone and ``determined`` what the intervals then give."""
-    from geocert.solvers.core.determinacy import fixes
+    from geocert.core.determinacy import fixes
 
     forged = copy.deepcopy(document)
     for stated, own in zip(forged["stages"][1]["determinacy"]["intervals"], intervals):

@@ -146,7 +146,7 @@ class TestMembersNoKindWrites:
 def _track_cost(document: dict, index: int, point: list) -> float:
     """What ``point`` costs on track ``index`` of a triangulation certificate's data (the
     verifier's own recomputation, verify._check_residual_claim's)."""
-    from geocert.solvers.core.geometry import norm_cost
+    from geocert.core.geometry import norm_cost
     from geocert.verify.checks import _adapter
 
     adapter = _adapter("triangulation")
@@ -508,7 +508,7 @@ class TestMotionJudgedInSquareMemory:
     autocalibration kind bounds its cameras at 1,000)."""
 
     def test_memory_is_linear_in_the_cameras(self):
-        from geocert.solvers.core.strict import document_size
+        from geocert.core.strict import document_size
 
         small, large = _with_cameras(300), _with_cameras(900)
         (small_valid, small_peak), (large_valid, large_peak) = _peak_bytes(small), _peak_bytes(large)

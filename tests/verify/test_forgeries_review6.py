@@ -184,7 +184,7 @@ class TestAbsoluteGapCapInTheCostsUnits:
 
     def test_the_cap_is_refused_as_input_naming_the_option(self):
         from geocert.jobs.runner import solve_job
-        from geocert.solvers.core.geometry import InputError
+        from geocert.core.geometry import InputError
 
         certificate = stored("autocalibration_direct")["certificate"]
         with pytest.raises(InputError) as refusal:
@@ -545,7 +545,7 @@ def test_each_kinds_request_refuses_an_abs_gap_beyond_its_cap_naming_the_option(
 
     from geocert.jobs.runner import parse_job
     from geocert.kinds import KINDS
-    from geocert.solvers.core.geometry import InputError
+    from geocert.core.geometry import InputError
 
     kind, cap = KINDS.get(name), _abs_gap_caps()[name]
     example = copy.deepcopy(kind.example)

@@ -97,7 +97,7 @@ def _interval_at(result: dict, level: float) -> dict:
     """``result`` with its far track's proven interval proven again (genuinely: the enclosure
     test passes) at cost increase ``level``, the proof's sublevel and the determinacy's
     proven_intervals both restated."""
-    from geocert.solvers.core.geometry import normalised_cameras
+    from geocert.core.geometry import normalised_cameras
     from geocert.solvers.fractional.convexity import ball_intervals, sublevel_radii
     from geocert.solvers.fractional.determinacy import proven_track
     from geocert.solvers.fractional.flat import FlatTracks
@@ -265,7 +265,7 @@ class TestStackedPathRecordsOpen:
 
     @pytest.mark.parametrize("edit", sorted(RECORD_MEMBERS))
     def test_the_per_item_check_refuses_the_forgery(self, edit):
-        from geocert.solvers.core.strict import Invalid
+        from geocert.core.strict import Invalid
         from geocert.verify.checks import verify_item
 
         certificate = stored("triangulation_l2l2")["certificate"]

@@ -63,7 +63,7 @@ def _map_proven_at(result: dict, level: float) -> dict:
 def _own_level(result: dict) -> float:
     """The level the map's interval is documented at (docs/certificate.md: 3^2 times its cost
     over 2k - 11, at least its gap), from its claim."""
-    from geocert.solvers.core.determinacy import cost_increase
+    from geocert.core.determinacy import cost_increase
 
     claim = result["certificate"]["items"][0]
     points = len(result["certificate"]["data"]["maps"][0]["source"])
@@ -153,7 +153,7 @@ class TestOptionsTheSolverRefuses:
     @pytest.mark.parametrize("name,value", REFUSED_OPTIONS)
     def test_the_forgery_is_false(self, name, value):
         from geocert.jobs.runner import solve_job
-        from geocert.solvers.core.geometry import InputError
+        from geocert.core.geometry import InputError
         from tests.verify.test_forgeries import stored
 
         certificate = stored("resection_l2l2")["certificate"]

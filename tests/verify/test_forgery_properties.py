@@ -24,7 +24,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from geocert.solvers.core.certificates import data_hash, problem_hash, unpack
+from geocert.core.certificates import data_hash, problem_hash, unpack
 from geocert.verify.checks import verify_any
 
 STORED = Path(__file__).resolve().parents[1] / "data" / "certificates"
@@ -134,7 +134,7 @@ def _claim_cost(kind: str, data: dict, options: dict, claim: dict) -> float | No
     """The claim's solution's cost recomputed from the data by the kind's cost function (None
     where its solution is not one of the scope, e.g. behind a camera: then it must be refused)."""
     from geocert.kinds import get_kind
-    from geocert.solvers.core.geometry import norm_cost
+    from geocert.core.geometry import norm_cost
 
     adapter = get_kind(kind).verification
     if kind in ("triangulation", "reconstruction", "resection", "homography"):

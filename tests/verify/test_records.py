@@ -1,4 +1,4 @@
-"""The closed records the verifier reads (geocert.solvers.core.records) and the warning codes it
+"""The closed records the verifier reads (geocert.core.records) and the warning codes it
 accepts (core.warning_codes) are what the writers write: the kinds' result models, and every code
 the source writes."""
 
@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from geocert.solvers.core import records
-from geocert.solvers.core.strict import Invalid
-from geocert.solvers.core.warning_codes import WARNING_CODES
+from geocert.core import records
+from geocert.core.strict import Invalid
+from geocert.core.warning_codes import WARNING_CODES
 
 SOURCE = Path(__file__).resolve().parents[2] / "geocert"
 # A code written as a literal ({"code": "x"}) or as a motion's name (return "x", looks).

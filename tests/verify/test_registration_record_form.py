@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.core.certificates import problem_hash
+from geocert.core.certificates import problem_hash
 from geocert.solvers.reconstruction import calibration_tie
 from geocert.verify import hashed_options
 from geocert.verify.checks import checked_options, verify_any

@@ -15,17 +15,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 import scipy.optimize
 
-from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unpack
-from geocert.solvers.core.conic import ConicStatus, solve_conic
-from geocert.solvers.core.geometry import InputError
+from geocert.core.certificates import data_hash, pack, problem_hash, unpack
+from geocert.core.conic import ConicStatus, solve_conic
+from geocert.core.geometry import InputError
 from geocert.solvers.fractional.search import root_region
 from geocert.jobs.runner import parse_job, solve_job
 from geocert.solvers.fractional.relaxation import Relaxation
 from geocert.solvers.fractional.charts import Chart
-from geocert.solvers.core.coverage import uncovered_part
+from geocert.core.coverage import uncovered_part
 from geocert.verify.checks import verify_any, verify_document
-from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.cones import proves_infeasible
+from geocert.core.bnb import Box
+from geocert.core.cones import proves_infeasible
 
 from tests.support import every_track_searched, project, random_cameras
 
@@ -682,7 +682,7 @@ class TestHostileReview:
                            for i in range(8000)]
         # Disjoint leaves are split apart by planes (n log n a level): the quadratic subtraction
         # that took 13 minutes on 8000 leaves is never reached.
-        from geocert.solvers.core import coverage as proof_module
+        from geocert.core import coverage as proof_module
 
         def never(*args, **kwargs):
             raise AssertionError("leaves separable by planes were subtracted one by one")
@@ -708,7 +708,7 @@ class TestHostileReviewRoundTwo:
         # solution must be a point of R inside the claim box.
         from geocert.solvers.fractional.relaxation import residual_region, root_bounds, gamma_for
         from geocert.solvers.fractional.items import TrackItem
-        from geocert.solvers.core.geometry import norm_cost, normalised_cameras
+        from geocert.core.geometry import norm_cost, normalised_cameras
         cameras = copy.deepcopy(CAMERAS) + [[[800, 0, 320, 0], [0, 800, 240, -800], [0.3, 0, 1, 0]]]
         data = {"cameras": cameras, "tracks": [{"views": [0, 1, 2], "points": [[330, 250], [250, 251], [320, 200]]}]}
         options = {"norm": "L2L2", "rel_gap": 0.001, "abs_gap": 1e-07, "max_residual": None}
@@ -774,7 +774,7 @@ class TestHostileReviewRoundTwo:
         # The pinwheel with its hole filled covers, and is recognised; with a budget below the
         # work it takes, the same cover is "not shown covered" (refused): the budget is enforced,
         # so the hostile document above stops after MAX_WORK leaf-piece tests (83 s before it).
-        from geocert.solvers.core import coverage as proof_module
+        from geocert.core import coverage as proof_module
         full = np.array([[0, 0], [0.6, 0], [0.4, 0.6], [0, 0.4], [0.4, 0.4]], float)
         full_hi = np.array([[0.6, 0.4], [1, 0.6], [1, 1], [0.4, 1], [0.6, 0.6]], float)
         assert uncovered_part(Box(lo, hi), full, full_hi) is None
@@ -842,7 +842,7 @@ class TestNestingDepth:
     scalars in C: every container is still found, wherever it hides among scalars."""
 
     def test_depths(self):
-        from geocert.solvers.core.strict import nesting_depth
+        from geocert.core.strict import nesting_depth
 
         assert nesting_depth(1.0, 64) == 0
         assert nesting_depth({}, 64) == 1
@@ -851,7 +851,7 @@ class TestNestingDepth:
         assert nesting_depth([1.0, 2.0, 3.0, [[[]]]], 64) == 4  # behind scalars
 
     def test_a_deep_document_stops_past_the_limit(self):
-        from geocert.solvers.core.strict import nesting_depth
+        from geocert.core.strict import nesting_depth
 
         deep: list = [0.0]
         for _ in range(10_000):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.core.certificates import pack
+from geocert.core.certificates import pack
 from geocert.solvers.fractional import stacked
 from geocert.verify.fractional import TrackItems
 from geocert.verify.checks import checked_options, verify_any

@@ -12,10 +12,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.certificates import pack, unpack
-from geocert.solvers.core.geometry import normalised_cameras
-from geocert.solvers.core.strict import Invalid
+from geocert.core.bnb import Box
+from geocert.core.certificates import pack, unpack
+from geocert.core.geometry import normalised_cameras
+from geocert.core.strict import Invalid
 from geocert.solvers.fractional import stacked
 from geocert.solvers.fractional.charts import Chart
 from geocert.solvers.fractional.items import TrackItem

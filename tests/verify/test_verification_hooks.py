@@ -101,7 +101,7 @@ def test_an_adapter_allowing_no_uncertified_word_refuses_every_one(declares):
     """The verifier's own check (checks.uncertified_claim): with `uncertified_statuses = ()` the
     status "not_certified" is refused; on main the falsy tuple fell back to the verifier's words
     and the item was accepted."""
-    from geocert.solvers.core.strict import Invalid
+    from geocert.core.strict import Invalid
     from geocert.verify.checks import uncertified_claim
 
     with pytest.raises(Invalid, match="an uncertified item's status is one of"):
@@ -112,7 +112,7 @@ def test_an_adapter_allowing_no_uncertified_word_refuses_every_one(declares):
 def test_an_adapter_hashing_no_option_is_hashed_over_none(declares):
     """`claim_options = ()`: the problem hash covers no option (on main the empty tuple fell back
     to CLAIM_OPTIONS, the residual kinds' four)."""
-    from geocert.solvers.core.certificates import data_hash, problem_hash
+    from geocert.core.certificates import data_hash, problem_hash
     from geocert.verify.checks import _check_hashes
 
     data, options = {"items": []}, {"norm": "L2L2", "rel_gap": 1e-3}

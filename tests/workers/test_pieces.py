@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from geocert.jobs.store import JobStore
-from geocert.solvers.core import pieces
+from geocert.core import pieces
 from geocert.workers import pieces as workers_pieces
 from tests.support import embedded_redis_client
 

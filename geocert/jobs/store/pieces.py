@@ -1,4 +1,4 @@
-"""A running task's pieces (solvers.core.pieces) handed to the service's other solver processes:
+"""A running task's pieces (core.pieces) handed to the service's other solver processes:
 one set of pieces at a time per stage, taken one by one from a shared counter, so that the task
 that put them and every helper take each piece once, in the pieces' order (the pieces taken at
 any moment are the first ones: a stop keeps a prefix). Values are bytes the caller encodes

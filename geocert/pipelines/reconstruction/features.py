@@ -50,9 +50,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from geocert.solvers.core import pieces
-from geocert.solvers.core.bnb import asks_to_stop
-from geocert.solvers.core.geometry import InputError
+from geocert.core import pieces
+from geocert.core.bnb import asks_to_stop
+from geocert.core.geometry import InputError
 from geocert.pipelines.reconstruction.options import FeatureOptions  # noqa: F401 (declared with the options)
 
 # Limits on one image. The encoded size bounds the work of decoding and the memory a request can
@@ -563,7 +563,7 @@ FEATURE_THREADS = 2
 
 def in_order_threads(function, items: list, stop) -> list | None:
     """``function(item)`` for the items, FEATURE_THREADS at a time (at most the processors), the
-    results in the items' order: solvers.core.pieces.in_threads (``stop`` as it reads it)."""
+    results in the items' order: core.pieces.in_threads (``stop`` as it reads it)."""
     return pieces.in_threads(function, items, stop, FEATURE_THREADS)
 
 
@@ -573,7 +573,7 @@ _DETECTORS = threading.local()  # a detector per thread: OpenCV does not promise
 @pieces.piece
 def image_features(options: FeatureOptions, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """One image's keypoints ((n, 2) pixels) and SIFT descriptors: a piece of the features stage
-    (solvers.core.pieces), a pure function of the image and options."""
+    (core.pieces), a pure function of the image and options."""
     settings = (options.contrast_threshold, options.edge_threshold)
     if getattr(_DETECTORS, "settings", None) != settings:
         # nfeatures 0: every keypoint detected, then select_keypoints keeps the largest-scale ones

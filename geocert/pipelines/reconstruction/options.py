@@ -10,8 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from geocert.solvers.autocalibration.problem import CHIRALITY, AutocalibrationOptions
-from geocert.solvers.core.declared_options import option, option_ranges, redeclared
-from geocert.solvers.core.geometry import InputError
+from geocert.core.declared_options import option, option_ranges, redeclared
+from geocert.core.geometry import InputError
 from geocert.solvers.fractional.options import FractionalOptions, ResidualOptions, SearchOptions
 from geocert.solvers.reconstruction import run_control
 

@@ -31,7 +31,7 @@ from geocert.pipelines.reconstruction.fit import (depths_and_errors as _depths_a
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction.camera_claim import FOCAL_P, PRINCIPAL_POINT_CHI2, PRINCIPAL_POINT_P, RADIAL_CHI2
 from geocert.solvers.reconstruction.tracks import Observations
-from geocert.solvers.core.strict import Invalid
+from geocert.core.strict import Invalid
 
 STAGES = ("projective", "autocalibration", "bundle_adjustment", "structure", "cameras")
 

@@ -14,7 +14,7 @@ from scipy.optimize import least_squares
 from geocert.solvers.autocalibration import affine_relaxation
 from geocert.solvers.autocalibration import cuts
 from geocert.solvers.autocalibration import frames
-from geocert.solvers.core.bnb import BnbOptions, Box, branch_and_bound
+from geocert.core.bnb import BnbOptions, Box, branch_and_bound
 
 MAX_RELAXATION_ROWS = 64  # chirality rows beyond this: only the hull's (the others are redundant)
 
@@ -75,7 +75,7 @@ def gordan_rows(rows: np.ndarray) -> list[int] | None:
 
 
 class AffineProblem(cuts.BoxSearch):
-    """The branch-and-bound problem of one region (geocert.solvers.core.bnb.BranchProblem)."""
+    """The branch-and-bound problem of one region (geocert.core.bnb.BranchProblem)."""
 
     def __init__(self, region: Region, all_a: np.ndarray, all_b: np.ndarray, record: bool):
         super().__init__(region.lo, region.hi, record)

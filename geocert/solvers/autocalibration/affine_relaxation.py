@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from geocert.solvers.autocalibration import envelopes
-from geocert.solvers.core.cones import ConeSpec
+from geocert.core.cones import ConeSpec
 
 WIDEN = 1e-12  # relative outward rounding of every interval computed here
 

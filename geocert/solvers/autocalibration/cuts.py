@@ -13,10 +13,10 @@ from typing import Callable
 
 import numpy as np
 
-from geocert.solvers.core.bnb import Box, BoxBound, BoxStatus
-from geocert.solvers.core.certificates import LeafProof
-from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
-from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound, safe_lower_bounds
+from geocert.core.bnb import Box, BoxBound, BoxStatus
+from geocert.core.certificates import LeafProof
+from geocert.core.conic import ConicStatus, ReusableConicProgram
+from geocert.core.cones import proves_infeasible, safe_lower_bound, safe_lower_bounds
 
 # Where the solves of both stages' searches stop (node bounds and tightening), instead of 1e-9:
 # every bound taken is the safe bound of whatever dual a solve returns, so a looser solve moves a

@@ -39,7 +39,7 @@ import numpy as np
 
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation
-from geocert.solvers.core.determinacy import (RELATIVE_WIDTH, SIGMAS, certified_gap, clip, cost_increase,
+from geocert.core.determinacy import (RELATIVE_WIDTH, SIGMAS, certified_gap, clip, cost_increase,
                                               curvature_intervals, interval, numeric_jacobian, ranges_at, spread,
                                               sublevel_rays, tick)
 

@@ -39,8 +39,8 @@ from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration.proofs import check_recorded_bound
 from geocert.solvers.autocalibration.problem import CHIRALITY, ORDERS  # the options it reads (problem.py checks them)
-from geocert.solvers.core.geometry import InputError
-from geocert.solvers.core.strict import Invalid, charge, dual_vector, informational, record, same
+from geocert.core.geometry import InputError
+from geocert.core.strict import Invalid, charge, dual_vector, informational, record, same
 
 RANK_TOLERANCE = 1e-4  # numerical rank: eigenvalues of the moment matrix above this times the largest
 # Chirality pairs a program holds (one moment row each, about a hundred nonzeros): the signed

@@ -152,7 +152,7 @@ def proven_ends(setup, sides: dict, where: str, live: list, level: float) -> dic
     """Each name's [lower, upper] in pixels (None: not proven) that ``sides`` ({ratio: {"lower",
     "upper"}}, each side's entries one {delta, c, z} an orientation of ``live``) prove at
     ``level``, every dual read by safe_bound in its rebuilt program (direct_sublevel._ends)."""
-    from geocert.solvers.core.strict import record
+    from geocert.core.strict import record
 
     forms = ratios(setup.cameras)
     ends = {}
@@ -177,7 +177,7 @@ def check(setup, sublevel, gone: tuple, cost: float) -> dict[str, list]:
     hold what they prove: a stated end beyond a proven one (narrower) or where none is proven is
     refused."""
     from geocert.solvers.autocalibration.proofs import sublevel_level
-    from geocert.solvers.core.strict import Invalid, is_number, record
+    from geocert.core.strict import Invalid, is_number, record
 
     where = "proof/sublevel/intrinsics"
     intrinsics = record(sublevel["intrinsics"], where, RATIOS + ("intervals",))
@@ -204,7 +204,7 @@ def proven_document(sublevel: dict) -> dict:
     """The proven intervals a one-K direct stage's determinacy states from its proof's sublevel:
     the focal length's (direct_sublevel.proven_document), then, when it carries "intrinsics",
     NAMES' in order, a null end with its reason."""
-    from geocert.solvers.core.determinacy import proven_document as document
+    from geocert.core.determinacy import proven_document as document
 
     if "intrinsics" not in sublevel:
         return direct_sublevel.proven_document(sublevel)

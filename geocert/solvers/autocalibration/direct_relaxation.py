@@ -31,7 +31,7 @@ Order-d relaxation, variables y_a (the moments of degree 1..2d; y_0 = 1):
 - each 2x2 principal minor's localizing matrix (degree <= d - 1) positive semidefinite, each 3x3
   principal minor's moment >= 0, each chirality pair's moment >= 0 and each focal row's >= 0;
 - det Q's moment: an equality (trace Q = 1 is substituted, no rows).
-Conic form (Clarabel's, geocert.solvers.core.cones): minimise q'y s.t. A y + s = b, s in the cones.
+Conic form (Clarabel's, geocert.core.cones): minimise q'y s.t. A y + s = b, s in the cones.
 
 Safe bound (safe_bound): for Q PSD with trace 1, Q_aa lies in [0, 1] and |Q_ab| <= sqrt(Q_aa Q_bb)
 <= 1/2, so every x_k lies in [-1/3, 2/3] or [-1/2, 1/2], every moment y_a of a feasible Q in [-1, 1],
@@ -51,7 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from geocert.solvers.core.cones import ConeSpec
+from geocert.core.cones import ConeSpec
 
 ENTRIES = tuple((a, b) for a in range(4) for b in range(a, 4))[:-1]  # x's order; Q_33 = 1 - Q_00 - Q_11 - Q_22
 CENTRE = np.array([1.0 / 3.0 if a == b else 0.0 for a, b in ENTRIES])  # Q0 = diag(1, 1, 1, 0) / 3's free entries
@@ -414,7 +414,7 @@ def safe_bound(program: Program, z: np.ndarray, floor: float = 0.0) -> tuple[flo
     plus the products with the constant and the eigenvalue). Never below 0, since f >= 0
     everywhere; ``floor``: that floor (-inf for an objective that is not (7.12): a proven interval's,
     direct_sublevel, where a non-finite bound is then -inf too)."""
-    from geocert.solvers.core.cones import (UNIT_ROUNDOFF, eigenvalue_error, flush_subnormal, project_dual,
+    from geocert.core.cones import (UNIT_ROUNDOFF, eigenvalue_error, flush_subnormal, project_dual,
                                             rounding_margin, smat)
 
     cones = program.cones

@@ -53,11 +53,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from geocert.solvers.autocalibration import direct
-from geocert.solvers.core import interior_point
+from geocert.core import interior_point
 from geocert.solvers.autocalibration import direct_relaxation
-from geocert.solvers.core.certificates import pack
+from geocert.core.certificates import pack
 from geocert.solvers.autocalibration.proofs import sublevel_level
-from geocert.solvers.core.conic import ConicStatus, SolveSettings, solve_once
+from geocert.core.conic import ConicStatus, SolveSettings, solve_once
 
 
 @dataclass
@@ -132,7 +132,7 @@ def solve_program(program: direct_relaxation.Program, enough=None, attempts=None
 
 def _solve_ipm(program: direct_relaxation.Program, tolerance: float, check=None):
     """interior_point's solve as (status, y, z, raw status): OPTIMAL only when its residuals and gap
-    met the tolerance (solvers.core.conic's map of its statuses)."""
+    met the tolerance (core.conic's map of its statuses)."""
     result = interior_point.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
                                   program.cones.psd, tolerance=tolerance, max_iter=IPM_MAX_ITER, check=check)
     raw = f"ipm {result.raw_status}"
@@ -639,7 +639,7 @@ def _ends_here(setup, sides: dict, level: float, view: int | None) -> tuple[floa
     """r's (lower, upper) ends the entries prove (view ``view``'s, or the mean's), as the verifier
     computes them (direct_sublevel._ends); an end with no entries is infinite."""
     from geocert.solvers.autocalibration import direct_sublevel
-    from geocert.solvers.core.certificates import unpack
+    from geocert.core.certificates import unpack
 
     ends = {"lower": -math.inf, "upper": math.inf}
     for side, sign in (("lower", 1.0), ("upper", -1.0)):

@@ -31,7 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from geocert.solvers.autocalibration import direct_relaxation
-from geocert.solvers.core.cones import ConeSpec
+from geocert.core.cones import ConeSpec
 
 NAME = "focal"
 _SIDE = len(direct_relaxation.monomials(1))
@@ -150,14 +150,14 @@ def cost_increase(cost: float, lower_bound: float, views: int) -> float:
     """The level the kind proves the interval at: SIGMAS^2 times (7.12)'s residual variance, cost
     over its 4 residuals a view less Q's 8 degrees of freedom, never below the certified gap
     (core.determinacy.cost_increase, the estimates' rule); the verifier asks no lower a level."""
-    from geocert.solvers.core.determinacy import cost_increase as rule
+    from geocert.core.determinacy import cost_increase as rule
 
     return rule(cost, max(4 * views - 8, 1), cost - lower_bound)
 
 
 def proven_document(sublevel: dict) -> dict:
     """The proven intervals a direct stage's determinacy states from its proof's ``sublevel``."""
-    from geocert.solvers.core.determinacy import proven_document as document
+    from geocert.core.determinacy import proven_document as document
 
     return document(sublevel["cost_increase"], (NAME,), [sublevel["interval"]], LEVEL)
 
@@ -165,7 +165,7 @@ def proven_document(sublevel: dict) -> dict:
 def _level(sublevel) -> float:
     """proof/sublevel's cost_increase, checked (the level is sublevel_level of the cost and it)."""
     from geocert.solvers.autocalibration.proofs import LARGEST_INCREASE, SMALLEST_INCREASE
-    from geocert.solvers.core.strict import Invalid, is_number
+    from geocert.core.strict import Invalid, is_number
 
     increase = sublevel.get("cost_increase")
     if not (is_number(increase) and (increase == 0 or SMALLEST_INCREASE <= increase <= LARGEST_INCREASE)):
@@ -181,7 +181,7 @@ def _ends(setup, holder: dict, where: str, live: list, level: float, view: int |
     ``live`` a side, each safe bound above 0; an end stated null is not proven (-inf or inf here;
     pixels clips the focal length's to the scope)."""
     from geocert.solvers.autocalibration import direct
-    from geocert.solvers.core.strict import Invalid, charge, dual_vector, is_number, record
+    from geocert.core.strict import Invalid, charge, dual_vector, is_number, record
 
     if build is None:
         def build(pairs, c, sign):
@@ -224,7 +224,7 @@ def _ends(setup, holder: dict, where: str, live: list, level: float, view: int |
 
 def _stated_holds(holder: dict, where: str, lo: float, hi: float) -> None:
     """The interval ``holder`` states holds [lo, hi] (a wider one is a weaker true statement)."""
-    from geocert.solvers.core.strict import Invalid, numbers
+    from geocert.core.strict import Invalid, numbers
 
     stated = numbers(holder.get("interval"), f"{where}/interval", (2,))
     if not (stated[0] <= lo and hi <= stated[1]):
@@ -240,7 +240,7 @@ def check(setup, sublevel, gone: tuple, cost: float) -> tuple[float, float]:
     stated interval must hold what they prove (a wider one is a weaker true statement, a
     narrower one is refused). Returns the interval proven."""
     from geocert.solvers.autocalibration.proofs import sublevel_level
-    from geocert.solvers.core.strict import record
+    from geocert.core.strict import record
 
     record(sublevel, "proof/sublevel", ("cost_increase", "lower", "upper", "interval"), ("intrinsics",))
     level = sublevel_level(cost, _level(sublevel))
@@ -274,7 +274,7 @@ VIEWS_LEVEL = ("every absolute dual quadric of the direct stage's scope whose co
 def proven_views_document(sublevel: dict) -> dict:
     """The proven intervals a varying-focal direct stage's determinacy states from its proof's
     ``sublevel``: focal[0] .. focal[m-1]."""
-    from geocert.solvers.core.determinacy import proven_document as document
+    from geocert.core.determinacy import proven_document as document
 
     views = sublevel["views"]
     return document(sublevel["cost_increase"], tuple(VIEW_NAME.format(k) for k in range(len(views))),
@@ -287,7 +287,7 @@ def check_views(setup, sublevel, gone: tuple, cost: float) -> list[tuple[float, 
     cost_increase). One entry a view, in order, each {lower, upper, interval} as check's one
     focal length's; every view's stated interval must hold what its programs prove."""
     from geocert.solvers.autocalibration.proofs import sublevel_level
-    from geocert.solvers.core.strict import Invalid, record
+    from geocert.core.strict import Invalid, record
 
     record(sublevel, "proof/sublevel", ("cost_increase", "views"))
     level = sublevel_level(cost, _level(sublevel))

@@ -20,7 +20,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from geocert.solvers.core.geometry import InputError
+from geocert.core.geometry import InputError
 
 
 @dataclass

@@ -15,9 +15,9 @@ from scipy.optimize import least_squares
 
 from geocert.solvers.autocalibration import cuts
 from geocert.solvers.autocalibration import metric_relaxation
-from geocert.solvers.core.bnb import BnbOptions, Box, Progress, asks_to_stop, branch_and_bound, tolerance
-from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
-from geocert.solvers.core.cones import safe_lower_bound
+from geocert.core.bnb import BnbOptions, Box, Progress, asks_to_stop, branch_and_bound, tolerance
+from geocert.core.conic import ConicStatus, ReusableConicProgram
+from geocert.core.cones import safe_lower_bound
 
 
 @dataclass

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from geocert.solvers.autocalibration import envelopes
-from geocert.solvers.core.cones import ConeSpec
+from geocert.core.cones import ConeSpec
 
 WIDEN = 1e-12
 # Not used, measured: the matrix form of McCormick's envelopes ((lambda - L) omega and

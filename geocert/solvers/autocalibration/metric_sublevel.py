@@ -31,8 +31,8 @@ import numpy as np
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import proofs
 from geocert.solvers.autocalibration.metric import MetricProblem, tighten
-from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.strict import Invalid
+from geocert.core.bnb import Box
+from geocert.core.strict import Invalid
 
 CAP_MARGIN = 1e-4  # the programs' cap, this much above U: a leaf is excluded by a bound above U
 EXCLUDE_MARGIN = 1e-6  # the search closes a box only when its bound exceeds U by this much

@@ -46,8 +46,8 @@ from geocert.solvers.autocalibration import frames, metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration.proofs import (LARGEST_INCREASE, SMALLEST_INCREASE, check_regions, record,
                                                     sublevel_level)
-from geocert.solvers.core.determinacy import proven_document as _proven_document
-from geocert.solvers.core.strict import Invalid, charge, number, numbers
+from geocert.core.determinacy import proven_document as _proven_document
+from geocert.core.strict import Invalid, charge, number, numbers
 
 WIDEN = 1e-12
 PLANE_BOXES = 6_000  # boxes bounded by the search over planes alone (3 dimensions)

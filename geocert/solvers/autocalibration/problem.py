@@ -10,9 +10,9 @@ import numpy as np
 
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation
-from geocert.solvers.core.bnb import BnbOptions, Progress
-from geocert.solvers.core.declared_options import option, redeclared
-from geocert.solvers.core.geometry import InputError
+from geocert.core.bnb import BnbOptions, Progress
+from geocert.core.declared_options import option, redeclared
+from geocert.core.geometry import InputError
 from geocert.solvers.fractional.options import MAX_REL_GAP, SearchOptions
 
 METHODS = ("stratified", "direct")

@@ -24,12 +24,12 @@ import numpy as np
 from geocert.solvers.autocalibration import affine_relaxation as arelax
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation
-from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.certificates import pack
-from geocert.solvers.core.cones import SMALLEST_NORMAL, proves_infeasible, safe_lower_bound
-from geocert.solvers.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
+from geocert.core.bnb import Box
+from geocert.core.certificates import pack
+from geocert.core.cones import SMALLEST_NORMAL, proves_infeasible, safe_lower_bound
+from geocert.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
                                          numbers as _numbers, record)
-from geocert.solvers.core.coverage import SIDE_TOLERANCE, extended, uncovered_part, widened
+from geocert.core.coverage import SIDE_TOLERANCE, extended, uncovered_part, widened
 from geocert.solvers.fractional.proof import LEAF_CLAIM_TOLERANCE  # the record's allowance, as the fractional kinds'
 
 MAX_LEAVES = 200_000

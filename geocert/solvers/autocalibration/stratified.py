@@ -15,7 +15,7 @@ from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration.problem import (AutocalibrationOptions, Problem, StageProgress, bnb_options,
                                                      plane_from_input, plane_in_input, stage_callback,
                                                      upper_triangular_root)
-from geocert.solvers.core.bnb import asks_to_stop
+from geocert.core.bnb import asks_to_stop
 
 
 @dataclass

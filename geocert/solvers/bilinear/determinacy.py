@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from geocert.solvers.core.determinacy import certified_gap, curvature_intervals, numeric_jacobian
+from geocert.core.determinacy import certified_gap, curvature_intervals, numeric_jacobian
 
 DEPENDENT = 1e-3  # basis shapes whose differences' smallest singular value is below this fraction: nearly dependent
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from geocert.solvers.core.declared_options import option, redeclared
-from geocert.solvers.core.geometry import InputError
+from geocert.core.declared_options import option, redeclared
+from geocert.core.geometry import InputError
 from geocert.solvers.fractional.options import CERTIFICATE_MODES, JobLimit, SearchOptions, _describe, _within
 
 NORMS = ("L1L1", "L2L2")

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.core.geometry import COORDINATE_LIMIT, InputError, is_number, number_array
+from geocert.core.geometry import COORDINATE_LIMIT, InputError, is_number, number_array
 
 # The normalised basis may not have any direction (a combination of shapes) this much smaller than
 # its largest: such a basis cannot tell its coefficients apart.

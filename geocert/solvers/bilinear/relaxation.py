@@ -23,8 +23,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from geocert.solvers.core.cones import UNIT_ROUNDOFF, ConeSpec, safe_lower_bound
-from geocert.solvers.core.csc import CscMatrix
+from geocert.core.cones import UNIT_ROUNDOFF, ConeSpec, safe_lower_bound
+from geocert.core.csc import CscMatrix
 
 if TYPE_CHECKING:  # imported where a scipy matrix is built: the verifier loads numpy alone
     import scipy.sparse as sp

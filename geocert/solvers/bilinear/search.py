@@ -20,10 +20,10 @@ import scipy.optimize
 from geocert.solvers.bilinear import problem as bilinear_problem
 from geocert.solvers.bilinear.options import BilinearOptions
 from geocert.solvers.bilinear.relaxation import Relaxation, tightening_objective, with_cost_cap
-from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound
-from geocert.solvers.core.certificates import pack
-from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
-from geocert.solvers.core.cones import proves_infeasible, safe_lower_bounds_and_margins
+from geocert.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound
+from geocert.core.certificates import pack
+from geocert.core.conic import ConicStatus, ReusableConicProgram
+from geocert.core.cones import proves_infeasible, safe_lower_bounds_and_margins
 from geocert.solvers.fractional.results import ItemResult
 
 # With camera_bound null the box is problem.default_half_width of the incumbent; when the camera the

@@ -13,8 +13,8 @@ from fractions import Fraction
 
 import numpy as np
 
-from geocert.solvers.core.geometry import lengths
-from geocert.solvers.core.strict import charge
+from geocert.core.geometry import lengths
+from geocert.core.strict import charge
 from geocert.solvers.fractional.relaxation import FractionalProgram
 
 

@@ -57,7 +57,7 @@ import copy
 
 import numpy as np
 
-from geocert.solvers.core.strict import Invalid, number, numbers, record
+from geocert.core.strict import Invalid, number, numbers, record
 from geocert.solvers.fractional.flat import PAIRS, FlatTracks, smallest_eigenvalue3
 
 U = 2.0 ** -52

@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from geocert.solvers.core import exact
-from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE, ROUNDING
-from geocert.solvers.core.determinacy import SIGMAS
+from geocert.core import exact
+from geocert.core.certificates import OBJECTIVE_TOLERANCE, ROUNDING
+from geocert.core.determinacy import SIGMAS
 from geocert.solvers.fractional.columns import LocalColumns, TrackResults, sublevels
 from geocert.solvers.fractional.convexity import (ball_bounds, ball_intervals, convexity_bounds, convexity_terms,
                                                   sublevel_radii)

@@ -22,9 +22,9 @@ import math
 
 import numpy as np
 
-from geocert.solvers.core.determinacy import (SIGMAS, SINGULAR, Determinacy, certified_gap, curvature_intervals,
+from geocert.core.determinacy import (SIGMAS, SINGULAR, Determinacy, certified_gap, curvature_intervals,
                                                interval, numeric_jacobian, proven_document, safely, spread)
-from geocert.solvers.core.exact import exact_centroid_image, exact_squared_residuals  # noqa: F401 (callers read them here)
+from geocert.core.exact import exact_centroid_image, exact_squared_residuals  # noqa: F401 (callers read them here)
 from geocert.solvers.fractional import fixed_order
 from geocert.solvers.fractional.columns import solutions, sublevels
 
@@ -384,7 +384,7 @@ def _normaliser(points: np.ndarray) -> np.ndarray:
 def map_level(source: np.ndarray, target: np.ndarray, matrix, cost: float | None, lower: float | None) -> float:
     """An L2L2 resection's level, the one its estimate, its proven interval and the verifier read:
     3^2 times the exact squared residuals over 2k - 11, at least the certified gap."""
-    from geocert.solvers.core.determinacy import cost_increase
+    from geocert.core.determinacy import cost_increase
 
     squared = exact_squared_residuals(source, target, np.asarray(matrix, dtype=float))
     return float(cost_increase(squared, 2 * len(source) - 11, certified_gap(cost, lower)))

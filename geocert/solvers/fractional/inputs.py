@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from geocert.solvers.core.geometry import InputError
+from geocert.core.geometry import InputError
 
 
 def minimum_points(n: int, m: int) -> int:

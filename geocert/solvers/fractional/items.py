@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from geocert.solvers.core import exact
-from geocert.solvers.core.certificates import OBJECTIVE_TOLERANCE, residual_rounding
-from geocert.solvers.core.geometry import cost_rounding, norm_cost
-from geocert.solvers.core.strict import Invalid, numbers
+from geocert.core import exact
+from geocert.core.certificates import OBJECTIVE_TOLERANCE, residual_rounding
+from geocert.core.geometry import cost_rounding, norm_cost
+from geocert.core.strict import Invalid, numbers
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.results import LocalCertificate
 from geocert.solvers.fractional.proof import (SOLVER_DISCOUNT_FACTOR, check_program, program_allowance,

@@ -43,11 +43,11 @@ from typing import Callable
 
 import numpy as np
 
-from geocert.solvers.core.bnb import Box, Progress
-from geocert.solvers.core.certificates import LeafProof, RootProof, SearchProof, encode, residual_rounding
-from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram
-from geocert.solvers.core.cones import ConeSpec
-from geocert.solvers.core.geometry import cost_roundings, normalised_cameras
+from geocert.core.bnb import Box, Progress
+from geocert.core.certificates import LeafProof, RootProof, SearchProof, encode, residual_rounding
+from geocert.core.conic import ConicStatus, ReusableConicProgram
+from geocert.core.cones import ConeSpec
+from geocert.core.geometry import cost_roundings, normalised_cameras
 from geocert.solvers.fractional import stacked
 from geocert.solvers.fractional.charts import Chart
 from geocert.solvers.fractional.columns import TrackResults
@@ -60,7 +60,7 @@ from geocert.solvers.fractional.search import (MAX_SCALE, ROOT_SUBSET, branch_di
 from geocert.solvers.fractional.items import PROGRAM_REFUSED, UNDISCOUNTABLE, TrackItem, refused_by_verifier
 from geocert.solvers.fractional.proof import SOLVER_DISCOUNT_FACTOR, track_uncertainty
 from geocert.solvers.fractional.triangulation import track_result, triangulate
-from geocert.solvers.core import barrier, self_check
+from geocert.core import barrier, self_check
 
 D = 3
 SCOPE = "every point in front of every camera"

@@ -8,8 +8,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from geocert.solvers.core.declared_options import DeclaredRange, DeclaredRanges, option, redeclared
-from geocert.solvers.core.geometry import InputError
+from geocert.core.declared_options import DeclaredRange, DeclaredRanges, option, redeclared
+from geocert.core.geometry import InputError
 from geocert.solvers.fractional.relaxation import NORMS
 
 # The gaps a certificate may be asked for: at rel_gap near 1, or an abs_gap as large as the costs,

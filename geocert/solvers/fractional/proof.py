@@ -12,12 +12,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.certificates import BOUND_TOLERANCE, TERMS_ROUNDING
-from geocert.solvers.core.geometry import cost_rounding
-from geocert.solvers.core.cones import proves_infeasible, rounding_counted, safe_lower_bound
-from geocert.solvers.core.coverage import extended, uncovered_part, widened
-from geocert.solvers.core.strict import (Invalid, box as _box, charge, dual_vector, informational, number as _number,
+from geocert.core.bnb import Box
+from geocert.core.certificates import BOUND_TOLERANCE, TERMS_ROUNDING
+from geocert.core.geometry import cost_rounding
+from geocert.core.cones import proves_infeasible, rounding_counted, safe_lower_bound
+from geocert.core.coverage import extended, uncovered_part, widened
+from geocert.core.strict import (Invalid, box as _box, charge, dual_vector, informational, number as _number,
                                          numbers as _numbers, record)
 from geocert.solvers.fractional.relaxation import (Relaxation, cost_unit, gamma_for, residual_region, root_bounds,
                                                    tightening_objective, with_cost_cap)

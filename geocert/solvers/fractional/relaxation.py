@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.cones import ConeSpec, safe_lower_bounds
-from geocert.solvers.core.geometry import norm_cost, residual_lengths
+from geocert.core.bnb import Box
+from geocert.core.cones import ConeSpec, safe_lower_bounds
+from geocert.core.geometry import norm_cost, residual_lengths
 
 # Only for the split heuristic (a relative variation): the domain is every positive depth, cut
 # nowhere short of 0, so that no point of the scope is left out of a bound.

@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-from geocert.solvers.core.strict import Invalid, number, record
+from geocert.core.strict import Invalid, number, record
 from geocert.solvers.fractional.convexity import SMALLEST, UNDERFLOW
 from geocert.solvers.fractional.fixed_order import gram, norm, weighted
 from geocert.solvers.fractional.resection_sublevel import (ETA, MAX_ROUNDS, ROUNDS_STOP, U, Scene, encloses,

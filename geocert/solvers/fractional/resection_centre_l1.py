@@ -2,7 +2,7 @@
 (every point at positive depth) costing at most the returned camera P0's cost plus
 ``cost_increase`` has its centre within them. Stated beside the depth row read off the leaves
 (fractional.resection_leaves: ``proof.sublevel.centre``), at the same level. Numpy only for the
-check (the solver's conic programs, which only find the multipliers, go through solvers.core.conic).
+check (the solver's conic programs, which only find the multipliers, go through core.conic).
 
 The leaves bound the branched last row only; the centre needs all 11 of a camera's unknowns. It
 is bounded as an L2L2 resection's (fractional.resection_sublevel: the slice, the whitened
@@ -42,7 +42,7 @@ import math
 
 import numpy as np
 
-from geocert.solvers.core.strict import Invalid, number, numbers, record
+from geocert.core.strict import Invalid, number, numbers, record
 from geocert.solvers.fractional.convexity import LARGEST, SMALLEST, UNDERFLOW
 from geocert.solvers.fractional.fixed_order import mul, norm, weighted
 from geocert.solvers.fractional.resection_sublevel import (STATED_SLACK, U, Scene, centre_bounds, check_enclosure,
@@ -155,8 +155,8 @@ def _multipliers(scene: Scene, increase: float, r: float, direction: np.ndarray)
     """(mu, y) for max direction . theta over the convex set of (3): the multipliers of its conic
     program (solved once; an inexact answer serves, since the check recomputes the bound from
     whatever multipliers are stated); None when it does not solve."""
-    from geocert.solvers.core.cones import ConeSpec
-    from geocert.solvers.core.conic import SolveSettings, solve_once
+    from geocert.core.cones import ConeSpec
+    from geocert.core.conic import SolveSettings, solve_once
 
     k, norm = scene.k, scene.norm
     s = _weights(scene, r)

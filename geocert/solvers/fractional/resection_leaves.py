@@ -28,9 +28,9 @@ import math
 
 import numpy as np
 
-from geocert.solvers.core.determinacy import SIGMAS, proven_document
-from geocert.solvers.core.geometry import norm_cost
-from geocert.solvers.core.strict import Invalid, number, numbers, record
+from geocert.core.determinacy import SIGMAS, proven_document
+from geocert.core.geometry import norm_cost
+from geocert.core.strict import Invalid, number, numbers, record
 from geocert.solvers.fractional.charts import MapChart
 from geocert.solvers.fractional.proof import checked_leaves
 from geocert.solvers.fractional.resection_centre_l1 import NAMES as CENTRE_NAMES, verify_l1_centre

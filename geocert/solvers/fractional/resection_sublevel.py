@@ -53,7 +53,7 @@ import math
 
 import numpy as np
 
-from geocert.solvers.core.strict import Invalid, number, numbers, record
+from geocert.core.strict import Invalid, number, numbers, record
 from geocert.solvers.fractional.convexity import LARGEST, SMALLEST, UNDERFLOW, in_range
 from geocert.solvers.fractional.fixed_order import (cholesky, cholesky_completes, gram, inverse3, lower_inverse, mul, norm,
                                                    weighted)

@@ -17,11 +17,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, Progress, branch_and_bound
-from geocert.solvers.core.certificates import CapProof, LeafProof, RootProof, SearchProof, TighteningProof, encode
-from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram, solve_conic
-from geocert.solvers.core.cones import ConeSpec, proves_infeasible, safe_lower_bound
-from geocert.solvers.core.geometry import cost_rounding, lengths, norm_cost, norm_terms, residual_lengths
+from geocert.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, Progress, branch_and_bound
+from geocert.core.certificates import CapProof, LeafProof, RootProof, SearchProof, TighteningProof, encode
+from geocert.core.conic import ConicStatus, ReusableConicProgram, solve_conic
+from geocert.core.cones import ConeSpec, proves_infeasible, safe_lower_bound
+from geocert.core.geometry import cost_rounding, lengths, norm_cost, norm_terms, residual_lengths
 from geocert.solvers.fractional.options import FractionalOptions
 from geocert.solvers.fractional.results import SearchCertificate
 from geocert.solvers.fractional.relaxation import (EPS_DEPTH, ConicData, FractionalProgram, Relaxation, complete_functionals,

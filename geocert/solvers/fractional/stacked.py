@@ -20,13 +20,13 @@ from collections import defaultdict
 
 import numpy as np
 
-from geocert.solvers.core import exact
-from geocert.solvers.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE, TERMS_ROUNDING, residual_rounding
-from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.cones import ConeSpec, _project_rows, rounding_counted, stacked_rounding_margin, subnormal
-from geocert.solvers.core.coverage import uncovered_part
-from geocert.solvers.core.geometry import cost_roundings, lengths, norm_terms, normalised_cameras
-from geocert.solvers.core.strict import Invalid, charge, dual_vector, numbers
+from geocert.core import exact
+from geocert.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE, TERMS_ROUNDING, residual_rounding
+from geocert.core.bnb import Box
+from geocert.core.cones import ConeSpec, _project_rows, rounding_counted, stacked_rounding_margin, subnormal
+from geocert.core.coverage import uncovered_part
+from geocert.core.geometry import cost_roundings, lengths, norm_terms, normalised_cameras
+from geocert.core.strict import Invalid, charge, dual_vector, numbers
 from geocert.solvers.fractional.charts import reference_work
 from geocert.solvers.fractional.convexity import verify_sublevel
 from geocert.solvers.fractional.proof import (SCALE_RANGE, _sample_steps, allowance, raw_sizes, stated_root_agrees,

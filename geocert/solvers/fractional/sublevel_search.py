@@ -15,8 +15,8 @@ import time
 
 import numpy as np
 
-from geocert.solvers.core.bnb import Box, BoxStatus
-from geocert.solvers.core.certificates import SearchProof, encode
+from geocert.core.bnb import Box, BoxStatus
+from geocert.core.certificates import SearchProof, encode
 from geocert.solvers.fractional.charts import MapChart
 from geocert.solvers.fractional.relaxation import gamma_for
 from geocert.solvers.fractional.resection_leaves import STATED_PAD, depth_row_map, hull

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from geocert.solvers.core.determinacy import information_intervals
+from geocert.core.determinacy import information_intervals
 from geocert.solvers.lines.geometry import LineSet, segment_lines
 from geocert.solvers.lines.refine import _lateral, _Problem, _start
 

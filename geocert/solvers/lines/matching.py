@@ -31,7 +31,7 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from geocert.solvers.core.declared_options import DeclaredRanges, option
+from geocert.core.declared_options import DeclaredRanges, option
 from geocert.solvers.lines.geometry import Rig, cross, skew
 
 _BIG = 1e6

@@ -15,7 +15,7 @@ from typing import Callable
 
 import numpy as np
 
-from geocert.solvers.core.declared_options import DeclaredRanges, option
+from geocert.core.declared_options import DeclaredRanges, option
 from geocert.solvers.lines import incremental
 from geocert.solvers.lines.geometry import LineSet, cross, directions_and_points, line_errors
 from geocert.solvers.lines.results import Degenerate, Motion

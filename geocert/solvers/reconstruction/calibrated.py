@@ -48,9 +48,9 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.spatial.transform import Rotation
 
-from geocert.solvers.core import pieces
-from geocert.solvers.core.bnb import asks_to_stop
-from geocert.solvers.core.geometry import InputError
+from geocert.core import pieces
+from geocert.core.bnb import asks_to_stop
+from geocert.core.geometry import InputError
 from geocert.solvers.reconstruction import bundle, schur
 
 
@@ -517,7 +517,7 @@ def _pair_rays(state: _State, i: int, j: int, pairs: np.ndarray) -> tuple:
 def pair_geometry(threshold_px: float, pair: tuple) -> PairGeometry:
     """The essential matrix of a candidate pair (_pair_rays) by RANSAC on the tracks both views
     see, its pose, inliers and their median triangulation angle: a piece of the initial pair's
-    search (solvers.core.pieces), a pure function of its rays (OpenCV's RANSAC seeds its
+    search (core.pieces), a pure function of its rays (OpenCV's RANSAC seeds its
     generator per call)."""
     i, j, ra, rb, focal = pair
     none = PairGeometry((i, j), len(ra), 0, 0.0, 1.0)

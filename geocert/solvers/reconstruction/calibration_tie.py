@@ -86,7 +86,7 @@ import math
 
 import numpy as np
 
-from geocert.solvers.core.strict import Invalid, numbers
+from geocert.core.strict import Invalid, numbers
 from geocert.solvers.reconstruction import camera_claim, centred_fit
 from geocert.solvers.reconstruction.calibration_claim import BUILT_WITH_ONE_K, camera_intrinsics
 

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from geocert.solvers.core import strict
+from geocert.core import strict
 
 ITERATIONS = 30  # Levenberg-Marquardt steps at most (the synthetic scene's 60 px shift converges in 6)
 CHUNK = 200_000  # observation pairs per block of the points' Schur complement (memory: CHUNK * 81 floats at most)

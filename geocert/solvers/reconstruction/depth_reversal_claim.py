@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.core.geometry import is_number
-from geocert.solvers.core.strict import Invalid
+from geocert.core.geometry import is_number
+from geocert.core.strict import Invalid
 from geocert.solvers.reconstruction import depth_reversal
 
 # The twin is told apart when the costs differ by more than this many noise variances (the

@@ -11,8 +11,8 @@ import math
 from dataclasses import fields
 from typing import Any
 
-from geocert.solvers.core.geometry import is_number
-from geocert.solvers.core.strict import Invalid
+from geocert.core.geometry import is_number
+from geocert.core.strict import Invalid
 from geocert.solvers.fractional.options import FractionalOptions, SearchOptions
 from geocert.solvers.reconstruction import camera_claim
 

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geocert.solvers.core import pieces
-from geocert.solvers.core.geometry import norm_cost
+from geocert.core import pieces
+from geocert.core.geometry import norm_cost
 from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
 from geocert.solvers.fractional.results import MapResult, TrackResult
 from geocert.solvers.reconstruction import camera_claim
@@ -150,7 +150,7 @@ def resect_cameras(cameras: dict[int, np.ndarray], sources: dict[int, tuple[np.n
     def points(view: int):
         return sources.get(view, (np.zeros((0, 3)), np.zeros((0, 2))))
 
-    if pieces.spreading():  # a caller spreads each camera's search over processes (solvers.core.pieces)
+    if pieces.spreading():  # a caller spreads each camera's search over processes (core.pieces)
         def stop(k: int) -> bool:
             if k and progress is not None:
                 progress(k, len(cameras))

@@ -115,7 +115,7 @@ def test_a_focal_length_no_test_freed_is_refused(verified):
 def test_a_focal_length_beyond_the_views_named_is_refused(verified):
     """The test names view LONGER: a camera of another view with a focal length of its own (its P
     rewritten to match), or the test naming another view, is refused by the test's check."""
-    from geocert.solvers.core.strict import Invalid
+    from geocert.core.strict import Invalid
     from geocert.verify.reconstruction_members import _check_focals_per_view
 
     _, result = verified

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from geocert.solvers.core.geometry import InputError
+from geocert.core.geometry import InputError
 from geocert.pipelines.reconstruction import features
 from geocert.solvers.reconstruction import calibrated
 from testing.camera_errors import align_rotations, rotation_angle_deg

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from geocert.solvers.autocalibration import affine, affine_relaxation, frames, metric, metric_relaxation, scenes
-from geocert.solvers.core.bnb import BnbOptions, Box
-from geocert.solvers.core.conic import ConicStatus, solve_conic
-from geocert.solvers.core.cones import safe_lower_bound
+from geocert.core.bnb import BnbOptions, Box
+from geocert.core.conic import ConicStatus, solve_conic
+from geocert.core.cones import safe_lower_bound
 
 K0 = np.array([[1000.0, 0.0, 500.0], [0.0, 1000.0, 500.0], [0.0, 0.0, 1.0]])
 RANGES = {"focal": [0.3, 5.0], "aspect": [0.9, 1.1], "skew": [-0.01, 0.01], "u": [-0.25, 0.25], "v": [-0.25, 0.25]}
@@ -183,7 +183,7 @@ def in_cones(program, x: np.ndarray, tol: float = 1e-9) -> bool:
             return False
         start += size
     for size in c.psd:
-        from geocert.solvers.core.cones import smat
+        from geocert.core.cones import smat
         rows = size * (size + 1) // 2
         if np.linalg.eigvalsh(smat(s[start:start + rows], size))[0] < -scale[start:start + rows].max():
             return False
@@ -395,7 +395,7 @@ class TestUncleanSolvesStillBound:
         assert report.valid, report.first_failure
 
     def test_an_unclean_solves_dual_bounds_every_sampled_point(self):
-        from geocert.solvers.core import conic
+        from geocert.core import conic
 
         scene, norm = normalised_scene(10, 0.1, 10016)
         coef, _ = frames.modulus_coefficients(norm.cameras, norm.reference)

@@ -24,9 +24,9 @@ from geocert.solvers.autocalibration import frames, metric, proofs
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import CLAIM_OPTIONS, read_data
-from geocert.solvers.core.certificates import data_hash, pack, problem_hash, unpack
-from geocert.solvers.core.cones import proves_infeasible
-from geocert.solvers.core.geometry import InputError
+from geocert.core.certificates import data_hash, pack, problem_hash, unpack
+from geocert.core.cones import proves_infeasible
+from geocert.core.geometry import InputError
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import uncertify
 

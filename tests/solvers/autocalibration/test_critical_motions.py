@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 from geocert.jobs.runner import solve_job
 from geocert.solvers import datasets
 from geocert.solvers.autocalibration import determinacy, scenes
-from geocert.solvers.core.determinacy import fixes
+from geocert.core.determinacy import fixes
 from tests.support import shared_data
 
 BENCH_DATA = Path(os.environ.get("GEOCERT_BENCH_DATA") or Path(__file__).resolve().parents[4] / "bench-data")

@@ -13,11 +13,11 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import direct, direct_solve, scenes
-from geocert.solvers.core import interior_point
+from geocert.core import interior_point
 from geocert.solvers.autocalibration import direct_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
-from geocert.solvers.core.certificates import pack, unpack
-from geocert.solvers.core.cones import smat
+from geocert.core.certificates import pack, unpack
+from geocert.core.cones import smat
 from geocert.verify.checks import verify_any
 
 UNIT = {"aspect": [0.95, 1.05], "skew": [-0.01, 0.01], "principal_point": [[-0.1, 0.1], [-0.1, 0.1]]}
@@ -218,7 +218,7 @@ def test_the_focal_rows_make_seed_1008_certify(monkeypatch):
     (direct_solve._solve_order's settled; tests/solvers/autocalibration/test_direct_split.py), so
     the splitting certifies at its upper half (rank one) whichever way that half's solve ends. It
     solves with the Schur complement assembled through the svec operator ("kron"; the two assemblies
-    agree to 1e-12: tests/solvers/core/test_interior_point.py), as it did when measured."""
+    agree to 1e-12: tests/core/test_interior_point.py), as it did when measured."""
     scene, Ks = scenes.table71_scene(1008, 0.2, True)
     data = {"cameras": scene.cameras.tolist(), "points": scene.points.tolist()}
     monkeypatch.setattr(interior_point, "ASSEMBLY", "kron")
@@ -345,7 +345,7 @@ class TestBadInput:
     ])
     def test_named(self, options, field):
         from geocert.jobs.runner import parse_job
-        from geocert.solvers.core.geometry import InputError
+        from geocert.core.geometry import InputError
 
         scene, _, data, intrinsics = table71(1, 0.0)
         with pytest.raises(InputError) as error:
@@ -353,7 +353,7 @@ class TestBadInput:
         assert error.value.field == field
 
     def test_points_chirality_needs_points(self):
-        from geocert.solvers.core.geometry import InputError
+        from geocert.core.geometry import InputError
 
         scene, _, data, intrinsics = table71(1, 0.0)
         del data["points"]
@@ -365,7 +365,7 @@ class TestBadInput:
 @pytest.mark.parametrize("chirality, remedy", [("points", '"centers" or give fewer points'),
                                                ("centers", '"none" or fewer cameras')])
 def test_a_program_too_large_names_a_remedy_that_shrinks_it(chirality, remedy):
-    from geocert.solvers.core.geometry import InputError
+    from geocert.core.geometry import InputError
 
     views = 2000 if chirality == "centers" else 300  # centres alone: views (views - 1) / 2 pairs
     with pytest.raises(InputError, match=remedy):

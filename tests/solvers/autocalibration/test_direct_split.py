@@ -15,9 +15,9 @@ import pytest
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import direct, direct_solve, scenes
 from geocert.solvers.autocalibration import direct_relaxation
-from geocert.solvers.core.certificates import pack, unpack
-from geocert.solvers.core.cones import smat
-from geocert.solvers.core.strict import Invalid
+from geocert.core.certificates import pack, unpack
+from geocert.core.cones import smat
+from geocert.core.strict import Invalid
 from geocert.verify.checks import verify_any
 
 UNIT = {"aspect": [0.95, 1.05], "skew": [-0.01, 0.01], "principal_point": [[-0.1, 0.1], [-0.1, 0.1]]}
@@ -136,7 +136,7 @@ def test_a_split_that_lowers_the_bound_is_not_kept(monkeypatch):
     def leaf(cuts, status, bound, rank):
         return direct_solve.Leaf(orientation, cuts, None, status, np.zeros(3), z, "fake", bound, (rank, 0.5, None))
 
-    from geocert.solvers.core.conic import ConicStatus
+    from geocert.core.conic import ConicStatus
 
     def fake_leaf(setup, options, order, orientation, cuts, check=None):
         if not cuts:
@@ -165,7 +165,7 @@ def test_an_unclean_half_bounded_above_the_best_quadric_does_not_stop_the_certif
     setup = direct.DirectSetup(None, np.eye(4), np.zeros((1, 3, 4)), [orientation], [])
     z = np.zeros(3)
 
-    from geocert.solvers.core.conic import ConicStatus
+    from geocert.core.conic import ConicStatus
 
     def fake_leaf(setup, options, order, orientation, cuts, check=None):
         if not cuts:
@@ -193,7 +193,7 @@ def test_an_unclean_half_bounded_below_the_best_quadric_still_stops_it(monkeypat
     setup = direct.DirectSetup(None, np.eye(4), np.zeros((1, 3, 4)), [orientation], [])
     z = np.zeros(3)
 
-    from geocert.solvers.core.conic import ConicStatus
+    from geocert.core.conic import ConicStatus
 
     def fake_leaf(setup, options, order, orientation, cuts, check=None):
         if not cuts:

@@ -17,8 +17,8 @@ from geocert.solvers.bilinear import problem
 from geocert.solvers.bilinear.options import BilinearOptions
 from geocert.solvers.bilinear.relaxation import Relaxation, mccormick_rows
 from geocert.solvers.bilinear.search import Model, fit_frame
-from geocert.solvers.core.conic import ConicStatus, solve_conic
-from geocert.solvers.core.geometry import InputError
+from geocert.core.conic import ConicStatus, solve_conic
+from geocert.core.geometry import InputError
 from geocert.verify.checks import verify_any
 
 
@@ -296,7 +296,7 @@ def test_a_node_tightening_side_moved_is_refused(certified_result):
 
 
 def test_a_dual_vector_changed_is_refused(certified_result):
-    from geocert.solvers.core.certificates import pack, unpack
+    from geocert.core.certificates import pack, unpack
 
     def change(item):
         for record in item["proof"]["proofs"]:

@@ -269,7 +269,7 @@ def test_the_convexity_paths_results_hold_against_the_branch_and_bound(dinosaur)
     """convexity_path.certify_tracks: each result it certifies has the cost its point and
     residuals give, a lower bound below the branch and bound's certified optimum and within the
     tolerance of its cost; it certifies nearly every Dinosaur track."""
-    from geocert.solvers.core.geometry import norm_cost, normalised_cameras, reprojection_residuals
+    from geocert.core.geometry import norm_cost, normalised_cameras, reprojection_residuals
     from geocert.solvers.fractional.convexity_path import certify_tracks
 
     cameras, tracks = dinosaur
@@ -294,7 +294,7 @@ def test_the_convexity_path_certifies_nothing_the_branch_and_bound_refutes(noise
     """Noisy tracks of 2 to 4 views (several local minima at 30-300 px): every lower bound the
     path certifies lies below the branch and bound's certified optimum of the track, and a
     track it leaves is left whole (None)."""
-    from geocert.solvers.core.geometry import normalised_cameras
+    from geocert.core.geometry import normalised_cameras
     from geocert.solvers.fractional.convexity_path import certify_tracks
 
     rng = np.random.default_rng(seed("path", str(noise)))
@@ -314,7 +314,7 @@ def test_every_bound_the_path_claims_is_one_a_checker_proves_track_by_track(dino
     """convexity.track_bound, one track at a time from the claim's point and radius (as a
     verifier computes it), proves at least the lower bound the batched path claimed, for every
     certified Dinosaur track (the solver's doubled allowances absorb the sums' last bits)."""
-    from geocert.solvers.core.geometry import normalised_cameras
+    from geocert.core.geometry import normalised_cameras
     from geocert.solvers.fractional.convexity import track_bound
     from geocert.solvers.fractional.convexity_path import certify_tracks
 
@@ -334,7 +334,7 @@ def test_every_bound_the_path_claims_is_one_a_checker_proves_track_by_track(dino
 def test_a_track_within_abs_gap_of_zero_is_left_to_the_trivial_bound():
     """Exact observations: the cost is within abs_gap of 0, which the trivial bound certifies
     (the search's first step); the convexity path leaves such a track."""
-    from geocert.solvers.core.geometry import normalised_cameras
+    from geocert.core.geometry import normalised_cameras
     from geocert.solvers.fractional.convexity_path import certify_tracks
 
     rng = np.random.default_rng(seed("exact"))

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from geocert.solvers.core.determinacy import information_intervals
+from geocert.core.determinacy import information_intervals
 from geocert.solvers.fractional import homography_estimate
 from geocert.solvers.fractional.fixed_order import symmetric_eigen
 from tests.verify.test_forgeries_review34 import _refused, _valid

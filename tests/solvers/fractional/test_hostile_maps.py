@@ -87,7 +87,7 @@ class TestGeoreferencedResection:
     def test_a_program_wrong_in_its_millionth_part_is_refused(self, wrong):
         # The allowance for the terms' round-off (certificates.TERMS_ROUNDING) must not hide a
         # program built wrong: one coefficient of one observation off by a millionth of itself.
-        from geocert.solvers.core.strict import Invalid
+        from geocert.core.strict import Invalid
         from geocert.solvers.fractional.items import MapItem
 
         X, u = georeferenced_resection(0)

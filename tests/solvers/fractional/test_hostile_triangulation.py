@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 from testing.hostile_triangulation import refused, scene
-from geocert.solvers.core.geometry import normalised_cameras
-from geocert.solvers.core.strict import Invalid
+from geocert.core.geometry import normalised_cameras
+from geocert.core.strict import Invalid
 from geocert.solvers.fractional.items import TrackItem
 from geocert.solvers.fractional.proof import check_program
 from geocert.solvers.fractional.many_tracks import triangulate_many

@@ -178,7 +178,7 @@ def test_max_residual_solves_every_track_alone(dinosaur):
 def test_the_batched_refinement_reaches_scipys_minimum(dinosaur):
     """The batched LM from the DLT start ends at least as low as search.local_refine (MINPACK's
     LM, tolerances 1e-8) on every track's L2L2 cost, to 1e-10 relative."""
-    from geocert.solvers.core.geometry import normalised_cameras
+    from geocert.core.geometry import normalised_cameras
     from geocert.solvers.fractional.relaxation import FractionalProgram
     from geocert.solvers.fractional.search import local_refine
 

@@ -10,8 +10,8 @@ import pytest
 
 from geocert.verify import checks as verify
 from geocert.solvers.fractional.results import claim_of
-from geocert.solvers.core.bnb import Box, BoxStatus
-from geocert.solvers.core.geometry import norm_terms
+from geocert.core.bnb import Box, BoxStatus
+from geocert.core.geometry import norm_terms
 from geocert.solvers.fractional import search
 from geocert.solvers.fractional.charts import MapChart
 from geocert.solvers.fractional.maps import _REASONS, dlt, fit_map

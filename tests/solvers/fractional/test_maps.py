@@ -8,11 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from testing.baselines import map_dlt_lm
-from geocert.solvers.core.bnb import Box, BoxStatus
+from geocert.core.bnb import Box, BoxStatus
 from geocert.solvers.fractional.charts import MapChart, normaliser
-from geocert.solvers.core.conic import ConicStatus, solve_conic
+from geocert.core.conic import ConicStatus, solve_conic
 from geocert.solvers.fractional.search import Prepared, prepare
-from geocert.solvers.core.geometry import InputError, norm_cost
+from geocert.core.geometry import InputError, norm_cost
 from geocert.solvers.fractional.inputs import check_correspondences
 from geocert.solvers.fractional.maps import _REASONS, dlt, fit_map
 from geocert.solvers.fractional.options import MapOptions
@@ -303,7 +303,7 @@ def test_a_cut_box_whose_bound_fails_is_bounded_as_it_was(monkeypatch):
     """A box cut to hug the maps within the cap can leave a relaxation the conic solver does not
     end cleanly (seen on a Dinosaur camera: 21 nodes instead of 5). Then the node is bounded
     uncut, and nothing is excluded."""
-    from geocert.solvers.core.bnb import BoxBound
+    from geocert.core.bnb import BoxBound
 
     rng = np.random.default_rng(seed("node tightening fallback"))
     for _ in range(10):

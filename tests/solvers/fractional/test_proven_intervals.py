@@ -111,7 +111,7 @@ def test_the_proven_intervals_hold_the_truth_on_most_tracks():
 def test_the_terms_moved_to_a_level_are_the_ones_computed_at_it():
     """The convexity path reuses its terms at the sublevel's level (at_level): the radii are those
     of the terms computed afresh at it, bit for bit, so the verifier's recomputation agrees."""
-    from geocert.solvers.core.geometry import normalised_cameras
+    from geocert.core.geometry import normalised_cameras
     from geocert.solvers.fractional.convexity import at_level, convexity_terms, sublevel_radii
     from geocert.solvers.fractional.flat import FlatTracks, linear, refine
 

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from geocert.solvers.fractional import relaxation
-from geocert.solvers.core.bnb import Box, BoxStatus
+from geocert.core.bnb import Box, BoxStatus
 from geocert.solvers.fractional.search import Prepared
 from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, prepare_track
 
@@ -101,7 +101,7 @@ def test_root_bounds_are_each_duals_safe_bound(seed, views, spoil):
     """relaxation.root_bounds takes every root dual's safe bound at once: each equals
     cones.safe_lower_bound of that dual alone, also for duals pushed out of the dual cone, and a
     dual holding inf or NaN bounds nothing (-inf below, +inf above), the others unaffected."""
-    from geocert.solvers.core.cones import safe_lower_bound
+    from geocert.core.cones import safe_lower_bound
 
     rng = np.random.default_rng(seed)
     cameras = random_cameras(rng, views)

@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from geocert.solvers.core.strict import Invalid
+from geocert.core.strict import Invalid
 from geocert.solvers.fractional import maps
 from geocert.solvers.fractional.maps import fit_map
 from geocert.solvers.fractional.options import MapOptions

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from geocert.kinds.triangulation import track_document, track_documents
-from geocert.solvers.core.geometry import norm_cost, reprojection_residuals
+from geocert.core.geometry import norm_cost, reprojection_residuals
 from geocert.solvers.fractional import determinacy
 from geocert.solvers.fractional.many_tracks import triangulate_many
 from geocert.solvers.fractional.columns import TrackResults, solutions

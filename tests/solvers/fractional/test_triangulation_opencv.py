@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from geocert.solvers.core.geometry import fundamental_from_cameras
+from geocert.core.geometry import fundamental_from_cameras
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 
 from tests.support import random_cameras

@@ -8,7 +8,7 @@ import pytest
 pyscipopt = pytest.importorskip("pyscipopt")
 
 from testing.baselines import scip_triangulate
-from geocert.solvers.core.geometry import norm_cost
+from geocert.core.geometry import norm_cost
 from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, triangulate
 
 from tests.support import noisy_track, random_cameras

@@ -11,7 +11,7 @@ import pytest
 
 from geocert.jobs.runner import parse_job, solve_job
 from geocert.kinds.stereo_lines import KIND
-from geocert.solvers.core.geometry import InputError
+from geocert.core.geometry import InputError
 from geocert.solvers.lines import align, incremental, linear, polynomial, scenes
 from geocert.solvers.lines import refine as refinement
 from geocert.solvers.lines.geometry import line_set, log_rotation, rodrigues, rotation_error_deg

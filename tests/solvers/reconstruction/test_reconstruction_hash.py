@@ -11,7 +11,7 @@ import dataclasses
 
 import pytest
 
-from geocert.solvers.core.certificates import problem_hash
+from geocert.core.certificates import problem_hash
 from geocert.verify import hashed_options
 from geocert.verify.checks import checked_options, verify_any
 from tests.verify.test_forgeries import stored

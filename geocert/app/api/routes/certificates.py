@@ -15,7 +15,7 @@ from geocert.app.errors import PROBLEM_JSON, ApiProblem, is_json_media_type, jso
 from geocert.app.schemas import RESULT_MODELS, VerifyReport
 from geocert.kinds.schema import CertificateDocument
 from geocert.verify import checks as verify
-from geocert.solvers.core.strict import RepeatedName, Unreadable, load_document
+from geocert.core.strict import RepeatedName, Unreadable, load_document
 from geocert.settings import get_settings
 from geocert.jobs.store import TERMINAL
 

@@ -30,7 +30,7 @@ from geocert.app.job_submission import _submit
 from geocert.jobs.collection import collector_held
 from geocert.app.errors import ApiProblem, is_json_media_type
 from geocert.app.schemas import JOB_EXAMPLES, JOB_REQUEST, JOB_STATUSES, Job, JobList, JobRequest
-from geocert.solvers.core.geometry import InputError
+from geocert.core.geometry import InputError
 from geocert.workers.queue import loop_producer, loop_producer_tried, ready_loop_producer, withdraw_queued
 from geocert.jobs.store import REDIS_GONE, TERMINAL, JobStore, ResultGone, events, read_job
 

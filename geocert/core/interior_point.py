@@ -1,6 +1,6 @@
 """A primal-dual interior-point method for the moment relaxation (direct_relaxation.Program),
 numpy only, that exploits what Clarabel cannot: the structure of the PSD cones' scaling. Part of
-the conic boundary (solvers.core.conic maps its statuses to ours).
+the conic boundary (core.conic maps its statuses to ours).
 
 Why: Clarabel factors the quasi-definite KKT system in which each PSD cone's Nesterov-Todd block
 is a dense n(n+1)/2 square (the 55 x 55 moment matrix: 1540 rows), about 3e9 flops an iteration
@@ -35,7 +35,7 @@ import numpy as np
 import scipy.linalg as sl
 import scipy.sparse as sp
 
-from geocert.solvers.core.conic import ConicStatus, map_interior_point_status
+from geocert.core.conic import ConicStatus, map_interior_point_status
 
 REFINEMENT = 3  # refinement steps per Newton solve (1 left the dual residual at 1e-9 late in some solves; 2-4 at 1e-12)
 # ... and up to this many while the equations' error is above a tenth of the tolerance (of |q|, |b|):

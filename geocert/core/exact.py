@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from geocert.solvers.core.geometry import cost_rounding, norm_terms
+from geocert.core.geometry import cost_rounding, norm_terms
 
 # Float evaluation serves where its cost is this share of OBJECTIVE_TOLERANCE (relative) from
 # the exact one at worst; elsewhere the cost is computed exactly. A writer's float cost and a

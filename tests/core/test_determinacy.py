@@ -12,7 +12,7 @@ import pytest
 from testing.determinacy import cameras_looking_at_origin, project
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import scenes
-from geocert.solvers.core.determinacy import curvature_intervals
+from geocert.core.determinacy import curvature_intervals
 from geocert.solvers.fractional import determinacy as fractional
 
 from tests.support import random_cameras
@@ -306,7 +306,7 @@ class TestTracksMany:
         return cameras, tracks, results
 
     def test_the_same_documents_as_track_by_track(self):
-        from geocert.solvers.core.determinacy import safely
+        from geocert.core.determinacy import safely
 
         cameras, tracks, results = self.scene()
         many = fractional.tracks_many(cameras, tracks, results)

@@ -1,7 +1,7 @@
 """A batched log-barrier method for many small second-order-cone programs at once: the residual
 regions of triangulation's tracks (one nonnegative row, then second-order cones of size 3, in 3
 unknowns), as the batched triangulation (fractional.many_tracks) bounds its tracks' root regions.
-Part of the conic boundary (solvers.core.conic)."""
+Part of the conic boundary (core.conic)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geocert.solvers.core.conic import ConicStatus, map_barrier_status
+from geocert.core.conic import ConicStatus, map_barrier_status
 
 # How a problem's iterations ended, by code (the method's own words, conic's map makes them ours).
 ENDINGS = ("Centred", "InfeasibleStart", "NoStep", "NotFinite")

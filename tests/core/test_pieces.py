@@ -1,4 +1,4 @@
-"""solvers.core.pieces' in-process mappings: in_threads (and in_order) tell a caller each item's
+"""core.pieces' in-process mappings: in_threads (and in_order) tell a caller each item's
 end through ``done``, in the calling thread, before the next ``stop`` is asked."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from geocert.solvers.core import pieces
+from geocert.core import pieces
 
 
 def slow_square(item: int) -> int:

@@ -6,7 +6,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from geocert.solvers.core import exact
+from geocert.core import exact
 
 
 def _by_fractions(matrix: np.ndarray, point: np.ndarray, target: np.ndarray) -> list[float]:

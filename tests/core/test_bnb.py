@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from geocert.solvers.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound
+from geocert.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound
 
 
 class Interval:

@@ -1,7 +1,7 @@
 """The conic boundary: the one place that talks to the conic solver (Clarabel), and the one list
 of every back-end's statuses mapped to ours (ConicStatus), so that callers read ours only.
 
-The boundary's modules, all in solvers/core: this one (Clarabel), interior_point.py (the
+The boundary's modules, all in geocert/core: this one (Clarabel), interior_point.py (the
 structured primal-dual interior-point method, numpy, the direct autocalibration's moment programs
 solved first by it) and barrier.py (the batched log-barrier method of the batched triangulation's
 root regions). Each speaks its own statuses; each maps them here, through an explicit table where a
@@ -29,7 +29,7 @@ import clarabel
 import numpy as np
 import scipy.sparse as sp
 
-from geocert.solvers.core.cones import ConeSpec
+from geocert.core.cones import ConeSpec
 
 
 class ConicStatus(enum.Enum):

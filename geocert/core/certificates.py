@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.core.bnb import Box
+from geocert.core.bnb import Box
 
 FORMAT = "geocert-certificate"
 # Every tolerance is relative, with no absolute floor a document could exploit (docs/certificate.md,

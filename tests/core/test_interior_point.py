@@ -1,4 +1,4 @@
-"""The direct method's structured interior-point solver (geocert.solvers.core.interior_point)
+"""The direct method's structured interior-point solver (geocert.core.interior_point)
 and how direct_solve uses it: the Schur complement's block operator, small conic programs
 against Clarabel, an unclean solve never reported clean, the better of two clean solves kept,
 and Table 7.1's seed 1006 (varying focal) certified, which Clarabel's accuracy left uncertified."""
@@ -12,11 +12,11 @@ import pytest
 import scipy.sparse as sp
 
 from geocert.solvers.autocalibration import direct, direct_solve, scenes
-from geocert.solvers.core import interior_point
+from geocert.core import interior_point
 from geocert.solvers.autocalibration import direct_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
-from geocert.solvers.core.cones import ConeSpec, rounding_uncounted, smat, svec
-from geocert.solvers.core.conic import ConicStatus, SolveSettings, solve_once
+from geocert.core.cones import ConeSpec, rounding_uncounted, smat, svec
+from geocert.core.conic import ConicStatus, SolveSettings, solve_once
 
 UNIT = {"aspect": [0.95, 1.05], "skew": [-0.01, 0.01], "principal_point": [[-0.1, 0.1], [-0.1, 0.1]]}
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from geocert.solvers.core.geometry import InputError
+from geocert.core.geometry import InputError
 from geocert.jobs.runner import parse_job, solve_job
 
 from tests.support import random_cameras
@@ -102,14 +102,14 @@ class TestNumberArray:
         ([[1.0, 2.0], [5e9, 1.0]], "x/1/0"),
     ])
     def test_the_first_bad_entry_is_named(self, value, field):
-        from geocert.solvers.core.geometry import number_array
+        from geocert.core.geometry import number_array
 
         with pytest.raises(InputError) as raised:
             number_array(value, "x", "pairs", 2, limit=1e9)
         assert raised.value.field == field
 
     def test_good_rows_of_floats_and_ints_are_read(self):
-        from geocert.solvers.core.geometry import number_array
+        from geocert.core.geometry import number_array
 
         array = number_array([[1.0, 2], [3, 4.5]], "x", "pairs", 2, limit=1e9)
         assert array.tolist() == [[1.0, 2.0], [3.0, 4.5]]
@@ -133,7 +133,7 @@ class TestCameraChecks:
         ({4: "depth"}, ("cameras/4", "rank-deficient")),
     ])
     def test_the_first_failing_camera_and_check_are_named(self, spoil, named):
-        from geocert.solvers.core.geometry import check_cameras
+        from geocert.core.geometry import check_cameras
 
         cams = self.cameras()
         for index, how in spoil.items():
@@ -150,7 +150,7 @@ class TestCameraChecks:
         assert error.value.field == named[0] and named[1] in str(error.value)
 
     def test_rank_deficiency_quotes_that_cameras_singular_values(self):
-        from geocert.solvers.core.geometry import check_cameras
+        from geocert.core.geometry import check_cameras
 
         cams = self.cameras()
         cams[3, 2] = cams[3, 0]
@@ -159,7 +159,7 @@ class TestCameraChecks:
         assert str(np.linalg.svd(cams[3], compute_uv=False).tolist()) in str(error.value)
 
     def test_cameras_far_from_one_are_scaled_by_powers_of_two_alone(self):
-        from geocert.solvers.core.geometry import check_cameras, normalised_cameras
+        from geocert.core.geometry import check_cameras, normalised_cameras
 
         cams = self.cameras()
         cams[1] *= 2.0 ** 200

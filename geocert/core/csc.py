@@ -2,7 +2,7 @@
 program's constraint matrix, for the verifier, which loads no scipy. A dense matrix times it sums
 each column's products one after another in the order its entries are stored, as scipy.sparse's
 product does, so a bound computed over it is the bound computed over scipy's matrix of the same
-entries, to the last bit (tests/solvers/core/test_csc.py compares them).
+entries, to the last bit (tests/core/test_csc.py compares them).
 
 It is read as scipy's is (``data``, ``indices``, ``indptr``, ``shape``, ``nnz``, ``tocsc``,
 ``abs``, ``!= 0``, ``astype``), which is how core.cones tells a sparse matrix from a dense one."""

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from geocert.solvers.core import conic
-from geocert.solvers.core.cones import ConeSpec
-from geocert.solvers.core.conic import ConicStatus, ReusableConicProgram, map_clarabel_status, solve_conic
+from geocert.core import conic
+from geocert.core.cones import ConeSpec
+from geocert.core.conic import ConicStatus, ReusableConicProgram, map_clarabel_status, solve_conic
 
 BALL = ConeSpec(nonneg=1, soc=(4,))
 
@@ -142,7 +142,7 @@ class TestPSDCones:
 
     def smallest_eigenvalue_program(self, C: np.ndarray):
         """min trace(C X) s.t. trace(X) = 1, X PSD: its value is C's smallest eigenvalue."""
-        from geocert.solvers.core.cones import ConeSpec, svec
+        from geocert.core.cones import ConeSpec, svec
         n = len(C)
         size = n * (n + 1) // 2
         q = svec(C)
@@ -152,7 +152,7 @@ class TestPSDCones:
         return q, A, b, ConeSpec(zero=1, psd=(n,))
 
     def test_svec_is_an_isometry(self):
-        from geocert.solvers.core.cones import smat, svec
+        from geocert.core.cones import smat, svec
         rng = np.random.default_rng(4)
         for n in (1, 2, 4):
             A, B = rng.normal(size=(2, n, n))
@@ -161,7 +161,7 @@ class TestPSDCones:
             assert np.allclose(smat(svec(A), n), A)
 
     def test_the_solver_and_the_safe_bound_agree_with_the_eigenvalue(self):
-        from geocert.solvers.core.cones import safe_lower_bound
+        from geocert.core.cones import safe_lower_bound
         rng = np.random.default_rng(5)
         for n in (2, 3, 5):
             C = rng.normal(size=(n, n))
@@ -181,7 +181,7 @@ class TestPSDCones:
             assert safe_lower_bound(q, A, b, cones, noisy, -box, box) <= smallest + 1e-12
 
     def test_the_projection_lands_in_the_cone(self):
-        from geocert.solvers.core.cones import ConeSpec, project_dual, smat
+        from geocert.core.cones import ConeSpec, project_dual, smat
         rng = np.random.default_rng(6)
         z = rng.normal(size=1 + 2 + 3 + 6)
         projected = project_dual(z, ConeSpec(nonneg=1, soc=(2,), psd=(2, 3)))[3:]
@@ -197,7 +197,7 @@ class TestSafeBoundOfAnyIterate:
     def test_a_spoiled_dual_bounds_nothing(self, spoil):
         import warnings
 
-        from geocert.solvers.core.cones import proves_infeasible, safe_lower_bound
+        from geocert.core.cones import proves_infeasible, safe_lower_bound
 
         centre = np.array([0.5, -0.2, 0.1])
         A, b = ball(centre, 1.0)
@@ -220,7 +220,7 @@ class TestSafeLowerBoundsOfRows:
     is not finite."""
 
     def test_each_row_is_the_single_bound(self):
-        from geocert.solvers.core.cones import safe_lower_bound, safe_lower_bounds
+        from geocert.core.cones import safe_lower_bound, safe_lower_bounds
 
         rng = np.random.default_rng(4)
         cones = ConeSpec(zero=2, nonneg=3, soc=(3, 4, 3), psd=(3,))

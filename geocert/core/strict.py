@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.certificates import unpack
-from geocert.solvers.core.geometry import InputError, is_number, number_array
+from geocert.core.bnb import Box
+from geocert.core.certificates import unpack
+from geocert.core.geometry import InputError, is_number, number_array
 
 SMALLEST_NORMAL = 2.0 ** -1022  # as cones.SMALLEST_NORMAL (this module imports no cone code)
 

@@ -14,8 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from geocert.solvers.core.strict import Invalid
-from geocert.solvers.core.warning_codes import WARNING_CODES
+from geocert.core.strict import Invalid
+from geocert.core.warning_codes import WARNING_CODES
 
 
 @dataclass(frozen=True)
@@ -102,7 +102,7 @@ def check(value: Any, shape: "Record | ByName", where: str) -> None:
 # A warning (a determinacy's, a reconstruction summary's, a stage's motion warnings).
 WARNING = record("code", "detail", codes=WARNING_CODES)
 
-# Determinacy (kinds.schema.Determinacy, written by solvers.core.determinacy and each kind's own).
+# Determinacy (kinds.schema.Determinacy, written by core.determinacy and each kind's own).
 DETERMINACY = record("method", "proven", "determined", "level", "cost_increase", "redundancy", "pooled_tracks",
                      proven_intervals=record("cost_increase", "level", intervals=record("name", "lower", "upper", "reason")),
                      proven_over_planes=record("cost_increase", "affine_increase", "level",

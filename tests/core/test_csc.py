@@ -10,8 +10,8 @@ import pytest
 import scipy.sparse as sp
 
 from geocert.solvers.bilinear.relaxation import Relaxation, insert_row, with_cost_cap
-from geocert.solvers.core.cones import safe_lower_bounds
-from geocert.solvers.core.csc import CscMatrix
+from geocert.core.cones import safe_lower_bounds
+from geocert.core.csc import CscMatrix
 
 
 def relaxations(norm: str, coefficients: str, seed: int):

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from geocert.solvers.core.bnb import Box
-from geocert.solvers.core.strict import Invalid
+from geocert.core.bnb import Box
+from geocert.core.strict import Invalid
 
 MAX_PIECES = 5_000  # uncovered pieces kept when leaves are subtracted one by one
 MAX_WORK = 200_000  # leaf-piece tests when leaves are subtracted one by one
