@@ -138,10 +138,11 @@ def _until(deadline: float | None):
         _DEADLINE.reset(token)
 
 
-def not_analysed(what: str, why: str) -> dict:
+def not_analysed(what: str, why: str, code: str = "time_limit") -> dict:
     """The determinacy document of an analysis not done: no interval, not determined, and a
-    ``time_limit`` warning saying what was not analysed and why."""
-    return Determinacy(warnings=[{"code": "time_limit", "detail": f"{what} was not analysed: {why}"}]).document()
+    warning (``time_limit``: its clock ran out; ``not_analysed``: the data defeated its linear
+    algebra) saying what was not analysed and why."""
+    return Determinacy(warnings=[{"code": code, "detail": f"{what} was not analysed: {why}"}]).document()
 
 
 def within(deadline: float | None, what: str, why: str, function, *args, **kwargs) -> dict | None:

@@ -7,7 +7,7 @@ tests/verify/test_records.py collects the codes the source writes and checks the
 from __future__ import annotations
 
 # Determinacy: how well the data fix an item's answer (docs/kinds.md, "Determinacy").
-DETERMINACY_CODES = ("at_infinity", "near_zero_parallax", "near_coplanar_points", "near_collinear_points",
+DETERMINACY_CODES = ("not_analysed", "at_infinity", "near_zero_parallax", "near_coplanar_points", "near_collinear_points",
                      "near_critical_configuration", "near_dependent_basis", "near_parallel_lines")
 # Motions for which constant intrinsics are not fixed (autocalibration.determinacy.motion_name).
 MOTION_CODES = ("pure_translation", "orbital_motion", "rotation_about_one_axis", "critical_motion")

@@ -21,7 +21,7 @@ from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finit
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import STAGES, outcome, read_data
-from geocert.core.determinacy import within
+from geocert.core.determinacy import safely, within
 from geocert.core.self_check import enabled as self_check_enabled
 
 Range = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[lo, hi]")]
@@ -332,14 +332,20 @@ def stratified_item(parsed: Parsed, options: autocalibration_problem.Autocalibra
     centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
     why = (f"the job's time limit (options.time_limit_s, {options.time_limit_s:g} s a stage) had passed, and "
            f"{ANALYSIS_GRACE_S:g} s more")
+    # the motion judged at the returned K, stated even where a stage's analysis stops or fails
+    judged = None if result.p is None or document["K"] is None else \
+        safely(determinacy.judged_motion, problem, result.p, np.array(document["K"]), centres)
     if result.p is not None and math.isfinite(affine_cost):
-        affine_stage["determinacy"] = within(deadline, "the affine stage's determinacy", why, determinacy.affine_stage,
-                                             problem, result.p, affine_stage["cost"], affine_stage["lower_bound"],
-                                             centres, None if document["K"] is None else np.array(document["K"]))
+        affine_stage["determinacy"] = determinacy.with_motion(
+            within(deadline, "the affine stage's determinacy", why, determinacy.affine_stage, problem, result.p,
+                   affine_stage["cost"], affine_stage["lower_bound"], centres,
+                   None if document["K"] is None else np.array(document["K"])),
+            judged, "the affine stage's determinacy")
     if document["K"] is not None:
-        metric_stage["determinacy"] = within(deadline, "the metric stage's determinacy", why, determinacy.metric_stage,
-                                             problem, result.p, np.array(document["K"]), metric_stage["cost"],
-                                             metric_stage["lower_bound"], centres)
+        metric_stage["determinacy"] = determinacy.with_motion(
+            within(deadline, "the metric stage's determinacy", why, determinacy.metric_stage, problem, result.p,
+                   np.array(document["K"]), metric_stage["cost"], metric_stage["lower_bound"], centres),
+            judged, "the metric stage's determinacy")
         proof = metric_stage["certificate"].get("proof")
         if prove_intervals and full and proof is not None and metric_stage["certified"] \
                 and metric_stage["determinacy"] is not None:

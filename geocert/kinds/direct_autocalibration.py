@@ -83,18 +83,24 @@ def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptio
         # How well the data fix the plane and K (one focal length a view: each view's), read with the
         # stratified costs' curvature (the moment relaxation has no local parametrisation of its own).
         from geocert.solvers.autocalibration import determinacy
-        from geocert.core.determinacy import within
+        from geocert.core.determinacy import safely, within
 
         p = autocalibration_problem.plane_from_input(problem, np.array(document["plane_at_infinity"]))
         centres = None if document["cameras"] is None else np.array([c["center"] for c in document["cameras"]])
         why = (f"the job's time limit (options.time_limit_s, {options.time_limit_s:g} s) had passed, and "
                f"{ANALYSIS_GRACE_S:g} s more")
+        # the motion judged at the returned K (one K's DIAC; with Ks the best fit's), stated even
+        # where the analysis stops or fails
+        judged = None if p is None else safely(determinacy.judged_motion, problem, p,
+                                               None if document["Ks"] is not None else np.array(document["K"]), centres)
         if p is not None and document["Ks"] is not None:
             stage["determinacy"] = within(deadline, "the direct stage's determinacy", why,
                                           determinacy.varying_focal_stage, problem, p, document["Ks"], centres)
         elif p is not None:
             stage["determinacy"] = within(deadline, "the direct stage's determinacy", why, determinacy.metric_stage,
                                           problem, p, np.array(document["K"]), None, None, centres)
+        if p is not None:
+            stage["determinacy"] = determinacy.with_motion(stage["determinacy"], judged, "the direct stage's determinacy")
         proof = stage["certificate"].get("proof")
         asked = options.prove_focal_interval or options.prove_intrinsics_intervals
         if p is not None and asked and options.certificate == "full" and proof is not None \

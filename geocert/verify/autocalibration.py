@@ -225,7 +225,7 @@ class AutocalibrationVerification(Verification):
         if items[0].get("K") is not None:
             raise Invalid("claim", "the affine stage states no calibration")
 
-    def check_returned(self, result: dict, certificate: dict) -> None:
+    def check_returned(self, result: dict, certificate: dict, earlier_estimates: bool = True) -> None:
         """The result's own status and reason are what its stages give (outcome: a result written
         before they were stated has neither); its headline fields are the claims' (plane, K), and
         what follows from them (upgrade, quadric, cameras, points, ranges, baseline) recomputed
@@ -251,7 +251,7 @@ class AutocalibrationVerification(Verification):
         if direct:
             if result.get("baseline") is not None:  # the direct method has no linear estimate
                 raise Invalid("returned", "baseline: the direct method states no linear estimate")
-            return _check_returned_direct(result, certificate)
+            return _check_returned_direct(result, certificate, earlier_estimates)
         if result.get("plane_at_infinity") != claims[0].get("plane_at_infinity"):
             raise Invalid("returned", "plane_at_infinity differs from the affine stage's claim")
         if result.get("K") != claims[1].get("K"):
@@ -291,7 +291,8 @@ class AutocalibrationVerification(Verification):
             estimates.check_contains(stage.get("determinacy"), f"stages/{number}/determinacy")
             estimates.check_stage_level(stage.get("determinacy"), stage.get("cost"), stage.get("lower_bound"),
                                         f"stages/{number}/determinacy")
-        autocalibration_estimates.check_stratified(problem, p, result.get("K"), stages, _centres(derived["cameras"]))
+        autocalibration_estimates.check_stratified(problem, p, result.get("K"), stages, _centres(derived["cameras"]),
+                                                   earlier_estimates)
 
     @staticmethod
     def estimates_of(result: dict, certificate: dict) -> dict:
@@ -678,7 +679,7 @@ def _ranges_stated(result: dict, problem) -> bool:
     return never_started and result.get("intrinsics") == {}
 
 
-def _check_returned_direct(result: dict, certificate: dict) -> None:
+def _check_returned_direct(result: dict, certificate: dict, earlier_estimates: bool = True) -> None:
     from geocert.solvers.autocalibration import direct
 
     claim = certificate["items"][0]
@@ -719,7 +720,7 @@ def _check_returned_direct(result: dict, certificate: dict) -> None:
     p = autocalibration_problem.plane_from_input(problem, np.asarray(result["plane_at_infinity"], dtype=float)) \
         if result.get("plane_at_infinity") is not None else None
     autocalibration_estimates.check_direct(problem, p, result.get("K"), result.get("Ks"), result["stages"][0],
-                                           _centres(expected.get("cameras")))
+                                           _centres(expected.get("cameras")), earlier_estimates)
 
 
 def _centres(cameras: Any) -> np.ndarray | None:

@@ -6,19 +6,22 @@ redundancy are tied elsewhere (estimates.check_plane, check_intrinsics, check_st
 this module an orbital motion's undetermined K, its intervals collapsed onto their values and its
 warning dropped, verified as determined (review 41). Here, at the returned plane and K:
 
-- **Widths.** The writer's walks (``affine_walk``, ``metric_walk``: numpy only) are made again.
-  The affine stage's intervals are that walk's ranges; a K stage's hold its walk's ranges (the
-  plane's family widens them, in quadrature), so each stated interval must contain the
-  recomputed one, to ``WALK_SLACK`` of its width, and be unbounded where the walk is. In a
-  document written before the walk (its intervals state no tolerance) a K stage's end may instead
-  hold the local curvature's (Gauss-Newton, the level's own words), as such documents state: each
-  end is held to the nearer of the two to the value, unbounded only where both are. With one focal length a view (``varying_focal_stage``,
-  curvature only) the curvature's alone.
-- **Motions.** The DIAC's family (``motion_warnings``, numpy only) is judged again with the
-  returned K's DIAC; where it finds a critical motion at thresholds just either side of
-  ``RELATIVE_WIDTH`` (no rounding of the same sums could turn the judgement), the stage must carry
-  a critical-motion warning (its code the writer's geometry names; any of CRITICAL_CODES is read
-  as one). The plane family's own warning needs the writer's scipy refits and is not demanded.
+- **Widths.** The writer's analyses are made again. The affine stage's intervals are its modulus
+  walk's ranges (``affine_walk``); a K stage's are the metric walk's and the plane family's added
+  in quadrature (``metric_intervals``: the family's metric refits are the writer's scipy
+  least-squares, as an autocalibration's check already reads scipy); with one focal length a view
+  the curvature's (``varying_focal_stage``). Each stated interval must contain the recomputed one,
+  to ``WALK_SLACK`` of its width, and be unbounded where it is. In a document hashed before the
+  estimates' form was declared (the stored ones) a K stage's end may instead hold the metric
+  walk's or the local curvature's (Gauss-Newton, the level's own words), whichever lies nearer the
+  value, and its plane family is not judged.
+- **Motions.** The DIAC's family (``motion_warnings``) is judged again with the returned K's
+  DIAC, and each stage's plane family (the planes the modulus cost cannot tell apart, the metric
+  fit redone on each); where either moves K by more than ``RELATIVE_WIDTH``, clear of it by
+  ``JUDGEMENT_MARGIN`` either side (no rounding of the same sums could turn the judgement), the
+  stage must carry a critical-motion warning (its code the writer's geometry names; any of
+  CRITICAL_CODES is read as one), whatever its analysis came to: the writer states the DIAC's
+  judgement even in an analysis stopped at its clock or defeated by the data (with_motion).
 """
 
 from __future__ import annotations
@@ -45,64 +48,109 @@ WALK_SLACK = 1e-2
 JUDGEMENT_MARGIN = 1e-4  # relative, either side of RELATIVE_WIDTH: a motion judged critical at both
 
 
-def check_stratified(problem, p: np.ndarray | None, K: Any, stages: list, centres: np.ndarray | None) -> None:
-    """The affine stage's intervals are its modulus walk's; the metric stage's hold its metric
-    walk's (scoped to the intrinsics ranges); both stages' motions judged again."""
+def check_stratified(problem, p: np.ndarray | None, K: Any, stages: list, centres: np.ndarray | None,
+                     earlier: bool = True) -> None:
+    """The affine stage's intervals are its modulus walk's; the metric stage's hold its writer's
+    (metric_intervals); both stages' motions judged again. ``earlier``: whether the document's
+    hash lets its estimates be of the earlier form (checks._check_hashes)."""
     if p is None:
         return
     affine = _analysed(stages[0])
+    w = w_of_K(problem, np.asarray(K, dtype=float)) if isinstance(K, list) else None
     if affine is not None:
-        walk = _walked(writer.affine_walk, problem, p, certified_gap(_cost(stages[0], "cost"),
-                                                                      _cost(stages[0], "lower_bound")))
+        gap = certified_gap(_cost(stages[0], "cost"), _cost(stages[0], "lower_bound"))
+        walk = _walked(writer.affine_walk, problem, p, gap)
         if walk is not None:
             _check_holds(affine, walk["intervals"], "stages/0/determinacy")
+            if w is not None and _current(affine, earlier):
+                family = _walked(writer.plane_family, problem, p, w, gap, None, walk)
+                _check_plane_motion(affine, family, "stages/0/determinacy")
     metric = _analysed(stages[1])
-    if metric is None or not isinstance(K, list):
+    if w is None:
         return
-    w = w_of_K(problem, np.asarray(K, dtype=float))
-    walk = _walked(writer.metric_walk, problem, p, w,
-                   certified_gap(_cost(stages[1], "cost"), _cost(stages[1], "lower_bound")))
-    if walk is not None:
-        _check_holds(metric, _held(walk, problem, metric), "stages/1/determinacy")
+    if metric is not None:
+        _check_K_stage(problem, p, w, certified_gap(_cost(stages[1], "cost"), _cost(stages[1], "lower_bound")),
+                       metric, "stages/1/determinacy", earlier)
     H = metric_relaxation.homographies(problem.norm.cameras, problem.norm.reference, p)
     omega = metric_relaxation.omega_of(w)
-    for number, stated in ((0, affine), (1, metric)):
-        if stated is not None:
-            _check_motion(stated, H, centres, omega, f"stages/{number}/determinacy")
+    # the affine stage states an estimate where its cost is finite (the writer's condition)
+    analysed = (0, 1) if math.isfinite(_cost(stages[0], "cost") or math.inf) else (1,)
+    for number in analysed:
+        _check_motion(stages[number].get("determinacy") if isinstance(stages[number], dict) else None,
+                      H, centres, omega, f"stages/{number}/determinacy")
 
 
-def check_direct(problem, p: np.ndarray | None, K: Any, Ks: Any, stage: dict, centres: np.ndarray | None) -> None:
+def check_direct(problem, p: np.ndarray | None, K: Any, Ks: Any, stage: dict, centres: np.ndarray | None,
+                 earlier: bool = True) -> None:
     """The direct stage's estimate: one K's metric walk (clipped to the intrinsics ranges, as the
     stratified metric stage's) or one focal length a view's curvature intervals, and its
     motion judged again."""
     stated = _analysed(stage)
-    if p is None or stated is None:
+    if p is None:
         return
     H = metric_relaxation.homographies(problem.norm.cameras, problem.norm.reference, p)
     if isinstance(Ks, list):
-        again = _walked(writer.varying_focal_stage, problem, p, Ks, None)
+        again = _walked(writer.varying_focal_stage, problem, p, Ks, None) if stated is not None else None
         if again is not None:
             _check_holds(stated, again["intervals"], "stages/0/determinacy")
         omega = None  # the writer judges the motion with the DIAC the H fit best
     elif isinstance(K, list):
         w = w_of_K(problem, np.asarray(K, dtype=float))
-        walk = _walked(writer.metric_walk, problem, p, w, None)
-        if walk is not None:
-            _check_holds(stated, _held(walk, problem, stated), "stages/0/determinacy")
+        if stated is not None:
+            _check_K_stage(problem, p, w, None, stated, "stages/0/determinacy", earlier)
         omega = metric_relaxation.omega_of(w)
     else:
         return
-    _check_motion(stated, H, centres, omega, "stages/0/determinacy")
+    _check_motion(stage.get("determinacy") if isinstance(stage, dict) else None, H, centres, omega,
+                  "stages/0/determinacy")
 
 
-def _held(walk: dict, problem, stated: dict) -> list[dict]:
-    """What a K stage's stated intervals must hold: the walk's; in a document written before the
-    walk (its intervals state no tolerance: estimates.check_intrinsics reads the same), each end
-    the walk's or the local curvature's, whichever lies nearer the value (None only where both
-    are unbounded). Read so for today's documents, the curvature's bounded ends stood for a
-    critical motion's unbounded K (review 43)."""
-    intervals = stated.get("intervals")
-    if any(isinstance(i, dict) and "tolerance" in i for i in intervals or []):
+def _current(stated: dict, earlier: bool) -> bool:
+    """Whether a stage's estimate is read in today's form: the document's hash declares the
+    estimates' form (``earlier`` False). One hashed before (the stored documents) is read in the
+    earlier form whatever its intervals state: tolerances were stated before the walks were."""
+    return not earlier
+
+
+def _check_K_stage(problem, p: np.ndarray, w: np.ndarray, gap: float | None, stated: dict, where: str,
+                   earlier: bool) -> None:
+    """Today's K stage holds the writer's intervals made again (metric_intervals: the metric walk
+    and the plane family in quadrature) and states the plane family's critical motion; an earlier
+    one holds its walk or its curvature (_held)."""
+    if _current(stated, earlier):
+        found = _walked(writer.metric_intervals, problem, p, w, gap)
+        if found is not None:
+            _check_holds(stated, found["intervals"], where)
+            _check_plane_motion(stated, found["family"], where)
+        return
+    walk = _walked(writer.metric_walk, problem, p, w, gap)
+    if walk is not None:
+        _check_holds(stated, _held(walk, problem, stated, earlier), where)
+
+
+def _check_plane_motion(stated: dict, family: dict | None, where: str) -> None:
+    """The plane family's warning (determinacy._plane_warning): where the planes the modulus cost
+    cannot tell apart move K by more than RELATIVE_WIDTH, clear of it by JUDGEMENT_MARGIN, the
+    stage states a critical-motion warning (review 43: dropped, with the intervals narrowed to the
+    metric walk's, a loose plane's K read as fixed to 10%)."""
+    if family is None or not np.all(np.isfinite(family["K"])):
+        return
+    if not family["largest_move"] > writer.RELATIVE_WIDTH * (1 + JUDGEMENT_MARGIN):
+        return
+    warnings = stated.get("warnings")
+    codes = [w.get("code") for w in warnings if isinstance(w, dict)] if isinstance(warnings, list) else []
+    if not any(code in writer.CRITICAL_CODES for code in codes):
+        raise Invalid("returned", f"{where}/warnings state no critical motion; the planes at infinity the modulus "
+                                  f"cost cannot tell from the returned one, walked again, move K by "
+                                  f"{family['largest_move']:.3g} of its focal length")
+
+
+def _held(walk: dict, problem, stated: dict, earlier: bool = True) -> list[dict]:
+    """What a K stage's stated intervals must hold: the walk's; in a document of the earlier form
+    (_current), each end the walk's or the local curvature's, whichever lies nearer the value
+    (None only where both are unbounded). Read so for today's documents, the curvature's bounded
+    ends stood for a critical motion's unbounded K (review 43)."""
+    if _current(stated, earlier):
         return walk["intervals"]
     bounds = writer.scope_of(problem)
     out = []
@@ -155,12 +203,18 @@ def _check_holds(stated: dict, recomputed: list[dict], where: str) -> None:
                                           f"{'an unbounded end' if mine is None else repr(mine)[:30]} at its level")
 
 
-def _check_motion(stated: dict, H: np.ndarray, centres: np.ndarray | None, omega: np.ndarray | None,
+def _check_motion(stated: Any, H: np.ndarray, centres: np.ndarray | None, omega: np.ndarray | None,
                   where: str) -> None:
+    """Whatever the stage's analysis came to (ran, stopped at its clock, defeated by the data:
+    its writer states the motion in each, with_motion), a motion judged critical again needs a
+    critical-motion warning: a null or stopped estimate is no place to hide one (review 43)."""
     judged = [safely(writer.motion_warnings, H, centres, omega=omega,
                      threshold=writer.RELATIVE_WIDTH * (1 + sign * JUDGEMENT_MARGIN)) for sign in (-1, 1)]
     if not all(judged):
         return  # not critical, or critical only at a threshold rounding could turn
+    if not isinstance(stated, dict):
+        raise Invalid("returned", f"{where} is null; judged again at the returned K the motion is critical "
+                                  f"({judged[1][0]['code']}), which the stage must state")
     warnings = stated.get("warnings")
     codes = [w.get("code") for w in warnings if isinstance(w, dict)] if isinstance(warnings, list) else []
     if not any(code in writer.CRITICAL_CODES for code in codes):

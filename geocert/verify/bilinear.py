@@ -172,7 +172,7 @@ class BilinearVerification(Verification):
                 boxes.append({"item": claim["index"], "camera_lower": [lo[:3], lo[3:]], "camera_upper": [hi[:3], hi[3:]]})
         return {"camera_boxes": boxes}
 
-    def check_returned(self, result: dict, certificate: dict) -> None:
+    def check_returned(self, result: dict, certificate: dict, earlier_estimates: bool = True) -> None:
         """Each frame's shape and residuals are what its camera and coefficients give, and a
         certified frame's summary states the camera box its proof covers (the scope); a root
         region, certified or not, means what the kind's words say (FRAME_REGION_MEANING)."""

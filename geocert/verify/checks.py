@@ -793,7 +793,7 @@ def _check_returned(result: dict, certificate: dict, earlier_estimates: bool = T
     check_notes(result)  # its informational fields, typed
     own = hook(kind.verification, "check_returned")
     if own is not None:  # what else the result returns, derived from the claims
-        own(result, certificate)
+        own(result, certificate, earlier_estimates)
     estimates.check(kind, result, certificate, earlier_estimates)  # a track's or map's determinacy, recomputed
     if certificate["kind"] not in ("triangulation", "resection"):  # kinds whose determinacy proves intervals (own check)
         # a kind proving some intervals says which parts are estimates still (its check_returned checked the rest)

@@ -31,9 +31,11 @@ import numpy as np
 
 from geocert.core.determinacy import SIGMAS, certified_gap, cost_increase as level_of, fixes, safely
 from geocert.core.geometry import is_number, normalised_cameras
+from geocert.core.warning_codes import MOTION_CODES
 from geocert.core.strict import Invalid, same
 from geocert.solvers.fractional import determinacy as estimate
 
+NOT_ANALYSED = ("time_limit", "not_analysed")  # core.determinacy.not_analysed's codes
 NUMBER_SLACK = 1e-6  # of an interval's width: another machine's eigendecomposition of the same J'J
 VALUE_SLACK = 1e-9  # of a value: its own rounding
 MAX_COST_SPREAD = 1e-6  # the most a map's cost spread may move its estimate, relative (far-off data)
@@ -298,13 +300,17 @@ def check_stage_level(determinacy: Any, cost: Any, lower_bound: Any, where: str)
 
 
 def stopped(determinacy: dict) -> bool:
-    """An analysis stopped at its deadline (core.determinacy.not_analysed): no interval, one
-    time_limit warning, nothing determined; it claims nothing."""
+    """An analysis stopped at its deadline or defeated by the data (core.determinacy.not_analysed):
+    no interval, a time_limit or not_analysed warning first, nothing determined; it claims nothing
+    of the intervals. An autocalibration stage's states after it the critical motion judged at
+    its returned K (autocalibration.determinacy.with_motion), which autocalibration_estimates
+    judges again."""
     warnings = determinacy.get("warnings")
     return (determinacy.get("intervals") == [] and determinacy.get("determined") is False
             and determinacy.get("proven") is False and determinacy.get("proven_intervals") is None
-            and isinstance(warnings, list) and len(warnings) == 1 and isinstance(warnings[0], dict)
-            and warnings[0].get("code") == "time_limit")
+            and isinstance(warnings, list) and len(warnings) >= 1
+            and all(isinstance(w, dict) for w in warnings) and warnings[0].get("code") in NOT_ANALYSED
+            and all(w.get("code") in MOTION_CODES for w in warnings[1:]))
 
 
 def _check_tracks(kind, result: dict, certificate: dict, earlier: bool = True) -> None:

@@ -406,7 +406,7 @@ class TrackItems:
         """What the report's scope adds once the result is checked (root regions in earlier words)."""
         return earlier_words_scope(self.earlier_words)
 
-    def check_returned(self, result: dict, certificate: dict) -> None:
+    def check_returned(self, result: dict, certificate: dict, earlier_estimates: bool = True) -> None:
         """A track's determinacy may say proven only with the intervals its claim's proof proves:
         determinacy.proven_track of the proof's sublevel, every member (its level's words too).
         Triangulation results only: a kind that reads its points as tracks (reconstruction)
@@ -579,7 +579,7 @@ class MapItems:
                            self.earlier_words, "reference_point", chart_terms,
                            "the search box, its functionals and reference point")
 
-    def check_returned(self, result: dict, certificate: dict) -> None:
+    def check_returned(self, result: dict, certificate: dict, earlier_estimates: bool = True) -> None:
         """Each returned map's ``residuals`` are what its matrix leaves on the certificate's data
         (target minus the map's image), certified or not, and an uncertified map's cost is their
         norm (verify.uncertified_claim, on its claim): a residual or a cost no matrix gives is refused."""

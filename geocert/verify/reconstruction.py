@@ -1202,7 +1202,7 @@ class ReconstructionItems(TrackItems, Verification):
                 return [(stop, certified)]
         return [("optimal" if certified else "not_certified", certified)]
 
-    def check_returned(self, result: dict, certificate: dict) -> None:
+    def check_returned(self, result: dict, certificate: dict, earlier_estimates: bool = True) -> None:
         """A certified point's summary states its proof's root box and scope in the solver's words,
         as a triangulation track's must (TrackItems: the same writer makes both); its determinacy
         is an estimate (checked with the result's other estimates)."""

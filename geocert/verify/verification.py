@@ -116,9 +116,10 @@ class Verification(abc.ABC):
     """``returned_scope() -> dict``: what the report's scope says of the returned result (e.g. root
     regions in earlier words). None: nothing."""
 
-    check_returned: Callable[[dict, dict], None] | None = None
-    """``check_returned(result, certificate)``: what else the result returns, derived from the
-    claims, checked against them. None: nothing else."""
+    check_returned: Callable[[dict, dict, bool], None] | None = None
+    """``check_returned(result, certificate, earlier_estimates)``: what else the result returns,
+    derived from the claims, checked against them (``earlier_estimates``: whether the document's
+    hash lets its estimates be of the earlier form, checks._check_hashes). None: nothing else."""
 
     estimates_of: Callable[[dict, dict], Any] | None = None
     """``estimates_of(result, certificate)``: the parts of the result whose determinacy is an

@@ -1,7 +1,8 @@
 """Review 43: a hostile review of autocalibration's determinacy estimates as the verifier now
 walks them again (verify/autocalibration_estimates.py) and of extreme-scale inputs.
 
-Found (each an xfail(strict) test below: it fails today, the forgery being accepted):
+Found (each was an xfail(strict) test below, the forgery being accepted; all three are fixed at
+their causes and their tests are plain):
 
 1. A K stage's width from the plane's own family, and that family's critical-motion warning, are
    the document's word. The writer's K intervals are the metric walk's (the plane held fixed)
@@ -18,6 +19,11 @@ Found (each an xfail(strict) test below: it fails today, the forgery being accep
    verifies (valid: true): "the data fix K to 10%, at 590 px", for a camera of 800 px.
    Where: verify/autocalibration_estimates.py, check_stratified (the metric stage checked
    against metric_walk alone, the plane family neither recomputed nor bounded below).
+   Fixed: a K stage of today's form is held to its writer's intervals made again in full
+   (determinacy.metric_intervals: the metric walk and the plane family in quadrature, the
+   family's refits the writer's scipy least-squares), and each stage's plane family is judged
+   again: where it moves K by more than 10% (clear of the margin) a critical-motion warning is
+   demanded (autocalibration_estimates._check_K_stage, _check_plane_motion).
 
 2. The "nearer of walk and curvature" rule, meant for documents written before the walk
    (their intervals state no tolerance), applies to current-form documents too. On the orbital
@@ -40,6 +46,11 @@ Found (each an xfail(strict) test below: it fails today, the forgery being accep
    runs only for an analysed estimate.
    Where: verify/autocalibration_estimates.py, _analysed (None for null and for
    estimates.stopped), so _check_motion is skipped.
+   Fixed: the writer judges the motion at the returned K first (determinacy.judged_motion) and
+   states it even where the analysis stops at its clock or fails (with_motion: after the
+   time_limit or not_analysed warning, which estimates.stopped reads as claiming no interval);
+   the verifier judges the motion again whatever the estimate came to, and a null estimate or one
+   without a critical-motion warning is refused where the motion is critical.
 
 Seen, not filed as a class: any of CRITICAL_CODES is read as the critical-motion warning, so an
 orbital motion's warning restated as ``pure_translation`` verifies (the code names the motion's
@@ -66,7 +77,7 @@ import numpy as np
 import pytest
 
 from geocert.verify.checks import verify_any
-from tests.verify.test_forgeries_review41 import _orbital_job
+from tests.verify.test_forgeries_review41 import CRITICAL_CODES, _orbital_job
 
 SCENE_K = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
 
@@ -161,8 +172,6 @@ def test_the_weak_planes_genuine_result_verifies_and_leaves_K_undetermined(weak_
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="review 43 class 1: a K stage's plane-family width and warning are "
-                                       "not checked; K restated as fixed-plane walk, determined true, verifies")
 def test_a_weak_planes_K_restated_determined_is_refused(weak_plane_result):
     forged = _restated(weak_plane_result, _walked_again(weak_plane_result)["walk"], drop_warnings=True)
     assert [stage["determinacy"]["determined"] for stage in forged["stages"]] == [True, True]
@@ -189,8 +198,6 @@ STOPPED = {"intervals": [], "determined": False, "proven": False, "proven_interv
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="review 43 class 3: estimate null or stopped skips the motion judgement "
-                                       "(_analysed), hiding an orbital motion")
 def test_an_orbital_motions_estimates_nulled_or_stopped_are_refused(orbital_result):
     """Both restatements refused: null (the writer's when its analysis raised) and stopped (its
     clock's), each hiding the orbital warning the verifier finds again at the returned K."""
@@ -199,3 +206,30 @@ def test_an_orbital_motions_estimates_nulled_or_stopped_are_refused(orbital_resu
         for stage in forged["stages"]:
             stage["determinacy"] = None if restated is None else dict(stage["determinacy"], **copy.deepcopy(restated))
         assert not _accepted(forged)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("stops_with", ["clock", "linear_algebra"])
+def test_a_stage_stopped_or_failed_states_the_critical_motion_and_verifies(monkeypatch, stops_with):
+    """The writer's side of class 3: the metric stage's analysis stopped at its clock (OutOfTime,
+    as core.determinacy.within stops it) or defeated by the data (a LinAlgError: safely) still
+    states the orbital motion judged at the returned K, and the document verifies; the same
+    document with that warning dropped is refused."""
+    from geocert.core.determinacy import OutOfTime
+    from geocert.jobs.runner import solve_job
+    from geocert.solvers.autocalibration import determinacy
+
+    def stopped(*args, **kwargs):
+        raise OutOfTime if stops_with == "clock" else np.linalg.LinAlgError("singular")
+
+    monkeypatch.setattr(determinacy, "metric_stage", stopped)
+    result = solve_job(_orbital_job())
+    metric = result["stages"][1]["determinacy"]
+    assert metric["intervals"] == [] and metric["determined"] is False
+    codes = [w["code"] for w in metric["warnings"]]
+    assert codes[0] == ("time_limit" if stops_with == "clock" else "not_analysed")
+    assert any(code in CRITICAL_CODES for code in codes[1:])
+    assert _accepted(result)
+    forged = copy.deepcopy(result)
+    forged["stages"][1]["determinacy"]["warnings"] = metric["warnings"][:1]
+    assert not _accepted(forged)

@@ -40,8 +40,8 @@ import numpy as np
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.core.determinacy import (RELATIVE_WIDTH, SIGMAS, certified_gap, clip, cost_increase,
-                                              curvature_intervals, interval, numeric_jacobian, ranges_at, spread,
-                                              sublevel_rays, tick)
+                                              curvature_intervals, interval, not_analysed, numeric_jacobian, ranges_at,
+                                              spread, sublevel_rays, tick)
 
 # Radians: rotations given exactly (a metric reconstruction's) carry no noise estimate, and are not
 # taken as known better than 0.6 degrees. Adjusted along a critical family they scatter by that
@@ -325,6 +325,31 @@ def motion_warnings(H: np.ndarray, centres: np.ndarray | None, noise: float | No
                        f"(more than {100 * RELATIVE_WIDTH:g}%); {looks}: a critical motion for constant intrinsics"}]
 
 
+def judged_motion(problem, p: np.ndarray, K_pixels: np.ndarray | None, centres: np.ndarray | None) -> list[dict]:
+    """The DIAC family's critical-motion warning at the plane p and the returned K's DIAC (None:
+    the DIAC the infinite homographies fit best), alone: cheap, and judged again by the verifier
+    from the returned plane and K whatever the stage's analysis came to."""
+    from geocert.solvers.autocalibration.problem import w_of_K
+
+    H = metric_relaxation.homographies(problem.norm.cameras, problem.norm.reference, p)
+    omega = None if K_pixels is None else metric_relaxation.omega_of(w_of_K(problem, np.asarray(K_pixels, float)))
+    return motion_warnings(H, centres, omega=omega)
+
+
+def with_motion(document: dict | None, judged: list[dict] | None, what: str) -> dict | None:
+    """A stage's determinacy that its clock stopped (core.determinacy.not_analysed) or that failed
+    (None: the data defeated its linear algebra) still states the critical motion ``judged``
+    (judged_motion), after its ``time_limit`` or ``not_analysed`` warning: a stage stopped or
+    failed is no place to hide one (review 43). An analysis that ran states its own."""
+    if not judged:
+        return document
+    if document is None:
+        document = not_analysed(what, "the data defeated its linear algebra", "not_analysed")
+    elif document.get("intervals") != [] or len(document.get("warnings") or []) != 1:
+        return document
+    return {**document, "warnings": [*document["warnings"], *judged]}
+
+
 def _merge(warnings: list[dict], more: list[dict]) -> list[dict]:
     """One warning per code, the details of a repeated code joined."""
     out = [dict(w) for w in warnings]
@@ -505,19 +530,15 @@ def metric_walk(problem, p: np.ndarray, w: np.ndarray, gap: float | None) -> dic
                           for k, name in enumerate(NAMES)]}
 
 
-def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | None, lower: float | None,
-                 centres: np.ndarray | None) -> dict:
-    """K's intervals: the metric walk's and the plane family's in quadrature, clipped to the
-    intrinsics ranges (scope_of)."""
-    from geocert.solvers.autocalibration.problem import w_of_K
-
-    w = w_of_K(problem, K_pixels)
-    walk = metric_walk(problem, p, w, certified_gap(cost, lower))
-    setup, residuals, J, value, scales, out = (walk[k] for k in ("setup", "residuals", "J", "value", "scales",
-                                                                 "estimate"))
-    lo_w, hi_w = walk["lower"], walk["upper"]
-    # The plane is an estimate too: its family (the modulus cost's, to its own noise level) moves
-    # the optimum; the metric fit is redone on each plane reached. The two added in quadrature.
+def metric_intervals(problem, p: np.ndarray, w: np.ndarray, gap: float | None) -> dict:
+    """The metric stage's intervals at the plane p and omega entries w: the metric walk's and the
+    plane family's (the modulus cost's, to its own noise level, the metric fit redone on each plane
+    it reaches) added in quadrature, clipped to the intrinsics ranges; with the walk and the family
+    (the verifier makes them again: the family's refits with the writer's scipy, as the rest of an
+    autocalibration's check)."""
+    walk = metric_walk(problem, p, w, gap)
+    residuals, J, value, scales = (walk[k] for k in ("residuals", "J", "value", "scales"))
+    # The plane is an estimate too: its family moves the optimum, in the directions extreme for K.
     Jp = numeric_jacobian(lambda q: residuals(w, q), p)
     try:
         D = -np.linalg.lstsq(J, Jp, rcond=None)[0]  # dw*/dp, 5 x 3: the directions extreme for K
@@ -526,12 +547,26 @@ def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | Non
         extra = []
     family = plane_family(problem, p, w, None, extra)
     lo_p, hi_p = ranges_at(value, family["Ks"])
-    lower_end = value - np.hypot(value - lo_w, value - lo_p)
-    upper_end = value + np.hypot(hi_w - value, hi_p - value)
-    out.intervals = [clip(interval(name, value[k], lower_end[k], upper_end[k], scales[k]), *bounds)
-                     for k, (name, bounds) in enumerate(zip(NAMES, scope_of(problem)))]
-    named = motion_warnings(setup.H, centres, omega=metric_relaxation.omega_of(w))
-    out.warnings = _merge(_merge(out.warnings, named), _plane_warning(family, setup.H, centres, named))
+    lower_end = value - np.hypot(value - walk["lower"], value - lo_p)
+    upper_end = value + np.hypot(walk["upper"] - value, hi_p - value)
+    intervals = [clip(interval(name, value[k], lower_end[k], upper_end[k], scales[k]), *bounds)
+                 for k, (name, bounds) in enumerate(zip(NAMES, scope_of(problem)))]
+    return {"walk": walk, "family": family, "intervals": intervals}
+
+
+def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | None, lower: float | None,
+                 centres: np.ndarray | None) -> dict:
+    """K's intervals (metric_intervals) and the motion's warnings: the DIAC family's and the
+    plane family's."""
+    from geocert.solvers.autocalibration.problem import w_of_K
+
+    w = w_of_K(problem, K_pixels)
+    found = metric_intervals(problem, p, w, certified_gap(cost, lower))
+    out = found["walk"]["estimate"]
+    out.intervals = found["intervals"]
+    H = found["walk"]["setup"].H
+    named = motion_warnings(H, centres, omega=metric_relaxation.omega_of(w))
+    out.warnings = _merge(_merge(out.warnings, named), _plane_warning(found["family"], H, centres, named))
     return out.document()
 
 
