@@ -62,7 +62,7 @@ def check_stratified(problem, p: np.ndarray | None, K: Any, stages: list, centre
         walk = _walked(writer.affine_walk, problem, p, gap)
         if walk is not None:
             _check_holds(affine, walk["intervals"], "stages/0/determinacy")
-            if w is not None and _current(affine, earlier):
+            if w is not None and not earlier:
                 family = _walked(writer.plane_family, problem, p, w, gap, None, walk)
                 _check_plane_motion(affine, family, "stages/0/determinacy")
     metric = _analysed(stages[1])
@@ -105,19 +105,14 @@ def check_direct(problem, p: np.ndarray | None, K: Any, Ks: Any, stage: dict, ce
                   "stages/0/determinacy")
 
 
-def _current(stated: dict, earlier: bool) -> bool:
-    """Whether a stage's estimate is read in today's form: the document's hash declares the
-    estimates' form (``earlier`` False). One hashed before (the stored documents) is read in the
-    earlier form whatever its intervals state: tolerances were stated before the walks were."""
-    return not earlier
-
-
 def _check_K_stage(problem, p: np.ndarray, w: np.ndarray, gap: float | None, stated: dict, where: str,
                    earlier: bool) -> None:
-    """Today's K stage holds the writer's intervals made again (metric_intervals: the metric walk
-    and the plane family in quadrature) and states the plane family's critical motion; an earlier
-    one holds its walk or its curvature (_held)."""
-    if _current(stated, earlier):
+    """Today's K stage (``earlier`` False: the document's hash declares the estimates' form) holds
+    the writer's intervals made again (metric_intervals: the metric walk and the plane family in
+    quadrature) and states the plane family's critical motion. One of a document hashed before
+    (the stored ones) is read in the earlier form whatever its intervals state (tolerances were
+    stated before the walks were): it holds its walk or its curvature (_nearer)."""
+    if not earlier:
         found = _walked(writer.metric_intervals, problem, p, w, gap)
         if found is not None:
             _check_holds(stated, found["intervals"], where)
@@ -125,7 +120,7 @@ def _check_K_stage(problem, p: np.ndarray, w: np.ndarray, gap: float | None, sta
         return
     walk = _walked(writer.metric_walk, problem, p, w, gap)
     if walk is not None:
-        _check_holds(stated, _held(walk, problem, stated, earlier), where)
+        _check_holds(stated, _nearer(walk, problem), where)
 
 
 def _check_plane_motion(stated: dict, family: dict | None, where: str) -> None:
@@ -145,13 +140,11 @@ def _check_plane_motion(stated: dict, family: dict | None, where: str) -> None:
                                   f"{family['largest_move']:.3g} of its focal length")
 
 
-def _held(walk: dict, problem, stated: dict, earlier: bool = True) -> list[dict]:
-    """What a K stage's stated intervals must hold: the walk's; in a document of the earlier form
-    (_current), each end the walk's or the local curvature's, whichever lies nearer the value
-    (None only where both are unbounded). Read so for today's documents, the curvature's bounded
-    ends stood for a critical motion's unbounded K (review 43)."""
-    if _current(stated, earlier):
-        return walk["intervals"]
+def _nearer(walk: dict, problem) -> list[dict]:
+    """What an earlier-form K stage's intervals must hold: each end the metric walk's or the local
+    curvature's (clipped as the stage clips), whichever lies nearer the value (None only where
+    both are unbounded). Read so for today's documents, the curvature's bounded ends stood for a
+    critical motion's unbounded K (review 43)."""
     bounds = writer.scope_of(problem)
     out = []
     for own, curved, (lowest, highest) in zip(walk["intervals"], walk["estimate"].intervals, bounds):

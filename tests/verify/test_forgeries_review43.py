@@ -33,8 +33,8 @@ their causes and their tests are plain):
    bounded intervals for a K that a critical motion leaves free. The verifier knows the form
    (every interval states ``tolerance``; estimates.check_intrinsics reads ``earlier`` so).
    Where: verify/autocalibration_estimates.py, _nearer (used for every K stage, whatever form).
-   Fixed: the nearer-end rule (_held) is read only for a stage whose intervals state no tolerance
-   (the earlier form); today's are held to the walk.
+   Fixed: the nearer-end rule (_nearer) is read only in a document hashed without the
+   estimates' form (the earlier form); today's are held to the writer's intervals.
 
 3. A stage's whole estimate nulled (or restated as stopped at its clock: one ``time_limit``
    warning, no interval) hides a critical motion. On the orbital result, both stages'
@@ -109,7 +109,7 @@ def _weak_plane_job() -> dict:
 
 def _walked_again(document: dict) -> dict:
     """The verifier's own walks at the returned plane and K (the metric walk, and each end the
-    nearer of walk and curvature as autocalibration_estimates._held reads it for earlier documents)."""
+    nearer of walk and curvature as autocalibration_estimates._nearer reads it for earlier documents)."""
     from geocert.solvers.autocalibration import determinacy as writer, problem as autocalibration_problem
     from geocert.core.determinacy import certified_gap
     from geocert.verify import autocalibration as verifier
@@ -126,7 +126,7 @@ def _walked_again(document: dict) -> dict:
     metric = document["stages"][1]
     walk = writer.metric_walk(problem, p, w, certified_gap(metric["cost"], metric["lower_bound"]))
     # the nearer-end rule, as read for a document of the earlier form (intervals without tolerances)
-    return {"walk": walk["intervals"], "nearer": autocalibration_estimates._held(walk, problem, {"intervals": []})}
+    return {"walk": walk["intervals"], "nearer": autocalibration_estimates._nearer(walk, problem)}
 
 
 def _restated(document: dict, intervals: list[dict], drop_warnings: bool) -> dict:
