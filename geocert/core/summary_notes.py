@@ -14,8 +14,8 @@ from __future__ import annotations
 from typing import Any
 
 TRIVIAL = "the incumbent's cost is within abs_gap of the trivial bound 0"
-# The proof types bounded with no search, as their proofs name them (fractional.convexity's, and
-# fractional.resection_bound.TYPE: tests/verify/test_forgeries_review42.py solves one of each).
+# The proof types bounded with no search, as their proofs name them (fractional.resection_bound.TYPE
+# is this one; tests/verify/test_forgeries_review42.py solves one of each).
 CONVEXITY, SUBLEVEL_BOUND = "convexity", "sublevel_bound"
 
 

@@ -40,6 +40,7 @@ import math
 
 import numpy as np
 
+from geocert.core import summary_notes
 from geocert.core.strict import Invalid, number, record
 from geocert.solvers.fractional.convexity import SMALLEST, UNDERFLOW
 from geocert.solvers.fractional.fixed_order import gram, norm, weighted
@@ -47,7 +48,7 @@ from geocert.solvers.fractional.resection_sublevel import (ETA, MAX_ROUNDS, ROUN
                                                             least_eigenvalue_below, reference_point, shrink,
                                                             smallest_radius)
 
-TYPE = "sublevel_bound"
+TYPE = summary_notes.SUBLEVEL_BOUND  # the proof type, named once where its note is written
 
 
 def tangent_terms(scene: Scene, r: float) -> tuple[float, float, float] | None:
