@@ -23,7 +23,7 @@ from geocert.core.determinacy import ESTIMATES_FORM
 from geocert.core.geometry import InputError, is_number
 from geocert.verify import cost_rounding
 from geocert.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
-                                         numbers as _numbers, record as _record)
+                                 numbers as _numbers, record as _record)
 from geocert.verify import residual_claims
 from geocert.verify.verification import Verification
 

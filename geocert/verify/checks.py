@@ -22,12 +22,12 @@ from geocert.core import exact, self_check, summary_notes
 from geocert.core.cones import rounding_uncounted
 from geocert.core.self_check import SelfCheckFailed
 from geocert.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
-                                               data_hash, problem_hash)
+                                       data_hash, problem_hash)
 from geocert.core.geometry import cost_rounding, is_number, norm_cost, residual_lengths
 from geocert.verify.notes import check_notes
 from geocert.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
-                                         informational, number as _number, printable_tree, record, same,
-                                         work_budget)
+                                 informational, number as _number, printable_tree, record, same,
+                                 work_budget)
 from geocert.verify import residual_claims
 from geocert.verify import estimates
 from geocert.verify.verification import hook

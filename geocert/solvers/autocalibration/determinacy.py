@@ -40,8 +40,8 @@ import numpy as np
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.core.determinacy import (RELATIVE_WIDTH, SIGMAS, certified_gap, clip, cost_increase,
-                                              curvature_intervals, interval, not_analysed, numeric_jacobian, ranges_at,
-                                              spread, sublevel_rays, tick)
+                                      curvature_intervals, interval, not_analysed, numeric_jacobian, ranges_at,
+                                      spread, sublevel_rays, tick)
 
 # Radians: rotations given exactly (a metric reconstruction's) carry no noise estimate, and are not
 # taken as known better than 0.6 degrees. Adjusted along a critical family they scatter by that

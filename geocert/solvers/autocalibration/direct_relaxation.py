@@ -415,7 +415,7 @@ def safe_bound(program: Program, z: np.ndarray, floor: float = 0.0) -> tuple[flo
     everywhere; ``floor``: that floor (-inf for an objective that is not (7.12): a proven interval's,
     direct_sublevel, where a non-finite bound is then -inf too)."""
     from geocert.core.cones import (UNIT_ROUNDOFF, eigenvalue_error, flush_subnormal, project_dual,
-                                            rounding_margin, smat)
+                                    rounding_margin, smat)
 
     cones = program.cones
     m_size = cones.psd[-1]

@@ -28,7 +28,7 @@ from geocert.core.bnb import Box
 from geocert.core.certificates import pack
 from geocert.core.cones import SMALLEST_NORMAL, proves_infeasible, safe_lower_bound
 from geocert.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
-                                         numbers as _numbers, record)
+                                 numbers as _numbers, record)
 from geocert.core.coverage import SIDE_TOLERANCE, extended, uncovered_part, widened
 from geocert.solvers.fractional.proof import LEAF_CLAIM_TOLERANCE  # the record's allowance, as the fractional kinds'
 
