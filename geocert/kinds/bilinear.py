@@ -89,7 +89,7 @@ def frame_document(result, options: BilinearOptions) -> dict:
         certificate = {"scope": SCOPE if region is not None else "every camera and coefficient vector",
                        "root_region": region, "tolerance": finite_or_none(result.tolerance),
                        "tolerance_met": result.certified, "leaves": result.leaves}
-        if region is None:
+        if region is None and result.certified:  # a note says how a bound was proven: none uncertified
             certificate["note"] = summary_notes.TRIVIAL
         if result.proof is not None:
             certificate["proof"] = result.proof

@@ -27,7 +27,9 @@ def certificate_summary(result: ItemResult, region: dict, meaning: str, scope: s
     proof = proof_of(result)
     extra = {"proof": proof} if proof is not None else {}
     if isinstance(c, LocalCertificate):
-        return local_summary(c.scope, c.tolerance, c.radius, c.tolerance_met and result.certified, extra, c.note)
+        summary = local_summary(c.scope, c.tolerance, c.radius, c.tolerance_met and result.certified, extra, c.note)
+        # A note says how a bound was proven: an item not certified proves none (verify.checks refuses one)
+        return summary if result.certified else {**summary, "note": None}
     if c is not None:
         return {**extra,
                 "scope": c.scope,
