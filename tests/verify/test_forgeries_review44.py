@@ -42,6 +42,14 @@ certifies K near 1000 px for the same data. Both stages do carry a critical_moti
 earlier form certifies the same K as today's (to 1e-4 px). A verifier that would refuse the earlier
 form for documents written after the change needs a form marker the hash covers (none changed with
 this commit).
+
+Tried, held: the stored reconstruction's calibration certificate replaced by one of its data with
+the reference camera times 2^28, solved in the earlier form (tests/verify/test_calibration_tie.py's
+``carrying``), verifies with the same K to 1e-11 px: its projective reconstruction is noise-free, so
+every frame poses the same optimum (a noisy reconstruction was not tried: a pipeline run each). The
+reconstruction's report forwards the calibration certificate's reference_scale_as_given scope
+(scope.calibration_reference), so a reader of the reconstruction is told which frame its K is
+certified in.
 """
 
 from __future__ import annotations
@@ -116,3 +124,52 @@ def test_an_earlier_proof_restated_in_todays_form_is_refused():
     report = _report(forged)
     assert not report.valid
     assert report.first_failure["check"] == "objective"
+
+
+def _stored_stratified_scaled(factor: float, as_given: bool, monkeypatch) -> dict:
+    """The stored stratified data with its reference camera times ``factor``, solved today, or
+    (``as_given``) as an earlier writer would: the reference's scale as given, the proofs stating no
+    reference_scale."""
+    import numpy as np
+
+    from geocert.jobs.runner import solve_job
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
+
+    certificate = stored("autocalibration_stratified")["certificate"]
+    data = dict(certificate["data"])
+    cameras = np.asarray(data["cameras"], dtype=float)
+    intrinsics = dict(certificate["options"]["intrinsics"] or {})
+    reference = autocalibration_problem.prepare(cameras, None, data.get("image_size"), intrinsics).norm.reference
+    cameras[reference] *= factor
+    data["cameras"] = cameras.tolist()
+    job = {"kind": "autocalibration", "data": data, "options": certificate["options"]}
+    if not as_given:
+        return solve_job(job)
+    prepare = autocalibration_problem.prepare
+    with monkeypatch.context() as patched:
+        patched.setattr(autocalibration_problem, "prepare",
+                        lambda *args, **kwargs: prepare(*args, **{"unit_reference": False, **kwargs})
+                        if len(args) < 6 else prepare(*args, **kwargs))
+        return solve_job(job)
+
+
+def test_an_earlier_form_far_from_todays_K_says_K_is_not_determined(monkeypatch):
+    """Seen, not filed: the earlier form is writable by anyone, and with the reference camera times
+    2^28 it certifies another K than today's for the same data. What holds: where it verifies with
+    a K more than 1% off today's, neither stage says the data fix K, and the report's scope names
+    the items read in the earlier frame."""
+    import numpy as np
+
+    factor = 2.0 ** 28
+    earlier = _stored_stratified_scaled(factor, True, monkeypatch)
+    today = _stored_stratified_scaled(factor, False, monkeypatch)
+    assert all(frames.REFERENCE_SCALE not in item["proof"] for item in earlier["certificate"]["items"])
+    report = _report(earlier)
+    assert _report(today).valid
+    assert report.valid  # the earlier form is read in the frame it states (docs/certificate.md)
+    assert report.scope["reference_scale_as_given"]["items"] == [0, 1]
+    focal, focal_today = earlier["K"][0][0], today["K"][0][0]
+    if abs(focal - focal_today) > 0.01 * focal_today:
+        assert all(stage["determinacy"]["determined"] is False and stage["determinacy"]["warnings"]
+                   for stage in earlier["stages"])
+    assert np.isfinite(focal)
