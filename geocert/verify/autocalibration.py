@@ -338,17 +338,16 @@ class AutocalibrationVerification(Verification):
         stage's has; None when the stage returns none."""
         # An uncertified stage has no proof to name its frame: its cost is read in the data's own
         # frame (today's form, the reference camera the data give), or in another frame a writer
-        # may have posed it in where that is the cost it states: a camera on the tie's edge (the
-        # certified stage's proof names it), the best conditioned an earlier writer took (the first:
-        # an exact ring ties every camera, and a wrong cost must not buy a prepare for each), each
-        # with the reference at unit scale or as given (frames.UNIT_REFERENCE). Each is a true
-        # statement of what the solution costs in a problem the data pose; none is a proof.
+        # may have posed it in where that is the cost it states: a tied camera's (the certified
+        # stage's proof names it), an earlier writer's best conditioned, each with the reference at
+        # unit scale or as given (frames.UNIT_REFERENCE). Each is a true statement of what the
+        # solution costs in a problem the data pose; none is a proof.
         intrinsics = dict(options["intrinsics"] or {})
         try:
             cameras, points, image_size = read_data(data)
             references = list(dict.fromkeys(
                 autocalibration_problem.reference_candidates(cameras, image_size, intrinsics)
-                + autocalibration_problem.earlier_references(cameras, image_size, intrinsics)[:1]))
+                + autocalibration_problem.earlier_references(cameras, image_size, intrinsics)))
             first = self._solution_cost(autocalibration_problem.prepare(cameras, points, image_size, intrinsics),
                                         claim, options)
             stated = claim.get("cost")
