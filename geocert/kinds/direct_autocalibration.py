@@ -13,7 +13,6 @@ import numpy as np
 from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document
 from geocert.solvers.autocalibration import direct
 from geocert.solvers.autocalibration import direct_relaxation
-from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 
 SCOPE = ("every absolute dual quadric Q (trace 1 in the program's frame) positive semidefinite of rank 3 "
@@ -75,7 +74,7 @@ def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptio
             result.certified, result.status, result.reason = False, "not_certified", f"no metric upgrade: {exc}"
     stage = stage_document("direct", result.status, result.certified, cost, result.lower_bound, 0, result.elapsed_s,
                            result.reason, options.metric_rel_gap, options.abs_gap, SCOPE,
-                           {**result.proof, **frames.frame_statement(problem.norm)} if full and result.certified else None)
+                           {**result.proof, "reference": problem.norm.reference} if full and result.certified else None)
     stage["certificate"].update({"order": result.order, "moment_rank": result.rank,
                                  "eigenvalue_ratio": result.eigenvalue_ratio, "conic_status": result.conic_status})
     for key in ("plane_at_infinity", "K", "dual_absolute_quadric"):

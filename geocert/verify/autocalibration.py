@@ -5,14 +5,12 @@ metric stage's (conditional on the plane at infinity it states)."""
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 
 from typing import Any
 
 import numpy as np
 
-from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration import plane_sublevel, proofs
@@ -185,16 +183,6 @@ class AutocalibrationVerification(Verification):
                      "reference_note": "these cameras' conditioning lies within the rounding of the tie's edge "
                                        "(frames.REFERENCE_TIE), so which of them is the reference camera is a "
                                        "machine's rounding's choice, and on noisy data each poses its own problem"}
-        as_given = [position for position, item in enumerate(items) if isinstance(item, dict)
-                    and item.get("certified") is True and not _unit_frame(item.get("proof"))]
-        if as_given:
-            scope["reference_scale_as_given"] = {
-                "items": as_given,
-                "note": f"these items' proofs state no {frames.REFERENCE_SCALE} (written before the frame brought the "
-                        "reference camera to unit scale): each is checked in the frame of the reference camera as the "
-                        "data give it, a true claim about the problem posed there, whose optimum on noisy data moves "
-                        "with the scale the reference camera was given in (today's writer poses the same problem at "
-                        "any scale)"}
         cameras_unnamed = sorted(earlier)
         unnamed = [position for position, item in enumerate(items) if isinstance(item, dict)
                    and item.get("certified") is True and isinstance(item.get("proof"), dict)
@@ -273,8 +261,7 @@ class AutocalibrationVerification(Verification):
             options = certificate["options"]
             intrinsics = dict(options.get("intrinsics") or {})
             problem = autocalibration_problem.prepare(cameras, points, image_size, intrinsics,
-                                                      _stated_reference(claims, cameras, image_size, intrinsics),
-                                                      _stated_unit_frame(claims))
+                                                      _stated_reference(claims, cameras, image_size, intrinsics))
         except (InputError, TypeError, ValueError) as exc:
             raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
         if result.get("method") != options.get("method") or not _ranges_stated(result, problem):
@@ -336,34 +323,11 @@ class AutocalibrationVerification(Verification):
         """What an uncertified stage's solution costs (the affine stage's plane, the metric
         stage's K for its plane, the direct stage's quadric), with the allowance a certified
         stage's has; None when the stage returns none."""
-        # An uncertified stage has no proof to name its frame: its cost is read in the data's own
-        # frame (today's form, the reference camera the data give), or in another frame a writer
-        # may have posed it in where that is the cost it states: a tied camera's (the certified
-        # stage's proof names it), an earlier writer's best conditioned, each with the reference at
-        # unit scale or as given (frames.UNIT_REFERENCE). Each is a true statement of what the
-        # solution costs in a problem the data pose; none is a proof.
-        intrinsics = dict(options["intrinsics"] or {})
         try:
             cameras, points, image_size = read_data(data)
-            references = list(dict.fromkeys(
-                autocalibration_problem.reference_candidates(cameras, image_size, intrinsics)
-                + autocalibration_problem.earlier_references(cameras, image_size, intrinsics)))
-            first = self._solution_cost(autocalibration_problem.prepare(cameras, points, image_size, intrinsics),
-                                        claim, options)
-            stated = claim.get("cost")
-            if first is None or not is_number(stated) or abs(stated - first[0]) <= first[1]:
-                return first
-            for reference, unit in itertools.product(references, (True, False)):
-                other = self._solution_cost(autocalibration_problem.prepare(
-                    cameras, points, image_size, intrinsics, reference, unit), claim, options)
-                if other is not None and abs(stated - other[0]) <= other[1]:
-                    return other
+            problem = autocalibration_problem.prepare(cameras, points, image_size, dict(options["intrinsics"] or {}))
         except InputError as exc:
             raise Invalid("data", f"{exc.field}: {exc.reason}") from exc
-        return first
-
-    @staticmethod
-    def _solution_cost(problem, claim: dict, options: dict) -> tuple[float, float] | None:
         with np.errstate(all="ignore"):
             if options["method"] == "direct":
                 if claim.get("dual_absolute_quadric") is None:
@@ -414,7 +378,6 @@ class AutocalibrationVerification(Verification):
         except InputError as exc:
             raise Invalid("options", f"{exc.field}: {exc.reason}") from exc
         proof = claim.get("proof")
-        unit = _unit_frame(proof)
         if isinstance(proof, dict) and "reference" in proof:
             if proof["reference"] not in references or type(proof["reference"]) is not int:
                 raise Invalid("scope", f"proof/reference is {proof['reference']!r:.40}: these data's claims are posed "
@@ -427,9 +390,7 @@ class AutocalibrationVerification(Verification):
         for reference in references:
             tried = list(passed)
             try:
-                problem = autocalibration_problem.prepare(cameras, points, image_size, intrinsics, reference, unit)
-                if isinstance(proof, dict):
-                    proofs.check_reference(problem, proof)
+                problem = autocalibration_problem.prepare(cameras, points, image_size, intrinsics, reference)
                 out = self._check_claim_in(problem, arrays, options, claim, claimed, lower_claimed, tried)
             except Invalid as exc:
                 first = first or exc
@@ -486,24 +447,6 @@ class AutocalibrationVerification(Verification):
             if "proven_interval" not in passed:
                 passed.append("proven_interval")
         return bound, options["metric_rel_gap"]
-
-
-def _unit_frame(proof: Any) -> bool:
-    """Whether a proof is posed in today's frame (the reference at unit scale: it states
-    frames.REFERENCE_SCALE) or an earlier writer's (the reference as given: it states none). No
-    proof: today's."""
-    return not isinstance(proof, dict) or frames.REFERENCE_SCALE in proof
-
-
-def _stated_unit_frame(claims: list) -> bool:
-    """The frame's form the returned fields are read in: the certified stages' proofs' (_unit_frame),
-    which must agree (each stage's answer is read in one frame); with no certified proof, today's."""
-    forms = {_unit_frame(item["proof"]) for item in claims if isinstance(item, dict)
-             and item.get("certified") is True and isinstance(item.get("proof"), dict)}
-    if len(forms) > 1:
-        raise Invalid("scope", f"the certified stages' proofs are posed in two forms of frame (one states "
-                               f"{frames.REFERENCE_SCALE}, one does not): a result is read in one")
-    return forms.pop() if forms else True
 
 
 def _stated_reference(claims: list, cameras: np.ndarray, image_size, intrinsics: dict) -> int | None:
@@ -745,8 +688,7 @@ def _check_returned_direct(result: dict, certificate: dict, earlier_estimates: b
         cameras, points, image_size = read_data(certificate["data"])
         intrinsics = dict(options.get("intrinsics") or {})
         problem = autocalibration_problem.prepare(cameras, points, image_size, intrinsics,
-                                                  _stated_reference(certificate["items"], cameras, image_size, intrinsics),
-                                                  _stated_unit_frame(certificate["items"]))
+                                                  _stated_reference(certificate["items"], cameras, image_size, intrinsics))
     except (InputError, TypeError, ValueError) as exc:
         raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
     if result.get("method") != "direct" or not _ranges_stated(result, problem):

@@ -320,7 +320,7 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
     orientations it excludes: each orientation of the setup (built with exclude=False) is either
     excluded exactly (Gordan, rational arithmetic) or bounded by the safe bound of its dual."""
     record(proof, "proof", ("type", "order", "programs", "excluded"),
-           ("reference", frames.REFERENCE_SCALE, "moment_rank", "eigenvalue_ratio", "sublevel"))  # the frame's: check_claim
+           ("reference", "moment_rank", "eigenvalue_ratio", "sublevel"))  # reference: the verifier's check_claim
     informational(proof.get("moment_rank"), "proof/moment_rank", "integer")  # they explain a bound, prove nothing
     informational(proof.get("eigenvalue_ratio"), "proof/eigenvalue_ratio")
     if not same(proof.get("order"), order):

@@ -2,9 +2,8 @@
 
 * Image coordinates are preconditioned by ``N = K0^-1`` (K0: the middle of the intrinsics
   ranges), so that the calibration sought is near the identity (thesis 6.7 works with K = I).
-* The reference camera (the lowest-indexed of the best conditioned left 3x3 blocks, reference_camera),
-  its left block first brought to Frobenius norm sqrt 3 (UNIT_REFERENCE), is moved to ``[I | 0]`` by
-  ``T0``;
+* The reference camera (the lowest-indexed of the best conditioned left 3x3 blocks, reference_camera)
+  is moved to ``[I | 0]`` by ``T0``;
   there the plane at infinity is ``(p, 1)`` (thesis 6.2) and view j's infinite homography is
   ``H_j = A_j - a_j p^T``, whose characteristic polynomial has coefficients affine in p (3.5, 6.2.2).
 * Chirality (thesis 3.5, 6.2.3; Hartley 1998): with points and cameras sign-normalised so that
@@ -35,27 +34,6 @@ class Normalised:
     T0: np.ndarray  # 4x4: input frame -> reference frame is X -> T0^-1 X; cameras P -> P T0
     N: np.ndarray  # 3x3 image preconditioner
     camera_signs: np.ndarray  # (m,)
-    unit_reference: bool = True  # the frame's form (UNIT_REFERENCE); False: an earlier proof's
-
-
-# A homogeneous camera is the same camera at any scale, but the reference camera's scale sets the
-# frame: T0 maps its left block A to I, so the reference times c makes T0's left block 1/c times the
-# world's, which moves the plane at infinity (p -> p / c) against the other cameras' last columns
-# and every camera's Frobenius normalisation with it. A problem posed that way has another optimum
-# on noisy data (the stored stratified scene's cameras times 2^20 moved K by 0.3 px; times 2^24 the
-# metric stage hit its clock; times 2^28 it certified a K at the ranges' corner). The reference is
-# therefore first divided by its left block's Frobenius norm over sqrt 3 (a rotation's), so that
-# any scale of the data poses the same problem, to rounding. A proof states this form by the
-# member REFERENCE_SCALE with the value UNIT_REFERENCE; a proof without it was written before,
-# with the reference as given, and is read in that frame (the verifier's scope says so).
-REFERENCE_SCALE = "reference_scale"
-UNIT_REFERENCE = "left block at Frobenius norm sqrt 3"
-
-
-def frame_statement(norm: Normalised) -> dict:
-    """What a proof states of the frame it is posed in: the reference camera, and its scale's form
-    (only where it is today's)."""
-    return {"reference": int(norm.reference), **({REFERENCE_SCALE: UNIT_REFERENCE} if norm.unit_reference else {})}
 
 
 # Cameras and points are homogeneous: any scale is the same camera or point. At extreme scales the
@@ -142,17 +120,11 @@ def earlier_references(cameras: np.ndarray, N: np.ndarray) -> list[int]:
     return [int(i) for i in close[np.argsort(-ratio[close], kind="stable")]]
 
 
-def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, reference: int | None = None,
-              unit_reference: bool = True) -> Normalised:
-    """The problem's frame (module docstring); ``unit_reference`` False: the reference's scale as
-    given (the form an earlier proof was posed in, REFERENCE_SCALE)."""
+def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, reference: int | None = None) -> Normalised:
     cams = np.einsum("ab,ibc->iac", N, unit_scaled(cameras))
     points = None if points is None else unit_scaled(points)
     r = reference_camera(cams) if reference is None else reference
     A, a = cams[r, :, :3], cams[r, :, 3]
-    if unit_reference:
-        scale = np.linalg.norm(A) / np.sqrt(3.0)
-        A, a = A / scale, a / scale
     Ainv = np.linalg.inv(A)
     T0 = np.eye(4)
     T0[:3, :3] = Ainv
@@ -177,7 +149,7 @@ def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, ref
             tau = np.where((depth_signs * signs[:, None]).sum(axis=0) >= 0, 1.0, -1.0)
         pts = pts * tau[:, None]
         out = out * signs[:, None, None]
-    return Normalised(out, pts, r, T0, N, signs, unit_reference)
+    return Normalised(out, pts, r, T0, N, signs)
 
 
 def modulus_coefficients(cameras: np.ndarray, reference: int) -> tuple[np.ndarray, np.ndarray]:

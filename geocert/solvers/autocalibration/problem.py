@@ -195,14 +195,13 @@ class Problem:
 
 
 def prepare(cameras: np.ndarray, points: np.ndarray | None, image_size, intrinsics: dict,
-            reference: int | None = None, unit_reference: bool = True) -> Problem:
+            reference: int | None = None) -> Problem:
     """The problem in its normalised frame; ``reference`` (default: frames.reference_camera, the
     lowest-indexed of the best-conditioned cameras) the camera moved to [I | 0], whose view the
-    modulus constraints leave out; ``unit_reference`` False: its scale as given (an earlier proof's
-    frame, frames.UNIT_REFERENCE)."""
+    modulus constraints leave out."""
     ranges = resolve_ranges(intrinsics, image_size)
     K0 = preconditioner(ranges)
-    norm = frames.normalise(cameras, points, np.linalg.inv(K0), reference, unit_reference)
+    norm = frames.normalise(cameras, points, np.linalg.inv(K0), reference)
     return Problem(norm, ranges, K0, normalised_ranges(ranges, K0))
 
 

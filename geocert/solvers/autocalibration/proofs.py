@@ -54,15 +54,15 @@ def encode_leaves(leaves: list) -> tuple[list, list]:
     return proofs, out
 
 
-def encode_affine(stage, norm: frames.Normalised) -> dict:
-    """The affine stage's proof, posed in the problem's frame ``norm`` (frames.frame_statement)."""
+def encode_affine(stage, reference: int) -> dict:
+    """The affine stage's proof, posed in the frame of camera ``reference`` (the problem's)."""
     regions = []
     for region in stage.regions:
         proofs, leaves = encode_leaves(region.leaves)
         regions.append({"delta": region.delta, "frame": region.G.tolist(), "rows": region.rows,
                         "box": _box(region.lo, region.hi), "basis": region.basis, "unit": region.setup.unit,
                         "proofs": proofs, "leaves": leaves})
-    return {"type": "stratified_affine", **frames.frame_statement(norm), "regions": regions,
+    return {"type": "stratified_affine", "reference": int(reference), "regions": regions,
             "excluded": [{"delta": item["delta"], "rows": item["rows"]} for item in stage.excluded]}
 
 
@@ -71,10 +71,10 @@ def _rounds(rounds: list) -> list:
              "duals": [pack(z) for z in r.duals]} for r in rounds]
 
 
-def encode_metric(stage, norm: frames.Normalised) -> dict:
-    """The metric stage's proof, posed in the problem's frame ``norm`` (frames.frame_statement)."""
+def encode_metric(stage, reference: int) -> dict:
+    """The metric stage's proof, posed in the frame of camera ``reference`` (the problem's)."""
     proofs, leaves = encode_leaves(stage.leaves)
-    return {"type": "stratified_metric", **frames.frame_statement(norm), "unit": stage.unit, "tightening": _rounds(stage.rounds),
+    return {"type": "stratified_metric", "reference": int(reference), "unit": stage.unit, "tightening": _rounds(stage.rounds),
             "search_box": _box(stage.search_lo, stage.search_hi), "proofs": proofs, "leaves": leaves}
 
 
@@ -376,26 +376,16 @@ def check_regions(problem, regions: Any, excluded: Any, fields: tuple[str, ...],
 
 def check_reference(problem, proof: dict) -> None:
     """A proof stating the camera whose frame it is posed in is checked in that frame only (an
-    earlier proof states none: the verifier's check_claim tries the frames it may be posed in), and
-    in the form of frame it states (frames.REFERENCE_SCALE: today's, the reference at unit scale;
-    absent, an earlier proof's, the reference as given)."""
+    earlier proof states none: the verifier's check_claim tries the frames it may be posed in)."""
     if "reference" in proof and (type(proof["reference"]) is not int or proof["reference"] != problem.norm.reference):
         raise Invalid("scope", f"proof/reference is {proof['reference']!r:.40}: this problem is posed in the frame "
                                f"of camera {problem.norm.reference}")
-    scale = proof.get(frames.REFERENCE_SCALE)
-    if frames.REFERENCE_SCALE in proof and scale != frames.UNIT_REFERENCE:
-        raise Invalid("format", f"proof/{frames.REFERENCE_SCALE} is {scale!r:.40}: the one form it states is "
-                                f"{frames.UNIT_REFERENCE!r}")
-    if (scale is not None) != problem.norm.unit_reference:
-        raise Invalid("scope", f"the proof is posed in the {'unit' if scale is not None else 'as-given'} reference "
-                               f"frame, and checked in the {'unit' if problem.norm.unit_reference else 'as-given'} "
-                               f"one ({frames.REFERENCE_SCALE})")
 
 
 def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
     """The bound an affine proof establishes over every plane chirality allows."""
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
-    record(proof, "proof", ("type", "regions", "excluded"), ("reference", frames.REFERENCE_SCALE))
+    record(proof, "proof", ("type", "regions", "excluded"), ("reference",))
     check_reference(problem, proof)
     regions, excluded = proof.get("regions"), proof.get("excluded")
     if not isinstance(regions, list) or not isinstance(excluded, list):
@@ -422,7 +412,7 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
     with its ``sublevel``, the proven intervals too (``cost``: the claimed K's recomputed cost).
     Its ``plane_sublevel`` is plane_sublevel.check's (the verifier calls it beside this)."""
     record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"),
-           ("reference", frames.REFERENCE_SCALE, "sublevel", "plane_sublevel"))
+           ("reference", "sublevel", "plane_sublevel"))
     check_reference(problem, proof)
     setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
     setup.unit = checked_unit(proof.get("unit"), "unit", claimed_cost)

@@ -151,7 +151,7 @@ class TestSolutionOutOfScope:
     def test_suboptimal_plane_with_its_cost(self, solved, problem):
         """A worse plane, its true cost, lower bound = cost: the proof shows only ~0."""
         r = copy.deepcopy(solved)
-        plane, cost = suboptimal_plane(problem, r["certificate"]["items"][0], (0.05, -0.025, 0.025))
+        plane, cost = suboptimal_plane(problem, r["certificate"]["items"][0], (0.2, -0.1, 0.1))
         set_claim(r, 0, plane_at_infinity=plane, cost=cost, lower_bound=cost, gap=0.0)
         # Refused for its bound, or sooner: the proof's unit was chosen for the optimum's cost,
         # 1e7 times smaller (proofs.UNIT_RANGE).
@@ -661,7 +661,7 @@ class TestNanBoundSkipped:
     def test_affine_any_plane_certified(self, solved, problem):
         r = copy.deepcopy(solved)
         claim = r["certificate"]["items"][0]
-        plane, cost = suboptimal_plane(problem, claim, (0.05, -0.025, 0.025))
+        plane, cost = suboptimal_plane(problem, claim, (0.2, -0.1, 0.1))
         region = claim["proof"]["regions"][0]
         G = np.array(region["frame"])
         rows = frames.chirality_rows(problem.norm, float(region["delta"]))
@@ -711,7 +711,7 @@ class TestFlippedFrame:
                       proofs=[{"box": region["box"], "upper_bound": 1e30, "kind": "farkas", "z": pack(z),
                                "bound": None}],
                       leaves=[region["box"] + [0]])
-        plane, cost = suboptimal_plane(problem, claim, (0.05, -0.025, 0.025))
+        plane, cost = suboptimal_plane(problem, claim, (0.2, -0.1, 0.1))
         set_claim(r, 0, plane_at_infinity=plane, cost=cost, lower_bound=cost, gap=0.0)
         refused(r)
 
@@ -737,7 +737,7 @@ class TestMetricPlaneMismatch:
         r["certificate"]["options"]["metric_rel_gap"] = 1e-2
         rehash(r)
         set_claim(r, 1, plane_at_infinity=plane, K=K.tolist(), cost=cost, lower_bound=cost - gap, gap=gap,
-                  proof=proofs.encode_metric(stage, problem.norm))
+                  proof=proofs.encode_metric(stage, problem.norm.reference))
         assert r["stages"][0]["plane_at_infinity"] != plane
         refused(r)
 
