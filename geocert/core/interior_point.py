@@ -205,7 +205,9 @@ def _schur_complement(n: int, An: sp.csr_matrix, An_used: np.ndarray, flat_n: np
             H += np.asarray(B.AT @ (B.AT @ B.kron(Gi)).T)
         return (H + H.T) / 2
     H = np.zeros((n, n))
-    np.add.at(H.reshape(-1), flat_n, ((An_used.T * weight) @ An_used).ravel())
+    # (the flat positions are distinct, so the indexed sum is np.add.at's: measured 0.5 ms for np.add.at on these
+    # values against 0.04 ms)
+    H.reshape(-1)[flat_n] += ((An_used.T * weight) @ An_used).ravel()
     for B, Gi in zip(blocks, Gis):
         if len(B.cols) == n:
             H += B.schur(Gi)
@@ -259,6 +261,10 @@ def _iterate(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: in
 
     # start: y minimising ||A y - b||, slacks shifted into the cones; z the least-norm dual, shifted
     AK = sp.vstack([An] + [B.A for B in blocks]).tocsr()
+    # the transposes once (each .T builds a new sparse matrix, about 20 times an iteration: measured
+    # 70 ms a solve); the same products as before
+    AKT, AeT = AK.T, Ae.T
+    AeT_dense = AeT.toarray() if zero else None
     bK = np.concatenate([bn] + [B.b for B in blocks])
     AtA = (A.T @ A).toarray()
     AtA[np.diag_indices(n)] += 1e-10 * max(1.0, AtA.diagonal().max())
@@ -300,7 +306,7 @@ def _iterate(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: in
         # residuals
         r_p = bK - AK @ y - s
         r_e = be - Ae @ y
-        r_d = -(AK.T @ zK + Ae.T @ lam_e + q)
+        r_d = -(AKT @ zK + AeT @ lam_e + q)
         gap = float(s @ zK)
         mu = gap / nu
         pobj = float(q @ y)
@@ -338,7 +344,7 @@ def _iterate(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: in
                 status = "NumericalError"
                 break
         if zero:
-            HiAe = sl.cho_solve(Hf, Ae.T.toarray(), check_finite=legacy)
+            HiAe = sl.cho_solve(Hf, AeT_dense, check_finite=legacy)
             S_e = Ae @ HiAe
             S_e = np.atleast_2d(S_e)
 
@@ -366,13 +372,13 @@ def _iterate(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: in
                 T = rinv.T @ V @ rinv - Gi @ B.mat(rpb) @ Gi
                 ts.append(B.vec(T))
             t = np.concatenate([tn] + ts)
-            rhs = r_d - AK.T @ t
+            rhs = r_d - AKT @ t
             dy, dl = schur(rhs, r_e)
             dz = inverse_scale(AK @ dy) + t
             for step in range(MAX_REFINEMENT):
                 # refined against the operator itself (H is its rounded product): the dual
                 # equations' and the equalities' residuals, solved for again with no centring part
-                e_d = r_d - (AK.T @ dz + Ae.T @ dl)
+                e_d = r_d - (AKT @ dz + AeT @ dl)
                 e_e = r_e - Ae @ dy
                 if (step >= REFINEMENT and np.linalg.norm(e_d) <= 0.1 * tolerance * qnorm
                         and np.linalg.norm(e_e) <= 0.1 * tolerance * bnorm):
