@@ -22,6 +22,8 @@ fixed-focal scenes in a last column (intrinsics ranges: focal [0.5, 2], the same
         [--rows rows.jsonl]   (or --from-rows rows.jsonl: the table of the trials run so far)
     .venv/bin/python -m bench.direct_autocalibration --speed [--trials 5]   (issue 38: against the former
         Schur complement assembly in the same run, the ratio printed)
+    .venv/bin/python -m bench.direct_autocalibration --speed --against ../other-checkout [--trials 5]
+        (against another checkout's code, each in its own process, solves interleaved)
 
 --jobs runs that many solves at once (each single-threaded); the load average is printed before
 and after, since times on a shared machine are inflated by the other work on it.
@@ -206,6 +208,68 @@ def speed(trials: int, first: int) -> None:
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
+def _worker() -> None:
+    """--worker: one solve (_timed) per JSON line [seed, varying, chirality] on stdin, its answer a
+    JSON line on stdout; the geocert it runs is whichever PYTHONPATH selects (speed_against)."""
+    import sys
+
+    for line in sys.stdin:
+        seed, varying, chirality = json.loads(line)
+        row = _timed(seed, varying, chirality)
+        row["Ks"] = None if row["Ks"] is None else row["Ks"].tolist()
+        print(json.dumps(row), flush=True)
+
+
+def speed_against(other: str, trials: int, first: int) -> None:
+    """Issue 38: this checkout's direct method against the geocert of checkout ``other`` (a path),
+    each in its own long-lived worker process (--worker, PYTHONPATH choosing the code), the same
+    scene solved by both one after the other (the order alternating), so both see the same load;
+    one warm-up solve each first. Prints per column the median processor seconds, their ratio, the
+    largest relative difference of K and the certified counts."""
+    import subprocess
+    import sys
+
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    workers = {}
+    for name, root in (("before", os.path.abspath(other)), ("after", here)):
+        env = {**os.environ, "PYTHONPATH": root}
+        workers[name] = subprocess.Popen([sys.executable, os.path.abspath(__file__), "--worker"], env=env, cwd=root,
+                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+
+    def ask(name: str, task: list) -> dict:
+        workers[name].stdin.write(json.dumps(task) + "\n")
+        workers[name].stdin.flush()
+        return json.loads(workers[name].stdout.readline())
+
+    print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())} ({os.cpu_count()} cores)", flush=True)
+    for name in workers:
+        ask(name, [999, False, "none"])
+    names = [f"{focal}/{'chir' if chirality == 'points' else 'no chir'}" for focal, _, chirality in COLUMNS]
+    out = {name: {"before": [], "after": []} for name in names}
+    for i in range(first, first + trials):
+        for name, (_, varying, chirality) in zip(names, COLUMNS):
+            for which in (("before", "after") if i % 2 == 0 else ("after", "before")):
+                out[name][which].append(ask(which, [1000 + i, varying, chirality]))
+    for worker in workers.values():
+        worker.stdin.close()
+        worker.wait()
+    print(f"direct autocalibration, {trials} trials per column (seeds {1000 + first} to {1000 + first + trials - 1}), "
+          f"processor seconds a solve (one BLAS thread); before: {os.path.abspath(other)}, after: {here}")
+    print(f"{'column':<18}{'before':>10}{'after':>10}{'ratio':>8}{'max |dK|/|K|':>14}{'certified before/after':>24}")
+    for name in names:
+        old, new = out[name]["before"], out[name]["after"]
+        a, b = float(np.median([r["cpu"] for r in old])), float(np.median([r["cpu"] for r in new]))
+        diffs = [float(np.max(np.abs(np.array(x["Ks"]) - y["Ks"])) / np.max(np.abs(x["Ks"]))) for x, y in zip(old, new)
+                 if x["Ks"] is not None and y["Ks"] is not None]
+        print(f"{name:<18}{a:>10.3f}{b:>10.3f}{a / b:>8.2f}{max(diffs) if diffs else float('nan'):>14.1e}"
+              f"{sum(r['certified'] for r in old):>16d}/{sum(r['certified'] for r in new)}")
+    every_old = [r["cpu"] for name in names for r in out[name]["before"]]
+    every_new = [r["cpu"] for name in names for r in out[name]["after"]]
+    print(f"{'all':<18}{np.median(every_old):>10.3f}{np.median(every_new):>10.3f}"
+          f"{np.median(every_old) / np.median(every_new):>8.2f}")
+    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+
+
 def _run(task: tuple) -> dict:
     return {"task": list(task), **trial(*task)}
 
@@ -228,7 +292,16 @@ def main() -> None:
     parser.add_argument("--from-rows", help="print the table of the trials in this file, solving nothing")
     parser.add_argument("--speed", action="store_true",
                         help="issue 38: processor time against the former Schur assembly, same run (prints the ratio)")
+    parser.add_argument("--against", metavar="CHECKOUT",
+                        help="with --speed: against that checkout's geocert (a path), each in its own process")
+    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.worker:
+        _worker()
+        return
+    if args.speed and args.against:
+        speed_against(args.against, args.trials, args.first_trial)
+        return
     if args.speed:
         speed(args.trials, args.first_trial)
         return
