@@ -34,7 +34,6 @@ from __future__ import annotations
 import copy
 import json
 
-import pytest
 
 from geocert.core import summary_notes
 from geocert.verify.checks import verify_any
