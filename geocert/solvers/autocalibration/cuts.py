@@ -16,6 +16,7 @@ import numpy as np
 from geocert.core.bnb import Box, BoxBound, BoxStatus
 from geocert.core.certificates import LeafProof
 from geocert.core.conic import ConicStatus, ReusableConicProgram
+from geocert.core.coverage import SIDE_TOLERANCE
 from geocert.core.cones import proves_infeasible, safe_lower_bound, safe_lower_bounds
 
 # Where the solves of both stages' searches stop (node bounds and tightening), instead of 1e-9:
@@ -63,13 +64,36 @@ def side_bounds(program, dims: int, stop: Callable[[], bool] | None = None) -> l
     return [(k, sign, float(value), z) for (k, sign, _, z), value in zip(solved, values) if math.isfinite(value)]
 
 
-def tighten_box(build_capped: Callable, box: Box, cap: float, record: bool, stop: Callable[[], bool] | None = None
-                ) -> tuple[list[tuple[Box, CutProof]], Box | None]:
+def _grown_values(build_capped: Callable, box: Box, cap: float, growth: float, program,
+                  found: list[tuple[int, float, float, np.ndarray]]) -> list[float]:
+    """Each cut's value recomputed with its own dual over the box grown by ``growth`` on every
+    side, the cut's own where that program has another shape (or none)."""
+    try:
+        grown = build_capped(box.lo - growth, box.hi + growth, cap)
+    except ValueError:
+        grown = None
+    if grown is None or grown.A.shape != program.A.shape:
+        return [value for _, _, value, _ in found]
+    values = safe_lower_bounds(np.array([np.eye(len(grown.q))[k] * sign for k, sign, _, _ in found]), grown.A,
+                               grown.b, grown.cones, np.array([z for _, _, _, z in found]), grown.lower, grown.upper)
+    return [min(value, float(again)) if math.isfinite(again) else value
+            for (_, _, value, _), again in zip(found, values)]
+
+
+def tighten_box(build_capped: Callable, box: Box, cap: float, record: bool, stop: Callable[[], bool] | None = None,
+                growth: float = 0.0) -> tuple[list[tuple[Box, CutProof]], Box | None]:
     """The slabs of the box its tightening cuts off, each with its cut, in a guillotine order
     (they and what remains partition the box), and what remains (None when nothing does).
     ``build_capped(lo, hi, cap)`` is the relaxation with the cost capped; its first variables are
     the box's coordinates. ``stop()`` ends the tightening early (side_bounds): the cuts found so
-    far stand, and what remains is only less tight."""
+    far stand, and what remains is only less tight.
+
+    ``growth``: how far the verifier may grow the box before it recomputes a cut over it (it
+    extends leaves over the slivers a cut's rounding leaves, proofs._moved_faces, up to
+    coverage.SIDE_TOLERANCE of the root box). The cut's safe bound over a grown box can drop far
+    more than the growth (measured: a box grown by 2.3e-14 moved a cut by 4.7e-9, its leaf then
+    refused as "not beyond the cut"): each slab ends at the smaller of the values over the box and
+    over the box grown on every side, so that it stays beyond its cut as the verifier reads it."""
     try:
         program = build_capped(box.lo, box.hi, cap)
     except ValueError:
@@ -78,7 +102,11 @@ def tighten_box(build_capped: Callable, box: Box, cap: float, record: bool, stop
         return [], box
     current_lo, current_hi = box.lo.copy(), box.hi.copy()
     slabs: list[tuple[Box, CutProof]] = []
-    for k, sign, value, z in side_bounds(program, len(box.lo), stop):
+    found = side_bounds(program, len(box.lo), stop)
+    if growth > 0 and found:
+        found = [(k, sign, value, z) for (k, sign, _, z), value
+                 in zip(found, _grown_values(build_capped, box, cap, growth, program, found))]
+    for k, sign, value, z in found:
         side = value if sign > 0 else -value  # points costing <= cap: x_k >= side (or <= side)
         if sign > 0 and side > current_lo[k]:
             slab_hi = current_hi.copy()
@@ -113,6 +141,10 @@ class BoxSearch:
 
     def __init__(self, root_lo: np.ndarray, root_hi: np.ndarray, record: bool):
         self.root_lo, self.root_hi, self.record = root_lo, root_hi, record
+        # how far the verifier may grow a box before recomputing its cuts (tighten_box): twice its
+        # tolerance for a cut's rounding, SIDE_TOLERANCE of the root box's size (proofs.check_leaves)
+        size = float(np.max(np.abs(np.concatenate([root_lo, root_hi, root_hi - root_lo]))))
+        self.growth = 2.0 * SIDE_TOLERANCE * size if math.isfinite(size) else 0.0
         self.program = ReusableConicProgram(lean=False, tolerance=SOLVE_TOLERANCE)
         self.upper = math.inf  # the incumbent's cost at the last bound
         self.cuts: dict[int, CutProof] = {}  # slabs cut off, by id, until the engine closes them
@@ -162,7 +194,7 @@ class BoxSearch:
         slabs: list[Box] = []
         if self.tightening and math.isfinite(self.upper):
             cut_off, box = tighten_box(lambda lo, hi, cap: self.build(lo, hi, cap, cap_row=True), box, self.upper,
-                                       self.record, self.past_deadline)
+                                       self.record, self.past_deadline, self.growth)
             for slab, proof in cut_off:
                 self.cuts[id(slab)] = proof
             slabs = [slab for slab, _ in cut_off]
