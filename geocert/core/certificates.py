@@ -191,17 +191,43 @@ def canonical_json(value: Any) -> bytes:
     return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False).encode()
 
 
-def data_hash(kind: str, data: Any) -> str:
-    """SHA-256 of the problem data, as canonical JSON of {"kind", "data"} (sorted keys, no spaces)."""
-    return hashlib.sha256(canonical_json({"kind": kind, "data": data})).hexdigest()
+def hashed_numbers(value: Any) -> Any:
+    """``value`` with every number written as the float it denotes (0.0 for -0.0; an integer no
+    float holds exactly kept). JSON has one kind of number, and other writers than Python's write
+    the same numbers differently (JavaScript's JSON.stringify, Go's encoding/json and jq write 640.0
+    as 640 and -0.0 as 0): a hash of Python's text of them refused a genuine result re-serialised
+    by one (review 45). Hashed so, a document's hashes are those of the numbers' values."""
+    if isinstance(value, bool) or value is None or isinstance(value, str):
+        return value
+    if isinstance(value, float):
+        return 0.0 if value == 0.0 else value
+    if isinstance(value, int):
+        try:
+            as_float = float(value)
+        except OverflowError:
+            return value
+        return (0.0 if as_float == 0.0 else as_float) if int(as_float) == value else value
+    if isinstance(value, list):
+        return [hashed_numbers(item) for item in value]
+    if isinstance(value, dict):
+        return {key: hashed_numbers(item) for key, item in value.items()}
+    return value
+
+
+def data_hash(kind: str, data: Any, values: bool = True) -> str:
+    """SHA-256 of the problem data, as canonical JSON of {"kind", "data"} (sorted keys, no spaces),
+    its numbers as their values (hashed_numbers; ``values`` False: as Python wrote them, the form of
+    documents written before)."""
+    return hashlib.sha256(canonical_json({"kind": kind, "data": hashed_numbers(data) if values else data})).hexdigest()
 
 
 def problem_hash(kind: str, data: Any, options: dict, names: tuple[str, ...] | None = None,
-                 marks: dict | None = None) -> str:
+                 marks: dict | None = None, values: bool = True) -> str:
     """SHA-256 of everything a claim depends on: canonical JSON of {"kind", "data", "options"}
     with the options ``names`` only (a kind's own, as declared, or for None CLAIM_OPTIONS: the
     fractional kinds'),
-    numbers as floats (max_residual null when unset); and ``marks``, the form a kind's documents
+    numbers as floats (max_residual null when unset; every number as its value, hashed_numbers,
+    unless ``values`` is False: data_hash); and ``marks``, the form a kind's documents
     declare beyond their options (its Verification.hash_marks: determinacy.ESTIMATES_FORM), as
     "form" (absent from the hash of a document written before the kind declared one)."""
     claimed = {name: options.get(name) for name in (CLAIM_OPTIONS if names is None else names)}
@@ -211,4 +237,4 @@ def problem_hash(kind: str, data: Any, options: dict, names: tuple[str, ...] | N
     hashed = {"kind": kind, "data": data, "options": claimed}
     if marks:
         hashed["form"] = marks
-    return hashlib.sha256(canonical_json(hashed)).hexdigest()
+    return hashlib.sha256(canonical_json(hashed_numbers(hashed) if values else hashed)).hexdigest()

@@ -570,11 +570,15 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
     if K is not None and model == "shared" and not all(calibration_claim.same(k, K) for k in Ks):
         raise Invalid("returned", f"{where}/K is not every registered camera's K (model shared)")
     if K is not None and model == "varying":
+        # The writer's K is the middle focal length's (upgrade.adjust: sorted, index len // 2) with
+        # the intrinsics the cameras share, or one camera's K (a principal point each): a focal length
+        # merely within the cameras' range is one no camera has (review 45).
         rest = np.array([[k[0, 1], k[0, 2], k[1, 2], k[1, 1] / k[0, 0]] for k in Ks + [K]])
-        focals = [k[0, 0] for k in Ks]
-        if not ((all(calibration_claim.same(r, rest[-1]) for r in rest) and min(focals) <= K[0, 0] <= max(focals))
-                or any(calibration_claim.same(k, K) for k in Ks)):  # or one camera's K (a principal point each)
-            raise Invalid("returned", f"{where}/K is not one of the registered cameras' focal lengths with their "
+        middle = sorted(k[0, 0] for k in Ks)[len(Ks) // 2]
+        if not ((all(calibration_claim.same(r, rest[-1]) for r in rest)
+                 and calibration_claim.same(np.array([K[0, 0]]), np.array([middle])))
+                or any(calibration_claim.same(k, K) for k in Ks)):
+            raise Invalid("returned", f"{where}/K is not the registered cameras' middle focal length with their "
                                       "shared intrinsics, nor one registered camera's K (model varying)")
     if model not in ("shared", "varying") or certified not in (True, False):
         raise Invalid("returned", f"{where}: model must be shared or varying, certified a boolean")
