@@ -573,11 +573,14 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
         # The writer's K is the middle focal length's (upgrade.adjust: sorted, index len // 2) with
         # the intrinsics the cameras share, or one camera's K (a principal point each): a focal length
         # merely within the cameras' range is one no camera has (review 45).
+        # One camera's K stands for them only where they share no principal point (a principal point
+        # per view): with shared intrinsics it is the middle focal length's, and an end camera's K
+        # would say no more than it (review 46).
         rest = np.array([[k[0, 1], k[0, 2], k[1, 2], k[1, 1] / k[0, 0]] for k in Ks + [K]])
         middle = sorted(k[0, 0] for k in Ks)[len(Ks) // 2]
-        if not ((all(calibration_claim.same(r, rest[-1]) for r in rest)
-                 and calibration_claim.same(np.array([K[0, 0]]), np.array([middle])))
-                or any(calibration_claim.same(k, K) for k in Ks)):
+        shared = all(calibration_claim.same(r, rest[-1]) for r in rest)
+        if not ((shared and calibration_claim.same(np.array([K[0, 0]]), np.array([middle])))
+                or (not shared and any(calibration_claim.same(k, K) for k in Ks))):
             raise Invalid("returned", f"{where}/K is not the registered cameras' middle focal length with their "
                                       "shared intrinsics, nor one registered camera's K (model varying)")
     if model not in ("shared", "varying") or certified not in (True, False):

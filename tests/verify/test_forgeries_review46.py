@@ -3,7 +3,9 @@
 its grown box (cuts.tighten_box's growth) and the varying calibration.K (reconstruction.
 _check_calibration).
 
-Found (a test below for each, xfail while the class stands):
+Found (a test below for each, which failed while the class stood; both fixed: metric.tighten's
+sides hold over the box grown as the verifier widens it, and a varying calibration.K with shared
+intrinsics is the middle focal length's):
 
 1. A genuine stratified autocalibration is refused by check "tightening" of its metric stage:
    make_scene(12 views, 1.0 %, 60 points, seed 1002), options certificate "full", fails
@@ -112,8 +114,6 @@ def test_a_number_beyond_float_range_is_not_hashed_as_a_float():
 
 # Class 1: a genuine stratified autocalibration refused at its metric stage's tightening
 
-@pytest.mark.xfail(strict=True, reason="review 46 class 1: metric.tighten's sides are bounds over the claimed box, "
-                                       "the verifier rebuilds each round over the widened one")
 def test_a_genuine_stratified_autocalibration_at_one_percent_noise_verifies():
     scene = scenes.make_scene(12, 1.0, points=60, seed=1002)
     result = solve_job({"kind": "autocalibration", "data": scene.job_data(), "options": {"certificate": "full"}})
@@ -158,8 +158,6 @@ def test_the_genuine_varying_result_verifies_and_states_the_middle_cameras_K(var
     assert verify_any(varying).valid
 
 
-@pytest.mark.xfail(strict=True, reason="review 46 class 2: _check_calibration's varying arm accepts any registered "
-                                       "camera's K, not the middle focal length's")
 @pytest.mark.parametrize("end", [0, -1])
 def test_a_varying_calibration_K_restated_as_an_end_cameras_is_refused(varying, end):
     forged = copy.deepcopy(varying)

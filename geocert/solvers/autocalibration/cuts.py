@@ -64,7 +64,15 @@ def side_bounds(program, dims: int, stop: Callable[[], bool] | None = None) -> l
     return [(k, sign, float(value), z) for (k, sign, _, z), value in zip(solved, values) if math.isfinite(value)]
 
 
-def _grown_values(build_capped: Callable, box: Box, cap: float, growth: float, program,
+def verifier_growth(lo: np.ndarray, hi: np.ndarray) -> float:
+    """How far the verifier may grow a box of a search over [lo, hi] before it recomputes a bound
+    over it: twice its tolerance for rounding, SIDE_TOLERANCE of the box's size (its largest
+    coordinate and width: coverage.widened, proofs.check_leaves)."""
+    size = float(np.max(np.abs(np.concatenate([lo, hi, hi - lo]))))
+    return 2.0 * SIDE_TOLERANCE * size if math.isfinite(size) else 0.0
+
+
+def grown_values(build_capped: Callable, box: Box, cap: float, growth: float, program,
                   found: list[tuple[int, float, float, np.ndarray]]) -> list[float]:
     """Each cut's value recomputed with its own dual over the box grown by ``growth`` on every
     side, the cut's own where that program has another shape (or none)."""
@@ -105,7 +113,7 @@ def tighten_box(build_capped: Callable, box: Box, cap: float, record: bool, stop
     found = side_bounds(program, len(box.lo), stop)
     if growth > 0 and found:
         found = [(k, sign, value, z) for (k, sign, _, z), value
-                 in zip(found, _grown_values(build_capped, box, cap, growth, program, found))]
+                 in zip(found, grown_values(build_capped, box, cap, growth, program, found))]
     for k, sign, value, z in found:
         side = value if sign > 0 else -value  # points costing <= cap: x_k >= side (or <= side)
         if sign > 0 and side > current_lo[k]:
@@ -143,8 +151,7 @@ class BoxSearch:
         self.root_lo, self.root_hi, self.record = root_lo, root_hi, record
         # how far the verifier may grow a box before recomputing its cuts (tighten_box): twice its
         # tolerance for a cut's rounding, SIDE_TOLERANCE of the root box's size (proofs.check_leaves)
-        size = float(np.max(np.abs(np.concatenate([root_lo, root_hi, root_hi - root_lo]))))
-        self.growth = 2.0 * SIDE_TOLERANCE * size if math.isfinite(size) else 0.0
+        self.growth = verifier_growth(root_lo, root_hi)
         self.program = ReusableConicProgram(lean=False, tolerance=SOLVE_TOLERANCE)
         self.upper = math.inf  # the incumbent's cost at the last bound
         self.cuts: dict[int, CutProof] = {}  # slabs cut off, by id, until the engine closes them
