@@ -192,18 +192,24 @@ def speed(trials: int, first: int) -> None:
     interior_point.ASSEMBLY = "moments"
     print(f"direct autocalibration, {trials} trials per column (seeds {1000 + first} to {1000 + first + trials - 1}), "
           "processor seconds a solve (one BLAS thread)")
-    print(f"{'column':<18}{'kron median':>12}{'moments median':>16}{'ratio':>8}{'max |dK|/|K|':>14}"
-          f"{'certified kron/moments':>24}")
+    _print_table(out, names, "kron", "moments")
+
+
+def _print_table(out: dict, names: list, first: str, second: str) -> None:
+    """Per column the median processor seconds of the ``first`` and ``second`` runs, their ratio,
+    the largest relative difference of K and the certified counts; then over all columns."""
+    print(f"{'column':<18}{first:>12}{second:>12}{'ratio':>8}{'max |dK|/|K|':>14}"
+          f"{f'certified {first}/{second}':>26}")
     for name in names:
-        old, new = out[name]["kron"], out[name]["moments"]
+        old, new = out[name][first], out[name][second]
         a, b = float(np.median([r["cpu"] for r in old])), float(np.median([r["cpu"] for r in new]))
-        diffs = [float(np.max(np.abs(x["Ks"] - y["Ks"])) / np.max(np.abs(x["Ks"]))) for x, y in zip(old, new)
-                 if x["Ks"] is not None and y["Ks"] is not None]
-        print(f"{name:<18}{a:>12.3f}{b:>16.3f}{a / b:>8.2f}{max(diffs) if diffs else float('nan'):>14.1e}"
-              f"{sum(r['certified'] for r in old):>16d}/{sum(r['certified'] for r in new)}")
-    every_old = [r["cpu"] for name in names for r in out[name]["kron"]]
-    every_new = [r["cpu"] for name in names for r in out[name]["moments"]]
-    print(f"{'all':<18}{np.median(every_old):>12.3f}{np.median(every_new):>16.3f}"
+        diffs = [float(np.max(np.abs(np.asarray(x["Ks"]) - np.asarray(y["Ks"]))) / np.max(np.abs(np.asarray(x["Ks"]))))
+                 for x, y in zip(old, new) if x["Ks"] is not None and y["Ks"] is not None]
+        print(f"{name:<18}{a:>12.3f}{b:>12.3f}{a / b:>8.2f}{max(diffs) if diffs else float('nan'):>14.1e}"
+              f"{sum(r['certified'] for r in old):>18d}/{sum(r['certified'] for r in new)}")
+    every_old = [r["cpu"] for name in names for r in out[name][first]]
+    every_new = [r["cpu"] for name in names for r in out[name][second]]
+    print(f"{'all':<18}{np.median(every_old):>12.3f}{np.median(every_new):>12.3f}"
           f"{np.median(every_old) / np.median(every_new):>8.2f}")
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
@@ -255,19 +261,7 @@ def speed_against(other: str, trials: int, first: int) -> None:
         worker.wait()
     print(f"direct autocalibration, {trials} trials per column (seeds {1000 + first} to {1000 + first + trials - 1}), "
           f"processor seconds a solve (one BLAS thread); before: {os.path.abspath(other)}, after: {here}")
-    print(f"{'column':<18}{'before':>10}{'after':>10}{'ratio':>8}{'max |dK|/|K|':>14}{'certified before/after':>24}")
-    for name in names:
-        old, new = out[name]["before"], out[name]["after"]
-        a, b = float(np.median([r["cpu"] for r in old])), float(np.median([r["cpu"] for r in new]))
-        diffs = [float(np.max(np.abs(np.array(x["Ks"]) - y["Ks"])) / np.max(np.abs(x["Ks"]))) for x, y in zip(old, new)
-                 if x["Ks"] is not None and y["Ks"] is not None]
-        print(f"{name:<18}{a:>10.3f}{b:>10.3f}{a / b:>8.2f}{max(diffs) if diffs else float('nan'):>14.1e}"
-              f"{sum(r['certified'] for r in old):>16d}/{sum(r['certified'] for r in new)}")
-    every_old = [r["cpu"] for name in names for r in out[name]["before"]]
-    every_new = [r["cpu"] for name in names for r in out[name]["after"]]
-    print(f"{'all':<18}{np.median(every_old):>10.3f}{np.median(every_new):>10.3f}"
-          f"{np.median(every_old) / np.median(every_new):>8.2f}")
-    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    _print_table(out, names, "before", "after")
 
 
 def _run(task: tuple) -> dict:

@@ -570,12 +570,10 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
     if K is not None and model == "shared" and not all(calibration_claim.same(k, K) for k in Ks):
         raise Invalid("returned", f"{where}/K is not every registered camera's K (model shared)")
     if K is not None and model == "varying":
-        # The writer's K is the middle focal length's (upgrade.adjust: sorted, index len // 2) with
-        # the intrinsics the cameras share, or one camera's K (a principal point each): a focal length
-        # merely within the cameras' range is one no camera has (review 45).
-        # One camera's K stands for them only where they share no principal point (a principal point
-        # per view): with shared intrinsics it is the middle focal length's, and an end camera's K
-        # would say no more than it (review 46).
+        # With shared intrinsics the writer's K is the middle focal length's (upgrade.adjust: sorted,
+        # index len // 2): a focal length merely within the cameras' range is one no camera has
+        # (review 45), an end camera's is not the one stated (review 46). Only with a principal point
+        # per view does one camera's K stand for them.
         rest = np.array([[k[0, 1], k[0, 2], k[1, 2], k[1, 1] / k[0, 0]] for k in Ks + [K]])
         middle = sorted(k[0, 0] for k in Ks)[len(Ks) // 2]
         shared = all(calibration_claim.same(r, rest[-1]) for r in rest)
