@@ -214,27 +214,35 @@ def hashed_numbers(value: Any) -> Any:
     return value
 
 
-def data_hash(kind: str, data: Any, values: bool = True) -> str:
+def data_hash(kind: str, data: Any, values: bool = True, converted: bool = False) -> str:
     """SHA-256 of the problem data, as canonical JSON of {"kind", "data"} (sorted keys, no spaces),
     its numbers as their values (hashed_numbers; ``values`` False: as Python wrote them, the form of
-    documents written before)."""
-    return hashlib.sha256(canonical_json({"kind": kind, "data": hashed_numbers(data) if values else data})).hexdigest()
+    documents written before). ``converted``: ``data`` is hashed_numbers' output already (a reader
+    hashing one document several ways converts its data once)."""
+    if values and not converted:
+        data = hashed_numbers(data)
+    return hashlib.sha256(canonical_json({"kind": kind, "data": data})).hexdigest()
 
 
 def problem_hash(kind: str, data: Any, options: dict, names: tuple[str, ...] | None = None,
-                 marks: dict | None = None, values: bool = True) -> str:
+                 marks: dict | None = None, values: bool = True, converted: bool = False) -> str:
     """SHA-256 of everything a claim depends on: canonical JSON of {"kind", "data", "options"}
     with the options ``names`` only (a kind's own, as declared, or for None CLAIM_OPTIONS: the
     fractional kinds'),
     numbers as floats (max_residual null when unset; every number as its value, hashed_numbers,
     unless ``values`` is False: data_hash); and ``marks``, the form a kind's documents
     declare beyond their options (its Verification.hash_marks: determinacy.ESTIMATES_FORM), as
-    "form" (absent from the hash of a document written before the kind declared one)."""
+    "form" (absent from the hash of a document written before the kind declared one).
+    ``converted``: as data_hash's."""
     claimed = {name: options.get(name) for name in (CLAIM_OPTIONS if names is None else names)}
     for name, value in claimed.items():
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             claimed[name] = float(value)
-    hashed = {"kind": kind, "data": data, "options": claimed}
+    hashed = {"kind": kind, "options": claimed}
     if marks:
         hashed["form"] = marks
-    return hashlib.sha256(canonical_json(hashed_numbers(hashed) if values else hashed)).hexdigest()
+    if values:
+        hashed = hashed_numbers(hashed)
+        data = data if converted else hashed_numbers(data)
+    hashed["data"] = data
+    return hashlib.sha256(canonical_json(hashed)).hexdigest()

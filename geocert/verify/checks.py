@@ -22,7 +22,7 @@ from geocert.core import exact, self_check, summary_notes
 from geocert.core.cones import rounding_uncounted
 from geocert.core.self_check import SelfCheckFailed
 from geocert.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
-                                       data_hash, problem_hash)
+                                       data_hash, hashed_numbers, problem_hash)
 from geocert.core.geometry import cost_rounding, is_number, norm_cost, residual_lengths
 from geocert.verify.notes import check_notes
 from geocert.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
@@ -625,23 +625,27 @@ def _check_hashes(document: dict, options: dict) -> tuple[tuple[str, ...], str |
     no tolerance: a kind that declares no mark, or a hash without the mark its kind declares)."""
     # Today's hashes are of the numbers' values (certificates.hashed_numbers); a document written
     # before hashed Python's text of them, and is read so where that is what its data hash to.
-    expected = data_hash(document["kind"], document["data"])
+    # the data's numbers converted once for every hash below (a traversal is most of a hash's cost)
+    data = hashed_numbers(document["data"])
+    expected = data_hash(document["kind"], data, converted=True)
     values = expected == document["data_sha256"]
+    if not values:
+        data = document["data"]
     if not values and data_hash(document["kind"], document["data"], False) != document["data_sha256"]:
         raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
     adapter = _adapter(document["kind"])
     names = hook(adapter, "claim_options", CLAIM_OPTIONS)
     marks = hook(adapter, "hash_marks")
-    expected = problem_hash(document["kind"], document["data"], options, names, marks, values)
+    expected = problem_hash(document["kind"], data, options, names, marks, values, converted=True)
     if expected == document["problem_sha256"]:
         return names, None, not marks
-    if marks and problem_hash(document["kind"], document["data"], options, names, values=values) \
+    if marks and problem_hash(document["kind"], data, options, names, values=values, converted=True) \
             == document["problem_sha256"]:
         return names, _unmarked_form(names, marks), True
     # a kind whose hash came to cover more options: its earlier forms, newest first, each with
     # what the report's scope says of it
     for earlier, statement in hook(adapter, "earlier_forms"):
-        if problem_hash(document["kind"], document["data"], options, earlier, values=values) \
+        if problem_hash(document["kind"], data, options, earlier, values=values, converted=True) \
                 == document["problem_sha256"]:
             return earlier, statement(options), True
     raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and options "

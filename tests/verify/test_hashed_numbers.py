@@ -10,7 +10,7 @@ import json
 
 import pytest
 
-from geocert.core.certificates import data_hash, hashed_numbers
+from geocert.core.certificates import data_hash, hashed_numbers, problem_hash
 from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
 from geocert.verify.checks import verify_any
@@ -42,6 +42,18 @@ def test_hashed_numbers_reads_a_number_as_its_value():
     assert json.dumps(hashed_numbers([-0.0, 0])) == "[0.0, 0.0]"
     assert hashed_numbers(2 ** 60 + 1) == 2 ** 60 + 1  # no float holds it: kept
     assert data_hash("k", {"x": [640, -0.0]}) == data_hash("k", {"x": [640.0, 0.0]})
+
+
+def test_data_converted_once_hash_as_the_data():
+    """The verifier converts a document's data once for all its hashes (converted=True)."""
+    data, options = {"x": [640, -0.0, [2, 3.5]], "n": 2 ** 60 + 1}, {"gap": 0, "max_residual": None}
+    once = hashed_numbers(data)
+    assert data_hash("k", once, converted=True) == data_hash("k", data)
+    assert problem_hash("k", once, options, ("gap",), {"f": 1}, converted=True) \
+        == problem_hash("k", data, options, ("gap",), {"f": 1})
+    assert problem_hash("k", data, options, ("gap",), values=False, converted=True) \
+        == problem_hash("k", data, options, ("gap",), values=False)
+    assert data_hash("k", once, converted=True) != data_hash("k", data, values=False)
 
 
 def test_documents_hashed_before_still_verify():
