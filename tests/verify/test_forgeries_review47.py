@@ -1,0 +1,148 @@
+"""Review 47: a hostile review of the hashes of the numbers' values (certificates.hashed_numbers,
+data_hash, problem_hash, checks._check_hashes), of the triangulation, resection, homography and
+bilinear certificates, and of the verifier's cost.
+
+Found (a test below for each, marked xfail while the class stands):
+
+1. A genuine document holding an integer literal no float holds exactly (the job's data as the
+   user sent it: a camera entry 922337203685477580801) is refused once re-serialised by
+   JavaScript, Go or any reader of JSON numbers as doubles: the hash keeps such an integer exact
+   (hashed_numbers: "an integer no float holds exactly kept"), while every other reader, and the
+   solver and verifier themselves (geometry.number_array: np.array(value, dtype=float)), read it
+   as its nearest float. JSON.parse then JSON.stringify writes 922337203685477600000, whose value
+   hashes as the float; the document, read the same, is refused "data_hash". The docs promise a
+   document re-serialised by another writer keeps its hashes.
+   Where: core/certificates.py, hashed_numbers, the ``int`` arm keeping ``value`` where
+   ``int(as_float) != value``. Suggested fix: hash every number as the float the readers take it
+   for (float(value) for an int within float range), since no field the hash covers reads an
+   integer beyond 2**53 exactly (views are indices below the camera count; the data's numbers
+   are read as floats); keep beyond-range integers as written (refused by the readers anyway).
+
+2. A triangulation, resection or homography document's data may hold members no solver takes
+   and no check reads (a track's "weights", a map's "inliers", a top-level member beside
+   "cameras"/"tracks" or "maps"): they are hashed with the data and the document verifies. The
+   API and the CLI refuse them in a job (the kind's request_model, kinds.schema.Strict:
+   extra="forbid", a 422 naming the member), so no genuine document holds one, and a reader of the document takes "weights": [1, 1000] for part
+   of the problem the claims are about (a weighted cost) while the verifier checked the
+   unweighted one. Bilinear (verify/bilinear.py) and autocalibration (autocalibration.read_data)
+   refuse an unknown data member by name ("data/weights: unknown field"), and every other part
+   of a document (options, proof records, result members) is closed to the names its writer
+   writes for the same reason.
+   Where: verify/fractional.py, TrackItems.read and MapItems.read (only the known members are
+   read; the others are neither refused nor checked), and checks._check_item_count.
+   Suggested fix: refuse a data member outside the kind's schema ({"cameras", "tracks"} and
+   {"views", "points"}; {"maps"} and {"source", "target"}), check "data", naming it, as
+   autocalibration.read_data does.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import pytest
+
+from geocert.jobs.runner import solve_job
+from geocert.kinds import get_kind
+from geocert.verify.checks import verify_any
+from tests.verify.test_forgeries import rehash, stored
+
+
+def _as_a_double_reader_writes(value):
+    """What JSON.parse then JSON.stringify make of a document: every number read as a double,
+    written as an integer where it is integral below 1e21 (-0.0 as 0)."""
+    if isinstance(value, bool) or value is None or isinstance(value, str):
+        return value
+    if isinstance(value, (int, float)):
+        as_float = float(value)
+        return int(as_float) if as_float.is_integer() and abs(as_float) < 1e21 else as_float
+    if isinstance(value, list):
+        return [_as_a_double_reader_writes(item) for item in value]
+    return {key: _as_a_double_reader_writes(item) for key, item in value.items()}
+
+
+# Class 1: a genuine document with an integer no float holds, re-serialised by a double reader
+
+@pytest.fixture(scope="module")
+def huge_integer_result() -> dict:
+    """A genuine triangulation: camera 0 scaled by 2**60, each entry written as the integer one
+    above (no float holds it; the solver reads its nearest float, as every reader does)."""
+    example = get_kind("triangulation").example
+    data = copy.deepcopy(example["data"])
+    data["cameras"][0] = [[int(v * 2 ** 60) + 1 if v != 0 else 0 for v in row] for row in data["cameras"][0]]
+    job = {**example, "data": data, "options": {**example.get("options", {}), "certificate": "full"}}
+    return json.loads(json.dumps(solve_job(job)))
+
+
+def test_the_huge_integer_result_is_genuine_and_verifies_as_written(huge_integer_result):
+    certificate = huge_integer_result["certificate"]
+    assert [item["certified"] for item in certificate["items"]] == [True, True]
+    assert certificate["data"]["cameras"][0][0][0] == 922337203685477580801  # as sent: no float holds it
+    report = verify_any(huge_integer_result)
+    assert report.valid, report.first_failure
+
+
+@pytest.mark.xfail(strict=True, reason="review 47 class 1: an integer no float holds is hashed exactly, though every "
+                                       "reader (the verifier's too) reads it as its nearest float: a genuine document "
+                                       "re-serialised by JavaScript is refused data_hash")
+def test_the_huge_integer_result_as_javascript_writes_it_verifies(huge_integer_result):
+    rewritten = json.loads(json.dumps(_as_a_double_reader_writes(huge_integer_result)))
+    assert rewritten["certificate"]["data"]["cameras"][0][0][0] == 922337203685477580800  # the same double
+    report = verify_any(rewritten)
+    assert report.valid, report.first_failure
+
+
+# Class 2: data members no solver takes and no check reads
+
+UNKNOWN_MEMBERS = [
+    ("triangulation_l2l2", ("weights",), [1.0, 1000.0]),
+    ("triangulation_l2l2", ("tracks", 0, "weights"), [1.0, 1000.0]),
+    ("resection_l2l2", ("maps", 0, "inliers"), [0, 1, 2]),
+    ("resection_l2l2", ("undistorted",), False),
+    ("homography2_l2l2", ("maps", 0, "weights"), [1000.0, 1.0, 1.0, 1.0]),
+]
+
+
+def _with_member(name: str, path: tuple, value) -> dict:
+    result = stored(name)
+    assert verify_any(result).valid
+    place = result["certificate"]["data"]
+    for step in path[:-1]:
+        place = place[step]
+    place[path[-1]] = value
+    rehash(result["certificate"])
+    return result
+
+
+@pytest.mark.xfail(strict=True, reason="review 47 class 2: a triangulation's or map's data may hold members no solver "
+                                       "takes and no check reads (a track's weights), hashed and verified")
+@pytest.mark.parametrize("name, path, value", UNKNOWN_MEMBERS)
+def test_a_data_member_no_solver_takes_is_refused(name, path, value):
+    report = verify_any(_with_member(name, path, value))
+    assert not report.valid and report.first_failure["check"] == "data", report.first_failure
+
+
+@pytest.mark.parametrize("kind", ["triangulation", "resection", "homography"])
+@pytest.mark.parametrize("where", ["data", "item"])
+def test_the_request_model_refuses_such_a_member(kind, where):
+    """The premise of class 2: the API refuses such a member (kinds.schema.Strict, a 422 naming
+    it), so no genuine document holds one."""
+    from pydantic import ValidationError
+
+    example = copy.deepcopy(get_kind(kind).example)
+    model = get_kind(kind).request_model
+    model.model_validate(example)
+    place = example["data"] if where == "data" else example["data"][get_kind(kind).item_key][0]
+    place["weights"] = [1.0, 1000.0]
+    with pytest.raises(ValidationError, match="weights"):
+        model.model_validate(example)
+
+
+# What held
+
+@pytest.mark.parametrize("path", [("weights",), ("frames", 0, "weights")])
+def test_a_bilinear_data_member_no_solver_takes_is_refused(path):
+    result = _with_member("bilinear_l2l2", path, [1.0, 1000.0])
+    report = verify_any(result)
+    assert not report.valid and report.first_failure["check"] == "data"
+    assert "unknown field" in report.first_failure["detail"]
