@@ -177,6 +177,74 @@ def test_a_bare_certificate_with_a_member_beyond_its_format_is_refused(name):
     assert "no member 'certified'" in report.first_failure["detail"]
 
 
+# Class 4: a pooled level's check reads every camera once per track (and every pooled track)
+
+def _pooled_document(tracks: int, cameras: int, spanning: bool = False) -> dict:
+    """The stored triangulation with ``cameras`` more cameras (no track's) and ``tracks`` more
+    tracks (track 0's data, claim uncertified), each stating a level pooled over its own run of
+    tracks (``spanning``: every track, split at its own index): one pool per track."""
+    from geocert.solvers.fractional.determinacy import pooled_level
+
+    result = stored("triangulation_l2l2")
+    certificate = result["certificate"]
+    certificate["data"]["cameras"] += [[[1, 2, 3, 4], [5, 6, 7, 8], [9, 1, 2, 3]] for _ in range(cameras)]
+    track, claim, returned = certificate["data"]["tracks"][0], certificate["items"][0], result["tracks"][0]
+    first = len(certificate["items"])
+    total = first + tracks
+    for index in range(first, total):
+        certificate["data"]["tracks"].append(copy.deepcopy(track))
+        certificate["items"].append({**copy.deepcopy(claim), "index": index, "status": "not_certified",
+                                     "certified": False, "lower_bound": None, "gap": None, "proof": None})
+        entry = {**copy.deepcopy(returned), "status": "not_certified", "certified": False, "lower_bound": None,
+                 "gap": None, "certificate": None, "reason": "node_limit", "nodes": 0}
+        entry["determinacy"].update(level=pooled_level((1.0, 1)), cost_increase=1e300,
+                                    pooled_tracks=[[0, index], [index, total]] if spanning else [[index, index + 1]])
+        result["tracks"].append(entry)
+    result["stats"]["items"] += tracks
+    result["stats"]["statuses"]["not_certified"] = tracks
+    rehash(certificate)
+    return json.loads(json.dumps(result))
+
+
+def _counting(monkeypatch, module, name: str, size) -> list:
+    counted = [0]
+    original = getattr(module, name)
+
+    def counting(*args):
+        counted[0] += size(*args)
+        return original(*args)
+
+    monkeypatch.setattr(module, name, counting)
+    return counted
+
+
+@pytest.mark.xfail(strict=True, reason="review 47 class 4: a level pooled over a different run of tracks for each "
+                                       "track reads every camera of the document once per track (tracks x cameras "
+                                       "of work, uncharged)")
+def test_pooled_levels_read_the_cameras_a_bounded_number_of_times(monkeypatch):
+    from geocert.verify import fractional
+
+    document = _pooled_document(tracks=40, cameras=2000)
+    cameras = len(document["certificate"]["data"]["cameras"])
+    read = _counting(monkeypatch, fractional, "normalised_cameras", lambda c: len(c))
+    report = verify_any(document)
+    assert not report.valid  # the levels stated are refused, once their pools are read
+    assert read[0] <= 4 * cameras, f"{read[0]} cameras normalised for a document of {cameras}"
+
+
+@pytest.mark.xfail(strict=True, reason="review 47 class 4: each track's pool over every track is recomputed from "
+                                       "every track's residuals (tracks^2 residual sums, uncharged)")
+def test_pooled_levels_sum_each_tracks_residuals_a_bounded_number_of_times(monkeypatch):
+    from geocert.verify import fractional
+
+    document = _pooled_document(tracks=40, cameras=0, spanning=True)
+    tracks = len(document["certificate"]["data"]["tracks"])
+    summed = _counting(monkeypatch, fractional, "squared_residuals", lambda *args: 1)
+    report = verify_any(document)
+    assert not report.valid
+    assert summed[0] <= 4 * tracks, f"{summed[0]} residual sums for a document of {tracks} tracks"
+
+
 # What held
 
 @pytest.mark.parametrize("path", [("weights",), ("frames", 0, "weights")])
