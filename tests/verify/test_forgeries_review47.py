@@ -328,3 +328,19 @@ def test_a_bilinear_data_member_no_solver_takes_is_refused(path):
     report = verify_any(result)
     assert not report.valid and report.first_failure["check"] == "data"
     assert "unknown field" in report.first_failure["detail"]
+
+
+@pytest.mark.parametrize("name", ["triangulation_l2l2", "resection_l2l2", "homography2_l2l2", "bilinear_l2l2"])
+@pytest.mark.parametrize("option, value, valid", [("abs_gap", -0.0, True), ("abs_gap", 5e-324, True),
+                                                  ("rel_gap", -0.0, False), ("max_residual", 5e-324, False)])
+def test_options_at_float_extremes_are_read_as_their_values(name, option, value, valid):
+    """A stricter abs_gap (-0.0 is 0) leaves the claims true (rel_gap certifies them); a rel_gap of
+    -0.0 leaves their gaps beyond the tolerance; a max_residual of the least subnormal puts every
+    solution beyond the scope."""
+    result = stored(name)
+    if option not in result["certificate"]["options"]:
+        pytest.skip(f"{name} states no {option}")
+    result["certificate"]["options"][option] = value
+    rehash(result["certificate"])
+    report = verify_any(result)
+    assert report.valid is valid, report.first_failure
