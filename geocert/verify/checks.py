@@ -22,7 +22,7 @@ from geocert.core import exact, self_check, summary_notes
 from geocert.core.cones import rounding_uncounted
 from geocert.core.self_check import SelfCheckFailed
 from geocert.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
-                                       data_hash, hashed_numbers, problem_hash)
+                                       data_digest, data_hash, problem_hash)
 from geocert.core.geometry import cost_rounding, is_number, norm_cost, residual_lengths
 from geocert.verify.notes import check_notes
 from geocert.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
@@ -372,10 +372,15 @@ def _verify(document: Any, returned: dict | None) -> Report:
         size = document_size(returned if returned is not None else document)
         if returned is not None and not holds:
             size += document_size(document)
-        extra = sorted(str(name) for name in set(document) - CERTIFICATE_MEMBERS) if returned is None else []
-        if extra:  # a result carrying its certificate's members would be read as it, its fields unchecked
+        # A member no check reads claims nothing: refused in a certificate on its own, and in one a
+        # result carries (a result's own members beside it would be read as the certificate's)
+        extra = sorted(str(name) for name in set(document) - CERTIFICATE_MEMBERS)
+        if extra and returned is None:
             raise Invalid("format", f"a certificate (it has 'format') has no member {extra[0]!r:.40}: a result "
                                     "carries its certificate in 'certificate'")
+        if extra:
+            raise Invalid("format", f"certificate has a member {extra[0]!r:.40} no certificate has (its members: "
+                                    f"{', '.join(sorted(CERTIFICATE_MEMBERS))})")
         items = _document_items(document)
         tallies["format"][0] += 1
         _check_option_names(document["kind"], document["options"])
@@ -625,27 +630,31 @@ def _check_hashes(document: dict, options: dict) -> tuple[tuple[str, ...], str |
     no tolerance: a kind that declares no mark, or a hash without the mark its kind declares)."""
     # Today's hashes are of the numbers' values (certificates.hashed_numbers); a document written
     # before hashed Python's text of them, and is read so where that is what its data hash to.
-    # the data's numbers converted once for every hash below (a traversal is most of a hash's cost)
-    data = hashed_numbers(document["data"])
-    expected = data_hash(document["kind"], data, converted=True)
+    # the data written once for every hash below (writing it is most of a hash's cost)
+    data = document["data"]
+    digest = data_digest(data)
+    expected = data_hash(document["kind"], data, digest=digest)
     values = expected == document["data_sha256"]
+    if not values:  # the values' form that kept an integer no float holds exactly as written
+        digest = data_digest(data, exact_integers=True)
+        values = data_hash(document["kind"], data, digest=digest) == document["data_sha256"]
     if not values:
-        data = document["data"]
-    if not values and data_hash(document["kind"], document["data"], False) != document["data_sha256"]:
-        raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
+        digest = data_digest(data, False)
+        if data_hash(document["kind"], data, False, digest) != document["data_sha256"]:
+            raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
     adapter = _adapter(document["kind"])
     names = hook(adapter, "claim_options", CLAIM_OPTIONS)
     marks = hook(adapter, "hash_marks")
-    expected = problem_hash(document["kind"], data, options, names, marks, values, converted=True)
+    expected = problem_hash(document["kind"], data, options, names, marks, values, digest)
     if expected == document["problem_sha256"]:
         return names, None, not marks
-    if marks and problem_hash(document["kind"], data, options, names, values=values, converted=True) \
+    if marks and problem_hash(document["kind"], data, options, names, values=values, digest=digest) \
             == document["problem_sha256"]:
         return names, _unmarked_form(names, marks), True
     # a kind whose hash came to cover more options: its earlier forms, newest first, each with
     # what the report's scope says of it
     for earlier, statement in hook(adapter, "earlier_forms"):
-        if problem_hash(document["kind"], data, options, earlier, values=values, converted=True) \
+        if problem_hash(document["kind"], data, options, earlier, values=values, digest=digest) \
                 == document["problem_sha256"]:
             return earlier, statement(options), True
     raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and options "

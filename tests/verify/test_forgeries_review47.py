@@ -128,9 +128,6 @@ def test_the_huge_integer_result_is_genuine_and_verifies_as_written(huge_integer
     assert report.valid, report.first_failure
 
 
-@pytest.mark.xfail(strict=True, reason="review 47 class 1: an integer no float holds is hashed exactly, though every "
-                                       "reader (the verifier's too) reads it as its nearest float: a genuine document "
-                                       "re-serialised by JavaScript is refused data_hash")
 def test_the_huge_integer_result_as_javascript_writes_it_verifies(huge_integer_result):
     rewritten = json.loads(json.dumps(_as_a_double_reader_writes(huge_integer_result)))
     assert rewritten["certificate"]["data"]["cameras"][0][0][0] == 922337203685477580800  # the same double
@@ -190,8 +187,6 @@ EXTRA_CERTIFICATE_MEMBERS = [("certified", True), ("max_residual", 1.0),
                              ("claims", [{"index": 0, "cost": 0.0, "certified": True}])]
 
 
-@pytest.mark.xfail(strict=True, reason="review 47 class 3: a certificate carried in its result may hold top-level "
-                                       "members no check reads (refused in a bare certificate)")
 @pytest.mark.parametrize("name", ["triangulation_l2l2", "resection_l2l2", "homography2_l2l2", "bilinear_l2l2"])
 @pytest.mark.parametrize("member, value", EXTRA_CERTIFICATE_MEMBERS)
 def test_a_carried_certificate_with_a_member_beyond_its_format_is_refused(name, member, value):
@@ -281,8 +276,6 @@ def test_pooled_levels_sum_each_tracks_residuals_a_bounded_number_of_times(monke
 
 # Class 5: the values hash copies the data
 
-@pytest.mark.xfail(strict=True, reason="review 47 class 5: the values hash copies the whole data as new lists and "
-                                       "floats (hashed_numbers) before writing it: 25 times the document's text")
 def test_the_hashes_take_memory_in_proportion_to_the_text():
     import tracemalloc
 
