@@ -1,0 +1,147 @@
+"""summary.calibration.K where each returned camera has its own K (the claim's model "varying") is
+the one camera's K the writer picks among the cameras it returns, and the verifier holds it to
+that pick (issue 33):
+
+- a focal length per view with shared intrinsics (camera_model "varying"): the middle focal
+  length's camera (sorted, index len // 2);
+- a principal point per view (principal_point "per_view"): among the views sharing the focal
+  length most of them have, the one whose principal point lies nearest the median of theirs.
+
+The sanity layer (pipeline._check_cameras) may drop a camera after the adjustment picked its K;
+the pick is then made again among the cameras returned, so a genuine result whose picked (or an
+end) camera was dropped verifies. A camera is dropped here by the sanity layer's own rule with
+its level raised (MIN_CAMERA_POINTS: the dropped view sees fewer points than that, the others
+more; the verifier does not read the level)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from geocert.jobs.runner import solve_job
+from geocert.solvers.autocalibration import scenes
+from geocert.solvers.reconstruction import synthetic
+from geocert.verify.checks import verify_any
+
+FOCALS = [700.0, 760.0, 820.0, 880.0, 940.0, 1000.0]  # view k's focal length (camera_model "varying")
+MIDDLE = 3  # the view of the middle focal length (sorted, index len // 2)
+SEEN = 30  # the points a view to be dropped sees (of 80; of 200 in the per-view scene)
+
+
+def _registered(result: dict) -> list[dict]:
+    return [c for c in result["cameras"] if c["registered"]]
+
+
+def _run(job: dict, drop: int | None) -> dict:
+    from geocert.pipelines.reconstruction import pipeline
+
+    with pytest.MonkeyPatch.context() as patch:
+        if drop is not None:
+            patch.setattr(pipeline, "MIN_CAMERA_POINTS", SEEN + 20)
+        result = json.loads(json.dumps(solve_job(job)))
+    if drop is not None:
+        assert [c["view"] for c in result["cameras"] if not c["registered"]] == [drop]
+        assert next(c for c in result["cameras"] if c["view"] == drop)["reason"].startswith("dropped")
+    return result
+
+
+def _tracks(images: list, drop: int | None) -> list[dict]:
+    """The tracks of every point in every view, view ``drop`` seeing only the first SEEN points."""
+    tracks = []
+    for k, pixels in enumerate(images):
+        views = [v for v in range(len(pixels)) if v != drop or k < SEEN]
+        tracks.append({"views": views, "points": [pixels[v] for v in views]})
+    return tracks
+
+
+def _varying(drop: int | None = None) -> dict:
+    """Six views round a cloud, each with its own focal length (FOCALS), 0.3 px noise."""
+    rng = np.random.default_rng(7)
+    X = rng.uniform(-1, 1, size=(80, 3))
+    cameras = []
+    for i, f in enumerate(FOCALS):
+        angle = 2 * np.pi * i / 6
+        centre = np.array([5 * np.cos(angle), 1.5 * np.sin(3 * angle), 5 * np.sin(angle)])
+        R = scenes.look_at(centre, np.zeros(3), rng, up=np.array([0.0, 1.0, 0.0]))
+        K = np.array([[f, 0, 320.0], [0, f, 240.0], [0, 0, 1]])
+        cameras.append(K @ np.hstack([R, (-R @ centre)[:, None]]))
+    images = [[((P @ np.append(x, 1.0))[:2] / (P @ np.append(x, 1.0))[2] + rng.normal(0, 0.3, 2)).tolist()
+               for P in cameras] for x in X]
+    views = [{"name": f"view{i}", "image_size": [640, 480]} for i in range(6)]
+    return _run({"kind": "reconstruction", "data": {"views": views, "tracks": _tracks(images, drop)},
+                 "options": {"certificate": "full", "camera_model": "varying"}}, drop)
+
+
+PER_VIEW = 8
+
+
+def _per_view(drop: int | None = None) -> dict:
+    """Eight general views, 0.3 px noise, each view's principal point moved by its own offset (up
+    to 15 px each way: the per-view principal points are kept), principal_point "per_view"."""
+    scene = synthetic.scene(views=PER_VIEW, points=200, seed=6, noise_px=0.3, spread_degrees=50.0)
+    shift = np.random.default_rng(1).uniform(-15, 15, (PER_VIEW, 2))
+    images = [[None] * PER_VIEW for _ in scene.tracks]
+    for k, (views, pixels) in enumerate(scene.tracks):
+        for v, p in zip(views, pixels + shift[np.asarray(views)]):
+            images[k][int(v)] = p.tolist()
+    tracks = []
+    for k, row in enumerate(images):
+        views = [v for v, p in enumerate(row) if p is not None and (v != drop or k < SEEN)]
+        if len(views) >= 2:
+            tracks.append({"views": views, "points": [row[v] for v in views]})
+    return _run({"kind": "reconstruction", "data": {"views": [{"image_size": list(scene.image_size)}] * PER_VIEW,
+                                                    "tracks": tracks},
+                 "options": {"certificate": "full", "principal_point": "per_view"}}, drop)
+
+
+def _middle_focal_K(result: dict) -> list:
+    cameras = sorted(_registered(result), key=lambda c: c["K"][0][0])
+    return cameras[len(cameras) // 2]["K"]
+
+
+def _middle_centre_K(result: dict) -> list:
+    """The K of the camera whose principal point lies nearest the median of the returned ones'
+    (one focal length shared: the scene has no view of a focal length of its own)."""
+    cameras = _registered(result)
+    assert len({c["K"][0][0] for c in cameras}) == 1
+    centres = np.array([[c["K"][0][2], c["K"][1][2]] for c in cameras])
+    return cameras[int(np.argmin(np.linalg.norm(centres - np.median(centres, axis=0), axis=1)))]["K"]
+
+
+@pytest.fixture(scope="module")
+def per_view() -> dict:
+    return _per_view()
+
+
+# A focal length per view: the picked camera, or an end camera (which moves the middle), dropped
+# after the adjustment picked its K
+
+@pytest.mark.parametrize("drop", [MIDDLE, len(FOCALS) - 1])
+def test_a_genuine_varying_result_whose_camera_was_dropped_after_the_pick_verifies(drop):
+    result = _varying(drop)
+    claim = result["summary"]["calibration"]
+    assert claim["model"] == "varying" and len(_registered(result)) == len(FOCALS) - 1
+    assert claim["K"] == _middle_focal_K(result)
+    report = verify_any(result)
+    assert report.valid, report.first_failure
+
+
+# A principal point per view: the writer's pick is held
+
+def test_the_genuine_per_view_result_states_the_middle_principal_points_K_and_verifies(per_view):
+    claim = per_view["summary"]["calibration"]
+    adjustment = next(s for s in per_view["stages"] if s["name"] == "bundle_adjustment")
+    assert adjustment["principal_point_per_view"]["estimated"] is True and claim["model"] == "varying"
+    assert claim["K"] == _middle_centre_K(per_view)
+    report = verify_any(per_view)
+    assert report.valid, report.first_failure
+
+
+def test_a_genuine_per_view_result_whose_picked_camera_was_dropped_verifies(per_view):
+    picked = next(c["view"] for c in _registered(per_view) if c["K"] == _middle_centre_K(per_view))
+    result = _per_view(picked)
+    assert result["summary"]["calibration"]["K"] == _middle_centre_K(result)
+    report = verify_any(result)
+    assert report.valid, report.first_failure
