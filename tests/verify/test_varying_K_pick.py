@@ -15,6 +15,7 @@ more; the verifier does not read the level)."""
 
 from __future__ import annotations
 
+import copy
 import json
 
 import numpy as np
@@ -22,7 +23,7 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import scenes
-from geocert.solvers.reconstruction import synthetic
+from geocert.solvers.reconstruction import calibration_claim, synthetic
 from geocert.verify.checks import verify_any
 
 FOCALS = [700.0, 760.0, 820.0, 880.0, 940.0, 1000.0]  # view k's focal length (camera_model "varying")
@@ -110,6 +111,27 @@ def _middle_centre_K(result: dict) -> list:
     return cameras[int(np.argmin(np.linalg.norm(centres - np.median(centres, axis=0), axis=1)))]["K"]
 
 
+def _restated(result: dict, K: list) -> dict:
+    """``result`` with ``K`` stated as summary.calibration.K, and the records read against it (the
+    adjustment stage's K, the depth-reversal record's focal length, the difference from the
+    certified K and the warning that states it) restated to match."""
+    forged = copy.deepcopy(result)
+    claim = forged["summary"]["calibration"]
+    if claim.get("certified_K") is not None:
+        was = calibration_claim.moved_figures(claim["difference"])
+        claim["difference"] = calibration_claim.difference(np.array(K), np.array(claim["certified_K"]))
+        for warning in forged["summary"].get("warnings") or []:
+            warning["detail"] = warning["detail"].replace(was, calibration_claim.moved_figures(claim["difference"]))
+    claim["K"] = K
+    for stage in forged["stages"]:
+        if stage["name"] == "bundle_adjustment" and "K" in stage:
+            stage["K"] = K
+    depth = forged["summary"].get("depth_reversal")
+    if isinstance(depth, dict) and depth.get("checked"):
+        depth["mirror_focal_px" if depth.get("adopted") else "focal_px"] = K[0][0]
+    return forged
+
+
 @pytest.fixture(scope="module")
 def per_view() -> dict:
     return _per_view()
@@ -137,6 +159,17 @@ def test_the_genuine_per_view_result_states_the_middle_principal_points_K_and_ve
     assert claim["K"] == _middle_centre_K(per_view)
     report = verify_any(per_view)
     assert report.valid, report.first_failure
+
+
+def test_another_cameras_K_restated_as_the_per_view_calibration_K_is_refused(per_view):
+    picked = _middle_centre_K(per_view)
+    others = [c["K"] for c in _registered(per_view) if c["K"] != picked]
+    assert len(others) == PER_VIEW - 1
+    report = verify_any(_restated(per_view, picked))  # restating the pick itself changes nothing
+    assert report.valid, report.first_failure
+    for K in others:
+        report = verify_any(_restated(per_view, K))
+        assert not report.valid and report.first_failure["check"] == "returned", report.first_failure
 
 
 def test_a_genuine_per_view_result_whose_picked_camera_was_dropped_verifies(per_view):
