@@ -531,8 +531,8 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
                        recorded: bool = True) -> None:
     """summary.calibration is about the K the cameras return (claims.CalibrationClaim): its K is
     every registered camera's (model "shared") or the one camera's K the writer picks among them
-    (calibration_claim.stated_camera) ("varying"); certified_K is stated exactly when certified, and is
-    the returned K exactly when returned_is_certified (then source "autocalibration"); the
+    (calibration_claim.stated_camera) ("varying"); certified_K is stated exactly when certified,
+    and is the returned K exactly when returned_is_certified (then source "autocalibration"); the
     difference and the certified intrinsics on their range's edge (the autocalibration stage's
     ranges) are recomputed; determined only when certified, off the edge and with no critical
     motion; the summary's autocalibration_certified and autocalibration_determined are its own;
