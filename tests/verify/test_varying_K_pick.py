@@ -78,14 +78,22 @@ def _varying(drop: int | None = None) -> dict:
 PER_VIEW = 8
 
 
-def _per_view(drop: int | None = None) -> dict:
+LONGER = 3  # the view seen with a longer focal length (_per_view's ``longer``)
+
+
+def _per_view(drop: int | None = None, longer: bool = False) -> dict:
     """Eight general views, 0.3 px noise, each view's principal point moved by its own offset (up
-    to 15 px each way: the per-view principal points are kept), principal_point "per_view"."""
+    to 15 px each way: the per-view principal points are kept), principal_point "per_view";
+    ``longer``: view LONGER seen with a focal length 1.15 times the others' (its pixels scaled
+    about its principal point: it is given a focal length of its own)."""
     scene = synthetic.scene(views=PER_VIEW, points=200, seed=6, noise_px=0.3, spread_degrees=50.0)
     shift = np.random.default_rng(1).uniform(-15, 15, (PER_VIEW, 2))
+    factor = np.where(np.arange(PER_VIEW) == LONGER, 1.15 if longer else 1.0, 1.0)
+    centre = scene.K[:2, 2]
     images = [[None] * PER_VIEW for _ in scene.tracks]
     for k, (views, pixels) in enumerate(scene.tracks):
-        for v, p in zip(views, pixels + shift[np.asarray(views)]):
+        views = np.asarray(views)
+        for v, p in zip(views, centre + (pixels - centre) * factor[views, None] + shift[views]):
             images[k][int(v)] = p.tolist()
     tracks = []
     for k, row in enumerate(images):
@@ -178,3 +186,35 @@ def test_a_genuine_per_view_result_whose_picked_camera_was_dropped_verifies(per_
     assert result["summary"]["calibration"]["K"] == _middle_centre_K(result)
     report = verify_any(result)
     assert report.valid, report.first_failure
+
+
+# A focal length of its own for one view besides a principal point each: the pick is among the
+# views sharing the others' focal length
+
+@pytest.fixture(scope="module")
+def focal_groups() -> dict:
+    return _per_view(longer=True)
+
+
+def _group_pick(result: dict) -> list:
+    """The K of the camera whose principal point lies nearest the median of those of the cameras
+    sharing the most common focal length."""
+    cameras = _registered(result)
+    focals = [c["K"][0][0] for c in cameras]
+    shared = [c for c in cameras if c["K"][0][0] == max(focals, key=focals.count)]
+    centres = np.array([[c["K"][0][2], c["K"][1][2]] for c in shared])
+    return shared[int(np.argmin(np.linalg.norm(centres - np.median(centres, axis=0), axis=1)))]["K"]
+
+
+def test_another_cameras_K_restated_beside_focal_groups_is_refused(focal_groups):
+    adjustment = next(s for s in focal_groups["stages"] if s["name"] == "bundle_adjustment")
+    assert adjustment["focal_per_view"]["estimated"] is True and adjustment["focal_per_view"]["views"] == [LONGER]
+    picked = _group_pick(focal_groups)
+    assert focal_groups["summary"]["calibration"]["K"] == picked
+    report = verify_any(focal_groups)
+    assert report.valid, report.first_failure
+    longer = next(c["K"] for c in _registered(focal_groups) if c["view"] == LONGER)
+    other = next(c["K"] for c in _registered(focal_groups) if c["view"] != LONGER and c["K"] != picked)
+    for K in (longer, other):  # the view of its own focal length, and another of the shared one
+        report = verify_any(_restated(focal_groups, K))
+        assert not report.valid and report.first_failure["check"] == "returned", report.first_failure
