@@ -530,9 +530,9 @@ def _warned(summary: dict, code: str) -> bool:
 def _check_calibration(result: dict, registered: list[dict], verify: Callable[[dict], object],
                        recorded: bool = True) -> None:
     """summary.calibration is about the K the cameras return (claims.CalibrationClaim): its K is
-    every registered camera's (model "shared") or one focal length among theirs with their
-    principal point and skew, or one camera's K (a principal point per view) ("varying"); certified_K is stated exactly when certified, and is
-    the returned K exactly when returned_is_certified (then source "autocalibration"); the
+    every registered camera's (model "shared") or the one camera's K the writer picks among them
+    (calibration_claim.stated_camera) ("varying"); certified_K is stated exactly when certified,
+    and is the returned K exactly when returned_is_certified (then source "autocalibration"); the
     difference and the certified intrinsics on their range's edge (the autocalibration stage's
     ranges) are recomputed; determined only when certified, off the edge and with no critical
     motion; the summary's autocalibration_certified and autocalibration_determined are its own;
@@ -570,17 +570,16 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
     if K is not None and model == "shared" and not all(calibration_claim.same(k, K) for k in Ks):
         raise Invalid("returned", f"{where}/K is not every registered camera's K (model shared)")
     if K is not None and model == "varying":
-        # With shared intrinsics the writer's K is the middle focal length's (upgrade.adjust: sorted,
-        # index len // 2): a focal length merely within the cameras' range is one no camera has
-        # (review 45), an end camera's is not the one stated (review 46). Only with a principal point
-        # per view does one camera's K stand for them.
-        rest = np.array([[k[0, 1], k[0, 2], k[1, 2], k[1, 1] / k[0, 0]] for k in Ks + [K]])
-        middle = sorted(k[0, 0] for k in Ks)[len(Ks) // 2]
-        shared = all(calibration_claim.same(r, rest[-1]) for r in rest)
-        if not ((shared and calibration_claim.same(np.array([K[0, 0]]), np.array([middle])))
-                or (not shared and any(calibration_claim.same(k, K) for k in Ks))):
-            raise Invalid("returned", f"{where}/K is not the registered cameras' middle focal length with their "
-                                      "shared intrinsics, nor one registered camera's K (model varying)")
+        # The writer's K is one camera's it returns, picked by calibration_claim.stated_camera: the
+        # middle focal length's with shared intrinsics (a focal length merely within the cameras'
+        # range is one no camera has: review 45; an end camera's is not the one stated: review 46),
+        # the middle principal point's among the cameras sharing the most common focal length with a
+        # principal point each (any other camera's would say no more than it: issue 33).
+        if not calibration_claim.same(K, Ks[calibration_claim.stated_camera(Ks)]):
+            raise Invalid("returned", f"{where}/K is not the K of the registered camera the writer states (the "
+                                      "middle focal length's with their shared intrinsics; with a principal point "
+                                      "per view, the middle principal point's among those sharing the most common "
+                                      "focal length) (model varying)")
     if model not in ("shared", "varying") or certified not in (True, False):
         raise Invalid("returned", f"{where}: model must be shared or varying, certified a boolean")
     cert = claim.get("certified_K")

@@ -777,6 +777,21 @@ def _check_principal_points_per_view(result: dict, stage: dict) -> None:
                                       "options.principal_point "
                                       "per_view)")
         _check_estimated_inside(result, where)
+    if isinstance(test, dict) and test.get("precise") is True:
+        # ``precise`` restates its sd_px (every view's at most max_sd_px), and a test whose every
+        # condition passed kept the principal points (pipeline._principal_points_per_view): beside
+        # ``estimated`` false, precise true says the test failed on its chi-square or the middle half
+        sd = test.get("sd_px")
+        if not (test.get("max_sd_px") == MAX_PRINCIPAL_POINT_SD_PX and isinstance(sd, list) and sd
+                and all(is_number(s) and s <= MAX_PRINCIPAL_POINT_SD_PX for s in sd)):
+            raise Invalid("returned", f"{where}/precise is true, and its sd_px are not every one at most max_sd_px "
+                                      f"{MAX_PRINCIPAL_POINT_SD_PX}")
+        chi2, threshold = test.get("chi2"), test.get("threshold")
+        if not estimated and is_number(chi2) and is_number(threshold) and chi2 > threshold \
+                and test.get("inside_middle_half") is True:
+            raise Invalid("returned", f"{where}/estimated is false, and its test states every condition for keeping "
+                                      "a principal point per view passed (chi2 above its threshold, inside the middle "
+                                      "half, precise)")
     if stage.get("model") != "simple":
         return
     Ks = [intrinsics_of(camera["P"]) for camera in result.get("cameras") or []

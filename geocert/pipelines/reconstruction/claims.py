@@ -245,14 +245,15 @@ class CalibrationClaim:
     """What the result says about K, built so that every claim is about a K it returns.
 
     ``K`` is the calibration the returned cameras use (every registered camera's, unless
-    ``model`` is "varying": then the camera with the middle focal length's, each camera carrying
-    its own; None when no metric reconstruction was found); ``certified_K`` the K the certified
-    autocalibration proved optimal for its upgrade (None when none was certified). ``certified``
-    is about ``certified_K`` only, and cannot be True without it; ``returned_is_certified`` says
-    whether the cameras use it (then K is certified_K), and ``difference`` how far the returned K
-    moved from it (the adjustment's work). ``determined`` is True only when the tracks fix K:
-    certified, no critical motion, and no certified intrinsic on its range's edge (an optimum on
-    the edge is the range's, not the data's)."""
+    ``model`` is "varying": then one camera's among those returned, each camera carrying its own
+    (calibration_claim.stated_camera: the middle focal length's, or with a principal point per
+    view the middle principal point's); None when no metric reconstruction was found);
+    ``certified_K`` the K the certified autocalibration proved optimal for its upgrade (None when
+    none was certified). ``certified`` is about ``certified_K`` only, and cannot be True without
+    it; ``returned_is_certified`` says whether the cameras use it (then K is certified_K), and
+    ``difference`` how far the returned K moved from it (the adjustment's work). ``determined`` is
+    True only when the tracks fix K: certified, no critical motion, and no certified intrinsic on
+    its range's edge (an optimum on the edge is the range's, not the data's)."""
 
     K: list | None
     # "given", "autocalibration", "bundle_adjustment" (it moved K), "camera_model" (no adjustment:

@@ -1127,7 +1127,31 @@ def _check_cameras(out: Reconstruction, metric: upgrade.Metric, obs: Observation
         if not changed:
             break
     out.checks.update(cameras_dropped=dropped, observations_removed=int(removed), threshold_px=threshold_px)
+    _stated_K(out, metric)
     return keep
+
+
+def _stated_K(out: Reconstruction, metric: upgrade.Metric) -> None:
+    """With a K per camera, metric.K (summary.calibration.K) is one camera's K picked among the
+    cameras returned (calibration_claim.stated_camera, which the verifier recomputes from them):
+    the adjustment picked it among the views it adjusted, and a camera the sanity layer dropped
+    since may have been that one, or moved the middle. The records stating the adjustment's K (its
+    stage's K, the depth-reversal record's focal length of the rig returned) move with it: each is
+    the returned K (the verifier reads them against summary.calibration.K)."""
+    views = [v for v, R in enumerate(metric.rotations) if R is not None]
+    if metric.Ks is None or metric.K is None or not views:
+        return
+    picked = metric.Ks[views[calibration_claim.stated_camera([metric.Ks[v] for v in views])]]
+    if np.array_equal(picked, metric.K):
+        return
+    was, metric.K = metric.K, picked.copy()
+    stage = next((s for s in out.stages if s.get("name") == "bundle_adjustment"), {})
+    if stage.get("K") is not None and np.array_equal(np.asarray(stage["K"], dtype=float), was):
+        stage["K"] = metric.K.tolist()
+    depth = out.checks.get("depth_reversal") or {}
+    focal = "mirror_focal_px" if depth.get("adopted") else "focal_px"
+    if depth.get("checked") and depth.get(focal) == float(was[0, 0]):
+        depth[focal] = float(metric.K[0, 0])
 
 
 def _metric_cameras(out: Reconstruction, metric: upgrade.Metric, n_views: int) -> dict[int, np.ndarray]:

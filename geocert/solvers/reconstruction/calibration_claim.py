@@ -65,6 +65,34 @@ def same(a, b) -> bool:
     return bool(a.shape == b.shape and np.all(np.abs(a - b) <= SAME * max(1.0, float(np.abs(b).max()))))
 
 
+def middle_centre(centres) -> int:
+    """The index of the principal point (of ``centres``, (n, 2)) nearest the median of them (ties:
+    the first)."""
+    centres = np.asarray(centres, dtype=float)
+    return int(np.argmin(np.linalg.norm(centres - np.median(centres, axis=0), axis=1)))
+
+
+def stated_camera(Ks) -> int:
+    """Which camera's K (``Ks``: the K of each camera returned, in view order) a result whose
+    cameras have a K each states as summary.calibration.K (the claim's model "varying"): where
+    they share their principal point, skew and aspect (camera_model "varying": a focal length
+    each), the middle focal length's (sorted, index len // 2); else (a principal point per view)
+    among the cameras sharing the focal length most of them share (ties: the earliest camera's;
+    all of them where one focal length is every camera's), the one whose principal point lies
+    nearest the median of theirs (middle_centre). The pipeline picks it among the cameras it
+    returns, after the sanity layer has dropped any (pipeline._check_cameras), and the verifier
+    recomputes it from them."""
+    Ks = [np.asarray(K, dtype=float) for K in Ks]
+    focals = np.array([K[0, 0] for K in Ks])
+    rest = [np.array([K[0, 1], K[0, 2], K[1, 2], K[1, 1] / K[0, 0]]) for K in Ks]
+    if all(same(r, rest[0]) for r in rest):
+        return int(np.argsort(focals, kind="stable")[len(focals) // 2])
+    values = list(dict.fromkeys(focals.tolist()))  # each focal length once, in order of its first camera
+    most = values[int(np.argmax([np.count_nonzero(focals == f) for f in values]))]  # argmax: the first of a tie
+    group = np.flatnonzero(focals == most)
+    return int(group[middle_centre(np.array([K[:2, 2] for K in Ks])[group])])
+
+
 def intrinsics(K) -> dict:
     K = np.asarray(K, dtype=float)
     return {"focal": float(K[0, 0]), "aspect": float(K[1, 1] / K[0, 0]), "skew": float(K[0, 1]),

@@ -123,6 +123,11 @@ def tie(result: dict, stage: dict, data: dict, recorded: bool = True) -> dict:
             and all(isinstance(t, int) and t >= 0 for t in tracks)):
         raise Invalid("returned", "stages/autocalibration must name the view of each calibration certificate camera "
                                   "and the track of each point (certificate_views, certificate_tracks)")
+    # The stage's count of the points the autocalibration used is the certificate's (both are the
+    # points upgrade.autocalibrate chose): a count beside the certificate that states it is tied to it.
+    if "points_used" in stage and stage["points_used"] != len(points):
+        raise Invalid("returned", f"stages/autocalibration/points_used {stage['points_used']!r:.40} is not the "
+                                  f"calibration certificate's {len(points)} points")
     size = data.get("image_size")
     if size is not None and any(camera.get("image_size") not in (None, list(size)) for camera in result["cameras"]
                                 if camera.get("view") in views):

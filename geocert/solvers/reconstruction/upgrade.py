@@ -16,7 +16,7 @@ import numpy as np
 from scipy.linalg import rq
 
 from geocert.solvers.autocalibration import problem as autocalibration_problem
-from geocert.solvers.reconstruction import motion_claim, schur
+from geocert.solvers.reconstruction import calibration_claim, motion_claim, schur
 
 
 @dataclass
@@ -268,9 +268,9 @@ def _stage(name: str, stage, elapsed: float) -> dict:
 
 def middle_centre(centres: np.ndarray) -> int:
     """The view whose principal point lies nearest the per-view principal points' median (its K
-    stands for theirs in Metric.K, as the middle focal length's does for the "varying" model)."""
-    centres = np.asarray(centres, dtype=float)
-    return int(np.argmin(np.linalg.norm(centres - np.median(centres, axis=0), axis=1)))
+    stands for theirs in Metric.K, as the middle focal length's does for the "varying" model): the
+    rule the verifier recomputes (calibration_claim.middle_centre)."""
+    return calibration_claim.middle_centre(centres)
 
 
 def K_of(metric: Metric, view: int) -> np.ndarray:
