@@ -154,6 +154,28 @@ def _check_pooled(index: int, determinacy, result: dict, certificate: dict, floo
                                   f"residual variance pooled over its pooled_tracks gives (pooled_floor)")
 
 
+def refuse_unknown_members(data, members: tuple[str, ...], key: str, item_members: tuple[str, ...]) -> None:
+    """Refuse (check ``data``, naming it) a member of the data, or of one of its items (the list
+    ``key``), that the kind's data do not have: ``members`` and ``item_members``, the kind's
+    request model's (kinds.schema.Strict refuses any other in a job, so no genuine document holds
+    one). A member no solver takes and no check reads would be hashed with the data and read as
+    part of the problem (a track's "weights": a weighted cost) that the claims are not about; the
+    bilinear and autocalibration kinds refuse theirs in the same words."""
+    if not isinstance(data, dict):
+        raise Invalid("data", "data must be an object")
+    for name in data:
+        if name not in members:
+            raise Invalid("data", f"data/{name}: unknown field (known: {', '.join(members)})")
+    entries = data.get(key)
+    if not isinstance(entries, list):
+        return  # _check_item_count refuses it, naming the list
+    known = frozenset(item_members)
+    for index, entry in enumerate(entries):
+        if isinstance(entry, dict) and not entry.keys() <= known:
+            name = next(name for name in entry if name not in item_members)
+            raise Invalid("data", f"data/{key}/{index}/{name}: unknown field (known: {', '.join(item_members)})")
+
+
 def _runs(runs, tracks: int) -> bool:
     """Whether ``runs`` are increasing, disjoint runs [first, stop) of indices of ``tracks``."""
     if not isinstance(runs, list) or not runs:
@@ -453,6 +475,11 @@ class TrackItems:
                            self.earlier_words, "reference_view", chart_terms,
                            "the search box, its functionals, denominator and reference view")
 
+    def check_data(self, data) -> None:
+        """The triangulation's data hold cameras and tracks, each track its views and points
+        (kinds.triangulation's request model, the same in every format version): nothing else."""
+        refuse_unknown_members(data, ("cameras", "tracks"), "tracks", ("views", "points"))
+
     def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
         """What an uncertified track's point costs on its observations (and the allowance for its
         rounding); None when it returns no point."""
@@ -546,6 +573,11 @@ class MapItems:
         if dims not in self.dimensions or not 1 <= len(source) <= MAX_POINTS:
             raise Invalid("data", f"data/maps/{index}: {dims[0]}D -> {dims[1]}D is not served for {self.kind}")
         return source, target
+
+    def check_data(self, data) -> None:
+        """A map kind's data hold maps, each its source and target points (kinds.resection_homography's
+        request model, the same in every format version): nothing else."""
+        refuse_unknown_members(data, ("maps",), "maps", ("source", "target"))
 
     def item(self, arrays: tuple, norm: str) -> MapItem:
         return MapItem(arrays, norm)

@@ -160,12 +160,12 @@ def _with_member(name: str, path: tuple, value) -> dict:
     return result
 
 
-@pytest.mark.xfail(strict=True, reason="review 47 class 2: a triangulation's or map's data may hold members no solver "
-                                       "takes and no check reads (a track's weights), hashed and verified")
 @pytest.mark.parametrize("name, path, value", UNKNOWN_MEMBERS)
 def test_a_data_member_no_solver_takes_is_refused(name, path, value):
     report = verify_any(_with_member(name, path, value))
     assert not report.valid and report.first_failure["check"] == "data", report.first_failure
+    named = "data/" + "/".join(map(str, path))
+    assert report.first_failure["detail"].startswith(f"{named}: unknown field"), report.first_failure
 
 
 @pytest.mark.parametrize("kind", ["triangulation", "resection", "homography"])
