@@ -389,6 +389,9 @@ def _verify(document: Any, returned: dict | None) -> Report:
         hashed, earlier_form, earlier_estimates = _check_hashes(document, options)
         tallies["data_hash"][0] += 1
         _check_item_count(document)
+        check_data = hook(_adapter(document["kind"]), "check_data")
+        if check_data is not None:  # members beyond the kind's, which no check would read
+            check_data(document["data"])
         report.scope = scope_statement(document["kind"], options)
         data_scope = hook(_adapter(document["kind"]), "data_scope")
         if data_scope is not None:

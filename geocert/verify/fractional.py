@@ -12,7 +12,7 @@ from geocert.core import exact
 from geocert.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.core.determinacy import ESTIMATES_FORM, certified_gap
 from geocert.core.geometry import cost_rounding, is_number, norm_cost, normalised_cameras
-from geocert.core.strict import Invalid, number as _number, numbers, record
+from geocert.core.strict import Invalid, charge, number as _number, numbers, record
 from geocert.solvers.fractional.charts import Chart, MapChart
 from geocert.solvers.fractional.convexity import outside_range, track_bound, verify_sublevel
 from geocert.solvers.fractional.convexity_path import cost_increase
@@ -117,7 +117,48 @@ def _check_proven(where: str, determinacy, claim: dict, norm, proven) -> None:
                                   f"{stated['cost_increase']!r:.12} below the {level!r:.12} its estimate is read at")
 
 
-def _check_pooled(index: int, determinacy, result: dict, certificate: dict, floors: dict) -> None:
+class _Pools:
+    """What the pooled levels of one triangulation result are checked with, each computed once a
+    document: the cameras normalised, every track's squared residuals at its returned point and
+    degrees of freedom (``costs``, ``dofs``: NaN and 0 for a track pooling nothing, at infinity or
+    with no point), and each pool's floor by its runs. A pool stated anew (each track may state its
+    own) costs only the gathering of its tracks' figures and pooled_floor over them, charged to the
+    verification's budget (strict.charge, a unit a track): recomputed per pool, the cameras and
+    residuals made the check tracks x (cameras + tracks), unpaid (review 47: 51 s of CPU for 1,000
+    tracks beside 40,000 unused cameras)."""
+
+    def __init__(self, result: dict, certificate: dict):
+        self.tracks, self.data = result["tracks"], certificate["data"]
+        self.costs: np.ndarray | None = None
+        self.dofs: np.ndarray | None = None
+        self.floors: dict = {}
+
+    def _residuals(self) -> None:
+        data = self.data
+        cameras = normalised_cameras(data["cameras"])  # as the writer reads them (huge entries overflow raw)
+        costs, dofs = np.full(len(self.tracks), np.nan), np.zeros(len(self.tracks))
+        for j, track in enumerate(self.tracks):
+            if not isinstance(track, dict) or track.get("point") is None or track.get("at_infinity") is not False:
+                continue
+            observed = data["tracks"][j]
+            costs[j] = squared_residuals(cameras, observed["views"], observed["points"], track["point"])
+            dofs[j] = 2 * len(observed["views"]) - 3
+        self.costs, self.dofs = costs, dofs
+
+    def floor(self, runs: list) -> float | None:
+        """pooled_floor over the tracks of ``runs`` (checked by _runs)."""
+        key = tuple(map(tuple, runs))
+        if key not in self.floors:
+            charge(sum(b - a for a, b in runs), "the tracks of a pooled level")
+            if self.costs is None:
+                self._residuals()
+            costs = np.concatenate([self.costs[a:b] for a, b in runs])
+            dofs = np.concatenate([self.dofs[a:b] for a, b in runs])
+            self.floors[key] = pooled_floor(costs, dofs)  # it pools only the tracks of finite cost
+        return self.floors[key]
+
+
+def _check_pooled(index: int, determinacy, result: dict, pools: _Pools) -> None:
     """A track's determinacy read at a level pooled over the job's tracks (its ``level`` as
     determinacy.pooled_level writes it) names the tracks pooled (``pooled_tracks``: runs [first,
     stop) of their indices, its own among them), and its cost_increase is at least the floor
@@ -135,23 +176,32 @@ def _check_pooled(index: int, determinacy, result: dict, certificate: dict, floo
         raise Invalid("returned", f"{where} is read at a level pooled over the job's tracks only with that level's "
                                   "words and the tracks pooled (pooled_tracks: runs [first, stop) of their indices, "
                                   "its own among them)")
-    key = tuple(map(tuple, runs))
-    if key not in floors:
-        data = certificate["data"]
-        cameras = normalised_cameras(data["cameras"])  # as the writer reads them (huge entries overflow raw)
-        costs, dofs = [], []
-        for a, b in runs:
-            for j in range(a, b):
-                track, observed = tracks[j], data["tracks"][j]
-                if not isinstance(track, dict) or track.get("point") is None or track.get("at_infinity") is not False:
-                    continue
-                costs.append(squared_residuals(cameras, observed["views"], observed["points"], track["point"]))
-                dofs.append(2 * len(observed["views"]) - 3)
-        floors[key] = pooled_floor(np.array(costs), np.array(dofs))
-    floor, level = floors[key], determinacy.get("cost_increase")
+    floor, level = pools.floor(runs), determinacy.get("cost_increase")
     if floor is not None and not (is_number(level) and level >= floor * (1 - LEVEL_ROUNDING)):
         raise Invalid("returned", f"{where}/cost_increase is {level!r:.12}, below {floor!r:.12}, the least the "
                                   f"residual variance pooled over its pooled_tracks gives (pooled_floor)")
+
+
+def refuse_unknown_members(data, members: tuple[str, ...], key: str, item_members: tuple[str, ...]) -> None:
+    """Refuse (check ``data``, naming it) a member of the data, or of one of its items (the list
+    ``key``), that the kind's data do not have: ``members`` and ``item_members``, the kind's
+    request model's (kinds.schema.Strict refuses any other in a job, so no genuine document holds
+    one). A member no solver takes and no check reads would be hashed with the data and read as
+    part of the problem (a track's "weights": a weighted cost) that the claims are not about; the
+    bilinear and autocalibration kinds refuse theirs in the same words."""
+    if not isinstance(data, dict):
+        raise Invalid("data", "data must be an object")
+    for name in data:
+        if name not in members:
+            raise Invalid("data", f"data/{name}: unknown field (known: {', '.join(members)})")
+    entries = data.get(key)
+    if not isinstance(entries, list):
+        return  # _check_item_count refuses it, naming the list
+    known = frozenset(item_members)
+    for index, entry in enumerate(entries):
+        if isinstance(entry, dict) and not entry.keys() <= known:
+            name = next(name for name in entry if name not in item_members)
+            raise Invalid("data", f"data/{key}/{index}/{name}: unknown field (known: {', '.join(item_members)})")
 
 
 def _runs(runs, tracks: int) -> bool:
@@ -414,13 +464,13 @@ class TrackItems:
         if certificate.get("kind") != "triangulation":
             return
         norm = (certificate.get("options") or {}).get("norm")
-        floors: dict = {}
+        pools = _Pools(result, certificate)
         for index, (item, claim) in enumerate(zip(result["tracks"], certificate["items"])):
             self._check_root_region(f"tracks/{index}", item.get("certificate"), claim, certificate, index)
             _check_scope_words(f"tracks/{index}", item.get("certificate"), claim, certificate["options"],
                                "every point in front of every camera")
             determinacy = item.get("determinacy")
-            _check_pooled(index, determinacy, result, certificate, floors)
+            _check_pooled(index, determinacy, result, pools)
             _check_proven(f"tracks/{index}", determinacy, claim, norm, proven_track)
             stated = determinacy.get("proven_intervals") if isinstance(determinacy, dict) else None
             if stated is None:
@@ -452,6 +502,11 @@ class TrackItems:
         _check_root_region(where, summary, claim, (TRACK_REGION_MEANING, TRACK_REGION_MEANING_EARLIER),
                            self.earlier_words, "reference_view", chart_terms,
                            "the search box, its functionals, denominator and reference view")
+
+    def check_data(self, data) -> None:
+        """The triangulation's data hold cameras and tracks, each track its views and points
+        (kinds.triangulation's request model, the same in every format version): nothing else."""
+        refuse_unknown_members(data, ("cameras", "tracks"), "tracks", ("views", "points"))
 
     def solution_cost(self, data: dict, claim: dict, options: dict) -> tuple[float, float] | None:
         """What an uncertified track's point costs on its observations (and the allowance for its
@@ -546,6 +601,11 @@ class MapItems:
         if dims not in self.dimensions or not 1 <= len(source) <= MAX_POINTS:
             raise Invalid("data", f"data/maps/{index}: {dims[0]}D -> {dims[1]}D is not served for {self.kind}")
         return source, target
+
+    def check_data(self, data) -> None:
+        """A map kind's data hold maps, each its source and target points (kinds.resection_homography's
+        request model, the same in every format version): nothing else."""
+        refuse_unknown_members(data, ("maps",), "maps", ("source", "target"))
 
     def item(self, arrays: tuple, norm: str) -> MapItem:
         return MapItem(arrays, norm)

@@ -1191,6 +1191,9 @@ class ReconstructionItems(TrackItems, Verification):
     claim_options = hashed_options.CLAIM_OPTIONS
     earlier_forms = hashed_options.EARLIER_FORMS
     option_names = run_control.OPTION_NAMES
+    # Its data are the pipeline's (views and input labels beside the cameras and tracks, read by
+    # check_result), not a triangulation's: TrackItems.check_data's members are not its.
+    check_data = None
 
     @staticmethod
     def job_outcomes(result: dict) -> list:

@@ -71,6 +71,11 @@ class Verification(abc.ABC):
     None: the kind's items are not its data's (autocalibration's stages: check_claims counts
     them)."""
 
+    check_data: Callable[[Any], None] | None = None
+    """``check_data(data)``: refuse (Invalid, check ``data``) what the data hold beyond the kind's
+    members, top level and per item, before any item is read: a member no check reads would be
+    taken for part of the problem. None: the data are read only through ``read``."""
+
     forget: Callable[[], None] | None = None
     """``forget()``: drop what the adapter remembers of one document (called before and after its
     items are checked). None: it remembers nothing."""

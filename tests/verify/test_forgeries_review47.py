@@ -157,12 +157,12 @@ def _with_member(name: str, path: tuple, value) -> dict:
     return result
 
 
-@pytest.mark.xfail(strict=True, reason="review 47 class 2: a triangulation's or map's data may hold members no solver "
-                                       "takes and no check reads (a track's weights), hashed and verified")
 @pytest.mark.parametrize("name, path, value", UNKNOWN_MEMBERS)
 def test_a_data_member_no_solver_takes_is_refused(name, path, value):
     report = verify_any(_with_member(name, path, value))
     assert not report.valid and report.first_failure["check"] == "data", report.first_failure
+    named = "data/" + "/".join(map(str, path))
+    assert report.first_failure["detail"].startswith(f"{named}: unknown field"), report.first_failure
 
 
 @pytest.mark.parametrize("kind", ["triangulation", "resection", "homography"])
@@ -247,9 +247,6 @@ def _counting(monkeypatch, module, name: str, size) -> list:
     return counted
 
 
-@pytest.mark.xfail(strict=True, reason="review 47 class 4: a level pooled over a different run of tracks for each "
-                                       "track reads every camera of the document once per track (tracks x cameras "
-                                       "of work, uncharged)")
 def test_pooled_levels_read_the_cameras_a_bounded_number_of_times(monkeypatch):
     from geocert.verify import fractional
 
@@ -261,8 +258,6 @@ def test_pooled_levels_read_the_cameras_a_bounded_number_of_times(monkeypatch):
     assert read[0] <= 4 * cameras, f"{read[0]} cameras normalised for a document of {cameras}"
 
 
-@pytest.mark.xfail(strict=True, reason="review 47 class 4: each track's pool over every track is recomputed from "
-                                       "every track's residuals (tracks^2 residual sums, uncharged)")
 def test_pooled_levels_sum_each_tracks_residuals_a_bounded_number_of_times(monkeypatch):
     from geocert.verify import fractional
 
@@ -272,6 +267,36 @@ def test_pooled_levels_sum_each_tracks_residuals_a_bounded_number_of_times(monke
     report = verify_any(document)
     assert not report.valid
     assert summed[0] <= 4 * tracks, f"{summed[0]} residual sums for a document of {tracks} tracks"
+
+
+def test_pooled_levels_are_paid_from_the_work_budget():
+    """What each pool stated anew still costs (its tracks gathered, pooled_floor over them) is
+    charged, a unit a track: a document stating more pools than its size pays for is refused."""
+    from geocert.core.strict import Invalid, work_budget
+    from geocert.verify import fractional
+
+    document = _pooled_document(tracks=40, cameras=0, spanning=True)
+    pools = fractional._Pools(document, document["certificate"])
+    with work_budget(100), pytest.raises(Invalid, match="more work than its size pays for"):
+        for index, track in enumerate(document["tracks"]):
+            fractional._check_pooled(index, track["determinacy"], document, pools)
+
+
+def test_a_pool_stated_by_every_track_is_paid_once():
+    """The writer's pools (every track of a batch states the same runs) cost a unit a track once."""
+    from geocert.core.strict import work_budget
+    from geocert.verify import fractional
+
+    document = _pooled_document(tracks=40, cameras=0)
+    tracks = len(document["tracks"])
+    for track in document["tracks"]:
+        if "pooled_tracks" in track["determinacy"]:
+            track["determinacy"]["pooled_tracks"] = [[0, tracks]]
+    pools = fractional._Pools(document, document["certificate"])
+    with work_budget(tracks):  # a unit short of paying for a second pool of them all
+        for index, track in enumerate(document["tracks"]):
+            fractional._check_pooled(index, track["determinacy"], document, pools)
+    assert list(pools.floors) == [((0, tracks),)]
 
 
 # Class 5: the values hash copies the data
