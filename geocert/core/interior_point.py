@@ -203,9 +203,11 @@ def _scaling_psd(S: np.ndarray, Z: np.ndarray):
 def _schur_complement(n: int, An: sp.csr_matrix, An_used: np.ndarray, flat_n: np.ndarray, weight: np.ndarray,
                       blocks: list, Gis: list, legacy: bool, work: dict | None = None) -> np.ndarray:
     """H = A_K' (W'W)^-1 A_K: the nonnegative rows' part (``weight`` z / s, dense over the moments
-    they hold, An_used at the flat positions flat_n) and each PSD block's (_Psd.schur, or with
-    ``legacy`` the former assembly through kron, the benchmark's baseline). ``work``, when given,
-    keeps H's array and the full blocks' from call to call (the same sums into them)."""
+    they hold, An_used at the flat positions flat_n of H's transpose) and each PSD block's
+    (_Psd.schur, or with ``legacy`` the former assembly through kron, the benchmark's baseline).
+    ``work``, when given, keeps H's array and the full blocks' from call to call (the same sums
+    into them). H is Fortran-ordered (but with ``legacy``), so that LAPACK factors it in place
+    (_cholesky): its flat positions are those of H.T, C-ordered, hence flat_n's transposed order."""
     if legacy:
         H = (sp.csr_matrix(An.T).multiply(weight[None, :]) @ An).toarray()
         for B, Gi in zip(blocks, Gis):
@@ -214,21 +216,36 @@ def _schur_complement(n: int, An: sp.csr_matrix, An_used: np.ndarray, flat_n: np
     if work is None:
         work = {}
     if "H" not in work:
-        work["H"] = np.empty((n, n))
+        work["H"] = np.empty((n, n), order="F")
     H = work["H"]
+    flat = H.T.reshape(-1)  # a view: H[i, j] is flat[j * n + i]
     H.fill(0.0)
     # (the flat positions are distinct, so the indexed sum is np.add.at's: measured 0.5 ms for np.add.at on these
     # values against 0.04 ms)
-    H.reshape(-1)[flat_n] += ((An_used.T * weight) @ An_used).ravel()
+    flat[flat_n] += ((An_used.T * weight) @ An_used).ravel()
     for B, Gi in zip(blocks, Gis):
         if len(B.cols) == n:
-            if id(B) not in work:
-                work[id(B)] = np.empty((n, n))
+            if id(B) not in work:  # (Fortran-ordered as H: schur's column chunks written contiguous, summed contiguous)
+                work[id(B)] = np.empty((n, n), order="F")
             H += B.schur(Gi, work[id(B)])
         else:  # (np.add.at at the flat positions: measured 3 to 5 times faster than H[np.ix_(cols, cols)] +=)
-            np.add.at(H.reshape(-1), (B.cols[:, None] * n + B.cols[None, :]).ravel(), B.schur(Gi).ravel())
-    # (cho_factor reads H's upper triangle only: H is symmetric up to rounding, unsymmetrised)
+            np.add.at(flat, (B.cols[None, :] * n + B.cols[:, None]).ravel(), B.schur(Gi).ravel())
+    # (the factorisation reads H's upper triangle only: H is symmetric up to rounding, unsymmetrised)
     return H
+
+
+def _cholesky(H: np.ndarray, legacy: bool):
+    """cho_factor(H)'s (c, lower): with ``legacy`` scipy's, which copies H; else LAPACK's dpotrf
+    on Fortran-ordered H in place (scipy's cho_factor copies a C-ordered array to Fortran order
+    first: measured 1.1 ms of its 5.4 ms at 714 x 714), the same upper factor bit for bit, H
+    overwritten by it. LinAlgError when H is not numerically positive definite (H then partly
+    overwritten but with ``legacy``)."""
+    if legacy:
+        return sl.cho_factor(H, check_finite=True)
+    c, info = sl.lapack.dpotrf(H, lower=0, clean=0, overwrite_a=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dpotrf: info {info}")
+    return c, False
 
 
 def solve(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: int, psd: tuple,
@@ -270,7 +287,7 @@ def _iterate(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: in
     # chirality rows' cubic forms hold 119 of the 714 at order 2; the sparse product took 6 ms)
     used_n = np.unique(An.indices)
     An_used = An[:, used_n].toarray()
-    flat_n = (used_n[:, None] * n + used_n[None, :]).ravel()
+    flat_n = (used_n[None, :] * n + used_n[:, None]).ravel()  # (H's flat positions, H Fortran-ordered)
     bnorm, qnorm = max(1.0, np.linalg.norm(b)), max(1.0, np.linalg.norm(q))
 
     # start: y minimising ||A y - b||, slacks shifted into the cones; z the least-norm dual, shifted
@@ -350,11 +367,13 @@ def _iterate(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: in
         Gis = [rinv.T @ rinv for r, rinv, lam in scal]
         H = _schur_complement(n, An, An_used, flat_n, zp[0] / sp_[0], blocks, Gis, legacy, work)
         try:
-            Hf = sl.cho_factor(H, check_finite=legacy)
+            Hf = _cholesky(H, legacy)
         except np.linalg.LinAlgError:
             try:
+                # (H assembled again: the failed factorisation overwrote part of it)
+                H = _schur_complement(n, An, An_used, flat_n, zp[0] / sp_[0], blocks, Gis, legacy, work)
                 H[np.diag_indices(n)] += 1e-12 * H.diagonal().max()
-                Hf = sl.cho_factor(H, check_finite=legacy)
+                Hf = _cholesky(H, legacy)
             except np.linalg.LinAlgError:
                 status = "NumericalError"
                 break
