@@ -61,7 +61,14 @@ def _svec_index(n: int):
 # kept as bench.direct_autocalibration --speed's baseline; the same iterates up to rounding, which
 # on seed 1008's ill-conditioned programs decides whether the last iterations pass the tolerance).
 ASSEMBLY = "moments"
-CHUNK = 32  # moments per chunk of the Schur block's assembly (_Psd.schur): its arrays stay in cache
+CHUNK = 32 * 55 * 55  # entries of Gi F_l Gi per chunk of the Schur block's assembly (_Psd.schur): 32 moments of the
+# 55 x 55 moment matrix, so that its arrays stay in cache; a small block's chunks hold more moments (a 10 x 10
+# block's all: 32 at a time, its assembly's Python overhead per chunk was most of its 0.3 ms)
+
+
+def _chunk(n: int) -> int:
+    """Moments per chunk of an n x n block's Schur assembly."""
+    return max(1, CHUNK // (n * n))
 
 
 _STRUCTURES: dict = {}
@@ -99,7 +106,7 @@ def _schur_structure(n: int, A: sp.csr_matrix):
     rows[pairs // n, slot] = pairs % n
     Fr = np.zeros((m, r, n))
     np.add.at(Fr, (L, slot[np.searchsorted(pairs, L * n + P)], Q), V)
-    heads = [F[:min(m, first + CHUNK)] for first in range(0, m, CHUNK)]
+    heads = [F[:min(m, first + _chunk(n))] for first in range(0, m, _chunk(n))]
     structure = cols, F, rows, Fr.reshape(m * r, n), heads
     if len(_STRUCTURES) >= 32:
         _STRUCTURES.pop(next(iter(_STRUCTURES)))
@@ -161,8 +168,8 @@ class _Psd:
         G = np.take(Gi, self.rows, axis=0, out=self._work[1]).transpose(0, 2, 1)  # (l, n, r): Gi[:, R_l]
         if out is None:
             out = np.empty((m, m))
-        for chunk, first in enumerate(range(0, m, CHUNK)):
-            last = min(m, first + CHUNK)
+        for chunk, first in enumerate(range(0, m, _chunk(n))):
+            last = min(m, first + _chunk(n))
             Y = np.matmul(G[first:last], Z[first:last])  # (l, a, s): (Gi F_l Gi)[a, s]
             if upper:
                 out[:last, first:last] = self.heads[chunk] @ Y.reshape(last - first, n * n).T
