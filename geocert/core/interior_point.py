@@ -118,6 +118,9 @@ class _Psd:
     def __init__(self, n: int, A: sp.csr_matrix, b: np.ndarray):
         self.n = n
         self.p, self.q, self.w = _svec_index(n)
+        # (mat's and vec's positions flat: a one-dimensional index measured 2 to 3 times faster than (p, q), a few
+        # hundred calls an iteration)
+        self.pq, self.qp = self.p * n + self.q, self.q * n + self.p
         self.ww = np.outer(self.w, self.w) / 2.0
         self.AT = sp.csr_matrix(A.T)
         self.A = A
@@ -128,12 +131,13 @@ class _Psd:
     def mat(self, v: np.ndarray) -> np.ndarray:
         S = np.zeros((self.n, self.n))
         vals = v / self.w
-        S[self.p, self.q] = vals
-        S[self.q, self.p] = vals
+        flat = S.reshape(-1)
+        flat[self.pq] = vals
+        flat[self.qp] = vals
         return S
 
     def vec(self, S: np.ndarray) -> np.ndarray:
-        return self.w * S[self.p, self.q]
+        return self.w * S.reshape(-1)[self.pq]
 
     def kron(self, Gi: np.ndarray) -> np.ndarray:
         """svec form of U -> Gi U Gi (symmetric): entry (pq, rs) is
