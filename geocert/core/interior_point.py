@@ -61,7 +61,14 @@ def _svec_index(n: int):
 # kept as bench.direct_autocalibration --speed's baseline; the same iterates up to rounding, which
 # on seed 1008's ill-conditioned programs decides whether the last iterations pass the tolerance).
 ASSEMBLY = "moments"
-CHUNK = 32  # moments per chunk of the Schur block's assembly (_Psd.schur): its arrays stay in cache
+CHUNK = 32 * 55 * 55  # entries of Gi F_l Gi per chunk of the Schur block's assembly (_Psd.schur): 32 moments of the
+# 55 x 55 moment matrix, so that its arrays stay in cache; a small block's chunks hold more moments (a 10 x 10
+# block's all: 32 at a time, its assembly's Python overhead per chunk was most of its 0.3 ms)
+
+
+def _chunk(n: int) -> int:
+    """Moments per chunk of an n x n block's Schur assembly."""
+    return max(1, CHUNK // (n * n))
 
 
 _STRUCTURES: dict = {}
@@ -72,7 +79,8 @@ def _schur_structure(n: int, A: sp.csr_matrix):
     matrices F_l = mat(A[:, l]) (full, symmetric) as (moment, n * n) rows (F), and each F_l's
     nonzero rows: their indices (rows, (moment, r), padded with row 0) and their entries (Fr,
     (moment * r, n), padded with zeros), r the most any F_l has (6 in the moment matrix's block,
-    whose F_l are its moment's positions). Kept by the rows' value (a few recent ones): the blocks
+    whose F_l are its moment's positions), and the rows of F up to each chunk's last moment (heads:
+    F[:last] for _Psd.schur's upper triangle). Kept by the rows' value (a few recent ones): the blocks
     repeat from solve to solve, their rows depending on the order and the cuts only."""
     A = sp.csr_matrix(A)
     A.sort_indices()
@@ -98,7 +106,8 @@ def _schur_structure(n: int, A: sp.csr_matrix):
     rows[pairs // n, slot] = pairs % n
     Fr = np.zeros((m, r, n))
     np.add.at(Fr, (L, slot[np.searchsorted(pairs, L * n + P)], Q), V)
-    structure = cols, F, rows, Fr.reshape(m * r, n)
+    heads = [F[:min(m, first + _chunk(n))] for first in range(0, m, _chunk(n))]
+    structure = cols, F, rows, Fr.reshape(m * r, n), heads
     if len(_STRUCTURES) >= 32:
         _STRUCTURES.pop(next(iter(_STRUCTURES)))
     _STRUCTURES[key] = structure
@@ -109,22 +118,26 @@ class _Psd:
     def __init__(self, n: int, A: sp.csr_matrix, b: np.ndarray):
         self.n = n
         self.p, self.q, self.w = _svec_index(n)
+        # (mat's and vec's positions flat: a one-dimensional index measured 2 to 3 times faster than (p, q), a few
+        # hundred calls an iteration)
+        self.pq, self.qp = self.p * n + self.q, self.q * n + self.p
         self.ww = np.outer(self.w, self.w) / 2.0
         self.AT = sp.csr_matrix(A.T)
         self.A = A
         self.b = b
-        self.cols, self.F, self.rows, self.Fr = _schur_structure(n, A)
+        self.cols, self.F, self.rows, self.Fr, self.heads = _schur_structure(n, A)
         self._work = None  # schur's work arrays
 
     def mat(self, v: np.ndarray) -> np.ndarray:
         S = np.zeros((self.n, self.n))
         vals = v / self.w
-        S[self.p, self.q] = vals
-        S[self.q, self.p] = vals
+        flat = S.reshape(-1)
+        flat[self.pq] = vals
+        flat[self.qp] = vals
         return S
 
     def vec(self, S: np.ndarray) -> np.ndarray:
-        return self.w * S[self.p, self.q]
+        return self.w * S.reshape(-1)[self.pq]
 
     def kron(self, Gi: np.ndarray) -> np.ndarray:
         """svec form of U -> Gi U Gi (symmetric): entry (pq, rs) is
@@ -139,14 +152,16 @@ class _Psd:
         out *= self.ww
         return out
 
-    def schur(self, Gi: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    def schur(self, Gi: np.ndarray, out: np.ndarray | None = None, upper: bool = False) -> np.ndarray:
         """A' kron(Gi) A over the block's moments (self.cols): entry (k, l) is trace(F_k Gi F_l Gi)
         with F_l = mat(A[:, l]). F_l Gi has r nonzero rows at most (its rows R_l: Z_l = F_l[R_l] Gi,
         one product for every l), so Gi F_l Gi = Gi[:, R_l] Z_l (a batch of n x r x n products),
         whose entries are summed over each F_k's positions (sparse), a chunk of moments l at a time
         (its arrays stay in cache). Measured against kron's 1540-square svec operator and its two
         sparse products, one BLAS thread, processor time: the 55 x 55 moment matrix's block 21 ms to
-        4.8 ms, the 40 x 40 one 4.1 ms to 0.8 ms."""
+        4.8 ms, the 40 x 40 one 4.1 ms to 0.8 ms. With ``upper``, a chunk's columns l only in the rows k up to its
+        last moment (every k <= l), from those rows of F (heads): the same values, about half the sparse products (the factorisation reads only H's
+        upper triangle); the others are left as they were in ``out``."""
         n, m = self.n, len(self.cols)
         r = self.rows.shape[1]
         if self._work is None:
@@ -157,10 +172,13 @@ class _Psd:
         G = np.take(Gi, self.rows, axis=0, out=self._work[1]).transpose(0, 2, 1)  # (l, n, r): Gi[:, R_l]
         if out is None:
             out = np.empty((m, m))
-        for first in range(0, m, CHUNK):
-            last = min(m, first + CHUNK)
+        for chunk, first in enumerate(range(0, m, _chunk(n))):
+            last = min(m, first + _chunk(n))
             Y = np.matmul(G[first:last], Z[first:last])  # (l, a, s): (Gi F_l Gi)[a, s]
-            out[:, first:last] = self.F @ Y.reshape(last - first, n * n).T
+            if upper:
+                out[:last, first:last] = self.heads[chunk] @ Y.reshape(last - first, n * n).T
+            else:
+                out[:, first:last] = self.F @ Y.reshape(last - first, n * n).T
         return out
 
 
@@ -203,9 +221,13 @@ def _scaling_psd(S: np.ndarray, Z: np.ndarray):
 def _schur_complement(n: int, An: sp.csr_matrix, An_used: np.ndarray, flat_n: np.ndarray, weight: np.ndarray,
                       blocks: list, Gis: list, legacy: bool, work: dict | None = None) -> np.ndarray:
     """H = A_K' (W'W)^-1 A_K: the nonnegative rows' part (``weight`` z / s, dense over the moments
-    they hold, An_used at the flat positions flat_n) and each PSD block's (_Psd.schur, or with
-    ``legacy`` the former assembly through kron, the benchmark's baseline). ``work``, when given,
-    keeps H's array and the full blocks' from call to call (the same sums into them)."""
+    they hold, An_used at the flat positions flat_n of H's transpose) and each PSD block's
+    (_Psd.schur, or with ``legacy`` the former assembly through kron, the benchmark's baseline).
+    ``work``, when given, keeps H's array and the full blocks' from call to call (the same sums
+    into them). H is Fortran-ordered (but with ``legacy``), so that LAPACK factors it in place
+    (_cholesky): its flat positions are those of H.T, C-ordered, hence flat_n's transposed order.
+    Only H's upper triangle is complete (all the factorisation reads): the PSD blocks' parts below
+    it are left out (_Psd.schur's ``upper``)."""
     if legacy:
         H = (sp.csr_matrix(An.T).multiply(weight[None, :]) @ An).toarray()
         for B, Gi in zip(blocks, Gis):
@@ -214,21 +236,43 @@ def _schur_complement(n: int, An: sp.csr_matrix, An_used: np.ndarray, flat_n: np
     if work is None:
         work = {}
     if "H" not in work:
-        work["H"] = np.empty((n, n))
+        work["H"] = np.empty((n, n), order="F")
     H = work["H"]
+    flat = H.T.reshape(-1)  # a view: H[i, j] is flat[j * n + i]
     H.fill(0.0)
     # (the flat positions are distinct, so the indexed sum is np.add.at's: measured 0.5 ms for np.add.at on these
     # values against 0.04 ms)
-    H.reshape(-1)[flat_n] += ((An_used.T * weight) @ An_used).ravel()
+    flat[flat_n] += ((An_used.T * weight) @ An_used).ravel()
     for B, Gi in zip(blocks, Gis):
         if len(B.cols) == n:
+            if id(B) not in work:  # (Fortran-ordered as H: schur's column chunks written contiguous, summed contiguous;
+                # zeros, since schur leaves the entries well below the diagonal unwritten)
+                work[id(B)] = np.zeros((n, n), order="F")
+            H += B.schur(Gi, work[id(B)], upper=True)
+        else:  # (np.add.at at the flat positions: measured 3 to 5 times faster than H[np.ix_(cols, cols)] +=;
+            # the upper triangle's positions computed once a solve, the block's cols ascending)
             if id(B) not in work:
-                work[id(B)] = np.empty((n, n))
-            H += B.schur(Gi, work[id(B)])
-        else:  # (np.add.at at the flat positions: measured 3 to 5 times faster than H[np.ix_(cols, cols)] +=)
-            np.add.at(H.reshape(-1), (B.cols[:, None] * n + B.cols[None, :]).ravel(), B.schur(Gi).ravel())
-    # (cho_factor reads H's upper triangle only: H is symmetric up to rounding, unsymmetrised)
+                k, l = np.triu_indices(len(B.cols))
+                work[id(B)] = (np.zeros((len(B.cols), len(B.cols))), k * len(B.cols) + l, B.cols[l] * n + B.cols[k])
+            out, upper, positions = work[id(B)]
+            np.add.at(flat, positions, np.take(B.schur(Gi, out, upper=True).reshape(-1), upper))
+    # (the factorisation reads H's upper triangle only: H is symmetric up to rounding, unsymmetrised, its lower
+    # triangle incomplete)
     return H
+
+
+def _cholesky(H: np.ndarray, legacy: bool):
+    """cho_factor(H)'s (c, lower): with ``legacy`` scipy's, which copies H; else LAPACK's dpotrf
+    on Fortran-ordered H in place (scipy's cho_factor copies a C-ordered array to Fortran order
+    first: measured 1.1 ms of its 5.4 ms at 714 x 714), the same upper factor bit for bit, H
+    overwritten by it. LinAlgError when H is not numerically positive definite (H then partly
+    overwritten but with ``legacy``)."""
+    if legacy:
+        return sl.cho_factor(H, check_finite=True)
+    c, info = sl.lapack.dpotrf(H, lower=0, clean=0, overwrite_a=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dpotrf: info {info}")
+    return c, False
 
 
 def solve(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: int, psd: tuple,
@@ -270,7 +314,7 @@ def _iterate(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: in
     # chirality rows' cubic forms hold 119 of the 714 at order 2; the sparse product took 6 ms)
     used_n = np.unique(An.indices)
     An_used = An[:, used_n].toarray()
-    flat_n = (used_n[:, None] * n + used_n[None, :]).ravel()
+    flat_n = (used_n[None, :] * n + used_n[:, None]).ravel()  # (H's flat positions, H Fortran-ordered)
     bnorm, qnorm = max(1.0, np.linalg.norm(b)), max(1.0, np.linalg.norm(q))
 
     # start: y minimising ||A y - b||, slacks shifted into the cones; z the least-norm dual, shifted
@@ -350,11 +394,13 @@ def _iterate(q: np.ndarray, A: sp.spmatrix, b: np.ndarray, zero: int, nonneg: in
         Gis = [rinv.T @ rinv for r, rinv, lam in scal]
         H = _schur_complement(n, An, An_used, flat_n, zp[0] / sp_[0], blocks, Gis, legacy, work)
         try:
-            Hf = sl.cho_factor(H, check_finite=legacy)
+            Hf = _cholesky(H, legacy)
         except np.linalg.LinAlgError:
             try:
+                # (H assembled again: the failed factorisation overwrote part of it)
+                H = _schur_complement(n, An, An_used, flat_n, zp[0] / sp_[0], blocks, Gis, legacy, work)
                 H[np.diag_indices(n)] += 1e-12 * H.diagonal().max()
-                Hf = sl.cho_factor(H, check_finite=legacy)
+                Hf = _cholesky(H, legacy)
             except np.linalg.LinAlgError:
                 status = "NumericalError"
                 break
