@@ -25,10 +25,13 @@ Found (a test below for each, marked xfail while the class stands):
    canonical_json({"kind", "data", "options", "form"}), its claimed options as floats) is
    refused "data_hash" when its data's text has no integer and no -0.0 (a homography's or a
    resection's coordinates all floats, as most clients write them) and an option it hashes is
-   -0.0 (``"abs_gap": -0.0`` or ``"rel_gap": -0.0``, which the options take: >= 0 holds). Its
+   -0.0 (``"abs_gap": -0.0`` or ``"rel_gap": -0.0``, which the options take: >= 0 holds), or
+   holds an integer inside a member (an autocalibration's ``"intrinsics": {"focal": [400,
+   4000]}``, the most natural way to write a range, beside its cameras, points and an image size
+   written as floats; ``{"skew": [-0.0, 0.0]}`` alike). Its
    data_sha256 matches the values' form too (the two texts are the same bytes), so
    _check_hashes reads the document as of the values' form and hashes its options as values
-   (0.0), never trying Python's text (-0.0) it was written in: "problem_sha256 is ..., but the
+   (0.0, 400.0), never trying Python's text (-0.0, 400) it was written in: "problem_sha256 is ..., but the
    kind, data and options hash to ...". The same document with "abs_gap": 0.0 verifies; docs
    and _check_hashes promise documents hashed before are read in their form.
    Where: verify/checks.py, _check_hashes: ``values`` is decided by the data hash alone (the
@@ -264,5 +267,36 @@ def test_a_document_hashed_before_review_45_with_an_option_minus_zero_verifies(k
     certificate = result["certificate"]
     assert math.copysign(1.0, certificate["options"][option]) == -1.0  # as the user sent it, kept by the writer
     assert data_hash(kind, certificate["data"]) == certificate["data_sha256"]  # the data's two texts the same
+    report = verify_any(result)
+    assert report.valid, report.first_failure
+
+
+@pytest.mark.xfail(strict=True, reason="review 48 class 2: a document hashed before review 45 whose data text is "
+                                       "the same in both forms is read in the values' form only; an integer inside "
+                                       "an option then fails its problem hash")
+@pytest.mark.parametrize("intrinsics", [{"focal": [400, 4000]}, {"skew": [-0.0, 0.0]}])
+def test_an_autocalibration_hashed_before_review_45_with_integer_ranges_verifies(intrinsics):
+    from geocert.kinds import get_kind
+
+    example = get_kind("autocalibration").example
+    job = {**example, "data": _floats(example["data"]),
+           "options": {**example.get("options", {}), "certificate": "full", "intrinsics": intrinsics}}
+    result = json.loads(json.dumps(solve_job(job)))
+    assert result["certificate"]["options"]["intrinsics"] == intrinsics  # kept as sent
+    assert verify_any(result).valid  # as today's writer hashes it
+    certificate = _hashed_before_review_45(result["certificate"])
+    assert data_hash("autocalibration", certificate["data"]) == certificate["data_sha256"]
+    report = verify_any(result)
+    assert report.valid, report.first_failure
+
+
+def test_an_autocalibration_hashed_before_review_45_with_float_ranges_verifies():
+    from geocert.kinds import get_kind
+
+    example = get_kind("autocalibration").example
+    job = {**example, "data": _floats(example["data"]),
+           "options": {**example.get("options", {}), "certificate": "full", "intrinsics": {"focal": [400.0, 4000.0]}}}
+    result = json.loads(json.dumps(solve_job(job)))
+    _hashed_before_review_45(result["certificate"])
     report = verify_any(result)
     assert report.valid, report.first_failure
