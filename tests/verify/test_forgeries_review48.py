@@ -40,6 +40,24 @@ Found (a test below for each, marked xfail while the class stands):
    fix: try the problem hash in every form the data hash matched (the values' form, the exact
    integers', Python's text), taking the first that matches, each with its own digest.
 
+3. Cost, memory: the values hash's scan of the data's text (certificates._VALUE_TOKENS, run by
+   data_digest twice when the values' form does not match: values, then exact integers) matches
+   a string with ``"(?:[^"\\]|\\.)*"``, a group repeated once a character, for which Python's
+   regular expression engine keeps a backtracking mark each time: about 150 bytes of memory per
+   character of a string (tracemalloc: 303 MB for a 2 MB string; a data text of integers, 3.2
+   times its size). docs/certificate.md says the hashes take "about 4 times the data's text in
+   memory". The hash runs before any check reads the data (check_data refuses an unknown member
+   after it; a reconstruction's data are not closed at all, class 1), so any document can carry
+   one long string: a 5 MB triangulation certificate whose data hold a member "note" of 5
+   million characters peaked at 639 MB (from 51) to be refused "data_hash", a 20 MB one at 2.4 GB
+   (6.2 s of CPU); the API takes bodies up to 32 MiB (GEOCERT_MAX_BODY_BYTES) and runs two
+   verifications at once: some 8 GB for two such bodies, which review 47 class 5 (1.2 GB for 28
+   MB) was fixed to avoid.
+   Where: core/certificates.py, _VALUE_TOKENS' string alternative. Suggested fix: the unrolled
+   loop ``"[^"\\]*(?:\\.[^"\\]*)*"`` (a single-character class repeated: no mark a character),
+   the same tokens: a 10 MB string scanned in 0.05 s with no memory beyond the text, against 0.9
+   s and 1.15 GB today (Python 3.11).
+
 Held (plain tests below, each able to fail):
 
 - The text hashed is canonical_json(hashed_numbers(data)) to the byte for strings, keys and
@@ -300,3 +318,28 @@ def test_an_autocalibration_hashed_before_review_45_with_float_ranges_verifies()
     _hashed_before_review_45(result["certificate"])
     report = verify_any(result)
     assert report.valid, report.first_failure
+
+
+# Class 3: the scan of a long string takes memory ~150 times its length
+
+def _peak(data) -> float:
+    import tracemalloc
+
+    size = len(canonical_json(data))
+    tracemalloc.start()
+    try:
+        data_digest(data)
+        data_digest(data, exact_integers=True)
+        return tracemalloc.get_traced_memory()[1] / size
+    finally:
+        tracemalloc.stop()
+
+
+@pytest.mark.xfail(strict=True, reason="review 48 class 3: _VALUE_TOKENS' string alternative keeps a backtracking "
+                                       "mark a character: ~150 bytes of memory a character of a string")
+def test_hashing_a_long_string_takes_memory_in_proportion_to_the_text():
+    assert _peak({"cameras": [], "note": "a" * 1_000_000}) < 8
+
+
+def test_hashing_integers_takes_memory_in_proportion_to_the_text():
+    assert _peak({"cameras": list(range(200_000)), "note": "short"}) < 8
