@@ -45,13 +45,15 @@ Found (a test below for each, marked xfail while the class stands):
    a string with ``"(?:[^"\\]|\\.)*"``, a group repeated once a character, for which Python's
    regular expression engine keeps a backtracking mark each time: about 150 bytes of memory per
    character of a string (tracemalloc: 303 MB for a 2 MB string; a data text of integers, 3.2
-   times its size). docs/certificate.md says the hashes take "about 4 times the data's text in
+   times its size), and as the canonical text writes a non-ASCII character as its escape (6 or
+   12 characters), about 380 bytes per byte of a document's UTF-8 text of "\u00e9" or an emoji
+   (a 1 MB string of "\u00e9": 380 MB). docs/certificate.md says the hashes take "about 4 times the data's text in
    memory". The hash runs before any check reads the data (check_data refuses an unknown member
    after it; a reconstruction's data are not closed at all, class 1), so any document can carry
    one long string: a 5 MB triangulation certificate whose data hold a member "note" of 5
    million characters peaked at 639 MB (from 51) to be refused "data_hash", a 20 MB one at 2.4 GB
    (6.2 s of CPU); the API takes bodies up to 32 MiB (GEOCERT_MAX_BODY_BYTES) and runs two
-   verifications at once: some 8 GB for two such bodies, which review 47 class 5 (1.2 GB for 28
+   verifications at once: some 8 GB for two such bodies of ASCII, 20 GB or more of accented text, which review 47 class 5 (1.2 GB for 28
    MB) was fixed to avoid.
    Where: core/certificates.py, _VALUE_TOKENS' string alternative. Suggested fix: the unrolled
    loop ``"[^"\\]*(?:\\.[^"\\]*)*"`` (a single-character class repeated: no mark a character),
