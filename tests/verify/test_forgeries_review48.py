@@ -73,6 +73,19 @@ Held (plain tests below, each able to fail):
 - Every stored certificate and result (tests/data/certificates, earlier/ included, which is
   refused for its over-claim as before) verifies as it did; a genuine varying reconstruction
   verifies as written and as JavaScript re-writes it (640.0 as 640).
+- A varying calibration.K after the sanity layer drops a camera (six views, the dropped one above
+  the middle focal length): the writer picks again among the five returned
+  (pipeline._stated_K) and the verifier agrees, as written and as JavaScript re-writes it; the
+  six cameras' middle restated is refused. With a principal point per view (simple model,
+  principal_point "per_view", eight views, each its own centre) the middle principal point's
+  camera is stated and verifies, re-written too; points_used beside the calibration
+  certificate is its count.
+- A carried reconstruction's camera and calibration certificates with a member beyond the
+  format's are refused (the bare certificate's rule).
+- Note, not a class: geocert.jobs.runner.solve_job (the library's entry; its docstring calls it
+  the CLI's path) solves a job whose data hold an unknown member ("note") without validating it
+  and writes a certificate the verifier refuses ("data/note: unknown field"); the CLI and the API
+  validate the request model first, so neither writes one.
 - _Pools' cache key is the runs' tuple of ints (type int, increasing, disjoint): two different
   pools cannot share a key.
 """
@@ -225,7 +238,7 @@ def test_a_varying_result_with_a_camera_dropped_refuses_the_six_cameras_middle(v
     if isinstance(depth, dict) and "focal_px" in depth:
         depth["focal_px"] = other[0][0]
     report = verify_any(forged)
-    assert not report.valid
+    assert not report.valid and "summary/calibration/K" in report.first_failure["detail"], report.first_failure
 
 
 # Class 2: a document hashed before review 45 whose data text is the same in both forms, an option -0.0
@@ -345,3 +358,58 @@ def test_hashing_a_long_string_takes_memory_in_proportion_to_the_text():
 
 def test_hashing_integers_takes_memory_in_proportion_to_the_text():
     assert _peak({"cameras": list(range(200_000)), "note": "short"}) < 8
+
+
+# Held: a principal point per view, the middle principal point's camera stated
+
+@pytest.fixture(scope="module")
+def per_view() -> dict:
+    """Eight views of one focal length (800 px), each its own principal point (25 px apart), 0.3 px
+    of noise, principal_point "per_view": the test keeps a principal point per view."""
+    from geocert.solvers.autocalibration import scenes
+
+    rng = np.random.default_rng(11)
+    X = rng.uniform(-1, 1, size=(150, 3))
+    cameras = []
+    for _ in range(8):
+        polar, azimuth = np.radians(50) * np.sqrt(rng.uniform()), rng.uniform(0, 2 * np.pi)
+        centre = 6 * np.array([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), -np.cos(polar)])
+        R = scenes.look_at(centre, 0.3 * rng.normal(size=3), rng, up=rng.normal(size=3))
+        K = np.array([[800.0, 0, 320.0 + 25 * rng.normal()], [0, 800.0, 240.0 + 25 * rng.normal()], [0, 0, 1]])
+        cameras.append(K @ np.hstack([R, (-R @ centre)[:, None]]))
+    tracks = []
+    for x in X:
+        images = [P @ np.append(x, 1.0) for P in cameras]
+        tracks.append({"views": list(range(8)),
+                       "points": [(p[:2] / p[2] + rng.normal(0, 0.3, 2)).tolist() for p in images]})
+    return json.loads(json.dumps(solve_job({
+        "kind": "reconstruction", "options": {"certificate": "full", "principal_point": "per_view"},
+        "data": {"views": [{"name": f"v{i}", "image_size": [640, 480]} for i in range(8)], "tracks": tracks}})))
+
+
+def test_a_principal_point_per_view_states_the_middle_principal_points_camera(per_view):
+    from geocert.solvers.reconstruction import calibration_claim
+
+    stage = next(s for s in per_view["stages"] if s["name"] == "bundle_adjustment")
+    assert stage["principal_point_per_view"]["estimated"] is True
+    Ks = [c["K"] for c in per_view["cameras"] if c["registered"]]
+    centres = {(K[0][2], K[1][2]) for K in Ks}
+    assert len(centres) == 8 and len({K[0][0] for K in Ks}) == 1
+    claim = per_view["summary"]["calibration"]
+    assert claim["model"] == "varying"
+    assert claim["K"] == Ks[calibration_claim.middle_centre([[K[0][2], K[1][2]] for K in Ks])]
+    for document in (per_view, json.loads(json.dumps(_as_a_double_reader_writes(per_view)))):
+        report = verify_any(document)
+        assert report.valid, report.first_failure
+
+
+def test_a_principal_point_per_view_with_another_cameras_K_is_refused(per_view):
+    forged = copy.deepcopy(per_view)
+    stated = forged["summary"]["calibration"]["K"]
+    other = next(c["K"] for c in forged["cameras"] if c["registered"] and c["K"] != stated)
+    forged["summary"]["calibration"]["K"] = other
+    for stage in forged["stages"]:
+        if stage["name"] == "bundle_adjustment" and stage.get("K") == stated:
+            stage["K"] = other
+    report = verify_any(forged)
+    assert not report.valid and "summary/calibration/K" in report.first_failure["detail"], report.first_failure
