@@ -220,7 +220,10 @@ def hashed_numbers(value: Any) -> Any:
 # In canonical JSON text: a string (skipped whole, so that nothing inside one is read as a number),
 # an integer, or a negative zero: the tokens whose value's text differs from Python's text of them.
 # A float's repr always has "." or "e" and is its value's text already.
-_VALUE_TOKENS = re.compile(rb'"(?:[^"\\]|\\.)*"|(?<![\w.+-])-?(?:\d+|0\.0)(?![\w.])')
+# The string's pattern unrolled (runs of plain characters, then an escape and its run): the
+# alternation per character kept a backtracking mark a character, about 150 bytes of memory for
+# each byte of a long string (review 48).
+_VALUE_TOKENS = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"|(?<![\w.+-])-?(?:\d+|0\.0)(?![\w.])')
 
 
 def _value_token(token: bytes, exact_integers: bool) -> bytes | None:

@@ -626,42 +626,60 @@ def _check_claim_members(kind, items: list) -> None:
                                     "nothing, so it is refused")
 
 
+def _problem_form(document: dict, options: dict, names: tuple[str, ...], marks: dict | None, values: bool,
+                  digest) -> tuple[tuple[str, ...], str | None, bool] | None:
+    """_check_hashes' answer where the problem hash is of one of the forms a kind's documents take
+    (with the data hashed as ``values`` says, ``digest`` their text's): today's, one without the
+    kind's mark, an earlier options form; None where it is none of them."""
+    kind, data = document["kind"], document["data"]
+    if problem_hash(kind, data, options, names, marks, values, digest) == document["problem_sha256"]:
+        return names, None, not marks
+    if marks and problem_hash(kind, data, options, names, values=values, digest=digest) \
+            == document["problem_sha256"]:
+        return names, _unmarked_form(names, marks), True
+    # a kind whose hash came to cover more options: its earlier forms, newest first, each with
+    # what the report's scope says of it
+    for earlier, statement in hook(_adapter(kind), "earlier_forms"):
+        if problem_hash(kind, data, options, earlier, values=values, digest=digest) == document["problem_sha256"]:
+            return earlier, statement(options), True
+    return None
+
+
 def _check_hashes(document: dict, options: dict) -> tuple[tuple[str, ...], str | None, bool]:
     """The data's and the problem's hashes; returns the options the problem hash covers, what
     the report's scope says of a problem hash of a kind's earlier form (None for the current one),
     and whether the document's determinacy estimates may be of the earlier form (intervals stating
     no tolerance: a kind that declares no mark, or a hash without the mark its kind declares)."""
     # Today's hashes are of the numbers' values (certificates.hashed_numbers); a document written
-    # before hashed Python's text of them, and is read so where that is what its data hash to.
-    # the data written once for every hash below (writing it is most of a hash's cost)
-    data = document["data"]
-    digest = data_digest(data)
-    expected = data_hash(document["kind"], data, digest=digest)
-    values = expected == document["data_sha256"]
-    if not values:  # the values' form that kept an integer no float holds exactly as written
-        digest = data_digest(data, exact_integers=True)
-        values = data_hash(document["kind"], data, digest=digest) == document["data_sha256"]
-    if not values:
-        digest = data_digest(data, False)
-        if data_hash(document["kind"], data, False, digest) != document["data_sha256"]:
-            raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
-    adapter = _adapter(document["kind"])
+    # before hashed them with an integer no float holds kept exact, or, before that, Python's text
+    # of them. Each form whose data hash is the document's is tried for the problem hash: where the
+    # data's text is the same in two forms (no integer, no negative zero), the options' may not
+    # be (review 48: "focal": [400, 4000] hashed as Python wrote it).
+    data, kind = document["data"], document["kind"]
+    adapter = _adapter(kind)
     names = hook(adapter, "claim_options", CLAIM_OPTIONS)
     marks = hook(adapter, "hash_marks")
-    expected = problem_hash(document["kind"], data, options, names, marks, values, digest)
-    if expected == document["problem_sha256"]:
-        return names, None, not marks
-    if marks and problem_hash(document["kind"], data, options, names, values=values, digest=digest) \
-            == document["problem_sha256"]:
-        return names, _unmarked_form(names, marks), True
-    # a kind whose hash came to cover more options: its earlier forms, newest first, each with
-    # what the report's scope says of it
-    for earlier, statement in hook(adapter, "earlier_forms"):
-        if problem_hash(document["kind"], data, options, earlier, values=values, digest=digest) \
-                == document["problem_sha256"]:
-            return earlier, statement(options), True
+    expected = None
+    for values, exact_integers in ((True, False), (True, True), (False, False)):
+        digest = data_digest(data, values, exact_integers)  # written once for every hash of the form
+        hashed = data_hash(kind, data, values, digest)
+        expected = expected or hashed
+        if hashed != document["data_sha256"]:
+            continue
+        found = _problem_form(document, options, names, marks, values, digest)
+        if found is not None:
+            return found
+        expected_problem = problem_hash(kind, data, options, names, marks, values, digest)
+        break
+    else:
+        raise Invalid("data_hash", f"data_sha256 is {document['data_sha256']!r}, but the data hash to {expected!r}")
+    # the data's text the same in the values' form and as written: the options as written
+    if values and data_hash(kind, data, False) == document["data_sha256"]:
+        found = _problem_form(document, options, names, marks, False, data_digest(data, False))
+        if found is not None:
+            return found
     raise Invalid("data_hash", f"problem_sha256 is {document['problem_sha256']!r}, but the kind, data and options "
-                               f"({', '.join(names)}) hash to {expected!r}")
+                               f"({', '.join(names)}) hash to {expected_problem!r}")
 
 
 def _unmarked_form(names: tuple[str, ...], marks: dict) -> str:

@@ -53,7 +53,7 @@ import numpy as np
 from geocert.core.geometry import is_number, norm_cost
 from geocert.core.strict import Invalid, number, numbers, same
 from geocert.verify import residual_claims
-from geocert.verify.fractional import TRACKS, TrackItems, _check_scope_words
+from geocert.verify.fractional import TRACKS, TrackItems, _check_scope_words, refuse_unknown_members
 from geocert.verify.reconstruction_members import intrinsics_of
 from geocert.verify.verification import Verification
 from geocert.solvers.fractional.options import TriangulationOptions
@@ -211,6 +211,7 @@ def _check_points(points: Any, tracks: Any, views: list[int]) -> None:
             raise Invalid("returned", f"points/{index}/observations are not the track its certificate is about")
 
 
+LABEL_MEMBERS = ("view_names", "image_sizes", "track_numbers")
 LABELS_UNSTATED = ("unchecked: the certificate's data state no input_labels (a document written before they were), so "
                    "which input track each point is, and each camera's name and image size, are the result's word only")
 LABELS_STATED = ("each point's track number and each camera's name and image size are the certificate's "
@@ -1191,9 +1192,16 @@ class ReconstructionItems(TrackItems, Verification):
     claim_options = hashed_options.CLAIM_OPTIONS
     earlier_forms = hashed_options.EARLIER_FORMS
     option_names = run_control.OPTION_NAMES
-    # Its data are the pipeline's (views and input labels beside the cameras and tracks, read by
-    # check_result), not a triangulation's: TrackItems.check_data's members are not its.
-    check_data = None
+    def check_data(self, data) -> None:
+        """The pipeline's data (kinds.reconstruction's certificate_data): the cameras, their
+        views, the tracks (each its views and points) and the input's labels (a document written
+        before the labels were stated has none): nothing else, as for a triangulation (review 48)."""
+        refuse_unknown_members(data, ("cameras", "views", "tracks", "input_labels"), "tracks", ("views", "points"))
+        labels = data.get("input_labels")
+        if isinstance(labels, dict):
+            for name in labels:
+                if name not in LABEL_MEMBERS:
+                    raise Invalid("data", f"data/input_labels/{name}: unknown field (known: {', '.join(LABEL_MEMBERS)})")
 
     @staticmethod
     def job_outcomes(result: dict) -> list:

@@ -138,8 +138,6 @@ def _with_member(result: dict, where: str) -> dict:
     return forged
 
 
-@pytest.mark.xfail(strict=True, reason="review 48 class 1: a reconstruction certificate's data member no writer "
-                                       "writes (check_data = None) is hashed and verifies")
 @pytest.mark.parametrize("where", ["top distortion", "top weights", "track weights"])
 def test_a_reconstruction_data_member_no_writer_writes_is_refused(varying, where):
     report = verify_any(_with_member(varying, where))
@@ -291,9 +289,6 @@ def test_a_document_hashed_before_review_45_verifies(kind):
     assert report.valid, report.first_failure
 
 
-@pytest.mark.xfail(strict=True, reason="review 48 class 2: a document hashed before review 45 whose data text is "
-                                       "the same in both forms is read in the values' form only; an option -0.0 "
-                                       "then fails its problem hash")
 @pytest.mark.parametrize("kind,option", [("homography", "abs_gap"), ("resection", "rel_gap")])
 def test_a_document_hashed_before_review_45_with_an_option_minus_zero_verifies(kind, option):
     result = _map_result(kind, option, -0.0)
@@ -304,9 +299,6 @@ def test_a_document_hashed_before_review_45_with_an_option_minus_zero_verifies(k
     assert report.valid, report.first_failure
 
 
-@pytest.mark.xfail(strict=True, reason="review 48 class 2: a document hashed before review 45 whose data text is "
-                                       "the same in both forms is read in the values' form only; an integer inside "
-                                       "an option then fails its problem hash")
 @pytest.mark.parametrize("intrinsics", [{"focal": [400, 4000]}, {"skew": [-0.0, 0.0]}])
 def test_an_autocalibration_hashed_before_review_45_with_integer_ranges_verifies(intrinsics):
     from geocert.kinds import get_kind
@@ -350,8 +342,6 @@ def _peak(data) -> float:
         tracemalloc.stop()
 
 
-@pytest.mark.xfail(strict=True, reason="review 48 class 3: _VALUE_TOKENS' string alternative keeps a backtracking "
-                                       "mark a character: ~150 bytes of memory a character of a string")
 def test_hashing_a_long_string_takes_memory_in_proportion_to_the_text():
     assert _peak({"cameras": [], "note": "a" * 1_000_000}) < 8
 
