@@ -92,6 +92,8 @@ def _central(result: dict, count: int, scale: float, every_track: bool) -> tuple
     forged = copy.deepcopy(result)
     stage = _stage(forged, "autocalibration")
     stage["certificate_views"], stage["certificate_tracks"] = views, held
+    if "points_used" in stage:  # the record restated as the forger's certificate has it
+        stage["points_used"] = len(held)
     return forged, data
 
 
