@@ -1192,6 +1192,7 @@ class ReconstructionItems(TrackItems, Verification):
     claim_options = hashed_options.CLAIM_OPTIONS
     earlier_forms = hashed_options.EARLIER_FORMS
     option_names = run_control.OPTION_NAMES
+
     def check_data(self, data) -> None:
         """The pipeline's data (kinds.reconstruction's certificate_data): the cameras, their
         views, the tracks (each its views and points) and the input's labels (a document written

@@ -33,7 +33,7 @@ intrinsics is the middle focal length's):
    first is then redundant: a K with the cameras' shared intrinsics and the middle focal length
    is the middle camera's K). Suggested fix at the cause: accept one camera's K only where the
    cameras do not share their principal point (the "per view" models), and there the camera the
-   writer picks (upgrade.middle_centre of the principal points, or the focal groups' rule).
+   writer picks (calibration_claim.middle_centre of the principal points, or the focal groups' rule).
    Seen, not a test (no genuine case built in the time): the writer's K is the middle of the
    views *adjusted*; the sanity layer (pipeline._check_cameras) may drop a camera after the
    adjustment without re-picking out.metric.K, so if it drops the middle camera calibration.K is

@@ -266,13 +266,6 @@ def _stage(name: str, stage, elapsed: float) -> dict:
             "elapsed_s": elapsed, "reason": stage.reason}
 
 
-def middle_centre(centres: np.ndarray) -> int:
-    """The view whose principal point lies nearest the per-view principal points' median (its K
-    stands for theirs in Metric.K, as the middle focal length's does for the "varying" model): the
-    rule the verifier recomputes (calibration_claim.middle_centre)."""
-    return calibration_claim.middle_centre(centres)
-
-
 def K_of(metric: Metric, view: int) -> np.ndarray:
     return metric.K if metric.Ks is None else metric.Ks[view]
 
@@ -368,13 +361,15 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
                                            should_stop=should_stop, k1=k1,
                                            stop=robust_stop if round_ == 0 else stop, centres=centres,
                                            groups=view_groups)
+        # (the K standing for a K per view here is the next round's start and Metric.K; the K a
+        # result states is picked again among the cameras it returns: pipeline._stated_K)
         if K.ndim == 3 and model == "principal_per_view":  # one principal point per view: the middle one's K stands for them
             centres = K[:, :2, 2]
-            K = K[middle_centre(centres)]
+            K = K[calibration_claim.middle_centre(centres)]
         elif K.ndim == 3 and model == "focal_groups":  # one K per view: the middle principal point's stands for them
             centres, focals = K[:, :2, 2], K[:, 0, 0]
             shared = np.flatnonzero(view_groups == 0)  # group 0: the views sharing the first focal length
-            K = K[shared[middle_centre(centres[shared])]]
+            K = K[shared[calibration_claim.middle_centre(centres[shared])]]
         elif K.ndim == 3:  # one K per view: the middle focal length stands for them in K
             focals = K[:, 0, 0]
             K = K[int(np.argsort(focals)[len(focals) // 2])]
