@@ -171,14 +171,16 @@ def test_a_far_maps_residuals_stated_zero_within_twice_the_rounding_are_refused(
 
 
 def test_the_zeroed_residuals_are_the_exact_ones_of_up_to_1e_8_px(far_exact_homography):
-    """Machine-independent (the exact residuals are one float everywhere): every residual is
-    zeroed, none is 0, the largest is above 1e-8 px, and the stated cost is theirs, not 0."""
+    """The forgery's premise: most residuals are zeroed, none of the exact ones is 0, the largest
+    zeroed is above 1e-8 px, and the stated cost is theirs, not 0. Not every residual: the solver's
+    map is one machine's (its BLAS's last digits), and its exact residuals lie 1.7 to 2.25 rounding
+    from 0 at most on two kernels measured, so one may fall outside the window."""
     from geocert.core import exact as core_exact
 
     document, exact, zeroed = _zeroed(far_exact_homography)
-    assert zeroed.all() and np.all(exact != 0) and np.abs(exact).max() > 1e-8
+    assert zeroed.mean() >= 0.75 and np.all(exact != 0) and np.abs(exact[zeroed]).max() > 1e-8
     assert document["maps"][0]["cost"] == core_exact.cost(exact, "L2L2") > 0
-    assert not np.any(document["maps"][0]["residuals"])
+    assert not np.any(np.array(document["maps"][0]["residuals"])[zeroed])
 
 
 def test_a_far_maps_residual_moved_past_twice_the_rounding_is_refused(far_exact_homography):
