@@ -1,0 +1,107 @@
+"""Review 49: a hostile review of the pooled levels' degrees of freedom (fractional._check_pooled,
+pooled_floor) and of a reconstruction's points' determinacy (the kind writes null).
+
+Found (a test below for each):
+
+1. A triangulation track's determinacy read at a level pooled over the job's tracks states, in
+   its ``level`` sentence, the degrees of freedom its pool's variance is estimated from
+   (determinacy.pooled_level: "(13 degrees of freedom, ...)"). The verifier checked the pool
+   (pooled_tracks) and the cost_increase against the floor recomputed from the pool's
+   residuals, but took the degrees of freedom as written: every track of a genuine result
+   restated at 0 or 10^9 degrees of freedom (a pool of five tracks of 2 and more views holds 13
+   at most; 10^9 reads as a variance known exactly, its Student quantile the normal's) verified.
+   Where: verify/fractional.py, _check_pooled (pooled_dof read, only its presence checked).
+   Fixed: pooled_floor.pooled_bounds gives the floor and the least and most degrees of freedom
+   the writer's pooling may keep of the pool's tracks (those surely pooled; those surely or
+   possibly pooled), and a stated figure outside them is refused, naming the level.
+
+2. A reconstruction's points are written with ``"determinacy": null`` (kinds.reconstruction:
+   the stages' analyses are not run for them), and nothing checked a point's determinacy
+   beyond "not proven": a point stating one (a triangulation track's estimate, or any object
+   saying proven: false) verified, an estimate of the point's uncertainty no writer made and no
+   check recomputed. Where: verify/reconstruction.py, ReconstructionItems.check_returned.
+   Fixed: a point's determinacy other than null is refused, naming it.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import pytest
+
+from geocert.solvers.fractional.determinacy import pooled_dof, pooled_level
+from geocert.verify.checks import verify_any
+from tests.verify.test_forgeries import stored
+from tests.verify.test_forgeries_review7 import far_two_view_track  # noqa: F401 (a fixture)
+
+
+# Class 1: a pooled level's degrees of freedom as written
+
+def test_the_genuine_pooled_result_verifies(far_two_view_track):  # noqa: F811
+    result = json.loads(json.dumps(far_two_view_track[1]))
+    assert all(pooled_dof(t["determinacy"]["level"]) is not None for t in result["tracks"])
+    report = verify_any(result)
+    assert report.valid, report.first_failure
+
+
+def _restated(result: dict, dof: int) -> dict:
+    forged = json.loads(json.dumps(result))
+    for track in forged["tracks"]:
+        determinacy = track["determinacy"]
+        determinacy["level"] = pooled_level((determinacy["cost_increase"], dof))
+    return forged
+
+
+@pytest.mark.parametrize("dof", ["none", "one more than the pool holds", "a billion"])
+def test_a_pooled_level_stating_degrees_of_freedom_its_pool_does_not_hold_is_refused(far_two_view_track, dof):  # noqa: F811
+    result = far_two_view_track[1]
+    data = result["certificate"]["data"]
+    most = sum(2 * len(track["views"]) - 3 for track in data["tracks"])  # every track of the pool pooled
+    stated = {"none": 0, "one more than the pool holds": most + 1, "a billion": 10 ** 9}[dof]
+    report = verify_any(_restated(result, stated))
+    assert not report.valid
+    assert report.first_failure["check"] == "returned", report.first_failure
+    assert "/determinacy/level" in report.first_failure["detail"], report.first_failure
+
+
+def test_the_degrees_of_freedom_the_writer_states_are_within_the_bounds(far_two_view_track):  # noqa: F811
+    """The genuine figure lies within what the verifier derives from the pool (the premise)."""
+    import numpy as np
+
+    from geocert.core.geometry import normalised_cameras
+    from geocert.verify.pooled_floor import pooled_bounds, squared_residuals
+
+    result = far_two_view_track[1]
+    data = result["certificate"]["data"]
+    cameras = normalised_cameras(data["cameras"])
+    costs = [squared_residuals(cameras, t["views"], t["points"], r["point"]) for t, r in zip(data["tracks"],
+                                                                                           result["tracks"])]
+    dofs = [2 * len(t["views"]) - 3 for t in data["tracks"]]
+    floor, least, most = pooled_bounds(np.array(costs), np.array(dofs))
+    stated = pooled_dof(result["tracks"][0]["determinacy"]["level"])
+    assert least <= stated <= most
+    assert floor <= result["tracks"][0]["determinacy"]["cost_increase"]
+
+
+# Class 2: a reconstruction point's determinacy, which its writer leaves null
+
+def test_the_stored_reconstruction_states_no_point_determinacy():
+    result = stored("reconstruction")
+    assert all(point["determinacy"] is None for point in result["points"])
+    report = verify_any(result)
+    assert report.valid, report.first_failure
+
+
+@pytest.mark.parametrize("stated", ["a triangulation track's", "proven false"])
+def test_a_reconstruction_point_stating_a_determinacy_is_refused(stated):
+    forged = stored("reconstruction")
+    if stated == "proven false":
+        determinacy = {"method": "curvature", "proven": False, "determined": True, "intervals": [], "warnings": []}
+    else:
+        determinacy = copy.deepcopy(stored("triangulation_l2l2")["tracks"][0]["determinacy"])
+    forged["points"][0]["determinacy"] = determinacy
+    report = verify_any(forged)
+    assert not report.valid
+    assert report.first_failure["check"] == "returned", report.first_failure
+    assert "points/0/determinacy" in report.first_failure["detail"], report.first_failure
