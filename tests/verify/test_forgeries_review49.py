@@ -105,3 +105,40 @@ def test_a_reconstruction_point_stating_a_determinacy_is_refused(stated):
     assert not report.valid
     assert report.first_failure["check"] == "returned", report.first_failure
     assert "points/0/determinacy" in report.first_failure["detail"], report.first_failure
+
+
+# Class 3: an autocalibration stage's determinacy words (method, level), which nothing read
+
+AUTOCALIBRATION_DOCUMENTS = ["autocalibration_direct", "autocalibration_stratified", "autocalibration_five_views"]
+WORDS = [("method", "branch_and_bound"),
+         ("level", "every solution in the certificate's scope whose cost exceeds the optimum's by at most "
+                   "cost_increase lies in these intervals; by the metric stage's proof")]
+
+
+@pytest.mark.parametrize("name", AUTOCALIBRATION_DOCUMENTS)
+def test_the_stored_autocalibrations_state_the_writers_words(name):
+    from geocert.core.determinacy import Determinacy
+
+    result = stored(name)
+    written = Determinacy().document()
+    for stage in result["stages"]:
+        assert stage["determinacy"]["method"] == written["method"]
+        assert stage["determinacy"]["level"] == written["level"]
+    report = verify_any(result)
+    assert report.valid, report.first_failure
+
+
+@pytest.mark.parametrize("name", AUTOCALIBRATION_DOCUMENTS)
+@pytest.mark.parametrize("member, words", WORDS)
+def test_an_autocalibration_stages_determinacy_in_other_words_is_refused(name, member, words):
+    """The writer states every stage's estimate in core.determinacy's one method and level
+    sentence (the analyses of autocalibration.determinacy set neither): other words claim a
+    method or a level no writer used and no check read (a level sentence saying the intervals
+    are a proof's verified beside proven: false)."""
+    forged = stored(name)
+    forged["stages"][-1]["determinacy"][member] = words
+    report = verify_any(forged)
+    assert not report.valid
+    assert report.first_failure["check"] == "returned", report.first_failure
+    assert f"stages/{len(forged['stages']) - 1}/determinacy/{member}" in report.first_failure["detail"], \
+        report.first_failure
