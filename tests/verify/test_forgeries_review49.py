@@ -21,6 +21,23 @@ Found (a test below for each):
    saying proven: false) verified, an estimate of the point's uncertainty no writer made and no
    check recomputed. Where: verify/reconstruction.py, ReconstructionItems.check_returned.
    Fixed: a point's determinacy other than null is refused, naming it.
+
+3. An autocalibration stage's determinacy states ``method`` "curvature" and core.determinacy's
+   default ``level`` sentence on every path (autocalibration.determinacy sets neither), and no
+   check read either: a stage's estimate said to be a search's ("branch_and_bound") or its level
+   said to be a proof's ("every solution in the certificate's scope ... lies in these
+   intervals") verified beside proven: false, in the direct and the stratified documents alike;
+   a triangulation's, resection's or bilinear frame's words are checked exactly. Where:
+   verify/autocalibration.py, check_returned (stratified and direct). Fixed: estimates.
+   check_stage_words refuses other words, naming the member.
+
+Held (looked at, nothing found): single-field edits of the stored reconstruction's summary,
+stats, images, stages, points and cameras (each number scaled, negated or zeroed, each boolean
+flipped, each string extended; each member deleted, a determinacy or an unknown member added)
+are refused but for informational figures the docs name so (times, the registration's
+thresholds and focal rounds, the adjustment's RMS, words) and members an earlier form lacks; the
+same edits of a pooled triangulation's tracks and stats, and of the stored resection, homography
+and bilinear results, are refused but for times.
 """
 
 from __future__ import annotations
@@ -142,3 +159,19 @@ def test_an_autocalibration_stages_determinacy_in_other_words_is_refused(name, m
     assert report.first_failure["check"] == "returned", report.first_failure
     assert f"stages/{len(forged['stages']) - 1}/determinacy/{member}" in report.first_failure["detail"], \
         report.first_failure
+
+
+# Class 4: a certified reconstruction point's summary with members left out
+
+@pytest.mark.parametrize("member", ["scope", "root_region", "tolerance", "tolerance_met", "leaves"])
+def test_a_reconstruction_points_summary_leaving_out_a_member_is_refused(member):
+    """The writer states a certified point's summary as a triangulation track's (track_document:
+    the same summary), and a track's leaving one out is refused; a point's verified."""
+    forged = stored("reconstruction")
+    assert forged["points"][0]["certified"] is True
+    del forged["points"][0]["certificate"][member]
+    report = verify_any(forged)
+    assert not report.valid
+    assert report.first_failure["check"] == "returned", report.first_failure
+    assert "points/0/certificate" in report.first_failure["detail"], report.first_failure
+    assert member in report.first_failure["detail"], report.first_failure
