@@ -36,8 +36,12 @@ stats, images, stages, points and cameras (each number scaled, negated or zeroed
 flipped, each string extended; each member deleted, a determinacy or an unknown member added)
 are refused but for informational figures the docs name so (times, the registration's
 thresholds and focal rounds, the adjustment's RMS, words) and members an earlier form lacks; the
-same edits of a pooled triangulation's tracks and stats, and of the stored resection, homography
-and bilinear results, are refused but for times.
+same edits of a pooled triangulation's tracks and stats (with NaN, infinities, 1e308, the least
+subnormal and -0.0 too) are refused but for times; of the stored resection, homography and
+bilinear results, all refused; of the stored autocalibration results, refused but for times,
+solver status words, the stage estimates' words (class 3) and their intervals widened, which a
+document hashed without the estimates' form may state (docs/certificate.md: an end may hold the
+metric walk's or the curvature's; wider holds the recomputed interval).
 """
 
 from __future__ import annotations
