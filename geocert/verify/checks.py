@@ -749,9 +749,11 @@ COMPLETE: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
     "autocalibration": (("", ("kind", "method", "intrinsics", "plane_at_infinity", "K", "dual_absolute_quadric",
                               "upgrade", "cameras", "points", "baseline", "stages", "stats")),
                         ("stages", _ITEM + ("name",)), ("stats", _STATS)),
-    # its items (cameras, points) and stage records by its own checks (verify.reconstruction*)
+    # its items' other members (cameras, points) and stage records by its own checks (verify.
+    # reconstruction*); a point's ``certified`` here, so that a certified point's summary states
+    # what a triangulation track's does (the same writer, track_document: review 49)
     "reconstruction": (("", ("kind", "norm", "cameras", "points", "stages", "summary", "images", "stats")),
-                       ("summary", ("time_s", "cpu_s")), ("stats", _STATS)),
+                       ("points", ("certified",)), ("summary", ("time_s", "cpu_s")), ("stats", _STATS)),
 }
 # An item's ``certificate`` (its summary) is required where it is certified (below); an
 # autocalibration stage's too unless it never started (kinds.autocalibration.cancelled_item writes

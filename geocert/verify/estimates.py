@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from geocert.core.determinacy import SIGMAS, certified_gap, cost_increase as level_of, fixes, safely
+from geocert.core.determinacy import SIGMAS, Determinacy, certified_gap, cost_increase as level_of, fixes, safely
 from geocert.core.geometry import is_number, normalised_cameras
 from geocert.core.warning_codes import MOTION_CODES
 from geocert.core.strict import Invalid, same
@@ -140,6 +140,23 @@ def check_determined(determinacy: dict, where: str, earlier: bool = True) -> Non
 
 INTRINSICS = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")  # autocalibration.determinacy.NAMES
 RELATIVE_WIDTH = 0.1  # core.determinacy.RELATIVE_WIDTH: the tolerance of a quantity of its scale
+
+
+# The words every autocalibration stage's estimate states (core.determinacy.Determinacy.document:
+# autocalibration.determinacy's analyses, stopped ones too, set neither the method nor the level).
+STAGE_WORDS = {name: Determinacy().document()[name] for name in ("method", "level")}
+
+
+def check_stage_words(determinacy: Any, where: str) -> None:
+    """An autocalibration stage's estimate states its writer's ``method`` and ``level`` sentence
+    (STAGE_WORDS): no check recomputes what other words would claim (a level said to be a
+    proof's, a method said to be a search), so they are not the writer's (review 49)."""
+    if not isinstance(determinacy, dict):
+        return
+    for name, words in STAGE_WORDS.items():
+        if determinacy.get(name) != words:
+            raise Invalid("returned", f"{where}/{name} is {determinacy.get(name)!r:.80}, and its writer states "
+                                      f"{words!r:.80} for every stage's estimate")
 
 
 def check_redundancy(determinacy: Any, expected: int, where: str) -> None:

@@ -23,7 +23,7 @@ from geocert.solvers.fractional.resection_bound import TYPE as SUBLEVEL_BOUND, v
 from geocert.solvers.fractional.resection_leaves import l1_cost_increase, verify_resection_leaves
 from geocert.solvers.fractional.resection_sublevel import verify_resection_sublevel
 from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
-from geocert.verify.pooled_floor import pooled_floor, squared_residuals
+from geocert.verify.pooled_floor import pooled_bounds, squared_residuals
 
 MAX_VIEWS = 1000  # views in a track, for the parser too: a chart's choice of reference takes views^2 work
 MAX_POINTS = 1_000_000
@@ -145,8 +145,9 @@ class _Pools:
             dofs[j] = 2 * len(observed["views"]) - 3
         self.costs, self.dofs = costs, dofs
 
-    def floor(self, runs: list) -> float | None:
-        """pooled_floor over the tracks of ``runs`` (checked by _runs)."""
+    def bounds(self, runs: list) -> tuple[float, int, int] | None:
+        """pooled_bounds over the tracks of ``runs`` (checked by _runs): the floor, and the least
+        and most degrees of freedom the pool's tracks may give."""
         key = tuple(map(tuple, runs))
         if key not in self.floors:
             charge(sum(b - a for a, b in runs), "the tracks of a pooled level")
@@ -154,7 +155,7 @@ class _Pools:
                 self._residuals()
             costs = np.concatenate([self.costs[a:b] for a, b in runs])
             dofs = np.concatenate([self.dofs[a:b] for a, b in runs])
-            self.floors[key] = pooled_floor(costs, dofs)  # it pools only the tracks of finite cost
+            self.floors[key] = pooled_bounds(costs, dofs)  # it pools only the tracks of finite cost
         return self.floors[key]
 
 
@@ -176,8 +177,20 @@ def _check_pooled(index: int, determinacy, result: dict, pools: _Pools) -> None:
         raise Invalid("returned", f"{where} is read at a level pooled over the job's tracks only with that level's "
                                   "words and the tracks pooled (pooled_tracks: runs [first, stop) of their indices, "
                                   "its own among them)")
-    floor, level = pools.floor(runs), determinacy.get("cost_increase")
-    if floor is not None and not (is_number(level) and level >= floor * (1 - LEVEL_ROUNDING)):
+    bounds, level = pools.bounds(runs), determinacy.get("cost_increase")
+    # The degrees of freedom the level states are its pool's (the writer's pooled_increase sums
+    # those of the tracks it pools, at least one): a figure its pool cannot give (none, or beyond
+    # its tracks', read as a variance known better than it is) is refused. A pool giving none (no
+    # track of finite residuals, or most of them 0 as the verifier computes them) bounds nothing:
+    # the writer's residuals, computed otherwise, may differ from these by a rounding there.
+    if bounds is None:
+        return
+    least, most = max(bounds[1], 1), bounds[2]
+    if not least <= stated_dof <= most:
+        raise Invalid("returned", f"{where}/level states {stated_dof} degrees of freedom, and the residuals of its "
+                                  f"pooled_tracks give from {least} to {most} (pooled_bounds)")
+    floor = bounds[0]
+    if not (is_number(level) and level >= floor * (1 - LEVEL_ROUNDING)):
         raise Invalid("returned", f"{where}/cost_increase is {level!r:.12}, below {floor!r:.12}, the least the "
                                   f"residual variance pooled over its pooled_tracks gives (pooled_floor)")
 

@@ -47,6 +47,16 @@ def student_floor(dof: float) -> float:
 def pooled_floor(costs: np.ndarray, dofs: np.ndarray) -> float | None:
     """At most the cost increase pooled_increase gives tracks of squared residuals ``costs`` and
     degrees of freedom ``dofs`` (as above); None where it gives none."""
+    bounds = pooled_bounds(costs, dofs)
+    return None if bounds is None else bounds[0]
+
+
+def pooled_bounds(costs: np.ndarray, dofs: np.ndarray) -> tuple[float, int, int] | None:
+    """(floor, least, most): pooled_floor's floor, and the least and most degrees of freedom D
+    pooled_increase may pool of these tracks (the sum over the tracks surely pooled; over those
+    surely or possibly pooled), between which the D a pooled level states must lie: a level's
+    degrees of freedom are its pool's, not the document's word (review 49). None where
+    pooled_increase gives no level."""
     dof = np.asarray(dofs, dtype=float)
     cost = np.asarray(costs, dtype=float)
     use = (dof > 0) & np.isfinite(cost)
@@ -67,8 +77,9 @@ def pooled_floor(costs: np.ndarray, dofs: np.ndarray) -> float | None:
             total, degrees = total + float(cost[k]), degrees + float(dof[k])
     if degrees == 0:
         return None
-    t = student_floor(float(dof[sure | either].sum()))
-    return t * t * total / degrees
+    most = float(dof[sure | either].sum())
+    t = student_floor(most)
+    return t * t * total / degrees, int(dof[sure].sum()), int(most)
 
 
 def squared_residuals(cameras: np.ndarray, views: list, points: np.ndarray, point) -> float:

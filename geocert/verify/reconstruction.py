@@ -1220,11 +1220,16 @@ class ReconstructionItems(TrackItems, Verification):
 
     def check_returned(self, result: dict, certificate: dict, earlier_estimates: bool = True) -> None:
         """A certified point's summary states its proof's root box and scope in the solver's words,
-        as a triangulation track's must (TrackItems: the same writer makes both); its determinacy
-        is an estimate (checked with the result's other estimates)."""
+        as a triangulation track's must (TrackItems: the same writer makes both). Its determinacy
+        is null: the kind runs no analysis for a point (kinds.reconstruction writes null), so a
+        point stating one states an estimate no writer made and no check recomputes (review 49)."""
         points = result.get("points")
         if not isinstance(points, list):
             return
+        for index, point in enumerate(points):
+            if isinstance(point, dict) and point.get("determinacy") is not None:
+                raise Invalid("returned", f"points/{index}/determinacy is stated, and a reconstruction's writer states "
+                                          "none for a point (null: no analysis of it is run)")
         for index, (point, claim) in enumerate(zip(points, certificate["items"])):
             summary = point.get("certificate") if isinstance(point, dict) else None
             self._check_root_region(f"points/{index}", summary, claim, certificate, index)

@@ -231,6 +231,14 @@ def _pooled_document(tracks: int, cameras: int, spanning: bool = False) -> dict:
         result["tracks"].append(entry)
     result["stats"]["items"] += tracks
     result["stats"]["statuses"]["not_certified"] = tracks
+    # each level states the most degrees of freedom its pool may give (review 49 refuses a figure
+    # beyond its pool's), so that what is measured here is the pools' cost, not that refusal
+    from geocert.verify.fractional import _Pools
+
+    pools = _Pools(result, certificate)
+    for entry in result["tracks"][first:]:
+        bounds = pools.bounds(entry["determinacy"]["pooled_tracks"])
+        entry["determinacy"]["level"] = pooled_level((1.0, 1 if bounds is None else bounds[2]))
     rehash(certificate)
     return json.loads(json.dumps(result))
 
@@ -289,9 +297,12 @@ def test_a_pool_stated_by_every_track_is_paid_once():
 
     document = _pooled_document(tracks=40, cameras=0)
     tracks = len(document["tracks"])
+    from geocert.solvers.fractional.determinacy import pooled_level
+
+    most = fractional._Pools(document, document["certificate"]).bounds([[0, tracks]])[2]  # the level's figure
     for track in document["tracks"]:
         if "pooled_tracks" in track["determinacy"]:
-            track["determinacy"]["pooled_tracks"] = [[0, tracks]]
+            track["determinacy"].update(pooled_tracks=[[0, tracks]], level=pooled_level((1.0, most)))
     pools = fractional._Pools(document, document["certificate"])
     with work_budget(tracks):  # a unit short of paying for a second pool of them all
         for index, track in enumerate(document["tracks"]):
