@@ -1,0 +1,77 @@
+"""Review 50: a hostile review of the kinds other than reconstruction (triangulation under each
+norm, batched and convexity-path tracks; resection and homography maps; bilinear; stratified and
+direct autocalibration), one edit at a time of genuine full certificates of small scenes: every
+member of the result and of the certificate beside its data set to 5e-324, -0.0, 0.0, 1e308,
+-1e308, "NaN", null, half, one and a half times, a relative 1e-6 off; strings to other words of
+the product (norms, statuses, proof types, methods); booleans flipped; lists duplicated at either
+end, cut at either end, reversed, emptied; records given an extra member or missing one; each
+option restated with its hashes made again.
+
+Found (a test below for each, which failed while the class stood):
+
+1. An autocalibration stage's determinacy may state any ``method`` and ``level`` (its words for
+   what the intervals are): the stratified affine and metric stages' and the direct stage's alike.
+   A curvature estimate relabelled ``"method": "proven"`` with the proven intervals' own level
+   ("every solution in the certificate's scope whose cost exceeds the optimum's by at most
+   cost_increase lies in these intervals; ...") verifies, so a reader takes the affine stage's
+   unproven plane-at-infinity estimate (its ``proven`` false, no proven intervals) for intervals
+   a proof covers. The track, map and frame estimates compare both words with their writer's
+   (estimates.COMPARED); the autocalibration writer (core.determinacy.Determinacy.document) states
+   only "curvature" and its default level, for every stage, analysed or not.
+   Where: verify/autocalibration.py, check_returned and the direct arm: no check reads the words.
+   Fixed at the cause: estimates.check_stage_words holds each stage's method and level to the
+   writer's.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import pytest
+
+from geocert.core.determinacy import proven_document
+from geocert.jobs.runner import solve_job
+from geocert.kinds import get_kind
+from geocert.verify.checks import verify_any
+
+
+def _example(kind: str, **options) -> dict:
+    example = get_kind(kind).example
+    job = {**example, "options": {**example.get("options", {}), "certificate": "full", **options}}
+    return json.loads(json.dumps(solve_job(job)))
+
+
+@pytest.fixture(scope="module")
+def stratified() -> dict:
+    return _example("autocalibration", method="stratified")
+
+
+@pytest.fixture(scope="module")
+def direct() -> dict:
+    return _example("autocalibration", method="direct")
+
+
+# Class 1: an autocalibration stage's determinacy words are free
+
+def test_the_genuine_autocalibrations_verify(stratified, direct):
+    for result in (stratified, direct):
+        report = verify_any(result)
+        assert report.valid, report.first_failure
+
+
+PROVEN_WORDS = proven_document(1.0, ("x",), [[0.0, 1.0]], "the curvature's ellipsoid")["level"]
+
+
+@pytest.mark.xfail(strict=True, reason="review 50 class 1")
+@pytest.mark.parametrize("which, stage", [("stratified", 0), ("stratified", 1), ("direct", 0)])
+@pytest.mark.parametrize("words", [{"method": "proven", "level": PROVEN_WORDS}, {"method": "sublevel"},
+                                   {"level": PROVEN_WORDS}])
+def test_an_estimate_worded_as_a_proof_is_refused(request, which, stage, words):
+    forged = copy.deepcopy(request.getfixturevalue(which))
+    determinacy = forged["stages"][stage]["determinacy"]
+    assert determinacy["method"] == "curvature"
+    determinacy.update(words)
+    report = verify_any(forged)
+    assert not report.valid
+    assert report.first_failure["check"] == "returned" and f"stages/{stage}/determinacy" in report.first_failure["detail"]
