@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from geocert.core.determinacy import SIGMAS, certified_gap, cost_increase as level_of, fixes, safely
+from geocert.core.determinacy import SIGMAS, Determinacy, certified_gap, cost_increase as level_of, fixes, safely
 from geocert.core.geometry import is_number, normalised_cameras
 from geocert.core.warning_codes import MOTION_CODES
 from geocert.core.strict import Invalid, same
@@ -277,6 +277,24 @@ def check_contains(determinacy: Any, where: str) -> None:
         if (is_number(lower) and lower > value + slack) or (is_number(upper) and upper < value - slack):
             raise Invalid("returned", f"{where}/intervals/{number} [{lower!r:.20}, {upper!r:.20}] does not hold its "
                                       f"value {value!r:.20}")
+
+
+# An autocalibration stage's estimate, in its writer's words (core.determinacy.Determinacy.document,
+# the only writer of a stage's determinacy, analysed or stopped): its method and level sentence.
+STAGE_WORDS = {name: Determinacy().document()[name] for name in ("method", "level")}
+
+
+def check_stage_words(determinacy: Any, where: str) -> None:
+    """An autocalibration stage's ``method`` and ``level`` are its writer's words (STAGE_WORDS), as a
+    track's, map's or frame's are compared with theirs (COMPARED): they say what the intervals are,
+    and other words ("proven", the proven intervals' level) would have a curvature estimate read as
+    intervals a proof covers."""
+    if not isinstance(determinacy, dict):
+        return
+    for name, words in STAGE_WORDS.items():
+        if determinacy.get(name) != words:
+            raise Invalid("returned", f"{where}/{name} is {determinacy.get(name)!r:.60}; a stage's estimate states "
+                                      f"its writer's {words!r:.60}")
 
 
 def check_stage_level(determinacy: Any, cost: Any, lower_bound: Any, where: str) -> None:

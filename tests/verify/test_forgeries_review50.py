@@ -63,7 +63,6 @@ def test_the_genuine_autocalibrations_verify(stratified, direct):
 PROVEN_WORDS = proven_document(1.0, ("x",), [[0.0, 1.0]], "the curvature's ellipsoid")["level"]
 
 
-@pytest.mark.xfail(strict=True, reason="review 50 class 1")
 @pytest.mark.parametrize("which, stage", [("stratified", 0), ("stratified", 1), ("direct", 0)])
 @pytest.mark.parametrize("words", [{"method": "proven", "level": PROVEN_WORDS}, {"method": "sublevel"},
                                    {"level": PROVEN_WORDS}])
