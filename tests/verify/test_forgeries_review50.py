@@ -21,6 +21,29 @@ Found (a test below for each, which failed while the class stood):
    Where: verify/autocalibration.py, check_returned and the direct arm: no check reads the words.
    Fixed at the cause: estimates.check_stage_words holds each stage's method and level to the
    writer's.
+
+Held (plain tests below for the first two; the rest tried by the sweep above and refused, or
+accepted only where the edit claims nothing false):
+
+- A proof with no search (a triangulation's convexity bound, a resection's sublevel bound: nodes
+  0) under a max_residual restated below its solution's residuals, hashes made again, is refused
+  (check ``scope``); restated above them the resection's verifies, and is true (its proof covers
+  every map), and the convexity proof is refused under any max_residual (check ``convexity``).
+- A camera scaled by a subnormal factor, hashes made again, is refused where the scaling rounds
+  the camera (the claimed cost is no longer the data's); scaled by -1 (every point behind it)
+  refused at its depth.
+- Accepted and claiming nothing false: a leaf box widened, a leaf's recorded bound or upper_bound
+  lowered or raised within its slack, leaves reordered or a leaf proof repeated, a root claim box
+  widened, a tightening round dropped or its cap raised, gaps (abs_gap, rel_gap) restated smaller
+  where the other gap still holds, max_residual restated above every residual, an estimate's
+  numbers moved within NUMBER_SLACK, an autocalibration estimate's interval widened (its check
+  asks only that it hold the walked one: estimates of a stage are refitted with scipy), run-control
+  options (max_nodes, time limits, certificate, detail) restated, informational words (reason,
+  conic_status, note removed). A summary's ``leaves`` written as -0.0 verifies (equal to 0; JSON
+  readers alike take it for 0).
+- Not a class: a stratified autocalibration certificate stating ``varying_focal: true`` verifies
+  with a scope identical to the genuine one; the solver takes that option (a direct-method option)
+  for a stratified job too and ignores it, so a genuine document may state it.
 """
 
 from __future__ import annotations
@@ -74,3 +97,23 @@ def test_an_estimate_worded_as_a_proof_is_refused(request, which, stage, words):
     report = verify_any(forged)
     assert not report.valid
     assert report.first_failure["check"] == "returned" and f"stages/{stage}/determinacy" in report.first_failure["detail"]
+
+
+# Held: max_residual restated on a proof with no search
+
+@pytest.mark.parametrize("kind, proof, above", [("triangulation", "convexity", False),
+                                                ("resection", "sublevel_bound", True)])
+def test_a_max_residual_below_the_solutions_residuals_is_refused_on_a_proof_without_search(kind, proof, above):
+    from tests.verify.test_forgeries import rehash
+
+    result = _example(kind, norm="L2L2")
+    assert result["certificate"]["items"][0]["proof"]["type"] == proof
+    assert verify_any(result).valid
+    for max_residual, valid in ((1e-3, False), (1e3, above)):
+        forged = copy.deepcopy(result)
+        forged["certificate"]["options"]["max_residual"] = max_residual
+        rehash(forged["certificate"], marked=True)
+        report = verify_any(json.loads(json.dumps(forged)))
+        assert report.valid is valid, report.first_failure
+        if max_residual < 1:
+            assert report.first_failure["check"] == "scope"
