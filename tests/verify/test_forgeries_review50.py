@@ -117,3 +117,18 @@ def test_a_max_residual_below_the_solutions_residuals_is_refused_on_a_proof_with
         assert report.valid is valid, report.first_failure
         if max_residual < 1:
             assert report.first_failure["check"] == "scope"
+
+
+# Held: a camera scaled to a subnormal (rounding it) or by -1, hashes made again
+
+@pytest.mark.parametrize("scale, cameras", [(2.0 ** -1060, "all"), (-1.0, 0)])
+def test_a_camera_rounded_by_a_subnormal_scale_or_turned_around_is_refused(scale, cameras):
+    from tests.verify.test_forgeries import rehash
+
+    forged = _example("triangulation", norm="L2L2")
+    data = forged["certificate"]["data"]
+    for index in (range(len(data["cameras"])) if cameras == "all" else [cameras]):
+        data["cameras"][index] = [[value * scale for value in row] for row in data["cameras"][index]]
+    rehash(forged["certificate"], marked=True)
+    report = verify_any(json.loads(json.dumps(forged)))
+    assert not report.valid
