@@ -243,6 +243,8 @@ class AutocalibrationVerification(Verification):
         if not isinstance(stages, list) or [s.get("name") if isinstance(s, dict) else None for s in stages] != names:
             raise Invalid("returned", f"stages must be named {', '.join(names)}, in that order")
         for index, (stage, claim) in enumerate(zip(stages, claims)):
+            # every stage's estimate, analysed or stopped, certified or not, in its writer's words
+            estimates.check_stage_words(stage.get("determinacy"), f"stages/{index}/determinacy")
             summary = stage.get("certificate")
             if claim.get("certified") is True and isinstance(summary, dict) and "scope" in summary \
                     and summary["scope"] != STAGE_SCOPES[names[index]]:

@@ -296,6 +296,24 @@ def check_contains(determinacy: Any, where: str) -> None:
                                       f"value {value!r:.20}")
 
 
+# An autocalibration stage's estimate, in its writer's words (core.determinacy.Determinacy.document,
+# the only writer of a stage's determinacy, analysed or stopped): its method and level sentence.
+STAGE_WORDS = {name: Determinacy().document()[name] for name in ("method", "level")}
+
+
+def check_stage_words(determinacy: Any, where: str) -> None:
+    """An autocalibration stage's ``method`` and ``level`` are its writer's words (STAGE_WORDS), as a
+    track's, map's or frame's are compared with theirs (COMPARED): they say what the intervals are,
+    and other words ("proven", the proven intervals' level) would have a curvature estimate read as
+    intervals a proof covers."""
+    if not isinstance(determinacy, dict):
+        return
+    for name, words in STAGE_WORDS.items():
+        if determinacy.get(name) != words:
+            raise Invalid("returned", f"{where}/{name} is {determinacy.get(name)!r:.60}; a stage's estimate states "
+                                      f"its writer's {words!r:.60}")
+
+
 def check_stage_level(determinacy: Any, cost: Any, lower_bound: Any, where: str) -> None:
     """A stratified stage's ``cost_increase`` is the writer's level (core.determinacy.
     cost_increase): SIGMAS^2 times the stage's cost over its redundancy, at least its certified
