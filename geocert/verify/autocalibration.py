@@ -290,7 +290,6 @@ class AutocalibrationVerification(Verification):
         estimates.check_redundancy(stages[0].get("determinacy"), len(cameras) - 4, "stages/0/determinacy")
         estimates.check_redundancy(stages[1].get("determinacy"), 5 * len(cameras) - 10, "stages/1/determinacy")
         for number, stage in enumerate(stages[:2]):
-            estimates.check_stage_words(stage.get("determinacy"), f"stages/{number}/determinacy")
             estimates.check_contains(stage.get("determinacy"), f"stages/{number}/determinacy")
             estimates.check_stage_level(stage.get("determinacy"), stage.get("cost"), stage.get("lower_bound"),
                                         f"stages/{number}/determinacy")
@@ -719,7 +718,6 @@ def _check_returned_direct(result: dict, certificate: dict, earlier_estimates: b
     else:  # varying focal lengths: an estimate of each view's, of Ks
         estimates.check_focal_lengths(result["stages"][0].get("determinacy"), result["Ks"], "stages/0/determinacy")
         _check_direct_level(problem, result, result["stages"][0].get("determinacy"), "stages/0/determinacy")
-    estimates.check_stage_words(result["stages"][0].get("determinacy"), "stages/0/determinacy")
     estimates.check_contains(result["stages"][0].get("determinacy"), "stages/0/determinacy")
     p = autocalibration_problem.plane_from_input(problem, np.asarray(result["plane_at_infinity"], dtype=float)) \
         if result.get("plane_at_infinity") is not None else None

@@ -142,23 +142,6 @@ INTRINSICS = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")  # aut
 RELATIVE_WIDTH = 0.1  # core.determinacy.RELATIVE_WIDTH: the tolerance of a quantity of its scale
 
 
-# The words every autocalibration stage's estimate states (core.determinacy.Determinacy.document:
-# autocalibration.determinacy's analyses, stopped ones too, set neither the method nor the level).
-STAGE_WORDS = {name: Determinacy().document()[name] for name in ("method", "level")}
-
-
-def check_stage_words(determinacy: Any, where: str) -> None:
-    """An autocalibration stage's estimate states its writer's ``method`` and ``level`` sentence
-    (STAGE_WORDS): no check recomputes what other words would claim (a level said to be a
-    proof's, a method said to be a search), so they are not the writer's (review 49)."""
-    if not isinstance(determinacy, dict):
-        return
-    for name, words in STAGE_WORDS.items():
-        if determinacy.get(name) != words:
-            raise Invalid("returned", f"{where}/{name} is {determinacy.get(name)!r:.80}, and its writer states "
-                                      f"{words!r:.80} for every stage's estimate")
-
-
 def check_redundancy(determinacy: Any, expected: int, where: str) -> None:
     """An autocalibration stage's estimate counts the residuals beyond its parameters as its
     writer does (autocalibration.determinacy: the affine stage's modulus constraints, one a view
@@ -305,7 +288,7 @@ def check_stage_words(determinacy: Any, where: str) -> None:
     """An autocalibration stage's ``method`` and ``level`` are its writer's words (STAGE_WORDS), as a
     track's, map's or frame's are compared with theirs (COMPARED): they say what the intervals are,
     and other words ("proven", the proven intervals' level) would have a curvature estimate read as
-    intervals a proof covers."""
+    intervals a proof covers (reviews 49 and 50)."""
     if not isinstance(determinacy, dict):
         return
     for name, words in STAGE_WORDS.items():
