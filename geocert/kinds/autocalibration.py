@@ -22,6 +22,7 @@ from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import STAGES, outcome, read_data
 from geocert.core.determinacy import safely, within
+from geocert.core.geometry import InputError
 from geocert.core.self_check import enabled as self_check_enabled
 
 Range = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[lo, hi]")]
@@ -113,6 +114,11 @@ class Parsed:
 
 
 # A small reconstruction (6 views of 12 points, synthetic: geocert.solvers.autocalibration.scenes, seed 11)
+# The options one method reads and the other ignores, with the method that reads each: asked for
+# with the other method, a job is refused (check_options).
+METHOD_OPTIONS = {"varying_focal": "direct", "prove_focal_interval": "direct", "prove_intrinsics_intervals": "direct",
+                  "prove_intervals_over_planes": "stratified"}
+
 EXAMPLE_DATA = {
     "cameras": [
         [[-0.02816711, -0.009239009, -0.02841612, 0.6616719], [0.02921911, -0.05869841, -0.02266608, 0.7454456], [-2.161665e-05, -3.637794e-05, -3.507275e-06, 0.001366901]],
@@ -160,7 +166,13 @@ class AutocalibrationKind(ProblemKind):
     def check_options(self, parsed: Parsed, options: autocalibration_problem.AutocalibrationOptions) -> None:
         """Every intrinsics range given or defaulted from data/image_size, and the direct method's
         chirality pairs counted (before the job is queued: the solve cannot start without them,
-        and nothing is built past the size limits)."""
+        and nothing is built past the size limits). An option of the other method asked for is
+        refused, naming it: the method would ignore it (varying_focal with the default stratified
+        method would return one K), a silent wrong answer to what was asked."""
+        for name, method in METHOD_OPTIONS.items():
+            if getattr(options, name) and options.method != method:
+                raise InputError(f"options/{name}", f"applies to the {method} method only (options/method "
+                                                    f"\"{method}\"); the {options.method} method would ignore it")
         autocalibration_problem.resolve_ranges(options.intrinsics, parsed.image_size)
         if options.method == "direct":
             from geocert.solvers.autocalibration import direct

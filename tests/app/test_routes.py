@@ -95,6 +95,16 @@ def test_a_summary_job_has_no_certificate_document(api, run_queued):
     assert 'options.certificate = "full"' in response.json()["detail"]
 
 
+def test_an_autocalibration_option_its_method_ignores_is_a_422_naming_it(api):
+    """varying_focal with the default (stratified) method: refused at submission, not queued to
+    return one K for every view."""
+    from geocert.kinds.autocalibration import EXAMPLE_DATA
+
+    response = api.post("/v1/jobs", json={"kind": "autocalibration", "data": EXAMPLE_DATA,
+                                          "options": {"varying_focal": True}})
+    assert problem_fields(response, 422) == ["options/varying_focal"]
+
+
 def test_verify_refuses_what_is_not_a_json_object_sent_as_json(api):
     assert problem_fields(api.post("/v1/certificates/verify", json=[1, 2]), 422) == ["body"]
     assert problem_fields(api.post("/v1/certificates/verify", content=b"{}", headers={"content-type": "text/plain"}),

@@ -35,6 +35,18 @@ def refused(job_document: dict) -> InputError:
 
 
 class TestBadInput:
+    @pytest.mark.parametrize("method, name", [("stratified", "varying_focal"), ("stratified", "prove_focal_interval"),
+                                              ("stratified", "prove_intrinsics_intervals"),
+                                              ("direct", "prove_intervals_over_planes")])
+    def test_an_option_of_the_other_method_is_refused_naming_it(self, method, name):
+        """The method asked for would ignore it: varying_focal with the default (stratified) method
+        would return one K for every view, not what was asked."""
+        error = refused(job(method=method, **{name: True}))
+        assert error.field == f"options/{name}" and "method only" in str(error)
+        kind, parsed, options = parse_job(job(method="direct" if method == "stratified" else "stratified",
+                                              **{name: True}))  # the method that reads it takes it
+        assert getattr(options, name) is True
+
     def test_fewer_than_three_cameras(self):
         document = job()
         document["data"]["cameras"] = document["data"]["cameras"][:2]
