@@ -108,17 +108,18 @@ class AutocalibrationResult(BaseModel):
     certificate: CertificateDocument | None = Field(None, description='with options.certificate = "full"')
 
 
+# The options one method reads and the other ignores, with the method that reads each: asked for
+# with the other method, a job is refused (check_options).
+METHOD_OPTIONS = {"varying_focal": "direct", "prove_focal_interval": "direct", "prove_intrinsics_intervals": "direct",
+                  "prove_intervals_over_planes": "stratified"}
+
+
 class Parsed:
     def __init__(self, cameras, points, image_size):
         self.cameras, self.points, self.image_size = cameras, points, image_size
 
 
 # A small reconstruction (6 views of 12 points, synthetic: geocert.solvers.autocalibration.scenes, seed 11)
-# The options one method reads and the other ignores, with the method that reads each: asked for
-# with the other method, a job is refused (check_options).
-METHOD_OPTIONS = {"varying_focal": "direct", "prove_focal_interval": "direct", "prove_intrinsics_intervals": "direct",
-                  "prove_intervals_over_planes": "stratified"}
-
 EXAMPLE_DATA = {
     "cameras": [
         [[-0.02816711, -0.009239009, -0.02841612, 0.6616719], [0.02921911, -0.05869841, -0.02266608, 0.7454456], [-2.161665e-05, -3.637794e-05, -3.507275e-06, 0.001366901]],

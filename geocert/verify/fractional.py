@@ -131,7 +131,7 @@ class _Pools:
         self.tracks, self.data = result["tracks"], certificate["data"]
         self.costs: np.ndarray | None = None
         self.dofs: np.ndarray | None = None
-        self.floors: dict = {}
+        self.pooled: dict = {}
 
     def _residuals(self) -> None:
         data = self.data
@@ -149,14 +149,14 @@ class _Pools:
         """pooled_bounds over the tracks of ``runs`` (checked by _runs): the floor, and the least
         and most degrees of freedom the pool's tracks may give."""
         key = tuple(map(tuple, runs))
-        if key not in self.floors:
+        if key not in self.pooled:
             charge(sum(b - a for a, b in runs), "the tracks of a pooled level")
             if self.costs is None:
                 self._residuals()
             costs = np.concatenate([self.costs[a:b] for a, b in runs])
             dofs = np.concatenate([self.dofs[a:b] for a, b in runs])
-            self.floors[key] = pooled_bounds(costs, dofs)  # it pools only the tracks of finite cost
-        return self.floors[key]
+            self.pooled[key] = pooled_bounds(costs, dofs)  # it pools only the tracks of finite cost
+        return self.pooled[key]
 
 
 def _check_pooled(index: int, determinacy, result: dict, pools: _Pools) -> None:

@@ -307,7 +307,7 @@ def test_a_pool_stated_by_every_track_is_paid_once():
     with work_budget(tracks):  # a unit short of paying for a second pool of them all
         for index, track in enumerate(document["tracks"]):
             fractional._check_pooled(index, track["determinacy"], document, pools)
-    assert list(pools.floors) == [((0, tracks),)]
+    assert list(pools.pooled) == [((0, tracks),)]
 
 
 # Class 5: the values hash copies the data

@@ -31,9 +31,16 @@ Found (a test below for each):
    verify/autocalibration.py, check_returned (stratified and direct). Fixed: estimates.
    check_stage_words refuses other words, naming the member.
 
+4. A certified reconstruction point's summary (``certificate``) with ``scope``, ``root_region``,
+   ``tolerance``, ``tolerance_met`` or ``leaves`` deleted verified, where a triangulation track's
+   (the same writer, track_document) is refused. Where: verify/checks.py, COMPLETE (no entry
+   for a reconstruction's points). Fixed: a point's ``certified`` is listed there, so that the
+   certified summary's members are required as a track's are.
+
 Held (looked at, nothing found): single-field edits of the stored reconstruction's summary,
 stats, images, stages, points and cameras (each number scaled, negated or zeroed, each boolean
-flipped, each string extended; each member deleted, a determinacy or an unknown member added)
+flipped, each string extended; each member deleted (but a certified point's summary members:
+class 4), a determinacy or an unknown member added)
 are refused but for informational figures the docs name so (times, the registration's
 thresholds and focal rounds, the adjustment's RMS, words) and members an earlier form lacks; the
 same edits of a pooled triangulation's tracks and stats (with NaN, infinities, 1e308, the least

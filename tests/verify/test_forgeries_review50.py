@@ -42,8 +42,9 @@ accepted only where the edit claims nothing false):
   conic_status, note removed). A summary's ``leaves`` written as -0.0 verifies (equal to 0; JSON
   readers alike take it for 0).
 - Not a class: a stratified autocalibration certificate stating ``varying_focal: true`` verifies
-  with a scope identical to the genuine one; the solver takes that option (a direct-method option)
-  for a stratified job too and ignores it, so a genuine document may state it.
+  with a scope identical to the genuine one. The solver took that option (a direct-method option)
+  for a stratified job and ignored it, so a genuine earlier document may state it; a submission
+  asking for it is refused since (kinds.autocalibration.METHOD_OPTIONS), the verifier still reads it.
 """
 
 from __future__ import annotations
