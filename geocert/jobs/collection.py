@@ -50,7 +50,7 @@ def start_up_heap_frozen() -> None:
     the Oxford Dinosaur (4983 tracks, the kind's chunks) a process started as a solver process
     spent 0.42 s of CPU instead of 0.53, the collector 0.017 s instead of 0.12, the items the same
     (bench.worker_collector); a 3-track job never ran the collector. Through the service the
-    workers' CPU for that job moved less than its noise (docs/benchmarks.md). Cycles made later are
+    workers' CPU for that job moved less than its noise (bench/results/service.md). Cycles made later are
     collected as before; the frozen objects are only never scanned (nor, in a forked process,
     written to by the collector, so their pages stay shared with the parent's).
 

@@ -78,7 +78,7 @@ class StreamedItemsRoute(APIRoute):
 async def read_in_one_pass(request: Request) -> None:
     """A job's JSON body validated from its bytes in one pass (``JOB_REQUEST.validate_json``)
     instead of FastAPI's two (``json.loads``, then validating the objects it made): 0.6 of their
-    CPU for a 0.9 MB body, 0.4 for a 2 kB one (docs/benchmarks.md). The model it gives stands as the
+    CPU for a 0.9 MB body, 0.4 for a 2 kB one (bench/results/service.md). The model it gives stands as the
     request's parsed JSON (Starlette's ``Request.json`` keeps it in ``_json``), which FastAPI then
     validates as an instance of the model: passed through, not read again. A body this pass
     refuses is left to FastAPI's two passes, so that its errors are worded exactly as they were
