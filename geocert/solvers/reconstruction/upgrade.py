@@ -314,7 +314,8 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
            stop: schur.StopRule = schur.CERES, groups: dict | None = None) -> tuple[Metric, np.ndarray, dict]:
     """Metric bundle adjustment (one shared K): Huber's loss, then plain least squares on the
     observations within the threshold. Returns the adjusted reconstruction, the observations
-    kept, and figures. ``should_stop()`` (asked each iteration) ends it where it is;
+    kept, and figures (among them each round's ``iterations`` and ``capped``: a round used all
+    ``max_iterations``, so may have stopped short of its minimum). ``should_stop()`` (asked each iteration) ends it where it is;
     ``robust_stop`` and ``stop`` (schur.StopRule) end the first round and the second sooner
     (``robust_stop`` None: robust_round_stop(model)).
     ``groups`` (model "focal_groups"): each registered view's focal length group {view: group},
@@ -345,6 +346,7 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
         view_groups = np.array([groups.get(int(v), 0) for v in views], dtype=int)
     rms_before = None
     k1 = metric.k1
+    iterations = []  # each round's
     for round_ in range(2):
         counts = np.bincount(obs_track[keep], minlength=len(X))
         X[counts < 2] = np.nan
@@ -355,12 +357,14 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
         use = np.flatnonzero(keep)
         if len(use) == 0:  # nothing left to adjust (none within the threshold): as it is, none kept
             break
-        K, R, t, Xp, r, k1 = bundle.metric(K, R, t, X[points], vindex[obs_view[use]], pindex[obs_track[use]],
-                                           pixels[use], f_scale=threshold_px / 2 if round_ == 0 else None,
-                                           max_iterations=max_iterations, model=model, focals=focals,
-                                           should_stop=should_stop, k1=k1,
-                                           stop=robust_stop if round_ == 0 else stop, centres=centres,
-                                           groups=view_groups)
+        # bundle.adjust (bundle.metric's, with the iterations it used): a round that used all
+        # max_iterations may not have converged, its cost an upper bound of its minimum's
+        out = bundle.adjust(K, R, t, X[points], vindex[obs_view[use]], pindex[obs_track[use]], pixels[use],
+                            bundle.Free(model, focals=focals, centres=centres, groups=view_groups, k1=k1),
+                            bundle.Schur(max_iterations, robust_stop if round_ == 0 else stop,
+                                         threshold_px / 2 if round_ == 0 else None, should_stop))
+        K, R, t, Xp, r, k1 = out.K, out.R, out.t, out.X, out.residuals, out.k1
+        iterations.append(int(out.iterations))
         # (the K standing for a K per view here is the next round's start and Metric.K; the K a
         # result states is picked again among the cameras it returns: pipeline._stated_K)
         if K.ndim == 3 and model == "principal_per_view":  # one principal point per view: the middle one's K stands for them
@@ -393,4 +397,5 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
     for k, v in enumerate(views):
         adjusted.rotations[v], adjusted.translations[v] = R[k], t[k]
     return adjusted, keep, {"elapsed_s": time.perf_counter() - start, "observations_kept": int(keep.sum()),
-                            "K": K.tolist()}
+                            "K": K.tolist(), "iterations": iterations,
+                            "capped": any(n >= max_iterations for n in iterations)}

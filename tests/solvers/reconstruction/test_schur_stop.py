@@ -169,3 +169,16 @@ def test_the_huber_round_stops_sooner_than_ceres_would_and_where_a_long_one_ends
     assert _degrees(quick.rotations, long.rotations) < 0.02 < 0.1 < _degrees(long.rotations, truth)
     assert abs(quick.K[0, 0] / long.K[0, 0] - 1) < 1e-3
     assert np.count_nonzero(kept != long_kept) < 0.01 * long_kept.sum()
+
+
+@pytest.mark.parametrize("max_iterations", [1, 200])
+def test_the_adjustment_says_whether_a_round_used_its_whole_iteration_cap(max_iterations):
+    # upgrade.adjust's "capped" is what the depth-reversal check states of its twin (mirror_capped):
+    # a round that used all its iterations may have stopped short of its minimum. One iteration
+    # cannot meet the function tolerance from a start this far off; 200 end by the rule.
+    K, R, t, X, view, track, pixels = _scene(noise_px=0.5)
+    metric = upgrade.Metric(K, list(R), list(t), X, [], False)
+    _, _, figures = upgrade.adjust(metric, view, track, pixels, threshold_px=5.0, max_iterations=max_iterations,
+                                   model="fixed")
+    assert len(figures["iterations"]) == 2 and all(1 <= n <= max_iterations for n in figures["iterations"])
+    assert figures["capped"] is (max_iterations == 1)
