@@ -50,6 +50,20 @@ def test_a_record_not_its_verdicts_is_refused(summary):
         claim.check(summary, cameras, [])
 
 
+@pytest.mark.parametrize("capped", [True, False, None])
+def test_whether_the_twins_adjustment_reached_its_cap_is_a_boolean_where_stated(capped):
+    # mirror_capped: the twin's stated cost is an upper bound (its adjustment at its iteration
+    # cap); taken as stated like the costs, absent from results written before it
+    more = {} if capped is None else {"mirror_capped": capped}
+    claim.check({"depth_reversal": _figures(**more), "poses_determined": True}, CAMERAS, [])
+
+
+@pytest.mark.parametrize("capped", [0.5, 1, "yes", None])
+def test_a_mirror_capped_not_a_boolean_is_refused(capped):
+    with pytest.raises(Invalid, match="mirror_capped"):
+        claim.check({"depth_reversal": _figures(mirror_capped=capped), "poses_determined": True}, CAMERAS, [])
+
+
 def test_the_angle_is_the_constructed_twins():
     assert claim.depth_reversal.mirror_angles_deg(dict(enumerate(ROTATIONS)), 0) == pytest.approx({0: 0.0, 1: TURNED})
     # a turn about the reference's optical axis is its own mirror image

@@ -50,8 +50,8 @@ def check(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold
     seen = np.bincount(obs.view[keep], minlength=len(metric.rotations))
     reference = max(registered, key=lambda v: (seen[v], -v))
     twin = depth_reversal.mirrored(metric, reference)
-    first, first_keep, _ = upgrade.adjust(twin, obs.view, obs.track, obs.pixel, threshold_px, model=model,
-                                          should_stop=should_stop)
+    first, first_keep, first_figures = upgrade.adjust(twin, obs.view, obs.track, obs.pixel, threshold_px,
+                                                      model=model, should_stop=should_stop)
     if should_stop is not None and should_stop():
         return stopped
     # The adjustment drops the observations its start did not fit, for good (a point left with
@@ -59,8 +59,9 @@ def check(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold
     # and adjusted once more, so the twin is judged on all it can explain, as the returned rig was
     # built (its registration triangulated each track as its views were placed). The twin is
     # judged at the better of its two adjusted states.
-    second, second_keep, _ = upgrade.adjust(retriangulated(first, obs), obs.view, obs.track, obs.pixel,
-                                            threshold_px, model=model, should_stop=should_stop)
+    second, second_keep, second_figures = upgrade.adjust(retriangulated(first, obs), obs.view, obs.track,
+                                                         obs.pixel, threshold_px, model=model,
+                                                         should_stop=should_stop)
     if should_stop is not None and should_stop():
         return stopped
     twin_cost, adjusted, twin_keep = min((fit_cost(first, obs, threshold_px), first, first_keep),
@@ -97,6 +98,10 @@ def check(metric: upgrade.Metric, obs: Observations, keep: np.ndarray, threshold
         "observations": int(len(obs.view)), "observations_fitting": kept,
         "mirror_observations_fitting": int(twin_keep.sum()),
         "focal_px": float(metric.K[0, 0]), "mirror_focal_px": float(adjusted.K[0, 0]),
+        # A twin's adjustment at its iteration cap states an upper bound of its cost, not its
+        # minimum (the long-lens twin's focal length runs off toward the affine camera's and its
+        # cost falls for hundreds of iterations): said, so a rejection read at the cap is known as one.
+        "mirror_capped": bool(first_figures["capped"] or second_figures["capped"]),
         "ambiguous": bool(ambiguous), "adopted": bool(adopted)}
     return kept_metric, kept_obs, figures
 

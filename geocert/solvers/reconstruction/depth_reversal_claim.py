@@ -38,7 +38,7 @@ NOT_CHECKED = {FEWER_THAN_2_VIEWS: "registered", STOPPED: "stopped", NOT_ADJUSTE
 MEMBERS = frozenset(("checked", "reference_view", "model", "cost_px2", "mirror_cost_px2", "cost_ratio",
                      "noise_variance_px2", "statistic", "threshold", "margin", "returned_refitted", "observations",
                      "observations_fitting", "mirror_observations_fitting", "focal_px", "mirror_focal_px",
-                     "mirror_rotation_deg", "ambiguous", "adopted"))
+                     "mirror_rotation_deg", "ambiguous", "adopted", "mirror_capped"))
 NOT_CHECKED_MEMBERS = frozenset(("checked", "reason"))
 # The bundle models the twin may be adjusted with (bundle.MODELS, which imports scipy; a test
 # asserts the two agree).
@@ -160,6 +160,11 @@ def _check_figures(figures: dict, ambiguous: bool, adopted: bool, stages: list, 
     if figures.get("model") not in MODELS or type(figures.get("returned_refitted")) is not bool:
         raise Invalid("returned", f"summary/depth_reversal's model is one of {', '.join(MODELS)} and "
                                   "returned_refitted true or false")
+    # mirror_capped: whether a twin's adjustment stopped at its iteration cap (its cost then an
+    # upper bound); taken as stated with the costs, a boolean where stated (results from before it
+    # was written have none).
+    if "mirror_capped" in figures and type(figures["mirror_capped"]) is not bool:
+        raise Invalid("returned", "summary/depth_reversal/mirror_capped must be true or false")
     if (ambiguous or adopted) and figures["returned_refitted"] is not True:
         raise Invalid("returned", "summary/depth_reversal/returned_refitted must be true: the returned rig is refitted "
                                   "whenever the twin is not rejected")

@@ -50,6 +50,7 @@ def test_a_long_lens_with_k_unknown_gives_the_right_poses_and_focal_length():
     reversal = out.summary["depth_reversal"]
     assert out.summary["poses_determined"] is True and not reversal["ambiguous"] and not reversal["adopted"]
     assert reversal["cost_ratio"] > 1 + reversal["margin"]
+    assert type(reversal["mirror_capped"]) is bool  # whether the twin's cost is its adjustment's at the cap
     assert all(c.pose_determined is True for c in registered)
     assert "poses_not_determined" not in [w["code"] for w in out.summary["warnings"]]
 
