@@ -24,7 +24,9 @@ principal point held at the centre shifts costs by a few percent whatever the no
 difference that small is not taken as evidence. Measured (the twin's cost over the returned one's):
 dinoSparseRing 1.21 with K unknown and 1.38 with K known, templeSparseRing 1.21 and 1.80, the Oxford
 Corridor 4.10 and 1.40; a synthetic turntable seen from 1000 times its size through a 165,000 px lens
-1.02 (0.3 px of noise)."""
+1.02 (0.3 px of noise). The twin's adjustments mostly stop at their iteration cap (the record's
+``mirror_capped``); run to convergence they left every verdict measured as it was
+(docs/reconstruction-vs-colmap.md, "The twin's adjustments at their cap")."""
 
 from __future__ import annotations
 
