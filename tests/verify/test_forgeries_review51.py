@@ -1,0 +1,96 @@
+"""Review 51: a hostile review of the newest checks (the pooled level's degrees of freedom, an
+autocalibration stage's words, a reconstruction's summaries and members, the hashes' forms, the
+autocalibration kind's method options), one edit at a time of genuine stored certificates and of
+certificates solved anew: each member of every ``determinacy`` set, nulled, deleted or given a
+member another writer states; lists cut, repeated and reversed; numbers scaled.
+
+Found (a test below for each, which failed while the class stood):
+
+1. A ``determinacy`` stating ``proven_over_planes`` (the record of intervals a stratified metric
+   stage's proof covers over the planes at infinity, plane_sublevel) beside any estimate but that
+   stage's verified: a triangulation track's, a resection's or homography's map's, a bilinear
+   frame's, the affine stage's and the direct stage's, with proven: false and any intervals
+   (collapsed onto the returned values, a level saying they are a proof's). A reader takes them
+   for intervals a proof covers. Where: checks._check_estimates asked only ``proven`` and
+   ``proven_intervals``; the track, map and frame estimates (estimates._compare) read neither.
+   Fixed: _check_estimates refuses it as it refuses proven intervals (a stratified metric stage's
+   stated with its proof is removed first by its estimates_of, and checked against its proof by
+   autocalibration._check_proven_intervals), and _compare refuses it beside a track's, map's or
+   frame's estimate.
+
+2. A ``determinacy`` naming ``pooled_tracks`` (the runs of a triangulation job's tracks whose
+   residuals a pooled level is read from) beside an estimate no writer pools verified: a map's,
+   a frame's, an autocalibration stage's. It says the estimate's level is the variance of tracks
+   the document does not have, and nothing read it (fractional._check_pooled reads a track's
+   only). Fixed: estimates.check_pool, from _compare (but a track's) and check_stage_words.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import pytest
+
+from geocert.verify.checks import verify_any
+from tests.verify.test_forgeries import stored
+
+# (stored document, where its estimates are, whether it is an estimate not of the metric stage)
+ESTIMATES = [("triangulation_l2l2", "tracks", 0), ("resection_l2l2", "maps", 0), ("homography2_l2l2", "maps", 0),
+             ("bilinear_l2l2", "frames", 1), ("autocalibration_stratified", "stages", 0),
+             ("autocalibration_direct", "stages", 0)]
+
+
+def _refused_naming(forged: dict, where: str, member: str) -> None:
+    report = verify_any(json.loads(json.dumps(forged)))
+    assert not report.valid
+    assert report.first_failure["check"] == "returned", report.first_failure
+    assert where in report.first_failure["detail"], report.first_failure
+    assert member in report.first_failure["detail"], report.first_failure
+
+
+@pytest.mark.parametrize("name, key, index", ESTIMATES)
+def test_the_stored_estimates_verify_and_name_no_pool_nor_planes(name, key, index):
+    result = stored(name)
+    determinacy = result[key][index]["determinacy"]
+    assert determinacy["proven"] is False
+    assert "proven_over_planes" not in determinacy and "pooled_tracks" not in determinacy
+    report = verify_any(result)
+    assert report.valid, report.first_failure
+
+
+# Class 1: intervals stated as proven over planes beside an estimate
+
+@pytest.mark.parametrize("name, key, index", ESTIMATES)
+def test_an_estimate_stating_intervals_proven_over_planes_is_refused(name, key, index):
+    forged = stored(name)
+    determinacy = forged[key][index]["determinacy"]
+    level = determinacy["cost_increase"]
+    determinacy["proven_over_planes"] = {
+        "cost_increase": level, "affine_increase": level,
+        "level": "every solution in the certificate's scope whose cost exceeds the optimum's by at most "
+                 "cost_increase lies in these intervals, over every plane at infinity the affine stage's proof leaves",
+        "intervals": [{"name": i["name"], "lower": i["value"], "upper": i["value"]}
+                      for i in determinacy["intervals"]]}
+    _refused_naming(forged, f"{key}/{index}/determinacy", "proven")
+
+
+# Class 2: a pool named beside an estimate no writer pools
+
+@pytest.mark.parametrize("name, key, index", [e for e in ESTIMATES if e[1] != "tracks"]
+                         + [("autocalibration_stratified", "stages", 1)])
+def test_an_estimate_no_writer_pools_naming_pooled_tracks_is_refused(name, key, index):
+    forged = stored(name)
+    forged[key][index]["determinacy"]["pooled_tracks"] = [[0, 1]]
+    _refused_naming(forged, f"{key}/{index}/determinacy", "pooled_tracks")
+
+
+def test_a_track_still_names_its_pool():
+    """A triangulation track's pool is read by fractional._check_pooled (review 49), not refused."""
+    result = stored("triangulation_l2l2")
+    forged = copy.deepcopy(result)
+    forged["tracks"][0]["determinacy"]["pooled_tracks"] = [[0, 1]]  # without the pooled level's words
+    report = verify_any(forged)
+    assert not report.valid and "tracks/0/determinacy" in report.first_failure["detail"]
+    assert "pooled over the job's tracks" in report.first_failure["detail"], report.first_failure
+
