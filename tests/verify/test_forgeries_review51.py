@@ -23,6 +23,19 @@ Found (a test below for each, which failed while the class stood):
    a frame's, an autocalibration stage's. It says the estimate's level is the variance of tracks
    the document does not have, and nothing read it (fractional._check_pooled reads a track's
    only). Fixed: estimates.check_pool, from _compare (but a track's) and check_stage_words.
+
+3. The stratified method reads no ``chirality`` option (the direct method's): its affine stage
+   searches the planes at infinity its own rows allow (the camera centres and the points given,
+   frames.chirality_rows). A stratified job asking ``"chirality": "none"`` was served, and its
+   document (the hash covering chirality: "none") verified with a scope saying "no plane at
+   infinity chirality allows has a modulus cost below lower_bound": read with its options, every
+   plane, where the proof covers those its rows allow. A stored stratified document restated so,
+   hashes made again, verifies alike. Where: kinds.autocalibration.METHOD_OPTIONS (a truthy test,
+   which a word option with a default cannot pass) and the stratified scope statement. Fixed: the
+   kind refuses a chirality other than its default with the stratified method, naming
+   options/chirality; the verifier's stratified scope says which planes its proof covers and that
+   options/chirality is not read (an earlier document of the writer that served such a job still
+   verifies, and its report no longer reads as every plane).
 """
 
 from __future__ import annotations
@@ -94,3 +107,40 @@ def test_a_track_still_names_its_pool():
     assert not report.valid and "tracks/0/determinacy" in report.first_failure["detail"]
     assert "pooled over the job's tracks" in report.first_failure["detail"], report.first_failure
 
+
+# Class 3: a stratified document stating the direct method's chirality
+
+@pytest.mark.parametrize("chirality", ["none", "points", "centers"])
+def test_a_stratified_reports_scope_says_its_chirality_is_not_the_options(chirality):
+    """The stratified method reads no chirality option (its affine stage's planes are those its
+    own rows allow: the camera centres and the points); restated "none", hashes made again, the
+    document verified with the same proof and a scope saying "no plane at infinity chirality
+    allows" beside options saying none: every plane. The scope now says which planes, and that
+    the option is not read."""
+    from tests.verify.test_forgeries import rehash
+
+    document = stored("autocalibration_stratified")
+    document["certificate"]["options"]["chirality"] = chirality
+    rehash(document["certificate"])
+    report = verify_any(json.loads(json.dumps(document)))
+    assert report.valid, report.first_failure  # a document of the writer before the kind refused it
+    said = report.scope["chirality"]
+    assert said.startswith("not read by the stratified method") and repr(chirality) in said
+    assert "chirality allows (scope.chirality)" in report.scope["statement"]
+
+
+def test_a_stratified_job_asking_a_chirality_is_refused_naming_it():
+    from geocert.core.geometry import InputError
+    from geocert.jobs.runner import parse_job
+    from geocert.kinds import get_kind
+
+    example = get_kind("autocalibration").example
+    for method, chirality, refused in (("stratified", "none", True), ("stratified", "centers", False),
+                                       ("direct", "none", False)):
+        job = {**example, "options": {**example.get("options", {}), "method": method, "chirality": chirality}}
+        if refused:
+            with pytest.raises(InputError) as error:
+                parse_job(job)
+            assert error.value.field == "options/chirality" and "method only" in str(error.value)
+        else:
+            assert parse_job(job)[2].chirality == chirality
