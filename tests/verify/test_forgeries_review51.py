@@ -36,6 +36,17 @@ Found (a test below for each, which failed while the class stood):
    options/chirality; the verifier's stratified scope says which planes its proof covers and that
    options/chirality is not read (an earlier document of the writer that served such a job still
    verifies, and its report no longer reads as every plane).
+
+4. A triangulation track's level pooled over a small pool could be stated at about half the
+   writer's and verify, its intervals made again at that level (0.74 of their width): the floor
+   (pooled_floor.pooled_bounds) bounded the Student quantile the writer squares (scipy's, 6.62 at
+   4 degrees of freedom) by Cornish-Fisher's first two terms (4.875 there), so the floor was 0.54
+   of the level on the triangulation example's two pooled tracks (2804 stated, 1520 accepted).
+   Where: pooled_floor.student_floor. Fixed: the quantile computed from the distribution's closed
+   form (numpy, bisection) up to 20,000 degrees of freedom, a relative 1e-8 below it; beyond,
+   the two terms are within 2e-8 of it (tests/verify/test_pooled_floor.py checks both against
+   scipy). The floor's other slack (the chi-square quantiles' 5% either side, which decide only
+   which tracks may be pooled) is left as it was.
 """
 
 from __future__ import annotations
@@ -144,3 +155,57 @@ def test_a_stratified_job_asking_a_chirality_is_refused_naming_it():
             assert error.value.field == "options/chirality" and "method only" in str(error.value)
         else:
             assert parse_job(job)[2].chirality == chirality
+
+
+# Class 4: a small pool's level stated below the writer's, within the Student floor's slack
+
+@pytest.fixture(scope="module")
+def pooled_pair() -> dict:
+    """The triangulation example solved anew: two tracks pooled (4 degrees of freedom)."""
+    from geocert.jobs.runner import solve_job
+    from geocert.kinds import get_kind
+
+    example = get_kind("triangulation").example
+    result = solve_job({**example, "options": {**example.get("options", {}), "certificate": "full"}})
+    return json.loads(json.dumps(result))
+
+
+def _restated_level(result: dict, share: float) -> dict:
+    """Every track's estimate made again by its writer's function at ``share`` of its pooled level
+    (the degrees of freedom stated as they were): narrower intervals, consistent with that level."""
+    import numpy as np
+
+    from geocert.core.geometry import normalised_cameras
+    from geocert.solvers.fractional import determinacy as estimate
+
+    forged = copy.deepcopy(result)
+    data = forged["certificate"]["data"]
+    cameras = normalised_cameras(data["cameras"])
+    for track, item in zip(data["tracks"], forged["tracks"]):
+        stated = item["determinacy"]
+        pooled = (stated["cost_increase"] * share, estimate.pooled_dof(stated["level"]))
+        again = estimate.track(cameras[track["views"]], np.asarray(track["points"], dtype=float), item["point"], False,
+                               item["cost"], item["lower_bound"], None, pooled)
+        item["determinacy"] = {**stated, **{k: again[k] for k in ("cost_increase", "level", "intervals", "determined",
+                                                                 "warnings")}}
+    return json.loads(json.dumps(forged))
+
+
+def test_the_pooled_pair_verifies_and_its_level_restated_as_it_is_verifies(pooled_pair):
+    from geocert.solvers.fractional.determinacy import pooled_dof
+
+    assert [pooled_dof(t["determinacy"]["level"]) for t in pooled_pair["tracks"]] == [4, 4]
+    assert verify_any(pooled_pair).valid
+    report = verify_any(_restated_level(pooled_pair, 1.0))
+    assert report.valid, report.first_failure
+
+
+@pytest.mark.parametrize("share", [0.75, 0.6])
+def test_a_small_pools_level_stated_below_the_writers_is_refused(pooled_pair, share):
+    """pooled_increase multiplies the pooled variance by the squared Student quantile of its
+    degrees of freedom (6.62 at 4); the floor took Cornish-Fisher's first two terms (4.875 at 4),
+    so a level 0.55 of the writer's, with intervals 0.74 of the width, verified."""
+    report = verify_any(_restated_level(pooled_pair, share))
+    assert not report.valid
+    assert report.first_failure["check"] == "returned", report.first_failure
+    assert "/determinacy/cost_increase" in report.first_failure["detail"], report.first_failure
