@@ -45,8 +45,16 @@ Found (a test below for each, which failed while the class stood):
    Where: pooled_floor.student_floor. Fixed: the quantile computed from the distribution's closed
    form (numpy, bisection) up to 20,000 degrees of freedom, a relative 1e-8 below it; beyond,
    the two terms are within 2e-8 of it (tests/verify/test_pooled_floor.py checks both against
-   scipy). The floor's other slack (the chi-square quantiles' 5% either side, which decide only
-   which tracks may be pooled) is left as it was.
+   scipy).
+
+5. The same floor read the chi-square median and 99.9% point (which decide which tracks the
+   writer pools) by Wilson-Hilferty's approximation within 5% either side, and took the least
+   variance over every track so read as possibly left out: a track just inside the writer's cut
+   was dropped. Five 2-view tracks, four at their median and one at 0.97 to 0.999 of the cut: the
+   writer's level 74.7, the floor 13.8 (0.18 of it; intervals 0.43 of their width would verify).
+   Where: pooled_floor.pooled_bounds. Fixed: both points from the chi-square's closed form
+   (pooled_floor.chi_square_points, numpy) to 1e-9 for every track length a job may have (up to
+   1,000 views), Wilson-Hilferty's kept beyond.
 """
 
 from __future__ import annotations
@@ -209,3 +217,40 @@ def test_a_small_pools_level_stated_below_the_writers_is_refused(pooled_pair, sh
     assert not report.valid
     assert report.first_failure["check"] == "returned", report.first_failure
     assert "/determinacy/cost_increase" in report.first_failure["detail"], report.first_failure
+
+
+# Class 5: a track just inside the writer's outlier cut, read as possibly left out
+
+@pytest.mark.parametrize("inside", [0.97, 0.999])
+def test_the_floor_keeps_a_track_just_inside_the_writers_cut(inside):
+    """Five 2-view tracks, four at the chi-square median and one just inside its 99.9% point: the
+    writer pools all five (74.7). Wilson-Hilferty's quantiles within 5% read the fifth as possibly
+    left out, and the floor, taking the least variance, left it out: 13.8, 0.18 of the level, so
+    a track's level stated there (intervals 0.43 of their width) verified beside its pool."""
+    import numpy as np
+    from scipy.special import chdtri
+
+    from geocert.solvers.fractional.determinacy import OUTLIER_TAIL, pooled_increase
+    from geocert.verify.pooled_floor import pooled_bounds
+
+    costs = np.array([chdtri(1, 0.5)] * 4 + [chdtri(1, OUTLIER_TAIL) * inside])
+    level, dof = pooled_increase({2: costs})
+    floor, least, most = pooled_bounds(costs, np.ones(5))
+    assert dof == 5 and least == most == 5
+    assert level * (1 - 1e-6) <= floor <= level
+
+
+def test_the_chi_square_points_are_scipys_for_every_track_length():
+    import numpy as np
+    from scipy.special import chdtri
+
+    from geocert.solvers.fractional.determinacy import OUTLIER_TAIL
+    from geocert.verify.fractional import MAX_VIEWS
+    from geocert.verify.pooled_floor import CHI2_ROUNDING, EXACT_CHI2_DOF, OUTLIER_TAIL as TAIL, chi_square_points
+
+    assert TAIL == OUTLIER_TAIL and 2 * MAX_VIEWS - 3 <= EXACT_CHI2_DOF
+    dofs = np.r_[np.arange(1, 80, 2), np.arange(81, 2 * MAX_VIEWS - 2, 46), [2 * MAX_VIEWS - 3]].astype(float)
+    median, tail, margin = chi_square_points(dofs)
+    assert np.all(margin == CHI2_ROUNDING)
+    for found, exact in ((median, chdtri(dofs, 0.5)), (tail, chdtri(dofs, OUTLIER_TAIL))):
+        assert np.all(np.abs(found - exact) <= CHI2_ROUNDING / 100 * exact)
