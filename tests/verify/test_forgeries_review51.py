@@ -55,6 +55,32 @@ Found (a test below for each, which failed while the class stood):
    Where: pooled_floor.pooled_bounds. Fixed: both points from the chi-square's closed form
    (pooled_floor.chi_square_points, numpy) to 1e-9 for every track length a job may have (up to
    1,000 views), Wilson-Hilferty's kept beyond.
+
+Held (tried and refused, or accepted only where the edit claims nothing false):
+
+- Every member of every stored document's determinacy nulled or deleted (proven, redundancy,
+  cost_increase, level, method, warnings, intervals cut, reversed, repeated): refused but for
+  proven null or left out, and proven_intervals null, which claim no proof (weaker).
+- An unknown member added to the result, the certificate, its options, data, a claim, a proof, an
+  item, its summary and the stats of each kind, hashes made again or not: refused.
+- Options restated with their hashes made again: a float max_nodes and abs_gap 0 (where rel_gap
+  still holds) verify and are true; rel_gap 0, 2^64 s, an unknown method or relaxation order,
+  chirality false: refused. Stratified documents stating varying_focal or a direct proof's option
+  verify unhashed (review 50: not a class). Integer views hashed as floats: refused (data_sha256).
+- The reconstruction's summary, stages and calibration claim, one field at a time: refused but
+  for informational figures (the registration's thresholds, focal rounds and initial pair, the
+  motion's rotation noise, a nested stage's nodes and reason, linear_K), -0.0 for 0, entries of
+  a K within their rounding of 0, warnings reordered or one repeated (nothing more claimed).
+- A triangulation pool named as another run of the job's tracks is checked as that run's
+  (docs/certificate.md: the pool's choice is not checked; left as documented).
+
+Found, not fixed: a reconstruction's summary.calibration.model restated "varying" beside cameras
+sharing one K (camera_model simple, the adjustment's model simple) verifies (the stored
+reconstruction and reconstruction_labelled): it says each camera carries its own K, which the
+writer (claims.calibration_claim: "varying" exactly when the adjustment returned a K a view) did
+not; the K it states is still every camera's and returned_is_certified must then be false, so
+nothing stronger follows. Tying it needs when the adjustment keeps a K a view (its model, the
+per-view principal point's test), which the verifier does not derive.
 """
 
 from __future__ import annotations
