@@ -109,9 +109,12 @@ class AutocalibrationResult(BaseModel):
 
 
 # The options one method reads and the other ignores, with the method that reads each: asked for
-# with the other method, a job is refused (check_options).
+# (other than its default) with the other method, a job is refused (check_options). ``chirality``
+# is the direct method's: the stratified affine stage searches the planes its own rows allow (the
+# points and the camera centres, frames.chirality_rows), so a stratified job asking "none" got a
+# certificate of fewer planes than asked for, under a hash saying "none" (review 51).
 METHOD_OPTIONS = {"varying_focal": "direct", "prove_focal_interval": "direct", "prove_intrinsics_intervals": "direct",
-                  "prove_intervals_over_planes": "stratified"}
+                  "prove_intervals_over_planes": "stratified", "chirality": "direct"}
 
 
 class Parsed:
@@ -170,8 +173,9 @@ class AutocalibrationKind(ProblemKind):
         and nothing is built past the size limits). An option of the other method asked for is
         refused, naming it: the method would ignore it (varying_focal with the default stratified
         method would return one K), a silent wrong answer to what was asked."""
+        defaults = autocalibration_problem.AutocalibrationOptions()
         for name, method in METHOD_OPTIONS.items():
-            if getattr(options, name) and options.method != method:
+            if getattr(options, name) != getattr(defaults, name) and options.method != method:
                 raise InputError(f"options/{name}", f"applies to the {method} method only (options/method "
                                                     f"\"{method}\"); the {options.method} method would ignore it")
         autocalibration_problem.resolve_ranges(options.intrinsics, parsed.image_size)

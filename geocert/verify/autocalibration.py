@@ -147,7 +147,16 @@ class AutocalibrationVerification(Verification):
         return {"kind": "autocalibration", "method": options["method"], "intrinsics": options["intrinsics"],
                 "rel_gap": options["rel_gap"], "metric_rel_gap": options["metric_rel_gap"],
                 "abs_gap": options["abs_gap"],
-                "statement": "stage 0 (affine): no plane at infinity chirality allows has a modulus cost below "
+                # the direct method's option, which the stratified stages do not read (their planes are
+                # those their own rows allow): stated "none" beside a stratified proof, hashed, it read
+                # as every plane searched (review 51); the kind refuses a stratified job asking one
+                # (kinds.autocalibration.METHOD_OPTIONS), an earlier document may state it
+                "chirality": f"not read by the stratified method (options/chirality {options.get('chirality')!r:.20} "
+                             "is the direct method's): its affine stage searches the planes at infinity its own "
+                             "chirality rows allow, the camera centres' and the points' given "
+                             "(frames.chirality_rows), whatever that option states",
+                "statement": "stage 0 (affine): no plane at infinity chirality allows (scope.chirality) has a "
+                             "modulus cost below "
                              "lower_bound; stage 1 (metric), for the plane at infinity it states: no "
                              "calibration K within the intrinsics ranges gives a DIAC K K^T costing less than "
                              "lower_bound; each solution returned is in its scope and costs cost"}

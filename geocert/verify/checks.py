@@ -847,14 +847,17 @@ def _check_returned(result: dict, certificate: dict, earlier_estimates: bool = T
 
 def _check_estimates(value: Any, where: str = "", earlier: bool = True) -> None:
     """Every ``determinacy`` a result holds outside its certificate is an estimate: none may call
-    itself proven, or state proven intervals, where no proof of them is carried."""
+    itself proven, or state proven intervals (``proven_intervals``, or ``proven_over_planes``: a
+    stratified metric stage's, which its adapter's estimates_of removes where its proof carries
+    them), where no proof of them is carried (review 51: intervals stated as proven over planes
+    beside a track's, a map's, a frame's or any stage's estimate verified)."""
     if isinstance(value, dict):
         for name, item in value.items():
             if name in ("certificate", "camera_certificate", "calibration_certificate"):
                 continue
             if name == "determinacy" and isinstance(item, dict) and (
                     not (item.get("proven") is None or item.get("proven") is False)  # 0 == False: not a boolean
-                    or item.get("proven_intervals") is not None):
+                    or item.get("proven_intervals") is not None or item.get("proven_over_planes") is not None):
                 raise Invalid("returned", f"{where}/determinacy says proven, and no proof of its intervals is "
                                           "carried (an estimate is proven: false)")
             if name == "determinacy" and isinstance(item, dict):

@@ -291,10 +291,21 @@ def check_stage_words(determinacy: Any, where: str) -> None:
     intervals a proof covers (reviews 49 and 50)."""
     if not isinstance(determinacy, dict):
         return
+    check_pool(determinacy, where)
     for name, words in STAGE_WORDS.items():
         if determinacy.get(name) != words:
             raise Invalid("returned", f"{where}/{name} is {determinacy.get(name)!r:.60}; a stage's estimate states "
                                       f"its writer's {words!r:.60}")
+
+
+def check_pool(determinacy: Any, where: str) -> None:
+    """An estimate no writer pools (a map's, a frame's, an autocalibration stage's: only a
+    triangulation track's level is pooled over the job's tracks) names no pooled_tracks: one would
+    say its level is the residual variance of tracks the document does not have, and no check
+    reads it (review 51)."""
+    if isinstance(determinacy, dict) and determinacy.get("pooled_tracks") is not None:
+        raise Invalid("returned", f"{where}/pooled_tracks is {determinacy['pooled_tracks']!r:.60}; only a "
+                                  "triangulation track's level is pooled over tracks (its writer names none here)")
 
 
 def check_stage_level(determinacy: Any, cost: Any, lower_bound: Any, where: str) -> None:
@@ -354,7 +365,7 @@ def _check_tracks(kind, result: dict, certificate: dict, earlier: bool = True) -
         # the ends as offsets from the value, to the width (review 37 class 2): VALUE_SLACK of a
         # value 1e6 off the origin is 1e-3 px, thousands of widths, so the x, y and z intervals
         # collapsed onto their values, or moved with them off the returned point, verified
-        _compare(where, determinacy, expected, earlier, width_slack=TRACK_WIDTH_SLACK, offsets=True)
+        _compare(where, determinacy, expected, earlier, width_slack=TRACK_WIDTH_SLACK, offsets=True, pooled=True)
 
 
 def _check_point_values(where: str, determinacy: dict, point: Any) -> None:
@@ -485,14 +496,21 @@ def _map_cost_spread(source: np.ndarray, target: np.ndarray, matrix: Any) -> flo
 
 def _compare(where: str, given: dict, expected: dict | None, earlier_form: bool = True,
              cost_spread: float = 0.0, width_slack: float = 0.0, value_floor: float = 0.0,
-             value_slack: float = VALUE_SLACK, offsets: bool = False) -> None:
+             value_slack: float = VALUE_SLACK, offsets: bool = False, pooled: bool = False) -> None:
     """``given`` is ``expected`` but for its proven intervals (checked against the proof) and the
     pool a pooled level names (checked against the data), to the module's slack; read as written
     before intervals stated a tolerance only where ``earlier_form`` allows it (check). A value
     (and an end with it) may differ by ``value_slack`` of itself and ``value_floor``; with
     ``offsets``, an end is read as its offset from its own interval's value (end - value) against
     the estimate's, to NUMBER_SLACK and ``width_slack`` of the width and END_OFFSET_ULPS of the end,
-    whatever the value's size."""
+    whatever the value's size. ``pooled``: whether the estimate may be read at a level pooled over
+    the job's tracks (a triangulation track's, whose pooled_tracks fractional._check_pooled checks
+    against the data); no other writer names a pool (check_pool)."""
+    if not pooled:
+        check_pool(given, where)
+    if given.get("proven_over_planes") is not None:  # a stratified metric stage's only (verify.autocalibration)
+        raise Invalid("returned", f"{where}/proven_over_planes: intervals proven over the planes at infinity are a "
+                                  "metric stage's; no proof of a track's, map's or frame's carries them")
     if expected is None:
         raise Invalid("returned", f"{where} is stated where the estimate is not defined on the data (its writer "
                                   "states none)")
