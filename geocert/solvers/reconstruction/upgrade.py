@@ -315,7 +315,8 @@ def adjust(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, pixels: 
     """Metric bundle adjustment (one shared K): Huber's loss, then plain least squares on the
     observations within the threshold. Returns the adjusted reconstruction, the observations
     kept, and figures (among them each round's ``iterations`` and ``capped``: a round used all
-    ``max_iterations``, so may have stopped short of its minimum). ``should_stop()`` (asked each iteration) ends it where it is;
+    ``max_iterations``, so may have stopped short of its minimum). ``should_stop()`` (asked each
+    iteration) ends it where it is;
     ``robust_stop`` and ``stop`` (schur.StopRule) end the first round and the second sooner
     (``robust_stop`` None: robust_round_stop(model)).
     ``groups`` (model "focal_groups"): each registered view's focal length group {view: group},
