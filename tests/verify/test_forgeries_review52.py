@@ -9,8 +9,10 @@ from __future__ import annotations
 import copy
 import json
 
+import numpy as np
 import pytest
 
+from geocert.core.strict import Invalid, document_size, work_budget
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import stored
 
@@ -33,3 +35,53 @@ def test_a_calibration_model_restated_varying_beside_one_shared_K_is_refused(nam
     forged = copy.deepcopy(result)
     forged["summary"]["calibration"]["model"] = "varying"
     _refused_naming(forged, "returned", "summary/calibration/model")
+
+
+# Review 51's second hole: the pooled floor's closed-form quantiles not charged to the budget
+
+@pytest.fixture(scope="module")
+def pooled_pair() -> dict:
+    """The triangulation example solved anew: two tracks pooled."""
+    from geocert.jobs.runner import solve_job
+    from geocert.kinds import get_kind
+
+    example = get_kind("triangulation").example
+    return json.loads(json.dumps(solve_job({**example, "options": {**example.get("options", {}),
+                                                                   "certificate": "full"}})))
+
+
+def test_a_budget_paying_for_all_but_the_pooled_quantiles_refuses_them(pooled_pair, monkeypatch):
+    """The example's checks cost about 50 units of work beside its pooled level's quantiles (about
+    2,400): a budget of 1,000 pays for the rest and not for them, refused naming them (unpaid,
+    they verified)."""
+    import geocert.verify.checks as checks
+
+    assert verify_any(pooled_pair).valid
+    monkeypatch.setattr(checks, "WORK_BASE", 1000 - checks.WORK_PER_UNIT * document_size(pooled_pair))
+    _refused_naming(pooled_pair, "format", "more work than its size pays for", "quantiles")
+
+
+def test_the_quantiles_of_every_track_length_are_charged_once_a_document_cached_or_not():
+    """Every track length up to 1,000 views (their chi-square points from the closed form) and
+    the pool's Student quantile: charged before they are computed, the same charge again with
+    the process's caches warm, once for a document however many pools read them."""
+    from geocert.verify.fractional import MAX_VIEWS
+    from geocert.verify.pooled_floor import pooled_bounds
+
+    dofs = 2.0 * np.arange(2, MAX_VIEWS + 1) - 3
+    costs = dofs.copy()  # each track at its mean
+
+    def charged(pools: int) -> int:
+        left = 10 ** 9
+        with work_budget(left):
+            from geocert.core.strict import _WORK
+            paid: set = set()
+            for _ in range(pools):
+                pooled_bounds(costs, dofs, paid)
+            return left - _WORK.get()[0]
+
+    first = charged(1)
+    assert first > 10 ** 6  # about a second of CPU here, computed
+    assert charged(1) == first and charged(3) == first  # the caches warm; three pools of one document
+    with work_budget(first // 2), pytest.raises(Invalid, match="quantiles"):
+        pooled_bounds(costs, dofs)
