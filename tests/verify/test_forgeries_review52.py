@@ -85,3 +85,33 @@ def test_the_quantiles_of_every_track_length_are_charged_once_a_document_cached_
     assert charged(1) == first and charged(3) == first  # the caches warm; three pools of one document
     with work_budget(first // 2), pytest.raises(Invalid, match="quantiles"):
         pooled_bounds(costs, dofs)
+
+
+# Class 1: what only the direct method writes, stated beside a stratified result
+
+STRATIFIED = ["autocalibration_stratified", "autocalibration_five_views"]
+
+
+@pytest.mark.parametrize("name", STRATIFIED)
+@pytest.mark.parametrize("figure", ["order", "moment_rank", "eigenvalue_ratio", "conic_status"])
+@pytest.mark.parametrize("stage", [0, 1])
+def test_a_direct_relaxations_figure_in_a_stratified_stages_summary_is_refused(name, figure, stage):
+    """moment_rank 1 (a moment relaxation solved exactly, the optimum extracted) and its fellows,
+    copied from the stored direct document's stage: the stratified stages solve no such relaxation,
+    and the figures verified, typed only (checks.SUMMARY_NOTES)."""
+    direct = stored("autocalibration_direct")["stages"][0]["certificate"]
+    forged = stored(name)
+    assert figure not in forged["stages"][stage]["certificate"]
+    forged["stages"][stage]["certificate"][figure] = direct[figure]
+    _refused_naming(forged, "returned", f"stages/{stage}/certificate/{figure}")
+
+
+@pytest.mark.parametrize("name", STRATIFIED)
+@pytest.mark.parametrize("which", ["direct's", "its own K"])
+def test_a_K_a_view_beside_a_stratified_result_is_refused(name, which):
+    """Ks (the direct method's K a view, options.varying_focal) says each camera was calibrated on
+    its own; beside a stratified result's one K no check read it."""
+    forged = stored(name)
+    views = len(forged["cameras"])
+    forged["Ks"] = (stored("autocalibration_direct")["Ks"][:views] if which == "direct's" else [forged["K"]] * views)
+    _refused_naming(forged, "returned", "Ks")
