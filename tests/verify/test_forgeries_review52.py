@@ -115,3 +115,22 @@ def test_a_K_a_view_beside_a_stratified_result_is_refused(name, which):
     views = len(forged["cameras"])
     forged["Ks"] = (stored("autocalibration_direct")["Ks"][:views] if which == "direct's" else [forged["K"]] * views)
     _refused_naming(forged, "returned", "Ks")
+
+
+# Class 2: the direct method's varying_focal hashed beside a stratified proof, the scope silent
+
+@pytest.mark.parametrize("name", STRATIFIED)
+def test_a_stratified_scope_says_varying_focal_is_not_read(name):
+    """A stratified document hashing varying_focal true (a job the kind refuses since review 50,
+    an earlier writer served) verified with a scope saying nothing of it: read with its options,
+    a K a view certified, where the metric stage certifies one K for every view. The scope now
+    says the option is not read, as it says of chirality (review 51)."""
+    from tests.verify.test_forgeries import rehash
+
+    forged = stored(name)
+    forged["certificate"]["options"]["varying_focal"] = True
+    rehash(forged["certificate"])
+    report = verify_any(json.loads(json.dumps(forged)))
+    assert report.valid, report.first_failure
+    assert "not read by the stratified method" in report.scope["varying_focal"]
+    assert "one K for every view" in report.scope["varying_focal"]
