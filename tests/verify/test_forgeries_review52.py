@@ -134,3 +134,16 @@ def test_a_stratified_scope_says_varying_focal_is_not_read(name):
     assert report.valid, report.first_failure
     assert "not read by the stratified method" in report.scope["varying_focal"]
     assert "one K for every view" in report.scope["varying_focal"]
+
+
+# Class 3: an entry of a list of records that is not one (a summary's warnings)
+
+@pytest.mark.parametrize("name", ["reconstruction", "reconstruction_labelled"])
+@pytest.mark.parametrize("entry", [None, "critical_motion", [], 0])
+def test_a_warning_not_a_record_is_refused(name, entry):
+    """A reconstruction summary's warnings ending in null, a bare code ("critical_motion", read
+    as that warning and no check of its words reached) or a list verified: records.check left
+    what is not a record to the checks reading the list, which pass over it."""
+    forged = stored(name)
+    forged["summary"]["warnings"].append(entry)
+    _refused_naming(forged, "returned", f"summary/warnings/{len(forged['summary']['warnings']) - 1}")
