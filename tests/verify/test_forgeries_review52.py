@@ -1,7 +1,67 @@
 """Review 52: the two holes review 51 left (a reconstruction's calibration model, the pooled
-floor's quantiles unpaid), and a hostile review of the newest checks.
+floor's quantiles unpaid), and a hostile review of the newest checks (review 51's fixes, and
+every result field of the stored documents): one edit at a time of each member (numbers scaled,
+nudged by 1e-6, set to -0.0, a subnormal, 1e308, "NaN", a string, null; booleans flipped;
+strings emptied; lists emptied, cut, repeated, reversed, null appended; members deleted or
+added), each kind's members stated in every other kind's result, options restated with their
+hashes made again, items and members reordered, one kind's certificate carried in another's place.
 
-CLASSES
+Review 51's holes (a test below for each, which failed while it stood):
+
+- summary.calibration.model restated "varying" beside cameras sharing one K (the adjustment's
+  model simple) verified. Fixed: reconstruction._calibration_model, the writer's model from the
+  adjustment's record (claims.calibration_claim: varying exactly when it returned a K a view).
+- The pooled floor's closed-form quantiles (a track length's chi-square points, a pool's Student
+  quantile) were computed unpaid: every track length up to 1,000 views about 1 s of CPU here, and
+  pools of many degrees of freedom 2.3 ms each (the Student cache keeps 256). Fixed: charged to the
+  verification's budget before they are computed (pooled_floor.charge_quantiles), once a document
+  whether cached or not, so that a verdict does not depend on what the process verified before.
+
+Found (a test below for each, which failed while the class stood):
+
+1. A stratified autocalibration result stating what only the direct method writes verified: its
+   relaxation's order, moment_rank (1: a moment relaxation solved exactly), eigenvalue_ratio and
+   conic_status in a stage's summary (checks.SUMMARY_NOTES types them only; the direct method's
+   are tied to its proof by _check_relaxation_figures), and Ks (a K a view, options.varying_focal)
+   beside its one K, the direct document's or its own K repeated. Fixed:
+   autocalibration._check_nothing_direct, on the stratified path.
+2. The direct method's varying_focal hashed true beside a stratified proof verified with a scope
+   saying nothing of it (read with its options: a K a view certified). The kind refuses such a
+   job since review 50; an earlier writer served it, so the document verifies, and the scope now
+   says the option is not read, as review 51 made it say of chirality.
+3. A reconstruction summary's warnings ending in null, a bare "critical_motion" or a list
+   verified: records.check left what is not a record to the checks reading the list, which pass
+   over it. Fixed: an entry of a list of records must be a record.
+
+Held (tried and refused, or accepted only where the edit claims nothing false):
+
+- Every field of each stored result edited one at a time: refused but for informational figures
+  (times, the registration's thresholds, focal rounds, initial pair, a projective stage's counts
+  within their bounds and its RMS), numbers within their documented rounding (intervals and
+  residuals nudged by 1e-6 of themselves, entries of a K within rounding of 0 or 1, a subnormal
+  where 0 was), weaker statements (a determinacy or a note left out, a reason emptied), integers
+  for their floats, warnings reordered.
+- Each kind's members in every other kind's result, item, determinacy and summary: refused but
+  for the two of class 1 (and proven_intervals null, which claims nothing).
+- Options restated, hashes made again: rel_gap and metric_rel_gap 0 or subnormal (the kind allows
+  0; abs_gap then certifies, and the scope says so), abs_gap 0, a convex bilinear job's
+  coefficient_bound (which the convex coefficients do not read), run controls (unhashed,
+  checked for range only: docs/certificate.md), chirality restated on a direct document (refused:
+  its programs' rows), relaxation_order 3 (refused).
+- Items reordered with their claims and data and the hashes made again (a true claim about the
+  reordered job); result items, cameras, points or observations reordered alone: refused. A
+  triangulation or resection certificate carried as a reconstruction's calibration or camera
+  certificate, or a result given another kind: refused.
+- A labelled reconstruction's camera renamed or two names swapped: refused (its input_labels).
+
+Found, not fixed:
+
+- summary.depth_reversal.mirror_capped is taken as stated (docs/certificate.md): whether a twin's
+  adjustment stopped at its iteration cap is not derivable without running it again; stated false
+  where it was true, a rejection read at the cap reads as one at the twin's minimum.
+- A run control (max_nodes, time_limit_s) restated below what a proof's leaves or the stated
+  times imply (max_nodes 1 beside a 30-leaf proof, a time limit of 5e-324 s) verifies: they are
+  not hashed and are checked for range only, as documented.
 """
 
 from __future__ import annotations
@@ -12,7 +72,7 @@ import json
 import numpy as np
 import pytest
 
-from geocert.core.strict import Invalid, document_size, work_budget
+from geocert.core.strict import _WORK, Invalid, document_size, work_budget
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import stored
 
@@ -74,7 +134,6 @@ def test_the_quantiles_of_every_track_length_are_charged_once_a_document_cached_
     def charged(pools: int) -> int:
         left = 10 ** 9
         with work_budget(left):
-            from geocert.core.strict import _WORK
             paid: set = set()
             for _ in range(pools):
                 pooled_bounds(costs, dofs, paid)
