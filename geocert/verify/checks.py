@@ -393,6 +393,9 @@ def _verify(document: Any, returned: dict | None) -> Report:
         if check_data is not None:  # members beyond the kind's, which no check would read
             check_data(document["data"])
         report.scope = scope_statement(document["kind"], options)
+        run_control = residual_claims.run_control_scope(document["options"])
+        if run_control is not None:  # what the report says of them, the statement being silent
+            report.scope["run_control"] = run_control
         data_scope = hook(_adapter(document["kind"]), "data_scope")
         if data_scope is not None:
             report.scope.update(data_scope(document["data"], options, items))

@@ -4,6 +4,8 @@ checked by the solver's own options class, and its scope in words. The verifier'
 
 from __future__ import annotations
 
+from typing import Any
+
 from geocert.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
 from geocert.core.geometry import InputError
 from geocert.core.strict import Invalid, number
@@ -46,6 +48,28 @@ def run_control_values(options_type: type, options: dict, names: tuple[str, ...]
         if type(getattr(options_type, name)) is int and not value.is_integer():
             raise Invalid("options", f"options/{name}: must be an integer, got {options[name]!r:.40}")
     return {name: int(value) if type(getattr(options_type, name)) is int else value for name, value in run.items()}
+
+
+# Every limit on a run's work any kind's options state (the residual kinds' RUN_CONTROL, an
+# autocalibration's, a reconstruction's stage limits): named in the report's scope, taken as stated.
+RUN_LIMITS = RUN_CONTROL + ("autocalibration_max_nodes", "autocalibration_time_limit_s", "structure_time_limit_s")
+
+
+def run_control_scope(options: Any) -> str | None:
+    """What the report says of the run-control limits the document states (review 53): they are
+    the request's, not hashed and checked for their ranges only, so nothing ties them to the proof
+    (a max_nodes of 1 beside a proof of 30 leaves, a time limit of 5e-324 s beside a search that
+    split its box, verify). No claim depends on them: a proof is checked whatever work found it, and
+    a hash binds nothing a forger cannot make again. None where the document states none."""
+    if not isinstance(options, dict):
+        return None
+    stated = [f"{name} {options[name]!r:.24}" for name in RUN_LIMITS if options.get(name) is not None]
+    if not stated:
+        return None
+    return (f"taken as stated: {', '.join(stated)} are the request's run controls, not hashed and checked only "
+            "for the ranges the solver accepts; they are not checked against the proof (its leaves, the items' "
+            "nodes, statuses and times), so they say nothing of the work that found it, and no claim depends on "
+            "them")
 
 
 def scope(kind: str, domain: str, options: dict) -> dict:
