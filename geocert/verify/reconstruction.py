@@ -1378,6 +1378,16 @@ class ReconstructionItems(TrackItems, Verification):
                                         "the earliest hash form (written before the check) lacks, so whether the "
                                         "depth-reversed twin of the rig fits as well (poses not determined) is not "
                                         "said")
+        elif isinstance(result["summary"].get("depth_reversal"), dict) \
+                and result["summary"]["depth_reversal"].get("checked") is not False:
+            # what the record's checks cannot derive without the twin's adjustment run again (review 53)
+            scoped["depth_reversal"] = (
+                "taken as stated: the depth-reversal record's two costs, its noise, the twin's own counts and focal "
+                "length, and mirror_capped (whether a twin's adjustment stopped at its iteration cap, its cost then "
+                "an upper bound) need the twin's adjustment run again, which the verifier does not do; a rejection "
+                "stated with mirror_capped false is read as one at the twin's minimum on the record's word. The "
+                "record's angles, its returned rig's counts and focal length, and its verdict's agreement with its "
+                "figures are checked; the verdict only ever adds doubt")
         if unchecked:
             scoped["camera_judgements"] = (
                 f"unchecked for cameras {', '.join(map(str, unchecked))}: each is called not certified, not searched, "
