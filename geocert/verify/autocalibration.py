@@ -265,6 +265,7 @@ class AutocalibrationVerification(Verification):
                     and summary["scope"] != STAGE_SCOPES[names[index]]:
                 raise Invalid("returned", f"stages/{index}/certificate/scope is {summary['scope']!r:.120}, the scope its "
                                           f"proof covers is {STAGE_SCOPES[names[index]]!r:.120}")
+        _check_calibration_forms(result)
         if direct:
             if result.get("baseline") is not None:  # the direct method has no linear estimate
                 raise Invalid("returned", "baseline: the direct method states no linear estimate")
@@ -716,6 +717,26 @@ def _check_nothing_direct(result: dict, stages: list) -> None:
     if result.get("Ks") is not None:
         raise Invalid("returned", "Ks is stated: the stratified method returns one K (K), a K a view only the direct "
                                   "method's options.varying_focal writes")
+
+
+def _check_calibration_forms(result: dict) -> None:
+    """Every K the result returns (K, each of Ks, each metric camera's) is a calibration matrix as
+    its writer makes one: 0 below the diagonal and K[2][2] 1, exactly (upper_triangular_root and
+    the cameras' RQ write them so; -0.0 is 0). Read only within rounding of the recomputed K, a
+    subnormal or 1e-300 there verified (review 53): a K no camera has, claimed returned."""
+    stated = [("K", result.get("K"))]
+    if isinstance(result.get("Ks"), list):
+        stated += [(f"Ks/{i}", K) for i, K in enumerate(result["Ks"]) if K is not None]
+    if isinstance(result.get("cameras"), list):
+        stated += [(f"cameras/{i}/K", c.get("K")) for i, c in enumerate(result["cameras"])
+                   if isinstance(c, dict) and c.get("K") is not None]
+    for where, K in stated:
+        if K is None:
+            continue
+        K = _numbers(K, where, (3, 3), "returned")
+        if not (K[1, 0] == K[2, 0] == K[2, 1] == 0 and K[2, 2] == 1):
+            raise Invalid("returned", f"{where} must be a calibration matrix: exactly 0 below the diagonal and "
+                                      "K[2][2] = 1, as its writer makes it")
 
 
 def _check_returned_direct(result: dict, certificate: dict, earlier_estimates: bool = True) -> None:
