@@ -526,6 +526,15 @@ def _check_calibration(result: dict, stage: dict, model: str, said: str) -> None
     if model in ("fixed", "full"):
         fits, what = shared(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2))), "one K"
     else:
+        # a model without skew: each camera's K its writer builds with a skew of 0, exactly (bundle:
+        # the model's K; the start put in the model). Read off P within the tolerance only, a K's
+        # skew of 5e-324 or 1e-300 verified (review 53): a skew the model does not have, claimed.
+        for number, camera in enumerate(registered):
+            K = camera.get("K")
+            if isinstance(K, list) and len(K) == 3 and isinstance(K[0], list) and len(K[0]) == 3 \
+                    and not (is_number(K[0][1]) and K[0][1] == 0):
+                raise Invalid("returned", f"{said} camera {camera.get('view')!r:.10}'s K states a skew of "
+                                          f"{K[0][1]!r:.30}: the model has none (exactly 0)")
         square = all(abs(K[0, 1]) <= tolerance and abs(K[0, 0] - K[1, 1]) <= tolerance for K in Ks)
         fits, what = square and shared(((0, 2), (1, 2))), "square pixels, no skew and one principal point"
         if model == "simple":
