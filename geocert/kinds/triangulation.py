@@ -245,7 +245,9 @@ class TriangulationKind(ProblemKind):
         not_started = None if deadline is None else (
             "not started: the job's time limit (options.job_time_limit_s, "
             f"{options.job_time_limit_s:g} s) passed before this track started")
-        results = triangulate_many(parsed.cameras, tracks, options, callback, deadline=deadline, not_started=not_started)
+        # A stop (the job's cancel) ends the batch where it is: its tracks not finished read cancelled.
+        results = triangulate_many(parsed.cameras, tracks, options, callback, deadline=deadline, not_started=not_started,
+                                   stop_ends_batch=True)
         projected = None
         if "full" in (options.detail, options.certificate):  # intervals proven at the level they are read at
             projected = determinacy.projected_tracks(parsed.cameras, tracks, results)

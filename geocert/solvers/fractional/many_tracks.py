@@ -108,7 +108,8 @@ class _Watch:
 def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarray]],
                      options: TriangulationOptions | None = None,
                      callback: Callable[[Progress], bool | None] | None = None,
-                     deadline: float | None = None, not_started: str = "not started: past the deadline") -> TrackResults:
+                     deadline: float | None = None, not_started: str = "not started: past the deadline",
+                     stop_ends_batch: bool = False) -> TrackResults:
     """Certified global optimum of every track: ``cameras`` (N, 3, 4) of the whole scene,
     ``tracks`` a list of ``(views, points)`` with ``views`` indices into ``cameras`` and
     ``points`` (len(views), 2). Returns one TrackResult per track, in order, as a TrackResults
@@ -141,11 +142,15 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
       digits, and ``elapsed_s`` (the batched work's time shared by the tracks it closed).
 
     Tracks the batched path does not close are solved by ``triangulate`` itself, so every
-    status it returns is possible. ``callback`` is called every CHECK_EVERY tracks of the batched
-    work (a Progress with no bounds) and between the nodes of those searches; once it returns
-    True, the search running stops (``cancelled``, its best point) and every track not finished
-    reads ``cancelled``, uncertified and without a point (STOPPED_BEFORE). ``deadline`` (a ``time.monotonic()`` value) is one clock the
-    batch shares: each of those searches stops by it (its time_limit_s no longer than what is
+    status it returns is possible. ``callback`` is called between the nodes of those searches;
+    once it returns True, the search running stops (``cancelled``, its best point). With
+    ``stop_ends_batch`` (a job's batch, where a stop is a cancel) it is also called every
+    CHECK_EVERY tracks of the batched work (a Progress with no bounds), and once it has asked to
+    stop no track is started: every track not finished reads ``cancelled``, uncertified and
+    without a point (STOPPED_BEFORE). Without it (a reconstruction's structure stage, which keeps
+    a stopped track's best point) the batched work runs to its end and each track left is still
+    prepared, its search stopping at its first node. ``deadline`` (a ``time.monotonic()`` value)
+    is one clock the batch shares: each of those searches stops by it (its time_limit_s no longer than what is
     left, so it ends ``time_limit`` with its best point), and a track not started by then reads
     ``time_limit`` with reason ``not_started``, uncertified and without a point. The work before
     them (the convexity path, the stacked roots) is bounded by the batch's size and not timed.
@@ -158,7 +163,7 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
     run = dataclasses.replace(options, certificate="full") if checking else options
     cameras = normalised_cameras(cameras)
     started = time.perf_counter()
-    watch = _Watch(callback, started)
+    watch = _Watch(callback if stop_ends_batch else None, started)
     results = TrackResults(len(tracks))
     try:
         # Under L2L2 most tracks are certified at their local optimum, without a search (kept
@@ -188,7 +193,8 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
     alone = results.unsolved()
     for i in alone:
         # triangulate self-checks its own results (and keeps the proof only when asked for).
-        # ``callback`` sees (and may stop) these searches; once stopped, no track is started.
+        # ``callback`` sees (and may stop) these searches; once stopped, with stop_ends_batch, no
+        # track is started.
         if watch.stopped:
             results[i] = TrackResult("cancelled", False, reason=STOPPED_BEFORE)
             continue
@@ -198,7 +204,7 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
             continue
         views, points = tracks[i]
         run_alone = options if left >= options.time_limit_s else dataclasses.replace(options, time_limit_s=left)
-        results[i] = triangulate(cameras[list(views)], points, run_alone, None if callback is None else watch.search)
+        results[i] = triangulate(cameras[list(views)], points, run_alone, watch.search if stop_ends_batch else callback)
     if checking:  # the columns' rows checked as the objects they would make (not kept)
         rows = [] if local is None else [(int(i), local.result(row)) for row, i in enumerate(local.index)]
         for i, result in [*searched.items(), *rows]:

@@ -48,7 +48,8 @@ def test_the_callback_is_called_every_few_tracks_of_the_batched_work(norm, monke
         refinements.calls = regions.calls = 0
         return False
 
-    results = many_tracks.triangulate_many(cameras, tracks, TriangulationOptions(norm=norm), callback)
+    results = many_tracks.triangulate_many(cameras, tracks, TriangulationOptions(norm=norm), callback,
+                                           stop_ends_batch=True)
     between.append((refinements.calls, regions.calls))
     assert all(result.certified for result in results)
     # every track went through the batched refinements and root regions (none is trivial here)
@@ -69,12 +70,28 @@ def test_a_stop_during_the_batched_work_ends_the_batch_there(monkeypatch):
         calls.append(progress)
         return len(calls) >= 3  # a cancel seen at the third call
 
-    results = many_tracks.triangulate_many(cameras, tracks, TriangulationOptions(norm="L1L1"), callback)
+    results = many_tracks.triangulate_many(cameras, tracks, TriangulationOptions(norm="L1L1"), callback,
+                                           stop_ends_batch=True)
     assert len(calls) == 3  # nothing asked again once stopped
     assert alone.calls == 0 and regions.calls <= many_tracks.CHECK_EVERY  # no further work was started
     stopped = [result for result in results if result.status == "cancelled"]
     assert len(stopped) == len(tracks)  # none had ended: each reads cancelled, not started, no point
     assert all(not r.certified and r.point is None and r.reason == many_tracks.STOPPED_BEFORE for r in stopped)
+
+
+def test_without_stop_ends_batch_a_stop_keeps_each_tracks_best_point(monkeypatch):
+    """A reconstruction's structure stage (its time limit) keeps a stopped track's best point: the
+    batched work is not interrupted, and each track left is prepared, its search stopped."""
+    cameras, tracks = scene(40)
+    calls = []
+
+    def callback(progress):
+        calls.append(progress)
+        return True
+
+    results = many_tracks.triangulate_many(cameras, tracks, TriangulationOptions(norm="L1L1", rel_gap=1e-9), callback)
+    assert all(result.point is not None for result in results)
+    assert {result.status for result in results} <= {"optimal", "cancelled"}
 
 
 def test_a_cancel_during_a_batch_of_the_job_runner_is_seen_within_a_few_tracks():
