@@ -127,11 +127,12 @@ def autocalibration_direct():
 
 
 def autocalibration_turntable():
-    """A turntable (every rotation about one axis): a critical motion, so the data do not fix
-    constant intrinsics (Sturm 1997): the modulus cost is flat along the planes the motion leaves
-    open, so the search stops at its node limit, and K is one of many that fit as well. The result
-    says so (``determinacy.warnings``: orbital_motion, ``determined``: false). A node limit, not a
-    time limit, ends it: the same place on any machine."""
+    """What it exercises: the critical motion warning ``orbital_motion``. A turntable (every
+    rotation about one axis) is a critical motion, so the data do not fix constant intrinsics
+    (Sturm 1997): the modulus cost is flat along the planes the motion leaves open, so the search
+    stops at its node limit, and K is one of many that fit as well. The result says so
+    (``determinacy.warnings``: orbital_motion, ``determined``: false). A node limit, not a time
+    limit, ends it: the same place on any machine."""
     scene = _autocalibration_scene("ring")
     data = {"cameras": rounded(scene.cameras, 9), "points": rounded(scene.points, 9),
             "image_size": list(scene.image_size)}

@@ -51,3 +51,28 @@ def test_the_link_finder_sees_a_broken_link(tmp_path):
                     "[anchor](#top) [gone](missing.md) [gone too](sub/missing.md#part)\n"
                     "```\n[in a fence](fenced.md)\n```\n")
     assert broken_links(page) == ["missing.md", "sub/missing.md#part"]
+
+
+def command_options(command: str) -> set[str]:
+    """The options ``geocert COMMAND`` accepts, as its own --help lists them."""
+    import contextlib
+    import io
+
+    import pytest
+
+    from geocert.app.cli import main
+
+    shown = io.StringIO()
+    with contextlib.redirect_stdout(shown), pytest.raises(SystemExit):
+        main([command, "--help"])
+    return set(re.findall(r"(?<![\w-])(--[a-z][a-z-]*)", shown.getvalue())) - {"--help"}
+
+
+def test_the_command_line_section_names_every_option_each_command_accepts():
+    """docs/api.md's "Command line" lists every option of every command (``--api-processes``
+    was accepted by ``geocert serve`` and missing there)."""
+    text = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
+    section = text.split("## Command line", 1)[1].split("\n## ", 1)[0]
+    missing = {command: sorted(option for option in command_options(command) if option not in section)
+               for command in ("solve", "verify", "serve", "worker", "openapi", "webhook-secret")}
+    assert {command: options for command, options in missing.items() if options} == {}

@@ -80,18 +80,35 @@ def _reason(error: dict) -> str:
     return reason
 
 
+def _given(value: Any) -> str:
+    """A JSON value as a reason quotes it: its type in words and the value (``a number 5``), so a
+    number is never shown as the string pydantic's tag makes of it ('5')."""
+    if isinstance(value, str):
+        return f"the string {json.dumps(value)}"
+    if isinstance(value, bool) or value is None:
+        return json.dumps(value)
+    if isinstance(value, (int, float)):
+        return f"the number {json.dumps(value)}"
+    return _JSON_TYPES.get(type(value), "a value of another type")
+
+
 def _field(error: dict) -> dict:
     """One pydantic error as the field it names and why. The job's kind (the union's tag) missing
-    or not one served is the field ``kind``, not ``body`` (pydantic places it on the union)."""
+    or not one served is the field ``kind``, not ``body`` (pydantic places it on the union), and
+    the reason says it must be one of the kinds served, quoting what was given as JSON (a number
+    5 is not the string '5' pydantic's tag makes of it)."""
     loc = tuple(error.get("loc", ()))
     if error.get("type") in ("union_tag_not_found", "union_tag_invalid"):
         ctx = error.get("ctx") or {}
         tag = str(ctx.get("discriminator", "kind")).strip("'")
-        served = ", ".join(repr(name) for name in dict.fromkeys(kind.name for kind in KINDS))
+        served = ", ".join(json.dumps(name) for name in dict.fromkeys(kind.name for kind in KINDS))
+        reason = f"must be one of the kinds served, a string: {served}"
         if error["type"] == "union_tag_not_found":
-            reason = f"Field required: one of {served}"
+            reason = f"Field required: {reason}"
         else:
-            reason = f"{ctx.get('tag')!r} is not a kind served: one of {ctx.get('expected_tags', served)}"
+            body = error.get("input")
+            given = body[tag] if isinstance(body, dict) and tag in body else ctx.get("tag")
+            reason += f" (got {_given(given)})"
         return {"field": field_path(loc + (tag,)), "reason": reason}
     return {"field": field_path(loc), "reason": _reason(error)}
 

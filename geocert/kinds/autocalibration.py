@@ -30,10 +30,26 @@ Point4 = Annotated[list[Finite], Field(min_length=4, max_length=4, description="
 Matrix3 = list[list[float]]
 
 
+# The largest image side taken, in pixels: far above any camera's (the largest sensors are some
+# 2e4 px a side, stitched gigapixel panoramas some 2e5). Beyond some 1e7 the default ranges'
+# scale left the affine stage failing with a reason about the data ("chirality does not bound
+# the plane at infinity", "no strictly quasi-affine plane") when the size was the cause.
+MAX_IMAGE_SIDE_PX = 1e6
+
+
+def image_side_refusal(size, where: str) -> None:
+    """An image size with a side over MAX_IMAGE_SIDE_PX: the 422 naming ``where``."""
+    for x in size if isinstance(size, (list, tuple, np.ndarray)) else ():
+        if isinstance(x, (int, float)) and not isinstance(x, bool) and abs(x) > MAX_IMAGE_SIDE_PX:
+            raise InputError(where, f"a side of {abs(x):g} px exceeds the limit of {MAX_IMAGE_SIDE_PX:g} px a side "
+                                    "(far above any camera's: give the size in pixels)")
+
+
 def ranges_within_limit(image_size, intrinsics: dict) -> None:
     """data/image_size and every intrinsics range within COORDINATE_LIMIT, as every kind's
     coordinates: beyond it K0 was singular in floating point and the queued job failed with
-    "Solver failure: LinAlgError" instead of this 422 naming the field."""
+    "Solver failure: LinAlgError" instead of this 422 naming the field; and data/image_size
+    within MAX_IMAGE_SIDE_PX a side."""
     named = [("data/image_size", image_size)] if image_size is not None else []
     for name, value in intrinsics.items():
         if name == "principal_point" and isinstance(value, (list, tuple)):
@@ -45,6 +61,8 @@ def ranges_within_limit(image_size, intrinsics: dict) -> None:
             if isinstance(x, (int, float)) and not isinstance(x, bool) and abs(x) > COORDINATE_LIMIT:
                 raise InputError(where, f"magnitude {abs(x):g} exceeds the limit {COORDINATE_LIMIT:g} "
                                         "(rescale the coordinates, e.g. to pixels)")
+    if image_size is not None:
+        image_side_refusal(image_size, "data/image_size")
 
 
 class AutocalibrationData(Strict):

@@ -21,7 +21,7 @@ import numpy as np
 from pydantic import BaseModel, Field
 
 from geocert.kinds.base import ProblemKind
-from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION, IntrinsicsIn, ranges_within_limit
+from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION, IntrinsicsIn, image_side_refusal, ranges_within_limit
 from geocert.kinds.documents import certificate_document
 from geocert.kinds.resection_homography import RESECTION, map_document
 from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict, options_model
@@ -198,6 +198,7 @@ def _read_views(data: dict) -> tuple[list, list]:
         size = number_array(view["image_size"], f"data/views/{i}/image_size", "[width, height]", 1, COORDINATE_LIMIT)
         if size.shape != (2,) or not np.all(size > 0):
             raise InputError(f"data/views/{i}/image_size", "must be [width, height], both positive")
+        image_side_refusal(size, f"data/views/{i}/image_size")
         name = view.get("name")
         if name is not None and not isinstance(name, str):
             raise InputError(f"data/views/{i}/name", "must be a string")

@@ -139,12 +139,33 @@ def test_a_queued_job_cancelled_never_starts_and_an_ended_one_is_a_409(api, run_
     (lambda body: body["data"]["tracks"][0]["views"].__setitem__(1, 10 ** 25), "data/tracks/0/views/1"),  # was a 500
     (lambda body: body.pop("kind"), "kind"),  # was named "body"
     (lambda body: body.update(kind="triangulate"), "kind"),  # was named "body"
+    (lambda body: body.update(kind=5), "kind"),
 ])
 def test_bad_input_is_a_422_naming_the_field(api, change, field):
     body, _ = exact_job(5)
     change(body)
     assert field in problem_fields(api.post("/v1/jobs", json=body), 422)
     assert api.get("/v1/jobs").json()["jobs"] == []  # nothing was made
+
+
+@pytest.mark.parametrize("kind, given", [
+    (5, "the number 5"),  # was "'5' is not a kind served": read as if the string "5" had been sent
+    (None, "null"), (True, "true"), (["triangulation"], "an array"),
+    ("triangulate", 'the string "triangulate"'),
+])
+def test_a_kind_not_served_says_it_must_be_one_of_the_kinds_served_and_what_was_given(api, kind, given):
+    body, _ = exact_job(5)
+    body["kind"] = kind
+    response = api.post("/v1/jobs", json=body)
+    assert problem_fields(response, 422) == ["kind"]
+    reason = response.json()["errors"][0]["reason"]
+    assert reason.startswith('must be one of the kinds served, a string: "triangulation", "resection"'), reason
+    assert reason.endswith(f"(got {given})"), reason
+    assert response.json()["detail"] == f"kind: {reason}"
+    body.pop("kind")
+    missing = api.post("/v1/jobs", json=body)
+    assert problem_fields(missing, 422) == ["kind"]
+    assert missing.json()["errors"][0]["reason"].startswith("Field required: must be one of the kinds served")
 
 
 def test_an_unknown_job_is_a_404(api):

@@ -85,6 +85,21 @@ class TestBadInput:
         error = refused(document)
         assert error.field == where and "exceeds the limit" in error.reason
 
+    @pytest.mark.parametrize("side", [1e7, 1e8, 5e8, 2e6])
+    def test_an_image_side_beyond_a_million_pixels(self, side):
+        """Between 1e7 and 1e9 (below the coordinate limit) the job was queued and failed with a
+        reason about the data ("chirality does not bound the plane at infinity") when the size
+        was the cause: now the 422 naming data/image_size and the limit."""
+        document = job()
+        document["data"]["image_size"] = [1000, side]
+        error = refused(document)
+        assert error.field == "data/image_size" and "exceeds the limit of 1e+06 px a side" in error.reason
+
+    def test_an_image_side_of_a_million_pixels_is_taken(self):
+        document = job()
+        document["data"]["image_size"] = [1e6, 1e6]
+        parse_job(document)
+
     def test_ranges_without_image_size(self):
         document = job()
         del document["data"]["image_size"]

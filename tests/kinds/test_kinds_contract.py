@@ -98,6 +98,16 @@ def certifies(kind) -> bool:
     return kind.certifies
 
 
+def test_the_triangulation_example_is_a_clean_first_template():
+    """The web page's first template (the triangulation kind's example, GET /v1/problems): every
+    track certified and determined, no warning; its observations fitted no point before, and the
+    page's first answer read "Not determined by the data: tracks #0, #1"."""
+    result = solve_job(KINDS.get("triangulation").example)
+    for track in result["tracks"]:
+        assert track["certified"] and track["determinacy"]["determined"] is True, track["determinacy"]
+        assert track["determinacy"]["warnings"] == []
+
+
 class TestOneLineToAddAKind:
     """A toy kind (tests/kinds/toy_kind.py) registered with one line: solved, verified, served in the
     API's schema and /v1/problems, and checked by the same contract."""

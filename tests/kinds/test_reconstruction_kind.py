@@ -42,6 +42,7 @@ class TestBadInput:
         ({"tracks": [{"views": [0, 1], "points": [[1.0, 2.0]]}]}, "data/tracks/0"),
         ({"tracks": [{"views": [0, 0], "points": [[1.0, 2.0], [3.0, 4.0]]}]}, "data/tracks/0/views"),
         ({"views": [{"image_size": [640, -1]}] * 6}, "data/views/0/image_size"),
+        ({"views": [{"image_size": [1e8, 480]}] * 6}, "data/views/0/image_size"),  # was queued: over 1e6 a side
         ({"cameras": []}, "data/cameras"),
     ])
     def test_names_the_item(self, data, field):

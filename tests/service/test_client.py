@@ -20,6 +20,7 @@ from geocert.app.client import (
 )
 
 from tests.servers import cluster
+from tests.support import ROOT
 from tests.support import service_job as triangulation_job
 
 KEY = "client-test-key-0123456789"
@@ -141,6 +142,33 @@ class TestJobs:
         assert error.value.job["status"] in ("queued", "running")
         job.cancel()
         job.wait(timeout=30)
+
+
+def python_snippet(document: str) -> str:
+    """The indented code block of a markdown page that starts with the client's import."""
+    lines = (ROOT / document).read_text(encoding="utf-8").splitlines()
+    start = lines.index("    from geocert.app.client import Client, InvalidRequest")
+    block = []
+    for line in lines[start:]:
+        if line and not line.startswith("    "):
+            break
+        block.append(line[4:])
+    return "\n".join(block).strip() + "\n"
+
+
+@pytest.mark.parametrize("document", ["README.md", "docs/api.md"])
+def test_the_documented_python_snippet_runs_as_written(served, monkeypatch, capsys, document):
+    """The snippet as a reader copies it (only the service's address is this test's): it used a
+    ``data`` it never defined, and failed with a NameError."""
+    monkeypatch.setenv("GEOCERT_API_KEY", KEY)
+    code = python_snippet(document)
+    assert '"http://127.0.0.1:8000"' in code
+    scope: dict = {}
+    exec(compile(code.replace('"http://127.0.0.1:8000"', repr(served)), document, "exec"), scope)
+    assert scope["result"]["tracks"][0]["certified"] is True
+    assert scope["certificate"]["format"] == "geocert-certificate"
+    assert any(job["id"] == scope["job"].id for job in scope["recent"])
+    assert "end" in capsys.readouterr().out  # the stream was printed to its end
 
 
 class TestErrors:

@@ -263,6 +263,18 @@ def test_every_example_has_its_check():
     assert set(CHECKS) == set(NAMES)
 
 
+def test_the_examples_readme_says_what_each_exercises_and_the_turntable_names_its_warning():
+    """examples/README.md has a line for every example; the turntable's names the warning its
+    result carries (check_turntable), so a newcomer reading the folder knows it is there to show
+    ``orbital_motion``, the critical motion warning."""
+    rows = {line.split("`")[1]: line for line in (EXAMPLES / "README.md").read_text().splitlines()
+            if line.startswith("| `")}
+    assert set(rows) == {f"{name}.json" for name in NAMES}
+    assert "`orbital_motion`" in rows["autocalibration-turntable.json"]
+    assert "critical motion" in rows["autocalibration-turntable.json"]
+    assert "orbital_motion" in generate.autocalibration_turntable.__doc__.split(".")[0]
+
+
 @pytest.mark.slow  # a real service and a CLI run per example
 @pytest.mark.parametrize("name", NAMES)
 def test_the_service_solves_the_example_and_the_cli_gives_the_same_answer(service, name):

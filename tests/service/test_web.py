@@ -495,6 +495,65 @@ class TestTheResultAsItIs:
             assert state(page)["status"] == "succeeded", info["kind"]
 
 
+class TestTheVerdictsWords:
+    """What the page says of a reconstruction's cameras and K, in the browser, from truth.js as
+    served (a page of its own: no service needed). A newcomer read "returned is: not certified",
+    "6 of 14 cameras certified; not certified: ... (not_run)" for views never registered, and
+    views_not_registered by index beside named photos."""
+
+    RESULT = {
+        "summary": {"calibration": {"K": [[800, 0, 320], [0, 800, 240], [0, 0, 1]], "source": "bundle_adjustment",
+                                    "certified": True, "returned_is_certified": False, "determined": True},
+                    "warnings": [{"code": "views_not_registered", "detail": (
+                        "3 of 6 views not registered (no camera returned for them): views 3, 4: too few "
+                        "3D-2D inliers; views 5: not started")}]},
+        "cameras": [{"view": 0, "name": "box0.jpg", "registered": True, "certified": True, "status": "optimal"},
+                    {"view": 1, "name": "box1.jpg", "registered": True, "certified": True, "status": "optimal"},
+                    {"view": 2, "name": "box2.jpg", "registered": True, "certified": False, "status": "not_run"},
+                    {"view": 3, "name": "box3.jpg", "registered": False, "certified": False, "status": "not_run",
+                     "reason": "too few 3D-2D inliers"},
+                    {"view": 4, "name": "box4.jpg", "registered": False, "certified": False, "status": "not_run",
+                     "reason": "too few 3D-2D inliers"},
+                    {"view": 5, "name": "box5.jpg", "registered": False, "certified": False, "status": "not_run",
+                     "reason": "not started"}],
+        "points": [{"certified": True}, {"certified": True}],
+    }
+
+    def verdict_of(self, page, tmp_path, result) -> list[str]:
+        truth = ROOT / "geocert" / "app" / "web" / "truth.js"
+        html = tmp_path / "truth.html"
+        html.write_text(f'<!doctype html><html><head><script src="{truth.as_uri()}"></script></head><body></body></html>')
+        page.get(html.as_uri())
+        lines = page.execute_script(
+            "return Truth.verdict({status: 'succeeded'}, arguments[0], 'points', true).lines.map(l => l.text);", result)
+        return lines
+
+    def test_the_cameras_line_says_which_views_were_not_registered_and_what_not_run_means(self, page, tmp_path):
+        lines = self.verdict_of(page, tmp_path, self.RESULT)
+        cameras = next(line for line in lines if "cameras certified" in line)
+        assert cameras.startswith("2 of 6 cameras certified; 3 not registered (no camera was returned for them, "
+                                  "so none is certified): box3.jpg, box4.jpg, box5.jpg"), cameras
+        assert "box2.jpg (not judged: no bound was computed for it, status not_run)" in cameras, cameras
+        assert "box3.jpg (not_run)" not in cameras  # was: every view not registered listed as not_run
+
+    def test_the_returned_K_is_said_plainly(self, page, tmp_path):
+        lines = self.verdict_of(page, tmp_path, self.RESULT)
+        assert not any("returned is" in line for line in lines), lines  # was "returned is: not certified"
+        assert ("The K the cameras use is not certified: it is the bundle adjustment's estimate; the "
+                "autocalibration's certified K is shown apart") in lines, lines
+
+    def test_views_not_registered_are_named_by_their_photos(self, page, tmp_path):
+        lines = self.verdict_of(page, tmp_path, self.RESULT)
+        warning = next(line for line in lines if line.startswith("Warning views_not_registered"))
+        assert warning.endswith("3 of 6 views not registered (no camera returned for them): box3.jpg, box4.jpg: "
+                                "too few 3D-2D inliers; box5.jpg: not started"), warning  # was "views 3, 4: ..."
+        unnamed = json.loads(json.dumps(self.RESULT))
+        for camera in unnamed["cameras"]:
+            camera["name"] = None
+        lines = self.verdict_of(page, tmp_path, unnamed)
+        assert any(line.endswith("views 3, 4: too few 3D-2D inliers; views 5: not started") for line in lines)
+
+
 class TestApiKeys:
     def test_the_page_asks_for_the_key_once_and_keeps_it_for_the_tab(self, page, tmp_path):
         process, base = start_service(tmp_path, GEOCERT_API_KEYS=KEY, NO_WORKERS="1")

@@ -57,7 +57,8 @@ const Truth = (() => {
         return;
       }
       if (typeof node.certified === "boolean" && owner) {
-        group(groups, pattern, label).entries.push({owner, certified: node.certified, status: node.status});
+        group(groups, pattern, label).entries.push({owner, certified: node.certified, status: node.status,
+                                                    unregistered: node.registered === false});
       }
       for (const key in node) {
         const value = node[key];
@@ -65,7 +66,7 @@ const Truth = (() => {
           if (key === "determined" || key.endsWith("_determined")) {
             group(undetermined, pattern + "/" + key, key === "determined" ? label
               : `${label ? label + ": " : ""}${words(key.replace(/_determined$/, ""))}`).where.push(owner || where);
-          } else if (key.endsWith("_certified")) flags.push({where, key});
+          } else if (key.endsWith("_certified")) flags.push({where, key, node});
           continue;
         }
         if (value === null || typeof value !== "object" || SKIP.has(key)) continue;
@@ -98,6 +99,46 @@ const Truth = (() => {
     return unique.length > limit ? `${shown}, … (${unique.length}${total ? " of " + total : ""})` : shown;
   }
 
+  // What an entry's status word means, for one not certified (the word itself follows in brackets).
+  const STATUS_WORDS = {
+    not_run: "not judged: no bound was computed for it",
+    not_certified: "judged: its bound did not reach the tolerance",
+    degenerate: "too few certified points to bound it",
+  };
+  const statusSaid = (status) => (STATUS_WORDS[status] ? `${STATUS_WORDS[status]}, status ${status}` : status);
+
+  // Where the returned K came from (summary.calibration.source), in words.
+  const SOURCES = {
+    bundle_adjustment: "the bundle adjustment's estimate",
+    camera_model: "the camera model's (the certified K with square pixels and the principal point at the centre)",
+    given: "the K given with the job", none: "none",
+  };
+
+  // A flag "*_certified": false, said plainly. ``node`` is the object that states it.
+  function flagText(key, node) {
+    if (key === "returned_is_certified") {
+      const source = node && SOURCES[node.source] ? `: it is ${SOURCES[node.source]}` : "";
+      const certified = node && node.certified ? "; the autocalibration's certified K is shown apart" : "";
+      return `The K the cameras use is not certified${source}${certified}`;
+    }
+    return `${words(key.replace(/_certified$/, ""))}: not certified`;
+  }
+
+  // views_not_registered names its views by index; with the job's photos named, by their names.
+  function unregisteredDetail(result, w) {
+    const cameras = Array.isArray(result.cameras) ? result.cameras.filter((c) => c && typeof c === "object") : [];
+    const missing = cameras.filter((c) => c.registered === false);
+    if (!missing.length || !missing.some((c) => typeof c.name === "string" && c.name)) return w.detail;
+    const why = new Map();
+    for (const c of missing) {
+      const reason = c.reason || "no reason recorded";
+      if (!why.has(reason)) why.set(reason, []);
+      why.get(reason).push(typeof c.name === "string" && c.name ? c.name : `view ${c.view}`);
+    }
+    return `${missing.length} of ${cameras.length} views not registered (no camera returned for them): ` +
+           [...why].map(([reason, names]) => `${names.join(", ")}: ${reason}`).join("; ");
+  }
+
   // The verdict: {level: "yes" | "warn" | "no" | "estimate" | "failed", headline, lines: [{level, text}]}
   // itemKey: the kind's list of claims (tracks, maps, stages, points, frames, pairs).
   function verdict(job, result, itemKey, certifies) {
@@ -109,19 +150,29 @@ const Truth = (() => {
     const found = scan(result);
     const main = found.groups.find((g) => g.pattern === `/${itemKey}/*`);
     const others = found.groups.filter((g) => g !== main);
-    // "4 of 6 cameras certified; not certified: box0.jpg (not_certified), ..." (reasons are in the tables)
+    // "6 of 14 cameras certified; 8 not registered (no camera was returned for them): a.jpg, ...;
+    // not certified: box0.jpg (judged: its bound did not reach the tolerance (not_certified))"
+    // (reasons are in the tables). An entry not registered is said so, not by its status word.
     const describe = (g) => {
       const n = g.entries.length, missing = g.entries.filter((e) => !e.certified), yes = n - missing.length;
       const only = n === 1 ? nameOf(g.entries[0].owner) : null;  // one named entry: say which
       if (!missing.length) return only && !only.startsWith("#") ? `${g.label.replace(/s$/, "")} ${only}: certified`
                                                                : `${yes} of ${n} ${g.label} certified`;
-      if (!yes) {
-        const statuses = new Map();
-        for (const e of missing) statuses.set(e.status || "no status", (statuses.get(e.status || "no status") || 0) + 1);
-        return `0 of ${n} ${g.label} certified (${[...statuses].map(([status, count]) => `${count} ${status}`).join(", ")})`;
+      const unregistered = missing.filter((e) => e.unregistered), judged = missing.filter((e) => !e.unregistered);
+      const some = (entries) => `${entries.slice(0, 6).map((e) => nameOf(e.owner)).join(", ")}${entries.length > 6 ? `, … (${entries.length})` : ""}`;
+      const parts = [`${yes} of ${n} ${g.label} certified`];
+      if (unregistered.length) {
+        parts.push(`${unregistered.length} not registered (no camera was returned for them, so none is certified): ${some(unregistered)}`);
       }
-      const named = missing.slice(0, 6).map((e) => `${nameOf(e.owner)}${e.status ? ` (${e.status})` : ""}`).join(", ");
-      return `${yes} of ${n} ${g.label} certified; not certified: ${named}${missing.length > 6 ? `, … (${missing.length})` : ""}`;
+      if (judged.length && !yes && judged.length > 6) {
+        const statuses = new Map();
+        for (const e of judged) statuses.set(e.status || "no status", (statuses.get(e.status || "no status") || 0) + 1);
+        parts.push(`not certified: ${[...statuses].map(([status, count]) => `${count} ${statusSaid(status)}`).join(", ")}`);
+      } else if (judged.length) {
+        const named = judged.slice(0, 6).map((e) => `${nameOf(e.owner)}${e.status ? ` (${statusSaid(e.status)})` : ""}`).join(", ");
+        parts.push(`not certified: ${named}${judged.length > 6 ? `, … (${judged.length})` : ""}`);
+      }
+      return parts.join("; ");
     };
     let allCertified = true, noneCertified = true, anyClaims = false;
     for (const g of [main, ...others].filter(Boolean)) {
@@ -138,7 +189,7 @@ const Truth = (() => {
       if (stage) lines.push({level: "info", text: `${words(subject)}: ${stage.status}${stage.reason ? ` (${stage.reason})` : ""}`, kind: "flag"});
       else {
         allCertified = false;
-        lines.push({level: "no", text: `${words(subject)}: not certified`, kind: "flag"});
+        lines.push({level: "no", text: flagText(f.key, f.node), kind: "flag"});
       }
     }
     for (const u of found.undetermined) {
@@ -147,8 +198,9 @@ const Truth = (() => {
                         " (the answer is one of many that fit as well; see the warnings)"});
     }
     for (const w of found.warnings) {
+      const detail = w.code === "views_not_registered" ? unregisteredDetail(result, w) : w.detail;
       lines.push({level: "warn", kind: "warning",
-                  text: `Warning ${w.code}${w.label ? ` (${w.label} ${listNames(w.where)})` : ""}${w.detail ? ": " + w.detail : ""}`});
+                  text: `Warning ${w.code}${w.label ? ` (${w.label} ${listNames(w.where)})` : ""}${detail ? ": " + detail : ""}`});
     }
     const troubled = found.undetermined.length + found.warnings.length > 0;
     let level, headline;

@@ -66,12 +66,50 @@ D = 3
 SCOPE = "every point in front of every camera"
 MAX_GROUP = 256  # tracks stacked in one group's arrays
 LEAF_MARGIN = 1e-8  # a root node's claimed bound below its computed safe bound (relative, + absolute)
+# Tracks of the batched work between two calls of the caller's callback (which may stop it): each
+# is a few milliseconds of per-track work under L2L1 and L1L1 (two local refinements, the root
+# region's 2d conic solves, the root node's), so a stop is seen within some tens of milliseconds.
+CHECK_EVERY = 8
+STOPPED_BEFORE = "the job was cancelled before this track started"
+
+
+class _Stopped(Exception):
+    """The callback asked to stop during the batched work."""
+
+
+class _Watch:
+    """The caller's callback over a batch: called every CHECK_EVERY tracks of the batched work
+    (with no bounds: a batch's figures come with its items) and between the nodes of the
+    searches of the tracks solved alone; once it has asked to stop, it stays stopped."""
+
+    def __init__(self, callback: Callable[[Progress], bool | None] | None, started: float):
+        self.callback, self.started = callback, started
+        self.stopped = False
+        self.count = 0
+
+    def tick(self, tracks: int = 1) -> None:
+        """``tracks`` more tracks of batched work done: the callback every CHECK_EVERY, and
+        _Stopped raised once it asks to stop."""
+        if self.callback is None:
+            return
+        self.count += tracks
+        if self.count >= CHECK_EVERY:
+            self.count = 0
+            if self.search(Progress(0, 0, -math.inf, math.inf, math.inf, math.inf, time.perf_counter() - self.started)):
+                raise _Stopped
+
+    def search(self, progress: Progress) -> bool:
+        """The callback a search of a track solved alone is given."""
+        if not self.stopped and self.callback is not None and self.callback(progress):
+            self.stopped = True
+        return self.stopped
 
 
 def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarray]],
                      options: TriangulationOptions | None = None,
                      callback: Callable[[Progress], bool | None] | None = None,
-                     deadline: float | None = None, not_started: str = "not started: past the deadline") -> TrackResults:
+                     deadline: float | None = None, not_started: str = "not started: past the deadline",
+                     stop_ends_batch: bool = False) -> TrackResults:
     """Certified global optimum of every track: ``cameras`` (N, 3, 4) of the whole scene,
     ``tracks`` a list of ``(views, points)`` with ``views`` indices into ``cameras`` and
     ``points`` (len(views), 2). Returns one TrackResult per track, in order, as a TrackResults
@@ -104,8 +142,15 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
       digits, and ``elapsed_s`` (the batched work's time shared by the tracks it closed).
 
     Tracks the batched path does not close are solved by ``triangulate`` itself, so every
-    status it returns is possible. ``deadline`` (a ``time.monotonic()`` value) is one clock the
-    batch shares: each of those searches stops by it (its time_limit_s no longer than what is
+    status it returns is possible. ``callback`` is called between the nodes of those searches;
+    once it returns True, the search running stops (``cancelled``, its best point). With
+    ``stop_ends_batch`` (a job's batch, where a stop is a cancel) it is also called every
+    CHECK_EVERY tracks of the batched work (a Progress with no bounds), and once it has asked to
+    stop no track is started: every track not finished reads ``cancelled``, uncertified and
+    without a point (STOPPED_BEFORE). Without it (a reconstruction's structure stage, which keeps
+    a stopped track's best point) the batched work runs to its end and each track left is still
+    prepared, its search stopping at its first node. ``deadline`` (a ``time.monotonic()`` value)
+    is one clock the batch shares: each of those searches stops by it (its time_limit_s no longer than what is
     left, so it ends ``time_limit`` with its best point), and a track not started by then reads
     ``time_limit`` with reason ``not_started``, uncertified and without a point. The work before
     them (the convexity path, the stacked roots) is bounded by the batch's size and not timed.
@@ -118,6 +163,7 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
     run = dataclasses.replace(options, certificate="full") if checking else options
     cameras = normalised_cameras(cameras)
     started = time.perf_counter()
+    watch = _Watch(callback if stop_ends_batch else None, started)
     results = TrackResults(len(tracks))
     try:
         # Under L2L2 most tracks are certified at their local optimum, without a search (kept
@@ -130,7 +176,9 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
         groups[len(tracks[i][0])].append(i)
     if run.max_residual is None:  # with a scope limit every track is solved alone (rare, not stacked)
         try:
-            _batched(cameras, tracks, groups, run, results)
+            _batched(cameras, tracks, groups, run, results, watch)
+        except _Stopped:
+            pass  # what it finished stands; the rest read cancelled below
         except (ArithmeticError, ValueError, np.linalg.LinAlgError):
             # Data this path does not handle (e.g. an SVD that does not converge on non-finite
             # numbers): what it finished stands, every other track is solved alone.
@@ -145,14 +193,18 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
     alone = results.unsolved()
     for i in alone:
         # triangulate self-checks its own results (and keeps the proof only when asked for).
-        # ``callback`` sees (and may stop) these searches, the only ones that run long.
+        # ``callback`` sees (and may stop) these searches; once stopped, with stop_ends_batch, no
+        # track is started.
+        if watch.stopped:
+            results[i] = TrackResult("cancelled", False, reason=STOPPED_BEFORE)
+            continue
         left = math.inf if deadline is None else deadline - time.monotonic()
         if left <= 0:
             results[i] = TrackResult("time_limit", False, reason=not_started)
             continue
         views, points = tracks[i]
         run_alone = options if left >= options.time_limit_s else dataclasses.replace(options, time_limit_s=left)
-        results[i] = triangulate(cameras[list(views)], points, run_alone, callback)
+        results[i] = triangulate(cameras[list(views)], points, run_alone, watch.search if stop_ends_batch else callback)
     if checking:  # the columns' rows checked as the objects they would make (not kept)
         rows = [] if local is None else [(int(i), local.result(row)) for row, i in enumerate(local.index)]
         for i, result in [*searched.items(), *rows]:
@@ -171,9 +223,10 @@ def triangulate_many(cameras: np.ndarray, tracks: list[tuple[list[int], np.ndarr
     return results
 
 
-def _batched(cameras, tracks, groups: dict, options: TriangulationOptions, results: list) -> None:
+def _batched(cameras, tracks, groups: dict, options: TriangulationOptions, results: list, watch: _Watch) -> None:
     """Fill ``results`` with the tracks this path closes: search.prepare per group, the root
-    regions of every track, then the root nodes per (views, branched functionals)."""
+    regions of every track, then the root nodes per (views, branched functionals). ``watch``
+    is told of the tracks done as the work goes (it raises _Stopped when asked to stop)."""
     entries: list[Entry] = []
     charted = []  # (members, the group's charts and starts)
     for n, members in groups.items():
@@ -184,30 +237,34 @@ def _batched(cameras, tracks, groups: dict, options: TriangulationOptions, resul
             group = _chart_group(cameras, [tracks[i] for i in chunk], n)
             if group is not None:
                 charted.append((chunk, group))
+            watch.tick(len(chunk))
     if options.norm == "L2L2":
         _refine_groups([group for _, group in charted])
     for chunk, group in charted:
-        ended, ready = _prepare_group(group, options)
+        ended, ready = _prepare_group(group, options, watch)
         for i, result in zip(chunk, ended):
             results[i] = result
         for entry in ready:
             entry.index = chunk[entry.index]
             entries.append(entry)
     if options.norm == "L2L2":
-        proofs = _root_regions(entries)
+        proofs = _root_regions(entries, watch)
     else:
         # search.root_region itself (2d Clarabel solves a track): under L2L1 and L1L1 the root
         # relaxation's point, refined where it beats the incumbent, lands on the cost's kinks,
         # where a root box differing in its last digits moves the point returned (measured: a
         # cost 4e-8 higher than triangulate's on one track of 300 with the barrier's boxes).
-        proofs = [root_region(entry.chart.program, entry.B, entry.gamma)[2] for entry in entries]
+        proofs = []
+        for entry in entries:
+            proofs.append(root_region(entry.chart.program, entry.B, entry.gamma)[2])
+            watch.tick()
     by_shape: dict[tuple[int, int], list] = defaultdict(list)
     for entry, proof in zip(entries, proofs):
         if proof is not None:
             by_shape[(len(entry.points), len(entry.B))].append((entry, proof))
     for (n, k), closing in by_shape.items():
         for start in range(0, len(closing), MAX_GROUP):
-            for index, result in _root_nodes(closing[start:start + MAX_GROUP], k, options):
+            for index, result in _root_nodes(closing[start:start + MAX_GROUP], k, options, watch):
                 results[index] = result
 
 
@@ -264,7 +321,7 @@ def _refine_padded(groups: list[dict]) -> None:
         start += G
 
 
-def _prepare_group(group: dict, options: TriangulationOptions):
+def _prepare_group(group: dict, options: TriangulationOptions, watch: _Watch):
     """search.prepare for the tracks of one group (n views each) from their charts and starts
     (refined under L2L2): (results of the tracks that end here, None for the rest; the Entries
     of the tracks ready for a root region)."""
@@ -286,6 +343,7 @@ def _prepare_group(group: dict, options: TriangulationOptions):
             programs[g] = FractionalProgram(num[g].copy(), den[g].copy(), exact[g], T[g, 3][None, :].copy(), norm)
             start, _ = local_refine(programs[g], v0[g], "L2L2")
             v0[g], cost0[g] = local_refine(programs[g], start)
+            watch.tick()
         ok &= np.isfinite(cost0)
     trivial = ok & (cost0 <= options.abs_gap)  # within tolerance of the trivial bound 0
     for g in np.flatnonzero(trivial):
@@ -464,7 +522,7 @@ def _buckets(sizes: list[int]) -> list[list[int]]:
 MIN_BUCKET = 96
 
 
-def _root_regions(entries: list) -> list:
+def _root_regions(entries: list, watch: _Watch) -> list:
     """Each track's RootProof, proven as search.root_region and prove_root prove it (the same
     region, inflated by 1 + 1e-6, the same claimed box and padding), or None where not proven
     (the track is then solved alone). The 2d bounds of a track are found by the batched barrier
@@ -475,6 +533,7 @@ def _root_regions(entries: list) -> list:
             chunk = members[start:start + 2 * MAX_GROUP]
             for i, root in zip(chunk, _root_regions_of([entries[i] for i in chunk])):
                 roots[i] = root
+            watch.tick(len(chunk))
     return roots
 
 
@@ -552,7 +611,7 @@ def _proven_roots(Q, A, b, x, z, solved, F, gamma, n) -> list:
 
 # --- the root node --------------------------------------------------------------------------
 
-def _root_nodes(closing: list, k: int, options: TriangulationOptions) -> list:
+def _root_nodes(closing: list, k: int, options: TriangulationOptions, watch: _Watch) -> list:
     """The one-node search of ``triangulate`` (bnb.branch_and_bound's root node, bounded as
     BoxProblem._bound bounds it) for tracks with a proven root region: (index, TrackResult) of
     those whose root closes the gap. The relaxations are assembled for all of them at once
@@ -581,6 +640,7 @@ def _root_nodes(closing: list, k: int, options: TriangulationOptions) -> list:
     solved = built.copy()
     for g in np.flatnonzero(built):
         result = solver.solve(q, A[g], b[g], cones)
+        watch.tick()
         if result.status is not ConicStatus.OPTIMAL:
             solved[g] = False  # infeasible, or not clean: the track is solved alone
             continue
@@ -592,6 +652,7 @@ def _root_nodes(closing: list, k: int, options: TriangulationOptions) -> list:
     to_charts = np.linalg.inv(np.array([entry.chart.T for entry in entries]))  # triangulate's inv(chart.T)
     done = []
     for g in np.flatnonzero(solved & np.isfinite(safe) & (safe >= 0)):
+        watch.tick()
         entry = entries[g]
         chart, v0, factor, upper_bound, B = entry.chart, entry.v0, entry.factor, entry.upper, entry.B
         program = chart.program
