@@ -10,7 +10,7 @@ import math
 from typing import Any
 
 from geocert.core import summary_notes
-from geocert.core.certificates import FORMAT, VERSION, data_hash, problem_hash
+from geocert.core.certificates import FORMAT, VERSION, data_digest, data_hash, problem_hash
 from geocert.solvers.fractional.results import ItemResult, LocalCertificate, proof_of
 
 
@@ -96,8 +96,11 @@ def certificate_document(kind, data: Any, options, items: list[dict]) -> dict:
                        "cost": item["cost"], "lower_bound": item["lower_bound"], "gap": item["gap"],
                        **solution, "proof": proof})
     options = dataclasses.asdict(options)
+    # Both hashes begin with the data's text: written and hashed once (a reconstruction's data are
+    # its photos, megabytes of base64), each hash going on from a copy.
+    digest = data_digest(data)
     return {"format": FORMAT, "version": VERSION, "kind": kind.name, "options": options,
-            "data": data, "data_sha256": data_hash(kind.name, data),
+            "data": data, "data_sha256": data_hash(kind.name, data, digest=digest),
             "problem_sha256": problem_hash(kind.name, data, options, getattr(kind.verification, "claim_options", None),
-                                           getattr(kind.verification, "hash_marks", None)),
+                                           getattr(kind.verification, "hash_marks", None), digest=digest),
             "items": claims}

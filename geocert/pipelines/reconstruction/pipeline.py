@@ -1309,23 +1309,27 @@ def _drop_outlier_points(points: list[Point], P: dict[int, np.ndarray], threshol
     (each observation it was solved from fit within threshold_px at the adjusted point, so its
     optimum cannot be farther unless something is wrong). Returns the points kept and the count
     dropped; a point not solved (no point) is kept as it is, with its status."""
-    kept, dropped = [], 0
-    for point in points:
-        r = point.result
-        if r.point is None:
-            kept.append(point)
-            continue
-        X = np.array(r.point if r.at_infinity else [*r.point, 1.0])
-        cams = np.array([P[int(v)] for v, _, _ in point.observations])
-        image = cams @ X
-        with np.errstate(divide="ignore", invalid="ignore"):
-            error = np.linalg.norm(image[:, :2] / image[:, 2:3] - np.array(point.observations)[:, 1:], axis=1)
-        if (not r.at_infinity and np.any(image[:, 2] <= 0)) or not np.all(
-                np.nan_to_num(error, nan=np.inf) <= threshold_px * np.sqrt(len(point.observations))):
-            dropped += 1
-            continue
-        kept.append(point)
-    return kept, dropped
+    solved = [point for point in points if point.result.point is not None]
+    if not solved:
+        return list(points), 0
+    # Every solved point's observations at once (rows point by point, each its own camera @ X and
+    # error, the same arithmetic as one point at a time), then a verdict per point.
+    counts = np.array([len(point.observations) for point in solved])
+    owner = np.repeat(np.arange(len(solved)), counts)
+    X = np.array([r.point if r.at_infinity else [*r.point, 1.0] for r in (point.result for point in solved)],
+                 dtype=float)
+    observed = np.array([o for point in solved for o in point.observations], dtype=float).reshape(-1, 3)
+    cams = np.array([P[int(v)] for v in observed[:, 0]]).reshape(-1, 3, 4)
+    image = (cams @ X[owner][:, :, None])[:, :, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        error = np.linalg.norm(image[:, :2] / image[:, 2:3] - observed[:, 1:], axis=1)
+    at_infinity = np.array([point.result.at_infinity for point in solved], dtype=bool)
+    fits = np.nan_to_num(error, nan=np.inf) <= threshold_px * np.sqrt(counts[owner])
+    behind = (image[:, 2] <= 0) & ~at_infinity[owner]
+    bad = np.bincount(owner, weights=(~fits | behind).astype(float), minlength=len(solved)) > 0
+    verdict = dict(zip(map(id, solved), bad.tolist()))
+    kept = [point for point in points if not verdict.get(id(point), False)]
+    return kept, len(points) - len(kept)
 
 
 def adjust_best(starts: list, obs: Observations, keep: np.ndarray, threshold_px: float, model: str,

@@ -212,8 +212,9 @@ def sources(points, views: list[int]) -> list[tuple[list, list]]:
     for point, at_infinity, certified, observations in points:
         if point is None or at_infinity or certified is not True:
             continue
+        source = [float(c) for c in point]
         for view, u, v in observations or []:
             if int(view) in found:
-                found[int(view)][0].append([float(c) for c in point])
+                found[int(view)][0].append(list(source))
                 found[int(view)][1].append([u, v])
     return [found[view] for view in views]

@@ -239,9 +239,11 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
         U = blocks.own(je, je)
         diag_u = np.diag(U).copy()
         # jb^T copied contiguous first: numpy's stacked product then takes its fast path (the same
-        # sums, about a third less CPU than from the transposed view).
-        V = by_track(np.ascontiguousarray(jb.transpose(0, 2, 1)) @ jb)
-        WmT = jb.transpose(0, 2, 1) @ je  # (M, d, c+s): each observation's W^T
+        # sums, about a third less CPU than from the transposed view). V's and W^T's terms in one
+        # product, jb^T [jb, je]: each entry is the same sum as from the two products apart.
+        both = np.ascontiguousarray(jb.transpose(0, 2, 1)) @ np.concatenate([jb, je], axis=2)
+        V = by_track(both[:, :, :d])
+        WmT = np.ascontiguousarray(both[:, :, d:])  # (M, d, c+s): each observation's W^T
         WmT_gathered = blocks.gathered(WmT)
         ga = np.einsum("mki,mk->mi", je, rw)  # (M, c+s); einsum: faster than matmul on stacks of vectors
         gb = by_track(np.einsum("mki,mk->mi", jb, rw))
