@@ -9,7 +9,7 @@ hashes made again, items and members reordered, one kind's certificate carried i
 Review 51's holes (a test below for each, which failed while it stood):
 
 - summary.calibration.model restated "varying" beside cameras sharing one K (the adjustment's
-  model simple) verified. Fixed: reconstruction._calibration_model, the writer's model from the
+  model simple) verified. Fixed: reconstruction._calibration_models, the writer's model from the
   adjustment's record (claims.calibration_claim: varying exactly when it returned a K a view).
 - The pooled floor's closed-form quantiles (a track length's chi-square points, a pool's Student
   quantile) were computed unpaid: every track length up to 1,000 views about 1 s of CPU here, and
