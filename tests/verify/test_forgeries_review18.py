@@ -204,9 +204,16 @@ def maps_uncertified() -> dict:
     return result
 
 
+# Observations fitting no point closely (costs 4.5 and 251 px^2 in L2L2): one node leaves the
+# second track's search open. The kind's example, clean since, certifies both at the root.
+LOOSE_TRACKS = [{"views": [0, 1], "points": [[330, 250], [251.5, 253]]},
+                {"views": [0, 1, 2], "points": [[330, 250], [250, 251], [320, 200]]}]
+
+
 @pytest.fixture(scope="module")
 def track_uncertified() -> dict:
-    result = _example("triangulation", norm="L1L1", max_residual=20.0, max_nodes=1)
+    data = {**get_kind("triangulation").example["data"], "tracks": LOOSE_TRACKS}
+    result = _example("triangulation", data=data, norm="L1L1", max_residual=20.0, max_nodes=1)
     assert [t["status"] for t in result["tracks"]] == ["optimal", "node_limit"]
     assert len(result["tracks"][1]["certificate"]["root_region"]["functionals"]) == 1
     _verifies(result)
