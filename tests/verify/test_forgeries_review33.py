@@ -382,7 +382,7 @@ def test_the_direct_other_frame_cost_is_not_its_claim(tied_direct):
 
     service, other = tied_direct["results"][1], tied_direct["results"][3]
     cameras, points, image_size = read_data(tied_direct["data"])
-    problem = autocalibration_problem.prepare(cameras, points, image_size, {})
+    problem = autocalibration_problem.prepare(cameras, points, image_size, {}, unit_reference=False)  # the direct frame
     assert problem.norm.reference == 1
     setup = _direct_setup(problem, service["certificate"]["options"])
     Q = np.array(other["certificate"]["items"][0]["dual_absolute_quadric"])

@@ -155,7 +155,8 @@ class TestAbsoluteGapCapInTheCostsUnits:
         options["abs_gap"] = abs_gap
         cameras, points, image_size = read_data(certificate["data"])
         setup = _direct_setup(autocalibration_problem.prepare(cameras, points, image_size,
-                                                              dict(options["intrinsics"] or {})), options)
+                                                              dict(options["intrinsics"] or {}), unit_reference=False),
+                              options)
         claim = certificate["items"][0]
         Q = Q_of(np.asarray(claim["dual_absolute_quadric"]))
         cost = float(direct_relaxation.cost(setup.cameras, setup.from_input(Q)))

@@ -34,6 +34,9 @@ class Normalised:
     T0: np.ndarray  # 4x4: input frame -> reference frame is X -> T0^-1 X; cameras P -> P T0
     N: np.ndarray  # 3x3 image preconditioner
     camera_signs: np.ndarray  # (m,)
+    # The power of two the preconditioned reference camera N P_ref was multiplied by before T0 was
+    # built from it (unit_reference_scale); None where the reference was taken at the scale given.
+    reference_scale: float | None = None
 
 
 # Cameras and points are homogeneous: any scale is the same camera or point. At extreme scales the
@@ -120,11 +123,32 @@ def earlier_references(cameras: np.ndarray, N: np.ndarray) -> list[int]:
     return [int(i) for i in close[np.argsort(-ratio[close], kind="stable")]]
 
 
-def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, reference: int | None = None) -> Normalised:
+# A projective camera is homogeneous: the reference camera times s is the same input, but T0 built
+# from it is [[A^-1 / s, -A^-1 a], [0, 1]], which scales the frame's first three coordinates, and
+# so the plane at infinity's p, by s. The stratified stages' branch and bound, chirality box and
+# tolerances are not invariant under that: on the stored stratified scene, its reference times
+# 2^28 (inside unit_scaled's range, so left as given) had a K 4,250 px off certified. The
+# stratified method therefore builds T0 from the preconditioned reference divided by the power of
+# two that brings its largest entry into [0.5, 1): exact, a function of the data (the verifier
+# recomputes it, no document chooses it), and the same frame for the camera times any power of
+# two (times any other factor, a frame at most a factor 2 away). The direct method keeps the frame
+# given: its trace-one normalisation moves with the world's scale too, and its answers were
+# established in that frame.
+def unit_reference_scale(camera: np.ndarray) -> float:
+    """The power of two that brings ``camera``'s largest entry into [0.5, 1)."""
+    _, exponent = np.frexp(np.abs(camera).max())
+    return float(np.ldexp(1.0, -int(exponent)))
+
+
+def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, reference: int | None = None,
+              unit_reference: bool = False) -> Normalised:
+    """The reconstruction in the frame of camera ``reference`` (default reference_camera); with
+    ``unit_reference``, that camera brought to unit scale first (unit_reference_scale)."""
     cams = np.einsum("ab,ibc->iac", N, unit_scaled(cameras))
     points = None if points is None else unit_scaled(points)
     r = reference_camera(cams) if reference is None else reference
-    A, a = cams[r, :, :3], cams[r, :, 3]
+    scale = unit_reference_scale(cams[r]) if unit_reference else None
+    A, a = (cams[r, :, :3], cams[r, :, 3]) if scale is None else (cams[r, :, :3] * scale, cams[r, :, 3] * scale)
     Ainv = np.linalg.inv(A)
     T0 = np.eye(4)
     T0[:3, :3] = Ainv
@@ -149,7 +173,7 @@ def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, ref
             tau = np.where((depth_signs * signs[:, None]).sum(axis=0) >= 0, 1.0, -1.0)
         pts = pts * tau[:, None]
         out = out * signs[:, None, None]
-    return Normalised(out, pts, r, T0, N, signs)
+    return Normalised(out, pts, r, T0, N, signs, scale)
 
 
 def modulus_coefficients(cameras: np.ndarray, reference: int) -> tuple[np.ndarray, np.ndarray]:

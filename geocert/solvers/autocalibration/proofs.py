@@ -54,7 +54,14 @@ def encode_leaves(leaves: list) -> tuple[list, list]:
     return proofs, out
 
 
-def encode_affine(stage, reference: int) -> dict:
+def _frame(reference: int, reference_scale: float | None) -> dict:
+    """The frame a proof is posed in: the reference camera, and the power of two it was brought to
+    unit scale by (frames.unit_reference_scale; none stated: the reference as given, an earlier
+    writer's frame)."""
+    return {"reference": int(reference), **({} if reference_scale is None else {"reference_scale": reference_scale})}
+
+
+def encode_affine(stage, reference: int, reference_scale: float | None = None) -> dict:
     """The affine stage's proof, posed in the frame of camera ``reference`` (the problem's)."""
     regions = []
     for region in stage.regions:
@@ -62,7 +69,7 @@ def encode_affine(stage, reference: int) -> dict:
         regions.append({"delta": region.delta, "frame": region.G.tolist(), "rows": region.rows,
                         "box": _box(region.lo, region.hi), "basis": region.basis, "unit": region.setup.unit,
                         "proofs": proofs, "leaves": leaves})
-    return {"type": "stratified_affine", "reference": int(reference), "regions": regions,
+    return {"type": "stratified_affine", **_frame(reference, reference_scale), "regions": regions,
             "excluded": [{"delta": item["delta"], "rows": item["rows"]} for item in stage.excluded]}
 
 
@@ -71,10 +78,10 @@ def _rounds(rounds: list) -> list:
              "duals": [pack(z) for z in r.duals]} for r in rounds]
 
 
-def encode_metric(stage, reference: int) -> dict:
+def encode_metric(stage, reference: int, reference_scale: float | None = None) -> dict:
     """The metric stage's proof, posed in the frame of camera ``reference`` (the problem's)."""
     proofs, leaves = encode_leaves(stage.leaves)
-    return {"type": "stratified_metric", "reference": int(reference), "unit": stage.unit, "tightening": _rounds(stage.rounds),
+    return {"type": "stratified_metric", **_frame(reference, reference_scale), "unit": stage.unit, "tightening": _rounds(stage.rounds),
             "search_box": _box(stage.search_lo, stage.search_hi), "proofs": proofs, "leaves": leaves}
 
 
@@ -380,12 +387,19 @@ def check_reference(problem, proof: dict) -> None:
     if "reference" in proof and (type(proof["reference"]) is not int or proof["reference"] != problem.norm.reference):
         raise Invalid("scope", f"proof/reference is {proof['reference']!r:.40}: this problem is posed in the frame "
                                f"of camera {problem.norm.reference}")
+    # The scale is the data's (frames.unit_reference_scale), recomputed: a document's own number is
+    # never multiplied into the frame, only compared with the one the data give.
+    stated = proof.get("reference_scale")
+    if stated != problem.norm.reference_scale or (stated is not None and type(stated) is not float):
+        raise Invalid("scope", f"proof/reference_scale is {stated!r:.40}: this problem is posed with its reference "
+                               f"camera scaled by {problem.norm.reference_scale!r} (frames.unit_reference_scale; "
+                               "none: as given, a proof written before proofs stated it)")
 
 
 def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
     """The bound an affine proof establishes over every plane chirality allows."""
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
-    record(proof, "proof", ("type", "regions", "excluded"), ("reference",))
+    record(proof, "proof", ("type", "regions", "excluded"), ("reference", "reference_scale"))
     check_reference(problem, proof)
     regions, excluded = proof.get("regions"), proof.get("excluded")
     if not isinstance(regions, list) or not isinstance(excluded, list):
@@ -412,7 +426,7 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
     with its ``sublevel``, the proven intervals too (``cost``: the claimed K's recomputed cost).
     Its ``plane_sublevel`` is plane_sublevel.check's (the verifier calls it beside this)."""
     record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"),
-           ("reference", "sublevel", "plane_sublevel"))
+           ("reference", "reference_scale", "sublevel", "plane_sublevel"))
     check_reference(problem, proof)
     setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
     setup.unit = checked_unit(proof.get("unit"), "unit", claimed_cost)
