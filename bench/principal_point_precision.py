@@ -5,7 +5,7 @@ returned cameras and points (solvers.reconstruction.principal_points: the reduce
 the points, the shared focal length and the other views free, the similarity's 7 directions left
 out), beside its distance from the views' median. A principal
 point the per-view test frees but the data fix only to tens of pixels trades with the view's
-rotation (docs/reconstruction-vs-colmap.md: templeSparseRing against Sceaux).
+rotation (bench/results/reconstruction_vs_colmap.md: templeSparseRing against Sceaux).
 
     .venv/bin/python -m bench.principal_point_precision RESULT.json [RESULT.json ...]
 """

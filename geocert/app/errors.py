@@ -80,9 +80,25 @@ def _reason(error: dict) -> str:
     return reason
 
 
+def _field(error: dict) -> dict:
+    """One pydantic error as the field it names and why. The job's kind (the union's tag) missing
+    or not one served is the field ``kind``, not ``body`` (pydantic places it on the union)."""
+    loc = tuple(error.get("loc", ()))
+    if error.get("type") in ("union_tag_not_found", "union_tag_invalid"):
+        ctx = error.get("ctx") or {}
+        tag = str(ctx.get("discriminator", "kind")).strip("'")
+        served = ", ".join(repr(name) for name in dict.fromkeys(kind.name for kind in KINDS))
+        if error["type"] == "union_tag_not_found":
+            reason = f"Field required: one of {served}"
+        else:
+            reason = f"{ctx.get('tag')!r} is not a kind served: one of {ctx.get('expected_tags', served)}"
+        return {"field": field_path(loc + (tag,)), "reason": reason}
+    return {"field": field_path(loc), "reason": _reason(error)}
+
+
 def validation_problem(errors: list[dict], instance: str | None = None) -> dict:
     """422 problem details from pydantic errors."""
-    fields = [{"field": field_path(e.get("loc", ())), "reason": _reason(e)} for e in errors]
+    fields = [_field(e) for e in errors]
     first = fields[0] if fields else {"field": "body", "reason": "invalid"}
     body = {"type": "about:blank", "title": "Invalid request", "status": 422,
             "detail": f"{first['field']}: {first['reason']}", "errors": fields}

@@ -71,9 +71,15 @@ def keep_declared(value: Any, shape: "Record | ByName") -> Any:
 
 def check(value: Any, shape: "Record | ByName", where: str) -> None:
     """Refuses a member of ``value`` (a record, or a list of records) its writer never writes, at
-    any depth of ``shape``. What is not a record (null, a number) is left to the checks reading it."""
+    any depth of ``shape``. What is not a record (null, a number) in its place is left to the
+    checks reading it; an entry of a list of records that is not one is refused: its writers write
+    records only, and the checks reading a list pass over what is not one (a summary's warnings
+    ending in null, a string "critical_motion" or a list verified: review 52)."""
     if isinstance(value, list):
         for index, entry in enumerate(value):
+            if not isinstance(entry, dict):
+                raise Invalid("returned", f"{where}/{index} is {entry!r:.40}: an entry of a list of records is a "
+                                          "record (an object), as its writer writes it")
             check(entry, shape, f"{where}/{index}")
         return
     if not isinstance(value, dict):

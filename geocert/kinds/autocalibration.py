@@ -22,12 +22,29 @@ from geocert.solvers.autocalibration import metric_relaxation
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import STAGES, outcome, read_data
 from geocert.core.determinacy import safely, within
-from geocert.core.geometry import InputError
+from geocert.core.geometry import COORDINATE_LIMIT, InputError
 from geocert.core.self_check import enabled as self_check_enabled
 
 Range = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[lo, hi]")]
 Point4 = Annotated[list[Finite], Field(min_length=4, max_length=4, description="[X, Y, Z, W]")]
 Matrix3 = list[list[float]]
+
+
+def ranges_within_limit(image_size, intrinsics: dict) -> None:
+    """data/image_size and every intrinsics range within COORDINATE_LIMIT, as every kind's
+    coordinates: beyond it K0 was singular in floating point and the queued job failed with
+    "Solver failure: LinAlgError" instead of this 422 naming the field."""
+    named = [("data/image_size", image_size)] if image_size is not None else []
+    for name, value in intrinsics.items():
+        if name == "principal_point" and isinstance(value, (list, tuple)):
+            named += [(f"options/intrinsics/{name}/{i}", pair) for i, pair in enumerate(value)]
+        else:
+            named.append((f"options/intrinsics/{name}", value))
+    for where, values in named:
+        for x in values if isinstance(values, (list, tuple, np.ndarray)) else ():
+            if isinstance(x, (int, float)) and not isinstance(x, bool) and abs(x) > COORDINATE_LIMIT:
+                raise InputError(where, f"magnitude {abs(x):g} exceeds the limit {COORDINATE_LIMIT:g} "
+                                        "(rescale the coordinates, e.g. to pixels)")
 
 
 class AutocalibrationData(Strict):
@@ -178,6 +195,7 @@ class AutocalibrationKind(ProblemKind):
             if getattr(options, name) != getattr(defaults, name) and options.method != method:
                 raise InputError(f"options/{name}", f"applies to the {method} method only (options/method "
                                                     f"\"{method}\"); the {options.method} method would ignore it")
+        ranges_within_limit(parsed.image_size, options.intrinsics)
         autocalibration_problem.resolve_ranges(options.intrinsics, parsed.image_size)
         if options.method == "direct":
             from geocert.solvers.autocalibration import direct

@@ -21,7 +21,7 @@ import numpy as np
 from pydantic import BaseModel, Field
 
 from geocert.kinds.base import ProblemKind
-from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION, IntrinsicsIn
+from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION, IntrinsicsIn, ranges_within_limit
 from geocert.kinds.documents import certificate_document
 from geocert.kinds.resection_homography import RESECTION, map_document
 from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict, options_model
@@ -386,6 +386,8 @@ class ReconstructionKind(ProblemKind):
 
     def check_options(self, parsed: Parsed, options: ReconstructionOptions) -> None:
         ranges = options.intrinsics if isinstance(options.intrinsics, dict) else {}
+        if "K" not in ranges:
+            ranges_within_limit(None, ranges)  # beyond it the job failed with LinAlgError
         complete = "K" in ranges or all(name in ranges for name in ("focal", "aspect", "skew", "principal_point"))
         if not complete and options.camera_model != "varying":
             first = parsed.image_sizes[0]

@@ -124,7 +124,10 @@ def tracks_in_bulk(entries: list, chosen, cameras: int) -> list | None:
     magnitude = np.abs(pixels)
     if not (np.isfinite(pixels).all() and (magnitude <= COORDINATE_LIMIT).all()):
         return None
-    index = np.array(indices, dtype=np.int64)
+    try:
+        index = np.array(indices, dtype=np.int64)
+    except OverflowError:  # an index beyond int64: out of range, which the loop names
+        return None
     if not ((index >= 0) & (index < cameras)).all():
         return None
     owner = np.repeat(np.arange(len(sizes)), sizes)

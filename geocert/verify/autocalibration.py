@@ -155,6 +155,12 @@ class AutocalibrationVerification(Verification):
                              "is the direct method's): its affine stage searches the planes at infinity its own "
                              "chirality rows allow, the camera centres' and the points' given "
                              "(frames.chirality_rows), whatever that option states",
+                # the same of the direct method's varying_focal: stated true beside a stratified
+                # proof, hashed, it verified with nothing saying the one K returned is every view's
+                # (review 52); refused at submission since review 50, an earlier writer served it
+                "varying_focal": f"not read by the stratified method (options/varying_focal "
+                                 f"{options.get('varying_focal')!r:.20} is the direct method's): its metric stage "
+                                 "certifies one K for every view (K), whatever that option states",
                 "statement": "stage 0 (affine): no plane at infinity chirality allows (scope.chirality) has a "
                              "modulus cost below "
                              "lower_bound; stage 1 (metric), for the plane at infinity it states: no "
@@ -270,6 +276,7 @@ class AutocalibrationVerification(Verification):
             if result.get("baseline") is not None:  # the direct method has no linear estimate
                 raise Invalid("returned", "baseline: the direct method states no linear estimate")
             return _check_returned_direct(result, certificate, earlier_estimates)
+        _check_nothing_direct(result, stages)
         if result.get("plane_at_infinity") != claims[0].get("plane_at_infinity"):
             raise Invalid("returned", "plane_at_infinity differs from the affine stage's claim")
         if result.get("K") != claims[1].get("K"):
@@ -736,6 +743,27 @@ def _ranges_stated(result: dict, problem) -> bool:
     never_started = all(isinstance(s, dict) and s.get("status") in ("cancelled", "time_limit") and not s.get("nodes")
                         and s.get("cost") is None and s.get("lower_bound") is None for s in stages)
     return never_started and result.get("intrinsics") == {}
+
+
+# What only the direct method writes: its relaxation's figures in its stage's summary (the kind's
+# stage summary record, records.STAGE_SUMMARY, is both methods'), read by _check_relaxation_figures
+# against the direct proof; and a K a view (Ks, options.varying_focal).
+DIRECT_SUMMARY = ("order", "moment_rank", "eigenvalue_ratio", "conic_status")
+
+
+def _check_nothing_direct(result: dict, stages: list) -> None:
+    """A stratified result states none of what only the direct method writes (DIRECT_SUMMARY, Ks):
+    beside a stratified stage, moment_rank 1 read as a moment relaxation solved exactly and Ks as
+    each camera calibrated on its own, and no check read them (review 52)."""
+    for index, stage in enumerate(stages):
+        summary = stage.get("certificate")
+        stated = [name for name in DIRECT_SUMMARY if isinstance(summary, dict) and summary.get(name) is not None]
+        if stated:
+            raise Invalid("returned", f"stages/{index}/certificate/{stated[0]} is stated: it is the direct method's "
+                                      "relaxation's figure, and the stratified stages solve no moment relaxation")
+    if result.get("Ks") is not None:
+        raise Invalid("returned", "Ks is stated: the stratified method returns one K (K), a K a view only the direct "
+                                  "method's options.varying_focal writes")
 
 
 def _check_returned_direct(result: dict, certificate: dict, earlier_estimates: bool = True) -> None:

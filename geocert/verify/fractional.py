@@ -132,6 +132,7 @@ class _Pools:
         self.costs: np.ndarray | None = None
         self.dofs: np.ndarray | None = None
         self.pooled: dict = {}
+        self.paid: set = set()  # the quantiles the document has paid for (pooled_floor.charge_quantiles)
 
     def _residuals(self) -> None:
         data = self.data
@@ -155,7 +156,7 @@ class _Pools:
                 self._residuals()
             costs = np.concatenate([self.costs[a:b] for a, b in runs])
             dofs = np.concatenate([self.dofs[a:b] for a, b in runs])
-            self.pooled[key] = pooled_bounds(costs, dofs)  # it pools only the tracks of finite cost
+            self.pooled[key] = pooled_bounds(costs, dofs, self.paid)  # it pools only the tracks of finite cost
         return self.pooled[key]
 
 

@@ -24,6 +24,7 @@ import math
 import numpy as np
 
 from geocert.core.determinacy import SIGMAS
+from geocert.core.strict import charge
 
 # The normal quantiles of the chi-square's 99.9% point (determinacy.OUTLIER_TAIL) and of 3
 # standard errors' two-sided coverage (determinacy.COVERAGE).
@@ -187,18 +188,57 @@ def pooled_floor(costs: np.ndarray, dofs: np.ndarray) -> float | None:
     return None if bounds is None else bounds[0]
 
 
-def pooled_bounds(costs: np.ndarray, dofs: np.ndarray) -> tuple[float, int, int] | None:
+# What the quantiles cost, charged to the verification's budget (strict.charge, a unit about a
+# microsecond of CPU here) before they are computed: each is a bisection of about QUANTILE_STEPS
+# evaluations of a sum of dof / 2 terms (chi_square_survival, student_coverage: some 8 units an
+# evaluation and a unit per TERMS_PER_UNIT terms). Unpaid, a document stating a track of every
+# length up to 1,000 views, or pools of many degrees of freedom each (the Student quantile's cache
+# keeps 256), asked for seconds of CPU its size did not pay for. The cache's values are charged as
+# if computed, once a document (pooled_bounds' ``paid``), so a verdict does not depend on what
+# the process verified before.
+QUANTILE_STEPS = 60
+EVALUATION_UNITS = 8
+TERMS_PER_UNIT = 256
+
+
+def quantile_work(dof: float) -> int:
+    """The work units one quantile computed from the closed form at ``dof`` degrees of freedom
+    costs (QUANTILE_STEPS evaluations of a sum of dof / 2 terms)."""
+    return QUANTILE_STEPS * (EVALUATION_UNITS + int(dof) // TERMS_PER_UNIT)
+
+
+def charge_quantiles(dofs: np.ndarray, most: float | None, paid: set) -> None:
+    """Charge (strict.charge) the closed-form quantiles pooled_bounds reads: each track length's
+    two chi-square points for tracks of ``dofs`` degrees of freedom (chi_square_points) and the
+    Student quantile at ``most`` (student_floor; None, none), each not in ``paid`` (a document's,
+    which they are added to)."""
+    work = 0
+    for k in np.unique(np.asarray(dofs, dtype=float)):
+        if 1 <= k <= EXACT_CHI2_DOF and float(k).is_integer() and ("chi2", k) not in paid:
+            paid.add(("chi2", k))
+            work += 2 * quantile_work(k)
+    if most is not None and 1 <= most <= EXACT_STUDENT_DOF and float(most).is_integer() and ("t", most) not in paid:
+        paid.add(("t", most))
+        work += quantile_work(most)
+    if work:
+        charge(work, "the pooled level's chi-square and Student quantiles")
+
+
+def pooled_bounds(costs: np.ndarray, dofs: np.ndarray, paid: set | None = None) -> tuple[float, int, int] | None:
     """(floor, least, most): pooled_floor's floor, and the least and most degrees of freedom D
     pooled_increase may pool of these tracks (the sum over the tracks surely pooled; over those
     surely or possibly pooled), between which the D a pooled level states must lie: a level's
     degrees of freedom are its pool's, not the document's word (review 49). None where
-    pooled_increase gives no level."""
+    pooled_increase gives no level. ``paid``: the quantiles this document has paid for
+    (charge_quantiles; None, a set of its own)."""
     dof = np.asarray(dofs, dtype=float)
     cost = np.asarray(costs, dtype=float)
     use = (dof > 0) & np.isfinite(cost)
     dof, cost = dof[use], cost[use]
     if not len(cost):
         return None
+    paid = set() if paid is None else paid
+    charge_quantiles(dof, None, paid)
     median, tail, margin = chi_square_points(dof)
     first_low = float(np.median(cost / (median * (1 + margin))))
     first_high = float(np.median(cost / (median * (1 - margin))))
@@ -213,6 +253,7 @@ def pooled_bounds(costs: np.ndarray, dofs: np.ndarray) -> tuple[float, int, int]
     if degrees == 0:
         return None
     most = float(dof[sure | either].sum())
+    charge_quantiles(np.zeros(0), most, paid)
     t = student_floor(most)
     return t * t * total / degrees, int(dof[sure].sum()), int(most)
 

@@ -583,6 +583,13 @@ def _check_calibration(result: dict, registered: list[dict], verify: Callable[[d
                                       "focal length) (model varying)")
     if model not in ("shared", "varying") or certified not in (True, False):
         raise Invalid("returned", f"{where}: model must be shared or varying, certified a boolean")
+    if K is not None and "model" in claim and model != _calibration_model(result, Ks):
+        # "varying" says each camera carries its own K: the writer says so exactly when the
+        # adjustment returned a K a view (claims.calibration_claim); beside cameras sharing one K
+        # it verified, the K still every camera's (review 51).
+        raise Invalid("returned", f"{where}/model is {model!r:.20}, and the adjustment returned "
+                                  + ("a K a view (varying)" if model == "shared" else "one K every camera shares "
+                                     "(shared)") + " (stages/bundle_adjustment: its model and principal point tests)")
     cert = claim.get("certified_K")
     if (cert is not None) != (certified is True) or (certified and K is None):
         raise Invalid("returned", f"{where}/certified_K is stated exactly when a certified K is claimed beside a "
@@ -669,6 +676,22 @@ def _check_moved_warning(summary: dict, due: bool, differences: list[dict]) -> N
         raise Invalid("returned", f"summary: the returned_K_not_certified warning must state how far the returned K "
                                   f"moved from the certified one, as summary/calibration/difference gives it "
                                   f"({said!r}), in the pipeline's words and nothing else")
+
+
+def _calibration_model(result: dict, Ks: list) -> str:
+    """The calibration model the writer states (claims.calibration_claim: "varying" exactly when
+    the adjustment returned a K a view, upgrade.Metric.Ks): an adjustment that ran to its end
+    states its model (_check_adjustment_model ties it to the options and the cameras), and returns
+    a K a view with the varying model, or with a principal point per view its test estimated (and
+    a focal length per view after it); one not run or stopped before it states its model returns
+    its start's (one K) or, stopped within a varying adjustment, a K a view: then the cameras
+    returned differ."""
+    stage = _stage(result, "bundle_adjustment")
+    if stage.get("model") is not None:
+        test = stage.get("principal_point_per_view")
+        per_view = stage["model"] == "varying" or (isinstance(test, dict) and test.get("estimated") is True)
+        return "varying" if per_view else "shared"
+    return "shared" if all(calibration_claim.same(k, Ks[0]) for k in Ks) else "varying"
 
 
 def _stage(result: dict, name: str) -> dict:

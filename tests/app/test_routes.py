@@ -136,6 +136,9 @@ def test_a_queued_job_cancelled_never_starts_and_an_ended_one_is_a_409(api, run_
     (lambda body: body["options"].update(no_such_option=1), "options/no_such_option"),
     (lambda body: body["options"].update(max_nodes=100.0), "options/max_nodes"),
     (lambda body: body["data"]["tracks"][0]["points"][0].__setitem__(0, "330"), "data/tracks/0/points/0/0"),
+    (lambda body: body["data"]["tracks"][0]["views"].__setitem__(1, 10 ** 25), "data/tracks/0/views/1"),  # was a 500
+    (lambda body: body.pop("kind"), "kind"),  # was named "body"
+    (lambda body: body.update(kind="triangulate"), "kind"),  # was named "body"
 ])
 def test_bad_input_is_a_422_naming_the_field(api, change, field):
     body, _ = exact_job(5)

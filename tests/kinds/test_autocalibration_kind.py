@@ -70,6 +70,21 @@ class TestBadInput:
     def test_an_empty_range(self):
         assert refused(job(intrinsics={"focal": [900, 800]})).field == "options/intrinsics/focal"
 
+    @pytest.mark.parametrize("where, change", [
+        ("data/image_size", lambda d: d["data"].update(image_size=[1e25, 1e25])),
+        ("options/intrinsics/focal", lambda d: d["options"].update(intrinsics={"focal": [1e200, 1e201]})),
+        ("options/intrinsics/principal_point/1", lambda d: d["options"].update(
+            intrinsics={"principal_point": [[0, 1000], [0, 2e9]]})),
+    ])
+    def test_a_size_or_range_beyond_the_coordinate_limit(self, where, change):
+        """Was a job failed with "Solver failure: LinAlgError: Singular matrix" (K0 singular in
+        floating point), queued as valid: now the 422 naming the field, as every kind's
+        coordinates beyond COORDINATE_LIMIT."""
+        document = job()
+        change(document)
+        error = refused(document)
+        assert error.field == where and "exceeds the limit" in error.reason
+
     def test_ranges_without_image_size(self):
         document = job()
         del document["data"]["image_size"]

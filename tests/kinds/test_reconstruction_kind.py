@@ -109,6 +109,7 @@ class TestBadInput:
     @pytest.mark.parametrize("options, field", [
         ({"intrinsics": {"K": [[800, 0, 320], [0, 800, 240]]}}, "options/intrinsics/K"),
         ({"intrinsics": {"focal": [10, 5]}}, "options/intrinsics/focal"),
+        ({"intrinsics": {"focal": [1e200, 1e201]}}, "options/intrinsics/focal"),  # was a job failed: LinAlgError
         ({"autocalibration": "sometimes"}, "options/autocalibration"),
         ({"threshold_px": 0}, "options/threshold_px"),
         ({"features": {"guided_ratio": 1.0}}, "options/features/guided_ratio"),

@@ -49,6 +49,7 @@ BAD = {
     "a view index a bool": lambda t: t[3]["views"].__setitem__(0, True),
     "a view out of range": lambda t: t[3]["views"].__setitem__(0, 6),
     "a negative view": lambda t: t[3]["views"].__setitem__(0, -1),
+    "a view index beyond int64": lambda t: t[3]["views"].__setitem__(0, 10 ** 25),  # was a 500 (OverflowError)
     "a view twice": lambda t: t[3].update(views=[1, 1], points=[[1.0, 2.0], [3.0, 4.0]]),
     "one view": lambda t: t[3].update(views=[1], points=[[1.0, 2.0]]),
     "fewer points than views": lambda t: t[3]["points"].pop(),

@@ -292,7 +292,7 @@ def test_pooled_levels_are_paid_from_the_work_budget():
 
 def test_a_pool_stated_by_every_track_is_paid_once():
     """The writer's pools (every track of a batch states the same runs) cost a unit a track once."""
-    from geocert.core.strict import work_budget
+    from geocert.core.strict import _WORK, work_budget
     from geocert.verify import fractional
 
     document = _pooled_document(tracks=40, cameras=0)
@@ -303,8 +303,14 @@ def test_a_pool_stated_by_every_track_is_paid_once():
     for track in document["tracks"]:
         if "pooled_tracks" in track["determinacy"]:
             track["determinacy"].update(pooled_tracks=[[0, tracks]], level=pooled_level((1.0, most)))
+    # the pool's cost: a unit a track, and its quantiles (pooled_floor.charge_quantiles, review 52)
+    once = fractional._Pools(document, document["certificate"])
+    with work_budget(10 ** 9):
+        once.bounds([[0, tracks]])
+        cost = 10 ** 9 - _WORK.get()[0]
+    assert cost >= tracks
     pools = fractional._Pools(document, document["certificate"])
-    with work_budget(tracks):  # a unit short of paying for a second pool of them all
+    with work_budget(cost):  # short of paying for a second pool of them all (a unit a track again)
         for index, track in enumerate(document["tracks"]):
             fractional._check_pooled(index, track["determinacy"], document, pools)
     assert list(pools.pooled) == [((0, tracks),)]

@@ -26,7 +26,7 @@ dinoSparseRing 1.21 with K unknown and 1.38 with K known, templeSparseRing 1.21 
 Corridor 4.10 and 1.40; a synthetic turntable seen from 1000 times its size through a 165,000 px lens
 1.02 (0.3 px of noise). The twin's adjustments mostly stop at their iteration cap (the record's
 ``mirror_capped``); run to convergence they left every verdict measured as it was
-(docs/reconstruction-vs-colmap.md, "The twin's adjustments at their cap")."""
+(bench/results/reconstruction_vs_colmap.md, "The twin's adjustments at their cap")."""
 
 from __future__ import annotations
 

@@ -164,7 +164,7 @@ class ReconstructionOptions(FractionalOptions):
     # the focal length. "auto" (the default) keeps it when the data fix it (a chi-square test on the
     # cost it saves; pipeline._radial_test), "on" always, "off" never. "auto" brings Sceaux's focal
     # length within 3% (COLMAP's +2.3%) and keeps no term on the rings, at the CPU of the test's
-    # adjustments (docs/reconstruction-vs-colmap.md). When kept, the observations are undistorted
+    # adjustments (bench/results/reconstruction_vs_colmap.md). When kept, the observations are undistorted
     # with it before the metric stages: every certificate is conditional on that k1. K known: one
     # k1 about K's principal point, K held as given, by the same test (pipeline._fixed_radial_test).
     radial_distortion: str = option("auto", choices=RADIAL_DISTORTIONS, description=(

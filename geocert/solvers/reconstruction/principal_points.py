@@ -7,7 +7,7 @@ direction the data leave free (an eigenvalue below 1e-12 of the largest) is not 
 infinite deviation); the noise's variance is read from the residuals. Near a distant object a principal
 point's shift and a small rotation of the view nearly coincide: the per-view chi-square test
 then passes on a misfit the principal points absorb while the data fix them to tens of pixels
-(templeSparseRing, docs/reconstruction-vs-colmap.md), which this measures."""
+(templeSparseRing, bench/results/reconstruction_vs_colmap.md), which this measures."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """What a reconstruction job imports before it needs it: scipy.optimize (about 0.15 s of CPU, a
-process's start-up that the bench counts beside COLMAP's; docs/reconstruction-vs-colmap.md) is
+process's start-up that the bench counts beside COLMAP's; bench/results/reconstruction_vs_colmap.md) is
 imported where it is called, which a K-known job on real photos never does."""
 
 from __future__ import annotations

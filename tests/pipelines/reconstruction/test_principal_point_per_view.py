@@ -1,6 +1,6 @@
 """A principal point for each view (options.principal_point "per_view", K unknown): photos whose
 principal point moves from shot to shot (a stabilised lens: Sceaux Castle's, measured in
-docs/reconstruction-vs-colmap.md) fit no shared K, and their cameras cannot be certified against
+bench/results/reconstruction_vs_colmap.md) fit no shared K, and their cameras cannot be certified against
 a free 3x4 camera; with a principal point each, freed by a chi-square test when the data fix
 them, they are, their claims counting it (8 degrees of freedom), and the verifier accepts the
 genuine document and refuses one whose principal point was moved."""
