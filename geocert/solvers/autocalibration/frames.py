@@ -37,6 +37,9 @@ class Normalised:
     # The power of two the preconditioned reference camera N P_ref was multiplied by before T0 was
     # built from it (unit_reference_scale); None where the reference was taken at the scale given.
     reference_scale: float | None = None
+    # unit_reference_scale of the preconditioned reference as given, whichever frame was built:
+    # how far the reference as given lies from unit scale (earlier_frame_readable).
+    reference_unit_scale: float = 1.0
 
 
 # Cameras and points are homogeneous: any scale is the same camera or point. At extreme scales the
@@ -140,6 +143,27 @@ def unit_reference_scale(camera: np.ndarray) -> float:
     return float(np.ldexp(1.0, -int(exponent)))
 
 
+# A stratified proof written before proofs stated reference_scale is posed in the reference as
+# given, whose scale the writer did not choose: the failure the unit reference frame mends can be
+# certified in it. Written that way (the reference as given) on the stored stratified scene, its
+# reference times 2^k (the preconditioned reference's largest entry in [2^(k-10), 2^(k-9))): K
+# within 4e-4 px of the truth up to k = 18 (the optimum lies 1.4e-4 px from it), then 0.03 px off
+# (k = 19), 0.34 px (k = 20), and 4,250 px off certified and verified (k = 28); scaled down,
+# nothing moved (to unit_scaled's floor, below which the camera is unit-scaled anyway). Such a
+# proof is read in its given frame only where that frame is well scaled, the preconditioned
+# reference's largest entry below 2^EARLIER_FRAME_EXPONENT (twice k = 17's, a factor 4 short of
+# the first K moved), and refused otherwise (proofs.check_earlier_frame). The stored
+# certificates' references lie in [2^-10, 2^-9) and [1, 2).
+EARLIER_FRAME_EXPONENT = 8
+
+
+def earlier_frame_readable(norm: Normalised) -> bool:
+    """Whether an earlier writer's proof (no reference_scale: the reference as given) may be read
+    in this problem's frame as given: its preconditioned reference's largest entry below
+    2^EARLIER_FRAME_EXPONENT (reference_unit_scale at least 2^-EARLIER_FRAME_EXPONENT)."""
+    return norm.reference_unit_scale >= 2.0 ** -EARLIER_FRAME_EXPONENT
+
+
 def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, reference: int | None = None,
               unit_reference: bool = False) -> Normalised:
     """The reconstruction in the frame of camera ``reference`` (default reference_camera); with
@@ -147,7 +171,8 @@ def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, ref
     cams = np.einsum("ab,ibc->iac", N, unit_scaled(cameras))
     points = None if points is None else unit_scaled(points)
     r = reference_camera(cams) if reference is None else reference
-    scale = unit_reference_scale(cams[r]) if unit_reference else None
+    unit = unit_reference_scale(cams[r])
+    scale = unit if unit_reference else None
     A, a = (cams[r, :, :3], cams[r, :, 3]) if scale is None else (cams[r, :, :3] * scale, cams[r, :, 3] * scale)
     Ainv = np.linalg.inv(A)
     T0 = np.eye(4)
@@ -173,7 +198,7 @@ def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, ref
             tau = np.where((depth_signs * signs[:, None]).sum(axis=0) >= 0, 1.0, -1.0)
         pts = pts * tau[:, None]
         out = out * signs[:, None, None]
-    return Normalised(out, pts, r, T0, N, signs, scale)
+    return Normalised(out, pts, r, T0, N, signs, scale, unit)
 
 
 def modulus_coefficients(cameras: np.ndarray, reference: int) -> tuple[np.ndarray, np.ndarray]:

@@ -396,11 +396,27 @@ def check_reference(problem, proof: dict) -> None:
                                "none: as given, a proof written before proofs stated it)")
 
 
+def check_earlier_frame(problem, proof: dict) -> None:
+    """A stratified proof stating no reference_scale (an earlier writer's: the reference camera as
+    given) is read in that frame only where it is well scaled (frames.earlier_frame_readable):
+    beyond, the frame's own failure could be certified there (the reference times 2^28 had a K
+    4,250 px off certified and verified), and the current writer states the scale."""
+    if "reference_scale" not in proof and problem.norm.reference_scale is None \
+            and not frames.earlier_frame_readable(problem.norm):
+        largest = -int(np.log2(problem.norm.reference_unit_scale))  # the entry lies in [2^(largest-1), 2^largest)
+        raise Invalid("scope", f"proof/reference_scale is not stated (a proof posed in the reference camera as given, "
+                               f"written before proofs stated it): that frame is read only where the preconditioned "
+                               f"reference's largest entry is below 2^{frames.EARLIER_FRAME_EXPONENT}, and camera "
+                               f"{problem.norm.reference}'s is at least 2^{largest - 1} (solve again: the current writer "
+                               "poses the stratified stages in the unit reference frame and states reference_scale)")
+
+
 def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
     """The bound an affine proof establishes over every plane chirality allows."""
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
     record(proof, "proof", ("type", "regions", "excluded"), ("reference", "reference_scale"))
     check_reference(problem, proof)
+    check_earlier_frame(problem, proof)
     regions, excluded = proof.get("regions"), proof.get("excluded")
     if not isinstance(regions, list) or not isinstance(excluded, list):
         raise Invalid("format", "an affine proof has regions and excluded")
@@ -428,6 +444,7 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
     record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"),
            ("reference", "reference_scale", "sublevel", "plane_sublevel"))
     check_reference(problem, proof)
+    check_earlier_frame(problem, proof)
     setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
     setup.unit = checked_unit(proof.get("unit"), "unit", claimed_cost)
     lo, hi, proven_lo, proven_hi = _check_rounds(problem, setup, proof, lower_claimed, "tightening", "its cap is "
