@@ -390,7 +390,8 @@ def check_reference(problem, proof: dict) -> None:
     # The scale is the data's (frames.unit_reference_scale), recomputed: a document's own number is
     # never multiplied into the frame, only compared with the one the data give.
     stated = proof.get("reference_scale")
-    if stated != problem.norm.reference_scale or (stated is not None and type(stated) is not float):
+    # a number (JavaScript writes 512.0 as 512), never a boolean (True == 1.0)
+    if stated != problem.norm.reference_scale or (stated is not None and type(stated) not in (float, int)):
         raise Invalid("scope", f"proof/reference_scale is {stated!r:.40}: this problem is posed with its reference "
                                f"camera scaled by {problem.norm.reference_scale!r} (frames.unit_reference_scale; "
                                "none: as given, a proof written before proofs stated it)")
