@@ -49,7 +49,11 @@ def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptio
         if elapsed > options.time_limit_s:
             raise direct_solve.Stopped("time_limit", f"stopped at options.time_limit_s ({options.time_limit_s:g} s)")
 
-    problem = autocalibration_problem.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
+    # the reference as given (prepare's unit_reference is the stratified method's frame): the direct
+    # method's trace-one normalisation moves with the world's scale too, and its answers were
+    # established in this frame
+    problem = autocalibration_problem.prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics,
+                                              unit_reference=False)
     setup = direct.setup_for(problem, options.chirality)
     checking = self_check_enabled()
     full = options.certificate == "full" or checking

@@ -234,6 +234,13 @@ class AutocalibrationVerification(Verification):
             # in two frames would claim a plane and a K of two different problems
             raise Invalid("claim", "the stages' proofs name different reference cameras (or one names none): both "
                                    "stages are posed in one frame")
+        scaled = {"reference_scale" in item["proof"] for item in items if isinstance(item, dict)
+                  and isinstance(item.get("proof"), dict)}
+        if len(scaled) > 1:
+            # one stage in the unit reference frame, the other in the reference as given: a plane and
+            # a K of two problems
+            raise Invalid("claim", "one stage's proof states reference_scale and the other's does not: both stages "
+                                   "are posed in one frame")
         planes = [item.get("plane_at_infinity") for item in items]
         if planes[1] != planes[0]:
             raise Invalid("claim", "the metric stage states another plane at infinity than the affine stage")
@@ -280,7 +287,8 @@ class AutocalibrationVerification(Verification):
             options = certificate["options"]
             intrinsics = dict(options.get("intrinsics") or {})
             problem = autocalibration_problem.prepare(cameras, points, image_size, intrinsics,
-                                                      _stated_reference(claims, cameras, image_size, intrinsics))
+                                                      _stated_reference(claims, cameras, image_size, intrinsics),
+                                                      _stated_unit(claims))
         except (InputError, TypeError, ValueError) as exc:
             raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
         if result.get("method") != options.get("method") or not _ranges_stated(result, problem):
@@ -342,9 +350,25 @@ class AutocalibrationVerification(Verification):
         """What an uncertified stage's solution costs (the affine stage's plane, the metric
         stage's K for its plane, the direct stage's quadric), with the allowance a certified
         stage's has; None when the stage returns none."""
+        direct = options["method"] == "direct"
+        # An uncertified stage carries no proof to state its frame: the stratified stages' costs are
+        # read in the unit reference frame (the current writer's) and, where that is not the cost
+        # stated, in the reference as given (an earlier writer's); the direct method has that one.
+        costs = [self._solution_cost_in(data, claim, options, unit) for unit in ((False,) if direct else (True, False))]
+        if costs[0] is None or len(costs) == 1:
+            return costs[0]
+        stated = claim.get("cost")
+        if isinstance(stated, (int, float)) and not isinstance(stated, bool) and costs[1] is not None \
+                and not abs(stated - costs[0][0]) <= costs[0][1] and abs(stated - costs[1][0]) <= costs[1][1]:
+            return costs[1]
+        return costs[0]
+
+    @staticmethod
+    def _solution_cost_in(data: dict, claim: dict, options: dict, unit: bool) -> tuple[float, float] | None:
         try:
             cameras, points, image_size = read_data(data)
-            problem = autocalibration_problem.prepare(cameras, points, image_size, dict(options["intrinsics"] or {}))
+            problem = autocalibration_problem.prepare(cameras, points, image_size, dict(options["intrinsics"] or {}),
+                                                      unit_reference=unit)
         except InputError as exc:
             raise Invalid("data", f"{exc.field}: {exc.reason}") from exc
         with np.errstate(all="ignore"):
@@ -405,11 +429,12 @@ class AutocalibrationVerification(Verification):
             references = [proof["reference"]]
         else:  # an earlier proof names no frame: those its writer's rounding may have taken (data_scope says so)
             references = earlier
+        unit = _unit_frame(proof, options["method"] == "direct")
         first = None
         for reference in references:
             tried = list(passed)
             try:
-                problem = autocalibration_problem.prepare(cameras, points, image_size, intrinsics, reference)
+                problem = autocalibration_problem.prepare(cameras, points, image_size, intrinsics, reference, unit)
                 out = self._check_claim_in(problem, arrays, options, claim, claimed, lower_claimed, tried)
             except Invalid as exc:
                 first = first or exc
@@ -466,6 +491,29 @@ class AutocalibrationVerification(Verification):
             if "proven_interval" not in passed:
                 passed.append("proven_interval")
         return bound, options["metric_rel_gap"]
+
+
+def _unit_frame(proof: Any, direct: bool) -> bool:
+    """Whether a certified stage's proof is posed in the unit reference frame (frames.unit_reference_scale:
+    the stratified writer's, stating ``reference_scale``) or in the reference as given (the direct
+    method's, and a stratified proof written before proofs stated it). The stated number is only
+    compared with the one the data give (proofs.check_reference), never used."""
+    if not isinstance(proof, dict) or "reference_scale" not in proof:
+        return False
+    if direct:
+        raise Invalid("scope", "proof/reference_scale is stated: the direct method's frame takes the reference "
+                               "camera as given (no reference_scale)")
+    return True
+
+
+def _stated_unit(claims: list) -> bool:
+    """The frame (unit reference or as given) the returned fields are read in: the one the proof
+    _stated_reference reads states (check_claims refuses stages whose proofs state two); the
+    current writer's, the unit reference frame, where no stage carries a proof."""
+    proofs = [(item.get("certified") is True, item["proof"]) for item in claims
+              if isinstance(item, dict) and isinstance(item.get("proof"), dict)]
+    proof = next((proof for certified, proof in proofs if certified), proofs[0][1] if proofs else None)
+    return not isinstance(proof, dict) or "reference_scale" in proof
 
 
 def _stated_reference(claims: list, cameras: np.ndarray, image_size, intrinsics: dict) -> int | None:
@@ -748,7 +796,8 @@ def _check_returned_direct(result: dict, certificate: dict, earlier_estimates: b
         cameras, points, image_size = read_data(certificate["data"])
         intrinsics = dict(options.get("intrinsics") or {})
         problem = autocalibration_problem.prepare(cameras, points, image_size, intrinsics,
-                                                  _stated_reference(certificate["items"], cameras, image_size, intrinsics))
+                                                  _stated_reference(certificate["items"], cameras, image_size, intrinsics),
+                                                  unit_reference=False)  # the direct method's frame
     except (InputError, TypeError, ValueError) as exc:
         raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
     if result.get("method") != "direct" or not _ranges_stated(result, problem):

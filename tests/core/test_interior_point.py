@@ -164,7 +164,8 @@ def test_table71_seed_1006_varying_focal_is_certified_rank_one():
     magnitudes, not from the rounding that happened: 3.7e-6 of it here): tightness is asserted on
     the bound before that charge, and the charge on its own."""
     scene, _ = scenes.table71_scene(1006, 0.2, True)
-    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
+    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]},
+                                              unit_reference=False)
     setup = direct.setup_for(problem, "none")
     options = SimpleNamespace(relaxation_order=2, metric_rel_gap=1e-4, abs_gap=1e-12)
     stage = direct_solve.solve_direct(setup, options, True)
@@ -183,7 +184,8 @@ def _varying_focal_solve(seed: int):
     """Table 7.1's varying-focal scene of ``seed`` without chirality: its order-2 program and
     interior_point's solve of it."""
     scene, _ = scenes.table71_scene(seed, 0.2, True)
-    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
+    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]},
+                                              unit_reference=False)
     setup = direct.setup_for(problem, "none")
     program = direct_relaxation.build(setup.cameras, None, 2)
     return program, interior_point.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,
@@ -250,7 +252,8 @@ def test_table71_seed_1012_chirality_split_half(monkeypatch):
     Haswell with 1 and Prescott with 1, "Stalled" on SkylakeX with 1 and Haswell with 2 (bounds
     7.7172e-4 and 7.7028e-4)."""
     scene, _ = scenes.table71_scene(1012, 0.2, True)
-    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]})
+    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, {**UNIT, "focal": [0.05, 1.0]},
+                                              unit_reference=False)
     setup = direct.setup_for(problem, "points")
     program = direct_relaxation.build(setup.cameras, setup.orientations[0].pairs, 2, ((8, 0.05772124305830394, -1.0),))
     result = interior_point.solve(program.q, program.A, program.b, program.cones.zero, program.cones.nonneg,

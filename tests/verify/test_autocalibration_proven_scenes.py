@@ -20,7 +20,7 @@ from geocert.verify.checks import verify_any
 from tests.support import shared_data
 from tests.verify.test_forgeries import rehash, stored
 from tests.verify.test_forgeries_review5 import WORLD_SHRINK
-from tests.verify.test_forgeries_review6 import FAR
+from tests.verify.test_forgeries_review6 import far_point_data
 
 NAMES = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")
 
@@ -50,8 +50,7 @@ def review_data(name: str) -> dict:
         data["cameras"] = [(np.asarray(P) @ np.linalg.inv(shrink)).tolist() for P in data["cameras"]]
         data["points"] = (np.asarray(data["points"]) @ shrink).tolist()
     elif name == "review6_far_point":
-        far = np.asarray(genuine["upgrade"]) @ np.array([0.0, 0.0, FAR, 1.0])
-        data["points"].append((far / np.max(np.abs(far))).tolist())
+        data = far_point_data()
     return {"kind": "autocalibration", "data": data, "options": dict(genuine["certificate"]["options"])}
 
 

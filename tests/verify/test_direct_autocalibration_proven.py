@@ -138,7 +138,7 @@ def test_the_solvers_interval_holds_the_true_quadrics_focal():
     from geocert.solvers.autocalibration import direct_sublevel
 
     scene, _ = scenes.table71_scene(0, 0.2, False)
-    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, UNIT)
+    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, UNIT, unit_reference=False)
     setup = direct.setup_for(problem, "centers")
     stage = direct_solve.solve_direct(setup, SimpleNamespace(relaxation_order=2, metric_rel_gap=1e-4, abs_gap=1e-9),
                                       True)

@@ -41,7 +41,8 @@ def scene():
 def setup(scene) -> direct.DirectSetup:
     """The program the kind builds for the scene (its frame, its focal rows)."""
     scene, _ = scene
-    return direct.setup_for(autocalibration_problem.prepare(scene.cameras, scene.points, None, INTRINSICS), "centers")
+    return direct.setup_for(autocalibration_problem.prepare(scene.cameras, scene.points, None, INTRINSICS,
+                                                            unit_reference=False), "centers")
 
 
 @pytest.fixture(scope="module")

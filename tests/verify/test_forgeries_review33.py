@@ -382,7 +382,7 @@ def test_the_direct_other_frame_cost_is_not_its_claim(tied_direct):
 
     service, other = tied_direct["results"][1], tied_direct["results"][3]
     cameras, points, image_size = read_data(tied_direct["data"])
-    problem = autocalibration_problem.prepare(cameras, points, image_size, {})
+    problem = autocalibration_problem.prepare(cameras, points, image_size, {}, unit_reference=False)  # the direct frame
     assert problem.norm.reference == 1
     setup = _direct_setup(problem, service["certificate"]["options"])
     Q = np.array(other["certificate"]["items"][0]["dual_absolute_quadric"])
@@ -515,8 +515,12 @@ def _stretched(inside: float) -> tuple[dict, float, float]:
     document = copy.deepcopy(stored("autocalibration_stratified"))
     certificate = document["certificate"]
     cameras, points, image_size = read_data(certificate["data"])
-    problem = autocalibration_problem.prepare(cameras, points, image_size, {})
-    region = certificate["items"][0]["proof"]["regions"][0]
+    proof = certificate["items"][0]["proof"]
+    # the frame the stored proof is posed in (written before proofs stated reference_scale: the
+    # reference camera as given)
+    problem = autocalibration_problem.prepare(cameras, points, image_size, {},
+                                              unit_reference="reference_scale" in proof)
+    region = proof["regions"][0]
     G = np.diag([STRETCH, 1.0, 1.0, 1.0]) @ np.array(region["frame"])
     assert np.linalg.cond(G) < 1e12  # proofs.check_regions' limit
     a, b = frames.frame_rows(G, frames.chirality_rows(problem.norm, region["delta"]))
@@ -551,7 +555,8 @@ def test_the_stretched_box_leaves_out_planes_chirality_allows():
     assert proven - stated > 5e-3
     original = stored("autocalibration_stratified")["certificate"]
     cameras, points, image_size = read_data(original["data"])
-    problem = autocalibration_problem.prepare(cameras, points, image_size, {})
+    problem = autocalibration_problem.prepare(cameras, points, image_size, {},  # the stored proof's frame
+                                              unit_reference="reference_scale" in original["items"][0]["proof"])
     region = original["items"][0]["proof"]["regions"][0]
     G = np.array(region["frame"])  # v[1] is the same coordinate in the stretched frame
     a, b = frames.frame_rows(G, frames.chirality_rows(problem.norm, region["delta"]))

@@ -25,8 +25,11 @@ def _valid(document: dict) -> bool:
 
 # The stored stratified autocalibration's projective frame with its world shrunk: cameras' fourth
 # columns divided by this, points' last coordinates multiplied by it (no projection changes), so
-# the metric points, centres and translations the upgrade gives are of order 1e-9.
-WORLD_SHRINK = 3e5
+# the metric points, centres and translations the upgrade gives are of order 1e-9. (3e5 did it in
+# the frame of the reference as given; the unit reference frame's world is 2^14 times larger
+# there, the shrink moving the reference's largest entry off its fourth column: 3e9 now, points
+# at about 9e-9 and centres at about 1.3e-8.)
+WORLD_SHRINK = 3e9
 
 
 @pytest.fixture(scope="module")

@@ -8,6 +8,7 @@ class's docstring says what is accepted, how false it is, and a suggested fix.""
 from __future__ import annotations
 
 import copy
+import functools
 import json
 
 import numpy as np
@@ -32,8 +33,11 @@ def _metric_setup(certificate: dict):
     from geocert.verify.autocalibration import read_data
 
     cameras, points, image_size = read_data(certificate["data"])
+    # the frame the proofs are posed in (a stored certificate written before proofs stated
+    # reference_scale: the reference as given)
     problem = autocalibration_problem.prepare(cameras, points, image_size,
-                                              dict(certificate["options"]["intrinsics"] or {}))
+                                              dict(certificate["options"]["intrinsics"] or {}),
+                                              unit_reference="reference_scale" in certificate["items"][1]["proof"])
     p = autocalibration_problem.plane_from_input(problem, np.asarray(certificate["items"][1]["plane_at_infinity"]))
     return problem, p, metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
 
@@ -155,7 +159,8 @@ class TestAbsoluteGapCapInTheCostsUnits:
         options["abs_gap"] = abs_gap
         cameras, points, image_size = read_data(certificate["data"])
         setup = _direct_setup(autocalibration_problem.prepare(cameras, points, image_size,
-                                                              dict(options["intrinsics"] or {})), options)
+                                                              dict(options["intrinsics"] or {}), unit_reference=False),
+                              options)
         claim = certificate["items"][0]
         Q = Q_of(np.asarray(claim["dual_absolute_quadric"]))
         cost = float(direct_relaxation.cost(setup.cameras, setup.from_input(Q)))
@@ -323,6 +328,31 @@ class TestAbsoluteGapCapOnABilinearFrame:
 FAR = 1e12
 
 
+@functools.cache
+def _current_upgrade() -> tuple:
+    """The upgrade the current writer returns for the stored data. The far point is placed by it:
+    a point 1e12 away lies 1e-12 from the plane at infinity, and where it lands rests on the plane
+    certified to those digits. The stored (earlier) writer's upgrade, from the frame of the
+    reference as given, put it at 3.3e8 from the unit reference frame's plane (certified within
+    its gap of the other), and the metric world is that frame's (the scene within 0.84 of the
+    origin, not 1.6e-3)."""
+    from geocert.jobs.runner import solve_job
+
+    genuine = stored("autocalibration_stratified")
+    result = solve_job({"kind": "autocalibration", "data": genuine["certificate"]["data"],
+                        "options": dict(genuine["certificate"]["options"])})
+    return tuple(map(tuple, result["upgrade"]))
+
+
+def far_point_data() -> dict:
+    """The stored data with one more point 1e12 along the current writer's metric z."""
+    genuine = stored("autocalibration_stratified")
+    data = copy.deepcopy(genuine["certificate"]["data"])
+    far = np.asarray(_current_upgrade()) @ np.array([0.0, 0.0, FAR, 1.0])
+    data["points"].append((far / np.max(np.abs(far))).tolist())
+    return data
+
+
 @pytest.fixture(scope="module")
 def far_point_result() -> dict:
     """A genuine stratified autocalibration of the stored data with one more point, far from the
@@ -331,10 +361,8 @@ def far_point_result() -> dict:
     from geocert.jobs.runner import solve_job
 
     genuine = stored("autocalibration_stratified")
-    data = copy.deepcopy(genuine["certificate"]["data"])
-    far = np.asarray(genuine["upgrade"]) @ np.array([0.0, 0.0, FAR, 1.0])
-    data["points"].append((far / np.max(np.abs(far))).tolist())
-    result = solve_job({"kind": "autocalibration", "data": data, "options": dict(genuine["certificate"]["options"])})
+    result = solve_job({"kind": "autocalibration", "data": far_point_data(),
+                        "options": dict(genuine["certificate"]["options"])})
     assert all(stage["certified"] for stage in result["stages"])
     return result
 
@@ -361,9 +389,10 @@ class TestDerivedArrayReadAtItsLargestEntry:
         assert _valid(far_point_result)
         # Where the far point lands rests on the certified plane's last digits (a point 1e12 away
         # is 1e-12 from the plane at infinity): 1.03e12 on one BLAS kernel, 9.7e10 on another.
-        # What the forgeries need is that 1e-9 of it dwarfs the scene (10 units against 1.6e-3).
-        assert abs(far_point_result["points"][-1][2]) > 1e10
-        assert np.max(np.abs(far_point_result["points"][:-1])) < 1e-2
+        # What the forgeries need is that 1e-9 of it dwarfs the scene (the scene within 0.84 of
+        # the origin in the unit reference frame's metric world, 1.6e-3 in the earlier frame's).
+        far, scene = abs(far_point_result["points"][-1][2]), np.max(np.abs(far_point_result["points"][:-1]))
+        assert far > 1e10 and 1e-9 * far > 10.0 * scene
 
     @staticmethod
     def forged(result: dict, move) -> dict:

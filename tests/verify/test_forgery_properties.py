@@ -156,7 +156,11 @@ def _claim_cost(kind: str, data: dict, options: dict, claim: dict) -> float | No
     from geocert.verify.autocalibration import read_data
 
     cameras, points, size = read_data(data)
-    problem = autocalibration_problem.prepare(cameras, points, size, dict(options.get("intrinsics") or {}))
+    # the frame the claim is posed in: a stratified proof stating reference_scale the unit reference
+    # frame, the direct method's and an earlier stratified proof's the reference as given
+    unit = options.get("method") != "direct" and "reference_scale" in (claim.get("proof") or {})
+    problem = autocalibration_problem.prepare(cameras, points, size, dict(options.get("intrinsics") or {}),
+                                              unit_reference=unit)
     if options.get("method") == "direct":
         from geocert.solvers.autocalibration import direct
         from geocert.solvers.autocalibration import direct_relaxation

@@ -138,6 +138,10 @@ def setup_for(problem: autocalibration_problem.Problem, chirality: str, exclude:
     """``exclude``: look for Gordan proofs excluding an orientation (the solver; the verifier
     keeps both orientations and reads the exclusions from the proof)."""
     norm = problem.norm
+    if norm.reference_scale is not None:
+        # the direct method is posed with the reference as given (its trace-one normalisation moves
+        # with the frame's scale, and its answers and documents are that frame's)
+        raise ValueError("the direct method takes a problem prepared with unit_reference=False")
     T = direct_relaxation.conditioning_frame(norm.cameras)
     cameras = direct_relaxation.framed_cameras(norm.cameras, T)
     to_frame = np.linalg.inv(T).T  # rows (points, centres) of the reference frame -> program frame

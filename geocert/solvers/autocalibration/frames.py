@@ -34,6 +34,12 @@ class Normalised:
     T0: np.ndarray  # 4x4: input frame -> reference frame is X -> T0^-1 X; cameras P -> P T0
     N: np.ndarray  # 3x3 image preconditioner
     camera_signs: np.ndarray  # (m,)
+    # The power of two the preconditioned reference camera N P_ref was multiplied by before T0 was
+    # built from it (unit_reference_scale); None where the reference was taken at the scale given.
+    reference_scale: float | None = None
+    # unit_reference_scale of the preconditioned reference as given, whichever frame was built:
+    # how far the reference as given lies from unit scale (earlier_frame_readable).
+    reference_unit_scale: float = 1.0
 
 
 # Cameras and points are homogeneous: any scale is the same camera or point. At extreme scales the
@@ -120,11 +126,54 @@ def earlier_references(cameras: np.ndarray, N: np.ndarray) -> list[int]:
     return [int(i) for i in close[np.argsort(-ratio[close], kind="stable")]]
 
 
-def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, reference: int | None = None) -> Normalised:
+# A projective camera is homogeneous: the reference camera times s is the same input, but T0 built
+# from it is [[A^-1 / s, -A^-1 a], [0, 1]], which scales the frame's first three coordinates, and
+# so the plane at infinity's p, by s. The stratified stages' branch and bound, chirality box and
+# tolerances are not invariant under that: on the stored stratified scene, its reference times
+# 2^28 (inside unit_scaled's range, so left as given) had a K 4,250 px off certified. The
+# stratified method therefore builds T0 from the preconditioned reference divided by the power of
+# two that brings its largest entry into [0.5, 1): exact, a function of the data (the verifier
+# recomputes it, no document chooses it), and the same frame for the camera times any power of
+# two (times any other factor, a frame at most a factor 2 away). The direct method keeps the frame
+# given: its trace-one normalisation moves with the world's scale too, and its answers were
+# established in that frame.
+def unit_reference_scale(camera: np.ndarray) -> float:
+    """The power of two that brings ``camera``'s largest entry into [0.5, 1)."""
+    _, exponent = np.frexp(np.abs(camera).max())
+    return float(np.ldexp(1.0, -int(exponent)))
+
+
+# A stratified proof written before proofs stated reference_scale is posed in the reference as
+# given, whose scale the writer did not choose: the failure the unit reference frame mends can be
+# certified in it. Written that way (the reference as given) on the stored stratified scene, its
+# reference times 2^k (the preconditioned reference's largest entry in [2^(k-10), 2^(k-9))): K
+# within 4e-4 px of the truth up to k = 18 (the optimum lies 1.4e-4 px from it), then 0.03 px off
+# (k = 19), 0.34 px (k = 20), and 4,250 px off certified and verified (k = 28); scaled down,
+# nothing moved (to unit_scaled's floor, below which the camera is unit-scaled anyway). Such a
+# proof is read in its given frame only where that frame is well scaled, the preconditioned
+# reference's largest entry below 2^EARLIER_FRAME_EXPONENT (twice k = 17's, a factor 4 short of
+# the first K moved), and refused otherwise (proofs.check_earlier_frame). The stored
+# certificates' references lie in [2^-10, 2^-9) and [1, 2).
+EARLIER_FRAME_EXPONENT = 8
+
+
+def earlier_frame_readable(norm: Normalised) -> bool:
+    """Whether an earlier writer's proof (no reference_scale: the reference as given) may be read
+    in this problem's frame as given: its preconditioned reference's largest entry below
+    2^EARLIER_FRAME_EXPONENT (reference_unit_scale at least 2^-EARLIER_FRAME_EXPONENT)."""
+    return norm.reference_unit_scale >= 2.0 ** -EARLIER_FRAME_EXPONENT
+
+
+def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, reference: int | None = None,
+              unit_reference: bool = False) -> Normalised:
+    """The reconstruction in the frame of camera ``reference`` (default reference_camera); with
+    ``unit_reference``, that camera brought to unit scale first (unit_reference_scale)."""
     cams = np.einsum("ab,ibc->iac", N, unit_scaled(cameras))
     points = None if points is None else unit_scaled(points)
     r = reference_camera(cams) if reference is None else reference
-    A, a = cams[r, :, :3], cams[r, :, 3]
+    unit = unit_reference_scale(cams[r])
+    scale = unit if unit_reference else None
+    A, a = (cams[r, :, :3], cams[r, :, 3]) if scale is None else (cams[r, :, :3] * scale, cams[r, :, 3] * scale)
     Ainv = np.linalg.inv(A)
     T0 = np.eye(4)
     T0[:3, :3] = Ainv
@@ -149,7 +198,7 @@ def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, ref
             tau = np.where((depth_signs * signs[:, None]).sum(axis=0) >= 0, 1.0, -1.0)
         pts = pts * tau[:, None]
         out = out * signs[:, None, None]
-    return Normalised(out, pts, r, T0, N, signs)
+    return Normalised(out, pts, r, T0, N, signs, scale, unit)
 
 
 def modulus_coefficients(cameras: np.ndarray, reference: int) -> tuple[np.ndarray, np.ndarray]:

@@ -54,7 +54,14 @@ def encode_leaves(leaves: list) -> tuple[list, list]:
     return proofs, out
 
 
-def encode_affine(stage, reference: int) -> dict:
+def _frame(reference: int, reference_scale: float | None) -> dict:
+    """The frame a proof is posed in: the reference camera, and the power of two it was brought to
+    unit scale by (frames.unit_reference_scale; none stated: the reference as given, an earlier
+    writer's frame)."""
+    return {"reference": int(reference), **({} if reference_scale is None else {"reference_scale": reference_scale})}
+
+
+def encode_affine(stage, reference: int, reference_scale: float | None = None) -> dict:
     """The affine stage's proof, posed in the frame of camera ``reference`` (the problem's)."""
     regions = []
     for region in stage.regions:
@@ -62,7 +69,7 @@ def encode_affine(stage, reference: int) -> dict:
         regions.append({"delta": region.delta, "frame": region.G.tolist(), "rows": region.rows,
                         "box": _box(region.lo, region.hi), "basis": region.basis, "unit": region.setup.unit,
                         "proofs": proofs, "leaves": leaves})
-    return {"type": "stratified_affine", "reference": int(reference), "regions": regions,
+    return {"type": "stratified_affine", **_frame(reference, reference_scale), "regions": regions,
             "excluded": [{"delta": item["delta"], "rows": item["rows"]} for item in stage.excluded]}
 
 
@@ -71,10 +78,10 @@ def _rounds(rounds: list) -> list:
              "duals": [pack(z) for z in r.duals]} for r in rounds]
 
 
-def encode_metric(stage, reference: int) -> dict:
+def encode_metric(stage, reference: int, reference_scale: float | None = None) -> dict:
     """The metric stage's proof, posed in the frame of camera ``reference`` (the problem's)."""
     proofs, leaves = encode_leaves(stage.leaves)
-    return {"type": "stratified_metric", "reference": int(reference), "unit": stage.unit, "tightening": _rounds(stage.rounds),
+    return {"type": "stratified_metric", **_frame(reference, reference_scale), "unit": stage.unit, "tightening": _rounds(stage.rounds),
             "search_box": _box(stage.search_lo, stage.search_hi), "proofs": proofs, "leaves": leaves}
 
 
@@ -380,13 +387,37 @@ def check_reference(problem, proof: dict) -> None:
     if "reference" in proof and (type(proof["reference"]) is not int or proof["reference"] != problem.norm.reference):
         raise Invalid("scope", f"proof/reference is {proof['reference']!r:.40}: this problem is posed in the frame "
                                f"of camera {problem.norm.reference}")
+    # The scale is the data's (frames.unit_reference_scale), recomputed: a document's own number is
+    # never multiplied into the frame, only compared with the one the data give.
+    stated = proof.get("reference_scale")
+    # a number (JavaScript writes 512.0 as 512), never a boolean (True == 1.0)
+    if stated != problem.norm.reference_scale or (stated is not None and type(stated) not in (float, int)):
+        raise Invalid("scope", f"proof/reference_scale is {stated!r:.40}: this problem is posed with its reference "
+                               f"camera scaled by {problem.norm.reference_scale!r} (frames.unit_reference_scale; "
+                               "none: as given, a proof written before proofs stated it)")
+
+
+def check_earlier_frame(problem, proof: dict) -> None:
+    """A stratified proof stating no reference_scale (an earlier writer's: the reference camera as
+    given) is read in that frame only where it is well scaled (frames.earlier_frame_readable):
+    beyond, the frame's own failure could be certified there (the reference times 2^28 had a K
+    4,250 px off certified and verified), and the current writer states the scale."""
+    if "reference_scale" not in proof and problem.norm.reference_scale is None \
+            and not frames.earlier_frame_readable(problem.norm):
+        largest = -int(np.log2(problem.norm.reference_unit_scale))  # the entry lies in [2^(largest-1), 2^largest)
+        raise Invalid("scope", f"proof/reference_scale is not stated (a proof posed in the reference camera as given, "
+                               f"written before proofs stated it): that frame is read only where the preconditioned "
+                               f"reference's largest entry is below 2^{frames.EARLIER_FRAME_EXPONENT}, and camera "
+                               f"{problem.norm.reference}'s is at least 2^{largest - 1} (solve again: the current writer "
+                               "poses the stratified stages in the unit reference frame and states reference_scale)")
 
 
 def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
     """The bound an affine proof establishes over every plane chirality allows."""
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
-    record(proof, "proof", ("type", "regions", "excluded"), ("reference",))
+    record(proof, "proof", ("type", "regions", "excluded"), ("reference", "reference_scale"))
     check_reference(problem, proof)
+    check_earlier_frame(problem, proof)
     regions, excluded = proof.get("regions"), proof.get("excluded")
     if not isinstance(regions, list) or not isinstance(excluded, list):
         raise Invalid("format", "an affine proof has regions and excluded")
@@ -412,8 +443,9 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
     with its ``sublevel``, the proven intervals too (``cost``: the claimed K's recomputed cost).
     Its ``plane_sublevel`` is plane_sublevel.check's (the verifier calls it beside this)."""
     record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"),
-           ("reference", "sublevel", "plane_sublevel"))
+           ("reference", "reference_scale", "sublevel", "plane_sublevel"))
     check_reference(problem, proof)
+    check_earlier_frame(problem, proof)
     setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)
     setup.unit = checked_unit(proof.get("unit"), "unit", claimed_cost)
     lo, hi, proven_lo, proven_hi = _check_rounds(problem, setup, proof, lower_claimed, "tightening", "its cap is "

@@ -136,7 +136,10 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
                             [int(t) for t in chosen],
                             replace(options, intrinsics=intrinsics), problem, solved)
     if H is None and method in ("direct", "auto"):
-        H, K, found = _direct(problem, P, X, options)
+        # the direct method's own frame (the reference as given), as its kind poses it; the
+        # stratified stages above took the unit reference frame (prepare's default)
+        direct_problem = autocalibration_problem.prepare(P, X, image_size, intrinsics, unit_reference=False)
+        H, K, found = _direct(direct_problem, P, X, options)
         stages += found
     empty.stages = stages
     if H is None:

@@ -180,20 +180,25 @@ class TestModelHouse:
         data, frame = house_in_projective_frame()
         results = {"stratified": solve(data, "stratified", intrinsics=cls.RANGES, time_limit_s=15.0),
                    "direct": solve(data, "direct", intrinsics=cls.RANGES, chirality="centers")}
-        problem = autocalibration_problem.prepare(np.array(data["cameras"]), np.array(data["points"]), (768, 576),
-                                                  cls.RANGES)
+        # each method's own problem: the stratified method's unit reference frame, the direct
+        # method's reference as given (its (7.12) is that frame's)
+        problem = {unit: autocalibration_problem.prepare(np.array(data["cameras"]), np.array(data["points"]),
+                                                         (768, 576), cls.RANGES, unit_reference=unit)
+                   for unit in (True, False)}
         vgg = {"plane_at_infinity": frame.T @ np.array([0.0, 0.0, 0.0, 1.0]),
                "dual_absolute_quadric": np.linalg.solve(frame, np.linalg.solve(frame, np.diag([1.0, 1, 1, 0])).T)}
         return problem, results, vgg
 
     @staticmethod
-    def costs(problem, answer) -> tuple[float, float]:
-        """((7.12) at the answer's quadric, the modulus cost at its plane)."""
-        setup = direct.setup_for(problem, "none")
+    def costs(problems, answer) -> tuple[float, float]:
+        """((7.12) at the answer's quadric in the direct method's frame, the modulus cost at its plane
+        in the stratified method's)."""
+        setup = direct.setup_for(problems[False], "none")
         Q = np.array(answer["dual_absolute_quadric"], dtype=float)
-        plane = autocalibration_problem.plane_from_input(problem, np.array(answer["plane_at_infinity"], dtype=float))
+        plane = autocalibration_problem.plane_from_input(problems[True],
+                                                         np.array(answer["plane_at_infinity"], dtype=float))
         return (direct_relaxation.cost(setup.cameras, setup.from_input(Q / np.linalg.norm(Q))),
-                autocalibration_problem.affine_cost(problem, plane))
+                autocalibration_problem.affine_cost(problems[True], plane))
 
     def test_only_the_direct_method_certifies_and_bounds_stay_below_costs(self, house):
         """The direct method certifies its quadric since its program is split (direct_solve.MAX_SPLITS):

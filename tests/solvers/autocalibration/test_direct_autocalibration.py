@@ -37,7 +37,7 @@ def random_feasible(rng: np.random.Generator) -> np.ndarray:
 
 
 def setup_of(scene, intrinsics, chirality="none"):
-    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, intrinsics)
+    problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, intrinsics, unit_reference=False)
     return direct.setup_for(problem, chirality)
 
 

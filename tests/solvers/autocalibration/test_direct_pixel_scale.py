@@ -91,7 +91,7 @@ class TestPixelScale:
         document, result = noisy
         data = document["data"]
         cameras, points = np.array(data["cameras"]), np.array(data["points"])
-        problem = autocalibration_problem.prepare(cameras, points, tuple(data["image_size"]), {})
+        problem = autocalibration_problem.prepare(cameras, points, tuple(data["image_size"]), {}, unit_reference=False)
         setup = direct.setup_for(problem, "none")
         Q_in = np.array(result["dual_absolute_quadric"])
         # the point nearest every metric camera's principal axis, in the input frame (metric X = H^-1 X_in)
