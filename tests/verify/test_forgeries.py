@@ -68,6 +68,16 @@ def refused(document: dict) -> dict:
     return report.first_failure
 
 
+def refused_naming(forged: dict, check: str, *words: str) -> None:
+    """The forged document, as JSON carries it, is refused by ``check`` with a detail naming each
+    of ``words``."""
+    report = verify_any(json.loads(json.dumps(forged)))
+    assert not report.valid
+    assert report.first_failure["check"] == check, report.first_failure
+    for word in words:
+        assert word in report.first_failure["detail"], report.first_failure
+
+
 def _old_farkas_test(A, b, cones, z, lower, upper, transform) -> bool:
     """The Farkas test as the verifier computed it before (no normalisation, no rounding
     counted): what a forger searches with."""

@@ -74,15 +74,7 @@ import pytest
 
 from geocert.core.strict import _WORK, Invalid, document_size, work_budget
 from geocert.verify.checks import verify_any
-from tests.verify.test_forgeries import stored
-
-
-def _refused_naming(forged: dict, check: str, *words: str) -> None:
-    report = verify_any(json.loads(json.dumps(forged)))
-    assert not report.valid
-    assert report.first_failure["check"] == check, report.first_failure
-    for word in words:
-        assert word in report.first_failure["detail"], report.first_failure
+from tests.verify.test_forgeries import refused_naming as _refused_naming, stored
 
 
 # Review 51's first hole: summary.calibration.model restated "varying" beside one K
