@@ -94,7 +94,9 @@ Held (refused, or accepted only where the edit claims nothing false):
   SIDE_TOLERANCE of the root box onto it and recomputes the cut over any box so grown
   (_moved_faces), and every leaf must lie beyond its recomputed cut and the leaves cover the box;
   a cut leaf's bound is its own cap, the cap the cut's program was built with. Nothing the writer
-  states of a slab's edge is used beyond that recomputation.
+  states of a slab's edge is used beyond that recomputation. On the stored five-view document's
+  affine stage (103 cuts): a cut's slab pushed into the part it keeps by 1e-12 to 1e-3 of its
+  width (coverage, then not beyond its cut), its cap times 10 or its sign flipped: refused.
 - An uncertified stratified stage (no proof to state its frame) has its cost read in the unit
   frame and, where that is not the cost stated, in the reference as given (solution_cost): not
   pursued further; its plane or K is stated in input coordinates, the same object in both frames,
@@ -195,6 +197,28 @@ def test_a_reference_scale_deleted_is_refused(genuine, stages):
     forged = copy.deepcopy(genuine)
     for stage in stages:
         del forged["certificate"]["items"][stage]["proof"]["reference_scale"]
+    assert not _valid(forged)
+
+
+# Held: a cut's slab is where the verifier recomputes it
+
+@pytest.mark.parametrize("edit", ["1e-12", "1e-9", "1e-6", "1e-3", "cap", "sign"])
+def test_a_cut_slab_moved_past_its_recomputed_cut_is_refused(edit):
+    forged = stored("autocalibration_five_views")
+    region = forged["certificate"]["items"][0]["proof"]["regions"][0]
+    index = next(i for i, proof in enumerate(region["proofs"]) if proof.get("kind") == "cut")
+    proof, leaf = region["proofs"][index], next(leaf for leaf in region["leaves"] if leaf[2] == index)
+    axis, sign = proof["axis"], proof["sign"]
+    if edit == "cap":
+        proof["upper_bound"] *= 10
+    elif edit == "sign":
+        proof["sign"] = -sign
+    else:
+        width = leaf[1][axis] - leaf[0][axis]
+        if sign > 0:
+            leaf[1][axis] += float(edit) * width
+        else:
+            leaf[0][axis] -= float(edit) * width
     assert not _valid(forged)
 
 
