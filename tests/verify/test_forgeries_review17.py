@@ -95,7 +95,7 @@ from geocert.verify import fractional as items
 from geocert.solvers.reconstruction import synthetic
 from geocert.verify import hashed_options
 from geocert.verify.checks import verify_any
-from tests.support import refused as _refused, stage as _stage, verified as _verifies
+from tests.support import refused as _refused, searched_tracks_job, stage as _stage, verified as _verifies
 from tests.verify.test_forgeries import rehash, uncertify
 
 VIEWS = 8
@@ -310,7 +310,7 @@ class TestRootRegionWhereStated:
         assert "not its proof's root box" in _refused(brief)["detail"]
 
     def test_earlier_words_where_no_search_ran_are_refused(self):
-        result = _example("triangulation")  # L2L2: track 0 certified by convexity
+        result = solve_job(searched_tracks_job())  # L2L2: track 0 certified by convexity, track 1 searched
         assert result["certificate"]["items"][0]["proof"]["type"] == "convexity"
         region = copy.deepcopy(result["tracks"][1]["certificate"]["root_region"])
         region["meaning"] = items.TRACK_REGION_MEANING_EARLIER

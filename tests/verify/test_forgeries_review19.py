@@ -101,7 +101,7 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
-from tests.support import refused as _refused, stage as _stage, verified as _verifies
+from tests.support import refused as _refused, searched_tracks_job, stage as _stage, verified as _verifies
 from tests.verify.test_forgeries import rehash
 from tests.verify.test_forgeries_review18 import _scene_job
 
@@ -166,7 +166,7 @@ def _example(name: str, **options) -> dict:
 
 @pytest.fixture(scope="module")
 def tracks() -> dict:
-    result = _example("triangulation", norm="L1L1", max_residual=20.0, max_nodes=1)
+    result = solve_job(searched_tracks_job(norm="L1L1", max_residual=20.0, max_nodes=1))
     assert [t["status"] for t in result["tracks"]] == ["optimal", "node_limit"]
     assert result["tracks"][0]["determinacy"]["proven"] is True
     _verifies(result)
