@@ -108,8 +108,8 @@ def _example(name: str, **options) -> dict:
 
 @pytest.fixture(scope="module")
 def triangulation_l1() -> dict:
-    """The triangulation example under L1L1 with max_residual 20: both tracks searched."""
-    result = _example("triangulation", norm="L1L1", max_residual=20.0)
+    """SEARCHED_TRACKS under L1L1 with max_residual 20: both tracks searched."""
+    result = solve_job(searched_tracks_job(norm="L1L1", max_residual=20.0))
     assert all(track["certified"] and track["certificate"]["root_region"] for track in result["tracks"])
     _verifies(result)
     return result
@@ -299,7 +299,7 @@ class TestProvenIntervals:
 
 class TestRootRegionWhereStated:
     def test_a_brief_result_given_a_summary_in_the_earlier_words_is_said(self, triangulation_l1):
-        brief = _example("triangulation", norm="L1L1", max_residual=20.0, detail="brief")
+        brief = solve_job(searched_tracks_job(norm="L1L1", max_residual=20.0, detail="brief"))
         assert brief["tracks"][0]["certificate"] is None
         summary = copy.deepcopy(triangulation_l1["tracks"][0]["certificate"])
         summary.pop("proof", None)

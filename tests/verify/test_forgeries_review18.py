@@ -147,7 +147,7 @@ from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
 from geocert.solvers.reconstruction import calibration_tie, synthetic
 from geocert.verify.checks import verify_any
-from tests.support import refused as _refused, stage as _stage, verified as _verifies
+from tests.support import refused as _refused, searched_tracks_job, stage as _stage, verified as _verifies
 from tests.verify.test_forgeries import rehash
 
 K800 = [[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]]
@@ -204,16 +204,9 @@ def maps_uncertified() -> dict:
     return result
 
 
-# Observations fitting no point closely (costs 4.5 and 251 px^2 in L2L2): one node leaves the
-# second track's search open. The kind's example, clean since, certifies both at the root.
-LOOSE_TRACKS = [{"views": [0, 1], "points": [[330, 250], [251.5, 253]]},
-                {"views": [0, 1, 2], "points": [[330, 250], [250, 251], [320, 200]]}]
-
-
 @pytest.fixture(scope="module")
 def track_uncertified() -> dict:
-    data = {**get_kind("triangulation").example["data"], "tracks": LOOSE_TRACKS}
-    result = _example("triangulation", data=data, norm="L1L1", max_residual=20.0, max_nodes=1)
+    result = solve_job(searched_tracks_job(norm="L1L1", max_residual=20.0, max_nodes=1))
     assert [t["status"] for t in result["tracks"]] == ["optimal", "node_limit"]
     assert len(result["tracks"][1]["certificate"]["root_region"]["functionals"]) == 1
     _verifies(result)
