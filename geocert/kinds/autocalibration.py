@@ -352,7 +352,7 @@ def stratified_item(parsed: Parsed, options: autocalibration_problem.Autocalibra
     affine_stage = stage_document("affine", status, certified, affine_cost, a.lower_bound, a.nodes,
                                   result.affine_s, reason, options.rel_gap, options.abs_gap,
                                   "every plane at infinity chirality allows",
-                                  proofs.encode_affine(a, problem.norm.reference, problem.norm.reference_scale)
+                                  proofs.encode_affine(a, problem.norm)
                                   if full and certified else None)
     affine_stage["plane_at_infinity"] = document["plane_at_infinity"]
     m = result.metric
@@ -375,7 +375,7 @@ def stratified_item(parsed: Parsed, options: autocalibration_problem.Autocalibra
                                       result.metric_s, m.reason if inside else "the DIAC returned left its domain by rounding",
                                       options.metric_rel_gap, options.abs_gap,
                                       "every K within the intrinsics ranges, for the plane at infinity stated",
-                                      proofs.encode_metric(m, problem.norm.reference, problem.norm.reference_scale)
+                                      proofs.encode_metric(m, problem.norm)
                                       if full and m.certified else None)
         metric_stage["K"] = K.tolist()
         H = autocalibration_problem.upgrade(problem, result.p, np.linalg.solve(problem.K0, K))

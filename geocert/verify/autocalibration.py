@@ -241,6 +241,12 @@ class AutocalibrationVerification(Verification):
             # a K of two problems
             raise Invalid("claim", "one stage's proof states reference_scale and the other's does not: both stages "
                                    "are posed in one frame")
+        worlds = {repr(item["proof"].get("world_scale", "none")) for item in items if isinstance(item, dict)
+                  and isinstance(item.get("proof"), dict)}
+        if len(worlds) > 1:
+            # the world at two scales: a plane and a K of two problems
+            raise Invalid("claim", "the stages' proofs state different world_scale (or one states none): both stages "
+                                   "are posed in one frame")
         planes = [item.get("plane_at_infinity") for item in items]
         if planes[1] != planes[0]:
             raise Invalid("claim", "the metric stage states another plane at infinity than the affine stage")
@@ -288,7 +294,7 @@ class AutocalibrationVerification(Verification):
             intrinsics = dict(options.get("intrinsics") or {})
             problem = autocalibration_problem.prepare(cameras, points, image_size, intrinsics,
                                                       _stated_reference(claims, cameras, image_size, intrinsics),
-                                                      _stated_unit(claims))
+                                                      **_stated_frame(claims))
         except (InputError, TypeError, ValueError) as exc:
             raise Invalid("returned", f"the data cannot be read again: {exc}") from exc
         if result.get("method") != options.get("method") or not _ranges_stated(result, problem):
@@ -352,23 +358,22 @@ class AutocalibrationVerification(Verification):
         stage's has; None when the stage returns none."""
         direct = options["method"] == "direct"
         # An uncertified stage carries no proof to state its frame: the stratified stages' costs are
-        # read in the unit reference frame (the current writer's) and, where that is not the cost
-        # stated, in the reference as given (an earlier writer's); the direct method has that one.
-        costs = [self._solution_cost_in(data, claim, options, unit) for unit in ((False,) if direct else (True, False))]
+        # read in the unit frame (the current writer's) and, where that is not the cost stated, in
+        # the earlier writers' (FRAMES); the direct method has the frame as given.
+        costs = [self._solution_cost_in(data, claim, options, frame) for frame in ((GIVEN_FRAME,) if direct else FRAMES)]
         if costs[0] is None or len(costs) == 1:
             return costs[0]
         stated = claim.get("cost")
-        if isinstance(stated, (int, float)) and not isinstance(stated, bool) and costs[1] is not None \
-                and not abs(stated - costs[0][0]) <= costs[0][1] and abs(stated - costs[1][0]) <= costs[1][1]:
-            return costs[1]
+        if isinstance(stated, (int, float)) and not isinstance(stated, bool):
+            return next((cost for cost in costs if cost is not None and abs(stated - cost[0]) <= cost[1]), costs[0])
         return costs[0]
 
     @staticmethod
-    def _solution_cost_in(data: dict, claim: dict, options: dict, unit: bool) -> tuple[float, float] | None:
+    def _solution_cost_in(data: dict, claim: dict, options: dict, frame: dict) -> tuple[float, float] | None:
         try:
             cameras, points, image_size = read_data(data)
             problem = autocalibration_problem.prepare(cameras, points, image_size, dict(options["intrinsics"] or {}),
-                                                      unit_reference=unit)
+                                                      **frame)
         except InputError as exc:
             raise Invalid("data", f"{exc.field}: {exc.reason}") from exc
         with np.errstate(all="ignore"):
@@ -429,12 +434,12 @@ class AutocalibrationVerification(Verification):
             references = [proof["reference"]]
         else:  # an earlier proof names no frame: those its writer's rounding may have taken (data_scope says so)
             references = earlier
-        unit = _unit_frame(proof, options["method"] == "direct")
+        frame = _proof_frame(proof, options["method"] == "direct")
         first = None
         for reference in references:
             tried = list(passed)
             try:
-                problem = autocalibration_problem.prepare(cameras, points, image_size, intrinsics, reference, unit)
+                problem = autocalibration_problem.prepare(cameras, points, image_size, intrinsics, reference, **frame)
                 out = self._check_claim_in(problem, arrays, options, claim, claimed, lower_claimed, tried)
             except Invalid as exc:
                 first = first or exc
@@ -493,27 +498,48 @@ class AutocalibrationVerification(Verification):
         return bound, options["metric_rel_gap"]
 
 
-def _unit_frame(proof: Any, direct: bool) -> bool:
-    """Whether a certified stage's proof is posed in the unit reference frame (frames.unit_reference_scale:
-    the stratified writer's, stating ``reference_scale``) or in the reference as given (the direct
-    method's, and a stratified proof written before proofs stated it). The stated number is only
-    compared with the one the data give (proofs.check_reference), never used."""
-    if not isinstance(proof, dict) or "reference_scale" not in proof:
-        return False
+# The frames a stratified document may be posed in (autocalibration_problem.prepare's arguments):
+# the current writer's (the reference and the world brought to unit scale, proofs stating
+# reference_scale and world_scale), an earlier one's (the reference only, stating reference_scale),
+# and the earliest (both as given, stating neither; the direct method's frame).
+UNIT_FRAME = {"unit_reference": True, "world": True}
+UNIT_REFERENCE_FRAME = {"unit_reference": True, "world": False}
+GIVEN_FRAME = {"unit_reference": False, "world": False}
+FRAMES = (UNIT_FRAME, UNIT_REFERENCE_FRAME, GIVEN_FRAME)
+
+
+def _proof_frame(proof: Any, direct: bool) -> dict:
+    """The frame a certified stage's proof is posed in (prepare's arguments), from the members it
+    states: reference_scale (the unit reference frame: the stratified writer's) and world_scale (the
+    world brought to unit scale as well: the current stratified writer's), neither (the reference
+    and world as given: the direct method's, and a stratified proof written before proofs stated
+    them). A stated reference_scale is only compared with the one the data give
+    (proofs.check_reference); a stated world_scale is the frame's power of two, which
+    proofs.check_reference holds to the data's."""
+    if not isinstance(proof, dict) or not ({"reference_scale", "world_scale"} & proof.keys()):
+        return GIVEN_FRAME
     if direct:
-        raise Invalid("scope", "proof/reference_scale is stated: the direct method's frame takes the reference "
-                               "camera as given (no reference_scale)")
-    return True
+        raise Invalid("scope", "proof/reference_scale or proof/world_scale is stated: the direct method's frame "
+                               "takes the reference camera and the world as given (neither stated)")
+    if "world_scale" not in proof:
+        return UNIT_REFERENCE_FRAME
+    if "reference_scale" not in proof:
+        raise Invalid("scope", "proof/world_scale is stated without proof/reference_scale: the world is brought "
+                               "to unit scale only in the unit reference frame")
+    stated = proof["world_scale"]
+    if type(stated) not in (float, int) or not 0.0 < stated < math.inf:
+        raise Invalid("scope", f"proof/world_scale is {stated!r:.40}: a positive power of two (frames.world_unit_scale)")
+    return {"unit_reference": True, "world": float(stated)}
 
 
-def _stated_unit(claims: list) -> bool:
-    """The frame (unit reference or as given) the returned fields are read in: the one the proof
-    _stated_reference reads states (check_claims refuses stages whose proofs state two); the
-    current writer's, the unit reference frame, where no stage carries a proof."""
+def _stated_frame(claims: list) -> dict:
+    """The frame the returned fields are read in: the one the proof _stated_reference reads states
+    (check_claims refuses stages whose proofs state two); the current writer's, UNIT_FRAME, where
+    no stage carries a proof."""
     proofs = [(item.get("certified") is True, item["proof"]) for item in claims
               if isinstance(item, dict) and isinstance(item.get("proof"), dict)]
     proof = next((proof for certified, proof in proofs if certified), proofs[0][1] if proofs else None)
-    return not isinstance(proof, dict) or "reference_scale" in proof
+    return UNIT_FRAME if proof is None else _proof_frame(proof, False)
 
 
 def _stated_reference(claims: list, cameras: np.ndarray, image_size, intrinsics: dict) -> int | None:

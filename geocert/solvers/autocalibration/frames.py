@@ -40,6 +40,12 @@ class Normalised:
     # unit_reference_scale of the preconditioned reference as given, whichever frame was built:
     # how far the reference as given lies from unit scale (earlier_frame_readable).
     reference_unit_scale: float = 1.0
+    # The power of two the frame's fourth coordinate was scaled by (world_unit_scale: the cameras'
+    # last columns in the reference frame times it); None where the world was taken at the scale given.
+    world_scale: float | None = None
+    # The other cameras' median ||a_j|| / ||A_j|| in the reference frame before world_scale: how far
+    # the world as given lies from unit scale (world_scale_fits, earlier_world_readable).
+    world_ratio: float = 1.0
 
 
 # Cameras and points are homogeneous: any scale is the same camera or point. At extreme scales the
@@ -164,10 +170,79 @@ def earlier_frame_readable(norm: Normalised) -> bool:
     return norm.reference_unit_scale >= 2.0 ** -EARLIER_FRAME_EXPONENT
 
 
+# The unit reference frame fixes the reference camera's scale, not the world's: with the reference
+# at [I | 0], the gauge left is X -> diag(1, 1, 1, 1/lambda) X, which keeps the reference and
+# multiplies every other camera's last column a_j by lambda (and the plane at infinity's p by
+# 1/lambda). A writer chooses lambda freely (the reference's centre at the origin and the fourth
+# coordinate times k), and the stages' box, tolerances and each camera's Frobenius normalisation
+# (which shrinks A_j as a_j grows) are not invariant under it: on the stored stratified scene,
+# k = 2^28 had a K 397 px off certified and verified. The stratified method therefore scales the
+# fourth coordinate by the power of two that brings the other cameras' median ||a_j|| / ||A_j||
+# (their distance from the reference, in its frame) into [2^(WORLD_EXPONENT - 1), 2^WORLD_EXPONENT):
+# a function of the data, stated in proofs as world_scale and recomputed by the verifier. The
+# octave is the geometric middle of the ratios over which the stored scene, solved in its world as
+# given, kept K within 3e-4 px (1.1e-6 to 301, EARLIER_WORLD_LOWEST below); nearer 1 the search
+# slowed (review 33's tied scene's affine stage: 1,141 nodes at [2^-6, 2^-5), its node limit at
+# [2^-4, 2^-3) and [0.5, 1); a 12-view ring: 17 s at [0.5, 1), 9 s at [2^-5, 2^-4)). Norms and a
+# median of products round differently on another machine, so a stated scale is taken where it
+# brings the data's ratio into the octave within WORLD_SCALE_TOLERANCE (world_scale_fits): one
+# power of two, or its neighbour where the ratio lies on the octave's edge.
+WORLD_EXPONENT = -5
+WORLD_SCALE_TOLERANCE = 1e-9
+
+
+def world_ratio(cameras: np.ndarray, reference: int) -> float:
+    """The median over the cameras other than ``reference`` of ||a_j|| / ||A_j|| (cameras in the
+    reference's frame, [A_j | a_j]); 1 where there is no other camera or the median is not a
+    positive finite number (every centre the reference's: no scale to fix)."""
+    others = np.delete(cameras, reference, axis=0)
+    if not len(others):
+        return 1.0
+    ratio = float(np.median(np.linalg.norm(others[:, :, 3], axis=1) / np.linalg.norm(others[:, :, :3], axis=(1, 2))))
+    return ratio if np.isfinite(ratio) and ratio > 0.0 else 1.0
+
+
+def world_unit_scale(ratio: float) -> float:
+    """The power of two that brings ``ratio`` into [2^(WORLD_EXPONENT - 1), 2^WORLD_EXPONENT)."""
+    _, exponent = np.frexp(ratio)
+    return float(np.ldexp(1.0, WORLD_EXPONENT - int(exponent)))
+
+
+def world_scale_fits(scale: float, ratio: float) -> bool:
+    """Whether ``scale`` (a stated world_scale) is a power of two that brings the data's ``ratio``
+    into [2^(WORLD_EXPONENT - 1), 2^WORLD_EXPONENT) within WORLD_SCALE_TOLERANCE (another machine's
+    rounding of the ratio)."""
+    mantissa, _ = np.frexp(scale)
+    top = 2.0 ** WORLD_EXPONENT
+    return bool(scale > 0.0 and np.isfinite(scale) and mantissa == 0.5
+                and 0.5 * top * (1.0 - WORLD_SCALE_TOLERANCE) <= scale * ratio < top * (1.0 + WORLD_SCALE_TOLERANCE))
+
+
+# A proof written before proofs stated world_scale (the world as given) is read only where the world
+# as given is near enough unit scale, the data's world_ratio in [2^EARLIER_WORLD_LOWEST,
+# 2^EARLIER_WORLD_HIGHEST) (proofs.check_earlier_frame). Written that way on the stored stratified
+# scene with its fourth coordinate times 2^k (its ratio 2^-9.8 at k = 0): K within 3e-4 px of the
+# truth from ratio 1.1e-6 to 301, 0.89 px off at 1.2e3, 293 px at 1.9e4 (the metric stage at its
+# clock), and 397 px off certified and verified at 3.1e5 (review 54); below 1e-9 nothing was
+# certified. The upper limit is a factor 4 short of the first K moved; the stored certificates lie
+# at 2^-10.
+EARLIER_WORLD_LOWEST = -20
+EARLIER_WORLD_HIGHEST = 8
+
+
+def earlier_world_readable(norm: Normalised) -> bool:
+    """Whether a proof stating no world_scale may be read in this problem's world as given."""
+    return 2.0 ** EARLIER_WORLD_LOWEST <= norm.world_ratio < 2.0 ** EARLIER_WORLD_HIGHEST
+
+
 def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, reference: int | None = None,
-              unit_reference: bool = False) -> Normalised:
+              unit_reference: bool = False, world: bool | float | None = None) -> Normalised:
     """The reconstruction in the frame of camera ``reference`` (default reference_camera); with
-    ``unit_reference``, that camera brought to unit scale first (unit_reference_scale)."""
+    ``unit_reference``, that camera brought to unit scale first (unit_reference_scale). ``world``:
+    True, the fourth coordinate scaled by world_unit_scale of the data's world_ratio; a number, by
+    that stated power of two where it fits the data (world_scale_fits; otherwise by the data's, and
+    proofs.check_reference refuses the stated one); False, the world as
+    given; None (default), True with ``unit_reference`` and False without."""
     cams = np.einsum("ab,ibc->iac", N, unit_scaled(cameras))
     points = None if points is None else unit_scaled(points)
     r = reference_camera(cams) if reference is None else reference
@@ -179,6 +254,13 @@ def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, ref
     T0[:3, :3] = Ainv
     T0[:3, 3] = -Ainv @ a
     out = cams @ T0
+    ratio = world_ratio(out, r)
+    world = unit_reference if world is None else world
+    world_scale = (None if world is False else float(world) if world is not True and world_scale_fits(float(world), ratio)
+                   else world_unit_scale(ratio))  # a stated scale that does not fit: the data's (refused by its check)
+    if world_scale is not None:  # X -> diag(1, 1, 1, 1 / world_scale) X: exact, a power of two
+        T0[:, 3] *= world_scale
+        out[:, :, 3] *= world_scale
     out /= np.linalg.norm(out, axis=(1, 2))[:, None, None] / np.sqrt(3.0)
     out[r] = np.hstack([np.eye(3), np.zeros((3, 1))])
     pts = None
@@ -187,6 +269,8 @@ def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, ref
         inv[:3, :3] = A
         inv[:3, 3] = a
         pts = points @ inv.T
+        if world_scale is not None:
+            pts[:, 3] /= world_scale
         pts /= np.linalg.norm(pts, axis=1)[:, None]
     signs = np.ones(len(out))
     if pts is not None:
@@ -198,7 +282,7 @@ def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, ref
             tau = np.where((depth_signs * signs[:, None]).sum(axis=0) >= 0, 1.0, -1.0)
         pts = pts * tau[:, None]
         out = out * signs[:, None, None]
-    return Normalised(out, pts, r, T0, N, signs, scale, unit)
+    return Normalised(out, pts, r, T0, N, signs, scale, unit, world_scale, ratio)
 
 
 def modulus_coefficients(cameras: np.ndarray, reference: int) -> tuple[np.ndarray, np.ndarray]:

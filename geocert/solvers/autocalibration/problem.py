@@ -195,16 +195,19 @@ class Problem:
 
 
 def prepare(cameras: np.ndarray, points: np.ndarray | None, image_size, intrinsics: dict,
-            reference: int | None = None, unit_reference: bool = True) -> Problem:
+            reference: int | None = None, unit_reference: bool = True, world: bool | float | None = None) -> Problem:
     """The problem in its normalised frame; ``reference`` (default: frames.reference_camera, the
     lowest-indexed of the best-conditioned cameras) the camera moved to [I | 0], whose view the
     modulus constraints leave out. ``unit_reference`` (the stratified method's frame) brings that
     camera to unit scale first, so that the frame does not depend on the scale it was given at
     (frames.unit_reference_scale); the direct method, and documents written before proofs stated
-    ``reference_scale``, pass False: the reference as given."""
+    ``reference_scale``, pass False: the reference as given. ``world`` is frames.normalise's: by
+    default the unit reference frame brings the world to unit scale too (frames.world_unit_scale);
+    False takes the world as given (documents written before proofs stated ``world_scale``), a
+    number is a stated world_scale."""
     ranges = resolve_ranges(intrinsics, image_size)
     K0 = preconditioner(ranges)
-    norm = frames.normalise(cameras, points, np.linalg.inv(K0), reference, unit_reference)
+    norm = frames.normalise(cameras, points, np.linalg.inv(K0), reference, unit_reference, world)
     return Problem(norm, ranges, K0, normalised_ranges(ranges, K0))
 
 

@@ -54,22 +54,25 @@ def encode_leaves(leaves: list) -> tuple[list, list]:
     return proofs, out
 
 
-def _frame(reference: int, reference_scale: float | None) -> dict:
-    """The frame a proof is posed in: the reference camera, and the power of two it was brought to
+def _frame(norm) -> dict:
+    """The frame a proof is posed in: the reference camera, the power of two it was brought to
     unit scale by (frames.unit_reference_scale; none stated: the reference as given, an earlier
-    writer's frame)."""
-    return {"reference": int(reference), **({} if reference_scale is None else {"reference_scale": reference_scale})}
+    writer's frame), and the power of two the fourth coordinate was scaled by (frames.world_unit_scale;
+    none stated: the world as given, an earlier writer's)."""
+    return {"reference": int(norm.reference),
+            **({} if norm.reference_scale is None else {"reference_scale": norm.reference_scale}),
+            **({} if norm.world_scale is None else {"world_scale": norm.world_scale})}
 
 
-def encode_affine(stage, reference: int, reference_scale: float | None = None) -> dict:
-    """The affine stage's proof, posed in the frame of camera ``reference`` (the problem's)."""
+def encode_affine(stage, norm) -> dict:
+    """The affine stage's proof, posed in the problem's frame ``norm`` (frames.Normalised)."""
     regions = []
     for region in stage.regions:
         proofs, leaves = encode_leaves(region.leaves)
         regions.append({"delta": region.delta, "frame": region.G.tolist(), "rows": region.rows,
                         "box": _box(region.lo, region.hi), "basis": region.basis, "unit": region.setup.unit,
                         "proofs": proofs, "leaves": leaves})
-    return {"type": "stratified_affine", **_frame(reference, reference_scale), "regions": regions,
+    return {"type": "stratified_affine", **_frame(norm), "regions": regions,
             "excluded": [{"delta": item["delta"], "rows": item["rows"]} for item in stage.excluded]}
 
 
@@ -78,10 +81,10 @@ def _rounds(rounds: list) -> list:
              "duals": [pack(z) for z in r.duals]} for r in rounds]
 
 
-def encode_metric(stage, reference: int, reference_scale: float | None = None) -> dict:
-    """The metric stage's proof, posed in the frame of camera ``reference`` (the problem's)."""
+def encode_metric(stage, norm) -> dict:
+    """The metric stage's proof, posed in the problem's frame ``norm`` (frames.Normalised)."""
     proofs, leaves = encode_leaves(stage.leaves)
-    return {"type": "stratified_metric", **_frame(reference, reference_scale), "unit": stage.unit, "tightening": _rounds(stage.rounds),
+    return {"type": "stratified_metric", **_frame(norm), "unit": stage.unit, "tightening": _rounds(stage.rounds),
             "search_box": _box(stage.search_lo, stage.search_hi), "proofs": proofs, "leaves": leaves}
 
 
@@ -395,6 +398,19 @@ def check_reference(problem, proof: dict) -> None:
         raise Invalid("scope", f"proof/reference_scale is {stated!r:.40}: this problem is posed with its reference "
                                f"camera scaled by {problem.norm.reference_scale!r} (frames.unit_reference_scale; "
                                "none: as given, a proof written before proofs stated it)")
+    # The world's scale likewise (frames.world_unit_scale): prepared with the stated power of two,
+    # which must be the one the data give, up to another machine's rounding of their ratio.
+    stated = proof.get("world_scale")
+    if stated is None and "world_scale" not in proof and problem.norm.world_scale is None:
+        return
+    if type(stated) not in (float, int) or stated != problem.norm.world_scale \
+            or not frames.world_scale_fits(float(stated), problem.norm.world_ratio):
+        raise Invalid("scope", f"proof/world_scale is {stated!r:.40}: this problem's cameras lie a median "
+                               f"{problem.norm.world_ratio:.6g} from the reference in its frame, which the power of "
+                               f"two {frames.world_unit_scale(problem.norm.world_ratio)!r} brings into "
+                               f"[2^{frames.WORLD_EXPONENT - 1}, 2^{frames.WORLD_EXPONENT}) "
+                               "(frames.world_unit_scale; none: the world as given, a proof written before proofs "
+                               "stated it)")
 
 
 def check_earlier_frame(problem, proof: dict) -> None:
@@ -410,12 +426,18 @@ def check_earlier_frame(problem, proof: dict) -> None:
                                f"reference's largest entry is below 2^{frames.EARLIER_FRAME_EXPONENT}, and camera "
                                f"{problem.norm.reference}'s is at least 2^{largest - 1} (solve again: the current writer "
                                "poses the stratified stages in the unit reference frame and states reference_scale)")
+    if "world_scale" not in proof and problem.norm.world_scale is None and not frames.earlier_world_readable(problem.norm):
+        raise Invalid("scope", f"proof/world_scale is not stated (a proof posed in the world as given, written before "
+                               f"proofs stated it): that frame is read only where the other cameras lie a median "
+                               f"between 2^{frames.EARLIER_WORLD_LOWEST} and 2^{frames.EARLIER_WORLD_HIGHEST} from "
+                               f"the reference in its frame, and these lie {problem.norm.world_ratio:.6g} (solve again: "
+                               "the current writer brings the world to unit scale and states world_scale)")
 
 
 def check_affine(problem, proof: dict, lower_claimed: float, claimed_cost: float, passed: list) -> float:
     """The bound an affine proof establishes over every plane chirality allows."""
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
-    record(proof, "proof", ("type", "regions", "excluded"), ("reference", "reference_scale"))
+    record(proof, "proof", ("type", "regions", "excluded"), ("reference", "reference_scale", "world_scale"))
     check_reference(problem, proof)
     check_earlier_frame(problem, proof)
     regions, excluded = proof.get("regions"), proof.get("excluded")
@@ -443,7 +465,7 @@ def check_metric(problem, p: np.ndarray, proof: dict, lower_claimed: float, clai
     with its ``sublevel``, the proven intervals too (``cost``: the claimed K's recomputed cost).
     Its ``plane_sublevel`` is plane_sublevel.check's (the verifier calls it beside this)."""
     record(proof, "proof", ("type", "unit", "tightening", "search_box", "proofs", "leaves"),
-           ("reference", "reference_scale", "sublevel", "plane_sublevel"))
+           ("reference", "reference_scale", "world_scale", "sublevel", "plane_sublevel"))
     check_reference(problem, proof)
     check_earlier_frame(problem, proof)
     setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, p, problem.unit_ranges)

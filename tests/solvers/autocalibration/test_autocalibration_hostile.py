@@ -737,7 +737,7 @@ class TestMetricPlaneMismatch:
         r["certificate"]["options"]["metric_rel_gap"] = 1e-2
         rehash(r)
         set_claim(r, 1, plane_at_infinity=plane, K=K.tolist(), cost=cost, lower_bound=cost - gap, gap=gap,
-                  proof=proofs.encode_metric(stage, problem.norm.reference, problem.norm.reference_scale))
+                  proof=proofs.encode_metric(stage, problem.norm))
         assert r["stages"][0]["plane_at_infinity"] != plane
         refused(r)
 

@@ -111,3 +111,16 @@ def test_a_direct_proof_stating_a_scale_is_refused():
     forged = copy.deepcopy(result)
     forged["certificate"]["items"][0]["proof"]["reference_scale"] = 1.0
     assert not verify_any(forged).valid
+
+
+def test_a_stated_world_scale_fits_only_where_it_brings_the_datas_ratio_into_its_octave():
+    """frames.world_scale_fits: the data's power of two, or its neighbour only where the ratio lies
+    within WORLD_SCALE_TOLERANCE of the octave's edge; never a number that is not a power of two."""
+    assert frames.WORLD_EXPONENT == -5  # the octave [2^-6, 2^-5)
+    ratio = 3.0  # world_unit_scale: 2^-7 (3 / 128 = 0.0234 in [0.0156, 0.03125))
+    assert frames.world_unit_scale(ratio) == 2.0 ** -7 and frames.world_scale_fits(2.0 ** -7, ratio)
+    assert not any(frames.world_scale_fits(scale, ratio)
+                   for scale in (2.0 ** -6, 2.0 ** -8, 0.3 * 2.0 ** -6, 0.0, -2.0 ** -7, np.inf, np.nan))
+    edge = 4.0 * (1.0 - 1e-12)  # a hair below 4: 2^-8 takes it a hair below 2^-6, 2^-7 a hair below 2^-5
+    assert frames.world_scale_fits(2.0 ** -7, edge) and frames.world_scale_fits(2.0 ** -8, edge)
+    assert not frames.world_scale_fits(2.0 ** -6, edge)
