@@ -455,7 +455,7 @@ class ReconstructionKind(ProblemKind):
             if found.status == "cancelled":
                 matches.update(status="cancelled", reason="the job was cancelled")
                 out = pipeline.not_reconstructed(len(parsed.image_sizes), "cancelled", "the job was cancelled",
-                                                 "the job was cancelled before the views were matched")
+                                                 "the job was cancelled before the views were matched", parsed.names)
             elif matched < 2:
                 # As a projective stage that fails (pipeline._run): the job succeeds with a
                 # result whose failed stage says why, the later stages skipped, the summary filled.
@@ -464,7 +464,7 @@ class ReconstructionKind(ProblemKind):
                     reason += "; " + matches["reason"]
                 matches.update(status="failed", reason=reason)
                 out = pipeline.not_reconstructed(len(parsed.image_sizes), "skipped", "the matches stage failed: "
-                                                 + reason, "no verified matches with another image")
+                                                 + reason, "no verified matches with another image", parsed.names)
         if out is None:
             exif = (parsed.images_stats or {}).get("exif_focal")
             if exif is not None and options.focal_prior_px is None and options.known_K() is None:
@@ -472,7 +472,7 @@ class ReconstructionKind(ProblemKind):
 
                 options = replace(options, focal_prior_px=exif["focal_px"])  # a prior the adjustment refines
                 images_document["focal_prior_from_exif"] = exif
-            out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
+            out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report, parsed.names)
         if clock["passed"]:
             _stopped_by_clock(out, limit_s)
         calibration_proof = self._calibration_proof(out, options)

@@ -441,6 +441,38 @@ class TestCertifiedFieldsTied:
         assert verify_any(json.loads(json.dumps(result))).valid
         refused_as_returned(result, lambda r: r["summary"]["warnings"].pop(0))
 
+    @pytest.mark.parametrize("named", [True, False])
+    def test_views_not_registered_are_named_as_the_request_named_them(self, named):
+        """Issue 35: the warning names each view not registered by its index and, when the request
+        named the views (a photo's file name), its name too (it listed indices alone); the
+        verifier still verifies it (it reads the warning's code)."""
+        body = job(certificate="full")
+        body["data"]["views"] += [{"name": "IMG_0007.jpg", "image_size": [640, 480]},
+                                  {"name": "IMG_0008.jpg", "image_size": [640, 480]}]
+        if not named:
+            for view in body["data"]["views"]:
+                view.pop("name", None)
+        result = solve_job(body)
+        warning = next(w for w in result["summary"]["warnings"] if w["code"] == "views_not_registered")
+        said = "views 6 (IMG_0007.jpg), 7 (IMG_0008.jpg): " if named else "views 6, 7: "
+        reason = result["cameras"][6]["reason"]
+        assert reason and result["cameras"][7]["reason"] == reason
+        assert warning["detail"] == ("2 of 8 views not registered (no camera returned for them): " + said
+                                     + reason), warning
+        assert verify_any(json.loads(json.dumps(result))).valid
+
+    def test_many_views_not_registered_are_counted_past_the_first_ten(self):
+        from geocert.pipelines.reconstruction.claims import unregistered_warning
+        from geocert.pipelines.reconstruction.pipeline import Camera
+
+        names = [f"IMG_{v:04d}.jpg" for v in range(50)]
+        names[3] = None  # a view the request left unnamed: its index alone
+        missing = [Camera(v, False, "no track observes this view") for v in range(2, 50)]
+        detail = unregistered_warning(missing, 50, names)["detail"]
+        assert detail == ("48 of 50 views not registered (no camera returned for them): views 2 (IMG_0002.jpg), 3, "
+                          + ", ".join(f"{v} (IMG_{v:04d}.jpg)" for v in range(4, 12))
+                          + ": no track observes this view; and 38 more (each camera's reason says why)"), detail
+
 
 def run_cancelled_at(stage: str, monkeypatch=None, **options) -> tuple[dict, list[str]]:
     """The example job solved as the service solves it (batch.solve_items), cancelled once a
