@@ -21,7 +21,8 @@ import numpy as np
 from pydantic import BaseModel, Field
 
 from geocert.kinds.base import ProblemKind
-from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION, IntrinsicsIn, image_side_refusal, ranges_within_limit
+from geocert.kinds.autocalibration import (KIND as AUTOCALIBRATION, IntrinsicsIn, image_side_refusal,
+                                           known_K_within_limit, ranges_within_limit)
 from geocert.kinds.documents import certificate_document
 from geocert.kinds.resection_homography import RESECTION, map_document
 from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict, options_model
@@ -389,6 +390,8 @@ class ReconstructionKind(ProblemKind):
         ranges = options.intrinsics if isinstance(options.intrinsics, dict) else {}
         if "K" not in ranges:
             ranges_within_limit(None, ranges)  # beyond it the job failed with LinAlgError
+        else:
+            known_K_within_limit(ranges["K"])
         complete = "K" in ranges or all(name in ranges for name in ("focal", "aspect", "skew", "principal_point"))
         if not complete and options.camera_model != "varying":
             first = parsed.image_sizes[0]

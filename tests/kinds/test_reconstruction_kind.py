@@ -122,6 +122,29 @@ class TestBadInput:
             parse_job(job(**options))
         assert error.value.field == field
 
+    @pytest.mark.parametrize("intrinsics, field", [
+        ({"focal": [800, 5e7]}, "options/intrinsics/focal"),
+        ({"skew": [0, 2e7]}, "options/intrinsics/skew"),
+        ({"principal_point": [[-3e8, 640], [0, 480]]}, "options/intrinsics/principal_point/0"),
+        ({"principal_point": [[0, 640], [0, 1.5e7]]}, "options/intrinsics/principal_point/1"),
+        ({"K": [[5e7, 0, 320], [0, 5e7, 240], [0, 0, 1]]}, "options/intrinsics/K/0/0"),
+        ({"K": [[800, 2e7, 320], [0, 800, 240], [0, 0, 1]]}, "options/intrinsics/K/0/1"),
+        ({"K": [[800, 0, -4e8], [0, 800, 240], [0, 0, 1]]}, "options/intrinsics/K/0/2"),
+        ({"K": [[800, 0, 320], [0, 3e7, 240], [0, 0, 1]]}, "options/intrinsics/K/1/1"),
+        ({"K": [[800, 0, 320], [0, 800, 1e12], [0, 0, 1]]}, "options/intrinsics/K/1/2"),  # no limit at all before
+    ])
+    def test_intrinsics_in_pixels_beyond_ten_image_sides(self, intrinsics, field):
+        """A focal length, skew or principal point over 1e7 px (ten times the largest image side
+        taken) was queued: now the 422 naming the range or the K entry, and the limit."""
+        with pytest.raises(InputError) as error:
+            parse_job(job(intrinsics=intrinsics))
+        assert error.value.field == field and "exceeds the limit of 1e+07 px" in error.value.reason, error.value
+
+    def test_intrinsics_of_ten_million_pixels_are_taken(self):
+        parse_job(job(intrinsics={"K": [[1e7, -1e7, 1e7], [0, 1e7, -1e7], [0, 0, 1]]}))
+        parse_job(job(intrinsics={"focal": [1e6, 1e7], "aspect": [0.9, 1.1], "skew": [-1e7, 1e7],
+                                  "principal_point": [[-1e7, 1e7], [-1e7, 1e7]]}))
+
 
 class TestResult:
     def test_fits_the_model_and_recovers_the_scene(self, solved):
