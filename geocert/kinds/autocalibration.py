@@ -36,6 +36,14 @@ Matrix3 = list[list[float]]
 # the plane at infinity", "no strictly quasi-affine plane") when the size was the cause.
 MAX_IMAGE_SIDE_PX = 1e6
 
+# The largest focal length, skew or principal point coordinate taken, in pixels (an intrinsics
+# range's ends, a known K's entries): ten times the largest image side. A focal length of 1e7 px
+# is a pixel of 0.02 arc seconds, finer than any telescope's (a 2e4 px sensor behind an 800 mm lens
+# is some 2e5 px), and a principal point 1e7 px off is ten sides beyond the largest image taken.
+# Between this and COORDINATE_LIMIT a range no image taken here can have was queued.
+MAX_INTRINSIC_PX = 10 * MAX_IMAGE_SIDE_PX
+PIXEL_RANGES = ("focal", "skew", "principal_point")  # the ranges in pixels (aspect is a ratio)
+
 
 def image_side_refusal(size, where: str) -> None:
     """An image size with a side over MAX_IMAGE_SIDE_PX: the 422 naming ``where``."""
@@ -48,21 +56,48 @@ def image_side_refusal(size, where: str) -> None:
 def ranges_within_limit(image_size, intrinsics: dict) -> None:
     """data/image_size and every intrinsics range within COORDINATE_LIMIT, as every kind's
     coordinates: beyond it K0 was singular in floating point and the queued job failed with
-    "Solver failure: LinAlgError" instead of this 422 naming the field; and data/image_size
-    within MAX_IMAGE_SIDE_PX a side."""
-    named = [("data/image_size", image_size)] if image_size is not None else []
+    "Solver failure: LinAlgError" instead of this 422 naming the field; the ranges in pixels
+    (focal, skew, principal_point) within MAX_INTRINSIC_PX; and data/image_size within
+    MAX_IMAGE_SIDE_PX a side."""
+    named = [("data/image_size", image_size, None)] if image_size is not None else []
     for name, value in intrinsics.items():
         if name == "principal_point" and isinstance(value, (list, tuple)):
-            named += [(f"options/intrinsics/{name}/{i}", pair) for i, pair in enumerate(value)]
+            named += [(f"options/intrinsics/{name}/{i}", pair, name) for i, pair in enumerate(value)]
         else:
-            named.append((f"options/intrinsics/{name}", value))
-    for where, values in named:
+            named.append((f"options/intrinsics/{name}", value, name))
+    for where, values, _ in named:
         for x in values if isinstance(values, (list, tuple, np.ndarray)) else ():
             if isinstance(x, (int, float)) and not isinstance(x, bool) and abs(x) > COORDINATE_LIMIT:
                 raise InputError(where, f"magnitude {abs(x):g} exceeds the limit {COORDINATE_LIMIT:g} "
                                         "(rescale the coordinates, e.g. to pixels)")
+    for where, values, name in named:
+        if name in PIXEL_RANGES and isinstance(values, (list, tuple)):
+            for end, x in zip(("its lower end", "its upper end"), values):
+                intrinsic_refusal(x, where, end)
     if image_size is not None:
         image_side_refusal(image_size, "data/image_size")
+
+
+def intrinsic_refusal(x, where: str, what: str) -> None:
+    """A focal length, skew or principal point coordinate ``x`` (``what``: which, in words) over
+    MAX_INTRINSIC_PX in magnitude: the 422 naming ``where``."""
+    if isinstance(x, (int, float)) and not isinstance(x, bool) and abs(x) > MAX_INTRINSIC_PX:
+        raise InputError(where, f"{what} {x:g} px exceeds the limit of {MAX_INTRINSIC_PX:g} px in magnitude for a "
+                                f"focal length, skew or principal point: ten times the largest image side taken "
+                                f"({MAX_IMAGE_SIDE_PX:g} px; a focal length of 1e7 px is a pixel of 0.02 arc "
+                                "seconds): give it in pixels")
+
+
+# A known K's entries in pixels, as intrinsic_refusal says them: [row, column, in words].
+K_ENTRIES = ((0, 0, "the focal length fx"), (0, 1, "the skew"), (0, 2, "the principal point's u"),
+             (1, 1, "the focal length fy"), (1, 2, "the principal point's v"))
+
+
+def known_K_within_limit(K, where: str = "options/intrinsics/K") -> None:
+    """A known K (a 3x3 list of numbers, its shape already checked) with every entry in pixels
+    within MAX_INTRINSIC_PX: the 422 naming the entry (``where``/row/column)."""
+    for i, j, what in K_ENTRIES:
+        intrinsic_refusal(K[i][j], f"{where}/{i}/{j}", what)
 
 
 class AutocalibrationData(Strict):

@@ -21,7 +21,8 @@ import numpy as np
 from pydantic import BaseModel, Field
 
 from geocert.kinds.base import ProblemKind
-from geocert.kinds.autocalibration import KIND as AUTOCALIBRATION, IntrinsicsIn, image_side_refusal, ranges_within_limit
+from geocert.kinds.autocalibration import (KIND as AUTOCALIBRATION, IntrinsicsIn, image_side_refusal,
+                                           known_K_within_limit, ranges_within_limit)
 from geocert.kinds.documents import certificate_document
 from geocert.kinds.resection_homography import RESECTION, map_document
 from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict, options_model
@@ -389,6 +390,8 @@ class ReconstructionKind(ProblemKind):
         ranges = options.intrinsics if isinstance(options.intrinsics, dict) else {}
         if "K" not in ranges:
             ranges_within_limit(None, ranges)  # beyond it the job failed with LinAlgError
+        else:
+            known_K_within_limit(ranges["K"])
         complete = "K" in ranges or all(name in ranges for name in ("focal", "aspect", "skew", "principal_point"))
         if not complete and options.camera_model != "varying":
             first = parsed.image_sizes[0]
@@ -455,7 +458,7 @@ class ReconstructionKind(ProblemKind):
             if found.status == "cancelled":
                 matches.update(status="cancelled", reason="the job was cancelled")
                 out = pipeline.not_reconstructed(len(parsed.image_sizes), "cancelled", "the job was cancelled",
-                                                 "the job was cancelled before the views were matched")
+                                                 "the job was cancelled before the views were matched", parsed.names)
             elif matched < 2:
                 # As a projective stage that fails (pipeline._run): the job succeeds with a
                 # result whose failed stage says why, the later stages skipped, the summary filled.
@@ -464,7 +467,7 @@ class ReconstructionKind(ProblemKind):
                     reason += "; " + matches["reason"]
                 matches.update(status="failed", reason=reason)
                 out = pipeline.not_reconstructed(len(parsed.image_sizes), "skipped", "the matches stage failed: "
-                                                 + reason, "no verified matches with another image")
+                                                 + reason, "no verified matches with another image", parsed.names)
         if out is None:
             exif = (parsed.images_stats or {}).get("exif_focal")
             if exif is not None and options.focal_prior_px is None and options.known_K() is None:
@@ -472,7 +475,7 @@ class ReconstructionKind(ProblemKind):
 
                 options = replace(options, focal_prior_px=exif["focal_px"])  # a prior the adjustment refines
                 images_document["focal_prior_from_exif"] = exif
-            out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report)
+            out = pipeline.reconstruct(tracks, parsed.image_sizes, options, report, parsed.names)
         if clock["passed"]:
             _stopped_by_clock(out, limit_s)
         calibration_proof = self._calibration_proof(out, options)

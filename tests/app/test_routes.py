@@ -105,6 +105,23 @@ def test_an_autocalibration_option_its_method_ignores_is_a_422_naming_it(api):
     assert problem_fields(response, 422) == ["options/varying_focal"]
 
 
+@pytest.mark.parametrize("kind, intrinsics, field", [
+    ("autocalibration", {"focal": [800, 5e7]}, "options/intrinsics/focal"),
+    ("autocalibration", {"principal_point": [[0, 640], [0, 2e8]]}, "options/intrinsics/principal_point/1"),
+    ("reconstruction", {"K": [[5e8, 0, 320], [0, 5e8, 240], [0, 0, 1]]}, "options/intrinsics/K/0/0"),
+])
+def test_intrinsics_over_ten_image_sides_are_a_422_naming_the_field(api, kind, intrinsics, field):
+    """A focal length or principal point over 1e7 px (ten times the largest image side taken)
+    was queued: the problem names the range or K entry and the limit, and nothing is made."""
+    from geocert.kinds import get_kind
+
+    body = {**get_kind(kind).example, "options": {"intrinsics": intrinsics}}
+    response = api.post("/v1/jobs", json=body)
+    assert problem_fields(response, 422) == [field]
+    assert "exceeds the limit of 1e+07 px" in response.json()["errors"][0]["reason"]
+    assert api.get("/v1/jobs").json()["jobs"] == []
+
+
 def test_verify_refuses_what_is_not_a_json_object_sent_as_json(api):
     assert problem_fields(api.post("/v1/certificates/verify", json=[1, 2]), 422) == ["body"]
     assert problem_fields(api.post("/v1/certificates/verify", content=b"{}", headers={"content-type": "text/plain"}),

@@ -95,6 +95,23 @@ class TestBadInput:
         error = refused(document)
         assert error.field == "data/image_size" and "exceeds the limit of 1e+06 px a side" in error.reason
 
+    @pytest.mark.parametrize("where, intrinsics", [
+        ("options/intrinsics/focal", {"focal": [800, 2e8]}),
+        ("options/intrinsics/focal", {"focal": [5e7, 6e7]}),
+        ("options/intrinsics/skew", {"skew": [-5e7, 0]}),
+        ("options/intrinsics/principal_point/0", {"principal_point": [[0, 1e8], [0, 480]]}),
+        ("options/intrinsics/principal_point/1", {"principal_point": [[0, 640], [-2e7, 480]]}),
+    ])
+    def test_a_range_in_pixels_beyond_ten_image_sides(self, where, intrinsics):
+        """Between 1e7 and 1e9 px (below the coordinate limit, above ten times the largest image
+        side taken) a focal, skew or principal point range was queued: now the 422 naming it."""
+        error = refused(job(intrinsics=intrinsics))
+        assert error.field == where and "exceeds the limit of 1e+07 px" in error.reason, error
+
+    def test_ranges_of_ten_million_pixels_are_taken(self):
+        parse_job(job(intrinsics={"focal": [1e6, 1e7], "skew": [-1e7, 1e7],
+                                  "principal_point": [[-1e7, 1e7], [-1e7, 1e7]], "aspect": [0.5, 2]}))
+
     def test_an_image_side_of_a_million_pixels_is_taken(self):
         document = job()
         document["data"]["image_size"] = [1e6, 1e6]

@@ -122,6 +122,29 @@ class TestBadInput:
             parse_job(job(**options))
         assert error.value.field == field
 
+    @pytest.mark.parametrize("intrinsics, field", [
+        ({"focal": [800, 5e7]}, "options/intrinsics/focal"),
+        ({"skew": [0, 2e7]}, "options/intrinsics/skew"),
+        ({"principal_point": [[-3e8, 640], [0, 480]]}, "options/intrinsics/principal_point/0"),
+        ({"principal_point": [[0, 640], [0, 1.5e7]]}, "options/intrinsics/principal_point/1"),
+        ({"K": [[5e7, 0, 320], [0, 5e7, 240], [0, 0, 1]]}, "options/intrinsics/K/0/0"),
+        ({"K": [[800, 2e7, 320], [0, 800, 240], [0, 0, 1]]}, "options/intrinsics/K/0/1"),
+        ({"K": [[800, 0, -4e8], [0, 800, 240], [0, 0, 1]]}, "options/intrinsics/K/0/2"),
+        ({"K": [[800, 0, 320], [0, 3e7, 240], [0, 0, 1]]}, "options/intrinsics/K/1/1"),
+        ({"K": [[800, 0, 320], [0, 800, 1e12], [0, 0, 1]]}, "options/intrinsics/K/1/2"),  # no limit at all before
+    ])
+    def test_intrinsics_in_pixels_beyond_ten_image_sides(self, intrinsics, field):
+        """A focal length, skew or principal point over 1e7 px (ten times the largest image side
+        taken) was queued: now the 422 naming the range or the K entry, and the limit."""
+        with pytest.raises(InputError) as error:
+            parse_job(job(intrinsics=intrinsics))
+        assert error.value.field == field and "exceeds the limit of 1e+07 px" in error.value.reason, error.value
+
+    def test_intrinsics_of_ten_million_pixels_are_taken(self):
+        parse_job(job(intrinsics={"K": [[1e7, -1e7, 1e7], [0, 1e7, -1e7], [0, 0, 1]]}))
+        parse_job(job(intrinsics={"focal": [1e6, 1e7], "aspect": [0.9, 1.1], "skew": [-1e7, 1e7],
+                                  "principal_point": [[-1e7, 1e7], [-1e7, 1e7]]}))
+
 
 class TestResult:
     def test_fits_the_model_and_recovers_the_scene(self, solved):
@@ -440,6 +463,38 @@ class TestCertifiedFieldsTied:
             "views_not_registered"
         assert verify_any(json.loads(json.dumps(result))).valid
         refused_as_returned(result, lambda r: r["summary"]["warnings"].pop(0))
+
+    @pytest.mark.parametrize("named", [True, False])
+    def test_views_not_registered_are_named_as_the_request_named_them(self, named):
+        """Issue 35: the warning names each view not registered by its index and, when the request
+        named the views (a photo's file name), its name too (it listed indices alone); the
+        verifier still verifies it (it reads the warning's code)."""
+        body = job(certificate="full")
+        body["data"]["views"] += [{"name": "IMG_0007.jpg", "image_size": [640, 480]},
+                                  {"name": "IMG_0008.jpg", "image_size": [640, 480]}]
+        if not named:
+            for view in body["data"]["views"]:
+                view.pop("name", None)
+        result = solve_job(body)
+        warning = next(w for w in result["summary"]["warnings"] if w["code"] == "views_not_registered")
+        said = "views 6 (IMG_0007.jpg), 7 (IMG_0008.jpg): " if named else "views 6, 7: "
+        reason = result["cameras"][6]["reason"]
+        assert reason and result["cameras"][7]["reason"] == reason
+        assert warning["detail"] == ("2 of 8 views not registered (no camera returned for them): " + said
+                                     + reason), warning
+        assert verify_any(json.loads(json.dumps(result))).valid
+
+    def test_many_views_not_registered_are_counted_past_the_first_ten(self):
+        from geocert.pipelines.reconstruction.claims import unregistered_warning
+        from geocert.pipelines.reconstruction.pipeline import Camera
+
+        names = [f"IMG_{v:04d}.jpg" for v in range(50)]
+        names[3] = None  # a view the request left unnamed: its index alone
+        missing = [Camera(v, False, "no track observes this view") for v in range(2, 50)]
+        detail = unregistered_warning(missing, 50, names)["detail"]
+        assert detail == ("48 of 50 views not registered (no camera returned for them): views 2 (IMG_0002.jpg), 3, "
+                          + ", ".join(f"{v} (IMG_{v:04d}.jpg)" for v in range(4, 12))
+                          + ": no track observes this view; and 38 more (each camera's reason says why)"), detail
 
 
 def run_cancelled_at(stage: str, monkeypatch=None, **options) -> tuple[dict, list[str]]:

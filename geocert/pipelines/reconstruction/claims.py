@@ -18,8 +18,10 @@ from geocert.solvers.reconstruction.calibration_claim import (CALIBRATED_CAMERAS
 
 
 
-def summarise(out, n_tracks: int, n_views: int) -> None:
-    """out.summary (a pipeline.Reconstruction's) from its cameras, points, stages and checks."""
+def summarise(out, n_tracks: int, n_views: int, names: list | None = None) -> None:
+    """out.summary (a pipeline.Reconstruction's) from its cameras, points, stages and checks.
+    ``names``: the views' names as the request gave them (None where it gave none), for the
+    warnings that name views."""
     judge_motion(out)
     squared, count = 0.0, 0
     for point in out.points:
@@ -59,12 +61,7 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
     warnings = []
     missing = [c for c in out.cameras if not c.registered]
     if missing:  # first: how much of what was sent the result covers
-        why: dict[str, list[int]] = {}
-        for c in missing:
-            why.setdefault(c.reason or "no reason recorded", []).append(c.view)
-        warnings.append({"code": "views_not_registered", "detail": (
-            f"{len(missing)} of {n_views} views not registered (no camera returned for them): " + "; ".join(
-                f"views {', '.join(map(str, views))}: {reason}" for reason, views in why.items()))})
+        warnings.append(unregistered_warning(missing, n_views, names))
     warnings += list(claim.warnings)
     reversal = _depth_reversal(out, registered)
     if reversal is not None:
@@ -99,6 +96,33 @@ def summarise(out, n_tracks: int, n_views: int) -> None:
             "certificate is about the returned cameras and points fitting their own observations, not about the "
             "rig being right): " + "; ".join(doubts))})
     out.summary["warnings"] = warnings
+
+
+# How many views the views_not_registered warning names; the rest it counts (each camera's
+# ``reason`` still says why it is not registered).
+VIEWS_NAMED = 10
+
+
+def unregistered_warning(missing: list, n_views: int, names: list | None = None) -> dict:
+    """The views_not_registered warning: how many of the views sent have no camera returned, and
+    the first VIEWS_NAMED of them by reason, each by its index and, where the request named it,
+    its name ("views 2 (IMG_0003.jpg), 5 (IMG_0006.jpg): <reason>"); the rest counted ("and 40
+    more"), so the text stays short for a large job. The verifier reads only its code."""
+    why: dict[str, list[str]] = {}
+    for c in missing[:VIEWS_NAMED]:
+        why.setdefault(c.reason or "no reason recorded", []).append(view_said(c.view, names))
+    said = "; ".join(f"view{'s' if len(views) > 1 else ''} {', '.join(views)}: {reason}"
+                     for reason, views in why.items())
+    if len(missing) > VIEWS_NAMED:
+        said += f"; and {len(missing) - VIEWS_NAMED} more (each camera's reason says why)"
+    return {"code": "views_not_registered",
+            "detail": f"{len(missing)} of {n_views} views not registered (no camera returned for them): {said}"}
+
+
+def view_said(view: int, names: list | None) -> str:
+    """A view as a warning names it: its index, and its name in brackets when the request gave one."""
+    name = names[view] if names is not None and 0 <= view < len(names) else None
+    return f"{view} ({name})" if isinstance(name, str) and name else str(view)
 
 
 def _misfit_said(beyond: list) -> str:

@@ -94,7 +94,9 @@ def _stage(name: str) -> dict:
 
 
 def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], image_sizes: list, options: ReconstructionOptions,
-                report=None) -> Reconstruction:
+                report=None, names: list | None = None) -> Reconstruction:
+    """``names``: the views' names as the request gave them (None: none given), for the summary's
+    warnings that name views (claims.summarise)."""
     n_views = len(image_sizes)
     stages = {name: _stage(name) for name in STAGES}
     cameras = [Camera(v, False, "not registered") for v in range(n_views)]
@@ -116,7 +118,7 @@ def reconstruct(tracks: list[tuple[np.ndarray, np.ndarray]], image_sizes: list, 
     out.cancelled = any(stage["status"] == "cancelled" for stage in out.stages)
     _untie_dropped_views(out, stages["autocalibration"])
     _untie_centred_misfit(out, stages, options, image_sizes)
-    claims.summarise(out, len(tracks), n_views)
+    claims.summarise(out, len(tracks), n_views, names)
     return out
 
 
@@ -172,14 +174,16 @@ def _untie_centred_misfit(out: Reconstruction, stages: dict, options: Reconstruc
             f"cameras (camera_model full) refuses it: {refused.detail}; its K is not claimed"))
 
 
-def not_reconstructed(n_views: int, status: str, reason: str, camera_reason: str) -> Reconstruction:
+def not_reconstructed(n_views: int, status: str, reason: str, camera_reason: str,
+                      names: list | None = None) -> Reconstruction:
     """The reconstruction when no tracks reach it (photos: the matches stage failed, or was
     cancelled): every stage ``status`` ("skipped" or "cancelled") with ``reason``, every view not
-    registered with ``camera_reason``, the summary filled (0 views registered, 0 points)."""
+    registered with ``camera_reason``, the summary filled (0 views registered, 0 points; ``names``
+    as reconstruct's)."""
     stages = [{**_stage(name), "status": status, "reason": reason} for name in STAGES]
     out = Reconstruction([Camera(v, False, camera_reason) for v in range(n_views)], [], stages,
                          cancelled=status == "cancelled")
-    claims.summarise(out, 0, n_views)
+    claims.summarise(out, 0, n_views, names)
     return out
 
 
