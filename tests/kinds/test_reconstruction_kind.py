@@ -496,6 +496,19 @@ class TestCertifiedFieldsTied:
                           + ", ".join(f"{v} (IMG_{v:04d}.jpg)" for v in range(4, 12))
                           + ": no track observes this view; and 38 more (each camera's reason says why)"), detail
 
+    def test_cameras_beyond_their_tolerance_are_named_as_the_request_named_them(self):
+        """The camera_fit_beyond_tolerance warning's views, and each cause's, by index and name."""
+        from types import SimpleNamespace
+
+        from geocert.pipelines.reconstruction.claims import _misfit_said
+
+        beyond = [SimpleNamespace(view=v, bound=SimpleNamespace(misfit={"cause": cause}))
+                  for v, cause in ((1, "pose"), (4, "pose"), (5, "unexplained"))]
+        said = _misfit_said(beyond, ["a.jpg", "b.jpg", None, None, "e.jpg", None])
+        assert said.startswith("views 1 (b.jpg), 4 (e.jpg): refitting its pose alone"), said
+        assert "; view 5: the pose is at its optimum" in said, said
+        assert _misfit_said(beyond).startswith("views 1, 4: refitting"), _misfit_said(beyond)
+
 
 def run_cancelled_at(stage: str, monkeypatch=None, **options) -> tuple[dict, list[str]]:
     """The example job solved as the service solves it (batch.solve_items), cancelled once a

@@ -75,12 +75,13 @@ def summarise(out, n_tracks: int, n_views: int, names: list | None = None) -> No
             f"no metric reconstruction was found: the {len(registered)} cameras returned are projective (P only, "
             "no K, R, t), known up to a 3D projective transformation, and no point is returned")})
     for dropped in out.checks.get("cameras_dropped", []):
-        warnings.append({"code": "camera_dropped", "detail": f"view {dropped['view']}: {dropped['reason']}"})
+        warnings.append({"code": "camera_dropped", "detail": f"view {view_said(dropped['view'], names)}: {dropped['reason']}"})
     beyond = [c for c in bounded if c.bound.beyond_tolerance]
     if beyond:
         warnings.append({"code": "camera_fit_beyond_tolerance", "detail": (
-            f"views {', '.join(str(c.view) for c in beyond)}: each costs more above a 3x4 camera on its own points "
-            "than its fewer degrees of freedom explain (its bound_reason says by how much): " + _misfit_said(beyond))})
+            f"views {', '.join(view_said(c.view, names) for c in beyond)}: each costs more above a 3x4 camera on its "
+            "own points than its fewer degrees of freedom explain (its bound_reason says by how much): "
+            + _misfit_said(beyond, names))})
     if out.checks.get("points_dropped"):
         warnings.append({"code": "points_dropped", "detail": f"{out.checks['points_dropped']} certified points lay "
                                                              "behind a camera or far from an observation: dropped"})
@@ -125,12 +126,12 @@ def view_said(view: int, names: list | None) -> str:
     return f"{view} ({name})" if isinstance(name, str) and name else str(view)
 
 
-def _misfit_said(beyond: list) -> str:
+def _misfit_said(beyond: list, names: list | None = None) -> str:
     """What the refits of the cameras beyond their tolerance found (camera_misfit.camera_misfit), in
     words: whether their poses or the camera's K misfit them."""
-    causes: dict[str, list[int]] = {}
+    causes: dict[str, list[str]] = {}
     for c in beyond:
-        causes.setdefault((c.bound.misfit or {}).get("cause") or "not refitted", []).append(c.view)
+        causes.setdefault((c.bound.misfit or {}).get("cause") or "not refitted", []).append(view_said(c.view, names))
     if set(causes) == {"not refitted"}:
         return "its pose, or the camera's K, may be off"
     said = {"pose": "refitting its pose alone removes most of it: the pose was off its optimum",
@@ -141,7 +142,7 @@ def _misfit_said(beyond: list) -> str:
             "unexplained": "the pose is at its optimum and no intrinsic of its own explains the rest (distortion, "
                            "its points, or an affine misfit)",
             "not refitted": "not refitted (its pose, or the camera's K, may be off)"}
-    return "; ".join(f"view{'s' if len(views) > 1 else ''} {', '.join(map(str, views))}: {said[cause]}"
+    return "; ".join(f"view{'s' if len(views) > 1 else ''} {', '.join(views)}: {said[cause]}"
                      for cause, views in causes.items())
 
 
