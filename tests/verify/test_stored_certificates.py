@@ -27,6 +27,16 @@ def test_every_certified_kind_is_stored():
     assert set(KINDS) <= kinds and {"stratified", "direct"} <= methods
 
 
+def test_every_stratified_frame_is_stored():
+    """A proof posed in the world as given (no world_scale: the earlier writers'), and one stating
+    world_scale beside reference_scale (the current writer's): both stay readable."""
+    frames = {tuple(sorted({"reference_scale", "world_scale"} & item["proof"].keys()))
+              for name in NAMES if stored(name)["kind"] == "autocalibration"
+              for item in stored(name)["certificate"]["items"] if isinstance(item.get("proof"), dict)
+              and item["proof"].get("type", "").startswith("stratified")}
+    assert {(), ("reference_scale", "world_scale")} <= frames, frames
+
+
 @pytest.mark.parametrize("name", NAMES)
 def test_a_stored_certificate_verifies_with_its_result(name):
     result = stored(name)

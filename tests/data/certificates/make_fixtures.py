@@ -177,11 +177,32 @@ def reconstruction_labelled() -> dict:
     """reconstruction's scene and options, written once the certificate's data state the input's
     labels (input_labels: every view's name and image size, each point's track number)."""
     return reconstruction()
+def autocalibration_world_scale() -> dict:
+    """The five views' scene upgraded by its own solve's upgrade, the reference camera's centre
+    moved to the origin and the fourth coordinate times 2^20 (the same images): proofs stating
+    world_scale (frames.world_unit_scale) beside reference_scale, the frame the writer took up after
+    review 54 (tests/verify/test_forgeries_review54.py re-poses data the same way)."""
+    from geocert.solvers.autocalibration import problem as autocalibration_problem
+
+    data = autocalibration_five_views()["certificate"]["data"]
+    upgrade = np.asarray(autocalibration_five_views()["upgrade"])
+    P, X = np.asarray(data["cameras"], dtype=float) @ upgrade, np.asarray(data["points"], dtype=float) @ np.linalg.inv(upgrade).T
+    P /= np.abs(P).max(axis=(1, 2))[:, None, None]
+    X /= np.abs(X).max(axis=1)[:, None]
+    reference = autocalibration_problem.prepare(P, X, tuple(data["image_size"]), {}).norm.reference
+    H = np.eye(4)
+    H[:3, 3] = -np.linalg.solve(P[reference, :, :3], P[reference, :, 3])
+    H = H @ np.diag([1.0, 1.0, 1.0, 2.0 ** 20])
+    P, X = P @ H, X @ np.linalg.inv(H).T
+    P[reference, :, 3] = 0.0
+    data = {**data, "cameras": P.tolist(), "points": X.tolist()}
+    return solve_job({"kind": "autocalibration", "data": data, "options": {"certificate": "full"}})
 
 
 CASES = {f.__name__: f for f in (triangulation_l2l2, triangulation_l1l1_max_residual, triangulation_l2l1,
                                  resection_l2l2, resection_node_tightening, resection_l1l1, resection_caps, homography2_l2l2,
-                                 homography3_l2l1, homography_far_from_origin, autocalibration_stratified, autocalibration_five_views, autocalibration_direct,
+                                 homography3_l2l1, homography_far_from_origin, autocalibration_stratified, autocalibration_five_views, autocalibration_world_scale,
+                                 autocalibration_direct,
                                  autocalibration_direct_points, bilinear_l1l1, bilinear_l2l2, reconstruction,
                                  reconstruction_labelled)}
 
