@@ -32,7 +32,14 @@ Found:
    warning, and verify_any valid. At 2^-33 (world_scale 2^28): the metric stage at its clock
    (K 235 px off, uncertified: no false claim). Five near views (not a majority of the eleven
    others, the median between the groups): world_scale 2^6, K within 3e-4 px of the truth
-   (control below). Not fixed: any single figure of the cameras' spread (median, max) can be
+   (control below). Six near views, the scene's cameras' ratio in the frame: 2^-25, 2^10.2:
+   K within 0.003 px, certified; 2^-28, 2^13.2: the metric stage at its clock (0.13 px off);
+   2^-30, 2^15.2: at its clock (61 px off); 2^-36, 2^18.7: certified 399 px off. The far cameras
+   behave as the uniform scene's did in the world as given (review 54: exact to 301, moving from
+   1.2e3), so a guard refusing (or leaving uncertified) a frame whose farthest camera lies beyond
+   2^8 (world_scale * frames.world_ratio_highest) would refuse this; one far view alone (a copy of
+   camera 0 translated 2^15, ratio 2^18 in the frame, the median unmoved) left both stages at their
+   clocks (K 98 px off, uncertified: nothing false), 2^22 was refused as rank-deficient. Not fixed: any single figure of the cameras' spread (median, max) can be
    outvoted one way or the other; a fix needs the frame to be safe for every camera's ratio (e.g.
    refusing, or leaving uncertified, data whose ratios spread over more octaves than the solver
    was shown to keep K exact over), which is a design decision for the maintainers.
