@@ -24,7 +24,7 @@ Tried:
 
 Found:
 
-1. (hole, xfail below) Six near views (one more than the scene's five other cameras) at 2^-36:
+1. (hole, fixed) Six near views (one more than the scene's five other cameras) at 2^-36:
    world_ratio 7.7e-12 (the near views' median), world_scale 2^31, which puts the scene's five real
    cameras at ratio about 2^18.7 in the frame, review 54's failure reached through the median.
    Both stages certified (affine cost 6.2e-13, "within abs_gap" 1e-12; metric 6.0), in 2.5 s,
@@ -39,10 +39,17 @@ Found:
    1.2e3), so a guard refusing (or leaving uncertified) a frame whose farthest camera lies beyond
    2^8 (world_scale * frames.world_ratio_highest) would refuse this; one far view alone (a copy of
    camera 0 translated 2^15, ratio 2^18 in the frame, the median unmoved) left both stages at their
-   clocks (K 98 px off, uncertified: nothing false), 2^22 was refused as rank-deficient. Not fixed: any single figure of the cameras' spread (median, max) can be
-   outvoted one way or the other; a fix needs the frame to be safe for every camera's ratio (e.g.
-   refusing, or leaving uncertified, data whose ratios spread over more octaves than the solver
-   was shown to keep K exact over), which is a design decision for the maintainers.
+   clocks (K 98 px off, uncertified: nothing false), 2^22 was refused as rank-deficient.
+   Fixed: the frame is used only where every other camera lies below 2^8 in it
+   (frames.world_frame_bounded: world_scale times the farthest ratio, frames.world_ratio_highest,
+   the earlier writers' limit); the kind's check_options refuses other data for the stratified
+   method (422 naming data/cameras; here the farthest at 3.2e6), a reconstruction's upgrade
+   (solvers/reconstruction/upgrade.autocalibrate) does not run the stratified search on such
+   registered views ("auto": the direct method), and proofs.check_reference refuses
+   a proof stating world_scale for them (a forger's writer without the check: K 399 px off, refused).
+   A maximum alone in place of the median would be outvoted the other way (one far view). The
+   price: data the solver got right are refused too (the near views at 2^-25, the scene's cameras
+   at 2^10.2: K exact before, now a 422), as is the one far view above (uncertified before).
 
 2. (hole, fixed) The earlier writer's limit (frames.earlier_world_readable) read the median only:
    the scene's fourth coordinate times 2^28 (its five other cameras at ratio 2^18.2, review 54's
@@ -54,15 +61,14 @@ Found:
    world_ratio_highest (frames.world_ratio_highest, the farthest other camera), and a proof
    stating no world_scale is read in the world as given only where that, too, lies below
    2^EARLIER_WORLD_HIGHEST; the stored stratified documents (stored scene, five views) stay read.
-   The current writer's frame (finding 1) is not mended by this: it scales the world by the
-   median, and a maximum instead would be outvoted by one far view.
 
 Held:
 
 - Duplicates of the reference at ratio 0 (the fallback to 1): the far cameras cannot be taken far
   enough; at 2^30 and 2^31 the data are refused as rank-deficient (frames.check_reconstruction,
-  a camera's translation 1e9 times its left block), and 2^-6 times a ratio the rank check allows
-  lies where the world as given kept K exact. world_ratio's fallback is checked below.
+  a camera's translation 1e9 times its left block); at 2^28 (the scene's cameras at 2^18.2, times
+  world_scale 2^-6: 2^12.2 in the frame) the fix's bound refuses the frame. world_ratio's fallback
+  is checked below.
 - The earlier writer's frame with near views at 2^-20: the median (2^-20.9) lies below
   EARLIER_WORLD_LOWEST and the document is refused.
 - world_scale_fits: the data's power of two and, on an octave's edge only, its neighbour are taken;
@@ -126,14 +132,39 @@ def _false_claim(result: dict) -> bool:
 
 # Found: views near the reference, a majority, decide the median and the frame
 
-@pytest.mark.xfail(strict=False, reason="review 55: a majority of views near the reference sets world_ratio's "
-                                        "median, leaving the scene's cameras 2^18.7 out: K 399 px off certified")
-def test_views_near_the_reference_outvoting_the_median_do_not_certify_a_false_K():
+def test_views_near_the_reference_outvoting_the_median_are_refused_by_the_writer():
+    from geocert.core.geometry import InputError
+    from geocert.jobs.runner import solve_job
+
     data, options = _with_near_views(-36.0, 6)
     norm = _norm(data)
     assert norm.world_scale == 2.0 ** 31  # the near views' median
-    result = _solve(data, options)
+    assert norm.world_scale * norm.world_ratio_highest > 2.0 ** 18
+    with pytest.raises(InputError, match="spread too far") as raised:
+        solve_job({"kind": "autocalibration", "data": data, "options": options})
+    assert raised.value.field == "data/cameras"
+
+
+def test_views_near_the_reference_outvoting_the_median_do_not_certify_a_false_K(monkeypatch):
+    """A forger's writer without the data check (and its self-check): K 399 px off, certified by
+    both stages (as today's writer did before the fix), is refused by the verifier."""
+    data, options = _with_near_views(-36.0, 6)
+    monkeypatch.delenv("GEOCERT_SELF_VERIFY", raising=False)
+    with monkeypatch.context() as patched:
+        patched.setattr(frames, "world_frame_bounded", lambda norm: True)
+        result = _solve(data, options)
+    if all(stage["certified"] for stage in result["stages"]):
+        assert np.abs(np.asarray(result["K"]) - TRUTH).max() > 10.0  # the false claim refused below
     assert not _false_claim(result), (result["K"], [s["cost"] for s in result["stages"]])
+    report = verify_any(json.loads(json.dumps(result)))
+    assert not report.valid and "world_frame_bounded" in report.first_failure["detail"]
+
+
+@pytest.mark.parametrize("exponent, bounded", [(-36.0, False), (-25.0, False), (-20.0, True)])
+def test_the_frame_is_bounded_only_where_every_camera_lies_within_2_to_the_8(exponent, bounded):
+    norm = _norm(_with_near_views(exponent, 6)[0])
+    assert frames.world_frame_bounded(norm) is bounded
+    assert (norm.world_scale * norm.world_ratio_highest < 2.0 ** 8) is bounded
 
 
 def test_near_views_not_a_majority_leave_the_frame_and_K():
@@ -153,7 +184,14 @@ def test_duplicates_of_the_reference_make_the_median_zero_and_the_ratio_one():
     reference = _norm(data).reference
     data["cameras"] = np.concatenate([P, np.repeat(P[reference:reference + 1], 6, axis=0)]).tolist()
     norm = _norm(data)
-    assert norm.world_ratio == 1.0 and norm.world_scale == 2.0 ** -6
+    assert norm.world_ratio == 1.0 and norm.world_scale == 2.0 ** -6 and frames.world_frame_bounded(norm)
+    document = stored("autocalibration_stratified")
+    data = _reposed(document["certificate"]["data"], document["certificate"]["options"], 2.0 ** 28,
+                    np.asarray(document["upgrade"]))
+    P = np.asarray(data["cameras"])
+    data["cameras"] = np.concatenate([P, np.repeat(P[reference:reference + 1], 6, axis=0)]).tolist()
+    norm = _norm(data)
+    assert norm.world_scale == 2.0 ** -6 and not frames.world_frame_bounded(norm)
 
 
 @pytest.mark.parametrize("exponent", [30, 31])

@@ -411,6 +411,12 @@ def check_reference(problem, proof: dict) -> None:
                                f"[2^{frames.WORLD_EXPONENT - 1}, 2^{frames.WORLD_EXPONENT}) "
                                "(frames.world_unit_scale; none: the world as given, a proof written before proofs "
                                "stated it)")
+    if not frames.world_frame_bounded(problem.norm):
+        raise Invalid("scope", f"proof/world_scale is {stated!r:.40}: in that frame the farthest camera lies "
+                               f"{problem.norm.world_scale * problem.norm.world_ratio_highest:.6g} from the reference, "
+                               f"beyond 2^{frames.EARLIER_WORLD_HIGHEST} (the other cameras' median is "
+                               f"{problem.norm.world_ratio:.6g}): the stratified frame is refused for these data "
+                               "(frames.world_frame_bounded)")
 
 
 def check_earlier_frame(problem, proof: dict) -> None:
