@@ -77,7 +77,6 @@ Held:
 
 from __future__ import annotations
 
-import copy
 import json
 
 import numpy as np
@@ -270,3 +269,13 @@ def test_stored_earlier_documents_are_read_and_lie_within_the_limit(name):
                                            dict(document["certificate"]["options"].get("intrinsics") or {}),
                                            unit_reference=True, world=False).norm
     assert norm.world_ratio_highest < 2.0 ** frames.EARLIER_WORLD_HIGHEST and _valid(document)
+
+
+def test_a_reconstructions_stratified_upgrade_is_not_run_on_such_views():
+    from geocert.solvers.reconstruction import upgrade
+
+    data, options = _with_near_views(-36.0, 6)
+    cameras = [np.asarray(P) for P in data["cameras"]]
+    out = upgrade.autocalibrate(cameras, np.asarray(data["points"]), tuple(data["image_size"]), {},
+                                autocalibration_problem.AutocalibrationOptions(), 100, method="stratified")
+    assert out.reason and "world_frame_bounded" in out.reason and not out.stages
