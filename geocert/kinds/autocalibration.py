@@ -250,6 +250,17 @@ class AutocalibrationKind(ProblemKind):
                                                     f"\"{method}\"); the {options.method} method would ignore it")
         ranges_within_limit(parsed.image_size, options.intrinsics)
         autocalibration_problem.resolve_ranges(options.intrinsics, parsed.image_size)
+        if options.method != "direct":
+            from geocert.solvers.autocalibration import frames
+
+            norm = autocalibration_problem.prepare(parsed.cameras, parsed.points, parsed.image_size,
+                                                   options.intrinsics).norm
+            if not frames.world_frame_bounded(norm):
+                raise InputError("data/cameras", f"the cameras' distances from the reference camera spread too far "
+                                                 f"for the stratified frame: their median brought to unit scale, the "
+                                                 f"farthest lies {norm.world_scale * norm.world_ratio_highest:.3g} "
+                                                 f"away, beyond 2^{frames.EARLIER_WORLD_HIGHEST} (a K could be "
+                                                 "certified wrong there); solve with fewer views near the reference")
         if options.method == "direct":
             from geocert.solvers.autocalibration import direct
 

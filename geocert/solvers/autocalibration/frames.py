@@ -46,6 +46,9 @@ class Normalised:
     # The other cameras' median ||a_j|| / ||A_j|| in the reference frame before world_scale: how far
     # the world as given lies from unit scale (world_scale_fits, earlier_world_readable).
     world_ratio: float = 1.0
+    # The largest of those ratios (0 where there is no other camera): the farthest camera, which a
+    # median over views near the reference does not see (earlier_world_readable; review 55).
+    world_ratio_highest: float = 0.0
 
 
 # Cameras and points are homogeneous: any scale is the same camera or point. At extreme scales the
@@ -202,6 +205,17 @@ def world_ratio(cameras: np.ndarray, reference: int) -> float:
     return ratio if np.isfinite(ratio) and ratio > 0.0 else 1.0
 
 
+def world_ratio_highest(cameras: np.ndarray, reference: int) -> float:
+    """The largest over the cameras other than ``reference`` of ||a_j|| / ||A_j|| (cameras in the
+    reference's frame); 0 where there is no other camera, inf where one is not finite."""
+    others = np.delete(cameras, reference, axis=0)
+    if not len(others):
+        return 0.0
+    with np.errstate(all="ignore"):
+        ratios = np.linalg.norm(others[:, :, 3], axis=1) / np.linalg.norm(others[:, :, :3], axis=(1, 2))
+    return float(np.max(np.where(np.isnan(ratios), np.inf, ratios)))
+
+
 def world_unit_scale(ratio: float) -> float:
     """The power of two that brings ``ratio`` into [2^(WORLD_EXPONENT - 1), 2^WORLD_EXPONENT)."""
     _, exponent = np.frexp(ratio)
@@ -225,14 +239,33 @@ def world_scale_fits(scale: float, ratio: float) -> bool:
 # truth from ratio 1.1e-6 to 301, 0.89 px off at 1.2e3, 293 px at 1.9e4 (the metric stage at its
 # clock), and 397 px off certified and verified at 3.1e5 (review 54); below 1e-9 nothing was
 # certified. The upper limit is a factor 4 short of the first K moved; the stored certificates lie
-# at 2^-10.
+# at 2^-10. The median alone is a vote a forger wins by adding views: review 55 put that scene's
+# cameras at 2^18 with six views of the same K translated 2^6 from the reference (the median 34,
+# inside the limit), and an earlier writer's proofs certified a K 399 px off that verified. Every
+# other camera, the farthest too (world_ratio_highest), must therefore lie below the upper limit.
 EARLIER_WORLD_LOWEST = -20
 EARLIER_WORLD_HIGHEST = 8
 
 
 def earlier_world_readable(norm: Normalised) -> bool:
-    """Whether a proof stating no world_scale may be read in this problem's world as given."""
-    return 2.0 ** EARLIER_WORLD_LOWEST <= norm.world_ratio < 2.0 ** EARLIER_WORLD_HIGHEST
+    """Whether a proof stating no world_scale may be read in this problem's world as given: the
+    median ratio in [2^EARLIER_WORLD_LOWEST, 2^EARLIER_WORLD_HIGHEST) and the largest below the top."""
+    return (2.0 ** EARLIER_WORLD_LOWEST <= norm.world_ratio < 2.0 ** EARLIER_WORLD_HIGHEST
+            and norm.world_ratio_highest < 2.0 ** EARLIER_WORLD_HIGHEST)
+
+
+# The frame's world_scale brings the median into the octave, and the median is a vote: views added
+# near the reference decide it and leave the scene's other cameras far (review 55: six views of the
+# same K translated 2^-36 from the reference put the stored scene's cameras at ratio 2^18.7 in the
+# frame, and a K 399 px off was certified and verified; at 2^10.2 K was exact, at 2^13.2 and 2^15.2
+# the metric stage reached its clock 0.13 and 61 px off). The far cameras behave as the uniform
+# scene's did in the world as given, so the frame is used only where every other camera lies
+# below 2^EARLIER_WORLD_HIGHEST in it: the stratified method refuses other data (the kind's
+# check_options, a 422 naming data/cameras) and the verifier proofs posed in such a frame.
+def world_frame_bounded(norm: Normalised) -> bool:
+    """Whether every other camera lies below 2^EARLIER_WORLD_HIGHEST from the reference in the
+    world-scaled frame (true where the world was taken as given: earlier_world_readable's)."""
+    return norm.world_scale is None or norm.world_scale * norm.world_ratio_highest < 2.0 ** EARLIER_WORLD_HIGHEST
 
 
 def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, reference: int | None = None,
@@ -254,7 +287,7 @@ def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, ref
     T0[:3, :3] = Ainv
     T0[:3, 3] = -Ainv @ a
     out = cams @ T0
-    ratio = world_ratio(out, r)
+    ratio, highest = world_ratio(out, r), world_ratio_highest(out, r)
     world = unit_reference if world is None else world
     world_scale = (None if world is False else float(world) if world is not True and world_scale_fits(float(world), ratio)
                    else world_unit_scale(ratio))  # a stated scale that does not fit: the data's (refused by its check)
@@ -282,7 +315,7 @@ def normalise(cameras: np.ndarray, points: np.ndarray | None, N: np.ndarray, ref
             tau = np.where((depth_signs * signs[:, None]).sum(axis=0) >= 0, 1.0, -1.0)
         pts = pts * tau[:, None]
         out = out * signs[:, None, None]
-    return Normalised(out, pts, r, T0, N, signs, scale, unit, world_scale, ratio)
+    return Normalised(out, pts, r, T0, N, signs, scale, unit, world_scale, ratio, highest)
 
 
 def modulus_coefficients(cameras: np.ndarray, reference: int) -> tuple[np.ndarray, np.ndarray]:

@@ -411,6 +411,12 @@ def check_reference(problem, proof: dict) -> None:
                                f"[2^{frames.WORLD_EXPONENT - 1}, 2^{frames.WORLD_EXPONENT}) "
                                "(frames.world_unit_scale; none: the world as given, a proof written before proofs "
                                "stated it)")
+    if not frames.world_frame_bounded(problem.norm):
+        raise Invalid("scope", f"proof/world_scale is {stated!r:.40}: in that frame the farthest camera lies "
+                               f"{problem.norm.world_scale * problem.norm.world_ratio_highest:.6g} from the reference, "
+                               f"beyond 2^{frames.EARLIER_WORLD_HIGHEST} (the other cameras' median is "
+                               f"{problem.norm.world_ratio:.6g}): the stratified frame is refused for these data "
+                               "(frames.world_frame_bounded)")
 
 
 def check_earlier_frame(problem, proof: dict) -> None:
@@ -430,7 +436,8 @@ def check_earlier_frame(problem, proof: dict) -> None:
         raise Invalid("scope", f"proof/world_scale is not stated (a proof posed in the world as given, written before "
                                f"proofs stated it): that frame is read only where the other cameras lie a median "
                                f"between 2^{frames.EARLIER_WORLD_LOWEST} and 2^{frames.EARLIER_WORLD_HIGHEST} from "
-                               f"the reference in its frame, and these lie {problem.norm.world_ratio:.6g} (solve again: "
+                               f"the reference in its frame, every one below 2^{frames.EARLIER_WORLD_HIGHEST}, and these lie a median "
+                               f"{problem.norm.world_ratio:.6g}, the farthest {problem.norm.world_ratio_highest:.6g} (solve again: "
                                "the current writer brings the world to unit scale and states world_scale)")
 
 

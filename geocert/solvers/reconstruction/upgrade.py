@@ -128,7 +128,17 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
     stages: list[dict] = []
     H = K = None
     proven = None
-    if method in ("stratified", "auto"):
+    from geocert.solvers.autocalibration import frames
+
+    if method == "stratified" and not frames.world_frame_bounded(problem.norm):
+        # review 55: views near the reference outvote the world scale's median and leave the
+        # others far, where a wrong K can be certified; the verifier refuses such a frame
+        empty.reason = (f"autocalibration found no metric upgrade (the registered views' distances from the "
+                        f"reference spread too far for the stratified frame: the farthest lies "
+                        f"{problem.norm.world_scale * problem.norm.world_ratio_highest:.3g} away, beyond "
+                        f"2^{frames.EARLIER_WORLD_HIGHEST}; frames.world_frame_bounded)")
+        return empty
+    if method in ("stratified", "auto") and frames.world_frame_bounded(problem.norm):  # else "auto": the direct
         H, K, found, solved = _stratified(problem, options, intrinsics, callback)
         stages += found
         if H is not None:
