@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.linalg import rq
 
+from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.solvers.reconstruction import calibration_claim, motion_claim, schur
 
@@ -128,8 +129,6 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
     stages: list[dict] = []
     H = K = None
     proven = None
-    from geocert.solvers.autocalibration import frames
-
     if method == "stratified" and not frames.world_frame_bounded(problem.norm):
         # review 55: views near the reference outvote the world scale's median and leave the
         # others far, where a wrong K can be certified; the verifier refuses such a frame
