@@ -253,8 +253,8 @@ class AutocalibrationKind(ProblemKind):
         if options.method != "direct":
             from geocert.solvers.autocalibration import frames
 
-            norm = autocalibration_problem.prepare(parsed.cameras, parsed.points, parsed.image_size,
-                                                   options.intrinsics).norm
+            # the cameras alone fix the frame's world scale and spread (the points only its signs)
+            norm = autocalibration_problem.prepare(parsed.cameras, None, parsed.image_size, options.intrinsics).norm
             if not frames.world_frame_bounded(norm):
                 raise InputError("data/cameras", f"the cameras' distances from the reference camera spread too far "
                                                  f"for the stratified frame: their median brought to unit scale, the "

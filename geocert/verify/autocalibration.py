@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 
 from typing import Any
 
@@ -527,7 +528,8 @@ def _proof_frame(proof: Any, direct: bool) -> dict:
         raise Invalid("scope", "proof/world_scale is stated without proof/reference_scale: the world is brought "
                                "to unit scale only in the unit reference frame")
     stated = proof["world_scale"]
-    if type(stated) not in (float, int) or not 0.0 < stated < math.inf:
+    # (an int beyond the largest float, which JSON may carry, is no float: refused here, not at float())
+    if type(stated) not in (float, int) or not 0.0 < stated <= sys.float_info.max:
         raise Invalid("scope", f"proof/world_scale is {stated!r:.40}: a positive power of two (frames.world_unit_scale)")
     return {"unit_reference": True, "world": float(stated)}
 

@@ -193,6 +193,15 @@ def test_a_scale_other_than_the_datas_is_refused(genuine, tag, stages, member):
     assert not verify_any(forged).valid
 
 
+def test_a_world_scale_beyond_the_largest_float_is_refused_naming_it(genuine):
+    """An int JSON carries beyond the largest float is named, not an OverflowError's format failure."""
+    forged = copy.deepcopy(genuine)
+    for item in forged["certificate"]["items"]:
+        item["proof"]["world_scale"] = 10 ** 400
+    report = verify_any(json.loads(json.dumps(forged)))
+    assert not report.valid and "proof/world_scale is" in report.first_failure["detail"], report.first_failure
+
+
 def test_the_reference_scale_written_as_an_int_is_the_same_number(genuine):
     document = copy.deepcopy(genuine)
     scale = document["certificate"]["items"][0]["proof"]["reference_scale"]

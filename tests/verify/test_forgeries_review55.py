@@ -87,6 +87,7 @@ from geocert.solvers.autocalibration import problem as autocalibration_problem
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import stored
 from tests.verify.test_forgeries_review54 import TRUTH, _reposed, _solve
+from tests.verify.test_forgeries_review54 import _earlier_world_writer as earlier_world_writer
 
 pytestmark = pytest.mark.filterwarnings("ignore")
 
@@ -220,17 +221,8 @@ def test_a_stated_world_scale_fits_only_the_datas_octave(ratio, scale, fits):
 
 def _earlier_world_writer(monkeypatch, data: dict, options: dict) -> dict:
     """``data`` solved by the writer before world_scale (the unit reference frame, the world as
-    given: proofs stating reference_scale only), its self-check off."""
-    import types
-
-    import geocert.kinds.autocalibration as kind
-
-    given = types.SimpleNamespace(**vars(autocalibration_problem))
-    given.prepare = lambda *args, **kwargs: autocalibration_problem.prepare(
-        *args, **{**kwargs, "unit_reference": True, "world": False})
-    monkeypatch.setattr(kind, "autocalibration_problem", given)
-    monkeypatch.delenv("GEOCERT_SELF_VERIFY", raising=False)
-    return _solve(data, options)
+    given: proofs stating reference_scale only), its self-check off (review 54's writer)."""
+    return earlier_world_writer(monkeypatch, data, options, unit_reference=True)
 
 
 def test_an_earlier_writers_proof_with_near_views_outvoting_the_median_is_refused(monkeypatch):
@@ -279,3 +271,16 @@ def test_a_reconstructions_stratified_upgrade_is_not_run_on_such_views():
     out = upgrade.autocalibrate(cameras, np.asarray(data["points"]), tuple(data["image_size"]), {},
                                 autocalibration_problem.AutocalibrationOptions(), 100, method="stratified")
     assert out.reason and "world_frame_bounded" in out.reason and not out.stages
+
+
+def test_auto_runs_the_direct_method_alone_on_such_views():
+    """"auto": no stratified stage is run, only the direct method's (and, where it finds no upgrade
+    either, the reason says the stratified frame was not run and why)."""
+    from geocert.solvers.reconstruction import upgrade
+
+    data, options = _with_near_views(-36.0, 6)
+    cameras = [np.asarray(P) for P in data["cameras"]]
+    out = upgrade.autocalibrate(cameras, np.asarray(data["points"]), tuple(data["image_size"]), {},
+                                autocalibration_problem.AutocalibrationOptions(), 100, method="auto")
+    assert out.stages and all(stage["name"] not in ("affine", "metric") for stage in out.stages), out.stages
+    assert out.K is not None or "stratified: not run" in out.reason

@@ -129,15 +129,17 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
     stages: list[dict] = []
     H = K = None
     proven = None
-    if method == "stratified" and not frames.world_frame_bounded(problem.norm):
-        # review 55: views near the reference outvote the world scale's median and leave the
-        # others far, where a wrong K can be certified; the verifier refuses such a frame
-        empty.reason = (f"autocalibration found no metric upgrade (the registered views' distances from the "
-                        f"reference spread too far for the stratified frame: the farthest lies "
-                        f"{problem.norm.world_scale * problem.norm.world_ratio_highest:.3g} away, beyond "
-                        f"2^{frames.EARLIER_WORLD_HIGHEST}; frames.world_frame_bounded)")
+    # review 55: views near the reference outvote the world scale's median and leave the others
+    # far, where a wrong K can be certified; the verifier refuses such a frame, so the stratified
+    # stages are not run on it ("auto": the direct method alone, its reason saying so)
+    spread = None if frames.world_frame_bounded(problem.norm) else (
+        f"the registered views' distances from the reference spread too far for the stratified frame: the "
+        f"farthest lies {problem.norm.world_scale * problem.norm.world_ratio_highest:.3g} away, beyond "
+        f"2^{frames.EARLIER_WORLD_HIGHEST} (frames.world_frame_bounded)")
+    if method == "stratified" and spread is not None:
+        empty.reason = f"autocalibration found no metric upgrade ({spread})"
         return empty
-    if method in ("stratified", "auto") and frames.world_frame_bounded(problem.norm):  # else "auto": the direct
+    if method in ("stratified", "auto") and spread is None:
         H, K, found, solved = _stratified(problem, options, intrinsics, callback)
         stages += found
         if H is not None:
@@ -152,7 +154,8 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
         stages += found
     empty.stages = stages
     if H is None:
-        reasons = "; ".join(f"{stage['name']}: {stage['reason']}" for stage in stages if stage.get("reason"))
+        reasons = "; ".join([f"stratified: not run, {spread}"] * (spread is not None)
+                            + [f"{stage['name']}: {stage['reason']}" for stage in stages if stage.get("reason")])
         empty.reason = f"autocalibration found no metric upgrade ({reasons or 'no answer'})"
         return empty
     certified = bool(stages) and all(stage["certified"] for stage in stages if stage["status"] != "skipped")
