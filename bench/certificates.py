@@ -28,7 +28,7 @@ from bench.resection import DATA, dinosaur_problems
 from geocert.solvers.datasets import load_dinosaur
 from geocert.solvers.fractional.maps import MapOptions, fit_map
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
-from geocert.solvers.fractional.results import claim_of
+from geocert.formulations.fractional.results import claim_of
 from geocert.verify.checks import verify_arrays
 
 

@@ -288,7 +288,7 @@ def real_resection(rng, noise_px: float = 0.5, sizes: tuple[int, ...] = (20, 100
     (all three), the proven width over the estimate's (median over coordinates and cameras), and
     the proof's cost per camera (fractional.resection_sublevel) against its check's (the
     verifier's recomputation of the stated proof, verify_resection_sublevel), processor seconds."""
-    from geocert.solvers.fractional.resection_sublevel import resection_sublevel, verify_resection_sublevel
+    from geocert.formulations.fractional.resection_sublevel import resection_sublevel, verify_resection_sublevel
 
     lines = [f"  {'scene':>40} | points | cameras | est. x/y/z coverage | est. all 3 | proven | proven all 3 | "
              "proven / est. width | proof ms | check ms"]
@@ -413,7 +413,7 @@ def synthetic_resection_l1(seeds: int = 20, size: int = 20, noise_px: float = 0.
     L2L2's, the result verifying, and the processor time of a full certificate against a summary's
     (both in this run), and of the full certificate with the centre's proof switched off (the
     depth row alone, as before it), with the centre's own proof and its check apart."""
-    from geocert.solvers.fractional.resection_centre_l1 import l1_centre, verify_l1_centre
+    from geocert.formulations.fractional.resection_centre_l1 import l1_centre, verify_l1_centre
     from geocert.verify.checks import verify_any
 
     lines = ["  norm | cameras | centre proven | truth inside | width / L2L2's (median, x y z) | verified | "

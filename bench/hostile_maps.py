@@ -48,7 +48,7 @@ from geocert.core.certificates import BOUND_TOLERANCE, pack, unpack
 from geocert.core.geometry import InputError
 from geocert.solvers.fractional.inputs import check_correspondences
 from geocert.solvers.fractional.maps import fit_map
-from geocert.solvers.fractional.results import claim_of
+from geocert.formulations.fractional.results import claim_of
 from testing.hostile_maps import random_camera, options_for, problem, refused
 
 KINDS = ("resection", "homography")

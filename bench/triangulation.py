@@ -49,8 +49,8 @@ from geocert.solvers.datasets import load_dinosaur
 from geocert.core.geometry import norm_cost
 from geocert.solvers.fractional.many_tracks import triangulate_many
 from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, triangulate
-from geocert.solvers.fractional import flat as flat_tracks
-from geocert.solvers.fractional.convexity import convexity_bounds
+from geocert.formulations.fractional import flat as flat_tracks
+from geocert.formulations.fractional.convexity import convexity_bounds
 
 # shared/ beside the checkout (or beside the folder of worktrees that holds it).
 DINOSAUR = next((folder / "shared" / "data" / "oxford_dinosaur" for folder in Path(__file__).resolve().parents[2:4]
@@ -342,7 +342,7 @@ def search_only(cameras, tracks, chunk: int = 500) -> int:
     from unittest import mock
 
     from geocert.solvers.fractional import many_tracks
-    from geocert.solvers.fractional.columns import TrackResults
+    from geocert.formulations.fractional.columns import TrackResults
 
     with mock.patch.object(many_tracks, "certify_tracks", lambda cameras, tracks, options: TrackResults(len(tracks))):
         return batched_certified(cameras, tracks, chunk)

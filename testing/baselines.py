@@ -144,7 +144,7 @@ def scip_map(source: np.ndarray, target: np.ndarray, norm: str, box: float = 10.
     entry of the normalised map lies in [-box, box]. Residuals d are variables tied to the map by
     ``d * depth = M_k . X - x_k * depth``.
     """
-    from geocert.solvers.fractional.charts import normaliser
+    from geocert.formulations.fractional.charts import normaliser
 
     n, m = source.shape[1], target.shape[1]
     S, T = normaliser(source), normaliser(target)

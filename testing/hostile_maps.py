@@ -10,8 +10,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from geocert.solvers.fractional.inputs import minimum_points
-from geocert.solvers.fractional.options import MapOptions
-from geocert.solvers.fractional.results import claim_of
+from geocert.formulations.fractional.options import MapOptions
+from geocert.formulations.fractional.results import claim_of
 from geocert.verify import checks as verify
 
 

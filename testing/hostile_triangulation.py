@@ -10,7 +10,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from geocert.core.geometry import normalised_cameras
-from geocert.solvers.fractional.results import claim_of
+from geocert.formulations.fractional.results import claim_of
 from geocert.verify import checks as verify
 
 

@@ -177,7 +177,7 @@ def every_track_searched():
     import pytest
 
     from geocert.solvers.fractional import many_tracks
-    from geocert.solvers.fractional.columns import TrackResults
+    from geocert.formulations.fractional.columns import TrackResults
 
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(many_tracks, "certify_tracks", lambda cameras, tracks, options: TrackResults(len(tracks)))
@@ -195,7 +195,7 @@ def loose_gaps():
 
     from geocert.solvers.bilinear.options import BilinearOptions
     from geocert.core.declared_options import KEY
-    from geocert.solvers.fractional.options import SearchOptions
+    from geocert.formulations.fractional.options import SearchOptions
 
     def classes(root):
         yield root

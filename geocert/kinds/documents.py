@@ -11,7 +11,7 @@ from typing import Any
 
 from geocert.core import summary_notes
 from geocert.core.certificates import FORMAT, VERSION, data_digest, data_hash, problem_hash
-from geocert.solvers.fractional.results import ItemResult, LocalCertificate, proof_of
+from geocert.formulations.fractional.results import ItemResult, LocalCertificate, proof_of
 
 
 def finite_or_none(value: float | None) -> float | None:

@@ -587,7 +587,7 @@ class ReconstructionKind(ProblemKind):
             item.pop(key, None)
         result = {"kind": self.name, "norm": options.norm, **item, "stats": stats}
         if options.certificate == "full" and camera_results:
-            from geocert.solvers.fractional.options import MapOptions
+            from geocert.formulations.fractional.options import MapOptions
 
             maps = [entry.pop("map") for entry in camera_results]
             for entry in camera_results:

@@ -16,8 +16,8 @@ from geocert.core.geometry import COORDINATE_LIMIT, InputError, number_array
 from geocert.solvers.fractional.inputs import check_correspondences
 from geocert.verify.fractional import MAP_REGION_MEANING
 from geocert.verify.adapters import VERIFIED_KINDS
-from geocert.solvers.fractional.options import MapOptions
-from geocert.solvers.fractional.results import MapResult
+from geocert.formulations.fractional.options import MapOptions
+from geocert.formulations.fractional.results import MapResult
 
 Coordinates = Annotated[list[Finite], Field(min_length=2, max_length=3)]
 
@@ -137,7 +137,7 @@ class MapKind(ProblemKind):
         from geocert.solvers.fractional.maps import fit_map  # the conic solver, only to solve
 
         from geocert.core.determinacy import safely
-        from geocert.solvers.fractional import determinacy
+        from geocert.formulations.fractional import determinacy
 
         source, target = parsed.maps[index]
         result = fit_map(source, target, options, callback)

@@ -14,9 +14,9 @@ from geocert.kinds.documents import brief_certificate, certificate_summary, loca
 from geocert.kinds.schema import Camera, CertificateDocument, ItemOutcome, JobBase, JobStats, Pixel, Strict, options_model
 from geocert.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, check_cameras, number_array
 from geocert.verify.fractional import MAX_VIEWS, TRACK_REGION_MEANING, TRACKS
-from geocert.solvers.fractional.options import TriangulationOptions
-from geocert.solvers.fractional.columns import SCOPE, TrackResults
-from geocert.solvers.fractional.results import SearchCertificate, TrackResult
+from geocert.formulations.fractional.options import TriangulationOptions
+from geocert.formulations.fractional.columns import SCOPE, TrackResults
+from geocert.formulations.fractional.results import SearchCertificate, TrackResult
 
 
 
@@ -225,8 +225,8 @@ class TriangulationKind(ProblemKind):
     @staticmethod
     def _document(parsed: ParsedTracks, views, points, result: TrackResult, options: TriangulationOptions) -> dict:
         from geocert.core.determinacy import safely
-        from geocert.solvers.fractional import determinacy
-        from geocert.solvers.fractional.columns import certified_sublevel
+        from geocert.formulations.fractional import determinacy
+        from geocert.formulations.fractional.columns import certified_sublevel
 
         document = track_document(result, options.detail, options.certificate == "full")
         if options.detail == "full":  # brief: not computed
@@ -237,9 +237,9 @@ class TriangulationKind(ProblemKind):
 
     def solve_batch(self, parsed: ParsedTracks, indices: list[int], options: TriangulationOptions, callback,
                     deadline: float | None = None) -> list[dict]:
-        from geocert.solvers.fractional import determinacy
+        from geocert.formulations.fractional import determinacy
         from geocert.solvers.fractional.many_tracks import triangulate_many  # the conic solver, only to solve
-        from geocert.solvers.fractional.convexity_path import raise_sublevels
+        from geocert.formulations.fractional.convexity_path import raise_sublevels
 
         tracks = [parsed.tracks[index] for index in indices]
         not_started = None if deadline is None else (

@@ -15,7 +15,7 @@ from geocert.verify.autocalibration import STAGES
 from geocert.verify.bilinear import FRAMES
 from geocert.core import records
 from geocert.core.strict import Invalid
-from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
+from geocert.formulations.fractional.options import MapOptions, TriangulationOptions
 from geocert.verify import reconstruction_stages as stage_checks
 from geocert.verify.fractional import TRACKS, MapItems, TrackItems
 from geocert.verify.reconstruction import RECONSTRUCTION

@@ -6,7 +6,7 @@ data, and the agreement of a result with its certificate. What depends on the ki
 verification adapter in the verifier's own registry (adapters.py; the service's kinds take
 their verification contract from it, never the reverse): how to read an item's data and rebuild its
 program, and which proof types it takes ("trivial" for every kind; "branch_and_bound" for the
-fractional kinds, checked in geocert.solvers.fractional.proof; room for others, e.g. "sdp_dual").
+fractional kinds, checked in geocert.formulations.fractional.proof; room for others, e.g. "sdp_dual").
 docs/certificate.md explains each step.
 """
 
@@ -78,7 +78,7 @@ def _check_option_words(options: dict) -> None:
     """options.certificate and options.detail (what a result carries, never what is proven),
     when the echo states them, are words the solvers take (fractional.options: CERTIFICATE_MODES,
     DETAIL_MODES): an echo stating another states a request no solver served."""
-    from geocert.solvers.fractional.options import CERTIFICATE_MODES, DETAIL_MODES
+    from geocert.formulations.fractional.options import CERTIFICATE_MODES, DETAIL_MODES
 
     for name, words in (("certificate", CERTIFICATE_MODES), ("detail", DETAIL_MODES)):
         value = options.get(name)

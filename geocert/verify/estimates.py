@@ -33,7 +33,7 @@ from geocert.core.determinacy import SIGMAS, Determinacy, certified_gap, cost_in
 from geocert.core.geometry import is_number, normalised_cameras
 from geocert.core.warning_codes import MOTION_CODES
 from geocert.core.strict import Invalid, same
-from geocert.solvers.fractional import determinacy as estimate
+from geocert.formulations.fractional import determinacy as estimate
 
 NOT_ANALYSED = ("time_limit", "not_analysed")  # core.determinacy.not_analysed's codes
 NUMBER_SLACK = 1e-6  # of an interval's width: another machine's eigendecomposition of the same J'J
@@ -438,7 +438,7 @@ def _far(source: np.ndarray, target: np.ndarray, matrix: Any, certificate: dict)
     from geocert.core import exact
     from geocert.core.certificates import OBJECTIVE_TOLERANCE
     from geocert.core.geometry import norm_cost
-    from geocert.solvers.fractional.items import MapItem
+    from geocert.formulations.fractional.items import MapItem
 
     norm = (certificate.get("options") or {}).get("norm")
     try:
@@ -475,7 +475,7 @@ def _map_cost_spread(source: np.ndarray, target: np.ndarray, matrix: Any) -> flo
     larger than itself, which another machine's kernels round otherwise, and the estimate's level
     (a multiple of the cost, where its certified gap sets it) moves with it."""
     from geocert.core.geometry import cost_rounding
-    from geocert.solvers.fractional.proof import residual_uncertainty
+    from geocert.formulations.fractional.proof import residual_uncertainty
 
     try:
         M = np.asarray(matrix, dtype=float)

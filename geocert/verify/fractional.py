@@ -1,7 +1,7 @@
 """The fractional kinds' verification adapters (numpy only): how the verifier reads a
 triangulation's tracks and a resection's or homography's maps from the problem data, refused unless
 the service serves them; each item's proof checked against its program (the item itself, its
-program rebuilt with the solver's charts: solvers/fractional/items.py); its solution from a claim;
+program rebuilt with the solver's charts: formulations/fractional/items.py); its solution from a claim;
 residuals from the raw data; and the scope."""
 
 from __future__ import annotations
@@ -13,16 +13,16 @@ from geocert.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.core.determinacy import ESTIMATES_FORM, certified_gap
 from geocert.core.geometry import cost_rounding, is_number, norm_cost, normalised_cameras
 from geocert.core.strict import Invalid, charge, number as _number, numbers, record
-from geocert.solvers.fractional.charts import Chart, MapChart
-from geocert.solvers.fractional.convexity import outside_range, track_bound, verify_sublevel
-from geocert.solvers.fractional.convexity_path import cost_increase
-from geocert.solvers.fractional.determinacy import map_level, pooled_dof, proven_map, proven_track
-from geocert.solvers.fractional.items import MapItem, TrackItem
-from geocert.solvers.fractional.proof import verify_search
-from geocert.solvers.fractional.resection_bound import TYPE as SUBLEVEL_BOUND, verify_resection_bound
-from geocert.solvers.fractional.resection_leaves import l1_cost_increase, verify_resection_leaves
-from geocert.solvers.fractional.resection_sublevel import verify_resection_sublevel
-from geocert.solvers.fractional.stacked import CHECKS, proven_tracks
+from geocert.formulations.fractional.charts import Chart, MapChart
+from geocert.formulations.fractional.convexity import outside_range, track_bound, verify_sublevel
+from geocert.formulations.fractional.convexity_path import cost_increase
+from geocert.formulations.fractional.determinacy import map_level, pooled_dof, proven_map, proven_track
+from geocert.formulations.fractional.items import MapItem, TrackItem
+from geocert.formulations.fractional.proof import verify_search
+from geocert.formulations.fractional.resection_bound import TYPE as SUBLEVEL_BOUND, verify_resection_bound
+from geocert.formulations.fractional.resection_leaves import l1_cost_increase, verify_resection_leaves
+from geocert.formulations.fractional.resection_sublevel import verify_resection_sublevel
+from geocert.formulations.fractional.stacked import CHECKS, proven_tracks
 from geocert.verify.pooled_floor import pooled_bounds, squared_residuals
 
 MAX_VIEWS = 1000  # views in a track, for the parser too: a chart's choice of reference takes views^2 work

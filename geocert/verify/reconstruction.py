@@ -56,7 +56,7 @@ from geocert.verify import residual_claims
 from geocert.verify.fractional import TRACKS, TrackItems, _check_scope_words, refuse_unknown_members
 from geocert.verify.reconstruction_members import intrinsics_of
 from geocert.verify.verification import Verification
-from geocert.solvers.fractional.options import TriangulationOptions
+from geocert.formulations.fractional.options import TriangulationOptions
 from geocert.solvers.reconstruction import (calibration_claim, calibration_tie, camera_claim, depth_reversal_claim,
                                            motion_claim, run_control)
 from geocert.verify import hashed_options

@@ -30,8 +30,8 @@ def _json_logs(**_) -> None:
 # costs 0.07 s of the 0.08 s a first task would pay.
 SOLVER_MODULES = (
     "geocert.solvers.fractional.many_tracks", "geocert.solvers.fractional.triangulation",
-    "geocert.solvers.fractional.convexity_path", "geocert.solvers.fractional.determinacy",
-    "geocert.solvers.fractional.maps", "geocert.solvers.fractional.options", "geocert.core.bnb",
+    "geocert.formulations.fractional.convexity_path", "geocert.formulations.fractional.determinacy",
+    "geocert.solvers.fractional.maps", "geocert.formulations.fractional.options", "geocert.core.bnb",
     "geocert.core.determinacy", "geocert.core.self_check", "geocert.solvers.bilinear.search",
     "geocert.solvers.autocalibration.stratified", "geocert.solvers.autocalibration.direct",
     "geocert.solvers.autocalibration.direct_solve", "geocert.solvers.autocalibration.direct_sublevel",

@@ -13,7 +13,7 @@ from testing.determinacy import cameras_looking_at_origin, project
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import scenes
 from geocert.core.determinacy import curvature_intervals
-from geocert.solvers.fractional import determinacy as fractional
+from geocert.formulations.fractional import determinacy as fractional
 
 from tests.support import random_cameras
 
@@ -276,7 +276,7 @@ class TestTracksMany:
         return a == b
 
     def scene(self):
-        from geocert.solvers.fractional.results import TrackResult
+        from geocert.formulations.fractional.results import TrackResult
 
         rng = np.random.default_rng(7)
         centres = np.array([[0.0, 0, 10], [0.05, 0, 10], [7.0, 0, 7], [10.0, 0, 0], [0.1, 0, 10]])

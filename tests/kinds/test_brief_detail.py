@@ -9,7 +9,7 @@ import pytest
 from geocert.jobs.runner import parse_job, solve_job
 from geocert.kinds import get_kind
 from geocert.core.geometry import InputError
-from geocert.solvers.fractional import determinacy
+from geocert.formulations.fractional import determinacy
 from geocert.verify.checks import RETURNED_FIELDS, verify_any
 
 KINDS = ("triangulation", "homography", "resection")

@@ -13,7 +13,7 @@ import pytest
 from geocert.jobs.runner import solve_job
 from geocert.core.geometry import InputError
 from geocert.solvers.fractional.many_tracks import triangulate_many
-from geocert.solvers.fractional.options import TriangulationOptions
+from geocert.formulations.fractional.options import TriangulationOptions
 from tests.support import reconstruction_data, service_job
 
 NOT_STARTED = "not started"

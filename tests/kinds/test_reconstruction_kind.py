@@ -637,7 +637,7 @@ class TestStructureTimeLimit:
         searches of time_limit_s each ran past the stage's limit. Now every search asks it too:
         told to stop after the chunk has begun, the searches still to run stop, keeping their
         best point (cancelled, which the pipeline reads as time_limit)."""
-        from geocert.solvers.fractional.options import TriangulationOptions
+        from geocert.formulations.fractional.options import TriangulationOptions
         from geocert.solvers.reconstruction import structure, synthetic
 
         scene = synthetic.scene(views=4, points=12, seed=3, noise_px=2.0)

@@ -13,7 +13,7 @@ import pytest
 
 from geocert.core.certificates import data_hash, pack, problem_hash, unpack
 from geocert.jobs.runner import solve_job
-from geocert.solvers.fractional.relaxation import NORMS
+from geocert.formulations.fractional.relaxation import NORMS
 from geocert.core.certificates import BOUND_TOLERANCE
 from geocert.core.coverage import uncovered_part
 from geocert.verify.checks import verify_arrays, verify_document
@@ -308,7 +308,7 @@ class TestNodeTighteningHostile:
 
     def test_a_cut_part_reaching_its_proven_side_exactly_is_refused(self, tightened, monkeypatch):
         # A point on a proven side may cost the cap: the leaf must lie strictly outside.
-        import geocert.solvers.fractional.proof as proof_module
+        import geocert.formulations.fractional.proof as proof_module
 
         ranges, original = {}, proof_module._proven_sides
         monkeypatch.setattr(proof_module, "_proven_sides",

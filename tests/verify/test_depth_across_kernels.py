@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from geocert.solvers.fractional import fixed_order
+from geocert.formulations.fractional import fixed_order
 from tests.verify.test_forgeries_review35 import _has_avx2, _run
 
 DISTANCES = (1e-3, 1e-6, 2e-9, 1e-10)  # of the point from camera 0's centre, which is 20 off the origin

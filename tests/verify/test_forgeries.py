@@ -102,7 +102,7 @@ def forged_point():
     triangulation certificate whose tracks were searched; a reconstruction's points are now
     mostly certified by their convexity, with no search to forge)."""
     from geocert.verify.fractional import TRACKS
-    from geocert.solvers.fractional.relaxation import Relaxation
+    from geocert.formulations.fractional.relaxation import Relaxation
     from geocert.solvers.fractional.search import root_region
 
     document = copy.deepcopy(stored(SEARCHED)["certificate"])

@@ -31,10 +31,10 @@ from scipy.optimize import least_squares
 
 from geocert.core.strict import Invalid
 from geocert.solvers.fractional.maps import fit_map
-from geocert.solvers.fractional.options import MapOptions
-from geocert.solvers.fractional.resection_bound import proven_bound, resection_bound
-from geocert.solvers.fractional.resection_sublevel import MAX_ROUNDS, Scene
-from geocert.solvers.fractional.results import claim_of
+from geocert.formulations.fractional.options import MapOptions
+from geocert.formulations.fractional.resection_bound import proven_bound, resection_bound
+from geocert.formulations.fractional.resection_sublevel import MAX_ROUNDS, Scene
+from geocert.formulations.fractional.results import claim_of
 from geocert.verify.checks import verify_arrays
 from tests.solvers.fractional.test_resection_bound import fast_claim, scene, searched
 

@@ -310,7 +310,7 @@ def _proven(result: dict, index: int):
 
 def _restate_intervals(result: dict) -> None:
     """A forger keeps the result's proven intervals the proof's (determinacy.proven_*)."""
-    from geocert.solvers.fractional.determinacy import proven_map, proven_track
+    from geocert.formulations.fractional.determinacy import proven_map, proven_track
 
     key = "maps" if "maps" in result else "tracks"
     for index, claim in enumerate(result["certificate"]["items"]):

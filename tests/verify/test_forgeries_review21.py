@@ -129,8 +129,8 @@ def test_a_focal_test_record_where_no_such_test_runs_is_refused(result, per_view
 @pytest.mark.parametrize("norm", ("L1L1", "L2L1"))
 def test_stated_multipliers_never_bound_the_centre_short_of_a_camera_within_the_level(norm):
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.fractional import resection_centre_l1 as centre_l1
-    from geocert.solvers.fractional.resection_sublevel import Scene, proven_centre
+    from geocert.formulations.fractional import resection_centre_l1 as centre_l1
+    from geocert.formulations.fractional.resection_sublevel import Scene, proven_centre
     from tests.solvers.fractional.test_resection_leaves import local_search, resection
 
     rng = np.random.default_rng(5)

@@ -192,7 +192,7 @@ def test_a_long_tracks_chart_reference_is_paid_from_the_work_budget(monkeypatch)
     tracks beyond it are refused for the work they ask for; on main all 5 tracks' 5 million pairs
     were projected."""
     from geocert.core import strict
-    from geocert.solvers.fractional import charts
+    from geocert.formulations.fractional import charts
     from geocert.verify import checks
 
     document = _long_tracks(5, 1000)

@@ -49,7 +49,7 @@ stricter bound); a certified track's summary null and its determinacy deleted un
 (options.detail is not hashed: the same document with detail "brief" verifies, and claims no
 more). The moved modules (verify/fractional.py, pooled_floor, residual_claims, notes,
 structure_check, hashed_options): every moved definition is byte-identical to its source, and what
-stayed in solvers/fractional/items.py too. plane_sublevel's charge: every camera-box bounded is
+stayed in formulations/fractional/items.py too. plane_sublevel's charge: every camera-box bounded is
 charged (_kept, in plane_hull and hull), each tree replayed within tree_budget + 2 boxes.
 
 Costly (xfail below): plane_sublevel's chirality test bounds every box against every chirality

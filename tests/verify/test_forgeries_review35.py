@@ -39,7 +39,7 @@ the value in exact arithmetic, in this process.
    accepts the same costs at their spread. The refused claims are genuine: the cost is what the
    data determine only to its rounding (the objective check's own spread says so), and the
    interval widths scale with sqrt(level), so the ends move by tens of percent of the width too.
-   At fault: geocert/solvers/fractional/determinacy.py:map_ (its level from curvature_intervals'
+   At fault: geocert/formulations/fractional/determinacy.py:map_ (its level from curvature_intervals'
    recomputed r.r, not the document's certified cost) with geocert/verify/estimates.py:_compare
    (the level and ends compared at a cost spread capped at 1e-6). Suggested fix at the cause: take
    the level from the stated cost and lower bound (the objective check has tied the stated cost to
@@ -67,7 +67,7 @@ the value in exact arithmetic, in this process.
    returned gives 0.0"); in another the two solves' matrices verified alike (not a test: it rests
    on which matrix each solve returns).
    At fault: geocert/verify/estimates.py:_compare (value and ends held to their own size) with
-   geocert/solvers/fractional/determinacy.py:map_ (the value and ends computed through the
+   geocert/formulations/fractional/determinacy.py:map_ (the value and ends computed through the
    normalisers, rounding at the terms' size). Suggested fix at the cause: hold the value and the
    ends to a few ulps of the magnitude of the terms they are computed from (|Tt^-1| |normalised|
    |Ts| |centroid|, as cost_rounding reads a residual's), which for review 34's far-off map is
@@ -120,7 +120,7 @@ the value in exact arithmetic, in this process.
    the ends stricter than the value they are value -+ half of (before it the ends had VALUE_SLACK of
    the value too, 2e-3 at 1e6, and (a)'s documents would have verified; (b)'s width differences,
    4e-3, exceed even that).
-   At fault: geocert/solvers/fractional/determinacy.py:map_ (the centre and its gradient taken
+   At fault: geocert/formulations/fractional/determinacy.py:map_ (the centre and its gradient taken
    through the pixel-world camera, matrix_of(theta), whose null vector is far off) with
    geocert/verify/estimates.py:_compare (an end held to END_ROUNDING of its size, not the slack
    its value is accepted at). Suggested fix at the cause: take the centre in the normalised frame
@@ -377,7 +377,7 @@ def centred_map() -> dict:
 
 
 def _recomputed_level(result: dict) -> float:
-    from geocert.solvers.fractional import determinacy
+    from geocert.formulations.fractional import determinacy
 
     data = result["certificate"]["data"]["maps"][0]
     item = result["maps"][0]

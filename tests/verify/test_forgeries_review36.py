@@ -180,7 +180,7 @@ def far_resection() -> dict:
 
 def _residuals(result: dict, index: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The map's data, its float residuals and the verifier's bound on each (residual_uncertainty)."""
-    from geocert.solvers.fractional.proof import residual_uncertainty
+    from geocert.formulations.fractional.proof import residual_uncertainty
 
     data = result["certificate"]["data"]["maps"][index]
     source, target = np.array(data["source"], dtype=float), np.array(data["target"], dtype=float)
@@ -202,7 +202,7 @@ def _at_cost(result: dict, cost: float, index: int = 0) -> dict:
     """The document with map ``index``'s cost restated (claim and result, the gap with it) and its
     estimate recomputed there, as the verifier computes it (determinacy.map_ at squared_sum = the
     stated cost)."""
-    from geocert.solvers.fractional import determinacy
+    from geocert.formulations.fractional import determinacy
 
     document = copy.deepcopy(result)
     item, claim = document["maps"][index], document["certificate"]["items"][index]
@@ -335,7 +335,7 @@ def test_a_far_map_interval_collapsed_or_moved_with_its_value_is_refused(far_res
 
 
 def test_the_moved_interval_lies_thousands_of_widths_from_the_returned_centre(far_resection):
-    from geocert.solvers.fractional import determinacy
+    from geocert.formulations.fractional import determinacy
 
     source, target, _, _ = _residuals(far_resection)
     item = far_resection["maps"][0]
@@ -400,7 +400,7 @@ def test_a_far_maps_residuals_are_held_to_what_the_data_determine():
     bit and verify; moved by 1.5 of the uncertainty (which review 36's allowance let verify) they
     are refused."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.fractional.items import MapItem
+    from geocert.formulations.fractional.items import MapItem
 
     result = solve_job({**_far_resection(1e8, 1e-6, 5), "options": {"norm": "L2L2", "certificate": "full",
                                                                      "detail": "full"}})

@@ -148,7 +148,7 @@ to an ulp and the ends read as offsets from it (item 3). Open: none.
    1.0595871829 below the 1.0595874399 its estimate is read at" (5.5e-7 apart); under Prescott
    alike. At an offset of 1e3 all four seeds 5 to 8 are refused (8.940348436676826e-06 against
    8.9403485185e-06: 9e-9 apart); at offset 0 all verify.
-   At fault: geocert/solvers/fractional/determinacy.py:map_ (the exact r'r) against
+   At fault: geocert/formulations/fractional/determinacy.py:map_ (the exact r'r) against
    determinacy.prove_map and geocert/verify/fractional.py:_check_map_level and _check_proven (the
    claim's float cost). Suggested fix at the cause: one level for the three: map_cost_increase of
    exact_squared_residuals(data, matrix) (with the certified gap) in prove_map and in
@@ -162,7 +162,7 @@ to an ulp and the ends read as offsets from it (item 3). Open: none.
    (Haswell's seed 6, Prescott's seed 5), "proof/sublevel: not proven at radius
    0.04968026993667487" (Prescott's seed 6). L1L1 and L2L1 far resections' centre proofs alike
    (resection_centre_l1: "narrower than what the proof proves", "not proven at radius").
-   At fault: geocert/solvers/fractional/resection_sublevel.py:verify_resection_sublevel (the
+   At fault: geocert/formulations/fractional/resection_sublevel.py:verify_resection_sublevel (the
    bounds recomputed with the verifier's rounding and compared with no allowance on the narrow
    side, CHECK_SLACK of the half-width and 4 ulps on the wide one) and its check_enclosure.
    Measured (seeds 5 and 6, 1e-3 px; the bounds one kernel recomputes against the other's, over
@@ -229,7 +229,7 @@ from tests.verify.test_forgeries_review36 import edge_service, far_resection  # 
 # Class 1: a far map's cost understated, and its residuals zeroed, within the residuals' worst-case bound
 
 def _map_item(result: dict, index: int = 0):
-    from geocert.solvers.fractional.items import MapItem
+    from geocert.formulations.fractional.items import MapItem
 
     data = result["certificate"]["data"]["maps"][index]
     source, target = np.array(data["source"], dtype=float), np.array(data["target"], dtype=float)
@@ -277,7 +277,7 @@ def test_the_understated_far_map_claims_a_quarter_of_its_exact_cost_and_zero_res
     """Machine-independent: the exact cost (determinacy.exact_squared_residuals, one float on every
     machine) is over 3 times the understated claim; every exact residual is above 1e-8 px while the
     forgery states at least half of them 0; its intervals are narrower than the genuine ones."""
-    from geocert.solvers.fractional import determinacy
+    from geocert.formulations.fractional import determinacy
 
     forged = _understated(far_resection)
     item, matrix = _map_item(far_resection)
@@ -360,7 +360,7 @@ def test_a_far_track_cost_understated_within_the_former_window_is_refused(far_tr
     1.05 of the least review 36's window allowed (each residual within rounding + 2
     residual_uncertainty of the verifier's float one: at 1e6 a quarter of the exact cost), refused."""
     from geocert.core import exact
-    from geocert.solvers.fractional.items import TrackItem
+    from geocert.formulations.fractional.items import TrackItem
 
     cameras = np.array(far_track["certificate"]["data"]["cameras"], dtype=float)
     track = far_track["certificate"]["data"]["tracks"][0]
@@ -511,7 +511,7 @@ def _fraction_squared_residuals(source, target, matrix) -> float:
 @pytest.mark.parametrize("scale", [1.0, 1e-300, 5e-324, 1e-160, 1e160, 1e300])
 @pytest.mark.parametrize("dims", [2, 3])
 def test_exact_squared_residuals_are_the_fraction_sum_on_tiny_huge_and_subnormal_data(scale, dims):
-    from geocert.solvers.fractional.determinacy import exact_squared_residuals
+    from geocert.formulations.fractional.determinacy import exact_squared_residuals
 
     rng = np.random.default_rng(37)
     source, target = rng.uniform(-1, 1, (6, dims)) * scale, rng.uniform(-1, 1, (6, dims))
@@ -521,7 +521,7 @@ def test_exact_squared_residuals_are_the_fraction_sum_on_tiny_huge_and_subnormal
 
 
 def test_exact_squared_residuals_of_a_point_mapped_to_infinity_are_infinite():
-    from geocert.solvers.fractional.determinacy import exact_squared_residuals
+    from geocert.formulations.fractional.determinacy import exact_squared_residuals
 
     rng = np.random.default_rng(37)
     matrix = rng.normal(size=(3, 3))
@@ -534,7 +534,7 @@ def test_an_estimate_whose_exact_sum_overflows_is_left_out_on_both_sides():
     OverflowError, against its docstring), and the estimate is none, the writer's and the
     verifier's alike (a null determinacy is accepted as it is)."""
     from geocert.core.determinacy import safely
-    from geocert.solvers.fractional import determinacy
+    from geocert.formulations.fractional import determinacy
 
     rng = np.random.default_rng(37)
     source, target = rng.uniform(-1, 1, (8, 2)), rng.uniform(-1, 1, (8, 2)) * 1e200
@@ -556,7 +556,7 @@ def _fraction_centroid_image(source, matrix) -> list[float]:
 @pytest.mark.parametrize("scale", [1.0, 1e-300, 5e-324, 1e6, 1e160, 1e300])
 @pytest.mark.parametrize("dims", [2, 3])
 def test_the_exact_centroid_image_is_the_fraction_one_on_tiny_huge_and_subnormal_data(scale, dims):
-    from geocert.solvers.fractional.determinacy import exact_centroid_image
+    from geocert.formulations.fractional.determinacy import exact_centroid_image
 
     rng = np.random.default_rng(37)
     source = rng.uniform(-1, 1, (7, dims)) * scale
@@ -565,7 +565,7 @@ def test_the_exact_centroid_image_is_the_fraction_one_on_tiny_huge_and_subnormal
 
 
 def test_a_centroid_mapped_to_infinity_has_no_value():
-    from geocert.solvers.fractional.determinacy import exact_centroid_image, map_
+    from geocert.formulations.fractional.determinacy import exact_centroid_image, map_
 
     source = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 2.0], [2.0, 2.0]])  # centroid (1, 1)
     matrix = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, -2.0]])  # its third coordinate 0
@@ -664,7 +664,7 @@ def test_the_exact_squared_residuals_differ_from_the_float_cost_beyond_level_rou
     """Machine-independent (the exact sum is one float everywhere; any machine's float sum of these
     residuals, 1e-3 px differences of terms of 1e5 * 800 px, rounds far beyond 1e-9 of the cost):
     the level the estimate reads and the level _check_map_level reads differ by more than it allows."""
-    from geocert.solvers.fractional import determinacy
+    from geocert.formulations.fractional import determinacy
     from geocert.verify.fractional import LEVEL_ROUNDING
 
     for seed, result in proven_far_resections.items():
@@ -718,7 +718,7 @@ def test_a_far_resections_centre_narrowed_one_ulp_past_its_proven_bound_is_refus
     """Class 6's fix allows the narrow side nothing: the recomputation is one float on every machine
     (fixed_order), so the stated intervals are the writer's bounds widened by STATED_SLACK of the
     half-width, and an end moved one ulp inside the bound recomputed here is refused."""
-    from geocert.solvers.fractional.resection_sublevel import STATED_SLACK, Scene, proven_centre
+    from geocert.formulations.fractional.resection_sublevel import STATED_SLACK, Scene, proven_centre
 
     for seed, result in proven_far_resections.items():
         item, matrix = _map_item(result)

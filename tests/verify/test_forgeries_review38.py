@@ -285,7 +285,7 @@ def test_the_uncertified_far_tracks_state_their_exact_cost_which_no_float_sum_ho
     figure's allowance of 1e-9 (so a float sum within 1e-9 of the exact one is luck, not a rule)."""
     from geocert.core import exact
     from geocert.core.geometry import cost_rounding
-    from geocert.solvers.fractional.items import TrackItem
+    from geocert.formulations.fractional.items import TrackItem
     from geocert.verify.fractional import figure_allowance
 
     norm = far_uncertified_tracks["certificate"]["options"]["norm"]
@@ -370,7 +370,7 @@ def test_the_understatement_is_over_5_per_cent_of_the_exact_cost(far_track_wide_
     (over 1e7 times OBJECTIVE_TOLERANCE of it)."""
     from geocert.core import exact
     from geocert.core.certificates import OBJECTIVE_TOLERANCE
-    from geocert.solvers.fractional.items import TrackItem
+    from geocert.formulations.fractional.items import TrackItem
 
     cameras = np.array(far_track_wide_gap["certificate"]["data"]["cameras"], dtype=float)
     track = far_track_wide_gap["certificate"]["data"]["tracks"][0]

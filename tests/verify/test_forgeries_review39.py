@@ -26,13 +26,13 @@ Found:
    camera), the point (3, 5, 40) * 1000 * 2^-1074 in front of them: exact cost 81.5 px^2 (the
    solver's own best point 81.2, uncertified), claimed 0: verifies. Rescaling the solution alone
    does not reach this one (its last coordinate is 1).
-   At fault: geocert/solvers/fractional/proof.py:residual_uncertainty (no absolute term for
+   At fault: geocert/formulations/fractional/proof.py:residual_uncertainty (no absolute term for
    underflow) as exact.needs_exact reads it in geocert/verify/checks.py:_check_residual_claim; the
    solutions read unscaled (items.TrackItem.solution for a point at infinity, MapItem.solution).
    Suggested fix at the cause: give residual_uncertainty an absolute term for underflow (each
    product's half of 2^-1074, a few 2^-1074 over the depth), or take the exact path wherever a
    projection's terms are below the normal range (2^-1022 times a margin), in the objective check,
-   the stacked check (solvers/fractional/stacked.py _check_group), fractional._stated_figure and
+   the stacked check (formulations/fractional/stacked.py _check_group), fractional._stated_figure and
    MapItems.check_returned alike; and read a homogeneous solution (a point at infinity, a map's
    matrix) scaled by a power of two to its largest entry near 1, as normalised_cameras does
    cameras (the exact residuals do not change).
@@ -96,7 +96,7 @@ DIRECTION = np.array([3.0, 5.0, 40.0, 0.0]) * 1000 * SUBNORMAL
 def _subnormal_track_certificate() -> dict:
     """A triangulation certificate of one track whose observations are this machine's float image
     of DIRECTION (the verifier's own projection), claiming DIRECTION at cost 0 by the trivial bound."""
-    from geocert.solvers.fractional.items import TrackItem
+    from geocert.formulations.fractional.items import TrackItem
 
     cameras = _cameras()
     proj = TrackItem((cameras, np.zeros((3, 2))), "L2L2", chart=False).raw_residuals(DIRECTION)[0]
@@ -138,7 +138,7 @@ def test_the_subnormal_direction_costs_over_1_px2_and_the_data_admit_no_cost_bel
     the claim "optimal at cost 0" is false whatever the direction."""
     from geocert.jobs.runner import solve_job
     from geocert.core import exact
-    from geocert.solvers.fractional.items import TrackItem
+    from geocert.formulations.fractional.items import TrackItem
 
     document = _subnormal_track_certificate()
     observations = np.array(document["data"]["tracks"][0]["points"])
@@ -168,7 +168,7 @@ def _rotating_camera_certificate() -> dict:
     panorama), and a finite point (3, 5, 40) * 1000 * 2^-1074 in front of them: every product
     behind its projections is subnormal. The observations are this machine's float image of it,
     claimed at cost 0 by the trivial bound."""
-    from geocert.solvers.fractional.items import TrackItem
+    from geocert.formulations.fractional.items import TrackItem
 
     rng = np.random.default_rng(2)
     K = np.array([[800.3, 0, 320.1], [0, 799.7, 240.2], [0, 0, 1]])
@@ -192,7 +192,7 @@ def test_the_finite_subnormal_point_costs_over_1_px2():
     solver's own best point on these data costs 81.2, uncertified): rescaling a point at infinity
     would not reach this one, whose last coordinate is 1."""
     from geocert.core import exact
-    from geocert.solvers.fractional.items import TrackItem
+    from geocert.formulations.fractional.items import TrackItem
 
     document = _rotating_camera_certificate()
     item = TrackItem((np.array(document["data"]["cameras"]), np.array(document["data"]["tracks"][0]["points"])),
@@ -219,7 +219,7 @@ def subnormal_map(request) -> dict:
     its targets this machine's float image under that matrix, claimed at cost 0 by the trivial
     bound, the exact residuals stated, no determinacy."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.fractional.items import MapItem
+    from geocert.formulations.fractional.items import MapItem
 
     result = copy.deepcopy(solve_job(_genuine_map_job(request.param)))
     certificate = result["certificate"]
@@ -253,7 +253,7 @@ def test_the_subnormal_map_costs_more_than_abs_gap_and_so_does_every_map(subnorm
     homography's 5.8e-6 against 4.85e-6; a resection's 1.5e4 against 7.6e3 px^2)."""
     from geocert.jobs.runner import solve_job
     from geocert.core import exact
-    from geocert.solvers.fractional.items import MapItem
+    from geocert.formulations.fractional.items import MapItem
 
     certificate = subnormal_map["certificate"]
     data = certificate["data"]["maps"][0]

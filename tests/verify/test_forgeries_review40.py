@@ -132,7 +132,7 @@ def test_the_scope_is_empty_and_the_claimed_point_is_outside_it():
     (0, 0)), 1e135 times max_residual; and no point is in scope, since view 0 asks |x| <=
     MAX_RESIDUAL and view 1 |x / 2 - TINY| <= MAX_RESIDUAL (x / 2 <= MAX_RESIDUAL / 2)."""
     from geocert.core import exact
-    from geocert.solvers.fractional.items import TrackItem
+    from geocert.formulations.fractional.items import TrackItem
 
     document = _empty_scope_certificate("L1L1")
     item = TrackItem((np.array(AXIS_CAMERAS), np.array(document["data"]["tracks"][0]["points"])), "L1L1",
@@ -243,7 +243,7 @@ def test_genuine_tracks_at_the_parallax_threshold_verify():
     verifies. Before, the writer's einsum cosines and the verifier's matmul ones differed in the
     last bit about half the time, and at a tie the warning (and determined) differed."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.fractional import determinacy as estimate
+    from geocert.formulations.fractional import determinacy as estimate
 
     centres = estimate._centres(LINE_CAMERAS)
 
@@ -327,7 +327,7 @@ def test_a_note_stating_a_radius_the_proof_does_not_prove_is_refused():
 
 @pytest.mark.parametrize("power", [0, 5, 60])
 def test_a_direction_just_above_the_normal_range_claimed_at_cost_0_is_refused(power):
-    from geocert.solvers.fractional.items import TrackItem
+    from geocert.formulations.fractional.items import TrackItem
     from tests.verify.test_forgeries_review39 import _subnormal_track_certificate
 
     document = _subnormal_track_certificate()

@@ -212,7 +212,7 @@ def _pooled_document(tracks: int, cameras: int, spanning: bool = False) -> dict:
     """The stored triangulation with ``cameras`` more cameras (no track's) and ``tracks`` more
     tracks (track 0's data, claim uncertified), each stating a level pooled over its own run of
     tracks (``spanning``: every track, split at its own index): one pool per track."""
-    from geocert.solvers.fractional.determinacy import pooled_level
+    from geocert.formulations.fractional.determinacy import pooled_level
 
     result = stored("triangulation_l2l2")
     certificate = result["certificate"]
@@ -297,7 +297,7 @@ def test_a_pool_stated_by_every_track_is_paid_once():
 
     document = _pooled_document(tracks=40, cameras=0)
     tracks = len(document["tracks"])
-    from geocert.solvers.fractional.determinacy import pooled_level
+    from geocert.formulations.fractional.determinacy import pooled_level
 
     most = fractional._Pools(document, document["certificate"]).bounds([[0, tracks]])[2]  # the level's figure
     for track in document["tracks"]:

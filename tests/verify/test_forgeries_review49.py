@@ -58,7 +58,7 @@ import json
 
 import pytest
 
-from geocert.solvers.fractional.determinacy import pooled_dof, pooled_level
+from geocert.formulations.fractional.determinacy import pooled_dof, pooled_level
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import stored
 from tests.verify.test_forgeries_review7 import far_two_view_track  # noqa: F401 (a fixture)

@@ -210,7 +210,7 @@ def _restated_level(result: dict, share: float) -> dict:
     import numpy as np
 
     from geocert.core.geometry import normalised_cameras
-    from geocert.solvers.fractional import determinacy as estimate
+    from geocert.formulations.fractional import determinacy as estimate
 
     forged = copy.deepcopy(result)
     data = forged["certificate"]["data"]
@@ -226,7 +226,7 @@ def _restated_level(result: dict, share: float) -> dict:
 
 
 def test_the_pooled_pair_verifies_and_its_level_restated_as_it_is_verifies(pooled_pair):
-    from geocert.solvers.fractional.determinacy import pooled_dof
+    from geocert.formulations.fractional.determinacy import pooled_dof
 
     assert [pooled_dof(t["determinacy"]["level"]) for t in pooled_pair["tracks"]] == [4, 4]
     assert verify_any(pooled_pair).valid
@@ -256,7 +256,7 @@ def test_the_floor_keeps_a_track_just_inside_the_writers_cut(inside):
     import numpy as np
     from scipy.special import chdtri
 
-    from geocert.solvers.fractional.determinacy import OUTLIER_TAIL, pooled_increase
+    from geocert.formulations.fractional.determinacy import OUTLIER_TAIL, pooled_increase
     from geocert.verify.pooled_floor import pooled_bounds
 
     costs = np.array([chdtri(1, 0.5)] * 4 + [chdtri(1, OUTLIER_TAIL) * inside])
@@ -270,7 +270,7 @@ def test_the_chi_square_points_are_scipys_for_every_track_length():
     import numpy as np
     from scipy.special import chdtri
 
-    from geocert.solvers.fractional.determinacy import OUTLIER_TAIL
+    from geocert.formulations.fractional.determinacy import OUTLIER_TAIL
     from geocert.verify.fractional import MAX_VIEWS
     from geocert.verify.pooled_floor import CHI2_ROUNDING, EXACT_CHI2_DOF, OUTLIER_TAIL as TAIL, chi_square_points
 

@@ -560,7 +560,7 @@ class TestRestatedCalibrationStagesAbsoluteFloor:
 def _abs_gap_caps() -> dict:
     from geocert.solvers.autocalibration.problem import MAX_ABS_GAP as AUTOCALIBRATION
     from geocert.solvers.bilinear.options import MAX_ABS_GAP as BILINEAR
-    from geocert.solvers.fractional.options import MAX_ABS_GAP as RESIDUALS
+    from geocert.formulations.fractional.options import MAX_ABS_GAP as RESIDUALS
 
     return {"triangulation": RESIDUALS, "resection": RESIDUALS, "homography": RESIDUALS, "bilinear": BILINEAR,
             "autocalibration": AUTOCALIBRATION, "reconstruction": RESIDUALS}

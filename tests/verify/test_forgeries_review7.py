@@ -327,8 +327,8 @@ def proven_at_own_level(result: dict, restate_level: bool = False) -> dict:
     """``result`` (far_two_view_track's) with its far track's interval proven at the track's own
     level (convexity_path.track_sublevel) and stated proven; ``restate_level``: its determinacy's
     cost_increase restated at that level too (its level sentence, naming the pooled variance, kept)."""
-    from geocert.solvers.fractional.convexity_path import track_sublevel
-    from geocert.solvers.fractional.determinacy import proven_track
+    from geocert.formulations.fractional.convexity_path import track_sublevel
+    from geocert.formulations.fractional.determinacy import proven_track
 
     forged = copy.deepcopy(result)
     track, claim = forged["tracks"][-1], forged["certificate"]["items"][-1]

@@ -98,9 +98,9 @@ def _interval_at(result: dict, level: float) -> dict:
     test passes) at cost increase ``level``, the proof's sublevel and the determinacy's
     proven_intervals both restated."""
     from geocert.core.geometry import normalised_cameras
-    from geocert.solvers.fractional.convexity import ball_intervals, sublevel_radii
-    from geocert.solvers.fractional.determinacy import proven_track
-    from geocert.solvers.fractional.flat import FlatTracks
+    from geocert.formulations.fractional.convexity import ball_intervals, sublevel_radii
+    from geocert.formulations.fractional.determinacy import proven_track
+    from geocert.formulations.fractional.flat import FlatTracks
 
     forged = copy.deepcopy(result)
     track, claim = forged["tracks"][-1], forged["certificate"]["items"][-1]
@@ -254,7 +254,7 @@ class TestStackedPathRecordsOpen:
 
     def test_the_genuine_certificate_verifies_on_the_stacked_path(self):
         from geocert.verify.fractional import MAX_VIEWS
-        from geocert.solvers.fractional.stacked import proven_tracks
+        from geocert.formulations.fractional.stacked import proven_tracks
         from geocert.verify.checks import checked_options
 
         result = stored("triangulation_l2l2")
@@ -542,7 +542,7 @@ class TestPooledLevelRestated:
         assert _valid(result) and _holds(result["tracks"][-1]["determinacy"]["proven_intervals"], truth)
 
     def test_the_forgery_is_false(self, far_two_view_track):  # noqa: F811
-        from geocert.solvers.fractional.determinacy import pooled_for
+        from geocert.formulations.fractional.determinacy import pooled_for
 
         truth, result = far_two_view_track
         forged = _proven_at_own_level(result)

@@ -44,8 +44,8 @@ def _map_proven_at(result: dict, level: float) -> dict:
     """``result`` with its map's proven interval proven again, genuinely (resection_sublevel: the
     enclosure test and the rounds pass), at cost increase ``level``: the proof's sublevel, the
     determinacy's proven_intervals and the determinacy's own cost_increase all restated."""
-    from geocert.solvers.fractional.determinacy import proven_map
-    from geocert.solvers.fractional.resection_sublevel import resection_sublevel
+    from geocert.formulations.fractional.determinacy import proven_map
+    from geocert.formulations.fractional.resection_sublevel import resection_sublevel
 
     forged = copy.deepcopy(result)
     data = forged["certificate"]["data"]["maps"][0]
@@ -170,7 +170,7 @@ class TestOptionsTheSolverRefuses:
     def test_the_solvers_own_edges_verify(self):
         """The verifier reads the ranges the solver and the API state (OPTION_RANGES,
         JOB_LIMIT_RANGE), so each range's own inclusive edge verifies."""
-        from geocert.solvers.fractional.options import MapOptions
+        from geocert.formulations.fractional.options import MapOptions
         from tests.verify.test_forgeries import stored
 
         edges = [("max_nodes", MapOptions.OPTION_RANGES["max_nodes"]["ge"]),

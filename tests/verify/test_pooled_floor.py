@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.special import chdtri, stdtrit
 
-from geocert.solvers.fractional.determinacy import COVERAGE, OUTLIER_TAIL, pooled_increase
+from geocert.formulations.fractional.determinacy import COVERAGE, OUTLIER_TAIL, pooled_increase
 from geocert.verify.fractional import MAX_VIEWS
 from geocert.verify.pooled_floor import (CHI2_MARGIN, Z_OUTLIER, pooled_floor, student_floor,
                                                      wilson_hilferty)

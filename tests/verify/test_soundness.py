@@ -20,8 +20,8 @@ from geocert.core.conic import ConicStatus, solve_conic
 from geocert.core.geometry import InputError
 from geocert.solvers.fractional.search import root_region
 from geocert.jobs.runner import parse_job, solve_job
-from geocert.solvers.fractional.relaxation import Relaxation
-from geocert.solvers.fractional.charts import Chart
+from geocert.formulations.fractional.relaxation import Relaxation
+from geocert.formulations.fractional.charts import Chart
 from geocert.core.coverage import uncovered_part
 from geocert.verify.checks import verify_any, verify_document
 from geocert.core.bnb import Box
@@ -359,7 +359,7 @@ class TestNoCrashNoExhaustion:
         rehash(doc)
         # The old verifier built this 18-dimensional program (2^18 rows, 18 s and 7 GB); now the
         # data are refused as they are read, and no chart is ever built.
-        from geocert.solvers.fractional import items
+        from geocert.formulations.fractional import items
 
         def never(*args, **kwargs):
             raise AssertionError("a program was built for a kind or dimension not served")
@@ -367,7 +367,7 @@ class TestNoCrashNoExhaustion:
         assert failed_check(doc) == "data"
 
     def test_l1_relaxations_grow_linearly_with_the_dimension(self):
-        from geocert.solvers.fractional.charts import MapChart
+        from geocert.formulations.fractional.charts import MapChart
         rows = {}
         for n in (2, 3):
             rng = np.random.default_rng(n)
@@ -629,7 +629,7 @@ class TestHostileReview:
         # The point or matrix returned is rounded from the search's variables: its cost and
         # residuals are recomputed from the raw data, and "optimal" survives only when the gap
         # and the scope still hold for them.
-        from geocert.solvers.fractional.options import TriangulationOptions
+        from geocert.formulations.fractional.options import TriangulationOptions
         from geocert.solvers.fractional.search import recomputed_status
         residuals = np.array([[3.0, 0.0], [0.0, 1.0]])
         options = TriangulationOptions(rel_gap=1e-3, max_residual=3.0)
@@ -706,8 +706,8 @@ class TestHostileReviewRoundTwo:
         # Dual bounds hold on R ∩ claim. A claim box that R does not meet (one depth -1 there)
         # gets "proven" ranges from a Farkas ray; a depth leaf then "proves" any bound. The
         # solution must be a point of R inside the claim box.
-        from geocert.solvers.fractional.relaxation import residual_region, root_bounds, gamma_for
-        from geocert.solvers.fractional.items import TrackItem
+        from geocert.formulations.fractional.relaxation import residual_region, root_bounds, gamma_for
+        from geocert.formulations.fractional.items import TrackItem
         from geocert.core.geometry import norm_cost, normalised_cameras
         cameras = copy.deepcopy(CAMERAS) + [[[800, 0, 320, 0], [0, 800, 240, -800], [0.3, 0, 1, 0]]]
         data = {"cameras": cameras, "tracks": [{"views": [0, 1, 2], "points": [[330, 250], [250, 251], [320, 200]]}]}
@@ -789,7 +789,7 @@ class TestProgramCheck:
 
     @staticmethod
     def altered(monkeypatch, change) -> None:
-        from geocert.solvers.fractional.items import TrackItem
+        from geocert.formulations.fractional.items import TrackItem
         from geocert.verify.fractional import TrackItems
 
         original = TrackItem.__init__

@@ -1,4 +1,4 @@
-"""Hostile documents against the verifier's stacked path (geocert/solvers/fractional/stacked.py):
+"""Hostile documents against the verifier's stacked path (geocert/formulations/fractional/stacked.py):
 each is refused by the per-item path, and must not be proven together either; or costs the stacked
 path far more than the per-item path would."""
 
@@ -11,7 +11,7 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.core.certificates import pack
-from geocert.solvers.fractional import stacked
+from geocert.formulations.fractional import stacked
 from geocert.verify.fractional import TrackItems
 from geocert.verify.checks import checked_options, verify_any
 

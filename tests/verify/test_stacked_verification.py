@@ -1,4 +1,4 @@
-"""The verifier's stacked path (geocert/solvers/fractional/stacked.py): it rebuilds the per-item
+"""The verifier's stacked path (geocert/formulations/fractional/stacked.py): it rebuilds the per-item
 path's charts and relaxations exactly, proves every track of the common shape, reports what the
 per-item path reports, and never proves a claim the per-item path refuses."""
 
@@ -16,11 +16,11 @@ from geocert.core.bnb import Box
 from geocert.core.certificates import pack, unpack
 from geocert.core.geometry import normalised_cameras
 from geocert.core.strict import Invalid
-from geocert.solvers.fractional import stacked
-from geocert.solvers.fractional.charts import Chart
-from geocert.solvers.fractional.items import TrackItem
+from geocert.formulations.fractional import stacked
+from geocert.formulations.fractional.charts import Chart
+from geocert.formulations.fractional.items import TrackItem
 from geocert.verify.fractional import TrackItems
-from geocert.solvers.fractional.relaxation import Relaxation
+from geocert.formulations.fractional.relaxation import Relaxation
 from geocert.verify.checks import checked_options, verify_any, verify_item
 
 from tests.support import every_track_searched, project, random_cameras

@@ -12,7 +12,7 @@ import numpy as np
 from geocert.solvers.autocalibration.problem import CHIRALITY, AutocalibrationOptions
 from geocert.core.declared_options import option, option_ranges, redeclared
 from geocert.core.geometry import InputError
-from geocert.solvers.fractional.options import FractionalOptions, ResidualOptions, SearchOptions
+from geocert.formulations.fractional.options import FractionalOptions, ResidualOptions, SearchOptions
 from geocert.solvers.reconstruction import run_control
 
 AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")

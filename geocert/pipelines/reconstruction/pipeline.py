@@ -22,7 +22,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from geocert.solvers.fractional.options import MapOptions, TriangulationOptions
+from geocert.formulations.fractional.options import MapOptions, TriangulationOptions
 from geocert.solvers.reconstruction import (bundle, calibration_claim, calibration_tie, camera_claim,
                                            depth_reversal_claim, projective, structure, upgrade)
 from geocert.pipelines.reconstruction import ambiguity, claims

@@ -13,7 +13,7 @@ from geocert.solvers.autocalibration import metric_relaxation
 from geocert.core.bnb import BnbOptions, Progress
 from geocert.core.declared_options import option, redeclared
 from geocert.core.geometry import InputError
-from geocert.solvers.fractional.options import MAX_REL_GAP, SearchOptions
+from geocert.formulations.fractional.options import MAX_REL_GAP, SearchOptions
 
 METHODS = ("stratified", "direct")
 STRATIFIED_ABS_GAP = 1e-12

@@ -30,7 +30,7 @@ from geocert.core.cones import SMALLEST_NORMAL, proves_infeasible, safe_lower_bo
 from geocert.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
                                  numbers as _numbers, record)
 from geocert.core.coverage import SIDE_TOLERANCE, extended, uncovered_part, widened
-from geocert.solvers.fractional.proof import LEAF_CLAIM_TOLERANCE  # the record's allowance, as the fractional kinds'
+from geocert.formulations.fractional.proof import LEAF_CLAIM_TOLERANCE  # the record's allowance, as the fractional kinds'
 
 MAX_LEAVES = 200_000
 # Tightening rounds of a metric proof (metric.tighten makes at most 12). Each builds a program

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 from geocert.core.declared_options import option, redeclared
 from geocert.core.geometry import InputError
-from geocert.solvers.fractional.options import CERTIFICATE_MODES, JobLimit, SearchOptions, _describe, _within
+from geocert.formulations.fractional.options import CERTIFICATE_MODES, JobLimit, SearchOptions, _describe, _within
 
 NORMS = ("L1L1", "L2L2")
 # abs_gap's cap, in the cost's units (image units, squared for L2L2): a frame's cost sums its

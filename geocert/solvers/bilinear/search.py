@@ -24,7 +24,7 @@ from geocert.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bo
 from geocert.core.certificates import pack
 from geocert.core.conic import ConicStatus, ReusableConicProgram
 from geocert.core.cones import proves_infeasible, safe_lower_bounds_and_margins
-from geocert.solvers.fractional.results import ItemResult
+from geocert.formulations.fractional.results import ItemResult
 
 # With camera_bound null the box is problem.default_half_width of the incumbent; when the camera the
 # search returns asks a wider one, the search runs again on it (at most this many times in all).

@@ -1,3 +1,3 @@
-"""Sums of ratios (thesis chapter 5): triangulation, resection and homographies as fractional
-programs (charts), their convex relaxations (relaxation), the search (search), the two kinds'
-solvers (triangulation, maps) and what the verifier needs of them (items, proof)."""
+"""Sums of ratios (thesis chapter 5): the branch-and-bound search (search, sublevel_search), the
+two kinds' solvers (triangulation, maps) and the batched tracks (many_tracks), on the programs and
+proofs of geocert.formulations.fractional."""

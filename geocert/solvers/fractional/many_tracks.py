@@ -48,17 +48,17 @@ from geocert.core.certificates import LeafProof, RootProof, SearchProof, encode,
 from geocert.core.conic import ConicStatus, ReusableConicProgram
 from geocert.core.cones import ConeSpec
 from geocert.core.geometry import cost_roundings, normalised_cameras
-from geocert.solvers.fractional import stacked
-from geocert.solvers.fractional.charts import Chart
-from geocert.solvers.fractional.columns import TrackResults
-from geocert.solvers.fractional.convexity_path import certify_tracks
-from geocert.solvers.fractional.options import TriangulationOptions
-from geocert.solvers.fractional.relaxation import FractionalProgram, cost_unit, gamma_for
-from geocert.solvers.fractional.results import SearchCertificate, TrackResult, claim_of
+from geocert.formulations.fractional import stacked
+from geocert.formulations.fractional.charts import Chart
+from geocert.formulations.fractional.columns import TrackResults
+from geocert.formulations.fractional.convexity_path import certify_tracks
+from geocert.formulations.fractional.options import TriangulationOptions
+from geocert.formulations.fractional.relaxation import FractionalProgram, cost_unit, gamma_for
+from geocert.formulations.fractional.results import SearchCertificate, TrackResult, claim_of
 from geocert.solvers.fractional.search import (MAX_SCALE, ROOT_SUBSET, branch_directions, depth_subspace,
                                                local_refine, recomputed_status, root_region)
-from geocert.solvers.fractional.items import PROGRAM_REFUSED, UNDISCOUNTABLE, TrackItem, refused_by_verifier
-from geocert.solvers.fractional.proof import SOLVER_DISCOUNT_FACTOR, track_uncertainty
+from geocert.formulations.fractional.items import PROGRAM_REFUSED, UNDISCOUNTABLE, TrackItem, refused_by_verifier
+from geocert.formulations.fractional.proof import SOLVER_DISCOUNT_FACTOR, track_uncertainty
 from geocert.solvers.fractional.triangulation import track_result, triangulate
 from geocert.core import barrier, self_check
 

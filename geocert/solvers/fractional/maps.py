@@ -20,20 +20,20 @@ import numpy as np
 
 from geocert.core import summary_notes
 from geocert.core.bnb import Progress
-from geocert.solvers.fractional.charts import MapChart, normaliser
-from geocert.solvers.fractional.options import MapOptions
-from geocert.solvers.fractional.resection_bound import resection_bound
-from geocert.solvers.fractional.results import LocalCertificate, MapResult, claim_of
+from geocert.formulations.fractional.charts import MapChart, normaliser
+from geocert.formulations.fractional.options import MapOptions
+from geocert.formulations.fractional.resection_bound import resection_bound
+from geocert.formulations.fractional.results import LocalCertificate, MapResult, claim_of
 from geocert.solvers.fractional.search import (LARGE_BOUND_TOLERANCE, Early, Reasons, local_refine, prepare,
                                                recomputed_status, search)
 from geocert.core.certificates import residual_rounding
-from geocert.solvers.fractional.items import (MapItem, discounted, refused_by_verifier, stated_residuals,
+from geocert.formulations.fractional.items import (MapItem, discounted, refused_by_verifier, stated_residuals,
                                               stated_tolerance)
 from geocert.core.self_check import checked_solve
 from geocert.core.determinacy import certified_gap
-from geocert.solvers.fractional.proof import program_allowance, program_discount
-from geocert.solvers.fractional.resection_leaves import NORMS as LEAF_NORMS, l1_cost_increase
-from geocert.solvers.fractional.resection_centre_l1 import l1_centre
+from geocert.formulations.fractional.proof import program_allowance, program_discount
+from geocert.formulations.fractional.resection_leaves import NORMS as LEAF_NORMS, l1_cost_increase
+from geocert.formulations.fractional.resection_centre_l1 import l1_centre
 from geocert.solvers.fractional.sublevel_search import leaves_sublevel
 
 

@@ -22,9 +22,9 @@ from geocert.core.certificates import CapProof, LeafProof, RootProof, SearchProo
 from geocert.core.conic import ConicStatus, ReusableConicProgram, solve_conic
 from geocert.core.cones import ConeSpec, proves_infeasible, safe_lower_bound
 from geocert.core.geometry import cost_rounding, lengths, norm_cost, norm_terms, residual_lengths
-from geocert.solvers.fractional.options import FractionalOptions
-from geocert.solvers.fractional.results import SearchCertificate
-from geocert.solvers.fractional.relaxation import (EPS_DEPTH, ConicData, FractionalProgram, Relaxation, complete_functionals,
+from geocert.formulations.fractional.options import FractionalOptions
+from geocert.formulations.fractional.results import SearchCertificate
+from geocert.formulations.fractional.relaxation import (EPS_DEPTH, ConicData, FractionalProgram, Relaxation, complete_functionals,
                          cost_unit, gamma_for, residual_region, root_bounds, tightening_objective, with_cost_cap)
 
 MAX_SCALE = 1e3

@@ -17,9 +17,9 @@ import numpy as np
 
 from geocert.core.bnb import Box, BoxStatus
 from geocert.core.certificates import SearchProof, encode
-from geocert.solvers.fractional.charts import MapChart
-from geocert.solvers.fractional.relaxation import gamma_for
-from geocert.solvers.fractional.resection_leaves import STATED_PAD, depth_row_map, hull
+from geocert.formulations.fractional.charts import MapChart
+from geocert.formulations.fractional.relaxation import gamma_for
+from geocert.formulations.fractional.resection_leaves import STATED_PAD, depth_row_map, hull
 from geocert.solvers.fractional.search import BoxProblem, Prepared, root_region
 
 # Boxes bounded at the level (each a few small SOCPs with node tightening). Measured on two

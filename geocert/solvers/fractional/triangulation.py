@@ -16,14 +16,14 @@ from typing import Callable
 import numpy as np
 
 from geocert.core.bnb import Progress
-from geocert.solvers.fractional.charts import Chart, camera_centres
-from geocert.solvers.fractional.convexity_path import track_sublevel
-from geocert.solvers.fractional.options import NORMS, TriangulationOptions
-from geocert.solvers.fractional.results import SearchCertificate, TrackResult, claim_of
+from geocert.formulations.fractional.charts import Chart, camera_centres
+from geocert.formulations.fractional.convexity_path import track_sublevel
+from geocert.formulations.fractional.options import NORMS, TriangulationOptions
+from geocert.formulations.fractional.results import SearchCertificate, TrackResult, claim_of
 from geocert.solvers.fractional.search import Early, Reasons, depth_subspace, prepare, recomputed_status, search
 from geocert.core.certificates import residual_rounding
 from geocert.core.geometry import normalised_cameras, reprojection_residuals
-from geocert.solvers.fractional.items import (TrackItem, discounted, refused_by_verifier, stated_residuals,
+from geocert.formulations.fractional.items import (TrackItem, discounted, refused_by_verifier, stated_residuals,
                                               stated_tolerance)
 from geocert.core.self_check import checked_solve
 

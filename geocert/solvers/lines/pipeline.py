@@ -13,7 +13,7 @@ import numpy as np
 
 from geocert.core.geometry import InputError
 from geocert.core.declared_options import option, redeclared
-from geocert.solvers.fractional.options import JobLimit, _describe, _within
+from geocert.formulations.fractional.options import JobLimit, _describe, _within
 from geocert.solvers.lines import align, incremental, linear, polynomial
 from geocert.solvers.lines.geometry import LineSet, Rig, directions_and_points, in_depth_units, line_set, \
     reprojection_residuals

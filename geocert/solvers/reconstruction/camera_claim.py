@@ -41,7 +41,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from geocert.solvers.fractional.options import MAX_ABS_GAP as RESIDUAL_MAX_ABS_GAP
+from geocert.formulations.fractional.options import MAX_ABS_GAP as RESIDUAL_MAX_ABS_GAP
 
 # Chi-square quantiles at 0.999 for 1 to 5 degrees of freedom (scipy.stats.chi2.ppf(0.999, d)).
 CHI2_999 = {1: 10.828, 2: 13.816, 3: 16.266, 4: 18.467, 5: 20.515}

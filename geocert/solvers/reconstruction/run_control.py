@@ -13,7 +13,7 @@ from typing import Any
 
 from geocert.core.geometry import is_number
 from geocert.core.strict import Invalid
-from geocert.solvers.fractional.options import FractionalOptions, SearchOptions
+from geocert.formulations.fractional.options import FractionalOptions, SearchOptions
 from geocert.solvers.reconstruction import camera_claim
 
 CAMERA_MODELS = ("simple", "varying", "full")

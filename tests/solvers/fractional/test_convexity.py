@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from geocert.solvers.fractional import flat as flat_tracks
+from geocert.formulations.fractional import flat as flat_tracks
 from geocert.solvers.fractional.many_tracks import triangulate_many
-from geocert.solvers.fractional.convexity import (PAIRS, bounds_at, convexity_bounds, outside_range, positive_definite,
+from geocert.formulations.fractional.convexity import (PAIRS, bounds_at, convexity_bounds, outside_range, positive_definite,
                                                   track_bound)
 from geocert.solvers.fractional.triangulation import TriangulationOptions
 
@@ -270,7 +270,7 @@ def test_the_convexity_paths_results_hold_against_the_branch_and_bound(dinosaur)
     residuals give, a lower bound below the branch and bound's certified optimum and within the
     tolerance of its cost; it certifies nearly every Dinosaur track."""
     from geocert.core.geometry import norm_cost, normalised_cameras, reprojection_residuals
-    from geocert.solvers.fractional.convexity_path import certify_tracks
+    from geocert.formulations.fractional.convexity_path import certify_tracks
 
     cameras, tracks = dinosaur
     options = TriangulationOptions(norm="L2L2", rel_gap=1e-3)
@@ -295,7 +295,7 @@ def test_the_convexity_path_certifies_nothing_the_branch_and_bound_refutes(noise
     path certifies lies below the branch and bound's certified optimum of the track, and a
     track it leaves is left whole (None)."""
     from geocert.core.geometry import normalised_cameras
-    from geocert.solvers.fractional.convexity_path import certify_tracks
+    from geocert.formulations.fractional.convexity_path import certify_tracks
 
     rng = np.random.default_rng(seed("path", str(noise)))
     cams, tracks = scene(rng, 120, (2, 4), noise, cameras=6)
@@ -315,8 +315,8 @@ def test_every_bound_the_path_claims_is_one_a_checker_proves_track_by_track(dino
     verifier computes it), proves at least the lower bound the batched path claimed, for every
     certified Dinosaur track (the solver's doubled allowances absorb the sums' last bits)."""
     from geocert.core.geometry import normalised_cameras
-    from geocert.solvers.fractional.convexity import track_bound
-    from geocert.solvers.fractional.convexity_path import certify_tracks
+    from geocert.formulations.fractional.convexity import track_bound
+    from geocert.formulations.fractional.convexity_path import certify_tracks
 
     cameras, tracks = dinosaur
     cameras = normalised_cameras(cameras)
@@ -335,7 +335,7 @@ def test_a_track_within_abs_gap_of_zero_is_left_to_the_trivial_bound():
     """Exact observations: the cost is within abs_gap of 0, which the trivial bound certifies
     (the search's first step); the convexity path leaves such a track."""
     from geocert.core.geometry import normalised_cameras
-    from geocert.solvers.fractional.convexity_path import certify_tracks
+    from geocert.formulations.fractional.convexity_path import certify_tracks
 
     rng = np.random.default_rng(seed("exact"))
     cams = random_cameras(rng, 6)

@@ -10,7 +10,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from geocert.solvers.fractional.determinacy import exact_squared_residuals
+from geocert.formulations.fractional.determinacy import exact_squared_residuals
 
 
 def _rational(source, target, matrix) -> Fraction:

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from geocert.core.determinacy import information_intervals
-from geocert.solvers.fractional import homography_estimate
-from geocert.solvers.fractional.fixed_order import symmetric_eigen
+from geocert.formulations.fractional import homography_estimate
+from geocert.formulations.fractional.fixed_order import symmetric_eigen
 from tests.verify.test_forgeries_review34 import _refused, _valid
 from tests.verify.test_forgeries_review37 import _far_homography
 

@@ -17,10 +17,10 @@ import pytest
 
 from testing.hostile_maps import options_for, problem, refused
 from geocert.verify import checks as verify
-from geocert.solvers.fractional import proof
-from geocert.solvers.fractional.items import MapItem, refused_by_verifier, stated_residuals
+from geocert.formulations.fractional import proof
+from geocert.formulations.fractional.items import MapItem, refused_by_verifier, stated_residuals
 from geocert.solvers.fractional.maps import fit_map
-from geocert.solvers.fractional.options import MapOptions
+from geocert.formulations.fractional.options import MapOptions
 from tests.support import loose_gaps
 
 # (seed, problem, norm): certified and refused ("the program's residuals differ from the data's").
@@ -88,7 +88,7 @@ class TestGeoreferencedResection:
         # The allowance for the terms' round-off (certificates.TERMS_ROUNDING) must not hide a
         # program built wrong: one coefficient of one observation off by a millionth of itself.
         from geocert.core.strict import Invalid
-        from geocert.solvers.fractional.items import MapItem
+        from geocert.formulations.fractional.items import MapItem
 
         X, u = georeferenced_resection(0)
         result = fit_map(X, u, options_for("L2L2"))

@@ -21,8 +21,8 @@ import pytest
 from testing.hostile_triangulation import refused, scene
 from geocert.core.geometry import normalised_cameras
 from geocert.core.strict import Invalid
-from geocert.solvers.fractional.items import TrackItem
-from geocert.solvers.fractional.proof import check_program
+from geocert.formulations.fractional.items import TrackItem
+from geocert.formulations.fractional.proof import check_program
 from geocert.solvers.fractional.many_tracks import triangulate_many
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 

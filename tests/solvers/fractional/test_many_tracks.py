@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from geocert.solvers.datasets import load_dinosaur
-from geocert.solvers.fractional import many_tracks, stacked
-from geocert.solvers.fractional.results import LocalCertificate, claim_of
+from geocert.solvers.fractional import many_tracks
+from geocert.formulations.fractional import stacked
+from geocert.formulations.fractional.results import LocalCertificate, claim_of
 from geocert.solvers.fractional.triangulation import TriangulationOptions, triangulate
 from geocert.verify.checks import checked_options, verify_arrays
 
@@ -179,7 +180,7 @@ def test_the_batched_refinement_reaches_scipys_minimum(dinosaur):
     """The batched LM from the DLT start ends at least as low as search.local_refine (MINPACK's
     LM, tolerances 1e-8) on every track's L2L2 cost, to 1e-10 relative."""
     from geocert.core.geometry import normalised_cameras
-    from geocert.solvers.fractional.relaxation import FractionalProgram
+    from geocert.formulations.fractional.relaxation import FractionalProgram
     from geocert.solvers.fractional.search import local_refine
 
     cameras, tracks = dinosaur

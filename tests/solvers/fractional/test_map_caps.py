@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from geocert.verify import checks as verify
-from geocert.solvers.fractional.results import claim_of
+from geocert.formulations.fractional.results import claim_of
 from geocert.core.bnb import Box, BoxStatus
 from geocert.core.geometry import norm_terms
 from geocert.solvers.fractional import search
-from geocert.solvers.fractional.charts import MapChart
+from geocert.formulations.fractional.charts import MapChart
 from geocert.solvers.fractional.maps import _REASONS, dlt, fit_map
-from geocert.solvers.fractional.options import MapOptions
+from geocert.formulations.fractional.options import MapOptions
 from geocert.solvers.fractional.search import Prepared, prepare
 from geocert.solvers.fractional.triangulation import NORMS
 

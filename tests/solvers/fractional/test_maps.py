@@ -9,13 +9,13 @@ from hypothesis import strategies as st
 
 from testing.baselines import map_dlt_lm
 from geocert.core.bnb import Box, BoxStatus
-from geocert.solvers.fractional.charts import MapChart, normaliser
+from geocert.formulations.fractional.charts import MapChart, normaliser
 from geocert.core.conic import ConicStatus, solve_conic
 from geocert.solvers.fractional.search import Prepared, prepare
 from geocert.core.geometry import InputError, norm_cost
 from geocert.solvers.fractional.inputs import check_correspondences
 from geocert.solvers.fractional.maps import _REASONS, dlt, fit_map
-from geocert.solvers.fractional.options import MapOptions
+from geocert.formulations.fractional.options import MapOptions
 from geocert.solvers.fractional.triangulation import NORMS
 
 from tests.support import apply, scene, seed
@@ -226,7 +226,7 @@ def test_root_region_from_a_subset_of_points_is_proven_for_all(norm, monkeypatch
     region, the verifier accepts the full certificate, and the subset holds the reference point."""
     import dataclasses
 
-    from geocert.solvers.fractional.results import claim_of
+    from geocert.formulations.fractional.results import claim_of
     from geocert.verify import checks as verify
     from geocert.solvers.fractional import search
 
@@ -338,7 +338,7 @@ def test_an_l2l2_proof_says_its_relaxation_and_the_verifier_holds_it_to_it(monke
     import copy
     import dataclasses
 
-    from geocert.solvers.fractional.results import claim_of
+    from geocert.formulations.fractional.results import claim_of
     from geocert.verify import checks as verify
     from geocert.solvers.fractional import maps
 
@@ -380,7 +380,7 @@ def test_root_tightening_stops_once_the_root_bound_closes_and_the_proof_still_ve
     round, and are not checked.)"""
     import dataclasses
 
-    from geocert.solvers.fractional.results import claim_of
+    from geocert.formulations.fractional.results import claim_of
     from geocert.verify import checks as verify
     from geocert.solvers.fractional import maps, search
 

@@ -13,8 +13,8 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers.fractional.many_tracks import triangulate_many
-from geocert.solvers.fractional.convexity import ball_intervals
-from geocert.solvers.fractional.determinacy import tracks_many
+from geocert.formulations.fractional.convexity import ball_intervals
+from geocert.formulations.fractional.determinacy import tracks_many
 from geocert.solvers.fractional.triangulation import TriangulationOptions
 from geocert.verify.checks import verify_any
 
@@ -112,8 +112,8 @@ def test_the_terms_moved_to_a_level_are_the_ones_computed_at_it():
     """The convexity path reuses its terms at the sublevel's level (at_level): the radii are those
     of the terms computed afresh at it, bit for bit, so the verifier's recomputation agrees."""
     from geocert.core.geometry import normalised_cameras
-    from geocert.solvers.fractional.convexity import at_level, convexity_terms, sublevel_radii
-    from geocert.solvers.fractional.flat import FlatTracks, linear, refine
+    from geocert.formulations.fractional.convexity import at_level, convexity_terms, sublevel_radii
+    from geocert.formulations.fractional.flat import FlatTracks, linear, refine
 
     rng = np.random.default_rng(seed("proven", "at level"))
     cams, tracks, _ = scene(rng, 200, (2, 10), 1.0)

@@ -7,7 +7,7 @@ import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from geocert.solvers.fractional import relaxation
+from geocert.formulations.fractional import relaxation
 from geocert.core.bnb import Box, BoxStatus
 from geocert.solvers.fractional.search import Prepared
 from geocert.solvers.fractional.triangulation import NORMS, TriangulationOptions, prepare_track

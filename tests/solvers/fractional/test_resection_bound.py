@@ -12,9 +12,9 @@ import pytest
 from geocert.core.strict import Invalid
 from geocert.solvers.fractional import maps
 from geocert.solvers.fractional.maps import fit_map
-from geocert.solvers.fractional.options import MapOptions
-from geocert.solvers.fractional.resection_bound import resection_bound
-from geocert.solvers.fractional.results import claim_of
+from geocert.formulations.fractional.options import MapOptions
+from geocert.formulations.fractional.resection_bound import resection_bound
+from geocert.formulations.fractional.results import claim_of
 from geocert.verify.checks import verify_arrays
 
 K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])

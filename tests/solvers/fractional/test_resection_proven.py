@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.fractional.resection_sublevel import Scene, proven_centre
+from geocert.formulations.fractional.resection_sublevel import Scene, proven_centre
 from geocert.verify.checks import verify_any
 
 from tests.support import map_job, scene, seed, forged_sublevel, refusal

@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from geocert.solvers.fractional import resection_sublevel
-from geocert.solvers.fractional.fixed_order import cholesky, cholesky_completes
+from geocert.formulations.fractional import resection_sublevel
+from geocert.formulations.fractional.fixed_order import cholesky, cholesky_completes
 
 
 def one_at_a_time(M: np.ndarray, allowance: float, steps: int) -> float | None:

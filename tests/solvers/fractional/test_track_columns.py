@@ -1,4 +1,4 @@
-"""Many tracks' results as columns (geocert/solvers/fractional/columns.py): triangulate_many keeps
+"""Many tracks' results as columns (geocert/formulations/fractional/columns.py): triangulate_many keeps
 the tracks its convexity path certifies as arrays, makes a TrackResult for one only when it is
 asked for, and what it makes is the certified result the verifier accepts; the triangulation
 kind's documents and determinacy read the columns and say what the objects would."""
@@ -13,10 +13,10 @@ import pytest
 
 from geocert.kinds.triangulation import track_document, track_documents
 from geocert.core.geometry import norm_cost, reprojection_residuals
-from geocert.solvers.fractional import determinacy
+from geocert.formulations.fractional import determinacy
 from geocert.solvers.fractional.many_tracks import triangulate_many
-from geocert.solvers.fractional.columns import TrackResults, solutions
-from geocert.solvers.fractional.results import LocalCertificate, claim_of
+from geocert.formulations.fractional.columns import TrackResults, solutions
+from geocert.formulations.fractional.results import LocalCertificate, claim_of
 from geocert.solvers.fractional.triangulation import TriangulationOptions
 from geocert.verify.checks import verify_arrays
 

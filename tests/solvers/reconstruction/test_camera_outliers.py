@@ -11,7 +11,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from geocert.solvers.fractional.options import MapOptions
+from geocert.formulations.fractional.options import MapOptions
 from geocert.solvers.reconstruction import camera_claim, structure
 from geocert.verify.reconstruction import camera_maps
 from geocert.verify.checks import verify_any

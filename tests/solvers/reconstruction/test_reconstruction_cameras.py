@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geocert.solvers.fractional.options import MapOptions
+from geocert.formulations.fractional.options import MapOptions
 from geocert.solvers.reconstruction import camera_claim, structure, synthetic
 
 

@@ -31,9 +31,9 @@ import numpy as np
 from geocert.core.determinacy import SIGMAS, proven_document
 from geocert.core.geometry import norm_cost
 from geocert.core.strict import Invalid, number, numbers, record
-from geocert.solvers.fractional.charts import MapChart
-from geocert.solvers.fractional.proof import checked_leaves
-from geocert.solvers.fractional.resection_centre_l1 import NAMES as CENTRE_NAMES, verify_l1_centre
+from geocert.formulations.fractional.charts import MapChart
+from geocert.formulations.fractional.proof import checked_leaves
+from geocert.formulations.fractional.resection_centre_l1 import NAMES as CENTRE_NAMES, verify_l1_centre
 
 NAMES = ("depth_x", "depth_y", "depth_z", "depth_0")
 NORMS = ("L1L1", "L2L1")

@@ -19,7 +19,7 @@ from geocert.core.cones import proves_infeasible, rounding_counted, safe_lower_b
 from geocert.core.coverage import extended, uncovered_part, widened
 from geocert.core.strict import (Invalid, box as _box, charge, dual_vector, informational, number as _number,
                                  numbers as _numbers, record)
-from geocert.solvers.fractional.relaxation import (Relaxation, cost_unit, gamma_for, residual_region, root_bounds,
+from geocert.formulations.fractional.relaxation import (Relaxation, cost_unit, gamma_for, residual_region, root_bounds,
                                                    tightening_objective, with_cost_cap)
 
 MAX_ROUNDS = 16  # bound-tightening rounds (the solver makes at most 4)

@@ -15,7 +15,7 @@ import numpy as np
 
 from geocert.core.geometry import lengths
 from geocert.core.strict import charge
-from geocert.solvers.fractional.relaxation import FractionalProgram
+from geocert.formulations.fractional.relaxation import FractionalProgram
 
 
 def camera_centres(cameras: np.ndarray) -> np.ndarray:

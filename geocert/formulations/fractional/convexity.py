@@ -58,7 +58,7 @@ import copy
 import numpy as np
 
 from geocert.core.strict import Invalid, number, numbers, record
-from geocert.solvers.fractional.flat import PAIRS, FlatTracks, smallest_eigenvalue3
+from geocert.formulations.fractional.flat import PAIRS, FlatTracks, smallest_eigenvalue3
 
 U = 2.0 ** -52
 # R as fractions of the distance to the nearest principal plane (half of it at most, so that

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from geocert.solvers.fractional.results import LocalCertificate, TrackResult
+from geocert.formulations.fractional.results import LocalCertificate, TrackResult
 
 SCOPE = "every point in front of every camera"
 

@@ -54,8 +54,8 @@ import math
 import numpy as np
 
 from geocert.core.strict import Invalid, number, numbers, record
-from geocert.solvers.fractional.convexity import LARGEST, SMALLEST, UNDERFLOW, in_range
-from geocert.solvers.fractional.fixed_order import (cholesky, cholesky_completes, gram, inverse3, lower_inverse, mul, norm,
+from geocert.formulations.fractional.convexity import LARGEST, SMALLEST, UNDERFLOW, in_range
+from geocert.formulations.fractional.fixed_order import (cholesky, cholesky_completes, gram, inverse3, lower_inverse, mul, norm,
                                                    weighted)
 
 U = 2.0 ** -52

@@ -22,7 +22,7 @@ import numpy as np
 
 from geocert.core.determinacy import SINGULAR, Determinacy, certified_gap, cost_increase, interval, spread
 from geocert.core.exact import exact_centroid_image, exact_squared_residuals
-from geocert.solvers.fractional.fixed_order import mul, norm, symmetric_eigen
+from geocert.formulations.fractional.fixed_order import mul, norm, symmetric_eigen
 
 FLAT = 1e-2  # fractional.determinacy.FLAT: points whose centred spread along a direction is below this
 

@@ -42,9 +42,9 @@ import numpy as np
 
 from geocert.core import summary_notes
 from geocert.core.strict import Invalid, number, record
-from geocert.solvers.fractional.convexity import SMALLEST, UNDERFLOW
-from geocert.solvers.fractional.fixed_order import gram, norm, weighted
-from geocert.solvers.fractional.resection_sublevel import (ETA, MAX_ROUNDS, ROUNDS_STOP, U, Scene, encloses,
+from geocert.formulations.fractional.convexity import SMALLEST, UNDERFLOW
+from geocert.formulations.fractional.fixed_order import gram, norm, weighted
+from geocert.formulations.fractional.resection_sublevel import (ETA, MAX_ROUNDS, ROUNDS_STOP, U, Scene, encloses,
                                                             least_eigenvalue_below, reference_point, shrink,
                                                             smallest_radius)
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from geocert.core.declared_options import DeclaredRange, DeclaredRanges, option, redeclared
 from geocert.core.geometry import InputError
-from geocert.solvers.fractional.relaxation import NORMS
+from geocert.formulations.fractional.relaxation import NORMS
 
 # The gaps a certificate may be asked for: at rel_gap near 1, or an abs_gap as large as the costs,
 # "certified optimal" would hold of a solution whatever it costs (a triangulation asked abs_gap

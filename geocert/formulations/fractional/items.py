@@ -13,9 +13,9 @@ from geocert.core import exact
 from geocert.core.certificates import OBJECTIVE_TOLERANCE, residual_rounding
 from geocert.core.geometry import cost_rounding, norm_cost
 from geocert.core.strict import Invalid, numbers
-from geocert.solvers.fractional.charts import Chart, MapChart
-from geocert.solvers.fractional.results import LocalCertificate
-from geocert.solvers.fractional.proof import (SOLVER_DISCOUNT_FACTOR, check_program, program_allowance,
+from geocert.formulations.fractional.charts import Chart, MapChart
+from geocert.formulations.fractional.results import LocalCertificate
+from geocert.formulations.fractional.proof import (SOLVER_DISCOUNT_FACTOR, check_program, program_allowance,
                                               program_discount, raw_sizes, residual_uncertainty, track_uncertainty)
 
 

@@ -27,9 +27,9 @@ from geocert.core.cones import ConeSpec, _project_rows, rounding_counted, stacke
 from geocert.core.coverage import uncovered_part
 from geocert.core.geometry import cost_roundings, lengths, norm_terms, normalised_cameras
 from geocert.core.strict import Invalid, charge, dual_vector, numbers
-from geocert.solvers.fractional.charts import reference_work
-from geocert.solvers.fractional.convexity import verify_sublevel
-from geocert.solvers.fractional.proof import (SCALE_RANGE, _sample_steps, allowance, raw_sizes, stated_root_agrees,
+from geocert.formulations.fractional.charts import reference_work
+from geocert.formulations.fractional.convexity import verify_sublevel
+from geocert.formulations.fractional.proof import (SCALE_RANGE, _sample_steps, allowance, raw_sizes, stated_root_agrees,
                                              track_uncertainty)
 
 D = 3  # a track's program has 3 variables

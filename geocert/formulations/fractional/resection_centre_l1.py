@@ -43,9 +43,9 @@ import math
 import numpy as np
 
 from geocert.core.strict import Invalid, number, numbers, record
-from geocert.solvers.fractional.convexity import LARGEST, SMALLEST, UNDERFLOW
-from geocert.solvers.fractional.fixed_order import mul, norm, weighted
-from geocert.solvers.fractional.resection_sublevel import (STATED_SLACK, U, Scene, centre_bounds, check_enclosure,
+from geocert.formulations.fractional.convexity import LARGEST, SMALLEST, UNDERFLOW
+from geocert.formulations.fractional.fixed_order import mul, norm, weighted
+from geocert.formulations.fractional.resection_sublevel import (STATED_SLACK, U, Scene, centre_bounds, check_enclosure,
                                                            enclosed_radius, proven_centre)
 
 NAMES = ("centre_x", "centre_y", "centre_z")

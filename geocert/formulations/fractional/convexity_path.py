@@ -24,12 +24,12 @@ import numpy as np
 from geocert.core import exact
 from geocert.core.certificates import OBJECTIVE_TOLERANCE, ROUNDING
 from geocert.core.determinacy import SIGMAS
-from geocert.solvers.fractional.columns import LocalColumns, TrackResults, sublevels
-from geocert.solvers.fractional.convexity import (ball_bounds, ball_intervals, convexity_bounds, convexity_terms,
+from geocert.formulations.fractional.columns import LocalColumns, TrackResults, sublevels
+from geocert.formulations.fractional.convexity import (ball_bounds, ball_intervals, convexity_bounds, convexity_terms,
                                                   sublevel_radii)
-from geocert.solvers.fractional.flat import FlatTracks, linear, refine
-from geocert.solvers.fractional.options import TriangulationOptions
-from geocert.solvers.fractional.proof import image_uncertainty
+from geocert.formulations.fractional.flat import FlatTracks, linear, refine
+from geocert.formulations.fractional.options import TriangulationOptions
+from geocert.formulations.fractional.proof import image_uncertainty
 
 STRICTNESS = 2.0  # the solver's allowances over the verifier's
 CLAIM_MARGIN = 1e-12  # the bound claimed below the bound computed (relative)

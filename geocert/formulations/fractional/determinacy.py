@@ -25,8 +25,8 @@ import numpy as np
 from geocert.core.determinacy import (SIGMAS, SINGULAR, Determinacy, certified_gap, curvature_intervals,
                                                interval, numeric_jacobian, proven_document, safely, spread)
 from geocert.core.exact import exact_centroid_image, exact_squared_residuals  # noqa: F401 (callers read them here)
-from geocert.solvers.fractional import fixed_order
-from geocert.solvers.fractional.columns import solutions, sublevels
+from geocert.formulations.fractional import fixed_order
+from geocert.formulations.fractional.columns import solutions, sublevels
 
 PARALLAX_DEGREES = 1.0  # rays meeting at less than this: near-zero parallax
 # The test reads the rays' cosines against this (no arccos: its last bit is the CPU's vector unit's)
@@ -335,7 +335,7 @@ def proven_map(sublevel: dict | None) -> dict | None:
     if sublevel is None:
         return None
     if "search" in sublevel:  # an L1 resection's, read off a search's leaves
-        from geocert.solvers.fractional.resection_leaves import proven_leaves_document
+        from geocert.formulations.fractional.resection_leaves import proven_leaves_document
         return proven_leaves_document(sublevel)
     return proven_document(sublevel["cost_increase"], ("centre_x", "centre_y", "centre_z"), sublevel["intervals"],
                            f"the cameras enclosed in a ball of radius {sublevel['radius']:.6g} (whitened by the "
@@ -350,7 +350,7 @@ def prove_map(source: np.ndarray, target: np.ndarray, matrix, cost: float, lower
     determinacy estimate is read at (map_level: 3^2 times the exact squared residuals / (2k - 11),
     at least the gap), computed from the data and the matrix so that a result without determinacy
     (detail brief) proves the same; set in ``document`` (the determinacy) too when given."""
-    from geocert.solvers.fractional.resection_sublevel import resection_sublevel
+    from geocert.formulations.fractional.resection_sublevel import resection_sublevel
 
     if matrix is None or cost is None or not math.isfinite(cost):
         return None
@@ -401,7 +401,7 @@ def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | Non
     M = np.asarray(matrix, dtype=float)
     m, n1 = M.shape
     if not (m == 3 and n1 == 4):  # a homography: in a fixed order of operations (review 38 class 4)
-        from geocert.solvers.fractional.homography_estimate import homography
+        from geocert.formulations.fractional.homography_estimate import homography
         return homography(source, target, M, cost, lower)
     # Parameters in normalised coordinates (centroid 0, mean distance sqrt 2 on both sides), where
     # the map's entries are of one size: in pixels they span orders of magnitude, and J'J's
