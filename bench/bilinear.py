@@ -15,8 +15,8 @@ import time
 
 import numpy as np
 
-from geocert.solvers.bilinear import problem as bilinear_problem
-from geocert.solvers.bilinear.options import BilinearOptions
+from geocert.formulations.bilinear import problem as bilinear_problem
+from geocert.formulations.bilinear.options import BilinearOptions
 from geocert.solvers.bilinear.search import fit_frame
 from testing.bilinear import scene, scip_bilinear
 
@@ -109,7 +109,7 @@ def gap_anatomy(K: int = 20, N: int = 50, seed: int = 0) -> None:
     then the same with one side's box shrunk about the incumbent (scaled by f) or pinned at it.
     McCormick's error is the product of the camera's and the coefficients' widths: shrinking
     either by f shrinks the gap by about f, and pinning either closes it."""
-    from geocert.solvers.bilinear.relaxation import Relaxation
+    from geocert.formulations.bilinear.relaxation import Relaxation
     from geocert.solvers.bilinear.search import Model, root_incumbent, tighten
     from geocert.core.conic import ReusableConicProgram
 
@@ -235,7 +235,7 @@ def trajectory(N: int = 50, seed: int = 0, runs=((20, 10.0), (40, 60.0)), widths
 def _at_incumbent(K: int, N: int, seed: int):
     """One frame (0.5% noise) in normalised units, its L2L2 relaxation (convex coefficients), the
     root incumbent's camera (6 entries) and cost."""
-    from geocert.solvers.bilinear.relaxation import Relaxation
+    from geocert.formulations.bilinear.relaxation import Relaxation
     from geocert.solvers.bilinear.search import Model, root_incumbent
 
     basis, points, *_ = scene(K, N, 0.005, seed)

@@ -56,7 +56,7 @@ def stratified_rows() -> list[dict]:
 
 def bilinear_rows() -> list[dict]:
     from bench.bilinear import scene
-    from geocert.solvers.bilinear.options import BilinearOptions
+    from geocert.formulations.bilinear.options import BilinearOptions
     from geocert.solvers.bilinear.search import fit_frame
 
     rows = []

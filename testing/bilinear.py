@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from geocert.solvers.bilinear import problem
+from geocert.formulations.bilinear import problem
 
 
 def scene(K: int, N: int, noise: float, seed: int, outliers: float = 0.0, image: float = 100.0):

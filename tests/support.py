@@ -193,7 +193,7 @@ def loose_gaps():
     import dataclasses
     import types
 
-    from geocert.solvers.bilinear.options import BilinearOptions
+    from geocert.formulations.bilinear.options import BilinearOptions
     from geocert.core.declared_options import KEY
     from geocert.formulations.fractional.options import SearchOptions
 

@@ -12,9 +12,9 @@ from pydantic import BaseModel, Field
 from geocert.kinds.base import ProblemKind
 from geocert.kinds.documents import finite_or_none, outcome_document
 from geocert.kinds.schema import CertificateDocument, Finite, ItemOutcome, JobBase, JobStats, Pixel, Strict, options_model
-from geocert.solvers.bilinear import determinacy
-from geocert.solvers.bilinear import problem
-from geocert.solvers.bilinear.options import BilinearOptions
+from geocert.formulations.bilinear import determinacy
+from geocert.formulations.bilinear import problem
+from geocert.formulations.bilinear.options import BilinearOptions
 from geocert.verify.bilinear import FRAME_REGION_MEANING, FRAMES
 from geocert.core import summary_notes
 from geocert.core.determinacy import safely

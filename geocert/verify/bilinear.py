@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.bilinear import problem
-from geocert.solvers.bilinear.options import BilinearOptions
-from geocert.solvers.bilinear.relaxation import Relaxation, tightening_objective, with_cost_cap
+from geocert.formulations.bilinear import problem
+from geocert.formulations.bilinear.options import BilinearOptions
+from geocert.formulations.bilinear.relaxation import Relaxation, tightening_objective, with_cost_cap
 from geocert.core.bnb import Box
 from geocert.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE
 from geocert.core.cones import proves_infeasible, safe_lower_bound

@@ -453,7 +453,7 @@ def _far(source: np.ndarray, target: np.ndarray, matrix: Any, certificate: dict)
 
 
 def _check_frames(kind, result: dict, certificate: dict, earlier: bool = True) -> None:
-    from geocert.solvers.bilinear import determinacy as frame_estimate
+    from geocert.formulations.bilinear import determinacy as frame_estimate
 
     read = kind.verification.read
     for index, item in enumerate(result.get("frames") or []):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from geocert.solvers.bilinear.relaxation import Relaxation, insert_row, with_cost_cap
+from geocert.formulations.bilinear.relaxation import Relaxation, insert_row, with_cost_cap
 from geocert.core.cones import safe_lower_bounds
 from geocert.core.csc import CscMatrix
 

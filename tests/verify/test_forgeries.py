@@ -473,7 +473,7 @@ class TestVerifierCost:
             assert not report.valid and "more work than its size pays for" in report.first_failure["detail"], name
 
     def test_a_basis_beyond_the_limits_is_refused(self):
-        from geocert.solvers.bilinear import problem as bilinear_problem
+        from geocert.formulations.bilinear import problem as bilinear_problem
         from geocert.core.geometry import InputError
 
         with pytest.raises(InputError, match="limit"):

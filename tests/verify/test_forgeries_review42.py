@@ -154,7 +154,7 @@ def test_the_small_scale_frame_is_certified_and_verifies(small_frame_result):
 
 @pytest.mark.parametrize("member", ["residuals", "shape", "baseline"])
 def test_small_residuals_shape_or_baseline_restated_are_refused(small_frame_result, member):
-    from geocert.solvers.bilinear import problem
+    from geocert.formulations.bilinear import problem
 
     forged = copy.deepcopy(small_frame_result)
     frame = forged["frames"][0]

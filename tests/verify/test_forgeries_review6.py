@@ -278,7 +278,7 @@ def small_frames() -> tuple[dict, dict]:
 def _frame_shifted_within_a_unit(result: dict) -> dict:
     """``result`` with frame 0's camera translated along x as far as a cost below 0.99 allows (its
     residuals what that camera leaves), claimed with the genuine solve's trivial bound 0."""
-    from geocert.solvers.bilinear import problem as bilinear_problem
+    from geocert.formulations.bilinear import problem as bilinear_problem
 
     forged = copy.deepcopy(result)
     certificate = forged["certificate"]
@@ -559,7 +559,7 @@ class TestRestatedCalibrationStagesAbsoluteFloor:
 # The abs_gap cap of each certified kind, in its cost's units (the kinds' models and the verifier read it).
 def _abs_gap_caps() -> dict:
     from geocert.solvers.autocalibration.problem import MAX_ABS_GAP as AUTOCALIBRATION
-    from geocert.solvers.bilinear.options import MAX_ABS_GAP as BILINEAR
+    from geocert.formulations.bilinear.options import MAX_ABS_GAP as BILINEAR
     from geocert.formulations.fractional.options import MAX_ABS_GAP as RESIDUALS
 
     return {"triangulation": RESIDUALS, "resection": RESIDUALS, "homography": RESIDUALS, "bilinear": BILINEAR,

@@ -146,7 +146,7 @@ def _claim_cost(kind: str, data: dict, options: dict, claim: dict) -> float | No
             return None
         return norm_cost(residuals, options["norm"])
     if kind == "bilinear":
-        from geocert.solvers.bilinear import problem as bilinear_problem
+        from geocert.formulations.bilinear import problem as bilinear_problem
 
         basis, points = adapter.read(data, claim["index"])
         return bilinear_problem.cost(bilinear_problem.residuals(basis, points, np.array(claim["camera"]),

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.optimize
 
-from geocert.solvers.bilinear import problem as bilinear_problem
-from geocert.solvers.bilinear.options import BilinearOptions
-from geocert.solvers.bilinear.relaxation import Relaxation, tightening_objective, with_cost_cap
+from geocert.formulations.bilinear import problem as bilinear_problem
+from geocert.formulations.bilinear.options import BilinearOptions
+from geocert.formulations.bilinear.relaxation import Relaxation, tightening_objective, with_cost_cap
 from geocert.core.bnb import BnbOptions, Box, BoxBound, BoxStatus, branch_and_bound
 from geocert.core.certificates import pack
 from geocert.core.conic import ConicStatus, ReusableConicProgram

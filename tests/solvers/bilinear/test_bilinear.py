@@ -13,9 +13,9 @@ from hypothesis import given, settings, strategies as st
 
 from testing.bilinear import scene
 from geocert.jobs.runner import parse_job, solve_job
-from geocert.solvers.bilinear import problem
-from geocert.solvers.bilinear.options import BilinearOptions
-from geocert.solvers.bilinear.relaxation import Relaxation, mccormick_rows
+from geocert.formulations.bilinear import problem
+from geocert.formulations.bilinear.options import BilinearOptions
+from geocert.formulations.bilinear.relaxation import Relaxation, mccormick_rows
 from geocert.solvers.bilinear.search import Model, fit_frame
 from geocert.core.conic import ConicStatus, solve_conic
 from geocert.core.geometry import InputError
@@ -428,7 +428,7 @@ def test_the_cost_cap_row_is_inserted_where_stacking_puts_it():
     both norms' relaxations (the verifier rebuilds the same program through it)."""
     import scipy.sparse as sp
 
-    from geocert.solvers.bilinear.relaxation import insert_row, with_cost_cap
+    from geocert.formulations.bilinear.relaxation import insert_row, with_cost_cap
 
     def stacked(A, at, columns):
         row = np.zeros(A.shape[1])
@@ -460,7 +460,7 @@ def test_the_basis_rank_check_is_one_decomposition_and_a_bisection(monkeypatch):
     """One singular value decomposition per shape cost K^3 N (100 s of the API's time for 300
     shapes of 400 points): a good basis takes one, a degenerate one a bisection, which still
     names the first shape that depends on those before it."""
-    from geocert.solvers.bilinear import problem
+    from geocert.formulations.bilinear import problem
 
     calls = []
     svd = np.linalg.svd
