@@ -25,7 +25,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from geocert.core.geometry import norm_cost
-from geocert.solvers.reconstruction import camera_claim
+from geocert.formulations.reconstruction import camera_claim
 from geocert.solvers.reconstruction.structure import free_camera_cost
 
 

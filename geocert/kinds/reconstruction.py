@@ -545,7 +545,7 @@ class ReconstructionKind(ProblemKind):
     def _camera_items(out, options, bounds: dict) -> list[dict]:
         """Each camera's resection as a resection item (with its data), for the camera certificate."""
         from geocert.pipelines.reconstruction.pipeline import point_entries
-        from geocert.solvers.reconstruction.camera_claim import kept, sources
+        from geocert.formulations.reconstruction.camera_claim import kept, sources
 
         views = sorted(bounds)
         found = [kept(source, target, out.cameras[view].P, bounds[view].set_aside)

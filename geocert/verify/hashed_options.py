@@ -40,8 +40,8 @@ from typing import Any
 
 from geocert.core.certificates import CLAIM_OPTIONS as EARLIER_CLAIM_OPTIONS
 from geocert.core.strict import Invalid, number
-from geocert.solvers.reconstruction.camera_claim import MAX_REL_GAP
-from geocert.solvers.reconstruction.run_control import CAMERA_MODELS, PRINCIPAL_POINTS, REGISTRATIONS
+from geocert.formulations.reconstruction.camera_claim import MAX_REL_GAP
+from geocert.formulations.reconstruction.run_control import CAMERA_MODELS, PRINCIPAL_POINTS, REGISTRATIONS
 
 # What the earlier form left out, at the value a request naming none of them got while that form
 # was written (ReconstructionOptions' defaults then; tests/solvers/reconstruction/test_reconstruction_hash.py

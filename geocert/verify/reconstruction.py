@@ -57,10 +57,9 @@ from geocert.verify.fractional import TRACKS, TrackItems, _check_scope_words, re
 from geocert.verify.reconstruction_members import intrinsics_of
 from geocert.verify.verification import Verification
 from geocert.formulations.fractional.options import TriangulationOptions
-from geocert.solvers.reconstruction import (calibration_claim, calibration_tie, camera_claim, depth_reversal_claim,
-                                           motion_claim, run_control)
+from geocert.formulations.reconstruction import calibration_claim, calibration_tie, camera_claim, depth_reversal_claim, motion_claim, run_control
 from geocert.verify import hashed_options
-from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
+from geocert.formulations.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
 
 ROUNDING = 1e-9  # relative: what JSON round trips and a recomputed cost may differ by
 MAX_CALIBRATION_ABS_GAP = 1e-9  # the autocalibration's costs are of order 1e-3 on real tracks (the pipeline's: 1e-12)

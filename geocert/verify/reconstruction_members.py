@@ -20,7 +20,7 @@ import numpy as np
 
 from geocert.core.geometry import is_number
 from geocert.core.strict import Invalid
-from geocert.solvers.reconstruction.camera_claim import (FOCAL_P, MAX_FOCAL_SD_FRACTION, MAX_PRINCIPAL_POINT_SD_PX,
+from geocert.formulations.reconstruction.camera_claim import (FOCAL_P, MAX_FOCAL_SD_FRACTION, MAX_PRINCIPAL_POINT_SD_PX,
                                                           PRINCIPAL_POINT_CHI2, PRINCIPAL_POINT_P, in_middle_half)
 from geocert.verify.reconstruction_stages import MAX_FIGURE, _values
 

@@ -40,7 +40,7 @@ SOLVER_MODULES = (
     "geocert.solvers.autocalibration.determinacy",
     "geocert.solvers.autocalibration.proofs", "geocert.solvers.lines.determinacy", "geocert.solvers.lines.geometry",
     "geocert.solvers.lines.scenes", "geocert.solvers.reconstruction.synthetic",
-    "geocert.solvers.reconstruction.camera_claim",
+    "geocert.formulations.reconstruction.camera_claim",
 )
 
 

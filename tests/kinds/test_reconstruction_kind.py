@@ -378,7 +378,8 @@ class TestCertifiedFieldsTied:
         from scipy.spatial.transform import Rotation
 
         from geocert.pipelines.reconstruction import pipeline
-        from geocert.solvers.reconstruction import camera_claim, structure
+        from geocert.solvers.reconstruction import structure
+        from geocert.formulations.reconstruction import camera_claim
 
         metric_cameras = pipeline._metric_cameras
 

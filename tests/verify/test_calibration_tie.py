@@ -11,7 +11,7 @@ import re
 import numpy as np
 import pytest
 
-from geocert.solvers.reconstruction import calibration_tie
+from geocert.formulations.reconstruction import calibration_tie
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import stored
 from tests.support import reconstruction_data
@@ -23,7 +23,7 @@ def registered_at(result: dict, data: dict) -> dict:
     built with another K would: where it says the registration estimated the principal point, its
     K_free the cameras' K; where it does not and the cameras' principal point is not the centre, a
     record made up to say it was estimated there."""
-    from geocert.solvers.reconstruction.calibration_claim import camera_intrinsics
+    from geocert.formulations.reconstruction.calibration_claim import camera_intrinsics
 
     result = copy.deepcopy(result)
     projective = next(s for s in result["stages"] if s["name"] == "projective")
@@ -42,7 +42,7 @@ def carrying(result: dict, data: dict) -> dict:
     """The result carrying the genuine calibration certificate of ``data`` (solved with the stored
     certificate's options), its calibration fields made that certificate's."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.reconstruction import calibration_claim
+    from geocert.formulations.reconstruction import calibration_claim
 
     options = dict(result["calibration_certificate"]["options"])
     other = solve_job({"kind": "autocalibration", "data": data, "options": options})

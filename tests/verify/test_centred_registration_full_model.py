@@ -34,7 +34,7 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.reconstruction import calibration_tie
+from geocert.formulations.reconstruction import calibration_tie
 from geocert.verify.checks import verify_any
 from tests.support import stage as _stage
 from tests.verify.test_forgeries_review18 import _scene_job

@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from geocert.core.strict import Invalid
-from geocert.solvers.reconstruction import depth_reversal_claim as claim
+from geocert.formulations.reconstruction import depth_reversal_claim as claim
 
 
 def _figures(cost=100.0, twin=400.0, variance=1.0, **more):

@@ -884,7 +884,7 @@ class TestCalibrationClaimsBehindNoProof:
 def _restate_mirror_angles(result: dict) -> None:
     """Each registered camera's mirror_rotation_deg, and the depth-reversal record's, restated from
     the cameras' rotations as the pipeline states them (depth_reversal.mirror_angles_deg)."""
-    from geocert.solvers.reconstruction.depth_reversal import mirror_angles_deg
+    from geocert.formulations.reconstruction.depth_reversal import mirror_angles_deg
 
     figures = result["summary"].get("depth_reversal") or {}
     if not figures.get("checked"):
@@ -909,7 +909,7 @@ def _moved_camera_result(result: dict, view: int, degrees: float, camera_rel_gap
     there."""
     from geocert.jobs.runner import solve_job
     from geocert.core.geometry import norm_cost
-    from geocert.solvers.reconstruction import camera_claim
+    from geocert.formulations.reconstruction import camera_claim
     from geocert.verify.reconstruction import camera_maps
 
     result = copy.deepcopy(result)
@@ -1108,7 +1108,7 @@ class TestCalibrationCertificateOfCalibratedCameras:
     def test_cameras_built_with_one_K_are_recognised_and_projective_ones_are_not(self):
         from scipy.spatial.transform import Rotation
 
-        from geocert.solvers.reconstruction.calibration_claim import built_with_one_K
+        from geocert.formulations.reconstruction.calibration_claim import built_with_one_K
 
         K = np.array([[800.0, 0.5, 320.0], [0.0, 790.0, 240.0], [0.0, 0.0, 1.0]])
         rng = np.random.default_rng(4)

@@ -11,7 +11,7 @@ import copy
 
 import pytest
 
-from geocert.solvers.reconstruction.camera_claim import RADIAL_CHI2
+from geocert.formulations.reconstruction.camera_claim import RADIAL_CHI2
 from geocert.verify.checks import verify_any
 from tests.pipelines.reconstruction.test_radial_known_K import K1, distorted_scene
 from tests.support import reconstruction_data

@@ -46,7 +46,7 @@ def _unsearch_cameras(result: dict) -> dict:
     a bound could certify has none of)."""
     from geocert.core.certificates import problem_hash
     from geocert.core.geometry import norm_cost
-    from geocert.solvers.reconstruction import camera_claim
+    from geocert.formulations.reconstruction import camera_claim
     from geocert.verify import hashed_options
     from geocert.verify.checks import checked_options
     from geocert.verify.reconstruction import camera_maps
@@ -93,7 +93,7 @@ def _certified_K_from(result: dict, document: dict) -> dict:
     the summary's certified K, its difference from the returned K, its range edges and the
     autocalibration stage's K and ranges made to agree with it."""
     from geocert.solvers.autocalibration import problem as autocalibration_problem
-    from geocert.solvers.reconstruction import calibration_claim
+    from geocert.formulations.reconstruction import calibration_claim
 
     result["calibration_certificate"] = document
     K = document["items"][1]["K"]

@@ -103,7 +103,8 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.reconstruction import camera_claim, synthetic
+from geocert.solvers.reconstruction import synthetic
+from geocert.formulations.reconstruction import camera_claim
 from tests.support import refused as _refused, stage as _stage, verified as _verifies
 
 VIEWS = 8

@@ -145,7 +145,8 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
-from geocert.solvers.reconstruction import calibration_tie, synthetic
+from geocert.solvers.reconstruction import synthetic
+from geocert.formulations.reconstruction import calibration_tie
 from geocert.verify.checks import verify_any
 from tests.support import refused as _refused, searched_tracks_job, stage as _stage, verified as _verifies
 from tests.verify.test_forgeries import rehash
@@ -445,7 +446,8 @@ def test_the_one_K_model_is_the_solvers_own(off_centre):
     model "principal": one K, its principal point free) find the same cost on the off-centre
     scene's observations, from the returned cameras; below the centred model's, at the returned
     cameras' (which estimate the principal point, one for all here)."""
-    from geocert.solvers.reconstruction import bundle, centred_fit
+    from geocert.solvers.reconstruction import bundle
+    from geocert.formulations.reconstruction import centred_fit
 
     cameras = [c for c in off_centre["cameras"] if c.get("registered")]
     placed = [p for p in off_centre["points"] if p.get("point") is not None]
@@ -495,7 +497,7 @@ def test_a_centred_fit_not_converged_or_too_large_is_not_used(off_centre, monkey
     unconverged fit's cost overstates the model's) and within its cost bound: otherwise the
     certificate is held to the returned cameras, as before the fit, and the off-centre run is
     refused again (stricter, never looser)."""
-    from geocert.solvers.reconstruction import centred_fit
+    from geocert.formulations.reconstruction import centred_fit
 
     monkeypatch.setattr(centred_fit, limit, value)
     assert "reconstruction of these tracks' observations" in _refused(off_centre)["detail"]
@@ -505,7 +507,8 @@ def test_the_centred_model_is_the_solvers_own(off_centre):
     """centred_fit (numpy, read by the verifier) and the pipeline's adjustment (bundle model
     "simple", the principal point held at the centre) find the same cost on the off-centre scene's
     observations, from the returned cameras (which have the principal point at (349, 220))."""
-    from geocert.solvers.reconstruction import bundle, centred_fit
+    from geocert.solvers.reconstruction import bundle
+    from geocert.formulations.reconstruction import centred_fit
 
     cameras = [c for c in off_centre["cameras"] if c.get("registered")]
     placed = [p for p in off_centre["points"] if p.get("point") is not None]
@@ -604,7 +607,8 @@ def test_a_cancel_in_the_adjustment_verifies(model, after):
 @pytest.mark.parametrize("model", ["simple", "varying", "full"])
 def test_the_depth_reversal_twin_adopted_verifies(monkeypatch, model):
     from geocert.pipelines.reconstruction import pipeline
-    from geocert.solvers.reconstruction import depth_reversal, upgrade
+    from geocert.solvers.reconstruction import upgrade
+    from geocert.formulations.reconstruction import depth_reversal
     from tests.solvers.reconstruction.test_reconstruction_long_lens import dino_like
 
     adjust_best = pipeline.adjust_best

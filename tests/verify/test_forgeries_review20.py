@@ -44,7 +44,7 @@ import copy
 import numpy as np
 import pytest
 
-from geocert.solvers.reconstruction import calibration_tie, centred_fit
+from geocert.formulations.reconstruction import calibration_tie, centred_fit
 from tests.support import stage as _stage
 from tests.verify.test_forgeries_review18 import SHIFTS, _centred_registration
 

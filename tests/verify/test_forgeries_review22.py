@@ -50,7 +50,7 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.reconstruction import calibration_tie
+from geocert.formulations.reconstruction import calibration_tie
 from geocert.verify.checks import verify_any
 from tests.support import stage as _stage
 from tests.verify.test_calibration_tie import registered_at
@@ -208,7 +208,7 @@ def test_the_centred_fit_from_the_per_view_models_gauge_family_finds_the_least()
     than 1.2 times the scene's 800). The centred fit from it converges to the same least cost."""
     from scipy.optimize import least_squares
 
-    from geocert.solvers.reconstruction import centred_fit
+    from geocert.formulations.reconstruction import centred_fit
     from geocert.verify.reconstruction_members import intrinsics_of
 
     views = 3

@@ -94,7 +94,7 @@ def test_the_registration_record_must_say_what_the_certificate_is_built_at(off_c
 def test_an_estimated_record_beside_a_centred_certificate_is_refused(off_centre):
     """The reverse: the record says the registration estimated the principal point, and the
     certificate's cameras are built at the centre (the returned K otherwise, the same poses)."""
-    from geocert.solvers.reconstruction import calibration_tie
+    from geocert.formulations.reconstruction import calibration_tie
     from tests.verify.test_forgeries_review18 import _reposed
 
     K = np.array(next(c for c in off_centre["cameras"] if c.get("registered"))["K"], dtype=float)

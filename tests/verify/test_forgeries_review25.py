@@ -133,7 +133,7 @@ def test_the_other_calibration_warnings_say_what_the_pipeline_says(name, code):
 def test_every_form_of_the_returned_K_warning_is_the_pipelines():
     """The forms the verifier accepts are the pipeline's, written through the same function, for
     each of the three which-K cases and both causes."""
-    from geocert.solvers.reconstruction import calibration_claim
+    from geocert.formulations.reconstruction import calibration_claim
 
     moved = {"focal_percent": 0.054, "principal_point_px": 0.707}
     forms = {calibration_claim.moved_warning(adjusted, which, moved)
@@ -156,7 +156,7 @@ def test_the_difference_edited_with_the_warning_is_refused():
 def test_the_returned_and_certified_K_swapped_are_refused():
     """summary/calibration's K and certified_K swapped (the warning's figures restated for the
     swap): the returned K is the cameras', the certified one the calibration certificate's."""
-    from geocert.solvers.reconstruction import calibration_claim
+    from geocert.formulations.reconstruction import calibration_claim
 
     result = stored("reconstruction")
     claim = result["summary"]["calibration"]

@@ -100,7 +100,7 @@ def test_a_genuine_run_whose_test_did_not_pass_verifies_without_the_centred_room
     certificate's cost 227.3 and 228.2 px^2, 258.1 and 259.1 allowed, the returned 227.4 and
     228.2)."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.reconstruction import calibration_tie
+    from geocert.formulations.reconstruction import calibration_tie
     from tests.verify.test_forgeries_review18 import _scene_job
 
     result = solve_job(_scene_job({}, points=200, shift=np.tile([shift, -shift * 2 / 3], (8, 1))))

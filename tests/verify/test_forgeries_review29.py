@@ -137,7 +137,7 @@ def test_a_genuine_run_held_at_the_centre_outside_the_middle_half_keeps_the_room
     import numpy as np
 
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.reconstruction import calibration_tie
+    from geocert.formulations.reconstruction import calibration_tie
     from tests.verify.test_forgeries_review18 import _scene_job
 
     result = solve_job(_scene_job({}, points=200, shift=np.tile([0.0, 135.0], (8, 1))))

@@ -179,7 +179,7 @@ def _carrying(result: dict, data: dict) -> dict:
     """tests.verify.test_calibration_tie.carrying, with the stage's ranges the certificate's (its
     data's image size is not the result's)."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.reconstruction import calibration_claim
+    from geocert.formulations.reconstruction import calibration_claim
     from tests.verify.test_calibration_tie import registered_at
 
     options = dict(result["calibration_certificate"]["options"])
@@ -347,7 +347,7 @@ def test_the_centred_fit_is_charged_for_the_pairs_it_sums():
     """Within a verification's budget, the fit pays at least a unit for each pair of observations
     of a point its solves sum (each solve sums all of them), before summing them."""
     from geocert.core import strict
-    from geocert.solvers.reconstruction import centred_fit
+    from geocert.formulations.reconstruction import centred_fit
 
     P, X, view, point, uv = _ring_scene(views=20, points=300, seen=6, noise=0.5)
     pairs = int(np.sum(np.bincount(point) ** 2))
@@ -364,7 +364,7 @@ def test_a_centred_fit_its_budget_cannot_pay_declines():
     """A budget too small for one solve: the fit declines (None: the tie then holds the certificate
     to the returned cameras, stricter) and charges nothing it did not run, refusing nothing."""
     from geocert.core import strict
-    from geocert.solvers.reconstruction import centred_fit
+    from geocert.formulations.reconstruction import centred_fit
 
     P, X, view, point, uv = _ring_scene(views=20, points=300, seen=6, noise=0.5)
     assert centred_fit.fit_with_intrinsics(P, None, X, view, point, uv) is not None  # unbudgeted, it converges

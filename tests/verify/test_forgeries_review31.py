@@ -396,7 +396,7 @@ def test_the_centred_fit_answers_exactly_its_unbudgeted_fit_or_nothing():
     budget left between 0 and what it was. So no budget chooses the tie's reference: a fit the
     budget cannot pay declines (the returned cameras, the stricter reading)."""
     from geocert.core import strict
-    from geocert.solvers.reconstruction import centred_fit
+    from geocert.formulations.reconstruction import centred_fit
     from tests.verify.test_forgeries_review30 import _ring_scene
 
     P, X, view, point, uv = _ring_scene(views=12, points=120, seen=5, noise=0.5)
@@ -415,7 +415,7 @@ def test_the_centred_fit_answers_exactly_its_unbudgeted_fit_or_nothing():
 
 
 def test_a_centred_fit_beyond_max_views_declines():
-    from geocert.solvers.reconstruction import centred_fit
+    from geocert.formulations.reconstruction import centred_fit
     from tests.verify.test_forgeries_review30 import _ring_scene
 
     P, X, view, point, uv = _ring_scene(views=centred_fit.MAX_VIEWS + 1, points=60, seen=2, noise=0.5)

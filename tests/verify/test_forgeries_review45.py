@@ -67,7 +67,7 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.reconstruction import calibration_claim
+from geocert.formulations.reconstruction import calibration_claim
 from geocert.verify.checks import verify_any
 from testing import photo_sets
 

@@ -378,7 +378,7 @@ def per_view() -> dict:
 
 
 def test_a_principal_point_per_view_states_the_middle_principal_points_camera(per_view):
-    from geocert.solvers.reconstruction import calibration_claim
+    from geocert.formulations.reconstruction import calibration_claim
 
     stage = next(s for s in per_view["stages"] if s["name"] == "bundle_adjustment")
     assert stage["principal_point_per_view"]["estimated"] is True

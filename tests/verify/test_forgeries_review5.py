@@ -396,7 +396,7 @@ def looser_cameras() -> dict:
     searched camera's bound, each camera's tolerance and the camera claim's words made the new
     certificate's."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.reconstruction import camera_claim
+    from geocert.formulations.reconstruction import camera_claim
 
     forged = stored("reconstruction")
     loose = 0.5

@@ -332,7 +332,7 @@ def _calibration_forged(k: float) -> dict:
     """The stored reconstruction carrying a calibration certificate solved again on its own
     projective data re-posed with the reference's centre at the origin and the fourth coordinate
     times k, with every figure the verifier recomputes from it restated."""
-    from geocert.solvers.reconstruction import calibration_claim
+    from geocert.formulations.reconstruction import calibration_claim
 
     forged = stored("reconstruction")
     genuine = forged["calibration_certificate"]

@@ -166,7 +166,8 @@ def _returning_the_twin(check):
     the rig it keeps, adjusted as the check adjusts it, returned in its place with the genuine
     figures' costs swapped (the twin called the better fit, its twin rejected)."""
     from geocert.pipelines.reconstruction import ambiguity
-    from geocert.solvers.reconstruction import depth_reversal, upgrade
+    from geocert.solvers.reconstruction import upgrade
+    from geocert.formulations.reconstruction import depth_reversal
 
     def forged(metric, obs, keep, threshold_px, model, should_stop=None):
         kept, _, figures = check(metric, obs, keep, threshold_px, model, should_stop)

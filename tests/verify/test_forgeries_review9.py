@@ -299,7 +299,8 @@ class TestDepthReversalFiguresUnread:
         assert not _valid(_record_restated(ambiguous_rig[1], changes))
 
     def test_the_verifiers_models_are_the_bundles(self):
-        from geocert.solvers.reconstruction import bundle, depth_reversal_claim
+        from geocert.solvers.reconstruction import bundle
+        from geocert.formulations.reconstruction import depth_reversal_claim
 
         assert depth_reversal_claim.MODELS == bundle.MODELS
 

@@ -20,7 +20,7 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.core.certificates import problem_hash
-from geocert.solvers.reconstruction import calibration_tie
+from geocert.formulations.reconstruction import calibration_tie
 from geocert.verify import hashed_options
 from geocert.verify.checks import checked_options, verify_any
 from tests.support import stage as _stage

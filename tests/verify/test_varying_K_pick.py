@@ -23,7 +23,8 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import scenes
-from geocert.solvers.reconstruction import calibration_claim, synthetic
+from geocert.solvers.reconstruction import synthetic
+from geocert.formulations.reconstruction import calibration_claim
 from geocert.verify.checks import verify_any
 
 FOCALS = [700.0, 760.0, 820.0, 880.0, 940.0, 1000.0]  # view k's focal length (camera_model "varying")

@@ -1,6 +1,6 @@
 """Whether the observations tell the returned reconstruction from its depth-reversed twin (issue
 35: never silently wrong). Under a long lens the cameras are nearly affine and a scene and its
-mirror image in depth project nearly alike (solvers/reconstruction/depth_reversal.py): the
+mirror image in depth project nearly alike (formulations/reconstruction/depth_reversal.py): the
 adjustment may settle in either, and its own residuals cannot say which is right. So the twin is
 built in the frame of the view that sees most, adjusted with the same camera model, and the two
 compared by MSAC's capped cost over every observation (fit.fit_cost), in units of the returned
@@ -33,8 +33,9 @@ from __future__ import annotations
 import numpy as np
 
 from geocert.pipelines.reconstruction.fit import fit_cost, rms
-from geocert.solvers.reconstruction import depth_reversal, upgrade
-from geocert.solvers.reconstruction.depth_reversal_claim import (FEWER_THAN_2_VIEWS, MIRROR_CHI2, MIRROR_MARGIN,
+from geocert.solvers.reconstruction import upgrade
+from geocert.formulations.reconstruction import depth_reversal
+from geocert.formulations.reconstruction.depth_reversal_claim import (FEWER_THAN_2_VIEWS, MIRROR_CHI2, MIRROR_MARGIN,
                                                                  STOPPED, verdict)
 from geocert.solvers.reconstruction.tracks import Observations
 

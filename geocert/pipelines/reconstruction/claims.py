@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geocert.solvers.reconstruction import depth_reversal, motion_claim
-from geocert.solvers.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
-from geocert.solvers.reconstruction.calibration_claim import (CALIBRATED_CAMERAS_WARNING, K_given, critical_warning,
+from geocert.formulations.reconstruction import depth_reversal, motion_claim
+from geocert.formulations.reconstruction.camera_claim import DOUBTFUL_DROPPED, DOUBTFUL_FRACTION, DOUBTFUL_REMOVED
+from geocert.formulations.reconstruction.calibration_claim import (CALIBRATED_CAMERAS_WARNING, K_given, critical_warning,
                                                               difference as k_difference, edge_warning,
                                                               moved_warning, on_range_edge, same)
 

@@ -13,13 +13,13 @@ from geocert.solvers.autocalibration.problem import CHIRALITY, AutocalibrationOp
 from geocert.core.declared_options import option, option_ranges, redeclared
 from geocert.core.geometry import InputError
 from geocert.formulations.fractional.options import FractionalOptions, ResidualOptions, SearchOptions
-from geocert.solvers.reconstruction import run_control
+from geocert.formulations.reconstruction import run_control
 
 AUTOCALIBRATION_METHODS = ("stratified", "direct", "auto")
 MAX_EXHAUSTIVE = 200  # images matched every pair with every other at most (19,900 pairs)
 PAIR_RULES = ("auto", "exhaustive", "retrieval", "sequential")  # FeatureOptions.pairs
 # The run-control options' ranges and words are stated in the solvers' layer, where the verifier
-# reads them too (solvers.reconstruction.run_control).
+# reads them too (formulations.reconstruction.run_control).
 CAMERA_MODELS, REGISTRATIONS, RADIAL_DISTORTIONS = run_control.CAMERA_MODELS, run_control.REGISTRATIONS, \
     run_control.RADIAL_DISTORTIONS
 RANGES = run_control.RANGES

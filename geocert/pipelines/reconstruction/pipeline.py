@@ -23,13 +23,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from geocert.formulations.fractional.options import MapOptions, TriangulationOptions
-from geocert.solvers.reconstruction import (bundle, calibration_claim, calibration_tie, camera_claim,
-                                           depth_reversal_claim, projective, structure, upgrade)
+from geocert.solvers.reconstruction import bundle, projective, structure, upgrade
+from geocert.formulations.reconstruction import calibration_claim, calibration_tie, camera_claim, depth_reversal_claim
 from geocert.pipelines.reconstruction import ambiguity, claims
 from geocert.pipelines.reconstruction.fit import (depths_and_errors as _depths_and_errors, fit_cost, rms as _rms,
                                                   same_images)
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
-from geocert.solvers.reconstruction.camera_claim import FOCAL_P, PRINCIPAL_POINT_CHI2, PRINCIPAL_POINT_P, RADIAL_CHI2
+from geocert.formulations.reconstruction.camera_claim import FOCAL_P, PRINCIPAL_POINT_CHI2, PRINCIPAL_POINT_P, RADIAL_CHI2
 from geocert.solvers.reconstruction.tracks import Observations
 from geocert.core.strict import Invalid
 

@@ -1,1 +1,3 @@
-"""From correspondences or photos to a certified metric reconstruction (issue 14)."""
+"""From correspondences or photos to a certified metric reconstruction: the estimators the
+pipeline (geocert.pipelines.reconstruction) calls, on the claims of
+geocert.formulations.reconstruction."""

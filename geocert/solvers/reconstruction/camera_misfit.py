@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from geocert.core.geometry import norm_cost
-from geocert.solvers.reconstruction import camera_claim
+from geocert.formulations.reconstruction import camera_claim
 
 # camera_misfit's refits, each beside the pose: none, the view's own principal point, its own
 # focal length and principal point.

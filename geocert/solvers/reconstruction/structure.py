@@ -20,7 +20,7 @@ from geocert.core import pieces
 from geocert.core.geometry import norm_cost
 from geocert.formulations.fractional.options import MapOptions, TriangulationOptions
 from geocert.formulations.fractional.results import MapResult, TrackResult
-from geocert.solvers.reconstruction import camera_claim
+from geocert.formulations.reconstruction import camera_claim
 from geocert.solvers.reconstruction.camera_misfit import camera_misfit, misfit_cause, misfit_words
 
 

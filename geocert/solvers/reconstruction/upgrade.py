@@ -17,7 +17,8 @@ from scipy.linalg import rq
 
 from geocert.solvers.autocalibration import frames
 from geocert.solvers.autocalibration import problem as autocalibration_problem
-from geocert.solvers.reconstruction import calibration_claim, motion_claim, schur
+from geocert.solvers.reconstruction import schur
+from geocert.formulations.reconstruction import calibration_claim, motion_claim
 
 
 @dataclass

@@ -12,7 +12,7 @@ import pytest
 from geocert.pipelines.reconstruction import pipeline
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.solvers.reconstruction import synthetic
-from geocert.solvers.reconstruction.camera_claim import RADIAL_CHI2
+from geocert.formulations.reconstruction.camera_claim import RADIAL_CHI2
 
 from testing.reconstruction import aligned_rotation_errors
 

@@ -12,7 +12,8 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from geocert.formulations.fractional.options import MapOptions
-from geocert.solvers.reconstruction import camera_claim, structure
+from geocert.solvers.reconstruction import structure
+from geocert.formulations.reconstruction import camera_claim
 from geocert.verify.reconstruction import camera_maps
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import refused, stored

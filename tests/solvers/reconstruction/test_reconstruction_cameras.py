@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from geocert.formulations.fractional.options import MapOptions
-from geocert.solvers.reconstruction import camera_claim, structure, synthetic
+from geocert.solvers.reconstruction import structure, synthetic
+from geocert.formulations.reconstruction import camera_claim
 
 
 @pytest.fixture(scope="module")

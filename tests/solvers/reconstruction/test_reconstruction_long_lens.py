@@ -13,7 +13,8 @@ import numpy as np
 
 from geocert.pipelines.reconstruction import pipeline
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
-from geocert.solvers.reconstruction import depth_reversal, synthetic, upgrade
+from geocert.solvers.reconstruction import synthetic, upgrade
+from geocert.formulations.reconstruction import depth_reversal
 from geocert.verify.checks import verify_any
 
 from tests.verify.test_forgeries import calibrated_reconstruction, refused  # noqa: F401 (a fixture, used by name)

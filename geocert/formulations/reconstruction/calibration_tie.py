@@ -87,8 +87,8 @@ import math
 import numpy as np
 
 from geocert.core.strict import Invalid, numbers
-from geocert.solvers.reconstruction import camera_claim, centred_fit
-from geocert.solvers.reconstruction.calibration_claim import BUILT_WITH_ONE_K, camera_intrinsics
+from geocert.formulations.reconstruction import camera_claim, centred_fit
+from geocert.formulations.reconstruction.calibration_claim import BUILT_WITH_ONE_K, camera_intrinsics
 
 TIE_RATIO, TIE_OBSERVATIONS = 10.0, 12
 # Each certificate camera of a registered view must image at least this many of the result's

@@ -19,7 +19,7 @@ import numpy as np
 
 from geocert.core.geometry import is_number
 from geocert.core.strict import Invalid
-from geocert.solvers.reconstruction import depth_reversal
+from geocert.formulations.reconstruction import depth_reversal
 
 # The twin is told apart when the costs differ by more than this many noise variances (the
 # chi-square with 1 degree of freedom at p = 0.001: a likelihood ratio above e^5.4) and by more

@@ -14,7 +14,7 @@ from typing import Any
 from geocert.core.geometry import is_number
 from geocert.core.strict import Invalid
 from geocert.formulations.fractional.options import FractionalOptions, SearchOptions
-from geocert.solvers.reconstruction import camera_claim
+from geocert.formulations.reconstruction import camera_claim
 
 CAMERA_MODELS = ("simple", "varying", "full")
 REGISTRATIONS = ("incremental", "projective")
