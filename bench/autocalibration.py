@@ -54,9 +54,10 @@ import numpy as np  # noqa: E402
 from scipy.optimize import least_squares  # noqa: E402
 
 from bench import machine_speed_ms  # noqa: E402
-from geocert.solvers.autocalibration import frames, metric, scenes, stratified  # noqa: E402
-from geocert.solvers.autocalibration import metric_relaxation  # noqa: E402
-from geocert.solvers.autocalibration import problem as autocalibration_problem  # noqa: E402
+from geocert.solvers.autocalibration import metric, scenes, stratified
+from geocert.formulations.autocalibration import frames
+from geocert.formulations.autocalibration import metric_relaxation
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 
 # Thesis Table 6.1: (noise %, views) -> (dp, df, duv, ds, pi_inf iterations (1), (2), omega* iterations).
 THESIS_61 = {

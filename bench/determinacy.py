@@ -475,9 +475,9 @@ def direct_views_proven(seeds: int = 6, views: int = 6) -> list[str]:
     true focal length, the returned one, and the true quadric's (which they must when its cost is
     within the level), the median half-width over the value (proven, and the curvature estimate's),
     and the processor time of the job with the proof against without it, and of its verification."""
-    from geocert.solvers.autocalibration import direct, direct_relaxation
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
-    from geocert.solvers.autocalibration.proofs import sublevel_level
+    from geocert.formulations.autocalibration import direct, direct_relaxation
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration.proofs import sublevel_level
     from geocert.verify.checks import verify_any
 
     intrinsics = {"aspect": [0.95, 1.05], "skew": [-0.01, 0.01], "principal_point": [[-0.1, 0.1], [-0.1, 0.1]],
@@ -539,9 +539,9 @@ def direct_views_proven_real(noise_px: float = 0.5) -> list[str]:
     quantity, f0 sqrt((f_x^2 + f_y^2 + s^2 + (u - u0)^2 + (v - v0)^2) / 2), (u0, v0) the ranges'
     middle, and against the true quadric's."""
     from geocert.solvers import datasets
-    from geocert.solvers.autocalibration import direct, direct_relaxation, direct_sublevel
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
-    from geocert.solvers.autocalibration.proofs import sublevel_level
+    from geocert.formulations.autocalibration import direct, direct_relaxation, direct_sublevel
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration.proofs import sublevel_level
     from geocert.verify.checks import verify_any
 
     if not (SHARED_DATA / "oxford_house").exists():

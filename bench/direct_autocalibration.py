@@ -68,7 +68,7 @@ def true_quadric_errors(seed: int, varying: bool) -> dict:
     (Hp^-1 diag(1, 1, 1, 0) Hp^-T, read from the same noisy input cameras as ours: one K, the mean
     of the views' normalised P_i Q P_i', with constant focal; each view's own with varying focal):
     the error the camera noise alone makes (no solve; from the seed)."""
-    from geocert.solvers.autocalibration import direct
+    from geocert.formulations.autocalibration import direct
 
     scene, Ks = scenes.table71_scene(seed, 0.2, varying)
     Hinv = np.linalg.inv(scene.projective)

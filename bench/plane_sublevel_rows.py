@@ -27,7 +27,8 @@ import tracemalloc
 import numpy as np
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import plane_sublevel, scenes
+from geocert.solvers.autocalibration import scenes
+from geocert.formulations.autocalibration import plane_sublevel
 from geocert.verify.checks import verify_any
 
 

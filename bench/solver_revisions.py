@@ -29,9 +29,21 @@ if __name__ == "__main__" and str(ROOT) not in sys.path:
 BILINEAR = ((5, 0, 30.0), (5, 1, 30.0), (10, 0, 30.0), (10, 1, 30.0), (20, 0, 10.0))
 
 
+def formulation(name: str):
+    """A module of geocert/formulations, or of geocert/solvers in a revision from before the
+    shared formulation had its own package (``--against`` may name one)."""
+    import importlib
+
+    try:
+        return importlib.import_module(f"geocert.formulations.{name}")
+    except ModuleNotFoundError:
+        return importlib.import_module(f"geocert.solvers.{name}")
+
+
 def stratified_rows() -> list[dict]:
     from geocert.solvers.autocalibration import affine, metric, scenes, stratified
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+
+    autocalibration_problem = formulation("autocalibration.problem")
 
     cpu: dict[str, float] = {}
     for module, name in ((affine, "solve_affine"), (metric, "solve_metric")):
@@ -56,8 +68,9 @@ def stratified_rows() -> list[dict]:
 
 def bilinear_rows() -> list[dict]:
     from bench.bilinear import scene
-    from geocert.formulations.bilinear.options import BilinearOptions
     from geocert.solvers.bilinear.search import fit_frame
+
+    BilinearOptions = formulation("bilinear.options").BilinearOptions
 
     rows = []
     for K, seed, limit in BILINEAR:

@@ -141,25 +141,15 @@ def test_no_verifier_module_imports_a_layer_above_it():
     assert imports_above("verify", ABOVE) == {}
 
 
-# The estimator families whose shared formulation has not yet moved to geocert/formulations: the
-# verifier still imports their solver modules. The list only shrinks.
-NOT_YET_FORMULATED = ("geocert.solvers.autocalibration", "geocert.solvers.bilinear",
-                      "geocert.solvers.reconstruction")
-
-
 def test_the_verifier_imports_no_estimator():
     """The verifier imports nothing it checks: what it shares with the writers (programs, frames,
     proofs' forms and their checks) is in geocert/formulations, below both."""
-    estimators = {module: {name for name in names if not name.startswith(NOT_YET_FORMULATED)}
-                  for module, names in imports_above("verify", ("geocert.solvers",)).items()}
-    assert {module: names for module, names in estimators.items() if names} == {}
+    assert imports_above("verify", ("geocert.solvers",)) == {}
 
 
 def test_the_formulations_import_nothing_above_them():
     """geocert/formulations lies below the estimators and the verifier alike, on geocert.core."""
-    formulated = {module: {name for name in names if not name.startswith(NOT_YET_FORMULATED)}
-                  for module, names in imports_above("formulations", ("geocert.solvers", *ABOVE_SOLVERS)).items()}
-    assert {module: names for module, names in formulated.items() if names} == {}
+    assert imports_above("formulations", ("geocert.solvers", *ABOVE_SOLVERS)) == {}
 
 
 def module_name(path: Path) -> str:

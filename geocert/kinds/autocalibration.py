@@ -18,8 +18,8 @@ from geocert.kinds.base import ProblemKind
 from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document
 from geocert.kinds.documents import finite_or_none
 from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finite, JobBase, JobStats, Strict, options_model
-from geocert.solvers.autocalibration import metric_relaxation
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import metric_relaxation
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import STAGES, outcome, read_data
 from geocert.core.determinacy import safely, within
 from geocert.core.geometry import COORDINATE_LIMIT, InputError
@@ -251,7 +251,7 @@ class AutocalibrationKind(ProblemKind):
         ranges_within_limit(parsed.image_size, options.intrinsics)
         autocalibration_problem.resolve_ranges(options.intrinsics, parsed.image_size)
         if options.method != "direct":
-            from geocert.solvers.autocalibration import frames
+            from geocert.formulations.autocalibration import frames
 
             # the cameras alone fix the frame's world scale and spread (the points only its signs)
             norm = autocalibration_problem.prepare(parsed.cameras, None, parsed.image_size, options.intrinsics).norm
@@ -262,7 +262,7 @@ class AutocalibrationKind(ProblemKind):
                                                  f"away, beyond 2^{frames.EARLIER_WORLD_HIGHEST} (a K could be "
                                                  "certified wrong there); solve with fewer views near the reference")
         if options.method == "direct":
-            from geocert.solvers.autocalibration import direct
+            from geocert.formulations.autocalibration import direct
 
             direct.check_size(len(parsed.cameras), 0 if parsed.points is None else len(parsed.points),
                               options.chirality)
@@ -347,7 +347,7 @@ def _prove_over_planes(problem: autocalibration_problem.Problem, result, affine_
     """The metric stage's intervals proven over the plane at infinity's own uncertainty
     (plane_sublevel), at both stages' estimated cost increases: into its proof
     (``plane_sublevel``) and its determinacy (``proven_over_planes``), when the search proves any."""
-    from geocert.solvers.autocalibration import plane_sublevel
+    from geocert.formulations.autocalibration import plane_sublevel
 
     affine_increase = affine_stage["determinacy"].get("cost_increase")
     increase = stage["determinacy"].get("cost_increase")
@@ -379,7 +379,7 @@ def stratified_item(parsed: Parsed, options: autocalibration_problem.Autocalibra
     (plane_sublevel). ``deadline``
     (time.monotonic): the job's time limit in all, which the stages' determinacy analyses and that
     search keep (a stage's analysis not done by then says so: determinacy.not_analysed)."""
-    from geocert.solvers.autocalibration import determinacy, proofs
+    from geocert.formulations.autocalibration import determinacy, proofs
 
     a = result.affine
     document: dict = {"method": options.method, "intrinsics": problem.ranges, "plane_at_infinity": None,

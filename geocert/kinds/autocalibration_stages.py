@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 
 from geocert.kinds.documents import finite_or_none
-from geocert.solvers.autocalibration import problem
+from geocert.formulations.autocalibration import problem
 from geocert.core.strict import Invalid
 from geocert.core.self_check import SelfCheckFailed
 from geocert.verify.checks import verify_arrays

@@ -11,9 +11,9 @@ import time
 import numpy as np
 
 from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document
-from geocert.solvers.autocalibration import direct
-from geocert.solvers.autocalibration import direct_relaxation
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import direct
+from geocert.formulations.autocalibration import direct_relaxation
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 
 SCOPE = ("every absolute dual quadric Q (trace 1 in the program's frame) positive semidefinite of rank 3 "
          "whose views' DIACs w = P Q P' keep (w11 + w22) / w33 within what the intrinsics ranges allow "
@@ -86,7 +86,7 @@ def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptio
     if document["plane_at_infinity"] is not None and (document["Ks"] is not None or document["K"] is not None):
         # How well the data fix the plane and K (one focal length a view: each view's), read with the
         # stratified costs' curvature (the moment relaxation has no local parametrisation of its own).
-        from geocert.solvers.autocalibration import determinacy
+        from geocert.formulations.autocalibration import determinacy
         from geocert.core.determinacy import safely, within
 
         p = autocalibration_problem.plane_from_input(problem, np.array(document["plane_at_infinity"]))
@@ -125,7 +125,8 @@ def _prove_focal(setup: direct.DirectSetup, result, stage: dict, proof: dict, de
     and its determinacy (``proven_intervals``), when the search ends before the job's deadline.
     ``intrinsics``: the other intrinsics' too (direct_intrinsics), over the same set, those the
     deadline leaves unproven stated null."""
-    from geocert.solvers.autocalibration import direct_intrinsics, direct_solve, direct_sublevel
+    from geocert.solvers.autocalibration import direct_solve
+    from geocert.formulations.autocalibration import direct_intrinsics, direct_sublevel
 
     increase = direct_sublevel.cost_increase(stage["cost"], stage["lower_bound"], len(setup.cameras))
 

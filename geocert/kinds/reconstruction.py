@@ -27,7 +27,7 @@ from geocert.kinds.documents import certificate_document
 from geocert.kinds.resection_homography import RESECTION, map_document
 from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict, options_model
 from geocert.kinds.triangulation import TrackOut, track_document
-from geocert.solvers.autocalibration.problem import StageProgress
+from geocert.formulations.autocalibration.problem import StageProgress
 from geocert.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, number_array
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.verify.reconstruction import RECONSTRUCTION

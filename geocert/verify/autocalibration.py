@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.autocalibration import metric_relaxation
-from geocert.solvers.autocalibration import problem as autocalibration_problem
-from geocert.solvers.autocalibration import plane_sublevel, proofs
+from geocert.formulations.autocalibration import metric_relaxation
+from geocert.formulations.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import plane_sublevel, proofs
 from geocert.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.core.determinacy import ESTIMATES_FORM, proven_document
 from geocert.core.geometry import InputError, is_number, number_array
@@ -53,7 +53,7 @@ STAGE_SCOPES = {
 
 def read_data(data: Any) -> tuple[np.ndarray, np.ndarray | None, tuple[float, float] | None]:
     """cameras, points, image_size, read strictly (InputError names the field)."""
-    from geocert.solvers.autocalibration.frames import check_reconstruction
+    from geocert.formulations.autocalibration.frames import check_reconstruction
 
     if not isinstance(data, dict):
         raise InputError("data", "must be an object with 'cameras' (and optional 'points', 'image_size')")
@@ -689,7 +689,7 @@ def _check_baseline(given: Any, problem, p) -> None:
 
 
 def _direct_setup(problem, options: dict):
-    from geocert.solvers.autocalibration import direct
+    from geocert.formulations.autocalibration import direct
 
     try:
         points = 0 if problem.norm.points is None else len(problem.norm.points)
@@ -703,8 +703,8 @@ def _direct_setup(problem, options: dict):
 def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, lower_claimed: float,
                   passed: list) -> float:
     """The direct stage: the quadric's cost and scope, what it gives, and the moment proof."""
-    from geocert.solvers.autocalibration import direct
-    from geocert.solvers.autocalibration import direct_relaxation
+    from geocert.formulations.autocalibration import direct
+    from geocert.formulations.autocalibration import direct_relaxation
 
     if claim["index"] != 0:
         raise Invalid("format", "the direct method has one stage (0)")
@@ -729,7 +729,7 @@ def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, l
         _check_direct_views_sublevel(setup, proof["sublevel"], excluded, claimed, Q)
         passed.append("proven_interval")
     elif "sublevel" in proof:  # the focal length's proven interval (direct_sublevel), at the claimed cost or above
-        from geocert.solvers.autocalibration import direct_sublevel
+        from geocert.formulations.autocalibration import direct_sublevel
 
         if isinstance(proof["sublevel"], dict) and "intrinsics" in proof["sublevel"] \
                 and options.get("prove_intrinsics_intervals") is not True:
@@ -738,7 +738,7 @@ def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, l
         at = max(claimed, direct_relaxation.cost(setup.cameras, Q))
         direct_sublevel.check(setup, proof["sublevel"], excluded, at)
         if "intrinsics" in proof["sublevel"]:  # the other intrinsics' (one K), over the same set
-            from geocert.solvers.autocalibration import direct_intrinsics
+            from geocert.formulations.autocalibration import direct_intrinsics
 
             direct_intrinsics.check(setup, proof["sublevel"], excluded, at)
         passed.append("proven_interval")
@@ -757,7 +757,7 @@ def _check_direct(problem, arrays, options: dict, claim: dict, claimed: float, l
 def _check_direct_views_sublevel(setup, sublevel, excluded: tuple, claimed: float, Q: np.ndarray) -> None:
     """A varying-focal direct proof's ``sublevel``: each view's focal length's proven interval
     (direct_sublevel.check_views), at the claimed cost or the quadric's, whichever is higher."""
-    from geocert.solvers.autocalibration import direct_relaxation, direct_sublevel
+    from geocert.formulations.autocalibration import direct_relaxation, direct_sublevel
 
     direct_sublevel.check_views(setup, sublevel, excluded, max(claimed, direct_relaxation.cost(setup.cameras, Q)))
 
@@ -816,7 +816,7 @@ def _check_calibration_forms(result: dict) -> None:
 
 
 def _check_returned_direct(result: dict, certificate: dict, earlier_estimates: bool = True) -> None:
-    from geocert.solvers.autocalibration import direct
+    from geocert.formulations.autocalibration import direct
 
     claim = certificate["items"][0]
     options = certificate["options"]
@@ -878,8 +878,8 @@ def _check_direct_level(problem, result: dict, determinacy: Any, where: str) -> 
     residuals' cost at the returned plane and K (or Ks) over their redundancy; no certified gap,
     the stage's certified cost being another cost). Unread, a level of 1e6, -1 or null verified
     (review 41), and with it intervals said to hold every quadric within it."""
-    from geocert.solvers.autocalibration.determinacy import varying_focal_residuals
-    from geocert.solvers.autocalibration.problem import w_of_K
+    from geocert.formulations.autocalibration.determinacy import varying_focal_residuals
+    from geocert.formulations.autocalibration.problem import w_of_K
     from geocert.core.determinacy import cost_increase
 
     if not isinstance(determinacy, dict) or estimates.stopped(determinacy):
@@ -913,9 +913,9 @@ def _check_direct_proven(stage: dict, claim: dict, views: int, per_view: bool) -
     with varying focal lengths its intervals focal[0] .. focal[m-1] (direct_sublevel.check or
     check_views checked them: the claim is certified, so its proof was checked), at no lower a
     cost increase than direct_sublevel.cost_increase gives for the stage's cost and bound."""
-    from geocert.solvers.autocalibration import direct_sublevel
+    from geocert.formulations.autocalibration import direct_sublevel
 
-    from geocert.solvers.autocalibration import direct_intrinsics
+    from geocert.formulations.autocalibration import direct_intrinsics
 
     reader = direct_sublevel.proven_views_document if per_view else direct_intrinsics.proven_document
     expected = _stated_proven(stage, claim, "stages/0", "direct", reader)
@@ -935,7 +935,7 @@ def _check_relaxation_figures(result: dict, claim: dict, options: dict) -> None:
     relaxation_order (the one the verifier builds the proof's programs at), its moment_rank and
     eigenvalue_ratio the proof's when the stage is certified (the proof's are checked with it:
     direct.check_rank), and otherwise figures a moment matrix of that order can have."""
-    from geocert.solvers.autocalibration import direct
+    from geocert.formulations.autocalibration import direct
 
     stage = result["stages"][0]
     summary = stage.get("certificate") if isinstance(stage, dict) else None
@@ -1011,7 +1011,7 @@ def _largest(expected: Any) -> float:
 
 def _affine_cost(problem, p: np.ndarray) -> tuple[float, float]:
     """The affine stage's cost at plane p (problem.affine_cost's sum) and its rounding."""
-    from geocert.solvers.autocalibration import frames
+    from geocert.formulations.autocalibration import frames
 
     coef, _ = frames.modulus_coefficients(problem.norm.cameras, problem.norm.reference)
     residuals = frames.modulus_residuals(coef, p)
@@ -1029,7 +1029,7 @@ def _metric_cost(setup, w: np.ndarray) -> tuple[float, float]:
 
 def _direct_cost(setup, Q: np.ndarray) -> tuple[float, float]:
     """The direct stage's cost at quadric Q (program frame) and its rounding."""
-    from geocert.solvers.autocalibration import direct_relaxation
+    from geocert.formulations.autocalibration import direct_relaxation
 
     return float(direct_relaxation.cost(setup.cameras, Q)), cost_rounding.squares_rounding(
         cost_rounding.direct_residuals(setup.cameras, Q), cost_rounding.direct_magnitudes(setup.cameras, Q))

@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.autocalibration import determinacy as writer
-from geocert.solvers.autocalibration import metric_relaxation
-from geocert.solvers.autocalibration.problem import w_of_K
+from geocert.formulations.autocalibration import determinacy as writer
+from geocert.formulations.autocalibration import metric_relaxation
+from geocert.formulations.autocalibration.problem import w_of_K
 from geocert.core.determinacy import certified_gap, clip, safely
 from geocert.core.strict import Invalid
 from geocert.verify import estimates

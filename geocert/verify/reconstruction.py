@@ -848,7 +848,7 @@ def _proven_calibration(result: dict, cert: np.ndarray, verify: Callable[[dict],
     reconstruction the pipeline upgraded: it proves K optimal for that reconstruction, which
     calibration_tie ties to the result (ReconstructionItems.check_result, once for any result
     carrying a calibration certificate; the scope states how closely)."""
-    from geocert.solvers.autocalibration import problem
+    from geocert.formulations.autocalibration import problem
 
     document = result.get("calibration_certificate")
     if not isinstance(document, dict) or document.get("kind") != "autocalibration":

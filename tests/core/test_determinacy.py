@@ -160,8 +160,8 @@ class TestAutocalibration:
 
     @pytest.mark.parametrize("noise", [0.1, 1.0])
     def test_the_motion_is_read_off_the_infinite_homographies(self, noise):
-        from geocert.solvers.autocalibration import determinacy, problem
-        from geocert.solvers.autocalibration import metric_relaxation
+        from geocert.formulations.autocalibration import determinacy, problem
+        from geocert.formulations.autocalibration import metric_relaxation
 
         found = {}
         for motion in ("ring", "sphere", "translation"):

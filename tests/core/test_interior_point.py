@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from geocert.solvers.autocalibration import direct, direct_solve, scenes
+from geocert.solvers.autocalibration import direct_solve, scenes
+from geocert.formulations.autocalibration import direct
 from geocert.core import interior_point
-from geocert.solvers.autocalibration import direct_relaxation
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import direct_relaxation
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.core.cones import ConeSpec, rounding_uncounted, smat, svec
 from geocert.core.conic import ConicStatus, SolveSettings, solve_once
 

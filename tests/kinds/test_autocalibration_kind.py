@@ -29,7 +29,7 @@ def job(data=None, **options) -> dict:
 def refused(job_document: dict) -> InputError:
     with pytest.raises(InputError) as error:
         kind, parsed, options = parse_job(job_document)
-        from geocert.solvers.autocalibration.problem import prepare
+        from geocert.formulations.autocalibration.problem import prepare
         prepare(parsed.cameras, parsed.points, parsed.image_size, options.intrinsics)
     return error.value
 
@@ -248,7 +248,7 @@ class TestSelfCheck:
     the verifier before it is returned, and a stage it refuses fails the job."""
 
     def test_a_refused_stage_fails_the_solve(self, monkeypatch):
-        from geocert.solvers.autocalibration import proofs
+        from geocert.formulations.autocalibration import proofs
         from geocert.core.strict import Invalid
         from geocert.verify.checks import SelfCheckFailed
 
@@ -302,7 +302,7 @@ class TestOxfordModelHouse:
     def test_the_affine_answer_is_no_worse_than_local_starts(self, house):
         from scipy.optimize import minimize
 
-        from geocert.solvers.autocalibration import problem as autocalibration_problem
+        from geocert.formulations.autocalibration import problem as autocalibration_problem
 
         data, frame, result = house
         problem = autocalibration_problem.prepare(np.array(data["cameras"]), np.array(data["points"]), (768, 576),

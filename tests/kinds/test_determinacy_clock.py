@@ -10,7 +10,7 @@ import pytest
 
 from geocert.kinds import autocalibration as kind_module
 from geocert.kinds import get_kind
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration import scenes, stratified
 from geocert.core import determinacy
 

@@ -243,7 +243,7 @@ def test_the_calibration_certificate_runs_no_analysis_it_does_not_carry(monkeypa
     """The calibration certificate's stratified item is built for its proofs; the stages'
     determinacy analyses, which the certificate does not carry, are not run (they ran outside any
     clock, for nothing), and the result still verifies."""
-    from geocert.solvers.autocalibration import determinacy
+    from geocert.formulations.autocalibration import determinacy
 
     begun = []
     for name in ("affine_stage", "metric_stage"):

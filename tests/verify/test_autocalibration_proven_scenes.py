@@ -104,9 +104,9 @@ class TestReviewScenes:
         as it reads it) lies inside what the result states, within a thousandth of the width:
         the solver states that hull (the first version read the leaves as its search left them,
         up to 7e-7 px narrower on these scenes)."""
-        from geocert.solvers.autocalibration import metric_relaxation
-        from geocert.solvers.autocalibration import problem as autocalibration_problem
-        from geocert.solvers.autocalibration import proofs
+        from geocert.formulations.autocalibration import metric_relaxation
+        from geocert.formulations.autocalibration import problem as autocalibration_problem
+        from geocert.formulations.autocalibration import proofs
         from geocert.verify.autocalibration import read_data
 
         certificate = review_result["certificate"]
@@ -208,8 +208,8 @@ class TestRealLayouts:
         On these critical motions the stated plane is one of a family, and the true K costs 11
         times the level for it (dinoSparseRing: the intervals, focal 1000 to 1075 px, miss the
         true 3310): that is the plane's error, not the intervals'."""
-        from geocert.solvers.autocalibration import metric_relaxation
-        from geocert.solvers.autocalibration import problem as autocalibration_problem
+        from geocert.formulations.autocalibration import metric_relaxation
+        from geocert.formulations.autocalibration import problem as autocalibration_problem
         from geocert.verify.autocalibration import read_data
 
         result, K = real_result
@@ -240,9 +240,10 @@ def test_with_the_true_plane_the_intervals_hold_the_true_K(layout):
     its determinacy's cost increase (metric_sublevel.prove) and checked by the verifier's
     proofs.check_sublevel: they hold the true K, all five intrinsics (dinoSparseRing: focal
     3134 to 3395 px about the true 3310; the House: 631 to 665 about 666)."""
-    from geocert.solvers.autocalibration import determinacy, metric, metric_sublevel, proofs
-    from geocert.solvers.autocalibration import metric_relaxation
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.solvers.autocalibration import metric, metric_sublevel
+    from geocert.formulations.autocalibration import determinacy, proofs
+    from geocert.formulations.autocalibration import metric_relaxation
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
 
     scene, ranges = layout()
     problem = autocalibration_problem.prepare(scene.cameras, scene.points, scene.image_size, dict(ranges))

@@ -49,7 +49,7 @@ def test_the_reference_is_the_lowest_indexed_of_the_tied():
     any tied camera's frame, the best first. (Alike to 1e-13, a tenth of EARLIER_TIE: a camera 1e-12
     apart lies on that tie's edge, where the SVD's rounding decides, and OpenBLAS's Prescott kernels
     left it out.)"""
-    from geocert.solvers.autocalibration import frames
+    from geocert.formulations.autocalibration import frames
 
     rng = np.random.default_rng(0)
     R = [np.linalg.qr(rng.normal(size=(3, 3)))[0] for _ in range(4)]

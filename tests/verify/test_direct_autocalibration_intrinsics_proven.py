@@ -27,7 +27,7 @@ NAMES = ["principal_u", "principal_v", "focal_y", "skew", "aspect"]
 def test_the_ratios_read_K_off_its_DIAC():
     """Each ratio at a quadric whose views all see K (W = mean P Q P' proportional to K K') is K's
     own: u, v, (a f)^2, s / (a f) and a^2 (fails without direct_intrinsics)."""
-    from geocert.solvers.autocalibration import direct_intrinsics
+    from geocert.formulations.autocalibration import direct_intrinsics
 
     rng = np.random.default_rng(3)
     K = np.array([[1.1, 0.02, 0.05], [0.0, 1.1 * 0.97, -0.03], [0.0, 0.0, 1.0]])
@@ -48,7 +48,7 @@ def test_the_ratios_read_K_off_its_DIAC():
 
 
 def test_asking_with_varying_focal_is_refused():
-    from geocert.solvers.autocalibration.problem import AutocalibrationOptions
+    from geocert.formulations.autocalibration.problem import AutocalibrationOptions
     from geocert.core.geometry import InputError
 
     options = AutocalibrationOptions(method="direct", varying_focal=True, prove_intrinsics_intervals=True)
@@ -80,7 +80,7 @@ def sublevel_of(result: dict) -> dict:
 
 def restated(forged: dict) -> dict:
     """``forged``'s determinacy made its proof's again, and its certificate rehashed."""
-    from geocert.solvers.autocalibration import direct_intrinsics
+    from geocert.formulations.autocalibration import direct_intrinsics
 
     forged["stages"][0]["determinacy"]["proven_intervals"] = direct_intrinsics.proven_document(sublevel_of(forged))
     rehash(forged["certificate"])

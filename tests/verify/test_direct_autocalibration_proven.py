@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import direct, direct_solve, scenes
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.solvers.autocalibration import direct_solve, scenes
+from geocert.formulations.autocalibration import direct
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.core.certificates import pack, unpack
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import rehash
@@ -52,7 +53,7 @@ def interval(result: dict) -> tuple[float, float]:
 
 def forged_interval(result: dict, lower: float, upper: float) -> dict:
     """``result`` stating [lower, upper] in its proof and its determinacy alike (rehashed)."""
-    from geocert.solvers.autocalibration import direct_sublevel  # imported here: each test fails on its own on code without it
+    from geocert.formulations.autocalibration import direct_sublevel
 
     forged = copy.deepcopy(result)
     sublevel = forged["certificate"]["items"][0]["proof"]["sublevel"]
@@ -135,7 +136,7 @@ def test_the_solvers_interval_holds_the_true_quadrics_focal():
     seed 0: its cost is above the level, 5.05e-4 against 4.79e-4, but its focal is inside)."""
     from types import SimpleNamespace
 
-    from geocert.solvers.autocalibration import direct_sublevel
+    from geocert.formulations.autocalibration import direct_sublevel
 
     scene, _ = scenes.table71_scene(0, 0.2, False)
     problem = autocalibration_problem.prepare(scene.cameras, scene.points, None, UNIT, unit_reference=False)

@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import direct, direct_relaxation, scenes
-from geocert.solvers.autocalibration import problem as autocalibration_problem
-from geocert.solvers.autocalibration.proofs import sublevel_level
+from geocert.solvers.autocalibration import scenes
+from geocert.formulations.autocalibration import direct, direct_relaxation
+from geocert.formulations.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration.proofs import sublevel_level
 from geocert.core.certificates import pack, unpack
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import rehash
@@ -74,7 +75,7 @@ def quantity(w: np.ndarray) -> float:
 def forged(result: dict, edit) -> dict:
     """``result`` with ``edit(sublevel)`` applied to its proof, its determinacy restated from the
     edited proof (so that only the proof's own check can refuse it), rehashed."""
-    from geocert.solvers.autocalibration import direct_sublevel  # here: each test fails on its own without it
+    from geocert.formulations.autocalibration import direct_sublevel
 
     document = copy.deepcopy(result)
     sublevel = sublevel_of(document)
@@ -177,7 +178,7 @@ class TestForged:
     def test_a_c_moved_inward_is_refused(self, setup, result):
         """View 1's lower end's c raised past the returned quadric's own ratio: that quadric is in
         the set with tr((A - c B) Q) < 0, so no dual proves the end."""
-        from geocert.solvers.autocalibration import direct_sublevel
+        from geocert.formulations.autocalibration import direct_sublevel
 
         own = direct_sublevel.ratio(setup.cameras, setup.from_input(np.array(result["dual_absolute_quadric"])), 1)
 

@@ -25,8 +25,8 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import frames
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import frames
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import read_data
 from geocert.verify.checks import verify_any
 

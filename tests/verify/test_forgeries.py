@@ -187,8 +187,8 @@ class TestSubnormalFarkasVectors:
 
 @pytest.fixture(scope="module")
 def forged_metric():
-    from geocert.solvers.autocalibration import metric_relaxation
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import metric_relaxation
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     document = copy.deepcopy(stored("autocalibration_five_views")["certificate"])
@@ -392,8 +392,8 @@ class TestDeterminacyWithinScope:
     test stands for issue 33's class on the stored certificate."""
 
     def test_the_metric_stages_intervals_lie_within_the_intrinsics_ranges(self):
-        from geocert.solvers.autocalibration import determinacy
-        from geocert.solvers.autocalibration import problem as autocalibration_problem
+        from geocert.formulations.autocalibration import determinacy
+        from geocert.formulations.autocalibration import problem as autocalibration_problem
         from geocert.verify.autocalibration import read_data
 
         result = stored("autocalibration_five_views")
@@ -433,7 +433,7 @@ class TestVerifierCost:
         return rehash(document)
 
     def test_ten_thousand_points_are_refused_before_any_program_is_built(self, monkeypatch):
-        from geocert.solvers.autocalibration import direct_relaxation
+        from geocert.formulations.autocalibration import direct_relaxation
 
         built = []
         original = direct_relaxation.build
@@ -445,7 +445,7 @@ class TestVerifierCost:
         assert not [count for count in built if count > 1000], built
 
     def test_a_short_dual_vector_is_refused_before_its_program_is_built(self, monkeypatch):
-        from geocert.solvers.autocalibration import direct_relaxation
+        from geocert.formulations.autocalibration import direct_relaxation
 
         built = []
         original = direct_relaxation.build
@@ -582,8 +582,8 @@ def thin_cut_metric():
     over the omega box of intrinsics whose principal point is pinned to +-1e-6 px (the middle of
     its default range, so the affine stage's genuine proof stands): a K of focal 600 px claimed
     optimal where the scene's own (focal 1000 px, in the same box) costs almost nothing."""
-    from geocert.solvers.autocalibration import metric_relaxation
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import metric_relaxation
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     result = stored("autocalibration_stratified")
@@ -737,8 +737,8 @@ class TestMetricRoundsBounded:
     minutes within the 32 MB body limit. Now at most proofs.MAX_ROUNDS (the solver makes 12)."""
 
     def test_rounds_beyond_the_limit_are_refused_before_any_is_built(self, monkeypatch):
-        from geocert.solvers.autocalibration import metric_relaxation
-        from geocert.solvers.autocalibration.proofs import MAX_ROUNDS
+        from geocert.formulations.autocalibration import metric_relaxation
+        from geocert.formulations.autocalibration.proofs import MAX_ROUNDS
 
         result = stored("autocalibration_five_views")
         proof = result["certificate"]["items"][1]["proof"]
@@ -1055,13 +1055,13 @@ class TestUnitOnExactData:
     unit of order 1 enlarges no bound; the subnormal and far units stay refused."""
 
     def test_a_unit_near_1_is_accepted_whatever_the_cost(self):
-        from geocert.solvers.autocalibration.proofs import checked_unit
+        from geocert.formulations.autocalibration.proofs import checked_unit
 
         assert checked_unit(1.526, "regions/0/unit", 1.3e-31) == 1.526
 
     @pytest.mark.parametrize("unit", [TINY, 1e-300, 1e-5, 1e5, 1e300])
     def test_a_unit_far_from_1_and_from_the_cost_is_refused(self, unit):
-        from geocert.solvers.autocalibration.proofs import checked_unit
+        from geocert.formulations.autocalibration.proofs import checked_unit
         from geocert.core.strict import Invalid
 
         with pytest.raises(Invalid):

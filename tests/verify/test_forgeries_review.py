@@ -92,7 +92,7 @@ def _certified_K_from(result: dict, document: dict) -> dict:
     """``document`` (an autocalibration certificate) put in as the calibration certificate, and
     the summary's certified K, its difference from the returned K, its range edges and the
     autocalibration stage's K and ranges made to agree with it."""
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.formulations.reconstruction import calibration_claim
 
     result["calibration_certificate"] = document
@@ -232,8 +232,8 @@ class TestCalibrationCertificateOptionsUntied:
 
     @pytest.mark.parametrize("options", [{"metric_rel_gap": 1.0}, {"abs_gap": 1e6}])
     def test_a_calibration_certificate_with_a_loose_gap_is_refused(self, calibrated_reconstruction, options):
-        from geocert.solvers.autocalibration import metric_relaxation
-        from geocert.solvers.autocalibration import problem as autocalibration_problem
+        from geocert.formulations.autocalibration import metric_relaxation
+        from geocert.formulations.autocalibration import problem as autocalibration_problem
         from geocert.verify.autocalibration import read_data
 
         result = copy.deepcopy(calibrated_reconstruction)

@@ -184,7 +184,7 @@ def test_the_direct_proven_intervals_numbers_edited_are_refused(direct_result, e
     replaced by a subnormal, 0, -0, a huge or tiny normal number, or its sign flipped, the result's
     determinacy restated from it: refused, every dual read by safe_bound in the programs rebuilt
     from the certificate's data (passing on main as here)."""
-    from geocert.solvers.autocalibration import direct_sublevel
+    from geocert.formulations.autocalibration import direct_sublevel
     from geocert.core.certificates import pack, unpack
     from tests.verify.test_forgeries import rehash
 

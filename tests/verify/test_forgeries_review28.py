@@ -272,7 +272,7 @@ def test_the_plane_searches_pay_a_unit_for_each_camera_box_bound(over_planes, mo
     in mean-value form over 8 variables) costs more than one, measured 65 to 78 us of CPU against
     the chart reference's 1.2 us a unit. Counted, not timed: the units charged cover the
     camera-box bounds made."""
-    from geocert.solvers.autocalibration import plane_sublevel
+    from geocert.formulations.autocalibration import plane_sublevel
 
     counted = {"bounds": 0, "units": 0}
     excluded, charge = plane_sublevel.excluded, plane_sublevel.charge
@@ -330,7 +330,7 @@ class TestOverPlanesRefused:
         _refused(document, "proven_over_planes")
 
     def test_the_affine_increase_lowered_in_proof_and_result_is_refused(self, over_planes):
-        from geocert.solvers.autocalibration import plane_sublevel
+        from geocert.formulations.autocalibration import plane_sublevel
 
         document = copy.deepcopy(over_planes)
         _sublevel(document)["affine_increase"] = 0.0

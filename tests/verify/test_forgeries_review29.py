@@ -364,7 +364,7 @@ class TestAutocalibrationRefused:
 def over_planes_block() -> tuple:
     """One block of boxes the verifier bounds in a genuine over-planes document (8 views, 60
     points): its context, region and boxes, captured from the verification."""
-    from geocert.solvers.autocalibration import plane_sublevel
+    from geocert.formulations.autocalibration import plane_sublevel
     from tests.solvers.autocalibration.test_autocalibration_over_planes import solved
 
     captured: list = []
@@ -390,7 +390,7 @@ def _block_peak(context, region, lo, hi) -> int:
 
     import numpy as np
 
-    from geocert.solvers.autocalibration import plane_sublevel
+    from geocert.formulations.autocalibration import plane_sublevel
 
     step = plane_sublevel.BLOCK_CAMERA_BOXES // len(context.problem.norm.cameras)
     boxes_lo, boxes_hi = np.resize(lo, (step, lo.shape[1])), np.resize(hi, (step, hi.shape[1]))
@@ -441,7 +441,7 @@ def test_a_block_of_camera_boxes_is_charged_for_its_chirality_rows(over_planes_b
     smaller by as much, so the work a document asks for stays within what its size pays."""
     import numpy as np
 
-    from geocert.solvers.autocalibration import plane_sublevel
+    from geocert.formulations.autocalibration import plane_sublevel
 
     context, region, lo, hi = over_planes_block
     many = copy.copy(region)

@@ -524,7 +524,7 @@ def _K_signed(result: dict, signs: tuple) -> dict:
     upgrade, quadric, cameras and points recomputed from it as the verifier recomputes them."""
     import numpy as np
 
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     result = copy.deepcopy(result)

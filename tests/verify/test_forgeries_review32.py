@@ -16,7 +16,7 @@ the map's cost spread capped at estimates.MAX_COST_SPREAD; the level's absolute 
    0.043) in the region's frame), which the verifier checked chirality allows. The proof's coverage
    (every plane of the orientation lies in the box the leaves cover) is false; here the stage's
    lower bound is 0 and stays true, but any leaf bound now rests on a box the rows do not prove.
-   At fault: geocert/solvers/autocalibration/proofs.py:check_regions (reach from the stated box)
+   At fault: geocert/formulations/autocalibration/proofs.py:check_regions (reach from the stated box)
    with frames.side_slack. Suggested fix: take reach from the proven sides (the exact_side values,
    or the box the rows prove by LP), not the stated ones, and refuse a stated side beyond its
    proven value by more than SIDE_TOLERANCE of the proven box (a stated side far outside what its

@@ -62,7 +62,7 @@ each row's term axis by axis, |rows| |G|^T times that axis' proven reach.
    and the LP extent) 0.63347: 0.6% of the axis' extent 1.67 (2% near cond 1e12), holding planes
    chirality allows (one at v[1] = 0.6328 exhibited) that no leaf covers. The stage's bound here is
    0 and stays true; a leaf bound over such a box rests on a box the rows do not prove.
-   At fault: geocert/solvers/autocalibration/frames.py:side_slack (one reach for every axis,
+   At fault: geocert/formulations/autocalibration/frames.py:side_slack (one reach for every axis,
    against |a_k|_1) as proofs.check_regions calls it. Suggested fix: per axis, the rounding of a_kj
    times that axis' proven reach, sum_j ROWS_ROUNDING (|w_k| |G_j|) max(|lo_j|, |hi_j|) + |b_k|'s
    (the rounding rows @ G^T actually has, componentwise), so a stretched axis' small entries pay
@@ -133,7 +133,7 @@ def _moved_to_a_tie(apart: float) -> dict:
     row only: the same reconstruction, its plane at infinity moved), t bisected to where camera 1
     is conditioned ``apart`` (relative) below camera 3, the best."""
     from geocert.solvers.autocalibration import scenes
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
 
     scene = scenes.make_scene(6, noise_percent=0.2, points=60, seed=1)
     N = np.linalg.inv(autocalibration_problem.preconditioner(autocalibration_problem.resolve_ranges({}, scene.image_size)))
@@ -161,7 +161,7 @@ def _moved_to_a_tie(apart: float) -> dict:
 def tied_data() -> dict:
     """Cameras 3 and 1 tied, camera 3 the best by 1e-11 (far beyond any machine's rounding of the
     SVD and frames.EARLIER_TIE, far inside REFERENCE_TIE)."""
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
 
     data = _moved_to_a_tie(1e-11)
     cameras = np.array(data["cameras"])
@@ -174,7 +174,7 @@ def _solved_in_each_frame(data: dict, method: str) -> dict:
     """The job solved with each tied camera as the reference (frames.reference_camera patched; the
     service's own choice is camera 1, the lowest-indexed of the two)."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.autocalibration import frames
+    from geocert.formulations.autocalibration import frames
 
     results = {}
     for reference in (3, 1):
@@ -205,7 +205,7 @@ def _other(tied_scene: dict) -> dict:
 def _in_service_frame(result: dict, data: dict) -> dict:
     """The result with what derives from its plane and K recomputed in the frame the verifier's
     check_returned reads (prepare, no reference), and its optional baseline left out."""
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     document = copy.deepcopy(result)
@@ -244,7 +244,7 @@ def test_the_self_check_refuses_another_frame(tied_data):
     """A solve posed in a tied camera's frame other than the reference's fails the service's own
     check (GEOCERT_SELF_VERIFY=1, as under test) rather than leave it."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.autocalibration import frames
+    from geocert.formulations.autocalibration import frames
     from geocert.core.self_check import SelfCheckFailed
 
     with pytest.MonkeyPatch.context() as patch:
@@ -309,8 +309,8 @@ def test_a_camera_on_the_ties_edge_leaves_two_frames_each_named():
     is the rounding's, so a solve posed in either frame verifies (its returned fields read in its
     proofs' frame), and the report names both cameras and the one its claims are posed in."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.autocalibration import frames
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import frames
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
 
     data = _moved_to_a_tie(frames.REFERENCE_TIE)
     assert autocalibration_problem.reference_candidates(np.array(data["cameras"]), data["image_size"], {}) == [1, 3]
@@ -328,7 +328,7 @@ def test_the_two_frames_pose_different_problems(tied_scene):
     """Why one frame is the data's: on noisy data each tied frame poses its own problem. The other
     frame's plane costs 35% more in the reference's frame than it claims in its own, and the bound it
     proves there lies above the cost of the plane certified in the reference's frame."""
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import _affine_cost, read_data
 
     other, service = _other(tied_scene), tied_scene["results"][tied_scene["service"]]
@@ -347,7 +347,7 @@ def test_reference_candidates_name_the_tie_edge():
     on the tie's edge (within REFERENCE_TIE_BAND of it) makes both it and the next choice
     candidates, since another machine's rounding may put it either side; a camera clearly outside
     is none."""
-    from geocert.solvers.autocalibration import frames
+    from geocert.formulations.autocalibration import frames
 
     def cameras(*ratios: float) -> np.ndarray:
         return np.array([np.hstack([np.diag([1.0, 1.0, r]), np.ones((3, 1))]) for r in ratios])
@@ -377,7 +377,7 @@ def test_the_direct_other_frame_cost_is_not_its_claim(tied_direct):
     """In the reference's frame (camera 1) the camera-3 quadric costs 1e-3 of itself less than it
     claims (10 times metric_rel_gap), and no less than the bound the reference frame's result
     proves: a claim about another problem."""
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import _direct_cost, _direct_setup, read_data
 
     service, other = tied_direct["results"][1], tied_direct["results"][3]
@@ -494,7 +494,7 @@ STRETCH = 3.5e-12  # the frame's axis 0 scaled by this: its condition number 3e1
 def _one_reach_slack(a: np.ndarray, b: np.ndarray, basis: list[int], axis: int, reach: float) -> float:
     """frames.side_slack as review 32 left it (the slack this forgery was built against): one reach,
     the largest proven side, for every axis, against |a_k|_1."""
-    from geocert.solvers.autocalibration import frames
+    from geocert.formulations.autocalibration import frames
 
     rhs = np.zeros(3)
     rhs[axis] = 1.0
@@ -508,8 +508,8 @@ def _stretched(inside: float) -> tuple[dict, float, float]:
     (the same polytope, its axis-0 extent 1e12 times longer), the box its rows' proven sides but
     the axis-1 upper side stated ``inside`` times its slack inside; the one leaf restated as the
     box. Returns the document, the proven side and the stated one."""
-    from geocert.solvers.autocalibration import frames
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import frames
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     document = copy.deepcopy(stored("autocalibration_stratified"))
@@ -547,8 +547,8 @@ def test_the_stretched_box_leaves_out_planes_chirality_allows():
     allowed_by_chirality), and no leaf covers it."""
     from scipy.optimize import linprog
 
-    from geocert.solvers.autocalibration import frames
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import frames
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     document, proven, stated = _stretched(0.9)

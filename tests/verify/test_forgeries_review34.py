@@ -137,8 +137,8 @@ EDGE = 1.2e-9  # camera 1's conditioning below camera 3's, relative: inside the 
 def edge_data() -> dict:
     """Review 33's tied scene (make_scene(6 views, 0.2% noise, seed 1), world frame moved by
     T = I + t E), t bisected so that camera 1's conditioning is EDGE below camera 3's."""
-    from geocert.solvers.autocalibration import frames
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import frames
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
 
     data = _moved_to_a_tie(EDGE)
     cameras, image_size = np.array(data["cameras"]), data["image_size"]
@@ -154,7 +154,7 @@ def _solved(data: dict, method: str) -> dict:
     """The job solved in each candidate's frame (frames.reference_camera patched; the service's own
     choice is camera 3)."""
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.autocalibration import frames
+    from geocert.formulations.autocalibration import frames
 
     results = {}
     for reference in (3, 1):
@@ -204,7 +204,7 @@ def test_the_edge_frames_claims_contradict(edge_stratified, edge_data):
     """Why class 1 is a forgery: in camera 3's frame (every machine's reference, prepare's), camera
     1's plane costs 5,000 times its claim, and the service's certificate proves no plane costs
     below twice that claim; its K is the intrinsics ranges' corner."""
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import _affine_cost, read_data
 
     service, forged = edge_stratified[3], edge_stratified[1]
@@ -364,8 +364,8 @@ def test_side_slack_stays_small_in_any_frame():
     scaled frames (cond < 1e12): at most 1e-8 of the axis' proven extent (measured 1.7e-9)."""
     import itertools
 
-    from geocert.solvers.autocalibration import frames
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import frames
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     certificate = stored("autocalibration_stratified")["certificate"]

@@ -93,7 +93,7 @@ the value in exact arithmetic, in this process.
    and camera 1's result too, its derived fields recomputed in camera 3's frame (review 34's
    _in_prepare_frame: check_returned reads prepare's frame for an unnamed proof), claiming a plane
    optimal at 9.604e-5 that costs 0.504 in camera 3's frame (review 34's figures) and K at the
-   intrinsics ranges' corner. At fault: geocert/solvers/autocalibration/frames.py:earlier_references (the earlier
+   intrinsics ranges' corner. At fault: geocert/formulations/autocalibration/frames.py:earlier_references (the earlier
    writer's argmax taken to be the rounding's choice within REFERENCE_TIE and its edge, where
    argmax's rounding is the SVD's, about 1e-15) with geocert/verify/autocalibration.py:check_claim
    (an unnamed proof also tried in reference_candidates' frames, the current writer's, which always
@@ -464,8 +464,8 @@ def test_the_unnamed_edge_claims_contradict(edge_direct, edge_data):
     and in camera 3's frame camera 1's quadric costs 3.65527e-5, not the 3.65058e-5 it claims
     (1.3e-3 more, 13 times metric_rel_gap): the two claims are of two problems, which the two
     reports do not tell apart."""
-    from geocert.solvers.autocalibration import frames
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import frames
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import AutocalibrationVerification, read_data
 
     cameras, _, image_size = read_data(edge_data)

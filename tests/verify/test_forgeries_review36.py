@@ -441,7 +441,7 @@ def _affine_uncertified_in_frame(result: dict, data: dict, reference: int) -> di
     """The result with its affine stage uncertified (its bound dropped, as an uncertified stage's
     writer states it), that stage's proof naming ``reference``, the returned fields recomputed
     from the plane and K in that camera's frame, and the outcome and counts the stages give."""
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import outcome, read_data
 
     document = copy.deepcopy(result)

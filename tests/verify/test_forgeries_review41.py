@@ -30,7 +30,7 @@ Found (each an xfail(strict) test below: it fails today, the forgery being accep
    the returned quadric: direct_relaxation.cost), or refuse a level the writer cannot write.
 
 3. An autocalibration leaf's recorded ``bound`` is unchecked (proofs.check_leaves,
-   geocert/solvers/autocalibration/proofs.py:130; the direct programs' likewise,
+   geocert/formulations/autocalibration/proofs.py:130; the direct programs' likewise,
    direct.py:334), where docs/certificate.md:203 says a dual proof's recorded bound "must not
    exceed the recomputed one by more than 1e-6 of their size, as a check that the record is the
    solver's", as bilinear (verify/bilinear.py:364) and the fractional kinds

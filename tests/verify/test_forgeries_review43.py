@@ -110,7 +110,7 @@ def _weak_plane_job() -> dict:
 def _walked_again(document: dict) -> dict:
     """The verifier's own walks at the returned plane and K (the metric walk, and each end the
     nearer of walk and curvature as autocalibration_estimates._nearer reads it for earlier documents)."""
-    from geocert.solvers.autocalibration import determinacy as writer, problem as autocalibration_problem
+    from geocert.formulations.autocalibration import determinacy as writer, problem as autocalibration_problem
     from geocert.core.determinacy import certified_gap
     from geocert.verify import autocalibration as verifier
     from geocert.verify import autocalibration_estimates
@@ -217,7 +217,7 @@ def test_a_stage_stopped_or_failed_states_the_critical_motion_and_verifies(monke
     document with that warning dropped is refused."""
     from geocert.core.determinacy import OutOfTime
     from geocert.jobs.runner import solve_job
-    from geocert.solvers.autocalibration import determinacy
+    from geocert.formulations.autocalibration import determinacy
 
     def stopped(*args, **kwargs):
         raise OutOfTime if stops_with == "clock" else np.linalg.LinAlgError("singular")

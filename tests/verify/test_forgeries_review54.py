@@ -119,7 +119,7 @@ import json
 import numpy as np
 import pytest
 
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import rehash, stored
 from tests.support import refused as _refused
@@ -401,7 +401,7 @@ def _earlier_world_writer(monkeypatch, data: dict, options: dict, unit_reference
 
 def test_an_earlier_frames_proof_in_a_world_frame_with_a_large_fourth_scale_is_refused(monkeypatch):
     """A proof stating neither scale, K 400 px off: the reference's 2^8 limit holds, the world's not."""
-    from geocert.solvers.autocalibration import frames
+    from geocert.formulations.autocalibration import frames
 
     document = stored("autocalibration_stratified")
     certificate = document["certificate"]

@@ -82,8 +82,8 @@ import json
 import numpy as np
 import pytest
 
-from geocert.solvers.autocalibration import frames
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import frames
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import stored
 from tests.verify.test_forgeries_review54 import TRUTH, _reposed, _solve

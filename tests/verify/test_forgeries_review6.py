@@ -28,8 +28,8 @@ FOCAL_SCALE = 1.17
 def _metric_setup(certificate: dict):
     """(problem, plane, metric setup) of a stratified certificate's metric stage, as the verifier
     builds them."""
-    from geocert.solvers.autocalibration import metric_relaxation
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import metric_relaxation
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     cameras, points, image_size = read_data(certificate["data"])
@@ -43,8 +43,8 @@ def _metric_setup(certificate: dict):
 
 
 def _metric_cost(certificate: dict, K: np.ndarray) -> float:
-    from geocert.solvers.autocalibration import metric_relaxation
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import metric_relaxation
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
 
     problem, _, setup = _metric_setup(certificate)
     return float(metric_relaxation.cost(setup, autocalibration_problem.w_of_K(problem, K)))
@@ -55,7 +55,7 @@ def _with_metric_K(result: dict, K: np.ndarray, abs_gap: float) -> dict:
     plane, at ``abs_gap``: the metric claim's K, cost and gap, the result's K and what follows
     from it (upgrade, quadric, cameras, points: what the verifier recomputes), the stage's figures
     and its summary's tolerance; the genuine proof and lower bound kept, the hashes redone."""
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     forged = copy.deepcopy(result)
@@ -122,7 +122,7 @@ class TestAbsoluteGapCapInTheCostsUnits:
 
     def test_the_same_result_at_the_kinds_cap_verifies(self):
         """The genuine K restated at the autocalibration kind's abs_gap cap: a true, weaker claim."""
-        from geocert.solvers.autocalibration.problem import MAX_ABS_GAP
+        from geocert.formulations.autocalibration.problem import MAX_ABS_GAP
 
         genuine = stored("autocalibration_five_views")
         assert _valid(_with_metric_K(genuine, np.asarray(genuine["K"]), MAX_ABS_GAP))
@@ -148,9 +148,9 @@ class TestAbsoluteGapCapInTheCostsUnits:
         ``abs_gap``: the claim's quadric, plane, K and cost, the result's derived fields (what the
         verifier recomputes), the stage's figures and tolerance; the genuine proof and bound kept.
         Returns it and the quadric's cost."""
-        from geocert.solvers.autocalibration import direct
-        from geocert.solvers.autocalibration import direct_relaxation
-        from geocert.solvers.autocalibration import problem as autocalibration_problem
+        from geocert.formulations.autocalibration import direct
+        from geocert.formulations.autocalibration import direct_relaxation
+        from geocert.formulations.autocalibration import problem as autocalibration_problem
         from geocert.verify.autocalibration import _direct_setup, read_data
 
         forged = stored("autocalibration_direct")
@@ -181,7 +181,7 @@ class TestAbsoluteGapCapInTheCostsUnits:
         return (moved + moved.T) / 2
 
     def test_the_direct_result_at_the_kinds_cap_verifies(self):
-        from geocert.solvers.autocalibration.problem import MAX_ABS_GAP
+        from geocert.formulations.autocalibration.problem import MAX_ABS_GAP
 
         assert _valid(stored("autocalibration_direct"))
         assert _valid(self.forged_direct(lambda Q: Q, MAX_ABS_GAP)[0])
@@ -558,7 +558,7 @@ class TestRestatedCalibrationStagesAbsoluteFloor:
 
 # The abs_gap cap of each certified kind, in its cost's units (the kinds' models and the verifier read it).
 def _abs_gap_caps() -> dict:
-    from geocert.solvers.autocalibration.problem import MAX_ABS_GAP as AUTOCALIBRATION
+    from geocert.formulations.autocalibration.problem import MAX_ABS_GAP as AUTOCALIBRATION
     from geocert.formulations.bilinear.options import MAX_ABS_GAP as BILINEAR
     from geocert.formulations.fractional.options import MAX_ABS_GAP as RESIDUALS
 

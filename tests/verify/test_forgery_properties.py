@@ -151,8 +151,8 @@ def _claim_cost(kind: str, data: dict, options: dict, claim: dict) -> float | No
         basis, points = adapter.read(data, claim["index"])
         return bilinear_problem.cost(bilinear_problem.residuals(basis, points, np.array(claim["camera"]),
                                                                 np.array(claim["coefficients"])), options["norm"])
-    from geocert.solvers.autocalibration import metric_relaxation
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import metric_relaxation
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.verify.autocalibration import read_data
 
     cameras, points, size = read_data(data)
@@ -162,8 +162,8 @@ def _claim_cost(kind: str, data: dict, options: dict, claim: dict) -> float | No
     problem = autocalibration_problem.prepare(cameras, points, size, dict(options.get("intrinsics") or {}),
                                               unit_reference=unit)
     if options.get("method") == "direct":
-        from geocert.solvers.autocalibration import direct
-        from geocert.solvers.autocalibration import direct_relaxation
+        from geocert.formulations.autocalibration import direct
+        from geocert.formulations.autocalibration import direct_relaxation
 
         setup = direct.setup_for(problem, options["chirality"], exclude=False)
         return direct_relaxation.cost(setup.cameras, setup.from_input(np.array(claim["dual_absolute_quadric"])))

@@ -41,7 +41,7 @@ def test_every_warning_code_the_source_writes_is_registered():
 
 
 def test_the_motion_codes_are_registered():
-    from geocert.solvers.autocalibration.determinacy import CRITICAL_CODES
+    from geocert.formulations.autocalibration.determinacy import CRITICAL_CODES
 
     assert set(CRITICAL_CODES) <= WARNING_CODES
 

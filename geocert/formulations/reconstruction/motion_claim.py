@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from geocert.solvers.autocalibration import determinacy
+from geocert.formulations.autocalibration import determinacy
 
 
 def motion(rotations: list, translations: list, noise: float | None = None, plane_noise: float | None = None

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geocert.solvers.autocalibration.problem import CHIRALITY, AutocalibrationOptions
+from geocert.formulations.autocalibration.problem import CHIRALITY, AutocalibrationOptions
 from geocert.core.declared_options import option, option_ranges, redeclared
 from geocert.core.geometry import InputError
 from geocert.formulations.fractional.options import FractionalOptions, ResidualOptions, SearchOptions

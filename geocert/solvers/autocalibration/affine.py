@@ -11,9 +11,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from geocert.solvers.autocalibration import affine_relaxation
+from geocert.formulations.autocalibration import affine_relaxation
 from geocert.solvers.autocalibration import cuts
-from geocert.solvers.autocalibration import frames
+from geocert.formulations.autocalibration import frames
 from geocert.core.bnb import BnbOptions, Box, branch_and_bound
 
 MAX_RELAXATION_ROWS = 64  # chirality rows beyond this: only the hull's (the others are redundant)
@@ -59,19 +59,6 @@ def relaxation_rows(a: np.ndarray, b: np.ndarray, always: int) -> list[int]:
         return list(range(len(a)))
     vertices.add(always)
     return sorted(vertices)
-
-
-def gordan_rows(rows: np.ndarray) -> list[int] | None:
-    """Rows (at most 5) with a nonnegative combination exactly 0: no plane is positive on all."""
-    from scipy.optimize import linprog
-
-    k = len(rows)
-    res = linprog(np.zeros(k), A_eq=np.vstack([rows.T, np.ones((1, k))]), b_eq=np.append(np.zeros(4), 1.0),
-                  bounds=[(0, None)] * k, method="highs")
-    if res.status != 0:
-        return None
-    chosen = [int(i) for i in np.argsort(-res.x)[:5] if res.x[i] > 0]
-    return chosen if frames.exact_gordan(rows, chosen) else None
 
 
 class AffineProblem(cuts.BoxSearch):
@@ -128,7 +115,7 @@ def regions_of(norm: frames.Normalised, coef: np.ndarray) -> tuple[list[Region],
         rows = frames.chirality_rows(norm, delta)
         plane = frames.interior_plane(rows)
         if plane is None:
-            chosen = gordan_rows(rows)
+            chosen = frames.gordan_rows(rows)
             if chosen is None:
                 return [], [], (f"the orientation {delta:+g} has no strictly quasi-affine plane, but that could "
                                 "not be proved exactly (points on the boundary of chirality?)")

@@ -52,11 +52,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from geocert.solvers.autocalibration import direct
+from geocert.formulations.autocalibration import direct
 from geocert.core import interior_point
-from geocert.solvers.autocalibration import direct_relaxation
+from geocert.formulations.autocalibration import direct_relaxation
 from geocert.core.certificates import pack
-from geocert.solvers.autocalibration.proofs import sublevel_level
+from geocert.formulations.autocalibration.proofs import sublevel_level
 from geocert.core.conic import ConicStatus, SolveSettings, solve_once
 
 
@@ -525,7 +525,7 @@ def prove_focal_lengths(setup: direct.DirectSetup, Q: np.ndarray, cost: float, i
     ends as prove_focal's, with that view's forms over the same programs; a view neither of whose
     ends is proven states the scope's range. None when no end of any view is proven, or ``check()``
     raises Stopped."""
-    from geocert.solvers.autocalibration import direct_sublevel
+    from geocert.formulations.autocalibration import direct_sublevel
 
     if not (math.isfinite(cost) and math.isfinite(increase) and increase >= 0 and cost >= 0):
         return None
@@ -545,7 +545,7 @@ def _prove_ends(setup: direct.DirectSetup, Q: np.ndarray, level: float, check, v
                 ratio=None) -> dict:
     """{"lower": entries or None, "upper": ...}: prove_focal's search, of the views' mean r (view
     None) or of view ``view``'s, or of ``ratio`` (a direct_intrinsics.Ratio) when given."""
-    from geocert.solvers.autocalibration import direct_intrinsics, direct_sublevel
+    from geocert.formulations.autocalibration import direct_intrinsics, direct_sublevel
 
     if ratio is None:
         def value(Q):
@@ -629,7 +629,7 @@ def _prove_ends(setup: direct.DirectSetup, Q: np.ndarray, level: float, check, v
 
 def _proven_here(setup, sublevel: dict, level: float) -> tuple[float, float]:
     """The interval the entries prove, as the verifier computes it (direct_sublevel.check)."""
-    from geocert.solvers.autocalibration import direct_sublevel
+    from geocert.formulations.autocalibration import direct_sublevel
 
     return direct_sublevel.pixels(float(setup.problem.K0[0, 0]), *_ends_here(setup, sublevel, level, None),
                                   direct_sublevel.scope_range(setup.problem.unit_ranges))
@@ -638,7 +638,7 @@ def _proven_here(setup, sublevel: dict, level: float) -> tuple[float, float]:
 def _ends_here(setup, sides: dict, level: float, view: int | None) -> tuple[float, float]:
     """r's (lower, upper) ends the entries prove (view ``view``'s, or the mean's), as the verifier
     computes them (direct_sublevel._ends); an end with no entries is infinite."""
-    from geocert.solvers.autocalibration import direct_sublevel
+    from geocert.formulations.autocalibration import direct_sublevel
     from geocert.core.certificates import unpack
 
     ends = {"lower": -math.inf, "upper": math.inf}
@@ -660,7 +660,7 @@ def prove_intrinsics(setup: direct.DirectSetup, Q: np.ndarray, cost: float, incr
     prove_focal's search, and the intervals they prove as the verifier reads them, padded outward
     by INTERVAL_PAD (of the value and f0). A ratio whose search ``check()`` stops, and every one
     after it, is left unproven (null ends): what was proven stands."""
-    from geocert.solvers.autocalibration import direct_intrinsics
+    from geocert.formulations.autocalibration import direct_intrinsics
 
     level = sublevel_level(cost, increase)
     forms = direct_intrinsics.ratios(setup.cameras)

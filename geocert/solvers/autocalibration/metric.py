@@ -14,7 +14,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from geocert.solvers.autocalibration import cuts
-from geocert.solvers.autocalibration import metric_relaxation
+from geocert.formulations.autocalibration import metric_relaxation
 from geocert.core.bnb import BnbOptions, Box, Progress, asks_to_stop, branch_and_bound, tolerance
 from geocert.core.conic import ConicStatus, ReusableConicProgram
 from geocert.core.cones import safe_lower_bound

@@ -28,8 +28,8 @@ import time
 
 import numpy as np
 
-from geocert.solvers.autocalibration import metric_relaxation
-from geocert.solvers.autocalibration import proofs
+from geocert.formulations.autocalibration import metric_relaxation
+from geocert.formulations.autocalibration import proofs
 from geocert.solvers.autocalibration.metric import MetricProblem, tighten
 from geocert.core.bnb import Box
 from geocert.core.strict import Invalid

@@ -10,9 +10,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geocert.solvers.autocalibration import affine, metric
-from geocert.solvers.autocalibration import metric_relaxation
-from geocert.solvers.autocalibration.problem import (AutocalibrationOptions, Problem, StageProgress, bnb_options,
+from geocert.solvers.autocalibration import metric
+from geocert.solvers.autocalibration import affine
+from geocert.formulations.autocalibration import metric_relaxation
+from geocert.formulations.autocalibration.problem import (AutocalibrationOptions, Problem, StageProgress, bnb_options,
                                                      plane_from_input, plane_in_input, stage_callback,
                                                      upper_triangular_root)
 from geocert.core.bnb import asks_to_stop

@@ -15,8 +15,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.linalg import rq
 
-from geocert.solvers.autocalibration import frames
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import frames
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.solvers.reconstruction import schur
 from geocert.formulations.reconstruction import calibration_claim, motion_claim
 
@@ -183,7 +183,7 @@ def rotation_noise(metric: Metric, obs_view: np.ndarray, obs_track: np.ndarray, 
 
 def _linear(P: np.ndarray, X: np.ndarray, image_size):
     """(H, K) of the linear estimate (linear_daq.py), or None."""
-    from geocert.solvers.autocalibration import direct
+    from geocert.formulations.autocalibration import direct
     from geocert.solvers.reconstruction import linear_daq
 
     if image_size is None:
@@ -240,7 +240,7 @@ def _stratified(problem: autocalibration_problem.Problem, options, intrinsics, c
     K[1, 0] = K[2, 0] = K[2, 1] = 0.0
     K[2, 2] = 1.0
     if stages[1]["certified"]:  # the K returned, as rounded, must lie in the metric stage's domain (as the kind's)
-        from geocert.solvers.autocalibration import metric_relaxation
+        from geocert.formulations.autocalibration import metric_relaxation
 
         setup = metric_relaxation.setup_for(problem.norm.cameras, problem.norm.reference, result.p, problem.unit_ranges)
         lo, hi = metric_relaxation.omega_box(problem.unit_ranges)
@@ -251,7 +251,8 @@ def _stratified(problem: autocalibration_problem.Problem, options, intrinsics, c
 
 
 def _direct(problem: autocalibration_problem.Problem, P: np.ndarray, X: np.ndarray, options):
-    from geocert.solvers.autocalibration import direct, direct_solve
+    from geocert.solvers.autocalibration import direct_solve
+    from geocert.formulations.autocalibration import direct
 
     start = time.perf_counter()
     setup = direct.setup_for(problem, options.chirality)

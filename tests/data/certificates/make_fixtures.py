@@ -182,7 +182,7 @@ def autocalibration_world_scale() -> dict:
     moved to the origin and the fourth coordinate times 2^20 (the same images): proofs stating
     world_scale (frames.world_unit_scale) beside reference_scale, the frame the writer took up after
     review 54 (tests/verify/test_forgeries_review54.py re-poses data the same way)."""
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
 
     data = autocalibration_five_views()["certificate"]["data"]
     upgrade = np.asarray(autocalibration_five_views()["upgrade"])

@@ -8,7 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from geocert.solvers.autocalibration import affine, affine_relaxation, frames, metric, metric_relaxation, scenes
+from geocert.solvers.autocalibration import metric, scenes
+from geocert.formulations.autocalibration import affine_relaxation, frames, metric_relaxation
+from geocert.solvers.autocalibration import affine
 from geocert.core.bnb import BnbOptions, Box
 from geocert.core.conic import ConicStatus, solve_conic
 from geocert.core.cones import safe_lower_bound
@@ -431,7 +433,7 @@ def test_the_metric_stage_tightening_stops_at_a_cancel_or_its_time_limit():
     """With many views one tightening round is ten conic programs of seconds each, and the rounds
     ran before the search looked at the clock (a 60-view metric stage took 12 s with a limit of 2
     s): a cancel seen at the stage's first check now stops it before any program."""
-    from geocert.solvers.autocalibration import problem as autocalibration_problem
+    from geocert.formulations.autocalibration import problem as autocalibration_problem
     from geocert.solvers.autocalibration import stratified
     from geocert.verify.autocalibration import read_data
 

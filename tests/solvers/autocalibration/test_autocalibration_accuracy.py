@@ -8,9 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geocert.solvers.autocalibration import frames, metric, scenes, stratified
-from geocert.solvers.autocalibration import metric_relaxation
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.solvers.autocalibration import metric, scenes, stratified
+from geocert.formulations.autocalibration import frames
+from geocert.formulations.autocalibration import metric_relaxation
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 
 STARTS = 50
 SCENES = [(5, 0.2, 3), (10, 0.1, 4), (10, 0.5, 11)]  # views, noise (% of the image side), seed

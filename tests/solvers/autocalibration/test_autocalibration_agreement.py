@@ -20,9 +20,10 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import direct, scenes
-from geocert.solvers.autocalibration import direct_relaxation
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.solvers.autocalibration import scenes
+from geocert.formulations.autocalibration import direct
+from geocert.formulations.autocalibration import direct_relaxation
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from tests.support import HOUSE_RANGES, house_in_projective_frame, shared_data
 
 

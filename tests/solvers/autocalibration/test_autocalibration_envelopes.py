@@ -20,8 +20,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from geocert.solvers.autocalibration import envelopes as env
-from geocert.solvers.autocalibration.envelopes import (
+from geocert.formulations.autocalibration import envelopes as env
+from geocert.formulations.autocalibration.envelopes import (
     SLACK,
     caseI_over,
     caseI_under,

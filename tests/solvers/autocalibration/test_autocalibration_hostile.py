@@ -19,10 +19,11 @@ from scipy.optimize import linprog
 
 from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
-from geocert.solvers.autocalibration import affine_relaxation as arelax
-from geocert.solvers.autocalibration import frames, metric, proofs
-from geocert.solvers.autocalibration import metric_relaxation
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import affine_relaxation as arelax
+from geocert.solvers.autocalibration import metric
+from geocert.formulations.autocalibration import frames, proofs
+from geocert.formulations.autocalibration import metric_relaxation
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import CLAIM_OPTIONS, read_data
 from geocert.core.certificates import data_hash, pack, problem_hash, unpack
 from geocert.core.cones import proves_infeasible

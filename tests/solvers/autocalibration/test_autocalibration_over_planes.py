@@ -19,8 +19,8 @@ import pytest
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers import datasets
-from geocert.solvers.autocalibration import metric_relaxation, plane_sublevel
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import metric_relaxation, plane_sublevel
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration import scenes
 from geocert.verify.autocalibration import read_data
 from geocert.verify.checks import verify_any
@@ -168,7 +168,7 @@ def test_planes_within_the_affine_increase_lie_in_a_plane_box(proven):
         for region in sublevel["regions"]:
             if region["plane_box"] is None:
                 continue
-            from geocert.solvers.autocalibration import frames
+            from geocert.formulations.autocalibration import frames
 
             M = frames.plane_map(np.array(region["frame"]), region["delta"])
             h = np.linalg.solve(M, np.append(q, 1.0))
@@ -260,7 +260,7 @@ def test_metric_cost_bounds_hold_at_sampled_points(proven):
     sublevel = proven["certificate"]["items"][1]["proof"]["plane_sublevel"]
     item = sublevel["regions"][0]
     region = plane_sublevel.Region(problem, item["delta"], np.array(item["frame"]), *map(np.array, item["box"]))
-    from geocert.solvers.autocalibration import frames
+    from geocert.formulations.autocalibration import frames
 
     M = frames.plane_map(region.G, region.delta)
     h = np.linalg.solve(M, np.append(p, 1.0))

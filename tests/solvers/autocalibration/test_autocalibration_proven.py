@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import metric_relaxation
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import metric_relaxation
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.solvers.autocalibration import scenes
-from geocert.solvers.autocalibration.determinacy import intrinsics
+from geocert.formulations.autocalibration.determinacy import intrinsics
 from geocert.verify.autocalibration import read_data
 from geocert.verify.checks import verify_any
 

@@ -22,7 +22,8 @@ from scipy.spatial.transform import Rotation
 
 from geocert.jobs.runner import solve_job
 from geocert.solvers import datasets
-from geocert.solvers.autocalibration import determinacy, scenes
+from geocert.solvers.autocalibration import scenes
+from geocert.formulations.autocalibration import determinacy
 from geocert.core.determinacy import fixes
 from tests.support import shared_data
 

@@ -16,8 +16,9 @@ from geocert.core.cones import safe_lower_bound
 from geocert.core.coverage import SIDE_TOLERANCE
 from geocert.core.strict import dual_vector
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import affine_relaxation, frames, scenes
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.solvers.autocalibration import scenes
+from geocert.formulations.autocalibration import affine_relaxation, frames
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import read_data
 from geocert.verify.checks import verify_any
 

@@ -1,4 +1,4 @@
-"""Direct autocalibration (thesis chapter 7, geocert.solvers.autocalibration.direct*): the moment
+"""Direct autocalibration (thesis chapter 7, geocert.formulations.autocalibration.direct*): the moment
 machinery against brute-force expansion, the safe bound's soundness for any dual vector, exact
 recovery, the certified optimum against many-start local minimisation, and the verifier refusing
 tampered certificates."""
@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import direct, direct_solve, scenes
+from geocert.solvers.autocalibration import direct_solve, scenes
+from geocert.formulations.autocalibration import direct
 from geocert.core import interior_point
-from geocert.solvers.autocalibration import direct_relaxation
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import direct_relaxation
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.core.certificates import pack, unpack
 from geocert.core.cones import smat
 from geocert.verify.checks import verify_any

@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import direct, scenes
-from geocert.solvers.autocalibration import direct_relaxation
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.solvers.autocalibration import scenes
+from geocert.formulations.autocalibration import direct
+from geocert.formulations.autocalibration import direct_relaxation
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.verify.checks import verify_any
 
 K_TRUE = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])

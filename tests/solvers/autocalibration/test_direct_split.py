@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import direct, direct_solve, scenes
-from geocert.solvers.autocalibration import direct_relaxation
+from geocert.solvers.autocalibration import direct_solve, scenes
+from geocert.formulations.autocalibration import direct
+from geocert.formulations.autocalibration import direct_relaxation
 from geocert.core.certificates import pack, unpack
 from geocert.core.cones import smat
 from geocert.core.strict import Invalid

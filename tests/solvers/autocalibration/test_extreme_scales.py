@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import frames
+from geocert.formulations.autocalibration import frames
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import stored
 

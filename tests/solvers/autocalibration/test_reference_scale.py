@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers.autocalibration import frames
-from geocert.solvers.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration import frames
+from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import stored
 

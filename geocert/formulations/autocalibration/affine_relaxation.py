@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geocert.solvers.autocalibration import envelopes
+from geocert.formulations.autocalibration import envelopes
 from geocert.core.cones import ConeSpec
 
 WIDEN = 1e-12  # relative outward rounding of every interval computed here
@@ -195,7 +195,7 @@ def product_rows(z: np.ndarray, y: np.ndarray, F: np.ndarray, yl, yu, xl, xu, n:
 
 def cost(setup: AffineSetup, v: np.ndarray) -> float:
     """The modulus cost at v (inf where d <= 0: not a plane of the domain)."""
-    from geocert.solvers.autocalibration.frames import modulus_residuals
+    from geocert.formulations.autocalibration.frames import modulus_residuals
 
     h = setup.M @ np.append(v, 1.0)
     if not h[3] > 0:

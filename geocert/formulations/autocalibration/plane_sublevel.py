@@ -42,9 +42,9 @@ import math
 
 import numpy as np
 
-from geocert.solvers.autocalibration import frames, metric_relaxation
-from geocert.solvers.autocalibration import problem as autocalibration_problem
-from geocert.solvers.autocalibration.proofs import (LARGEST_INCREASE, SMALLEST_INCREASE, check_regions, record,
+from geocert.formulations.autocalibration import frames, metric_relaxation
+from geocert.formulations.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration.proofs import (LARGEST_INCREASE, SMALLEST_INCREASE, check_regions, record,
                                                     sublevel_level)
 from geocert.core.determinacy import proven_document as _proven_document
 from geocert.core.strict import Invalid, charge, number, numbers

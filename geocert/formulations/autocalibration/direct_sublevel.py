@@ -30,7 +30,7 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-from geocert.solvers.autocalibration import direct_relaxation
+from geocert.formulations.autocalibration import direct_relaxation
 from geocert.core.cones import ConeSpec
 
 NAME = "focal"
@@ -164,7 +164,7 @@ def proven_document(sublevel: dict) -> dict:
 
 def _level(sublevel) -> float:
     """proof/sublevel's cost_increase, checked (the level is sublevel_level of the cost and it)."""
-    from geocert.solvers.autocalibration.proofs import LARGEST_INCREASE, SMALLEST_INCREASE
+    from geocert.formulations.autocalibration.proofs import LARGEST_INCREASE, SMALLEST_INCREASE
     from geocert.core.strict import Invalid, is_number
 
     increase = sublevel.get("cost_increase")
@@ -180,7 +180,7 @@ def _ends(setup, holder: dict, where: str, live: list, level: float, view: int |
     that ``holder``'s "lower" and "upper" entries prove: one {delta, c, z} an orientation in
     ``live`` a side, each safe bound above 0; an end stated null is not proven (-inf or inf here;
     pixels clips the focal length's to the scope)."""
-    from geocert.solvers.autocalibration import direct
+    from geocert.formulations.autocalibration import direct
     from geocert.core.strict import Invalid, charge, dual_vector, is_number, record
 
     if build is None:
@@ -239,7 +239,7 @@ def check(setup, sublevel, gone: tuple, cost: float) -> tuple[float, float]:
     orientation left has one entry a side, {delta, c, z}, whose safe bound must be above 0; the
     stated interval must hold what they prove (a wider one is a weaker true statement, a
     narrower one is refused). Returns the interval proven."""
-    from geocert.solvers.autocalibration.proofs import sublevel_level
+    from geocert.formulations.autocalibration.proofs import sublevel_level
     from geocert.core.strict import record
 
     record(sublevel, "proof/sublevel", ("cost_increase", "lower", "upper", "interval"), ("intrinsics",))
@@ -286,7 +286,7 @@ def check_views(setup, sublevel, gone: tuple, cost: float) -> list[tuple[float, 
     length in pixels over every Q of the scope (as check's) costing at most sublevel_level(cost,
     cost_increase). One entry a view, in order, each {lower, upper, interval} as check's one
     focal length's; every view's stated interval must hold what its programs prove."""
-    from geocert.solvers.autocalibration.proofs import sublevel_level
+    from geocert.formulations.autocalibration.proofs import sublevel_level
     from geocert.core.strict import Invalid, record
 
     record(sublevel, "proof/sublevel", ("cost_increase", "views"))

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geocert.solvers.autocalibration import envelopes
+from geocert.formulations.autocalibration import envelopes
 from geocert.core.cones import ConeSpec
 
 WIDEN = 1e-12

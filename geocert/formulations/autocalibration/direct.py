@@ -34,11 +34,11 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.autocalibration import direct_relaxation
-from geocert.solvers.autocalibration import frames
-from geocert.solvers.autocalibration import problem as autocalibration_problem
-from geocert.solvers.autocalibration.proofs import check_recorded_bound
-from geocert.solvers.autocalibration.problem import CHIRALITY, ORDERS  # the options it reads (problem.py checks them)
+from geocert.formulations.autocalibration import direct_relaxation
+from geocert.formulations.autocalibration import frames
+from geocert.formulations.autocalibration import problem as autocalibration_problem
+from geocert.formulations.autocalibration.proofs import check_recorded_bound
+from geocert.formulations.autocalibration.problem import CHIRALITY, ORDERS  # the options it reads (problem.py checks them)
 from geocert.core.geometry import InputError
 from geocert.core.strict import Invalid, charge, dual_vector, informational, record, same
 
@@ -163,7 +163,7 @@ def setup_for(problem: autocalibration_problem.Problem, chirality: str, exclude:
         orientations = []
         for delta in (1.0, -1.0):
             ref_rows = frames.chirality_rows(norm, delta)
-            chosen = _gordan_rows(ref_rows) if exclude else None
+            chosen = frames.gordan_rows(ref_rows) if exclude else None
             if chosen is not None:
                 excluded.append({"delta": delta, "rows": chosen})
                 continue
@@ -173,10 +173,6 @@ def setup_for(problem: autocalibration_problem.Problem, chirality: str, exclude:
     return DirectSetup(problem, T, cameras, orientations, excluded, focal_rows(cameras, problem.unit_ranges))
 
 
-def _gordan_rows(rows: np.ndarray) -> list[int] | None:
-    from geocert.solvers.autocalibration.affine import gordan_rows
-
-    return gordan_rows(rows)
 
 
 def chirality_holds(orientation: Orientation, Q: np.ndarray, tolerance: float = 0.0) -> bool:

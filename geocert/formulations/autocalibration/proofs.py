@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from geocert.solvers.autocalibration import affine_relaxation as arelax
-from geocert.solvers.autocalibration import frames
-from geocert.solvers.autocalibration import metric_relaxation
+from geocert.formulations.autocalibration import affine_relaxation as arelax
+from geocert.formulations.autocalibration import frames
+from geocert.formulations.autocalibration import metric_relaxation
 from geocert.core.bnb import Box
 from geocert.core.certificates import pack
 from geocert.core.cones import SMALLEST_NORMAL, proves_infeasible, safe_lower_bound

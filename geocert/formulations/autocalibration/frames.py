@@ -572,3 +572,16 @@ def check_reconstruction(cameras: np.ndarray, field: str = "data/cameras") -> No
     left = np.linalg.svd(cameras[:, :, :3], compute_uv=False)
     if not np.any(left[:, 2] > 1e-9 * left[:, 0]):
         raise InputError(field, "no camera has an invertible left 3x3 block (every centre at infinity)")
+
+
+def gordan_rows(rows: np.ndarray) -> list[int] | None:
+    """Rows (at most 5) with a nonnegative combination exactly 0: no plane is positive on all."""
+    from scipy.optimize import linprog
+
+    k = len(rows)
+    res = linprog(np.zeros(k), A_eq=np.vstack([rows.T, np.ones((1, k))]), b_eq=np.append(np.zeros(4), 1.0),
+                  bounds=[(0, None)] * k, method="highs")
+    if res.status != 0:
+        return None
+    chosen = [int(i) for i in np.argsort(-res.x)[:5] if res.x[i] > 0]
+    return chosen if exact_gordan(rows, chosen) else None

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geocert.solvers.autocalibration import direct_relaxation, direct_sublevel
+from geocert.formulations.autocalibration import direct_relaxation, direct_sublevel
 
 RATIOS = ("u", "v", "fy2", "t", "a2")  # what the duals prove, each a ratio N / D
 NAMES = ("principal_u", "principal_v", "focal_y", "skew", "aspect")  # what the intervals state, in order
@@ -176,7 +176,7 @@ def check(setup, sublevel, gone: tuple, cost: float) -> dict[str, list]:
     ratio's entries as the focal length's (every safe bound above 0); the stated intervals must
     hold what they prove: a stated end beyond a proven one (narrower) or where none is proven is
     refused."""
-    from geocert.solvers.autocalibration.proofs import sublevel_level
+    from geocert.formulations.autocalibration.proofs import sublevel_level
     from geocert.core.strict import Invalid, is_number, record
 
     where = "proof/sublevel/intrinsics"

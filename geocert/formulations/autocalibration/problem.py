@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from geocert.solvers.autocalibration import frames
-from geocert.solvers.autocalibration import metric_relaxation
+from geocert.formulations.autocalibration import frames
+from geocert.formulations.autocalibration import metric_relaxation
 from geocert.core.bnb import BnbOptions, Progress
 from geocert.core.declared_options import option, redeclared
 from geocert.core.geometry import InputError
@@ -63,7 +63,7 @@ class AutocalibrationOptions(SearchOptions):
     ``intrinsics``: ranges in pixels, {"focal": [lo, hi], "aspect": [lo, hi], "skew": [lo, hi],
     "principal_point": [[u_lo, u_hi], [v_lo, v_hi]]}; a range not given follows from
     data.image_size (see default_ranges).
-    The direct method (thesis ch. 7, geocert.solvers.autocalibration.direct) reads ``chirality``
+    The direct method (thesis ch. 7, geocert.formulations.autocalibration.direct) reads ``chirality``
     ("points", "centers" or "none"), ``varying_focal`` (one K, or one per view) and
     ``relaxation_order``; its one stage returns the metric upgrade and is certified with
     ``metric_rel_gap`` and ``abs_gap`` (its conic solves reach about 1e-5 relative: measured, the

@@ -37,8 +37,8 @@ import math
 
 import numpy as np
 
-from geocert.solvers.autocalibration import frames
-from geocert.solvers.autocalibration import metric_relaxation
+from geocert.formulations.autocalibration import frames
+from geocert.formulations.autocalibration import metric_relaxation
 from geocert.core.determinacy import (RELATIVE_WIDTH, SIGMAS, certified_gap, clip, cost_increase,
                                       curvature_intervals, interval, not_analysed, numeric_jacobian, ranges_at,
                                       spread, sublevel_rays, tick)
@@ -329,7 +329,7 @@ def judged_motion(problem, p: np.ndarray, K_pixels: np.ndarray | None, centres: 
     """The DIAC family's critical-motion warning at the plane p and the returned K's DIAC (None:
     the DIAC the infinite homographies fit best), alone: cheap, and judged again by the verifier
     from the returned plane and K whatever the stage's analysis came to."""
-    from geocert.solvers.autocalibration.problem import w_of_K
+    from geocert.formulations.autocalibration.problem import w_of_K
 
     H = metric_relaxation.homographies(problem.norm.cameras, problem.norm.reference, p)
     omega = None if K_pixels is None else metric_relaxation.omega_of(w_of_K(problem, np.asarray(K_pixels, float)))
@@ -454,7 +454,7 @@ def affine_walk(problem, p: np.ndarray, gap: float | None) -> dict:
     """The affine stage's intervals (the plane at infinity as the result states it, over the planes
     the modulus walk reaches) and that walk (``modulus_walk``, its extra directions the stated
     plane's coordinates' gradients): numpy only, the verifier's too."""
-    from geocert.solvers.autocalibration.problem import plane_in_input
+    from geocert.formulations.autocalibration.problem import plane_in_input
 
     plane = plane_in_input(problem, p)  # as the result states it
 
@@ -472,7 +472,7 @@ def affine_walk(problem, p: np.ndarray, gap: float | None) -> dict:
 
 def affine_stage(problem, p: np.ndarray, cost: float | None, lower: float | None, centres: np.ndarray | None,
                  K_pixels: np.ndarray | None = None) -> dict:
-    from geocert.solvers.autocalibration.problem import w_of_K
+    from geocert.formulations.autocalibration.problem import w_of_K
 
     walk = affine_walk(problem, p, certified_gap(cost, lower))
     w = None if K_pixels is None else w_of_K(problem, np.asarray(K_pixels, dtype=float))
@@ -558,7 +558,7 @@ def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | Non
                  centres: np.ndarray | None) -> dict:
     """K's intervals (metric_intervals) and the motion's warnings: the DIAC family's and the
     plane family's."""
-    from geocert.solvers.autocalibration.problem import w_of_K
+    from geocert.formulations.autocalibration.problem import w_of_K
 
     w = w_of_K(problem, K_pixels)
     found = metric_intervals(problem, p, w, certified_gap(cost, lower))
