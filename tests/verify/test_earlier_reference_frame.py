@@ -13,7 +13,7 @@ well inside and still verify (test_stored_certificates).
 earlier/autocalibration_stratified_reference_times_2p28.json is that earlier writer's result,
 stored as written: the stored stratified certificate's data with camera 5 (its reference) times
 2^28, solved with the certificate's own options by the code before the unit reference frame
-(tests/solvers/autocalibration/test_reference_scale.py poses the same data)."""
+(tests/formulations/autocalibration/test_reference_scale.py poses the same data)."""
 
 from __future__ import annotations
 

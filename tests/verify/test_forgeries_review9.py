@@ -29,7 +29,7 @@ def proven_resection() -> tuple[np.ndarray, dict]:
     """(the true camera centre, the genuine full result of one 25-point L2L2 resection with 1 px
     of noise, certified with a proven interval of its centre)."""
     from geocert.jobs.runner import solve_job
-    from tests.solvers.fractional.test_resection_proven import resection_job
+    from tests.formulations.fractional.test_resection_proven import resection_job
     from tests.support import seed
 
     rng = np.random.default_rng(seed("resection proven", "forged"))
