@@ -21,9 +21,9 @@ def _json_logs(**_) -> None:
 
 # The solvers the kinds import at their first solve (so that the API process, which imports the
 # kinds, never loads them), loaded as a solver process starts instead: a fresh worker's first
-# task of each process paid the import (some 0.08 s of CPU for triangulation's, 0.2 s of wall at
-# load 14, on a job whose solve is 0.05 s). tests/workers/test_solvers_loaded.py checks that the
-# kinds' solver imports find every geocert.solvers module loaded. Kept by hand rather than derived:
+# task of each process paid the import (some 0.08 s of CPU for triangulation's, on a job whose
+# solve is 0.05 s). tests/workers/test_solvers_loaded.py checks that the kinds' imports find every
+# geocert.solvers and geocert.formulations module they need loaded. Kept by hand rather than derived:
 # walking geocert.solvers with pkgutil loads all its modules (OpenCV's among them) into every solver
 # process, measured 0.12 s more CPU and 19 MB more peak memory at the start than this list (0.72
 # against 0.59 s, 126 against 107 MB), and reading the kinds' imports from their source at the start

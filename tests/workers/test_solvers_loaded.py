@@ -1,5 +1,6 @@
-"""A solver process loads the kinds' solvers as it starts (workers.signals.SOLVER_MODULES), not at
-its first task: after that, the solver imports the kinds make when they solve load nothing more."""
+"""A solver process loads the kinds' solvers and their formulations as it starts
+(workers.signals.SOLVER_MODULES), not at its first task: after that, the imports the kinds make
+when they solve load nothing more."""
 
 from __future__ import annotations
 
@@ -11,16 +12,18 @@ import sys
 from pathlib import Path
 
 KINDS = Path(__file__).resolve().parents[2] / "geocert" / "kinds"
+NUMERICS = ("geocert.solvers", "geocert.formulations")  # what a kind imports when it solves
 
 
 def lazy_solver_imports() -> list[str]:
-    """The ``from geocert.solvers... import ...`` statements inside the kinds' functions."""
+    """The ``from geocert.solvers... import ...`` and ``from geocert.formulations... import ...``
+    statements inside the kinds' functions."""
     found = set()
     for path in sorted(KINDS.glob("*.py")):
         for function in ast.walk(ast.parse(path.read_text())):
             if isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 for node in ast.walk(function):
-                    if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("geocert.solvers"):
+                    if isinstance(node, ast.ImportFrom) and (node.module or "").startswith(NUMERICS):
                         found.add(ast.unparse(node))
     return sorted(found)
 
@@ -29,11 +32,12 @@ _CHECK = """
 import json, sys
 from geocert.workers import signals
 signals._solvers_loaded()
-loaded = {name for name in sys.modules if name.startswith("geocert.solvers")}
+NUMERICS = ("geocert.solvers", "geocert.formulations")
+loaded = {name for name in sys.modules if name.startswith(NUMERICS)}
 added = {}
 for statement in json.loads(sys.argv[1]):
     exec(statement, {})
-    new = sorted({name for name in sys.modules if name.startswith("geocert.solvers")} - loaded)
+    new = sorted({name for name in sys.modules if name.startswith(NUMERICS)} - loaded)
     if new:
         added[statement] = new
         loaded.update(new)
