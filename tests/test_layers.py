@@ -214,11 +214,11 @@ def test_a_solvers_self_check_is_the_verifiers(monkeypatch):
     assert installed.__module__ == "geocert.verify.checks"
 
 
-# The kind whose programs the verifier still assembles with scipy.sparse (autocalibration's
-# direct_relaxation.py and direct_sublevel.py) and whose metric cameras it splits with
-# scipy.linalg.rq (autocalibration/problem.py): shared with the solvers, not yet numpy alone.
+# The kind whose programs the verifier still assembles with scipy.sparse (the direct method's
+# direct_relaxation.py and direct_sublevel.py) and whose stratified estimates it replays with
+# scipy.optimize.least_squares (determinacy.refit): shared with the writers, not yet numpy alone.
 # Every other kind's certificates verify with numpy alone (bilinear's relaxations are built on
-# core/csc.py for the verifier).
+# core/csc.py for the verifier; metric cameras are split by problem.rq, on numpy's QR).
 SCIPY_KINDS = ("autocalibration",)
 
 
@@ -261,6 +261,29 @@ print(json.dumps({"valid": valid, "estimate": estimate.first_failure, "above": a
     assert seen["above"] == []
     assert seen["numpy_only"] == []  # no scipy, conic solver or OpenCV for the numpy-only kinds
     assert "clarabel" not in seen["loaded"] and "cv2" not in seen["loaded"]
+
+
+def test_a_stratified_certificate_verifies_with_numpy_alone():
+    """The stratified method's proofs and its metric cameras (split by problem.rq on numpy's QR)
+    need no scipy: a stored stratified certificate whose estimates walk no plane family verifies
+    with scipy never imported."""
+    import json
+    import subprocess
+    import sys
+
+    code = """
+import json, sys
+from pathlib import Path
+from geocert.verify.checks import verify_any
+document = json.loads(Path("tests/data/certificates/autocalibration_stratified.json").read_text())
+report = verify_any(document)
+print(json.dumps({"valid": report.valid, "method": document.get("method"),
+                  "scipy": sorted(m for m in sys.modules if m == "scipy" or m.startswith("scipy."))[:3]}))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT.parent)
+    assert out.returncode == 0, out.stderr[-2000:]
+    seen = json.loads(out.stdout.strip().splitlines()[-1])
+    assert seen == {"valid": True, "method": "stratified", "scipy": []}
 
 
 def test_a_served_kind_registered_with_another_contract_is_refused():

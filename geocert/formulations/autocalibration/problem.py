@@ -260,10 +260,16 @@ def upgrade(problem: Problem, p: np.ndarray, K_unit: np.ndarray) -> np.ndarray:
     return problem.norm.T0 @ H
 
 
+def rq(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A = K R with K upper triangular (exactly: zeros below its diagonal) and R orthogonal, from
+    numpy's QR of A's rows reversed and transposed, so that the verifier splits cameras with numpy
+    alone: with J the exchange matrix, (J A)' = Q1 R1 gives A = (J R1' J)(J Q1')."""
+    Q1, R1 = np.linalg.qr(A[::-1].T)
+    return R1.T[::-1, ::-1], Q1.T[::-1]
+
+
 def metric_cameras(cameras: np.ndarray, H: np.ndarray) -> list[dict]:
     """Each metric camera as K [R | t] (R a rotation, K with K[2, 2] = 1) and its centre."""
-    from scipy.linalg import rq
-
     out = []
     for P in cameras:
         Q = P @ H
