@@ -27,7 +27,7 @@ from geocert.formulations.autocalibration import metric_relaxation
 from geocert.core.bnb import Box
 from geocert.core.certificates import pack
 from geocert.core.cones import SMALLEST_NORMAL, proves_infeasible, safe_lower_bound
-from geocert.core.strict import (Invalid, charge, dual_vector, informational, number as _number,
+from geocert.core.strict import (Invalid, charge, dual_vector, informational, is_number, number as _number,
                                  numbers as _numbers, record)
 from geocert.core.coverage import SIDE_TOLERANCE, extended, uncovered_part, widened
 from geocert.formulations.fractional.proof import LEAF_CLAIM_TOLERANCE  # the record's allowance, as the fractional kinds'
@@ -172,6 +172,10 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
         cap = caps[i]
         kind = item.get("kind")
         if kind == "cut":
+            # Its leaves are held to the cap (no point of them costs at most it), and the writer
+            # records the cap: a record above it is a bound no proof backs (21,970 over a cap of
+            # 0.022 verified), as a dual proof's record above its vector's bound would be.
+            check_recorded_bound(item.get("bound"), cap, f"proofs/{i}")
             proven_bounds.append(cap)
             continue
         if kind == "no_domain":
@@ -339,9 +343,10 @@ def check_regions(problem, regions: Any, excluded: Any, fields: tuple[str, ...],
     chirality rows in the frame."""
     if not isinstance(regions, list) or not isinstance(excluded, list):
         raise Invalid("format", f"{where}regions and {where}excluded must be lists")
-    deltas = sorted([r.get("delta") for r in regions if isinstance(r, dict)]
-                    + [e.get("delta") for e in excluded if isinstance(e, dict)])
-    if deltas != [-1.0, 1.0]:
+    deltas = ([r.get("delta") for r in regions if isinstance(r, dict)]
+              + [e.get("delta") for e in excluded if isinstance(e, dict)])
+    # numbers, never booleans (true == 1.0 in Python), before sorting (None and a string do not sort)
+    if not all(is_number(delta) for delta in deltas) or sorted(deltas) != [-1.0, 1.0]:
         raise Invalid("root_region", "each orientation (delta = +1 and -1) needs a region or an exclusion")
     for i, item in enumerate(excluded):
         record(item, f"{where}excluded/{i}", ("delta", "rows"))
