@@ -113,7 +113,8 @@ def test_a_cut_recording_a_bound_above_its_cap_is_refused(name):
     cut = holder["proofs"][i]
     assert cut["bound"] == cut["upper_bound"]  # the writer records the cap
     cut["bound"] = cut["upper_bound"] * 1e6
-    refused_naming(document, "leaf_bounds", f"proofs/{i}/bound")
+    # the bound a cut's leaves are held to, its cap, not a dual vector's
+    refused_naming(document, "leaf_bounds", f"proofs/{i}/bound", "(the cap)")
 
 
 def test_a_cut_recording_its_cap_or_less_verifies():

@@ -175,7 +175,7 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
             # Its leaves are held to the cap (no point of them costs at most it), and the writer
             # records the cap: a record above it is a bound no proof backs (21,970 over a cap of
             # 0.022 verified), as a dual proof's record above its vector's bound would be.
-            check_recorded_bound(item.get("bound"), cap, f"proofs/{i}")
+            check_recorded_bound(item.get("bound"), cap, f"proofs/{i}", proven_by="its leaves are held to (the cap)")
             proven_bounds.append(cap)
             continue
         if kind == "no_domain":
@@ -229,14 +229,15 @@ def check_leaves(proof: dict, root_lo: np.ndarray, root_hi: np.ndarray, build, u
 
 
 def check_recorded_bound(recorded: Any, bound: float, where: str,
-                         tolerance: float = LEAF_CLAIM_TOLERANCE) -> None:
+                         tolerance: float = LEAF_CLAIM_TOLERANCE, proven_by: str = "its vector proves") -> None:
     """A leaf's or program's recorded ``bound`` (informational: the verifier uses its own) is at
-    most the bound its vector proves, to ``tolerance`` of their size: unread, a record of
-    1e308 over a proven 2.2e-12 verified (review 41), a statement no proof backs."""
+    most the bound ``proven_by`` (its dual vector, or a cut's cap), to ``tolerance`` of their size:
+    unread, a record of 1e308 over a proven 2.2e-12 verified (review 41), a statement no proof
+    backs."""
     if recorded is None or not isinstance(recorded, (int, float)) or isinstance(recorded, bool):
         return  # null, or typed by informational
     if not bound >= recorded - tolerance * (abs(recorded) + abs(bound)):
-        raise Invalid("leaf_bounds", f"{where}/bound records {recorded!r}, above the bound its vector proves, "
+        raise Invalid("leaf_bounds", f"{where}/bound records {recorded!r}, above the bound {proven_by}, "
                                      f"{bound!r}")
 
 
