@@ -45,6 +45,7 @@ def job_request_adapter(body: object):
 
 def cmd_solve(args: argparse.Namespace) -> int:
     from geocert.core.geometry import InputError
+    from geocert.jobs.collection import start_up_heap_frozen
     from geocert.jobs.runner import solve_job
 
     try:
@@ -56,6 +57,10 @@ def cmd_solve(args: argparse.Namespace) -> int:
         return 2
     try:
         adapter = job_request_adapter(body)
+        # The job's kind is loaded: what the process holds now (modules, the kind) lives as long as
+        # it does, so the collector's full runs during the solve need not scan it again (as a
+        # solver process's heap once its solvers are loaded)
+        start_up_heap_frozen()
         request = adapter.dump_python(adapter.validate_python(body), mode="json")
         sink = _progress_bar if sys.stderr.isatty() else None
         result = solve_job(request, sink=sink)

@@ -174,13 +174,18 @@ def least_eigenvalue_above(M: np.ndarray, margin: float, allowance: float) -> bo
 
 
 
+def _shift(margin: float, allowance: float, trace: float) -> float:
+    """What least_eigenvalue_above takes off M's diagonal for ``margin`` (M's trace given)."""
+    return (margin + allowance + 32 * U * (trace + abs(margin)) + UNDERFLOW) * (1 + 8 * U)
+
+
 def _shifted(M: np.ndarray, margins: list, allowance: float) -> np.ndarray:
     """Whether least_eigenvalue_above(M, margin, allowance) passes, for each of the margins: its
     operations, each margin's matrix M less its shift, decided by one stacked factorisation
     (fixed_order.cholesky_completes: each answer the one cholesky gives alone)."""
     M = 0.5 * (M + M.T)
     trace = float(np.abs(np.diag(M)).sum())
-    shifts = [(margin + allowance + 32 * U * (trace + abs(margin)) + UNDERFLOW) * (1 + 8 * U) for margin in margins]
+    shifts = [_shift(margin, allowance, trace) for margin in margins]
     finite = np.array([math.isfinite(shift) for shift in shifts], dtype=bool) & bool(np.all(np.isfinite(M)))
     if not finite.any():
         return finite
@@ -190,10 +195,46 @@ def _shifted(M: np.ndarray, margins: list, allowance: float) -> np.ndarray:
     return passes
 
 
-# The bisection's next BISECTION_LEVELS steps are decided by one stacked factorisation of every
-# midpoint they may reach (2^levels - 1 of them): the factorisations of an 11 x 11 matrix are a
-# few dozen small array operations each, so a stack costs little more than one matrix.
+# Where no answer is known yet, the bisection's next BISECTION_LEVELS steps are decided by one
+# stacked factorisation of every midpoint they may reach (2^levels - 1 of them): the
+# factorisations of an 11 x 11 matrix are a few dozen small array operations each, so a stack
+# costs little more than one matrix.
 BISECTION_LEVELS = 4
+
+
+def _predicted_margins(M: np.ndarray, allowance: float, halvings: list, hi: float, steps: int) -> list:
+    """The margins least_eigenvalue_below would test if each test's answer were what M's
+    computed smallest eigenvalue predicts (the shift below it): the halvings up to the first
+    predicted to pass, then the bisection's midpoints. Only a guess of where the tests go (near
+    the eigenvalue the factorisation's rounding decides, not the prediction); empty where M has no
+    computed eigenvalue."""
+    M = 0.5 * (M + M.T)
+    if not np.all(np.isfinite(M)):
+        return []
+    try:
+        least = float(np.linalg.eigvalsh(M)[0])
+    except np.linalg.LinAlgError:
+        return []
+    trace = float(np.abs(np.diag(M)).sum())
+    margins, lo = [], None
+    for halving in halvings:
+        margins.append(halving)
+        if _shift(halving, allowance, trace) < least:
+            lo = halving
+            break
+    if lo is None:
+        return margins
+    hi = min(hi, 2 * lo)
+    for _ in range(steps):
+        middle = 0.5 * (lo + hi)
+        if not lo < middle < hi:
+            break
+        margins.append(middle)
+        if _shift(middle, allowance, trace) < least:
+            lo = middle
+        else:
+            hi = middle
+    return margins
 
 
 def least_eigenvalue_below(M: np.ndarray, allowance: float, steps: int = 48) -> float | None:
@@ -202,8 +243,10 @@ def least_eigenvalue_below(M: np.ndarray, allowance: float, steps: int = 48) -> 
     eigenvalue, to 2^-steps of it); None when none of 2^-60 of that passes. Only Cholesky
     factorisations in a fixed order decide: one kappa on every machine (LAPACK's eigvalsh, its
     first guess before, differed between BLAS kernels). The midpoints and each test's answer are
-    those of testing one midpoint after another: the next BISECTION_LEVELS steps' possible
-    midpoints are tested at once, then the path the answers take is followed."""
+    those of testing one midpoint after another, halving after halving then midpoint after
+    midpoint; the tests are made in stacks: first every margin the path eigvalsh predicts would
+    reach (_predicted_margins: it only chooses what is tested, never an answer), then, from the
+    first midpoint off that path, the next BISECTION_LEVELS steps' possible midpoints at once."""
     diagonal = np.diag(M)
     hi = float(diagonal.min()) if len(diagonal) else 0.0
     if not (hi > 0 and math.isfinite(hi)):
@@ -212,46 +255,55 @@ def least_eigenvalue_below(M: np.ndarray, allowance: float, steps: int = 48) -> 
     for _ in range(60):
         lo *= 0.5
         halvings.append(lo)
+    answers: dict[float, bool] = {}  # each margin tested: whether it passes
+
+    def test(margins: list) -> None:
+        """The margins not tested yet, by one stacked factorisation."""
+        unknown = [margin for margin in margins if margin not in answers]
+        if unknown:
+            answers.update(zip(unknown, _shifted(M, unknown, allowance).tolist()))
+
+    test(_predicted_margins(M, allowance, halvings, hi, steps))
+
     lo = None
-    for first in range(0, 60, BISECTION_LEVELS):
-        chunk = halvings[first:first + BISECTION_LEVELS]
-        passes = _shifted(M, chunk, allowance)
-        if passes.any():
-            lo = chunk[int(np.argmax(passes))]
+    for at, halving in enumerate(halvings):
+        if halving not in answers:
+            test(halvings[at:at + BISECTION_LEVELS])
+        if answers[halving]:
+            lo = halving
             break
     if lo is None:
         return None
     hi = min(hi, 2 * lo)
-    taken = 0
-    while taken < steps:
-        levels = min(BISECTION_LEVELS, steps - taken)
-        # node i (from 1) of the tree of intervals: its children 2i (the midpoint fails: hi moves
-        # to it) and 2i + 1 (it passes: lo moves); a midpoint not strictly inside ends the bisection.
-        bounds, middles = {1: (lo, hi)}, {}
-        for node in range(1, 2 ** levels):
-            if node not in bounds:
-                continue
-            a, b = bounds[node]
-            middle = 0.5 * (a + b)
-            if not a < middle < b:
-                continue
-            middles[node] = middle
-            if 2 * node < 2 ** levels:
-                bounds[2 * node], bounds[2 * node + 1] = (a, middle), (middle, b)
-        if 1 not in middles:
+    for taken in range(steps):
+        middle = 0.5 * (lo + hi)
+        if not lo < middle < hi:
             return lo
-        nodes = list(middles)
-        answers = dict(zip(nodes, _shifted(M, [middles[node] for node in nodes], allowance).tolist()))
-        node = 1
-        for _ in range(levels):
-            if node not in middles:
-                return lo
-            if answers[node]:
-                lo, node = middles[node], 2 * node + 1
-            else:
-                hi, node = middles[node], 2 * node
-            taken += 1
+        if middle not in answers:
+            test(_tree_midpoints(lo, hi, min(BISECTION_LEVELS, steps - taken)))
+        if answers[middle]:
+            lo = middle
+        else:
+            hi = middle
     return lo
+
+
+def _tree_midpoints(lo: float, hi: float, levels: int) -> list:
+    """Every midpoint the next ``levels`` steps of bisecting [lo, hi] may test: node i (from 1)
+    of the tree of intervals has children 2i (its midpoint fails: hi moves to it) and 2i + 1 (it
+    passes: lo moves); a midpoint not strictly inside its interval ends the bisection there."""
+    bounds, middles = {1: (lo, hi)}, []
+    for node in range(1, 2 ** levels):
+        if node not in bounds:
+            continue
+        a, b = bounds[node]
+        middle = 0.5 * (a + b)
+        if not a < middle < b:
+            continue
+        middles.append(middle)
+        if 2 * node < 2 ** levels:
+            bounds[2 * node], bounds[2 * node + 1] = (a, middle), (middle, b)
+    return middles
 
 def encloses(scene: Scene, increase: float, R: float, strictness: float = 1.0) -> bool:
     """(1) at radius R: every camera of the scope costing at most U lies within |phi| < R."""

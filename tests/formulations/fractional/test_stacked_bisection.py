@@ -76,3 +76,42 @@ def test_the_stacked_bisection_returns_the_one_at_a_time_kappa_to_the_last_bit(s
         assert repr(kappa) == repr(expected)
         found += kappa is not None
     assert found > 50
+
+
+@pytest.mark.parametrize("guess", ["none", "random", "halved"])
+def test_the_predicted_margins_choose_what_is_tested_never_an_answer(monkeypatch, guess):
+    """A wrong prediction (nothing, random margins, every margin halved) costs factorisations,
+    never the kappa: each answer comes from a factorisation of its own margin."""
+    predict = resection_sublevel._predicted_margins
+
+    def wrong(M, allowance, halvings, hi, steps):
+        if guess == "none":
+            return []
+        if guess == "random":
+            return list(np.random.default_rng(len(halvings)).uniform(0, hi, 40))
+        return [0.5 * margin for margin in predict(M, allowance, halvings, hi, steps)]
+
+    monkeypatch.setattr(resection_sublevel, "_predicted_margins", wrong)
+    for rng, M in matrices(60, 17):
+        allowance = float(10.0 ** rng.uniform(-20, 0)) * float(np.abs(np.diag(M)).max())
+        kappa = resection_sublevel.least_eigenvalue_below(M, allowance, 48)
+        with np.errstate(all="ignore"):
+            assert repr(kappa) == repr(one_at_a_time(M, allowance, 48))
+
+
+def test_the_predicted_path_leaves_few_factorisations_on_a_resection_like_matrix(monkeypatch):
+    """On well-scaled 11 x 11 matrices the eigenvalue's path is the factorisations' to the last
+    steps: the bisection then takes one stack of them and a few more, not one stack every
+    BISECTION_LEVELS steps."""
+    stacks = []
+    shifted = resection_sublevel._shifted
+    monkeypatch.setattr(resection_sublevel, "_shifted", lambda M, margins, allowance: (
+        stacks.append(len(margins)), shifted(M, margins, allowance))[1])
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        A = rng.normal(size=(11, 40))
+        M = A @ A.T
+        stacks.clear()
+        kappa = resection_sublevel.least_eigenvalue_below(M, 1e-12 * float(np.trace(M)), 48)
+        assert repr(kappa) == repr(one_at_a_time(M, 1e-12 * float(np.trace(M)), 48))
+        assert len(stacks) <= 3, stacks
