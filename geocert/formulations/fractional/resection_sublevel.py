@@ -202,6 +202,30 @@ def _shifted(M: np.ndarray, margins: list, allowance: float) -> np.ndarray:
 BISECTION_LEVELS = 4
 
 
+def _bisect(halvings: list, hi: float, steps: int, passes) -> float | None:
+    """The bisection least_eigenvalue_below makes: halving after halving to the first that passes,
+    then midpoint after midpoint, each answer ``passes(margin, batch)``'s (``batch()``: the margins
+    worth testing with it, the next halvings or the next levels' possible midpoints); None when no
+    halving passes."""
+    lo = None
+    for at, halving in enumerate(halvings):
+        if passes(halving, lambda: halvings[at:at + BISECTION_LEVELS]):
+            lo = halving
+            break
+    if lo is None:
+        return None
+    hi = min(hi, 2 * lo)
+    for taken in range(steps):
+        middle = 0.5 * (lo + hi)
+        if not lo < middle < hi:
+            return lo
+        if passes(middle, lambda: _tree_midpoints(lo, hi, min(BISECTION_LEVELS, steps - taken))):
+            lo = middle
+        else:
+            hi = middle
+    return lo
+
+
 def _predicted_margins(M: np.ndarray, allowance: float, halvings: list, hi: float, steps: int) -> list:
     """The margins least_eigenvalue_below would test if each test's answer were what M's
     computed smallest eigenvalue predicts (the shift below it): the halvings up to the first
@@ -216,24 +240,13 @@ def _predicted_margins(M: np.ndarray, allowance: float, halvings: list, hi: floa
     except np.linalg.LinAlgError:
         return []
     trace = float(np.abs(np.diag(M)).sum())
-    margins, lo = [], None
-    for halving in halvings:
-        margins.append(halving)
-        if _shift(halving, allowance, trace) < least:
-            lo = halving
-            break
-    if lo is None:
-        return margins
-    hi = min(hi, 2 * lo)
-    for _ in range(steps):
-        middle = 0.5 * (lo + hi)
-        if not lo < middle < hi:
-            break
-        margins.append(middle)
-        if _shift(middle, allowance, trace) < least:
-            lo = middle
-        else:
-            hi = middle
+    margins: list = []
+
+    def predicted(margin: float, batch) -> bool:
+        margins.append(margin)
+        return _shift(margin, allowance, trace) < least
+
+    _bisect(halvings, hi, steps, predicted)
     return margins
 
 
@@ -263,29 +276,13 @@ def least_eigenvalue_below(M: np.ndarray, allowance: float, steps: int = 48) -> 
         if unknown:
             answers.update(zip(unknown, _shifted(M, unknown, allowance).tolist()))
 
-    test(_predicted_margins(M, allowance, halvings, hi, steps))
+    def passes(margin: float, batch) -> bool:
+        if margin not in answers:
+            test(batch())
+        return answers[margin]
 
-    lo = None
-    for at, halving in enumerate(halvings):
-        if halving not in answers:
-            test(halvings[at:at + BISECTION_LEVELS])
-        if answers[halving]:
-            lo = halving
-            break
-    if lo is None:
-        return None
-    hi = min(hi, 2 * lo)
-    for taken in range(steps):
-        middle = 0.5 * (lo + hi)
-        if not lo < middle < hi:
-            return lo
-        if middle not in answers:
-            test(_tree_midpoints(lo, hi, min(BISECTION_LEVELS, steps - taken)))
-        if answers[middle]:
-            lo = middle
-        else:
-            hi = middle
-    return lo
+    test(_predicted_margins(M, allowance, halvings, hi, steps))
+    return _bisect(halvings, hi, steps, passes)
 
 
 def _tree_midpoints(lo: float, hi: float, levels: int) -> list:
