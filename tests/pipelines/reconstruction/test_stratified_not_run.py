@@ -18,7 +18,7 @@ import pytest
 from geocert.formulations.autocalibration import frames
 from geocert.solvers.reconstruction import upgrade
 
-pytestmark = pytest.mark.filterwarnings("ignore")
+pytestmark = [pytest.mark.filterwarnings("ignore"), pytest.mark.slow]  # a full solve: some 20 s
 
 
 def _spread_too_far(monkeypatch) -> None:
@@ -52,7 +52,7 @@ def test_the_autocalibration_stage_says_the_stratified_method_was_not_run_and_wh
     assert "carries only the stratified method's certificate" in reason, reason
 
 
-def test_the_document_saying_it_verifies(over_spread, tmp_path, capsys):
+def test_the_document_saying_so_verifies_with_geocert_verify(over_spread, tmp_path, capsys):
     from geocert.app.cli import main
 
     path = tmp_path / "over_spread.json"
