@@ -44,6 +44,13 @@ MAX_IMAGE_SIDE_PX = 1e6
 MAX_INTRINSIC_PX = 10 * MAX_IMAGE_SIDE_PX
 PIXEL_RANGES = ("focal", "skew", "principal_point")  # the ranges in pixels (aspect is a ratio)
 
+# The pixel aspect ratio fy / fx an aspect range's ends (and a known K's) may state. A camera's
+# pixels are square or nearly so, an anamorphic lens squeezes 2:1 and a line-scan set-up a few to
+# one; a ratio beyond a thousand to one either way is no camera's pixel, only a typing error or
+# units mixed up, and was queued up to COORDINATE_LIMIT (1e9), as the ranges in pixels were up to
+# MAX_INTRINSIC_PX before their own limit.
+MIN_ASPECT, MAX_ASPECT = 1e-3, 1e3
+
 
 def image_side_refusal(size, where: str) -> None:
     """An image size with a side over MAX_IMAGE_SIDE_PX: the 422 naming ``where``."""
@@ -57,8 +64,8 @@ def ranges_within_limit(image_size, intrinsics: dict) -> None:
     """data/image_size and every intrinsics range within COORDINATE_LIMIT, as every kind's
     coordinates: beyond it K0 was singular in floating point and the queued job failed with
     "Solver failure: LinAlgError" instead of this 422 naming the field; the ranges in pixels
-    (focal, skew, principal_point) within MAX_INTRINSIC_PX; and data/image_size within
-    MAX_IMAGE_SIDE_PX a side."""
+    (focal, skew, principal_point) within MAX_INTRINSIC_PX; the aspect range within MIN_ASPECT
+    and MAX_ASPECT; and data/image_size within MAX_IMAGE_SIDE_PX a side."""
     named = [("data/image_size", image_size, None)] if image_size is not None else []
     for name, value in intrinsics.items():
         if name == "principal_point" and isinstance(value, (list, tuple)):
@@ -74,6 +81,9 @@ def ranges_within_limit(image_size, intrinsics: dict) -> None:
         if name in PIXEL_RANGES and isinstance(values, (list, tuple)):
             for end, x in zip(("its lower end", "its upper end"), values):
                 intrinsic_refusal(x, where, end)
+        if name == "aspect" and isinstance(values, (list, tuple)):
+            for end, x in zip(("its lower end", "its upper end"), values):
+                aspect_refusal(x, where, end)
     if image_size is not None:
         image_side_refusal(image_size, "data/image_size")
 
@@ -88,6 +98,15 @@ def intrinsic_refusal(x, where: str, what: str) -> None:
                                 "seconds): give it in pixels")
 
 
+def aspect_refusal(x, where: str, what: str) -> None:
+    """A pixel aspect ratio fy / fx ``x`` (``what``: which end, in words) outside [MIN_ASPECT,
+    MAX_ASPECT]: the 422 naming ``where``."""
+    if isinstance(x, (int, float)) and not isinstance(x, bool) and not MIN_ASPECT <= x <= MAX_ASPECT:
+        raise InputError(where, f"{what} {x:g} lies outside [{MIN_ASPECT:g}, {MAX_ASPECT:g}]: a pixel aspect ratio "
+                                f"fy / fx beyond a thousand to one either way is no camera's (its pixels are square "
+                                "or nearly so; an anamorphic lens squeezes 2:1)")
+
+
 # A known K's entries in pixels, as intrinsic_refusal says them: [row, column, in words].
 K_ENTRIES = ((0, 0, "the focal length fx"), (0, 1, "the skew"), (0, 2, "the principal point's u"),
              (1, 1, "the focal length fy"), (1, 2, "the principal point's v"))
@@ -95,9 +114,13 @@ K_ENTRIES = ((0, 0, "the focal length fx"), (0, 1, "the skew"), (0, 2, "the prin
 
 def known_K_within_limit(K, where: str = "options/intrinsics/K") -> None:
     """A known K (a 3x3 list of numbers, its shape already checked) with every entry in pixels
-    within MAX_INTRINSIC_PX: the 422 naming the entry (``where``/row/column)."""
+    within MAX_INTRINSIC_PX, and its aspect ratio fy / fx (both positive) within MIN_ASPECT and
+    MAX_ASPECT: the 422 naming the entry (``where``/row/column; fy for the aspect ratio)."""
     for i, j, what in K_ENTRIES:
         intrinsic_refusal(K[i][j], f"{where}/{i}/{j}", what)
+    fx, fy = K[0][0], K[1][1]
+    if all(isinstance(f, (int, float)) and not isinstance(f, bool) and f > 0 for f in (fx, fy)):
+        aspect_refusal(fy / fx, f"{where}/1/1", "the aspect ratio fy / fx")
 
 
 class AutocalibrationData(Strict):
@@ -109,7 +132,7 @@ class AutocalibrationData(Strict):
 
 class IntrinsicsIn(Strict):
     focal: Range | None = Field(None, description="pixels; default 0.3 to 5 times the larger image side")
-    aspect: Range | None = Field(None, description="fy / fx; default 0.95 to 1.05")
+    aspect: Range | None = Field(None, description="fy / fx, within 1e-3 to 1e3; default 0.95 to 1.05")
     skew: Range | None = Field(None, description="pixels; default within 1% of the larger side")
     principal_point: Annotated[list[Range], Field(min_length=2, max_length=2)] | None = Field(
         None, description="[[u_lo, u_hi], [v_lo, v_hi]] pixels; default the middle half of the image")

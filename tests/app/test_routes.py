@@ -122,6 +122,30 @@ def test_intrinsics_over_ten_image_sides_are_a_422_naming_the_field(api, kind, i
     assert api.get("/v1/jobs").json()["jobs"] == []
 
 
+@pytest.mark.parametrize("kind", ["autocalibration", "reconstruction"])
+def test_an_aspect_ratio_no_camera_has_is_a_422_naming_the_range(api, kind):
+    """An aspect range to 1e9 (below the coordinate limit, far beyond any camera's pixel) was
+    queued: the problem names options/intrinsics/aspect and the bounds, and nothing is made."""
+    from geocert.kinds import get_kind
+
+    body = {**get_kind(kind).example, "options": {"intrinsics": {"aspect": [0.5, 1e9]}}}
+    response = api.post("/v1/jobs", json=body)
+    assert problem_fields(response, 422) == ["options/intrinsics/aspect"]
+    assert "outside [0.001, 1000]" in response.json()["errors"][0]["reason"]
+    assert api.get("/v1/jobs").json()["jobs"] == []
+
+
+def test_a_focal_prior_over_the_focal_ranges_limit_is_a_422_naming_it(api):
+    """focal_prior_px to 1e7 px, as a focal range (it was capped at 1e6); over it, the problem
+    names options/focal_prior_px."""
+    from geocert.kinds import get_kind
+
+    example = get_kind("reconstruction").example
+    response = api.post("/v1/jobs", json={**example, "options": {"focal_prior_px": 2e7}})
+    assert problem_fields(response, 422) == ["options/focal_prior_px"]
+    assert api.get("/v1/jobs").json()["jobs"] == []
+
+
 def test_verify_refuses_what_is_not_a_json_object_sent_as_json(api):
     assert problem_fields(api.post("/v1/certificates/verify", json=[1, 2]), 422) == ["body"]
     assert problem_fields(api.post("/v1/certificates/verify", content=b"{}", headers={"content-type": "text/plain"}),

@@ -108,6 +108,21 @@ class TestBadInput:
         error = refused(job(intrinsics=intrinsics))
         assert error.field == where and "exceeds the limit of 1e+07 px" in error.reason, error
 
+    @pytest.mark.parametrize("intrinsics, end", [
+        ({"aspect": [0.5, 1e9]}, "its upper end 1e+09"), ({"aspect": [1e-6, 2]}, "its lower end 1e-06"),
+        ({"aspect": [2e3, 3e3]}, "its lower end 2000"),
+    ])
+    @pytest.mark.parametrize("method", ["stratified", "direct"])
+    def test_an_aspect_ratio_no_camera_has(self, intrinsics, end, method):
+        """A pixel aspect ratio fy / fx beyond a thousand to one either way was queued up to the
+        coordinate limit (1e9): now the 422 naming the range, the end and the bounds."""
+        error = refused(job(intrinsics=intrinsics, method=method))
+        assert error.field == "options/intrinsics/aspect" and end in error.reason, error
+        assert "outside [0.001, 1000]" in error.reason and "aspect ratio" in error.reason, error
+
+    def test_aspect_ratios_of_a_thousand_to_one_are_taken(self):
+        parse_job(job(intrinsics={"aspect": [1e-3, 1e3]}))
+
     def test_ranges_of_ten_million_pixels_are_taken(self):
         parse_job(job(intrinsics={"focal": [1e6, 1e7], "skew": [-1e7, 1e7],
                                   "principal_point": [[-1e7, 1e7], [-1e7, 1e7]], "aspect": [0.5, 2]}))

@@ -140,8 +140,38 @@ class TestBadInput:
             parse_job(job(intrinsics=intrinsics))
         assert error.value.field == field and "exceeds the limit of 1e+07 px" in error.value.reason, error.value
 
+    @pytest.mark.parametrize("intrinsics, field", [
+        ({"aspect": [0.5, 1e9]}, "options/intrinsics/aspect"),
+        ({"aspect": [1e-5, 1.0]}, "options/intrinsics/aspect"),
+        ({"K": [[1, 0, 320], [0, 1e6, 240], [0, 0, 1]]}, "options/intrinsics/K/1/1"),
+        ({"K": [[1e6, 0, 320], [0, 10, 240], [0, 0, 1]]}, "options/intrinsics/K/1/1"),
+    ])
+    def test_an_aspect_ratio_no_camera_has(self, intrinsics, field):
+        """A pixel aspect ratio fy / fx beyond a thousand to one either way (a range's end, or a
+        known K's fy over fx) was queued: now the 422 naming the range or fy, and the bounds."""
+        with pytest.raises(InputError) as error:
+            parse_job(job(intrinsics=intrinsics))
+        assert error.value.field == field and "outside [0.001, 1000]" in error.value.reason, error.value
+
+    @pytest.mark.parametrize("prior", [2e7, 1e9])
+    def test_a_focal_prior_beyond_the_focal_ranges_limit(self, prior):
+        """focal_prior_px is held to the focal ranges' limit (1e7 px): over it, the 422 naming it."""
+        with pytest.raises(InputError) as error:
+            parse_job(job(focal_prior_px=prior))
+        assert error.value.field == "options/focal_prior_px" and "1e+07" in error.value.reason, error.value
+
+    def test_a_focal_prior_as_long_as_a_focal_range_may_reach_is_taken(self):
+        """A range may state focal lengths to 1e7 px, and a prior was refused above 1e6."""
+        from geocert.formulations.reconstruction import run_control
+        from geocert.kinds.autocalibration import MAX_INTRINSIC_PX
+
+        assert run_control.FOCAL_PRIOR_LIMIT == MAX_INTRINSIC_PX
+        parse_job(job(focal_prior_px=5e6))
+        parse_job(job(focal_prior_px=1e7, intrinsics={"focal": [1e6, 1e7]}))
+
     def test_intrinsics_of_ten_million_pixels_are_taken(self):
         parse_job(job(intrinsics={"K": [[1e7, -1e7, 1e7], [0, 1e7, -1e7], [0, 0, 1]]}))
+        parse_job(job(intrinsics={"K": [[1e4, 0, 320], [0, 1e7, 240], [0, 0, 1]]}))  # an aspect of 1e3
         parse_job(job(intrinsics={"focal": [1e6, 1e7], "aspect": [0.9, 1.1], "skew": [-1e7, 1e7],
                                   "principal_point": [[-1e7, 1e7], [-1e7, 1e7]]}))
 

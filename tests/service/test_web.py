@@ -554,6 +554,27 @@ class TestTheVerdictsWords:
         assert any(line.endswith("views 3, 4: too few 3D-2D inliers; views 5: not started") for line in lines)
 
 
+    def test_a_large_jobs_views_not_registered_are_named_ten_then_counted(self, page, tmp_path):
+        """500 photos, 480 not registered: the line named every one (a wall of names); now the
+        first 10, as the warning does, and "and 470 more", every view still in the cameras."""
+        cameras = [{"view": v, "name": f"IMG_{v:04d}.jpg", "registered": v < 20, "certified": v < 20,
+                    "status": "optimal" if v < 20 else "not_run",
+                    "reason": None if v < 20 else ("not started" if v % 2 else "too few 3D-2D inliers")}
+                   for v in range(500)]
+        result = {"summary": {"warnings": [{"code": "views_not_registered", "detail": (
+                      "480 of 500 views not registered (no camera returned for them): views 20 (IMG_0020.jpg), "
+                      "22 (IMG_0022.jpg), ...: too few 3D-2D inliers; and 470 more")}]},
+                  "cameras": cameras, "points": [{"certified": True}]}
+        lines = self.verdict_of(page, tmp_path, result)
+        warning = next(line for line in lines if line.startswith("Warning views_not_registered"))
+        named = [f"IMG_{v:04d}.jpg" for v in range(20, 30)]
+        assert all(name in warning for name in named), warning
+        assert "IMG_0030.jpg" not in warning and "IMG_0499.jpg" not in warning, warning
+        assert "480 of 500 views not registered" in warning and "and 470 more" in warning, warning
+        assert "cameras table" in warning, warning
+        assert len(warning) < 1000, len(warning)  # was every one of the 480 names
+
+
 class TestApiKeys:
     def test_the_page_asks_for_the_key_once_and_keeps_it_for_the_tab(self, page, tmp_path):
         process, base = start_service(tmp_path, GEOCERT_API_KEYS=KEY, NO_WORKERS="1")

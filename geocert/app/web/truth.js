@@ -124,19 +124,26 @@ const Truth = (() => {
     return `${words(key.replace(/_certified$/, ""))}: not certified`;
   }
 
+  // How many views the views_not_registered line names, as the warning itself does
+  // (claims.VIEWS_NAMED): a 500-photo job's would be a wall of names; the rest are counted, and
+  // the cameras table (and the JSON) still lists every view with its reason.
+  const VIEWS_NAMED = 10;
+
   // views_not_registered names its views by index; with the job's photos named, by their names.
   function unregisteredDetail(result, w) {
     const cameras = Array.isArray(result.cameras) ? result.cameras.filter((c) => c && typeof c === "object") : [];
     const missing = cameras.filter((c) => c.registered === false);
     if (!missing.length || !missing.some((c) => typeof c.name === "string" && c.name)) return w.detail;
     const why = new Map();
-    for (const c of missing) {
+    for (const c of missing.slice(0, VIEWS_NAMED)) {
       const reason = c.reason || "no reason recorded";
       if (!why.has(reason)) why.set(reason, []);
       why.get(reason).push(typeof c.name === "string" && c.name ? c.name : `view ${c.view}`);
     }
+    const more = missing.length > VIEWS_NAMED
+      ? `; and ${missing.length - VIEWS_NAMED} more (the cameras table lists every view and its reason)` : "";
     return `${missing.length} of ${cameras.length} views not registered (no camera returned for them): ` +
-           [...why].map(([reason, names]) => `${names.join(", ")}: ${reason}`).join("; ");
+           [...why].map(([reason, names]) => `${names.join(", ")}: ${reason}`).join("; ") + more;
   }
 
   // The verdict: {level: "yes" | "warn" | "no" | "estimate" | "failed", headline, lines: [{level, text}]}

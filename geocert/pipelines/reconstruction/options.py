@@ -227,7 +227,9 @@ class ReconstructionOptions(FractionalOptions):
         if self.focal_prior_px is not None and not (isinstance(self.focal_prior_px, (int, float))
                                                     and math.isfinite(self.focal_prior_px)
                                                     and 0 < self.focal_prior_px <= run_control.FOCAL_PRIOR_LIMIT):
-            raise InputError("options/focal_prior_px", "must be a positive number of pixels (at most 1e6), or null")
+            raise InputError("options/focal_prior_px", f"must be a positive number of pixels (at most "
+                                                       f"{run_control.FOCAL_PRIOR_LIMIT:g}, as a focal range's ends), "
+                                                       "or null")
         for name in ("metric_rel_gap", "camera_rel_gap", "autocalibration_rel_gap", "autocalibration_max_nodes",
                      "autocalibration_time_limit_s", "structure_time_limit_s", "autocalibration_points", "threshold_px", "min_inliers",
                      "focal_prior_factor", "focal_prior_rounds", "seed"):

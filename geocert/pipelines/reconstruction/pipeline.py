@@ -961,10 +961,13 @@ def _run(tracks, image_sizes, options: ReconstructionOptions, stages, out: Recon
                      points_used=metric.autocalibration_points, K=None if metric.K is None else metric.K.tolist(),
                      cameras_built_with_one_K=calibration_claim.built_with_one_K(
                          [P for P in proj.cameras if P is not None]))
+        if metric.stratified_not_run is not None:  # "auto" went straight to the direct method: said where
+            stage["reason"] = metric.stratified_not_run  # the page shows the upgrade's status
         if metric.certified and options.certificate == "full":
             if metric.proven is None:  # the direct method's upgrade: no certificate of it is carried here
-                stage.update(certified=False, reason="the direct method certified this upgrade, but a reconstruction "
-                                                     "carries only the stratified method's certificate: not claimed")
+                said = ("the direct method certified this upgrade, but a reconstruction carries only the stratified "
+                        "method's certificate: not claimed")
+                stage.update(certified=False, reason=said if not stage.get("reason") else f"{stage['reason']}; {said}")
             else:  # which views and tracks the calibration certificate's cameras and points are
                 out.proven = metric.proven
                 stage.update(certificate_views=metric.proven.views, certificate_tracks=metric.proven.tracks)

@@ -35,6 +35,9 @@ class Metric:
     Ks: list | None = None  # one K per view (the "varying" adjustment), else K for every view
     alternative: tuple | None = None  # (H, K) of the linear estimate: a second start for the adjustment
     skipped: str | None = None  # why the certified search was not run (a critical motion), if it was not
+    # "auto" with the direct method's upgrade found: why the stratified method was not tried first,
+    # when it was not (the registered views spread too far for its frame)
+    stratified_not_run: str | None = None
     # What a certificate of the stratified upgrade is built from (Proven), when one was solved
     proven: "Proven | None" = None
     k1: float = 0.0  # radial distortion about K's principal point (bundle model "radial"), of the pixels fit
@@ -99,7 +102,8 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
                   callback=None, skip_critical: bool = False, observed: tuple[np.ndarray, np.ndarray] | None = None,
                   per_view: int = 0) -> Metric:
     """The metric upgrade by the stratified method (thesis ch. 6), the direct one (ch. 7), or
-    "auto": stratified, and the direct method when the stratified one finds no upgrade. With
+    "auto": stratified, and the direct method when the stratified one finds no upgrade or cannot
+    be run (the registered views spread too far for its frame: ``stratified_not_run`` says so). With
     ``skip_critical``, the certified search is not run when the linear estimate's motion is
     critical (motion(): a turntable, an orbit, a translating camera): there the tracks do not
     determine constant intrinsics, and a certified optimum would be one of many equally good
@@ -164,6 +168,9 @@ def autocalibrate(cameras: list[np.ndarray | None], points: np.ndarray, image_si
     out.stages, out.certified, out.ranges, out.autocalibration_points = stages, certified, problem.ranges, len(chosen)
     out.proven = proven
     out.alternative = linear
+    if method == "auto" and spread is not None:  # the upgrade is the direct method's, the stratified one never tried
+        out.stratified_not_run = (f"the stratified method was not run ({spread}): the upgrade is the direct "
+                                  "method's")
     return out
 
 
