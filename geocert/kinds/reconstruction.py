@@ -28,6 +28,7 @@ from geocert.kinds.resection_homography import RESECTION, map_document
 from geocert.kinds.schema import CertificateDocument, Finite, JobBase, JobStats, Pixel, Strict, options_model
 from geocert.kinds.triangulation import TrackOut, track_document
 from geocert.formulations.autocalibration.problem import StageProgress
+from geocert.formulations.reconstruction import run_control
 from geocert.core.geometry import COORDINATE_LIMIT, NUMBER_TYPES, InputError, number_array
 from geocert.pipelines.reconstruction.options import ReconstructionOptions
 from geocert.verify.reconstruction import RECONSTRUCTION
@@ -329,7 +330,10 @@ def request_figures(data: dict) -> dict:
 
 def _exif_focal_prior(images: list[dict], sizes: list[tuple[float, float]]) -> dict | None:
     """The photos' EXIF focal lengths (pixels, from the 35 mm equivalent) and their median, when
-    every photo states one and they agree within 1% (one camera and zoom); else None."""
+    every photo states one, they agree within 1% (one camera and zoom) and the median is a prior
+    the options may state (at most run_control.FOCAL_PRIOR_LIMIT: a larger one, from a tag near
+    its 9,999 mm cap on a very wide photo, would make a document the verifier's option check
+    refuses); else None."""
     import base64
 
     from geocert.pipelines.reconstruction import features
@@ -347,7 +351,7 @@ def _exif_focal_prior(images: list[dict], sizes: list[tuple[float, float]]) -> d
             return None
         found.append(focal)
     median = float(np.median(found))
-    if not found or max(abs(f / median - 1) for f in found) > 0.01:
+    if not found or max(abs(f / median - 1) for f in found) > 0.01 or not median <= run_control.FOCAL_PRIOR_LIMIT:
         return None
     return {"focal_px": median, "images": len(found)}
 

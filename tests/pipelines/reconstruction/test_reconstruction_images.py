@@ -720,6 +720,24 @@ class TestExifFocal:
         assert features.exif_focal_px(_jpeg_with_focal_35mm(36, order), (3000, 2000)) == pytest.approx(3000.0)
         assert features.exif_focal_px(_jpeg_with_focal_35mm(0, order), (3000, 2000)) is None
 
+    def test_a_prior_beyond_the_options_limit_is_not_taken(self):
+        """The job's EXIF prior becomes its focal_prior_px, which the options (and the verifier
+        reading them) hold to run_control.FOCAL_PRIOR_LIMIT: a 9,999 mm equivalent on a photo
+        50,000 px wide states 1.39e7 px, and is ignored rather than written into a document the
+        verifier would refuse."""
+        import base64
+
+        from geocert.formulations.reconstruction.run_control import FOCAL_PRIOR_LIMIT
+        from geocert.kinds.reconstruction import _exif_focal_prior
+
+        def images(f35):
+            return [{"content": base64.b64encode(_jpeg_with_focal_35mm(f35)).decode()}] * 3
+
+        assert _exif_focal_prior(images(36), [(3000, 2000)] * 3) == {"focal_px": pytest.approx(3000.0), "images": 3}
+        assert features.exif_focal_px(_jpeg_with_focal_35mm(9999), (50_000, 100)) > FOCAL_PRIOR_LIMIT
+        assert _exif_focal_prior(images(9999), [(50_000, 100)] * 3) is None
+        assert _exif_focal_prior(images(7000), [(50_000, 100)] * 3)["focal_px"] <= FOCAL_PRIOR_LIMIT
+
     def test_no_exif_no_prior(self):
         assert features.exif_focal_px(b"\xff\xd8\xff\xda\x00\x02", (640, 480)) is None
         assert features.exif_focal_px(b"\x89PNG\r\n\x1a\n", (640, 480)) is None
