@@ -107,8 +107,11 @@ def maps_less_set_aside(found: list[tuple[list, list]], cameras: list[dict]) -> 
 
 def _close(value: Any, expected: float, scale: float) -> bool:
     """``value`` is a number within rounding of ``expected``, read at the magnitude ``scale`` or
-    its own, whichever is larger (0: a copy or a recomputation of the same sum, at its own)."""
-    return is_number(value) and abs(value - expected) <= ROUNDING * max(scale, abs(expected))
+    its own, whichever is larger (0: a copy or a recomputation of the same sum, at its own).
+    ``expected`` must be finite: against a recomputation that overflowed, |value - inf| <= inf
+    would hold for every stated value (depth_reversal_claim._close's class)."""
+    return is_number(value) and math.isfinite(expected) and abs(value - expected) <= ROUNDING * max(scale,
+                                                                                                       abs(expected))
 
 
 def _check_camera_fields(camera: dict, where: str) -> None:
