@@ -913,6 +913,11 @@ def _judged_motion(result: dict, registered: list[dict], summary: dict, stage: d
     be it. Returns (the critical motion, stated or found; whether the motion was fully judged:
     3 cameras and enough certified observations to estimate the rotations' noise, without which
     the plane at infinity's family is not judged, and nothing may be called determined)."""
+    given = summary.get("critical_motion")
+    if given is not None and not (isinstance(given, str) and given):
+        # the judgement's name or null: false, 0 or [] read as "no critical motion" by a reader
+        # and as none by the truthiness below, a type no writer gives
+        raise Invalid("returned", f"summary/critical_motion is {given!r:.40}: a critical motion's name, or null")
     if len(registered) < 3:
         return summary.get("critical_motion"), False
     by_view = {int(camera["view"]): camera for camera in registered}

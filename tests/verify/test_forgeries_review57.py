@@ -97,3 +97,17 @@ def test_a_genuine_reconstructions_depth_reversal_record_so_edited_is_refused(ex
     forged = copy.deepcopy(example_reconstruction)
     forged["summary"]["depth_reversal"][member] = value
     refused_naming(forged, "returned", "depth_reversal")
+
+
+# 3. A reconstruction summary's critical motion is a motion's name or null
+
+@pytest.mark.slow  # the example's solve: about 9 s
+@pytest.mark.parametrize("value", [False, 0, 0.0, [], ""])
+def test_a_summary_critical_motion_not_a_name_is_refused(example_reconstruction, value):
+    """Where the returned cameras' motion is judged not critical (the example: null), a summary
+    stating false, 0 or [] was read as none by its truthiness and verified: a type no writer gives,
+    which a reader takes for "judged not critical"."""
+    assert example_reconstruction["summary"]["critical_motion"] is None
+    forged = copy.deepcopy(example_reconstruction)
+    forged["summary"]["critical_motion"] = value
+    refused_naming(forged, "returned", "summary/critical_motion")
