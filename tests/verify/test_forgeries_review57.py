@@ -24,7 +24,7 @@ Tried (each forgery built from a genuine document, its hashes made again, verify
   2, 6 views, varying_focal): every number of the one-K proof's sublevel (the focal length's and
   the five other intrinsics' ends, each c, the level and the stated intervals: 337 forgeries,
   the determinacy restated) and of its determinacy alone (315), every number of the per-view
-  sublevel (about 350); by hand: the level halved, 0 or 2^128, the stage's cost halved, its
+  sublevel (337); by hand: the level halved, 0 or 2^128, the stage's cost halved, its
   lower bound raised to its cost, its cost null or true, the lower and upper entries swapped,
   an end nulled with the interval kept, an entry's orientation changed or doubled, u's and v's
   entries or intervals swapped, focal_y's and u's intervals swapped, the skew interval halved,
