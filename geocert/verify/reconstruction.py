@@ -107,8 +107,11 @@ def maps_less_set_aside(found: list[tuple[list, list]], cameras: list[dict]) -> 
 
 def _close(value: Any, expected: float, scale: float) -> bool:
     """``value`` is a number within rounding of ``expected``, read at the magnitude ``scale`` or
-    its own, whichever is larger (0: a copy or a recomputation of the same sum, at its own)."""
-    return is_number(value) and abs(value - expected) <= ROUNDING * max(scale, abs(expected))
+    its own, whichever is larger (0: a copy or a recomputation of the same sum, at its own).
+    ``expected`` must be finite: against a recomputation that overflowed, |value - inf| <= inf
+    would hold for every stated value (depth_reversal_claim._close's class)."""
+    return is_number(value) and math.isfinite(expected) and abs(value - expected) <= ROUNDING * max(scale,
+                                                                                                       abs(expected))
 
 
 def _check_camera_fields(camera: dict, where: str) -> None:
@@ -286,8 +289,12 @@ def _check_summary(result: dict, registered: list[dict]) -> None:
                 "cameras_certified_fraction": certified_cameras / len(registered) if registered else None}
     for name, value in expected.items():
         given = summary.get(name)
-        if not (same(given, value) or (value is not None and _close(given, value, 0.0))):
-            raise Invalid("returned", f"summary/{name} is {given!r}, the items give {value!r}")
+        # a count is the items' number itself (4.0 is 4, as JavaScript writes it; 4.000000001 is
+        # no count); only a fraction, a quotient, may differ from the recomputed one by its rounding
+        fraction = name.endswith("_fraction")
+        if not (same(given, value) or (fraction and value is not None and _close(given, value, 0.0))):
+            raise Invalid("returned", f"summary/{name} is {given!r}, the items give {value!r}"
+                                      + ("" if fraction else " (a count: exactly that number)"))
     rms = math.sqrt(squared / count) if count else None
     given = summary.get("rms_reprojection_px")
     if not (given is rms or (rms is not None and _close(given, rms, 1e-6))):
@@ -906,6 +913,11 @@ def _judged_motion(result: dict, registered: list[dict], summary: dict, stage: d
     be it. Returns (the critical motion, stated or found; whether the motion was fully judged:
     3 cameras and enough certified observations to estimate the rotations' noise, without which
     the plane at infinity's family is not judged, and nothing may be called determined)."""
+    given = summary.get("critical_motion")
+    if given is not None and not (isinstance(given, str) and given):
+        # the judgement's name or null: false, 0 or [] read as "no critical motion" by a reader
+        # and as none by the truthiness below, a type no writer gives
+        raise Invalid("returned", f"summary/critical_motion is {given!r:.40}: a critical motion's name, or null")
     if len(registered) < 3:
         return summary.get("critical_motion"), False
     by_view = {int(camera["view"]): camera for camera in registered}

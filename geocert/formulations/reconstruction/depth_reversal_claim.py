@@ -13,6 +13,7 @@ docs/certificate.md: the costs themselves, which need the adjusted twin."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -56,7 +57,11 @@ def verdict(cost: float, twin: float, variance: float) -> tuple[float, bool, boo
 
 
 def _close(value: Any, expected: float) -> bool:
-    return is_number(value) and abs(value - expected) <= ROUNDING * max(abs(expected), 1e-300)
+    """``value`` is a number within rounding of ``expected``, itself finite: a figure recomputed
+    from stated ones overflows to inf where they are extreme (a subnormal noise variance: the
+    statistic 15 / 5e-324), and |value - inf| <= ROUNDING * inf held for every stated value."""
+    return (is_number(value) and math.isfinite(expected)
+            and abs(value - expected) <= ROUNDING * max(abs(expected), 1e-300))
 
 
 def check(summary: dict, cameras: list[dict], stages: list, current_form: bool = False,
@@ -78,7 +83,8 @@ def check(summary: dict, cameras: list[dict], stages: list, current_form: bool =
             raise Invalid("returned", "summary/poses_determined or a camera's mirror_rotation_deg is stated without "
                                       "summary/depth_reversal")
         return
-    if not isinstance(figures, dict) or figures.get("checked") not in (True, False):
+    # by type: 1 in (True, False) and 1.0 == True in Python, and a number is never a boolean here
+    if not isinstance(figures, dict) or type(figures.get("checked")) is not bool:
         raise Invalid("returned", "summary/depth_reversal must be an object saying whether the check ran (checked)")
     extra = sorted(str(name) for name in set(figures) - (MEMBERS if figures["checked"] else NOT_CHECKED_MEMBERS))
     if extra:
