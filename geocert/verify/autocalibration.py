@@ -974,7 +974,8 @@ def _close(value: Any, expected: Any, scale: float | None = None) -> bool:
     machine). An array's scale is its largest entry (a list of records': each field's largest
     over the records, so that a camera centre at the origin is read at the layout's scale): no
     absolute floor, which a document could choose its world's size to fall under (centres and
-    points 1e-8 across, read within 1e-9, moved by half their size and verified)."""
+    points 1e-8 across, read within 1e-9, moved by half their size and verified). A recomputed
+    number or scale that is not finite matches nothing."""
     if expected is None or value is None:
         return value is None and expected is None
     if isinstance(expected, dict):
@@ -993,6 +994,8 @@ def _close(value: Any, expected: Any, scale: float | None = None) -> bool:
         return all(_close(v, e, scale) for v, e in zip(value, expected))
     if isinstance(expected, float) or isinstance(expected, int):
         scale = scale if scale is not None else abs(expected)
+        if not (math.isfinite(expected) and math.isfinite(scale)):
+            return False  # |value - inf| <= 1e-9 * inf holds for any value: an overflowed recomputation proves nothing
         return isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value - expected) <= (
             1e-9 * max(scale, abs(expected)))
     return value == expected

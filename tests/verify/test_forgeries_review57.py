@@ -203,3 +203,19 @@ def test_a_summary_critical_motion_not_a_name_is_refused(example_reconstruction,
     forged = copy.deepcopy(example_reconstruction)
     forged["summary"]["critical_motion"] = value
     refused_naming(forged, "returned", "summary/critical_motion")
+
+
+# 4. Review 57's open end, closed: the other "within rounding" comparisons against a recomputed
+#    value that overflowed. |value - inf| <= tolerance * inf holds for any stated value; a
+#    recomputed number (or the scale it is read at) that is not finite matches nothing.
+
+def test_a_stated_number_never_matches_an_overflowed_recomputation():
+    from geocert.formulations.reconstruction.calibration_claim import same
+    from geocert.verify.autocalibration import _close
+
+    inf = float("inf")
+    assert _close(1.0, 1.0) and _close([1.0, 2.0], [1.0, 2.0]) and same([1.0, 2.0], [1.0, 2.0])
+    assert not _close(3.0, inf)
+    assert not _close([3.0, 5.0], [inf, 5.0])  # the overflowed entry's scale reads every other at inf
+    assert not _close([{"t": [0.0, 7.0]}], [{"t": [inf, 1.0]}])
+    assert not same([3.0], [inf]) and not same([3.0, 9.0], [inf, 1.0]) and not same([inf], [inf])

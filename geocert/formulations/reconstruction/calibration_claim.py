@@ -61,8 +61,11 @@ CALIBRATED_CAMERAS_WARNING = (
 
 
 def same(a, b) -> bool:
+    """``a`` is ``b`` within SAME of b's scale, both finite (an infinite entry would make the scale
+    infinite and any ``a`` the same)."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    return bool(a.shape == b.shape and np.all(np.abs(a - b) <= SAME * max(1.0, float(np.abs(b).max()))))
+    return bool(a.shape == b.shape and np.all(np.isfinite(a)) and np.all(np.isfinite(b))
+                and np.all(np.abs(a - b) <= SAME * max(1.0, float(np.abs(b).max()))))
 
 
 def middle_centre(centres) -> int:
