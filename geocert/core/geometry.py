@@ -21,6 +21,19 @@ class InputError(ValueError):
 # such a coordinate is refused with the field and this limit named, rather than answered badly.
 COORDINATE_LIMIT = 1e9
 
+# The largest image side taken, in pixels: far above any camera's (the largest sensors are some
+# 2e4 px a side, stitched gigapixel panoramas some 2e5). Beyond some 1e7 the default ranges'
+# scale left the affine stage failing with a reason about the data ("chirality does not bound
+# the plane at infinity", "no strictly quasi-affine plane") when the size was the cause.
+MAX_IMAGE_SIDE_PX = 1e6
+
+# The largest focal length, skew or principal point coordinate taken, in pixels (an intrinsics
+# range's ends, a known K's entries): ten times the largest image side. A focal length of 1e7 px
+# is a pixel of 0.02 arc seconds, finer than any telescope's (a 2e4 px sensor behind an 800 mm lens
+# is some 2e5 px), and a principal point 1e7 px off is ten sides beyond the largest image taken.
+# Between this and COORDINATE_LIMIT a range no image taken here can have was queued.
+MAX_INTRINSIC_PX = 10 * MAX_IMAGE_SIDE_PX
+
 
 def is_number(x) -> bool:
     """A finite JSON number: a float or an int (never a bool or a string)."""

@@ -22,7 +22,7 @@ from geocert.formulations.autocalibration import metric_relaxation
 from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.verify.autocalibration import STAGES, outcome, read_data
 from geocert.core.determinacy import safely, within
-from geocert.core.geometry import COORDINATE_LIMIT, InputError
+from geocert.core.geometry import COORDINATE_LIMIT, MAX_IMAGE_SIDE_PX, MAX_INTRINSIC_PX, InputError
 from geocert.core.self_check import enabled as self_check_enabled
 
 Range = Annotated[list[Finite], Field(min_length=2, max_length=2, description="[lo, hi]")]
@@ -30,18 +30,6 @@ Point4 = Annotated[list[Finite], Field(min_length=4, max_length=4, description="
 Matrix3 = list[list[float]]
 
 
-# The largest image side taken, in pixels: far above any camera's (the largest sensors are some
-# 2e4 px a side, stitched gigapixel panoramas some 2e5). Beyond some 1e7 the default ranges'
-# scale left the affine stage failing with a reason about the data ("chirality does not bound
-# the plane at infinity", "no strictly quasi-affine plane") when the size was the cause.
-MAX_IMAGE_SIDE_PX = 1e6
-
-# The largest focal length, skew or principal point coordinate taken, in pixels (an intrinsics
-# range's ends, a known K's entries): ten times the largest image side. A focal length of 1e7 px
-# is a pixel of 0.02 arc seconds, finer than any telescope's (a 2e4 px sensor behind an 800 mm lens
-# is some 2e5 px), and a principal point 1e7 px off is ten sides beyond the largest image taken.
-# Between this and COORDINATE_LIMIT a range no image taken here can have was queued.
-MAX_INTRINSIC_PX = 10 * MAX_IMAGE_SIDE_PX
 PIXEL_RANGES = ("focal", "skew", "principal_point")  # the ranges in pixels (aspect is a ratio)
 
 # The pixel aspect ratio fy / fx an aspect range's ends (and a known K's) may state. A camera's

@@ -11,7 +11,7 @@ import math
 from dataclasses import fields
 from typing import Any
 
-from geocert.core.geometry import is_number
+from geocert.core.geometry import MAX_INTRINSIC_PX, is_number
 from geocert.core.strict import Invalid
 from geocert.formulations.fractional.options import FractionalOptions, SearchOptions
 from geocert.formulations.reconstruction import camera_claim
@@ -40,11 +40,10 @@ RANGES = {**{name: SearchOptions.OPTION_RANGES[name] for name in ("max_nodes", "
           "seed": {"ge": 0, "le": 2**31 - 1}}
 INTEGERS = ("max_nodes", "autocalibration_max_nodes", "autocalibration_points", "min_inliers", "focal_prior_rounds",
             "seed")
-# focal_prior_px, when given: a positive number of pixels at most this, the largest focal length a
-# range or a known K may state (kinds.autocalibration.MAX_INTRINSIC_PX, ten times the largest image
-# side taken; the kinds sit above this layer): a prior is a focal length like theirs, and a job
-# whose range reaches 1e7 px could not be given its prior there.
-FOCAL_PRIOR_LIMIT = 1e7
+# focal_prior_px, when given: a positive number of pixels at most the largest focal length a range
+# or a known K may state (core.geometry.MAX_INTRINSIC_PX): a prior is a focal length like theirs,
+# and a job whose range reaches that limit could not be given its prior there otherwise.
+FOCAL_PRIOR_LIMIT = MAX_INTRINSIC_PX
 FLAGS = ("bundle_adjustment", "resect_cameras", "bound_every_camera", "merge_components")
 CHOICES = {"camera_model": CAMERA_MODELS, "registration": REGISTRATIONS, "radial_distortion": RADIAL_DISTORTIONS,
            "principal_point": PRINCIPAL_POINTS, "autocalibration_on_critical_motion": ON_CRITICAL_MOTION}
