@@ -30,6 +30,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 import weakref
 
 import uvicorn
@@ -105,7 +106,7 @@ def _config(app: str, **where) -> uvicorn.Config:
 def run(app: str, host: str, port: int, processes: int = 1) -> None:
     """Serve ``app`` on host:port until told to stop: in this process alone, or with
     ``processes`` - 1 more API processes on the same listening socket (stopped with this one, and
-    by the kernel if this one dies)."""
+    by the kernel if this one dies, and by themselves if that fails)."""
     config = _config(app, host=host, port=port)
     if processes <= 1:
         Server(config).run()
@@ -135,7 +136,27 @@ def _serve_inherited(app: str, fd: int, parent: int) -> None:
     if os.getppid() != parent:  # it died before the request took effect
         return
     listening = socket.socket(fileno=fd)
-    Server(_config(app, host=listening.getsockname()[0], port=listening.getsockname()[1])).run(sockets=[listening])
+    config = _config(app, host=listening.getsockname()[0], port=listening.getsockname()[1])
+    server = Server(config)
+    _end_when_orphaned(server, parent, grace_s=(config.timeout_graceful_shutdown or 5) + 5)
+    server.run(sockets=[listening])
+
+
+def _end_when_orphaned(server: Server, parent: int, grace_s: float, poll_s: float = 0.5) -> None:
+    """Beside the kernel's signal: a thread that, once ``parent`` is gone, asks ``server`` to stop
+    and, if it has not ended ``grace_s`` later, ends the process. An API process must never outlive
+    `geocert serve` (it would hold the port), whatever kept the signal from working or the shutdown
+    from finishing."""
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(poll_s)
+        server.should_exit = True
+        stop()
+        time.sleep(grace_s)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="geocert-orphan-watch", daemon=True).start()
 
 
 def _die_with_parent() -> None:
