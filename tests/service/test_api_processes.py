@@ -150,8 +150,44 @@ def test_every_api_process_closes_a_connection_whose_headers_are_too_slow(tmp_pa
 
 
 def assert_ends(pids: list[int], limit_s: float = 30) -> None:
+    """Each of ``pids`` has ended (or is a zombie) within ``limit_s``; a process that reuses the
+    number later (the start time tells it apart) is not it."""
     deadline = time.monotonic() + limit_s
     for pid in pids:
-        while os.path.exists(f"/proc/{pid}") and open(f"/proc/{pid}/stat").read().split()[2] != "Z":
-            assert time.monotonic() < deadline, f"API process {pid} still runs after geocert serve stopped"
+        started = _start_time(pid)
+        while started is not None and _start_time(pid) == started and _state(pid) not in (None, "Z"):
+            assert time.monotonic() < deadline, f"API process {pid} still runs after geocert serve stopped: {_described(pid)}"
             time.sleep(0.1)
+
+
+def _described(pid: int) -> str:
+    """What the kernel says of a process that should have ended: its state, parent, command and
+    what it waits in, for a failure's message."""
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            lines = [line.strip() for line in status if line.startswith(("State", "PPid", "Threads", "SigCgt", "SigPnd", "ShdPnd"))]
+        with open(f"/proc/{pid}/cmdline", "rb") as cmdline:
+            command = cmdline.read().replace(b"\0", b" ").decode(errors="replace")
+        with open(f"/proc/{pid}/wchan") as wchan:
+            waits = wchan.read()
+    except OSError as exc:
+        return f"(gone while described: {exc})"
+    return f"{command!r}; {'; '.join(lines)}; waiting in {waits!r}"
+
+
+def _stat_fields(pid: int) -> list[str] | None:
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()  # after the command's name, which may hold spaces
+    except (FileNotFoundError, ProcessLookupError):
+        return None
+
+
+def _state(pid: int) -> str | None:
+    fields = _stat_fields(pid)
+    return None if fields is None else fields[0]
+
+
+def _start_time(pid: int) -> str | None:
+    fields = _stat_fields(pid)
+    return None if fields is None else fields[19]  # starttime, field 22 of proc(5)
