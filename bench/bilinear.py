@@ -8,6 +8,8 @@ fraction; SCIP on a few small instances.
 
 from __future__ import annotations
 
+import bench.one_blas_thread  # noqa: F401  (before numpy: one BLAS thread, as the workers have)
+
 import argparse
 import math
 import os

@@ -33,8 +33,7 @@ from __future__ import annotations
 
 import os
 
-for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_name, "1")
+import bench.one_blas_thread  # noqa: F401  (before numpy: one BLAS thread, as the workers have)
 
 import argparse  # noqa: E402
 import functools  # noqa: E402

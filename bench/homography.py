@@ -11,6 +11,8 @@ points, then Levenberg-Marquardt) with how often its L2L2 cost exceeds our certi
 
 from __future__ import annotations
 
+import bench.one_blas_thread  # noqa: F401  (before numpy: one BLAS thread, as the workers have)
+
 import argparse
 import os
 import time

@@ -10,11 +10,7 @@ from __future__ import annotations
 
 import os
 
-# One BLAS thread: the stages are single-threaded, and OpenBLAS's spinning threads on this shared
-# 2-core machine cost more than they gain (measured: a 432 x 432 Cholesky 150 ms of CPU with the
-# default threads under load, the Dinosaur's projective stage 25.5 s CPU against 13.2 s with one).
-for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_name, "1")
+import bench.one_blas_thread  # noqa: F401  (before numpy: one BLAS thread, as the workers have)
 
 import argparse
 import time

@@ -19,13 +19,7 @@ tracks that agree with the ground-truth cameras (triangulated by them, every obs
 
 from __future__ import annotations
 
-import os
-
-# One BLAS thread: the stages are single-threaded, and OpenBLAS's spinning threads on this shared
-# 2-core machine cost more than they gain (measured: a 432 x 432 Cholesky 150 ms of CPU with the
-# default threads under load, the Dinosaur's projective stage 25.5 s CPU against 13.2 s with one).
-for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_name, "1")
+import bench.one_blas_thread  # noqa: F401  (before numpy: one BLAS thread, as the workers have)
 
 import argparse
 import dataclasses
@@ -36,8 +30,9 @@ import cv2
 import numpy as np
 
 from bench import machine_speed_ms
-from geocert.solvers.reconstruction.calibrated import (CalibratedOptions, align_rotations,
-                                                       calibrated_reconstruction, refine_cameras, triangulate)
+from testing.camera_errors import align_rotations
+from geocert.solvers.reconstruction.calibrated import (CalibratedOptions, calibrated_reconstruction, refine_cameras,
+                                                       triangulate)
 from geocert.pipelines.reconstruction.features import FeatureOptions, tracks_from_images
 from geocert.solvers.reconstruction.render import box_scene
 

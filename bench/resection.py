@@ -13,6 +13,8 @@ for six points, so only --scip-cameras of each dataset); and the DLT + LM baseli
 
 from __future__ import annotations
 
+import bench.one_blas_thread  # noqa: F401  (before numpy: one BLAS thread, as the workers have)
+
 import argparse
 import os
 import pickle
