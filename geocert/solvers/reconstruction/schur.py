@@ -117,6 +117,21 @@ def _inverse(V: np.ndarray) -> np.ndarray:
         return adjugate / det[:, None, None]
 
 
+def _damped(V: np.ndarray, lam: float, finite: bool) -> np.ndarray:
+    """V + lam (diag(V) I + 1e-12 I) for a stack V (p, d, d), the points' damped blocks. Off the
+    diagonal that adds lam (0 + 0) = 0, which leaves an entry as it is unless it is -0.0 (V's
+    entries are bincount's sums, which never are) or its block's diagonal is not finite (inf 0 =
+    nan): when ``finite`` (every entry of V finite) only the diagonal is computed, the same
+    floats as the whole expression's, in a copy of V."""
+    if not finite:
+        d = V.shape[-1]
+        return V + lam * (np.einsum("pii->pi", V)[:, :, None] * np.eye(d) + 1e-12 * np.eye(d))
+    p, d = V.shape[0], V.shape[-1]
+    damped = V.copy()
+    damped.reshape(p, d * d)[:, ::d + 1] += lam * (V.reshape(p, d * d)[:, ::d + 1] + 1e-12)
+    return damped
+
+
 def _robust_weights(r: np.ndarray, f_scale: float | None) -> np.ndarray:
     """Per observation, the iteratively reweighted least squares weight of a Huber loss on the
     residual's length (None: plain least squares)."""
@@ -250,6 +265,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
         # product, jb^T [jb, je]: each entry is the same sum as from the two products apart.
         both = np.ascontiguousarray(jb.transpose(0, 2, 1)) @ np.concatenate([jb, je], axis=2)
         V = by_track(both[:, :, :d])
+        finite_v = bool(np.isfinite(V).all())
         WmT = np.ascontiguousarray(both[:, :, d:])  # (M, d, c+s): each observation's W^T
         WmT_gathered = blocks.gathered(WmT)
         ga = np.einsum("mki,mk->mi", je, rw)  # (M, c+s); einsum: faster than matmul on stacks of vectors
@@ -261,8 +277,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
                 iterations -= 1  # no step computed
                 break
         while True:
-            Vd = V + lam * (np.einsum("pii->pi", V)[:, :, None] * np.eye(d) + 1e-12 * np.eye(d))
-            Vinv = _inverse(Vd)
+            Vinv = _inverse(_damped(V, lam, finite_v))
             # Reduced system: (U - W V^-1 W^T) da = -(ga - W V^-1 gb).
             VWT = _rows(Vinv, track) @ WmT  # (M, d, c+s): (W V^-1)^T, V^-1 being symmetric
             Ured = U - blocks.reduction(VWT, WmT_gathered)

@@ -1,6 +1,7 @@
-"""schur.solve's and bundle._ByCamera's row gathers by np.take (schur._rows) give the same floats as
-numpy's fancy indexing: an adjustment under every camera model, Huber's weights on, is the same to
-the last bit as with the former way."""
+"""schur.solve's and bundle._ByCamera's row gathers by np.take (schur._rows) and the points' damped
+blocks with their diagonal alone computed (schur._damped) give the same floats as numpy's fancy
+indexing and the whole expression V + lam (diag(V) I + 1e-12 I): an adjustment under every camera
+model, Huber's weights on, is the same to the last bit as with the former ways."""
 
 from __future__ import annotations
 
@@ -9,6 +10,11 @@ import pytest
 
 from geocert.solvers.reconstruction import bundle, schur
 from tests.solvers.reconstruction.test_camera_frame_reuse import _scene
+
+
+def _whole(V, lam, finite):
+    d = V.shape[-1]
+    return V + lam * (np.einsum("pii->pi", V)[:, :, None] * np.eye(d) + 1e-12 * np.eye(d))
 
 
 def _fancy(values, index):
@@ -25,6 +31,23 @@ def _times_by_assignment(self, x, mats):
     scattered = np.empty((M, r, mats.shape[-1]))
     scattered[self.order] = out.reshape(M, r, mats.shape[-1])
     return scattered
+
+
+def test_damped_blocks_are_the_whole_expression_bit_for_bit():
+    rng = np.random.default_rng(7)
+    for d in (2, 3, 4):
+        jb = rng.normal(size=(600, 2, d)) * rng.choice([1e-9, 1.0, 1e6], size=(600, 1, 1))
+        track = rng.integers(0, 250, 600)  # some points unobserved: all-zero blocks
+        V = schur._sum_by(track, jb.transpose(0, 2, 1) @ jb, 250)
+        V[3] = 0.0
+        for lam in (1e-12, 1e-3, 0.37, 4e11):
+            assert np.array_equal(schur._damped(V, lam, True), _whole(V, lam, True))
+    # not finite: the whole expression (its nan off the diagonal of an infinite block kept)
+    V = rng.normal(size=(5, 3, 3))
+    V[1, 1, 1] = np.inf
+    V[2, 0, 2] = np.nan
+    assert np.array_equal(schur._damped(V, 1e-3, False), _whole(V, 1e-3, False), equal_nan=True)
+    assert np.isnan(schur._damped(V, 1e-3, False)[1, 1, 0])  # inf 0 in the row of the infinite entry
 
 
 def test_rows_are_fancy_indexing():
@@ -45,6 +68,7 @@ def test_an_adjustment_is_the_same_as_with_fancy_indexing(model, f_scale, monkey
     steps = bundle.Schur(max_iterations=15, f_scale=f_scale)
     taken = bundle.adjust(K, R, t, X, view, track, pixels, free, steps)
     monkeypatch.setattr(schur, "_rows", _fancy)
+    monkeypatch.setattr(schur, "_damped", _whole)
     monkeypatch.setattr(bundle._ByCamera, "times", _times_by_assignment)
     fancy = bundle.adjust(K, R, t, X, view, track, pixels, free, steps)
     assert taken.iterations == fancy.iterations > 2
