@@ -176,6 +176,8 @@ class _ByCamera:
         _, self.rows, inverse = np.unique(view, return_index=True, return_inverse=True)
         self.inverse = inverse
         self.order = np.argsort(inverse, kind="stable")  # the observations, camera by camera
+        self.position = np.empty_like(self.order)  # where each observation sits in that order
+        self.position[self.order] = np.arange(len(self.order))
         self.bounds = np.searchsorted(inverse[self.order], np.arange(len(self.rows) + 1)).tolist()
         self._last = None  # the last ``frame``'s poses and points (copies) and its answer
 
@@ -199,19 +201,17 @@ class _ByCamera:
     def times(self, x: np.ndarray, mats: np.ndarray) -> np.ndarray:
         """x[m] @ mats[camera of m] for x (M, r, k) and mats (n, k, l): (M, r, l)."""
         M, r, k = x.shape
-        gathered = x[self.order].reshape(-1, k)
+        gathered = schur._rows(x, self.order).reshape(-1, k)
         out = np.empty((M * r, mats.shape[-1]))
         for i, (b, e) in enumerate(zip(self.bounds[:-1], self.bounds[1:])):
             np.matmul(gathered[b * r:e * r], mats[i], out=out[b * r:e * r])
-        scattered = np.empty((M, r, mats.shape[-1]))
-        scattered[self.order] = out.reshape(M, r, mats.shape[-1])
-        return scattered
+        return schur._rows(out.reshape(M, r, mats.shape[-1]), self.position)  # back in the observations' order
 
     def camera_frame(self, R: np.ndarray, Am: np.ndarray, Bm: np.ndarray) -> np.ndarray:
         """R B + t per observation (M, 3), R the cameras' rotations (``rotations``); by einsum over
         the rotations spread to the observations (its sums are not a matrix product's bit for bit,
         and a vector per observation is einsum's fast case)."""
-        return np.einsum("mij,mj->mi", R[self.inverse], Bm) + Am[:, 3:6]
+        return np.einsum("mij,mj->mi", schur._rows(R, self.inverse), Bm) + Am[:, 3:6]
 
     def rotation_columns(self, Am: np.ndarray, cam: np.ndarray, du_dcam: np.ndarray) -> np.ndarray:
         """d pixel / d w (M, 2, 3) for cam = exp(w) B + t, du_dcam = d pixel / d cam."""

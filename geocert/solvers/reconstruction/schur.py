@@ -62,11 +62,18 @@ def _central_columns(evaluate, values: np.ndarray, step: float) -> np.ndarray:
 
 
 def _jacobians(residual, A, S, B, view, track, step=1e-6):
-    Am, Bm = A[view], B[track]
+    Am, Bm = _rows(A, view), _rows(B, track)
     ja = _central_columns(lambda a: residual(a, S, Bm), Am, step)
     js = _central_columns(lambda shared: residual(Am, shared, Bm), S, step)
     jb = _central_columns(lambda b: residual(Am, S, b), Bm, step)
     return ja, js, jb
+
+
+def _rows(values: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """values[index] for an integer index along the first axis: np.take's copy of the same rows,
+    several times faster than numpy's fancy indexing on the stacks here (a (p, 3, 3) stack
+    gathered to 9,000 observations: 0.03 against 0.14 ms)."""
+    return np.take(values, index, axis=0)
 
 
 def _sum_by(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
@@ -108,6 +115,21 @@ def _inverse(V: np.ndarray) -> np.ndarray:
     det = a * adjugate[:, 0, 0] + b * adjugate[:, 1, 0] + c * adjugate[:, 2, 0]
     with np.errstate(divide="ignore", invalid="ignore"):
         return adjugate / det[:, None, None]
+
+
+def _damped(V: np.ndarray, lam: float, finite: bool) -> np.ndarray:
+    """V + lam (diag(V) I + 1e-12 I) for a stack V (p, d, d), the points' damped blocks. Off the
+    diagonal that adds lam (0 + 0) = 0, which leaves an entry as it is unless it is -0.0 (V's
+    entries are bincount's sums, which never are) or its block's diagonal is not finite (inf 0 =
+    nan): when ``finite`` (every entry of V finite) only the diagonal is computed, the same
+    floats as the whole expression's, in a copy of V."""
+    if not finite:
+        d = V.shape[-1]
+        return V + lam * (np.einsum("pii->pi", V)[:, :, None] * np.eye(d) + 1e-12 * np.eye(d))
+    p, d = V.shape[0], V.shape[-1]
+    damped = V.copy()
+    damped.reshape(p, d * d)[:, ::d + 1] += lam * (V.reshape(p, d * d)[:, ::d + 1] + 1e-12)
+    return damped
 
 
 def _robust_weights(r: np.ndarray, f_scale: float | None) -> np.ndarray:
@@ -186,21 +208,21 @@ class _Blocks:
 
     def own(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
         """sum_m X_m^T Y_m (X, Y: (M, r, c + s)) in the reduced system's nc x nc matrix."""
-        Xs = X[self.own_order]
-        return self._summed(Xs, Xs if Y is X else Y[self.own_order], self.own_runs, self.own_at)
+        Xs = _rows(X, self.own_order)
+        return self._summed(Xs, Xs if Y is X else _rows(Y, self.own_order), self.own_runs, self.own_at)
 
     def gathered(self, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Y (M, r, c + s) in the order ``reduction`` reads it (once per Jacobian, not per damping)."""
-        return Y[self.own_order], Y[self.second]
+        return _rows(Y, self.own_order), _rows(Y, self.second)
 
     def reduction(self, X: np.ndarray, Y: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
         """sum over the observations m, m' of each point of X_m^T Y_m' in the nc x nc matrix, for
         X_m = V_j^-1 W_m^T and Y_m = W_m^T (``gathered``): W V^-1 W^T, what eliminating the points
         takes off U."""
-        own = self._summed(X[self.own_order], Y[0], self.own_runs, self.own_at)
+        own = self._summed(_rows(X, self.own_order), Y[0], self.own_runs, self.own_at)
         if len(self.first) == 0:
             return own
-        cross = self._summed(X[self.first], Y[1], self.pair_runs, self.pair_at)
+        cross = self._summed(_rows(X, self.first), Y[1], self.pair_runs, self.pair_at)
         return own + cross + cross.T
 
 
@@ -221,7 +243,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
                                np.broadcast_to(n * c + np.arange(s), (M, s))], axis=1)  # (M, c + s)
     blocks = _Blocks(view, track, n, c, s, p)
     by_track = _SumBy(track, p)
-    r = residual(A[view], S, B[track])
+    r = residual(_rows(A, view), S, _rows(B, track))
     cost = _cost(r, f_scale)
     lam = 1e-3
     iterations = 0
@@ -229,7 +251,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
         if should_stop is not None and should_stop():
             break
         ja, js, jb = (_jacobians(residual, A, S, B, view, track) if jacobian is None
-                      else jacobian(A[view], S, B[track]))
+                      else jacobian(_rows(A, view), S, _rows(B, track)))
         je = np.concatenate([ja, js], axis=2)  # (M, 2, c + s)
         rw = r
         if f_scale is not None:  # Huber's weights (plain least squares: all 1)
@@ -243,6 +265,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
         # product, jb^T [jb, je]: each entry is the same sum as from the two products apart.
         both = np.ascontiguousarray(jb.transpose(0, 2, 1)) @ np.concatenate([jb, je], axis=2)
         V = by_track(both[:, :, :d])
+        finite_v = bool(np.isfinite(V).all())
         WmT = np.ascontiguousarray(both[:, :, d:])  # (M, d, c+s): each observation's W^T
         WmT_gathered = blocks.gathered(WmT)
         ga = np.einsum("mki,mk->mi", je, rw)  # (M, c+s); einsum: faster than matmul on stacks of vectors
@@ -254,13 +277,12 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
                 iterations -= 1  # no step computed
                 break
         while True:
-            Vd = V + lam * (np.einsum("pii->pi", V)[:, :, None] * np.eye(d) + 1e-12 * np.eye(d))
-            Vinv = _inverse(Vd)
+            Vinv = _inverse(_damped(V, lam, finite_v))
             # Reduced system: (U - W V^-1 W^T) da = -(ga - W V^-1 gb).
-            VWT = Vinv[track] @ WmT  # (M, d, c+s): (W V^-1)^T, V^-1 being symmetric
+            VWT = _rows(Vinv, track) @ WmT  # (M, d, c+s): (W V^-1)^T, V^-1 being symmetric
             Ured = U - blocks.reduction(VWT, WmT_gathered)
             Ured[np.diag_indices(nc)] += lam * diag_u + 1e-12
-            rhs = np.bincount(cam_cols.ravel(), weights=(ga - np.einsum("mj,mjk->mk", gb[track], VWT)).ravel(),
+            rhs = np.bincount(cam_cols.ravel(), weights=(ga - np.einsum("mj,mjk->mk", _rows(gb, track), VWT)).ravel(),
                               minlength=nc)
             try:
                 da = -np.linalg.solve(Ured, rhs)
@@ -273,7 +295,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
                     return A, S, B, r, iterations
                 continue
             # Back substitution: db_j = -V_j^-1 (gb_j + sum_m W_m^T da_m).
-            wda = by_track(np.einsum("mij,mj->mi", WmT, da[cam_cols]))
+            wda = by_track(np.einsum("mij,mj->mi", WmT, np.take(da, cam_cols)))
             db = -(Vinv @ (gb + wda)[:, :, None])[:, :, 0]
             A_new = A + da[:n * c].reshape(n, c)
             S_new = S + da[n * c:]
@@ -282,7 +304,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
                 np.sqrt(np.sum(da * da) + np.sum(db * db))
                 <= (np.sqrt(np.sum(A * A) + np.sum(S * S) + np.sum(B * B)) + stop.parameter_tolerance)
                 * stop.parameter_tolerance)
-            r_new = residual(A_new[view], S_new, B_new[track])
+            r_new = residual(_rows(A_new, view), S_new, _rows(B_new, track))
             cost_new = _cost(r_new, f_scale) if np.all(np.isfinite(r_new)) else np.inf
             if cost_new < cost:
                 # A step within the parameter tolerance ends the solve, taken: near an exact fit it
