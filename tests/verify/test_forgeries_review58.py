@@ -1,0 +1,91 @@
+"""Review 58: a hostile review of the certificates for issue 33, where review 57 left off: every
+comparison of verify.estimates and verify.fractional (stated numbers against recomputed ones:
+overflow to inf or NaN, subnormals, -0.0, 1e308, one-ulp edits), the L1L1 resection's
+determinacy alone, the L2L1 proof's numbers, the reconstruction photos result's images and the
+stratified autocalibration's plane_sublevel.
+
+(The module docstring's account of what was tried and found is completed at the end of the review.)
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import numpy as np
+import pytest
+
+from geocert.verify.checks import verify_any
+from tests.verify.test_forgeries import refused_naming, rehash, uncertify
+
+pytestmark = pytest.mark.filterwarnings("ignore")
+
+
+def _valid(document: dict) -> bool:
+    return verify_any(json.loads(json.dumps(document))).valid
+
+
+@pytest.fixture(scope="module")
+def resections() -> dict:
+    """Two certified cameras (12 points, 1 px of noise, L2L2, a full certificate), as review 57's."""
+    from geocert.jobs.runner import solve_job
+    from tests.formulations.fractional.test_resection_proven import resection_job
+    from tests.support import seed
+
+    rng = np.random.default_rng(seed("resection proven", "forged"))
+    job, _ = resection_job(rng, 12, 1.0, maps=2)
+    result = json.loads(json.dumps(solve_job(job)))
+    assert _valid(result)
+    return result
+
+
+def _rescaled(result: dict, world: float, pixels: float) -> dict:
+    """The result with its second map's data restated in other units (its source points times
+    ``world``, its targets times ``pixels``: a camera in kilometres and in a finer pixel), the
+    camera restated to match (the same centre, in the new units), not certified, with the cost,
+    residuals and estimate its writers state for those data (geocert.formulations.fractional.
+    determinacy.map_): a genuine document (every coordinate within COORDINATE_LIMIT)."""
+    from geocert.core.geometry import COORDINATE_LIMIT
+    from geocert.formulations.fractional import determinacy as estimate
+    from geocert.formulations.fractional.items import MapItem
+    from geocert.verify.fractional import _stated_figure
+
+    result = copy.deepcopy(result)
+    data = result["certificate"]["data"]["maps"][1]
+    source, target = np.array(data["source"]) * world, np.array(data["target"]) * pixels
+    assert np.abs(source).max() <= COORDINATE_LIMIT and np.abs(target).max() <= COORDINATE_LIMIT
+    data.update(source=source.tolist(), target=target.tolist())
+    claim = result["certificate"]["items"][1]
+    M = np.diag([pixels, pixels, 1.0]) @ np.array(claim["matrix"]) @ np.diag([1 / world] * 3 + [1.0])
+    uncertify(claim)
+    claim.pop("proof")
+    claim["matrix"] = M.tolist()
+    item = MapItem((source, target), "L2L2", chart=False)
+    claim["cost"], _ = _stated_figure(item, M, "L2L2")
+    entry = result["maps"][1]
+    entry.update({name: claim[name] for name in ("matrix", "cost", "lower_bound", "gap", "status", "certified")})
+    entry["residuals"] = item.exact_residuals(M).tolist()
+    entry.pop("certificate")
+    entry["determinacy"] = json.loads(json.dumps(estimate.map_(source, target, M, claim["cost"], None)))
+    result["stats"].update(certified=1, statuses={"optimal": 1, "not_certified": 1})
+    rehash(result["certificate"])
+    return result
+
+
+# 1. A resection's centre is held to the rounding of the world's units, not the pixels'
+
+@pytest.mark.parametrize("world,pixels", [(1e-6, 1e6), (1.0, 1e6)])
+def test_a_resection_centre_restated_narrower_in_a_fine_pixel_is_refused(resections, world, pixels):
+    """The camera centre's value and ends were allowed MAP_VALUE_ROUNDING (8 ulps) of the data's
+    largest coordinate, source or target: a resection's targets in a fine pixel (8e8 px) gave its
+    centre, in the world's units, a floor of 1.4e-6 whatever the world's scale. In kilometres
+    (the source 1e-6 of the stored one's: the centre's interval some 6e-7 wide) every centre
+    interval collapsed to its value verified, beside determined true."""
+    genuine = _rescaled(resections, world, pixels)
+    assert _valid(genuine)
+    forged = copy.deepcopy(genuine)
+    intervals = forged["maps"][1]["determinacy"]["intervals"]
+    widths = [i["upper"] - i["lower"] for i in intervals]
+    for found, width in zip(intervals, widths):
+        found["lower"], found["upper"] = found["value"] - width / 1000, found["value"] + width / 1000
+    refused_naming(forged, "returned", "maps/1/determinacy/intervals/0/lower")
