@@ -576,7 +576,8 @@ def _check_offset(at: str, name: str, stated: dict, own: dict, width: float, wid
     elif is_number(given) and is_number(value):
         offset, expected = float(given) - float(value), own[name] - own["value"]
         rounding = END_OFFSET_ULPS * math.ulp(max(abs(own["value"]), abs(own[name])))
-        if abs(offset - expected) <= (NUMBER_SLACK + width_slack) * abs(width) + rounding:
+        allowed = (NUMBER_SLACK + width_slack) * abs(width) + rounding
+        if math.isfinite(expected) and math.isfinite(allowed) and abs(offset - expected) <= allowed:
             return
     raise Invalid("returned", f"{at}/{name} is {given!r:.40}, the estimate at the solution returned gives "
                               f"{own[name]!r:.40} (its offset from the value {own['value']!r:.40})")
@@ -627,4 +628,9 @@ def _close(given: Any, expected: float | None, width: float, absolute: float, re
         return given is None and expected is None
     if isinstance(given, bool) or not isinstance(given, (int, float)) or not math.isfinite(given):
         return False
-    return abs(given - expected) <= NUMBER_SLACK * abs(width) + absolute + relative * abs(expected)
+    allowed = NUMBER_SLACK * abs(width) + absolute + relative * abs(expected)
+    # an expected value, width or slack that overflowed (or is NaN) matches nothing: |x - inf| <= inf
+    # held for any stated x (review 57's class, in this module's comparison: review 58)
+    if not (math.isfinite(expected) and math.isfinite(allowed)):
+        return False
+    return abs(given - expected) <= allowed

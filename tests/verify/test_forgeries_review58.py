@@ -89,3 +89,43 @@ def test_a_resection_centre_restated_narrower_in_a_fine_pixel_is_refused(resecti
     for found, width in zip(intervals, widths):
         found["lower"], found["upper"] = found["value"] - width / 1000, found["value"] + width / 1000
     refused_naming(forged, "returned", "maps/1/determinacy/intervals/0/lower")
+
+
+# 2. Review 57's class in verify.estimates and verify.fractional: a stated number never matches a
+#    recomputed one (or a slack) that overflowed. Not shown reachable from a document (every
+#    recomputed figure there is read off checked data and a checked cost, within their range), but
+#    |x - inf| <= tolerance * inf held for any stated x in each comparison below.
+
+def test_an_estimate_never_matches_an_overflowed_recomputation():
+    from geocert.verify.estimates import _check_offset, _close
+    from geocert.core.strict import Invalid
+
+    inf, nan = float("inf"), float("nan")
+    assert _close(1.0, 1.0, 0.0, 0.0) and _close(None, None, 0.0, 0.0) and _close(0.0, -0.0, 0.0, 0.0)
+    assert not _close(3.0, inf, 0.0, 0.0) and not _close(3.0, nan, 0.0, 0.0)
+    assert not _close(3.0, 1.0, inf, 0.0)  # an interval whose width overflowed (ends near +-1e308)
+    assert not _close(3.0, 1.0, 0.0, inf) and not _close(3.0, 1.0, 0.0, nan)
+    own = {"value": 0.0, "lower": -1.7e308, "upper": 1.7e308}
+    width = own["upper"] - own["lower"]  # inf
+    with pytest.raises(Invalid, match="lower"):
+        _check_offset("at", "lower", {"value": 0.0, "lower": -1.0}, own, width, 0.0)
+
+
+def test_a_root_region_or_map_level_never_matches_an_overflowed_recomputation():
+    from geocert.core.strict import Invalid
+    from geocert.verify import fractional
+
+    assert fractional._agrees([1.0, 2.0], [1.0, 2.0]) and fractional._agrees([-0.0], [0.0])
+    assert not fractional._agrees([1.0, 2.0], [float("inf"), 2.0])
+    assert not fractional._agrees([1.0], [float("nan")])
+    result = {"proven_intervals": {"cost_increase": 5.0}, "cost_increase": 5.0}
+    claim = {"matrix": np.eye(3, 4).tolist(), "cost": 1.0, "lower_bound": 1.0}
+    data = {"maps": [{"source": [[0.0, 0.0, 1.0]] * 12, "target": [[0.0, 0.0]] * 12}]}
+    original = fractional.map_level
+    try:
+        # an overflowed level (refused already: the proven intervals' level is held at least to it first)
+        fractional.map_level = lambda *args: float("inf")
+        with pytest.raises(Invalid, match="proven at cost increase|cost_increase"):
+            fractional._check_map_level("maps/0", result, claim, data, 0)
+    finally:
+        fractional.map_level = original
