@@ -129,3 +129,53 @@ def test_a_root_region_or_map_level_never_matches_an_overflowed_recomputation():
             fractional._check_map_level("maps/0", result, claim, data, 0)
     finally:
         fractional.map_level = original
+
+
+# 3. The reconstruction photos result's images record: its counts agree with each other and with
+#    the result (the matches stage restating each, as the verifier requires)
+
+@pytest.fixture(scope="module")
+def photographed() -> dict:
+    """The kind's example from photos (examples/reconstruction-photos.json: 6 images) solved with a
+    full certificate."""
+    from pathlib import Path
+
+    from geocert.jobs.runner import solve_job
+
+    job = json.loads((Path(__file__).resolve().parents[2] / "examples" / "reconstruction-photos.json").read_text())
+    job["options"]["certificate"] = "full"
+    result = json.loads(json.dumps(solve_job(job)))
+    assert result["images"]["tracks_kept"] == result["summary"]["tracks"] and _valid(result)
+    return result
+
+
+def _restated(result: dict, name: str, value) -> dict:
+    """The images record's ``name`` restated, and the matches stage's alike."""
+    forged = copy.deepcopy(result)
+    forged["images"][name] = value
+    next(stage for stage in forged["stages"] if stage["name"] == "matches")[name] = copy.deepcopy(value)
+    return forged
+
+
+def _pairs(result: dict, edit) -> dict:
+    pairs = copy.deepcopy(result["images"]["verified_pairs"])
+    edit(pairs)
+    return _restated(result, "verified_pairs", pairs)
+
+
+@pytest.mark.slow  # the example's solve and each verification: about 20 s in all
+@pytest.mark.parametrize("forge,field", [
+    (lambda r: _restated(r, "tracks_kept", 0), "images/tracks_kept"),
+    (lambda r: _restated(r, "tracks_kept", r["images"]["tracks_kept"] + 1), "images/tracks_kept"),
+    (lambda r: _restated(r, "tracks_built", 1000 * r["images"]["tracks_built"]), "images/tracks_built"),
+    (lambda r: _restated(r, "dropped_inconsistent", r["images"]["dropped_inconsistent"] + 1), "images/tracks_built"),
+    (lambda r: _pairs(r, lambda p: p.append(copy.deepcopy(p[0]))), "images/verified_pairs"),
+    (lambda r: _pairs(r, lambda p: p[0].update(views=p[0]["views"][::-1])), "images/verified_pairs"),
+    (lambda r: _pairs(r, lambda p: p[0].update(inliers=-5)), "images/verified_pairs/0"),
+    (lambda r: _pairs(r, lambda p: p[0].update(matches=1e308)), "images/verified_pairs/0"),
+    (lambda r: _restated(r, "candidate_pairs", len(r["images"]["verified_pairs"]) - 1), "images/verified_pairs"),
+])
+def test_images_counts_that_contradict_each_other_or_the_result_are_refused(photographed, forge, field):
+    """Each accepted before: the record was typed (counts, pairs of views) and compared with the
+    matches stage, which a forger restates alike."""
+    refused_naming(forge(photographed), "returned", field)
