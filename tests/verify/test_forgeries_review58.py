@@ -179,3 +179,88 @@ def test_images_counts_that_contradict_each_other_or_the_result_are_refused(phot
     """Each accepted before: the record was typed (counts, pairs of views) and compared with the
     matches stage, which a forger restates alike."""
     refused_naming(forge(photographed), "returned", field)
+
+
+# Held: attacks already refused, kept as guards (documents generated as review 57's: 12 points,
+# 1 px, two maps, a full certificate under L1L1 and under L2L1)
+
+@pytest.fixture(scope="module")
+def l1_resections() -> dict:
+    return _solved_resections("L1L1")
+
+
+@pytest.fixture(scope="module")
+def l2l1_resections() -> dict:
+    return _solved_resections("L2L1")
+
+
+def _solved_resections(norm: str) -> dict:
+    from geocert.jobs.runner import solve_job
+    from tests.formulations.fractional.test_resection_proven import resection_job
+    from tests.support import seed
+
+    rng = np.random.default_rng(seed("resection proven", "forged"))
+    job, _ = resection_job(rng, 12, 1.0, maps=2, norm=norm)
+    result = json.loads(json.dumps(solve_job(job)))
+    assert _valid(result) and all(m["determinacy"]["proven"] is True for m in result["maps"])
+    return result
+
+
+def _estimate(result: dict) -> dict:
+    return result["maps"][0]["determinacy"]
+
+
+def _first_dual(proofs: list) -> dict:
+    return next(proof for proof in proofs if proof["kind"] == "dual")
+
+
+L1_DETERMINACY = {
+    "centre narrowed": (lambda d: _estimate(d)["intervals"][0].update(lower=_estimate(d)["intervals"][0]["value"] - 1e-3),
+                        "intervals/0/lower"),
+    "level 1e308": (lambda d: _estimate(d).update(cost_increase=1e308), "cost_increase"),
+    "level subnormal": (lambda d: _estimate(d).update(cost_increase=5e-324), "cost_increase"),
+    "tolerance subnormal": (lambda d: _estimate(d)["intervals"][0].update(tolerance=5e-324), "intervals/0/tolerance"),
+    "value -0.0": (lambda d: _estimate(d)["intervals"][0].update(value=-0.0), "intervals/0/value"),
+    "upper 1e308": (lambda d: _estimate(d)["intervals"][0].update(upper=1e308), "intervals/0/upper"),
+    "lower -1e308": (lambda d: _estimate(d)["intervals"][0].update(lower=-1e308), "intervals/0/lower"),
+    "proven level halved": (lambda d: _estimate(d)["proven_intervals"].update(
+        cost_increase=_estimate(d)["proven_intervals"]["cost_increase"] / 2), "proven_intervals"),
+    "proven end 1e308": (lambda d: _estimate(d)["proven_intervals"]["intervals"][0].update(upper=1e308),
+                         "proven_intervals"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(L1_DETERMINACY))
+def test_an_l1l1_resections_determinacy_alone_edited_is_refused(l1_resections, name):
+    edit, field = L1_DETERMINACY[name]
+    forged = copy.deepcopy(l1_resections)
+    edit(forged)
+    refused_naming(forged, "returned", f"maps/0/determinacy/{field}")
+
+
+def _proof(d: dict, index: int = 0) -> dict:
+    return d["certificate"]["items"][index]["proof"]
+
+
+L2L1_PROOF = {
+    "a search's dual bound raised": (lambda d: _first_dual(_proof(d)["proofs"]).update(
+        bound=2 * _first_dual(_proof(d)["proofs"])["bound"] + 1), "leaf_bounds"),
+    "a sublevel search's dual bound raised": (lambda d: _first_dual(_proof(d, 1)["sublevel"]["search"]["proofs"]).update(
+        bound=2 * _first_dual(_proof(d, 1)["sublevel"]["search"]["proofs"])["bound"] + 1), "leaf_bounds"),
+    "the sublevel's level 1e308": (lambda d: _proof(d)["sublevel"].update(cost_increase=1e308), "root_region"),
+    "the sublevel's level subnormal": (lambda d: _proof(d)["sublevel"].update(cost_increase=5e-324),
+                                       "proven_interval"),
+    "a centre multiplier 1e308": (lambda d: _proof(d)["sublevel"]["centre"]["duals"][0][0].update(mu=1e308),
+                                  "proven_interval"),
+    "the search box to 1e308": (lambda d: _proof(d)["search_box"][1].__setitem__(0, 1e308), "coverage"),
+    "the scale subnormal": (lambda d: _proof(d).update(scale=5e-324), "program"),
+    "a proof's cap subnormal": (lambda d: _proof(d)["proofs"][0].update(upper_bound=5e-324), "leaf_bounds"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(L2L1_PROOF))
+def test_an_l2l1_resections_proof_numbers_edited_are_refused(l2l1_resections, name):
+    edit, check = L2L1_PROOF[name]
+    forged = copy.deepcopy(l2l1_resections)
+    edit(forged)
+    refused_naming(forged, check)
