@@ -264,3 +264,64 @@ def test_an_l2l1_resections_proof_numbers_edited_are_refused(l2l1_resections, na
     forged = copy.deepcopy(l2l1_resections)
     edit(forged)
     refused_naming(forged, check)
+
+
+STORED_ESTIMATES = [("triangulation_l2l2", "tracks"), ("homography_far_from_origin", "maps"),
+                    ("bilinear_l1l1", "frames"), ("homography3_l2l1", "maps")]
+EXTREMES = {
+    "value 1e308": lambda i: i.update(value=1e308),
+    "upper the largest float": lambda i: i.update(upper=1.7976931348623157e308),
+    "ends +-1e308 (a width that overflows)": lambda i: i.update(lower=-1e308, upper=1e308),
+    "lower subnormal": lambda i: i.update(lower=5e-324),
+}
+
+
+@pytest.mark.parametrize("name,key", STORED_ESTIMATES)
+@pytest.mark.parametrize("edit", sorted(EXTREMES))
+def test_a_stored_estimate_restated_at_the_ends_of_the_float_range_is_refused(name, key, edit):
+    from tests.verify.test_forgeries import stored
+
+    forged = stored(name)
+    EXTREMES[edit](forged[key][0]["determinacy"]["intervals"][0])
+    refused_naming(forged, "returned", f"{key}/0/determinacy/")
+
+
+@pytest.fixture(scope="module")
+def over_planes() -> dict:
+    """A stratified certificate proving K's intervals over the planes at infinity too (options.
+    prove_intervals_over_planes: tests/solvers/autocalibration/test_autocalibration_over_planes'
+    synthetic scene, 8 views at 0.5 px)."""
+    from geocert.jobs.runner import solve_job
+    from geocert.solvers.autocalibration import scenes
+
+    scene = scenes.make_scene(8, 0.5, points=60, seed=1)
+    result = json.loads(json.dumps(solve_job({"kind": "autocalibration", "data": scene.job_data(),
+                                              "options": {"certificate": "full", "prove_intervals_over_planes": True}})))
+    assert _valid(result)
+    return result
+
+
+def _plane_sublevel(result: dict) -> dict:
+    return result["certificate"]["items"][1]["proof"]["plane_sublevel"]
+
+
+PLANE_SUBLEVEL = {
+    "cost increase halved": lambda s: s.update(cost_increase=s["cost_increase"] / 2),
+    "affine increase subnormal": lambda s: s.update(affine_increase=5e-324),
+    "focal interval narrowed": lambda s: s["intervals"][0].__setitem__(1, s["intervals"][0][1] / 2),
+    "the exclusion dropped": lambda s: s.update(excluded=[]),
+    "a region dropped": lambda s: s["regions"].pop(),
+}
+
+
+@pytest.mark.slow  # the scene's solve (about 9 s) and 2 s a verification
+@pytest.mark.parametrize("name", sorted(PLANE_SUBLEVEL))
+def test_a_plane_sublevel_edited_and_restated_in_the_result_is_refused(over_planes, name):
+    """Each edit with the result's proven_over_planes restated from the edited section (what a
+    forger writes beside it): refused by the proof's check."""
+    from geocert.formulations.autocalibration import plane_sublevel
+
+    forged = copy.deepcopy(over_planes)
+    PLANE_SUBLEVEL[name](_plane_sublevel(forged))
+    forged["stages"][1]["determinacy"]["proven_over_planes"] = plane_sublevel.proven_document(_plane_sublevel(forged))
+    assert not _valid(forged)
