@@ -4,7 +4,63 @@ overflow to inf or NaN, subnormals, -0.0, 1e308, one-ulp edits), the L1L1 resect
 determinacy alone, the L2L1 proof's numbers, the reconstruction photos result's images and the
 stratified autocalibration's plane_sublevel.
 
-(The module docstring's account of what was tried and found is completed at the end of the review.)
+Tried (each forgery built from a genuine document, its hashes made again where the data moved,
+verify_any run):
+
+- Stored documents' tracks, maps and frames (triangulation L2L2, L2L1 and L1L1 with max_residual,
+  resection L1L1, L2L2 and L2L1 with caps, homography L2L1 and far from the origin, bilinear
+  L1L1): every number of a track's, map's or frame's determinacy, and of whole result entries
+  where listed, each set to 5e-324, -5e-324, 0, -0.0, 1e308, -1e308, the largest float, 1e-300,
+  10**400, negated, the next float up or down, times 1 +- 1e-7, 1e6, 1/2, 2, 1e300 (4,285
+  forgeries). Accepted only: the next float or 1e-7 of an end, value or level (the documented
+  rounding), elapsed_s (informational), a homography's residual near 0 moved within its rounding.
+- An L1L1 resection's determinacy alone (review 57's open sweep; both maps, generated as
+  review 57's: 12 points, 1 px, full certificates): 1,044 forgeries, 100 accepted, all of them the
+  next float or 1e-7 of a number (the proven intervals are compared exactly: none accepted).
+- An L2L1 resection's proof numbers (80 numbers drawn from each map's proof: root, tightening,
+  proofs, leaves, the sublevel's search and centre): 2,784 forgeries, 422 accepted, each true: an
+  ulp or 1e-7 within the proven hull, a tightened proof's informational bound (it proves inf), a
+  tightened proof's cap raised (still proven), a centre multiplier halved (still proving), a
+  root claim widened, a non-branched functional's 0 set to a subnormal.
+- The comparisons themselves, read one by one: estimates._close, _check_offset, check_stage_level,
+  check_intrinsics, check_focal_lengths, check_plane, _check_holds, check_determined;
+  fractional._agrees, _check_map_level, _check_proven, _check_pooled. A recomputed number there
+  is read off checked data and a checked cost (a certified gap is within abs_gap and rel_gap, an
+  uncertified item's cost is finite), so no overflow was reached from a document.
+- Units: the map estimate's floor, read off the data's largest coordinate, against a resection
+  and a homography restated in other units (source and targets scaled apart, within
+  COORDINATE_LIMIT, the map not certified and its figures its writer's).
+- A photos reconstruction (examples/reconstruction-photos.json, full certificate): 107 forgeries
+  of its images record, the matches stage restated alike (each count +-1, 0, -1, a float, true,
+  1e308, 5e-324, x1000, null, "1"; features_per_image; verified pairs repeated, reversed,
+  dropped, beyond the candidates, their matches and inliers; time_s; pairs_chosen_by; stopped;
+  focal_prior_from_exif; members added or deleted).
+- A stratified certificate proving intervals over planes (8 views, 0.5 px,
+  prove_intervals_over_planes): 22 hand edits of its plane_sublevel (levels halved, 0, -0.0,
+  5e-324, 1e308; intervals narrowed, swapped, nulled, widened to +-1e308; the exclusion dropped,
+  flipped, written true, repeated; regions dropped, emptied, repeated; a member added) and
+  random numbers of its regions, each with the result's proven_over_planes restated.
+
+Found (a test below for each, which failed while the class stood):
+
+1. A resection's centre estimate was held to MAP_VALUE_ROUNDING of the largest coordinate of
+   source or target: targets in a fine pixel (8e8 px, within COORDINATE_LIMIT) gave a centre in
+   kilometres a floor of 1.4e-6, wider than its interval (6e-7), and every centre interval
+   collapsed to a thousandth verified. Fixed: a resection's floor reads the source alone (the
+   centre's units, Ts^-1 of a null vector); a homography's is unchanged.
+2. Review 57's overflow class in estimates._close, _check_offset and fractional._agrees: an
+   expected value, width or slack that is inf matched any stated number. Not reached from a
+   document; fixed at the comparison (helper tests).
+3. A photos reconstruction's images record was typed and compared with the matches stage only:
+   tracks_kept 0 beside 1,268 tracks reconstructed, tracks_built x1000, a pair verified twice or
+   as (j, i), more pairs than candidates, inliers -5 or matches 1e308 verified. Fixed: the tracks
+   kept are summary/tracks (matching done or stopped by its clock), built = kept + dropped, each
+   pair a candidate (i < j) once, at most candidate_pairs, its matches and inliers counts.
+
+Held: everything else above, but for what the record cannot tell (features_per_image 0s,
+candidate_pairs lowered to the verified pairs' number, pairs_chosen_by's words, stopped's text,
+focal_prior_from_exif's members, time_s; informational, taken as stated), a plane_sublevel
+interval widened (weaker, true) and its regions' frames moved by an ulp or 1e-7.
 """
 
 from __future__ import annotations
