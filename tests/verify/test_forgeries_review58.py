@@ -271,8 +271,8 @@ def _first_dual(proofs: list) -> dict:
 
 
 L1_DETERMINACY = {
-    "centre narrowed": (lambda d: _estimate(d)["intervals"][0].update(lower=_estimate(d)["intervals"][0]["value"] - 1e-3),
-                        "intervals/0/lower"),
+    "centre narrowed": (lambda d: _estimate(d)["intervals"][0].update(
+        lower=_estimate(d)["intervals"][0]["value"] - 1e-3), "intervals/0/lower"),
     "level 1e308": (lambda d: _estimate(d).update(cost_increase=1e308), "cost_increase"),
     "level subnormal": (lambda d: _estimate(d).update(cost_increase=5e-324), "cost_increase"),
     "tolerance subnormal": (lambda d: _estimate(d)["intervals"][0].update(tolerance=5e-324), "intervals/0/tolerance"),
@@ -298,11 +298,16 @@ def _proof(d: dict, index: int = 0) -> dict:
     return d["certificate"]["items"][index]["proof"]
 
 
+def _searched(d: dict) -> list:
+    """The second map's sublevel search's proofs."""
+    return _proof(d, 1)["sublevel"]["search"]["proofs"]
+
+
 L2L1_PROOF = {
     "a search's dual bound raised": (lambda d: _first_dual(_proof(d)["proofs"]).update(
         bound=2 * _first_dual(_proof(d)["proofs"])["bound"] + 1), "leaf_bounds"),
-    "a sublevel search's dual bound raised": (lambda d: _first_dual(_proof(d, 1)["sublevel"]["search"]["proofs"]).update(
-        bound=2 * _first_dual(_proof(d, 1)["sublevel"]["search"]["proofs"])["bound"] + 1), "leaf_bounds"),
+    "a sublevel search's dual bound raised": (lambda d: _first_dual(_searched(d)).update(
+        bound=2 * _first_dual(_searched(d))["bound"] + 1), "leaf_bounds"),
     "the sublevel's level 1e308": (lambda d: _proof(d)["sublevel"].update(cost_increase=1e308), "root_region"),
     "the sublevel's level subnormal": (lambda d: _proof(d)["sublevel"].update(cost_increase=5e-324),
                                        "proven_interval"),
@@ -351,8 +356,9 @@ def over_planes() -> dict:
     from geocert.solvers.autocalibration import scenes
 
     scene = scenes.make_scene(8, 0.5, points=60, seed=1)
-    result = json.loads(json.dumps(solve_job({"kind": "autocalibration", "data": scene.job_data(),
-                                              "options": {"certificate": "full", "prove_intervals_over_planes": True}})))
+    options = {"certificate": "full", "prove_intervals_over_planes": True}
+    job = {"kind": "autocalibration", "data": scene.job_data(), "options": options}
+    result = json.loads(json.dumps(solve_job(job)))
     assert _valid(result)
     return result
 
