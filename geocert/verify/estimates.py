@@ -414,8 +414,12 @@ def _check_maps(kind, result: dict, certificate: dict, earlier: bool = True) -> 
         # a homography's centroid image nearer the origin keeps VALUE_SLACK of itself, for documents
         # of earlier writers (computed through the normalisers, some 300 ulps apart between kernels
         # at 1e6 off the origin, review 37), which bear no mark of the form
+        # (a resection's centre is in the source's units: its floor is read off the source alone, as the
+        # centre is computed, Ts^-1 of a null vector; the targets' pixels, of another unit and any size
+        # up to COORDINATE_LIMIT, gave a centre in kilometres a floor wider than its interval: review 58)
         resection = np.asarray(item["matrix"]).shape == (3, 4)
-        _compare(where, determinacy, expected, earlier, spread, width_slack, _map_value_floor(source, target),
+        floor = _map_value_floor(source) if resection else _map_value_floor(source, target)
+        _compare(where, determinacy, expected, earlier, spread, width_slack, floor,
                  MAP_VALUE_ROUNDING if resection else VALUE_SLACK)
 
 
@@ -572,20 +576,22 @@ def _check_offset(at: str, name: str, stated: dict, own: dict, width: float, wid
     elif is_number(given) and is_number(value):
         offset, expected = float(given) - float(value), own[name] - own["value"]
         rounding = END_OFFSET_ULPS * math.ulp(max(abs(own["value"]), abs(own[name])))
-        if abs(offset - expected) <= (NUMBER_SLACK + width_slack) * abs(width) + rounding:
+        allowed = (NUMBER_SLACK + width_slack) * abs(width) + rounding
+        if math.isfinite(expected) and math.isfinite(allowed) and abs(offset - expected) <= allowed:
             return
     raise Invalid("returned", f"{at}/{name} is {given!r:.40}, the estimate at the solution returned gives "
                               f"{own[name]!r:.40} (its offset from the value {own['value']!r:.40})")
 
 
-def _map_value_floor(source: Any, target: Any) -> float:
+def _map_value_floor(*arrays: Any) -> float:
     """What a map estimate's value and ends may differ by whatever their own size:
-    MAP_VALUE_ROUNDING of the data's largest coordinate. The value (a homography's image of the
+    MAP_VALUE_ROUNDING of the largest coordinate of ``arrays`` (a homography's source and target;
+    a resection's source, the units of its centre). The value (a homography's image of the
     centroid, a resection's centre) is computed from terms of the data's size through the
     normalisers, so where it is near 0 (a centroid mapped to the origin) it is their rounding, not
     a number to a few ulps of itself (review 35 class 2: 1.03e-13 stated, 9.76e-14 recomputed, from
     terms of 200 px)."""
-    sizes = [float(np.max(np.abs(np.asarray(array, dtype=float)))) for array in (source, target)
+    sizes = [float(np.max(np.abs(np.asarray(array, dtype=float)))) for array in arrays
              if np.asarray(array).size]
     return MAP_VALUE_ROUNDING * max(sizes, default=0.0)
 
@@ -622,4 +628,9 @@ def _close(given: Any, expected: float | None, width: float, absolute: float, re
         return given is None and expected is None
     if isinstance(given, bool) or not isinstance(given, (int, float)) or not math.isfinite(given):
         return False
-    return abs(given - expected) <= NUMBER_SLACK * abs(width) + absolute + relative * abs(expected)
+    allowed = NUMBER_SLACK * abs(width) + absolute + relative * abs(expected)
+    # an expected value, width or slack that overflowed (or is NaN) matches nothing: |x - inf| <= inf
+    # held for any stated x (review 57's class, in this module's comparison: review 58)
+    if not (math.isfinite(expected) and math.isfinite(allowed)):
+        return False
+    return abs(given - expected) <= allowed

@@ -295,7 +295,9 @@ def _agrees(given, expected) -> bool:
         value = numbers(given, "value", expected.shape)
     except Invalid:
         return False
-    return bool(np.all(np.abs(value - expected) <= 1e-9 * np.maximum(1.0, np.abs(expected))))
+    # an expected entry that overflowed matches nothing (|x - inf| <= 1e-9 * inf held for any x)
+    return bool(np.all(np.isfinite(expected))
+                and np.all(np.abs(value - expected) <= 1e-9 * np.maximum(1.0, np.abs(expected))))
 
 
 def _stated_figure(item, solution: np.ndarray, norm: str) -> tuple[float, float]:

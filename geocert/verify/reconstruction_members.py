@@ -160,6 +160,40 @@ def _check_images(result: dict, matches: dict | None, views: int) -> None:
     counted = images.get("features_per_image")
     if counted is not None and (not isinstance(counted, list) or len(counted) != views):
         raise Invalid("returned", f"images/features_per_image must count each of the {views} images")
+    _check_image_counts(result, images, matches)
+
+
+def _check_image_counts(result: dict, images: dict, matches: dict) -> None:
+    """The matching figures' counts agree with each other and with the result, as their writer
+    (pipelines.reconstruction.features.tracks_from_images) states them: the tracks built are those
+    kept and those dropped; where matching ran to its end or its clock (the stage done or
+    time_limit), the tracks kept are the tracks the result reconstructs from (summary/tracks);
+    each verified pair is a candidate pair (i < j, none twice, no more than candidate_pairs).
+    Stated otherwise (both records alike, review 58: 0 tracks kept beside 1,268 reconstructed,
+    1,270,000 built, a pair verified twice), the figures were read as typed counts only."""
+    kept = images.get("tracks_kept")
+    parts = [images.get(name) for name in ("tracks_kept", "dropped_inconsistent", "dropped_short")]
+    tracks = (result.get("summary") or {}).get("tracks")
+    if kept is not None and matches.get("status") in ("done", "time_limit") and kept != tracks:
+        raise Invalid("returned", f"images/tracks_kept is {kept!r:.20}, and the result reconstructs from "
+                                  f"{tracks!r:.20} tracks (summary/tracks)")
+    built = images.get("tracks_built")
+    if built is not None and all(part is not None for part in parts) and built != sum(parts):
+        raise Invalid("returned", f"images/tracks_built is {built!r:.20}: the tracks kept and dropped number "
+                                  f"{sum(parts)!r:.20}")
+    pairs = images.get("verified_pairs")
+    if isinstance(pairs, list):
+        seen = [tuple(pair["views"]) for pair in pairs]  # two distinct views each (typed: "pairs")
+        candidates = images.get("candidate_pairs")
+        if any(i > j for i, j in seen) or len(set(seen)) != len(seen) or (
+                candidates is not None and len(seen) > candidates):
+            raise Invalid("returned", "images/verified_pairs are candidate pairs (i < j), none twice, at most "
+                                      f"candidate_pairs ({candidates!r:.20}) of them")
+        for number, pair in enumerate(pairs):  # its matches and inliers (and guided inliers) counted
+            if not all(type(pair.get(name)) is int and 0 <= pair[name] <= MAX_FIGURE for name in ("matches", "inliers")
+                       ) or not (pair.get("guided") is None or type(pair["guided"]) is int and pair["guided"] >= 0):
+                raise Invalid("returned", f"images/verified_pairs/{number}: matches and inliers (and guided) are "
+                                          "counts (integers >= 0)")
 
 
 def _check_ties(result: dict, stages: dict, views: int, tracks: int) -> None:
