@@ -9,7 +9,22 @@ Found (a test below for each, which failed while the class stood):
    source or target: a 3-D homography's source in a fine unit (x1e8, within COORDINATE_LIMIT) and
    its targets in a coarse one (x1e-8) gave the centroid image, in the target's units, a floor
    of 4.9e-7, wider than its intervals (1.3e-10): every interval collapsed to a thousandth of
-   its width verified.
+   its width verified. Fixed: a homography's floor reads the target alone (as review 58 did a
+   resection's the source).
+2. The photos' images record (examples/reconstruction-photos.json, a full certificate; each edit
+   made to the matches stage alike): review 58's ties were skipped where a count was null or
+   deleted (tracks_kept null beside 10^9 tracks built), tracks_built had no bound (10^6 dropped as
+   short, built restated to match, beside 2,639 inliers; every pair deleted beside 1,270 tracks),
+   and "stopped" was any text beside matching done. Fixed: where matching ran (done, time_limit,
+   failed) each count is stated, the tracks built are at most the verified pairs' inliers, and
+   stopped is stated only of a clock.
+3. A verified pair's figures against its writer's (features.match_pair): matches 2,000 beside
+   the first image's 1,027 features, a pair of an image with 0 features, inliers above matches
+   with no guided count, a guided count above the inliers (or 10^19), all verified. Fixed: each
+   figure at most the first image's features; inliers above matches only as the guided count.
+4. The images record was tied to the matches stage by ==: 1268.0, -0.0 or a pair's views [0.0,
+   1.0] equal to the stage's ints (typed there only); the float views stopped the check with a
+   TypeError. Fixed: the two records are the same JSON.
 """
 
 from __future__ import annotations
@@ -85,3 +100,109 @@ def test_a_homography_restated_narrower_with_its_source_in_a_finer_unit_is_refus
     genuine = _rescaled(stored("homography3_l2l1"), 1, world, pixels)
     assert _valid(genuine)
     refused_naming(_collapsed(genuine, 1), "returned", "maps/1/determinacy/intervals/0/")
+
+
+# 2-4. The photos reconstruction's images record (tests first on the record alone, quick, then on a
+#      solved document, slow)
+
+def _record() -> tuple[dict, dict, dict]:
+    """A result, images record and matches stage as kinds.reconstruction writes them (counts of
+    the photos example's form)."""
+    images = {"images": 3, "features_per_image": [100, 90, 80], "candidate_pairs": 3, "pairs_chosen_by": "exhaustive",
+              "verified_pairs": [{"views": [0, 1], "matches": 60, "inliers": 50},
+                                 {"views": [1, 2], "matches": 40, "inliers": 30, "guided": 45}],
+              "tracks_built": 52, "dropped_inconsistent": 1, "dropped_short": 1, "tracks_kept": 50}
+    images["verified_pairs"][1]["inliers"] = 45  # the guided matches replaced the pair's (more inliers)
+    matches = {"name": "matches", "status": "done", **copy.deepcopy(images)}
+    return {"summary": {"tracks": 50, "views": 3}}, images, matches
+
+
+def _check(result: dict, images: dict, matches: dict) -> None:
+    from geocert.verify.reconstruction_members import _check_image_counts
+
+    _check_image_counts(result, images, matches)
+
+
+def test_the_records_form_verifies():
+    _check(*_record())
+    result, images, matches = _record()
+    matches["status"] = "time_limit"
+    _check(result, {**images, "stopped": "x"}, {**matches, "stopped": "x"})
+
+
+def _edited(edit) -> tuple[dict, dict, dict]:
+    result, images, matches = _record()
+    edit(images)
+    edit(matches)
+    return result, images, matches
+
+
+RECORD = {
+    "tracks_kept null beside 10^9 built": lambda r: r.update(tracks_kept=None, tracks_built=10 ** 9),
+    "tracks_kept deleted": lambda r: r.pop("tracks_kept"),
+    "verified_pairs null": lambda r: r.update(verified_pairs=None),
+    "10^6 dropped as short": lambda r: r.update(dropped_short=10 ** 6, tracks_built=10 ** 6 + 51),
+    "every pair deleted": lambda r: r.update(verified_pairs=[]),
+    "stopped beside done": lambda r: r.update(stopped="features read of 3 of 3 images"),
+    "matches above the features": lambda r: r["verified_pairs"][0].update(matches=101),
+    "a pair of an image of 0 features": lambda r: r.update(features_per_image=[0, 90, 80]),
+    "inliers above matches unguided": lambda r: r["verified_pairs"][0].update(inliers=61),
+    "guided above the inliers": lambda r: r["verified_pairs"][1].update(guided=46),
+    "guided 10^19": lambda r: r["verified_pairs"][1].update(guided=10 ** 19),
+}
+
+
+@pytest.mark.parametrize("name", sorted(RECORD))
+def test_an_images_record_contradicting_its_writer_is_refused(name):
+    """Each accepted before (review 58's ties skipped a null count, and read no bound among a
+    pair's figures or between the pairs and the tracks)."""
+    from geocert.core.strict import Invalid
+
+    with pytest.raises(Invalid, match="images/"):
+        _check(*_edited(RECORD[name]))
+
+
+@pytest.fixture(scope="module")
+def photographed() -> dict:
+    """The kind's example from photos (6 images) solved with a full certificate, as review 58's."""
+    from pathlib import Path
+
+    from geocert.jobs.runner import solve_job
+
+    job = json.loads((Path(__file__).resolve().parents[2] / "examples" / "reconstruction-photos.json").read_text())
+    job["options"]["certificate"] = "full"
+    result = json.loads(json.dumps(solve_job(job)))
+    assert _valid(result)
+    return result
+
+
+def _restated(result: dict, edit, images_only: bool = False) -> dict:
+    forged = copy.deepcopy(result)
+    edit(forged["images"])
+    if not images_only:
+        edit(next(stage for stage in forged["stages"] if stage["name"] == "matches"))
+    return forged
+
+
+def _pair(**figures):
+    return lambda r: r["verified_pairs"][0].update(figures)
+
+
+@pytest.mark.slow  # the example's solve and each verification: about 20 s in all
+@pytest.mark.parametrize("edit,images_only,field", [
+    (lambda r: r.update(tracks_kept=None, tracks_built=10 ** 9), False, "images/tracks_kept"),
+    (lambda r: r.update(dropped_short=10 ** 6, tracks_built=r["tracks_built"] + 10 ** 6), False, "images/tracks_built"),
+    (lambda r: r.update(verified_pairs=[]), False, "images/tracks_built"),
+    (lambda r: r.update(stopped="x"), False, "images/stopped"),
+    (_pair(matches=2000), False, "images/verified_pairs/0"),
+    (lambda r: r["features_per_image"].__setitem__(0, 0), False, "images/verified_pairs/0"),
+    (lambda r: r["verified_pairs"][0].update(inliers=r["verified_pairs"][0]["matches"] + 100), False,
+     "images/verified_pairs/0"),
+    (lambda r: r["verified_pairs"][0].update(guided=r["verified_pairs"][0]["inliers"] + 50), False,
+     "images/verified_pairs/0"),
+    (lambda r: r.update(tracks_kept=float(r["tracks_kept"])), True, "images/tracks_kept"),
+    (lambda r: r.update(dropped_short=-0.0), True, "images/dropped_short"),
+    (lambda r: r["verified_pairs"][0].update(views=[0.0, 1.0]), True, "images/verified_pairs"),
+])
+def test_a_photos_images_record_contradicting_its_writer_is_refused(photographed, edit, images_only, field):
+    refused_naming(_restated(photographed, edit, images_only), "returned", field)
