@@ -629,7 +629,7 @@ def _close(given: Any, expected: float | None, width: float, absolute: float, re
     and ``relative`` (VALUE_SLACK) of its own size."""
     if expected is None or given is None:
         return given is None and expected is None
-    if isinstance(given, bool) or not isinstance(given, (int, float)) or not math.isfinite(given):
+    if not is_number(given):  # a finite float or an int within float range (10**400 raised OverflowError: review 59)
         return False
     allowed = NUMBER_SLACK * abs(width) + absolute + relative * abs(expected)
     # an expected value, width or slack that overflowed (or is NaN) matches nothing: |x - inf| <= inf

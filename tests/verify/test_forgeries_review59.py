@@ -25,6 +25,9 @@ Found (a test below for each, which failed while the class stood):
 4. The images record was tied to the matches stage by ==: 1268.0, -0.0 or a pair's views [0.0,
    1.0] equal to the stage's ints (typed there only); the float views stopped the check with a
    TypeError. Fixed: the two records are the same JSON.
+5. estimates._close read a stated int beyond float range (10**400) with math.isfinite, which
+   raised OverflowError: a stop, not a refusal (not reached from a document, whose reader refuses
+   such a number first). Fixed: a stated number is is_number's.
 """
 
 from __future__ import annotations
@@ -206,3 +209,79 @@ def _pair(**figures):
 ])
 def test_a_photos_images_record_contradicting_its_writer_is_refused(photographed, edit, images_only, field):
     refused_naming(_restated(photographed, edit, images_only), "returned", field)
+
+
+# 5. and review 58's comparisons at the ends of the float range (stated or recomputed NaN, inf,
+#    subnormals, -0.0, ints beyond float range): none matches what it is not
+
+SPECIAL = [float("nan"), float("inf"), -float("inf"), 5e-324, -5e-324, -0.0, 0.0, 1.0, 1e308, -1e308,
+           1.7976931348623157e308, 10 ** 400, 2 ** 1024, True, "1", None]
+
+
+def _matches(given, expected, width, absolute) -> bool:
+    import math
+
+    if given is None or expected is None:
+        return given is None and expected is None
+    numbers = [given, expected, width, absolute]
+    if any(type(x) not in (int, float) or type(x) is int and abs(x) >= 2 ** 1023 for x in numbers) or not all(
+            math.isfinite(x) for x in numbers):
+        return False
+    return abs(given - expected) <= 1e-6 * abs(width) + absolute + 1e-9 * abs(expected)
+
+
+def test_close_matches_only_a_finite_number_within_its_slack():
+    import itertools
+
+    from geocert.verify.estimates import _close
+
+    recomputed = [x for x in SPECIAL if type(x) is float or x is None]
+    slacks = [(0.0, 0.0), (1.0, 0.0), (float("inf"), 0.0), (float("nan"), 0.0), (0.0, float("inf")),
+              (0.0, float("nan")), (-float("inf"), 0.0), (0.0, -1.0), (5e-324, 5e-324)]
+    for given, expected, (width, absolute) in itertools.product(SPECIAL, recomputed, slacks):
+        assert _close(given, expected, width, absolute) == _matches(given, expected, width, absolute), \
+            (given, expected, width, absolute)
+
+
+def test_an_end_offset_matches_only_finite_numbers():
+    import itertools
+    import math
+
+    from geocert.core.strict import Invalid
+    from geocert.verify.estimates import _check_offset
+
+    for given, value, own_value, own_end, width in itertools.product(
+            SPECIAL, [0.0, -0.0, 1.0, 5e-324, 1e308], [0.0, 1.0, float("nan"), float("inf"), -0.0, 5e-324],
+            [1.0, float("nan"), float("inf"), -float("inf"), 5e-324, None], [1.0, float("nan"), float("inf"), 0.0]):
+        try:
+            _check_offset("at", "lower", {"value": value, "lower": given}, {"value": own_value, "lower": own_end},
+                          width, 0.0)
+        except Invalid:
+            continue
+        assert (given is None and own_end is None) or (type(given) in (int, float) and (type(given) is float or abs(given) < 2 ** 1023) and all(
+            math.isfinite(x) for x in (given, value, own_value, own_end, width))), (given, value, own_value, own_end)
+
+
+def test_agrees_matches_only_a_finite_number_within_its_rounding():
+    import itertools
+    import math
+
+    from geocert.verify import fractional
+
+    for given, expected in itertools.product(SPECIAL, [float("nan"), float("inf"), -float("inf"), 5e-324, -0.0,
+                                                       0.0, 1.0, 1e308]):
+        for shaped in (lambda x: x, lambda x: [x, 1.0]):
+            with np.errstate(all="ignore"):
+                agreed = fractional._agrees(shaped(given), shaped(expected))
+            assert not agreed or (type(given) in (int, float) and (type(given) is float or abs(given) < 2 ** 1023) and math.isfinite(given) and math.isfinite(expected)
+                                  and abs(given - expected) <= 1e-9 * max(1.0, abs(expected))), (given, expected)
+
+
+# Held: attacks already refused, kept as guards: homographies restated in other units (source and
+# targets scaled apart both ways), every interval collapsed onto its value
+
+@pytest.mark.parametrize("world,pixels", [(1e6, 1e-6), (1e-6, 1e6), (1e-8, 1e6), (1.0, 1e-9), (1e6, 1.0)])
+def test_a_homography_in_other_units_collapsed_is_refused(world, pixels):
+    genuine = _rescaled(stored("homography3_l2l1"), 1, world, pixels)
+    assert _valid(genuine)
+    refused_naming(_collapsed(genuine, 1), "returned", "maps/1/determinacy/intervals/0/")
