@@ -221,6 +221,9 @@ def _check_image_counts(result: dict, images: dict, matches: dict) -> None:
         _check_pair_figures(images, pairs)
 
 
+PAIR_FIGURES = {"views", "matches", "inliers", "guided"}  # features.match_pair's figures and the pair
+
+
 def _check_pair_figures(images: dict, pairs: list) -> None:
     """Each verified pair's figures as features.match_pair states them, and the tracks they make:
     its matches are the first image's features matched once each at most (the ratio test keeps a
@@ -233,6 +236,9 @@ def _check_pair_figures(images: dict, pairs: list) -> None:
     all verified."""
     counted = images.get("features_per_image")
     for number, pair in enumerate(pairs):
+        if not set(pair) <= PAIR_FIGURES:  # review 59: a member no writer states ("extra": 1) verified
+            raise Invalid("returned", f"images/verified_pairs/{number} states {sorted(set(pair) - PAIR_FIGURES)!r:.60}: "
+                                      f"a pair states {', '.join(sorted(PAIR_FIGURES))} only")
         first = pair["views"][0]
         figures = [pair[name] for name in ("matches", "inliers", "guided") if pair.get(name) is not None]
         guided = pair.get("guided")

@@ -24,7 +24,8 @@ Found (a test below for each, which failed while the class stood):
    figure at most the first image's features; inliers above matches only as the guided count.
 4. The images record was tied to the matches stage by ==: 1268.0, -0.0 or a pair's views [0.0,
    1.0] equal to the stage's ints (typed there only); the float views stopped the check with a
-   TypeError. Fixed: the two records are the same JSON.
+   TypeError. Fixed: the two records are the same JSON; a pair states its views and figures only
+   (a member "extra" verified).
 5. estimates._close read a stated int beyond float range (10**400) with math.isfinite, which
    raised OverflowError: a stop, not a refusal (not reached from a document, whose reader refuses
    such a number first). Fixed: a stated number is is_number's.
@@ -164,6 +165,7 @@ RECORD = {
     "inliers above matches unguided": lambda r: r["verified_pairs"][0].update(inliers=61),
     "guided above the inliers": lambda r: r["verified_pairs"][1].update(guided=46),
     "guided 10^19": lambda r: r["verified_pairs"][1].update(guided=10 ** 19),
+    "a pair's member no writer states": lambda r: r["verified_pairs"][0].update(extra=1),
 }
 
 
