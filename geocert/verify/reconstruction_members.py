@@ -237,17 +237,19 @@ def _check_pair_figures(images: dict, pairs: list) -> None:
     counted = images.get("features_per_image")
     for number, pair in enumerate(pairs):
         if not set(pair) <= PAIR_FIGURES:  # review 59: a member no writer states ("extra": 1) verified
-            raise Invalid("returned", f"images/verified_pairs/{number} states {sorted(set(pair) - PAIR_FIGURES)!r:.60}: "
-                                      f"a pair states {', '.join(sorted(PAIR_FIGURES))} only")
+            extra = sorted(set(pair) - PAIR_FIGURES)
+            raise Invalid("returned", f"images/verified_pairs/{number} states {extra!r:.60}: a pair states "
+                                      f"{', '.join(sorted(PAIR_FIGURES))} only")
         first = pair["views"][0]
         figures = [pair[name] for name in ("matches", "inliers", "guided") if pair.get(name) is not None]
         guided = pair.get("guided")
+        features = counted[first] if isinstance(counted, list) else None
         if isinstance(counted, list) and type(counted[first]) is int and max(figures) > counted[first] or (
                 pair["inliers"] > pair["matches"] and pair["inliers"] != guided) or (
                 guided is not None and guided > pair["inliers"]):
             raise Invalid("returned", f"images/verified_pairs/{number}: its figures are not a pair's its writer "
                                       f"states (matches {pair['matches']!r:.20}, inliers {pair['inliers']!r:.20}, "
-                                      f"guided {guided!r:.20}, of view {first}'s {counted[first] if isinstance(counted, list) else None!r:.20} features)")
+                                      f"guided {guided!r:.20}, of view {first}'s {features!r:.20} features)")
     built = images.get("tracks_built")
     if built is not None and built > sum(pair["inliers"] for pair in pairs):
         raise Invalid("returned", f"images/tracks_built is {built!r:.20}, more than the verified pairs' inliers "

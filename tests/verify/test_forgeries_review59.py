@@ -66,8 +66,8 @@ Held: the matches stage's status edits (refused by check_statuses beside points,
 kept), views out of range or equal, candidate_pairs beyond the pairs of views, negative or float
 counts in the stage; every homography and resection in other units but those above; every
 comparison at NaN, inf, subnormals and -0.0 (matched only a finite number within its slack).
-Left as read (the record cannot tell): a pair's inliers or matches 0 (the matching's min_inliers is not
-in the document's options to hold them to), every pair of views claimed verified with made-up
+Left as read (the record cannot tell): a pair's inliers or matches 0 (the matching's min_inliers
+is not stated in the document to hold them to), every pair of views claimed verified with made-up
 figures, the pairs' order.
 """
 
@@ -300,7 +300,8 @@ def test_an_end_offset_matches_only_finite_numbers():
                           width, 0.0)
         except Invalid:
             continue
-        assert (given is None and own_end is None) or (type(given) in (int, float) and (type(given) is float or abs(given) < 2 ** 1023) and all(
+        in_range = type(given) in (int, float) and (type(given) is float or abs(given) < 2 ** 1023)
+        assert (given is None and own_end is None) or (in_range and all(
             math.isfinite(x) for x in (given, value, own_value, own_end, width))), (given, value, own_value, own_end)
 
 
@@ -315,7 +316,8 @@ def test_agrees_matches_only_a_finite_number_within_its_rounding():
         for shaped in (lambda x: x, lambda x: [x, 1.0]):
             with np.errstate(all="ignore"):
                 agreed = fractional._agrees(shaped(given), shaped(expected))
-            assert not agreed or (type(given) in (int, float) and (type(given) is float or abs(given) < 2 ** 1023) and math.isfinite(given) and math.isfinite(expected)
+            in_range = type(given) in (int, float) and (type(given) is float or abs(given) < 2 ** 1023)
+            assert not agreed or (in_range and math.isfinite(given) and math.isfinite(expected)
                                   and abs(given - expected) <= 1e-9 * max(1.0, abs(expected))), (given, expected)
 
 
