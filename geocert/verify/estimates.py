@@ -416,9 +416,12 @@ def _check_maps(kind, result: dict, certificate: dict, earlier: bool = True) -> 
         # at 1e6 off the origin, review 37), which bear no mark of the form
         # (a resection's centre is in the source's units: its floor is read off the source alone, as the
         # centre is computed, Ts^-1 of a null vector; the targets' pixels, of another unit and any size
-        # up to COORDINATE_LIMIT, gave a centre in kilometres a floor wider than its interval: review 58)
+        # up to COORDINATE_LIMIT, gave a centre in kilometres a floor wider than its interval: review 58;
+        # a homography's centroid image is in the target's units, its floor read off the target alone,
+        # Tt^-1 of the normalised image: a source in a finer unit than its targets, 2.8e8 beside
+        # 2.5e-8, gave it a floor of 4.9e-7 beside intervals 1.3e-10 wide: review 59)
         resection = np.asarray(item["matrix"]).shape == (3, 4)
-        floor = _map_value_floor(source) if resection else _map_value_floor(source, target)
+        floor = _map_value_floor(source) if resection else _map_value_floor(target)
         _compare(where, determinacy, expected, earlier, spread, width_slack, floor,
                  MAP_VALUE_ROUNDING if resection else VALUE_SLACK)
 
@@ -585,8 +588,8 @@ def _check_offset(at: str, name: str, stated: dict, own: dict, width: float, wid
 
 def _map_value_floor(*arrays: Any) -> float:
     """What a map estimate's value and ends may differ by whatever their own size:
-    MAP_VALUE_ROUNDING of the largest coordinate of ``arrays`` (a homography's source and target;
-    a resection's source, the units of its centre). The value (a homography's image of the
+    MAP_VALUE_ROUNDING of the largest coordinate of ``arrays`` (a homography's target, the units
+    of its centroid image; a resection's source, the units of its centre). The value (a homography's image of the
     centroid, a resection's centre) is computed from terms of the data's size through the
     normalisers, so where it is near 0 (a centroid mapped to the origin) it is their rounding, not
     a number to a few ulps of itself (review 35 class 2: 1.03e-13 stated, 9.76e-14 recomputed, from
@@ -626,7 +629,7 @@ def _close(given: Any, expected: float | None, width: float, absolute: float, re
     and ``relative`` (VALUE_SLACK) of its own size."""
     if expected is None or given is None:
         return given is None and expected is None
-    if isinstance(given, bool) or not isinstance(given, (int, float)) or not math.isfinite(given):
+    if not is_number(given):  # a finite float or an int within float range (10**400 raised OverflowError: review 59)
         return False
     allowed = NUMBER_SLACK * abs(width) + absolute + relative * abs(expected)
     # an expected value, width or slack that overflowed (or is NaN) matches nothing: |x - inf| <= inf

@@ -12,6 +12,7 @@ stage). Each may be null where the stage has none, as a figure may."""
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 from typing import Any
@@ -148,7 +149,9 @@ def _check_images(result: dict, matches: dict | None, views: int) -> None:
     if images is None:
         return
     for name, value in images.items():
-        if name != "focal_prior_from_exif" and name in matches and matches[name] != value:
+        # the same JSON (review 59: 1268.0 or a pair's views [0.0, 1.0] compared equal to the stage's
+        # counts, typed there only, and an index of a float stopped the check with a TypeError)
+        if name != "focal_prior_from_exif" and name in matches and not _same(matches[name], value):
             raise Invalid("returned", f"images/{name} is not the matches stage's {name}")
         if name == "focal_prior_from_exif" or name in matches:
             continue
@@ -163,6 +166,16 @@ def _check_images(result: dict, matches: dict | None, views: int) -> None:
     _check_image_counts(result, images, matches)
 
 
+# The images record's counts its writer states wherever matching ran (features.tracks_from_images).
+COUNTED = ("images", "features_per_image", "candidate_pairs", "verified_pairs", "tracks_built",
+           "dropped_inconsistent", "dropped_short", "tracks_kept")
+
+
+def _same(one: Any, other: Any) -> bool:
+    """One JSON value and another written alike (a count and its float, true and 1, differ)."""
+    return json.dumps(one, sort_keys=True) == json.dumps(other, sort_keys=True)
+
+
 def _check_image_counts(result: dict, images: dict, matches: dict) -> None:
     """The matching figures' counts agree with each other and with the result, as their writer
     (pipelines.reconstruction.features.tracks_from_images) states them: the tracks built are those
@@ -171,6 +184,17 @@ def _check_image_counts(result: dict, images: dict, matches: dict) -> None:
     each verified pair is a candidate pair (i < j, none twice, no more than candidate_pairs).
     Stated otherwise (both records alike, review 58: 0 tracks kept beside 1,268 reconstructed,
     1,270,000 built, a pair verified twice), the figures were read as typed counts only."""
+    ran = matches.get("status") in ("done", "time_limit", "failed")
+    # matching that ran to its end, its clock or too few matched images states every count (kinds.
+    # reconstruction: all but a cancel keep the figures); a count null or deleted skipped the ties
+    # below (review 59: tracks_kept null beside 10^9 tracks built), and "stopped" is said of a clock
+    missing = [name for name in COUNTED if images.get(name) is None]
+    if ran and missing:
+        raise Invalid("returned", f"images/{missing[0]} is not stated where matching ran (the matches stage "
+                                  f"{matches.get('status')}): its writer states each of {', '.join(COUNTED)}")
+    if images.get("stopped") is not None and matches.get("status") == "done":
+        raise Invalid("returned", "images/stopped is stated beside matching that ran to its end (the matches stage "
+                                  "done): it says where the matching's clock stopped it")
     kept = images.get("tracks_kept")
     parts = [images.get(name) for name in ("tracks_kept", "dropped_inconsistent", "dropped_short")]
     tracks = (result.get("summary") or {}).get("tracks")
@@ -194,6 +218,42 @@ def _check_image_counts(result: dict, images: dict, matches: dict) -> None:
                        ) or not (pair.get("guided") is None or type(pair["guided"]) is int and pair["guided"] >= 0):
                 raise Invalid("returned", f"images/verified_pairs/{number}: matches and inliers (and guided) are "
                                           "counts (integers >= 0)")
+        _check_pair_figures(images, pairs)
+
+
+PAIR_FIGURES = {"views", "matches", "inliers", "guided"}  # features.match_pair's figures and the pair
+
+
+def _check_pair_figures(images: dict, pairs: list) -> None:
+    """Each verified pair's figures as features.match_pair states them, and the tracks they make:
+    its matches are the first image's features matched once each at most (the ratio test keeps a
+    row's nearest column), and so are its guided matches, whose inliers replace the pair's only
+    when more (so inliers exceed matches only as the guided count, and never fall below it); a
+    track is a connected group of the pairs' inlying matches (build_tracks), so there are at most
+    as many tracks built as inliers. Review 59: matches 2,000 beside an image of 1,027 features, an
+    image of 0 features in a verified pair, inliers above matches with no guided count, 10^6 tracks
+    dropped as short (tracks_built restated to match) beside 1,268 tracks from some 2,000 inliers,
+    all verified."""
+    counted = images.get("features_per_image")
+    for number, pair in enumerate(pairs):
+        if not set(pair) <= PAIR_FIGURES:  # review 59: a member no writer states ("extra": 1) verified
+            extra = sorted(set(pair) - PAIR_FIGURES)
+            raise Invalid("returned", f"images/verified_pairs/{number} states {extra!r:.60}: a pair states "
+                                      f"{', '.join(sorted(PAIR_FIGURES))} only")
+        first = pair["views"][0]
+        figures = [pair[name] for name in ("matches", "inliers", "guided") if pair.get(name) is not None]
+        guided = pair.get("guided")
+        features = counted[first] if isinstance(counted, list) else None
+        if isinstance(counted, list) and type(counted[first]) is int and max(figures) > counted[first] or (
+                pair["inliers"] > pair["matches"] and pair["inliers"] != guided) or (
+                guided is not None and guided > pair["inliers"]):
+            raise Invalid("returned", f"images/verified_pairs/{number}: its figures are not a pair's its writer "
+                                      f"states (matches {pair['matches']!r:.20}, inliers {pair['inliers']!r:.20}, "
+                                      f"guided {guided!r:.20}, of view {first}'s {features!r:.20} features)")
+    built = images.get("tracks_built")
+    if built is not None and built > sum(pair["inliers"] for pair in pairs):
+        raise Invalid("returned", f"images/tracks_built is {built!r:.20}, more than the verified pairs' inliers "
+                                  f"({sum(pair['inliers'] for pair in pairs)}): each track holds one at least")
 
 
 def _check_ties(result: dict, stages: dict, views: int, tracks: int) -> None:
