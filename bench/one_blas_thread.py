@@ -3,10 +3,10 @@ service's solver processes have (`geocert.app.cli.SINGLE_THREADED_BLAS`), unless
 already says otherwise.
 
 Why: the solvers are single-threaded, and on a shared 2-core machine OpenBLAS's threads spin while
-they wait for a core, charging the process CPU it does not use. Measured: a thin SVD of a 2000 x 9
-matrix (a 1000-point homography's linear estimate) 64 ms of CPU with two threads at load 3.7
-against 0.3 ms with one; a 432 x 432 Cholesky 150 ms under load; the Dinosaur's projective stage
-25.5 s against 13.2 s."""
+they wait for a core, charging the process CPU it does not use. While other work held the cores,
+a thin SVD of a 2000 x 9 matrix (a 1000-point homography's linear estimate) took some two hundred
+times the CPU with two threads as with one (bench/results/homography.md, "One BLAS thread"), and
+the Dinosaur's projective stage about twice."""
 
 import os
 

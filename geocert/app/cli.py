@@ -46,8 +46,9 @@ def job_request_adapter(body: object):
 def cmd_solve(args: argparse.Namespace) -> int:
     # As a solver process of the service: one BLAS thread unless the environment says otherwise,
     # set before numpy loads. The solvers are single-threaded, and on a busy machine OpenBLAS's
-    # threads spin waiting for a core (a 2000 x 9 SVD, a 1000-point map's linear estimate, took
-    # 64 ms of CPU with two threads at load 3.7, 0.3 ms with one).
+    # threads spin waiting for a core: a 2000 x 9 SVD (a 1000-point map's linear estimate) took
+    # some two hundred times the CPU with two threads as with one while other work held the cores
+    # (bench/results/homography.md).
     os.environ.update(worker_environment(dict(os.environ)))
     from geocert.core.geometry import InputError
     from geocert.jobs.collection import start_up_heap_frozen
