@@ -106,21 +106,27 @@ def resections() -> dict:
 def _rescaled(result: dict, world: float, pixels: float) -> dict:
     """The result with its second map's data restated in other units (its source points times
     ``world``, its targets times ``pixels``: a camera in kilometres and in a finer pixel), the
-    camera restated to match (the same centre, in the new units), not certified, with the cost,
-    residuals and estimate its writers state for those data (geocert.formulations.fractional.
-    determinacy.map_): a genuine document (every coordinate within COORDINATE_LIMIT)."""
+    camera restated to match (the same centre, in the new units): see ``restated_map``."""
+    data = result["certificate"]["data"]["maps"][1]
+    M = (np.diag([pixels, pixels, 1.0]) @ np.array(result["certificate"]["items"][1]["matrix"])
+         @ np.diag([1 / world] * 3 + [1.0]))
+    return restated_map(result, np.array(data["source"]) * world, np.array(data["target"]) * pixels, M)
+
+
+def restated_map(result: dict, source: np.ndarray, target: np.ndarray, M: np.ndarray) -> dict:
+    """A copy of the result with its second map's data ``source``, ``target`` and camera ``M``, not
+    certified, with the cost, residuals and estimate its writers state for those data
+    (geocert.formulations.fractional.determinacy.map_): a genuine document (every coordinate within
+    COORDINATE_LIMIT)."""
     from geocert.core.geometry import COORDINATE_LIMIT
     from geocert.formulations.fractional import determinacy as estimate
     from geocert.formulations.fractional.items import MapItem
     from geocert.verify.fractional import _stated_figure
 
-    result = copy.deepcopy(result)
-    data = result["certificate"]["data"]["maps"][1]
-    source, target = np.array(data["source"]) * world, np.array(data["target"]) * pixels
     assert np.abs(source).max() <= COORDINATE_LIMIT and np.abs(target).max() <= COORDINATE_LIMIT
-    data.update(source=source.tolist(), target=target.tolist())
+    result = copy.deepcopy(result)
+    result["certificate"]["data"]["maps"][1].update(source=source.tolist(), target=target.tolist())
     claim = result["certificate"]["items"][1]
-    M = np.diag([pixels, pixels, 1.0]) @ np.array(claim["matrix"]) @ np.diag([1 / world] * 3 + [1.0])
     uncertify(claim)
     claim.pop("proof")
     claim["matrix"] = M.tolist()

@@ -81,6 +81,7 @@ import pytest
 
 from geocert.verify.checks import verify_any
 from tests.verify.test_forgeries import refused_naming, rehash, stored, uncertify
+from tests.verify.test_forgeries_review58 import resections, restated_map  # noqa: F401  (resections: the fixture)
 
 pytestmark = pytest.mark.filterwarnings("ignore")
 
@@ -333,52 +334,16 @@ def test_a_homography_in_other_units_collapsed_is_refused(world, pixels):
 
 # 6. A map estimate's ends, for data so far off the origin that the width's slack exceeds the width
 
-@pytest.fixture(scope="module")
-def resections() -> dict:
-    """Two certified cameras (12 points, 1 px of noise, L2L2, a full certificate), as review 58's."""
-    from geocert.jobs.runner import solve_job
-    from tests.formulations.fractional.test_resection_proven import resection_job
-    from tests.support import seed
-
-    rng = np.random.default_rng(seed("resection proven", "forged"))
-    job, _ = resection_job(rng, 12, 1.0, maps=2)
-    result = json.loads(json.dumps(solve_job(job)))
-    assert _valid(result)
-    return result
-
-
 def _moved(result: dict, world: float, shift: float) -> dict:
     """The second map's source scaled by ``world`` and moved by ``shift`` (along (1, -1/2, 1/3)),
-    the camera restated to match, not certified, with its writers' cost, residuals and estimate."""
-    from geocert.core.geometry import COORDINATE_LIMIT
-    from geocert.formulations.fractional import determinacy as estimate
-    from geocert.formulations.fractional.items import MapItem
-    from geocert.verify.fractional import _stated_figure
-
-    result = copy.deepcopy(result)
+    the camera restated to match (review 58's ``restated_map``)."""
     data = result["certificate"]["data"]["maps"][1]
     offset = shift * np.array([1.0, -0.5, 1 / 3])
-    source, target = np.array(data["source"]) * world + offset, np.array(data["target"])
-    assert np.abs(source).max() <= COORDINATE_LIMIT
-    data.update(source=source.tolist())
-    claim = result["certificate"]["items"][1]
     undo = np.eye(4)
     undo[:3, :3] /= world
     undo[:3, 3] = -offset / world
-    M = np.array(claim["matrix"]) @ undo
-    uncertify(claim)
-    claim.pop("proof")
-    claim["matrix"] = M.tolist()
-    item = MapItem((source, target), "L2L2", chart=False)
-    claim["cost"], _ = _stated_figure(item, M, "L2L2")
-    entry = result["maps"][1]
-    entry.update({name: claim[name] for name in ("matrix", "cost", "lower_bound", "gap", "status", "certified")})
-    entry["residuals"] = item.exact_residuals(M).tolist()
-    entry.pop("certificate")
-    entry["determinacy"] = json.loads(json.dumps(estimate.map_(source, target, M, claim["cost"], None)))
-    result["stats"].update(certified=1, statuses={"optimal": 1, "not_certified": 1})
-    rehash(result["certificate"])
-    return result
+    M = np.array(result["certificate"]["items"][1]["matrix"]) @ undo
+    return restated_map(result, np.array(data["source"]) * world + offset, np.array(data["target"]), M)
 
 
 @pytest.mark.parametrize("world,shift", [
