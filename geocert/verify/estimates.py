@@ -586,17 +586,16 @@ def _check_offset(at: str, name: str, stated: dict, own: dict, width: float, wid
                               f"{own[name]!r:.40} (its offset from the value {own['value']!r:.40})")
 
 
-def _map_value_floor(*arrays: Any) -> float:
+def _map_value_floor(coordinates: Any) -> float:
     """What a map estimate's value and ends may differ by whatever their own size:
-    MAP_VALUE_ROUNDING of the largest coordinate of ``arrays`` (a homography's target, the units
+    MAP_VALUE_ROUNDING of the largest of ``coordinates`` (a homography's target, the units
     of its centroid image; a resection's source, the units of its centre). The value (a homography's image of the
     centroid, a resection's centre) is computed from terms of the data's size through the
     normalisers, so where it is near 0 (a centroid mapped to the origin) it is their rounding, not
     a number to a few ulps of itself (review 35 class 2: 1.03e-13 stated, 9.76e-14 recomputed, from
     terms of 200 px)."""
-    sizes = [float(np.max(np.abs(np.asarray(array, dtype=float)))) for array in arrays
-             if np.asarray(array).size]
-    return MAP_VALUE_ROUNDING * max(sizes, default=0.0)
+    coordinates = np.asarray(coordinates, dtype=float)
+    return MAP_VALUE_ROUNDING * (float(np.max(np.abs(coordinates))) if coordinates.size else 0.0)
 
 
 def _map_offset(source: Any, target: Any) -> float:

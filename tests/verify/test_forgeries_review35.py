@@ -497,8 +497,7 @@ def _moved(result: dict, **shifts) -> dict:
 def _floor(result: dict) -> float:
     from geocert.verify.estimates import _map_value_floor
 
-    data = result["certificate"]["data"]["maps"][0]
-    return _map_value_floor(data["source"], data["target"])
+    return _map_value_floor(result["certificate"]["data"]["maps"][0]["target"])  # a homography's: its target's units
 
 
 @pytest.mark.parametrize("floors", [2.0, 100.0])
